@@ -1,0 +1,35 @@
+# Two entry points, each self-contained from a fresh clone:
+#   make demo   set up .venv, run one closed-loop CMPC episode (3 robots, 7 humans) with an MCAP log
+#   make test   set up .venv, lint (ruff), run the test suite (pytest)
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+# Datasets are never committed: use CROWDMPC_DATA if set, else the team's shared copy beside the clone.
+CROWDMPC_DATA ?= $(abspath ../shared/data)
+export CROWDMPC_DATA
+
+.PHONY: demo test lint setup clean
+
+$(BIN)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --upgrade pip >/dev/null
+	# torch first and pinned: an unpinned torch pulls a multi-GB CUDA build
+	$(BIN)/pip install torch==2.13.0
+	$(BIN)/pip install -e '.[dev]'
+	touch $@
+
+setup: $(BIN)/.installed
+
+demo: $(BIN)/.installed
+	$(BIN)/crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario circle \
+		--robots 3 --humans 7 --episodes 1 --seed 0 --record runs/demo --plot runs/demo/episode.png
+
+lint: $(BIN)/.installed
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+test: lint
+	$(BIN)/python -m pytest -q
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache .ruff_cache *.egg-info

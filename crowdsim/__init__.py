@@ -1,0 +1,1 @@
+"""The crowd world: ORCA pedestrians, multi-robot scenarios, episode metrics. Never imports `mpc`."""

@@ -1,0 +1,102 @@
+"""The contract every pedestrian predictor fulfils (DESIGN.md, "Predictors").
+
+Agent layout used throughout the project
+----------------------------------------
+* ``history``: ``(L, N, 2)`` positions in metres of *all* agents over the last ``L`` observed steps
+  (row ``L-1`` is the current time ``t``), sampled every ``DT`` seconds.
+* ``mask``: ``(L, N)`` bool, True where the agent was observed (TrajNet++ scenes have partial tracks).
+* ``humans``: 1-D int array of the indices (into ``N``) of the agents whose future is predicted.
+  Every other index is a robot; robots are taken in increasing index order.
+* ``robots_future``: ``(H, M, 2)`` the robots' planned positions at ``t+1 .. t+H``, or ``None`` when there
+  are no robots whose plan is known (dataset evaluation: every agent is predicted by the model).
+
+Recursive single-step prediction, Eq. (1): each step predicts the next position of every agent; the humans'
+predictions are fed back, the robots' are replaced by their planned positions. This is the coupling.
+
+The symbolic twin
+-----------------
+``encode(history, mask, humans)`` computes numerically everything that depends only on the observed past
+(e.g. LSTM states after the ``L`` observed steps) and returns it as one flat float64 ``context`` vector whose
+agent order is: ``humans`` in the given order, then the robots in increasing index order.
+
+``to_casadi(n_humans, n_robots, horizon)`` returns a ``casadi.Function`` with
+
+* input 0 ``context``: ``(context_size(n_humans, n_robots), 1)``
+* input 1 ``robots_future``: ``(horizon * n_robots * 2, 1)``, ``robots_future.reshape(-1)`` (order h, m, xy)
+
+and output 0 ``humans_future``: ``(horizon * n_humans * 2, 1)``, ``(H, N_h, 2).reshape(-1)``, such that
+``f(encode(...), robots_future.ravel())`` equals ``rollout(...)`` to 1e-6 in float64 (a contract test).
+``to_casadi`` takes the number of robots as well as the number of humans (DESIGN.md's sketch has a single
+``n_agents``) because the two play different roles in the recursion.
+"""
+
+from __future__ import annotations
+
+from typing import Final, Protocol, runtime_checkable
+
+import casadi as ca
+import numpy as np
+
+DT: Final[float] = 0.4  # s; TrajNet++ samples at 2.5 Hz, and the paper's MPC uses tau = 0.4 s (Table I)
+OBS_LEN: Final[int] = 9  # TrajNet++ observes 9 steps and predicts 12 (Kothari et al. 2021)
+PRED_LEN: Final[int] = 12
+
+
+@runtime_checkable
+class Predictor(Protocol):
+    name: str
+    obs_len: int  # number of observed steps the model uses (L)
+
+    def rollout(
+        self,
+        history: np.ndarray,
+        mask: np.ndarray,
+        robots_future: np.ndarray | None,
+        humans: np.ndarray,
+        horizon: int | None = None,
+    ) -> np.ndarray:
+        """Predicted human positions ``(H, N_h, 2)``; ``horizon`` is needed only when ``robots_future`` is None."""
+        ...
+
+    def encode(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> np.ndarray:
+        """The numeric summary of the observed past that ``to_casadi``'s function takes as ``context``."""
+        ...
+
+    def context_size(self, n_humans: int, n_robots: int) -> int: ...
+
+    def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function: ...
+
+
+def robot_indices(n_agents: int, humans: np.ndarray) -> np.ndarray:
+    """Indices of the robots: every agent that is not a human, in increasing order."""
+    is_human = np.zeros(n_agents, dtype=bool)
+    is_human[np.asarray(humans, dtype=int)] = True
+    return np.flatnonzero(~is_human)
+
+
+def check_rollout_inputs(
+    history: np.ndarray,
+    mask: np.ndarray,
+    robots_future: np.ndarray | None,
+    humans: np.ndarray,
+    horizon: int | None,
+) -> int:
+    """Validate shapes shared by every predictor; return the horizon H."""
+    if history.ndim != 3 or history.shape[2] != 2:
+        raise ValueError(f"history must have shape (L, N, 2), got {history.shape}")
+    if mask.shape != history.shape[:2]:
+        raise ValueError(f"mask must have shape {history.shape[:2]}, got {mask.shape}")
+    humans = np.asarray(humans)
+    n_agents = history.shape[1]
+    if humans.ndim != 1 or (humans.size and (humans.min() < 0 or humans.max() >= n_agents)):
+        raise ValueError(f"humans must be a 1-D index array into {n_agents} agents, got {humans}")
+    n_robots = n_agents - len(np.unique(humans))
+    if robots_future is None:
+        if horizon is None:
+            raise ValueError("horizon is required when robots_future is None")
+        return int(horizon)
+    if robots_future.ndim != 3 or robots_future.shape[1:] != (n_robots, 2):
+        raise ValueError(f"robots_future must have shape (H, {n_robots}, 2), got {robots_future.shape}")
+    if horizon is not None and horizon != robots_future.shape[0]:
+        raise ValueError(f"horizon {horizon} disagrees with robots_future of length {robots_future.shape[0]}")
+    return robots_future.shape[0]

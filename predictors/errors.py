@@ -1,0 +1,40 @@
+"""Errors a user can cause through predictors and data. The CLI prints these without a traceback."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class PredictorError(ValueError):
+    """Base class of the user-facing errors raised by `predictors`."""
+
+
+class DatasetFormatError(PredictorError):
+    """A dataset file that does not follow the TrajNet++ ndjson format (or raw obsmat.txt)."""
+
+    def __init__(self, path: str | Path, line: int | None, reason: str):
+        self.path = str(path)
+        self.line = line
+        self.reason = reason
+        where = f"{self.path}:{line}" if line is not None else self.path
+        super().__init__(f"{where}: {reason}")
+
+
+class UnknownPredictor(PredictorError):
+    def __init__(self, name: str, choices: list[str]):
+        self.name = name
+        self.choices = choices
+        super().__init__(f"unknown predictor {name!r}; choose from {choices}")
+
+
+class CheckpointMismatch(PredictorError):
+    """A checkpoint file whose sha256 differs from the one the zoo manifest records."""
+
+    def __init__(self, path: str | Path, expected: str, found: str):
+        self.path = str(path)
+        self.expected = expected
+        self.found = found
+        super().__init__(
+            f"checkpoint {self.path} has sha256 {found}, but the manifest expects {expected}; "
+            "the file is corrupt or was replaced — restore it or re-run `crowdmpc zoo verify`"
+        )

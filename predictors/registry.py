@@ -1,0 +1,28 @@
+"""The explicit registry of predictors: exact names, no string matching.
+
+``PREDICTORS`` maps a name to a factory for predictors that need no trained weights. Trained models are
+named entries of the model zoo (``checkpoints/manifest.json``) and are loaded by ``load_predictor`` as well.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from predictors.base import Predictor
+from predictors.constant_velocity import ConstantVelocity
+from predictors.errors import UnknownPredictor
+
+PREDICTORS: dict[str, Callable[[], Predictor]] = {
+    "constant_velocity": ConstantVelocity,
+}
+
+
+def available() -> list[str]:
+    """Every name ``load_predictor`` accepts."""
+    return sorted(PREDICTORS)
+
+
+def load_predictor(name: str) -> Predictor:
+    if name in PREDICTORS:
+        return PREDICTORS[name]()
+    raise UnknownPredictor(name, available())
