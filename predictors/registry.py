@@ -1,13 +1,15 @@
 """The explicit registry of predictors: exact names, no string matching.
 
 ``PREDICTORS`` maps a name to a factory for predictors that need no trained weights. Trained models are
-named entries of the model zoo (``checkpoints/manifest.json``) and are loaded by ``load_predictor`` as well.
+named entries of the model zoo (``checkpoints/manifest.json``, see ``predictors.zoo``) and are loaded by
+``load_predictor`` as well, after their files' sha256 are checked against the manifest.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
+from predictors import zoo
 from predictors.base import Predictor
 from predictors.constant_velocity import ConstantVelocity
 from predictors.errors import UnknownPredictor
@@ -18,11 +20,13 @@ PREDICTORS: dict[str, Callable[[], Predictor]] = {
 
 
 def available() -> list[str]:
-    """Every name ``load_predictor`` accepts."""
-    return sorted(PREDICTORS)
+    """Every name ``load_predictor`` accepts: the registered predictors, then the zoo entries."""
+    return sorted(PREDICTORS) + [name for name in zoo.zoo_names() if name not in PREDICTORS]
 
 
 def load_predictor(name: str) -> Predictor:
     if name in PREDICTORS:
         return PREDICTORS[name]()
+    if name in zoo.zoo_names():
+        return zoo.load_zoo(name)
     raise UnknownPredictor(name, available())

@@ -1,0 +1,351 @@
+"""Every speed figure of the project in one run: a table, then the same numbers as JSON.
+
+    python benchmarks/run_all.py                 # everything (a few minutes on 2 cores)
+    python benchmarks/run_all.py --quick         # fewer steps and sizes (about a minute)
+    python benchmarks/run_all.py --json out.json --sections simulator,control
+
+Sections
+  simulator   one CrowdEnv.step (ORCA for every human + the robots' integration), humans 5..50, robots 3..12
+  control     one control step (ControlOutput.solve_time_s: prediction + every solve) per controller, and for
+              CMPC per predictor (every one the registry has, plus the ORCA oracle) and per coupling
+  scaling     CMPC and DMPC control step against the number of humans (5..50) and of robots (3..12)
+  dmpc        DMPC's local solves in a thread pool vs one after the other (mpc/dmpc.py): the speed-up
+  episodes    episodes per minute of one process per controller, and of a real sweep with K workers, with
+              the projected time of the paper's full Table II (10 cells x 1000 episodes)
+
+Control steps are timed in closed loop (the controller acts, the simulator steps), over the first ``--steps``
+steps of episodes of both scenarios, so the crowd is in the robots' way as it is in a sweep. Medians and 95th
+percentiles in milliseconds. The machine is shared: figures vary with the load, which is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# The sibling benchmark modules (orca_step.py, control_step.py) are imported by name, however this is run.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes")
+SCENARIOS = ("circle", "perpendicular")
+TABLE2_EPISODES = 10 * 1000  # the paper: 5 crowd sizes x 2 methods, 500 + 500 episodes per cell
+
+
+def _stats(samples_s: Sequence[float]) -> dict[str, float]:
+    ms = np.asarray(samples_s, dtype=float) * 1e3
+    return {
+        "median_ms": float(np.median(ms)),
+        "p95_ms": float(np.percentile(ms, 95)),
+        "mean_ms": float(ms.mean()),
+        "n": int(ms.size),
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Measurements
+# ----------------------------------------------------------------------------------------------------------
+
+
+def simulator_step(n_humans: int, n_robots: int, episodes: int) -> dict[str, float]:
+    """CrowdEnv.step in real circle-crossing episodes with ORCA robots: benchmarks/orca_step.py's measure
+    (each step timed on a copy of the environment, the fastest of 2 kept)."""
+    import orca_step
+
+    return orca_step.measure(n_humans, n_robots, episodes, "circle", repeats=2)
+
+
+def control_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int = 2) -> dict[str, Any]:
+    """The controller's own step time in closed loop (first ``steps`` steps of ``episodes`` episodes)."""
+    from crowdsim.env import CrowdEnv
+    from pipelines.sweep import build_controller
+
+    controller = build_controller(spec)
+    env, times, iterations, fallbacks = CrowdEnv(), [], [], 0
+    for k in range(episodes):
+        obs = env.reset(k // 2, SCENARIOS[k % 2], n_humans, n_robots)
+        controller.reset(obs)
+        for _ in range(steps):
+            out = controller.act(obs)
+            times.append(out.solve_time_s)
+            iterations.append(out.iterations)
+            fallbacks += out.fallback is not None
+            obs, done, _ = env.step(out.accelerations)
+            if done:
+                break
+    return _stats(times) | {"iterations_mean": float(np.mean(iterations)), "fallback_steps": fallbacks}
+
+
+def episodes_per_minute(spec: Any, n_humans: int, episodes: int) -> dict[str, float]:
+    """Whole episodes in this process, alternating scenarios as a sweep does; controller built once."""
+    from pipelines.closed_loop import run_episode
+    from pipelines.sweep import build_controller
+
+    controller = build_controller(spec)
+    t0 = time.perf_counter()
+    steps = 0
+    for k in range(episodes):
+        result = run_episode(controller, seed=k // 2, scenario=SCENARIOS[k % 2], n_humans=n_humans)
+        steps += result.metrics.n_steps
+    wall = time.perf_counter() - t0
+    return {
+        "episodes": episodes,
+        "wall_s": wall,
+        "episodes_per_minute": 60.0 * episodes / wall,
+        "steps": steps,
+    }
+
+
+def sweep_rate(predictor: str, n_humans: int, episodes_per_cell: int, workers: int) -> dict[str, float]:
+    """A real ``run_sweep`` of Table II (CMPC and DMPC) at one crowd size with K process workers."""
+    from pipelines.experiments import get_experiment
+    from pipelines.sweep import SweepConfig, run_sweep
+
+    experiment = get_experiment("table2").with_predictor(predictor)
+    with tempfile.TemporaryDirectory(prefix="crowdmpc-bench-") as out:
+        config = SweepConfig(
+            experiment,
+            Path(out),
+            episodes_per_cell,
+            humans=(n_humans,),
+            workers=workers,
+            backend="process",
+            progress=False,
+        )
+        outcome = run_sweep(config)
+    steady = outcome.steady_episodes_per_minute
+    return {
+        "workers": workers,
+        "episodes": outcome.ran,
+        "wall_s": outcome.wall_s,
+        "startup_s": outcome.startup_s,
+        "episodes_per_minute": outcome.episodes_per_minute,
+        "steady_episodes_per_minute": steady,
+        "projected_table2_hours": TABLE2_EPISODES / steady / 60.0 if steady else float("nan"),
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The run
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _predictors() -> list[str]:
+    from pipelines.experiments import ORACLE_PREDICTOR
+    from predictors.registry import available
+
+    return [*available(), ORACLE_PREDICTOR]
+
+
+def _timed(label: str, fn: Callable[[], dict[str, Any]], errors: dict[str, str]) -> dict[str, Any] | None:
+    """Run one measurement; a failure (a missing model, a broken build) is reported, not fatal."""
+    t0 = time.perf_counter()
+    try:
+        result = fn()
+    except Exception as exc:  # noqa: BLE001 - the benchmark reports what it could not measure
+        errors[label] = f"{type(exc).__name__}: {exc}"
+        print(f"  {label}: failed ({errors[label]})", file=sys.stderr)
+        return None
+    print(f"  {label}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    return result
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from pipelines.controllers import ControllerSpec
+
+    quick = args.quick
+    steps = args.steps or (8 if quick else 20)
+    humans_scale = (5, 20, 50) if quick else (5, 9, 20, 50)
+    robots_scale = (3, 6) if quick else (3, 6, 12)
+    errors: dict[str, str] = {}
+    report: dict[str, Any] = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "load_average": list(os.getloadavg()),
+            "python": platform.python_version(),
+            "platform": platform.platform(),
+            "numpy": np.__version__,
+        },
+        "settings": {"steps": steps, "quick": quick, "workers": args.workers},
+    }
+    sections = args.sections
+    cv = "constant_velocity"
+
+    if "simulator" in sections:
+        print("simulator step", file=sys.stderr)
+        episodes = 1 if quick else 3
+        sim: dict[str, Any] = {}
+        for n in humans_scale:
+            sim[f"h{n}_r3"] = _timed(
+                f"{n} humans, 3 robots", lambda n=n: simulator_step(n, 3, episodes), errors
+            )
+        for m in robots_scale:
+            sim[f"h7_r{m}"] = _timed(
+                f"7 humans, {m} robots", lambda m=m: simulator_step(7, m, episodes), errors
+            )
+        report["simulator_step"] = sim
+
+    if "control" in sections:
+        print("control step at 7 humans, 3 robots", file=sys.stderr)
+        specs = {
+            "straight": ControllerSpec("straight"),
+            "orca": ControllerSpec("orca"),
+            "cmpc": ControllerSpec("cmpc", cv),
+            "dmpc": ControllerSpec("dmpc", cv),
+        }
+        for name in _predictors():
+            if name != cv:
+                specs[f"cmpc/{name}"] = ControllerSpec("cmpc", name)
+        coupled = "social_lstm_soft_eth" if "social_lstm_soft_eth" in _predictors() else cv
+        specs[f"cmpc/{coupled}/nlp-exact"] = ControllerSpec("cmpc", coupled, coupling="nlp")
+        specs[f"cmpc/{coupled}/nlp-first-order"] = ControllerSpec(
+            "cmpc", coupled, coupling="nlp", mpc_overrides=(("coupled_mode", "first_order"),)
+        )
+        report["control_step"] = {
+            label: _timed(label, lambda s=spec: control_step(s, 7, 3, steps), errors)
+            for label, spec in specs.items()
+        }
+
+    if "scaling" in sections:
+        print("scaling (constant velocity)", file=sys.stderr)
+        scale: dict[str, Any] = {}
+        for controller in ("cmpc", "dmpc"):
+            spec = ControllerSpec(controller, cv)
+            for n in humans_scale:
+                label = f"{controller} {n} humans, 3 robots"
+                scale[f"{controller}_h{n}_r3"] = _timed(
+                    label, lambda s=spec, n=n: control_step(s, n, 3, steps, 1), errors
+                )
+            for m in robots_scale:
+                label = f"{controller} 7 humans, {m} robots"
+                scale[f"{controller}_h7_r{m}"] = _timed(
+                    label, lambda s=spec, m=m: control_step(s, 7, m, steps, 1), errors
+                )
+        report["scaling"] = scale
+
+    if "dmpc" in sections:
+        print("DMPC: local solves in threads vs serial", file=sys.stderr)
+        speedup: dict[str, Any] = {}
+        for m in robots_scale:
+            row = {}
+            for mode in ("serial", "threads"):
+                spec = ControllerSpec("dmpc", cv, mpc_overrides=(("dmpc_parallel", mode),))
+                row[mode] = _timed(
+                    f"{m} robots, {mode}", lambda s=spec, m=m: control_step(s, 7, m, steps, 1), errors
+                )
+            if row["serial"] and row["threads"]:
+                row["speedup_median"] = row["serial"]["median_ms"] / row["threads"]["median_ms"]
+            speedup[f"r{m}"] = row
+        report["dmpc_parallel"] = speedup
+
+    if "episodes" in sections:
+        print("episodes per minute at 7 humans", file=sys.stderr)
+        n_episodes = 2 if quick else 4
+        single = {}
+        for name in ("straight", "orca", "cmpc", "dmpc"):
+            spec = ControllerSpec(name, cv)
+            single[name] = _timed(
+                f"{name}, 1 process", lambda s=spec: episodes_per_minute(s, 7, n_episodes), errors
+            )
+        report["episodes_per_minute"] = {"one_process": single}
+        per_cell = args.sweep_episodes or (2 if quick else 6)
+        report["episodes_per_minute"]["sweep"] = _timed(
+            f"table2 sweep, 7 humans, {args.workers} workers",
+            lambda: sweep_rate(cv, 7, per_cell, args.workers),
+            errors,
+        )
+    report["errors"] = errors
+    return report
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Printing
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _row(label: str, stats: dict[str, Any] | None) -> str:
+    if not stats:
+        return f"| {label} | failed | | |"
+    extra = f"{stats['iterations_mean']:.2f}" if "iterations_mean" in stats else ""
+    return f"| {label} | {stats['median_ms']:.2f} | {stats['p95_ms']:.2f} | {extra} |"
+
+
+def table(report: dict[str, Any]) -> str:
+    lines = [
+        f"machine: {report['machine']['cpus']} CPUs, load {report['machine']['load_average']}, "
+        f"python {report['machine']['python']}",
+        "",
+        "| what | median ms | p95 ms | IBR iterations |",
+        "|---|---|---|---|",
+    ]
+    for key, stats in report.get("simulator_step", {}).items():
+        lines.append(_row(f"simulator step {key}", stats))
+    for key, stats in report.get("control_step", {}).items():
+        lines.append(_row(f"control step {key} (7 humans)", stats))
+    for key, stats in report.get("scaling", {}).items():
+        lines.append(_row(f"control step {key}", stats))
+    for key, row in report.get("dmpc_parallel", {}).items():
+        for mode in ("serial", "threads"):
+            lines.append(_row(f"dmpc {key} {mode}", row.get(mode)))
+        if "speedup_median" in row:
+            lines.append(f"| dmpc {key} threads speed-up (median) | x{row['speedup_median']:.2f} | | |")
+    episodes = report.get("episodes_per_minute")
+    if episodes:
+        lines += ["", "| episodes per minute (7 humans) | value |", "|---|---|"]
+        for name, stats in episodes["one_process"].items():
+            value = f"{stats['episodes_per_minute']:.1f}" if stats else "failed"
+            lines.append(f"| {name}, one process | {value} |")
+        sweep = episodes.get("sweep")
+        if sweep:
+            lines.append(
+                f"| table2 sweep, {sweep['workers']} workers (CMPC+DMPC) | "
+                f"{sweep['steady_episodes_per_minute']:.1f} "
+                f"({sweep['episodes_per_minute']:.1f} with {sweep['startup_s']:.1f} s start-up) |"
+            )
+            lines.append(
+                f"| projected full Table II (10 x 1000 episodes) | {sweep['projected_table2_hours']:.2f} h |"
+            )
+    if report["errors"]:
+        lines += ["", "not measured: " + "; ".join(f"{k}: {v}" for k, v in report["errors"].items())]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--quick", action="store_true", help="fewer steps and sizes")
+    parser.add_argument("--steps", type=int, help="control steps timed per episode (default 20, quick 8)")
+    parser.add_argument("--workers", type=int, default=2, help="workers of the sweep measurement (default 2)")
+    parser.add_argument("--sweep-episodes", type=int, help="episodes per cell of the sweep measurement")
+    parser.add_argument(
+        "--sections",
+        type=lambda s: tuple(s.split(",")),
+        default=SECTIONS,
+        help=f"subset of {','.join(SECTIONS)}",
+    )
+    parser.add_argument("--json", type=Path, help="also write the JSON here")
+    args = parser.parse_args(argv)
+    unknown = set(args.sections) - set(SECTIONS)
+    if unknown:
+        parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
+    report = run(args)
+    print(table(report))
+    text = json.dumps(report, indent=1)
+    print(text)
+    if args.json:
+        args.json.write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,259 @@
+"""The crowd world the robots navigate: a gymnasium-style environment, CrowdNav-equivalent for several robots.
+
+One step (``tau = dt = 0.4`` s), everything simultaneous:
+
+1. Every human computes its ORCA velocity (``crowdsim.orca``) from the *current* positions and velocities
+   of all other agents, robots included: robots are visible and treated as ordinary reciprocal agents. This
+   equals one RVO2 ``doStep`` and CrowdNav's per-human ``ORCA.predict`` (which builds a fresh RVO2 simulator
+   holding every other agent with its current velocity). Preferred velocity: ``v_pref`` towards the goal,
+   the raw goal offset within 1 m, zero once strictly within ``radius`` of the goal (the human stops).
+2. Robots are double integrators, Eq. (2): ``s' = s + tau v + tau^2/2 a``, ``v' = v + tau a``, with the
+   bounds of Eq. (6) enforced by clipping the acceleration, per component, to
+   ``[max(-a_max, (-v_max - v) / tau), min(a_max, (v_max - v) / tau)]``: within the acceleration bound and
+   such that the new velocity stays within ``[-v_max, v_max]``. (That interval is never empty because the
+   velocity starts at zero and so always lies within the bound.)
+3. Humans move with their new velocity: ``p' = p + tau v'`` (RVO2's ``Agent::update``).
+
+RVO2 radius: CrowdNav gives RVO2 every agent's radius plus 0.01 m "for safety"
+(``EnvConfig.orca_radius_margin``); this is kept, so ORCA agents aim to stay 0.62 m apart while contact
+(the metric) is counted below 0.6 m.
+
+A robot has reached its goal once it is strictly within ``radius`` of it; the first such time is kept
+(reaching is not undone by moving away). The episode ends when every robot has reached its goal, or at the
+time limit (``round(time_limit / dt)`` steps). With no robots at all (synthetic crowds) it ends when every
+human is within its radius of its goal, or at the time limit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from crowdsim.errors import SimulationError
+from crowdsim.metrics import Trajectory
+from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
+from crowdsim.scenarios import Layout, make_layout
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Simulator settings; defaults are the paper's (Section VI, Table I) and CrowdNav's ORCA setup."""
+
+    dt: float = 0.4  # s, tau: simulation step = control period (Table I)
+    time_limit: float = 30.0  # s, CrowdNav's episode time limit
+    radius: float = 0.3  # m, every robot and human
+    v_pref: float = 1.0  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav)
+    v_max: float = 1.0  # m/s, robot velocity bound per component, Eq. (6)
+    a_max: float = 2.0  # m/s^2, robot acceleration bound per component, Eq. (6)
+    history_len: int = 8  # L, rows of Observation.history (Table I)
+    orca: OrcaParams = field(default_factory=OrcaParams)  # neighbour distance, max neighbours, time horizon
+    orca_radius_margin: float = 0.01  # m added to the radius given to ORCA (CrowdNav's "for safety")
+
+    def __post_init__(self):
+        for name in ("dt", "time_limit", "radius", "v_pref", "v_max", "a_max"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise SimulationError(f"EnvConfig.{name} must be a finite number > 0, got {value!r}")
+        if not (isinstance(self.history_len, int) and self.history_len >= 1):
+            raise SimulationError(f"EnvConfig.history_len must be an int >= 1, got {self.history_len!r}")
+        if not self.orca_radius_margin >= 0:
+            raise SimulationError(
+                f"EnvConfig.orca_radius_margin must be >= 0 m, got {self.orca_radius_margin!r}"
+            )
+        if not isinstance(self.orca, OrcaParams):
+            raise SimulationError(f"EnvConfig.orca must be an OrcaParams, got {type(self.orca).__name__}")
+
+    @property
+    def max_steps(self) -> int:
+        return int(round(self.time_limit / self.dt))
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a controller sees at one step (robots first, then humans, everywhere agents are stacked)."""
+
+    time: float  # s since episode start
+    step: int
+    robot_positions: np.ndarray  # (M, 2) m
+    robot_velocities: np.ndarray  # (M, 2) m/s
+    robot_goals: np.ndarray  # (M, 2) m
+    robot_last_actions: np.ndarray  # (M, 2) m/s^2, last applied (clipped) acceleration, zeros at start
+    robot_reached: np.ndarray  # (M,) bool, robot has reached its goal (within its radius)
+    human_positions: np.ndarray  # (N, 2) m
+    human_velocities: np.ndarray  # (N, 2) m/s
+    human_goals: np.ndarray  # (N, 2) m
+    history: np.ndarray  # (history_len, M+N, 2) last positions, robots first; row -1 = now; padded at start
+    radius: float  # m, every agent
+    dt: float  # s
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.robot_positions)
+
+    @property
+    def n_humans(self) -> int:
+        return len(self.human_positions)
+
+
+class CrowdEnv:
+    """ORCA humans and double-integrator robots (module docstring). Not thread-safe; one episode at a time."""
+
+    def __init__(self, config: EnvConfig = EnvConfig()):
+        if not isinstance(config, EnvConfig):
+            raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
+        self.config = config
+        self._started = False
+
+    # ---- episode control ---------------------------------------------------------------------------------
+
+    def reset(self, seed: int, scenario: str, n_humans: int, n_robots: int = 3) -> Observation:
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise SimulationError(f"seed must be an int >= 0, got {seed!r}")
+        cfg = self.config
+        layout = make_layout(
+            scenario, n_humans, n_robots, np.random.default_rng(seed), radius=cfg.radius, v_pref=cfg.v_pref
+        )
+        return self.reset_layout(layout)
+
+    def reset_layout(self, layout: Layout) -> Observation:
+        """Start an episode from given starts and goals (everyone at rest), e.g. a hand-built test scene."""
+        names = ("robot_starts", "robot_goals", "human_starts", "human_goals")
+        shapes = [np.shape(getattr(layout, name)) for name in names]
+        if shapes[0] != shapes[1] or shapes[2] != shapes[3] or any(len(s) != 2 or s[1] != 2 for s in shapes):
+            raise SimulationError(f"layout arrays must be (M, 2), (M, 2), (N, 2), (N, 2); got {shapes}")
+        self._rp = np.array(layout.robot_starts, dtype=float)
+        self._rv = np.zeros_like(self._rp)
+        self._ra = np.zeros_like(self._rp)
+        self._rg = np.array(layout.robot_goals, dtype=float)
+        self._hp = np.array(layout.human_starts, dtype=float)
+        self._hv = np.zeros_like(self._hp)
+        self._hg = np.array(layout.human_goals, dtype=float)
+        self._step = 0
+        self._done = False
+        self._reach_step = np.full(len(self._rp), -1)
+        self._mark_reached()
+        self._rp_log, self._rv_log = [self._rp], [self._rv]
+        self._hp_log, self._hv_log = [self._hp], [self._hv]
+        self._ra_log: list[np.ndarray] = []
+        self._started = True
+        return self._observation()
+
+    def step(self, robot_accelerations: np.ndarray) -> tuple[Observation, bool, dict[str, Any]]:
+        """Advance one ``dt``. Returns ``(observation, done, info)``.
+
+        info: ``accelerations`` (M, 2) applied after clipping, ``clipped`` (M,) bool, ``orca_lp3`` number of
+        humans whose 2-D linear program was infeasible this step, ``success`` and ``timeout`` (when done).
+        """
+        if not self._started:
+            raise SimulationError("step() called before reset()")
+        if self._done:
+            raise SimulationError("step() called after the episode ended; call reset()")
+        cfg = self.config
+        m = len(self._rp)
+        a = np.asarray(robot_accelerations, dtype=float)
+        if a.shape != (m, 2) or not np.isfinite(a).all():
+            raise SimulationError(
+                f"robot_accelerations must be a finite ({m}, 2) array, got shape {a.shape} "
+                f"with {int((~np.isfinite(a)).sum())} non-finite entries"
+            )
+
+        # Humans decide from the current state of everyone (before any agent moves).
+        positions = np.concatenate([self._rp, self._hp])
+        velocities = np.concatenate([self._rv, self._hv])
+        humans = np.arange(m, m + len(self._hp))
+        pref = preferred_velocities(self._hp, self._hg, cfg.v_pref, stop_radius=cfg.radius)
+        hv_new, lp3 = orca_velocities(
+            positions,
+            velocities,
+            pref,
+            cfg.radius + cfg.orca_radius_margin,
+            cfg.v_pref,
+            cfg.orca,
+            cfg.dt,
+            agents=humans,
+        )
+
+        # Robots: clip the acceleration so that |a| <= a_max and |v + dt a| <= v_max, per component.
+        lo = np.maximum(-cfg.a_max, (-cfg.v_max - self._rv) / cfg.dt)
+        hi = np.minimum(cfg.a_max, (cfg.v_max - self._rv) / cfg.dt)
+        a_applied = np.clip(a, lo, hi)
+        rv_new = np.clip(self._rv + cfg.dt * a_applied, -cfg.v_max, cfg.v_max)  # clip only absorbs rounding
+        self._rp = self._rp + cfg.dt * self._rv + 0.5 * cfg.dt**2 * a_applied
+        self._rv = rv_new
+        self._ra = a_applied
+        self._hp = self._hp + cfg.dt * hv_new
+        self._hv = hv_new
+        self._step += 1
+        self._mark_reached()
+
+        self._rp_log.append(self._rp)
+        self._rv_log.append(self._rv)
+        self._hp_log.append(self._hp)
+        self._hv_log.append(self._hv)
+        self._ra_log.append(a_applied)
+
+        if m > 0:
+            all_there = bool((self._reach_step >= 0).all())
+        else:
+            all_there = bool((np.linalg.norm(self._hp - self._hg, axis=1) < cfg.radius).all())
+        timeout = self._step >= cfg.max_steps and not all_there
+        self._done = all_there or timeout
+        info: dict[str, Any] = {
+            "accelerations": a_applied,
+            "clipped": np.any(a_applied != a, axis=1),
+            "orca_lp3": int(lp3.sum()),
+        }
+        if self._done:
+            info["success"] = all_there
+            info["timeout"] = timeout
+        return self._observation(), self._done, info
+
+    def trajectory(self) -> Trajectory:
+        """Everything recorded since the last reset."""
+        if not self._started:
+            raise SimulationError("trajectory() called before reset()")
+        m = len(self._rg)
+        return Trajectory(
+            robot_positions=np.stack(self._rp_log),
+            robot_velocities=np.stack(self._rv_log),
+            human_positions=np.stack(self._hp_log),
+            human_velocities=np.stack(self._hv_log),
+            robot_goals=self._rg.copy(),
+            human_goals=self._hg.copy(),
+            robot_accelerations=np.stack(self._ra_log) if self._ra_log else np.zeros((0, m, 2)),
+            dt=self.config.dt,
+            radius=self.config.radius,
+        )
+
+    # ---- internals ---------------------------------------------------------------------------------------
+
+    def _mark_reached(self) -> None:
+        inside = np.linalg.norm(self._rp - self._rg, axis=1) < self.config.radius
+        self._reach_step = np.where((self._reach_step < 0) & inside, self._step, self._reach_step)
+
+    def _observation(self) -> Observation:
+        rows = self._positions_history()
+        return Observation(
+            time=self._step * self.config.dt,
+            step=self._step,
+            robot_positions=self._rp.copy(),
+            robot_velocities=self._rv.copy(),
+            robot_goals=self._rg.copy(),
+            robot_last_actions=self._ra.copy(),
+            robot_reached=self._reach_step >= 0,
+            human_positions=self._hp.copy(),
+            human_velocities=self._hv.copy(),
+            human_goals=self._hg.copy(),
+            history=rows,
+            radius=self.config.radius,
+            dt=self.config.dt,
+        )
+
+    def _positions_history(self) -> np.ndarray:
+        length = self.config.history_len
+        recent = list(zip(self._rp_log[-length:], self._hp_log[-length:], strict=True))
+        # At the start of an episode the missing past is the initial position repeated (standing still).
+        recent = [recent[0]] * (length - len(recent)) + recent
+        return np.stack([np.concatenate([r, h]) for r, h in recent])

@@ -1,0 +1,191 @@
+"""The paper's episode metrics (Section VI; DESIGN.md "Crowd simulator"), computed from a recorded trajectory.
+
+Distances are evaluated at the simulation steps (every 0.4 s), as CrowdNav and the paper report them.
+
+* success: every robot came within its radius of its goal (strictly closer than ``radius``) before the end.
+* travel time: the time at which the last robot first reached its goal (NaN unless success).
+* collision: the minimum robot-human centre distance over the episode is below ``d_min = 0.8`` m.
+* contact: that minimum is below the sum of the radii (0.6 m): physical contact.
+* discomfort: at some step a robot's projected path intersects a human's projected path; a projected path is
+  the closed segment from the agent's position to ``position + velocity * 1.2 s`` (length speed x 1.2 s). An
+  agent standing still projects a point; touching segments count as intersecting.
+* min distance: robot-human (the collision metric's number); robot-robot and human-human minima are kept too.
+* path length: per robot, the length of the polyline through its positions over the whole episode.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Final
+
+import numpy as np
+
+from crowdsim.errors import SimulationError
+
+COLLISION_DISTANCE: Final[float] = 0.8  # m, d_min of Table I: personal-space violation (Section VI)
+DISCOMFORT_HORIZON: Final[float] = 1.2  # s, "the proportional factor is chosen as 1.2 s" (Section VI)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Everything recorded in one episode; row ``k`` is time ``k * dt``."""
+
+    robot_positions: np.ndarray  # (T+1, M, 2) m
+    robot_velocities: np.ndarray  # (T+1, M, 2) m/s
+    human_positions: np.ndarray  # (T+1, N, 2) m
+    human_velocities: np.ndarray  # (T+1, N, 2) m/s, the ORCA velocity each human moved with
+    robot_goals: np.ndarray  # (M, 2) m
+    human_goals: np.ndarray  # (N, 2) m
+    robot_accelerations: np.ndarray  # (T, M, 2) m/s^2, the applied (clipped) accelerations
+    dt: float  # s
+    radius: float  # m, every agent
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.robot_positions) - 1
+
+
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    success: bool  # every robot reached its goal before the time limit
+    travel_time: float  # s until the last robot reached its goal; NaN unless success
+    collision: bool  # min robot-human distance < 0.8 m
+    contact: bool  # min robot-human distance < sum of radii
+    discomfort: bool  # projected paths of a robot and a human intersected at some step
+    timeout: bool  # not every robot reached its goal
+    min_distance: float  # m, robot-human centre distance (inf without humans)
+    min_distance_robots: float  # m, robot-robot (inf with one robot)
+    min_distance_humans: float  # m, human-human (inf with fewer than two humans)
+    path_length: tuple[float, ...]  # m, per robot
+    reach_times: tuple[float, ...]  # s, first time each robot was within its radius of its goal (NaN: never)
+    discomfort_steps: int  # number of steps with at least one intersecting robot/human pair
+    n_steps: int  # simulation steps in the episode
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-friendly (NaN and inf become None)."""
+
+        def clean(x):
+            if isinstance(x, tuple):
+                return [clean(v) for v in x]
+            if isinstance(x, float) and not math.isfinite(x):
+                return None
+            return x
+
+        return {k: clean(v) for k, v in self.__dict__.items()}
+
+
+def first_reach_steps(robot_positions: np.ndarray, robot_goals: np.ndarray, radius: float) -> np.ndarray:
+    """Index of the first row where each robot is strictly within ``radius`` of its goal, -1 if never. (M,)"""
+    inside = np.linalg.norm(robot_positions - robot_goals[None], axis=-1) < radius  # (T+1, M)
+    return np.where(inside.any(axis=0), inside.argmax(axis=0), -1)
+
+
+def _min_pair_distance(a: np.ndarray, b: np.ndarray, same: bool) -> float:
+    """Smallest centre distance over time between agents of ``a (T, P, 2)`` and ``b (T, Q, 2)``."""
+    if a.shape[1] == 0 or b.shape[1] == 0 or (same and a.shape[1] < 2):
+        return math.inf
+    d = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1)
+    if same:
+        iu = np.triu_indices(a.shape[1], k=1)
+        d = d[:, iu[0], iu[1]]
+    return float(d.min())
+
+
+def _cross(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+def segments_intersect(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Whether closed segments ``p1q1`` and ``p2q2`` share a point; arrays ``(..., 2)`` broadcast.
+
+    The classic orientation test with the collinear cases, so touching endpoints, a point lying on a segment
+    and overlapping collinear segments all count; degenerate (zero-length) segments are points.
+    """
+    d1 = q1 - p1
+    d2 = q2 - p2
+    o1 = _cross(d1[..., 0], d1[..., 1], p2[..., 0] - p1[..., 0], p2[..., 1] - p1[..., 1])
+    o2 = _cross(d1[..., 0], d1[..., 1], q2[..., 0] - p1[..., 0], q2[..., 1] - p1[..., 1])
+    o3 = _cross(d2[..., 0], d2[..., 1], p1[..., 0] - p2[..., 0], p1[..., 1] - p2[..., 1])
+    o4 = _cross(d2[..., 0], d2[..., 1], q1[..., 0] - p2[..., 0], q1[..., 1] - p2[..., 1])
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
+
+    def on_segment(p, q, r):  # r collinear with pq: is it inside pq's bounding box?
+        lo = np.minimum(p, q)
+        hi = np.maximum(p, q)
+        return np.all((r >= lo) & (r <= hi), axis=-1)
+
+    touch = (
+        ((o1 == 0) & on_segment(p1, q1, p2))
+        | ((o2 == 0) & on_segment(p1, q1, q2))
+        | ((o3 == 0) & on_segment(p2, q2, p1))
+        | ((o4 == 0) & on_segment(p2, q2, q1))
+    )
+    return proper | touch
+
+
+def discomfort_steps(traj: Trajectory, horizon: float = DISCOMFORT_HORIZON) -> np.ndarray:
+    """(T+1,) bool: at that step some robot's projected path intersects some human's projected path."""
+    rp, hp = traj.robot_positions, traj.human_positions
+    if rp.shape[1] == 0 or hp.shape[1] == 0:
+        return np.zeros(len(rp), dtype=bool)
+    r_end = rp + horizon * traj.robot_velocities
+    h_end = hp + horizon * traj.human_velocities
+    hit = segments_intersect(rp[:, :, None], r_end[:, :, None], hp[:, None], h_end[:, None])  # (T+1, M, N)
+    return hit.any(axis=(1, 2))
+
+
+def episode_metrics(
+    traj: Trajectory,
+    *,
+    collision_distance: float = COLLISION_DISTANCE,
+    discomfort_horizon: float = DISCOMFORT_HORIZON,
+) -> EpisodeMetrics:
+    """The metrics of one episode (module docstring)."""
+    rp, hp = traj.robot_positions, traj.human_positions
+    if rp.shape[1] == 0:
+        raise SimulationError("episode metrics need at least one robot; the trajectory has n_robots=0")
+    reach = first_reach_steps(rp, traj.robot_goals, traj.radius)
+    success = bool((reach >= 0).all())
+    # Rounded so that 29 steps read 11.6 s, not 11.600000000000001 s.
+    reach_times = tuple(round(float(k * traj.dt), 9) if k >= 0 else math.nan for k in reach)
+    min_rh = _min_pair_distance(rp, hp, same=False)
+    disc = discomfort_steps(traj, discomfort_horizon)
+    return EpisodeMetrics(
+        success=success,
+        travel_time=max(reach_times) if success else math.nan,
+        collision=min_rh < collision_distance,
+        contact=min_rh < 2.0 * traj.radius,
+        discomfort=bool(disc.any()),
+        timeout=not success,
+        min_distance=min_rh,
+        min_distance_robots=_min_pair_distance(rp, rp, same=True),
+        min_distance_humans=_min_pair_distance(hp, hp, same=True),
+        path_length=tuple(float(x) for x in np.linalg.norm(np.diff(rp, axis=0), axis=-1).sum(axis=0)),
+        reach_times=reach_times,
+        discomfort_steps=int(disc.sum()),
+        n_steps=traj.n_steps,
+    )
+
+
+def _rate(flags: list[bool]) -> float:
+    return 100.0 * sum(flags) / len(flags)
+
+
+def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
+    """Rates in % with their counts, travel time over successful episodes (NaN if none), distances."""
+    if not metrics:
+        raise SimulationError("aggregate needs at least one episode, got an empty list")
+    travel = [m.travel_time for m in metrics if m.success]
+    min_d = [m.min_distance for m in metrics]
+    out: dict[str, float | int] = {"episodes": len(metrics)}
+    for name in ("success", "collision", "contact", "discomfort", "timeout"):
+        flags = [bool(getattr(m, name)) for m in metrics]
+        out[f"{name}_rate"] = _rate(flags)
+        out[f"{name}_count"] = sum(flags)
+    out["travel_time_mean"] = float(np.mean(travel)) if travel else math.nan
+    out["travel_time_std"] = float(np.std(travel)) if travel else math.nan
+    out["min_distance_mean"] = float(np.mean(min_d))
+    out["min_distance_min"] = float(np.min(min_d))
+    out["path_length_mean"] = float(np.mean([np.mean(m.path_length) for m in metrics]))
+    return out

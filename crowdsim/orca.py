@@ -1,0 +1,313 @@
+"""Optimal reciprocal collision avoidance (van den Berg, Guy, Lin, Manocha, "Reciprocal n-body collision
+avoidance", 2011), following the reference RVO2 library (``Agent::computeNewVelocity``,
+``linearProgram1/2/3``).
+
+What matches RVO2
+-----------------
+* Neighbours: the ``max_neighbors`` nearest other agents strictly within ``neighbor_dist``, sorted by
+  distance (the order in which RVO2's ``insertAgentNeighbor`` keeps them); the ORCA lines are built in that
+  order, which matters to the incremental linear programs.
+* One ORCA half-plane per neighbour: the velocity obstacle truncated by ``time_horizon`` (projection of the
+  relative velocity on the cut-off circle or on a leg), reciprocal 1/2 responsibility
+  (``point = v + u / 2``), and, for agents that already overlap, the cut-off circle of the simulation time
+  step.
+* The incremental 2-D linear program on the max-speed disc (closest point to the preferred velocity), and the
+  3-D linear program (minimise the largest violation) when the 2-D one is infeasible.
+
+Deviations, all outside the behaviour one can observe in a crowd
+----------------------------------------------------------------
+* float64 instead of RVO2's float32; the same ``RVO_EPSILON = 1e-5`` for parallel lines.
+* No static obstacles (the scenarios have none), so there are no obstacle lines and ``time_horizon_obst`` is
+  not a parameter.
+* Two agents whose relative velocity equals exactly ``relative position / time step`` while overlapping give
+  RVO2 a 0/0 (NaN velocity); here that measure-zero case uses the line through the current velocity
+  perpendicular to the two centres (push apart), so a simulation never produces NaN.
+
+Neighbour geometry and the half-planes of every agent are computed at once with numpy broadcasting; only the
+linear programs, which are sequential by nature, run per agent in plain Python floats (faster than numpy
+scalars for a handful of lines). Agents whose preferred velocity already satisfies every half-plane (the
+2-D program's first pass changes nothing) are resolved in numpy without entering Python at all.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+from crowdsim.errors import SimulationError
+
+RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
+
+
+@dataclass(frozen=True)
+class OrcaParams:
+    """RVO2 agent parameters as CrowdNav sets them for its ORCA pedestrians (``policy/orca.py``)."""
+
+    neighbor_dist: float = 10.0  # m, only agents strictly closer than this are neighbours
+    max_neighbors: int = 10  # the nearest this many neighbours get a half-plane
+    time_horizon: float = 5.0  # s, velocity obstacles are truncated at this horizon
+
+    def __post_init__(self):
+        if not self.neighbor_dist > 0:
+            raise SimulationError(f"neighbor_dist must be > 0 m, got {self.neighbor_dist!r}")
+        if not (isinstance(self.max_neighbors, int) and self.max_neighbors >= 0):
+            raise SimulationError(f"max_neighbors must be an int >= 0, got {self.max_neighbors!r}")
+        if not self.time_horizon > 0:
+            raise SimulationError(f"time_horizon must be > 0 s, got {self.time_horizon!r}")
+
+
+def preferred_velocities(
+    positions: np.ndarray, goals: np.ndarray, v_pref: float, stop_radius: float = 0.0
+) -> np.ndarray:
+    """CrowdNav's preferred velocity: ``v_pref`` towards the goal, the raw goal offset (m/s) within 1 m.
+
+    Agents strictly within ``stop_radius`` of their goal have reached it and prefer to stand still.
+    positions, goals: ``(A, 2)`` m. Returns ``(A, 2)`` m/s.
+    """
+    offset = goals - positions
+    dist = np.linalg.norm(offset, axis=-1, keepdims=True)
+    far = dist > 1.0
+    pref = np.where(far, offset / np.where(far, dist, 1.0) * v_pref, offset)
+    return np.where(dist < stop_radius, 0.0, pref)
+
+
+def nearest_neighbors(
+    positions: np.ndarray, agents: np.ndarray, params: OrcaParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbours of each agent in ``agents``, nearest first, as RVO2's k-d tree query returns them.
+
+    Returns ``(index (S, K), valid (S, K))`` with ``K = min(max_neighbors, A - 1)``; the valid entries of a
+    row form a prefix. Distance ties keep the lower index first.
+    """
+    n_agents = len(positions)
+    k = min(params.max_neighbors, n_agents - 1)
+    if k <= 0:
+        return np.zeros((len(agents), 0), dtype=int), np.zeros((len(agents), 0), dtype=bool)
+    diff = positions[None, :, :] - positions[agents, None, :]
+    dist_sq = np.einsum("sai,sai->sa", diff, diff)
+    dist_sq[np.arange(len(agents)), agents] = np.inf  # an agent is not its own neighbour
+    order = np.argsort(dist_sq, axis=1, kind="stable")[:, :k]
+    valid = np.take_along_axis(dist_sq, order, axis=1) < params.neighbor_dist**2
+    return order, valid
+
+
+def orca_halfplanes(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    radii: np.ndarray,
+    agents: np.ndarray,
+    params: OrcaParams,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ORCA lines of every agent in ``agents`` against its neighbours, in RVO2's order.
+
+    positions, velocities: ``(A, 2)``; radii: ``(A,)`` m (the radius RVO2 is given). A line is a point and a
+    unit direction; the permitted velocities lie on its left (``det(direction, point - v) <= 0``).
+    Returns ``points (S, K, 2)``, ``directions (S, K, 2)`` and ``counts (S,)``: row ``s`` holds
+    ``counts[s]`` valid lines, the rest is padding.
+    """
+    nbr, valid = nearest_neighbors(positions, agents, params)
+    # Component arrays (S, K): cheaper than (S, K, 2) stacks for the few agents of a crowd.
+    px, py = positions[:, 0], positions[:, 1]
+    vx, vy = velocities[:, 0], velocities[:, 1]
+    vix, viy = vx[agents][:, None], vy[agents][:, None]
+    rx = px[nbr] - px[agents][:, None]  # relative position, from the agent to its neighbour
+    ry = py[nbr] - py[agents][:, None]
+    ux = vix - vx[nbr]  # relative velocity
+    uy = viy - vy[nbr]
+    comb_r = radii[agents][:, None] + radii[nbr]
+    comb_r_sq = comb_r * comb_r
+    dist_sq = rx * rx + ry * ry
+    inv_th = 1.0 / params.time_horizon
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # No collision: w goes from the centre of the cut-off circle to the relative velocity.
+        wx = ux - inv_th * rx
+        wy = uy - inv_th * ry
+        w_len_sq = wx * wx + wy * wy
+        w_len = np.sqrt(w_len_sq)
+        dot1 = wx * rx + wy * ry
+        on_cutoff = (dot1 < 0.0) & (dot1 * dot1 > comb_r_sq * w_len_sq)
+        # On the cut-off circle: direction (w_y, -w_x) / |w|, u = (R / tau_h - |w|) w / |w|.
+        cut_scale = (comb_r * inv_th - w_len) / w_len
+        cut_dx, cut_dy = wy / w_len, -wx / w_len
+
+        # On a leg: the tangent from the agent to the neighbour's disc, on the side of w.
+        leg = np.sqrt(np.maximum(dist_sq - comb_r_sq, 0.0))
+        on_left = rx * wy - ry * wx > 0.0
+        sign = np.where(on_left, 1.0, -1.0)
+        leg_dx = (rx * leg - sign * ry * comb_r) / dist_sq
+        leg_dy = (sign * rx * comb_r + ry * leg) / dist_sq
+        leg_dx, leg_dy = sign * leg_dx, sign * leg_dy
+        dot2 = ux * leg_dx + uy * leg_dy
+
+        # Collision: the cut-off circle of one simulation time step, so the overlap is resolved in one step.
+        cx = ux - rx / dt
+        cy = uy - ry / dt
+        c_len = np.sqrt(cx * cx + cy * cy)
+        degenerate = c_len <= 0.0
+        if degenerate.any():
+            # The measure-zero 0/0 case (module docstring): the unit vector from the neighbour to the agent.
+            r_len = np.sqrt(dist_sq)
+            apart_x = np.where(r_len > 0.0, -rx / r_len, 1.0)
+            apart_y = np.where(r_len > 0.0, -ry / r_len, 0.0)
+            cx = np.where(degenerate, apart_x, cx)
+            cy = np.where(degenerate, apart_y, cy)
+            c_unit = np.where(degenerate, 1.0, c_len)
+        else:
+            c_unit = c_len
+        col_scale = (comb_r / dt - c_len) / c_unit
+        col_dx, col_dy = cy / c_unit, -cx / c_unit
+
+    colliding = dist_sq <= comb_r_sq
+    dir_x = np.where(colliding, col_dx, np.where(on_cutoff, cut_dx, leg_dx))
+    dir_y = np.where(colliding, col_dy, np.where(on_cutoff, cut_dy, leg_dy))
+    u_x = np.where(colliding, col_scale * cx, np.where(on_cutoff, cut_scale * wx, dot2 * leg_dx - ux))
+    u_y = np.where(colliding, col_scale * cy, np.where(on_cutoff, cut_scale * wy, dot2 * leg_dy - uy))
+    # Reciprocity: each agent takes half of the change that avoids the collision.
+    points = np.stack([vix + 0.5 * u_x, viy + 0.5 * u_y], axis=-1)
+    directions = np.stack([dir_x, dir_y], axis=-1)
+    return points, directions, valid.sum(axis=1)
+
+
+def _lp1(px, py, dx, dy, no, radius, optx, opty, direction_opt):
+    """RVO2's linearProgram1: optimum on line ``no`` within the disc and lines ``0..no-1``, or None."""
+    dot = px[no] * dx[no] + py[no] * dy[no]
+    discriminant = dot * dot + radius * radius - (px[no] * px[no] + py[no] * py[no])
+    if discriminant < 0.0:
+        return None  # the max-speed disc lies entirely outside line ``no``
+    sq = math.sqrt(discriminant)
+    t_left = -dot - sq
+    t_right = -dot + sq
+    dxn, dyn, pxn, pyn = dx[no], dy[no], px[no], py[no]
+    for i in range(no):
+        denominator = dxn * dy[i] - dyn * dx[i]
+        numerator = dx[i] * (pyn - py[i]) - dy[i] * (pxn - px[i])
+        if abs(denominator) <= RVO_EPSILON:
+            if numerator < 0.0:
+                return None  # (almost) parallel and line ``no`` lies outside line i
+            continue
+        t = numerator / denominator
+        if denominator >= 0.0:
+            t_right = min(t_right, t)
+        else:
+            t_left = max(t_left, t)
+        if t_left > t_right:
+            return None
+    if direction_opt:
+        t = t_right if optx * dxn + opty * dyn > 0.0 else t_left
+    else:
+        t = dxn * (optx - pxn) + dyn * (opty - pyn)
+        t = t_left if t < t_left else (t_right if t > t_right else t)
+    return pxn + t * dxn, pyn + t * dyn
+
+
+def _lp2(px, py, dx, dy, radius, optx, opty, direction_opt):
+    """RVO2's linearProgram2. Returns ``(index of the first infeasible line or len(lines), x, y)``."""
+    if direction_opt:
+        rx, ry = optx * radius, opty * radius  # optx, opty is a unit direction here
+    else:
+        norm_sq = optx * optx + opty * opty
+        if norm_sq > radius * radius:
+            scale = radius / math.sqrt(norm_sq)
+            rx, ry = optx * scale, opty * scale
+        else:
+            rx, ry = optx, opty
+    for i in range(len(px)):
+        if dx[i] * (py[i] - ry) - dy[i] * (px[i] - rx) > 0.0:
+            new = _lp1(px, py, dx, dy, i, radius, optx, opty, direction_opt)
+            if new is None:
+                return i, rx, ry
+            rx, ry = new
+    return len(px), rx, ry
+
+
+def _lp3(px, py, dx, dy, begin, radius, rx, ry):
+    """RVO2's linearProgram3 (no obstacle lines): the velocity minimising the largest line penetration."""
+    distance = 0.0
+    for i in range(begin, len(px)):
+        if dx[i] * (py[i] - ry) - dy[i] * (px[i] - rx) > distance:
+            qpx, qpy, qdx, qdy = [], [], [], []
+            for j in range(i):
+                determinant = dx[i] * dy[j] - dy[i] * dx[j]
+                if abs(determinant) <= RVO_EPSILON:
+                    if dx[i] * dx[j] + dy[i] * dy[j] > 0.0:
+                        continue  # parallel, same direction: line j adds nothing
+                    ox, oy = 0.5 * (px[i] + px[j]), 0.5 * (py[i] + py[j])
+                else:
+                    f = (dx[j] * (py[i] - py[j]) - dy[j] * (px[i] - px[j])) / determinant
+                    ox, oy = px[i] + f * dx[i], py[i] + f * dy[i]
+                ex, ey = dx[j] - dx[i], dy[j] - dy[i]
+                norm = math.sqrt(ex * ex + ey * ey)
+                qpx.append(ox)
+                qpy.append(oy)
+                qdx.append(ex / norm)
+                qdy.append(ey / norm)
+            fail, nx, ny = _lp2(qpx, qpy, qdx, qdy, radius, -dy[i], dx[i], True)
+            # A failure here is floating-point noise (the current result is feasible by construction):
+            # keep the current result.
+            if fail >= len(qpx):
+                rx, ry = nx, ny
+            distance = dx[i] * (py[i] - ry) - dy[i] * (px[i] - rx)
+    return rx, ry
+
+
+def orca_velocities(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    pref_velocities: np.ndarray,
+    radii: np.ndarray | float,
+    max_speeds: np.ndarray | float,
+    params: OrcaParams,
+    dt: float,
+    agents: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """New velocities of ``agents`` (default: all) as one RVO2 ``doStep`` would compute them.
+
+    positions, velocities: ``(A, 2)`` current state of every agent (each avoids all the others);
+    pref_velocities: ``(S, 2)`` for the agents in ``agents``; radii, max_speeds: scalars or ``(A,)``.
+    dt is the simulation time step (used only when agents already overlap).
+    Returns ``(velocities (S, 2), used_lp3 (S,) bool)``.
+    """
+    positions = np.asarray(positions, dtype=float)
+    velocities = np.asarray(velocities, dtype=float)
+    n_agents = len(positions)
+    agents = np.arange(n_agents) if agents is None else np.asarray(agents, dtype=int)
+    radii = np.broadcast_to(np.asarray(radii, dtype=float), (n_agents,))
+    max_speeds = np.broadcast_to(np.asarray(max_speeds, dtype=float), (n_agents,))[agents]
+    pref = np.asarray(pref_velocities, dtype=float).reshape(len(agents), 2)
+
+    # The 2-D program's starting point: the preferred velocity, shortened onto the max-speed disc.
+    speed = np.linalg.norm(pref, axis=1)
+    too_fast = speed > max_speeds
+    start = np.where(too_fast[:, None], pref * (max_speeds / np.where(too_fast, speed, 1.0))[:, None], pref)
+    used_lp3 = np.zeros(len(agents), dtype=bool)
+    if len(agents) == 0 or n_agents < 2:
+        return start, used_lp3
+
+    points, directions, counts = orca_halfplanes(positions, velocities, radii, agents, params, dt)
+    k = points.shape[1]
+    slot_valid = np.arange(k)[None, :] < counts[:, None]
+    off = points - start[:, None, :]
+    violated = (directions[..., 0] * off[..., 1] - directions[..., 1] * off[..., 0] > 0.0) & slot_valid
+    todo = np.flatnonzero(violated.any(axis=1))
+    if len(todo) == 0:
+        return start, used_lp3
+    new = start.copy()
+    # One conversion to nested Python lists (agent, xy, line) for all the agents that need the program.
+    pts = points[todo].transpose(0, 2, 1).tolist()
+    dirs = directions[todo].transpose(0, 2, 1).tolist()
+    opts = pref[todo].tolist()
+    speeds = max_speeds[todo].tolist()
+    for row, s in enumerate(todo.tolist()):
+        c = int(counts[s])
+        px, py, dx, dy = pts[row][0][:c], pts[row][1][:c], dirs[row][0][:c], dirs[row][1][:c]
+        fail, rx, ry = _lp2(px, py, dx, dy, speeds[row], opts[row][0], opts[row][1], False)
+        if fail < c:
+            used_lp3[s] = True
+            rx, ry = _lp3(px, py, dx, dy, fail, speeds[row], rx, ry)
+        new[s] = rx, ry
+    return new, used_lp3

@@ -1,0 +1,102 @@
+"""Episode pictures in the style of the paper's Fig. 2: robots filled, humans hollow, robot goals as stars.
+
+Figures are built with ``matplotlib.figure.Figure`` (no pyplot, no global state), which renders with the Agg
+backend whatever backend the process has selected.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+
+# matplotlib's tab10, the order pipelines.recording uses, so robot i has one colour everywhere.
+ROBOT_COLORS = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#d62728",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#17becf",
+)
+HUMAN_COLOR = "0.35"
+GOAL_COLOR = "red"
+
+
+def default_snapshots(n_rows: int, count: int = 5) -> list[int]:
+    """``count`` evenly spaced rows from the first to the last (fewer if the episode is short)."""
+    return sorted({int(round(x)) for x in np.linspace(0, n_rows - 1, min(count, n_rows))})
+
+
+def plot_episode(
+    robot_positions: np.ndarray,
+    human_positions: np.ndarray,
+    robot_goals: np.ndarray,
+    ax: Axes | None = None,
+    title: str | None = None,
+    snapshot_steps: Sequence[int] | None = None,
+    *,
+    radius: float = 0.3,
+    dt: float | None = None,
+) -> Figure:
+    """Trajectories of one episode with the agents drawn to scale at a few snapshot steps.
+
+    robot_positions ``(T, M, 2)``, human_positions ``(T, N, 2)``, robot_goals ``(M, 2)`` in m. Snapshots
+    (rows of the arrays; default five evenly spaced, first and last included) are drawn fainter the earlier
+    they are; with ``dt`` the legend gives their times in seconds. Returns the figure (``ax.figure`` if
+    ``ax`` is given).
+    """
+    robot_positions = np.asarray(robot_positions, dtype=float)
+    human_positions = np.asarray(human_positions, dtype=float)
+    robot_goals = np.asarray(robot_goals, dtype=float)
+    n_rows, n_robots = robot_positions.shape[:2]
+    n_humans = human_positions.shape[1]
+    if ax is None:
+        fig = Figure(figsize=(7, 7))
+        ax = fig.add_subplot()
+    else:
+        fig = ax.figure
+    snaps = default_snapshots(n_rows) if snapshot_steps is None else sorted({int(s) for s in snapshot_steps})
+    snaps = [s for s in snaps if 0 <= s < n_rows]
+
+    for j in range(n_humans):
+        ax.plot(*human_positions[:, j].T, color=HUMAN_COLOR, lw=0.8, alpha=0.5, zorder=1)
+    for i in range(n_robots):
+        color = ROBOT_COLORS[i % len(ROBOT_COLORS)]
+        ax.plot(*robot_positions[:, i].T, color=color, lw=1.5, zorder=2, label=f"robot {i}")
+    for k, row in enumerate(snaps):
+        alpha = 0.25 + 0.75 * (k + 1) / len(snaps)
+        for j in range(n_humans):
+            ring = Circle(human_positions[row, j], radius, fill=False, ec=HUMAN_COLOR, lw=1.0, alpha=alpha)
+            ring.set_zorder(3)
+            ax.add_patch(ring)
+        for i in range(n_robots):
+            color = ROBOT_COLORS[i % len(ROBOT_COLORS)]
+            disc = Circle(robot_positions[row, i], radius, fc=color, ec="k", lw=0.5, alpha=alpha)
+            disc.set_zorder(4)
+            ax.add_patch(disc)
+    ax.plot(*robot_goals.T, "*", color=GOAL_COLOR, ms=14, mec="k", mew=0.5, zorder=5, label="robot goals")
+    ax.plot([], [], "o", mfc="none", mec=HUMAN_COLOR, label="humans")
+    if snaps:
+        when = [f"{row * dt:g} s" for row in snaps] if dt is not None else [f"step {row}" for row in snaps]
+        ax.plot([], [], " ", label="snapshots: " + ", ".join(when))
+
+    everything = np.concatenate([robot_positions.reshape(-1, 2), human_positions.reshape(-1, 2), robot_goals])
+    lo, hi = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.8)
+    if title:
+        ax.set_title(title)
+    return fig

@@ -1,0 +1,140 @@
+"""Algorithm 1, IBR-based centralized MPC: alternate the humans' prediction and the joint solve (Eq. 17).
+
+At iteration ``j`` the predictor is rolled out given the robots' planned positions of iteration ``j-1`` (the
+recursive, coupled prediction of Eq. 1), then the joint NLP is solved with those predictions, warm-started from
+iteration ``j-1``. The loop stops when ``|F^(j) - F^(j-1)| <= xi`` (``F^(0) = inf``, so at least two
+predictions are made) or at ``j_max``.
+
+A prediction identical (bit for bit) to the previous one means the NLP to solve is the one just solved: its
+solution is ``u^(j-1)`` and ``F^(j) = F^(j-1)``, so the solve is skipped and the loop ends converged. This is
+a fixed point of Algorithm 1, not an approximation; it is what happens at every step with a predictor that
+ignores the robots (constant velocity).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpc.config import MPCConfig
+from mpc.dynamics import braking, rollout_numpy
+from mpc.fallback import Start
+from mpc.nlp import JointNLP, Solution, StepData
+
+# predict(robots_future (H, M, 2)) -> humans' predicted positions (H, N_h, 2)
+PredictFn = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class IBRResult:
+    """The outcome of one control step's IBR loop (Algorithm 1 or 2)."""
+
+    accels: np.ndarray  # (M, H, 2) the plan to apply (u^(0) when nothing was solved)
+    positions: np.ndarray  # (M, H, 2) its planned positions at t+1..t+H
+    prediction: np.ndarray | None  # (H, N_h, 2) the prediction the plan was optimised against
+    potential: float  # F_t (Eq. 16) of the plan under ``prediction`` (nan when nothing was solved)
+    iterations: int  # IBR iterations j used
+    solves: int  # NLP solves run (CMPC: <= iterations; DMPC: up to M per iteration)
+    solved: bool  # at least one solve produced the plan (False: ``accels`` is the fallback u^(0))
+    converged: bool  # the stopping test of the algorithm held before j_max
+    status: str  # "ok", or the first failure: an IPOPT status, "nan_prediction", "timeout"
+    predictions: tuple[np.ndarray, ...]  # (H, N_h, 2) of every iteration
+    potentials: tuple[float, ...]  # F^(j) of every iteration that produced a plan
+    lam_x: np.ndarray | None  # (M, H, 2) multipliers of the final plan, for the next warm start
+    lam_g: np.ndarray | None
+    solver_iterations: int  # IPOPT iterations summed over the solves
+
+
+def finite_prediction(prediction: np.ndarray, shape: tuple[int, ...]) -> np.ndarray | None:
+    """``prediction`` as float64 when it has ``shape`` and is finite everywhere, else None."""
+    prediction = np.asarray(prediction, dtype=float)
+    if prediction.shape != shape or not np.all(np.isfinite(prediction)):
+        return None
+    return prediction
+
+
+def better(a: Solution, b: Solution) -> Solution:
+    """The successful solution with the lower cost (``a`` when neither succeeded)."""
+    if b.success and (not a.success or b.cost < a.cost):
+        return b
+    return a
+
+
+class CMPC:
+    """Algorithm 1 for a fixed problem size; the joint NLP is built once, here."""
+
+    def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int):
+        self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
+        self.nlp = JointNLP(cfg, n_robots, n_humans)
+
+    def solve(self, data: StepData, predict: PredictFn, start: Start) -> IBRResult:
+        cfg = self.cfg
+        t0 = time.perf_counter()
+        pred_shape = (cfg.horizon, self.n_humans, 2)
+        accels = start.accels
+        positions = rollout_numpy(data.states, accels, cfg.dt)[0]
+        lam_x = None if start.lam_x is None else start.lam_x.ravel()
+        lam_g = None if start.lam_g is None else start.lam_g.ravel()
+        status, solved, converged = "ok", False, False
+        potential, previous_potential = math.nan, math.inf
+        used, previous, predictions, potentials = None, None, [], []
+        solves = solver_iterations = iterations = 0
+        for j in range(1, cfg.j_max + 1):
+            iterations = j
+            prediction = finite_prediction(predict(positions.transpose(1, 0, 2)), pred_shape)
+            if prediction is None:
+                status = "nan_prediction"
+                break
+            predictions.append(prediction)
+            if previous is not None and np.array_equal(prediction, previous):
+                converged = True  # the same NLP again: u^(j) = u^(j-1), F^(j) = F^(j-1)
+                potentials.append(potential)
+                break
+            sol = self.nlp.solve(data, prediction, accels, lam_x, lam_g)
+            solves += 1
+            solver_iterations += sol.iterations
+            if (
+                j == 1
+                and cfg.multi_start
+                and start.kind != "brake"
+                and (not sol.success or self.nlp.penalty(sol.accels, data, prediction) > cfg.restart_penalty)
+            ):
+                other = self.nlp.solve(data, prediction, braking(data.states, cfg.horizon, cfg.dt, cfg.a_max))
+                solves += 1
+                solver_iterations += other.iterations
+                sol = better(sol, other)
+            if not sol.success:
+                status = sol.status
+                break
+            accels, lam_x, lam_g, potential = sol.accels, sol.lam_x, sol.lam_g, sol.cost
+            positions = rollout_numpy(data.states, accels, cfg.dt)[0]
+            solved, used = True, prediction
+            potentials.append(potential)
+            if abs(potential - previous_potential) <= cfg.xi:
+                converged = True
+                break
+            if time.perf_counter() - t0 > cfg.time_limit_s:
+                status = "timeout"
+                break
+            previous_potential, previous = potential, prediction
+        shape = (self.n_robots, cfg.horizon, 2)
+        return IBRResult(
+            accels=accels,
+            positions=positions,
+            prediction=used,
+            potential=potential,
+            iterations=iterations,
+            solves=solves,
+            solved=solved,
+            converged=converged,
+            status=status,
+            predictions=tuple(predictions),
+            potentials=tuple(potentials),
+            lam_x=None if lam_x is None or not solved else np.reshape(lam_x, shape),
+            lam_g=None if lam_g is None or not solved else np.reshape(lam_g, shape),
+            solver_iterations=solver_iterations,
+        )

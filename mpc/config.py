@@ -1,0 +1,122 @@
+"""The MPC's parameters: Table I of the paper, the two values it omits, and the solver's knobs.
+
+Every formulation (joint NLP, local NLPs, coupled NLP) reads the same frozen ``MPCConfig``. Symbols and
+equation numbers are the paper's (Le et al., "Multi-robot cooperative navigation in crowds: a game-theoretic
+learning-based model predictive control approach").
+
+Table I's ``L = 8`` (observed steps) is not here: it belongs to the predictor (``Predictor.obs_len``), which
+decides how much history it reads; the simulator keeps ``history_len = 8`` rows for it.
+
+The two values the paper uses without giving them:
+
+* ``d_flock`` (``d_ij`` in Eq. 15) = 1.2 m. The robot-robot penalty of Eq. 12 goes through
+  ``omega_coll * smax(d_min^2 - d^2)`` with ``omega_coll = 1e7`` and ``mu = 30``: at 1.0 m it still costs
+  about 7 per step, at 1.1 m 0.01, at 1.2 m 1e-5. 1.2 m is the tightest spacing at which the flocking term
+  (weight 10) does not fight the collision penalty, so the flock stays as compact as the safety distance
+  allows (1.2 m between centres leaves 0.6 m between the 0.3 m bodies).
+* ``delta`` (``delta`` in Eqs. 7 and 15) = 1e-3. In Eq. 7 (metres) it keeps the goal normalisation finite at
+  the goal, where the weight becomes ``omega_goal / delta``; in the smoothed norm
+  ``||z|| ~ sqrt(z^T z + delta)`` (square metres) it biases a 1.2 m flocking distance by 0.4 mm and bounds
+  the curvature of the norm at ``z = 0`` by ``1 / sqrt(delta) ~ 32``, which IPOPT handles without trouble.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+from mpc.errors import MPCConfigError
+
+PARALLEL_MODES = ("serial", "threads")  # how DMPC runs the robots' local solves (see mpc/dmpc.py)
+COUPLED_MODES = ("exact", "first_order")  # the predictor inside the NLP, or its linearisation (mpc/coupled.py)
+ON_GOAL_MODES = ("brake", "track")  # what a robot that has reached its goal does (MPCConfig.on_goal)
+
+
+@dataclass(frozen=True)
+class MPCConfig:
+    # --- Table I ---------------------------------------------------------------------------------------
+    horizon: int = 4  # H, control and prediction horizon (steps)
+    dt: float = 0.4  # tau, s, sampling time of the double integrator, Eq. 2
+    w_goal: float = 10.0  # omega^goal, reference tracking weight, Eqs. 7 and 13
+    w_acce: float = 0.1  # omega^acce, acceleration weight, Eqs. 9 and 13
+    w_jerk: float = 0.1  # omega^jerk, jerk weight, Eqs. 10 and 13
+    w_coll: float = 1e7  # omega^coll, robot-human (Eq. 11, 13) and robot-robot (Eq. 12, 14) penalty weight
+    w_floc: float = 10.0  # omega^floc, flocking weight, Eqs. 14 and 15 (0 disables flocking, Table III "NF")
+    v_max: float = 1.0  # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
+    a_max: float = 2.0  # a_max, m/s^2, bound on each acceleration component, Eq. 6
+    rho: float = 0.5  # rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11
+    d_min: float = 0.8  # d_min, m, minimum allowed distance, Eqs. 11 and 12
+    mu: float = 30.0  # mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, Eq. 12
+    j_max: int = 10  # j_max, maximum IBR iterations, Algorithms 1 and 2
+    xi: float = 1e-3  # xi, CMPC convergence threshold on |F^(j) - F^(j-1)|, Algorithm 1
+    epsilon: float = 1e-3  # epsilon, DMPC improvement and epsilon-Nash threshold, Algorithm 2
+    # --- omitted by the paper (see the module docstring) ------------------------------------------------
+    d_flock: float = 1.2  # d_ij, m, desired distance between two robots of the flock, Eq. 15
+    delta: float = 1e-3  # delta, goal-normalisation offset (Eq. 7) and norm smoothing (Eq. 15)
+    # --- robots on their goals (not in the paper, whose episodes end when its single robot arrives) -------
+    # "track": a robot that has reached its goal stays in the optimisation with its goal term (the reference
+    # is then the goal itself, weighted omega_goal / (||s - goal|| + delta) = 1e4 on the goal), so it holds
+    # its place unless a human or another robot needs the room; flocking with it is off. "brake": its
+    # controls are pinned to braking: it stays exactly where it stopped and can neither dodge a human nor let
+    # a teammate through (the three goals are 1 m apart, under the ~1.03 m the Eq. 12 penalty keeps free).
+    on_goal: str = "track"
+    # --- solver -------------------------------------------------------------------------------------------
+    # IPOPT minimises cost_scale * F. IPOPT's own gradient-based scaling already tames the 1e7 penalty
+    # (measured: no speed-up from scaling F by 1e-2 or 1e-4; only looser solutions, since tol applies to
+    # the scaled problem), so the default leaves F as it is.
+    cost_scale: float = 1.0
+    ipopt_tol: float = 1e-6  # IPOPT tol (scaled NLP error)
+    ipopt_max_iter: int = 100  # IPOPT max_iter; hitting it counts as a failure (fallback)
+    # Wall-time budget of one control step: IPOPT's max_wall_time for each solve (exceeding it is a failure),
+    # and no new IBR iteration starts once the step has used it. A safety net, far above the normal step
+    # time, so that results do not depend on the machine's load.
+    time_limit_s: float = 1.0
+    warm_start: bool = True  # start every solve from the shifted previous solution (primal and dual)
+    # The collision penalties make F non-convex, and the shifted previous plan can sit in a basin that has
+    # become poor (a gap closing). multi_start: when the first solution of a step still pays more than
+    # restart_penalty of collision penalty, solve again from braking and keep the lower cost (CMPC: F;
+    # DMPC: each robot's C_i). Measured on recorded steps: braking found a much lower F in ~1.5 % of steps.
+    multi_start: bool = True
+    restart_penalty: float = 1.0
+    jit: bool = False  # compile the NLP's functions with the system C compiler (~1.3x faster, ~15 s a build)
+    dmpc_parallel: str = "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
+    coupled_mode: str = "exact"  # coupling="nlp": "exact" predictor in the NLP, or its "first_order" model
+
+    def __post_init__(self):
+        for name in ("horizon", "j_max", "ipopt_max_iter"):
+            value = getattr(self, name)
+            minimum = 0 if name == "ipopt_max_iter" else 1
+            if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+                raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        positive = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi", "epsilon", "delta")
+        positive += ("d_flock", "cost_scale", "ipopt_tol", "time_limit_s")
+        non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty")
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise MPCConfigError(f"{name} must be a finite number, got {value!r}")
+            if name in positive and value <= 0:
+                raise MPCConfigError(f"{name} must be > 0, got {value!r}")
+            if name in non_negative and value < 0:
+                raise MPCConfigError(f"{name} must be >= 0, got {value!r}")
+        for name in ("warm_start", "multi_start", "jit"):
+            if not isinstance(getattr(self, name), bool):
+                raise MPCConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.dmpc_parallel not in PARALLEL_MODES:
+            raise MPCConfigError(f"dmpc_parallel must be one of {PARALLEL_MODES}, got {self.dmpc_parallel!r}")
+        if self.on_goal not in ON_GOAL_MODES:
+            raise MPCConfigError(f"on_goal must be one of {ON_GOAL_MODES}, got {self.on_goal!r}")
+        if self.coupled_mode not in COUPLED_MODES:
+            raise MPCConfigError(f"coupled_mode must be one of {COUPLED_MODES}, got {self.coupled_mode!r}")
+
+    def replace(self, **changes: Any) -> MPCConfig:
+        """A copy with ``changes`` applied (validated); unknown names raise ``MPCConfigError``."""
+        names = {f.name for f in fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise MPCConfigError(f"unknown MPC config field(s) {unknown}; choose from {sorted(names)}")
+        return MPCConfig(**{**asdict(self), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)

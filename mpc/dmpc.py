@@ -1,0 +1,152 @@
+"""Algorithm 2, IBR-based distributed MPC with the epsilon-Nash stopping rule.
+
+At iteration ``j``: predict the humans given the robots' plans of iteration ``j-1``; every moving robot ``i``
+solves its local NLP (Eq. 5) given the others' plans ``x_-i^(j-1)``; it keeps the new plan only if
+``C_i(u_i^(j), u_-i^(j-1)) <= C_i(u_i^(j-1), u_-i^(j-1)) - epsilon`` (else ``u_i^(j) = u_i^(j-1)``); the loop ends
+when every robot satisfies ``C_i(u_i^(j), u_-i^(j)) <= C_i(u_i^(j-1), u_-i^(j)) + epsilon`` or at ``j_max``.
+A robot parked on its goal does not play: its plan is braking. A failed local solve counts as a rejected plan.
+
+Parallelism. The local solves of one iteration are independent. ``dmpc_parallel="threads"`` runs them in a
+thread pool; CasADi (3.8) holds the GIL during a ``Function`` call, so on the measured problem sizes the pool
+only adds its own overhead (benchmarks/control_step.py measures both). ``"serial"`` is the default.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from mpc.cmpc import IBRResult, PredictFn, better, finite_prediction
+from mpc.config import MPCConfig
+from mpc.dynamics import braking, rollout_numpy
+from mpc.fallback import Start
+from mpc.nlp import JointNLP, LocalNLP, Solution, StepData
+
+
+def accept(new_cost: float, old_cost: float, epsilon: float) -> bool:
+    """Algorithm 2, lines 5-6: a new plan replaces the old one only if it lowers C_i by at least epsilon."""
+    return new_cost <= old_cost - epsilon
+
+
+class DMPC:
+    """Algorithm 2 for a fixed problem size; the local NLP (shared by all robots) is built once, here."""
+
+    def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int):
+        self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
+        self.local = LocalNLP(cfg, n_robots, n_humans)
+        # Only to report F_t of the final plan, the common currency of CMPC and DMPC.
+        self.joint = JointNLP(cfg, n_robots, n_humans)
+        self._pool = ThreadPoolExecutor(max_workers=n_robots) if cfg.dmpc_parallel == "threads" else None
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def _solve_all(self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]]):
+        if self._pool is None:
+            return [self.local.solve(*job) for job in jobs]
+        return list(self._pool.map(lambda job: self.local.solve(*job), jobs))
+
+    def _restart(
+        self, data: StepData, moving: np.ndarray, params: dict, sols: list[Solution]
+    ) -> tuple[list[Solution], list[Solution]]:
+        """``multi_start``: robots whose first solution still pays collision penalty solve again from braking.
+
+        Returns the better solution per robot (lower C_i) and the extra solutions.
+        """
+        cfg = self.cfg
+        brake = braking(data.states, cfg.horizon, cfg.dt, cfg.a_max)
+        redo = [
+            k
+            for k, (i, sol) in enumerate(zip(moving, sols, strict=True))
+            if not sol.success or self.local.penalty(sol.accels, params[i]) > cfg.restart_penalty
+        ]
+        extra = self._solve_all([(moving[k], params[moving[k]], brake[moving[k]], None, None) for k in redo])
+        out = list(sols)
+        for k, other in zip(redo, extra, strict=True):
+            out[k] = better(sols[k], other)
+        return out, extra
+
+    def solve(self, data: StepData, predict: PredictFn, start: Start) -> IBRResult:
+        cfg, local = self.cfg, self.local
+        t0 = time.perf_counter()
+        pred_shape = (cfg.horizon, self.n_humans, 2)
+        moving = np.flatnonzero(np.asarray(data.active, dtype=bool))
+        accels = start.accels.copy()
+        positions = rollout_numpy(data.states, accels, cfg.dt)[0]
+        lam_x = None if start.lam_x is None else start.lam_x.copy()
+        lam_g = None if start.lam_g is None else start.lam_g.copy()
+        status, converged = "ok", False
+        used, predictions, potentials = None, [], []
+        solves = solver_iterations = iterations = 0
+        for j in range(1, cfg.j_max + 1):
+            iterations = j
+            prediction = finite_prediction(predict(positions.transpose(1, 0, 2)), pred_shape)
+            if prediction is None:
+                status = "nan_prediction"
+                break
+            predictions.append(prediction)
+            # Line 4: every robot's best response to the others' plans of iteration j-1.
+            params = {i: local.params(i, data, positions, prediction) for i in moving}
+            jobs = [
+                (i, params[i], accels[i], None if lam_x is None else lam_x[i], None if lam_g is None else lam_g[i])
+                for i in moving
+            ]
+            sols: list[Solution] = self._solve_all(jobs)
+            solves += len(sols)
+            solver_iterations += sum(s.iterations for s in sols)
+            if j == 1 and cfg.multi_start and start.kind != "brake":
+                sols, extra = self._restart(data, moving, params, sols)
+                solves += len(extra)
+                solver_iterations += sum(s.iterations for s in extra)
+            # Lines 5-6: keep a new plan only if it lowers C_i(., u_-i^(j-1)) by at least epsilon.
+            new_accels = accels.copy()
+            for i, sol in zip(moving, sols, strict=True):
+                if not sol.success:
+                    status = sol.status if status == "ok" else status
+                    continue
+                # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
+                if accept(sol.cost, local.cost(accels[i], params[i]), cfg.epsilon):
+                    new_accels[i] = sol.accels
+                    if lam_x is None or lam_g is None:
+                        lam_x = np.zeros((self.n_robots, cfg.horizon, 2))
+                        lam_g = np.zeros((self.n_robots, cfg.horizon, 2))
+                    lam_x[i] = sol.lam_x.reshape(cfg.horizon, 2)
+                    lam_g[i] = sol.lam_g.reshape(cfg.horizon, 2)
+            if any(s.success for s in sols):
+                used = prediction
+            # Lines 12-16: the epsilon-Nash check against the others' new plans.
+            new_positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
+            converged = True
+            for i in moving:
+                p = local.params(i, data, new_positions, prediction)
+                converged &= local.cost(new_accels[i], p) <= local.cost(accels[i], p) + cfg.epsilon
+            accels, positions = new_accels, new_positions
+            if used is not None:
+                potentials.append(self.joint.potential(accels, data, used))
+            if converged:
+                break
+            if time.perf_counter() - t0 > cfg.time_limit_s:
+                status = "timeout" if status == "ok" else status
+                break
+        return IBRResult(
+            accels=accels,
+            positions=positions,
+            prediction=used,
+            potential=potentials[-1] if potentials else math.nan,
+            iterations=iterations,
+            solves=solves,
+            # A solved step may keep u^(0) for every robot: rejecting non-improving plans is Algorithm 2.
+            solved=used is not None,
+            converged=converged,
+            status=status,
+            predictions=tuple(predictions),
+            potentials=tuple(potentials),
+            lam_x=lam_x,
+            lam_g=lam_g,
+            solver_iterations=solver_iterations,
+        )

@@ -1,0 +1,85 @@
+"""What a control step starts from, and what it falls back to when it cannot solve.
+
+A solver failure (any IPOPT status outside ``nlp.SOLVED``), a non-finite prediction, or running out of the
+step's time budget never ends an episode. The step then applies, in order of preference:
+
+1. ``"shifted"``: the last solved plan shifted by the steps elapsed since it was solved, as long as it still has
+   actions that came out of a solve (a plan of horizon H covers H-1 further steps), clipped to Eq. 6 from the
+   current state;
+2. ``"brake"``: decelerate every velocity component as hard as ``a_max`` allows.
+
+The same shifted plan is the initial strategy ``u^(0)`` of the IBR loops and the warm start of the first
+solve (primal and dual: multipliers are shifted the same way), which is why it lives here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpc.config import MPCConfig
+from mpc.dynamics import braking, clip_to_bounds
+from mpc.nlp import StepData
+
+FALLBACK_KINDS = ("shifted", "brake")
+
+
+@dataclass(frozen=True)
+class Start:
+    """The initial strategy of a control step."""
+
+    accels: np.ndarray  # (M, H, 2) u^(0): shifted previous plan (clipped to Eq. 6) or braking
+    kind: str  # "shifted" or "brake": what applying ``accels`` means when no solve succeeds
+    lam_x: np.ndarray | None  # (M, H, 2) shifted bound multipliers of the last solve, or None (cold start)
+    lam_g: np.ndarray | None  # (M, H, 2) shifted velocity-constraint multipliers, or None
+
+
+def shift(values: np.ndarray) -> np.ndarray:
+    """Drop the first step of an ``(M, H, 2)`` array and append zeros (zero acceleration keeps the velocity)."""
+    return np.concatenate([values[:, 1:], np.zeros_like(values[:, :1])], axis=1)
+
+
+class PlanMemory:
+    """The plan applied at the previous step and how many of its actions came from a solve."""
+
+    def __init__(self, cfg: MPCConfig):
+        self.cfg = cfg
+        self.reset()
+
+    def reset(self) -> None:
+        self._plan: np.ndarray | None = None  # (M, H, 2) whose first action was applied last step
+        self._solved_actions = 0  # leading actions of _plan that came out of a solve
+        self._lam_x: np.ndarray | None = None
+        self._lam_g: np.ndarray | None = None
+
+    def start(self, data: StepData) -> Start:
+        """``u^(0)`` for this step: the previous plan shifted by one step, else braking."""
+        cfg = self.cfg
+        brake = braking(data.states, cfg.horizon, cfg.dt, cfg.a_max)
+        parked = ~np.asarray(data.active, dtype=bool)
+        if self._plan is None or self._solved_actions <= 1 or self._plan.shape[0] != data.n_robots:
+            return Start(brake, "brake", None, None)
+        accels = clip_to_bounds(data.states, shift(self._plan), cfg.dt, cfg.v_max, cfg.a_max)
+        accels[parked] = brake[parked]
+        lam_x = None if self._lam_x is None else shift(self._lam_x)
+        lam_g = None if self._lam_g is None else shift(self._lam_g)
+        return Start(accels, "shifted", lam_x, lam_g)
+
+    def commit(
+        self,
+        applied_plan: np.ndarray,
+        solved: bool,
+        lam_x: np.ndarray | None = None,
+        lam_g: np.ndarray | None = None,
+    ) -> None:
+        """Record the plan whose first action is applied now; ``solved``: it came out of this step's solves."""
+        if solved:
+            self._solved_actions = self.cfg.horizon
+            self._lam_x, self._lam_g = lam_x, lam_g
+        else:
+            # A fallback plan is the shifted previous one (one solved action fewer) or braking (none).
+            self._solved_actions = max(self._solved_actions - 1, 0)
+            if self._lam_x is not None:
+                self._lam_x, self._lam_g = shift(self._lam_x), shift(self._lam_g)
+        self._plan = np.array(applied_plan, dtype=float)

@@ -1,0 +1,319 @@
+"""The joint NLP (Eq. 17, minimise the potential F) and the per-robot local NLP (Eq. 5, minimise C_i).
+
+Built once per problem size (robots M, humans N_h) as CasADi SX graphs with parameters for everything that
+changes between solves: current states, previously applied actions, goals, per-pair flocking weights, the
+humans' predicted positions and (local NLP) the other robots' planned positions. Single shooting: the only
+decision variables are the accelerations, whose bounds (Eq. 6) are simple bounds; the velocity bounds (Eq. 6)
+are linear constraints ``-v_max <= v_t + dt cumsum(a) <= v_max``. A robot that is parked on its goal keeps
+its place in the NLP (same structure for every step) with its controls fixed to braking through equal lower
+and upper bounds, which IPOPT removes from the problem (``fixed_variable_treatment = make_parameter``).
+
+Array layout: a plan is ``(M, H, 2)`` accelerations, row-major flattened into the decision vector; the
+humans' predictions ``(H, N_h, 2)`` and the other robots' positions ``(M-1, H, 2)`` travel row-major
+flattened. ``reshape(v, 2, -1)`` (column-major) turns each of those into the ``(2, .)`` blocks of mpc/costs.py.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from mpc import costs
+from mpc.config import MPCConfig
+from mpc.dynamics import braking
+
+# IPOPT statuses after which the returned point is a solution we use.
+SOLVED = frozenset({"Solve_Succeeded", "Solved_To_Acceptable_Level"})
+
+
+@dataclass(frozen=True)
+class StepData:
+    """What the controller knows at time t, besides the predictions."""
+
+    states: np.ndarray  # (M, 4) [s_x, s_y, v_x, v_y], m and m/s
+    last_actions: np.ndarray  # (M, 2) m/s^2, applied at t-1 (Eq. 10)
+    goals: np.ndarray  # (M, 2) m
+    active: np.ndarray  # (M,) bool; False: controls pinned to braking (a robot parked on its goal)
+    arrived: np.ndarray | None = None  # (M,) bool, has reached its goal: no flocking with it; None: all False
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.states)
+
+    def floc_weights(self, w_floc: float) -> np.ndarray:
+        """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
+        has arrived or is pinned (a parked robot must not pull the flock, nor be pulled)."""
+        m = self.n_robots
+        free = np.asarray(self.active, dtype=bool)
+        if self.arrived is not None:
+            free = free & ~np.asarray(self.arrived, dtype=bool)
+        return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
+
+
+@dataclass(frozen=True)
+class Solution:
+    """One IPOPT solve."""
+
+    accels: np.ndarray  # (M, H, 2) joint, or (H, 2) local
+    cost: float  # F (joint) or C_i (local), unscaled
+    status: str  # IPOPT return status
+    success: bool  # status in SOLVED and the result is finite
+    iterations: int  # IPOPT iterations
+    lam_x: np.ndarray = field(repr=False)  # multipliers, for the next warm start
+    lam_g: np.ndarray = field(repr=False)
+
+
+def ipopt_options(cfg: MPCConfig, warm: bool) -> dict:
+    """IPOPT through CasADi: silent, exact Hessian, tolerances and limits from the config.
+
+    ``warm``: start from given primal and dual values (``warm_start_init_point``) with a small barrier
+    parameter, since the shifted previous solution is already close to optimal.
+    """
+    opts = {
+        "print_time": False,
+        # Multipliers of the parameters are never used; skipping them also avoids differentiating the
+        # reference trajectory (Eq. 8), whose norm is not differentiable once the reference sits on the goal.
+        "calc_lam_p": False,
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "ipopt.tol": cfg.ipopt_tol,
+        "ipopt.acceptable_tol": max(1e2 * cfg.ipopt_tol, 1e-4),
+        "ipopt.max_iter": cfg.ipopt_max_iter,
+        "ipopt.max_wall_time": cfg.time_limit_s,
+    }
+    if cfg.jit:
+        opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}})
+    if warm:
+        opts.update(
+            {
+                "ipopt.warm_start_init_point": "yes",
+                "ipopt.mu_init": 1e-3,
+                "ipopt.warm_start_bound_push": 1e-6,
+                "ipopt.warm_start_mult_bound_push": 1e-6,
+            }
+        )
+    return opts
+
+
+def _blocks(flat: ca.SX, n_blocks: int, horizon: int) -> list[ca.SX]:
+    """``n_blocks`` ``(2, H)`` matrices from a row-major flat ``(n_blocks, H, 2)`` vector."""
+    mat = ca.reshape(flat, 2, n_blocks * horizon)
+    return [mat[:, b * horizon : (b + 1) * horizon] for b in range(n_blocks)]
+
+
+class _Solver:
+    """One IPOPT instance pair (cold start, warm start) for an NLP, both built at construction.
+
+    Built eagerly so that the first control steps do not pay for it. Separate ``_Solver`` objects of the same
+    NLP can run in separate threads (CasADi releases the GIL during a call); one object must not be called
+    from two threads at once (IPOPT's memory is per instance: that segfaults).
+    """
+
+    def __init__(self, name: str, nlp: dict, cfg: MPCConfig):
+        self.cfg = cfg
+        self._cold = ca.nlpsol(name, "ipopt", nlp, ipopt_options(cfg, warm=False))
+        self._warm = ca.nlpsol(name, "ipopt", nlp, ipopt_options(cfg, warm=True)) if cfg.warm_start else None
+
+    def solve(self, x0, p, lbx, ubx, lbg, ubg, lam_x0=None, lam_g0=None) -> tuple[dict, dict]:
+        args = {"x0": x0, "p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+        solver = self._cold
+        if self._warm is not None and lam_x0 is not None:
+            args["lam_x0"] = np.ravel(lam_x0)
+            args["lam_g0"] = np.ravel(lam_g0)
+            solver = self._warm
+        out = solver(**args)
+        return out, solver.stats()
+
+
+def _solution(out: dict, stats: dict, cost_scale: float, shape: tuple[int, ...]) -> Solution:
+    accels = np.asarray(out["x"]).reshape(shape)
+    cost = float(out["f"]) / cost_scale
+    status = str(stats["return_status"])
+    success = status in SOLVED and bool(np.all(np.isfinite(accels))) and math.isfinite(cost)
+    return Solution(
+        accels=accels,
+        cost=cost,
+        status=status,
+        success=success,
+        iterations=int(stats["iter_count"]),
+        lam_x=np.asarray(out["lam_x"]).ravel(),
+        lam_g=np.asarray(out["lam_g"]).ravel(),
+    )
+
+
+class FixedPredictions:
+    """The humans' predicted positions are parameters: Eq. 17 as Algorithm 1 solves it."""
+
+    def __init__(self, horizon: int, n_humans: int):
+        self.n_params = 2 * horizon * n_humans
+
+    def humans(self, p: ca.SX, robots_future: ca.SX) -> ca.SX:
+        return p
+
+
+class JointNLP:
+    """Eq. 17: ``min_u F(u, s_H)`` over all robots' controls.
+
+    ``humans_model`` says where the humans' positions ``s_H`` come from: by default they are parameters (the
+    predictions of an IBR iteration); mpc/coupled.py passes models that compute them inside the NLP from the
+    robots' planned positions. Its parameters (``extra`` below) close the parameter vector.
+    """
+
+    def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int, humans_model=None):
+        self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
+        h, m = cfg.horizon, n_robots
+        self.n_pairs = m * (m - 1) // 2
+        model = humans_model if humans_model is not None else FixedPredictions(h, n_humans)
+        u = ca.SX.sym("u", 2 * h * m)
+        p_state = ca.SX.sym("states", 4 * m)
+        p_last = ca.SX.sym("last_actions", 2 * m)
+        p_goal = ca.SX.sym("goals", 2 * m)
+        p_floc = ca.SX.sym("floc_weights", self.n_pairs)
+        p_extra = ca.SX.sym("humans_model", model.n_params)
+        p = ca.vertcat(p_state, p_last, p_goal, p_floc, p_extra)
+        states = ca.reshape(p_state, 4, m)
+        lasts = ca.reshape(p_last, 2, m)
+        goals = ca.reshape(p_goal, 2, m)
+        tracks = [
+            costs.make_track(states[:, i], a, lasts[:, i], goals[:, i], cfg.dt)
+            for i, a in enumerate(_blocks(u, m, h))
+        ]
+        # Robots' planned positions (H, M, 2) row-major: column h * M + m of a (2, H * M) matrix.
+        robots_future = ca.vec(ca.horzcat(*[t.positions[:, k] for k in range(h) for t in tracks]))
+        humans_flat = model.humans(p_extra, robots_future)
+        humans = ca.reshape(humans_flat, 2, h * n_humans)
+        F = costs.potential(tracks, p_floc, humans, n_humans, cfg)
+        penalty = costs.collision_penalty(tracks, humans, n_humans, cfg)
+        g = ca.vertcat(*[ca.vec(t.velocities) for t in tracks])
+        self.penalty_fn = ca.Function("penalty", [u, p], [penalty], ["u", "p"], ["penalty"])
+        self.potential_fn = ca.Function("F", [u, p], [F], ["u", "p"], ["F"])
+        self.humans_fn = ca.Function("humans", [u, p], [humans_flat], ["u", "p"], ["humans"])
+        nlp = {"x": u, "p": p, "f": cfg.cost_scale * F, "g": g}
+        self._solver = _Solver(f"joint_{m}r_{n_humans}h", nlp, cfg)
+
+    def params(self, data: StepData, extra: np.ndarray) -> np.ndarray:
+        """The parameter vector for ``data``; ``extra``: the humans model's parameters (by default the
+        predictions ``(H, N_h, 2)``)."""
+        return np.concatenate(
+            [
+                data.states.ravel(),
+                data.last_actions.ravel(),
+                data.goals.ravel(),
+                data.floc_weights(self.cfg.w_floc),
+                np.asarray(extra, dtype=float).ravel(),
+            ]
+        )
+
+    def bounds(self, data: StepData) -> tuple[np.ndarray, np.ndarray]:
+        """Acceleration bounds (Eq. 6); a parked robot's controls are pinned to braking."""
+        cfg = self.cfg
+        lbx = np.full((self.n_robots, cfg.horizon, 2), -cfg.a_max)
+        ubx = np.full((self.n_robots, cfg.horizon, 2), cfg.a_max)
+        parked = ~np.asarray(data.active, dtype=bool)
+        if parked.any():
+            brake = braking(data.states[parked], cfg.horizon, cfg.dt, cfg.a_max)
+            lbx[parked] = brake
+            ubx[parked] = brake
+        return lbx.ravel(), ubx.ravel()
+
+    def potential(self, accels: np.ndarray, data: StepData, extra: np.ndarray) -> float:
+        """F (Eq. 16) of the plan ``accels`` ``(M, H, 2)``."""
+        return float(self.potential_fn(np.ravel(accels), self.params(data, extra)))
+
+    def penalty(self, accels: np.ndarray, data: StepData, extra: np.ndarray) -> float:
+        """The collision part of F (robot-human and robot-robot penalties, weighted) for ``accels``."""
+        return float(self.penalty_fn(np.ravel(accels), self.params(data, extra)))
+
+    def humans(self, accels: np.ndarray, data: StepData, extra: np.ndarray) -> np.ndarray:
+        """The humans' positions ``(H, N_h, 2)`` the NLP sees for the plan ``accels``."""
+        flat = np.asarray(self.humans_fn(np.ravel(accels), self.params(data, extra)))
+        return flat.reshape(self.cfg.horizon, self.n_humans, 2)
+
+    def solve(
+        self,
+        data: StepData,
+        extra: np.ndarray,
+        accels0: np.ndarray,
+        lam_x0: np.ndarray | None = None,
+        lam_g0: np.ndarray | None = None,
+    ) -> Solution:
+        """Solve from the initial guess ``accels0`` ``(M, H, 2)`` (and multipliers, when warm-starting)."""
+        lbx, ubx = self.bounds(data)
+        x0 = np.clip(np.ravel(accels0), lbx, ubx)
+        v = self.cfg.v_max
+        out, stats = self._solver.solve(x0, self.params(data, extra), lbx, ubx, -v, v, lam_x0, lam_g0)
+        return _solution(out, stats, self.cfg.cost_scale, (self.n_robots, self.cfg.horizon, 2))
+
+
+class LocalNLP:
+    """Eq. 5 for one robot: ``min_{u_i} C_i(u_i, u_-i)`` with the other robots' planned positions given.
+
+    The same instance serves every robot: who "i" is lives entirely in the parameters.
+    """
+
+    def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int):
+        self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
+        h, n_others = cfg.horizon, n_robots - 1
+        u = ca.SX.sym("u", 2 * h)
+        p_state = ca.SX.sym("state", 4)
+        p_last = ca.SX.sym("last_action", 2)
+        p_goal = ca.SX.sym("goal", 2)
+        p_floc = ca.SX.sym("floc_weights", n_others)
+        p_others = ca.SX.sym("others", 2 * h * n_others)
+        p_humans = ca.SX.sym("humans", 2 * h * n_humans)
+        p = ca.vertcat(p_state, p_last, p_goal, p_floc, p_others, p_humans)
+        track = costs.make_track(p_state, ca.reshape(u, 2, h), p_last, p_goal, cfg.dt)
+        others = _blocks(p_others, n_others, h)
+        humans = ca.reshape(p_humans, 2, h * n_humans)
+        weights = [p_floc[k] for k in range(n_others)]
+        C = costs.robot_cost(track, others, weights, humans, n_humans, cfg)
+        penalty = cfg.w_coll * costs.human_collision_cost(track.positions, track.velocities, humans, n_humans, cfg)
+        for positions_j in others:
+            penalty = penalty + cfg.w_coll * costs.robot_collision_cost(track.positions, positions_j, cfg)
+        g = ca.vec(track.velocities)
+        self.cost_fn = ca.Function("C", [u, p], [C], ["u", "p"], ["C"])
+        self.penalty_fn = ca.Function("penalty", [u, p], [penalty], ["u", "p"], ["penalty"])
+        nlp = {"x": u, "p": p, "f": cfg.cost_scale * C, "g": g}
+        # One IPOPT instance per robot, so that DMPC may run the robots' solves in threads.
+        self._solvers = [_Solver(f"local_{n_robots}r_{n_humans}h_{i}", nlp, cfg) for i in range(n_robots)]
+
+    def params(self, i: int, data: StepData, positions: np.ndarray, humans: np.ndarray) -> np.ndarray:
+        """Parameters for robot ``i`` given every robot's planned positions ``(M, H, 2)`` (row ``i`` unused)."""
+        others = [j for j in range(self.n_robots) if j != i]
+        floc = data.floc_weights(self.cfg.w_floc)
+        weights = [floc[costs.pair_index(i, j, self.n_robots)] for j in others]
+        return np.concatenate(
+            [
+                data.states[i],
+                data.last_actions[i],
+                data.goals[i],
+                np.asarray(weights, dtype=float),
+                np.asarray(positions, dtype=float)[others].ravel(),
+                np.asarray(humans, dtype=float).ravel(),
+            ]
+        )
+
+    def cost(self, accels_i: np.ndarray, params: np.ndarray) -> float:
+        """C_i of robot ``i``'s plan ``accels_i`` ``(H, 2)`` with ``params`` from :meth:`params`."""
+        return float(self.cost_fn(np.ravel(accels_i), params))
+
+    def penalty(self, accels_i: np.ndarray, params: np.ndarray) -> float:
+        """The collision part of C_i (weighted robot-human and robot-robot penalties)."""
+        return float(self.penalty_fn(np.ravel(accels_i), params))
+
+    def solve(
+        self,
+        i: int,
+        params: np.ndarray,
+        accels0: np.ndarray,
+        lam_x0: np.ndarray | None = None,
+        lam_g0: np.ndarray | None = None,
+    ) -> Solution:
+        """Robot ``i``'s solve (on its own IPOPT instance) with ``params`` from :meth:`params`."""
+        cfg = self.cfg
+        x0 = np.clip(np.ravel(accels0), -cfg.a_max, cfg.a_max)
+        out, stats = self._solvers[i].solve(x0, params, -cfg.a_max, cfg.a_max, -cfg.v_max, cfg.v_max, lam_x0, lam_g0)
+        return _solution(out, stats, cfg.cost_scale, (cfg.horizon, 2))

@@ -1,0 +1,208 @@
+"""The closed loop: scenario -> (controller -> simulator step) until the episode ends -> metrics.
+
+Controllers handle their own failures (a solver that fails falls back inside the controller and says so in
+``ControlOutput.fallback``); anything that escapes a controller or an observer is a bug and propagates with
+its traceback.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import Counter
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Final
+
+import numpy as np
+
+from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
+from pipelines.controllers import Controller, ControllerSpec, EpisodeObserver, make_controller
+
+DEFAULT_ENV: Final[EnvConfig] = EnvConfig()
+
+# Controllers that use no pedestrian predictor: their results carry predictor None.
+PREDICTOR_FREE: Final[frozenset[str]] = frozenset({"straight", "orca"})
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One finished episode: who drove, what happened, what it cost."""
+
+    seed: int
+    scenario: str
+    n_humans: int
+    n_robots: int
+    controller: str
+    predictor: str | None
+    metrics: EpisodeMetrics
+    robot_positions: np.ndarray  # (T+1, M, 2) m
+    human_positions: np.ndarray  # (T+1, N, 2) m
+    robot_goals: np.ndarray  # (M, 2) m
+    human_goals: np.ndarray  # (N, 2) m
+    solve_times_s: np.ndarray  # (T,) s, wall time of each control step
+    statuses: tuple[str, ...]  # (T,) solver status per control step
+    fallbacks: tuple[str | None, ...]  # (T,) None or the fallback used
+    iterations: np.ndarray  # (T,) int, IBR iterations per control step
+
+    def record(self) -> dict[str, Any]:
+        """A JSON-ready summary of the episode (no trajectories)."""
+        ms = self.solve_times_s * 1e3
+        return {
+            "seed": self.seed,
+            "scenario": self.scenario,
+            "n_humans": self.n_humans,
+            "n_robots": self.n_robots,
+            "controller": self.controller,
+            "predictor": self.predictor,
+            "metrics": self.metrics.as_dict(),
+            "solve_time_median_ms": float(np.median(ms)) if ms.size else None,
+            "solve_time_max_ms": float(ms.max()) if ms.size else None,
+            "iterations_mean": float(self.iterations.mean()) if self.iterations.size else None,
+            "statuses": dict(Counter(self.statuses)),
+            "fallbacks": dict(Counter(f for f in self.fallbacks if f is not None)),
+        }
+
+
+def _predictor_name(controller: Controller) -> str | None:
+    """The predictor a controller exposes as ``predictor`` (a name, or an object with a ``name``), or None."""
+    predictor = getattr(controller, "predictor", None)
+    if predictor is None or isinstance(predictor, str):
+        return predictor
+    name = getattr(predictor, "name", None)
+    return name if isinstance(name, str) else None
+
+
+def run_episode(
+    controller: Controller,
+    *,
+    seed: int,
+    scenario: str,
+    n_humans: int,
+    n_robots: int = 3,
+    env_config: EnvConfig = DEFAULT_ENV,
+    observers: Sequence[EpisodeObserver] = (),
+    meta: Mapping[str, Any] | None = None,
+) -> EpisodeResult:
+    """Run one episode to its end (every robot at its goal, or the time limit).
+
+    The meta given to ``on_reset`` holds seed, scenario, n_humans, n_robots, controller, predictor (from
+    ``meta``, else from the controller's ``predictor`` attribute), predictor_sha256 (None unless given in
+    ``meta``) and config (the environment's settings); entries of ``meta`` are added and take precedence.
+    """
+    env = CrowdEnv(env_config)
+    obs = env.reset(seed, scenario, n_humans, n_robots)
+    controller.reset(obs)
+    full_meta: dict[str, Any] = {
+        "seed": seed,
+        "scenario": scenario,
+        "n_humans": n_humans,
+        "n_robots": n_robots,
+        "controller": controller.name,
+        "predictor": _predictor_name(controller),
+        "predictor_sha256": None,
+        "config": {"env": dataclasses.asdict(env_config)},
+    }
+    full_meta.update(meta or {})
+    for observer in observers:
+        observer.on_reset(obs, full_meta)
+
+    solve_times: list[float] = []
+    statuses: list[str] = []
+    fallbacks: list[str | None] = []
+    iterations: list[int] = []
+    done = False
+    while not done:
+        out = controller.act(obs)
+        next_obs, done, _ = env.step(out.accelerations)
+        solve_times.append(float(out.solve_time_s))
+        statuses.append(str(out.status))
+        fallbacks.append(out.fallback)
+        iterations.append(int(out.iterations))
+        for observer in observers:
+            observer.on_step(obs, out, next_obs)
+        obs = next_obs
+
+    traj = env.trajectory()
+    result = EpisodeResult(
+        seed=seed,
+        scenario=scenario,
+        n_humans=n_humans,
+        n_robots=n_robots,
+        controller=controller.name,
+        predictor=full_meta["predictor"],
+        metrics=episode_metrics(traj),
+        robot_positions=traj.robot_positions,
+        human_positions=traj.human_positions,
+        robot_goals=traj.robot_goals,
+        human_goals=traj.human_goals,
+        solve_times_s=np.asarray(solve_times, dtype=float),
+        statuses=tuple(statuses),
+        fallbacks=tuple(fallbacks),
+        iterations=np.asarray(iterations, dtype=int),
+    )
+    for observer in observers:
+        observer.on_end(result)
+    return result
+
+
+def run_episodes(
+    spec: ControllerSpec,
+    *,
+    episodes: int,
+    seed: int,
+    scenario: str,
+    n_humans: int,
+    n_robots: int = 3,
+    observers_factory: Callable[[], Iterable[EpisodeObserver]] | None = None,
+    progress: bool = True,
+    env_config: EnvConfig = DEFAULT_ENV,
+    meta: Mapping[str, Any] | None = None,
+) -> list[EpisodeResult]:
+    """``episodes`` episodes with one controller built once from ``spec``; episode ``i`` uses ``seed + i``.
+
+    ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file).
+    """
+    from tqdm import tqdm
+
+    controller = make_controller(spec)
+    run_meta = {"predictor": None if spec.controller in PREDICTOR_FREE else spec.predictor, **(meta or {})}
+    results: list[EpisodeResult] = []
+    bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)
+    for i in bar:
+        observers = tuple(observers_factory()) if observers_factory is not None else ()
+        result = run_episode(
+            controller,
+            seed=seed + i,
+            scenario=scenario,
+            n_humans=n_humans,
+            n_robots=n_robots,
+            env_config=env_config,
+            observers=observers,
+            meta=run_meta,
+        )
+        results.append(result)
+        rate = 100.0 * sum(r.metrics.success for r in results) / len(results)
+        bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
+    return results
+
+
+def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+    """Episode metrics (``crowdsim.metrics.aggregate``) and control-step costs over all steps of all episodes.
+
+    Solve times in ms per control step: median, p95, max; IBR iterations: mean and max; fallback steps.
+    """
+    out: dict[str, Any] = dict(aggregate([r.metrics for r in results]))
+    ms = np.concatenate([r.solve_times_s for r in results]) * 1e3
+    its = np.concatenate([r.iterations for r in results])
+    has = ms.size > 0
+    out["control_steps"] = int(ms.size)
+    out["solve_time_median_ms"] = float(np.median(ms)) if has else math.nan
+    out["solve_time_p95_ms"] = float(np.percentile(ms, 95)) if has else math.nan
+    out["solve_time_max_ms"] = float(ms.max()) if has else math.nan
+    out["iterations_mean"] = float(its.mean()) if has else math.nan
+    out["iterations_max"] = int(its.max()) if has else 0
+    out["fallback_steps"] = int(sum(f is not None for r in results for f in r.fallbacks))
+    out["statuses"] = dict(Counter(s for r in results for s in r.statuses))
+    return out

@@ -1,0 +1,151 @@
+"""``crowdmpc data``: prepare TrajNet++ scenes from raw BIWI EWAP, dataset statistics, synthetic ORCA data."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from pipelines.errors import PipelineError
+
+EPILOG = """examples:
+  crowdmpc data prepare --raw ../shared/data/raw_ewap --out data/prepared
+  crowdmpc data stats data/prepared
+  crowdmpc data synth --out data/synth/orca_circle.ndjson --episodes 100 --humans 7 --seed 0 --scenario circle
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "data",
+        help="prepare, inspect and synthesise TrajNet++ datasets",
+        description="Prepare TrajNet++ ndjson scenes from raw BIWI EWAP annotations, print dataset "
+        "statistics, or synthesise scenes from ORCA crowds.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    actions = parser.add_subparsers(dest="data_command", metavar="ACTION", required=True)
+
+    prepare = actions.add_parser(
+        "prepare",
+        help="raw EWAP obsmat.txt -> TrajNet++ train/val/test ndjson",
+        description="Convert raw_ewap/seq_eth and seq_hotel to TrajNet++ scenes (21 steps, a start every 2 "
+        "steps) with a temporal 70/10/20 split per sequence, and check the hotel conversion against the "
+        "official TrajNet++ file when it lies beside the raw data.",
+        epilog="example:\n  crowdmpc data prepare --raw ../shared/data/raw_ewap --out data/prepared\n",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    prepare.add_argument(
+        "--raw", required=True, type=Path, help="raw_ewap directory (or the directory holding it)"
+    )
+    prepare.add_argument(
+        "--out", required=True, type=Path, help="output directory for {train,val,test}/*.ndjson"
+    )
+    prepare.add_argument(
+        "--no-check", action="store_true", help="skip the comparison with reference conversions"
+    )
+    prepare.add_argument(
+        "--keep-all", action="store_true", help="keep every scene (TrajNet++ keeps only 10%% of static ones)"
+    )
+    prepare.add_argument(
+        "--no-tags",
+        action="store_true",
+        help="skip the TrajNet++ categorisation (a Kalman fit per scene): faster, untagged, nothing dropped",
+    )
+    prepare.add_argument(
+        "--seed", type=int, default=42, help="seed of the static-scene acceptance (default 42)"
+    )
+    prepare.set_defaults(func=run_prepare)
+
+    stats = actions.add_parser(
+        "stats",
+        help="scenes, tracks, pedestrians and agents per scene of every ndjson file in a directory",
+        description="Print a table of scenes, tracks, pedestrians and agents per scene (min/mean/max), "
+        "one row per file.",
+        epilog="example:\n  crowdmpc data stats data/prepared\n",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    stats.add_argument("directory", type=Path, help="directory searched recursively for *.ndjson")
+    stats.set_defaults(func=run_stats)
+
+    synth = actions.add_parser(
+        "synth",
+        help="simulate ORCA crowds and write them as TrajNet++ scenes",
+        description="Run seeded ORCA crowd episodes (CrowdNav-like scenarios) and write TrajNet++ ndjson "
+        "scenes (2.5 Hz, 21-step scenes), e.g. to train a predictor on the pedestrians it meets in closed "
+        "loop.",
+        epilog="example:\n  crowdmpc data synth --out data/synth/orca.ndjson --episodes 100 --humans 7 "
+        "--seed 0\n",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    synth.add_argument("--out", required=True, type=Path, help="ndjson file to write")
+    synth.add_argument("--episodes", required=True, type=int, help="number of episodes")
+    synth.add_argument("--humans", required=True, type=int, help="humans per episode")
+    synth.add_argument("--seed", required=True, type=int, help="seed of episode 0 (episode i uses seed + i)")
+    synth.add_argument("--scenario", choices=("circle", "perpendicular"), default="circle")
+    synth.add_argument(
+        "--with-robots", action="store_true", help="include robots (driven straight) in the crowd"
+    )
+    synth.set_defaults(func=run_synth)
+
+
+def run_prepare(args: argparse.Namespace) -> int:
+    from predictors.data.locate import raw_ewap_dir
+    from predictors.data.prepare import TRAJNETPP_ACCEPTANCE, default_references, prepare_ewap
+
+    raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
+    if raw is None:
+        raise PipelineError(
+            f"--raw {args.raw}: expected a BIWI EWAP directory holding seq_eth/obsmat.txt and "
+            "seq_hotel/obsmat.txt"
+        )
+    references = {} if args.no_check else default_references(raw)
+    manifest = prepare_ewap(
+        raw,
+        args.out,
+        acceptance=None if args.keep_all else TRAJNETPP_ACCEPTANCE,
+        categorize_scenes=not args.no_tags,
+        seed=args.seed,
+        references=references,
+        progress=sys.stderr.isatty(),
+        log=lambda msg: print(msg, flush=True),
+    )
+    if not args.no_check and "biwi_hotel" not in manifest["self_check"]:
+        print(
+            "self-check skipped: no official biwi_hotel.ndjson found at "
+            f"{raw.resolve().parent / 'trajnetpp_vita/train/real_data'}"
+        )
+    print(f"wrote {args.out / 'manifest.json'}")
+    for name, check in manifest["self_check"].items():
+        print(
+            f"{name} check against the {check['label']} file: {check['reproduced']} / "
+            f"{check['reference_scenes']} scenes reproduced exactly"
+        )
+    return 0
+
+
+def run_stats(args: argparse.Namespace) -> int:
+    from predictors.data.stats import file_stats, format_table, ndjson_files
+
+    files = ndjson_files(args.directory)
+    print(format_table([file_stats(f) for f in files], root=args.directory))
+    return 0
+
+
+def run_synth(args: argparse.Namespace) -> int:
+    if args.episodes < 1 or args.humans < 1:
+        raise PipelineError(f"--episodes and --humans must be >= 1, got {args.episodes} and {args.humans}")
+    try:
+        from pipelines.synth import synthesize
+    except ModuleNotFoundError as exc:
+        if exc.name != "pipelines.synth":
+            raise
+        raise PipelineError(
+            "synthetic data needs pipelines/synth.py (the crowd simulator), which is not installed"
+        ) from None
+    summary = synthesize(
+        args.out, args.episodes, args.humans, args.seed, scenario=args.scenario, with_robots=args.with_robots
+    )
+    for key, value in summary.items():
+        print(f"{key}: {value}")
+    return 0

@@ -1,0 +1,75 @@
+"""``crowdmpc evaluate``: TrajNet++ metrics (ADE, FDE, Col-I, Col-II, top-k) of a predictor on a split."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+EPILOG = """examples:
+  crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
+  crowdmpc evaluate --predictor constant_velocity --data-dir data/prepared --protocol loo --json cv_loo.json
+
+protocols (data/README.md):
+  paper  train = ETH + Hotel train splits, val = their val splits, test = ETH test split
+  loo    train = zara01, zara03, students001, students003 (TrajNet++) + Hotel train split,
+         val = Hotel val split, test = the same ETH test split
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "evaluate",
+        help="ADE/FDE/Col-I/Col-II of a predictor on TrajNet++ scenes",
+        description="Evaluate a registered predictor on TrajNet++ scenes: 9 observed -> 12 predicted steps, "
+        "metrics of the primary pedestrian per file and overall.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--predictor", required=True, help="registered predictor or model-zoo name")
+    parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
+    parser.add_argument(
+        "--dataset", default="biwi_eth", choices=("biwi_eth", "biwi_hotel"), help="test sequence"
+    )
+    parser.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to score")
+    parser.add_argument(
+        "--protocol", default="paper", choices=("paper", "loo"), help="which files form the split"
+    )
+    parser.add_argument(
+        "--top-k", type=int, default=None, metavar="K", help="top-K ADE/FDE for sampling models"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed for sampling models (default 0)")
+    parser.add_argument(
+        "--json", type=Path, default=None, metavar="FILE", help="also write the results as JSON"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from predictors.data.locate import prepared_dir, protocol_files
+    from predictors.evaluate import EvalConfig, evaluate, format_table
+    from predictors.registry import load_predictor
+
+    config = EvalConfig(top_k=args.top_k, seed=args.seed)
+    predictor = load_predictor(args.predictor)
+    files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
+    root = prepared_dir(args.data_dir)
+    result = evaluate(predictor, files[args.split], config, progress=not args.no_progress, root=root)
+    result.update(
+        protocol=args.protocol,
+        dataset=args.dataset,
+        split=args.split,
+        data_dir=str(root),
+        files_evaluated=[str(p) for p in files[args.split]],
+    )
+    print(f"protocol {args.protocol}, split {args.split}, data {root}")
+    print(format_table(result))
+    if args.top_k is not None and result["top_k"] is None:
+        print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0

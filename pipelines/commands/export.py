@@ -1,0 +1,65 @@
+"""``crowdmpc export``: a predictor's symbolic twin as a saved CasADi Function (``Function.save``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pipelines.errors import PipelineError
+
+EPILOG = """examples:
+  crowdmpc export social_lstm_soft_eth --out social_lstm_soft_eth.casadi --humans 7 --robots 3 --horizon 4
+  python -c "import casadi; f = casadi.Function.load('social_lstm_soft_eth.casadi'); print(f)"
+
+The function is built for fixed sizes and does recursive coupled prediction over the horizon:
+  input  0 "context"        (context_size, 1)  predictor.encode(history, mask, humans): the observed past
+                                               encoded numerically (LSTM states after the observed steps,
+                                               current positions, the humans' first predicted step, who is
+                                               present); agents ordered humans, then robots
+  input  1 "robots_future"  (H*M*2, 1)         the robots' planned positions at t+1..t+H, (H, M, 2) row-major
+  output 0 "humans_future"  (H*N_h*2, 1)       the humans' predicted positions at t+1..t+H,
+                                               (H, N_h, 2) row-major
+At every step the humans' predictions are fed back and the robots' positions come from the plan, so the
+output depends on the plan (for social pooling, through the neighbours' positions and hidden states).
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "export",
+        help="save a predictor's CasADi function (recursive coupled prediction) to a file",
+        description="Build predictor NAME's CasADi twin for fixed numbers of humans, robots and horizon "
+        "steps "
+        "and save it with casadi.Function.save.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("name", help="registered predictor or model-zoo name")
+    parser.add_argument("--out", required=True, type=Path, help="output file (.casadi)")
+    parser.add_argument("--humans", type=int, default=7, help="number of humans N_h (default 7)")
+    parser.add_argument("--robots", type=int, default=3, help="number of robots M (default 3)")
+    parser.add_argument("--horizon", type=int, default=4, help="prediction horizon H (default 4, Table I)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from predictors.registry import load_predictor
+
+    if args.humans < 1 or args.robots < 0 or args.horizon < 1:
+        raise PipelineError(
+            "need --humans >= 1, --robots >= 0, --horizon >= 1, "
+            f"got {args.humans}, {args.robots}, {args.horizon}"
+        )
+    predictor = load_predictor(args.name)
+    function = predictor.to_casadi(args.humans, args.robots, args.horizon)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    function.save(str(args.out))
+    size = predictor.context_size(args.humans, args.robots)
+    print(
+        f"wrote {args.out}: {function.name()} for {args.humans} humans, {args.robots} robots, "
+        f"horizon {args.horizon}"
+    )
+    print(f"  input  context        ({size}, 1)  from {args.name}.encode(history, mask, humans)")
+    print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")
+    print(f"  output humans_future  ({args.horizon * args.humans * 2}, 1)  (H, N_h, 2) row-major")
+    return 0

@@ -1,0 +1,144 @@
+"""``crowdmpc review``: read MCAP recordings of closed-loop runs back (summary, plots, animation, check)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.review import Recording
+
+EPILOG = """examples:
+  crowdmpc review runs/                                   # one row per episode, then rates over them
+  crowdmpc review runs/circle_seed000000.mcap --plot p.png --times 0,4,8 --animate a.gif
+  crowdmpc review runs/a.mcap --compare other/a.mcap --plot overlay.png
+  crowdmpc review runs/ --check --json review.json        # validate every message against its schema
+
+A file whose run was killed reads up to its last complete chunk, with a warning. Exit code 1 when --check
+finds invalid messages.
+"""
+
+MAX_ERRORS_SHOWN = 20
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "review",
+        help="summarize, plot, animate, compare and check MCAP recordings",
+        description="Review closed-loop runs recorded with `crowdmpc simulate --record DIR`.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("path", type=Path, help="an .mcap file, or a folder of them (aggregate table)")
+    parser.add_argument(
+        "--plot", type=Path, metavar="PNG", help="trajectories with plans (overlay with --compare)"
+    )
+    parser.add_argument(
+        "--times", type=_times, metavar="T1,T2,..", help="simulated times (s) of the plans drawn by --plot"
+    )
+    parser.add_argument("--animate", type=Path, metavar="GIF|MP4", help="the episode as an animation")
+    parser.add_argument(
+        "--compare", type=Path, metavar="OTHER.mcap", help="side-by-side metrics with this run"
+    )
+    parser.add_argument("--check", action="store_true", help="validate every message against its schema")
+    parser.add_argument("--json", type=Path, metavar="FILE", help="also write the summary as JSON")
+    parser.set_defaults(func=run)
+
+
+def _times(text: str) -> list[float]:
+    try:
+        times = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected seconds separated by commas, e.g. 0,4,8; got {text!r}"
+        ) from None
+    if not times or any(t < 0 for t in times):
+        raise argparse.ArgumentTypeError(f"expected non-negative seconds, e.g. 0,4,8; got {text!r}")
+    return times
+
+
+def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
+    from pipelines.review import check_recording
+
+    failed = 0
+    for rec in recordings:
+        checked, errors = check_recording(rec)
+        report.setdefault("check", {})[str(rec.path)] = {"messages": checked, "errors": errors}
+        verdict = "ok" if not errors else f"{len(errors)} invalid"
+        print(f"check {rec.path}: {checked} messages, {verdict}")
+        for line in errors[:MAX_ERRORS_SHOWN]:
+            print(f"  {line}")
+        if len(errors) > MAX_ERRORS_SHOWN:
+            print(f"  ... and {len(errors) - MAX_ERRORS_SHOWN} more")
+        failed += bool(errors)
+    return failed
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipelines.review import (
+        aggregate_table,
+        animate_recording,
+        compare_table,
+        find_recordings,
+        format_summary,
+        plot_compare,
+        plot_recording,
+        read_recording,
+        summarize,
+    )
+
+    if args.times and not args.plot:
+        raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
+    report: dict[str, Any] = {}
+    if args.path.is_dir():
+        single_file_only = [
+            f"--{name}" for name in ("plot", "times", "animate", "compare") if getattr(args, name)
+        ]
+        if single_file_only:
+            raise PipelineError(
+                f"{', '.join(single_file_only)} need one .mcap file, not the folder {args.path}"
+            )
+        recordings = [read_recording(p) for p in find_recordings(args.path)]
+        table, totals = aggregate_table(recordings)
+        print(table)
+        report.update(runs=[summarize(rec) for rec in recordings], totals=totals)
+    else:
+        recordings = [read_recording(args.path)]
+        summary = summarize(recordings[0])
+        print(format_summary(summary))
+        report["summary"] = summary
+    for rec in recordings:
+        if rec.warning:
+            print(f"crowdmpc review: warning: {rec.warning}", file=sys.stderr)
+
+    failed = _check(recordings, report) if args.check else 0
+
+    if not args.path.is_dir():
+        rec = recordings[0]
+        other = read_recording(args.compare) if args.compare else None
+        if other is not None:
+            print()
+            print(compare_table(rec, other))
+            report["compare"] = summarize(other)
+            if other.warning:
+                print(f"crowdmpc review: warning: {other.warning}", file=sys.stderr)
+        if args.plot:
+            if other is not None:
+                plot_compare(rec, other, args.plot)
+                print(f"overlay plot: {args.plot}")
+            else:
+                drawn = plot_recording(rec, args.plot, args.times)
+                print(f"plot: {args.plot} (plans at t = {', '.join(f'{t:g}' for t in drawn)} s)")
+        if args.animate:
+            frames = animate_recording(rec, args.animate)
+            print(f"animation: {args.animate} ({frames} frames)")
+
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        print(f"json: {args.json}")
+    return 1 if failed else 0

@@ -1,0 +1,183 @@
+"""``crowdmpc sweep``: run an experiment's cells (Tables II/III, ablations) resumably, and tabulate them."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from pipelines.errors import PipelineError
+
+EPILOG = """examples:
+  crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
+  crowdmpc sweep --experiment table2 --predictor constant_velocity --humans 7 --episodes-per-cell 4 \\
+      --out /tmp/sw
+  crowdmpc sweep --experiment predictors --episodes-per-cell 100 --record failures --out runs/predictors
+  crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
+
+Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
+figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle);
+coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); baselines
+(straight and ORCA robots, a quick check of a setup). Episode i of every cell is the same crowd (circle for
+even i, perpendicular for odd i, seed --seed + i // 2).
+
+Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
+--episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;
+retried on rerun), cells.csv, episodes.csv, table.md, success_vs_humans.png, travel_time_vs_humans.png,
+sweep.json, and with --record the MCAP logs in DIR/mcap/<cell>/.
+"""
+
+
+def _humans(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
+    return values
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from pipelines.experiments import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+    from pipelines.sweep import BACKENDS, RECORD_POLICIES
+
+    p = subparsers.add_parser(
+        "sweep",
+        help="run an experiment's episodes in parallel (resumable) and write its table and plots",
+        description="Run the cells of an experiment, append every finished episode to DIR/episodes.jsonl, "
+        "and write a CSV, a Markdown table beside the paper's figures, and plots.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--experiment", required=True, choices=sorted(EXPERIMENTS))
+    p.add_argument(
+        "--episodes-per-cell",
+        type=int,
+        default=PAPER_EPISODES_PER_CELL,
+        metavar="N",
+        help=f"episodes per cell, half of each scenario (default {PAPER_EPISODES_PER_CELL}, the paper's)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        metavar="K",
+        help="parallel workers (default: CPUs)",
+    )
+    p.add_argument(
+        "--ray-address", metavar="ADDR", help="run on this Ray cluster (needs the [cluster] extra)"
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="auto",
+        help="auto (default): Ray when installed, else a local process pool; inline: in this process",
+    )
+    p.add_argument(
+        "--humans", type=_humans, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
+    )
+    p.add_argument("--robots", type=int, default=3, help="robots per episode (default 3)")
+    p.add_argument("--seed", type=int, default=0, help="base scenario seed (default 0)")
+    p.add_argument(
+        "--predictor",
+        metavar="NAME",
+        help="replace the predictor of every method (table2/table3 default to social_lstm_eth, as the paper)",
+    )
+    p.add_argument(
+        "--record",
+        choices=RECORD_POLICIES,
+        default="none",
+        help="keep MCAP logs: of failed episodes (not all robots arrived, or a collision), all, or none",
+    )
+    p.add_argument(
+        "--out", type=Path, required=True, metavar="DIR", help="sweep directory (created; resumed)"
+    )
+    p.add_argument(
+        "--report-only", action="store_true", help="write the table and plots from DIR; run nothing"
+    )
+    p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _check_predictors(experiment) -> None:
+    """Fail before starting workers, not once per episode in errors.jsonl."""
+    from pipelines.experiments import ORACLE_PREDICTOR
+    from predictors.registry import available
+
+    known = set(available()) | {ORACLE_PREDICTOR}
+    missing = sorted({spec.predictor for _, spec in experiment.methods} - known)
+    if missing:
+        raise PipelineError(
+            f"experiment {experiment.name!r} needs predictors {missing} that are not available; "
+            f"available: {sorted(known)} (train or fetch the zoo models, or pass --predictor)"
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipelines.experiments import get_experiment
+    from pipelines.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, run_sweep
+    from pipelines.sweep_report import write_report
+
+    experiment = get_experiment(args.experiment)
+    if args.predictor:
+        experiment = experiment.with_predictor(args.predictor)
+    config = SweepConfig(
+        experiment=experiment,
+        out=args.out,
+        episodes_per_cell=args.episodes_per_cell,
+        humans=args.humans,
+        seed=args.seed,
+        n_robots=args.robots,
+        workers=args.workers,
+        backend=args.backend,
+        ray_address=args.ray_address,
+        record=args.record,
+        progress=not args.no_progress,
+    )
+    tasks = config.tasks()
+    cells = experiment.cells(config.humans, config.n_robots)
+    if args.dry_run:
+        print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
+        for cell in cells:
+            print(f"  {cell.method:>22}  {cell.n_humans} humans  {cell.key}")
+        return 0
+
+    status = 0
+    if not args.report_only:
+        _check_predictors(experiment)
+        outcome = run_sweep(config)
+        done = outcome.already_done + outcome.ran
+        rate = (
+            f", {outcome.episodes_per_minute:.1f} episodes/min; "
+            f"{outcome.steady_episodes_per_minute:.1f} after {outcome.startup_s:.1f} s of worker start-up"
+            if outcome.ran
+            else ""
+        )
+        print(
+            f"{experiment.name}: {done}/{outcome.planned} episodes recorded ({outcome.ran} this run in "
+            f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})",
+            file=sys.stderr,
+        )
+        if outcome.errors:
+            print(
+                f"{len(outcome.errors)} episodes raised; see {args.out / 'errors.jsonl'} (a rerun retries)",
+                file=sys.stderr,
+            )
+            status = 1
+        if outcome.interrupted:
+            print("interrupted: rerun the same command to resume", file=sys.stderr)
+            status = 130
+    elif not (args.out / EPISODES_FILE).exists():
+        raise PipelineError(f"{args.out / EPISODES_FILE} does not exist: nothing to report")
+
+    planned = {t.key for t in tasks}
+    records = [
+        r for key, r in EpisodeLog(args.out / EPISODES_FILE).load(repair=False).items() if key in planned
+    ]
+    report = write_report(args.out, experiment, cells, records)
+    print(report.markdown)
+    print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
+    return status

@@ -1,0 +1,259 @@
+"""``crowdmpc train``: train Social-LSTM, the vanilla LSTM or the Social-GAN-like model with Lightning."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from pipelines.errors import PipelineError
+
+MODELS = ("social_lstm", "vanilla_lstm", "social_gan")
+DATASET_SUFFIX = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
+
+EPILOG = """examples:
+  crowdmpc train --model social_lstm --data-dir ../shared/data --epochs 25
+  crowdmpc train --model social_lstm --pooling soft --data-dir ../shared/data --out runs/train/sl_soft
+  crowdmpc train --model social_lstm --data-dir ../shared/data --out runs/train/sl --resume
+  crowdmpc train --model social_lstm --train synth/train.ndjson --val synth/val.ndjson \\
+      --test synth/test.ndjson --name social_lstm_synth
+
+Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for --resume), csv/ and
+tensorboard/ logs, and at the end NAME.pt + NAME.json (state_dict + config) with NAME.metrics.json (TrajNet++
+val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair into the model zoo.
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "train",
+        help="train a learned predictor (Social-LSTM, vanilla LSTM, Social-GAN-like)",
+        description="Train a predictor on TrajNet++ scenes with Lightning: progress bar, CSV and TensorBoard "
+        "logs, best checkpoint on validation ADE, resumable, seeded.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--model", required=True, choices=MODELS)
+    parser.add_argument(
+        "--pooling",
+        choices=("grid", "soft"),
+        default=None,
+        help="social pooling: grid (hard, TrajNet++) or soft (bilinear, differentiable); "
+        "default grid for social_lstm, soft for social_gan; not for vanilla_lstm",
+    )
+    parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
+    parser.add_argument("--protocol", default="paper", choices=("paper", "loo"), help="train/val/test files")
+    parser.add_argument("--dataset", default="biwi_eth", choices=tuple(DATASET_SUFFIX), help="test sequence")
+    parser.add_argument(
+        "--train",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="explicit training ndjson files instead of --protocol (needs --val)",
+    )
+    parser.add_argument("--val", nargs="+", type=Path, default=None, metavar="FILE")
+    parser.add_argument("--test", nargs="+", type=Path, default=None, metavar="FILE")
+    parser.add_argument("--epochs", type=int, default=25, help="training epochs (default 25)")
+    parser.add_argument("--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)")
+    parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
+    parser.add_argument("--step-size", type=int, default=10, help="epochs per 10x learning-rate decay")
+    parser.add_argument(
+        "--loss", choices=("gaussian", "l2"), default="gaussian", help="(LSTMs) default gaussian"
+    )
+    parser.add_argument("--hidden-dim", type=int, default=None, help="LSTM hidden size (default 32)")
+    parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
+    parser.add_argument("--out", type=Path, default=None, help="run directory (default runs/train/NAME)")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
+    parser.add_argument("--seed", type=int, default=0, help="seed of weights, shuffling, augmentation")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def default_name(model: str, pooling: str, dataset: str, explicit_files: bool) -> str:
+    suffix = "custom" if explicit_files else DATASET_SUFFIX[dataset]
+    variant = "_soft" if model == "social_lstm" and pooling == "soft" else ""
+    variant = "_grid" if model == "social_gan" and pooling == "grid" else variant
+    return f"{model}{variant}_{suffix}"
+
+
+def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
+    """The train/val/test files and the directory their names are relative to (None: as given)."""
+    if args.train is not None or args.val is not None:
+        if not args.train or not args.val:
+            raise PipelineError("--train and --val go together (explicit files replace --protocol)")
+        files = {"train": list(args.train), "val": list(args.val), "test": list(args.test or [])}
+        for split, paths in files.items():
+            for path in paths:
+                if not path.is_file():
+                    raise PipelineError(f"--{split} file {path} does not exist")
+        return files, None
+    from predictors.data.locate import prepared_dir, protocol_files
+
+    files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
+    return files, prepared_dir(args.data_dir)
+
+
+def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) -> dict:
+    """Training data identity for the zoo: each file's sha256 and one hash over train + val."""
+    import hashlib
+
+    from predictors.zoo import sha256_file
+
+    def label(path: Path) -> str:
+        return str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else path.name
+
+    record = {"protocol": protocol, "files": {}}
+    digest = hashlib.sha256()
+    for split in ("train", "val", "test"):
+        record["files"][split] = {label(p): sha256_file(p) for p in files[split]}
+        if split != "test":
+            for name, sha in sorted(record["files"][split].items()):
+                digest.update(f"{split}/{name}:{sha}\n".encode())
+    record["sha256"] = digest.hexdigest()
+    return record
+
+
+def run(args: argparse.Namespace) -> int:
+    import warnings
+
+    import lightning as L
+    import torch
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
+
+    from predictors.base import OBS_LEN
+    from predictors.data.datamodule import TrajnetDataModule
+    from predictors.evaluate import EvalConfig, evaluate
+    from predictors.nets.social_gan import generator_config
+    from predictors.nets.social_lstm import SocialLSTMConfig
+    from predictors.training import OptimConfig, make_module
+    from predictors.zoo import load_checkpoint, save_checkpoint
+
+    if args.epochs < 1 or args.batch_size < 1:
+        raise PipelineError(
+            f"--epochs and --batch-size must be >= 1, got {args.epochs} and {args.batch_size}"
+        )
+    if args.model == "vanilla_lstm" and args.pooling is not None:
+        raise PipelineError("--pooling does not apply to vanilla_lstm (it has no social pooling)")
+    pooling = {"vanilla_lstm": "none", "social_lstm": "grid", "social_gan": "soft"}[args.model]
+    pooling = args.pooling or pooling
+    sizes = {} if args.hidden_dim is None else {"hidden_dim": args.hidden_dim}
+    if args.model == "social_gan":
+        net_config = generator_config(pooling=pooling, **sizes)
+    else:
+        net_config = SocialLSTMConfig(pooling=pooling, **sizes)
+    optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
+    explicit = args.train is not None or args.val is not None
+    name = args.name or default_name(args.model, pooling, args.dataset, explicit)
+    out = args.out or Path("runs") / "train" / name
+    ckpt_dir = out / "checkpoints"
+    last = ckpt_dir / "last.ckpt"
+    if args.resume and not last.is_file():
+        raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
+    if not args.resume and last.is_file():
+        raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
+
+    files, root = resolve_files(args)
+    protocol = "custom" if explicit else args.protocol
+    # Tiny tensors on a shared CPU: one thread is faster than torch's pool, which spin-waits for cores.
+    torch.set_num_threads(1)
+    warnings.filterwarnings("ignore", message=".*does not have many workers.*")
+    warnings.filterwarnings("ignore", message=".*Checkpoint directory.*exists and is not empty.*")
+    L.seed_everything(args.seed, workers=True, verbose=False)
+
+    data = TrajnetDataModule(
+        files["train"], files["val"], files["test"], batch_size=args.batch_size, seed=args.seed
+    )
+    module = make_module(args.model, net_config, optim)
+    best = ModelCheckpoint(
+        dirpath=ckpt_dir,
+        filename="best-{epoch:03d}-{val_ade:.4f}",
+        monitor="val_ade",
+        mode="min",
+        save_last=True,
+        save_top_k=1,
+    )
+    trainer = L.Trainer(
+        max_epochs=args.epochs,
+        accelerator="cpu",
+        devices=1,
+        logger=[CSVLogger(out, name="csv"), TensorBoardLogger(out, name="tensorboard")],
+        callbacks=[best],
+        deterministic=True,
+        enable_progress_bar=not args.no_progress,
+        enable_model_summary=False,
+        log_every_n_steps=5,
+    )
+    started = time.perf_counter()
+    trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
+    elapsed = time.perf_counter() - started
+
+    best_path = best.best_model_path or str(last)
+    state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
+    module.load_state_dict(state)
+    epoch_times = epoch_times_from_csv(trainer.loggers[0].log_dir)
+    extra = {
+        "training": {
+            "epochs": args.epochs,
+            "best_checkpoint": Path(best_path).name,
+            "seed": args.seed,
+            "batch_size": args.batch_size,
+            "optim": optim.__dict__,
+        }
+    }
+    weights, _ = save_checkpoint(
+        module.net, model=args.model, name=name, out_dir=out, obs_len=OBS_LEN, extra=extra
+    )
+    predictor = load_checkpoint(weights)
+    top_k = 20 if args.model == "social_gan" else None
+    metrics = {}
+    for split in ("val", "test"):
+        if files[split]:
+            result = evaluate(
+                predictor,
+                files[split],
+                EvalConfig(top_k=top_k, seed=args.seed),
+                progress=not args.no_progress,
+                root=root,
+            )
+            metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
+    summary = {
+        "name": name,
+        "model": args.model,
+        "protocol": protocol,
+        "training_data": data_record(files, root, protocol),
+        "metrics": metrics,
+        "training": {
+            **extra["training"],
+            "wall_time_s": round(elapsed, 1),
+            "median_epoch_time_s": round(sorted(epoch_times)[len(epoch_times) // 2], 2)
+            if epoch_times
+            else None,
+            "threads": 1,
+        },
+    }
+    (out / f"{name}.metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"{name}: best {Path(best_path).name}; weights {weights} (+ .json)")
+    for split, m in metrics.items():
+        line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
+        if "topk_ade" in m:
+            line += f"  top-{top_k} ADE {m['topk_ade']:.3f}  FDE {m['topk_fde']:.3f}"
+        print(line)
+    print(
+        f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
+        f"`crowdmpc zoo add {weights}`"
+    )
+    return 0
+
+
+def epoch_times_from_csv(log_dir: str) -> list[float]:
+    """Training epoch wall times logged by the module (``epoch_time_s``)."""
+    import csv
+
+    path = Path(log_dir) / "metrics.csv"
+    if not path.is_file():
+        return []
+    with open(path) as f:
+        return [float(row["epoch_time_s"]) for row in csv.DictReader(f) if row.get("epoch_time_s")]

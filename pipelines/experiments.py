@@ -1,0 +1,286 @@
+"""The experiments a sweep runs, as data: their cells, their episodes, and the paper's own figures.
+
+An experiment is a table: its columns are *methods* (a label and the ControllerSpec behind it) repeated for
+each number of humans, its rows are the paper's metrics. A *cell* is one method at one crowd size; an
+*episode task* is one seeded scenario run in one cell.
+
+Seeding. Episode ``i`` of every cell of an experiment is the same crowd: scenario ``SCENARIOS[i % 2]`` (so
+any prefix of a cell is half circle and half perpendicular crossing, as the paper's 500 + 500) with seed
+``seed + i // 2``. The circle episodes of a cell are therefore exactly those of
+``crowdmpc simulate --scenario circle --seed S --episodes N/2``, and cells differ only in the controller.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Final
+
+from pipelines.controllers import ControllerSpec
+from pipelines.errors import PipelineError
+
+SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
+PAPER_HUMANS: Final[tuple[int, ...]] = (5, 6, 7, 8, 9)  # Tables II and III
+PAPER_EPISODES_PER_CELL: Final[int] = 1000  # Section VI: 500 circle + 500 perpendicular crossing per cell
+ORACLE_PREDICTOR: Final[str] = "orca_oracle"  # pipelines/oracle.py: the humans' own ORCA, simulated forward
+
+PAPER_REFERENCE: Final[str] = (
+    "Le, Tadiparthi, Chalaki, Mahjoub, D'sa, Moradi-Pari, Malikopoulos, 'Multi-Robot Cooperative Navigation "
+    "in Crowds: A Game-Theoretic Learning-Based Model Predictive Control Approach', Section VI"
+)
+
+
+@dataclass(frozen=True)
+class PaperFigures:
+    """One column of the paper's Table II or III (1000 episodes: 500 circle + 500 perpendicular)."""
+
+    success: float  # success rate, %
+    travel_time: float  # average travel time over successful episodes, s
+    collision: float  # collision (personal-space violation, < 0.8 m) rate, %
+    discomfort: float  # discomfort rate, %
+
+
+def _figures(rows: Mapping[str, Sequence[Sequence[float]]]) -> Mapping[tuple[str, int], PaperFigures]:
+    """Build {(method, n_humans): figures} from per-method rows (success, time, collision, discomfort)
+    each listing 5..9 humans, the transposition of how the paper prints them."""
+    table: dict[tuple[str, int], PaperFigures] = {}
+    for method, (success, time, collision, discomfort) in rows.items():
+        for k, n in enumerate(PAPER_HUMANS):
+            table[(method, n)] = PaperFigures(success[k], time[k], collision[k], discomfort[k])
+    return MappingProxyType(table)
+
+
+# Table II, "Comparison between centralized MPC (CMPC) and distributed MPC (DMPC)", as the paper prints it.
+PAPER_TABLE_II: Final = _figures(
+    {
+        "CMPC": (
+            (94.0, 91.9, 90.0, 86.7, 84.5),
+            (17.9, 18.6, 19.1, 19.6, 20.1),
+            (0.2, 0.8, 1.3, 1.1, 1.2),
+            (0.5, 1.2, 1.3, 1.4, 2.1),
+        ),
+        "DMPC": (
+            (93.4, 91.8, 88.7, 86.9, 83.9),
+            (18.1, 18.7, 19.2, 19.8, 20.3),
+            (0.3, 0.6, 1.1, 1.1, 1.9),
+            (0.6, 1.5, 1.1, 1.3, 1.8),
+        ),
+    }
+)
+
+# Table III, "Comparison between centralized MPC with (F) and without (NF) the flocking objective". Its F
+# column is CMPC of Table II, but the paper prints 86.6 / 84.7 % success at 8 / 9 humans where Table II has
+# 86.7 / 84.5: both are kept as printed.
+PAPER_TABLE_III: Final = _figures(
+    {
+        "F": (
+            (94.0, 91.9, 90.0, 86.6, 84.7),
+            (17.9, 18.6, 19.1, 19.6, 20.1),
+            (0.2, 0.8, 1.3, 1.1, 1.2),
+            (0.5, 1.2, 1.3, 1.4, 2.1),
+        ),
+        "NF": (
+            (96.7, 94.0, 93.8, 88.8, 86.1),
+            (17.6, 18.4, 18.8, 19.3, 19.8),
+            (0.2, 0.9, 0.4, 1.8, 2.4),
+            (1.4, 2.2, 2.0, 2.2, 2.6),
+        ),
+    }
+)
+
+
+def predictor_of(spec: ControllerSpec) -> str | None:
+    """The predictor a controller uses; None for the baselines, which use none."""
+    from pipelines.closed_loop import PREDICTOR_FREE
+
+    return None if spec.controller in PREDICTOR_FREE else spec.predictor
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One method at one crowd size: a column of the experiment's table."""
+
+    method: str  # the column label, e.g. "CMPC", "NF", "social_lstm_eth"
+    spec: ControllerSpec
+    n_humans: int
+    n_robots: int = 3
+
+    def __post_init__(self):
+        if self.n_humans < 1:
+            raise PipelineError(f"a cell needs at least one human, got n_humans={self.n_humans}")
+        if self.n_robots < 1:
+            raise PipelineError(f"a cell needs at least one robot, got n_robots={self.n_robots}")
+
+    @property
+    def key(self) -> str:
+        """Everything that defines the cell's episodes, so records of a changed definition never mix."""
+        s = self.spec
+        parts = [s.controller, predictor_of(s) or "none", "F" if s.flocking else "NF", s.coupling]
+        parts += [f"{name}={value}" for name, value in s.mpc_overrides]
+        return "-".join(parts) + f"-h{self.n_humans}-r{self.n_robots}"
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One episode to run: a cell and a seeded scenario."""
+
+    experiment: str
+    cell: Cell
+    index: int  # episode index within the cell
+    scenario: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """The record key in episodes.jsonl: unique within a sweep directory."""
+        return f"{self.cell.key}/{self.scenario}/{self.seed}"
+
+
+def scenario_schedule(episodes: int, seed: int = 0) -> list[tuple[str, int]]:
+    """(scenario, seed) of episodes 0..episodes-1 of every cell: alternate scenarios, seeds count up per
+    scenario, so a cell's first 2k episodes are k circle + k perpendicular crossings."""
+    if episodes < 1:
+        raise PipelineError(f"episodes per cell must be at least 1, got {episodes}")
+    if seed < 0:
+        raise PipelineError(f"the base seed must be non-negative, got {seed}")
+    return [(SCENARIOS[i % 2], seed + i // 2) for i in range(episodes)]
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A table to reproduce: methods (columns, in table order) x numbers of humans."""
+
+    name: str
+    title: str
+    methods: tuple[tuple[str, ControllerSpec], ...]  # (column label, controller spec)
+    humans: tuple[int, ...]
+    paper: Mapping[tuple[str, int], PaperFigures] = field(default_factory=lambda: MappingProxyType({}))
+    paper_source: str | None = None  # where `paper` was transcribed from; None: no such table
+    # False when the methods' predictors are part of the comparison (or they use none): no `--predictor`.
+    predictor_swappable: bool = True
+
+    def __post_init__(self):
+        labels = [label for label, _ in self.methods]
+        if not labels or len(set(labels)) != len(labels):
+            raise PipelineError(f"experiment {self.name!r} needs distinct method labels, got {labels}")
+        if not self.humans:
+            raise PipelineError(f"experiment {self.name!r} has no numbers of humans")
+
+    @property
+    def method_labels(self) -> tuple[str, ...]:
+        return tuple(label for label, _ in self.methods)
+
+    def with_predictor(self, predictor: str) -> Experiment:
+        """The experiment with every method's predictor replaced (e.g. Table II with constant velocity)."""
+        if not self.predictor_swappable:
+            raise PipelineError(
+                f"experiment {self.name!r} fixes each method's predictor; --predictor applies only to "
+                f"{sorted(n for n, e in EXPERIMENTS.items() if e.predictor_swappable)}"
+            )
+        methods = tuple((label, replace(spec, predictor=predictor)) for label, spec in self.methods)
+        return replace(self, methods=methods)
+
+    def cells(self, humans: Sequence[int] | None = None, n_robots: int = 3) -> tuple[Cell, ...]:
+        """Cells in table order: for each number of humans, every method."""
+        return tuple(
+            Cell(label, spec, n, n_robots) for n in (humans or self.humans) for label, spec in self.methods
+        )
+
+    def tasks(
+        self,
+        episodes_per_cell: int,
+        *,
+        humans: Sequence[int] | None = None,
+        seed: int = 0,
+        n_robots: int = 3,
+    ) -> list[EpisodeTask]:
+        """Every episode of the sweep, cell by cell (so a worker keeps reusing one controller)."""
+        schedule = scenario_schedule(episodes_per_cell, seed)
+        return [
+            EpisodeTask(self.name, cell, i, scenario, s)
+            for cell in self.cells(humans, n_robots)
+            for i, (scenario, s) in enumerate(schedule)
+        ]
+
+
+# Table II and III use the paper's predictor, Social-LSTM trained on ETH (grid pooling as in TrajNet++);
+# `crowdmpc sweep --predictor constant_velocity` runs the same tables with the baseline.
+PAPER_PREDICTOR: Final[str] = "social_lstm_eth"
+# The coupled NLP needs a useful gradient of the prediction with respect to the robots' plan: soft pooling.
+COUPLING_PREDICTOR: Final[str] = "social_lstm_soft_eth"
+# The predictor-swap ablation: every zoo model the predictors issue trains, the baseline, and the oracle.
+SWAP_PREDICTORS: Final[tuple[str, ...]] = (
+    "constant_velocity",
+    "vanilla_lstm_eth",
+    "social_lstm_eth",
+    "social_lstm_soft_eth",
+    "social_gan_eth",
+    "social_lstm_synth",
+    ORACLE_PREDICTOR,
+)
+ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)  # the middle of the paper's range
+
+EXPERIMENTS: dict[str, Experiment] = {
+    "table2": Experiment(
+        name="table2",
+        title="Table II: centralized (CMPC) vs distributed (DMPC) MPC",
+        methods=(
+            ("CMPC", ControllerSpec("cmpc", PAPER_PREDICTOR)),
+            ("DMPC", ControllerSpec("dmpc", PAPER_PREDICTOR)),
+        ),
+        humans=PAPER_HUMANS,
+        paper=PAPER_TABLE_II,
+        paper_source=f"{PAPER_REFERENCE}, Table II",
+    ),
+    "table3": Experiment(
+        name="table3",
+        title="Table III: CMPC with (F) and without (NF) the flocking objective",
+        methods=(
+            ("F", ControllerSpec("cmpc", PAPER_PREDICTOR, flocking=True)),
+            ("NF", ControllerSpec("cmpc", PAPER_PREDICTOR, flocking=False)),
+        ),
+        humans=PAPER_HUMANS,
+        paper=PAPER_TABLE_III,
+        paper_source=f"{PAPER_REFERENCE}, Table III",
+    ),
+    "predictors": Experiment(
+        name="predictors",
+        title="Predictor swap: CMPC with each predictor (ORCA ground truth as an oracle)",
+        methods=tuple((name, ControllerSpec("cmpc", name)) for name in SWAP_PREDICTORS),
+        humans=ABLATION_HUMANS,
+        predictor_swappable=False,
+    ),
+    "coupling": Experiment(
+        name="coupling",
+        title="Coupling: CMPC by iterated best response (Alg. 1) vs the predictor inside the joint NLP",
+        methods=(
+            ("IBR", ControllerSpec("cmpc", COUPLING_PREDICTOR, coupling="ibr")),
+            ("NLP", ControllerSpec("cmpc", COUPLING_PREDICTOR, coupling="nlp")),
+            # mpc/coupled.py's linearised predictor: nearly the cost of fixed predictions, the exact gradient.
+            (
+                "NLP first-order",
+                ControllerSpec(
+                    "cmpc",
+                    COUPLING_PREDICTOR,
+                    coupling="nlp",
+                    mpc_overrides=(("coupled_mode", "first_order"),),
+                ),
+            ),
+        ),
+        humans=ABLATION_HUMANS,
+    ),
+    "baselines": Experiment(
+        name="baselines",
+        title="Baselines: robots driving straight to their goals vs robots moving by ORCA",
+        methods=(("straight", ControllerSpec("straight")), ("ORCA", ControllerSpec("orca"))),
+        humans=PAPER_HUMANS,
+        predictor_swappable=False,
+    ),
+}
+
+
+def get_experiment(name: str) -> Experiment:
+    if name not in EXPERIMENTS:
+        raise PipelineError(f"unknown experiment {name!r}; choose from {sorted(EXPERIMENTS)}")
+    return EXPERIMENTS[name]

@@ -1,0 +1,151 @@
+"""CMPC and DMPC as closed-loop controllers: crowdsim observations in, accelerations and solver facts out.
+
+One controller per run: the predictor is loaded once, and the NLPs are built once per problem size (robots,
+humans) and reused across episodes. Per step: the observation becomes the solvers' ``StepData``; the humans'
+predictions come from ``predictor.rollout`` on the last ``predictor.obs_len`` rows of ``obs.history`` (robots
+first, then humans) with the robots' planned positions as ``robots_future`` (or, for ``coupling="nlp"``, from
+the predictor's CasADi twin inside the NLP, fed ``predictor.encode`` of the same history); a robot that has
+reached its goal holds position (its controls are pinned to braking and it stops pulling the flock).
+A step that cannot solve falls back (mpc/fallback.py) and says so in ``ControlOutput.fallback``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mpc.cmpc import CMPC, IBRResult
+from mpc.config import MPCConfig
+from mpc.coupled import CoupledCMPC
+from mpc.dmpc import DMPC
+from mpc.dynamics import braking, rollout_numpy
+from mpc.fallback import PlanMemory
+from mpc.nlp import StepData
+from pipelines.controllers import ControllerSpec, ControlOutput
+from pipelines.errors import PipelineError
+from predictors.registry import load_predictor
+
+if TYPE_CHECKING:
+    from crowdsim.env import Observation
+
+
+def mpc_config(spec: ControllerSpec) -> MPCConfig:
+    """Table I defaults, then ``spec.mpc_overrides``, then ``omega_floc = 0`` when flocking is off."""
+    cfg = MPCConfig().replace(**dict(spec.mpc_overrides))
+    return cfg if spec.flocking else cfg.replace(w_floc=0.0)
+
+
+def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.ndarray]:
+    """The last ``obs_len`` rows of ``obs.history`` ``(L, M+N, 2)`` and an all-True mask.
+
+    A history shorter than ``obs_len`` is padded at the front with its first row (standing still), the
+    simulator's own convention at the start of an episode.
+    """
+    history = np.asarray(obs.history, dtype=float)
+    if len(history) < obs_len:
+        history = np.concatenate([np.repeat(history[:1], obs_len - len(history), axis=0), history])
+    history = history[-obs_len:]
+    return history, np.ones(history.shape[:2], dtype=bool)
+
+
+class MPCController:
+    """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``), or the coupled NLP (``coupling="nlp"``)."""
+
+    def __init__(self, spec: ControllerSpec, distributed: bool):
+        if distributed and spec.coupling == "nlp":
+            raise PipelineError(
+                "coupling 'nlp' puts the predictor inside the joint NLP, which is centralised: use it with "
+                "--controller cmpc (dmpc supports coupling 'ibr')"
+            )
+        self.spec = spec
+        self.name = "dmpc" if distributed else "cmpc"
+        self.distributed = distributed
+        self.cfg = mpc_config(spec)
+        self.predictor = load_predictor(spec.predictor)
+        self.memory = PlanMemory(self.cfg)
+        self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
+
+    def solver(self, n_robots: int, n_humans: int) -> CMPC | DMPC | CoupledCMPC:
+        """The solver for this problem size, built on first use and kept."""
+        key = (n_robots, n_humans)
+        if key not in self._solvers:
+            if self.spec.coupling == "nlp":
+                function = self.predictor.to_casadi(n_humans, n_robots, self.cfg.horizon)
+                size = self.predictor.context_size(n_humans, n_robots)
+                self._solvers[key] = CoupledCMPC(self.cfg, n_robots, n_humans, function, size)
+            elif self.distributed:
+                self._solvers[key] = DMPC(self.cfg, n_robots, n_humans)
+            else:
+                self._solvers[key] = CMPC(self.cfg, n_robots, n_humans)
+        return self._solvers[key]
+
+    def reset(self, obs: Observation) -> None:
+        self.solver(obs.n_robots, obs.n_humans)  # build now, not inside the first timed step
+        self.memory.reset()
+
+    def act(self, obs: Observation) -> ControlOutput:
+        t0 = time.perf_counter()
+        cfg = self.cfg
+        n_robots, n_humans = obs.n_robots, obs.n_humans
+        states = np.concatenate([obs.robot_positions, obs.robot_velocities], axis=1).astype(float)
+        reached = np.asarray(obs.robot_reached, dtype=bool)
+        data = StepData(
+            states=states,
+            last_actions=np.asarray(obs.robot_last_actions, dtype=float),
+            goals=np.asarray(obs.robot_goals, dtype=float),
+            active=~reached if cfg.on_goal == "brake" else np.ones(n_robots, dtype=bool),
+            arrived=reached,
+        )
+        if reached.all():  # everyone is there (the episode ends): nothing to optimise
+            plan = braking(states, cfg.horizon, cfg.dt, cfg.a_max)
+            self.memory.commit(plan, solved=False)
+            return ControlOutput(
+                accelerations=plan[:, 0],
+                solve_time_s=time.perf_counter() - t0,
+                plan=rollout_numpy(states, plan, cfg.dt)[0],
+            )
+        solver = self.solver(n_robots, n_humans)
+        history, mask = predictor_history(obs, self.predictor.obs_len)
+        humans = np.arange(n_robots, n_robots + n_humans)
+        start = self.memory.start(data)
+        if isinstance(solver, CoupledCMPC):
+            result = solver.solve(data, self.predictor.encode(history, mask, humans), start)
+        else:
+
+            def predict(robots_future: np.ndarray) -> np.ndarray:
+                return self.predictor.rollout(history, mask, robots_future, humans)
+
+            result = solver.solve(data, predict, start)
+        return self._output(result, start.kind, data, t0)
+
+    def _output(self, result: IBRResult, start_kind: str, data: StepData, t0: float) -> ControlOutput:
+        cfg = self.cfg
+        if result.solved:
+            plan, fallback = result.accels, None
+            self.memory.commit(plan, solved=True, lam_x=result.lam_x, lam_g=result.lam_g)
+        else:
+            plan, fallback = result.accels, start_kind  # the IBR loops return u^(0) when nothing was solved
+            self.memory.commit(plan, solved=False)
+        return ControlOutput(
+            accelerations=plan[:, 0].copy(),
+            solve_time_s=time.perf_counter() - t0,
+            status=result.status,
+            iterations=result.iterations,
+            fallback=fallback,
+            potential=result.potential if math.isfinite(result.potential) else None,
+            plan=rollout_numpy(data.states, plan, cfg.dt)[0],
+            prediction=result.prediction,
+            iteration_predictions=result.predictions if self.spec.record_iterations else (),
+            extra={
+                "solves": result.solves,
+                "solver_iterations": result.solver_iterations,
+                "converged": result.converged,
+            },
+        )
+
+
+def make_mpc_controller(spec: ControllerSpec, distributed: bool) -> MPCController:
+    return MPCController(spec, distributed)

@@ -1,0 +1,173 @@
+"""The ORCA-ground-truth oracle: predict the humans by simulating them forward with the simulator's own ORCA.
+
+The predictor-swap ablation needs an upper bound on what a better predictor could buy: a model that knows
+what the learned ones must guess, namely each human's goal and the exact rule the humans move by. Given the
+current state (positions, velocities, goals) and the robots' planned positions, the oracle repeats the
+environment's human update (``crowdsim.env``, step 1 and 3) ``H`` times:
+
+* the humans' ORCA velocities from everyone's current positions and velocities, robots included, with the
+  environment's parameters (radius plus CrowdNav's margin, preferred speed, neighbours, time horizon) and
+  preferred velocities towards their goals, zero once within their radius of it;
+* humans move ``p' = p + tau v'``; robots move to their planned positions, and their velocity is the double
+  integrator's end-of-step velocity ``v' = 2 (s' - s) / tau - v`` (exact for a plan that obeys Eq. 2).
+
+So its one-step prediction is exactly what the simulator will do when the robots apply the plan's first
+action, and its whole prediction is exact if they follow the plan. It lives in ``pipelines`` because it joins
+crowdsim with the predictor protocol; it needs the humans' goals, which are not in the history a predictor
+normally gets, so it is told each observation through ``observe`` before it predicts (``OracleController``
+does that for the MPC controller it wraps). It is numeric only: it has no CasADi twin (ORCA's linear programs
+are not smooth), so it works with iterated best response (``coupling="ibr"``), not inside the coupled NLP.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from crowdsim.env import EnvConfig
+from crowdsim.orca import orca_velocities, preferred_velocities
+from pipelines.errors import PipelineError
+from predictors.base import check_rollout_inputs
+from predictors.errors import PredictorError
+
+if TYPE_CHECKING:
+    import casadi as ca
+
+    from crowdsim.env import Observation
+    from pipelines.controllers import Controller, ControllerSpec, ControlOutput
+
+ORACLE_NAME = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
+
+
+class OrcaOracle:
+    """A ``Predictor`` (rollout only) that simulates the humans' ORCA forward from the observed state."""
+
+    name = ORACLE_NAME
+    obs_len = 1  # only the current state matters: ORCA is memoryless
+
+    def __init__(self, env_config: EnvConfig | None = None):
+        self.env_config = env_config or EnvConfig()
+        self._obs: Observation | None = None
+
+    def observe(self, obs: Observation) -> None:
+        """The state the next rollouts start from (velocities and goals are not in the history)."""
+        self._obs = obs
+
+    def rollout(
+        self,
+        history: np.ndarray,
+        mask: np.ndarray,
+        robots_future: np.ndarray | None,
+        humans: np.ndarray,
+        horizon: int | None = None,
+    ) -> np.ndarray:
+        """Predicted positions ``(H, N_h, 2)`` of ``humans``; agent layout as ``Observation.history``: the
+        robots first, then the humans. Without ``robots_future`` the robots keep their velocity."""
+        horizon = check_rollout_inputs(history, mask, robots_future, humans, horizon)
+        obs = self._obs
+        if obs is None:
+            raise PredictorError("the ORCA oracle predicts from an observation: call observe(obs) first")
+        m, n = obs.n_robots, obs.n_humans
+        now = np.concatenate([obs.robot_positions, obs.human_positions])
+        if history.shape[1] != m + n or not np.allclose(history[-1], now, atol=1e-9):
+            raise PredictorError(
+                "the ORCA oracle got a history whose current positions are not those of the observation it "
+                f"was told ({history.shape[1]} agents, {m} robots + {n} humans): call observe(obs) every step"
+            )
+        humans = np.asarray(humans, dtype=int)
+        if humans.size and humans.min() < m:
+            raise PredictorError(f"the ORCA oracle predicts humans (indices >= {m}), got indices {humans}")
+        if robots_future is None:
+            steps = np.arange(1, horizon + 1, dtype=float)[:, None, None]
+            robots_future = obs.robot_positions[None] + steps * obs.dt * obs.robot_velocities[None]
+        return self.simulate(obs, np.asarray(robots_future, dtype=float))[:, humans - m]
+
+    def simulate(self, obs: Observation, robots_future: np.ndarray) -> np.ndarray:
+        """Every human's positions ``(H, N, 2)`` at t+1..t+H, the robots on ``robots_future (H, M, 2)``."""
+        cfg = self.env_config
+        dt = obs.dt
+        m = obs.n_robots
+        rp, rv = obs.robot_positions.astype(float), obs.robot_velocities.astype(float)
+        hp, hv = obs.human_positions.astype(float), obs.human_velocities.astype(float)
+        humans = np.arange(m, m + obs.n_humans)
+        out = np.empty((len(robots_future), obs.n_humans, 2))
+        for k, robots_next in enumerate(robots_future):
+            pref = preferred_velocities(hp, obs.human_goals, cfg.v_pref, stop_radius=obs.radius)
+            hv, _ = orca_velocities(
+                np.concatenate([rp, hp]),
+                np.concatenate([rv, hv]),
+                pref,
+                obs.radius + cfg.orca_radius_margin,
+                cfg.v_pref,
+                cfg.orca,
+                dt,
+                agents=humans,
+            )
+            hp = hp + dt * hv
+            rv = 2.0 * (robots_next - rp) / dt - rv
+            rp = robots_next
+            out[k] = hp
+        return out
+
+    # The symbolic face of the protocol: ORCA's piecewise linear programs have no useful derivatives.
+    def encode(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> np.ndarray:
+        raise PredictorError(_NO_CASADI)
+
+    def context_size(self, n_humans: int, n_robots: int) -> int:
+        raise PredictorError(_NO_CASADI)
+
+    def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
+        raise PredictorError(_NO_CASADI)
+
+
+_NO_CASADI = (
+    "the ORCA oracle has no CasADi twin (ORCA is not differentiable): use it with coupling='ibr', "
+    "not inside the coupled NLP"
+)
+
+
+class OracleController:
+    """Wraps an MPC controller whose predictor is an ``OrcaOracle``: tells the oracle each observation before
+    the controller predicts with it. Everything else is the wrapped controller's."""
+
+    def __init__(self, inner: Controller, oracle: OrcaOracle):
+        self.inner = inner
+        self.oracle = oracle
+        self.name = f"{inner.name}+{oracle.name}"
+
+    def reset(self, obs: Observation) -> None:
+        self.oracle.observe(obs)
+        self.inner.reset(obs)
+
+    def act(self, obs: Observation) -> ControlOutput:
+        self.oracle.observe(obs)
+        return self.inner.act(obs)
+
+    def __getattr__(self, name: str) -> Any:  # e.g. the closed loop asking for the predictor's sha256
+        return getattr(self.inner, name)
+
+
+def make_oracle_controller(spec: ControllerSpec, env_config: EnvConfig | None = None) -> Controller:
+    """The MPC controller of ``spec`` (cmpc or dmpc, coupling "ibr") predicting with the ORCA oracle.
+
+    ``MPCController`` loads its predictor by name from the registry, where the oracle cannot be (it needs the
+    simulator and each observation); it is built with the constant-velocity predictor, which loads nothing,
+    and its ``predictor`` is then replaced by the oracle: the controller reads ``predictor.obs_len`` and calls
+    ``predictor.rollout`` each step, which the oracle provides.
+    """
+    from pipelines.mpc_controllers import make_mpc_controller
+
+    if spec.controller not in ("cmpc", "dmpc"):
+        raise PipelineError(f"the ORCA oracle is a predictor for cmpc/dmpc, not for {spec.controller!r}")
+    if spec.coupling != "ibr":
+        raise PipelineError(f"the ORCA oracle needs coupling 'ibr' (no CasADi twin), got {spec.coupling!r}")
+    oracle = OrcaOracle(env_config)
+    inner = make_mpc_controller(
+        replace(spec, predictor="constant_velocity"), distributed=spec.controller == "dmpc"
+    )
+    if not hasattr(inner, "predictor"):
+        raise PipelineError("the MPC controller has no 'predictor' attribute for the oracle to take over")
+    inner.predictor = oracle
+    return OracleController(inner, oracle)

@@ -1,0 +1,413 @@
+"""Recording closed-loop episodes to MCAP: one file per episode, an EpisodeObserver for the closed loop.
+
+Channels (JSON, schemas in ``pipelines.schemas``), log time = simulation time since the episode start:
+  /robots, /humans      the state at t and the accelerations applied from t; the final state comes at the end
+  /mpc/plan             each robot's planned positions t+1..t+H (controllers that plan)
+  /mpc/prediction       the humans' predicted positions, per IBR iteration when asked (predicting controllers)
+  /mpc/solver           status, wall time, IBR iterations, potential F_t, fallback
+  /scene                foxglove.SceneUpdate: agents as spheres, goals, plans and predictions as line strips
+  /episode/metrics      once, at the end
+Metadata records: "crowdmpc" (version, format), "episode" (seed, scenario, controller, predictor, checkpoint
+sha256, sizes), "config" and "run" (JSON-encoded values).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+from collections import Counter
+from collections.abc import Mapping
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+
+from pipelines.errors import PipelineError
+from pipelines.recorder import McapRecorder
+from pipelines.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
+
+if TYPE_CHECKING:
+    from crowdsim.env import Observation
+    from pipelines.controllers import ControlOutput
+
+FORMAT: Final[str] = "crowdmpc-episode/1"  # bump when a channel's meaning changes
+FRAME_ID: Final[str] = "world"
+
+# crowdsim.plotting.ROBOT_COLORS (matplotlib's tab10) as RGB, so that the 3D panel and the plots colour
+# robot i alike (copied: importing the plotting module costs half a second; a test keeps the two equal).
+ROBOT_RGB: Final[tuple[tuple[float, float, float], ...]] = (
+    (0.122, 0.467, 0.706),
+    (1.000, 0.498, 0.055),
+    (0.173, 0.627, 0.173),
+    (0.839, 0.153, 0.157),
+    (0.580, 0.404, 0.741),
+    (0.549, 0.337, 0.294),
+    (0.890, 0.467, 0.761),
+    (0.498, 0.498, 0.498),
+    (0.737, 0.741, 0.133),
+    (0.090, 0.745, 0.812),
+)
+HUMAN_RGB: Final[tuple[float, float, float]] = (0.45, 0.45, 0.45)
+
+
+@functools.cache
+def crowdmpc_version() -> str:
+    """The installed crowdmpc's version (looked up once: importlib.metadata scans every distribution)."""
+    try:
+        return version("crowdmpc")
+    except PackageNotFoundError:  # running from a source tree that was not installed
+        return "0+unknown"
+
+
+def episode_filename(scenario: str, seed: int) -> str:
+    return f"{scenario}_seed{seed:06d}.mcap"
+
+
+def seconds_to_ns(t: float) -> int:
+    return int(round(t * 1e9))
+
+
+def plain(value: Any) -> Any:
+    """``value`` as plain JSON: numpy scalars/arrays to Python, tuples to lists, NaN/inf to None."""
+    if isinstance(value, float | np.floating):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, np.ndarray):
+        return plain(value.tolist()) if value.dtype.kind == "f" else value.tolist()
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): plain(v) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    return value
+
+
+def _metadata_strings(values: Mapping[str, Any]) -> dict[str, str]:
+    """MCAP metadata holds strings only: every value JSON-encoded (``review`` decodes them back)."""
+    return {str(k): json.dumps(plain(v), default=str) for k, v in values.items()}
+
+
+def _color(rgb: tuple[float, float, float], alpha: float) -> dict[str, float]:
+    return {"r": rgb[0], "g": rgb[1], "b": rgb[2], "a": alpha}
+
+
+def _dumps(value: Any) -> str:
+    return json.dumps(value, separators=(",", ":"))
+
+
+# The hot path formats JSON text from templates: one %-format call per array instead of json.dumps over
+# hundreds of small dicts and shortest-repr floats (on_step for 3 robots, 7 humans, H = 12: ~0.9 -> ~0.4 ms).
+PLAN_DECIMALS: Final = 6  # /mpc/plan and /mpc/prediction: 1 µm, far below any solver tolerance
+SCENE_DECIMALS: Final = 3  # /scene is for the eye: 1 mm
+_SCENE_XY: Final = f'"x":%.{SCENE_DECIMALS}f,"y":%.{SCENE_DECIMALS}f'
+
+
+@functools.lru_cache(maxsize=256)
+def _array_template(shape: tuple[int, ...], number: str) -> str:
+    """JSON text of a nested array of ``shape`` with ``number`` (a %-format) as each entry."""
+    if not shape:
+        return number
+    inner = _array_template(shape[1:], number)
+    return "[" + ",".join([inner] * shape[0]) + "]"
+
+
+def array_json(values: np.ndarray, decimals: int) -> str:
+    """``values`` as JSON nested lists with ``decimals`` fixed decimals; NaN/inf (never expected) as null."""
+    if not np.isfinite(values).all():
+        return _dumps(plain(np.round(values, decimals)))
+    return _array_template(values.shape, f"%.{decimals}f") % tuple(values.ravel().tolist())
+
+
+_IDENTITY: Final = _dumps({"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0})
+_ORIGIN: Final = '{"position":{"x":0.0,"y":0.0,"z":0.0},"orientation":' + _IDENTITY + "}"
+_LINE_Z: Final = 0.02  # m, just above the ground so lines are not hidden by it
+_POINT: Final = "{" + _SCENE_XY + ',"z":' + repr(_LINE_Z) + "}"
+_ENTITY_IDS: Final = ("robots", "humans", "goals", "plans", "predictions")
+
+
+class SceneBuilder:
+    """The per-step foxglove.SceneUpdate as JSON text; colours, sizes and templates fixed once per episode.
+
+    Entities: "robots" and "humans" (spheres of the agents' diameter standing on the ground), "goals" (flat
+    discs in the robots' colours), "plans" (a line strip per robot from its position through its plan) and
+    "predictions" (a line strip per human through its predicted positions), all in the "world" frame.
+    """
+
+    def __init__(self, n_robots: int, n_humans: int, radius: float):
+        diameter = 2.0 * radius
+        agent = {"x": diameter, "y": diameter, "z": diameter}
+        rgb = [ROBOT_RGB[i % len(ROBOT_RGB)] for i in range(n_robots)]
+        self._robots = self._sphere_template([_color(c, 1.0) for c in rgb], agent, radius)
+        self._humans = self._sphere_template([_color(HUMAN_RGB, 0.8)] * n_humans, agent, radius)
+        self._goals = self._sphere_template(
+            [_color(c, 0.6) for c in rgb], {"x": 0.25, "y": 0.25, "z": 0.05}, 0.025
+        )
+        self._plan_colors = [_dumps(_color(c, 0.9)) for c in rgb]
+        self._prediction_colors = [_dumps(_color(HUMAN_RGB, 0.6))] * n_humans
+        self._lines: dict[tuple[str, int], str] = {}  # (kind, points per strip) -> template
+        # Each entity: a head before its timestamp, a middle before its spheres, one before its lines, a tail.
+        self._entity_parts = {
+            eid: (
+                '{"timestamp":',
+                f',"frame_id":"{FRAME_ID}","id":"{eid}","lifetime":{{"sec":0,"nsec":0}},"frame_locked":false,'
+                '"metadata":[],"arrows":[],"cubes":[],"spheres":[',
+                '],"cylinders":[],"lines":[',
+                '],"triangles":[],"texts":[],"models":[]}',
+            )
+            for eid in _ENTITY_IDS
+        }
+
+    @staticmethod
+    def _sphere_template(colors: list[dict], size: dict, z: float) -> str:
+        return ",".join(
+            '{"pose":{"position":{' + _SCENE_XY + ',"z":' + repr(float(z)) + '},"orientation":' + _IDENTITY
+            + '},"size":' + _dumps(size) + ',"color":' + _dumps(color) + "}"
+            for color in colors
+        )  # fmt: skip
+
+    def _line_template(self, kind: str, colors: list[str], thickness: float, n_points: int) -> str:
+        key = (kind, n_points)
+        if key not in self._lines:
+            points = ",".join([_POINT] * n_points)
+            self._lines[key] = ",".join(
+                '{"type":0,"pose":' + _ORIGIN + ',"thickness":' + repr(thickness)
+                + ',"scale_invariant":false,"points":[' + points + '],"color":' + color
+                + ',"colors":[],"indices":[]}'
+                for color in colors
+            )  # fmt: skip
+        return self._lines[key]
+
+    def _entity(self, eid: str, stamp: str, spheres: str = "", lines: str = "") -> str:
+        head, before_spheres, before_lines, tail = self._entity_parts[eid]
+        return head + stamp + before_spheres + spheres + before_lines + lines + tail
+
+    def update(
+        self,
+        log_time_ns: int,
+        robot_positions: np.ndarray,  # (M, 2)
+        robot_goals: np.ndarray,  # (M, 2)
+        human_positions: np.ndarray,  # (N, 2)
+        plan: np.ndarray | None,  # (M, H, 2)
+        prediction: np.ndarray | None,  # (H, N, 2)
+    ) -> bytes:
+        sec, nsec = divmod(log_time_ns, 1_000_000_000)
+        stamp = f'{{"sec":{sec},"nsec":{nsec}}}'
+        plan_lines = prediction_lines = ""
+        if plan is not None and np.isfinite(plan).all():
+            # each strip starts at the robot so that the plan reads as "from here"
+            tracks = np.concatenate([robot_positions[:, None, :], plan], axis=1)
+            template = self._line_template("plan", self._plan_colors, 0.05, tracks.shape[1])
+            plan_lines = template % tuple(tracks.ravel().tolist())
+        if prediction is not None and prediction.shape[1] > 0 and np.isfinite(prediction).all():
+            tracks = np.concatenate([human_positions[:, None, :], np.swapaxes(prediction, 0, 1)], axis=1)
+            template = self._line_template("prediction", self._prediction_colors, 0.03, tracks.shape[1])
+            prediction_lines = template % tuple(tracks.ravel().tolist())
+        # Every entity is sent at every step (also those that do not move): after a seek, Foxglove only shows
+        # what was published near the new time.
+        entities = ",".join(
+            (
+                self._entity("robots", stamp, self._robots % tuple(robot_positions.ravel().tolist())),
+                self._entity("humans", stamp, self._humans % tuple(human_positions.ravel().tolist())),
+                self._entity("goals", stamp, self._goals % tuple(robot_goals.ravel().tolist())),
+                self._entity("plans", stamp, lines=plan_lines),
+                self._entity("predictions", stamp, lines=prediction_lines),
+            )
+        )
+        return ('{"deletions":[],"entities":[' + entities + "]}").encode()
+
+
+class McapEpisodeRecorder:
+    """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode.
+
+    :param out_dir: folder for the files (created if missing).
+    :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
+        keeps them: ``ControllerSpec(record_iterations=True)``).
+    :param run_meta: facts about the whole run (command line, sweep cell...), stored in the "run" metadata.
+    """
+
+    def __init__(
+        self,
+        out_dir: str | Path,
+        *,
+        record_iterations: bool = False,
+        run_meta: Mapping[str, Any] | None = None,
+    ):
+        self.out_dir = Path(out_dir)
+        if self.out_dir.exists() and not self.out_dir.is_dir():
+            raise PipelineError(f"--record needs a folder; {self.out_dir} is a file")
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.record_iterations = record_iterations
+        self.run_meta = dict(run_meta or {})
+        self.paths: list[Path] = []  # every file started, in order
+        self._recorder: McapRecorder | None = None
+        self._scene: SceneBuilder | None = None
+        self._last: Observation | None = None  # the newest state seen
+        self._last_written_step = -1
+
+    # -- EpisodeObserver -------------------------------------------------------------------------------------
+    def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
+        self.close()  # an episode that ended without on_end (an exception in the loop) is finished as it is
+        missing = [key for key in ("seed", "scenario") if key not in meta]
+        if missing:
+            raise PipelineError(f"recording needs {missing} in the episode meta; got keys {sorted(meta)}")
+        seed, scenario = int(meta["seed"]), str(meta["scenario"])
+        n_robots, n_humans = len(obs.robot_positions), len(obs.human_positions)
+        episode = {
+            "seed": str(seed),
+            "scenario": scenario,
+            "controller": str(meta.get("controller", "")),
+            "predictor": str(meta.get("predictor") or ""),
+            "predictor_sha256": str(meta.get("predictor_sha256") or ""),
+            "n_robots": str(n_robots),
+            "n_humans": str(n_humans),
+            "dt": repr(float(obs.dt)),
+            "radius": repr(float(obs.radius)),
+        }
+        path = self.out_dir / episode_filename(scenario, seed)
+        self._recorder = McapRecorder(
+            path,
+            metadata={
+                "crowdmpc": {"version": crowdmpc_version(), "format": FORMAT},
+                "episode": episode,
+                "config": _metadata_strings(meta.get("config") or {}),
+                "run": _metadata_strings(self.run_meta),
+            },
+        )
+        self.paths.append(path)
+        self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius))
+        self._last = obs
+        self._last_written_step = -1
+
+    def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
+        rec = self._require_open()
+        t_ns = seconds_to_ns(obs.time)
+        stamp = {"time": float(obs.time), "step": int(obs.step)}
+        self._write_state(
+            rec, obs, t_ns, stamp, next_obs.robot_last_actions.tolist(), out.accelerations.tolist()
+        )
+        plan = None if out.plan is None else np.asarray(out.plan, dtype=float)
+        prediction = None if out.prediction is None else np.asarray(out.prediction, dtype=float)
+        head = f'{{"time":{float(obs.time)!r},"step":{int(obs.step)},"positions":'
+        if plan is not None:
+            rec.write_json(
+                "/mpc/plan", f"{head}{array_json(plan, PLAN_DECIMALS)}}}".encode(), t_ns, schema=PLAN
+            )
+        if prediction is not None:
+            iterations = ",".join(
+                array_json(np.asarray(p, dtype=float), PLAN_DECIMALS)
+                for p in (out.iteration_predictions if self.record_iterations else ())
+            )
+            text = f'{head}{array_json(prediction, PLAN_DECIMALS)},"iterations":[{iterations}]}}'
+            rec.write_json("/mpc/prediction", text.encode(), t_ns, schema=PREDICTION)
+        solver = {
+            **stamp,
+            "status": str(out.status),
+            "solve_time_s": float(out.solve_time_s),
+            "iterations": int(out.iterations),
+            "potential": plain(out.potential),
+            "fallback": out.fallback,
+            "extra": plain(out.extra) if out.extra else {},
+        }
+        rec.write("/mpc/solver", solver, t_ns, schema=SOLVER)
+        scene = self._scene.update(
+            t_ns, obs.robot_positions, obs.robot_goals, obs.human_positions, plan, prediction
+        )
+        rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
+        self._last = next_obs
+
+    def on_end(self, result: Any) -> None:
+        rec = self._require_open()
+        last = self._last
+        t_ns = seconds_to_ns(last.time)
+        if last.step > self._last_written_step:  # the terminal state, reached by the last step
+            self._write_state(rec, last, t_ns, {"time": float(last.time), "step": int(last.step)}, None, None)
+            scene = self._scene.update(
+                t_ns, last.robot_positions, last.robot_goals, last.human_positions, None, None
+            )
+            rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
+        rec.write("/episode/metrics", episode_summary(result), t_ns, schema=EPISODE_METRICS)
+        self.close()
+
+    # -- lifetime --------------------------------------------------------------------------------------------
+    def close(self) -> None:
+        """Finish the open file, if any (also what ``with McapEpisodeRecorder(...)`` does on the way out)."""
+        if self._recorder is not None:
+            recorder, self._recorder = self._recorder, None
+            recorder.close()
+
+    def __enter__(self) -> McapEpisodeRecorder:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # -- helpers ---------------------------------------------------------------------------------------------
+    def _require_open(self) -> McapRecorder:
+        if self._recorder is None:
+            raise PipelineError("McapEpisodeRecorder: on_step/on_end called before on_reset")
+        return self._recorder
+
+    def _write_state(
+        self,
+        rec: McapRecorder,
+        obs: Observation,
+        t_ns: int,
+        stamp: dict[str, Any],
+        actions: list | None,
+        commanded: list | None,
+    ) -> None:
+        robots = {
+            **stamp,
+            "positions": obs.robot_positions.tolist(),
+            "velocities": obs.robot_velocities.tolist(),
+            "goals": obs.robot_goals.tolist(),
+            "actions": actions,
+            "commanded": commanded,
+            "reached": obs.robot_reached.tolist(),
+        }
+        rec.write("/robots", robots, t_ns, schema=ROBOTS)
+        humans = {
+            **stamp,
+            "positions": obs.human_positions.tolist(),
+            "velocities": obs.human_velocities.tolist(),
+            "goals": obs.human_goals.tolist(),
+        }
+        rec.write("/humans", humans, t_ns, schema=HUMANS)
+        self._last_written_step = int(obs.step)
+
+
+def episode_summary(result: Any) -> dict[str, Any]:
+    """The /episode/metrics message of a ``pipelines.closed_loop.EpisodeResult``."""
+    times_ms = np.asarray(result.solve_times_s, dtype=float) * 1e3
+    iterations = np.asarray(result.iterations, dtype=float)
+    has_steps = times_ms.size > 0
+    solve = {
+        "median_ms": float(np.median(times_ms)) if has_steps else None,
+        "p95_ms": float(np.percentile(times_ms, 95)) if has_steps else None,
+        "max_ms": float(times_ms.max()) if has_steps else None,
+        "mean_iterations": float(iterations.mean()) if iterations.size else None,
+    }
+    return {
+        "seed": int(result.seed),
+        "scenario": str(result.scenario),
+        "controller": str(result.controller),
+        "predictor": None if result.predictor is None else str(result.predictor),
+        "n_humans": int(result.n_humans),
+        "n_robots": int(result.n_robots),
+        "n_steps": int(times_ms.size),
+        "metrics": plain(result.metrics),
+        "solve": solve,
+        "statuses": dict(Counter(str(s) for s in result.statuses)),
+        "fallbacks": dict(Counter(str(f) for f in result.fallbacks if f is not None)),
+    }

@@ -1,0 +1,5 @@
+"""TrajNet++ data: reading and validating ndjson, converting raw BIWI EWAP annotations, statistics, locating
+the files of an evaluation protocol, and the scene windows that training consumes.
+
+Only ``datamodule`` imports Lightning, and only ``windows``/``datamodule`` import torch.
+"""

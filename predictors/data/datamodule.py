@@ -1,0 +1,105 @@
+"""A Lightning ``DataModule`` over TrajNet++ scene windows (the only data module that imports Lightning)."""
+
+from __future__ import annotations
+
+from functools import partial
+from pathlib import Path
+
+import lightning as L
+import torch
+from torch.utils.data import DataLoader
+
+from predictors.base import OBS_LEN, PRED_LEN
+from predictors.data.locate import protocol_files
+from predictors.data.windows import TrajnetSceneDataset, collate_scenes
+from predictors.errors import PredictorError
+
+
+class TrajnetDataModule(L.LightningDataModule):
+    """Train/val/test ``SceneBatch`` loaders over lists of TrajNet++ ndjson files.
+
+    Training batches are shuffled and (with ``augment``) randomly rotated, both seeded by ``seed``;
+    validation and test batches are neither.
+    """
+
+    def __init__(
+        self,
+        train_files: list[str | Path],
+        val_files: list[str | Path],
+        test_files: list[str | Path],
+        batch_size: int = 64,
+        augment: bool = True,
+        seed: int = 0,
+        num_workers: int = 0,
+        obs_len: int = OBS_LEN,
+        pred_len: int = PRED_LEN,
+    ):
+        super().__init__()
+        if batch_size < 1:
+            raise PredictorError(f"batch_size must be >= 1, got {batch_size}")
+        if num_workers < 0:
+            raise PredictorError(f"num_workers must be >= 0, got {num_workers}")
+        self.files = {"train": list(train_files), "val": list(val_files), "test": list(test_files)}
+        self.batch_size = batch_size
+        self.augment = augment
+        self.seed = seed
+        self.num_workers = num_workers
+        self.obs_len = obs_len
+        self.pred_len = pred_len
+        self.datasets: dict[str, TrajnetSceneDataset] = {}
+        self.save_hyperparameters(
+            {
+                "files": {k: [str(p) for p in v] for k, v in self.files.items()},
+                "batch_size": batch_size,
+                "augment": augment,
+                "seed": seed,
+                "obs_len": obs_len,
+                "pred_len": pred_len,
+            }
+        )
+
+    @classmethod
+    def from_protocol(
+        cls, data_dir: str | Path | None, protocol: str = "paper", dataset: str = "biwi_eth", **kwargs
+    ) -> TrajnetDataModule:
+        files = protocol_files(data_dir, protocol, dataset)
+        return cls(files["train"], files["val"], files["test"], **kwargs)
+
+    def _dataset(self, split: str) -> TrajnetSceneDataset:
+        if split not in self.datasets:
+            if not self.files[split]:
+                raise PredictorError(f"no {split} files were given to the data module")
+            self.datasets[split] = TrajnetSceneDataset(
+                self.files[split],
+                obs_len=self.obs_len,
+                pred_len=self.pred_len,
+                augment=self.augment and split == "train",
+                seed=self.seed,
+            )
+        return self.datasets[split]
+
+    def setup(self, stage: str | None = None) -> None:
+        wanted = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), "predict": ("test",)}
+        for split in wanted.get(stage, ("train", "val", "test")) if stage else ("train", "val", "test"):
+            if self.files[split]:
+                self._dataset(split)
+
+    def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        return DataLoader(
+            self._dataset(split),
+            batch_size=self.batch_size,
+            shuffle=shuffle,
+            num_workers=self.num_workers,
+            collate_fn=partial(collate_scenes, obs_len=self.obs_len),
+            generator=torch.Generator().manual_seed(self.seed) if shuffle else None,
+            persistent_workers=self.num_workers > 0,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", shuffle=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", shuffle=False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)

@@ -1,0 +1,180 @@
+"""Where the data is: the data directory, the prepared splits (built and cached on first use), and the files
+of each evaluation protocol.
+
+A data directory is either
+
+* a *prepared* directory written by ``crowdmpc data prepare`` (``manifest.json``,
+  ``{train,val,test}/*.ndjson``),
+* or a *raw* directory like the team's shared data: ``raw_ewap/seq_{eth,hotel}/obsmat.txt`` (or the
+  ``raw_ewap`` directory itself), optionally with ``trajnetpp_vita/train/real_data/*.ndjson`` beside it.
+  The raw annotations are prepared once into ``<cache>/prepared/<content hash>`` (cache:
+  ``$CROWDMPC_CACHE``, else ``~/.cache/crowdmpc``).
+
+Protocols (data/README.md explains them):
+
+* ``paper``: train = train splits of ETH and Hotel, val = their val splits, test = the test split of
+  ``dataset`` (ETH by default).
+* ``loo`` (leave one sequence out): test = the same test split; train = every TrajNet++ training file
+  of another sequence (zara01, zara03, students001, students003) plus the train split of the other BIWI
+  sequence (Hotel), val = that sequence's val split. Nothing from ETH is used for training or validation.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import sys
+from pathlib import Path
+from typing import Final
+
+from predictors.data.prepare import (
+    CONVERTER_VERSION,
+    EWAP_SEQUENCES,
+    SPLITS,
+    default_references,
+    prepare_ewap,
+)
+from predictors.data.prepare import sha256_file as _sha256_file
+from predictors.errors import PredictorError
+
+DATA_ENV: Final[str] = "CROWDMPC_DATA"
+CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
+VITA_TRAIN: Final[Path] = Path("trajnetpp_vita") / "train" / "real_data"
+PROTOCOLS: Final[tuple[str, ...]] = ("paper", "loo")
+DATASETS: Final[tuple[str, ...]] = tuple(EWAP_SEQUENCES)
+
+
+def resolve_data_dir(data_dir: str | Path | None) -> Path:
+    """``data_dir`` if given, else ``$CROWDMPC_DATA``; it must exist."""
+    if data_dir is None or str(data_dir) == "":
+        data_dir = os.environ.get(DATA_ENV) or None
+        if data_dir is None:
+            raise PredictorError(
+                f"no data directory: pass --data-dir DIR or set {DATA_ENV} (a prepared directory from "
+                "`crowdmpc data prepare`, or a directory holding raw_ewap/; see data/README.md)"
+            )
+    path = Path(data_dir).expanduser()
+    if not path.is_dir():
+        raise PredictorError(f"data directory {path} does not exist")
+    return path
+
+
+def cache_root() -> Path:
+    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "crowdmpc").expanduser()
+
+
+def read_manifest(directory: Path) -> dict | None:
+    """The manifest of a complete prepared directory, else None."""
+    manifest_path = directory / "manifest.json"
+    if not manifest_path.is_file():
+        return None
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    if not isinstance(manifest, dict) or manifest.get("format") != "crowdmpc-prepared":
+        return None
+    if not all((directory / name).is_file() for name in manifest.get("files", {})):
+        return None
+    return manifest
+
+
+def raw_ewap_dir(directory: Path) -> Path | None:
+    for candidate in (directory / "raw_ewap", directory):
+        if all((candidate / seq / "obsmat.txt").is_file() for seq in EWAP_SEQUENCES.values()):
+            return candidate
+    return None
+
+
+def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True) -> Path:
+    """The prepared directory for ``data_dir`` (module doc); raw data is prepared into the cache once."""
+    directory = resolve_data_dir(data_dir)
+    if read_manifest(directory) is not None:
+        return directory
+    if (directory / "manifest.json").is_file():
+        raise PredictorError(
+            f"{directory / 'manifest.json'} exists but the prepared data is incomplete or unreadable; "
+            "re-run `crowdmpc data prepare`"
+        )
+    raw = raw_ewap_dir(directory)
+    if raw is None:
+        raise PredictorError(
+            f"{directory} holds neither prepared splits (manifest.json and train/val/test/*.ndjson from "
+            "`crowdmpc data prepare`) nor raw BIWI EWAP annotations (raw_ewap/seq_eth/obsmat.txt and "
+            "raw_ewap/seq_hotel/obsmat.txt); see data/README.md"
+        )
+    digest = hashlib.sha256(CONVERTER_VERSION.encode())
+    for seq in EWAP_SEQUENCES.values():
+        digest.update(_sha256_file(raw / seq / "obsmat.txt").encode())
+    target = cache_root() / "prepared" / digest.hexdigest()[:16]
+    if read_manifest(target) is not None:
+        return target
+    log = log or (lambda msg: print(msg, file=sys.stderr))
+    log(f"preparing {raw} into {target} (first use only; about two minutes)")
+    staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
+    shutil.rmtree(staging, ignore_errors=True)
+    prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log)
+    try:
+        staging.rename(target)
+    except OSError:  # another process finished first; its copy is as good as ours
+        shutil.rmtree(staging, ignore_errors=True)
+        if read_manifest(target) is None:
+            raise
+    return target
+
+
+def vita_train_dir(data_dir: Path, prepared: Path) -> Path | None:
+    """The TrajNet++ training files: in the data directory, or beside the raw data it was prepared from."""
+    candidates = [data_dir / VITA_TRAIN]
+    manifest = read_manifest(prepared) or {}
+    source = manifest.get("source_dir")
+    if source:
+        candidates.append(Path(source).parent / VITA_TRAIN)
+    for candidate in candidates:
+        if candidate.is_dir() and any(candidate.glob("*.ndjson")):
+            return candidate
+    return None
+
+
+def protocol_files(
+    data_dir: str | Path | None, protocol: str, dataset: str = "biwi_eth", *, log=None, progress: bool = True
+) -> dict[str, list[Path]]:
+    """``{"train": [...], "val": [...], "test": [...]}``: the ndjson files of ``protocol`` for ``dataset``."""
+    if protocol not in PROTOCOLS:
+        raise PredictorError(f"unknown protocol {protocol!r}; choose from {list(PROTOCOLS)}")
+    if dataset not in DATASETS:
+        raise PredictorError(f"unknown dataset {dataset!r}; choose from {list(DATASETS)}")
+    directory = resolve_data_dir(data_dir)
+    prepared = prepared_dir(directory, log=log, progress=progress)
+
+    def split_file(split: str, name: str) -> Path:
+        return prepared / split / f"{name}.ndjson"
+
+    if protocol == "paper":
+        files = {
+            "train": [split_file("train", name) for name in DATASETS],
+            "val": [split_file("val", name) for name in DATASETS],
+            "test": [split_file("test", dataset)],
+        }
+    else:
+        vita = vita_train_dir(directory, prepared)
+        if vita is None:
+            raise PredictorError(
+                f"--protocol loo needs the TrajNet++ training files ({VITA_TRAIN}/*.ndjson) in {directory} "
+                "or beside the raw data it was prepared from; see data/README.md"
+            )
+        others = [name for name in DATASETS if name != dataset]
+        # the BIWI sequences come from our own splits, so the whole-sequence TrajNet++ hotel file is left out
+        # (it would overlap the val split)
+        external = sorted(p for p in vita.glob("*.ndjson") if p.stem not in DATASETS)
+        files = {
+            "train": external + [split_file("train", name) for name in others],
+            "val": [split_file("val", name) for name in others],
+            "test": [split_file("test", dataset)],
+        }
+    missing = [str(p) for split in SPLITS for p in files[split] if not p.is_file()]
+    if missing:
+        raise PredictorError(f"prepared data in {prepared} lacks {missing}; re-run `crowdmpc data prepare`")
+    return files

@@ -1,0 +1,98 @@
+"""Per-file statistics of TrajNet++ ndjson files (``crowdmpc data stats``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from predictors.data.trajnet_io import read_scenes, validate_ndjson
+from predictors.errors import PredictorError
+
+
+@dataclass(frozen=True)
+class FileStats:
+    path: Path
+    scenes: int
+    tracks: int  # track records
+    pedestrians: int  # distinct pedestrian ids
+    agents_min: int  # agents per scene, as Reader.paths_to_xy returns them (primary included)
+    agents_mean: float
+    agents_max: int
+    types: tuple[int, int, int, int]  # scenes of TrajNet++ type I, II, III, IV (untagged scenes not counted)
+
+
+def file_stats(path: str | Path) -> FileStats:
+    summary = validate_ndjson(path)
+    scenes = read_scenes(path)
+    agents = np.asarray([s.xy.shape[1] for s in scenes] or [0])
+    types = [0, 0, 0, 0]
+    for scene in scenes:
+        if isinstance(scene.tag, list) and scene.tag and scene.tag[0] in (1, 2, 3, 4):
+            types[scene.tag[0] - 1] += 1
+    return FileStats(
+        path=Path(path),
+        scenes=len(scenes),
+        tracks=summary.n_tracks,
+        pedestrians=len(summary.pedestrians),
+        agents_min=int(agents.min()),
+        agents_mean=float(agents.mean()) if scenes else 0.0,
+        agents_max=int(agents.max()),
+        types=(types[0], types[1], types[2], types[3]),
+    )
+
+
+def ndjson_files(directory: str | Path) -> list[Path]:
+    """Every ``*.ndjson`` under ``directory`` (recursively), sorted."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise PredictorError(f"{directory} is not a directory")
+    files = sorted(p for p in directory.rglob("*.ndjson") if p.is_file())
+    if not files:
+        raise PredictorError(f"no .ndjson files under {directory}")
+    return files
+
+
+def format_table(stats: list[FileStats], root: str | Path | None = None) -> str:
+    """A plain-text table, one row per file plus the totals."""
+    header = ("file", "scenes", "tracks", "peds", "agents/scene min", "mean", "max", "types I/II/III/IV")
+    rows = []
+    for s in stats:
+        name = str(s.path.relative_to(root)) if root is not None else str(s.path)
+        rows.append(
+            (
+                name,
+                str(s.scenes),
+                str(s.tracks),
+                str(s.pedestrians),
+                str(s.agents_min),
+                f"{s.agents_mean:.1f}",
+                str(s.agents_max),
+                "/".join(map(str, s.types)),
+            )
+        )
+    if len(stats) > 1:
+        n = sum(s.scenes for s in stats)
+        mean = sum(s.agents_mean * s.scenes for s in stats) / max(n, 1)
+        types = [sum(s.types[k] for s in stats) for k in range(4)]
+        rows.append(
+            (
+                "total",
+                str(n),
+                str(sum(s.tracks for s in stats)),
+                "-",
+                str(min(s.agents_min for s in stats)),
+                f"{mean:.1f}",
+                str(max(s.agents_max for s in stats)),
+                "/".join(map(str, types)),
+            )
+        )
+    widths = [max(len(r[k]) for r in [header, *rows]) for k in range(len(header))]
+
+    def fmt(r):
+        return "  ".join(
+            c.ljust(w) if k == 0 else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths, strict=True))
+        )
+
+    return "\n".join([fmt(header), "  ".join("-" * w for w in widths), *map(fmt, rows)])

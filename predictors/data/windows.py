@@ -1,0 +1,243 @@
+"""TrajNet++ scenes as training windows: a torch ``Dataset``, the ``SceneBatch`` it collates into, and the
+normalisation (centring on the primary, random rotation) that training uses.
+
+Each scene is ``T = obs_len + pred_len`` steps (9 + 12) of all its agents, the primary pedestrian at agent
+index 0. Positions are expressed in a scene frame: translated so that the primary's last observed position
+(step ``obs_len - 1``) is the origin and, with ``augment``, rotated by an angle drawn uniformly in [0, 2 pi)
+-- pedestrian motion has no preferred heading, so rotations are free extra data. Missing entries (an agent
+absent at a step) are 0 with ``mask`` False, never NaN.
+
+Loading parses each file once (through ``trajnet_io.read_scenes``, i.e. ``trajnetplusplustools.Reader``)
+and keeps the arrays: in memory for the process, and on disk under ``<cache>/scenes/<sha256 of the file>``
+(``$CROWDMPC_CACHE`` or ``~/.cache/crowdmpc``) so the next run skips parsing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset, get_worker_info
+
+from predictors.base import OBS_LEN, PRED_LEN
+from predictors.data.locate import cache_root
+from predictors.data.prepare import sha256_file
+from predictors.data.trajnet_io import read_scenes
+from predictors.errors import PredictorError
+
+SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
+CACHE_VERSION: Final[str] = "scenes-v1"  # bump when FileArrays' layout changes
+
+
+@dataclass(frozen=True)
+class FileArrays:
+    """All scenes of one file, agents of every scene concatenated along one axis."""
+
+    xy: (
+        np.ndarray
+    )  # (T, A, 2) float32 metres, world frame, NaN where an agent is absent; A = agents of all scenes
+    offsets: np.ndarray  # (S + 1,) int64: scene s owns agents offsets[s]:offsets[s+1], its primary first
+    scene_ids: np.ndarray  # (S,) int64 scene ids as in the file
+
+    def __len__(self) -> int:
+        return len(self.scene_ids)
+
+    def scene(self, s: int) -> np.ndarray:
+        """``(T, N_s, 2)`` positions of scene ``s``."""
+        return self.xy[:, self.offsets[s] : self.offsets[s + 1]]
+
+
+_MEMORY: dict[tuple[str, int, int, int], FileArrays] = {}
+
+
+def load_file_arrays(
+    path: str | Path, *, scene_length: int = SCENE_LENGTH, disk_cache: bool = True
+) -> FileArrays:
+    """The scenes of ``path`` as arrays; every primary must span ``scene_length`` evenly spaced frames."""
+    path = Path(path)
+    if not path.is_file():
+        raise PredictorError(f"dataset file {path} does not exist")
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, scene_length)
+    if key in _MEMORY:
+        return _MEMORY[key]
+    disk = None
+    if disk_cache:
+        disk = cache_root() / "scenes" / f"{sha256_file(path)}-{scene_length}-{CACHE_VERSION}.npz"
+        if disk.is_file():
+            try:
+                with np.load(disk) as data:
+                    arrays = FileArrays(data["xy"], data["offsets"], data["scene_ids"])
+                _MEMORY[key] = arrays
+                return arrays
+            except (OSError, KeyError, ValueError):
+                pass  # a damaged cache entry is rebuilt below
+    scenes = read_scenes(path, require_length=scene_length)
+    sizes = np.asarray([s.xy.shape[1] for s in scenes], dtype=np.int64)
+    arrays = FileArrays(
+        xy=np.concatenate([np.empty((scene_length, 0, 2))] + [s.xy for s in scenes], axis=1).astype(
+            np.float32
+        ),
+        offsets=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        scene_ids=np.asarray([s.id for s in scenes], dtype=np.int64),
+    )
+    if disk is not None:
+        try:
+            disk.parent.mkdir(parents=True, exist_ok=True)
+            tmp = disk.with_name(f".{disk.name}.tmp.npz")
+            np.savez(tmp, xy=arrays.xy, offsets=arrays.offsets, scene_ids=arrays.scene_ids)
+            tmp.replace(disk)
+        except OSError:
+            pass  # a read-only cache only costs speed
+    _MEMORY[key] = arrays
+    return arrays
+
+
+@dataclass(frozen=True)
+class SceneSample:
+    """One normalised scene (what ``TrajnetSceneDataset[i]`` returns)."""
+
+    positions: np.ndarray  # (T, N, 2) float32, scene frame, 0 where mask is False
+    mask: np.ndarray  # (T, N) bool
+    origin: np.ndarray  # (2,) float32, world position of the scene-frame origin
+    rotation: np.ndarray  # (2, 2) float32, scene = (world - origin) @ rotation.T
+
+
+@dataclass(frozen=True)
+class SceneBatch:
+    """A padded batch of scenes; agent 0 of every scene is its primary pedestrian."""
+
+    positions: torch.Tensor  # (B, T, Nmax, 2) float32 metres, scene frame, 0 where mask is False
+    mask: torch.Tensor  # (B, T, Nmax) bool, True where the agent is present (False also for padding)
+    origin: torch.Tensor  # (B, 2) float32, world position of each scene's origin (primary at step obs_len-1)
+    rotation: torch.Tensor  # (B, 2, 2) float32, positions = (world - origin) @ rotation^T
+    obs_len: int  # steps [0, obs_len) are observed, [obs_len, T) are to be predicted
+
+    def __len__(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def observed(self) -> torch.Tensor:
+        """(B, obs_len, Nmax, 2)"""
+        return self.positions[:, : self.obs_len]
+
+    @property
+    def future(self) -> torch.Tensor:
+        """(B, T - obs_len, Nmax, 2)"""
+        return self.positions[:, self.obs_len :]
+
+    def to_world(self, positions: torch.Tensor) -> torch.Tensor:
+        """Scene-frame positions ``(B, ..., 2)`` back to world coordinates."""
+        flat = positions.reshape(positions.shape[0], -1, 2)
+        world = flat @ self.rotation + self.origin[:, None, :]
+        return world.reshape(positions.shape)
+
+    def to(self, device, non_blocking: bool = False) -> SceneBatch:
+        """A copy on ``device`` (Lightning moves batches through this method)."""
+        return dataclasses.replace(
+            self,
+            **{
+                f.name: getattr(self, f.name).to(device, non_blocking=non_blocking)
+                for f in dataclasses.fields(self)
+                if isinstance(getattr(self, f.name), torch.Tensor)
+            },
+        )
+
+
+def rotation_matrix(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.asarray([[c, -s], [s, c]], dtype=np.float32)
+
+
+def normalise(xy: np.ndarray, obs_len: int, angle: float | None) -> SceneSample:
+    """Centre ``xy`` ``(T, N, 2)`` (NaN = absent) on the primary's position at step ``obs_len - 1`` and rotate
+    by ``angle`` (radians, counter-clockwise; None = no rotation)."""
+    mask = ~np.isnan(xy).any(axis=-1)
+    if not mask[obs_len - 1, 0]:
+        raise PredictorError("the primary pedestrian must be present at the last observed step")
+    origin = xy[obs_len - 1, 0].astype(np.float32)
+    rotation = rotation_matrix(angle) if angle is not None else np.eye(2, dtype=np.float32)
+    positions = (np.where(mask[..., None], xy, origin) - origin) @ rotation.T
+    positions = np.where(mask[..., None], positions, 0.0).astype(np.float32)
+    return SceneSample(positions, mask, origin, rotation)
+
+
+class TrajnetSceneDataset(Dataset):
+    """Scenes of one or more TrajNet++ files as normalised ``SceneSample``s.
+
+    With ``augment`` every item is rotated by a random angle. Angles come from a generator seeded with
+    ``seed`` in the main process, and from each DataLoader worker's own torch generator in workers (which
+    torch seeds from the loader's generator, so a seeded loader gives the same angles on every run).
+    """
+
+    def __init__(
+        self,
+        files: list[str | Path],
+        *,
+        obs_len: int = OBS_LEN,
+        pred_len: int = PRED_LEN,
+        augment: bool = False,
+        seed: int = 0,
+        scene_length: int = SCENE_LENGTH,
+    ):
+        if obs_len < 2 or pred_len < 1 or obs_len + pred_len > scene_length:
+            raise PredictorError(
+                f"need obs_len >= 2, pred_len >= 1 and obs_len + pred_len <= {scene_length}, "
+                f"got obs_len={obs_len}, pred_len={pred_len}"
+            )
+        if not files:
+            raise PredictorError("a scene dataset needs at least one file")
+        self.files = [Path(f) for f in files]
+        self.obs_len = obs_len
+        self.pred_len = pred_len
+        self.augment = augment
+        self.arrays = [load_file_arrays(f, scene_length=scene_length) for f in self.files]
+        sizes = np.asarray([len(a) for a in self.arrays], dtype=np.int64)
+        self._starts = np.concatenate([[0], np.cumsum(sizes)])
+        self._generator = torch.Generator().manual_seed(seed)
+
+    def __len__(self) -> int:
+        return int(self._starts[-1])
+
+    def locate(self, index: int) -> tuple[int, int]:
+        """(file index, scene index within that file) of dataset item ``index``."""
+        if not 0 <= index < len(self):
+            raise IndexError(index)
+        k = int(np.searchsorted(self._starts, index, side="right") - 1)
+        return k, int(index - self._starts[k])
+
+    def _angle(self) -> float:
+        generator = self._generator if get_worker_info() is None else None
+        return float(torch.rand((), generator=generator)) * 2.0 * math.pi
+
+    def __getitem__(self, index: int) -> SceneSample:
+        k, s = self.locate(index)
+        xy = self.arrays[k].scene(s)
+        xy = xy[xy.shape[0] - (self.obs_len + self.pred_len) :]  # the prediction is always the scene's end
+        present = ~np.isnan(xy).any(axis=-1).all(axis=0)  # drop agents absent from the whole window
+        present[0] = True
+        return normalise(xy[:, present], self.obs_len, self._angle() if self.augment else None)
+
+
+def collate_scenes(samples: list[SceneSample], obs_len: int = OBS_LEN) -> SceneBatch:
+    """Pad the agents of ``samples`` to the batch maximum and stack them into a ``SceneBatch``."""
+    steps = samples[0].positions.shape[0]
+    n_max = max(s.positions.shape[1] for s in samples)
+    positions = np.zeros((len(samples), steps, n_max, 2), dtype=np.float32)
+    mask = np.zeros((len(samples), steps, n_max), dtype=bool)
+    for b, sample in enumerate(samples):
+        n = sample.positions.shape[1]
+        positions[b, :, :n] = sample.positions
+        mask[b, :, :n] = sample.mask
+    return SceneBatch(
+        positions=torch.from_numpy(positions),
+        mask=torch.from_numpy(mask),
+        origin=torch.from_numpy(np.stack([s.origin for s in samples])),
+        rotation=torch.from_numpy(np.stack([s.rotation for s in samples])),
+        obs_len=obs_len,
+    )

@@ -1,0 +1,182 @@
+"""Evaluate any registered predictor on TrajNet++ scenes (``crowdmpc evaluate``).
+
+Every scene gives the predictor its first ``obs_len`` steps of every agent observed in them (world
+coordinates, absent entries 0 with ``mask`` False, the primary first) and asks for ``pred_len`` steps of
+all of them (``humans`` = every agent); there are no robots (``robots_future=None``). A predictor that
+also has ``sample(history, mask, robots_future, humans, horizon, k, rng) -> (k, H, N_h, 2)`` is scored
+top-k too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from predictors.base import OBS_LEN, PRED_LEN, Predictor
+from predictors.data.trajnet_io import read_scenes
+from predictors.errors import PredictorError
+from predictors.metrics import SceneScore, score_scene, summarize
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    obs_len: int = OBS_LEN  # observed steps given to the predictor (TrajNet++: 9)
+    pred_len: int = PRED_LEN  # predicted steps scored (TrajNet++: 12)
+    top_k: int | None = None  # samples for top-k ADE/FDE (predictors with ``sample`` only)
+    seed: int = 0  # seeds the generator passed to ``sample``
+
+    def __post_init__(self):
+        if self.obs_len < 2 or self.pred_len < 1:
+            raise PredictorError(
+                f"need obs_len >= 2 and pred_len >= 1, got {self.obs_len} and {self.pred_len}"
+            )
+        if self.top_k is not None and self.top_k < 1:
+            raise PredictorError(f"--top-k must be >= 1, got {self.top_k}")
+
+
+def predict_scene(predictor: Predictor, xy: np.ndarray, config: EvalConfig, rng: np.random.Generator | None):
+    """``(prediction, agents, samples)`` for one scene ``(obs_len + pred_len, N, 2)`` (NaN = absent).
+
+    ``agents`` are the scene's agents observed at least once (the primary, agent 0, first); the predictor
+    sees only those, all as humans, and ``prediction`` is ``(pred_len, len(agents), 2)`` in that order.
+    """
+    observed = xy[: config.obs_len]
+    seen = ~np.isnan(observed).any(axis=-1)
+    agents = np.flatnonzero(seen.any(axis=0))  # an agent that only appears later cannot be predicted
+    mask = seen[:, agents]
+    history = np.where(mask[..., None], observed[:, agents], 0.0)
+    humans = np.arange(len(agents))
+    prediction = np.asarray(predictor.rollout(history, mask, None, humans, horizon=config.pred_len))
+    expected = (config.pred_len, len(agents), 2)
+    if prediction.shape != expected:
+        raise PredictorError(
+            f"predictor {predictor.name!r} returned shape {prediction.shape}, expected {expected}"
+        )
+    samples = None
+    if config.top_k is not None and hasattr(predictor, "sample"):
+        samples = np.asarray(
+            predictor.sample(history, mask, None, humans, config.pred_len, config.top_k, rng)
+        )
+    return prediction, agents, samples
+
+
+@dataclass(frozen=True)
+class EvalScene:
+    """One scene cut to the evaluation window."""
+
+    xy: np.ndarray  # (obs_len + pred_len, N, 2) metres, NaN where absent; agent 0 is the primary
+    frames: np.ndarray  # (obs_len + pred_len,) frame ids
+
+
+def load_eval_scenes(path: str | Path, config: EvalConfig = EvalConfig()) -> list[EvalScene]:
+    """The scenes of one ndjson file, each cut to its last ``obs_len + pred_len`` steps."""
+    length = config.obs_len + config.pred_len
+    scenes = []
+    for scene in read_scenes(path):
+        if len(scene.frames) < length:
+            raise PredictorError(
+                f"{path}:{scene.line}: scene {scene.id} has {len(scene.frames)} steps, the evaluation needs "
+                f"{length} ({config.obs_len} observed + {config.pred_len} predicted); is this a test/ file "
+                "without ground truth?"
+            )
+        frames = scene.frames[len(scene.frames) - length :]
+        if np.unique(np.diff(frames)).size != 1:
+            raise PredictorError(
+                f"{path}:{scene.line}: scene {scene.id} has unevenly spaced frames {frames.tolist()}"
+            )
+        scenes.append(EvalScene(scene.xy[len(scene.frames) - length :], frames))
+    return scenes
+
+
+def score_scenes(
+    predictor: Predictor, scenes: list[EvalScene], config: EvalConfig = EvalConfig(), progress=None
+) -> list[SceneScore]:
+    """Scores of ``scenes``; ``progress`` is a tqdm bar to advance (or None)."""
+    rng = np.random.default_rng(config.seed)
+    scores = []
+    for scene in scenes:
+        prediction, agents, samples = predict_scene(predictor, scene.xy, config, rng)
+        scores.append(
+            score_scene(prediction, agents.tolist(), scene.xy, scene.frames, config.obs_len, samples)
+        )
+        if progress is not None:
+            progress.update(1)
+    return scores
+
+
+def evaluate(
+    predictor: Predictor,
+    files: list[Path],
+    config: EvalConfig = EvalConfig(),
+    *,
+    progress: bool = True,
+    root: Path | None = None,
+) -> dict:
+    """Per-file and overall (scenes pooled) metrics, as a JSON-ready dict."""
+    from tqdm import tqdm
+
+    loaded = {Path(path): load_eval_scenes(path, config) for path in files}
+    per_file: dict[str, dict] = {}
+    all_scores: list[SceneScore] = []
+    # disable=None: a bar on a terminal only, so logs and pipes stay clean
+    with tqdm(
+        total=sum(len(s) for s in loaded.values()),
+        desc=f"evaluating {predictor.name}",
+        unit="scene",
+        leave=False,
+        disable=None if progress else True,
+    ) as bar:
+        for path, scenes in loaded.items():
+            scores = score_scenes(predictor, scenes, config, bar)
+            in_root = root is not None and path.is_relative_to(root)
+            per_file[str(path.relative_to(root)) if in_root else str(path)] = summarize(scores)
+            all_scores.extend(scores)
+    return {
+        "predictor": predictor.name,
+        "obs_len": config.obs_len,
+        "pred_len": config.pred_len,
+        "top_k": config.top_k if config.top_k is not None and hasattr(predictor, "sample") else None,
+        "files": per_file,
+        "overall": summarize(all_scores),
+    }
+
+
+def format_table(result: dict) -> str:
+    """The per-file and overall metrics as a plain-text table."""
+    topk = result.get("top_k") is not None
+    header = ["file", "scenes", "ADE [m]", "FDE [m]", "Col-I [%]", "Col-II [%]"]
+    if topk:
+        header += [f"top-{result['top_k']} ADE", f"top-{result['top_k']} FDE"]
+
+    def row(name: str, m: dict) -> list[str]:
+        if m["scenes"] == 0:
+            return [name, "0"] + ["-"] * (len(header) - 2)
+        cells = [
+            name,
+            str(m["scenes"]),
+            f"{m['ade']:.3f}",
+            f"{m['fde']:.3f}",
+            "n/a" if m["col_i"] is None else f"{m['col_i']:.2f}",
+            f"{m['col_ii']:.2f}",
+        ]
+        if topk:
+            cells += [f"{m['topk_ade']:.3f}", f"{m['topk_fde']:.3f}"]
+        return cells
+
+    rows = [row(name, m) for name, m in result["files"].items()]
+    if len(result["files"]) > 1:
+        rows.append(row("overall", result["overall"]))
+    widths = [max(len(r[k]) for r in [header, *rows]) for k in range(len(header))]
+
+    def fmt(r):
+        return "  ".join(
+            c.ljust(w) if k == 0 else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths, strict=True))
+        )
+
+    title = (
+        f"{result['predictor']}: {result['obs_len']} observed -> {result['pred_len']} predicted steps "
+        "(TrajNet++ metrics, primary pedestrian)"
+    )
+    return "\n".join([title, fmt(header), "  ".join("-" * w for w in widths), *map(fmt, rows)])

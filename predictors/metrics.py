@@ -1,0 +1,164 @@
+"""Prediction metrics as TrajNet++ defines them (Kothari et al. 2021; trajnetplusplusbaselines' evaluator).
+
+* ADE: mean L2 distance between the primary pedestrian's predicted and true positions over the predicted
+  steps; FDE: the distance at the last step. Both in metres, averaged over scenes.
+* Col-I (prediction collision): the primary's prediction collides with the *predicted* path of a neighbour.
+  Counted only where the model predicted exactly the neighbours the ground truth has (after dropping those
+  that appear only after the observation), as the TrajNet++ evaluator does. Percent of those scenes.
+* Col-II (ground-truth collision): the primary's prediction collides with a neighbour's *true* path. Percent
+  of scenes.
+* A collision is ``trajnetplusplustools.metrics.collision``: over the common frames, consecutive steps are
+  joined by segments sampled at their ends and midpoints, and two pedestrians of radius 0.1 m touch at
+  some sample (``collides`` hands the library only the pairs that come that close).
+* Top-k ADE/FDE (k samples): ADE of the sample with the lowest ADE, and that sample's FDE
+  (``trajnetplusplustools.metrics.topk``).
+
+Predictions are rounded to centimetres before scoring, as the TrajNet++ evaluator does. ``ade``/``fde`` are
+plain vectorised versions (numpy or torch) for training losses and logging.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from trajnetplusplustools import TrackRow
+from trajnetplusplustools import metrics as tt_metrics
+
+
+def ade(pred, truth):
+    """Mean displacement over steps, ``(..., H, 2)`` -> ``(...)``; numpy arrays or torch tensors."""
+    return (((pred - truth) ** 2).sum(-1) ** 0.5).mean(-1)
+
+
+def fde(pred, truth):
+    """Final displacement: ``(..., H, 2)`` -> ``(...)``; numpy arrays or torch tensors."""
+    return ((pred[..., -1, :] - truth[..., -1, :]) ** 2).sum(-1) ** 0.5
+
+
+PERSON_RADIUS: Final[float] = 0.1  # m, trajnetplusplustools.metrics.collision default
+# Slack for the exact prefilter below: a pair is handed to trajnetplusplustools unless it is clearly apart.
+_PREFILTER_SLACK: Final[float] = 1e-6
+
+
+def collides(primary: np.ndarray, other: np.ndarray, frames: np.ndarray, pedestrian: int = 1) -> bool:
+    """``trajnetplusplustools.metrics.collision`` of two ``(H, 2)`` paths over the same ``frames`` (NaN =
+    absent in ``other``; ``primary`` complete).
+
+    The library's check walks the common steps in Python; most pairs are metres apart, so a vectorised pass
+    over the very points it samples (each step and each segment midpoint, as offsets between the two paths)
+    rules those out first, and only the pairs that come within reach are decided by the library itself.
+    """
+    present = ~np.isnan(other).any(axis=-1)
+    if present.sum() < 2:  # the library pairs consecutive common steps; fewer than two give no segment
+        return False
+    gap = primary[present] - other[present]
+    points = np.concatenate([gap, 0.5 * (gap[:-1] + gap[1:])])
+    if np.hypot(points[:, 0], points[:, 1]).min() > 2 * PERSON_RADIUS + _PREFILTER_SLACK:
+        return False
+    return bool(
+        tt_metrics.collision(
+            track_rows(primary, frames), track_rows(other, frames, pedestrian), n_predictions=len(frames)
+        )
+    )
+
+
+def track_rows(
+    xy: np.ndarray, frames: np.ndarray, pedestrian: int = 0, prediction_number=None
+) -> list[TrackRow]:
+    """``(T, 2)`` positions at ``frames`` as trajnetplusplustools rows, absent steps omitted."""
+    return [
+        TrackRow(int(f), pedestrian, float(x), float(y), prediction_number)
+        for f, (x, y) in zip(frames, xy, strict=True)
+        if not (np.isnan(x) or np.isnan(y))
+    ]
+
+
+@dataclass(frozen=True)
+class SceneScore:
+    ade: float  # m
+    fde: float  # m
+    col_i: bool | None  # None: the predicted neighbours are not the ground truth's, so Col-I does not apply
+    col_ii: bool
+    topk_ade: float | None = None  # m, with samples only
+    topk_fde: float | None = None
+
+
+def score_scene(
+    prediction: np.ndarray,
+    predicted_agents: Sequence[int],
+    truth: np.ndarray,
+    frames: np.ndarray,
+    obs_len: int,
+    samples: np.ndarray | None = None,
+) -> SceneScore:
+    """TrajNet++ metrics of one scene.
+
+    ``prediction``: ``(H, N_h, 2)`` predicted positions of ``predicted_agents`` (indices into the scene's
+    agents, the primary -- agent 0 -- first); ``truth``: ``(obs_len + H, N, 2)`` true positions, NaN where
+    absent; ``frames``: ``(obs_len + H,)`` frame ids; ``samples``: optional ``(k, H, N_h, 2)`` for top-k.
+    """
+    horizon = truth.shape[0] - obs_len
+    if prediction.shape[0] != horizon or list(predicted_agents)[:1] != [0]:
+        raise ValueError(
+            f"prediction must be ({horizon}, N_h, 2) with the primary (agent 0) first, got "
+            f"{prediction.shape} for agents {list(predicted_agents)}"
+        )
+    future = frames[obs_len:]
+    prediction = np.round(prediction, 2)
+    truth_primary = track_rows(truth[obs_len:, 0], future)
+    if len(truth_primary) != horizon:
+        raise ValueError("the primary pedestrian must be present at every predicted step")
+    primary = track_rows(prediction[:, 0], future)
+    ade_value = tt_metrics.average_l2(truth_primary, primary, n_predictions=horizon)
+    fde_value = tt_metrics.final_l2(truth_primary, primary)
+
+    # neighbours that exist for the evaluator: present at some observed step
+    neighbours = [j for j in range(1, truth.shape[1]) if not np.isnan(truth[:obs_len, j]).any(axis=-1).all()]
+    # the library intersects frames; only the predicted ones can be common with the primary's prediction
+    col_ii = any(collides(prediction[:, 0], truth[obs_len:, j], future, j) for j in neighbours)
+    col_i = None
+    if sorted(predicted_agents[1:]) == neighbours:
+        col_i = any(
+            collides(prediction[:, 0], prediction[:, k], future, int(j))
+            for k, j in enumerate(predicted_agents[1:], start=1)
+        )
+
+    topk_ade = topk_fde = None
+    if samples is not None:
+        samples = np.round(samples, 2)
+        rows = [r for m in range(samples.shape[0]) for r in track_rows(samples[m, :, 0], future, 0, m)]
+        topk_ade, topk_fde = tt_metrics.topk(
+            rows, truth_primary, n_predictions=horizon, k_samples=samples.shape[0]
+        )
+    return SceneScore(
+        float(ade_value),
+        float(fde_value),
+        col_i,
+        bool(col_ii),
+        None if topk_ade is None else float(topk_ade),
+        None if topk_fde is None else float(topk_fde),
+    )
+
+
+def summarize(scores: Sequence[SceneScore]) -> dict:
+    """Scene-averaged metrics: ``scenes``, ``ade``, ``fde`` (m), ``col_i``, ``col_ii`` (%), ``col_i_scenes``
+    (scenes Col-I applies to), and ``topk_ade``/``topk_fde`` when every scene has them."""
+    n = len(scores)
+    if n == 0:
+        return {"scenes": 0}
+    col_i = [s.col_i for s in scores if s.col_i is not None]
+    result = {
+        "scenes": n,
+        "ade": float(np.mean([s.ade for s in scores])),
+        "fde": float(np.mean([s.fde for s in scores])),
+        "col_i": 100.0 * float(np.mean(col_i)) if col_i else None,
+        "col_i_scenes": len(col_i),
+        "col_ii": 100.0 * float(np.mean([s.col_ii for s in scores])),
+    }
+    if all(s.topk_ade is not None for s in scores):
+        result["topk_ade"] = float(np.mean([s.topk_ade for s in scores]))
+        result["topk_fde"] = float(np.mean([s.topk_fde for s in scores]))
+    return result

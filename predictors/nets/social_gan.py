@@ -1,0 +1,63 @@
+"""Social-GAN-like model (Gupta et al. 2018): a generator and a local trajectory discriminator.
+
+The generator is ``SocialLSTM`` with ``noise_dim > 0`` and a point head: an LSTM encoder over displacements
+with social pooling at every step, noise ``z`` added (through a bias-free linear map) to the decoder's
+initial hidden state, and a decoder with pooling at every step, so that the robots' plans reach the humans'
+predictions in a recursive rollout exactly as for Social-LSTM. ``z = 0`` gives the deterministic prediction
+that is exported to CasADi. Training uses the variety (best-of-k) loss plus the adversarial loss.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+from predictors.errors import PredictorError
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+
+
+def generator_config(pooling: str = "soft", noise_dim: int = 8, **overrides) -> SocialLSTMConfig:
+    if noise_dim < 1:
+        raise PredictorError(f"a generator needs noise_dim >= 1, got {noise_dim}")
+    return SocialLSTMConfig(pooling=pooling, noise_dim=noise_dim, head="point", **overrides)
+
+
+def make_generator(config: SocialLSTMConfig) -> SocialLSTM:
+    if config.noise_dim < 1 or config.head != "point":
+        raise PredictorError(f"a generator needs noise_dim >= 1 and head 'point', got {config}")
+    return SocialLSTM(config)
+
+
+@dataclass(frozen=True)
+class DiscriminatorConfig:
+    embedding_dim: int = 16
+    hidden_dim: int = 32
+    input_scale: float = 4.0
+
+    def __post_init__(self):
+        if self.embedding_dim < 1 or self.hidden_dim < 1:
+            raise PredictorError(f"discriminator sizes must be >= 1, got {self}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class Discriminator(nn.Module):
+    """Scores one agent's whole trajectory (observed + future): a logit, high for "real"."""
+
+    def __init__(self, config: DiscriminatorConfig = DiscriminatorConfig()):
+        super().__init__()
+        self.config = config
+        self.embedding = nn.Linear(2, config.embedding_dim)
+        self.lstm = nn.LSTM(config.embedding_dim, config.hidden_dim, batch_first=True)
+        self.classifier = nn.Sequential(
+            nn.Linear(config.hidden_dim, config.hidden_dim), nn.ReLU(), nn.Linear(config.hidden_dim, 1)
+        )
+
+    def forward(self, trajectory: torch.Tensor) -> torch.Tensor:
+        """``trajectory`` (B, T, 2) positions -> logits (B,)."""
+        displacement = (trajectory[:, 1:] - trajectory[:, :-1]) * self.config.input_scale
+        _, (h, _) = self.lstm(torch.relu(self.embedding(displacement)))
+        return self.classifier(h[-1]).squeeze(-1)

@@ -1,0 +1,236 @@
+"""Social-LSTM as TrajNet++ builds it (Alahi et al. 2016; Kothari et al. 2021, ``trajnetbaselines/lstm``).
+
+Per agent: the displacement since the last step and the pooled neighbours' hidden states are scaled by 4,
+embedded (``Linear + ReLU``) and fed to an LSTM cell; a linear head gives the next displacement as a
+bivariate Gaussian (mean, sigmas, correlation) or as a point. Separate encoder and decoder cells, start tags
+on two spare embedding slots, single-step prediction applied recursively: the encoder's last step predicts
+the first future position, each decoder step the next one from the previous prediction. ``pooling="none"``
+is the vanilla LSTM (the ablation); ``"grid"`` TrajNet++'s hard social grid; ``"soft"`` its differentiable
+twin. ``noise_dim > 0`` makes it the generator of the Social-GAN-like model (``nets.social_gan``).
+
+Shapes: ``B`` scenes, ``N`` agents, positions in metres, tensors ``(B, N, ...)`` per step. Missing entries
+are masked, never NaN. The symbolic twin of ``decode_step`` is ``predictors.learned``'s CasADi function.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+from predictors.errors import PredictorError
+from predictors.nets.pooling import POOLINGS, GridPooling
+
+HEADS = ("gaussian", "point")
+N_TAGS = 2  # TrajNet++ InputEmbedding keeps two embedding slots for the encoder/decoder start tags
+
+
+@dataclass(frozen=True)
+class SocialLSTMConfig:
+    """Hyper-parameters; TrajNet++'s defaults in brackets. Ours are small so that one CPU epoch on ETH takes
+    seconds and the CasADi twin stays cheap inside the MPC: the pooling's ``grid_size**2 * latent_dim``
+    inputs dominate its cost (10 agents, 3 symbolic steps: 8x8x8 cells/latent cost 1.1 ms an evaluation and
+    11 ms a Jacobian, 6x6x4 cost 0.5 ms and 3.7 ms)."""
+
+    pooling: str = "grid"  # "none" (vanilla LSTM) | "grid" (hard, TrajNet++) | "soft" (bilinear)
+    hidden_dim: int = 32  # LSTM hidden size D [128]
+    embedding_dim: int = 16  # input embedding incl. the 2 tag slots [64]
+    cell_side: float = 0.8  # m, side of one pooling cell [0.6]; the grid spans +-2.4 m around the agent
+    grid_size: int = 6  # cells per side of the pooling grid [12]
+    latent_dim: int = 4  # neighbours' hidden states are compressed to this before pooling [16]
+    pool_dim: int = 16  # pooled interaction vector [256]
+    input_scale: float = 4.0  # inputs (displacement and pooled vector) are multiplied by this [4.0]
+    noise_dim: int = 0  # > 0: generator of the GAN, noise added to the decoder's initial hidden state
+    head: str = "gaussian"  # "gaussian" (5 outputs, TrajNet++ Hidden2Normal) | "point" (2 outputs)
+
+    def __post_init__(self):
+        if self.pooling not in POOLINGS:
+            raise PredictorError(f"pooling {self.pooling!r} is not one of {list(POOLINGS)}")
+        if self.head not in HEADS:
+            raise PredictorError(f"head {self.head!r} is not one of {list(HEADS)}")
+        for name in ("hidden_dim", "grid_size", "latent_dim", "pool_dim"):
+            if getattr(self, name) < 1:
+                raise PredictorError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.embedding_dim <= N_TAGS:
+            raise PredictorError(
+                f"embedding_dim must be > {N_TAGS} (start-tag slots), got {self.embedding_dim}"
+            )
+        if self.cell_side <= 0 or self.input_scale <= 0:
+            raise PredictorError(
+                f"cell_side and input_scale must be > 0, got {self.cell_side} and {self.input_scale}"
+            )
+        if self.noise_dim < 0:
+            raise PredictorError(f"noise_dim must be >= 0, got {self.noise_dim}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> SocialLSTMConfig:
+        unknown = sorted(set(values) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise PredictorError(
+                f"unknown Social-LSTM config keys {unknown}; expected a subset of "
+                f"{sorted(cls.__dataclass_fields__)}"
+            )
+        return cls(**values)
+
+
+def gaussian_head(raw: torch.Tensor) -> torch.Tensor:
+    """TrajNet++ ``Hidden2Normal``: bounded sigmas and correlation for numerical stability."""
+    return torch.cat(
+        [
+            raw[..., :2],
+            0.01 + 0.2 * torch.sigmoid(raw[..., 2:4]),
+            0.7 * torch.sigmoid(raw[..., 4:5]),
+        ],
+        dim=-1,
+    )
+
+
+class SocialLSTM(nn.Module):
+    def __init__(self, config: SocialLSTMConfig = SocialLSTMConfig()):
+        super().__init__()
+        self.config = config
+        cfg = config
+        self.pool: GridPooling | None = None
+        pooled = 0
+        if cfg.pooling != "none":
+            self.pool = GridPooling(
+                hidden_dim=cfg.hidden_dim,
+                latent_dim=cfg.latent_dim,
+                out_dim=cfg.pool_dim,
+                cell_side=cfg.cell_side,
+                grid_size=cfg.grid_size,
+                soft=cfg.pooling == "soft",
+            )
+            pooled = cfg.pool_dim
+        self.input_embedding = nn.Linear(2 + pooled, cfg.embedding_dim - N_TAGS)
+        self.encoder = nn.LSTMCell(cfg.embedding_dim, cfg.hidden_dim)
+        self.decoder = nn.LSTMCell(cfg.embedding_dim, cfg.hidden_dim)
+        self.head = nn.Linear(cfg.hidden_dim, 5 if cfg.head == "gaussian" else 2)
+        self.noise = nn.Linear(cfg.noise_dim, cfg.hidden_dim, bias=False) if cfg.noise_dim else None
+
+    # ------------------------------------------------------------------------------------------ pieces
+    def output(self, hidden: torch.Tensor) -> torch.Tensor:
+        """Head on hidden states: (..., 5) Gaussian parameters or (..., 2) a step; the mean is [..., :2]."""
+        raw = self.head(hidden)
+        return gaussian_head(raw) if self.config.head == "gaussian" else raw
+
+    def _tag_step(self, cell: nn.LSTMCell, h: torch.Tensor, c: torch.Tensor, slot: int):
+        batch, n_agents, _ = h.shape
+        tag = h.new_zeros(batch * n_agents, self.config.embedding_dim)
+        tag[:, self.config.embedding_dim - N_TAGS + slot] = 1
+        h, c = cell(tag, (h.reshape(batch * n_agents, -1), c.reshape(batch * n_agents, -1)))
+        return h.reshape(batch, n_agents, -1), c.reshape(batch, n_agents, -1)
+
+    def step(
+        self,
+        cell: nn.LSTMCell,
+        h: torch.Tensor,
+        c: torch.Tensor,
+        prev: torch.Tensor,
+        cur: torch.Tensor,
+        active: torch.Tensor,
+        neighbours: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """One step for every agent: (h, c) updated where ``active``; returns (h, c, head output).
+
+        ``prev``/``cur`` (B, N, 2) positions at the last two steps; ``active`` (B, N) bool: the agent is seen
+        at both; ``neighbours`` (B, N): who may be pooled (TrajNet++ pools only agents present at the step).
+        """
+        batch, n_agents, _ = cur.shape
+        active_f = active.to(cur.dtype)[..., None]
+        parts = [(cur - prev) * active_f]
+        if self.pool is not None:
+            # TrajNet++ detaches the pooled hidden states while training; a rollout keeps them attached so
+            # that autograd gives the full Jacobian with respect to the robots' plan.
+            pooled_hidden = h.detach() if self.training else h
+            parts.append(self.pool(pooled_hidden, cur, neighbours))
+        x = torch.relu(self.input_embedding(torch.cat(parts, dim=-1) * self.config.input_scale))
+        x = torch.cat([x, x.new_zeros(batch, n_agents, N_TAGS)], dim=-1)
+        h_new, c_new = cell(
+            x.reshape(batch * n_agents, -1),
+            (h.reshape(batch * n_agents, -1), c.reshape(batch * n_agents, -1)),
+        )
+        h = torch.where(active[..., None], h_new.reshape(batch, n_agents, -1), h)
+        c = torch.where(active[..., None], c_new.reshape(batch, n_agents, -1), c)
+        return h, c, self.output(h)
+
+    # ---------------------------------------------------------------------------------------- phases
+    def encode(
+        self, positions: torch.Tensor, mask: torch.Tensor, noise: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Observed past -> decoder state and the head output that predicts the first future position.
+
+        ``positions`` (B, L, N, 2) with ``mask`` (B, L, N); the first future position of agent ``n`` is
+        ``positions[:, -1, n] + out[..., n, :2]``. ``noise`` (B, N, noise_dim) only for a generator
+        (None = zeros, the deterministic prediction).
+        """
+        batch, length, n_agents, _ = positions.shape
+        h = positions.new_zeros(batch, n_agents, self.config.hidden_dim)
+        c = torch.zeros_like(h)
+        h, c = self._tag_step(self.encoder, h, c, slot=0)
+        out = self.output(h)
+        for t in range(1, length):
+            active = mask[:, t - 1] & mask[:, t]
+            h, c, out = self.step(self.encoder, h, c, positions[:, t - 1], positions[:, t], active, active)
+        if self.noise is not None and noise is not None:
+            h = h + self.noise(noise)
+        h, c = self._tag_step(self.decoder, h, c, slot=1)
+        if self.noise is not None:
+            # The generator's first prediction comes from the decoder, so that the noise shapes it too.
+            active = mask[:, -2] & mask[:, -1] if length > 1 else torch.zeros_like(mask[:, -1])
+            prev = positions[:, -2] if length > 1 else positions[:, -1]
+            h, c, out = self.step(self.decoder, h, c, prev, positions[:, -1], active, active)
+        return h, c, out
+
+    def decode_step(self, h, c, prev, cur, neighbours):
+        """A prediction step: every agent is updated; ``neighbours`` (B, N) marks who may be pooled."""
+        active = torch.ones(cur.shape[:2], dtype=torch.bool, device=cur.device)
+        return self.step(self.decoder, h, c, prev, cur, active, neighbours)
+
+    def forward(
+        self,
+        positions: torch.Tensor,
+        mask: torch.Tensor,
+        obs_len: int,
+        pred_len: int,
+        *,
+        teacher_forcing: bool,
+        noise: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Scenes (B, T, N, 2) with the primary agent at index 0 -> (outputs, predicted positions).
+
+        Returns head outputs (B, pred_len, N, 5|2) for the displacements into steps ``obs_len ..`` and the
+        predicted positions (B, pred_len, N, 2). With ``teacher_forcing`` (TrajNet++ training), the
+        neighbours' inputs are their true positions and only the primary is fed its own predictions;
+        without it (evaluation) every agent is fed its own predictions and agents present at the last
+        observed step are pooled.
+        """
+        observed = positions[:, :obs_len]
+        observed_mask = mask[:, :obs_len]
+        h, c, out = self.encode(observed, observed_mask, noise)
+        now = observed[:, -1]
+        outputs = [out]
+        predicted = [now + out[..., :2]]
+        present = observed_mask[:, -1]
+        prev_model, cur_model = now, predicted[0]
+        for k in range(1, pred_len):
+            prev_in, cur_in = prev_model, cur_model
+            if self.training:  # TrajNet++ "DETACH!!!": no gradient through the fed-back positions
+                prev_in, cur_in = prev_in.detach(), cur_in.detach()
+            if teacher_forcing:
+                t = obs_len - 1 + k
+                prev_in = torch.cat([prev_in[:, :1], positions[:, t - 1, 1:]], dim=1)
+                cur_in = torch.cat([cur_in[:, :1], positions[:, t, 1:]], dim=1)
+                active = mask[:, t - 1] & mask[:, t]
+                active = torch.cat([torch.ones_like(active[:, :1]), active[:, 1:]], dim=1)
+                h, c, out = self.step(self.decoder, h, c, prev_in, cur_in, active, active)
+            else:
+                h, c, out = self.decode_step(h, c, prev_in, cur_in, present)
+            outputs.append(out)
+            predicted.append(cur_in + out[..., :2])
+            prev_model, cur_model = cur_in, predicted[-1]
+        return torch.stack(outputs, dim=1), torch.stack(predicted, dim=1)

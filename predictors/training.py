@@ -1,0 +1,258 @@
+"""Thin LightningModules around ``predictors.nets``: loss, optimiser, logging (STYLE.md example 6).
+
+Only this module and ``pipelines`` import Lightning. Both modules share one ``model_step(batch, stage)`` for
+train/val/test. Training follows TrajNet++ (``lstm/trainer.py``): Adam (lr 1e-3, weight decay 1e-4), StepLR,
+neighbours teacher-forced and only the primary fed its own (detached) predictions, loss on the primary's 12
+predicted displacements. Validation and test predict every agent recursively, as ``crowdmpc evaluate`` does,
+and log the primary's ADE/FDE (``val_ade`` selects the best checkpoint).
+
+The GAN (``GANModule``) optimises by hand (``automatic_optimization = False``): a generator step on the
+variety (best-of-k) loss plus the adversarial loss, then a discriminator step on real vs generated
+trajectories.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import lightning as L
+import torch
+import torch.nn.functional as F
+
+from predictors.base import OBS_LEN, PRED_LEN
+from predictors.data.windows import SceneBatch
+from predictors.errors import PredictorError
+from predictors.metrics import ade, fde
+from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
+from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+
+LOSSES = ("gaussian", "l2")
+
+
+@dataclass(frozen=True)
+class OptimConfig:
+    lr: float = 1e-3  # Adam learning rate [TrajNet++ 1e-3]
+    weight_decay: float = 1e-4  # [TrajNet++ 1e-4]
+    step_size: int = 10  # epochs between learning-rate decays by gamma [TrajNet++ 10]
+    gamma: float = 0.1  # [torch StepLR default, as TrajNet++]
+    loss: str = "gaussian"  # "gaussian" (TrajNet++ "pred") | "l2"; the GAN always uses variety + adversarial
+    variety_k: int = 6  # GAN: samples per scene for the best-of-k loss [Social GAN: 20]
+    adversarial_weight: float = 0.1  # GAN: weight of the generator's adversarial loss
+    top_k: int = 20  # GAN: samples for the validation top-k ADE/FDE
+
+    def __post_init__(self):
+        if self.loss not in LOSSES:
+            raise PredictorError(f"loss {self.loss!r} is not one of {list(LOSSES)}")
+        if self.lr <= 0 or self.weight_decay < 0 or self.step_size < 1 or not 0 < self.gamma <= 1:
+            raise PredictorError(
+                f"need lr > 0, weight_decay >= 0, step_size >= 1 and 0 < gamma <= 1, got {asdict(self)}"
+            )
+        if self.variety_k < 1 or self.top_k < 1 or self.adversarial_weight < 0:
+            raise PredictorError(
+                f"need variety_k >= 1, top_k >= 1 and adversarial_weight >= 0, got {asdict(self)}"
+            )
+
+
+def primary_targets(batch: SceneBatch) -> tuple[torch.Tensor, torch.Tensor]:
+    """The primary's true future positions (B, H, 2) and which of its steps are valid (B, H)."""
+    return batch.future[:, :, 0], batch.mask[:, batch.obs_len :, 0]
+
+
+def scene_arrays(batch: SceneBatch) -> tuple[torch.Tensor, torch.Tensor]:
+    return batch.positions, batch.mask
+
+
+class _EpochTimer(L.LightningModule):
+    """Logs the wall time of every training epoch (``epoch_time_s``)."""
+
+    def on_train_epoch_start(self) -> None:
+        self._epoch_start = time.perf_counter()
+
+    def on_train_epoch_end(self) -> None:
+        self.log("epoch_time_s", time.perf_counter() - self._epoch_start, prog_bar=True)
+
+
+class SocialLSTMModule(_EpochTimer):
+    """Social-LSTM and the vanilla LSTM (the net's ``pooling`` decides)."""
+
+    def __init__(
+        self, net_config: dict, optim_config: dict, obs_len: int = OBS_LEN, pred_len: int = PRED_LEN
+    ):
+        super().__init__()
+        self.save_hyperparameters()
+        self.net = SocialLSTM(SocialLSTMConfig.from_dict(net_config))
+        self.optim = OptimConfig(**optim_config)
+        self.obs_len = obs_len
+        self.pred_len = pred_len
+
+    def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
+        positions, mask = scene_arrays(batch)
+        teacher = stage == "train"
+        outputs, predicted = self.net(positions, mask, self.obs_len, self.pred_len, teacher_forcing=teacher)
+        truth, valid = primary_targets(batch)
+        # TrajNet++ targets: true displacements of the primary (B, H, 2)
+        previous = torch.cat([positions[:, self.obs_len - 1 : self.obs_len, 0], truth[:, :-1]], dim=1)
+        target = truth - previous
+        primary = outputs[:, :, 0]
+        if self.optim.loss == "gaussian" and self.net.config.head == "gaussian":
+            loss = gaussian_nll(primary, target, valid)
+        else:
+            loss = l2_loss(primary[..., :2], target, valid)
+        return {
+            "loss": loss,
+            "ade": ade(predicted[:, :, 0], truth).mean(),
+            "fde": fde(predicted[:, :, 0], truth).mean(),
+        }
+
+    def training_step(self, batch: SceneBatch, batch_idx: int) -> torch.Tensor:
+        out = self.model_step(batch, "train")
+        self.log("train_loss", out["loss"], prog_bar=True, batch_size=len(batch))
+        return out["loss"]
+
+    def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        self._log_eval(self.model_step(batch, "val"), "val", len(batch))
+
+    def test_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        self._log_eval(self.model_step(batch, "test"), "test", len(batch))
+
+    def _log_eval(self, out: dict, stage: str, batch_size: int) -> None:
+        for key, value in out.items():
+            self.log(f"{stage}_{key}", value, prog_bar=key == "ade", batch_size=batch_size)
+
+    def configure_optimizers(self):
+        optimizer = torch.optim.Adam(
+            self.net.parameters(), lr=self.optim.lr, weight_decay=self.optim.weight_decay
+        )
+        scheduler = torch.optim.lr_scheduler.StepLR(optimizer, self.optim.step_size, self.optim.gamma)
+        return [optimizer], [scheduler]
+
+
+class GANModule(_EpochTimer):
+    """Social-GAN-like training with manual optimisation; ``self.net`` is the generator."""
+
+    def __init__(
+        self,
+        net_config: dict,
+        optim_config: dict,
+        discriminator_config: dict | None = None,
+        obs_len: int = OBS_LEN,
+        pred_len: int = PRED_LEN,
+    ):
+        super().__init__()
+        self.save_hyperparameters()
+        self.automatic_optimization = False
+        config = SocialLSTMConfig.from_dict(net_config)
+        if config.noise_dim < 1 or config.head != "point":
+            raise PredictorError(f"the GAN generator needs noise_dim >= 1 and head 'point', got {config}")
+        self.net = SocialLSTM(config)
+        self.discriminator = Discriminator(DiscriminatorConfig(**(discriminator_config or {})))
+        self.optim = OptimConfig(**optim_config)
+        self.obs_len = obs_len
+        self.pred_len = pred_len
+
+    def _generate(self, batch: SceneBatch, k: int, teacher_forcing: bool, zero_noise: bool = False):
+        """``k`` generated futures of the primary: (k, B, H, 2)."""
+        positions, mask = scene_arrays(batch)
+        batch_size, _, n_agents, _ = positions.shape
+        repeat = (k, 1, 1, 1)
+        noise = positions.new_zeros(k * batch_size, n_agents, self.net.config.noise_dim)
+        if not zero_noise:
+            noise.normal_()
+        _, predicted = self.net(
+            positions.repeat(*repeat),
+            mask.repeat(k, 1, 1),
+            self.obs_len,
+            self.pred_len,
+            teacher_forcing=teacher_forcing,
+            noise=noise,
+        )
+        return predicted[:, :, 0].reshape(k, batch_size, self.pred_len, 2)
+
+    def _trajectory(self, batch: SceneBatch, future: torch.Tensor) -> torch.Tensor:
+        return torch.cat([batch.positions[:, : self.obs_len, 0], future], dim=1)
+
+    def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
+        truth, valid = primary_targets(batch)
+        if stage == "train":
+            samples = self._generate(batch, self.optim.variety_k, teacher_forcing=True)
+            variety = variety_loss(samples, truth, valid)
+            fake_logits = self.discriminator(self._trajectory(batch, samples[0]))
+            adversarial = F.binary_cross_entropy_with_logits(fake_logits, torch.ones_like(fake_logits))
+            return {
+                "loss": variety + self.optim.adversarial_weight * adversarial,
+                "variety": variety,
+                "adversarial": adversarial,
+                "fake": samples[0].detach(),
+            }
+        deterministic = self._generate(batch, 1, teacher_forcing=False, zero_noise=True)[0]
+        samples = self._generate(batch, self.optim.top_k, teacher_forcing=False)
+        errors = ade(samples, truth[None])  # (k, B)
+        best = errors.argmin(dim=0)
+        index = torch.arange(len(batch), device=best.device)
+        return {
+            "ade": ade(deterministic, truth).mean(),
+            "fde": fde(deterministic, truth).mean(),
+            "topk_ade": errors[best, index].mean(),
+            "topk_fde": fde(samples[best, index], truth).mean(),
+        }
+
+    def training_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        opt_g, opt_d = self.optimizers()
+        # Generator first: its adversarial term runs through the discriminator, whose weights must not change
+        # between that forward pass and this backward pass. (Its gradients on the discriminator are cleared
+        # before the discriminator's own step.)
+        out = self.model_step(batch, "train")
+        opt_g.zero_grad()
+        self.manual_backward(out["loss"])
+        opt_g.step()
+
+        real_logits = self.discriminator(self._trajectory(batch, batch.future[:, :, 0]))
+        fake_logits = self.discriminator(self._trajectory(batch, out["fake"]))
+        d_loss = F.binary_cross_entropy_with_logits(
+            real_logits, torch.ones_like(real_logits)
+        ) + F.binary_cross_entropy_with_logits(fake_logits, torch.zeros_like(fake_logits))
+        opt_d.zero_grad()
+        self.manual_backward(d_loss)
+        opt_d.step()
+
+        size = len(batch)
+        self.log("train_loss", out["loss"], prog_bar=True, batch_size=size)
+        self.log("train_variety", out["variety"], batch_size=size)
+        self.log("train_adversarial", out["adversarial"], batch_size=size)
+        self.log("train_d_loss", d_loss, prog_bar=True, batch_size=size)
+
+    def on_train_epoch_end(self) -> None:
+        super().on_train_epoch_end()
+        for scheduler in self.lr_schedulers():
+            scheduler.step()
+
+    def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        for key, value in self.model_step(batch, "val").items():
+            self.log(f"val_{key}", value, prog_bar=key == "ade", batch_size=len(batch))
+
+    def test_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        for key, value in self.model_step(batch, "test").items():
+            self.log(f"test_{key}", value, batch_size=len(batch))
+
+    def configure_optimizers(self):
+        opt_g = torch.optim.Adam(
+            self.net.parameters(), lr=self.optim.lr, weight_decay=self.optim.weight_decay
+        )
+        opt_d = torch.optim.Adam(self.discriminator.parameters(), lr=self.optim.lr)
+        schedulers = [
+            torch.optim.lr_scheduler.StepLR(o, self.optim.step_size, self.optim.gamma) for o in (opt_g, opt_d)
+        ]
+        return [opt_g, opt_d], schedulers
+
+
+def make_module(model: str, net_config: SocialLSTMConfig, optim: OptimConfig) -> L.LightningModule:
+    """The LightningModule of a ``--model`` choice."""
+    if model == "social_gan":
+        return GANModule(net_config.to_dict(), asdict(optim))
+    if model in ("social_lstm", "vanilla_lstm"):
+        return SocialLSTMModule(net_config.to_dict(), asdict(optim))
+    raise PredictorError(
+        f"unknown model {model!r}; choose from ['social_gan', 'social_lstm', 'vanilla_lstm']"
+    )

@@ -1,0 +1,160 @@
+"""CrowdEnv: robot dynamics and clipping, episode end, observations, reproducibility."""
+
+import numpy as np
+import pytest
+
+from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.errors import SimulationError
+from crowdsim.scenarios import Layout
+
+
+def one_robot(start=(0.0, 0.0), goal=(0.0, 9.0), humans=(), human_goals=()):
+    return Layout(
+        robot_starts=np.array([start], dtype=float),
+        robot_goals=np.array([goal], dtype=float),
+        human_starts=np.array(humans, dtype=float).reshape(-1, 2),
+        human_goals=np.array(human_goals, dtype=float).reshape(-1, 2),
+    )
+
+
+def test_config_validation_names_the_value():
+    with pytest.raises(SimulationError, match="dt.*-0.4"):
+        EnvConfig(dt=-0.4)
+    with pytest.raises(SimulationError, match="history_len.*0"):
+        EnvConfig(history_len=0)
+    assert EnvConfig().max_steps == 75  # 30 s at 0.4 s
+
+
+def test_double_integrator_and_clipping_rule():
+    env = CrowdEnv()
+    env.reset_layout(one_robot())
+    # Step 1: a = (5, -5) is clipped to the acceleration bound (2, -2): v = (0.8, -0.8),
+    # s = 0.5 * 0.4^2 * (2, -2) = (0.16, -0.16).
+    obs, done, info = env.step(np.array([[5.0, -5.0]]))
+    np.testing.assert_allclose(obs.robot_last_actions, [[2.0, -2.0]])
+    np.testing.assert_allclose(obs.robot_velocities, [[0.8, -0.8]])
+    np.testing.assert_allclose(obs.robot_positions, [[0.16, -0.16]])
+    assert info["clipped"].tolist() == [True] and not done
+    # Step 2: a_x = 5 would exceed v_max: clipped to (1 - 0.8) / 0.4 = 0.5; a_y = 0 is within
+    # [max(-2, (-1 + 0.8) / 0.4), min(2, (1 + 0.8) / 0.4)] = [-0.5, 2] and stays 0.
+    # x = 0.16 + 0.4 * 0.8 + 0.08 * 0.5 = 0.52; y = -0.16 - 0.32 = -0.48.
+    obs, _, info = env.step(np.array([[5.0, 0.0]]))
+    np.testing.assert_allclose(obs.robot_last_actions, [[0.5, 0.0]])
+    np.testing.assert_allclose(obs.robot_velocities, [[1.0, -0.8]])
+    np.testing.assert_allclose(obs.robot_positions, [[0.52, -0.48]])
+    # Step 3: braking hard in y from -0.8: a_y = 2 (bound), v_y = 0; a_x = -0.5 is inside the bounds.
+    obs, _, info = env.step(np.array([[-0.5, 3.0]]))
+    np.testing.assert_allclose(obs.robot_last_actions, [[-0.5, 2.0]])
+    np.testing.assert_allclose(obs.robot_velocities, [[0.8, 0.0]], atol=1e-15)
+    assert info["clipped"].tolist() == [True]
+
+
+def test_bad_actions_and_call_order_raise():
+    env = CrowdEnv()
+    with pytest.raises(SimulationError, match="before reset"):
+        env.step(np.zeros((1, 2)))
+    env.reset_layout(one_robot())
+    with pytest.raises(SimulationError, match=r"\(1, 2\).*\(3,\)"):
+        env.step(np.zeros(3))
+    with pytest.raises(SimulationError, match="non-finite"):
+        env.step(np.array([[np.nan, 0.0]]))
+
+
+def test_invalid_scenario_and_sizes_name_the_value():
+    env = CrowdEnv()
+    with pytest.raises(SimulationError, match="'square'"):
+        env.reset(0, "square", 5)
+    with pytest.raises(SimulationError, match="n_humans.*51"):
+        env.reset(0, "circle", 51)
+    with pytest.raises(SimulationError, match="n_robots.*13"):
+        env.reset(0, "circle", 5, 13)
+    with pytest.raises(SimulationError, match="seed.*-1"):
+        env.reset(-1, "circle", 5)
+
+
+def test_reaching_the_goal_ends_the_episode_and_is_latched():
+    env = CrowdEnv()
+    env.reset_layout(one_robot(goal=(0.0, 0.8)))
+    # Full acceleration north: y = 0.16; then a is clipped to 0.5 by v_max: y = 0.16 + 0.32 + 0.04 = 0.52,
+    # 0.28 m from the goal: reached at step 2.
+    obs, done, _ = env.step(np.array([[0.0, 2.0]]))
+    assert not done and not obs.robot_reached[0]
+    obs, done, info = env.step(np.array([[0.0, 2.0]]))
+    assert obs.robot_positions[0, 1] == pytest.approx(0.52)
+    assert done and obs.robot_reached[0] and info["success"] and not info["timeout"]
+    with pytest.raises(SimulationError, match="ended"):
+        env.step(np.zeros((1, 2)))
+
+
+def test_time_limit_ends_the_episode():
+    env = CrowdEnv(EnvConfig(time_limit=2.0))
+    env.reset_layout(one_robot())
+    for k in range(5):
+        obs, done, info = env.step(np.zeros((1, 2)))
+        assert done == (k == 4)
+    assert info["timeout"] and not info["success"]
+    assert obs.time == pytest.approx(2.0) and obs.step == 5
+    assert env.trajectory().n_steps == 5
+
+
+def test_observation_layout_and_history_padding():
+    env = CrowdEnv(EnvConfig(history_len=3))
+    obs = env.reset(4, "circle", 5, 2)
+    assert obs.robot_positions.shape == (2, 2) and obs.human_positions.shape == (5, 2)
+    assert obs.history.shape == (3, 7, 2)
+    start = np.concatenate([obs.robot_positions, obs.human_positions])
+    np.testing.assert_array_equal(obs.history, np.broadcast_to(start, (3, 7, 2)))
+    obs1, _, _ = env.step(np.zeros((2, 2)))
+    obs2, _, _ = env.step(np.zeros((2, 2)))
+    obs3, _, _ = env.step(np.zeros((2, 2)))
+    np.testing.assert_array_equal(obs3.history[0, 2:], obs1.human_positions)  # robots first, then humans
+    np.testing.assert_array_equal(obs3.history[-1, :2], obs3.robot_positions)
+    np.testing.assert_array_equal(obs3.history[1, 2:], obs2.human_positions)
+    assert obs3.radius == 0.3 and obs3.dt == 0.4
+
+
+def test_humans_walk_by_orca_and_see_the_robots():
+    # A human walking east towards a parked robot 4 m ahead (10 cm off its line) must step around it.
+    env = CrowdEnv()
+    env.reset_layout(
+        one_robot(start=(0.0, 0.0), goal=(0.0, 9.0), humans=[(-4.0, 0.1)], human_goals=[(4.0, 0.1)])
+    )
+    obs, _, _ = env.step(np.zeros((1, 2)))
+    # Within the 5 s horizon at 1 m/s it would hit the robot: it slows down at once (RVO2's cut-off case).
+    assert np.linalg.norm(obs.human_velocities[0]) < 0.5
+    lateral, closest = 0.0, np.inf
+    for _ in range(20):
+        obs, _, _ = env.step(np.zeros((1, 2)))
+        lateral = max(lateral, abs(obs.human_positions[0, 1]))
+        closest = min(closest, np.linalg.norm(obs.human_positions[0] - obs.robot_positions[0]))
+    # The parked robot takes no share of the avoidance (its "reciprocal" half is never executed), so the
+    # human can come slightly closer than ORCA's 0.62 m, but not into contact.
+    assert lateral > 0.3 and closest > 0.6
+    assert obs.human_positions[0, 0] > 3.0  # it went past
+
+
+def test_same_seed_same_episode():
+    def run(seed):
+        env = CrowdEnv()
+        obs = env.reset(seed, "perpendicular", 7, 3)
+        done = False
+        while not done:
+            obs, done, _ = env.step(np.tile([0.0, 2.0], (3, 1)))
+        return env.trajectory()
+
+    a, b, c = run(11), run(11), run(12)
+    for name in ("robot_positions", "human_positions", "human_velocities", "human_goals"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.human_goals, c.human_goals)
+
+
+def test_crowd_without_robots_ends_when_every_human_arrived():
+    env = CrowdEnv()
+    env.reset(0, "circle", 5, 0)
+    done, info = False, {}
+    while not done:
+        _, done, info = env.step(np.zeros((0, 2)))
+    traj = env.trajectory()
+    assert info["success"]
+    assert np.all(np.linalg.norm(traj.human_positions[-1] - traj.human_goals, axis=1) < 0.3)
+    assert traj.robot_positions.shape == (traj.n_steps + 1, 0, 2)

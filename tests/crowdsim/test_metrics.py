@@ -1,0 +1,132 @@
+"""Episode metrics on constructed trajectories (numbers checkable on paper)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from crowdsim.errors import SimulationError
+from crowdsim.metrics import Trajectory, aggregate, episode_metrics, segments_intersect
+
+
+def make_traj(robot_pos, human_pos, robot_vel=None, human_vel=None, robot_goals=None, dt=0.4):
+    rp = np.asarray(robot_pos, dtype=float)
+    hp = np.asarray(human_pos, dtype=float)
+    return Trajectory(
+        robot_positions=rp,
+        robot_velocities=np.zeros_like(rp) if robot_vel is None else np.asarray(robot_vel, dtype=float),
+        human_positions=hp,
+        human_velocities=np.zeros_like(hp) if human_vel is None else np.asarray(human_vel, dtype=float),
+        robot_goals=np.asarray(robot_goals if robot_goals is not None else rp[-1], dtype=float),
+        human_goals=hp[-1],
+        robot_accelerations=np.zeros((len(rp) - 1, rp.shape[1], 2)),
+        dt=dt,
+        radius=0.3,
+    )
+
+
+P = np.array  # short alias for hand-written points
+
+
+@pytest.mark.parametrize(
+    "p1, q1, p2, q2, expected",
+    [
+        ((0, 0), (1.2, 0), (0.6, 1), (0.6, -1), True),  # proper crossing
+        ((0, 0), (1.2, 0), (1.2, 1.2), (1.2, 0), True),  # end point touches end point
+        ((0, 0), (1.2, 0), (0.6, 1.2), (0.6, 0), True),  # end point touches the middle
+        ((0, 0), (1.2, 0), (1.2, 1.3), (1.2, 0.1), False),  # misses by 0.1 m
+        ((0, 0), (1.2, 0), (2.0, 0), (0.8, 0), True),  # collinear, overlapping
+        ((0, 0), (1.2, 0), (2.0, 0), (1.3, 0), False),  # collinear, apart
+        ((0, 0), (1.2, 0), (0.5, 0), (0.5, 0), True),  # a standing agent on the path
+        ((0, 0), (1.2, 0), (0.5, 0.1), (0.5, 0.1), False),  # a standing agent beside it
+        ((0, 0), (0, 0), (0, 0), (0, 0), True),  # two standing agents at the same point
+    ],
+)
+def test_segments_intersect(p1, q1, p2, q2, expected):
+    assert bool(segments_intersect(P(p1, float), P(q1, float), P(p2, float), P(q2, float))) is expected
+    # symmetric in the two segments
+    assert bool(segments_intersect(P(p2, float), P(q2, float), P(p1, float), P(q1, float))) is expected
+
+
+def test_discomfort_from_projected_paths_that_just_touch():
+    # Robot at 0 moving east at 1 m/s projects to (1.2, 0); a human at (1.2, 1.2) moving south at 1 m/s
+    # projects to (1.2, 0): the paths touch at one step -> discomfort. A human 0.1 m further north misses.
+    touching = make_traj(
+        robot_pos=[[[0.0, 0.0]]],
+        human_pos=[[[1.2, 1.2]]],
+        robot_vel=[[[1.0, 0.0]]],
+        human_vel=[[[0.0, -1.0]]],
+    )
+    m = episode_metrics(touching)
+    assert m.discomfort and m.discomfort_steps == 1
+    missing = make_traj(
+        robot_pos=[[[0.0, 0.0]]],
+        human_pos=[[[1.2, 1.3]]],
+        robot_vel=[[[1.0, 0.0]]],
+        human_vel=[[[0.0, -1.0]]],
+    )
+    assert not episode_metrics(missing).discomfort
+
+
+def test_discomfort_length_scales_with_speed():
+    # At 0.5 m/s the robot projects only 0.6 m: a human path crossing x = 0.7 is not reached; at 1 m/s it is.
+    human_pos, human_vel = [[[0.7, 1.0]]], [[[0.0, -1.0]]]  # projects (0.7, 1.0) -> (0.7, -0.2)
+    slow = make_traj([[[0.0, 0.0]]], human_pos, robot_vel=[[[0.5, 0.0]]], human_vel=human_vel)
+    fast = make_traj([[[0.0, 0.0]]], human_pos, robot_vel=[[[1.0, 0.0]]], human_vel=human_vel)
+    assert not episode_metrics(slow).discomfort
+    assert episode_metrics(fast).discomfort
+
+
+def test_collision_and_contact_thresholds():
+    # Robot still at 0; a human passes at its closest 0.7 m (collision, no contact), another time 0.55 m.
+    robot = [[[0.0, 0.0]]] * 3
+    near = make_traj(robot, [[[2.0, 0.7]], [[0.0, 0.7]], [[-2.0, 0.7]]])
+    m = episode_metrics(near)
+    assert m.min_distance == pytest.approx(0.7)
+    assert m.collision and not m.contact
+    touching = make_traj(robot, [[[2.0, 0.55]], [[0.0, 0.55]], [[-2.0, 0.55]]])
+    assert episode_metrics(touching).contact
+    far = make_traj(robot, [[[2.0, 0.8]], [[0.0, 0.8]], [[-2.0, 0.8]]])  # exactly 0.8 is not below 0.8
+    assert not episode_metrics(far).collision
+
+
+def test_success_travel_time_and_path_length():
+    # Two robots: one is within 0.3 m of its goal at row 2 (t = 0.8 s), the other at row 3 (t = 1.2 s).
+    rp = [[[0, 0], [5, 0]], [[0, 1], [5, 0.5]], [[0, 1.8], [5, 1.0]], [[0, 2.0], [5, 1.8]]]
+    traj = make_traj(rp, [[[9.0, 9.0]]] * 4, robot_goals=[[0.0, 2.0], [5.0, 2.0]])
+    m = episode_metrics(traj)
+    assert m.success and not m.timeout
+    assert m.reach_times == (0.8, 1.2)
+    assert m.travel_time == 1.2
+    assert m.path_length == pytest.approx((2.0, 1.8))
+    assert m.min_distance_robots == pytest.approx(5.0)
+    assert m.n_steps == 3
+    late = make_traj(rp[:3], [[[9.0, 9.0]]] * 3, robot_goals=[[0.0, 2.0], [5.0, 2.0]])
+    m = episode_metrics(late)
+    assert not m.success and m.timeout and math.isnan(m.travel_time) and math.isnan(m.reach_times[1])
+
+
+def test_aggregate_rates_and_counts():
+    rp = [[[0, 0]], [[0, 1.9]]]
+    ok = episode_metrics(make_traj(rp, [[[3.0, 0.0]], [[3.0, 0.0]]], robot_goals=[[0.0, 2.0]]))
+    hit = episode_metrics(make_traj(rp, [[[0.5, 0.0]], [[3.0, 0.0]]], robot_goals=[[0.0, 2.0]]))
+    fail = episode_metrics(make_traj(rp, [[[3.0, 0.0]], [[3.0, 0.0]]], robot_goals=[[0.0, 5.0]]))
+    out = aggregate([ok, hit, fail, ok])
+    assert out["episodes"] == 4
+    assert out["success_rate"] == 75.0 and out["success_count"] == 3
+    assert out["collision_rate"] == 25.0 and out["contact_count"] == 1
+    assert out["timeout_count"] == 1
+    assert out["travel_time_mean"] == pytest.approx(0.4)
+    assert out["min_distance_min"] == pytest.approx(0.5)
+    with pytest.raises(SimulationError, match="empty"):
+        aggregate([])
+
+
+def test_metrics_need_a_robot_and_serialise_to_json():
+    with pytest.raises(SimulationError, match="n_robots=0"):
+        episode_metrics(
+            make_traj(np.zeros((2, 0, 2)), [[[0.0, 0.0]], [[1.0, 0.0]]], robot_goals=np.zeros((0, 2)))
+        )
+    m = episode_metrics(make_traj([[[0, 0]], [[0, 1]]], np.zeros((2, 0, 2)), robot_goals=[[0.0, 5.0]]))
+    d = m.as_dict()
+    assert d["min_distance"] is None and d["travel_time"] is None and d["reach_times"] == [None]

@@ -1,0 +1,262 @@
+"""ORCA against hand-computed cases, brute-force geometry and an independent optimiser."""
+
+import math
+
+import numpy as np
+import pytest
+
+from crowdsim.errors import SimulationError
+from crowdsim.orca import (
+    OrcaParams,
+    nearest_neighbors,
+    orca_halfplanes,
+    orca_velocities,
+    preferred_velocities,
+)
+
+PARAMS = OrcaParams()  # neighbour distance 10 m, 10 neighbours, time horizon 5 s
+DT = 0.4
+
+
+def rvo_step(positions, velocities, goals, radius=0.3, speed=1.0, dt=DT, params=PARAMS):
+    """One RVO2 doStep for everyone: new velocities from the current state, then move."""
+    pref = preferred_velocities(positions, goals, speed, stop_radius=radius)
+    new, lp3 = orca_velocities(positions, velocities, pref, radius, speed, params, dt)
+    return positions + dt * new, new, lp3
+
+
+def test_params_validation_names_the_value():
+    with pytest.raises(SimulationError, match="max_neighbors.*-1"):
+        OrcaParams(max_neighbors=-1)
+    with pytest.raises(SimulationError, match="time_horizon.*0"):
+        OrcaParams(time_horizon=0.0)
+
+
+def test_preferred_velocity_unit_far_raw_near_zero_at_goal():
+    positions = np.array([[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    goals = np.array([[3.0, 4.0], [0.6, 0.0], [0.2, 0.0]])
+    pref = preferred_velocities(positions, goals, 1.0, stop_radius=0.3)
+    np.testing.assert_allclose(pref, [[0.6, 0.8], [0.6, 0.0], [0.0, 0.0]])
+
+
+def test_one_agent_alone_walks_straight_at_preferred_speed():
+    p = np.array([[0.0, 0.0]])
+    v = np.zeros((1, 2))
+    goal = np.array([[6.0, 0.0]])
+    xs = []
+    for _ in range(12):
+        p, v, lp3 = rvo_step(p, v, goal)
+        xs.append(p[0].copy())
+        assert not lp3.any()
+    xs = np.array(xs)
+    # The goal is still more than 1 m away at x = 4.8, so the first 12 steps are all at 1 m/s.
+    np.testing.assert_allclose(xs[:, 0], 0.4 * np.arange(1, 13), atol=1e-12)
+    np.testing.assert_allclose(xs[:, 1], 0.0, atol=1e-15)
+    # Then: 1.2 m away -> 1 m/s -> x = 5.2; 0.8 m away -> v = 0.8 -> 5.52; 0.48 away -> v = 0.48 -> 5.712.
+    for expected in (5.2, 5.52, 5.712):
+        p, v, _ = rvo_step(p, v, goal)
+        assert p[0, 0] == pytest.approx(expected, abs=1e-12)
+    # 0.288 m from the goal, within its radius: it stops there.
+    p, v, _ = rvo_step(p, v, goal)
+    np.testing.assert_allclose(v, 0.0)
+    assert p[0, 0] == pytest.approx(5.712, abs=1e-12)
+
+
+def test_head_on_first_step_hand_computed():
+    # A at (-2, 0), B at (2, 0), both still, radii 0.3 (R = 0.6), tau_h = 5 s.
+    # w = 0 - (4, 0)/5 = (-0.8, 0): behind the cut-off centre -> project on the cut-off circle:
+    # u = (R/5 - 0.8) * (-1, 0) = (0.68, 0); A's line: point (0.34, 0), direction (0, 1) -> v_x <= 0.34.
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    v = np.zeros((2, 2))
+    points, dirs, counts = orca_halfplanes(p, v, np.full(2, 0.3), np.arange(2), PARAMS, DT)
+    np.testing.assert_array_equal(counts, [1, 1])
+    np.testing.assert_allclose(points[0, 0], [0.34, 0.0], atol=1e-12)
+    np.testing.assert_allclose(dirs[0, 0], [0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(points[1, 0], [-0.34, 0.0], atol=1e-12)
+    np.testing.assert_allclose(dirs[1, 0], [0.0, -1.0], atol=1e-12)
+    pref = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    new, lp3 = orca_velocities(p, v, pref, 0.3, 1.0, PARAMS, DT)
+    np.testing.assert_allclose(new, [[0.34, 0.0], [-0.34, 0.0]], atol=1e-12)
+    assert not lp3.any()
+
+
+def test_leg_projection_hand_computed():
+    # A at 0 moving (1, 0), B at (2, 0) still: w = (1, 0) - (2, 0)/5 = (0.6, 0) points ahead -> legs.
+    # det(rel, w) = 0 -> right leg: direction -(2 leg, -2 R)/4 with leg = sqrt(4 - 0.36) = sqrt(3.64),
+    # i.e. (-sqrt(0.91), 0.3); u = (v.d) d - v = (0.91 - 1, -0.3 sqrt(0.91)); point = v + u/2.
+    p = np.array([[0.0, 0.0], [2.0, 0.0]])
+    v = np.array([[1.0, 0.0], [0.0, 0.0]])
+    points, dirs, _ = orca_halfplanes(p, v, np.full(2, 0.3), np.array([0]), PARAMS, DT)
+    s = math.sqrt(0.91)
+    np.testing.assert_allclose(dirs[0, 0], [-s, 0.3], atol=1e-12)
+    np.testing.assert_allclose(points[0, 0], [1.0 - 0.045, -0.15 * s], atol=1e-12)
+
+
+def test_head_on_pass_symmetrically_without_contact():
+    # Offset by 0.1 m laterally so the symmetry between "pass left" and "pass right" is broken; the motion
+    # stays point-symmetric about the origin (B's state is exactly minus A's).
+    p = np.array([[-4.0, -0.05], [4.0, 0.05]])
+    v = np.zeros((2, 2))
+    goals = np.array([[4.0, -0.05], [-4.0, 0.05]])
+    min_dist, max_lateral = np.inf, 0.0
+    for _ in range(40):
+        p, v, lp3 = rvo_step(p, v, goals)
+        assert not lp3.any()
+        np.testing.assert_allclose(p[1], -p[0], atol=1e-12)
+        min_dist = min(min_dist, np.linalg.norm(p[1] - p[0]))
+        max_lateral = max(max_lateral, abs(p[0, 1] + 0.05))
+    assert min_dist >= 0.6 - 1e-9
+    assert max_lateral > 0.15  # they did step aside
+    np.testing.assert_allclose(p, goals, atol=0.3)  # and both arrived
+
+
+def test_perfectly_aligned_head_on_slows_down_but_never_touches():
+    # RVO2 has no tie-breaker: exactly aligned agents get no lateral component and stop facing each other
+    # (the known symmetric deadlock); ORCA still keeps them apart.
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    v = np.zeros((2, 2))
+    goals = np.array([[2.0, 0.0], [-2.0, 0.0]])
+    for _ in range(60):
+        p, v, _ = rvo_step(p, v, goals)
+        assert np.linalg.norm(p[1] - p[0]) >= 0.6 - 1e-9
+    np.testing.assert_allclose(p[:, 1], 0.0, atol=1e-15)
+    assert np.abs(v).max() < 0.05
+
+
+def test_overlapping_agents_move_apart_in_one_step():
+    # A at 0, B at (0.4, 0), still, R = 0.6: w = 0 - (0.4, 0)/dt = (-1, 0), |w| = 1;
+    # u = (0.6/0.4 - 1) * (-1, 0) = (-0.5, 0); A's line: point (-0.25, 0), direction (0, 1) -> v_x <= -0.25.
+    p = np.array([[0.0, 0.0], [0.4, 0.0]])
+    v = np.zeros((2, 2))
+    pref = np.zeros((2, 2))
+    new, lp3 = orca_velocities(p, v, pref, 0.3, 1.0, PARAMS, DT)
+    np.testing.assert_allclose(new, [[-0.25, 0.0], [0.25, 0.0]], atol=1e-12)
+    assert not lp3.any()
+    p_next = p + DT * new
+    assert np.linalg.norm(p_next[1] - p_next[0]) == pytest.approx(0.6, abs=1e-12)
+
+
+def test_dense_case_uses_the_3d_program():
+    # An agent with four overlapping neighbours at 0.4 m (N, S, E, W): each demands moving away from it at
+    # 0.25 m/s, so v_x <= -0.25 and v_x >= 0.25 at once: the 2-D program is infeasible. The 3-D program
+    # minimises the largest violation, max(v_x + .25, .25 - v_x, v_y + .25, .25 - v_y), uniquely at v = 0.
+    p = np.array([[0.0, 0.0], [0.4, 0.0], [-0.4, 0.0], [0.0, 0.4], [0.0, -0.4]])
+    v = np.zeros((5, 2))
+    pref = np.array([[1.0, 0.0]])
+    new, lp3 = orca_velocities(p, v, pref, 0.3, 1.0, PARAMS, DT, agents=np.array([0]))
+    assert lp3[0]
+    np.testing.assert_allclose(new[0], [0.0, 0.0], atol=1e-9)
+
+
+def test_neighbours_are_the_nearest_within_range_sorted():
+    params = OrcaParams(neighbor_dist=3.0, max_neighbors=2)
+    p = np.array([[0.0, 0.0], [2.5, 0.0], [1.0, 0.0], [0.0, 2.0], [10.0, 0.0]])
+    idx, valid = nearest_neighbors(p, np.array([0, 4]), params)
+    np.testing.assert_array_equal(idx[0], [2, 3])  # 1 m, then 2 m; 2.5 m is the third nearest: dropped
+    np.testing.assert_array_equal(valid[0], [True, True])
+    np.testing.assert_array_equal(valid[1], [False, False])  # agent 4 is 7.5 m from everyone
+
+
+def _in_truncated_vo(x, rel, radius, horizon):
+    """Brute-force membership: relative velocity x collides within horizon (some t in [0, tau])."""
+    xx = np.einsum("...i,...i->...", x, x)
+    t = np.clip(np.einsum("...i,i->...", x, rel) / np.where(xx > 0, xx, 1.0), 0.0, horizon)
+    return np.linalg.norm(rel - t[..., None] * x, axis=-1) < radius
+
+
+@pytest.mark.parametrize(
+    "rel, rel_vel",
+    [
+        ((2.0, 0.5), (0.3, 0.4)),  # outside, nearest the left leg
+        ((2.0, 0.0), (1.0, -0.3)),  # inside, nearest the right leg
+        ((1.5, 1.0), (0.1, 0.1)),  # inside the cut-off disc region
+        ((3.0, 0.0), (-0.2, 0.1)),  # behind the cut-off circle
+    ],
+)
+def test_halfplane_is_the_smallest_exit_from_the_truncated_vo(rel, rel_vel):
+    # The ORCA paper: u = (closest point of the VO boundary to the relative velocity) - relative velocity.
+    # Brute force: the boundary cells of a fine grid of the VO's membership test.
+    rel, rel_vel = np.array(rel), np.array(rel_vel)
+    p = np.array([[0.0, 0.0], rel])
+    v = np.array([rel_vel, [0.0, 0.0]])
+    points, dirs, _ = orca_halfplanes(p, v, np.full(2, 0.3), np.array([0]), PARAMS, DT)
+    u = 2.0 * (points[0, 0] - v[0])
+    h = 0.004
+    g = np.arange(-2.0, 2.0, h)
+    grid = rel_vel + np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)
+    inside = _in_truncated_vo(grid, rel, 0.6, PARAMS.time_horizon)
+    edge = inside ^ np.roll(inside, 1, 0) | inside ^ np.roll(inside, 1, 1)
+    nearest = np.linalg.norm(grid[edge] - rel_vel, axis=1).min()
+    assert np.linalg.norm(u) == pytest.approx(nearest, abs=2 * h)
+    # rel_vel + u lies on the boundary: just beyond it (along u) is outside, just before it inside.
+    unit = u / np.linalg.norm(u)
+    was_inside = _in_truncated_vo(rel_vel, rel, 0.6, PARAMS.time_horizon)
+    assert _in_truncated_vo(rel_vel + u + 1e-6 * unit, rel, 0.6, PARAMS.time_horizon) != was_inside
+    assert _in_truncated_vo(rel_vel + u - 1e-6 * unit, rel, 0.6, PARAMS.time_horizon) == was_inside
+    # The line is perpendicular to u (where u is not tiny).
+    assert abs(np.dot(dirs[0, 0], u)) <= 1e-9 * max(1.0, np.linalg.norm(u))
+
+
+def _violation(v, points, dirs):
+    return dirs[:, 0] * (points[:, 1] - v[1]) - dirs[:, 1] * (points[:, 0] - v[0])
+
+
+def test_2d_program_finds_the_closest_feasible_velocity_to_the_preferred_one():
+    optimize = pytest.importorskip("scipy.optimize")
+    rng = np.random.default_rng(3)
+    checked = 0
+    for _ in range(60):
+        p = rng.uniform(-3, 3, (6, 2))
+        if np.linalg.norm(p[:, None] - p[None], axis=-1)[np.triu_indices(6, 1)].min() < 0.7:
+            continue
+        v = rng.uniform(-0.7, 0.7, (6, 2))
+        pref = rng.uniform(-1.5, 1.5, (1, 2))
+        new, lp3 = orca_velocities(p, v, pref, 0.3, 1.0, PARAMS, DT, agents=np.array([0]))
+        if lp3[0]:
+            continue
+        points, dirs, c = orca_halfplanes(p, v, np.full(6, 0.3), np.array([0]), PARAMS, DT)
+        points, dirs = points[0, : c[0]], dirs[0, : c[0]]
+        assert _violation(new[0], points, dirs).max() <= 1e-9
+        assert np.linalg.norm(new[0]) <= 1.0 + 1e-9
+        cons = [
+            {"type": "ineq", "fun": lambda x, p=points, d=dirs: -_violation(x, p, d)},
+            {"type": "ineq", "fun": lambda x: 1.0 - x @ x},
+        ]
+
+        def distance_sq(x, target=pref[0]):
+            return np.sum((x - target) ** 2)
+
+        ref = optimize.minimize(distance_sq, new[0], constraints=cons, method="SLSQP", tol=1e-12)
+        assert np.sum((new[0] - pref[0]) ** 2) <= ref.fun + 1e-7
+        checked += 1
+    assert checked >= 20
+
+
+def test_3d_program_minimises_the_largest_violation():
+    optimize = pytest.importorskip("scipy.optimize")
+    rng = np.random.default_rng(5)
+    checked = 0
+    for _ in range(200):
+        p = rng.uniform(-0.7, 0.7, (7, 2))
+        v = rng.uniform(-1, 1, (7, 2))
+        pref = rng.uniform(-1, 1, (1, 2))
+        new, lp3 = orca_velocities(p, v, pref, 0.3, 1.0, PARAMS, DT, agents=np.array([0]))
+        if not lp3[0]:
+            continue
+        points, dirs, c = orca_halfplanes(p, v, np.full(7, 0.3), np.array([0]), PARAMS, DT)
+        points, dirs = points[0, : c[0]], dirs[0, : c[0]]
+        # min t  s.t.  violation_i(v) <= t,  |v| <= 1
+        cons = [
+            {"type": "ineq", "fun": lambda x, p=points, d=dirs: x[2] - _violation(x[:2], p, d)},
+            {"type": "ineq", "fun": lambda x: 1.0 - x[:2] @ x[:2]},
+        ]
+        best = np.inf
+        for start in (np.zeros(2), new[0]):
+            x0 = np.append(start, _violation(start, points, dirs).max())
+            ref = optimize.minimize(lambda x: x[2], x0, constraints=cons, method="SLSQP", tol=1e-12)
+            best = min(best, ref.fun)
+        assert best > 0.0  # the 2-D program was right: no velocity satisfies every line
+        assert _violation(new[0], points, dirs).max() <= best + 1e-6
+        assert np.linalg.norm(new[0]) <= 1.0 + 1e-9
+        checked += 1
+    assert checked >= 10

@@ -1,0 +1,38 @@
+"""plot_episode draws what Fig. 2 shows and saves a PNG."""
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+
+from crowdsim.plotting import default_snapshots, plot_episode
+
+
+def test_default_snapshots_include_first_and_last():
+    assert default_snapshots(21) == [0, 5, 10, 15, 20]
+    assert default_snapshots(3) == [0, 1, 2]
+
+
+def test_plot_episode_draws_filled_robots_and_hollow_humans(tmp_path):
+    t = np.linspace(0, 1, 11)[:, None]
+    robots = np.stack(
+        [np.hstack([t * 0, -5 + 10 * t]), np.hstack([1 + t * 0, -5 + 10 * t])], axis=1
+    )  # (11, 2, 2)
+    humans = np.stack([np.hstack([-5 + 10 * t, t * 0])], axis=1)  # (11, 1, 2)
+    goals = robots[-1]
+    fig = plot_episode(robots, humans, goals, title="test", snapshot_steps=[0, 5, 10], dt=0.4)
+    assert isinstance(fig, Figure)
+    ax = fig.axes[0]
+    circles = [p for p in ax.patches if isinstance(p, Circle)]
+    assert len(circles) == 3 * (2 + 1)
+    assert sum(c.get_fill() for c in circles) == 3 * 2  # robots filled, humans hollow
+    assert all(c.get_radius() == 0.3 for c in circles)
+    assert "0 s, 2 s, 4 s" in " ".join(t.get_text() for t in ax.get_legend().get_texts())
+    out = tmp_path / "ep.png"
+    fig.savefig(out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_episode_on_given_axes():
+    fig = Figure()
+    ax = fig.add_subplot()
+    assert plot_episode(np.zeros((2, 1, 2)), np.zeros((2, 0, 2)), np.ones((1, 2)), ax=ax) is fig

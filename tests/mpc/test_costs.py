@@ -1,0 +1,158 @@
+"""Each cost term of Section IV against a value computed by hand, and Lemma 1 numerically."""
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpc import costs
+from mpc.config import MPCConfig
+from mpc.dynamics import rollout_numpy
+from mpc.nlp import JointNLP, LocalNLP, StepData
+
+CFG = MPCConfig()
+
+
+def value(x) -> float:
+    return float(ca.DM(x))
+
+
+def test_smax_by_hand():
+    assert value(costs.smax(ca.DM(0.0), 30.0)) == pytest.approx(math.log(2) / 30)
+    assert value(costs.smax(ca.DM(0.05), 30.0)) == pytest.approx(math.log(math.exp(1.5) + 1) / 30)
+    assert value(costs.smax(ca.DM(1.0), 30.0)) == pytest.approx(1.0 + math.log1p(math.exp(-30)) / 30)
+    assert value(costs.smax(ca.DM(-1.0), 30.0)) == pytest.approx(math.log1p(math.exp(-30)) / 30, rel=1e-12)
+    # Far beyond any overflow of exp(mu z): the stable form stays finite and equal to z.
+    assert value(costs.smax(ca.DM(100.0), 30.0)) == pytest.approx(100.0)
+
+
+def test_smooth_norm_by_hand():
+    np.testing.assert_allclose(costs.smooth_norm(ca.DM([[3, 0], [4, 0]]), 0.0).full(), [[5.0, 0.0]])
+    assert value(costs.smooth_norm(ca.DM([3, 4]), 1e-3)) == pytest.approx(math.sqrt(25.001))
+
+
+def test_reference_trajectory_moves_at_v_max_and_stops_on_the_goal():
+    # tau v_max = 0.4 m per step towards a goal 1 m away: 0.4, 0.8, then the remaining 0.2, then stay.
+    ref = costs.reference_trajectory(ca.DM([0, 0]), ca.DM([0, 1]), 4, 0.4, 1.0)
+    np.testing.assert_allclose(ref.full(), [[0, 0, 0, 0], [0.4, 0.8, 1.0, 1.0]], atol=1e-12)
+    # Along (3, 4) / 5: 0.4 * (0.6, 0.8) = (0.24, 0.32) per step.
+    ref = costs.reference_trajectory(ca.DM([1, 1]), ca.DM([4, 5]), 2, 0.4, 1.0)
+    np.testing.assert_allclose(ref.full(), [[1.24, 1.48], [1.32, 1.64]], atol=1e-12)
+    # Standing on the goal: the reference stays there (no division by zero).
+    ref = costs.reference_trajectory(ca.DM([2, 2]), ca.DM([2, 2]), 3, 0.4, 1.0)
+    np.testing.assert_allclose(ref.full(), [[2, 2, 2], [2, 2, 2]])
+
+
+def test_goal_cost_by_hand():
+    # Errors (0, 0.1) and (0, -0.3): 0.01 + 0.09 = 0.1, divided by ||s_t - goal|| + delta = 1 + 0.001.
+    positions = ca.DM([[0, 0], [0.5, 0.5]])
+    reference = ca.DM([[0, 0], [0.4, 0.8]])
+    cost = costs.goal_cost(positions, reference, ca.DM([0, 0]), ca.DM([0, 1]), 1e-3)
+    assert value(cost) == pytest.approx(0.1 / 1.001)
+
+
+def test_acceleration_and_jerk_costs_by_hand():
+    accels = ca.DM([[1, 0], [2, -1]])  # a_0 = (1, 2), a_1 = (0, -1)
+    assert value(costs.acceleration_cost(accels)) == pytest.approx(1 + 4 + 0 + 1)
+    # With a_{-1} = (1, 0): differences (0, 2) and (-1, -3): 4 + 1 + 9
+    assert value(costs.jerk_cost(accels, ca.DM([1, 0]))) == pytest.approx(14.0)
+
+
+def test_human_collision_cost_by_hand():
+    # Robot at (0, 0) moving at (1, 0), human at (1, 0): g = 0.64 + 0.5 * 1 - 1 = 0.14.
+    # A second human far away (10 m) adds smax(0.64 + 0.5 - 100) ~ 0.
+    positions, velocities = ca.DM([0, 0]), ca.DM([1, 0])
+    humans = ca.DM([[1, 10], [0, 0]])
+    cost = costs.human_collision_cost(positions, velocities, humans, 2, CFG)
+    assert value(cost) == pytest.approx(math.log(math.exp(30 * 0.14) + 1) / 30)
+
+
+def test_human_collision_cost_pairs_each_step_with_that_steps_humans():
+    # H = 2, one human: at step 0 it is 1 m away (g = 0.64 - 1), at step 1 on top of the robot (g = 0.64).
+    positions = ca.DM([[0, 0], [0, 0]])
+    velocities = ca.DM.zeros(2, 2)
+    humans = ca.DM([[1, 0], [0, 0]])  # column k * N_h + n
+    cost = costs.human_collision_cost(positions, velocities, humans, 1, CFG)
+    expected = math.log(math.exp(30 * -0.36) + 1) / 30 + math.log(math.exp(30 * 0.64) + 1) / 30
+    assert value(cost) == pytest.approx(expected)
+
+
+def test_robot_collision_and_flocking_costs_by_hand():
+    a, b = ca.DM([0, 0]), ca.DM([1, 0])
+    # g = d_min^2 - d^2 = 0.64 - 1 = -0.36
+    expected = math.log(math.exp(30 * -0.36) + 1) / 30
+    assert value(costs.robot_collision_cost(a, b, CFG)) == pytest.approx(expected)
+    # (sqrt(d^2 + delta) - d_ij)^2 with d = 2: (sqrt(4.001) - 1.2)^2
+    far = ca.DM([0, 2])
+    assert value(costs.flocking_cost(a, far, CFG)) == pytest.approx((math.sqrt(4.001) - 1.2) ** 2)
+
+
+def test_individual_and_shared_costs_are_the_weighted_sums():
+    rng = np.random.default_rng(1)
+    state, accels = ca.DM(rng.normal(size=4)), ca.DM(rng.normal(size=(2, 3)))
+    last, goal = ca.DM(rng.normal(size=2)), ca.DM([3.0, 4.0])
+    humans = ca.DM(rng.normal(size=(2, 3 * 2)))
+    track = costs.make_track(state, accels, last, goal, CFG.dt)
+    reference = costs.reference_trajectory(state[0:2], goal, 3, CFG.dt, CFG.v_max)
+    expected = (
+        10.0 * value(costs.goal_cost(track.positions, reference, state[0:2], goal, CFG.delta))
+        + 0.1 * value(costs.acceleration_cost(accels))
+        + 0.1 * value(costs.jerk_cost(accels, last))
+        + 1e7 * value(costs.human_collision_cost(track.positions, track.velocities, humans, 2, CFG))
+    )
+    assert value(costs.individual_cost(track, humans, 2, CFG)) == pytest.approx(expected)
+    other = ca.DM(rng.normal(size=(2, 3)))
+    shared = value(costs.shared_cost(track.positions, other, 7.0, CFG))
+    expected = 1e7 * value(costs.robot_collision_cost(track.positions, other, CFG)) + 7.0 * value(
+        costs.flocking_cost(track.positions, other, CFG)
+    )
+    assert shared == pytest.approx(expected)
+    assert shared == pytest.approx(value(costs.shared_cost(other, track.positions, 7.0, CFG)))  # J_ij = J_ji
+
+
+def test_pair_index_enumerates_unordered_pairs_row_major():
+    pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+    assert [costs.pair_index(i, j, 4) for i, j in pairs] == list(range(6))
+    assert costs.pair_index(3, 1, 4) == costs.pair_index(1, 3, 4)
+
+
+def test_potential_counts_each_pair_once():
+    # Two robots, no humans: F = J_1 + J_2 + J_12 and C_i = J_i + J_12, so C_1 + C_2 - F = J_12.
+    rng = np.random.default_rng(2)
+    tracks = [
+        costs.make_track(ca.DM(rng.normal(size=4)), ca.DM(rng.normal(size=(2, 2))), ca.DM.zeros(2),
+                         ca.DM(rng.normal(size=2)), CFG.dt)  # fmt: skip
+        for _ in range(2)
+    ]
+    humans = ca.DM.zeros(2, 0)
+    F = value(costs.potential(tracks, ca.DM([10.0]), humans, 0, CFG))
+    c1 = value(costs.robot_cost(tracks[0], [tracks[1].positions], [10.0], humans, 0, CFG))
+    c2 = value(costs.robot_cost(tracks[1], [tracks[0].positions], [10.0], humans, 0, CFG))
+    j12 = value(costs.shared_cost(tracks[0].positions, tracks[1].positions, 10.0, CFG))
+    assert c1 + c2 - F == pytest.approx(j12)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lemma_1_local_gradient_equals_potential_gradient(seed):
+    """dC_i/du_i = dF/du_i (Lemma 1) for random states, plans, goals and predictions, 3 robots, 4 humans."""
+    m, n, h = 3, 4, CFG.horizon
+    rng = np.random.default_rng(seed)
+    joint, local = JointNLP(CFG, m, n), LocalNLP(CFG, m, n)
+    states = np.concatenate([rng.uniform(-1.5, 1.5, (m, 2)), rng.uniform(-1, 1, (m, 2))], axis=1)
+    # Some robot-robot and robot-human distances inside the penalty zone, so every term contributes.
+    data = StepData(states, rng.uniform(-2, 2, (m, 2)), rng.uniform(-4, 4, (m, 2)), np.ones(m, bool))
+    humans = rng.uniform(-2, 2, (h, n, 2))
+    accels = rng.uniform(-2, 2, (m, h, 2))
+    u = ca.SX.sym("u", 2 * h * m)
+    grad_F = ca.Function("dF", [u], [ca.gradient(joint.potential_fn(u, joint.params(data, humans)), u)])
+    dF = grad_F(accels.ravel()).full().reshape(m, h, 2)
+    positions = rollout_numpy(states, accels, CFG.dt)[0]
+    for i in range(m):
+        ui = ca.SX.sym("ui", 2 * h)
+        params = local.params(i, data, positions, humans)
+        grad_C = ca.Function("dC", [ui], [ca.gradient(local.cost_fn(ui, params), ui)])
+        dC = grad_C(accels[i].ravel()).full().reshape(h, 2)
+        scale = max(1.0, float(np.abs(dF[i]).max()))
+        np.testing.assert_allclose(dC, dF[i], rtol=1e-9, atol=1e-9 * scale)
+        assert np.abs(dF[i]).max() > 0

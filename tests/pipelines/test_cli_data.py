@@ -1,0 +1,170 @@
+"""``crowdmpc data`` and ``crowdmpc evaluate`` from the command line: results, and one-line errors."""
+
+import json
+import sys
+import types
+
+import pytest
+
+from pipelines.cli import main
+from predictors.data.prepare import prepare_ewap
+from tests.predictors.samples import (
+    scene,
+    track,
+    walk_scene_records,
+    write_lines,
+    write_tiny_ewap,
+    write_walk_file,
+)
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+
+
+@pytest.fixture
+def prepared(tmp_path):
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    prepare_ewap(raw, out, categorize_scenes=False, log=lambda msg: None)
+    return out
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def assert_one_line_error(code, err, *fragments):
+    assert code == 2
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    for fragment in fragments:
+        assert fragment in lines[0]
+
+
+def test_stats_table(tmp_path, capsys):
+    write_walk_file(tmp_path / "a" / "walk.ndjson")
+    code, out, _ = run(capsys, "data", "stats", str(tmp_path))
+    assert code == 0
+    header, _, row = out.splitlines()[:3]
+    assert header.split()[:4] == ["file", "scenes", "tracks", "peds"]
+    assert row.split()[:7] == ["a/walk.ndjson", "2", "45", "3", "3", "3.0", "3"]
+
+
+BAD_LINES = {
+    "bad json": ('{"track": {"f": 0, "p": 1', "invalid JSON"),
+    "missing keys": (json.dumps({"track": {"f": 0, "p": 1}}), "lacks key(s) ['x', 'y']"),
+    "non-numeric coordinate": (json.dumps(track(0, 1, "a", 0.0)), "'x' must be a number"),
+    "frame outside every scene": (
+        json.dumps(track(9999, 1, 0.0, 0.0)),
+        "frame 9999 lies outside every scene",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_LINES))
+@pytest.mark.parametrize("command", ["stats", "evaluate"])
+def test_malformed_input_is_one_line_and_exit_2(case, command, tmp_path, capsys, prepared):
+    line, reason = BAD_LINES[case]
+    if command == "stats":
+        path = write_lines(tmp_path / "bad" / "bad.ndjson", [*walk_scene_records(), line])
+        code, _, err = run(capsys, "data", "stats", str(tmp_path / "bad"))
+    else:
+        path = prepared / "test" / "biwi_eth.ndjson"
+        path.write_text(path.read_text() + line + "\n")
+        code, _, err = run(
+            capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(prepared)
+        )
+    n_lines = len(path.read_text().splitlines())
+    assert_one_line_error(code, err, f"{path}:{n_lines}: ", reason)
+
+
+def test_stats_without_files(tmp_path, capsys):
+    code, _, err = run(capsys, "data", "stats", str(tmp_path))
+    assert_one_line_error(code, err, "no .ndjson files under")
+
+
+def test_prepare_and_evaluate(tmp_path, capsys):
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    code, stdout, _ = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags")
+    assert code == 0
+    assert "biwi_eth    test" in stdout and (out / "manifest.json").is_file()
+    report = tmp_path / "r.json"
+    code, stdout, _ = run(
+        capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(out), "--json", str(report)
+    )
+    assert code == 0
+    assert "test/biwi_eth.ndjson" in stdout and "ADE [m]" in stdout
+    result = json.loads(report.read_text())
+    assert result["protocol"] == "paper" and result["split"] == "test"
+    # the walkers keep a constant velocity; only the centimetre rounding of the written files is left
+    assert result["overall"]["scenes"] > 0 and result["overall"]["ade"] < 0.05
+
+
+def test_prepare_rejects_a_directory_without_ewap(tmp_path, capsys):
+    code, _, err = run(capsys, "data", "prepare", "--raw", str(tmp_path), "--out", str(tmp_path / "o"))
+    assert_one_line_error(code, err, "expected a BIWI EWAP directory")
+
+
+def test_prepare_reports_a_malformed_obsmat_line(tmp_path, capsys):
+    raw = write_tiny_ewap(tmp_path / "data")
+    obsmat = raw / "seq_hotel" / "obsmat.txt"
+    obsmat.write_bytes(obsmat.read_bytes() + b"  1.0 2.0 oops\r\n")
+    code, _, err = run(
+        capsys, "data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "o"), "--no-tags"
+    )
+    n_lines = len(obsmat.read_bytes().splitlines())
+    assert_one_line_error(code, err, f"{obsmat}:{n_lines}: expected 8 numeric columns, found 3")
+
+
+def test_evaluate_without_a_data_directory(monkeypatch, capsys):
+    monkeypatch.delenv("CROWDMPC_DATA", raising=False)
+    code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity")
+    assert_one_line_error(code, err, "pass --data-dir DIR or set CROWDMPC_DATA")
+
+
+def test_evaluate_unknown_predictor(prepared, capsys):
+    code, _, err = run(capsys, "evaluate", "--predictor", "oracle_of_delphi", "--data-dir", str(prepared))
+    assert_one_line_error(code, err, "unknown predictor 'oracle_of_delphi'")
+
+
+def test_evaluate_on_a_directory_without_data(tmp_path, capsys):
+    code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(tmp_path))
+    assert_one_line_error(code, err, "neither prepared splits")
+
+
+def test_evaluate_a_scene_file_without_ground_truth(prepared, capsys):
+    target = prepared / "test" / "biwi_eth.ndjson"
+    write_lines(target, [scene(0, 1, 0, 80)] + [track(10 * k, 1, 0.5 * k, 0.0) for k in range(9)])
+    code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(prepared))
+    assert_one_line_error(code, err, f"{target}:1: scene 0 has 9 steps, the evaluation needs 21")
+
+
+def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
+    calls = []
+
+    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False):
+        calls.append((out_path, episodes, n_humans, seed, scenario, with_robots))
+        return {"scenes": 12, "out": str(out_path)}
+
+    monkeypatch.setitem(sys.modules, "pipelines.synth", types.SimpleNamespace(synthesize=synthesize))
+    out = tmp_path / "s.ndjson"
+    argv = ["data", "synth", "--out", str(out), "--episodes", "3", "--humans", "5", "--seed", "7"]
+    code, stdout, _ = run(capsys, *argv, "--scenario", "perpendicular", "--with-robots")
+    assert code == 0 and "scenes: 12" in stdout
+    assert calls == [(out, 3, 5, 7, "perpendicular", True)]
+    code, _, err = run(capsys, *argv[:5], "0", *argv[6:])
+    assert_one_line_error(code, err, "--episodes and --humans must be >= 1")
+
+
+@pytest.mark.parametrize("argv", [["data", "--help"], ["data", "prepare", "--help"], ["evaluate", "--help"]])
+def test_help_shows_an_example(argv, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 0
+    assert "example" in capsys.readouterr().out

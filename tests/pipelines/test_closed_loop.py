@@ -1,0 +1,102 @@
+"""The closed loop: episode bookkeeping, observer hooks, seeds, summaries, errors that must surface."""
+
+import numpy as np
+import pytest
+
+from crowdsim.env import EnvConfig
+from pipelines.closed_loop import run_episode, run_episodes, summarize
+from pipelines.controllers import ControllerSpec, ControlOutput, make_controller
+
+
+class Spy:
+    """An EpisodeObserver that records the calls it gets."""
+
+    def __init__(self):
+        self.calls = []
+        self.meta = None
+        self.result = None
+
+    def on_reset(self, obs, meta):
+        self.calls.append(("reset", obs.step))
+        self.meta = meta
+
+    def on_step(self, obs, out, next_obs):
+        assert next_obs.step == obs.step + 1
+        self.calls.append(("step", obs.step))
+
+    def on_end(self, result):
+        self.calls.append(("end", None))
+        self.result = result
+
+
+def test_run_episode_records_everything_and_calls_the_hooks_in_order():
+    spy = Spy()
+    result = run_episode(
+        make_controller(ControllerSpec("orca")), seed=3, scenario="circle", n_humans=5, observers=[spy]
+    )
+    t = result.metrics.n_steps
+    assert result.robot_positions.shape == (t + 1, 3, 2) and result.human_positions.shape == (t + 1, 5, 2)
+    assert (
+        result.solve_times_s.shape == (t,) and len(result.statuses) == t and result.iterations.shape == (t,)
+    )
+    assert result.controller == "orca" and result.predictor is None and result.seed == 3
+    assert spy.calls == [("reset", 0)] + [("step", k) for k in range(t)] + [("end", None)]
+    assert spy.result is result
+    assert {"seed", "scenario", "controller", "predictor", "predictor_sha256", "config"} <= set(spy.meta)
+    assert spy.meta["config"]["env"]["dt"] == 0.4 and spy.meta["config"]["env"]["orca"]["time_horizon"] == 5.0
+
+
+def test_run_episodes_uses_seed_plus_i_and_fresh_observers():
+    made = []
+
+    def factory():
+        made.append(Spy())
+        return [made[-1]]
+
+    results = run_episodes(
+        ControllerSpec("straight"), episodes=3, seed=10, scenario="perpendicular", n_humans=4, n_robots=2,
+        observers_factory=factory, progress=False,
+    )  # fmt: skip
+    assert [r.seed for r in results] == [10, 11, 12] and len(made) == 3
+    single = run_episode(
+        make_controller(ControllerSpec("straight")), seed=11, scenario="perpendicular", n_humans=4, n_robots=2
+    )
+    np.testing.assert_array_equal(single.human_positions, results[1].human_positions)
+    assert made[1].meta["seed"] == 11
+
+
+def test_summarize_reports_rates_and_step_costs():
+    results = run_episodes(
+        ControllerSpec("orca"), episodes=2, seed=0, scenario="circle", n_humans=3, progress=False
+    )
+    s = summarize(results)
+    assert s["episodes"] == 2 and 0 <= s["success_rate"] <= 100
+    assert s["control_steps"] == sum(r.metrics.n_steps for r in results)
+    assert 0 < s["solve_time_median_ms"] <= s["solve_time_p95_ms"] <= s["solve_time_max_ms"]
+    assert (
+        s["iterations_max"] == 0 and s["fallback_steps"] == 0 and s["statuses"] == {"ok": s["control_steps"]}
+    )
+
+
+def test_controller_errors_are_not_swallowed():
+    class Broken:
+        name = "broken"
+
+        def reset(self, obs):
+            pass
+
+        def act(self, obs):
+            if obs.step == 2:
+                raise RuntimeError("solver exploded")
+            return ControlOutput(accelerations=np.zeros((obs.n_robots, 2)))
+
+    with pytest.raises(RuntimeError, match="exploded"):
+        run_episode(Broken(), seed=0, scenario="circle", n_humans=2)
+
+
+def test_env_config_is_used():
+    result = run_episode(
+        make_controller(ControllerSpec("orca")), seed=0, scenario="circle", n_humans=2,
+        env_config=EnvConfig(time_limit=2.0),
+    )  # fmt: skip
+    assert result.metrics.n_steps == 5 and result.metrics.timeout

@@ -1,0 +1,140 @@
+"""CMPC/DMPC as closed-loop controllers, driven through crowdsim's CrowdEnv."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from crowdsim.env import CrowdEnv
+from mpc.dynamics import braking
+from mpc.errors import MPCConfigError
+from pipelines.closed_loop import run_episode
+from pipelines.controllers import ControllerSpec, make_controller
+from pipelines.errors import PipelineError
+from pipelines.mpc_controllers import make_mpc_controller, predictor_history
+
+
+class Collect:
+    def __init__(self):
+        self.outputs = []
+
+    def on_reset(self, obs, meta):
+        pass
+
+    def on_step(self, obs, out, next_obs):
+        self.outputs.append(out)
+
+    def on_end(self, result):
+        pass
+
+
+def first_step(spec, n_humans=3, seed=0):
+    env = CrowdEnv()
+    obs = env.reset(seed, "circle", n_humans)
+    controller = make_controller(spec)
+    controller.reset(obs)
+    return obs, controller.act(obs)
+
+
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_control_output_fields(name):
+    obs, out = first_step(ControllerSpec(name))
+    h = 4
+    assert out.accelerations.shape == (3, 2) and np.all(np.abs(out.accelerations) <= 2.0 + 1e-9)
+    assert out.plan.shape == (3, h, 2) and out.prediction.shape == (h, 3, 2)
+    assert out.status == "ok" and out.fallback is None and out.iterations >= 1
+    assert out.solve_time_s > 0 and np.isfinite(out.potential)
+    assert out.iteration_predictions == ()
+    assert {"solves", "solver_iterations", "converged"} <= set(out.extra)
+    # Constant velocity: every human keeps its current velocity (zero at the start).
+    np.testing.assert_allclose(out.prediction, np.broadcast_to(obs.human_positions, (h, 3, 2)))
+
+
+def test_record_iterations_keeps_every_iterations_prediction():
+    _, out = first_step(ControllerSpec("cmpc", record_iterations=True))
+    assert len(out.iteration_predictions) == out.iterations == 2
+
+
+def test_spec_options_reach_the_config():
+    controller = make_mpc_controller(
+        ControllerSpec("cmpc", flocking=False, mpc_overrides=(("horizon", 5), ("j_max", 3))), distributed=False
+    )
+    assert controller.cfg.w_floc == 0.0 and controller.cfg.horizon == 5 and controller.cfg.j_max == 3
+    with pytest.raises(MPCConfigError, match="horizn"):
+        make_mpc_controller(ControllerSpec("cmpc", mpc_overrides=(("horizn", 5),)), distributed=False)
+    with pytest.raises(MPCConfigError, match="horizon"):
+        make_mpc_controller(ControllerSpec("cmpc", mpc_overrides=(("horizon", 0),)), distributed=False)
+
+
+def test_coupled_nlp_is_centralised_only():
+    with pytest.raises(PipelineError, match="cmpc"):
+        make_mpc_controller(ControllerSpec("dmpc", coupling="nlp"), distributed=True)
+
+
+def test_coupled_nlp_with_constant_velocity_matches_ibr():
+    _, ibr = first_step(ControllerSpec("cmpc"))
+    _, nlp = first_step(ControllerSpec("cmpc", coupling="nlp"))
+    assert nlp.status == "ok" and nlp.iterations == 1
+    np.testing.assert_allclose(nlp.prediction, ibr.prediction, atol=1e-12)
+    assert nlp.potential == pytest.approx(ibr.potential, rel=1e-4)
+
+
+def test_forced_solver_failure_falls_back_and_the_episode_goes_on():
+    spec = ControllerSpec("cmpc", mpc_overrides=(("ipopt_max_iter", 0),))
+    controller = make_controller(spec)
+    collect = Collect()
+    env = CrowdEnv()
+    obs = env.reset(0, "circle", 2)
+    controller.reset(obs)
+    for _ in range(3):
+        out = controller.act(obs)
+        assert out.fallback == "brake" and out.status == "Maximum_Iterations_Exceeded"
+        obs, done, _ = env.step(out.accelerations)
+        collect.outputs.append(out)
+        assert not done
+    np.testing.assert_allclose(collect.outputs[0].accelerations, 0.0)  # braking from rest
+
+
+def test_robot_on_its_goal_brakes_when_pinned():
+    env = CrowdEnv()
+    obs = env.reset(0, "circle", 3)
+    velocities = obs.robot_velocities.copy()
+    velocities[0] = [0.4, -0.6]
+    obs = dataclasses.replace(obs, robot_velocities=velocities, robot_reached=np.array([True, False, False]))
+    controller = make_controller(ControllerSpec("cmpc", mpc_overrides=(("on_goal", "brake"),)))
+    controller.reset(obs)
+    out = controller.act(obs)
+    expected = braking(np.concatenate([obs.robot_positions, velocities], axis=1)[:1], 4, 0.4, 2.0)[0, 0]
+    np.testing.assert_allclose(out.accelerations[0], expected, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_robot_on_its_goal_holds_position_when_tracking(name):
+    """The default: a robot resting on its goal, nobody near, keeps still (its plan stays on the goal)."""
+    env = CrowdEnv()
+    obs = env.reset(0, "circle", 0)
+    positions = obs.robot_positions.copy()
+    positions[0] = obs.robot_goals[0]
+    obs = dataclasses.replace(obs, robot_positions=positions, robot_reached=np.array([True, False, False]))
+    controller = make_controller(ControllerSpec(name))
+    controller.reset(obs)
+    out = controller.act(obs)
+    assert np.abs(out.accelerations[0]).max() < 1e-3
+    assert np.linalg.norm(out.plan[0] - obs.robot_goals[0], axis=1).max() < 1e-3
+
+
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_two_robots_without_humans_reach_their_goals(name):
+    result = run_episode(make_controller(ControllerSpec(name)), seed=0, scenario="circle", n_humans=0, n_robots=2)
+    assert result.metrics.success
+    assert all(f is None for f in result.fallbacks)
+
+
+def test_predictor_history_takes_the_last_rows_and_pads_the_start():
+    env = CrowdEnv()
+    obs = env.reset(0, "circle", 2)
+    history, mask = predictor_history(obs, 3)
+    assert history.shape == (3, 5, 2) and mask.all()
+    padded, _ = predictor_history(obs, 10)
+    assert padded.shape == (10, 5, 2)
+    np.testing.assert_array_equal(padded[0], obs.history[0])

@@ -1,0 +1,90 @@
+"""The ORCA oracle predicts exactly what the simulator does when the robots follow the plan."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crowdsim.env import CrowdEnv
+from pipelines.oracle import OracleController, OrcaOracle
+from predictors.errors import PredictorError
+
+
+def _plan(obs, accelerations: np.ndarray) -> np.ndarray:
+    """Robot positions (H, M, 2) of the double integrator (Eq. 2) under accelerations (H, M, 2)."""
+    p, v, out = obs.robot_positions.copy(), obs.robot_velocities.copy(), []
+    for a in accelerations:
+        p = p + obs.dt * v + 0.5 * obs.dt**2 * a
+        v = v + obs.dt * a
+        out.append(p)
+    return np.stack(out)
+
+
+@pytest.mark.parametrize("scenario", ["circle", "perpendicular"])
+def test_oracle_equals_the_simulator_over_the_horizon(scenario):
+    env = CrowdEnv()
+    obs = env.reset(seed=3, scenario=scenario, n_humans=7, n_robots=3)
+    for _ in range(3):  # leave the standing start: humans and robots moving
+        obs, _, _ = env.step(np.tile([0.0, 0.5], (3, 1)))
+    # Small accelerations stay inside the bounds, so the simulator applies them unclipped.
+    accelerations = np.stack([np.tile([0.3 * (-1) ** k, 0.2], (3, 1)) for k in range(4)])
+    oracle = OrcaOracle()
+    oracle.observe(obs)
+    m, n = obs.n_robots, obs.n_humans
+    humans = np.arange(m, m + n)
+    mask = np.ones(obs.history.shape[:2], dtype=bool)
+    predicted = oracle.rollout(obs.history, mask, _plan(obs, accelerations), humans)
+    actual = []
+    for a in accelerations:
+        obs, done, info = env.step(a)
+        assert not info["clipped"].any()
+        actual.append(obs.human_positions)
+    np.testing.assert_allclose(predicted, np.stack(actual), rtol=0, atol=1e-9)
+
+
+def test_oracle_returns_the_humans_asked_for_in_their_order():
+    env = CrowdEnv()
+    obs = env.reset(seed=0, scenario="circle", n_humans=5, n_robots=3)
+    oracle = OrcaOracle()
+    oracle.observe(obs)
+    mask = np.ones(obs.history.shape[:2], dtype=bool)
+    everyone = oracle.rollout(obs.history, mask, None, np.arange(3, 8), horizon=4)
+    two = oracle.rollout(obs.history, mask, None, np.array([6, 4]), horizon=4)
+    np.testing.assert_array_equal(two, everyone[:, [3, 1]])
+
+
+def test_oracle_refuses_a_history_it_was_not_told_about():
+    env = CrowdEnv()
+    obs = env.reset(seed=0, scenario="circle", n_humans=5, n_robots=3)
+    oracle = OrcaOracle()
+    mask = np.ones(obs.history.shape[:2], dtype=bool)
+    with pytest.raises(PredictorError, match="observe"):
+        oracle.rollout(obs.history, mask, None, np.arange(3, 8), horizon=2)
+    oracle.observe(obs)
+    later, _, _ = env.step(np.zeros((3, 2)))
+    with pytest.raises(PredictorError, match="observe"):
+        oracle.rollout(later.history, mask, None, np.arange(3, 8), horizon=2)
+    with pytest.raises(PredictorError, match="CasADi"):
+        oracle.to_casadi(5, 3, 4)
+
+
+def test_oracle_controller_tells_the_oracle_before_the_inner_controller_acts():
+    seen = []
+
+    class Inner:
+        name = "inner"
+
+        def reset(self, obs):
+            seen.append(("reset", oracle._obs is obs))
+
+        def act(self, obs):
+            seen.append(("act", oracle._obs is obs))
+            return "out"
+
+    oracle = OrcaOracle()
+    controller = OracleController(Inner(), oracle)
+    obs = CrowdEnv().reset(seed=0, scenario="circle", n_humans=5)
+    controller.reset(obs)
+    assert controller.act(obs) == "out"
+    assert seen == [("reset", True), ("act", True)]
+    assert controller.name == "inner+orca_oracle"

@@ -1,0 +1,135 @@
+"""``crowdmpc train``, ``zoo`` and ``export`` from the command line, on a dataset the test writes itself."""
+
+from __future__ import annotations
+
+import json
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from pipelines.cli import main
+from predictors.registry import available, load_predictor
+from predictors.zoo import checkpoints_dir
+from tests.predictors.samples import write_walk_file
+
+
+@pytest.fixture(autouse=True)
+def _private_dirs(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path_factory.mktemp("zoo")))
+
+
+@pytest.fixture
+def trained(tmp_path):
+    """One epoch of soft-pooling Social-LSTM on the walk scenes, as `crowdmpc train` writes it."""
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    args = [
+        "train",
+        "--model",
+        "social_lstm",
+        "--pooling",
+        "soft",
+        "--train",
+        str(data),
+        "--val",
+        str(data),
+        "--test",
+        str(data),
+        "--epochs",
+        "1",
+        "--batch-size",
+        "2",
+        "--out",
+        str(out),
+        "--name",
+        "walker",
+        "--no-progress",
+    ]
+    assert main(args) == 0
+    return out, args
+
+
+def test_train_writes_checkpoint_pair_logs_and_metrics(trained):
+    out, _ = trained
+    config = json.loads((out / "walker.json").read_text())
+    assert config["class"] == "SocialLSTMPredictor" and config["net"]["pooling"] == "soft"
+    summary = json.loads((out / "walker.metrics.json").read_text())
+    assert set(summary["metrics"]) == {"val", "test"} and summary["metrics"]["test"]["scenes"] == 2
+    assert summary["training_data"]["files"]["train"] == summary["training_data"]["files"]["val"]
+    assert (out / "checkpoints" / "last.ckpt").is_file()
+    assert list((out / "csv").glob("version_*/metrics.csv"))
+    assert list((out / "tensorboard").glob("version_*/events.out.tfevents.*"))
+
+
+def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
+    out, args = trained
+    assert main(args) == 2
+    assert "already holds a training run; pass --resume" in capsys.readouterr().err
+    more = [a if a != "1" else "2" for a in args]  # --epochs 2: one more epoch from last.ckpt
+    assert main([*more, "--resume"]) == 0
+    assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
+
+
+def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, capsys):
+    out, _ = trained
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 0
+    assert "walker" in available()
+    capsys.readouterr()
+    assert main(["zoo", "list"]) == 0
+    listing = capsys.readouterr().out
+    assert "walker" in listing and "SocialLSTMPredictor" in listing
+    assert main(["zoo", "show", "walker"]) == 0
+    assert json.loads(capsys.readouterr().out)["training_data"]["sha256"]
+    assert main(["zoo", "verify"]) == 0
+    assert "1 of 1 entries ok" in capsys.readouterr().out
+
+    casadi_file = tmp_path / "walker.casadi"
+    assert (
+        main(
+            [
+                "export",
+                "walker",
+                "--out",
+                str(casadi_file),
+                "--humans",
+                "2",
+                "--robots",
+                "1",
+                "--horizon",
+                "3",
+            ]
+        )
+        == 0
+    )
+    function = ca.Function.load(str(casadi_file))
+    predictor = load_predictor("walker")
+    history = np.stack([np.array([[0.4 * t, 0.0], [0.4 * t, 0.6], [1.0, 0.3 * t]]) for t in range(8)])
+    mask = np.ones((8, 3), dtype=bool)
+    plan = np.array([[[1.0, 2.4]], [[1.0, 2.7]], [[1.0, 3.0]]])
+    np.testing.assert_allclose(
+        np.asarray(function(predictor.encode(history, mask, np.array([0, 1])), plan.ravel())).reshape(
+            3, 2, 2
+        ),
+        predictor.rollout(history, mask, plan, np.array([0, 1])),
+        rtol=0,
+        atol=1e-6,
+    )
+
+    zoo_dir = checkpoints_dir()
+    data = bytearray((zoo_dir / "walker.pt").read_bytes())
+    data[-10] ^= 0x01
+    (zoo_dir / "walker.pt").write_bytes(bytes(data))
+    assert main(["zoo", "verify"]) == 1
+    assert "walker.pt has sha256" in capsys.readouterr().out
+    assert main(["export", "walker", "--out", str(casadi_file)]) == 2
+    assert "the manifest expects" in capsys.readouterr().err
+
+
+def test_unknown_names_and_bad_options_are_one_line_errors(capsys):
+    assert main(["export", "no_such_model", "--out", "x.casadi"]) == 2
+    assert "unknown predictor 'no_such_model'; choose from" in capsys.readouterr().err
+    assert main(["zoo", "show", "nope"]) == 2
+    assert main(["train", "--model", "vanilla_lstm", "--pooling", "soft", "--train", "a", "--val", "b"]) == 2
+    assert "--pooling does not apply to vanilla_lstm" in capsys.readouterr().err

@@ -1,0 +1,124 @@
+"""McapRecorder: JSON messages round-trip; a topic keeps its type; the file is always finished."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType
+
+from pipelines.errors import PipelineError
+from pipelines.recorder import DEFAULT_COMPRESSION, McapRecorder
+from pipelines.review import MAGIC, read_recording
+from pipelines.schemas import HUMANS, ROBOTS, MessageSchema
+
+ROBOT_MESSAGE = {
+    "time": 0.4,
+    "step": 1,
+    "positions": [[1.0, 2.0], [-0.5, 0.25]],
+    "velocities": [[0.1, 0.0], [0.0, -0.1]],
+    "goals": [[5.0, 5.0], [-5.0, 5.0]],
+    "actions": [[2.0, -2.0], [0.0, 0.5]],
+    "commanded": [[3.0, -2.0], [0.0, 0.5]],
+    "reached": [False, True],
+}
+HUMAN_MESSAGE = {
+    "time": 0.4,
+    "step": 1,
+    "positions": [[0.0, 0.0]],
+    "velocities": [[1.0, 0.0]],
+    "goals": [[4, 0]],
+}
+
+
+@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.LZ4, CompressionType.ZSTD])
+def test_messages_metadata_and_schemas_round_trip(tmp_path, compression):
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path, compression=compression, metadata={"episode": {"seed": "3"}}) as rec:
+        rec.write("/robots", ROBOT_MESSAGE, 400_000_000, schema=ROBOTS)
+        rec.write("/humans", HUMAN_MESSAGE, 400_000_000, schema=HUMANS)
+        rec.write("/robots", {**ROBOT_MESSAGE, "step": 2, "time": 0.8}, 800_000_000, schema=ROBOTS)
+        rec.add_metadata("late", {"note": "written after messages"})
+    got = read_recording(path)
+    assert not got.truncated and got.warning is None
+    assert [m.data for m in got.messages["/robots"]] == [
+        ROBOT_MESSAGE,
+        {**ROBOT_MESSAGE, "step": 2, "time": 0.8},
+    ]
+    assert [m.log_time_ns for m in got.messages["/robots"]] == [400_000_000, 800_000_000]
+    assert got.data("/humans") == [HUMAN_MESSAGE]
+    assert got.metadata == {"episode": {"seed": "3"}, "late": {"note": "written after messages"}}
+    robots = got.channels["/robots"]
+    assert (robots.message_encoding, robots.schema_name, robots.schema_encoding) == (
+        "json",
+        "crowdmpc.Robots",
+        "jsonschema",
+    )
+    assert json.loads(robots.schema_data) == ROBOTS.schema
+
+
+def test_two_topics_of_one_type_share_one_schema_record(tmp_path):
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path) as rec:
+        rec.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+        rec.write("/robots_again", ROBOT_MESSAGE, 0, schema=ROBOTS)
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert len(summary.schemas) == 1 and len(summary.channels) == 2
+
+
+def test_type_change_on_a_topic_is_refused(tmp_path):
+    with McapRecorder(tmp_path / "a.mcap") as rec:
+        rec.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+        with pytest.raises(PipelineError, match="'/robots' carries 'crowdmpc.Robots'.*'crowdmpc.Humans'"):
+            rec.write("/robots", HUMAN_MESSAGE, 1, schema=HUMANS)
+        changed = MessageSchema("crowdmpc.Robots", {**ROBOTS.schema, "required": ["time"]})
+        with pytest.raises(PipelineError, match="schema 'crowdmpc.Robots' changed"):
+            rec.write("/robots", ROBOT_MESSAGE, 1, schema=changed)
+        # an equal schema built anew is the same type
+        rec.write("/robots", ROBOT_MESSAGE, 2, schema=MessageSchema("crowdmpc.Robots", ROBOTS.schema))
+    assert len(read_recording(tmp_path / "a.mcap").data("/robots")) == 2
+
+
+def test_file_is_finished_when_the_block_raises(tmp_path):
+    path = tmp_path / "a.mcap"
+    with pytest.raises(RuntimeError, match="boom"), McapRecorder(path) as rec:
+        rec.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+        raise RuntimeError("boom")
+    assert rec.closed
+    assert path.read_bytes().endswith(MAGIC)
+    assert read_recording(path).data("/robots") == [ROBOT_MESSAGE]
+    rec.close()  # idempotent
+    with pytest.raises(PipelineError, match="already finished"):
+        rec.write("/robots", ROBOT_MESSAGE, 1, schema=ROBOTS)
+
+
+def test_small_chunks_make_several_chunks(tmp_path):
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path, chunk_size=1024) as rec:
+        for k in range(100):
+            rec.write("/robots", {**ROBOT_MESSAGE, "step": k}, k, schema=ROBOTS)
+    with open(path, "rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    assert stats.message_count == 100 and stats.chunk_count > 10
+
+
+def test_bad_input_is_refused_with_a_clear_message(tmp_path):
+    with pytest.raises(PipelineError, match="folder .* does not exist"):
+        McapRecorder(tmp_path / "missing" / "a.mcap")
+    with pytest.raises(PipelineError, match="chunk_size must be a positive"):
+        McapRecorder(tmp_path / "a.mcap", chunk_size=0)
+    with pytest.raises(PipelineError, match="CompressionType"):
+        McapRecorder(tmp_path / "a.mcap", compression="zstd")
+    with McapRecorder(tmp_path / "a.mcap") as rec:
+        with pytest.raises(PipelineError, match="not plain JSON.*Out of range float"):
+            rec.write("/robots", {**ROBOT_MESSAGE, "time": float("nan")}, 0, schema=ROBOTS)
+        with pytest.raises(PipelineError, match="needs str keys and values"):
+            rec.add_metadata("episode", {"seed": 3})
+        with pytest.raises(PipelineError, match="non-negative int of ns"):
+            rec.write("/robots", ROBOT_MESSAGE, 0.4, schema=ROBOTS)
+
+
+def test_default_compression_is_the_best_installed():
+    assert DEFAULT_COMPRESSION is CompressionType.ZSTD  # mcap depends on zstandard and lz4

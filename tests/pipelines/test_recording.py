@@ -1,0 +1,183 @@
+"""McapEpisodeRecorder: every channel reads back with the values the closed loop had; metadata is complete."""
+
+from __future__ import annotations
+
+import json
+from importlib.metadata import version
+
+import numpy as np
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.recording import FORMAT, ROBOT_RGB, McapEpisodeRecorder, episode_filename
+from pipelines.review import check_recording, read_recording
+from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
+
+NS = 1_000_000_000
+
+
+@pytest.fixture(scope="module")
+def episode(tmp_path_factory):
+    return record_episode(tmp_path_factory.mktemp("runs"), record_iterations=True)
+
+
+@pytest.fixture(scope="module")
+def recording(episode):
+    return read_recording(episode.path)
+
+
+def test_scene_colours_are_the_plots_colours():
+    from crowdsim.plotting import ROBOT_COLORS
+
+    for rgb, hex_color in zip(ROBOT_RGB, ROBOT_COLORS, strict=True):
+        assert rgb == pytest.approx([int(hex_color[k : k + 2], 16) / 255 for k in (1, 3, 5)], abs=6e-4)
+
+
+def test_one_file_per_episode_named_by_scenario_and_seed(episode):
+    assert episode.path.name == "circle_seed000007.mcap" == episode_filename("circle", 7)
+
+
+def test_robots_and_humans_round_trip(episode, recording):
+    robots, humans = recording.messages["/robots"], recording.messages["/humans"]
+    states = episode.observations
+    assert len(robots) == len(humans) == len(states) == 6  # 5 steps + the terminal state
+    for k, (r, h, obs) in enumerate(zip(robots, humans, states, strict=True)):
+        assert r.log_time_ns == h.log_time_ns == k * 400_000_000  # simulation time, ns from the start
+        assert r.data["step"] == k and r.data["time"] == pytest.approx(0.4 * k)
+        np.testing.assert_array_equal(r.data["positions"], obs.robot_positions)
+        np.testing.assert_array_equal(r.data["velocities"], obs.robot_velocities)
+        np.testing.assert_array_equal(r.data["goals"], obs.robot_goals)
+        assert r.data["reached"] == obs.robot_reached.tolist()
+        np.testing.assert_array_equal(h.data["positions"], obs.human_positions)
+        np.testing.assert_array_equal(h.data["velocities"], obs.human_velocities)
+        np.testing.assert_array_equal(h.data["goals"], obs.human_goals)
+    for r, out, after in zip(robots[:-1], episode.outputs, states[1:], strict=True):
+        np.testing.assert_array_equal(r.data["commanded"], out.accelerations)
+        np.testing.assert_array_equal(r.data["actions"], after.robot_last_actions)  # applied = clipped
+    assert not np.array_equal(robots[0].data["actions"], robots[0].data["commanded"])  # 3 m/s^2 > a_max
+    assert robots[-1].data["actions"] is None and robots[-1].data["commanded"] is None
+
+
+def test_plan_prediction_and_solver_round_trip(episode, recording):
+    plans, predictions = recording.messages["/mpc/plan"], recording.messages["/mpc/prediction"]
+    solver = recording.data("/mpc/solver")
+    assert len(plans) == len(predictions) == len(solver) == len(episode.outputs) == 5
+    for k, out in enumerate(episode.outputs):
+        assert plans[k].log_time_ns == predictions[k].log_time_ns == k * 400_000_000
+        # plans and predictions are recorded to 1e-6 m (PLAN_DECIMALS): within 5e-7 m of the values
+        np.testing.assert_allclose(plans[k].data["positions"], out.plan, rtol=0, atol=5.1e-7)
+        assert np.shape(plans[k].data["positions"]) == (3, HORIZON, 2)
+        np.testing.assert_allclose(predictions[k].data["positions"], out.prediction, rtol=0, atol=5.1e-7)
+        np.testing.assert_allclose(
+            predictions[k].data["iterations"], np.stack(out.iteration_predictions), rtol=0, atol=5.1e-7
+        )
+        assert solver[k]["solve_time_s"] == out.solve_time_s
+        assert (solver[k]["status"], solver[k]["iterations"], solver[k]["fallback"]) == (
+            out.status,
+            out.iterations,
+            out.fallback,
+        )
+        assert solver[k]["extra"] == {"lp3": k, "gap": 0.25}
+    assert [s["potential"] for s in solver] == [0.5, None, 2.5, 3.5, 4.5]  # NaN is recorded as null
+    assert [s["fallback"] for s in solver] == [None, None, "shifted", None, None]
+
+
+def test_scene_update_draws_agents_goals_plans_and_predictions(episode, recording):
+    scenes = recording.messages["/scene"]
+    assert len(scenes) == 6
+    first = scenes[1].data  # step 1: every entity has content
+    entities = {e["id"]: e for e in first["entities"]}
+    assert list(entities) == ["robots", "humans", "goals", "plans", "predictions"]
+    obs, out = episode.observations[1], episode.outputs[1]
+    assert all(e["frame_id"] == "world" for e in entities.values())
+    assert entities["robots"]["timestamp"] == {"sec": 0, "nsec": 400_000_000}
+    robots = entities["robots"]["spheres"]
+    xyz = [[s["pose"]["position"][c] for c in "xyz"] for s in robots]
+    np.testing.assert_allclose(np.array(xyz)[:, :2], obs.robot_positions, atol=5e-4)  # rounded to 1 mm
+    assert all(p[2] == 0.3 for p in xyz)  # sphere centre at z = radius: standing on the ground
+    assert robots[0]["size"] == {"x": 0.6, "y": 0.6, "z": 0.6}
+    assert len({json.dumps(s["color"]) for s in robots}) == 3  # one colour per robot
+    assert len(entities["humans"]["spheres"]) == 4 and len(entities["goals"]["spheres"]) == 3
+    plans = entities["plans"]["lines"]
+    assert len(plans) == 3 and all(line["type"] == 0 for line in plans)  # LINE_STRIP
+    plan0 = [[p["x"], p["y"]] for p in plans[0]["points"]]
+    np.testing.assert_allclose(plan0, np.vstack([obs.robot_positions[0], out.plan[0]]), atol=5e-4)
+    predictions = entities["predictions"]["lines"]
+    assert len(predictions) == 4 and len(predictions[0]["points"]) == HORIZON + 1
+    last = {e["id"]: e for e in scenes[-1].data["entities"]}  # terminal state: no plan any more
+    assert last["plans"]["lines"] == [] and len(last["robots"]["spheres"]) == 3
+
+
+def test_episode_metrics_at_the_end(episode, recording):
+    (message,) = recording.messages["/episode/metrics"]
+    assert message.log_time_ns == 2 * NS  # the terminal state's time, 5 steps of 0.4 s
+    got = message.data
+    assert (got["seed"], got["scenario"], got["controller"], got["predictor"]) == (
+        7,
+        "circle",
+        "handmade",
+        "constant_velocity",
+    )
+    assert got["metrics"] == episode.result.metrics.as_dict()
+    assert got["n_steps"] == 5
+    assert got["solve"]["median_ms"] == pytest.approx(30.0)  # solve times 10, 20, .., 50 ms
+    assert got["solve"]["max_ms"] == pytest.approx(50.0)
+    assert got["statuses"] == {"Solve_Succeeded": 2, "ok": 3}
+    assert got["fallbacks"] == {"shifted": 1}
+
+
+def test_metadata_present(recording):
+    meta = recording.metadata
+    assert meta["crowdmpc"] == {"version": version("crowdmpc"), "format": FORMAT}
+    assert meta["episode"] == {
+        "seed": "7",
+        "scenario": "circle",
+        "controller": "handmade",
+        "predictor": "constant_velocity",
+        "predictor_sha256": "ab" * 32,
+        "n_robots": "3",
+        "n_humans": "4",
+        "dt": "0.4",
+        "radius": "0.3",
+    }
+    assert recording.config() == {"env": {"dt": 0.4, "radius": 0.3}, "horizon": HORIZON}
+    assert recording.run_meta() == {"argv": ["test"]}
+
+
+def test_every_message_matches_its_schema(recording):
+    checked, errors = check_recording(recording)
+    assert errors == [] and checked == sum(len(m) for m in recording.messages.values()) == 34
+
+
+def test_iterations_only_when_asked_and_no_plan_channels_without_a_plan(tmp_path):
+    plain = read_recording(record_episode(tmp_path / "a", steps=2).path)
+    assert all(p["iterations"] == [] for p in plain.data("/mpc/prediction"))
+    baseline = read_recording(record_episode(tmp_path / "b", steps=2, with_plan=False).path)
+    assert "/mpc/plan" not in baseline.messages and "/mpc/prediction" not in baseline.messages
+    assert len(baseline.data("/mpc/solver")) == 2
+
+
+def test_an_episode_left_without_on_end_is_finished_by_the_next_reset(tmp_path):
+    first = record_episode(tmp_path, seed=1, steps=2, end=False)
+    recorder = McapEpisodeRecorder(tmp_path)
+    obs = first.observations[0]
+    recorder.on_reset(obs, {**first.meta, "seed": 2})
+    recorder.on_step(obs, control_output(obs), first.observations[1])
+    recorder.on_reset(obs, {**first.meta, "seed": 3})  # no on_end for seed 2
+    recorder.close()
+    for path in recorder.paths:
+        rec = read_recording(path)
+        assert not rec.truncated and "/episode/metrics" not in rec.messages
+    assert [p.name for p in recorder.paths] == ["circle_seed000002.mcap", "circle_seed000003.mcap"]
+
+
+def test_misuse_is_reported(tmp_path):
+    recorder = McapEpisodeRecorder(tmp_path)
+    obs = record_episode(tmp_path / "x", steps=1).observations[0]
+    with pytest.raises(PipelineError, match=r"needs \['scenario'\]"):
+        recorder.on_reset(obs, {"seed": 1})
+    with pytest.raises(PipelineError, match="before on_reset"):
+        recorder.on_step(obs, control_output(obs), obs)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(PipelineError, match="is a file"):
+        McapEpisodeRecorder(tmp_path / "file")

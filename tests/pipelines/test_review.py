@@ -1,0 +1,171 @@
+"""crowdmpc review: summaries, truncated files, the schema check, pictures, comparison, folders."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from pipelines.cli import main
+from pipelines.errors import PipelineError
+from pipelines.recorder import McapRecorder
+from pipelines.review import episode_view, read_recording, summarize
+from pipelines.schemas import ROBOTS
+from tests.pipelines.mcap_episode import record_episode
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Two finished 8-step episodes in one folder."""
+    folder = tmp_path_factory.mktemp("runs")
+    return [record_episode(folder, seed=seed, steps=8) for seed in (1, 2)]
+
+
+def test_summary_of_a_finished_run(runs, capsys):
+    assert main(["review", str(runs[0].path)]) == 0
+    out, err = capsys.readouterr()
+    assert err == ""
+    for expected in (
+        "circle (seed 1)",
+        "3 robots, 4 humans",
+        "handmade",
+        "constant_velocity",
+        "ab" * 32,
+        "9 states, 3.2 s simulated",
+        "median 45.0 ms",  # solve times 10..80 ms
+    ):
+        assert expected in out, expected
+    assert [line.split()[1:] for line in out.splitlines() if line.startswith("fallbacks")] == [
+        ["shifted", "1"]
+    ]
+    summary = summarize(read_recording(runs[0].path))
+    assert summary["metrics"] == runs[0].result.metrics.as_dict()
+    assert summary["solver"]["statuses"] == {"Solve_Succeeded": 3, "ok": 5}
+
+
+@pytest.mark.parametrize("cut", [1, 0.5])
+def test_a_truncated_file_reads_up_to_its_last_chunk_with_a_warning(tmp_path, cut, capsys):
+    # A long episode makes several 64 KiB chunks; cutting bytes off the end is a killed run.
+    full = record_episode(tmp_path / "full", steps=75, n_humans=7)
+    n_full = len(full.observations)
+    assert n_full > 20
+    data = full.path.read_bytes()
+    kept = len(data) - 1 if cut == 1 else int(len(data) * cut)
+    cut_path = tmp_path / "cut.mcap"
+    cut_path.write_bytes(data[:kept])
+
+    rec = read_recording(cut_path)
+    assert rec.truncated and "truncated" in rec.warning
+    complete = read_recording(full.path)
+    n_states = len(rec.data("/robots"))
+    if cut == 1:  # only the closing magic is damaged: every message is still there
+        assert rec.messages.keys() == complete.messages.keys()
+        assert n_states == n_full
+    else:
+        assert 0 < n_states < n_full and "/episode/metrics" not in rec.messages
+    # what was read is what was written
+    np.testing.assert_array_equal(
+        episode_view(rec).robot_positions,
+        episode_view(complete).robot_positions[: len(episode_view(rec).times)],
+    )
+
+    assert main(["review", str(cut_path), "--check"]) == 0
+    out, err = capsys.readouterr()
+    assert "warning" in err and "truncated" in err
+    assert "ok" in out.splitlines()[-1]
+    if cut != 1:
+        assert "metrics           missing" in out
+
+
+def test_check_catches_a_bad_message(tmp_path, capsys):
+    path = tmp_path / "bad.mcap"
+    good = {
+        "time": 0.0,
+        "step": 0,
+        "positions": [[0.0, 0.0]],
+        "velocities": [[0.0, 0.0]],
+        "goals": [[1.0, 1.0]],
+        "actions": None,
+        "commanded": None,
+        "reached": [False],
+    }
+    with McapRecorder(path) as rec:  # the recorder does not validate (cheap); --check does
+        rec.write("/robots", good, 0, schema=ROBOTS)
+        rec.write(
+            "/robots", {**good, "step": 1, "positions": [[0.0]], "speed": 2}, 400_000_000, schema=ROBOTS
+        )
+    assert main(["review", str(path), "--check", "--json", str(tmp_path / "r.json")]) == 1
+    out = capsys.readouterr().out
+    assert "2 messages, 2 invalid" in out
+    assert "/robots @ 0.400 s (crowdmpc.Robots): $.positions[0]: 1 items, expected at least 2" in out
+    assert "$: unexpected property 'speed'" in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert len(report["check"][str(path)]["errors"]) == 2
+
+
+def test_recorded_episodes_pass_the_check(runs, capsys):
+    assert main(["review", str(runs[0].path.parent), "--check"]) == 0
+    assert capsys.readouterr().out.count(" ok\n") == 2
+
+
+def test_folder_gives_one_row_per_run_and_the_rates(runs, capsys, tmp_path):
+    assert main(["review", str(runs[0].path.parent), "--json", str(tmp_path / "all.json")]) == 0
+    out = capsys.readouterr().out
+    assert "circle_seed000001.mcap" in out and "circle_seed000002.mcap" in out
+    assert "\n2 runs\n" in out
+    expected_success = sum(r.result.metrics.success for r in runs) * 50.0
+    assert f"success {expected_success:.1f} % " in out
+    assert "over 16 steps; fallback steps 2" in out  # 8 steps each, one "shifted" fallback per run
+    totals = json.loads((tmp_path / "all.json").read_text())["totals"]
+    assert totals["episodes"] == 2 and totals["success_rate"] == expected_success
+    assert totals["solve_time_max_ms"] == pytest.approx(80.0)
+    assert main(["review", str(runs[0].path.parent), "--plot", str(tmp_path / "p.png")]) == 2
+    assert "--plot need one .mcap file" in capsys.readouterr().err
+
+
+def test_plot_animation_and_comparison(runs, tmp_path, capsys):
+    png, gif, overlay = tmp_path / "p.png", tmp_path / "a.gif", tmp_path / "o.png"
+    assert (
+        main(["review", str(runs[0].path), "--plot", str(png), "--times", "0,1.2,2.5", "--animate", str(gif)])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "plans at t = 0, 1.2, 2.4 s" in out  # 2.5 s is no state: the nearest one, 2.4 s, is drawn
+    assert Image.open(png).size[0] > 300
+    with Image.open(gif) as animation:
+        assert animation.n_frames == 9 and animation.info["duration"] == 400  # one frame per 0.4 s step
+    assert main(["review", str(runs[0].path), "--compare", str(runs[1].path), "--plot", str(overlay)]) == 0
+    out = capsys.readouterr().out
+    assert "A: circle_seed000001.mcap" in out and "B: circle_seed000002.mcap" in out and "travel_time" in out
+    assert overlay.stat().st_size > 0
+
+
+def test_unreadable_input_is_a_user_error(tmp_path, capsys):
+    not_mcap = tmp_path / "x.mcap"
+    not_mcap.write_text("hello, not an mcap file")
+    assert main(["review", str(not_mcap)]) == 2
+    assert "is not an MCAP file" in capsys.readouterr().err
+    assert main(["review", str(tmp_path / "missing.mcap")]) == 2
+    assert main(["review", str(tmp_path)]) == 2  # a folder with no valid recordings
+    assert main(["review", str(not_mcap), "--times", "0,4"]) == 2  # --times without --plot
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
+def test_mp4_without_ffmpeg_says_so(runs, tmp_path):
+    with pytest.raises(PipelineError, match="needs ffmpeg"):
+        from pipelines.review import animate_recording
+
+        animate_recording(read_recording(runs[0].path), tmp_path / "a.mp4")
+
+
+def test_folder_with_a_truncated_run(runs, tmp_path, capsys):
+    shutil.copy(runs[0].path, tmp_path / "a.mcap")
+    data = runs[1].path.read_bytes()
+    (tmp_path / "b.mcap").write_bytes(data[: len(data) // 3])
+    assert main(["review", str(tmp_path)]) == 0
+    out, err = capsys.readouterr()
+    assert "2 runs, 1 truncated (no metrics)" in out
+    assert "b.mcap is truncated" in err

@@ -1,0 +1,58 @@
+"""``crowdmpc simulate`` end to end with the baselines."""
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+
+
+def test_simulate_orca_prints_the_table_and_writes_json_and_plot(tmp_path, capsys):
+    out_json, out_png = tmp_path / "run.json", tmp_path / "ep.png"
+    code = main(
+        ["simulate", "--controller", "orca", "--scenario", "circle", "--humans", "5", "--episodes", "2",
+         "--seed", "7", "--json", str(out_json), "--plot", str(out_png), "--no-progress"]
+    )  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    for row in ("success", "travel time", "collision", "contact", "discomfort", "min distance", "solve time",
+                "IBR iterations"):  # fmt: skip
+        assert row in text
+    payload = json.loads(out_json.read_text())
+    assert payload["summary"]["episodes"] == 2
+    assert [e["seed"] for e in payload["episodes"]] == [7, 8]
+    assert payload["run"]["controller"] == "orca" and payload["run"]["predictor"] is None
+    assert out_png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_simulate_records_one_mcap_per_episode(tmp_path, capsys):
+    pytest.importorskip("pipelines.recording")
+    code = main(
+        ["simulate", "--controller", "straight", "--humans", "3", "--episodes", "2", "--record",
+         str(tmp_path / "rec"), "--no-progress"]
+    )  # fmt: skip
+    assert code == 0
+    assert sorted(p.name for p in (tmp_path / "rec").glob("*.mcap")) == [
+        "circle_seed000000.mcap",
+        "circle_seed000001.mcap",
+    ]
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--episodes", "0"], "--episodes must be >= 1, got 0"),
+        (["--robots", "13"], "--robots must be in 1..12, got 13"),
+        (["--humans", "60"], "n_humans must be in [0, 50], got 60"),
+    ],
+)
+def test_bad_options_are_one_line_errors(args, message, capsys):
+    assert main(["simulate", "--controller", "orca", "--no-progress", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_unknown_scenario_is_rejected_by_the_parser():
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "--controller", "orca", "--scenario", "square"])
+    assert exc.value.code == 2

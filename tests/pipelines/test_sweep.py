@@ -1,0 +1,546 @@
+"""Sweeps: the experiments as data, durable resumable records (killed for real), the report's numbers."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipelines.cli import main
+from pipelines.controllers import ControllerSpec
+from pipelines.errors import PipelineError
+from pipelines.experiments import (
+    EXPERIMENTS,
+    PAPER_TABLE_II,
+    PAPER_TABLE_III,
+    PaperFigures,
+    get_experiment,
+    scenario_schedule,
+)
+from pipelines.sweep import (
+    EPISODES_FILE,
+    ERRORS_FILE,
+    EpisodeLog,
+    EpisodeWorker,
+    SweepConfig,
+    is_failure,
+    mcap_path,
+    run_sweep,
+    sweep_lock,
+)
+from pipelines.sweep_report import (
+    CELLS_CSV,
+    markdown_table,
+    mcnemar_exact,
+    summarize,
+    wilson_interval,
+    write_report,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+
+# ----------------------------------------------------------------------------------------------------------
+# Experiments as data
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_schedule_alternates_scenarios_and_counts_seeds_per_scenario():
+    assert scenario_schedule(5, seed=10) == [
+        ("circle", 10),
+        ("perpendicular", 10),
+        ("circle", 11),
+        ("perpendicular", 11),
+        ("circle", 12),
+    ]
+    with pytest.raises(PipelineError, match="at least 1"):
+        scenario_schedule(0)
+
+
+@pytest.mark.parametrize("name", sorted(EXPERIMENTS))
+def test_every_cell_of_an_experiment_runs_the_same_crowds(name):
+    experiment = EXPERIMENTS[name]
+    tasks = experiment.tasks(6, seed=3)
+    cells = experiment.cells()
+    assert len(tasks) == 6 * len(cells) == 6 * len(experiment.methods) * len(experiment.humans)
+    by_cell: dict[str, list[tuple[str, int]]] = {}
+    for task in tasks:
+        by_cell.setdefault(task.cell.key, []).append((task.scenario, task.seed))
+    assert all(episodes == scenario_schedule(6, 3) for episodes in by_cell.values())
+    assert len({t.key for t in tasks}) == len(tasks)  # record keys never collide
+
+
+def test_experiment_cells():
+    table2 = get_experiment("table2")
+    assert table2.method_labels == ("CMPC", "DMPC") and table2.humans == (5, 6, 7, 8, 9)
+    assert [c.spec.controller for c in table2.cells()[:2]] == ["cmpc", "dmpc"]
+    f, nf = get_experiment("table3").cells(humans=(7,))
+    assert (f.spec.flocking, nf.spec.flocking) == (True, False) and f.key != nf.key
+    assert f.key == "cmpc-social_lstm_eth-F-ibr-h7-r3"
+    predictors = get_experiment("predictors")
+    assert predictors.humans == (7,)
+    assert [s.predictor for _, s in predictors.methods] == [
+        "constant_velocity",
+        "vanilla_lstm_eth",
+        "social_lstm_eth",
+        "social_lstm_soft_eth",
+        "social_gan_eth",
+        "social_lstm_synth",
+        "orca_oracle",
+    ]
+    coupling = get_experiment("coupling").cells()
+    assert [c.spec.coupling for c in coupling] == ["ibr", "nlp", "nlp"]
+    assert coupling[2].key == "cmpc-social_lstm_soft_eth-F-nlp-coupled_mode=first_order-h7-r3"
+    cv = table2.with_predictor("constant_velocity")
+    assert {s.predictor for _, s in cv.methods} == {"constant_velocity"}
+    assert cv.cells()[0].key == "cmpc-constant_velocity-F-ibr-h5-r3"
+    with pytest.raises(PipelineError, match="fixes each method's predictor"):
+        predictors.with_predictor("constant_velocity")
+    with pytest.raises(PipelineError, match="unknown experiment 'table4'"):
+        get_experiment("table4")
+
+
+def test_paper_figures_as_printed():
+    assert PAPER_TABLE_II[("CMPC", 7)] == PaperFigures(90.0, 19.1, 1.3, 1.3)
+    assert PAPER_TABLE_II[("DMPC", 9)] == PaperFigures(83.9, 20.3, 1.9, 1.8)
+    assert PAPER_TABLE_III[("NF", 5)] == PaperFigures(96.7, 17.6, 0.2, 1.4)
+    assert PAPER_TABLE_III[("F", 8)].success == 86.6  # Table II prints 86.7 for the same configuration
+    assert len(PAPER_TABLE_II) == len(PAPER_TABLE_III) == 10
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Wilson intervals, checked by hand:
+#   centre = (p + z^2/2n) / (1 + z^2/n),  half = z sqrt(p(1-p)/n + z^2/4n^2) / (1 + z^2/n),  z^2 = 3.841459
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("k", "n", "lo", "hi"),
+    [
+        (0, 10, 0.0, 0.2775),  # centre = half = 0.192073 / 1.384146 = 0.138767
+        (10, 10, 0.7225, 1.0),
+        (5, 10, 0.2366, 0.7634),  # half = 1.959964 * sqrt(0.025 + 0.009604) / 1.384146 = 0.263413
+        (3, 4, 0.3006, 0.9544),  # centre 1.230182 / 1.960365 = 0.627527, half 0.326888
+        (50, 100, 0.4038, 0.5962),
+    ],
+)
+def test_wilson_interval_hand_values(k, n, lo, hi):
+    assert wilson_interval(k, n) == pytest.approx((lo, hi), abs=5e-5)
+
+
+@pytest.mark.parametrize(
+    ("b", "c", "p"),
+    [(0, 0, 1.0), (0, 6, 2 / 64), (1, 9, 2 * 11 / 1024), (5, 5, 1.0)],  # 2 * sum_{k<=min} C(n, k) / 2^n
+)
+def test_mcnemar_exact_hand_values(b, c, p):
+    assert mcnemar_exact(b, c) == pytest.approx(p)
+    assert mcnemar_exact(c, b) == pytest.approx(p)
+
+
+def test_wilson_interval_edges():
+    assert all(math.isnan(x) for x in wilson_interval(0, 0))
+    with pytest.raises(PipelineError):
+        wilson_interval(5, 4)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The record log
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_torn_last_line_is_dropped_and_the_log_goes_on(tmp_path):
+    log = EpisodeLog(tmp_path / EPISODES_FILE)
+    log.append({"key": "a", "x": float("nan")})
+    log.append({"key": "b", "x": np.float64(2.0)})
+    whole = log.path.read_bytes()
+    with open(log.path, "ab") as f:
+        f.write(b'{"key": "c", "x"')  # a kill in the middle of a write
+    assert list(log.load(repair=False)) == ["a", "b"]
+    assert log.path.read_bytes() != whole  # repair=False leaves the file alone
+    records = log.load()
+    assert records == {"a": {"key": "a", "x": None}, "b": {"key": "b", "x": 2.0}}
+    assert log.path.read_bytes() == whole
+    log.append({"key": "c", "x": 3})
+    assert list(log.load()) == ["a", "b", "c"]
+
+
+def test_a_garbled_last_line_counts_as_torn_but_one_in_the_middle_is_refused(tmp_path):
+    path = tmp_path / EPISODES_FILE
+    path.write_bytes(b'{"key": "a"}\n{"key": \x00\x00\n')
+    assert list(EpisodeLog(path).load()) == ["a"]
+    assert path.read_bytes() == b'{"key": "a"}\n'
+    path.write_bytes(b'{"key": "a"}\nnot json\n{"key": "b"}\n')
+    with pytest.raises(PipelineError, match=":2: not a JSON record"):
+        EpisodeLog(path).load()
+    path.write_bytes(b'{"key": "a"}\n{"key": "a"}\n')
+    with pytest.raises(PipelineError, match="a second record for 'a'"):
+        EpisodeLog(path).load()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Running sweeps (in this process: the inline backend, the same worker as the pools)
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _config(out: Path, episodes: int, **kw) -> SweepConfig:
+    kw = {"humans": (5,), "backend": "inline", "progress": False} | kw
+    return SweepConfig(get_experiment("baselines"), out, episodes, **kw)
+
+
+def test_a_rerun_runs_only_what_is_missing_and_extends(tmp_path):
+    first = run_sweep(_config(tmp_path, 2))
+    assert (first.planned, first.already_done, first.ran, first.errors) == (4, 0, 4, [])
+    again = run_sweep(_config(tmp_path, 2))
+    assert (again.planned, again.already_done, again.ran) == (4, 4, 0)
+    more = run_sweep(_config(tmp_path, 3))
+    assert (more.planned, more.already_done, more.ran) == (6, 4, 2)
+    records = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    assert set(records) == {t.key for t in _config(tmp_path, 3).tasks()}
+    record = records["orca-none-F-ibr-h5-r3/perpendicular/0"]
+    assert (record["method"], record["predictor"], record["scenario"], record["seed"]) == (
+        "ORCA",
+        None,
+        "perpendicular",
+        0,
+    )
+    assert record["metrics"]["n_steps"] == record["solver"]["steps"] > 0
+    meta = json.loads((tmp_path / "sweep.json").read_text())
+    assert meta["experiment"] == "baselines" and len(meta["runs"]) == 3
+
+
+def test_a_worker_builds_each_controller_once_per_cell():
+    worker = EpisodeWorker()
+    tasks = get_experiment("baselines").tasks(3, humans=(5,))
+    outcomes = [worker.run(t) for t in tasks]
+    assert all(o.error is None for o in outcomes)
+    assert worker.builds == 2
+
+
+def test_record_failures_keeps_the_mcap_logs_of_failed_episodes(tmp_path):
+    run_sweep(_config(tmp_path, 2, record="failures"))
+    records = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    tasks = {t.key: t for t in _config(tmp_path, 2).tasks()}
+    kept = {key for key in records if mcap_path(tmp_path, tasks[key]).exists()}
+    assert kept == {key for key, r in records.items() if is_failure(r["metrics"])}
+    assert kept  # straight robots crossing 5 humans violate personal space
+    assert all(mcap_path(tmp_path, tasks[k]).read_bytes().startswith(b"\x89MCAP") for k in kept)
+
+
+def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_path, monkeypatch):
+    def broken(spec):
+        raise RuntimeError("no solver here")
+
+    monkeypatch.setattr("pipelines.sweep.build_controller", broken)
+    with pytest.raises(PipelineError, match=r"first 4 episodes all raised \(RuntimeError: no solver here\)"):
+        run_sweep(_config(tmp_path, 5))
+    errors = (tmp_path / ERRORS_FILE).read_text().splitlines()
+    assert len(errors) == 4 and "no solver here" in json.loads(errors[0])["error"]
+    assert EpisodeLog(tmp_path / EPISODES_FILE).load() == {}
+
+
+def test_one_directory_one_sweep_at_a_time_and_one_experiment(tmp_path):
+    with sweep_lock(tmp_path), pytest.raises(PipelineError, match="another sweep is writing"):
+        run_sweep(_config(tmp_path, 1))
+    run_sweep(_config(tmp_path, 1))
+    other = SweepConfig(get_experiment("table2"), tmp_path, 1, backend="inline", progress=False)
+    with pytest.raises(PipelineError, match="holds a sweep of experiment 'baselines'"):
+        run_sweep(other)
+
+
+def test_a_cell_is_not_extended_with_other_weights(tmp_path):
+    experiment = get_experiment("table2").with_predictor("constant_velocity")
+    config = SweepConfig(experiment, tmp_path, 2, humans=(5,), backend="inline", progress=False)
+    task = config.tasks()[0]
+    record = {
+        "key": task.key,
+        "cell": task.cell.key,
+        "predictor": "constant_velocity",
+        "predictor_sha256": "0123",
+    }
+    EpisodeLog(tmp_path / EPISODES_FILE).append(record)
+    with pytest.raises(PipelineError, match="sha256 0123, but the zoo's 'constant_velocity' is now None"):
+        run_sweep(config)
+
+
+@pytest.mark.slow
+def test_the_ray_backend_runs_the_same_sweep(tmp_path):
+    pytest.importorskip("ray")  # the [cluster] extra
+    outcome = run_sweep(_config(tmp_path, 3, backend="ray", workers=2))
+    assert (outcome.backend, outcome.ran, outcome.complete) == ("ray", 6, True)
+    inline = tmp_path / "inline"
+    run_sweep(_config(inline, 3))
+    ray_records = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    inline_records = EpisodeLog(inline / EPISODES_FILE).load()
+    assert {k: r["metrics"] for k, r in ray_records.items()} == {
+        k: r["metrics"] for k, r in inline_records.items()
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Killed for real: a sweep process killed twice by SIGKILL, a torn line, then run to the end
+# ----------------------------------------------------------------------------------------------------------
+
+EPISODES_PER_CELL = 60  # x 2 cells: ~0.05 s each at 9 humans, so a run lasts long enough to be killed
+
+
+def _sweep_command(out: Path) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "pipelines.cli",
+        "sweep",
+        "--experiment",
+        "baselines",
+        "--humans",
+        "9",
+        "--episodes-per-cell",
+        str(EPISODES_PER_CELL),
+        "--workers",
+        "2",
+        "--backend",
+        "process",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
+
+
+def _lines(path: Path) -> int:
+    return path.read_bytes().count(b"\n") if path.exists() else 0
+
+
+def _group_alive(pgid: int) -> bool:
+    """Whether a live (not zombie) process of the group remains; zombies wait for a reaper, not for us."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()  # after "pid (comm)": state, ppid, pgrp, ...
+            if int(fields[2]) == pgid and fields[0] != "Z":
+                return True
+    return False
+
+
+def _start_and_kill(out: Path, at_least: int) -> int:
+    """Start a sweep, SIGKILL its driver once ``at_least`` records exist; the number recorded at the kill."""
+    log = out / EPISODES_FILE
+    proc = subprocess.Popen(
+        _sweep_command(out),
+        cwd=REPO,
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while _lines(log) < at_least:
+            if proc.poll() is not None:
+                pytest.fail(
+                    f"the sweep ended before it could be killed: {proc.stderr.read().decode()[-2000:]}"
+                )
+            assert time.monotonic() < deadline, "the sweep made no progress"
+            time.sleep(0.01)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+        recorded = _lines(log)
+        # The pool workers notice that their driver is gone and exit on their own (no orphans left running).
+        deadline = time.monotonic() + 30
+        while _group_alive(proc.pid):
+            assert time.monotonic() < deadline, "pool workers outlived their killed driver"
+            time.sleep(0.05)
+        return recorded
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.stderr.close()
+
+
+def test_killed_twice_then_rerun_gives_every_episode_once(tmp_path):
+    planned = 2 * EPISODES_PER_CELL
+    first = _start_and_kill(tmp_path, at_least=10)
+    second = _start_and_kill(tmp_path, at_least=first + 20)
+    assert first < second < planned
+    with open(tmp_path / EPISODES_FILE, "ab") as f:
+        f.write(b'{"key": "straight-none-F-ibr-h9-r3/circle/5')  # and a write torn by a third kill
+    done = subprocess.run(_sweep_command(tmp_path), cwd=REPO, capture_output=True, timeout=300)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
+    lines = (tmp_path / EPISODES_FILE).read_bytes().splitlines()
+    keys = [json.loads(line)["key"] for line in lines]
+    assert len(keys) == planned and len(set(keys)) == planned
+    tasks = get_experiment("baselines").tasks(EPISODES_PER_CELL, humans=(9,))
+    assert set(keys) == {t.key for t in tasks}
+    assert f"{planned}/{planned} episodes recorded ({planned - second} this run" in done.stderr.decode()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The report
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _records(experiment, outcomes: dict[tuple[str, int], list[tuple[bool, float, bool, bool]]]):
+    """Synthetic records: (method, humans) -> per episode (success, travel time, collision, discomfort)."""
+    records = []
+    for cell in experiment.cells():
+        for i, (success, time_s, collision, discomfort) in enumerate(
+            outcomes.get((cell.method, cell.n_humans), [])
+        ):
+            records.append(
+                {
+                    "key": f"{cell.key}/{i}",
+                    "cell": cell.key,
+                    "method": cell.method,
+                    "n_humans": cell.n_humans,
+                    "scenario": ("circle", "perpendicular")[i % 2],
+                    "seed": i // 2,
+                    "metrics": {
+                        "success": success,
+                        "travel_time": time_s if success else None,
+                        "collision": collision,
+                        "contact": False,
+                        "discomfort": discomfort,
+                        "min_distance": 1.0,
+                        "n_steps": 50,
+                    },
+                    "solver": {
+                        "steps": 50,
+                        "total_ms": 500.0,
+                        "median_ms": 10.0,
+                        "p95_ms": 20.0,
+                        "max_ms": 30.0,
+                        "mean_iterations": 2.0,
+                        "max_iterations": 3,
+                        "fallback_steps": 1,
+                        "statuses": {"ok": 50},
+                    },
+                    "wall_s": 1.0,
+                }
+            )
+    return records
+
+
+TABLE2_EPISODES = {
+    ("CMPC", 5): [
+        (True, 18.0, False, False),
+        (True, 20.0, True, False),
+        (True, 19.0, False, True),
+        (False, 0, False, False),
+    ],
+    ("DMPC", 5): [
+        (True, 21.0, False, False),
+        (False, 0, False, False),
+        (False, 0, True, True),
+        (False, 0, False, False),
+    ],
+    ("CMPC", 6): [(True, 18.0, False, False)] * 4,
+    ("DMPC", 6): [(True, 18.0, False, False)] * 4,
+}
+
+
+def test_markdown_table_is_laid_out_like_the_paper():
+    table2 = get_experiment("table2")
+    summaries = summarize(table2, table2.cells(), _records(table2, TABLE2_EPISODES))
+    lines = markdown_table(table2, summaries).splitlines()
+    assert lines[0] == "## Table II: centralized (CMPC) vs distributed (DMPC) MPC"
+    table = lines[lines.index("| Metrics \\ Methods | CMPC | DMPC | CMPC | DMPC |") :]
+    assert table[1] == "|---|---|---|---|---|"
+    assert table[2] == "| Numbers of pedestrians | 5 | 5 | 6 | 6 |"
+    # 3/4 -> 75.0 [30.1, 95.4]; 1/4 -> 25.0 [4.6, 69.9]; 4/4 -> 100.0 [51.0, 100.0]: ties are left unmarked.
+    assert table[3] == (
+        "| Success rate (%) | **75.0 [30.1, 95.4]** | 25.0 [4.6, 69.9] "
+        "| 100.0 [51.0, 100.0] | 100.0 [51.0, 100.0] |"
+    )
+    assert table[4] == "| &nbsp;&nbsp;paper | **94.0** | 93.4 | **91.9** | 91.8 |"
+    # Mean of 18, 20, 19 = 19.0; sample sd 1.0 -> 1.96 / sqrt(3) = 1.1. One success: no interval.
+    assert table[5] == "| Average travel time (s) | **19.0 ± 1.1** | 21.0 | 18.0 ± 0.0 | 18.0 ± 0.0 |"
+    assert table[6] == "| &nbsp;&nbsp;paper | **17.9** | 18.1 | **18.6** | 18.7 |"
+    assert table[7].startswith(
+        "| Collision rate (%) | 25.0 [4.6, 69.9] | 25.0 [4.6, 69.9] | 0.0 [0.0, 49.0] |"
+    )
+    assert table[9].startswith("| Discomfort rate (%) |")
+    assert "| Episodes | 4 | 4 | 4 | 4 |" in table
+    # DMPC at 5 failed on crowds 1 and 2 where CMPC succeeded, and won none: 2 * (1/2)^2 = 0.5.
+    assert (
+        "| Success, paired with the group's first method | reference | +0 / −2 (p = 0.5) | reference |"
+        in "\n".join(table)
+    )
+    assert "| Success circle / perpendicular (%) | 100 / 50 | 50 / 0 | 100 / 100 | 100 / 100 |" in table
+
+
+def test_report_files(tmp_path):
+    table2 = get_experiment("table2")
+    report = write_report(tmp_path, table2, table2.cells(), _records(table2, TABLE2_EPISODES))
+    assert {p.name for p in report.files} == {
+        "cells.csv",
+        "episodes.csv",
+        "table.md",
+        "success_vs_humans.png",
+        "travel_time_vs_humans.png",
+    }
+    rows = (tmp_path / CELLS_CSV).read_text().splitlines()
+    header = rows[0].split(",")
+    first = dict(zip(header, rows[1].split(","), strict=True))
+    assert len(rows) == 1 + 4  # cells with records only
+    assert (first["method"], first["n_humans"], first["success_count"], first["paper_success"]) == (
+        "CMPC",
+        "5",
+        "3",
+        "94.0",
+    )
+    assert float(first["success_ci_lo"]) == pytest.approx(30.064, abs=1e-3)
+    assert (tmp_path / "success_vs_humans.png").read_bytes().startswith(b"\x89PNG")
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The command line
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_cli_dry_run_lists_the_cells(tmp_path, capsys):
+    assert (
+        main(
+            [
+                "sweep",
+                "--experiment",
+                "table3",
+                "--episodes-per-cell",
+                "10",
+                "--dry-run",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "10 cells x 10 episodes = 100" in out and "cmpc-social_lstm_eth-NF-ibr-h9-r3" in out
+
+
+def test_cli_user_errors_are_one_line(tmp_path, capsys):
+    args = ["sweep", "--experiment", "baselines", "--out", str(tmp_path)]
+    assert main([*args, "--episodes-per-cell", "0"]) == 2
+    assert "--episodes-per-cell must be at least 1" in capsys.readouterr().err
+    assert main([*args, "--predictor", "constant_velocity"]) == 2
+    assert "fixes each method's predictor" in capsys.readouterr().err
+    assert main(["sweep", "--experiment", "table2", "--predictor", "nope", "--out", str(tmp_path)]) == 2
+    assert "needs predictors ['nope']" in capsys.readouterr().err
+    assert main([*args, "--report-only"]) == 2
+
+
+def test_cli_runs_a_small_sweep_and_reports(tmp_path, capsys):
+    args = ["sweep", "--experiment", "baselines", "--humans", "5,6", "--episodes-per-cell", "2"]
+    assert main([*args, "--backend", "inline", "--no-progress", "--out", str(tmp_path)]) == 0
+    captured = capsys.readouterr()
+    assert "8/8 episodes recorded" in captured.err
+    assert "| Numbers of pedestrians | 5 | 5 | 6 | 6 |" in captured.out
+    assert (tmp_path / "table.md").exists()
+
+
+def test_controller_spec_of_cells_is_validated():
+    with pytest.raises(PipelineError):
+        ControllerSpec("nope")

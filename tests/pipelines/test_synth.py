@@ -1,0 +1,43 @@
+"""Synthetic TrajNet++ scenes from ORCA crowds, read back with trajnetplusplustools."""
+
+import numpy as np
+import pytest
+import trajnetplusplustools as tt
+
+from crowdsim.env import CrowdEnv
+from pipelines.errors import PipelineError
+from pipelines.synth import synthesize
+
+
+def test_synth_writes_trajnet_scenes_matching_the_simulation(tmp_path):
+    out = tmp_path / "orca.ndjson"
+    summary = synthesize(out, episodes=2, n_humans=3, seed=5)
+    assert summary["episodes"] == 2 and summary["pedestrians"] == 6 and summary["scenes"] > 0
+    scenes = list(tt.Reader(str(out), scene_type="paths").scenes())
+    assert len(scenes) == summary["scenes"]
+    for _, paths in scenes:
+        frames = [row.frame for row in paths[0]]
+        assert len(frames) == 21 and np.all(np.diff(frames) == 10)  # 21 steps, 10 frame ids per 0.4 s
+    # Episode 0 is seed 5, pedestrians 0-2; episode 1 is seed 6, pedestrians 3-5 on later frames.
+    start = CrowdEnv().reset(5, "circle", 3, 0).human_positions
+    first = {row.pedestrian: row for _, paths in scenes for row in paths[0] if row.frame == 0}
+    assert first  # scenes starting at frame 0 exist
+    for ped, row in first.items():
+        np.testing.assert_allclose([row.x, row.y], start[ped], atol=0.005)  # written in centimetres
+    primaries = {paths[0][0].pedestrian for _, paths in scenes}
+    assert primaries <= set(range(6)) and primaries & {3, 4, 5}
+    starts = {paths[0][0].pedestrian: paths[0][0].frame for _, paths in scenes}
+    assert min(f for p, f in starts.items() if p >= 3) > max(f for p, f in starts.items() if p < 3)
+
+
+def test_synth_with_robots_never_makes_a_robot_primary(tmp_path):
+    out = tmp_path / "orca_robots.ndjson"
+    summary = synthesize(out, episodes=1, n_humans=4, seed=0, scenario="perpendicular", with_robots=True)
+    assert summary["robots_per_episode"] == 3
+    scenes = list(tt.Reader(str(out), scene_type="paths").scenes())
+    assert scenes and all(paths[0][0].pedestrian >= 3 for _, paths in scenes)  # ids 0-2 are the robots
+
+
+def test_synth_rejects_bad_sizes(tmp_path):
+    with pytest.raises(PipelineError, match="episodes.*0"):
+        synthesize(tmp_path / "x.ndjson", episodes=0, n_humans=3, seed=0)

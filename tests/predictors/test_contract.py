@@ -1,0 +1,169 @@
+"""ONE contract test over every predictor: each registered name, each zoo entry, and an untrained instance
+of every learned model (so the contract holds even before a zoo exists). A new predictor inherits it all.
+
+Checks: shapes and finiteness (with and without a robot plan, robots first as in closed loop and
+interleaved), torch rollout vs the CasADi twin (values <= 1e-6 in float64), the Jacobian of the humans'
+prediction with respect to the robot plan (CasADi vs torch autograd, or central differences for predictors
+without torch), the CasADi function's save/load round trip (the export path), the checkpoint round trip, and
+refusal of a checkpoint whose sha256 differs from the manifest.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+import torch
+
+from predictors.base import Predictor
+from predictors.errors import CheckpointMismatch
+from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor
+from predictors.nets.social_gan import generator_config
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.registry import PREDICTORS, load_predictor
+from predictors.zoo import add_to_zoo, load_checkpoint, load_zoo, save_checkpoint, zoo_names
+
+HORIZON = 4
+TOL = 1e-6
+
+
+def _untrained(kind: str) -> LearnedPredictor:
+    torch.manual_seed(7)
+    if kind == "social_gan":
+        return SocialGANPredictor(SocialLSTM(generator_config(pooling="soft")), name=kind)
+    pooling = {"vanilla_lstm": "none", "social_lstm_grid": "grid", "social_lstm_soft": "soft"}[kind]
+    return SocialLSTMPredictor(SocialLSTM(SocialLSTMConfig(pooling=pooling)), name=kind)
+
+
+UNTRAINED = ["vanilla_lstm", "social_lstm_grid", "social_lstm_soft", "social_gan"]
+CASES = (
+    [("registry", name) for name in sorted(PREDICTORS)]
+    + [("zoo", name) for name in zoo_names()]
+    + [("untrained", kind) for kind in UNTRAINED]
+)
+
+
+@pytest.fixture(params=CASES, ids=[f"{source}:{name}" for source, name in CASES])
+def predictor(request) -> Predictor:
+    source, name = request.param
+    return _untrained(name) if source == "untrained" else load_predictor(name)
+
+
+def crossing_scene(robots_first: bool = True):
+    """8 observed steps of 2 robots and 4 humans walking through each other within ~2 m (pooling range).
+
+    Returns history (L, 6, 2), mask, humans, robots_future (H, 2, 2). With ``robots_first`` the layout is
+    the simulator's (robots 0, 1); otherwise robots sit at indices 1 and 4 and humans come unsorted.
+    """
+    L = 8
+    t = np.arange(L)[:, None] * 0.4
+    start = np.array([[-1.5, 0.3], [1.5, -0.2], [-1.0, -1.0], [0.8, 1.2], [0.0, -1.6], [1.2, 0.6]])
+    velocity = np.array([[0.9, 0.0], [-0.9, 0.1], [0.5, 0.6], [-0.3, -0.8], [0.1, 0.9], [-0.7, -0.2]])
+    history = start[None] + t[..., None] * velocity[None] - 0.4 * (L - 1) * velocity[None] / 2
+    mask = np.ones((L, 6), dtype=bool)
+    robots = np.array([0, 1])
+    steps = np.arange(1, HORIZON + 1)[:, None, None] * 0.4
+    robots_future = history[-1, robots][None] + steps * velocity[robots][None] * 1.1
+    if robots_first:
+        return history, mask, np.array([2, 3, 4, 5]), robots_future
+    order = np.array([2, 0, 3, 5, 1, 4])  # old index at each new position: robots land at 1 and 4
+    return history[:, order], mask[:, order], np.array([5, 0, 2, 3]), robots_future
+
+
+def torch_jacobian(p: LearnedPredictor, history, mask, robots_future, humans) -> np.ndarray:
+    plan = torch.tensor(robots_future, dtype=torch.float64)
+    jac = torch.autograd.functional.jacobian(
+        lambda r: p.rollout_tensor(history, mask, r, humans).reshape(-1), plan
+    )
+    return jac.reshape(-1, plan.numel()).numpy()
+
+
+def finite_difference_jacobian(p: Predictor, history, mask, robots_future, humans, eps=1e-6) -> np.ndarray:
+    columns = []
+    for k in range(robots_future.size):
+        step = np.zeros(robots_future.size)
+        step[k] = eps
+        up = p.rollout(history, mask, robots_future + step.reshape(robots_future.shape), humans)
+        down = p.rollout(history, mask, robots_future - step.reshape(robots_future.shape), humans)
+        columns.append((up - down).reshape(-1) / (2 * eps))
+    return np.stack(columns, axis=1)
+
+
+@pytest.mark.parametrize("robots_first", [True, False], ids=["robots-first", "interleaved"])
+def test_rollout_casadi_values_and_jacobians(predictor, robots_first):
+    history, mask, humans, robots_future = crossing_scene(robots_first)
+    n_humans, n_robots = len(humans), robots_future.shape[1]
+
+    out = predictor.rollout(history, mask, robots_future, humans)
+    assert out.shape == (HORIZON, n_humans, 2)
+    assert np.isfinite(out).all()
+
+    context = predictor.encode(history, mask, humans)
+    assert context.shape == (predictor.context_size(n_humans, n_robots),)
+    assert context.dtype == np.float64 and np.isfinite(context).all()
+    function = predictor.to_casadi(n_humans, n_robots, HORIZON)
+    assert function.name_in() == ["context", "robots_future"] and function.name_out() == ["humans_future"]
+    symbolic = np.asarray(function(context, robots_future.reshape(-1))).reshape(HORIZON, n_humans, 2)
+    np.testing.assert_allclose(symbolic, out, rtol=0, atol=TOL)
+
+    ctx, plan = function.mx_in(0), function.mx_in(1)
+    jac_fn = ca.Function("plan_jacobian", [ctx, plan], [ca.jacobian(function(ctx, plan), plan)])
+    jac_casadi = np.asarray(jac_fn(context, robots_future.reshape(-1)))
+    if isinstance(predictor, LearnedPredictor):
+        jac_reference = torch_jacobian(predictor, history, mask, robots_future, humans)
+    else:
+        jac_reference = finite_difference_jacobian(predictor, history, mask, robots_future, humans)
+    np.testing.assert_allclose(jac_casadi, jac_reference, rtol=0, atol=TOL)
+
+
+def test_rollout_without_robots(predictor):
+    """Dataset evaluation: every agent is a human, no plan; partial tracks allowed."""
+    history, mask, _, _ = crossing_scene()
+    mask = mask.copy()
+    mask[:3, 4] = False  # enters late
+    mask[-2:, 5] = False  # left two steps ago
+    humans = np.arange(6)
+    out = predictor.rollout(history, mask, None, humans, horizon=12)
+    assert out.shape == (12, 6, 2)
+    assert np.isfinite(out).all()
+
+
+def test_casadi_function_save_load_round_trip(predictor, tmp_path):
+    history, mask, humans, robots_future = crossing_scene()
+    function = predictor.to_casadi(len(humans), robots_future.shape[1], HORIZON)
+    path = tmp_path / "predictor.casadi"
+    function.save(str(path))
+    loaded = ca.Function.load(str(path))
+    context = predictor.encode(history, mask, humans)
+    np.testing.assert_array_equal(
+        np.asarray(loaded(context, robots_future.reshape(-1))),
+        np.asarray(function(context, robots_future.reshape(-1))),
+    )
+
+
+def test_checkpoint_round_trip_and_hash_refusal(predictor, tmp_path):
+    if not isinstance(predictor, LearnedPredictor):
+        pytest.skip(f"{predictor.name} has no weights: nothing to save")
+    history, mask, humans, robots_future = crossing_scene()
+    model = "social_gan" if isinstance(predictor, SocialGANPredictor) else predictor.kind
+    weights, _ = save_checkpoint(
+        predictor.net, model=model, name="roundtrip", out_dir=tmp_path / "run", obs_len=predictor.obs_len
+    )
+    reloaded = load_checkpoint(weights)
+    assert type(reloaded) is type(predictor)
+    # Checkpoints store float32 weights; a trained zoo entry is float32 already, an untrained one rounds.
+    np.testing.assert_allclose(
+        reloaded.rollout(history, mask, robots_future, humans),
+        predictor.rollout(history, mask, robots_future, humans),
+        rtol=0,
+        atol=1e-5,
+    )
+
+    zoo = tmp_path / "zoo"
+    add_to_zoo(weights, name="roundtrip", protocol="test", training_data={}, metrics={}, directory=zoo)
+    assert load_zoo("roundtrip", zoo).name == "roundtrip"
+    data = bytearray((zoo / "roundtrip.pt").read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    (zoo / "roundtrip.pt").write_bytes(bytes(data))
+    with pytest.raises(CheckpointMismatch, match="roundtrip.pt has sha256"):
+        load_zoo("roundtrip", zoo)

@@ -1,0 +1,123 @@
+"""The learned predictors' coupling to the robot plan, agent layout, gaps, and the GAN's sampling."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+import torch
+
+from predictors.learned import SocialGANPredictor, SocialLSTMPredictor, casadi_name
+from predictors.nets.social_gan import generator_config
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from tests.predictors.test_contract import HORIZON, crossing_scene
+
+
+def social_lstm(pooling: str) -> SocialLSTMPredictor:
+    torch.manual_seed(3)
+    return SocialLSTMPredictor(SocialLSTM(SocialLSTMConfig(pooling=pooling)), name=f"sl_{pooling}")
+
+
+def plan_jacobian(predictor, history, mask, humans, robots_future) -> np.ndarray:
+    f = predictor.to_casadi(len(humans), robots_future.shape[1], robots_future.shape[0])
+    ctx, plan = f.mx_in(0), f.mx_in(1)
+    jac = ca.Function("plan_jacobian", [ctx, plan], [ca.jacobian(f(ctx, plan), plan)])
+    return np.asarray(jac(predictor.encode(history, mask, humans), robots_future.reshape(-1)))
+
+
+def test_soft_pooling_couples_humans_to_the_robot_plan():
+    history, mask, humans, robots_future = crossing_scene()
+    jac = plan_jacobian(social_lstm("soft"), history, mask, humans, robots_future)
+    n_h = len(humans)
+    # t+1 comes from the observed past alone; from t+2 on every step depends on the plan.
+    assert not jac[: 2 * n_h].any()
+    assert np.abs(jac[2 * n_h :]).max() > 1e-4
+    # the last plan step (t+H) is never an input to the predictions up to t+H
+    assert not jac[:, -2 * robots_future.shape[1] :].any()
+
+
+def test_vanilla_lstm_ignores_the_robot_plan():
+    history, mask, humans, robots_future = crossing_scene()
+    predictor = social_lstm("none")
+    assert not plan_jacobian(predictor, history, mask, humans, robots_future).any()
+    np.testing.assert_array_equal(
+        predictor.rollout(history, mask, robots_future, humans),
+        predictor.rollout(history, mask, robots_future + 1.0, humans),
+    )
+
+
+def test_robot_plan_replaces_the_robots_own_prediction():
+    history, mask, humans, robots_future = crossing_scene()
+    predictor = social_lstm("soft")
+    planned = predictor.rollout(history, mask, robots_future, humans)
+    swerve = robots_future.copy()
+    swerve[:, 0] += [0.0, 0.3]  # robot 0 swerves sideways
+    assert not np.allclose(predictor.rollout(history, mask, swerve, humans), planned)
+    assert np.array_equal(predictor.rollout(history, mask, swerve, humans)[0], planned[0])  # t+1 fixed
+
+
+def test_output_follows_the_order_of_humans():
+    history, mask, humans, robots_future = crossing_scene()
+    predictor = social_lstm("grid")
+    out = predictor.rollout(history, mask, robots_future, humans)
+    flipped = predictor.rollout(history, mask, robots_future, humans[::-1])
+    np.testing.assert_allclose(flipped, out[:, ::-1], rtol=0, atol=1e-12)
+
+
+def test_agent_missing_now_is_extrapolated_and_not_pooled():
+    history, mask, _, _ = crossing_scene()
+    mask = mask.copy()
+    mask[-2:, 5] = False  # agent 5 was last seen two steps ago, walking (-0.7, -0.2) m/s
+    predictor = social_lstm("soft")
+    pos, seen, _ = predictor._prepare(history, mask, np.arange(6), keep_robots=False)
+    np.testing.assert_allclose(pos[-1, 5], history[-3, 5] + 2 * (history[-3, 5] - history[-4, 5]))
+    context = predictor.encode(history, mask, np.arange(6))
+    assert context[-6:].tolist() == [1, 1, 1, 1, 1, 0]  # present flags: agent 5 is not pooled
+    # moving the absent agent's (never seen) current position changes nothing for the others
+    other = history.copy()
+    other[-2:, 5] += 50.0
+    np.testing.assert_array_equal(
+        predictor.rollout(history, mask, None, np.arange(6), horizon=5)[:, :5],
+        predictor.rollout(other, mask, None, np.arange(6), horizon=5)[:, :5],
+    )
+
+
+def test_never_observed_human_is_refused_and_unseen_robot_without_plan_dropped():
+    history, mask, _, _ = crossing_scene()
+    mask = mask.copy()
+    mask[:, 3] = False
+    predictor = social_lstm("grid")
+    with pytest.raises(ValueError, match=r"agents \[3\] are never observed"):
+        predictor.rollout(history, mask, None, np.arange(6), horizon=3)
+    out = predictor.rollout(history, mask, None, np.array([0, 1, 2, 4, 5]), horizon=3)  # 3 is a "robot"
+    assert out.shape == (3, 5, 2)
+
+
+def test_rollout_reuses_the_encoding_of_the_same_past():
+    history, mask, humans, robots_future = crossing_scene()
+    predictor = social_lstm("soft")
+    first = predictor.rollout(history, mask, robots_future, humans)
+    key = predictor._last_encoding[0]
+    second = predictor.rollout(history, mask, robots_future * 1.01, humans)
+    assert predictor._last_encoding[0] is key
+    assert not np.array_equal(first, second)
+
+
+def test_gan_sample_shapes_reproducibility_and_spread():
+    torch.manual_seed(0)
+    net = SocialLSTM(generator_config(pooling="soft"))
+    torch.nn.init.normal_(net.noise.weight)
+    gan = SocialGANPredictor(net, name="gan")
+    history, mask, humans, robots_future = crossing_scene()
+    a = gan.sample(history, mask, robots_future, humans, None, 5, np.random.default_rng(1))
+    b = gan.sample(history, mask, robots_future, humans, None, 5, np.random.default_rng(1))
+    assert a.shape == (5, HORIZON, len(humans), 2)
+    np.testing.assert_array_equal(a, b)
+    assert a.std(axis=0).max() > 1e-3
+    with pytest.raises(ValueError, match="k must be >= 1"):
+        gan.sample(history, mask, robots_future, humans, None, 0, np.random.default_rng(1))
+
+
+def test_casadi_name_is_always_valid():
+    assert casadi_name("social_lstm_eth_h7_r3_H4") == "social_lstm_eth_h7_r3_H4"
+    assert casadi_name("7-up__model") == "predictor_7_up_model"

@@ -1,0 +1,102 @@
+import shutil
+
+import pytest
+
+from predictors.data import locate
+from predictors.data.locate import prepared_dir, protocol_files, resolve_data_dir
+from predictors.data.prepare import prepare_ewap
+from predictors.errors import PredictorError
+from tests.predictors.samples import write_tiny_ewap, write_walk_file
+
+
+@pytest.fixture
+def raw_root(tmp_path):
+    """A raw data directory like the shared one: raw_ewap/ and TrajNet++ training files beside it."""
+    root = tmp_path / "data"
+    write_tiny_ewap(root)
+    vita = root / "trajnetpp_vita" / "train" / "real_data"
+    write_walk_file(vita / "crowds_zara01.ndjson")
+    write_walk_file(vita / "biwi_hotel.ndjson")
+    return root
+
+
+@pytest.fixture
+def prepared(raw_root, tmp_path):
+    out = tmp_path / "prepared"
+    prepare_ewap(raw_root / "raw_ewap", out, categorize_scenes=False, log=lambda msg: None)
+    return out
+
+
+def test_data_dir_from_argument_or_environment(tmp_path, monkeypatch):
+    monkeypatch.delenv("CROWDMPC_DATA", raising=False)
+    with pytest.raises(PredictorError, match="pass --data-dir DIR or set CROWDMPC_DATA"):
+        resolve_data_dir(None)
+    monkeypatch.setenv("CROWDMPC_DATA", str(tmp_path))
+    assert resolve_data_dir(None) == tmp_path
+    assert resolve_data_dir(tmp_path / ".") == tmp_path / "."
+    with pytest.raises(PredictorError, match="does not exist"):
+        resolve_data_dir(tmp_path / "absent")
+
+
+def test_paper_protocol_files(prepared):
+    files = protocol_files(prepared, "paper")
+    assert [p.relative_to(prepared).as_posix() for p in files["train"]] == [
+        "train/biwi_eth.ndjson",
+        "train/biwi_hotel.ndjson",
+    ]
+    assert [p.name for p in files["val"]] == ["biwi_eth.ndjson", "biwi_hotel.ndjson"]
+    assert [p.relative_to(prepared).as_posix() for p in files["test"]] == ["test/biwi_eth.ndjson"]
+    hotel = protocol_files(prepared, "paper", "biwi_hotel")
+    assert [p.relative_to(prepared).as_posix() for p in hotel["test"]] == ["test/biwi_hotel.ndjson"]
+
+
+def test_loo_protocol_finds_the_trajnet_files_beside_the_raw_data(prepared, raw_root):
+    files = protocol_files(prepared, "loo")
+    vita = raw_root / "trajnetpp_vita" / "train" / "real_data"
+    # the whole-sequence TrajNet++ hotel file is left out: hotel comes from our own splits
+    assert files["train"] == [vita / "crowds_zara01.ndjson", prepared / "train" / "biwi_hotel.ndjson"]
+    assert files["val"] == [prepared / "val" / "biwi_hotel.ndjson"]
+    assert files["test"] == [prepared / "test" / "biwi_eth.ndjson"]
+
+
+def test_loo_without_trajnet_files_says_what_is_missing(prepared, raw_root):
+    shutil.rmtree(raw_root / "trajnetpp_vita")
+    with pytest.raises(PredictorError, match="--protocol loo needs the TrajNet"):
+        protocol_files(prepared, "loo")
+
+
+def test_raw_directory_is_prepared_once_into_the_cache(raw_root, monkeypatch, tmp_path):
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    calls = []
+
+    def fast_prepare(*args, **kwargs):
+        calls.append(args)
+        # no categorisation and no self-check: this test is about locating and caching
+        return prepare_ewap(*args, **{**kwargs, "categorize_scenes": False, "references": {}})
+
+    monkeypatch.setattr(locate, "prepare_ewap", fast_prepare)
+    first = prepared_dir(raw_root, log=lambda msg: None, progress=False)
+    assert first.parent == tmp_path / "cache" / "prepared"
+    assert (first / "test" / "biwi_eth.ndjson").is_file()
+    assert prepared_dir(raw_root / "raw_ewap", log=lambda msg: None) == first  # raw_ewap itself works too
+    assert len(calls) == 1
+    files = protocol_files(raw_root, "loo", log=lambda msg: None)
+    assert files["test"] == [first / "test" / "biwi_eth.ndjson"]
+
+
+def test_directory_without_data_is_explained(tmp_path):
+    with pytest.raises(PredictorError, match="neither prepared splits"):
+        prepared_dir(tmp_path)
+
+
+def test_unknown_protocol_and_dataset(prepared):
+    with pytest.raises(PredictorError, match="unknown protocol 'lofo'"):
+        protocol_files(prepared, "lofo")
+    with pytest.raises(PredictorError, match="unknown dataset 'zara'"):
+        protocol_files(prepared, "paper", "zara")
+
+
+def test_incomplete_prepared_directory_is_not_used(prepared):
+    (prepared / "test" / "biwi_eth.ndjson").unlink()
+    with pytest.raises(PredictorError, match="incomplete or unreadable"):
+        protocol_files(prepared, "paper")

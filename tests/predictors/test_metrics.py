@@ -1,0 +1,102 @@
+import numpy as np
+import pytest
+import torch
+from trajnetplusplustools import metrics as tt_metrics
+
+from predictors.metrics import SceneScore, ade, collides, fde, score_scene, summarize, track_rows
+
+
+def test_ade_fde_hand_computed_numpy_and_torch():
+    pred = np.array([[0.0, 0.0], [3.0, 4.0]])
+    truth = np.zeros((2, 2))
+    assert ade(pred, truth) == pytest.approx(2.5)  # distances 0 and 5
+    assert fde(pred, truth) == pytest.approx(5.0)
+    batch = torch.tensor(np.stack([pred, pred + [0.0, 1.0]]))
+    torch.testing.assert_close(
+        ade(batch, torch.zeros_like(batch)), torch.tensor([2.5, (1 + np.hypot(3, 5)) / 2]).double()
+    )
+    torch.testing.assert_close(
+        fde(batch, torch.zeros_like(batch)), torch.tensor([5.0, np.hypot(3, 5)]).double()
+    )
+
+
+def line(start, step, n=12):
+    return np.asarray(start, dtype=float) + np.arange(1, n + 1)[:, None] * np.asarray(step, dtype=float)
+
+
+FRAMES = np.arange(90, 210, 10)
+
+
+def test_collision_hand_computed():
+    primary = line([0.0, 0.0], [0.1, 0.0])  # x = 0.1 .. 1.2 on the x axis
+    assert collides(primary, np.tile([0.6, 0.15], (12, 1)), FRAMES)  # 0.15 m <= 2 x 0.1 m
+    assert not collides(primary, np.tile([0.6, 0.25], (12, 1)), FRAMES)
+    only_one_common = np.full((12, 2), np.nan)
+    only_one_common[5] = [0.6, 0.0]
+    assert not collides(primary, only_one_common, FRAMES)  # no segment to test, as in TrajNet++
+
+
+def test_collides_agrees_with_trajnetplusplustools_on_random_pairs():
+    rng = np.random.default_rng(0)
+    hits = 0
+    for _ in range(400):
+        primary = np.cumsum(rng.normal(0, 0.15, (12, 2)), axis=0)
+        other = primary + rng.normal(0, 0.4, (12, 2)) + rng.normal(0, 0.3, 2)
+        other[rng.random(12) < 0.2] = np.nan
+        expected = tt_metrics.collision(
+            track_rows(primary, FRAMES), track_rows(other, FRAMES, 1), n_predictions=12
+        )
+        assert collides(primary, other, FRAMES) == expected
+        hits += expected
+    assert 50 < hits < 350  # both outcomes were exercised
+
+
+def walking_truth():
+    """Primary walks +x at 0.5 m/step for 21 steps; neighbour 1 walks beside it at y = 0.35;
+    neighbour 2 appears only after the observation."""
+    truth = np.full((21, 3, 2), np.nan)
+    x = 0.5 * np.arange(21)
+    truth[:, 0] = np.stack([x, np.zeros(21)], axis=1)
+    truth[:, 1] = np.stack([x, np.full(21, 0.35)], axis=1)
+    truth[12:, 2] = [[20.0, 20.0]] * 9
+    return truth
+
+
+def test_scene_scores_hand_computed():
+    truth = walking_truth()
+    frames = np.arange(0, 210, 10)
+    prediction = np.stack([truth[9:, 0] + [0.0, 0.3], truth[9:, 1] + [0.0, 5.0]], axis=1)  # (12, 2, 2)
+    score = score_scene(prediction, [0, 1], truth, frames, obs_len=9)
+    assert score.ade == pytest.approx(0.3) and score.fde == pytest.approx(0.3)
+    assert score.col_ii  # 0.05 m from neighbour 1's true path
+    assert score.col_i is False  # its predicted path is 5 m away
+    assert (
+        score_scene(prediction[:, :1], [0], truth, frames, obs_len=9).col_i is None
+    )  # neighbour unpredicted
+
+
+def test_top_k_takes_the_best_sample():
+    truth = walking_truth()
+    frames = np.arange(0, 210, 10)
+    prediction = truth[9:, :2]
+    samples = np.stack([prediction + [1.0, 0.0], prediction + [0.0, 0.5]])
+    score = score_scene(prediction, [0, 1], truth, frames, obs_len=9, samples=samples)
+    assert score.topk_ade == pytest.approx(0.5) and score.topk_fde == pytest.approx(0.5)
+
+
+def test_summarize_averages_scenes_and_gives_percentages():
+    scores = [
+        SceneScore(1.0, 2.0, True, True),
+        SceneScore(2.0, 3.0, False, False),
+        SceneScore(3.0, 4.0, None, False),
+    ]
+    summary = summarize(scores)
+    assert (
+        summary["scenes"] == 3
+        and summary["ade"] == pytest.approx(2.0)
+        and summary["fde"] == pytest.approx(3.0)
+    )
+    assert summary["col_i"] == pytest.approx(50.0) and summary["col_i_scenes"] == 2
+    assert summary["col_ii"] == pytest.approx(100 / 3)
+    assert "topk_ade" not in summary
+    assert summarize([]) == {"scenes": 0}

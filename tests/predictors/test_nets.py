@@ -1,0 +1,134 @@
+"""The torch networks: shapes, masking, who influences whom, heads and losses with hand-computed numbers."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from predictors.errors import PredictorError
+from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
+from predictors.nets.social_gan import Discriminator, generator_config
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig, gaussian_head
+
+
+def walking_batch(batch: int = 2, agents: int = 3, steps: int = 21) -> tuple[torch.Tensor, torch.Tensor]:
+    """Agents walking in parallel 0.6 m apart (inside each other's pooling grid), 0.4 m per step."""
+    t = torch.arange(steps, dtype=torch.float32)[:, None]
+    positions = torch.stack(
+        [torch.cat([0.4 * t, torch.full_like(t, 0.6 * a)], dim=1) for a in range(agents)], 1
+    )
+    return positions[None].repeat(batch, 1, 1, 1), torch.ones(batch, steps, agents, dtype=torch.bool)
+
+
+@pytest.mark.parametrize("pooling", ["none", "grid", "soft"])
+@pytest.mark.parametrize("teacher_forcing", [True, False])
+def test_forward_shapes(pooling, teacher_forcing):
+    net = SocialLSTM(SocialLSTMConfig(pooling=pooling))
+    positions, mask = walking_batch()
+    outputs, predicted = net(positions, mask, 9, 12, teacher_forcing=teacher_forcing)
+    assert outputs.shape == (2, 12, 3, 5)
+    assert predicted.shape == (2, 12, 3, 2)
+    assert torch.isfinite(predicted).all()
+
+
+def test_gaussian_head_bounds():
+    params = gaussian_head(torch.tensor([[0.3, -0.2, -100.0, 100.0, 100.0]]))
+    assert params[0, :2].tolist() == pytest.approx([0.3, -0.2])
+    assert params[0, 2].item() == pytest.approx(0.01)  # 0.01 + 0.2 * sigmoid(-100)
+    assert params[0, 3].item() == pytest.approx(0.21)
+    assert params[0, 4].item() == pytest.approx(0.7)
+
+
+def primary_prediction(net, positions, mask):
+    with torch.no_grad():
+        return net.eval()(positions, mask, 9, 12, teacher_forcing=False)[1][:, :, 0]
+
+
+def test_neighbours_influence_only_through_pooling():
+    torch.manual_seed(0)
+    positions, mask = walking_batch(batch=1)
+    moved = positions.clone()
+    moved[:, :, 1, 1] += 0.3  # the neighbour walks 0.3 m further out
+    vanilla = SocialLSTM(SocialLSTMConfig(pooling="none"))
+    assert torch.equal(primary_prediction(vanilla, positions, mask), primary_prediction(vanilla, moved, mask))
+    social = SocialLSTM(SocialLSTMConfig(pooling="soft"))
+    assert not torch.allclose(
+        primary_prediction(social, positions, mask), primary_prediction(social, moved, mask)
+    )
+
+
+def test_absent_and_distant_agents_do_not_influence_the_primary():
+    torch.manual_seed(0)
+    net = SocialLSTM(SocialLSTMConfig(pooling="soft"))
+    positions, mask = walking_batch(batch=1)
+    alone = primary_prediction(net, positions[:, :, :1], mask[:, :, :1])
+    absent_mask = mask.clone()
+    absent_mask[:, :, 1:] = False
+    assert torch.allclose(primary_prediction(net, positions, absent_mask), alone, atol=1e-6)
+    far = positions.clone()
+    far[:, :, 1:, 1] += 10.0  # 10 m away: outside every grid
+    assert torch.allclose(primary_prediction(net, far, mask), alone, atol=1e-6)
+
+
+def test_in_eval_mode_a_neighbours_past_reaches_the_primary_gradient():
+    torch.manual_seed(0)
+    net = SocialLSTM(SocialLSTMConfig(pooling="soft"))
+    positions, mask = walking_batch(batch=1)
+    positions.requires_grad_(True)
+    net.eval()
+    _, predicted = net(positions, mask, 9, 12, teacher_forcing=False)
+    (grad,) = torch.autograd.grad(predicted[:, -1, 0].sum(), positions)
+    assert grad[:, :9, 1].abs().sum() > 0  # the neighbour's past reaches the primary
+
+
+def test_generator_noise_changes_predictions_and_zero_noise_is_deterministic():
+    torch.manual_seed(0)
+    net = SocialLSTM(generator_config(pooling="soft"))
+    torch.nn.init.normal_(net.noise.weight)
+    positions, mask = walking_batch(batch=1)
+    net.eval()
+    zero = torch.zeros(1, 3, net.config.noise_dim)
+    with torch.no_grad():
+        a = net(positions, mask, 9, 12, teacher_forcing=False, noise=zero)[1]
+        b = net(positions, mask, 9, 12, teacher_forcing=False, noise=None)[1]
+        c = net(positions, mask, 9, 12, teacher_forcing=False, noise=torch.randn(1, 3, net.config.noise_dim))[
+            1
+        ]
+    assert torch.equal(a, b)
+    assert not torch.allclose(a, c)
+    assert a.shape == (1, 12, 3, 2)
+
+
+def test_discriminator_scores_each_trajectory():
+    logits = Discriminator()(torch.randn(5, 21, 2))
+    assert logits.shape == (5,)
+
+
+def test_gaussian_nll_hand_computed():
+    # target at the mean, sigma 0.1 and 0.2, rho 0: NLL = log(2 pi * 0.1 * 0.2)
+    params = torch.tensor([[0.0, 0.0, 0.1, 0.2, 0.0]])
+    nll = gaussian_nll(params, torch.zeros(1, 2), torch.ones(1))
+    assert nll.item() == pytest.approx(math.log(2 * math.pi * 0.02), abs=1e-6)
+    # one sigma off along x adds 1/2
+    nll = gaussian_nll(params, torch.tensor([[0.1, 0.0]]), torch.ones(1))
+    assert nll.item() == pytest.approx(math.log(2 * math.pi * 0.02) + 0.5, abs=1e-6)
+
+
+def test_l2_and_variety_loss_hand_computed():
+    weight = torch.ones(1, 2)
+    assert l2_loss(torch.tensor([[[3.0, 4.0]]]), torch.zeros(1, 1, 2), torch.ones(1, 1)).item() == 5.0
+    target = torch.zeros(1, 2, 2)
+    samples = torch.stack([torch.full((1, 2, 2), 3.0), torch.tensor([[[0.3, 0.4], [0.0, 0.0]]])])
+    # sample 0: mean distance 3 sqrt 2; sample 1: (0.5 + 0) / 2 = 0.25 -> the best counts
+    assert variety_loss(samples, target, weight).item() == pytest.approx(0.25)
+
+
+def test_config_validation_names_the_bad_value():
+    with pytest.raises(PredictorError, match="pooling 'max' is not one of"):
+        SocialLSTMConfig(pooling="max")
+    with pytest.raises(PredictorError, match="embedding_dim must be > 2"):
+        SocialLSTMConfig(embedding_dim=2)
+    with pytest.raises(PredictorError, match=r"unknown Social-LSTM config keys \['hidden'\]"):
+        SocialLSTMConfig.from_dict({"hidden": 3})

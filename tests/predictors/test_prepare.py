@@ -1,0 +1,188 @@
+import json
+
+import numpy as np
+import pytest
+
+from predictors.data.prepare import (
+    Reference,
+    SceneSpec,
+    build_scenes,
+    compare_with_reference,
+    infer_frame_step,
+    prepare_ewap,
+    read_obsmat,
+    split_frames,
+    write_ndjson,
+)
+from predictors.data.trajnet_io import read_scenes
+from predictors.errors import DatasetFormatError
+from tests.predictors.samples import write_tiny_ewap
+
+
+def walkers(n_steps=25, peds=(1, 2), step=0.5, spacing=1.0, frame_step=10):
+    """Pedestrians walking +x side by side (``spacing`` m apart in y), one row per frame."""
+    rows = [
+        (k * frame_step, ped, step * k, spacing * i) for k in range(n_steps) for i, ped in enumerate(peds)
+    ]
+    return np.asarray(rows, dtype=float)
+
+
+def keys(scenes):
+    return [(s.primary, s.start_frame, s.end_frame) for s in scenes]
+
+
+def test_chunks_of_21_rows_every_2_steps_per_pedestrian():
+    scenes = build_scenes(walkers(), frame_step=10, categorize_scenes=False)
+    # 25 rows -> windows starting at rows 0, 2, 4 (frames 0, 20, 40), for each pedestrian in order
+    assert keys(scenes) == [(1, 0, 200), (1, 20, 220), (1, 40, 240), (2, 0, 200), (2, 20, 220), (2, 40, 240)]
+    assert [s.id for s in scenes] == list(range(6))
+    assert all(s.tag == 0 and s.fps == 2.5 for s in scenes)
+
+
+def test_scene_ids_start_where_asked_and_pedestrians_keep_first_appearance_order():
+    tracks = walkers(peds=(7, 3))
+    scenes = build_scenes(tracks, frame_step=10, start_scene_id=100, categorize_scenes=False)
+    assert [s.primary for s in scenes] == [7, 7, 7, 3, 3, 3]
+    assert scenes[0].id == 100
+
+
+def test_window_with_a_gap_in_the_primary_is_dropped():
+    tracks = walkers(peds=(1, 2, 3))
+    tracks = tracks[~((tracks[:, 0] == 100) & (tracks[:, 1] == 3))]  # pedestrian 3 unseen at frame 100
+    # pedestrian 3: 24 rows, every 21-row window spans the 20-frame gap; 1 and 2 keep all three windows
+    assert [p for p, _, _ in keys(build_scenes(tracks, frame_step=10, categorize_scenes=False))] == [
+        1
+    ] * 3 + [2] * 3
+
+
+def test_too_little_activity_drops_the_window():
+    tracks = walkers()
+    tracks = tracks[~((tracks[:, 0] == 100) & (tracks[:, 1] == 2))]
+    # every window of pedestrian 1 contains frame 100: 2 x 21 - 1 = 41 rows < 42
+    assert build_scenes(tracks, frame_step=10, categorize_scenes=False) == []
+
+
+def test_pedestrians_in_different_10m_cells_are_not_close():
+    assert build_scenes(walkers(spacing=10.0), frame_step=10, categorize_scenes=False) == []
+    assert len(build_scenes(walkers(spacing=3.0), frame_step=10, categorize_scenes=False)) == 6
+
+
+def test_a_perfectly_still_primary_is_dropped_but_a_slow_one_is_kept():
+    still = walkers(peds=(1,))
+    still[:, 2] = 4.0
+    slow = walkers(peds=(2,), step=0.01)
+    scenes = build_scenes(np.concatenate([still, slow]), frame_step=10, categorize_scenes=False)
+    assert [s.primary for s in scenes] == [2, 2, 2]
+
+
+def test_frame_step_other_than_the_data_drops_everything():
+    assert build_scenes(walkers(frame_step=6), frame_step=10, categorize_scenes=False) == []
+    assert len(build_scenes(walkers(frame_step=6), frame_step=6, categorize_scenes=False)) == 6
+
+
+def test_categorisation_tags_and_acceptance():
+    walking = walkers(peds=(1, 2))
+    slow = walkers(peds=(3,), step=0.02)  # moves 0.4 m in 21 steps: static (type I)
+    slow[:, 3] = 0.5
+    tracks = np.concatenate([walking, slow])
+    # the legacy global generator (which pykalman samples from) must be left as it was
+    before = np.random.get_state()[1].copy()  # noqa: NPY002
+    scenes = build_scenes(tracks, frame_step=10, acceptance=(1.0, 1.0, 1.0, 1.0))
+    after = np.random.get_state()[1]  # noqa: NPY002
+    np.testing.assert_array_equal(after, before)
+    tags = {(s.primary, s.start_frame): s.tag for s in scenes}
+    assert tags[(1, 0)][0] in (2, 3)  # straight walk beside a neighbour: linear, or interacting (group)
+    assert tags[(3, 0)] == (1, ())
+    dropped = build_scenes(tracks, frame_step=10, acceptance=(0.0, 1.0, 1.0, 1.0))
+    assert 3 not in {s.primary for s in dropped} and len(dropped) == 6
+    assert build_scenes(tracks, frame_step=10) == build_scenes(tracks, frame_step=10)  # deterministic
+
+
+def test_write_ndjson_rounds_to_centimetres_and_keeps_rows_at_primary_frames(tmp_path):
+    tracks = walkers()
+    tracks[0, 2] = 0.123456
+    extra = np.asarray([[5.0, 9, 1.0, 1.0], [400.0, 9, 1.0, 1.0]])  # off the step grid / after every scene
+    tracks = np.concatenate([tracks, extra])
+    scenes = [SceneSpec(0, 1, 0, 200, 2.5, (2, ())), SceneSpec(1, 2, 40, 240)]
+    path = tmp_path / "out.ndjson"
+    write_ndjson(path, scenes, tracks)
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert lines[0] == {"scene": {"id": 0, "p": 1, "s": 0, "e": 200, "fps": 2.5, "tag": [2, []]}}
+    assert lines[1]["scene"]["tag"] == 0
+    frames = [line["track"]["f"] for line in lines[2:]]
+    assert frames == sorted(frames) and set(frames) == set(range(0, 241, 10))
+    assert lines[2]["track"] == {"f": 0, "p": 1, "x": 0.12, "y": 0.0}
+    read = read_scenes(path, require_length=21)
+    assert [s.primary for s in read] == [1, 2]
+
+
+def test_write_ndjson_refuses_a_scene_without_its_primary(tmp_path):
+    with pytest.raises(ValueError, match="primary 5 has no row"):
+        write_ndjson(tmp_path / "x.ndjson", [SceneSpec(0, 5, 0, 200)], walkers())
+
+
+def test_split_frames_is_temporal_70_10_20():
+    parts = split_frames(np.arange(0, 100, 10))
+    assert parts["train"].tolist() == [0, 10, 20, 30, 40, 50, 60]
+    assert parts["val"].tolist() == [70]
+    assert parts["test"].tolist() == [80, 90]
+
+
+def test_infer_frame_step():
+    assert infer_frame_step(np.array([0, 6, 12, 18, 30, 36])) == 6
+
+
+def test_read_obsmat_picks_columns_and_shifts_frames(tmp_path):
+    path = tmp_path / "obsmat.txt"
+    path.write_bytes(b"  1.0 3.0 1.5 0.0 -2.5 0.1 0.0 0.2\r\n 11.0 3.0 1.6 0.0 -2.4 0.1 0.0 0.2\r\n")
+    np.testing.assert_array_equal(read_obsmat(path), [[0, 3, 1.5, -2.5], [10, 3, 1.6, -2.4]])
+
+
+@pytest.mark.parametrize(
+    ("content", "line", "reason"),
+    [
+        (b"1 2 3 4 5 6 7\n", 1, "expected 8 numeric columns, found 7"),
+        (b"1 2 3 4 5 6 7 8\n1 2 x 4 5 6 7 8\n", 2, "non-numeric"),
+        (b"1.5 2 3 4 5 6 7 8\n", 1, "must be integers"),
+        (b"1 2 3 4 5 6 7 8\n\n1 2 3 4 5 6 7 8\n", 3, "repeats line 1"),
+        (b"1 2 nan 4 5 6 7 8\n", 1, "finite"),
+    ],
+)
+def test_read_obsmat_rejects_malformed_lines(tmp_path, content, line, reason):
+    path = tmp_path / "obsmat.txt"
+    path.write_bytes(content)
+    with pytest.raises(DatasetFormatError, match=reason) as info:
+        read_obsmat(path)
+    assert info.value.line == line
+
+
+def test_prepare_ewap_writes_splits_without_crossing_boundaries(tmp_path):
+    raw = write_tiny_ewap(tmp_path)
+    out = tmp_path / "prepared"
+    manifest = prepare_ewap(raw, out, categorize_scenes=False, log=lambda msg: None)
+    for name, seq in (("biwi_eth", "seq_eth"), ("biwi_hotel", "seq_hotel")):
+        parts = split_frames(read_obsmat(raw / seq / "obsmat.txt")[:, 0])
+        for split in ("train", "val", "test"):
+            info = manifest["files"][f"{split}/{name}.ndjson"]
+            scenes = read_scenes(out / split / f"{name}.ndjson", require_length=21)
+            assert info["scenes"] == len(scenes) > 0
+            low, high = parts[split][0], parts[split][-1]
+            assert all(low <= s.start and s.end <= high for s in scenes)
+        ids = [
+            s.id for split in ("train", "val", "test") for s in read_scenes(out / split / f"{name}.ndjson")
+        ]
+        assert ids == list(range(len(ids)))  # ids run on across the splits of a sequence
+    again = prepare_ewap(raw, tmp_path / "again", categorize_scenes=False, log=lambda msg: None)
+    assert {k: v["sha256"] for k, v in again["files"].items()} == {
+        k: v["sha256"] for k, v in manifest["files"].items()
+    }
+
+
+def test_hotel_reproduces_every_official_scene(shared_data, tmp_path):
+    tracks = read_obsmat(shared_data / "raw_ewap/seq_hotel/obsmat.txt")
+    official = shared_data / "trajnetpp_vita/train/real_data/biwi_hotel.ndjson"
+    check = compare_with_reference(
+        tracks, Reference(official, "official TrajNet++", compare_tags=False), frame_step=10, workdir=tmp_path
+    )
+    assert (check.reproduced, check.reference_scenes) == (229, 229)
+    assert check.ours_moving_not_in_reference == 0  # the rest are static scenes TrajNet++ dropped at random

@@ -1,0 +1,122 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from predictors.data.windows import (
+    TrajnetSceneDataset,
+    collate_scenes,
+    load_file_arrays,
+    normalise,
+    rotation_matrix,
+)
+from predictors.errors import DatasetFormatError, PredictorError
+from tests.predictors.samples import walk_scene_records, write_lines, write_walk_file
+
+
+def test_normalise_centres_on_the_primary_and_rotates():
+    xy = np.full((3, 2, 2), np.nan)
+    xy[:, 0] = [[0.0, 0.0], [1.0, 2.0], [2.0, 2.0]]
+    xy[1, 1] = [1.0, 3.0]  # the neighbour is seen only at step 1, 1 m "above" the primary
+    sample = normalise(xy, obs_len=2, angle=math.pi / 2)
+    np.testing.assert_allclose(sample.origin, [1.0, 2.0])
+    # a quarter turn counter-clockwise: +x -> +y, +y -> -x
+    np.testing.assert_allclose(sample.positions[:, 0], [[2.0, -1.0], [0.0, 0.0], [0.0, 1.0]], atol=1e-6)
+    np.testing.assert_allclose(sample.positions[1, 1], [-1.0, 0.0], atol=1e-6)
+    assert sample.mask.tolist() == [[True, False], [True, True], [True, False]]
+    assert (sample.positions[~sample.mask] == 0).all()
+
+
+def test_normalise_needs_the_primary_at_the_last_observed_step():
+    xy = np.zeros((3, 1, 2))
+    xy[1] = np.nan
+    with pytest.raises(PredictorError, match="last observed step"):
+        normalise(xy, obs_len=2, angle=None)
+
+
+def test_dataset_items_and_batches(tmp_path):
+    dataset = TrajnetSceneDataset([write_walk_file(tmp_path / "walk.ndjson")])
+    assert len(dataset) == 2
+    item = dataset[0]
+    assert item.positions.shape == (21, 3, 2) and item.positions.dtype == np.float32
+    np.testing.assert_allclose(item.origin, [4.0, 0.0])  # primary at step 8: 8 x 0.5 m
+    np.testing.assert_allclose(item.positions[8, 0], [0.0, 0.0])
+    np.testing.assert_allclose(item.positions[20, 0], [6.0, 0.0])
+    assert item.mask[:, 2].tolist() == [True] * 3 + [False] * 18
+    batch = collate_scenes([dataset[0], dataset[1]])
+    assert batch.positions.shape == (2, 21, 3, 2) and batch.mask.shape == (2, 21, 3)
+    assert batch.observed.shape == (2, 9, 3, 2) and batch.future.shape == (2, 12, 3, 2)
+    assert len(batch) == 2
+    # scene 1's primary is pedestrian 2; its agents are 2, 1, 3 in order of appearance
+    np.testing.assert_allclose(batch.positions[1, 8, 1].numpy(), [0.0, -1.0])
+    world = batch.to_world(batch.positions)
+    np.testing.assert_allclose(world[0, 20, 0].numpy(), [10.0, 0.0], atol=1e-5)
+
+
+def test_collate_pads_agents_with_zeros_and_false(tmp_path):
+    records = walk_scene_records()
+    lonely = [r for r in records if "scene" in r or r["track"]["p"] == 1]
+    dataset = TrajnetSceneDataset(
+        [write_lines(tmp_path / "lonely.ndjson", lonely), write_walk_file(tmp_path / "w.ndjson")]
+    )
+    batch = collate_scenes([dataset[0], dataset[1]])
+    assert batch.positions.shape == (2, 21, 3, 2)
+    assert not batch.mask[0, :, 1:].any() and (batch.positions[0, :, 1:] == 0).all()
+
+
+def test_augmentation_is_seeded_and_keeps_distances(tmp_path):
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    a = TrajnetSceneDataset([path], augment=True, seed=3)
+    b = TrajnetSceneDataset([path], augment=True, seed=3)
+    c = TrajnetSceneDataset([path], augment=True, seed=4)
+    draws_a = [a[0].rotation for _ in range(3)]
+    draws_b = [b[0].rotation for _ in range(3)]
+    for x, y in zip(draws_a, draws_b, strict=True):
+        np.testing.assert_allclose(x, y)
+    assert not np.allclose(draws_a[0], draws_a[1])  # a new angle on every draw
+    assert not np.allclose(draws_a[0], c[0].rotation)
+    item = a[0]
+    np.testing.assert_allclose(item.rotation @ item.rotation.T, np.eye(2), atol=1e-6)
+    gap = np.linalg.norm(item.positions[:, 0] - item.positions[:, 1], axis=-1)
+    np.testing.assert_allclose(gap, 1.0, atol=1e-5)  # the two walkers stay 1 m apart
+    np.testing.assert_allclose(rotation_matrix(0.0), np.eye(2))
+
+
+def test_obs_and_pred_lengths_take_the_end_of_the_scene(tmp_path):
+    dataset = TrajnetSceneDataset([write_walk_file(tmp_path / "walk.ndjson")], obs_len=8, pred_len=12)
+    item = dataset[0]
+    assert item.positions.shape[0] == 20
+    # the prediction is always the scene's last 12 steps, so scene step 8 stays the last observed one
+    np.testing.assert_allclose(item.origin, [4.0, 0.0])
+    with pytest.raises(PredictorError, match="obs_len"):
+        TrajnetSceneDataset([tmp_path / "walk.ndjson"], obs_len=10, pred_len=12)
+
+
+def test_file_arrays_are_cached_in_memory_and_on_disk(tmp_path, monkeypatch):
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("CROWDMPC_CACHE", str(cache))
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    arrays = load_file_arrays(path)
+    assert arrays.offsets.tolist() == [0, 3, 6] and arrays.xy.shape == (21, 6, 2)
+    assert load_file_arrays(path) is arrays
+    stored = list((cache / "scenes").glob("*.npz"))
+    assert len(stored) == 1
+    from predictors.data import windows
+
+    windows._MEMORY.clear()
+    again = load_file_arrays(path)
+    np.testing.assert_array_equal(again.xy, arrays.xy)
+
+
+def test_dataset_rejects_short_scenes(tmp_path):
+    records = walk_scene_records()
+    records[0]["scene"]["e"] = 190
+    with pytest.raises(DatasetFormatError, match="has 20 frames, need 21"):
+        TrajnetSceneDataset([write_lines(tmp_path / "short.ndjson", records[:-3])])
+
+
+def test_batch_to_device_returns_a_batch(tmp_path):
+    dataset = TrajnetSceneDataset([write_walk_file(tmp_path / "walk.ndjson")])
+    batch = collate_scenes([dataset[0]]).to(torch.device("cpu"))
+    assert batch.positions.device.type == "cpu" and batch.obs_len == 9
