@@ -65,7 +65,10 @@ def closed_loop(spec: ControllerSpec, n_humans: int, episodes: int, floor: bool 
             iterations.append(out.iterations)
             solves.append(out.extra.get("solves", 0))
             obs, done, _ = env.step(out.accelerations)
-    row = _stats(times) | {"iterations_mean": float(np.mean(iterations)), "solves_mean": float(np.mean(solves))}
+    row = _stats(times) | {
+        "iterations_mean": float(np.mean(iterations)),
+        "solves_mean": float(np.mean(solves)),
+    }
     if floor:
         nlp = controller.solver(3, n_humans).nlp
         bare = []
@@ -78,12 +81,16 @@ def closed_loop(spec: ControllerSpec, n_humans: int, episodes: int, floor: bool 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--humans", type=int, nargs="+", default=[5, 7, 9])
     parser.add_argument("--episodes", type=int, default=3, help="circle episodes per row (seeds 0..)")
     parser.add_argument("--predictor", default="constant_velocity")
     parser.add_argument("--dmpc-parallel", action="store_true", help="DMPC serial vs thread pool (7 humans)")
-    parser.add_argument("--coupled", action="store_true", help="CMPC with coupling='nlp' (exact, first_order)")
+    parser.add_argument(
+        "--coupled", action="store_true", help="CMPC with coupling='nlp' (exact, first_order)"
+    )
     parser.add_argument("--no-ibr", action="store_true", help="skip the CMPC/DMPC/floor rows")
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args(argv)
@@ -95,7 +102,12 @@ def main(argv: list[str] | None = None) -> int:
             cmpc = closed_loop(ControllerSpec("cmpc", args.predictor), n, args.episodes, floor=True)
             rows.append((f"cmpc      {n} humans", cmpc))
             rows.append((f"floor     {n} humans", cmpc["floor"]))
-            rows.append((f"dmpc      {n} humans", closed_loop(ControllerSpec("dmpc", args.predictor), n, args.episodes)))
+            rows.append(
+                (
+                    f"dmpc      {n} humans",
+                    closed_loop(ControllerSpec("dmpc", args.predictor), n, args.episodes),
+                )
+            )
         if args.dmpc_parallel and n == 7:
             for mode in ("serial", "threads"):
                 spec = ControllerSpec("dmpc", args.predictor, mpc_overrides=(("dmpc_parallel", mode),))

@@ -1,21 +1,25 @@
 """Every speed figure of the project in one run: a table, then the same numbers as JSON.
 
-    python benchmarks/run_all.py                 # everything (a few minutes on 2 cores)
-    python benchmarks/run_all.py --quick         # fewer steps and sizes (about a minute)
-    python benchmarks/run_all.py --json out.json --sections simulator,control
+    nice -n 10 .venv/bin/python benchmarks/run_all.py            # everything (several minutes on 2 cores)
+    nice -n 10 .venv/bin/python benchmarks/run_all.py --quick    # fewer sizes, shorter runs
+    nice -n 10 .venv/bin/python benchmarks/run_all.py --json out.json --sections simulator,control
 
 Sections
   simulator   one CrowdEnv.step (ORCA for every human + the robots' integration), humans 5..50, robots 3..12
-  control     one control step (ControlOutput.solve_time_s: prediction + every solve) per controller, and for
-              CMPC per predictor (every one the registry has, plus the ORCA oracle) and per coupling
-  scaling     CMPC and DMPC control step against the number of humans (5..50) and of robots (3..12)
+              (benchmarks/orca_step.py's ``measure``)
+  control     one control step (ControlOutput.solve_time_s: prediction + every solve) per controller, CMPC's
+              floor (the joint NLP solved once with the prediction fixed), and CMPC per predictor (every one
+              the registry has, plus the ORCA oracle) and per coupling (benchmarks/control_step.py's
+              ``closed_loop`` for CMPC/DMPC, whole circle-crossing episodes)
+  scaling     CMPC and DMPC control step against the number of humans (5..50, control_step.py) and of robots
+              (3..12, here: control_step.py has 3 robots)
   dmpc        DMPC's local solves in a thread pool vs one after the other (mpc/dmpc.py): the speed-up
   episodes    episodes per minute of one process per controller, and of a real sweep with K workers, with
               the projected time of the paper's full Table II (10 cells x 1000 episodes)
 
-Control steps are timed in closed loop (the controller acts, the simulator steps), over the first ``--steps``
-steps of episodes of both scenarios, so the crowd is in the robots' way as it is in a sweep. Medians and 95th
-percentiles in milliseconds. The machine is shared: figures vary with the load, which is printed.
+Rows measured here rather than by control_step.py (the baselines, the oracle, robots != 3) time the first
+``--steps`` control steps of episodes of both scenarios. Medians and 95th percentiles in milliseconds. The
+machine is shared: figures vary with the load, which is printed.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes")
 SCENARIOS = ("circle", "perpendicular")
+ORACLE_PREDICTOR = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
 TABLE2_EPISODES = 10 * 1000  # the paper: 5 crowd sizes x 2 methods, 500 + 500 episodes per cell
 
 
@@ -47,7 +52,7 @@ def _stats(samples_s: Sequence[float]) -> dict[str, float]:
         "median_ms": float(np.median(ms)),
         "p95_ms": float(np.percentile(ms, 95)),
         "mean_ms": float(ms.mean()),
-        "n": int(ms.size),
+        "steps": int(ms.size),
     }
 
 
@@ -64,13 +69,22 @@ def simulator_step(n_humans: int, n_robots: int, episodes: int) -> dict[str, flo
     return orca_step.measure(n_humans, n_robots, episodes, "circle", repeats=2)
 
 
-def control_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int = 2) -> dict[str, Any]:
-    """The controller's own step time in closed loop (first ``steps`` steps of ``episodes`` episodes)."""
+def mpc_step(spec: Any, n_humans: int, episodes: int, floor: bool = False) -> dict[str, Any]:
+    """CMPC/DMPC with a registry predictor and 3 robots: benchmarks/control_step.py's closed_loop (whole
+    circle-crossing episodes; with ``floor`` also the bare joint-NLP solve of the same steps)."""
+    import control_step
+
+    return control_step.closed_loop(spec, n_humans, episodes, floor=floor) | {"method": "control_step.py"}
+
+
+def any_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int = 2) -> dict[str, Any]:
+    """Any controller (the baselines, the ORCA oracle, any number of robots), which control_step.py does not
+    cover: the step time over the first ``steps`` steps of ``episodes`` episodes, alternating scenarios."""
     from crowdsim.env import CrowdEnv
     from pipelines.sweep import build_controller
 
     controller = build_controller(spec)
-    env, times, iterations, fallbacks = CrowdEnv(), [], [], 0
+    env, times, iterations, solves = CrowdEnv(), [], [], []
     for k in range(episodes):
         obs = env.reset(k // 2, SCENARIOS[k % 2], n_humans, n_robots)
         controller.reset(obs)
@@ -78,11 +92,15 @@ def control_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: 
             out = controller.act(obs)
             times.append(out.solve_time_s)
             iterations.append(out.iterations)
-            fallbacks += out.fallback is not None
+            solves.append(out.extra.get("solves", 0))
             obs, done, _ = env.step(out.accelerations)
             if done:
                 break
-    return _stats(times) | {"iterations_mean": float(np.mean(iterations)), "fallback_steps": fallbacks}
+    return _stats(times) | {
+        "iterations_mean": float(np.mean(iterations)),
+        "solves_mean": float(np.mean(solves)),
+        "method": f"run_all.py, first {steps} steps",
+    }
 
 
 def episodes_per_minute(spec: Any, n_humans: int, episodes: int) -> dict[str, float]:
@@ -140,7 +158,6 @@ def sweep_rate(predictor: str, n_humans: int, episodes_per_cell: int, workers: i
 
 
 def _predictors() -> list[str]:
-    from pipelines.experiments import ORACLE_PREDICTOR
     from predictors.registry import available
 
     return [*available(), ORACLE_PREDICTOR]
@@ -196,24 +213,28 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
     if "control" in sections:
         print("control step at 7 humans, 3 robots", file=sys.stderr)
-        specs = {
-            "straight": ControllerSpec("straight"),
-            "orca": ControllerSpec("orca"),
-            "cmpc": ControllerSpec("cmpc", cv),
-            "dmpc": ControllerSpec("dmpc", cv),
-        }
+        episodes = 1 if quick else 2
+        control: dict[str, Any] = {}
+        for name in ("straight", "orca"):
+            control[name] = _timed(name, lambda n=name: any_step(ControllerSpec(n), 7, 3, steps), errors)
+        cmpc = _timed("cmpc + floor", lambda: mpc_step(ControllerSpec("cmpc", cv), 7, episodes, True), errors)
+        control["cmpc"] = cmpc
+        control["floor (joint NLP, fixed prediction)"] = cmpc["floor"] if cmpc else None
+        control["dmpc"] = _timed("dmpc", lambda: mpc_step(ControllerSpec("dmpc", cv), 7, episodes), errors)
         for name in _predictors():
-            if name != cv:
-                specs[f"cmpc/{name}"] = ControllerSpec("cmpc", name)
+            if name == cv:
+                continue
+            spec = ControllerSpec("cmpc", name)
+            if name == ORACLE_PREDICTOR:  # not a registry predictor: control_step.py cannot build it
+                control[f"cmpc/{name}"] = _timed(name, lambda s=spec: any_step(s, 7, 3, steps), errors)
+            else:
+                control[f"cmpc/{name}"] = _timed(name, lambda s=spec: mpc_step(s, 7, episodes), errors)
         coupled = "social_lstm_soft_eth" if "social_lstm_soft_eth" in _predictors() else cv
-        specs[f"cmpc/{coupled}/nlp-exact"] = ControllerSpec("cmpc", coupled, coupling="nlp")
-        specs[f"cmpc/{coupled}/nlp-first-order"] = ControllerSpec(
-            "cmpc", coupled, coupling="nlp", mpc_overrides=(("coupled_mode", "first_order"),)
-        )
-        report["control_step"] = {
-            label: _timed(label, lambda s=spec: control_step(s, 7, 3, steps), errors)
-            for label, spec in specs.items()
-        }
+        for mode in ("exact", "first_order"):
+            spec = ControllerSpec("cmpc", coupled, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
+            label = f"cmpc/{coupled}/nlp-{mode}"
+            control[label] = _timed(label, lambda s=spec: mpc_step(s, 7, episodes), errors)
+        report["control_step"] = control
 
     if "scaling" in sections:
         print("scaling (constant velocity)", file=sys.stderr)
@@ -222,25 +243,24 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             spec = ControllerSpec(controller, cv)
             for n in humans_scale:
                 label = f"{controller} {n} humans, 3 robots"
-                scale[f"{controller}_h{n}_r3"] = _timed(
-                    label, lambda s=spec, n=n: control_step(s, n, 3, steps, 1), errors
-                )
+                scale[f"{controller}_h{n}_r3"] = _timed(label, lambda s=spec, n=n: mpc_step(s, n, 1), errors)
             for m in robots_scale:
                 label = f"{controller} 7 humans, {m} robots"
                 scale[f"{controller}_h7_r{m}"] = _timed(
-                    label, lambda s=spec, m=m: control_step(s, 7, m, steps, 1), errors
+                    label, lambda s=spec, m=m: any_step(s, 7, m, steps, 2), errors
                 )
         report["scaling"] = scale
 
     if "dmpc" in sections:
-        print("DMPC: local solves in threads vs serial", file=sys.stderr)
+        # The same measurement for every robot count (control_step.py's --dmpc-parallel has 3 robots only).
+        print("DMPC: local solves in threads vs serial, 7 humans", file=sys.stderr)
         speedup: dict[str, Any] = {}
         for m in robots_scale:
             row = {}
             for mode in ("serial", "threads"):
                 spec = ControllerSpec("dmpc", cv, mpc_overrides=(("dmpc_parallel", mode),))
                 row[mode] = _timed(
-                    f"{m} robots, {mode}", lambda s=spec, m=m: control_step(s, 7, m, steps, 1), errors
+                    f"{m} robots, {mode}", lambda s=spec, m=m: any_step(s, 7, m, steps, 2), errors
                 )
             if row["serial"] and row["threads"]:
                 row["speedup_median"] = row["serial"]["median_ms"] / row["threads"]["median_ms"]
@@ -257,6 +277,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 f"{name}, 1 process", lambda s=spec: episodes_per_minute(s, 7, n_episodes), errors
             )
         report["episodes_per_minute"] = {"one_process": single}
+        if single["cmpc"] and single["dmpc"]:
+            # Half of Table II is CMPC and half DMPC; K workers on K free cores run K episodes at once.
+            minutes = (
+                TABLE2_EPISODES
+                / 2
+                * (1 / single["cmpc"]["episodes_per_minute"] + 1 / single["dmpc"]["episodes_per_minute"])
+            )
+            report["episodes_per_minute"]["projected_table2_hours_from_one_process"] = (
+                minutes / args.workers / 60
+            )
         per_cell = args.sweep_episodes or (2 if quick else 6)
         report["episodes_per_minute"]["sweep"] = _timed(
             f"table2 sweep, 7 humans, {args.workers} workers",
@@ -312,7 +342,14 @@ def table(report: dict[str, Any]) -> str:
                 f"({sweep['episodes_per_minute']:.1f} with {sweep['startup_s']:.1f} s start-up) |"
             )
             lines.append(
-                f"| projected full Table II (10 x 1000 episodes) | {sweep['projected_table2_hours']:.2f} h |"
+                f"| projected full Table II (10 x 1000 episodes) from the sweep | "
+                f"{sweep['projected_table2_hours']:.2f} h |"
+            )
+        projected = episodes.get("projected_table2_hours_from_one_process")
+        if projected is not None:
+            lines.append(
+                f"| projected full Table II from the one-process rates, {report['settings']['workers']} "
+                f"workers | {projected:.2f} h |"
             )
     if report["errors"]:
         lines += ["", "not measured: " + "; ".join(f"{k}: {v}" for k, v in report["errors"].items())]

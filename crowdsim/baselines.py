@@ -1,7 +1,7 @@
 """Two robot controllers that need no prediction or optimisation, so the simulator is useful on its own.
 
-Both implement ``pipelines.controllers.Controller`` structurally (``name``, ``reset``, ``act``); crowdsim
-imports nothing from the project, so ``ControlOutput`` is imported lazily at the call.
+Both implement ``pipelines.controllers.Controller`` structurally (``name``, ``reset``, ``act``) and return
+``crowdsim.control.ControlOutput``.
 
 * ``straight``: track a velocity pointing at the goal, ignoring humans and the other robots. Its speed is
   ``v_max`` unless braking must begin: the largest next speed ``v'`` from which a constant deceleration
@@ -20,10 +20,11 @@ Both turn a desired velocity into the acceleration ``(v_desired - v) / tau`` cli
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from crowdsim.control import ControlOutput
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
 
 if TYPE_CHECKING:
@@ -32,9 +33,7 @@ if TYPE_CHECKING:
 DEFAULT_PARAMS = OrcaParams()  # CrowdNav's RVO2 parameters
 
 
-def _output(accelerations: np.ndarray, started: float) -> Any:
-    from pipelines.controllers import ControlOutput
-
+def _output(accelerations: np.ndarray, started: float) -> ControlOutput:
     return ControlOutput(accelerations=accelerations, solve_time_s=time.perf_counter() - started)
 
 
@@ -61,7 +60,7 @@ class StraightController:
         v_next = b * (np.sqrt(0.25 * tau**2 + 2.0 * slack / b) - 0.5 * tau)
         return unit * np.minimum(self.v_max, v_next)[:, None]
 
-    def act(self, obs: Observation) -> Any:
+    def act(self, obs: Observation) -> ControlOutput:
         started = time.perf_counter()
         a = (self.desired_velocities(obs) - obs.robot_velocities) / obs.dt
         return _output(np.clip(a, -self.a_max, self.a_max), started)
@@ -105,7 +104,7 @@ class OrcaController:
         )
         return v
 
-    def act(self, obs: Observation) -> Any:
+    def act(self, obs: Observation) -> ControlOutput:
         started = time.perf_counter()
         a = (self.desired_velocities(obs) - obs.robot_velocities) / obs.dt
         return _output(np.clip(a, -self.a_max, self.a_max), started)

@@ -1,9 +1,9 @@
 """Algorithm 1, IBR-based centralized MPC: alternate the humans' prediction and the joint solve (Eq. 17).
 
-At iteration ``j`` the predictor is rolled out given the robots' planned positions of iteration ``j-1`` (the
-recursive, coupled prediction of Eq. 1), then the joint NLP is solved with those predictions, warm-started from
-iteration ``j-1``. The loop stops when ``|F^(j) - F^(j-1)| <= xi`` (``F^(0) = inf``, so at least two
-predictions are made) or at ``j_max``.
+At iteration ``j`` the predictor is rolled out given the robots' planned positions of iteration ``j-1``
+(the recursive, coupled prediction of Eq. 1), then the joint NLP is solved with those predictions,
+warm-started from iteration ``j-1``. The loop stops when ``|F^(j) - F^(j-1)| <= xi`` (``F^(0) = inf``, so
+at least two predictions are made) or at ``j_max``.
 
 A prediction identical (bit for bit) to the previous one means the NLP to solve is the one just solved: its
 solution is ``u^(j-1)`` and ``F^(j) = F^(j-1)``, so the solve is skipped and the loop ends converged. This is

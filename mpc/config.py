@@ -29,7 +29,8 @@ from typing import Any
 from mpc.errors import MPCConfigError
 
 PARALLEL_MODES = ("serial", "threads")  # how DMPC runs the robots' local solves (see mpc/dmpc.py)
-COUPLED_MODES = ("exact", "first_order")  # the predictor inside the NLP, or its linearisation (mpc/coupled.py)
+# coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
+COUPLED_MODES = ("auto", "exact", "first_order")
 ON_GOAL_MODES = ("brake", "track")  # what a robot that has reached its goal does (MPCConfig.on_goal)
 
 
@@ -59,7 +60,7 @@ class MPCConfig:
     # is then the goal itself, weighted omega_goal / (||s - goal|| + delta) = 1e4 on the goal), so it holds
     # its place unless a human or another robot needs the room; flocking with it is off. "brake": its
     # controls are pinned to braking: it stays exactly where it stopped and can neither dodge a human nor let
-    # a teammate through (the three goals are 1 m apart, under the ~1.03 m the Eq. 12 penalty keeps free).
+    # a teammate through to a goal closer than ~1.03 m, the distance the Eq. 12 penalty keeps free.
     on_goal: str = "track"
     # --- solver -------------------------------------------------------------------------------------------
     # IPOPT minimises cost_scale * F. IPOPT's own gradient-based scaling already tames the 1e7 penalty
@@ -81,7 +82,10 @@ class MPCConfig:
     restart_penalty: float = 1.0
     jit: bool = False  # compile the NLP's functions with the system C compiler (~1.3x faster, ~15 s a build)
     dmpc_parallel: str = "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
-    coupled_mode: str = "exact"  # coupling="nlp": "exact" predictor in the NLP, or its "first_order" model
+    # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
+    # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
+    # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
+    coupled_mode: str = "auto"
 
     def __post_init__(self):
         for name in ("horizon", "j_max", "ipopt_max_iter"):

@@ -44,12 +44,14 @@ def smax(z: Symbolic, mu: float) -> Symbolic:
     return ca.fmax(z, 0) + ca.log1p(ca.exp(-mu * ca.fabs(z))) / mu
 
 
-def reference_trajectory(position: Symbolic, goal: Symbolic, horizon: int, dt: float, v_max: float) -> Symbolic:
+def reference_trajectory(
+    position: Symbolic, goal: Symbolic, horizon: int, dt: float, v_max: float
+) -> Symbolic:
     """Eq. 8: ``(2, H)`` points on the straight line from the current position to the goal.
 
-    Each step advances ``min(dt v_max, remaining distance)`` along the fixed direction from ``s_t`` to the goal,
-    so the reference moves at ``v_max`` and stops on the goal. A function of parameters only (no derivative
-    with respect to the controls is ever taken through it).
+    Each step advances ``min(dt v_max, remaining distance)`` along the fixed direction from ``s_t`` to the
+    goal, so the reference moves at ``v_max`` and stops on the goal. A function of parameters only (no
+    derivative with respect to the controls is ever taken through it).
     """
     offset = goal - position
     direction = offset / ca.fmax(ca.norm_2(offset), _TINY)
@@ -80,9 +82,10 @@ def jerk_cost(accels: Symbolic, last_action: Symbolic) -> Symbolic:
 def human_collision_cost(
     positions: Symbolic, velocities: Symbolic, humans: Symbolic, n_humans: int, cfg: MPCConfig
 ) -> Symbolic:
-    """Eqs. 11-12 summed over humans: ``sum_j sum_k smax(d_min^2 + rho ||v_{k+1}||^2 - ||s_{k+1} - s_j,k+1||^2)``.
+    """Eq. 11 through the penalty of Section IV, summed over humans and steps. Unweighted.
 
-    Unweighted; ``humans`` is ``(2, H * N_h)`` (module docstring).
+    ``sum_j sum_k smax(d_min^2 + rho ||v_{k+1}||^2 - ||s_{k+1} - s_j,k+1||^2)``; ``humans`` is
+    ``(2, H * N_h)`` (module docstring).
     """
     total = positions[0, 0] * 0  # the type of the inputs (SX, MX or DM), also with no humans
     for k in range(positions.shape[1]):
@@ -94,7 +97,7 @@ def human_collision_cost(
 
 
 def robot_collision_cost(positions_i: Symbolic, positions_j: Symbolic, cfg: MPCConfig) -> Symbolic:
-    """Eq. 12 with the penalty of Section IV: ``sum_k smax(d_min^2 - ||s_i,k+1 - s_j,k+1||^2)``. Unweighted."""
+    """Eq. 12 through the penalty of Section IV: ``sum_k smax(d_min^2 - ||s_i,k+1 - s_j,k+1||^2)``."""
     g = cfg.d_min**2 - ca.sum1((positions_i - positions_j) ** 2)
     return ca.sum2(smax(g, cfg.mu))
 
@@ -137,7 +140,7 @@ def individual_cost(track: Track, humans: Symbolic, n_humans: int, cfg: MPCConfi
 def shared_cost(positions_i: Symbolic, positions_j: Symbolic, w_floc: Symbolic, cfg: MPCConfig) -> Symbolic:
     """Eq. 14: ``J_ij = w_coll J_coll_ij + w_floc_ij J_floc_ij``; symmetric in ``i, j`` (Lemma 1).
 
-    ``w_floc`` is per pair (a parameter in the NLPs) so that a robot parked on its goal stops pulling the others
+    ``w_floc`` is per pair (a parameter in the NLPs) so that a robot on its goal stops pulling the others
     while the weights stay symmetric.
     """
     return cfg.w_coll * robot_collision_cost(positions_i, positions_j, cfg) + w_floc * flocking_cost(
@@ -146,7 +149,7 @@ def shared_cost(positions_i: Symbolic, positions_j: Symbolic, w_floc: Symbolic, 
 
 
 def pair_index(i: int, j: int, n_robots: int) -> int:
-    """Index of the unordered pair ``{i, j}`` in the row-major list of pairs ``(0,1), (0,2), .., (M-2, M-1)``."""
+    """Index of the unordered pair ``{i, j}`` in the row-major list ``(0,1), (0,2), .., (M-2, M-1)``."""
     a, b = (i, j) if i < j else (j, i)
     return a * n_robots - a * (a + 1) // 2 + (b - a - 1)
 

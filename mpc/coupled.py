@@ -9,7 +9,7 @@ horizon is symbolic. The NLP is built once per problem size, like every other.
 
 Two models of the humans (``MPCConfig.coupled_mode``):
 
-* ``"exact"``: ``f`` itself inside the NLP, IPOPT with exact derivatives of the network. One solve per step.
+* ``"exact"``: ``f`` itself inside the NLP. One solve per step.
 * ``"first_order"``: ``f`` linearised around the current plan ``r0``: ``s_H ~ f(r0) + J (r - r0)``, with the
   value and the Jacobian ``J = df/dr`` evaluated numerically once per iteration and passed as parameters; the
   NLP then costs about as much as one with fixed predictions. Re-linearise at the new plan and solve again
@@ -17,35 +17,64 @@ Two models of the humans (``MPCConfig.coupled_mode``):
   iteration (``u`` optimal for the model linearised at ``u``) is a stationary point of the exact coupled
   problem, since the linear model matches ``f`` and its first derivative there; IBR's fixed points (the
   predictions held constant) ignore that derivative.
+* ``"auto"`` (default): exact when ``f`` expands into at most ``EXPAND_MAX_NODES`` scalar nodes (constant
+  velocity, small models), first-order otherwise.
 
-With the constant-velocity predictor ``J = 0`` and both modes reduce to one solve with fixed predictions.
+Measured (an untrained Social-LSTM of the default size, soft pooling, 7 humans, 3 robots, H = 4, closed loop
+on the shared 2-core machine under load): exact with ``f`` expanded to SX: 97 s to build, every solve past
+the 1 s limit; exact as an MX call node with IPOPT's exact Hessian: ~80 ms an IPOPT iteration, solves past
+1 s; exact as MX with L-BFGS: median ~280 ms, some solves at max_iter; first-order: median ~90 ms, p95
+~120-145 ms (one Jacobian of f costs ~15 ms, f itself ~1 ms); Algorithm 1 with the same predictor: ~65 ms.
+
+With the constant-velocity predictor ``J = 0``: both modes reduce to one solve with fixed predictions (the
+first-order loop sees the same linear model twice and stops, as Algorithm 1 does on a repeated prediction).
 """
 
 from __future__ import annotations
 
 import math
 import time
+from typing import Final
 
 import casadi as ca
 import numpy as np
 
-from mpc.cmpc import IBRResult, finite_prediction
+from mpc.cmpc import IBRResult, better, finite_prediction
 from mpc.config import MPCConfig
-from mpc.dynamics import rollout_numpy
+from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start
 from mpc.nlp import JointNLP, StepData
 
+# A predictor whose expanded scalar graph is larger than this stays an MX call node inside the NLP.
+EXPAND_MAX_NODES: Final[int] = 20_000
+
+
+def expand_if_small(function: ca.Function) -> ca.Function | None:
+    """``function`` as an SX function when its scalar graph has at most ``EXPAND_MAX_NODES`` nodes."""
+    expanded = function if function.is_a("SXFunction") else function.expand()
+    return expanded if expanded.n_nodes() <= EXPAND_MAX_NODES else None
+
 
 class ExactPredictor:
-    """Humans model of the joint NLP: the predictor's CasADi function of (context, robots_future)."""
+    """Humans model of the joint NLP: the predictor's CasADi function of (context, robots_future).
 
-    def __init__(self, function: ca.Function, context_size: int):
-        self.function = function
+    A small predictor (constant velocity, toys) is expanded into the NLP's SX graph: no call overhead and
+    exact second derivatives. A network is not: expanding the default Social-LSTM (soft pooling, 7 humans,
+    3 robots, H = 4) gives millions of scalar nodes, a 97 s build and more than 1 s a solve; kept as an MX
+    call node with IPOPT's exact Hessian it still costs ~80 ms an IPOPT iteration. Networks therefore stay
+    MX with IPOPT's limited-memory (L-BFGS) Hessian, which needs only the network's gradient.
+    """
+
+    def __init__(self, function: ca.Function, context_size: int, expanded: ca.Function | None):
+        """``expanded``: ``expand_if_small(function)``, computed once by the caller."""
         self.n_params = context_size
+        if expanded is not None:
+            self.function, self.symbolic, self.options = expanded, ca.SX, {}
+        else:
+            self.function, self.symbolic = function, ca.MX
+            self.options = {"ipopt.hessian_approximation": "limited-memory"}
 
-    def humans(self, p: ca.SX, robots_future: ca.SX) -> ca.SX:
-        # Called on SX symbols the (MX) function is expanded into the NLP's scalar graph: no call overhead
-        # inside IPOPT's evaluations, and exact second derivatives.
+    def humans(self, p, robots_future):
         return self.function(p, robots_future)
 
 
@@ -73,13 +102,19 @@ class CoupledCMPC:
     ``function`` is ``predictor.to_casadi(n_humans, n_robots, H)`` and ``context_size`` its context length.
     """
 
-    def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int, function: ca.Function, context_size: int):
+    def __init__(
+        self, cfg: MPCConfig, n_robots: int, n_humans: int, function: ca.Function, context_size: int
+    ):
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         self.function = function
         h = cfg.horizon
         self.n_out, self.n_in = 2 * h * n_humans, 2 * h * n_robots
-        if cfg.coupled_mode == "exact":
-            self.model = ExactPredictor(function, context_size)
+        expanded = expand_if_small(function)
+        self.mode = cfg.coupled_mode
+        if self.mode == "auto":
+            self.mode = "exact" if expanded is not None else "first_order"
+        if self.mode == "exact":
+            self.model = ExactPredictor(function, context_size, expanded)
         else:
             self.model = FirstOrderPredictor(self.n_out, self.n_in)
             # By position, not by name: the protocol fixes the inputs' order and sizes only.
@@ -102,7 +137,7 @@ class CoupledCMPC:
         return (self.cfg.horizon, self.n_humans, 2)
 
     def solve(self, data: StepData, context: np.ndarray, start: Start) -> IBRResult:
-        if self.cfg.coupled_mode == "exact":
+        if self.mode == "exact":
             return self._solve_exact(data, np.asarray(context, dtype=float), start)
         return self._solve_first_order(data, np.asarray(context, dtype=float), start)
 
@@ -131,12 +166,23 @@ class CoupledCMPC:
             return self._result(data, start.accels, None, (), 1, 0, False, False, "nan_prediction", (),
                                 None, None, 0)  # fmt: skip
         sol = self.nlp.solve(data, context, start.accels, start.lam_x, start.lam_g)
+        solves, iterations = 1, sol.iterations
+        if (
+            self.cfg.multi_start
+            and start.kind != "brake"
+            and (not sol.success or self.nlp.penalty(sol.accels, data, context) > self.cfg.restart_penalty)
+        ):
+            other = self.nlp.solve(
+                data, context, braking(data.states, self.cfg.horizon, self.cfg.dt, self.cfg.a_max)
+            )
+            solves, iterations = 2, iterations + other.iterations
+            sol = better(sol, other)
         if not sol.success:
-            return self._result(data, start.accels, None, (), 1, 1, False, False, sol.status, (),
-                                None, None, sol.iterations)  # fmt: skip
+            return self._result(data, start.accels, None, (), 1, solves, False, False, sol.status, (),
+                                None, None, iterations)  # fmt: skip
         prediction = self.nlp.humans(sol.accels, data, context)
-        return self._result(data, sol.accels, prediction, (sol.cost,), 1, 1, True, True, "ok", (prediction,),
-                            sol.lam_x, sol.lam_g, sol.iterations)  # fmt: skip
+        return self._result(data, sol.accels, prediction, (sol.cost,), 1, solves, True, True, "ok",
+                            (prediction,), sol.lam_x, sol.lam_g, iterations)  # fmt: skip
 
     def _solve_first_order(self, data: StepData, context: np.ndarray, start: Start) -> IBRResult:
         cfg = self.cfg
@@ -146,7 +192,7 @@ class CoupledCMPC:
         lam_x = None if start.lam_x is None else start.lam_x.ravel()
         lam_g = None if start.lam_g is None else start.lam_g.ravel()
         status, solved, converged = "ok", False, False
-        previous_potential, used = math.inf, None
+        previous_potential, used, previous_model = math.inf, None, None
         predictions: list[np.ndarray] = []
         potentials: list[float] = []
         solves = solver_iterations = iterations = 0
@@ -159,10 +205,26 @@ class CoupledCMPC:
                 status = "nan_prediction"
                 break
             predictions.append(value.reshape(self._pred_shape))
+            model = (value - jac @ r0, jac)  # s_H = offset + J r: what the NLP sees
+            if previous_model is not None and all(map(np.array_equal, model, previous_model)):
+                converged = True  # the same NLP again (always so when J = 0): u^(j) = u^(j-1)
+                potentials.append(potentials[-1])
+                break
+            previous_model = model
             extra = FirstOrderPredictor.params(value, jac, r0)
             sol = self.nlp.solve(data, extra, accels, lam_x, lam_g)
             solves += 1
             solver_iterations += sol.iterations
+            if (
+                j == 1
+                and cfg.multi_start
+                and start.kind != "brake"
+                and (not sol.success or self.nlp.penalty(sol.accels, data, extra) > cfg.restart_penalty)
+            ):
+                other = self.nlp.solve(data, extra, braking(data.states, cfg.horizon, cfg.dt, cfg.a_max))
+                solves += 1
+                solver_iterations += other.iterations
+                sol = better(sol, other)
             if not sol.success:
                 status = sol.status
                 break

@@ -1,14 +1,19 @@
 """Algorithm 2, IBR-based distributed MPC with the epsilon-Nash stopping rule.
 
-At iteration ``j``: predict the humans given the robots' plans of iteration ``j-1``; every moving robot ``i``
-solves its local NLP (Eq. 5) given the others' plans ``x_-i^(j-1)``; it keeps the new plan only if
-``C_i(u_i^(j), u_-i^(j-1)) <= C_i(u_i^(j-1), u_-i^(j-1)) - epsilon`` (else ``u_i^(j) = u_i^(j-1)``); the loop ends
-when every robot satisfies ``C_i(u_i^(j), u_-i^(j)) <= C_i(u_i^(j-1), u_-i^(j)) + epsilon`` or at ``j_max``.
-A robot parked on its goal does not play: its plan is braking. A failed local solve counts as a rejected plan.
+At iteration ``j``: predict the humans given the robots' plans of iteration ``j-1``; every robot ``i`` solves
+its local NLP (Eq. 5) given the others' plans ``x_-i^(j-1)``; it keeps the new plan only if
+``C_i(u_i^(j), u_-i^(j-1)) <= C_i(u_i^(j-1), u_-i^(j-1)) - epsilon`` (else ``u_i^(j) = u_i^(j-1)``); the loop
+ends when every robot satisfies ``C_i(u_i^(j), u_-i^(j)) <= C_i(u_i^(j-1), u_-i^(j)) + epsilon`` or at
+``j_max``. A robot whose controls are pinned (``on_goal="brake"``) does not play: its plan is braking. A
+failed local solve counts as a rejected plan.
 
-Parallelism. The local solves of one iteration are independent. ``dmpc_parallel="threads"`` runs them in a
-thread pool; CasADi (3.8) holds the GIL during a ``Function`` call, so on the measured problem sizes the pool
-only adds its own overhead (benchmarks/control_step.py measures both). ``"serial"`` is the default.
+Parallelism. The local solves of one iteration are independent. CasADi 3.8 releases the GIL while IPOPT
+runs, so ``dmpc_parallel="threads"`` really runs them concurrently, each robot on its own IPOPT instance (one
+instance shared by threads segfaults). Whether that pays depends on free cores: three cold local solves took
+18.2 ms one after the other and 14.5 ms in threads with the machine half idle, but in closed loop on this
+shared 2-core machine (load average 3.5-4.4) the median DMPC step took 34 ms serial and 50 ms with threads
+(benchmarks/control_step.py --dmpc-parallel). Warm local solves take 1-2 ms, so the pool's hand-offs weigh
+as much as the work. ``"serial"`` is the default.
 """
 
 from __future__ import annotations
@@ -46,7 +51,9 @@ class DMPC:
             self._pool.shutdown()
             self._pool = None
 
-    def _solve_all(self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]]):
+    def _solve_all(
+        self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]]
+    ):
         if self._pool is None:
             return [self.local.solve(*job) for job in jobs]
         return list(self._pool.map(lambda job: self.local.solve(*job), jobs))
@@ -93,7 +100,13 @@ class DMPC:
             # Line 4: every robot's best response to the others' plans of iteration j-1.
             params = {i: local.params(i, data, positions, prediction) for i in moving}
             jobs = [
-                (i, params[i], accels[i], None if lam_x is None else lam_x[i], None if lam_g is None else lam_g[i])
+                (
+                    i,
+                    params[i],
+                    accels[i],
+                    None if lam_x is None else lam_x[i],
+                    None if lam_g is None else lam_g[i],
+                )
                 for i in moving
             ]
             sols: list[Solution] = self._solve_all(jobs)

@@ -15,7 +15,7 @@ Symbolic = ca.SX | ca.MX | ca.DM
 
 
 def step(state: Symbolic, accel: Symbolic, dt: float) -> Symbolic:
-    """One step of Eq. 2: ``s+ = s + dt v + dt^2 a / 2``, ``v+ = v + dt a``; state ``(4, 1)``, accel ``(2, 1)``."""
+    """Eq. 2: ``s+ = s + dt v + dt^2 a / 2``, ``v+ = v + dt a``; state ``(4, 1)``, accel ``(2, 1)``."""
     s, v = state[0:2], state[2:4]
     return ca.vertcat(s + dt * v + 0.5 * dt**2 * accel, v + dt * accel)
 
@@ -68,7 +68,9 @@ def braking(states: np.ndarray, horizon: int, dt: float, a_max: float) -> np.nda
     return out
 
 
-def clip_to_bounds(states: np.ndarray, accels: np.ndarray, dt: float, v_max: float, a_max: float) -> np.ndarray:
+def clip_to_bounds(
+    states: np.ndarray, accels: np.ndarray, dt: float, v_max: float, a_max: float
+) -> np.ndarray:
     """``accels`` ``(M, H, 2)`` changed as little as possible (per step, per component) to satisfy Eq. 6.
 
     A velocity already beyond ``v_max`` is brought back as fast as ``a_max`` allows. Used to make a shifted

@@ -3,9 +3,9 @@
 A solver failure (any IPOPT status outside ``nlp.SOLVED``), a non-finite prediction, or running out of the
 step's time budget never ends an episode. The step then applies, in order of preference:
 
-1. ``"shifted"``: the last solved plan shifted by the steps elapsed since it was solved, as long as it still has
-   actions that came out of a solve (a plan of horizon H covers H-1 further steps), clipped to Eq. 6 from the
-   current state;
+1. ``"shifted"``: the last solved plan shifted by the steps elapsed since it was solved, as long as it still
+   has actions that came out of a solve (a plan of horizon H covers H-1 further steps), clipped to Eq. 6
+   from the current state;
 2. ``"brake"``: decelerate every velocity component as hard as ``a_max`` allows.
 
 The same shifted plan is the initial strategy ``u^(0)`` of the IBR loops and the warm start of the first
@@ -36,7 +36,7 @@ class Start:
 
 
 def shift(values: np.ndarray) -> np.ndarray:
-    """Drop the first step of an ``(M, H, 2)`` array and append zeros (zero acceleration keeps the velocity)."""
+    """Drop the first step of an ``(M, H, 2)`` array and append zeros (zero acceleration keeps velocity)."""
     return np.concatenate([values[:, 1:], np.zeros_like(values[:, :1])], axis=1)
 
 
@@ -73,7 +73,7 @@ class PlanMemory:
         lam_x: np.ndarray | None = None,
         lam_g: np.ndarray | None = None,
     ) -> None:
-        """Record the plan whose first action is applied now; ``solved``: it came out of this step's solves."""
+        """Record the plan whose first action is applied now; ``solved``: it came out of this step's solve."""
         if solved:
             self._solved_actions = self.cfg.horizon
             self._lam_x, self._lam_g = lam_x, lam_g

@@ -8,15 +8,23 @@ explicit registry of controllers (baselines from ``crowdsim.baselines``, the gam
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
-import numpy as np
-
+from crowdsim.control import ControlOutput
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
+
+__all__ = [
+    "CONTROLLERS",
+    "ControlOutput",
+    "Controller",
+    "ControllerSpec",
+    "EpisodeObserver",
+    "make_controller",
+]
 
 COUPLINGS = ("ibr", "nlp")
 
@@ -37,22 +45,6 @@ class ControllerSpec:
             raise PipelineError(f"unknown controller {self.controller!r}; choose from {sorted(CONTROLLERS)}")
         if self.coupling not in COUPLINGS:
             raise PipelineError(f"unknown coupling {self.coupling!r}; choose from {list(COUPLINGS)}")
-
-
-@dataclass(frozen=True)
-class ControlOutput:
-    """One control step's decision and what it cost to make it."""
-
-    accelerations: np.ndarray  # (M, 2) m/s^2, the actions to apply now
-    solve_time_s: float = 0.0  # wall time of the whole control step (prediction + all solves)
-    status: str = "ok"  # solver status of the step ("ok" for the baselines)
-    iterations: int = 0  # IBR iterations used (0 for the baselines)
-    fallback: str | None = None  # None, "shifted" (previous plan shifted) or "brake"
-    potential: float | None = None  # F_t, Eq. (16), at the returned plan
-    plan: np.ndarray | None = None  # (M, H, 2) planned robot positions at t+1..t+H
-    prediction: np.ndarray | None = None  # (H, N_h, 2) predicted human positions used by the final solve
-    iteration_predictions: tuple[np.ndarray, ...] = ()  # (H, N_h, 2) per IBR iteration, when asked
-    extra: dict[str, Any] = field(default_factory=dict)  # controller-specific numbers (JSON-serialisable)
 
 
 class Controller(Protocol):

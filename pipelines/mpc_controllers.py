@@ -4,8 +4,11 @@ One controller per run: the predictor is loaded once, and the NLPs are built onc
 humans) and reused across episodes. Per step: the observation becomes the solvers' ``StepData``; the humans'
 predictions come from ``predictor.rollout`` on the last ``predictor.obs_len`` rows of ``obs.history`` (robots
 first, then humans) with the robots' planned positions as ``robots_future`` (or, for ``coupling="nlp"``, from
-the predictor's CasADi twin inside the NLP, fed ``predictor.encode`` of the same history); a robot that has
-reached its goal holds position (its controls are pinned to braking and it stops pulling the flock).
+the predictor's CasADi twin inside the NLP, fed ``predictor.encode`` of the same history).
+
+A robot that has reached its goal (``obs.robot_reached``) holds position and stops flocking: by default
+(``on_goal="track"``) it stays in the optimisation anchored by its goal term, so it keeps still unless a
+human or a teammate needs the room; ``on_goal="brake"`` pins it to braking instead (mpc/config.py).
 A step that cannot solve falls back (mpc/fallback.py) and says so in ``ControlOutput.fallback``.
 """
 
@@ -52,7 +55,7 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
 
 
 class MPCController:
-    """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``), or the coupled NLP (``coupling="nlp"``)."""
+    """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``) or the coupled NLP (``coupling="nlp"``)."""
 
     def __init__(self, spec: ControllerSpec, distributed: bool):
         if distributed and spec.coupling == "nlp":

@@ -11,14 +11,14 @@ Execution. Ray when it is installed (``pip install -e .[cluster]``): ``ray.init`
 CPUs, or joins a cluster with ``--ray-address``; K actors each run episodes. Without Ray, K processes of a
 ``concurrent.futures`` pool (spawn start method: no state forked from the driver). Both backends run the same
 ``EpisodeWorker``: it builds a cell's controller once and reuses it for every episode of that cell it gets
-(tasks are dispatched cell by cell), and returns a JSON-ready record (plus the MCAP bytes of a kept log) to
-the driver. A failing episode (an exception in the controller) does not stop the sweep: it goes to
-``<out>/errors.jsonl`` and not to the records, so a rerun tries it again.
+(tasks come interleaved across the cells, episode index by episode index), and returns a JSON-ready record
+(plus the MCAP bytes of a kept log) to the driver. A failing episode (an exception in the controller) does
+not stop the sweep: it goes to ``<out>/errors.jsonl`` and not to the records, so a rerun tries it again.
 
 Recording (``--record failures|all``) happens *during* the run: the worker records every episode to a scratch
 file and keeps it only when the policy asks. Re-running a failure afterwards would be cheaper, but an episode
 is only reproducible if everything in the loop is (solver timeouts and thread timing are not), and a log of a
-different run than the recorded metrics would mislead; recording costs a fraction of the episode time.
+different run than the recorded metrics would mislead; recording costs about 5% of a CMPC episode.
 """
 
 from __future__ import annotations
@@ -55,9 +55,10 @@ MCAP_DIR: Final[str] = "mcap"
 FAIL_FAST_ERRORS: Final[int] = 4
 RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
-# Controllers a worker keeps built at once: a sweep goes cell by cell, so a few are enough, and each MPC
-# controller holds CasADi solvers worth keeping but not without bound.
-CONTROLLER_CACHE: Final[int] = 4
+# Controllers a worker keeps built at once (least recently used dropped first). Tasks come interleaved across
+# the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
+# MPC controller holds a few CasADi/IPOPT instances (megabytes), worth keeping but not without bound.
+CONTROLLER_CACHE: Final[int] = 16
 # Library thread pools inside each worker: the workers are the parallelism.
 SINGLE_THREAD_ENV: Final[dict[str, str]] = {
     "OMP_NUM_THREADS": "1",

@@ -138,8 +138,7 @@ class ZooEntry:
 
     def to_json(self) -> dict:
         out = asdict(self)
-        out["class"] = out.pop("cls")
-        return out
+        return {"name": out.pop("name"), "class": out.pop("cls"), **out}
 
     @classmethod
     def from_json(cls, values: dict, where: Path) -> ZooEntry:

@@ -29,6 +29,14 @@ sweep.json, and with --record the MCAP logs in DIR/mcap/<cell>/.
 """
 
 
+def _cpus() -> int:
+    """CPUs this process may use (a container or taskset may allow fewer than the machine has)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def _humans(text: str) -> tuple[int, ...]:
     try:
         values = tuple(int(v) for v in text.split(",") if v.strip())
@@ -62,9 +70,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--workers",
         type=int,
-        default=os.cpu_count() or 1,
+        default=_cpus(),
         metavar="K",
-        help="parallel workers (default: CPUs)",
+        help="parallel workers (default: the CPUs this process may use)",
     )
     p.add_argument(
         "--ray-address", metavar="ADDR", help="run on this Ray cluster (needs the [cluster] extra)"

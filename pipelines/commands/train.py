@@ -56,7 +56,9 @@ def register(subparsers) -> None:
     parser.add_argument("--val", nargs="+", type=Path, default=None, metavar="FILE")
     parser.add_argument("--test", nargs="+", type=Path, default=None, metavar="FILE")
     parser.add_argument("--epochs", type=int, default=25, help="training epochs (default 25)")
-    parser.add_argument("--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)")
+    parser.add_argument(
+        "--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)"
+    )
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--step-size", type=int, default=10, help="epochs per 10x learning-rate decay")
     parser.add_argument(

@@ -38,6 +38,9 @@ def register(subparsers) -> None:
     add.add_argument("weights", type=Path, help="NAME.pt written by `crowdmpc train` (beside NAME.json)")
     add.add_argument("--name", default=None, help="zoo name (default: the checkpoint's own name)")
     add.add_argument(
+        "--protocol", default=None, help="protocol label (default: the training run's: paper, loo or custom)"
+    )
+    add.add_argument(
         "--metrics",
         type=Path,
         default=None,
@@ -51,11 +54,12 @@ def _metric(metrics: dict, split: str, key: str) -> str:
     return "-" if value is None else f"{value:.3f}"
 
 
-def format_list(entries) -> str:
+def format_list(entries, root: Path) -> str:
     header = [
         "name",
         "class",
         "model",
+        "pooling",
         "protocol",
         "val ADE",
         "val FDE",
@@ -70,11 +74,16 @@ def format_list(entries) -> str:
         topk = "-"
         if m.get("test", {}).get("topk_ade") is not None:
             topk = f"{m['test']['topk_ade']:.3f}/{m['test']['topk_fde']:.3f}"
+        try:
+            pooling = json.loads((root / entry.config).read_text())["net"]["pooling"]
+        except (OSError, KeyError, TypeError, json.JSONDecodeError):
+            pooling = "?"
         rows.append(
             [
                 entry.name,
                 entry.cls,
                 entry.model,
+                pooling,
                 entry.protocol,
                 _metric(m, "val", "ade"),
                 _metric(m, "val", "fde"),
@@ -100,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         if not entries:
             print(f"the zoo in {root} is empty")
             return 0
-        print(format_list(entries))
+        print(format_list(entries, root))
         print("ADE/FDE in metres, TrajNet++ metrics of the primary pedestrian (9 -> 12 steps)")
         return 0
     if args.zoo_command == "show":
@@ -123,12 +132,15 @@ def run(args: argparse.Namespace) -> int:
         summary = json.loads(metrics_path.read_text())
         name = args.name or summary.get("name") or args.weights.stem
         training = dict(summary.get("training", {}))
+        training_data = dict(summary.get("training_data", {}))
+        if args.protocol:
+            training_data["protocol"] = args.protocol
         training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
         entry = zoo.add_to_zoo(
             args.weights,
             name=name,
             protocol=args.protocol or summary.get("protocol", "custom"),
-            training_data=summary.get("training_data", {}),
+            training_data=training_data,
             metrics=summary.get("metrics", {}),
             training=training,
             directory=root,

@@ -48,5 +48,7 @@ class ReactivePredictor:
         out = []
         for h in range(horizon):
             mean = ca.sum2(plan[:, h * n_robots : (h + 1) * n_robots]) / n_robots
-            out.append(ca.vec(pos + (h + 1) * DT * vel + ca.repmat(self.gain * (mean - robots_now), 1, n_humans)))
+            out.append(
+                ca.vec(pos + (h + 1) * DT * vel + ca.repmat(self.gain * (mean - robots_now), 1, n_humans))
+            )
         return ca.Function(self.name, [context, robots_future], [ca.vertcat(*out)])

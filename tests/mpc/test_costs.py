@@ -121,8 +121,13 @@ def test_potential_counts_each_pair_once():
     # Two robots, no humans: F = J_1 + J_2 + J_12 and C_i = J_i + J_12, so C_1 + C_2 - F = J_12.
     rng = np.random.default_rng(2)
     tracks = [
-        costs.make_track(ca.DM(rng.normal(size=4)), ca.DM(rng.normal(size=(2, 2))), ca.DM.zeros(2),
-                         ca.DM(rng.normal(size=2)), CFG.dt)  # fmt: skip
+        costs.make_track(
+            ca.DM(rng.normal(size=4)),
+            ca.DM(rng.normal(size=(2, 2))),
+            ca.DM.zeros(2),
+            ca.DM(rng.normal(size=2)),
+            CFG.dt,
+        )  # fmt: skip
         for _ in range(2)
     ]
     humans = ca.DM.zeros(2, 0)

@@ -35,9 +35,7 @@ def test_constant_velocity_coupled_equals_fixed_predictions(mode):
     predictor = ConstantVelocity()
     start = PlanMemory(cfg).start(data)
     result = coupled(cfg, predictor).solve(data, predictor.encode(history, mask, humans), start)
-    reference = CMPC(cfg, 3, 2).solve(
-        data, lambda rf: predictor.rollout(history, mask, rf, humans), start
-    )
+    reference = CMPC(cfg, 3, 2).solve(data, lambda rf: predictor.rollout(history, mask, rf, humans), start)
     assert result.solved and result.status == "ok"
     np.testing.assert_allclose(result.prediction, reference.prediction, atol=1e-12)
     assert result.potential == pytest.approx(reference.potential, rel=1e-6)
@@ -57,7 +55,9 @@ def test_first_order_model_of_a_linear_predictor_is_exact():
     np.testing.assert_allclose(out["first_order"].accels, out["exact"].accels, atol=1e-4)
     # The prediction reported is the predictor's own at the returned plan.
     plan = out["exact"].positions.transpose(1, 0, 2)
-    np.testing.assert_allclose(out["exact"].prediction, predictor.rollout(history, mask, plan, humans), atol=1e-12)
+    np.testing.assert_allclose(
+        out["exact"].prediction, predictor.rollout(history, mask, plan, humans), atol=1e-12
+    )
 
 
 def test_accounting_for_the_reaction_does_not_lose_to_ibr():
@@ -82,3 +82,37 @@ def test_non_finite_context_falls_back():
     context[0] = np.nan
     result = coupled(cfg, predictor).solve(data, context, PlanMemory(cfg).start(data))
     assert not result.solved and result.status == "nan_prediction"
+
+
+def test_auto_mode_expands_small_predictors_and_linearises_big_ones(monkeypatch):
+    import mpc.coupled
+
+    cfg = MPCConfig()
+    assert cfg.coupled_mode == "auto"
+    assert coupled(cfg, ConstantVelocity()).mode == "exact"
+    monkeypatch.setattr(mpc.coupled, "EXPAND_MAX_NODES", 0)  # every predictor counts as a network now
+    solver = coupled(cfg, ConstantVelocity())
+    assert solver.mode == "first_order"
+    data, history, mask, humans = scene()
+    result = solver.solve(data, ConstantVelocity().encode(history, mask, humans), PlanMemory(cfg).start(data))
+    assert result.solved and result.iterations == 2 and result.solves == 1  # J = 0: same model twice
+
+
+def test_exact_mode_keeps_a_big_predictor_as_a_call_node_with_lbfgs(monkeypatch):
+    import casadi as ca
+
+    import mpc.coupled
+
+    monkeypatch.setattr(mpc.coupled, "EXPAND_MAX_NODES", 0)
+    # L-BFGS on the 1e7-weighted penalties needs far more iterations than the exact Hessian.
+    cfg = MPCConfig(coupled_mode="exact", multi_start=False, ipopt_max_iter=3000, time_limit_s=10.0)
+    predictor = ConstantVelocity()
+    solver = coupled(cfg, predictor)
+    assert solver.model.symbolic is ca.MX
+    assert solver.model.options == {"ipopt.hessian_approximation": "limited-memory"}
+    data, history, mask, humans = scene()
+    start = PlanMemory(cfg).start(data)
+    result = solver.solve(data, predictor.encode(history, mask, humans), start)
+    reference = CMPC(cfg, 3, 2).solve(data, lambda rf: predictor.rollout(history, mask, rf, humans), start)
+    assert result.solved
+    assert result.potential == pytest.approx(reference.potential, rel=1e-4)

@@ -57,7 +57,8 @@ def test_record_iterations_keeps_every_iterations_prediction():
 
 def test_spec_options_reach_the_config():
     controller = make_mpc_controller(
-        ControllerSpec("cmpc", flocking=False, mpc_overrides=(("horizon", 5), ("j_max", 3))), distributed=False
+        ControllerSpec("cmpc", flocking=False, mpc_overrides=(("horizon", 5), ("j_max", 3))),
+        distributed=False,
     )
     assert controller.cfg.w_floc == 0.0 and controller.cfg.horizon == 5 and controller.cfg.j_max == 3
     with pytest.raises(MPCConfigError, match="horizn"):
@@ -71,10 +72,11 @@ def test_coupled_nlp_is_centralised_only():
         make_mpc_controller(ControllerSpec("dmpc", coupling="nlp"), distributed=True)
 
 
-def test_coupled_nlp_with_constant_velocity_matches_ibr():
+@pytest.mark.parametrize(("mode", "iterations"), [("first_order", 2), ("exact", 1)])
+def test_coupled_nlp_with_constant_velocity_matches_ibr(mode, iterations):
     _, ibr = first_step(ControllerSpec("cmpc"))
-    _, nlp = first_step(ControllerSpec("cmpc", coupling="nlp"))
-    assert nlp.status == "ok" and nlp.iterations == 1
+    _, nlp = first_step(ControllerSpec("cmpc", coupling="nlp", mpc_overrides=(("coupled_mode", mode),)))
+    assert nlp.status == "ok" and nlp.iterations == iterations and nlp.extra["solves"] == ibr.extra["solves"]
     np.testing.assert_allclose(nlp.prediction, ibr.prediction, atol=1e-12)
     assert nlp.potential == pytest.approx(ibr.potential, rel=1e-4)
 
@@ -125,7 +127,9 @@ def test_robot_on_its_goal_holds_position_when_tracking(name):
 
 @pytest.mark.parametrize("name", ["cmpc", "dmpc"])
 def test_two_robots_without_humans_reach_their_goals(name):
-    result = run_episode(make_controller(ControllerSpec(name)), seed=0, scenario="circle", n_humans=0, n_robots=2)
+    result = run_episode(
+        make_controller(ControllerSpec(name)), seed=0, scenario="circle", n_humans=0, n_robots=2
+    )
     assert result.metrics.success
     assert all(f is None for f in result.fallbacks)
 
@@ -138,3 +142,14 @@ def test_predictor_history_takes_the_last_rows_and_pads_the_start():
     padded, _ = predictor_history(obs, 10)
     assert padded.shape == (10, 5, 2)
     np.testing.assert_array_equal(padded[0], obs.history[0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_crowded_episodes_run_without_fallbacks(name):
+    controller = make_controller(ControllerSpec(name))
+    for seed in range(3):
+        result = run_episode(controller, seed=seed, scenario="circle", n_humans=7)
+        assert all(f is None for f in result.fallbacks)
+        assert set(result.statuses) == {"ok"}
+        assert result.metrics.n_steps == len(result.solve_times_s) > 0

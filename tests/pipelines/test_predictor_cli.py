@@ -63,6 +63,17 @@ def test_train_writes_checkpoint_pair_logs_and_metrics(trained):
     assert list((out / "tensorboard").glob("version_*/events.out.tfevents.*"))
 
 
+def test_train_is_seeded(trained, tmp_path):
+    import torch
+
+    out, args = trained
+    again = tmp_path / "again"
+    assert main([*[str(again) if a == str(out) else a for a in args]]) == 0
+    first = torch.load(out / "walker.pt", weights_only=True)
+    second = torch.load(again / "walker.pt", weights_only=True)
+    assert all(torch.equal(first[k], second[k]) for k in first)
+
+
 def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
     out, args = trained
     assert main(args) == 2

@@ -98,7 +98,8 @@ def test_experiment_cells():
     ]
     coupling = get_experiment("coupling").cells()
     assert [c.spec.coupling for c in coupling] == ["ibr", "nlp", "nlp"]
-    assert coupling[2].key == "cmpc-social_lstm_soft_eth-F-nlp-coupled_mode=first_order-h7-r3"
+    assert [c.method for c in coupling] == ["IBR", "NLP exact", "NLP first-order"]
+    assert coupling[1].key == "cmpc-social_lstm_soft_eth-F-nlp-coupled_mode=exact-h7-r3"
     cv = table2.with_predictor("constant_velocity")
     assert {s.predictor for _, s in cv.methods} == {"constant_velocity"}
     assert cv.cells()[0].key == "cmpc-constant_velocity-F-ibr-h5-r3"

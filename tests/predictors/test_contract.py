@@ -114,6 +114,9 @@ def test_rollout_casadi_values_and_jacobians(predictor, robots_first):
     else:
         jac_reference = finite_difference_jacobian(predictor, history, mask, robots_future, humans)
     np.testing.assert_allclose(jac_casadi, jac_reference, rtol=0, atol=TOL)
+    if isinstance(predictor, LearnedPredictor) and predictor.config.pooling == "soft":
+        # the differentiable pooling is what couples the humans to the plan inside the NLP
+        assert np.abs(jac_casadi).max() > 1e-6
 
 
 def test_rollout_without_robots(predictor):
