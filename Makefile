@@ -1,5 +1,6 @@
 # Two entry points, each self-contained from a fresh clone:
-#   make demo   set up .venv, run one closed-loop CMPC episode (3 robots, 7 humans) with an MCAP log
+#   make demo   set up .venv, run one closed-loop CMPC episode (3 robots, 7 humans, the zoo's Social-LSTM)
+#               printing its metrics, writing runs/demo/*.mcap and a plot
 #   make test   set up .venv, lint (ruff), run the test suite (pytest)
 PYTHON ?= python3
 VENV   ?= .venv
@@ -21,7 +22,7 @@ $(BIN)/.installed: pyproject.toml
 setup: $(BIN)/.installed
 
 demo: $(BIN)/.installed
-	$(BIN)/crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario circle \
+	$(BIN)/crowdmpc simulate --controller cmpc --predictor social_lstm_eth --scenario circle \
 		--robots 3 --humans 7 --episodes 1 --seed 0 --record runs/demo --plot runs/demo/episode.png
 
 lint: $(BIN)/.installed

@@ -1,4 +1,4 @@
-"""Errors a user can cause through the simulator (bad scenario, bad sizes). Printed by the CLI without a traceback."""
+"""Errors a user can cause through the simulator (bad scenario, bad sizes); the CLI prints them plainly."""
 
 
 class SimulationError(ValueError):

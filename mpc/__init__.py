@@ -1,1 +1,1 @@
-"""Game-theoretic MPC for several robots: dynamics, costs, NLPs, CMPC (Alg. 1), DMPC (Alg. 2). No Lightning."""
+"""Game-theoretic MPC for several robots: dynamics, costs, NLPs, CMPC (Alg. 1), DMPC (Alg. 2)."""

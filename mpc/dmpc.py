@@ -9,11 +9,12 @@ failed local solve counts as a rejected plan.
 
 Parallelism. The local solves of one iteration are independent. CasADi 3.8 releases the GIL while IPOPT
 runs, so ``dmpc_parallel="threads"`` really runs them concurrently, each robot on its own IPOPT instance (one
-instance shared by threads segfaults). Whether that pays depends on free cores: three cold local solves took
-18.2 ms one after the other and 14.5 ms in threads with the machine half idle, but in closed loop on this
-shared 2-core machine (load average 3.5-4.4) the median DMPC step took 34 ms serial and 50 ms with threads
-(benchmarks/control_step.py --dmpc-parallel). Warm local solves take 1-2 ms, so the pool's hand-offs weigh
-as much as the work. ``"serial"`` is the default.
+instance shared by threads segfaults). Whether that pays depends on free cores. benchmarks/control_step.py
+--dmpc-parallel, 3 robots, 7 humans, closed loop on this 2-core machine: median step 32.7 ms serial vs
+23.6 ms threads with the machine otherwise idle (load 1.0), but 33.7 ms vs 50.2 ms with the other engineers'
+jobs running (load 3.5-4.4): warm local solves take 1-2 ms, so waiting for a core costs as much as the work.
+``"serial"`` is the default because DMPC's long runs are sweeps, whose process workers already occupy every
+core; ``"threads"`` is the faster choice for a single run on a machine with a free core.
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ def crowdmpc_version() -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="crowdmpc",
-        description="Multi-robot cooperative navigation in crowds with learned predictors and game-theoretic MPC.",
+        description="Multi-robot navigation in crowds with learned predictors and game-theoretic MPC.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

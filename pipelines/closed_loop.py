@@ -88,8 +88,9 @@ def run_episode(
     """Run one episode to its end (every robot at its goal, or the time limit).
 
     The meta given to ``on_reset`` holds seed, scenario, n_humans, n_robots, controller, predictor (from
-    ``meta``, else from the controller's ``predictor`` attribute), predictor_sha256 (None unless given in
-    ``meta``) and config (the environment's settings); entries of ``meta`` are added and take precedence.
+    ``meta``, else from the controller's ``predictor`` attribute), predictor_sha256 and config (the
+    environment's settings, plus whatever the controller's optional ``describe()`` adds: the MPC's config and
+    the checkpoint's sha256); entries of ``meta`` are added and take precedence.
     """
     env = CrowdEnv(env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
@@ -104,6 +105,11 @@ def run_episode(
         "predictor_sha256": None,
         "config": {"env": dataclasses.asdict(env_config)},
     }
+    describe = getattr(controller, "describe", None)  # e.g. the MPC's config and the checkpoint's sha256
+    if describe is not None:
+        described = dict(describe())
+        full_meta["config"].update(described.pop("config", {}))
+        full_meta.update(described)
     full_meta.update(meta or {})
     for observer in observers:
         observer.on_reset(obs, full_meta)

@@ -79,16 +79,27 @@ def _orca(spec: ControllerSpec) -> Controller:
     return OrcaController()
 
 
-def _cmpc(spec: ControllerSpec) -> Controller:
+# The ORCA-ground-truth oracle needs the humans' goals and the simulator, so it is not in the predictor
+# registry; its MPC controllers come from pipelines.oracle.
+ORACLE_PREDICTOR = "orca_oracle"
+
+
+def _mpc(spec: ControllerSpec, distributed: bool) -> Controller:
+    if spec.predictor == ORACLE_PREDICTOR:
+        from pipelines.oracle import make_oracle_controller
+
+        return make_oracle_controller(spec)
     from pipelines.mpc_controllers import make_mpc_controller
 
-    return make_mpc_controller(spec, distributed=False)
+    return make_mpc_controller(spec, distributed=distributed)
+
+
+def _cmpc(spec: ControllerSpec) -> Controller:
+    return _mpc(spec, distributed=False)
 
 
 def _dmpc(spec: ControllerSpec) -> Controller:
-    from pipelines.mpc_controllers import make_mpc_controller
-
-    return make_mpc_controller(spec, distributed=True)
+    return _mpc(spec, distributed=True)
 
 
 CONTROLLERS: dict[str, Callable[[ControllerSpec], Controller]] = {

@@ -17,13 +17,12 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Final
 
-from pipelines.controllers import ControllerSpec
+from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec
 from pipelines.errors import PipelineError
 
 SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 PAPER_HUMANS: Final[tuple[int, ...]] = (5, 6, 7, 8, 9)  # Tables II and III
 PAPER_EPISODES_PER_CELL: Final[int] = 1000  # Section VI: 500 circle + 500 perpendicular crossing per cell
-ORACLE_PREDICTOR: Final[str] = "orca_oracle"  # pipelines/oracle.py: the humans' own ORCA, simulated forward
 
 PAPER_REFERENCE: Final[str] = (
     "Le, Tadiparthi, Chalaki, Mahjoub, D'sa, Moradi-Pari, Malikopoulos, 'Multi-Robot Cooperative Navigation "

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,7 +29,8 @@ from mpc.fallback import PlanMemory
 from mpc.nlp import StepData
 from pipelines.controllers import ControllerSpec, ControlOutput
 from pipelines.errors import PipelineError
-from predictors.registry import load_predictor
+from predictors.base import Predictor
+from predictors.registry import checkpoint_sha256, load_predictor
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -57,7 +58,7 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
 class MPCController:
     """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``) or the coupled NLP (``coupling="nlp"``)."""
 
-    def __init__(self, spec: ControllerSpec, distributed: bool):
+    def __init__(self, spec: ControllerSpec, distributed: bool, predictor: Predictor | None = None):
         if distributed and spec.coupling == "nlp":
             raise PipelineError(
                 "coupling 'nlp' puts the predictor inside the joint NLP, which is centralised: use it with "
@@ -67,9 +68,23 @@ class MPCController:
         self.name = "dmpc" if distributed else "cmpc"
         self.distributed = distributed
         self.cfg = mpc_config(spec)
-        self.predictor = load_predictor(spec.predictor)
+        self.predictor = predictor if predictor is not None else load_predictor(spec.predictor)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
+
+    def describe(self) -> dict[str, Any]:
+        """What the episode metadata records about this controller (the closed loop merges it)."""
+        name = getattr(self.predictor, "name", self.spec.predictor)
+        return {
+            "predictor": name,
+            "predictor_sha256": checkpoint_sha256(name),
+            "config": {
+                "mpc": self.cfg.to_dict(),
+                "coupling": self.spec.coupling,
+                "flocking": self.spec.flocking,
+                "distributed": self.distributed,
+            },
+        }
 
     def solver(self, n_robots: int, n_humans: int) -> CMPC | DMPC | CoupledCMPC:
         """The solver for this problem size, built on first use and kept."""
@@ -150,5 +165,8 @@ class MPCController:
         )
 
 
-def make_mpc_controller(spec: ControllerSpec, distributed: bool) -> MPCController:
-    return MPCController(spec, distributed)
+def make_mpc_controller(
+    spec: ControllerSpec, distributed: bool, predictor: Predictor | None = None
+) -> MPCController:
+    """``predictor`` replaces the one ``spec.predictor`` names (the ORCA oracle, which no registry holds)."""
+    return MPCController(spec, distributed, predictor)

@@ -28,6 +28,7 @@ import numpy as np
 
 from crowdsim.env import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
+from pipelines.controllers import ORACLE_PREDICTOR
 from pipelines.errors import PipelineError
 from predictors.base import check_rollout_inputs
 from predictors.errors import PredictorError
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
     from crowdsim.env import Observation
     from pipelines.controllers import Controller, ControllerSpec, ControlOutput
 
-ORACLE_NAME = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
+ORACLE_NAME = ORACLE_PREDICTOR
 
 
 class OrcaOracle:
@@ -152,10 +153,9 @@ class OracleController:
 def make_oracle_controller(spec: ControllerSpec, env_config: EnvConfig | None = None) -> Controller:
     """The MPC controller of ``spec`` (cmpc or dmpc, coupling "ibr") predicting with the ORCA oracle.
 
-    ``MPCController`` loads its predictor by name from the registry, where the oracle cannot be (it needs the
-    simulator and each observation); it is built with the constant-velocity predictor, which loads nothing,
-    and its ``predictor`` is then replaced by the oracle: the controller reads ``predictor.obs_len`` and calls
-    ``predictor.rollout`` each step, which the oracle provides.
+    The oracle cannot be in the predictor registry (it needs the simulator and each observation), so it is
+    handed to ``make_mpc_controller`` directly: the controller reads ``predictor.obs_len`` and calls
+    ``predictor.rollout`` each step, which the oracle provides (it has no CasADi twin, hence IBR only).
     """
     from pipelines.mpc_controllers import make_mpc_controller
 
@@ -164,10 +164,8 @@ def make_oracle_controller(spec: ControllerSpec, env_config: EnvConfig | None = 
     if spec.coupling != "ibr":
         raise PipelineError(f"the ORCA oracle needs coupling 'ibr' (no CasADi twin), got {spec.coupling!r}")
     oracle = OrcaOracle(env_config)
+    # the spec keeps naming a registered predictor, so that validation and config code see a loadable name
     inner = make_mpc_controller(
-        replace(spec, predictor="constant_velocity"), distributed=spec.controller == "dmpc"
+        replace(spec, predictor="constant_velocity"), distributed=spec.controller == "dmpc", predictor=oracle
     )
-    if not hasattr(inner, "predictor"):
-        raise PipelineError("the MPC controller has no 'predictor' attribute for the oracle to take over")
-    inner.predictor = oracle
     return OracleController(inner, oracle)

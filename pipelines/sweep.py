@@ -43,7 +43,7 @@ from typing import Any, Final, Protocol
 
 from pipelines.controllers import Controller, ControllerSpec, make_controller
 from pipelines.errors import PipelineError
-from pipelines.experiments import ORACLE_PREDICTOR, EpisodeTask, Experiment, predictor_of
+from pipelines.experiments import EpisodeTask, Experiment, predictor_of
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
@@ -160,23 +160,14 @@ def sweep_lock(out: Path) -> Iterator[None]:
 
 
 def build_controller(spec: ControllerSpec) -> Controller:
-    """A cell's controller; the oracle predictor is not in the predictor registry (it needs the humans'
-    goals and the simulator), so its controllers come from pipelines.oracle."""
-    if spec.predictor == ORACLE_PREDICTOR and spec.controller in ("cmpc", "dmpc"):
-        from pipelines.oracle import make_oracle_controller
-
-        return make_oracle_controller(spec)
+    """A cell's controller (the registry routes the ORCA oracle predictor to pipelines.oracle)."""
     return make_controller(spec)
 
 
 def predictor_sha256(name: str | None) -> str | None:
-    """The zoo's sha256 of a trained predictor's weights; None for the predictors without weights."""
-    if name is None:
-        return None
-    from predictors.zoo import read_manifest
+    from predictors.registry import checkpoint_sha256
 
-    entry = read_manifest().get(name)
-    return entry.sha256 if entry is not None else None
+    return checkpoint_sha256(name)
 
 
 def is_failure(metrics: dict[str, Any]) -> bool:
@@ -184,8 +175,9 @@ def is_failure(metrics: dict[str, Any]) -> bool:
     return (not metrics.get("success")) or bool(metrics.get("collision"))
 
 
-def episode_record(task: EpisodeTask, result: Any, wall_s: float) -> dict[str, Any]:
-    """One JSON-ready line of episodes.jsonl from a closed-loop EpisodeResult."""
+def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) -> dict[str, Any]:
+    """One JSON-ready line of episodes.jsonl from a closed-loop EpisodeResult; ``cpu_s`` is the worker's CPU
+    time for the episode, which unlike ``wall_s`` does not depend on how busy the machine was."""
     import numpy as np
 
     spec = task.cell.spec
@@ -225,6 +217,7 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float) -> dict[str, A
                 "statuses": status_counts,
             },
             "wall_s": wall_s,
+            "cpu_s": cpu_s,
             "worker": f"{socket.gethostname()}:{os.getpid()}",
         }
     )
@@ -286,7 +279,7 @@ class EpisodeWorker:
             "predictor": predictor_of(task.cell.spec),
             "predictor_sha256": predictor_sha256(predictor_of(task.cell.spec)),
         }
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         try:
             result = run_episode(
                 controller,
@@ -297,7 +290,9 @@ class EpisodeWorker:
                 observers=() if recorder is None else (recorder,),
                 meta=meta,
             )
-            record = episode_record(task, result, time.perf_counter() - start)
+            record = episode_record(
+                task, result, time.perf_counter() - start, time.process_time() - cpu_start
+            )
             mcap = None
             if recorder is not None and (self.record == "all" or is_failure(record["metrics"])):
                 mcap = recorder.paths[-1].read_bytes()

@@ -55,7 +55,7 @@ class Predictor(Protocol):
         humans: np.ndarray,
         horizon: int | None = None,
     ) -> np.ndarray:
-        """Predicted human positions ``(H, N_h, 2)``; ``horizon`` is needed only when ``robots_future`` is None."""
+        """Predicted human positions ``(H, N_h, 2)``; ``horizon`` is needed when ``robots_future`` is None."""
         ...
 
     def encode(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> np.ndarray:

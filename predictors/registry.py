@@ -24,6 +24,14 @@ def available() -> list[str]:
     return sorted(PREDICTORS) + [name for name in zoo.zoo_names() if name not in PREDICTORS]
 
 
+def checkpoint_sha256(name: str | None) -> str | None:
+    """The zoo's sha256 of a trained predictor's weights; None for predictors without weights (or no name)."""
+    if name is None or name in PREDICTORS:
+        return None
+    entry = zoo.read_manifest().get(name)
+    return entry.sha256 if entry is not None else None
+
+
 def load_predictor(name: str) -> Predictor:
     if name in PREDICTORS:
         return PREDICTORS[name]()

@@ -6,8 +6,12 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.experiments import Experiment
 
 EPILOG = """examples:
   crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
@@ -110,7 +114,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _check_predictors(experiment) -> None:
+def _check_predictors(experiment: Experiment) -> None:
     """Fail before starting workers, not once per episode in errors.jsonl."""
     from pipelines.experiments import ORACLE_PREDICTOR
     from predictors.registry import available
@@ -188,4 +192,15 @@ def run(args: argparse.Namespace) -> int:
     report = write_report(args.out, experiment, cells, records)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
+    cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]
+    if cpu:
+        # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
+        mean = sum(cpu) / len(cpu)
+        hours = mean * len(tasks) / 3600
+        k = config.workers
+        print(
+            f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
+            f"{hours:.2f} CPU-hours: {hours / k:.2f} h for {k} workers on {k} free cores",
+            file=sys.stderr,
+        )
     return status

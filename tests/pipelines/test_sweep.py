@@ -213,6 +213,7 @@ def test_a_rerun_runs_only_what_is_missing_and_extends(tmp_path):
         0,
     )
     assert record["metrics"]["n_steps"] == record["solver"]["steps"] > 0
+    assert record["wall_s"] > 0 and record["cpu_s"] > 0
     meta = json.loads((tmp_path / "sweep.json").read_text())
     assert meta["experiment"] == "baselines" and len(meta["runs"]) == 3
 
@@ -538,6 +539,7 @@ def test_cli_runs_a_small_sweep_and_reports(tmp_path, capsys):
     assert main([*args, "--backend", "inline", "--no-progress", "--out", str(tmp_path)]) == 0
     captured = capsys.readouterr()
     assert "8/8 episodes recorded" in captured.err
+    assert "the 8 planned episodes take" in captured.err
     assert "| Numbers of pedestrians | 5 | 5 | 6 | 6 |" in captured.out
     assert (tmp_path / "table.md").exists()
 
