@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpc.config import MPCConfig
-from mpc.dynamics import braking, rollout_numpy
+from mpc.dynamics import rollout_numpy
 from mpc.fallback import Start
-from mpc.nlp import JointNLP, Solution, StepData
+from mpc.nlp import JointNLP, StepData
 
 # predict(robots_future (H, M, 2)) -> humans' predicted positions (H, N_h, 2)
 PredictFn = Callable[[np.ndarray], np.ndarray]
@@ -57,13 +57,6 @@ def finite_prediction(prediction: np.ndarray, shape: tuple[int, ...]) -> np.ndar
     return prediction
 
 
-def better(a: Solution, b: Solution) -> Solution:
-    """The successful solution with the lower cost (``a`` when neither succeeded)."""
-    if b.success and (not a.success or b.cost < a.cost):
-        return b
-    return a
-
-
 class CMPC:
     """Algorithm 1 for a fixed problem size; the joint NLP is built once, here."""
 
@@ -94,19 +87,11 @@ class CMPC:
                 converged = True  # the same NLP again: u^(j) = u^(j-1), F^(j) = F^(j-1)
                 potentials.append(potential)
                 break
-            sol = self.nlp.solve(data, prediction, accels, lam_x, lam_g)
-            solves += 1
-            solver_iterations += sol.iterations
-            if (
-                j == 1
-                and cfg.multi_start
-                and start.kind != "brake"
-                and (not sol.success or self.nlp.penalty(sol.accels, data, prediction) > cfg.restart_penalty)
-            ):
-                other = self.nlp.solve(data, prediction, braking(data.states, cfg.horizon, cfg.dt, cfg.a_max))
-                solves += 1
-                solver_iterations += other.iterations
-                sol = better(sol, other)
+            sol, n_solves, n_iterations = self.nlp.solve_multi_start(
+                data, prediction, accels, lam_x, lam_g, restart=j == 1 and start.kind != "brake"
+            )
+            solves += n_solves
+            solver_iterations += n_iterations
             if not sol.success:
                 status = sol.status
                 break

@@ -39,9 +39,9 @@ from typing import Final
 import casadi as ca
 import numpy as np
 
-from mpc.cmpc import IBRResult, better, finite_prediction
+from mpc.cmpc import IBRResult, finite_prediction
 from mpc.config import MPCConfig
-from mpc.dynamics import braking, rollout_numpy
+from mpc.dynamics import rollout_numpy
 from mpc.fallback import Start
 from mpc.nlp import JointNLP, StepData
 
@@ -165,18 +165,9 @@ class CoupledCMPC:
         if not np.all(np.isfinite(context)):
             return self._result(data, start.accels, None, (), 1, 0, False, False, "nan_prediction", (),
                                 None, None, 0)  # fmt: skip
-        sol = self.nlp.solve(data, context, start.accels, start.lam_x, start.lam_g)
-        solves, iterations = 1, sol.iterations
-        if (
-            self.cfg.multi_start
-            and start.kind != "brake"
-            and (not sol.success or self.nlp.penalty(sol.accels, data, context) > self.cfg.restart_penalty)
-        ):
-            other = self.nlp.solve(
-                data, context, braking(data.states, self.cfg.horizon, self.cfg.dt, self.cfg.a_max)
-            )
-            solves, iterations = 2, iterations + other.iterations
-            sol = better(sol, other)
+        sol, solves, iterations = self.nlp.solve_multi_start(
+            data, context, start.accels, start.lam_x, start.lam_g, restart=start.kind != "brake"
+        )
         if not sol.success:
             return self._result(data, start.accels, None, (), 1, solves, False, False, sol.status, (),
                                 None, None, iterations)  # fmt: skip
@@ -212,19 +203,11 @@ class CoupledCMPC:
                 break
             previous_model = model
             extra = FirstOrderPredictor.params(value, jac, r0)
-            sol = self.nlp.solve(data, extra, accels, lam_x, lam_g)
-            solves += 1
-            solver_iterations += sol.iterations
-            if (
-                j == 1
-                and cfg.multi_start
-                and start.kind != "brake"
-                and (not sol.success or self.nlp.penalty(sol.accels, data, extra) > cfg.restart_penalty)
-            ):
-                other = self.nlp.solve(data, extra, braking(data.states, cfg.horizon, cfg.dt, cfg.a_max))
-                solves += 1
-                solver_iterations += other.iterations
-                sol = better(sol, other)
+            sol, n_solves, n_iterations = self.nlp.solve_multi_start(
+                data, extra, accels, lam_x, lam_g, restart=j == 1 and start.kind != "brake"
+            )
+            solves += n_solves
+            solver_iterations += n_iterations
             if not sol.success:
                 status = sol.status
                 break

@@ -25,11 +25,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from mpc.cmpc import IBRResult, PredictFn, better, finite_prediction
+from mpc.cmpc import IBRResult, PredictFn, finite_prediction
 from mpc.config import MPCConfig
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start
-from mpc.nlp import JointNLP, LocalNLP, Solution, StepData
+from mpc.nlp import JointNLP, LocalNLP, Solution, StepData, better
 
 
 def accept(new_cost: float, old_cost: float, epsilon: float) -> bool:

@@ -68,6 +68,13 @@ class Solution:
     lam_g: np.ndarray = field(repr=False)
 
 
+def better(a: Solution, b: Solution) -> Solution:
+    """The successful solution with the lower cost (``a`` when neither succeeded)."""
+    if b.success and (not a.success or b.cost < a.cost):
+        return b
+    return a
+
+
 def ipopt_options(cfg: MPCConfig, warm: bool) -> dict:
     """IPOPT through CasADi: silent, exact Hessian, tolerances and limits from the config.
 
@@ -256,6 +263,29 @@ class JointNLP:
         v = self.cfg.v_max
         out, stats = self._solver.solve(x0, self.params(data, extra), lbx, ubx, -v, v, lam_x0, lam_g0)
         return _solution(out, stats, self.cfg.cost_scale, (self.n_robots, self.cfg.horizon, 2))
+
+    def solve_multi_start(
+        self,
+        data: StepData,
+        extra: np.ndarray,
+        accels0: np.ndarray,
+        lam_x0: np.ndarray | None = None,
+        lam_g0: np.ndarray | None = None,
+        *,
+        restart: bool,
+    ) -> tuple[Solution, int, int]:
+        """``solve``, then (when ``restart`` and ``cfg.multi_start``) once more from braking if the first
+        solution failed or still pays more than ``cfg.restart_penalty`` of collision penalty: a warm start can
+        sit in a poor local minimum as a gap closes. Returns the better solution, the solves and IPOPT
+        iterations spent."""
+        sol = self.solve(data, extra, accels0, lam_x0, lam_g0)
+        cfg = self.cfg
+        if not (restart and cfg.multi_start):
+            return sol, 1, sol.iterations
+        if sol.success and self.penalty(sol.accels, data, extra) <= cfg.restart_penalty:
+            return sol, 1, sol.iterations
+        other = self.solve(data, extra, braking(data.states, cfg.horizon, cfg.dt, cfg.a_max))
+        return better(sol, other), 2, sol.iterations + other.iterations
 
 
 class LocalNLP:
