@@ -1,0 +1,40 @@
+"""The dependency rules of DESIGN.md, checked on the source: data flows one way, and the controller and the
+simulator stay usable without the training stack."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def imported_roots(package: str) -> dict[str, set[str]]:
+    """Top-level module names imported anywhere (also inside functions) by each file of ``package``."""
+    found = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names.update(alias.name.split(".")[0] for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split(".")[0])
+        found[str(path.relative_to(ROOT))] = names
+    return found
+
+
+@pytest.mark.parametrize("package", ["mpc", "crowdsim"])
+def test_no_lightning(package):
+    offenders = {f: n & {"lightning", "pytorch_lightning"} for f, n in imported_roots(package).items()}
+    assert not {f: n for f, n in offenders.items() if n}
+
+
+def test_crowdsim_imports_nothing_else_from_the_project():
+    offenders = {f: n & {"mpc", "predictors", "pipelines"} for f, n in imported_roots("crowdsim").items()}
+    assert not {f: n for f, n in offenders.items() if n}
+
+
+def test_the_library_packages_do_not_import_the_pipelines():
+    for package in ("mpc", "predictors"):
+        offenders = {f: n & {"pipelines"} for f, n in imported_roots(package).items()}
+        assert not {f: n for f, n in offenders.items() if n}, package
