@@ -7,11 +7,15 @@ backend whatever backend the process has selected.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.backend_bases import FigureCanvasBase
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
+
+from crowdsim.errors import SimulationError
 
 # matplotlib's tab10, the order pipelines.recording uses, so robot i has one colour everywhere.
 ROBOT_COLORS = (
@@ -28,6 +32,32 @@ ROBOT_COLORS = (
 )
 HUMAN_COLOR = "0.35"
 GOAL_COLOR = "red"
+
+
+def check_figure_path(path: str | Path, option: str) -> None:
+    """Raise SimulationError unless matplotlib can write a figure named ``path`` (``option``: the CLI flag).
+
+    Commands check before their (long) runs: ``savefig`` only complains about the format at the very end.
+    """
+    suffix = Path(path).suffix.lower().lstrip(".")
+    supported = FigureCanvasBase.get_supported_filetypes()
+    if suffix not in supported:
+        raise SimulationError(
+            f"{option} {path}: cannot write a figure of type {suffix or '(no suffix)'!r}; "
+            f"name it with one of {sorted(supported)}"
+        )
+
+
+def frame_axes(ax: Axes, *points: np.ndarray) -> None:
+    """Equal-aspect metric axes showing every ``(..., 2)`` point given, with a 1 m margin."""
+    everything = np.concatenate([np.reshape(p, (-1, 2)) for p in points])
+    lo, hi = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
 
 
 def default_snapshots(n_rows: int, count: int = 5) -> list[int]:
@@ -88,14 +118,7 @@ def plot_episode(
         when = [f"{row * dt:g} s" for row in snaps] if dt is not None else [f"step {row}" for row in snaps]
         ax.plot([], [], " ", label="snapshots: " + ", ".join(when))
 
-    everything = np.concatenate([robot_positions.reshape(-1, 2), human_positions.reshape(-1, 2), robot_goals])
-    lo, hi = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.grid(True, lw=0.3, alpha=0.5)
+    frame_axes(ax, robot_positions, human_positions, robot_goals)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.8)
     if title:
         ax.set_title(title)

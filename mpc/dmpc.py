@@ -45,9 +45,10 @@ class DMPC:
         self.local = LocalNLP(cfg, n_robots, n_humans)
         # Only to report F_t of the final plan, the common currency of CMPC and DMPC.
         self.joint = JointNLP(cfg, n_robots, n_humans)
-        self._pool = ThreadPoolExecutor(max_workers=n_robots) if cfg.dmpc_parallel == "threads" else None
+        self._pool: ThreadPoolExecutor | None = None  # made on first use with dmpc_parallel="threads"
 
     def close(self) -> None:
+        """Stop the solver threads; a later solve starts them again."""
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
@@ -55,8 +56,10 @@ class DMPC:
     def _solve_all(
         self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]]
     ):
-        if self._pool is None:
+        if self.cfg.dmpc_parallel != "threads":
             return [self.local.solve(*job) for job in jobs]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=self.n_robots)
         return list(self._pool.map(lambda job: self.local.solve(*job), jobs))
 
     def _restart(
@@ -88,7 +91,7 @@ class DMPC:
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         lam_x = None if start.lam_x is None else start.lam_x.copy()
         lam_g = None if start.lam_g is None else start.lam_g.copy()
-        status, converged = "ok", False
+        status, converged, first_failure = "ok", False, ""
         used, predictions, potentials = None, [], []
         solves = solver_iterations = iterations = 0
         for j in range(1, cfg.j_max + 1):
@@ -121,7 +124,9 @@ class DMPC:
             new_accels = accels.copy()
             for i, sol in zip(moving, sols, strict=True):
                 if not sol.success:
-                    status = sol.status if status == "ok" else status
+                    # A robot whose local solve failed keeps its plan, as if it had not improved; the step
+                    # fails only when no local solve ever succeeded (below).
+                    first_failure = first_failure or sol.status
                     continue
                 # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
                 if accept(sol.cost, local.cost(accels[i], params[i]), cfg.epsilon):
@@ -131,11 +136,13 @@ class DMPC:
                         lam_g = np.zeros((self.n_robots, cfg.horizon, 2))
                     lam_x[i] = sol.lam_x.reshape(cfg.horizon, 2)
                     lam_g[i] = sol.lam_g.reshape(cfg.horizon, 2)
-            if any(s.success for s in sols):
+            solved_now = any(s.success for s in sols)
+            if solved_now:
                 used = prediction
-            # Lines 12-16: the epsilon-Nash check against the others' new plans.
+            # Lines 12-16: the epsilon-Nash check against the others' new plans. An iteration in which every
+            # local solve failed proves nothing, so it cannot end the loop as converged.
             new_positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
-            converged = True
+            converged = solved_now
             for i in moving:
                 p = local.params(i, data, new_positions, prediction)
                 converged &= local.cost(new_accels[i], p) <= local.cost(accels[i], p) + cfg.epsilon
@@ -147,6 +154,8 @@ class DMPC:
             if time.perf_counter() - t0 > cfg.time_limit_s:
                 status = "timeout" if status == "ok" else status
                 break
+        if used is None and status == "ok" and first_failure:
+            status = first_failure
         return IBRResult(
             accels=accels,
             positions=positions,

@@ -23,18 +23,14 @@ def step(state: Symbolic, accel: Symbolic, dt: float) -> Symbolic:
 def rollout(state: Symbolic, accels: Symbolic, dt: float) -> tuple[Symbolic, Symbolic]:
     """Positions and velocities ``(2, H)`` at ``t+1..t+H`` from state ``(4, 1)`` and controls ``(2, H)``.
 
-    Closed form of ``H`` applications of :func:`step` (linear in the controls):
-    ``v_{k+1} = v_t + dt sum_{l<=k} a_l`` and ``s_{k+1} = s_k + dt v_k + dt^2 a_k / 2``.
+    ``H`` applications of :func:`step`, so Eq. 2 is written once.
     """
-    s, v = state[0:2], state[2:4]
-    positions, velocities = [], []
+    states = []
     for k in range(accels.shape[1]):
-        a = accels[:, k]
-        s = s + dt * v + 0.5 * dt**2 * a
-        v = v + dt * a
-        positions.append(s)
-        velocities.append(v)
-    return ca.horzcat(*positions), ca.horzcat(*velocities)
+        state = step(state, accels[:, k], dt)
+        states.append(state)
+    trajectory = ca.horzcat(*states)
+    return trajectory[0:2, :], trajectory[2:4, :]
 
 
 def rollout_numpy(states: np.ndarray, accels: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

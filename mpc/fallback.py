@@ -22,8 +22,6 @@ from mpc.config import MPCConfig
 from mpc.dynamics import braking, clip_to_bounds
 from mpc.nlp import StepData
 
-FALLBACK_KINDS = ("shifted", "brake")
-
 
 @dataclass(frozen=True)
 class Start:

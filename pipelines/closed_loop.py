@@ -176,21 +176,26 @@ def run_episodes(
     run_meta = {"predictor": None if spec.controller in PREDICTOR_FREE else spec.predictor, **(meta or {})}
     results: list[EpisodeResult] = []
     bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)
-    for i in bar:
-        observers = tuple(observers_factory()) if observers_factory is not None else ()
-        result = run_episode(
-            controller,
-            seed=seed + i,
-            scenario=scenario,
-            n_humans=n_humans,
-            n_robots=n_robots,
-            env_config=env_config,
-            observers=observers,
-            meta=run_meta,
-        )
-        results.append(result)
-        rate = 100.0 * sum(r.metrics.success for r in results) / len(results)
-        bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
+    try:
+        for i in bar:
+            observers = tuple(observers_factory()) if observers_factory is not None else ()
+            result = run_episode(
+                controller,
+                seed=seed + i,
+                scenario=scenario,
+                n_humans=n_humans,
+                n_robots=n_robots,
+                env_config=env_config,
+                observers=observers,
+                meta=run_meta,
+            )
+            results.append(result)
+            rate = 100.0 * sum(r.metrics.success for r in results) / len(results)
+            bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
+    finally:
+        close = getattr(controller, "close", None)  # e.g. DMPC's solver threads
+        if close is not None:
+            close()
     return results
 
 

@@ -72,6 +72,13 @@ class MPCController:
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
 
+    def close(self) -> None:
+        """Release what the solvers hold (DMPC's thread pool); the controller can still be used after."""
+        for solver in self._solvers.values():
+            close = getattr(solver, "close", None)
+            if close is not None:
+                close()
+
     def describe(self) -> dict[str, Any]:
         """What the episode metadata records about this controller (the closed loop merges it)."""
         name = getattr(self.predictor, "name", self.spec.predictor)

@@ -39,13 +39,11 @@ if TYPE_CHECKING:
     from crowdsim.env import Observation
     from pipelines.controllers import Controller, ControllerSpec, ControlOutput
 
-ORACLE_NAME = ORACLE_PREDICTOR
-
 
 class OrcaOracle:
     """A ``Predictor`` (rollout only) that simulates the humans' ORCA forward from the observed state."""
 
-    name = ORACLE_NAME
+    name = ORACLE_PREDICTOR
     obs_len = 1  # only the current state matters: ORCA is memoryless
 
     def __init__(self, env_config: EnvConfig | None = None):

@@ -614,6 +614,8 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
+    from crowdsim.plotting import frame_axes
+
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in (".gif", ".mp4"):
@@ -626,16 +628,7 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
 
     fig = Figure(figsize=(6, 6), layout="constrained")
     ax = fig.add_subplot()
-    everything = np.concatenate(
-        [view.robot_positions.reshape(-1, 2), view.human_positions.reshape(-1, 2), view.robot_goals]
-    )
-    lo, hi = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.grid(True, lw=0.3, alpha=0.5)
+    frame_axes(ax, view.robot_positions, view.human_positions, view.robot_goals)
     ax.set_title(rec.label, fontsize=9)
     ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14, zorder=1)
     robots = [Circle((0, 0), view.radius, fc=_robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]

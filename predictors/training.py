@@ -60,12 +60,9 @@ def primary_targets(batch: SceneBatch) -> tuple[torch.Tensor, torch.Tensor]:
     return batch.future[:, :, 0], batch.mask[:, batch.obs_len :, 0]
 
 
-def scene_arrays(batch: SceneBatch) -> tuple[torch.Tensor, torch.Tensor]:
-    return batch.positions, batch.mask
-
-
-class _EpochTimer(L.LightningModule):
-    """Logs the wall time of every training epoch (``epoch_time_s``)."""
+class _PredictorModule(L.LightningModule):
+    """What both modules share: validation and test through the subclass's ``model_step(batch, stage)``,
+    and the wall time of every training epoch (``epoch_time_s``)."""
 
     def on_train_epoch_start(self) -> None:
         self._epoch_start = time.perf_counter()
@@ -73,8 +70,18 @@ class _EpochTimer(L.LightningModule):
     def on_train_epoch_end(self) -> None:
         self.log("epoch_time_s", time.perf_counter() - self._epoch_start, prog_bar=True)
 
+    def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        self._log_eval(self.model_step(batch, "val"), "val", len(batch))
 
-class SocialLSTMModule(_EpochTimer):
+    def test_step(self, batch: SceneBatch, batch_idx: int) -> None:
+        self._log_eval(self.model_step(batch, "test"), "test", len(batch))
+
+    def _log_eval(self, out: dict, stage: str, batch_size: int) -> None:
+        for key, value in out.items():
+            self.log(f"{stage}_{key}", value, prog_bar=key == "ade", batch_size=batch_size)
+
+
+class SocialLSTMModule(_PredictorModule):
     """Social-LSTM and the vanilla LSTM (the net's ``pooling`` decides)."""
 
     def __init__(
@@ -88,9 +95,11 @@ class SocialLSTMModule(_EpochTimer):
         self.pred_len = pred_len
 
     def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
-        positions, mask = scene_arrays(batch)
+        positions = batch.positions
         teacher = stage == "train"
-        outputs, predicted = self.net(positions, mask, self.obs_len, self.pred_len, teacher_forcing=teacher)
+        outputs, predicted = self.net(
+            positions, batch.mask, self.obs_len, self.pred_len, teacher_forcing=teacher
+        )
         truth, valid = primary_targets(batch)
         # TrajNet++ targets: true displacements of the primary (B, H, 2)
         previous = torch.cat([positions[:, self.obs_len - 1 : self.obs_len, 0], truth[:, :-1]], dim=1)
@@ -111,16 +120,6 @@ class SocialLSTMModule(_EpochTimer):
         self.log("train_loss", out["loss"], prog_bar=True, batch_size=len(batch))
         return out["loss"]
 
-    def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
-        self._log_eval(self.model_step(batch, "val"), "val", len(batch))
-
-    def test_step(self, batch: SceneBatch, batch_idx: int) -> None:
-        self._log_eval(self.model_step(batch, "test"), "test", len(batch))
-
-    def _log_eval(self, out: dict, stage: str, batch_size: int) -> None:
-        for key, value in out.items():
-            self.log(f"{stage}_{key}", value, prog_bar=key == "ade", batch_size=batch_size)
-
     def configure_optimizers(self):
         optimizer = torch.optim.Adam(
             self.net.parameters(), lr=self.optim.lr, weight_decay=self.optim.weight_decay
@@ -129,7 +128,7 @@ class SocialLSTMModule(_EpochTimer):
         return [optimizer], [scheduler]
 
 
-class GANModule(_EpochTimer):
+class GANModule(_PredictorModule):
     """Social-GAN-like training with manual optimisation; ``self.net`` is the generator."""
 
     def __init__(
@@ -154,7 +153,7 @@ class GANModule(_EpochTimer):
 
     def _generate(self, batch: SceneBatch, k: int, teacher_forcing: bool, zero_noise: bool = False):
         """``k`` generated futures of the primary: (k, B, H, 2)."""
-        positions, mask = scene_arrays(batch)
+        positions, mask = batch.positions, batch.mask
         batch_size, _, n_agents, _ = positions.shape
         repeat = (k, 1, 1, 1)
         noise = positions.new_zeros(k * batch_size, n_agents, self.net.config.noise_dim)
@@ -227,14 +226,6 @@ class GANModule(_EpochTimer):
         super().on_train_epoch_end()
         for scheduler in self.lr_schedulers():
             scheduler.step()
-
-    def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
-        for key, value in self.model_step(batch, "val").items():
-            self.log(f"val_{key}", value, prog_bar=key == "ade", batch_size=len(batch))
-
-    def test_step(self, batch: SceneBatch, batch_idx: int) -> None:
-        for key, value in self.model_step(batch, "test").items():
-            self.log(f"test_{key}", value, batch_size=len(batch))
 
     def configure_optimizers(self):
         opt_g = torch.optim.Adam(

@@ -10,15 +10,17 @@ first; a file that differs is refused with ``CheckpointMismatch``.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
+import pickle
 import shutil
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
+from predictors.base import OBS_LEN
 from predictors.errors import CheckpointMismatch, PredictorError
+from predictors.hashing import sha256_file
 
 if TYPE_CHECKING:
     from predictors.learned import LearnedPredictor
@@ -36,14 +38,6 @@ def checkpoints_dir(directory: str | Path | None = None) -> Path:
         return Path(directory)
     env = os.environ.get(CHECKPOINTS_ENV)
     return Path(env) if env else Path(__file__).resolve().parents[1] / "checkpoints"
-
-
-def sha256_file(path: str | Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
 
 
 # ----------------------------------------------------------------------------------------- checkpoint pair
@@ -110,15 +104,23 @@ def load_checkpoint(
         raise PredictorError(
             f"{config}: unknown predictor class {cls_name!r}; expected one of {sorted(PREDICTOR_CLASSES)}"
         )
+    obs_len = document.get("obs_len", OBS_LEN)
+    if not isinstance(obs_len, int) or isinstance(obs_len, bool):
+        raise PredictorError(f'{config}: "obs_len" must be an integer, got {obs_len!r}')
     net = SocialLSTM(SocialLSTMConfig.from_dict(document.get("net", {})))
     try:
         state = torch.load(weights, map_location="cpu", weights_only=True)
+    except (pickle.UnpicklingError, EOFError, RuntimeError):
+        # torch's own message suggests weights_only=False, which a checkpoint must never need
+        raise PredictorError(
+            f"{weights}: not a state_dict of tensors as `crowdmpc train` writes (truncated, or not a "
+            "torch file, or a pickled object, which is never loaded)"
+        ) from None
+    try:
         net.load_state_dict(state, strict=True)
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:
         raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from exc
-    return PREDICTOR_CLASSES[cls_name](
-        net, name=name or document.get("name", weights.stem), obs_len=int(document.get("obs_len", 9))
-    )
+    return PREDICTOR_CLASSES[cls_name](net, name=name or document.get("name", weights.stem), obs_len=obs_len)
 
 
 # ------------------------------------------------------------------------------------------------ manifest
@@ -142,6 +144,8 @@ class ZooEntry:
 
     @classmethod
     def from_json(cls, values: dict, where: Path) -> ZooEntry:
+        if not isinstance(values, dict):
+            raise PredictorError(f"{where}: a zoo entry must be a JSON object, got {values!r}")
         required = ("name", "class", "model", "file", "sha256", "config", "config_sha256", "protocol")
         missing = [k for k in required if k not in values]
         if missing:
@@ -163,7 +167,10 @@ def read_manifest(directory: str | Path | None = None) -> dict[str, ZooEntry]:
         raise PredictorError(f"{path}: not valid JSON ({exc})") from exc
     if not isinstance(document, dict) or document.get("format") != MANIFEST_FORMAT:
         raise PredictorError(f'{path}: not a crowdmpc zoo manifest (expected "format": "{MANIFEST_FORMAT}")')
-    entries = [ZooEntry.from_json(e, path) for e in document.get("models", [])]
+    models = document.get("models", [])
+    if not isinstance(models, list):
+        raise PredictorError(f'{path}: "models" must be a list of entries, got {models!r}')
+    entries = [ZooEntry.from_json(e, path) for e in models]
     return {e.name: e for e in entries}
 
 

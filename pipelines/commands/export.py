@@ -50,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
             "need --humans >= 1, --robots >= 0, --horizon >= 1, "
             f"got {args.humans}, {args.robots}, {args.horizon}"
         )
+    if args.out.is_dir():
+        raise PipelineError(
+            f"--out {args.out} is a directory; give the file to write, e.g. {args.name}.casadi"
+        )
     predictor = load_predictor(args.name)
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)
     args.out.parent.mkdir(parents=True, exist_ok=True)

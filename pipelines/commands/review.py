@@ -94,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
+    if args.plot:
+        from crowdsim.plotting import check_figure_path
+
+        check_figure_path(args.plot, "--plot")
     report: dict[str, Any] = {}
     if args.path.is_dir():
         single_file_only = [

@@ -121,6 +121,10 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"--robots must be in 1..{MAX_ROBOTS}, got {args.robots}")
     if args.seed < 0:
         raise PipelineError(f"--seed must be >= 0, got {args.seed}")
+    if args.plot is not None:
+        from crowdsim.plotting import check_figure_path
+
+        check_figure_path(args.plot, "--plot")
     spec = ControllerSpec(
         controller=args.controller,
         predictor=args.predictor,

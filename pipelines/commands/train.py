@@ -101,7 +101,7 @@ def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) 
     """Training data identity for the zoo: each file's sha256 and one hash over train + val."""
     import hashlib
 
-    from predictors.zoo import sha256_file
+    from predictors.hashing import sha256_file
 
     def label(path: Path) -> str:
         return str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else path.name

@@ -129,7 +129,12 @@ def run(args: argparse.Namespace) -> int:
             raise PipelineError(
                 f"{metrics_path} does not exist; pass --metrics FILE (written by `crowdmpc train`)"
             )
-        summary = json.loads(metrics_path.read_text())
+        try:
+            summary = json.loads(metrics_path.read_text())
+        except json.JSONDecodeError as exc:
+            raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
+        if not isinstance(summary, dict):
+            raise PipelineError(f"{metrics_path}: expected the JSON object `crowdmpc train` writes")
         name = args.name or summary.get("name") or args.weights.stem
         training = dict(summary.get("training", {}))
         training_data = dict(summary.get("training_data", {}))

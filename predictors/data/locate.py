@@ -36,8 +36,8 @@ from predictors.data.prepare import (
     default_references,
     prepare_ewap,
 )
-from predictors.data.prepare import sha256_file as _sha256_file
 from predictors.errors import PredictorError
+from predictors.hashing import sha256_file
 
 DATA_ENV: Final[str] = "CROWDMPC_DATA"
 CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
@@ -107,7 +107,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
         )
     digest = hashlib.sha256(CONVERTER_VERSION.encode())
     for seq in EWAP_SEQUENCES.values():
-        digest.update(_sha256_file(raw / seq / "obsmat.txt").encode())
+        digest.update(sha256_file(raw / seq / "obsmat.txt").encode())
     target = cache_root() / "prepared" / digest.hexdigest()[:16]
     if read_manifest(target) is not None:
         return target

@@ -34,7 +34,6 @@ uses train 70 %, val 10 %, test 20 % (for BIWI ETH the test part is the same las
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import tempfile
@@ -53,6 +52,7 @@ from trajnetplusplustools.writers import trajnet
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.trajnet_io import read_scenes
 from predictors.errors import DatasetFormatError, PredictorError
+from predictors.hashing import sha256_file
 
 # Converter defaults (trajnetplusplusdataset convert.py arguments, scene.py constants).
 CHUNK_SIZE: Final[int] = OBS_LEN + PRED_LEN  # 21 rows = 9 observed + 12 predicted
@@ -420,14 +420,6 @@ class SelfCheck:
     tags_compared: int
     tags_agree: int
     mismatches: tuple[str, ...] = field(default_factory=tuple)  # first few reasons, for the report
-
-
-def sha256_file(path: str | Path) -> str:
-    digest = hashlib.sha256()
-    with Path(path).open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def compare_with_reference(

@@ -76,13 +76,15 @@ def format_table(stats: list[FileStats], root: str | Path | None = None) -> str:
         n = sum(s.scenes for s in stats)
         mean = sum(s.agents_mean * s.scenes for s in stats) / max(n, 1)
         types = [sum(s.types[k] for s in stats) for k in range(4)]
+        # a file without scenes reports 0 agents, which is no scene's minimum
+        with_scenes = [s for s in stats if s.scenes] or stats
         rows.append(
             (
                 "total",
                 str(n),
                 str(sum(s.tracks for s in stats)),
                 "-",
-                str(min(s.agents_min for s in stats)),
+                str(min(s.agents_min for s in with_scenes)),
                 f"{mean:.1f}",
                 str(max(s.agents_max for s in stats)),
                 "/".join(map(str, types)),

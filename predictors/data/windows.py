@@ -26,9 +26,9 @@ from torch.utils.data import Dataset, get_worker_info
 
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.locate import cache_root
-from predictors.data.prepare import sha256_file
 from predictors.data.trajnet_io import read_scenes
 from predictors.errors import PredictorError
+from predictors.hashing import sha256_file
 
 SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
 CACHE_VERSION: Final[str] = "scenes-v1"  # bump when FileArrays' layout changes

@@ -1,7 +1,9 @@
 """Social-LSTM as TrajNet++ builds it (Alahi et al. 2016; Kothari et al. 2021, ``trajnetbaselines/lstm``).
 
 Per agent: the displacement since the last step and the pooled neighbours' hidden states are scaled by 4,
-embedded (``Linear + ReLU``) and fed to an LSTM cell; a linear head gives the next displacement as a
+embedded (``Linear + ReLU``) and fed to an LSTM cell (one difference from TrajNet++, which embeds the
+displacement alone and appends the pooled vector to that embedding; the shipped weights use this layout,
+so changing it means retraining); a linear head gives the next displacement as a
 bivariate Gaussian (mean, sigmas, correlation) or as a point. Separate encoder and decoder cells, start tags
 on two spare embedding slots, single-step prediction applied recursively: the encoder's last step predicts
 the first future position, each decoder step the next one from the previous prediction. ``pooling="none"``
@@ -68,13 +70,20 @@ class SocialLSTMConfig:
 
     @classmethod
     def from_dict(cls, values: dict) -> SocialLSTMConfig:
+        if not isinstance(values, dict):
+            raise PredictorError(f"a Social-LSTM config must be a JSON object, got {values!r}")
         unknown = sorted(set(values) - set(cls.__dataclass_fields__))
         if unknown:
             raise PredictorError(
                 f"unknown Social-LSTM config keys {unknown}; expected a subset of "
                 f"{sorted(cls.__dataclass_fields__)}"
             )
-        return cls(**values)
+        try:
+            return cls(**values)
+        except TypeError as exc:  # a value of the wrong type, e.g. "32" for hidden_dim, fails a comparison
+            raise PredictorError(
+                f"Social-LSTM config {values} holds a value of the wrong type: {exc}"
+            ) from None
 
 
 def gaussian_head(raw: torch.Tensor) -> torch.Tensor:

@@ -1,10 +1,12 @@
 """plot_episode draws what Fig. 2 shows and saves a PNG."""
 
 import numpy as np
+import pytest
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from crowdsim.plotting import default_snapshots, plot_episode
+from crowdsim.errors import SimulationError
+from crowdsim.plotting import check_figure_path, default_snapshots, plot_episode
 
 
 def test_default_snapshots_include_first_and_last():
@@ -36,3 +38,10 @@ def test_plot_episode_on_given_axes():
     fig = Figure()
     ax = fig.add_subplot()
     assert plot_episode(np.zeros((2, 1, 2)), np.zeros((2, 0, 2)), np.ones((1, 2)), ax=ax) is fig
+
+
+def test_figure_paths_are_checked_by_suffix():
+    check_figure_path("out/ep.PNG", "--plot")
+    check_figure_path("ep.pdf", "--plot")
+    with pytest.raises(SimulationError, match=r"--plot ep\.foo: cannot write a figure of type 'foo'"):
+        check_figure_path("ep.foo", "--plot")

@@ -68,3 +68,35 @@ def test_threaded_local_solves_give_the_serial_result():
         solver.close()
     np.testing.assert_allclose(results[0].accels, results[1].accels, atol=1e-12)
     assert results[0].iterations == results[1].iterations
+
+
+def test_close_stops_the_threads_and_a_later_solve_starts_them_again():
+    cfg = MPCConfig(dmpc_parallel="threads")
+    data = data_two_robots()
+    solver = DMPC(cfg, 2, 0)
+    first = solver.solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
+    solver.close()
+    assert solver._pool is None
+    again = solver.solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
+    assert solver._pool is not None
+    solver.close()
+    np.testing.assert_allclose(first.accels, again.accels, atol=1e-12)
+
+
+def test_a_failed_local_solve_does_not_fail_a_step_that_solved(monkeypatch):
+    cfg = MPCConfig()
+    data = data_two_robots()
+    solver = DMPC(cfg, 2, 0)
+    real_solve = solver.local.solve
+
+    def robot_1_fails(i, *args):
+        sol = real_solve(i, *args)
+        return (
+            sol
+            if i == 0
+            else type(sol)(**{**sol.__dict__, "status": "Invalid_Number_Detected", "success": False})
+        )
+
+    monkeypatch.setattr(solver.local, "solve", robot_1_fails)
+    result = solver.solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
+    assert result.solved and result.status == "ok"

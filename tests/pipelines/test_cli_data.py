@@ -55,6 +55,15 @@ def test_stats_table(tmp_path, capsys):
     assert row.split()[:7] == ["a/walk.ndjson", "2", "45", "3", "3", "3.0", "3"]
 
 
+def test_stats_total_ignores_files_without_scenes(tmp_path, capsys):
+    write_walk_file(tmp_path / "walk.ndjson")
+    write_lines(tmp_path / "empty.ndjson", [])  # an empty split is a valid file
+    code, out, _ = run(capsys, "data", "stats", str(tmp_path))
+    assert code == 0
+    total = out.splitlines()[-1].split()
+    assert total[:2] == ["total", "2"] and total[4] == "3"  # min agents/scene: the walk's 3, not 0
+
+
 BAD_LINES = {
     "bad json": ('{"track": {"f": 0, "p": 1', "invalid JSON"),
     "missing keys": (json.dumps({"track": {"f": 0, "p": 1}}), "lacks key(s) ['x', 'y']"),

@@ -144,3 +144,30 @@ def test_unknown_names_and_bad_options_are_one_line_errors(capsys):
     assert main(["zoo", "show", "nope"]) == 2
     assert main(["train", "--model", "vanilla_lstm", "--pooling", "soft", "--train", "a", "--val", "b"]) == 2
     assert "--pooling does not apply to vanilla_lstm" in capsys.readouterr().err
+
+
+def test_unreadable_checkpoint_files_are_one_line_errors(tmp_path, capsys):
+    weights = tmp_path / "bad.pt"
+    config = {
+        "format": "crowdmpc-predictor",
+        "class": "SocialLSTMPredictor",
+        "model": "social_lstm",
+        "net": {},
+    }
+    (tmp_path / "bad.json").write_text(json.dumps(config))
+    (tmp_path / "bad.metrics.json").write_text("{}")
+    for content in (b"", b"not a torch file\n"):  # torch raises EOFError / UnpicklingError for these
+        weights.write_bytes(content)
+        assert main(["zoo", "add", str(weights)]) == 2
+        assert "bad.pt: not a state_dict of tensors" in capsys.readouterr().err
+
+    (tmp_path / "bad.json").write_text(json.dumps({**config, "net": {"hidden_dim": "32"}}))
+    assert main(["zoo", "add", str(weights)]) == 2
+    assert "holds a value of the wrong type" in capsys.readouterr().err
+
+    (tmp_path / "bad.metrics.json").write_text("{not json")
+    assert main(["zoo", "add", str(weights)]) == 2
+    assert "bad.metrics.json: not valid JSON" in capsys.readouterr().err
+
+    assert main(["export", "constant_velocity", "--out", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err

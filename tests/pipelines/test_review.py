@@ -151,6 +151,9 @@ def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     assert main(["review", str(tmp_path / "missing.mcap")]) == 2
     assert main(["review", str(tmp_path)]) == 2  # a folder with no valid recordings
     assert main(["review", str(not_mcap), "--times", "0,4"]) == 2  # --times without --plot
+    capsys.readouterr()
+    assert main(["review", str(not_mcap), "--plot", str(tmp_path / "p")]) == 2  # checked before reading
+    assert "cannot write a figure of type '(no suffix)'" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")

@@ -44,6 +44,7 @@ def test_simulate_records_one_mcap_per_episode(tmp_path, capsys):
         (["--episodes", "0"], "--episodes must be >= 1, got 0"),
         (["--robots", "13"], "--robots must be in 1..12, got 13"),
         (["--humans", "60"], "n_humans must be in [0, 50], got 60"),
+        (["--plot", "episode.foo"], "--plot episode.foo: cannot write a figure of type 'foo'"),
     ],
 )
 def test_bad_options_are_one_line_errors(args, message, capsys):
