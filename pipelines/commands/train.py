@@ -82,6 +82,8 @@ def default_name(model: str, pooling: str, dataset: str, explicit_files: bool) -
 
 def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
     """The train/val/test files and the directory their names are relative to (None: as given)."""
+    if args.test is not None and args.train is None and args.val is None:
+        raise PipelineError("--test goes with --train and --val (explicit files replace --protocol)")
     if args.train is not None or args.val is not None:
         if not args.train or not args.val:
             raise PipelineError("--train and --val go together (explicit files replace --protocol)")

@@ -171,3 +171,10 @@ def test_unreadable_checkpoint_files_are_one_line_errors(tmp_path, capsys):
 
     assert main(["export", "constant_velocity", "--out", str(tmp_path)]) == 2
     assert "is a directory" in capsys.readouterr().err
+
+
+def test_test_files_without_train_and_val_are_refused(tmp_path, capsys):
+    path = tmp_path / "t.ndjson"
+    write_walk_file(path)
+    assert main(["train", "--model", "vanilla_lstm", "--test", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert "--test goes with --train and --val" in capsys.readouterr().err

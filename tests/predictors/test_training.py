@@ -70,7 +70,10 @@ def test_model_step_shares_one_path_for_val_and_test(tiny_data):
     module = SocialLSTMModule(SocialLSTMConfig().to_dict(), OptimConfig().__dict__).eval()
     with torch.no_grad():
         val, test = module.model_step(batch, "val"), module.model_step(batch, "test")
+        train = module.model_step(batch, "train")
     assert all(torch.equal(val[k], test[k]) for k in val)
+    # training feeds the ground truth back (teacher forcing), evaluation its own predictions
+    assert not all(torch.equal(val[k], train[k]) for k in val if k in train)
 
 
 def test_bad_options_are_refused():
