@@ -13,10 +13,8 @@ sha256, sizes), "config" and "run" (JSON-encoded values).
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
-import math
 from collections import Counter
 from collections.abc import Mapping
 from importlib.metadata import PackageNotFoundError, version
@@ -27,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
+from pipelines.plain_json import plain
 from pipelines.recorder import McapRecorder
 from pipelines.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
 
@@ -69,26 +68,6 @@ def episode_filename(scenario: str, seed: int) -> str:
 
 def seconds_to_ns(t: float) -> int:
     return int(round(t * 1e9))
-
-
-def plain(value: Any) -> Any:
-    """``value`` as plain JSON: numpy scalars/arrays to Python, tuples to lists, NaN/inf to None."""
-    if isinstance(value, float | np.floating):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    if isinstance(value, bool | np.bool_):
-        return bool(value)
-    if isinstance(value, int | np.integer):
-        return int(value)
-    if isinstance(value, np.ndarray):
-        return plain(value.tolist()) if value.dtype.kind == "f" else value.tolist()
-    if isinstance(value, list | tuple):
-        return [plain(v) for v in value]
-    if isinstance(value, Mapping):
-        return {str(k): plain(v) for k, v in value.items()}
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    return value
 
 
 def _metadata_strings(values: Mapping[str, Any]) -> dict[str, str]:

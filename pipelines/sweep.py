@@ -26,7 +26,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
-import math
 import os
 import shutil
 import socket
@@ -44,6 +43,7 @@ from typing import Any, Final, Protocol
 from pipelines.controllers import Controller, ControllerSpec, make_controller
 from pipelines.errors import PipelineError
 from pipelines.experiments import EpisodeTask, Experiment, predictor_of
+from pipelines.plain_json import plain
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
@@ -70,19 +70,6 @@ SINGLE_THREAD_ENV: Final[dict[str, str]] = {
 # ----------------------------------------------------------------------------------------------------------
 # The durable record log
 # ----------------------------------------------------------------------------------------------------------
-
-
-def json_ready(value: Any) -> Any:
-    """Plain JSON (no NaN/inf, which strict readers reject): numpy values to Python, NaN and inf to None."""
-    if isinstance(value, dict):
-        return {str(k): json_ready(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_ready(v) for v in value]
-    if hasattr(value, "tolist"):  # numpy array or scalar
-        return json_ready(value.tolist())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 class EpisodeLog:
@@ -129,7 +116,7 @@ class EpisodeLog:
         return records
 
     def append(self, record: dict[str, Any]) -> None:
-        line = json.dumps(json_ready(record), allow_nan=False, separators=(",", ":")) + "\n"
+        line = json.dumps(plain(record), allow_nan=False, separators=(",", ":")) + "\n"
         with open(self.path, "ab") as f:
             f.write(line.encode())
             f.flush()
@@ -188,7 +175,7 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) 
     for status in statuses:
         status_counts[status] = status_counts.get(status, 0) + 1
     has_steps = solve_ms.size > 0
-    return json_ready(
+    return plain(
         {
             "key": task.key,
             "experiment": task.experiment,
@@ -609,7 +596,7 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
         }
     )
     tmp = path.with_suffix(".json.part")
-    tmp.write_text(json.dumps(json_ready(meta), indent=1) + "\n")
+    tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
     os.replace(tmp, path)
 
 

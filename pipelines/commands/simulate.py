@@ -9,11 +9,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from pipelines.controllers import CONTROLLERS, COUPLINGS
 from pipelines.errors import PipelineError
+from pipelines.plain_json import plain
 
 EPILOG = """examples:
   crowdmpc simulate --controller orca --scenario circle --humans 7 --episodes 20 --seed 0
@@ -55,19 +54,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
-
-
-def json_ready(value: Any) -> Any:
-    """Plain JSON: NaN and inf become null, tuples lists, numpy scalars Python numbers."""
-    if isinstance(value, dict):
-        return {str(k): json_ready(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_ready(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _fmt(x: float, unit: str = "", digits: int = 2) -> str:
@@ -182,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         payload = {"run": run_meta, "summary": summary, "episodes": [r.record() for r in results]}
-        args.json.write_text(json.dumps(json_ready(payload), indent=1) + "\n")
+        args.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.plot is not None:
         from crowdsim.plotting import plot_episode
