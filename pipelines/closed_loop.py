@@ -26,6 +26,21 @@ DEFAULT_ENV: Final[EnvConfig] = EnvConfig()
 PREDICTOR_FREE: Final[frozenset[str]] = frozenset({"straight", "orca"})
 
 
+def step_time_stats(seconds: Sequence[float] | np.ndarray) -> dict[str, float | None]:
+    """Median, 95th percentile and maximum of control-step wall times, in ms (None when there are no steps).
+
+    Every report (simulate, MCAP metrics, review, sweep) states solve times through this one function.
+    """
+    ms = np.asarray(seconds, dtype=float) * 1e3
+    if ms.size == 0:
+        return {"median_ms": None, "p95_ms": None, "max_ms": None}
+    return {
+        "median_ms": float(np.median(ms)),
+        "p95_ms": float(np.percentile(ms, 95)),
+        "max_ms": float(ms.max()),
+    }
+
+
 @dataclass(frozen=True)
 class EpisodeResult:
     """One finished episode: who drove, what happened, what it cost."""
@@ -48,7 +63,7 @@ class EpisodeResult:
 
     def record(self) -> dict[str, Any]:
         """A JSON-ready summary of the episode (no trajectories)."""
-        ms = self.solve_times_s * 1e3
+        times = step_time_stats(self.solve_times_s)
         return {
             "seed": self.seed,
             "scenario": self.scenario,
@@ -57,8 +72,8 @@ class EpisodeResult:
             "controller": self.controller,
             "predictor": self.predictor,
             "metrics": self.metrics.as_dict(),
-            "solve_time_median_ms": float(np.median(ms)) if ms.size else None,
-            "solve_time_max_ms": float(ms.max()) if ms.size else None,
+            "solve_time_median_ms": times["median_ms"],
+            "solve_time_max_ms": times["max_ms"],
             "iterations_mean": float(self.iterations.mean()) if self.iterations.size else None,
             "statuses": dict(Counter(self.statuses)),
             "fallbacks": dict(Counter(f for f in self.fallbacks if f is not None)),
@@ -205,13 +220,11 @@ def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
     Solve times in ms per control step: median, p95, max; IBR iterations: mean and max; fallback steps.
     """
     out: dict[str, Any] = dict(aggregate([r.metrics for r in results]))
-    ms = np.concatenate([r.solve_times_s for r in results]) * 1e3
+    times = np.concatenate([r.solve_times_s for r in results])
     its = np.concatenate([r.iterations for r in results])
-    has = ms.size > 0
-    out["control_steps"] = int(ms.size)
-    out["solve_time_median_ms"] = float(np.median(ms)) if has else math.nan
-    out["solve_time_p95_ms"] = float(np.percentile(ms, 95)) if has else math.nan
-    out["solve_time_max_ms"] = float(ms.max()) if has else math.nan
+    has = times.size > 0
+    out["control_steps"] = int(times.size)
+    out.update({f"solve_time_{k}": v for k, v in step_time_stats(times).items()})
     out["iterations_mean"] = float(its.mean()) if has else math.nan
     out["iterations_max"] = int(its.max()) if has else 0
     out["fallback_steps"] = int(sum(f is not None for r in results for f in r.fallbacks))

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
+from pipelines.closed_loop import step_time_stats
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 from pipelines.recorder import McapRecorder
@@ -368,13 +369,9 @@ class McapEpisodeRecorder:
 
 def episode_summary(result: Any) -> dict[str, Any]:
     """The /episode/metrics message of a ``pipelines.closed_loop.EpisodeResult``."""
-    times_ms = np.asarray(result.solve_times_s, dtype=float) * 1e3
     iterations = np.asarray(result.iterations, dtype=float)
-    has_steps = times_ms.size > 0
     solve = {
-        "median_ms": float(np.median(times_ms)) if has_steps else None,
-        "p95_ms": float(np.percentile(times_ms, 95)) if has_steps else None,
-        "max_ms": float(times_ms.max()) if has_steps else None,
+        **step_time_stats(result.solve_times_s),
         "mean_iterations": float(iterations.mean()) if iterations.size else None,
     }
     return {
@@ -384,7 +381,7 @@ def episode_summary(result: Any) -> dict[str, Any]:
         "predictor": None if result.predictor is None else str(result.predictor),
         "n_humans": int(result.n_humans),
         "n_robots": int(result.n_robots),
-        "n_steps": int(times_ms.size),
+        "n_steps": len(result.solve_times_s),
         "metrics": plain(result.metrics),
         "solve": solve,
         "statuses": dict(Counter(str(s) for s in result.statuses)),

@@ -25,6 +25,7 @@ from mcap.reader import NonSeekingReader
 from mcap.records import Metadata
 from mcap.stream_reader import StreamReader
 
+from pipelines.closed_loop import step_time_stats
 from pipelines.errors import PipelineError
 from pipelines.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, unsupported_keywords, validate
 
@@ -253,14 +254,11 @@ def _solver_stats(rec: Recording) -> dict[str, Any]:
     solver = rec.data("/mpc/solver")
     if not solver:
         return {"steps": 0}
-    times_ms = np.array([s["solve_time_s"] for s in solver], dtype=float) * 1e3
     iterations = np.array([s["iterations"] for s in solver], dtype=float)
     potentials = [s["potential"] for s in solver if s["potential"] is not None]
     return {
         "steps": len(solver),
-        "median_ms": float(np.median(times_ms)),
-        "p95_ms": float(np.percentile(times_ms, 95)),
-        "max_ms": float(times_ms.max()),
+        **step_time_stats([s["solve_time_s"] for s in solver]),
         "mean_iterations": float(iterations.mean()),
         "max_iterations": int(iterations.max()),
         "statuses": dict(Counter(s["status"] for s in solver)),
@@ -386,13 +384,10 @@ def aggregate_table(recordings: list[Recording]) -> tuple[str, dict[str, Any]]:
         totals.update(_aggregate_metrics(ended))
     solver = [m for rec in recordings for m in rec.data("/mpc/solver")]
     if solver:
-        ms = np.array([m["solve_time_s"] for m in solver]) * 1e3
+        times = step_time_stats([m["solve_time_s"] for m in solver])
+        totals.update({f"solve_time_{k}": v for k, v in times.items()})
         totals.update(
-            control_steps=len(solver),
-            solve_time_median_ms=float(np.median(ms)),
-            solve_time_p95_ms=float(np.percentile(ms, 95)),
-            solve_time_max_ms=float(ms.max()),
-            fallback_steps=sum(m["fallback"] is not None for m in solver),
+            control_steps=len(solver), fallback_steps=sum(m["fallback"] is not None for m in solver)
         )
     return _table(header, rows) + "\n\n" + _format_totals(totals), totals
 

@@ -167,6 +167,8 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) 
     time for the episode, which unlike ``wall_s`` does not depend on how busy the machine was."""
     import numpy as np
 
+    from pipelines.closed_loop import step_time_stats
+
     spec = task.cell.spec
     solve_ms = np.asarray(result.solve_times_s, dtype=float) * 1e3
     iterations = np.asarray(result.iterations, dtype=float)
@@ -174,7 +176,6 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) 
     status_counts: dict[str, int] = {}
     for status in statuses:
         status_counts[status] = status_counts.get(status, 0) + 1
-    has_steps = solve_ms.size > 0
     return plain(
         {
             "key": task.key,
@@ -195,9 +196,7 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) 
             "solver": {
                 "steps": int(solve_ms.size),
                 "total_ms": float(solve_ms.sum()),
-                "median_ms": float(np.median(solve_ms)) if has_steps else None,
-                "p95_ms": float(np.percentile(solve_ms, 95)) if has_steps else None,
-                "max_ms": float(solve_ms.max()) if has_steps else None,
+                **step_time_stats(result.solve_times_s),
                 "mean_iterations": float(iterations.mean()) if iterations.size else None,
                 "max_iterations": int(iterations.max()) if iterations.size else None,
                 "fallback_steps": sum(f is not None for f in result.fallbacks),
