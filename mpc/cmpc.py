@@ -49,6 +49,45 @@ class IBRResult:
     solver_iterations: int  # IPOPT iterations summed over the solves
 
 
+def joint_result(
+    n_robots: int,
+    horizon: int,
+    *,
+    accels: np.ndarray,
+    positions: np.ndarray,
+    prediction: np.ndarray | None,
+    potentials: list[float] | tuple[float, ...],
+    iterations: int,
+    solves: int,
+    solved: bool,
+    converged: bool,
+    status: str,
+    predictions: list[np.ndarray] | tuple[np.ndarray, ...],
+    lam_x: np.ndarray | None,
+    lam_g: np.ndarray | None,
+    solver_iterations: int,
+) -> IBRResult:
+    """The result of a joint-NLP loop (CMPC, coupled NLP): F of the last iteration, and multipliers shaped
+    ``(M, H, 2)`` only when a plan was solved (a failed step warm-starts nothing)."""
+    shape = (n_robots, horizon, 2)
+    return IBRResult(
+        accels=accels,
+        positions=positions,
+        prediction=prediction,
+        potential=potentials[-1] if potentials else math.nan,
+        iterations=iterations,
+        solves=solves,
+        solved=solved,
+        converged=converged,
+        status=status,
+        predictions=tuple(predictions),
+        potentials=tuple(potentials),
+        lam_x=None if lam_x is None or not solved else np.reshape(lam_x, shape),
+        lam_g=None if lam_g is None or not solved else np.reshape(lam_g, shape),
+        solver_iterations=solver_iterations,
+    )
+
+
 def finite_prediction(prediction: np.ndarray, shape: tuple[int, ...]) -> np.ndarray | None:
     """``prediction`` as float64 when it has ``shape`` and is finite everywhere, else None."""
     prediction = np.asarray(prediction, dtype=float)
@@ -106,20 +145,20 @@ class CMPC:
                 status = "timeout"
                 break
             previous_potential, previous = potential, prediction
-        shape = (self.n_robots, cfg.horizon, 2)
-        return IBRResult(
+        return joint_result(
+            self.n_robots,
+            cfg.horizon,
             accels=accels,
             positions=positions,
             prediction=used,
-            potential=potential,
+            potentials=potentials,
             iterations=iterations,
             solves=solves,
             solved=solved,
             converged=converged,
             status=status,
-            predictions=tuple(predictions),
-            potentials=tuple(potentials),
-            lam_x=None if lam_x is None or not solved else np.reshape(lam_x, shape),
-            lam_g=None if lam_g is None or not solved else np.reshape(lam_g, shape),
+            predictions=predictions,
+            lam_x=lam_x,
+            lam_g=lam_g,
             solver_iterations=solver_iterations,
         )

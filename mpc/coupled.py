@@ -39,7 +39,7 @@ from typing import Final
 import casadi as ca
 import numpy as np
 
-from mpc.cmpc import IBRResult, finite_prediction
+from mpc.cmpc import IBRResult, finite_prediction, joint_result
 from mpc.config import MPCConfig
 from mpc.dynamics import rollout_numpy
 from mpc.fallback import Start
@@ -143,21 +143,21 @@ class CoupledCMPC:
 
     def _result(self, data, accels, prediction, potentials, iterations, solves, solved, converged, status,
                 predictions, lam_x, lam_g, solver_iterations) -> IBRResult:  # fmt: skip
-        shape = (self.n_robots, self.cfg.horizon, 2)
-        return IBRResult(
+        return joint_result(
+            self.n_robots,
+            self.cfg.horizon,
             accels=accels,
             positions=rollout_numpy(data.states, accels, self.cfg.dt)[0],
             prediction=prediction,
-            potential=potentials[-1] if potentials else math.nan,
+            potentials=potentials,
             iterations=iterations,
             solves=solves,
             solved=solved,
             converged=converged,
             status=status,
-            predictions=tuple(predictions),
-            potentials=tuple(potentials),
-            lam_x=None if lam_x is None or not solved else np.reshape(lam_x, shape),
-            lam_g=None if lam_g is None or not solved else np.reshape(lam_g, shape),
+            predictions=predictions,
+            lam_x=lam_x,
+            lam_g=lam_g,
             solver_iterations=solver_iterations,
         )
 
