@@ -27,9 +27,10 @@ from mpc.dmpc import DMPC
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory
 from mpc.nlp import StepData
-from pipelines.controllers import ControllerSpec, ControlOutput
+from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec, ControlOutput
 from pipelines.errors import PipelineError
 from predictors.base import Predictor
+from predictors.errors import UnknownPredictor
 from predictors.registry import checkpoint_sha256, load_predictor
 
 if TYPE_CHECKING:
@@ -55,6 +56,14 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     return history, np.ones(history.shape[:2], dtype=bool)
 
 
+def _load(name: str) -> Predictor:
+    """The registry's predictor, or an error that also names the oracle the controller registry offers."""
+    try:
+        return load_predictor(name)
+    except UnknownPredictor as exc:
+        raise UnknownPredictor(name, [*exc.choices, ORACLE_PREDICTOR]) from None
+
+
 class MPCController:
     """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``) or the coupled NLP (``coupling="nlp"``)."""
 
@@ -68,7 +77,7 @@ class MPCController:
         self.name = "dmpc" if distributed else "cmpc"
         self.distributed = distributed
         self.cfg = mpc_config(spec)
-        self.predictor = predictor if predictor is not None else load_predictor(spec.predictor)
+        self.predictor = predictor if predictor is not None else _load(spec.predictor)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
 

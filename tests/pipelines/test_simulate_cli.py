@@ -57,3 +57,9 @@ def test_unknown_scenario_is_rejected_by_the_parser():
     with pytest.raises(SystemExit) as exc:
         main(["simulate", "--controller", "orca", "--scenario", "square"])
     assert exc.value.code == 2
+
+
+def test_an_unknown_predictor_lists_the_zoo_and_the_oracle(capsys):
+    assert main(["simulate", "--controller", "cmpc", "--predictor", "nope", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown predictor 'nope'" in err and "'constant_velocity'" in err and "'orca_oracle'" in err
