@@ -41,12 +41,12 @@ class IBRResult:
     solves: int  # NLP solves run (CMPC: <= iterations; DMPC: up to M per iteration)
     solved: bool  # at least one solve produced the plan (False: ``accels`` is the fallback u^(0))
     converged: bool  # the stopping test of the algorithm held before j_max
-    status: str  # "ok", or the first failure: an IPOPT status, "nan_prediction", "timeout"
+    status: str  # "ok", or the first failure: a solver status (mpc/nlp.py), "nan_prediction", "timeout"
     predictions: tuple[np.ndarray, ...]  # (H, N_h, 2) of every iteration
     potentials: tuple[float, ...]  # F^(j) of every iteration that produced a plan
     lam_x: np.ndarray | None  # (M, H, 2) multipliers of the final plan, for the next warm start
     lam_g: np.ndarray | None
-    solver_iterations: int  # IPOPT iterations summed over the solves
+    solver_iterations: int  # solver iterations summed over the solves
 
 
 def joint_result(
@@ -127,7 +127,13 @@ class CMPC:
                 potentials.append(potential)
                 break
             sol, n_solves, n_iterations = self.nlp.solve_multi_start(
-                data, prediction, accels, lam_x, lam_g, restart=j == 1 and start.kind != "brake"
+                data,
+                prediction,
+                accels,
+                lam_x,
+                lam_g,
+                restart=j == 1 and start.kind != "brake",
+                explore=j == 1 and start.kind == "brake",
             )
             solves += n_solves
             solver_iterations += n_iterations

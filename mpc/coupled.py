@@ -69,10 +69,10 @@ class ExactPredictor:
         """``expanded``: ``expand_if_small(function)``, computed once by the caller."""
         self.n_params = context_size
         if expanded is not None:
-            self.function, self.symbolic, self.options = expanded, ca.SX, {}
+            self.function, self.symbolic, self.ipopt_options = expanded, ca.SX, {}
         else:
             self.function, self.symbolic = function, ca.MX
-            self.options = {"ipopt.hessian_approximation": "limited-memory"}
+            self.ipopt_options = {"ipopt.hessian_approximation": "limited-memory"}
 
     def humans(self, p, robots_future):
         return self.function(p, robots_future)
@@ -166,7 +166,13 @@ class CoupledCMPC:
             return self._result(data, start.accels, None, (), 1, 0, False, False, "nan_prediction", (),
                                 None, None, 0)  # fmt: skip
         sol, solves, iterations = self.nlp.solve_multi_start(
-            data, context, start.accels, start.lam_x, start.lam_g, restart=start.kind != "brake"
+            data,
+            context,
+            start.accels,
+            start.lam_x,
+            start.lam_g,
+            restart=start.kind != "brake",
+            explore=start.kind == "brake",
         )
         if not sol.success:
             return self._result(data, start.accels, None, (), 1, solves, False, False, sol.status, (),
@@ -204,7 +210,13 @@ class CoupledCMPC:
             previous_model = model
             extra = FirstOrderPredictor.params(value, jac, r0)
             sol, n_solves, n_iterations = self.nlp.solve_multi_start(
-                data, extra, accels, lam_x, lam_g, restart=j == 1 and start.kind != "brake"
+                data,
+                extra,
+                accels,
+                lam_x,
+                lam_g,
+                restart=j == 1 and start.kind != "brake",
+                explore=j == 1 and start.kind == "brake",
             )
             solves += n_solves
             solver_iterations += n_iterations

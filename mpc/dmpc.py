@@ -7,8 +7,8 @@ ends when every robot satisfies ``C_i(u_i^(j), u_-i^(j)) <= C_i(u_i^(j-1), u_-i^
 ``j_max``. A robot whose controls are pinned (``on_goal="brake"``) does not play: its plan is braking. A
 failed local solve counts as a rejected plan.
 
-Parallelism. The local solves of one iteration are independent. CasADi 3.8 releases the GIL while IPOPT
-runs, so ``dmpc_parallel="threads"`` really runs them concurrently, each robot on its own IPOPT instance (one
+Parallelism. The local solves of one iteration are independent. CasADi 3.8 releases the GIL while a solver
+runs, so ``dmpc_parallel="threads"`` really runs them concurrently, each robot on its own solver instance (one
 instance shared by threads segfaults). Whether that pays depends on free cores. benchmarks/control_step.py
 --dmpc-parallel, 3 robots, 7 humans, closed loop on this 2-core machine: median step 32.7 ms serial vs
 23.6 ms threads with the machine otherwise idle (load 1.0), but 33.7 ms vs 50.2 ms with the other engineers'
@@ -54,7 +54,7 @@ class DMPC:
             self._pool = None
 
     def _solve_all(
-        self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]]
+        self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, bool]]
     ):
         if self.cfg.dmpc_parallel != "threads":
             return [self.local.solve(*job) for job in jobs]
@@ -71,12 +71,15 @@ class DMPC:
         """
         cfg = self.cfg
         brake = braking(data.states, cfg.horizon, cfg.dt, cfg.a_max)
+        penalties = self.local.penalties([s.accels for s in sols], [params[i] for i in moving])
         redo = [
             k
-            for k, (i, sol) in enumerate(zip(moving, sols, strict=True))
-            if not sol.success or self.local.penalty(sol.accels, params[i]) > cfg.restart_penalty
+            for k, (sol, penalty) in enumerate(zip(sols, penalties, strict=True))
+            if not sol.success or penalty > cfg.restart_penalty
         ]
-        extra = self._solve_all([(moving[k], params[moving[k]], brake[moving[k]], None, None) for k in redo])
+        extra = self._solve_all(
+            [(moving[k], params[moving[k]], brake[moving[k]], None, None, False) for k in redo]
+        )
         out = list(sols)
         for k, other in zip(redo, extra, strict=True):
             out[k] = better(sols[k], other)
@@ -110,6 +113,7 @@ class DMPC:
                     accels[i],
                     None if lam_x is None else lam_x[i],
                     None if lam_g is None else lam_g[i],
+                    j == 1 and start.kind == "brake",
                 )
                 for i in moving
             ]
@@ -122,14 +126,15 @@ class DMPC:
                 solver_iterations += sum(s.iterations for s in extra)
             # Lines 5-6: keep a new plan only if it lowers C_i(., u_-i^(j-1)) by at least epsilon.
             new_accels = accels.copy()
-            for i, sol in zip(moving, sols, strict=True):
+            old_costs = local.costs([accels[i] for i in moving], [params[i] for i in moving])
+            for i, sol, old_cost in zip(moving, sols, old_costs, strict=True):
                 if not sol.success:
                     # A robot whose local solve failed keeps its plan, as if it had not improved; the step
                     # fails only when no local solve ever succeeded (below).
                     first_failure = first_failure or sol.status
                     continue
                 # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
-                if accept(sol.cost, local.cost(accels[i], params[i]), cfg.epsilon):
+                if accept(sol.cost, old_cost, cfg.epsilon):
                     new_accels[i] = sol.accels
                     if lam_x is None or lam_g is None:
                         lam_x = np.zeros((self.n_robots, cfg.horizon, 2))
@@ -142,10 +147,11 @@ class DMPC:
             # Lines 12-16: the epsilon-Nash check against the others' new plans. An iteration in which every
             # local solve failed proves nothing, so it cannot end the loop as converged.
             new_positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
-            converged = solved_now
-            for i in moving:
-                p = local.params(i, data, new_positions, prediction)
-                converged &= local.cost(new_accels[i], p) <= local.cost(accels[i], p) + cfg.epsilon
+            new_params = [local.params(i, data, new_positions, prediction) for i in moving]
+            checks = local.costs(
+                [new_accels[i] for i in moving] + [accels[i] for i in moving], new_params + new_params
+            ).reshape(2, len(moving))
+            converged = solved_now and bool(np.all(checks[0] <= checks[1] + cfg.epsilon))
             accels, positions = new_accels, new_positions
             if used is not None:
                 potentials.append(self.joint.potential(accels, data, used))

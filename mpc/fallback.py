@@ -1,6 +1,6 @@
 """What a control step starts from, and what it falls back to when it cannot solve.
 
-A solver failure (any IPOPT status outside ``nlp.SOLVED``), a non-finite prediction, or running out of the
+A solver failure (any status outside ``nlp.SOLVED``), a non-finite prediction, or running out of the
 step's time budget never ends an episode. The step then applies, in order of preference:
 
 1. ``"shifted"``: the last solved plan shifted by the steps elapsed since it was solved, as long as it still

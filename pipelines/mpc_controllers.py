@@ -2,9 +2,10 @@
 
 One controller per run: the predictor is loaded once, and the NLPs are built once per problem size (robots,
 humans) and reused across episodes. Per step: the observation becomes the solvers' ``StepData``; the humans'
-predictions come from ``predictor.rollout`` on the last ``predictor.obs_len`` rows of ``obs.history`` (robots
-first, then humans) with the robots' planned positions as ``robots_future`` (or, for ``coupling="nlp"``, from
-the predictor's CasADi twin inside the NLP, fed ``predictor.encode`` of the same history).
+predictions come from the predictor on the last ``predictor.obs_len`` rows of ``obs.history`` (robots first,
+then humans) with the robots' planned positions as ``robots_future``: its CasADi twin evaluated numerically
+on ``predictor.encode`` of that history (``rollout`` for a predictor without a twin, the ORCA oracle), or,
+for ``coupling="nlp"``, the same twin inside the NLP.
 
 A robot that has reached its goal (``obs.robot_reached``) holds position and stops flocking: by default
 (``on_goal="track"``) it stays in the optimisation anchored by its goal term, so it keeps still unless a
@@ -26,11 +27,12 @@ from mpc.coupled import CoupledCMPC
 from mpc.dmpc import DMPC
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory
+from mpc.fastcall import BufferedFunction
 from mpc.nlp import StepData
 from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec, ControlOutput
 from pipelines.errors import PipelineError
 from predictors.base import Predictor
-from predictors.errors import UnknownPredictor
+from predictors.errors import PredictorError, UnknownPredictor
 from predictors.registry import checkpoint_sha256, load_predictor
 
 if TYPE_CHECKING:
@@ -80,6 +82,7 @@ class MPCController:
         self.predictor = predictor if predictor is not None else _load(spec.predictor)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
+        self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
 
     def close(self) -> None:
         """Release what the solvers hold (DMPC's thread pool); the controller can still be used after."""
@@ -116,6 +119,37 @@ class MPCController:
                 self._solvers[key] = CMPC(self.cfg, n_robots, n_humans)
         return self._solvers[key]
 
+    def _twin(self, n_humans: int, n_robots: int) -> BufferedFunction | None:
+        """The predictor's CasADi twin for this size, or None for a predictor without one (the oracle)."""
+        key = (n_humans, n_robots)
+        if key not in self._twins:
+            try:
+                function = self.predictor.to_casadi(n_humans, n_robots, self.cfg.horizon)
+            except PredictorError:
+                self._twins[key] = None
+            else:
+                self._twins[key] = BufferedFunction(function)
+        return self._twins[key]
+
+    def _predict_fn(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray, n_robots: int):
+        """The IBR loop's ``predict``: robots' planned positions ``(H, M, 2)`` -> humans' ``(H, N_h, 2)``.
+
+        Through the predictor's CasADi twin on ``encode`` of the past when it has one: the contract test
+        holds it to ``rollout`` within 1e-6, and for the networks it is ~4x cheaper than the torch rollout
+        (0.42 vs 1.78 ms, social_lstm_eth, 7 humans + 3 robots), which the loop calls several times a step.
+        """
+        n_humans = len(humans)
+        twin = self._twin(n_humans, n_robots)
+        if twin is None:
+            return lambda robots_future: self.predictor.rollout(history, mask, robots_future, humans)
+        context = self.predictor.encode(history, mask, humans)
+        shape = (self.cfg.horizon, n_humans, 2)
+
+        def predict(robots_future: np.ndarray) -> np.ndarray:
+            return twin(context, robots_future)[0].reshape(shape)
+
+        return predict
+
     def reset(self, obs: Observation) -> None:
         self.solver(obs.n_robots, obs.n_humans)  # build now, not inside the first timed step
         self.memory.reset()
@@ -148,11 +182,7 @@ class MPCController:
         if isinstance(solver, CoupledCMPC):
             result = solver.solve(data, self.predictor.encode(history, mask, humans), start)
         else:
-
-            def predict(robots_future: np.ndarray) -> np.ndarray:
-                return self.predictor.rollout(history, mask, robots_future, humans)
-
-            result = solver.solve(data, predict, start)
+            result = solver.solve(data, self._predict_fn(history, mask, humans, n_robots), start)
         return self._output(result, start.kind, data, t0)
 
     def _output(self, result: IBRResult, start_kind: str, data: StepData, t0: float) -> ControlOutput:

@@ -36,7 +36,7 @@ import time
 import traceback
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Final, Protocol
 
@@ -59,6 +59,8 @@ BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
 # the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
 # MPC controller holds a few CasADi/IPOPT instances (megabytes), worth keeping but not without bound.
 CONTROLLER_CACHE: Final[int] = 16
+# Controllers whose NLPs jit compiles (build_controller); the baselines solve none.
+JIT_CONTROLLERS: Final[frozenset[str]] = frozenset({"cmpc", "dmpc"})
 # Library thread pools inside each worker: the workers are the parallelism.
 SINGLE_THREAD_ENV: Final[dict[str, str]] = {
     "OMP_NUM_THREADS": "1",
@@ -146,9 +148,32 @@ def sweep_lock(out: Path) -> Iterator[None]:
 # ----------------------------------------------------------------------------------------------------------
 
 
-def build_controller(spec: ControllerSpec) -> Controller:
-    """A cell's controller (the registry routes the ORCA oracle predictor to pipelines.oracle)."""
+def build_controller(spec: ControllerSpec, jit: bool = False) -> Controller:
+    """A cell's controller (the registry routes the ORCA oracle predictor to pipelines.oracle).
+
+    ``jit``: the MPC controllers compile their NLPs (MPCConfig.jit). It is a worker setting, not part of the
+    cell: compiled and interpreted functions compute the same costs (to rounding), so the cell key, and the
+    records a rerun resumes from, do not depend on it.
+    """
+    if jit and spec.controller in JIT_CONTROLLERS:
+        spec = replace(spec, mpc_overrides=(*spec.mpc_overrides, ("jit", True)))
     return make_controller(spec)
+
+
+def jit_available() -> bool:
+    """Whether CasADi's jit can compile here: its "shell" compiler calls gcc."""
+    return shutil.which("gcc") is not None
+
+
+def _jit_scratch_directory() -> None:
+    """Move a worker process into a scratch directory of its own: CasADi's jit writes its C sources into the
+    current directory (it has no option for another), and a killed worker must not leave them in the
+    user's."""
+    import atexit
+
+    scratch = tempfile.mkdtemp(prefix="crowdmpc-worker-")
+    os.chdir(scratch)
+    atexit.register(shutil.rmtree, scratch, ignore_errors=True)
 
 
 def predictor_sha256(name: str | None) -> str | None:
@@ -222,10 +247,11 @@ class EpisodeOutcome:
 class EpisodeWorker:
     """Runs episode tasks; builds each cell's controller once and reuses it across that cell's episodes."""
 
-    def __init__(self, record: str = "none"):
+    def __init__(self, record: str = "none", jit: bool = False):
         if record not in RECORD_POLICIES:
             raise PipelineError(f"unknown --record {record!r}; choose from {list(RECORD_POLICIES)}")
         self.record = record
+        self.jit = jit
         self._controllers: OrderedDict[str, Controller] = OrderedDict()
         self.builds = 0  # controllers built so far (a test checks the reuse)
 
@@ -234,7 +260,7 @@ class EpisodeWorker:
         if key in self._controllers:
             self._controllers.move_to_end(key)
             return self._controllers[key]
-        controller = build_controller(task.cell.spec)
+        controller = build_controller(task.cell.spec, self.jit)
         self.builds += 1
         self._controllers[key] = controller
         while len(self._controllers) > CONTROLLER_CACHE:
@@ -324,14 +350,16 @@ def _exit_with_parent() -> None:
     threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
 
 
-def _init_pool_worker(record: str) -> None:
+def _init_pool_worker(record: str, jit: bool) -> None:
     import signal
 
     global _WORKER
     # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent()
-    _WORKER = EpisodeWorker(record)
+    if jit:
+        _jit_scratch_directory()
+    _WORKER = EpisodeWorker(record, jit)
 
 
 def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
@@ -359,8 +387,9 @@ class InlineBackend:
 
     name = "inline"
 
-    def __init__(self, record: str):
-        self.worker = EpisodeWorker(record)
+    def __init__(self, record: str, jit: bool = False):
+        # jit's C sources land in the current directory while the driver runs (removed when it exits).
+        self.worker = EpisodeWorker(record, jit)
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         for task in tasks:
@@ -375,7 +404,7 @@ class ProcessBackend:
 
     name = "process"
 
-    def __init__(self, workers: int, record: str):
+    def __init__(self, workers: int, record: str, jit: bool = False):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
@@ -385,7 +414,7 @@ class ProcessBackend:
                 max_workers=workers,
                 mp_context=multiprocessing.get_context("spawn"),
                 initializer=_init_pool_worker,
-                initargs=(record,),
+                initargs=(record, jit),
             )
             # Start every worker now, while the environment above is in force.
             for future in [self._pool.submit(os.getpid) for _ in range(workers)]:
@@ -418,6 +447,15 @@ class ProcessBackend:
             process.join(timeout=5)
 
 
+class _RayEpisodeWorker(EpisodeWorker):
+    """An EpisodeWorker in a Ray actor: its own process, so it may move to a scratch directory for jit."""
+
+    def __init__(self, record: str = "none", jit: bool = False):
+        if jit:
+            _jit_scratch_directory()
+        super().__init__(record, jit)
+
+
 class RayBackend:
     """K Ray actors, on a local Ray (K CPUs) or on a cluster (--ray-address); the cluster's nodes need
     crowdmpc installed like the driver. The driver alone writes the sweep directory, so any node can run
@@ -425,7 +463,7 @@ class RayBackend:
 
     name = "ray"
 
-    def __init__(self, workers: int, record: str, address: str | None):
+    def __init__(self, workers: int, record: str, address: str | None, jit: bool = False):
         try:
             import ray
         except ImportError:
@@ -440,8 +478,8 @@ class RayBackend:
                 ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
             else:
                 ray.init(address=address, runtime_env=env, log_to_driver=False)
-        actor = ray.remote(num_cpus=1)(EpisodeWorker)
-        self._actors = [actor.remote(record) for _ in range(workers)]
+        actor = ray.remote(num_cpus=1)(_RayEpisodeWorker)
+        self._actors = [actor.remote(record, jit) for _ in range(workers)]
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         ray = self._ray
@@ -474,7 +512,7 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
-def make_backend(kind: str, workers: int, record: str, ray_address: str | None) -> Backend:
+def make_backend(kind: str, workers: int, record: str, ray_address: str | None, jit: bool = False) -> Backend:
     if kind not in BACKENDS:
         raise PipelineError(f"unknown backend {kind!r}; choose from {list(BACKENDS)}")
     if workers < 1:
@@ -482,10 +520,10 @@ def make_backend(kind: str, workers: int, record: str, ray_address: str | None) 
     if ray_address is not None and kind in ("process", "inline"):
         raise PipelineError(f"--ray-address needs the Ray backend, not --backend {kind}")
     if kind == "inline":
-        return InlineBackend(record)
+        return InlineBackend(record, jit)
     if kind == "ray" or (kind == "auto" and (ray_available() or ray_address is not None)):
-        return RayBackend(workers, record, ray_address)
-    return ProcessBackend(workers, record)
+        return RayBackend(workers, record, ray_address, jit)
+    return ProcessBackend(workers, record, jit)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -506,6 +544,7 @@ class SweepConfig:
     ray_address: str | None = None
     record: str = "none"  # RECORD_POLICIES
     progress: bool = True
+    jit: bool = False  # compile the MPC controllers' NLPs in every worker (build_controller)
 
     def __post_init__(self):
         if self.episodes_per_cell < 1:
@@ -587,6 +626,7 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
             "humans": list(config.humans or config.experiment.humans),
             "seed": config.seed,
             "n_robots": config.n_robots,
+            "jit": config.jit,
             "planned": planned,
             "cells": [
                 {"key": c.key, "method": c.method, "n_humans": c.n_humans, **asdict(c.spec)}
@@ -674,7 +714,7 @@ def _check_same_predictors(out: Path, tasks: list[EpisodeTask], done: dict[str, 
 
 
 def _default_backend(config: SweepConfig) -> Backend:
-    return make_backend(config.backend, config.workers, config.record, config.ray_address)
+    return make_backend(config.backend, config.workers, config.record, config.ray_address, config.jit)
 
 
 def _append_error(out: Path, task: EpisodeTask, error: str) -> None:

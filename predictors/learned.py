@@ -1,11 +1,16 @@
 """Learned predictors (Social-LSTM, vanilla LSTM, Social-GAN-like) behind the ``Predictor`` protocol.
 
-Each wraps a ``nets.SocialLSTM`` and computes the same map three ways:
+Each wraps a ``nets.SocialLSTM`` and computes the same map two ways:
 
-* ``rollout``: float64 torch, recursive (Eq. 1): at every step the humans' predictions are fed back and the
-  robots' positions are taken from ``robots_future`` (their own predictions are discarded);
-* ``encode`` + ``to_casadi``: the observed past is run through the encoder numerically, and only the
-  prediction horizon is symbolic, built from ``predictors.casadi_layers`` with the model's own weights.
+* ``rollout`` (and ``rollout_tensor``, ``sample``): float64 torch, recursive (Eq. 1): at every step the
+  humans' predictions are fed back and the robots' positions are taken from ``robots_future`` (their own
+  predictions are discarded). Training uses torch, and this is the reference the CasADi twins are tested
+  against;
+* ``encode`` + ``to_casadi``: CasADi twins of the net's two halves, built from ``predictors.casadi_layers``
+  with the model's own weights (agents as columns, one MX graph each, one step function ``_casadi_step``).
+  ``encode`` evaluates the encoder's twin (``casadi_encoder``) numerically on the observed past, because
+  torch's per-operation overhead on these tiny tensors cost milliseconds per control step; only the
+  prediction horizon (``to_casadi``) is symbolic.
 
 Context layout (``encode``), agents ordered humans (as given) then robots (increasing index), ``D`` hidden:
 ``h (N, D) | c (N, D) | now (N, 2) | first (N_h, 2) | present (N)``, each block row-major: the decoder's
@@ -76,8 +81,11 @@ class LearnedPredictor:
             k: v.detach().cpu().numpy().astype(np.float64) for k, v in self.net.state_dict().items()
         }
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
-        # The iterative best response predicts many times from the same past: keep the last encoding.
+        self._encoders: dict[tuple[int, int], ca.Function] = {}
+        # The iterative best response predicts many times from the same past: keep the last encoding
+        # (torch state for ``rollout``, the context for ``encode``).
         self._last_encoding: tuple[bytes, tuple] | None = None
+        self._last_context: tuple[bytes, np.ndarray] | None = None
 
     # ------------------------------------------------------------------------------------- numeric side
     def _prepare(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray, keep_robots: bool = True):
@@ -185,14 +193,19 @@ class LearnedPredictor:
                 horizon,
             )[0].numpy()
 
-    def _encoded(self, history, mask, humans, keep_robots: bool = True):
-        """``_prepare`` and the encoder, memoised on the exact inputs of the previous call."""
+    @staticmethod
+    def _input_key(history, mask, humans, keep_robots: bool) -> bytes:
+        """The exact inputs of an encoding, as bytes to compare with the memoised one."""
         history = np.ascontiguousarray(history, dtype=np.float64)
         mask = np.ascontiguousarray(mask, dtype=bool)
         humans = np.ascontiguousarray(humans, dtype=np.int64)
-        key = b"|".join(
+        return b"|".join(
             [str((history.shape, keep_robots)).encode(), history.tobytes(), mask.tobytes(), humans.tobytes()]
         )
+
+    def _encoded(self, history, mask, humans, keep_robots: bool = True):
+        """``_prepare`` and the torch encoder, memoised on the exact inputs of the previous call."""
+        key = self._input_key(history, mask, humans, keep_robots)
         if self._last_encoding is None or self._last_encoding[0] != key:
             pos, seen, n_humans = self._prepare(history, mask, humans, keep_robots)
             with torch.no_grad(), single_threaded():
@@ -201,17 +214,25 @@ class LearnedPredictor:
         return self._last_encoding[1]
 
     def encode(self, history, mask, humans):
-        pos, seen, n_humans, (h, c, out) = self._encoded(history, mask, humans)
-        first = pos[-1, :n_humans] + out[0, :n_humans, :2].numpy()
-        return np.concatenate(
-            [
-                h[0].numpy().ravel(),
-                c[0].numpy().ravel(),
-                pos[-1].ravel(),
-                first.ravel(),
-                seen[-1].astype(float),
-            ]
-        )
+        """The context (module docstring), computed by the CasADi encoder and memoised like ``_encoded``."""
+        key = self._input_key(history, mask, humans, True)
+        if self._last_context is None or self._last_context[0] != key:
+            pos, seen, n_humans = self._prepare(history, mask, humans)
+            length, n_agents, _ = pos.shape
+            h, c, step = self.casadi_encoder(n_agents, length)(pos.ravel(), seen.ravel().astype(np.float64))
+            first = pos[-1, :n_humans] + np.asarray(step).reshape(n_agents, 2)[:n_humans]
+            context = np.concatenate(
+                [
+                    np.asarray(h).ravel(),
+                    np.asarray(c).ravel(),
+                    pos[-1].ravel(),
+                    first.ravel(),
+                    seen[-1].astype(float),
+                ]
+            )
+            self._last_context = (key, context)
+        # A copy: the caller may write into its context, the memo must stay what the encoder computed.
+        return self._last_context[1].copy()
 
     def context_size(self, n_humans: int, n_robots: int) -> int:
         n_agents = n_humans + n_robots
@@ -265,15 +286,44 @@ class LearnedPredictor:
 
     def _casadi_decode_step(self, h, c, previous, current, present, n_humans):
         """The twin of ``SocialLSTM.decode_step``, agents as columns; returns the humans' mean step."""
+        h, c = self._casadi_step("decoder", h, c, previous, current, neighbours=present)
+        return h, c, self._casadi_mean(h[:, :n_humans])
+
+    def _casadi_mean(self, h):
+        """The head's mean step ``(2, N)``: the first two outputs of either head are the raw linear ones."""
+        return cl.linear(h, self._weights["head.weight"][:2], self._weights["head.bias"][:2])
+
+    def _casadi_lstm(self, cell: str, x, h, c, weight_ih: np.ndarray):
+        w = self._weights
+        return cl.lstm_cell(
+            x, h, c, weight_ih, w[f"{cell}.weight_hh"], w[f"{cell}.bias_ih"], w[f"{cell}.bias_hh"]
+        )
+
+    def _casadi_tag_step(self, cell: str, h, c, slot: int):
+        """The twin of ``SocialLSTM._tag_step``: every agent is updated."""
+        column = self.config.embedding_dim - N_TAGS + slot
+        # The one-hot tag times weight_ih is that weight's column; a (1, N) input of ones selects it exactly.
+        weight_ih = self._weights[f"{cell}.weight_ih"][:, column : column + 1]
+        return self._casadi_lstm(cell, ca.DM.ones(1, h.shape[1]), h, c, weight_ih)
+
+    def _casadi_step(self, cell: str, h, c, previous, current, *, neighbours, active=None):
+        """The twin of ``SocialLSTM.step`` (agents as columns): the new ``(h, c)``.
+
+        ``neighbours`` (1, N) weights who may be pooled; ``active`` (1, N) of 0/1 marks the agents that move
+        and are updated, None for all of them (a prediction step, whose graph then carries no masking).
+        """
         w, cfg = self._weights, self.config
-        parts = [current - previous]
+        displacement = current - previous
+        if active is not None:
+            displacement = displacement * ca.repmat(active, 2, 1)
+        parts = [displacement]
         if cfg.pooling != "none":
             weights = cl.grid_cell_weights(
                 current,
                 cell_side=cfg.cell_side,
                 grid_size=cfg.grid_size,
                 soft=cfg.pooling == "soft",
-                neighbour_weight=present,
+                neighbour_weight=neighbours,
             )
             values = cl.linear(h, w["pool.hidden_encoding.weight"], w["pool.hidden_encoding.bias"])
             grid = cl.grid_pool(values, weights)
@@ -283,18 +333,68 @@ class LearnedPredictor:
                 ca.vertcat(*parts) * cfg.input_scale, w["input_embedding.weight"], w["input_embedding.bias"]
             )
         )
-        # The two tag slots of the embedding are zero at every prediction step: drop their weight columns.
-        h, c = cl.lstm_cell(
-            x,
-            h,
-            c,
-            w["decoder.weight_ih"][:, : cfg.embedding_dim - N_TAGS],
-            w["decoder.weight_hh"],
-            w["decoder.bias_ih"],
-            w["decoder.bias_hh"],
+        # The two tag slots of the embedding are zero at every step but the tag steps: drop their columns.
+        h_new, c_new = self._casadi_lstm(
+            cell, x, h, c, w[f"{cell}.weight_ih"][:, : cfg.embedding_dim - N_TAGS]
         )
-        mean = cl.linear(h[:, :n_humans], w["head.weight"][:2], w["head.bias"][:2])
-        return h, c, mean
+        if active is None:
+            return h_new, c_new
+        # torch.where(active, new, old): with weights of exactly 0 and 1 the blend reproduces it bit for bit.
+        keep = ca.repmat(active, h.shape[0], 1)
+        return keep * h_new + (1 - keep) * h, keep * c_new + (1 - keep) * c
+
+    def casadi_encoder(self, n_agents: int, length: int) -> ca.Function:
+        """``encoder(positions, seen) -> (h, c, step)``: ``SocialLSTM.encode``'s twin, built once per size.
+
+        Inputs are ``_prepare``'s arrays, flattened row-major: ``positions`` (L, N, 2) and ``seen`` (L, N) as
+        0/1 floats. Outputs, row-major: the decoder's state ``h``, ``c`` (N, D) and ``step`` (N, 2), the mean
+        of the head output that predicts the first future position (``positions[-1] + step``). A generator's
+        noise is zero, as in ``encode``.
+        """
+        if n_agents < 1 or length < 1:
+            raise PredictorError(f"casadi_encoder needs n_agents, length >= 1, got {n_agents}, {length}")
+        key = (n_agents, length)
+        if key not in self._encoders:
+            self._encoders[key] = self._build_casadi_encoder(*key)
+        return self._encoders[key]
+
+    def _build_casadi_encoder(self, n: int, length: int) -> ca.Function:
+        d = self.config.hidden_dim
+        positions = ca.MX.sym("positions", 2 * n * length)
+        seen = ca.MX.sym("seen", n * length)
+        # Column t * N + j is agent j at step t (the row-major (L, N, 2) and (L, N) inputs).
+        pos = ca.reshape(positions, 2, n * length)
+        flags = ca.reshape(seen, 1, n * length)
+
+        def at(t):
+            return pos[:, t * n : (t + 1) * n]
+
+        def seen_at(t):
+            return flags[:, t * n : (t + 1) * n]
+
+        h, c = self._casadi_tag_step("encoder", ca.DM.zeros(d, n), ca.DM.zeros(d, n), slot=0)
+        for t in range(1, length):
+            active = seen_at(t - 1) * seen_at(t)
+            h, c = self._casadi_step("encoder", h, c, at(t - 1), at(t), neighbours=active, active=active)
+        step = self._casadi_mean(h)
+        h, c = self._casadi_tag_step("decoder", h, c, slot=1)
+        if self.config.noise_dim:
+            # The generator's first prediction comes from a decoder step (SocialLSTM.encode).
+            if length > 1:
+                active, previous = seen_at(length - 2) * seen_at(length - 1), at(length - 2)
+            else:
+                active, previous = ca.DM.zeros(1, n), at(length - 1)
+            h, c = self._casadi_step(
+                "decoder", h, c, previous, at(length - 1), neighbours=active, active=active
+            )
+            step = self._casadi_mean(h)
+        return ca.Function(
+            casadi_name(f"{self.name}_encoder_n{n}_L{length}"),
+            [positions, seen],
+            [ca.reshape(h, d * n, 1), ca.reshape(c, d * n, 1), ca.reshape(step, 2 * n, 1)],
+            ["positions", "seen"],
+            ["h", "c", "step"],
+        )
 
 
 class SocialLSTMPredictor(LearnedPredictor):

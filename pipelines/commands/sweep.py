@@ -111,7 +111,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--jit",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="compile the MPC NLPs with gcc in every worker: 2-4 s a build, then solves ~2x faster "
+        "(auto, the default: on when gcc is found)",
+    )
     p.set_defaults(func=run)
+
+
+def _jit(choice: str) -> bool:
+    from pipelines.sweep import jit_available
+
+    if choice == "on" and not jit_available():
+        raise PipelineError("--jit on needs gcc on the PATH (CasADi compiles with it); use --jit off")
+    return choice == "on" or (choice == "auto" and jit_available())
 
 
 def _check_predictors(experiment: Experiment) -> None:
@@ -148,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         record=args.record,
         progress=not args.no_progress,
+        jit=_jit(args.jit),
     )
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)

@@ -39,7 +39,7 @@ def test_defaults_are_table_one():
         ("horizon", 2.5),
         ("horizon", True),
         ("j_max", 0),
-        ("ipopt_max_iter", -1),
+        ("solver_max_iter", -1),
         ("dt", 0.0),
         ("w_goal", -1.0),
         ("w_coll", 0.0),
@@ -52,7 +52,7 @@ def test_defaults_are_table_one():
         ("delta", 0.0),
         ("d_flock", 0.0),
         ("cost_scale", 0.0),
-        ("ipopt_tol", 0.0),
+        ("solver_tol", 0.0),
         ("time_limit_s", 0.0),
         ("w_acce", -0.1),
         ("w_jerk", -0.1),
@@ -72,8 +72,8 @@ def test_invalid_values_are_named(field, value):
 
 
 def test_zero_is_allowed_where_a_term_may_be_switched_off():
-    cfg = MPCConfig(w_floc=0.0, w_acce=0.0, w_jerk=0.0, rho=0.0, ipopt_max_iter=0)
-    assert cfg.w_floc == 0.0 and cfg.ipopt_max_iter == 0
+    cfg = MPCConfig(w_floc=0.0, w_acce=0.0, w_jerk=0.0, rho=0.0, solver_max_iter=0)
+    assert cfg.w_floc == 0.0 and cfg.solver_max_iter == 0
 
 
 def test_replace_validates_and_rejects_unknown_fields():

@@ -30,7 +30,7 @@ def coupled(cfg, predictor):
 
 @pytest.mark.parametrize("mode", ["exact", "first_order"])
 def test_constant_velocity_coupled_equals_fixed_predictions(mode):
-    cfg = MPCConfig(coupled_mode=mode, multi_start=False, ipopt_tol=1e-9)
+    cfg = MPCConfig(coupled_mode=mode, multi_start=False, solver_tol=1e-9)
     data, history, mask, humans = scene()
     predictor = ConstantVelocity()
     start = PlanMemory(cfg).start(data)
@@ -48,7 +48,7 @@ def test_first_order_model_of_a_linear_predictor_is_exact():
     context = predictor.encode(history, mask, humans)
     out = {}
     for mode in ("exact", "first_order"):
-        cfg = MPCConfig(coupled_mode=mode, multi_start=False, ipopt_tol=1e-9)
+        cfg = MPCConfig(coupled_mode=mode, multi_start=False, solver_tol=1e-9)
         out[mode] = coupled(cfg, predictor).solve(data, context, PlanMemory(cfg).start(data))
         assert out[mode].solved
     assert out["first_order"].potential == pytest.approx(out["exact"].potential, rel=1e-6)
@@ -105,11 +105,11 @@ def test_exact_mode_keeps_a_big_predictor_as_a_call_node_with_lbfgs(monkeypatch)
 
     monkeypatch.setattr(mpc.coupled, "EXPAND_MAX_NODES", 0)
     # L-BFGS on the 1e7-weighted penalties needs far more iterations than the exact Hessian.
-    cfg = MPCConfig(coupled_mode="exact", multi_start=False, ipopt_max_iter=3000, time_limit_s=10.0)
+    cfg = MPCConfig(coupled_mode="exact", multi_start=False, solver_max_iter=3000, time_limit_s=10.0)
     predictor = ConstantVelocity()
     solver = coupled(cfg, predictor)
     assert solver.model.symbolic is ca.MX
-    assert solver.model.options == {"ipopt.hessian_approximation": "limited-memory"}
+    assert solver.model.ipopt_options == {"ipopt.hessian_approximation": "limited-memory"}
     data, history, mask, humans = scene()
     start = PlanMemory(cfg).start(data)
     result = solver.solve(data, predictor.encode(history, mask, humans), start)

@@ -41,7 +41,7 @@ def test_a_plan_that_does_not_improve_by_epsilon_is_rejected():
 
 def test_an_equilibrium_start_is_kept_and_converges_in_one_iteration():
     """Starting at the joint optimum (a Nash equilibrium, Lemma 1), no robot can improve by epsilon."""
-    cfg = MPCConfig(multi_start=False, ipopt_tol=1e-10)
+    cfg = MPCConfig(multi_start=False, solver_tol=1e-10)
     data = data_two_robots()
     optimum = CMPC(cfg, 2, 0).solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
     start = Start(optimum.accels, "shifted", None, None)

@@ -20,7 +20,7 @@ def humans(cfg, value=0.0):
 
 
 def test_forced_ipopt_failure_returns_the_start_and_its_status():
-    cfg = MPCConfig(ipopt_max_iter=0)
+    cfg = MPCConfig(solver_max_iter=0)
     data = moving_data()
     start = PlanMemory(cfg).start(data)
     assert start.kind == "brake"

@@ -237,7 +237,7 @@ def test_record_failures_keeps_the_mcap_logs_of_failed_episodes(tmp_path):
 
 
 def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_path, monkeypatch):
-    def broken(spec):
+    def broken(spec, jit=False):
         raise RuntimeError("no solver here")
 
     monkeypatch.setattr("pipelines.sweep.build_controller", broken)

@@ -7,10 +7,20 @@ import numpy as np
 import pytest
 import torch
 
-from predictors.learned import SocialGANPredictor, SocialLSTMPredictor, casadi_name
+from predictors.errors import PredictorError
+from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor, casadi_name
 from predictors.nets.social_gan import generator_config
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.registry import load_predictor
 from tests.predictors.test_contract import HORIZON, crossing_scene
+
+ZOO_MODELS = [
+    "social_lstm_eth",
+    "social_lstm_soft_eth",
+    "vanilla_lstm_eth",
+    "social_gan_eth",
+    "social_lstm_synth",
+]
 
 
 def social_lstm(pooling: str) -> SocialLSTMPredictor:
@@ -101,6 +111,94 @@ def test_rollout_reuses_the_encoding_of_the_same_past():
     second = predictor.rollout(history, mask, robots_future * 1.01, humans)
     assert predictor._last_encoding[0] is key
     assert not np.array_equal(first, second)
+
+
+def gappy_scene():
+    """``crossing_scene`` with every kind of gap ``SocialLSTM.encode`` masks: a human missing mid-track
+    (agent 2 at step 3), one absent now (agent 5, last seen three steps ago), one seen at a single step
+    (agent 3, step 4 only), and a robot that enters late (agent 1)."""
+    history, mask, humans, _ = crossing_scene()
+    mask = mask.copy()
+    mask[3, 2] = False
+    mask[-3:, 5] = False
+    mask[:, 3] = False
+    mask[4, 3] = True
+    mask[:2, 1] = False
+    return history, mask, humans
+
+
+def context_blocks(context: np.ndarray, n_humans: int, n_agents: int, hidden: int) -> dict[str, np.ndarray]:
+    sizes = {"h": n_agents * hidden, "c": n_agents * hidden, "now": 2 * n_agents, "first": 2 * n_humans}
+    sizes["present"] = n_agents
+    ends = np.cumsum(list(sizes.values()))
+    assert ends[-1] == context.size
+    return dict(zip(sizes, np.split(context, ends[:-1]), strict=True))
+
+
+def torch_context(predictor: LearnedPredictor, history, mask, humans) -> np.ndarray:
+    """The context as ``encode`` computed it in torch: ``SocialLSTM.encode`` on the prepared past."""
+    pos, seen, n_humans = predictor._prepare(history, mask, humans)
+    with torch.no_grad():
+        h, c, out = predictor.net.encode(torch.from_numpy(pos)[None], torch.from_numpy(seen)[None])
+    first = pos[-1, :n_humans] + out[0, :n_humans, :2].numpy()
+    parts = [h[0].numpy(), c[0].numpy(), pos[-1], first, seen[-1].astype(float)]
+    return np.concatenate([part.ravel() for part in parts])
+
+
+@pytest.mark.parametrize("name", ZOO_MODELS)
+@pytest.mark.parametrize("length", [8, 2, 1], ids=["L8-gaps", "L2-gaps", "L1"])
+def test_casadi_encoder_gives_the_torch_context(name, length):
+    predictor = load_predictor(name)
+    history, mask, humans = gappy_scene()
+    history, mask = history[-length:], mask[-length:].copy()
+    if length == 2:  # the start of an episode: agent 5 seen only before, agent 3 only now
+        mask[:] = True
+        mask[1, 5] = mask[0, 3] = False
+    if length == 1:
+        mask[:] = True  # a single step: everyone must be seen now
+    context = predictor.encode(history, mask, humans)
+    reference = torch_context(predictor, history, mask, humans)
+    n_agents, hidden = history.shape[1], predictor.config.hidden_dim
+    got = context_blocks(context, len(humans), n_agents, hidden)
+    for block, expected in context_blocks(reference, len(humans), n_agents, hidden).items():
+        np.testing.assert_allclose(got[block], expected, rtol=0, atol=1e-9, err_msg=f"block {block}")
+    if length > 1:
+        # the gaps are not a no-op: the same past fully observed gives another state
+        full = predictor.encode(history, np.ones_like(mask), humans)
+        assert np.abs(full[: 2 * n_agents * hidden] - context[: 2 * n_agents * hidden]).max() > 1e-3
+
+
+def test_encode_runs_without_torch_and_reuses_a_copy_of_the_context(monkeypatch):
+    history, mask, humans = gappy_scene()
+    predictor = social_lstm("grid")
+    expected = torch_context(predictor, history, mask, humans)
+
+    def no_torch(*args, **kwargs):
+        raise AssertionError("encode called the torch encoder")
+
+    monkeypatch.setattr(predictor.net, "encode", no_torch)
+    context = predictor.encode(history, mask, humans)
+    np.testing.assert_allclose(context, expected, rtol=0, atol=1e-9)
+    key = predictor._last_context[0]
+    context[:] = 0.0  # the caller's copy, not the memo
+    again = predictor.encode(history, mask, humans)
+    assert predictor._last_context[0] is key
+    np.testing.assert_allclose(again, expected, rtol=0, atol=1e-9)
+    moved = history.copy()
+    moved[-1, 2] += 0.5
+    assert not np.allclose(predictor.encode(moved, mask, humans), expected)
+    assert predictor._last_context[0] is not key
+
+
+def test_casadi_encoder_is_built_once_per_size():
+    predictor = social_lstm("soft")
+    encoder = predictor.casadi_encoder(6, 8)
+    assert predictor.casadi_encoder(6, 8) is encoder
+    assert predictor.casadi_encoder(7, 8) is not encoder
+    assert encoder.name_in() == ["positions", "seen"] and encoder.name_out() == ["h", "c", "step"]
+    assert encoder.size1_in(0) == 8 * 6 * 2 and encoder.size1_out(0) == 6 * predictor.config.hidden_dim
+    with pytest.raises(PredictorError, match="n_agents, length >= 1"):
+        predictor.casadi_encoder(0, 8)
 
 
 def test_gan_sample_shapes_reproducibility_and_spread():
