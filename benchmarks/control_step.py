@@ -6,7 +6,7 @@ the IBR bookkeeping). Rows:
 
 * ``cmpc`` / ``dmpc``: Algorithms 1 and 2 with the constant-velocity predictor (or ``--predictor``);
 * ``floor``: the joint NLP of the CMPC rows solved once with the prediction fixed, from the same warm start
-  as CMPC's first solve, for every recorded step: what IPOPT alone costs (no predictor, no IBR);
+  as CMPC's first solve, for every recorded step: what the solver alone costs (no predictor, no IBR);
 * ``--dmpc-parallel``: DMPC with its local solves one after the other and in a thread pool;
 * ``--coupled``: CMPC with the predictor inside the NLP (``coupling="nlp"``), exact and first-order.
 

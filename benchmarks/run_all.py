@@ -14,8 +14,9 @@ Sections
   scaling     CMPC and DMPC control step against the number of humans (5..50, control_step.py) and of robots
               (3..12, here: control_step.py has 3 robots)
   dmpc        DMPC's local solves in a thread pool vs one after the other (mpc/dmpc.py): the speed-up
-  episodes    episodes per minute of one process per controller, and of a real sweep with K workers, with
-              the projected time of the paper's full Table II (10 cells x 1000 episodes)
+  episodes    episodes per minute of one process per controller (Table II's predictor, 7 humans), and of a
+              real Table II sweep (5-9 humans) with K workers, with the projected time of the paper's full
+              Table II (10 cells x 1000 episodes) from its rate and from its CPU time per episode
 
 Rows measured here rather than by control_step.py (the baselines, the oracle, robots != 3) time the first
 ``--steps`` control steps of episodes of both scenarios. Medians and 95th percentiles in milliseconds. The
@@ -44,6 +45,7 @@ SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes")
 SCENARIOS = ("circle", "perpendicular")
 ORACLE_PREDICTOR = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
 TABLE2_EPISODES = 10 * 1000  # the paper: 5 crowd sizes x 2 methods, 500 + 500 episodes per cell
+PAPER_PREDICTOR = "social_lstm_eth"  # pipelines.experiments.PAPER_PREDICTOR
 
 
 def _stats(samples_s: Sequence[float]) -> dict[str, float]:
@@ -104,11 +106,13 @@ def any_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int 
 
 
 def episodes_per_minute(spec: Any, n_humans: int, episodes: int) -> dict[str, float]:
-    """Whole episodes in this process, alternating scenarios as a sweep does; controller built once."""
+    """Whole episodes in this process, alternating scenarios as a sweep does; controller built (and, when gcc
+    is found, compiled, as sweep workers do) once, its NLPs built by a first episode that is not timed."""
     from pipelines.closed_loop import run_episode
-    from pipelines.sweep import build_controller
+    from pipelines.sweep import build_controller, jit_available
 
-    controller = build_controller(spec)
+    controller = build_controller(spec, jit_available())
+    run_episode(controller, seed=10_000, scenario=SCENARIOS[0], n_humans=n_humans)
     t0 = time.perf_counter()
     steps = 0
     for k in range(episodes):
@@ -123,10 +127,12 @@ def episodes_per_minute(spec: Any, n_humans: int, episodes: int) -> dict[str, fl
     }
 
 
-def sweep_rate(predictor: str, n_humans: int, episodes_per_cell: int, workers: int) -> dict[str, float]:
-    """A real ``run_sweep`` of Table II (CMPC and DMPC) at one crowd size with K process workers."""
+def sweep_rate(predictor: str, episodes_per_cell: int, workers: int) -> dict[str, float]:
+    """A real ``run_sweep`` of Table II (CMPC and DMPC, 5-9 humans) with K process workers, compiled as
+    ``crowdmpc sweep`` does by default. ``steady_cpu_s_per_episode`` leaves out each worker's first episode
+    of a cell (it builds and compiles the NLPs): the cost per episode a long sweep approaches."""
     from pipelines.experiments import get_experiment
-    from pipelines.sweep import SweepConfig, run_sweep
+    from pipelines.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, jit_available, run_sweep
 
     experiment = get_experiment("table2").with_predictor(predictor)
     with tempfile.TemporaryDirectory(prefix="crowdmpc-bench-") as out:
@@ -134,14 +140,26 @@ def sweep_rate(predictor: str, n_humans: int, episodes_per_cell: int, workers: i
             experiment,
             Path(out),
             episodes_per_cell,
-            humans=(n_humans,),
             workers=workers,
             backend="process",
             progress=False,
+            jit=jit_available(),
         )
         outcome = run_sweep(config)
+        records = list(EpisodeLog(Path(out) / EPISODES_FILE).load(repair=False).values())
+    built, steady_cpu = set(), []
+    for record in records:
+        first = (record["worker"], record["cell"]) not in built
+        built.add((record["worker"], record["cell"]))
+        if not first:
+            steady_cpu.append(record["cpu_s"])
+    cpu = float(np.mean(steady_cpu)) if steady_cpu else float("nan")
     steady = outcome.steady_episodes_per_minute
     return {
+        "predictor": predictor,
+        "jit": config.jit,
+        "steady_cpu_s_per_episode": cpu,
+        "projected_table2_hours_from_cpu": TABLE2_EPISODES * cpu / workers / 3600,
         "workers": workers,
         "episodes": outcome.ran,
         "wall_s": outcome.wall_s,
@@ -268,11 +286,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         report["dmpc_parallel"] = speedup
 
     if "episodes" in sections:
-        print("episodes per minute at 7 humans", file=sys.stderr)
+        # Table II's own predictor, so that the projection is of the table itself.
+        paper = PAPER_PREDICTOR if PAPER_PREDICTOR in _predictors() else cv
+        print(f"episodes per minute at 7 humans, {paper}", file=sys.stderr)
         n_episodes = 2 if quick else 4
         single = {}
         for name in ("straight", "orca", "cmpc", "dmpc"):
-            spec = ControllerSpec(name, cv)
+            spec = ControllerSpec(name, paper)
             single[name] = _timed(
                 f"{name}, 1 process", lambda s=spec: episodes_per_minute(s, 7, n_episodes), errors
             )
@@ -289,8 +309,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             )
         per_cell = args.sweep_episodes or (2 if quick else 6)
         report["episodes_per_minute"]["sweep"] = _timed(
-            f"table2 sweep, 7 humans, {args.workers} workers",
-            lambda: sweep_rate(cv, 7, per_cell, args.workers),
+            f"table2 sweep, 5-9 humans, {args.workers} workers",
+            lambda: sweep_rate(paper, per_cell, args.workers),
             errors,
         )
     report["errors"] = errors
@@ -330,7 +350,7 @@ def table(report: dict[str, Any]) -> str:
             lines.append(f"| dmpc {key} threads speed-up (median) | x{row['speedup_median']:.2f} | | |")
     episodes = report.get("episodes_per_minute")
     if episodes:
-        lines += ["", "| episodes per minute (7 humans) | value |", "|---|---|"]
+        lines += ["", "| episodes per minute (one process: 7 humans; sweep: 5-9) | value |", "|---|---|"]
         for name, stats in episodes["one_process"].items():
             value = f"{stats['episodes_per_minute']:.1f}" if stats else "failed"
             lines.append(f"| {name}, one process | {value} |")
@@ -342,8 +362,16 @@ def table(report: dict[str, Any]) -> str:
                 f"({sweep['episodes_per_minute']:.1f} with {sweep['startup_s']:.1f} s start-up) |"
             )
             lines.append(
-                f"| projected full Table II (10 x 1000 episodes) from the sweep | "
+                f"| projected full Table II (10 x 1000 episodes) from the sweep's rate | "
                 f"{sweep['projected_table2_hours']:.2f} h |"
+            )
+            lines.append(
+                f"| table2 sweep, CPU per episode once the NLPs are built (jit {sweep['jit']}) | "
+                f"{sweep['steady_cpu_s_per_episode']:.3f} s |"
+            )
+            lines.append(
+                f"| projected full Table II from that CPU time, {sweep['workers']} workers | "
+                f"{sweep['projected_table2_hours_from_cpu']:.2f} h |"
             )
         projected = episodes.get("projected_table2_hours_from_one_process")
         if projected is not None:

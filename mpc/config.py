@@ -69,29 +69,31 @@ class MPCConfig:
     # applies to the scaled problem), so the default leaves F as it is.
     cost_scale: float = 1.0
     # "fatrop" or "ipopt": the interior-point solver of every NLP built from fixed predictions (joint and
-    # local). Fatrop with a dense single stage solves these small NLPs (8 or 24 accelerations) 3-4x faster
-    # than IPOPT (whose MUMPS factorisation costs ~0.3 ms an iteration here) and finds the same solutions:
-    # measured on 2380 recorded DMPC local problems (3 robots, 7 humans), 0.81 vs 2.8 ms a solve, the cost
-    # within 1e-3 of IPOPT's on 2379 of them; 0.42 ms with ``jit`` (benchmarks/solvers.py). A Fatrop solve
-    # that fails is retried with IPOPT, so robustness stays IPOPT's. The coupled NLP with a network inside
-    # always uses IPOPT (it needs IPOPT's L-BFGS Hessian, mpc/coupled.py).
+    # local). Fatrop with a dense single stage solves these small NLPs (8 or 24 accelerations) 2-3.5x faster
+    # than IPOPT, whose MUMPS factorisation costs ~0.3 ms an iteration here, and finds the same solutions:
+    # `benchmarks/solvers.py` on 2413 recorded DMPC local problems (3 robots, 7 humans) gives 0.92 vs 3.2 ms
+    # a solve, the cost within 1e-3 of IPOPT's on 2409; on 230 joint ones 3.3 vs 7.1 ms, 226 the same. A
+    # Fatrop solve that fails is retried with IPOPT, and a step that starts from braking asks both
+    # (mpc/nlp.py, _Solver, has why). The coupled NLP with a network inside always uses IPOPT (it needs
+    # IPOPT's L-BFGS Hessian, mpc/coupled.py).
     solver: str = "fatrop"
     solver_tol: float = 1e-6  # the solver's tol (Fatrop: KKT error; IPOPT: scaled NLP error)
     solver_max_iter: int = 100  # iterations per solve; hitting it counts as a failure (fallback)
     # Wall-time budget of one control step: no new IBR iteration starts once the step has used it, and
     # IPOPT's max_wall_time for each solve (exceeding it is a failure; a Fatrop solve is bounded by
-    # solver_max_iter, ~5 ms). A safety net, far above the normal step time, so that results do not depend
+    # solver_max_iter, a few ms). A safety net, far above the normal step time, so that results do not depend
     # on the machine's load.
     time_limit_s: float = 1.0
-    warm_start: bool = True  # start every solve from the shifted previous solution (primal and dual)
+    warm_start: bool = True  # start every solve from the shifted previous solution (IPOPT: also its duals)
     # The collision penalties make F non-convex, and the shifted previous plan can sit in a basin that has
     # become poor (a gap closing). multi_start: when the first solution of a step still pays more than
     # restart_penalty of collision penalty, solve again from braking and keep the lower cost (CMPC: F;
     # DMPC: each robot's C_i). Measured on recorded steps: braking found a much lower F in ~1.5 % of steps.
     multi_start: bool = True
     restart_penalty: float = 1.0
-    # Compile the NLP's functions with the system C compiler (gcc): a local solve 0.81 -> 0.42 ms and a
-    # joint one 3.0 -> 1.3 ms with Fatrop, for 2-4 s of build per NLP. Worth it for sweeps, not one episode.
+    # Compile the NLP's functions with the system C compiler (gcc): with Fatrop a local solve 0.92 -> 0.50 ms
+    # and a joint one 3.3 -> 1.4 ms, for 2.4 and 7.8 s of build (benchmarks/solvers.py). Worth it for
+    # sweeps (`crowdmpc sweep --jit auto`, the default), not for one episode.
     jit: bool = False
     dmpc_parallel: str = "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the

@@ -12,7 +12,8 @@ runs, so ``dmpc_parallel="threads"`` really runs them concurrently, each robot o
 instance shared by threads segfaults). Whether that pays depends on free cores. benchmarks/control_step.py
 --dmpc-parallel, 3 robots, 7 humans, closed loop on this 2-core machine: median step 32.7 ms serial vs
 23.6 ms threads with the machine otherwise idle (load 1.0), but 33.7 ms vs 50.2 ms with the other engineers'
-jobs running (load 3.5-4.4): warm local solves take 1-2 ms, so waiting for a core costs as much as the work.
+jobs running (load 3.5-4.4): warm local solves took 1-2 ms (IPOPT; Fatrop's take 0.5-1 ms), so waiting
+for a core costs as much as the work.
 ``"serial"`` is the default because DMPC's long runs are sweeps, whose process workers already occupy every
 core; ``"threads"`` is the faster choice for a single run on a machine with a free core.
 """

@@ -57,7 +57,7 @@ RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
 # Controllers a worker keeps built at once (least recently used dropped first). Tasks come interleaved across
 # the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
-# MPC controller holds a few CasADi/IPOPT instances (megabytes), worth keeping but not without bound.
+# MPC controller holds a few CasADi solver instances (megabytes), worth keeping but not without bound.
 CONTROLLER_CACHE: Final[int] = 16
 # Controllers whose NLPs jit compiles (build_controller); the baselines solve none.
 JIT_CONTROLLERS: Final[frozenset[str]] = frozenset({"cmpc", "dmpc"})

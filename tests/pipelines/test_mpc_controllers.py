@@ -159,3 +159,24 @@ def test_crowded_episodes_run_without_fallbacks(name):
         assert all(f is None for f in result.fallbacks)
         assert set(result.statuses) == {"ok"}
         assert result.metrics.n_steps == len(result.solve_times_s) > 0
+
+
+def test_ibr_predicts_through_the_twin_and_matches_the_torch_rollout(monkeypatch):
+    controller = make_controller(ControllerSpec("cmpc", "social_lstm_eth"))
+    env = CrowdEnv()
+    obs = env.reset(1, "perpendicular", 5)
+    for _ in range(4):  # a few steps of history, the robots driving straight ahead
+        obs, _, _ = env.step(np.tile([0.0, 0.5], (obs.n_robots, 1)))
+    history, mask = predictor_history(obs, controller.predictor.obs_len)
+    humans = np.arange(obs.n_robots, obs.n_robots + obs.n_humans)
+    robots_future = obs.robot_positions + np.cumsum(np.full((4, obs.n_robots, 2), [0.1, 0.3]), axis=0)
+    reference = controller.predictor.rollout(history, mask, robots_future, humans)
+
+    def no_rollout(*args, **kwargs):
+        raise AssertionError("the IBR loop called the torch rollout")
+
+    monkeypatch.setattr(controller.predictor, "rollout", no_rollout)
+    predict = controller._predict_fn(history, mask, humans, obs.n_robots)
+    np.testing.assert_allclose(predict(robots_future), reference, rtol=0, atol=1e-9)
+    # the robots' plan reaches the humans' prediction
+    assert not np.allclose(predict(robots_future + 1.0), reference, atol=1e-6)

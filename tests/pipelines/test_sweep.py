@@ -32,6 +32,7 @@ from pipelines.sweep import (
     EpisodeLog,
     EpisodeWorker,
     SweepConfig,
+    build_controller,
     is_failure,
     mcap_path,
     run_sweep,
@@ -547,3 +548,13 @@ def test_cli_runs_a_small_sweep_and_reports(tmp_path, capsys):
 def test_controller_spec_of_cells_is_validated():
     with pytest.raises(PipelineError):
         ControllerSpec("nope")
+
+
+def test_jit_is_a_worker_setting_that_leaves_the_cell_alone():
+    spec = ControllerSpec("cmpc", "constant_velocity")
+    assert build_controller(spec, jit=True).cfg.jit is True
+    assert build_controller(spec).cfg.jit is False
+    # the baselines solve no NLP: nothing to compile, and nothing breaks
+    assert build_controller(ControllerSpec("orca"), jit=True) is not None
+    cell = get_experiment("table2").with_predictor("constant_velocity").cells((5,))[0]
+    assert "jit" not in cell.key
