@@ -362,7 +362,8 @@ def table(report: dict[str, Any]) -> str:
                 f"({sweep['episodes_per_minute']:.1f} with {sweep['startup_s']:.1f} s start-up) |"
             )
             lines.append(
-                f"| projected full Table II (10 x 1000 episodes) from the sweep's rate | "
+                f"| projected full Table II (10 x 1000 episodes) from the sweep's rate (in a short sweep, "
+                f"mostly the one-off jit builds) | "
                 f"{sweep['projected_table2_hours']:.2f} h |"
             )
             lines.append(

@@ -151,7 +151,10 @@ class MPCController:
         return predict
 
     def reset(self, obs: Observation) -> None:
-        self.solver(obs.n_robots, obs.n_humans)  # build now, not inside the first timed step
+        # Build now, not inside the first timed step.
+        self.solver(obs.n_robots, obs.n_humans)
+        if self.spec.coupling != "nlp":
+            self._twin(obs.n_humans, obs.n_robots)
         self.memory.reset()
 
     def act(self, obs: Observation) -> ControlOutput:

@@ -153,9 +153,11 @@ def build_controller(spec: ControllerSpec, jit: bool = False) -> Controller:
 
     ``jit``: the MPC controllers compile their NLPs (MPCConfig.jit). It is a worker setting, not part of the
     cell: compiled and interpreted functions compute the same costs (to rounding), so the cell key, and the
-    records a rerun resumes from, do not depend on it.
+    records a rerun resumes from, do not depend on it. The coupled NLP is not compiled: its graph (the
+    network, or a first-order model's 56 x 24 Jacobian of parameters) kept gcc busy for over two minutes per
+    worker (measured: 148 s for the first first-order episode of `--experiment coupling`).
     """
-    if jit and spec.controller in JIT_CONTROLLERS:
+    if jit and spec.controller in JIT_CONTROLLERS and spec.coupling == "ibr":
         spec = replace(spec, mpc_overrides=(*spec.mpc_overrides, ("jit", True)))
     return make_controller(spec)
 

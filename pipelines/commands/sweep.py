@@ -115,7 +115,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--jit",
         choices=("auto", "on", "off"),
         default="auto",
-        help="compile the MPC NLPs with gcc in every worker: 2-4 s a build, then solves ~2x faster "
+        help="compile the MPC NLPs with gcc in every worker: 2-8 s a build, then solves ~2x faster "
         "(auto, the default: on when gcc is found)",
     )
     p.set_defaults(func=run)

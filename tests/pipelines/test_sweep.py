@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -554,6 +555,7 @@ def test_jit_is_a_worker_setting_that_leaves_the_cell_alone():
     spec = ControllerSpec("cmpc", "constant_velocity")
     assert build_controller(spec, jit=True).cfg.jit is True
     assert build_controller(spec).cfg.jit is False
+    assert build_controller(dataclasses.replace(spec, coupling="nlp"), jit=True).cfg.jit is False
     # the baselines solve no NLP: nothing to compile, and nothing breaks
     assert build_controller(ControllerSpec("orca"), jit=True) is not None
     cell = get_experiment("table2").with_predictor("constant_velocity").cells((5,))[0]
