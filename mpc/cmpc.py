@@ -127,13 +127,7 @@ class CMPC:
                 potentials.append(potential)
                 break
             sol, n_solves, n_iterations = self.nlp.solve_multi_start(
-                data,
-                prediction,
-                accels,
-                lam_x,
-                lam_g,
-                restart=j == 1 and start.kind != "brake",
-                explore=j == 1 and start.kind == "brake",
+                data, prediction, accels, lam_x, lam_g, **start.first_solve(j)
             )
             solves += n_solves
             solver_iterations += n_iterations

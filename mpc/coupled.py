@@ -166,13 +166,7 @@ class CoupledCMPC:
             return self._result(data, start.accels, None, (), 1, 0, False, False, "nan_prediction", (),
                                 None, None, 0)  # fmt: skip
         sol, solves, iterations = self.nlp.solve_multi_start(
-            data,
-            context,
-            start.accels,
-            start.lam_x,
-            start.lam_g,
-            restart=start.kind != "brake",
-            explore=start.kind == "brake",
+            data, context, start.accels, start.lam_x, start.lam_g, **start.first_solve(1)
         )
         if not sol.success:
             return self._result(data, start.accels, None, (), 1, solves, False, False, sol.status, (),
@@ -210,13 +204,7 @@ class CoupledCMPC:
             previous_model = model
             extra = FirstOrderPredictor.params(value, jac, r0)
             sol, n_solves, n_iterations = self.nlp.solve_multi_start(
-                data,
-                extra,
-                accels,
-                lam_x,
-                lam_g,
-                restart=j == 1 and start.kind != "brake",
-                explore=j == 1 and start.kind == "brake",
+                data, extra, accels, lam_x, lam_g, **start.first_solve(j)
             )
             solves += n_solves
             solver_iterations += n_iterations

@@ -107,6 +107,7 @@ class DMPC:
             predictions.append(prediction)
             # Line 4: every robot's best response to the others' plans of iteration j-1.
             params = {i: local.params(i, data, positions, prediction) for i in moving}
+            flags = start.first_solve(j)
             jobs = [
                 (
                     i,
@@ -114,14 +115,14 @@ class DMPC:
                     accels[i],
                     None if lam_x is None else lam_x[i],
                     None if lam_g is None else lam_g[i],
-                    j == 1 and start.kind == "brake",
+                    flags["explore"],
                 )
                 for i in moving
             ]
             sols: list[Solution] = self._solve_all(jobs)
             solves += len(sols)
             solver_iterations += sum(s.iterations for s in sols)
-            if j == 1 and cfg.multi_start and start.kind != "brake":
+            if cfg.multi_start and flags["restart"]:
                 sols, extra = self._restart(data, moving, params, sols)
                 solves += len(extra)
                 solver_iterations += sum(s.iterations for s in extra)

@@ -32,6 +32,13 @@ class Start:
     lam_x: np.ndarray | None  # (M, H, 2) shifted bound multipliers of the last solve, or None (cold start)
     lam_g: np.ndarray | None  # (M, H, 2) shifted velocity-constraint multipliers, or None
 
+    def first_solve(self, iteration: int) -> dict[str, bool]:
+        """How the IBR loops solve at ``iteration`` (from 1): the first solve of a step restarts from braking
+        when stuck (``multi_start``), unless the step already starts from braking, where it asks both solvers
+        instead (``explore``, mpc/nlp.py ``_Solver``); later solves do neither."""
+        first = iteration == 1
+        return {"restart": first and self.kind != "brake", "explore": first and self.kind == "brake"}
+
 
 def shift(values: np.ndarray) -> np.ndarray:
     """Drop the first step of an ``(M, H, 2)`` array and append zeros (zero acceleration keeps velocity)."""
