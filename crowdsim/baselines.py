@@ -26,6 +26,7 @@ import numpy as np
 
 from crowdsim.control import ControlOutput
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
+from crowdsim.world import A_MAX, V_MAX
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -42,7 +43,7 @@ class StraightController:
 
     name = "straight"
 
-    def __init__(self, *, v_max: float = 1.0, a_max: float = 2.0):
+    def __init__(self, *, v_max: float = V_MAX, a_max: float = A_MAX):
         self.v_max = v_max  # m/s, per component, Eq. (6)
         self.a_max = a_max  # m/s^2, per component, Eq. (6)
 
@@ -74,8 +75,8 @@ class OrcaController:
     def __init__(
         self,
         *,
-        v_max: float = 1.0,
-        a_max: float = 2.0,
+        v_max: float = V_MAX,
+        a_max: float = A_MAX,
         params: OrcaParams = DEFAULT_PARAMS,
         radius_margin: float = 0.01,
     ):

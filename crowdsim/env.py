@@ -3,10 +3,12 @@
 One step (``tau = dt = 0.4`` s), everything simultaneous:
 
 1. Every human computes its ORCA velocity (``crowdsim.orca``) from the *current* positions and velocities
-   of all other agents, robots included: robots are visible and treated as ordinary reciprocal agents. This
-   equals one RVO2 ``doStep`` and CrowdNav's per-human ``ORCA.predict`` (which builds a fresh RVO2 simulator
-   holding every other agent with its current velocity). Preferred velocity: ``v_pref`` towards the goal,
-   the raw goal offset within 1 m, zero once strictly within ``radius`` of the goal (the human stops).
+   of the other agents. With ``robots_visible`` (the default, as in the paper's fork) the robots are among
+   them, treated as ordinary reciprocal agents; otherwise the humans' ORCA does not see the robots at all
+   (CrowdNav's own default). This equals one RVO2 ``doStep`` and CrowdNav's per-human ``ORCA.predict``
+   (which builds a fresh RVO2 simulator holding every other visible agent with its current velocity).
+   Preferred velocity: ``v_pref`` towards the goal, the raw goal offset within 1 m, zero once strictly
+   within ``radius`` of the goal (the human stops).
 2. Robots are double integrators, Eq. (2): ``s' = s + tau v + tau^2/2 a``, ``v' = v + tau a``, with the
    bounds of Eq. (6) enforced by clipping the acceleration, per component, to
    ``[max(-a_max, (-v_max - v) / tau), min(a_max, (v_max - v) / tau)]``: within the acceleration bound and
@@ -18,38 +20,59 @@ RVO2 radius: CrowdNav gives RVO2 every agent's radius plus 0.01 m "for safety"
 (``EnvConfig.orca_radius_margin``); this is kept, so ORCA agents aim to stay 0.62 m apart while contact
 (the metric) is counted below 0.6 m.
 
-A robot has reached its goal once it is strictly within ``radius`` of it; the first such time is kept
-(reaching is not undone by moving away). The episode ends when every robot has reached its goal, or at the
-time limit (``round(time_limit / dt)`` steps). With no robots at all (synthetic crowds) it ends when every
-human is within its radius of its goal, or at the time limit.
+A robot has reached its goal once it is strictly within ``radius`` of it (``Observation.robot_reached``
+keeps "has reached it at some point", whatever the success rule). The episode ends in success under
+``success_rule``: "simultaneous" (paper) when every robot is within its radius of its goal at the same
+step, the fork's ``all(reaching_goal)``; "first_reach" (v1) when every robot has reached its goal at
+least once. Otherwise it ends at the time limit, after ``max_steps`` steps (see ``EnvConfig.max_steps``).
+With no robots at all (synthetic crowds) it ends when every human is within its radius of its goal, or at
+the time limit.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from crowdsim.conventions import (
+    CROSSINGS,
+    PAPER_SPAWN_SEPARATION,
+    PAPER_TIME_LIMIT,
+    PAPER_TIMEOUT_MARGIN,
+    SUCCESS_RULES,
+    Crossing,
+    SuccessRule,
+)
 from crowdsim.errors import SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
 from crowdsim.scenarios import Layout, make_layout
+from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF
 
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """Simulator settings; defaults are the paper's (Section VI, Table I) and CrowdNav's ORCA setup."""
+    """Simulator settings. The defaults are the "paper" profile with visible robots (``crowdsim.profiles``):
+    the paper's Table I, the authors' CrowdNav fork and CrowdNav's ORCA setup."""
 
-    dt: float = 0.4  # s, tau: simulation step = control period (Table I)
-    time_limit: float = 30.0  # s, CrowdNav's episode time limit
-    radius: float = 0.3  # m, every robot and human
-    v_pref: float = 1.0  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav)
-    v_max: float = 1.0  # m/s, robot velocity bound per component, Eq. (6)
-    a_max: float = 2.0  # m/s^2, robot acceleration bound per component, Eq. (6)
-    history_len: int = 8  # L, rows of Observation.history (Table I)
+    dt: float = DT  # s, tau: simulation step = control period (Table I)
+    time_limit: float = PAPER_TIME_LIMIT  # s, the episode's time limit
+    radius: float = RADIUS  # m, every robot and human
+    v_pref: float = V_PREF  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav)
+    v_max: float = V_MAX  # m/s, robot velocity bound per component, Eq. (6)
+    a_max: float = A_MAX  # m/s^2, robot acceleration bound per component, Eq. (6)
+    history_len: int = OBS_LEN  # L, rows of Observation.history: the predictors' observed length
     orca: OrcaParams = field(default_factory=OrcaParams)  # neighbour distance, max neighbours, time horizon
     orca_radius_margin: float = 0.01  # m added to the radius given to ORCA (CrowdNav's "for safety")
+    profile: str = "paper"  # name of the convention set, for records; the fields below are what acts
+    timeout_margin: float = PAPER_TIMEOUT_MARGIN  # s, no step starts at or after time_limit - margin
+    spawn_separation: float = PAPER_SPAWN_SEPARATION  # m added to the two radii between sampled humans
+    crossing: Crossing = "paper"  # the humans' start/goal sampling rules (crowdsim.crossings)
+    success_rule: SuccessRule = "simultaneous"  # module docstring
+    robots_visible: bool = True  # the humans' ORCA sees the robots
 
     def __post_init__(self):
         for name in ("dt", "time_limit", "radius", "v_pref", "v_max", "a_max"):
@@ -64,10 +87,39 @@ class EnvConfig:
             )
         if not isinstance(self.orca, OrcaParams):
             raise SimulationError(f"EnvConfig.orca must be an OrcaParams, got {type(self.orca).__name__}")
+        if not (isinstance(self.profile, str) and self.profile):
+            raise SimulationError(f"EnvConfig.profile must be a non-empty name, got {self.profile!r}")
+        margin = self.timeout_margin
+        if not (isinstance(margin, int | float) and 0 <= margin < self.time_limit):
+            raise SimulationError(
+                f"EnvConfig.timeout_margin must be in [0, time_limit={self.time_limit}) s, got {margin!r}"
+            )
+        separation = self.spawn_separation
+        if not (isinstance(separation, int | float) and np.isfinite(separation) and separation >= 0):
+            raise SimulationError(
+                f"EnvConfig.spawn_separation must be a finite number >= 0 m, got {separation!r}"
+            )
+        if self.crossing not in CROSSINGS:
+            raise SimulationError(
+                f"EnvConfig.crossing must be one of {list(CROSSINGS)}, got {self.crossing!r}"
+            )
+        if self.success_rule not in SUCCESS_RULES:
+            raise SimulationError(
+                f"EnvConfig.success_rule must be one of {list(SUCCESS_RULES)}, got {self.success_rule!r}"
+            )
+        if not isinstance(self.robots_visible, bool | np.bool_):
+            raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
 
     @property
     def max_steps(self) -> int:
-        return int(round(self.time_limit / self.dt))
+        """Steps before the timeout: those starting at ``t = k dt < time_limit - timeout_margin``.
+
+        The fork checks ``global_time >= time_limit - 1`` before each step, so with 40 s and 0.4 s steps start
+        at t = 0, 0.4, ..., 38.8 and t = 39.2 is a timeout: 98 steps. With no margin (v1) it is
+        ``time_limit / dt``: 75 steps of 0.4 s in 30 s. The 1e-9 absorbs rounding such as 30 / 0.4 =
+        75.00000000000001.
+        """
+        return math.ceil((self.time_limit - self.timeout_margin) / self.dt - 1e-9)
 
 
 @dataclass(frozen=True)
@@ -113,7 +165,14 @@ class CrowdEnv:
             raise SimulationError(f"seed must be an int >= 0, got {seed!r}")
         cfg = self.config
         layout = make_layout(
-            scenario, n_humans, n_robots, np.random.default_rng(seed), radius=cfg.radius, v_pref=cfg.v_pref
+            scenario,
+            n_humans,
+            n_robots,
+            np.random.default_rng(seed),
+            radius=cfg.radius,
+            v_pref=cfg.v_pref,
+            crossing=cfg.crossing,
+            spawn_separation=cfg.spawn_separation,
         )
         return self.reset_layout(layout)
 
@@ -159,10 +218,13 @@ class CrowdEnv:
                 f"with {int((~np.isfinite(a)).sum())} non-finite entries"
             )
 
-        # Humans decide from the current state of everyone (before any agent moves).
-        positions = np.concatenate([self._rp, self._hp])
-        velocities = np.concatenate([self._rv, self._hv])
-        humans = np.arange(m, m + len(self._hp))
+        # Humans decide from the current state of everyone they see (before any agent moves).
+        if cfg.robots_visible:
+            positions = np.concatenate([self._rp, self._hp])
+            velocities = np.concatenate([self._rv, self._hv])
+            humans = np.arange(m, m + len(self._hp))
+        else:
+            positions, velocities, humans = self._hp, self._hv, np.arange(len(self._hp))
         pref = preferred_velocities(self._hp, self._hg, cfg.v_pref, stop_radius=cfg.radius)
         hv_new, lp3 = orca_velocities(
             positions,
@@ -194,8 +256,10 @@ class CrowdEnv:
         self._hv_log.append(self._hv)
         self._ra_log.append(a_applied)
 
-        if m > 0:
+        if m > 0 and cfg.success_rule == "first_reach":
             all_there = bool((self._reach_step >= 0).all())
+        elif m > 0:
+            all_there = bool((np.linalg.norm(self._rp - self._rg, axis=1) < cfg.radius).all())
         else:
             all_there = bool((np.linalg.norm(self._hp - self._hg, axis=1) < cfg.radius).all())
         timeout = self._step >= cfg.max_steps and not all_there
@@ -225,6 +289,7 @@ class CrowdEnv:
             robot_accelerations=np.stack(self._ra_log) if self._ra_log else np.zeros((0, m, 2)),
             dt=self.config.dt,
             radius=self.config.radius,
+            success_rule=self.config.success_rule,
         )
 
     # ---- internals ---------------------------------------------------------------------------------------

@@ -3,3 +3,11 @@
 
 class SimulationError(ValueError):
     """Base class of the user-facing errors raised by `crowdsim`."""
+
+
+def too_crowded(human: int, n_humans: int, scenario: str, n_robots: int, draws: int) -> SimulationError:
+    """The error of a layout whose rejection sampling ran dry (``human`` counts from 0)."""
+    return SimulationError(
+        f"could not place human {human + 1} of n_humans={n_humans} in scenario {scenario!r} with "
+        f"{n_robots} robots after {draws} draws; use fewer agents"
+    )

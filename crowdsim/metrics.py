@@ -2,10 +2,17 @@
 
 Distances are evaluated at the simulation steps (every 0.4 s), as CrowdNav and the paper report them.
 
-* success: every robot came within its radius of its goal (strictly closer than ``radius``) before the end.
-* travel time: the time at which the last robot first reached its goal (NaN unless success).
+* success, under the trajectory's ``success_rule`` (``EnvConfig.success_rule``): "simultaneous" (paper
+  profile, the authors' CrowdNav fork) when at some step every robot is within its radius of its goal
+  (strictly closer than ``radius``) at once; "first_reach" (v1) when every robot came within its radius of
+  its goal at some step, each at its own.
+* travel time: the first step at which the rule holds, as a time (NaN unless success). Either way
+  ``reach_times`` keeps each robot's own first reach.
 * collision: the minimum robot-human centre distance over the episode is below ``d_min = 0.8`` m.
 * contact: that minimum is below the sum of the radii (0.6 m): physical contact.
+* per-step counts: ``collision_steps``, ``contact_steps`` and ``discomfort_steps`` count the recorded
+  states (rows 0..T) at which the condition holds; ``aggregate`` turns them into frequencies per evaluated
+  state, CrowdNav's per-step convention.
 * discomfort: at some step a robot's projected path intersects a human's projected path; a projected path is
   the closed segment from the agent's position to ``position + velocity * 1.2 s`` (length speed x 1.2 s). An
   agent standing still projects a point; touching segments count as intersecting.
@@ -16,15 +23,21 @@ Distances are evaluated at the simulation steps (every 0.4 s), as CrowdNav and t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any, Final
 
 import numpy as np
 
+from crowdsim.conventions import SUCCESS_RULES, SuccessRule
 from crowdsim.errors import SimulationError
 
 COLLISION_DISTANCE: Final[float] = 0.8  # m, d_min of Table I: personal-space violation (Section VI)
 DISCOMFORT_HORIZON: Final[float] = 1.2  # s, "the proportional factor is chosen as 1.2 s" (Section VI)
+# Fields added after records were first written: EpisodeMetrics.from_dict leaves them None when absent.
+ADDED_COUNTS: Final[tuple[str, ...]] = ("collision_steps", "contact_steps")
+# as_dict writes inf as null; for these fields inf is the value without any pair of agents.
+_INF_WHEN_NULL: Final[tuple[str, ...]] = ("min_distance", "min_distance_robots", "min_distance_humans")
 
 
 @dataclass(frozen=True)
@@ -40,6 +53,13 @@ class Trajectory:
     robot_accelerations: np.ndarray  # (T, M, 2) m/s^2, the applied (clipped) accelerations
     dt: float  # s
     radius: float  # m, every agent
+    success_rule: SuccessRule = "simultaneous"  # how success is decided (module docstring), EnvConfig's
+
+    def __post_init__(self):
+        if self.success_rule not in SUCCESS_RULES:
+            raise SimulationError(
+                f"Trajectory.success_rule must be one of {list(SUCCESS_RULES)}, got {self.success_rule!r}"
+            )
 
     @property
     def n_steps(self) -> int:
@@ -48,8 +68,10 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class EpisodeMetrics:
-    success: bool  # every robot reached its goal before the time limit
-    travel_time: float  # s until the last robot reached its goal; NaN unless success
+    """One episode's metrics (module docstring); ``as_dict`` / ``from_dict`` round-trip through JSON."""
+
+    success: bool  # the robots reached their goals before the time limit, under the success rule
+    travel_time: float  # s until the success rule held; NaN unless success
     collision: bool  # min robot-human distance < 0.8 m
     contact: bool  # min robot-human distance < sum of radii
     discomfort: bool  # projected paths of a robot and a human intersected at some step
@@ -59,8 +81,12 @@ class EpisodeMetrics:
     min_distance_humans: float  # m, human-human (inf with fewer than two humans)
     path_length: tuple[float, ...]  # m, per robot
     reach_times: tuple[float, ...]  # s, first time each robot was within its radius of its goal (NaN: never)
-    discomfort_steps: int  # number of steps with at least one intersecting robot/human pair
-    n_steps: int  # simulation steps in the episode
+    discomfort_steps: int  # states (rows 0..T) with at least one intersecting robot/human pair
+    # States (rows 0..T) whose minimum robot-human distance is below 0.8 m, resp. below the sum of the radii.
+    # None only when rebuilt by from_dict from a record written before the counts existed.
+    collision_steps: int | None
+    contact_steps: int | None
+    n_steps: int  # simulation steps in the episode; the trajectory has n_steps + 1 states
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly (NaN and inf become None)."""
@@ -74,11 +100,51 @@ class EpisodeMetrics:
 
         return {k: clean(v) for k, v in self.__dict__.items()}
 
+    @classmethod
+    def from_dict(cls, record: Mapping[str, Any]) -> EpisodeMetrics:
+        """Rebuild from ``as_dict``'s output (e.g. read back from JSON).
+
+        null becomes inf for the minimum distances (no pair of agents) and NaN elsewhere (travel time, reach
+        times); lists become tuples. The counts in ``ADDED_COUNTS`` may be absent (records written before
+        them) and are then None; any other missing key raises SimulationError naming it.
+        """
+        names = [f.name for f in fields(cls)]
+        missing = [n for n in names if n not in record and n not in ADDED_COUNTS]
+        if missing:
+            raise SimulationError(f"episode metrics record lacks {missing}")
+        values: dict[str, Any] = {}
+        for name in names:
+            value = record.get(name)
+            if name in _INF_WHEN_NULL:
+                value = math.inf if value is None else float(value)
+            elif isinstance(value, list | tuple):
+                value = tuple(math.nan if v is None else v for v in value)
+            elif value is None and name not in ADDED_COUNTS:
+                value = math.nan
+            values[name] = value
+        return cls(**values)
+
 
 def first_reach_steps(robot_positions: np.ndarray, robot_goals: np.ndarray, radius: float) -> np.ndarray:
     """Index of the first row where each robot is strictly within ``radius`` of its goal, -1 if never. (M,)"""
     inside = np.linalg.norm(robot_positions - robot_goals[None], axis=-1) < radius  # (T+1, M)
     return np.where(inside.any(axis=0), inside.argmax(axis=0), -1)
+
+
+def _row_min_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(T,) smallest centre distance at each row between agents of ``a (T, P, 2)`` and ``b (T, Q, 2)``."""
+    if a.shape[1] == 0 or b.shape[1] == 0:
+        return np.full(len(a), math.inf)
+    return np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
+
+
+def _success_step(traj: Trajectory, reach: np.ndarray, rule: str) -> int:
+    """First row at which ``rule`` holds, -1 if never (module docstring)."""
+    if rule == "first_reach":
+        return int(reach.max()) if (reach >= 0).all() else -1
+    inside = np.linalg.norm(traj.robot_positions - traj.robot_goals[None], axis=-1) < traj.radius
+    together = inside.all(axis=1)
+    return int(together.argmax()) if together.any() else -1
 
 
 def _min_pair_distance(a: np.ndarray, b: np.ndarray, same: bool) -> float:
@@ -140,20 +206,29 @@ def episode_metrics(
     *,
     collision_distance: float = COLLISION_DISTANCE,
     discomfort_horizon: float = DISCOMFORT_HORIZON,
+    success_rule: str | None = None,
 ) -> EpisodeMetrics:
-    """The metrics of one episode (module docstring)."""
+    """The metrics of one episode (module docstring); ``success_rule`` overrides the trajectory's."""
     rp, hp = traj.robot_positions, traj.human_positions
     if rp.shape[1] == 0:
         raise SimulationError("episode metrics need at least one robot; the trajectory has n_robots=0")
+    rule = traj.success_rule if success_rule is None else success_rule
+    if rule not in SUCCESS_RULES:
+        raise SimulationError(f"success_rule must be one of {list(SUCCESS_RULES)}, got {rule!r}")
     reach = first_reach_steps(rp, traj.robot_goals, traj.radius)
-    success = bool((reach >= 0).all())
-    # Rounded so that 29 steps read 11.6 s, not 11.600000000000001 s.
-    reach_times = tuple(round(float(k * traj.dt), 9) if k >= 0 else math.nan for k in reach)
-    min_rh = _min_pair_distance(rp, hp, same=False)
+    done_step = _success_step(traj, reach, rule)
+    success = done_step >= 0
+
+    def seconds(k: int) -> float:  # rounded so that 29 steps read 11.6 s, not 11.600000000000001 s
+        return round(float(k * traj.dt), 9)
+
+    reach_times = tuple(seconds(k) if k >= 0 else math.nan for k in reach)
+    row_min = _row_min_distance(rp, hp)
+    min_rh = float(row_min.min())
     disc = discomfort_steps(traj, discomfort_horizon)
     return EpisodeMetrics(
         success=success,
-        travel_time=max(reach_times) if success else math.nan,
+        travel_time=seconds(done_step) if success else math.nan,
         collision=min_rh < collision_distance,
         contact=min_rh < 2.0 * traj.radius,
         discomfort=bool(disc.any()),
@@ -164,6 +239,8 @@ def episode_metrics(
         path_length=tuple(float(x) for x in np.linalg.norm(np.diff(rp, axis=0), axis=-1).sum(axis=0)),
         reach_times=reach_times,
         discomfort_steps=int(disc.sum()),
+        collision_steps=int((row_min < collision_distance).sum()),
+        contact_steps=int((row_min < 2.0 * traj.radius).sum()),
         n_steps=traj.n_steps,
     )
 
@@ -173,7 +250,12 @@ def _rate(flags: list[bool]) -> float:
 
 
 def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
-    """Rates in % with their counts, travel time over successful episodes (NaN if none), distances."""
+    """Rates in % with their counts, travel time over successful episodes (NaN if none), distances.
+
+    Per-step frequencies in % (``collision_step_freq``, ``contact_step_freq``, ``discomfort_step_freq``):
+    the states at which the condition holds over all states evaluated, ``100 sum(x_steps) / sum(n_steps +
+    1)``; NaN when some episode lacks the count (rebuilt from an older record).
+    """
     if not metrics:
         raise SimulationError("aggregate needs at least one episode, got an empty list")
     travel = [m.travel_time for m in metrics if m.success]
@@ -187,5 +269,11 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
     out["travel_time_std"] = float(np.std(travel)) if travel else math.nan
     out["min_distance_mean"] = float(np.mean(min_d))
     out["min_distance_min"] = float(np.min(min_d))
+    out["min_distance_median"] = float(np.median(min_d))
+    states = sum(m.n_steps + 1 for m in metrics)
+    for name in ("collision", "contact", "discomfort"):
+        counts = [getattr(m, f"{name}_steps") for m in metrics]
+        missing = any(c is None for c in counts)
+        out[f"{name}_step_freq"] = math.nan if missing else 100.0 * sum(counts) / states
     out["path_length_mean"] = float(np.mean([np.mean(m.path_length) for m in metrics]))
     return out

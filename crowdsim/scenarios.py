@@ -1,52 +1,42 @@
 """Seeded start/goal layouts: circle crossing and perpendicular crossing, with a row of robots.
 
-Robots (every scenario)
------------------------
+Robots (every scenario, every profile)
+--------------------------------------
 ``n_robots`` robots start on the line ``y = -5`` m at ``x_k = (k - (M - 1) / 2) * 1.0`` m (1 m apart,
 centred on ``x = 0``) and have their goals mirrored on ``y = +5`` m at the same ``x``, so they all travel
 the same way (north, 10 m) side by side and can flock. Three robots: starts (-1, -5), (0, -5), (1, -5).
-The layout is deterministic; only the humans are random.
+The layout is deterministic; only the humans are random. Where the paper's robots start and end is not
+public, so both profiles keep this row: it isolates the published conventions (the humans' sampling,
+timing and success rule) from a choice of ours.
 
 Humans
 ------
-Sampled one after the other with CrowdNav's rejection rule: a candidate is redrawn while its start or its
-goal lies closer than ``r_i + r_j + 0.2`` m (CrowdNav's ``discomfort_dist``) to any start or goal of the
-agents placed before it (robots first). CrowdNav checks only the candidate's start; checking the goal too
-makes no difference for circle crossing (goals are the mirrored starts) and keeps goals apart in the
-perpendicular scenario.
+Sampled by ``crowdsim.crossings`` under the profile's convention (``crossing``: "paper" follows the
+authors' CrowdNav fork, "v1" this project's first simulator), with ``r_i + r_j + spawn_separation`` as the
+minimum separation (1.1 m for "paper", 0.8 m for "v1").
 
-* circle: a uniform angle on the radius-5 m circle plus uniform noise in ``[-v_pref/2, v_pref/2)`` on each
-  coordinate (CrowdNav's ``generate_circle_crossing_human``); the goal is the opposite point ``-start``.
-* perpendicular: humans cross the 10 m square horizontally, through the robots' north-bound column. A fair
-  coin picks the side; the start is ``(±(5 + e), y)`` with ``e`` uniform in ``[-1, 1)`` m (within a metre of
-  the square's side) and ``y`` uniform in ``[-5, 5)`` m; the goal is ``(∓(5 + e'), y + n)`` on the opposite
-  side, ``e'`` uniform in ``[-1, 1)`` m and ``n`` uniform in ``[-v_pref/2, v_pref/2)``, so the crossing is
-  nearly horizontal.
-
-Up to 16 humans (``DENSE_HUMANS``; the paper uses 5-9) the geometry is exactly the above. Larger crowds, up
-to 50 for scaling benchmarks, do not fit it (the rejection sampling runs dry around 20 humans), so for
-``n_humans > 16`` the circle radius, respectively the square's vertical extent, is multiplied by
-``n_humans / 16``: the humans' starts keep the density of 16 humans. The robot row never changes.
-
-Every random number comes from the ``numpy.random.Generator`` passed in, in a fixed order, so a seed fixes
-the layout.
+Up to 16 humans (``DENSE_HUMANS``; the paper uses 5-9) the geometry is exactly that of the crossing rules.
+Larger crowds, up to 50 for scaling benchmarks, do not fit it (the rejection sampling runs dry around 20
+humans), so for ``n_humans > 16`` the circle radius, respectively the square's vertical extent, is
+multiplied by ``n_humans / 16``: the humans' starts keep the density of 16 humans. The robot row never
+changes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 
+from crowdsim.conventions import CROSSINGS, SPAWN_SEPARATION
+from crowdsim.crossings import PLACERS
 from crowdsim.errors import SimulationError
+from crowdsim.world import RADIUS, V_PREF
 
-CIRCLE_RADIUS: Final[float] = 5.0  # m, circle crossing (the brief; CrowdNav's default is 4 m)
-SQUARE_WIDTH: Final[float] = 10.0  # m, side of the perpendicular-crossing square
+SCENARIOS: Final[tuple[str, ...]] = ("circle", "perpendicular")
 ROBOT_SPACING: Final[float] = 1.0  # m between neighbouring robots on the start line
 ROBOT_START_Y: Final[float] = -5.0  # m; goals at +5
-DISCOMFORT_DIST: Final[float] = 0.2  # m, CrowdNav's extra separation between sampled starts/goals
 MAX_HUMANS: Final[int] = 50
 MAX_ROBOTS: Final[int] = 12
 MAX_TRIES: Final[int] = 10_000  # rejection-sampling draws per human before the layout is declared too crowded
@@ -71,31 +61,6 @@ def robot_layout(n_robots: int) -> tuple[np.ndarray, np.ndarray]:
     starts = np.stack([x, np.full(n_robots, ROBOT_START_Y)], axis=1)
     goals = np.stack([x, np.full(n_robots, -ROBOT_START_Y)], axis=1)
     return starts, goals
-
-
-def _circle_candidate(rng: np.random.Generator, v_pref: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
-    angle = rng.random() * 2.0 * np.pi
-    noise = (rng.random(2) - 0.5) * v_pref
-    start = scale * CIRCLE_RADIUS * np.array([np.cos(angle), np.sin(angle)]) + noise
-    return start, -start
-
-
-def _perpendicular_candidate(
-    rng: np.random.Generator, v_pref: float, scale: float
-) -> tuple[np.ndarray, np.ndarray]:
-    side = -1.0 if rng.random() > 0.5 else 1.0
-    half = SQUARE_WIDTH / 2.0
-    y = (rng.random() - 0.5) * scale * SQUARE_WIDTH
-    u = rng.random(3)
-    start = np.array([side * (half + 2.0 * u[0] - 1.0), y])
-    goal = np.array([-side * (half + 2.0 * u[1] - 1.0), y + (u[2] - 0.5) * v_pref])
-    return start, goal
-
-
-SCENARIOS: dict[str, Callable[[np.random.Generator, float, float], tuple[np.ndarray, np.ndarray]]] = {
-    "circle": _circle_candidate,
-    "perpendicular": _perpendicular_candidate,
-}
 
 
 def geometry_scale(n_humans: int) -> float:
@@ -123,37 +88,35 @@ def make_layout(
     n_robots: int,
     rng: np.random.Generator,
     *,
-    radius: float = 0.3,
-    v_pref: float = 1.0,
+    radius: float = RADIUS,
+    v_pref: float = V_PREF,
+    crossing: str = "paper",
+    spawn_separation: float | None = None,
 ) -> Layout:
-    """Robot row plus ``n_humans`` humans rejection-sampled from ``rng`` (module docstring)."""
+    """Robot row plus ``n_humans`` humans sampled from ``rng`` under the ``crossing`` rules.
+
+    ``spawn_separation`` (m, added to the two radii) defaults to the crossing convention's own: 0.5 for
+    "paper", 0.2 for "v1". The defaults are the paper profile's, like ``EnvConfig()``'s.
+    """
     check_sizes(scenario, n_humans, n_robots)
-    candidate = SCENARIOS[scenario]
-    scale = geometry_scale(n_humans)
+    if crossing not in CROSSINGS:
+        raise SimulationError(f"unknown crossing {crossing!r}; choose from {list(CROSSINGS)}")
+    separation = SPAWN_SEPARATION[crossing] if spawn_separation is None else spawn_separation
+    if not (np.isfinite(separation) and separation >= 0):
+        raise SimulationError(f"spawn_separation must be a finite number >= 0 m, got {spawn_separation!r}")
     robot_starts, robot_goals = robot_layout(n_robots)
     # Every placed agent has the same radius, so the separation is one number.
-    min_dist = 2.0 * radius + DISCOMFORT_DIST
-    taken = list(robot_starts) + list(robot_goals)
-    starts, goals = [], []
-    for h in range(n_humans):
-        for _ in range(MAX_TRIES):
-            start, goal = candidate(rng, v_pref, scale)
-            if not taken:
-                break
-            points = np.asarray(taken)
-            if (
-                np.linalg.norm(points - start, axis=1).min() >= min_dist
-                and np.linalg.norm(points - goal, axis=1).min() >= min_dist
-            ):
-                break
-        else:
-            raise SimulationError(
-                f"could not place human {h + 1} of n_humans={n_humans} in scenario {scenario!r} with "
-                f"{n_robots} robots after {MAX_TRIES} draws; use fewer agents"
-            )
-        starts.append(start)
-        goals.append(goal)
-        taken += [start, goal]
+    starts, goals = PLACERS[crossing](
+        scenario,
+        n_humans,
+        robot_starts,
+        robot_goals,
+        rng,
+        min_dist=2.0 * radius + separation,
+        v_pref=v_pref,
+        scale=geometry_scale(n_humans),
+        max_tries=MAX_TRIES,
+    )
     return Layout(
         robot_starts=robot_starts,
         robot_goals=robot_goals,

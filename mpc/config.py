@@ -4,8 +4,10 @@ Every formulation (joint NLP, local NLPs, coupled NLP) reads the same frozen ``M
 equation numbers are the paper's (Le et al., "Multi-robot cooperative navigation in crowds: a game-theoretic
 learning-based model predictive control approach").
 
-Table I's ``L = 8`` (observed steps) is not here: it belongs to the predictor (``Predictor.obs_len``), which
-decides how much history it reads; the simulator keeps ``history_len = 8`` rows for it.
+The facts the MPC shares with the simulator and the predictors (``tau``, ``v_max``, ``a_max``) default to
+``crowdsim.world``, their one source. Table I's ``L`` (observed steps) is not here: it belongs to the
+predictor (``Predictor.obs_len``, 9 for every zoo model), and the simulator keeps ``crowdsim.world.OBS_LEN``
+rows of history for it; the closed loop checks that they agree (``pipelines.mpc_controllers.check_world``).
 
 The two values the paper uses without giving them:
 
@@ -26,6 +28,7 @@ import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from crowdsim import world
 from mpc.errors import MPCConfigError
 
 SOLVERS = ("fatrop", "ipopt")  # MPCConfig.solver
@@ -39,14 +42,16 @@ ON_GOAL_MODES = ("brake", "track")  # what a robot that has reached its goal doe
 class MPCConfig:
     # --- Table I ---------------------------------------------------------------------------------------
     horizon: int = 4  # H, control and prediction horizon (steps)
-    dt: float = 0.4  # tau, s, sampling time of the double integrator, Eq. 2
+    dt: float = world.DT  # tau, s, sampling time of the double integrator, Eq. 2
     w_goal: float = 10.0  # omega^goal, reference tracking weight, Eqs. 7 and 13
     w_acce: float = 0.1  # omega^acce, acceleration weight, Eqs. 9 and 13
     w_jerk: float = 0.1  # omega^jerk, jerk weight, Eqs. 10 and 13
     w_coll: float = 1e7  # omega^coll, robot-human (Eq. 11, 13) and robot-robot (Eq. 12, 14) penalty weight
     w_floc: float = 10.0  # omega^floc, flocking weight, Eqs. 14 and 15 (0 disables flocking, Table III "NF")
-    v_max: float = 1.0  # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
-    a_max: float = 2.0  # a_max, m/s^2, bound on each acceleration component, Eq. 6
+    v_max: float = (
+        world.V_MAX
+    )  # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
+    a_max: float = world.A_MAX  # a_max, m/s^2, bound on each acceleration component, Eq. 6
     rho: float = 0.5  # rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11
     d_min: float = 0.8  # d_min, m, minimum allowed distance, Eqs. 11 and 12
     mu: float = 30.0  # mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, Eq. 12
@@ -100,6 +105,13 @@ class MPCConfig:
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
     coupled_mode: str = "auto"
+    # --- safety under prediction error (beyond the paper) --------------------------------------------------
+    # m_k, m, added to d_min in the robot-human constraint of Eq. 11 at horizon step k = 1..H:
+    # smax((d_min + m_k)^2 + rho ||v||^2 - ||s - s_j||^2). () (the default) is exactly the paper's Eq. 11.
+    # The closed loop fills it from the predictor's conformal calibration (pipelines/margins.py): if the
+    # realised human position lies within m_k of the prediction, keeping d_min + m_k from the prediction
+    # keeps d_min from the human. Robot-robot (Eq. 12) is unchanged: robots know each other's plans.
+    human_margins: tuple[float, ...] = ()
 
     def __post_init__(self):
         for name in ("horizon", "j_max", "solver_max_iter"):
@@ -129,6 +141,27 @@ class MPCConfig:
             raise MPCConfigError(f"on_goal must be one of {ON_GOAL_MODES}, got {self.on_goal!r}")
         if self.coupled_mode not in COUPLED_MODES:
             raise MPCConfigError(f"coupled_mode must be one of {COUPLED_MODES}, got {self.coupled_mode!r}")
+        self._check_margins()
+
+    def _check_margins(self) -> None:
+        margins = self.human_margins
+        if not isinstance(margins, tuple | list):
+            raise MPCConfigError(
+                f"human_margins must be a sequence of {self.horizon} numbers, got {margins!r}"
+            )
+        if margins and len(margins) != self.horizon:
+            raise MPCConfigError(
+                f"human_margins needs one margin per horizon step ({self.horizon}), got {len(margins)}"
+            )
+        for m in margins:
+            if isinstance(m, bool) or not isinstance(m, int | float) or not math.isfinite(m) or m < 0:
+                raise MPCConfigError(f"human_margins must be finite numbers >= 0 m, got {list(margins)}")
+        # JSON round trips give lists: keep the frozen config hashable and comparable.
+        object.__setattr__(self, "human_margins", tuple(float(m) for m in margins))
+
+    def human_margin(self, k: int) -> float:
+        """m_k of horizon step ``k`` (0-based), 0 without margins (the paper's Eq. 11)."""
+        return self.human_margins[k] if self.human_margins else 0.0
 
     def replace(self, **changes: Any) -> MPCConfig:
         """A copy with ``changes`` applied (validated); unknown names raise ``MPCConfigError``."""

@@ -84,14 +84,14 @@ def human_collision_cost(
 ) -> Symbolic:
     """Eq. 11 through the penalty of Section IV, summed over humans and steps. Unweighted.
 
-    ``sum_j sum_k smax(d_min^2 + rho ||v_{k+1}||^2 - ||s_{k+1} - s_j,k+1||^2)``; ``humans`` is
-    ``(2, H * N_h)`` (module docstring).
+    ``sum_j sum_k smax((d_min + m_k)^2 + rho ||v_{k+1}||^2 - ||s_{k+1} - s_j,k+1||^2)``; ``humans`` is
+    ``(2, H * N_h)`` (module docstring). ``m_k`` is ``cfg.human_margin(k)``, 0 in the paper's method.
     """
     total = positions[0, 0] * 0  # the type of the inputs (SX, MX or DM), also with no humans
     for k in range(positions.shape[1]):
         block = humans[:, k * n_humans : (k + 1) * n_humans]
         dist2 = ca.sum1((block - ca.repmat(positions[:, k], 1, n_humans)) ** 2)
-        g = cfg.d_min**2 + cfg.rho * ca.sumsqr(velocities[:, k]) - dist2
+        g = (cfg.d_min + cfg.human_margin(k)) ** 2 + cfg.rho * ca.sumsqr(velocities[:, k]) - dist2
         total = total + ca.sum2(smax(g, cfg.mu))
     return total
 

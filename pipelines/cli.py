@@ -14,7 +14,7 @@ from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
 # The order in which subcommands are listed by --help.
-COMMANDS = ("data", "evaluate", "train", "export", "zoo", "simulate", "sweep", "review")
+COMMANDS = ("data", "evaluate", "train", "export", "zoo", "calibrate", "simulate", "sweep", "review")
 
 # Errors a user can cause: printed as one line, exit code 2, no traceback. Anything else is a bug and keeps
 # its traceback.

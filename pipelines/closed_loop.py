@@ -187,7 +187,7 @@ def run_episodes(
     """
     from tqdm import tqdm
 
-    controller = make_controller(spec)
+    controller = make_controller(spec, env_config)
     run_meta = {"predictor": None if spec.controller in PREDICTOR_FREE else spec.predictor, **(meta or {})}
     results: list[EpisodeResult] = []
     bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)

@@ -13,9 +13,10 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from crowdsim.control import ControlOutput
 from pipelines.errors import PipelineError
+from pipelines.margins import MarginSpec
 
 if TYPE_CHECKING:
-    from crowdsim.env import Observation
+    from crowdsim.env import EnvConfig, Observation
 
 __all__ = [
     "CONTROLLERS",
@@ -39,12 +40,17 @@ class ControllerSpec:
     coupling: str = "ibr"  # "ibr": Algorithm 1/2; "nlp": the predictor inside the joint NLP
     record_iterations: bool = False  # keep the humans' prediction of every IBR iteration in ControlOutput
     mpc_overrides: tuple[tuple[str, Any], ...] = ()  # (field, value) pairs applied to mpc.config.MPCConfig
+    margins: MarginSpec = MarginSpec()  # allowance for prediction error in Eq. 11 (pipelines/margins.py)
 
     def __post_init__(self):
         if self.controller not in CONTROLLERS:
             raise PipelineError(f"unknown controller {self.controller!r}; choose from {sorted(CONTROLLERS)}")
         if self.coupling not in COUPLINGS:
             raise PipelineError(f"unknown coupling {self.coupling!r}; choose from {list(COUPLINGS)}")
+        if not isinstance(self.margins, MarginSpec):
+            raise PipelineError(f"margins must be a MarginSpec, got {self.margins!r}")
+        if any(name == "human_margins" for name, _ in self.mpc_overrides):
+            raise PipelineError("set human margins through ControllerSpec.margins, not mpc_overrides")
 
 
 class Controller(Protocol):
@@ -67,13 +73,13 @@ class EpisodeObserver(Protocol):
     def on_end(self, result: Any) -> None: ...
 
 
-def _straight(spec: ControllerSpec) -> Controller:
+def _straight(spec: ControllerSpec, env_config: EnvConfig | None) -> Controller:
     from crowdsim.baselines import StraightController
 
     return StraightController()
 
 
-def _orca(spec: ControllerSpec) -> Controller:
+def _orca(spec: ControllerSpec, env_config: EnvConfig | None) -> Controller:
     from crowdsim.baselines import OrcaController
 
     return OrcaController()
@@ -84,25 +90,25 @@ def _orca(spec: ControllerSpec) -> Controller:
 ORACLE_PREDICTOR = "orca_oracle"
 
 
-def _mpc(spec: ControllerSpec, distributed: bool) -> Controller:
+def _mpc(spec: ControllerSpec, distributed: bool, env_config: EnvConfig | None) -> Controller:
     if spec.predictor == ORACLE_PREDICTOR:
         from pipelines.oracle import make_oracle_controller
 
-        return make_oracle_controller(spec)
+        return make_oracle_controller(spec, env_config)
     from pipelines.mpc_controllers import make_mpc_controller
 
     return make_mpc_controller(spec, distributed=distributed)
 
 
-def _cmpc(spec: ControllerSpec) -> Controller:
-    return _mpc(spec, distributed=False)
+def _cmpc(spec: ControllerSpec, env_config: EnvConfig | None) -> Controller:
+    return _mpc(spec, False, env_config)
 
 
-def _dmpc(spec: ControllerSpec) -> Controller:
-    return _mpc(spec, distributed=True)
+def _dmpc(spec: ControllerSpec, env_config: EnvConfig | None) -> Controller:
+    return _mpc(spec, True, env_config)
 
 
-CONTROLLERS: dict[str, Callable[[ControllerSpec], Controller]] = {
+CONTROLLERS: dict[str, Callable[[ControllerSpec, EnvConfig | None], Controller]] = {
     "straight": _straight,
     "orca": _orca,
     "cmpc": _cmpc,
@@ -110,5 +116,7 @@ CONTROLLERS: dict[str, Callable[[ControllerSpec], Controller]] = {
 }
 
 
-def make_controller(spec: ControllerSpec) -> Controller:
-    return CONTROLLERS[spec.controller](spec)
+def make_controller(spec: ControllerSpec, env_config: EnvConfig | None = None) -> Controller:
+    """The controller of ``spec`` for episodes simulated under ``env_config`` (the ORCA oracle simulates the
+    humans with it; None: the default conventions)."""
+    return CONTROLLERS[spec.controller](spec, env_config)

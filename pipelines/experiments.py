@@ -15,10 +15,15 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
+from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
 from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec
 from pipelines.errors import PipelineError
+from pipelines.margins import MarginSpec
+
+if TYPE_CHECKING:
+    from crowdsim.env import EnvConfig
 
 SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 PAPER_HUMANS: Final[tuple[int, ...]] = (5, 6, 7, 8, 9)  # Tables II and III
@@ -97,6 +102,27 @@ def predictor_of(spec: ControllerSpec) -> str | None:
 
 
 @dataclass(frozen=True)
+class World:
+    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility."""
+
+    profile: str = "paper"
+    visibility: str = "visible"
+
+    def __post_init__(self):
+        if self.profile not in PROFILES:
+            raise PipelineError(f"unknown profile {self.profile!r}; choose from {sorted(PROFILES)}")
+        if self.visibility not in VISIBILITY:
+            raise PipelineError(f"unknown visibility {self.visibility!r}; choose from {list(VISIBILITY)}")
+
+    @property
+    def label(self) -> str:
+        return f"{self.profile}-{self.visibility}"
+
+    def env_config(self) -> EnvConfig:
+        return make_env_config(self.profile, self.visibility)
+
+
+@dataclass(frozen=True)
 class Cell:
     """One method at one crowd size: a column of the experiment's table."""
 
@@ -104,6 +130,7 @@ class Cell:
     spec: ControllerSpec
     n_humans: int
     n_robots: int = 3
+    world: World = World()
 
     def __post_init__(self):
         if self.n_humans < 1:
@@ -117,6 +144,7 @@ class Cell:
         s = self.spec
         parts = [s.controller, predictor_of(s) or "none", "F" if s.flocking else "NF", s.coupling]
         parts += [f"{name}={value}" for name, value in s.mpc_overrides]
+        parts += [f"m={s.margins.label}", self.world.label]
         return "-".join(parts) + f"-h{self.n_humans}-r{self.n_robots}"
 
 
@@ -158,6 +186,10 @@ class Experiment:
     paper_source: str | None = None  # where `paper` was transcribed from; None: no such table
     # False when the methods' predictors are part of the comparison (or they use none): no `--predictor`.
     predictor_swappable: bool = True
+    world: World = World()  # the conventions of every cell, unless `method_worlds` names the method's own
+    method_worlds: Mapping[str, World] = field(default_factory=lambda: MappingProxyType({}))
+    # False when the methods' margins are part of the comparison (safety, conventions): no `--margins`.
+    margins_swappable: bool = True
 
     def __post_init__(self):
         labels = [label for label, _ in self.methods]
@@ -180,10 +212,30 @@ class Experiment:
         methods = tuple((label, replace(spec, predictor=predictor)) for label, spec in self.methods)
         return replace(self, methods=methods)
 
+    def with_margins(self, margins: MarginSpec) -> Experiment:
+        """Every method planning with ``margins`` (e.g. Table II with conformal margins)."""
+        if not self.margins_swappable:
+            raise PipelineError(
+                f"experiment {self.name!r} fixes each method's margins; --margins does not apply"
+            )
+        methods = tuple((label, replace(spec, margins=margins)) for label, spec in self.methods)
+        return replace(self, methods=methods)
+
+    def with_world(self, world: World) -> Experiment:
+        """Every cell simulated under ``world`` (profile and visibility)."""
+        if self.method_worlds:
+            raise PipelineError(
+                f"experiment {self.name!r} fixes each method's profile and visibility; --profile and "
+                "--visibility do not apply"
+            )
+        return replace(self, world=world)
+
     def cells(self, humans: Sequence[int] | None = None, n_robots: int = 3) -> tuple[Cell, ...]:
         """Cells in table order: for each number of humans, every method."""
         return tuple(
-            Cell(label, spec, n, n_robots) for n in (humans or self.humans) for label, spec in self.methods
+            Cell(label, spec, n, n_robots, self.method_worlds.get(label, self.world))
+            for n in (humans or self.humans)
+            for label, spec in self.methods
         )
 
     def tasks(
@@ -229,6 +281,35 @@ def _coupled(mode: str) -> ControllerSpec:
     return ControllerSpec("cmpc", COUPLING_PREDICTOR, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
 
 
+# The safety experiment: the paper's method (no margin) and conformal margins at decreasing alpha (more
+# coverage, wider margins), CMPC with the paper's predictor at the middle of the paper's range.
+SAFETY_ALPHAS: Final[tuple[float, ...]] = (0.5, 0.2, 0.1, 0.05, 0.01)
+
+
+def _safety_methods() -> tuple[tuple[str, ControllerSpec], ...]:
+    methods = [("none", ControllerSpec("cmpc", PAPER_PREDICTOR))]
+    for alpha in SAFETY_ALPHAS:
+        margins = MarginSpec("conformal", alpha=alpha)
+        methods.append((f"alpha={alpha:g}", ControllerSpec("cmpc", PAPER_PREDICTOR, margins=margins)))
+    return tuple(methods)
+
+
+# How much of the gap to the paper's collision rates each convention explains: profile x visibility x
+# margins, CMPC with the paper's predictor, the same crowds in every cell.
+def _convention_methods() -> tuple[tuple[tuple[str, ControllerSpec], ...], Mapping[str, World]]:
+    methods, worlds = [], {}
+    for profile in ("v1", "paper"):
+        for visibility in VISIBILITY:
+            for margins in (MarginSpec(), MarginSpec("conformal")):
+                label = f"{profile}/{visibility}/{margins.label}"
+                methods.append((label, ControllerSpec("cmpc", PAPER_PREDICTOR, margins=margins)))
+                worlds[label] = World(profile, visibility)
+    return tuple(methods), MappingProxyType(worlds)
+
+
+_CONVENTION_METHODS, _CONVENTION_WORLDS = _convention_methods()
+
+
 EXPERIMENTS: dict[str, Experiment] = {
     "table2": Experiment(
         name="table2",
@@ -272,12 +353,28 @@ EXPERIMENTS: dict[str, Experiment] = {
         ),
         humans=ABLATION_HUMANS,
     ),
+    "safety": Experiment(
+        name="safety",
+        title="Safety: CMPC without margins (the paper) and with conformal margins at decreasing alpha",
+        methods=_safety_methods(),
+        humans=ABLATION_HUMANS,
+        margins_swappable=False,
+    ),
+    "conventions": Experiment(
+        name="conventions",
+        title="Conventions: simulation profile x robot visibility x margins (CMPC, paper's predictor)",
+        methods=_CONVENTION_METHODS,
+        humans=ABLATION_HUMANS,
+        method_worlds=_CONVENTION_WORLDS,
+        margins_swappable=False,
+    ),
     "baselines": Experiment(
         name="baselines",
         title="Baselines: robots driving straight to their goals vs robots moving by ORCA",
         methods=(("straight", ControllerSpec("straight")), ("ORCA", ControllerSpec("orca"))),
         humans=PAPER_HUMANS,
         predictor_swappable=False,
+        margins_swappable=False,
     ),
 }
 

@@ -31,6 +31,7 @@ from mpc.fastcall import BufferedFunction
 from mpc.nlp import StepData
 from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec, ControlOutput
 from pipelines.errors import PipelineError
+from predictors.base import DT as PREDICTOR_DT
 from predictors.base import Predictor
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.registry import checkpoint_sha256, load_predictor
@@ -48,14 +49,28 @@ def mpc_config(spec: ControllerSpec) -> MPCConfig:
 def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.ndarray]:
     """The last ``obs_len`` rows of ``obs.history`` ``(L, M+N, 2)`` and an all-True mask.
 
-    A history shorter than ``obs_len`` is padded at the front with its first row (standing still), the
-    simulator's own convention at the start of an episode.
+    The predictor gets exactly the rows it reads: a history shorter than ``obs_len`` is refused (the
+    simulator's ``EnvConfig.history_len`` must be at least the predictor's ``obs_len``), never padded here.
+    Before an episode's first step everyone stood still, which is what the simulator's own history says.
     """
     history = np.asarray(obs.history, dtype=float)
     if len(history) < obs_len:
-        history = np.concatenate([np.repeat(history[:1], obs_len - len(history), axis=0), history])
+        raise PipelineError(
+            f"the predictor reads {obs_len} observed steps but the simulator keeps {len(history)} "
+            f"(EnvConfig.history_len): use history_len >= {obs_len}"
+        )
     history = history[-obs_len:]
     return history, np.ones(history.shape[:2], dtype=bool)
+
+
+def check_world(obs: Observation, cfg: MPCConfig, predictor: Predictor) -> None:
+    """The simulator, the MPC and the predictor agree on the shared facts (crowdsim/world.py): the control
+    period is the simulation step and the predictor's sampling time, and the history holds what it reads."""
+    if abs(obs.dt - cfg.dt) > 1e-12:
+        raise PipelineError(f"the simulator steps {obs.dt} s but the MPC plans with tau = {cfg.dt} s")
+    if getattr(predictor, "obs_len", 0) > 1 and abs(cfg.dt - PREDICTOR_DT) > 1e-12:
+        raise PipelineError(f"the predictors are sampled every {PREDICTOR_DT} s, the MPC's tau is {cfg.dt} s")
+    predictor_history(obs, predictor.obs_len)
 
 
 def _load(name: str) -> Predictor:
@@ -78,8 +93,10 @@ class MPCController:
         self.spec = spec
         self.name = "dmpc" if distributed else "cmpc"
         self.distributed = distributed
-        self.cfg = mpc_config(spec)
         self.predictor = predictor if predictor is not None else _load(spec.predictor)
+        name = getattr(self.predictor, "name", spec.predictor)
+        cfg = mpc_config(spec)
+        self.cfg = cfg.replace(human_margins=spec.margins.resolve(name, cfg.horizon, checkpoint_sha256(name)))
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
@@ -102,6 +119,7 @@ class MPCController:
                 "coupling": self.spec.coupling,
                 "flocking": self.spec.flocking,
                 "distributed": self.distributed,
+                "margins": self.spec.margins.describe(self.cfg.human_margins),
             },
         }
 
@@ -151,6 +169,7 @@ class MPCController:
         return predict
 
     def reset(self, obs: Observation) -> None:
+        check_world(obs, self.cfg, self.predictor)
         # Build now, not inside the first timed step.
         self.solver(obs.n_robots, obs.n_humans)
         if self.spec.coupling != "nlp":

@@ -92,11 +92,15 @@ class OrcaOracle:
         hp, hv = obs.human_positions.astype(float), obs.human_velocities.astype(float)
         humans = np.arange(m, m + obs.n_humans)
         out = np.empty((len(robots_future), obs.n_humans, 2))
+        # Invisible robots (EnvConfig.robots_visible False) are not in the humans' ORCA at all.
+        seen = m if cfg.robots_visible else 0
+        if not cfg.robots_visible:
+            humans = humans - m
         for k, robots_next in enumerate(robots_future):
             pref = preferred_velocities(hp, obs.human_goals, cfg.v_pref, stop_radius=obs.radius)
             hv, _ = orca_velocities(
-                np.concatenate([rp, hp]),
-                np.concatenate([rv, hv]),
+                np.concatenate([rp[:seen], hp]),
+                np.concatenate([rv[:seen], hv]),
                 pref,
                 obs.radius + cfg.orca_radius_margin,
                 cfg.v_pref,

@@ -420,28 +420,19 @@ def _format_totals(t: dict[str, Any]) -> str:
 
 
 def _aggregate_metrics(recorded: list[dict[str, Any]]) -> dict[str, Any]:
-    """crowdsim's own aggregate over EpisodeMetrics rebuilt from the recorded dicts (null was NaN or inf)."""
-    import dataclasses
-
+    """crowdsim's own aggregate over EpisodeMetrics rebuilt from the recorded dicts (null was NaN or inf;
+    recordings from before the per-step counts still aggregate, their frequencies reading n/a)."""
+    from crowdsim.errors import SimulationError
     from crowdsim.metrics import EpisodeMetrics, aggregate
 
-    names = [f.name for f in dataclasses.fields(EpisodeMetrics)]
-    rebuilt = []
-    for m in recorded:
-        missing = [n for n in names if n not in m]
-        if missing:
-            raise PipelineError(f"recorded metrics lack {missing}: written by another crowdmpc version?")
-        rebuilt.append(EpisodeMetrics(**{n: _unnull(m[n]) for n in names}))
+    try:
+        rebuilt = [EpisodeMetrics.from_dict(m) for m in recorded]
+    except SimulationError as exc:
+        raise PipelineError(f"recorded metrics: {exc}: written by another crowdmpc version?") from None
     return {
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in aggregate(rebuilt).items()
     }
-
-
-def _unnull(value: Any) -> Any:
-    if isinstance(value, list):
-        return tuple(_unnull(v) for v in value)
-    return math.nan if value is None else value
 
 
 def compare_table(a: Recording, b: Recording) -> str:

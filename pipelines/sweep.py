@@ -38,12 +38,15 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from pipelines.controllers import Controller, ControllerSpec, make_controller
 from pipelines.errors import PipelineError
 from pipelines.experiments import EpisodeTask, Experiment, predictor_of
 from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from crowdsim.env import EnvConfig
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
@@ -148,7 +151,9 @@ def sweep_lock(out: Path) -> Iterator[None]:
 # ----------------------------------------------------------------------------------------------------------
 
 
-def build_controller(spec: ControllerSpec, jit: bool = False) -> Controller:
+def build_controller(
+    spec: ControllerSpec, jit: bool = False, env_config: EnvConfig | None = None
+) -> Controller:
     """A cell's controller (the registry routes the ORCA oracle predictor to pipelines.oracle).
 
     ``jit``: the MPC controllers compile their NLPs (MPCConfig.jit). It is a worker setting, not part of the
@@ -159,7 +164,7 @@ def build_controller(spec: ControllerSpec, jit: bool = False) -> Controller:
     """
     if jit and spec.controller in JIT_CONTROLLERS and spec.coupling == "ibr":
         spec = replace(spec, mpc_overrides=(*spec.mpc_overrides, ("jit", True)))
-    return make_controller(spec)
+    return make_controller(spec, env_config)
 
 
 def jit_available() -> bool:
@@ -214,6 +219,9 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) 
             "predictor_sha256": predictor_sha256(predictor_of(spec)),
             "flocking": spec.flocking,
             "coupling": spec.coupling,
+            "margins": spec.margins.label,
+            "profile": task.cell.world.profile,
+            "visibility": task.cell.world.visibility,
             "n_humans": task.cell.n_humans,
             "n_robots": task.cell.n_robots,
             "index": task.index,
@@ -262,7 +270,7 @@ class EpisodeWorker:
         if key in self._controllers:
             self._controllers.move_to_end(key)
             return self._controllers[key]
-        controller = build_controller(task.cell.spec, self.jit)
+        controller = build_controller(task.cell.spec, self.jit, task.cell.world.env_config())
         self.builds += 1
         self._controllers[key] = controller
         while len(self._controllers) > CONTROLLER_CACHE:
@@ -301,6 +309,7 @@ class EpisodeWorker:
                 scenario=task.scenario,
                 n_humans=task.cell.n_humans,
                 n_robots=task.cell.n_robots,
+                env_config=task.cell.world.env_config(),
                 observers=() if recorder is None else (recorder,),
                 meta=meta,
             )
@@ -631,7 +640,13 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
             "jit": config.jit,
             "planned": planned,
             "cells": [
-                {"key": c.key, "method": c.method, "n_humans": c.n_humans, **asdict(c.spec)}
+                {
+                    "key": c.key,
+                    "method": c.method,
+                    "n_humans": c.n_humans,
+                    **asdict(c.spec),
+                    **asdict(c.world),
+                }
                 for c in config.experiment.cells(config.humans, config.n_robots)
             ],
         }

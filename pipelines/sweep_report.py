@@ -5,7 +5,8 @@ its coverage for rates near 0 or 100 % and for small samples, where the normal a
 collisions gives [0, 1.9] %, not [0, 0]). Travel time is the mean over successful episodes with a normal 95%
 interval of the mean (1.96 standard errors). The Markdown table is laid out like the paper's Tables II/III:
 one column per method and number of pedestrians, the four metrics as rows, the paper's figure under each
-of ours, and the better method of each group in bold (as the paper prints it).
+of ours, and the better method of each group in bold (as the paper prints it). Per-step frequencies, the
+histogram of closest approaches and the success / collision trade-off come from pipelines.safety_report.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from pipelines import safety_report as safety
 from pipelines.errors import PipelineError
 from pipelines.experiments import SCENARIOS, Cell, Experiment, PaperFigures, predictor_of
 
@@ -74,6 +76,12 @@ class CellSummary:
     travel_time_mean: float  # s, over successful episodes (nan if none)
     travel_time_ci: float  # s, half width of the 95% interval of the mean (nan with < 2 successes)
     min_distance_mean: float  # m, robot-human
+    min_distance_median: float  # m, robot-human
+    min_distances: tuple[float, ...]  # m, each episode's minimum robot-human distance (inf: no human)
+    # % of recorded states (rows 0..T) with the condition, over the cell; nan when some record lacks the count
+    collision_step_freq: float
+    contact_step_freq: float
+    discomfort_step_freq: float
     step_median_ms: float  # median over episodes of the per-episode median control step
     step_p95_ms: float  # 95th percentile over episodes of the per-episode p95
     step_mean_ms: float  # all control-step time / all steps
@@ -128,6 +136,7 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
         travel_time_mean=_mean(times),
         travel_time_ci=_half_width(times),
         min_distance_mean=_mean([m["min_distance"] for m in metrics if m["min_distance"] is not None]),
+        **safety.safety_figures(metrics),
         step_median_ms=float(np.median(medians)) if medians else math.nan,
         step_p95_ms=float(np.percentile(p95s, 95)) if p95s else math.nan,
         step_mean_ms=sum(s["total_ms"] for s in solver) / steps if steps else math.nan,
@@ -167,6 +176,7 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "predictor": s.cell.spec.predictor,
             "flocking": s.cell.spec.flocking,
             "coupling": s.cell.spec.coupling,
+            **safety.world_columns(s.cell),
             "cell": s.cell.key,
             "episodes": s.episodes,
         }
@@ -185,6 +195,8 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "travel_time_mean": s.travel_time_mean,
             "travel_time_ci": s.travel_time_ci,
             "min_distance_mean": s.min_distance_mean,
+            "min_distance_median": s.min_distance_median,
+            **{f"{k}_step_freq": getattr(s, f"{k}_step_freq") for k in safety.STEP_COUNTS},
             "step_median_ms": s.step_median_ms,
             "step_p95_ms": s.step_p95_ms,
             "step_mean_ms": s.step_mean_ms,
@@ -214,6 +226,9 @@ def episode_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
                 "discomfort": m["discomfort"],
                 "min_distance": m["min_distance"],
                 "n_steps": m["n_steps"],
+                # Absent from records written before them: empty cells, not a failed report.
+                **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
+                **{k: r.get(k) for k in ("margins", "profile", "visibility")},
                 "step_median_ms": s["median_ms"],
                 "step_p95_ms": s["p95_ms"],
                 "step_max_ms": s["max_ms"],
@@ -277,6 +292,29 @@ def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
     return winners if len(winners) < len(values) else set()
 
 
+def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_line: str) -> str:
+    """The paragraph above the table: how many episodes, which predictors and conventions, how to read it."""
+    predictors = sorted({predictor_of(s.cell.spec) or "none" for s in columns})
+    counts = sorted({s.episodes for s in columns})
+    per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
+    notes = [
+        f"## {experiment.title}",
+        "",
+        f"Ours: {per_cell} episodes per cell, "
+        "half circle and half perpendicular crossing, the same seeds in every cell; "
+        f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
+        "interval in brackets; travel time over successful episodes ± the 95% interval of its mean. "
+        "Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) this method "
+        "succeeded and the first one failed / the reverse, with the exact McNemar p-value.",
+        world_line,
+    ]
+    if any(s.paper for s in columns):
+        notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
+    else:
+        notes.append("The paper has no such table.")
+    return "\n".join(notes)
+
+
 def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> str:
     """The paper's layout: a column per (number of pedestrians, method), metrics as rows, paper under ours."""
     if not summaries:
@@ -303,6 +341,9 @@ def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> 
         "|---|" + "---|" * len(columns),
         "| Numbers of pedestrians | " + " | ".join(str(s.cell.n_humans) for s in columns) + " |",
     ]
+    world_line, worlds = safety.world_note([s.cell for s in columns])
+    if worlds:
+        lines.append("| Margins / profile / visibility | " + " | ".join(worlds) + " |")
 
     def add(label: str, texts: list[str]) -> None:
         lines.append(f"| {label} | " + " | ".join(texts) + " |")
@@ -331,6 +372,8 @@ def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> 
             pv = paper_values(name)
             add("&nbsp;&nbsp;paper", bolded([_fmt(v) for v in pv], pv, higher))
     add("Contact rate (%) (< 0.6 m)", [_rate_cell(s.contact) for s in columns])
+    add("Collision per step (%)", [_fmt(s.collision_step_freq, 2) for s in columns])
+    add("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns])
     add(
         "Success circle / perpendicular (%)",
         [" / ".join(_fmt(s.success_by_scenario[sc].percent, 0) for sc in SCENARIOS) for s in columns],
@@ -352,24 +395,7 @@ def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> 
     add("IBR iterations per step (mean)", [_fmt(s.iterations_mean, 2) for s in columns])
     add("Fallback steps (%)", [_fmt(s.fallback_step_rate, 2) for s in columns])
 
-    predictors = sorted({predictor_of(s.cell.spec) or "none" for s in columns})
-    counts = sorted({s.episodes for s in columns})
-    per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
-    notes = [
-        f"## {experiment.title}",
-        "",
-        f"Ours: {per_cell} episodes per cell, "
-        "half circle and half perpendicular crossing, the same seeds in every cell; "
-        f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
-        "interval in brackets; travel time over successful episodes ± the 95% interval of its mean. "
-        "Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) this method "
-        "succeeded and the first one failed / the reverse, with the exact McNemar p-value.",
-    ]
-    if has_paper:
-        notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
-    else:
-        notes.append("The paper has no such table.")
-    return "\n".join(notes) + "\n\n" + "\n".join(lines) + "\n"
+    return _table_notes(experiment, columns, world_line) + "\n\n" + "\n".join(lines) + "\n"
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -446,7 +472,8 @@ class Report:
 def write_report(
     out: Path, experiment: Experiment, cells: Sequence[Cell], records: Sequence[dict[str, Any]]
 ) -> Report:
-    """cells.csv, episodes.csv, table.md and the plots in ``out``; ``records`` are those of ``cells``."""
+    """cells.csv, episodes.csv, table.md, min_distance_hist.csv and the plots in ``out``; ``records`` are
+    those of ``cells``."""
     out = Path(out)
     keys = {c.key for c in cells}
     records = [r for r in records if r["cell"] in keys]
@@ -455,7 +482,8 @@ def write_report(
     write_csv(out / EPISODES_CSV, episode_rows(records))
     markdown = markdown_table(experiment, summaries)
     (out / TABLE_MD).write_text(markdown)
-    files = [out / CELLS_CSV, out / EPISODES_CSV, out / TABLE_MD]
+    write_csv(out / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
+    files = [out / CELLS_CSV, out / EPISODES_CSV, out / TABLE_MD, out / safety.MIN_DISTANCE_HIST_CSV]
     if summaries:
-        files += plot_vs_humans(experiment, summaries, out)
+        files += plot_vs_humans(experiment, summaries, out) + safety.plot_safety(experiment, summaries, out)
     return Report(markdown, tuple(files))

@@ -37,8 +37,12 @@ from typing import Final, Protocol, runtime_checkable
 import casadi as ca
 import numpy as np
 
-DT: Final[float] = 0.4  # s; TrajNet++ samples at 2.5 Hz, and the paper's MPC uses tau = 0.4 s (Table I)
-OBS_LEN: Final[int] = 9  # TrajNet++ observes 9 steps and predicts 12 (Kothari et al. 2021)
+from crowdsim import world
+
+# TrajNet++ samples at 2.5 Hz and observes 9 steps (Kothari et al. 2021); the paper's MPC uses tau = 0.4 s.
+# One source with the simulator and the MPC: crowdsim.world.
+DT: Final[float] = world.DT
+OBS_LEN: Final[int] = world.OBS_LEN
 PRED_LEN: Final[int] = 12
 
 

@@ -38,3 +38,23 @@ def test_the_library_packages_do_not_import_the_pipelines():
     for package in ("mpc", "predictors"):
         offenders = {f: n & {"pipelines"} for f, n in imported_roots(package).items()}
         assert not {f: n for f, n in offenders.items() if n}, package
+
+
+def test_the_library_packages_take_only_the_world_facts_from_the_simulator():
+    """mpc and predictors share tau, L and the robot bounds through crowdsim.world (one source), and nothing
+    else of the simulator."""
+    for package in ("mpc", "predictors"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    modules = (
+                        [node.module]
+                        if node.module != "crowdsim"
+                        else [f"crowdsim.{a.name}" for a in node.names]
+                    )
+                elif isinstance(node, ast.Import):
+                    modules = [a.name for a in node.names]
+                else:
+                    continue
+                bad = [m for m in modules if m.split(".")[0] == "crowdsim" and m != "crowdsim.world"]
+                assert not bad, f"{path.relative_to(ROOT)} imports {bad}"

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from pipelines.controllers import CONTROLLERS, COUPLINGS
 from pipelines.errors import PipelineError
@@ -46,6 +47,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="first episode's seed (default: %(default)s)")
     parser.add_argument("--no-flocking", action="store_true", help="omega_floc = 0 (Table III, NF)")
     parser.add_argument("--coupling", default="ibr", choices=COUPLINGS, help="default: %(default)s")
+    parser.add_argument(
+        "--margins",
+        default="none",
+        metavar="SPEC",
+        help="allowance for prediction error in the robot-human distance: none (the paper, default), "
+        "conformal[:ALPHA[:closed-loop|real]] (needs `crowdmpc calibrate`), fixed:M1,..,MH (metres)",
+    )
+    parser.add_argument(
+        "--profile", default="paper", choices=sorted(PROFILES), help="simulation conventions (default: paper)"
+    )
+    parser.add_argument(
+        "--visibility", default="visible", choices=VISIBILITY, help="robots seen by the humans' ORCA"
+    )
     parser.add_argument("--json", type=Path, metavar="FILE", help="write the summary and per-episode records")
     parser.add_argument("--plot", type=Path, metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
     parser.add_argument("--record", type=Path, metavar="DIR", help="one MCAP file per episode in DIR")
@@ -76,6 +90,12 @@ def format_table(summary: dict[str, Any], header: str) -> str:
         ("collision (<0.8 m)", rate("collision")),
         ("contact (<0.6 m)", rate("contact")),
         ("discomfort", rate("discomfort")),
+        (
+            "per step",
+            f"collision {_fmt(summary.get('collision_step_freq'), ' %')}, contact "
+            f"{_fmt(summary.get('contact_step_freq'), ' %')}, discomfort "
+            f"{_fmt(summary.get('discomfort_step_freq'), ' %')} of states",
+        ),  # fmt: skip
         ("timeout", rate("timeout")),
         (
             "min distance",
@@ -97,9 +117,10 @@ def format_table(summary: dict[str, Any], header: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdsim.env import EnvConfig
+    from crowdsim.profiles import make_env_config
     from pipelines.closed_loop import PREDICTOR_FREE, run_episodes, summarize
     from pipelines.controllers import ControllerSpec
+    from pipelines.margins import parse_margins
 
     if args.episodes < 1:
         raise PipelineError(f"--episodes must be >= 1, got {args.episodes}")
@@ -117,8 +138,9 @@ def run(args: argparse.Namespace) -> int:
         flocking=not args.no_flocking,
         coupling=args.coupling,
         record_iterations=args.record_iterations,
+        margins=parse_margins(args.margins),
     )
-    env_config = EnvConfig()
+    env_config = make_env_config(args.profile, args.visibility)
     predictor = None if args.controller in PREDICTOR_FREE else args.predictor
     run_meta = {
         "command": "simulate",
@@ -127,6 +149,9 @@ def run(args: argparse.Namespace) -> int:
         "predictor": predictor,
         "flocking": spec.flocking,
         "coupling": spec.coupling,
+        "margins": spec.margins.label,
+        "profile": args.profile,
+        "visibility": args.visibility,
         "scenario": args.scenario,
         "humans": args.humans,
         "robots": args.robots,
@@ -159,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
 
     summary = summarize(results)
     header = (
-        f"controller {args.controller} | predictor {predictor or '-'} | scenario {args.scenario} | "
+        f"controller {args.controller} | predictor {predictor or '-'} | margins {spec.margins.label} | "
+        f"{args.profile}/{args.visibility} | scenario {args.scenario} | "
         f"humans {args.humans} | robots {args.robots} | episodes {args.episodes} | seeds {args.seed}.."
         f"{args.seed + args.episodes - 1}"
     )

@@ -18,13 +18,16 @@ EPILOG = """examples:
   crowdmpc sweep --experiment table2 --predictor constant_velocity --humans 7 --episodes-per-cell 4 \\
       --out /tmp/sw
   crowdmpc sweep --experiment predictors --episodes-per-cell 100 --record failures --out runs/predictors
+  crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
 figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle);
-coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); baselines
-(straight and ORCA robots, a quick check of a setup). Episode i of every cell is the same crowd (circle for
-even i, perpendicular for odd i, seed --seed + i // 2).
+coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); safety
+(CMPC without margins and with conformal margins at alpha 0.5 .. 0.01, 7 humans); conventions (simulation
+profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check).
+--margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling.
+Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
 
 Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
 --episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;
@@ -52,6 +55,7 @@ def _humans(text: str) -> tuple[int, ...]:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from crowdsim.profiles import PROFILES, VISIBILITY
     from pipelines.experiments import EXPERIMENTS, PAPER_EPISODES_PER_CELL
     from pipelines.sweep import BACKENDS, RECORD_POLICIES
 
@@ -96,6 +100,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--predictor",
         metavar="NAME",
         help="replace the predictor of every method (table2/table3 default to social_lstm_eth, as the paper)",
+    )
+    p.add_argument(
+        "--margins",
+        metavar="SPEC",
+        help="safety margins of every method: none (the paper), conformal[:ALPHA[:closed-loop|real]], "
+        "fixed:M1,..,MH (default: the experiment's own, none for table2/table3/predictors/coupling)",
+    )
+    p.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        help="simulation conventions (default paper: the authors' CrowdNav fork; v1: this project's first)",
+    )
+    p.add_argument(
+        "--visibility",
+        choices=VISIBILITY,
+        help="whether the humans' ORCA sees the robots (default visible, as the authors' fork)",
     )
     p.add_argument(
         "--record",
@@ -143,14 +163,41 @@ def _check_predictors(experiment: Experiment) -> None:
         )
 
 
-def run(args: argparse.Namespace) -> int:
-    from pipelines.experiments import get_experiment
-    from pipelines.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, run_sweep
-    from pipelines.sweep_report import write_report
+def _check_margins(experiment: Experiment) -> None:
+    """Every method's margins resolve (a calibration that matches the weights) before workers start."""
+    from mpc.config import MPCConfig
+    from pipelines.experiments import predictor_of
+    from predictors.registry import checkpoint_sha256
+
+    horizon = MPCConfig().horizon
+    for _, spec in experiment.methods:
+        name = predictor_of(spec)
+        spec.margins.resolve(name, dict(spec.mpc_overrides).get("horizon", horizon), checkpoint_sha256(name))
+
+
+def configured_experiment(args: argparse.Namespace) -> Experiment:
+    """The experiment with the command line's --predictor, --margins, --profile and --visibility applied."""
+    from pipelines.experiments import World, get_experiment
+    from pipelines.margins import parse_margins
 
     experiment = get_experiment(args.experiment)
     if args.predictor:
         experiment = experiment.with_predictor(args.predictor)
+    if args.margins:
+        experiment = experiment.with_margins(parse_margins(args.margins))
+    if args.profile or args.visibility:
+        world = World(
+            args.profile or experiment.world.profile, args.visibility or experiment.world.visibility
+        )
+        experiment = experiment.with_world(world)
+    return experiment
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipelines.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, run_sweep
+    from pipelines.sweep_report import write_report
+
+    experiment = configured_experiment(args)
     config = SweepConfig(
         experiment=experiment,
         out=args.out,
@@ -176,6 +223,7 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     if not args.report_only:
         _check_predictors(experiment)
+        _check_margins(experiment)
         outcome = run_sweep(config)
         done = outcome.already_done + outcome.ran
         rate = (

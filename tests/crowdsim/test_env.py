@@ -1,11 +1,18 @@
 """CrowdEnv: robot dynamics and clipping, episode end, observations, reproducibility."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from crowdsim.baselines import StraightController
 from crowdsim.env import CrowdEnv, EnvConfig
 from crowdsim.errors import SimulationError
+from crowdsim.metrics import episode_metrics
+from crowdsim.profiles import PROFILES
 from crowdsim.scenarios import Layout
+
+V1 = PROFILES["v1"]
 
 
 def one_robot(start=(0.0, 0.0), goal=(0.0, 9.0), humans=(), human_goals=()):
@@ -22,7 +29,36 @@ def test_config_validation_names_the_value():
         EnvConfig(dt=-0.4)
     with pytest.raises(SimulationError, match="history_len.*0"):
         EnvConfig(history_len=0)
-    assert EnvConfig().max_steps == 75  # 30 s at 0.4 s
+    with pytest.raises(SimulationError, match="crossing.*'square'"):
+        EnvConfig(crossing="square")
+    with pytest.raises(SimulationError, match="success_rule.*'any'"):
+        EnvConfig(success_rule="any")
+    with pytest.raises(SimulationError, match="timeout_margin.*2.0"):
+        EnvConfig(time_limit=2.0, timeout_margin=2.0)
+    with pytest.raises(SimulationError, match="spawn_separation.*-0.1"):
+        EnvConfig(spawn_separation=-0.1)
+    with pytest.raises(SimulationError, match="robots_visible.*'yes'"):
+        EnvConfig(robots_visible="yes")
+
+
+def test_max_steps_per_profile():
+    # paper: steps start while t < 40 - 1 = 39 s, i.e. at t = 0, 0.4, ..., 38.8: 98 steps (39 / 0.4 = 97.5).
+    assert EnvConfig().max_steps == 98
+    # v1: 30 s at 0.4 s, no margin (30 / 0.4 = 75.00000000000001 in floats).
+    assert V1.max_steps == 75
+    # Margin 1 s of 2 s: steps start at t = 0, 0.4, 0.8 (1.2 >= 1): 3 steps.
+    assert EnvConfig(time_limit=2.0).max_steps == 3
+
+
+def test_paper_episode_times_out_after_98_steps_at_39_2_s():
+    env = CrowdEnv()
+    env.reset_layout(one_robot())
+    done, steps = False, 0
+    while not done:
+        obs, done, info = env.step(np.zeros((1, 2)))
+        steps += 1
+    assert steps == 98 and obs.time == pytest.approx(39.2)
+    assert info["timeout"] and not info["success"]
 
 
 def test_double_integrator_and_clipping_rule():
@@ -87,7 +123,7 @@ def test_reaching_the_goal_ends_the_episode_and_is_latched():
 
 
 def test_time_limit_ends_the_episode():
-    env = CrowdEnv(EnvConfig(time_limit=2.0))
+    env = CrowdEnv(dataclasses.replace(V1, time_limit=2.0))
     env.reset_layout(one_robot())
     for k in range(5):
         obs, done, info = env.step(np.zeros((1, 2)))
@@ -98,6 +134,7 @@ def test_time_limit_ends_the_episode():
 
 
 def test_observation_layout_and_history_padding():
+    assert EnvConfig().history_len == 9  # the predictors' observed length, crowdsim.world.OBS_LEN
     env = CrowdEnv(EnvConfig(history_len=3))
     obs = env.reset(4, "circle", 5, 2)
     assert obs.robot_positions.shape == (2, 2) and obs.human_positions.shape == (5, 2)
@@ -158,3 +195,90 @@ def test_crowd_without_robots_ends_when_every_human_arrived():
     assert info["success"]
     assert np.all(np.linalg.norm(traj.human_positions[-1] - traj.human_goals, axis=1) < 0.3)
     assert traj.robot_positions.shape == (traj.n_steps + 1, 0, 2)
+
+
+def test_simultaneous_success_waits_for_every_robot_inside_at_once():
+    # Robot 0 starts on its goal and is pushed off east; robot 1 reaches its goal at step 2 (as above: y =
+    # 0.52, 0.28 m from (5, 0.8)). Robot 0: x = 0.16 at step 1 (inside), 0.52 at step 2 (outside).
+    layout = Layout(
+        robot_starts=np.array([[0.0, 0.0], [5.0, 0.0]]),
+        robot_goals=np.array([[0.0, 0.0], [5.0, 0.8]]),
+        human_starts=np.zeros((0, 2)),
+        human_goals=np.zeros((0, 2)),
+    )
+    push = np.array([[2.0, 0.0], [0.0, 2.0]])
+    first = CrowdEnv(V1)
+    first.reset_layout(layout)
+    first.step(push)
+    obs, done, info = first.step(push)
+    assert obs.robot_positions[0, 0] == pytest.approx(0.52)
+    assert done and info["success"]  # first_reach: robot 0 reached at step 0, robot 1 at step 2
+    assert episode_metrics(first.trajectory()).travel_time == 0.8
+
+    both = CrowdEnv()  # paper: simultaneous
+    obs = both.reset_layout(layout)
+    assert obs.robot_reached.tolist() == [True, False]
+    both.step(push)
+    obs, done, _ = both.step(push)
+    assert not done and obs.robot_reached.tolist() == [True, True]  # reached at some point, not together
+    controller = StraightController()
+    for _ in range(40):
+        obs, done, info = both.step(controller.act(obs).accelerations)
+        if done:
+            break
+    assert done and info["success"]
+    assert np.all(np.linalg.norm(obs.robot_positions - obs.robot_goals, axis=1) < 0.3)
+    m = episode_metrics(both.trajectory())
+    assert m.success and m.travel_time == pytest.approx(obs.time) and m.reach_times == (0.0, 0.8)
+    assert both.trajectory().success_rule == "simultaneous"
+
+
+# v1 episodes recorded with the simulator before the profiles existed (StraightController, 6 humans, 3
+# robots): the v1 profile must reproduce them bit for bit.
+V1_EPISODES = {
+    ("circle", 3): (
+        0.4770132844111444,
+        [
+            [-0.027749566226718994, 6.118599098629747],
+            [1.538668001339696, -0.10899663214631745],
+            [2.9423847930093583, -1.3548407778469236],
+            [0.7802779978740197, 2.924100422339943],
+            [-2.2444712772578637, 2.450691950218957],
+            [0.4734884325320734, 5.689706872496366],
+        ],
+    ),
+    ("perpendicular", 5): (
+        0.6305523189528461,
+        [
+            [4.279378559321248, 2.6469137713282684],
+            [-3.874489932546199, -0.26115352992046703],
+            [5.266088225568255, -2.282123354652665],
+            [4.726295152769794, -1.529032864288608],
+            [3.657898289901178, -2.112307598202763],
+            [4.668479609522392, -5.278747824555177],
+        ],
+    ),
+}
+
+
+@pytest.mark.parametrize("scenario, seed", list(V1_EPISODES))
+def test_v1_profile_reproduces_the_first_simulator(scenario, seed):
+    env = CrowdEnv(V1)
+    obs = env.reset(seed, scenario, 6, 3)
+    controller = StraightController()
+    done, info = False, {}
+    while not done:
+        obs, done, info = env.step(controller.act(obs).accelerations)
+    traj = env.trajectory()
+    m = episode_metrics(traj)
+    min_distance, final_humans = V1_EPISODES[scenario, seed]
+    assert traj.n_steps == 26 and info["success"] and m.reach_times == (10.4, 10.4, 10.4)
+    assert m.min_distance == min_distance
+    np.testing.assert_array_equal(traj.human_positions[-1], final_humans)
+
+
+def test_profile_reaches_the_layout():
+    paper = CrowdEnv().reset(0, "perpendicular", 5)
+    v1 = CrowdEnv(V1).reset(0, "perpendicular", 5)
+    assert np.all(np.abs(paper.human_positions[:, 0]) >= 5.0)  # the fork's U(1.0, 1.2) * 5
+    assert not np.array_equal(paper.human_positions, v1.human_positions)

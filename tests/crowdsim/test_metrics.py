@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from crowdsim.errors import SimulationError
-from crowdsim.metrics import Trajectory, aggregate, episode_metrics, segments_intersect
+from crowdsim.metrics import EpisodeMetrics, Trajectory, aggregate, episode_metrics, segments_intersect
 
 
-def make_traj(robot_pos, human_pos, robot_vel=None, human_vel=None, robot_goals=None, dt=0.4):
+def make_traj(
+    robot_pos, human_pos, robot_vel=None, human_vel=None, robot_goals=None, success_rule="simultaneous"
+):
     rp = np.asarray(robot_pos, dtype=float)
     hp = np.asarray(human_pos, dtype=float)
     return Trajectory(
@@ -20,8 +22,9 @@ def make_traj(robot_pos, human_pos, robot_vel=None, human_vel=None, robot_goals=
         robot_goals=np.asarray(robot_goals if robot_goals is not None else rp[-1], dtype=float),
         human_goals=hp[-1],
         robot_accelerations=np.zeros((len(rp) - 1, rp.shape[1], 2)),
-        dt=dt,
+        dt=0.4,
         radius=0.3,
+        success_rule=success_rule,
     )
 
 
@@ -130,3 +133,65 @@ def test_metrics_need_a_robot_and_serialise_to_json():
     m = episode_metrics(make_traj([[[0, 0]], [[0, 1]]], np.zeros((2, 0, 2)), robot_goals=[[0.0, 5.0]]))
     d = m.as_dict()
     assert d["min_distance"] is None and d["travel_time"] is None and d["reach_times"] == [None]
+
+
+def test_success_rules_when_a_robot_reaches_then_leaves():
+    # Goals (0, 2) and (5, 2). Robot 0 is inside at row 1, outside at row 2 (1 m off), inside again at row 3;
+    # robot 1 is inside from row 2 on. first_reach: done at row 2 (0.8 s); simultaneous: only row 3 (1.2 s).
+    rp = [[[0, 0], [5, 0]], [[0, 2.0], [5, 1.0]], [[0, 3.0], [5, 2.0]], [[0, 2.1], [5, 2.0]]]
+    goals = [[0.0, 2.0], [5.0, 2.0]]
+    humans = [[[9.0, 9.0]]] * 4
+    first = episode_metrics(make_traj(rp, humans, robot_goals=goals, success_rule="first_reach"))
+    both = episode_metrics(make_traj(rp, humans, robot_goals=goals, success_rule="simultaneous"))
+    assert first.success and first.travel_time == 0.8
+    assert both.success and both.travel_time == 1.2
+    assert first.reach_times == both.reach_times == (0.4, 0.8)  # each robot's own first reach either way
+    cut = make_traj(rp[:3], humans[:3], robot_goals=goals)  # ends before both are inside together
+    assert episode_metrics(cut, success_rule="first_reach").success
+    m = episode_metrics(cut)
+    assert not m.success and m.timeout and math.isnan(m.travel_time) and m.reach_times == (0.4, 0.8)
+    with pytest.raises(SimulationError, match="success_rule.*'sometimes'"):
+        episode_metrics(cut, success_rule="sometimes")
+
+
+def test_collision_and_contact_steps_count_states():
+    # Robot still at 0; the human's distance at rows 0..5: 2.0, 0.7, 0.55, 0.79, 0.8, 0.6.
+    # Below 0.8 m: rows 1, 2, 3, 5 -> 4 (0.8 exactly is not below); below 0.6 m: row 2 -> 1 (nor is 0.6).
+    ys = [2.0, 0.7, 0.55, 0.79, 0.8, 0.6]
+    m = episode_metrics(make_traj([[[0.0, 0.0]]] * 6, [[[0.0, y]] for y in ys]))
+    assert m.collision_steps == 4 and m.contact_steps == 1
+    assert m.min_distance == pytest.approx(0.55) and m.n_steps == 5
+    alone = make_traj([[[0, 0]], [[0, 1]]], np.zeros((2, 0, 2)), robot_goals=[[0.0, 5.0]])
+    no_humans = episode_metrics(alone)
+    assert no_humans.collision_steps == 0 and no_humans.contact_steps == 0
+
+
+def test_aggregate_step_frequencies_and_median():
+    # a: 6 states, 4 collision, 1 contact (as above); b: 2 states, 1 collision (0.7 m at row 0), no contact.
+    ys = [2.0, 0.7, 0.55, 0.79, 0.8, 0.6]
+    a = episode_metrics(make_traj([[[0.0, 0.0]]] * 6, [[[0.0, y]] for y in ys]))
+    b = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.0, 0.7]], [[0.0, 3.0]]]))
+    out = aggregate([a, b])
+    assert out["collision_step_freq"] == pytest.approx(100.0 * 5 / 8)
+    assert out["contact_step_freq"] == pytest.approx(100.0 * 1 / 8)
+    assert out["discomfort_step_freq"] == 0.0  # everyone stands still
+    assert out["min_distance_median"] == pytest.approx((0.55 + 0.7) / 2)
+    c = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.0, 0.9]], [[0.0, 3.0]]]))
+    assert aggregate([a, b, c])["min_distance_median"] == pytest.approx(0.7)
+
+
+def test_from_dict_round_trip_and_old_records():
+    ys = [2.0, 0.7, 0.55]
+    m = episode_metrics(make_traj([[[0.0, 0.0]]] * 3, [[[0.0, y]] for y in ys], robot_goals=[[0.0, 9.0]]))
+    back = EpisodeMetrics.from_dict(m.as_dict())
+    assert back.as_dict() == m.as_dict() and math.isnan(back.travel_time)
+    alone = episode_metrics(make_traj([[[0, 0]], [[0, 1]]], np.zeros((2, 0, 2)), robot_goals=[[0.0, 5.0]]))
+    assert EpisodeMetrics.from_dict(alone.as_dict()).min_distance == math.inf  # null was "no pair"
+    old = {k: v for k, v in m.as_dict().items() if k not in ("collision_steps", "contact_steps")}
+    rebuilt = EpisodeMetrics.from_dict(old)
+    assert rebuilt.collision_steps is None and rebuilt.discomfort_steps == m.discomfort_steps
+    out = aggregate([m, rebuilt])
+    assert math.isnan(out["collision_step_freq"]) and out["discomfort_step_freq"] == 0.0
+    assert out["collision_rate"] == 100.0
+    with pytest.raises(SimulationError, match="min_distance"):
+        EpisodeMetrics.from_dict({k: v for k, v in old.items() if k != "min_distance"})

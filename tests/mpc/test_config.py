@@ -82,3 +82,20 @@ def test_replace_validates_and_rejects_unknown_fields():
         MPCConfig().replace(horizon=0)
     with pytest.raises(MPCConfigError, match="unknown MPC config field"):
         MPCConfig().replace(horizn=6)
+
+
+def test_human_margins_are_validated_and_kept_as_a_tuple():
+    assert MPCConfig().human_margins == () and MPCConfig().human_margin(3) == 0.0
+    cfg = MPCConfig(human_margins=[0.05, 0.1, 0.15, 0.2])  # a JSON round trip gives a list
+    assert cfg.human_margins == (0.05, 0.1, 0.15, 0.2) and cfg.human_margin(1) == 0.1
+    assert cfg == MPCConfig(human_margins=(0.05, 0.1, 0.15, 0.2)) and hash(cfg) == hash(
+        MPCConfig(human_margins=(0.05, 0.1, 0.15, 0.2))
+    )
+    for bad, match in (
+        ((0.1, 0.2), "one margin per horizon step"),
+        ((0.1, -0.1, 0.1, 0.1), ">= 0"),
+        ((0.1, float("nan"), 0.1, 0.1), "finite"),
+        (0.3, "sequence"),
+    ):
+        with pytest.raises(MPCConfigError, match=match):
+            MPCConfig(human_margins=bad)

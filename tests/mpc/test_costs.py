@@ -161,3 +161,25 @@ def test_lemma_1_local_gradient_equals_potential_gradient(seed):
         scale = max(1.0, float(np.abs(dF[i]).max()))
         np.testing.assert_allclose(dC, dF[i], rtol=1e-9, atol=1e-9 * scale)
         assert np.abs(dF[i]).max() > 0
+
+
+def test_human_margins_grow_the_distance_per_step_by_hand():
+    """Eq. 11 with margins: (d_min + m_k)^2 + rho ||v||^2 - ||s - s_j||^2 inside smax, step k's own m_k."""
+    cfg = MPCConfig(horizon=2, human_margins=(0.1, 0.3))
+    positions = ca.DM([[0.0, 0.0], [0.0, 0.0]])  # the robot stands at the origin at both steps
+    velocities = ca.DM.zeros(2, 2)
+    humans = ca.DM([[1.0, 1.0], [0.0, 0.0]])  # one human 1 m away at both steps
+    # Step 1: 0.9^2 - 1 = -0.19; step 2: 1.1^2 - 1 = 0.21.
+    expected = sum(math.log1p(math.exp(cfg.mu * g)) / cfg.mu for g in (0.9**2 - 1.0, 1.1**2 - 1.0))
+    got = value(costs.human_collision_cost(positions, velocities, humans, 1, cfg))
+    assert got == pytest.approx(expected, rel=1e-12)
+    # Without margins (the paper): 0.8^2 - 1 = -0.36 at both steps.
+    paper = value(costs.human_collision_cost(positions, velocities, humans, 1, MPCConfig(horizon=2)))
+    assert paper == pytest.approx(2 * math.log1p(math.exp(-0.36 * cfg.mu)) / cfg.mu, rel=1e-12)
+
+
+def test_margins_leave_the_robot_robot_penalty_alone():
+    cfg = MPCConfig(horizon=2, human_margins=(0.5, 0.5))
+    a, b = ca.DM([[0.0, 0.0], [0.0, 0.0]]), ca.DM([[0.9, 0.9], [0.0, 0.0]])
+    paper = MPCConfig(horizon=2)
+    assert value(costs.robot_collision_cost(a, b, cfg)) == value(costs.robot_collision_cost(a, b, paper))

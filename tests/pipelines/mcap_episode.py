@@ -62,7 +62,7 @@ def record_episode(
     end: bool = True,
 ) -> RecordedEpisode:
     """Run ``steps`` steps (or to the end of the episode) through a McapEpisodeRecorder."""
-    env = CrowdEnv(EnvConfig(time_limit=steps * 0.4))
+    env = CrowdEnv(EnvConfig(time_limit=steps * 0.4, timeout_margin=0.0))
     obs = env.reset(seed, scenario, n_humans, n_robots)
     meta = {
         "seed": seed,

@@ -97,6 +97,6 @@ def test_controller_errors_are_not_swallowed():
 def test_env_config_is_used():
     result = run_episode(
         make_controller(ControllerSpec("orca")), seed=0, scenario="circle", n_humans=2,
-        env_config=EnvConfig(time_limit=2.0),
+        env_config=EnvConfig(time_limit=2.0, timeout_margin=0.0),
     )  # fmt: skip
     assert result.metrics.n_steps == 5 and result.metrics.timeout

@@ -140,14 +140,25 @@ def test_two_robots_without_humans_reach_their_goals(name):
     assert all(f is None for f in result.fallbacks)
 
 
-def test_predictor_history_takes_the_last_rows_and_pads_the_start():
+def test_predictor_history_takes_the_last_rows_and_refuses_to_pad():
     env = CrowdEnv()
     obs = env.reset(0, "circle", 2)
     history, mask = predictor_history(obs, 3)
     assert history.shape == (3, 5, 2) and mask.all()
-    padded, _ = predictor_history(obs, 10)
-    assert padded.shape == (10, 5, 2)
-    np.testing.assert_array_equal(padded[0], obs.history[0])
+    np.testing.assert_array_equal(history, obs.history[-3:])
+    full, _ = predictor_history(obs, len(obs.history))
+    np.testing.assert_array_equal(full, obs.history)
+    with pytest.raises(PipelineError, match=r"reads 10 observed steps.*keeps 9.*history_len >= 10"):
+        predictor_history(obs, 10)
+
+
+def test_every_zoo_predictor_is_fed_exactly_its_observed_steps():
+    """The default simulator keeps as many rows as every shipped model reads (Table I's L, as trained)."""
+    from predictors.registry import available, load_predictor
+
+    history_len = CrowdEnv().config.history_len
+    for name in available():
+        assert load_predictor(name).obs_len <= history_len, name
 
 
 @pytest.mark.slow

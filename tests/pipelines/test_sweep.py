@@ -24,9 +24,11 @@ from pipelines.experiments import (
     PAPER_TABLE_II,
     PAPER_TABLE_III,
     PaperFigures,
+    World,
     get_experiment,
     scenario_schedule,
 )
+from pipelines.margins import MarginSpec
 from pipelines.sweep import (
     EPISODES_FILE,
     ERRORS_FILE,
@@ -86,7 +88,7 @@ def test_experiment_cells():
     assert [c.spec.controller for c in table2.cells()[:2]] == ["cmpc", "dmpc"]
     f, nf = get_experiment("table3").cells(humans=(7,))
     assert (f.spec.flocking, nf.spec.flocking) == (True, False) and f.key != nf.key
-    assert f.key == "cmpc-social_lstm_eth-F-ibr-h7-r3"
+    assert f.key == "cmpc-social_lstm_eth-F-ibr-m=none-paper-visible-h7-r3"
     predictors = get_experiment("predictors")
     assert predictors.humans == (7,)
     assert [s.predictor for _, s in predictors.methods] == [
@@ -101,14 +103,36 @@ def test_experiment_cells():
     coupling = get_experiment("coupling").cells()
     assert [c.spec.coupling for c in coupling] == ["ibr", "nlp", "nlp"]
     assert [c.method for c in coupling] == ["IBR", "NLP exact", "NLP first-order"]
-    assert coupling[1].key == "cmpc-social_lstm_soft_eth-F-nlp-coupled_mode=exact-h7-r3"
+    assert coupling[1].key == "cmpc-social_lstm_soft_eth-F-nlp-coupled_mode=exact-m=none-paper-visible-h7-r3"
     cv = table2.with_predictor("constant_velocity")
     assert {s.predictor for _, s in cv.methods} == {"constant_velocity"}
-    assert cv.cells()[0].key == "cmpc-constant_velocity-F-ibr-h5-r3"
+    assert cv.cells()[0].key == "cmpc-constant_velocity-F-ibr-m=none-paper-visible-h5-r3"
     with pytest.raises(PipelineError, match="fixes each method's predictor"):
         predictors.with_predictor("constant_velocity")
     with pytest.raises(PipelineError, match="unknown experiment 'table4'"):
         get_experiment("table4")
+
+
+def test_margins_profile_and_visibility_are_part_of_every_cell():
+    table2 = get_experiment("table2")
+    cp = table2.with_margins(MarginSpec("conformal", alpha=0.05))
+    assert {s.margins.label for _, s in cp.methods} == {"cp0.05"}
+    assert cp.cells((7,))[0].key == "cmpc-social_lstm_eth-F-ibr-m=cp0.05-paper-visible-h7-r3"
+    v1 = table2.with_world(World("v1", "invisible"))
+    assert v1.cells((7,))[1].key == "dmpc-social_lstm_eth-F-ibr-m=none-v1-invisible-h7-r3"
+    assert v1.cells((7,))[1].world.env_config().robots_visible is False
+    # Every cell of the convention ablation differs, on the same crowds; its settings are not overridable.
+    conventions = get_experiment("conventions")
+    keys = [c.key for c in conventions.cells()]
+    assert len(keys) == len(set(keys)) == 8
+    with pytest.raises(PipelineError, match="fixes each method's profile"):
+        conventions.with_world(World("v1"))
+    with pytest.raises(PipelineError, match="fixes each method's margins"):
+        get_experiment("safety").with_margins(MarginSpec())
+    safety = get_experiment("safety")
+    assert safety.method_labels == ("none", "alpha=0.5", "alpha=0.2", "alpha=0.1", "alpha=0.05", "alpha=0.01")
+    with pytest.raises(PipelineError, match="unknown profile 'crowdnav'"):
+        World("crowdnav")
 
 
 def test_paper_figures_as_printed():
@@ -207,7 +231,7 @@ def test_a_rerun_runs_only_what_is_missing_and_extends(tmp_path):
     assert (more.planned, more.already_done, more.ran) == (6, 4, 2)
     records = EpisodeLog(tmp_path / EPISODES_FILE).load()
     assert set(records) == {t.key for t in _config(tmp_path, 3).tasks()}
-    record = records["orca-none-F-ibr-h5-r3/perpendicular/0"]
+    record = records["orca-none-F-ibr-m=none-paper-visible-h5-r3/perpendicular/0"]
     assert (record["method"], record["predictor"], record["scenario"], record["seed"]) == (
         "ORCA",
         None,
@@ -239,7 +263,7 @@ def test_record_failures_keeps_the_mcap_logs_of_failed_episodes(tmp_path):
 
 
 def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_path, monkeypatch):
-    def broken(spec, jit=False):
+    def broken(spec, jit=False, env_config=None):
         raise RuntimeError("no solver here")
 
     monkeypatch.setattr("pipelines.sweep.build_controller", broken)
@@ -485,6 +509,9 @@ def test_report_files(tmp_path):
         "table.md",
         "success_vs_humans.png",
         "travel_time_vs_humans.png",
+        "min_distance_hist.csv",
+        "min_distance_hist.png",
+        "safety_tradeoff.png",
     }
     rows = (tmp_path / CELLS_CSV).read_text().splitlines()
     header = rows[0].split(",")
@@ -522,7 +549,10 @@ def test_cli_dry_run_lists_the_cells(tmp_path, capsys):
         == 0
     )
     out = capsys.readouterr().out
-    assert "10 cells x 10 episodes = 100" in out and "cmpc-social_lstm_eth-NF-ibr-h9-r3" in out
+    assert (
+        "10 cells x 10 episodes = 100" in out
+        and "cmpc-social_lstm_eth-NF-ibr-m=none-paper-visible-h9-r3" in out
+    )
 
 
 def test_cli_user_errors_are_one_line(tmp_path, capsys):

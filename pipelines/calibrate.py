@@ -1,0 +1,166 @@
+"""Closed-loop calibration data: a predictor's errors inside the MPC, with the humans reacting to the robots.
+
+Real scenes (``predictors.calibration.real_errors``) measure a predictor where it was trained; the
+controller meets it elsewhere: ORCA humans who yield to robots and then close the gap again. So the default
+calibration source is the closed loop itself: CMPC episodes with the paper's method (no margins) on seeds
+disjoint from every evaluation seed, recording at each step the prediction the final solve used and, once
+the episode is over, where each human really was ``k`` steps later.
+
+Only humans within ``near`` metres of some robot at prediction time are scored. The margin acts only where
+the robot-human penalty is active; a human walking alone on the far side of the scene is predicted almost
+perfectly by any model, and counting such samples would shrink the quantile without making a crossing any
+safer. ``near = inf`` scores everyone.
+
+Seeds: calibration episodes use ``seed, seed + 1, ...`` from ``CALIBRATION_SEED`` (one million); sweeps and
+``simulate`` use small seeds (a 1000-episode cell uses 0..499), so the two never share a crowd.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from crowdsim.env import Observation
+    from pipelines.controllers import ControlOutput
+
+CALIBRATION_SEED: Final[int] = 1_000_000  # first seed of calibration episodes (module docstring)
+NEAR: Final[float] = 3.0  # m, humans scored: within this distance of a robot when predicted (docstring)
+SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
+
+
+class PredictionErrors:
+    """An episode observer that turns each step's prediction into displacement errors ``(n, H)`` (NaN where
+    the episode ended before step ``k``), appended to ``errors`` at the end of every episode."""
+
+    def __init__(self, near: float = NEAR):
+        if not near > 0:
+            raise PipelineError(f"near must be > 0 m, got {near!r}")
+        self.near = near
+        self.rows: list[np.ndarray] = []
+        self._made: list[tuple[int, np.ndarray, np.ndarray]] = []
+
+    @property
+    def errors(self) -> np.ndarray:
+        return np.concatenate(self.rows) if self.rows else np.zeros((0, 0))
+
+    def on_reset(self, obs: Observation, meta: dict[str, Any]) -> None:
+        self._made = []
+
+    def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
+        if out.prediction is None or obs.n_humans == 0:
+            return
+        gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
+        close = gaps.min(axis=1) <= self.near if obs.n_robots else np.ones(obs.n_humans, dtype=bool)
+        if close.any():
+            self._made.append((obs.step, np.asarray(out.prediction, dtype=float), close))
+
+    def on_end(self, result: Any) -> None:
+        truth = np.asarray(result.human_positions, dtype=float)  # (T+1, N, 2)
+        last = len(truth) - 1
+        for step, prediction, close in self._made:
+            horizon = len(prediction)
+            errors = np.full((int(close.sum()), horizon), math.nan)
+            for k in range(1, horizon + 1):
+                if step + k <= last:
+                    diff = prediction[k - 1, close] - truth[step + k, close]
+                    errors[:, k - 1] = np.linalg.norm(diff, axis=-1)
+            self.rows.append(errors)
+        self._made = []
+
+
+@dataclass(frozen=True)
+class ClosedLoopPlan:
+    """Which episodes a closed-loop calibration runs."""
+
+    predictor: str
+    episodes: int = 200
+    seed: int = CALIBRATION_SEED
+    humans: tuple[int, ...] = (5, 6, 7, 8, 9)
+    controller: str = "cmpc"
+    profile: str = "paper"
+    visibility: str = "visible"
+    near: float = NEAR
+
+    def __post_init__(self):
+        if isinstance(self.episodes, bool) or not isinstance(self.episodes, int) or not 1 <= self.episodes:
+            raise PipelineError(f"--episodes must be a positive integer, got {self.episodes!r}")
+        if self.seed < 0:
+            raise PipelineError(f"--seed must be >= 0, got {self.seed}")
+        if not self.humans or min(self.humans) < 1:
+            raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
+        if self.controller not in ("cmpc", "dmpc"):
+            raise PipelineError(f"calibration runs cmpc or dmpc, got {self.controller!r}")
+
+    def schedule(self) -> list[tuple[str, int, int]]:
+        """``(scenario, n_humans, seed)`` of every episode: scenarios alternate, crowd sizes cycle."""
+        return [
+            (SCENARIOS[i % 2], self.humans[(i // 2) % len(self.humans)], self.seed + i)
+            for i in range(self.episodes)
+        ]
+
+
+def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.ndarray, dict[str, Any]]:
+    """Run ``plan``'s episodes (margins none) and return the errors ``(n, H)`` and what identifies them."""
+    from tqdm import tqdm
+
+    from crowdsim.profiles import make_env_config
+    from pipelines.closed_loop import PREDICTOR_FREE, run_episode
+    from pipelines.controllers import ControllerSpec, make_controller
+
+    if plan.controller in PREDICTOR_FREE:
+        raise PipelineError(f"controller {plan.controller!r} uses no predictor")
+    env_config = make_env_config(plan.profile, plan.visibility)
+    controller = make_controller(ControllerSpec(plan.controller, plan.predictor), env_config)
+    observer = PredictionErrors(plan.near)
+    successes = 0
+    try:
+        bar = tqdm(plan.schedule(), desc=f"calibrating {plan.predictor}", unit="ep", disable=not progress)
+        for scenario, n_humans, seed in bar:
+            result = run_episode(
+                controller,
+                seed=seed,
+                scenario=scenario,
+                n_humans=n_humans,
+                env_config=env_config,
+                observers=(observer,),
+            )
+            successes += result.metrics.success
+    finally:
+        close = getattr(controller, "close", None)
+        if close is not None:
+            close()
+    details = asdict(plan) | {"seeds": [plan.seed, plan.seed + plan.episodes - 1], "successes": successes}
+    return observer.errors, details
+
+
+def errors_sha256(errors: np.ndarray, details: dict[str, Any]) -> str:
+    """Identifies closed-loop calibration data: the errors themselves and the settings that produced them."""
+    import hashlib
+    import json
+
+    digest = hashlib.sha256(np.ascontiguousarray(errors, dtype="<f8").tobytes())
+    digest.update(json.dumps(details, sort_keys=True, default=str).encode())
+    return digest.hexdigest()
+
+
+def format_coverage(
+    alphas: Sequence[float], quantiles: Sequence[Sequence[float]], coverage: Sequence[Sequence[float]] | None
+) -> str:
+    """One line per alpha: margins per step and, when measured, held-out coverage against 1 - alpha."""
+    lines = []
+    for i, alpha in enumerate(alphas):
+        margins = ", ".join(f"{q:.3f}" for q in quantiles[i])
+        line = f"  alpha {alpha:<5g} margins m_k [m]: {margins}"
+        if coverage is not None:
+            line += f" | held-out coverage (target {1 - alpha:.0%}): " + ", ".join(
+                f"{c:.1%}" for c in coverage[i]
+            )
+        lines.append(line)
+    return "\n".join(lines)

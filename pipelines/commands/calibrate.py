@@ -1,0 +1,166 @@
+"""``crowdmpc calibrate``: conformal margins for a predictor, from real scenes or closed-loop episodes."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+from pipelines.errors import PipelineError
+
+EPILOG = """examples:
+  crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.5,0.2,0.1,0.05,0.01
+  crowdmpc calibrate --predictor constant_velocity --source real --alpha 0.1 --holdout
+  crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --episodes 20 --dry-run
+
+Each alpha gives one block in the zoo's calibrations.json: the (1 - alpha) split-conformal quantile of the
+predictor's displacement error at each horizon step k = 1..H, used as the margin m_k of
+`--margins conformal:ALPHA[:SOURCE]` (simulate, sweep). Sources: real (the prepared ETH/hotel validation
+scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
+evaluation seed; only humans within --near m of a robot are scored). --holdout measures coverage on data
+the calibration did not see: the test scenes (real) or as many further episodes (closed-loop).
+"""
+
+
+def _alphas(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--alpha takes numbers like 0.1,0.05, got {text!r}") from None
+    if not values or not all(0.0 < a < 1.0 for a in values):
+        raise argparse.ArgumentTypeError(f"--alpha needs numbers in (0, 1), got {text!r}")
+    return values
+
+
+def _humans(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
+    return values
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from crowdsim.profiles import PROFILES, VISIBILITY
+    from pipelines.calibrate import CALIBRATION_SEED, NEAR
+
+    p = subparsers.add_parser(
+        "calibrate",
+        help="conformal prediction margins for a predictor (real scenes or closed-loop episodes)",
+        description="Measure a predictor's displacement error per horizon step and store its conformal "
+        "quantiles, the safety margins of `--margins conformal`.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--predictor", required=True, help="a registered predictor, a zoo entry or orca_oracle")
+    p.add_argument("--source", required=True, choices=("real", "closed-loop"))
+    p.add_argument("--alpha", type=_alphas, default=(0.1,), metavar="A[,A..]", help="default 0.1")
+    p.add_argument("--horizon", type=int, default=4, help="steps calibrated (the MPC's H, default 4)")
+    p.add_argument("--data-dir", type=Path, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
+    p.add_argument("--episodes", type=int, default=200, help="closed-loop episodes (default 200)")
+    p.add_argument("--humans", type=_humans, default=(5, 6, 7, 8, 9), metavar="5,6,7", help="crowd sizes")
+    p.add_argument("--seed", type=int, default=CALIBRATION_SEED, help="first closed-loop seed")
+    p.add_argument("--controller", choices=("cmpc", "dmpc"), default="cmpc")
+    p.add_argument("--profile", choices=sorted(PROFILES), default="paper")
+    p.add_argument("--visibility", choices=VISIBILITY, default="visible")
+    p.add_argument("--near", type=float, default=NEAR, help=f"m, humans scored (default {NEAR})")
+    p.add_argument("--holdout", action="store_true", help="also measure coverage on held-out data")
+    p.add_argument("--json", type=Path, metavar="FILE", help="write the blocks and coverage as JSON")
+    p.add_argument("--dry-run", action="store_true", help="measure and print; store nothing")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple[list, Any]:
+    from predictors.calibration import calibrate_real, real_errors
+    from predictors.data.locate import prepared_dir, protocol_files
+
+    files = protocol_files(args.data_dir, "paper")
+    blocks, _ = calibrate_real(
+        predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256
+    )
+    holdout = real_errors(predictor, files["test"], args.horizon) if args.holdout else None
+    return blocks, holdout
+
+
+def _closed_loop(args: argparse.Namespace, sha256: str | None) -> tuple[list, Any]:
+    from pipelines.calibrate import ClosedLoopPlan, closed_loop_errors, errors_sha256
+    from predictors.calibration import calibration_from_errors
+
+    plan = ClosedLoopPlan(
+        predictor=args.predictor,
+        episodes=args.episodes,
+        seed=args.seed,
+        humans=args.humans,
+        controller=args.controller,
+        profile=args.profile,
+        visibility=args.visibility,
+        near=args.near,
+    )
+    errors, details = closed_loop_errors(plan, progress=not args.no_progress)
+    if errors.shape[1:] != (args.horizon,):
+        raise PipelineError(f"the controller predicts {errors.shape[1:]} steps, --horizon is {args.horizon}")
+    data_sha256 = errors_sha256(errors, details)
+    blocks = [
+        calibration_from_errors(
+            errors,
+            predictor=args.predictor,
+            predictor_sha256=sha256,
+            source="closed-loop",
+            alpha=alpha,
+            data_sha256=data_sha256,
+            details=details | {"rows": int(errors.shape[0])},
+        )
+        for alpha in args.alpha
+    ]
+    holdout = None
+    if args.holdout:
+        # As many further episodes, on the seeds right after the calibration's: data it never saw.
+        after = dataclasses.replace(plan, seed=plan.seed + plan.episodes)
+        holdout, _ = closed_loop_errors(after, progress=not args.no_progress)
+    return blocks, holdout
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipelines.calibrate import format_coverage
+    from pipelines.plain_json import plain
+    from predictors.calibration import coverage, save_calibration
+    from predictors.registry import checkpoint_sha256, load_predictor
+
+    if not 1 <= args.horizon <= 50:
+        raise PipelineError(f"--horizon must be in 1..50 steps, got {args.horizon}")
+    if not 1 <= args.episodes <= 100_000:
+        raise PipelineError(f"--episodes must be in 1..100000, got {args.episodes}")
+    if args.json is not None and args.json.parent.exists() and not args.json.parent.is_dir():
+        raise PipelineError(f"--json {args.json}: {args.json.parent} is not a directory")
+    sha256 = checkpoint_sha256(args.predictor)
+    if args.source == "real":
+        from pipelines.controllers import ORACLE_PREDICTOR
+
+        if args.predictor == ORACLE_PREDICTOR:
+            raise PipelineError(
+                "the ORCA oracle knows the simulator, not real people: use --source closed-loop"
+            )
+        blocks, holdout = _real(args, load_predictor(args.predictor), sha256)
+    else:
+        blocks, holdout = _closed_loop(args, sha256)
+    cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None
+    n = ", ".join(str(c) for c in blocks[0].n)
+    print(f"{args.predictor}: {args.source} calibration, samples per step {n}")
+    print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
+    if not args.dry_run:
+        for block in blocks:
+            path = save_calibration(block)
+        print(f"wrote {len(blocks)} block(s) to {path}")
+    if args.json is not None:
+        payload = {"blocks": [b.to_json() for b in blocks], "holdout_coverage": cover}
+        if holdout is not None:
+            payload["holdout_rows"] = int(holdout.shape[0])
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,130 @@
+"""Safety margins on the robot-human distance: which ones a controller plans with, and where they come from.
+
+The paper plans on point predictions: its robot-human constraint (Eq. 11) keeps ``d_min`` from where the
+predictor says each human will be, with no allowance for the predictor's error. ``MarginSpec`` chooses an
+allowance ``m_k`` per horizon step (``MPCConfig.human_margins``):
+
+* ``none``: no margin, exactly the paper's method (the default);
+* ``conformal``: ``m_k`` = the (1 - alpha) split-conformal quantile of the predictor's step-k displacement
+  error (Lindemann et al. 2023), read from the predictor's calibration (``crowdmpc calibrate``,
+  ``predictors/calibration.py``), calibrated on closed-loop episodes (the default source: humans reacting
+  to robots, as the controller will meet them) or on held-out real scenes;
+* ``fixed``: margins given by hand, one per horizon step.
+
+On the command line: ``none``, ``conformal`` (alpha 0.1, closed-loop), ``conformal:0.05``,
+``conformal:0.05:real``, ``fixed:0.05,0.1,0.15,0.2``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Final, Literal
+
+from pipelines.errors import PipelineError
+
+MarginMode = Literal["none", "conformal", "fixed"]
+CalibrationSource = Literal["closed-loop", "real"]
+MARGIN_MODES: Final[tuple[str, ...]] = ("none", "conformal", "fixed")
+CALIBRATION_SOURCES: Final[tuple[str, ...]] = ("closed-loop", "real")
+DEFAULT_ALPHA: Final[float] = 0.1
+MAX_MARGIN: Final[float] = 5.0  # m; a margin beyond this leaves no room to move in a 10 m scene
+
+
+@dataclass(frozen=True)
+class MarginSpec:
+    """How the controller enlarges the robot-human distance of Eq. 11 (module docstring)."""
+
+    mode: MarginMode = "none"
+    alpha: float = DEFAULT_ALPHA  # conformal: miscoverage level, 0 < alpha < 1
+    source: CalibrationSource = "closed-loop"  # conformal: which calibration
+    values: tuple[float, ...] = ()  # fixed: m_1..m_H in metres
+
+    def __post_init__(self):
+        if self.mode not in MARGIN_MODES:
+            raise PipelineError(f"unknown margin mode {self.mode!r}; choose from {list(MARGIN_MODES)}")
+        if self.source not in CALIBRATION_SOURCES:
+            raise PipelineError(
+                f"unknown calibration source {self.source!r}; choose from {list(CALIBRATION_SOURCES)}"
+            )
+        alpha = self.alpha
+        if isinstance(alpha, bool) or not isinstance(alpha, int | float) or not 0.0 < alpha < 1.0:
+            raise PipelineError(f"margin alpha must be a number in (0, 1), got {alpha!r}")
+        values = tuple(self.values)
+        for v in values:
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= MAX_MARGIN:
+                raise PipelineError(
+                    f"fixed margins must be numbers in [0, {MAX_MARGIN}] m, got {list(values)}"
+                )
+        if (self.mode == "fixed") != bool(values):
+            raise PipelineError(
+                "fixed margins need values (e.g. fixed:0.05,0.1,0.15,0.2); other modes take none"
+            )
+        object.__setattr__(self, "values", tuple(float(v) for v in values))
+        object.__setattr__(self, "alpha", float(alpha))
+
+    @property
+    def label(self) -> str:
+        """Short and exact, for cell keys, tables and metadata: ``none``, ``cp0.1``, ``cp0.05-real``,
+        ``fixed0.05_0.1_0.15_0.2``."""
+        if self.mode == "none":
+            return "none"
+        if self.mode == "fixed":
+            return "fixed" + "_".join(f"{v:g}" for v in self.values)
+        return f"cp{self.alpha:g}" + ("" if self.source == "closed-loop" else f"-{self.source}")
+
+    def resolve(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[float, ...]:
+        """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``."""
+        if self.mode == "none":
+            return ()
+        if self.mode == "fixed":
+            if len(self.values) != horizon:
+                raise PipelineError(
+                    f"fixed margins need one value per horizon step ({horizon}), got {len(self.values)}"
+                )
+            return self.values
+        if predictor is None:
+            raise PipelineError("conformal margins need a predictor; this controller uses none")
+        from predictors.calibration import find_calibration
+
+        block = find_calibration(predictor, self.source, self.alpha, sha256=sha256)
+        if len(block.quantiles) < horizon:
+            raise PipelineError(
+                f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} covers "
+                f"{len(block.quantiles)} steps, the MPC's horizon is {horizon}; recalibrate with that horizon"
+            )
+        return tuple(block.quantiles[:horizon])
+
+    def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
+        """What metadata and records state about the margins actually planned with."""
+        out: dict[str, Any] = {"mode": self.mode, "label": self.label, "margins_m": list(resolved)}
+        if self.mode == "conformal":
+            out |= {"alpha": self.alpha, "source": self.source}
+        return out
+
+
+def parse_margins(text: str) -> MarginSpec:
+    """``none`` | ``conformal[:ALPHA[:SOURCE]]`` | ``fixed:M1,M2,..`` (module docstring)."""
+    mode, _, rest = text.strip().partition(":")
+    if mode == "none" and not rest:
+        return MarginSpec()
+    if mode == "conformal":
+        alpha_text, _, source = rest.partition(":")
+        alpha = _number(alpha_text, text) if alpha_text else DEFAULT_ALPHA
+        return MarginSpec("conformal", alpha=alpha, source=source or "closed-loop")  # type: ignore[arg-type]
+    if mode == "fixed" and rest:
+        return MarginSpec("fixed", values=tuple(_number(v, text) for v in rest.split(",")))
+    raise PipelineError(
+        f"bad margins {text!r}; expected none, conformal[:ALPHA[:closed-loop|real]] or fixed:M1,..,MH "
+        "(metres)"
+    )
+
+
+def _number(text: str, whole: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise PipelineError(f"bad margins {whole!r}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise PipelineError(f"bad margins {whole!r}: {text!r} is not a finite number")
+    return value

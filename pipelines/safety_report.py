@@ -1,0 +1,267 @@
+"""The safety side of a sweep's report: per-step frequencies, how close each episode came, what margins cost.
+
+The paper's rates are per episode: an episode counts as a collision when a robot came within d_min = 0.8 m
+of a human at any step, so a brush and a long intrusion weigh the same. CrowdNav reports how often the
+condition holds per evaluated state as well (crowdsim.metrics.aggregate); both are given, the per-step
+frequencies as ``100 sum(x_steps) / sum(n_steps + 1)`` over a cell's episodes. Records written before the
+step counts existed still report, with NaN (printed "—") for what they lack.
+
+Two plots: the histogram of each episode's minimum robot-human distance, with the contact (0.6 m) and
+personal-space (0.8 m) thresholds drawn, shows whether collisions are near misses or deep intrusions; the
+success / collision trade-off places each method (for the ``safety`` experiment: conformal margins at
+decreasing alpha) against the collision target, its mean travel time written beside it.
+
+Nothing here imports pipelines.sweep_report at run time: that module builds on this one.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+
+from crowdsim.metrics import COLLISION_DISTANCE
+from crowdsim.world import RADIUS
+
+if TYPE_CHECKING:
+    from pipelines.experiments import Cell, Experiment
+    from pipelines.sweep_report import CellSummary
+
+MIN_DISTANCE_HIST_PNG: Final[str] = "min_distance_hist.png"
+MIN_DISTANCE_HIST_CSV: Final[str] = "min_distance_hist.csv"
+SAFETY_TRADEOFF_PNG: Final[str] = "safety_tradeoff.png"
+
+STEP_COUNTS: Final[tuple[str, ...]] = ("collision", "contact", "discomfort")  # each a metrics "<name>_steps"
+CONTACT_DISTANCE: Final[float] = 2.0 * RADIUS  # m, the radii touch: crowdsim.metrics' contact
+# The collision rate the trade-off plot measures methods against: the paper's Tables II and III stay below
+# it at every crowd size (at most 1.9 %).
+COLLISION_TARGET: Final[float] = 2.0  # %
+HIST_BIN_WIDTH: Final[float] = 0.05  # m
+HIST_MAX: Final[float] = 3.0  # m; farther minima (and episodes without humans) share one overflow bin
+# Rounded so that the CSV reads 0.05, 0.1, ... rather than accumulated floating-point sums.
+HIST_EDGES: Final[np.ndarray] = np.round(np.arange(0.0, HIST_MAX + HIST_BIN_WIDTH / 2, HIST_BIN_WIDTH), 6)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Numbers
+# ----------------------------------------------------------------------------------------------------------
+
+
+def step_frequency(metrics: Sequence[Mapping[str, Any]], name: str) -> float:
+    """% of evaluated states (rows 0..T of every episode) at which ``name`` held; NaN when some episode
+    lacks the count (an older record) or there are no episodes, rather than a rate over part of the cell."""
+    counts = [m.get(f"{name}_steps") for m in metrics]
+    steps = [m.get("n_steps") for m in metrics]
+    if not metrics or any(c is None for c in counts) or any(n is None for n in steps):
+        return math.nan
+    return 100.0 * sum(counts) / sum(n + 1 for n in steps)
+
+
+def min_distances(metrics: Sequence[Mapping[str, Any]]) -> tuple[float, ...]:
+    """Each episode's minimum robot-human distance (m); null (as_dict's inf: no human) is inf."""
+    return tuple(math.inf if m.get("min_distance") is None else float(m["min_distance"]) for m in metrics)
+
+
+def safety_figures(metrics: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """CellSummary's safety fields from a cell's metrics dicts."""
+    distances = min_distances(metrics)
+    finite = [d for d in distances if math.isfinite(d)]
+    return {f"{name}_step_freq": step_frequency(metrics, name) for name in STEP_COUNTS} | {
+        "min_distance_median": float(np.median(finite)) if finite else math.nan,
+        "min_distances": distances,
+    }
+
+
+def world_columns(cell: Cell) -> dict[str, str]:
+    """The conventions a cell ran under, as cells.csv and the histogram CSV name them."""
+    return {
+        "margins": cell.spec.margins.label,
+        "profile": cell.world.profile,
+        "visibility": cell.world.visibility,
+    }
+
+
+def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
+    """The table notes' line on margins, profile and visibility, and, when they differ across the columns,
+    each column's "margins / profile / visibility" for a row of its own (else None)."""
+    worlds = [tuple(world_columns(c).values()) for c in cells]
+    margins, profiles, visibilities = (sorted(set(values)) for values in zip(*worlds, strict=True))
+    parts = (
+        f"Margins: {margins[0]}" if len(margins) == 1 else "Margins: per column",
+        f"profile {profiles[0]}" if len(profiles) == 1 else "profile per column",
+        f"robots {visibilities[0]} to the humans"
+        if len(visibilities) == 1
+        else "robot visibility per column",
+    )
+    line = f"{parts[0]}; {parts[1]}, {parts[2]}."
+    if len(set(worlds)) == 1:
+        return line, None
+    return line[:-1] + " (row 'Margins / profile / visibility').", [" / ".join(w) for w in worlds]
+
+
+def min_distance_counts(distances: Sequence[float]) -> np.ndarray:
+    """Episodes per HIST_EDGES bin, then one overflow count for minima of HIST_MAX or more, so that every
+    episode is counted once: len(HIST_EDGES) counts."""
+    d = np.asarray(distances, dtype=float)
+    inside = np.histogram(d[d < HIST_MAX], bins=HIST_EDGES)[0]
+    return np.append(inside, int((d >= HIST_MAX).sum()))
+
+
+def min_distance_hist_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
+    """min_distance_hist.csv: a row per cell and bin (the last bin, up to inf, is the overflow)."""
+    upper = np.append(HIST_EDGES[1:], math.inf)
+    rows = []
+    for s in summaries:
+        cell = {"cell": s.cell.key, "method": s.cell.method, "n_humans": s.cell.n_humans} | world_columns(
+            s.cell
+        )
+        for lo, hi, count in zip(HIST_EDGES, upper, min_distance_counts(s.min_distances), strict=True):
+            rows.append(cell | {"bin_lo_m": float(lo), "bin_hi_m": float(hi), "episodes": int(count)})
+    return rows
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Plots
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")  # reports are written by sweeps on machines without a display
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _panels(plt, count: int, size: tuple[float, float], title: str, **kwargs):
+    """A figure with ``count`` panels in rows of at most three, the unused ones hidden, and ``title`` wrapped
+    to the figure's width (experiment titles are longer than one panel is wide)."""
+    ncols = min(3, count)
+    nrows = math.ceil(count / ncols)
+    fig, axes = plt.subplots(
+        nrows,
+        ncols,
+        figsize=(size[0] * ncols, size[1] * nrows),
+        squeeze=False,
+        layout="constrained",
+        **kwargs,
+    )
+    for ax in axes.flat[count:]:
+        ax.set_visible(False)
+    fig.suptitle(textwrap.fill(title, width=int(12 * size[0] * ncols)), fontsize="medium")
+    return fig, list(axes.flat[:count])
+
+
+def _by_humans(experiment: Experiment, summaries: Sequence[CellSummary]) -> dict[int, list[CellSummary]]:
+    """Summaries per number of humans, each list in the experiment's method order."""
+    order = {label: k for k, label in enumerate(experiment.method_labels)}
+    groups: dict[int, list[CellSummary]] = {}
+    for s in sorted(summaries, key=lambda s: (s.cell.n_humans, order.get(s.cell.method, len(order)))):
+        groups.setdefault(s.cell.n_humans, []).append(s)
+    return groups
+
+
+def _method_colors(experiment: Experiment) -> dict[str, str]:
+    """One colour per method, the same in every panel and plot."""
+    return {label: f"C{k % 10}" for k, label in enumerate(experiment.method_labels)}
+
+
+def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[CellSummary], path: Path) -> Path:
+    """Step histograms of each episode's minimum robot-human distance, one per method, overlaid on shared
+    bins; one panel per number of humans, since a larger crowd shifts the whole distribution."""
+    plt = _pyplot()
+    groups = _by_humans(experiment, summaries)
+    colors = _method_colors(experiment)
+    fig, axes = _panels(plt, len(groups), (5.0, 3.6), experiment.title, sharex=True, sharey=True)
+    for ax, (n, cells) in zip(axes, groups.items(), strict=True):
+        for s in cells:
+            counts = min_distance_counts(s.min_distances)
+            beyond = f", {counts[-1]} beyond {HIST_MAX:g} m" if counts[-1] else ""
+            label = f"{s.cell.method} ({s.episodes}{beyond})"
+            ax.stairs(counts[:-1], HIST_EDGES, color=colors.get(s.cell.method), lw=1.3, label=label)
+        ax.axvline(CONTACT_DISTANCE, color="k", ls=":", lw=1, label=f"contact ({CONTACT_DISTANCE:g} m)")
+        ax.axvline(COLLISION_DISTANCE, color="k", ls="--", lw=1, label=f"d_min ({COLLISION_DISTANCE:g} m)")
+        ax.set_xlim(0.0, HIST_MAX)
+        ax.set_title(f"{n} humans", fontsize="medium")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="x-small", title="method (episodes)", title_fontsize="x-small")
+    fig.supxlabel("episode's minimum robot-human distance (m)")
+    fig.supylabel("episodes")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+_LABEL_CORNERS: Final[tuple[tuple[int, int], ...]] = ((5, 5), (5, -5), (-5, 5), (-5, -5))  # points
+
+
+def _annotation(s: CellSummary) -> str:
+    time = s.travel_time_mean
+    return f"{s.cell.method}, {time:.1f} s" if time == time else f"{s.cell.method}, no success"
+
+
+def plot_safety_tradeoff(experiment: Experiment, summaries: Sequence[CellSummary], path: Path) -> Path | None:
+    """Success against collision rate per method, both with their 95% Wilson intervals, one panel per
+    number of humans that has at least two methods to trade off; None (nothing written) when none has."""
+    groups = {n: cells for n, cells in _by_humans(experiment, summaries).items() if len(cells) >= 2}
+    if not groups:
+        return None
+    plt = _pyplot()
+    colors = _method_colors(experiment)
+    fig, axes = _panels(plt, len(groups), (5.6, 4.2), experiment.title)
+    for ax, (n, cells) in zip(axes, groups.items(), strict=True):
+        for k, s in enumerate(cells):
+            x, y = s.collision.percent, s.success.percent
+            (x_lo, x_hi), (y_lo, y_hi) = s.collision.interval, s.success.interval
+            color = colors.get(s.cell.method)
+            ax.errorbar(
+                x,
+                y,
+                # Clipped at 0: at a rate of exactly 0 or 100 % the Wilson bound can round past it.
+                xerr=[[max(0.0, x - x_lo)], [max(0.0, x_hi - x)]],
+                yerr=[[max(0.0, y - y_lo)], [max(0.0, y_hi - y)]],
+                fmt="o",
+                color=color,
+                capsize=3,
+            )
+            # Neighbouring methods (e.g. close alphas) often sit close together: their labels take turns
+            # at the four corners of the point, on a translucent box so that crossings stay legible.
+            dx, dy = _LABEL_CORNERS[k % len(_LABEL_CORNERS)]
+            ax.annotate(
+                _annotation(s),
+                (x, y),
+                xytext=(dx, dy),
+                textcoords="offset points",
+                ha="left" if dx > 0 else "right",
+                va="bottom" if dy > 0 else "top",
+                fontsize="x-small",
+                color=color,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
+                zorder=10,  # above every method's error bars, drawn later
+            )
+        ax.axvline(
+            COLLISION_TARGET, color="grey", ls="--", lw=1, label=f"{COLLISION_TARGET:g} % collision target"
+        )
+        ax.set_xlim(left=min(-0.5, ax.get_xlim()[0]))
+        ax.set_xlabel(f"collision rate (%), < {COLLISION_DISTANCE:g} m")
+        ax.set_ylabel("success rate (%)")
+        ax.set_title(
+            f"{n} humans: mean travel time of successful episodes beside each method", fontsize="small"
+        )
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="x-small", loc="lower right")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_safety(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
+    """The safety plots in ``out`` (the trade-off only where two methods share a crowd size)."""
+    written = [plot_min_distance_hist(experiment, summaries, out / MIN_DISTANCE_HIST_PNG)]
+    tradeoff = plot_safety_tradeoff(experiment, summaries, out / SAFETY_TRADEOFF_PNG)
+    return written + ([tradeoff] if tradeoff else [])

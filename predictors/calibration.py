@@ -1,0 +1,513 @@
+"""Conformal calibration of a predictor's displacement errors (Lindemann et al. 2023, "Safe planning in
+dynamic environments using conformal prediction").
+
+The MPC enlarges its robot-human safety distance at horizon step ``k`` (1..H) by a margin ``m_k``, the
+``(1 - alpha)`` split-conformal quantile of the predictor's step-``k`` displacement error on calibration data.
+This module computes those quantiles, builds them from real (TrajNet++) data, stores them beside the zoo
+manifest and measures their coverage.
+
+Error layout (used everywhere, also by the closed-loop source): ``errors`` is a float array ``(n, H)``; a row
+is one (human, prediction time) sample and column ``k-1`` is ``|predicted - realised|`` at step ``k`` in
+metres, NaN where the realised position at step ``k`` is unknown (the episode or scene ended). Each column is
+calibrated on its own non-NaN entries.
+
+What the guarantee is, honestly: for *exchangeable* calibration and test samples, split conformal gives
+marginal coverage ``P(error_k <= m_k) >= 1 - alpha`` for each step ``k`` separately (not jointly over the
+steps). Samples from the same scene or episode are correlated (neighbouring humans, overlapping time windows),
+and closed-loop errors depend on the planner that used the margins, so exchangeability is at best
+approximate: the coverage measured on held-out data (``coverage``) is what to report, not ``1 - alpha``.
+
+Storage: ``calibrations.json`` in the zoo directory (``predictors.zoo.checkpoints_dir``), beside the
+manifest, so that weightless predictors get a calibration too and recalibrating never rewrites the
+manifest's hashes::
+
+    {"format": "crowdmpc-calibrations", "version": 1, "calibrations": [block, ...]}
+
+one block (``Calibration.to_json``) per (predictor, source, alpha).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from types import EllipsisType
+from typing import Any, Final
+
+import numpy as np
+
+from predictors.base import DT, Predictor
+from predictors.errors import PredictorError, UnknownPredictor
+from predictors.evaluate import EvalConfig, EvalScene, load_eval_scenes, predict_scene
+from predictors.hashing import sha256_file
+from predictors.zoo import checkpoints_dir, read_manifest
+
+CALIBRATIONS_NAME: Final[str] = "calibrations.json"
+CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
+CALIBRATIONS_VERSION: Final[int] = 1
+SOURCES: Final[tuple[str, ...]] = ("real", "closed-loop")
+HORIZON: Final[int] = 4  # MPC horizon steps H the margins are made for by default
+ALPHA_TOLERANCE: Final[float] = 1e-12  # alphas closer than this are the same calibration key
+# An alpha written as a decimal (0.1) is not exact in binary, so (n + 1)(1 - alpha) can land a hair above an
+# integer it equals mathematically; without this slack the rank would round up one sample too far.
+_RANK_SLACK: Final[float] = 1e-9
+
+
+# ------------------------------------------------------------------------------------------------ statistics
+def _check_alpha(alpha: float, what: str = "alpha") -> float:
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0.0 < alpha < 1.0:
+        raise PredictorError(f"{what} must be a number with 0 < alpha < 1, got {alpha!r}")
+    return float(alpha)
+
+
+def conformal_rank(n: int, alpha: float) -> int:
+    """The 1-based rank ``ceil((n + 1)(1 - alpha))`` of the split-conformal quantile among ``n`` scores."""
+    return math.ceil((n + 1) * (1.0 - _check_alpha(alpha)) - _RANK_SLACK)
+
+
+def min_samples(alpha: float) -> int:
+    """The fewest scores for which the quantile at ``alpha`` is finite: ``ceil(1/alpha - 1)``."""
+    return math.ceil(1.0 / _check_alpha(alpha) - 1.0 - _RANK_SLACK)
+
+
+def conformal_quantile(scores: np.ndarray, alpha: float) -> float:
+    """Split-conformal ``(1 - alpha)`` quantile of 1-D finite non-negative ``scores``.
+
+    Sorts the ``n`` scores and returns the ``ceil((n + 1)(1 - alpha))``-th smallest (the finite-sample
+    correction). When that rank exceeds ``n`` there are too few samples for this alpha (fewer than
+    ``min_samples(alpha)``, e.g. 9 at alpha = 0.1) and the honest answer is ``math.inf``: no finite margin is
+    guaranteed to cover.
+    """
+    scores = np.asarray(scores, dtype=float)
+    if scores.ndim != 1:
+        raise PredictorError(f"scores must be a 1-D array, got shape {scores.shape}")
+    if not np.all(np.isfinite(scores)) or np.any(scores < 0):
+        bad = scores[~(np.isfinite(scores) & (scores >= 0))][0]
+        raise PredictorError(f"scores must be finite and non-negative (errors in metres), got {bad!r}")
+    rank = conformal_rank(len(scores), alpha)
+    if rank > len(scores):
+        return math.inf
+    return float(np.partition(scores, rank - 1)[rank - 1])
+
+
+def _check_errors(errors: np.ndarray) -> np.ndarray:
+    errors = np.asarray(errors, dtype=float)
+    if errors.ndim != 2 or errors.shape[1] < 1:
+        raise PredictorError(f"errors must have shape (n, H) with H >= 1, got {errors.shape}")
+    known = errors[~np.isnan(errors)]
+    bad = known[~(np.isfinite(known) & (known >= 0))]
+    if bad.size:
+        raise PredictorError(
+            f"errors must be finite non-negative distances in metres (NaN where unknown), got {bad[0]!r}"
+        )
+    return errors
+
+
+def step_counts(errors: np.ndarray) -> tuple[int, ...]:
+    """Non-NaN samples per horizon step (column)."""
+    errors = _check_errors(errors)
+    return tuple(int(c) for c in (~np.isnan(errors)).sum(axis=0))
+
+
+def step_quantiles(errors: np.ndarray, alpha: float) -> tuple[float, ...]:
+    """``conformal_quantile`` of each column's non-NaN entries (``inf`` where a column has too few)."""
+    errors = _check_errors(errors)
+    return tuple(conformal_quantile(col[~np.isnan(col)], alpha) for col in errors.T)
+
+
+def coverage(errors: np.ndarray, quantiles: tuple[float, ...] | list[float]) -> tuple[float, ...]:
+    """Share (0..1) of each column's non-NaN entries with error <= its quantile; NaN for an empty column."""
+    errors = _check_errors(errors)
+    quantiles = tuple(float(q) for q in quantiles)
+    if len(quantiles) != errors.shape[1]:
+        raise PredictorError(f"{len(quantiles)} quantiles for errors of {errors.shape[1]} horizon steps")
+    shares = []
+    for col, q in zip(errors.T, quantiles, strict=True):
+        known = col[~np.isnan(col)]
+        shares.append(float(np.mean(known <= q)) if known.size else math.nan)
+    return tuple(shares)
+
+
+# -------------------------------------------------------------------------------------------- the block
+def now_iso() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def _is_sha256(value: object) -> bool:
+    return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value)
+
+
+def _is_count(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _is_margin(value: object) -> bool:
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    return number and math.isfinite(value) and value >= 0
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The conformal margins of one predictor for one data source and alpha."""
+
+    predictor: str  # registry / zoo name
+    predictor_sha256: str | None  # the zoo weights' sha256; None for weightless ones (constant_velocity)
+    source: str  # "real" (TrajNet++ data) or "closed-loop" (simulated episodes)
+    alpha: float  # miscoverage: margins cover with probability >= 1 - alpha (module doc)
+    n: tuple[int, ...]  # calibration samples per horizon step k = 1..H
+    quantiles: tuple[float, ...]  # margins m_k in metres, per step k = 1..H
+    data_sha256: str  # identifies the calibration data (files, or episodes and their settings)
+    details: dict[str, Any] = field(default_factory=dict)  # free JSON: files, seeds, settings
+    created: str = field(default_factory=now_iso)  # ISO 8601 time of calibration
+
+    def __post_init__(self):
+        if not isinstance(self.predictor, str) or not self.predictor:
+            raise PredictorError(f"calibration 'predictor' must be a non-empty name, got {self.predictor!r}")
+        if self.predictor_sha256 is not None and not _is_sha256(self.predictor_sha256):
+            raise PredictorError(
+                f"calibration 'predictor_sha256' must be 64 lowercase hex digits or null, "
+                f"got {self.predictor_sha256!r}"
+            )
+        if self.source not in SOURCES:
+            raise PredictorError(f"calibration 'source' must be one of {list(SOURCES)}, got {self.source!r}")
+        _check_alpha(self.alpha, "calibration 'alpha'")
+        self._check_steps()
+        if not _is_sha256(self.data_sha256):
+            raise PredictorError(
+                f"calibration 'data_sha256' must be 64 lowercase hex digits, got {self.data_sha256!r}"
+            )
+        self._check_details_and_time()
+
+    def _check_steps(self) -> None:
+        if not isinstance(self.n, tuple) or not self.n or not all(_is_count(c) for c in self.n):
+            raise PredictorError(f"calibration 'n' must be a non-empty list of sample counts, got {self.n!r}")
+        if not isinstance(self.quantiles, tuple) or not all(_is_margin(q) for q in self.quantiles):
+            raise PredictorError(
+                f"calibration 'quantiles' must be a list of finite non-negative metres, "
+                f"got {self.quantiles!r}"
+            )
+        if len(self.quantiles) != len(self.n):
+            raise PredictorError(
+                f"calibration has {len(self.quantiles)} quantiles but {len(self.n)} sample counts; "
+                "expected one of each per horizon step"
+            )
+
+    def _check_details_and_time(self) -> None:
+        if not isinstance(self.details, dict):
+            raise PredictorError(f"calibration 'details' must be a JSON object, got {self.details!r}")
+        try:
+            json.dumps(self.details, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise PredictorError(f"calibration 'details' is not plain JSON ({exc})") from None
+        try:
+            datetime.fromisoformat(self.created)
+        except (TypeError, ValueError):
+            raise PredictorError(
+                f"calibration 'created' must be an ISO 8601 time, got {self.created!r}"
+            ) from None
+
+    @property
+    def horizon(self) -> int:
+        return len(self.quantiles)
+
+    def key(self) -> tuple[str, str, float]:
+        return self.predictor, self.source, self.alpha
+
+    def matches(self, predictor: str, source: str, alpha: float) -> bool:
+        same_alpha = abs(self.alpha - alpha) <= ALPHA_TOLERANCE
+        return self.predictor == predictor and self.source == source and same_alpha
+
+    def to_json(self) -> dict:
+        return {
+            "predictor": self.predictor,
+            "predictor_sha256": self.predictor_sha256,
+            "source": self.source,
+            "alpha": self.alpha,
+            "n": list(self.n),
+            "quantiles": list(self.quantiles),
+            "data_sha256": self.data_sha256,
+            "details": self.details,
+            "created": self.created,
+        }
+
+    @classmethod
+    def from_json(cls, values: object, where: str | Path) -> Calibration:
+        if not isinstance(values, dict):
+            raise PredictorError(f"{where}: a calibration must be a JSON object, got {values!r}")
+        required = ("predictor", "predictor_sha256", "source", "alpha", "n", "quantiles", "data_sha256")
+        missing = [k for k in (*required, "created") if k not in values]
+        if missing:
+            raise PredictorError(f"{where}: calibration {values.get('predictor', '?')!r} lacks {missing}")
+        lists = {k: values[k] for k in ("n", "quantiles")}
+        bad = [k for k, v in lists.items() if not isinstance(v, list)]
+        if bad:
+            raise PredictorError(f"{where}: calibration {bad} must be lists (one entry per horizon step)")
+        try:
+            return cls(
+                **{k: values[k] for k in required if k not in lists},
+                n=tuple(lists["n"]),
+                quantiles=tuple(lists["quantiles"]),
+                details=values.get("details", {}),
+                created=values["created"],
+            )
+        except PredictorError as exc:
+            raise PredictorError(f"{where}: {exc}") from None
+
+
+def calibration_from_errors(
+    errors: np.ndarray,
+    *,
+    predictor: str,
+    predictor_sha256: str | None,
+    source: str,
+    alpha: float,
+    data_sha256: str,
+    details: dict | None = None,
+) -> Calibration:
+    """The block for ``errors`` (module layout); refuses a step with too few samples for ``alpha``."""
+    quantiles = step_quantiles(errors, alpha)
+    counts = step_counts(errors)
+    short = [k + 1 for k, q in enumerate(quantiles) if not math.isfinite(q)]
+    if short:
+        raise PredictorError(
+            f"too few {source} samples for alpha={alpha:g} at horizon step(s) {short} "
+            f"(samples per step {list(counts)}, need at least {min_samples(alpha)}); use more data or a "
+            "larger alpha"
+        )
+    return Calibration(
+        predictor=predictor,
+        predictor_sha256=predictor_sha256,
+        source=source,
+        alpha=float(alpha),
+        n=counts,
+        quantiles=quantiles,
+        data_sha256=data_sha256,
+        details=dict(details or {}),
+        created=now_iso(),
+    )
+
+
+# ------------------------------------------------------------------------------------------------- storage
+def calibrations_path(directory: str | Path | None = None) -> Path:
+    return checkpoints_dir(directory) / CALIBRATIONS_NAME
+
+
+def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
+    """Every stored block; an absent file means none."""
+    path = calibrations_path(directory)
+    if not path.is_file():
+        return []
+    try:
+        document = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise PredictorError(f"{path}: not valid JSON ({exc})") from exc
+    if not isinstance(document, dict) or document.get("format") != CALIBRATIONS_FORMAT:
+        raise PredictorError(
+            f'{path}: not a crowdmpc calibrations file (expected "format": "{CALIBRATIONS_FORMAT}")'
+        )
+    if document.get("version") != CALIBRATIONS_VERSION:
+        raise PredictorError(
+            f'{path}: unsupported "version" {document.get("version")!r}, expected {CALIBRATIONS_VERSION}'
+        )
+    blocks = document.get("calibrations", [])
+    if not isinstance(blocks, list):
+        raise PredictorError(f'{path}: "calibrations" must be a list of blocks, got {blocks!r}')
+    result = [Calibration.from_json(b, f"{path}: calibrations[{i}]") for i, b in enumerate(blocks)]
+    for i, block in enumerate(result):
+        # two blocks for one key would make find_calibration's answer depend on their order
+        if any(other.matches(*block.key()) for other in result[:i]):
+            raise PredictorError(
+                f"{path}: calibrations[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
+                f"alpha={block.alpha:g}; keep one of them"
+            )
+    return result
+
+
+def save_calibration(block: Calibration, directory: str | Path | None = None) -> Path:
+    """Store ``block``, replacing the one with the same (predictor, source, alpha); written atomically."""
+    path = calibrations_path(directory)
+    kept = [b for b in read_calibrations(directory) if not b.matches(*block.key())]
+    blocks = sorted([*kept, block], key=Calibration.key)
+    document = {
+        "format": CALIBRATIONS_FORMAT,
+        "version": CALIBRATIONS_VERSION,
+        "calibrations": [b.to_json() for b in blocks],
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def current_sha256(predictor: str, directory: str | Path | None = None) -> str | None:
+    """The sha256 of ``predictor``'s weights in the zoo at ``directory``; None for a weightless predictor."""
+    from predictors.registry import PREDICTORS
+
+    if predictor in PREDICTORS:
+        return None
+    entries = read_manifest(directory)
+    if predictor not in entries:
+        raise UnknownPredictor(predictor, sorted(PREDICTORS) + sorted(entries))
+    return entries[predictor].sha256
+
+
+def _recalibrate_hint(predictor: str, source: str, alpha: float) -> str:
+    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha:g}"
+
+
+def find_calibration(
+    predictor: str,
+    source: str,
+    alpha: float,
+    directory: str | Path | None = None,
+    sha256: str | None | EllipsisType = ...,
+) -> Calibration:
+    """The stored block for (predictor, source, alpha), checked against the current weights.
+
+    ``sha256`` is the sha256 the weights have now (None for a weightless predictor); the default ``...``
+    reads it from the zoo manifest in ``directory``. A block made for other weights is refused.
+    """
+    _check_alpha(alpha)
+    if source not in SOURCES:
+        raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
+    path = calibrations_path(directory)
+    blocks = read_calibrations(directory)
+    found = [b for b in blocks if b.matches(predictor, source, alpha)]
+    if not found:
+        others = sorted(b.alpha for b in blocks if b.predictor == predictor and b.source == source)
+        have = f" (it has alpha {', '.join(f'{a:g}' for a in others)})" if others else ""
+        raise PredictorError(
+            f"no {source} calibration at alpha={alpha:g} for predictor {predictor!r} in {path}{have}; "
+            f"run: {_recalibrate_hint(predictor, source, alpha)}"
+        )
+    block = found[0]
+    expected = current_sha256(predictor, directory) if sha256 is ... else sha256
+    if block.predictor_sha256 != expected:
+        raise PredictorError(
+            f"{path}: the {source} calibration at alpha={alpha:g} of predictor {predictor!r} was made for "
+            f"weights sha256 {block.predictor_sha256}, but the weights now have sha256 {expected}; the "
+            f"weights changed since calibration, recalibrate: {_recalibrate_hint(predictor, source, alpha)}"
+        )
+    return block
+
+
+# ---------------------------------------------------------------------------------------------- real data
+def validation_files(data_dir: str | Path | None = None) -> list[Path]:
+    """The prepared data's ``val/`` ndjson files (biwi_eth, biwi_hotel: the paper protocol's val split).
+
+    Their names relative to ``predictors.data.locate.prepared_dir(data_dir)`` are what ``real_data_sha256``
+    should hash (pass that directory as ``root``).
+    """
+    from predictors.data.locate import protocol_files
+
+    return protocol_files(data_dir, "paper")["val"]
+
+
+def file_hashes(files: list[Path], root: str | Path | None = None) -> dict[str, str]:
+    """``{name: sha256}``; names relative to ``root`` where inside it, else the bare file name."""
+    root = Path(root) if root is not None else None
+    hashes: dict[str, str] = {}
+    for path in map(Path, files):
+        in_root = root is not None and path.is_relative_to(root)
+        name = path.relative_to(root).as_posix() if in_root else path.name
+        if name in hashes:
+            raise PredictorError(
+                f"two calibration files are both named {name!r} ({path}); pass the data directory as root "
+                "so that their relative names tell them apart"
+            )
+        hashes[name] = sha256_file(path)
+    return hashes
+
+
+def combined_sha256(hashes: dict[str, str]) -> str:
+    """One sha256 over ``{name: sha256}`` sorted by name, so the order files were given in does not matter."""
+    digest = hashlib.sha256()
+    for name, sha in sorted(hashes.items()):
+        digest.update(f"{name}:{sha}\n".encode())
+    return digest.hexdigest()
+
+
+def real_data_sha256(files: list[Path], root: str | Path | None = None) -> str:
+    """One sha256 over the sorted file names (see ``file_hashes``) and their contents' sha256."""
+    return combined_sha256(file_hashes(files, root))
+
+
+def _scene_errors(predictor: Predictor, scene: EvalScene, config: EvalConfig) -> tuple[np.ndarray, list]:
+    """Rows ``(m, H)`` for the agents observed at the last observed step, and their (frame, x, y) keys."""
+    prediction, agents, _ = predict_scene(predictor, scene.xy, config, None)
+    last = config.obs_len - 1
+    now = scene.xy[last, agents]
+    current = ~np.isnan(now).any(axis=-1)  # a predictor only knows where someone is now if it saw them now
+    truth = scene.xy[config.obs_len :, agents]
+    errors = np.linalg.norm(prediction - truth, axis=-1)  # NaN where the agent is absent at step k
+    frame = int(scene.frames[last])
+    keys = [(frame, float(x), float(y)) for x, y in now[current]]
+    return errors[:, current].T, keys
+
+
+def real_errors(predictor: Predictor, files: list[Path], horizon: int = HORIZON) -> np.ndarray:
+    """Step-wise displacement errors ``(n, horizon)`` of ``predictor`` on TrajNet++ ndjson ``files``.
+
+    Each scene is cut to its last ``predictor.obs_len + horizon`` steps (``load_eval_scenes``) and predicted
+    with every agent as a human and no robots (``predict_scene``). TrajNet++ scenes overlap: the same person
+    at the same time appears in the scene of each nearby primary. A row is one (person, prediction time), so
+    within a file a repeat (same last observed frame and position) is dropped and the first scene's
+    prediction is kept.
+    """
+    if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+        raise PredictorError(f"horizon must be a positive number of steps, got {horizon!r}")
+    config = EvalConfig(obs_len=predictor.obs_len, pred_len=horizon)
+    rows: list[np.ndarray] = []
+    for path in files:
+        seen: set[tuple[int, float, float]] = set()
+        for scene in load_eval_scenes(path, config):
+            errors, keys = _scene_errors(predictor, scene, config)
+            for row, key in zip(errors, keys, strict=True):
+                if key not in seen:
+                    seen.add(key)
+                    rows.append(row)
+    return np.asarray(rows, dtype=float).reshape(-1, horizon)
+
+
+def calibrate_real(
+    predictor: Predictor,
+    files: list[Path],
+    alphas: list[float] | tuple[float, ...],
+    horizon: int = HORIZON,
+    root: str | Path | None = None,
+    sha256: str | None = None,
+) -> tuple[list[Calibration], np.ndarray]:
+    """One "real" block per alpha from ``files`` (``sha256``: the predictor's weights), and the errors."""
+    if not alphas:
+        raise PredictorError("need at least one alpha to calibrate")
+    if not files:
+        raise PredictorError("need at least one ndjson file to calibrate on")
+    hashes = file_hashes(files, root)
+    errors = real_errors(predictor, files, horizon)
+    details = {
+        "files": hashes,
+        "obs_len": predictor.obs_len,
+        "horizon": horizon,
+        "dt": DT,
+        "rows": int(errors.shape[0]),
+    }
+    data_sha256 = combined_sha256(hashes)
+    blocks = [
+        calibration_from_errors(
+            errors,
+            predictor=predictor.name,
+            predictor_sha256=sha256,
+            source="real",
+            alpha=alpha,
+            data_sha256=data_sha256,
+            details=details,
+        )
+        for alpha in alphas
+    ]
+    return blocks, errors

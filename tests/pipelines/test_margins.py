@@ -1,0 +1,146 @@
+"""Safety margins: parsing, resolution from a calibration, the MPC planning with them, closed-loop errors."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from crowdsim.env import CrowdEnv
+from pipelines.calibrate import ClosedLoopPlan, PredictionErrors, closed_loop_errors
+from pipelines.closed_loop import run_episode
+from pipelines.controllers import ControllerSpec, ControlOutput, make_controller
+from pipelines.errors import PipelineError
+from pipelines.margins import MarginSpec, parse_margins
+from predictors.calibration import calibration_from_errors, save_calibration
+from predictors.errors import PredictorError
+
+
+def test_parse_margins():
+    assert parse_margins("none") == MarginSpec()
+    assert parse_margins("conformal") == MarginSpec("conformal", alpha=0.1, source="closed-loop")
+    assert parse_margins("conformal:0.05:real") == MarginSpec("conformal", alpha=0.05, source="real")
+    assert parse_margins("fixed:0.1,0.2,0.3,0.4").values == (0.1, 0.2, 0.3, 0.4)
+    assert parse_margins("conformal:0.05").label == "cp0.05"
+    assert parse_margins("conformal:0.05:real").label == "cp0.05-real"
+    assert parse_margins("fixed:0.1,0.2,0.3,0.4").label == "fixed0.1_0.2_0.3_0.4"
+    for bad, match in (
+        ("wide", "bad margins 'wide'"),
+        ("conformal:x", "'x' is not a number"),
+        ("conformal:1.5", r"alpha must be a number in \(0, 1\)"),
+        ("conformal:0.1:guess", "unknown calibration source 'guess'"),
+        ("fixed:0.1,-1,0,0", r"fixed margins must be numbers in \[0, 5.0\]"),
+        ("fixed:nan", "not a finite number"),
+        ("none:0.1", "bad margins"),
+    ):
+        with pytest.raises(PipelineError, match=match):
+            parse_margins(bad)
+
+
+def test_resolution_reads_the_calibration_and_checks_the_horizon(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    assert MarginSpec().resolve("constant_velocity", 4, None) == ()
+    assert MarginSpec("fixed", values=(0.1, 0.2)).resolve(None, 2, None) == (0.1, 0.2)
+    with pytest.raises(PipelineError, match="one value per horizon step"):
+        MarginSpec("fixed", values=(0.1, 0.2)).resolve(None, 4, None)
+    with pytest.raises(PredictorError, match="run: crowdmpc calibrate --predictor constant_velocity"):
+        MarginSpec("conformal").resolve("constant_velocity", 4, None)
+    # Scores 0.01 .. 0.20 per step k (times k): the 0.9 quantile of 19 samples is the 18th smallest.
+    errors = np.outer(np.arange(1, 20) / 100.0, [1.0, 2.0, 3.0, 4.0])
+    block = calibration_from_errors(
+        errors,
+        predictor="constant_velocity",
+        predictor_sha256=None,
+        source="closed-loop",
+        alpha=0.1,
+        data_sha256="0" * 64,
+    )
+    save_calibration(block)
+    assert MarginSpec("conformal").resolve("constant_velocity", 4, None) == pytest.approx(
+        (0.18, 0.36, 0.54, 0.72)
+    )
+    assert MarginSpec("conformal").resolve("constant_velocity", 2, None) == pytest.approx((0.18, 0.36))
+    with pytest.raises(PipelineError, match="covers 4 steps, the MPC's horizon is 6"):
+        MarginSpec("conformal").resolve("constant_velocity", 6, None)
+    with pytest.raises(PredictorError, match="weights changed since calibration"):
+        MarginSpec("conformal").resolve("constant_velocity", 4, "f" * 64)
+
+
+def test_the_controller_plans_with_the_margins_and_says_so():
+    spec = ControllerSpec("cmpc", "constant_velocity", margins=parse_margins("fixed:0.1,0.2,0.3,0.4"))
+    controller = make_controller(spec)
+    assert controller.cfg.human_margins == (0.1, 0.2, 0.3, 0.4)
+    described = controller.describe()["config"]["margins"]
+    assert described == {"mode": "fixed", "label": "fixed0.1_0.2_0.3_0.4", "margins_m": [0.1, 0.2, 0.3, 0.4]}
+    paper = make_controller(ControllerSpec("cmpc", "constant_velocity"))
+    assert paper.cfg.human_margins == () and paper.describe()["config"]["margins"]["mode"] == "none"
+    with pytest.raises(PipelineError, match="through ControllerSpec.margins"):
+        ControllerSpec("cmpc", mpc_overrides=(("human_margins", (0.1,) * 4),))
+
+
+def test_margins_keep_the_robots_further_from_a_head_on_human():
+    """One robot, one human walking straight at it: a 0.4 m margin on every step keeps them further apart."""
+    from crowdsim.scenarios import Layout
+
+    layout = Layout(
+        robot_starts=np.array([[0.0, -3.0]]),
+        robot_goals=np.array([[0.0, 3.0]]),
+        human_starts=np.array([[0.05, 3.0]]),
+        human_goals=np.array([[0.05, -3.0]]),
+    )
+    distances = {}
+    for text in ("none", "fixed:0.4,0.4,0.4,0.4"):
+        controller = make_controller(ControllerSpec("cmpc", "constant_velocity", margins=parse_margins(text)))
+        env = CrowdEnv()
+        obs = env.reset_layout(layout)
+        controller.reset(obs)
+        done = False
+        while not done:
+            obs, done, _ = env.step(controller.act(obs).accelerations)
+        traj = env.trajectory()
+        distances[text] = float(
+            np.linalg.norm(traj.robot_positions[:, 0] - traj.human_positions[:, 0], axis=-1).min()
+        )
+    assert distances["fixed:0.4,0.4,0.4,0.4"] > distances["none"] + 0.1
+
+
+def test_prediction_errors_by_hand():
+    """A prediction made at step 1 of a 3-step episode: k = 1, 2 are scored, k = 3 is past the end (NaN)."""
+    observer = PredictionErrors(near=2.0)
+    obs = SimpleNamespace(
+        step=1,
+        n_humans=2,
+        n_robots=1,
+        human_positions=np.array([[1.0, 0.0], [5.0, 0.0]]),  # the second human is 5 m from the robot
+        robot_positions=np.array([[0.0, 0.0]]),
+    )
+    prediction = np.array([[[1.0, 0.1], [5.0, 0.0]], [[1.0, 0.5], [5.0, 0.0]], [[1.0, 0.9], [5.0, 0.0]]])
+    observer.on_reset(obs, {})
+    observer.on_step(obs, ControlOutput(accelerations=np.zeros((1, 2)), prediction=prediction), obs)
+    observer.on_step(obs, ControlOutput(accelerations=np.zeros((1, 2))), obs)  # no prediction: skipped
+    truth = np.array([[[0, 0], [5, 0]], [[1, 0], [5, 0]], [[1, 0.2], [5, 0]], [[1, 0.2], [5, 0]]], float)
+    observer.on_end(SimpleNamespace(human_positions=truth))
+    errors = observer.errors
+    assert errors.shape == (1, 3)  # only the human within 2 m
+    np.testing.assert_allclose(errors[0, :2], [0.1, 0.3])
+    assert math.isnan(errors[0, 2])
+
+
+@pytest.mark.slow
+def test_closed_loop_errors_of_constant_velocity():
+    plan = ClosedLoopPlan("constant_velocity", episodes=2, humans=(3,))
+    errors, details = closed_loop_errors(plan, progress=False)
+    assert errors.ndim == 2 and errors.shape[1] == 4 and len(errors) > 10
+    assert details["seeds"] == [1_000_000, 1_000_001]
+    finite = errors[np.isfinite(errors)]
+    assert (finite >= 0).all() and np.nanmedian(errors[:, 3]) >= np.nanmedian(errors[:, 0])
+    # The calibration episodes are ordinary closed-loop episodes of their seeds.
+    again = run_episode(
+        make_controller(ControllerSpec("cmpc", "constant_velocity")),
+        seed=1_000_000,
+        scenario="circle",
+        n_humans=3,
+    )
+    assert again.metrics.n_steps > 0
+    with pytest.raises(PipelineError, match="calibration runs cmpc or dmpc"):
+        ClosedLoopPlan("constant_velocity", controller="orca")

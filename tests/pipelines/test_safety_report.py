@@ -1,0 +1,222 @@
+"""The report's safety side: per-step frequencies by hand, old records, the histogram's counts, the plots."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import pytest
+
+from pipelines.controllers import ControllerSpec
+from pipelines.experiments import Experiment, get_experiment
+from pipelines.margins import MarginSpec
+from pipelines.safety_report import (
+    HIST_EDGES,
+    MIN_DISTANCE_HIST_CSV,
+    MIN_DISTANCE_HIST_PNG,
+    SAFETY_TRADEOFF_PNG,
+    min_distance_counts,
+    step_frequency,
+    world_note,
+)
+from pipelines.sweep_report import CELLS_CSV, EPISODES_CSV, markdown_table, summarize, write_report
+
+NEW_KEYS = ("collision_steps", "contact_steps")
+
+
+def _record(cell, i, min_distance, n_steps, steps=(0, 0, 0), *, success=True, collision=None, old=False):
+    """An episodes.jsonl line; ``steps`` = (collision, contact, discomfort) step counts. ``old``: as written
+    before the step counts and the margins / profile / visibility fields existed."""
+    collision_steps, contact_steps, discomfort_steps = steps
+    metrics = {
+        "success": success,
+        "travel_time": 15.0 + i if success else None,
+        "collision": collision_steps > 0 if collision is None else collision,
+        "contact": contact_steps > 0,
+        "discomfort": discomfort_steps > 0,
+        "timeout": not success,
+        "min_distance": min_distance,
+        "discomfort_steps": discomfort_steps,
+        "collision_steps": collision_steps,
+        "contact_steps": contact_steps,
+        "n_steps": n_steps,
+    }
+    record = {
+        "key": f"{cell.key}/{i}",
+        "cell": cell.key,
+        "method": cell.method,
+        "n_humans": cell.n_humans,
+        "scenario": ("circle", "perpendicular")[i % 2],
+        "seed": i // 2,
+        "margins": cell.spec.margins.label,
+        "profile": cell.world.profile,
+        "visibility": cell.world.visibility,
+        "metrics": metrics,
+        "solver": {
+            "steps": n_steps,
+            "total_ms": 10.0 * n_steps,
+            "median_ms": 10.0,
+            "p95_ms": 20.0,
+            "max_ms": 30.0,
+            "mean_iterations": 2.0,
+            "max_iterations": 3,
+            "fallback_steps": 0,
+            "statuses": {"ok": n_steps},
+        },
+        "wall_s": 1.0,
+    }
+    if old:
+        for key in (*NEW_KEYS, "discomfort_steps"):
+            del metrics[key]
+        for key in ("margins", "profile", "visibility"):
+            del record[key]
+    return record
+
+
+def _safety_records(old: bool = False):
+    """The safety experiment's first two cells: "none" with hand-chosen counts, "alpha=0.5" without
+    collisions. "none": states 10 + 20 + 30 = 60; collision steps 3 + 0 + 3 = 6 (10 %), contact 1 + 0 + 2 = 3
+    (5 %), discomfort 6 + 0 + 6 = 12 (20 %); minima 0.5, 1.2, 0.7 -> median 0.7."""
+    safety = get_experiment("safety")
+    none, half = safety.cells()[:2]
+    records = [
+        _record(none, 0, 0.5, 9, (3, 1, 6), success=False, old=old),
+        _record(none, 1, 1.2, 19, old=old),
+        _record(none, 2, 0.7, 29, (3, 2, 6), old=old),
+    ]
+    records += [_record(half, i, 1.0 + 0.5 * i, 20, old=old) for i in range(4)]
+    return safety, [none, half], records
+
+
+def test_step_frequencies_by_hand():
+    safety, cells, records = _safety_records()
+    none, half = summarize(safety, cells, records)
+    assert none.collision_step_freq == pytest.approx(10.0)
+    assert none.contact_step_freq == pytest.approx(5.0)
+    assert none.discomfort_step_freq == pytest.approx(20.0)
+    assert none.min_distance_median == pytest.approx(0.7)
+    assert (half.collision_step_freq, half.min_distance_median) == (0.0, pytest.approx(1.75))
+
+    table = markdown_table(safety, [none, half]).splitlines()
+    assert "| Collision per step (%) | 10.00 | 0.00 |" in table
+    assert "| Min robot-human distance, median (m) | 0.70 | 1.75 |" in table
+    # The methods differ in their margins only: shared conventions in the notes, margins in a row.
+    assert "Margins: per column; profile paper, robots visible to the humans" in "\n".join(table)
+    assert "| Margins / profile / visibility | none / paper / visible | cp0.5 / paper / visible |" in table
+
+
+def test_step_frequency_needs_every_count():
+    rows = [{"collision_steps": 2, "n_steps": 4}, {"collision_steps": 0, "n_steps": 14}]
+    assert step_frequency(rows, "collision") == pytest.approx(100.0 * 2 / 20)
+    assert math.isnan(step_frequency([*rows, {"n_steps": 9}], "collision"))  # one old record: no rate
+    assert math.isnan(step_frequency([], "collision"))
+
+
+def test_cells_and_episodes_csv_carry_the_new_columns(tmp_path):
+    safety, cells, records = _safety_records()
+    write_report(tmp_path, safety, cells, records)
+    with open(tmp_path / CELLS_CSV) as f:
+        first = next(csv.DictReader(f))
+    assert (first["margins"], first["profile"], first["visibility"]) == ("none", "paper", "visible")
+    assert float(first["collision_step_freq"]) == pytest.approx(10.0)
+    assert float(first["contact_step_freq"]) == pytest.approx(5.0)
+    assert float(first["discomfort_step_freq"]) == pytest.approx(20.0)
+    assert float(first["min_distance_median"]) == pytest.approx(0.7)
+    with open(tmp_path / EPISODES_CSV) as f:
+        episodes = list(csv.DictReader(f))
+    assert [(e["collision_steps"], e["contact_steps"]) for e in episodes[:3]] == [
+        ("3", "1"),
+        ("0", "0"),
+        ("3", "2"),
+    ]
+    assert episodes[3]["margins"] == "cp0.5"
+
+
+def test_old_records_without_the_new_keys_still_report(tmp_path):
+    safety, cells, records = _safety_records(old=True)
+    report = write_report(tmp_path, safety, cells, records)
+    none, _ = summarize(safety, cells, records)
+    assert math.isnan(none.collision_step_freq) and math.isnan(none.discomfort_step_freq)
+    assert none.min_distance_median == pytest.approx(0.7)  # min_distance has always been recorded
+    assert "| Collision per step (%) | — | — |" in report.markdown.splitlines()
+    with open(tmp_path / CELLS_CSV) as f:
+        assert next(csv.DictReader(f))["collision_step_freq"] == ""
+    with open(tmp_path / EPISODES_CSV) as f:
+        first = next(csv.DictReader(f))
+    assert (first["collision_steps"], first["margins"], first["visibility"]) == ("", "", "")
+
+    # A cell mixing old and new records gives no per-step rate rather than one over part of the cell.
+    _, _, new = _safety_records()
+    mixed = summarize(safety, cells, records[:1] + new[1:])
+    assert math.isnan(mixed[0].collision_step_freq)
+    assert mixed[1].collision_step_freq == 0.0
+
+
+def test_histogram_counts_every_episode_once(tmp_path):
+    safety, cells, records = _safety_records()
+    records.append(_record(cells[1], 4, None, 20))  # null minimum (no human): the overflow bin
+    write_report(tmp_path, safety, cells, records)
+    with open(tmp_path / MIN_DISTANCE_HIST_CSV) as f:
+        rows = list(csv.DictReader(f))
+    per_cell: dict[str, int] = {}
+    for row in rows:
+        per_cell[row["cell"]] = per_cell.get(row["cell"], 0) + int(row["episodes"])
+    assert per_cell == {cells[0].key: 3, cells[1].key: 5}
+    assert len(rows) == 2 * len(HIST_EDGES)  # 60 bins of 0.05 m up to 3 m, then the overflow
+    none = [r for r in rows if r["cell"] == cells[0].key]
+    assert {(r["bin_lo_m"], r["bin_hi_m"]) for r in none if r["episodes"] != "0"} == {
+        ("0.5", "0.55"),
+        ("0.7", "0.75"),
+        ("1.2", "1.25"),
+    }
+    # Bins are [lo, hi): 1.0 m in bin 20, 2.99 m in the last 0.05 m bin; 3 m and no human in the overflow.
+    assert list(min_distance_counts([1.0, 2.99, 3.0, math.inf])[[20, 59, 60]]) == [1, 1, 2]
+    assert (none[-1]["bin_lo_m"], none[-1]["bin_hi_m"]) == ("3.0", "inf")
+
+
+def test_write_report_writes_both_plots(tmp_path):
+    safety, cells, records = _safety_records()
+    report = write_report(tmp_path, safety, cells, records)
+    names = {p.name for p in report.files}
+    assert {MIN_DISTANCE_HIST_PNG, SAFETY_TRADEOFF_PNG, MIN_DISTANCE_HIST_CSV} <= names
+    assert {"cells.csv", "episodes.csv", "table.md", "success_vs_humans.png"} <= names
+    for name in (MIN_DISTANCE_HIST_PNG, SAFETY_TRADEOFF_PNG):
+        data = (tmp_path / name).read_bytes()
+        assert data.startswith(b"\x89PNG") and len(data) > 1000
+
+
+def _tiny(methods: int) -> Experiment:
+    """Two crowd sizes, ``methods`` methods, every one with the same conventions."""
+    labels = ("A", "B", "C")[:methods]
+    return Experiment(
+        name="tiny",
+        title="Tiny",
+        methods=tuple((label, ControllerSpec("cmpc", margins=MarginSpec())) for label in labels),
+        humans=(5, 6),
+    )
+
+
+def test_several_crowd_sizes_and_a_single_method(tmp_path):
+    for methods in (2, 1):
+        experiment = _tiny(methods)
+        cells = experiment.cells()
+        records = [_record(c, i, 0.4 + 0.3 * i, 20, (i, 0, 0)) for c in cells for i in range(3)]
+        out = tmp_path / str(methods)
+        out.mkdir()
+        report = write_report(out, experiment, cells, records)
+        names = {p.name for p in report.files}
+        assert MIN_DISTANCE_HIST_PNG in names and (out / MIN_DISTANCE_HIST_PNG).stat().st_size > 0
+        # Nothing to trade off with one method per crowd size.
+        assert (SAFETY_TRADEOFF_PNG in names) == (methods == 2) == (out / SAFETY_TRADEOFF_PNG).exists()
+        assert "Margins: none; profile paper, robots visible to the humans." in report.markdown
+        assert "| Margins / profile / visibility |" not in report.markdown
+
+
+def test_world_note_of_the_conventions_experiment():
+    cells = get_experiment("conventions").cells()
+    line, worlds = world_note(cells)
+    assert line == (
+        "Margins: per column; profile per column, robot visibility per column "
+        "(row 'Margins / profile / visibility')."
+    )
+    assert worlds is not None and worlds[:2] == ["none / v1 / visible", "cp0.1 / v1 / visible"]

@@ -1,0 +1,347 @@
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from predictors import zoo
+from predictors.calibration import (
+    CALIBRATIONS_FORMAT,
+    CALIBRATIONS_NAME,
+    Calibration,
+    calibrate_real,
+    calibration_from_errors,
+    conformal_quantile,
+    coverage,
+    find_calibration,
+    min_samples,
+    read_calibrations,
+    real_data_sha256,
+    real_errors,
+    save_calibration,
+    step_counts,
+    step_quantiles,
+    validation_files,
+)
+from predictors.constant_velocity import ConstantVelocity
+from predictors.data.prepare import prepare_ewap
+from predictors.errors import PredictorError, UnknownPredictor
+from tests.predictors.samples import STEP, scene, track, write_lines, write_tiny_ewap, write_walk_file
+
+SHA_A = "a" * 64
+SHA_B = "b" * 64
+DATA = "d" * 64
+NAN = math.nan
+
+
+# ---------------------------------------------------------------------------------------------- statistics
+def test_conformal_quantile_by_hand():
+    scores = np.arange(10, 0, -1, dtype=float)  # 1..10, unsorted on purpose
+    assert conformal_quantile(scores, 0.1) == 10.0  # rank ceil(11 * 0.9) = 10
+    assert conformal_quantile(scores, 0.2) == 9.0  # rank ceil(11 * 0.8) = 9
+    assert conformal_quantile(scores, 0.5) == 6.0  # rank ceil(5.5) = 6
+
+
+def test_too_few_samples_give_infinity():
+    assert conformal_quantile(np.arange(1.0, 6.0), 0.1) == math.inf  # rank ceil(6 * 0.9) = 6 > 5
+    assert conformal_quantile(np.array([]), 0.1) == math.inf
+    assert min_samples(0.1) == 9 and min_samples(0.2) == 4 and min_samples(0.05) == 19
+    assert conformal_quantile(np.arange(1.0, 10.0), 0.1) == 9.0  # n = 9 is just enough
+
+
+@pytest.mark.parametrize("alpha", [0.0, 1.0, -0.1, 1.5, True, "0.1"])
+def test_alpha_must_lie_strictly_between_zero_and_one(alpha):
+    with pytest.raises(PredictorError, match="0 < alpha < 1"):
+        conformal_quantile(np.ones(20), alpha)
+
+
+@pytest.mark.parametrize("bad", [-1.0, math.inf, NAN])
+def test_scores_must_be_finite_and_non_negative(bad):
+    with pytest.raises(PredictorError, match="finite and non-negative"):
+        conformal_quantile(np.array([1.0, bad]), 0.5)
+
+
+def test_step_quantiles_use_each_columns_known_entries():
+    errors = np.full((10, 2), NAN)
+    errors[:, 0] = np.arange(1.0, 11.0)
+    errors[:4, 1] = [0.4, 0.1, 0.3, 0.2]  # step 2 known for four samples only
+    assert step_counts(errors) == (10, 4)
+    assert step_quantiles(errors, 0.2) == (9.0, 0.4)  # ranks ceil(11 * 0.8) = 9 and ceil(5 * 0.8) = 4
+    assert step_quantiles(errors, 0.1) == (10.0, math.inf)  # four samples are too few at alpha 0.1
+
+
+def test_errors_must_be_a_matrix_of_distances():
+    with pytest.raises(PredictorError, match=r"shape \(n, H\)"):
+        step_quantiles(np.ones(5), 0.1)
+    with pytest.raises(PredictorError, match="non-negative distances"):
+        step_quantiles(np.array([[1.0, -0.5]]), 0.1)
+
+
+def test_coverage_by_hand():
+    errors = np.array([[0.1, 0.5], [0.2, NAN], [0.3, 0.7], [0.4, 0.9]])
+    assert coverage(errors, (0.2, 0.7)) == (0.5, pytest.approx(2 / 3))
+    assert coverage(errors, [1.0, 0.1]) == (1.0, 0.0)
+    assert math.isnan(coverage(np.full((2, 1), NAN), (1.0,))[0])  # nothing to cover
+    with pytest.raises(PredictorError, match="1 quantiles for errors of 2 horizon steps"):
+        coverage(errors, (1.0,))
+
+
+def test_held_out_coverage_on_exchangeable_data():
+    """Split conformal on i.i.d. data: mean held-out coverage is ceil((n+1)(1-a))/(n+1) >= 1 - a."""
+    rng = np.random.default_rng(7)
+    alpha, n_cal, n_test, trials = 0.1, 99, 500, 300
+    shares = []
+    for _ in range(trials):
+        scale = np.array([0.1, 0.2, 0.3, 0.4])  # errors grow with the horizon step
+        cal = np.abs(rng.normal(size=(n_cal, 4))) * scale
+        test = np.abs(rng.normal(size=(n_test, 4))) * scale
+        shares.append(coverage(test, step_quantiles(cal, alpha)))
+    mean = np.mean(shares, axis=0)
+    assert np.all(mean >= 1 - alpha - 0.01)
+    assert np.all(mean <= 1 - alpha + 1 / (n_cal + 1) + 0.01)  # and not much more than asked for
+
+
+# -------------------------------------------------------------------------------------------- the block
+def block(**changes) -> Calibration:
+    values = dict(
+        predictor="social_lstm_eth",
+        predictor_sha256=SHA_A,
+        source="real",
+        alpha=0.1,
+        n=(100, 98, 95, 90),
+        quantiles=(0.1, 0.25, 0.4, 0.6),
+        data_sha256=DATA,
+        details={"files": {"val/biwi_eth.ndjson": SHA_B}},
+        created="2026-11-30T12:00:00+00:00",
+    )
+    values.update(changes)
+    return Calibration(**values)
+
+
+def test_block_json_round_trip():
+    original = block()
+    text = json.dumps(original.to_json())
+    assert Calibration.from_json(json.loads(text), "here") == original
+    assert original.horizon == 4
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"predictor": ""}, "'predictor' must be a non-empty name"),
+        ({"predictor_sha256": "abc"}, "'predictor_sha256' must be 64 lowercase hex"),
+        ({"source": "sim"}, r"'source' must be one of \['real', 'closed-loop'\], got 'sim'"),
+        ({"alpha": 0.0}, "'alpha' must be a number with 0 < alpha < 1"),
+        ({"n": (1, 2)}, "4 quantiles but 2 sample counts"),
+        ({"n": (1, -2, 3, 4)}, "'n' must be a non-empty list of sample counts"),
+        ({"quantiles": (0.1, math.inf, 0.3, 0.4)}, "'quantiles' must be a list of finite non-negative"),
+        ({"data_sha256": "x"}, "'data_sha256' must be 64 lowercase hex"),
+        ({"details": {"x": object()}}, "'details' is not plain JSON"),
+        ({"created": "yesterday"}, "'created' must be an ISO 8601 time, got 'yesterday'"),
+    ],
+)
+def test_block_validation(changes, message):
+    with pytest.raises(PredictorError, match=message):
+        block(**changes)
+
+
+def test_from_json_names_where_and_what():
+    values = block().to_json()
+    del values["quantiles"]
+    with pytest.raises(PredictorError, match=r"^f.json: calibration 'social_lstm_eth' lacks \['quantiles'\]"):
+        Calibration.from_json(values, "f.json")
+    values = block().to_json() | {"alpha": 2}
+    with pytest.raises(PredictorError, match=r"^f.json: calibration 'alpha' must be"):
+        Calibration.from_json(values, "f.json")
+    with pytest.raises(PredictorError, match="must be lists"):
+        Calibration.from_json(block().to_json() | {"n": 5}, "f.json")
+
+
+def test_calibration_from_errors_refuses_too_few_samples():
+    errors = np.full((10, 2), NAN)
+    errors[:, 0] = np.arange(1.0, 11.0)
+    errors[:4, 1] = 0.5
+    made = calibration_from_errors(
+        errors, predictor="p", predictor_sha256=None, source="closed-loop", alpha=0.2, data_sha256=DATA
+    )
+    assert made.n == (10, 4) and made.quantiles == (9.0, 0.5) and made.source == "closed-loop"
+    with pytest.raises(PredictorError, match=r"alpha=0.1 at horizon step\(s\) \[2\].*need at least 9"):
+        calibration_from_errors(
+            errors, predictor="p", predictor_sha256=None, source="closed-loop", alpha=0.1, data_sha256=DATA
+        )
+
+
+# ------------------------------------------------------------------------------------------------- storage
+def test_storage_round_trip_and_replacement(tmp_path):
+    assert read_calibrations(tmp_path) == []
+    first, other_alpha, other_source = block(), block(alpha=0.05), block(source="closed-loop")
+    for b in (first, other_alpha, other_source):
+        path = save_calibration(b, tmp_path)
+    assert path == tmp_path / CALIBRATIONS_NAME
+    document = json.loads(path.read_text())
+    assert document["format"] == CALIBRATIONS_FORMAT and document["version"] == 1
+    # stored sorted by (predictor, source, alpha), whatever the order of saving
+    assert read_calibrations(tmp_path) == [other_source, other_alpha, first]
+
+    newer = block(alpha=0.1 + 1e-15, quantiles=(0.2, 0.3, 0.5, 0.7))  # the same alpha, to 1e-12
+    save_calibration(newer, tmp_path)
+    stored = read_calibrations(tmp_path)
+    assert len(stored) == 3 and newer in stored and first not in stored
+    assert not list(tmp_path.glob(".*.tmp"))  # the temp file was renamed into place
+
+
+def test_storage_sits_beside_the_manifest_and_leaves_it_alone(tmp_path, monkeypatch):
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(tmp_path))
+    manifest = tmp_path / zoo.MANIFEST_NAME
+    manifest.write_text('{"format": "crowdmpc-zoo", "version": 1, "models": []}\n')
+    before = manifest.read_bytes()
+    assert save_calibration(block()) == tmp_path / CALIBRATIONS_NAME
+    assert manifest.read_bytes() == before
+    assert read_calibrations() == [block()]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{not json", "not valid JSON"),
+        (
+            '{"format": "crowdmpc-zoo", "version": 1}',
+            'not a crowdmpc calibrations file .*"crowdmpc-calibrations"',
+        ),
+        ('{"format": "crowdmpc-calibrations", "version": 2}', 'unsupported "version" 2, expected 1'),
+        ('{"format": "crowdmpc-calibrations", "version": 1, "calibrations": {}}', "must be a list of blocks"),
+        ('{"format": "crowdmpc-calibrations", "version": 1, "calibrations": [3]}', r"calibrations\[0\]: a "),
+    ],
+)
+def test_malformed_file_is_explained(tmp_path, text, message):
+    (tmp_path / CALIBRATIONS_NAME).write_text(text)
+    with pytest.raises(PredictorError, match=f"{CALIBRATIONS_NAME}.*{message}"):
+        read_calibrations(tmp_path)
+
+
+def test_bad_block_and_duplicates_in_the_file_are_explained(tmp_path):
+    path = tmp_path / CALIBRATIONS_NAME
+    bad = block().to_json() | {"source": "sim"}
+    path.write_text(json.dumps({"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": [bad]}))
+    with pytest.raises(PredictorError, match=r"calibrations\[0\]: calibration 'source' must be one of"):
+        read_calibrations(tmp_path)
+    twice = [block().to_json(), block().to_json()]
+    path.write_text(json.dumps({"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": twice}))
+    with pytest.raises(PredictorError, match=r"calibrations\[1\] repeats predictor 'social_lstm_eth'"):
+        read_calibrations(tmp_path)
+
+
+def test_find_calibration(tmp_path):
+    save_calibration(block(), tmp_path)
+    save_calibration(block(alpha=0.2), tmp_path)
+    assert find_calibration("social_lstm_eth", "real", 0.1, tmp_path, sha256=SHA_A) == block()
+    with pytest.raises(PredictorError) as missing:
+        find_calibration("social_lstm_eth", "closed-loop", 0.1, tmp_path, sha256=SHA_A)
+    assert "\n" not in str(missing.value)
+    assert str(missing.value).startswith(
+        "no closed-loop calibration at alpha=0.1 for predictor 'social_lstm_eth' in "
+    )
+    assert str(missing.value).endswith(
+        "; run: crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1"
+    )
+    with pytest.raises(PredictorError, match=r"\(it has alpha 0.1, 0.2\); run: crowdmpc calibrate"):
+        find_calibration("social_lstm_eth", "real", 0.05, tmp_path, sha256=SHA_A)
+
+
+def test_find_calibration_refuses_other_weights(tmp_path):
+    save_calibration(block(), tmp_path)
+    with pytest.raises(PredictorError) as stale:
+        find_calibration("social_lstm_eth", "real", 0.1, tmp_path, sha256=SHA_B)
+    message = str(stale.value)
+    assert f"made for weights sha256 {SHA_A}, but the weights now have sha256 {SHA_B}" in message
+    assert "weights changed since calibration, recalibrate: crowdmpc calibrate --predictor" in message
+
+
+def test_find_calibration_reads_the_current_weights_from_the_zoo(tmp_path):
+    entry = zoo.ZooEntry(
+        "social_lstm_eth", "SocialLSTMPredictor", "social_lstm", "w.pt", SHA_A, "w.json", SHA_B, "paper"
+    )
+    zoo.write_manifest({entry.name: entry}, tmp_path)
+    save_calibration(block(), tmp_path)
+    save_calibration(block(predictor="constant_velocity", predictor_sha256=None), tmp_path)
+    assert find_calibration("social_lstm_eth", "real", 0.1, tmp_path).predictor_sha256 == SHA_A
+    assert find_calibration("constant_velocity", "real", 0.1, tmp_path).predictor_sha256 is None
+    zoo.write_manifest({entry.name: dataclasses.replace(entry, sha256=SHA_B)}, tmp_path)  # retrained
+    with pytest.raises(PredictorError, match="weights changed since calibration"):
+        find_calibration("social_lstm_eth", "real", 0.1, tmp_path)
+    save_calibration(block(predictor="gone"), tmp_path)
+    with pytest.raises(UnknownPredictor, match="unknown predictor 'gone'"):
+        find_calibration("gone", "real", 0.1, tmp_path)
+
+
+# ---------------------------------------------------------------------------------------------- real data
+def stopping_scene_file(path):
+    """A 21-step scene (primary 1) whose last six steps, 15..20, are what obs_len 2 + horizon 4 keep.
+
+    1 walks +x at 0.5 m/step throughout; 2 walks beside it and stops at step 16 (the last observed one);
+    3 walks at y = 3 until step 18, then leaves; 4 is seen at step 15 only, so not at the last observed step.
+    """
+    records = [scene(0, 1, 0, 20 * STEP)]
+    for k in range(21):
+        f = k * STEP
+        records.append(track(f, 1, 0.5 * k, 0.0))
+        records.append(track(f, 2, 0.5 * min(k, 16), 1.0))
+        if k <= 18:
+            records.append(track(f, 3, 0.25 * k, 3.0))
+        if k == 15:
+            records.append(track(f, 4, 9.0, 9.0))
+    return write_lines(path, records)
+
+
+@pytest.mark.parametrize("obs_len", [2, 9])
+def test_real_errors_by_hand(tmp_path, obs_len):
+    path = stopping_scene_file(tmp_path / "stop.ndjson")
+    errors = real_errors(ConstantVelocity(obs_len=obs_len), [path], horizon=4)
+    # agents in order of appearance: walker 0 m; stopper overshoots by k x 0.5 m; leaver 0 m then unknown
+    expected = np.array([[0.0, 0.0, 0.0, 0.0], [0.5, 1.0, 1.5, 2.0], [0.0, 0.0, NAN, NAN]])
+    np.testing.assert_allclose(errors, expected, atol=1e-9)
+
+
+def test_real_errors_count_each_person_and_time_once(tmp_path):
+    # two scenes over the same frames (primaries 1 and 2): the same two people, at the same times
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    errors = real_errors(ConstantVelocity(), [path], horizon=4)
+    np.testing.assert_allclose(errors, np.zeros((2, 4)), atol=1e-9)
+    # two files are two sequences: rows from each count, however alike
+    other = write_walk_file(tmp_path / "other.ndjson")
+    assert real_errors(ConstantVelocity(), [path, other], horizon=4).shape == (4, 4)
+    with pytest.raises(PredictorError, match="horizon must be a positive number of steps"):
+        real_errors(ConstantVelocity(), [path], horizon=0)
+
+
+def test_real_data_sha256_names_and_contents(tmp_path):
+    a = write_walk_file(tmp_path / "val" / "a.ndjson")
+    b = stopping_scene_file(tmp_path / "val" / "b.ndjson")
+    digest = real_data_sha256([a, b], tmp_path)
+    assert digest == real_data_sha256([b, a], tmp_path)  # order does not matter
+    assert digest != real_data_sha256([a, b])  # names do: "a.ndjson" is not "val/a.ndjson"
+    b.write_text(b.read_text().replace('"x": 0.0', '"x": 0.01', 1))
+    assert digest != real_data_sha256([a, b], tmp_path)
+    c = write_walk_file(tmp_path / "test" / "a.ndjson")
+    with pytest.raises(PredictorError, match="both named 'a.ndjson'"):
+        real_data_sha256([a, c])
+
+
+def test_calibrate_real_on_prepared_validation_files(tmp_path):
+    prepared = tmp_path / "prepared"
+    prepare_ewap(write_tiny_ewap(tmp_path / "data"), prepared, categorize_scenes=False, log=lambda msg: None)
+    files = validation_files(prepared)
+    names = ["val/biwi_eth.ndjson", "val/biwi_hotel.ndjson"]
+    assert [p.relative_to(prepared).as_posix() for p in files] == names
+    blocks, errors = calibrate_real(ConstantVelocity(), files, [0.1, 0.2], root=prepared)
+    assert errors.shape[1] == 4 and errors.shape[0] >= 9
+    assert [b.alpha for b in blocks] == [0.1, 0.2]
+    for b in blocks:
+        assert b.predictor == "constant_velocity" and b.predictor_sha256 is None and b.source == "real"
+        assert b.n == step_counts(errors) and b.quantiles == step_quantiles(errors, b.alpha)
+        assert b.data_sha256 == real_data_sha256(files, prepared)
+        assert sorted(b.details["files"]) == names
+        assert all(c >= 1 - b.alpha for c in coverage(errors, b.quantiles))  # in-sample, so it must hold
+    save_calibration(blocks[0], tmp_path)
+    assert find_calibration("constant_velocity", "real", 0.1, tmp_path, sha256=None) == blocks[0]
