@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
+from pipelines.margins import MarginSpec
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -87,6 +88,10 @@ class ClosedLoopPlan:
     profile: str = "paper"
     visibility: str = "visible"
     near: float = NEAR
+    # What the controller plans with while the errors are measured: none for a calibration (the paper's
+    # method); a held-out check may plan with the calibrated margins, to see whether the coverage survives
+    # the change they make to how the robots, and so the humans, move.
+    margins: MarginSpec = MarginSpec()
 
     def __post_init__(self):
         if isinstance(self.episodes, bool) or not isinstance(self.episodes, int) or not 1 <= self.episodes:
@@ -107,7 +112,7 @@ class ClosedLoopPlan:
 
 
 def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.ndarray, dict[str, Any]]:
-    """Run ``plan``'s episodes (margins none) and return the errors ``(n, H)`` and what identifies them."""
+    """Run ``plan``'s episodes and return the errors ``(n, H)`` and what identifies them."""
     from tqdm import tqdm
 
     from crowdsim.profiles import make_env_config
@@ -117,7 +122,8 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
     if plan.controller in PREDICTOR_FREE:
         raise PipelineError(f"controller {plan.controller!r} uses no predictor")
     env_config = make_env_config(plan.profile, plan.visibility)
-    controller = make_controller(ControllerSpec(plan.controller, plan.predictor), env_config)
+    spec = ControllerSpec(plan.controller, plan.predictor, margins=plan.margins)
+    controller = make_controller(spec, env_config)
     observer = PredictionErrors(plan.near)
     successes = 0
     try:
@@ -136,7 +142,11 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
         close = getattr(controller, "close", None)
         if close is not None:
             close()
-    details = asdict(plan) | {"seeds": [plan.seed, plan.seed + plan.episodes - 1], "successes": successes}
+    details = asdict(plan) | {
+        "margins": plan.margins.label,
+        "seeds": [plan.seed, plan.seed + plan.episodes - 1],
+        "successes": successes,
+    }
     return observer.errors, details
 
 

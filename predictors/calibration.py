@@ -3,19 +3,9 @@ dynamic environments using conformal prediction").
 
 The MPC enlarges its robot-human safety distance at horizon step ``k`` (1..H) by a margin ``m_k``, the
 ``(1 - alpha)`` split-conformal quantile of the predictor's step-``k`` displacement error on calibration data.
-This module computes those quantiles, builds them from real (TrajNet++) data, stores them beside the zoo
-manifest and measures their coverage.
-
-Error layout (used everywhere, also by the closed-loop source): ``errors`` is a float array ``(n, H)``; a row
-is one (human, prediction time) sample and column ``k-1`` is ``|predicted - realised|`` at step ``k`` in
-metres, NaN where the realised position at step ``k`` is unknown (the episode or scene ended). Each column is
-calibrated on its own non-NaN entries.
-
-What the guarantee is, honestly: for *exchangeable* calibration and test samples, split conformal gives
-marginal coverage ``P(error_k <= m_k) >= 1 - alpha`` for each step ``k`` separately (not jointly over the
-steps). Samples from the same scene or episode are correlated (neighbouring humans, overlapping time windows),
-and closed-loop errors depend on the planner that used the margins, so exchangeability is at best
-approximate: the coverage measured on held-out data (``coverage``) is what to report, not ``1 - alpha``.
+The statistics (quantiles with the finite-sample correction, coverage, what the guarantee is) are in
+``predictors.conformal``; this module turns them into stored blocks, measures the errors on real (TrajNet++)
+scenes and finds the block a controller asks for.
 
 Storage: ``calibrations.json`` in the zoo directory (``predictors.zoo.checkpoints_dir``), beside the
 manifest, so that weightless predictors get a calibration too and recalibrating never rewrites the
@@ -41,6 +31,7 @@ from typing import Any, Final
 import numpy as np
 
 from predictors.base import DT, Predictor
+from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.evaluate import EvalConfig, EvalScene, load_eval_scenes, predict_scene
 from predictors.hashing import sha256_file
@@ -52,87 +43,8 @@ CALIBRATIONS_VERSION: Final[int] = 1
 SOURCES: Final[tuple[str, ...]] = ("real", "closed-loop")
 HORIZON: Final[int] = 4  # MPC horizon steps H the margins are made for by default
 ALPHA_TOLERANCE: Final[float] = 1e-12  # alphas closer than this are the same calibration key
-# An alpha written as a decimal (0.1) is not exact in binary, so (n + 1)(1 - alpha) can land a hair above an
-# integer it equals mathematically; without this slack the rank would round up one sample too far.
-_RANK_SLACK: Final[float] = 1e-9
 
 
-# ------------------------------------------------------------------------------------------------ statistics
-def _check_alpha(alpha: float, what: str = "alpha") -> float:
-    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0.0 < alpha < 1.0:
-        raise PredictorError(f"{what} must be a number with 0 < alpha < 1, got {alpha!r}")
-    return float(alpha)
-
-
-def conformal_rank(n: int, alpha: float) -> int:
-    """The 1-based rank ``ceil((n + 1)(1 - alpha))`` of the split-conformal quantile among ``n`` scores."""
-    return math.ceil((n + 1) * (1.0 - _check_alpha(alpha)) - _RANK_SLACK)
-
-
-def min_samples(alpha: float) -> int:
-    """The fewest scores for which the quantile at ``alpha`` is finite: ``ceil(1/alpha - 1)``."""
-    return math.ceil(1.0 / _check_alpha(alpha) - 1.0 - _RANK_SLACK)
-
-
-def conformal_quantile(scores: np.ndarray, alpha: float) -> float:
-    """Split-conformal ``(1 - alpha)`` quantile of 1-D finite non-negative ``scores``.
-
-    Sorts the ``n`` scores and returns the ``ceil((n + 1)(1 - alpha))``-th smallest (the finite-sample
-    correction). When that rank exceeds ``n`` there are too few samples for this alpha (fewer than
-    ``min_samples(alpha)``, e.g. 9 at alpha = 0.1) and the honest answer is ``math.inf``: no finite margin is
-    guaranteed to cover.
-    """
-    scores = np.asarray(scores, dtype=float)
-    if scores.ndim != 1:
-        raise PredictorError(f"scores must be a 1-D array, got shape {scores.shape}")
-    if not np.all(np.isfinite(scores)) or np.any(scores < 0):
-        bad = scores[~(np.isfinite(scores) & (scores >= 0))][0]
-        raise PredictorError(f"scores must be finite and non-negative (errors in metres), got {bad!r}")
-    rank = conformal_rank(len(scores), alpha)
-    if rank > len(scores):
-        return math.inf
-    return float(np.partition(scores, rank - 1)[rank - 1])
-
-
-def _check_errors(errors: np.ndarray) -> np.ndarray:
-    errors = np.asarray(errors, dtype=float)
-    if errors.ndim != 2 or errors.shape[1] < 1:
-        raise PredictorError(f"errors must have shape (n, H) with H >= 1, got {errors.shape}")
-    known = errors[~np.isnan(errors)]
-    bad = known[~(np.isfinite(known) & (known >= 0))]
-    if bad.size:
-        raise PredictorError(
-            f"errors must be finite non-negative distances in metres (NaN where unknown), got {bad[0]!r}"
-        )
-    return errors
-
-
-def step_counts(errors: np.ndarray) -> tuple[int, ...]:
-    """Non-NaN samples per horizon step (column)."""
-    errors = _check_errors(errors)
-    return tuple(int(c) for c in (~np.isnan(errors)).sum(axis=0))
-
-
-def step_quantiles(errors: np.ndarray, alpha: float) -> tuple[float, ...]:
-    """``conformal_quantile`` of each column's non-NaN entries (``inf`` where a column has too few)."""
-    errors = _check_errors(errors)
-    return tuple(conformal_quantile(col[~np.isnan(col)], alpha) for col in errors.T)
-
-
-def coverage(errors: np.ndarray, quantiles: tuple[float, ...] | list[float]) -> tuple[float, ...]:
-    """Share (0..1) of each column's non-NaN entries with error <= its quantile; NaN for an empty column."""
-    errors = _check_errors(errors)
-    quantiles = tuple(float(q) for q in quantiles)
-    if len(quantiles) != errors.shape[1]:
-        raise PredictorError(f"{len(quantiles)} quantiles for errors of {errors.shape[1]} horizon steps")
-    shares = []
-    for col, q in zip(errors.T, quantiles, strict=True):
-        known = col[~np.isnan(col)]
-        shares.append(float(np.mean(known <= q)) if known.size else math.nan)
-    return tuple(shares)
-
-
-# -------------------------------------------------------------------------------------------- the block
 def now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
@@ -174,7 +86,7 @@ class Calibration:
             )
         if self.source not in SOURCES:
             raise PredictorError(f"calibration 'source' must be one of {list(SOURCES)}, got {self.source!r}")
-        _check_alpha(self.alpha, "calibration 'alpha'")
+        check_alpha(self.alpha, "calibration 'alpha'")
         self._check_steps()
         if not _is_sha256(self.data_sha256):
             raise PredictorError(
@@ -373,7 +285,7 @@ def find_calibration(
     ``sha256`` is the sha256 the weights have now (None for a weightless predictor); the default ``...``
     reads it from the zoo manifest in ``directory``. A block made for other weights is refused.
     """
-    _check_alpha(alpha)
+    check_alpha(alpha)
     if source not in SOURCES:
         raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
     path = calibrations_path(directory)

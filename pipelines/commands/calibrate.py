@@ -69,6 +69,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--visibility", choices=VISIBILITY, default="visible")
     p.add_argument("--near", type=float, default=NEAR, help=f"m, humans scored (default {NEAR})")
     p.add_argument("--holdout", action="store_true", help="also measure coverage on held-out data")
+    p.add_argument(
+        "--holdout-margins",
+        default="none",
+        metavar="SPEC",
+        help="closed-loop held-out episodes plan with these margins (e.g. conformal:0.1, once stored); "
+        "default none, the calibration's own conditions",
+    )
     p.add_argument("--json", type=Path, metavar="FILE", help="write the blocks and coverage as JSON")
     p.add_argument("--dry-run", action="store_true", help="measure and print; store nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -87,11 +94,10 @@ def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple
     return blocks, holdout
 
 
-def _closed_loop(args: argparse.Namespace, sha256: str | None) -> tuple[list, Any]:
-    from pipelines.calibrate import ClosedLoopPlan, closed_loop_errors, errors_sha256
-    from predictors.calibration import calibration_from_errors
+def _plan(args: argparse.Namespace) -> Any:
+    from pipelines.calibrate import ClosedLoopPlan
 
-    plan = ClosedLoopPlan(
+    return ClosedLoopPlan(
         predictor=args.predictor,
         episodes=args.episodes,
         seed=args.seed,
@@ -101,11 +107,17 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> tuple[list, An
         visibility=args.visibility,
         near=args.near,
     )
-    errors, details = closed_loop_errors(plan, progress=not args.no_progress)
+
+
+def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
+    from pipelines.calibrate import closed_loop_errors, errors_sha256
+    from predictors.calibration import calibration_from_errors
+
+    errors, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
     if errors.shape[1:] != (args.horizon,):
         raise PipelineError(f"the controller predicts {errors.shape[1:]} steps, --horizon is {args.horizon}")
     data_sha256 = errors_sha256(errors, details)
-    blocks = [
+    return [
         calibration_from_errors(
             errors,
             predictor=args.predictor,
@@ -117,20 +129,30 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> tuple[list, An
         )
         for alpha in args.alpha
     ]
-    holdout = None
-    if args.holdout:
-        # As many further episodes, on the seeds right after the calibration's: data it never saw.
-        after = dataclasses.replace(plan, seed=plan.seed + plan.episodes)
-        holdout, _ = closed_loop_errors(after, progress=not args.no_progress)
-    return blocks, holdout
+
+
+def _closed_loop_holdout(args: argparse.Namespace) -> Any:
+    """As many further episodes, on the seeds right after the calibration's: crowds it never saw."""
+    from pipelines.calibrate import closed_loop_errors
+    from pipelines.margins import parse_margins
+
+    plan = _plan(args)
+    after = dataclasses.replace(
+        plan, seed=plan.seed + plan.episodes, margins=parse_margins(args.holdout_margins)
+    )
+    errors, _ = closed_loop_errors(after, progress=not args.no_progress)
+    return errors
 
 
 def run(args: argparse.Namespace) -> int:
     from pipelines.calibrate import format_coverage
+    from pipelines.margins import parse_margins
     from pipelines.plain_json import plain
-    from predictors.calibration import coverage, save_calibration
+    from predictors.calibration import save_calibration
+    from predictors.conformal import coverage
     from predictors.registry import checkpoint_sha256, load_predictor
 
+    parse_margins(args.holdout_margins)  # a typo fails now, not after the calibration episodes
     if not 1 <= args.horizon <= 50:
         raise PipelineError(f"--horizon must be in 1..50 steps, got {args.horizon}")
     if not 1 <= args.episodes <= 100_000:
@@ -147,17 +169,27 @@ def run(args: argparse.Namespace) -> int:
             )
         blocks, holdout = _real(args, load_predictor(args.predictor), sha256)
     else:
-        blocks, holdout = _closed_loop(args, sha256)
-    cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None
-    n = ", ".join(str(c) for c in blocks[0].n)
-    print(f"{args.predictor}: {args.source} calibration, samples per step {n}")
-    print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
-    if not args.dry_run:
+        blocks, holdout = _closed_loop(args, sha256), None
+    if not args.dry_run:  # stored before a held-out run, which may plan with these very margins
         for block in blocks:
             path = save_calibration(block)
         print(f"wrote {len(blocks)} block(s) to {path}")
+    if args.holdout and args.source == "closed-loop":
+        holdout = _closed_loop_holdout(args)
+    cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None
+    n = ", ".join(str(c) for c in blocks[0].n)
+    print(f"{args.predictor}: {args.source} calibration, samples per step {n}")
+    if args.holdout and args.source == "closed-loop":
+        print(f"held-out: {holdout.shape[0]} samples, planning with margins {args.holdout_margins}")
+    elif args.holdout:
+        print(f"held-out: {holdout.shape[0]} samples of the prepared test scenes")
+    print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
     if args.json is not None:
-        payload = {"blocks": [b.to_json() for b in blocks], "holdout_coverage": cover}
+        payload = {
+            "blocks": [b.to_json() for b in blocks],
+            "holdout_coverage": cover,
+            "holdout_margins": args.holdout_margins if args.holdout else None,
+        }
         if holdout is not None:
             payload["holdout_rows"] = int(holdout.shape[0])
         args.json.parent.mkdir(parents=True, exist_ok=True)

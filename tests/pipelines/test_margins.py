@@ -144,3 +144,28 @@ def test_closed_loop_errors_of_constant_velocity():
     assert again.metrics.n_steps > 0
     with pytest.raises(PipelineError, match="calibration runs cmpc or dmpc"):
         ClosedLoopPlan("constant_velocity", controller="orca")
+
+
+@pytest.mark.slow
+def test_calibrate_cli_stores_blocks_and_checks_them_on_held_out_episodes(tmp_path, monkeypatch, capsys):
+    import json
+
+    from pipelines.cli import main
+    from predictors.calibration import read_calibrations
+
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    args = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--alpha", "0.5,0.2"]
+    args += ["--episodes", "2", "--humans", "3", "--no-progress", "--json", str(tmp_path / "c.json")]
+    assert main([*args, "--holdout", "--holdout-margins", "conformal:0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "planning with margins conformal:0.5" in out and "held-out coverage (target 50%)" in out
+    blocks = read_calibrations(tmp_path)
+    assert [(b.predictor, b.source, b.alpha) for b in blocks] == [
+        ("constant_velocity", "closed-loop", 0.2),
+        ("constant_velocity", "closed-loop", 0.5),
+    ]
+    assert blocks[0].details["seeds"] == [1_000_000, 1_000_001] and blocks[0].details["margins"] == "none"
+    payload = json.loads((tmp_path / "c.json").read_text())
+    assert len(payload["holdout_coverage"]) == 2 and all(0 <= c <= 1 for c in payload["holdout_coverage"][0])
+    assert main([*args[:-2], "--holdout-margins", "wide"]) == 2
+    assert "bad margins 'wide'" in capsys.readouterr().err

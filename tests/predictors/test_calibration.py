@@ -12,18 +12,14 @@ from predictors.calibration import (
     Calibration,
     calibrate_real,
     calibration_from_errors,
-    conformal_quantile,
-    coverage,
     find_calibration,
-    min_samples,
     read_calibrations,
     real_data_sha256,
     real_errors,
     save_calibration,
-    step_counts,
-    step_quantiles,
     validation_files,
 )
+from predictors.conformal import conformal_quantile, coverage, min_samples, step_counts, step_quantiles
 from predictors.constant_velocity import ConstantVelocity
 from predictors.data.prepare import prepare_ewap
 from predictors.errors import PredictorError, UnknownPredictor
