@@ -116,11 +116,9 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
     from tqdm import tqdm
 
     from crowdsim.profiles import make_env_config
-    from pipelines.closed_loop import PREDICTOR_FREE, run_episode
+    from pipelines.closed_loop import run_episode
     from pipelines.controllers import ControllerSpec, make_controller
 
-    if plan.controller in PREDICTOR_FREE:
-        raise PipelineError(f"controller {plan.controller!r} uses no predictor")
     env_config = make_env_config(plan.profile, plan.visibility)
     spec = ControllerSpec(plan.controller, plan.predictor, margins=plan.margins)
     controller = make_controller(spec, env_config)

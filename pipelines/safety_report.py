@@ -11,7 +11,8 @@ personal-space (0.8 m) thresholds drawn, shows whether collisions are near misse
 success / collision trade-off places each method (for the ``safety`` experiment: conformal margins at
 decreasing alpha) against the collision target, its mean travel time written beside it.
 
-Nothing here imports pipelines.sweep_report at run time: that module builds on this one.
+It reads a cell's summary through ``SafetyColumn`` (``pipelines.sweep_report.CellSummary`` is one) and imports
+nothing from the report that builds on it.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import math
 import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 import numpy as np
 
@@ -29,7 +30,37 @@ from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
     from pipelines.experiments import Cell, Experiment
-    from pipelines.sweep_report import CellSummary
+
+
+class _Rate(Protocol):
+    @property
+    def percent(self) -> float: ...
+
+    @property
+    def interval(self) -> tuple[float, float]: ...
+
+
+class SafetyColumn(Protocol):
+    """What the safety plots and the histogram read of one cell's summary."""
+
+    @property
+    def cell(self) -> Cell: ...
+
+    @property
+    def episodes(self) -> int: ...
+
+    @property
+    def success(self) -> _Rate: ...
+
+    @property
+    def collision(self) -> _Rate: ...
+
+    @property
+    def travel_time_mean(self) -> float: ...
+
+    @property
+    def min_distances(self) -> tuple[float, ...]: ...
+
 
 MIN_DISTANCE_HIST_PNG: Final[str] = "min_distance_hist.png"
 MIN_DISTANCE_HIST_CSV: Final[str] = "min_distance_hist.csv"
@@ -67,7 +98,7 @@ def min_distances(metrics: Sequence[Mapping[str, Any]]) -> tuple[float, ...]:
 
 
 def safety_figures(metrics: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """CellSummary's safety fields from a cell's metrics dicts."""
+    """A cell summary's safety fields from the cell's metrics dicts."""
     distances = min_distances(metrics)
     finite = [d for d in distances if math.isfinite(d)]
     return {f"{name}_step_freq": step_frequency(metrics, name) for name in STEP_COUNTS} | {
@@ -111,7 +142,7 @@ def min_distance_counts(distances: Sequence[float]) -> np.ndarray:
     return np.append(inside, int((d >= HIST_MAX).sum()))
 
 
-def min_distance_hist_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
+def min_distance_hist_rows(summaries: Sequence[SafetyColumn]) -> list[dict[str, Any]]:
     """min_distance_hist.csv: a row per cell and bin (the last bin, up to inf, is the overflow)."""
     upper = np.append(HIST_EDGES[1:], math.inf)
     rows = []
@@ -157,10 +188,10 @@ def _panels(plt, count: int, size: tuple[float, float], title: str, **kwargs):
     return fig, list(axes.flat[:count])
 
 
-def _by_humans(experiment: Experiment, summaries: Sequence[CellSummary]) -> dict[int, list[CellSummary]]:
+def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dict[int, list[SafetyColumn]]:
     """Summaries per number of humans, each list in the experiment's method order."""
     order = {label: k for k, label in enumerate(experiment.method_labels)}
-    groups: dict[int, list[CellSummary]] = {}
+    groups: dict[int, list[SafetyColumn]] = {}
     for s in sorted(summaries, key=lambda s: (s.cell.n_humans, order.get(s.cell.method, len(order)))):
         groups.setdefault(s.cell.n_humans, []).append(s)
     return groups
@@ -171,7 +202,7 @@ def _method_colors(experiment: Experiment) -> dict[str, str]:
     return {label: f"C{k % 10}" for k, label in enumerate(experiment.method_labels)}
 
 
-def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[CellSummary], path: Path) -> Path:
+def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[SafetyColumn], path: Path) -> Path:
     """Step histograms of each episode's minimum robot-human distance, one per method, overlaid on shared
     bins; one panel per number of humans, since a larger crowd shifts the whole distribution."""
     plt = _pyplot()
@@ -200,12 +231,14 @@ def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[CellSumma
 _LABEL_CORNERS: Final[tuple[tuple[int, int], ...]] = ((5, 5), (5, -5), (-5, 5), (-5, -5))  # points
 
 
-def _annotation(s: CellSummary) -> str:
+def _annotation(s: SafetyColumn) -> str:
     time = s.travel_time_mean
     return f"{s.cell.method}, {time:.1f} s" if time == time else f"{s.cell.method}, no success"
 
 
-def plot_safety_tradeoff(experiment: Experiment, summaries: Sequence[CellSummary], path: Path) -> Path | None:
+def plot_safety_tradeoff(
+    experiment: Experiment, summaries: Sequence[SafetyColumn], path: Path
+) -> Path | None:
     """Success against collision rate per method, both with their 95% Wilson intervals, one panel per
     number of humans that has at least two methods to trade off; None (nothing written) when none has."""
     groups = {n: cells for n, cells in _by_humans(experiment, summaries).items() if len(cells) >= 2}
@@ -260,7 +293,7 @@ def plot_safety_tradeoff(experiment: Experiment, summaries: Sequence[CellSummary
     return path
 
 
-def plot_safety(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
+def plot_safety(experiment: Experiment, summaries: Sequence[SafetyColumn], out: Path) -> list[Path]:
     """The safety plots in ``out`` (the trade-off only where two methods share a crowd size)."""
     written = [plot_min_distance_hist(experiment, summaries, out / MIN_DISTANCE_HIST_PNG)]
     tradeoff = plot_safety_tradeoff(experiment, summaries, out / SAFETY_TRADEOFF_PNG)

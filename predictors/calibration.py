@@ -22,6 +22,7 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -35,7 +36,7 @@ from predictors.conformal import check_alpha, min_samples, step_counts, step_qua
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.evaluate import EvalConfig, EvalScene, load_eval_scenes, predict_scene
 from predictors.hashing import sha256_file
-from predictors.zoo import checkpoints_dir, read_manifest
+from predictors.zoo import checkpoints_dir, read_document, read_manifest
 
 CALIBRATIONS_NAME: Final[str] = "calibrations.json"
 CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
@@ -203,6 +204,11 @@ def calibration_from_errors(
     )
 
 
+def calibrations_from_errors(errors: np.ndarray, alphas: Sequence[float], **block: Any) -> list[Calibration]:
+    """One block per alpha from the same errors; ``block``: calibration_from_errors' keywords but alpha."""
+    return [calibration_from_errors(errors, alpha=alpha, **block) for alpha in alphas]
+
+
 # ------------------------------------------------------------------------------------------------- storage
 def calibrations_path(directory: str | Path | None = None) -> Path:
     return checkpoints_dir(directory) / CALIBRATIONS_NAME
@@ -213,14 +219,7 @@ def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
     path = calibrations_path(directory)
     if not path.is_file():
         return []
-    try:
-        document = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise PredictorError(f"{path}: not valid JSON ({exc})") from exc
-    if not isinstance(document, dict) or document.get("format") != CALIBRATIONS_FORMAT:
-        raise PredictorError(
-            f'{path}: not a crowdmpc calibrations file (expected "format": "{CALIBRATIONS_FORMAT}")'
-        )
+    document = read_document(path, CALIBRATIONS_FORMAT, "crowdmpc calibrations file")
     if document.get("version") != CALIBRATIONS_VERSION:
         raise PredictorError(
             f'{path}: unsupported "version" {document.get("version")!r}, expected {CALIBRATIONS_VERSION}'
@@ -409,17 +408,13 @@ def calibrate_real(
         "dt": DT,
         "rows": int(errors.shape[0]),
     }
-    data_sha256 = combined_sha256(hashes)
-    blocks = [
-        calibration_from_errors(
-            errors,
-            predictor=predictor.name,
-            predictor_sha256=sha256,
-            source="real",
-            alpha=alpha,
-            data_sha256=data_sha256,
-            details=details,
-        )
-        for alpha in alphas
-    ]
+    blocks = calibrations_from_errors(
+        errors,
+        alphas,
+        predictor=predictor.name,
+        predictor_sha256=sha256,
+        source="real",
+        data_sha256=combined_sha256(hashes),
+        details=details,
+    )
     return blocks, errors

@@ -40,6 +40,17 @@ def checkpoints_dir(directory: str | Path | None = None) -> Path:
     return Path(env) if env else Path(__file__).resolve().parents[1] / "checkpoints"
 
 
+def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]:
+    """A JSON object whose ``"format"`` is ``document_format``, or PredictorError naming ``path``."""
+    try:
+        document = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise PredictorError(f"{path}: not valid JSON ({exc})") from exc
+    if not isinstance(document, dict) or document.get("format") != document_format:
+        raise PredictorError(f'{path}: not a {what} (expected "format": "{document_format}")')
+    return document
+
+
 # ----------------------------------------------------------------------------------------- checkpoint pair
 def save_checkpoint(
     net: SocialLSTM, *, model: str, name: str, out_dir: str | Path, obs_len: int, extra: dict | None = None
@@ -91,14 +102,7 @@ def load_checkpoint(
             found = sha256_file(path)
             if found != expected:
                 raise CheckpointMismatch(path, expected, found)
-    try:
-        document = json.loads(config.read_text())
-    except json.JSONDecodeError as exc:
-        raise PredictorError(f"{config}: not valid JSON ({exc})") from exc
-    if not isinstance(document, dict) or document.get("format") != CONFIG_FORMAT:
-        raise PredictorError(
-            f'{config}: not a crowdmpc predictor config (expected "format": "{CONFIG_FORMAT}")'
-        )
+    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
     cls_name = document.get("class")
     if cls_name not in PREDICTOR_CLASSES:
         raise PredictorError(
@@ -161,12 +165,7 @@ def read_manifest(directory: str | Path | None = None) -> dict[str, ZooEntry]:
     path = checkpoints_dir(directory) / MANIFEST_NAME
     if not path.is_file():
         return {}
-    try:
-        document = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise PredictorError(f"{path}: not valid JSON ({exc})") from exc
-    if not isinstance(document, dict) or document.get("format") != MANIFEST_FORMAT:
-        raise PredictorError(f'{path}: not a crowdmpc zoo manifest (expected "format": "{MANIFEST_FORMAT}")')
+    document = read_document(path, MANIFEST_FORMAT, "crowdmpc zoo manifest")
     models = document.get("models", [])
     if not isinstance(models, list):
         raise PredictorError(f'{path}: "models" must be a list of entries, got {models!r}')

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from pipelines.commands import humans_list
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -34,16 +35,6 @@ def _alphas(text: str) -> tuple[float, ...]:
     return values
 
 
-def _humans(text: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
-    return values
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.profiles import PROFILES, VISIBILITY
     from pipelines.calibrate import CALIBRATION_SEED, NEAR
@@ -62,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--horizon", type=int, default=4, help="steps calibrated (the MPC's H, default 4)")
     p.add_argument("--data-dir", type=Path, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
     p.add_argument("--episodes", type=int, default=200, help="closed-loop episodes (default 200)")
-    p.add_argument("--humans", type=_humans, default=(5, 6, 7, 8, 9), metavar="5,6,7", help="crowd sizes")
+    p.add_argument("--humans", type=humans_list, default=(5, 6, 7, 8, 9), metavar="5,6,7", help="crowd sizes")
     p.add_argument("--seed", type=int, default=CALIBRATION_SEED, help="first closed-loop seed")
     p.add_argument("--controller", choices=("cmpc", "dmpc"), default="cmpc")
     p.add_argument("--profile", choices=sorted(PROFILES), default="paper")
@@ -111,24 +102,20 @@ def _plan(args: argparse.Namespace) -> Any:
 
 def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
     from pipelines.calibrate import closed_loop_errors, errors_sha256
-    from predictors.calibration import calibration_from_errors
+    from predictors.calibration import calibrations_from_errors
 
     errors, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
     if errors.shape[1:] != (args.horizon,):
         raise PipelineError(f"the controller predicts {errors.shape[1:]} steps, --horizon is {args.horizon}")
-    data_sha256 = errors_sha256(errors, details)
-    return [
-        calibration_from_errors(
-            errors,
-            predictor=args.predictor,
-            predictor_sha256=sha256,
-            source="closed-loop",
-            alpha=alpha,
-            data_sha256=data_sha256,
-            details=details | {"rows": int(errors.shape[0])},
-        )
-        for alpha in args.alpha
-    ]
+    return calibrations_from_errors(
+        errors,
+        args.alpha,
+        predictor=args.predictor,
+        predictor_sha256=sha256,
+        source="closed-loop",
+        data_sha256=errors_sha256(errors, details),
+        details=details | {"rows": int(errors.shape[0])},
+    )
 
 
 def _closed_loop_holdout(args: argparse.Namespace) -> Any:

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pipelines.commands import humans_list
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -42,16 +43,6 @@ def _cpus() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
-
-
-def _humans(text: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
-    return values
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -92,7 +83,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="auto (default): Ray when installed, else a local process pool; inline: in this process",
     )
     p.add_argument(
-        "--humans", type=_humans, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
+        "--humans", type=humans_list, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
     )
     p.add_argument("--robots", type=int, default=3, help="robots per episode (default 3)")
     p.add_argument("--seed", type=int, default=0, help="base scenario seed (default 0)")
@@ -165,14 +156,13 @@ def _check_predictors(experiment: Experiment) -> None:
 
 def _check_margins(experiment: Experiment) -> None:
     """Every method's margins resolve (a calibration that matches the weights) before workers start."""
-    from mpc.config import MPCConfig
     from pipelines.experiments import predictor_of
+    from pipelines.mpc_controllers import mpc_config
     from predictors.registry import checkpoint_sha256
 
-    horizon = MPCConfig().horizon
     for _, spec in experiment.methods:
         name = predictor_of(spec)
-        spec.margins.resolve(name, dict(spec.mpc_overrides).get("horizon", horizon), checkpoint_sha256(name))
+        spec.margins.resolve(name, mpc_config(spec).horizon, checkpoint_sha256(name))
 
 
 def configured_experiment(args: argparse.Namespace) -> Experiment:
