@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 from crowdsim.env import CrowdEnv
-from pipelines.controllers import ControllerSpec
-from pipelines.mpc_controllers import MPCController
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.mpc import MPCController
 
 
 def _stats(seconds: list[float]) -> dict[str, float]:

@@ -14,9 +14,9 @@ import json
 import tempfile
 import time
 
-from pipelines.closed_loop import run_episode
-from pipelines.controllers import ControllerSpec, make_controller
-from pipelines.recording import McapEpisodeRecorder
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
 
 
 class TimedRecorder(McapEpisodeRecorder):

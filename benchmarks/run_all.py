@@ -83,7 +83,7 @@ def any_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int 
     """Any controller (the baselines, the ORCA oracle, any number of robots), which control_step.py does not
     cover: the step time over the first ``steps`` steps of ``episodes`` episodes, alternating scenarios."""
     from crowdsim.env import CrowdEnv
-    from pipelines.sweep import build_controller
+    from pipelines.experiments.sweep import build_controller
 
     controller = build_controller(spec)
     env, times, iterations, solves = CrowdEnv(), [], [], []
@@ -108,8 +108,8 @@ def any_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int 
 def episodes_per_minute(spec: Any, n_humans: int, episodes: int) -> dict[str, float]:
     """Whole episodes in this process, alternating scenarios as a sweep does; controller built (and, when gcc
     is found, compiled, as sweep workers do) once, its NLPs built by a first episode that is not timed."""
-    from pipelines.closed_loop import run_episode
-    from pipelines.sweep import build_controller, jit_available
+    from pipelines.experiments.sweep import build_controller, jit_available
+    from pipelines.loop.episode import run_episode
 
     controller = build_controller(spec, jit_available())
     run_episode(controller, seed=10_000, scenario=SCENARIOS[0], n_humans=n_humans)
@@ -131,8 +131,8 @@ def sweep_rate(predictor: str, episodes_per_cell: int, workers: int) -> dict[str
     """A real ``run_sweep`` of Table II (CMPC and DMPC, 5-9 humans) with K process workers, compiled as
     ``crowdmpc sweep`` does by default. ``steady_cpu_s_per_episode`` leaves out each worker's first episode
     of a cell (it builds and compiles the NLPs): the cost per episode a long sweep approaches."""
-    from pipelines.experiments import get_experiment
-    from pipelines.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, jit_available, run_sweep
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, jit_available, run_sweep
 
     experiment = get_experiment("table2").with_predictor(predictor)
     with tempfile.TemporaryDirectory(prefix="crowdmpc-bench-") as out:
@@ -195,7 +195,7 @@ def _timed(label: str, fn: Callable[[], dict[str, Any]], errors: dict[str, str])
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from pipelines.controllers import ControllerSpec
+    from pipelines.loop.controllers import ControllerSpec
 
     quick = args.quick
     steps = args.steps or (8 if quick else 20)

@@ -34,8 +34,8 @@ SCENARIOS = ("circle", "perpendicular")
 
 def record_problems(n_humans: int, episodes: int, predictor: str) -> dict[str, list[dict[str, Any]]]:
     """Every local and joint solve of ``episodes`` DMPC and CMPC episodes: inputs and the loop's cost."""
-    from pipelines.closed_loop import run_episode
-    from pipelines.controllers import ControllerSpec, make_controller
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.episode import run_episode
 
     problems: dict[str, list[dict[str, Any]]] = {"local": [], "joint": []}
     local_solve, joint_solve = nlp_module.LocalNLP.solve, nlp_module.JointNLP.solve

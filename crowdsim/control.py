@@ -1,7 +1,7 @@
 """What a robot controller hands the closed loop each step.
 
 It lives in the simulator package because the simulator's baselines produce it and ``crowdsim`` imports
-nothing else from the project; ``pipelines.controllers`` re-exports it for the MPC controllers.
+nothing else from the project; ``pipelines.loop.controllers`` re-exports it for the MPC controllers.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from matplotlib.patches import Circle
 
 from crowdsim.errors import SimulationError
 
-# matplotlib's tab10, the order pipelines.recording uses, so robot i has one colour everywhere.
+# matplotlib's tab10, the order pipelines.logs.recording uses, so robot i has one colour everywhere.
 ROBOT_COLORS = (
     "#1f77b4",
     "#ff7f0e",

@@ -108,7 +108,7 @@ class MPCConfig:
     # --- safety under prediction error (beyond the paper) --------------------------------------------------
     # m_k, m, added to d_min in the robot-human constraint of Eq. 11 at horizon step k = 1..H:
     # smax((d_min + m_k)^2 + rho ||v||^2 - ||s - s_j||^2). () (the default) is exactly the paper's Eq. 11.
-    # The closed loop fills it from the predictor's conformal calibration (pipelines/margins.py): if the
+    # The closed loop fills it from the predictor's conformal calibration (pipelines/loop/margins.py): if the
     # realised human position lies within m_k of the prediction, keeping d_min + m_k from the prediction
     # keeps d_min from the human. Robot-robot (Eq. 12) is unchanged: robots know each other's plans.
     human_margins: tuple[float, ...] = ()

@@ -37,7 +37,7 @@ def _alphas(text: str) -> tuple[float, ...]:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.profiles import PROFILES, VISIBILITY
-    from pipelines.calibrate import CALIBRATION_SEED, NEAR
+    from pipelines.experiments.calibrate import CALIBRATION_SEED, NEAR
 
     p = subparsers.add_parser(
         "calibrate",
@@ -86,7 +86,7 @@ def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from pipelines.calibrate import ClosedLoopPlan
+    from pipelines.experiments.calibrate import ClosedLoopPlan
 
     return ClosedLoopPlan(
         predictor=args.predictor,
@@ -101,7 +101,7 @@ def _plan(args: argparse.Namespace) -> Any:
 
 
 def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
-    from pipelines.calibrate import closed_loop_errors, errors_sha256
+    from pipelines.experiments.calibrate import closed_loop_errors, errors_sha256
     from predictors.calibration import calibrations_from_errors
 
     errors, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
@@ -120,8 +120,8 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
 
 def _closed_loop_holdout(args: argparse.Namespace) -> Any:
     """As many further episodes, on the seeds right after the calibration's: crowds it never saw."""
-    from pipelines.calibrate import closed_loop_errors
-    from pipelines.margins import parse_margins
+    from pipelines.experiments.calibrate import closed_loop_errors
+    from pipelines.loop.margins import parse_margins
 
     plan = _plan(args)
     after = dataclasses.replace(
@@ -132,8 +132,8 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.calibrate import format_coverage
-    from pipelines.margins import parse_margins
+    from pipelines.experiments.calibrate import format_coverage
+    from pipelines.loop.margins import parse_margins
     from pipelines.plain_json import plain
     from predictors.calibration import save_calibration
     from predictors.conformal import coverage
@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"--json {args.json}: {args.json.parent} is not a directory")
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "real":
-        from pipelines.controllers import ORACLE_PREDICTOR
+        from pipelines.loop.controllers import ORACLE_PREDICTOR
 
         if args.predictor == ORACLE_PREDICTOR:
             raise PipelineError(

@@ -136,12 +136,13 @@ def run_synth(args: argparse.Namespace) -> int:
     if args.episodes < 1 or args.humans < 1:
         raise PipelineError(f"--episodes and --humans must be >= 1, got {args.episodes} and {args.humans}")
     try:
-        from pipelines.synth import synthesize
+        from pipelines.experiments.synth import synthesize
     except ModuleNotFoundError as exc:
-        if exc.name != "pipelines.synth":
+        if exc.name != "pipelines.experiments.synth":
             raise
         raise PipelineError(
-            "synthetic data needs pipelines/synth.py (the crowd simulator), which is not installed"
+            "synthetic data needs pipelines/experiments/synth.py (the crowd simulator), "
+            "which is not installed"
         ) from None
     summary = synthesize(
         args.out, args.episodes, args.humans, args.seed, scenario=args.scenario, with_robots=args.with_robots

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
-    from pipelines.review import Recording
+    from pipelines.logs.review import Recording
 
 EPILOG = """examples:
   crowdmpc review runs/                                   # one row per episode, then rates over them
@@ -63,7 +63,7 @@ def _times(text: str) -> list[float]:
 
 
 def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
-    from pipelines.review import check_recording
+    from pipelines.logs.review import check_recording
 
     failed = 0
     for rec in recordings:
@@ -80,7 +80,7 @@ def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.review import (
+    from pipelines.logs.review import (
         aggregate_table,
         animate_recording,
         compare_table,

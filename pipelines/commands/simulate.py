@@ -11,8 +11,8 @@ from typing import Any
 
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
-from pipelines.controllers import CONTROLLERS, COUPLINGS
 from pipelines.errors import PipelineError
+from pipelines.loop.controllers import CONTROLLERS, COUPLINGS
 from pipelines.plain_json import plain
 
 EPILOG = """examples:
@@ -118,9 +118,9 @@ def format_table(summary: dict[str, Any], header: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from crowdsim.profiles import make_env_config
-    from pipelines.closed_loop import PREDICTOR_FREE, run_episodes, summarize
-    from pipelines.controllers import ControllerSpec
-    from pipelines.margins import parse_margins
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import PREDICTOR_FREE, run_episodes, summarize
+    from pipelines.loop.margins import parse_margins
 
     if args.episodes < 1:
         raise PipelineError(f"--episodes must be >= 1, got {args.episodes}")
@@ -161,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
 
     recorder = None
     if args.record is not None:
-        from pipelines.recording import McapEpisodeRecorder
+        from pipelines.logs.recording import McapEpisodeRecorder
 
         recorder = McapEpisodeRecorder(
             args.record, record_iterations=args.record_iterations, run_meta=run_meta

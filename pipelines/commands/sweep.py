@@ -12,7 +12,7 @@ from pipelines.commands import humans_list
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
-    from pipelines.experiments import Experiment
+    from pipelines.experiments.cells import Experiment
 
 EPILOG = """examples:
   crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
@@ -47,8 +47,8 @@ def _cpus() -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.profiles import PROFILES, VISIBILITY
-    from pipelines.experiments import EXPERIMENTS, PAPER_EPISODES_PER_CELL
-    from pipelines.sweep import BACKENDS, RECORD_POLICIES
+    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+    from pipelines.experiments.sweep import BACKENDS, RECORD_POLICIES
 
     p = subparsers.add_parser(
         "sweep",
@@ -133,7 +133,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _jit(choice: str) -> bool:
-    from pipelines.sweep import jit_available
+    from pipelines.experiments.sweep import jit_available
 
     if choice == "on" and not jit_available():
         raise PipelineError("--jit on needs gcc on the PATH (CasADi compiles with it); use --jit off")
@@ -142,7 +142,7 @@ def _jit(choice: str) -> bool:
 
 def _check_predictors(experiment: Experiment) -> None:
     """Fail before starting workers, not once per episode in errors.jsonl."""
-    from pipelines.experiments import ORACLE_PREDICTOR
+    from pipelines.experiments.cells import ORACLE_PREDICTOR
     from predictors.registry import available
 
     known = set(available()) | {ORACLE_PREDICTOR}
@@ -156,8 +156,8 @@ def _check_predictors(experiment: Experiment) -> None:
 
 def _check_margins(experiment: Experiment) -> None:
     """Every method's margins resolve (a calibration that matches the weights) before workers start."""
-    from pipelines.experiments import predictor_of
-    from pipelines.mpc_controllers import mpc_config
+    from pipelines.experiments.cells import predictor_of
+    from pipelines.loop.mpc import mpc_config
     from predictors.registry import checkpoint_sha256
 
     for _, spec in experiment.methods:
@@ -167,8 +167,8 @@ def _check_margins(experiment: Experiment) -> None:
 
 def configured_experiment(args: argparse.Namespace) -> Experiment:
     """The experiment with the command line's --predictor, --margins, --profile and --visibility applied."""
-    from pipelines.experiments import World, get_experiment
-    from pipelines.margins import parse_margins
+    from pipelines.experiments.cells import World, get_experiment
+    from pipelines.loop.margins import parse_margins
 
     experiment = get_experiment(args.experiment)
     if args.predictor:
@@ -184,8 +184,8 @@ def configured_experiment(args: argparse.Namespace) -> Experiment:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, run_sweep
-    from pipelines.sweep_report import write_report
+    from pipelines.experiments.report import write_report
+    from pipelines.experiments.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, run_sweep
 
     experiment = configured_experiment(args)
     config = SweepConfig(

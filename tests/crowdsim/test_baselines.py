@@ -6,7 +6,7 @@ from crowdsim.baselines import OrcaController, StraightController
 from crowdsim.env import CrowdEnv
 from crowdsim.metrics import episode_metrics
 from crowdsim.scenarios import Layout
-from pipelines.controllers import ControlOutput
+from pipelines.loop.controllers import ControlOutput
 
 
 def layout(robot_starts, robot_goals, human_starts=(), human_goals=()):

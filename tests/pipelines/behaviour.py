@@ -17,10 +17,10 @@ import numpy as np
 from mcap.reader import make_reader
 
 from crowdsim.profiles import make_env_config
-from pipelines.closed_loop import run_episode
-from pipelines.controllers import ControllerSpec, make_controller
-from pipelines.margins import parse_margins
-from pipelines.recording import McapEpisodeRecorder
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
+from pipelines.loop.margins import parse_margins
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "behaviour.json"
 
@@ -81,8 +81,13 @@ def run_batch(mcap_dir: Path) -> dict[str, Any]:
             observers.append(McapEpisodeRecorder(mcap_dir))
         try:
             result = run_episode(
-                controller, seed=seed, scenario=scenario, n_humans=humans, n_robots=robots,
-                env_config=env, observers=observers,
+                controller,
+                seed=seed,
+                scenario=scenario,
+                n_humans=humans,
+                n_robots=robots,
+                env_config=env,
+                observers=observers,
             )
         finally:
             close = getattr(controller, "close", None)

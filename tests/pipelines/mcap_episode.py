@@ -14,9 +14,9 @@ import numpy as np
 
 from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.metrics import episode_metrics
-from pipelines.closed_loop import EpisodeResult
-from pipelines.controllers import ControlOutput
-from pipelines.recording import McapEpisodeRecorder
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.loop.controllers import ControlOutput
+from pipelines.loop.episode import EpisodeResult
 
 HORIZON = 4
 

@@ -161,7 +161,9 @@ def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
         calls.append((out_path, episodes, n_humans, seed, scenario, with_robots))
         return {"scenes": 12, "out": str(out_path)}
 
-    monkeypatch.setitem(sys.modules, "pipelines.synth", types.SimpleNamespace(synthesize=synthesize))
+    monkeypatch.setitem(
+        sys.modules, "pipelines.experiments.synth", types.SimpleNamespace(synthesize=synthesize)
+    )
     out = tmp_path / "s.ndjson"
     argv = ["data", "synth", "--out", str(out), "--episodes", "3", "--humans", "5", "--seed", "7"]
     code, stdout, _ = run(capsys, *argv, "--scenario", "perpendicular", "--with-robots")

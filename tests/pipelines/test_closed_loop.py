@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from crowdsim.env import EnvConfig
-from pipelines.closed_loop import run_episode, run_episodes, summarize
-from pipelines.controllers import ControllerSpec, ControlOutput, make_controller
+from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
+from pipelines.loop.episode import run_episode, run_episodes, summarize
 
 
 class Spy:

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from crowdsim.env import CrowdEnv
-from pipelines.calibrate import ClosedLoopPlan, PredictionErrors, closed_loop_errors
-from pipelines.closed_loop import run_episode
-from pipelines.controllers import ControllerSpec, ControlOutput, make_controller
 from pipelines.errors import PipelineError
-from pipelines.margins import MarginSpec, parse_margins
+from pipelines.experiments.calibrate import ClosedLoopPlan, PredictionErrors, closed_loop_errors
+from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
+from pipelines.loop.episode import run_episode
+from pipelines.loop.margins import MarginSpec, parse_margins
 from predictors.calibration import calibration_from_errors, save_calibration
 from predictors.errors import PredictorError
 

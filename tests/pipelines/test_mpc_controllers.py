@@ -8,10 +8,10 @@ import pytest
 from crowdsim.env import CrowdEnv
 from mpc.dynamics import braking
 from mpc.errors import MPCConfigError
-from pipelines.closed_loop import run_episode
-from pipelines.controllers import ControllerSpec, make_controller
 from pipelines.errors import PipelineError
-from pipelines.mpc_controllers import make_mpc_controller, predictor_history
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
+from pipelines.loop.mpc import make_mpc_controller, predictor_history
 
 
 class Collect:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crowdsim.env import CrowdEnv
-from pipelines.oracle import OracleController, OrcaOracle
+from pipelines.loop.oracle import OracleController, OrcaOracle
 from predictors.errors import PredictorError
 
 

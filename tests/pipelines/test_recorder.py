@@ -9,9 +9,9 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType
 
 from pipelines.errors import PipelineError
-from pipelines.recorder import DEFAULT_COMPRESSION, McapRecorder
-from pipelines.review import MAGIC, read_recording
-from pipelines.schemas import HUMANS, ROBOTS, MessageSchema
+from pipelines.logs.recorder import DEFAULT_COMPRESSION, McapRecorder
+from pipelines.logs.review import MAGIC, read_recording
+from pipelines.logs.schemas import HUMANS, ROBOTS, MessageSchema
 
 ROBOT_MESSAGE = {
     "time": 0.4,

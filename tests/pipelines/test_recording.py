@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from pipelines.errors import PipelineError
-from pipelines.recording import FORMAT, ROBOT_RGB, McapEpisodeRecorder, episode_filename
-from pipelines.review import check_recording, read_recording
+from pipelines.logs.recording import FORMAT, ROBOT_RGB, McapEpisodeRecorder, episode_filename
+from pipelines.logs.review import check_recording, read_recording
 from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
 
 NS = 1_000_000_000

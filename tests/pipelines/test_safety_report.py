@@ -7,10 +7,9 @@ import math
 
 import pytest
 
-from pipelines.controllers import ControllerSpec
-from pipelines.experiments import Experiment, get_experiment
-from pipelines.margins import MarginSpec
-from pipelines.safety_report import (
+from pipelines.experiments.cells import Experiment, get_experiment
+from pipelines.experiments.report import CELLS_CSV, EPISODES_CSV, markdown_table, summarize, write_report
+from pipelines.experiments.safety_report import (
     HIST_EDGES,
     MIN_DISTANCE_HIST_CSV,
     MIN_DISTANCE_HIST_PNG,
@@ -19,7 +18,8 @@ from pipelines.safety_report import (
     step_frequency,
     world_note,
 )
-from pipelines.sweep_report import CELLS_CSV, EPISODES_CSV, markdown_table, summarize, write_report
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.margins import MarginSpec
 
 NEW_KEYS = ("collision_steps", "contact_steps")
 

@@ -26,7 +26,7 @@ def test_simulate_orca_prints_the_table_and_writes_json_and_plot(tmp_path, capsy
 
 
 def test_simulate_records_one_mcap_per_episode(tmp_path, capsys):
-    pytest.importorskip("pipelines.recording")
+    pytest.importorskip("pipelines.logs.recording")
     code = main(
         ["simulate", "--controller", "straight", "--humans", "3", "--episodes", "2", "--record",
          str(tmp_path / "rec"), "--no-progress"]

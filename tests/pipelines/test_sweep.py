@@ -17,9 +17,8 @@ import numpy as np
 import pytest
 
 from pipelines.cli import main
-from pipelines.controllers import ControllerSpec
 from pipelines.errors import PipelineError
-from pipelines.experiments import (
+from pipelines.experiments.cells import (
     EXPERIMENTS,
     PAPER_TABLE_II,
     PAPER_TABLE_III,
@@ -28,8 +27,15 @@ from pipelines.experiments import (
     get_experiment,
     scenario_schedule,
 )
-from pipelines.margins import MarginSpec
-from pipelines.sweep import (
+from pipelines.experiments.report import (
+    CELLS_CSV,
+    markdown_table,
+    mcnemar_exact,
+    summarize,
+    wilson_interval,
+    write_report,
+)
+from pipelines.experiments.sweep import (
     EPISODES_FILE,
     ERRORS_FILE,
     EpisodeLog,
@@ -41,14 +47,8 @@ from pipelines.sweep import (
     run_sweep,
     sweep_lock,
 )
-from pipelines.sweep_report import (
-    CELLS_CSV,
-    markdown_table,
-    mcnemar_exact,
-    summarize,
-    wilson_interval,
-    write_report,
-)
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.margins import MarginSpec
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -266,7 +266,7 @@ def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_pat
     def broken(spec, jit=False, env_config=None):
         raise RuntimeError("no solver here")
 
-    monkeypatch.setattr("pipelines.sweep.build_controller", broken)
+    monkeypatch.setattr("pipelines.experiments.sweep.build_controller", broken)
     with pytest.raises(PipelineError, match=r"first 4 episodes all raised \(RuntimeError: no solver here\)"):
         run_sweep(_config(tmp_path, 5))
     errors = (tmp_path / ERRORS_FILE).read_text().splitlines()

@@ -6,7 +6,7 @@ import trajnetplusplustools as tt
 
 from crowdsim.env import CrowdEnv
 from pipelines.errors import PipelineError
-from pipelines.synth import synthesize
+from pipelines.experiments.synth import synthesize
 
 
 def test_synth_writes_trajnet_scenes_matching_the_simulation(tmp_path):

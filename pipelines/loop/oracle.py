@@ -28,8 +28,8 @@ import numpy as np
 
 from crowdsim.env import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
-from pipelines.controllers import ORACLE_PREDICTOR
 from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ORACLE_PREDICTOR
 from predictors.base import check_rollout_inputs
 from predictors.errors import PredictorError
 
@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     import casadi as ca
 
     from crowdsim.env import Observation
-    from pipelines.controllers import Controller, ControllerSpec, ControlOutput
+    from pipelines.loop.controllers import Controller, ControllerSpec, ControlOutput
 
 
 class OrcaOracle:
@@ -159,7 +159,7 @@ def make_oracle_controller(spec: ControllerSpec, env_config: EnvConfig | None = 
     handed to ``make_mpc_controller`` directly: the controller reads ``predictor.obs_len`` and calls
     ``predictor.rollout`` each step, which the oracle provides (it has no CasADi twin, hence IBR only).
     """
-    from pipelines.mpc_controllers import make_mpc_controller
+    from pipelines.loop.mpc import make_mpc_controller
 
     if spec.controller not in ("cmpc", "dmpc"):
         raise PipelineError(f"the ORCA oracle is a predictor for cmpc/dmpc, not for {spec.controller!r}")

@@ -29,7 +29,7 @@ from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
-    from pipelines.experiments import Cell, Experiment
+    from pipelines.experiments.cells import Cell, Experiment
 
 
 class _Rate(Protocol):

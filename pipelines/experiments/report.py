@@ -20,9 +20,9 @@ from typing import Any, Final
 
 import numpy as np
 
-from pipelines import safety_report as safety
 from pipelines.errors import PipelineError
-from pipelines.experiments import SCENARIOS, Cell, Experiment, PaperFigures, predictor_of
+from pipelines.experiments import safety_report as safety
+from pipelines.experiments.cells import SCENARIOS, Cell, Experiment, PaperFigures, predictor_of
 
 Z95: Final[float] = 1.959963984540054  # two-sided 95% standard normal quantile
 CELLS_CSV: Final[str] = "cells.csv"

@@ -29,8 +29,8 @@ from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory
 from mpc.fastcall import BufferedFunction
 from mpc.nlp import StepData
-from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec, ControlOutput
 from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ORACLE_PREDICTOR, ControllerSpec, ControlOutput
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import Predictor
 from predictors.errors import PredictorError, UnknownPredictor

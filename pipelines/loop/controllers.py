@@ -2,7 +2,7 @@
 
 ``crowdsim`` never imports ``mpc``; this module names what a controller is to the closed loop, and holds the
 explicit registry of controllers (baselines from ``crowdsim.baselines``, the game-theoretic MPCs from
-``pipelines.mpc_controllers``). Factories import lazily so that choosing ``orca`` never loads CasADi solvers.
+``pipelines.loop.mpc``). Factories import lazily so that choosing ``orca`` never loads CasADi solvers.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from crowdsim.control import ControlOutput
 from pipelines.errors import PipelineError
-from pipelines.margins import MarginSpec
+from pipelines.loop.margins import MarginSpec
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig, Observation
@@ -40,7 +40,7 @@ class ControllerSpec:
     coupling: str = "ibr"  # "ibr": Algorithm 1/2; "nlp": the predictor inside the joint NLP
     record_iterations: bool = False  # keep the humans' prediction of every IBR iteration in ControlOutput
     mpc_overrides: tuple[tuple[str, Any], ...] = ()  # (field, value) pairs applied to mpc.config.MPCConfig
-    margins: MarginSpec = MarginSpec()  # allowance for prediction error in Eq. 11 (pipelines/margins.py)
+    margins: MarginSpec = MarginSpec()  # allowance for prediction error in Eq. 11 (pipelines/loop/margins.py)
 
     def __post_init__(self):
         if self.controller not in CONTROLLERS:
@@ -92,10 +92,10 @@ ORACLE_PREDICTOR = "orca_oracle"
 
 def _mpc(spec: ControllerSpec, distributed: bool, env_config: EnvConfig | None) -> Controller:
     if spec.predictor == ORACLE_PREDICTOR:
-        from pipelines.oracle import make_oracle_controller
+        from pipelines.loop.oracle import make_oracle_controller
 
         return make_oracle_controller(spec, env_config)
-    from pipelines.mpc_controllers import make_mpc_controller
+    from pipelines.loop.mpc import make_mpc_controller
 
     return make_mpc_controller(spec, distributed=distributed)
 

@@ -1,6 +1,6 @@
 """Recording closed-loop episodes to MCAP: one file per episode, an EpisodeObserver for the closed loop.
 
-Channels (JSON, schemas in ``pipelines.schemas``), log time = simulation time since the episode start:
+Channels (JSON, schemas in ``pipelines.logs.schemas``), log time = simulation time since the episode start:
   /robots, /humans      the state at t and the accelerations applied from t; the final state comes at the end
   /mpc/plan             each robot's planned positions t+1..t+H (controllers that plan)
   /mpc/prediction       the humans' predicted positions, per IBR iteration when asked (predicting controllers)
@@ -24,15 +24,15 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from pipelines.closed_loop import step_time_stats
 from pipelines.errors import PipelineError
+from pipelines.logs.recorder import McapRecorder
+from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
+from pipelines.loop.episode import step_time_stats
 from pipelines.plain_json import plain
-from pipelines.recorder import McapRecorder
-from pipelines.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
-    from pipelines.controllers import ControlOutput
+    from pipelines.loop.controllers import ControlOutput
 
 FORMAT: Final[str] = "crowdmpc-episode/1"  # bump when a channel's meaning changes
 FRAME_ID: Final[str] = "world"

@@ -25,11 +25,11 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
-from pipelines.margins import MarginSpec
+from pipelines.loop.margins import MarginSpec
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
-    from pipelines.controllers import ControlOutput
+    from pipelines.loop.controllers import ControlOutput
 
 CALIBRATION_SEED: Final[int] = 1_000_000  # first seed of calibration episodes (module docstring)
 NEAR: Final[float] = 3.0  # m, humans scored: within this distance of a robot when predicted (docstring)
@@ -116,8 +116,8 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
     from tqdm import tqdm
 
     from crowdsim.profiles import make_env_config
-    from pipelines.closed_loop import run_episode
-    from pipelines.controllers import ControllerSpec, make_controller
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.episode import run_episode
 
     env_config = make_env_config(plan.profile, plan.visibility)
     spec = ControllerSpec(plan.controller, plan.predictor, margins=plan.margins)

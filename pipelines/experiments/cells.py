@@ -18,9 +18,9 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
-from pipelines.controllers import ORACLE_PREDICTOR, ControllerSpec
 from pipelines.errors import PipelineError
-from pipelines.margins import MarginSpec
+from pipelines.loop.controllers import ORACLE_PREDICTOR, ControllerSpec
+from pipelines.loop.margins import MarginSpec
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig
@@ -96,7 +96,7 @@ PAPER_TABLE_III: Final = _figures(
 
 def predictor_of(spec: ControllerSpec) -> str | None:
     """The predictor a controller uses; None for the baselines, which use none."""
-    from pipelines.closed_loop import PREDICTOR_FREE
+    from pipelines.loop.episode import PREDICTOR_FREE
 
     return None if spec.controller in PREDICTOR_FREE else spec.predictor
 

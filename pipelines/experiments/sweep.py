@@ -40,9 +40,9 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, Protocol
 
-from pipelines.controllers import Controller, ControllerSpec, make_controller
 from pipelines.errors import PipelineError
-from pipelines.experiments import EpisodeTask, Experiment, predictor_of
+from pipelines.experiments.cells import EpisodeTask, Experiment, predictor_of
+from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
@@ -154,7 +154,7 @@ def sweep_lock(out: Path) -> Iterator[None]:
 def build_controller(
     spec: ControllerSpec, jit: bool = False, env_config: EnvConfig | None = None
 ) -> Controller:
-    """A cell's controller (the registry routes the ORCA oracle predictor to pipelines.oracle).
+    """A cell's controller (the registry routes the ORCA oracle predictor to pipelines.loop.oracle).
 
     ``jit``: the MPC controllers compile their NLPs (MPCConfig.jit). It is a worker setting, not part of the
     cell: compiled and interpreted functions compute the same costs (to rounding), so the cell key, and the
@@ -199,7 +199,7 @@ def episode_record(task: EpisodeTask, result: Any, wall_s: float, cpu_s: float) 
     time for the episode, which unlike ``wall_s`` does not depend on how busy the machine was."""
     import numpy as np
 
-    from pipelines.closed_loop import step_time_stats
+    from pipelines.loop.episode import step_time_stats
 
     spec = task.cell.spec
     solve_ms = np.asarray(result.solve_times_s, dtype=float) * 1e3
@@ -284,12 +284,12 @@ class EpisodeWorker:
             return EpisodeOutcome(task.key, error=traceback.format_exc())
 
     def _run(self, task: EpisodeTask) -> EpisodeOutcome:
-        from pipelines.closed_loop import run_episode
+        from pipelines.loop.episode import run_episode
 
         controller = self.controller(task)
         recorder = None
         if self.record != "none":
-            from pipelines.recording import McapEpisodeRecorder
+            from pipelines.logs.recording import McapEpisodeRecorder
 
             # A scratch folder per episode; a kept log goes to the driver as bytes (it may run elsewhere).
             run_meta = {"experiment": task.experiment, "cell": task.cell.key}

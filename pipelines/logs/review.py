@@ -25,9 +25,9 @@ from mcap.reader import NonSeekingReader
 from mcap.records import Metadata
 from mcap.stream_reader import StreamReader
 
-from pipelines.closed_loop import step_time_stats
 from pipelines.errors import PipelineError
-from pipelines.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, unsupported_keywords, validate
+from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, unsupported_keywords, validate
+from pipelines.loop.episode import step_time_stats
 
 MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 
@@ -90,7 +90,7 @@ class Recording:
 
 
 def _decoded(record: dict[str, str]) -> dict[str, Any]:
-    """Metadata values are JSON text (pipelines.recording); a value that is not stays a string."""
+    """Metadata values are JSON text (pipelines.logs.recording); a value that is not stays a string."""
     out: dict[str, Any] = {}
     for key, text in record.items():
         try:

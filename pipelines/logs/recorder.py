@@ -19,7 +19,7 @@ from typing import IO, Any, Final
 from mcap.writer import CompressionType, Writer
 
 from pipelines.errors import PipelineError
-from pipelines.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, MessageSchema
+from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, MessageSchema
 
 DEFAULT_CHUNK_SIZE: Final[int] = 64 * 1024  # bytes, uncompressed
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from crowdsim.env import CrowdEnv, EnvConfig
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
-from pipelines.controllers import Controller, ControllerSpec, EpisodeObserver, make_controller
+from pipelines.loop.controllers import Controller, ControllerSpec, EpisodeObserver, make_controller
 
 DEFAULT_ENV: Final[EnvConfig] = EnvConfig()
 
