@@ -6,11 +6,11 @@ import argparse
 import importlib
 import importlib.util
 import sys
-from importlib.metadata import PackageNotFoundError, version
 
 from crowdsim.errors import SimulationError
 from mpc.errors import MPCConfigError
 from pipelines.errors import PipelineError
+from pipelines.version import crowdmpc_version
 from predictors.errors import PredictorError
 
 # The order in which subcommands are listed by --help.
@@ -34,13 +34,6 @@ EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
   crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario circle --humans 7 --episodes 5
 """
-
-
-def crowdmpc_version() -> str:
-    try:
-        return version("crowdmpc")
-    except PackageNotFoundError:  # running from a source tree that was not installed
-        return "0+unknown"
 
 
 def build_parser() -> argparse.ArgumentParser:

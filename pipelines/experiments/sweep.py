@@ -618,7 +618,7 @@ def _write_atomic(path: Path, data: bytes) -> None:
 
 def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
     """sweep.json: what the directory holds, and a line per run (a directory belongs to one experiment)."""
-    from pipelines.cli import crowdmpc_version
+    from pipelines.version import crowdmpc_version
 
     path = out / SWEEP_FILE
     meta: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}

@@ -13,11 +13,9 @@ sha256, sizes), "config" and "run" (JSON-encoded values).
 
 from __future__ import annotations
 
-import functools
 import json
 from collections import Counter
 from collections.abc import Mapping
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
@@ -29,6 +27,7 @@ from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
 from pipelines.loop.episode import step_time_stats
 from pipelines.plain_json import plain
+from pipelines.version import crowdmpc_version
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -52,15 +51,6 @@ ROBOT_RGB: Final[tuple[tuple[float, float, float], ...]] = (
     (0.090, 0.745, 0.812),
 )
 HUMAN_RGB: Final[tuple[float, float, float]] = (0.45, 0.45, 0.45)
-
-
-@functools.cache
-def crowdmpc_version() -> str:
-    """The installed crowdmpc's version (looked up once: importlib.metadata scans every distribution)."""
-    try:
-        return version("crowdmpc")
-    except PackageNotFoundError:  # running from a source tree that was not installed
-        return "0+unknown"
 
 
 def episode_filename(scenario: str, seed: int) -> str:
