@@ -13,6 +13,7 @@ sha256, sizes), "config" and "run" (JSON-encoded values).
 
 from __future__ import annotations
 
+import functools
 import json
 from collections import Counter
 from collections.abc import Mapping
