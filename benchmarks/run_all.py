@@ -83,9 +83,9 @@ def any_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int 
     """Any controller (the baselines, the ORCA oracle, any number of robots), which control_step.py does not
     cover: the step time over the first ``steps`` steps of ``episodes`` episodes, alternating scenarios."""
     from crowdsim.env import CrowdEnv
-    from pipelines.experiments.sweep import build_controller
+    from pipelines.loop.controllers import make_controller
 
-    controller = build_controller(spec)
+    controller = make_controller(spec)
     env, times, iterations, solves = CrowdEnv(), [], [], []
     for k in range(episodes):
         obs = env.reset(k // 2, SCENARIOS[k % 2], n_humans, n_robots)
@@ -108,10 +108,11 @@ def any_step(spec: Any, n_humans: int, n_robots: int, steps: int, episodes: int 
 def episodes_per_minute(spec: Any, n_humans: int, episodes: int) -> dict[str, float]:
     """Whole episodes in this process, alternating scenarios as a sweep does; controller built (and, when gcc
     is found, compiled, as sweep workers do) once, its NLPs built by a first episode that is not timed."""
-    from pipelines.experiments.sweep import build_controller, jit_available
+    from pipelines.experiments.worker import jit_available
+    from pipelines.loop.controllers import make_controller
     from pipelines.loop.episode import run_episode
 
-    controller = build_controller(spec, jit_available())
+    controller = make_controller(spec, jit=jit_available())
     run_episode(controller, seed=10_000, scenario=SCENARIOS[0], n_humans=n_humans)
     t0 = time.perf_counter()
     steps = 0
@@ -132,7 +133,9 @@ def sweep_rate(predictor: str, episodes_per_cell: int, workers: int) -> dict[str
     ``crowdmpc sweep`` does by default. ``steady_cpu_s_per_episode`` leaves out each worker's first episode
     of a cell (it builds and compiles the NLPs): the cost per episode a long sweep approaches."""
     from pipelines.experiments.cells import get_experiment
-    from pipelines.experiments.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, jit_available, run_sweep
+    from pipelines.experiments.log import EPISODES_FILE, EpisodeLog
+    from pipelines.experiments.sweep import SweepConfig, run_sweep
+    from pipelines.experiments.worker import jit_available
 
     experiment = get_experiment("table2").with_predictor(predictor)
     with tempfile.TemporaryDirectory(prefix="crowdmpc-bench-") as out:

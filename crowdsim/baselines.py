@@ -1,7 +1,7 @@
 """Two robot controllers that need no prediction or optimisation, so the simulator is useful on its own.
 
-Both implement ``pipelines.controllers.Controller`` structurally (``name``, ``reset``, ``act``) and return
-``crowdsim.control.ControlOutput``.
+Both have ``name``, ``reset`` and ``act`` and return ``crowdsim.control.ControlOutput``;
+``pipelines.loop.baselines`` makes them closed-loop controllers.
 
 * ``straight``: track a velocity pointing at the goal, ignoring humans and the other robots. Its speed is
   ``v_max`` unless braking must begin: the largest next speed ``v'`` from which a constant deceleration

@@ -26,16 +26,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from typing import Any, Final, Literal, get_args
 
 from crowdsim import world
 from mpc.errors import MPCConfigError
 
-SOLVERS = ("fatrop", "ipopt")  # MPCConfig.solver
-PARALLEL_MODES = ("serial", "threads")  # how DMPC runs the robots' local solves (see mpc/dmpc.py)
+# Option types as Literals (values stay plain strings in JSON and MCAP metadata); the tuples are their values.
+Solver = Literal["fatrop", "ipopt"]
+ParallelMode = Literal["serial", "threads"]  # how DMPC runs the robots' local solves (see mpc/dmpc.py)
 # coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
-COUPLED_MODES = ("auto", "exact", "first_order")
-ON_GOAL_MODES = ("brake", "track")  # what a robot that has reached its goal does (MPCConfig.on_goal)
+CoupledMode = Literal["auto", "exact", "first_order"]
+OnGoal = Literal["brake", "track"]  # what a robot that has reached its goal does (MPCConfig.on_goal)
+SOLVERS: Final[tuple[Solver, ...]] = get_args(Solver)
+PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
+COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
+ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,7 @@ class MPCConfig:
     # its place unless a human or another robot needs the room; flocking with it is off. "brake": its
     # controls are pinned to braking: it stays exactly where it stopped and can neither dodge a human nor let
     # a teammate through to a goal closer than ~1.03 m, the distance the Eq. 12 penalty keeps free.
-    on_goal: str = "track"
+    on_goal: OnGoal = "track"
     # --- solver -------------------------------------------------------------------------------------------
     # The solver minimises cost_scale * F. IPOPT's own gradient-based scaling already tames the 1e7 penalty
     # (measured with IPOPT: no speed-up from scaling F by 1e-2 or 1e-4; only looser solutions, since tol
@@ -81,7 +86,7 @@ class MPCConfig:
     # Fatrop solve that fails is retried with IPOPT, and a step that starts from braking asks both
     # (mpc/nlp.py, _Solver, has why). The coupled NLP with a network inside always uses IPOPT (it needs
     # IPOPT's L-BFGS Hessian, mpc/coupled.py).
-    solver: str = "fatrop"
+    solver: Solver = "fatrop"
     solver_tol: float = 1e-6  # the solver's tol (Fatrop: KKT error; IPOPT: scaled NLP error)
     solver_max_iter: int = 100  # iterations per solve; hitting it counts as a failure (fallback)
     # Wall-time budget of one control step: no new IBR iteration starts once the step has used it, and
@@ -100,11 +105,13 @@ class MPCConfig:
     # and a joint one 3.3 -> 1.4 ms, for 2.4 and 7.8 s of build (benchmarks/solvers.py). Worth it for
     # sweeps (`crowdmpc sweep --jit auto`, the default), not for one episode.
     jit: bool = False
-    dmpc_parallel: str = "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
+    dmpc_parallel: ParallelMode = (
+        "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
+    )
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
-    coupled_mode: str = "auto"
+    coupled_mode: CoupledMode = "auto"
     # --- safety under prediction error (beyond the paper) --------------------------------------------------
     # m_k, m, added to d_min in the robot-human constraint of Eq. 11 at horizon step k = 1..H:
     # smax((d_min + m_k)^2 + rho ||v||^2 - ||s - s_j||^2). () (the default) is exactly the paper's Eq. 11.

@@ -32,12 +32,15 @@ and output 0 ``humans_future``: ``(horizon * n_humans * 2, 1)``, ``(H, N_h, 2).r
 
 from __future__ import annotations
 
-from typing import Final, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Final, Protocol, runtime_checkable
 
 import casadi as ca
 import numpy as np
 
 from crowdsim import world
+
+if TYPE_CHECKING:
+    from crowdsim.env import EnvConfig, Observation
 
 # TrajNet++ samples at 2.5 Hz and observes 9 steps (Kothari et al. 2021); the paper's MPC uses tau = 0.4 s.
 # One source with the simulator and the MPC: crowdsim.world.
@@ -69,6 +72,14 @@ class Predictor(Protocol):
     def context_size(self, n_humans: int, n_robots: int) -> int: ...
 
     def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function: ...
+
+
+@runtime_checkable
+class ObservingPredictor(Predictor, Protocol):
+    """A predictor that needs more than the observed positions: the closed loop hands it each observation and
+    the simulator's settings before it predicts (the ORCA oracle reads the humans' goals and velocities)."""
+
+    def observe(self, obs: Observation, env_config: EnvConfig) -> None: ...
 
 
 def robot_indices(n_agents: int, humans: np.ndarray) -> np.ndarray:

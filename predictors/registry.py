@@ -1,6 +1,7 @@
 """The explicit registry of predictors: exact names, no string matching.
 
-``PREDICTORS`` maps a name to a factory for predictors that need no trained weights. Trained models are
+``PREDICTORS`` maps a name to a factory for predictors that need no trained weights (constant velocity, and
+the ORCA-ground-truth oracle of ``predictors.oracle``). Trained models are
 named entries of the model zoo (``checkpoints/manifest.json``, see ``predictors.zoo``) and are loaded by
 ``load_predictor`` as well, after their files' sha256 are checked against the manifest.
 """
@@ -14,8 +15,16 @@ from predictors.base import Predictor
 from predictors.constant_velocity import ConstantVelocity
 from predictors.errors import UnknownPredictor
 
+
+def _orca_oracle() -> Predictor:
+    from predictors.oracle import OrcaOracle  # loads the simulator's ORCA: only when asked for
+
+    return OrcaOracle()
+
+
 PREDICTORS: dict[str, Callable[[], Predictor]] = {
     "constant_velocity": ConstantVelocity,
+    "orca_oracle": _orca_oracle,
 }
 
 

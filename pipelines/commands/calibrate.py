@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"--json {args.json}: {args.json.parent} is not a directory")
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "real":
-        from pipelines.loop.controllers import ORACLE_PREDICTOR
+        from predictors.oracle import ORACLE_PREDICTOR
 
         if args.predictor == ORACLE_PREDICTOR:
             raise PipelineError(

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
-    from pipelines.logs.review import Recording
+    from pipelines.logs.reader import Recording
 
 EPILOG = """examples:
   crowdmpc review runs/                                   # one row per episode, then rates over them
@@ -80,17 +80,9 @@ def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.logs.review import (
-        aggregate_table,
-        animate_recording,
-        compare_table,
-        find_recordings,
-        format_summary,
-        plot_compare,
-        plot_recording,
-        read_recording,
-        summarize,
-    )
+    from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
+    from pipelines.logs.reader import find_recordings, read_recording
+    from pipelines.logs.review import aggregate_table, compare_table, format_summary, summarize
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")

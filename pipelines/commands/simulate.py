@@ -119,7 +119,7 @@ def format_table(summary: dict[str, Any], header: str) -> str:
 def run(args: argparse.Namespace) -> int:
     from crowdsim.profiles import make_env_config
     from pipelines.loop.controllers import ControllerSpec
-    from pipelines.loop.episode import PREDICTOR_FREE, run_episodes, summarize
+    from pipelines.loop.episode import run_episodes, summarize
     from pipelines.loop.margins import parse_margins
 
     if args.episodes < 1:
@@ -141,12 +141,11 @@ def run(args: argparse.Namespace) -> int:
         margins=parse_margins(args.margins),
     )
     env_config = make_env_config(args.profile, args.visibility)
-    predictor = None if args.controller in PREDICTOR_FREE else args.predictor
     run_meta = {
         "command": "simulate",
         "argv": sys.argv[1:],
         "controller": args.controller,
-        "predictor": predictor,
+        "predictor": spec.predictor_name,
         "flocking": spec.flocking,
         "coupling": spec.coupling,
         "margins": spec.margins.label,
@@ -184,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
 
     summary = summarize(results)
     header = (
-        f"controller {args.controller} | predictor {predictor or '-'} | margins {spec.margins.label} | "
+        f"controller {args.controller} | predictor {spec.predictor_name or '-'} | "
+        f"margins {spec.margins.label} | "
         f"{args.profile}/{args.visibility} | scenario {args.scenario} | "
         f"humans {args.humans} | robots {args.robots} | episodes {args.episodes} | seeds {args.seed}.."
         f"{args.seed + args.episodes - 1}"
@@ -193,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        payload = {"run": run_meta, "summary": summary, "episodes": [r.record() for r in results]}
+        payload = {"run": run_meta, "summary": summary, "episodes": [r.record().to_dict() for r in results]}
         args.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.plot is not None:

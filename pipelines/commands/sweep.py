@@ -47,8 +47,9 @@ def _cpus() -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.profiles import PROFILES, VISIBILITY
+    from pipelines.experiments.backends import BACKENDS
     from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
-    from pipelines.experiments.sweep import BACKENDS, RECORD_POLICIES
+    from pipelines.experiments.worker import RECORD_POLICIES
 
     p = subparsers.add_parser(
         "sweep",
@@ -133,7 +134,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _jit(choice: str) -> bool:
-    from pipelines.experiments.sweep import jit_available
+    from pipelines.experiments.worker import jit_available
 
     if choice == "on" and not jit_available():
         raise PipelineError("--jit on needs gcc on the PATH (CasADi compiles with it); use --jit off")
@@ -142,10 +143,9 @@ def _jit(choice: str) -> bool:
 
 def _check_predictors(experiment: Experiment) -> None:
     """Fail before starting workers, not once per episode in errors.jsonl."""
-    from pipelines.experiments.cells import ORACLE_PREDICTOR
     from predictors.registry import available
 
-    known = set(available()) | {ORACLE_PREDICTOR}
+    known = set(available())
     missing = sorted({spec.predictor for _, spec in experiment.methods} - known)
     if missing:
         raise PipelineError(
@@ -156,12 +156,11 @@ def _check_predictors(experiment: Experiment) -> None:
 
 def _check_margins(experiment: Experiment) -> None:
     """Every method's margins resolve (a calibration that matches the weights) before workers start."""
-    from pipelines.experiments.cells import predictor_of
     from pipelines.loop.mpc import mpc_config
     from predictors.registry import checkpoint_sha256
 
     for _, spec in experiment.methods:
-        name = predictor_of(spec)
+        name = spec.predictor_name
         spec.margins.resolve(name, mpc_config(spec).horizon, checkpoint_sha256(name))
 
 
@@ -184,8 +183,9 @@ def configured_experiment(args: argparse.Namespace) -> Experiment:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.experiments.log import EPISODES_FILE, EpisodeLog
     from pipelines.experiments.report import write_report
-    from pipelines.experiments.sweep import EPISODES_FILE, EpisodeLog, SweepConfig, run_sweep
+    from pipelines.experiments.sweep import SweepConfig, run_sweep
 
     experiment = configured_experiment(args)
     config = SweepConfig(
@@ -200,7 +200,8 @@ def run(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         record=args.record,
         progress=not args.no_progress,
-        jit=_jit(args.jit),
+        # nothing to compile (baselines only): gcc is not needed, workers stay where they are
+        jit=any(spec.kind.compiles for _, spec in experiment.methods) and _jit(args.jit),
     )
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)

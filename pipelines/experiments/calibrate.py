@@ -30,6 +30,7 @@ from pipelines.loop.margins import MarginSpec
 if TYPE_CHECKING:
     from crowdsim.env import Observation
     from pipelines.loop.controllers import ControlOutput
+    from pipelines.loop.episode import EpisodeResult
 
 CALIBRATION_SEED: Final[int] = 1_000_000  # first seed of calibration episodes (module docstring)
 NEAR: Final[float] = 3.0  # m, humans scored: within this distance of a robot when predicted (docstring)
@@ -62,7 +63,7 @@ class PredictionErrors:
         if close.any():
             self._made.append((obs.step, np.asarray(out.prediction, dtype=float), close))
 
-    def on_end(self, result: Any) -> None:
+    def on_end(self, result: EpisodeResult) -> None:
         truth = np.asarray(result.human_positions, dtype=float)  # (T+1, N, 2)
         last = len(truth) - 1
         for step, prediction, close in self._made:
@@ -137,9 +138,7 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
             )
             successes += result.metrics.success
     finally:
-        close = getattr(controller, "close", None)
-        if close is not None:
-            close()
+        controller.close()
     details = asdict(plan) | {
         "margins": plan.margins.label,
         "seeds": [plan.seed, plan.seed + plan.episodes - 1],

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
 from pipelines.errors import PipelineError
-from pipelines.loop.controllers import ORACLE_PREDICTOR, ControllerSpec
+from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec
 
 if TYPE_CHECKING:
@@ -94,13 +94,6 @@ PAPER_TABLE_III: Final = _figures(
 )
 
 
-def predictor_of(spec: ControllerSpec) -> str | None:
-    """The predictor a controller uses; None for the baselines, which use none."""
-    from pipelines.loop.episode import PREDICTOR_FREE
-
-    return None if spec.controller in PREDICTOR_FREE else spec.predictor
-
-
 @dataclass(frozen=True)
 class World:
     """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility."""
@@ -142,7 +135,7 @@ class Cell:
     def key(self) -> str:
         """Everything that defines the cell's episodes, so records of a changed definition never mix."""
         s = self.spec
-        parts = [s.controller, predictor_of(s) or "none", "F" if s.flocking else "NF", s.coupling]
+        parts = [s.controller, s.predictor_name or "none", "F" if s.flocking else "NF", s.coupling]
         parts += [f"{name}={value}" for name, value in s.mpc_overrides]
         parts += [f"m={s.margins.label}", self.world.label]
         return "-".join(parts) + f"-h{self.n_humans}-r{self.n_robots}"
@@ -249,7 +242,7 @@ class Experiment:
         """Every episode of the sweep, episode index by episode index across the cells: at any moment of a
         sweep every cell has run (about) the same crowds, so a sweep stopped early still gives a whole table
         compared on the same crowds, and the progress bar's rate (a stationary mix of cells) gives an honest
-        ETA. Workers keep every cell's controller built (sweep.CONTROLLER_CACHE)."""
+        ETA. Workers keep every cell's controller built (worker.CONTROLLER_CACHE)."""
         schedule = scenario_schedule(episodes_per_cell, seed)
         cells = self.cells(humans, n_robots)
         return [
@@ -272,7 +265,7 @@ SWAP_PREDICTORS: Final[tuple[str, ...]] = (
     "social_lstm_soft_eth",
     "social_gan_eth",
     "social_lstm_synth",
-    ORACLE_PREDICTOR,
+    "orca_oracle",  # the upper bound: the humans' own ORCA (predictors/oracle.py)
 )
 ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)  # the middle of the paper's range
 

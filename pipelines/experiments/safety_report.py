@@ -11,7 +11,8 @@ personal-space (0.8 m) thresholds drawn, shows whether collisions are near misse
 success / collision trade-off places each method (for the ``safety`` experiment: conformal margins at
 decreasing alpha) against the collision target, its mean travel time written beside it.
 
-It reads a cell's summary through ``SafetyColumn`` (``pipelines.sweep_report.CellSummary`` is one) and imports
+It reads a cell's summary through ``SafetyColumn`` (``pipelines.experiments.summary.CellSummary`` is one)
+and imports
 nothing from the report that builds on it.
 """
 

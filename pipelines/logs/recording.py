@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 import json
-from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
@@ -26,15 +25,16 @@ import numpy as np
 from pipelines.errors import PipelineError
 from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
-from pipelines.loop.episode import step_time_stats
 from pipelines.plain_json import plain
 from pipelines.version import crowdmpc_version
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
     from pipelines.loop.controllers import ControlOutput
+    from pipelines.loop.episode import EpisodeResult
 
-FORMAT: Final[str] = "crowdmpc-episode/1"  # bump when a channel's meaning changes
+# bump when a channel's meaning changes; 2: /episode/metrics is the EpisodeRecord (pipelines/loop/record.py)
+FORMAT: Final[str] = "crowdmpc-episode/2"
 FRAME_ID: Final[str] = "world"
 
 # crowdsim.plotting.ROBOT_COLORS (matplotlib's tab10) as RGB, so that the 3D panel and the plots colour
@@ -295,7 +295,7 @@ class McapEpisodeRecorder:
         rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
         self._last = next_obs
 
-    def on_end(self, result: Any) -> None:
+    def on_end(self, result: EpisodeResult) -> None:
         rec = self._require_open()
         last = self._last
         t_ns = seconds_to_ns(last.time)
@@ -358,23 +358,6 @@ class McapEpisodeRecorder:
         self._last_written_step = int(obs.step)
 
 
-def episode_summary(result: Any) -> dict[str, Any]:
-    """The /episode/metrics message of a ``pipelines.closed_loop.EpisodeResult``."""
-    iterations = np.asarray(result.iterations, dtype=float)
-    solve = {
-        **step_time_stats(result.solve_times_s),
-        "mean_iterations": float(iterations.mean()) if iterations.size else None,
-    }
-    return {
-        "seed": int(result.seed),
-        "scenario": str(result.scenario),
-        "controller": str(result.controller),
-        "predictor": None if result.predictor is None else str(result.predictor),
-        "n_humans": int(result.n_humans),
-        "n_robots": int(result.n_robots),
-        "n_steps": len(result.solve_times_s),
-        "metrics": plain(result.metrics),
-        "solve": solve,
-        "statuses": dict(Counter(str(s) for s in result.statuses)),
-        "fallbacks": dict(Counter(str(f) for f in result.fallbacks if f is not None)),
-    }
+def episode_summary(result: EpisodeResult) -> dict[str, Any]:
+    """The /episode/metrics message: the closed loop's ``EpisodeRecord``, as every report serialises it."""
+    return result.record().to_dict()

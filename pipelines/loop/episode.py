@@ -19,31 +19,14 @@ import numpy as np
 from crowdsim.env import CrowdEnv, EnvConfig
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from pipelines.loop.controllers import Controller, ControllerSpec, EpisodeObserver, make_controller
+from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 
 DEFAULT_ENV: Final[EnvConfig] = EnvConfig()
-
-# Controllers that use no pedestrian predictor: their results carry predictor None.
-PREDICTOR_FREE: Final[frozenset[str]] = frozenset({"straight", "orca"})
-
-
-def step_time_stats(seconds: Sequence[float] | np.ndarray) -> dict[str, float | None]:
-    """Median, 95th percentile and maximum of control-step wall times, in ms (None when there are no steps).
-
-    Every report (simulate, MCAP metrics, review, sweep) states solve times through this one function.
-    """
-    ms = np.asarray(seconds, dtype=float) * 1e3
-    if ms.size == 0:
-        return {"median_ms": None, "p95_ms": None, "max_ms": None}
-    return {
-        "median_ms": float(np.median(ms)),
-        "p95_ms": float(np.percentile(ms, 95)),
-        "max_ms": float(ms.max()),
-    }
 
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """One finished episode: who drove, what happened, what it cost."""
+    """One finished episode: who drove, what happened, what it cost, and the trajectories."""
 
     seed: int
     scenario: str
@@ -51,6 +34,7 @@ class EpisodeResult:
     n_robots: int
     controller: str
     predictor: str | None
+    predictor_sha256: str | None
     metrics: EpisodeMetrics
     robot_positions: np.ndarray  # (T+1, M, 2) m
     human_positions: np.ndarray  # (T+1, N, 2) m
@@ -61,32 +45,19 @@ class EpisodeResult:
     fallbacks: tuple[str | None, ...]  # (T,) None or the fallback used
     iterations: np.ndarray  # (T,) int, IBR iterations per control step
 
-    def record(self) -> dict[str, Any]:
-        """A JSON-ready summary of the episode (no trajectories)."""
-        times = step_time_stats(self.solve_times_s)
-        return {
-            "seed": self.seed,
-            "scenario": self.scenario,
-            "n_humans": self.n_humans,
-            "n_robots": self.n_robots,
-            "controller": self.controller,
-            "predictor": self.predictor,
-            "metrics": self.metrics.as_dict(),
-            "solve_time_median_ms": times["median_ms"],
-            "solve_time_max_ms": times["max_ms"],
-            "iterations_mean": float(self.iterations.mean()) if self.iterations.size else None,
-            "statuses": dict(Counter(self.statuses)),
-            "fallbacks": dict(Counter(f for f in self.fallbacks if f is not None)),
-        }
-
-
-def _predictor_name(controller: Controller) -> str | None:
-    """The predictor a controller exposes as ``predictor`` (a name, or an object with a ``name``), or None."""
-    predictor = getattr(controller, "predictor", None)
-    if predictor is None or isinstance(predictor, str):
-        return predictor
-    name = getattr(predictor, "name", None)
-    return name if isinstance(name, str) else None
+    def record(self) -> EpisodeRecord:
+        """The episode without its trajectories: what every report and log serialises."""
+        return EpisodeRecord(
+            seed=self.seed,
+            scenario=self.scenario,
+            n_humans=self.n_humans,
+            n_robots=self.n_robots,
+            controller=self.controller,
+            predictor=self.predictor,
+            predictor_sha256=self.predictor_sha256,
+            metrics=self.metrics,
+            solver=SolverStats.of_steps(self.solve_times_s, self.iterations, self.statuses, self.fallbacks),
+        )
 
 
 def run_episode(
@@ -102,10 +73,10 @@ def run_episode(
 ) -> EpisodeResult:
     """Run one episode to its end (every robot at its goal, or the time limit).
 
-    The meta given to ``on_reset`` holds seed, scenario, n_humans, n_robots, controller, predictor (from
-    ``meta``, else from the controller's ``predictor`` attribute), predictor_sha256 and config (the
-    environment's settings, plus whatever the controller's optional ``describe()`` adds: the MPC's config and
-    the checkpoint's sha256); entries of ``meta`` are added and take precedence.
+    The meta given to ``on_reset`` holds seed, scenario, n_humans, n_robots, controller, predictor (the
+    controller's), predictor_sha256 and config (the environment's settings, plus what the controller's
+    ``describe()`` adds: the MPC's config, the checkpoint's sha256); entries of ``meta`` are added and take
+    precedence.
     """
     env = CrowdEnv(env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
@@ -116,15 +87,13 @@ def run_episode(
         "n_humans": n_humans,
         "n_robots": n_robots,
         "controller": controller.name,
-        "predictor": _predictor_name(controller),
+        "predictor": controller.predictor,
         "predictor_sha256": None,
         "config": {"env": dataclasses.asdict(env_config)},
     }
-    describe = getattr(controller, "describe", None)  # e.g. the MPC's config and the checkpoint's sha256
-    if describe is not None:
-        described = dict(describe())
-        full_meta["config"].update(described.pop("config", {}))
-        full_meta.update(described)
+    described = dict(controller.describe())
+    full_meta["config"].update(described.pop("config", {}))
+    full_meta.update(described)
     full_meta.update(meta or {})
     for observer in observers:
         observer.on_reset(obs, full_meta)
@@ -153,6 +122,7 @@ def run_episode(
         n_robots=n_robots,
         controller=controller.name,
         predictor=full_meta["predictor"],
+        predictor_sha256=full_meta["predictor_sha256"],
         metrics=episode_metrics(traj),
         robot_positions=traj.robot_positions,
         human_positions=traj.human_positions,
@@ -188,7 +158,7 @@ def run_episodes(
     from tqdm import tqdm
 
     controller = make_controller(spec, env_config)
-    run_meta = {"predictor": None if spec.controller in PREDICTOR_FREE else spec.predictor, **(meta or {})}
+    run_meta = dict(meta or {})
     results: list[EpisodeResult] = []
     bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)
     try:
@@ -208,9 +178,7 @@ def run_episodes(
             rate = 100.0 * sum(r.metrics.success for r in results) / len(results)
             bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
     finally:
-        close = getattr(controller, "close", None)  # e.g. DMPC's solver threads
-        if close is not None:
-            close()
+        controller.close()  # e.g. DMPC's solver threads
     return results
 
 

@@ -30,19 +30,26 @@ from mpc.fallback import PlanMemory
 from mpc.fastcall import BufferedFunction
 from mpc.nlp import StepData
 from pipelines.errors import PipelineError
-from pipelines.loop.controllers import ORACLE_PREDICTOR, ControllerSpec, ControlOutput
+from pipelines.loop.controllers import ControllerSpec, ControlOutput
 from predictors.base import DT as PREDICTOR_DT
-from predictors.base import Predictor
-from predictors.errors import PredictorError, UnknownPredictor
+from predictors.base import ObservingPredictor, Predictor
+from predictors.errors import PredictorError
 from predictors.registry import checkpoint_sha256, load_predictor
 
 if TYPE_CHECKING:
-    from crowdsim.env import Observation
+    from crowdsim.env import EnvConfig, Observation
 
 
-def mpc_config(spec: ControllerSpec) -> MPCConfig:
-    """Table I defaults, then ``spec.mpc_overrides``, then ``omega_floc = 0`` when flocking is off."""
+def mpc_config(spec: ControllerSpec, jit: bool = False) -> MPCConfig:
+    """Table I defaults, then ``spec.mpc_overrides``, then ``omega_floc = 0`` when flocking is off.
+
+    ``jit`` compiles the IBR loops' NLPs. The coupled NLP is not compiled: its graph (the network, or a
+    first-order model's 56 x 24 Jacobian of parameters) kept gcc busy for over two minutes per process
+    (measured: 148 s for the first first-order episode of `--experiment coupling`).
+    """
     cfg = MPCConfig().replace(**dict(spec.mpc_overrides))
+    if jit and spec.coupling == "ibr":
+        cfg = cfg.replace(jit=True)
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
 
 
@@ -68,23 +75,27 @@ def check_world(obs: Observation, cfg: MPCConfig, predictor: Predictor) -> None:
     period is the simulation step and the predictor's sampling time, and the history holds what it reads."""
     if abs(obs.dt - cfg.dt) > 1e-12:
         raise PipelineError(f"the simulator steps {obs.dt} s but the MPC plans with tau = {cfg.dt} s")
-    if getattr(predictor, "obs_len", 0) > 1 and abs(cfg.dt - PREDICTOR_DT) > 1e-12:
+    if predictor.obs_len > 1 and abs(cfg.dt - PREDICTOR_DT) > 1e-12:
         raise PipelineError(f"the predictors are sampled every {PREDICTOR_DT} s, the MPC's tau is {cfg.dt} s")
     predictor_history(obs, predictor.obs_len)
-
-
-def _load(name: str) -> Predictor:
-    """The registry's predictor, or an error that also names the oracle the controller registry offers."""
-    try:
-        return load_predictor(name)
-    except UnknownPredictor as exc:
-        raise UnknownPredictor(name, [*exc.choices, ORACLE_PREDICTOR]) from None
 
 
 class MPCController:
     """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``) or the coupled NLP (``coupling="nlp"``)."""
 
-    def __init__(self, spec: ControllerSpec, distributed: bool, predictor: Predictor | None = None):
+    def __init__(
+        self,
+        spec: ControllerSpec,
+        distributed: bool,
+        *,
+        env_config: EnvConfig | None = None,
+        jit: bool = False,
+        predictor: Predictor | None = None,
+    ):
+        """``env_config``: the simulator's settings, for a predictor that observes it (the ORCA oracle);
+        ``predictor``: a predictor object in place of the one ``spec.predictor`` names (tests)."""
+        from crowdsim.env import EnvConfig
+
         if distributed and spec.coupling == "nlp":
             raise PipelineError(
                 "coupling 'nlp' puts the predictor inside the joint NLP, which is centralised: use it with "
@@ -93,10 +104,18 @@ class MPCController:
         self.spec = spec
         self.name = "dmpc" if distributed else "cmpc"
         self.distributed = distributed
-        self.predictor = predictor if predictor is not None else _load(spec.predictor)
-        name = getattr(self.predictor, "name", spec.predictor)
-        cfg = mpc_config(spec)
-        self.cfg = cfg.replace(human_margins=spec.margins.resolve(name, cfg.horizon, checkpoint_sha256(name)))
+        self.env_config = env_config if env_config is not None else EnvConfig()
+        self.model: Predictor = predictor if predictor is not None else load_predictor(spec.predictor)
+        self.predictor: str | None = self.model.name
+        self._observer = self.model if isinstance(self.model, ObservingPredictor) else None
+        if spec.coupling == "nlp" and self._observer is not None:
+            raise PipelineError(
+                f"the {self.model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "
+                "to put inside the joint NLP"
+            )
+        cfg = mpc_config(spec, jit)
+        margins = spec.margins.resolve(self.model.name, cfg.horizon, checkpoint_sha256(self.model.name))
+        self.cfg = cfg.replace(human_margins=margins)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
@@ -104,16 +123,13 @@ class MPCController:
     def close(self) -> None:
         """Release what the solvers hold (DMPC's thread pool); the controller can still be used after."""
         for solver in self._solvers.values():
-            close = getattr(solver, "close", None)
-            if close is not None:
-                close()
+            if isinstance(solver, DMPC):
+                solver.close()
 
     def describe(self) -> dict[str, Any]:
         """What the episode metadata records about this controller (the closed loop merges it)."""
-        name = getattr(self.predictor, "name", self.spec.predictor)
         return {
-            "predictor": name,
-            "predictor_sha256": checkpoint_sha256(name),
+            "predictor_sha256": checkpoint_sha256(self.model.name),
             "config": {
                 "mpc": self.cfg.to_dict(),
                 "coupling": self.spec.coupling,
@@ -128,8 +144,8 @@ class MPCController:
         key = (n_robots, n_humans)
         if key not in self._solvers:
             if self.spec.coupling == "nlp":
-                function = self.predictor.to_casadi(n_humans, n_robots, self.cfg.horizon)
-                size = self.predictor.context_size(n_humans, n_robots)
+                function = self.model.to_casadi(n_humans, n_robots, self.cfg.horizon)
+                size = self.model.context_size(n_humans, n_robots)
                 self._solvers[key] = CoupledCMPC(self.cfg, n_robots, n_humans, function, size)
             elif self.distributed:
                 self._solvers[key] = DMPC(self.cfg, n_robots, n_humans)
@@ -142,7 +158,7 @@ class MPCController:
         key = (n_humans, n_robots)
         if key not in self._twins:
             try:
-                function = self.predictor.to_casadi(n_humans, n_robots, self.cfg.horizon)
+                function = self.model.to_casadi(n_humans, n_robots, self.cfg.horizon)
             except PredictorError:
                 self._twins[key] = None
             else:
@@ -159,8 +175,8 @@ class MPCController:
         n_humans = len(humans)
         twin = self._twin(n_humans, n_robots)
         if twin is None:
-            return lambda robots_future: self.predictor.rollout(history, mask, robots_future, humans)
-        context = self.predictor.encode(history, mask, humans)
+            return lambda robots_future: self.model.rollout(history, mask, robots_future, humans)
+        context = self.model.encode(history, mask, humans)
         shape = (self.cfg.horizon, n_humans, 2)
 
         def predict(robots_future: np.ndarray) -> np.ndarray:
@@ -168,8 +184,13 @@ class MPCController:
 
         return predict
 
+    def _observe(self, obs: Observation) -> None:
+        if self._observer is not None:
+            self._observer.observe(obs, self.env_config)
+
     def reset(self, obs: Observation) -> None:
-        check_world(obs, self.cfg, self.predictor)
+        check_world(obs, self.cfg, self.model)
+        self._observe(obs)
         # Build now, not inside the first timed step.
         self.solver(obs.n_robots, obs.n_humans)
         if self.spec.coupling != "nlp":
@@ -178,6 +199,7 @@ class MPCController:
 
     def act(self, obs: Observation) -> ControlOutput:
         t0 = time.perf_counter()
+        self._observe(obs)
         cfg = self.cfg
         n_robots, n_humans = obs.n_robots, obs.n_humans
         states = np.concatenate([obs.robot_positions, obs.robot_velocities], axis=1).astype(float)
@@ -198,11 +220,11 @@ class MPCController:
                 plan=rollout_numpy(states, plan, cfg.dt)[0],
             )
         solver = self.solver(n_robots, n_humans)
-        history, mask = predictor_history(obs, self.predictor.obs_len)
+        history, mask = predictor_history(obs, self.model.obs_len)
         humans = np.arange(n_robots, n_robots + n_humans)
         start = self.memory.start(data)
         if isinstance(solver, CoupledCMPC):
-            result = solver.solve(data, self.predictor.encode(history, mask, humans), start)
+            result = solver.solve(data, self.model.encode(history, mask, humans), start)
         else:
             result = solver.solve(data, self._predict_fn(history, mask, humans, n_robots), start)
         return self._output(result, start.kind, data, t0)
@@ -231,10 +253,3 @@ class MPCController:
                 "converged": result.converged,
             },
         )
-
-
-def make_mpc_controller(
-    spec: ControllerSpec, distributed: bool, predictor: Predictor | None = None
-) -> MPCController:
-    """``predictor`` replaces the one ``spec.predictor`` names (the ORCA oracle, which no registry holds)."""
-    return MPCController(spec, distributed, predictor)

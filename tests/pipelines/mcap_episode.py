@@ -93,6 +93,7 @@ def record_episode(
         n_robots=n_robots,
         controller="handmade",
         predictor="constant_velocity",
+        predictor_sha256="ab" * 32,
         metrics=episode_metrics(traj),
         robot_positions=traj.robot_positions,
         human_positions=traj.human_positions,

@@ -81,8 +81,15 @@ def test_summarize_reports_rates_and_step_costs():
 def test_controller_errors_are_not_swallowed():
     class Broken:
         name = "broken"
+        predictor = None
 
         def reset(self, obs):
+            pass
+
+        def describe(self):
+            return {}
+
+        def close(self):
             pass
 
         def act(self, obs):

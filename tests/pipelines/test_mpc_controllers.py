@@ -11,7 +11,7 @@ from mpc.errors import MPCConfigError
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
-from pipelines.loop.mpc import make_mpc_controller, predictor_history
+from pipelines.loop.mpc import MPCController, mpc_config, predictor_history
 
 
 class Collect:
@@ -56,20 +56,27 @@ def test_record_iterations_keeps_every_iterations_prediction():
 
 
 def test_spec_options_reach_the_config():
-    controller = make_mpc_controller(
+    controller = MPCController(
         ControllerSpec("cmpc", flocking=False, mpc_overrides=(("horizon", 5), ("j_max", 3))),
         distributed=False,
     )
     assert controller.cfg.w_floc == 0.0 and controller.cfg.horizon == 5 and controller.cfg.j_max == 3
     with pytest.raises(MPCConfigError, match="horizn"):
-        make_mpc_controller(ControllerSpec("cmpc", mpc_overrides=(("horizn", 5),)), distributed=False)
+        MPCController(ControllerSpec("cmpc", mpc_overrides=(("horizn", 5),)), distributed=False)
     with pytest.raises(MPCConfigError, match="horizon"):
-        make_mpc_controller(ControllerSpec("cmpc", mpc_overrides=(("horizon", 0),)), distributed=False)
+        MPCController(ControllerSpec("cmpc", mpc_overrides=(("horizon", 0),)), distributed=False)
+
+
+def test_jit_compiles_the_ibr_nlps_only():
+    assert mpc_config(ControllerSpec("cmpc"), jit=True).jit
+    assert not mpc_config(ControllerSpec("cmpc"), jit=False).jit
+    # the coupled NLP's graph holds the network: compiling it took minutes (mpc_config's docstring)
+    assert not mpc_config(ControllerSpec("cmpc", "social_lstm_soft_eth", coupling="nlp"), jit=True).jit
 
 
 def test_coupled_nlp_is_centralised_only():
     with pytest.raises(PipelineError, match="cmpc"):
-        make_mpc_controller(ControllerSpec("dmpc", coupling="nlp"), distributed=True)
+        MPCController(ControllerSpec("dmpc", coupling="nlp"), distributed=True)
 
 
 @pytest.mark.parametrize(("mode", "iterations"), [("first_order", 2), ("exact", 1)])
@@ -178,15 +185,15 @@ def test_ibr_predicts_through_the_twin_and_matches_the_torch_rollout(monkeypatch
     obs = env.reset(1, "perpendicular", 5)
     for _ in range(4):  # a few steps of history, the robots driving straight ahead
         obs, _, _ = env.step(np.tile([0.0, 0.5], (obs.n_robots, 1)))
-    history, mask = predictor_history(obs, controller.predictor.obs_len)
+    history, mask = predictor_history(obs, controller.model.obs_len)
     humans = np.arange(obs.n_robots, obs.n_robots + obs.n_humans)
     robots_future = obs.robot_positions + np.cumsum(np.full((4, obs.n_robots, 2), [0.1, 0.3]), axis=0)
-    reference = controller.predictor.rollout(history, mask, robots_future, humans)
+    reference = controller.model.rollout(history, mask, robots_future, humans)
 
     def no_rollout(*args, **kwargs):
         raise AssertionError("the IBR loop called the torch rollout")
 
-    monkeypatch.setattr(controller.predictor, "rollout", no_rollout)
+    monkeypatch.setattr(controller.model, "rollout", no_rollout)
     predict = controller._predict_fn(history, mask, humans, obs.n_robots)
     np.testing.assert_allclose(predict(robots_future), reference, rtol=0, atol=1e-9)
     # the robots' plan reaches the humans' prediction

@@ -5,9 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdsim.env import CrowdEnv
-from pipelines.loop.oracle import OracleController, OrcaOracle
+from crowdsim.env import CrowdEnv, EnvConfig
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
 from predictors.errors import PredictorError
+from predictors.oracle import OrcaOracle
+from predictors.registry import load_predictor
 
 
 def _plan(obs, accelerations: np.ndarray) -> np.ndarray:
@@ -29,7 +32,7 @@ def test_oracle_equals_the_simulator_over_the_horizon(scenario):
     # Small accelerations stay inside the bounds, so the simulator applies them unclipped.
     accelerations = np.stack([np.tile([0.3 * (-1) ** k, 0.2], (3, 1)) for k in range(4)])
     oracle = OrcaOracle()
-    oracle.observe(obs)
+    oracle.observe(obs, EnvConfig())
     m, n = obs.n_robots, obs.n_humans
     humans = np.arange(m, m + n)
     mask = np.ones(obs.history.shape[:2], dtype=bool)
@@ -46,7 +49,7 @@ def test_oracle_returns_the_humans_asked_for_in_their_order():
     env = CrowdEnv()
     obs = env.reset(seed=0, scenario="circle", n_humans=5, n_robots=3)
     oracle = OrcaOracle()
-    oracle.observe(obs)
+    oracle.observe(obs, EnvConfig())
     mask = np.ones(obs.history.shape[:2], dtype=bool)
     everyone = oracle.rollout(obs.history, mask, None, np.arange(3, 8), horizon=4)
     two = oracle.rollout(obs.history, mask, None, np.array([6, 4]), horizon=4)
@@ -60,7 +63,7 @@ def test_oracle_refuses_a_history_it_was_not_told_about():
     mask = np.ones(obs.history.shape[:2], dtype=bool)
     with pytest.raises(PredictorError, match="observe"):
         oracle.rollout(obs.history, mask, None, np.arange(3, 8), horizon=2)
-    oracle.observe(obs)
+    oracle.observe(obs, EnvConfig())
     later, _, _ = env.step(np.zeros((3, 2)))
     with pytest.raises(PredictorError, match="observe"):
         oracle.rollout(later.history, mask, None, np.arange(3, 8), horizon=2)
@@ -68,23 +71,21 @@ def test_oracle_refuses_a_history_it_was_not_told_about():
         oracle.to_casadi(5, 3, 4)
 
 
-def test_oracle_controller_tells_the_oracle_before_the_inner_controller_acts():
-    seen = []
-
-    class Inner:
-        name = "inner"
-
-        def reset(self, obs):
-            seen.append(("reset", oracle._obs is obs))
-
-        def act(self, obs):
-            seen.append(("act", oracle._obs is obs))
-            return "out"
-
-    oracle = OrcaOracle()
-    controller = OracleController(Inner(), oracle)
-    obs = CrowdEnv().reset(seed=0, scenario="circle", n_humans=5)
+def test_the_mpc_hands_the_oracle_each_observation_and_the_simulators_settings():
+    env_config = EnvConfig(robots_visible=False)
+    controller = make_controller(ControllerSpec("cmpc", "orca_oracle"), env_config)
+    assert isinstance(controller.model, OrcaOracle) and controller.predictor == "orca_oracle"
+    env = CrowdEnv(env_config)
+    obs = env.reset(seed=0, scenario="circle", n_humans=5, n_robots=3)
     controller.reset(obs)
-    assert controller.act(obs) == "out"
-    assert seen == [("reset", True), ("act", True)]
-    assert controller.name == "inner+orca_oracle"
+    assert controller.model._obs is obs and controller.model.env_config is env_config
+    out = controller.act(obs)
+    later, _, _ = env.step(out.accelerations)
+    controller.act(later)
+    assert controller.model._obs is later
+
+
+def test_the_oracle_is_a_registered_predictor_that_refuses_the_coupled_nlp():
+    assert isinstance(load_predictor("orca_oracle"), OrcaOracle)
+    with pytest.raises(PipelineError, match="coupling 'ibr'"):
+        make_controller(ControllerSpec("cmpc", "orca_oracle", coupling="nlp"))

@@ -9,8 +9,8 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType
 
 from pipelines.errors import PipelineError
+from pipelines.logs.reader import MAGIC, read_recording
 from pipelines.logs.recorder import DEFAULT_COMPRESSION, McapRecorder
-from pipelines.logs.review import MAGIC, read_recording
 from pipelines.logs.schemas import HUMANS, ROBOTS, MessageSchema
 
 ROBOT_MESSAGE = {

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from pipelines.errors import PipelineError
+from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import FORMAT, ROBOT_RGB, McapEpisodeRecorder, episode_filename
-from pipelines.logs.review import check_recording, read_recording
+from pipelines.logs.review import check_recording
+from pipelines.loop.record import EpisodeRecord
 from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
 
 NS = 1_000_000_000
@@ -119,11 +121,13 @@ def test_episode_metrics_at_the_end(episode, recording):
         "constant_velocity",
     )
     assert got["metrics"] == episode.result.metrics.as_dict()
-    assert got["n_steps"] == 5
-    assert got["solve"]["median_ms"] == pytest.approx(30.0)  # solve times 10, 20, .., 50 ms
-    assert got["solve"]["max_ms"] == pytest.approx(50.0)
-    assert got["statuses"] == {"Solve_Succeeded": 2, "ok": 3}
-    assert got["fallbacks"] == {"shifted": 1}
+    solver = got["solver"]
+    assert solver["steps"] == 5 and solver["total_ms"] == pytest.approx(150.0)
+    assert solver["median_ms"] == pytest.approx(30.0)  # solve times 10, 20, .., 50 ms
+    assert solver["max_ms"] == pytest.approx(50.0)
+    assert solver["statuses"] == {"Solve_Succeeded": 2, "ok": 3}
+    assert solver["fallbacks"] == {"shifted": 1} and solver["fallback_steps"] == 1
+    assert got == episode.result.record().to_dict() == EpisodeRecord.from_dict(got).to_dict()
 
 
 def test_metadata_present(recording):

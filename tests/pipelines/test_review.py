@@ -11,8 +11,9 @@ from PIL import Image
 
 from pipelines.cli import main
 from pipelines.errors import PipelineError
+from pipelines.logs.reader import episode_view, read_recording
 from pipelines.logs.recorder import McapRecorder
-from pipelines.logs.review import episode_view, read_recording, summarize
+from pipelines.logs.review import summarize
 from pipelines.logs.schemas import ROBOTS
 from tests.pipelines.mcap_episode import record_episode
 
@@ -159,7 +160,7 @@ def test_unreadable_input_is_a_user_error(tmp_path, capsys):
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
 def test_mp4_without_ffmpeg_says_so(runs, tmp_path):
     with pytest.raises(PipelineError, match="needs ffmpeg"):
-        from pipelines.logs.review import animate_recording
+        from pipelines.logs.plots import animate_recording
 
         animate_recording(read_recording(runs[0].path), tmp_path / "a.mp4")
 

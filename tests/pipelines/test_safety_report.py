@@ -8,7 +8,7 @@ import math
 import pytest
 
 from pipelines.experiments.cells import Experiment, get_experiment
-from pipelines.experiments.report import CELLS_CSV, EPISODES_CSV, markdown_table, summarize, write_report
+from pipelines.experiments.report import CELLS_CSV, EPISODES_CSV, write_report
 from pipelines.experiments.safety_report import (
     HIST_EDGES,
     MIN_DISTANCE_HIST_CSV,
@@ -18,6 +18,8 @@ from pipelines.experiments.safety_report import (
     step_frequency,
     world_note,
 )
+from pipelines.experiments.summary import summarize
+from pipelines.experiments.tables import markdown_table
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from pipelines.errors import PipelineError
-from pipelines.logs.schemas import CHANNELS, SCENE_UPDATE, unsupported_keywords, validate
+from pipelines.logs.jsonschema import unsupported_keywords, validate
+from pipelines.logs.schemas import CHANNELS, SCENE_UPDATE
 
 POINT = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2}
 RECORD = {

@@ -27,27 +27,13 @@ from pipelines.experiments.cells import (
     get_experiment,
     scenario_schedule,
 )
-from pipelines.experiments.report import (
-    CELLS_CSV,
-    markdown_table,
-    mcnemar_exact,
-    summarize,
-    wilson_interval,
-    write_report,
-)
-from pipelines.experiments.sweep import (
-    EPISODES_FILE,
-    ERRORS_FILE,
-    EpisodeLog,
-    EpisodeWorker,
-    SweepConfig,
-    build_controller,
-    is_failure,
-    mcap_path,
-    run_sweep,
-    sweep_lock,
-)
-from pipelines.loop.controllers import ControllerSpec
+from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, sweep_lock
+from pipelines.experiments.report import CELLS_CSV, write_report
+from pipelines.experiments.summary import summarize, wilson_interval
+from pipelines.experiments.sweep import SweepConfig, mcap_path, run_sweep
+from pipelines.experiments.tables import markdown_table, mcnemar_exact
+from pipelines.experiments.worker import EpisodeWorker, is_failure
+from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.margins import MarginSpec
 
 REPO = Path(__file__).resolve().parents[2]
@@ -263,10 +249,10 @@ def test_record_failures_keeps_the_mcap_logs_of_failed_episodes(tmp_path):
 
 
 def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_path, monkeypatch):
-    def broken(spec, jit=False, env_config=None):
+    def broken(spec, env_config=None, *, jit=False):
         raise RuntimeError("no solver here")
 
-    monkeypatch.setattr("pipelines.experiments.sweep.build_controller", broken)
+    monkeypatch.setattr("pipelines.experiments.worker.make_controller", broken)
     with pytest.raises(PipelineError, match=r"first 4 episodes all raised \(RuntimeError: no solver here\)"):
         run_sweep(_config(tmp_path, 5))
     errors = (tmp_path / ERRORS_FILE).read_text().splitlines()
@@ -583,10 +569,10 @@ def test_controller_spec_of_cells_is_validated():
 
 def test_jit_is_a_worker_setting_that_leaves_the_cell_alone():
     spec = ControllerSpec("cmpc", "constant_velocity")
-    assert build_controller(spec, jit=True).cfg.jit is True
-    assert build_controller(spec).cfg.jit is False
-    assert build_controller(dataclasses.replace(spec, coupling="nlp"), jit=True).cfg.jit is False
+    assert make_controller(spec, jit=True).cfg.jit is True
+    assert make_controller(spec).cfg.jit is False
+    assert make_controller(dataclasses.replace(spec, coupling="nlp"), jit=True).cfg.jit is False
     # the baselines solve no NLP: nothing to compile, and nothing breaks
-    assert build_controller(ControllerSpec("orca"), jit=True) is not None
+    assert make_controller(ControllerSpec("orca"), jit=True) is not None
     cell = get_experiment("table2").with_predictor("constant_velocity").cells((5,))[0]
     assert "jit" not in cell.key

@@ -12,24 +12,23 @@ environment's human update (``crowdsim.env``, step 1 and 3) ``H`` times:
   integrator's end-of-step velocity ``v' = 2 (s' - s) / tau - v`` (exact for a plan that obeys Eq. 2).
 
 So its one-step prediction is exactly what the simulator will do when the robots apply the plan's first
-action, and its whole prediction is exact if they follow the plan. It lives in ``pipelines`` because it joins
-crowdsim with the predictor protocol; it needs the humans' goals, which are not in the history a predictor
-normally gets, so it is told each observation through ``observe`` before it predicts (``OracleController``
-does that for the MPC controller it wraps). It is numeric only: it has no CasADi twin (ORCA's linear programs
-are not smooth), so it works with iterated best response (``coupling="ibr"``), not inside the coupled NLP.
+action, and its whole prediction is exact if they follow the plan. It is registered like every predictor
+(``predictors.registry``); it is the one predictor that reads the simulator (its ORCA is the humans' own
+rule), which the layering test allows for this module only. It needs the humans' goals and velocities, which
+are not in the history a predictor normally gets, so it is an ``ObservingPredictor``: the MPC controller hands
+it each observation and the simulator's settings before it predicts. It is numeric only: it has no CasADi twin
+(ORCA's linear programs are not smooth), so it works with iterated best response (``coupling="ibr"``), not
+inside the coupled NLP.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
 from crowdsim.env import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
-from pipelines.errors import PipelineError
-from pipelines.loop.controllers import ORACLE_PREDICTOR
 from predictors.base import check_rollout_inputs
 from predictors.errors import PredictorError
 
@@ -37,7 +36,8 @@ if TYPE_CHECKING:
     import casadi as ca
 
     from crowdsim.env import Observation
-    from pipelines.loop.controllers import Controller, ControllerSpec, ControlOutput
+
+ORACLE_PREDICTOR: Final[str] = "orca_oracle"
 
 
 class OrcaOracle:
@@ -46,13 +46,15 @@ class OrcaOracle:
     name = ORACLE_PREDICTOR
     obs_len = 1  # only the current state matters: ORCA is memoryless
 
-    def __init__(self, env_config: EnvConfig | None = None):
-        self.env_config = env_config or EnvConfig()
+    def __init__(self) -> None:
+        self.env_config = EnvConfig()
         self._obs: Observation | None = None
 
-    def observe(self, obs: Observation) -> None:
-        """The state the next rollouts start from (velocities and goals are not in the history)."""
+    def observe(self, obs: Observation, env_config: EnvConfig) -> None:
+        """The state the next rollouts start from (velocities and goals are not in the history) and the
+        simulator's settings the humans move by (ORCA parameters, whether they see the robots)."""
         self._obs = obs
+        self.env_config = env_config
 
     def rollout(
         self,
@@ -129,45 +131,3 @@ _NO_CASADI = (
     "the ORCA oracle has no CasADi twin (ORCA is not differentiable): use it with coupling='ibr', "
     "not inside the coupled NLP"
 )
-
-
-class OracleController:
-    """Wraps an MPC controller whose predictor is an ``OrcaOracle``: tells the oracle each observation before
-    the controller predicts with it. Everything else is the wrapped controller's."""
-
-    def __init__(self, inner: Controller, oracle: OrcaOracle):
-        self.inner = inner
-        self.oracle = oracle
-        self.name = f"{inner.name}+{oracle.name}"
-
-    def reset(self, obs: Observation) -> None:
-        self.oracle.observe(obs)
-        self.inner.reset(obs)
-
-    def act(self, obs: Observation) -> ControlOutput:
-        self.oracle.observe(obs)
-        return self.inner.act(obs)
-
-    def __getattr__(self, name: str) -> Any:  # e.g. the closed loop asking for the predictor's sha256
-        return getattr(self.inner, name)
-
-
-def make_oracle_controller(spec: ControllerSpec, env_config: EnvConfig | None = None) -> Controller:
-    """The MPC controller of ``spec`` (cmpc or dmpc, coupling "ibr") predicting with the ORCA oracle.
-
-    The oracle cannot be in the predictor registry (it needs the simulator and each observation), so it is
-    handed to ``make_mpc_controller`` directly: the controller reads ``predictor.obs_len`` and calls
-    ``predictor.rollout`` each step, which the oracle provides (it has no CasADi twin, hence IBR only).
-    """
-    from pipelines.loop.mpc import make_mpc_controller
-
-    if spec.controller not in ("cmpc", "dmpc"):
-        raise PipelineError(f"the ORCA oracle is a predictor for cmpc/dmpc, not for {spec.controller!r}")
-    if spec.coupling != "ibr":
-        raise PipelineError(f"the ORCA oracle needs coupling 'ibr' (no CasADi twin), got {spec.coupling!r}")
-    oracle = OrcaOracle(env_config)
-    # the spec keeps naming a registered predictor, so that validation and config code see a loadable name
-    inner = make_mpc_controller(
-        replace(spec, predictor="constant_velocity"), distributed=spec.controller == "dmpc", predictor=oracle
-    )
-    return OracleController(inner, oracle)

@@ -1,0 +1,236 @@
+"""Where a sweep's episodes run: the same EpisodeWorker inline, in a process pool, or in Ray actors.
+
+Execution. Ray when it is installed (``pip install -e .[cluster]``): ``ray.init`` starts a local Ray with K
+CPUs, or joins a cluster with ``--ray-address``; K actors each run episodes. Without Ray, K processes of a
+``concurrent.futures`` pool (spawn start method: no state forked from the driver). Both backends run the same
+``EpisodeWorker`` (pipelines.experiments.worker) and hand its outcomes back to the driver in completion order;
+library thread pools inside each worker are held to one thread, since the workers are the parallelism. The
+inline backend runs one episode at a time in the driver's own process, for debugging and profiling.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import threading
+from collections.abc import Iterable, Iterator
+from typing import Any, Final, Protocol
+
+from pipelines.errors import PipelineError
+from pipelines.experiments.cells import EpisodeTask
+from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, jit_scratch_directory
+
+BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
+# Library thread pools inside each worker: the workers are the parallelism.
+SINGLE_THREAD_ENV: Final[dict[str, str]] = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
+
+
+class Backend(Protocol):
+    name: str
+
+    def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+        """Outcomes in completion order."""
+        ...
+
+    def close(self) -> None: ...
+
+
+_WORKER: EpisodeWorker | None = None  # one per pool process
+
+
+def _exit_with_parent() -> None:
+    """A pool worker whose driver was killed (SIGKILL leaves no time to shut the pool down) exits at once
+    instead of finishing its episode and waiting for work forever."""
+    import multiprocessing
+    from multiprocessing.connection import wait
+
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        wait([parent.sentinel])
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
+
+
+def _init_pool_worker(record: str, jit: bool) -> None:
+    import signal
+
+    global _WORKER
+    # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _exit_with_parent()
+    if jit:
+        jit_scratch_directory()
+    _WORKER = EpisodeWorker(record, jit)
+
+
+def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
+    assert _WORKER is not None, "pool worker used before its initializer ran"
+    return _WORKER.run(task)
+
+
+@contextlib.contextmanager
+def _child_environment(values: dict[str, str]) -> Iterator[None]:
+    """Environment for processes started inside the block (spawned workers copy it at start)."""
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update({k: os.environ.get(k, v) for k, v in values.items()})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class InlineBackend:
+    """One episode at a time in the driver's own process: for debugging and profiling (pdb, cProfile)."""
+
+    name = "inline"
+
+    def __init__(self, record: str, jit: bool = False):
+        # jit's C sources land in the current directory while the driver runs (removed when it exits).
+        self.worker = EpisodeWorker(record, jit)
+
+    def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+        for task in tasks:
+            yield self.worker.run(task)
+
+    def close(self) -> None:
+        pass
+
+
+class ProcessBackend:
+    """K spawned processes of a concurrent.futures pool."""
+
+    name = "process"
+
+    def __init__(self, workers: int, record: str, jit: bool = False):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.workers = workers
+        with _child_environment(SINGLE_THREAD_ENV):
+            self._pool = ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_init_pool_worker,
+                initargs=(record, jit),
+            )
+            # Start every worker now, while the environment above is in force.
+            for future in [self._pool.submit(os.getpid) for _ in range(workers)]:
+                future.result()
+
+    def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+        from concurrent.futures import FIRST_COMPLETED, wait
+
+        pending = iter(tasks)
+        in_flight: set = set()
+        # Two tasks in flight per worker keep them busy without queueing the whole sweep (a cancel is quick).
+        for task in _take(pending, 2 * self.workers):
+            in_flight.add(self._pool.submit(_run_in_pool, task))
+        while in_flight:
+            done, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+            for future in done:
+                for task in _take(pending, 1):
+                    in_flight.add(self._pool.submit(_run_in_pool, task))
+                yield future.result()
+
+    def close(self) -> None:
+        # Cancel what has not started and end the running episodes now: their records were never written, so a
+        # rerun runs them again. (ProcessPoolExecutor has no public way to stop a running call.)
+        processes = list((getattr(self._pool, "_processes", None) or {}).values())
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
+        for process in processes:
+            process.join(timeout=5)
+
+
+class _RayEpisodeWorker(EpisodeWorker):
+    """An EpisodeWorker in a Ray actor: its own process, so it may move to a scratch directory for jit."""
+
+    def __init__(self, record: str = "none", jit: bool = False):
+        if jit:
+            jit_scratch_directory()
+        super().__init__(record, jit)
+
+
+class RayBackend:
+    """K Ray actors, on a local Ray (K CPUs) or on a cluster (--ray-address); the cluster's nodes need
+    crowdmpc installed like the driver. The driver alone writes the sweep directory, so any node can run
+    episodes."""
+
+    name = "ray"
+
+    def __init__(self, workers: int, record: str, address: str | None, jit: bool = False):
+        try:
+            import ray
+        except ImportError:
+            raise PipelineError(
+                "the Ray backend needs the cluster extra: pip install -e '.[cluster]'"
+            ) from None
+        self._ray = ray
+        self._owns_ray = not ray.is_initialized()
+        if self._owns_ray:
+            env = {"env_vars": dict(SINGLE_THREAD_ENV)}
+            if address is None:
+                ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
+            else:
+                ray.init(address=address, runtime_env=env, log_to_driver=False)
+        actor = ray.remote(num_cpus=1)(_RayEpisodeWorker)
+        self._actors = [actor.remote(record, jit) for _ in range(workers)]
+
+    def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+        ray = self._ray
+        pending = iter(tasks)
+        owner: dict[Any, Any] = {}  # object ref -> actor
+        for actor in self._actors:
+            for task in _take(pending, 2):
+                owner[actor.run.remote(task)] = actor
+        while owner:
+            (ref,), _ = ray.wait(list(owner), num_returns=1)
+            actor = owner.pop(ref)
+            for task in _take(pending, 1):
+                owner[actor.run.remote(task)] = actor
+            yield ray.get(ref)
+
+    def close(self) -> None:
+        for actor in self._actors:
+            self._ray.kill(actor)
+        if self._owns_ray:
+            self._ray.shutdown()
+
+
+def _take(it: Iterator[EpisodeTask], n: int) -> list[EpisodeTask]:
+    return list(itertools.islice(it, n))
+
+
+def ray_available() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("ray") is not None
+
+
+def make_backend(kind: str, workers: int, record: str, ray_address: str | None, jit: bool = False) -> Backend:
+    if kind not in BACKENDS:
+        raise PipelineError(f"unknown backend {kind!r}; choose from {list(BACKENDS)}")
+    if workers < 1:
+        raise PipelineError(f"--workers must be at least 1, got {workers}")
+    if ray_address is not None and kind in ("process", "inline"):
+        raise PipelineError(f"--ray-address needs the Ray backend, not --backend {kind}")
+    if kind == "inline":
+        return InlineBackend(record, jit)
+    if kind == "ray" or (kind == "auto" and (ray_available() or ray_address is not None)):
+        return RayBackend(workers, record, ray_address, jit)
+    return ProcessBackend(workers, record, jit)

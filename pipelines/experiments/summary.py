@@ -1,0 +1,152 @@
+"""A cell's episode records reduced to the paper's metrics, with their confidence intervals.
+
+Rates come with 95% Wilson score intervals (Wilson 1927; the interval that stays inside [0, 100] % and keeps
+its coverage for rates near 0 or 100 % and for small samples, where the normal approximation fails: 0 of 200
+collisions gives [0, 1.9] %, not [0, 0]). Travel time is the mean over successful episodes with a normal 95%
+interval of the mean (1.96 standard errors). The safety fields (per-step frequencies, closest approaches) come
+from pipelines.experiments.safety_report. Every part of the report (pipelines.experiments.report, .tables,
+.report_plots) reads these summaries.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Final
+
+import numpy as np
+
+from pipelines.errors import PipelineError
+from pipelines.experiments import safety_report as safety
+from pipelines.experiments.cells import SCENARIOS, Cell, Experiment, PaperFigures
+
+Z95: Final[float] = 1.959963984540054  # two-sided 95% standard normal quantile
+
+
+def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of a binomial proportion, as fractions in [0, 1]; (nan, nan) when n = 0."""
+    if n < 0 or not 0 <= successes <= n:
+        raise PipelineError(f"wilson_interval needs 0 <= successes <= n, got {successes} of {n}")
+    if n == 0:
+        return math.nan, math.nan
+    p = successes / n
+    denominator = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denominator
+    half = z * math.sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass(frozen=True)
+class Rate:
+    count: int
+    n: int
+
+    @property
+    def percent(self) -> float:
+        return 100.0 * self.count / self.n if self.n else math.nan
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        """95% Wilson interval in %."""
+        lo, hi = wilson_interval(self.count, self.n)
+        return 100.0 * lo, 100.0 * hi
+
+
+@dataclass(frozen=True)
+class CellSummary:
+    """One cell's episodes, reduced to the paper's metrics and our solver figures."""
+
+    cell: Cell
+    episodes: int
+    success: Rate
+    collision: Rate
+    contact: Rate
+    discomfort: Rate
+    success_by_scenario: dict[str, Rate]
+    successes: dict[tuple[str, int], bool]  # (scenario, seed) -> success: pairs episodes across cells
+    travel_time_mean: float  # s, over successful episodes (nan if none)
+    travel_time_ci: float  # s, half width of the 95% interval of the mean (nan with < 2 successes)
+    min_distance_mean: float  # m, robot-human
+    min_distance_median: float  # m, robot-human
+    min_distances: tuple[float, ...]  # m, each episode's minimum robot-human distance (inf: no human)
+    # % of recorded states (rows 0..T) with the condition, over the cell; nan when some record lacks the count
+    collision_step_freq: float
+    contact_step_freq: float
+    discomfort_step_freq: float
+    step_median_ms: float  # median over episodes of the per-episode median control step
+    step_p95_ms: float  # 95th percentile over episodes of the per-episode p95
+    step_mean_ms: float  # all control-step time / all steps
+    iterations_mean: float  # IBR iterations per control step
+    fallback_step_rate: float  # % of control steps that fell back
+    paper: PaperFigures | None
+
+    @property
+    def paper_row(self) -> dict[str, float | None]:
+        return (
+            asdict(self.paper)
+            if self.paper
+            else dict.fromkeys(("success", "travel_time", "collision", "discomfort"))
+        )
+
+
+def _mean(values: Sequence[float]) -> float:
+    return float(np.mean(values)) if len(values) else math.nan
+
+
+def _half_width(values: Sequence[float]) -> float:
+    """Half width of the normal 95% interval of the mean (nan with fewer than two values)."""
+    if len(values) < 2:
+        return math.nan
+    return Z95 * float(np.std(values, ddof=1)) / math.sqrt(len(values))
+
+
+def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFigures | None) -> CellSummary:
+    n = len(records)
+    metrics = [r["metrics"] for r in records]
+
+    def rate(name: str, rows: Sequence[dict[str, Any]] = metrics) -> Rate:
+        return Rate(sum(bool(m[name]) for m in rows), len(rows))
+
+    times = [m["travel_time"] for m in metrics if m["success"] and m["travel_time"] is not None]
+    solver = [r["solver"] for r in records]
+    steps = sum(s["steps"] for s in solver)
+    medians = [s["median_ms"] for s in solver if s["median_ms"] is not None]
+    p95s = [s["p95_ms"] for s in solver if s["p95_ms"] is not None]
+    iterations = [s["mean_iterations"] for s in solver if s["mean_iterations"] is not None]
+    return CellSummary(
+        cell=cell,
+        episodes=n,
+        success=rate("success"),
+        collision=rate("collision"),
+        contact=rate("contact"),
+        discomfort=rate("discomfort"),
+        successes={(r["scenario"], r["seed"]): bool(r["metrics"]["success"]) for r in records},
+        success_by_scenario={
+            s: rate("success", [r["metrics"] for r in records if r["scenario"] == s]) for s in SCENARIOS
+        },
+        travel_time_mean=_mean(times),
+        travel_time_ci=_half_width(times),
+        min_distance_mean=_mean([m["min_distance"] for m in metrics if m["min_distance"] is not None]),
+        **safety.safety_figures(metrics),
+        step_median_ms=float(np.median(medians)) if medians else math.nan,
+        step_p95_ms=float(np.percentile(p95s, 95)) if p95s else math.nan,
+        step_mean_ms=sum(s["total_ms"] for s in solver) / steps if steps else math.nan,
+        iterations_mean=_mean(iterations),
+        fallback_step_rate=100.0 * sum(s["fallback_steps"] for s in solver) / steps if steps else math.nan,
+        paper=paper,
+    )
+
+
+def summarize(
+    experiment: Experiment, cells: Sequence[Cell], records: Iterable[dict[str, Any]]
+) -> list[CellSummary]:
+    """One summary per cell that has records, in table order."""
+    by_cell: dict[str, list[dict[str, Any]]] = {}
+    for record in records:
+        by_cell.setdefault(record["cell"], []).append(record)
+    return [
+        summarize_cell(cell, by_cell[cell.key], experiment.paper.get((cell.method, cell.n_humans)))
+        for cell in cells
+        if by_cell.get(cell.key)
+    ]

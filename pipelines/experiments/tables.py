@@ -1,0 +1,183 @@
+"""The sweep's Markdown table, laid out like the paper's Tables II/III, and the paired comparison it prints.
+
+One column per method and number of pedestrians, the four metrics as rows, the paper's figure under each of
+ours, and the better method of each group in bold (as the paper prints it). Success is also compared pairwise
+on the crowds both methods ran (the same scenarios and seeds), with the exact McNemar test.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from pipelines.experiments import safety_report as safety
+from pipelines.experiments.cells import SCENARIOS, Experiment
+from pipelines.experiments.summary import CellSummary, Rate
+
+
+def mcnemar_exact(b: int, c: int) -> float:
+    """Two-sided exact McNemar test: the p-value of ``b`` vs ``c`` discordant pairs under a fair coin."""
+    n = b + c
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, k) for k in range(min(b, c) + 1)) / 2.0**n
+    return min(1.0, 2.0 * tail)
+
+
+def paired_success(reference: CellSummary, other: CellSummary) -> tuple[int, int, float]:
+    """On the crowds both cells ran: (other succeeded where the reference failed, the reverse, McNemar p)."""
+    shared = reference.successes.keys() & other.successes.keys()
+    gained = sum(other.successes[k] and not reference.successes[k] for k in shared)
+    lost = sum(reference.successes[k] and not other.successes[k] for k in shared)
+    return gained, lost, mcnemar_exact(gained, lost)
+
+
+def _fmt(x: float | None, digits: int = 1) -> str:
+    return "—" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+
+
+def _rate_cell(r: Rate) -> str:
+    lo, hi = r.interval
+    return f"{_fmt(r.percent)} [{_fmt(lo)}, {_fmt(hi)}]" if r.n else "—"
+
+
+def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
+    """Indices of the best value (as printed, one decimal) in a group; none when every method ties or the
+    group has one member, as the paper leaves ties unmarked."""
+    finite = [(i, round(v, 1)) for i, v in enumerate(values) if not math.isnan(v)]
+    if len(values) < 2 or not finite:
+        return set()
+    best = (max if higher_is_better else min)(v for _, v in finite)
+    winners = {i for i, v in finite if v == best}
+    return winners if len(winners) < len(values) else set()
+
+
+def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_line: str) -> str:
+    """The paragraph above the table: how many episodes, which predictors and conventions, how to read it."""
+    predictors = sorted({s.cell.spec.predictor_name or "none" for s in columns})
+    counts = sorted({s.episodes for s in columns})
+    per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
+    notes = [
+        f"## {experiment.title}",
+        "",
+        f"Ours: {per_cell} episodes per cell, "
+        "half circle and half perpendicular crossing, the same seeds in every cell; "
+        f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
+        "interval in brackets; travel time over successful episodes ± the 95% interval of its mean. "
+        "Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) this method "
+        "succeeded and the first one failed / the reverse, with the exact McNemar p-value.",
+        world_line,
+    ]
+    if any(s.paper for s in columns):
+        notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
+    else:
+        notes.append("The paper has no such table.")
+    return "\n".join(notes)
+
+
+def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> str:
+    """The paper's layout: a column per (number of pedestrians, method), metrics as rows, paper under ours."""
+    if not summaries:
+        return f"## {experiment.title}\n\nNo episodes recorded yet.\n"
+    groups: dict[int, list[CellSummary]] = {}
+    for s in summaries:
+        groups.setdefault(s.cell.n_humans, []).append(s)
+    columns = [s for n in sorted(groups) for s in groups[n]]
+    lines = [
+        "| Metrics \\ Methods | " + " | ".join(s.cell.method for s in columns) + " |",
+        "|---|" + "---|" * len(columns),
+        "| Numbers of pedestrians | " + " | ".join(str(s.cell.n_humans) for s in columns) + " |",
+    ]
+    world_line, worlds = safety.world_note([s.cell for s in columns])
+    if worlds:
+        lines.append("| Margins / profile / visibility | " + " | ".join(worlds) + " |")
+    lines += _metric_rows(groups, columns)
+    lines += _detail_rows(groups, columns)
+    return _table_notes(experiment, columns, world_line) + "\n\n" + "\n".join(lines) + "\n"
+
+
+def _row(label: str, texts: Sequence[str]) -> str:
+    return f"| {label} | " + " | ".join(texts) + " |"
+
+
+def _bolded(
+    groups: dict[int, list[CellSummary]],
+    columns: list[CellSummary],
+    texts: list[str],
+    values: list[float],
+    higher_is_better: bool,
+) -> list[str]:
+    """``texts`` (one per column), the best of each group of columns by ``values`` in bold."""
+    out = []
+    for n in sorted(groups):
+        idx = [columns.index(s) for s in groups[n]]
+        best = _best([values[i] for i in idx], higher_is_better)
+        out += [f"**{texts[i]}**" if j in best else texts[i] for j, i in enumerate(idx)]
+    return out
+
+
+def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
+    """The paper's four metrics: ours with their intervals, and the paper's figures under each when it has
+    them, the better method of each group in bold."""
+    has_paper = any(s.paper for s in columns)
+    metric_rows = (
+        ("Success rate (%)", "success", True),
+        ("Average travel time (s)", "travel_time", False),
+        ("Collision rate (%)", "collision", False),
+        ("Discomfort rate (%)", "discomfort", False),
+    )
+    lines = []
+    for label, name, higher in metric_rows:
+        if name == "travel_time":
+            values = [s.travel_time_mean for s in columns]
+            texts = [
+                f"{_fmt(s.travel_time_mean)} ± {_fmt(s.travel_time_ci)}"
+                if s.travel_time_ci == s.travel_time_ci
+                else _fmt(s.travel_time_mean)
+                for s in columns
+            ]
+        else:
+            rates: list[Rate] = [getattr(s, name) for s in columns]
+            values = [r.percent for r in rates]
+            texts = [_rate_cell(r) for r in rates]
+        lines.append(_row(label, _bolded(groups, columns, texts, values, higher)))
+        if has_paper:
+            pv = [getattr(s.paper, name) if s.paper else math.nan for s in columns]
+            paper = _bolded(groups, columns, [_fmt(v) for v in pv], pv, higher)
+            lines.append(_row("&nbsp;&nbsp;paper", paper))
+    return lines
+
+
+def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
+    """Each column's successes paired with those of its group's first method (the reference)."""
+    paired = []
+    for s in columns:
+        reference = groups[s.cell.n_humans][0]
+        if s is reference:
+            paired.append("reference" if len(groups[s.cell.n_humans]) > 1 else "—")
+        else:
+            gained, lost, p = paired_success(reference, s)
+            paired.append(f"+{gained} / −{lost} (p = {p:.2g})")
+    return paired
+
+
+def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
+    """What the paper does not print: contact, per-step collisions, closest approach, success per scenario,
+    the paired comparison, and what the controller cost."""
+    return [
+        _row("Contact rate (%) (< 0.6 m)", [_rate_cell(s.contact) for s in columns]),
+        _row("Collision per step (%)", [_fmt(s.collision_step_freq, 2) for s in columns]),
+        _row("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns]),
+        _row(
+            "Success circle / perpendicular (%)",
+            [" / ".join(_fmt(s.success_by_scenario[sc].percent, 0) for sc in SCENARIOS) for s in columns],
+        ),
+        _row("Success, paired with the group's first method", _paired_texts(groups, columns)),
+        _row("Episodes", [str(s.episodes) for s in columns]),
+        _row(
+            "Control step median / p95 (ms)",
+            [f"{_fmt(s.step_median_ms, 2)} / {_fmt(s.step_p95_ms, 2)}" for s in columns],
+        ),
+        _row("IBR iterations per step (mean)", [_fmt(s.iterations_mean, 2) for s in columns]),
+        _row("Fallback steps (%)", [_fmt(s.fallback_step_rate, 2) for s in columns]),
+    ]

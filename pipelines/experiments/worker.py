@@ -1,0 +1,163 @@
+"""Episodes into records: what runs in the workers, whichever backend hosts them.
+
+Every backend (pipelines.experiments.backends) runs the same ``EpisodeWorker``: it builds a cell's controller
+once and reuses it for every episode of that cell it gets (tasks come interleaved across the cells, episode
+index by episode index), and returns a JSON-ready record (plus the MCAP bytes of a kept log) to the driver. A
+failing episode (an exception in the controller) does not stop the sweep: the worker hands back its traceback,
+which the driver writes to ``<out>/errors.jsonl`` and not to the records, so a rerun tries it again.
+
+Recording (``--record failures|all``) happens *during* the run: the worker records every episode to a scratch
+file and keeps it only when the policy asks. Re-running a failure afterwards would be cheaper, but an episode
+is only reproducible if everything in the loop is (solver timeouts and thread timing are not), and a log of a
+different run than the recorded metrics would mislead; recording costs about 5% of a CMPC episode.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import tempfile
+import time
+import traceback
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Final
+
+from pipelines.errors import PipelineError
+from pipelines.experiments.cells import EpisodeTask
+from pipelines.loop.controllers import Controller, make_controller
+from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from pipelines.loop.episode import EpisodeResult
+
+RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
+# Controllers a worker keeps built at once (least recently used dropped first). Tasks come interleaved across
+# the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
+# MPC controller holds a few CasADi solver instances (megabytes), worth keeping but not without bound.
+CONTROLLER_CACHE: Final[int] = 16
+
+
+def jit_available() -> bool:
+    """Whether CasADi's jit can compile here: its "shell" compiler calls gcc."""
+    return shutil.which("gcc") is not None
+
+
+def jit_scratch_directory() -> None:
+    """Move a worker process into a scratch directory of its own: CasADi's jit writes its C sources into the
+    current directory (it has no option for another), and a killed worker must not leave them in the
+    user's."""
+    import atexit
+
+    scratch = tempfile.mkdtemp(prefix="crowdmpc-worker-")
+    os.chdir(scratch)
+    atexit.register(shutil.rmtree, scratch, ignore_errors=True)
+
+
+def is_failure(metrics: dict[str, Any]) -> bool:
+    """What ``--record failures`` keeps: not every robot arrived, or personal space was violated."""
+    return (not metrics.get("success")) or bool(metrics.get("collision"))
+
+
+def episode_record(task: EpisodeTask, result: EpisodeResult, wall_s: float, cpu_s: float) -> dict[str, Any]:
+    """One line of episodes.jsonl: the closed loop's ``EpisodeRecord`` and what only the sweep knows (the
+    cell, the worker). ``cpu_s`` is the worker's CPU time for the episode, which unlike ``wall_s`` does not
+    depend on how busy the machine was."""
+    spec, world = task.cell.spec, task.cell.world
+    sweep = {
+        "key": task.key,
+        "experiment": task.experiment,
+        "cell": task.cell.key,
+        "method": task.cell.method,
+        "index": task.index,
+        "flocking": spec.flocking,
+        "coupling": spec.coupling,
+        "margins": spec.margins.label,
+        "profile": world.profile,
+        "visibility": world.visibility,
+        "wall_s": wall_s,
+        "cpu_s": cpu_s,
+        "worker": f"{socket.gethostname()}:{os.getpid()}",
+    }
+    return {**result.record().to_dict(), **plain(sweep)}
+
+
+@dataclass
+class EpisodeOutcome:
+    """What a worker hands back: a record, or the error that stopped the episode; a kept MCAP log."""
+
+    key: str
+    record: dict[str, Any] | None = None
+    error: str | None = None
+    mcap: bytes | None = None
+
+
+class EpisodeWorker:
+    """Runs episode tasks; builds each cell's controller once and reuses it across that cell's episodes."""
+
+    def __init__(self, record: str = "none", jit: bool = False):
+        if record not in RECORD_POLICIES:
+            raise PipelineError(f"unknown --record {record!r}; choose from {list(RECORD_POLICIES)}")
+        self.record = record
+        self.jit = jit
+        self._controllers: OrderedDict[str, Controller] = OrderedDict()
+        self.builds = 0  # controllers built so far (a test checks the reuse)
+
+    def controller(self, task: EpisodeTask) -> Controller:
+        key = task.cell.key
+        if key in self._controllers:
+            self._controllers.move_to_end(key)
+            return self._controllers[key]
+        controller = make_controller(task.cell.spec, task.cell.world.env_config(), jit=self.jit)
+        self.builds += 1
+        self._controllers[key] = controller
+        while len(self._controllers) > CONTROLLER_CACHE:
+            self._controllers.popitem(last=False)
+        return controller
+
+    def run(self, task: EpisodeTask) -> EpisodeOutcome:
+        try:
+            return self._run(task)
+        except Exception:  # a bug or a solver crash in one episode must not end a sweep of thousands
+            return EpisodeOutcome(task.key, error=traceback.format_exc())
+
+    def _run(self, task: EpisodeTask) -> EpisodeOutcome:
+        from pipelines.loop.episode import run_episode
+
+        controller = self.controller(task)
+        recorder = None
+        if self.record != "none":
+            from pipelines.logs.recording import McapEpisodeRecorder
+
+            # A scratch folder per episode; a kept log goes to the driver as bytes (it may run elsewhere).
+            run_meta = {"experiment": task.experiment, "cell": task.cell.key}
+            recorder = McapEpisodeRecorder(tempfile.mkdtemp(prefix="crowdmpc-episode-"), run_meta=run_meta)
+        meta = {
+            "experiment": task.experiment,
+            "cell": task.cell.key,
+            "method": task.cell.method,
+        }
+        start, cpu_start = time.perf_counter(), time.process_time()
+        try:
+            result = run_episode(
+                controller,
+                seed=task.seed,
+                scenario=task.scenario,
+                n_humans=task.cell.n_humans,
+                n_robots=task.cell.n_robots,
+                env_config=task.cell.world.env_config(),
+                observers=() if recorder is None else (recorder,),
+                meta=meta,
+            )
+            record = episode_record(
+                task, result, time.perf_counter() - start, time.process_time() - cpu_start
+            )
+            mcap = None
+            if recorder is not None and (self.record == "all" or is_failure(record["metrics"])):
+                mcap = recorder.paths[-1].read_bytes()
+            return EpisodeOutcome(task.key, record=record, mcap=mcap)
+        finally:
+            if recorder is not None:
+                recorder.close()  # already closed by on_end unless the episode raised
+                shutil.rmtree(recorder.out_dir, ignore_errors=True)

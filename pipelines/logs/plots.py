@@ -1,0 +1,178 @@
+"""Pictures of episode recordings: trajectories with the plans and predictions, A/B overlay, animation.
+
+Trajectories are drawn with crowdsim.plotting's figure and colours, so that a recorded run looks like a
+simulated one; the plans and predictions, which only the recording holds, are drawn on top of them.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+
+from pipelines.errors import PipelineError
+from pipelines.logs.reader import EpisodeView, Recording, episode_view
+
+
+def _robot_color(i: int) -> str:
+    from crowdsim.plotting import ROBOT_COLORS
+
+    return ROBOT_COLORS[i % len(ROBOT_COLORS)]
+
+
+GOAL_COLOR: Final = "red"  # as crowdsim.plotting draws them
+HUMAN_COLOR: Final = "0.35"
+
+
+def default_times(view: EpisodeView, count: int = 3) -> list[float]:
+    return [float(t) for t in np.linspace(view.times[0], view.times[-1], count + 1)[:-1]]
+
+
+def _draw_plans(ax: Any, view: EpisodeView, row: int, *, label: bool) -> None:
+    """Robot i's plan at state ``row`` from its position, one marker per planned step, above the agents
+    (a plan that is followed would otherwise hide under the trajectory); predictions dotted grey."""
+    step = int(view.steps[row])
+    plan = view.plans.get(step)
+    if plan is not None:
+        for i, track in enumerate(plan):
+            pts = np.vstack([view.robot_positions[row, i], track])
+            ax.plot(pts[:, 0], pts[:, 1], "--o", color=_robot_color(i), lw=1.2, ms=3, mfc="white", mew=0.8,
+                    zorder=6, label="plan" if label and i == 0 else None)  # fmt: skip
+    prediction = view.predictions.get(step)
+    if prediction is not None:
+        for j in range(prediction.shape[1]):
+            pts = np.vstack([view.human_positions[row, j], prediction[:, j]])
+            ax.plot(pts[:, 0], pts[:, 1], ":.", color=HUMAN_COLOR, lw=1.0, ms=3, zorder=6,
+                    label="prediction" if label and j == 0 else None)  # fmt: skip
+
+
+def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | None = None) -> list[float]:
+    """Trajectories (crowdsim.plotting.plot_episode) with the plans and predictions made at ``times`` (s).
+
+    Returns the times actually drawn (the nearest recorded states).
+    """
+    from crowdsim.plotting import plot_episode
+
+    view = episode_view(rec)
+    rows = sorted({view.row_at(t) for t in (times if times else default_times(view))})
+    fig = plot_episode(
+        view.robot_positions,
+        view.human_positions,
+        view.robot_goals,
+        snapshot_steps=rows,
+        radius=view.radius,
+        dt=view.dt,
+    )
+    ax = fig.axes[0]
+    for k, row in enumerate(rows):
+        _draw_plans(ax, view, row, label=k == 0)
+    drawn = [float(view.times[r]) for r in rows]
+    ax.set_title(f"{rec.label}\nplans and predictions at t = {', '.join(f'{t:g}' for t in drawn)} s")
+    if rec.truncated:
+        ax.text(0.01, 0.01, "TRUNCATED FILE", transform=ax.transAxes, color="red", fontsize=9)
+    _dedupe_legend(ax)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
+    return drawn
+
+
+def _dedupe_legend(ax: Any, *, below: bool = False) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    unique = dict(zip(labels, handles, strict=True))
+    if unique and below:  # under the axes: nothing drawn is hidden
+        ax.legend(
+            unique.values(), unique.keys(), loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=7
+        )
+    elif unique:
+        ax.legend(unique.values(), unique.keys(), loc="best", fontsize=7)
+
+
+def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
+    """Both runs' trajectories on one axes: A solid, B dashed, robots in the same colours."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 7))
+    ax = fig.add_subplot()
+    for rec, style, alpha in ((a, "-", 1.0), (b, "--", 0.8)):
+        view = episode_view(rec)
+        tag = "A" if rec is a else "B"
+        for j in range(view.human_positions.shape[1]):
+            ax.plot(*view.human_positions[:, j].T, style, color="0.6", lw=0.8, alpha=0.6,
+                    label=f"{tag} humans" if j == 0 else None)  # fmt: skip
+        for i in range(view.robot_positions.shape[1]):
+            ax.plot(*view.robot_positions[:, i].T, style, color=_robot_color(i), lw=2.0, alpha=alpha,
+                    label=f"{tag}: {rec.label}" if i == 0 else None)  # fmt: skip
+        ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.set_title("A solid, B dashed")
+    _dedupe_legend(ax, below=True)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
+
+
+def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> int:
+    """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg). Returns the frame count.
+
+    One frame per recorded state, played at ``speed`` times simulated time.
+    """
+    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
+
+    from crowdsim.plotting import frame_axes
+
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise PipelineError(f"--animate writes .gif or .mp4, got {out.name!r}")
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise PipelineError("an .mp4 needs ffmpeg, which is not installed here; ask for a .gif instead")
+    view = episode_view(rec)
+    fps = speed / view.dt
+    m, n = view.robot_positions.shape[1], view.human_positions.shape[1]
+
+    fig = Figure(figsize=(6, 6), layout="constrained")
+    ax = fig.add_subplot()
+    frame_axes(ax, view.robot_positions, view.human_positions, view.robot_goals)
+    ax.set_title(rec.label, fontsize=9)
+    ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14, zorder=1)
+    robots = [Circle((0, 0), view.radius, fc=_robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]
+    humans = [Circle((0, 0), view.radius, fill=False, ec=HUMAN_COLOR, lw=1.2, zorder=3) for _ in range(n)]
+    for patch in robots + humans:
+        ax.add_patch(patch)
+    trails = [ax.plot([], [], "-", color=_robot_color(i), lw=1.0, alpha=0.6)[0] for i in range(m)]
+    plans = [ax.plot([], [], "--", color=_robot_color(i), lw=1.2)[0] for i in range(m)]
+    predictions = [ax.plot([], [], ":", color=HUMAN_COLOR, lw=1.0)[0] for _ in range(n)]
+    clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
+
+    def draw(row: int) -> list[Any]:
+        step = int(view.steps[row])
+        for i, patch in enumerate(robots):
+            patch.center = view.robot_positions[row, i]
+            trails[i].set_data(view.robot_positions[: row + 1, i, 0], view.robot_positions[: row + 1, i, 1])
+        for j, patch in enumerate(humans):
+            patch.center = view.human_positions[row, j]
+        plan = view.plans.get(step)
+        for i, line in enumerate(plans):
+            pts = np.vstack([view.robot_positions[row, i], plan[i]]) if plan is not None else np.empty((0, 2))
+            line.set_data(pts[:, 0], pts[:, 1])
+        prediction = view.predictions.get(step)
+        for j, line in enumerate(predictions):
+            pts = (
+                np.vstack([view.human_positions[row, j], prediction[:, j]])
+                if prediction is not None
+                else np.empty((0, 2))
+            )
+            line.set_data(pts[:, 0], pts[:, 1])
+        clock.set_text(f"t = {view.times[row]:.1f} s" + ("   (truncated file)" if rec.truncated else ""))
+        return [*robots, *humans, *trails, *plans, *predictions, clock]
+
+    frames = len(view.times)
+    animation = FuncAnimation(fig, draw, frames=frames, blit=False)
+    writer = PillowWriter(fps=fps) if suffix == ".gif" else FFMpegWriter(fps=fps)
+    animation.save(out, writer=writer, dpi=80)
+    return frames
