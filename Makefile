@@ -1,7 +1,7 @@
 # Two entry points, each self-contained from a fresh clone:
 #   make demo   set up .venv, run one closed-loop CMPC episode (3 robots, 7 humans, the zoo's Social-LSTM)
 #               printing its metrics, writing runs/demo/*.mcap and a plot
-#   make test   set up .venv, lint (ruff), run the test suite (pytest)
+#   make test   set up .venv, lint (ruff), type-check (mypy), run the test suite (pytest)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -9,7 +9,7 @@ BIN    := $(VENV)/bin
 CROWDMPC_DATA ?= $(abspath ../shared/data)
 export CROWDMPC_DATA
 
-.PHONY: demo test lint setup clean
+.PHONY: demo test lint typecheck setup clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,8 +29,12 @@ lint: $(BIN)/.installed
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# mypy reads its configuration (packages to check, CasADi treated as untyped) from pyproject.toml.
+typecheck: $(BIN)/.installed
+	$(BIN)/mypy
+
 # The slow tests (closed-loop batches, a real Ray sweep when Ray is installed) fit CI's budget: run them all.
-test: lint
+test: lint typecheck
 	$(BIN)/python -m pytest -q -m "slow or not slow"
 
 clean:

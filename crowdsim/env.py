@@ -50,7 +50,7 @@ from crowdsim.errors import SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
 from crowdsim.scenarios import Layout, make_layout
-from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF
+from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF, WorldFacts
 
 
 @dataclass(frozen=True)
@@ -109,6 +109,17 @@ class EnvConfig:
             )
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
+
+    @classmethod
+    def from_world(cls, world: WorldFacts, **settings: Any) -> EnvConfig:
+        """The simulator for ``world`` (tau, L, radii, speeds, bounds), with ``settings`` for the rest."""
+        facts = {"dt": world.dt, "history_len": world.obs_len, "radius": world.radius}
+        facts |= {"v_pref": world.v_pref, "v_max": world.v_max, "a_max": world.a_max}
+        return cls(**facts, **settings)
+
+    def world(self) -> WorldFacts:
+        """The world facts this simulator runs with (what the MPC and the predictors must agree with)."""
+        return WorldFacts(self.dt, self.history_len, self.radius, self.v_pref, self.v_max, self.a_max)
 
     @property
     def max_steps(self) -> int:

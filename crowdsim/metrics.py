@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, Final
+from typing import Any, Final, cast
 
 import numpy as np
 
@@ -198,7 +198,8 @@ def discomfort_steps(traj: Trajectory, horizon: float = DISCOMFORT_HORIZON) -> n
     r_end = rp + horizon * traj.robot_velocities
     h_end = hp + horizon * traj.human_velocities
     hit = segments_intersect(rp[:, :, None], r_end[:, :, None], hp[:, None], h_end[:, None])  # (T+1, M, N)
-    return hit.any(axis=(1, 2))
+    # any() over axes of a 3-D array is an array; numpy types it as "bool | ndarray" for any input.
+    return cast(np.ndarray, hit.any(axis=(1, 2)))
 
 
 def episode_metrics(

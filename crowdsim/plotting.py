@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -92,7 +93,9 @@ def plot_episode(
         fig = Figure(figsize=(7, 7))
         ax = fig.add_subplot()
     else:
-        fig = ax.figure
+        # Typed "Figure | SubFigure"; callers pass axes of a top-level Figure (an axes of a SubFigure would
+        # get that SubFigure back, unchanged at run time).
+        fig = cast(Figure, ax.figure)
     snaps = default_snapshots(n_rows) if snapshot_steps is None else sorted({int(s) for s in snapshot_steps})
     snaps = [s for s in snaps if 0 <= s < n_rows]
 

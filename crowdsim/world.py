@@ -1,22 +1,50 @@
 """The world facts every package shares: time step, observed history, agent size and robot bounds.
 
-One source, so that the simulator, the MPC and the predictors cannot drift apart; they import these names
-rather than repeating the numbers. The crowd geometry (circle radius, square width) is the same in every
-simulation profile (``crowdsim.profiles``) and lives here too.
+One source, so that the simulator, the MPC and the predictors cannot drift apart. ``WorldFacts`` is the
+object: ``EnvConfig.from_world`` and ``MPCConfig.from_world`` build the simulator's and the MPC's settings
+from one, ``EnvConfig.world()`` reads it back, and the closed loop refuses a controller whose MPC or
+predictor disagrees with the simulator it drives in (``pipelines.loop.mpc.check_world``). ``WORLD`` holds the
+defaults, which the module constants name for the code that only needs a number. The crowd geometry (circle
+radius, square width) is the same in every simulation profile (``crowdsim.profiles``) and lives here too.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, fields
 from typing import Final
 
-DT: Final[float] = 0.4  # s, tau: simulation step = control period (Table I; TrajNet++ samples at 2.5 Hz)
-# L: observed steps every zoo predictor reads. TrajNet++ observes 9 steps; the paper's Table I says 8, but
-# our models are trained on 9, so the simulator keeps 9 rows of history and feeds them exactly their length.
-OBS_LEN: Final[int] = 9
-RADIUS: Final[float] = 0.3  # m, every robot and human (Table I; CrowdNav's env config)
-V_PREF: Final[float] = 1.0  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav's env config)
-V_MAX: Final[float] = 1.0  # m/s, robot velocity bound per component, Eq. (6)
-A_MAX: Final[float] = 2.0  # m/s^2, robot acceleration bound per component, Eq. (6)
+from crowdsim.errors import SimulationError
+
+
+@dataclass(frozen=True)
+class WorldFacts:
+    dt: float = 0.4  # s, tau: simulation step = control period (Table I; TrajNet++ samples at 2.5 Hz)
+    # L: observed steps every zoo predictor reads. TrajNet++ observes 9 steps; the paper's Table I says 8, but
+    # our models are trained on 9, so the simulator keeps 9 rows of history and feeds them exactly that.
+    obs_len: int = 9
+    radius: float = 0.3  # m, every robot and human (Table I; CrowdNav's env config)
+    v_pref: float = 1.0  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav's env config)
+    v_max: float = 1.0  # m/s, robot velocity bound per component, Eq. (6)
+    a_max: float = 2.0  # m/s^2, robot acceleration bound per component, Eq. (6)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "obs_len":
+                if not (isinstance(value, int) and value >= 1):
+                    raise SimulationError(f"WorldFacts.obs_len must be an int >= 1, got {value!r}")
+            elif not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise SimulationError(f"WorldFacts.{f.name} must be a finite number > 0, got {value!r}")
+
+
+WORLD: Final[WorldFacts] = WorldFacts()
+DT: Final[float] = WORLD.dt
+OBS_LEN: Final[int] = WORLD.obs_len
+RADIUS: Final[float] = WORLD.radius
+V_PREF: Final[float] = WORLD.v_pref
+V_MAX: Final[float] = WORLD.v_max
+A_MAX: Final[float] = WORLD.a_max
 
 CIRCLE_RADIUS: Final[float] = 5.0  # m, circle crossing (the paper's fork, env_m.config; CrowdNav's is 4 m)
 SQUARE_WIDTH: Final[float] = 10.0  # m, side of the perpendicular-crossing square (env_m.config)

@@ -7,7 +7,7 @@ learning-based model predictive control approach").
 The facts the MPC shares with the simulator and the predictors (``tau``, ``v_max``, ``a_max``) default to
 ``crowdsim.world``, their one source. Table I's ``L`` (observed steps) is not here: it belongs to the
 predictor (``Predictor.obs_len``, 9 for every zoo model), and the simulator keeps ``crowdsim.world.OBS_LEN``
-rows of history for it; the closed loop checks that they agree (``pipelines.mpc_controllers.check_world``).
+rows of history for it; the closed loop checks that they agree (``pipelines.loop.mpc.check_world``).
 
 The two values the paper uses without giving them:
 
@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, Final, Literal, get_args
 
 from crowdsim import world
+from crowdsim.world import WorldFacts
 from mpc.errors import MPCConfigError
 
 # Option types as Literals (values stay plain strings in JSON and MCAP metadata); the tuples are their values.
@@ -169,6 +170,11 @@ class MPCConfig:
     def human_margin(self, k: int) -> float:
         """m_k of horizon step ``k`` (0-based), 0 without margins (the paper's Eq. 11)."""
         return self.human_margins[k] if self.human_margins else 0.0
+
+    @classmethod
+    def from_world(cls, world: WorldFacts, **settings: Any) -> MPCConfig:
+        """Table I's MPC in ``world``: its tau and robot bounds, with ``settings`` for the rest."""
+        return cls(dt=world.dt, v_max=world.v_max, a_max=world.a_max, **settings)
 
     def replace(self, **changes: Any) -> MPCConfig:
         """A copy with ``changes`` applied (validated); unknown names raise ``MPCConfigError``."""

@@ -8,10 +8,13 @@ column ``k`` is the value at ``t+k+1``. Column-major ``(2, H)`` blocks are what 
 
 from __future__ import annotations
 
+from typing import TypeAlias
+
 import casadi as ca
 import numpy as np
 
-Symbolic = ca.SX | ca.MX | ca.DM
+# CasADi is checked as untyped (see pyproject.toml), so this alias is Any to mypy; it documents intent.
+Symbolic: TypeAlias = ca.SX | ca.MX | ca.DM
 
 
 def step(state: Symbolic, accel: Symbolic, dt: float) -> Symbolic:

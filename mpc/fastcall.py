@@ -9,10 +9,11 @@ arrays bound to the function once, and a call copies the arguments in and trigge
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 class BufferedFunction:
@@ -36,9 +37,10 @@ class BufferedFunction:
         self._res = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
         self._buffer, self._trigger = function.buffer()
         for i, a in enumerate(self._args):
-            self._buffer.set_arg(i, memoryview(a))
+            # numpy declares ndarray.__buffer__ only for Python >= 3.12; an ndarray is a buffer on 3.11 too.
+            self._buffer.set_arg(i, memoryview(a))  # type: ignore[arg-type]
         for i, r in enumerate(self._res):
-            self._buffer.set_res(i, memoryview(r))
+            self._buffer.set_res(i, memoryview(r))  # type: ignore[arg-type]  # as set_arg above
         self.names_in = tuple(function.name_in())
         self.names_out = tuple(function.name_out())
 
@@ -49,15 +51,15 @@ class BufferedFunction:
         self._trigger()
         return [r.copy() for r in self._res]
 
-    def call(self, values: dict[str, object]) -> dict[str, np.ndarray]:
+    def call(self, values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
         """Inputs and outputs by name (an nlpsol's ``x0``, ``p``, ... -> ``x``, ``f``, ...); inputs left out
         are zero."""
-        args: list[object] = [0.0] * len(self._args)
+        args: list[ArrayLike] = [0.0] * len(self._args)
         for name, value in values.items():
             args[self.names_in.index(name)] = value
         return dict(zip(self.names_out, self(*args), strict=True))
 
-    def _fill(self, args: Sequence[object]) -> None:
+    def _fill(self, args: Sequence[ArrayLike]) -> None:
         for buffer, value in zip(self._args, args, strict=True):
             buffer[:] = np.ravel(value) if np.ndim(value) else value
 

@@ -11,10 +11,13 @@ of every piece lives in ``predictors.nets``; ``tests/predictors/test_casadi_laye
 
 from __future__ import annotations
 
+from typing import TypeAlias
+
 import casadi as ca
 import numpy as np
 
-Expr = ca.MX | ca.SX | ca.DM
+# CasADi is checked as untyped (see pyproject.toml), so this alias is Any to mypy; it documents intent.
+Expr: TypeAlias = ca.MX | ca.SX | ca.DM
 
 
 def _bias_columns(bias: np.ndarray, n_cols: int) -> ca.DM:

@@ -173,6 +173,12 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
 
     frames = len(view.times)
     animation = FuncAnimation(fig, draw, frames=frames, blit=False)
-    writer = PillowWriter(fps=fps) if suffix == ".gif" else FFMpegWriter(fps=fps)
+    # matplotlib's stubs say fps: int, but the writers take any positive number (Pillow: 1000 / fps ms a
+    # frame, ffmpeg: -r fps); speed / dt is fractional (e.g. 2.5) and must not be rounded.
+    writer = (
+        PillowWriter(fps=fps)  # type: ignore[arg-type]
+        if suffix == ".gif"
+        else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
+    )
     animation.save(out, writer=writer, dpi=80)
     return frames

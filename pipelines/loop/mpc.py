@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from crowdsim.world import WORLD, WorldFacts
 from mpc.cmpc import CMPC, IBRResult
 from mpc.config import MPCConfig
 from mpc.coupled import CoupledCMPC
@@ -40,14 +41,15 @@ if TYPE_CHECKING:
     from crowdsim.env import EnvConfig, Observation
 
 
-def mpc_config(spec: ControllerSpec, jit: bool = False) -> MPCConfig:
-    """Table I defaults, then ``spec.mpc_overrides``, then ``omega_floc = 0`` when flocking is off.
+def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORLD) -> MPCConfig:
+    """Table I in ``world`` (tau, robot bounds), then ``spec.mpc_overrides``, then ``omega_floc = 0`` when
+    flocking is off.
 
     ``jit`` compiles the IBR loops' NLPs. The coupled NLP is not compiled: its graph (the network, or a
     first-order model's 56 x 24 Jacobian of parameters) kept gcc busy for over two minutes per process
     (measured: 148 s for the first first-order episode of `--experiment coupling`).
     """
-    cfg = MPCConfig().replace(**dict(spec.mpc_overrides))
+    cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
     if jit and spec.coupling == "ibr":
         cfg = cfg.replace(jit=True)
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
@@ -70,14 +72,23 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     return history, np.ones(history.shape[:2], dtype=bool)
 
 
-def check_world(obs: Observation, cfg: MPCConfig, predictor: Predictor) -> None:
-    """The simulator, the MPC and the predictor agree on the shared facts (crowdsim/world.py): the control
-    period is the simulation step and the predictor's sampling time, and the history holds what it reads."""
-    if abs(obs.dt - cfg.dt) > 1e-12:
-        raise PipelineError(f"the simulator steps {obs.dt} s but the MPC plans with tau = {cfg.dt} s")
-    if predictor.obs_len > 1 and abs(cfg.dt - PREDICTOR_DT) > 1e-12:
-        raise PipelineError(f"the predictors are sampled every {PREDICTOR_DT} s, the MPC's tau is {cfg.dt} s")
-    predictor_history(obs, predictor.obs_len)
+def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None:
+    """The MPC and the predictor agree with the simulator's world facts (crowdsim/world.py): the control
+    period is the simulation step and the predictor's sampling time, the MPC's robot bounds are the
+    simulator's, and the history holds what the predictor reads."""
+    for name in ("dt", "v_max", "a_max"):
+        ours, theirs = getattr(cfg, name), getattr(world, name)
+        if abs(ours - theirs) > 1e-12:
+            raise PipelineError(f"the simulator's {name} is {theirs} but the MPC's is {ours} (mpc_overrides)")
+    if predictor.obs_len > 1 and abs(world.dt - PREDICTOR_DT) > 1e-12:
+        raise PipelineError(
+            f"the predictors are sampled every {PREDICTOR_DT} s, the simulator's tau is {world.dt} s"
+        )
+    if predictor.obs_len > world.obs_len:
+        raise PipelineError(
+            f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator keeps "
+            f"{world.obs_len} (EnvConfig.history_len): use history_len >= {predictor.obs_len}"
+        )
 
 
 class MPCController:
@@ -113,9 +124,10 @@ class MPCController:
                 f"the {self.model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "
                 "to put inside the joint NLP"
             )
-        cfg = mpc_config(spec, jit)
+        cfg = mpc_config(spec, jit, self.env_config.world())
         margins = spec.margins.resolve(self.model.name, cfg.horizon, checkpoint_sha256(self.model.name))
         self.cfg = cfg.replace(human_margins=margins)
+        check_world(self.env_config.world(), self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
@@ -189,7 +201,11 @@ class MPCController:
             self._observer.observe(obs, self.env_config)
 
     def reset(self, obs: Observation) -> None:
-        check_world(obs, self.cfg, self.model)
+        if abs(obs.dt - self.cfg.dt) > 1e-12:  # an episode of another simulator than the one built for
+            raise PipelineError(
+                f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
+            )
+        predictor_history(obs, self.model.obs_len)
         self._observe(obs)
         # Build now, not inside the first timed step.
         self.solver(obs.n_robots, obs.n_humans)

@@ -198,3 +198,19 @@ def test_ibr_predicts_through_the_twin_and_matches_the_torch_rollout(monkeypatch
     np.testing.assert_allclose(predict(robots_future), reference, rtol=0, atol=1e-9)
     # the robots' plan reaches the humans' prediction
     assert not np.allclose(predict(robots_future + 1.0), reference, atol=1e-6)
+
+
+def test_the_mpc_is_built_from_the_simulators_world_and_refuses_to_disagree():
+    from crowdsim.env import EnvConfig
+    from crowdsim.world import WORLD, WorldFacts
+
+    assert EnvConfig().world() == WORLD and EnvConfig.from_world(WORLD) == EnvConfig()
+    fast = WorldFacts(v_max=1.5, a_max=3.0)
+    controller = make_controller(ControllerSpec("cmpc"), EnvConfig.from_world(fast))
+    assert (controller.cfg.v_max, controller.cfg.a_max, controller.cfg.dt) == (1.5, 3.0, 0.4)
+    with pytest.raises(PipelineError, match=r"simulator's v_max is 1.5 but the MPC's is 1.0"):
+        make_controller(ControllerSpec("cmpc", mpc_overrides=(("v_max", 1.0),)), EnvConfig.from_world(fast))
+    with pytest.raises(PipelineError, match=r"predictor social_lstm_eth reads 9 .* keeps 5"):
+        make_controller(ControllerSpec("cmpc", "social_lstm_eth"), EnvConfig(history_len=5))
+    with pytest.raises(PipelineError, match=r"sampled every 0.4 s, the simulator's tau is 0.2 s"):
+        make_controller(ControllerSpec("cmpc", "social_lstm_eth"), EnvConfig(dt=0.2))
