@@ -113,6 +113,7 @@ class CoupledCMPC:
         self.mode = cfg.coupled_mode
         if self.mode == "auto":
             self.mode = "exact" if expanded is not None else "first_order"
+        self.model: ExactPredictor | FirstOrderPredictor
         if self.mode == "exact":
             self.model = ExactPredictor(function, context_size, expanded)
         else:

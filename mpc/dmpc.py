@@ -90,7 +90,8 @@ class DMPC:
         cfg, local = self.cfg, self.local
         t0 = time.perf_counter()
         pred_shape = (cfg.horizon, self.n_humans, 2)
-        moving = np.flatnonzero(np.asarray(data.active, dtype=bool))
+        # Indices of the active robots; np.ndarray (as in _restart) so its items pass where an int is taken.
+        moving: np.ndarray = np.flatnonzero(np.asarray(data.active, dtype=bool))
         accels = start.accels.copy()
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         lam_x = None if start.lam_x is None else start.lam_x.copy()

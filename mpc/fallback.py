@@ -86,5 +86,9 @@ class PlanMemory:
             # A fallback plan is the shifted previous one (one solved action fewer) or braking (none).
             self._solved_actions = max(self._solved_actions - 1, 0)
             if self._lam_x is not None:
+                if self._lam_g is None:
+                    raise RuntimeError(
+                        "PlanMemory holds lam_x without lam_g: commit both multipliers or neither"
+                    )
                 self._lam_x, self._lam_g = shift(self._lam_x), shift(self._lam_g)
         self._plan = np.array(applied_plan, dtype=float)

@@ -59,8 +59,9 @@ def _is_count(value: object) -> bool:
 
 
 def _is_margin(value: object) -> bool:
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    return number and math.isfinite(value) and value >= 0
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        return False
+    return math.isfinite(value) and value >= 0
 
 
 @dataclass(frozen=True)
@@ -325,8 +326,10 @@ def file_hashes(files: list[Path], root: str | Path | None = None) -> dict[str, 
     root = Path(root) if root is not None else None
     hashes: dict[str, str] = {}
     for path in map(Path, files):
-        in_root = root is not None and path.is_relative_to(root)
-        name = path.relative_to(root).as_posix() if in_root else path.name
+        if root is not None and path.is_relative_to(root):
+            name = path.relative_to(root).as_posix()
+        else:
+            name = path.name
         if name in hashes:
             raise PredictorError(
                 f"two calibration files are both named {name!r} ({path}); pass the data directory as root "

@@ -130,8 +130,8 @@ def evaluate(
     ) as bar:
         for path, scenes in loaded.items():
             scores = score_scenes(predictor, scenes, config, bar)
-            in_root = root is not None and path.is_relative_to(root)
-            per_file[str(path.relative_to(root)) if in_root else str(path)] = summarize(scores)
+            key = str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else str(path)
+            per_file[key] = summarize(scores)
             all_scores.extend(scores)
     return {
         "predictor": predictor.name,

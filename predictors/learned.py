@@ -28,7 +28,6 @@ import copy
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -65,7 +64,7 @@ def casadi_name(text: str) -> str:
 class LearnedPredictor:
     """Common machinery; use ``SocialLSTMPredictor`` or ``SocialGANPredictor``."""
 
-    kind: ClassVar[str]
+    kind: str  # set by each subclass; SocialLSTMPredictor refines it per instance (vanilla or social)
 
     def __init__(self, net: SocialLSTM, *, name: str, obs_len: int = OBS_LEN):
         if obs_len < 2:
@@ -159,7 +158,8 @@ class LearnedPredictor:
         horizon: int | None = None,
     ) -> torch.Tensor:
         """``rollout`` as a differentiable float64 tensor function of ``robots_future`` (H, M, 2)."""
-        check_rollout_inputs(
+        # The checked horizon: robots_future's length, else ``horizon`` (which it requires then).
+        horizon = check_rollout_inputs(
             np.asarray(history),
             np.asarray(mask),
             None if robots_future is None else robots_future.detach().numpy(),
@@ -167,7 +167,6 @@ class LearnedPredictor:
             horizon,
         )
         pos, seen, n_humans = self._prepare(history, mask, humans, keep_robots=robots_future is not None)
-        horizon = int(robots_future.shape[0]) if robots_future is not None else int(horizon)
         future = None if robots_future is None else robots_future.to(torch.float64)[None]
         with single_threaded():
             out = self._rollout_tensor(

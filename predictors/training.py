@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, cast
 
 import lightning as L
 import torch
@@ -27,6 +28,10 @@ from predictors.metrics import ade, fde
 from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+
+if TYPE_CHECKING:
+    from lightning.pytorch.core.optimizer import LightningOptimizer
+    from torch.optim.lr_scheduler import LRScheduler
 
 LOSSES = ("gaussian", "l2")
 
@@ -69,6 +74,10 @@ class _PredictorModule(L.LightningModule):
 
     def on_train_epoch_end(self) -> None:
         self.log("epoch_time_s", time.perf_counter() - self._epoch_start, prog_bar=True)
+
+    def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
+        """The loss and metrics of ``batch``; each subclass defines it."""
+        raise NotImplementedError
 
     def validation_step(self, batch: SceneBatch, batch_idx: int) -> None:
         self._log_eval(self.model_step(batch, "val"), "val", len(batch))
@@ -198,7 +207,8 @@ class GANModule(_PredictorModule):
         }
 
     def training_step(self, batch: SceneBatch, batch_idx: int) -> None:
-        opt_g, opt_d = self.optimizers()
+        # configure_optimizers returns two optimizers, so Lightning hands back a list of two.
+        opt_g, opt_d = cast("list[LightningOptimizer]", self.optimizers())
         # Generator first: its adversarial term runs through the discriminator, whose weights must not change
         # between that forward pass and this backward pass. (Its gradients on the discriminator are cleared
         # before the discriminator's own step.)
@@ -224,7 +234,8 @@ class GANModule(_PredictorModule):
 
     def on_train_epoch_end(self) -> None:
         super().on_train_epoch_end()
-        for scheduler in self.lr_schedulers():
+        # Two StepLR schedulers (configure_optimizers), so a list of plain LRSchedulers.
+        for scheduler in cast("list[LRScheduler]", self.lr_schedulers()):
             scheduler.step()
 
     def configure_optimizers(self):
@@ -238,7 +249,7 @@ class GANModule(_PredictorModule):
         return [opt_g, opt_d], schedulers
 
 
-def make_module(model: str, net_config: SocialLSTMConfig, optim: OptimConfig) -> L.LightningModule:
+def make_module(model: str, net_config: SocialLSTMConfig, optim: OptimConfig) -> SocialLSTMModule | GANModule:
     """The LightningModule of a ``--model`` choice."""
     if model == "social_gan":
         return GANModule(net_config.to_dict(), asdict(optim))

@@ -216,7 +216,7 @@ def load_zoo(name: str, directory: str | Path | None = None) -> LearnedPredictor
 def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
     """``(name, problem or None)`` for every entry: files present, hashes as recorded, weights loadable."""
     root = checkpoints_dir(directory)
-    results = []
+    results: list[tuple[str, str | None]] = []
     for name in zoo_names(root):
         try:
             load_zoo(name, root)

@@ -67,3 +67,79 @@ def test_the_library_packages_take_only_the_world_facts_from_the_simulator():
                     continue
                 bad = [m for m in modules if m.split(".")[0] == "crowdsim" and m not in allowed]
                 assert not bad, f"{path.relative_to(ROOT)} imports {bad}"
+
+
+# pipelines/ in rooms, each importing only the rooms before it: the closed loop, then its logs, then the
+# experiments built on both, then the command line on top. The shared leaves import no room.
+ROOMS = ("loop", "logs", "experiments", "commands")
+LEAVES = ("errors", "plain_json", "version")
+
+
+def project_imports() -> dict[str, set[str]]:
+    """Each project module's project-module imports (anywhere in the file, lazy and TYPE_CHECKING ones too:
+    a cycle through a function-level import is still two modules that need each other)."""
+    paths = {
+        ".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): p
+        for package in ("crowdsim", "mpc", "predictors", "pipelines")
+        for p in (ROOT / package).rglob("*.py")
+    }
+
+    def module_of(name: str) -> str | None:
+        while name and name not in paths:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph = {}
+    for module, path in paths.items():
+        names = []
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names += [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names += [f"{node.module}.{a.name}" for a in node.names]
+        found = {module_of(n) for n in names} - {None, module}
+        graph[module] = {m for m in found if not module.startswith(m + ".")}  # a package's own __init__
+    return graph
+
+
+def test_no_import_cycles_anywhere():
+    graph = project_imports()
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+
+    def visit(module: str, path: list[str]) -> None:
+        state[module] = 1
+        for dep in sorted(graph[module]):
+            if state.get(dep) == 1:
+                cycle = path[path.index(dep) :] + [dep]
+                pytest.fail("import cycle: " + " -> ".join(cycle))
+            if dep not in state:
+                visit(dep, [*path, dep])
+        state[module] = 2
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module, [module])
+
+
+def test_the_pipelines_rooms_import_one_way():
+    graph = project_imports()
+    for module, deps in graph.items():
+        parts = module.split(".")
+        if parts[0] != "pipelines" or len(parts) < 2:
+            continue
+        room = parts[1]
+        inner = {d.split(".")[1] for d in deps if d.startswith("pipelines.") and d.count(".") >= 1}
+        if room in LEAVES:
+            assert not inner, f"{module} is a shared leaf but imports {sorted(inner)}"
+        elif room in ROOMS:
+            later = set(ROOMS[ROOMS.index(room) + 1 :]) | {"cli"}
+            assert not inner & later, f"{module} imports the later room(s) {sorted(inner & later)}"
+
+
+def test_the_cycle_check_finds_a_cycle(tmp_path, monkeypatch):
+    """The cycle test can fail: a hand-made graph with a loop is caught."""
+    import tests.test_layering as layering
+
+    monkeypatch.setattr(layering, "project_imports", lambda: {"a": {"b"}, "b": {"c"}, "c": {"a"}})
+    with pytest.raises(pytest.fail.Exception, match="a -> b -> c -> a"):
+        layering.test_no_import_cycles_anywhere()

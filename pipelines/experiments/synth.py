@@ -46,7 +46,8 @@ def episode_tracks(
     controller = OrcaController() if n_robots else None
     if controller is not None:
         controller.reset(obs)
-    done, info = False, {}
+    done = False
+    info: dict[str, Any] = {}
     while not done:
         action = controller.act(obs).accelerations if controller is not None else np.zeros((0, 2))
         obs, done, info = env.step(action)

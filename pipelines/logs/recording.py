@@ -260,6 +260,7 @@ class McapEpisodeRecorder:
 
     def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
         rec = self._require_open()
+        builder, _ = self._require_episode()
         t_ns = seconds_to_ns(obs.time)
         stamp = {"time": float(obs.time), "step": int(obs.step)}
         self._write_state(
@@ -289,7 +290,7 @@ class McapEpisodeRecorder:
             "extra": plain(out.extra) if out.extra else {},
         }
         rec.write("/mpc/solver", solver, t_ns, schema=SOLVER)
-        scene = self._scene.update(
+        scene = builder.update(
             t_ns, obs.robot_positions, obs.robot_goals, obs.human_positions, plan, prediction
         )
         rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
@@ -297,11 +298,11 @@ class McapEpisodeRecorder:
 
     def on_end(self, result: EpisodeResult) -> None:
         rec = self._require_open()
-        last = self._last
+        builder, last = self._require_episode()
         t_ns = seconds_to_ns(last.time)
         if last.step > self._last_written_step:  # the terminal state, reached by the last step
             self._write_state(rec, last, t_ns, {"time": float(last.time), "step": int(last.step)}, None, None)
-            scene = self._scene.update(
+            scene = builder.update(
                 t_ns, last.robot_positions, last.robot_goals, last.human_positions, None, None
             )
             rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
@@ -328,6 +329,12 @@ class McapEpisodeRecorder:
         if self._recorder is None:
             raise PipelineError("McapEpisodeRecorder: on_step/on_end called before on_reset")
         return self._recorder
+
+    def _require_episode(self) -> tuple[SceneBuilder, Observation]:
+        """The scene builder and newest state, which on_reset sets together with the open file."""
+        if self._scene is None or self._last is None:
+            raise PipelineError("McapEpisodeRecorder: on_step/on_end called before on_reset")
+        return self._scene, self._last
 
     def _write_state(
         self,

@@ -2,28 +2,35 @@
 
 ``crowdsim`` never imports ``mpc``; this module names the controller protocol and holds the explicit, typed
 registry of controllers: the baselines (``pipelines.loop.baselines`` adapts ``crowdsim.baselines``) and the
-game-theoretic MPCs (``pipelines.loop.mpc``). Each registry entry states the facts the pipelines need before
-a controller exists (does it plan with a predictor, can its NLPs be compiled); each controller states the
-rest itself (``predictor``, ``describe``, ``close``). Builders import lazily so that choosing ``orca`` never
-loads CasADi solvers.
+game-theoretic MPCs (``pipelines.loop.mpc``). What the pipelines must know before a controller exists (does
+it plan with a predictor, can its NLPs be compiled) is stated per name in ``pipelines.loop.spec``; each
+controller states the rest itself (``predictor``, ``describe``, ``close``). Builders import lazily so that
+choosing ``orca`` never loads CasADi solvers.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final, Literal, Protocol, get_args
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from crowdsim.control import ControlOutput
-from pipelines.errors import PipelineError
-from pipelines.loop.margins import MarginSpec
+from pipelines.loop.spec import (
+    CONTROLLER_KINDS,
+    COUPLINGS,
+    ControllerKind,
+    ControllerName,
+    ControllerSpec,
+    Coupling,
+)
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig, Observation
-    from pipelines.loop.episode import EpisodeResult
 
+# The spec and the controllers' facts live in pipelines.loop.spec (the MPC adapter needs them, and the
+# registry needs the adapter); they are re-exported here, the registry's public face.
 __all__ = [
     "CONTROLLERS",
+    "CONTROLLER_KINDS",
     "COUPLINGS",
     "ControlOutput",
     "Controller",
@@ -31,14 +38,8 @@ __all__ = [
     "ControllerName",
     "ControllerSpec",
     "Coupling",
-    "EpisodeObserver",
     "make_controller",
 ]
-
-# Literal rather than Enum: the values travel unchanged through argparse, JSON records and MCAP metadata.
-ControllerName = Literal["straight", "orca", "cmpc", "dmpc"]
-Coupling = Literal["ibr", "nlp"]  # "ibr": Algorithm 1/2; "nlp": the predictor inside the joint NLP
-COUPLINGS: Final[tuple[Coupling, ...]] = get_args(Coupling)
 
 
 class Controller(Protocol):
@@ -63,58 +64,8 @@ class Controller(Protocol):
         ...
 
 
-class EpisodeObserver(Protocol):
-    """Hooks the closed loop calls; the MCAP recorder is one."""
-
-    def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None: ...
-
-    def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None: ...
-
-    def on_end(self, result: EpisodeResult) -> None: ...
-
-
-@dataclass(frozen=True)
-class ControllerSpec:
-    """What the user chose on the command line; the controller is built from it once per run."""
-
-    controller: ControllerName
-    predictor: str = "constant_velocity"  # a name accepted by predictors.registry.load_predictor
-    flocking: bool = True  # False: omega_floc = 0 (Table III, "NF")
-    coupling: Coupling = "ibr"
-    record_iterations: bool = False  # keep the humans' prediction of every IBR iteration in ControlOutput
-    mpc_overrides: tuple[tuple[str, Any], ...] = ()  # (field, value) pairs applied to mpc.config.MPCConfig
-    margins: MarginSpec = MarginSpec()  # allowance for prediction error in Eq. 11 (pipelines/loop/margins.py)
-
-    def __post_init__(self) -> None:
-        if self.controller not in CONTROLLERS:
-            raise PipelineError(f"unknown controller {self.controller!r}; choose from {sorted(CONTROLLERS)}")
-        if self.coupling not in COUPLINGS:
-            raise PipelineError(f"unknown coupling {self.coupling!r}; choose from {list(COUPLINGS)}")
-        if not isinstance(self.margins, MarginSpec):
-            raise PipelineError(f"margins must be a MarginSpec, got {self.margins!r}")
-        if any(name == "human_margins" for name, _ in self.mpc_overrides):
-            raise PipelineError("set human margins through ControllerSpec.margins, not mpc_overrides")
-
-    @property
-    def kind(self) -> ControllerKind:
-        return CONTROLLERS[self.controller]
-
-    @property
-    def predictor_name(self) -> str | None:
-        """The predictor this spec's controller plans with; None for a controller that uses none."""
-        return self.predictor if self.kind.uses_predictor else None
-
-
+# (spec, env_config, jit) -> controller
 Builder = Callable[[ControllerSpec, "EnvConfig | None", bool], Controller]
-
-
-@dataclass(frozen=True)
-class ControllerKind:
-    """A registry entry: how to build the controller, and what the pipelines must know before it exists."""
-
-    build: Builder  # (spec, env_config, jit) -> controller
-    uses_predictor: bool  # plans with spec.predictor (records and cell keys name it)
-    compiles: bool  # jit=True compiles its NLPs to C (MPCConfig.jit); it changes speed, not results
 
 
 def _straight(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
@@ -143,13 +94,13 @@ def _dmpc(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Cont
     return MPCController(spec, distributed=True, env_config=env_config, jit=jit)
 
 
-CONTROLLERS: Final[Mapping[ControllerName, ControllerKind]] = {
-    "straight": ControllerKind(_straight, uses_predictor=False, compiles=False),
-    "orca": ControllerKind(_orca, uses_predictor=False, compiles=False),
-    "cmpc": ControllerKind(_cmpc, uses_predictor=True, compiles=True),
-    "dmpc": ControllerKind(_dmpc, uses_predictor=True, compiles=True),
+CONTROLLERS: Final[Mapping[ControllerName, Builder]] = {
+    "straight": _straight,
+    "orca": _orca,
+    "cmpc": _cmpc,
+    "dmpc": _dmpc,
 }
-assert set(CONTROLLERS) == set(get_args(ControllerName))
+assert set(CONTROLLERS) == set(CONTROLLER_KINDS)  # every controller has its facts, and no more
 
 
 def make_controller(
@@ -158,4 +109,4 @@ def make_controller(
     """The controller of ``spec`` for episodes simulated under ``env_config`` (a predictor that observes the
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
     compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
-    return spec.kind.build(spec, env_config, jit)
+    return CONTROLLERS[spec.controller](spec, env_config, jit)

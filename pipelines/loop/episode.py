@@ -12,14 +12,26 @@ import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, Protocol
 
 import numpy as np
 
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.control import ControlOutput
+from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
-from pipelines.loop.controllers import Controller, ControllerSpec, EpisodeObserver, make_controller
+from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
+
+
+class EpisodeObserver(Protocol):
+    """Hooks the closed loop calls; the MCAP recorder is one."""
+
+    def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None: ...
+
+    def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None: ...
+
+    def on_end(self, result: EpisodeResult) -> None: ...
+
 
 DEFAULT_ENV: Final[EnvConfig] = EnvConfig()
 

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from crowdsim.control import ControlOutput
 from crowdsim.world import WORLD, WorldFacts
 from mpc.cmpc import CMPC, IBRResult
 from mpc.config import MPCConfig
@@ -31,7 +32,7 @@ from mpc.fallback import PlanMemory
 from mpc.fastcall import BufferedFunction
 from mpc.nlp import StepData
 from pipelines.errors import PipelineError
-from pipelines.loop.controllers import ControllerSpec, ControlOutput
+from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
 from predictors.errors import PredictorError
@@ -86,8 +87,8 @@ def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None
         )
     if predictor.obs_len > world.obs_len:
         raise PipelineError(
-            f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator keeps "
-            f"{world.obs_len} (EnvConfig.history_len): use history_len >= {predictor.obs_len}"
+            f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator "
+            f"keeps {world.obs_len} (EnvConfig.history_len): use history_len >= {predictor.obs_len}"
         )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import partial
 from pathlib import Path
 
@@ -24,9 +25,9 @@ class TrajnetDataModule(L.LightningDataModule):
 
     def __init__(
         self,
-        train_files: list[str | Path],
-        val_files: list[str | Path],
-        test_files: list[str | Path],
+        train_files: Sequence[str | Path],
+        val_files: Sequence[str | Path],
+        test_files: Sequence[str | Path],
         batch_size: int = 64,
         augment: bool = True,
         seed: int = 0,

@@ -340,7 +340,7 @@ def build_scenes(
                 draw = np.random.default_rng([seed % 2**63, primary % 2**63, start % 2**63]).uniform()
                 keep[k] = bool(draw < acceptance[kind - 1])
 
-    scenes = []
+    scenes: list[SceneSpec] = []
     for (primary, window), tag, kept in zip(candidates, tags, keep, strict=True):
         if kept:
             scene_id = start_scene_id + len(scenes)
