@@ -113,7 +113,7 @@ class EnvConfig:
     @classmethod
     def from_world(cls, world: WorldFacts, **settings: Any) -> EnvConfig:
         """The simulator for ``world`` (tau, L, radii, speeds, bounds), with ``settings`` for the rest."""
-        facts = {"dt": world.dt, "history_len": world.obs_len, "radius": world.radius}
+        facts: dict[str, Any] = {"dt": world.dt, "history_len": world.obs_len, "radius": world.radius}
         facts |= {"v_pref": world.v_pref, "v_max": world.v_max, "a_max": world.a_max}
         return cls(**facts, **settings)
 

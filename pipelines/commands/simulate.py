@@ -7,13 +7,18 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import CONTROLLERS, COUPLINGS
 from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from crowdsim.env import EnvConfig
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import EpisodeResult
 
 EPILOG = """examples:
   crowdmpc simulate --controller orca --scenario circle --humans 7 --episodes 20 --seed 0
@@ -70,7 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _fmt(x: float, unit: str = "", digits: int = 2) -> str:
+def _fmt(x: float | None, unit: str = "", digits: int = 2) -> str:
     return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}{unit}"
 
 
@@ -116,12 +121,7 @@ def format_table(summary: dict[str, Any], header: str) -> str:
     return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
 
 
-def run(args: argparse.Namespace) -> int:
-    from crowdsim.profiles import make_env_config
-    from pipelines.loop.controllers import ControllerSpec
-    from pipelines.loop.episode import run_episodes, summarize
-    from pipelines.loop.margins import parse_margins
-
+def _check(args: argparse.Namespace) -> None:
     if args.episodes < 1:
         raise PipelineError(f"--episodes must be >= 1, got {args.episodes}")
     if not 1 <= args.robots <= MAX_ROBOTS:
@@ -132,16 +132,11 @@ def run(args: argparse.Namespace) -> int:
         from crowdsim.plotting import check_figure_path
 
         check_figure_path(args.plot, "--plot")
-    spec = ControllerSpec(
-        controller=args.controller,
-        predictor=args.predictor,
-        flocking=not args.no_flocking,
-        coupling=args.coupling,
-        record_iterations=args.record_iterations,
-        margins=parse_margins(args.margins),
-    )
-    env_config = make_env_config(args.profile, args.visibility)
-    run_meta = {
+
+
+def _run_meta(args: argparse.Namespace, spec: ControllerSpec) -> dict[str, Any]:
+    """The command line's choices, for the JSON output and every MCAP file's "run" metadata."""
+    return {
         "command": "simulate",
         "argv": sys.argv[1:],
         "controller": args.controller,
@@ -158,6 +153,24 @@ def run(args: argparse.Namespace) -> int:
         "seed": args.seed,
     }
 
+
+def run(args: argparse.Namespace) -> int:
+    from crowdsim.profiles import make_env_config
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import run_episodes, summarize
+    from pipelines.loop.margins import parse_margins
+
+    _check(args)
+    spec = ControllerSpec(
+        controller=args.controller,
+        predictor=args.predictor,
+        flocking=not args.no_flocking,
+        coupling=args.coupling,
+        record_iterations=args.record_iterations,
+        margins=parse_margins(args.margins),
+    )
+    env_config = make_env_config(args.profile, args.visibility)
+    run_meta = _run_meta(args, spec)
     recorder = None
     if args.record is not None:
         from pipelines.logs.recording import McapEpisodeRecorder
@@ -190,33 +203,35 @@ def run(args: argparse.Namespace) -> int:
         f"{args.seed + args.episodes - 1}"
     )
     print(format_table(summary, header))
-
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         payload = {"run": run_meta, "summary": summary, "episodes": [r.record().to_dict() for r in results]}
         args.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.plot is not None:
-        from crowdsim.plotting import plot_episode
-
-        first = results[0]
-        m = first.metrics
-        title = (
-            f"{args.controller}, {args.scenario}, seed {first.seed}: "
-            + (f"success in {m.travel_time:g} s" if m.success else "timeout")
-            + f", min robot-human distance {m.min_distance:.2f} m"
-        )
-        fig = plot_episode(
-            first.robot_positions,
-            first.human_positions,
-            first.robot_goals,
-            title=title,
-            radius=env_config.radius,
-            dt=env_config.dt,
-        )
-        args.plot.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(args.plot, dpi=120, bbox_inches="tight")
-        print(f"wrote {args.plot}")
+        _plot(args, results[0], env_config)
     if recorder is not None:
         print(f"wrote {len(recorder.paths)} MCAP file(s) to {args.record}")
     return 0
+
+
+def _plot(args: argparse.Namespace, first: EpisodeResult, env_config: EnvConfig) -> None:
+    from crowdsim.plotting import plot_episode
+
+    m = first.metrics
+    title = (
+        f"{args.controller}, {args.scenario}, seed {first.seed}: "
+        + (f"success in {m.travel_time:g} s" if m.success else "timeout")
+        + f", min robot-human distance {m.min_distance:.2f} m"
+    )
+    fig = plot_episode(
+        first.robot_positions,
+        first.human_positions,
+        first.robot_goals,
+        title=title,
+        radius=env_config.radius,
+        dt=env_config.dt,
+    )
+    args.plot.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.plot, dpi=120, bbox_inches="tight")
+    print(f"wrote {args.plot}")

@@ -46,10 +46,8 @@ def _cpus() -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from crowdsim.profiles import PROFILES, VISIBILITY
     from pipelines.experiments.backends import BACKENDS
     from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
-    from pipelines.experiments.worker import RECORD_POLICIES
 
     p = subparsers.add_parser(
         "sweep",
@@ -88,6 +86,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--robots", type=int, default=3, help="robots per episode (default 3)")
     p.add_argument("--seed", type=int, default=0, help="base scenario seed (default 0)")
+    _add_method_options(p)
+    _add_execution_options(p)
+    p.set_defaults(func=run)
+
+
+def _add_method_options(p: argparse.ArgumentParser) -> None:
+    """What replaces the experiment's own choices for every method."""
+    from crowdsim.profiles import PROFILES, VISIBILITY
+
     p.add_argument(
         "--predictor",
         metavar="NAME",
@@ -109,6 +116,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=VISIBILITY,
         help="whether the humans' ORCA sees the robots (default visible, as the authors' fork)",
     )
+
+
+def _add_execution_options(p: argparse.ArgumentParser) -> None:
+    """Where the sweep goes, what it keeps, and how it runs."""
+    from pipelines.experiments.worker import RECORD_POLICIES
+
     p.add_argument(
         "--record",
         choices=RECORD_POLICIES,
@@ -130,7 +143,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="compile the MPC NLPs with gcc in every worker: 2-8 s a build, then solves ~2x faster "
         "(auto, the default: on when gcc is found)",
     )
-    p.set_defaults(func=run)
 
 
 def _jit(choice: str) -> bool:

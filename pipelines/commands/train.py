@@ -6,6 +6,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 from pipelines.errors import PipelineError
 
@@ -108,7 +109,7 @@ def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) 
     def label(path: Path) -> str:
         return str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else path.name
 
-    record = {"protocol": protocol, "files": {}}
+    record: dict[str, Any] = {"protocol": protocol, "files": {}}
     digest = hashlib.sha256()
     for split in ("train", "val", "test"):
         record["files"][split] = {label(p): sha256_file(p) for p in files[split]}
@@ -119,19 +120,57 @@ def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) 
     return record
 
 
+def _net_config(args: argparse.Namespace) -> tuple[str, Any]:
+    """The pooling and the network config the command line asks for."""
+    from predictors.nets.social_gan import generator_config
+    from predictors.nets.social_lstm import SocialLSTMConfig
+
+    if args.model == "vanilla_lstm" and args.pooling is not None:
+        raise PipelineError("--pooling does not apply to vanilla_lstm (it has no social pooling)")
+    pooling = {"vanilla_lstm": "none", "social_lstm": "grid", "social_gan": "soft"}[args.model]
+    pooling = args.pooling or pooling
+    sizes = {} if args.hidden_dim is None else {"hidden_dim": args.hidden_dim}
+    if args.model == "social_gan":
+        return pooling, generator_config(pooling=pooling, **sizes)
+    return pooling, SocialLSTMConfig(pooling=pooling, **sizes)
+
+
+def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any]:
+    """Lightning's trainer and the callback that keeps the best checkpoint by validation ADE."""
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
+
+    best = ModelCheckpoint(
+        dirpath=ckpt_dir,
+        filename="best-{epoch:03d}-{val_ade:.4f}",
+        monitor="val_ade",
+        mode="min",
+        save_last=True,
+        save_top_k=1,
+    )
+    trainer = L.Trainer(
+        max_epochs=args.epochs,
+        accelerator="cpu",
+        devices=1,
+        logger=[CSVLogger(out, name="csv"), TensorBoardLogger(out, name="tensorboard")],
+        callbacks=[best],
+        deterministic=True,
+        enable_progress_bar=not args.no_progress,
+        enable_model_summary=False,
+        log_every_n_steps=5,
+    )
+    return trainer, best
+
+
 def run(args: argparse.Namespace) -> int:
     import warnings
 
     import lightning as L
     import torch
-    from lightning.pytorch.callbacks import ModelCheckpoint
-    from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
     from predictors.base import OBS_LEN
     from predictors.data.datamodule import TrajnetDataModule
-    from predictors.evaluate import EvalConfig, evaluate
-    from predictors.nets.social_gan import generator_config
-    from predictors.nets.social_lstm import SocialLSTMConfig
     from predictors.training import OptimConfig, make_module
     from predictors.zoo import load_checkpoint, save_checkpoint
 
@@ -139,15 +178,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"--epochs and --batch-size must be >= 1, got {args.epochs} and {args.batch_size}"
         )
-    if args.model == "vanilla_lstm" and args.pooling is not None:
-        raise PipelineError("--pooling does not apply to vanilla_lstm (it has no social pooling)")
-    pooling = {"vanilla_lstm": "none", "social_lstm": "grid", "social_gan": "soft"}[args.model]
-    pooling = args.pooling or pooling
-    sizes = {} if args.hidden_dim is None else {"hidden_dim": args.hidden_dim}
-    if args.model == "social_gan":
-        net_config = generator_config(pooling=pooling, **sizes)
-    else:
-        net_config = SocialLSTMConfig(pooling=pooling, **sizes)
+    pooling, net_config = _net_config(args)
     optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
     explicit = args.train is not None or args.val is not None
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
@@ -171,25 +202,7 @@ def run(args: argparse.Namespace) -> int:
         files["train"], files["val"], files["test"], batch_size=args.batch_size, seed=args.seed
     )
     module = make_module(args.model, net_config, optim)
-    best = ModelCheckpoint(
-        dirpath=ckpt_dir,
-        filename="best-{epoch:03d}-{val_ade:.4f}",
-        monitor="val_ade",
-        mode="min",
-        save_last=True,
-        save_top_k=1,
-    )
-    trainer = L.Trainer(
-        max_epochs=args.epochs,
-        accelerator="cpu",
-        devices=1,
-        logger=[CSVLogger(out, name="csv"), TensorBoardLogger(out, name="tensorboard")],
-        callbacks=[best],
-        deterministic=True,
-        enable_progress_bar=not args.no_progress,
-        enable_model_summary=False,
-        log_every_n_steps=5,
-    )
+    trainer, best = _trainer(args, out, ckpt_dir)
     started = time.perf_counter()
     trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
     elapsed = time.perf_counter() - started
@@ -197,7 +210,6 @@ def run(args: argparse.Namespace) -> int:
     best_path = best.best_model_path or str(last)
     state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
-    epoch_times = epoch_times_from_csv(trainer.loggers[0].log_dir)
     extra = {
         "training": {
             "epochs": args.epochs,
@@ -210,19 +222,9 @@ def run(args: argparse.Namespace) -> int:
     weights, _ = save_checkpoint(
         module.net, model=args.model, name=name, out_dir=out, obs_len=OBS_LEN, extra=extra
     )
-    predictor = load_checkpoint(weights)
     top_k = 20 if args.model == "social_gan" else None
-    metrics = {}
-    for split in ("val", "test"):
-        if files[split]:
-            result = evaluate(
-                predictor,
-                files[split],
-                EvalConfig(top_k=top_k, seed=args.seed),
-                progress=not args.no_progress,
-                root=root,
-            )
-            metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
+    metrics = _evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
+    epoch_times = epoch_times_from_csv(trainer.loggers[0].log_dir)
     summary = {
         "name": name,
         "model": args.model,
@@ -239,8 +241,33 @@ def run(args: argparse.Namespace) -> int:
         },
     }
     (out / f"{name}.metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(f"{name}: best {Path(best_path).name}; weights {weights} (+ .json)")
-    for split, m in metrics.items():
+    _print_summary(summary, Path(best_path).name, weights, top_k)
+    return 0
+
+
+def _evaluate_splits(
+    args: argparse.Namespace, predictor: Any, files: dict[str, Any], root: Any, top_k: int | None
+) -> dict[str, dict[str, Any]]:
+    """ADE/FDE of the trained model on the validation and test files it was given."""
+    from predictors.evaluate import EvalConfig, evaluate
+
+    metrics = {}
+    for split in ("val", "test"):
+        if files[split]:
+            result = evaluate(
+                predictor,
+                files[split],
+                EvalConfig(top_k=top_k, seed=args.seed),
+                progress=not args.no_progress,
+                root=root,
+            )
+            metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
+    return metrics
+
+
+def _print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int | None) -> None:
+    print(f"{summary['name']}: best {best}; weights {weights} (+ .json)")
+    for split, m in summary["metrics"].items():
         line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
         if "topk_ade" in m:
             line += f"  top-{top_k} ADE {m['topk_ade']:.3f}  FDE {m['topk_fde']:.3f}"
@@ -249,7 +276,6 @@ def run(args: argparse.Namespace) -> int:
         f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
         f"`crowdmpc zoo add {weights}`"
     )
-    return 0
 
 
 def epoch_times_from_csv(log_dir: str) -> list[float]:

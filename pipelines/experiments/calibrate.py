@@ -18,9 +18,9 @@ Seeds: calibration episodes use ``seed, seed + 1, ...`` from ``CALIBRATION_SEED`
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, cast
 
 import numpy as np
 
@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from crowdsim.env import Observation
     from pipelines.loop.controllers import ControlOutput
     from pipelines.loop.episode import EpisodeResult
+    from pipelines.loop.spec import ControllerName
 
 CALIBRATION_SEED: Final[int] = 1_000_000  # first seed of calibration episodes (module docstring)
 NEAR: Final[float] = 3.0  # m, humans scored: within this distance of a robot when predicted (docstring)
@@ -52,7 +53,7 @@ class PredictionErrors:
     def errors(self) -> np.ndarray:
         return np.concatenate(self.rows) if self.rows else np.zeros((0, 0))
 
-    def on_reset(self, obs: Observation, meta: dict[str, Any]) -> None:
+    def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
         self._made = []
 
     def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
@@ -121,7 +122,8 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
     from pipelines.loop.episode import run_episode
 
     env_config = make_env_config(plan.profile, plan.visibility)
-    spec = ControllerSpec(plan.controller, plan.predictor, margins=plan.margins)
+    # ClosedLoopPlan.__post_init__ admits "cmpc" and "dmpc" only.
+    spec = ControllerSpec(cast("ControllerName", plan.controller), plan.predictor, margins=plan.margins)
     controller = make_controller(spec, env_config)
     observer = PredictionErrors(plan.near)
     successes = 0

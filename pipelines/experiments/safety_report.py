@@ -22,7 +22,7 @@ import math
 import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 import numpy as np
 
@@ -90,7 +90,8 @@ def step_frequency(metrics: Sequence[Mapping[str, Any]], name: str) -> float:
     steps = [m.get("n_steps") for m in metrics]
     if not metrics or any(c is None for c in counts) or any(n is None for n in steps):
         return math.nan
-    return 100.0 * sum(counts) / sum(n + 1 for n in steps)
+    # No None left (checked above).
+    return 100.0 * sum(cast("list[float]", counts)) / sum(n + 1 for n in cast("list[float]", steps))
 
 
 def min_distances(metrics: Sequence[Mapping[str, Any]]) -> tuple[float, ...]:

@@ -197,6 +197,10 @@ def run_sweep(
                             f"tracebacks in {out / ERRORS_FILE}"
                         )
                     continue
+                if result.record is None:
+                    raise PipelineError(
+                        f"episode {result.key}: the worker returned neither a record nor an error"
+                    )
                 if result.mcap is not None:
                     _write_atomic(mcap_path(out, task), result.mcap)  # before the record that vouches for it
                 log.append(result.record)
@@ -216,7 +220,7 @@ def _check_same_predictors(out: Path, tasks: list[EpisodeTask], done: dict[str, 
     model): its table would silently mix two predictors."""
     from predictors.registry import checkpoint_sha256
 
-    current: dict[str, str | None] = {}
+    current: dict[str | None, str | None] = {}  # predictor name (None in a record without one) -> sha256
     for task in tasks:
         record = done.get(task.key)
         if record is None:
