@@ -40,15 +40,15 @@ def record_problems(n_humans: int, episodes: int, predictor: str) -> dict[str, l
     problems: dict[str, list[dict[str, Any]]] = {"local": [], "joint": []}
     local_solve, joint_solve = nlp_module.LocalNLP.solve, nlp_module.JointNLP.solve
 
-    def local(self, i, params, accels0, lam_x0=None, lam_g0=None):
-        sol = local_solve(self, i, params, accels0, lam_x0, lam_g0)
+    def local(self, i, params, accels0, lam_x0=None, lam_g0=None, explore=False):
+        sol = local_solve(self, i, params, accels0, lam_x0, lam_g0, explore)
         lbx, ubx = -self.cfg.a_max, self.cfg.a_max
         x0 = np.clip(np.ravel(accels0), lbx, ubx)
         problems["local"].append(dict(x0=x0, p=params.copy(), lbx=lbx, ubx=ubx, lam_x0=lam_x0, lam_g0=lam_g0))
         return sol
 
-    def joint(self, data, extra, accels0, lam_x0=None, lam_g0=None):
-        sol = joint_solve(self, data, extra, accels0, lam_x0, lam_g0)
+    def joint(self, data, extra, accels0, lam_x0=None, lam_g0=None, explore=False):
+        sol = joint_solve(self, data, extra, accels0, lam_x0, lam_g0, explore)
         lbx, ubx = self.bounds(data)
         x0 = np.clip(np.ravel(accels0), lbx, ubx)
         p = self.params(data, extra)

@@ -41,7 +41,7 @@ class IBRResult:
     solves: int  # NLP solves run (CMPC: <= iterations; DMPC: up to M per iteration)
     solved: bool  # at least one solve produced the plan (False: ``accels`` is the fallback u^(0))
     converged: bool  # the stopping test of the algorithm held before j_max
-    status: str  # "ok", or the first failure: a solver status (mpc/nlp.py), "nan_prediction", "timeout"
+    status: str  # "ok", or the first failure: a solver status (mpc/solvers.py), "nan_prediction", "timeout"
     predictions: tuple[np.ndarray, ...]  # (H, N_h, 2) of every iteration
     potentials: tuple[float, ...]  # F^(j) of every iteration that produced a plan
     lam_x: np.ndarray | None  # (M, H, 2) multipliers of the final plan, for the next warm start

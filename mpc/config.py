@@ -85,7 +85,7 @@ class MPCConfig:
     # `benchmarks/solvers.py` on 2413 recorded DMPC local problems (3 robots, 7 humans) gives 0.92 vs 3.2 ms
     # a solve, the cost within 1e-3 of IPOPT's on 2409; on 230 joint ones 3.3 vs 7.1 ms, 226 the same. A
     # Fatrop solve that fails is retried with IPOPT, and a step that starts from braking asks both
-    # (mpc/nlp.py, _Solver, has why). The coupled NLP with a network inside always uses IPOPT (it needs
+    # (mpc/solvers.py, _Solver, has why). The coupled NLP with a network inside always uses IPOPT (it needs
     # IPOPT's L-BFGS Hessian, mpc/coupled.py).
     solver: Solver = "fatrop"
     solver_tol: float = 1e-6  # the solver's tol (Fatrop: KKT error; IPOPT: scaled NLP error)

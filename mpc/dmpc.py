@@ -30,7 +30,8 @@ from mpc.cmpc import IBRResult, PredictFn, finite_prediction
 from mpc.config import MPCConfig
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start
-from mpc.nlp import JointNLP, LocalNLP, Solution, StepData, better
+from mpc.nlp import JointNLP, LocalNLP, StepData
+from mpc.solvers import Solution, better
 
 
 def accept(new_cost: float, old_cost: float, epsilon: float) -> bool:
@@ -108,53 +109,23 @@ class DMPC:
             predictions.append(prediction)
             # Line 4: every robot's best response to the others' plans of iteration j-1.
             params = {i: local.params(i, data, positions, prediction) for i in moving}
-            flags = start.first_solve(j)
-            jobs = [
-                (
-                    i,
-                    params[i],
-                    accels[i],
-                    None if lam_x is None else lam_x[i],
-                    None if lam_g is None else lam_g[i],
-                    flags["explore"],
-                )
-                for i in moving
-            ]
-            sols: list[Solution] = self._solve_all(jobs)
-            solves += len(sols)
-            solver_iterations += sum(s.iterations for s in sols)
-            if cfg.multi_start and flags["restart"]:
-                sols, extra = self._restart(data, moving, params, sols)
-                solves += len(extra)
-                solver_iterations += sum(s.iterations for s in extra)
-            # Lines 5-6: keep a new plan only if it lowers C_i(., u_-i^(j-1)) by at least epsilon.
-            new_accels = accels.copy()
-            old_costs = local.costs([accels[i] for i in moving], [params[i] for i in moving])
-            for i, sol, old_cost in zip(moving, sols, old_costs, strict=True):
-                if not sol.success:
-                    # A robot whose local solve failed keeps its plan, as if it had not improved; the step
-                    # fails only when no local solve ever succeeded (below).
-                    first_failure = first_failure or sol.status
-                    continue
-                # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
-                if accept(sol.cost, old_cost, cfg.epsilon):
-                    new_accels[i] = sol.accels
-                    if lam_x is None or lam_g is None:
-                        lam_x = np.zeros((self.n_robots, cfg.horizon, 2))
-                        lam_g = np.zeros((self.n_robots, cfg.horizon, 2))
-                    lam_x[i] = sol.lam_x.reshape(cfg.horizon, 2)
-                    lam_g[i] = sol.lam_g.reshape(cfg.horizon, 2)
+            sols, n_solves, n_iterations = self._best_responses(
+                data, moving, params, accels, lam_x, lam_g, start.first_solve(j)
+            )
+            solves += n_solves
+            solver_iterations += n_iterations
+            new_accels, lam_x, lam_g, failure = self._keep_improvements(
+                moving, params, accels, sols, lam_x, lam_g
+            )
+            first_failure = first_failure or failure
             solved_now = any(s.success for s in sols)
             if solved_now:
                 used = prediction
             # Lines 12-16: the epsilon-Nash check against the others' new plans. An iteration in which every
             # local solve failed proves nothing, so it cannot end the loop as converged.
             new_positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
-            new_params = [local.params(i, data, new_positions, prediction) for i in moving]
-            checks = local.costs(
-                [new_accels[i] for i in moving] + [accels[i] for i in moving], new_params + new_params
-            ).reshape(2, len(moving))
-            converged = solved_now and bool(np.all(checks[0] <= checks[1] + cfg.epsilon))
+            at_nash = self._at_nash(data, moving, accels, new_accels, new_positions, prediction)
+            converged = solved_now and at_nash
             accels, positions = new_accels, new_positions
             if used is not None:
                 potentials.append(self.joint.potential(accels, data, used))
@@ -182,3 +153,84 @@ class DMPC:
             lam_g=lam_g,
             solver_iterations=solver_iterations,
         )
+
+    def _best_responses(
+        self,
+        data: StepData,
+        moving: np.ndarray,
+        params: dict,
+        accels: np.ndarray,
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+        flags: dict[str, bool],
+    ) -> tuple[list[Solution], int, int]:
+        """Line 4 for every moving robot, warm from its plan and multipliers of iteration j-1, then (when
+        ``flags`` ask for it) ``_restart``. Returns the solutions, the solves and solver iterations spent."""
+        jobs = [
+            (
+                i,
+                params[i],
+                accels[i],
+                None if lam_x is None else lam_x[i],
+                None if lam_g is None else lam_g[i],
+                flags["explore"],
+            )
+            for i in moving
+        ]
+        sols: list[Solution] = self._solve_all(jobs)
+        solves = len(sols)
+        solver_iterations = sum(s.iterations for s in sols)
+        if self.cfg.multi_start and flags["restart"]:
+            sols, extra = self._restart(data, moving, params, sols)
+            solves += len(extra)
+            solver_iterations += sum(s.iterations for s in extra)
+        return sols, solves, solver_iterations
+
+    def _keep_improvements(
+        self,
+        moving: np.ndarray,
+        params: dict,
+        accels: np.ndarray,
+        sols: list[Solution],
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
+        """Lines 5-6: keep a new plan only if it lowers C_i(., u_-i^(j-1)) by at least epsilon; a kept plan's
+        multipliers warm-start the robot's next solve. Returns the plans, the multipliers (``lam_x`` and
+        ``lam_g`` updated in place, or made on the first kept plan) and the first failed solve's status."""
+        cfg = self.cfg
+        new_accels = accels.copy()
+        first_failure = ""
+        old_costs = self.local.costs([accels[i] for i in moving], [params[i] for i in moving])
+        for i, sol, old_cost in zip(moving, sols, old_costs, strict=True):
+            if not sol.success:
+                # A robot whose local solve failed keeps its plan, as if it had not improved; the step
+                # fails only when no local solve ever succeeded (solve).
+                first_failure = first_failure or sol.status
+                continue
+            # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
+            if accept(sol.cost, old_cost, cfg.epsilon):
+                new_accels[i] = sol.accels
+                if lam_x is None or lam_g is None:
+                    lam_x = np.zeros((self.n_robots, cfg.horizon, 2))
+                    lam_g = np.zeros((self.n_robots, cfg.horizon, 2))
+                lam_x[i] = sol.lam_x.reshape(cfg.horizon, 2)
+                lam_g[i] = sol.lam_g.reshape(cfg.horizon, 2)
+        return new_accels, lam_x, lam_g, first_failure
+
+    def _at_nash(
+        self,
+        data: StepData,
+        moving: np.ndarray,
+        accels: np.ndarray,
+        new_accels: np.ndarray,
+        new_positions: np.ndarray,
+        prediction: np.ndarray,
+    ) -> bool:
+        """Lines 12-16: no robot's new plan is worse, by more than epsilon, than its old one against the
+        others' new plans."""
+        new_params = [self.local.params(i, data, new_positions, prediction) for i in moving]
+        checks = self.local.costs(
+            [new_accels[i] for i in moving] + [accels[i] for i in moving], new_params + new_params
+        ).reshape(2, len(moving))
+        return bool(np.all(checks[0] <= checks[1] + self.cfg.epsilon))

@@ -1,6 +1,6 @@
 """What a control step starts from, and what it falls back to when it cannot solve.
 
-A solver failure (any status outside ``nlp.SOLVED``), a non-finite prediction, or running out of the
+A solver failure (any status outside ``solvers.SOLVED``), a non-finite prediction, or running out of the
 step's time budget never ends an episode. The step then applies, in order of preference:
 
 1. ``"shifted"``: the last solved plan shifted by the steps elapsed since it was solved, as long as it still
@@ -35,7 +35,7 @@ class Start:
     def first_solve(self, iteration: int) -> dict[str, bool]:
         """How the IBR loops solve at ``iteration`` (from 1): the first solve of a step restarts from braking
         when stuck (``multi_start``), unless the step already starts from braking, where it asks both solvers
-        instead (``explore``, mpc/nlp.py ``_Solver``); later solves do neither."""
+        instead (``explore``, mpc/solvers.py ``_Solver``); later solves do neither."""
         first = iteration == 1
         return {"restart": first and self.kind != "brake", "explore": first and self.kind == "brake"}
 

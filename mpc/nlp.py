@@ -18,9 +18,7 @@ flattened. ``reshape(v, 2, -1)`` (column-major) turns each into the ``(2, .)`` b
 from __future__ import annotations
 
 import math
-import threading
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -29,11 +27,7 @@ from mpc import costs
 from mpc.config import MPCConfig
 from mpc.dynamics import braking
 from mpc.fastcall import BufferedFunction
-
-# Statuses after which the returned point is a solution we use (IPOPT's names; a Fatrop success is reported
-# as "Solve_Succeeded" too).
-SOLVED = frozenset({"Solve_Succeeded", "Solved_To_Acceptable_Level"})
-_BUILD_LOCK = threading.Lock()
+from mpc.solvers import SOLVED, Solution, _Solver, better
 
 
 @dataclass(frozen=True)
@@ -60,181 +54,10 @@ class StepData:
         return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
 
 
-@dataclass(frozen=True)
-class Solution:
-    """One solve: Fatrop's point, or IPOPT's when Fatrop failed or (``explore``) IPOPT found a lower cost."""
-
-    accels: np.ndarray  # (M, H, 2) joint, or (H, 2) local
-    cost: float  # F (joint) or C_i (local), unscaled
-    status: str  # "Solve_Succeeded" or IPOPT's return status
-    success: bool  # status in SOLVED and the result is finite
-    iterations: int  # solver iterations (Fatrop's and IPOPT's together)
-    solver: str  # "fatrop" or "ipopt": which one produced the point
-    lam_x: np.ndarray = field(repr=False)  # multipliers, for the next warm start
-    lam_g: np.ndarray = field(repr=False)
-
-
-def better(a: Solution, b: Solution) -> Solution:
-    """The successful solution with the lower cost (``a`` when neither succeeded)."""
-    if b.success and (not a.success or b.cost < a.cost):
-        return b
-    return a
-
-
-def _jit_options(cfg: MPCConfig) -> dict:
-    if not cfg.jit:
-        return {}
-    return {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
-
-
-def ipopt_options(cfg: MPCConfig, warm: bool) -> dict:
-    """IPOPT through CasADi: silent, exact Hessian, tolerances and limits from the config.
-
-    ``warm``: start from given primal and dual values (``warm_start_init_point``) with a small barrier
-    parameter, since the shifted previous solution is already close to optimal. Measured on 185 recorded
-    steps (3 robots, 7 humans): mu_init 1e-3 and 1e-5 tie (4.6 ms, ~10 iterations), 1e-2 is 20 % slower;
-    mu_strategy adaptive and no NLP scaling are slower; L-BFGS is 10x slower and fails; tol 1e-4 saves 10 %
-    but stops short of the optimum (F up to 20 higher).
-    """
-    opts = {
-        "print_time": False,
-        # Multipliers of the parameters are never used; skipping them also avoids differentiating the
-        # reference trajectory (Eq. 8), whose norm is not differentiable once the reference sits on the goal.
-        "calc_lam_p": False,
-        "ipopt.print_level": 0,
-        "ipopt.sb": "yes",
-        "ipopt.tol": cfg.solver_tol,
-        "ipopt.acceptable_tol": max(1e2 * cfg.solver_tol, 1e-4),
-        "ipopt.max_iter": cfg.solver_max_iter,
-        "ipopt.max_wall_time": cfg.time_limit_s,
-    } | _jit_options(cfg)
-    if warm:
-        opts.update(
-            {
-                "ipopt.warm_start_init_point": "yes",
-                "ipopt.mu_init": 1e-3,
-                "ipopt.warm_start_bound_push": 1e-6,
-                "ipopt.warm_start_mult_bound_push": 1e-6,
-            }
-        )
-    return opts
-
-
-def fatrop_options(cfg: MPCConfig) -> dict:
-    """Fatrop through CasADi: the NLP as one dense stage (``structure_detection`` none: single shooting has
-    no stage structure to exploit, and 8-24 variables do not need it), silent, errors as statuses.
-
-    Fatrop takes no dual warm start, only the primal guess. Measured on 2380 recorded local problems:
-    mu_init 1e-2 takes 8.7 iterations, 1e-3 and 1e-1 9.7; tol 1e-5 saves 3 % (benchmarks/solvers.py).
-    """
-    return {
-        "structure_detection": "none",
-        "print_time": False,
-        "calc_lam_p": False,
-        "error_on_fail": False,
-        "fatrop": {
-            "print_level": 0,
-            "tol": cfg.solver_tol,
-            "mu_init": 1e-2,
-            "max_iter": cfg.solver_max_iter,
-        },
-    } | _jit_options(cfg)
-
-
 def _blocks(flat: ca.SX, n_blocks: int, horizon: int) -> list[ca.SX]:
     """``n_blocks`` ``(2, H)`` matrices from a row-major flat ``(n_blocks, H, 2)`` vector."""
     mat = ca.reshape(flat, 2, n_blocks * horizon)
     return [mat[:, b * horizon : (b + 1) * horizon] for b in range(n_blocks)]
-
-
-class _Solver:
-    """The solver(s) of one NLP: Fatrop and IPOPT together (``cfg.solver="fatrop"``), or IPOPT alone.
-
-    With Fatrop, a solve goes to Fatrop, and to IPOPT (warm when given multipliers) only if Fatrop fails. A
-    solve with ``explore`` (the first solve of a step that starts from braking: an episode's first step, or
-    one after failures) goes to both, and the lower cost wins. From a standing start the NLP has several
-    local minima, and the one the first step picks sets the robots' formation for the episode: measured on
-    40 CMPC episodes (social_lstm_eth, 7 humans), IPOPT from the first step's zero start reaches F = 23.3
-    (outer robots ahead) where Fatrop reaches 26.4 (middle robot ahead), and Fatrop alone then violates
-    personal space in 37.5 % of episodes against IPOPT's 10 %. Exploring with both, the 40 episodes give
-    IPOPT's results (90 % success, 10 % collision, 16.97 s against 16.96 s travel) at Fatrop's speed.
-
-    IPOPT instances are built when first needed, compiled (``jit``) only when IPOPT is the solver.
-    ``ipopt_extra``: IPOPT-only settings the NLP needs (the coupled NLP's L-BFGS Hessian); they make IPOPT
-    the solver. Separate ``_Solver`` objects of the same NLP can run in separate threads (CasADi releases
-    the GIL during a call); one object must not be called from two threads at once (a solver's memory is
-    per instance: IPOPT segfaults).
-    """
-
-    def __init__(self, name: str, nlp: dict, cfg: MPCConfig, ipopt_extra: dict | None = None):
-        self.cfg = cfg
-        self._name, self._nlp, self._ipopt_extra = name, nlp, ipopt_extra or {}
-        self.primary = "ipopt" if cfg.solver == "ipopt" or self._ipopt_extra else "fatrop"
-        self._fatrop = None
-        self._ipopt_instances: dict[bool, BufferedFunction] = {}
-        if self.primary == "fatrop":
-            self._fatrop = BufferedFunction(ca.nlpsol(name, "fatrop", nlp, fatrop_options(cfg)))
-        else:
-            self._ipopt(warm=False)
-            if cfg.warm_start:
-                self._ipopt(warm=True)
-
-    def _ipopt(self, warm: bool) -> BufferedFunction:
-        if warm not in self._ipopt_instances:
-            cfg = self.cfg if self.primary == "ipopt" else self.cfg.replace(jit=False)
-            options = ipopt_options(cfg, warm=warm) | self._ipopt_extra
-            # DMPC's threads may build their robots' IPOPT at the same moment, from the same SX graph, whose
-            # reference counts are not atomic: one build at a time.
-            with _BUILD_LOCK:
-                solver = ca.nlpsol(self._name, "ipopt", self._nlp, options)
-            self._ipopt_instances[warm] = BufferedFunction(solver)
-        return self._ipopt_instances[warm]
-
-    def solve(
-        self, x0, p, lbx, ubx, lbg, ubg, lam_x0=None, lam_g0=None, explore: bool = False
-    ) -> tuple[dict, dict]:
-        """Returns CasADi's output and ``{"status", "iterations", "solver"}``."""
-        args = {"x0": x0, "p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
-        warm = self.cfg.warm_start and lam_x0 is not None
-        if self._fatrop is None:
-            return self._solve_ipopt(args, lam_x0, lam_g0, warm)
-        t0 = time.perf_counter()
-        out = self._fatrop.call(args)
-        stats = self._fatrop.stats()
-        info = {"status": "Solve_Succeeded", "iterations": int(stats["iter_count"]), "solver": "fatrop"}
-        if time.perf_counter() - t0 > self.cfg.time_limit_s:
-            # Fatrop has no wall-time limit: IPOPT's max_wall_time rule, applied after the fact.
-            return out, info | {"status": "Maximum_WallTime_Exceeded"}
-        if not stats["success"]:
-            info["status"] = "Fatrop_Failed"
-        elif not explore:
-            return out, info
-        other, other_info = self._solve_ipopt(args, lam_x0, lam_g0, warm)
-        iterations = info["iterations"] + other_info["iterations"]
-        cost = _cost(out, info)
-        if math.isfinite(cost) and cost <= _cost(other, other_info) + 1e-9 * max(1.0, abs(cost)):
-            # Fatrop's, also when IPOPT reached the same minimum up to rounding.
-            return out, info | {"iterations": iterations}
-        return other, other_info | {"iterations": iterations}
-
-    def _solve_ipopt(self, args: dict, lam_x0, lam_g0, warm: bool) -> tuple[dict, dict]:
-        solver = self._ipopt(warm)
-        if warm:
-            args = args | {"lam_x0": np.ravel(lam_x0), "lam_g0": np.ravel(lam_g0)}
-        out = solver.call(args)
-        stats = solver.stats()
-        return out, {
-            "status": str(stats["return_status"]),
-            "iterations": int(stats["iter_count"]),
-            "solver": "ipopt",
-        }
-
-
-def _cost(out: dict, info: dict) -> float:
-    """The objective of a solve's point, +inf unless the solve succeeded with finite numbers."""
-    f = float(out["f"][0])
-    finite = math.isfinite(f) and bool(np.all(np.isfinite(out["x"])))
-    return f if info["status"] in SOLVED and finite else math.inf
 
 
 def _solution(out: dict, stats: dict, cost_scale: float, shape: tuple[int, ...]) -> Solution:
@@ -358,7 +181,7 @@ class JointNLP:
         explore: bool = False,
     ) -> Solution:
         """Solve from the initial guess ``accels0`` ``(M, H, 2)`` (and multipliers, when warm-starting);
-        ``explore``: with both solvers, keeping the lower cost (``_Solver``)."""
+        ``explore``: with both solvers, keeping the lower cost (mpc/solvers.py ``_Solver``)."""
         lbx, ubx = self.bounds(data)
         x0 = np.clip(np.ravel(accels0), lbx, ubx)
         v = self.cfg.v_max

@@ -6,16 +6,8 @@ Each wraps a ``nets.SocialLSTM`` and computes the same map two ways:
   humans' predictions are fed back and the robots' positions are taken from ``robots_future`` (their own
   predictions are discarded). Training uses torch, and this is the reference the CasADi twins are tested
   against;
-* ``encode`` + ``to_casadi``: CasADi twins of the net's two halves, built from ``predictors.casadi_layers``
-  with the model's own weights (agents as columns, one MX graph each, one step function ``_casadi_step``).
-  ``encode`` evaluates the encoder's twin (``casadi_encoder``) numerically on the observed past, because
-  torch's per-operation overhead on these tiny tensors cost milliseconds per control step; only the
-  prediction horizon (``to_casadi``) is symbolic.
-
-Context layout (``encode``), agents ordered humans (as given) then robots (increasing index), ``D`` hidden:
-``h (N, D) | c (N, D) | now (N, 2) | first (N_h, 2) | present (N)``, each block row-major: the decoder's
-LSTM state, the agents' current positions, the humans' predicted positions at ``t+1`` (these depend on the
-past only) and 1/0 for agents observed at the current step (only those are pooled as neighbours).
+* ``encode`` + ``to_casadi``: the net's CasADi twin (``predictors.casadi_twin``, which also has the context
+  layout), the encoder's evaluated numerically and the decoder's symbolic.
 
 An agent missing at the current step is extrapolated from its last observed step (constant velocity when its
 last two steps were seen, else held), takes part in the recursion, but is never pooled; an agent never
@@ -25,7 +17,6 @@ observed cannot be predicted (``ValueError``).
 from __future__ import annotations
 
 import copy
-import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -33,10 +24,10 @@ import casadi as ca
 import numpy as np
 import torch
 
-from predictors import casadi_layers as cl
 from predictors.base import OBS_LEN, check_rollout_inputs, robot_indices
+from predictors.casadi_twin import SocialLSTMTwin
 from predictors.errors import PredictorError
-from predictors.nets.social_lstm import N_TAGS, SocialLSTM, SocialLSTMConfig
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 
 MODEL_KINDS = ("social_lstm", "vanilla_lstm", "social_gan")
 
@@ -55,12 +46,6 @@ def single_threaded() -> Iterator[None]:
             torch.set_num_threads(before)
 
 
-def casadi_name(text: str) -> str:
-    """A valid CasADi function name: a letter first, then letters, digits and single underscores."""
-    name = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_]", "_", text)).strip("_")
-    return name if name[:1].isalpha() else f"predictor_{name}"
-
-
 class LearnedPredictor:
     """Common machinery; use ``SocialLSTMPredictor`` or ``SocialGANPredictor``."""
 
@@ -76,9 +61,10 @@ class LearnedPredictor:
         self.net = copy.deepcopy(net).to(torch.float64).eval()
         for p in self.net.parameters():
             p.requires_grad_(False)
-        self._weights = {
-            k: v.detach().cpu().numpy().astype(np.float64) for k, v in self.net.state_dict().items()
-        }
+        self._twin = SocialLSTMTwin(
+            {k: v.detach().cpu().numpy().astype(np.float64) for k, v in self.net.state_dict().items()},
+            self.config,
+        )
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
         self._encoders: dict[tuple[int, int], ca.Function] = {}
         # The iterative best response predicts many times from the same past: keep the last encoding
@@ -213,7 +199,8 @@ class LearnedPredictor:
         return self._last_encoding[1]
 
     def encode(self, history, mask, humans):
-        """The context (module docstring), computed by the CasADi encoder and memoised like ``_encoded``."""
+        """The context (layout: ``predictors.casadi_twin``), computed by the CasADi encoder and memoised like
+        ``_encoded``."""
         key = self._input_key(history, mask, humans, True)
         if self._last_context is None or self._last_context[0] != key:
             pos, seen, n_humans = self._prepare(history, mask, humans)
@@ -234,8 +221,7 @@ class LearnedPredictor:
         return self._last_context[1].copy()
 
     def context_size(self, n_humans: int, n_robots: int) -> int:
-        n_agents = n_humans + n_robots
-        return n_agents * (2 * self.config.hidden_dim + 2 + 1) + 2 * n_humans
+        return self._twin.context_size(n_humans, n_robots)
 
     # ------------------------------------------------------------------------------------ symbolic side
     def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
@@ -247,100 +233,8 @@ class LearnedPredictor:
             )
         key = (n_humans, n_robots, horizon)
         if key not in self._functions:
-            self._functions[key] = self._build_casadi(*key)
+            self._functions[key] = self._twin.prediction(self.name, *key)
         return self._functions[key]
-
-    def _build_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
-        d = self.config.hidden_dim
-        n = n_humans + n_robots
-        context = ca.MX.sym("context", self.context_size(n_humans, n_robots))
-        robots_future = ca.MX.sym("robots_future", horizon * n_robots * 2)
-        blocks = np.cumsum([0, n * d, n * d, 2 * n, 2 * n_humans, n])
-        h = ca.reshape(context[blocks[0] : blocks[1]], d, n)  # column j = agent j (row-major (N, D) input)
-        c = ca.reshape(context[blocks[1] : blocks[2]], d, n)
-        now = ca.reshape(context[blocks[2] : blocks[3]], 2, n)
-        first = ca.reshape(context[blocks[3] : blocks[4]], 2, n_humans)
-        present = ca.reshape(context[blocks[4] : blocks[5]], 1, n)
-        plan = [
-            ca.reshape(robots_future[2 * n_robots * k : 2 * n_robots * (k + 1)], 2, n_robots)
-            for k in range(horizon)
-        ]
-
-        previous = now
-        current = ca.horzcat(first, plan[0])
-        outputs = [first]
-        for k in range(1, horizon):
-            h, c, mean = self._casadi_decode_step(h, c, previous, current, present, n_humans)
-            humans_next = current[:, :n_humans] + mean
-            outputs.append(humans_next)
-            previous, current = current, ca.horzcat(humans_next, plan[k])
-        humans_future = ca.vertcat(*[ca.reshape(o, 2 * n_humans, 1) for o in outputs])
-        return ca.Function(
-            casadi_name(f"{self.name}_h{n_humans}_r{n_robots}_H{horizon}"),
-            [context, robots_future],
-            [humans_future],
-            ["context", "robots_future"],
-            ["humans_future"],
-        )
-
-    def _casadi_decode_step(self, h, c, previous, current, present, n_humans):
-        """The twin of ``SocialLSTM.decode_step``, agents as columns; returns the humans' mean step."""
-        h, c = self._casadi_step("decoder", h, c, previous, current, neighbours=present)
-        return h, c, self._casadi_mean(h[:, :n_humans])
-
-    def _casadi_mean(self, h):
-        """The head's mean step ``(2, N)``: the first two outputs of either head are the raw linear ones."""
-        return cl.linear(h, self._weights["head.weight"][:2], self._weights["head.bias"][:2])
-
-    def _casadi_lstm(self, cell: str, x, h, c, weight_ih: np.ndarray):
-        w = self._weights
-        return cl.lstm_cell(
-            x, h, c, weight_ih, w[f"{cell}.weight_hh"], w[f"{cell}.bias_ih"], w[f"{cell}.bias_hh"]
-        )
-
-    def _casadi_tag_step(self, cell: str, h, c, slot: int):
-        """The twin of ``SocialLSTM._tag_step``: every agent is updated."""
-        column = self.config.embedding_dim - N_TAGS + slot
-        # The one-hot tag times weight_ih is that weight's column; a (1, N) input of ones selects it exactly.
-        weight_ih = self._weights[f"{cell}.weight_ih"][:, column : column + 1]
-        return self._casadi_lstm(cell, ca.DM.ones(1, h.shape[1]), h, c, weight_ih)
-
-    def _casadi_step(self, cell: str, h, c, previous, current, *, neighbours, active=None):
-        """The twin of ``SocialLSTM.step`` (agents as columns): the new ``(h, c)``.
-
-        ``neighbours`` (1, N) weights who may be pooled; ``active`` (1, N) of 0/1 marks the agents that move
-        and are updated, None for all of them (a prediction step, whose graph then carries no masking).
-        """
-        w, cfg = self._weights, self.config
-        displacement = current - previous
-        if active is not None:
-            displacement = displacement * ca.repmat(active, 2, 1)
-        parts = [displacement]
-        if cfg.pooling != "none":
-            weights = cl.grid_cell_weights(
-                current,
-                cell_side=cfg.cell_side,
-                grid_size=cfg.grid_size,
-                soft=cfg.pooling == "soft",
-                neighbour_weight=neighbours,
-            )
-            values = cl.linear(h, w["pool.hidden_encoding.weight"], w["pool.hidden_encoding.bias"])
-            grid = cl.grid_pool(values, weights)
-            parts.append(cl.relu(cl.linear(grid, w["pool.embedding.weight"], w["pool.embedding.bias"])))
-        x = cl.relu(
-            cl.linear(
-                ca.vertcat(*parts) * cfg.input_scale, w["input_embedding.weight"], w["input_embedding.bias"]
-            )
-        )
-        # The two tag slots of the embedding are zero at every step but the tag steps: drop their columns.
-        h_new, c_new = self._casadi_lstm(
-            cell, x, h, c, w[f"{cell}.weight_ih"][:, : cfg.embedding_dim - N_TAGS]
-        )
-        if active is None:
-            return h_new, c_new
-        # torch.where(active, new, old): with weights of exactly 0 and 1 the blend reproduces it bit for bit.
-        keep = ca.repmat(active, h.shape[0], 1)
-        return keep * h_new + (1 - keep) * h, keep * c_new + (1 - keep) * c
 
     def casadi_encoder(self, n_agents: int, length: int) -> ca.Function:
         """``encoder(positions, seen) -> (h, c, step)``: ``SocialLSTM.encode``'s twin, built once per size.
@@ -354,46 +248,8 @@ class LearnedPredictor:
             raise PredictorError(f"casadi_encoder needs n_agents, length >= 1, got {n_agents}, {length}")
         key = (n_agents, length)
         if key not in self._encoders:
-            self._encoders[key] = self._build_casadi_encoder(*key)
+            self._encoders[key] = self._twin.encoder(self.name, *key)
         return self._encoders[key]
-
-    def _build_casadi_encoder(self, n: int, length: int) -> ca.Function:
-        d = self.config.hidden_dim
-        positions = ca.MX.sym("positions", 2 * n * length)
-        seen = ca.MX.sym("seen", n * length)
-        # Column t * N + j is agent j at step t (the row-major (L, N, 2) and (L, N) inputs).
-        pos = ca.reshape(positions, 2, n * length)
-        flags = ca.reshape(seen, 1, n * length)
-
-        def at(t):
-            return pos[:, t * n : (t + 1) * n]
-
-        def seen_at(t):
-            return flags[:, t * n : (t + 1) * n]
-
-        h, c = self._casadi_tag_step("encoder", ca.DM.zeros(d, n), ca.DM.zeros(d, n), slot=0)
-        for t in range(1, length):
-            active = seen_at(t - 1) * seen_at(t)
-            h, c = self._casadi_step("encoder", h, c, at(t - 1), at(t), neighbours=active, active=active)
-        step = self._casadi_mean(h)
-        h, c = self._casadi_tag_step("decoder", h, c, slot=1)
-        if self.config.noise_dim:
-            # The generator's first prediction comes from a decoder step (SocialLSTM.encode).
-            if length > 1:
-                active, previous = seen_at(length - 2) * seen_at(length - 1), at(length - 2)
-            else:
-                active, previous = ca.DM.zeros(1, n), at(length - 1)
-            h, c = self._casadi_step(
-                "decoder", h, c, previous, at(length - 1), neighbours=active, active=active
-            )
-            step = self._casadi_mean(h)
-        return ca.Function(
-            casadi_name(f"{self.name}_encoder_n{n}_L{length}"),
-            [positions, seen],
-            [ca.reshape(h, d * n, 1), ca.reshape(c, d * n, 1), ca.reshape(step, 2 * n, 1)],
-            ["positions", "seen"],
-            ["h", "c", "step"],
-        )
 
 
 class SocialLSTMPredictor(LearnedPredictor):

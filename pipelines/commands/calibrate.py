@@ -74,8 +74,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple[list, Any]:
-    from predictors.calibration import calibrate_real, real_errors
+    from predictors.calibration import calibrate_real
     from predictors.data.locate import prepared_dir, protocol_files
+    from predictors.real_data import real_errors
 
     files = protocol_files(args.data_dir, "paper")
     blocks, _ = calibrate_real(

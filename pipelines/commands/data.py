@@ -91,7 +91,9 @@ def register(subparsers) -> None:
 
 def run_prepare(args: argparse.Namespace) -> int:
     from predictors.data.locate import raw_ewap_dir
-    from predictors.data.prepare import TRAJNETPP_ACCEPTANCE, default_references, prepare_ewap
+    from predictors.data.prepare import prepare_ewap
+    from predictors.data.selfcheck import default_references
+    from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
 
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:

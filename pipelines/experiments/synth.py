@@ -77,7 +77,7 @@ def synthesize(
     static scenes); it costs a Kalman fit (~50 ms) per scene, so it is off by default (tags 0, all kept).
     Returns a summary: counts of episodes, scenes, pedestrians, rows, and episodes that hit the time limit.
     """
-    from predictors.data.prepare import build_scenes, write_ndjson
+    from predictors.data.trajnet_scenes import build_scenes, write_ndjson
 
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise PipelineError(f"episodes must be an int >= 1, got {episodes!r}")

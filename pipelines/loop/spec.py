@@ -34,7 +34,6 @@ CONTROLLER_KINDS: Final[Mapping[ControllerName, ControllerKind]] = {
     "cmpc": ControllerKind(uses_predictor=True, compiles=True),
     "dmpc": ControllerKind(uses_predictor=True, compiles=True),
 }
-assert set(CONTROLLER_KINDS) == set(get_args(ControllerName))
 
 
 @dataclass(frozen=True)

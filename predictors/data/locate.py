@@ -29,13 +29,9 @@ import sys
 from pathlib import Path
 from typing import Final
 
-from predictors.data.prepare import (
-    CONVERTER_VERSION,
-    EWAP_SEQUENCES,
-    SPLITS,
-    default_references,
-    prepare_ewap,
-)
+from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
+from predictors.data.prepare import CONVERTER_VERSION, prepare_ewap
+from predictors.data.selfcheck import default_references
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 

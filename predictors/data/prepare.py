@@ -1,499 +1,43 @@
-"""Raw BIWI EWAP annotations (``obsmat.txt``) to TrajNet++ ndjson scenes, as TrajNet++'s converter makes them.
-
-The reference is ``vita-epfl/trajnetplusplusdataset`` (``readers.biwi``, ``scene.Scenes``, ``convert.write``,
-``get_type.trajectory_type``), reimplemented here on numpy arrays:
-
-1. Reading: obsmat columns 0, 1, 2 and 4 are frame, pedestrian, x and y (metres, world frame); the frame is
-   shifted by -1 (the converter's "1-index to 0-index"). Frame ids are otherwise kept (hotel steps by 10, ETH
-   by 6), both at 2.5 Hz.
-2. Chunking: for each pedestrian (in order of first appearance) the frame-sorted rows are cut into windows of
-   ``chunk_size`` = 21 rows (9 observed + 12 predicted) starting every ``chunk_stride`` = 2 rows. A window
-   becomes a scene of that primary pedestrian if (a) the primary moved: squared displacement first -> last
-   above ``min_length`` (0 by default, so only a perfectly still primary fails); (b) it has no gap: the
-   largest frame increment is below 1.5 x the (upper) median increment, and here additionally the median is
-   the sequence's own ``frame_step``; (c) there is activity: at least 2 x 21 rows (all pedestrians) in its
-   frames; (d) the primary is near someone: at one of its frames it shares a 10 m x 10 m grid cell with
-   another pedestrian.
-3. Categorisation (TrajNet++ types): I static (primary moves < 1 m), II linear (a Kalman filter fitted on
-   the 9 observed steps predicts the final position within 0.5 m), III interacting (someone in a 15 deg cone
-   within 5 m ahead, or a group), IV other; III gets sub-types 1 leader-follower, 2 collision avoidance,
-   3 group, 4 other. The checks are trajnetplusplustools' own (``kalman``, ``interactions``), on coordinates
-   rounded to centimetres as the converter's intermediate file has them.
-4. Acceptance: a scene of type k is kept with probability ``acceptance[k-1]`` (TrajNet++: 0.1 for static,
-   1 otherwise). TrajNet++ draws from numpy's global generator in file order, which cannot be replayed; here
-   each scene draws from its own generator seeded by (seed, primary, start frame), so the result is
-   deterministic and does not depend on what else is in the file.
-5. Writing: scene records first (ids consecutive from ``start_scene_id``), then every row (all pedestrians)
-   at a frame of some kept scene's primary, sorted by frame, with coordinates rounded to centimetres by
-   ``trajnetplusplustools.writers``.
-
-The split (``split_frames``) is the converter's too: distinct frames are sorted and cut by fractions, and
-scenes are built within each part, so no scene crosses a boundary. TrajNet++ uses 60/20/20; this project
-uses train 70 %, val 10 %, test 20 % (for BIWI ETH the test part is the same last 20 % either way).
+"""BIWI EWAP to the prepared data directory: each raw sequence read (``predictors.data.ewap``), split in time,
+cut into TrajNet++ scenes per part (``predictors.data.trajnet_scenes``), written as
+``{train,val,test}/<name>.ndjson`` with a ``manifest.json`` that records sources, parameters and hashes, so
+that cached preparations can be checked and rebuilt when the conversion changes; optionally self-checked
+against TrajNet++'s own files (``predictors.data.selfcheck``).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import tempfile
-from collections.abc import Iterable, Sequence
-from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Final
 
 import numpy as np
-from trajnetplusplustools import Reader, SceneRow, TrackRow, kalman
-from trajnetplusplustools import metrics as tt_metrics
-from trajnetplusplustools.interactions import check_interaction, get_interaction_type, group
-from trajnetplusplustools.writers import trajnet
 
-from predictors.base import OBS_LEN, PRED_LEN
-from predictors.data.trajnet_io import read_scenes
-from predictors.errors import DatasetFormatError, PredictorError
+from predictors.data.ewap import (
+    EWAP_SEQUENCES,
+    SPLIT_FRACTIONS,
+    SPLITS,
+    infer_frame_step,
+    read_obsmat,
+    split_frames,
+)
+from predictors.data.selfcheck import Reference, compare_with_reference, describe_check
+from predictors.data.trajnet_scenes import (
+    CHUNK_SIZE,
+    CHUNK_STRIDE,
+    DEFAULT_SEED,
+    MIN_LENGTH,
+    TRAJNETPP_ACCEPTANCE,
+    build_scenes,
+    write_ndjson,
+)
+from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 
-# Converter defaults (trajnetplusplusdataset convert.py arguments, scene.py constants).
-CHUNK_SIZE: Final[int] = OBS_LEN + PRED_LEN  # 21 rows = 9 observed + 12 predicted
-CHUNK_STRIDE: Final[int] = 2  # convert.py --chunk_stride default
-MIN_LENGTH: Final[float] = 0.0  # convert.py --min_length default (compared with the *squared* displacement)
-GAP_TOLERANCE: Final[float] = 1.5  # scene.py continuous_frames
-ACTIVITY_FACTOR: Final[float] = 2.0  # scene.py: rows in the scene's frames >= 2 x chunk_size
-PROXIMITY_CELL: Final[float] = 10.0  # m; scene.py close_pedestrians cell_size
-TRAJNET_FPS: Final[float] = 2.5  # EWAP info.txt: annotated at 2.5 fps
-# Categorisation thresholds (convert.py "categorizers" defaults).
-STATIC_THRESHOLD: Final[float] = 1.0  # m, type I
-LINEAR_THRESHOLD: Final[float] = 0.5  # m, type II (Kalman final-position error)
-INTER_POS_RANGE: Final[float] = 15.0  # deg, type III cone half-angle
-INTER_DIST_THRESH: Final[float] = 5.0  # m, type III cone length
-GROUP_DIST_THRESH: Final[float] = 0.8  # m, type IIIc
-GROUP_STD_THRESH: Final[float] = 0.2  # m, type IIIc
-TRAJNETPP_ACCEPTANCE: Final[tuple[float, float, float, float]] = (
-    0.1,
-    1.0,
-    1.0,
-    1.0,
-)  # convert.py --acceptance
-DEFAULT_SEED: Final[int] = 42  # convert.py seeds numpy with 42
-
-SPLIT_FRACTIONS: Final[tuple[float, float]] = (0.7, 0.1)  # train, val; test is the rest
-SPLITS: Final[tuple[str, ...]] = ("train", "val", "test")
-EWAP_SEQUENCES: Final[dict[str, str]] = {"biwi_eth": "seq_eth", "biwi_hotel": "seq_hotel"}
 # Bump when the conversion changes, so cached preparations are rebuilt.
 CONVERTER_VERSION: Final[str] = "crowdmpc-ewap-1"
-
-Tag = int | tuple[int, tuple[int, ...]]
-
-
-@dataclass(frozen=True)
-class SceneSpec:
-    """One scene record: the primary pedestrian and its first/last frame (inclusive)."""
-
-    id: int
-    primary: int
-    start_frame: int
-    end_frame: int
-    fps: float = TRAJNET_FPS
-    tag: Tag = 0  # (type 1-4, interaction sub-types) when categorised, else 0
-
-    def json_tag(self) -> object:
-        return [self.tag[0], list(self.tag[1])] if isinstance(self.tag, tuple) else self.tag
-
-
-# ----------------------------------------------------------------------------------------------- reading raw
-
-
-def read_obsmat(path: str | Path) -> np.ndarray:
-    """BIWI EWAP ``obsmat.txt`` as ``(R, 4)`` rows ``frame - 1, pedestrian, x, y`` (metres), in file order.
-
-    Each line holds 8 numbers ``frame id pos_x pos_z pos_y v_x v_z v_y`` (z unused); anything else raises
-    ``DatasetFormatError`` naming the line.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetFormatError(path, None, "no such file (expected a BIWI EWAP obsmat.txt)")
-    rows: list[tuple[float, float, float, float]] = []
-    seen: dict[tuple[int, int], int] = {}
-    with path.open("rb") as handle:
-        for lineno, raw in enumerate(handle, start=1):
-            fields = raw.split()
-            if not fields:
-                continue
-            if len(fields) != 8:
-                raise DatasetFormatError(path, lineno, f"expected 8 numeric columns, found {len(fields)}")
-            try:
-                values = [float(v) for v in fields]
-            except ValueError:
-                raise DatasetFormatError(
-                    path, lineno, f"non-numeric value in {raw.decode(errors='replace')!r}"
-                ) from None
-            frame, ped, x, y = values[0], values[1], values[2], values[4]
-            if not all(np.isfinite((frame, ped, x, y))):
-                raise DatasetFormatError(path, lineno, "frame, id and coordinates must be finite")
-            if frame != int(frame) or ped != int(ped) or frame < 1:
-                raise DatasetFormatError(
-                    path, lineno, f"frame {frame} and id {ped} must be integers, frame >= 1"
-                )
-            key = (int(frame), int(ped))
-            if key in seen:
-                raise DatasetFormatError(
-                    path, lineno, f"pedestrian {key[1]} at frame {key[0]} repeats line {seen[key]}"
-                )
-            seen[key] = lineno
-            rows.append((frame - 1.0, ped, x, y))  # the converter's shift from 1- to 0-based frames
-    if not rows:
-        raise DatasetFormatError(path, None, "no annotation rows")
-    return np.asarray(rows, dtype=np.float64)
-
-
-def infer_frame_step(frames: np.ndarray) -> int:
-    """The sequence's frame increment between consecutive annotated steps (its most common one)."""
-    unique = np.unique(np.asarray(frames, dtype=np.int64))
-    if unique.size < 2:
-        raise PredictorError("cannot infer a frame step from fewer than two distinct frames")
-    steps, counts = np.unique(np.diff(unique), return_counts=True)
-    return int(steps[np.argmax(counts)])
-
-
-def split_frames(
-    frames: np.ndarray, fractions: tuple[float, float] = SPLIT_FRACTIONS
-) -> dict[str, np.ndarray]:
-    """Temporal split of the distinct frames: the first ``fractions[0]`` train, the next ``fractions[1]`` val,
-    the rest test (index arithmetic as in TrajNet++'s ``convert.write``)."""
-    train, val = fractions
-    if not (0 <= train and 0 <= val and train + val <= 1):
-        raise PredictorError(f"split fractions must be >= 0 and sum to <= 1, got train={train}, val={val}")
-    unique = np.unique(np.asarray(frames, dtype=np.int64))
-    i_train = int(len(unique) * train)
-    i_val = i_train + int(len(unique) * val)
-    return {"train": unique[:i_train], "val": unique[i_train:i_val], "test": unique[i_val:]}
-
-
-# ------------------------------------------------------------------------------------------------- chunking
-
-
-def _check_tracks(tracks: np.ndarray) -> np.ndarray:
-    tracks = np.asarray(tracks, dtype=np.float64)
-    if tracks.ndim != 2 or tracks.shape[1] != 4:
-        raise ValueError(f"tracks must have shape (R, 4) [frame, ped_id, x, y], got {tracks.shape}")
-    if not np.all(np.isfinite(tracks)):
-        raise ValueError("tracks must be finite")
-    ids = tracks[:, :2]
-    if np.any(ids != np.round(ids)):
-        raise ValueError("frame and pedestrian ids in tracks must be integers")
-    keys = ids.astype(np.int64)
-    if len(np.unique(keys, axis=0)) != len(keys):
-        raise ValueError("tracks hold duplicate (frame, pedestrian) rows")
-    return tracks
-
-
-def _continuous(frames: np.ndarray, frame_step: int) -> bool:
-    steps = np.diff(frames)
-    median = np.sort(steps)[len(steps) // 2]  # the converter's upper median
-    return bool(median * GAP_TOLERANCE > steps.max() and median == frame_step)
-
-
-def _close_rows(frames: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """(R,) bool: the row shares its frame's 10 m grid cell with another row (scene.py close_pedestrians)."""
-    cells = np.floor_divide(xy, PROXIMITY_CELL).astype(np.int64)
-    keys = np.column_stack([frames, cells])
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    return counts[inverse.ravel()] > 1
-
-
-def _candidate_windows(
-    tracks: np.ndarray, frame_step: int, chunk_size: int, chunk_stride: int, min_length: float
-) -> list[tuple[int, np.ndarray]]:
-    """(primary, row indices of its window) for every window that passes the converter's filters."""
-    frames = tracks[:, 0].astype(np.int64)
-    peds = tracks[:, 1].astype(np.int64)
-    xy = tracks[:, 2:4]
-    unique_frames, frame_inverse, frame_counts = np.unique(frames, return_inverse=True, return_counts=True)
-    rows_at = frame_counts[frame_inverse.ravel()]  # (R,) rows sharing each row's frame
-    close = _close_rows(frames, xy)
-
-    _, first_row = np.unique(peds, return_index=True)
-    candidates = []
-    for ped in peds[np.sort(first_row)]:  # pedestrians in order of first appearance, like the converter
-        rows = np.flatnonzero(peds == ped)
-        rows = rows[np.argsort(frames[rows], kind="stable")]
-        for i in range(0, len(rows) - chunk_size + 1, chunk_stride):
-            window = rows[i : i + chunk_size]
-            if np.sum((xy[window[0]] - xy[window[-1]]) ** 2) <= min_length:
-                continue
-            if not _continuous(frames[window], frame_step):
-                continue
-            if rows_at[window].sum() < ACTIVITY_FACTOR * chunk_size:
-                continue
-            if not close[window].any():
-                continue
-            candidates.append((int(ped), window))
-    return candidates
-
-
-# ----------------------------------------------------------------------------------------- categorisation
-
-
-@contextmanager
-def _global_numpy_seed(entropy: Sequence[int]):
-    """trajnetplusplustools' Kalman filter samples from numpy's global generator; make that reproducible
-    without leaving the global state changed."""
-    # the legacy global generator is deliberate here: it is the one pykalman draws from
-    state = np.random.get_state()  # noqa: NPY002
-    np.random.seed(np.random.SeedSequence([int(v) % 2**63 for v in entropy]).generate_state(4))  # noqa: NPY002
-    try:
-        yield
-    finally:
-        np.random.set_state(state)  # noqa: NPY002
-
-
-def categorize(
-    paths: list[list[TrackRow]], *, obs_len: int, pred_len: int, seed: int
-) -> tuple[int, tuple[int, ...]]:
-    """TrajNet++ type (1-4) and interaction sub-types of one scene given as Reader paths (primary first)."""
-    primary = paths[0]
-    if np.hypot(primary[0].x - primary[-1].x, primary[0].y - primary[-1].y) < STATIC_THRESHOLD:
-        return 1, ()
-    with _global_numpy_seed((seed, primary[0].pedestrian, primary[0].frame)):
-        prediction, _ = kalman.predict(paths, obs_len, pred_len)[0]
-    if tt_metrics.final_l2(primary, prediction) < LINEAR_THRESHOLD:
-        return 2, ()
-    xy = Reader.paths_to_xy(paths)
-    interacting = np.any(
-        check_interaction(xy, pos_range=INTER_POS_RANGE, dist_thresh=INTER_DIST_THRESH, obs_len=obs_len)
-    ) or np.any(group(xy, GROUP_DIST_THRESH, GROUP_STD_THRESH, obs_len))
-    if interacting:
-        sub = get_interaction_type(xy, INTER_POS_RANGE, INTER_DIST_THRESH, obs_len)
-        return 3, tuple(int(s) for s in sub)
-    return 4, ()
-
-
-def _scene_paths(tracks: np.ndarray, union_frames: np.ndarray, primary: int, start: int, end: int):
-    """The scene as the converter's categoriser reads it back: rows at frames of any candidate scene within
-    [start, end], coordinates rounded to centimetres as written."""
-    frames = tracks[:, 0].astype(np.int64)
-    lo, hi = np.searchsorted(union_frames, [start, end + 1])
-    rows = np.flatnonzero(np.isin(frames, union_frames[lo:hi]))
-    rows = rows[np.argsort(frames[rows], kind="stable")]
-    track_rows = [
-        TrackRow(
-            int(tracks[r, 0]), int(tracks[r, 1]), round(float(tracks[r, 2]), 2), round(float(tracks[r, 3]), 2)
-        )
-        for r in rows
-    ]
-    return Reader.track_rows_to_paths(primary, track_rows)
-
-
-def build_scenes(
-    tracks: np.ndarray,
-    *,
-    frame_step: int,
-    chunk_size: int = CHUNK_SIZE,
-    chunk_stride: int = CHUNK_STRIDE,
-    start_scene_id: int = 0,
-    fps: float = TRAJNET_FPS,
-    obs_len: int = OBS_LEN,
-    min_length: float = MIN_LENGTH,
-    categorize_scenes: bool = True,
-    acceptance: tuple[float, float, float, float] | None = TRAJNETPP_ACCEPTANCE,
-    seed: int = DEFAULT_SEED,
-    progress: bool = False,
-) -> list[SceneSpec]:
-    """TrajNet++ scenes of ``tracks`` (``(R, 4)`` rows ``frame, ped_id, x, y``), as the converter builds them.
-
-    ``frame_step`` is the frame increment of one time step (10 for hotel, 6 for ETH, 1 for frames numbered by
-    step). With ``categorize_scenes`` each scene gets its TrajNet++ tag and ``acceptance`` (per type, None
-    keeps all) drops scenes as TrajNet++ does; categorising costs a Kalman fit (~50 ms) per moving primary,
-    so for large synthetic sets pass ``categorize_scenes=False`` (tags 0, nothing dropped).
-    """
-    tracks = _check_tracks(tracks)
-    if frame_step < 1 or chunk_size < 2 or chunk_stride < 1:
-        raise ValueError(
-            f"need frame_step >= 1, chunk_size >= 2, chunk_stride >= 1; got {frame_step}, "
-            f"{chunk_size}, {chunk_stride}"
-        )
-    if categorize_scenes and not 1 <= obs_len < chunk_size:
-        raise ValueError(f"obs_len must be in [1, chunk_size) to categorise, got {obs_len}")
-    if acceptance is not None and (len(acceptance) != 4 or not all(0 <= a <= 1 for a in acceptance)):
-        raise ValueError(f"acceptance must be four probabilities (types I-IV), got {acceptance}")
-    if tracks.shape[0] == 0:
-        return []
-    candidates = _candidate_windows(tracks, frame_step, chunk_size, chunk_stride, min_length)
-    frames = tracks[:, 0].astype(np.int64)
-
-    tags: list[Tag] = [0] * len(candidates)
-    keep = [True] * len(candidates)
-    if categorize_scenes and candidates:
-        union_frames = np.unique(np.concatenate([frames[w] for _, w in candidates]))
-        iterator: Iterable = enumerate(candidates)
-        if progress:
-            from tqdm import tqdm
-
-            iterator = tqdm(iterator, total=len(candidates), desc="categorising", unit="scene", leave=False)
-        for k, (primary, window) in iterator:
-            start, end = int(frames[window[0]]), int(frames[window[-1]])
-            paths = _scene_paths(tracks, union_frames, primary, start, end)
-            kind, sub = categorize(paths, obs_len=obs_len, pred_len=chunk_size - obs_len, seed=seed)
-            tags[k] = (kind, sub)
-            if acceptance is not None:
-                draw = np.random.default_rng([seed % 2**63, primary % 2**63, start % 2**63]).uniform()
-                keep[k] = bool(draw < acceptance[kind - 1])
-
-    scenes: list[SceneSpec] = []
-    for (primary, window), tag, kept in zip(candidates, tags, keep, strict=True):
-        if kept:
-            scene_id = start_scene_id + len(scenes)
-            start, end = int(frames[window[0]]), int(frames[window[-1]])
-            scenes.append(SceneSpec(scene_id, primary, start, end, float(fps), tag))
-    return scenes
-
-
-# --------------------------------------------------------------------------------------------------- writing
-
-
-def scene_track_rows(scenes: Sequence[SceneSpec], tracks: np.ndarray) -> np.ndarray:
-    """Indices of the rows a file of ``scenes`` holds: every row at a frame of some scene's primary,
-    sorted by frame (stable)."""
-    tracks = _check_tracks(tracks)
-    frames = tracks[:, 0].astype(np.int64)
-    peds = tracks[:, 1].astype(np.int64)
-    wanted: set[int] = set()
-    for scene in scenes:
-        own = (peds == scene.primary) & (frames >= scene.start_frame) & (frames <= scene.end_frame)
-        if not own.any():
-            raise ValueError(
-                f"scene {scene.id}: primary {scene.primary} has no row in frames "
-                f"{scene.start_frame}-{scene.end_frame}"
-            )
-        wanted.update(frames[own].tolist())
-    rows = np.flatnonzero(np.isin(frames, np.fromiter(wanted, dtype=np.int64, count=len(wanted))))
-    return rows[np.argsort(frames[rows], kind="stable")]
-
-
-def write_ndjson(
-    path: str | Path, scenes: Sequence[SceneSpec], tracks: np.ndarray, fps: float = TRAJNET_FPS
-) -> None:
-    """Write a TrajNet++ ndjson file: the scene records, then the track rows they need (see module doc)."""
-    path = Path(path)
-    tracks = _check_tracks(tracks)
-    for scene in scenes:
-        if scene.fps != fps:
-            raise ValueError(f"scene {scene.id} was built at {scene.fps} fps but is written as {fps} fps")
-    rows = scene_track_rows(scenes, tracks)
-    lines = [
-        trajnet(SceneRow(s.id, s.primary, s.start_frame, s.end_frame, fps, s.json_tag())) for s in scenes
-    ]
-    lines.extend(
-        trajnet(TrackRow(int(tracks[r, 0]), int(tracks[r, 1]), float(tracks[r, 2]), float(tracks[r, 3])))
-        for r in rows
-    )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text("".join(line + "\n" for line in lines))
-    tmp.replace(path)  # readers never see a half-written file
-
-
-# --------------------------------------------------------------------------------------- EWAP preparation
-
-
-@dataclass(frozen=True)
-class Reference:
-    """A TrajNet++ conversion of one whole raw sequence to check ours against."""
-
-    path: Path
-    label: str  # how the report names it, e.g. "official TrajNet++"
-    compare_tags: bool = True  # costs one Kalman fit per moving scene
-
-
-@dataclass(frozen=True)
-class SelfCheck:
-    """Our full-sequence conversion of a sequence against a reference TrajNet++ file of it."""
-
-    reference: str
-    label: str
-    reference_scenes: int
-    reproduced: int  # same primary, start, end, agents and every coordinate within tolerance
-    ours: int  # scenes in our full-sequence conversion, before acceptance
-    ours_static_not_in_reference: int
-    ours_moving_not_in_reference: int
-    tags_compared: int
-    tags_agree: int
-    mismatches: tuple[str, ...] = field(default_factory=tuple)  # first few reasons, for the report
-
-
-def compare_with_reference(
-    tracks: np.ndarray,
-    reference: Reference,
-    *,
-    frame_step: int,
-    workdir: Path,
-    tolerance: float = 1e-6,
-    progress: bool = False,
-) -> SelfCheck:
-    """Convert the whole sequence (no split, nothing dropped by acceptance) and look up each reference scene.
-
-    The fair comparison for TrajNet++'s files: they convert a sequence whole (hotel is train-only, ETH
-    test-only in TrajNet++) and then drop static scenes at random, so every reference scene should be among
-    ours and the extra ones should all be static.
-    """
-    with_tags = reference.compare_tags
-    ours = build_scenes(
-        tracks, frame_step=frame_step, categorize_scenes=with_tags, acceptance=None, progress=progress
-    )
-    ours_path = workdir / f"whole_{Path(reference.path).stem}.ndjson"
-    write_ndjson(ours_path, ours, tracks)
-    ours_by_key = {(s.primary, s.start, s.end): s for s in read_scenes(ours_path)}
-    reference_scenes = read_scenes(reference.path)
-    matched: set[tuple[int, int, int]] = set()
-    mismatches: list[str] = []
-    tags_compared = tags_agree = 0
-    for ref in reference_scenes:
-        key = (ref.primary, ref.start, ref.end)
-        mine = ours_by_key.get(key)
-        if mine is None:
-            mismatches.append(f"scene {ref.id} {key}: not among ours")
-            continue
-        problem = _scene_difference(ref, mine, tolerance)
-        if problem:
-            mismatches.append(f"scene {ref.id} {key}: {problem}")
-            continue
-        matched.add(key)
-        if with_tags and isinstance(ref.tag, list):
-            tags_compared += 1
-            tags_agree += ref.tag == mine.tag
-    extra = [s for k, s in ours_by_key.items() if k not in matched]
-    static = sum(_is_static(s) for s in extra)
-    return SelfCheck(
-        reference=str(reference.path),
-        label=reference.label,
-        reference_scenes=len(reference_scenes),
-        reproduced=len(matched),
-        ours=len(ours_by_key),
-        ours_static_not_in_reference=static,
-        ours_moving_not_in_reference=len(extra) - static,
-        tags_compared=tags_compared,
-        tags_agree=tags_agree,
-        mismatches=tuple(mismatches[:10]),
-    )
-
-
-def _is_static(scene) -> bool:
-    first, last = scene.xy[0, 0], scene.xy[-1, 0]
-    return bool(np.hypot(*(first - last)) < STATIC_THRESHOLD)
-
-
-def _scene_difference(ref, mine, tolerance: float) -> str | None:
-    if not np.array_equal(ref.frames, mine.frames):
-        return "different primary frames"
-    if set(ref.agents.tolist()) != set(mine.agents.tolist()):
-        return f"agents differ: {sorted(set(ref.agents.tolist()) ^ set(mine.agents.tolist()))}"
-    order = [int(np.flatnonzero(mine.agents == a)[0]) for a in ref.agents]
-    a, b = ref.xy, mine.xy[:, order]
-    if not np.array_equal(np.isnan(a), np.isnan(b)):
-        return "different missing entries"
-    gap = np.nanmax(np.abs(a - b)) if np.isfinite(a).any() else 0.0
-    return None if gap <= tolerance else f"coordinates differ by up to {gap:.3g} m"
 
 
 def prepare_ewap(
@@ -520,7 +64,34 @@ def prepare_ewap(
             f"{raw_dir} is not a BIWI EWAP directory: missing {missing} (see data/README.md for the archive)"
         )
     out_dir.mkdir(parents=True, exist_ok=True)
-    manifest: dict = {
+    manifest = _new_manifest(raw_dir, acceptance, categorize_scenes, seed, fractions)
+    options = dict(categorize_scenes=categorize_scenes, acceptance=acceptance, seed=seed, progress=progress)
+    for name, source in sources.items():
+        tracks = read_obsmat(source)
+        frame_step = infer_frame_step(tracks[:, 0])
+        parts = split_frames(tracks[:, 0], fractions)
+        manifest["sources"][name] = {
+            "path": str(source.resolve()),
+            "sha256": sha256_file(source),
+            "frame_step": frame_step,
+        }
+        manifest["files"].update(_write_parts(name, tracks, parts, frame_step, out_dir, options, log))
+        reference = (references or {}).get(name)
+        if reference is not None and Path(reference.path).is_file():
+            manifest["self_check"][name] = _self_check(name, tracks, reference, frame_step, progress, log)
+    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    return manifest
+
+
+def _new_manifest(
+    raw_dir: Path,
+    acceptance: tuple[float, float, float, float] | None,
+    categorize_scenes: bool,
+    seed: int,
+    fractions: tuple[float, float],
+) -> dict:
+    """The manifest before any sequence is converted: what was asked for, with empty per-sequence parts."""
+    return {
         "format": "crowdmpc-prepared",
         "converter": CONVERTER_VERSION,
         "source_dir": str(raw_dir.resolve()),
@@ -541,81 +112,45 @@ def prepare_ewap(
         "files": {},
         "self_check": {},
     }
-    for name, source in sources.items():
-        tracks = read_obsmat(source)
-        frame_step = infer_frame_step(tracks[:, 0])
-        parts = split_frames(tracks[:, 0], fractions)
-        manifest["sources"][name] = {
-            "path": str(source.resolve()),
-            "sha256": sha256_file(source),
-            "frame_step": frame_step,
+
+
+def _write_parts(
+    name: str,
+    tracks: np.ndarray,
+    parts: dict[str, np.ndarray],
+    frame_step: int,
+    out_dir: Path,
+    scenes_options: dict,
+    log,
+) -> dict[str, dict]:
+    """Each split part of one sequence as its own ndjson file; scene ids run on across the parts, so a
+    sequence's ids stay unique. Returns the manifest's entries for the files written."""
+    files: dict[str, dict] = {}
+    next_id = 0
+    for split in SPLITS:
+        rows = tracks[np.isin(tracks[:, 0].astype(np.int64), parts[split])]
+        scenes = build_scenes(rows, frame_step=frame_step, start_scene_id=next_id, **scenes_options)
+        next_id += len(scenes)
+        target = out_dir / split / f"{name}.ndjson"
+        write_ndjson(target, scenes, rows)
+        first, last = (int(parts[split][0]), int(parts[split][-1])) if len(parts[split]) else (None, None)
+        files[f"{split}/{name}.ndjson"] = {
+            "scenes": len(scenes),
+            "frames": [first, last],
+            "sha256": sha256_file(target),
         }
-        next_id = 0
-        for split in SPLITS:
-            rows = tracks[np.isin(tracks[:, 0].astype(np.int64), parts[split])]
-            scenes = build_scenes(
-                rows,
-                frame_step=frame_step,
-                start_scene_id=next_id,
-                categorize_scenes=categorize_scenes,
-                acceptance=acceptance,
-                seed=seed,
-                progress=progress,
-            )
-            next_id += len(scenes)
-            target = out_dir / split / f"{name}.ndjson"
-            write_ndjson(target, scenes, rows)
-            first, last = (int(parts[split][0]), int(parts[split][-1])) if len(parts[split]) else (None, None)
-            manifest["files"][f"{split}/{name}.ndjson"] = {
-                "scenes": len(scenes),
-                "frames": [first, last],
-                "sha256": sha256_file(target),
-            }
-            log(f"{name:<11} {split:<5} frames {first}-{last}: {len(scenes):5d} scenes -> {target}")
-        reference = (references or {}).get(name)
-        if reference is not None and Path(reference.path).is_file():
-            with tempfile.TemporaryDirectory(prefix="crowdmpc-selfcheck-") as workdir:
-                check = compare_with_reference(
-                    tracks, reference, frame_step=frame_step, workdir=Path(workdir), progress=progress
-                )
-            manifest["self_check"][name] = asdict(check)
-            for line in describe_check(name, check):
-                log(line)
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-    return manifest
+        log(f"{name:<11} {split:<5} frames {first}-{last}: {len(scenes):5d} scenes -> {target}")
+    return files
 
 
-def default_references(raw_dir: str | Path) -> dict[str, Reference]:
-    """Reference conversions found beside a raw EWAP directory laid out like the team's shared data:
-    the official TrajNet++ hotel file, and pedro-mgb's (unofficial) whole-ETH conversion."""
-    root = Path(raw_dir).resolve().parent
-    found = {
-        "biwi_hotel": Reference(
-            root / "trajnetpp_vita" / "train" / "real_data" / "biwi_hotel.ndjson", "official TrajNet++", True
-        ),
-        # tags skipped: one Kalman fit per scene of the whole of ETH would add about a minute
-        "biwi_eth": Reference(
-            root / "trajnetpp_pedro-mgb" / "test_private" / "real_data" / "biwi_eth.ndjson",
-            "unofficial (pedro-mgb, TrajNet++ converter)",
-            False,
-        ),
-    }
-    return {name: ref for name, ref in found.items() if ref.path.is_file()}
-
-
-def describe_check(name: str, check: SelfCheck) -> list[str]:
-    lines = [
-        f"self-check {name}: reproduced {check.reproduced} / {check.reference_scenes} scenes of the "
-        f"{check.label} file {check.reference} exactly (same primary, start, end, agents, every coordinate "
-        "within 1e-6)",
-        f"  our whole-sequence conversion has {check.ours} scenes before acceptance; of those not in the "
-        f"reference, {check.ours_static_not_in_reference} are static (type I, which TrajNet++ keeps at "
-        f"random with probability 0.1) and {check.ours_moving_not_in_reference} are moving",
-    ]
-    if check.tags_compared:
-        lines.append(
-            f"  categorisation tags agree on {check.tags_agree} / {check.tags_compared} reproduced scenes "
-            "(type II rests on a sampled Kalman prediction, so borderline scenes can flip)"
+def _self_check(
+    name: str, tracks: np.ndarray, reference: Reference, frame_step: int, progress: bool, log
+) -> dict:
+    """``compare_with_reference`` in a scratch directory, reported through ``log``; the manifest's entry."""
+    with tempfile.TemporaryDirectory(prefix="crowdmpc-selfcheck-") as workdir:
+        check = compare_with_reference(
+            tracks, reference, frame_step=frame_step, workdir=Path(workdir), progress=progress
         )
-    lines.extend(f"  mismatch: {m}" for m in check.mismatches)
-    return lines
+    for line in describe_check(name, check):
+        log(line)
+    return asdict(check)

@@ -1,4 +1,5 @@
-"""Plain ``torch.nn`` networks of the learned predictors; no Lightning, no CasADi (``predictors.learned``)."""
+"""Plain ``torch.nn`` networks of the learned predictors; no Lightning, no CasADi (their twin is
+``predictors.casadi_twin``)."""
 
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig

@@ -107,3 +107,20 @@ def test_env_config_is_used():
         env_config=EnvConfig(time_limit=2.0, timeout_margin=0.0),
     )  # fmt: skip
     assert result.metrics.n_steps == 5 and result.metrics.timeout
+
+
+def test_every_controller_name_has_its_facts_and_a_builder_and_states_its_predictor():
+    from typing import get_args
+
+    from pipelines.loop.controllers import CONTROLLER_KINDS, CONTROLLERS, ControllerName
+
+    assert set(CONTROLLERS) == set(CONTROLLER_KINDS) == set(get_args(ControllerName))
+    for name, kind in CONTROLLER_KINDS.items():
+        spec = ControllerSpec(name, "constant_velocity")
+        controller = make_controller(spec)
+        try:
+            assert controller.predictor == spec.predictor_name
+            assert (controller.predictor is not None) == kind.uses_predictor
+            assert set(controller.describe()) >= {"predictor_sha256", "config"}
+        finally:
+            controller.close()

@@ -14,15 +14,13 @@ from predictors.calibration import (
     calibration_from_errors,
     find_calibration,
     read_calibrations,
-    real_data_sha256,
-    real_errors,
     save_calibration,
-    validation_files,
 )
 from predictors.conformal import conformal_quantile, coverage, min_samples, step_counts, step_quantiles
 from predictors.constant_velocity import ConstantVelocity
 from predictors.data.prepare import prepare_ewap
 from predictors.errors import PredictorError, UnknownPredictor
+from predictors.real_data import real_data_sha256, real_errors, validation_files
 from tests.predictors.samples import STEP, scene, track, write_lines, write_tiny_ewap, write_walk_file
 
 SHA_A = "a" * 64

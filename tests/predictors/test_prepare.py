@@ -3,18 +3,11 @@ import json
 import numpy as np
 import pytest
 
-from predictors.data.prepare import (
-    Reference,
-    SceneSpec,
-    build_scenes,
-    compare_with_reference,
-    infer_frame_step,
-    prepare_ewap,
-    read_obsmat,
-    split_frames,
-    write_ndjson,
-)
+from predictors.data.ewap import infer_frame_step, read_obsmat, split_frames
+from predictors.data.prepare import prepare_ewap
+from predictors.data.selfcheck import Reference, compare_with_reference
 from predictors.data.trajnet_io import read_scenes
+from predictors.data.trajnet_scenes import SceneSpec, build_scenes, write_ndjson
 from predictors.errors import DatasetFormatError
 from tests.predictors.samples import write_tiny_ewap
 
