@@ -97,7 +97,7 @@ def replay(nlp: dict, cfg: MPCConfig, problems: list[dict[str, Any]]) -> dict[st
     cpu0 = time.process_time()
     for pr in problems:
         out, stats = solver.solve(pr["x0"], pr["p"], pr["lbx"], pr["ubx"], -v, v, pr["lam_x0"], pr["lam_g0"])
-        costs.append(float(out["f"]))
+        costs.append(float(np.asarray(out["f"]).item()))  # BufferedFunction returns (1, 1) arrays
         iterations.append(stats["iterations"])
         failures += stats["status"] not in nlp_module.SOLVED
         used[stats["solver"]] += 1
