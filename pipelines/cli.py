@@ -6,6 +6,7 @@ import argparse
 import importlib
 import importlib.util
 import sys
+from typing import NoReturn
 
 from crowdsim.errors import SimulationError
 from mpc.errors import MPCConfigError
@@ -36,8 +37,17 @@ EPILOG = """examples:
 """
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argparse parser whose errors are one line and a pointer to ``--help``, exit code 2, instead of the
+    usage block (which for a long option list is many lines before the one that matters). Subparsers are of
+    the class of their parent (argparse's ``add_subparsers`` default), so every level errs the same way."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}; see '{self.prog} --help'\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="crowdmpc",
         description="Multi-robot navigation in crowds with learned predictors and game-theoretic MPC.",
         epilog=EPILOG,

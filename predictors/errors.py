@@ -5,6 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def short_repr(value: object, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters: a hostile file's value must not flood a one-line error."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
 class PredictorError(ValueError):
     """Base class of the user-facing errors raised by `predictors`."""
 

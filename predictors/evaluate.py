@@ -16,7 +16,7 @@ import numpy as np
 
 from predictors.base import OBS_LEN, PRED_LEN, Predictor
 from predictors.data.trajnet_io import read_scenes
-from predictors.errors import PredictorError
+from predictors.errors import DatasetFormatError, PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
 
 
@@ -76,15 +76,17 @@ def load_eval_scenes(path: str | Path, config: EvalConfig = EvalConfig()) -> lis
     scenes = []
     for scene in read_scenes(path):
         if len(scene.frames) < length:
-            raise PredictorError(
-                f"{path}:{scene.line}: scene {scene.id} has {len(scene.frames)} steps, the evaluation needs "
-                f"{length} ({config.obs_len} observed + {config.pred_len} predicted); is this a test/ file "
-                "without ground truth?"
+            raise DatasetFormatError(
+                path,
+                scene.line,
+                f"scene {scene.id} has {len(scene.frames)} steps, the evaluation needs {length} "
+                f"({config.obs_len} observed + {config.pred_len} predicted); is this a test/ file without "
+                "ground truth?",
             )
         frames = scene.frames[len(scene.frames) - length :]
         if np.unique(np.diff(frames)).size != 1:
-            raise PredictorError(
-                f"{path}:{scene.line}: scene {scene.id} has unevenly spaced frames {frames.tolist()}"
+            raise DatasetFormatError(
+                path, scene.line, f"scene {scene.id} has unevenly spaced frames {frames.tolist()}"
             )
         scenes.append(EvalScene(scene.xy[len(scene.frames) - length :], frames))
     return scenes

@@ -4,6 +4,11 @@ so that ``crowdmpc --help`` stays fast."""
 from __future__ import annotations
 
 import argparse
+import os
+import tempfile
+from pathlib import Path
+
+from pipelines.errors import PipelineError
 
 
 def humans_list(text: str) -> tuple[int, ...]:
@@ -15,3 +20,44 @@ def humans_list(text: str) -> tuple[int, ...]:
     if not values or min(values) < 1:
         raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
     return values
+
+
+def check_writable(path: Path | None, option: str, *, directory: bool = False) -> None:
+    """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
+
+    ``directory``: the path is a directory the command creates or writes into, else a file it creates or
+    replaces. What does not exist yet is judged by its nearest existing ancestor, which must be a directory
+    the command may create entries in; the check creates nothing (a probe file is made and removed at once).
+    """
+    if path is None:
+        return
+    path = Path(path)
+    label = f"{option} {path}"
+    if path.exists():
+        if directory != path.is_dir():
+            raise PipelineError(f"{label}: " + ("not a directory" if directory else "is a directory"))
+        try:
+            if directory:
+                _probe(path)
+            else:
+                open(path, "ab").close()  # neither its contents nor its modification time change
+        except OSError as exc:
+            raise PipelineError(f"{label}: cannot write there ({exc.strerror or exc})") from None
+        return
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise PipelineError(f"{label}: {ancestor} is not a directory")
+    try:
+        _probe(ancestor)
+    except OSError as exc:
+        raise PipelineError(f"{label}: cannot create it in {ancestor} ({exc.strerror or exc})") from None
+
+
+def _probe(directory: Path) -> None:
+    """Create and remove a file in ``directory``: the one test of writability that a read-only file system,
+    ACLs and root's privileges all answer truthfully."""
+    fd, name = tempfile.mkstemp(prefix=".crowdmpc-probe-", dir=directory)
+    os.close(fd)
+    os.unlink(name)

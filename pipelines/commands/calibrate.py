@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from pipelines.commands import humans_list
+from pipelines.commands import check_writable, humans_list
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -145,8 +145,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"--horizon must be in 1..50 steps, got {args.horizon}")
     if not 1 <= args.episodes <= 100_000:
         raise PipelineError(f"--episodes must be in 1..100000, got {args.episodes}")
-    if args.json is not None and args.json.parent.exists() and not args.json.parent.is_dir():
-        raise PipelineError(f"--json {args.json}: {args.json.parent} is not a directory")
+    check_writable(args.json, "--json")
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "real":
         from predictors.oracle import ORACLE_PREDICTOR

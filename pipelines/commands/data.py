@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -95,6 +96,7 @@ def run_prepare(args: argparse.Namespace) -> int:
     from predictors.data.selfcheck import default_references
     from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
 
+    check_writable(args.out, "--out", directory=True)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:
         raise PipelineError(
@@ -137,6 +139,7 @@ def run_stats(args: argparse.Namespace) -> int:
 def run_synth(args: argparse.Namespace) -> int:
     if args.episodes < 1 or args.humans < 1:
         raise PipelineError(f"--episodes and --humans must be >= 1, got {args.episodes} and {args.humans}")
+    check_writable(args.out, "--out")
     try:
         from pipelines.experiments.synth import synthesize
     except ModuleNotFoundError as exc:

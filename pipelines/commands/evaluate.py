@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from pipelines.commands import check_writable
+
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
   crowdmpc evaluate --predictor constant_velocity --data-dir data/prepared --protocol loo --json cv_loo.json
@@ -52,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     from predictors.evaluate import EvalConfig, evaluate, format_table
     from predictors.registry import load_predictor
 
+    check_writable(args.json, "--json")
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
     predictor = load_predictor(args.predictor)
     files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)

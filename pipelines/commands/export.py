@@ -7,6 +7,10 @@ from pathlib import Path
 
 from pipelines.errors import PipelineError
 
+# The MPC predicts over 4 steps (Table I); the CasADi function grows with H (its graph unrolls H recursive
+# steps, and 100000 ran without bound), so H is capped well above any horizon the controller can solve over.
+MAX_HORIZON = 100
+
 EPILOG = """examples:
   crowdmpc export social_lstm_soft_eth --out social_lstm_soft_eth.casadi --humans 7 --robots 3 --horizon 4
   python -c "import casadi; f = casadi.Function.load('social_lstm_soft_eth.casadi'); print(f)"
@@ -38,16 +42,22 @@ def register(subparsers) -> None:
     parser.add_argument("--out", required=True, type=Path, help="output file (.casadi)")
     parser.add_argument("--humans", type=int, default=7, help="number of humans N_h (default 7)")
     parser.add_argument("--robots", type=int, default=3, help="number of robots M (default 3)")
-    parser.add_argument("--horizon", type=int, default=4, help="prediction horizon H (default 4, Table I)")
+    parser.add_argument(
+        "--horizon", type=int, default=4, help="prediction horizon H, 1..100 (default 4, Table I)"
+    )
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
     from predictors.registry import load_predictor
 
-    if args.humans < 1 or args.robots < 0 or args.horizon < 1:
+    # Checked before anything is loaded or built; the agent counts are the simulator's (crowdsim.scenarios).
+    if not (
+        1 <= args.humans <= MAX_HUMANS and 0 <= args.robots <= MAX_ROBOTS and 1 <= args.horizon <= MAX_HORIZON
+    ):
         raise PipelineError(
-            "need --humans >= 1, --robots >= 0, --horizon >= 1, "
+            f"need --humans in 1..{MAX_HUMANS}, --robots in 0..{MAX_ROBOTS}, --horizon in 1..{MAX_HORIZON}, "
             f"got {args.humans}, {args.robots}, {args.horizon}"
         )
     if args.out.is_dir():

@@ -19,8 +19,17 @@ EPILOG = """examples:
   crowdmpc review runs/a.mcap --compare other/a.mcap --plot overlay.png
   crowdmpc review runs/ --check --json review.json        # validate every message against its schema
 
-A file whose run was killed reads up to its last complete chunk, with a warning. Exit code 1 when --check
-finds invalid messages.
+A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
+compression fails) or a message that is not what the review reads is left out, with a warning; --check lists
+every one, with the schema violations.
+
+In a folder, every readable file is reviewed; each unreadable one (empty, not MCAP, cut inside its header, a
+folder named *.mcap) gets one line on stderr, and each unfinished NAME.mcap.part (a recording still being
+written, or whose run was killed: review it by name to read what it holds) a warning line.
+
+Exit code: 0 when the review ran, even with files left out of a folder (a sweep killed half-way must still
+review what it finished); 2 when nothing could be read (one file, or a folder without one readable recording);
+with --check, 1 when any file has a bad chunk, a bad message, a schema violation or is unreadable.
 """
 
 MAX_ERRORS_SHOWN = 20
@@ -79,9 +88,35 @@ def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
     return failed
 
 
+def _read_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording], int]:
+    """Every readable recording of ``folder`` and how many were not; a line on stderr for each left out."""
+    from pipelines.logs.reader import find_recordings, read_recording
+
+    paths, unfinished = find_recordings(folder)
+    for path in unfinished:
+        print(
+            f"crowdmpc review: warning: skipping {path}: unfinished (its run was killed or is still "
+            f"writing); `crowdmpc review {path}` reads what it holds",
+            file=sys.stderr,
+        )
+    recordings, unreadable = [], {}
+    for path in paths:
+        try:
+            recordings.append(read_recording(path))
+        except PipelineError as exc:
+            unreadable[str(path)] = str(exc)
+            print(f"crowdmpc review: unreadable: {exc}", file=sys.stderr)
+    report.update(unreadable=unreadable, unfinished=[str(p) for p in unfinished])
+    if not recordings:
+        raise PipelineError(
+            f"no readable recording in {folder} ({len(unreadable)} unreadable, {len(unfinished)} unfinished)"
+        )
+    return recordings, len(unreadable)
+
+
 def run(args: argparse.Namespace) -> int:
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
-    from pipelines.logs.reader import find_recordings, read_recording
+    from pipelines.logs.reader import read_recording
     from pipelines.logs.review import aggregate_table, compare_table, format_summary, summarize
 
     if args.times and not args.plot:
@@ -91,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
 
         check_figure_path(args.plot, "--plot")
     report: dict[str, Any] = {}
+    n_unreadable = 0
     if args.path.is_dir():
         single_file_only = [
             f"--{name}" for name in ("plot", "times", "animate", "compare") if getattr(args, name)
@@ -99,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
             raise PipelineError(
                 f"{', '.join(single_file_only)} need one .mcap file, not the folder {args.path}"
             )
-        recordings = [read_recording(p) for p in find_recordings(args.path)]
+        recordings, n_unreadable = _read_folder(args.path, report)
         table, totals = aggregate_table(recordings)
         print(table)
         report.update(runs=[summarize(rec) for rec in recordings], totals=totals)
@@ -111,8 +147,10 @@ def run(args: argparse.Namespace) -> int:
     for rec in recordings:
         if rec.warning:
             print(f"crowdmpc review: warning: {rec.warning}", file=sys.stderr)
+        if rec.problems_warning and not args.check:  # --check lists them all
+            print(f"crowdmpc review: warning: {rec.problems_warning}", file=sys.stderr)
 
-    failed = _check(recordings, report) if args.check else 0
+    failed = _check(recordings, report) + n_unreadable if args.check else 0
 
     if not args.path.is_dir():
         rec = recordings[0]
@@ -121,8 +159,9 @@ def run(args: argparse.Namespace) -> int:
             print()
             print(compare_table(rec, other))
             report["compare"] = summarize(other)
-            if other.warning:
-                print(f"crowdmpc review: warning: {other.warning}", file=sys.stderr)
+            for warning in (other.warning, other.problems_warning):
+                if warning:
+                    print(f"crowdmpc review: warning: {warning}", file=sys.stderr)
         if args.plot:
             if other is not None:
                 plot_compare(rec, other, args.plot)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
+from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import CONTROLLERS, COUPLINGS
 from pipelines.plain_json import plain
@@ -132,6 +133,10 @@ def _check(args: argparse.Namespace) -> None:
         from crowdsim.plotting import check_figure_path
 
         check_figure_path(args.plot, "--plot")
+    # Before the episodes, not after them: a path that cannot be written would waste the whole run.
+    check_writable(args.json, "--json")
+    check_writable(args.plot, "--plot")
+    check_writable(args.record, "--record", directory=True)
 
 
 def _run_meta(args: argparse.Namespace, spec: ControllerSpec) -> dict[str, Any]:

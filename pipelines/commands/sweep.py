@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipelines.commands import humans_list
+from pipelines.commands import check_writable, humans_list
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -35,6 +35,11 @@ Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are n
 retried on rerun), cells.csv, episodes.csv, table.md, success_vs_humans.png, travel_time_vs_humans.png,
 sweep.json, and with --record the MCAP logs in DIR/mcap/<cell>/.
 """
+
+
+# A local pool (processes, or a local Ray) gets at most this many workers per CPU: more only queue for the
+# same cores, each holding its own solvers and predictor in memory. A Ray cluster (--ray-address) takes more.
+LOCAL_WORKERS_PER_CPU = 4
 
 
 def _cpus() -> int:
@@ -194,11 +199,26 @@ def configured_experiment(args: argparse.Namespace) -> Experiment:
     return experiment
 
 
+def _check_workers(args: argparse.Namespace) -> None:
+    """Local workers within what this machine can run (the bounds of every sweep are SweepConfig's)."""
+    if args.ray_address is not None or args.backend == "inline" or args.workers < 1:
+        return
+    most = max(LOCAL_WORKERS_PER_CPU * _cpus(), 8)
+    if args.workers > most:
+        raise PipelineError(
+            f"--workers {args.workers}: at most {most} here ({LOCAL_WORKERS_PER_CPU} per CPU this process "
+            f"may use, {_cpus()}); more only queue for the same cores (a Ray cluster takes more)"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from pipelines.experiments.log import EPISODES_FILE, EpisodeLog
     from pipelines.experiments.report import write_report
     from pipelines.experiments.sweep import SweepConfig, run_sweep
 
+    _check_workers(args)
+    if not args.dry_run:
+        check_writable(args.out, "--out", directory=True)
     experiment = configured_experiment(args)
     config = SweepConfig(
         experiment=experiment,

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
 
+from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 
 MODELS = ("social_lstm", "vanilla_lstm", "social_gan")
@@ -91,8 +93,10 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
         files = {"train": list(args.train), "val": list(args.val), "test": list(args.test or [])}
         for split, paths in files.items():
             for path in paths:
-                if not path.is_file():
+                if not path.exists():
                     raise PipelineError(f"--{split} file {path} does not exist")
+                if not path.is_file():
+                    raise PipelineError(f"--{split} {path} is not a data file (a directory or a device)")
         return files, None
     from predictors.data.locate import prepared_dir, protocol_files
 
@@ -163,7 +167,43 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
     return trainer, best
 
 
+def _check_numbers(args: argparse.Namespace) -> None:
+    """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
+    if not (math.isfinite(args.lr) and args.lr > 0):
+        raise PipelineError(f"--lr must be a finite number > 0, got {args.lr}")
+    for option, value in (
+        ("--epochs", args.epochs),
+        ("--batch-size", args.batch_size),
+        ("--step-size", args.step_size),
+        ("--hidden-dim", args.hidden_dim),
+    ):
+        if value is not None and value < 1:
+            raise PipelineError(f"{option} must be >= 1, got {value}")
+    if not 0 <= args.seed < 2**32:  # Lightning would replace one outside numpy's range by 0, with a warning
+        raise PipelineError(f"--seed must be in 0..{2**32 - 1}, got {args.seed}")
+
+
 def run(args: argparse.Namespace) -> int:
+    _check_numbers(args)
+    pooling, net_config = _net_config(args)
+    explicit = args.train is not None or args.val is not None
+    name = args.name or default_name(args.model, pooling, args.dataset, explicit)
+    out = args.out or Path("runs") / "train" / name
+    check_writable(out, "--out", directory=True)
+    ckpt_dir = out / "checkpoints"
+    last = ckpt_dir / "last.ckpt"
+    if args.resume and not last.is_file():
+        raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
+    if not args.resume and last.is_file():
+        raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
+    files, root = resolve_files(args)
+    return _train(args, net_config, name, out, (files, root))
+
+
+def _train(
+    args: argparse.Namespace, net_config: Any, name: str, out: Path, data_files: tuple[dict, Path | None]
+) -> int:
+    """Lightning's part of ``run``, once every option has been checked."""
     import warnings
 
     import lightning as L
@@ -174,24 +214,11 @@ def run(args: argparse.Namespace) -> int:
     from predictors.training import OptimConfig, make_module
     from predictors.zoo import load_checkpoint, save_checkpoint
 
-    if args.epochs < 1 or args.batch_size < 1:
-        raise PipelineError(
-            f"--epochs and --batch-size must be >= 1, got {args.epochs} and {args.batch_size}"
-        )
-    pooling, net_config = _net_config(args)
+    files, root = data_files
     optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
-    explicit = args.train is not None or args.val is not None
-    name = args.name or default_name(args.model, pooling, args.dataset, explicit)
-    out = args.out or Path("runs") / "train" / name
     ckpt_dir = out / "checkpoints"
     last = ckpt_dir / "last.ckpt"
-    if args.resume and not last.is_file():
-        raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
-    if not args.resume and last.is_file():
-        raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
-
-    files, root = resolve_files(args)
-    protocol = "custom" if explicit else args.protocol
+    protocol = "custom" if args.train is not None or args.val is not None else args.protocol
     # Tiny tensors on a shared CPU: one thread is faster than torch's pool, which spin-waits for cores.
     torch.set_num_threads(1)
     warnings.filterwarnings("ignore", message=".*does not have many workers.*")
@@ -261,7 +288,8 @@ def _evaluate_splits(
                 progress=not args.no_progress,
                 root=root,
             )
-            metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
+            if result["overall"].get("scenes"):  # an empty --test file has nothing to report
+                metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
     return metrics
 
 

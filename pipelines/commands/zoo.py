@@ -50,8 +50,12 @@ def register(subparsers) -> None:
 
 
 def _metric(metrics: dict, split: str, key: str) -> str:
-    value = metrics.get(split, {}).get(key)
-    return "-" if value is None else f"{value:.3f}"
+    """A metric as a table cell: "-" when absent, "?" when the manifest holds something else than a number."""
+    values = metrics.get(split, {})
+    value = values.get(key) if isinstance(values, dict) else None
+    if value is None:
+        return "-"
+    return "?" if isinstance(value, bool) or not isinstance(value, int | float) else f"{value:.3f}"
 
 
 def format_list(entries, root: Path) -> str:
@@ -72,8 +76,8 @@ def format_list(entries, root: Path) -> str:
     for entry in entries:
         m = entry.metrics
         topk = "-"
-        if m.get("test", {}).get("topk_ade") is not None:
-            topk = f"{m['test']['topk_ade']:.3f}/{m['test']['topk_fde']:.3f}"
+        if _metric(m, "test", "topk_ade") != "-":
+            topk = f"{_metric(m, 'test', 'topk_ade')}/{_metric(m, 'test', 'topk_fde')}"
         try:
             pooling = json.loads((root / entry.config).read_text())["net"]["pooling"]
         except (OSError, KeyError, TypeError, json.JSONDecodeError):
@@ -135,7 +139,11 @@ def run(args: argparse.Namespace) -> int:
             raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
         if not isinstance(summary, dict):
             raise PipelineError(f"{metrics_path}: expected the JSON object `crowdmpc train` writes")
-        name = args.name or summary.get("name") or args.weights.stem
+        for key in ("training", "training_data", "metrics"):
+            if not isinstance(summary.get(key, {}), dict):
+                raise PipelineError(f'{metrics_path}: "{key}" must be a JSON object')
+        name = args.name if args.name is not None else summary.get("name") or args.weights.stem
+        # add_to_zoo checks the name before it writes anything
         training = dict(summary.get("training", {}))
         training_data = dict(summary.get("training_data", {}))
         if args.protocol:

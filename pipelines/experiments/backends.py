@@ -19,7 +19,7 @@ from typing import Any, Final, Protocol
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.cells import EpisodeTask
-from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, jit_scratch_directory
+from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, worker_scratch
 
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
 # Library thread pools inside each worker: the workers are the parallelism.
@@ -60,21 +60,49 @@ def _exit_with_parent() -> None:
     threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
 
 
-def _init_pool_worker(record: str, jit: bool) -> None:
+def _init_pool_worker(record: str, jit: bool, scratch_root: str | None) -> None:
     import signal
 
     global _WORKER
     # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent()
+    scratch = worker_scratch(scratch_root)
     if jit:
-        jit_scratch_directory()
-    _WORKER = EpisodeWorker(record, jit)
+        os.chdir(
+            scratch
+        )  # CasADi's jit writes its C sources into the current directory (no option for another)
+    _WORKER = EpisodeWorker(record, jit, scratch)
 
 
 def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
     assert _WORKER is not None, "pool worker used before its initializer ran"
     return _WORKER.run(task)
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (unless it runs already) so that it does not warn about the
+    pool's semaphores when the driver is killed.
+
+    The pool's queues hold named POSIX semaphores (5; spawn needs names the workers can open), which the
+    driver registers with the tracker, a process of its own, and unregisters when it exits. A driver killed by
+    SIGKILL cannot; the tracker then unlinks them, which is what it is for, and warns "There appear to be 5
+    leaked semaphore objects to clean up at shutdown" on the terminal after the driver is gone. Nothing is
+    left behind, so that warning is noise: the tracker starts with it filtered out (its warning filters come
+    from the environment it starts in). SIGTERM and SIGHUP end a sweep in an orderly way (run_sweep), with no
+    warning either."""
+    from multiprocessing import resource_tracker
+
+    quiet = "ignore:resource_tracker:UserWarning"
+    saved = os.environ.get("PYTHONWARNINGS")
+    os.environ["PYTHONWARNINGS"] = f"{saved},{quiet}" if saved else quiet
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if saved is None:
+            os.environ.pop("PYTHONWARNINGS", None)
+        else:
+            os.environ["PYTHONWARNINGS"] = saved
 
 
 @contextlib.contextmanager
@@ -97,9 +125,9 @@ class InlineBackend:
 
     name = "inline"
 
-    def __init__(self, record: str, jit: bool = False):
+    def __init__(self, record: str, jit: bool = False, scratch_root: str | None = None):
         # jit's C sources land in the current directory while the driver runs (removed when it exits).
-        self.worker = EpisodeWorker(record, jit)
+        self.worker = EpisodeWorker(record, jit, worker_scratch(scratch_root))
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         for task in tasks:
@@ -114,17 +142,18 @@ class ProcessBackend:
 
     name = "process"
 
-    def __init__(self, workers: int, record: str, jit: bool = False):
+    def __init__(self, workers: int, record: str, jit: bool = False, scratch_root: str | None = None):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
         self.workers = workers
+        _start_resource_tracker()
         with _child_environment(SINGLE_THREAD_ENV):
             self._pool = ProcessPoolExecutor(
                 max_workers=workers,
                 mp_context=multiprocessing.get_context("spawn"),
                 initializer=_init_pool_worker,
-                initargs=(record, jit),
+                initargs=(record, jit, scratch_root),
             )
             # Start every worker now, while the environment above is in force.
             for future in [self._pool.submit(os.getpid) for _ in range(workers)]:
@@ -158,12 +187,14 @@ class ProcessBackend:
 
 
 class _RayEpisodeWorker(EpisodeWorker):
-    """An EpisodeWorker in a Ray actor: its own process, so it may move to a scratch directory for jit."""
+    """An EpisodeWorker in a Ray actor: its own process, so it may move to a scratch directory for jit (the
+    driver's scratch root when the actor runs on the driver's machine, else one of its own)."""
 
-    def __init__(self, record: str = "none", jit: bool = False):
+    def __init__(self, record: str = "none", jit: bool = False, scratch_root: str | None = None):
+        scratch = worker_scratch(scratch_root)
         if jit:
-            jit_scratch_directory()
-        super().__init__(record, jit)
+            os.chdir(scratch)
+        super().__init__(record, jit, scratch)
 
 
 class RayBackend:
@@ -173,7 +204,14 @@ class RayBackend:
 
     name = "ray"
 
-    def __init__(self, workers: int, record: str, address: str | None, jit: bool = False):
+    def __init__(
+        self,
+        workers: int,
+        record: str,
+        address: str | None,
+        jit: bool = False,
+        scratch_root: str | None = None,
+    ):
         try:
             import ray
         except ImportError:
@@ -189,7 +227,7 @@ class RayBackend:
             else:
                 ray.init(address=address, runtime_env=env, log_to_driver=False)
         actor = ray.remote(num_cpus=1)(_RayEpisodeWorker)
-        self._actors = [actor.remote(record, jit) for _ in range(workers)]
+        self._actors = [actor.remote(record, jit, scratch_root) for _ in range(workers)]
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         ray = self._ray
@@ -222,7 +260,16 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
-def make_backend(kind: str, workers: int, record: str, ray_address: str | None, jit: bool = False) -> Backend:
+def make_backend(
+    kind: str,
+    workers: int,
+    record: str,
+    ray_address: str | None,
+    jit: bool = False,
+    scratch_root: str | None = None,
+) -> Backend:
+    """``scratch_root``: the driver's folder for the workers' scratch (pipelines.experiments.worker), which
+    the driver removes; None: each worker makes its own in the temp directory."""
     if kind not in BACKENDS:
         raise PipelineError(f"unknown backend {kind!r}; choose from {list(BACKENDS)}")
     if workers < 1:
@@ -230,7 +277,7 @@ def make_backend(kind: str, workers: int, record: str, ray_address: str | None, 
     if ray_address is not None and kind in ("process", "inline"):
         raise PipelineError(f"--ray-address needs the Ray backend, not --backend {kind}")
     if kind == "inline":
-        return InlineBackend(record, jit)
+        return InlineBackend(record, jit, scratch_root)
     if kind == "ray" or (kind == "auto" and (ray_available() or ray_address is not None)):
-        return RayBackend(workers, record, ray_address, jit)
-    return ProcessBackend(workers, record, jit)
+        return RayBackend(workers, record, ray_address, jit, scratch_root)
+    return ProcessBackend(workers, record, jit, scratch_root)

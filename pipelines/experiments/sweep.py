@@ -14,15 +14,20 @@ pool, or inline).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import shutil
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments.backends import BACKENDS, Backend, make_backend
 from pipelines.experiments.cells import EpisodeTask, Experiment
@@ -34,12 +39,17 @@ from pipelines.experiments.log import (
     EpisodeLog,
     sweep_lock,
 )
-from pipelines.experiments.worker import RECORD_POLICIES
+from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
 from pipelines.plain_json import plain
 
 # A sweep whose first episodes all raise is misconfigured (a missing model, a broken build): stop it rather
 # than fill errors.jsonl with thousands of copies of one traceback.
 FAIL_FAST_ERRORS: Final[int] = 4
+# Upper bounds checked before any worker starts (a typo must not become thousands of failing episodes): the
+# paper runs 100 episodes per cell; workers are Ray actors at most (a local pool is held to its CPUs by the
+# command line, pipelines/commands/sweep.py).
+MAX_EPISODES_PER_CELL: Final[int] = 100_000
+MAX_WORKERS: Final[int] = 4096
 
 
 @dataclass(frozen=True)
@@ -60,14 +70,22 @@ class SweepConfig:
     def __post_init__(self):
         if self.episodes_per_cell < 1:
             raise PipelineError(f"--episodes-per-cell must be at least 1, got {self.episodes_per_cell}")
-        if self.workers < 1:
-            raise PipelineError(f"--workers must be at least 1, got {self.workers}")
+        if self.episodes_per_cell > MAX_EPISODES_PER_CELL:
+            raise PipelineError(
+                f"--episodes-per-cell must be at most {MAX_EPISODES_PER_CELL}, got {self.episodes_per_cell}"
+            )
+        if not 1 <= self.workers <= MAX_WORKERS:
+            raise PipelineError(f"--workers must be at least 1 and at most {MAX_WORKERS}, got {self.workers}")
+        if not 1 <= self.n_robots <= MAX_ROBOTS:
+            raise PipelineError(f"--robots must be in 1..{MAX_ROBOTS}, got {self.n_robots}")
         if self.record not in RECORD_POLICIES:
             raise PipelineError(f"unknown --record {self.record!r}; choose from {list(RECORD_POLICIES)}")
         if self.backend not in BACKENDS:
             raise PipelineError(f"unknown backend {self.backend!r}; choose from {list(BACKENDS)}")
         if self.humans is not None and (not self.humans or min(self.humans) < 1):
             raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
+        if self.humans is not None and max(self.humans) > MAX_HUMANS:
+            raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
 
     def tasks(self) -> list[EpisodeTask]:
         return self.experiment.tasks(
@@ -159,9 +177,13 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
 def run_sweep(
     config: SweepConfig,
     *,
-    backend_factory: Callable[[SweepConfig], Backend] | None = None,
+    backend_factory: Callable[[SweepConfig, str], Backend] | None = None,
 ) -> SweepOutcome:
-    """Run every planned episode that ``<out>/episodes.jsonl`` does not hold yet."""
+    """Run every planned episode that ``<out>/episodes.jsonl`` does not hold yet.
+
+    ``backend_factory(config, scratch_root)``: the backend (default: ``config``'s); ``scratch_root`` is this
+    run's folder for the workers' temporary files, which the driver removes when the run ends (and the next
+    sweep removes when the driver was killed, pipelines.experiments.worker)."""
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     tasks = config.tasks()
@@ -177,42 +199,81 @@ def run_sweep(
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:
             return outcome
-        by_key = {t.key: t for t in todo}
-        start = time.perf_counter()
-        backend = (backend_factory or _default_backend)(config)
-        outcome.backend = backend.name
-        outcome.startup_s = time.perf_counter() - start
-        bar = _progress_bar(config, outcome)
+        scratch = make_scratch_root()
         try:
-            for result in backend.run(todo):
-                task = by_key[result.key]
-                if result.error is not None:
-                    outcome.errors.append(result.key)
-                    _append_error(out, task, result.error)
-                    bar.set_postfix(errors=len(outcome.errors), refresh=False)
-                    if outcome.ran == 0 and len(outcome.errors) >= FAIL_FAST_ERRORS:
-                        last = result.error.strip().splitlines()[-1]
-                        raise PipelineError(
-                            f"the first {len(outcome.errors)} episodes all raised ({last}); "
-                            f"tracebacks in {out / ERRORS_FILE}"
-                        )
-                    continue
-                if result.record is None:
-                    raise PipelineError(
-                        f"episode {result.key}: the worker returned neither a record nor an error"
-                    )
-                if result.mcap is not None:
-                    _write_atomic(mcap_path(out, task), result.mcap)  # before the record that vouches for it
-                log.append(result.record)
-                outcome.ran += 1
-                bar.update(1)
+            with _terminate_as_interrupt():
+                _run_tasks(config, todo, log, outcome, backend_factory or _default_backend, str(scratch))
         except KeyboardInterrupt:
             outcome.interrupted = True
         finally:
-            outcome.wall_s = time.perf_counter() - start
-            bar.close()
-            backend.close()
+            shutil.rmtree(scratch, ignore_errors=True)
     return outcome
+
+
+def _run_tasks(
+    config: SweepConfig,
+    todo: list[EpisodeTask],
+    log: EpisodeLog,
+    outcome: SweepOutcome,
+    backend_factory: Callable[[SweepConfig, str], Backend],
+    scratch: str,
+) -> None:
+    """Start the backend, write every outcome as it comes back, and end the backend."""
+    out = Path(config.out)
+    by_key = {t.key: t for t in todo}
+    start = time.perf_counter()
+    backend = backend_factory(config, scratch)
+    outcome.backend = backend.name
+    outcome.startup_s = time.perf_counter() - start
+    bar = _progress_bar(config, outcome)
+    try:
+        for result in backend.run(todo):
+            task = by_key[result.key]
+            if result.error is not None:
+                outcome.errors.append(result.key)
+                _append_error(out, task, result.error)
+                bar.set_postfix(errors=len(outcome.errors), refresh=False)
+                if outcome.ran == 0 and len(outcome.errors) >= FAIL_FAST_ERRORS:
+                    last = result.error.strip().splitlines()[-1]
+                    raise PipelineError(
+                        f"the first {len(outcome.errors)} episodes all raised ({last}); "
+                        f"tracebacks in {out / ERRORS_FILE}"
+                    )
+                continue
+            if result.record is None:
+                raise PipelineError(
+                    f"episode {result.key}: the worker returned neither a record nor an error"
+                )
+            if result.mcap is not None:
+                _write_atomic(mcap_path(out, task), result.mcap)  # before the record that vouches for it
+            log.append(result.record)
+            outcome.ran += 1
+            bar.update(1)
+    finally:
+        outcome.wall_s = time.perf_counter() - start
+        bar.close()
+        backend.close()
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM (``kill``) and SIGHUP (a closed terminal) end the sweep like Ctrl-C: the workers are stopped,
+    the scratch removed, multiprocessing's semaphores released, and a rerun resumes. Only the main thread may
+    set signal handlers; elsewhere (a sweep run from a thread) the default actions stay."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    signals = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    saved = {s: signal.signal(s, interrupt) for s in signals}
+    try:
+        yield
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
 
 
 def _check_same_predictors(out: Path, tasks: list[EpisodeTask], done: dict[str, dict[str, Any]]) -> None:
@@ -236,8 +297,10 @@ def _check_same_predictors(out: Path, tasks: list[EpisodeTask], done: dict[str, 
             )
 
 
-def _default_backend(config: SweepConfig) -> Backend:
-    return make_backend(config.backend, config.workers, config.record, config.ray_address, config.jit)
+def _default_backend(config: SweepConfig, scratch: str) -> Backend:
+    return make_backend(
+        config.backend, config.workers, config.record, config.ray_address, config.jit, scratch
+    )
 
 
 def _append_error(out: Path, task: EpisodeTask, error: str) -> None:

@@ -15,6 +15,7 @@ different run than the recorded metrics would mislead; recording costs about 5% 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import tempfile
@@ -22,6 +23,7 @@ import time
 import traceback
 from collections import OrderedDict
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError
@@ -44,15 +46,60 @@ def jit_available() -> bool:
     return shutil.which("gcc") is not None
 
 
-def jit_scratch_directory() -> None:
-    """Move a worker process into a scratch directory of its own: CasADi's jit writes its C sources into the
-    current directory (it has no option for another), and a killed worker must not leave them in the
-    user's."""
+# The scratch of one sweep run: ``<temp>/crowdmpc-sweep-<driver pid>-<random>/``, one subfolder per worker for
+# CasADi's jit sources and the MCAP files of episodes being recorded. The driver removes it when the run ends;
+# a killed driver (or worker) cannot, so every sweep first removes the roots of drivers that are gone.
+SCRATCH_PREFIX: Final[str] = "crowdmpc-sweep-"
+_SCRATCH_NAME: Final[re.Pattern[str]] = re.compile(re.escape(SCRATCH_PREFIX) + r"(\d+)-")
+
+
+def make_scratch_root() -> Path:
+    """A new scratch root for this driver's sweep run, after removing those of drivers that are gone."""
+    remove_stale_scratch()
+    return Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-"))
+
+
+def remove_stale_scratch(temp_dir: str | Path | None = None) -> list[Path]:
+    """Remove the scratch roots (in ``temp_dir``, default the system's) whose driver process is gone."""
+    removed = []
+    for root in Path(temp_dir or tempfile.gettempdir()).glob(SCRATCH_PREFIX + "*"):
+        match = _SCRATCH_NAME.match(root.name)
+        if match is None or not root.is_dir() or _alive(int(match[1])):
+            continue
+        shutil.rmtree(root, ignore_errors=True)
+        removed.append(root)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, killed and not yet reaped, does not). A pid the system gave to
+    a new process keeps its old root until that process ends too."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):  # not Linux, or gone meanwhile
+        return True
+
+
+def worker_scratch(root: str | Path | None) -> str:
+    """A scratch folder of this worker process's own: in the driver's ``root`` when it is on this machine,
+    else (no root, or a Ray node elsewhere) a new folder in the temp directory, removed when the process exits
+    normally (a killed worker's is left behind: only a driver-owned root avoids that)."""
     import atexit
 
+    if root is not None and os.path.isdir(root):
+        return tempfile.mkdtemp(prefix=f"worker-{os.getpid()}-", dir=root)
     scratch = tempfile.mkdtemp(prefix="crowdmpc-worker-")
-    os.chdir(scratch)
     atexit.register(shutil.rmtree, scratch, ignore_errors=True)
+    return scratch
 
 
 def is_failure(metrics: dict[str, Any]) -> bool:
@@ -96,11 +143,13 @@ class EpisodeOutcome:
 class EpisodeWorker:
     """Runs episode tasks; builds each cell's controller once and reuses it across that cell's episodes."""
 
-    def __init__(self, record: str = "none", jit: bool = False):
+    def __init__(self, record: str = "none", jit: bool = False, scratch: str | Path | None = None):
+        """``scratch``: the folder of this worker's temporary files (default: the temp directory)."""
         if record not in RECORD_POLICIES:
             raise PipelineError(f"unknown --record {record!r}; choose from {list(RECORD_POLICIES)}")
         self.record = record
         self.jit = jit
+        self.scratch = scratch
         self._controllers: OrderedDict[str, Controller] = OrderedDict()
         self.builds = 0  # controllers built so far (a test checks the reuse)
 
@@ -132,7 +181,8 @@ class EpisodeWorker:
 
             # A scratch folder per episode; a kept log goes to the driver as bytes (it may run elsewhere).
             run_meta = {"experiment": task.experiment, "cell": task.cell.key}
-            recorder = McapEpisodeRecorder(tempfile.mkdtemp(prefix="crowdmpc-episode-"), run_meta=run_meta)
+            scratch = tempfile.mkdtemp(prefix="crowdmpc-episode-", dir=self.scratch)
+            recorder = McapEpisodeRecorder(scratch, run_meta=run_meta)
         meta = {
             "experiment": task.experiment,
             "cell": task.cell.key,

@@ -1,27 +1,36 @@
 """Reading episode recordings back: every message and metadata record, and the episode as arrays.
 
-Files are read with ``NonSeekingReader(...).iter_messages(log_time_order=False)``, the one way mcap 1.6 reads
-a file whose writer was killed: it walks the records front to back and stops where the bytes stop, so a
-truncated file yields everything up to its last complete chunk. The seeking reader needs the footer, and
-log-time ordering sorts (so reads everything) before yielding anything. A file is truncated when it does not
-end with MCAP's magic.
+A file is read whole into memory and walked front to back, record by record (mcap's ``StreamReader`` with
+``emit_chunks``), so that a truncated file (its writer was killed) yields everything up to its last complete
+chunk; a file is truncated when it does not end with MCAP's magic. CRCs are verified where the file carries
+them: each chunk's (``breakup_chunk(validate_crc=True)``, one chunk at a time, so that a bad chunk loses only
+its own messages) and the data section's (``validate_crcs``; crowdmpc's writer leaves it 0, i.e. absent).
+
+Nothing in a file raises past ``read_recording`` except a file that is not a recording at all (missing, a
+folder, empty, not MCAP, no complete header): a bad chunk, a message that is not JSON or lacks what the review
+reads (``pipelines.logs.shapes``), a bad metadata value or a corrupt record becomes a line of
+``Recording.problems`` or of ``LoggedMessage.problem``, and the messages it held are left out.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
 from mcap.exceptions import EndOfFile
-from mcap.reader import NonSeekingReader
-from mcap.records import Metadata
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel as McapChannel
+from mcap.records import Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
 from pipelines.errors import PipelineError
+from pipelines.logs.recorder import UNFINISHED_SUFFIX
+from pipelines.logs.shapes import episode_metadata_problems, message_problem
 
 MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 
@@ -38,7 +47,11 @@ class Channel:
 @dataclass(frozen=True)
 class LoggedMessage:
     log_time_ns: int
-    data: Any  # the decoded JSON (None when it did not decode; see Recording.decode_errors)
+    data: Any  # the decoded JSON (None when it did not decode)
+    problem: str | None = None  # why the review leaves it out: not JSON, or lacks what the review reads
+
+    def where(self, topic: str) -> str:
+        return f"{topic} @ {_seconds(self.log_time_ns)}"
 
 
 @dataclass(frozen=True)
@@ -51,7 +64,7 @@ class Recording:
     messages: dict[str, list[LoggedMessage]]  # topic -> messages in file order
     truncated: bool  # the file does not end with MCAP's closing magic
     stopped_at: str | None = None  # what ended reading early (truncated files)
-    decode_errors: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)  # bad chunks, bad metadata, corruption (not messages)
 
     @property
     def warning(self) -> str | None:
@@ -64,8 +77,29 @@ class Recording:
             f"t = {last:.1f} s, the last complete chunk; the rest is lost ({self.stopped_at or 'no footer'})"
         )
 
+    def message_problems(self) -> list[str]:
+        """A line per message the review leaves out (``LoggedMessage.problem``), naming topic and log time."""
+        return [
+            f"{m.where(topic)}: {m.problem}; left out"
+            for topic, messages in self.messages.items()
+            for m in messages
+            if m.problem
+        ]
+
+    @property
+    def problems_warning(self) -> str | None:
+        """One line naming the file, its first problem and how many there are (file's, then messages')."""
+        problems = self.problems + self.message_problems()
+        if not problems:
+            return None
+        n = len(problems)
+        return f"{self.path}: {problems[0]}" + (f" (1 of {n} problems; --check lists them)" if n > 1 else "")
+
     def episode(self) -> dict[str, str]:
-        return self.metadata.get("episode", {})
+        """The "episode" metadata record without the values that do not parse (they are in ``problems``)."""
+        record = self.metadata.get("episode", {})
+        bad = episode_metadata_problems(record)
+        return {k: v for k, v in record.items() if k not in bad}
 
     def config(self) -> dict[str, Any]:
         return _decoded(self.metadata.get("config", {}))
@@ -74,7 +108,8 @@ class Recording:
         return _decoded(self.metadata.get("run", {}))
 
     def data(self, topic: str) -> list[Any]:
-        return [m.data for m in self.messages.get(topic, ()) if m.data is not None]
+        """The messages of ``topic`` that the review can use (see ``LoggedMessage.problem``)."""
+        return [m.data for m in self.messages.get(topic, ()) if m.problem is None]
 
     @property
     def label(self) -> str:
@@ -89,7 +124,7 @@ def _decoded(record: dict[str, str]) -> dict[str, Any]:
     for key, text in record.items():
         try:
             out[key] = json.loads(text)
-        except ValueError:
+        except (ValueError, RecursionError):
             out[key] = text
     return out
 
@@ -99,84 +134,168 @@ def _decoded(record: dict[str, str]) -> dict[str, Any]:
 # ------------------------------------------------------------------------------------------------------------
 
 
-def _ends_with_magic(path: Path) -> bool:
-    size = path.stat().st_size
-    if size < 2 * len(MAGIC):
-        return False
-    with open(path, "rb") as f:
-        f.seek(size - len(MAGIC))
-        return f.read() == MAGIC
-
-
-def _check_header(path: Path) -> None:
-    with open(path, "rb") as f:
-        head = f.read(len(MAGIC))
-    if head != MAGIC:
-        raise PipelineError(f"{path} is not an MCAP file (it does not start with MCAP's magic bytes)")
-
-
-def _stop_reason(exc: BaseException) -> str:
+def _reason(exc: BaseException) -> str:
     if isinstance(exc, EndOfFile | struct.error):
         return "the file ends inside a record"
     return f"{type(exc).__name__}: {exc}".rstrip(": ")
 
 
+def _seconds(ns: int) -> str:
+    return f"{ns / 1e9:.3f} s"
+
+
+class _Walk:
+    """The records of one file in order, into channels, messages, metadata and problems."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.channels: dict[str, Channel] = {}
+        self.messages: dict[str, list[LoggedMessage]] = {}
+        self.problems: list[str] = []
+        self._schemas: dict[int, Schema] = {}
+        self._channels: dict[int, McapChannel] = {}
+        self._orphans: dict[int, list[Message]] = {}  # channel id -> messages read before its channel
+
+    def take(self, record: McapRecord, offset: int) -> None:
+        if isinstance(record, Chunk):
+            try:
+                inner = breakup_chunk(record, validate_crc=True)
+            except Exception as exc:  # noqa: BLE001 (CRC, codec or parse error: the chunk's bytes are bad)
+                self.problems.append(
+                    f"bad chunk at byte {offset} (log times {_seconds(record.message_start_time)} to "
+                    f"{_seconds(record.message_end_time)}): {_reason(exc)}; its messages are left out"
+                )
+                return
+            for r in inner:
+                self.take(r, offset)
+        elif isinstance(record, Schema):
+            self._schemas.setdefault(record.id, record)
+        elif isinstance(record, McapChannel):
+            self._channels.setdefault(record.id, record)
+        elif isinstance(record, Message):
+            channel = self._channels.get(record.channel_id)
+            if channel is None:
+                self._orphans.setdefault(record.channel_id, []).append(record)
+            else:
+                self._messages_of(channel).append(self._decoded(channel.topic, record))
+        elif isinstance(record, Metadata):
+            self.metadata[record.name] = dict(record.metadata)
+
+    def finish(self) -> None:
+        """Messages whose channel came later (the summary repeats the channels) join their topic first."""
+        for channel_id, orphans in self._orphans.items():
+            channel = self._channels.get(channel_id)
+            if channel is None:
+                self.problems.append(
+                    f"{len(orphans)} message(s) on channel id {channel_id} (log times "
+                    f"{_seconds(orphans[0].log_time)} to {_seconds(orphans[-1].log_time)}), which no channel "
+                    "record describes: left out"
+                )
+                continue
+            topic_messages = self._messages_of(channel)
+            topic_messages[:0] = [self._decoded(channel.topic, m) for m in orphans]
+        for key, problem in episode_metadata_problems(self.metadata.get("episode", {})).items():
+            self.problems.append(f"metadata 'episode': {problem}; the review ignores {key}")
+
+    def _messages_of(self, channel: McapChannel) -> list[LoggedMessage]:
+        topic = channel.topic
+        if topic not in self.channels:
+            schema = self._schemas.get(channel.schema_id)
+            self.channels[topic] = Channel(
+                topic,
+                channel.message_encoding,
+                schema.name if schema else "",
+                schema.encoding if schema else "",
+                schema.data if schema else b"",
+            )
+            self.messages[topic] = []
+        return self.messages[topic]
+
+    @staticmethod
+    def _decoded(topic: str, message: Message) -> LoggedMessage:
+        try:
+            data = json.loads(message.data)
+        except (ValueError, RecursionError) as exc:  # UnicodeDecodeError is a ValueError
+            return LoggedMessage(message.log_time, None, f"not JSON ({type(exc).__name__}: {exc})")
+        return LoggedMessage(message.log_time, data, message_problem(topic, data))
+
+
+def _records(buffer: io.BytesIO, size: int, *, first: bool) -> Iterator[McapRecord]:
+    # record_size_limit: no record is longer than the file, whatever a corrupt length field says
+    reader = StreamReader(
+        buffer, skip_magic=not first, emit_chunks=True, validate_crcs=True, record_size_limit=size
+    )
+    return iter(reader.records)
+
+
 def read_recording(path: str | Path) -> Recording:
-    """Read every message and metadata record of ``path``; a truncated file reads up to its last chunk."""
+    """Read every message and metadata record of ``path``; a truncated file reads up to its last chunk.
+
+    Raises PipelineError only when ``path`` is no recording at all: missing, a folder, empty, not MCAP, or
+    cut inside its header.
+    """
     path = Path(path)
+    if path.is_dir():
+        raise PipelineError(f"{path} is a folder, not a recording")
     if not path.is_file():
         raise PipelineError(f"{path}: no such recording")
-    _check_header(path)
-    complete = _ends_with_magic(path)
-    stopped_at = None
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise PipelineError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if not data:
+        raise PipelineError(f"{path} is empty (0 bytes): its run was killed before writing anything")
+    if not data.startswith(MAGIC):
+        raise PipelineError(f"{path} is not an MCAP file (it does not start with MCAP's magic bytes)")
+    complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
+    buffer = io.BytesIO(data)
+    records = _records(buffer, len(data), first=True)
+    try:
+        header = next(records)
+    except Exception as exc:  # noqa: BLE001 (whatever the bytes after the magic are, this is no recording)
+        raise PipelineError(
+            f"{path} has no complete MCAP header ({len(data)} bytes; {_reason(exc)}): not a recording"
+        ) from None
+    if not isinstance(header, Header):
+        raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
 
-    metadata: dict[str, dict[str, str]] = {}
-    with open(path, "rb") as f:
-        # emit_chunks: walk over chunks without decompressing them; metadata records sit between chunks.
+    walk, stopped_at = _Walk(path), None
+    while True:
+        offset = buffer.tell()
         try:
-            for record in StreamReader(f, emit_chunks=True).records:
-                if isinstance(record, Metadata):
-                    metadata[record.name] = dict(record.metadata)
-        except Exception as exc:  # noqa: BLE001 (any parse error past a cut; a finished file re-raises)
+            record = next(records)
+        except StopIteration:
+            break
+        except Exception as exc:  # noqa: BLE001 (any parse error: a cut, or corrupt bytes)
+            if isinstance(exc, CRCValidationError) and isinstance(exc.record, DataEnd):
+                walk.problems.append(
+                    f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
+                )
+                records = _records(buffer, len(data), first=False)  # the summary section still reads
+                continue
             if complete:
-                raise PipelineError(f"{path} is corrupt: {_stop_reason(exc)}") from exc
-            stopped_at = _stop_reason(exc)
-
-    channels: dict[str, Channel] = {}
-    messages: dict[str, list[LoggedMessage]] = {}
-    decode_errors: list[str] = []
-    with open(path, "rb") as f:
-        try:
-            for schema, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
-                topic = channel.topic
-                if topic not in channels:
-                    channels[topic] = Channel(
-                        topic,
-                        channel.message_encoding,
-                        schema.name if schema else "",
-                        schema.encoding if schema else "",
-                        schema.data if schema else b"",
-                    )
-                    messages[topic] = []
-                try:
-                    data = json.loads(message.data)
-                except ValueError as exc:
-                    data = None
-                    decode_errors.append(f"{topic} @ {message.log_time / 1e9:.3f} s: not JSON ({exc})")
-                messages[topic].append(LoggedMessage(message.log_time, data))
-        except Exception as exc:  # noqa: BLE001 (see above)
-            if complete:
-                raise PipelineError(f"{path} is corrupt: {_stop_reason(exc)}") from exc
-            stopped_at = _stop_reason(exc)
-    return Recording(path, metadata, channels, messages, not complete, stopped_at, decode_errors)
+                walk.problems.append(
+                    f"corrupt record at byte {offset} ({_reason(exc)}); the rest of the file is not read"
+                )
+            else:
+                stopped_at = _reason(exc)
+            break
+        walk.take(record, offset)
+    walk.finish()
+    return Recording(
+        path, walk.metadata, walk.channels, walk.messages, not complete, stopped_at, walk.problems
+    )
 
 
-def find_recordings(directory: str | Path) -> list[Path]:
+def find_recordings(directory: str | Path) -> tuple[list[Path], list[Path]]:
+    """The ``*.mcap`` entries of ``directory`` (whatever they are) and its unfinished ``*.mcap.part``."""
     directory = Path(directory)
     paths = sorted(directory.glob("*.mcap"))
-    if not paths:
+    unfinished = sorted(directory.glob(f"*.mcap{UNFINISHED_SUFFIX}"))
+    if not paths and not unfinished:
         raise PipelineError(f"no .mcap files in {directory}")
-    return paths
+    return paths, unfinished
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -209,6 +328,18 @@ def _points(rows: list[Any], n: int) -> np.ndarray:
 
 
 def episode_view(rec: Recording) -> EpisodeView:
+    """The arrays; PipelineError when the recorded states do not make one episode (sizes that change)."""
+    try:
+        return _episode_view(rec)
+    except PipelineError:
+        raise
+    except ValueError as exc:  # a reshape that does not fit: another agent count in some message
+        raise PipelineError(
+            f"{rec.path}: the recorded states do not make one episode ({exc}); --check tells more"
+        ) from None
+
+
+def _episode_view(rec: Recording) -> EpisodeView:
     humans = rec.data("/humans")
     by_step = {h["step"]: h for h in humans}
     robots = [r for r in rec.data("/robots") if r["step"] in by_step]  # a cut can fall between the two
@@ -219,6 +350,9 @@ def episode_view(rec: Recording) -> EpisodeView:
     ep = rec.episode()
     times = np.array([r["time"] for r in robots], dtype=float)
     dt = float(ep["dt"]) if "dt" in ep else float(np.median(np.diff(times))) if len(times) > 1 else 0.4
+    plans = {p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")}
+    if any(len(plan) != m for plan in plans.values()):
+        raise ValueError(f"a /mpc/plan is not for {m} robots")
     return EpisodeView(
         times=times,
         steps=np.array(steps, dtype=int),
@@ -228,7 +362,7 @@ def episode_view(rec: Recording) -> EpisodeView:
         ),
         robot_goals=_points(robots[0]["goals"], m),
         human_goals=_points(humans[0]["goals"], n),
-        plans={p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")},
+        plans=plans,
         predictions={
             p["step"]: np.asarray(p["positions"], dtype=float).reshape(-1, n, 2)
             for p in rec.data("/mpc/prediction")

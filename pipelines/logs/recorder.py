@@ -6,11 +6,14 @@ always finishes the file (chunk flushed, summary and footer written), also when 
 
 Chunks default to 64 KiB (DESIGN.md): a run killed mid-way loses at most the open chunk, ~30 small messages,
 where mcap's 1 MiB default would lose ~1000.
+
+The file is written as ``<name>.part`` and renamed to ``<name>`` when it is finished; see ``McapRecorder``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
@@ -22,6 +25,7 @@ from pipelines.errors import PipelineError
 from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, MessageSchema
 
 DEFAULT_CHUNK_SIZE: Final[int] = 64 * 1024  # bytes, uncompressed
+UNFINISHED_SUFFIX: Final[str] = ".part"  # the file's name until it is finished
 
 
 def _default_compression() -> CompressionType:
@@ -49,7 +53,8 @@ _ENCODER: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 class McapRecorder:
     """Write JSON messages with JSON schemas to one MCAP file.
 
-    :param path: the file to create (its folder must exist); an existing file is replaced.
+    :param path: the file to create (its folder must exist); an existing file is replaced when this one is
+        finished. Until then the bytes go to ``<path>.part``.
     :param chunk_size: uncompressed bytes per chunk.
     :param compression: chunk compression; the default is the best codec installed.
     :param metadata: ``{name: {key: value}}`` metadata records written right after the header.
@@ -70,7 +75,14 @@ class McapRecorder:
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise PipelineError(f"cannot record to {self.path}: folder {self.path.parent} does not exist")
-        self._stream: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 (closed by close())
+        # Written to <name>.part, renamed to <name> by close(), rather than created at <name> once the first
+        # chunk is ready: a file under its final name is then always a finished recording (a folder review, a
+        # sweep's resume, Foxglove never meet a half-written one, nor a 0-byte one from a run killed in its
+        # first second, when header and metadata still sat in the write buffer), while nothing is lost: a
+        # killed run leaves its chunks in the .part, which `crowdmpc review NAME.part` reads. Creating the
+        # file late would still leave a truncated .mcap for any kill after the first chunk.
+        self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
+        self._stream: IO[bytes] = open(self.part_path, "wb")  # noqa: SIM115 (closed by close())
         try:
             self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
             self._writer.start(profile="", library="crowdmpc")
@@ -98,7 +110,10 @@ class McapRecorder:
         return self._closed
 
     def close(self) -> None:
-        """Flush the open chunk, write the summary and footer, close the file. Idempotent."""
+        """Flush the open chunk, write the summary and footer, close the file and give it its name.
+
+        Idempotent. When finishing fails the file keeps its ``.part`` name: it is not a finished recording.
+        """
         if self._closed:
             return
         self._closed = True
@@ -106,6 +121,7 @@ class McapRecorder:
             self._writer.finish()
         finally:
             self._stream.close()
+        os.replace(self.part_path, self.path)
 
     # -- writing ---------------------------------------------------------------------------------------------
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:

@@ -17,9 +17,8 @@ from typing import Any, Final
 
 import numpy as np
 
-from pipelines.errors import PipelineError
 from pipelines.logs.jsonschema import unsupported_keywords, validate
-from pipelines.logs.reader import Recording
+from pipelines.logs.reader import Channel, LoggedMessage, Recording
 from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING
 from pipelines.loop.episode import step_time_stats
 
@@ -67,6 +66,7 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "messages": {topic: len(msgs) for topic, msgs in sorted(rec.messages.items())},
         "truncated": rec.truncated,
         "warning": rec.warning,
+        "problems": rec.problems + rec.message_problems(),
     }
 
 
@@ -113,6 +113,10 @@ def format_summary(summary: dict[str, Any]) -> str:
             ("final potential", s["final_potential"]),
         ]
     rows.append(("messages", summary["messages"]))
+    if summary["problems"]:
+        rows.append(
+            ("problems", f"{len(summary['problems'])}, left out of this summary (--check lists them)")
+        )
     # the full warning goes to stderr (crowdmpc review); the summary says it in a word
     rows.append(("truncated", "YES: read up to its last complete chunk" if summary["truncated"] else "no"))
     width = max(len(k) for k, _ in rows)
@@ -157,10 +161,13 @@ def aggregate_table(recordings: list[Recording]) -> tuple[str, dict[str, Any]]:
         ]
         for s in summaries
     ]
-    ended = [s["metrics"] for s in summaries if s["metrics"] is not None]
+    ended = [s for s in summaries if s["metrics"] is not None]
     totals: dict[str, Any] = {"runs": len(summaries), "ended": len(ended)}
     if ended:
-        totals.update(_aggregate_metrics(ended))
+        rates, unusable = _aggregate_metrics([s["metrics"] for s in ended])
+        totals.update(rates)
+        if unusable:
+            totals["unusable_metrics"] = [ended[i]["file"] for i in unusable]
     solver = [m for rec in recordings for m in rec.data("/mpc/solver")]
     if solver:
         times = step_time_stats([m["solve_time_s"] for m in solver])
@@ -175,8 +182,13 @@ def _format_totals(t: dict[str, Any]) -> str:
     lines = [
         f"{t['runs']} runs"
         + (f", {t['runs'] - t['ended']} truncated (no metrics)" if t["ended"] < t["runs"] else "")
+        + (
+            f", {len(t['unusable_metrics'])} with metrics of another format (left out of the rates)"
+            if t.get("unusable_metrics")
+            else ""
+        )
     ]
-    if t["ended"]:
+    if "episodes" in t:
         n = t["episodes"]
         rates = ", ".join(
             f"{name} {t[f'{name}_rate']:.1f} % ({t[f'{name}_count']}/{n})"
@@ -198,20 +210,28 @@ def _format_totals(t: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _aggregate_metrics(recorded: list[dict[str, Any]]) -> dict[str, Any]:
+def _aggregate_metrics(recorded: list[dict[str, Any]]) -> tuple[dict[str, Any], list[int]]:
     """crowdsim's own aggregate over EpisodeMetrics rebuilt from the recorded dicts (null was NaN or inf;
-    recordings from before the per-step counts still aggregate, their frequencies reading n/a)."""
+    recordings from before the per-step counts still aggregate, their frequencies reading n/a), and the
+    indices of the records that do not rebuild (written by another version, or not by crowdmpc at all)."""
     from crowdsim.errors import SimulationError
     from crowdsim.metrics import EpisodeMetrics, aggregate
 
-    try:
-        rebuilt = [EpisodeMetrics.from_dict(m) for m in recorded]
-    except SimulationError as exc:
-        raise PipelineError(f"recorded metrics: {exc}: written by another crowdmpc version?") from None
+    rebuilt, unusable = [], []
+    for i, record in enumerate(recorded):
+        try:
+            metrics = EpisodeMetrics.from_dict(record)
+            aggregate([metrics])  # its values are of the types the aggregate adds up
+        except (SimulationError, TypeError, ValueError, AttributeError):
+            unusable.append(i)
+        else:
+            rebuilt.append(metrics)
+    if not rebuilt:
+        return {}, unusable
     return {
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in aggregate(rebuilt).items()
-    }
+    }, unusable
 
 
 def compare_table(a: Recording, b: Recording) -> str:
@@ -236,33 +256,58 @@ def compare_table(a: Recording, b: Recording) -> str:
 
 
 def check_recording(rec: Recording) -> tuple[int, list[str]]:
-    """Validate every message against its channel's schema as stored in the file: (checked, errors)."""
-    errors = list(rec.decode_errors)
+    """Validate every message against its channel's schema as stored in the file: (checked, errors).
+
+    The errors begin with what reading found (bad chunks, bad metadata, corrupt records); then, per message,
+    its schema violations, or why the review left it out when the schema lets it pass (not JSON, or lacking
+    what the review reads under a schema that does not require it).
+    """
+    errors = list(rec.problems)
     checked = 0
     for topic, channel in rec.channels.items():
-        if channel.message_encoding != MESSAGE_ENCODING or channel.schema_encoding != SCHEMA_ENCODING:
-            errors.append(
-                f"{topic}: encoding {channel.message_encoding!r} / schema {channel.schema_encoding!r}, "
-                f"expected {MESSAGE_ENCODING!r} / {SCHEMA_ENCODING!r}"
-            )
-            continue
+        messages = rec.messages[topic]
         try:
-            schema = json.loads(channel.schema_data)
-        except ValueError as exc:
-            errors.append(f"{topic}: schema {channel.schema_name!r} is not JSON ({exc})")
+            n, topic_errors = _check_topic(topic, channel, messages)
+        except (ValueError, TypeError, AttributeError, KeyError, IndexError, RecursionError) as exc:
+            # the file's schema is JSON but no schema (e.g. "required": 5): nothing on the topic is checked
+            n, topic_errors = 0, [f"{topic}: schema {channel.schema_name!r} is malformed ({exc!r})"]
+            topic_errors += [f"{m.where(topic)}: {m.problem}" for m in messages if m.problem]
+        checked += n
+        errors += topic_errors
+    return checked, errors
+
+
+def _check_topic(topic: str, channel: Channel, messages: list[LoggedMessage]) -> tuple[int, list[str]]:
+    unusable = [f"{m.where(topic)}: {m.problem}" for m in messages if m.problem]
+    if channel.message_encoding != MESSAGE_ENCODING or channel.schema_encoding != SCHEMA_ENCODING:
+        return 0, [
+            f"{topic}: encoding {channel.message_encoding!r} / schema {channel.schema_encoding!r}, "
+            f"expected {MESSAGE_ENCODING!r} / {SCHEMA_ENCODING!r}",
+            *unusable,
+        ]
+    try:
+        schema = json.loads(channel.schema_data)
+    except (ValueError, RecursionError) as exc:
+        return 0, [f"{topic}: schema {channel.schema_name!r} is not JSON ({exc})", *unusable]
+    if not isinstance(schema, dict):
+        return 0, [f"{topic}: schema {channel.schema_name!r} is not a JSON object", *unusable]
+    unchecked = unsupported_keywords(schema)
+    if unchecked:
+        return 0, [
+            f"{topic}: schema {channel.schema_name!r} uses keywords not checked here: {unchecked}",
+            *unusable,
+        ]
+    checked, errors = 0, []
+    for message in messages:
+        if message.data is None:  # not JSON
+            errors.append(f"{message.where(topic)}: {message.problem}")
             continue
-        unchecked = unsupported_keywords(schema)
-        if unchecked:
-            errors.append(
-                f"{topic}: schema {channel.schema_name!r} uses keywords not checked here: {unchecked}"
-            )
-            continue
-        for message in rec.messages[topic]:
-            if message.data is None:
-                continue
-            checked += 1
-            for problem in validate(message.data, schema):
-                errors.append(
-                    f"{topic} @ {message.log_time_ns / 1e9:.3f} s ({channel.schema_name}): {problem}"
-                )
+        checked += 1
+        violations = [
+            f"{message.where(topic)} ({channel.schema_name}): {problem}"
+            for problem in validate(message.data, schema)
+        ]
+        if not violations and message.problem:
+            violations.append(f"{message.where(topic)}: {message.problem}")
+        errors += violations
     return checked, errors

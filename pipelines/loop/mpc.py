@@ -10,7 +10,10 @@ for ``coupling="nlp"``, the same twin inside the NLP.
 A robot that has reached its goal (``obs.robot_reached``) holds position and stops flocking: by default
 (``on_goal="track"``) it stays in the optimisation anchored by its goal term, so it keeps still unless a
 human or a teammate needs the room; ``on_goal="brake"`` pins it to braking instead (mpc/config.py).
-A step that cannot solve falls back (mpc/fallback.py) and says so in ``ControlOutput.fallback``.
+A step that cannot solve falls back (mpc/fallback.py) and says so in ``ControlOutput.fallback``; so does a
+step whose solve raised (CasADi reports a failure inside a solver call as a ``RuntimeError``), with status
+``"exception: <type>"`` and the message in ``extra["exception"]``. Only the solve is guarded: an exception
+from the predictor it calls, or from anything else in the step, is a bug and propagates.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from mpc.config import MPCConfig
 from mpc.coupled import CoupledCMPC
 from mpc.dmpc import DMPC
 from mpc.dynamics import braking, rollout_numpy
-from mpc.fallback import PlanMemory
+from mpc.fallback import PlanMemory, Start
 from mpc.fastcall import BufferedFunction
 from mpc.nlp import StepData
 from pipelines.errors import PipelineError
@@ -132,6 +135,8 @@ class MPCController:
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
+        self.solve_exceptions = 0  # control steps whose solve raised (each fell back), since construction
+        self._predictor_error: BaseException | None = None  # raised by the predictor in this step's solve
 
     def close(self) -> None:
         """Release what the solvers hold (DMPC's thread pool); the controller can still be used after."""
@@ -184,16 +189,21 @@ class MPCController:
         Through the predictor's CasADi twin on ``encode`` of the past when it has one: the contract test
         holds it to ``rollout`` within 1e-6, and for the networks it is ~4x cheaper than the torch rollout
         (0.42 vs 1.78 ms, social_lstm_eth, 7 humans + 3 robots), which the loop calls several times a step.
+        What it raises is remembered, so that ``act`` lets it through instead of taking it for the solver's.
         """
         n_humans = len(humans)
         twin = self._twin(n_humans, n_robots)
-        if twin is None:
-            return lambda robots_future: self.model.rollout(history, mask, robots_future, humans)
-        context = self.model.encode(history, mask, humans)
+        context = None if twin is None else self.model.encode(history, mask, humans)
         shape = (self.cfg.horizon, n_humans, 2)
 
         def predict(robots_future: np.ndarray) -> np.ndarray:
-            return twin(context, robots_future)[0].reshape(shape)
+            try:
+                if twin is None:
+                    return self.model.rollout(history, mask, robots_future, humans)
+                return twin(context, robots_future)[0].reshape(shape)
+            except BaseException as exc:
+                self._predictor_error = exc
+                raise
 
         return predict
 
@@ -241,10 +251,37 @@ class MPCController:
         humans = np.arange(n_robots, n_robots + n_humans)
         start = self.memory.start(data)
         if isinstance(solver, CoupledCMPC):
-            result = solver.solve(data, self.model.encode(history, mask, humans), start)
+            context = self.model.encode(history, mask, humans)
         else:
-            result = solver.solve(data, self._predict_fn(history, mask, humans, n_robots), start)
+            predict = self._predict_fn(history, mask, humans, n_robots)
+        self._predictor_error = None
+        try:  # the solve alone
+            if isinstance(solver, CoupledCMPC):
+                result = solver.solve(data, context, start)
+            else:
+                result = solver.solve(data, predict, start)
+        except Exception as exc:
+            if exc is self._predictor_error:
+                raise
+            return self._exception_output(exc, start, data, t0)
         return self._output(result, start.kind, data, t0)
+
+    def _exception_output(self, exc: Exception, start: Start, data: StepData, t0: float) -> ControlOutput:
+        """A solve that raised: the step falls back to its start (the shifted plan, or braking) as for any
+        failed solve, and says what was raised."""
+        self.solve_exceptions += 1
+        self.memory.commit(start.accels, solved=False)
+        return ControlOutput(
+            accelerations=start.accels[:, 0].copy(),
+            solve_time_s=time.perf_counter() - t0,
+            status=f"exception: {type(exc).__name__}",
+            fallback=start.kind,
+            plan=rollout_numpy(data.states, start.accels, self.cfg.dt)[0],
+            extra={
+                "exception": f"{type(exc).__name__}: {exc}"[:500],
+                "solve_exceptions": self.solve_exceptions,
+            },
+        )
 
     def _output(self, result: IBRResult, start_kind: str, data: StepData, t0: float) -> ControlOutput:
         cfg = self.cfg

@@ -13,7 +13,7 @@ from torch.utils.data import DataLoader
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.locate import protocol_files
 from predictors.data.windows import TrajnetSceneDataset, collate_scenes
-from predictors.errors import PredictorError
+from predictors.errors import DatasetFormatError, PredictorError
 
 
 class TrajnetDataModule(L.LightningDataModule):
@@ -70,13 +70,24 @@ class TrajnetDataModule(L.LightningDataModule):
         if split not in self.datasets:
             if not self.files[split]:
                 raise PredictorError(f"no {split} files were given to the data module")
-            self.datasets[split] = TrajnetSceneDataset(
+            dataset = TrajnetSceneDataset(
                 self.files[split],
                 obs_len=self.obs_len,
                 pred_len=self.pred_len,
                 augment=self.augment and split == "train",
                 seed=self.seed,
             )
+            if split in ("train", "val") and len(dataset) == 0:
+                # An empty split is a valid file, but nothing to train on or to select the best epoch by
+                # (the shuffling sampler fails obscurely, and an empty validation leaves no val metrics).
+                purpose = "training" if split == "train" else "validation"
+                if len(self.files[split]) == 1:
+                    raise DatasetFormatError(
+                        self.files[split][0], None, f"holds no scenes; {purpose} needs one"
+                    )
+                names = ", ".join(str(f) for f in self.files[split])
+                raise PredictorError(f"the {split} files hold no scenes; {purpose} needs one: {names}")
+            self.datasets[split] = dataset
         return self.datasets[split]
 
     def setup(self, stage: str | None = None) -> None:

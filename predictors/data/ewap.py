@@ -12,11 +12,21 @@ uses train 70 %, val 10 %, test 20 % (for BIWI ETH the test part is the same las
 
 from __future__ import annotations
 
+import math
+import re
 from pathlib import Path
 from typing import Final
 
 import numpy as np
 
+from predictors.data.validate import (
+    MAX_COORDINATE,
+    MAX_FRAME,
+    MAX_ID,
+    MAX_LINE_BYTES,
+    read_error,
+    require_file,
+)
 from predictors.errors import DatasetFormatError, PredictorError
 
 SPLIT_FRACTIONS: Final[tuple[float, float]] = (0.7, 0.1)  # train, val; test is the rest
@@ -24,47 +34,88 @@ SPLITS: Final[tuple[str, ...]] = ("train", "val", "test")
 EWAP_SEQUENCES: Final[dict[str, str]] = {"biwi_eth": "seq_eth", "biwi_hotel": "seq_hotel"}
 
 
+# A decimal number as EWAP writes it ("7.8000000e+02"), or nan/inf (refused as not finite). Python's float()
+# also takes "1_0" (= 10.0), which is no number in a data file.
+_NUMBER: Final = re.compile(
+    rb"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:nan|inf|infinity)", re.IGNORECASE
+)
+_COLUMNS: Final[tuple[str, ...]] = ("frame", "id", "pos_x", "pos_z", "pos_y", "v_x", "v_z", "v_y")
+
+
 def read_obsmat(path: str | Path) -> np.ndarray:
     """BIWI EWAP ``obsmat.txt`` as ``(R, 4)`` rows ``frame - 1, pedestrian, x, y`` (metres), in file order.
 
-    Each line holds 8 numbers ``frame id pos_x pos_z pos_y v_x v_z v_y`` (z unused); anything else raises
-    ``DatasetFormatError`` naming the line.
+    Each line holds 8 numbers ``frame id pos_x pos_z pos_y v_x v_z v_y`` (z unused), all finite, with an
+    integer frame in 1..``MAX_FRAME``, an integer id in 0..``MAX_ID`` and ``|x|, |y| < MAX_COORDINATE``
+    (the bounds, and why, are in ``predictors.data.validate``); a sequence needs annotations at two frames
+    at least. Anything else raises ``DatasetFormatError`` naming the file and the line.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetFormatError(path, None, "no such file (expected a BIWI EWAP obsmat.txt)")
+    path = require_file(path, " (expected a BIWI EWAP obsmat.txt)")
     rows: list[tuple[float, float, float, float]] = []
     seen: dict[tuple[int, int], int] = {}
-    with path.open("rb") as handle:
-        for lineno, raw in enumerate(handle, start=1):
-            fields = raw.split()
-            if not fields:
-                continue
-            if len(fields) != 8:
-                raise DatasetFormatError(path, lineno, f"expected 8 numeric columns, found {len(fields)}")
-            try:
-                values = [float(v) for v in fields]
-            except ValueError:
-                raise DatasetFormatError(
-                    path, lineno, f"non-numeric value in {raw.decode(errors='replace')!r}"
-                ) from None
-            frame, ped, x, y = values[0], values[1], values[2], values[4]
-            if not all(np.isfinite((frame, ped, x, y))):
-                raise DatasetFormatError(path, lineno, "frame, id and coordinates must be finite")
-            if frame != int(frame) or ped != int(ped) or frame < 1:
-                raise DatasetFormatError(
-                    path, lineno, f"frame {frame} and id {ped} must be integers, frame >= 1"
-                )
-            key = (int(frame), int(ped))
-            if key in seen:
-                raise DatasetFormatError(
-                    path, lineno, f"pedestrian {key[1]} at frame {key[0]} repeats line {seen[key]}"
-                )
-            seen[key] = lineno
-            rows.append((frame - 1.0, ped, x, y))  # the converter's shift from 1- to 0-based frames
+    lineno = 0
+    try:
+        with path.open("rb") as handle:
+            while raw := handle.readline(MAX_LINE_BYTES + 1):
+                lineno += 1
+                if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
+                    raise DatasetFormatError(path, lineno, f"line longer than {MAX_LINE_BYTES} bytes")
+                row = _obsmat_row(path, lineno, raw)
+                if row is None:
+                    continue
+                key = (int(row[0]), int(row[1]))
+                if key in seen:
+                    raise DatasetFormatError(
+                        path, lineno, f"pedestrian {key[1]} at frame {key[0]} repeats line {seen[key]}"
+                    )
+                seen[key] = lineno
+                rows.append((row[0] - 1.0, row[1], row[2], row[3]))  # the converter's 1- to 0-based frames
+    except OSError as exc:
+        raise read_error(path, lineno or None, exc) from None
     if not rows:
         raise DatasetFormatError(path, None, "no annotation rows")
+    if len({frame for frame, _ in seen}) < 2:
+        raise DatasetFormatError(
+            path, None, "annotations at a single frame; a sequence needs at least two distinct frames"
+        )
     return np.asarray(rows, dtype=np.float64)
+
+
+def _obsmat_row(path: Path, lineno: int, raw: bytes) -> tuple[float, float, float, float] | None:
+    """``(frame, id, x, y)`` of one obsmat line as read (1-based frame), or None for a blank line."""
+    fields = raw.split()
+    if not fields:
+        return None
+    if len(fields) != len(_COLUMNS):
+        raise DatasetFormatError(
+            path, lineno, f"expected {len(_COLUMNS)} numeric columns, found {len(fields)}"
+        )
+    for column, field in zip(_COLUMNS, fields, strict=True):
+        if not _NUMBER.fullmatch(field):
+            text = field.decode(errors="replace")
+            shown = text if len(text) <= 30 else f"{text[:27]}..."
+            raise DatasetFormatError(path, lineno, f"non-numeric value {shown!r} in column {column}")
+    values = [float(v) for v in fields]
+    bad = [column for column, v in zip(_COLUMNS, values, strict=True) if not math.isfinite(v)]
+    if bad:
+        raise DatasetFormatError(path, lineno, f"{', '.join(bad)} not finite; every column must be a number")
+    frame, ped, x, y = values[0], values[1], values[2], values[4]
+    if frame != int(frame) or ped != int(ped):
+        raise DatasetFormatError(path, lineno, f"frame {frame:g} and id {ped:g} must be integers")
+    if not 1 <= frame <= MAX_FRAME:
+        raise DatasetFormatError(
+            path, lineno, f"frame {frame:g} outside the supported range 1..{MAX_FRAME:.0e}"
+        )
+    if not 0 <= ped <= MAX_ID:
+        raise DatasetFormatError(path, lineno, f"id {ped:g} outside the supported range 0..{MAX_ID:.0e}")
+    for name, value in (("pos_x", x), ("pos_y", y)):
+        if not abs(value) < MAX_COORDINATE:
+            raise DatasetFormatError(
+                path,
+                lineno,
+                f"{name} {value:g} m outside the supported range |{name}| < {MAX_COORDINATE:.0e} m",
+            )
+    return frame, ped, x, y
 
 
 def infer_frame_step(frames: np.ndarray) -> int:

@@ -27,11 +27,12 @@ from torch.utils.data import Dataset, get_worker_info
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.locate import cache_root
 from predictors.data.trajnet_io import read_scenes
+from predictors.data.validate import read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 
 SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
-CACHE_VERSION: Final[str] = "scenes-v1"  # bump when FileArrays' layout changes
+CACHE_VERSION: Final[str] = "scenes-v2"  # bump when FileArrays' layout or the validation changes
 
 
 @dataclass(frozen=True)
@@ -59,16 +60,18 @@ def load_file_arrays(
     path: str | Path, *, scene_length: int = SCENE_LENGTH, disk_cache: bool = True
 ) -> FileArrays:
     """The scenes of ``path`` as arrays; every primary must span ``scene_length`` evenly spaced frames."""
-    path = Path(path)
-    if not path.is_file():
-        raise PredictorError(f"dataset file {path} does not exist")
-    stat = path.stat()
-    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, scene_length)
-    if key in _MEMORY:
-        return _MEMORY[key]
+    path = require_file(path)
+    try:
+        stat = path.stat()
+        key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, scene_length)
+        if key in _MEMORY:
+            return _MEMORY[key]
+        digest = sha256_file(path) if disk_cache else None
+    except OSError as exc:
+        raise read_error(path, None, exc) from None
     disk = None
     if disk_cache:
-        disk = cache_root() / "scenes" / f"{sha256_file(path)}-{scene_length}-{CACHE_VERSION}.npz"
+        disk = cache_root() / "scenes" / f"{digest}-{scene_length}-{CACHE_VERSION}.npz"
         if disk.is_file():
             try:
                 with np.load(disk) as data:

@@ -9,12 +9,13 @@ that is exported to CasADi. Training uses the variety (best-of-k) loss plus the 
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
 
-from predictors.errors import PredictorError
+from predictors.errors import PredictorError, short_repr
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 
 
@@ -37,8 +38,18 @@ class DiscriminatorConfig:
     input_scale: float = 4.0
 
     def __post_init__(self):
-        if self.embedding_dim < 1 or self.hidden_dim < 1:
-            raise PredictorError(f"discriminator sizes must be >= 1, got {self}")
+        # The bounds of the generator's sizes (nets.social_lstm.SIZE_BOUNDS), for the same reason.
+        for name in ("embedding_dim", "hidden_dim"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= 4096:
+                raise PredictorError(
+                    f"discriminator {name} must be an integer in 1..4096, got {short_repr(value)}"
+                )
+        scale = self.input_scale
+        if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not 0 < scale <= 1000:
+            raise PredictorError(
+                f"discriminator input_scale must be a number in (0, 1000], got {short_repr(scale)}"
+            )
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -16,16 +16,38 @@ are masked, never NaN. The symbolic twin of ``decode_step`` is ``predictors.casa
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
 
-from predictors.errors import PredictorError
+from predictors.errors import PredictorError, short_repr
 from predictors.nets.pooling import POOLINGS, GridPooling
 
 HEADS = ("gaussian", "point")
 N_TAGS = 2  # TrajNet++ InputEmbedding keeps two embedding slots for the encoder/decoder start tags
+
+# Bounds on a config, checked before any tensor is allocated: a zoo config is a file anyone can edit, and one
+# hidden size of 4e6 asked torch for 256 TB. TrajNet++'s defaults are hidden 128, embedding 64, grid 12,
+# latent 16, pool 256 (0.8 M parameters); the shipped nets have 13 k to 16 k. Each width may be 4096
+# (32x TrajNet++'s hidden size), the grid 64 cells a side, and the whole net at most 10 M parameters (80 MB
+# in float64, the predictor's copy; 12x TrajNet++'s): far more than the MPC's CasADi twin can evaluate at
+# control rate, so no net that could be used is refused, and no file can make us allocate more.
+SIZE_BOUNDS: dict[str, tuple[int, int]] = {
+    "hidden_dim": (1, 4096),
+    "embedding_dim": (N_TAGS + 1, 4096),
+    "grid_size": (1, 64),  # 64 x 64 cells of cell_side
+    "latent_dim": (1, 4096),
+    "pool_dim": (1, 4096),
+    "noise_dim": (0, 4096),
+}
+# Upper bounds of the positive float settings: a cell of 100 m spans any scene; inputs scaled by more than
+# 1000 saturate every unit.
+FLOAT_BOUNDS: dict[str, float] = {"cell_side": 100.0, "input_scale": 1000.0}
+MAX_PARAMETERS = 10_000_000
+WRONG_TYPE = "Social-LSTM config holds a value of the wrong type"
 
 
 @dataclass(frozen=True)
@@ -47,23 +69,58 @@ class SocialLSTMConfig:
     head: str = "gaussian"  # "gaussian" (5 outputs, TrajNet++ Hidden2Normal) | "point" (2 outputs)
 
     def __post_init__(self):
+        # Types first: a config comes from a JSON file that anyone can edit, and a float, bool or string size
+        # would otherwise reach torch (a traceback) or a comparison (a TypeError).
+        for name in ("pooling", "head"):
+            if not isinstance(getattr(self, name), str):
+                raise PredictorError(
+                    f"{WRONG_TYPE}: {name} must be a string, got {short_repr(getattr(self, name))}"
+                )
         if self.pooling not in POOLINGS:
-            raise PredictorError(f"pooling {self.pooling!r} is not one of {list(POOLINGS)}")
+            raise PredictorError(f"pooling {short_repr(self.pooling)} is not one of {list(POOLINGS)}")
         if self.head not in HEADS:
-            raise PredictorError(f"head {self.head!r} is not one of {list(HEADS)}")
-        for name in ("hidden_dim", "grid_size", "latent_dim", "pool_dim"):
-            if getattr(self, name) < 1:
-                raise PredictorError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.embedding_dim <= N_TAGS:
+            raise PredictorError(f"head {short_repr(self.head)} is not one of {list(HEADS)}")
+        for name, (low, high) in SIZE_BOUNDS.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise PredictorError(f"{WRONG_TYPE}: {name} must be an integer, got {short_repr(value)}")
+            if not low <= value <= high:
+                if name == "embedding_dim" and value <= N_TAGS:
+                    raise PredictorError(f"embedding_dim must be > {N_TAGS} (start-tag slots), got {value}")
+                raise PredictorError(f"{name} must be in {low}..{high}, got {value}")
+        for name, high_f in FLOAT_BOUNDS.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise PredictorError(f"{WRONG_TYPE}: {name} must be a number, got {short_repr(value)}")
+            if not math.isfinite(value):
+                raise PredictorError(f"{name} must be a finite number, got {value!r}")
+            if not 0 < value <= high_f:
+                raise PredictorError(f"{name} must be in (0, {high_f:g}], got {value}")
+        count = self.parameter_count()
+        if count > MAX_PARAMETERS:
             raise PredictorError(
-                f"embedding_dim must be > {N_TAGS} (start-tag slots), got {self.embedding_dim}"
+                f"this net would have {count:,} parameters, more than the {MAX_PARAMETERS:,} allowed "
+                "(hidden_dim, embedding_dim, grid_size**2 * latent_dim * pool_dim too large)"
             )
-        if self.cell_side <= 0 or self.input_scale <= 0:
-            raise PredictorError(
-                f"cell_side and input_scale must be > 0, got {self.cell_side} and {self.input_scale}"
-            )
-        if self.noise_dim < 0:
-            raise PredictorError(f"noise_dim must be >= 0, got {self.noise_dim}")
+
+    def parameter_count(self) -> int:
+        """The number of parameters ``SocialLSTM(self)`` has, computed without allocating them."""
+
+        def linear(n_in: int, n_out: int, bias: bool = True) -> int:
+            return n_in * n_out + (n_out if bias else 0)
+
+        pooled = 0
+        count = 0
+        if self.pooling != "none":
+            count += linear(self.hidden_dim, self.latent_dim)
+            count += linear(self.grid_size**2 * self.latent_dim, self.pool_dim)
+            pooled = self.pool_dim
+        count += linear(2 + pooled, self.embedding_dim - N_TAGS)
+        # encoder and decoder LSTMCells: weight_ih, weight_hh and two biases, 4 gates each
+        count += 2 * 4 * self.hidden_dim * (self.embedding_dim + self.hidden_dim + 2)
+        count += linear(self.hidden_dim, 5 if self.head == "gaussian" else 2)
+        count += linear(self.noise_dim, self.hidden_dim, bias=False) if self.noise_dim else 0
+        return count
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -71,19 +128,15 @@ class SocialLSTMConfig:
     @classmethod
     def from_dict(cls, values: dict) -> SocialLSTMConfig:
         if not isinstance(values, dict):
-            raise PredictorError(f"a Social-LSTM config must be a JSON object, got {values!r}")
+            raise PredictorError(f"a Social-LSTM config must be a JSON object, got {short_repr(values)}")
         unknown = sorted(set(values) - set(cls.__dataclass_fields__))
         if unknown:
+            shown = short_repr(unknown, 200)
             raise PredictorError(
-                f"unknown Social-LSTM config keys {unknown}; expected a subset of "
+                f"unknown Social-LSTM config keys {shown}; expected a subset of "
                 f"{sorted(cls.__dataclass_fields__)}"
             )
-        try:
-            return cls(**values)
-        except TypeError as exc:  # a value of the wrong type, e.g. "32" for hidden_dim, fails a comparison
-            raise PredictorError(
-                f"Social-LSTM config {values} holds a value of the wrong type: {exc}"
-            ) from None
+        return cls(**values)  # __post_init__ checks every value's type and range
 
 
 def gaussian_head(raw: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,135 @@
+"""What ``crowdmpc review`` needs of a recorded message and of the episode metadata, checked on reading.
+
+A message that decodes as JSON but lacks what the review reads (a field, a type, an array's shape) is reported
+by ``pipelines.logs.reader`` and left out, so that a hostile or foreign file cannot crash the summary, the
+table or the plots. This is deliberately less than the channel's schema: only the fields the review reads,
+so that a recording from another crowdmpc version (extra fields) still reviews; ``review --check`` holds every
+message to the schema stored in its file.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Any, Final
+
+import numpy as np
+
+# -- values ------------------------------------------------------------------------------------------------
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_real(x: Any) -> bool:
+    """A finite JSON number (json.loads also reads NaN and Infinity)."""
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _array_problem(value: Any, ndim: int) -> str | None:
+    """``value`` is a rectangular array of numbers (null allowed) with ``ndim`` axes, the last of size 2."""
+    try:
+        array = np.asarray(value, dtype=float)
+    except (ValueError, TypeError, OverflowError, RecursionError):
+        return "is not a rectangular array of numbers"
+    if array.ndim != ndim or array.shape[-1] != 2:
+        return f"has shape {array.shape}, expected {ndim} axes ending in 2 (x, y)"
+    return None
+
+
+def _fields(message: Any, checks: Mapping[str, Callable[[Any], str | None]]) -> str | None:
+    if not isinstance(message, dict):
+        return f"a JSON {type(message).__name__}, expected an object"
+    for name, check in checks.items():
+        if name not in message:
+            return f"lacks {name!r}"
+        problem = check(message[name])
+        if problem:
+            return f"{name!r} {problem}"
+    return None
+
+
+def _int(x: Any) -> str | None:
+    return None if _is_int(x) else f"is {x!r}, expected an integer"
+
+
+def _real(x: Any) -> str | None:
+    return None if _is_real(x) else f"is {x!r}, expected a finite number"
+
+
+def _real_or_null(x: Any) -> str | None:
+    return None if x is None or _is_real(x) else f"is {x!r}, expected a finite number or null"
+
+
+def _text(x: Any) -> str | None:
+    return None if isinstance(x, str) else f"is {x!r}, expected a string"
+
+
+def _text_or_null(x: Any) -> str | None:
+    return None if x is None or isinstance(x, str) else f"is {x!r}, expected a string or null"
+
+
+def _object(x: Any) -> str | None:
+    return None if isinstance(x, dict) else f"is a JSON {type(x).__name__}, expected an object"
+
+
+def _points(x: Any) -> str | None:  # (K, 2)
+    return _array_problem(x, 2)
+
+
+def _tracks(x: Any) -> str | None:  # (A, H, 2) or (H, N, 2)
+    return _array_problem(x, 3)
+
+
+_Checks = dict[str, Callable[[Any], str | None]]
+_STATE: Final[_Checks] = {"time": _real, "step": _int, "positions": _points, "goals": _points}
+_TRACK: Final[_Checks] = {"time": _real, "step": _int, "positions": _tracks}
+_REQUIRED: Final[dict[str, _Checks]] = {
+    "/robots": _STATE,
+    "/humans": _STATE,
+    "/mpc/plan": _TRACK,
+    "/mpc/prediction": _TRACK,
+    "/mpc/solver": {
+        "time": _real,
+        "step": _int,
+        "status": _text,
+        "solve_time_s": _real,
+        "iterations": _real,
+        "potential": _real_or_null,
+        "fallback": _text_or_null,
+    },
+    "/episode/metrics": {"metrics": _object},
+}
+
+
+def message_problem(topic: str, message: Any) -> str | None:
+    """Why the review cannot use ``message`` (decoded JSON) of ``topic``, or None; other topics pass."""
+    checks = _REQUIRED.get(topic)
+    return None if checks is None else _fields(message, checks)
+
+
+# -- metadata ----------------------------------------------------------------------------------------------
+
+_EPISODE_INTS: Final = ("seed", "n_robots", "n_humans")
+_EPISODE_REALS: Final = ("dt", "radius")
+
+
+def episode_metadata_problems(episode: Mapping[str, str]) -> dict[str, str]:
+    """{key: problem} for the values of the "episode" metadata record that the review parses as numbers."""
+    problems = {}
+    for key in _EPISODE_INTS:
+        if key in episode:
+            try:
+                int(episode[key])
+            except ValueError:
+                problems[key] = f"{key} = {episode[key]!r} is not an integer"
+    for key in _EPISODE_REALS:
+        if key in episode:
+            try:
+                value = float(episode[key])
+            except ValueError:
+                value = math.nan
+            if not (math.isfinite(value) and value > 0):
+                problems[key] = f"{key} = {episode[key]!r} is not a positive number"
+    return problems

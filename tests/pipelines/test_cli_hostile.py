@@ -1,0 +1,427 @@
+"""Hostile input and faults: one-line parser errors, output paths checked before any work, sizes checked
+before any worker starts, training numbers checked before Lightning, a raising NLP solve that falls back,
+and a killed sweep's scratch removed by the next one."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands import check_writable
+from pipelines.errors import PipelineError
+from pipelines.experiments.log import EPISODES_FILE
+from pipelines.experiments.worker import SCRATCH_PREFIX, remove_stale_scratch
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode, summarize
+from tests.predictors.samples import write_walk_file
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _one_error_line(capsys, command: str) -> str:
+    """The one line a user error prints: ``crowdmpc <command>: error: ...``; nothing on stdout."""
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith(f"crowdmpc {command}: error: "), lines[0]
+    assert captured.out == "", captured.out  # no table, no progress: no work was done
+    return lines[0]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 1. Parser errors: one line and a pointer to --help, exit code 2
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv, command, named",
+    [
+        (["simulate", "--controller", "bogus"], "simulate", "--controller"),
+        (["simulate", "--controller", "orca", "--humans", "many"], "simulate", "--humans"),
+        (["simulate"], "simulate", "--controller"),
+        (["sweep", "--experiment", "nope", "--out", "x"], "sweep", "--experiment"),
+        (["sweep", "--experiment", "baselines", "--humans", "5,x", "--out", "x"], "sweep", "--humans"),
+        (["train", "--model", "gpt"], "train", "--model"),
+        (["calibrate", "--predictor", "cv", "--source", "real", "--alpha", "2"], "calibrate", "--alpha"),
+        (["data"], "data", "ACTION"),
+        (["data", "prepare", "--raw"], "data prepare", "--raw"),
+        (["bogus"], "", "COMMAND"),
+        (["simulate", "--controller", "orca", "--frobnicate"], "", "--frobnicate"),
+    ],
+)
+def test_parser_errors_are_one_line_and_point_to_help(argv, command, named, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    captured = capsys.readouterr()
+    prog = f"crowdmpc {command}".strip()
+    assert captured.out == ""
+    assert captured.err.count("\n") == 1, captured.err
+    line = captured.err.rstrip("\n")
+    assert line.startswith(f"{prog}: error: ") and named in line, line
+    assert line.endswith(f"; see '{prog} --help'"), line
+
+
+def test_a_parser_error_exits_2_from_the_command_line():
+    done = subprocess.run(
+        [sys.executable, "-m", "pipelines.cli", "simulate", "--controller", "bogus"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr == (
+        "crowdmpc simulate: error: argument --controller: invalid choice: 'bogus' "
+        "(choose from 'cmpc', 'dmpc', 'orca', 'straight'); see 'crowdmpc simulate --help'\n"
+    )
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 2. Output paths: checked before any work
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def a_file(tmp_path) -> Path:
+    path = tmp_path / "file"
+    path.write_text("not a directory\n")
+    return path
+
+
+def test_check_writable(tmp_path, a_file):
+    check_writable(None, "--json")
+    check_writable(tmp_path / "new" / "deeper" / "out.json", "--json")  # created later, by the command
+    check_writable(tmp_path / "new" / "dir", "--out", directory=True)
+    check_writable(a_file, "--json")  # replaced
+    check_writable(tmp_path, "--out", directory=True)  # written into
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # the checks create nothing
+    assert a_file.read_text() == "not a directory\n"
+    with pytest.raises(PipelineError, match=rf"^--json {a_file}/out.json: {a_file} is not a directory$"):
+        check_writable(a_file / "out.json", "--json")
+    with pytest.raises(PipelineError, match=rf"^--json {a_file}/a/b.json: {a_file} is not a directory$"):
+        check_writable(a_file / "a" / "b.json", "--json")
+    with pytest.raises(PipelineError, match=rf"^--json {tmp_path}: is a directory$"):
+        check_writable(tmp_path, "--json")
+    with pytest.raises(PipelineError, match=rf"^--out {a_file}: not a directory$"):
+        check_writable(a_file, "--out", directory=True)
+
+
+@pytest.mark.parametrize("option", ["--json", "--plot", "--record"])
+def test_simulate_checks_its_outputs_before_the_episodes(option, a_file, capsys, monkeypatch):
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("an episode ran before the output paths were checked")
+
+    monkeypatch.setattr("pipelines.loop.episode.run_episodes", no_episodes)
+    target = a_file / "out.png"
+    argv = ["simulate", "--controller", "orca", "--humans", "3", "--no-progress", option, str(target)]
+    assert main(argv) == 2
+    line = _one_error_line(capsys, "simulate")
+    assert line == f"crowdmpc simulate: error: {option} {target}: {a_file} is not a directory"
+
+
+@pytest.mark.parametrize(
+    "argv, option",
+    [
+        (["sweep", "--experiment", "baselines", "--humans", "5", "--episodes-per-cell", "1"], "--out"),
+        (["evaluate", "--predictor", "constant_velocity"], "--json"),
+        (["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop"], "--json"),
+        (["data", "synth", "--episodes", "1", "--humans", "2", "--seed", "0"], "--out"),
+        (["data", "prepare", "--raw", "."], "--out"),
+    ],
+)
+def test_every_output_path_is_checked_first(argv, option, a_file, capsys):
+    target = a_file / "out"
+    assert main([*argv, option, str(target)]) == 2
+    line = _one_error_line(capsys, argv[0])
+    assert line.endswith(f"{option} {target}: {a_file} is not a directory")
+    assert not target.exists()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 3. Sweep sizes: checked before any worker starts
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--humans", "1000"], "--humans must be in 1..50, got 1000"),
+        (["--humans", "5,51"], "--humans must be in 1..50, got 51"),
+        (["--robots", "50"], "--robots must be in 1..12, got 50"),
+        (["--robots", "0"], "--robots must be in 1..12, got 0"),
+        (["--episodes-per-cell", "1000001"], "--episodes-per-cell must be at most 100000, got 1000001"),
+        (["--workers", "0"], "--workers must be at least 1 and at most 4096, got 0"),
+        (["--workers", "100000", "--backend", "inline"], "--workers must be at least 1 and at most 4096"),
+        (["--workers", "100000"], "--workers 100000: at most "),
+    ],
+)
+def test_sweep_sizes_are_refused_before_any_worker_starts(options, message, tmp_path, capsys, monkeypatch):
+    def no_workers(*args, **kwargs):
+        raise AssertionError("workers started")
+
+    monkeypatch.setattr("pipelines.experiments.sweep.make_backend", no_workers)
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "baselines", "--episodes-per-cell", "2", "--workers", "1"]
+    assert main([*argv, "--no-progress", "--out", str(out), *options]) == 2
+    assert message in _one_error_line(capsys, "sweep")
+    assert not out.exists()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 4. Training numbers: checked before Lightning
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--lr", "nan"], "--lr must be a finite number > 0, got nan"),
+        (["--lr", "inf"], "--lr must be a finite number > 0, got inf"),
+        (["--lr", "-0.001"], "--lr must be a finite number > 0, got -0.001"),
+        (["--lr", "0"], "--lr must be a finite number > 0, got 0.0"),
+        (["--epochs", "-1"], "--epochs must be >= 1, got -1"),
+        (["--batch-size", "0"], "--batch-size must be >= 1, got 0"),
+        (["--step-size", "-5"], "--step-size must be >= 1, got -5"),
+        (["--hidden-dim", "0"], "--hidden-dim must be >= 1, got 0"),
+        (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
+    ],
+)
+def test_training_numbers_are_refused_in_one_line(options, message, tmp_path, capsys):
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data)]
+    assert main([*argv, "--out", str(tmp_path / "run"), "--no-progress", *options]) == 2
+    assert _one_error_line(capsys, "train") == f"crowdmpc train: error: {message}"
+    assert not (tmp_path / "run").exists()
+
+
+def test_training_numbers_are_checked_before_lightning_is_imported(tmp_path, a_file):
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    script = (
+        "import sys\n"
+        "from pipelines.cli import main\n"
+        "code = main(sys.argv[1:])\n"
+        "print('lightning' in sys.modules)\n"
+        "sys.exit(code)\n"
+    )
+    argv = ["train", "--model", "social_lstm", "--train", str(data), "--val", str(data)]
+    for options, message in [
+        (["--lr", "nan", "--out", str(tmp_path / "run")], "--lr must be a finite number > 0, got nan"),
+        (["--out", str(a_file / "run")], f"--out {a_file}/run: {a_file} is not a directory"),
+    ]:
+        done = subprocess.run(
+            [sys.executable, "-c", script, *argv, *options],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert done.returncode == 2
+        assert done.stdout == "False\n"
+        assert done.stderr == f"crowdmpc train: error: {message}\n"
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 5. Faults: a solve that raises falls back, and the episode goes on
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _raising_solve(every: int = 1):
+    """``_Solver.solve`` that raises as CasADi does when a call fails, on every ``every``-th call."""
+    from mpc.solvers import _Solver
+
+    original = _Solver.solve
+    calls = {"n": 0}
+
+    def solve(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] % every == 0:
+            raise RuntimeError(".../casadi/core/function.cpp:1458: Error in Function::call for 'solver'")
+        return original(self, *args, **kwargs)
+
+    return solve
+
+
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_a_solve_that_raises_falls_back_and_the_episode_finishes(name, monkeypatch):
+    monkeypatch.setattr("mpc.solvers._Solver.solve", _raising_solve())
+    controller = make_controller(ControllerSpec(name))
+    result = run_episode(controller, seed=0, scenario="circle", n_humans=2)
+    steps = len(result.statuses)
+    assert steps == result.metrics.n_steps > 1  # to the time limit: the robots only brake
+    assert set(result.statuses) == {"exception: RuntimeError"}
+    assert set(result.fallbacks) == {"brake"}  # nothing was ever solved: nothing to shift
+    assert controller.solve_exceptions == steps
+    summary = summarize([result])
+    assert summary["fallback_steps"] == steps and summary["statuses"] == {"exception: RuntimeError": steps}
+
+
+def test_a_raising_solve_between_good_ones_shifts_the_last_plan(monkeypatch):
+    monkeypatch.setattr("mpc.solvers._Solver.solve", _raising_solve(every=5))
+    controller = make_controller(ControllerSpec("cmpc"))
+    result = run_episode(controller, seed=0, scenario="circle", n_humans=2)
+    raised = [i for i, s in enumerate(result.statuses) if s == "exception: RuntimeError"]
+    assert raised and controller.solve_exceptions == len(raised)
+    after_a_solve = [i for i in raised if result.statuses[i - 1] == "ok"]
+    assert after_a_solve and all(result.fallbacks[i] == "shifted" for i in after_a_solve)
+    assert "ok" in result.statuses and np.isfinite(result.robot_positions).all()
+
+
+def test_the_step_says_what_the_solve_raised(monkeypatch):
+    from crowdsim.env import CrowdEnv
+
+    monkeypatch.setattr("mpc.solvers._Solver.solve", _raising_solve())
+    controller = make_controller(ControllerSpec("cmpc"))
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller.reset(obs)
+    out = controller.act(obs)
+    assert (out.status, out.fallback, out.iterations) == ("exception: RuntimeError", "brake", 0)
+    assert out.extra["exception"].startswith("RuntimeError: .../casadi/core/function.cpp:1458")
+    assert out.extra["solve_exceptions"] == 1 and out.plan.shape == (3, 4, 2)
+    np.testing.assert_allclose(out.accelerations, 0.0)  # braking from rest
+
+
+def test_a_predictor_that_raises_is_not_taken_for_the_solver(monkeypatch):
+    from crowdsim.env import CrowdEnv
+
+    controller = make_controller(ControllerSpec("cmpc"))
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller.reset(obs)
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("a bug in the predictor")
+
+    monkeypatch.setattr(controller, "_twin", lambda n_humans, n_robots: None)
+    monkeypatch.setattr(controller.model, "rollout", broken)
+    with pytest.raises(ZeroDivisionError, match="a bug in the predictor"):
+        controller.act(obs)
+    assert controller.solve_exceptions == 0
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 6. A sweep's scratch: owned by the driver, removed when it ends, and by the next sweep when it was killed
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_stale_scratch_of_dead_drivers_is_removed(tmp_path):
+    dead = tmp_path / f"{SCRATCH_PREFIX}{_dead_pid()}-abc"
+    mine = tmp_path / f"{SCRATCH_PREFIX}{os.getpid()}-abc"
+    parent = tmp_path / f"{SCRATCH_PREFIX}{os.getppid()}-abc"
+    other = tmp_path / "crowdmpc-sweep-notapid"
+    for folder in (dead, mine, parent, other):
+        (folder / "worker-1-x").mkdir(parents=True)
+        (folder / "worker-1-x" / "jit_tmp.c").write_text("int main;\n")
+    assert remove_stale_scratch(tmp_path) == [dead]
+    assert not dead.exists() and mine.exists() and parent.exists() and other.exists()
+
+
+def test_a_sweep_removes_its_scratch(tmp_path, monkeypatch):
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)  # read TMPDIR again
+    argv = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1"]
+    assert (
+        main([*argv, "--backend", "inline", "--record", "all", "--no-progress", "--out", str(tmp_path / "o")])
+        == 0
+    )
+    assert list((tmp_path / "tmp").iterdir()) == []
+
+
+def _sweep(out: Path, tmp: Path, episodes: int, *extra: str) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "pipelines.cli",
+        "sweep",
+        "--experiment",
+        "baselines",
+        "--humans",
+        "9",
+        "--episodes-per-cell",
+        str(episodes),
+        "--no-progress",
+        "--out",
+        str(out),
+        *extra,
+    ]
+
+
+def _start_and_signal(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, str, list[Path]]:
+    """A process-pool sweep with its temp directory in ``tmp_path/tmp``, sent ``sig`` once it has recorded
+    a few episodes; its stderr (read to the end: until the resource tracker, which shares it, is gone too)
+    and the scratch roots its driver left."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir(exist_ok=True)
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(
+        _sweep(out, tmp, 2000, "--workers", "2", "--backend", "process"),
+        cwd=REPO,
+        env=os.environ | {"TMPDIR": str(tmp)},
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        log = out / EPISODES_FILE
+        while not (log.exists() and log.read_bytes().count(b"\n") >= 5):
+            assert proc.poll() is None, proc.stderr.read()
+            assert time.monotonic() < deadline, "the sweep made no progress"
+            time.sleep(0.02)
+        roots = list(tmp.glob(SCRATCH_PREFIX + f"{proc.pid}-*"))
+        assert len(roots) == 1 and len(list(roots[0].iterdir())) == 2  # a folder per worker
+        os.kill(proc.pid, sig)
+        _, err = proc.communicate(timeout=30)
+        return proc, err, roots
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+@pytest.mark.slow
+def test_a_killed_sweeps_scratch_is_removed_by_the_next_and_no_semaphore_warning(tmp_path):
+    proc, err, roots = _start_and_signal(tmp_path, signal.SIGKILL)
+    assert proc.returncode == -signal.SIGKILL
+    assert "leaked semaphore" not in err and "resource_tracker" not in err, err
+    assert roots[0].exists()  # nobody could remove it: the driver was killed
+    tmp = tmp_path / "tmp"
+    done = subprocess.run(
+        _sweep(tmp_path / "next", tmp, 1, "--backend", "inline"),
+        cwd=REPO,
+        env=os.environ | {"TMPDIR": str(tmp)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert list(tmp.iterdir()) == []  # the killed driver's root, and the next sweep's own
+
+
+@pytest.mark.slow
+def test_a_terminated_sweep_stops_in_order(tmp_path):
+    proc, err, roots = _start_and_signal(tmp_path, signal.SIGTERM)
+    assert proc.returncode == 130, err
+    assert "interrupted: rerun the same command to resume" in err
+    assert "leaked semaphore" not in err and "Traceback" not in err, err
+    assert list((tmp_path / "tmp").iterdir()) == []
+    records = [json.loads(line) for line in (tmp_path / "killed" / EPISODES_FILE).read_text().splitlines()]
+    assert len(records) >= 5

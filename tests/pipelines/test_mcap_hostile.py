@@ -1,0 +1,393 @@
+"""Hostile MCAP input: whatever a file holds, ``crowdmpc review`` reports it in a line and never crashes; a
+recording killed at any moment leaves every finished episode complete.
+
+Every bad file is generated here from a real recorded episode (tests/pipelines/mcap_episode.py) or with the
+mcap writer: cuts at many offsets, flipped bytes inside chunks, payloads that are not JSON or not of the
+shape the review reads, bad metadata, empty files, a folder named x.mcap, unfinished .part files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+
+from pipelines.cli import main
+from pipelines.errors import PipelineError
+from pipelines.logs.reader import read_recording
+from pipelines.logs.recorder import McapRecorder
+from pipelines.logs.recording import episode_filename
+from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, ROBOTS, SOLVER
+from tests.pipelines.mcap_episode import record_episode
+
+REPO = Path(__file__).resolve().parents[2]
+HEADER_END = (
+    33  # magic (8) + crowdmpc's Header record (9 + 4 + 4 + len("crowdmpc")): the shortest readable cut
+)
+S = 1_000_000_000  # ns
+
+
+def robot(step: int, n: int = 1) -> dict:
+    return {
+        "time": 0.4 * step,
+        "step": step,
+        "positions": [[0.1 * step, 0.0]] * n,
+        "velocities": [[0.0, 0.0]] * n,
+        "goals": [[1.0, 1.0]] * n,
+        "actions": None,
+        "commanded": None,
+        "reached": [False] * n,
+    }
+
+
+def review(capsys, *args: object) -> tuple[int, str, str]:
+    rc = main(["review", *map(str, args)])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def lines_naming(text: str, path: Path) -> list[str]:
+    return [line for line in text.splitlines() if str(path) in line]
+
+
+@pytest.fixture(scope="module")
+def episode(tmp_path_factory):
+    """A finished episode long enough for several chunks."""
+    return record_episode(tmp_path_factory.mktemp("episode"), steps=75, n_humans=7)
+
+
+def test_cut_at_many_offsets_reads_a_prefix_or_is_reported(episode, tmp_path, capsys):
+    data = episode.path.read_bytes()
+    complete = read_recording(episode.path)
+    rng = random.Random(0)
+    cuts = sorted(
+        {*range(0, HEADER_END + 2, 3), HEADER_END, *rng.sample(range(40, len(data)), 40), len(data) - 1}
+    )
+    folder = tmp_path / "cuts"
+    folder.mkdir()
+    shutil.copy(episode.path, folder / "full.mcap")
+    unreadable, truncated, ended = [], [], 1  # the full file ended its episode
+    for cut in cuts:
+        path = folder / f"cut{cut:07d}.mcap"
+        path.write_bytes(data[:cut])
+        try:
+            rec = read_recording(path)
+        except PipelineError as exc:
+            assert str(path) in str(exc) and "\n" not in str(exc)
+            unreadable.append(path)
+            continue
+        truncated.append(path)
+        ended += bool(rec.data("/episode/metrics"))  # the cut took the closing magic only
+        assert rec.truncated and not rec.problems and not rec.message_problems(), cut
+        for topic, messages in rec.messages.items():  # what was read is what was written
+            assert [m.data for m in messages] == [m.data for m in complete.messages[topic][: len(messages)]]
+    assert [p.name for p in unreadable] == [f"cut{c:07d}.mcap" for c in cuts if c < HEADER_END]
+
+    rc, out, err = review(capsys, folder)
+    assert rc == 0
+    for path in unreadable:
+        (line,) = lines_naming(err, path)
+        assert line.startswith("crowdmpc review: unreadable: ")
+    for path in truncated:
+        (line,) = lines_naming(err, path)
+        assert "is truncated" in line
+        assert path.name in out  # a row of the table
+    runs = len(truncated) + 1
+    assert f"\n{runs} runs, {runs - ended} truncated (no metrics)\n" in out
+    rc, out, _ = review(capsys, folder, "--check")
+    assert rc == 1  # the unreadable cuts fail the check; the truncated ones pass it
+    assert out.count(" ok\n") == len(truncated) + 1
+
+
+@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD])
+def test_a_flipped_byte_in_a_chunk_loses_that_chunk_only(tmp_path, capsys, compression):
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path, compression=compression, chunk_size=2048) as rec:
+        for k in range(60):
+            rec.write("/robots", robot(k), k * S // 2, schema=ROBOTS)
+    data = path.read_bytes()
+    with open(path, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert len(chunks) >= 4
+    rng = random.Random(1)
+    for i, chunk in enumerate(
+        [chunks[0], chunks[len(chunks) // 2], chunks[-1]]
+    ):  # the first holds the channel
+        # opcode, length, start and end time, uncompressed size and CRC, compression string, data length
+        start = chunk.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4 + 4 + len(chunk.compression) + 8
+        bad = bytearray(data)
+        bad[rng.randrange(start, start + chunk.compressed_size)] ^= 1 << rng.randrange(8)
+        flipped = tmp_path / f"flip{i}.mcap"
+        flipped.write_bytes(bytes(bad))
+
+        rec = read_recording(flipped)
+        (problem,) = rec.problems
+        assert problem.startswith(f"bad chunk at byte {chunk.chunk_start_offset} ") and "left out" in problem
+        lost = [k for k in range(60) if chunk.message_start_time <= k * S // 2 <= chunk.message_end_time]
+        assert 0 < len(lost) < 60
+        assert [r["step"] for r in rec.data("/robots")] == [k for k in range(60) if k not in lost]
+
+        rc, _, err = review(capsys, flipped)
+        assert rc == 0
+        (line,) = lines_naming(err, flipped)
+        assert "bad chunk" in line
+        rc, out, _ = review(capsys, flipped, "--check")
+        assert rc == 1
+        assert f"check {flipped}: {60 - len(lost)} messages, 1 invalid\n  bad chunk at byte" in out
+
+
+def test_the_data_section_crc_is_checked_where_the_file_has_one(tmp_path, capsys):
+    path = tmp_path / "a.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f, compression=CompressionType.NONE, enable_data_crcs=True)
+        writer.start()
+        writer.add_metadata("episode", {"scenario": "circle"})
+        channel = writer.register_channel("/robots", "json", writer.register_schema(*_schema(ROBOTS)))
+        writer.add_message(channel, log_time=0, data=ROBOTS_JSON, publish_time=0)
+        writer.finish()
+    data = bytearray(path.read_bytes())
+    assert read_recording(path).problems == []
+    data[data.index(b"circle")] ^= 0x20  # "Circle": outside every chunk, only the data section CRC sees it
+    path.write_bytes(bytes(data))
+    rec = read_recording(path)
+    (problem,) = rec.problems
+    assert problem.startswith("data section CRC mismatch")
+    assert rec.episode()["scenario"] == "Circle" and len(rec.data("/robots")) == 1  # the rest still reads
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 1 and "data section CRC mismatch" in out
+
+
+ROBOTS_JSON = b'{"time":0.0,"step":0,"positions":[[0,0]],"velocities":[[0,0]],"goals":[[1,1]],"actions":null,\
+"commanded":null,"reached":[false]}'
+
+
+def _schema(schema) -> tuple[str, str, bytes]:
+    return schema.name, "jsonschema", schema.data
+
+
+def _hostile_file(path: Path) -> None:
+    """Everything but the framing is wrong: payloads, shapes, metadata values, a schema that is no schema."""
+    with open(path, "wb") as f:
+        writer = Writer(f, compression=CompressionType.ZSTD)
+        writer.start()
+        writer.add_metadata("episode", {"seed": "abc", "n_robots": "two", "dt": "-1", "scenario": "circle"})
+        writer.add_metadata("config", {"env": "{not json"})
+        channels = {
+            topic: writer.register_channel(topic, "json", writer.register_schema(*_schema(schema)))
+            for topic, schema in (
+                ("/robots", ROBOTS),
+                ("/mpc/solver", SOLVER),
+                ("/episode/metrics", EPISODE_METRICS),
+            )
+        }
+        channels["/humans"] = writer.register_channel(
+            "/humans", "json", writer.register_schema("x.Anything", "jsonschema", b'{"type": "object"}')
+        )
+        channels["/broken"] = writer.register_channel(
+            "/broken",
+            "json",
+            writer.register_schema("x.Broken", "jsonschema", b'{"type": "object", "required": 5}'),
+        )
+        for topic, seconds, payload in (
+            ("/robots", 0.0, b"\xff\xfe not json"),
+            ("/robots", 0.4, b"[1, 2]"),
+            ("/robots", 0.8, b'{"time": 0.8, "positions": [[0, 0]], "goals": [[1, 1]]}'),
+            ("/robots", 1.2, b"[" * 100_000),
+            ("/mpc/solver", 0.0, b'{"time": 0, "step": 0, "status": "ok", "solve_time_s": NaN, '
+             b'"iterations": 1, "potential": null, "fallback": null}'),
+            ("/episode/metrics", 1.2, b'{"metrics": {"success": true}}'),
+            ("/broken", 0.0, b'{"a": 1}'),
+            ("/humans", 0.0, b'{"time": 0.0}'),
+        ):  # fmt: skip
+            t = int(seconds * S)
+            writer.add_message(channels[topic], log_time=t, data=payload, publish_time=t)
+        writer.finish()
+
+
+def test_payloads_shapes_and_metadata_review_expects_not_are_reported(episode, tmp_path, capsys):
+    path = tmp_path / "hostile.mcap"
+    _hostile_file(path)
+    rec = read_recording(path)
+    assert not rec.truncated and rec.data("/robots") == [] and rec.data("/mpc/solver") == []
+    assert rec.episode() == {"scenario": "circle"}  # the values that do not parse are left out, and reported
+    assert rec.problems == [
+        "metadata 'episode': seed = 'abc' is not an integer; the review ignores seed",
+        "metadata 'episode': n_robots = 'two' is not an integer; the review ignores n_robots",
+        "metadata 'episode': dt = '-1' is not a positive number; the review ignores dt",
+    ]
+    assert rec.config() == {"env": "{not json"}
+    problems = rec.message_problems()
+    assert [p.split(":")[0] for p in problems] == [
+        "/robots @ 0.000 s",
+        "/robots @ 0.400 s",
+        "/robots @ 0.800 s",
+        "/robots @ 1.200 s",
+        "/mpc/solver @ 0.000 s",
+        "/humans @ 0.000 s",
+    ]
+    assert "not JSON (UnicodeDecodeError" in problems[0] and "a JSON list, expected an object" in problems[1]
+    assert "lacks 'step'" in problems[2] and "not JSON (RecursionError" in problems[3]
+    assert "'solve_time_s' is nan, expected a finite number" in problems[4]
+
+    rc, out, err = review(capsys, path)
+    assert rc == 0 and "problems" in out
+    (line,) = err.splitlines()
+    assert (
+        line == f"crowdmpc review: warning: {path}: {rec.problems[0]} (1 of 9 problems; --check lists them)"
+    )
+
+    rc, out, err = review(capsys, path, "--check", "--json", tmp_path / "r.json")
+    assert rc == 1 and err == ""
+    assert f"check {path}: " in out
+    errors = "\n".join(json.loads((tmp_path / "r.json").read_text())["check"][str(path)]["errors"])
+    for expected in (
+        "/robots @ 0.000 s: not JSON",
+        "/robots @ 0.400 s (crowdmpc.Robots): $: expected object, got",
+        "/robots @ 0.800 s (crowdmpc.Robots): $: missing required property 'step'",
+        "/robots @ 1.200 s: not JSON (RecursionError",
+        "/mpc/solver @ 0.000 s (crowdmpc.Solver): $.solve_time_s: expected number, got float nan",
+        "/humans @ 0.000 s: lacks 'step'",  # its (permissive) schema lets it pass; the review cannot use it
+        "/episode/metrics @ 1.200 s (crowdmpc.EpisodeRecord): $: missing required property",
+        "/broken: schema 'x.Broken' is malformed (TypeError(",
+    ):
+        assert expected in errors, expected
+
+    rc, _, err = review(capsys, path, "--plot", tmp_path / "p.png")
+    assert (
+        rc == 2
+        and err.splitlines()[-1]
+        == f"crowdmpc review: error: {path} holds no complete state (/robots and /humans) to draw"
+    )
+
+    shutil.copy(episode.path, tmp_path / "good.mcap")
+    rc, out, err = review(capsys, tmp_path)
+    assert rc == 0
+    assert "good.mcap" in out and "hostile.mcap" in out
+    assert "2 runs, 1 with metrics of another format (left out of the rates)" in out
+    assert "success " in out  # the rates of the good run
+    assert len(lines_naming(err, path)) == 1
+
+
+def test_states_of_changing_sizes_cannot_be_drawn(tmp_path, capsys):
+    path = tmp_path / "sizes.mcap"
+    human = {
+        "time": 0.0,
+        "step": 0,
+        "positions": [[3.0, 0.0]],
+        "velocities": [[0.0, 0.0]],
+        "goals": [[0.0, 0.0]],
+    }
+    with McapRecorder(path) as rec:
+        for k, n in enumerate((1, 2)):
+            rec.write("/robots", robot(k, n), k * S, schema=ROBOTS)
+            rec.write("/humans", {**human, "step": k, "time": 0.4 * k}, k * S, schema=HUMANS)
+    rc, _, err = review(capsys, path, "--animate", tmp_path / "a.gif")
+    assert rc == 2 and "do not make one episode" in err and str(path) in err
+
+
+def test_a_folder_reviews_its_readable_files_and_lists_the_rest(episode, tmp_path, capsys):
+    good = tmp_path / "good.mcap"
+    shutil.copy(episode.path, good)
+    data = episode.path.read_bytes()
+    unreadable = {
+        "empty.mcap": b"",
+        "garbage.mcap": b"hello, not an mcap file" * 5,
+        "header_cut.mcap": data[:20],
+        "magic_only.mcap": data[:8],
+    }
+    for name, content in unreadable.items():
+        (tmp_path / name).write_bytes(content)
+    (tmp_path / "x.mcap").mkdir()
+    (tmp_path / "killed_early.mcap.part").write_bytes(b"")
+    (tmp_path / "killed_late.mcap.part").write_bytes(data[: len(data) // 2])
+
+    rc, out, err = review(capsys, tmp_path)
+    assert rc == 0
+    assert "good.mcap" in out and "\n1 runs\n" in out
+    for name in [*unreadable, "x.mcap"]:
+        (line,) = lines_naming(err, tmp_path / name)
+        assert line.startswith("crowdmpc review: unreadable: "), line
+    assert (
+        "is empty (0 bytes)" in err and "is not an MCAP file" in err and "is a folder, not a recording" in err
+    )
+    for name in ("killed_early.mcap.part", "killed_late.mcap.part"):
+        (line,) = lines_naming(err, tmp_path / name)
+        assert line.startswith(f"crowdmpc review: warning: skipping {tmp_path / name}: unfinished")
+    assert len(err.splitlines()) == len(unreadable) + 1 + 2
+
+    rc, out, _ = review(capsys, tmp_path, "--check")
+    assert rc == 1 and out.count(" ok\n") == 1  # unreadable files fail the check
+
+    rc, _, err = review(capsys, tmp_path / "killed_late.mcap.part")  # by name, a .part reads
+    assert rc == 0 and "is truncated" in err
+
+    good.unlink()
+    rc, _, err = review(capsys, tmp_path)
+    assert rc == 2  # nothing readable
+    assert err.splitlines()[-1].startswith(f"crowdmpc review: error: no readable recording in {tmp_path}")
+
+
+# ------------------------------------------------------------------------------------------------------------
+# a recording killed at random moments
+# ------------------------------------------------------------------------------------------------------------
+
+CHILD = """
+import sys
+from pathlib import Path
+from tests.pipelines.mcap_episode import record_episode
+
+print("ready", flush=True)
+for seed in range(1000):
+    episode = record_episode(Path(sys.argv[1]), seed=seed, steps=12, n_humans=5)
+    print(seed, len(episode.observations), flush=True)
+"""
+
+
+@pytest.mark.slow
+def test_a_recording_killed_at_random_moments_loses_no_finished_episode(tmp_path, capsys):
+    rng = random.Random(2024)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    moments = [0.0, 0.002, *(rng.uniform(0.0, 0.25) for _ in range(8))]
+    for i, delay in enumerate(moments):
+        folder = tmp_path / f"run{i}"
+        child = subprocess.Popen(
+            [sys.executable, "-c", CHILD, str(folder)], cwd=REPO, env=env, stdout=subprocess.PIPE, text=True
+        )
+        assert child.stdout is not None and child.stdout.readline() == "ready\n"
+        time.sleep(delay)
+        child.send_signal(signal.SIGKILL)
+        out, _ = child.communicate()
+        finished = {int(seed): int(states) for seed, states in (line.split() for line in out.splitlines())}
+
+        files = {p.name for p in folder.glob("*.mcap")}
+        names = {seed: episode_filename("circle", seed) for seed in range(len(finished) + 1)}
+        assert {names[s] for s in finished} <= files <= set(names.values())  # the next may be renamed
+        parts = list(folder.glob("*.part"))
+        assert len(parts) <= 1 and all(p.name == names[len(finished)] + ".part" for p in parts)
+        for seed, states in finished.items():
+            rec = read_recording(folder / names[seed])
+            assert not rec.truncated and not rec.problems and not rec.message_problems()
+            assert len(rec.data("/robots")) == states and len(rec.data("/episode/metrics")) == 1
+        for part in parts:  # read by name: truncated, or no recording yet; never another exception
+            try:
+                assert read_recording(part).truncated
+            except PipelineError as exc:
+                assert str(part) in str(exc)
+
+        rc, out, err = review(capsys, folder)
+        if files:
+            assert rc == 0 and f"\n{len(files)} runs\n" in out, (delay, out, err)
+        else:  # killed before the first episode ended: nothing to review, said in one line
+            assert rc == 2 and err.splitlines()[-1].startswith("crowdmpc review: error: ")
+        assert "truncated" not in err and "Traceback" not in err
+        assert all(len(lines_naming(err, part)) == 1 for part in parts)

@@ -1,0 +1,508 @@
+"""The model zoo against hostile input: every bad name, path, hash, config, weights file or option is refused
+with a PredictorError/PipelineError that names the file (and key), which the CLI prints as one line, exit 2.
+
+Every bad input is generated here, in tmp_path, from a copy of a real zoo entry; checkpoints/ is only read.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+
+from pipelines.cli import main
+from predictors import zoo
+from predictors.errors import CheckpointMismatch, PredictorError
+from predictors.nets.social_gan import DiscriminatorConfig, generator_config
+from predictors.nets.social_lstm import MAX_PARAMETERS, SocialLSTM, SocialLSTMConfig
+
+REAL_ZOO = Path(__file__).resolve().parents[2] / "checkpoints"
+NAME = "social_lstm_eth"
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def real_entry() -> dict:
+    document = json.loads((REAL_ZOO / zoo.MANIFEST_NAME).read_text())
+    return next(e for e in document["models"] if e["name"] == NAME)
+
+
+def write_manifest(root: Path, *entries: dict) -> Path:
+    path = root / zoo.MANIFEST_NAME
+    path.write_text(json.dumps({"format": zoo.MANIFEST_FORMAT, "version": 1, "models": list(entries)}))
+    return path
+
+
+@pytest.fixture
+def zoo_dir(tmp_path, monkeypatch) -> Path:
+    """A private zoo holding a copy of the real entry ``NAME`` (files and manifest entry), the CLI's zoo."""
+    root = tmp_path / "zoo"
+    root.mkdir()
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", root / f"{NAME}{suffix}")
+    write_manifest(root, real_entry())
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(root))
+    return root
+
+
+@pytest.fixture
+def pair(tmp_path) -> tuple[Path, Path]:
+    """A copy of the real checkpoint pair outside any zoo, with the metrics file `zoo add` reads."""
+    src = tmp_path / "src"
+    src.mkdir()
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", src / f"{NAME}{suffix}")
+    (src / f"{NAME}.metrics.json").write_text("{}")
+    return src / f"{NAME}.pt", src / f"{NAME}.json"
+
+
+def cli(args: list[str], capsys) -> tuple[int, str]:
+    """Exit code and the one line the CLI printed on stderr (asserted to be exactly one)."""
+    capsys.readouterr()
+    code = main(args)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    return code, lines[0]
+
+
+def tree(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+# ------------------------------------------------------------------------------------------------ control
+def test_the_copied_real_entry_verifies_and_loads(zoo_dir, capsys):
+    assert main(["zoo", "verify"]) == 0
+    assert "1 of 1 entries ok" in capsys.readouterr().out
+    assert zoo.load_zoo(NAME).name == NAME
+
+
+# ------------------------------------------------------------------------------------------------- names
+@pytest.mark.parametrize(
+    "name", ["../x", "ABS", ".", "..", "a/b", "a\\b", "", ".hidden", "-x", "x" * 65, "a b", "a\x00b"]
+)
+def test_zoo_add_refuses_unsafe_names_before_writing(tmp_path, zoo_dir, pair, capsys, name):
+    if name == "ABS":
+        name = str(tmp_path / "abs")
+    before = tree(tmp_path)
+    code, line = cli(["zoo", "add", str(pair[0]), f"--name={name}"], capsys)
+    assert code == 2
+    assert line.startswith("crowdmpc zoo: error: zoo name ") and "is not allowed" in line
+    assert tree(tmp_path) == before  # nothing written, inside the zoo or out of it
+    with pytest.raises(PredictorError, match="is not allowed"):
+        zoo.add_to_zoo(pair[0], name=name, protocol="p", training_data={}, metrics={}, directory=zoo_dir)
+
+
+def test_zoo_add_accepts_a_safe_name(zoo_dir, pair, capsys):
+    assert main(["zoo", "add", str(pair[0]), "--name", "My_model-2.v1"]) == 0
+    assert zoo.load_zoo("My_model-2.v1").name == "My_model-2.v1"
+    assert (zoo_dir / "My_model-2.v1.pt").is_file()
+
+
+def test_zoo_add_does_not_write_through_a_symbolic_link(tmp_path, zoo_dir, pair, capsys):
+    outside = tmp_path / "outside.pt"
+    outside.write_bytes(b"keep me")
+    (zoo_dir / "linked.pt").symlink_to(outside)
+    code, line = cli(["zoo", "add", str(pair[0]), "--name", "linked"], capsys)
+    assert code == 2 and "lies outside the zoo directory" in line
+    assert outside.read_bytes() == b"keep me"
+
+
+@pytest.mark.parametrize("name", ["../x", "/tmp/x", "..", 7, None])
+def test_manifest_names_must_be_safe(zoo_dir, capsys, name):
+    manifest = write_manifest(zoo_dir, {**real_entry(), "name": name})
+    with pytest.raises(PredictorError) as refused:
+        zoo.read_manifest(zoo_dir)
+    assert str(refused.value).startswith(f"{manifest}: zoo name ")
+    code, line = cli(["zoo", "list"], capsys)
+    assert code == 2 and str(manifest) in line and "is not allowed" in line
+
+
+def test_manifest_names_must_be_unique(zoo_dir):
+    manifest = write_manifest(zoo_dir, real_entry(), real_entry())
+    with pytest.raises(PredictorError, match=f"^{re.escape(str(manifest))}: entry '{NAME}' appears twice$"):
+        zoo.read_manifest(zoo_dir)
+
+
+# ------------------------------------------------------------------------------------------ file paths
+@pytest.mark.parametrize("key", ["file", "config"])
+@pytest.mark.parametrize(
+    "where", ["dotdot", "absolute", "inner_dotdot", "symlink", "the_zoo_itself", "empty"]
+)
+def test_manifest_files_must_lie_inside_the_zoo(tmp_path, zoo_dir, capsys, key, where):
+    suffix = ".pt" if key == "file" else ".json"
+    outside = tmp_path / f"outside{suffix}"
+    shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", outside)  # a valid file: only its place is wrong
+    (zoo_dir / "sub").mkdir()
+    if where == "symlink":
+        (zoo_dir / f"link{suffix}").symlink_to(outside)
+    value = {
+        "dotdot": f"../outside{suffix}",
+        "absolute": str(outside),
+        "inner_dotdot": f"sub/../../outside{suffix}",
+        "symlink": f"link{suffix}",
+        "the_zoo_itself": ".",
+        "empty": "",
+    }[where]
+    manifest = write_manifest(zoo_dir, {**real_entry(), key: value})
+    with pytest.raises(PredictorError) as refused:
+        zoo.load_zoo(NAME)
+    message = str(refused.value)
+    assert message.startswith(f'{manifest}: entry {NAME!r}: "{key}" ')
+    assert "outside the zoo directory" in message or "must be a file name inside the zoo" in message
+    for args in (["zoo", "verify"], ["zoo", "list"], ["export", NAME, "--out", str(tmp_path / "o.casadi")]):
+        code, line = cli(args, capsys)
+        assert code == 2 and f'entry {NAME!r}: "{key}"' in line, args
+    assert not (tmp_path / "o.casadi").exists()
+
+
+def test_a_file_in_a_subdirectory_of_the_zoo_is_fine(zoo_dir):
+    (zoo_dir / "sub").mkdir()
+    (zoo_dir / f"{NAME}.pt").rename(zoo_dir / "sub" / "w.pt")
+    write_manifest(zoo_dir, {**real_entry(), "file": "sub/w.pt"})
+    assert zoo.load_zoo(NAME).name == NAME
+
+
+# ------------------------------------------------------------------------------------------------ hashes
+def tamper_weights(path: Path) -> None:
+    """A valid state_dict with other values: what a hash check exists to catch."""
+    state = torch.load(path, weights_only=True)
+    state["head.bias"] = state["head.bias"] + 1.0
+    torch.save(state, path)
+
+
+@pytest.mark.parametrize("key", ["sha256", "config_sha256"])
+@pytest.mark.parametrize("value", [None, "", "0" * 63, "A" * 64, "g" * 64, 12, ["0" * 64], "MISSING"])
+def test_a_missing_or_malformed_sha256_is_refused_never_skipped(tmp_path, zoo_dir, capsys, key, value):
+    tamper_weights(zoo_dir / f"{NAME}.pt")
+    entry = real_entry()
+    if value == "MISSING":
+        del entry[key]
+    else:
+        entry[key] = value
+    manifest = write_manifest(zoo_dir, entry)
+    with pytest.raises(PredictorError) as refused:
+        zoo.load_zoo(NAME)
+    message = str(refused.value)
+    assert message.startswith(f"{manifest}: ")
+    assert f'"{key}" must be a sha256 (64 lowercase hex digits)' in message or f"lacks ['{key}']" in message
+    code, line = cli(["export", NAME, "--out", str(tmp_path / "o.casadi")], capsys)
+    assert code == 2 and str(manifest) in line and key in line
+    assert not (tmp_path / "o.casadi").exists()
+
+
+def test_tampered_weights_with_the_recorded_sha256_are_refused(tmp_path, zoo_dir, capsys):
+    tamper_weights(zoo_dir / f"{NAME}.pt")
+    with pytest.raises(CheckpointMismatch):
+        zoo.load_zoo(NAME)
+    code, line = cli(["export", NAME, "--out", str(tmp_path / "o.casadi")], capsys)
+    assert code == 2 and "the manifest expects" in line
+
+
+def test_load_checkpoint_refuses_a_malformed_expected_sha256(pair):
+    with pytest.raises(PredictorError, match="must be a sha256"):
+        zoo.load_checkpoint(pair[0], expected_sha256="not a hash")
+
+
+# ------------------------------------------------------------------------------------- finite weights
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+@pytest.mark.parametrize("everywhere", [True, False])
+def test_non_finite_weights_are_refused_naming_the_tensor(tmp_path, zoo_dir, capsys, bad, everywhere):
+    weights = zoo_dir / f"{NAME}.pt"
+    state = torch.load(weights, weights_only=True)
+    if everywhere:
+        state = {k: torch.full_like(v, bad) for k, v in state.items()}
+        tensor = next(iter(state))
+    else:
+        tensor = "decoder.weight_hh"
+        state[tensor] = state[tensor].clone()
+        state[tensor][3, 1] = bad
+    torch.save(state, weights)
+    write_manifest(zoo_dir, {**real_entry(), "sha256": sha256(weights)})  # a consistent, hostile zoo
+    message = f"{weights.resolve()}: tensor '{tensor}' holds NaN or infinite values"
+    with pytest.raises(PredictorError, match=f"^{re.escape(message)}$"):
+        zoo.load_zoo(NAME)
+    capsys.readouterr()
+    assert main(["zoo", "verify"]) == 1
+    out = capsys.readouterr().out
+    assert f"{NAME}: {message}\n" in out and "0 of 1 entries ok" in out
+    code, line = cli(["export", NAME, "--out", str(tmp_path / "o.casadi")], capsys)
+    assert code == 2 and "holds NaN or infinite values" in line
+
+
+# ------------------------------------------------------------------------------------- weights files
+def real_state() -> dict[str, torch.Tensor]:
+    return torch.load(REAL_ZOO / f"{NAME}.pt", weights_only=True)
+
+
+def _weights_cases() -> dict[str, tuple[object, str]]:
+    """Name -> (bytes to write, or an object to torch.save; what the one-line message says after the path)."""
+    good = (REAL_ZOO / f"{NAME}.pt").read_bytes()
+    state = real_state()
+    return {
+        "empty": (b"", ": not a state_dict of tensors as `crowdmpc train` writes"),
+        "truncated": (good[: len(good) // 2], ": not a state_dict of tensors as `crowdmpc train` writes"),
+        "truncated_end": (good[:-30], ": not a state_dict of tensors as `crowdmpc train` writes"),
+        "garbage": (b"\x00\xff" * 500, ": not a state_dict of tensors as `crowdmpc train` writes"),
+        "text": (b"not a torch file\n", ": not a state_dict of tensors as `crowdmpc train` writes"),
+        "too_large": (b"\x00" * (2 << 20), "bytes, more than the"),
+        "a_list": ([1, 2, 3], ": not a state_dict (a dict of tensors), but a list"),
+        "a_tensor": (torch.zeros(3), ": not a state_dict (a dict of tensors), but a Tensor"),
+        "strings": ({"a": "b"}, ": 'a' is a str, not a dense tensor"),
+        "string_values": ({k: "x" for k in state}, ": 'pool.hidden_encoding.weight' is a str, not a dense"),
+        "nested": ({k: [1, [2, {"x": None}]] for k in state}, ": 'pool.hidden_encoding.weight' is a list"),
+        "int_key": ({**state, 3: torch.zeros(1)}, ": a state_dict key is 3, not a string"),
+        "missing": (
+            {k: v for k, v in state.items() if k != "head.bias"},
+            "missing ['head.bias'], unexpected []",
+        ),
+        "extra": ({**state, "x": torch.zeros(1)}, "missing [], unexpected ['x']"),
+        "shape": ({**state, "head.bias": torch.zeros(7)}, ": tensor 'head.bias' has shape (7,), the net of"),
+        "wrong_rank": ({**state, "head.bias": torch.zeros(5, 1)}, "has shape (5, 1), the net of"),
+        "int_dtype": (
+            {**state, "head.bias": torch.zeros(5, dtype=torch.int64)},
+            "is torch.int64, not floating",
+        ),
+        "bool_dtype": (
+            {**state, "head.bias": torch.zeros(5, dtype=torch.bool)},
+            "is torch.bool, not floating",
+        ),
+        "complex": ({**state, "head.bias": torch.zeros(5, dtype=torch.complex64)}, "not floating point"),
+    }
+
+
+@pytest.mark.parametrize("case", sorted(_weights_cases()))
+def test_bad_weights_files_are_one_line_errors_naming_the_file(pair, zoo_dir, capsys, case):
+    weights, config = pair
+    content, message = _weights_cases()[case]
+    if isinstance(content, bytes):
+        weights.write_bytes(content)
+    else:
+        torch.save(content, weights)
+    with pytest.raises(PredictorError) as refused:
+        zoo.load_checkpoint(weights)
+    text = str(refused.value)
+    assert text.startswith(str(weights)) and message in text and "\n" not in text
+    code, line = cli(["zoo", "add", str(weights)], capsys)
+    assert code == 2 and line.startswith(f"crowdmpc zoo: error: {weights}") and message in line
+    assert tree(zoo_dir) == {zoo.MANIFEST_NAME, f"{NAME}.pt", f"{NAME}.json"}  # the zoo untouched
+
+
+def test_weights_that_are_not_a_regular_file_are_refused(pair):
+    weights, _ = pair
+    weights.unlink()
+    weights.mkdir()
+    with pytest.raises(
+        PredictorError, match=f"^checkpoint file {re.escape(str(weights))} is not a regular file$"
+    ):
+        zoo.load_checkpoint(weights)
+
+
+# ------------------------------------------------------------------------------------------------ configs
+def _config_cases() -> dict[str, tuple[dict, str]]:
+    """Name -> (changes to the config document, "net" entries merged; what the message says)."""
+    wrong = "holds a value of the wrong type"
+    return {
+        "hidden_64GB": ({"net": {"hidden_dim": 4_000_000}}, '"net": hidden_dim must be in 1..4096'),
+        "hidden_0": ({"net": {"hidden_dim": 0}}, "hidden_dim must be in 1..4096, got 0"),
+        "hidden_str": ({"net": {"hidden_dim": "32"}}, f"{wrong}: hidden_dim must be an integer, got '32'"),
+        "hidden_bool": ({"net": {"hidden_dim": True}}, f"{wrong}: hidden_dim must be an integer, got True"),
+        "hidden_float": ({"net": {"hidden_dim": 32.5}}, f"{wrong}: hidden_dim must be an integer"),
+        "hidden_null": ({"net": {"hidden_dim": None}}, f"{wrong}: hidden_dim must be an integer, got None"),
+        "hidden_nested": (
+            {"net": {"hidden_dim": [[1], {"a": 2}]}},
+            f"{wrong}: hidden_dim must be an integer",
+        ),
+        "grid_huge": ({"net": {"grid_size": 100_000}}, "grid_size must be in 1..64"),
+        "latent_huge": ({"net": {"latent_dim": 10**30}}, "latent_dim must be in 1..4096"),
+        "params_total": (
+            {"net": {"grid_size": 64, "latent_dim": 4096, "pool_dim": 4096}},
+            f"parameters, more than the {MAX_PARAMETERS:,} allowed",
+        ),
+        "embedding_2": ({"net": {"embedding_dim": 2}}, "embedding_dim must be > 2"),
+        "noise_negative": ({"net": {"noise_dim": -1}}, "noise_dim must be in 0..4096"),
+        "cell_nan": ({"net": {"cell_side": float("nan")}}, "cell_side must be a finite number, got nan"),
+        "cell_inf": ({"net": {"cell_side": float("inf")}}, "cell_side must be a finite number"),
+        "cell_negative": ({"net": {"cell_side": -1}}, "cell_side must be in (0, 100]"),
+        "cell_str": ({"net": {"cell_side": "0.8"}}, f"{wrong}: cell_side must be a number"),
+        "scale_huge": ({"net": {"input_scale": 1e9}}, "input_scale must be in (0, 1000]"),
+        "pooling_int": ({"net": {"pooling": 3}}, f"{wrong}: pooling must be a string, got 3"),
+        "pooling_unknown": ({"net": {"pooling": "max"}}, "pooling 'max' is not one of"),
+        "head_list": ({"net": {"head": ["gaussian"]}}, f"{wrong}: head must be a string"),
+        "net_list": ({"net": [1, 2]}, '"net": a Social-LSTM config must be a JSON object, got [1, 2]'),
+        "net_unknown_key": ({"net": {"hidden": 3}}, "unknown Social-LSTM config keys ['hidden']"),
+        "obs_len_huge": ({"obs_len": 10**9}, '"obs_len" must be in 2..100, got 1000000000'),
+        "obs_len_1": ({"obs_len": 1}, '"obs_len" must be in 2..100, got 1'),
+        "obs_len_str": ({"obs_len": "9"}, "\"obs_len\" must be an integer, got '9'"),
+        "obs_len_bool": ({"obs_len": True}, '"obs_len" must be an integer, got True'),
+        "class_list": ({"class": ["SocialLSTMPredictor"]}, "unknown predictor class ['SocialLSTMPredictor']"),
+        "class_unknown": ({"class": "Transformer"}, "unknown predictor class 'Transformer'"),
+        "model_unknown": ({"model": "transformer"}, '"model" must be one of'),
+        "model_mismatch": ({"model": "social_gan"}, '"model" \'social_gan\' does not go with "class"'),
+        "name_dict": ({"name": {"a": 1}}, '"name" must be a string'),
+        "format": ({"format": "other"}, "not a crowdmpc predictor config"),
+    }
+
+
+@pytest.mark.parametrize("case", sorted(_config_cases()))
+def test_bad_configs_are_refused_naming_the_file_before_a_net_is_built(
+    pair, zoo_dir, monkeypatch, capsys, case
+):
+    weights, config = pair
+    changes, message = _config_cases()[case]
+    document = json.loads(config.read_text())
+    for key, value in changes.items():
+        document[key] = {**document[key], **value} if key == "net" and isinstance(value, dict) else value
+    config.write_text(json.dumps(document))  # NaN and Infinity as JSON's common extension, as Python reads it
+
+    def no_net(*args, **kwargs):
+        raise AssertionError("a net was built from a bad config")
+
+    monkeypatch.setattr(SocialLSTM, "__init__", no_net)
+    with pytest.raises(PredictorError) as refused:
+        zoo.load_checkpoint(weights)
+    text = str(refused.value)
+    assert text.startswith(f"{config}: ") and message in text and "\n" not in text
+    code, line = cli(["zoo", "add", str(weights)], capsys)
+    assert code == 2 and line.startswith(f"crowdmpc zoo: error: {config}: ") and message in line
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"\xff\xfe{}", "not valid JSON (not UTF-8 text)"),
+        (b"[" * 100_000, "not valid JSON"),
+        (b'{"obs_len": ' + b"9" * 5000 + b"}", "not valid JSON"),
+        (b"{", "not valid JSON"),
+    ],
+)
+def test_unreadable_configs_are_one_line_errors(pair, content, message):
+    weights, config = pair
+    config.write_bytes(content)
+    with pytest.raises(PredictorError) as refused:
+        zoo.load_checkpoint(weights)
+    assert str(refused.value).startswith(f"{config}: {message}") and "\n" not in str(refused.value)
+
+
+def test_config_bounds_refuse_nothing_real_and_count_parameters_exactly():
+    for config in [
+        SocialLSTMConfig(pooling="none"),
+        SocialLSTMConfig(pooling="grid", head="point"),
+        SocialLSTMConfig(pooling="soft"),
+        generator_config(),
+        SocialLSTMConfig(hidden_dim=128, embedding_dim=64, grid_size=12, latent_dim=16, pool_dim=256),
+    ]:
+        assert config.parameter_count() == sum(p.numel() for p in SocialLSTM(config).parameters())
+    with pytest.raises(PredictorError, match="discriminator hidden_dim must be an integer in 1..4096"):
+        DiscriminatorConfig(hidden_dim=10**9)
+    with pytest.raises(PredictorError, match="discriminator input_scale must be a number"):
+        DiscriminatorConfig(input_scale=float("nan"))
+
+
+# ------------------------------------------------------------------------------------------- manifests
+@pytest.mark.parametrize("kind", ["directory", "dangling_link", "fifo"])
+def test_a_manifest_that_is_not_a_regular_file_is_refused(zoo_dir, capsys, kind):
+    manifest = zoo_dir / zoo.MANIFEST_NAME
+    manifest.unlink()
+    if kind == "directory":
+        manifest.mkdir()
+    elif kind == "dangling_link":
+        manifest.symlink_to(zoo_dir / "nowhere.json")
+    else:
+        os.mkfifo(manifest)  # reading it would block forever
+    with pytest.raises(
+        PredictorError, match=f"^{re.escape(str(manifest))}: the zoo manifest is not a regular file$"
+    ):
+        zoo.read_manifest(zoo_dir)
+    for args in (["zoo", "verify"], ["zoo", "list"]):
+        code, line = cli(args, capsys)
+        assert (
+            code == 2 and line == f"crowdmpc zoo: error: {manifest}: the zoo manifest is not a regular file"
+        )
+
+
+def test_an_absent_manifest_is_still_an_empty_zoo(zoo_dir, capsys):
+    (zoo_dir / zoo.MANIFEST_NAME).unlink()
+    assert zoo.read_manifest(zoo_dir) == {}
+    assert main(["zoo", "verify"]) == 0
+    assert "0 of 0 entries ok" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"metrics": [1]}, '"metrics" must be a JSON object'),
+        ({"training": "x"}, '"training" must be a JSON object'),
+        ({"training_data": None}, '"training_data" must be a JSON object'),
+        ({"protocol": 3}, '"protocol" must be a string'),
+        ({"class": None}, '"class" must be a string'),
+        ({"file": 3}, '"file" must be a file name inside the zoo'),
+        ({"config": "a\x00b"}, '"config" must be a file name inside the zoo'),
+    ],
+)
+def test_manifest_values_of_the_wrong_type_are_refused(zoo_dir, capsys, change, message):
+    manifest = write_manifest(zoo_dir, {**real_entry(), **change})
+    with pytest.raises(PredictorError) as refused:
+        zoo.read_manifest(zoo_dir)
+    assert str(refused.value).startswith(f"{manifest}: entry {NAME!r}: ") and message in str(refused.value)
+    code, line = cli(["zoo", "show", NAME], capsys)
+    assert code == 2 and message in line
+
+
+def test_a_non_utf8_manifest_is_a_one_line_error(zoo_dir, capsys):
+    manifest = zoo_dir / zoo.MANIFEST_NAME
+    manifest.write_bytes(b"\xff\xfe")
+    code, line = cli(["zoo", "verify"], capsys)
+    assert code == 2 and line == f"crowdmpc zoo: error: {manifest}: not valid JSON (not UTF-8 text)"
+
+
+def test_zoo_list_shows_junk_metrics_as_question_marks(zoo_dir, capsys):
+    write_manifest(zoo_dir, {**real_entry(), "metrics": {"val": [1], "test": {"ade": "x", "topk_ade": {}}}})
+    assert main(["zoo", "list"]) == 0
+    row = capsys.readouterr().out.splitlines()[2].split()
+    assert row[0] == NAME and row[5:9] == ["-", "-", "?", "-"] and row[9] == "?/-"
+
+
+@pytest.mark.parametrize("summary", [{"training": "x"}, {"metrics": [1]}, {"name": 5}, {"protocol": 3}])
+def test_zoo_add_refuses_a_bad_metrics_file_before_writing(tmp_path, zoo_dir, pair, capsys, summary):
+    (pair[0].with_suffix(".metrics.json")).write_text(json.dumps(summary))
+    before = tree(tmp_path)
+    code, line = cli(["zoo", "add", str(pair[0])], capsys)
+    assert code == 2 and line.startswith("crowdmpc zoo: error: ")
+    assert tree(tmp_path) == before
+
+
+# ---------------------------------------------------------------------------------------------- export
+@pytest.mark.parametrize(
+    "option, value", [("--horizon", 100_000), ("--horizon", 0), ("--horizon", 101), ("--humans", 10**6)]
+)
+def test_export_sizes_are_bounded_and_checked_before_any_work(
+    tmp_path, zoo_dir, monkeypatch, capsys, option, value
+):
+    import predictors.registry
+
+    def no_load(name):
+        raise AssertionError("a predictor was loaded before the options were checked")
+
+    monkeypatch.setattr(predictors.registry, "load_predictor", no_load)
+    out = tmp_path / "o.casadi"
+    code, line = cli(["export", NAME, "--out", str(out), option, str(value)], capsys)
+    assert code == 2
+    got = f"7, 3, {value}" if option == "--horizon" else f"{value}, 3, 4"
+    assert line == (
+        "crowdmpc export: error: need --humans in 1..50, --robots in 0..12, --horizon in 1..100, got " + got
+    )
+    assert not out.exists()
+
+
+def test_export_at_the_horizon_bound_works(tmp_path, zoo_dir):
+    out = tmp_path / "o.casadi"
+    assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "100"]) == 0
+    assert out.is_file()
