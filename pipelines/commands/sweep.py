@@ -212,7 +212,7 @@ def _check_workers(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.experiments.log import EPISODES_FILE, EpisodeLog
+    from pipelines.experiments.log import EPISODES_FILE, episode_log
     from pipelines.experiments.report import write_report
     from pipelines.experiments.sweep import SweepConfig, run_sweep
 
@@ -273,9 +273,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"{args.out / EPISODES_FILE} does not exist: nothing to report")
 
     planned = {t.key for t in tasks}
-    records = [
-        r for key, r in EpisodeLog(args.out / EPISODES_FILE).load(repair=False).items() if key in planned
-    ]
+    records = [r for key, r in episode_log(args.out).load(repair=False).items() if key in planned]
     report = write_report(args.out, experiment, cells, records)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)

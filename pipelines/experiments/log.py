@@ -14,11 +14,13 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Final
 
+from crowdsim.errors import SimulationError
 from pipelines.errors import PipelineError
+from pipelines.loop.record import EpisodeRecord
 from pipelines.plain_json import plain
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
@@ -31,8 +33,10 @@ MCAP_DIR: Final[str] = "mcap"
 class EpisodeLog:
     """Append-only JSON-lines file of episode records, one per key."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, check: Callable[[dict[str, Any], str], None] | None = None):
+        """``check(record, "file:line")`` raises for a record of the wrong shape (``episode_log``'s does)."""
         self.path = Path(path)
+        self.check = check
 
     def load(self, repair: bool = True) -> dict[str, dict[str, Any]]:
         """Every complete record by key. A torn tail (bytes after the last newline, or a last line that is not
@@ -58,6 +62,8 @@ class EpisodeLog:
                 key = record.get("key") if isinstance(record, dict) else None
                 if not isinstance(key, str):
                     raise PipelineError(f"{self.path}:{number}: record has no 'key'; the file is damaged")
+                if self.check is not None:
+                    self.check(record, f"{self.path}:{number}")
                 if key in records:
                     raise PipelineError(
                         f"{self.path}:{number}: a second record for {key!r}; the file is damaged"
@@ -77,6 +83,40 @@ class EpisodeLog:
             f.write(line.encode())
             f.flush()
             os.fsync(f.fileno())
+
+
+def episode_log(out: Path) -> EpisodeLog:
+    """A sweep directory's episodes.jsonl, every line checked to be a record the report can read."""
+    return EpisodeLog(out / EPISODES_FILE, check=check_record)
+
+
+def check_record(record: dict[str, Any], where: str) -> None:
+    """A line the report can read: the closed loop's episode record and the sweep's cell fields."""
+    try:
+        EpisodeRecord.from_dict(record)
+    except (PipelineError, SimulationError) as exc:
+        raise PipelineError(f"{where}: {exc}; the file is damaged") from None
+    for name, kind, what in (
+        ("cell", str, "a string"),
+        ("method", str, "a string"),
+        ("index", int, "an integer"),
+    ):
+        value = record.get(name)
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise PipelineError(f"{where}: record's {name!r} is not {what}; the file is damaged")
+
+
+def read_sweep_file(path: Path) -> dict[str, Any]:
+    """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it."""
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise PipelineError(
+            f"{path}: not a sweep file ({type(exc).__name__}: {str(exc)[:120]}); move it away to start afresh"
+        ) from None
+    if not (isinstance(meta, dict) and isinstance(meta.get("runs", []), list)):
+        raise PipelineError(f"{path}: not a sweep file (expected an object with a list of runs)")
+    return meta
 
 
 @contextlib.contextmanager

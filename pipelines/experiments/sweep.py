@@ -37,6 +37,8 @@ from pipelines.experiments.log import (
     MCAP_DIR,
     SWEEP_FILE,
     EpisodeLog,
+    episode_log,
+    read_sweep_file,
     sweep_lock,
 )
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
@@ -139,7 +141,7 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
     from pipelines.version import crowdmpc_version
 
     path = out / SWEEP_FILE
-    meta: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
     if meta and meta.get("experiment") != config.experiment.name:
         raise PipelineError(
             f"{out} holds a sweep of experiment {meta.get('experiment')!r}, not {config.experiment.name!r}; "
@@ -192,7 +194,7 @@ def run_sweep(
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
     with sweep_lock(out):
         _update_sweep_file(out, config, len(tasks))
-        log = EpisodeLog(out / EPISODES_FILE)
+        log = episode_log(out)
         done = log.load()
         _check_same_predictors(out, tasks, done)
         todo = [t for t in tasks if t.key not in done]

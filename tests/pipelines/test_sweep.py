@@ -270,18 +270,16 @@ def test_one_directory_one_sweep_at_a_time_and_one_experiment(tmp_path):
 
 
 def test_a_cell_is_not_extended_with_other_weights(tmp_path):
-    experiment = get_experiment("table2").with_predictor("constant_velocity")
-    config = SweepConfig(experiment, tmp_path, 2, humans=(5,), backend="inline", progress=False)
-    task = config.tasks()[0]
-    record = {
-        "key": task.key,
-        "cell": task.cell.key,
-        "predictor": "constant_velocity",
-        "predictor_sha256": "0123",
-    }
-    EpisodeLog(tmp_path / EPISODES_FILE).append(record)
+    experiment = get_experiment("baselines")
+    config = SweepConfig(experiment, tmp_path, 1, humans=(3,), backend="inline", progress=False)
+    run_sweep(config)
+    path = tmp_path / EPISODES_FILE
+    records = [json.loads(line) for line in path.read_text().splitlines()]
+    for r in records:  # as if run with a predictor whose weights have changed since
+        r["predictor"], r["predictor_sha256"] = "constant_velocity", "0123"
+    path.write_text("".join(json.dumps(r) + "\n" for r in records))
     with pytest.raises(PipelineError, match="sha256 0123, but the zoo's 'constant_velocity' is now None"):
-        run_sweep(config)
+        run_sweep(dataclasses.replace(config, episodes_per_cell=2))
 
 
 @pytest.mark.slow

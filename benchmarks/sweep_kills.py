@@ -1,0 +1,81 @@
+"""Kill a sweep again and again, then let it finish: is every planned episode recorded exactly once, and is no
+worker scratch left behind?
+
+    .venv/bin/python benchmarks/sweep_kills.py        # 10 kills, seed 0, Table II, constant velocity
+    .venv/bin/python benchmarks/sweep_kills.py --kills 20 --seed 3 --episodes-per-cell 20
+
+Each round starts ``crowdmpc sweep`` (process pool, 2 workers) on the same directory and sends SIGKILL to the
+driver's whole process group at a random moment (seeded) between 0.5 s and 4 s after the start; a last run
+finishes the sweep. Prints per round how many records there were, then planned vs recorded, duplicate keys,
+torn lines, and the crowdmpc scratch folders left in the temp directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def records(out: Path) -> list[str]:
+    path = out / "episodes.jsonl"
+    if not path.exists():
+        return []
+    return [line for line in path.read_text().split("\n") if line.strip()]
+
+
+def scratch() -> set[str]:
+    tmp = Path(tempfile.gettempdir())
+    return {p.name for p in tmp.glob("crowdmpc-*") if p.is_dir()}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--kills", type=int, default=10)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--experiment", default="table2")
+    parser.add_argument("--predictor", default="constant_velocity")
+    parser.add_argument("--episodes-per-cell", type=int, default=12)
+    args = parser.parse_args()
+    rng = random.Random(args.seed)
+    before = scratch()
+    with tempfile.TemporaryDirectory(prefix="sweep-kills-") as tmp:
+        out = Path(tmp) / "sweep"
+        cmd = [sys.executable, "-m", "pipelines.cli", "sweep", "--experiment", args.experiment,
+               "--episodes-per-cell", str(args.episodes_per_cell), "--workers", "2", "--backend", "process",
+               "--jit", "off", "--no-progress", "--out", str(out)]  # fmt: skip
+        if args.predictor:
+            cmd += ["--predictor", args.predictor]
+        for k in range(args.kills):
+            proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                                    stderr=subprocess.DEVNULL)  # fmt: skip
+            delay = rng.uniform(0.5, 4.0)
+            time.sleep(delay)
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            print(f"kill {k + 1:2d} after {delay:.2f} s: {len(records(out))} records")
+        done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+        lines = records(out)
+        keys = [json.loads(line)["key"] for line in lines]
+        sweep = json.loads((out / "sweep.json").read_text())
+        planned = sweep["runs"][-1]["planned"]
+        print(f"final run exit {done.returncode}; planned {planned}, recorded {len(lines)}, "
+              f"distinct {len(set(keys))}, duplicates {len(keys) - len(set(keys))}")  # fmt: skip
+    left = scratch() - before
+    print(f"crowdmpc scratch folders left in {tempfile.gettempdir()}: {len(left)} {sorted(left)[:5]}")
+    return 0 if planned == len(lines) == len(set(keys)) and not left else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
