@@ -125,6 +125,8 @@ def format_table(summary: dict[str, Any], header: str) -> str:
 def _check(args: argparse.Namespace) -> None:
     if args.episodes < 1:
         raise PipelineError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.episodes > 100_000:  # a sweep's cell holds at most as many; beyond, use `crowdmpc sweep`
+        raise PipelineError(f"--episodes must be at most 100000 (use crowdmpc sweep), got {args.episodes}")
     if not 1 <= args.robots <= MAX_ROBOTS:
         raise PipelineError(f"--robots must be in 1..{MAX_ROBOTS}, got {args.robots}")
     if args.seed < 0:

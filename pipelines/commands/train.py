@@ -171,14 +171,16 @@ def _check_numbers(args: argparse.Namespace) -> None:
     """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
     if not (math.isfinite(args.lr) and args.lr > 0):
         raise PipelineError(f"--lr must be a finite number > 0, got {args.lr}")
-    for option, value in (
-        ("--epochs", args.epochs),
-        ("--batch-size", args.batch_size),
-        ("--step-size", args.step_size),
-        ("--hidden-dim", args.hidden_dim),
+    # Upper bounds far above any sensible run, so that a typo cannot ask for days or for all the memory:
+    # the zoo refuses hidden sizes over 4096 (predictors/nets), and ETH/hotel has ~2000 training scenes.
+    for option, value, high in (
+        ("--epochs", args.epochs, 100_000),
+        ("--batch-size", args.batch_size, 65_536),
+        ("--step-size", args.step_size, 100_000),
+        ("--hidden-dim", args.hidden_dim, 4096),
     ):
-        if value is not None and value < 1:
-            raise PipelineError(f"{option} must be >= 1, got {value}")
+        if value is not None and not 1 <= value <= high:
+            raise PipelineError(f"{option} must be in 1..{high}, got {value}")
     if not 0 <= args.seed < 2**32:  # Lightning would replace one outside numpy's range by 0, with a warning
         raise PipelineError(f"--seed must be in 0..{2**32 - 1}, got {args.seed}")
 
@@ -197,7 +199,20 @@ def run(args: argparse.Namespace) -> int:
     if not args.resume and last.is_file():
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
+    _check_data(files)
     return _train(args, net_config, name, out, (files, root))
+
+
+def _check_data(files: dict[str, list[Path]]) -> None:
+    """Every data file parses and the training and validation splits hold scenes, before Lightning starts
+    (its banner would come before the one-line error)."""
+    from predictors.data.validate import validate_ndjson
+
+    for split, paths in files.items():
+        summaries = [validate_ndjson(path) for path in paths]
+        if split in ("train", "val") and not any(s.scene_lines for s in summaries):
+            names = ", ".join(str(p) for p in paths)
+            raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")
 
 
 def _train(

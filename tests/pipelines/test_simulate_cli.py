@@ -42,6 +42,7 @@ def test_simulate_records_one_mcap_per_episode(tmp_path, capsys):
     "args, message",
     [
         (["--episodes", "0"], "--episodes must be >= 1, got 0"),
+        (["--episodes", "1000000"], "--episodes must be at most 100000"),
         (["--robots", "13"], "--robots must be in 1..12, got 13"),
         (["--humans", "60"], "n_humans must be in [0, 50], got 60"),
         (["--plot", "episode.foo"], "--plot episode.foo: cannot write a figure of type 'foo'"),
