@@ -23,8 +23,7 @@ from predictors.data.validate import (
     MAX_COORDINATE,
     MAX_FRAME,
     MAX_ID,
-    MAX_LINE_BYTES,
-    read_error,
+    bounded_lines,
     require_file,
 )
 from predictors.errors import DatasetFormatError, PredictorError
@@ -53,25 +52,17 @@ def read_obsmat(path: str | Path) -> np.ndarray:
     path = require_file(path, " (expected a BIWI EWAP obsmat.txt)")
     rows: list[tuple[float, float, float, float]] = []
     seen: dict[tuple[int, int], int] = {}
-    lineno = 0
-    try:
-        with path.open("rb") as handle:
-            while raw := handle.readline(MAX_LINE_BYTES + 1):
-                lineno += 1
-                if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
-                    raise DatasetFormatError(path, lineno, f"line longer than {MAX_LINE_BYTES} bytes")
-                row = _obsmat_row(path, lineno, raw)
-                if row is None:
-                    continue
-                key = (int(row[0]), int(row[1]))
-                if key in seen:
-                    raise DatasetFormatError(
-                        path, lineno, f"pedestrian {key[1]} at frame {key[0]} repeats line {seen[key]}"
-                    )
-                seen[key] = lineno
-                rows.append((row[0] - 1.0, row[1], row[2], row[3]))  # the converter's 1- to 0-based frames
-    except OSError as exc:
-        raise read_error(path, lineno or None, exc) from None
+    for lineno, raw in bounded_lines(path):
+        row = _obsmat_row(path, lineno, raw)
+        if row is None:
+            continue
+        key = (int(row[0]), int(row[1]))
+        if key in seen:
+            raise DatasetFormatError(
+                path, lineno, f"pedestrian {key[1]} at frame {key[0]} repeats line {seen[key]}"
+            )
+        seen[key] = lineno
+        rows.append((row[0] - 1.0, row[1], row[2], row[3]))  # the converter's 1- to 0-based frames
     if not rows:
         raise DatasetFormatError(path, None, "no annotation rows")
     if len({frame for frame, _ in seen}) < 2:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -182,8 +183,9 @@ def _parse_line(path: Path, lineno: int, raw: bytes) -> Any:
         raise DatasetFormatError(path, lineno, f"invalid JSON ({str(exc).split(';')[0]})") from None
 
 
-def _lines(path: Path):
-    """``(line number, bytes)`` of every line, each at most ``MAX_LINE_BYTES`` long."""
+def bounded_lines(path: Path) -> Iterator[tuple[int, bytes]]:
+    """``(line number, bytes)`` of every line, each at most ``MAX_LINE_BYTES`` long; a read error names the
+    file and line. Every data reader goes through it (ndjson here, obsmat in ``ewap``)."""
     lineno = 0
     try:
         with path.open("rb") as handle:
@@ -204,7 +206,7 @@ def parse_ndjson(path: str | Path) -> NdjsonContent:
     track_rows: list[TrackRow] = []
     scene_rows: list[SceneRow] = []
     nan_rows: list[tuple[int, int, int]] = []  # (frame, pedestrian, line) of tracks with a NaN coordinate
-    for lineno, raw in _lines(path):
+    for lineno, raw in bounded_lines(path):
         record = _parse_line(path, lineno, raw)
         if record is _BLANK:
             continue
