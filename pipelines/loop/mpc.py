@@ -128,10 +128,11 @@ class MPCController:
                 f"the {self.model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "
                 "to put inside the joint NLP"
             )
-        cfg = mpc_config(spec, jit, self.env_config.world())
+        world = self.env_config.world()
+        cfg = mpc_config(spec, jit, world)
         margins = spec.margins.resolve(self.model.name, cfg.horizon, checkpoint_sha256(self.model.name))
         self.cfg = cfg.replace(human_margins=margins)
-        check_world(self.env_config.world(), self.cfg, self.model)
+        check_world(world, self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
