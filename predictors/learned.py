@@ -1,13 +1,21 @@
-"""Learned predictors (Social-LSTM, vanilla LSTM, Social-GAN-like) behind the ``Predictor`` protocol.
+"""Learned predictors: any net that keeps the step contract (``predictors.nets.contract``) behind the
+``Predictor`` protocol.
 
-Each wraps a ``nets.SocialLSTM`` and computes the same map two ways:
+One ``LearnedPredictor`` computes the same map two ways:
 
 * ``rollout`` (and ``rollout_tensor``, ``sample``): float64 torch, recursive (Eq. 1): at every step the
   humans' predictions are fed back and the robots' positions are taken from ``robots_future`` (their own
-  predictions are discarded). Training uses torch, and this is the reference the CasADi twins are tested
+  predictions are discarded). Training uses torch, and this is the reference the CasADi side is checked
   against;
-* ``encode`` + ``to_casadi``: the net's CasADi twin (``predictors.casadi_twin``, which also has the context
-  layout), the encoder's evaluated numerically and the decoder's symbolic.
+* ``encode`` + ``to_casadi``: the net's own ``encode`` and ``decode_step`` exported to CasADi by
+  ``predictors.export`` (no hand-written twin). The encoder's function is evaluated numerically; the decoder
+  step is called ``H - 1`` times inside the symbolic prediction, so the MPC differentiates through it.
+
+Context layout (``encode``), agents ordered humans (as given) then robots (increasing index):
+``state_0 (N, ...) | ... | state_k (N, ...) | now (N, 2) | first (N_h, 2) | present (N)``, each block
+row-major: the net's state after the observed past, the agents' current positions, the humans' predicted
+positions at ``t+1`` (these depend on the past only) and 1/0 for agents observed at the current step (only
+those are neighbours).
 
 An agent missing at the current step is extrapolated from its last observed step (constant velocity when its
 last two steps were seen, else held), takes part in the recursion, but is never pooled; an agent never
@@ -17,6 +25,8 @@ observed cannot be predicted (``ValueError``).
 from __future__ import annotations
 
 import copy
+import math
+import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -25,11 +35,15 @@ import numpy as np
 import torch
 
 from predictors.base import OBS_LEN, check_rollout_inputs, robot_indices
-from predictors.casadi_twin import SocialLSTMTwin
 from predictors.errors import PredictorError
-from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.export import TensorSpec, export_function, output_shapes
+from predictors.nets.social_lstm import SocialLSTM
 
-MODEL_KINDS = ("social_lstm", "vanilla_lstm", "social_gan")
+
+def casadi_name(text: str) -> str:
+    """A valid CasADi function name: a letter first, then letters, digits and single underscores."""
+    name = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_]", "_", text)).strip("_")
+    return name if name[:1].isalpha() else f"predictor_{name}"
 
 
 @contextmanager
@@ -47,26 +61,24 @@ def single_threaded() -> Iterator[None]:
 
 
 class LearnedPredictor:
-    """Common machinery; use ``SocialLSTMPredictor`` or ``SocialGANPredictor``."""
+    """Any net that keeps the step contract, as a ``Predictor``; ``kind`` names its model kind
+    (``predictors.models``)."""
 
-    kind: str  # set by each subclass; SocialLSTMPredictor refines it per instance (vanilla or social)
-
-    def __init__(self, net: SocialLSTM, *, name: str, obs_len: int = OBS_LEN):
+    def __init__(self, net: torch.nn.Module, *, name: str, obs_len: int = OBS_LEN, kind: str | None = None):
         if obs_len < 2:
             raise PredictorError(f"obs_len must be >= 2 (a displacement needs two steps), got {obs_len}")
         self.name = name
         self.obs_len = obs_len
-        self.config: SocialLSTMConfig = net.config
+        self.kind: str = kind or getattr(type(self), "default_kind", type(net).__name__)
+        self.config = net.config
         # A private float64 copy in eval mode: training may go on with the original.
         self.net = copy.deepcopy(net).to(torch.float64).eval()
         for p in self.net.parameters():
             p.requires_grad_(False)
-        self._twin = SocialLSTMTwin(
-            {k: v.detach().cpu().numpy().astype(np.float64) for k, v in self.net.state_dict().items()},
-            self.config,
-        )
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
         self._encoders: dict[tuple[int, int], ca.Function] = {}
+        self._steps: dict[int, ca.Function] = {}
+        self._state_widths: tuple[tuple[int, ...], int] | None = None
         # The iterative best response predicts many times from the same past: keep the last encoding
         # (torch state for ``rollout``, the context for ``encode``).
         self._last_encoding: tuple[bytes, tuple] | None = None
@@ -115,11 +127,18 @@ class LearnedPredictor:
         noise: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """``pos`` (B, L, N, 2), ``seen`` (B, L, N), ``robots_future`` (B, H, M, 2) -> (B, H, N_h, 2)."""
-        h, c, out = self.net.encode(pos, seen, noise)
-        return self._decode(h, c, out, pos, seen, n_humans, robots_future, horizon)
+        encoded = self._encode_torch(pos, seen, noise)
+        return self._decode(encoded, pos, seen, n_humans, robots_future, horizon)
 
-    def _decode(self, h, c, out, pos, seen, n_humans, robots_future, horizon) -> torch.Tensor:
-        """The recursion after the encoder: the torch twin of the CasADi function."""
+    def _encode_torch(self, pos: torch.Tensor, seen: torch.Tensor, noise: torch.Tensor | None = None):
+        """``net.encode``: ``(*state, out)``; only a generator takes noise."""
+        if noise is not None:
+            return self.net.encode(pos, seen, noise)
+        return self.net.encode(pos, seen)
+
+    def _decode(self, encoded, pos, seen, n_humans, robots_future, horizon) -> torch.Tensor:
+        """The recursion after the encoder: what the CasADi prediction function computes."""
+        state, out = tuple(encoded[:-1]), encoded[-1]
         present = seen[:, -1]
         positions = [pos[:, -1]]
 
@@ -131,7 +150,8 @@ class LearnedPredictor:
 
         positions.append(advance(out[..., :2], 0))
         for k in range(1, horizon):
-            h, c, out = self.net.decode_step(h, c, positions[-2], positions[-1], present)
+            *state_list, out = self.net.decode_step(*state, positions[-2], positions[-1], present)
+            state = tuple(state_list)
             positions.append(advance(out[..., :2], k))
         return torch.stack(positions[1:], dim=1)[:, :, :n_humans]
 
@@ -163,14 +183,10 @@ class LearnedPredictor:
     def rollout(self, history, mask, robots_future, humans, horizon=None):
         future = None if robots_future is None else np.asarray(robots_future, dtype=np.float64)
         horizon = check_rollout_inputs(np.asarray(history), np.asarray(mask), future, humans, horizon)
-        pos, seen, n_humans, (h, c, out) = self._encoded(
-            history, mask, humans, keep_robots=future is not None
-        )
+        pos, seen, n_humans, encoded = self._encoded(history, mask, humans, keep_robots=future is not None)
         with torch.no_grad(), single_threaded():
             return self._decode(
-                h,
-                c,
-                out,
+                encoded,
                 torch.from_numpy(pos)[None],
                 torch.from_numpy(seen)[None],
                 n_humans,
@@ -194,25 +210,25 @@ class LearnedPredictor:
         if self._last_encoding is None or self._last_encoding[0] != key:
             pos, seen, n_humans = self._prepare(history, mask, humans, keep_robots)
             with torch.no_grad(), single_threaded():
-                state = self.net.encode(torch.from_numpy(pos)[None], torch.from_numpy(seen)[None])
+                state = self._encode_torch(torch.from_numpy(pos)[None], torch.from_numpy(seen)[None])
             self._last_encoding = (key, (pos, seen, n_humans, state))
         return self._last_encoding[1]
 
     def encode(self, history, mask, humans):
-        """The context (layout: ``predictors.casadi_twin``), computed by the CasADi encoder and memoised like
+        """The context (layout: this module's docstring), computed by the exported encoder and memoised like
         ``_encoded``."""
         key = self._input_key(history, mask, humans, True)
         if self._last_context is None or self._last_context[0] != key:
             pos, seen, n_humans = self._prepare(history, mask, humans)
             length, n_agents, _ = pos.shape
-            h, c, step = self.casadi_encoder(n_agents, length)(pos.ravel(), seen.ravel().astype(np.float64))
-            first = pos[-1, :n_humans] + np.asarray(step).reshape(n_agents, 2)[:n_humans]
+            *state, out = self.casadi_encoder(n_agents, length)(pos.ravel(), seen.ravel().astype(np.float64))
+            width = self._widths()[1]
+            step = np.asarray(out).reshape(n_agents, width)[:n_humans, :2]
             context = np.concatenate(
                 [
-                    np.asarray(h).ravel(),
-                    np.asarray(c).ravel(),
+                    *[np.asarray(block).ravel() for block in state],
                     pos[-1].ravel(),
-                    first.ravel(),
+                    (pos[-1, :n_humans] + step).ravel(),
                     seen[-1].astype(float),
                 ]
             )
@@ -220,8 +236,33 @@ class LearnedPredictor:
         # A copy: the caller may write into its context, the memo must stay what the encoder computed.
         return self._last_context[1].copy()
 
+    def _widths(self) -> tuple[tuple[int, ...], int]:
+        """Per agent: the width of each state tensor, and of the head output (from a symbolic run of encode
+        with one and with two agents, which also checks that every output is ``(B, N, ...)``)."""
+        if self._state_widths is None:
+            shapes = []
+            for n in (1, 2):
+                specs = [TensorSpec("positions", (1, 2, n, 2)), TensorSpec("mask", (1, 2, n), True)]
+                shapes.append(output_shapes(self.net, self.net.encode, specs))
+            if len(shapes[0]) < 2 or any(
+                len(a) < 2 or a[:2] != (1, 1) or b[:2] != (1, 2) or a[2:] != b[2:]
+                for a, b in zip(*shapes, strict=True)
+            ):
+                raise PredictorError(
+                    f"{self.name}: encode must return (*state, out), each of shape (B, N, ...); got "
+                    f"{shapes[1]} for B=1, N=2 (see predictors/nets/contract.py)"
+                )
+            widths = tuple(math.prod(shape[2:]) for shape in shapes[0])
+            if widths[-1] < 2:
+                raise PredictorError(
+                    f"{self.name}: the head output must have at least 2 values (the mean step)"
+                )
+            self._state_widths = (widths[:-1], widths[-1])
+        return self._state_widths
+
     def context_size(self, n_humans: int, n_robots: int) -> int:
-        return self._twin.context_size(n_humans, n_robots)
+        n_agents = n_humans + n_robots
+        return n_agents * (sum(self._widths()[0]) + 2 + 1) + 2 * n_humans
 
     # ------------------------------------------------------------------------------------ symbolic side
     def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
@@ -233,46 +274,115 @@ class LearnedPredictor:
             )
         key = (n_humans, n_robots, horizon)
         if key not in self._functions:
-            self._functions[key] = self._twin.prediction(self.name, *key)
+            if not self._functions:
+                self._functions[key] = self._prediction(*key)  # the check below builds its own size
+                self._check_export()
+            self._functions.setdefault(key, self._prediction(*key))
         return self._functions[key]
 
+    def _check_export(self) -> None:
+        """The first export of this predictor is checked against torch (values and Jacobians, 1e-6) at a
+        small size: every size is built by the same symbolic run of the same methods, so an operation mapped
+        wrongly shows at any size; ``crowdmpc export`` checks the size it writes."""
+        from predictors.export.parity import require_parity
+
+        require_parity(self, *PARITY_SIZE)
+
+    def _prediction(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
+        """The recursion of ``_decode`` around the exported decoder step, on flat row-major vectors."""
+        widths, out_width = self._widths()
+        n = n_humans + n_robots
+        context = ca.MX.sym("context", self.context_size(n_humans, n_robots))
+        robots_future = ca.MX.sym("robots_future", horizon * n_robots * 2)
+        bounds = np.cumsum([0, *[n * w for w in widths], 2 * n, 2 * n_humans, n]).tolist()
+        blocks = [context[bounds[i] : bounds[i + 1]] for i in range(len(bounds) - 1)]
+        state, (now, first, present) = blocks[: len(widths)], blocks[len(widths) :]
+        plan = [robots_future[2 * n_robots * k : 2 * n_robots * (k + 1)] for k in range(horizon)]
+        # The humans' mean steps in the step's flat (N, K) output: entries K*i and K*i + 1 of human i.
+        means = [out_width * i + j for i in range(n_humans) for j in (0, 1)]
+        step = self.casadi_step(n) if horizon > 1 else None
+        previous, current, outputs = now, ca.vertcat(first, plan[0]), [first]
+        for k in range(1, horizon):
+            *state, out = step(*state, previous, current, present)
+            humans_next = current[: 2 * n_humans] + out[means]
+            outputs.append(humans_next)
+            previous, current = current, ca.vertcat(humans_next, plan[k])
+        return ca.Function(
+            casadi_name(f"{self.name}_h{n_humans}_r{n_robots}_H{horizon}"),
+            [context, robots_future],
+            [ca.vertcat(*outputs)],
+            ["context", "robots_future"],
+            ["humans_future"],
+        )
+
+    def casadi_step(self, n_agents: int) -> ca.Function:
+        """``step(*state, prev, cur, neighbours) -> (*state, out)``: ``net.decode_step`` exported for one
+        scene of ``n_agents`` (row-major flat inputs and outputs), built once per size."""
+        if n_agents not in self._steps:
+            # The state tensors' own shapes (an LSTM's (1, N, D); a window's (1, N, K, 2)), not flat widths.
+            state_shapes = output_shapes(
+                self.net,
+                self.net.encode,
+                [TensorSpec("positions", (1, 2, n_agents, 2)), TensorSpec("mask", (1, 2, n_agents), True)],
+            )[:-1]
+            specs = [TensorSpec(f"state_{i}", shape) for i, shape in enumerate(state_shapes)]
+            specs += [
+                TensorSpec("prev", (1, n_agents, 2)),
+                TensorSpec("cur", (1, n_agents, 2)),
+                TensorSpec("neighbours", (1, n_agents), True),
+            ]
+            names = [f"next_state_{i}" for i in range(len(state_shapes))] + ["out"]
+            self._steps[n_agents] = export_function(
+                self.net, self.net.decode_step, specs, names, casadi_name(f"{self.name}_step_n{n_agents}")
+            )
+        return self._steps[n_agents]
+
     def casadi_encoder(self, n_agents: int, length: int) -> ca.Function:
-        """``encoder(positions, seen) -> (h, c, step)``: ``SocialLSTM.encode``'s twin, built once per size.
+        """``encoder(positions, seen) -> (*state, out)``: ``net.encode`` exported, built once per size.
 
         Inputs are ``_prepare``'s arrays, flattened row-major: ``positions`` (L, N, 2) and ``seen`` (L, N) as
-        0/1 floats. Outputs, row-major: the decoder's state ``h``, ``c`` (N, D) and ``step`` (N, 2), the mean
-        of the head output that predicts the first future position (``positions[-1] + step``). A generator's
-        noise is zero, as in ``encode``.
+        0/1 floats. Outputs, row-major: each state tensor (N, ...) and the head output ``out`` (N, K), whose
+        first two columns are the mean step to the first future position. A generator's noise is zero.
         """
         if n_agents < 1 or length < 1:
             raise PredictorError(f"casadi_encoder needs n_agents, length >= 1, got {n_agents}, {length}")
         key = (n_agents, length)
         if key not in self._encoders:
-            self._encoders[key] = self._twin.encoder(self.name, *key)
+            widths, _ = self._widths()
+            specs = [
+                TensorSpec("positions", (1, length, n_agents, 2)),
+                TensorSpec("seen", (1, length, n_agents), True),
+            ]
+            names = [f"state_{i}" for i in range(len(widths))] + ["out"]
+            self._encoders[key] = export_function(
+                self.net,
+                self.net.encode,
+                specs,
+                names,
+                casadi_name(f"{self.name}_encoder_n{n_agents}_L{length}"),
+            )
         return self._encoders[key]
 
 
 class SocialLSTMPredictor(LearnedPredictor):
     """Social-LSTM (``pooling`` "grid" or "soft") or, with ``pooling="none"``, the vanilla LSTM."""
 
-    kind = "social_lstm"
-
-    def __init__(self, net: SocialLSTM, *, name: str, obs_len: int = OBS_LEN):
+    def __init__(self, net: SocialLSTM, *, name: str, obs_len: int = OBS_LEN, kind: str | None = None):
         if net.config.noise_dim:
             raise PredictorError("SocialLSTMPredictor takes a net without noise; use SocialGANPredictor")
-        super().__init__(net, name=name, obs_len=obs_len)
-        self.kind = "vanilla_lstm" if net.config.pooling == "none" else "social_lstm"
+        default = "vanilla_lstm" if net.config.pooling == "none" else "social_lstm"
+        super().__init__(net, name=name, obs_len=obs_len, kind=kind or default)
 
 
 class SocialGANPredictor(LearnedPredictor):
     """Social-GAN-like generator: deterministic (zero noise) ``rollout``/``to_casadi``, plus ``sample``."""
 
-    kind = "social_gan"
+    default_kind = "social_gan"
 
-    def __init__(self, net: SocialLSTM, *, name: str, obs_len: int = OBS_LEN):
-        if not net.config.noise_dim:
+    def __init__(self, net: SocialLSTM, *, name: str, obs_len: int = OBS_LEN, kind: str | None = None):
+        if not getattr(net.config, "noise_dim", 0):
             raise PredictorError("SocialGANPredictor needs a generator net (noise_dim >= 1)")
-        super().__init__(net, name=name, obs_len=obs_len)
+        super().__init__(net, name=name, obs_len=obs_len, kind=kind)
 
     def sample(
         self,
@@ -304,6 +414,12 @@ class SocialGANPredictor(LearnedPredictor):
             )
         return out.numpy()
 
+
+# (humans, robots, horizon) of the check on first export: small, but with neighbours and a recursion.
+PARITY_SIZE = (2, 1, 3)
+
+# The zoo's model kinds before predictors.models; kept until every caller goes through predictors.models.
+MODEL_KINDS = ("social_lstm", "vanilla_lstm", "social_gan")
 
 PREDICTOR_CLASSES: dict[str, type[LearnedPredictor]] = {
     "SocialLSTMPredictor": SocialLSTMPredictor,

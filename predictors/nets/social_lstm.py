@@ -152,6 +152,8 @@ def gaussian_head(raw: torch.Tensor) -> torch.Tensor:
 
 
 class SocialLSTM(nn.Module):
+    config_class = SocialLSTMConfig  # the step contract (predictors/nets/contract.py)
+
     def __init__(self, config: SocialLSTMConfig = SocialLSTMConfig()):
         super().__init__()
         self.config = config
@@ -173,6 +175,10 @@ class SocialLSTM(nn.Module):
         self.decoder = nn.LSTMCell(cfg.embedding_dim, cfg.hidden_dim)
         self.head = nn.Linear(cfg.hidden_dim, 5 if cfg.head == "gaussian" else 2)
         self.noise = nn.Linear(cfg.noise_dim, cfg.hidden_dim, bias=False) if cfg.noise_dim else None
+
+    @property
+    def head_type(self) -> str:  # the contract's name: ``head`` is the output layer, as in TrajNet++
+        return self.config.head
 
     # ------------------------------------------------------------------------------------------ pieces
     def output(self, hidden: torch.Tensor) -> torch.Tensor:

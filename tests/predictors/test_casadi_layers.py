@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from predictors import casadi_layers as cl
+from tests.predictors.handwritten import layers as cl
 from predictors.nets.pooling import cell_weights
 
 

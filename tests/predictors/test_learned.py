@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from predictors.casadi_twin import casadi_name
+from predictors.learned import casadi_name
 from predictors.errors import PredictorError
 from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor
 from predictors.nets.social_gan import generator_config
@@ -177,6 +177,7 @@ def test_encode_runs_without_torch_and_reuses_a_copy_of_the_context(monkeypatch)
     def no_torch(*args, **kwargs):
         raise AssertionError("encode called the torch encoder")
 
+    predictor.encode(history + 1.0, mask, humans)  # exports the encoder (a symbolic run of net.encode)
     monkeypatch.setattr(predictor.net, "encode", no_torch)
     context = predictor.encode(history, mask, humans)
     np.testing.assert_allclose(context, expected, rtol=0, atol=1e-9)
@@ -196,7 +197,7 @@ def test_casadi_encoder_is_built_once_per_size():
     encoder = predictor.casadi_encoder(6, 8)
     assert predictor.casadi_encoder(6, 8) is encoder
     assert predictor.casadi_encoder(7, 8) is not encoder
-    assert encoder.name_in() == ["positions", "seen"] and encoder.name_out() == ["h", "c", "step"]
+    assert encoder.name_in() == ["positions", "seen"] and encoder.name_out() == ["state_0", "state_1", "out"]
     assert encoder.size1_in(0) == 8 * 6 * 2 and encoder.size1_out(0) == 6 * predictor.config.hidden_dim
     with pytest.raises(PredictorError, match="n_agents, length >= 1"):
         predictor.casadi_encoder(0, 8)

@@ -18,7 +18,7 @@ import re
 import casadi as ca
 import numpy as np
 
-from predictors import casadi_layers as cl
+from tests.predictors.handwritten import layers as cl
 from predictors.nets.social_lstm import N_TAGS, SocialLSTMConfig
 
 

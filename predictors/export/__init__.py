@@ -1,0 +1,10 @@
+"""Automatic torch -> CasADi export of predictor nets (``export_function``), with its one error type.
+
+``symbolic`` holds the symbolic tensor torch code runs on, ``ops`` the table of supported operations,
+``trace`` the run and the ``casadi.Function`` it becomes, ``parity`` the check against torch.
+"""
+
+from predictors.export.errors import ExportError
+from predictors.export.trace import TensorSpec, export_function, output_shapes
+
+__all__ = ["ExportError", "TensorSpec", "export_function", "output_shapes"]

@@ -1,0 +1,88 @@
+"""The check every export passes: the CasADi prediction against the torch rollout, values and Jacobians with
+respect to the robots' plan, in float64 (``PARITY_TOLERANCE``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+import casadi as ca
+import numpy as np
+import torch
+
+from predictors.export.errors import ExportError
+
+if TYPE_CHECKING:
+    from predictors.learned import LearnedPredictor
+
+PARITY_TOLERANCE: Final[float] = 1e-6
+
+
+@dataclass(frozen=True)
+class Parity:
+    value_error: float  # max |CasADi - torch| over the predicted positions, metres
+    jacobian_error: float  # max |dCasADi/dplan - dtorch/dplan|
+
+    @property
+    def worst(self) -> float:
+        return max(self.value_error, self.jacobian_error)
+
+    def ok(self, tolerance: float = PARITY_TOLERANCE) -> bool:
+        return self.worst <= tolerance
+
+
+def crossing_scene(
+    n_humans: int, n_robots: int, horizon: int, obs_len: int, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A plausible scene: agents within 3 m of each other (so pooling and attention see neighbours) walking
+    at ~1 m/s; ``(history (L, N, 2), mask, humans, robots_future (H, M, 2))``, robots last."""
+    rng = np.random.default_rng(seed)
+    n = n_humans + n_robots
+    start = rng.uniform(-3.0, 3.0, (n, 2))
+    velocity = rng.normal(0.0, 1.0, (n, 2))
+    steps = np.arange(obs_len)[:, None, None] * 0.4
+    history = start[None] + steps * velocity[None] + rng.normal(0.0, 0.02, (obs_len, n, 2))
+    future = (
+        history[-1, n_humans:][None]
+        + (np.arange(1, horizon + 1)[:, None, None] * 0.4) * velocity[None, n_humans:]
+    )
+    return history, np.ones((obs_len, n), dtype=bool), np.arange(n_humans), future
+
+
+def check_parity(
+    predictor: LearnedPredictor, n_humans: int, n_robots: int, horizon: int, seed: int = 0
+) -> Parity:
+    """``to_casadi``'s function against ``rollout_tensor`` on ``crossing_scene``."""
+    history, mask, humans, future = crossing_scene(n_humans, n_robots, horizon, predictor.obs_len, seed)
+    function = predictor.to_casadi(n_humans, n_robots, horizon)
+    context = predictor.encode(history, mask, humans)
+    plan = ca.MX.sym("plan", future.size)
+    symbolic = function(context, plan)
+    jacobian = ca.Function("parity_jacobian", [plan], [symbolic, ca.jacobian(symbolic, plan)])
+    value, jac = (np.asarray(x) for x in jacobian(future.ravel()))
+
+    def rollout(plan_t: torch.Tensor) -> torch.Tensor:
+        return predictor.rollout_tensor(history, mask, plan_t.reshape(future.shape), humans).reshape(-1)
+
+    plan_t = torch.from_numpy(future.ravel().copy())
+    torch_value = rollout(plan_t).detach().numpy()
+    torch_jac = (
+        torch.autograd.functional.jacobian(rollout, plan_t).numpy() if future.size else np.zeros((0, 0))
+    )
+    return Parity(
+        value_error=float(np.abs(value.ravel() - torch_value).max(initial=0.0)),
+        jacobian_error=float(np.abs(jac.reshape(torch_jac.shape) - torch_jac).max(initial=0.0)),
+    )
+
+
+def require_parity(predictor: LearnedPredictor, n_humans: int, n_robots: int, horizon: int) -> Parity:
+    """``check_parity``, or ExportError when it exceeds ``PARITY_TOLERANCE``."""
+    parity = check_parity(predictor, n_humans, n_robots, horizon)
+    if not parity.ok():
+        raise ExportError(
+            f"the exported prediction differs from torch by {parity.value_error:.2e} (values) and "
+            f"{parity.jacobian_error:.2e} (Jacobians), more than {PARITY_TOLERANCE:g}",
+            predictor.name,
+        )
+    return parity

@@ -1,0 +1,187 @@
+"""Run a net's own methods on symbolic tensors and wrap the result as a ``casadi.Function``.
+
+``export_function(net, method, inputs, outputs, name)`` calls ``method`` (e.g. ``net.decode_step``) with one
+``SymTensor`` per input. While it runs, the recurrent cells (``nn.LSTMCell``, ``nn.GRUCell``, whose forward
+calls fused kernels) are replaced by their CasADi forms on this instance only, and a pair of global module
+hooks keeps the path of the module that runs (``pool.embedding``), so that an unsupported operation is
+reported where it happens.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import torch
+from torch import nn
+
+from predictors.export import ops
+from predictors.export.errors import MODULE_STACK, ExportError
+from predictors.export.symbolic import SymTensor, lift
+
+
+@dataclass(frozen=True)
+class TensorSpec:
+    """One input of an exported function: its name, torch shape, and whether it is a mask (0/1)."""
+
+    name: str
+    shape: tuple[int, ...]
+    is_bool: bool = False
+
+    @property
+    def size(self) -> int:
+        size = 1
+        for s in self.shape:
+            size *= s
+        return size
+
+
+# ----------------------------------------------------------------------------------------- recurrent cells
+def _cell_inputs(cell: nn.Module, x: Any) -> tuple[SymTensor, bool]:
+    x = lift(x)
+    if x.ndim not in (1, 2):
+        raise ExportError(f"{type(cell).__name__} input of shape {x.shape_}", "")
+    return (ops.unsqueeze(x, 0), False) if x.ndim == 1 else (x, True)
+
+
+def _gates(cell: nn.Module, x: SymTensor, h: SymTensor) -> tuple[Any, Any]:
+    """``x W_ih^T + b_ih`` and ``h W_hh^T + b_hh`` as (rows, gates) matrices."""
+    return (
+        ops.linear(x, cell.weight_ih, cell.bias_ih).m,  # type: ignore[arg-type]
+        ops.linear(h, cell.weight_hh, cell.bias_hh).m,  # type: ignore[arg-type]
+    )
+
+
+def _state(value: Any, rows: int, hidden: int, batched: bool) -> SymTensor:
+    if value is None:
+        return lift(torch.zeros(rows, hidden, dtype=torch.float64))
+    value = lift(value)
+    return value if batched else ops.unsqueeze(value, 0)
+
+
+def lstm_cell(cell: nn.LSTMCell, input: Any, hx: Any = None) -> tuple[SymTensor, SymTensor]:  # noqa: A002
+    """``nn.LSTMCell`` (gate order i, f, g, o)."""
+    x, batched = _cell_inputs(cell, input)
+    d = cell.hidden_size
+    rows = x.shape_[0]
+    h = _state(None if hx is None else hx[0], rows, d, batched)
+    c = _state(None if hx is None else hx[1], rows, d, batched)
+    from_x, from_h = _gates(cell, x, h)
+    gates = from_x + from_h
+    i = ops.sigmoid(gates[:, 0:d])
+    f = ops.sigmoid(gates[:, d : 2 * d])
+    g = ca.tanh(gates[:, 2 * d : 3 * d])
+    o = ops.sigmoid(gates[:, 3 * d : 4 * d])
+    c_new = SymTensor(f * c.m + i * g, (rows, d))
+    h_new = SymTensor(o * ca.tanh(c_new.m), (rows, d))
+    if not batched:
+        return ops.squeeze(h_new, 0), ops.squeeze(c_new, 0)
+    return h_new, c_new
+
+
+def gru_cell(cell: nn.GRUCell, input: Any, hx: Any = None) -> SymTensor:  # noqa: A002
+    """``nn.GRUCell`` (gate order r, z, n; the reset gate multiplies the hidden part, bias included)."""
+    x, batched = _cell_inputs(cell, input)
+    d = cell.hidden_size
+    rows = x.shape_[0]
+    h = _state(hx, rows, d, batched)
+    from_x, from_h = _gates(cell, x, h)
+    r = ops.sigmoid(from_x[:, 0:d] + from_h[:, 0:d])
+    z = ops.sigmoid(from_x[:, d : 2 * d] + from_h[:, d : 2 * d])
+    n = ca.tanh(from_x[:, 2 * d : 3 * d] + r * from_h[:, 2 * d : 3 * d])
+    h_new = SymTensor((1 - z) * n + z * h.m, (rows, d))
+    return h_new if batched else ops.squeeze(h_new, 0)
+
+
+CELLS: dict[type[nn.Module], Callable[..., Any]] = {nn.LSTMCell: lstm_cell, nn.GRUCell: gru_cell}
+
+
+# ----------------------------------------------------------------------------------------------- tracing
+@contextmanager
+def symbolic_run(net: nn.Module) -> Iterator[None]:
+    """While inside: the net's cells compute on SymTensors, and ``MODULE_STACK`` names the running module."""
+    names = {id(module): name or type(net).__name__ for name, module in net.named_modules()}
+    patched = []
+    for module in net.modules():
+        cell = CELLS.get(type(module))
+        if cell is not None:
+            module.forward = functools.partial(cell, module)  # this instance only, removed below
+            patched.append(module)
+
+    def enter(module, args):
+        MODULE_STACK.append(names.get(id(module), type(module).__name__))
+
+    def leave(module, args, output):
+        if MODULE_STACK:
+            MODULE_STACK.pop()
+
+    pre = nn.modules.module.register_module_forward_pre_hook(enter)
+    post = nn.modules.module.register_module_forward_hook(leave)
+    MODULE_STACK.clear()
+    MODULE_STACK.append(type(net).__name__)
+    was_training = net.training
+    net.eval()
+    try:
+        with torch.no_grad():
+            yield
+    finally:
+        pre.remove()
+        post.remove()
+        MODULE_STACK.clear()
+        for module in patched:
+            del module.forward
+        net.train(was_training)
+
+
+def _flat_output(value: Any, what: str) -> Any:
+    if isinstance(value, (SymTensor, torch.Tensor)):
+        return lift(value).flat()
+    raise ExportError(f"{what} is a {type(value).__name__}, not a tensor", "")
+
+
+def export_function(
+    net: nn.Module,
+    method: Callable[..., Any],
+    inputs: Sequence[TensorSpec],
+    output_names: Sequence[str],
+    name: str,
+    *,
+    symbol: type = ca.MX,
+) -> ca.Function:
+    """``method(*inputs)`` as a CasADi function of the inputs' row-major flat vectors.
+
+    ``method`` returns one tensor or a tuple of ``len(output_names)`` tensors; each becomes an output, its
+    row-major flat vector. ``symbol`` is ``ca.MX`` (few large nodes: cheap to differentiate) or ``ca.SX``.
+    """
+    symbols = [symbol.sym(spec.name, spec.size) for spec in inputs]
+    tensors = [
+        SymTensor.from_flat(s, spec.shape, spec.is_bool) for s, spec in zip(symbols, inputs, strict=True)
+    ]
+    with symbolic_run(net):
+        result = method(*tensors)
+    values = result if isinstance(result, tuple) else (result,)
+    if len(values) != len(output_names):
+        raise ExportError(
+            f"{getattr(method, '__name__', 'the method')} returned {len(values)} values, expected "
+            f"{len(output_names)} ({', '.join(output_names)})",
+            type(net).__name__,
+        )
+    outputs = [_flat_output(v, n) for v, n in zip(values, output_names, strict=True)]
+    return ca.Function(name, symbols, outputs, [s.name for s in inputs], list(output_names))
+
+
+def output_shapes(
+    net: nn.Module, method: Callable[..., Any], inputs: Sequence[TensorSpec]
+) -> list[tuple[int, ...]]:
+    """The shapes ``method`` returns for ``inputs`` (a symbolic run; nothing is built)."""
+    tensors = [
+        SymTensor.from_flat(ca.MX.sym(spec.name, spec.size), spec.shape, spec.is_bool) for spec in inputs
+    ]
+    with symbolic_run(net):
+        result = method(*tensors)
+    values = result if isinstance(result, tuple) else (result,)
+    return [tuple(lift(v).shape_) for v in values]
