@@ -34,7 +34,31 @@ EPILOG = """examples:
   crowdmpc data prepare --raw ../shared/data/raw_ewap --out data/prepared
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
   crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario circle --humans 7 --episodes 5
+  crowdmpc --plugin my_predictor:MyNet train --model my_predictor:MyNet --data-dir ../shared/data
+
+Plugins: --plugin module:NetClass (before the command; repeatable) registers a predictor net of your own
+(the step contract of predictors/nets/contract.py) as the model kind "module:NetClass", for every command
+and the sweep's workers. The module is imported from the installed packages or the current directory.
+$CROWDMPC_PLUGINS (comma-separated) does the same; installed packages may declare entry points in the group
+"crowdmpc.predictors". Trained models go to the user zoo, $CROWDMPC_ZOO (default
+$XDG_DATA_HOME/crowdmpc/zoo or ~/.local/share/crowdmpc/zoo); the shipped zoo (checkpoints/) is read-only.
 """
+
+
+class PluginAction(argparse.Action):
+    """``--plugin module:NetClass``: registered as soon as it is parsed (``predictors.models``), so that the
+    options after it (``train --model module:NetClass``) can name it, and recorded in ``$CROWDMPC_PLUGINS``
+    for the processes the command starts. A plugin that does not load is a one-line parser error."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from predictors.models import register_plugins
+
+        try:
+            register_plugins([str(values)])
+        except PredictorError as exc:
+            parser.error(str(exc))
+        items = list(getattr(namespace, self.dest, None) or [])
+        setattr(namespace, self.dest, [*items, values])
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -54,6 +78,13 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"crowdmpc {crowdmpc_version()}")
+    parser.add_argument(
+        "--plugin",
+        action=PluginAction,
+        default=[],
+        metavar="MODULE:CLASS",
+        help="register a predictor net of your own as model kind MODULE:CLASS (repeatable; before COMMAND)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         module_name = f"pipelines.commands.{name}"

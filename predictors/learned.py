@@ -27,8 +27,7 @@ from __future__ import annotations
 import copy
 import math
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -38,26 +37,16 @@ from predictors.base import OBS_LEN, check_rollout_inputs, robot_indices
 from predictors.errors import PredictorError
 from predictors.export import TensorSpec, export_function, output_shapes
 from predictors.nets.social_lstm import SocialLSTM
+from predictors.threads import single_threaded
+
+# (humans, robots, horizon) of the check on first export: small, but with neighbours and a recursion.
+PARITY_SIZE = (2, 1, 3)
 
 
 def casadi_name(text: str) -> str:
     """A valid CasADi function name: a letter first, then letters, digits and single underscores."""
     name = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_]", "_", text)).strip("_")
     return name if name[:1].isalpha() else f"predictor_{name}"
-
-
-@contextmanager
-def single_threaded() -> Iterator[None]:
-    """Run torch on one thread: these tensors are tiny, and on a shared CPU torch's thread pool spin-waits
-    (a 64x40 linear layer took 1-1.7 ms on 2 threads against 0.1 ms on one, measured on the 2-core box)."""
-    before = torch.get_num_threads()
-    if before != 1:
-        torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        if before != 1:
-            torch.set_num_threads(before)
 
 
 class LearnedPredictor:
@@ -69,10 +58,11 @@ class LearnedPredictor:
             raise PredictorError(f"obs_len must be >= 2 (a displacement needs two steps), got {obs_len}")
         self.name = name
         self.obs_len = obs_len
-        self.kind: str = kind or getattr(type(self), "default_kind", type(net).__name__)
-        self.config = net.config
-        # A private float64 copy in eval mode: training may go on with the original.
-        self.net = copy.deepcopy(net).to(torch.float64).eval()
+        self.kind: str = str(kind or getattr(type(self), "default_kind", type(net).__name__))
+        self.config: Any = net.config
+        # A private float64 copy in eval mode: training may go on with the original. Typed Any: the step
+        # contract's methods (encode, decode_step) are not nn.Module's.
+        self.net: Any = copy.deepcopy(net).to(torch.float64).eval()
         for p in self.net.parameters():
             p.requires_grad_(False)
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
@@ -300,10 +290,9 @@ class LearnedPredictor:
         plan = [robots_future[2 * n_robots * k : 2 * n_robots * (k + 1)] for k in range(horizon)]
         # The humans' mean steps in the step's flat (N, K) output: entries K*i and K*i + 1 of human i.
         means = [out_width * i + j for i in range(n_humans) for j in (0, 1)]
-        step = self.casadi_step(n) if horizon > 1 else None
         previous, current, outputs = now, ca.vertcat(first, plan[0]), [first]
         for k in range(1, horizon):
-            *state, out = step(*state, previous, current, present)
+            *state, out = self.casadi_step(n)(*state, previous, current, present)
             humans_next = current[: 2 * n_humans] + out[means]
             outputs.append(humans_next)
             previous, current = current, ca.vertcat(humans_next, plan[k])
@@ -413,22 +402,3 @@ class SocialGANPredictor(LearnedPredictor):
                 noise,
             )
         return out.numpy()
-
-
-# (humans, robots, horizon) of the check on first export: small, but with neighbours and a recursion.
-PARITY_SIZE = (2, 1, 3)
-
-# The zoo's model kinds before predictors.models; kept until every caller goes through predictors.models.
-MODEL_KINDS = ("social_lstm", "vanilla_lstm", "social_gan")
-
-PREDICTOR_CLASSES: dict[str, type[LearnedPredictor]] = {
-    "SocialLSTMPredictor": SocialLSTMPredictor,
-    "SocialGANPredictor": SocialGANPredictor,
-}
-
-
-def predictor_class_for(model: str) -> type[LearnedPredictor]:
-    """The predictor class of a ``--model`` choice."""
-    if model not in MODEL_KINDS:
-        raise PredictorError(f"unknown model {model!r}; choose from {list(MODEL_KINDS)}")
-    return SocialGANPredictor if model == "social_gan" else SocialLSTMPredictor

@@ -1,9 +1,10 @@
 """The explicit registry of predictors: exact names, no string matching.
 
 ``PREDICTORS`` maps a name to a factory for predictors that need no trained weights (constant velocity, and
-the ORCA-ground-truth oracle of ``predictors.oracle``). Trained models are
-named entries of the model zoo (``checkpoints/manifest.json``, see ``predictors.zoo``) and are loaded by
-``load_predictor`` as well, after their files' sha256 are checked against the manifest.
+the ORCA-ground-truth oracle of ``predictors.oracle``). Trained models are named entries of the model zoos
+(the shipped ``checkpoints/manifest.json``, then the user zoo ``$CROWDMPC_ZOO``; see ``predictors.zoo``) and
+are loaded by ``load_predictor`` as well, after their files' sha256 are checked against their manifest. A
+zoo entry of a plugin's model kind loads once the plugin is registered (``predictors.models``).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ PREDICTORS: dict[str, Callable[[], Predictor]] = {
 
 
 def available() -> list[str]:
-    """Every name ``load_predictor`` accepts: the registered predictors, then the zoo entries."""
+    """Every name ``load_predictor`` accepts: the registered predictors, then the entries of both zoos."""
     return sorted(PREDICTORS) + [name for name in zoo.zoo_names() if name not in PREDICTORS]
 
 
@@ -37,13 +38,14 @@ def checkpoint_sha256(name: str | None) -> str | None:
     """The zoo's sha256 of a trained predictor's weights; None for predictors without weights (or no name)."""
     if name is None or name in PREDICTORS:
         return None
-    entry = zoo.read_manifest().get(name)
-    return entry.sha256 if entry is not None else None
+    located = zoo.locate(name)
+    return located.entry.sha256 if located is not None else None
 
 
 def load_predictor(name: str) -> Predictor:
     if name in PREDICTORS:
         return PREDICTORS[name]()
-    if name in zoo.zoo_names():
-        return zoo.load_zoo(name)
+    located = zoo.locate(name)
+    if located is not None:
+        return zoo.load_located(located)
     raise UnknownPredictor(name, available())

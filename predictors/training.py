@@ -1,7 +1,9 @@
 """Thin LightningModules around ``predictors.nets``: loss, optimiser, logging (STYLE.md example 6).
 
-Only this module and ``pipelines`` import Lightning. Both modules share one ``model_step(batch, stage)`` for
-train/val/test. Training follows TrajNet++ (``lstm/trainer.py``): Adam (lr 1e-3, weight decay 1e-4), StepLR,
+Only this module and ``pipelines`` import Lightning. ``PredictorModule`` trains any net that keeps the step
+contract (``nets.contract``) of any registered model kind (``predictors.models``); ``GANModule`` the
+adversarial ones; ``make_module`` picks. Both share one ``model_step(batch, stage)`` for train/val/test.
+Training follows TrajNet++ (``lstm/trainer.py``): Adam (lr 1e-3, weight decay 1e-4), StepLR,
 neighbours teacher-forced and only the primary fed its own (detached) predictions, loss on the primary's 12
 predicted displacements. Validation and test predict every agent recursively, as ``crowdmpc evaluate`` does,
 and log the primary's ADE/FDE (``val_ade`` selects the best checkpoint).
@@ -14,8 +16,9 @@ trajectories.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import lightning as L
 import torch
@@ -25,7 +28,9 @@ from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.metrics import ade, fde
+from predictors.models import model_kind
 from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
+from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 
@@ -90,31 +95,75 @@ class _PredictorModule(L.LightningModule):
             self.log(f"{stage}_{key}", value, prog_bar=key == "ade", batch_size=batch_size)
 
 
-class SocialLSTMModule(_PredictorModule):
-    """Social-LSTM and the vanilla LSTM (the net's ``pooling`` decides)."""
+def legacy_model(net_config: Mapping[str, Any]) -> str:
+    """The model kind of a checkpoint written before modules recorded one (hyper-parameters
+    ``net_config, optim_config`` only): those were Social-LSTMs, vanilla without pooling."""
+    return "vanilla_lstm" if net_config.get("pooling") == "none" else "social_lstm"
+
+
+def defines_forward(net: torch.nn.Module) -> bool:
+    """Whether the net's class has its own training ``forward`` (``nn.Module``'s only raises)."""
+    return type(net).forward is not torch.nn.Module.forward
+
+
+class PredictorModule(_PredictorModule):
+    """Any net that keeps the step contract (``predictors.nets.contract``), trained as TrajNet++ trains
+    Social-LSTM: the net's own ``forward`` when its class defines one, else the generic teacher-forced
+    rollout (``nets.rollout``); Gaussian NLL when the net has a Gaussian head and the loss is "gaussian",
+    else L2 on the mean steps.
+
+    ``net_config`` holds values over the kind's defaults (``models.ModelKind.config``); the hyper-parameters
+    record the whole validated config. ``model=None`` is a checkpoint from before models were recorded
+    (``legacy_model``).
+    """
 
     def __init__(
-        self, net_config: dict, optim_config: dict, obs_len: int = OBS_LEN, pred_len: int = PRED_LEN
+        self,
+        model: str | None = None,
+        net_config: Mapping[str, Any] | None = None,
+        optim_config: Mapping[str, Any] | None = None,
+        obs_len: int = OBS_LEN,
+        pred_len: int = PRED_LEN,
     ):
         super().__init__()
-        self.save_hyperparameters()
-        self.net = SocialLSTM(SocialLSTMConfig.from_dict(net_config))
-        self.optim = OptimConfig(**optim_config)
+        values = dict(net_config or {})
+        model = legacy_model(values) if model is None else model
+        kind = model_kind(model)
+        if kind.adversarial:
+            raise PredictorError(f"model {model!r} is trained as a GAN (GANModule), not by PredictorModule")
+        config = kind.config(values)
+        self.optim = OptimConfig(**(optim_config or {}))
+        self.save_hyperparameters(
+            {
+                "model": model,
+                "net_config": kind.config_dict(config),
+                "optim_config": asdict(self.optim),
+                "obs_len": obs_len,
+                "pred_len": pred_len,
+            }
+        )
+        self.model_name = model
+        self.net = kind.build_net(config)
         self.obs_len = obs_len
         self.pred_len = pred_len
 
+    def rollout(self, positions: torch.Tensor, mask: torch.Tensor, teacher_forcing: bool):
+        """(outputs (B, H, N, K), predicted positions (B, H, N, 2)) of the scenes."""
+        if defines_forward(self.net):
+            return self.net(positions, mask, self.obs_len, self.pred_len, teacher_forcing=teacher_forcing)
+        return teacher_forced_rollout(
+            self.net, positions, mask, self.obs_len, self.pred_len, teacher_forcing=teacher_forcing
+        )
+
     def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
         positions = batch.positions
-        teacher = stage == "train"
-        outputs, predicted = self.net(
-            positions, batch.mask, self.obs_len, self.pred_len, teacher_forcing=teacher
-        )
+        outputs, predicted = self.rollout(positions, batch.mask, teacher_forcing=stage == "train")
         truth, valid = primary_targets(batch)
         # TrajNet++ targets: true displacements of the primary (B, H, 2)
         previous = torch.cat([positions[:, self.obs_len - 1 : self.obs_len, 0], truth[:, :-1]], dim=1)
         target = truth - previous
         primary = outputs[:, :, 0]
-        if self.optim.loss == "gaussian" and self.net.config.head == "gaussian":
+        if self.optim.loss == "gaussian" and self.net.head_type == "gaussian":
             loss = gaussian_nll(primary, target, valid)
         else:
             loss = l2_loss(primary[..., :2], target, valid)
@@ -135,6 +184,10 @@ class SocialLSTMModule(_PredictorModule):
         )
         scheduler = torch.optim.lr_scheduler.StepLR(optimizer, self.optim.step_size, self.optim.gamma)
         return [optimizer], [scheduler]
+
+
+# The name before any net but Social-LSTM could be trained; the same class (note ``model`` comes first).
+SocialLSTMModule = PredictorModule
 
 
 class GANModule(_PredictorModule):
@@ -249,12 +302,19 @@ class GANModule(_PredictorModule):
         return [opt_g, opt_d], schedulers
 
 
-def make_module(model: str, net_config: SocialLSTMConfig, optim: OptimConfig) -> SocialLSTMModule | GANModule:
-    """The LightningModule of a ``--model`` choice."""
-    if model == "social_gan":
-        return GANModule(net_config.to_dict(), asdict(optim))
-    if model in ("social_lstm", "vanilla_lstm"):
-        return SocialLSTMModule(net_config.to_dict(), asdict(optim))
-    raise PredictorError(
-        f"unknown model {model!r}; choose from ['social_gan', 'social_lstm', 'vanilla_lstm']"
-    )
+def make_module(model: str, net_config: Any, optim: OptimConfig) -> PredictorModule | GANModule:
+    """The LightningModule of a ``--model`` choice: ``net_config`` is the kind's config instance, or a dict
+    of values over its defaults (None: the defaults); GAN training for adversarial kinds."""
+    kind = model_kind(model)
+    if isinstance(net_config, kind.config_class):
+        config = net_config
+    elif net_config is None or isinstance(net_config, Mapping):
+        config = kind.config(net_config)
+    else:
+        raise PredictorError(
+            f"{model}: expected a {kind.config_class.__name__} or a dict, got {type(net_config).__name__}"
+        )
+    values = kind.config_dict(config)
+    if kind.adversarial:
+        return GANModule(values, asdict(optim))
+    return PredictorModule(model, values, asdict(optim))

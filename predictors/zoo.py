@@ -1,11 +1,22 @@
 """The model zoo: trained predictors as ``state_dict`` + JSON config pairs, listed in ``manifest.json``.
 
 A checkpoint is two files: ``NAME.pt`` (a plain ``state_dict`` of tensors, read with
-``torch.load(..., weights_only=True)``, never a pickled object) and ``NAME.json`` (what to build: predictor
-class, model kind, net hyper-parameters, observed steps). The manifest (``checkpoints/manifest.json``, or
-``$CROWDMPC_CHECKPOINTS/manifest.json``) records for each entry its files and their sha256, the training data
+``torch.load(..., weights_only=True)``, never a pickled object) and ``NAME.json`` (what to build: the model
+kind of ``predictors.models``, its net's hyper-parameters, observed steps; ``"class"``, the predictor class,
+is informational). A manifest records for each entry its files and their sha256, the training data
 (protocol, files and their hashes) and validation/test metrics. Loading a zoo entry checks both hashes
 first; a file that differs is refused with ``CheckpointMismatch``.
+
+Two zoos, read in this order:
+
+* the shipped zoo, ``checkpoints/`` (or ``$CROWDMPC_CHECKPOINTS``): read-only package data, its manifest
+  tracked with the code;
+* the user zoo, ``$CROWDMPC_ZOO`` (default ``$XDG_DATA_HOME/crowdmpc/zoo``, else
+  ``~/.local/share/crowdmpc/zoo``): where ``crowdmpc zoo add`` writes, with its own manifest. A user entry may
+  not take a shipped entry's name.
+
+A config names its model kind; a kind no source registers (``predictors.models``) is refused with a message
+saying how to register it. A zoo file never makes crowdmpc import code.
 """
 
 from __future__ import annotations
@@ -24,10 +35,21 @@ from predictors.errors import CheckpointMismatch, PredictorError, short_repr
 from predictors.hashing import sha256_file
 
 if TYPE_CHECKING:
+    import torch
+
     from predictors.learned import LearnedPredictor
-    from predictors.nets.social_lstm import SocialLSTM
 
 CHECKPOINTS_ENV: Final[str] = "CROWDMPC_CHECKPOINTS"
+ZOO_ENV: Final[str] = "CROWDMPC_ZOO"
+SHIPPED: Final[str] = "shipped"
+USER: Final[str] = "user"
+# The predictor classes a config's informational "class" may name: the generic one, the Social-LSTM class of
+# the shipped checkpoints (written before model kinds), and the GAN generator's (a kind with ``adversarial``).
+PREDICTOR_CLASS_NAMES: Final[tuple[str, ...]] = (
+    "LearnedPredictor",
+    "SocialLSTMPredictor",
+    "SocialGANPredictor",
+)
 CONFIG_FORMAT: Final[str] = "crowdmpc-predictor"
 MANIFEST_FORMAT: Final[str] = "crowdmpc-zoo"
 MANIFEST_NAME: Final[str] = "manifest.json"
@@ -80,11 +102,55 @@ def zoo_path(root: Path, relative: object, what: str) -> Path:
 
 
 def checkpoints_dir(directory: str | Path | None = None) -> Path:
-    """``directory``, else ``$CROWDMPC_CHECKPOINTS``, else the repository's ``checkpoints/``."""
+    """The shipped zoo: ``directory``, else ``$CROWDMPC_CHECKPOINTS``, else the repository's checkpoints/."""
     if directory is not None:
         return Path(directory)
     env = os.environ.get(CHECKPOINTS_ENV)
     return Path(env) if env else Path(__file__).resolve().parents[1] / "checkpoints"
+
+
+def user_zoo_dir(directory: str | Path | None = None) -> Path:
+    """The user zoo: ``directory``, else ``$CROWDMPC_ZOO``, else ``$XDG_DATA_HOME/crowdmpc/zoo`` (an absolute
+    ``XDG_DATA_HOME`` only, as the XDG spec says), else ``~/.local/share/crowdmpc/zoo``."""
+    if directory is not None:
+        return Path(directory)
+    env = os.environ.get(ZOO_ENV)
+    if env:
+        return Path(env)
+    data = os.environ.get("XDG_DATA_HOME")
+    if data and Path(data).is_absolute():
+        return Path(data) / "crowdmpc" / "zoo"
+    try:
+        home = Path.home()
+    except (RuntimeError, KeyError):  # no $HOME and no password entry
+        raise PredictorError(f"cannot find the home directory for the user zoo; set {ZOO_ENV}") from None
+    return home / ".local" / "share" / "crowdmpc" / "zoo"
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise PredictorError(f"zoo directory {path} cannot be resolved: {exc}") from None
+
+
+def is_shipped(directory: str | Path) -> bool:
+    """Whether ``directory`` is the shipped zoo or lies inside it (symbolic links followed)."""
+    return _resolved(Path(directory)).is_relative_to(_resolved(checkpoints_dir()))
+
+
+def writable_zoo_dir(directory: str | Path | None = None) -> Path:
+    """The user zoo ``zoo add`` and ``zoo remove`` write into; PredictorError when it is the shipped zoo."""
+    root = user_zoo_dir(directory)
+    if is_shipped(root):
+        where = f"${ZOO_ENV}" if directory is None else "the zoo directory"
+        raise PredictorError(
+            f"{where} {root} is the shipped zoo {checkpoints_dir()} (or inside it), which is read-only; "
+            f"point {ZOO_ENV} at a directory of your own"
+        )
+    if root.exists() and not root.is_dir():
+        raise PredictorError(f"the user zoo {root} is not a directory")
+    return root
 
 
 def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]:
@@ -109,13 +175,26 @@ def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]
 
 # ----------------------------------------------------------------------------------------- checkpoint pair
 def save_checkpoint(
-    net: SocialLSTM, *, model: str, name: str, out_dir: str | Path, obs_len: int, extra: dict | None = None
+    net: torch.nn.Module,
+    *,
+    model: str,
+    name: str,
+    out_dir: str | Path,
+    obs_len: int,
+    extra: dict | None = None,
 ) -> tuple[Path, Path]:
-    """Write ``out_dir/NAME.pt`` (float32 state_dict) and ``out_dir/NAME.json``; returns both paths."""
+    """Write ``out_dir/NAME.pt`` (float32 state_dict) and ``out_dir/NAME.json``; returns both paths.
+
+    ``model`` is a registered model kind (``predictors.models``) whose net class ``net`` is."""
     import torch
 
-    from predictors.learned import predictor_class_for
+    from predictors.models import model_kind
 
+    check_name(name, "checkpoint name")  # NAME becomes the files' names
+    kind = model_kind(model)
+    if not isinstance(net, kind.net_class):
+        raise PredictorError(f"model {model!r} is a {kind.net_class.__name__}, got a {type(net).__name__}")
+    net_config = kind.config_dict(getattr(net, "config", None))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     weights = out_dir / f"{name}.pt"
@@ -125,14 +204,25 @@ def save_checkpoint(
     document = {
         "format": CONFIG_FORMAT,
         "name": name,
-        "class": predictor_class_for(model).__name__,
-        "model": model,
+        "class": kind.predictor_class_name,  # informational: the kind decides
+        "model": kind.name,
         "obs_len": obs_len,
-        "net": net.config.to_dict(),
+        "net": net_config,
         **(extra or {}),
     }
     config.write_text(json.dumps(document, indent=2) + "\n")
     return weights, config
+
+
+def _legacy_model(document: dict[str, Any], config: Path) -> str:
+    """The model kind of a config written before ``"model"`` existed: its predictor class and pooling."""
+    cls_name = document.get("class")
+    if cls_name == "SocialGANPredictor":
+        return "social_gan"
+    if cls_name == "SocialLSTMPredictor":
+        net = document.get("net")
+        return "vanilla_lstm" if isinstance(net, dict) and net.get("pooling") == "none" else "social_lstm"
+    raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
 
 
 def load_checkpoint(
@@ -146,13 +236,13 @@ def load_checkpoint(
     """The predictor of a checkpoint pair (``config`` defaults to ``weights`` with ``.json``).
 
     Everything is checked before it is used, each failure a PredictorError naming the file: the sha256 (when
-    expected, as the zoo always does), the config's types and ranges before any net is built, the weights'
+    expected, as the zoo always does), the model kind (registered, never imported on the file's word), the
+    config's types and ranges before any net is built (its size counted on the meta device), the weights'
     size before they are read, then that they are a state_dict of finite float tensors of the net's shapes.
     """
     import torch
 
-    from predictors.learned import MODEL_KINDS, PREDICTOR_CLASSES, predictor_class_for
-    from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+    from predictors.models import model_kind
 
     weights = Path(weights)
     config = Path(config) if config is not None else weights.with_suffix(".json")
@@ -167,19 +257,18 @@ def load_checkpoint(
                 raise CheckpointMismatch(path, expected, found)
     document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
     cls_name = document.get("class")
-    if not isinstance(cls_name, str) or cls_name not in PREDICTOR_CLASSES:
+    if cls_name is not None and (not isinstance(cls_name, str) or cls_name not in PREDICTOR_CLASS_NAMES):
         raise PredictorError(
             f"{config}: unknown predictor class {short_repr(cls_name)}; expected one of "
-            f"{sorted(PREDICTOR_CLASSES)}"
+            f'{list(PREDICTOR_CLASS_NAMES)} (or no "class": it is informational)'
         )
-    model = document.get("model")
-    if model is not None:
-        if not isinstance(model, str) or model not in MODEL_KINDS:
-            raise PredictorError(
-                f'{config}: "model" must be one of {list(MODEL_KINDS)}, got {short_repr(model)}'
-            )
-        if predictor_class_for(model).__name__ != cls_name:
-            raise PredictorError(f'{config}: "model" {model!r} does not go with "class" {cls_name!r}')
+    model = document["model"] if "model" in document else _legacy_model(document, config)
+    try:
+        kind = model_kind(model)  # a registered kind only: a file never makes us import a module
+    except PredictorError as exc:
+        raise PredictorError(f'{config}: "model": {exc}') from None
+    if cls_name is not None and (cls_name == "SocialGANPredictor") != kind.adversarial:
+        raise PredictorError(f'{config}: "model" {kind.name!r} does not go with "class" {cls_name!r}')
     own_name = document.get("name", weights.stem)
     if not isinstance(own_name, str):
         raise PredictorError(f'{config}: "name" must be a string, got {short_repr(own_name)}')
@@ -189,10 +278,9 @@ def load_checkpoint(
     if not 2 <= obs_len <= MAX_OBS_LEN:
         raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
     try:
-        net_config = SocialLSTMConfig.from_dict(document.get("net", {}))
+        net = kind.build_net(document.get("net", {}))  # validated, and bounded before memory is taken
     except PredictorError as exc:
         raise PredictorError(f'{config}: "net": {exc}') from None
-    net = SocialLSTM(net_config)  # bounded: the config's checks cap its parameters
     expected_state = net.state_dict()
     limit = 8 * sum(t.numel() for t in expected_state.values()) + WEIGHTS_OVERHEAD_BYTES
     size = weights.stat().st_size
@@ -214,7 +302,7 @@ def load_checkpoint(
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:  # not expected after the checks above
         raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from None
     try:
-        return PREDICTOR_CLASSES[cls_name](net, name=name or own_name, obs_len=obs_len)
+        return kind.predictor(net, name=name or own_name, obs_len=obs_len)
     except PredictorError as exc:
         raise PredictorError(f"{config}: {exc}") from None
 
@@ -256,8 +344,8 @@ def check_state_dict(state: object, expected: dict[str, Any], weights: Path, con
 @dataclass(frozen=True)
 class ZooEntry:
     name: str
-    cls: str  # predictor class, a key of predictors.learned.PREDICTOR_CLASSES
-    model: str  # social_lstm | vanilla_lstm | social_gan
+    cls: str  # predictor class (informational), one of PREDICTOR_CLASS_NAMES
+    model: str  # model kind (predictors.models): social_lstm, social_gru, a plugin's module:NetClass ...
     file: str  # weights file, relative to the checkpoints directory
     sha256: str
     config: str  # JSON config file, relative to the checkpoints directory
@@ -317,9 +405,15 @@ class ZooEntry:
 
 
 def read_manifest(directory: str | Path | None = None) -> dict[str, ZooEntry]:
-    """Entries by name; an absent manifest is an empty zoo. Every entry is checked (``ZooEntry``), and its
-    files must lie inside the zoo directory."""
-    root = checkpoints_dir(directory)
+    """Entries by name of the zoo at ``directory``; ``None``: the shipped zoo's and then the user zoo's (a
+    user entry under a shipped name is left out: the shipped one is what loads). An absent manifest is an
+    empty zoo. Every entry is checked (``ZooEntry``), and its files must lie inside its zoo directory."""
+    if directory is None:
+        merged: dict[str, ZooEntry] = {}
+        for located in zoo_entries():
+            merged.setdefault(located.entry.name, located.entry)
+        return merged
+    root = Path(directory)
     path = root / MANIFEST_NAME
     if not path.exists() and not path.is_symlink():
         return {}
@@ -339,50 +433,145 @@ def read_manifest(directory: str | Path | None = None) -> dict[str, ZooEntry]:
     return entries
 
 
-def write_manifest(entries: dict[str, ZooEntry], directory: str | Path | None = None) -> Path:
-    path = checkpoints_dir(directory) / MANIFEST_NAME
+def write_manifest(entries: dict[str, ZooEntry], directory: str | Path) -> Path:
+    """Write the manifest of the zoo at ``directory`` (atomically: a temporary file renamed)."""
+    path = Path(directory) / MANIFEST_NAME
     path.parent.mkdir(parents=True, exist_ok=True)
     document = {
         "format": MANIFEST_FORMAT,
         "version": 1,
         "models": [entries[name].to_json() for name in sorted(entries)],
     }
-    tmp = path.with_name(f".{path.name}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(document, indent=2) + "\n")
     tmp.replace(path)
     return path
 
 
+# ---------------------------------------------------------------------------------- the shipped + user zoos
+@dataclass(frozen=True)
+class Located:
+    """A zoo entry and where it lives."""
+
+    source: str  # SHIPPED | USER
+    root: Path  # its zoo directory
+    entry: ZooEntry
+
+    @property
+    def manifest(self) -> Path:
+        return self.root / MANIFEST_NAME
+
+
+def zoo_roots(user_dir: str | Path | None = None) -> list[tuple[str, Path]]:
+    """``(source, directory)`` of the shipped zoo and the user zoo (``user_dir``, else ``user_zoo_dir()``), in
+    the order they are read; the user zoo is left out when it is the shipped one."""
+    shipped = checkpoints_dir()
+    roots = [(SHIPPED, shipped)]
+    user = user_zoo_dir(user_dir)
+    if _resolved(user) != _resolved(shipped):
+        roots.append((USER, user))
+    return roots
+
+
+def zoo_entries(user_dir: str | Path | None = None) -> list[Located]:
+    """Every entry of the shipped zoo, then every entry of the user zoo (including one that takes a shipped
+    name, which never loads: ``verify`` reports it)."""
+    return [
+        Located(source, root, entry)
+        for source, root in zoo_roots(user_dir)
+        for entry in read_manifest(root).values()
+    ]
+
+
+def locate(name: str, user_dir: str | Path | None = None) -> Located | None:
+    """The entry ``name`` loads: the shipped zoo's, else the user zoo's (read only when needed, so that a
+    broken user manifest does not stop the shipped models); None when neither has it."""
+    for source, root in zoo_roots(user_dir):
+        entry = read_manifest(root).get(name)
+        if entry is not None:
+            return Located(source, root, entry)
+    return None
+
+
 def zoo_names(directory: str | Path | None = None) -> list[str]:
+    """The names of the zoo at ``directory``; ``None``: of both zoos."""
     return sorted(read_manifest(directory))
 
 
 def find_entry(name: str, directory: str | Path | None = None) -> ZooEntry:
-    entries = read_manifest(directory)
-    if name not in entries:
-        from predictors.errors import UnknownPredictor
+    """The entry ``name`` of the zoo at ``directory`` (``None``: of both zoos), or UnknownPredictor."""
+    if directory is None:
+        located = locate(name)
+        if located is not None:
+            return located.entry
+    else:
+        entries = read_manifest(directory)
+        if name in entries:
+            return entries[name]
+    from predictors.errors import UnknownPredictor
 
-        raise UnknownPredictor(name, sorted(entries))
-    return entries[name]
+    raise UnknownPredictor(name, zoo_names(directory))
 
 
-def load_zoo(name: str, directory: str | Path | None = None) -> LearnedPredictor:
-    """A zoo entry as a predictor, after checking both files' sha256 against the manifest."""
-    root = checkpoints_dir(directory)
-    entry = find_entry(name, root)
-    weights, config = entry.paths(root, root / MANIFEST_NAME)
+def load_located(located: Located, name: str | None = None) -> LearnedPredictor:
+    """A located entry as a predictor, after checking both files' sha256 against its manifest."""
+    weights, config = located.entry.paths(located.root, located.manifest)
     return load_checkpoint(
         weights,
         config,
-        name=entry.name,
-        expected_sha256=entry.sha256,
-        expected_config_sha256=entry.config_sha256,
+        name=name or located.entry.name,
+        expected_sha256=located.entry.sha256,
+        expected_config_sha256=located.entry.config_sha256,
     )
 
 
+def load_zoo(name: str, directory: str | Path | None = None) -> LearnedPredictor:
+    """Zoo entry ``name`` (of the zoo at ``directory``; ``None``: the shipped zoo, then the user zoo) as a
+    predictor, after checking both files' sha256 against the manifest."""
+    if directory is None:
+        located = locate(name)
+        if located is None:
+            from predictors.errors import UnknownPredictor
+
+            raise UnknownPredictor(name, zoo_names())
+    else:
+        root = Path(directory)
+        located = Located(USER, root, find_entry(name, root))
+    return load_located(located)
+
+
+def shadowed(located: Located) -> bool:
+    """Whether ``located`` is a user entry under a name the shipped zoo has (it never loads)."""
+    return located.source == USER and located.entry.name in read_manifest(checkpoints_dir())
+
+
+def verify_entries(user_dir: str | Path | None = None) -> list[tuple[Located, str | None]]:
+    """``(entry, problem or None)`` for every entry of both zoos: files present, hashes as recorded, weights
+    loadable, no user entry under a shipped name."""
+    results: list[tuple[Located, str | None]] = []
+    for located in zoo_entries(user_dir):
+        if shadowed(located):
+            results.append(
+                (
+                    located,
+                    f"{located.manifest}: a shipped model has this name, so this entry never loads; "
+                    f"remove it (`crowdmpc zoo remove {located.entry.name}`) and add it under another name",
+                )
+            )
+            continue
+        try:
+            load_located(located)
+            results.append((located, None))
+        except PredictorError as exc:
+            results.append((located, str(exc)))
+    return results
+
+
 def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
-    """``(name, problem or None)`` for every entry: files present, hashes as recorded, weights loadable."""
-    root = checkpoints_dir(directory)
+    """``(name, problem or None)`` for every entry of the zoo at ``directory`` (``None``: of both zoos)."""
+    if directory is None:
+        return [(located.entry.name, problem) for located, problem in verify_entries()]
+    root = Path(directory)
     results: list[tuple[str, str | None]] = []
     for name in zoo_names(root):
         try:
@@ -402,10 +591,24 @@ def add_to_zoo(
     metrics: dict,
     training: dict | None = None,
     directory: str | Path | None = None,
+    shipped: bool = False,
 ) -> ZooEntry:
-    """Copy a checkpoint pair into the zoo as ``NAME.pt``/``NAME.json`` and record it in the manifest."""
+    """Copy a checkpoint pair into the user zoo (``directory``, else ``user_zoo_dir()``) as
+    ``NAME.pt``/``NAME.json`` and record it in its manifest.
+
+    The shipped zoo is read-only: a ``directory`` that is (or lies in) it is refused, and so is a ``name`` it
+    has. ``shipped=True`` is the maintainers' way to add a model to the shipped zoo itself (``directory``
+    then defaults to ``checkpoints_dir()``)."""
     check_name(name)  # before anything is written: NAME becomes the files' names
-    root = checkpoints_dir(directory)
+    if shipped:
+        root = checkpoints_dir(directory)
+    else:
+        root = writable_zoo_dir(directory)
+        if name in read_manifest(checkpoints_dir()):
+            raise PredictorError(
+                f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}; "
+                "pick another name"
+            )
     weights = Path(weights)
     config = weights.with_suffix(".json")
     entries = read_manifest(root)  # refuse to add to a manifest that does not read
@@ -438,3 +641,25 @@ def add_to_zoo(
     entries[name] = entry
     write_manifest(entries, root)
     return entry
+
+
+def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
+    """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its manifest entry,
+    then its files (those no other entry names). Returns the entry and the zoo directory."""
+    check_name(name)
+    root = writable_zoo_dir(directory)
+    entries = read_manifest(root)
+    if name not in entries:
+        if directory is None and name in read_manifest(checkpoints_dir()):
+            raise PredictorError(
+                f"{name!r} is a model of the shipped zoo {checkpoints_dir()}, which is read-only"
+            )
+        raise PredictorError(f"the user zoo {root} has no entry {name!r}; it has {sorted(entries)}")
+    entry = entries.pop(name)
+    manifest = root / MANIFEST_NAME
+    files = set(entry.paths(root, manifest))  # inside the zoo: checked when the manifest was read
+    still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
+    write_manifest(entries, root)
+    for path in files - still_used:
+        path.unlink(missing_ok=True)
+    return entry, root

@@ -29,7 +29,12 @@ def register(subparsers) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--predictor", required=True, help="registered predictor or model-zoo name")
+    parser.add_argument(
+        "--predictor",
+        required=True,
+        help="registered predictor or model-zoo name (shipped or user zoo; a plugin's model needs "
+        "crowdmpc --plugin module:NetClass evaluate ...)",
+    )
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
     parser.add_argument(
         "--dataset", default="biwi_eth", choices=("biwi_eth", "biwi_hotel"), help="test sequence"

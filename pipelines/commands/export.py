@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import time
 from pathlib import Path
 
 from pipelines.errors import PipelineError
@@ -48,6 +49,17 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+def _parity(predictor, args: argparse.Namespace):
+    """The exported function against torch at the size written (None for a predictor without a net); a
+    difference beyond the tolerance is an error, and nothing is written."""
+    from predictors.export.parity import require_parity
+    from predictors.learned import LearnedPredictor
+
+    if not isinstance(predictor, LearnedPredictor):
+        return None
+    return require_parity(predictor, args.humans, args.robots, args.horizon)
+
+
 def run(args: argparse.Namespace) -> int:
     from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
     from predictors.registry import load_predictor
@@ -65,14 +77,24 @@ def run(args: argparse.Namespace) -> int:
             f"--out {args.out} is a directory; give the file to write, e.g. {args.name}.casadi"
         )
     predictor = load_predictor(args.name)
+    start = time.perf_counter()
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)
+    seconds = time.perf_counter() - start
+    parity = _parity(predictor, args)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     function.save(str(args.out))
     size = predictor.context_size(args.humans, args.robots)
     print(
         f"wrote {args.out}: {function.name()} for {args.humans} humans, {args.robots} robots, "
-        f"horizon {args.horizon}"
+        f"horizon {args.horizon} (exported in {seconds:.2f} s)"
     )
+    if parity is not None:
+        from predictors.export.parity import PARITY_TOLERANCE
+
+        print(
+            f"  parity with torch (float64): values {parity.value_error:.1e}, Jacobians with respect to the "
+            f"robots' plan {parity.jacobian_error:.1e} (tolerance {PARITY_TOLERANCE:g})"
+        )
     print(f"  input  context        ({size}, 1)  from {args.name}.encode(history, mask, humans)")
     print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")
     print(f"  output humans_future  ({args.horizon * args.humans * 2}, 1)  (H, N_h, 2) row-major")

@@ -26,6 +26,7 @@ EPILOG = """examples:
   crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario perpendicular --humans 5 \\
       --episodes 10 --json runs/cmpc.json --plot runs/cmpc.png --record runs/cmpc
   crowdmpc simulate --controller dmpc --no-flocking --coupling ibr --humans 9 --episodes 50
+  crowdmpc --plugin my_predictor:MyNet simulate --controller cmpc --predictor my_net_eth --humans 7
 
 Episode i uses seed S + i. --plot draws the first episode; --record writes one MCAP file per episode.
 """
@@ -42,7 +43,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--controller", required=True, choices=sorted(CONTROLLERS), help="robot controller")
     parser.add_argument(
-        "--predictor", default="constant_velocity", help="predictor of cmpc/dmpc (default: %(default)s)"
+        "--predictor",
+        default="constant_velocity",
+        help="predictor of cmpc/dmpc: a registered name or a model of the shipped or user zoo "
+        "(default: %(default)s)",
     )
     parser.add_argument(
         "--scenario", default="circle", choices=sorted(SCENARIOS), help="default: %(default)s"

@@ -19,11 +19,14 @@ EPILOG = """examples:
   crowdmpc sweep --experiment table2 --predictor constant_velocity --humans 7 --episodes-per-cell 4 \\
       --out /tmp/sw
   crowdmpc sweep --experiment predictors --episodes-per-cell 100 --record failures --out runs/predictors
+  crowdmpc --plugin my_predictor:MyNet sweep --experiment predictors \\
+      --predictors constant_velocity,social_lstm_eth,my_net_eth --episodes-per-cell 20 --out runs/swap
   crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
-figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle);
+figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle; by
+default the shipped models, --predictors for any list of registered and zoo names, a user zoo's included);
 coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); safety
 (CMPC without margins and with conformal margins at alpha 0.5 .. 0.01, 7 humans); conventions (simulation
 profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check).
@@ -96,6 +99,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+# A swap table of more predictors than this is no table anyone reads; each is a column of every row.
+MAX_SWAP_PREDICTORS = 64
+
+
+def predictor_list(text: str) -> tuple[str, ...]:
+    """An argparse type: ``a,b,c`` -> ("a", "b", "c"), each a well-formed predictor name."""
+    from predictors.zoo import NAME_PATTERN
+
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(
+            f"expected names like constant_velocity,social_lstm_eth, got {text!r}"
+        )
+    if len(names) > MAX_SWAP_PREDICTORS:
+        raise argparse.ArgumentTypeError(f"at most {MAX_SWAP_PREDICTORS} names, got {len(names)}")
+    bad = [name for name in names if NAME_PATTERN.fullmatch(name) is None]
+    if bad:
+        raise argparse.ArgumentTypeError(f"{bad[0][:64]!r} is not a predictor name")
+    return names
+
+
 def _add_method_options(p: argparse.ArgumentParser) -> None:
     """What replaces the experiment's own choices for every method."""
     from crowdsim.profiles import PROFILES, VISIBILITY
@@ -104,6 +128,13 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         "--predictor",
         metavar="NAME",
         help="replace the predictor of every method (table2/table3 default to social_lstm_eth, as the paper)",
+    )
+    p.add_argument(
+        "--predictors",
+        type=predictor_list,
+        metavar="A,B,C",
+        help="the predictors experiment's list, one column each (default: the shipped swap table, with "
+        "social_gru_eth and social_attention_eth when the zoo has them)",
     )
     p.add_argument(
         "--margins",
@@ -159,16 +190,29 @@ def _jit(choice: str) -> bool:
 
 
 def _check_predictors(experiment: Experiment) -> None:
-    """Fail before starting workers, not once per episode in errors.jsonl."""
+    """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
+    in a zoo, and a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit)."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+    from predictors.models import model_kind
     from predictors.registry import available
 
     known = set(available())
-    missing = sorted({spec.predictor for _, spec in experiment.methods} - known)
+    wanted = {spec.predictor for _, spec in experiment.methods}
+    missing = sorted(wanted - known)
     if missing:
+        hint = "--predictors" if experiment.predictor_list else "--predictor"
         raise PipelineError(
             f"experiment {experiment.name!r} needs predictors {missing} that are not available; "
-            f"available: {sorted(known)} (train or fetch the zoo models, or pass --predictor)"
+            f"available: {sorted(known)} (train or fetch the zoo models, or pass {hint})"
         )
+    for name in sorted(wanted):
+        located = zoo.locate(name)
+        if located is not None:
+            try:
+                model_kind(located.entry.model)
+            except PredictorError as exc:
+                raise PipelineError(f"predictor {name!r} of the {located.source} zoo: {exc}") from None
 
 
 def _check_margins(experiment: Experiment) -> None:
@@ -182,11 +226,19 @@ def _check_margins(experiment: Experiment) -> None:
 
 
 def configured_experiment(args: argparse.Namespace) -> Experiment:
-    """The experiment with the command line's --predictor, --margins, --profile and --visibility applied."""
+    """The experiment with the command line's --predictors, --predictor, --margins, --profile and
+    --visibility applied."""
     from pipelines.experiments.cells import World, get_experiment
     from pipelines.loop.margins import parse_margins
 
     experiment = get_experiment(args.experiment)
+    if args.predictors is not None:
+        experiment = experiment.with_predictors(args.predictors)
+    elif experiment.predictor_list:
+        from pipelines.experiments.cells import swap_predictors
+        from predictors.registry import available
+
+        experiment = experiment.with_predictors(swap_predictors(available()))
     if args.predictor:
         experiment = experiment.with_predictor(args.predictor)
     if args.margins:

@@ -1,19 +1,24 @@
-"""``crowdmpc train``: train Social-LSTM, the vanilla LSTM or the Social-GAN-like model with Lightning."""
+"""``crowdmpc train``: train a predictor net of any registered model kind (``predictors.models``: Social-LSTM,
+the vanilla LSTM, the Social-GAN-like model, Social-GRU, social attention, entry points, plugins) with
+Lightning."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import re
 import time
 from pathlib import Path
 from typing import Any
 
 from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
+from predictors.errors import PredictorError
 
-MODELS = ("social_lstm", "vanilla_lstm", "social_gan")
 DATASET_SUFFIX = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
+# --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
+MAX_NET_CONFIG_CHARS = 65_536
 
 EPILOG = """examples:
   crowdmpc train --model social_lstm --data-dir ../shared/data --epochs 25
@@ -21,29 +26,49 @@ EPILOG = """examples:
   crowdmpc train --model social_lstm --data-dir ../shared/data --out runs/train/sl --resume
   crowdmpc train --model social_lstm --train synth/train.ndjson --val synth/val.ndjson \\
       --test synth/test.ndjson --name social_lstm_synth
+  crowdmpc train --model social_attention --net-config '{"heads": 2}' --data-dir ../shared/data
+  crowdmpc --plugin my_predictor:MyNet train --model my_predictor:MyNet --data-dir ../shared/data
+
+--model takes every registered model kind: the shipped ones, installed entry points (group
+"crowdmpc.predictors") and plugins (crowdmpc --plugin module:NetClass, or $CROWDMPC_PLUGINS). --net-config
+sets hyper-parameters of the kind's config (a JSON object; unknown keys and bad values are refused);
+--pooling and --hidden-dim are short for two of them, for the kinds whose config has them.
 
 Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for --resume), csv/ and
 tensorboard/ logs, and at the end NAME.pt + NAME.json (state_dict + config) with NAME.metrics.json (TrajNet++
-val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair into the model zoo.
+val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair into the user zoo.
 """
 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "train",
-        help="train a learned predictor (Social-LSTM, vanilla LSTM, Social-GAN-like)",
+        help="train a learned predictor (Social-LSTM, Social-GRU, attention, ..., or a plugin's net)",
         description="Train a predictor on TrajNet++ scenes with Lightning: progress bar, CSV and TensorBoard "
         "logs, best checkpoint on validation ADE, resumable, seeded.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--model", required=True, choices=MODELS)
+    parser.add_argument(
+        "--model",
+        required=True,
+        type=model_name,
+        metavar="KIND",
+        help="model kind: social_lstm, vanilla_lstm, social_gan, social_gru, social_attention, an entry "
+        "point's name, or a plugin's module:NetClass",
+    )
     parser.add_argument(
         "--pooling",
-        choices=("grid", "soft"),
         default=None,
         help="social pooling: grid (hard, TrajNet++) or soft (bilinear, differentiable); "
-        "default grid for social_lstm, soft for social_gan; not for vanilla_lstm",
+        "default grid for social_lstm, soft for social_gan and social_gru; not for vanilla_lstm, and only "
+        "for kinds whose config has a pooling",
+    )
+    parser.add_argument(
+        "--net-config",
+        default=None,
+        metavar="JSON",
+        help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'",
     )
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
     parser.add_argument("--protocol", default="paper", choices=("paper", "loo"), help="train/val/test files")
@@ -67,7 +92,9 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--loss", choices=("gaussian", "l2"), default="gaussian", help="(LSTMs) default gaussian"
     )
-    parser.add_argument("--hidden-dim", type=int, default=None, help="LSTM hidden size (default 32)")
+    parser.add_argument(
+        "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
+    )
     parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
     parser.add_argument("--out", type=Path, default=None, help="run directory (default runs/train/NAME)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
@@ -76,11 +103,26 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def default_name(model: str, pooling: str, dataset: str, explicit_files: bool) -> str:
+def model_name(text: str) -> str:
+    """An argparse type: a registered model kind (plugins given before the command are registered by then)."""
+    from predictors.models import model_kind
+
+    try:
+        return model_kind(text).name
+    except PredictorError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def default_name(model: str, pooling: str | None, dataset: str, explicit_files: bool) -> str:
+    """``social_lstm_soft_eth`` and the like; a plugin's ``module:MyNet`` gives ``my_net_eth``."""
     suffix = "custom" if explicit_files else DATASET_SUFFIX[dataset]
     variant = "_soft" if model == "social_lstm" and pooling == "soft" else ""
     variant = "_grid" if model == "social_gan" and pooling == "grid" else variant
-    return f"{model}{variant}_{suffix}"
+    stem = model.rpartition(":")[2]
+    if stem != model:  # a class name: MyNet -> my_net
+        stem = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", stem).lower()
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", stem).lstrip("_.-") or "model"
+    return f"{stem[:48]}{variant}_{suffix}"
 
 
 def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
@@ -124,19 +166,51 @@ def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) 
     return record
 
 
-def _net_config(args: argparse.Namespace) -> tuple[str, Any]:
-    """The pooling and the network config the command line asks for."""
-    from predictors.nets.social_gan import generator_config
-    from predictors.nets.social_lstm import SocialLSTMConfig
+def _net_config(args: argparse.Namespace) -> tuple[str | None, Any]:
+    """The pooling (None: the kind has none) and the network config the command line asks for."""
+    from predictors.models import model_kind
 
-    if args.model == "vanilla_lstm" and args.pooling is not None:
-        raise PipelineError("--pooling does not apply to vanilla_lstm (it has no social pooling)")
-    pooling = {"vanilla_lstm": "none", "social_lstm": "grid", "social_gan": "soft"}[args.model]
-    pooling = args.pooling or pooling
-    sizes = {} if args.hidden_dim is None else {"hidden_dim": args.hidden_dim}
-    if args.model == "social_gan":
-        return pooling, generator_config(pooling=pooling, **sizes)
-    return pooling, SocialLSTMConfig(pooling=pooling, **sizes)
+    kind = model_kind(args.model)
+    overrides: dict[str, Any] = {}
+    if args.net_config is not None:
+        overrides = _parse_net_config(args.net_config)
+    for option, key, value in (
+        ("--pooling", "pooling", args.pooling),
+        ("--hidden-dim", "hidden_dim", args.hidden_dim),
+    ):
+        if value is None:
+            continue
+        if not kind.has_field(key) or (key == "pooling" and kind.defaults.get("pooling") == "none"):
+            why = "it has no social pooling" if key == "pooling" else f"its config has no {key}"
+            raise PipelineError(f"{option} does not apply to {args.model} ({why})")
+        if key in overrides:
+            raise PipelineError(f"{option} and --net-config both set {key}; give it once")
+        overrides[key] = value
+    try:
+        config = kind.config(overrides)
+    except PredictorError as exc:
+        source = "--net-config" if args.net_config is not None else "the options"
+        raise PipelineError(f"{source}: {args.model}: {exc}") from None
+    pooling = getattr(config, "pooling", None)
+    return (pooling if isinstance(pooling, str) else None), config
+
+
+def _parse_net_config(text: str) -> dict[str, Any]:
+    if len(text) > MAX_NET_CONFIG_CHARS:
+        raise PipelineError(
+            f"--net-config: {len(text)} characters, more than the {MAX_NET_CONFIG_CHARS} allowed"
+        )
+    try:
+        values = json.loads(text)
+    except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
+        raise PipelineError(f"--net-config: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise PipelineError("--net-config: not valid JSON (nested too deeply)") from None
+    if not isinstance(values, dict):
+        raise PipelineError(
+            f"--net-config must be a JSON object like '{{\"hidden_dim\": 64}}', got {text[:60]!r}"
+        )
+    return values
 
 
 def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any]:
@@ -186,10 +260,13 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from predictors.zoo import check_name
+
     _check_numbers(args)
     pooling, net_config = _net_config(args)
     explicit = args.train is not None or args.val is not None
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
+    check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
     check_writable(out, "--out", directory=True)
     ckpt_dir = out / "checkpoints"
@@ -226,6 +303,7 @@ def _train(
 
     from predictors.base import OBS_LEN
     from predictors.data.datamodule import TrajnetDataModule
+    from predictors.models import model_kind
     from predictors.training import OptimConfig, make_module
     from predictors.zoo import load_checkpoint, save_checkpoint
 
@@ -264,7 +342,7 @@ def _train(
     weights, _ = save_checkpoint(
         module.net, model=args.model, name=name, out_dir=out, obs_len=OBS_LEN, extra=extra
     )
-    top_k = 20 if args.model == "social_gan" else None
+    top_k = 20 if model_kind(args.model).adversarial else None
     metrics = _evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
     epoch_times = epoch_times_from_csv(trainer.loggers[0].log_dir)
     summary = {
@@ -308,6 +386,13 @@ def _evaluate_splits(
     return metrics
 
 
+def _plugin_option(model: str) -> str:
+    """``--plugin MODEL `` when ``model`` is a plugin's kind (later commands must register it too)."""
+    from predictors.models import model_kind
+
+    return f"--plugin {model} " if model_kind(model).source == "plugin" else ""
+
+
 def _print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int | None) -> None:
     print(f"{summary['name']}: best {best}; weights {weights} (+ .json)")
     for split, m in summary["metrics"].items():
@@ -317,7 +402,7 @@ def _print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int
         print(line)
     print(
         f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
-        f"`crowdmpc zoo add {weights}`"
+        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {weights}`"
     )
 
 

@@ -1,4 +1,4 @@
-"""``crowdmpc zoo``: list, show, verify and add trained predictors (``checkpoints/manifest.json``)."""
+"""``crowdmpc zoo``: list, show, verify, add and remove trained predictors of the shipped and user zoos."""
 
 from __future__ import annotations
 
@@ -12,29 +12,36 @@ EPILOG = """examples:
   crowdmpc zoo list
   crowdmpc zoo show social_lstm_eth
   crowdmpc zoo verify
-  crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt
+  crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt --name my_social_lstm
+  crowdmpc --plugin my_predictor:MyNet zoo add runs/train/mynet_eth/mynet_eth.pt
+  crowdmpc zoo remove my_social_lstm
 
-The zoo lives in checkpoints/ (or $CROWDMPC_CHECKPOINTS): NAME.pt (state_dict) + NAME.json (config) per
-model, and manifest.json with their sha256, training data and metrics. A file whose sha256 differs from the
-manifest is refused when loaded; `verify` checks every entry.
+Two zoos, each NAME.pt (state_dict) + NAME.json (config) per model and a manifest.json with their sha256,
+training data and metrics: the shipped zoo, checkpoints/ (or $CROWDMPC_CHECKPOINTS), read-only; and the user
+zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo, else ~/.local/share/crowdmpc/zoo, or --dir), where
+`add` writes and `remove` deletes. A user model may not take a shipped model's name. A file whose sha256
+differs from its manifest is refused when loaded; `verify` checks every entry of both zoos. A model of a
+plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...).
 """
 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "zoo",
-        help="the model zoo of trained predictors",
-        description="List, show, verify and add trained predictors of the model zoo.",
+        help="the model zoos of trained predictors (shipped, and your own)",
+        description="List, show, verify, add and remove trained predictors of the model zoos.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--dir", type=Path, default=None, help="zoo directory (default checkpoints/)")
+    parser.add_argument(
+        "--dir", type=Path, default=None, help="the user zoo directory (default $CROWDMPC_ZOO, see below)"
+    )
     actions = parser.add_subparsers(dest="zoo_command", metavar="ACTION", required=True)
-    actions.add_parser("list", help="one line per model with its metrics")
+    actions.add_parser("list", help="one line per model of both zoos with its metrics")
     show = actions.add_parser("show", help="the manifest entry of one model")
     show.add_argument("name")
-    actions.add_parser("verify", help="check every entry's files against the manifest (exit 1 on a problem)")
-    add = actions.add_parser("add", help="copy a trained checkpoint pair into the zoo")
+    actions.add_parser("verify", help="check every entry's files against its manifest (exit 1 on a problem)")
+    add = actions.add_parser("add", help="copy a trained checkpoint pair into the user zoo")
     add.add_argument("weights", type=Path, help="NAME.pt written by `crowdmpc train` (beside NAME.json)")
     add.add_argument("--name", default=None, help="zoo name (default: the checkpoint's own name)")
     add.add_argument(
@@ -46,6 +53,13 @@ def register(subparsers) -> None:
         default=None,
         help="metrics JSON (default NAME.metrics.json beside the weights)",
     )
+    add.add_argument(
+        "--shipped",
+        action="store_true",
+        help="maintainers: add to the shipped zoo (checkpoints/, tracked in git) instead of the user zoo",
+    )
+    remove = actions.add_parser("remove", help="remove a model (and its files) from the user zoo")
+    remove.add_argument("name")
     parser.set_defaults(func=run)
 
 
@@ -58,7 +72,23 @@ def _metric(metrics: dict, split: str, key: str) -> str:
     return "?" if isinstance(value, bool) or not isinstance(value, int | float) else f"{value:.3f}"
 
 
-def format_list(entries, root: Path) -> str:
+def _pooling(located) -> str:
+    """The net's pooling as a table cell: "-" for a kind without one, "?" for a config that does not read."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+
+    try:
+        _, config = located.entry.paths(located.root, located.manifest)
+        net = zoo.read_document(config, zoo.CONFIG_FORMAT, "crowdmpc predictor config").get("net")
+    except (OSError, PredictorError):
+        return "?"
+    if not isinstance(net, dict):
+        return "?"
+    pooling = net.get("pooling", "-")
+    return pooling if isinstance(pooling, str) and len(pooling) <= 16 else "?"
+
+
+def format_list(located_entries) -> str:
     header = [
         "name",
         "class",
@@ -71,23 +101,21 @@ def format_list(entries, root: Path) -> str:
         "test FDE",
         "top-20 ADE/FDE",
         "kB",
+        "zoo",
     ]
     rows = []
-    for entry in entries:
+    for located in located_entries:
+        entry = located.entry
         m = entry.metrics
         topk = "-"
         if _metric(m, "test", "topk_ade") != "-":
             topk = f"{_metric(m, 'test', 'topk_ade')}/{_metric(m, 'test', 'topk_fde')}"
-        try:
-            pooling = json.loads((root / entry.config).read_text())["net"]["pooling"]
-        except (OSError, KeyError, TypeError, json.JSONDecodeError):
-            pooling = "?"
         rows.append(
             [
                 entry.name,
                 entry.cls,
                 entry.model,
-                pooling,
+                _pooling(located),
                 entry.protocol,
                 _metric(m, "val", "ade"),
                 _metric(m, "val", "fde"),
@@ -95,6 +123,7 @@ def format_list(entries, root: Path) -> str:
                 _metric(m, "test", "fde"),
                 topk,
                 entry.training.get("size_kb", "-"),
+                located.source,
             ]
         )
     rows = [[str(c) for c in r] for r in rows]
@@ -107,57 +136,82 @@ def format_list(entries, root: Path) -> str:
 def run(args: argparse.Namespace) -> int:
     from predictors import zoo
 
-    root = zoo.checkpoints_dir(args.dir)
     if args.zoo_command == "list":
-        entries = list(zoo.read_manifest(root).values())
+        entries = zoo.zoo_entries(args.dir)
         if not entries:
-            print(f"the zoo in {root} is empty")
+            roots = " and ".join(f"the {source} zoo {root}" for source, root in zoo.zoo_roots(args.dir))
+            print(f"no models in {roots}")
             return 0
-        print(format_list(entries, root))
+        print(format_list(entries))
         print("ADE/FDE in metres, TrajNet++ metrics of the primary pedestrian (9 -> 12 steps)")
         return 0
     if args.zoo_command == "show":
-        entry = zoo.find_entry(args.name, root)
-        print(json.dumps(entry.to_json(), indent=2))
+        located = zoo.locate(args.name, args.dir)
+        if located is None:
+            from predictors.errors import UnknownPredictor
+
+            raise UnknownPredictor(args.name, sorted({e.entry.name for e in zoo.zoo_entries(args.dir)}))
+        print(json.dumps({**located.entry.to_json(), "zoo": located.source}, indent=2))
         return 0
     if args.zoo_command == "verify":
-        results = zoo.verify(root)
-        for name, problem in results:
-            print(f"{name}: {'ok' if problem is None else problem}")
+        results = zoo.verify_entries(args.dir)
+        for located, problem in results:
+            label = located.entry.name if located.source == zoo.SHIPPED else f"{located.entry.name} (user)"
+            print(f"{label}: {'ok' if problem is None else problem}")
         bad = sum(problem is not None for _, problem in results)
         print(f"{len(results) - bad} of {len(results)} entries ok")
         return 1 if bad else 0
     if args.zoo_command == "add":
-        metrics_path = args.metrics or args.weights.with_suffix(".metrics.json")
-        if not metrics_path.is_file():
-            raise PipelineError(
-                f"{metrics_path} does not exist; pass --metrics FILE (written by `crowdmpc train`)"
-            )
-        try:
-            summary = json.loads(metrics_path.read_text())
-        except json.JSONDecodeError as exc:
-            raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
-        if not isinstance(summary, dict):
-            raise PipelineError(f"{metrics_path}: expected the JSON object `crowdmpc train` writes")
-        for key in ("training", "training_data", "metrics"):
-            if not isinstance(summary.get(key, {}), dict):
-                raise PipelineError(f'{metrics_path}: "{key}" must be a JSON object')
-        name = args.name if args.name is not None else summary.get("name") or args.weights.stem
-        # add_to_zoo checks the name before it writes anything
-        training = dict(summary.get("training", {}))
-        training_data = dict(summary.get("training_data", {}))
-        if args.protocol:
-            training_data["protocol"] = args.protocol
-        training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
-        entry = zoo.add_to_zoo(
-            args.weights,
-            name=name,
-            protocol=args.protocol or summary.get("protocol", "custom"),
-            training_data=training_data,
-            metrics=summary.get("metrics", {}),
-            training=training,
-            directory=root,
-        )
-        print(f"added {entry.name} ({entry.file}, sha256 {entry.sha256[:12]}…) to {root}")
+        return _add(args)
+    if args.zoo_command == "remove":
+        entry, root = zoo.remove_from_zoo(args.name, args.dir)
+        print(f"removed {entry.name} from the user zoo {root}")
         return 0
     raise PipelineError(f"unknown zoo action {args.zoo_command!r}")
+
+
+def _add(args: argparse.Namespace) -> int:
+    from predictors import zoo
+
+    if args.shipped and args.dir is not None:
+        raise PipelineError("--shipped adds to the shipped zoo; it does not go with --dir")
+    # before anything is read: the user zoo, never the shipped one unless a maintainer says --shipped
+    root = zoo.checkpoints_dir() if args.shipped else zoo.writable_zoo_dir(args.dir)
+    metrics_path = args.metrics or args.weights.with_suffix(".metrics.json")
+    if not metrics_path.is_file():
+        raise PipelineError(
+            f"{metrics_path} does not exist; pass --metrics FILE (written by `crowdmpc train`)"
+        )
+    if metrics_path.stat().st_size > zoo.MAX_DOCUMENT_BYTES:
+        raise PipelineError(
+            f"{metrics_path}: more than the {zoo.MAX_DOCUMENT_BYTES} bytes a metrics file may have"
+        )
+    try:
+        summary = json.loads(metrics_path.read_text())
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, not UTF-8, nested too deeply
+        raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
+    if not isinstance(summary, dict):
+        raise PipelineError(f"{metrics_path}: expected the JSON object `crowdmpc train` writes")
+    for key in ("training", "training_data", "metrics"):
+        if not isinstance(summary.get(key, {}), dict):
+            raise PipelineError(f'{metrics_path}: "{key}" must be a JSON object')
+    name = args.name if args.name is not None else summary.get("name") or args.weights.stem
+    # add_to_zoo checks the name before it writes anything
+    training = dict(summary.get("training", {}))
+    training_data = dict(summary.get("training_data", {}))
+    if args.protocol:
+        training_data["protocol"] = args.protocol
+    training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
+    entry = zoo.add_to_zoo(
+        args.weights,
+        name=name,
+        protocol=args.protocol or summary.get("protocol", "custom"),
+        training_data=training_data,
+        metrics=summary.get("metrics", {}),
+        training=training,
+        directory=None if args.shipped else root,
+        shipped=args.shipped,
+    )
+    which = "shipped" if args.shipped else "user"
+    print(f"added {entry.name} ({entry.file}, sha256 {entry.sha256[:12]}…) to the {which} zoo {root}")
+    return 0

@@ -12,7 +12,7 @@ any prefix of a cell is half circle and half perpendicular crossing, as the pape
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Final
@@ -183,6 +183,9 @@ class Experiment:
     method_worlds: Mapping[str, World] = field(default_factory=lambda: MappingProxyType({}))
     # False when the methods' margins are part of the comparison (safety, conventions): no `--margins`.
     margins_swappable: bool = True
+    # True when the methods are one per predictor, labelled by its name (the swap table): `--predictors`
+    # replaces the list.
+    predictor_list: bool = False
 
     def __post_init__(self):
         labels = [label for label, _ in self.methods]
@@ -203,6 +206,28 @@ class Experiment:
                 f"{sorted(n for n, e in EXPERIMENTS.items() if e.predictor_swappable)}"
             )
         methods = tuple((label, replace(spec, predictor=predictor)) for label, spec in self.methods)
+        return replace(self, methods=methods)
+
+    def with_predictors(self, predictors: Sequence[str]) -> Experiment:
+        """The swap table over ``predictors`` (one method each, labelled by its name, in this order), every
+        method as the experiment's first (controller, margins ...) but for its predictor."""
+        if not self.predictor_list:
+            raise PipelineError(
+                f"--predictors applies only to the experiments "
+                f"{sorted(n for n, e in EXPERIMENTS.items() if e.predictor_list)}, not {self.name!r}"
+                + (
+                    " (use --predictor to replace every method's predictor)"
+                    if self.predictor_swappable
+                    else ""
+                )
+            )
+        if not predictors:
+            raise PipelineError(f"experiment {self.name!r} needs at least one predictor")
+        repeated = sorted({name for name in predictors if list(predictors).count(name) > 1})
+        if repeated:
+            raise PipelineError(f"--predictors names {repeated} more than once")
+        template = self.methods[0][1]
+        methods = tuple((name, replace(template, predictor=name)) for name in predictors)
         return replace(self, methods=methods)
 
     def with_margins(self, margins: MarginSpec) -> Experiment:
@@ -257,16 +282,28 @@ class Experiment:
 PAPER_PREDICTOR: Final[str] = "social_lstm_eth"
 # The coupled NLP needs a useful gradient of the prediction with respect to the robots' plan: soft pooling.
 COUPLING_PREDICTOR: Final[str] = "social_lstm_soft_eth"
-# The predictor-swap ablation: every zoo model the predictors issue trains, the baseline, and the oracle.
+# The predictor-swap ablation: every zoo model the predictors issues train, the baseline, and the oracle.
+# `crowdmpc sweep --experiment predictors --predictors a,b,c` swaps any others (a user zoo's, a plugin's).
 SWAP_PREDICTORS: Final[tuple[str, ...]] = (
     "constant_velocity",
     "vanilla_lstm_eth",
     "social_lstm_eth",
     "social_lstm_soft_eth",
     "social_gan_eth",
+    "social_gru_eth",
+    "social_attention_eth",
     "social_lstm_synth",
     "orca_oracle",  # the upper bound: the humans' own ORCA (predictors/oracle.py)
 )
+# Models of the swap table that came after the first zoo (issue 13): in the default list once a zoo has them.
+LATER_SWAP_PREDICTORS: Final[frozenset[str]] = frozenset({"social_gru_eth", "social_attention_eth"})
+
+
+def swap_predictors(available: Collection[str] = ()) -> tuple[str, ...]:
+    """The default swap table: ``SWAP_PREDICTORS``, less the later models not in ``available``."""
+    return tuple(name for name in SWAP_PREDICTORS if name not in LATER_SWAP_PREDICTORS or name in available)
+
+
 ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)  # the middle of the paper's range
 
 
@@ -329,9 +366,10 @@ EXPERIMENTS: dict[str, Experiment] = {
     "predictors": Experiment(
         name="predictors",
         title="Predictor swap: CMPC with each predictor (ORCA ground truth as an oracle)",
-        methods=tuple((name, ControllerSpec("cmpc", name)) for name in SWAP_PREDICTORS),
+        methods=tuple((name, ControllerSpec("cmpc", name)) for name in swap_predictors()),
         humans=ABLATION_HUMANS,
         predictor_swappable=False,
+        predictor_list=True,
     ),
     "coupling": Experiment(
         name="coupling",

@@ -662,7 +662,7 @@ def _register() -> None:
         for owner in (torch, torch.Tensor):
             if hasattr(owner, name):
                 HANDLERS[getattr(owner, name)] = op
-    dunder = {
+    dunder: dict[str, Callable[..., Any]] = {
         "__add__": add,
         "__radd__": lambda a, b: add(b, a),
         "__sub__": sub,

@@ -5,16 +5,31 @@ respect to the robots' plan, in float64 (``PARITY_TOLERANCE``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import Any, Final, Protocol
 
 import casadi as ca
 import numpy as np
 import torch
 
 from predictors.export.errors import ExportError
+from predictors.threads import single_threaded
 
-if TYPE_CHECKING:
-    from predictors.learned import LearnedPredictor
+
+class Exported(Protocol):
+    """What the check needs of a predictor (``predictors.learned.LearnedPredictor`` has it all); a protocol
+    and not that class, because the class calls this module on its first export."""
+
+    name: str
+    obs_len: int
+
+    def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> Any: ...
+
+    def encode(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> np.ndarray: ...
+
+    def rollout_tensor(
+        self, history: np.ndarray, mask: np.ndarray, robots_future: Any, humans: np.ndarray
+    ) -> torch.Tensor: ...
+
 
 PARITY_TOLERANCE: Final[float] = 1e-6
 
@@ -50,9 +65,7 @@ def crossing_scene(
     return history, np.ones((obs_len, n), dtype=bool), np.arange(n_humans), future
 
 
-def check_parity(
-    predictor: LearnedPredictor, n_humans: int, n_robots: int, horizon: int, seed: int = 0
-) -> Parity:
+def check_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: int, seed: int = 0) -> Parity:
     """``to_casadi``'s function against ``rollout_tensor`` on ``crossing_scene``."""
     history, mask, humans, future = crossing_scene(n_humans, n_robots, horizon, predictor.obs_len, seed)
     function = predictor.to_casadi(n_humans, n_robots, horizon)
@@ -66,17 +79,20 @@ def check_parity(
         return predictor.rollout_tensor(history, mask, plan_t.reshape(future.shape), humans).reshape(-1)
 
     plan_t = torch.from_numpy(future.ravel().copy())
-    torch_value = rollout(plan_t).detach().numpy()
-    torch_jac = (
-        torch.autograd.functional.jacobian(rollout, plan_t).numpy() if future.size else np.zeros((0, 0))
-    )
+    with single_threaded():  # one backward pass per output: torch's thread pool only spins on these sizes
+        torch_value = rollout(plan_t).detach().numpy()
+        torch_jac = (
+            torch.autograd.functional.jacobian(rollout, plan_t, vectorize=True).numpy()
+            if future.size
+            else np.zeros((0, 0))
+        )
     return Parity(
         value_error=float(np.abs(value.ravel() - torch_value).max(initial=0.0)),
         jacobian_error=float(np.abs(jac.reshape(torch_jac.shape) - torch_jac).max(initial=0.0)),
     )
 
 
-def require_parity(predictor: LearnedPredictor, n_humans: int, n_robots: int, horizon: int) -> Parity:
+def require_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: int) -> Parity:
     """``check_parity``, or ExportError when it exceeds ``PARITY_TOLERANCE``."""
     parity = check_parity(predictor, n_humans, n_robots, horizon)
     if not parity.ok():

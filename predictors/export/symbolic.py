@@ -177,8 +177,9 @@ def op_name(func: Any) -> str:
     qualname = getattr(func, "__qualname__", None) or getattr(func, "__name__", None) or repr(func)
     if module.startswith("torch._C") or module in ("", "builtins"):
         module = "torch"
-    if qualname.startswith("TensorBase."):
-        qualname = "Tensor." + qualname.removeprefix("TensorBase.")
+    for prefix, public in (("TensorBase.", "Tensor."), ("_VariableFunctionsClass.", ""), ("_nn.", "")):
+        if qualname.startswith(prefix):
+            qualname = public + qualname.removeprefix(prefix)
     return f"{module}.{qualname}" if not qualname.startswith(module) else qualname
 
 

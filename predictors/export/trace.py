@@ -150,7 +150,7 @@ def export_function(
     output_names: Sequence[str],
     name: str,
     *,
-    symbol: type = ca.MX,
+    symbol: Any = ca.MX,
 ) -> ca.Function:
     """``method(*inputs)`` as a CasADi function of the inputs' row-major flat vectors.
 

@@ -1,4 +1,4 @@
-"""What a network must offer to be a crowdmpc predictor: the step contract every net (shipped or a plugin) keeps.
+"""The step contract every predictor net keeps, shipped or plugin: what a network must offer to crowdmpc.
 
 A predictor net is a ``torch.nn.Module`` that predicts one step at a time for every agent (Eq. (1)), with a
 state it carries between steps (an LSTM's ``(h, c)``, a GRU's ``h``, a window of positions: any tensors):

@@ -10,14 +10,14 @@ import pytest
 
 from pipelines.cli import main
 from predictors.registry import available, load_predictor
-from predictors.zoo import checkpoints_dir
+from predictors.zoo import user_zoo_dir
 from tests.predictors.samples import write_walk_file
 
 
 @pytest.fixture(autouse=True)
 def _private_dirs(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
-    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path_factory.mktemp("zoo")))
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path_factory.mktemp("shipped")))  # an empty one
 
 
 @pytest.fixture
@@ -54,7 +54,8 @@ def trained(tmp_path):
 def test_train_writes_checkpoint_pair_logs_and_metrics(trained):
     out, _ = trained
     config = json.loads((out / "walker.json").read_text())
-    assert config["class"] == "SocialLSTMPredictor" and config["net"]["pooling"] == "soft"
+    assert config["model"] == "social_lstm" and config["net"]["pooling"] == "soft"
+    assert config["class"] == "LearnedPredictor"  # informational: the model kind decides
     summary = json.loads((out / "walker.metrics.json").read_text())
     assert set(summary["metrics"]) == {"val", "test"} and summary["metrics"]["test"]["scenes"] == 2
     assert summary["training_data"]["files"]["train"] == summary["training_data"]["files"]["val"]
@@ -90,11 +91,11 @@ def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, cap
     capsys.readouterr()
     assert main(["zoo", "list"]) == 0
     listing = capsys.readouterr().out
-    assert "walker" in listing and "SocialLSTMPredictor" in listing
+    assert "walker" in listing and "social_lstm" in listing
     assert main(["zoo", "show", "walker"]) == 0
     assert json.loads(capsys.readouterr().out)["training_data"]["sha256"]
     assert main(["zoo", "verify"]) == 0
-    assert "1 of 1 entries ok" in capsys.readouterr().out
+    assert "walker (user): ok\n1 of 1 entries ok" in capsys.readouterr().out
 
     casadi_file = tmp_path / "walker.casadi"
     assert (
@@ -128,7 +129,7 @@ def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, cap
         atol=1e-6,
     )
 
-    zoo_dir = checkpoints_dir()
+    zoo_dir = user_zoo_dir()
     data = bytearray((zoo_dir / "walker.pt").read_bytes())
     data[-10] ^= 0x01
     (zoo_dir / "walker.pt").write_bytes(bytes(data))

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from tests.predictors.handwritten import layers as cl
 from predictors.nets.pooling import cell_weights
+from tests.predictors.handwritten import layers as cl
 
 
 def numpy_params(module: torch.nn.Module) -> dict[str, np.ndarray]:

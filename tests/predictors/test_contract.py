@@ -1,8 +1,10 @@
-"""ONE contract test over every predictor: each registered name, each zoo entry, and an untrained instance
-of every learned model (so the contract holds even before a zoo exists). A new predictor inherits it all.
+"""ONE contract test over every predictor: each registered name, each shipped zoo entry, and an untrained net
+of every registered model kind (``predictors.models``: the shipped kinds, and the test plugin
+``tests.plugins.toy_predictor:ToyNet``, so a user's predictor is held to the same contract), so the contract
+holds even before a zoo exists. A new predictor, or a new kind, inherits it all.
 
 Checks: shapes and finiteness (with and without a robot plan, robots first as in closed loop and
-interleaved), torch rollout vs the CasADi twin (values <= 1e-6 in float64), the Jacobian of the humans'
+interleaved), torch rollout vs the CasADi function (values <= 1e-6 in float64), the Jacobian of the humans'
 prediction with respect to the robot plan (CasADi vs torch autograd, or central differences for predictors
 without torch), the CasADi function's save/load round trip (the export path), the checkpoint round trip, and
 refusal of a checkpoint whose sha256 differs from the manifest.
@@ -10,45 +12,58 @@ refusal of a checkpoint whose sha256 differs from the manifest.
 
 from __future__ import annotations
 
+import json
+
 import casadi as ca
 import numpy as np
 import pytest
 import torch
 
-from predictors.base import Predictor
+from predictors.base import OBS_LEN, Predictor
 from predictors.errors import CheckpointMismatch
-from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor
-from predictors.nets.social_gan import generator_config
-from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.learned import LearnedPredictor
+from predictors.models import load_plugin, model_kind, model_kinds
 from predictors.oracle import ORACLE_PREDICTOR
 from predictors.registry import PREDICTORS, load_predictor
-from predictors.zoo import add_to_zoo, load_checkpoint, load_zoo, save_checkpoint, zoo_names
+from predictors.zoo import add_to_zoo, checkpoints_dir, load_checkpoint, load_zoo, save_checkpoint, zoo_names
 
 HORIZON = 4
 TOL = 1e-6
+TOY = "tests.plugins.toy_predictor:ToyNet"
+
+load_plugin(TOY)  # registered before the kinds are listed: the contract covers plugins
+
+# Every kind with its own config, and the variants the MPC relies on (soft pooling: the coupled NLP).
+UNTRAINED = [(name, {}) for name in sorted(model_kinds())] + [("social_lstm", {"pooling": "soft"})]
 
 
-def _untrained(kind: str) -> LearnedPredictor:
+def _untrained(kind_name: str, overrides: dict) -> LearnedPredictor:
     torch.manual_seed(7)
-    if kind == "social_gan":
-        return SocialGANPredictor(SocialLSTM(generator_config(pooling="soft")), name=kind)
-    pooling = {"vanilla_lstm": "none", "social_lstm_grid": "grid", "social_lstm_soft": "soft"}[kind]
-    return SocialLSTMPredictor(SocialLSTM(SocialLSTMConfig(pooling=pooling)), name=kind)
+    kind = model_kind(kind_name)
+    return kind.predictor(
+        kind.build_net(kind.config(overrides)), name=f"untrained_{kind_name}", obs_len=OBS_LEN
+    )
 
 
-UNTRAINED = ["vanilla_lstm", "social_lstm_grid", "social_lstm_soft", "social_gan"]
+def _label(kind_name: str, overrides: dict) -> str:
+    return kind_name + (json.dumps(overrides, separators=(",", ":")) if overrides else "")
+
+
 CASES = (
     # the ORCA oracle reads the simulator and has no CasADi twin: tests/pipelines/test_oracle.py
-    [("registry", name) for name in sorted(PREDICTORS) if name != ORACLE_PREDICTOR]
-    + [("zoo", name) for name in zoo_names()]
-    + [("untrained", kind) for kind in UNTRAINED]
+    [("registry", name, {}) for name in sorted(PREDICTORS) if name != ORACLE_PREDICTOR]
+    # the shipped zoo only: collection must not read a user's zoo (tests get an empty one of their own)
+    + [("zoo", name, {}) for name in zoo_names(checkpoints_dir())]
+    + [("untrained", name, overrides) for name, overrides in UNTRAINED]
 )
 
 
-@pytest.fixture(params=CASES, ids=[f"{source}:{name}" for source, name in CASES])
+@pytest.fixture(params=CASES, ids=[f"{source}:{_label(name, o)}" for source, name, o in CASES])
 def predictor(request) -> Predictor:
-    source, name = request.param
-    return _untrained(name) if source == "untrained" else load_predictor(name)
+    source, name, overrides = request.param
+    if source == "untrained":
+        return _untrained(name, overrides)
+    return load_zoo(name, checkpoints_dir()) if source == "zoo" else load_predictor(name)
 
 
 def crossing_scene(robots_first: bool = True):
@@ -116,7 +131,7 @@ def test_rollout_casadi_values_and_jacobians(predictor, robots_first):
     else:
         jac_reference = finite_difference_jacobian(predictor, history, mask, robots_future, humans)
     np.testing.assert_allclose(jac_casadi, jac_reference, rtol=0, atol=TOL)
-    if isinstance(predictor, LearnedPredictor) and predictor.config.pooling == "soft":
+    if isinstance(predictor, LearnedPredictor) and getattr(predictor.config, "pooling", None) == "soft":
         # the differentiable pooling is what couples the humans to the plan inside the NLP
         assert np.abs(jac_casadi).max() > 1e-6
 
@@ -150,12 +165,15 @@ def test_checkpoint_round_trip_and_hash_refusal(predictor, tmp_path):
     if not isinstance(predictor, LearnedPredictor):
         pytest.skip(f"{predictor.name} has no weights: nothing to save")
     history, mask, humans, robots_future = crossing_scene()
-    model = "social_gan" if isinstance(predictor, SocialGANPredictor) else predictor.kind
     weights, _ = save_checkpoint(
-        predictor.net, model=model, name="roundtrip", out_dir=tmp_path / "run", obs_len=predictor.obs_len
+        predictor.net,
+        model=predictor.kind,
+        name="roundtrip",
+        out_dir=tmp_path / "run",
+        obs_len=predictor.obs_len,
     )
     reloaded = load_checkpoint(weights)
-    assert type(reloaded) is type(predictor)
+    assert type(reloaded) is type(predictor) and reloaded.kind == predictor.kind
     # Checkpoints store float32 weights; a trained zoo entry is float32 already, an untrained one rounds.
     np.testing.assert_allclose(
         reloaded.rollout(history, mask, robots_future, humans),

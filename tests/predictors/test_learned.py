@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from predictors.learned import casadi_name
 from predictors.errors import PredictorError
-from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor
+from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor, casadi_name
 from predictors.nets.social_gan import generator_config
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 from predictors.registry import load_predictor

@@ -2,15 +2,28 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 import lightning as L
 import pytest
 import torch
 
 from predictors.data.datamodule import TrajnetDataModule
 from predictors.errors import PredictorError
+from predictors.models import load_plugin
+from predictors.nets.social_attention import SocialAttention
 from predictors.nets.social_gan import generator_config
-from predictors.nets.social_lstm import SocialLSTMConfig
-from predictors.training import GANModule, OptimConfig, SocialLSTMModule, make_module
+from predictors.nets.social_gru import SocialGRU, SocialGRUConfig
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.training import (
+    GANModule,
+    OptimConfig,
+    PredictorModule,
+    SocialLSTMModule,
+    defines_forward,
+    make_module,
+)
 from tests.predictors.samples import write_walk_file
 
 
@@ -67,7 +80,9 @@ def test_gan_module_fast_dev_run_updates_both_networks(tiny_data):
 def test_model_step_shares_one_path_for_val_and_test(tiny_data):
     tiny_data.setup("test")
     batch = next(iter(tiny_data.test_dataloader()))
-    module = SocialLSTMModule(SocialLSTMConfig().to_dict(), OptimConfig().__dict__).eval()
+    module = SocialLSTMModule(
+        net_config=SocialLSTMConfig().to_dict(), optim_config=OptimConfig().__dict__
+    ).eval()
     with torch.no_grad():
         val, test = module.model_step(batch, "val"), module.model_step(batch, "test")
         train = module.model_step(batch, "train")
@@ -83,3 +98,127 @@ def test_bad_options_are_refused():
         make_module("transformer", SocialLSTMConfig(), OptimConfig())
     with pytest.raises(PredictorError, match="needs noise_dim >= 1"):
         GANModule(SocialLSTMConfig().to_dict(), OptimConfig().__dict__)
+    with pytest.raises(PredictorError, match="expected a SocialGRUConfig or a dict, got SocialLSTMConfig"):
+        make_module("social_gru", SocialLSTMConfig(), OptimConfig())
+    with pytest.raises(PredictorError, match=r"unknown social_gru config keys \['noise_dim'\]"):
+        make_module("social_gru", {"noise_dim": 8}, OptimConfig())
+    with pytest.raises(PredictorError, match="is trained as a GAN"):
+        PredictorModule("social_gan")
+
+
+# ---------------------------------------------------------------------------------------- any model kind
+@pytest.mark.parametrize(
+    ("model", "net_config", "net_class"),
+    [
+        ("social_gru", SocialGRUConfig(hidden_dim=16), SocialGRU),  # a config instance
+        ("social_attention", {"heads": 2}, SocialAttention),  # values over the kind's defaults
+    ],
+)
+def test_new_kinds_train_with_their_own_forward(tiny_data, model, net_config, net_class):
+    torch.manual_seed(0)
+    module = make_module(model, net_config, OptimConfig())
+    assert isinstance(module, PredictorModule) and type(module.net) is net_class
+    assert defines_forward(module.net) and module.net.head_type == "gaussian"
+    assert module.hparams["net_config"] == module.net.config.to_dict()  # the whole config is recorded
+    before = [p.detach().clone() for p in module.net.parameters()]
+    trainer = fast_dev_trainer()
+    trainer.fit(module, datamodule=tiny_data)
+    assert any(not torch.equal(a, b) for a, b in zip(before, module.net.parameters(), strict=True))
+    assert torch.isfinite(trainer.callback_metrics["train_loss"])
+    assert torch.isfinite(trainer.callback_metrics["val_ade"])
+
+
+@dataclass(frozen=True)
+class ConstantStepConfig:
+    gain: float = 1.0
+
+
+class ConstantStepNet(torch.nn.Module):
+    """A plugin that keeps only the step contract (no ``forward``): the next step is a linear map of the
+    last one; the state is the last step."""
+
+    config_class: ClassVar[type] = ConstantStepConfig
+    head_type = "point"
+
+    def __init__(self, config: ConstantStepConfig):
+        super().__init__()
+        self.config = config
+        self.step_map = torch.nn.Linear(2, 2)
+
+    def encode(self, positions, mask):
+        last = (positions[:, -1] - positions[:, -2]) * mask[:, -1, :, None]
+        return last, self.step_map(last * self.config.gain)
+
+    def decode_step(self, last, prev, cur, neighbours):
+        step = cur - prev
+        return step, self.step_map(step * self.config.gain)
+
+
+def test_a_net_without_forward_trains_through_the_generic_rollout(tiny_data):
+    torch.manual_seed(0)
+    kind = load_plugin(f"{__name__}:ConstantStepNet")
+    module = make_module(kind.name, {"gain": 2.0}, OptimConfig(loss="gaussian"))  # point head: L2
+    assert isinstance(module, PredictorModule) and not defines_forward(module.net)
+    assert module.net.config == ConstantStepConfig(gain=2.0)
+    before = module.net.step_map.weight.detach().clone()
+    trainer = fast_dev_trainer()
+    trainer.fit(module, datamodule=tiny_data)
+    assert not torch.equal(before, module.net.step_map.weight)
+    assert torch.isfinite(trainer.callback_metrics["train_loss"])
+
+
+# ------------------------------------------------------------------------------------ older checkpoints
+def _old_checkpoint(tiny_data, tmp_path, config: SocialLSTMConfig):
+    """A checkpoint whose hyper-parameters are those of the old SocialLSTMModule (no ``model``)."""
+    torch.manual_seed(0)
+    trainer = L.Trainer(
+        max_epochs=1,
+        limit_train_batches=1,
+        limit_val_batches=1,
+        accelerator="cpu",
+        logger=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        enable_checkpointing=False,
+    )
+    module = make_module("social_lstm", config, OptimConfig())
+    trainer.fit(module, datamodule=tiny_data)
+    path = tmp_path / "old.ckpt"
+    trainer.save_checkpoint(path)
+    checkpoint = torch.load(path, weights_only=False)
+    checkpoint["hyper_parameters"] = {
+        "net_config": config.to_dict(),
+        "optim_config": OptimConfig().__dict__,
+        "obs_len": module.obs_len,
+        "pred_len": module.pred_len,
+    }
+    torch.save(checkpoint, path)
+    return path, module
+
+
+@pytest.mark.parametrize(("pooling", "model"), [("grid", "social_lstm"), ("none", "vanilla_lstm")])
+def test_old_checkpoints_load_as_social_or_vanilla_lstm(tiny_data, tmp_path, pooling, model):
+    path, trained = _old_checkpoint(tiny_data, tmp_path, SocialLSTMConfig(pooling=pooling))
+    loaded = PredictorModule.load_from_checkpoint(path, map_location="cpu")
+    assert loaded.model_name == model and loaded.hparams["model"] == model
+    assert type(loaded.net) is SocialLSTM and loaded.net.config == trained.net.config
+    for a, b in zip(loaded.net.parameters(), trained.net.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_resume_from_an_old_checkpoint(tiny_data, tmp_path):
+    path, _ = _old_checkpoint(tiny_data, tmp_path, SocialLSTMConfig())
+    trainer = L.Trainer(
+        max_epochs=2,
+        limit_train_batches=1,
+        limit_val_batches=1,
+        accelerator="cpu",
+        logger=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        enable_checkpointing=False,
+    )
+    module = make_module("social_lstm", SocialLSTMConfig(), OptimConfig())
+    trainer.fit(module, datamodule=tiny_data, ckpt_path=str(path))
+    assert trainer.current_epoch == 2
+    assert torch.isfinite(trainer.callback_metrics["train_loss"])

@@ -1,20 +1,318 @@
-"""The zoo manifest refuses malformed documents with a message naming the file, never a traceback."""
+"""The two zoos: the shipped one (read-only) and the user's (``$CROWDMPC_ZOO``, where ``zoo add`` writes),
+checkpoints of any registered model kind, plugins included, and malformed manifests.
+
+The shipped zoo of these tests is a copy of one real entry in tmp_path; checkpoints/ is only read.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import json
+import shutil
+import sys
+from pathlib import Path
 
 import pytest
+import torch
 
-from predictors.errors import PredictorError
-from predictors.zoo import read_manifest
+from pipelines.cli import main
+from predictors import models, zoo
+from predictors.errors import PredictorError, UnknownPredictor
+from predictors.learned import LearnedPredictor, SocialGANPredictor
+from predictors.models import load_plugin
+from predictors.registry import available, checkpoint_sha256, load_predictor
+from predictors.zoo import ZOO_ENV, read_manifest, user_zoo_dir
+
+REAL_ZOO = Path(__file__).resolve().parents[2] / "checkpoints"
+NAME = "social_lstm_eth"
+TOY = "tests.plugins.toy_predictor:ToyNet"
 
 
 @pytest.mark.parametrize(
-    ("models", "message"),
+    ("models_", "message"),
     [({"a": 1}, '"models" must be a list'), ([1], "a zoo entry must be a JSON object, got 1")],
 )
-def test_malformed_manifest_is_a_predictor_error(tmp_path, models, message):
-    (tmp_path / "manifest.json").write_text(json.dumps({"format": "crowdmpc-zoo", "models": models}))
+def test_malformed_manifest_is_a_predictor_error(tmp_path, models_, message):
+    (tmp_path / "manifest.json").write_text(json.dumps({"format": "crowdmpc-zoo", "models": models_}))
     with pytest.raises(PredictorError, match=message):
         read_manifest(tmp_path)
+
+
+# ------------------------------------------------------------------------------------------------ fixtures
+def real_entry(name: str = NAME) -> dict:
+    document = json.loads((REAL_ZOO / zoo.MANIFEST_NAME).read_text())
+    return next(e for e in document["models"] if e["name"] == name)
+
+
+def write_manifest(root: Path, *entries: dict) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / zoo.MANIFEST_NAME
+    path.write_text(json.dumps({"format": zoo.MANIFEST_FORMAT, "version": 1, "models": list(entries)}))
+    return path
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every file under ``root`` and its sha256: what "untouched" means."""
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in root.rglob("*")
+        if p.is_file()
+    }
+
+
+@pytest.fixture
+def shipped(tmp_path, monkeypatch) -> Path:
+    """A shipped zoo holding a copy of the real entry ``NAME``."""
+    root = tmp_path / "shipped"
+    root.mkdir()
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", root / f"{NAME}{suffix}")
+    write_manifest(root, real_entry())
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(root))
+    return root
+
+
+@pytest.fixture
+def user(tmp_path, monkeypatch) -> Path:
+    root = tmp_path / "user"  # not created: `zoo add` makes it
+    monkeypatch.setenv(ZOO_ENV, str(root))
+    return root
+
+
+@pytest.fixture
+def pair(tmp_path) -> Path:
+    """A copy of the real checkpoint pair outside any zoo, with the metrics file `zoo add` reads."""
+    src = tmp_path / "src"
+    src.mkdir()
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", src / f"{NAME}{suffix}")
+    (src / f"{NAME}.metrics.json").write_text(json.dumps({"metrics": {"test": {"ade": 0.5}}}))
+    return src / f"{NAME}.pt"
+
+
+def cli(args: list[str], capsys) -> tuple[int, str, str]:
+    capsys.readouterr()
+    code = main(args)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+# ------------------------------------------------------------------------------------------- where it is
+def test_the_user_zoo_defaults_to_the_users_data_directory(tmp_path, monkeypatch):
+    monkeypatch.delenv(ZOO_ENV)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    assert user_zoo_dir() == tmp_path / "xdg" / "crowdmpc" / "zoo"
+    monkeypatch.setenv("XDG_DATA_HOME", "relative/data")  # ignored, as the XDG spec says
+    assert user_zoo_dir() == tmp_path / "home" / ".local" / "share" / "crowdmpc" / "zoo"
+    monkeypatch.delenv("XDG_DATA_HOME")
+    assert user_zoo_dir() == tmp_path / "home" / ".local" / "share" / "crowdmpc" / "zoo"
+    monkeypatch.setenv(ZOO_ENV, str(tmp_path / "mine"))
+    assert user_zoo_dir() == tmp_path / "mine" and user_zoo_dir(tmp_path / "x") == tmp_path / "x"
+
+
+# ---------------------------------------------------------------------------------------- add, see, remove
+def test_add_writes_the_user_zoo_and_every_command_sees_both(shipped, user, pair, capsys):
+    before = snapshot(shipped)
+    code, out, _ = cli(["zoo", "add", str(pair), "--name", "mine"], capsys)
+    assert code == 0 and f"to the user zoo {user}" in out
+    assert snapshot(shipped) == before
+    assert {"mine.pt", "mine.json", zoo.MANIFEST_NAME} == set(snapshot(user))
+
+    assert {NAME, "mine"} <= set(available())
+    assert load_predictor("mine").name == "mine" and load_predictor(NAME).name == NAME
+    assert checkpoint_sha256("mine") == hashlib.sha256((user / "mine.pt").read_bytes()).hexdigest()
+    assert checkpoint_sha256(NAME) == real_entry()["sha256"]
+    assert zoo.zoo_names() == sorted([NAME, "mine"]) and zoo.zoo_names(user) == ["mine"]
+
+    code, out, _ = cli(["zoo", "list"], capsys)
+    rows = [line.split() for line in out.splitlines()[2:4]]
+    assert code == 0 and [(r[0], r[-1]) for r in rows] == [(NAME, "shipped"), ("mine", "user")]
+    code, out, _ = cli(["zoo", "show", "mine"], capsys)
+    assert code == 0 and json.loads(out)["zoo"] == "user"
+    code, out, _ = cli(["zoo", "verify"], capsys)
+    assert code == 0 and f"{NAME}: ok\nmine (user): ok\n2 of 2 entries ok\n" == out
+
+    code, out, _ = cli(["zoo", "remove", "mine"], capsys)
+    assert code == 0 and out == f"removed mine from the user zoo {user}\n"
+    assert set(snapshot(user)) == {zoo.MANIFEST_NAME} and zoo.zoo_names(user) == []
+    with pytest.raises(UnknownPredictor):
+        load_predictor("mine")
+    assert snapshot(shipped) == before
+
+
+def test_a_user_model_may_not_take_a_shipped_name(shipped, user, pair, capsys):
+    before = snapshot(shipped)
+    code, _, err = cli(["zoo", "add", str(pair)], capsys)  # its own name, social_lstm_eth, is shipped
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc zoo: error: zoo name {NAME!r} is taken by a model of the shipped zoo {shipped}; "
+        "pick another name"
+    )
+    assert not user.exists() and snapshot(shipped) == before
+
+
+@pytest.mark.parametrize("where", ["env", "env_inside", "env_symlink", "dir_option"])
+def test_the_shipped_zoo_is_read_only(tmp_path, shipped, pair, monkeypatch, capsys, where):
+    before = snapshot(shipped)
+    target = {"env": shipped, "env_inside": shipped / "sub", "dir_option": shipped}.get(
+        where, tmp_path / "link"
+    )
+    if where == "env_symlink":
+        target.symlink_to(shipped)
+    options = ["--dir", str(target)] if where == "dir_option" else []
+    if where != "dir_option":
+        monkeypatch.setenv(ZOO_ENV, str(target))
+    for action in (["add", str(pair), "--name", "other"], ["remove", NAME]):
+        code, _, err = cli(["zoo", *options, *action], capsys)
+        line = one_line(err)
+        assert (
+            code == 2 and f"{target} is the shipped zoo {shipped} (or inside it), which is read-only" in line
+        )
+    assert snapshot(shipped) == before
+    with pytest.raises(PredictorError, match="which is read-only"):
+        zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={}, directory=shipped)
+    assert snapshot(shipped) == before
+
+
+def test_maintainers_add_to_the_shipped_zoo_on_purpose_only(shipped, user, pair):
+    entry = zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={}, shipped=True)
+    assert (shipped / "other.pt").is_file() and zoo.locate("other").source == zoo.SHIPPED == "shipped"
+    assert entry.name in read_manifest(shipped) and not user.exists()
+
+
+def test_a_user_zoo_that_is_a_file_is_refused(user, pair, capsys):
+    user.write_text("not a directory")
+    code, _, err = cli(["zoo", "add", str(pair), "--name", "other"], capsys)
+    assert code == 2 and one_line(err) == f"crowdmpc zoo: error: the user zoo {user} is not a directory"
+
+
+def test_the_real_shipped_zoo_is_never_written(pair, monkeypatch, capsys):
+    monkeypatch.delenv(zoo.CHECKPOINTS_ENV, raising=False)
+    monkeypatch.setenv(ZOO_ENV, str(REAL_ZOO))
+    manifest = (REAL_ZOO / zoo.MANIFEST_NAME).read_bytes()
+    code, _, err = cli(["zoo", "add", str(pair), "--name", "other"], capsys)
+    assert code == 2 and "which is read-only" in one_line(err)
+    assert (REAL_ZOO / zoo.MANIFEST_NAME).read_bytes() == manifest and not (REAL_ZOO / "other.pt").exists()
+
+
+def test_remove_refuses_what_the_user_zoo_does_not_have(shipped, user, capsys):
+    code, _, err = cli(["zoo", "remove", NAME], capsys)
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc zoo: error: {NAME!r} is a model of the shipped zoo {shipped}, which is read-only"
+    )
+    code, _, err = cli(["zoo", "remove", "nope"], capsys)
+    assert (
+        code == 2
+        and one_line(err) == f"crowdmpc zoo: error: the user zoo {user} has no entry 'nope'; it has []"
+    )
+    code, _, err = cli(["zoo", "remove", "../x"], capsys)
+    assert code == 2 and "zoo name '../x' is not allowed" in one_line(err)
+
+
+def test_a_user_entry_under_a_shipped_name_is_reported_and_never_loads(shipped, user, capsys):
+    for suffix in (".pt", ".json"):
+        user.mkdir(exist_ok=True)
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", user / f"{NAME}{suffix}")
+    write_manifest(user, real_entry())  # written by hand: `zoo add` refuses the name
+    assert zoo.locate(NAME).source == zoo.SHIPPED
+    assert available().count(NAME) == 1
+    code, out, _ = cli(["zoo", "verify"], capsys)
+    assert code == 1 and f"{NAME} (user): {user / zoo.MANIFEST_NAME}: a shipped model has this name" in out
+
+
+def test_a_broken_user_manifest_stops_no_shipped_model(shipped, user, capsys):
+    user.mkdir()
+    (user / zoo.MANIFEST_NAME).write_text("{")
+    assert load_predictor(NAME).name == NAME
+    code, _, err = cli(["zoo", "list"], capsys)
+    assert code == 2 and one_line(err).startswith(
+        f"crowdmpc zoo: error: {user / zoo.MANIFEST_NAME}: not valid JSON"
+    )
+
+
+# ------------------------------------------------------------------------------------ any kind, plugins too
+def toy_pair(tmp_path: Path, model: str = TOY) -> Path:
+    kind = load_plugin(TOY)
+    torch.manual_seed(0)
+    weights, _ = zoo.save_checkpoint(
+        kind.build_net(kind.config({"hidden_dim": 4})),
+        model=model,
+        name="toy_eth",
+        out_dir=tmp_path,
+        obs_len=9,
+    )
+    return weights
+
+
+def test_a_plugin_model_goes_through_the_user_zoo(tmp_path, shipped, user, monkeypatch):
+    weights = toy_pair(tmp_path / "run")
+    document = json.loads(weights.with_suffix(".json").read_text())
+    assert document["model"] == TOY and document["class"] == "LearnedPredictor"
+    assert document["net"] == {"hidden_dim": 4, "radius": 2.0}
+    entry = zoo.add_to_zoo(weights, name="toy_eth", protocol="custom", training_data={}, metrics={})
+    assert entry.model == TOY and (user / "toy_eth.pt").is_file()
+    predictor = load_predictor("toy_eth")
+    assert isinstance(predictor, LearnedPredictor) and predictor.kind == TOY and predictor.name == "toy_eth"
+
+    monkeypatch.setattr(models, "_PLUGINS", {})  # a new process, without --plugin
+    with pytest.raises(PredictorError) as refused:
+        load_predictor("toy_eth")
+    assert str(refused.value) == (
+        f'{user / "toy_eth.json"}: "model": model {TOY!r} is a plugin that is not registered; register it '
+        f"with `crowdmpc --plugin {TOY} COMMAND ...` or CROWDMPC_PLUGINS={TOY}"
+    )
+
+
+def test_a_zoo_file_never_imports_a_module(tmp_path, shipped, user):
+    weights = toy_pair(tmp_path / "run")
+    config = weights.with_suffix(".json")
+    never = "tests.plugins.never_imported:Net"
+    config.write_text(json.dumps({**json.loads(config.read_text()), "model": never}))
+    with pytest.raises(PredictorError, match=f"model {never!r} is a plugin that is not registered"):
+        zoo.load_checkpoint(weights)
+    assert "tests.plugins.never_imported" not in sys.modules
+
+
+def test_save_checkpoint_refuses_what_it_cannot_reload(tmp_path):
+    kind = load_plugin(TOY)
+    net = kind.build_net(kind.config())
+    with pytest.raises(PredictorError, match="unknown model 'nope'"):
+        zoo.save_checkpoint(net, model="nope", name="x", out_dir=tmp_path, obs_len=9)
+    with pytest.raises(PredictorError, match="model 'social_lstm' is a SocialLSTM, got a ToyNet"):
+        zoo.save_checkpoint(net, model="social_lstm", name="x", out_dir=tmp_path, obs_len=9)
+    with pytest.raises(PredictorError, match="checkpoint name '../x' is not allowed"):
+        zoo.save_checkpoint(net, model=TOY, name="../x", out_dir=tmp_path, obs_len=9)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "name, kind, cls",
+    [
+        ("social_lstm_eth", "social_lstm", LearnedPredictor),
+        ("vanilla_lstm_eth", "vanilla_lstm", LearnedPredictor),
+    ],
+)
+def test_configs_from_before_model_kinds_still_load(tmp_path, name, kind, cls):
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
+    config = tmp_path / f"{name}.json"
+    document = json.loads(config.read_text())
+    del document["model"]  # the class and the pooling say which kind it is
+    config.write_text(json.dumps(document))
+    predictor = zoo.load_checkpoint(tmp_path / f"{name}.pt")
+    assert isinstance(predictor, cls) and predictor.kind == kind
+    del document["class"]
+    config.write_text(json.dumps(document))
+    with pytest.raises(PredictorError, match='"model" is missing'):
+        zoo.load_checkpoint(tmp_path / f"{name}.pt")
+
+
+def test_the_shipped_gan_loads_as_a_sampling_predictor():
+    predictor = zoo.load_zoo("social_gan_eth", REAL_ZOO)
+    assert isinstance(predictor, SocialGANPredictor) and predictor.kind == "social_gan"

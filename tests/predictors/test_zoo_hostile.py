@@ -43,13 +43,16 @@ def write_manifest(root: Path, *entries: dict) -> Path:
 
 @pytest.fixture
 def zoo_dir(tmp_path, monkeypatch) -> Path:
-    """A private zoo holding a copy of the real entry ``NAME`` (files and manifest entry), the CLI's zoo."""
+    """A private user zoo holding a copy of the real entry ``NAME`` (files and manifest entry), the CLI's
+    zoo, beside an empty shipped zoo (tests/predictors/test_zoo.py has the shipped zoo's own cases)."""
     root = tmp_path / "zoo"
     root.mkdir()
     for suffix in (".pt", ".json"):
         shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", root / f"{NAME}{suffix}")
     write_manifest(root, real_entry())
-    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(root))
+    (tmp_path / "shipped").mkdir()
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(tmp_path / "shipped"))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(root))
     return root
 
 
@@ -232,7 +235,7 @@ def test_non_finite_weights_are_refused_naming_the_tensor(tmp_path, zoo_dir, cap
     capsys.readouterr()
     assert main(["zoo", "verify"]) == 1
     out = capsys.readouterr().out
-    assert f"{NAME}: {message}\n" in out and "0 of 1 entries ok" in out
+    assert f"{NAME} (user): {message}\n" in out and "0 of 1 entries ok" in out
     code, line = cli(["export", NAME, "--out", str(tmp_path / "o.casadi")], capsys)
     assert code == 2 and "holds NaN or infinite values" in line
 
@@ -336,16 +339,28 @@ def _config_cases() -> dict[str, tuple[dict, str]]:
         "pooling_int": ({"net": {"pooling": 3}}, f"{wrong}: pooling must be a string, got 3"),
         "pooling_unknown": ({"net": {"pooling": "max"}}, "pooling 'max' is not one of"),
         "head_list": ({"net": {"head": ["gaussian"]}}, f"{wrong}: head must be a string"),
-        "net_list": ({"net": [1, 2]}, '"net": a Social-LSTM config must be a JSON object, got [1, 2]'),
-        "net_unknown_key": ({"net": {"hidden": 3}}, "unknown Social-LSTM config keys ['hidden']"),
+        "net_list": ({"net": [1, 2]}, '"net": a social_lstm config must be a JSON object, got [1, 2]'),
+        "net_unknown_key": ({"net": {"hidden": 3}}, "unknown social_lstm config keys ['hidden']"),
         "obs_len_huge": ({"obs_len": 10**9}, '"obs_len" must be in 2..100, got 1000000000'),
         "obs_len_1": ({"obs_len": 1}, '"obs_len" must be in 2..100, got 1'),
         "obs_len_str": ({"obs_len": "9"}, "\"obs_len\" must be an integer, got '9'"),
         "obs_len_bool": ({"obs_len": True}, '"obs_len" must be an integer, got True'),
         "class_list": ({"class": ["SocialLSTMPredictor"]}, "unknown predictor class ['SocialLSTMPredictor']"),
         "class_unknown": ({"class": "Transformer"}, "unknown predictor class 'Transformer'"),
-        "model_unknown": ({"model": "transformer"}, '"model" must be one of'),
+        "model_unknown": ({"model": "transformer"}, "\"model\": unknown model 'transformer'; choose from"),
+        "model_list": ({"model": ["social_lstm"]}, "\"model\": unknown model ['social_lstm']; choose from"),
         "model_mismatch": ({"model": "social_gan"}, '"model" \'social_gan\' does not go with "class"'),
+        # a plugin that is not registered: refused, never imported on the file's word
+        "model_plugin": (
+            {"model": "os:system"},
+            "\"model\": model 'os:system' is a plugin that is not registered; register it with "
+            "`crowdmpc --plugin os:system COMMAND ...` or CROWDMPC_PLUGINS=os:system",
+        ),
+        "model_no_such_module": (
+            {"model": "no_such_module_xyz:Net"},
+            "model 'no_such_module_xyz:Net' is a plugin that is not registered",
+        ),
+        "model_other_kind": ({"model": "social_gru"}, "unknown social_gru config keys ['noise_dim']"),
         "name_dict": ({"name": {"a": 1}}, '"name" must be a string'),
         "format": ({"format": "other"}, "not a crowdmpc predictor config"),
     }

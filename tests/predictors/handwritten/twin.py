@@ -18,8 +18,8 @@ import re
 import casadi as ca
 import numpy as np
 
-from tests.predictors.handwritten import layers as cl
 from predictors.nets.social_lstm import N_TAGS, SocialLSTMConfig
+from tests.predictors.handwritten import layers as cl
 
 
 def casadi_name(text: str) -> str:

@@ -1,0 +1,302 @@
+"""The explicit registry of trainable predictor networks ("model kinds"), shipped ones and plugins.
+
+A model kind is a net class that keeps the step contract (``predictors.nets.contract``) plus the config values
+that make it this kind (``vanilla_lstm`` is ``SocialLSTM`` without pooling). ``train --model``, the zoo's
+``"model"`` field and ``export`` name kinds. Three sources, in this order:
+
+* the shipped kinds (``SHIPPED``);
+* installed packages' entry points in the group ``crowdmpc.predictors`` (``name = "module:NetClass"``);
+* ``module:NetClass`` given by the user: ``--plugin module:NetClass`` on the command line, or the
+  ``CROWDMPC_PLUGINS`` environment variable (comma-separated), which the command line sets so that sweep
+  workers see the same plugins. The kind's name is ``module:NetClass``.
+
+A zoo config that names a kind no source registers is refused with a message that says how to register it:
+a file in a zoo never makes crowdmpc import code by itself.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import inspect
+import os
+import re
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final, cast
+
+from predictors.errors import PredictorError, short_repr
+
+if TYPE_CHECKING:
+    import torch
+
+    from predictors.learned import LearnedPredictor
+
+ENTRY_POINT_GROUP: Final[str] = "crowdmpc.predictors"
+PLUGINS_ENV: Final[str] = "CROWDMPC_PLUGINS"
+# A plugin is named as an importable module and a class in it: dotted identifiers, nothing else.
+PLUGIN_PATTERN: Final[re.Pattern[str]] = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*", re.ASCII)
+# A longer spec is no module path anyone writes; refusing it keeps every message about it one short line.
+MAX_PLUGIN_SPEC: Final[int] = 200
+# Every net, shipped or plugin, is bounded like the shipped Social-LSTM (nets/social_lstm.MAX_PARAMETERS):
+# a config is a file anyone can edit, and its sizes are checked on the meta device before memory is taken.
+MAX_PARAMETERS: Final[int] = 10_000_000
+
+
+class UnknownModel(PredictorError):
+    """A model kind that no source registers. A name of the form ``module:NetClass`` is a plugin that was not
+    loaded: the message says how to load it (crowdmpc never imports a module because a file names it)."""
+
+    def __init__(self, name: object, choices: list[str]):
+        self.name = name
+        self.choices = choices
+        if isinstance(name, str) and len(name) <= MAX_PLUGIN_SPEC and PLUGIN_PATTERN.fullmatch(name):
+            super().__init__(
+                f"model {name!r} is a plugin that is not registered; register it with "
+                f"`crowdmpc --plugin {name} COMMAND ...` or {PLUGINS_ENV}={name}"
+            )
+            return
+        super().__init__(
+            f"unknown model {short_repr(name)}; choose from {choices}, or register a plugin with "
+            f"--plugin module:NetClass (or ${PLUGINS_ENV}, or an entry point in {ENTRY_POINT_GROUP!r})"
+        )
+
+
+@dataclass(frozen=True)
+class ModelKind:
+    """A trainable predictor: its net class, this kind's config values, and how it is trained."""
+
+    name: str
+    net_class: type[torch.nn.Module]
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    adversarial: bool = False  # trained as a GAN generator (predictors.training.GANModule)
+    source: str = "shipped"  # "shipped", "entry point <dist>", or "plugin"
+
+    def __post_init__(self):
+        check_net_class(self.net_class, self.name)
+
+    @property
+    def config_class(self) -> type:
+        return self.net_class.config_class  # type: ignore[attr-defined, no-any-return]
+
+    def has_field(self, name: str) -> bool:
+        """Whether this kind's config has a field ``name`` (``train --pooling`` needs ``pooling``)."""
+        return any(f.name == name for f in dataclasses.fields(self.config_class))
+
+    @property
+    def predictor_class_name(self) -> str:
+        """The class ``predictor`` makes, by name: what a checkpoint's informational ``"class"`` says."""
+        return "SocialGANPredictor" if self.adversarial else "LearnedPredictor"
+
+    def config_dict(self, config: Any) -> dict[str, Any]:
+        """``config`` (a ``config_class`` instance) as the JSON object a checkpoint stores."""
+        if not isinstance(config, self.config_class):
+            raise PredictorError(
+                f"{self.name}: expected a {self.config_class.__name__}, got {type(config).__name__}"
+            )
+        to_dict = getattr(config, "to_dict", None)
+        return dict(to_dict()) if callable(to_dict) else dataclasses.asdict(cast(Any, config))
+
+    def config(self, overrides: Mapping[str, Any] | None = None) -> Any:
+        """This kind's config: the class defaults, then ``defaults``, then ``overrides``; validated."""
+        if overrides is not None and not isinstance(overrides, Mapping):
+            return self._config(overrides)  # refused there, in one line
+        return self._config({**self.defaults, **(overrides or {})})
+
+    def _config(self, values: Mapping[str, Any]) -> Any:
+        cls = self.config_class
+        if not isinstance(values, Mapping):
+            raise PredictorError(f"a {self.name} config must be a JSON object, got {short_repr(values)}")
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise PredictorError(
+                f"unknown {self.name} config keys {short_repr(unknown, 200)}; expected a subset of "
+                f"{sorted(known)}"
+            )
+        from_dict = getattr(cls, "from_dict", None)
+        try:
+            return from_dict(dict(values)) if callable(from_dict) else cls(**values)
+        except PredictorError:
+            raise
+        except Exception as exc:  # a plugin's own validation (TypeError, ValueError, an assert ...)
+            raise PredictorError(f"{self.name} config: {type(exc).__name__}: {exc}") from None
+
+    def build_net(self, config: Any) -> torch.nn.Module:
+        """The net of ``config`` (a ``config_class`` instance, or a dict validated like ``config``).
+
+        Its size is counted on the meta device first: no config can make us allocate more than
+        ``MAX_PARAMETERS`` parameters."""
+        import torch
+
+        if not isinstance(config, self.config_class):
+            config = self._config(config)
+        try:
+            with torch.device("meta"):
+                probe = self.net_class(config)
+        except PredictorError:
+            raise
+        except Exception as exc:  # a plugin's constructor: its fault is the config's or the class's
+            raise PredictorError(
+                f"{self.name}: building the net failed: {type(exc).__name__}: {exc}"
+            ) from None
+        count = sum(p.numel() for p in probe.parameters())
+        if count > MAX_PARAMETERS:
+            raise PredictorError(
+                f"{self.name}: this config makes a net of {count:,} parameters, more than the "
+                f"{MAX_PARAMETERS:,} allowed"
+            )
+        return self.net_class(config)
+
+    def predictor(self, net: torch.nn.Module, *, name: str, obs_len: int) -> LearnedPredictor:
+        from predictors.learned import LearnedPredictor, SocialGANPredictor
+
+        cls: type[LearnedPredictor] = SocialGANPredictor if self.adversarial else LearnedPredictor
+        return cls(net, name=name, obs_len=obs_len, kind=self.name)
+
+
+def check_net_class(cls: object, name: str) -> None:
+    """PredictorError naming ``name`` unless ``cls`` keeps the step contract (``nets.contract``)."""
+    import torch
+
+    where = f"model {name!r}"
+    if not (inspect.isclass(cls) and issubclass(cls, torch.nn.Module)):
+        raise PredictorError(f"{where}: {short_repr(cls)} is not a torch.nn.Module subclass")
+    config_class = getattr(cls, "config_class", None)
+    if not (inspect.isclass(config_class) and dataclasses.is_dataclass(config_class)):
+        raise PredictorError(f"{where}: {cls.__name__}.config_class must be a dataclass of hyper-parameters")
+    for method in ("encode", "decode_step"):
+        if not callable(getattr(cls, method, None)):
+            raise PredictorError(
+                f"{where}: {cls.__name__} has no {method}() (see predictors/nets/contract.py)"
+            )
+    if not hasattr(cls, "head_type"):
+        raise PredictorError(f'{where}: {cls.__name__} has no "head_type" ("gaussian" or "point")')
+
+
+def _shipped() -> dict[str, ModelKind]:
+    from predictors.nets.social_attention import SocialAttention
+    from predictors.nets.social_gru import SocialGRU
+    from predictors.nets.social_lstm import SocialLSTM
+
+    kinds = [
+        ModelKind("social_lstm", SocialLSTM, {"pooling": "grid"}),
+        ModelKind("vanilla_lstm", SocialLSTM, {"pooling": "none"}),
+        ModelKind(
+            "social_gan", SocialLSTM, {"pooling": "soft", "noise_dim": 8, "head": "point"}, adversarial=True
+        ),
+        ModelKind("social_gru", SocialGRU),
+        ModelKind("social_attention", SocialAttention),
+    ]
+    return {kind.name: kind for kind in kinds}
+
+
+_SHIPPED: dict[str, ModelKind] = {}
+_PLUGINS: dict[str, ModelKind] = {}
+
+
+def shipped() -> dict[str, ModelKind]:
+    if not _SHIPPED:
+        _SHIPPED.update(_shipped())
+    return dict(_SHIPPED)
+
+
+def _import_class(spec: str, what: str) -> object:
+    module_name, _, class_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # a plugin module that does not import: say which and why, in one line
+        raise PredictorError(
+            f"{what} {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
+        ) from None
+    if not hasattr(module, class_name):
+        raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}")
+    return getattr(module, class_name)
+
+
+def load_plugin(spec: str) -> ModelKind:
+    """Register ``module:NetClass`` (importing the module) and return its kind, named ``spec``.
+
+    The module is looked up on ``sys.path``, plus the current directory, as ``python -m`` would: a user's
+    one-file plugin next to where they work needs no install."""
+    if not isinstance(spec, str) or len(spec) > MAX_PLUGIN_SPEC or PLUGIN_PATTERN.fullmatch(spec) is None:
+        raise PredictorError(f"plugin {short_repr(spec)} is not of the form module:NetClass")
+    if spec in _PLUGINS:
+        return _PLUGINS[spec]
+    if spec in shipped():
+        raise PredictorError(f"plugin {spec!r} would shadow a shipped model")
+    cwd = str(Path.cwd())
+    if cwd not in sys.path:
+        sys.path.append(cwd)  # after the installed packages: a local file never shadows one
+    cls = _import_class(spec, "plugin")
+    kind = ModelKind(spec, cls, defaults=dict(getattr(cls, "kind_defaults", {})), source="plugin")  # type: ignore[arg-type]
+    _PLUGINS[spec] = kind
+    return kind
+
+
+def register_plugins(specs: list[str] | tuple[str, ...]) -> list[ModelKind]:
+    """Load each plugin and record it in ``CROWDMPC_PLUGINS`` so that child processes (sweep workers) load it
+    as well."""
+    kinds = [load_plugin(spec) for spec in specs]
+    listed = [s for s in os.environ.get(PLUGINS_ENV, "").split(",") if s]
+    os.environ[PLUGINS_ENV] = ",".join(dict.fromkeys([*listed, *specs]))
+    return kinds
+
+
+def _environment_plugins() -> None:
+    for spec in os.environ.get(PLUGINS_ENV, "").split(","):
+        if spec.strip():
+            load_plugin(spec.strip())
+
+
+def _entry_points() -> dict[str, Any]:
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def model_kinds() -> dict[str, ModelKind]:
+    """Every registered kind by name: shipped, then entry points (loaded), then plugins."""
+    kinds = shipped()
+    for name in _entry_points():
+        if name not in kinds:
+            kinds[name] = model_kind(name)
+    _environment_plugins()
+    kinds.update(_PLUGINS)
+    return kinds
+
+
+def model_names() -> list[str]:
+    """The names ``model_kind`` accepts, importing nothing new (entry points are named, not loaded)."""
+    _environment_plugins()
+    return sorted({*shipped(), *_entry_points(), *_PLUGINS})
+
+
+def model_kind(name: object) -> ModelKind:
+    """The kind called ``name``; ``UnknownModel`` (listing the choices) when no source registers it."""
+    if not isinstance(name, str):
+        raise UnknownModel(name, model_names())
+    kinds = shipped()
+    if name in kinds:
+        return kinds[name]
+    if name in _PLUGINS:
+        return _PLUGINS[name]
+    entry = _entry_points().get(name)
+    if entry is not None:
+        if name not in _PLUGINS:
+            try:
+                cls = entry.load()
+            except Exception as exc:
+                raise PredictorError(
+                    f"entry point {name!r} ({entry.value}) does not load: {type(exc).__name__}: {exc}"
+                ) from None
+            dist = getattr(entry.dist, "name", "?")
+            _PLUGINS[name] = ModelKind(
+                name, cls, defaults=dict(getattr(cls, "kind_defaults", {})), source=f"entry point {dist}"
+            )
+        return _PLUGINS[name]
+    _environment_plugins()
+    if name in _PLUGINS:
+        return _PLUGINS[name]
+    raise UnknownModel(name, model_names())

@@ -1,0 +1,12 @@
+import pytest
+
+from predictors.models import PLUGINS_ENV
+from predictors.zoo import ZOO_ENV
+
+
+@pytest.fixture(autouse=True)
+def _private_user_zoo(tmp_path_factory, monkeypatch):
+    """Every test gets an empty user zoo of its own (never the real ~/.local/share/crowdmpc/zoo), and no
+    plugins from the environment; what a test sets (``--plugin`` sets CROWDMPC_PLUGINS) is undone after."""
+    monkeypatch.setenv(ZOO_ENV, str(tmp_path_factory.mktemp("user_zoo")))
+    monkeypatch.delenv(PLUGINS_ENV, raising=False)

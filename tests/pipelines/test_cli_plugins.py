@@ -1,0 +1,296 @@
+"""A user's predictor through the command line: ``crowdmpc --plugin module:NetClass`` for train, zoo,
+evaluate, simulate and ``sweep --experiment predictors --predictors a,b,c`` (whose workers load the plugin
+too), and every way to get it wrong as one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.experiments.cells import SWAP_PREDICTORS, swap_predictors
+from predictors import models
+from predictors.data.prepare import prepare_ewap
+from predictors.models import PLUGINS_ENV
+from predictors.registry import load_predictor
+from predictors.zoo import user_zoo_dir, zoo_names
+from tests.predictors.samples import write_tiny_ewap, write_walk_file
+
+REPO = Path(__file__).resolve().parents[2]
+TOY = "tests.plugins.toy_predictor:ToyNet"
+NEVER = "tests.plugins.never_imported:Net"  # importing that module raises
+
+
+@pytest.fixture(autouse=True)
+def _private_dirs(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    capsys.readouterr()
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def one_line(err: str) -> str:
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def parser_error(capsys, *argv: str) -> str:
+    """The one line of an argparse error (exit 2)."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main(list(argv))
+    assert exc.value.code == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    return one_line(captured.err)
+
+
+# ---------------------------------------------------------------------------------------------- the flow
+def test_a_plugin_from_training_to_the_swap_table(tmp_path, capsys):
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    code, stdout, _ = run(
+        capsys, "--plugin", TOY, "train", "--model", TOY, "--net-config", '{"hidden_dim": 4}',
+        "--train", str(data), "--val", str(data), "--epochs", "1", "--batch-size", "2", "--out", str(out),
+        "--no-progress",
+    )  # fmt: skip
+    assert code == 0
+    weights = out / "toy_net_custom.pt"
+    assert f"`crowdmpc --plugin {TOY} zoo add {weights}`" in stdout
+    config = json.loads(weights.with_suffix(".json").read_text())
+    assert config["model"] == TOY and config["net"] == {"hidden_dim": 4, "radius": 2.0}
+    assert os.environ[PLUGINS_ENV] == TOY  # for the processes the commands start
+
+    code, stdout, _ = run(capsys, "--plugin", TOY, "zoo", "add", str(weights), "--name", "toy_walk")
+    assert code == 0 and (user_zoo_dir() / "toy_walk.pt").is_file()
+    assert load_predictor("toy_walk").kind == TOY
+
+    raw = write_tiny_ewap(tmp_path / "data")
+    prepared = tmp_path / "prepared"
+    prepare_ewap(raw, prepared, categorize_scenes=False, log=lambda msg: None)
+    code, stdout, _ = run(
+        capsys, "--plugin", TOY, "evaluate", "--predictor", "toy_walk", "--data-dir", str(prepared),
+        "--no-progress",
+    )  # fmt: skip
+    assert code == 0 and "ADE [m]" in stdout
+
+    result = tmp_path / "sim.json"
+    code, _, _ = run(
+        capsys, "--plugin", TOY, "simulate", "--controller", "cmpc", "--predictor", "toy_walk",
+        "--humans", "2", "--robots", "1", "--episodes", "1", "--json", str(result), "--no-progress",
+    )  # fmt: skip
+    assert code == 0 and json.loads(result.read_text())["run"]["predictor"] == "toy_walk"
+
+    sweep = tmp_path / "sweep"
+    code, stdout, _ = run(
+        capsys, "--plugin", TOY, "sweep", "--experiment", "predictors",
+        "--predictors", "constant_velocity,toy_walk", "--humans", "2", "--robots", "1",
+        "--episodes-per-cell", "1", "--backend", "process", "--workers", "1", "--jit", "off",
+        "--no-progress", "--out", str(sweep),
+    )  # fmt: skip
+    assert code == 0  # the worker process loaded the plugin (CROWDMPC_PLUGINS) and the user zoo's model
+    records = [json.loads(line) for line in (sweep / "episodes.jsonl").read_text().splitlines()]
+    assert sorted(r["key"].split("-")[1] for r in records) == ["constant_velocity", "toy_walk"]
+    assert "toy_walk" in stdout
+
+
+def test_a_new_process_loads_a_plugin_model_only_with_the_plugin_registered(tmp_path):
+    weights = _toy_checkpoint(tmp_path)
+    assert main(["--plugin", TOY, "zoo", "add", str(weights), "--name", "toy_walk"]) == 0
+    script = "from predictors.registry import load_predictor; print(load_predictor('toy_walk').kind)"
+    env = {**os.environ}
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, env=env, capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout == f"{TOY}\n"  # CROWDMPC_PLUGINS, set by --plugin
+    env.pop(PLUGINS_ENV)
+    export = [sys.executable, "-m", "pipelines.cli", "export", "toy_walk", "--out", str(tmp_path / "x")]
+    done = subprocess.run(export, cwd=REPO, env=env, capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr == (
+        f'crowdmpc export: error: {user_zoo_dir() / "toy_walk.json"}: "model": model {TOY!r} is a plugin '
+        f"that is not registered; register it with `crowdmpc --plugin {TOY} COMMAND ...` or "
+        f"{PLUGINS_ENV}={TOY}\n"
+    )
+
+
+def _toy_checkpoint(tmp_path: Path) -> Path:
+    from predictors.models import load_plugin
+    from predictors.zoo import save_checkpoint
+
+    kind = load_plugin(TOY)
+    (tmp_path / "run").mkdir()
+    weights, _ = save_checkpoint(
+        kind.build_net(kind.config({"hidden_dim": 4})),
+        model=TOY,
+        name="toy",
+        out_dir=tmp_path / "run",
+        obs_len=9,
+    )
+    (tmp_path / "run" / "toy.metrics.json").write_text("{}")
+    return weights
+
+
+# ------------------------------------------------------------------------------------------- bad plugins
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("../x", "plugin '../x' is not of the form module:NetClass"),
+        ("my_predictor.py", "plugin 'my_predictor.py' is not of the form module:NetClass"),
+        ("os:system", "model 'os:system': <built-in function system> is not a torch.nn.Module subclass"),
+        (
+            "no_such_module_q:Net",
+            "plugin 'no_such_module_q:Net': importing 'no_such_module_q' failed: ModuleNotFoundError: "
+            "No module named 'no_such_module_q'",
+        ),
+        ("tests.plugins.toy_predictor:Nope", "plugin 'tests.plugins.toy_predictor:Nope': module "),
+    ],
+)
+def test_a_bad_plugin_is_a_one_line_error(spec, message, capsys):
+    line = parser_error(capsys, "--plugin", spec, "zoo", "list")
+    assert line.startswith(f"crowdmpc: error: {message}") and line.endswith("; see 'crowdmpc --help'")
+    assert PLUGINS_ENV not in os.environ
+
+
+def test_an_unregistered_plugin_kind_is_refused_by_train_and_never_imported(capsys):
+    line = parser_error(capsys, "train", "--model", NEVER)
+    assert line == (
+        f"crowdmpc train: error: argument --model: model {NEVER!r} is a plugin that is not registered; "
+        f"register it with `crowdmpc --plugin {NEVER} COMMAND ...` or {PLUGINS_ENV}={NEVER}; "
+        "see 'crowdmpc train --help'"
+    )
+    assert "tests.plugins.never_imported" not in sys.modules
+    line = parser_error(capsys, "train", "--model", "gpt")
+    assert line.startswith("crowdmpc train: error: argument --model: unknown model 'gpt'; choose from [")
+
+
+def test_the_sweep_refuses_a_plugin_model_whose_plugin_is_not_registered(tmp_path, monkeypatch, capsys):
+    weights = _toy_checkpoint(tmp_path)
+    assert main(["--plugin", TOY, "zoo", "add", str(weights), "--name", "toy_walk"]) == 0
+    monkeypatch.setattr(models, "_PLUGINS", {})  # a new process, without --plugin
+    monkeypatch.delenv(PLUGINS_ENV)
+    code, _, err = run(
+        capsys, "sweep", "--experiment", "predictors", "--predictors", "constant_velocity,toy_walk",
+        "--backend", "inline", "--out", str(tmp_path / "sweep"),
+    )  # fmt: skip
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc sweep: error: predictor 'toy_walk' of the user zoo: model {TOY!r} is a plugin that is not "
+        f"registered; register it with `crowdmpc --plugin {TOY} COMMAND ...` or {PLUGINS_ENV}={TOY}"
+    )
+    assert not (tmp_path / "sweep" / "episodes.jsonl").exists()
+
+
+# ------------------------------------------------------------------------------------------- --predictors
+def test_the_default_swap_table_takes_the_later_models_once_a_zoo_has_them():
+    assert "social_gru_eth" in SWAP_PREDICTORS
+    assert swap_predictors(()) == (
+        "constant_velocity", "vanilla_lstm_eth", "social_lstm_eth", "social_lstm_soft_eth", "social_gan_eth",
+        "social_lstm_synth", "orca_oracle",
+    )  # fmt: skip
+    assert swap_predictors({"social_gru_eth"})[5:7] == ("social_gru_eth", "social_lstm_synth")
+
+
+def test_predictors_lists_the_swap_table(tmp_path, capsys):
+    code, stdout, _ = run(
+        capsys, "sweep", "--experiment", "predictors", "--predictors", "constant_velocity, orca_oracle",
+        "--dry-run", "--out", str(tmp_path),
+    )  # fmt: skip
+    assert code == 0
+    assert [line.split()[0] for line in stdout.splitlines()[1:]] == ["constant_velocity", "orca_oracle"]
+    code, stdout, _ = run(capsys, "sweep", "--experiment", "predictors", "--dry-run", "--out", str(tmp_path))
+    shipped = swap_predictors(set(zoo_names()))  # the shipped zoo's GRU and attention models included
+    assert "social_gru_eth" in shipped and "social_attention_eth" in shipped
+    assert code == 0 and stdout.startswith("Predictor swap") and len(stdout.splitlines()) == 1 + len(shipped)
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            ["--experiment", "table2", "--predictors", "constant_velocity"],
+            "--predictors applies only to the experiments ['predictors'], not 'table2' (use --predictor to "
+            "replace every method's predictor)",
+        ),
+        (
+            ["--experiment", "baselines", "--predictors", "constant_velocity"],
+            "--predictors applies only to the experiments ['predictors'], not 'baselines'",
+        ),
+        (
+            ["--experiment", "predictors", "--predictors", "constant_velocity,constant_velocity"],
+            "--predictors names ['constant_velocity'] more than once",
+        ),
+        (
+            ["--experiment", "predictors", "--predictors", "constant_velocity,nope"],
+            "experiment 'predictors' needs predictors ['nope'] that are not available",
+        ),
+    ],
+)
+def test_bad_predictor_lists_are_one_line(tmp_path, capsys, options, message):
+    code, _, err = run(capsys, "sweep", *options, "--backend", "inline", "--out", str(tmp_path / "s"))
+    line = one_line(err)
+    assert code == 2 and line.startswith(f"crowdmpc sweep: error: {message}"), line
+    assert not (tmp_path / "s" / "episodes.jsonl").exists()
+
+
+@pytest.mark.parametrize("value", ["../x,a", ",", "a/b", "x" * 65])
+def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
+    line = parser_error(
+        capsys, "sweep", "--experiment", "predictors", "--predictors", value, "--out", str(tmp_path)
+    )
+    assert line.startswith("crowdmpc sweep: error: argument --predictors: ")
+    assert line.endswith(
+        ("is not a predictor name; see 'crowdmpc sweep --help'", "got ','; see 'crowdmpc sweep --help'")
+    )
+
+
+# -------------------------------------------------------------------------------------- train's options
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            ["--model", "social_attention", "--pooling", "soft"],
+            "--pooling does not apply to social_attention",
+        ),
+        (["--model", "vanilla_lstm", "--pooling", "soft"], "--pooling does not apply to vanilla_lstm"),
+        (
+            ["--model", "social_lstm", "--pooling", "max"],
+            "the options: social_lstm: pooling 'max' is not one of",
+        ),
+        (["--model", "social_lstm", "--net-config", "[1]"], "--net-config must be a JSON object"),
+        (["--model", "social_lstm", "--net-config", "{"], "--net-config: not valid JSON"),
+        (["--model", "social_lstm", "--net-config", "[" * 100_000], "--net-config: 100000 characters"),
+        (
+            ["--model", "social_gru", "--net-config", '{"bogus": 1}'],
+            "--net-config: social_gru: unknown social_gru config keys ['bogus']",
+        ),
+        (
+            ["--model", "social_lstm", "--net-config", '{"hidden_dim": 10000000}'],
+            "--net-config: social_lstm: hidden_dim must be in 1..4096",
+        ),
+        (
+            ["--model", "social_lstm", "--pooling", "grid", "--net-config", '{"pooling": "soft"}'],
+            "--pooling and --net-config both set pooling",
+        ),
+        (
+            ["--model", TOY, "--net-config", '{"radius": -1}'],
+            f"--net-config: {TOY}: {TOY} config: ValueError",
+        ),
+        (["--model", "social_lstm", "--name", "../x"], "--name '../x' is not allowed"),
+    ],
+)
+def test_train_options_are_checked_in_one_line(tmp_path, capsys, options, message):
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", TOY, "train", *options, "--train", str(data), "--val", str(data)]
+    code, _, err = run(capsys, *argv, "--out", str(tmp_path / "run"), "--no-progress")
+    line = one_line(err)
+    assert code == 2 and line.startswith(f"crowdmpc train: error: {message}"), line
+    assert not (tmp_path / "run").exists()

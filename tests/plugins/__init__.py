@@ -1,0 +1,1 @@
+"""Predictor plugins the tests register (``crowdmpc --plugin tests.plugins.toy_predictor:ToyNet``)."""

@@ -1,0 +1,205 @@
+"""The exporter, operation by operation against torch (values and Jacobians, float64), its refusals, SX and
+MX, and the exported Social-LSTM against the hand-written twin kept as an independent cross-check."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from predictors.export import ExportError, TensorSpec, export_function
+from predictors.learned import SocialLSTMPredictor
+from predictors.nets.pooling import GridPooling
+from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from tests.predictors.handwritten.twin import SocialLSTMTwin
+
+
+class Wrap(nn.Module):
+    """A function of tensors as a module (its forward is what is exported)."""
+
+    def __init__(self, fn, **modules):
+        super().__init__()
+        self.fn = fn
+        for name, module in modules.items():
+            self.add_module(name, module)
+
+    def forward(self, *xs):
+        return self.fn(self, *xs)
+
+
+def check(module: nn.Module, *inputs: torch.Tensor, symbol=ca.MX, atol=1e-10):
+    """``module(*inputs)`` exported: values and the Jacobian of the (first) output against torch."""
+    module = module.double().eval()
+    specs = [TensorSpec(f"x{i}", tuple(x.shape), x.dtype == torch.bool) for i, x in enumerate(inputs)]
+    function = export_function(module, module.forward, specs, ["y"], "f", symbol=symbol)
+    args = [x.double().numpy().ravel() for x in inputs]
+    with torch.no_grad():
+        expected = module(*inputs).reshape(-1).numpy()
+    np.testing.assert_allclose(np.asarray(function(*args)).ravel(), expected, rtol=0, atol=atol)
+    floats = [i for i, x in enumerate(inputs) if x.dtype != torch.bool]
+    symbols = [ca.MX.sym(f"a{i}", len(a)) for i, a in enumerate(args)]
+    out = function(*symbols)
+    jacobian = ca.Function("j", symbols, [ca.jacobian(out, symbols[floats[0]])])
+    got = np.asarray(jacobian(*args))
+
+    def first(x):
+        xs = list(inputs)
+        xs[floats[0]] = x
+        return module(*xs).reshape(-1)
+
+    torch_jac = torch.autograd.functional.jacobian(first, inputs[floats[0]].double()).reshape(got.shape)
+    np.testing.assert_allclose(got, torch_jac.numpy(), rtol=0, atol=1e-8)
+
+
+def randn(*shape):
+    return torch.randn(*shape, dtype=torch.float64)
+
+
+OPERATIONS = {
+    "arithmetic": (lambda m, x, y: (x * 2 - y) / (1.5 + y**2) + 3 - x, (randn(3, 4), randn(3, 4))),
+    "broadcast": (lambda m, x, y: x[:, None, :] - x[None] + y, (randn(3, 2), randn(3, 1, 2))),
+    "unary": (
+        lambda m, x: torch.tanh(x) + torch.sigmoid(x) + F.relu(x) + F.gelu(x) + F.softplus(x) + torch.exp(x),
+        (randn(2, 5),),
+    ),
+    "log_sqrt_abs": (lambda m, x: torch.log(x.abs() + 1) + torch.sqrt(x**2 + 1), (randn(4, 3),)),
+    "linear": (lambda m, x: m.lin(x), (randn(2, 3, 5),), {"lin": nn.Linear(5, 4)}),
+    "matmul_batched": (lambda m, x, y: x @ y, (randn(2, 3, 4), randn(2, 4, 5))),
+    "matmul_2d": (lambda m, x, y: torch.matmul(x, y), (randn(2, 3, 4), randn(4, 2))),
+    "cat_stack": (
+        lambda m, x, y: torch.cat([torch.stack([x, y], dim=1), torch.stack([y, x], dim=1)], dim=0).sum(-1),
+        (randn(3, 2), randn(3, 2)),
+    ),
+    "cat_middle": (lambda m, x, y: torch.cat([x, y], dim=1), (randn(2, 3, 2), randn(2, 1, 2))),
+    "slice_index": (lambda m, x: x[:, 1:3, ::2] * x[0, -1, 0] + x[:, :2, None, 1], (randn(2, 4, 4),)),
+    "shape_ops": (
+        lambda m, x: x.reshape(3, -1).transpose(0, 1).unsqueeze(0).permute(2, 0, 1).flatten(1).T,
+        (randn(3, 2, 4),),
+    ),
+    "expand_repeat": (lambda m, x: x.expand(2, 3, 4) + x.repeat(2, 1, 1), (randn(1, 3, 4),)),
+    "sum_mean": (lambda m, x: x.sum(-1) + x.mean(dim=(0, 2), keepdim=True)[0, :, 0], (randn(2, 3, 4),)),
+    "softmax": (lambda m, x: F.softmax(x, dim=1) + torch.softmax(x, -1), (randn(2, 3, 3),)),
+    "where_mask": (
+        lambda m, x, k: torch.where(k[..., None], x, -x),
+        (randn(2, 3, 2), torch.rand(2, 3) > 0.5),
+    ),
+    "mask_logic": (
+        lambda m, x, k: (
+            x * (k | ~k).to(x.dtype)[..., None] + x * (k & (x[..., 0] > 0)).to(x.dtype)[..., None]
+        ),
+        (randn(2, 3, 2), torch.rand(2, 3) > 0.5),
+    ),
+    "layer_norm": (lambda m, x: m.norm(x), (randn(2, 3, 6),), {"norm": nn.LayerNorm(6)}),
+    "attention": (
+        lambda m, q, k, v, a: F.scaled_dot_product_attention(q, k, v, attn_mask=a),
+        (
+            randn(1, 2, 4, 3),
+            randn(1, 2, 4, 3),
+            randn(1, 2, 4, 5),
+            (torch.rand(4, 4) > 0.4) | torch.eye(4, dtype=torch.bool),
+        ),
+    ),
+    "einsum": (lambda m, w, v: torch.einsum("bijc,bjf->bicf", w, v), (randn(1, 3, 3, 4), randn(1, 3, 2))),
+    "lstm_cell": (
+        lambda m, x, h, c: m.cell(x, (h, c))[0] + m.cell(x, (h, c))[1],
+        (randn(4, 3), randn(4, 5), randn(4, 5)),
+        {"cell": nn.LSTMCell(3, 5)},
+    ),
+    "gru_cell": (lambda m, x, h: m.cell(x, h), (randn(4, 3), randn(4, 5)), {"cell": nn.GRUCell(3, 5)}),
+    "soft_grid_pooling": (
+        lambda m, h, p, n: m.pool(h, p, n),
+        (randn(1, 5, 6), randn(1, 5, 2), torch.tensor([[True, True, False, True, True]])),
+        {"pool": GridPooling(hidden_dim=6, latent_dim=3, out_dim=4, cell_side=0.8, grid_size=4, soft=True)},
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(OPERATIONS))
+def test_operation_matches_torch_in_values_and_jacobians(name):
+    torch.manual_seed(0)
+    fn, inputs, *modules = OPERATIONS[name]
+    check(Wrap(fn, **(modules[0] if modules else {})), *inputs)
+
+
+@pytest.mark.parametrize("name", ["arithmetic", "linear", "lstm_cell", "soft_grid_pooling", "attention"])
+def test_sx_export_and_mx_function_called_with_sx(name):
+    torch.manual_seed(0)
+    fn, inputs, *modules = OPERATIONS[name]
+    module = Wrap(fn, **(modules[0] if modules else {})).double()
+    check(module, *inputs, symbol=ca.SX)
+    specs = [TensorSpec(f"x{i}", tuple(x.shape), x.dtype == torch.bool) for i, x in enumerate(inputs)]
+    mx = export_function(module, module.forward, specs, ["y"], "f")
+    sx_args = [ca.SX.sym(f"s{i}", x.numel()) for i, x in enumerate(inputs)]
+    expanded = ca.Function("g", sx_args, [mx(*sx_args)])
+    args = [x.double().numpy().ravel() for x in inputs]
+    np.testing.assert_allclose(np.asarray(expanded(*args)), np.asarray(mx(*args)), rtol=0, atol=1e-12)
+
+
+def export(fn, *shapes, **modules):
+    module = Wrap(fn, **modules).double()
+    specs = [TensorSpec(f"x{i}", s) for i, s in enumerate(shapes)]
+    return export_function(module, module.forward, specs, ["y"], "f")
+
+
+def test_unsupported_operation_names_the_op_and_the_module():
+    class Sorting(nn.Module):
+        def forward(self, x):
+            return torch.sort(x, dim=-1).values
+
+    with pytest.raises(ExportError, match=r"unsupported operation torch\.sort .*module 'inner'") as info:
+        export(lambda m, x: m.inner(x), (3, 4), inner=Sorting())
+    assert "\n" not in str(info.value)
+
+
+def test_data_dependent_branch_is_refused_with_the_module():
+    class Branching(nn.Module):
+        def forward(self, x):
+            return x if x.sum() > 0 else -x
+
+    with pytest.raises(ExportError, match=r"bool\(\) of a symbolic tensor.*module 'block'"):
+        export(lambda m, x: m.block(x), (3,), block=Branching())
+
+
+def test_in_place_write_and_value_reads_are_refused():
+    def write(m, x):
+        y = x * 1
+        y[0] = 0
+        return y
+
+    with pytest.raises(ExportError, match="in-place write"):
+        export(write, (3,))
+    with pytest.raises(ExportError, match=r"item\(\)"):
+        export(lambda m, x: x * x[0].item(), (3,))
+    with pytest.raises(ExportError, match=r"unsupported tensor method \.masked_fill_"):
+        export(lambda m, x: x.masked_fill_(x > 0, 0.0), (3,))
+    with pytest.raises(ExportError, match="MultiheadAttention|unsupported"):
+        attention = nn.MultiheadAttention(4, 1, batch_first=True)
+        export(lambda m, x: m.mha(x, x, x)[0], (1, 3, 4), mha=attention)
+
+
+@pytest.mark.parametrize("pooling", ["grid", "soft", "none"])
+def test_exported_social_lstm_equals_the_hand_written_twin(pooling):
+    """The independent cross-check: two derivations of the same map agree to rounding."""
+    torch.manual_seed(1)
+    net = SocialLSTM(SocialLSTMConfig(pooling=pooling))
+    predictor = SocialLSTMPredictor(net, name="cross")
+    weights = {k: v.numpy() for k, v in predictor.net.state_dict().items()}
+    twin = SocialLSTMTwin(weights, predictor.config)
+    rng = np.random.default_rng(3)
+    n_humans, n_robots, horizon = 4, 2, 5
+    context_size = predictor.context_size(n_humans, n_robots)
+    assert context_size == twin.context_size(n_humans, n_robots)
+    context = rng.normal(0, 0.5, context_size)
+    context[-(n_humans + n_robots) :] = (rng.random(n_humans + n_robots) > 0.3).astype(float)
+    plan = rng.normal(0, 1.5, horizon * n_robots * 2)
+    exported = predictor.to_casadi(n_humans, n_robots, horizon)
+    reference = twin.prediction("cross", n_humans, n_robots, horizon)
+    np.testing.assert_allclose(
+        np.asarray(exported(context, plan)), np.asarray(reference(context, plan)), rtol=0, atol=1e-12
+    )
+    x = ca.MX.sym("x", plan.size)
+    jac = [ca.Function("j", [x], [ca.jacobian(f(context, x), x)])(plan) for f in (exported, reference)]
+    np.testing.assert_allclose(np.asarray(jac[0]), np.asarray(jac[1]), rtol=0, atol=1e-12)

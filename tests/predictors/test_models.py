@@ -1,0 +1,225 @@
+"""The registry of model kinds (``predictors.models``): shipped kinds, plugins by ``module:NetClass`` and by
+entry point, and what it refuses (bad specs, classes that break the contract, bad configs, oversized nets),
+each as one PredictorError line."""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from importlib import metadata
+
+import pytest
+import torch
+
+from predictors import models
+from predictors.errors import PredictorError
+from predictors.learned import LearnedPredictor, SocialGANPredictor
+from predictors.models import (
+    ENTRY_POINT_GROUP,
+    MAX_PARAMETERS,
+    PLUGINS_ENV,
+    UnknownModel,
+    load_plugin,
+    model_kind,
+    model_kinds,
+    model_names,
+    register_plugins,
+)
+from tests.plugins.toy_predictor import ToyConfig, ToyNet
+
+TOY = "tests.plugins.toy_predictor:ToyNet"
+NEVER = "tests.plugins.never_imported:Net"  # importing that module raises
+SHIPPED = {"social_lstm", "vanilla_lstm", "social_gan", "social_gru", "social_attention"}
+
+
+@pytest.fixture
+def no_plugins(monkeypatch):
+    """A registry without the plugins other tests of this process registered."""
+    monkeypatch.setattr(models, "_PLUGINS", {})
+
+
+def fake_entry_points(monkeypatch, **entries: str) -> None:
+    """Installed entry points of the group ``crowdmpc.predictors``: name -> ``module:Class``."""
+    points = [metadata.EntryPoint(name=n, value=v, group=ENTRY_POINT_GROUP) for n, v in entries.items()]
+
+    def entry_points(*, group: str):
+        return [p for p in points if p.group == group]
+
+    monkeypatch.setattr(models.metadata, "entry_points", entry_points)
+
+
+# ------------------------------------------------------------------------------------------------ shipped
+def test_the_shipped_kinds(no_plugins):
+    assert SHIPPED <= set(model_names())
+    assert set(model_kinds()) >= SHIPPED
+    gan = model_kind("social_gan")
+    assert gan.adversarial and gan.source == "shipped" and gan.predictor_class_name == "SocialGANPredictor"
+    assert gan.config().noise_dim == 8 and gan.config().head == "point"
+    assert model_kind("vanilla_lstm").config().pooling == "none"
+    assert model_kind("social_lstm").predictor_class_name == "LearnedPredictor"
+    assert model_kind("social_lstm").has_field("pooling") and not model_kind("social_attention").has_field(
+        "pooling"
+    )
+
+
+@pytest.mark.parametrize("name", ["gpt", "", "Social_LSTM", "social_lstm ", None, 3, ["social_lstm"]])
+def test_an_unknown_name_lists_the_choices(no_plugins, name):
+    with pytest.raises(UnknownModel) as refused:
+        model_kind(name)
+    message = str(refused.value)
+    assert message.startswith(f"unknown model {name!r}; choose from [")
+    assert "'social_lstm'" in message and "--plugin module:NetClass" in message and "\n" not in message
+
+
+def test_an_unregistered_plugin_name_says_how_to_register_it_and_imports_nothing(no_plugins):
+    with pytest.raises(UnknownModel) as refused:
+        model_kind(NEVER)
+    assert str(refused.value) == (
+        f"model {NEVER!r} is a plugin that is not registered; register it with "
+        f"`crowdmpc --plugin {NEVER} COMMAND ...` or {PLUGINS_ENV}={NEVER}"
+    )
+    assert "tests.plugins.never_imported" not in sys.modules
+
+
+# ------------------------------------------------------------------------------------------------ plugins
+def test_a_plugin_by_module_and_class(no_plugins):
+    kind = load_plugin(TOY)
+    assert kind.name == TOY and kind.net_class is ToyNet and kind.source == "plugin"
+    assert model_kind(TOY) is kind and TOY in model_names() and TOY in model_kinds()
+    assert load_plugin(TOY) is kind  # loaded once
+    config = kind.config({"hidden_dim": 4})
+    assert config == ToyConfig(hidden_dim=4) and kind.config_dict(config) == {"hidden_dim": 4, "radius": 2.0}
+    predictor = kind.predictor(kind.build_net(config), name="toy", obs_len=9)
+    assert type(predictor) is LearnedPredictor and predictor.kind == TOY and predictor.name == "toy"
+
+
+def test_register_plugins_records_them_for_child_processes(no_plugins, monkeypatch):
+    monkeypatch.setenv(PLUGINS_ENV, "some.module:Other")
+    monkeypatch.setattr(models, "load_plugin", lambda spec: spec)  # record only: some.module is not real
+    register_plugins([TOY, TOY])
+    assert os.environ[PLUGINS_ENV] == f"some.module:Other,{TOY}"  # kept, and each listed once
+
+
+def test_plugins_from_the_environment(no_plugins, monkeypatch):
+    monkeypatch.setenv(PLUGINS_ENV, f" {TOY} ,")
+    assert TOY in model_names()
+    assert model_kind(TOY).source == "plugin"
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("../x", "plugin '../x' is not of the form module:NetClass"),
+        ("/tmp/x.py:Net", "is not of the form module:NetClass"),
+        ("toy_predictor", "is not of the form module:NetClass"),
+        ("a:b:c", "is not of the form module:NetClass"),
+        ("a b:C", "is not of the form module:NetClass"),
+        ("mödule:Net", "is not of the form module:NetClass"),
+        ("a." * 150 + "b:C", "is not of the form module:NetClass"),
+        ("", "is not of the form module:NetClass"),
+        (None, "plugin None is not of the form module:NetClass"),
+        ("os:system", "model 'os:system': <built-in function system> is not a torch.nn.Module subclass"),
+        ("os:nope", "plugin 'os:nope': module 'os' has no 'nope'"),
+        (
+            "no_such_module_q:Net",
+            "plugin 'no_such_module_q:Net': importing 'no_such_module_q' failed: ModuleNotFoundError",
+        ),
+        (NEVER, "importing 'tests.plugins.never_imported' failed: AssertionError"),
+        ("torch.nn:Linear", "Linear.config_class must be a dataclass of hyper-parameters"),
+        ("tests.plugins.toy_predictor:ToyConfig", "is not a torch.nn.Module subclass"),
+    ],
+)
+def test_bad_plugins_are_refused_in_one_line(no_plugins, spec, message):
+    with pytest.raises(PredictorError) as refused:
+        load_plugin(spec)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+    assert spec not in models._PLUGINS
+
+
+def test_a_class_without_the_step_methods_is_refused(no_plugins, monkeypatch):
+    class NoStep(torch.nn.Module):
+        config_class = ToyConfig
+        head_type = "point"
+
+    monkeypatch.setattr(sys.modules["tests.plugins.toy_predictor"], "NoStep", NoStep, raising=False)
+    with pytest.raises(PredictorError, match=r"NoStep has no encode\(\)"):
+        load_plugin("tests.plugins.toy_predictor:NoStep")
+
+
+# ------------------------------------------------------------------------------------------- entry points
+def test_a_plugin_by_entry_point(no_plugins, monkeypatch):
+    fake_entry_points(monkeypatch, toy_ep=TOY, social_lstm=TOY)
+    assert "toy_ep" in model_names()
+    kind = model_kind("toy_ep")
+    assert kind.net_class is ToyNet and kind.source.startswith("entry point") and kind.name == "toy_ep"
+    assert model_kinds()["toy_ep"] is kind
+    assert model_kind("social_lstm").source == "shipped"  # an entry point never replaces a shipped kind
+
+
+def test_an_entry_point_that_does_not_load_is_one_line(no_plugins, monkeypatch):
+    fake_entry_points(monkeypatch, broken="no_such_module_q:Net")
+    with pytest.raises(PredictorError) as refused:
+        model_kind("broken")
+    message = str(refused.value)
+    assert message.startswith(
+        "entry point 'broken' (no_such_module_q:Net) does not load: ModuleNotFoundError"
+    )
+
+
+# ------------------------------------------------------------------------------------------------ configs
+@pytest.mark.parametrize(
+    "kind, values, message",
+    [
+        (
+            TOY,
+            {"bogus": 1},
+            f"unknown {TOY} config keys ['bogus']; expected a subset of ['hidden_dim', 'radius']",
+        ),
+        (TOY, {"hidden_dim": 0}, f"{TOY} config: ValueError: hidden_dim must be in 1..4096, got 0"),
+        (TOY, {"hidden_dim": "8"}, f"{TOY} config: TypeError: hidden_dim must be an integer, got '8'"),
+        (TOY, {"radius": float("nan")}, "radius must be in (0, 100], got nan"),
+        (TOY, [1, 2], f"a {TOY} config must be a JSON object, got [1, 2]"),
+        ("social_lstm", {"pooling": "max"}, "pooling 'max' is not one of"),
+        ("social_lstm", {"hidden": 3}, "unknown social_lstm config keys ['hidden']"),
+        ("social_gru", {"hidden_dim": True}, "hidden_dim must be an integer, got True"),
+        ("social_attention", {"pooling": "soft"}, "unknown social_attention config keys ['pooling']"),
+    ],
+)
+def test_bad_configs_are_refused(no_plugins, kind, values, message):
+    load_plugin(TOY)
+    with pytest.raises(PredictorError) as refused:
+        model_kind(kind).config(values)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+    if isinstance(values, dict):  # a dict given to build_net is validated the same way
+        with pytest.raises(PredictorError):
+            model_kind(kind).build_net({**values})
+
+
+def test_an_oversized_net_is_refused_before_memory_is_taken(no_plugins, monkeypatch):
+    kind = load_plugin(TOY)
+    devices = []
+    original = ToyNet.__init__
+
+    def spy(self, config):
+        devices.append(torch.empty(()).device.type)  # the default device the net is built on
+        original(self, config)
+
+    monkeypatch.setattr(ToyNet, "__init__", spy)
+    config = kind.config({"hidden_dim": 4096})  # 4096 x 4096 recurrent weights alone: 16.8 M
+    with pytest.raises(PredictorError) as refused:
+        kind.build_net(config)
+    assert re.fullmatch(
+        rf"{re.escape(TOY)}: this config makes a net of [\d,]+ parameters, more than the "
+        rf"{MAX_PARAMETERS:,} allowed",
+        str(refused.value),
+    )
+    assert devices == ["meta"]
+    kind.build_net(kind.config({"hidden_dim": 64}))
+    assert devices == ["meta", "meta", "cpu"]
+
+
+def test_the_gan_kind_makes_a_sampling_predictor(no_plugins):
+    kind = model_kind("social_gan")
+    predictor = kind.predictor(kind.build_net(kind.config()), name="g", obs_len=9)
+    assert isinstance(predictor, SocialGANPredictor) and predictor.kind == "social_gan"

@@ -1,0 +1,79 @@
+"""docs/extending.md, run as written: every ``crowdmpc`` command of its bash blocks, in order, in a directory
+holding only the guide's example file, with fewer epochs and episodes (the only edits), each must succeed.
+So the guide cannot go stale: a changed option, a renamed file or a broken step fails this test."""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.predictors.samples import shared_data_dir
+
+ROOT = Path(__file__).resolve().parents[1]
+GUIDE = ROOT / "docs" / "extending.md"
+EXAMPLE = ROOT / "docs" / "examples" / "window_mlp.py"
+# Smaller runs than the guide's (CI has 2 cores); nothing else in a command is changed.
+SHORTER = {
+    r"--epochs \d+": "--epochs 1",
+    r"--episodes-per-cell \d+": "--episodes-per-cell 2",
+    r"--episodes \d+": "--episodes 1",
+}
+
+
+def guide_commands() -> list[str]:
+    blocks = re.findall(r"```bash\n(.*?)```", GUIDE.read_text(), flags=re.S)
+    commands = []
+    for block in blocks:
+        for command in block.replace("\\\n", " ").splitlines():
+            if command.strip().startswith("crowdmpc "):
+                for pattern, replacement in SHORTER.items():
+                    command = re.sub(pattern, replacement, command)
+                commands.append(command.strip())
+    return commands
+
+
+def test_the_guide_has_every_step():
+    steps = [shlex.split(c)[3] for c in guide_commands()]  # crowdmpc --plugin X <command>
+    assert steps == ["train", "zoo", "evaluate", "export", "simulate", "sweep"]
+
+
+def test_the_guide_runs_from_its_own_directory(tmp_path):
+    data = shared_data_dir()
+    if data is None:
+        pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
+    work = tmp_path / "my_project"
+    work.mkdir()
+    shutil.copy(EXAMPLE, work / EXAMPLE.name)  # the user's file, outside the package
+    env = {
+        **os.environ,
+        "CROWDMPC_DATA": str(data),
+        "CROWDMPC_ZOO": str(tmp_path / "zoo"),
+        "CROWDMPC_CACHE": str(tmp_path / "cache"),
+        "PYTHONPATH": str(ROOT),
+    }
+    env.pop("CROWDMPC_PLUGINS", None)
+    outputs = []
+    for command in guide_commands():
+        argv = [a.replace("$CROWDMPC_DATA", str(data)) for a in shlex.split(command)]
+        done = subprocess.run(
+            [sys.executable, "-m", "pipelines.cli", *argv[1:]],
+            cwd=work,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert done.returncode == 0, f"{command}\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
+        outputs.append(done.stdout)
+    assert re.search(r"parity with torch \(float64\): values \S+, Jacobians", "".join(outputs))
+    table = (work / "runs" / "swap-window-mlp" / "table.md").read_text()
+    assert "window_mlp_eth" in table and "social_lstm_eth" in table
+    assert (tmp_path / "zoo" / "window_mlp_eth.pt").is_file()
+    assert not (ROOT / "checkpoints" / "window_mlp_eth.pt").exists()
