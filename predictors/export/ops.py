@@ -102,21 +102,14 @@ def power(a, b):
 
 
 def where(condition, a, b):
-    if not isinstance(condition, SymTensor):  # a constant mask: all True or all False needs no node
-        mask = constant(condition).astype(bool)
-        shape = tuple(
-            np.broadcast_shapes(
-                mask.shape,
-                np.shape(constant(a)) if not isinstance(a, SymTensor) else lift(a).shape_,
-                lift(b).shape_,
-            )
-        )
-        if mask.all():
-            return broadcast_to(lift(a), shape)
-        if not mask.any():
-            return broadcast_to(lift(b), shape)
     c, x, y = lift(condition), lift(a), lift(b)
     shape = tuple(np.broadcast_shapes(c.shape_, x.shape_, y.shape_))
+    if not isinstance(condition, SymTensor):  # a constant mask, all True or all False, needs no node
+        mask = constant(condition).astype(bool)
+        if mask.all():
+            return broadcast_to(x, shape)
+        if not mask.any():
+            return broadcast_to(y, shape)
     # if_else, not c * a + (1 - c) * b: an infinite value in the branch not taken must not give NaN.
     return SymTensor(
         ca.if_else(_operand(c, shape), _operand(x, shape), _operand(y, shape), False), shape, x.is_bool

@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from predictors.export import ops
-from predictors.export.errors import MODULE_STACK, ExportError
+from predictors.export.errors import MODULE_STACK, ExportError, current_module
 from predictors.export.symbolic import SymTensor, lift
 
 
@@ -44,7 +44,7 @@ class TensorSpec:
 def _cell_inputs(cell: nn.Module, x: Any) -> tuple[SymTensor, bool]:
     x = lift(x)
     if x.ndim not in (1, 2):
-        raise ExportError(f"{type(cell).__name__} input of shape {x.shape_}", "")
+        raise ExportError(f"{type(cell).__name__} input of shape {x.shape_}", current_module())
     return (ops.unsqueeze(x, 0), False) if x.ndim == 1 else (x, True)
 
 
@@ -140,7 +140,7 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
 def _flat_output(value: Any, what: str) -> Any:
     if isinstance(value, (SymTensor, torch.Tensor)):
         return lift(value).flat()
-    raise ExportError(f"{what} is a {type(value).__name__}, not a tensor", "")
+    raise ExportError(f"{what} is a {type(value).__name__}, not a tensor", current_module())
 
 
 def export_function(
