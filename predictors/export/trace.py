@@ -19,8 +19,11 @@ import casadi as ca
 import torch
 from torch import nn
 
-from predictors.export import ops
+from predictors.export import ops  # noqa: F401 (registers the operation table)
+from predictors.export.elementwise import sigmoid
 from predictors.export.errors import MODULE_STACK, ExportError, current_module
+from predictors.export.linalg import linear
+from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.symbolic import SymTensor, lift
 
 
@@ -45,14 +48,14 @@ def _cell_inputs(cell: nn.Module, x: Any) -> tuple[SymTensor, bool]:
     x = lift(x)
     if x.ndim not in (1, 2):
         raise ExportError(f"{type(cell).__name__} input of shape {x.shape_}", current_module())
-    return (ops.unsqueeze(x, 0), False) if x.ndim == 1 else (x, True)
+    return (unsqueeze(x, 0), False) if x.ndim == 1 else (x, True)
 
 
 def _gates(cell: nn.Module, x: SymTensor, h: SymTensor) -> tuple[Any, Any]:
     """``x W_ih^T + b_ih`` and ``h W_hh^T + b_hh`` as (rows, gates) matrices."""
     return (
-        ops.linear(x, cell.weight_ih, cell.bias_ih).m,  # type: ignore[arg-type]
-        ops.linear(h, cell.weight_hh, cell.bias_hh).m,  # type: ignore[arg-type]
+        linear(x, cell.weight_ih, cell.bias_ih).m,  # type: ignore[arg-type]
+        linear(h, cell.weight_hh, cell.bias_hh).m,  # type: ignore[arg-type]
     )
 
 
@@ -60,7 +63,7 @@ def _state(value: Any, rows: int, hidden: int, batched: bool) -> SymTensor:
     if value is None:
         return lift(torch.zeros(rows, hidden, dtype=torch.float64))
     value = lift(value)
-    return value if batched else ops.unsqueeze(value, 0)
+    return value if batched else unsqueeze(value, 0)
 
 
 def lstm_cell(cell: nn.LSTMCell, input: Any, hx: Any = None) -> tuple[SymTensor, SymTensor]:  # noqa: A002
@@ -72,14 +75,14 @@ def lstm_cell(cell: nn.LSTMCell, input: Any, hx: Any = None) -> tuple[SymTensor,
     c = _state(None if hx is None else hx[1], rows, d, batched)
     from_x, from_h = _gates(cell, x, h)
     gates = from_x + from_h
-    i = ops.sigmoid(gates[:, 0:d])
-    f = ops.sigmoid(gates[:, d : 2 * d])
+    i = sigmoid(gates[:, 0:d])
+    f = sigmoid(gates[:, d : 2 * d])
     g = ca.tanh(gates[:, 2 * d : 3 * d])
-    o = ops.sigmoid(gates[:, 3 * d : 4 * d])
+    o = sigmoid(gates[:, 3 * d : 4 * d])
     c_new = SymTensor(f * c.m + i * g, (rows, d))
     h_new = SymTensor(o * ca.tanh(c_new.m), (rows, d))
     if not batched:
-        return ops.squeeze(h_new, 0), ops.squeeze(c_new, 0)
+        return squeeze(h_new, 0), squeeze(c_new, 0)
     return h_new, c_new
 
 
@@ -90,11 +93,11 @@ def gru_cell(cell: nn.GRUCell, input: Any, hx: Any = None) -> SymTensor:  # noqa
     rows = x.shape_[0]
     h = _state(hx, rows, d, batched)
     from_x, from_h = _gates(cell, x, h)
-    r = ops.sigmoid(from_x[:, 0:d] + from_h[:, 0:d])
-    z = ops.sigmoid(from_x[:, d : 2 * d] + from_h[:, d : 2 * d])
+    r = sigmoid(from_x[:, 0:d] + from_h[:, 0:d])
+    z = sigmoid(from_x[:, d : 2 * d] + from_h[:, d : 2 * d])
     n = ca.tanh(from_x[:, 2 * d : 3 * d] + r * from_h[:, 2 * d : 3 * d])
     h_new = SymTensor((1 - z) * n + z * h.m, (rows, d))
-    return h_new if batched else ops.squeeze(h_new, 0)
+    return h_new if batched else squeeze(h_new, 0)
 
 
 CELLS: dict[type[nn.Module], Callable[..., Any]] = {nn.LSTMCell: lstm_cell, nn.GRUCell: gru_cell}

@@ -1,0 +1,163 @@
+"""Elementwise arithmetic, activations, comparisons and masks, as whole-matrix CasADi operations."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import torch
+
+from predictors.export.errors import ExportError, current_module
+from predictors.export.symbolic import (
+    SymTensor,
+    as_float,
+    broadcast_to,
+    constant,
+    lift,
+    rows_cols,
+)
+
+
+# ----------------------------------------------------------------------------------------------- elementwise
+def operand(x: SymTensor, shape: tuple[int, ...]) -> Any:
+    """``x.m`` brought to ``shape``: a scalar stays one, a row or column is repeated, the rest gathered."""
+    if x.numel() == 1 or x.shape_ == shape:
+        return x.m
+    rows, cols = rows_cols(shape)
+    padded = (1,) * (len(shape) - len(x.shape_)) + x.shape_
+    if padded[-1] == cols and math.prod(padded[:-1]) == 1:
+        return ca.repmat(x.m, rows, 1)
+    if padded[:-1] == shape[:-1] and padded[-1] == 1:
+        return ca.repmat(x.m, 1, cols)
+    return broadcast_to(x, shape).m
+
+
+def _is_constant(value: Any, number: float) -> bool:
+    if isinstance(value, SymTensor):
+        return False
+    array = constant(value)
+    return bool(array.size) and bool((array == number).all())
+
+
+def binary(op: Callable[[Any, Any], Any], a: Any, b: Any, *, is_bool: bool = False) -> SymTensor:
+    x, y = lift(a), lift(b)
+    shape = tuple(np.broadcast_shapes(x.shape_, y.shape_))
+    return SymTensor(op(operand(x, shape), operand(y, shape)), shape, is_bool)
+
+
+def add(a, b, *, alpha=1):
+    if alpha != 1:
+        b = mul(b, alpha)
+    for sym, other in ((a, b), (b, a)):  # x + 0: no node (masks of ones and zeros are common)
+        if isinstance(sym, SymTensor) and _is_constant(other, 0.0):
+            if tuple(np.broadcast_shapes(sym.shape_, tuple(np.shape(constant(other))))) == sym.shape_:
+                return as_float(sym)
+    return binary(lambda p, q: p + q, a, b)
+
+
+def sub(a, b, *, alpha=1):
+    return add(a, mul(b, -alpha) if isinstance(b, SymTensor) else -alpha * constant(b))
+
+
+def mul(a, b):
+    for sym, other in ((a, b), (b, a)):  # x * 1: no node
+        if isinstance(sym, SymTensor) and _is_constant(other, 1.0):
+            if tuple(np.broadcast_shapes(sym.shape_, tuple(np.shape(constant(other))))) == sym.shape_:
+                return as_float(sym)
+    return binary(lambda p, q: p * q, a, b)
+
+
+def div(a, b, *, rounding_mode=None):
+    if rounding_mode is not None:
+        raise ExportError(f"division with rounding_mode={rounding_mode!r}", current_module())
+    return binary(lambda p, q: p / q, a, b)
+
+
+def power(a, b):
+    return binary(lambda p, q: p**q, a, b)
+
+
+def where(condition, a, b):
+    c, x, y = lift(condition), lift(a), lift(b)
+    shape = tuple(np.broadcast_shapes(c.shape_, x.shape_, y.shape_))
+    if not isinstance(condition, SymTensor):  # a constant mask, all True or all False, needs no node
+        mask = constant(condition).astype(bool)
+        if mask.all():
+            return broadcast_to(x, shape)
+        if not mask.any():
+            return broadcast_to(y, shape)
+    # if_else, not c * a + (1 - c) * b: an infinite value in the branch not taken must not give NaN.
+    return SymTensor(
+        ca.if_else(operand(c, shape), operand(x, shape), operand(y, shape), False), shape, x.is_bool
+    )
+
+
+def unary(op: Callable[[Any], Any]) -> Callable[..., SymTensor]:
+    def apply(x, *args, **kwargs):
+        x = lift(x)
+        return SymTensor(op(x.m), x.shape_)
+
+    return apply
+
+
+def sigmoid(m):
+    # exp(-x) overflows to inf for x << 0, and 1 / (1 + inf) is the correct limit 0.
+    return 1 / (1 + ca.exp(-m))
+
+
+def gelu(x, approximate="none"):
+    x = lift(x)
+    if approximate == "tanh":
+        inner = math.sqrt(2 / math.pi) * (x.m + 0.044715 * x.m**3)
+        return SymTensor(0.5 * x.m * (1 + ca.tanh(inner)), x.shape_)
+    return SymTensor(0.5 * x.m * (1 + ca.erf(x.m / math.sqrt(2))), x.shape_)
+
+
+def softplus(x, beta=1.0, threshold=20.0):
+    x = lift(x)
+    scaled = beta * x.m
+    # torch reverts to the identity above the threshold, where log1p(exp) would overflow
+    return SymTensor(ca.if_else(scaled > threshold, x.m, ca.log1p(ca.exp(scaled)) / beta, False), x.shape_)
+
+
+def leaky_relu(x, negative_slope=0.01, inplace=False):
+    x = lift(x)
+    return SymTensor(ca.fmax(x.m, 0) + negative_slope * ca.fmin(x.m, 0), x.shape_)
+
+
+def clamp(x, min=None, max=None):  # noqa: A002 (torch's names)
+    x = lift(x)
+    m = x.m
+    if min is not None:
+        m = ca.fmax(m, lift(min).m) if not isinstance(min, SymTensor) else binary(ca.fmax, x, min).m
+    if max is not None:
+        m = ca.fmin(m, lift(max).m) if not isinstance(max, SymTensor) else binary(ca.fmin, x, max).m
+    return SymTensor(m, x.shape_)
+
+
+def identity(x, *args, **kwargs):
+    return x
+
+
+def to(x, *args, **kwargs):
+    """``.to(dtype)``/``.to(device)``: the symbolic value is float64 or a mask; only ``bool`` changes it."""
+    dtype = kwargs.get("dtype")
+    for arg in args:
+        if isinstance(arg, torch.dtype):
+            dtype = arg
+        elif isinstance(arg, (torch.Tensor, SymTensor)):
+            dtype = arg.dtype
+    x = lift(x)
+    if dtype == torch.bool:
+        return x if x.is_bool else SymTensor(x.m != 0, x.shape_, True)
+    if dtype is not None and not dtype.is_floating_point:
+        raise ExportError(f"conversion to {dtype} (only float and bool tensors export)", current_module())
+    return as_float(x)
+
+
+def logical_not(x):
+    x = lift(x)
+    return SymTensor(1 - (x.m != 0), x.shape_, True)

@@ -1,0 +1,177 @@
+"""Reductions, softmax, linear layers, matmul and einsum."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from predictors.export.elementwise import add
+from predictors.export.errors import ExportError, current_module
+from predictors.export.movement import normal_dim, permute, reshape, squeeze, transpose, unsqueeze
+from predictors.export.symbolic import (
+    SymTensor,
+    as_float,
+    broadcast_to,
+    constant,
+    lift,
+)
+
+
+# ------------------------------------------------------------------------------------------- reductions
+def _to_last(x: SymTensor, dims: Sequence[int]) -> tuple[SymTensor, tuple[int, ...]]:
+    """``x`` with ``dims`` moved to the end and merged into one column block; the kept shape."""
+    keep = [d for d in range(x.ndim) if d not in dims]
+    moved = (
+        permute(x, tuple(keep + list(dims))) if list(dims) != list(range(x.ndim - len(dims), x.ndim)) else x
+    )
+    kept = tuple(x.shape_[d] for d in keep)
+    return reshape(moved, kept + (math.prod(x.shape_[d] for d in dims),)), kept
+
+
+def _reduce_dims(x: SymTensor, dim) -> list[int]:
+    if dim is None:
+        return list(range(x.ndim))
+    dims = dim if isinstance(dim, (tuple, list)) else (dim,)
+    return sorted(normal_dim(d, x.ndim) for d in dims)
+
+
+def reduce_sum(x, dim=None, keepdim=False, *, dtype=None):
+    x = as_float(lift(x))
+    if not x.shape_:
+        return x
+    dims = _reduce_dims(x, dim)
+    merged, kept = _to_last(x, dims)
+    out = SymTensor(ca.sum2(merged.m), kept + (1,))
+    shape = tuple(1 if d in dims else s for d, s in enumerate(x.shape_)) if keepdim else kept
+    return reshape(out, shape)
+
+
+def mean(x, dim=None, keepdim=False, *, dtype=None):
+    x = lift(x)
+    count = math.prod(x.shape_[d] for d in _reduce_dims(x, dim))
+    total = reduce_sum(x, dim, keepdim)
+    return SymTensor(total.m / count, total.shape_)
+
+
+def _row_max(m):
+    top = m[:, 0]
+    for j in range(1, m.shape[1]):
+        top = ca.fmax(top, m[:, j])
+    return top
+
+
+def softmax_rows(m, mask=None):
+    """Softmax of every row of ``m``; ``mask`` (0/1, same shape) leaves entries out exactly as -inf would."""
+    cols = m.shape[1]
+    shifted = m if mask is None else ca.if_else(mask, m, -1e300, False)
+    # The shift by the row's maximum changes no value (softmax is shift invariant) but keeps exp finite.
+    e = ca.exp(m - ca.repmat(_row_max(shifted), 1, cols))
+    if mask is not None:
+        e = ca.if_else(mask, e, 0, False)
+    return e / ca.repmat(ca.sum2(e), 1, cols)
+
+
+def softmax(x, dim=None, _stacklevel=3, dtype=None):
+    x = as_float(lift(x))
+    dim = normal_dim(x.ndim - 1 if dim is None else dim, x.ndim)
+    if dim == x.ndim - 1:
+        return SymTensor(softmax_rows(x.m), x.shape_)
+    order = [d for d in range(x.ndim) if d != dim] + [dim]
+    inverse = np.argsort(order).tolist()
+    moved = permute(x, tuple(order))
+    return permute(SymTensor(softmax_rows(moved.m), moved.shape_), tuple(inverse))
+
+
+def log_softmax(x, dim=None, _stacklevel=3, dtype=None):
+    y = softmax(x, dim)
+    return SymTensor(ca.log(y.m), y.shape_)
+
+
+# ------------------------------------------------------------------------------------------- linear algebra
+def linear(x, weight, bias=None):
+    x = lift(x)
+    w = constant(weight) if not isinstance(weight, SymTensor) else None
+    if w is None:
+        return (
+            add(matmul(x, transpose(weight, 0, 1)), bias)
+            if bias is not None
+            else matmul(x, transpose(weight, 0, 1))
+        )
+    out = ca.mtimes(x.m, ca.DM(w.T))
+    if bias is not None:
+        out = out + ca.repmat(ca.DM(constant(bias).reshape(1, -1)), out.shape[0], 1)
+    return SymTensor(out, x.shape_[:-1] + (w.shape[0],))
+
+
+def matmul(a, b):
+    x, y = lift(a), lift(b)
+    if x.ndim == 1:
+        return squeeze(matmul(unsqueeze(x, 0), y), -2)
+    if y.ndim == 1:
+        return squeeze(matmul(x, unsqueeze(y, -1)), -1)
+    n, k = x.shape_[-2:]
+    p = y.shape_[-1]
+    if y.shape_[-2] != k:
+        raise ExportError(f"matmul of {x.shape_} and {y.shape_}", current_module())
+    if y.ndim == 2:  # one mtimes over all leading dims of x
+        return SymTensor(ca.mtimes(x.m, y.m), x.shape_[:-1] + (p,))
+    batch = tuple(np.broadcast_shapes(x.shape_[:-2], y.shape_[:-2]))
+    x = broadcast_to(x, batch + (n, k))
+    y = broadcast_to(y, batch + (k, p))
+    blocks = [
+        ca.mtimes(x.m[i * n : (i + 1) * n, :], y.m[i * k : (i + 1) * k, :]) for i in range(math.prod(batch))
+    ]
+    return SymTensor(ca.vertcat(*blocks), batch + (n, p))
+
+
+def einsum(equation: str, *operands):
+    """Two-operand (or one-operand) einsum as permutes, sums and one batched matmul."""
+    if len(operands) == 1 and isinstance(operands[0], (list, tuple)):
+        operands = tuple(operands[0])
+    equation = equation.replace(" ", "")
+    if "..." in equation or "->" not in equation or len(operands) not in (1, 2):
+        raise ExportError(
+            f"einsum {equation!r} (explicit '->', one or two operands, no '...')", current_module()
+        )
+    inputs, output = equation.split("->")
+    specs = inputs.split(",")
+    tensors = [lift(t) for t in operands]
+    if len(tensors) == 1:
+        (spec,), (x,) = specs, tensors
+        summed = [i for i, c in enumerate(spec) if c not in output]
+        kept = "".join(c for c in spec if c in output)
+        y = reduce_sum(x, summed) if summed else x
+        return permute(y, tuple(kept.index(c) for c in output)) if kept != output else y
+    (sa, sb), (a, b) = specs, tensors
+    # letters seen by one operand only and not in the output are summed out first
+    for which in (0, 1):
+        spec, other = (sa, sb) if which == 0 else (sb, sa)
+        lonely = [i for i, c in enumerate(spec) if c not in other and c not in output]
+        if lonely:
+            reduced = reduce_sum(a if which == 0 else b, lonely)
+            spec = "".join(c for i, c in enumerate(spec) if i not in lonely)
+            if which == 0:
+                a, sa = reduced, spec
+            else:
+                b, sb = reduced, spec
+    batch = [c for c in sa if c in sb and c in output]
+    contract = [c for c in sa if c in sb and c not in output]
+    left = [c for c in sa if c not in sb]
+    right = [c for c in sb if c not in sa]
+    size = {c: a.shape_[sa.index(c)] for c in sa} | {c: b.shape_[sb.index(c)] for c in sb}
+
+    def arrange(x: SymTensor, spec: str, groups: list[list[str]]) -> SymTensor:
+        order = [spec.index(c) for g in groups for c in g]
+        y = permute(x, tuple(order)) if order != list(range(len(spec))) else x
+        return reshape(y, tuple(math.prod(size[c] for c in g) for g in groups))
+
+    lhs = arrange(a, sa, [batch, left, contract])
+    rhs = arrange(b, sb, [batch, contract, right])
+    product = matmul(lhs, rhs)  # (batch, left, right)
+    order_now = batch + left + right
+    result = reshape(product, tuple(size[c] for c in order_now))
+    perm = tuple(order_now.index(c) for c in output)
+    return permute(result, perm) if perm != tuple(range(len(perm))) else result
