@@ -1,5 +1,6 @@
 import pytest
 
+from pipelines.loop.spec import PLUGINS_ENV as CONTROLLER_PLUGINS_ENV
 from predictors.models import PLUGINS_ENV
 from predictors.zoo import ZOO_ENV
 
@@ -7,6 +8,8 @@ from predictors.zoo import ZOO_ENV
 @pytest.fixture(autouse=True)
 def _private_user_zoo(tmp_path_factory, monkeypatch):
     """Every test gets an empty user zoo of its own (never the real ~/.local/share/crowdmpc/zoo), and no
-    plugins from the environment; what a test sets (``--plugin`` sets CROWDMPC_PLUGINS) is undone after."""
+    plugins from the environment; what a test sets (``--plugin`` sets CROWDMPC_PLUGINS or
+    CROWDMPC_CONTROLLERS) is undone after."""
     monkeypatch.setenv(ZOO_ENV, str(tmp_path_factory.mktemp("user_zoo")))
     monkeypatch.delenv(PLUGINS_ENV, raising=False)
+    monkeypatch.delenv(CONTROLLER_PLUGINS_ENV, raising=False)
