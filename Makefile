@@ -2,6 +2,7 @@
 #   make demo   set up .venv, run one closed-loop CMPC episode (3 robots, 7 humans, the zoo's Social-LSTM)
 #               printing its metrics, writing runs/demo/*.mcap and a plot
 #   make test   set up .venv, lint (ruff), type-check (mypy), run the test suite (pytest)
+#   make dist   build the sdist and the wheel (with the shipped model zoo) into dist/
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -9,7 +10,7 @@ BIN    := $(VENV)/bin
 CROWDMPC_DATA ?= $(abspath ../shared/data)
 export CROWDMPC_DATA
 
-.PHONY: demo test lint typecheck setup clean
+.PHONY: demo test lint typecheck setup dist clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,5 +38,10 @@ typecheck: $(BIN)/.installed
 test: lint typecheck
 	$(BIN)/python -m pytest -q -m "slow or not slow"
 
+# sdist first, then the wheel from the sdist (what a user's `pip install` gets); tests/test_wheel.py installs
+# one into a fresh virtual environment and runs it outside the clone.
+dist: $(BIN)/.installed
+	$(BIN)/python -m build --no-isolation --outdir dist .
+
 clean:
-	rm -rf $(VENV) runs .pytest_cache .ruff_cache *.egg-info
+	rm -rf $(VENV) runs .pytest_cache .ruff_cache *.egg-info build dist

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from mpc import compile_cache
 from mpc.config import MPCConfig
 from mpc.fastcall import BufferedFunction
 
@@ -42,10 +43,12 @@ def better(a: Solution, b: Solution) -> Solution:
     return a
 
 
-def _jit_options(cfg: MPCConfig) -> dict:
-    if not cfg.jit:
-        return {}
-    return {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+def build_nlpsol(name: str, plugin: str, nlp: dict, options: dict, jit: bool) -> ca.Function:
+    """``casadi.nlpsol``; with ``jit``, compiled with gcc through the persistent compile cache
+    (mpc/compile_cache.py: compiled once per machine, then loaded in milliseconds by every process)."""
+    if jit:
+        return compile_cache.nlpsol(name, plugin, nlp, options)
+    return ca.nlpsol(name, plugin, nlp, options)
 
 
 def ipopt_options(cfg: MPCConfig, warm: bool) -> dict:
@@ -68,7 +71,7 @@ def ipopt_options(cfg: MPCConfig, warm: bool) -> dict:
         "ipopt.acceptable_tol": max(1e2 * cfg.solver_tol, 1e-4),
         "ipopt.max_iter": cfg.solver_max_iter,
         "ipopt.max_wall_time": cfg.time_limit_s,
-    } | _jit_options(cfg)
+    }
     if warm:
         opts.update(
             {
@@ -99,7 +102,7 @@ def fatrop_options(cfg: MPCConfig) -> dict:
             "mu_init": 1e-2,
             "max_iter": cfg.solver_max_iter,
         },
-    } | _jit_options(cfg)
+    }
 
 
 class _Solver:
@@ -128,7 +131,8 @@ class _Solver:
         self._fatrop = None
         self._ipopt_instances: dict[bool, BufferedFunction] = {}
         if self.primary == "fatrop":
-            self._fatrop = BufferedFunction(ca.nlpsol(name, "fatrop", nlp, fatrop_options(cfg)))
+            fatrop = build_nlpsol(name, "fatrop", nlp, fatrop_options(cfg), cfg.jit)
+            self._fatrop = BufferedFunction(fatrop)
         else:
             self._ipopt(warm=False)
             if cfg.warm_start:
@@ -136,12 +140,12 @@ class _Solver:
 
     def _ipopt(self, warm: bool) -> BufferedFunction:
         if warm not in self._ipopt_instances:
-            cfg = self.cfg if self.primary == "ipopt" else self.cfg.replace(jit=False)
-            options = ipopt_options(cfg, warm=warm) | self._ipopt_extra
+            jit = self.cfg.jit and self.primary == "ipopt"
+            options = ipopt_options(self.cfg, warm=warm) | self._ipopt_extra
             # DMPC's threads may build their robots' IPOPT at the same moment, from the same SX graph, whose
             # reference counts are not atomic: one build at a time.
             with _BUILD_LOCK:
-                solver = ca.nlpsol(self._name, "ipopt", self._nlp, options)
+                solver = build_nlpsol(self._name, "ipopt", self._nlp, options, jit)
             self._ipopt_instances[warm] = BufferedFunction(solver)
         return self._ipopt_instances[warm]
 

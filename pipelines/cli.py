@@ -15,7 +15,19 @@ from pipelines.version import crowdmpc_version
 from predictors.errors import PredictorError
 
 # The order in which subcommands are listed by --help.
-COMMANDS = ("data", "evaluate", "train", "export", "zoo", "calibrate", "simulate", "sweep", "review")
+COMMANDS = (
+    "data",
+    "evaluate",
+    "train",
+    "export",
+    "zoo",
+    "calibrate",
+    "simulate",
+    "sweep",
+    "review",
+    "cache",
+    "config",
+)
 
 # Errors a user can cause: printed as one line, exit code 2, no traceback. Anything else is a bug and keeps
 # its traceback.
@@ -34,6 +46,7 @@ EPILOG = """examples:
   crowdmpc data prepare --raw ../shared/data/raw_ewap --out data/prepared
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
   crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario circle --humans 7 --episodes 5
+  crowdmpc --config docs/examples/demo.toml --set mpc.w_coll=1e6 simulate --humans 5
   crowdmpc --plugin my_predictor:MyNet train --model my_predictor:MyNet --data-dir ../shared/data
 
 Plugins: --plugin module:NetClass (before the command; repeatable) registers a predictor net of your own
@@ -51,7 +64,7 @@ class PluginAction(argparse.Action):
     for the processes the command starts. A plugin that does not load is a one-line parser error."""
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
-        from predictors.models import register_plugins
+        from pipelines.plugins import register_plugins
 
         try:
             register_plugins([str(values)])
@@ -85,6 +98,18 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="MODULE:CLASS",
         help="register a predictor net of your own as model kind MODULE:CLASS (repeatable; before COMMAND)",
     )
+    # Config files (pipelines/config): also accepted after simulate, sweep and config show.
+    parser.add_argument(
+        "--config", dest="config_file", metavar="FILE", help="a TOML config file (see `crowdmpc config show`)"
+    )
+    parser.add_argument(
+        "--set",
+        dest="config_set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="override one config value, e.g. mpc.w_coll=1e6 (repeatable)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         module_name = f"pipelines.commands.{name}"
@@ -95,11 +120,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``crowdmpc`` command. Its output flushed here, so that a reader that left (``crowdmpc review ... |
+    head``) ends the command quietly, with the status of a SIGPIPE, instead of a BrokenPipeError traceback."""
+    from pipelines.commands import quit_closed_stdout, stdout_reader_left
+
+    try:
+        try:
+            return _main(argv)
+        finally:
+            sys.stdout.flush()
+    except BrokenPipeError:
+        if not stdout_reader_left():  # another pipe (a worker's): a real error
+            raise
+        return quit_closed_stdout()
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 2
+    if (args.config_file or args.config_set) and args.command not in ("simulate", "sweep", "config"):
+        parser.error(f"--config and --set apply to simulate, sweep and config, not {args.command}")
     try:
         return int(args.func(args) or 0)
     except USER_ERRORS as exc:

@@ -7,13 +7,15 @@ The statistics (quantiles with the finite-sample correction, coverage, what the 
 ``predictors.conformal``, the errors on real (TrajNet++) scenes in ``predictors.real_data``; this module turns
 them into stored blocks and finds the block a controller asks for.
 
-Storage: ``calibrations.json`` in the zoo directory (``predictors.zoo.checkpoints_dir``), beside the
-manifest, so that weightless predictors get a calibration too and recalibrating never rewrites the
-manifest's hashes::
+Storage: ``calibrations.json`` in a zoo directory, beside the manifest, so that weightless predictors get a
+calibration too and recalibrating never rewrites the manifest's hashes::
 
     {"format": "crowdmpc-calibrations", "version": 1, "calibrations": [block, ...]}
 
-one block (``Calibration.to_json``) per (predictor, source, alpha).
+one block (``Calibration.to_json``) per (predictor, source, alpha). The shipped zoo's file
+(``predictors.zoo.checkpoints_dir``) holds the calibrations shipped with the models and is never written: a
+user's calibrations go to the user zoo's file (``predictors.zoo.user_zoo_dir``), and a block there replaces
+the shipped block of the same key. Functions given a ``directory`` read and write that directory's file only.
 """
 
 from __future__ import annotations
@@ -34,7 +36,14 @@ from predictors.base import DT, Predictor
 from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
-from predictors.zoo import checkpoints_dir, read_document, read_manifest
+from predictors.zoo import (
+    checkpoints_dir,
+    is_shipped,
+    read_document,
+    read_manifest,
+    user_zoo_dir,
+    writable_zoo_dir,
+)
 
 CALIBRATIONS_NAME: Final[str] = "calibrations.json"
 CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
@@ -209,12 +218,24 @@ def calibrations_from_errors(errors: np.ndarray, alphas: Sequence[float], **bloc
 
 # ------------------------------------------------------------------------------------------------- storage
 def calibrations_path(directory: str | Path | None = None) -> Path:
-    return checkpoints_dir(directory) / CALIBRATIONS_NAME
+    """The file ``save_calibration`` writes: in ``directory``, else in the user zoo (PredictorError when the
+    user zoo is the shipped one, which is read-only)."""
+    root = Path(directory) if directory is not None else writable_zoo_dir()
+    return root / CALIBRATIONS_NAME
 
 
-def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
-    """Every stored block; an absent file means none."""
-    path = calibrations_path(directory)
+def calibration_files(directory: str | Path | None = None) -> list[Path]:
+    """The files calibrations are read from, the first holding a key winning: ``directory``'s alone, else the
+    user zoo's, then the shipped zoo's (once when they are the same directory)."""
+    if directory is not None:
+        return [Path(directory) / CALIBRATIONS_NAME]
+    user = user_zoo_dir()
+    roots = [checkpoints_dir()] if is_shipped(user) else [user, checkpoints_dir()]
+    return [root / CALIBRATIONS_NAME for root in roots]
+
+
+def read_calibration_file(path: Path) -> list[Calibration]:
+    """Every block of one calibrations file; an absent file means none."""
     if not path.is_file():
         return []
     document = read_document(path, CALIBRATIONS_FORMAT, "crowdmpc calibrations file")
@@ -236,10 +257,27 @@ def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
     return result
 
 
+def stored_calibrations(directory: str | Path | None = None) -> list[tuple[Path, Calibration]]:
+    """``(file, block)`` for every block in force (``calibration_files``): a user block hides the shipped
+    block of its key."""
+    found: list[tuple[Path, Calibration]] = []
+    for path in calibration_files(directory):
+        for block in read_calibration_file(path):
+            if not any(other.matches(*block.key()) for _, other in found):
+                found.append((path, block))
+    return found
+
+
+def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
+    """Every block in force: ``directory``'s, else the user zoo's, then the shipped ones not replaced."""
+    return [block for _, block in stored_calibrations(directory)]
+
+
 def save_calibration(block: Calibration, directory: str | Path | None = None) -> Path:
-    """Store ``block``, replacing the one with the same (predictor, source, alpha); written atomically."""
+    """Store ``block`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
+    replacing that file's block with the same (predictor, source, alpha); written atomically."""
     path = calibrations_path(directory)
-    kept = [b for b in read_calibrations(directory) if not b.matches(*block.key())]
+    kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
     blocks = sorted([*kept, block], key=Calibration.key)
     document = {
         "format": CALIBRATIONS_FORMAT,
@@ -285,17 +323,17 @@ def find_calibration(
     check_alpha(alpha)
     if source not in SOURCES:
         raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
-    path = calibrations_path(directory)
-    blocks = read_calibrations(directory)
-    found = [b for b in blocks if b.matches(predictor, source, alpha)]
+    stored = stored_calibrations(directory)
+    found = [(path, b) for path, b in stored if b.matches(predictor, source, alpha)]
     if not found:
-        others = sorted(b.alpha for b in blocks if b.predictor == predictor and b.source == source)
+        others = sorted(b.alpha for _, b in stored if b.predictor == predictor and b.source == source)
         have = f" (it has alpha {', '.join(f'{a:g}' for a in others)})" if others else ""
+        files = " or ".join(str(p) for p in calibration_files(directory))
         raise PredictorError(
-            f"no {source} calibration at alpha={alpha:g} for predictor {predictor!r} in {path}{have}; "
+            f"no {source} calibration at alpha={alpha:g} for predictor {predictor!r} in {files}{have}; "
             f"run: {_recalibrate_hint(predictor, source, alpha)}"
         )
-    block = found[0]
+    path, block = found[0]
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
         raise PredictorError(

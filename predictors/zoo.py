@@ -10,7 +10,7 @@ first; a file that differs is refused with ``CheckpointMismatch``.
 Two zoos, read in this order:
 
 * the shipped zoo, ``checkpoints/`` (or ``$CROWDMPC_CHECKPOINTS``): read-only package data, its manifest
-  tracked with the code;
+  tracked with the code, installed as the package ``crowdmpc_checkpoints``;
 * the user zoo, ``$CROWDMPC_ZOO`` (default ``$XDG_DATA_HOME/crowdmpc/zoo``, else
   ``~/.local/share/crowdmpc/zoo``): where ``crowdmpc zoo add`` writes, with its own manifest. A user entry may
   not take a shipped entry's name.
@@ -22,68 +22,35 @@ saying how to register it. A zoo file never makes crowdmpc import code.
 from __future__ import annotations
 
 import hashlib
+import importlib.resources
 import json
 import os
-import re
 import shutil
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from predictors.base import OBS_LEN
-from predictors.errors import CheckpointMismatch, PredictorError, short_repr
+from predictors.checkpoint import (
+    CONFIG_FORMAT,
+    check_name,
+    check_sha256,
+    load_checkpoint,
+    read_document,
+)
+from predictors.errors import PredictorError, short_repr
 from predictors.hashing import sha256_file
 
 if TYPE_CHECKING:
-    import torch
-
     from predictors.learned import LearnedPredictor
 
 CHECKPOINTS_ENV: Final[str] = "CROWDMPC_CHECKPOINTS"
+CHECKPOINTS_DIRNAME: Final[str] = "checkpoints"  # the shipped zoo in the repository
+CHECKPOINTS_PACKAGE: Final[str] = "crowdmpc_checkpoints"  # the same, installed (pyproject.toml's package-dir)
 ZOO_ENV: Final[str] = "CROWDMPC_ZOO"
 SHIPPED: Final[str] = "shipped"
 USER: Final[str] = "user"
-# The predictor classes a config's informational "class" may name: the generic one, the Social-LSTM class of
-# the shipped checkpoints (written before model kinds), and the GAN generator's (a kind with ``adversarial``).
-PREDICTOR_CLASS_NAMES: Final[tuple[str, ...]] = (
-    "LearnedPredictor",
-    "SocialLSTMPredictor",
-    "SocialGANPredictor",
-)
-CONFIG_FORMAT: Final[str] = "crowdmpc-predictor"
 MANIFEST_FORMAT: Final[str] = "crowdmpc-zoo"
 MANIFEST_NAME: Final[str] = "manifest.json"
-
-# A zoo name becomes a file name (NAME.pt, NAME.json) and a CasADi function name: letters, digits, "_", "."
-# and "-", starting with a letter or digit, so that no name is a path ("../x", "/tmp/x"), hidden, "." or "..".
-NAME_PATTERN: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
-SHA256_PATTERN: Final[re.Pattern[str]] = re.compile(r"[0-9a-f]{64}")
-# Observed steps a checkpoint may ask for: TrajNet++ observes 9 (3.6 s at 2.5 Hz); 100 steps are 40 s of
-# history, beyond any scene's, and the encoder (torch and CasADi) unrolls once per step.
-MAX_OBS_LEN: Final[int] = 100
-# A manifest or config is a few kB (the shipped manifest 13 kB); refuse to read a huge file into memory.
-MAX_DOCUMENT_BYTES: Final[int] = 64 << 20
-# A weights file holds the net's tensors (at most 8 bytes an element, float64) plus torch's zip framing.
-WEIGHTS_OVERHEAD_BYTES: Final[int] = 1 << 20
-
-
-def check_name(name: object, what: str = "zoo name") -> str:
-    """``name`` if it is a safe zoo name (``NAME_PATTERN``), else PredictorError."""
-    if not isinstance(name, str) or NAME_PATTERN.fullmatch(name) is None:
-        raise PredictorError(
-            f"{what} {short_repr(name)} is not allowed: use 1 to 64 letters, digits, '_', '.' or '-', "
-            "starting with a letter or digit"
-        )
-    return name
-
-
-def check_sha256(value: object, what: str) -> str:
-    """``value`` if it is a sha256 as the zoo records it (64 lowercase hex digits), else PredictorError.
-
-    A missing hash is never "skip the check": every zoo file is verified before it is loaded."""
-    if not isinstance(value, str) or SHA256_PATTERN.fullmatch(value) is None:
-        raise PredictorError(f"{what} must be a sha256 (64 lowercase hex digits), got {short_repr(value)}")
-    return value
 
 
 def zoo_path(root: Path, relative: object, what: str) -> Path:
@@ -102,11 +69,35 @@ def zoo_path(root: Path, relative: object, what: str) -> Path:
 
 
 def checkpoints_dir(directory: str | Path | None = None) -> Path:
-    """The shipped zoo: ``directory``, else ``$CROWDMPC_CHECKPOINTS``, else the repository's checkpoints/."""
+    """The shipped zoo: ``directory``, else ``$CROWDMPC_CHECKPOINTS``, else ``shipped_checkpoints_dir()``."""
     if directory is not None:
         return Path(directory)
     env = os.environ.get(CHECKPOINTS_ENV)
-    return Path(env) if env else Path(__file__).resolve().parents[1] / "checkpoints"
+    return Path(env) if env else shipped_checkpoints_dir()
+
+
+def shipped_checkpoints_dir() -> Path:
+    """The zoo shipped with this code: the repository's checkpoints/ beside the packages in a clone, else the
+    installed package data ``crowdmpc_checkpoints`` (pyproject.toml maps checkpoints/ to that package).
+
+    The clone's directory comes first so that a clone always reads its own zoo, even when a crowdmpc wheel is
+    installed too or its editable install predates the mapping. PredictorError when neither exists."""
+    clone = Path(__file__).resolve().parents[1]
+    if (clone / "pyproject.toml").is_file() and (clone / CHECKPOINTS_DIRNAME / MANIFEST_NAME).is_file():
+        return clone / CHECKPOINTS_DIRNAME
+    try:
+        installed = importlib.resources.files(CHECKPOINTS_PACKAGE)
+    except ModuleNotFoundError:
+        raise PredictorError(
+            f"the shipped model zoo is missing: neither {clone / CHECKPOINTS_DIRNAME} nor the package "
+            f"{CHECKPOINTS_PACKAGE!r}; reinstall crowdmpc, or set {CHECKPOINTS_ENV} to a zoo directory"
+        ) from None
+    if not isinstance(installed, Path):  # e.g. installed inside a zip: torch.load needs a real file
+        raise PredictorError(
+            f"the shipped model zoo {installed} is not a directory on disk; install crowdmpc unpacked "
+            f"(pip install), or set {CHECKPOINTS_ENV} to a zoo directory"
+        )
+    return installed
 
 
 def user_zoo_dir(directory: str | Path | None = None) -> Path:
@@ -151,193 +142,6 @@ def writable_zoo_dir(directory: str | Path | None = None) -> Path:
     if root.exists() and not root.is_dir():
         raise PredictorError(f"the user zoo {root} is not a directory")
     return root
-
-
-def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]:
-    """A JSON object whose ``"format"`` is ``document_format``, or PredictorError naming ``path``."""
-    if path.exists() and not path.is_file():  # a directory or a FIFO (reading one would block forever)
-        raise PredictorError(f"{path}: not a regular file")
-    size = path.stat().st_size  # a missing file: FileNotFoundError, as before
-    if size > MAX_DOCUMENT_BYTES:
-        raise PredictorError(f"{path}: {size} bytes, more than the {MAX_DOCUMENT_BYTES} a {what} may have")
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise PredictorError(f"{path}: not valid JSON (not UTF-8 text)") from None
-    except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
-        raise PredictorError(f"{path}: not valid JSON ({exc})") from None
-    except RecursionError:
-        raise PredictorError(f"{path}: not valid JSON (nested too deeply)") from None
-    if not isinstance(document, dict) or document.get("format") != document_format:
-        raise PredictorError(f'{path}: not a {what} (expected "format": "{document_format}")')
-    return document
-
-
-# ----------------------------------------------------------------------------------------- checkpoint pair
-def save_checkpoint(
-    net: torch.nn.Module,
-    *,
-    model: str,
-    name: str,
-    out_dir: str | Path,
-    obs_len: int,
-    extra: dict | None = None,
-) -> tuple[Path, Path]:
-    """Write ``out_dir/NAME.pt`` (float32 state_dict) and ``out_dir/NAME.json``; returns both paths.
-
-    ``model`` is a registered model kind (``predictors.models``) whose net class ``net`` is."""
-    import torch
-
-    from predictors.models import model_kind
-
-    check_name(name, "checkpoint name")  # NAME becomes the files' names
-    kind = model_kind(model)
-    if not isinstance(net, kind.net_class):
-        raise PredictorError(f"model {model!r} is a {kind.net_class.__name__}, got a {type(net).__name__}")
-    net_config = kind.config_dict(getattr(net, "config", None))
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    weights = out_dir / f"{name}.pt"
-    config = out_dir / f"{name}.json"
-    state = {k: v.detach().to("cpu", torch.float32).clone() for k, v in net.state_dict().items()}
-    torch.save(state, weights)
-    document = {
-        "format": CONFIG_FORMAT,
-        "name": name,
-        "class": kind.predictor_class_name,  # informational: the kind decides
-        "model": kind.name,
-        "obs_len": obs_len,
-        "net": net_config,
-        **(extra or {}),
-    }
-    config.write_text(json.dumps(document, indent=2) + "\n")
-    return weights, config
-
-
-def _legacy_model(document: dict[str, Any], config: Path) -> str:
-    """The model kind of a config written before ``"model"`` existed: its predictor class and pooling."""
-    cls_name = document.get("class")
-    if cls_name == "SocialGANPredictor":
-        return "social_gan"
-    if cls_name == "SocialLSTMPredictor":
-        net = document.get("net")
-        return "vanilla_lstm" if isinstance(net, dict) and net.get("pooling") == "none" else "social_lstm"
-    raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
-
-
-def load_checkpoint(
-    weights: str | Path,
-    config: str | Path | None = None,
-    *,
-    name: str | None = None,
-    expected_sha256: str | None = None,
-    expected_config_sha256: str | None = None,
-) -> LearnedPredictor:
-    """The predictor of a checkpoint pair (``config`` defaults to ``weights`` with ``.json``).
-
-    Everything is checked before it is used, each failure a PredictorError naming the file: the sha256 (when
-    expected, as the zoo always does), the model kind (registered, never imported on the file's word), the
-    config's types and ranges before any net is built (its size counted on the meta device), the weights'
-    size before they are read, then that they are a state_dict of finite float tensors of the net's shapes.
-    """
-    import torch
-
-    from predictors.models import model_kind
-
-    weights = Path(weights)
-    config = Path(config) if config is not None else weights.with_suffix(".json")
-    for path, expected in ((weights, expected_sha256), (config, expected_config_sha256)):
-        if not path.exists():
-            raise PredictorError(f"checkpoint file {path} does not exist")
-        if not path.is_file():
-            raise PredictorError(f"checkpoint file {path} is not a regular file")
-        if expected is not None:
-            found = sha256_file(path)
-            if found != check_sha256(expected, f"the expected sha256 of {path}"):
-                raise CheckpointMismatch(path, expected, found)
-    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
-    cls_name = document.get("class")
-    if cls_name is not None and (not isinstance(cls_name, str) or cls_name not in PREDICTOR_CLASS_NAMES):
-        raise PredictorError(
-            f"{config}: unknown predictor class {short_repr(cls_name)}; expected one of "
-            f'{list(PREDICTOR_CLASS_NAMES)} (or no "class": it is informational)'
-        )
-    model = document["model"] if "model" in document else _legacy_model(document, config)
-    try:
-        kind = model_kind(model)  # a registered kind only: a file never makes us import a module
-    except PredictorError as exc:
-        raise PredictorError(f'{config}: "model": {exc}') from None
-    if cls_name is not None and (cls_name == "SocialGANPredictor") != kind.adversarial:
-        raise PredictorError(f'{config}: "model" {kind.name!r} does not go with "class" {cls_name!r}')
-    own_name = document.get("name", weights.stem)
-    if not isinstance(own_name, str):
-        raise PredictorError(f'{config}: "name" must be a string, got {short_repr(own_name)}')
-    obs_len = document.get("obs_len", OBS_LEN)
-    if isinstance(obs_len, bool) or not isinstance(obs_len, int):
-        raise PredictorError(f'{config}: "obs_len" must be an integer, got {short_repr(obs_len)}')
-    if not 2 <= obs_len <= MAX_OBS_LEN:
-        raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
-    try:
-        net = kind.build_net(document.get("net", {}))  # validated, and bounded before memory is taken
-    except PredictorError as exc:
-        raise PredictorError(f'{config}: "net": {exc}') from None
-    expected_state = net.state_dict()
-    limit = 8 * sum(t.numel() for t in expected_state.values()) + WEIGHTS_OVERHEAD_BYTES
-    size = weights.stat().st_size
-    if size > limit:
-        raise PredictorError(
-            f"{weights}: {size} bytes, more than the {limit} a state_dict of the net of {config} can take"
-        )
-    try:
-        state = torch.load(weights, map_location="cpu", weights_only=True)
-    except Exception:  # whatever a corrupt or hostile file makes torch raise, the file is at fault
-        # torch's own message suggests weights_only=False, which a checkpoint must never need
-        raise PredictorError(
-            f"{weights}: not a state_dict of tensors as `crowdmpc train` writes (truncated, or not a "
-            "torch file, or a pickled object, which is never loaded)"
-        ) from None
-    check_state_dict(state, expected_state, weights, config)
-    try:
-        net.load_state_dict(state, strict=True)
-    except (RuntimeError, KeyError, TypeError, ValueError) as exc:  # not expected after the checks above
-        raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from None
-    try:
-        return kind.predictor(net, name=name or own_name, obs_len=obs_len)
-    except PredictorError as exc:
-        raise PredictorError(f"{config}: {exc}") from None
-
-
-def check_state_dict(state: object, expected: dict[str, Any], weights: Path, config: Path) -> None:
-    """PredictorError (one line, naming ``weights``) unless ``state`` holds exactly the tensors of
-    ``expected`` (a net's ``state_dict``), each of its shape, floating point and finite."""
-    import torch
-
-    if not isinstance(state, dict):
-        raise PredictorError(f"{weights}: not a state_dict (a dict of tensors), but a {type(state).__name__}")
-    for key, value in state.items():
-        if not isinstance(key, str):
-            raise PredictorError(f"{weights}: a state_dict key is {short_repr(key)}, not a string")
-        if not isinstance(value, torch.Tensor) or value.layout != torch.strided or value.is_quantized:
-            raise PredictorError(
-                f"{weights}: {short_repr(key)} is a {type(value).__name__}, not a dense tensor"
-            )
-    missing = sorted(set(expected) - set(state))
-    unexpected = sorted(set(state) - set(expected))
-    if missing or unexpected:
-        raise PredictorError(
-            f"{weights}: weights do not fit the net of {config}: missing {short_repr(missing, 120)}, "
-            f"unexpected {short_repr(unexpected, 120)}"
-        )
-    for key, value in state.items():
-        want = tuple(expected[key].shape)
-        if tuple(value.shape) != want:
-            raise PredictorError(
-                f"{weights}: tensor {key!r} has shape {tuple(value.shape)}, the net of {config} needs {want}"
-            )
-        if not value.is_floating_point():
-            raise PredictorError(f"{weights}: tensor {key!r} is {value.dtype}, not floating point")
-        if not bool(torch.isfinite(value).all()):
-            raise PredictorError(f"{weights}: tensor {key!r} holds NaN or infinite values")
 
 
 # ------------------------------------------------------------------------------------------------ manifest

@@ -5,6 +5,18 @@ from predictors.models import PLUGINS_ENV
 from predictors.zoo import ZOO_ENV
 
 
+@pytest.fixture(scope="session")
+def _session_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("crowdmpc_cache")
+
+
+@pytest.fixture(autouse=True)
+def _private_cache_root(_session_cache, monkeypatch):
+    """Compiled solvers and prepared data go to one cache of this test session, never ~/.cache/crowdmpc
+    (tests/predictors gives each of its tests a fresh one)."""
+    monkeypatch.setenv("CROWDMPC_CACHE", str(_session_cache))
+
+
 @pytest.fixture(autouse=True)
 def _private_user_zoo(tmp_path_factory, monkeypatch):
     """Every test gets an empty user zoo of its own (never the real ~/.local/share/crowdmpc/zoo), and no

@@ -5,10 +5,16 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
+import sys
 import tempfile
 from pathlib import Path
+from typing import Final
 
 from pipelines.errors import PipelineError
+
+# The shell's exit status of a process that SIGPIPE ended (128 + 13): what `cmd | head` reports for a C tool.
+CLOSED_PIPE_STATUS: Final[int] = 141
 
 
 def humans_list(text: str) -> tuple[int, ...]:
@@ -61,3 +67,31 @@ def _probe(directory: Path) -> None:
     fd, name = tempfile.mkstemp(prefix=".crowdmpc-probe-", dir=directory)
     os.close(fd)
     os.unlink(name)
+
+
+def stdout_reader_left() -> bool:
+    """Whether stdout is a pipe (or socket) whose reading end is closed (``crowdmpc review ... | head`` after
+    ``head`` exited); False when stdout is a terminal, a file, or cannot be asked."""
+    try:
+        fd = sys.stdout.fileno()
+        if not (stat.S_ISFIFO(os.fstat(fd).st_mode) or stat.S_ISSOCK(os.fstat(fd).st_mode)):
+            return False
+        import select
+
+        poller = select.poll()  # POSIX; the writing end of a pipe without readers polls as POLLERR
+        poller.register(fd, select.POLLOUT)
+        return any(events & (select.POLLERR | select.POLLHUP) for _, events in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # no fileno (captured output), closed, no poll
+        return False
+
+
+def quit_closed_stdout() -> int:
+    """After a write to a stdout whose reader left: the rest of the output goes to /dev/null (Python flushes
+    stdout once more at exit, which would raise again) and the status is ``CLOSED_PIPE_STATUS``, as for a
+    tool that SIGPIPE ended; no traceback, the reader has what it wanted."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    finally:
+        os.close(devnull)
+    return CLOSED_PIPE_STATUS

@@ -16,8 +16,9 @@ EPILOG = """examples:
   crowdmpc calibrate --predictor constant_velocity --source real --alpha 0.1 --holdout
   crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --episodes 20 --dry-run
 
-Each alpha gives one block in the zoo's calibrations.json: the (1 - alpha) split-conformal quantile of the
-predictor's displacement error at each horizon step k = 1..H, used as the margin m_k of
+Each alpha gives one block in the user zoo's calibrations.json ($CROWDMPC_ZOO; the shipped zoo's blocks are
+read-only defaults): the (1 - alpha) split-conformal quantile of the predictor's displacement error at each
+horizon step k = 1..H, used as the margin m_k of
 `--margins conformal:ALPHA[:SOURCE]` (simulate, sweep). Sources: real (the prepared ETH/hotel validation
 scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
 evaluation seed; only humans within --near m of a robot are scored). --holdout measures coverage on data
@@ -136,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     from pipelines.experiments.calibrate import format_coverage
     from pipelines.loop.margins import parse_margins
     from pipelines.plain_json import plain
-    from predictors.calibration import save_calibration
+    from predictors.calibration import calibrations_path, save_calibration
     from predictors.conformal import coverage
     from predictors.registry import checkpoint_sha256, load_predictor
 
@@ -146,6 +147,8 @@ def run(args: argparse.Namespace) -> int:
     if not 1 <= args.episodes <= 100_000:
         raise PipelineError(f"--episodes must be in 1..100000, got {args.episodes}")
     check_writable(args.json, "--json")
+    if not args.dry_run:  # the user zoo's file (never the shipped zoo's): refused now, not after the episodes
+        check_writable(calibrations_path(), "calibrations file")
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "real":
         from predictors.oracle import ORACLE_PREDICTOR

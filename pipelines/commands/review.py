@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -121,10 +122,18 @@ def run(args: argparse.Namespace) -> int:
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
+    # every output checked before any file is read: its format, then that it can be written
     if args.plot:
         from crowdsim.plotting import check_figure_path
 
         check_figure_path(args.plot, "--plot")
+    if args.animate:
+        from pipelines.logs.plots import check_animation_path
+
+        check_animation_path(args.animate, "--animate")
+    check_writable(args.plot, "--plot")
+    check_writable(args.animate, "--animate")
+    check_writable(args.json, "--json")
     report: dict[str, Any] = {}
     n_unreadable = 0
     if args.path.is_dir():

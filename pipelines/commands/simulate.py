@@ -6,18 +6,19 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from pipelines.commands import check_writable
-from pipelines.errors import PipelineError
-from pipelines.loop.controllers import CONTROLLERS, COUPLINGS
+from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig
+    from pipelines.config import Option, RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import EpisodeResult
 
@@ -28,11 +29,43 @@ EPILOG = """examples:
   crowdmpc simulate --controller dmpc --no-flocking --coupling ibr --humans 9 --episodes 50
   crowdmpc --plugin my_predictor:MyNet simulate --controller cmpc --predictor my_net_eth --humans 7
 
+  crowdmpc --config docs/examples/demo.toml simulate --humans 5    # the file's settings, 5 humans
+
 Episode i uses seed S + i. --plot draws the first episode; --record writes one MCAP file per episode.
+Every option can also come from a TOML config file (--config FILE, before or after `simulate`; `crowdmpc
+config show` prints one with every default) and --set SECTION.KEY=VALUE items (e.g. --set mpc.w_coll=1e6):
+defaults < the file < --set < the options given here.
 """
 
 
+# The options that set a config key when given (their defaults are the config's: pipelines/config).
+def _options() -> tuple[Option, ...]:
+    from pipelines.config import Option
+
+    return (
+        Option("controller", "controller", "controller", "--controller"),
+        Option("predictor", "controller", "predictor", "--predictor"),
+        Option("no_flocking", "controller", "flocking", "--no-flocking", lambda v: not v),
+        Option("coupling", "controller", "coupling", "--coupling"),
+        Option("margins", "controller", "margins", "--margins"),
+        Option("record_iterations", "controller", "record_iterations", "--record-iterations"),
+        Option("profile", "env", "profile", "--profile"),
+        Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
+        Option("scenario", "scenario", "name", "--scenario"),
+        Option("humans", "scenario", "humans", "--humans"),
+        Option("robots", "scenario", "robots", "--robots"),
+        Option("episodes", "simulate", "episodes", "--episodes"),
+        Option("seed", "simulate", "seed", "--seed"),
+        Option("json", "simulate", "json", "--json"),
+        Option("plot", "simulate", "plot", "--plot"),
+        Option("record", "simulate", "record", "--record"),
+        Option("no_progress", "simulate", "progress", "--no-progress", lambda v: not v),
+    )
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from pipelines.commands.config import add_config_options
+
     parser = subparsers.add_parser(
         "simulate",
         help="run closed-loop episodes and print the paper's metrics",
@@ -41,43 +74,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--controller", required=True, choices=sorted(CONTROLLERS), help="robot controller")
+    # Defaults are None: an option given overrides the config (file, --set), whose defaults are these.
+    parser.add_argument(
+        "--controller",
+        type=controller_name,
+        metavar="NAME",
+        help="robot controller: straight, orca, cmpc, dmpc or a registered plugin's name (required, here or "
+        "as [controller] controller in --config)",
+    )
     parser.add_argument(
         "--predictor",
-        default="constant_velocity",
         help="predictor of cmpc/dmpc: a registered name or a model of the shipped or user zoo "
-        "(default: %(default)s)",
+        "(default: constant_velocity)",
     )
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS), help="default: circle")
+    parser.add_argument("--humans", type=int, help=f"0..{MAX_HUMANS} (default: 7)")
+    parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: 3)")
+    parser.add_argument("--episodes", type=int, help="default: 1")
+    parser.add_argument("--seed", type=int, help="first episode's seed (default: 0)")
     parser.add_argument(
-        "--scenario", default="circle", choices=sorted(SCENARIOS), help="default: %(default)s"
+        "--no-flocking", action="store_true", default=None, help="omega_floc = 0 (Table III, NF)"
     )
-    parser.add_argument("--humans", type=int, default=7, help=f"0..{MAX_HUMANS} (default: %(default)s)")
-    parser.add_argument("--robots", type=int, default=3, help=f"1..{MAX_ROBOTS} (default: %(default)s)")
-    parser.add_argument("--episodes", type=int, default=1, help="default: %(default)s")
-    parser.add_argument("--seed", type=int, default=0, help="first episode's seed (default: %(default)s)")
-    parser.add_argument("--no-flocking", action="store_true", help="omega_floc = 0 (Table III, NF)")
-    parser.add_argument("--coupling", default="ibr", choices=COUPLINGS, help="default: %(default)s")
+    parser.add_argument("--coupling", choices=COUPLINGS, help="default: ibr")
     parser.add_argument(
         "--margins",
-        default="none",
         metavar="SPEC",
         help="allowance for prediction error in the robot-human distance: none (the paper, default), "
         "conformal[:ALPHA[:closed-loop|real]] (needs `crowdmpc calibrate`), fixed:M1,..,MH (metres)",
     )
+    parser.add_argument("--profile", choices=sorted(PROFILES), help="simulation conventions (default: paper)")
     parser.add_argument(
-        "--profile", default="paper", choices=sorted(PROFILES), help="simulation conventions (default: paper)"
-    )
-    parser.add_argument(
-        "--visibility", default="visible", choices=VISIBILITY, help="robots seen by the humans' ORCA"
+        "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
     )
     parser.add_argument("--json", type=Path, metavar="FILE", help="write the summary and per-episode records")
     parser.add_argument("--plot", type=Path, metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
     parser.add_argument("--record", type=Path, metavar="DIR", help="one MCAP file per episode in DIR")
     parser.add_argument(
-        "--record-iterations", action="store_true", help="record every IBR iteration's prediction"
+        "--record-iterations",
+        action="store_true",
+        default=None,
+        help="record every IBR iteration's prediction",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.set_defaults(func=run)
+    parser.add_argument("--no-progress", action="store_true", default=None, help="no progress bar")
+    add_config_options(parser)
+    parser.set_defaults(func=run, parser_error=parser.error)
 
 
 def _fmt(x: float | None, unit: str = "", digits: int = 2) -> str:
@@ -126,79 +166,103 @@ def format_table(summary: dict[str, Any], header: str) -> str:
     return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
 
 
-def _check(args: argparse.Namespace) -> None:
-    if args.episodes < 1:
-        raise PipelineError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.episodes > 100_000:  # a sweep's cell holds at most as many; beyond, use `crowdmpc sweep`
-        raise PipelineError(f"--episodes must be at most 100000 (use crowdmpc sweep), got {args.episodes}")
-    if not 1 <= args.robots <= MAX_ROBOTS:
-        raise PipelineError(f"--robots must be in 1..{MAX_ROBOTS}, got {args.robots}")
-    if args.seed < 0:
-        raise PipelineError(f"--seed must be >= 0, got {args.seed}")
-    if args.plot is not None:
+@dataclass(frozen=True)
+class SimulateRun:
+    """What one ``simulate`` runs, resolved from the defaults, the config file, ``--set`` and the options."""
+
+    config: RunConfig
+    spec: ControllerSpec
+    json: Path | None
+    plot: Path | None
+    record: Path | None
+
+    @property
+    def controller(self) -> str:
+        return self.spec.controller
+
+
+def resolve_run(args: argparse.Namespace) -> SimulateRun:
+    """The run's effective config, with every number and output path checked before any work starts."""
+    from pipelines.config import command_config
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.margins import parse_margins
+
+    config = command_config(args, _options())
+    chosen = config.controller
+    if chosen.controller is None:  # the parser's own one-line error, as for any missing option
+        args.parser_error("the following arguments are required: --controller (or [controller] controller)")
+        raise SystemExit(2)  # parser_error exits
+    spec = ControllerSpec(
+        controller=chosen.controller,
+        predictor=chosen.predictor or "constant_velocity",
+        flocking=chosen.flocking,
+        coupling=chosen.coupling,  # type: ignore[arg-type]  # one of COUPLINGS (settings check it)
+        record_iterations=chosen.record_iterations,
+        mpc_overrides=config.mpc_overrides(),
+        margins=parse_margins(chosen.margins or "none"),
+    )
+    paths = {name: getattr(config.simulate, name) for name in ("json", "plot", "record")}
+    run = SimulateRun(config, spec, **{k: None if v is None else Path(v) for k, v in paths.items()})
+    if run.plot is not None:
         from crowdsim.plotting import check_figure_path
 
-        check_figure_path(args.plot, "--plot")
+        check_figure_path(run.plot, config.label("simulate", "plot"))
     # Before the episodes, not after them: a path that cannot be written would waste the whole run.
-    check_writable(args.json, "--json")
-    check_writable(args.plot, "--plot")
-    check_writable(args.record, "--record", directory=True)
+    check_writable(run.json, config.label("simulate", "json"))
+    check_writable(run.plot, config.label("simulate", "plot"))
+    check_writable(run.record, config.label("simulate", "record"), directory=True)
+    return run
 
 
-def _run_meta(args: argparse.Namespace, spec: ControllerSpec) -> dict[str, Any]:
-    """The command line's choices, for the JSON output and every MCAP file's "run" metadata."""
+def _run_meta(run: SimulateRun) -> dict[str, Any]:
+    """The run's choices, for the JSON output and every MCAP file's "run" metadata: the main ones at the top,
+    and the whole effective config (with the config file it came from) under "config"."""
+    cfg, spec = run.config, run.spec
     return {
         "command": "simulate",
         "argv": sys.argv[1:],
-        "controller": args.controller,
+        "controller": spec.controller,
         "predictor": spec.predictor_name,
         "flocking": spec.flocking,
         "coupling": spec.coupling,
         "margins": spec.margins.label,
-        "profile": args.profile,
-        "visibility": args.visibility,
-        "scenario": args.scenario,
-        "humans": args.humans,
-        "robots": args.robots,
-        "episodes": args.episodes,
-        "seed": args.seed,
+        "profile": cfg.env.profile,
+        "visibility": "visible" if cfg.env.robots_visible else "invisible",
+        "scenario": cfg.scenario.name,
+        "humans": cfg.scenario.humans,
+        "robots": cfg.scenario.robots,
+        "episodes": cfg.simulate.episodes,
+        "seed": cfg.simulate.seed,
+        "config_file": cfg.path,
+        "config": cfg.effective(),
     }
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdsim.profiles import make_env_config
-    from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import run_episodes, summarize
-    from pipelines.loop.margins import parse_margins
 
-    _check(args)
-    spec = ControllerSpec(
-        controller=args.controller,
-        predictor=args.predictor,
-        flocking=not args.no_flocking,
-        coupling=args.coupling,
-        record_iterations=args.record_iterations,
-        margins=parse_margins(args.margins),
-    )
-    env_config = make_env_config(args.profile, args.visibility)
-    run_meta = _run_meta(args, spec)
+    resolved = resolve_run(args)
+    cfg, spec = resolved.config, resolved.spec
+    scenario, sim = cfg.scenario, cfg.simulate
+    env_config = cfg.env
+    run_meta = _run_meta(resolved)
     recorder = None
-    if args.record is not None:
+    if resolved.record is not None:
         from pipelines.logs.recording import McapEpisodeRecorder
 
         recorder = McapEpisodeRecorder(
-            args.record, record_iterations=args.record_iterations, run_meta=run_meta
+            resolved.record, record_iterations=spec.record_iterations, run_meta=run_meta
         )
     try:
         results = run_episodes(
             spec,
-            episodes=args.episodes,
-            seed=args.seed,
-            scenario=args.scenario,
-            n_humans=args.humans,
-            n_robots=args.robots,
+            episodes=sim.episodes,
+            seed=sim.seed,
+            scenario=scenario.name,
+            n_humans=scenario.humans,
+            n_robots=scenario.robots,
             observers_factory=(lambda: (recorder,)) if recorder is not None else None,
-            progress=not args.no_progress,
+            progress=sim.progress,
             env_config=env_config,
         )
     finally:
@@ -207,31 +271,31 @@ def run(args: argparse.Namespace) -> int:
 
     summary = summarize(results)
     header = (
-        f"controller {args.controller} | predictor {spec.predictor_name or '-'} | "
+        f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
         f"margins {spec.margins.label} | "
-        f"{args.profile}/{args.visibility} | scenario {args.scenario} | "
-        f"humans {args.humans} | robots {args.robots} | episodes {args.episodes} | seeds {args.seed}.."
-        f"{args.seed + args.episodes - 1}"
+        f"{run_meta['profile']}/{run_meta['visibility']} | scenario {scenario.name} | "
+        f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
+        f"{sim.seed + sim.episodes - 1}"
     )
     print(format_table(summary, header))
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
+    if resolved.json is not None:
+        resolved.json.parent.mkdir(parents=True, exist_ok=True)
         payload = {"run": run_meta, "summary": summary, "episodes": [r.record().to_dict() for r in results]}
-        args.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
-        print(f"wrote {args.json}")
-    if args.plot is not None:
-        _plot(args, results[0], env_config)
+        resolved.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
+        print(f"wrote {resolved.json}")
+    if resolved.plot is not None:
+        _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:
-        print(f"wrote {len(recorder.paths)} MCAP file(s) to {args.record}")
+        print(f"wrote {len(recorder.paths)} MCAP file(s) to {resolved.record}")
     return 0
 
 
-def _plot(args: argparse.Namespace, first: EpisodeResult, env_config: EnvConfig) -> None:
+def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:
     from crowdsim.plotting import plot_episode
 
     m = first.metrics
     title = (
-        f"{args.controller}, {args.scenario}, seed {first.seed}: "
+        f"{controller}, {first.scenario}, seed {first.seed}: "
         + (f"success in {m.travel_time:g} s" if m.success else "timeout")
         + f", min robot-human distance {m.min_distance:.2f} m"
     )
@@ -243,6 +307,6 @@ def _plot(args: argparse.Namespace, first: EpisodeResult, env_config: EnvConfig)
         radius=env_config.radius,
         dt=env_config.dt,
     )
-    args.plot.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.plot, dpi=120, bbox_inches="tight")
-    print(f"wrote {args.plot}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    print(f"wrote {path}")

@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pipelines.commands import check_writable, humans_list
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
+    from pipelines.config import Option, RunConfig
     from pipelines.experiments.cells import Experiment
 
 EPILOG = """examples:
@@ -23,6 +24,7 @@ EPILOG = """examples:
       --predictors constant_velocity,social_lstm_eth,my_net_eth --episodes-per-cell 20 --out runs/swap
   crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
+  crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
 figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle; by
@@ -32,28 +34,47 @@ coupling (CMPC by iterated best response vs the coupled NLP, exact and first-ord
 profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check).
 --margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling.
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
+Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
+section, `crowdmpc config show` lists every key) and --set SECTION.KEY=VALUE items: defaults < the file <
+--set < the options given here. [controller] and [mpc] values that differ from their defaults apply to every
+method (and become part of the cell keys); a value the experiment compares across its methods is refused, as
+are [world], [env] and [env.orca] values beyond profile and robots_visible (simulate-only).
 
 Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
 --episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;
-retried on rerun), cells.csv, episodes.csv, table.md, success_vs_humans.png, travel_time_vs_humans.png,
-sweep.json, and with --record the MCAP logs in DIR/mcap/<cell>/.
+retried on rerun), cells.csv, episodes.csv, table.md, a plot per outcome (success, travel_time, collision,
+contact, discomfort) named OUTCOME_vs_humans.png, or OUTCOME_by_method.png for an experiment at one crowd
+size, min_distance_hist.csv/.png, safety_tradeoff.png, sweep.json, and with --record the MCAP logs in
+DIR/mcap/<cell>/.
 """
 
 
-# A local pool (processes, or a local Ray) gets at most this many workers per CPU: more only queue for the
-# same cores, each holding its own solvers and predictor in memory. A Ray cluster (--ray-address) takes more.
-LOCAL_WORKERS_PER_CPU = 4
+# The options that set a config key when given (their defaults are the config's: pipelines/config).
+def _options() -> tuple[Option, ...]:
+    from pipelines.config import Option
 
-
-def _cpus() -> int:
-    """CPUs this process may use (a container or taskset may allow fewer than the machine has)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
+    return (
+        Option("experiment", "sweep", "experiment", "--experiment"),
+        Option("out", "sweep", "out", "--out"),
+        Option("episodes_per_cell", "sweep", "episodes_per_cell", "--episodes-per-cell"),
+        Option("humans", "sweep", "humans", "--humans"),
+        Option("seed", "sweep", "seed", "--seed"),
+        Option("workers", "sweep", "workers", "--workers"),
+        Option("backend", "sweep", "backend", "--backend"),
+        Option("ray_address", "sweep", "ray_address", "--ray-address"),
+        Option("record", "sweep", "record", "--record"),
+        Option("jit", "sweep", "jit", "--jit"),
+        Option("predictors", "sweep", "predictors", "--predictors"),
+        Option("robots", "scenario", "robots", "--robots"),
+        Option("predictor", "controller", "predictor", "--predictor"),
+        Option("margins", "controller", "margins", "--margins"),
+        Option("profile", "env", "profile", "--profile"),
+        Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
+    )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from pipelines.commands.config import add_config_options
     from pipelines.experiments.backends import BACKENDS
     from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
 
@@ -65,18 +86,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--experiment", required=True, choices=sorted(EXPERIMENTS))
+    # Defaults are None: an option given overrides the config (file, --set), whose defaults are these.
+    p.add_argument(
+        "--experiment", choices=sorted(EXPERIMENTS), help="required (here or as [sweep] experiment)"
+    )
     p.add_argument(
         "--episodes-per-cell",
         type=int,
-        default=PAPER_EPISODES_PER_CELL,
         metavar="N",
         help=f"episodes per cell, half of each scenario (default {PAPER_EPISODES_PER_CELL}, the paper's)",
     )
     p.add_argument(
         "--workers",
         type=int,
-        default=_cpus(),
         metavar="K",
         help="parallel workers (default: the CPUs this process may use)",
     )
@@ -86,26 +108,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--backend",
         choices=BACKENDS,
-        default="auto",
         help="auto (default): Ray when installed, else a local process pool; inline: in this process",
     )
     p.add_argument(
         "--humans", type=humans_list, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
     )
-    p.add_argument("--robots", type=int, default=3, help="robots per episode (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="base scenario seed (default 0)")
+    p.add_argument("--robots", type=int, help="robots per episode (default 3)")
+    p.add_argument("--seed", type=int, help="base scenario seed (default 0)")
     _add_method_options(p)
     _add_execution_options(p)
-    p.set_defaults(func=run)
-
-
-# A swap table of more predictors than this is no table anyone reads; each is a column of every row.
-MAX_SWAP_PREDICTORS = 64
+    add_config_options(p)
+    p.set_defaults(func=run, parser_error=p.error)
 
 
 def predictor_list(text: str) -> tuple[str, ...]:
     """An argparse type: ``a,b,c`` -> ("a", "b", "c"), each a well-formed predictor name."""
-    from predictors.zoo import NAME_PATTERN
+    from pipelines.config.settings import MAX_SWAP_PREDICTORS
+    from predictors.checkpoint import NAME_PATTERN
 
     names = tuple(name.strip() for name in text.split(",") if name.strip())
     if not names:
@@ -156,16 +175,19 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
 
 def _add_execution_options(p: argparse.ArgumentParser) -> None:
     """Where the sweep goes, what it keeps, and how it runs."""
+    from pipelines.config.settings import JIT_CHOICES
     from pipelines.experiments.worker import RECORD_POLICIES
 
     p.add_argument(
         "--record",
         choices=RECORD_POLICIES,
-        default="none",
         help="keep MCAP logs: of failed episodes (not all robots arrived, or a collision), all, or none",
     )
     p.add_argument(
-        "--out", type=Path, required=True, metavar="DIR", help="sweep directory (created; resumed)"
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="sweep directory, created; resumed (required, here or in --config)",
     )
     p.add_argument(
         "--report-only", action="store_true", help="write the table and plots from DIR; run nothing"
@@ -174,19 +196,13 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
         "--jit",
-        choices=("auto", "on", "off"),
-        default="auto",
-        help="compile the MPC NLPs with gcc in every worker: 2-8 s a build, then solves ~2x faster "
-        "(auto, the default: on when gcc is found)",
+        choices=JIT_CHOICES,
+        help="compile the MPC NLPs with gcc, once per machine ($CROWDMPC_CACHE/compiled, `crowdmpc cache "
+        "info`): 2-8 s a first compile, later runs load it; solves then ~2x faster, ~0.1 s CPU saved a CMPC "
+        "episode, ~0.2 s a DMPC one. auto (the default): on when gcc is found and the run's episodes repay "
+        "compiling each NLP it needs (8 s CPU joint, 2.3 s local, counted per distinct cell settings): from "
+        "12 episodes per cell for the 7-predictor swap, 36 for table2; a warm cache is not consulted",
     )
-
-
-def _jit(choice: str) -> bool:
-    from pipelines.experiments.worker import jit_available
-
-    if choice == "on" and not jit_available():
-        raise PipelineError("--jit on needs gcc on the PATH (CasADi compiles with it); use --jit off")
-    return choice == "on" or (choice == "auto" and jit_available())
 
 
 def _check_predictors(experiment: Experiment) -> None:
@@ -225,67 +241,205 @@ def _check_margins(experiment: Experiment) -> None:
         spec.margins.resolve(name, mpc_config(spec).horizon, checkpoint_sha256(name))
 
 
-def configured_experiment(args: argparse.Namespace) -> Experiment:
-    """The experiment with the command line's --predictors, --predictor, --margins, --profile and
-    --visibility applied."""
+def configured_experiment(cfg: RunConfig) -> Experiment:
+    """The experiment of ``cfg`` with its choices applied to every method: the predictors, predictor and
+    margins (--predictors, --predictor, --margins or the config), the profile and visibility, and the
+    [controller] and [mpc] values that differ from their defaults (a value the experiment compares across
+    its methods is refused)."""
     from pipelines.experiments.cells import World, get_experiment
     from pipelines.loop.margins import parse_margins
 
-    experiment = get_experiment(args.experiment)
-    if args.predictors is not None:
-        experiment = experiment.with_predictors(args.predictors)
+    experiment = get_experiment(cfg.sweep.experiment or "")
+    if cfg.sweep.predictors is not None:
+        experiment = _applied(cfg, "sweep", "predictors", experiment.with_predictors, cfg.sweep.predictors)
     elif experiment.predictor_list:
         from pipelines.experiments.cells import swap_predictors
         from predictors.registry import available
 
         experiment = experiment.with_predictors(swap_predictors(available()))
-    if args.predictor:
-        experiment = experiment.with_predictor(args.predictor)
-    if args.margins:
-        experiment = experiment.with_margins(parse_margins(args.margins))
-    if args.profile or args.visibility:
-        world = World(
-            args.profile or experiment.world.profile, args.visibility or experiment.world.visibility
+    if cfg.controller.predictor:
+        experiment = _applied(
+            cfg, "controller", "predictor", experiment.with_predictor, cfg.controller.predictor
         )
-        experiment = experiment.with_world(world)
+    if cfg.controller.margins:
+        margins = parse_margins(cfg.controller.margins)
+        experiment = _applied(cfg, "controller", "margins", experiment.with_margins, margins)
+    if cfg.chosen("env", "profile") or cfg.chosen("env", "robots_visible"):
+        world = World(
+            cfg.env.profile if cfg.chosen("env", "profile") else experiment.world.profile,
+            ("visible" if cfg.env.robots_visible else "invisible")
+            if cfg.chosen("env", "robots_visible")
+            else experiment.world.visibility,
+        )
+        key = "profile" if cfg.chosen("env", "profile") else "robots_visible"
+        experiment = _applied(cfg, "env", key, experiment.with_world, world)
+    for key in ("controller", "coupling", "flocking", "record_iterations"):
+        if cfg.chosen("controller", key):
+            experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
+    for key, value in cfg.mpc_overrides():
+        experiment = _with_mpc_override(cfg, experiment, key, value)
     return experiment
 
 
-def _check_workers(args: argparse.Namespace) -> None:
-    """Local workers within what this machine can run (the bounds of every sweep are SweepConfig's)."""
-    if args.ray_address is not None or args.backend == "inline" or args.workers < 1:
-        return
-    most = max(LOCAL_WORKERS_PER_CPU * _cpus(), 8)
-    if args.workers > most:
-        raise PipelineError(
-            f"--workers {args.workers}: at most {most} here ({LOCAL_WORKERS_PER_CPU} per CPU this process "
-            f"may use, {_cpus()}); more only queue for the same cores (a Ray cluster takes more)"
+def _applied(
+    cfg: RunConfig, section: str, key: str, method: Callable[[Any], Experiment], value: Any
+) -> Experiment:
+    """``method(value)``, its refusal named by where the value came from when that is no option."""
+    try:
+        return method(value)
+    except PipelineError as exc:
+        source = cfg.source(section, key)
+        if source is None or source.kind == "cli":
+            raise
+        raise cfg.error(section, key, str(exc)) from None
+
+
+def _with_spec_field(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
+    """Every method's ``ControllerSpec.<key>`` set to ``value``, unless the experiment compares it."""
+    import dataclasses
+
+    own = {getattr(spec, key) for _, spec in experiment.methods}
+    if len(own) > 1:
+        raise cfg.error(
+            "controller",
+            key,
+            f"experiment {experiment.name!r} compares its methods' {key} ({sorted(map(str, own))}); "
+            "leave it unset for this sweep",
         )
+    methods = tuple((label, dataclasses.replace(spec, **{key: value})) for label, spec in experiment.methods)
+    return dataclasses.replace(experiment, methods=methods)
+
+
+def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
+    """Every method's MPC with ``key = value`` (ControllerSpec.mpc_overrides, part of the cell keys), unless
+    a method sets that key itself."""
+    import dataclasses
+
+    if key == "jit":
+        raise cfg.error(
+            "mpc", key, "a sweep compiles by [sweep] jit (--jit auto|on|off), which leaves the cells alone"
+        )
+    methods = []
+    for label, spec in experiment.methods:
+        own = dict(spec.mpc_overrides)
+        if key in own and own[key] != value:
+            raise cfg.error(
+                "mpc",
+                key,
+                f"method {label!r} of experiment {experiment.name!r} sets {key} = {own[key]!r} itself; "
+                "leave it unset for this sweep",
+            )
+        overrides = spec.mpc_overrides if key in own else (*spec.mpc_overrides, (key, value))
+        methods.append((label, dataclasses.replace(spec, mpc_overrides=overrides)))
+    return dataclasses.replace(experiment, methods=tuple(methods))
+
+
+def _check_world(cfg: RunConfig) -> None:
+    """A sweep's cells run a named profile (``World``: profile and visibility): refuse the other [world],
+    [env] and [env.orca] values (set to something else than the default) rather than ignore them."""
+    from crowdsim.profiles import PROFILES
+
+    why = (
+        "a sweep's cells run a named profile ([env] profile, robots_visible); other [world], [env] and "
+        "[env.orca] values apply to simulate only"
+    )
+    profile = PROFILES[cfg.env.profile]
+    for section, key, default in (
+        *(("world", k, cfg.default("world", k)) for k in cfg.values["world"]),
+        *(("env.orca", k, cfg.default("env.orca", k)) for k in cfg.values["env.orca"]),
+        *(
+            ("env", k, getattr(profile, k))
+            for k in cfg.values["env"]
+            if k not in ("profile", "robots_visible")
+        ),
+    ):
+        value = cfg.values[section][key]
+        if value is not None and value != default:
+            raise cfg.error(section, key, f"{value!r}: {why}")
+
+
+def _jit(
+    choice: str,
+    label: str,
+    experiment: Experiment,
+    humans: tuple[int, ...] | None,
+    n_robots: int,
+    episodes: int,
+) -> bool:
+    """--jit: on, off, or auto: on when gcc is found and the CPU the compiled solvers save over the run's
+    episodes covers compiling every NLP the run needs (_jit_pays)."""
+    from pipelines.experiments.worker import jit_available
+
+    if choice == "on" and not jit_available():
+        raise PipelineError(f"{label} on needs gcc on the PATH (CasADi compiles with it); use --jit off")
+    if choice != "auto":
+        return choice == "on"
+    return jit_available() and _jit_pays(experiment.cells(humans, n_robots), episodes)
+
+
+def _jit_pays(cells, episodes_per_cell: int) -> bool:
+    """Whether compiling repays itself: the saving (episodes x saving per episode, mpc.compile_cache's
+    measured SAVING_PER_EPISODE_S) is at least one cold compile (COMPILE_S) per NLP the cells may need. Cells
+    are counted apart when anything that may change their NLP differs (shared NLPs compile once per machine,
+    so this overestimates); the coupled NLP is not compiled. What the cache already holds is not consulted
+    (its key needs the NLP built): below the threshold a warm cache forgoes ~0.1-0.2 s an episode."""
+    from mpc.compile_cache import COMPILE_S, SAVING_PER_EPISODE_S
+
+    nlps: dict[str, float] = {}
+    saving = 0.0
+    for cell in cells:
+        spec = cell.spec
+        if not spec.kind.compiles or spec.coupling != "ibr":
+            continue
+        nlp = "local" if spec.controller == "dmpc" else "joint"  # a compiling plugin: counted as CMPC
+        per_predictor = spec.predictor if spec.margins.mode != "none" else None  # conformal margins
+        # Not the predictor otherwise, nor flocking: predictions and flocking weights are NLP parameters.
+        identity = (nlp, spec.mpc_overrides, spec.margins, per_predictor, cell.world)
+        nlps[repr((identity, cell.n_robots, cell.n_humans))] = COMPILE_S[nlp]
+        saving += episodes_per_cell * SAVING_PER_EPISODE_S[nlp]
+    return bool(nlps) and saving >= sum(nlps.values())
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.config import command_config
     from pipelines.experiments.log import EPISODES_FILE, episode_log
     from pipelines.experiments.report import write_report
     from pipelines.experiments.sweep import SweepConfig, run_sweep
 
-    _check_workers(args)
+    # Every number and name is checked here (pipelines/config), before anything is written or started.
+    cfg = command_config(args, _options())
+    settings = cfg.sweep
+    for key in ("experiment", "out"):
+        if getattr(settings, key) is None:
+            args.parser_error(f"the following arguments are required: --{key} (or [sweep] {key})")
+    out = Path(settings.out or "")
     if not args.dry_run:
-        check_writable(args.out, "--out", directory=True)
-    experiment = configured_experiment(args)
+        check_writable(out, cfg.label("sweep", "out"), directory=True)
+    _check_world(cfg)
+    experiment = configured_experiment(cfg)
     config = SweepConfig(
         experiment=experiment,
-        out=args.out,
-        episodes_per_cell=args.episodes_per_cell,
-        humans=args.humans,
-        seed=args.seed,
-        n_robots=args.robots,
-        workers=args.workers,
-        backend=args.backend,
-        ray_address=args.ray_address,
-        record=args.record,
+        out=out,
+        episodes_per_cell=settings.episodes_per_cell,
+        humans=settings.humans,
+        seed=settings.seed,
+        n_robots=cfg.scenario.robots,
+        workers=settings.n_workers,
+        backend=settings.backend,
+        ray_address=settings.ray_address,
+        record=settings.record,
         progress=not args.no_progress,
         # nothing to compile (baselines only): gcc is not needed, workers stay where they are
-        jit=any(spec.kind.compiles for _, spec in experiment.methods) and _jit(args.jit),
+        jit=any(spec.kind.compiles for _, spec in experiment.methods)
+        and _jit(
+            settings.jit,
+            cfg.label("sweep", "jit"),
+            experiment,
+            settings.humans,
+            cfg.scenario.robots,
+            settings.episodes_per_cell,
+        ),
+        run_config={"config_file": cfg.path, **cfg.effective()},
     )
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
@@ -314,19 +468,19 @@ def run(args: argparse.Namespace) -> int:
         )
         if outcome.errors:
             print(
-                f"{len(outcome.errors)} episodes raised; see {args.out / 'errors.jsonl'} (a rerun retries)",
+                f"{len(outcome.errors)} episodes raised; see {out / 'errors.jsonl'} (a rerun retries)",
                 file=sys.stderr,
             )
             status = 1
         if outcome.interrupted:
             print("interrupted: rerun the same command to resume", file=sys.stderr)
             status = 130
-    elif not (args.out / EPISODES_FILE).exists():
-        raise PipelineError(f"{args.out / EPISODES_FILE} does not exist: nothing to report")
+    elif not (out / EPISODES_FILE).exists():
+        raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
 
     planned = {t.key for t in tasks}
-    records = [r for key, r in episode_log(args.out).load(repair=False).items() if key in planned]
-    report = write_report(args.out, experiment, cells, records)
+    records = [r for key, r in episode_log(out).load(repair=False).items() if key in planned]
+    report = write_report(out, experiment, cells, records)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
     cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]

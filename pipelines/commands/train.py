@@ -260,7 +260,7 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from predictors.zoo import check_name
+    from predictors.checkpoint import check_name
 
     _check_numbers(args)
     pooling, net_config = _net_config(args)
@@ -302,10 +302,10 @@ def _train(
     import torch
 
     from predictors.base import OBS_LEN
+    from predictors.checkpoint import load_checkpoint, save_checkpoint
     from predictors.data.datamodule import TrajnetDataModule
     from predictors.models import model_kind
     from predictors.training import OptimConfig, make_module
-    from predictors.zoo import load_checkpoint, save_checkpoint
 
     files, root = data_files
     optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)

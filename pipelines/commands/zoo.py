@@ -74,12 +74,14 @@ def _metric(metrics: dict, split: str, key: str) -> str:
 
 def _pooling(located) -> str:
     """The net's pooling as a table cell: "-" for a kind without one, "?" for a config that does not read."""
-    from predictors import zoo
+    from predictors import checkpoint
     from predictors.errors import PredictorError
 
     try:
         _, config = located.entry.paths(located.root, located.manifest)
-        net = zoo.read_document(config, zoo.CONFIG_FORMAT, "crowdmpc predictor config").get("net")
+        net = checkpoint.read_document(config, checkpoint.CONFIG_FORMAT, "crowdmpc predictor config").get(
+            "net"
+        )
     except (OSError, PredictorError):
         return "?"
     if not isinstance(net, dict):
@@ -171,10 +173,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _add(args: argparse.Namespace) -> int:
-    from predictors import zoo
+    from predictors import checkpoint, zoo
 
     if args.shipped and args.dir is not None:
         raise PipelineError("--shipped adds to the shipped zoo; it does not go with --dir")
+    if args.shipped and not (zoo.checkpoints_dir().parent / "pyproject.toml").is_file():
+        # An installed crowdmpc's zoo is package data inside site-packages: maintainers add to a clone's.
+        raise PipelineError(
+            f"--shipped adds to a clone's checkpoints/, and {zoo.checkpoints_dir()} is not one (an installed "
+            "package); add to your user zoo without --shipped"
+        )
     # before anything is read: the user zoo, never the shipped one unless a maintainer says --shipped
     root = zoo.checkpoints_dir() if args.shipped else zoo.writable_zoo_dir(args.dir)
     metrics_path = args.metrics or args.weights.with_suffix(".metrics.json")
@@ -182,9 +190,9 @@ def _add(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"{metrics_path} does not exist; pass --metrics FILE (written by `crowdmpc train`)"
         )
-    if metrics_path.stat().st_size > zoo.MAX_DOCUMENT_BYTES:
+    if metrics_path.stat().st_size > checkpoint.MAX_DOCUMENT_BYTES:
         raise PipelineError(
-            f"{metrics_path}: more than the {zoo.MAX_DOCUMENT_BYTES} bytes a metrics file may have"
+            f"{metrics_path}: more than the {checkpoint.MAX_DOCUMENT_BYTES} bytes a metrics file may have"
         )
     try:
         summary = json.loads(metrics_path.read_text())

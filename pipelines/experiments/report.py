@@ -2,8 +2,9 @@
 
 ``write_report`` writes them all into a sweep's directory: cells.csv (a row per cell: the paper's metrics with
 their 95% intervals, our safety and solver figures, the paper's figures) and episodes.csv (a row per episode)
-from here, table.md from pipelines.experiments.tables, the plots from pipelines.experiments.report_plots,
-and min_distance_hist.csv with the safety plots from pipelines.experiments.safety_report. The cells'
+from here, table.md from pipelines.experiments.tables, a plot per outcome from
+pipelines.experiments.report_plots (``OUTCOME_vs_humans.png``, or ``OUTCOME_by_method.png`` at one crowd
+size), and min_distance_hist.csv with the safety plots from pipelines.experiments.safety_report. The cells'
 summaries, with their Wilson intervals, are pipelines.experiments.summary's.
 """
 
@@ -17,7 +18,7 @@ from typing import Any, Final
 
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Cell, Experiment
-from pipelines.experiments.report_plots import plot_vs_humans
+from pipelines.experiments.report_plots import plot_outcomes
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
 
@@ -133,5 +134,5 @@ def write_report(
     write_csv(out / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
     files = [out / CELLS_CSV, out / EPISODES_CSV, out / TABLE_MD, out / safety.MIN_DISTANCE_HIST_CSV]
     if summaries:
-        files += plot_vs_humans(experiment, summaries, out) + safety.plot_safety(experiment, summaries, out)
+        files += plot_outcomes(experiment, summaries, out) + safety.plot_safety(experiment, summaries, out)
     return Report(markdown, tuple(files))

@@ -1,28 +1,111 @@
-"""The report's plots against the number of humans: success rate and travel time, ours beside the paper's.
+"""The report's plots, one per outcome: success, travel time, collision, contact and discomfort, ours beside
+the paper's.
 
-One line per method (bars when the experiment has a single crowd size), our 95% intervals as error bars, the
-paper's figures dashed. The safety plots (closest approaches, the success / collision trade-off) are
+An experiment over several crowd sizes (Tables II and III) gets ``OUTCOME_vs_humans.png``: the number of
+humans on the x axis, a line per method. An experiment at one crowd size (the predictor swap, coupling,
+safety, ...) gets ``OUTCOME_by_method.png``: a bar per method. Our 95% intervals are the error bars (Wilson
+for the rates, normal for the mean travel time), the paper's figures open squares (dashed lines across
+crowd sizes). The safety plots (closest approaches, the success / collision trade-off) are
 pipelines.experiments.safety_report's.
 """
 
 from __future__ import annotations
 
+import math
+import textwrap
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
+from crowdsim.metrics import COLLISION_DISTANCE
 from pipelines.experiments.cells import Experiment
-from pipelines.experiments.summary import CellSummary
-
-SUCCESS_PNG: Final[str] = "success_vs_humans.png"
-TRAVEL_TIME_PNG: Final[str] = "travel_time_vs_humans.png"
+from pipelines.experiments.summary import CellSummary, Rate
 
 
-def plot_vs_humans(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
-    """Success rate and travel time against the number of humans, one line per method (bars when the
-    experiment has a single crowd size), our 95% intervals as error bars and the paper's figures dashed."""
+@dataclass(frozen=True)
+class Outcome:
+    """One plotted outcome: a ``CellSummary`` field, also the file's stem and, where the paper reports it, a
+    ``PaperFigures`` field."""
+
+    name: str
+    ylabel: str
+    meaning: str  # a line under the title saying what counts
+
+
+OUTCOMES: Final[tuple[Outcome, ...]] = (
+    Outcome("success", "Success rate (%)", "the robots reach their goals within the time limit"),
+    Outcome("travel_time", "Average travel time (s)", "mean over successful episodes"),
+    Outcome(
+        "collision",
+        "Collision rate (%)",
+        f"a robot closer than {COLLISION_DISTANCE:g} m to a human (personal-space violation)",
+    ),
+    Outcome("contact", "Contact rate (%)", "a robot touching a human (closer than the sum of their radii)"),
+    Outcome("discomfort", "Discomfort rate (%)", "a robot's projected path crossing a human's"),
+)
+
+
+def plot_filename(outcome: str, *, by_method: bool) -> str:
+    """``OUTCOME_by_method.png`` for an experiment at one crowd size, else ``OUTCOME_vs_humans.png``."""
+    return f"{outcome}_by_method.png" if by_method else f"{outcome}_vs_humans.png"
+
+
+def _values(cells: Sequence[CellSummary], name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Our values and their error bars, (2, K) below/above (nan where there is none)."""
+    if name == "travel_time":
+        y = np.array([s.travel_time_mean for s in cells], dtype=float)
+        half = np.array([s.travel_time_ci for s in cells], dtype=float)
+        return y, np.vstack([half, half])
+    rates: list[Rate] = [getattr(s, name) for s in cells]
+    y = np.array([r.percent for r in rates], dtype=float)
+    bounds = np.array([r.interval for r in rates], dtype=float).reshape(-1, 2).T
+    return y, np.abs(bounds - y)
+
+
+def _paper(cells: Sequence[CellSummary], name: str) -> list[float | None]:
+    values = [getattr(s.paper, name, None) if s.paper else None for s in cells]
+    return [v if v is not None and math.isfinite(v) else None for v in values]
+
+
+def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> None:
+    cells = [next(s for s in summaries if s.cell.method == m) for m in methods]
+    y, err = _values(cells, name)
+    x = np.arange(len(methods))
+    colors = [f"C{k}" for k in range(len(methods))]
+    ax.bar(
+        x, y, yerr=None if np.isnan(err).all() else err, color=colors, capsize=4, label="ours (95% interval)"
+    )
+    paper = [(k, v) for k, v in enumerate(_paper(cells, name)) if v is not None]
+    if paper:
+        px, py = zip(*paper, strict=True)
+        ax.plot(px, py, ls="none", marker="s", ms=8, mfc="none", mec="k", label="paper")
+        ax.legend(fontsize="small")
+    ax.set_xticks(x, methods, rotation=30, ha="right")
+
+
+def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> None:
+    for k, method in enumerate(methods):
+        cells = sorted((s for s in summaries if s.cell.method == method), key=lambda s: s.cell.n_humans)
+        x = np.array([s.cell.n_humans for s in cells], dtype=float)
+        y, err = _values(cells, name)
+        color = f"C{k}"
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=f"{method} (ours)")
+        paper = [
+            (s.cell.n_humans, v) for s, v in zip(cells, _paper(cells, name), strict=True) if v is not None
+        ]
+        if paper:
+            px, py = zip(*paper, strict=True)
+            ax.plot(px, py, ls="--", marker="s", mfc="none", color=color, label=f"{method} (paper)")
+    ax.set_xticks(sorted({s.cell.n_humans for s in summaries}))
+    ax.set_xlabel("number of humans")
+    ax.legend(fontsize="small")
+
+
+def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], outcome: Outcome) -> Any:
+    """The pyplot figure of one outcome: by method at one crowd size, else against the number of humans."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,45 +113,32 @@ def plot_vs_humans(experiment: Experiment, summaries: Sequence[CellSummary], out
 
     methods = [m for m in experiment.method_labels if any(s.cell.method == m for s in summaries)]
     humans = sorted({s.cell.n_humans for s in summaries})
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    if len(humans) == 1:
+        _draw_by_method(ax, methods, summaries, outcome.name)
+        ax.set_xlabel(f"method ({humans[0]} humans)")
+    else:
+        _draw_vs_humans(ax, methods, summaries, outcome.name)
+    if outcome.name != "travel_time":
+        ax.set_ylim(bottom=0.0)
+    ax.set_ylabel(outcome.ylabel)
+    ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}", fontsize="medium")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def plot_outcomes(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
+    """One plot per outcome (``OUTCOMES``) in ``out``, named by ``plot_filename``; returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    by_method = len({s.cell.n_humans for s in summaries}) == 1
     written = []
-    panels = (
-        ("success", "Success rate (%)", SUCCESS_PNG),
-        ("travel_time", "Average travel time (s)", TRAVEL_TIME_PNG),
-    )
-    for name, ylabel, filename in panels:
-        fig, ax = plt.subplots(figsize=(6.4, 4.2), layout="constrained")
-        for k, method in enumerate(methods):
-            cells = sorted((s for s in summaries if s.cell.method == method), key=lambda s: s.cell.n_humans)
-            x = np.array([s.cell.n_humans for s in cells], dtype=float)
-            if name == "success":
-                y = np.array([s.success.percent for s in cells])
-                ci = np.array([s.success.interval for s in cells]).T
-                err = np.abs(ci - y)
-            else:
-                y = np.array([s.travel_time_mean for s in cells])
-                err = np.array([s.travel_time_ci for s in cells])
-            color = f"C{k}"
-            if len(humans) == 1:
-                ax.bar(
-                    k, y[0], yerr=None if np.isnan(err).all() else err.reshape(-1, 1), color=color, capsize=4
-                )
-            else:
-                ax.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=f"{method} (ours)")
-            paper = [(s.cell.n_humans, getattr(s.paper, name)) for s in cells if s.paper]
-            if paper:
-                px, py = zip(*paper, strict=True)
-                ax.plot(px, py, ls="--", marker="s", mfc="none", color=color, label=f"{method} (paper)")
-        if len(humans) == 1:
-            ax.set_xticks(range(len(methods)), methods, rotation=30, ha="right")
-            ax.set_xlabel(f"method ({humans[0]} humans)")
-        else:
-            ax.set_xticks(humans)
-            ax.set_xlabel("number of humans")
-            ax.legend(fontsize="small")
-        ax.set_ylabel(ylabel)
-        ax.set_title(experiment.title, fontsize="medium")
-        ax.grid(alpha=0.3)
-        path = out / filename
+    for outcome in OUTCOMES:
+        fig = outcome_figure(experiment, summaries, outcome)
+        path = out / plot_filename(outcome.name, by_method=by_method)
         fig.savefig(path, dpi=120)
         plt.close(fig)
         written.append(path)

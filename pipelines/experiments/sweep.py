@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -68,6 +68,8 @@ class SweepConfig:
     record: str = "none"  # RECORD_POLICIES
     progress: bool = True
     jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
+    # The run's effective config (pipelines/config: every section, and the file it came from), for sweep.json.
+    run_config: Mapping[str, Any] | None = field(default=None, compare=False)
 
     def __post_init__(self):
         if self.episodes_per_cell < 1:
@@ -159,6 +161,7 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
             "n_robots": config.n_robots,
             "jit": config.jit,
             "planned": planned,
+            **({"config": config.run_config} if config.run_config is not None else {}),
             "cells": [
                 {
                     "key": c.key,

@@ -14,6 +14,7 @@ different run than the recorded metrics would mislead; recording costs about 5% 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import shutil
@@ -22,6 +23,7 @@ import tempfile
 import time
 import traceback
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
@@ -32,6 +34,7 @@ from pipelines.loop.controllers import Controller, make_controller
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
+    from crowdsim.env import EnvConfig
     from pipelines.loop.episode import EpisodeResult
 
 RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
@@ -107,10 +110,18 @@ def is_failure(metrics: dict[str, Any]) -> bool:
     return (not metrics.get("success")) or bool(metrics.get("collision"))
 
 
-def episode_record(task: EpisodeTask, result: EpisodeResult, wall_s: float, cpu_s: float) -> dict[str, Any]:
+def episode_record(
+    task: EpisodeTask,
+    result: EpisodeResult,
+    wall_s: float,
+    cpu_s: float,
+    config: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
     """One line of episodes.jsonl: the closed loop's ``EpisodeRecord`` and what only the sweep knows (the
     cell, the worker). ``cpu_s`` is the worker's CPU time for the episode, which unlike ``wall_s`` does not
-    depend on how busy the machine was."""
+    depend on how busy the machine was. ``config``: the effective config the episode ran with
+    (``cell_config``: the simulator's and the controller's, as in the MCAP metadata), under "config"; records
+    written before it existed have none, and nothing that reads records needs it."""
     spec, world = task.cell.spec, task.cell.world
     sweep = {
         "key": task.key,
@@ -127,7 +138,18 @@ def episode_record(task: EpisodeTask, result: EpisodeResult, wall_s: float, cpu_
         "cpu_s": cpu_s,
         "worker": f"{socket.gethostname()}:{os.getpid()}",
     }
+    if config is not None:
+        sweep["config"] = config
     return {**result.record().to_dict(), **plain(sweep)}
+
+
+def cell_config(controller: Controller, env_config: EnvConfig) -> dict[str, Any]:
+    """The effective config of a cell's episodes, as ``run_episode`` puts it in the MCAP "config" metadata:
+    the simulator's settings and what the controller's ``describe()`` adds (the MPC's config, coupling,
+    flocking, margins)."""
+    config: dict[str, Any] = {"env": dataclasses.asdict(env_config)}
+    config.update(dict(controller.describe()).get("config", {}))
+    return plain(config)
 
 
 @dataclass
@@ -151,6 +173,7 @@ class EpisodeWorker:
         self.jit = jit
         self.scratch = scratch
         self._controllers: OrderedDict[str, Controller] = OrderedDict()
+        self._configs: dict[str, dict[str, Any]] = {}  # cell key -> cell_config, built with its controller
         self.builds = 0  # controllers built so far (a test checks the reuse)
 
     def controller(self, task: EpisodeTask) -> Controller:
@@ -158,11 +181,14 @@ class EpisodeWorker:
         if key in self._controllers:
             self._controllers.move_to_end(key)
             return self._controllers[key]
-        controller = make_controller(task.cell.spec, task.cell.world.env_config(), jit=self.jit)
+        env_config = task.cell.world.env_config()
+        controller = make_controller(task.cell.spec, env_config, jit=self.jit)
         self.builds += 1
         self._controllers[key] = controller
+        self._configs[key] = cell_config(controller, env_config)
         while len(self._controllers) > CONTROLLER_CACHE:
-            self._controllers.popitem(last=False)
+            dropped, _ = self._controllers.popitem(last=False)
+            self._configs.pop(dropped, None)
         return controller
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
@@ -201,7 +227,11 @@ class EpisodeWorker:
                 meta=meta,
             )
             record = episode_record(
-                task, result, time.perf_counter() - start, time.process_time() - cpu_start
+                task,
+                result,
+                time.perf_counter() - start,
+                time.process_time() - cpu_start,
+                config=self._configs.get(task.cell.key),
             )
             mcap = None
             if recorder is not None and (self.record == "all" or is_failure(record["metrics"])):

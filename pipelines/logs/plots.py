@@ -7,7 +7,7 @@ simulated one; the plans and predictions, which only the recording holds, are dr
 from __future__ import annotations
 
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -114,28 +114,49 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
     fig.savefig(out, dpi=120, bbox_inches="tight")
 
 
-def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> int:
-    """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg). Returns the frame count.
+ANIMATION_SUFFIXES: Final = (".gif", ".mp4")
 
-    One frame per recorded state, played at ``speed`` times simulated time.
-    """
-    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+
+def check_animation_path(out: str | Path, option: str = "--animate") -> None:
+    """PipelineError unless ``out`` names an animation this machine can write (.gif; .mp4 with ffmpeg):
+    checked before the work, as ``crowdsim.plotting.check_figure_path`` is for figures."""
+    suffix = Path(out).suffix.lower()
+    if suffix not in ANIMATION_SUFFIXES:
+        raise PipelineError(f"{option} writes .gif or .mp4, got {Path(out).name!r}")
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise PipelineError("an .mp4 needs ffmpeg, which is not installed here; ask for a .gif instead")
+
+
+def _animation_legend(fig: Any, view: EpisodeView) -> None:
+    """What each mark is, under the axes (nothing drawn is hidden): robots in their own colours (robot 0's
+    stands for all), humans, goals, the paths so far, and plans and predictions when the file has them."""
+    from matplotlib.lines import Line2D
+
+    robot = _robot_color(0)
+    entries = [
+        Line2D([], [], ls="none", marker="o", ms=9, mfc=robot, mec="k", mew=0.5, label="robot"),
+        Line2D([], [], ls="none", marker="o", ms=9, mfc="none", mec=HUMAN_COLOR, mew=1.2, label="human"),
+        Line2D([], [], ls="none", marker="*", ms=12, mfc=GOAL_COLOR, mec="k", mew=0.5, label="robot goal"),
+        Line2D([], [], ls="-", color=robot, lw=1.0, alpha=0.6, label="robot path"),
+    ]
+    if view.plans:
+        entries.append(Line2D([], [], ls="--", color=robot, lw=1.2, label="robot plan"))
+    if view.predictions:
+        entries.append(Line2D([], [], ls=":", color=HUMAN_COLOR, lw=1.0, label="predicted human path"))
+    fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+
+
+def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], EpisodeView]:
+    """The animation's figure, its frame function (recorded state ``row`` -> changed artists) and the view."""
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
     from crowdsim.plotting import frame_axes
 
-    out = Path(out)
-    suffix = out.suffix.lower()
-    if suffix not in (".gif", ".mp4"):
-        raise PipelineError(f"--animate writes .gif or .mp4, got {out.name!r}")
-    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
-        raise PipelineError("an .mp4 needs ffmpeg, which is not installed here; ask for a .gif instead")
     view = episode_view(rec)
-    fps = speed / view.dt
     m, n = view.robot_positions.shape[1], view.human_positions.shape[1]
 
-    fig = Figure(figsize=(6, 6), layout="constrained")
+    fig = Figure(figsize=(6, 6.5), layout="constrained")
     ax = fig.add_subplot()
     frame_axes(ax, view.robot_positions, view.human_positions, view.robot_goals)
     ax.set_title(rec.label, fontsize=9)
@@ -148,6 +169,7 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
     plans = [ax.plot([], [], "--", color=_robot_color(i), lw=1.2)[0] for i in range(m)]
     predictions = [ax.plot([], [], ":", color=HUMAN_COLOR, lw=1.0)[0] for _ in range(n)]
     clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
+    _animation_legend(fig, view)
 
     def draw(row: int) -> list[Any]:
         step = int(view.steps[row])
@@ -171,13 +193,27 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
         clock.set_text(f"t = {view.times[row]:.1f} s" + ("   (truncated file)" if rec.truncated else ""))
         return [*robots, *humans, *trails, *plans, *predictions, clock]
 
+    return fig, draw, view
+
+
+def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> int:
+    """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg). Returns the frame count.
+
+    One frame per recorded state, played at ``speed`` times simulated time.
+    """
+    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+
+    out = Path(out)
+    check_animation_path(out)
+    fig, draw, view = animation_figure(rec)
+    fps = speed / view.dt
     frames = len(view.times)
     animation = FuncAnimation(fig, draw, frames=frames, blit=False)
     # matplotlib's stubs say fps: int, but the writers take any positive number (Pillow: 1000 / fps ms a
     # frame, ffmpeg: -r fps); speed / dt is fractional (e.g. 2.5) and must not be rounded.
     writer = (
         PillowWriter(fps=fps)  # type: ignore[arg-type]
-        if suffix == ".gif"
+        if out.suffix.lower() == ".gif"
         else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
     )
     animation.save(out, writer=writer, dpi=80)

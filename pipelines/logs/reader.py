@@ -6,6 +6,11 @@ chunk; a file is truncated when it does not end with MCAP's magic. CRCs are veri
 them: each chunk's (``breakup_chunk(validate_crc=True)``, one chunk at a time, so that a bad chunk loses only
 its own messages) and the data section's (``validate_crcs``; crowdmpc's writer leaves it 0, i.e. absent).
 
+Log times are wall clock since the Unix epoch: the episode's start (metadata "episode" ``start_time_ns``) +
+its simulation time (``pipelines.logs.recording``); files recorded before that, without ``start_time_ns``,
+count log time from 0. Either way ``Recording.sim_seconds`` gives the simulation time of a log time, and
+every place (warnings, problems) names a message by it.
+
 Nothing in a file raises past ``read_recording`` except a file that is not a recording at all (missing, a
 folder, empty, not MCAP, no complete header): a bad chunk, a message that is not JSON or lacks what the review
 reads (``pipelines.logs.shapes``), a bad metadata value or a corrupt record becomes a line of
@@ -33,6 +38,7 @@ from pipelines.logs.recorder import UNFINISHED_SUFFIX
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
 
 MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
+START_TIME_KEY: Final[str] = "start_time_ns"  # in the "episode" metadata record (pipelines.logs.recording)
 
 
 @dataclass(frozen=True)
@@ -50,8 +56,9 @@ class LoggedMessage:
     data: Any  # the decoded JSON (None when it did not decode)
     problem: str | None = None  # why the review leaves it out: not JSON, or lacks what the review reads
 
-    def where(self, topic: str) -> str:
-        return f"{topic} @ {_seconds(self.log_time_ns)}"
+    def where(self, topic: str, start_time_ns: int = 0) -> str:
+        """``topic @ T s``, T the simulation time (``start_time_ns``: the log time of the episode's start)."""
+        return f"{topic} @ {_seconds(self.log_time_ns - start_time_ns)}"
 
 
 @dataclass(frozen=True)
@@ -71,16 +78,27 @@ class Recording:
         if not self.truncated:
             return None
         n = sum(len(v) for v in self.messages.values())
-        last = max((m[-1].log_time_ns for m in self.messages.values() if m), default=0) / 1e9
+        ends = [m[-1].log_time_ns for m in self.messages.values() if m]
+        last = self.sim_seconds(max(ends)) if ends else 0.0
         return (
             f"{self.path} is truncated (the run was killed or is still writing): read {n} messages up to "
             f"t = {last:.1f} s, the last complete chunk; the rest is lost ({self.stopped_at or 'no footer'})"
         )
 
+    @property
+    def start_time_ns(self) -> int:
+        """The log time of the episode's start: its wall-clock start in ns since the Unix epoch, or 0 for a
+        file recorded before log times were wall clock (or whose value is bad: a ``problems`` line)."""
+        return start_time_ns(self.metadata)
+
+    def sim_seconds(self, log_time_ns: int) -> float:
+        """The simulation time (s) of a log time of this file."""
+        return (log_time_ns - self.start_time_ns) / 1e9
+
     def message_problems(self) -> list[str]:
-        """A line per message the review leaves out (``LoggedMessage.problem``), naming topic and log time."""
+        """A line per message the review leaves out (``LoggedMessage.problem``), naming topic and time."""
         return [
-            f"{m.where(topic)}: {m.problem}; left out"
+            f"{m.where(topic, self.start_time_ns)}: {m.problem}; left out"
             for topic, messages in self.messages.items()
             for m in messages
             if m.problem
@@ -116,6 +134,26 @@ class Recording:
         ep = self.episode()
         parts = [ep.get("controller"), ep.get("predictor"), ep.get("scenario"), f"seed {ep.get('seed', '?')}"]
         return " / ".join(p for p in parts if p)
+
+
+def _start_time_problem(metadata: dict[str, dict[str, str]]) -> str | None:
+    text = metadata.get("episode", {}).get(START_TIME_KEY)
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if 0 <= value < 1 << 64:  # an MCAP log time is a uint64
+        return None
+    return f"{START_TIME_KEY} = {text!r} is not a log time (an integer of ns in 0 .. 2^64 - 1)"
+
+
+def start_time_ns(metadata: dict[str, dict[str, str]]) -> int:
+    """The log time of the episode's start from the metadata records; 0 when absent (older files) or bad."""
+    if _start_time_problem(metadata) is not None:
+        return 0
+    return int(metadata.get("episode", {}).get(START_TIME_KEY, "0"))
 
 
 def _decoded(record: dict[str, str]) -> dict[str, Any]:
@@ -162,9 +200,10 @@ class _Walk:
             try:
                 inner = breakup_chunk(record, validate_crc=True)
             except Exception as exc:  # noqa: BLE001 (CRC, codec or parse error: the chunk's bytes are bad)
+                start = start_time_ns(self.metadata)  # metadata precede the chunks
                 self.problems.append(
-                    f"bad chunk at byte {offset} (log times {_seconds(record.message_start_time)} to "
-                    f"{_seconds(record.message_end_time)}): {_reason(exc)}; its messages are left out"
+                    f"bad chunk at byte {offset} (times {_seconds(record.message_start_time - start)} to "
+                    f"{_seconds(record.message_end_time - start)}): {_reason(exc)}; its messages are left out"
                 )
                 return
             for r in inner:
@@ -184,19 +223,23 @@ class _Walk:
 
     def finish(self) -> None:
         """Messages whose channel came later (the summary repeats the channels) join their topic first."""
+        start = start_time_ns(self.metadata)
         for channel_id, orphans in self._orphans.items():
             channel = self._channels.get(channel_id)
             if channel is None:
                 self.problems.append(
-                    f"{len(orphans)} message(s) on channel id {channel_id} (log times "
-                    f"{_seconds(orphans[0].log_time)} to {_seconds(orphans[-1].log_time)}), which no channel "
-                    "record describes: left out"
+                    f"{len(orphans)} message(s) on channel id {channel_id} (times "
+                    f"{_seconds(orphans[0].log_time - start)} to {_seconds(orphans[-1].log_time - start)}), "
+                    "which no channel record describes: left out"
                 )
                 continue
             topic_messages = self._messages_of(channel)
             topic_messages[:0] = [self._decoded(channel.topic, m) for m in orphans]
         for key, problem in episode_metadata_problems(self.metadata.get("episode", {})).items():
             self.problems.append(f"metadata 'episode': {problem}; the review ignores {key}")
+        bad_start = _start_time_problem(self.metadata)
+        if bad_start is not None:
+            self.problems.append(f"metadata 'episode': {bad_start}; times are log times from 0")
 
     def _messages_of(self, channel: McapChannel) -> list[LoggedMessage]:
         topic = channel.topic

@@ -135,7 +135,8 @@ class McapRecorder:
     def write(
         self, topic: str, message: Mapping[str, Any], log_time_ns: int, *, schema: MessageSchema
     ) -> None:
-        """Append ``message`` (plain JSON values) to ``topic`` at ``log_time_ns`` (ns since episode start)."""
+        """Append ``message`` (plain JSON values) to ``topic`` at ``log_time_ns`` (ns since the Unix epoch, as
+        Foxglove reads it; an episode's recording: its wall-clock start + simulation time)."""
         channel_id = self._channel_id(topic, schema, log_time_ns)
         try:
             data = _ENCODER.encode(message).encode()

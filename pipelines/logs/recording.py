@@ -1,6 +1,9 @@
 """Recording closed-loop episodes to MCAP: one file per episode, an EpisodeObserver for the closed loop.
 
-Channels (JSON, schemas in ``pipelines.logs.schemas``), log time = simulation time since the episode start:
+Log time = the episode's wall-clock start (metadata "episode" ``start_time_ns``, ns since the Unix epoch) +
+its simulation time, so that Foxglove's clock shows when the run happened; the state, plan, prediction and
+solver messages carry their simulation time too ("time", s, and "step"). Channels (JSON, schemas in
+``pipelines.logs.schemas``):
   /robots, /humans      the state at t and the accelerations applied from t; the final state comes at the end
   /mpc/plan             each robot's planned positions t+1..t+H (controllers that plan)
   /mpc/prediction       the humans' predicted positions, per IBR iteration when asked (predicting controllers)
@@ -8,13 +11,14 @@ Channels (JSON, schemas in ``pipelines.logs.schemas``), log time = simulation ti
   /scene                foxglove.SceneUpdate: agents as spheres, goals, plans and predictions as line strips
   /episode/metrics      once, at the end
 Metadata records: "crowdmpc" (version, format), "episode" (seed, scenario, controller, predictor, checkpoint
-sha256, sizes), "config" and "run" (JSON-encoded values).
+sha256, sizes, start_time_ns), "config" and "run" (JSON-encoded values).
 """
 
 from __future__ import annotations
 
 import functools
 import json
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
@@ -33,8 +37,9 @@ if TYPE_CHECKING:
     from pipelines.loop.controllers import ControlOutput
     from pipelines.loop.episode import EpisodeResult
 
-# bump when a channel's meaning changes; 2: /episode/metrics is the EpisodeRecord (pipelines/loop/record.py)
-FORMAT: Final[str] = "crowdmpc-episode/2"
+# bump when a channel's meaning changes; 2: /episode/metrics is the EpisodeRecord (pipelines/loop/record.py);
+# 3: log times are wall clock, episode start_time_ns + simulation time (before: simulation time from 0)
+FORMAT: Final[str] = "crowdmpc-episode/3"
 FRAME_ID: Final[str] = "world"
 
 # crowdsim.plotting.ROBOT_COLORS (matplotlib's tab10) as RGB, so that the 3D panel and the plots colour
@@ -223,6 +228,7 @@ class McapEpisodeRecorder:
         self._scene: SceneBuilder | None = None
         self._last: Observation | None = None  # the newest state seen
         self._last_written_step = -1
+        self._start_ns = 0  # the episode's wall-clock start, ns since the Unix epoch: log time at t = 0
 
     # -- EpisodeObserver -------------------------------------------------------------------------------------
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
@@ -232,6 +238,7 @@ class McapEpisodeRecorder:
             raise PipelineError(f"recording needs {missing} in the episode meta; got keys {sorted(meta)}")
         seed, scenario = int(meta["seed"]), str(meta["scenario"])
         n_robots, n_humans = len(obs.robot_positions), len(obs.human_positions)
+        self._start_ns = time.time_ns()
         episode = {
             "seed": str(seed),
             "scenario": scenario,
@@ -242,6 +249,7 @@ class McapEpisodeRecorder:
             "n_humans": str(n_humans),
             "dt": repr(float(obs.dt)),
             "radius": repr(float(obs.radius)),
+            "start_time_ns": str(self._start_ns),
         }
         path = self.out_dir / episode_filename(scenario, seed)
         self._recorder = McapRecorder(
@@ -261,7 +269,7 @@ class McapEpisodeRecorder:
     def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
         rec = self._require_open()
         builder, _ = self._require_episode()
-        t_ns = seconds_to_ns(obs.time)
+        t_ns = self._start_ns + seconds_to_ns(obs.time)
         stamp = {"time": float(obs.time), "step": int(obs.step)}
         self._write_state(
             rec, obs, t_ns, stamp, next_obs.robot_last_actions.tolist(), out.accelerations.tolist()
@@ -299,7 +307,7 @@ class McapEpisodeRecorder:
     def on_end(self, result: EpisodeResult) -> None:
         rec = self._require_open()
         builder, last = self._require_episode()
-        t_ns = seconds_to_ns(last.time)
+        t_ns = self._start_ns + seconds_to_ns(last.time)
         if last.step > self._last_written_step:  # the terminal state, reached by the last step
             self._write_state(rec, last, t_ns, {"time": float(last.time), "step": int(last.step)}, None, None)
             scene = builder.update(

@@ -12,6 +12,7 @@ import json
 import math
 from collections import Counter
 from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
@@ -61,6 +62,7 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "crowdmpc_version": rec.metadata.get("crowdmpc", {}).get("version"),
         "states": len(robots),
         "sim_time_s": robots[-1]["time"] if robots else 0.0,
+        "started": _wall_clock(rec.start_time_ns),
         "metrics": metrics_messages[-1]["metrics"] if metrics_messages else None,
         "solver": _solver_stats(rec),
         "messages": {topic: len(msgs) for topic, msgs in sorted(rec.messages.items())},
@@ -68,6 +70,13 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "warning": rec.warning,
         "problems": rec.problems + rec.message_problems(),
     }
+
+
+def _wall_clock(ns: int) -> str | None:
+    """ISO 8601 UTC time of a wall-clock log time; None for 0 (files whose log times start at 0)."""
+    if ns <= 0:
+        return None
+    return datetime.fromtimestamp(ns / 1e9, UTC).isoformat(timespec="seconds")
 
 
 def _fmt(value: Any) -> str:
@@ -95,6 +104,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         ("predictor sha256", summary["predictor_sha256"]),
         ("crowdmpc", summary["crowdmpc_version"]),
         ("recorded", f"{summary['states']} states, {summary['sim_time_s']:.1f} s simulated"),
+        ("started", summary["started"]),
     ]
     metrics = summary["metrics"]
     if metrics is None:
@@ -267,18 +277,24 @@ def check_recording(rec: Recording) -> tuple[int, list[str]]:
     for topic, channel in rec.channels.items():
         messages = rec.messages[topic]
         try:
-            n, topic_errors = _check_topic(topic, channel, messages)
+            n, topic_errors = _check_topic(topic, channel, messages, rec.start_time_ns)
         except (ValueError, TypeError, AttributeError, KeyError, IndexError, RecursionError) as exc:
             # the file's schema is JSON but no schema (e.g. "required": 5): nothing on the topic is checked
             n, topic_errors = 0, [f"{topic}: schema {channel.schema_name!r} is malformed ({exc!r})"]
-            topic_errors += [f"{m.where(topic)}: {m.problem}" for m in messages if m.problem]
+            topic_errors += [
+                f"{m.where(topic, rec.start_time_ns)}: {m.problem}" for m in messages if m.problem
+            ]
         checked += n
         errors += topic_errors
     return checked, errors
 
 
-def _check_topic(topic: str, channel: Channel, messages: list[LoggedMessage]) -> tuple[int, list[str]]:
-    unusable = [f"{m.where(topic)}: {m.problem}" for m in messages if m.problem]
+def _check_topic(
+    topic: str, channel: Channel, messages: list[LoggedMessage], start_time_ns: int
+) -> tuple[int, list[str]]:
+    """Checked messages and errors of one topic; messages named by their simulation time (``start_time_ns``:
+    the file's log time of the episode start)."""
+    unusable = [f"{m.where(topic, start_time_ns)}: {m.problem}" for m in messages if m.problem]
     if channel.message_encoding != MESSAGE_ENCODING or channel.schema_encoding != SCHEMA_ENCODING:
         return 0, [
             f"{topic}: encoding {channel.message_encoding!r} / schema {channel.schema_encoding!r}, "
@@ -300,14 +316,14 @@ def _check_topic(topic: str, channel: Channel, messages: list[LoggedMessage]) ->
     checked, errors = 0, []
     for message in messages:
         if message.data is None:  # not JSON
-            errors.append(f"{message.where(topic)}: {message.problem}")
+            errors.append(f"{message.where(topic, start_time_ns)}: {message.problem}")
             continue
         checked += 1
         violations = [
-            f"{message.where(topic)} ({channel.schema_name}): {problem}"
+            f"{message.where(topic, start_time_ns)} ({channel.schema_name}): {problem}"
             for problem in validate(message.data, schema)
         ]
         if not violations and message.problem:
-            violations.append(f"{message.where(topic)}: {message.problem}")
+            violations.append(f"{message.where(topic, start_time_ns)}: {message.problem}")
         errors += violations
     return checked, errors

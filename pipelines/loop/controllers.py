@@ -2,25 +2,42 @@
 
 ``crowdsim`` never imports ``mpc``; this module names the controller protocol and holds the explicit, typed
 registry of controllers: the baselines (``pipelines.loop.baselines`` adapts ``crowdsim.baselines``) and the
-game-theoretic MPCs (``pipelines.loop.mpc``). What the pipelines must know before a controller exists (does
-it plan with a predictor, can its NLPs be compiled) is stated per name in ``pipelines.loop.spec``; each
-controller states the rest itself (``predictor``, ``describe``, ``close``). Builders import lazily so that
-choosing ``orca`` never loads CasADi solvers.
+game-theoretic MPCs (``pipelines.loop.mpc``), plus the plugins (entry points in the group
+``crowdmpc.controllers``, ``crowdmpc --plugin module:Class``; ``pipelines.loop.spec`` says how they are
+found). What the pipelines must know before a controller exists (does it plan with a predictor, can its NLPs
+be compiled) is stated per name in ``pipelines.loop.spec``; each controller states the rest itself
+(``predictor``, ``describe``, ``close``). Builders import lazily so that choosing ``orca`` never loads CasADi
+solvers.
+
+A plugin is a class implementing ``Controller``, built as ``Class(spec, env_config, jit=jit)``: ``spec`` the
+``ControllerSpec`` (its ``predictor``, ``mpc_overrides`` ... for the plugin to use as it sees fit),
+``env_config`` the simulator's ``EnvConfig`` (None: the defaults), ``jit`` whether the run asks for compiled
+NLPs. Optional class attributes ``uses_predictor`` and ``compiles`` (bools) state its facts.
 """
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from crowdsim.control import ControlOutput
+from pipelines.errors import PipelineError
 from pipelines.loop.spec import (
     CONTROLLER_KINDS,
     COUPLINGS,
     ControllerKind,
     ControllerName,
+    ControllerPlugin,
     ControllerSpec,
     Coupling,
+    UnknownController,
+    controller_names,
+    controller_plugin,
+    is_plugin_spec,
+    is_shipped,
+    load_controller_plugin,
+    register_controller_plugins,
 )
 
 if TYPE_CHECKING:
@@ -37,8 +54,14 @@ __all__ = [
     "ControllerKind",
     "ControllerName",
     "ControllerSpec",
+    "ControllerPlugin",
     "Coupling",
+    "UnknownController",
+    "controller_name",
+    "controller_names",
+    "load_controller_plugin",
     "make_controller",
+    "register_controller_plugins",
 ]
 
 
@@ -108,4 +131,39 @@ def make_controller(
     """The controller of ``spec`` for episodes simulated under ``env_config`` (a predictor that observes the
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
     compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
-    return CONTROLLERS[spec.controller](spec, env_config, jit)
+    if is_shipped(spec.controller):
+        return CONTROLLERS[spec.controller](spec, env_config, jit)
+    return _build_plugin(controller_plugin(spec.controller), spec, env_config, jit)
+
+
+def _build_plugin(
+    plugin: ControllerPlugin, spec: ControllerSpec, env_config: EnvConfig | None, jit: bool
+) -> Controller:
+    """``plugin.cls(spec, env_config, jit=jit)``; a constructor that fails, or builds something without a
+    ``name`` and a ``predictor``, is a one-line PipelineError naming the plugin."""
+    try:
+        controller = plugin.cls(spec, env_config, jit=jit)
+    except PipelineError:
+        raise
+    except Exception as exc:  # the plugin's own validation (TypeError, ValueError, an assert ...)
+        raise PipelineError(
+            f"controller {plugin.name!r}: building it failed: {type(exc).__name__}: {exc}"
+        ) from None
+    name, predictor = getattr(controller, "name", None), getattr(controller, "predictor", ())
+    if not (isinstance(name, str) and name) or not (predictor is None or isinstance(predictor, str)):
+        raise PipelineError(
+            f"controller {plugin.name!r}: a {plugin.cls.__name__} needs a non-empty str name and a predictor "
+            f"(str or None), got name={name!r:.60}, predictor={predictor!r:.60}"
+        )
+    return controller  # type: ignore[no-any-return]
+
+
+def controller_name(value: str) -> str:
+    """``--controller``'s type: ``value`` if some source registers it, else the parser's one-line error
+    (argparse's own wording for an unknown name; how to register it for a ``module:Class``)."""
+    if is_shipped(value) or value in controller_names():
+        return value
+    if is_plugin_spec(value):
+        raise argparse.ArgumentTypeError(str(UnknownController(value, [])))
+    choices = ", ".join(repr(name) for name in controller_names())
+    raise argparse.ArgumentTypeError(f"invalid choice: {value!r:.60} (choose from {choices})")

@@ -3,18 +3,39 @@
 The facts are what the pipelines need before a controller is built: whether it plans with a predictor (its
 records and cell keys then name one) and whether its NLPs can be compiled. The builders that turn a spec
 into a controller are the registry of ``pipelines.loop.controllers``, which checks it covers these names.
+
+Controllers come from three sources, in this order, as predictor nets do (``predictors.models``):
+
+* the shipped ones (``CONTROLLER_KINDS``);
+* installed packages' entry points in the group ``crowdmpc.controllers`` (``name = "module:Class"``);
+* ``module:Class`` given by the user: ``crowdmpc --plugin module:Class`` (``pipelines.plugins``), or the
+  ``CROWDMPC_CONTROLLERS`` environment variable (comma-separated), which ``--plugin`` sets so that the
+  processes a command starts load it too. The controller's name is then ``module:Class``.
+
+A plugin is a class that implements the ``Controller`` protocol (``pipelines.loop.controllers``: ``name``,
+``predictor``, ``reset``, ``act``, ``describe``, ``close``), is built as ``Class(spec, env_config, jit=jit)``
+and states its facts as class attributes ``uses_predictor`` and ``compiles`` (bools; False when absent).
+Its facts are known once its class is loaded, so they live here with the shipped ones.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import importlib
+import inspect
+import os
+import re
+import sys
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Final, Literal, get_args
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Final, Literal, TypeGuard, get_args
 
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec
 
-# Literal rather than Enum: the values travel unchanged through argparse, JSON records and MCAP metadata.
+# The shipped controllers. Literal rather than Enum: the values travel unchanged through argparse, JSON
+# records and MCAP metadata. A plugin's name is any other registered string.
 ControllerName = Literal["straight", "orca", "cmpc", "dmpc"]
 Coupling = Literal["ibr", "nlp"]  # "ibr": Algorithm 1/2; "nlp": the predictor inside the joint NLP
 COUPLINGS: Final[tuple[Coupling, ...]] = get_args(Coupling)
@@ -40,7 +61,7 @@ CONTROLLER_KINDS: Final[Mapping[ControllerName, ControllerKind]] = {
 class ControllerSpec:
     """What the user chose on the command line; the controller is built from it once per run."""
 
-    controller: ControllerName
+    controller: str  # a ControllerName or a registered plugin's name
     predictor: str = "constant_velocity"  # a name accepted by predictors.registry.load_predictor
     flocking: bool = True  # False: omega_floc = 0 (Table III, "NF")
     coupling: Coupling = "ibr"
@@ -49,10 +70,7 @@ class ControllerSpec:
     margins: MarginSpec = MarginSpec()  # allowance for prediction error in Eq. 11 (pipelines/loop/margins.py)
 
     def __post_init__(self) -> None:
-        if self.controller not in CONTROLLER_KINDS:
-            raise PipelineError(
-                f"unknown controller {self.controller!r}; choose from {sorted(CONTROLLER_KINDS)}"
-            )
+        controller_kind(self.controller)  # UnknownController unless some source registers it
         if self.coupling not in COUPLINGS:
             raise PipelineError(f"unknown coupling {self.coupling!r}; choose from {list(COUPLINGS)}")
         if not isinstance(self.margins, MarginSpec):
@@ -62,9 +80,170 @@ class ControllerSpec:
 
     @property
     def kind(self) -> ControllerKind:
-        return CONTROLLER_KINDS[self.controller]
+        return controller_kind(self.controller)
 
     @property
     def predictor_name(self) -> str | None:
         """The predictor this spec's controller plans with; None for a controller that uses none."""
         return self.predictor if self.kind.uses_predictor else None
+
+
+# ---- plugins ---------------------------------------------------------------------------------------------
+ENTRY_POINT_GROUP: Final[str] = "crowdmpc.controllers"
+PLUGINS_ENV: Final[str] = "CROWDMPC_CONTROLLERS"
+# An importable module and a class in it, as for predictor nets (predictors.models.PLUGIN_PATTERN).
+PLUGIN_PATTERN: Final[re.Pattern[str]] = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*", re.ASCII)
+MAX_PLUGIN_SPEC: Final[int] = 200  # longer is no module path anyone writes; keeps every message one line
+CONTROLLER_METHODS: Final[tuple[str, ...]] = ("reset", "act", "describe", "close")
+
+
+@dataclass(frozen=True)
+class ControllerPlugin:
+    """A controller class from outside the package, and its facts."""
+
+    name: str  # what --controller and ControllerSpec.controller call it
+    cls: type  # built as cls(spec, env_config, jit=jit)
+    kind: ControllerKind
+    source: str  # "plugin" or "entry point <distribution>"
+
+
+class UnknownController(PipelineError):
+    """A controller name no source registers; for a ``module:Class`` name, the message says how to register
+    it (crowdmpc imports a plugin only when the user registers it)."""
+
+    def __init__(self, name: object, choices: list[str]):
+        self.name = name
+        self.choices = choices
+        if is_plugin_spec(name):
+            super().__init__(
+                f"controller {name!r} is a plugin that is not registered; register it with "
+                f"`crowdmpc --plugin {name} COMMAND ...` or {PLUGINS_ENV}={name}"
+            )
+            return
+        text = repr(name) if len(repr(name)) <= 60 else f"{repr(name)[:57]}..."
+        super().__init__(
+            f"unknown controller {text}; choose from {choices}, or register a plugin with --plugin "
+            f"module:Class (or ${PLUGINS_ENV}, or an entry point in {ENTRY_POINT_GROUP!r})"
+        )
+
+
+_PLUGINS: dict[str, ControllerPlugin] = {}
+
+
+def is_shipped(name: object) -> TypeGuard[ControllerName]:
+    return isinstance(name, str) and name in CONTROLLER_KINDS
+
+
+def is_plugin_spec(name: object) -> TypeGuard[str]:
+    """Whether ``name`` has the form ``module:Class`` (and a sane length)."""
+    return (
+        isinstance(name, str) and len(name) <= MAX_PLUGIN_SPEC and PLUGIN_PATTERN.fullmatch(name) is not None
+    )
+
+
+def is_controller_class(obj: object) -> bool:
+    """A class with every method of the ``Controller`` protocol: what ``--plugin`` takes for a controller."""
+    return inspect.isclass(obj) and all(callable(getattr(obj, m, None)) for m in CONTROLLER_METHODS)
+
+
+def import_plugin(spec: str) -> object:
+    """What ``module:Class`` names, importing the module from the installed packages or, after them, the
+    current directory (as ``python -m`` would). PipelineError in one line when it cannot."""
+    if not is_plugin_spec(spec):
+        text = repr(spec) if len(repr(spec)) <= 60 else f"{repr(spec)[:57]}..."
+        raise PipelineError(f"plugin {text} is not of the form module:Class")
+    cwd = str(Path.cwd())
+    if cwd not in sys.path:
+        sys.path.append(cwd)  # after the installed packages: a local file never shadows one
+    module_name, _, class_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # a plugin module that does not import: say which and why, in one line
+        raise PipelineError(
+            f"plugin {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
+        ) from None
+    if not hasattr(module, class_name):
+        raise PipelineError(f"plugin {spec!r}: module {module_name!r} has no {class_name!r}")
+    return getattr(module, class_name)
+
+
+def plugin_kind(cls: object, name: str) -> ControllerKind:
+    """The facts of the controller class ``cls``; PipelineError naming ``name`` unless it is one."""
+    if not inspect.isclass(cls):
+        raise PipelineError(f"controller {name!r}: {cls!r:.60} is not a class")
+    missing = [m for m in CONTROLLER_METHODS if not callable(getattr(cls, m, None))]
+    if missing:
+        raise PipelineError(
+            f"controller {name!r}: {cls.__name__} has no {', '.join(missing)} (the Controller protocol of "
+            "pipelines/loop/controllers.py)"
+        )
+    facts = {fact: getattr(cls, fact, False) for fact in ("uses_predictor", "compiles")}
+    for fact, value in facts.items():
+        if not isinstance(value, bool):
+            raise PipelineError(f"controller {name!r}: {cls.__name__}.{fact} must be a bool, got {value!r}")
+    return ControllerKind(**facts)
+
+
+def load_controller_plugin(spec: str) -> ControllerPlugin:
+    """Register the controller class ``module:Class`` (importing its module) under the name ``spec``."""
+    if spec in _PLUGINS:
+        return _PLUGINS[spec]
+    cls = import_plugin(spec)
+    plugin = ControllerPlugin(spec, cls, plugin_kind(cls, spec), "plugin")  # type: ignore[arg-type]
+    _PLUGINS[spec] = plugin
+    return plugin
+
+
+def register_controller_plugins(specs: Sequence[str]) -> list[ControllerPlugin]:
+    """Load each plugin and list it in ``CROWDMPC_CONTROLLERS`` for the processes started after."""
+    plugins = [load_controller_plugin(spec) for spec in specs]
+    listed = [s for s in os.environ.get(PLUGINS_ENV, "").split(",") if s]
+    os.environ[PLUGINS_ENV] = ",".join(dict.fromkeys([*listed, *specs]))
+    return plugins
+
+
+def _environment_plugins() -> None:
+    for spec in os.environ.get(PLUGINS_ENV, "").split(","):
+        if spec.strip():
+            load_controller_plugin(spec.strip())
+
+
+def _entry_points() -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP) if not is_shipped(ep.name)}
+
+
+def controller_names() -> list[str]:
+    """Every name ``ControllerSpec`` accepts: shipped, entry points (named, not loaded) and plugins."""
+    _environment_plugins()
+    return sorted({*CONTROLLER_KINDS, *_entry_points(), *_PLUGINS})
+
+
+def controller_plugin(name: str) -> ControllerPlugin:
+    """The registered plugin called ``name`` (loading an entry point on first use); UnknownController
+    listing the choices when no source registers it. Not for shipped names."""
+    if name in _PLUGINS:
+        return _PLUGINS[name]
+    entry = _entry_points().get(name) if isinstance(name, str) else None
+    if entry is not None:
+        try:
+            cls = entry.load()
+        except Exception as exc:
+            raise PipelineError(
+                f"entry point {name!r} ({entry.value}) does not load: {type(exc).__name__}: {exc}"
+            ) from None
+        dist = getattr(entry.dist, "name", "?")
+        _PLUGINS[name] = ControllerPlugin(name, cls, plugin_kind(cls, name), f"entry point {dist}")
+        return _PLUGINS[name]
+    _environment_plugins()
+    if name in _PLUGINS:
+        return _PLUGINS[name]
+    raise UnknownController(name, controller_names())
+
+
+def controller_kind(name: object) -> ControllerKind:
+    """The facts of the controller called ``name``, shipped or plugin; UnknownController otherwise."""
+    if is_shipped(name):
+        return CONTROLLER_KINDS[name]
+    if not isinstance(name, str):
+        raise UnknownController(name, controller_names())
+    return controller_plugin(name).kind

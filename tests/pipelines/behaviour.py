@@ -39,7 +39,8 @@ CASES: dict[str, tuple[ControllerSpec, str, int, int, int]] = {
     ),
 }
 RECORDED = "cmpc_cv"  # the case whose MCAP messages are compared too
-TIMING = ("time_s", "_ms", "solve_time", "wall")  # keys whose values are wall-clock, not behaviour
+# keys whose values are wall-clock, not behaviour ("timestamp": /scene's stamps, its wall-clock log time)
+TIMING = ("time_s", "_ms", "solve_time", "wall", "timestamp")
 
 
 def _numbers(value: Any, key: str = "") -> tuple[float, int]:

@@ -124,8 +124,8 @@ def test_a_new_process_loads_a_plugin_model_only_with_the_plugin_registered(tmp_
 
 
 def _toy_checkpoint(tmp_path: Path) -> Path:
+    from predictors.checkpoint import save_checkpoint
     from predictors.models import load_plugin
-    from predictors.zoo import save_checkpoint
 
     kind = load_plugin(TOY)
     (tmp_path / "run").mkdir()

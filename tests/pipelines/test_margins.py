@@ -153,7 +153,7 @@ def test_calibrate_cli_stores_blocks_and_checks_them_on_held_out_episodes(tmp_pa
     from pipelines.cli import main
     from predictors.calibration import read_calibrations
 
-    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))  # calibrate writes to the user zoo
     args = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--alpha", "0.5,0.2"]
     args += ["--episodes", "2", "--humans", "3", "--no-progress", "--json", str(tmp_path / "c.json")]
     assert main([*args, "--holdout", "--holdout-margins", "conformal:0.5"]) == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from importlib.metadata import version
 
 import numpy as np
@@ -44,7 +45,8 @@ def test_robots_and_humans_round_trip(episode, recording):
     states = episode.observations
     assert len(robots) == len(humans) == len(states) == 6  # 5 steps + the terminal state
     for k, (r, h, obs) in enumerate(zip(robots, humans, states, strict=True)):
-        assert r.log_time_ns == h.log_time_ns == k * 400_000_000  # simulation time, ns from the start
+        # log time: the wall-clock start + simulation time (ns); the simulation time is in the message too
+        assert r.log_time_ns == h.log_time_ns == recording.start_time_ns + k * 400_000_000
         assert r.data["step"] == k and r.data["time"] == pytest.approx(0.4 * k)
         np.testing.assert_array_equal(r.data["positions"], obs.robot_positions)
         np.testing.assert_array_equal(r.data["velocities"], obs.robot_velocities)
@@ -65,7 +67,7 @@ def test_plan_prediction_and_solver_round_trip(episode, recording):
     solver = recording.data("/mpc/solver")
     assert len(plans) == len(predictions) == len(solver) == len(episode.outputs) == 5
     for k, out in enumerate(episode.outputs):
-        assert plans[k].log_time_ns == predictions[k].log_time_ns == k * 400_000_000
+        assert plans[k].log_time_ns == predictions[k].log_time_ns == recording.start_time_ns + k * 400_000_000
         # plans and predictions are recorded to 1e-6 m (PLAN_DECIMALS): within 5e-7 m of the values
         np.testing.assert_allclose(plans[k].data["positions"], out.plan, rtol=0, atol=5.1e-7)
         assert np.shape(plans[k].data["positions"]) == (3, HORIZON, 2)
@@ -92,7 +94,8 @@ def test_scene_update_draws_agents_goals_plans_and_predictions(episode, recordin
     assert list(entities) == ["robots", "humans", "goals", "plans", "predictions"]
     obs, out = episode.observations[1], episode.outputs[1]
     assert all(e["frame_id"] == "world" for e in entities.values())
-    assert entities["robots"]["timestamp"] == {"sec": 0, "nsec": 400_000_000}
+    sec, nsec = divmod(recording.start_time_ns + 400_000_000, NS)  # the message's log time
+    assert entities["robots"]["timestamp"] == {"sec": sec, "nsec": nsec}
     robots = entities["robots"]["spheres"]
     xyz = [[s["pose"]["position"][c] for c in "xyz"] for s in robots]
     np.testing.assert_allclose(np.array(xyz)[:, :2], obs.robot_positions, atol=5e-4)  # rounded to 1 mm
@@ -112,7 +115,7 @@ def test_scene_update_draws_agents_goals_plans_and_predictions(episode, recordin
 
 def test_episode_metrics_at_the_end(episode, recording):
     (message,) = recording.messages["/episode/metrics"]
-    assert message.log_time_ns == 2 * NS  # the terminal state's time, 5 steps of 0.4 s
+    assert recording.sim_seconds(message.log_time_ns) == 2.0  # the terminal state's time, 5 steps of 0.4 s
     got = message.data
     assert (got["seed"], got["scenario"], got["controller"], got["predictor"]) == (
         7,
@@ -133,7 +136,9 @@ def test_episode_metrics_at_the_end(episode, recording):
 def test_metadata_present(recording):
     meta = recording.metadata
     assert meta["crowdmpc"] == {"version": version("crowdmpc"), "format": FORMAT}
-    assert meta["episode"] == {
+    episode = dict(meta["episode"])
+    assert 0 < time.time_ns() - int(episode.pop("start_time_ns")) < 600 * NS  # wall clock, this session
+    assert episode == {
         "seed": "7",
         "scenario": "circle",
         "controller": "handmade",

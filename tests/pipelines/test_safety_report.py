@@ -181,7 +181,7 @@ def test_write_report_writes_both_plots(tmp_path):
     report = write_report(tmp_path, safety, cells, records)
     names = {p.name for p in report.files}
     assert {MIN_DISTANCE_HIST_PNG, SAFETY_TRADEOFF_PNG, MIN_DISTANCE_HIST_CSV} <= names
-    assert {"cells.csv", "episodes.csv", "table.md", "success_vs_humans.png"} <= names
+    assert {"cells.csv", "table.md", "success_by_method.png", "collision_by_method.png"} <= names
     for name in (MIN_DISTANCE_HIST_PNG, SAFETY_TRADEOFF_PNG):
         data = (tmp_path / name).read_bytes()
         assert data.startswith(b"\x89PNG") and len(data) > 1000

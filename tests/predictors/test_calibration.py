@@ -185,14 +185,43 @@ def test_storage_round_trip_and_replacement(tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))  # the temp file was renamed into place
 
 
-def test_storage_sits_beside_the_manifest_and_leaves_it_alone(tmp_path, monkeypatch):
-    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(tmp_path))
+def test_storage_sits_beside_the_manifest_and_leaves_it_alone(tmp_path):
     manifest = tmp_path / zoo.MANIFEST_NAME
     manifest.write_text('{"format": "crowdmpc-zoo", "version": 1, "models": []}\n')
     before = manifest.read_bytes()
-    assert save_calibration(block()) == tmp_path / CALIBRATIONS_NAME
+    assert save_calibration(block(), tmp_path) == tmp_path / CALIBRATIONS_NAME
     assert manifest.read_bytes() == before
-    assert read_calibrations() == [block()]
+    assert read_calibrations(tmp_path) == [block()]
+
+
+def test_user_calibrations_go_to_the_user_zoo_and_shipped_ones_are_read_only_defaults(tmp_path, monkeypatch):
+    shipped, user = tmp_path / "shipped", tmp_path / "user"
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(shipped))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(user))
+    save_calibration(block(), shipped)  # as shipped: alpha 0.1 and 0.2
+    save_calibration(block(alpha=0.2), shipped)
+    shipped_bytes = (shipped / CALIBRATIONS_NAME).read_bytes()
+    assert read_calibrations() == [block(), block(alpha=0.2)]  # no user file yet: the shipped defaults
+
+    mine = block(quantiles=(0.5, 0.6, 0.7, 0.8), predictor_sha256=SHA_B)  # the user's own, same key as one
+    assert save_calibration(mine) == user / CALIBRATIONS_NAME
+    assert (shipped / CALIBRATIONS_NAME).read_bytes() == shipped_bytes
+    assert read_calibrations(user) == [mine]  # the user file holds the user's block only
+    assert read_calibrations() == [mine, block(alpha=0.2)]  # the user's replaces the shipped one
+    assert find_calibration("social_lstm_eth", "real", 0.1, sha256=SHA_B) == mine
+    assert find_calibration("social_lstm_eth", "real", 0.2, sha256=SHA_A) == block(alpha=0.2)
+    with pytest.raises(PredictorError, match=f"{user / CALIBRATIONS_NAME}: the real calibration"):
+        find_calibration("social_lstm_eth", "real", 0.1, sha256=SHA_A)  # the file named is the user's
+    with pytest.raises(
+        PredictorError, match=f"in {user / CALIBRATIONS_NAME} or {shipped / CALIBRATIONS_NAME}"
+    ):
+        find_calibration("social_lstm_eth", "real", 0.05, sha256=SHA_A)
+
+    monkeypatch.setenv(zoo.ZOO_ENV, str(shipped))  # a user zoo that is the shipped one: never written
+    with pytest.raises(PredictorError, match="read-only"):
+        save_calibration(block(alpha=0.3))
+    assert (shipped / CALIBRATIONS_NAME).read_bytes() == shipped_bytes
+    assert read_calibrations() == [block(), block(alpha=0.2)]
 
 
 @pytest.mark.parametrize(

@@ -20,12 +20,13 @@ import pytest
 import torch
 
 from predictors.base import OBS_LEN, Predictor
+from predictors.checkpoint import load_checkpoint, save_checkpoint
 from predictors.errors import CheckpointMismatch
 from predictors.learned import LearnedPredictor
 from predictors.models import load_plugin, model_kind, model_kinds
 from predictors.oracle import ORACLE_PREDICTOR
 from predictors.registry import PREDICTORS, load_predictor
-from predictors.zoo import add_to_zoo, checkpoints_dir, load_checkpoint, load_zoo, save_checkpoint, zoo_names
+from predictors.zoo import add_to_zoo, checkpoints_dir, load_zoo, zoo_names
 
 HORIZON = 4
 TOL = 1e-6

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import models, zoo
+from predictors import checkpoint, models, zoo
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.learned import LearnedPredictor, SocialGANPredictor
 from predictors.models import load_plugin
@@ -240,7 +240,7 @@ def test_a_broken_user_manifest_stops_no_shipped_model(shipped, user, capsys):
 def toy_pair(tmp_path: Path, model: str = TOY) -> Path:
     kind = load_plugin(TOY)
     torch.manual_seed(0)
-    weights, _ = zoo.save_checkpoint(
+    weights, _ = checkpoint.save_checkpoint(
         kind.build_net(kind.config({"hidden_dim": 4})),
         model=model,
         name="toy_eth",
@@ -275,7 +275,7 @@ def test_a_zoo_file_never_imports_a_module(tmp_path, shipped, user):
     never = "tests.plugins.never_imported:Net"
     config.write_text(json.dumps({**json.loads(config.read_text()), "model": never}))
     with pytest.raises(PredictorError, match=f"model {never!r} is a plugin that is not registered"):
-        zoo.load_checkpoint(weights)
+        checkpoint.load_checkpoint(weights)
     assert "tests.plugins.never_imported" not in sys.modules
 
 
@@ -283,11 +283,11 @@ def test_save_checkpoint_refuses_what_it_cannot_reload(tmp_path):
     kind = load_plugin(TOY)
     net = kind.build_net(kind.config())
     with pytest.raises(PredictorError, match="unknown model 'nope'"):
-        zoo.save_checkpoint(net, model="nope", name="x", out_dir=tmp_path, obs_len=9)
+        checkpoint.save_checkpoint(net, model="nope", name="x", out_dir=tmp_path, obs_len=9)
     with pytest.raises(PredictorError, match="model 'social_lstm' is a SocialLSTM, got a ToyNet"):
-        zoo.save_checkpoint(net, model="social_lstm", name="x", out_dir=tmp_path, obs_len=9)
+        checkpoint.save_checkpoint(net, model="social_lstm", name="x", out_dir=tmp_path, obs_len=9)
     with pytest.raises(PredictorError, match="checkpoint name '../x' is not allowed"):
-        zoo.save_checkpoint(net, model=TOY, name="../x", out_dir=tmp_path, obs_len=9)
+        checkpoint.save_checkpoint(net, model=TOY, name="../x", out_dir=tmp_path, obs_len=9)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -305,12 +305,12 @@ def test_configs_from_before_model_kinds_still_load(tmp_path, name, kind, cls):
     document = json.loads(config.read_text())
     del document["model"]  # the class and the pooling say which kind it is
     config.write_text(json.dumps(document))
-    predictor = zoo.load_checkpoint(tmp_path / f"{name}.pt")
+    predictor = checkpoint.load_checkpoint(tmp_path / f"{name}.pt")
     assert isinstance(predictor, cls) and predictor.kind == kind
     del document["class"]
     config.write_text(json.dumps(document))
     with pytest.raises(PredictorError, match='"model" is missing'):
-        zoo.load_checkpoint(tmp_path / f"{name}.pt")
+        checkpoint.load_checkpoint(tmp_path / f"{name}.pt")
 
 
 def test_the_shipped_gan_loads_as_a_sampling_predictor():

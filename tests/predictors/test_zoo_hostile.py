@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import zoo
+from predictors import checkpoint, zoo
 from predictors.errors import CheckpointMismatch, PredictorError
 from predictors.nets.social_gan import DiscriminatorConfig, generator_config
 from predictors.nets.social_lstm import MAX_PARAMETERS, SocialLSTM, SocialLSTMConfig
@@ -211,7 +211,7 @@ def test_tampered_weights_with_the_recorded_sha256_are_refused(tmp_path, zoo_dir
 
 def test_load_checkpoint_refuses_a_malformed_expected_sha256(pair):
     with pytest.raises(PredictorError, match="must be a sha256"):
-        zoo.load_checkpoint(pair[0], expected_sha256="not a hash")
+        checkpoint.load_checkpoint(pair[0], expected_sha256="not a hash")
 
 
 # ------------------------------------------------------------------------------------- finite weights
@@ -290,7 +290,7 @@ def test_bad_weights_files_are_one_line_errors_naming_the_file(pair, zoo_dir, ca
     else:
         torch.save(content, weights)
     with pytest.raises(PredictorError) as refused:
-        zoo.load_checkpoint(weights)
+        checkpoint.load_checkpoint(weights)
     text = str(refused.value)
     assert text.startswith(str(weights)) and message in text and "\n" not in text
     code, line = cli(["zoo", "add", str(weights)], capsys)
@@ -305,7 +305,7 @@ def test_weights_that_are_not_a_regular_file_are_refused(pair):
     with pytest.raises(
         PredictorError, match=f"^checkpoint file {re.escape(str(weights))} is not a regular file$"
     ):
-        zoo.load_checkpoint(weights)
+        checkpoint.load_checkpoint(weights)
 
 
 # ------------------------------------------------------------------------------------------------ configs
@@ -382,7 +382,7 @@ def test_bad_configs_are_refused_naming_the_file_before_a_net_is_built(
 
     monkeypatch.setattr(SocialLSTM, "__init__", no_net)
     with pytest.raises(PredictorError) as refused:
-        zoo.load_checkpoint(weights)
+        checkpoint.load_checkpoint(weights)
     text = str(refused.value)
     assert text.startswith(f"{config}: ") and message in text and "\n" not in text
     code, line = cli(["zoo", "add", str(weights)], capsys)
@@ -402,7 +402,7 @@ def test_unreadable_configs_are_one_line_errors(pair, content, message):
     weights, config = pair
     config.write_bytes(content)
     with pytest.raises(PredictorError) as refused:
-        zoo.load_checkpoint(weights)
+        checkpoint.load_checkpoint(weights)
     assert str(refused.value).startswith(f"{config}: {message}") and "\n" not in str(refused.value)
 
 

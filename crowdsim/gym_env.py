@@ -1,0 +1,420 @@
+"""``crowdmpc/CrowdNav-v0``: the crowd simulator (``crowdsim.env.CrowdEnv``) as a gymnasium environment.
+
+``import crowdsim`` registers it; then ``gymnasium.make("crowdmpc/CrowdNav-v0", n_humans=7)`` (constructor
+keyword arguments below). The dynamics, the humans and the episode end are ``CrowdEnv``'s, unchanged: an
+episode of this environment with seed ``s`` is the episode ``crowdmpc simulate`` runs with seed ``s``.
+
+Observation: ``Box`` of shape ``(max_robots + max_humans, 7)``, float64, one row per agent, robots first
+(rows ``0..max_robots-1``), then humans. Columns (``COLUMNS``; named slices ``POSITION``, ``VELOCITY``,
+``GOAL`` and the index ``PRESENT``):
+
+    x, y [m]  vx, vy [m/s]  goal_x, goal_y [m]  present (1.0 or 0.0)
+
+A human's goal columns are 0: as in CrowdNav, a human's observable state is its position and velocity.
+Rows past the episode's ``n_robots`` robots, respectively ``n_humans`` humans, are all zeros (present 0):
+the spaces are fixed at construction for ``max_robots`` and ``max_humans``, and ``reset(options=...)``
+may run smaller episodes (``scenario``, ``n_humans``, ``n_robots``) or a hand-built ``Layout``. Bounds:
+velocities within ``±max(v_max, v_pref)`` (robots per component, humans' ORCA speed); positions and goals
+within ``±position_limit = scene_limit + max(v_max, v_pref) time_limit``, where ``scene_limit = 2 max(circle
+radius, square width) x geometry_scale(max_humans)`` bounds every start and goal (20 m, so 60 m with the
+paper's defaults). Values are clipped into the box, which absorbs rounding only.
+
+Action: ``Box(-a_max, a_max, (max_robots, 2))``, float64: each robot's acceleration [m/s^2], the native
+action. ``CrowdEnv`` clips it per component to the acceleration and velocity bounds of Eq. (6); rows past
+``n_robots`` are ignored. For velocity commands (CrowdNav's holonomic ``ActionXY``) wrap the environment in
+``crowdsim.gym_wrappers.VelocityControl``.
+
+Reward: one team reward per step, the rule of the paper authors' CrowdNav fork (``crowd_sim.py`` ``step``,
+values from ``env_m.config [reward]``, ``RewardConfig``). With ``d_i`` the closest distance between robot
+``i``'s boundary and any human's during the step (the relative motion taken as a straight segment, as
+CrowdNav's ``point_to_segment_dist``), and ``d = min_i d_i``, the first rule that applies gives it:
+
+1. the step reaches the time limit (``truncated``): 0;
+2. some robot touches a human (``d < 0``): ``collision = -0.25`` (the episode goes on, as in the fork;
+   ``end_on_collision=True`` ends it, as upstream CrowdNav does);
+3. the robots succeed (the success rule of ``EnvConfig``; ``terminated``): ``success = +1``;
+4. ``d < discomfort_dist = 0.4`` m: ``(d - discomfort_dist) * discomfort_factor * dt``, factor 0.5 /s;
+5. otherwise 0.
+
+``info["robot_rewards"]`` gives each robot the same rule applied to its own ``d_i`` (success and timeout
+are the team's), for multi-agent learners.
+
+Info: ``"observation"`` is the native ``Observation`` (a ``ComparableObservation``): what the MPC
+controllers and baselines act on, with the positions history the predictors read. ``reset`` adds ``seed``
+(the episode's layout seed), ``scenario``, ``n_humans`` and ``n_robots``. ``step`` adds ``CrowdEnv``'s
+``accelerations`` (applied after clipping), ``clipped`` and ``orca_lp3``, and the new state's metrics as
+``crowdsim.metrics`` counts them per state: ``min_distance`` (robot-human centre distance, m),
+``collision`` (below 0.8 m), ``contact`` (below the sum of the radii), ``discomfort`` (projected paths
+intersect); ``surface_distance`` ``(n_robots,)`` (the ``d_i`` above), ``robot_rewards``, ``reached``,
+``success`` and ``timeout``. The last step adds ``episode_metrics``, the ``EpisodeMetrics`` of the whole
+episode (what ``crowdmpc simulate`` reports).
+
+``render()`` (``render_mode="rgb_array"``) draws the trajectories so far and the agents now
+(``crowdsim.plotting``) into a ``(480, 640, 3)`` uint8 array.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Final
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from crowdsim import ENV_ID
+from crowdsim.conventions import PAPER_DISCOMFORT_DIST
+from crowdsim.env import CrowdEnv, EnvConfig, Observation
+from crowdsim.errors import SimulationError
+from crowdsim.metrics import COLLISION_DISTANCE, DISCOMFORT_HORIZON, episode_metrics, segments_intersect
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, geometry_scale
+from crowdsim.world import CIRCLE_RADIUS, SQUARE_WIDTH
+
+__all__ = [
+    "COLUMNS",
+    "ENV_ID",
+    "GOAL",
+    "POSITION",
+    "PRESENT",
+    "VELOCITY",
+    "ComparableObservation",
+    "CrowdNavEnv",
+    "RewardConfig",
+    "surface_distances",
+]
+
+COLUMNS: Final[tuple[str, ...]] = ("x", "y", "vx", "vy", "goal_x", "goal_y", "present")
+POSITION: Final[slice] = slice(0, 2)  # m
+VELOCITY: Final[slice] = slice(2, 4)  # m/s
+GOAL: Final[slice] = slice(4, 6)  # m; 0 for humans
+PRESENT: Final[int] = 6  # 1.0 for an agent of this episode, 0.0 for a padding row
+RESET_OPTIONS: Final[tuple[str, ...]] = ("scenario", "n_humans", "n_robots", "layout")
+LAYOUT_SCENARIO: Final[str] = "layout"  # the scenario an episode from options["layout"] reports
+RENDER_SIZE: Final[tuple[float, float]] = (8.0, 6.0)  # inches at RENDER_DPI: 640 x 480 pixels
+RENDER_DPI: Final[int] = 80
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """The reward's numbers (module docstring), the CrowdNav fork's ``env_m.config [reward]``."""
+
+    success: float = 1.0  # success_reward, once, on the step the robots succeed
+    collision: float = -0.25  # collision_penalty, per step with a robot-human contact
+    discomfort_dist: float = PAPER_DISCOMFORT_DIST  # m between boundaries (upstream CrowdNav: 0.2)
+    discomfort_factor: float = 0.5  # discomfort_penalty_factor, 1/s (the penalty is scaled by dt)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise SimulationError(f"RewardConfig.{f.name} must be a finite number, got {value!r}")
+        if self.discomfort_dist < 0 or self.discomfort_factor < 0:
+            raise SimulationError(
+                f"RewardConfig.discomfort_dist and discomfort_factor must be >= 0, got "
+                f"{self.discomfort_dist!r} and {self.discomfort_factor!r}"
+            )
+
+    def step_reward(self, surface_distance: float, *, success: bool, timeout: bool, dt: float) -> float:
+        """The reward of one step (the module docstring's rules 1-5): ``surface_distance`` is the closest
+        robot-human boundary distance during the step (m), ``dt`` the step (s)."""
+        if timeout:
+            return 0.0
+        if surface_distance < 0:
+            return float(self.collision)
+        if success:
+            return float(self.success)
+        if surface_distance < self.discomfort_dist:
+            return float((surface_distance - self.discomfort_dist) * self.discomfort_factor * dt)
+        return 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class ComparableObservation(Observation):
+    """An ``Observation`` that compares equal field by field, arrays exactly (``Observation``'s own ``==``
+    raises on its arrays), so that an info dict holding one can be compared, as gymnasium's checker does."""
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Observation):
+            return NotImplemented
+        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(Observation))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @classmethod
+    def of(cls, obs: Observation) -> ComparableObservation:
+        return cls(**{f.name: getattr(obs, f.name) for f in fields(Observation)})
+
+
+def _count(value: object, name: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not low <= value <= high:
+        raise SimulationError(f"{name} must be an int in [{low}, {high}], got {value!r}")
+    return int(value)
+
+
+def surface_distances(before: Observation, after: Observation) -> np.ndarray:
+    """``(M,)`` closest boundary distance of each robot to any human during the step, the relative motion
+    taken as the segment from its start to its end (CrowdNav's ``point_to_segment_dist``); inf without
+    humans."""
+    if before.n_humans == 0:
+        return np.full(before.n_robots, math.inf)
+    p0 = before.human_positions[None] - before.robot_positions[:, None]  # (M, N, 2) human relative to robot
+    d = (after.human_positions[None] - after.robot_positions[:, None]) - p0
+    length2 = np.einsum("mnk,mnk->mn", d, d)
+    t = np.clip(-np.einsum("mnk,mnk->mn", p0, d) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    closest = np.linalg.norm(p0 + t[..., None] * d, axis=-1)
+    return closest.min(axis=1) - 2.0 * after.radius
+
+
+class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
+    """ORCA crowd, double-integrator robots, CrowdNav's reward (module docstring).
+
+    :param scenario: "circle" or "perpendicular", the default of ``reset``.
+    :param n_humans: humans per episode (default of ``reset``).
+    :param n_robots: robots per episode (default of ``reset``), at least 1.
+    :param max_humans: rows of humans in the observation (default ``n_humans``).
+    :param max_robots: rows of robots in the observation and the action (default ``n_robots``).
+    :param config: the simulator's settings (default ``EnvConfig()``, the paper's profile;
+        ``crowdsim.profiles.make_env_config`` names the others).
+    :param reward: the reward's numbers.
+    :param end_on_collision: end the episode (``terminated``) at a robot-human contact, as upstream CrowdNav.
+    :param render_mode: None or "rgb_array".
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 2.5}  # 1 / dt by default
+
+    def __init__(
+        self,
+        *,
+        scenario: str = "circle",
+        n_humans: int = 5,
+        n_robots: int = 3,
+        max_humans: int | None = None,
+        max_robots: int | None = None,
+        config: EnvConfig | None = None,
+        reward: RewardConfig | None = None,
+        end_on_collision: bool = False,
+        render_mode: str | None = None,
+    ):
+        config = EnvConfig() if config is None else config
+        if not isinstance(config, EnvConfig):
+            raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
+        reward = RewardConfig() if reward is None else reward
+        if not isinstance(reward, RewardConfig):
+            raise SimulationError(f"reward must be a RewardConfig, got {type(reward).__name__}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise SimulationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if not isinstance(end_on_collision, bool):
+            raise SimulationError(f"end_on_collision must be a bool, got {end_on_collision!r}")
+        check_sizes(scenario, n_humans, n_robots)
+        self.n_robots = _count(n_robots, "n_robots", 1, MAX_ROBOTS)
+        self.n_humans = int(n_humans)
+        self.max_robots = _count(
+            n_robots if max_robots is None else max_robots, "max_robots", n_robots, MAX_ROBOTS
+        )
+        self.max_humans = _count(
+            n_humans if max_humans is None else max_humans, "max_humans", n_humans, MAX_HUMANS
+        )
+        self.scenario = scenario
+        self.config = config
+        self.reward_config = reward
+        self.end_on_collision = end_on_collision
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": 1.0 / config.dt}
+
+        # Bounds (module docstring): twice the largest scene, plus the farthest anyone travels per axis.
+        speed = max(config.v_max, config.v_pref)
+        self.scene_limit = 2.0 * max(CIRCLE_RADIUS, SQUARE_WIDTH) * geometry_scale(self.max_humans)
+        self.position_limit = self.scene_limit + speed * config.time_limit
+        rows = self.max_robots + self.max_humans
+        limit = np.array([self.position_limit] * 2 + [speed] * 2 + [self.position_limit] * 2 + [1.0])
+        self._high = np.broadcast_to(limit, (rows, len(COLUMNS))).copy()
+        self._low = -self._high
+        self._low[:, PRESENT] = 0.0
+        self.observation_space = spaces.Box(self._low, self._high, dtype=np.float64)
+        self.action_space = spaces.Box(-config.a_max, config.a_max, (self.max_robots, 2), dtype=np.float64)
+
+        self._sim = CrowdEnv(config)
+        self._obs: Observation | None = None
+        self._episode: dict[str, Any] = {}
+        self._done = False
+        self._figure: Any = None
+
+    # ---- gymnasium API -----------------------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """A new episode: layout seed ``seed``, or the next draw of the environment's generator when None.
+
+        ``options`` may set ``scenario``, ``n_humans`` (at most ``max_humans``) and ``n_robots`` (1 to
+        ``max_robots``) for this episode; the constructor's values are the defaults. Or ``layout``, a
+        ``crowdsim.scenarios.Layout`` of starts and goals to start from instead (a hand-built scene; its
+        scenario reads "layout"), alone."""
+        super().reset(seed=seed)
+        chosen = self._episode_options(options)
+        episode_seed = int(self.np_random.integers(0, 2**31 - 1)) if seed is None else int(seed)
+        if "layout" in chosen:
+            obs = self._sim.reset_layout(chosen.pop("layout"))
+        else:
+            obs = self._sim.reset(episode_seed, chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
+        self._obs = obs
+        self._episode = {"seed": episode_seed, **chosen}
+        self._done = False
+        return self._array(obs), {"observation": ComparableObservation.of(obs), **self._episode}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._obs is None:
+            raise SimulationError("step() called before reset()")
+        if self._done:
+            raise SimulationError("step() called after the episode ended; call reset()")
+        a = np.asarray(action, dtype=float)
+        if a.shape != (self.max_robots, 2):
+            raise SimulationError(f"action must be a ({self.max_robots}, 2) array, got shape {a.shape}")
+        before = self._obs
+        obs, done, native = self._sim.step(a[: before.n_robots])
+        self._obs = obs
+
+        cfg = self.config
+        gaps = surface_distances(before, obs)
+        contact_in_step = gaps < 0
+        success = bool(native.get("success", False))
+        timeout = bool(native.get("timeout", False))
+        rule = self.reward_config.step_reward
+        reward = rule(float(gaps.min()), success=success, timeout=timeout, dt=cfg.dt)
+        robot_rewards = np.array([rule(float(g), success=success, timeout=timeout, dt=cfg.dt) for g in gaps])
+
+        centre = np.linalg.norm(obs.robot_positions[:, None] - obs.human_positions[None], axis=-1)
+        min_distance = float(centre.min()) if centre.size else math.inf
+        r_end = obs.robot_positions + DISCOMFORT_HORIZON * obs.robot_velocities
+        h_end = obs.human_positions + DISCOMFORT_HORIZON * obs.human_velocities
+        discomfort = segments_intersect(
+            obs.robot_positions[:, None], r_end[:, None], obs.human_positions[None], h_end[None]
+        )
+        terminated = success or (self.end_on_collision and bool(contact_in_step.any()))
+        truncated = timeout and not terminated
+        self._done = terminated or truncated
+        info: dict[str, Any] = {
+            "observation": ComparableObservation.of(obs),
+            **native,
+            "min_distance": min_distance,
+            "collision": min_distance < COLLISION_DISTANCE,
+            "contact": min_distance < 2.0 * cfg.radius,
+            "discomfort": bool(np.any(discomfort)),
+            "surface_distance": gaps,
+            "robot_rewards": robot_rewards,
+            "reached": obs.robot_reached.copy(),
+            "success": success,
+            "timeout": timeout,
+        }
+        if self._done:
+            info["episode_metrics"] = episode_metrics(self._sim.trajectory())
+        return self._array(obs), reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
+        if self.render_mode is None:
+            return None
+        if self._obs is None:
+            raise SimulationError("render() called before reset()")
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        from crowdsim.plotting import plot_episode
+
+        traj = self._sim.trajectory()
+        fig = Figure(figsize=RENDER_SIZE, dpi=RENDER_DPI)
+        canvas = FigureCanvasAgg(fig)
+        ax = fig.add_axes((0.09, 0.09, 0.6, 0.82))  # room on the right for plot_episode's legend
+        last = traj.n_steps
+        title = (
+            f"{self._episode['scenario']}, seed {self._episode['seed']}: t = {last * self.config.dt:.1f} s"
+        )
+        plot_episode(
+            traj.robot_positions,
+            traj.human_positions,
+            traj.robot_goals,
+            ax=ax,
+            title=title,
+            snapshot_steps=[last],
+            radius=self.config.radius,
+            dt=self.config.dt,
+        )
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def close(self) -> None:
+        """Nothing is held between calls (each frame is drawn on a figure of its own)."""
+
+    # ---- the native simulator ----------------------------------------------------------------------------
+
+    @property
+    def observation(self) -> Observation:
+        """The native observation of the current state (what ``info["observation"]`` holds)."""
+        if self._obs is None:
+            raise SimulationError("no observation before reset()")
+        return self._obs
+
+    @property
+    def simulator(self) -> CrowdEnv:
+        """The ``CrowdEnv`` underneath: ``simulator.trajectory()`` is the episode so far."""
+        return self._sim
+
+    @property
+    def episode(self) -> dict[str, Any]:
+        """This episode's seed, scenario, n_humans and n_robots (empty before the first reset)."""
+        return dict(self._episode)
+
+    # ---- internals ---------------------------------------------------------------------------------------
+
+    def _episode_options(self, options: dict[str, Any] | None) -> dict[str, Any]:
+        chosen: dict[str, Any] = {
+            "scenario": self.scenario,
+            "n_humans": self.n_humans,
+            "n_robots": self.n_robots,
+        }
+        if options is None:
+            return chosen
+        if not isinstance(options, dict):
+            raise SimulationError(f"reset options must be a dict, got {type(options).__name__}")
+        unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
+        if unknown:
+            raise SimulationError(f"unknown reset options {unknown}; choose from {list(RESET_OPTIONS)}")
+        if "layout" in options:
+            layout = options["layout"]
+            others = sorted(k for k in options if k != "layout")
+            if others:
+                raise SimulationError(f"reset option 'layout' sets the agents; drop {others}")
+            if not isinstance(layout, Layout):
+                raise SimulationError(f"options['layout'] must be a Layout, got {type(layout).__name__}")
+            points = [np.asarray(getattr(layout, f.name), dtype=float) for f in fields(Layout)]
+            if not all(np.all(np.abs(p) <= self.scene_limit) for p in points):  # NaN fails too
+                raise SimulationError(
+                    f"options['layout']: starts and goals must lie within ±{self.scene_limit:g} m "
+                    "(the observation's bounds assume so)"
+                )
+            sizes = {"n_humans": len(layout.human_starts), "n_robots": len(layout.robot_starts)}
+            chosen = {"scenario": LAYOUT_SCENARIO, **sizes, "layout": layout}
+        else:
+            chosen.update(options)
+            check_sizes(chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
+        if chosen["n_humans"] > self.max_humans:
+            raise SimulationError(
+                f"options: n_humans={chosen['n_humans']} exceeds this environment's max_humans="
+                f"{self.max_humans}; make it with max_humans={chosen['n_humans']}"
+            )
+        if not 1 <= chosen["n_robots"] <= self.max_robots:
+            raise SimulationError(
+                f"options: n_robots must be in [1, max_robots={self.max_robots}], got {chosen['n_robots']}"
+            )
+        chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
+        return chosen
+
+    def _array(self, obs: Observation) -> np.ndarray:
+        out = np.zeros((self.max_robots + self.max_humans, len(COLUMNS)))
+        m, n = obs.n_robots, obs.n_humans
+        robots, humans = out[:m], out[self.max_robots : self.max_robots + n]
+        robots[:, POSITION], robots[:, VELOCITY] = obs.robot_positions, obs.robot_velocities
+        robots[:, GOAL] = obs.robot_goals
+        humans[:, POSITION], humans[:, VELOCITY] = obs.human_positions, obs.human_velocities
+        robots[:, PRESENT] = humans[:, PRESENT] = 1.0
+        return np.clip(out, self._low, self._high)

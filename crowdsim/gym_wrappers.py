@@ -1,0 +1,78 @@
+"""Wrappers of ``crowdmpc/CrowdNav-v0`` (``crowdsim.gym_env``).
+
+``VelocityControl`` takes what CrowdNav policies output, a velocity per robot (holonomic ``ActionXY``), and
+turns it into the acceleration the environment takes with a bounded proportional tracker:
+
+    a = clip(k (v_cmd - v), -a_max, a_max)   per component, k = gain (default 1 / dt)
+
+With the default gain the new velocity ``v' = v + dt a`` is the command itself whenever
+``|v_cmd - v| <= a_max dt`` per component (0.8 m/s with Table I), and otherwise moves ``a_max dt`` towards
+it: the command is reached as fast as the acceleration bound allows, with no overshoot. A smaller gain
+(``0 < gain <= 1 / dt``) tracks more gently. The command space is ``Box(-v_max, v_max, (max_robots, 2))``,
+the velocity bound of Eq. (6); rows past the episode's robots are ignored. ``crowdsim.baselines`` turns its
+desired velocities into accelerations by this same rule, so a baseline's velocities through this wrapper
+drive exactly as the baseline does.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from crowdsim.env import Observation
+from crowdsim.errors import SimulationError
+from crowdsim.gym_env import CrowdNavEnv
+
+
+class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):
+    """Velocity commands in, accelerations out (module docstring).
+
+    :param env: a ``crowdmpc/CrowdNav-v0`` environment, possibly wrapped.
+    :param gain: k in 1/s, in ``(0, 1/dt]``; default ``1/dt``.
+    """
+
+    def __init__(self, env: gym.Env[np.ndarray, np.ndarray], *, gain: float | None = None):
+        gym.utils.RecordConstructorArgs.__init__(self, gain=gain)  # env.spec can rebuild the wrapper
+        gym.ActionWrapper.__init__(self, env)
+        base = env.unwrapped
+        if not isinstance(base, CrowdNavEnv):
+            raise SimulationError(f"VelocityControl wraps a CrowdNavEnv, got {type(base).__name__}")
+        cfg = base.config
+        gain = 1.0 / cfg.dt if gain is None else gain
+        if isinstance(gain, bool) or not isinstance(gain, int | float) or not 0 < gain <= 1.0 / cfg.dt:
+            raise SimulationError(f"gain must be a number in (0, 1/dt = {1.0 / cfg.dt:g}] 1/s, got {gain!r}")
+        self.gain = float(gain)
+        self._period = cfg.dt if gain == 1.0 / cfg.dt else 1.0 / self.gain  # divide as the baselines do
+        self.a_max = cfg.a_max
+        self.action_space = spaces.Box(-cfg.v_max, cfg.v_max, (base.max_robots, 2), dtype=np.float64)
+        self._native: Observation | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._native = info["observation"]
+        return obs, info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
+        result = super().step(action)
+        self._native = result[4]["observation"]
+        return result
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        """The accelerations that track the commanded velocities ``action`` ``(max_robots, 2)`` m/s."""
+        if self._native is None:
+            raise SimulationError("step() called before reset()")
+        command = np.asarray(action, dtype=float)
+        if command.shape != self.action_space.shape:
+            raise SimulationError(
+                f"velocity action must be a {self.action_space.shape} array, got shape {command.shape}"
+            )
+        m = self._native.n_robots
+        accelerations = np.zeros_like(command)
+        tracked = (command[:m] - self._native.robot_velocities) / self._period
+        accelerations[:m] = np.clip(tracked, -self.a_max, self.a_max)
+        return accelerations

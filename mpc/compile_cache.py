@@ -1,0 +1,324 @@
+"""Compile once per machine: jit-compiled CasADi solvers cached on disk.
+
+CasADi's ``jit`` (``nlpsol(..., {"jit": True, "compiler": "shell"})``) writes C code for the solver's
+functions (objective, gradient, constraint Jacobian, Lagrangian Hessian, ...), compiles it with gcc and loads
+the library: 2-8 s of gcc per NLP, which every worker of every sweep used to pay again. Here the first build
+of an NLP on a machine compiles it and stores it; every later build, in any process, loads it in milliseconds.
+
+Mechanism (CasADi's own, no generated code of ours): a solver built with ``jit_serialize="link"`` serializes
+to a description that names its compiled library instead of carrying source; ``Function.load`` of that
+description loads the library (``Importer(library, "dll")``) without generating or compiling anything. An
+entry is two files in ``$CROWDMPC_CACHE/compiled`` (default ``~/.cache/crowdmpc/compiled``):
+
+* ``<key>.<tag>.so``: the library gcc wrote (``<tag>``: the compiling process and a random suffix, so that
+  two processes compiling the same NLP never write the same file);
+* ``<key>.casadi``: the serialized solver naming that library, published only once the library is
+  complete, by a hard link from a temporary file (``os.link`` never replaces: the first finished compile
+  wins, and a reader sees either no entry or a complete one).
+
+While a process compiles an entry it holds ``<key>.lock`` (``flock``), so that the other workers of a sweep
+wait for that one compile instead of running their own. Every solver is returned as loaded from its entry,
+in the compiling process too: a cold run and a warm one solve with the same object built the same way.
+
+The key is a SHA-256 over what determines the compiled code and the solver: this module's format version,
+the cache directory (the entry names its library by absolute path), the CasADi version, the platform, the
+compiler (path and ``--version``) and flags, the solver plugin and options, and the serialized NLP
+(``Function.serialize`` of ``x, p -> f, g``: the full expression graph). The solver's name is not in it (it
+names nothing in the generated code): DMPC's per-robot solvers of one NLP share an entry.
+
+The predictors' CasADi twins are not compiled: measured (7 humans, 3 robots, H = 4), gcc gives
+social_lstm_eth's 0.74 ms a call 0.68 ms and vanilla_lstm_eth's 0.27 ms 0.36 ms; their MX graphs are a few
+dozen matrix operations, which CasADi's interpreter already runs as compiled loops.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import platform
+import re
+import secrets
+import shlex
+import shutil
+import subprocess
+import sys
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Final
+
+import casadi as ca
+
+try:  # POSIX; without it (Windows) concurrent compiles of one entry are not serialised, only wasted
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None  # type: ignore[assignment]
+
+# The variable and default of predictors.data.locate.cache_root, repeated here: importing predictors would
+# cost mpc a second of imports (trajnetplusplustools) and a dependency it does not otherwise have.
+CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
+SUBDIR: Final[str] = "compiled"
+# Bump when the layout or the key changes: old entries are then never read (``crowdmpc cache clear``).
+FORMAT: Final[int] = 1
+COMPILER: Final[str] = "gcc"  # CasADi's "shell" compiler plugin calls it
+FLAGS: Final[tuple[str, ...]] = ("-O2",)
+# What compiling costs and saves, per NLP, for `crowdmpc sweep --jit auto`, measured by
+# benchmarks/compile_cache.py (3 robots, 7 humans, the shared 2-core machine): a cold compile of CMPC's joint
+# NLP takes 8.2 s of CPU, gcc included (wall 5.1 / 6.7 / 7.8 s at 5 / 7 / 9 humans with the machine at load
+# 1.4, twice that at load 4), of DMPC's local NLP 2.3 s; a warm load 15-95 ms, as long as a build without
+# jit. The jit then saves 0.10-0.11 s of CPU per CMPC episode (0.26 -> 0.15 s; 0.11 s with social_lstm_eth)
+# and 0.19-0.22 s per DMPC episode (0.51 -> 0.30 s).
+COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
+SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
+# The files this module writes, and the only ones ``clear`` removes: <key>.casadi, <key>.<tag>.so (its
+# library), <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o, .tmp-<key>.<tag>.casadi).
+_KEY = r"[0-9a-f]{64}"
+_TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's
+OWNED: Final[re.Pattern[str]] = re.compile(
+    rf"{_KEY}\.(casadi|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.casadi"
+)
+_ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
+
+
+class CompileCacheError(RuntimeError):
+    """The cache cannot be used as asked (no compiler, a directory that is not one)."""
+
+
+def cache_dir() -> Path:
+    """``$CROWDMPC_CACHE/compiled``, default ``~/.cache/crowdmpc/compiled`` (not created here)."""
+    root = os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "crowdmpc"
+    return Path(root).expanduser() / SUBDIR
+
+
+@dataclass(frozen=True)
+class Compiler:
+    """The C compiler the jit calls, as the key records it."""
+
+    path: str  # absolute path of gcc
+    version: str  # first line of ``gcc --version``
+    flags: tuple[str, ...]
+
+    def describe(self) -> str:
+        return f"{self.version} ({self.path}) {' '.join(self.flags)}"
+
+
+@cache
+def compiler() -> Compiler | None:
+    """gcc on the PATH, or None (then nothing can be compiled). Asked once per process."""
+    path = shutil.which(COMPILER)
+    if path is None:
+        return None
+    try:
+        out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return Compiler(path, (out.stdout.splitlines() or ["unknown"])[0].strip(), FLAGS)
+
+
+def _key(kind: str, options: Mapping, payload: str, cc: Compiler, folder: Path) -> str:
+    h = hashlib.sha256()
+    header = {
+        "format": FORMAT,
+        # An entry names its library by absolute path: a cache shared by machines that mount it at different
+        # paths keeps one entry per path instead of each replacing the others' as unloadable.
+        "directory": str(folder.resolve()),
+        "kind": kind,
+        "casadi": ca.__version__,
+        "platform": [sys.platform, platform.machine()],
+        "compiler": [cc.path, cc.version, list(cc.flags)],
+        "options": options,
+    }
+    h.update(json.dumps(header, sort_keys=True, default=repr).encode())
+    h.update(b"\0")
+    h.update(payload.encode("utf-8", "surrogateescape"))
+    return h.hexdigest()
+
+
+def nlp_key(plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path) -> str:
+    """The key of ``nlpsol(_, plugin, nlp, options)`` compiled with ``cc`` into ``folder``."""
+    names = sorted(nlp)
+    oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp[k] for k in names if k not in ("x", "p")])
+    return _key(f"nlpsol:{plugin}:{','.join(names)}", options, oracle.serialize(), cc, folder)
+
+
+def _directory(directory: str | Path | None) -> Path:
+    path = Path(directory) if directory is not None else cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CompileCacheError(f"cannot create the compile cache {path}: {exc}") from exc
+    if not path.is_dir():
+        raise CompileCacheError(f"the compile cache {path} is not a directory")
+    return path
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """Hold ``path`` (created if missing) exclusively: other processes' and threads' ``_locked`` wait."""
+    if fcntl is None:  # pragma: no cover
+        yield
+        return
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _publish(tmp: Path, final: Path) -> bool:
+    """Move the complete file ``tmp`` to ``final`` unless ``final`` exists; whether ``tmp`` became it."""
+    try:
+        os.link(tmp, final)
+    except FileExistsError:
+        return False
+    except OSError:  # a file system without hard links: replace (both are complete entries)
+        os.replace(tmp, final)
+        return True
+    finally:
+        tmp.unlink(missing_ok=True)
+    return True
+
+
+def _load_solver(manifest: Path) -> ca.Function | None:
+    """The solver of an entry, or None when it cannot be loaded (missing, or its library is gone)."""
+    if not manifest.is_file():
+        return None
+    try:
+        return ca.Function.load(str(manifest))
+    except RuntimeError:
+        return None
+
+
+def nlpsol(
+    name: str, plugin: str, nlp: Mapping, options: Mapping, *, directory: str | Path | None = None
+) -> ca.Function:
+    """``casadi.nlpsol(name, plugin, nlp, options)`` compiled with gcc ``-O2``, from the cache when it holds
+    this NLP, else compiled now and stored. ``options`` must not set the jit options themselves.
+
+    Raises ``CompileCacheError`` when gcc is not on the PATH or the cache directory cannot be made.
+    """
+    cc = compiler()
+    if cc is None:
+        raise CompileCacheError(f"jit needs {COMPILER} on the PATH (CasADi compiles with it)")
+    clash = sorted(set(options) & {"jit", "compiler", "jit_options", "jit_name", "jit_serialize"})
+    if clash:
+        raise ValueError(f"nlpsol options {clash} are set by the compile cache")
+    folder = _directory(directory)
+    key = nlp_key(plugin, nlp, options, cc, folder)
+    manifest = folder / f"{key}.casadi"
+    solver = _load_solver(manifest)
+    if solver is not None:
+        return solver
+    # Another process (or thread: flock locks are per open file) compiling this entry is waited for.
+    with _locked(folder / f"{key}.lock"):
+        solver = _load_solver(manifest)
+        if solver is not None:
+            return solver
+        manifest.unlink(missing_ok=True)  # unloadable (its library was removed): compile again
+        _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
+        solver = _load_solver(manifest)
+    if solver is None:
+        raise CompileCacheError(f"the compiled solver {manifest} was stored but does not load")
+    return solver
+
+
+def _compile_nlpsol(
+    name: str, plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path, key: str
+) -> None:
+    tag = f"{os.getpid()}_{secrets.token_hex(4)}"
+    library = f"{key}.{tag}"
+    # CasADi writes the generated source to <jit_name>.c in the current directory (its CodeGenerator takes
+    # no directory for a solver's functions); the object file and library go to jit_options' directory.
+    jit_name = f"crowdmpc_jit_{tag}"
+    source = Path.cwd() / f"{jit_name}.c"
+    jit = {
+        "jit": True,
+        "compiler": "shell",
+        "jit_name": jit_name,
+        "jit_temp_suffix": False,
+        "jit_cleanup": False,  # we remove the source; CasADi would look for it in the wrong directory
+        "jit_serialize": "link",
+        "jit_options": {
+            "compiler": shlex.quote(cc.path),
+            "linker": shlex.quote(cc.path),
+            "flags": list(cc.flags),
+            "directory": str(folder.resolve()) + os.sep,
+            "name": library,
+            "temp_suffix": False,
+            "cleanup": False,  # the library is the cache entry: it must outlive this process
+            "verbose": False,
+        },
+    }
+    tmp = folder / f".tmp-{key}.{tag}.casadi"
+    published = False
+    try:
+        solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
+        solver.save(str(tmp))
+        del solver
+        published = _publish(tmp, folder / f"{key}.casadi")
+    finally:
+        source.unlink(missing_ok=True)
+        (folder / f"{library}.o").unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
+        if not published:  # failed, or another process published first (no lock): its library is used
+            (folder / f"{library}.so").unlink(missing_ok=True)
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    """What ``crowdmpc cache info`` prints."""
+
+    directory: Path
+    exists: bool
+    entries: int  # compiled solvers
+    files: int  # files of ours, leftovers included
+    size_bytes: int
+    casadi_version: str
+    compiler: str  # Compiler.describe(), or why there is none
+
+
+def _owned_files(folder: Path) -> list[os.DirEntry]:
+    """Regular files of ours directly in ``folder``: names we write, never a symlink, never a folder."""
+    if not folder.is_dir():
+        return []
+    with os.scandir(folder) as it:
+        return [e for e in it if OWNED.fullmatch(e.name) and e.is_file(follow_symlinks=False)]
+
+
+def info(directory: str | Path | None = None) -> CacheInfo:
+    """The cache's location, entries and size, and what compiles into it."""
+    folder = Path(directory) if directory is not None else cache_dir()
+    files = _owned_files(folder)
+    cc = compiler()
+    return CacheInfo(
+        directory=folder,
+        exists=folder.is_dir(),
+        entries=sum(1 for e in files if _ENTRY.fullmatch(e.name)),
+        files=len(files),
+        size_bytes=sum(e.stat(follow_symlinks=False).st_size for e in files),
+        casadi_version=ca.__version__,
+        compiler=cc.describe() if cc is not None else f"none ({COMPILER} not on the PATH)",
+    )
+
+
+def clear(directory: str | Path | None = None) -> tuple[int, int]:
+    """Remove the files of ours in the cache directory (not the directory, nor anything else in it).
+
+    Returns (files removed, bytes freed). A directory that is a symlink is refused: its files live elsewhere.
+    A process that loaded an entry keeps using it (an unlinked library stays mapped); the next build compiles.
+    """
+    folder = Path(directory) if directory is not None else cache_dir()
+    if folder.is_symlink():
+        raise CompileCacheError(f"{folder} is a symlink; not clearing files outside the cache")
+    removed = freed = 0
+    for entry in _owned_files(folder):
+        size = entry.stat(follow_symlinks=False).st_size
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(entry.path)
+            removed += 1
+            freed += size
+    return removed, freed

@@ -1,0 +1,64 @@
+"""``crowdmpc cache``: the persistent compile cache of the jit-compiled MPC solvers (mpc/compile_cache.py)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from pipelines.errors import PipelineError
+
+EPILOG = """examples:
+  crowdmpc cache info
+  crowdmpc cache info --json
+  crowdmpc cache clear
+
+With jit (`crowdmpc sweep --jit auto|on`), each NLP is compiled with gcc once per machine and stored in
+$CROWDMPC_CACHE/compiled (default ~/.cache/crowdmpc/compiled): a serialized solver (<key>.casadi) and its
+library (<key>.<tag>.so). Every later build, in any worker of any run, loads it in milliseconds. The key
+hashes the NLP's expression graph, the solver and its options, the CasADi version and the compiler with its
+flags, so an entry is never used for anything else; a CasADi or gcc upgrade starts new entries (clear the
+old ones). `clear` removes the cache's own files only, never a symlink or what it points to; a run that
+already loaded an entry keeps using it.
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "cache",
+        help="the compile cache of the jit-compiled MPC solvers (info, clear)",
+        description="Show or clear the persistent cache of compiled MPC solvers.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    actions = parser.add_subparsers(dest="cache_command", metavar="ACTION", required=True)
+    info = actions.add_parser("info", help="directory, entries, size, CasADi version and compiler")
+    info.add_argument("--json", action="store_true", help="print the same as one JSON object")
+    actions.add_parser("clear", help="remove every compiled entry (the next jit build compiles again)")
+    parser.set_defaults(func=run)
+
+
+def _size(n: int) -> str:
+    return f"{n} B" if n < 1024 else f"{n / 1024:.1f} KiB" if n < 1024**2 else f"{n / 1024**2:.1f} MiB"
+
+
+def run(args: argparse.Namespace) -> int:
+    from mpc import compile_cache
+
+    if args.cache_command == "info":
+        stats = compile_cache.info()
+        if args.json:
+            fields = {**stats.__dict__, "directory": str(stats.directory)}
+            print(json.dumps(fields, indent=2))
+            return 0
+        where = str(stats.directory) + ("" if stats.exists else " (not created yet)")
+        print(f"directory: {where}")
+        print(f"entries:   {stats.entries} ({stats.files} files, {_size(stats.size_bytes)})")
+        print(f"casadi:    {stats.casadi_version}")
+        print(f"compiler:  {stats.compiler}")
+        return 0
+    try:
+        removed, freed = compile_cache.clear()
+    except compile_cache.CompileCacheError as exc:
+        raise PipelineError(str(exc)) from exc
+    print(f"removed {removed} files ({_size(freed)}) from {compile_cache.cache_dir()}")
+    return 0

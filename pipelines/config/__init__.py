@@ -1,0 +1,32 @@
+"""Config files: one TOML file sets the world, the simulator, the scenario, the controller, the MPC and the
+``simulate`` / ``sweep`` runs (``crowdmpc --config run.toml simulate``, ``--set mpc.w_coll=1e6``).
+
+* ``schema``: the sections and keys, each mapped onto the frozen dataclass that validates it;
+* ``settings``: the dataclasses of the run settings that had none (scenario, controller choice, commands);
+* ``resolve``: file + ``--set`` + options -> a validated ``RunConfig``, with one-line errors;
+* ``render``: a ``RunConfig`` as annotated TOML (``crowdmpc config show``).
+"""
+
+from pipelines.config.render import render
+from pipelines.config.resolve import (
+    ConfigError,
+    Option,
+    RunConfig,
+    command_config,
+    load,
+    parse_set,
+    read_file,
+    resolve,
+)
+
+__all__ = [
+    "ConfigError",
+    "Option",
+    "RunConfig",
+    "command_config",
+    "load",
+    "parse_set",
+    "read_file",
+    "render",
+    "resolve",
+]

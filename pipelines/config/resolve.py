@@ -1,0 +1,452 @@
+"""Reading a config file, ``--set`` overrides and the command line's options into one validated ``RunConfig``.
+
+Precedence, lowest first: the dataclasses' defaults, the TOML file, ``--set SECTION.KEY=VALUE`` (in order),
+the command's explicit options (``--humans 5``). Every value is checked by the dataclass it belongs to; an
+error is one line naming where the value came from, the key and what is expected:
+
+    run.toml: mpc.horizon: must be an integer >= 1, got 'four'
+    --set mpc.horizon: must be an integer >= 1, got 0
+    --humans: n_humans must be in [0, 50], got 60
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import tomllib
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final, Literal
+
+from crowdsim.env import EnvConfig
+from crowdsim.errors import SimulationError
+from crowdsim.orca import OrcaParams
+from crowdsim.world import WorldFacts
+from mpc.config import MPCConfig
+from mpc.errors import MPCConfigError
+from pipelines.config.schema import SECTION_BY_NAME, SECTIONS, WRITE_ORDER, Key, Section
+from pipelines.config.settings import (
+    ControllerSettings,
+    ScenarioSettings,
+    SimulateSettings,
+    SweepSettings,
+)
+from pipelines.errors import PipelineError
+from predictors.errors import PredictorError
+
+MAX_CONFIG_BYTES: Final[int] = 1 << 20  # a config file is a page of settings, never a megabyte
+# What the dataclasses raise for a bad value.
+VALUE_ERRORS: Final[tuple[type[Exception], ...]] = (
+    PipelineError,
+    SimulationError,
+    MPCConfigError,
+    PredictorError,
+)
+
+
+class ConfigError(PipelineError):
+    """A config file, ``--set`` or option that cannot be used: one line naming it."""
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a value came from: a config file, ``--set``, or a command-line option."""
+
+    kind: Literal["file", "set", "cli"]
+    where: str  # the file's path as given, "--set", or the option ("--humans")
+
+    def label(self, section: str, key: str, message: str) -> str:
+        """The one-line error for ``message`` (a dataclass's, e.g. "horizon must be an integer >= 1, ...")."""
+        if self.kind == "cli":
+            match = _field_prefix(key).match(message)
+            return f"{self.where} {message[match.end() :]}" if match else f"{self.where}: {message}"
+        return f"{self.prefix(section, key)}: {reason(message, key)}"
+
+    def prefix(self, section: str, key: str) -> str:
+        return f"{self.where}: {section}.{key}" if self.kind == "file" else f"--set {section}.{key}"
+
+
+def _field_prefix(key: str) -> re.Pattern[str]:
+    """A dataclass message's leading field name: ``horizon `` or ``EnvConfig.time_limit ``."""
+    return re.compile(rf"(?:[A-Za-z_]\w*\.)?{re.escape(key)} (?=must|\d)")
+
+
+def reason(message: str, key: str) -> str:
+    """``message`` without its leading field name when it states a requirement ("must be ...")."""
+    match = _field_prefix(key).match(message)
+    return message[match.end() :] if match and message[match.end() :].startswith("must") else message
+
+
+def _named_field(message: str, section: Section) -> str | None:
+    """The key a dataclass message is about, when it starts with one of the section's keys."""
+    match = re.match(r"(?:[A-Za-z_]\w*\.)?(\w+) must", message)
+    return match[1] if match and match[1] in section.names else None
+
+
+@dataclass(frozen=True)
+class Entry:
+    section: str
+    key: str
+    value: Any
+    source: Source
+
+
+# ---- reading ---------------------------------------------------------------------------------------------
+
+
+def _unknown_section(where: str, name: str) -> ConfigError:
+    valid = ", ".join(f"[{s}]" for s in WRITE_ORDER)
+    return ConfigError(f"{where}: [{name}]: unknown section; valid sections: {valid}")
+
+
+def _check_key(prefix: str, section: Section, key: str) -> None:
+    """Refuse a key the section does not have, saying where it belongs or which keys are valid."""
+    if section.key(key) is not None:
+        return
+    if key in section.elsewhere:
+        raise ConfigError(f"{prefix}: not a [{section.name}] key: {section.elsewhere[key]}")
+    close = difflib.get_close_matches(key, section.names, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise ConfigError(f"{prefix}: unknown key{hint}; valid keys: {', '.join(section.names)}")
+
+
+def read_file(path: str | Path) -> list[Entry]:
+    """The entries of a TOML config file, in file order; unknown sections and keys refused."""
+    where = str(path)
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError(f"--config {where}: no such file")
+    if not p.is_file():
+        raise ConfigError(f"--config {where}: not a file")
+    if p.stat().st_size > MAX_CONFIG_BYTES:
+        raise ConfigError(f"--config {where}: {p.stat().st_size} bytes; a config file is at most 1 MiB")
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"{where}: not UTF-8 text (a TOML file)") from None
+    except OSError as exc:
+        raise ConfigError(f"--config {where}: cannot read it ({exc.strerror or exc})") from None
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{where}: not valid TOML: {exc}") from None
+    source = Source("file", where)
+    entries: list[Entry] = []
+
+    def table(name: str, values: Any) -> None:
+        section = SECTION_BY_NAME[name]
+        if not isinstance(values, dict):
+            raise ConfigError(f"{where}: {name}: must be a table ([{name}]), got {values!r}"[:300])
+        for key, value in values.items():
+            if name == "env" and key == "orca":
+                table("env.orca", value)
+                continue
+            _check_key(source.prefix(name, key), section, key)
+            entries.append(Entry(name, key, value, source))
+
+    for name, values in document.items():
+        if name == "env.orca" or name not in SECTION_BY_NAME:  # [env.orca] is written as a table of [env]
+            raise _unknown_section(where, name)
+        table(name, values)
+    return entries
+
+
+BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@-]+")
+
+
+def parse_set(text: str) -> Entry:
+    """``--set SECTION.KEY=VALUE``: VALUE is a TOML value (``1e6``, ``true``, ``"circle"``, ``[5, 6]``); a
+    bare word that is no TOML value (``circle``, ``conformal:0.05``, ``runs/x``) is taken as a string."""
+    name, sep, raw = text.partition("=")
+    name, raw = name.strip(), raw.strip()
+    if not sep or "." not in name:
+        raise ConfigError(f"--set {text[:80]!r}: expected SECTION.KEY=VALUE, e.g. mpc.w_coll=1e6")
+    section_name, key = name.rsplit(".", 1)
+    section = SECTION_BY_NAME.get(section_name)
+    if section is None:
+        raise _unknown_section(f"--set {name}", section_name)
+    _check_key(f"--set {name}", section, key)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        if BARE_VALUE.fullmatch(raw) is None:
+            raise ConfigError(
+                f'--set {name}: {raw[:80]!r} is not a TOML value (e.g. 1e6, true, "circle", [5, 6])'
+            ) from None
+        value = raw
+    return Entry(section.name, key, value, Source("set", "--set"))
+
+
+# ---- validation ------------------------------------------------------------------------------------------
+
+_KIND_TEXT: Final[Mapping[str, str]] = {
+    "int": "an integer",
+    "float": "a number",
+    "bool": "true or false",
+    "str": "a string",
+    "ints": "a list of integers, like [5, 6, 7]",
+    "strs": 'a list of names, like ["constant_velocity", "social_lstm_eth"]',
+}
+
+
+def _coerce(key: Key, value: Any) -> tuple[bool, Any]:
+    """(ok, value as the dataclass takes it): TOML integers become floats where a float is expected, lists
+    become tuples."""
+    if key.kind == "bool":
+        return isinstance(value, bool), value
+    if key.kind == "int":
+        return isinstance(value, int) and not isinstance(value, bool), value
+    if key.kind == "float":
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        return ok, float(value) if ok else value
+    if key.kind == "str":
+        return isinstance(value, str), value
+    item = str if key.kind == "strs" else int
+    ok = isinstance(value, list) and all(isinstance(v, item) and not isinstance(v, bool) for v in value)
+    return ok, tuple(value) if ok else value
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+@dataclass
+class _Resolver:
+    chosen: dict[str, dict[str, Any]]  # section -> key -> value (set somewhere)
+    sources: dict[tuple[str, str], Source]
+    built: dict[str, Any] = field(default_factory=dict)
+    values: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def build(self, section: Section) -> Any:
+        chosen = self.chosen.get(section.name, {})
+        values: dict[str, Any] = {k.name: k.default for k in section.keys}
+        for name, raw in chosen.items():
+            key = section.key(name)
+            assert key is not None  # read_file and parse_set refuse unknown keys
+            ok, value = _coerce(key, raw)
+            if not ok:
+                raise self._kind_error(section, key, raw, values)
+            if key.most is not None and value > key.most:  # a number that sizes the work
+                most = key.most if key.kind == "float" else int(key.most)
+                message = f"{name} must be at most {most}, got {_short(value)}"
+                raise ConfigError(self.sources[(section.name, name)].label(section.name, name, message))
+            values[name] = value
+        try:
+            obj = section.build(values, self.built)
+        except VALUE_ERRORS as exc:
+            raise self._attribute(section, values, str(exc)) from None
+        self.built[section.name] = obj
+        self.values[section.name] = values
+        return obj
+
+    def _kind_error(self, section: Section, key: Key, raw: Any, defaults: dict[str, Any]) -> ConfigError:
+        """The dataclass's own message for a value of the wrong type when it names the key (MPCConfig's
+        "must be an integer >= 1, got 'four'"), else "must be an integer, got 'four'"."""
+        message = f"{key.name} must be {_KIND_TEXT[key.kind]}, got {_short(raw)}"
+        try:
+            section.build({**defaults, key.name: raw}, self.built)
+        except VALUE_ERRORS as exc:  # its own wording, when it is about this key and shows the value
+            if _named_field(str(exc), section) == key.name and repr(raw) in str(exc):
+                message = str(exc)
+        except (TypeError, ValueError, AttributeError):
+            pass
+        return ConfigError(self.sources[(section.name, key.name)].label(section.name, key.name, message))
+
+    def _attribute(self, section: Section, values: dict[str, Any], message: str) -> ConfigError:
+        """A one-line error for a section that does not validate: the key the message names, else the first
+        chosen key that breaks it alone, else the last chosen one."""
+        chosen = self.chosen.get(section.name, {})
+        culprit = _named_field(message, section)
+        if culprit is None:
+            defaults = {k.name: k.default for k in section.keys}
+            for name in chosen:
+                try:
+                    section.build({**defaults, name: values[name]}, self.built)
+                except VALUE_ERRORS:
+                    culprit = name
+                    break
+                except Exception:  # noqa: BLE001 - only locating the key here
+                    continue
+        if culprit is None and chosen:
+            culprit = list(chosen)[-1]
+        source = None if culprit is None else self.sources.get((section.name, culprit))
+        if source is not None:
+            return ConfigError(source.label(section.name, culprit or "", message))
+        # A default that clashes with a chosen value (of this section, or of one built before, [world]):
+        # "run.toml: env.time_limit: env.timeout_margin (unset: the paper profile's 1.0): must be ...".
+        clash = [((section.name, name), self.sources[(section.name, name)]) for name in chosen]
+        clash = clash or [(k, src) for k, src in self.sources.items() if k[0] in self.built]
+        lead = ""
+        if clash:
+            (clash_section, clash_key), src = clash[-1]
+            lead = (src.where if src.kind == "cli" else src.prefix(clash_section, clash_key)) + ": "
+        if culprit is None:
+            return ConfigError(f"{lead}[{section.name}]: {message}")
+        shown = f"{section.name}.{culprit} (unset: {_unset_value(section, culprit, values)})"
+        return ConfigError(f"{lead}{shown}: {reason(message, culprit)}")
+
+
+def _unset_value(section: Section, key: str, values: Mapping[str, Any]) -> str:
+    """What an unset key stands for: an [env] key its profile's value, others their default."""
+    if section.name == "env":
+        from crowdsim.profiles import PROFILES
+
+        profile = str(values.get("profile"))
+        value = getattr(PROFILES.get(profile, PROFILES["paper"]), key, None)
+        return f"the {profile} profile's {_short(value)}"
+    k = section.key(key)
+    return _short(None if k is None else k.default)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """The effective configuration of a run: every section validated, and where each chosen value came
+    from."""
+
+    world: WorldFacts
+    orca: OrcaParams
+    env: EnvConfig
+    scenario: ScenarioSettings
+    controller: ControllerSettings
+    mpc: MPCConfig  # Table I in `world`, then [mpc]; flocking and margins are applied by the controller
+    simulate: SimulateSettings
+    sweep: SweepSettings
+    values: Mapping[str, Mapping[str, Any]]  # section -> key -> value (None: unset)
+    sources: Mapping[tuple[str, str], Source]  # (section, key) -> where a chosen value came from
+    path: str | None = None  # the config file, if any
+
+    def is_set(self, section: str, key: str) -> bool:
+        return (section, key) in self.sources
+
+    def source(self, section: str, key: str) -> Source | None:
+        return self.sources.get((section, key))
+
+    def default(self, section: str, key: str) -> Any:
+        k = SECTION_BY_NAME[section].key(key)
+        if k is None:
+            raise KeyError(f"{section}.{key}")
+        if section == "mpc":  # Table I in this config's world
+            return getattr(MPCConfig.from_world(self.world), key)
+        return k.default
+
+    def chosen(self, section: str, key: str) -> bool:
+        """Whether the run asks for this value: given as an option, or set to something else than the
+        default (a file written by ``config show`` chooses nothing)."""
+        source = self.sources.get((section, key))
+        if source is None:
+            return False
+        return source.kind == "cli" or self.values[section][key] != self.default(section, key)
+
+    def label(self, section: str, key: str) -> str:
+        """How an error about this value names it: "run.toml: sweep.out", "--out", "--set sweep.out"."""
+        source = self.sources.get((section, key))
+        if source is None:
+            return f"{section}.{key}"
+        return source.where if source.kind == "cli" else source.prefix(section, key)
+
+    def error(self, section: str, key: str, message: str) -> ConfigError:
+        """A one-line error about this value (``message`` says what is wrong, starting with "must" or not)."""
+        source = self.sources.get((section, key))
+        if source is None:
+            return ConfigError(f"{section}.{key}: {message}")
+        if source.kind == "cli":
+            return ConfigError(f"{source.where}: {message}")
+        return ConfigError(f"{source.prefix(section, key)}: {message}")
+
+    def mpc_overrides(self) -> tuple[tuple[str, Any], ...]:
+        """The [mpc] values that differ from Table I in this world: ``ControllerSpec.mpc_overrides``."""
+        table_i = MPCConfig.from_world(self.world)
+        return tuple(
+            (name, value) for name, value in self.values["mpc"].items() if value != getattr(table_i, name)
+        )
+
+    def effective(self) -> dict[str, dict[str, Any]]:
+        """Every section's effective values, for records and metadata: the unset [env] keys as the profile
+        gives them, other unset keys as null."""
+        out = {name: dict(self.values[name]) for name in WRITE_ORDER}
+        for name in out["env"]:
+            if out["env"][name] is None:
+                out["env"][name] = getattr(self.env, name)
+        return out
+
+
+def resolve(entries: Iterable[Entry], path: str | None = None) -> RunConfig:
+    """Validate ``entries`` (later ones override earlier ones) over the defaults."""
+    chosen: dict[str, dict[str, Any]] = {}
+    sources: dict[tuple[str, str], Source] = {}
+    for entry in entries:
+        chosen.setdefault(entry.section, {})[entry.key] = entry.value
+        sources[(entry.section, entry.key)] = entry.source
+    resolver = _Resolver(chosen, sources)
+    for section in SECTIONS:
+        resolver.build(section)
+    built = resolver.built
+    return RunConfig(
+        world=built["world"],
+        orca=built["env.orca"],
+        env=built["env"],
+        scenario=built["scenario"],
+        controller=built["controller"],
+        mpc=built["mpc"],
+        simulate=built["simulate"],
+        sweep=built["sweep"],
+        values=resolver.values,
+        sources=sources,
+        path=path,
+    )
+
+
+# ---- the command line --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Option:
+    """A command-line option that sets a config key when given (its argparse default is None)."""
+
+    dest: str
+    section: str
+    key: str
+    flag: str
+    convert: Any = None  # value -> the key's value (e.g. --no-flocking -> flocking = false)
+
+
+def cli_entries(args: Any, options: Sequence[Option]) -> list[Entry]:
+    entries = []
+    for option in options:
+        value = getattr(args, option.dest, None)
+        if value is None:
+            continue
+        if option.convert is not None:
+            value = option.convert(value)
+        if isinstance(value, tuple):
+            value = list(value)
+        if isinstance(value, Path):
+            value = str(value)
+        entries.append(Entry(option.section, option.key, value, Source("cli", option.flag)))
+    return entries
+
+
+def config_arguments(args: Any) -> tuple[str | None, list[str]]:
+    """The config file and ``--set`` items of a command line: before the command (``crowdmpc --config F``)
+    or after it (``crowdmpc simulate --config F``); one file at most."""
+    files = [f for f in (getattr(args, "config_file", None), getattr(args, "sub_config_file", None)) if f]
+    if len(files) > 1 and files[0] != files[1]:
+        raise ConfigError(f"--config given twice ({files[0]}, {files[1]}); one config file per run")
+    sets = [*(getattr(args, "config_set", None) or []), *(getattr(args, "sub_config_set", None) or [])]
+    return (str(files[0]) if files else None), sets
+
+
+def load(path: str | None = None, sets: Sequence[str] = (), cli: Sequence[Entry] = ()) -> RunConfig:
+    """Defaults < the file at ``path`` < ``sets`` < ``cli``, validated."""
+    entries = read_file(path) if path is not None else []
+    entries += [parse_set(text) for text in sets]
+    entries += list(cli)
+    return resolve(entries, path)
+
+
+def command_config(args: Any, options: Sequence[Option] = ()) -> RunConfig:
+    """The effective config of a command: its --config file, --set items and explicit ``options``."""
+    path, sets = config_arguments(args)
+    return load(path, sets, cli_entries(args, options))

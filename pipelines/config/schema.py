@@ -1,0 +1,434 @@
+"""What a config file may hold: its sections, their keys with types, defaults and comments, and how each
+section becomes the frozen dataclass that validates it.
+
+The sections map onto the dataclasses the code already runs with:
+
+========== ============================================= =================================================
+section    dataclass                                      keys
+========== ============================================= =================================================
+world      crowdsim.world.WorldFacts                      the facts the simulator and the MPC share
+env        crowdsim.env.EnvConfig                         the simulator's conventions (a named profile's)
+env.orca   crowdsim.orca.OrcaParams                       the humans' ORCA
+scenario   pipelines.config.settings.ScenarioSettings     simulate's scenario, crowd and robots
+controller pipelines.config.settings.ControllerSettings   pipelines.loop.spec.ControllerSpec's choices
+mpc        mpc.config.MPCConfig                           Table I, the solver (ControllerSpec.mpc_overrides)
+simulate   pipelines.config.settings.SimulateSettings     ``crowdmpc simulate``'s run
+sweep      pipelines.config.settings.SweepSettings        ``crowdmpc sweep``'s run
+========== ============================================= =================================================
+
+``[world]`` is the one place for tau, L, the radius and the speed bounds: it reaches the simulator through
+``EnvConfig.from_world`` and the MPC through ``MPCConfig.from_world``, so ``[env]`` and ``[mpc]`` refuse
+those keys. ``[mpc]`` also refuses ``human_margins`` (margins are ``[controller] margins``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
+from typing import Any, Final, Literal
+
+from crowdsim.env import EnvConfig
+from crowdsim.orca import OrcaParams
+from crowdsim.profiles import PROFILES, make_env_config
+from crowdsim.world import WorldFacts
+from mpc.config import MPCConfig
+from pipelines.config.settings import (
+    ControllerSettings,
+    ScenarioSettings,
+    SimulateSettings,
+    SweepSettings,
+    available_cpus,
+)
+from pipelines.errors import PipelineError
+
+Kind = Literal["int", "float", "bool", "str", "ints", "strs"]
+
+
+@dataclass(frozen=True)
+class Key:
+    name: str
+    kind: Kind
+    default: Any  # None: no single default (printed commented out, with `example`)
+    note: str  # the comment `config show` prints: symbol, unit, equation, Table I value, CLI option
+    example: Any = None  # the commented-out value of a key without a default
+    most: float | None = None  # an upper bound on a number that sizes work (MOST)
+
+
+@dataclass(frozen=True)
+class Section:
+    name: str  # "mpc", "env.orca"
+    doc: str  # the comment above the section
+    keys: tuple[Key, ...]
+    # values (every key: default or chosen) and the sections built before -> the validated object
+    build: Callable[[dict[str, Any], Mapping[str, Any]], Any]
+    elsewhere: Mapping[str, str] = dataclasses.field(default_factory=dict)  # refused key -> where it goes
+
+    def key(self, name: str) -> Key | None:
+        return next((k for k in self.keys if k.name == name), None)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(k.name for k in self.keys)
+
+
+def _kind(value: Any) -> Kind:
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, int):
+        return "int"
+    if isinstance(value, float):
+        return "float"
+    if isinstance(value, str):
+        return "str"
+    raise TypeError(f"no config kind for {value!r}")
+
+
+# Numbers that size the work (NLP size, iterations, history rows, ORCA neighbours, episode length) are
+# bounded before anything runs; the dataclasses only require them positive. Far above any sensible value.
+MOST: Final[Mapping[str, float]] = {
+    "world.obs_len": 1000,
+    "env.time_limit": 3600.0,  # s: an hour-long episode
+    "env.orca.max_neighbors": 1000,
+    "mpc.horizon": 100,
+    "mpc.j_max": 1000,
+    "mpc.solver_max_iter": 100_000,
+    "mpc.time_limit_s": 3600.0,
+}
+MAX_EPISODE_STEPS: Final[int] = 100_000  # time_limit / dt
+
+
+def _keys_of(obj: Any, names: tuple[str, ...], notes: Mapping[str, str], section: str) -> tuple[Key, ...]:
+    return tuple(
+        Key(
+            name,
+            _kind(getattr(obj, name)),
+            getattr(obj, name),
+            notes[name],
+            most=MOST.get(f"{section}.{name}"),
+        )
+        for name in names
+    )
+
+
+# ---- [world] ---------------------------------------------------------------------------------------------
+WORLD_NOTES: Final[Mapping[str, str]] = {
+    "dt": "tau, s: simulation step = control period = the predictors' sampling time (Table I: 0.4 s)",
+    "obs_len": "L, observed steps the predictors read (Table I: 8; the zoo's models are trained on 9)",
+    "radius": "m, every robot and human (CrowdNav)",
+    "v_pref": "m/s, the humans' preferred speed = their ORCA max speed (CrowdNav)",
+    "v_max": "v_max, m/s, robot velocity bound per component, Eq. 6 (Table I: 1.0 m/s)",
+    "a_max": "a_max, m/s^2, robot acceleration bound per component, Eq. 6 (Table I: 2.0 m/s^2)",
+}
+WORLD_KEYS: Final = _keys_of(WorldFacts(), tuple(f.name for f in fields(WorldFacts)), WORLD_NOTES, "world")
+
+
+def _build_world(values: dict[str, Any], built: Mapping[str, Any]) -> WorldFacts:
+    return WorldFacts(**values)
+
+
+# ---- [env.orca] ------------------------------------------------------------------------------------------
+ORCA_NOTES: Final[Mapping[str, str]] = {
+    "neighbor_dist": "m, only agents strictly closer than this are neighbours (CrowdNav's ORCA)",
+    "max_neighbors": "the nearest this many neighbours get a half-plane",
+    "time_horizon": "s, velocity obstacles are truncated at this horizon",
+}
+ORCA_KEYS: Final = _keys_of(OrcaParams(), tuple(f.name for f in fields(OrcaParams)), ORCA_NOTES, "env.orca")
+
+
+def _build_orca(values: dict[str, Any], built: Mapping[str, Any]) -> OrcaParams:
+    return OrcaParams(**values)
+
+
+# ---- [env] -----------------------------------------------------------------------------------------------
+# EnvConfig's fields that [world] sets (history_len is the world's obs_len); its ORCA is [env.orca].
+ENV_FROM_WORLD: Final[tuple[str, ...]] = ("dt", "history_len", "radius", "v_pref", "v_max", "a_max")
+# The profile's conventions: unset, they are the chosen profile's values.
+ENV_PROFILE_KEYS: Final[tuple[str, ...]] = (
+    "time_limit",
+    "timeout_margin",
+    "spawn_separation",
+    "crossing",
+    "success_rule",
+    "orca_radius_margin",
+)
+ENV_NOTES: Final[Mapping[str, str]] = {
+    "time_limit": "s, the episode's time limit",
+    "timeout_margin": "s, no step starts at or after time_limit - timeout_margin",
+    "spawn_separation": "m added to the two radii between sampled humans",
+    "crossing": "how the humans' starts and goals are sampled: paper | v1",
+    "success_rule": "simultaneous (every robot at its goal at once) | first_reach (each reached it once)",
+    "orca_radius_margin": "m added to the radius given to ORCA (CrowdNav's 'for safety')",
+}
+
+
+def _profile_note(name: str) -> str:
+    values = ", ".join(f"{p} {getattr(cfg, name)!r}" for p, cfg in sorted(PROFILES.items()))
+    return f"{ENV_NOTES[name]}; unset: the profile's ({values})"
+
+
+ENV_KEYS: Final[tuple[Key, ...]] = (
+    Key(
+        "profile",
+        "str",
+        "paper",
+        "simulation conventions: paper (the authors' CrowdNav fork) | v1 (this project's first simulator); "
+        "the keys left unset below take its values (--profile)",
+    ),
+    Key("robots_visible", "bool", True, "the humans' ORCA sees the robots (--visibility visible|invisible)"),
+    *(
+        Key(
+            name,
+            _kind(getattr(EnvConfig(), name)),
+            None,
+            _profile_note(name),
+            getattr(EnvConfig(), name),
+            MOST.get(f"env.{name}"),
+        )
+        for name in ENV_PROFILE_KEYS
+    ),
+)
+
+
+def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
+    base = make_env_config(values["profile"], "visible" if values["robots_visible"] else "invisible")
+    settings = {
+        f.name: getattr(base, f.name) for f in fields(EnvConfig) if f.name not in (*ENV_FROM_WORLD, "orca")
+    }
+    settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
+    settings["robots_visible"] = values["robots_visible"]
+    env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
+    if env.max_steps > MAX_EPISODE_STEPS:
+        raise PipelineError(
+            f"time_limit must be at most {MAX_EPISODE_STEPS} steps of dt = {env.dt} s, got "
+            f"{env.time_limit} s ({env.max_steps} steps)"
+        )
+    return env
+
+
+# ---- [scenario] ------------------------------------------------------------------------------------------
+SCENARIO_KEYS: Final = (
+    Key("name", "str", "circle", "circle | perpendicular (--scenario)"),
+    Key("humans", "int", 7, "humans in the crowd, 0..50 (--humans)"),
+    Key("robots", "int", 3, "robots, 1..12 (--robots; sweep too)"),
+)
+
+
+def _build_scenario(values: dict[str, Any], built: Mapping[str, Any]) -> ScenarioSettings:
+    return ScenarioSettings(**values)
+
+
+# ---- [controller] ----------------------------------------------------------------------------------------
+CONTROLLER_KEYS: Final = (
+    Key(
+        "controller",
+        "str",
+        None,
+        "straight | orca | cmpc (Algorithm 1) | dmpc (Algorithm 2) (--controller; simulate needs one; "
+        "sweep: every method's)",
+        "cmpc",
+    ),
+    Key(
+        "predictor",
+        "str",
+        None,
+        "a registered predictor or a zoo model (--predictor); unset: constant_velocity in simulate, "
+        "the experiment's own in sweep",
+        "constant_velocity",
+    ),
+    Key("coupling", "str", "ibr", "ibr (Algorithms 1 and 2) | nlp (the predictor inside the joint NLP)"),
+    Key("flocking", "bool", True, "false: omega^floc = 0 (Table III, NF; --no-flocking)"),
+    Key(
+        "margins",
+        "str",
+        None,
+        "robot-human allowance for prediction error: none (the paper) | conformal[:ALPHA[:closed-loop|real]] "
+        "| fixed:M1,..,MH (--margins); unset: none in simulate, the experiment's own in sweep",
+        "none",
+    ),
+    Key("record_iterations", "bool", False, "record every IBR iteration's prediction (--record-iterations)"),
+)
+
+
+def _build_controller(values: dict[str, Any], built: Mapping[str, Any]) -> ControllerSettings:
+    return ControllerSettings(**values)
+
+
+# ---- [mpc] -----------------------------------------------------------------------------------------------
+MPC_FROM_WORLD: Final[tuple[str, ...]] = ("dt", "v_max", "a_max")
+MPC_NOTES: Final[Mapping[str, str]] = {
+    "horizon": "H, control and prediction horizon, steps (Table I: 4)",
+    "w_goal": "omega^goal, reference tracking weight, Eqs. 7 and 13 (Table I: 10.0)",
+    "w_acce": "omega^acce, acceleration weight, Eqs. 9 and 13 (Table I: 1e-1)",
+    "w_jerk": "omega^jerk, jerk weight, Eqs. 10 and 13 (Table I: 1e-1)",
+    "w_coll": "omega^coll, robot-human (Eq. 11) and robot-robot (Eq. 12) penalty weight (Table I: 1e7)",
+    "w_floc": "omega^floc, flocking weight, Eqs. 14 and 15 (Table I: 10; 0 disables flocking)",
+    "rho": "rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11 (Table I: 0.5)",
+    "d_min": "d_min, m, minimum allowed distance, Eqs. 11 and 12 (Table I: 0.8 m)",
+    "mu": "mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, Eq. 12 (Table I: 30)",
+    "j_max": "j_max, maximum IBR iterations, Algorithms 1 and 2 (Table I: 10)",
+    "xi": "xi, CMPC convergence threshold on |F^(j) - F^(j-1)|, Algorithm 1 (Table I: 1e-3)",
+    "epsilon": "epsilon, DMPC improvement and epsilon-Nash threshold, Algorithm 2 (Table I: 1e-3)",
+    "d_flock": "d_ij, m, desired robot-robot distance in the flock, Eq. 15 (not in the paper: mpc/config.py)",
+    "delta": "delta, goal-normalisation offset (Eq. 7) and norm smoothing (Eq. 15) (not in the paper)",
+    "on_goal": "a robot on its goal: track (stays in the optimisation, holds its place) | brake",
+    "cost_scale": "the solver minimises cost_scale * F",
+    "solver": "fatrop | ipopt: the interior-point solver of the NLPs with fixed predictions",
+    "solver_tol": "the solver's tolerance (Fatrop: KKT error; IPOPT: scaled NLP error)",
+    "solver_max_iter": "iterations per solve; hitting it counts as a failure (fallback)",
+    "time_limit_s": "s, wall-time budget of one control step (a safety net, far above the normal step time)",
+    "warm_start": "start every solve from the shifted previous solution",
+    "multi_start": "solve again from braking when the first solution pays more than restart_penalty",
+    "restart_penalty": "collision penalty above which multi_start solves again",
+    "jit": "compile the NLPs with gcc (simulate; a sweep compiles by [sweep] jit)",
+    "dmpc_parallel": "serial | threads: how DMPC runs its local solves",
+    "coupled_mode": "coupling nlp: auto | exact (the predictor inside the NLP) | first_order",
+}
+MPC_EXCLUDED: Final[tuple[str, ...]] = (*MPC_FROM_WORLD, "human_margins")
+MPC_KEYS: Final = _keys_of(
+    MPCConfig(), tuple(f.name for f in fields(MPCConfig) if f.name not in MPC_EXCLUDED), MPC_NOTES, "mpc"
+)
+
+
+def _build_mpc(values: dict[str, Any], built: Mapping[str, Any]) -> MPCConfig:
+    return MPCConfig.from_world(built["world"], **values)
+
+
+# ---- [simulate] and [sweep] ------------------------------------------------------------------------------
+SIMULATE_KEYS: Final = (
+    Key("episodes", "int", 1, "episodes; episode i uses seed + i (--episodes)"),
+    Key("seed", "int", 0, "the first episode's seed (--seed)"),
+    Key("json", "str", None, "write the summary and per-episode records here (--json)", "runs/run.json"),
+    Key("plot", "str", None, "draw the first episode: PNG, PDF or SVG (--plot)", "runs/episode.png"),
+    Key("record", "str", None, "one MCAP file per episode in this folder (--record)", "runs/mcap"),
+    Key("progress", "bool", True, "show a progress bar (--no-progress)"),
+)
+
+
+def _build_simulate(values: dict[str, Any], built: Mapping[str, Any]) -> SimulateSettings:
+    return SimulateSettings(**values)
+
+
+def _sweep_keys() -> tuple[Key, ...]:
+    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+
+    return (
+        Key(
+            "experiment",
+            "str",
+            None,
+            f"{' | '.join(sorted(EXPERIMENTS))} (--experiment; sweep needs one)",
+            "table2",
+        ),
+        Key(
+            "out", "str", None, "the sweep directory, created and resumed (--out; sweep needs one)", "runs/x"
+        ),
+        Key(
+            "episodes_per_cell",
+            "int",
+            PAPER_EPISODES_PER_CELL,
+            "episodes per cell, half of each scenario (the paper's 1000; --episodes-per-cell)",
+        ),
+        Key("humans", "ints", None, "crowd sizes (--humans); unset: the experiment's own", [5, 6, 7, 8, 9]),
+        Key("seed", "int", 0, "base scenario seed: episode i is seed + i // 2 (--seed)"),
+        Key(
+            "workers",
+            "int",
+            None,
+            "parallel workers (--workers); unset: the CPUs this process may use",
+            available_cpus(),
+        ),
+        Key(
+            "backend",
+            "str",
+            "auto",
+            "auto (Ray when installed, else processes) | ray | process | inline (--backend)",
+        ),
+        Key("ray_address", "str", None, "run on this Ray cluster (--ray-address)", "ray://head:10001"),
+        Key("record", "str", "none", "keep MCAP logs: none | failures | all (--record)"),
+        Key(
+            "jit",
+            "str",
+            "auto",
+            "compile the MPC NLPs (once per machine, cached): auto (when it pays back) | on | off (--jit)",
+        ),
+        Key(
+            "predictors",
+            "strs",
+            None,
+            "the predictors experiment's columns (--predictors); unset: the shipped swap table",
+            ["constant_velocity", "social_lstm_eth"],
+        ),
+    )
+
+
+def _build_sweep(values: dict[str, Any], built: Mapping[str, Any]) -> SweepSettings:
+    return SweepSettings(**values)
+
+
+_WORLD_REASON = "set it in [world], the one source of the simulator's and the MPC's shared facts"
+SECTIONS: Final[tuple[Section, ...]] = (
+    Section(
+        "world",
+        "The facts the simulator, the MPC and the predictors share (crowdsim/world.py). Set here only: they "
+        "reach the simulator through EnvConfig.from_world and the MPC through MPCConfig.from_world.",
+        WORLD_KEYS,
+        _build_world,
+    ),
+    Section(
+        "env.orca",
+        "The humans' ORCA (crowdsim/orca.py, OrcaParams): RVO2's parameters as CrowdNav sets them.",
+        ORCA_KEYS,
+        _build_orca,
+    ),
+    Section(
+        "env",
+        "The simulator (crowdsim/env.py, EnvConfig): a named profile's conventions, each overridable.",
+        ENV_KEYS,
+        _build_env,
+        {
+            **{name: _WORLD_REASON for name in ENV_FROM_WORLD if name != "history_len"},
+            "history_len": "set [world] obs_len, the one source of the observed steps",
+        },
+    ),
+    Section(
+        "scenario",
+        "What simulate runs (crowdsim/scenarios.py); a sweep reads robots only (its episodes alternate the "
+        "two scenarios, its crowd sizes are [sweep] humans).",
+        SCENARIO_KEYS,
+        _build_scenario,
+    ),
+    Section(
+        "controller",
+        "The robots' controller (pipelines/loop/spec.py, ControllerSpec). A sweep applies what is set here, "
+        "or differs from these defaults, to every method of its experiment.",
+        CONTROLLER_KEYS,
+        _build_controller,
+    ),
+    Section(
+        "mpc",
+        "The MPC of cmpc and dmpc (mpc/config.py, MPCConfig): the paper's Table I, the two values it omits, "
+        "and the solver. Values that differ from these defaults become ControllerSpec.mpc_overrides (and "
+        "part of a sweep's cell keys).",
+        MPC_KEYS,
+        _build_mpc,
+        {
+            **{name: _WORLD_REASON for name in MPC_FROM_WORLD},
+            "human_margins": 'set margins in [controller] margins (e.g. "fixed:0.05,0.1,0.15,0.2")',
+        },
+    ),
+    Section("simulate", "crowdmpc simulate's run.", SIMULATE_KEYS, _build_simulate),
+    Section("sweep", "crowdmpc sweep's run (pipelines/experiments).", _sweep_keys(), _build_sweep),
+)
+SECTION_BY_NAME: Final[Mapping[str, Section]] = {s.name: s for s in SECTIONS}
+# The order in which sections are written: a nested table follows its parent.
+WRITE_ORDER: Final[tuple[str, ...]] = (
+    "world",
+    "env",
+    "env.orca",
+    "scenario",
+    "controller",
+    "mpc",
+    "simulate",
+    "sweep",
+)

@@ -1,0 +1,191 @@
+"""The run settings that have no dataclass of their own elsewhere: the scenario, the controller choice, and
+the ``simulate`` and ``sweep`` commands' options. Each validates itself, like ``MPCConfig`` and ``EnvConfig``:
+messages start with the field's name ("episodes must be >= 1, got 0"), which the config loader turns into
+"run.toml: simulate.episodes: must be >= 1, got 0" or "--episodes must be >= 1, got 0".
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Final
+
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS, check_sizes
+from pipelines.errors import PipelineError
+from pipelines.experiments.backends import BACKENDS
+from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+from pipelines.experiments.sweep import MAX_EPISODES_PER_CELL, MAX_WORKERS
+from pipelines.experiments.worker import RECORD_POLICIES
+from pipelines.loop.spec import COUPLINGS, ControllerSpec
+
+MAX_SIMULATE_EPISODES: Final[int] = (
+    100_000  # a sweep's cell holds at most as many; beyond, use `crowdmpc sweep`
+)
+# A local pool (processes, or a local Ray) gets at most this many workers per CPU: more only queue for the
+# same cores, each holding its own solvers and predictor in memory. A Ray cluster (ray_address) takes more.
+LOCAL_WORKERS_PER_CPU: Final[int] = 4
+# A swap table of more predictors than this is no table anyone reads; each is a column of every row.
+MAX_SWAP_PREDICTORS: Final[int] = 64
+JIT_CHOICES: Final[tuple[str, ...]] = ("auto", "on", "off")
+
+
+def available_cpus() -> int:
+    """CPUs this process may use (a container or taskset may allow fewer than the machine has)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class ScenarioSettings:
+    """What ``simulate`` runs: one scenario, a crowd size, a robot count (a sweep reads ``robots`` only)."""
+
+    name: str = "circle"  # crowdsim.scenarios.SCENARIOS
+    humans: int = 7
+    robots: int = 3
+
+    def __post_init__(self) -> None:
+        if not (_is_int(self.robots) and 1 <= self.robots <= MAX_ROBOTS):
+            raise PipelineError(f"robots must be in 1..{MAX_ROBOTS}, got {self.robots!r}")
+        if self.name not in SCENARIOS:
+            raise PipelineError(f"name must be one of {list(SCENARIOS)}, got {self.name!r}")
+        check_sizes(self.name, self.humans, self.robots)  # n_humans in [0, MAX_HUMANS]
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """The ``ControllerSpec`` choices of a config file. ``None``: not chosen (``simulate`` requires a
+    controller and defaults the predictor to constant_velocity and the margins to none; a sweep keeps its
+    experiment's own)."""
+
+    controller: str | None = None
+    predictor: str | None = None
+    coupling: str = "ibr"
+    flocking: bool = True
+    margins: str | None = None  # pipelines.loop.margins.parse_margins syntax
+    record_iterations: bool = False
+
+    def __post_init__(self) -> None:
+        if self.controller is not None:
+            ControllerSpec(
+                self.controller
+            )  # a shipped or registered plugin controller, else UnknownController
+        if self.coupling not in COUPLINGS:
+            raise PipelineError(f"coupling must be one of {list(COUPLINGS)}, got {self.coupling!r}")
+        if self.predictor is not None and not (isinstance(self.predictor, str) and self.predictor.strip()):
+            raise PipelineError(f"predictor must be a predictor's name, got {self.predictor!r}")
+        if self.margins is not None:
+            from pipelines.loop.margins import parse_margins
+
+            parse_margins(self.margins)
+
+
+@dataclass(frozen=True)
+class SimulateSettings:
+    """``crowdmpc simulate``'s run: how many episodes from which seed, and where the outputs go."""
+
+    episodes: int = 1
+    seed: int = 0  # episode i uses seed + i
+    json: str | None = None  # the summary and per-episode records
+    plot: str | None = None  # the first episode's figure
+    record: str | None = None  # a folder of one MCAP file per episode
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if not _is_int(self.episodes) or self.episodes < 1:
+            raise PipelineError(f"episodes must be >= 1, got {self.episodes!r}")
+        if self.episodes > MAX_SIMULATE_EPISODES:
+            raise PipelineError(
+                f"episodes must be at most {MAX_SIMULATE_EPISODES} (use crowdmpc sweep), got {self.episodes}"
+            )
+        if not _is_int(self.seed) or self.seed < 0:
+            raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
+        for name in ("json", "plot", "record"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, str) and value):
+                raise PipelineError(f"{name} must be a path, got {value!r}")
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """``crowdmpc sweep``'s run: the experiment, its size, where it goes and how it runs."""
+
+    experiment: str | None = None  # pipelines.experiments.cells.EXPERIMENTS; required by sweep
+    out: str | None = None  # the sweep directory; required by sweep
+    episodes_per_cell: int = PAPER_EPISODES_PER_CELL
+    humans: tuple[int, ...] | None = None  # None: the experiment's own
+    seed: int = 0
+    workers: int | None = None  # None: the CPUs this process may use
+    backend: str = "auto"
+    ray_address: str | None = None
+    record: str = "none"
+    jit: str = "auto"
+    predictors: tuple[str, ...] | None = None  # the predictors experiment's list; None: the shipped one
+
+    def __post_init__(self) -> None:
+        if self.experiment is not None and self.experiment not in EXPERIMENTS:
+            raise PipelineError(f"experiment must be one of {sorted(EXPERIMENTS)}, got {self.experiment!r}")
+        if self.out is not None and not (isinstance(self.out, str) and self.out):
+            raise PipelineError(f"out must be a path, got {self.out!r}")
+        n = self.episodes_per_cell
+        if not _is_int(n) or n < 1:
+            raise PipelineError(f"episodes_per_cell must be at least 1, got {n!r}")
+        if n > MAX_EPISODES_PER_CELL:
+            raise PipelineError(f"episodes_per_cell must be at most {MAX_EPISODES_PER_CELL}, got {n}")
+        if self.humans is not None:
+            if not self.humans or not all(_is_int(h) for h in self.humans):
+                raise PipelineError(f"humans must list positive numbers, got {list(self.humans)}")
+            if not 1 <= min(self.humans) or max(self.humans) > MAX_HUMANS:
+                bad = min(self.humans) if min(self.humans) < 1 else max(self.humans)
+                raise PipelineError(f"humans must be in 1..{MAX_HUMANS}, got {bad}")
+        if not _is_int(self.seed) or self.seed < 0:
+            raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
+        if self.backend not in BACKENDS:
+            raise PipelineError(f"backend must be one of {list(BACKENDS)}, got {self.backend!r}")
+        if self.ray_address is not None and not (isinstance(self.ray_address, str) and self.ray_address):
+            raise PipelineError(f"ray_address must be an address, got {self.ray_address!r}")
+        if self.record not in RECORD_POLICIES:
+            raise PipelineError(f"record must be one of {list(RECORD_POLICIES)}, got {self.record!r}")
+        if self.jit not in JIT_CHOICES:
+            raise PipelineError(f"jit must be one of {list(JIT_CHOICES)}, got {self.jit!r}")
+        self._check_workers()
+        self._check_predictors()
+
+    def _check_workers(self) -> None:
+        workers = self.workers
+        if workers is None:
+            return
+        if not _is_int(workers):
+            raise PipelineError(f"workers must be an integer, got {workers!r}")
+        local = self.ray_address is None and self.backend != "inline"
+        most = max(LOCAL_WORKERS_PER_CPU * available_cpus(), 8)
+        if local and workers > most:
+            raise PipelineError(
+                f"workers {workers}: at most {most} here ({LOCAL_WORKERS_PER_CPU} per CPU this process "
+                f"may use, {available_cpus()}); more only queue for the same cores (a Ray cluster takes more)"
+            )
+        if not 1 <= workers <= MAX_WORKERS:
+            raise PipelineError(f"workers must be at least 1 and at most {MAX_WORKERS}, got {workers}")
+
+    def _check_predictors(self) -> None:
+        names = self.predictors
+        if names is None:
+            return
+        from predictors.checkpoint import NAME_PATTERN
+
+        if not names:
+            raise PipelineError("predictors must name at least one predictor, got []")
+        if len(names) > MAX_SWAP_PREDICTORS:
+            raise PipelineError(f"predictors must name at most {MAX_SWAP_PREDICTORS}, got {len(names)}")
+        bad = [name for name in names if not isinstance(name, str) or NAME_PATTERN.fullmatch(name) is None]
+        if bad:
+            raise PipelineError(f"predictors must be predictor names, got {str(bad[0])[:64]!r}")
+
+    @property
+    def n_workers(self) -> int:
+        return available_cpus() if self.workers is None else self.workers

@@ -1,0 +1,207 @@
+"""The closed loop through gymnasium's API: ``crowdmpc/CrowdNav-v0`` (``crowdsim.gym_env``) driven by a
+``Controller`` or by any policy, with the closed loop's observers and records.
+
+* ``run_gym_episode(controller, env, seed=...)`` is ``run_episode`` through ``env.reset`` / ``env.step``:
+  the controller acts on ``info["observation"]`` and its accelerations are the action. The episode, its
+  ``EpisodeResult`` and what the observers see are those of ``run_episode`` with the same seed, scenario and
+  sizes (the environment's ``EpisodeMetrics`` are the ones ``crowdmpc simulate`` reports).
+* ``ObserveEpisodes(env, observers)`` wraps the environment for a policy that is not a ``Controller`` (a
+  CrowdNav-style velocity policy under ``crowdsim.gym_wrappers.VelocityControl``): every episode goes to the
+  observers (``pipelines.logs.recording.McapEpisodeRecorder`` records it to MCAP) and ends in an
+  ``EpisodeResult`` in ``results``. The action it sees is the acceleration command; its "solve time" is the
+  wall time from the environment handing out an observation to the next action arriving (the policy's).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from crowdsim.control import ControlOutput
+from crowdsim.env import Observation
+from crowdsim.gym_env import CrowdNavEnv
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import Controller
+from pipelines.loop.episode import EpisodeObserver, EpisodeResult
+
+
+def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
+    """The ``CrowdNavEnv`` under ``env``'s wrappers; PipelineError for another environment."""
+    base = env.unwrapped
+    if not isinstance(base, CrowdNavEnv):
+        raise PipelineError(f"expected a crowdmpc/CrowdNav-v0 environment, got {type(base).__name__}")
+    return base
+
+
+def episode_meta(
+    base: CrowdNavEnv,
+    controller: str,
+    predictor: str | None,
+    described: Mapping[str, Any] | None = None,
+    meta: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The meta ``on_reset`` gets, as ``run_episode`` builds it: the episode (seed, scenario, sizes), who
+    drives, the environment's config plus what the controller's ``describe()`` adds, then ``meta``."""
+    full: dict[str, Any] = {
+        **base.episode,
+        "controller": controller,
+        "predictor": predictor,
+        "predictor_sha256": None,
+        "config": {"env": dataclasses.asdict(base.config)},
+    }
+    extra = dict(described or {})
+    full["config"].update(extra.pop("config", {}))
+    full.update(extra)
+    full.update(meta or {})
+    return full
+
+
+class _Steps:
+    """One episode's control steps, and the ``EpisodeResult`` they end in."""
+
+    def __init__(self) -> None:
+        self.solve_times: list[float] = []
+        self.statuses: list[str] = []
+        self.fallbacks: list[str | None] = []
+        self.iterations: list[int] = []
+
+    def add(self, out: ControlOutput) -> None:
+        self.solve_times.append(float(out.solve_time_s))
+        self.statuses.append(str(out.status))
+        self.fallbacks.append(out.fallback)
+        self.iterations.append(int(out.iterations))
+
+    def result(self, base: CrowdNavEnv, meta: Mapping[str, Any], info: Mapping[str, Any]) -> EpisodeResult:
+        traj = base.simulator.trajectory()
+        episode = base.episode
+        return EpisodeResult(
+            seed=episode["seed"],
+            scenario=episode["scenario"],
+            n_humans=episode["n_humans"],
+            n_robots=episode["n_robots"],
+            controller=str(meta["controller"]),
+            predictor=meta["predictor"],
+            predictor_sha256=meta["predictor_sha256"],
+            metrics=info["episode_metrics"],
+            robot_positions=traj.robot_positions,
+            human_positions=traj.human_positions,
+            robot_goals=traj.robot_goals,
+            human_goals=traj.human_goals,
+            solve_times_s=np.asarray(self.solve_times, dtype=float),
+            statuses=tuple(self.statuses),
+            fallbacks=tuple(self.fallbacks),
+            iterations=np.asarray(self.iterations, dtype=int),
+        )
+
+
+def _padded(accelerations: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    action = np.zeros(shape)
+    action[: len(accelerations)] = accelerations
+    return action
+
+
+def run_gym_episode(
+    controller: Controller,
+    env: gym.Env[np.ndarray, np.ndarray],
+    *,
+    seed: int,
+    options: dict[str, Any] | None = None,
+    observers: Sequence[EpisodeObserver] = (),
+    meta: Mapping[str, Any] | None = None,
+) -> EpisodeResult:
+    """One episode of ``controller`` in the gymnasium environment ``env`` (acceleration actions), from
+    ``env.reset(seed=seed, options=options)`` to ``terminated`` or ``truncated`` (module docstring)."""
+    base = crowdnav_env(env)
+    if env.action_space != base.action_space:
+        raise PipelineError(
+            "run_gym_episode gives the environment accelerations; pass it without VelocityControl"
+        )
+    shape = (base.max_robots, 2)
+    _, info = env.reset(seed=seed, options=options)
+    obs: Observation = info["observation"]
+    controller.reset(obs)
+    full_meta = episode_meta(base, controller.name, controller.predictor, controller.describe(), meta)
+    for observer in observers:
+        observer.on_reset(obs, full_meta)
+    steps = _Steps()
+    done = False
+    while not done:
+        out = controller.act(obs)
+        _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
+        steps.add(out)
+        for observer in observers:
+            observer.on_step(obs, out, info["observation"])
+        obs = info["observation"]
+        done = terminated or truncated
+    result = steps.result(base, full_meta, info)
+    for observer in observers:
+        observer.on_end(result)
+    return result
+
+
+class ObserveEpisodes(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
+    """Every episode of the wrapped ``crowdmpc/CrowdNav-v0`` (acceleration actions) to ``observers``
+    (module docstring).
+
+    :param env: the environment, possibly wrapped; wrap it in ``VelocityControl`` after this wrapper.
+    :param observers: ``EpisodeObserver``\\ s, e.g. an ``McapEpisodeRecorder``.
+    :param controller: the name the records give the policy.
+    :param meta: added to each episode's meta (``episode_meta``).
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[np.ndarray, np.ndarray],
+        observers: Sequence[EpisodeObserver],
+        *,
+        controller: str = "gym_policy",
+        meta: Mapping[str, Any] | None = None,
+    ):
+        super().__init__(env)
+        self._base = crowdnav_env(env)
+        self.observers = tuple(observers)
+        self.controller = controller
+        self.meta = dict(meta or {})
+        self.results: list[EpisodeResult] = []  # every finished episode, in order
+        self._obs: Observation | None = None
+        self._meta: dict[str, Any] = {}
+        self._steps = _Steps()
+        self._handed_out = 0.0
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._obs = info["observation"]
+        self._meta = episode_meta(self._base, self.controller, None, None, self.meta)
+        self._steps = _Steps()
+        for observer in self.observers:
+            observer.on_reset(info["observation"], self._meta)
+        self._handed_out = time.perf_counter()
+        return obs, info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
+        elapsed = time.perf_counter() - self._handed_out
+        if self._obs is None:
+            raise PipelineError("step() called before reset()")
+        before = self._obs
+        out = ControlOutput(
+            accelerations=np.array(action, dtype=float)[: before.n_robots], solve_time_s=elapsed
+        )
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._obs = info["observation"]
+        self._steps.add(out)
+        for observer in self.observers:
+            observer.on_step(before, out, info["observation"])
+        if terminated or truncated:
+            result = self._steps.result(self._base, self._meta, info)
+            self.results.append(result)
+            for observer in self.observers:
+                observer.on_end(result)
+        self._handed_out = time.perf_counter()
+        return obs, reward, terminated, truncated, info

@@ -1,0 +1,69 @@
+"""``crowdmpc --plugin module:Class``: one option for both kinds of plugin, told apart by what the class is.
+
+* a ``torch.nn.Module`` subclass is a predictor net: ``predictors.models.load_plugin`` registers it as the
+  model kind ``module:Class`` and lists it in ``CROWDMPC_PLUGINS``;
+* a class with the ``Controller`` protocol's methods (``reset``, ``act``, ``describe``, ``close``) is a robot
+  controller: ``pipelines.loop.spec`` registers it as the controller ``module:Class`` (``simulate
+  --controller module:Class``) and lists it in ``CROWDMPC_CONTROLLERS``.
+
+Either variable is read by the processes a command starts (sweep workers), so they load the same plugins.
+A plugin that does not load is a ``PluginError``: one line, which the command line prints as a parser error.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from typing import Literal
+
+from pipelines.errors import PipelineError
+from pipelines.loop.spec import (
+    import_plugin,
+    is_controller_class,
+    is_plugin_spec,
+    register_controller_plugins,
+)
+from predictors.errors import PredictorError, short_repr
+
+PluginKind = Literal["model", "controller"]
+
+
+class PluginError(PipelineError, PredictorError):
+    """A ``--plugin`` that does not load, of either kind (so it is caught as either package's error)."""
+
+
+def _is_net(obj: object) -> bool:
+    torch = sys.modules.get("torch")  # a net's module imported torch; a controller's need not
+    return torch is not None and isinstance(obj, type) and issubclass(obj, torch.nn.Module)
+
+
+def register(spec: str) -> PluginKind:
+    """Register the plugin ``module:Class`` (importing its module) as a model kind or a controller, and
+    say which."""
+    from predictors import models
+
+    if not is_plugin_spec(spec):
+        raise PluginError(
+            f"plugin {short_repr(spec)} is not of the form module:NetClass or module:Controller"
+        )
+    try:
+        obj = import_plugin(spec)
+        if is_controller_class(obj) and not _is_net(obj):
+            register_controller_plugins([spec])
+            return "controller"
+        if not _is_net(obj):
+            raise PluginError(
+                f"model {spec!r}: {short_repr(obj)} is not a torch.nn.Module subclass (a predictor net), nor "
+                "a controller class with reset, act, describe and close (pipelines/loop/controllers.py)"
+            )
+        models.register_plugins([spec])
+    except PluginError:
+        raise
+    except (PipelineError, PredictorError) as exc:
+        raise PluginError(str(exc)) from None
+    return "model"
+
+
+def register_plugins(specs: Sequence[str]) -> list[PluginKind]:
+    """``register`` each of ``specs``, in order (what ``crowdmpc --plugin`` calls)."""
+    return [register(spec) for spec in specs]

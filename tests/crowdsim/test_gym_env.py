@@ -1,0 +1,286 @@
+"""crowdmpc/CrowdNav-v0: gymnasium's checker, the observation layout, the reward by hand, the episode is
+CrowdEnv's, the time limit, rendering, and the velocity wrapper."""
+
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import crowdsim
+from crowdsim.baselines import OrcaController, StraightController
+from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.errors import SimulationError
+from crowdsim.gym_env import (
+    COLUMNS,
+    GOAL,
+    POSITION,
+    PRESENT,
+    VELOCITY,
+    ComparableObservation,
+    CrowdNavEnv,
+    RewardConfig,
+)
+from crowdsim.gym_wrappers import VelocityControl
+from crowdsim.metrics import episode_metrics
+from crowdsim.scenarios import Layout
+
+WRAPPED = "is different from the unwrapped version"  # check_env's note on any wrapper, not a failure
+
+
+def checked(env: gym.Env, expected: tuple[str, ...] = ()) -> None:
+    """check_env passes, and warns of nothing but ``expected``."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env)
+    unexpected = [str(w.message) for w in caught if not any(e in str(w.message) for e in expected)]
+    assert not unexpected
+
+
+def one_robot(human: tuple[float, float]) -> Layout:
+    """A robot at rest at the origin (goal 5 m south) and a human standing at ``human`` (its own goal)."""
+    point = np.array([human])
+    return Layout(np.zeros((1, 2)), np.array([[0.0, -5.0]]), point, point)
+
+
+# --------------------------------------------------------------------------------------------- the API
+def test_importing_crowdsim_registers_the_environment_by_its_path():
+    spec = gym.spec(crowdsim.ENV_ID)
+    assert crowdsim.ENV_ID == "crowdmpc/CrowdNav-v0"
+    assert spec.entry_point == "crowdsim.gym_env:CrowdNavEnv"
+
+
+def test_importing_crowdsim_loads_neither_the_simulator_nor_matplotlib():
+    script = (
+        "import sys, crowdsim; print(sorted(m for m in ('crowdsim.env', 'matplotlib') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout == "[]\n", done.stderr
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"render_mode": "rgb_array"}, {"n_humans": 3, "max_humans": 6, "n_robots": 2, "max_robots": 4}]
+)
+def test_check_env_passes_without_a_warning(kwargs):
+    checked(gym.make(crowdsim.ENV_ID, **kwargs).unwrapped)
+
+
+def test_check_env_passes_the_velocity_wrapper():
+    checked(VelocityControl(gym.make(crowdsim.ENV_ID, render_mode="rgb_array")), expected=(WRAPPED,))
+    checked(VelocityControl(gym.make(crowdsim.ENV_ID, n_humans=2).unwrapped, gain=1.0), expected=(WRAPPED,))
+
+
+def test_the_spaces():
+    env = CrowdNavEnv(n_humans=5, n_robots=3)
+    assert env.action_space == gym.spaces.Box(-2.0, 2.0, (3, 2), dtype=np.float64)  # a_max, Table I
+    assert env.observation_space.shape == (8, len(COLUMNS)) and env.observation_space.dtype == np.float64
+    # 2 x 10 m square + 1 m/s x 40 s; velocities within v_max = v_pref = 1 m/s
+    assert env.observation_space.high[0].tolist() == [60, 60, 1, 1, 60, 60, 1]
+    assert env.observation_space.low[0].tolist() == [-60, -60, -1, -1, -60, -60, 0]
+    assert VelocityControl(env).action_space == gym.spaces.Box(-1.0, 1.0, (3, 2), dtype=np.float64)
+
+
+def test_observation_rows_are_the_agents_robots_first_then_padding():
+    env = CrowdNavEnv(n_humans=2, max_humans=4, n_robots=2, max_robots=3)
+    obs, info = env.reset(seed=5)
+    native = info["observation"]
+    assert obs.shape == (7, 7) and info["seed"] == 5 and info["n_humans"] == 2
+    robots, humans = obs[:3], obs[3:]
+    np.testing.assert_array_equal(robots[:2, POSITION], native.robot_positions)
+    np.testing.assert_array_equal(robots[:2, VELOCITY], native.robot_velocities)
+    np.testing.assert_array_equal(robots[:2, GOAL], native.robot_goals)
+    np.testing.assert_array_equal(humans[:2, POSITION], native.human_positions)
+    assert (humans[:, GOAL] == 0).all()  # unobserved, as in CrowdNav
+    assert robots[:2, PRESENT].tolist() == [1, 1] and humans[:2, PRESENT].tolist() == [1, 1]
+    assert not robots[2].any() and not humans[2:].any()  # padding
+    obs, info = env.reset(seed=5, options={"n_humans": 4, "n_robots": 3, "scenario": "perpendicular"})
+    assert obs[:, PRESENT].all() and info["scenario"] == "perpendicular"
+
+
+def test_the_layout_seed_is_the_simulators():
+    env = CrowdNavEnv(n_humans=4)
+    _, info = env.reset(seed=11)
+    native = CrowdEnv(EnvConfig()).reset(11, "circle", 4, 3)
+    assert info["observation"] == native  # ComparableObservation: field by field, arrays exactly
+    assert isinstance(info["observation"], ComparableObservation)
+    _, first = env.reset()  # unseeded resets draw from the generator reset(seed=11) seeded
+    env.reset(seed=11)
+    _, again = env.reset()
+    assert first["seed"] == again["seed"] and first["observation"] == again["observation"]
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            {"n_humans": 6},
+            "options: n_humans=6 exceeds this environment's max_humans=5; make it with max_humans=6",
+        ),
+        ({"n_robots": 0}, "options: n_robots must be in [1, max_robots=3], got 0"),
+        ({"humans": 3}, "unknown reset options ['humans']; choose from"),
+        ({"scenario": "square"}, "unknown scenario 'square'"),
+        (
+            {"layout": one_robot((0.0, 2.0)), "n_humans": 1},
+            "reset option 'layout' sets the agents; drop ['n_humans']",
+        ),
+        ({"layout": one_robot((0.0, 99.0))}, "options['layout']: starts and goals must lie within ±20 m"),
+    ],
+)
+def test_bad_reset_options_are_one_line(options, message):
+    with pytest.raises(SimulationError) as exc:
+        CrowdNavEnv().reset(seed=0, options=options)
+    assert str(exc.value).startswith(message) and "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"render_mode": "human"}, "render_mode must be None or 'rgb_array', got 'human'"),
+        ({"n_robots": 0}, "n_robots must be an int in [1, 12], got 0"),
+        ({"n_humans": 5, "max_humans": 4}, "max_humans must be an int in [5, 50], got 4"),
+        ({"config": "paper"}, "config must be an EnvConfig, got str"),
+        ({"reward": RewardConfig(), "end_on_collision": 1}, "end_on_collision must be a bool, got 1"),
+    ],
+)
+def test_bad_constructor_arguments_are_one_line(kwargs, message):
+    with pytest.raises(SimulationError, match=message.replace("[", r"\[").replace("(", r"\(")):
+        CrowdNavEnv(**kwargs)
+
+
+def test_bad_actions_and_calls_out_of_order_are_refused():
+    env = CrowdNavEnv(n_humans=1, config=EnvConfig(time_limit=0.8, timeout_margin=0.0))
+    with pytest.raises(SimulationError, match="before reset"):
+        env.step(np.zeros((3, 2)))
+    env.reset(seed=0)
+    with pytest.raises(SimulationError, match=r"action must be a \(3, 2\) array, got shape \(2, 2\)"):
+        env.step(np.zeros((2, 2)))
+    with pytest.raises(SimulationError, match="1 non-finite"):
+        env.step(np.array([[np.nan, 0.0], [0.0, 0.0], [0.0, 0.0]]))
+    env.step(np.zeros((3, 2)))
+    *_, truncated, _ = env.step(np.zeros((3, 2)))
+    assert truncated
+    with pytest.raises(SimulationError, match="after the episode ended"):
+        env.step(np.zeros((3, 2)))
+
+
+# ------------------------------------------------------------------------------------------- the reward
+def test_the_reward_rules_in_their_order():
+    rule = RewardConfig().step_reward
+    assert rule(-0.1, success=True, timeout=False, dt=0.4) == -0.25  # contact first
+    assert rule(0.1, success=True, timeout=False, dt=0.4) == 1.0
+    assert rule(0.2, success=False, timeout=False, dt=0.4) == pytest.approx((0.2 - 0.4) * 0.5 * 0.4)
+    assert rule(0.4, success=False, timeout=False, dt=0.4) == 0.0  # the discomfort distance itself
+    assert rule(-1.0, success=False, timeout=True, dt=0.4) == 0.0  # CrowdNav: the timeout step earns 0
+    with pytest.raises(SimulationError, match="RewardConfig.collision must be a finite number, got nan"):
+        RewardConfig(collision=float("nan"))
+
+
+def test_standing_0_3_m_from_a_human_costs_the_discomfort_penalty():
+    env = CrowdNavEnv(n_robots=1, n_humans=1)
+    obs, info = env.reset(seed=0, options={"layout": one_robot((0.0, 0.9))})
+    assert info["scenario"] == "layout" and obs[1, POSITION].tolist() == [0.0, 0.9]
+    _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
+    # nobody moves (the human is at its goal); boundaries 0.9 - 2 x 0.3 = 0.3 m apart
+    assert info["surface_distance"] == pytest.approx([0.3])
+    assert reward == pytest.approx((0.3 - 0.4) * 0.5 * 0.4) and info["robot_rewards"] == pytest.approx(
+        [reward]
+    )
+    assert info["min_distance"] == pytest.approx(0.9) and not info["collision"] and not info["contact"]
+    assert not (terminated or truncated)
+
+
+@pytest.mark.parametrize("end_on_collision", [False, True])
+def test_contact_costs_the_collision_penalty_and_may_end_the_episode(end_on_collision):
+    env = CrowdNavEnv(n_robots=1, n_humans=1, end_on_collision=end_on_collision)
+    env.reset(seed=0, options={"layout": one_robot((0.0, 0.5))})  # overlapping by 0.1 m
+    _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
+    assert info["surface_distance"] == pytest.approx([-0.1])  # at the start of the step
+    assert reward == -0.25 and terminated == end_on_collision and not truncated
+    assert ("episode_metrics" in info) == end_on_collision
+
+
+def test_the_time_limit_truncates_with_the_episode_metrics():
+    config = EnvConfig(time_limit=2.0, timeout_margin=0.0)  # 5 steps of 0.4 s
+    env = CrowdNavEnv(n_humans=2, config=config)
+    env.reset(seed=3)
+    steps = [env.step(np.zeros((3, 2))) for _ in range(5)]
+    assert [s[2:4] for s in steps] == [(False, False)] * 4 + [(False, True)]
+    _, reward, _, _, info = steps[-1]
+    assert reward == 0.0 and info["timeout"] and not info["success"]
+    assert info["episode_metrics"] == episode_metrics(env.simulator.trajectory())
+    assert info["episode_metrics"].n_steps == 5 and info["episode_metrics"].timeout
+    assert all("episode_metrics" not in s[4] for s in steps[:-1])
+
+
+def test_an_episode_is_crowdenvs_and_its_metrics_are_the_simulators():
+    """The straight-line baseline through the gymnasium API, with its accelerations and with its velocities
+    through VelocityControl, drives exactly as through CrowdEnv."""
+    baseline = StraightController()
+    native = CrowdEnv(EnvConfig())
+    obs, done = native.reset(7, "circle", 4, 3), False
+    while not done:
+        obs, done, _ = native.step(baseline.act(obs).accelerations)
+    expected = native.trajectory()
+
+    for wrapped in (False, True):
+        env = CrowdNavEnv(n_humans=4)
+        driven = VelocityControl(env) if wrapped else env
+        _, info = driven.reset(seed=7)
+        total, ended = 0.0, False
+        while not ended:
+            native_obs = info["observation"]
+            action = (
+                baseline.desired_velocities(native_obs) if wrapped else baseline.act(native_obs).accelerations
+            )
+            _, reward, terminated, truncated, info = driven.step(action)
+            total, ended = total + reward, terminated or truncated
+        traj = env.simulator.trajectory()
+        np.testing.assert_array_equal(traj.robot_positions, expected.robot_positions)
+        np.testing.assert_array_equal(traj.human_positions, expected.human_positions)
+        assert info["episode_metrics"] == episode_metrics(expected)
+        assert terminated and info["success"]
+        # the blind baseline brushes a human on its last step: the collision penalty comes first
+        assert reward == (-0.25 if (info["surface_distance"] < 0).any() else 1.0)
+
+
+def test_orca_robots_reach_their_goals_through_the_velocity_wrapper():
+    env = VelocityControl(CrowdNavEnv(n_humans=5))
+    robots = OrcaController()
+    _, info = env.reset(seed=2)
+    terminated = truncated = False
+    while not (terminated or truncated):
+        _, reward, terminated, truncated, info = env.step(robots.desired_velocities(info["observation"]))
+    assert terminated and info["episode_metrics"].success and reward == 1.0  # the success reward
+
+
+# ------------------------------------------------------------------------------------ velocity, render
+def test_the_velocity_tracker_by_hand():
+    env = VelocityControl(CrowdNavEnv(n_robots=1, n_humans=1))
+    env.reset(seed=0, options={"layout": one_robot((3.0, 3.0))})
+    _, _, _, _, info = env.step(np.array([[0.5, -1.0]]))
+    # from rest: (0.5, -1.0) / 0.4 s = (1.25, -2.5) m/s^2, the second clipped to a_max = 2
+    assert info["accelerations"].tolist() == [[1.25, -2.0]]
+    assert info["observation"].robot_velocities == pytest.approx(np.array([[0.5, -0.8]]))
+    gentle = VelocityControl(CrowdNavEnv(n_robots=1, n_humans=1), gain=1.0)
+    gentle.reset(seed=0, options={"layout": one_robot((3.0, 3.0))})
+    assert gentle.step(np.array([[0.5, -1.0]]))[4]["accelerations"].tolist() == [[0.5, -1.0]]
+    with pytest.raises(SimulationError, match=r"gain must be a number in \(0, 1/dt = 2.5\] 1/s, got 3"):
+        VelocityControl(CrowdNavEnv(), gain=3)
+    with pytest.raises(SimulationError, match="VelocityControl wraps a CrowdNavEnv"):
+        VelocityControl(gym.make("CartPole-v1"))
+
+
+def test_render_draws_an_rgb_frame():
+    env = CrowdNavEnv(n_humans=3, render_mode="rgb_array")
+    with pytest.raises(SimulationError, match="before reset"):
+        env.render()
+    env.reset(seed=1)
+    env.step(np.zeros((3, 2)))
+    frame = env.render()
+    assert frame.shape == (480, 640, 3) and frame.dtype == np.uint8 and frame.std() > 0
+    assert CrowdNavEnv().render() is None  # no render mode, nothing drawn
+    env.close()
+    env.close()

@@ -1,0 +1,241 @@
+"""The persistent compile cache: compiled once, loaded after, identical solves, safe under concurrency."""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpc import compile_cache, solvers
+from mpc.cmpc import CMPC
+from mpc.config import MPCConfig
+from mpc.fallback import PlanMemory
+from mpc.nlp import StepData
+from predictors.base import DT
+from tests.mpc.reactive import ReactivePredictor
+
+needs_gcc = pytest.mark.skipif(compile_cache.compiler() is None, reason="gcc is not on the PATH")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch) -> Path:
+    """A private $CROWDMPC_CACHE, and a private working directory (to see what is written into it)."""
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path / "cache"))
+    work = tmp_path / "cwd"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    return tmp_path / "cache" / compile_cache.SUBDIR
+
+
+def small_nlp(weight: float = 1.0) -> dict:
+    x, p = ca.SX.sym("x", 2), ca.SX.sym("p", 2)
+    return {"x": x, "p": p, "f": weight * ca.sumsqr(x - p) + ca.sumsqr(ca.sin(x)), "g": x[0] + x[1]}
+
+
+IPOPT = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
+
+
+def suffixes(folder: Path) -> list[str]:
+    """The cache's files by type, lock files left out."""
+    return sorted(p.suffix for p in folder.iterdir() if p.suffix != ".lock")
+
+
+# --- CMPC: the same solves cold, warm and without the cache ------------------------------------------------
+
+
+def crossing_case():
+    """Two robots heading north, two humans walking south between them and reacting to the robots."""
+    states = np.array([[-0.6, -3.0, 0, 0.5], [0.6, -3.0, 0, 0.5]], dtype=float)
+    data = StepData(states, np.zeros((2, 2)), states[:, :2] + [0.0, 6.0], np.ones(2, dtype=bool))
+    now = np.concatenate([states[:, :2], [[-0.3, 0.0], [0.5, 0.4]]])
+    history = np.stack([now + [0.0, DT], now])
+    mask = np.ones(history.shape[:2], dtype=bool)
+    predictor = ReactivePredictor(gain=0.3)
+    return data, lambda robots_future: predictor.rollout(history, mask, robots_future, np.array([2, 3]))
+
+
+def cmpc_steps(solver: CMPC, steps: int = 3) -> list:
+    """A few control steps from standing (the first explores with both solvers), warm-started after."""
+    data, predict = crossing_case()
+    memory = PlanMemory(solver.cfg)
+    results = []
+    for _ in range(steps):
+        result = solver.solve(data, predict, memory.start(data))
+        memory.commit(result.accels, result.solved, result.lam_x, result.lam_g)
+        results.append(result)
+    return results
+
+
+def assert_same(a: list, b: list) -> None:
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.accels, y.accels)
+        np.testing.assert_array_equal(x.lam_x, y.lam_x)
+        assert (x.potentials, x.iterations, x.solves, x.solver_iterations, x.status) == (
+            y.potentials, y.iterations, y.solves, y.solver_iterations, y.status
+        )  # fmt: skip
+
+
+@needs_gcc
+def test_cmpc_solves_the_same_cold_warm_and_without_the_cache(cache, monkeypatch):
+    cfg = MPCConfig(jit=True)
+    compiles = []
+    compile_nlpsol = compile_cache._compile_nlpsol
+    monkeypatch.setattr(
+        compile_cache, "_compile_nlpsol", lambda *a: compiles.append(a[0]) or compile_nlpsol(*a)
+    )
+    cold = cmpc_steps(CMPC(cfg, 2, 2))
+    assert compiles == ["joint_2r_2h"]  # the Fatrop solver; the IPOPT fallback is not compiled
+    warm = cmpc_steps(CMPC(cfg, 2, 2))
+    assert compiles == ["joint_2r_2h"]  # loaded, not compiled again
+    assert suffixes(cache) == [".casadi", ".so"]  # one entry: a solver and its library
+    assert not list(Path.cwd().iterdir())  # no generated source left in the working directory
+
+    def plain_jit(name, plugin, nlp, options, jit):  # CasADi's own jit, as before the cache
+        jit_options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+        return ca.nlpsol(name, plugin, nlp, options | (jit_options if jit else {}))
+
+    monkeypatch.setattr(solvers, "build_nlpsol", plain_jit)
+    uncached = cmpc_steps(CMPC(cfg, 2, 2))
+    assert all(r.solved for r in cold) and cold[0].iterations > 1
+    assert_same(cold, warm)
+    assert_same(cold, uncached)
+
+
+# --- nlpsol entries --------------------------------------------------------------------------------------
+
+
+@needs_gcc
+def test_an_entry_is_a_solver_and_its_library_published_complete(cache):
+    solver = compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    files = {p.suffix: p.name for p in cache.iterdir()}
+    key = files[".casadi"].removesuffix(".casadi")
+    assert len(key) == 64 and sorted(files) == [".casadi", ".lock", ".so"]
+    assert files[".lock"] == f"{key}.lock" and files[".so"].startswith(f"{key}.")  # <key>.<pid>_<random>.so
+    again = compile_cache.nlpsol("another_name", "ipopt", small_nlp(), IPOPT)  # the name is not in the key
+    assert len(list(cache.iterdir())) == 3
+    out = [
+        s(x0=0, p=[1, 2], lbg=-1, ubg=1) for s in (solver, again, ca.nlpsol("s", "ipopt", small_nlp(), IPOPT))
+    ]
+    np.testing.assert_array_equal(out[0]["x"], out[1]["x"])
+    np.testing.assert_allclose(out[0]["x"], out[2]["x"], atol=1e-9)
+
+
+@needs_gcc
+def test_the_key_covers_the_nlp_options_casadi_compiler_and_directory(monkeypatch, tmp_path):
+    cc = compile_cache.compiler()
+    key = compile_cache.nlp_key("ipopt", small_nlp(), IPOPT, cc, tmp_path)
+    assert compile_cache.nlp_key("ipopt", small_nlp(), IPOPT, cc, tmp_path) == key  # a graph built again
+    assert compile_cache.nlp_key("ipopt", small_nlp(2.0), IPOPT, cc, tmp_path) != key
+    assert compile_cache.nlp_key("fatrop", small_nlp(), IPOPT, cc, tmp_path) != key
+    assert compile_cache.nlp_key("ipopt", small_nlp(), IPOPT | {"ipopt.tol": 1e-3}, cc, tmp_path) != key
+    other_flags = compile_cache.Compiler(cc.path, cc.version, ("-O3",))
+    assert compile_cache.nlp_key("ipopt", small_nlp(), IPOPT, other_flags, tmp_path) != key
+    assert compile_cache.nlp_key("ipopt", small_nlp(), IPOPT, cc, tmp_path / "moved") != key
+    monkeypatch.setattr(ca, "__version__", "0.0.0")
+    assert compile_cache.nlp_key("ipopt", small_nlp(), IPOPT, cc, tmp_path) != key
+
+
+@needs_gcc
+def test_an_entry_whose_library_is_gone_is_compiled_again(cache):
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    (library,) = cache.glob("*.so")
+    library.unlink()
+    solver = compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    assert len(list(cache.glob("*.so"))) == 1 and not library.exists()
+    assert solver(x0=0, p=[1, 2], lbg=-1, ubg=1)["x"].shape == (2, 1)
+
+
+@needs_gcc
+def test_the_jit_options_belong_to_the_cache(cache):
+    with pytest.raises(ValueError, match="jit_options"):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT | {"jit_options": {"flags": ["-O3"]}})
+
+
+def test_no_gcc_is_an_error_naming_it(cache, monkeypatch):
+    monkeypatch.setattr(compile_cache, "compiler", lambda: None)
+    with pytest.raises(compile_cache.CompileCacheError, match="gcc on the PATH"):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+
+
+CHILD = """
+import sys
+sys.path.insert(0, {root!r})
+import casadi as ca
+from mpc import compile_cache
+compiled = []
+compile = compile_cache._compile_nlpsol
+compile_cache._compile_nlpsol = lambda *a: compiled.append(1) or compile(*a)
+x, p = ca.SX.sym("x", 3), ca.SX.sym("p", 3)
+f = ca.sumsqr(x - p) + ca.sumsqr(ca.sin(x)) + ca.sumsqr(ca.cos(3 * x))
+options = {{"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}}
+solver = compile_cache.nlpsol("s", "ipopt", {{"x": x, "p": p, "f": f, "g": ca.sum1(x)}}, options)
+print(len(compiled), float(solver(x0=0, p=[1, 2, 3], lbg=-1, ubg=1)["f"]))
+"""
+
+
+@needs_gcc
+def test_concurrent_workers_compile_an_entry_once(cache, tmp_path):
+    script = tmp_path / "child.py"
+    script.write_text(textwrap.dedent(CHILD.format(root=str(ROOT))))
+    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
+    children = [
+        subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env)
+        for _ in range(3)
+    ]
+    outputs = [child.communicate(timeout=300)[0].split() for child in children]
+    assert all(child.returncode == 0 for child in children)
+    assert sorted(int(o[0]) for o in outputs) == [0, 0, 1]  # one compiled, the others waited and loaded
+    assert len({o[1] for o in outputs}) == 1
+    assert suffixes(cache) == [".casadi", ".so"]  # and no temporaries
+
+
+# --- info and clear -----------------------------------------------------------------------------------------
+
+
+def test_info_and_clear_touch_only_our_files(tmp_path):
+    folder = tmp_path / "compiled"
+    folder.mkdir()
+    key = "ab" * 32
+    ours = [f"{key}.casadi", f"{key}.123_ab12cd34.so", f"{key}.123_ab12cd34.o", f"{key}.lock"]
+    ours.append(f".tmp-{key}.77_0123abcd.casadi")  # what a killed compile leaves
+    for name in ours:
+        (folder / name).write_bytes(b"x" * 10)
+    outside = tmp_path / "precious.so"
+    outside.write_bytes(b"keep")
+    (folder / f"{'cd' * 32}.casadi").symlink_to(outside)  # named like ours, but a link: left alone
+    (folder / "notes.txt").write_text("not ours")
+    (folder / f"{key}.so").write_text("not a name of ours")
+    (folder / f"{'ef' * 32}.casadi").mkdir()  # a folder named like an entry
+    stats = compile_cache.info(folder)
+    assert (stats.entries, stats.files, stats.size_bytes) == (1, 5, 50)
+    assert stats.casadi_version == ca.__version__
+    assert compile_cache.clear(folder) == (5, 50)
+    left = [f"{'cd' * 32}.casadi", "notes.txt", f"{'ef' * 32}.casadi", f"{key}.so"]
+    assert sorted(p.name for p in folder.iterdir()) == sorted(left)
+    assert outside.read_bytes() == b"keep"
+    assert compile_cache.info(folder).entries == 0
+
+
+def test_clear_refuses_a_cache_directory_that_is_a_symlink(tmp_path):
+    target = tmp_path / "elsewhere"
+    target.mkdir()
+    (target / f"{'ab' * 32}.casadi").write_text("x")
+    link = tmp_path / "compiled"
+    link.symlink_to(target)
+    with pytest.raises(compile_cache.CompileCacheError, match="symlink"):
+        compile_cache.clear(link)
+    assert (target / f"{'ab' * 32}.casadi").exists()
+
+
+def test_the_cache_lives_under_crowdmpc_cache(monkeypatch, tmp_path):
+    from predictors.data.locate import cache_root
+
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path))
+    assert compile_cache.cache_dir() == cache_root() / "compiled" == tmp_path / "compiled"
+    monkeypatch.delenv(compile_cache.CACHE_ENV)
+    assert compile_cache.cache_dir() == cache_root() / "compiled"

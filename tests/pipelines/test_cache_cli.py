@@ -1,0 +1,94 @@
+"""``crowdmpc cache info|clear`` on a private $CROWDMPC_CACHE."""
+
+import json
+
+import casadi as ca
+import pytest
+
+from mpc import compile_cache
+from pipelines.cli import main
+
+
+@pytest.fixture
+def folder(tmp_path, monkeypatch):
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path / "cache"))
+    return tmp_path / "cache" / "compiled"
+
+
+def test_info_on_a_cache_not_created_yet(folder, capsys):
+    assert main(["cache", "info"]) == 0
+    out = capsys.readouterr().out
+    assert f"directory: {folder} (not created yet)" in out
+    assert "entries:   0 (0 files, 0 B)" in out
+    assert f"casadi:    {ca.__version__}" in out
+
+
+def test_info_counts_entries_and_clear_removes_only_ours(folder, capsys):
+    folder.mkdir(parents=True)
+    key = "0123456789abcdef" * 4
+    (folder / f"{key}.casadi").write_bytes(b"s" * 1000)
+    (folder / f"{key}.42_deadbeef.so").write_bytes(b"l" * 2000)
+    (folder / f"{key}.lock").touch()
+    (folder / "README").write_text("someone else's")
+    assert main(["cache", "info", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["entries"], info["files"], info["size_bytes"]) == (1, 3, 3000)
+    assert info["directory"] == str(folder) and info["exists"]
+    assert main(["cache", "clear"]) == 0
+    assert capsys.readouterr().out == f"removed 3 files (2.9 KiB) from {folder}\n"
+    assert [p.name for p in folder.iterdir()] == ["README"]
+
+
+def test_clear_of_a_symlinked_cache_is_a_one_line_error(folder, tmp_path, capsys):
+    target = tmp_path / "elsewhere"
+    target.mkdir()
+    folder.parent.mkdir()
+    folder.symlink_to(target)
+    assert main(["cache", "clear"]) == 2
+    assert "symlink" in capsys.readouterr().err
+
+
+def test_cache_needs_an_action(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["cache"])
+    assert exc.value.code == 2
+
+
+# --- the --jit auto rule of crowdmpc sweep ------------------------------------------------------------------
+
+SEVEN = (
+    "constant_velocity,vanilla_lstm_eth,social_lstm_eth,social_lstm_soft_eth,social_gan_eth,social_lstm_synth,"
+    "orca_oracle"
+).split(",")
+
+
+def test_auto_compiles_when_the_episodes_repay_the_compiles():
+    from pipelines.commands.sweep import _jit_pays
+    from pipelines.experiments.cells import EXPERIMENTS
+
+    # Seven predictors share one joint NLP (8 s), 0.1 s saved an episode each: 12 episodes per cell repay it.
+    swap = EXPERIMENTS["predictors"].with_predictors(SEVEN).cells()
+    assert not _jit_pays(swap, 2) and not _jit_pays(swap, 11) and _jit_pays(swap, 12)
+    # Table II: a joint (8 s) and a local (2.3 s) NLP per crowd size, 0.1 + 0.19 s saved per episode pair.
+    table2 = EXPERIMENTS["table2"].cells()
+    assert not _jit_pays(table2, 35) and _jit_pays(table2, 36) and _jit_pays(table2, 1000)
+    assert not _jit_pays(EXPERIMENTS["baselines"].cells(), 1000)  # nothing to compile
+
+
+def test_auto_is_off_without_gcc_and_on_needs_it(monkeypatch):
+    from pipelines.commands import sweep
+    from pipelines.errors import PipelineError
+    from pipelines.experiments import worker
+    from pipelines.experiments.cells import EXPERIMENTS
+
+    experiment = EXPERIMENTS["predictors"].with_predictors(SEVEN)
+    monkeypatch.setattr(worker, "jit_available", lambda: True)
+    assert sweep._jit("auto", "--jit", experiment, None, 3, 100)
+    assert not sweep._jit("auto", "--jit", experiment, None, 3, 2)
+    assert sweep._jit("on", "--jit", experiment, None, 3, 2) and not sweep._jit(
+        "off", "--jit", experiment, None, 3, 100
+    )
+    monkeypatch.setattr(worker, "jit_available", lambda: False)
+    assert not sweep._jit("auto", "--jit", experiment, None, 3, 100)
+    with pytest.raises(PipelineError, match="needs gcc"):
+        sweep._jit("on", "--jit", experiment, None, 3, 100)

@@ -1,0 +1,547 @@
+"""Config files: the TOML schema over the frozen dataclasses, precedence (defaults < file < --set <
+options), one-line errors naming file, key and expected value, `config show` round trips, the effective config
+in simulate's JSON and MCAP metadata and in sweep records, and docs/examples/demo.toml reproducing `make
+demo`."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shlex
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from crowdsim.env import EnvConfig
+from crowdsim.orca import OrcaParams
+from crowdsim.world import WorldFacts
+from mpc.config import MPCConfig
+from pipelines.cli import main
+from pipelines.config import ConfigError, load
+from pipelines.config.schema import (
+    ENV_FROM_WORLD,
+    MPC_EXCLUDED,
+    SECTION_BY_NAME,
+    SECTIONS,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+DEMO_TOML = REPO / "docs" / "examples" / "demo.toml"
+SECTION_OBJECTS = ("world", "orca", "env", "scenario", "controller", "mpc", "simulate", "sweep")
+
+
+def _objects(cfg) -> dict:
+    return {name: getattr(cfg, name) for name in SECTION_OBJECTS}
+
+
+def _write(tmp_path: Path, text: str, name: str = "run.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _one_error_line(capsys, command: str) -> str:
+    """The one line a user error prints, ``crowdmpc <command>: error: ...``; nothing on stdout."""
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith(f"crowdmpc {command}: error: "), lines[0]
+    assert captured.out == "", captured.out
+    return lines[0].removeprefix(f"crowdmpc {command}: error: ")
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The schema: every dataclass field has its key (or a stated home), every key a comment
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_every_field_of_the_dataclasses_has_a_key_or_a_stated_home():
+    keys = {s.name: set(s.names) for s in SECTIONS}
+    assert keys["world"] == {f.name for f in dataclasses.fields(WorldFacts)}
+    assert keys["env.orca"] == {f.name for f in dataclasses.fields(OrcaParams)}
+    env_fields = {f.name for f in dataclasses.fields(EnvConfig)}
+    assert keys["env"] | set(ENV_FROM_WORLD) | {"orca"} == env_fields
+    assert keys["mpc"] | set(MPC_EXCLUDED) == {f.name for f in dataclasses.fields(MPCConfig)}
+    # the keys set elsewhere are refused with where they go
+    assert set(SECTION_BY_NAME["mpc"].elsewhere) == set(MPC_EXCLUDED)
+    assert set(SECTION_BY_NAME["env"].elsewhere) == set(ENV_FROM_WORLD)
+    for section in SECTIONS:
+        for key in section.keys:
+            assert key.note, f"{section.name}.{key.name} has no comment"
+
+
+def test_config_show_prints_the_annotated_defaults_and_loads_back_to_them(tmp_path, capsys):
+    assert main(["config", "show"]) == 0
+    text = capsys.readouterr().out
+    tomllib.loads(text)  # valid TOML
+    for line in text.splitlines():  # every key has its comment
+        if line and not line.startswith("#") and not line.startswith("["):
+            assert "  # " in line, line
+    # the paper's Table I, annotated
+    assert "w_coll = 1e7" in text and "(Table I: 1e7)" in text
+    assert "horizon = 4" in text and "(Table I: 4)" in text
+    assert "dt = 0.4" in text and "(Table I: 0.4 s)" in text
+    assert "# controller = " in text  # no default: commented out
+    path = _write(tmp_path, text)
+    assert _objects(load(str(path))) == _objects(load())
+    assert load(str(path)).mpc_overrides() == ()
+
+
+def test_config_show_of_a_file_and_sets_is_the_effective_config_and_loads_back(tmp_path, capsys):
+    path = _write(tmp_path, '[mpc]\nw_coll = 1e6\n\n[env]\nprofile = "v1"\ntime_limit = 25\n')
+    sets = ["--set", "scenario.humans=5", "--set", "controller.margins=conformal:0.05"]
+    argv = ["config", "show", "--config", str(path), *sets]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "w_coll = 1e6" in text and "humans = 5" in text and 'margins = "conformal:0.05"' in text
+    assert "time_limit = 25.0" in text and "# timeout_margin = 0.0" in text  # v1's, unset
+    shown = _write(tmp_path, text, "shown.toml")
+    effective = load(str(path), ["scenario.humans=5", "controller.margins=conformal:0.05"])
+    assert _objects(load(str(shown))) == _objects(effective)
+    assert effective.env.time_limit == 25.0 and effective.env.success_rule == "first_reach"
+    # the global options work as well
+    assert main(["--config", str(path), "--set", "scenario.humans=5", "config", "show"]) == 0
+    assert "humans = 5" in capsys.readouterr().out
+
+
+def test_precedence_defaults_file_set_options(tmp_path):
+    from pipelines.config.resolve import Entry, Source
+
+    path = str(_write(tmp_path, "[scenario]\nhumans = 5\nrobots = 2\n"))
+    assert load().scenario.humans == 7
+    assert load(path).scenario.humans == 5
+    assert load(path, ["scenario.humans=6"]).scenario.humans == 6
+    assert load(path, ["scenario.humans=6", "scenario.humans=4"]).scenario.humans == 4  # in order
+    option = Entry("scenario", "humans", 8, Source("cli", "--humans"))
+    cfg = load(path, ["scenario.humans=6"], [option])
+    assert cfg.scenario.humans == 8 and cfg.scenario.robots == 2
+
+
+def test_the_command_line_overrides_the_file(tmp_path, capsys):
+    path = _write(
+        tmp_path, '[controller]\ncontroller = "straight"\n[scenario]\nhumans = 2\n[simulate]\nseed = 3\n'
+    )
+    out = tmp_path / "run.json"
+    argv = ["--config", str(path), "simulate", "--humans", "1", "--json", str(out), "--no-progress"]
+    assert main(argv) == 0
+    payload = json.loads(out.read_text())
+    assert payload["run"]["humans"] == 1 and payload["run"]["seed"] == 3
+    assert [e["n_humans"] for e in payload["episodes"]] == [1]
+    assert payload["run"]["controller"] == "straight"
+
+
+@pytest.mark.parametrize("profile", ["paper", "v1"])
+@pytest.mark.parametrize("visibility", ["visible", "invisible"])
+def test_the_env_section_builds_the_profiles_own_config(profile, visibility):
+    from crowdsim.profiles import make_env_config
+
+    items = [f"env.profile={profile}", f"env.robots_visible={str(visibility == 'visible').lower()}"]
+    assert load(None, items).env == make_env_config(profile, visibility)
+
+
+def test_world_facts_reach_the_simulator_and_the_mpc_from_one_place(tmp_path):
+    from pipelines.loop.mpc import mpc_config
+
+    cfg = load(str(_write(tmp_path, "[world]\na_max = 3.0\nv_max = 1.5\nradius = 0.25\n")))
+    assert (cfg.env.a_max, cfg.env.v_max, cfg.env.radius) == (3.0, 1.5, 0.25)
+    assert (cfg.mpc.a_max, cfg.mpc.v_max) == (3.0, 1.5)
+    assert cfg.env.world() == cfg.world
+    # the closed loop builds the MPC from the simulator's world: the same numbers
+    assert mpc_config(_spec(cfg), world=cfg.env.world()).a_max == 3.0
+    assert cfg.mpc_overrides() == ()  # nothing in [mpc] differs from Table I in this world
+
+
+def _spec(cfg):
+    from pipelines.loop.spec import ControllerSpec
+
+    return ControllerSpec("cmpc", mpc_overrides=cfg.mpc_overrides())
+
+
+def test_mpc_overrides_are_the_values_that_differ_from_table_i(tmp_path):
+    cfg = load(None, ["mpc.w_coll=1e6", "mpc.horizon=4", "mpc.solver=ipopt"])
+    assert cfg.mpc_overrides() == (("w_coll", 1e6), ("solver", "ipopt"))
+    assert cfg.mpc.w_coll == 1e6 and isinstance(cfg.mpc.w_coll, float)
+    assert load(None, ["mpc.w_goal=20"]).mpc.w_goal == 20.0  # a TOML integer where a float is expected
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Errors: one line naming the file (or --set, or the option), the key and what is expected
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('[mpc]\nhorizon = "four"\n', "run.toml: mpc.horizon: must be an integer >= 1, got 'four'"),
+        ("[mpc]\nhorizon = 0\n", "run.toml: mpc.horizon: must be an integer >= 1, got 0"),
+        ("[mpc]\nw_coll = -1\n", "run.toml: mpc.w_coll: must be > 0, got -1.0"),
+        (
+            '[mpc]\nsolver = "gurobi"\n',
+            "run.toml: mpc.solver: must be one of ('fatrop', 'ipopt'), got 'gurobi'",
+        ),
+        ("[world]\ndt = 0\n", "run.toml: world.dt: must be a finite number > 0, got 0.0"),
+        ('[env]\ncrossing = "x"\n', "run.toml: env.crossing: must be one of ['paper', 'v1'], got 'x'"),
+        (
+            '[env]\nprofile = "v2"\n',
+            "run.toml: env.profile: unknown profile 'v2'; choose from ['paper', 'v1']",
+        ),
+        ("[env]\nrobots_visible = 1\n", "run.toml: env.robots_visible: must be a bool, got 1"),
+        (
+            '[env.orca]\nneighbor_dist = "far"\n',
+            "run.toml: env.orca.neighbor_dist: must be a number, got 'far'",
+        ),
+        ("[scenario]\nhumans = 100\n", "run.toml: scenario.humans: n_humans must be in [0, 50], got 100"),
+        ("[scenario]\nrobots = 0\n", "run.toml: scenario.robots: must be in 1..12, got 0"),
+        (
+            '[scenario]\nname = "square"\n',
+            "run.toml: scenario.name: must be one of ['circle', 'perpendicular'], got 'square'",
+        ),  # fmt: skip
+        ("[simulate]\nepisodes = 0\n", "run.toml: simulate.episodes: must be >= 1, got 0"),
+        ("[sweep]\nhumans = [5, 60]\n", "run.toml: sweep.humans: must be in 1..50, got 60"),
+        (
+            '[sweep]\nhumans = "5,6"\n',
+            "run.toml: sweep.humans: must be a list of integers, like [5, 6, 7], got '5,6'",
+        ),  # fmt: skip
+        (
+            "[env]\ntime_limit = 0.5\n",
+            "run.toml: env.time_limit: env.timeout_margin (unset: the paper profile's 1.0): "
+            "must be in [0, time_limit=0.5) s, got 1.0",
+        ),  # fmt: skip
+    ],
+)
+def test_a_bad_value_is_one_line_naming_file_key_and_expectation(
+    text, message, tmp_path, capsys, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    _write(tmp_path, text)
+    assert main(["--config", "run.toml", "simulate", "--controller", "orca", "--no-progress"]) == 2
+    assert _one_error_line(capsys, "simulate") == message
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (
+            "[mpc]\nhorizn = 4\n",
+            "run.toml: mpc.horizn: unknown key (did you mean 'horizon'?); valid keys: horizon, w_goal, ",
+        ),  # fmt: skip
+        (
+            "[mcp]\nhorizon = 4\n",
+            "run.toml: [mcp]: unknown section; valid sections: [world], [env], [env.orca], ",
+        ),
+        ("horizon = 4\n", "run.toml: [horizon]: unknown section; valid sections: "),
+        ("[mpc]\ndt = 0.2\n", "run.toml: mpc.dt: not a [mpc] key: set it in [world]"),
+        (
+            "[mpc]\nhuman_margins = [0.1]\n",
+            "run.toml: mpc.human_margins: not a [mpc] key: set margins in [controller] margins",
+        ),  # fmt: skip
+        ("[env]\nhistory_len = 8\n", "run.toml: env.history_len: not a [env] key: set [world] obs_len"),
+        (
+            "[mpc]\nhorizon = 4\nw_coll = = 1\n",
+            "run.toml: not valid TOML: Invalid value (at line 3, column 10)",
+        ),
+        (
+            "[mpc]\nhorizon = 4\n[mpc]\n",
+            "run.toml: not valid TOML: Cannot declare ('mpc',) twice (at line 3, column 5)",
+        ),
+        ("mpc = 3\n", "run.toml: mpc: must be a table ([mpc]), got 3"),
+    ],
+)
+def test_a_bad_key_section_or_syntax_is_one_line(text, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _write(tmp_path, text)
+    assert main(["simulate", "--config", "run.toml", "--controller", "orca", "--no-progress"]) == 2
+    assert _one_error_line(capsys, "simulate").startswith(message)
+
+
+@pytest.mark.parametrize(
+    "item, message",
+    [
+        ("mpc.horizon=0", "--set mpc.horizon: must be an integer >= 1, got 0"),
+        ("mpc.horizon=four", "--set mpc.horizon: must be an integer >= 1, got 'four'"),
+        ("mpc.w_coll=", "--set mpc.w_coll: '' is not a TOML value"),
+        ("mpc.w_coll", "--set 'mpc.w_coll': expected SECTION.KEY=VALUE, e.g. mpc.w_coll=1e6"),
+        ("horizon=4", "--set 'horizon=4': expected SECTION.KEY=VALUE"),
+        ("mpc.horizn=4", "--set mpc.horizn: unknown key (did you mean 'horizon'?)"),
+        ("controller.margins=bogus", "--set controller.margins: bad margins 'bogus'"),
+        ("controller.coupling=mpc", "--set controller.coupling: must be one of ['ibr', 'nlp'], got 'mpc'"),
+    ],
+)
+def test_a_bad_set_item_is_one_line(item, message, capsys):
+    assert main(["simulate", "--controller", "orca", "--no-progress", "--set", item]) == 2
+    assert _one_error_line(capsys, "simulate").startswith(message)
+
+
+def test_file_problems_are_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["--config", "nope.toml", "simulate", "--controller", "orca"]) == 2
+    assert _one_error_line(capsys, "simulate") == "--config nope.toml: no such file"
+    (tmp_path / "bin.toml").write_bytes(b"\xff\xfe[mpc]\n")
+    assert main(["--config", "bin.toml", "simulate", "--controller", "orca"]) == 2
+    assert _one_error_line(capsys, "simulate") == "bin.toml: not UTF-8 text (a TOML file)"
+    _write(tmp_path, "", "a.toml"), _write(tmp_path, "", "b.toml")
+    assert main(["--config", "a.toml", "simulate", "--config", "b.toml", "--controller", "orca"]) == 2
+    assert "--config given twice" in _one_error_line(capsys, "simulate")
+
+
+def test_an_unknown_controller_in_a_file_is_one_line(tmp_path, capsys):
+    path = _write(tmp_path, '[controller]\ncontroller = "bogus"\n')
+    assert main(["simulate", "--config", str(path), "--no-progress"]) == 2
+    assert _one_error_line(capsys, "simulate").startswith(
+        f"{path}: controller.controller: unknown controller 'bogus'; choose from ['cmpc', 'dmpc', 'orca', "
+    )
+
+
+def test_a_missing_controller_is_the_parsers_error(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "--no-progress"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--controller (or [controller] controller)" in err
+
+
+def test_errors_from_the_python_api_are_config_errors(tmp_path):
+    with pytest.raises(ConfigError, match=r"^--set mpc.horizon: must be an integer >= 1, got 0$"):
+        load(None, ["mpc.horizon=0"])
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Numbers are checked before any work (issue 15's `--humans 100`)
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--humans", "100"], "--humans: n_humans must be in [0, 50], got 100"),
+        (["--humans", "-1"], "--humans: n_humans must be in [0, 50], got -1"),
+        (["--robots", "13"], "--robots must be in 1..12, got 13"),
+        (["--episodes", "0"], "--episodes must be >= 1, got 0"),
+        (["--seed", "-2"], "--seed must be >= 0, got -2"),
+        (["--set", "scenario.humans=100"], "--set scenario.humans: n_humans must be in [0, 50], got 100"),
+        (["--set", "mpc.horizon=100000"], "--set mpc.horizon: must be at most 100, got 100000"),
+        (["--set", "mpc.j_max=1e9"], "--set mpc.j_max: must be an integer >= 1, got 1000000000.0"),
+        (["--set", "env.time_limit=1e9"], "--set env.time_limit: must be at most 3600.0, got 1000000000.0"),
+        (
+            ["--set", "env.orca.max_neighbors=100000"],
+            "--set env.orca.max_neighbors: must be at most 1000, got 100000",
+        ),  # fmt: skip
+        (
+            ["--set", "world.dt=1e-6"],
+            "--set world.dt: env.time_limit (unset: the paper profile's 40.0): must be at most 100000 steps "
+            "of dt = 1e-06 s, got 40.0 s (39000000 steps)",
+        ),
+    ],
+)
+def test_simulate_numbers_are_refused_before_any_episode(options, message, capsys, monkeypatch):
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("episodes started")
+
+    monkeypatch.setattr("pipelines.loop.episode.run_episodes", no_episodes)
+    monkeypatch.setattr("pipelines.loop.episode.make_controller", no_episodes)
+    assert main(["simulate", "--controller", "cmpc", *options]) == 2  # progress bar on: none may start
+    assert _one_error_line(capsys, "simulate") == message
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The effective config in simulate's JSON and MCAP metadata
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_simulate_records_the_effective_config_in_json_and_mcap(tmp_path, capsys):
+    from pipelines.logs.reader import read_recording
+
+    path = _write(
+        tmp_path, '[controller]\ncontroller = "straight"\n[scenario]\nhumans = 2\n[env]\ntime_limit = 20\n'
+    )
+    out, rec = tmp_path / "run.json", tmp_path / "rec"
+    argv = ["--config", str(path), "--set", "mpc.w_coll=1e6", "simulate", "--json", str(out)]
+    argv += ["--record", str(rec), "--no-progress"]
+    assert main(argv) == 0
+    run = json.loads(out.read_text())["run"]
+    assert run["config_file"] == str(path)
+    config = run["config"]
+    assert config["env"]["time_limit"] == 20.0 and config["env"]["timeout_margin"] == 1.0  # the profile's
+    assert config["mpc"]["w_coll"] == 1e6 and config["scenario"]["humans"] == 2
+    assert set(config) == {"world", "env", "env.orca", "scenario", "controller", "mpc", "simulate", "sweep"}
+    (mcap,) = sorted(rec.glob("*.mcap"))
+    meta = read_recording(mcap).metadata
+    recorded = meta["run"]["config"]
+    recorded = json.loads(recorded) if isinstance(recorded, str) else recorded
+    assert recorded == config
+    env = meta["config"]["env"]
+    env = json.loads(env) if isinstance(env, str) else env
+    assert env["time_limit"] == 20.0  # what the simulator ran with
+
+
+# ----------------------------------------------------------------------------------------------------------
+# docs/examples/demo.toml is `make demo`
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _make_demo_argv() -> list[str]:
+    """The arguments of `crowdmpc` in the Makefile's demo recipe."""
+    lines = (REPO / "Makefile").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("demo:"))
+    recipe = ""
+    for line in lines[start + 1 :]:
+        if not line.startswith("\t"):
+            break
+        recipe += line.strip().removesuffix("\\") + " "
+    words = shlex.split(recipe)
+    return words[next(i for i, w in enumerate(words) if w.endswith("crowdmpc")) + 1 :]
+
+
+def _resolved(argv: list[str]):
+    from pipelines.cli import build_parser
+    from pipelines.commands.simulate import resolve_run
+
+    run = resolve_run(build_parser().parse_args(argv))
+    return run.spec, _objects(run.config), (run.json, run.plot, run.record)
+
+
+def test_demo_toml_resolves_to_make_demos_run(monkeypatch):
+    monkeypatch.chdir(REPO)  # where `make demo` runs; the paths are relative to it
+    demo = _make_demo_argv()
+    assert demo[0] == "simulate" and "--controller" in demo
+    assert _resolved(demo) == _resolved(["--config", str(DEMO_TOML.relative_to(REPO)), "simulate"])
+
+
+def _without_wall_clock(record: dict) -> dict:
+    solver = {k: v for k, v in record["solver"].items() if not k.endswith("_ms")}
+    return {**record, "solver": solver}
+
+
+def test_demo_toml_gives_make_demos_metrics(tmp_path, capsys):
+    demo = _make_demo_argv()
+    # outputs go to tmp_path: the command line's --record and --plot take precedence over the file's
+    outputs = {"--record": str(tmp_path / "cli"), "--plot": str(tmp_path / "cli.png")}
+    cli = [outputs.get(prev, word) for prev, word in zip(["", *demo[:-1]], demo, strict=True)]
+    assert main([*cli, "--json", str(tmp_path / "cli.json"), "--no-progress"]) == 0
+    argv = ["--config", str(DEMO_TOML), "simulate", "--json", str(tmp_path / "toml.json"), "--no-progress"]
+    argv += ["--record", str(tmp_path / "toml"), "--plot", str(tmp_path / "toml.png")]
+    assert main(argv) == 0
+    capsys.readouterr()
+    by_cli, by_toml = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "toml"))
+    assert [_without_wall_clock(r) for r in by_toml["episodes"]] == [
+        _without_wall_clock(r) for r in by_cli["episodes"]
+    ]
+    assert by_toml["run"]["config"]["controller"] == by_cli["run"]["config"]["controller"]
+    assert by_toml["run"]["config"]["mpc"] == by_cli["run"]["config"]["mpc"]
+    assert len(list((tmp_path / "toml").glob("*.mcap"))) == 1
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Sweeps: the config's experiment settings, its choices applied to every method, and the records
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_a_sweep_from_a_config_file_records_its_effective_config(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    path = _write(
+        tmp_path,
+        f'[sweep]\nexperiment = "baselines"\nout = "{out}"\nhumans = [2]\nepisodes_per_cell = 2\n'
+        'backend = "inline"\n[scenario]\nrobots = 2\n',
+    )
+    assert main(["--config", str(path), "sweep", "--no-progress"]) == 0
+    capsys.readouterr()
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert len(records) == 4 and all(r["n_robots"] == 2 for r in records)
+    for record in records:
+        assert record["config"]["env"]["time_limit"] == 40.0  # the cell's simulator, as in MCAP metadata
+    run = json.loads((out / "sweep.json").read_text())["runs"][-1]
+    assert run["config"]["config_file"] == str(path)
+    assert run["config"]["sweep"]["humans"] == [2] and run["config"]["scenario"]["robots"] == 2
+
+
+def test_records_without_a_config_still_load_and_resume(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--experiment", "baselines", "--humans", "2", "--backend", "inline", "--no-progress"]
+    assert main([*args, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    log = out / "episodes.jsonl"
+    old = [json.loads(line) for line in log.read_text().splitlines()]
+    for record in old:  # as written before records carried their config
+        record.pop("config")
+    log.write_text("".join(json.dumps(r) + "\n" for r in old))
+    capsys.readouterr()
+    assert main([*args, "--episodes-per-cell", "3", "--out", str(out)]) == 0
+    assert "6/6 episodes recorded (2 this run" in capsys.readouterr().err
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [("config" in r) for r in records] == [False] * 4 + [True] * 2
+
+
+def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path, capsys):
+    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--dry-run", "--out", str(tmp_path)]
+    assert main([*argv, "--set", "mpc.w_coll=1e6", "--set", "mpc.horizon=4"]) == 0
+    out = capsys.readouterr().out
+    assert "cmpc-social_lstm_eth-F-ibr-w_coll=1000000.0-m=none-paper-visible-h5-r3" in out
+    assert "dmpc-social_lstm_eth-F-ibr-w_coll=1000000.0-m=none-paper-visible-h5-r3" in out
+    # a file of defaults (what `config show` writes) changes no cell
+    main(["config", "show"])
+    defaults = _write(tmp_path, capsys.readouterr().out, "defaults.toml")
+    assert main([*argv, "--config", str(defaults)]) == 0
+    assert "cmpc-social_lstm_eth-F-ibr-m=none-paper-visible-h5-r3" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "experiment, item, message",
+    [
+        (
+            "table3",
+            "controller.flocking=false",
+            "--set controller.flocking: experiment 'table3' compares its methods' flocking",
+        ),  # fmt: skip
+        (
+            "coupling",
+            "mpc.coupled_mode=exact",
+            "--set mpc.coupled_mode: method 'NLP first-order' of experiment 'coupling' sets coupled_mode",
+        ),  # fmt: skip
+        ("table2", "env.time_limit=20", "--set env.time_limit: 20.0: a sweep's cells run a named profile"),
+        ("table2", "world.radius=0.2", "--set world.radius: 0.2: a sweep's cells run a named profile"),
+        ("table2", "mpc.jit=true", "--set mpc.jit: a sweep compiles by [sweep] jit"),
+        (
+            "baselines",
+            "controller.predictor=constant_velocity",
+            "--set controller.predictor: experiment 'baselines' fixes each method's predictor",
+        ),  # fmt: skip
+        ("table2", "sweep.episodes_per_cell=0", "--set sweep.episodes_per_cell: must be at least 1, got 0"),
+        ("table2", "sweep.workers=0", "--set sweep.workers: must be at least 1 and at most 4096, got 0"),
+    ],
+)
+def test_a_sweep_refuses_what_it_cannot_apply_in_one_line(experiment, item, message, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    argv = [
+        "sweep",
+        "--experiment",
+        experiment,
+        "--humans",
+        "7",
+        "--dry-run",
+        "--out",
+        str(out),
+        "--set",
+        item,
+    ]
+    assert main(argv) == 2
+    assert _one_error_line(capsys, "sweep").startswith(message)
+    assert not out.exists()
+
+
+def test_a_sweep_needs_an_experiment_and_a_directory(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["sweep", "--out", str(tmp_path)])
+    assert "--experiment (or [sweep] experiment)" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["sweep", "--set", "sweep.experiment=baselines"])
+    assert "--out (or [sweep] out)" in capsys.readouterr().err
+
+
+def test_commands_that_read_no_config_refuse_one(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--config", "run.toml", "zoo", "list"])
+    assert exc.value.code == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc: error: --config and --set apply to simulate, sweep and config, not zoo; "
+        "see 'crowdmpc --help'\n"
+    )

@@ -1,0 +1,180 @@
+"""Controllers register like predictor nets: ``crowdmpc --plugin module:Class`` (told apart from a net by what
+the class is), ``$CROWDMPC_CONTROLLERS`` and entry points in ``crowdmpc.controllers``; a plugin runs in
+``simulate`` and ``run_episode``, and every way to get it wrong is one line."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from importlib.metadata import EntryPoint
+from pathlib import Path
+
+import pytest
+
+from pipelines import plugins
+from pipelines.cli import main
+from pipelines.errors import PipelineError
+from pipelines.loop import spec as registry
+from pipelines.loop.controllers import (
+    ControllerSpec,
+    UnknownController,
+    controller_names,
+    make_controller,
+    register_controller_plugins,
+)
+from pipelines.loop.episode import run_episode
+from predictors import models
+from predictors.models import PLUGINS_ENV as NETS_ENV
+from predictors.models import model_names
+
+REPO = Path(__file__).resolve().parents[2]
+TOYS = "tests.plugins.toy_controller"
+TOY = f"{TOYS}:StraightLine"
+NET = "tests.plugins.toy_predictor:ToyNet"
+NEVER = "tests.plugins.never_imported:Controller"  # importing that module raises
+SHIPPED = ["cmpc", "dmpc", "orca", "straight"]
+
+
+@pytest.fixture(autouse=True)
+def _fresh_registries(monkeypatch, tmp_path_factory):
+    """No plugin registered before a test, none left after (the registries are per process)."""
+    monkeypatch.setattr(registry, "_PLUGINS", {})
+    monkeypatch.setattr(models, "_PLUGINS", {})
+    monkeypatch.delenv(registry.PLUGINS_ENV, raising=False)
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    capsys.readouterr()
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def parser_error(capsys, *argv: str) -> str:
+    """The one line of an argparse error (exit 2)."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main(list(argv))
+    assert exc.value.code == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and "Traceback" not in captured.err
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    return lines[0]
+
+
+# ---------------------------------------------------------------------------------------------- the flow
+def test_simulate_runs_a_plugin_controller(tmp_path, capsys):
+    out = tmp_path / "toy.json"
+    code, stdout, _ = run(
+        capsys, "--plugin", TOY, "simulate", "--controller", TOY, "--humans", "2", "--episodes", "2",
+        "--no-progress", "--json", str(out),
+    )  # fmt: skip
+    assert code == 0 and stdout.startswith(f"controller {TOY} | predictor - |")
+    payload = json.loads(out.read_text())
+    assert [e["controller"] for e in payload["episodes"]] == ["straight_line", "straight_line"]
+    assert all(e["metrics"]["success"] and e["predictor"] is None for e in payload["episodes"])
+    assert os.environ[registry.PLUGINS_ENV] == TOY  # for the processes the command starts
+    assert NETS_ENV not in os.environ  # a controller is no model kind
+    assert TOY in controller_names() and TOY not in model_names()
+
+
+def test_a_plugin_controller_runs_through_run_episode_like_a_shipped_one():
+    register_controller_plugins([TOY])
+    spec = ControllerSpec(TOY)
+    assert spec.kind == registry.ControllerKind(uses_predictor=False, compiles=False)
+    assert spec.predictor_name is None
+    controller = make_controller(spec)
+    result = run_episode(controller, seed=3, scenario="perpendicular", n_humans=4)
+    assert result.controller == "straight_line" and result.metrics.success
+    assert registry.controller_plugin(TOY).source == "plugin"
+
+
+def test_a_net_plugin_is_still_a_model_kind():
+    assert plugins.register_plugins([NET, TOY]) == ["model", "controller"]
+    assert NET in model_names() and NET not in controller_names()
+    assert os.environ[NETS_ENV] == NET and os.environ[registry.PLUGINS_ENV] == TOY
+
+
+def test_a_new_process_sees_the_registered_controllers(tmp_path):
+    register_controller_plugins([TOY])
+    script = "from pipelines.loop.controllers import controller_names; print(controller_names())"
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO, env={**os.environ}, capture_output=True, text=True
+    )
+    assert done.returncode == 0 and done.stdout == f"{sorted([*SHIPPED, TOY])}\n"
+
+
+def test_an_entry_point_names_a_controller(monkeypatch):
+    entry = EntryPoint(name="straight_line", value=TOY, group=registry.ENTRY_POINT_GROUP)
+    shadow = EntryPoint(name="cmpc", value=TOY, group=registry.ENTRY_POINT_GROUP)  # shipped names win
+    monkeypatch.setattr(registry.metadata, "entry_points", lambda group: [entry, shadow])
+    assert controller_names() == sorted([*SHIPPED, "straight_line"])
+    result = run_episode(
+        make_controller(ControllerSpec("straight_line")), seed=0, scenario="circle", n_humans=2
+    )
+    assert result.metrics.success and registry.controller_plugin("straight_line").source == "entry point ?"
+    assert make_controller(ControllerSpec("cmpc")).name == "cmpc"
+
+
+# ------------------------------------------------------------------------------------------ bad plugins
+def test_an_unknown_controller_is_one_line_and_an_unregistered_plugin_is_never_imported(capsys):
+    line = parser_error(capsys, "simulate", "--controller", "bogus")
+    assert line == (
+        "crowdmpc simulate: error: argument --controller: invalid choice: 'bogus' (choose from 'cmpc', "
+        "'dmpc', 'orca', 'straight'); see 'crowdmpc simulate --help'"
+    )
+    line = parser_error(capsys, "simulate", "--controller", NEVER)
+    assert line == (
+        f"crowdmpc simulate: error: argument --controller: controller {NEVER!r} is a plugin that is not "
+        f"registered; register it with `crowdmpc --plugin {NEVER} COMMAND ...` or "
+        f"{registry.PLUGINS_ENV}={NEVER}; see 'crowdmpc simulate --help'"
+    )
+    assert "tests.plugins.never_imported" not in sys.modules
+    with pytest.raises(UnknownController, match=r"unknown controller 'nope'; choose from \['cmpc', "):
+        ControllerSpec("nope")
+    register_controller_plugins([TOY])
+    line = parser_error(capsys, "simulate", "--controller", "bogus")
+    assert f"'straight', '{TOY}')" in line  # the registered plugins are choices too
+
+
+@pytest.mark.parametrize(
+    "plugin, message",
+    [
+        (
+            f"{TOYS}:NoAct",
+            f"model '{TOYS}:NoAct': <class '{TOYS}.NoAct'> is not a torch.nn.Module subclass (a predictor "
+            "net), nor a controller class with reset, act, describe and close",
+        ),
+        (
+            f"{TOYS}:BadFacts",
+            f"controller '{TOYS}:BadFacts': BadFacts.uses_predictor must be a bool, got 'yes'",
+        ),
+        (
+            "toy_controller.py",
+            "plugin 'toy_controller.py' is not of the form module:NetClass or module:Controller",
+        ),
+        (f"{TOYS}:Nope", f"plugin '{TOYS}:Nope': module "),
+    ],
+)
+def test_a_bad_plugin_is_a_one_line_parser_error(plugin, message, capsys):
+    line = parser_error(capsys, "--plugin", plugin, "simulate", "--controller", "orca")
+    assert line.startswith(f"crowdmpc: error: {message}"), line
+    assert registry.PLUGINS_ENV not in os.environ
+
+
+def test_a_plugin_that_fails_to_build_is_one_line(capsys):
+    broken = f"{TOYS}:Broken"
+    code, stdout, err = run(capsys, "--plugin", broken, "simulate", "--controller", broken, "--no-progress")
+    assert code == 2 and stdout == ""
+    assert err == (
+        f"crowdmpc simulate: error: controller {broken!r}: building it failed: ValueError: speed must be a "
+        "positive number of m/s, got -1.0\n"
+    )
+    nameless = f"{TOYS}:Nameless"
+    register_controller_plugins([nameless])
+    with pytest.raises(PipelineError, match="needs a non-empty str name and a predictor"):
+        make_controller(ControllerSpec(nameless))

@@ -1,0 +1,122 @@
+"""The closed loop through gymnasium's API: CMPC and the ORCA baseline drive crowdmpc/CrowdNav-v0 to the
+episodes, metrics and observer calls of ``run_episode``; any policy's episodes are recorded to MCAP; the
+docs example runs."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import crowdsim
+from crowdsim.env import EnvConfig
+from crowdsim.gym_env import CrowdNavEnv
+from crowdsim.gym_wrappers import VelocityControl
+from pipelines.errors import PipelineError
+from pipelines.logs.reader import episode_view, read_recording
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.logs.review import check_recording
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
+from pipelines.loop.gym_loop import ObserveEpisodes, run_gym_episode
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "gym_velocity_policy.py"
+
+
+class Calls:
+    """An EpisodeObserver that keeps what it is given."""
+
+    def __init__(self) -> None:
+        self.meta: dict[str, Any] = {}
+        self.steps: list[tuple[Any, Any, Any]] = []
+        self.result: Any = None
+
+    def on_reset(self, obs, meta) -> None:
+        self.meta = dict(meta)
+
+    def on_step(self, obs, out, next_obs) -> None:
+        self.steps.append((obs, out, next_obs))
+
+    def on_end(self, result) -> None:
+        self.result = result
+
+
+@pytest.mark.parametrize("name", ["orca", "cmpc"])
+def test_a_controller_through_the_gym_env_is_run_episode(name):
+    """The same seed gives the same episode, bit for bit: trajectories, metrics, solver statuses and what the
+    observers see (CMPC with the constant-velocity predictor, as `crowdmpc simulate --controller cmpc`)."""
+    spec = ControllerSpec(name, "constant_velocity")
+    seen, gym_seen = Calls(), Calls()
+    direct = run_episode(make_controller(spec), seed=4, scenario="circle", n_humans=5, observers=[seen])
+    env = gym.make(crowdsim.ENV_ID, n_humans=5)
+    through = run_gym_episode(make_controller(spec), env, seed=4, observers=[gym_seen])
+
+    np.testing.assert_array_equal(through.robot_positions, direct.robot_positions)
+    np.testing.assert_array_equal(through.human_positions, direct.human_positions)
+    assert through.metrics.as_dict() == direct.metrics.as_dict()
+    assert (through.statuses, through.fallbacks) == (direct.statuses, direct.fallbacks)
+    np.testing.assert_array_equal(through.iterations, direct.iterations)
+    record, direct_record = through.record().to_dict(), direct.record().to_dict()
+    for r in (record, direct_record):
+        r["solver"] = {k: v for k, v in r["solver"].items() if not k.endswith("_ms")}  # wall times
+    assert record == direct_record
+    assert gym_seen.meta == seen.meta and len(gym_seen.steps) == len(seen.steps) == direct.metrics.n_steps
+    assert gym_seen.result is through
+    for (obs, out, nxt), (obs2, out2, nxt2) in zip(gym_seen.steps, seen.steps, strict=True):
+        assert obs == obs2 and nxt == nxt2  # ComparableObservation against the loop's own
+        np.testing.assert_array_equal(out.accelerations, out2.accelerations)
+
+
+def test_run_gym_episode_takes_reset_options_and_refuses_velocity_actions():
+    env = CrowdNavEnv(n_humans=4, max_robots=4, config=EnvConfig(time_limit=2.0, timeout_margin=0.0))
+    result = run_gym_episode(
+        make_controller(ControllerSpec("straight")), env, seed=1, options={"n_humans": 2, "n_robots": 2}
+    )
+    assert (result.n_humans, result.n_robots, result.metrics.n_steps) == (2, 2, 5)
+    assert result.robot_positions.shape == (6, 2, 2)
+    with pytest.raises(PipelineError, match="pass it without VelocityControl"):
+        run_gym_episode(make_controller(ControllerSpec("straight")), VelocityControl(env), seed=1)
+    with pytest.raises(PipelineError, match="expected a crowdmpc/CrowdNav-v0 environment, got CartPoleEnv"):
+        ObserveEpisodes(gym.make("CartPole-v1"), [])
+
+
+def test_a_policys_episodes_are_recorded_to_mcap(tmp_path):
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        base = CrowdNavEnv(n_humans=3, config=EnvConfig(time_limit=3.2, timeout_margin=0.0))
+        env = VelocityControl(ObserveEpisodes(base, [recorder], controller="still", meta={"note": "test"}))
+        for seed in (5, 6):
+            env.reset(seed=seed)
+            done = False
+            while not done:
+                *_, terminated, truncated, info = env.step(np.zeros((3, 2)))
+                done = terminated or truncated
+    results = env.env.results  # ObserveEpisodes's
+    assert [r.seed for r in results] == [5, 6] and all(r.controller == "still" for r in results)
+    assert results[1].metrics == info["episode_metrics"] and results[1].metrics.n_steps == 8
+    assert [p.name for p in recorder.paths] == ["circle_seed000005.mcap", "circle_seed000006.mcap"]
+    rec = read_recording(recorder.paths[1])
+    _, errors = check_recording(rec)
+    assert not errors and not rec.truncated
+    assert rec.episode()["controller"] == "still" and rec.config()["env"]["time_limit"] == 3.2
+    view = episode_view(rec)
+    np.testing.assert_allclose(view.robot_positions, results[1].robot_positions)
+    assert len(rec.data("/episode/metrics")) == 1
+
+
+def test_the_docs_example_runs_and_records(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("gym_velocity_policy", EXAMPLE)
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    example.main(episodes=2, out_dir=str(tmp_path / "runs"), n_humans=3)
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("seed 0: return ") and out[1].startswith("seed 1: return ")
+    assert out[-1] == f"wrote 2 MCAP files to {tmp_path / 'runs'}"
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == [
+        "circle_seed000000.mcap",
+        "circle_seed000001.mcap",
+    ]

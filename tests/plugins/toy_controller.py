@@ -1,0 +1,76 @@
+"""A user's controller as a plugin: ``crowdmpc --plugin tests.plugins.toy_controller:StraightLine simulate
+--controller tests.plugins.toy_controller:StraightLine``.
+
+Every robot heads straight for its goal at a constant ``speed`` (m/s), blind to everyone else, and stops on
+it: the commanded velocity is ``speed`` towards the goal, or the whole remaining offset in one step when that
+is shorter; the acceleration that reaches it in one step is clipped to the bound.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from crowdsim.control import ControlOutput
+from crowdsim.env import EnvConfig, Observation
+from crowdsim.world import A_MAX
+
+
+class StraightLine:
+    uses_predictor = False  # the controller's facts (pipelines.loop.spec); both default to False
+    compiles = False
+
+    name = "straight_line"
+    predictor = None
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False, speed: float = 0.8):
+        self.a_max = A_MAX if env_config is None else env_config.a_max  # m/s^2, per component
+        self.speed = speed  # m/s
+
+    def reset(self, obs: Observation) -> None:
+        pass
+
+    def act(self, obs: Observation) -> ControlOutput:
+        started = time.perf_counter()
+        offset = obs.robot_goals - obs.robot_positions
+        dist = np.linalg.norm(offset, axis=1, keepdims=True)
+        wanted = offset / np.maximum(dist, 1e-9) * np.minimum(self.speed, dist / obs.dt)
+        a = np.clip((wanted - obs.robot_velocities) / obs.dt, -self.a_max, self.a_max)
+        return ControlOutput(accelerations=a, solve_time_s=time.perf_counter() - started)
+
+    def describe(self) -> dict[str, Any]:
+        return {"predictor_sha256": None, "config": {"speed": self.speed}}
+
+    def close(self) -> None:
+        pass
+
+
+class NoAct:
+    """Not a controller: ``--plugin`` refuses it in one line."""
+
+    name = "no_act"
+
+    def reset(self, obs: Observation) -> None:
+        pass
+
+
+class BadFacts(StraightLine):
+    """States a fact that is no bool: refused when registered."""
+
+    uses_predictor = "yes"  # type: ignore[assignment]
+
+
+class Broken(StraightLine):
+    """Refuses to be built, as a plugin validating its options would."""
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False):
+        super().__init__(spec, env_config, jit=jit, speed=-1.0)
+        raise ValueError(f"speed must be a positive number of m/s, got {self.speed}")
+
+
+class Nameless(StraightLine):
+    """Builds an object without a name: make_controller refuses it."""
+
+    name = ""
