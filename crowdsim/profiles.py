@@ -11,8 +11,8 @@
   spawn separation, its own perpendicular geometry, success once every robot has reached its goal at least
   once.
 
-Where the robots start and end is not public; both profiles keep ``crowdsim.scenarios.robot_layout``'s row,
-which isolates the published conventions. Visibility is chosen separately (``make_env_config``); CrowdNav's
+Where the robots start and end is not public; both profiles keep ``crowdsim.scenarios.robot_layout``'s
+formation (the row up to 3 robots), which isolates the published conventions. Visibility is chosen separately (``make_env_config``); CrowdNav's
 own default is invisible robots, the fork's configuration visible ones.
 """
 

@@ -5,7 +5,9 @@ object: ``EnvConfig.from_world`` and ``MPCConfig.from_world`` build the simulato
 from one, ``EnvConfig.world()`` reads it back, and the closed loop refuses a controller whose MPC or
 predictor disagrees with the simulator it drives in (``pipelines.loop.mpc.check_world``). ``WORLD`` holds the
 defaults, which the module constants name for the code that only needs a number. The crowd geometry (circle
-radius, square width) is the same in every simulation profile (``crowdsim.profiles``) and lives here too.
+radius, square width) is the same in every simulation profile (``crowdsim.profiles``) and lives here too, and
+so do the two robot-robot distances that the MPC's costs and the robots' formations
+(``crowdsim.scenarios``) must agree on: ``MPCConfig`` takes them as its defaults.
 """
 
 from __future__ import annotations
@@ -48,3 +50,11 @@ A_MAX: Final[float] = WORLD.a_max
 
 CIRCLE_RADIUS: Final[float] = 5.0  # m, circle crossing (the paper's fork, env_m.config; CrowdNav's is 4 m)
 SQUARE_WIDTH: Final[float] = 10.0  # m, side of the perpendicular-crossing square (env_m.config)
+
+# Robot-robot distances (module constants, not WorldFacts fields: the MPC may override them per run, the
+# formations do not follow). MPCConfig's d_min and d_flock default to these; crowdsim.scenarios spaces the
+# robots' starts and goals with them.
+D_MIN: Final[float] = 0.8  # m, d_min (Table I): the closest a robot may come to another agent, Eqs. 11-12
+# m, d_ij (Eq. 15): desired distance between two robots of the flock. Not in the paper; mpc/config.py's
+# docstring has why 1.2 m: the tightest spacing at which the Eq. 12 penalty no longer fights the flocking.
+D_FLOCK: Final[float] = 1.2

@@ -12,7 +12,7 @@ def test_robot_row_three_robots_and_twelve():
     starts, goals = robot_layout(3)
     np.testing.assert_array_equal(starts, [[-1, -5], [0, -5], [1, -5]])
     np.testing.assert_array_equal(goals, [[-1, 5], [0, 5], [1, 5]])
-    starts, goals = robot_layout(12)
+    starts, goals = robot_layout(12, "row")
     np.testing.assert_allclose(starts[[0, -1], 0], [-5.5, 5.5])
     np.testing.assert_allclose(np.diff(starts[:, 0]), 1.0)
     np.testing.assert_array_equal(robot_layout(1)[0], [[0, -5]])

@@ -1,0 +1,201 @@
+"""Success, collision, travel time and control-step time against the number of robots.
+
+For every number of robots M (``--robots``, default 3 5 6 12) and controller (``--controllers``, default CMPC
+and DMPC with ``--predictor``, default constant velocity), ``--episodes`` episodes (default 50) with
+``--humans`` humans (default 7) under the paper profile: episode ``i`` runs scenario ``circle`` for even
+``i`` and ``perpendicular`` for odd ``i`` (``--scenarios`` to change), seed ``--seed + i``. The robots stand
+in ``--formation`` (default ``auto``, crowdsim.scenarios.choose_formation: then episode ``i`` is exactly
+``CrowdEnv.reset(seed, scenario, humans, M)``); ``--formation row`` gives the first layout (1 m row, goals
+10 m north) for a before/after comparison.
+
+Per row: success, collision (robot-human below d_min) and timeout rates in %, mean travel time over the
+successful episodes, the smallest robot-robot distance, the robots that reached their goals (% of all),
+and the control step (``ControlOutput.solve_time_s``: prediction, every solve and the IBR bookkeeping) as
+median / p95 / p99 in ms over every step of every episode, with the steps that ran to j_max IBR iterations
+and those that fell back (braking). The machine is shared: the load average is printed; run it under
+``nice`` and repeat when the figures look noisy.
+
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py                       # 50 episodes a row
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --episodes 4 --controllers cmpc --robots 3 6 12
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --formation row --json before.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+from typing import Any, cast
+
+import numpy as np
+
+from crowdsim.env import CrowdEnv
+from crowdsim.metrics import aggregate, episode_metrics
+from crowdsim.profiles import make_env_config
+from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.mpc import MPCController
+
+CONTROLLERS = ("cmpc", "dmpc")
+
+
+def step_stats(seconds: list[float]) -> dict[str, float]:
+    """Median, 95th and 99th percentile of control-step wall times, in ms."""
+    ms = np.asarray(seconds, dtype=float) * 1e3
+    if ms.size == 0:
+        return {"median_ms": math.nan, "p95_ms": math.nan, "p99_ms": math.nan}
+    return {
+        "median_ms": float(np.median(ms)),
+        "p95_ms": float(np.percentile(ms, 95)),
+        "p99_ms": float(np.percentile(ms, 99)),
+    }
+
+
+def run_row(
+    controller: str,
+    predictor: str,
+    n_robots: int,
+    n_humans: int,
+    episodes: int,
+    seed: int,
+    scenarios: tuple[str, ...],
+    formation: str,
+) -> dict[str, Any]:
+    """``episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
+    env_config = make_env_config("paper")
+    env = CrowdEnv(env_config)
+    mpc = MPCController(ControllerSpec(controller, predictor), distributed=controller == "dmpc")
+    metrics, times, iterations, fallbacks = [], [], [], 0
+    t0 = time.perf_counter()
+    try:
+        for i in range(episodes):
+            layout = make_layout(
+                scenarios[i % len(scenarios)],
+                n_humans,
+                n_robots,
+                np.random.default_rng(seed + i),
+                radius=env_config.radius,
+                v_pref=env_config.v_pref,
+                crossing=env_config.crossing,
+                spawn_separation=env_config.spawn_separation,
+                formation=cast(Formation, formation),  # one of FORMATIONS (argparse's choices)
+            )
+            obs = env.reset_layout(layout)
+            mpc.reset(obs)
+            done = False
+            while not done:
+                out = mpc.act(obs)
+                times.append(out.solve_time_s)
+                iterations.append(out.iterations)
+                fallbacks += out.fallback is not None
+                obs, done, _ = env.step(out.accelerations)
+            metrics.append(episode_metrics(env.trajectory()))
+    finally:
+        mpc.close()
+    agg = aggregate(metrics)
+    reached = [np.isfinite(m.reach_times).mean() for m in metrics]
+    return {
+        "controller": controller,
+        "robots": n_robots,
+        "formation": choose_formation(n_robots) if formation == "auto" else formation,
+        "episodes": episodes,
+        "success_rate": agg["success_rate"],
+        "collision_rate": agg["collision_rate"],
+        "timeout_rate": agg["timeout_rate"],
+        "travel_time_mean": agg["travel_time_mean"],
+        "min_distance_robots": float(min(m.min_distance_robots for m in metrics)),
+        "reached_pct": 100.0 * float(np.mean(reached)),
+        "steps": len(times),
+        "j_max_steps": int(sum(it >= mpc.cfg.j_max for it in iterations)),
+        "fallback_steps": fallbacks,
+        **step_stats(times),
+        "wall_s": time.perf_counter() - t0,
+    }
+
+
+def _json_safe(value: Any) -> Any:
+    """NaN and inf as null (strict JSON), tuples as lists."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _fmt(x: float, spec: str) -> str:
+    return format(x, spec) if math.isfinite(x) else "-".rjust(len(format(0.0, spec)))
+
+
+def print_table(rows: list[dict[str, Any]]) -> None:
+    head = (
+        f"{'ctrl':<5} {'M':>3} {'formation':<9} {'succ%':>6} {'coll%':>6} {'tout%':>6} {'travel s':>8} "
+        f"{'min rr m':>8} {'reach%':>6} {'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'steps':>6} "
+        f"{'j_max':>5} {'fallb':>5}"
+    )
+    print(head)
+    for r in rows:
+        print(
+            f"{r['controller']:<5} {r['robots']:>3} {r['formation']:<9} {r['success_rate']:6.1f} "
+            f"{r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} {_fmt(r['travel_time_mean'], '8.2f')} "
+            f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
+            f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
+            f"{r['fallback_steps']:5d}"
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--robots", type=int, nargs="+", default=[3, 5, 6, 12])
+    parser.add_argument("--controllers", nargs="+", choices=CONTROLLERS, default=list(CONTROLLERS))
+    parser.add_argument("--predictor", default="constant_velocity")
+    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per row (default 50)")
+    parser.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
+    parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
+    parser.add_argument("--formation", choices=FORMATIONS, default="auto")
+    parser.add_argument("--json", help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+
+    report: dict[str, Any] = {"load_before": os.getloadavg(), "args": vars(args)}
+    rows = []
+    for controller in args.controllers:
+        for m in args.robots:
+            rows.append(
+                run_row(
+                    controller,
+                    args.predictor,
+                    m,
+                    args.humans,
+                    args.episodes,
+                    args.seed,
+                    tuple(args.scenarios),
+                    args.formation,
+                )
+            )
+    report["load_after"] = os.getloadavg()
+    report["rows"] = rows
+
+    print(
+        f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
+        f"({'/'.join(args.scenarios)}), formation {args.formation}"
+    )
+    print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
+    print_table(rows)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(_json_safe(report), f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
