@@ -5,9 +5,11 @@ equation numbers are the paper's (Le et al., "Multi-robot cooperative navigation
 learning-based model predictive control approach").
 
 The facts the MPC shares with the simulator and the predictors (``tau``, ``v_max``, ``a_max``) default to
-``crowdsim.world``, their one source. Table I's ``L`` (observed steps) is not here: it belongs to the
-predictor (``Predictor.obs_len``, 9 for every zoo model), and the simulator keeps ``crowdsim.world.OBS_LEN``
-rows of history for it; the closed loop checks that they agree (``pipelines.loop.mpc.check_world``).
+``crowdsim.world``, their one source; so do ``d_min`` and ``d_flock``, which the robots' start and goal
+formations (``crowdsim.scenarios``) are spaced with. Table I's ``L`` (observed steps) is not here: it belongs
+to the predictor (``Predictor.obs_len``, 9 for every zoo model), and the simulator keeps
+``crowdsim.world.OBS_LEN`` rows of history for it; the closed loop checks that they agree
+(``pipelines.loop.mpc.check_world``).
 
 The two values the paper uses without giving them:
 
@@ -35,11 +37,16 @@ from mpc.errors import MPCConfigError
 # Option types as Literals (values stay plain strings in JSON and MCAP metadata); the tuples are their values.
 Solver = Literal["fatrop", "ipopt"]
 ParallelMode = Literal["serial", "threads"]  # how DMPC runs the robots' local solves (see mpc/dmpc.py)
+# how a DMPC iteration turns the robots' best responses into the new plans (see mpc/dmpc.py)
+DMPCUpdate = Literal["jacobi", "gauss_seidel", "relaxed", "sequential_accept"]
+DMPCStop = Literal["regret", "no_improvement"]  # when DMPC's iterations end (MPCConfig.dmpc_stop)
 # coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
 CoupledMode = Literal["auto", "exact", "first_order"]
 OnGoal = Literal["brake", "track"]  # what a robot that has reached its goal does (MPCConfig.on_goal)
 SOLVERS: Final[tuple[Solver, ...]] = get_args(Solver)
 PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
+DMPC_UPDATES: Final[tuple[DMPCUpdate, ...]] = get_args(DMPCUpdate)
+DMPC_STOPS: Final[tuple[DMPCStop, ...]] = get_args(DMPCStop)
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
 ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
 
@@ -59,13 +66,13 @@ class MPCConfig:
     )  # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
     a_max: float = world.A_MAX  # a_max, m/s^2, bound on each acceleration component, Eq. 6
     rho: float = 0.5  # rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11
-    d_min: float = 0.8  # d_min, m, minimum allowed distance, Eqs. 11 and 12
+    d_min: float = world.D_MIN  # d_min, m, minimum allowed distance, Eqs. 11 and 12
     mu: float = 30.0  # mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, Eq. 12
     j_max: int = 10  # j_max, maximum IBR iterations, Algorithms 1 and 2
     xi: float = 1e-3  # xi, CMPC convergence threshold on |F^(j) - F^(j-1)|, Algorithm 1
     epsilon: float = 1e-3  # epsilon, DMPC improvement and epsilon-Nash threshold, Algorithm 2
     # --- omitted by the paper (see the module docstring) ------------------------------------------------
-    d_flock: float = 1.2  # d_ij, m, desired distance between two robots of the flock, Eq. 15
+    d_flock: float = world.D_FLOCK  # d_ij, m, desired distance between two robots of the flock, Eq. 15
     delta: float = 1e-3  # delta, goal-normalisation offset (Eq. 7) and norm smoothing (Eq. 15)
     # --- robots on their goals (not in the paper, whose episodes end when its single robot arrives) -------
     # "track": a robot that has reached its goal stays in the optimisation with its goal term (the reference
@@ -109,6 +116,19 @@ class MPCConfig:
     dmpc_parallel: ParallelMode = (
         "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
     )
+    # DMPC's update (mpc/dmpc.py has the measurements). "jacobi": Algorithm 2 as printed, every robot
+    # best-responds to the others' plans of iteration j-1 and keeps its own improvement; "gauss_seidel":
+    # the robots solve one after the other, each against the latest plans; "relaxed": Jacobi, each robot
+    # moving only dmpc_relaxation of the way to its best response; "sequential_accept": Jacobi's solves
+    # (parallel), then the improvements are accepted one robot at a time, largest first, each re-checked
+    # against the plans accepted before it (every accepted plan lowers the potential F by >= epsilon).
+    dmpc_update: DMPCUpdate = "jacobi"
+    dmpc_relaxation: float = 0.5  # in (0, 1], the step towards the best response of dmpc_update="relaxed"
+    # When DMPC's iterations end (before j_max). "regret": Algorithm 2's lines 12-16, no robot's new plan is
+    # worse by epsilon than its old one against the others' new plans; "no_improvement": an iteration in
+    # which no robot keeps a new plan, i.e. no best response to the current plans improves by epsilon (the
+    # epsilon-Nash definition itself, at u^(j-1)).
+    dmpc_stop: DMPCStop = "regret"
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
@@ -128,7 +148,7 @@ class MPCConfig:
             if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
                 raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
         positive = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi", "epsilon", "delta")
-        positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s")
+        positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")
         non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty")
         for name in positive + non_negative:
             value = getattr(self, name)
@@ -145,6 +165,12 @@ class MPCConfig:
             raise MPCConfigError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         if self.dmpc_parallel not in PARALLEL_MODES:
             raise MPCConfigError(f"dmpc_parallel must be one of {PARALLEL_MODES}, got {self.dmpc_parallel!r}")
+        if self.dmpc_update not in DMPC_UPDATES:
+            raise MPCConfigError(f"dmpc_update must be one of {DMPC_UPDATES}, got {self.dmpc_update!r}")
+        if self.dmpc_stop not in DMPC_STOPS:
+            raise MPCConfigError(f"dmpc_stop must be one of {DMPC_STOPS}, got {self.dmpc_stop!r}")
+        if not 0 < self.dmpc_relaxation <= 1:
+            raise MPCConfigError(f"dmpc_relaxation must be in (0, 1], got {self.dmpc_relaxation!r}")
         if self.on_goal not in ON_GOAL_MODES:
             raise MPCConfigError(f"on_goal must be one of {ON_GOAL_MODES}, got {self.on_goal!r}")
         if self.coupled_mode not in COUPLED_MODES:

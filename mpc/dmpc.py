@@ -1,19 +1,73 @@
-"""Algorithm 2, IBR-based distributed MPC with the epsilon-Nash stopping rule.
+"""Algorithm 2, IBR-based distributed MPC with the epsilon-Nash stopping rule, and two repairs of its update.
 
 At iteration ``j``: predict the humans given the robots' plans of iteration ``j-1``; every robot ``i`` solves
 its local NLP (Eq. 5) given the others' plans ``x_-i^(j-1)``; it keeps the new plan only if
 ``C_i(u_i^(j), u_-i^(j-1)) <= C_i(u_i^(j-1), u_-i^(j-1)) - epsilon`` (else ``u_i^(j) = u_i^(j-1)``); the loop
 ends when every robot satisfies ``C_i(u_i^(j), u_-i^(j)) <= C_i(u_i^(j-1), u_-i^(j)) + epsilon`` or at
 ``j_max``. A robot whose controls are pinned (``on_goal="brake"``) does not play: its plan is braking. A
-failed local solve counts as a rejected plan.
+failed local solve counts as a rejected plan. That is ``dmpc_update="jacobi"``, ``dmpc_stop="regret"``, the
+default.
 
-Parallelism. The local solves of one iteration are independent. CasADi 3.8 releases the GIL while a solver
-runs, so ``dmpc_parallel="threads"`` really runs them concurrently, each robot on its own solver instance (one
-instance shared by threads segfaults). Whether that pays depends on free cores. benchmarks/control_step.py
---dmpc-parallel, 3 robots, 7 humans, closed loop on this 2-core machine: median step 32.7 ms serial vs
-23.6 ms threads with the machine otherwise idle (load 1.0), but 33.7 ms vs 50.2 ms with the other engineers'
-jobs running (load 3.5-4.4): warm local solves took 1-2 ms (IPOPT; Fatrop's take 0.5-1 ms), so waiting
-for a core costs as much as the work.
+Why the paper's update cycles. Every robot best-responds to the others' *old* plans at once (a Jacobi
+update). Where robots stand close, each dodges the others' old plans and the new plans collide with each
+other; the next iteration undoes it. Measured on ``CrowdEnv().reset(0, "circle", 7, 6)`` (6 robots, 7 humans,
+constant velocity, 40 steps): every step ran to j_max = 10; all 6 robots kept a new plan in every iteration;
+the epsilon-Nash test failed by more than 1e3 (a robot-robot penalty, w_coll = 1e7) in every iteration; F^(j)
+of a step alternated 4.65e6, 6.36e6, 4.44e6, 6.09e6, ...: a period-2 cycle between colliding plans. With 3
+robots from rest in a 1 m row it already alternates 2.1e7, 47, 1.7e7, 42, ... (tests/mpc/
+test_dmpc_convergence.py); on the circle at M = 3 35 % of the steps run to j_max, 86 % of iterations failing
+the test by more than epsilon.
+
+The repairs (``dmpc_update``). The game is an exact potential game (Lemma 1): changing one robot's plan
+changes F (Eq. 16) by exactly the change of that robot's C_i. So a plan kept because it lowers C_i by epsilon
+*against the plans in force when it is kept* lowers F by epsilon, and an update built from such steps cannot
+cycle.
+
+* ``"gauss_seidel"``: the robots solve one after the other (index order), each against the latest plans
+  (those kept earlier in the sweep), and keep or reject at once. Sequential: nothing to run in parallel.
+* ``"sequential_accept"``: the M solves of Algorithm 2 (in parallel, against u^(j-1)); then the coordinator
+  keeps the best responses one at a time, largest improvement first, each re-checked against the plans kept
+  before it. The first robot's test is Algorithm 2's own; a later robot whose response no longer improves
+  keeps its plan and solves again next iteration.
+* ``"relaxed"``: Jacobi, each robot moving ``dmpc_relaxation`` (alpha) of the way to its best response, kept
+  if that lowers C_i(., u_-i^(j-1)) by epsilon. No guarantee, and measured worse: half a best response can
+  collide where neither end does (from rest, robots then do not move at all; F - F* below).
+
+The stop (``dmpc_stop``). ``"regret"`` is lines 12-16. After a Gauss-Seidel sweep it nearly always holds at
+once (a new plan rarely loses to the shifted old one): one sweep a step, robots far from an equilibrium.
+``"no_improvement"`` ends at an iteration in which no robot keeps a new plan: no best response to the current
+plans improves by epsilon, which is the paper's definition of an epsilon-Nash equilibrium itself rather than a
+proxy for it. With epsilon = 1e-3 on costs of 10-1000 the improvements creep on for many iterations, so most
+steps still reach j_max, but with F falling at every one of them.
+
+Measured on recorded CMPC steps (7 humans, constant velocity; F* = CMPC's joint optimum of the same step):
+F - F* median / p90 / max, and IBR iterations per step:
+
+    M = 3 (40 steps)                    median     p90      max   its        M = 6 (30 steps)
+    jacobi, regret                       0.117    10.3     71.4   4.67       12.9   3466    39016   8.40
+    gauss_seidel, regret                 0.212     5.8     55.5   1.12       27.0   1599    62699   1.33
+    gauss_seidel, no_improvement         0.004    0.06     29.7   6.08        1.2   10.1     35.2   9.07
+    sequential_accept, no_improvement    0.007    0.33     29.7   7.70        2.8   21.9     60.6   9.20
+    relaxed (0.5), regret                3.6     14655    2.1e6   1.07        746   4.3e5   2.6e6   1.40
+
+and in closed loop, benchmarks/dmpc_scaling.py (3 circle episodes, 7 humans): at M = 6 jacobi succeeds in
+1 of 3 episodes (99 % of steps at j_max, median step 143 ms), gauss_seidel + regret in 0 of 3 (11 ms),
+gauss_seidel + no_improvement in 3 of 3 (43 ms), sequential_accept + no_improvement in 3 of 3 (44 ms serial,
+34 ms threads). At M = 3 every rule succeeds in 3 of 3, and the repairs with no_improvement take more
+iterations than jacobi (5.6 and 6.5 a step against 4.4): the default stays the paper's.
+
+Parallelism (``dmpc_parallel="threads"``). The local solves of one iteration are independent, and CasADi
+releases the GIL while a solver runs: two threads calling Fatrop local solvers were both inside the solver
+71-80 % of the time (1.5-1.8x). What held the thread pool back was the hand-over, one future per solve: on
+batches of 6 local problems recorded at M = 6 (about 0.7 ms a solve), 1.2x, where a CasADi
+``map(6, "thread")`` over the bare Fatrop solver reached 1.4-1.8x. That map returns no per-robot solver
+statistics (status, iterations), which the Fatrop-to-IPOPT fallback and the acceptance rule need, so the
+solves stay separate calls: the calling thread and ``cores - 1`` helpers take them from a shared iterator
+(``_solve_all``). Same batches, alternating with the serial path, load 0.6-0.9 on the 2 cores: 1.45x
+(sequential_accept) and 1.57x (jacobi, 13 % of whose solves fall back to IPOPT), identical to the serial
+results bit for bit; in closed loop at M = 6 (load 1.0-1.3) the local-solve phase ran 1.38x and 1.50x
+faster. What is left is Python around each solve (~85 us of the 0.7 ms, under the GIL) and the other
+processes on the cores: the load average decides the speed-up more than the mechanism.
 ``"serial"`` is the default because DMPC's long runs are sweeps, whose process workers already occupy every
 core; ``"threads"`` is the faster choice for a single run on a machine with a free core.
 """
@@ -21,8 +75,11 @@ core; ``"threads"`` is the faster choice for a single run on a machine with a fr
 from __future__ import annotations
 
 import math
+import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
+from dataclasses import replace
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -32,6 +89,25 @@ from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start
 from mpc.nlp import JointNLP, LocalNLP, StepData
 from mpc.solvers import Solution, better
+
+
+class _Update(NamedTuple):
+    """One iteration's lines 3-10: the plans kept, their multipliers, and what it took."""
+
+    accels: np.ndarray  # (M, H, 2) u^(j)
+    lam_x: np.ndarray | None  # (M, H, 2) multipliers of the kept plans (None until a plan is kept)
+    lam_g: np.ndarray | None
+    failure: str  # the first failed local solve's status, "" if none failed
+    solved: bool  # at least one local solve succeeded
+    solves: int
+    solver_iterations: int
+
+
+def _cores() -> int:
+    """The CPUs this process may run on (its affinity mask, e.g. under ``taskset``)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def accept(new_cost: float, old_cost: float, epsilon: float) -> bool:
@@ -48,6 +124,8 @@ class DMPC:
         # Only to report F_t of the final plan, the common currency of CMPC and DMPC.
         self.joint = JointNLP(cfg, n_robots, n_humans)
         self._pool: ThreadPoolExecutor | None = None  # made on first use with dmpc_parallel="threads"
+        # Threads besides the caller's for the local solves: one per further core, at most one per robot.
+        self._helpers = max(1, min(n_robots, _cores()) - 1)
 
     def close(self) -> None:
         """Stop the solver threads; a later solve starts them again."""
@@ -57,12 +135,33 @@ class DMPC:
 
     def _solve_all(
         self, jobs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, bool]]
-    ):
-        if self.cfg.dmpc_parallel != "threads":
+    ) -> list[Solution]:
+        """``LocalNLP.solve`` of every job, results in the jobs' order.
+
+        With ``dmpc_parallel="threads"`` the calling thread and up to ``cores - 1`` helper threads take the
+        jobs one by one from a shared iterator until none is left: no thread waits while there is work, and
+        a job costs no hand-over (a future per job cost a third of the speed-up, module docstring). The jobs
+        are for distinct robots, so no solver instance runs in two threads at once.
+        """
+        if self.cfg.dmpc_parallel != "threads" or len(jobs) < 2:
             return [self.local.solve(*job) for job in jobs]
         if self._pool is None:
-            self._pool = ThreadPoolExecutor(max_workers=self.n_robots)
-        return list(self._pool.map(lambda job: self.local.solve(*job), jobs))
+            self._pool = ThreadPoolExecutor(max_workers=self._helpers)
+        results: list[Solution | None] = [None] * len(jobs)
+        pending = iter(range(len(jobs)))  # next() on a range iterator is atomic under the GIL
+
+        def drain() -> None:
+            for k in pending:
+                results[k] = self.local.solve(*jobs[k])
+
+        helpers = [self._pool.submit(drain) for _ in range(min(self._helpers, len(jobs) - 1))]
+        try:
+            drain()
+        finally:
+            wait(helpers)  # never leave a solver running in a helper after this call
+        for helper in helpers:
+            helper.result()  # a helper's exception, raised here
+        return cast(list[Solution], results)
 
     def _restart(
         self, data: StepData, moving: np.ndarray, params: dict, sols: list[Solution]
@@ -88,7 +187,7 @@ class DMPC:
         return out, extra
 
     def solve(self, data: StepData, predict: PredictFn, start: Start) -> IBRResult:
-        cfg, local = self.cfg, self.local
+        cfg = self.cfg
         t0 = time.perf_counter()
         pred_shape = (cfg.horizon, self.n_humans, 2)
         # Indices of the active robots; np.ndarray (as in _restart) so its items pass where an int is taken.
@@ -107,25 +206,27 @@ class DMPC:
                 status = "nan_prediction"
                 break
             predictions.append(prediction)
-            # Line 4: every robot's best response to the others' plans of iteration j-1.
-            params = {i: local.params(i, data, positions, prediction) for i in moving}
-            sols, n_solves, n_iterations = self._best_responses(
-                data, moving, params, accels, lam_x, lam_g, start.first_solve(j)
+            # Lines 3-10: the robots' best responses and the plans they keep (cfg.dmpc_update).
+            update = self._update(
+                data, moving, positions, prediction, accels, lam_x, lam_g, start.first_solve(j)
             )
-            solves += n_solves
-            solver_iterations += n_iterations
-            new_accels, lam_x, lam_g, failure = self._keep_improvements(
-                moving, params, accels, sols, lam_x, lam_g
-            )
-            first_failure = first_failure or failure
-            solved_now = any(s.success for s in sols)
+            new_accels, lam_x, lam_g = update.accels, update.lam_x, update.lam_g
+            solves += update.solves
+            solver_iterations += update.solver_iterations
+            first_failure = first_failure or update.failure
+            solved_now = update.solved
             if solved_now:
                 used = prediction
             # Lines 12-16: the epsilon-Nash check against the others' new plans. An iteration in which every
             # local solve failed proves nothing, so it cannot end the loop as converged.
             new_positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
-            at_nash = self._at_nash(data, moving, accels, new_accels, new_positions, prediction)
-            converged = solved_now and at_nash
+            if cfg.dmpc_stop == "no_improvement":
+                # No robot kept a new plan: no best response to u^(j-1) improves by epsilon (u^(j) = u^(j-1)).
+                converged = solved_now and np.array_equal(new_accels, accels)
+            else:
+                converged = solved_now and self._at_nash(
+                    data, moving, accels, new_accels, new_positions, prediction
+                )
             accels, positions = new_accels, new_positions
             if used is not None:
                 potentials.append(self.joint.potential(accels, data, used))
@@ -153,6 +254,63 @@ class DMPC:
             lam_g=lam_g,
             solver_iterations=solver_iterations,
         )
+
+    def _update(
+        self,
+        data: StepData,
+        moving: np.ndarray,
+        positions: np.ndarray,
+        prediction: np.ndarray,
+        accels: np.ndarray,
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+        flags: dict[str, bool],
+    ) -> _Update:
+        """Lines 3-10 of iteration j from the plans ``accels`` of iteration j-1 (positions ``(M, H, 2)``),
+        as ``cfg.dmpc_update`` says (module docstring)."""
+        rule = self.cfg.dmpc_update
+        if rule == "gauss_seidel":
+            return self._sweep(data, moving, positions, prediction, accels, lam_x, lam_g, flags)
+        # Line 4: every robot's best response to the others' plans of iteration j-1 (parallel).
+        params = {i: self.local.params(i, data, positions, prediction) for i in moving}
+        sols, n_solves, n_iterations = self._best_responses(data, moving, params, accels, lam_x, lam_g, flags)
+        if rule == "jacobi":
+            kept = self._keep_improvements(moving, params, accels, sols, lam_x, lam_g)
+        elif rule == "relaxed":
+            kept = self._keep_relaxed(moving, params, accels, sols, lam_x, lam_g)
+        else:
+            kept = self._accept_in_turn(data, moving, params, prediction, accels, sols, lam_x, lam_g)
+        solved = any(s.success for s in sols)
+        return _Update(*kept, solved, n_solves, n_iterations)
+
+    def _sweep(
+        self,
+        data: StepData,
+        moving: np.ndarray,
+        positions: np.ndarray,
+        prediction: np.ndarray,
+        accels: np.ndarray,
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+        flags: dict[str, bool],
+    ) -> _Update:
+        """Gauss-Seidel: the robots best-respond one after the other (index order), each to the latest plans,
+        and keep an improvement of at least epsilon at once (lines 4-6 for one robot at a time)."""
+        accels, positions = accels.copy(), positions.copy()
+        failure, solved, solves, solver_iterations = "", False, 0, 0
+        for i in moving:
+            one = np.array([i])
+            params = {i: self.local.params(i, data, positions, prediction)}
+            sols, n_solves, n_iterations = self._best_responses(
+                data, one, params, accels, lam_x, lam_g, flags
+            )
+            accels, lam_x, lam_g, failed = self._keep_improvements(one, params, accels, sols, lam_x, lam_g)
+            positions[i] = rollout_numpy(data.states[one], accels[one], self.cfg.dt)[0][0]
+            failure = failure or failed
+            solved = solved or sols[0].success
+            solves += n_solves
+            solver_iterations += n_iterations
+        return _Update(accels, lam_x, lam_g, failure, solved, solves, solver_iterations)
 
     def _best_responses(
         self,
@@ -198,10 +356,22 @@ class DMPC:
         """Lines 5-6: keep a new plan only if it lowers C_i(., u_-i^(j-1)) by at least epsilon; a kept plan's
         multipliers warm-start the robot's next solve. Returns the plans, the multipliers (``lam_x`` and
         ``lam_g`` updated in place, or made on the first kept plan) and the first failed solve's status."""
-        cfg = self.cfg
+        old_costs = self.local.costs([accels[i] for i in moving], [params[i] for i in moving])
+        return self._keep(moving, accels, sols, old_costs, lam_x, lam_g)
+
+    def _keep(
+        self,
+        moving: np.ndarray,
+        accels: np.ndarray,
+        sols: list[Solution],
+        old_costs: np.ndarray,
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
+        """Robot ``moving[k]`` keeps ``sols[k]`` if its cost ``sol.cost`` is at least epsilon below
+        ``old_costs[k]``, the cost of its plan of iteration j-1 (both against the others' plans of j-1)."""
         new_accels = accels.copy()
         first_failure = ""
-        old_costs = self.local.costs([accels[i] for i in moving], [params[i] for i in moving])
         for i, sol, old_cost in zip(moving, sols, old_costs, strict=True):
             if not sol.success:
                 # A robot whose local solve failed keeps its plan, as if it had not improved; the step
@@ -209,14 +379,88 @@ class DMPC:
                 first_failure = first_failure or sol.status
                 continue
             # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
-            if accept(sol.cost, old_cost, cfg.epsilon):
+            if accept(sol.cost, old_cost, self.cfg.epsilon):
                 new_accels[i] = sol.accels
-                if lam_x is None or lam_g is None:
-                    lam_x = np.zeros((self.n_robots, cfg.horizon, 2))
-                    lam_g = np.zeros((self.n_robots, cfg.horizon, 2))
-                lam_x[i] = sol.lam_x.reshape(cfg.horizon, 2)
-                lam_g[i] = sol.lam_g.reshape(cfg.horizon, 2)
+                lam_x, lam_g = self._multipliers(i, sol, lam_x, lam_g)
         return new_accels, lam_x, lam_g, first_failure
+
+    def _keep_relaxed(
+        self,
+        moving: np.ndarray,
+        params: dict,
+        accels: np.ndarray,
+        sols: list[Solution],
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
+        """Lines 5-6 for a relaxed step: the candidate plan is ``u_i^(j-1) + alpha (u_i* - u_i^(j-1))``
+        (``alpha = cfg.dmpc_relaxation``; feasible, as a convex combination of two feasible plans), kept if
+        it lowers C_i(., u_-i^(j-1)) by at least epsilon. Same returns as ``_keep_improvements``."""
+        cfg = self.cfg
+        alpha = cfg.dmpc_relaxation
+        candidates = [
+            accels[i] + alpha * (sol.accels - accels[i]) for i, sol in zip(moving, sols, strict=True)
+        ]
+        checks = self.local.costs(
+            candidates + [accels[i] for i in moving], [params[i] for i in moving] * 2
+        ).reshape(2, len(moving))
+        relaxed = [
+            replace(sol, accels=candidate, cost=float(cost))
+            for sol, candidate, cost in zip(sols, candidates, checks[0], strict=True)
+        ]
+        return self._keep(moving, accels, relaxed, checks[1], lam_x, lam_g)
+
+    def _accept_in_turn(
+        self,
+        data: StepData,
+        moving: np.ndarray,
+        params: dict,
+        prediction: np.ndarray,
+        accels: np.ndarray,
+        sols: list[Solution],
+        lam_x: np.ndarray | None,
+        lam_g: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
+        """Lines 5-6 one robot at a time: the best responses (all computed against u^(j-1)) are taken in
+        order of their improvement of C_i(., u_-i^(j-1)), largest first, and each is kept only if it lowers
+        C_i by at least epsilon against the plans kept so far. In an exact potential game a kept plan lowers
+        F by as much as it lowers C_i, so F falls by at least epsilon per kept plan and the loop cannot
+        cycle. Same returns as ``_keep_improvements``."""
+        cfg = self.cfg
+        old_costs = self.local.costs([accels[i] for i in moving], [params[i] for i in moving])
+        gains = [
+            old - sol.cost if sol.success else -math.inf for sol, old in zip(sols, old_costs, strict=True)
+        ]
+        order = sorted(range(len(moving)), key=lambda k: -gains[k])  # stable: ties in robot order
+        new_accels, positions = accels.copy(), None
+        failure = ""
+        for k in order:
+            i, sol = moving[k], sols[k]
+            if not sol.success:
+                failure = failure or sol.status
+                continue
+            if positions is None:  # nothing kept yet: the others' plans are u_-i^(j-1)
+                new_cost, old_cost = sol.cost, old_costs[k]
+            else:
+                q = self.local.params(i, data, positions, prediction)
+                new_cost, old_cost = self.local.costs([sol.accels, new_accels[i]], [q, q])
+            if accept(new_cost, old_cost, cfg.epsilon):
+                new_accels[i] = sol.accels
+                positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
+                lam_x, lam_g = self._multipliers(i, sol, lam_x, lam_g)
+        return new_accels, lam_x, lam_g, failure
+
+    def _multipliers(
+        self, i: int, sol: Solution, lam_x: np.ndarray | None, lam_g: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``lam_x``, ``lam_g`` (made on the first kept plan) with robot ``i``'s row set from ``sol``."""
+        h = self.cfg.horizon
+        if lam_x is None or lam_g is None:
+            lam_x = np.zeros((self.n_robots, h, 2))
+            lam_g = np.zeros((self.n_robots, h, 2))
+        lam_x[i] = sol.lam_x.reshape(h, 2)
+        lam_g[i] = sol.lam_g.reshape(h, 2)
+        return lam_x, lam_g
 
     def _at_nash(
         self,

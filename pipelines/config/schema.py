@@ -282,6 +282,9 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "restart_penalty": "collision penalty above which multi_start solves again",
     "jit": "compile the NLPs with gcc (simulate; a sweep compiles by [sweep] jit)",
     "dmpc_parallel": "serial | threads: how DMPC runs its local solves",
+    "dmpc_update": "jacobi (Algorithm 2) | gauss_seidel | relaxed | sequential_accept: DMPC's update",
+    "dmpc_relaxation": "in (0, 1]: the step towards the best response of dmpc_update relaxed",
+    "dmpc_stop": "regret (Algorithm 2, lines 12-16) | no_improvement: when DMPC's iterations end",
     "coupled_mode": "coupling nlp: auto | exact (the predictor inside the NLP) | first_order",
 }
 MPC_EXCLUDED: Final[tuple[str, ...]] = (*MPC_FROM_WORLD, "human_margins")

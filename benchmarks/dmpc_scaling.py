@@ -1,0 +1,253 @@
+"""DMPC (Algorithm 2) against the number of robots: its update rules, and its local solves serial vs threaded.
+
+For every number of robots M (``--robots``, default 3 6), DMPC rule (``--rules``: ``UPDATE:STOP`` pairs of
+``MPCConfig.dmpc_update`` and ``dmpc_stop``, default ``RULES``: the paper's ``jacobi:regret`` and the
+alternatives of mpc/dmpc.py) and way of running the local solves (``--parallel``, default ``serial`` and
+``threads``; ``gauss_seidel`` solves one robot at a time and runs serially only), ``--episodes``
+circle-crossing episodes (seeds 0.., ``CrowdEnv.reset(seed, "circle", humans, M)``) with ``--humans`` humans
+(default 7) and the constant-velocity predictor. The parallel modes of one (M, rule) run each seed one after
+the other, so that both see the same load; their trajectories must be identical (checked: "same").
+
+Per row: the control step (``ControlOutput.solve_time_s``) as median / p95 / p99 in ms over every step of
+every episode; IBR iterations per step (mean) and the share of steps that ran to j_max; local solves per
+step; the local-solve phase (``DMPC._solve_all``: every local solve of the step) in ms per step (mean); and
+success / collision / timeout counts. Then, per (M, rule), the threads-over-serial speed-up of the step
+median and of the local-solve phase.
+
+``--replay``: the local-solve phase alone, on the iterations recorded from one serial episode of each
+(M, rule): every recorded batch of M local problems is solved by DMPC's serial and threaded code paths
+alternately (the order flips each repetition), so that both see the same load, after one untimed pass; the
+results are compared bit for bit.
+
+The machine is shared: the load average is printed before and after; run it under ``nice`` and read the
+speed-ups together with the load (a parallel phase needs a free core to be faster).
+
+    nice -n 5 .venv/bin/python benchmarks/dmpc_scaling.py --episodes 3 --robots 3 6
+    nice -n 5 .venv/bin/python benchmarks/dmpc_scaling.py --episodes 1 --robots 6 --replay \\
+        --rules sequential_accept:no_improvement
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from mpc.config import DMPC_STOPS, DMPC_UPDATES, PARALLEL_MODES
+from mpc.dmpc import DMPC
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.episode import run_episode
+from pipelines.loop.mpc import MPCController
+
+PREDICTOR = "constant_velocity"
+# (dmpc_update, dmpc_stop): Algorithm 2 as printed, then the alternatives (mpc/dmpc.py has why these).
+RULES: tuple[str, ...] = (
+    "jacobi:regret",
+    "gauss_seidel:regret",
+    "gauss_seidel:no_improvement",
+    "sequential_accept:no_improvement",
+    "relaxed:no_improvement",
+)
+
+
+def _controller(rule: str, parallel: str) -> MPCController:
+    update, stop = rule.split(":")
+    overrides = (("dmpc_update", update), ("dmpc_stop", stop), ("dmpc_parallel", parallel))
+    return MPCController(ControllerSpec("dmpc", PREDICTOR, mpc_overrides=overrides), distributed=True)
+
+
+class _PhaseClock:
+    """Wraps a DMPC's ``_solve_all`` (its local-solve phase): time spent and, when asked, the batches."""
+
+    def __init__(self, solver: DMPC, record: bool = False):
+        self.seconds, self.solves = 0.0, 0
+        self.batches: list[list[tuple]] = []
+        self._solve_all, self._record = solver._solve_all, record
+        solver._solve_all = self  # type: ignore[method-assign]
+
+    def __call__(self, jobs):
+        if self._record:
+            self.batches.append(
+                [tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in j) for j in jobs]
+            )
+        t0 = time.perf_counter()
+        out = self._solve_all(jobs)
+        self.seconds += time.perf_counter() - t0
+        self.solves += len(jobs)
+        return out
+
+
+def _row(times: list[float], iterations: list[int], outcomes: list[Any], phase: _PhaseClock, j_max: int):
+    ms = np.asarray(times) * 1e3
+    its = np.asarray(iterations)
+    return {
+        "median_ms": float(np.median(ms)),
+        "p95_ms": float(np.percentile(ms, 95)),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "steps": int(ms.size),
+        "iterations_mean": float(its.mean()),
+        "at_j_max": float(np.mean(its >= j_max)),
+        "solves_per_step": phase.solves / ms.size,
+        "phase_ms_per_step": phase.seconds * 1e3 / ms.size,
+        "success": sum(m.success for m in outcomes),
+        "collision": sum(m.collision for m in outcomes),
+        "timeout": sum(m.timeout for m in outcomes),
+        "episodes": len(outcomes),
+    }
+
+
+def closed_loop(n_robots: int, n_humans: int, rule: str, modes: list[str], episodes: int) -> dict[str, Any]:
+    """Every mode of one (M, rule) on the same seeds, mode after mode within a seed."""
+    if rule.startswith("gauss_seidel"):
+        modes = ["serial"]  # one solve at a time: nothing to run in parallel
+    controllers = {mode: _controller(rule, mode) for mode in modes}
+    clocks = {}
+    for mode, controller in controllers.items():
+        solver = controller.solver(n_robots, n_humans)
+        assert isinstance(solver, DMPC)
+        clocks[mode] = _PhaseClock(solver)
+    data: dict[str, dict[str, list]] = {m: {"times": [], "its": [], "outcomes": []} for m in modes}
+    same = True
+    try:
+        for seed in range(episodes):
+            paths = []
+            for mode, controller in controllers.items():
+                result = run_episode(
+                    controller, seed=seed, scenario="circle", n_humans=n_humans, n_robots=n_robots
+                )
+                data[mode]["times"].extend(result.solve_times_s)
+                data[mode]["its"].extend(result.iterations)
+                data[mode]["outcomes"].append(result.metrics)
+                paths.append(result.robot_positions)
+            same = same and all(np.array_equal(paths[0], p) for p in paths[1:])
+    finally:
+        for controller in controllers.values():
+            controller.close()
+    j_max = next(iter(controllers.values())).cfg.j_max
+    rows = {m: _row(d["times"], d["its"], d["outcomes"], clocks[m], j_max) for m, d in data.items()}
+    return {"rows": rows, "same": same}
+
+
+def replay(n_robots: int, n_humans: int, rule: str, reps: int) -> dict[str, Any]:
+    """The local-solve phase alone: one serial episode's batches of M problems, serial vs threads."""
+    controller = _controller(rule, "serial")
+    solver = controller.solver(n_robots, n_humans)
+    assert isinstance(solver, DMPC)
+    clock = _PhaseClock(solver, record=True)
+    run_episode(controller, seed=0, scenario="circle", n_humans=n_humans, n_robots=n_robots)
+    batches = [b for b in clock.batches if len(b) == n_robots]
+    threaded = DMPC(solver.cfg.replace(dmpc_parallel="threads"), n_robots, n_humans)
+    variants = {"serial": clock._solve_all, "threads": threaded._solve_all}  # DMPC's own two code paths
+    for batch in batches:  # untimed: both paths build what they build on first use (IPOPT fallbacks)
+        for solve_all in variants.values():
+            solve_all(batch)
+    seconds = dict.fromkeys(variants, 0.0)
+    identical = True
+    for r in range(reps):
+        for batch in batches:
+            outs = {}
+            for name in variants if r % 2 == 0 else list(variants)[::-1]:
+                t0 = time.perf_counter()
+                outs[name] = variants[name](batch)
+                seconds[name] += time.perf_counter() - t0
+            identical = identical and all(
+                np.array_equal(a.accels, b.accels) and a.cost == b.cost
+                for a, b in zip(outs["serial"], outs["threads"], strict=True)
+            )
+    threaded.close()
+    n = reps * len(batches)
+    return {
+        "batches": len(batches),
+        "reps": reps,
+        "serial_ms": seconds["serial"] * 1e3 / n,
+        "threads_ms": seconds["threads"] * 1e3 / n,
+        "speedup": seconds["serial"] / seconds["threads"],
+        "identical": identical,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--robots", type=int, nargs="+", default=[3, 6])
+    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--episodes", type=int, default=3, help="circle episodes per row (seeds 0..)")
+    parser.add_argument("--rules", nargs="+", default=list(RULES), help="UPDATE:STOP pairs")
+    parser.add_argument("--parallel", nargs="+", choices=PARALLEL_MODES, default=list(PARALLEL_MODES))
+    parser.add_argument("--replay", action="store_true", help="also time the local-solve phase alone")
+    parser.add_argument("--replay-reps", type=int, default=3)
+    parser.add_argument("--json", help="also write the figures to this file")
+    args = parser.parse_args(argv)
+
+    report: dict[str, Any] = {"load_before": os.getloadavg(), "cpus": os.cpu_count(), "cells": {}}
+    t_start = time.perf_counter()
+    for rule in args.rules:
+        update, _, stop = rule.partition(":")
+        if update not in DMPC_UPDATES or stop not in DMPC_STOPS:
+            parser.error(f"rule {rule!r}: UPDATE:STOP with UPDATE in {DMPC_UPDATES}, STOP in {DMPC_STOPS}")
+    for m in args.robots:
+        for rule in args.rules:
+            key = f"r{m} {rule}"
+            cell = closed_loop(m, args.humans, rule, args.parallel, args.episodes)
+            if args.replay and len(cell["rows"]) > 1:
+                cell["replay"] = replay(m, args.humans, rule, args.replay_reps)
+            cell["load"] = os.getloadavg()[0]
+            report["cells"][key] = cell
+            print(f"done {key} ({time.perf_counter() - t_start:.0f} s, load {cell['load']:.2f})", flush=True)
+    report["load_after"] = os.getloadavg()
+    report["wall_s"] = time.perf_counter() - t_start
+
+    print(
+        f"DMPC, {PREDICTOR}, circle crossing, {args.humans} humans, {args.episodes} episodes per row, "
+        f"{report['cpus']} CPUs"
+    )
+    print(
+        f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}; "
+        f"{report['wall_s']:.0f} s"
+    )
+    header = (
+        f"{'M':>2} {'update:stop':<32} {'solves':<8} {'median':>7} {'p95':>7} {'p99':>7} {'IBR its':>7} "
+        f"{'j_max':>6} {'solves':>6} {'phase':>7} {'succ':>5} {'coll':>5} {'tout':>5}"
+    )
+    print(header)
+    print(
+        f"{'':>2} {'':<32} {'':<8} {'ms':>7} {'ms':>7} {'ms':>7} {'/step':>7} {'%':>6} {'/step':>6} {'ms':>7}"
+    )
+    for key, cell in report["cells"].items():
+        m, rule = key[1:].split(" ", 1)
+        for mode, row in cell["rows"].items():
+            print(
+                f"{m:>2} {rule:<32} {mode:<8} {row['median_ms']:7.1f} {row['p95_ms']:7.1f} "
+                f"{row['p99_ms']:7.1f} {row['iterations_mean']:7.2f} {100 * row['at_j_max']:6.0f} "
+                f"{row['solves_per_step']:6.1f} {row['phase_ms_per_step']:7.1f} "
+                f"{row['success']:>2}/{row['episodes']:<2} {row['collision']:>2}/{row['episodes']:<2} "
+                f"{row['timeout']:>2}/{row['episodes']:<2}"
+            )
+        rows = cell["rows"]
+        if "serial" in rows and "threads" in rows:
+            s, t = rows["serial"], rows["threads"]
+            line = (
+                f"{'':>2} {'':<32} threads/serial: step median x{s['median_ms'] / t['median_ms']:.2f}, "
+                f"phase x{s['phase_ms_per_step'] / t['phase_ms_per_step']:.2f}, "
+                f"same trajectories: {cell['same']}"
+            )
+            if "replay" in cell:
+                rp = cell["replay"]
+                line += (
+                    f"; replayed phase {rp['serial_ms']:.2f} -> {rp['threads_ms']:.2f} ms/iteration "
+                    f"(x{rp['speedup']:.2f}, bitwise equal: {rp['identical']})"
+                )
+            print(line)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(report, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
