@@ -12,8 +12,9 @@
   once.
 
 Where the robots start and end is not public; both profiles keep ``crowdsim.scenarios.robot_layout``'s
-formation (the row up to 3 robots), which isolates the published conventions. Visibility is chosen separately (``make_env_config``); CrowdNav's
-own default is invisible robots, the fork's configuration visible ones.
+formation (the row up to 3 robots), which isolates the published conventions. Visibility is chosen
+separately (``make_env_config``); CrowdNav's own default is invisible robots, the fork's configuration
+visible ones.
 """
 
 from __future__ import annotations
