@@ -22,6 +22,8 @@ EPILOG = """examples:
   crowdmpc sweep --experiment predictors --episodes-per-cell 100 --record failures --out runs/predictors
   crowdmpc --plugin my_predictor:MyNet sweep --experiment predictors \\
       --predictors constant_velocity,social_lstm_eth,my_net_eth --episodes-per-cell 20 --out runs/swap
+  crowdmpc --plugin my_controller:MyCtl sweep --experiment controllers \
+      --controllers cmpc,orca,my_controller:MyCtl --episodes-per-cell 20 --out runs/controllers
   crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
   crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
@@ -31,7 +33,9 @@ figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORC
 default the shipped models, --predictors for any list of registered and zoo names, a user zoo's included);
 coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); safety
 (CMPC without margins and with conformal margins at alpha 0.5 .. 0.01, 7 humans); conventions (simulation
-profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check).
+profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check);
+controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight, --controllers for any list,
+controller plugins included).
 --margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling.
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
@@ -65,6 +69,7 @@ def _options() -> tuple[Option, ...]:
         Option("record", "sweep", "record", "--record"),
         Option("jit", "sweep", "jit", "--jit"),
         Option("predictors", "sweep", "predictors", "--predictors"),
+        Option("controllers", "sweep", "controllers", "--controllers"),
         Option("robots", "scenario", "robots", "--robots"),
         Option("predictor", "controller", "predictor", "--predictor"),
         Option("margins", "controller", "margins", "--margins"),
@@ -121,6 +126,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run, parser_error=p.error)
 
 
+def controller_list(text: str) -> tuple[str, ...]:
+    """An argparse type: ``a,b,c`` -> ("a", "b", "c"); whether each is registered is checked with the
+    experiment (``Experiment.with_controllers``)."""
+    from pipelines.config.settings import MAX_SWAP_PREDICTORS
+
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    if not names or len(names) > MAX_SWAP_PREDICTORS:
+        raise argparse.ArgumentTypeError(
+            f"expected 1 to {MAX_SWAP_PREDICTORS} names like cmpc,orca, got {text[:64]!r}"
+        )
+    return names
+
+
 def predictor_list(text: str) -> tuple[str, ...]:
     """An argparse type: ``a,b,c`` -> ("a", "b", "c"), each a well-formed predictor name."""
     from pipelines.config.settings import MAX_SWAP_PREDICTORS
@@ -154,6 +172,13 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         metavar="A,B,C",
         help="the predictors experiment's list, one column each (default: the shipped swap table, with "
         "social_gru_eth and social_attention_eth when the zoo has them)",
+    )
+    p.add_argument(
+        "--controllers",
+        type=controller_list,
+        metavar="A,B,C",
+        help="the controllers experiment's list, one column each (default: cmpc,dmpc,orca,straight; a "
+        "plugin's module:Class after `crowdmpc --plugin module:Class`)",
     )
     p.add_argument(
         "--margins",
@@ -257,6 +282,8 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
         from predictors.registry import available
 
         experiment = experiment.with_predictors(swap_predictors(available()))
+    if cfg.sweep.controllers is not None:
+        experiment = _applied(cfg, "sweep", "controllers", experiment.with_controllers, cfg.sweep.controllers)
     if cfg.controller.predictor:
         experiment = _applied(
             cfg, "controller", "predictor", experiment.with_predictor, cfg.controller.predictor

@@ -362,6 +362,13 @@ def _sweep_keys() -> tuple[Key, ...]:
             "the predictors experiment's columns (--predictors); unset: the shipped swap table",
             ["constant_velocity", "social_lstm_eth"],
         ),
+        Key(
+            "controllers",
+            "strs",
+            None,
+            "the controllers experiment's columns (--controllers); unset: cmpc, dmpc, orca, straight",
+            ["cmpc", "orca"],
+        ),
     )
 
 

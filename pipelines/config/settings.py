@@ -126,6 +126,7 @@ class SweepSettings:
     record: str = "none"
     jit: str = "auto"
     predictors: tuple[str, ...] | None = None  # the predictors experiment's list; None: the shipped one
+    controllers: tuple[str, ...] | None = None  # the controllers experiment's list; None: the shipped one
 
     def __post_init__(self) -> None:
         if self.experiment is not None and self.experiment not in EXPERIMENTS:
@@ -155,6 +156,7 @@ class SweepSettings:
             raise PipelineError(f"jit must be one of {list(JIT_CHOICES)}, got {self.jit!r}")
         self._check_workers()
         self._check_predictors()
+        self._check_controllers()
 
     def _check_workers(self) -> None:
         workers = self.workers
@@ -185,6 +187,18 @@ class SweepSettings:
         bad = [name for name in names if not isinstance(name, str) or NAME_PATTERN.fullmatch(name) is None]
         if bad:
             raise PipelineError(f"predictors must be predictor names, got {str(bad[0])[:64]!r}")
+
+    def _check_controllers(self) -> None:
+        names = self.controllers
+        if names is None:
+            return
+        if not names:
+            raise PipelineError("controllers must name at least one controller, got []")
+        if len(names) > MAX_SWAP_PREDICTORS:
+            raise PipelineError(f"controllers must name at most {MAX_SWAP_PREDICTORS}, got {len(names)}")
+        bad = [name for name in names if not isinstance(name, str) or not 0 < len(name) <= 200]
+        if bad:
+            raise PipelineError(f"controllers must be controller names, got {str(bad[0])[:64]!r}")
 
     @property
     def n_workers(self) -> int:

@@ -186,6 +186,9 @@ class Experiment:
     # True when the methods are one per predictor, labelled by its name (the swap table): `--predictors`
     # replaces the list.
     predictor_list: bool = False
+    # True when the methods are one per controller, labelled by its name: `--controllers` replaces the list
+    # (plugins included, `crowdmpc --plugin module:Class`).
+    controller_list: bool = False
 
     def __post_init__(self):
         labels = [label for label, _ in self.methods]
@@ -228,6 +231,27 @@ class Experiment:
             raise PipelineError(f"--predictors names {repeated} more than once")
         template = self.methods[0][1]
         methods = tuple((name, replace(template, predictor=name)) for name in predictors)
+        return replace(self, methods=methods)
+
+    def with_controllers(self, controllers: Sequence[str]) -> Experiment:
+        """One method per controller (labelled by its name, in this order), each as the experiment's first
+        method (predictor, margins ...) but for its controller; an unregistered name is refused here."""
+        from pipelines.loop.spec import controller_kind
+
+        if not self.controller_list:
+            raise PipelineError(
+                f"--controllers applies only to the experiments "
+                f"{sorted(n for n, e in EXPERIMENTS.items() if e.controller_list)}, not {self.name!r}"
+            )
+        if not controllers:
+            raise PipelineError(f"experiment {self.name!r} needs at least one controller")
+        repeated = sorted({name for name in controllers if list(controllers).count(name) > 1})
+        if repeated:
+            raise PipelineError(f"--controllers names {repeated} more than once")
+        for name in controllers:
+            controller_kind(name)  # UnknownController: one line saying how to register a plugin
+        template = self.methods[0][1]
+        methods = tuple((name, replace(template, controller=name)) for name in controllers)
         return replace(self, methods=methods)
 
     def with_margins(self, margins: MarginSpec) -> Experiment:
@@ -304,7 +328,14 @@ def swap_predictors(available: Collection[str] = ()) -> tuple[str, ...]:
     return tuple(name for name in SWAP_PREDICTORS if name not in LATER_SWAP_PREDICTORS or name in available)
 
 
-ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)  # the middle of the paper's range
+ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)
+# The controllers experiment's default columns: the paper's two and the baselines.
+SHIPPED_CONTROLLERS: Final[tuple[str, ...]] = (
+    "cmpc",
+    "dmpc",
+    "orca",
+    "straight",
+)  # the middle of the paper's range
 
 
 def _coupled(mode: str) -> ControllerSpec:
@@ -370,6 +401,13 @@ EXPERIMENTS: dict[str, Experiment] = {
         humans=ABLATION_HUMANS,
         predictor_swappable=False,
         predictor_list=True,
+    ),
+    "controllers": Experiment(
+        name="controllers",
+        title="Controllers: each controller at 7 humans with the paper's predictor",
+        methods=tuple((name, ControllerSpec(name, PAPER_PREDICTOR)) for name in SHIPPED_CONTROLLERS),
+        humans=ABLATION_HUMANS,
+        controller_list=True,
     ),
     "coupling": Experiment(
         name="coupling",

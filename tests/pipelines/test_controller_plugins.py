@@ -82,6 +82,27 @@ def test_simulate_runs_a_plugin_controller(tmp_path, capsys):
     assert TOY in controller_names() and TOY not in model_names()
 
 
+def test_a_sweep_compares_a_plugin_controller_with_shipped_ones_in_worker_processes(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    code, stdout, _ = run(
+        capsys, "--plugin", TOY, "sweep", "--experiment", "controllers", "--controllers", f"orca,{TOY}",
+        "--humans", "3", "--episodes-per-cell", "2", "--workers", "2", "--backend", "process", "--jit", "off",
+        "--no-progress", "--out", str(out),
+    )  # fmt: skip
+    assert code == 0, stdout
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert sorted(r["controller"] for r in records) == ["orca", "orca", "straight_line", "straight_line"]
+    table = (out / "table.md").read_text()
+    assert TOY in table and " orca " in table
+
+
+def test_controllers_is_refused_outside_the_controllers_experiment(tmp_path, capsys):
+    argv = ["sweep", "--experiment", "table2", "--controllers", "cmpc", "--dry-run", "--out", str(tmp_path)]
+    code, _, err = run(capsys, *argv)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "--controllers applies only to the experiments ['controllers'], not 'table2'" in err
+
+
 def test_a_plugin_controller_runs_through_run_episode_like_a_shipped_one():
     register_controller_plugins([TOY])
     spec = ControllerSpec(TOY)
