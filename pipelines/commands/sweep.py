@@ -34,8 +34,8 @@ default the shipped models, --predictors for any list of registered and zoo name
 coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); safety
 (CMPC without margins and with conformal margins at alpha 0.5 .. 0.01, 7 humans); conventions (simulation
 profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check);
-controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight, --controllers for any list,
-controller plugins included).
+controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight; --controllers for any
+list, controller plugins included).
 --margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling.
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
