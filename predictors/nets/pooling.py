@@ -17,6 +17,8 @@ relative coordinate with the same float operations so that hard binning agrees e
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 from torch import nn
 
@@ -68,3 +70,20 @@ class GridPooling(nn.Module):
         values = self.hidden_encoding(hidden)  # (B, N, F)
         grid = torch.einsum("bijc,bjf->bicf", weights, values)  # flattened index c * F + f
         return torch.relu(self.embedding(grid.reshape(*grid.shape[:2], -1)))
+
+
+def pooling_for(config: Any) -> tuple[GridPooling | None, int]:
+    """The social pooling a net's config asks for (its ``pooling``, ``hidden_dim``, ``latent_dim``,
+    ``pool_dim``, ``cell_side``, ``grid_size``) and the width it adds to the step's input; ``(None, 0)`` for
+    ``pooling="none"``."""
+    if config.pooling == "none":
+        return None, 0
+    pool = GridPooling(
+        hidden_dim=config.hidden_dim,
+        latent_dim=config.latent_dim,
+        out_dim=config.pool_dim,
+        cell_side=config.cell_side,
+        grid_size=config.grid_size,
+        soft=config.pooling == "soft",
+    )
+    return pool, config.pool_dim

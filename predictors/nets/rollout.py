@@ -20,6 +20,8 @@ from typing import Any
 
 import torch
 
+from predictors.errors import PredictorError
+
 MaskedStep = Callable[..., tuple[torch.Tensor, ...]]
 # A net keeping ``nets.contract.StepNet``. Typed ``Any``: the protocol's variadic ``decode_step`` matches no
 # concrete signature (``decode_step(h, c, prev, cur, neighbours)``), so mypy could not check it anyway.
@@ -86,3 +88,30 @@ def teacher_forced_rollout(
         predicted.append(cur_in + out[..., :2])
         prev_model, cur_model = cur_in, predicted[-1]
     return torch.stack(outputs, dim=1), torch.stack(predicted, dim=1)
+
+
+class TeacherForcedForward:
+    """``forward`` for a step-contract net that has ``decode_step_masked``: ``teacher_forced_rollout`` with
+    that step, the training and evaluation rollout ``SocialLSTM.forward`` does (no noise: not a GAN)."""
+
+    def forward(
+        self,
+        positions: torch.Tensor,
+        mask: torch.Tensor,
+        obs_len: int,
+        pred_len: int,
+        *,
+        teacher_forcing: bool,
+        noise: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        if noise is not None:
+            raise PredictorError(f"{type(self).__name__} takes no noise (it is not a GAN generator)")
+        return teacher_forced_rollout(
+            self,
+            positions,
+            mask,
+            obs_len,
+            pred_len,
+            teacher_forcing=teacher_forcing,
+            masked_step=self.decode_step_masked,  # type: ignore[attr-defined]
+        )

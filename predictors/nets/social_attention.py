@@ -36,7 +36,7 @@ from predictors.nets.config_checks import (
     config_to_dict,
 )
 from predictors.nets.contract import Head
-from predictors.nets.rollout import teacher_forced_rollout
+from predictors.nets.rollout import TeacherForcedForward
 from predictors.nets.social_lstm import HEADS, MAX_PARAMETERS, gaussian_head
 
 LABEL = "Social-Attention"
@@ -161,7 +161,7 @@ class NeighbourAttention(nn.Module):
         return stream + self.ff_out(F.gelu(self.ff_in(self.ff_norm(stream))))
 
 
-class SocialAttention(nn.Module):
+class SocialAttention(TeacherForcedForward, nn.Module):
     config_class: ClassVar[type] = SocialAttentionConfig
 
     def __init__(self, config: SocialAttentionConfig = SocialAttentionConfig()):
@@ -261,26 +261,3 @@ class SocialAttention(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``decode_step`` updating only the ``active`` agents (teacher-forced training)."""
         return self.step(self.decoder, h, c, prev, cur, active, neighbours)
-
-    def forward(
-        self,
-        positions: torch.Tensor,
-        mask: torch.Tensor,
-        obs_len: int,
-        pred_len: int,
-        *,
-        teacher_forcing: bool,
-        noise: torch.Tensor | None = None,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Training and evaluation rollout, as ``SocialLSTM.forward`` (``nets.rollout``); no noise input."""
-        if noise is not None:
-            raise ValueError("SocialAttention takes no noise (it is not a GAN generator)")
-        return teacher_forced_rollout(
-            self,
-            positions,
-            mask,
-            obs_len,
-            pred_len,
-            teacher_forcing=teacher_forcing,
-            masked_step=self.decode_step_masked,
-        )

@@ -29,8 +29,8 @@ from predictors.nets.config_checks import (
     config_to_dict,
 )
 from predictors.nets.contract import Head
-from predictors.nets.pooling import POOLINGS, GridPooling
-from predictors.nets.rollout import teacher_forced_rollout
+from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
+from predictors.nets.rollout import TeacherForcedForward
 from predictors.nets.social_lstm import FLOAT_BOUNDS, HEADS, MAX_PARAMETERS, N_TAGS, gaussian_head
 
 LABEL = "Social-GRU"
@@ -113,25 +113,15 @@ def tag_input(like: torch.Tensor, rows: int, embedding_dim: int, slot: int) -> t
     )
 
 
-class SocialGRU(nn.Module):
+class SocialGRU(TeacherForcedForward, nn.Module):
     config_class: ClassVar[type] = SocialGRUConfig
 
     def __init__(self, config: SocialGRUConfig = SocialGRUConfig()):
         super().__init__()
         self.config = config
         cfg = config
-        self.pool: GridPooling | None = None
-        pooled = 0
-        if cfg.pooling != "none":
-            self.pool = GridPooling(
-                hidden_dim=cfg.hidden_dim,
-                latent_dim=cfg.latent_dim,
-                out_dim=cfg.pool_dim,
-                cell_side=cfg.cell_side,
-                grid_size=cfg.grid_size,
-                soft=cfg.pooling == "soft",
-            )
-            pooled = cfg.pool_dim
+        self.pool: GridPooling | None
+        self.pool, pooled = pooling_for(cfg)
         self.input_embedding = nn.Linear(2 + pooled, cfg.embedding_dim - N_TAGS)
         self.encoder = nn.GRUCell(cfg.embedding_dim, cfg.hidden_dim)
         self.decoder = nn.GRUCell(cfg.embedding_dim, cfg.hidden_dim)
@@ -214,26 +204,3 @@ class SocialGRU(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """``decode_step`` updating only the ``active`` agents (teacher-forced training)."""
         return self.step(self.decoder, h, prev, cur, active, neighbours)
-
-    def forward(
-        self,
-        positions: torch.Tensor,
-        mask: torch.Tensor,
-        obs_len: int,
-        pred_len: int,
-        *,
-        teacher_forcing: bool,
-        noise: torch.Tensor | None = None,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Training and evaluation rollout, as ``SocialLSTM.forward`` (``nets.rollout``); no noise input."""
-        if noise is not None:
-            raise ValueError("SocialGRU takes no noise (it is not a GAN generator)")
-        return teacher_forced_rollout(
-            self,
-            positions,
-            mask,
-            obs_len,
-            pred_len,
-            teacher_forcing=teacher_forcing,
-            masked_step=self.decode_step_masked,
-        )

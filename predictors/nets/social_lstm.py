@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from predictors.errors import PredictorError, short_repr
-from predictors.nets.pooling import POOLINGS, GridPooling
+from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
 
 HEADS = ("gaussian", "point")
 N_TAGS = 2  # TrajNet++ InputEmbedding keeps two embedding slots for the encoder/decoder start tags
@@ -158,18 +158,8 @@ class SocialLSTM(nn.Module):
         super().__init__()
         self.config = config
         cfg = config
-        self.pool: GridPooling | None = None
-        pooled = 0
-        if cfg.pooling != "none":
-            self.pool = GridPooling(
-                hidden_dim=cfg.hidden_dim,
-                latent_dim=cfg.latent_dim,
-                out_dim=cfg.pool_dim,
-                cell_side=cfg.cell_side,
-                grid_size=cfg.grid_size,
-                soft=cfg.pooling == "soft",
-            )
-            pooled = cfg.pool_dim
+        self.pool: GridPooling | None
+        self.pool, pooled = pooling_for(cfg)
         self.input_embedding = nn.Linear(2 + pooled, cfg.embedding_dim - N_TAGS)
         self.encoder = nn.LSTMCell(cfg.embedding_dim, cfg.hidden_dim)
         self.decoder = nn.LSTMCell(cfg.embedding_dim, cfg.hidden_dim)
