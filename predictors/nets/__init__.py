@@ -1,5 +1,5 @@
-"""Plain ``torch.nn`` networks of the learned predictors; no Lightning, no CasADi (their twin is
-``predictors.casadi_twin``)."""
+"""Plain ``torch.nn`` networks of the learned predictors; no Lightning, no CasADi (``predictors.export``
+builds their CasADi side from their own methods)."""
 
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig

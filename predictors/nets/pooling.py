@@ -11,7 +11,8 @@ Two ways to put a neighbour in a cell:
   non-zero gradient with respect to the neighbours' positions (the coupled NLP needs it). A neighbour's
   weights sum to 1 between the outermost cell centres and fade to 0 half a cell beyond the grid's edge.
 
-The CasADi twin is ``predictors.casadi_layers.grid_cell_weights`` / ``grid_pool``; both compute the
+``predictors.export`` exports this code as it is; the hand-written twin kept as a cross-check,
+``tests/predictors/handwritten/layers.py`` (``grid_cell_weights`` / ``grid_pool``), and this code compute the
 relative coordinate with the same float operations so that hard binning agrees exactly.
 """
 
@@ -34,7 +35,7 @@ def cell_weights(
     Cell ``c = kx * grid_size + ky`` with ``kx`` along x, as in TrajNet++.
     """
     n_agents = positions.shape[1]
-    # u[b, i, j] = (p_j - p_i) / cell_side + grid_size / 2, the same operations as the CasADi twin.
+    # u[b, i, j] = (p_j - p_i) / cell_side + grid_size / 2, the same operations as the hand-written twin.
     u = (positions[:, None, :, :] - positions[:, :, None, :]) / cell_side + grid_size / 2
     k = torch.arange(grid_size, dtype=positions.dtype, device=positions.device)
     if soft:

@@ -11,7 +11,7 @@ is the vanilla LSTM (the ablation); ``"grid"`` TrajNet++'s hard social grid; ``"
 twin. ``noise_dim > 0`` makes it the generator of the Social-GAN-like model (``nets.social_gan``).
 
 Shapes: ``B`` scenes, ``N`` agents, positions in metres, tensors ``(B, N, ...)`` per step. Missing entries
-are masked, never NaN. The symbolic twin of ``decode_step`` is ``predictors.casadi_twin``'s CasADi function.
+are masked, never NaN. ``predictors.export`` turns ``encode`` and ``decode_step`` into CasADi functions.
 """
 
 from __future__ import annotations
