@@ -385,7 +385,15 @@ def _start_and_signal(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, str, 
     try:
         deadline = time.monotonic() + 60
         log = out / EPISODES_FILE
-        while not (log.exists() and log.read_bytes().count(b"\n") >= 5):
+
+        def started() -> bool:
+            """A few episodes recorded and both workers up (a worker process starts, and makes its folder,
+            when the pool first needs it: the first may record its five before the second is up)."""
+            roots = list(tmp.glob(SCRATCH_PREFIX + f"{proc.pid}-*"))
+            recorded = log.exists() and log.read_bytes().count(b"\n") >= 5
+            return recorded and len(roots) == 1 and len(list(roots[0].iterdir())) == 2
+
+        while not started():
             assert proc.poll() is None, proc.stderr.read()
             assert time.monotonic() < deadline, "the sweep made no progress"
             time.sleep(0.02)
