@@ -204,7 +204,14 @@ def shipped() -> dict[str, ModelKind]:
     return dict(_SHIPPED)
 
 
-def _import_class(spec: str, what: str) -> object:
+def import_class(spec: str, what: str = "plugin") -> object:
+    """What ``module:Class`` names (the form is the caller's to check), importing the module from the
+    installed packages or, after them, the current directory, as ``python -m`` would: a user's one-file
+    plugin next to where they work needs no install, and never shadows an installed module. PredictorError
+    in one line, naming ``what`` and ``spec``, when it cannot. Shared by net and controller plugins."""
+    cwd = str(Path.cwd())
+    if cwd not in sys.path:
+        sys.path.append(cwd)
     module_name, _, class_name = spec.partition(":")
     try:
         module = importlib.import_module(module_name)
@@ -228,10 +235,7 @@ def load_plugin(spec: str) -> ModelKind:
         return _PLUGINS[spec]
     if spec in shipped():
         raise PredictorError(f"plugin {spec!r} would shadow a shipped model")
-    cwd = str(Path.cwd())
-    if cwd not in sys.path:
-        sys.path.append(cwd)  # after the installed packages: a local file never shadows one
-    cls = _import_class(spec, "plugin")
+    cls = import_class(spec, "plugin")
     kind = ModelKind(spec, cls, defaults=dict(getattr(cls, "kind_defaults", {})), source="plugin")  # type: ignore[arg-type]
     _PLUGINS[spec] = kind
     return kind

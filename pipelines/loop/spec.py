@@ -20,15 +20,12 @@ Its facts are known once its class is loaded, so they live here with the shipped
 
 from __future__ import annotations
 
-import importlib
 import inspect
 import os
 import re
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
-from pathlib import Path
 from typing import Any, Final, Literal, TypeGuard, get_args
 
 from pipelines.errors import PipelineError
@@ -152,19 +149,13 @@ def import_plugin(spec: str) -> object:
     if not is_plugin_spec(spec):
         text = repr(spec) if len(repr(spec)) <= 60 else f"{repr(spec)[:57]}..."
         raise PipelineError(f"plugin {text} is not of the form module:Class")
-    cwd = str(Path.cwd())
-    if cwd not in sys.path:
-        sys.path.append(cwd)  # after the installed packages: a local file never shadows one
-    module_name, _, class_name = spec.partition(":")
+    from predictors.errors import PredictorError
+    from predictors.models import import_class
+
     try:
-        module = importlib.import_module(module_name)
-    except Exception as exc:  # a plugin module that does not import: say which and why, in one line
-        raise PipelineError(
-            f"plugin {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
-        ) from None
-    if not hasattr(module, class_name):
-        raise PipelineError(f"plugin {spec!r}: module {module_name!r} has no {class_name!r}")
-    return getattr(module, class_name)
+        return import_class(spec, "plugin")
+    except PredictorError as exc:
+        raise PipelineError(str(exc)) from None
 
 
 def plugin_kind(cls: object, name: str) -> ControllerKind:
