@@ -17,10 +17,20 @@ Sections
   episodes    episodes per minute of one process per controller (Table II's predictor, 7 humans), and of a
               real Table II sweep (5-9 humans) with K workers, with the projected time of the paper's full
               Table II (10 cells x 1000 episodes) from its rate and from its CPU time per episode
+  export      the exported CasADi predictors against the hand-written twins (Social-LSTM family): export
+              time, parity with torch (values, Jacobians), the IBR prediction call and the coupled-NLP control
+              step over one circle episode (benchmarks/export.py's ``measure``; quick: one model, no episode)
+  robots      CMPC and DMPC control step in whole paper-profile episodes with M robots in their formations
+              (3..12, ``auto``), with success rate and fallbacks (benchmarks/robot_scaling.py's ``run_row``;
+              quick: CMPC at 3 and 6 robots, 1 episode)
+  dmpc_updates  DMPC's update rules (UPDATE:STOP) x local solves serial/threads, circle episodes, 3..12 robots
+              (benchmarks/dmpc_scaling.py's ``closed_loop``; quick: 3 and 6 robots, jacobi:regret and
+              sequential_accept:no_improvement, 1 episode)
 
 Rows measured here rather than by control_step.py (the baselines, the oracle, robots != 3) time the first
-``--steps`` control steps of episodes of both scenarios. Medians and 95th percentiles in milliseconds. The
-machine is shared: figures vary with the load, which is printed.
+``--steps`` control steps of episodes of both scenarios (export, robots and dmpc_updates time whole episodes).
+Medians and 95th percentiles in milliseconds. The machine is shared: figures vary with the load, which is
+printed.
 """
 
 from __future__ import annotations
@@ -38,10 +48,11 @@ from typing import Any
 
 import numpy as np
 
-# The sibling benchmark modules (orca_step.py, control_step.py) are imported by name, however this is run.
+# The sibling benchmark modules (orca_step.py, control_step.py, export.py, robot_scaling.py, dmpc_scaling.py)
+# are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes")
+SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates")
 SCENARIOS = ("circle", "perpendicular")
 ORACLE_PREDICTOR = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
 TABLE2_EPISODES = 10 * 1000  # the paper: 5 crowd sizes x 2 methods, 500 + 500 episodes per cell
@@ -171,6 +182,37 @@ def sweep_rate(predictor: str, episodes_per_cell: int, workers: int) -> dict[str
         "steady_episodes_per_minute": steady,
         "projected_table2_hours": TABLE2_EPISODES / steady / 60.0 if steady else float("nan"),
     }
+
+
+def export_rows(model: str, n_humans: int, calls: int, closed_loop: bool) -> dict[str, dict[str, Any]]:
+    """One zoo model exported to CasADi (and, for the Social-LSTM family, its hand-written twin):
+    benchmarks/export.py's measure, keyed by twin ("exported", "hand-written")."""
+    import export
+
+    from predictors.zoo import zoo_names
+
+    if model not in zoo_names():
+        raise LookupError(f"{model} is not in the zoo")
+    return {row["twin"]: row for row in export.measure(model, n_humans, calls, closed_loop)}
+
+
+def robots_row(controller: str, n_robots: int, n_humans: int, episodes: int) -> dict[str, Any]:
+    """CMPC/DMPC (constant velocity) with ``n_robots`` robots in their formation (``auto``), paper profile,
+    episodes alternating circle/perpendicular from seed 0: benchmarks/robot_scaling.py's run_row."""
+    import robot_scaling
+
+    scenarios = tuple(robot_scaling.SCENARIOS)
+    cv = "constant_velocity"
+    row = robot_scaling.run_row(controller, cv, n_robots, n_humans, episodes, 0, scenarios, "auto")
+    return row | {"method": "robot_scaling.py, whole episodes"}
+
+
+def dmpc_update_cell(n_robots: int, n_humans: int, rule: str, episodes: int) -> dict[str, Any]:
+    """One DMPC rule (UPDATE:STOP) at ``n_robots`` robots, serial and threaded local solves on the same
+    circle seeds: benchmarks/dmpc_scaling.py's closed_loop (gauss_seidel rules run serially only)."""
+    import dmpc_scaling
+
+    return dmpc_scaling.closed_loop(n_robots, n_humans, rule, ["serial", "threads"], episodes)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -316,6 +358,50 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             lambda: sweep_rate(paper, per_cell, args.workers),
             errors,
         )
+
+    if "export" in sections:
+        print("exported predictors vs hand-written twins, 7 humans, 3 robots, H=4", file=sys.stderr)
+        import export
+
+        models = ("social_lstm_soft_eth",) if quick else export.DEFAULT_MODELS
+        calls = 100 if quick else 300
+        report["export"] = {
+            model: _timed(model, lambda m=model: export_rows(m, 7, calls, not quick), errors)
+            for model in models
+        }
+
+    if "robots" in sections:
+        print("control step against robots in formation, 7 humans, paper profile", file=sys.stderr)
+        controllers = ("cmpc",) if quick else ("cmpc", "dmpc")
+        episodes = 1 if quick else 2
+        robots: dict[str, Any] = {}
+        for controller in controllers:
+            for m in robots_scale:
+                robots[f"{controller}_h7_r{m}"] = _timed(
+                    f"{controller}, {m} robots",
+                    lambda c=controller, m=m: robots_row(c, m, 7, episodes),
+                    errors,
+                )
+        report["robots"] = robots
+
+    if "dmpc_updates" in sections:
+        print("DMPC update rules x serial/threads, 7 humans, circle", file=sys.stderr)
+        import dmpc_scaling
+
+        rules = ("jacobi:regret", "sequential_accept:no_improvement") if quick else dmpc_scaling.RULES
+        episodes = 1 if quick else 2
+        updates: dict[str, Any] = {}
+        for m in robots_scale:
+            for rule in rules:
+                cell = _timed(
+                    f"{m} robots, {rule}", lambda m=m, r=rule: dmpc_update_cell(m, 7, r, episodes), errors
+                )
+                if cell:
+                    rows = cell["rows"]
+                    if "serial" in rows and "threads" in rows:
+                        cell["speedup_median"] = rows["serial"]["median_ms"] / rows["threads"]["median_ms"]
+                updates[f"r{m} {rule}"] = cell
+        report["dmpc_updates"] = updates
     report["errors"] = errors
     return report
 
@@ -351,6 +437,48 @@ def table(report: dict[str, Any]) -> str:
             lines.append(_row(f"dmpc {key} {mode}", row.get(mode)))
         if "speedup_median" in row:
             lines.append(f"| dmpc {key} threads speed-up (median) | x{row['speedup_median']:.2f} | | |")
+    for key, row in report.get("robots", {}).items():
+        label = f"control step robots {key}"
+        if row:
+            label += (
+                f" ({row['formation']}, {row['episodes']} ep, success {row['success_rate']:.0f}%, "
+                f"collision {row['collision_rate']:.0f}%, fallbacks {row['fallback_steps']}/{row['steps']})"
+            )
+        lines.append(_row(label, row))
+    for key, cell in report.get("dmpc_updates", {}).items():
+        if not cell:
+            lines.append(_row(f"dmpc {key}", None))
+            continue
+        for mode, stats in cell["rows"].items():
+            lines.append(_row(f"dmpc {key} {mode}", stats))
+        if "speedup_median" in cell:
+            lines.append(
+                f"| dmpc {key} threads speed-up (median; same trajectories: {cell['same']}) | "
+                f"x{cell['speedup_median']:.2f} | | |"
+            )
+    exported = report.get("export")
+    if exported:
+        lines += [
+            "",
+            "| exported predictor (7 humans, 3 robots, H=4) | export s | value err | jac err | IBR ms/call "
+            "| NLP step median ms |",
+            "|---|---|---|---|---|---|",
+        ]
+        for model, rows in exported.items():
+            if not rows:
+                lines.append(f"| {model} | failed | | | | |")
+                continue
+            for twin, r in rows.items():
+                lines.append(
+                    f"| {model} {twin} | {r['export_s']:.3f} | {r['value_err']:.1e} | {r['jac_err']:.1e} | "
+                    f"{r['ibr_ms']:.3f} | {r['nlp_ms']:.2f} |"
+                )
+            if "exported" in rows and "hand-written" in rows:
+                e, h = rows["exported"], rows["hand-written"]
+                lines.append(
+                    f"| {model} ratio exported / hand-written (target <= 1.5) | | | | "
+                    f"{e['ibr_ms'] / h['ibr_ms']:.2f} | {e['nlp_ms'] / h['nlp_ms']:.2f} |"
+                )
     episodes = report.get("episodes_per_minute")
     if episodes:
         lines += ["", "| episodes per minute (one process: 7 humans; sweep: 5-9) | value |", "|---|---|"]
