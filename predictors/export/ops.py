@@ -147,7 +147,8 @@ SHAPING: dict[str, Callable[..., Any]] = {
 }
 
 
-def _register() -> None:
+def register() -> None:
+    """Enter every supported operation in the dispatch tables (idempotent: the tables are dicts)."""
     for name, op in ELEMENTWISE.items():
         handler = unary(op)
         METHODS[name] = handler
@@ -243,6 +244,3 @@ def _register() -> None:
             "relu": HANDLERS[torch.relu],
         }
     )
-
-
-_register()

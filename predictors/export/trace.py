@@ -19,12 +19,14 @@ import casadi as ca
 import torch
 from torch import nn
 
-from predictors.export import ops  # noqa: F401 (registers the operation table)
 from predictors.export.elementwise import sigmoid
 from predictors.export.errors import MODULE_STACK, ExportError, current_module
 from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
+from predictors.export.ops import register
 from predictors.export.symbolic import SymTensor, lift
+
+register()  # the dispatch tables SymTensor consults, filled before anything is exported
 
 
 @dataclass(frozen=True)
