@@ -56,30 +56,16 @@ gauss_seidel + no_improvement in 3 of 3 (43 ms), sequential_accept + no_improvem
 34 ms threads). At M = 3 every rule succeeds in 3 of 3, and the repairs with no_improvement take more
 iterations than jacobi (5.6 and 6.5 a step against 4.4): the default stays the paper's.
 
-Parallelism (``dmpc_parallel="threads"``). The local solves of one iteration are independent, and CasADi
-releases the GIL while a solver runs: two threads calling Fatrop local solvers were both inside the solver
-71-80 % of the time (1.5-1.8x). What held the thread pool back was the hand-over, one future per solve: on
-batches of 6 local problems recorded at M = 6 (about 0.7 ms a solve), 1.2x, where a CasADi
-``map(6, "thread")`` over the bare Fatrop solver reached 1.4-1.8x. That map returns no per-robot solver
-statistics (status, iterations), which the Fatrop-to-IPOPT fallback and the acceptance rule need, so the
-solves stay separate calls: the calling thread and ``cores - 1`` helpers take them from a shared iterator
-(``_solve_all``). Same batches, alternating with the serial path, load 0.6-0.9 on the 2 cores: 1.45x
-(sequential_accept) and 1.57x (jacobi, 13 % of whose solves fall back to IPOPT), identical to the serial
-results bit for bit; in closed loop at M = 6 (load 1.0-1.3) the local-solve phase ran 1.38x and 1.50x
-faster. What is left is Python around each solve (~85 us of the 0.7 ms, under the GIL) and the other
-processes on the cores: the load average decides the speed-up more than the mechanism.
-``"serial"`` is the default because DMPC's long runs are sweeps, whose process workers already occupy every
-core; ``"threads"`` is the faster choice for a single run on a machine with a free core.
+Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements.
 """
 
 from __future__ import annotations
 
 import math
-import os
 import time
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import NamedTuple, cast
+from typing import NamedTuple
 
 import numpy as np
 
@@ -88,6 +74,7 @@ from mpc.config import MPCConfig
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start
 from mpc.nlp import JointNLP, LocalNLP, StepData
+from mpc.parallel import cores, run_in_threads
 from mpc.solvers import Solution, better
 
 
@@ -101,13 +88,6 @@ class _Update(NamedTuple):
     solved: bool  # at least one local solve succeeded
     solves: int
     solver_iterations: int
-
-
-def _cores() -> int:
-    """The CPUs this process may run on (its affinity mask, e.g. under ``taskset``)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def accept(new_cost: float, old_cost: float, epsilon: float) -> bool:
@@ -125,7 +105,7 @@ class DMPC:
         self.joint = JointNLP(cfg, n_robots, n_humans)
         self._pool: ThreadPoolExecutor | None = None  # made on first use with dmpc_parallel="threads"
         # Threads besides the caller's for the local solves: one per further core, at most one per robot.
-        self._helpers = max(1, min(n_robots, _cores()) - 1)
+        self._helpers = max(1, min(n_robots, cores()) - 1)
 
     def close(self) -> None:
         """Stop the solver threads; a later solve starts them again."""
@@ -138,30 +118,14 @@ class DMPC:
     ) -> list[Solution]:
         """``LocalNLP.solve`` of every job, results in the jobs' order.
 
-        With ``dmpc_parallel="threads"`` the calling thread and up to ``cores - 1`` helper threads take the
-        jobs one by one from a shared iterator until none is left: no thread waits while there is work, and
-        a job costs no hand-over (a future per job cost a third of the speed-up, module docstring). The jobs
-        are for distinct robots, so no solver instance runs in two threads at once.
+        With ``dmpc_parallel="threads"``, ``mpc.parallel.run_in_threads``. The jobs are for distinct robots,
+        so no solver instance runs in two threads at once.
         """
         if self.cfg.dmpc_parallel != "threads" or len(jobs) < 2:
             return [self.local.solve(*job) for job in jobs]
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=self._helpers)
-        results: list[Solution | None] = [None] * len(jobs)
-        pending = iter(range(len(jobs)))  # next() on a range iterator is atomic under the GIL
-
-        def drain() -> None:
-            for k in pending:
-                results[k] = self.local.solve(*jobs[k])
-
-        helpers = [self._pool.submit(drain) for _ in range(min(self._helpers, len(jobs) - 1))]
-        try:
-            drain()
-        finally:
-            wait(helpers)  # never leave a solver running in a helper after this call
-        for helper in helpers:
-            helper.result()  # a helper's exception, raised here
-        return cast(list[Solution], results)
+        return run_in_threads(self._pool, self._helpers, self.local.solve, jobs)
 
     def _restart(
         self, data: StepData, moving: np.ndarray, params: dict, sols: list[Solution]
