@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import checkpoint, models, zoo
+from predictors import checkpoint, manifest, models, zoo
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.learned import LearnedPredictor, SocialGANPredictor
 from predictors.models import load_plugin
@@ -47,7 +47,7 @@ def real_entry(name: str = NAME) -> dict:
 def write_manifest(root: Path, *entries: dict) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     path = root / zoo.MANIFEST_NAME
-    path.write_text(json.dumps({"format": zoo.MANIFEST_FORMAT, "version": 1, "models": list(entries)}))
+    path.write_text(json.dumps({"format": manifest.MANIFEST_FORMAT, "version": 1, "models": list(entries)}))
     return path
 
 

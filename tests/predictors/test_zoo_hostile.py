@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import checkpoint, zoo
+from predictors import checkpoint, manifest, zoo
 from predictors.errors import CheckpointMismatch, PredictorError
 from predictors.nets.social_gan import DiscriminatorConfig, generator_config
 from predictors.nets.social_lstm import MAX_PARAMETERS, SocialLSTM, SocialLSTMConfig
@@ -37,7 +37,7 @@ def real_entry() -> dict:
 
 def write_manifest(root: Path, *entries: dict) -> Path:
     path = root / zoo.MANIFEST_NAME
-    path.write_text(json.dumps({"format": zoo.MANIFEST_FORMAT, "version": 1, "models": list(entries)}))
+    path.write_text(json.dumps({"format": manifest.MANIFEST_FORMAT, "version": 1, "models": list(entries)}))
     return path
 
 
