@@ -1,0 +1,169 @@
+"""What a sweep will run, settled before any worker starts: the experiment with the config's choices applied
+to every method (``configured_experiment``), and the checks that refuse, in one line, what would otherwise
+fail once per episode (predictors, margins, world settings a sweep cannot honour)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.config import RunConfig
+    from pipelines.experiments.cells import Experiment
+
+
+def check_predictors(experiment: Experiment) -> None:
+    """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
+    in a zoo, and a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit)."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+    from predictors.models import model_kind
+    from predictors.registry import available
+
+    known = set(available())
+    wanted = {spec.predictor for _, spec in experiment.methods}
+    missing = sorted(wanted - known)
+    if missing:
+        hint = "--predictors" if experiment.predictor_list else "--predictor"
+        raise PipelineError(
+            f"experiment {experiment.name!r} needs predictors {missing} that are not available; "
+            f"available: {sorted(known)} (train or fetch the zoo models, or pass {hint})"
+        )
+    for name in sorted(wanted):
+        located = zoo.locate(name)
+        if located is not None:
+            try:
+                model_kind(located.entry.model)
+            except PredictorError as exc:
+                raise PipelineError(f"predictor {name!r} of the {located.source} zoo: {exc}") from None
+
+
+def check_margins(experiment: Experiment) -> None:
+    """Every method's margins resolve (a calibration that matches the weights) before workers start."""
+    from pipelines.loop.mpc import mpc_config
+    from predictors.registry import checkpoint_sha256
+
+    for _, spec in experiment.methods:
+        name = spec.predictor_name
+        spec.margins.resolve(name, mpc_config(spec).horizon, checkpoint_sha256(name))
+
+
+def configured_experiment(cfg: RunConfig) -> Experiment:
+    """The experiment of ``cfg`` with its choices applied to every method: the predictors, predictor and
+    margins (--predictors, --predictor, --margins or the config), the profile and visibility, and the
+    [controller] and [mpc] values that differ from their defaults (a value the experiment compares across
+    its methods is refused)."""
+    from pipelines.experiments.cells import World, get_experiment
+    from pipelines.loop.margins import parse_margins
+
+    experiment = get_experiment(cfg.sweep.experiment or "")
+    if cfg.sweep.predictors is not None:
+        experiment = _applied(cfg, "sweep", "predictors", experiment.with_predictors, cfg.sweep.predictors)
+    elif experiment.predictor_list:
+        from pipelines.experiments.cells import swap_predictors
+        from predictors.registry import available
+
+        experiment = experiment.with_predictors(swap_predictors(available()))
+    if cfg.sweep.controllers is not None:
+        experiment = _applied(cfg, "sweep", "controllers", experiment.with_controllers, cfg.sweep.controllers)
+    if cfg.controller.predictor:
+        experiment = _applied(
+            cfg, "controller", "predictor", experiment.with_predictor, cfg.controller.predictor
+        )
+    if cfg.controller.margins:
+        margins = parse_margins(cfg.controller.margins)
+        experiment = _applied(cfg, "controller", "margins", experiment.with_margins, margins)
+    if cfg.chosen("env", "profile") or cfg.chosen("env", "robots_visible"):
+        world = World(
+            cfg.env.profile if cfg.chosen("env", "profile") else experiment.world.profile,
+            ("visible" if cfg.env.robots_visible else "invisible")
+            if cfg.chosen("env", "robots_visible")
+            else experiment.world.visibility,
+        )
+        key = "profile" if cfg.chosen("env", "profile") else "robots_visible"
+        experiment = _applied(cfg, "env", key, experiment.with_world, world)
+    for key in ("controller", "coupling", "flocking", "record_iterations"):
+        if cfg.chosen("controller", key):
+            experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
+    for key, value in cfg.mpc_overrides():
+        experiment = _with_mpc_override(cfg, experiment, key, value)
+    return experiment
+
+
+def _applied(
+    cfg: RunConfig, section: str, key: str, method: Callable[[Any], Experiment], value: Any
+) -> Experiment:
+    """``method(value)``, its refusal named by where the value came from when that is no option."""
+    try:
+        return method(value)
+    except PipelineError as exc:
+        source = cfg.source(section, key)
+        if source is None or source.kind == "cli":
+            raise
+        raise cfg.error(section, key, str(exc)) from None
+
+
+def _with_spec_field(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
+    """Every method's ``ControllerSpec.<key>`` set to ``value``, unless the experiment compares it."""
+    import dataclasses
+
+    own = {getattr(spec, key) for _, spec in experiment.methods}
+    if len(own) > 1:
+        raise cfg.error(
+            "controller",
+            key,
+            f"experiment {experiment.name!r} compares its methods' {key} ({sorted(map(str, own))}); "
+            "leave it unset for this sweep",
+        )
+    methods = tuple((label, dataclasses.replace(spec, **{key: value})) for label, spec in experiment.methods)
+    return dataclasses.replace(experiment, methods=methods)
+
+
+def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
+    """Every method's MPC with ``key = value`` (ControllerSpec.mpc_overrides, part of the cell keys), unless
+    a method sets that key itself."""
+    import dataclasses
+
+    if key == "jit":
+        raise cfg.error(
+            "mpc", key, "a sweep compiles by [sweep] jit (--jit auto|on|off), which leaves the cells alone"
+        )
+    methods = []
+    for label, spec in experiment.methods:
+        own = dict(spec.mpc_overrides)
+        if key in own and own[key] != value:
+            raise cfg.error(
+                "mpc",
+                key,
+                f"method {label!r} of experiment {experiment.name!r} sets {key} = {own[key]!r} itself; "
+                "leave it unset for this sweep",
+            )
+        overrides = spec.mpc_overrides if key in own else (*spec.mpc_overrides, (key, value))
+        methods.append((label, dataclasses.replace(spec, mpc_overrides=overrides)))
+    return dataclasses.replace(experiment, methods=tuple(methods))
+
+
+def check_world(cfg: RunConfig) -> None:
+    """A sweep's cells run a named profile (``World``: profile and visibility): refuse the other [world],
+    [env] and [env.orca] values (set to something else than the default) rather than ignore them."""
+    from crowdsim.profiles import PROFILES
+
+    why = (
+        "a sweep's cells run a named profile ([env] profile, robots_visible); other [world], [env] and "
+        "[env.orca] values apply to simulate only"
+    )
+    profile = PROFILES[cfg.env.profile]
+    for section, key, default in (
+        *(("world", k, cfg.default("world", k)) for k in cfg.values["world"]),
+        *(("env.orca", k, cfg.default("env.orca", k)) for k in cfg.values["env.orca"]),
+        *(
+            ("env", k, getattr(profile, k))
+            for k in cfg.values["env"]
+            if k not in ("profile", "robots_visible")
+        ),
+    ):
+        value = cfg.values[section][key]
+        if value is not None and value != default:
+            raise cfg.error(section, key, f"{value!r}: {why}")

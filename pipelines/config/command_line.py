@@ -1,0 +1,62 @@
+"""A command's effective config: its ``--config`` file, ``--set`` items and the options given explicitly
+(defaults < file < ``--set`` < options), each option mapped onto its config key."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, parse_set, read_file, resolve
+
+
+@dataclass(frozen=True)
+class Option:
+    """A command-line option that sets a config key when given (its argparse default is None)."""
+
+    dest: str
+    section: str
+    key: str
+    flag: str
+    convert: Any = None  # value -> the key's value (e.g. --no-flocking -> flocking = false)
+
+
+def cli_entries(args: Any, options: Sequence[Option]) -> list[Entry]:
+    entries = []
+    for option in options:
+        value = getattr(args, option.dest, None)
+        if value is None:
+            continue
+        if option.convert is not None:
+            value = option.convert(value)
+        if isinstance(value, tuple):
+            value = list(value)
+        if isinstance(value, Path):
+            value = str(value)
+        entries.append(Entry(option.section, option.key, value, Source("cli", option.flag)))
+    return entries
+
+
+def config_arguments(args: Any) -> tuple[str | None, list[str]]:
+    """The config file and ``--set`` items of a command line: before the command (``crowdmpc --config F``)
+    or after it (``crowdmpc simulate --config F``); one file at most."""
+    files = [f for f in (getattr(args, "config_file", None), getattr(args, "sub_config_file", None)) if f]
+    if len(files) > 1 and files[0] != files[1]:
+        raise ConfigError(f"--config given twice ({files[0]}, {files[1]}); one config file per run")
+    sets = [*(getattr(args, "config_set", None) or []), *(getattr(args, "sub_config_set", None) or [])]
+    return (str(files[0]) if files else None), sets
+
+
+def load(path: str | None = None, sets: Sequence[str] = (), cli: Sequence[Entry] = ()) -> RunConfig:
+    """Defaults < the file at ``path`` < ``sets`` < ``cli``, validated."""
+    entries = read_file(path) if path is not None else []
+    entries += [parse_set(text) for text in sets]
+    entries += list(cli)
+    return resolve(entries, path)
+
+
+def command_config(args: Any, options: Sequence[Option] = ()) -> RunConfig:
+    """The effective config of a command: its --config file, --set items and explicit ``options``."""
+    path, sets = config_arguments(args)
+    return load(path, sets, cli_entries(args, options))
