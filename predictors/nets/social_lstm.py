@@ -25,6 +25,7 @@ from torch import nn
 
 from predictors.errors import PredictorError, short_repr
 from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
+from predictors.nets.rollout import teacher_forced_rollout
 
 HEADS = ("gaussian", "point")
 N_TAGS = 2  # TrajNet++ InputEmbedding keeps two embedding slots for the encoder/decoder start tags
@@ -249,6 +250,10 @@ class SocialLSTM(nn.Module):
         active = torch.ones(cur.shape[:2], dtype=torch.bool, device=cur.device)
         return self.step(self.decoder, h, c, prev, cur, active, neighbours)
 
+    def decode_step_masked(self, h, c, prev, cur, active, neighbours):
+        """``decode_step`` updating only the ``active`` agents (teacher-forced training)."""
+        return self.step(self.decoder, h, c, prev, cur, active, neighbours)
+
     def forward(
         self,
         positions: torch.Tensor,
@@ -267,28 +272,14 @@ class SocialLSTM(nn.Module):
         without it (evaluation) every agent is fed its own predictions and agents present at the last
         observed step are pooled.
         """
-        observed = positions[:, :obs_len]
-        observed_mask = mask[:, :obs_len]
-        h, c, out = self.encode(observed, observed_mask, noise)
-        now = observed[:, -1]
-        outputs = [out]
-        predicted = [now + out[..., :2]]
-        present = observed_mask[:, -1]
-        prev_model, cur_model = now, predicted[0]
-        for k in range(1, pred_len):
-            prev_in, cur_in = prev_model, cur_model
-            if self.training:  # TrajNet++ "DETACH!!!": no gradient through the fed-back positions
-                prev_in, cur_in = prev_in.detach(), cur_in.detach()
-            if teacher_forcing:
-                t = obs_len - 1 + k
-                prev_in = torch.cat([prev_in[:, :1], positions[:, t - 1, 1:]], dim=1)
-                cur_in = torch.cat([cur_in[:, :1], positions[:, t, 1:]], dim=1)
-                active = mask[:, t - 1] & mask[:, t]
-                active = torch.cat([torch.ones_like(active[:, :1]), active[:, 1:]], dim=1)
-                h, c, out = self.step(self.decoder, h, c, prev_in, cur_in, active, active)
-            else:
-                h, c, out = self.decode_step(h, c, prev_in, cur_in, present)
-            outputs.append(out)
-            predicted.append(cur_in + out[..., :2])
-            prev_model, cur_model = cur_in, predicted[-1]
-        return torch.stack(outputs, dim=1), torch.stack(predicted, dim=1)
+        encoded = self.encode(positions[:, :obs_len], mask[:, :obs_len], noise)
+        return teacher_forced_rollout(
+            self,
+            positions,
+            mask,
+            obs_len,
+            pred_len,
+            teacher_forcing=teacher_forcing,
+            encoded=encoded,
+            masked_step=self.decode_step_masked,
+        )
