@@ -68,7 +68,8 @@ class LearnedPredictor:
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
         self._encoders: dict[tuple[int, int], ca.Function] = {}
         self._steps: dict[int, ca.Function] = {}
-        self._state_widths: tuple[tuple[int, ...], int] | None = None
+        # Per agent: each state tensor's trailing dims, and the head output's width (``_layout``).
+        self._layout_memo: tuple[tuple[tuple[int, ...], ...], int] | None = None
         # The iterative best response predicts many times from the same past: keep the last encoding
         # (torch state for ``rollout``, the context for ``encode``).
         self._last_encoding: tuple[bytes, tuple] | None = None
@@ -226,10 +227,11 @@ class LearnedPredictor:
         # A copy: the caller may write into its context, the memo must stay what the encoder computed.
         return self._last_context[1].copy()
 
-    def _widths(self) -> tuple[tuple[int, ...], int]:
-        """Per agent: the width of each state tensor, and of the head output (from a symbolic run of encode
-        with one and with two agents, which also checks that every output is ``(B, N, ...)``)."""
-        if self._state_widths is None:
+    def _layout(self) -> tuple[tuple[tuple[int, ...], ...], int]:
+        """Per agent: the trailing dims of each state tensor (an LSTM's ``(D,)``, a window's ``(K, 2)``) and
+        the width of the head output, from a symbolic run of encode with one and with two agents, which also
+        checks that every output is ``(B, N, ...)``."""
+        if self._layout_memo is None:
             shapes = []
             for n in (1, 2):
                 specs = [TensorSpec("positions", (1, 2, n, 2)), TensorSpec("mask", (1, 2, n), True)]
@@ -242,13 +244,18 @@ class LearnedPredictor:
                     f"{self.name}: encode must return (*state, out), each of shape (B, N, ...); got "
                     f"{shapes[1]} for B=1, N=2 (see predictors/nets/contract.py)"
                 )
-            widths = tuple(math.prod(shape[2:]) for shape in shapes[0])
-            if widths[-1] < 2:
+            out_width = math.prod(shapes[0][-1][2:])
+            if out_width < 2:
                 raise PredictorError(
                     f"{self.name}: the head output must have at least 2 values (the mean step)"
                 )
-            self._state_widths = (widths[:-1], widths[-1])
-        return self._state_widths
+            self._layout_memo = (tuple(shape[2:] for shape in shapes[0][:-1]), out_width)
+        return self._layout_memo
+
+    def _widths(self) -> tuple[tuple[int, ...], int]:
+        """Per agent: the width of each state tensor (flattened) and of the head output."""
+        dims, out_width = self._layout()
+        return tuple(math.prod(d) for d in dims), out_width
 
     def context_size(self, n_humans: int, n_robots: int) -> int:
         n_agents = n_humans + n_robots
@@ -309,11 +316,7 @@ class LearnedPredictor:
         scene of ``n_agents`` (row-major flat inputs and outputs), built once per size."""
         if n_agents not in self._steps:
             # The state tensors' own shapes (an LSTM's (1, N, D); a window's (1, N, K, 2)), not flat widths.
-            state_shapes = output_shapes(
-                self.net,
-                self.net.encode,
-                [TensorSpec("positions", (1, 2, n_agents, 2)), TensorSpec("mask", (1, 2, n_agents), True)],
-            )[:-1]
+            state_shapes = [(1, n_agents, *dims) for dims in self._layout()[0]]
             specs = [TensorSpec(f"state_{i}", shape) for i, shape in enumerate(state_shapes)]
             specs += [
                 TensorSpec("prev", (1, n_agents, 2)),
