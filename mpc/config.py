@@ -47,6 +47,8 @@ SOLVERS: Final[tuple[Solver, ...]] = get_args(Solver)
 PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
 DMPC_UPDATES: Final[tuple[DMPCUpdate, ...]] = get_args(DMPCUpdate)
 DMPC_STOPS: Final[tuple[DMPCStop, ...]] = get_args(DMPCStop)
+Guidance = Literal["none", "standing"]
+GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
 ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
 
@@ -140,6 +142,10 @@ class MPCConfig:
     # realised human position lies within m_k of the prediction, keeping d_min + m_k from the prediction
     # keeps d_min from the human. Robot-robot (Eq. 12) is unchanged: robots know each other's plans.
     human_margins: tuple[float, ...] = ()
+    # Where Eq. 8's reference heads. "none": the goal (the paper). "standing": around humans standing still,
+    # discs of radius d_min plus their margin, when they block the straight line to the goal (mpc/guidance.py:
+    # the local minimum behind a row of standing humans; the closed loop says who stands).
+    guidance: Guidance = "none"
 
     def __post_init__(self):
         for name in ("horizon", "j_max", "solver_max_iter"):
@@ -173,6 +179,8 @@ class MPCConfig:
             raise MPCConfigError(f"dmpc_relaxation must be in (0, 1], got {self.dmpc_relaxation!r}")
         if self.on_goal not in ON_GOAL_MODES:
             raise MPCConfigError(f"on_goal must be one of {ON_GOAL_MODES}, got {self.on_goal!r}")
+        if self.guidance not in GUIDANCE_MODES:
+            raise MPCConfigError(f"guidance must be one of {GUIDANCE_MODES}, got {self.guidance!r}")
         if self.coupled_mode not in COUPLED_MODES:
             raise MPCConfigError(f"coupled_mode must be one of {COUPLED_MODES}, got {self.coupled_mode!r}")
         self._check_margins()

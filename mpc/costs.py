@@ -80,18 +80,27 @@ def jerk_cost(accels: Symbolic, last_action: Symbolic) -> Symbolic:
 
 
 def human_collision_cost(
-    positions: Symbolic, velocities: Symbolic, humans: Symbolic, n_humans: int, cfg: MPCConfig
+    positions: Symbolic,
+    velocities: Symbolic,
+    humans: Symbolic,
+    n_humans: int,
+    cfg: MPCConfig,
+    margins: Symbolic | None = None,
 ) -> Symbolic:
     """Eq. 11 through the penalty of Section IV, summed over humans and steps. Unweighted.
 
-    ``sum_j sum_k smax((d_min + m_k)^2 + rho ||v_{k+1}||^2 - ||s_{k+1} - s_j,k+1||^2)``; ``humans`` is
-    ``(2, H * N_h)`` (module docstring). ``m_k`` is ``cfg.human_margin(k)``, 0 in the paper's method.
+    ``sum_j sum_k smax((d_min + m_jk)^2 + rho ||v_{k+1}||^2 - ||s_{k+1} - s_j,k+1||^2)``; ``humans`` is
+    ``(2, H * N_h)`` (module docstring). ``margins``: ``m_jk`` as a ``(1, H * N_h)`` row in the columns of
+    ``humans`` (the NLPs pass a parameter: a margin per human and step); None: ``m_k = cfg.human_margin(k)``
+    for every human. All 0 is the paper's method.
     """
     total = positions[0, 0] * 0  # the type of the inputs (SX, MX or DM), also with no humans
     for k in range(positions.shape[1]):
-        block = humans[:, k * n_humans : (k + 1) * n_humans]
+        columns = slice(k * n_humans, (k + 1) * n_humans)
+        block = humans[:, columns]
         dist2 = ca.sum1((block - ca.repmat(positions[:, k], 1, n_humans)) ** 2)
-        g = (cfg.d_min + cfg.human_margin(k)) ** 2 + cfg.rho * ca.sumsqr(velocities[:, k]) - dist2
+        margin = cfg.human_margin(k) if margins is None else margins[:, columns]
+        g = (cfg.d_min + margin) ** 2 + cfg.rho * ca.sumsqr(velocities[:, k]) - dist2
         total = total + ca.sum2(smax(g, cfg.mu))
     return total
 
@@ -117,23 +126,36 @@ class Track:
     goal: Symbolic  # (2, 1)
     positions: Symbolic  # (2, H) at t+1..t+H
     velocities: Symbolic  # (2, H)
+    target: Symbolic  # (2, 1) where Eq. 8's reference heads: the goal, or a detour point (mpc/guidance.py)
 
 
-def make_track(state: Symbolic, accels: Symbolic, last_action: Symbolic, goal: Symbolic, dt: float) -> Track:
-    """A robot's track: Eq. 2 rolled out from ``state`` under ``accels``."""
+def make_track(
+    state: Symbolic,
+    accels: Symbolic,
+    last_action: Symbolic,
+    goal: Symbolic,
+    dt: float,
+    target: Symbolic | None = None,
+) -> Track:
+    """A robot's track: Eq. 2 rolled out from ``state`` under ``accels``; ``target`` defaults to the goal."""
     positions, velocities = rollout(state, accels, dt)
-    return Track(state, accels, last_action, goal, positions, velocities)
+    return Track(state, accels, last_action, goal, positions, velocities, goal if target is None else target)
 
 
-def individual_cost(track: Track, humans: Symbolic, n_humans: int, cfg: MPCConfig) -> Symbolic:
-    """Eq. 13: ``J_i = w_goal J_goal + w_acce J_acce + w_jerk J_jerk + w_coll sum_j J_coll_ij``."""
+def individual_cost(
+    track: Track, humans: Symbolic, n_humans: int, cfg: MPCConfig, margins: Symbolic | None = None
+) -> Symbolic:
+    """Eq. 13: ``J_i = w_goal J_goal + w_acce J_acce + w_jerk J_jerk + w_coll sum_j J_coll_ij``.
+
+    Eq. 8's reference heads for ``track.target`` (the goal unless guidance detours it); Eq. 7's weight
+    ``1 / (||s_t - s_goal|| + delta)`` keeps the real goal."""
     position = track.state[0:2]
-    reference = reference_trajectory(position, track.goal, track.accels.shape[1], cfg.dt, cfg.v_max)
+    reference = reference_trajectory(position, track.target, track.accels.shape[1], cfg.dt, cfg.v_max)
     return (
         cfg.w_goal * goal_cost(track.positions, reference, position, track.goal, cfg.delta)
         + cfg.w_acce * acceleration_cost(track.accels)
         + cfg.w_jerk * jerk_cost(track.accels, track.last_action)
-        + cfg.w_coll * human_collision_cost(track.positions, track.velocities, humans, n_humans, cfg)
+        + cfg.w_coll * human_collision_cost(track.positions, track.velocities, humans, n_humans, cfg, margins)
     )
 
 
@@ -161,16 +183,23 @@ def robot_cost(
     humans: Symbolic,
     n_humans: int,
     cfg: MPCConfig,
+    margins: Symbolic | None = None,
 ) -> Symbolic:
-    """``C_i = J_i + sum_{j != i} J_ij`` (Definition 1, the objective of Eq. 5), others' positions given."""
-    total = individual_cost(track, humans, n_humans, cfg)
+    """``C_i = J_i + sum_{j != i} J_ij`` (Definition 1, the objective of Eq. 5), others' positions given;
+    ``margins``: see :func:`human_collision_cost`."""
+    total = individual_cost(track, humans, n_humans, cfg, margins)
     for positions_j, w in zip(other_positions, other_floc_weights, strict=True):
         total = total + shared_cost(track.positions, positions_j, w, cfg)
     return total
 
 
 def potential(
-    tracks: Sequence[Track], floc_weights: Symbolic, humans: Symbolic, n_humans: int, cfg: MPCConfig
+    tracks: Sequence[Track],
+    floc_weights: Symbolic,
+    humans: Symbolic,
+    n_humans: int,
+    cfg: MPCConfig,
+    margins: Symbolic | None = None,
 ) -> Symbolic:
     """Eq. 16 with each unordered pair once (module docstring): ``F = sum_i J_i + sum_{i<j} J_ij``.
 
@@ -179,18 +208,22 @@ def potential(
     n_robots = len(tracks)
     total = 0
     for i, track in enumerate(tracks):
-        total = total + individual_cost(track, humans, n_humans, cfg)
+        total = total + individual_cost(track, humans, n_humans, cfg, margins)
         for j in range(i + 1, n_robots):
             w = floc_weights[pair_index(i, j, n_robots)]
             total = total + shared_cost(track.positions, tracks[j].positions, w, cfg)
     return total
 
 
-def collision_penalty(tracks: Sequence[Track], humans: Symbolic, n_humans: int, cfg: MPCConfig) -> Symbolic:
+def collision_penalty(
+    tracks: Sequence[Track], humans: Symbolic, n_humans: int, cfg: MPCConfig, margins: Symbolic | None = None
+) -> Symbolic:
     """The collision part of the potential: ``w_coll`` times every robot-human and robot-robot penalty."""
     total = 0
     for i, track in enumerate(tracks):
-        total = total + human_collision_cost(track.positions, track.velocities, humans, n_humans, cfg)
+        total = total + human_collision_cost(
+            track.positions, track.velocities, humans, n_humans, cfg, margins
+        )
         for other in tracks[i + 1 :]:
             total = total + robot_collision_cost(track.positions, other.positions, cfg)
     return cfg.w_coll * total

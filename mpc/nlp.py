@@ -1,18 +1,19 @@
 """The joint NLP (Eq. 17, minimise the potential F) and the per-robot local NLP (Eq. 5, minimise C_i).
 
-Built once per problem size (robots M, humans N_h) as CasADi SX graphs (MX when a coupled humans model is
-too big to expand, mpc/coupled.py) with parameters for everything that changes between solves: current
-states, previously applied actions, goals, per-pair flocking weights, the humans' predicted positions and
-(local NLP) the other robots' planned positions. Single shooting: the only
+Built once per problem size (robots M, humans N_h) as CasADi SX graphs (MX when a coupled humans model is too
+big to expand, mpc/coupled.py) with parameters for everything that changes between solves: current states,
+previously applied actions, goals, per-pair flocking weights, the safety margin of every human at every step,
+the humans' predicted positions and (local NLP) the other robots' planned positions. Single shooting: the only
 decision variables are the accelerations, whose bounds (Eq. 6) are simple bounds; the velocity bounds (Eq. 6)
 are linear constraints ``-v_max <= v_t + dt cumsum(a) <= v_max``. A robot pinned on its goal
 (``on_goal="brake"``) keeps its place in the NLP (same structure at every step) with its controls fixed to
-braking through equal lower and upper bounds (IPOPT removes such variables from the problem, Fatrop keeps
-them at the bound).
+braking through equal lower and upper bounds (IPOPT removes such variables from the problem, Fatrop keeps them
+at the bound).
 
 Array layout: a plan is ``(M, H, 2)`` accelerations, row-major flattened into the decision vector; the
-humans' predictions ``(H, N_h, 2)`` and the other robots' positions ``(M-1, H, 2)`` travel row-major
-flattened. ``reshape(v, 2, -1)`` (column-major) turns each into the ``(2, .)`` blocks of mpc/costs.py.
+humans' predictions ``(H, N_h, 2)``, their margins ``(H, N_h)`` and the other robots' positions
+``(M-1, H, 2)`` travel row-major flattened. ``reshape(v, 2, -1)`` (column-major) turns each into the
+``(2, .)`` blocks of mpc/costs.py.
 """
 
 from __future__ import annotations
@@ -39,6 +40,10 @@ class StepData:
     goals: np.ndarray  # (M, 2) m
     active: np.ndarray  # (M,) bool; False: controls pinned to braking (a robot parked on its goal)
     arrived: np.ndarray | None = None  # (M,) bool, has reached its goal: no flocking with it; None: all False
+    # (H, N_h) m added to d_min for each human at each step (Eq. 11); None: cfg.human_margins for everyone
+    human_margins: np.ndarray | None = None
+    # (M, 2) m, where Eq. 8's reference heads (mpc/guidance.py); None: the goals (the paper)
+    targets: np.ndarray | None = None
 
     @property
     def n_robots(self) -> int:
@@ -52,6 +57,30 @@ class StepData:
         if self.arrived is not None:
             free = free & ~np.asarray(self.arrived, dtype=bool)
         return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
+
+    def reference_targets(self) -> np.ndarray:
+        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals."""
+        targets = self.goals if self.targets is None else self.targets
+        targets = np.asarray(targets, dtype=float)
+        if targets.shape != (self.n_robots, 2) or not np.all(np.isfinite(targets)):
+            raise ValueError(
+                f"targets must be finite positions of shape {(self.n_robots, 2)}, got {targets.shape}"
+            )
+        return targets
+
+    def margins(self, cfg: MPCConfig, n_humans: int) -> np.ndarray:
+        """The NLPs' margin parameters: ``human_margins`` row-major, else ``cfg.human_margin(k)`` for every
+        human (all 0 in the paper's method)."""
+        if self.human_margins is None:
+            steps = [cfg.human_margin(k) for k in range(cfg.horizon)]
+            return np.repeat(np.asarray(steps, dtype=float), n_humans)
+        margins = np.asarray(self.human_margins, dtype=float)
+        if margins.shape != (cfg.horizon, n_humans) or not np.all(np.isfinite(margins) & (margins >= 0)):
+            raise ValueError(
+                f"human_margins must be finite metres >= 0 of shape {(cfg.horizon, n_humans)}, got "
+                f"{margins.shape}"
+            )
+        return margins.ravel()
 
 
 def _blocks(flat: ca.SX, n_blocks: int, horizon: int) -> list[ca.SX]:
@@ -106,22 +135,26 @@ class JointNLP:
         p_state = sym.sym("states", 4 * m)
         p_last = sym.sym("last_actions", 2 * m)
         p_goal = sym.sym("goals", 2 * m)
+        p_target = sym.sym("targets", 2 * m)
         p_floc = sym.sym("floc_weights", self.n_pairs)
+        p_margins = sym.sym("human_margins", h * n_humans)
         p_extra = sym.sym("humans_model", model.n_params)
-        p = ca.vertcat(p_state, p_last, p_goal, p_floc, p_extra)
+        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_floc, p_margins, p_extra)
         states = ca.reshape(p_state, 4, m)
         lasts = ca.reshape(p_last, 2, m)
         goals = ca.reshape(p_goal, 2, m)
+        targets = ca.reshape(p_target, 2, m)
         tracks = [
-            costs.make_track(states[:, i], a, lasts[:, i], goals[:, i], cfg.dt)
+            costs.make_track(states[:, i], a, lasts[:, i], goals[:, i], cfg.dt, targets[:, i])
             for i, a in enumerate(_blocks(u, m, h))
         ]
         # Robots' planned positions (H, M, 2) row-major: column h * M + m of a (2, H * M) matrix.
         robots_future = ca.vec(ca.horzcat(*[t.positions[:, k] for k in range(h) for t in tracks]))
         humans_flat = model.humans(p_extra, robots_future)
         humans = ca.reshape(humans_flat, 2, h * n_humans)
-        F = costs.potential(tracks, p_floc, humans, n_humans, cfg)
-        penalty = costs.collision_penalty(tracks, humans, n_humans, cfg)
+        margins = ca.reshape(p_margins, 1, h * n_humans)
+        F = costs.potential(tracks, p_floc, humans, n_humans, cfg, margins)
+        penalty = costs.collision_penalty(tracks, humans, n_humans, cfg, margins)
         g = ca.vertcat(*[ca.vec(t.velocities) for t in tracks])
         self.penalty_fn = ca.Function("penalty", [u, p], [penalty], ["u", "p"], ["penalty"])
         self.potential_fn = ca.Function("F", [u, p], [F], ["u", "p"], ["F"])
@@ -141,7 +174,9 @@ class JointNLP:
                 data.states.ravel(),
                 data.last_actions.ravel(),
                 data.goals.ravel(),
+                data.reference_targets().ravel(),
                 data.floc_weights(self.cfg.w_floc),
+                data.margins(self.cfg, self.n_humans),
                 np.asarray(extra, dtype=float).ravel(),
             ]
         )
@@ -227,17 +262,20 @@ class LocalNLP:
         p_state = ca.SX.sym("state", 4)
         p_last = ca.SX.sym("last_action", 2)
         p_goal = ca.SX.sym("goal", 2)
+        p_target = ca.SX.sym("target", 2)
         p_floc = ca.SX.sym("floc_weights", n_others)
         p_others = ca.SX.sym("others", 2 * h * n_others)
+        p_margins = ca.SX.sym("human_margins", h * n_humans)
         p_humans = ca.SX.sym("humans", 2 * h * n_humans)
-        p = ca.vertcat(p_state, p_last, p_goal, p_floc, p_others, p_humans)
-        track = costs.make_track(p_state, ca.reshape(u, 2, h), p_last, p_goal, cfg.dt)
+        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_floc, p_others, p_margins, p_humans)
+        track = costs.make_track(p_state, ca.reshape(u, 2, h), p_last, p_goal, cfg.dt, p_target)
         others = _blocks(p_others, n_others, h)
         humans = ca.reshape(p_humans, 2, h * n_humans)
         weights = [p_floc[k] for k in range(n_others)]
-        C = costs.robot_cost(track, others, weights, humans, n_humans, cfg)
+        margins = ca.reshape(p_margins, 1, h * n_humans)
+        C = costs.robot_cost(track, others, weights, humans, n_humans, cfg, margins)
         penalty = cfg.w_coll * costs.human_collision_cost(
-            track.positions, track.velocities, humans, n_humans, cfg
+            track.positions, track.velocities, humans, n_humans, cfg, margins
         )
         for positions_j in others:
             penalty = penalty + cfg.w_coll * costs.robot_collision_cost(track.positions, positions_j, cfg)
@@ -265,8 +303,10 @@ class LocalNLP:
                 data.states[i],
                 data.last_actions[i],
                 data.goals[i],
+                data.reference_targets()[i],
                 np.asarray(weights, dtype=float),
                 np.asarray(positions, dtype=float)[others].ravel(),
+                data.margins(self.cfg, self.n_humans),
                 np.asarray(humans, dtype=float).ravel(),
             ]
         )

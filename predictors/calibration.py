@@ -34,6 +34,7 @@ import numpy as np
 
 from predictors.base import DT, Predictor
 from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
+from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
 from predictors.zoo import (
@@ -83,6 +84,9 @@ class Calibration:
     data_sha256: str  # identifies the calibration data (files, or episodes and their settings)
     details: dict[str, Any] = field(default_factory=dict)  # free JSON: files, seeds, settings
     created: str = field(default_factory=now_iso)  # ISO 8601 time of calibration
+    # margins per motion class and step (predictors.conformal_classes); None where the data has no classes
+    # (real scenes) or too few samples in a class for alpha
+    classes: ClassMargins | None = None
 
     def __post_init__(self):
         if not isinstance(self.predictor, str) or not self.predictor:
@@ -101,6 +105,11 @@ class Calibration:
                 f"calibration 'data_sha256' must be 64 lowercase hex digits, got {self.data_sha256!r}"
             )
         self._check_details_and_time()
+        if self.classes is not None and self.classes.horizon != len(self.quantiles):
+            raise PredictorError(
+                f"calibration class margins cover {self.classes.horizon} steps, its quantiles "
+                f"{len(self.quantiles)}"
+            )
 
     def _check_steps(self) -> None:
         if not isinstance(self.n, tuple) or not self.n or not all(_is_count(c) for c in self.n):
@@ -142,6 +151,7 @@ class Calibration:
         return self.predictor == predictor and self.source == source and same_alpha
 
     def to_json(self) -> dict:
+        classes = {} if self.classes is None else {"classes": self.classes.to_json()}
         return {
             "predictor": self.predictor,
             "predictor_sha256": self.predictor_sha256,
@@ -152,7 +162,7 @@ class Calibration:
             "data_sha256": self.data_sha256,
             "details": self.details,
             "created": self.created,
-        }
+        } | classes
 
     @classmethod
     def from_json(cls, values: object, where: str | Path) -> Calibration:
@@ -173,6 +183,7 @@ class Calibration:
                 quantiles=tuple(lists["quantiles"]),
                 details=values.get("details", {}),
                 created=values["created"],
+                classes=None if values.get("classes") is None else ClassMargins.from_json(values["classes"]),
             )
         except PredictorError as exc:
             raise PredictorError(f"{where}: {exc}") from None
@@ -187,8 +198,10 @@ def calibration_from_errors(
     alpha: float,
     data_sha256: str,
     details: dict | None = None,
+    classes: np.ndarray | None = None,
 ) -> Calibration:
-    """The block for ``errors`` (module layout); refuses a step with too few samples for ``alpha``."""
+    """The block for ``errors`` (module layout); refuses a step with too few samples for ``alpha``.
+    ``classes``: the motion class of each error row, for class margins as well (``conformal_classes``)."""
     quantiles = step_quantiles(errors, alpha)
     counts = step_counts(errors)
     short = [k + 1 for k, q in enumerate(quantiles) if not math.isfinite(q)]
@@ -208,6 +221,7 @@ def calibration_from_errors(
         data_sha256=data_sha256,
         details=dict(details or {}),
         created=now_iso(),
+        classes=None if classes is None else class_margins(errors, classes, alpha),
     )
 
 

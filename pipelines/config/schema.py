@@ -243,7 +243,8 @@ CONTROLLER_KEYS: Final = (
         "str",
         None,
         "robot-human allowance for prediction error: none (the paper) | conformal[:ALPHA[:closed-loop|real]] "
-        "| fixed:M1,..,MH (--margins); unset: none in simulate, the experiment's own in sweep",
+        "| conformal-motion[:ALPHA] | fixed:M1,..,MH (--margins); unset: none in simulate, the experiment's "
+        "own in sweep",
         "none",
     ),
     Key("record_iterations", "bool", False, "record every IBR iteration's prediction (--record-iterations)"),
@@ -285,6 +286,7 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "dmpc_update": "jacobi (Algorithm 2) | gauss_seidel | relaxed | sequential_accept: DMPC's update",
     "dmpc_relaxation": "in (0, 1]: the step towards the best response of dmpc_update relaxed",
     "dmpc_stop": "regret (Algorithm 2, lines 12-16) | no_improvement: when DMPC's iterations end",
+    "guidance": "none (the paper: Eq. 8 heads for the goal) | standing: around rows of humans standing still",
     "coupled_mode": "coupling nlp: auto | exact (the predictor inside the NLP) | first_order",
 }
 MPC_EXCLUDED: Final[tuple[str, ...]] = (*MPC_FROM_WORLD, "human_margins")

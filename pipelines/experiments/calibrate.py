@@ -26,6 +26,7 @@ import numpy as np
 
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec
+from predictors.conformal_classes import motion_classes
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -40,18 +41,24 @@ SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 
 class PredictionErrors:
     """An episode observer that turns each step's prediction into displacement errors ``(n, H)`` (NaN where
-    the episode ended before step ``k``), appended to ``errors`` at the end of every episode."""
+    the episode ended before step ``k``), appended to ``errors`` at the end of every episode, and each row's
+    motion class at prediction time (``predictors.conformal_classes``) to ``classes``."""
 
     def __init__(self, near: float = NEAR):
         if not near > 0:
             raise PipelineError(f"near must be > 0 m, got {near!r}")
         self.near = near
         self.rows: list[np.ndarray] = []
-        self._made: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.class_rows: list[np.ndarray] = []
+        self._made: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
 
     @property
     def errors(self) -> np.ndarray:
         return np.concatenate(self.rows) if self.rows else np.zeros((0, 0))
+
+    @property
+    def classes(self) -> np.ndarray:
+        return np.concatenate(self.class_rows) if self.class_rows else np.zeros(0, dtype=np.int64)
 
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
         self._made = []
@@ -62,12 +69,14 @@ class PredictionErrors:
         gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
         close = gaps.min(axis=1) <= self.near if obs.n_robots else np.ones(obs.n_humans, dtype=bool)
         if close.any():
-            self._made.append((obs.step, np.asarray(out.prediction, dtype=float), close))
+            # what the controller saw: the humans' rows of the history, obs.step + 1 positions observed
+            classes = motion_classes(obs.history[:, obs.n_robots :], obs.step + 1, obs.dt)
+            self._made.append((obs.step, np.asarray(out.prediction, dtype=float), close, classes[close]))
 
     def on_end(self, result: EpisodeResult) -> None:
         truth = np.asarray(result.human_positions, dtype=float)  # (T+1, N, 2)
         last = len(truth) - 1
-        for step, prediction, close in self._made:
+        for step, prediction, close, classes in self._made:
             horizon = len(prediction)
             errors = np.full((int(close.sum()), horizon), math.nan)
             for k in range(1, horizon + 1):
@@ -75,6 +84,7 @@ class PredictionErrors:
                     diff = prediction[k - 1, close] - truth[step + k, close]
                     errors[:, k - 1] = np.linalg.norm(diff, axis=-1)
             self.rows.append(errors)
+            self.class_rows.append(classes)
         self._made = []
 
 
@@ -113,8 +123,11 @@ class ClosedLoopPlan:
         ]
 
 
-def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.ndarray, dict[str, Any]]:
-    """Run ``plan``'s episodes and return the errors ``(n, H)`` and what identifies them."""
+def closed_loop_errors(
+    plan: ClosedLoopPlan, progress: bool = True
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Run ``plan``'s episodes and return the errors ``(n, H)``, each row's motion class ``(n,)`` and what
+    identifies them."""
     from tqdm import tqdm
 
     from crowdsim.profiles import make_env_config
@@ -146,15 +159,18 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> tuple[np.
         "seeds": [plan.seed, plan.seed + plan.episodes - 1],
         "successes": successes,
     }
-    return observer.errors, details
+    return observer.errors, observer.classes, details
 
 
-def errors_sha256(errors: np.ndarray, details: dict[str, Any]) -> str:
-    """Identifies closed-loop calibration data: the errors themselves and the settings that produced them."""
+def errors_sha256(errors: np.ndarray, details: dict[str, Any], classes: np.ndarray | None = None) -> str:
+    """Identifies closed-loop calibration data: the errors themselves (with their motion classes) and the
+    settings that produced them."""
     import hashlib
     import json
 
     digest = hashlib.sha256(np.ascontiguousarray(errors, dtype="<f8").tobytes())
+    if classes is not None:
+        digest.update(np.ascontiguousarray(classes, dtype="<i8").tobytes())
     digest.update(json.dumps(details, sort_keys=True, default=str).encode())
     return digest.hexdigest()
 
@@ -173,3 +189,29 @@ def format_coverage(
             )
         lines.append(line)
     return "\n".join(lines)
+
+
+def class_coverage_report(
+    blocks: Sequence[Any], holdout: np.ndarray | None, classes: np.ndarray | None
+) -> list[list[list[float]]] | None:
+    """Print each block's class margins (``predictors.conformal_classes``) and, given held-out errors with
+    their classes, the coverage within each class; returns that coverage (block, class, step) or None."""
+    from predictors.conformal_classes import MOTION_CLASSES, class_coverage
+
+    report = []
+    for block in blocks:
+        if block.classes is None:
+            continue
+        cover = None
+        if holdout is not None and classes is not None:
+            cover = class_coverage(holdout, classes, block.classes)
+        print(f"  alpha {block.alpha:g}, margins per motion class (samples at step 1):")
+        for c, name in enumerate(MOTION_CLASSES):
+            margins = ", ".join(f"{q:.3f}" for q in block.classes.quantiles[c])
+            line = f"    {name:<9} n={block.classes.n[c][0]:<6} m_k [m]: {margins}"
+            if cover is not None:
+                line += " | held-out coverage: " + ", ".join(f"{v:.1%}" for v in cover[c])
+            print(line)
+        if cover is not None:
+            report.append([list(row) for row in cover])
+    return report if holdout is not None and classes is not None else None

@@ -284,16 +284,20 @@ def _coupled(mode: str) -> ControllerSpec:
     return ControllerSpec("cmpc", COUPLING_PREDICTOR, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
 
 
-# The safety experiment: the paper's method (no margin) and conformal margins at decreasing alpha (more
-# coverage, wider margins), CMPC with the paper's predictor at the middle of the paper's range.
+# The safety experiment: the paper's method (no margin), then conformal margins at decreasing alpha (more
+# coverage, wider margins), one margin per step for everyone and one per motion class ("motion"), CMPC with
+# the paper's predictor at the middle of the paper's range.
 SAFETY_ALPHAS: Final[tuple[float, ...]] = (0.5, 0.2, 0.1, 0.05, 0.01)
 
 
 def _safety_methods() -> tuple[tuple[str, ControllerSpec], ...]:
     methods = [("none", ControllerSpec("cmpc", PAPER_PREDICTOR))]
-    for alpha in SAFETY_ALPHAS:
-        margins = MarginSpec("conformal", alpha=alpha)
-        methods.append((f"alpha={alpha:g}", ControllerSpec("cmpc", PAPER_PREDICTOR, margins=margins)))
+    for mode, prefix in (("conformal", ""), ("conformal-motion", "motion ")):
+        for alpha in SAFETY_ALPHAS:
+            margins = MarginSpec(mode, alpha=alpha)  # type: ignore[arg-type]
+            methods.append(
+                (f"{prefix}alpha={alpha:g}", ControllerSpec("cmpc", PAPER_PREDICTOR, margins=margins))
+            )
     return tuple(methods)
 
 
@@ -366,7 +370,8 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "safety": Experiment(
         name="safety",
-        title="Safety: CMPC without margins (the paper) and with conformal margins at decreasing alpha",
+        title="Safety: CMPC without margins (the paper), with conformal margins at decreasing alpha, pooled "
+        "and per motion class",
         methods=_safety_methods(),
         humans=ABLATION_HUMANS,
         margins_swappable=False,

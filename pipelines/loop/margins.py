@@ -9,23 +9,30 @@ allowance ``m_k`` per horizon step (``MPCConfig.human_margins``):
   error (Lindemann et al. 2023), read from the predictor's calibration (``crowdmpc calibrate``,
   ``predictors/calibration.py``), calibrated on closed-loop episodes (the default source: humans reacting
   to robots, as the controller will meet them) or on held-out real scenes;
+* ``conformal-motion``: ``m_jk`` per human ``j`` and step: the quantile of the human's motion class (new,
+  standing, slow, walking; ``predictors.conformal_classes``) at this step, from the same closed-loop
+  calibration: coverage within each class, and a standing human no longer gets a walking human's margin;
 * ``fixed``: margins given by hand, one per horizon step.
 
 On the command line: ``none``, ``conformal`` (alpha 0.1, closed-loop), ``conformal:0.05``,
-``conformal:0.05:real``, ``fixed:0.05,0.1,0.15,0.2``.
+``conformal:0.05:real``, ``conformal-motion[:ALPHA]``, ``fixed:0.05,0.1,0.15,0.2``.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Final, Literal
+from typing import TYPE_CHECKING, Any, Final, Literal
 
 from pipelines.errors import PipelineError
 
-MarginMode = Literal["none", "conformal", "fixed"]
+if TYPE_CHECKING:
+    from predictors.calibration import Calibration
+    from predictors.conformal_classes import ClassMargins
+
+MarginMode = Literal["none", "conformal", "conformal-motion", "fixed"]
 CalibrationSource = Literal["closed-loop", "real"]
-MARGIN_MODES: Final[tuple[str, ...]] = ("none", "conformal", "fixed")
+MARGIN_MODES: Final[tuple[str, ...]] = ("none", "conformal", "conformal-motion", "fixed")
 CALIBRATION_SOURCES: Final[tuple[str, ...]] = ("closed-loop", "real")
 DEFAULT_ALPHA: Final[float] = 0.1
 MAX_MARGIN: Final[float] = 5.0  # m; a margin beyond this leaves no room to move in a 10 m scene
@@ -56,6 +63,11 @@ class MarginSpec:
                 raise PipelineError(
                     f"fixed margins must be numbers in [0, {MAX_MARGIN}] m, got {list(values)}"
                 )
+        if self.mode == "conformal-motion" and self.source != "closed-loop":
+            raise PipelineError(
+                "conformal-motion margins need the closed-loop calibration: real scenes hold no human "
+                "observed for fewer than L steps, so one of the motion classes cannot be calibrated on them"
+            )
         if (self.mode == "fixed") != bool(values):
             raise PipelineError(
                 "fixed margins need values (e.g. fixed:0.05,0.1,0.15,0.2); other modes take none"
@@ -71,11 +83,14 @@ class MarginSpec:
             return "none"
         if self.mode == "fixed":
             return "fixed" + "_".join(f"{v:g}" for v in self.values)
+        if self.mode == "conformal-motion":
+            return f"cpm{self.alpha:g}"
         return f"cp{self.alpha:g}" + ("" if self.source == "closed-loop" else f"-{self.source}")
 
     def resolve(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[float, ...]:
-        """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``."""
-        if self.mode == "none":
+        """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``: the same
+        margins for every human (none for ``conformal-motion``, whose margins ``resolve_classes`` gives)."""
+        if self.mode in ("none", "conformal-motion"):
             return ()
         if self.mode == "fixed":
             if len(self.values) != horizon:
@@ -83,6 +98,22 @@ class MarginSpec:
                     f"fixed margins need one value per horizon step ({horizon}), got {len(self.values)}"
                 )
             return self.values
+        return tuple(self._block(predictor, horizon, sha256).quantiles[:horizon])
+
+    def resolve_classes(self, predictor: str | None, horizon: int, sha256: str | None) -> ClassMargins | None:
+        """The margins per motion class for ``conformal-motion``; None for every other mode."""
+        if self.mode != "conformal-motion":
+            return None
+        block = self._block(predictor, horizon, sha256)
+        if block.classes is None:
+            raise PipelineError(
+                f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} has no margins per "
+                "motion class (made before they existed, or too few samples in a class for this alpha); "
+                f"recalibrate: crowdmpc calibrate --predictor {predictor} --alpha {self.alpha:g}"
+            )
+        return block.classes
+
+    def _block(self, predictor: str | None, horizon: int, sha256: str | None) -> Calibration:
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
         from predictors.calibration import find_calibration
@@ -93,12 +124,12 @@ class MarginSpec:
                 f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} covers "
                 f"{len(block.quantiles)} steps, the MPC's horizon is {horizon}; recalibrate with that horizon"
             )
-        return tuple(block.quantiles[:horizon])
+        return block
 
     def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
         """What metadata and records state about the margins actually planned with."""
         out: dict[str, Any] = {"mode": self.mode, "label": self.label, "margins_m": list(resolved)}
-        if self.mode == "conformal":
+        if self.mode in ("conformal", "conformal-motion"):
             out |= {"alpha": self.alpha, "source": self.source}
         return out
 
@@ -108,15 +139,15 @@ def parse_margins(text: str) -> MarginSpec:
     mode, _, rest = text.strip().partition(":")
     if mode == "none" and not rest:
         return MarginSpec()
-    if mode == "conformal":
+    if mode in ("conformal", "conformal-motion"):
         alpha_text, _, source = rest.partition(":")
         alpha = _number(alpha_text, text) if alpha_text else DEFAULT_ALPHA
-        return MarginSpec("conformal", alpha=alpha, source=source or "closed-loop")  # type: ignore[arg-type]
+        return MarginSpec(mode, alpha=alpha, source=source or "closed-loop")  # type: ignore[arg-type]
     if mode == "fixed" and rest:
         return MarginSpec("fixed", values=tuple(_number(v, text) for v in rest.split(",")))
     raise PipelineError(
-        f"bad margins {text!r}; expected none, conformal[:ALPHA[:closed-loop|real]] or fixed:M1,..,MH "
-        "(metres)"
+        f"bad margins {text!r}; expected none, conformal[:ALPHA[:closed-loop|real]], "
+        "conformal-motion[:ALPHA] or fixed:M1,..,MH (metres)"
     )
 
 

@@ -33,13 +33,17 @@ from mpc.dmpc import DMPC
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory, Start
 from mpc.fastcall import BufferedFunction
+from mpc.guidance import guidance_targets
 from mpc.nlp import StepData
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
+from predictors.conformal_classes import MOTION_CLASSES, motion_classes
 from predictors.errors import PredictorError
 from predictors.registry import checkpoint_sha256, load_predictor
+
+STANDING = MOTION_CLASSES.index("standing")
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig, Observation
@@ -130,8 +134,11 @@ class MPCController:
             )
         world = self.env_config.world()
         cfg = mpc_config(spec, jit, world)
-        margins = spec.margins.resolve(self.model.name, cfg.horizon, checkpoint_sha256(self.model.name))
+        sha256 = checkpoint_sha256(self.model.name)
+        margins = spec.margins.resolve(self.model.name, cfg.horizon, sha256)
         self.cfg = cfg.replace(human_margins=margins)
+        # conformal-motion: a margin per human and step from the human's motion class, chosen every step
+        self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256)
         check_world(world, self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
@@ -154,7 +161,8 @@ class MPCController:
                 "coupling": self.spec.coupling,
                 "flocking": self.spec.flocking,
                 "distributed": self.distributed,
-                "margins": self.spec.margins.describe(self.cfg.human_margins),
+                "margins": self.spec.margins.describe(self.cfg.human_margins)
+                | ({} if self.class_margins is None else {"classes": self.class_margins.to_json()}),
             },
         }
 
@@ -238,6 +246,7 @@ class MPCController:
             goals=np.asarray(obs.robot_goals, dtype=float),
             active=~reached if cfg.on_goal == "brake" else np.ones(n_robots, dtype=bool),
             arrived=reached,
+            **self._crowd_allowances(obs, states, reached),
         )
         if reached.all():  # everyone is there (the episode ends): nothing to optimise
             plan = braking(states, cfg.horizon, cfg.dt, cfg.a_max)
@@ -266,6 +275,28 @@ class MPCController:
                 raise
             return self._exception_output(exc, start, data, t0)
         return self._output(result, start.kind, data, t0)
+
+    def _crowd_allowances(self, obs: Observation, states: np.ndarray, reached: np.ndarray) -> dict[str, Any]:
+        """StepData's ``human_margins`` (conformal-motion: each human's class margins, ``(H, N_h)``) and
+        ``targets`` (guidance "standing": around the humans standing still); absent: the configured
+        margins for every human, the goals."""
+        cfg = self.cfg
+        if self.class_margins is None and cfg.guidance == "none":
+            return {}
+        classes = motion_classes(obs.history[:, obs.n_robots :], obs.step + 1, obs.dt)
+        out: dict[str, Any] = {}
+        if self.class_margins is not None:
+            out["human_margins"] = margins = self.class_margins.per_human(classes, cfg.horizon)
+        if cfg.guidance == "standing":
+            standing = classes == STANDING
+            last = cfg.horizon - 1
+            margin = (
+                margins[last, standing].max(initial=0.0) if "human_margins" in out else cfg.human_margin(last)
+            )
+            out["targets"] = guidance_targets(
+                states[:, :2], obs.robot_goals, obs.human_positions[standing], cfg.d_min + margin, ~reached
+            )
+        return out
 
     def _exception_output(self, exc: Exception, start: Start, data: StepData, t0: float) -> ControlOutput:
         """A solve that raised: the step falls back to its start (the shifted plan, or braking) as for any

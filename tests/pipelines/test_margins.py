@@ -113,6 +113,8 @@ def test_prediction_errors_by_hand():
         n_robots=1,
         human_positions=np.array([[1.0, 0.0], [5.0, 0.0]]),  # the second human is 5 m from the robot
         robot_positions=np.array([[0.0, 0.0]]),
+        history=np.zeros((8, 3, 2)),  # 2 positions observed of a window of 8: the "new" class
+        dt=0.4,
     )
     prediction = np.array([[[1.0, 0.1], [5.0, 0.0]], [[1.0, 0.5], [5.0, 0.0]], [[1.0, 0.9], [5.0, 0.0]]])
     observer.on_reset(obs, {})
@@ -124,12 +126,14 @@ def test_prediction_errors_by_hand():
     assert errors.shape == (1, 3)  # only the human within 2 m
     np.testing.assert_allclose(errors[0, :2], [0.1, 0.3])
     assert math.isnan(errors[0, 2])
+    assert observer.classes.tolist() == [0]
 
 
 @pytest.mark.slow
 def test_closed_loop_errors_of_constant_velocity():
     plan = ClosedLoopPlan("constant_velocity", episodes=2, humans=(3,))
-    errors, details = closed_loop_errors(plan, progress=False)
+    errors, classes, details = closed_loop_errors(plan, progress=False)
+    assert classes.shape == (len(errors),) and set(classes.tolist()) <= {0, 1, 2, 3}
     assert errors.ndim == 2 and errors.shape[1] == 4 and len(errors) > 10
     assert details["seeds"] == [1_000_000, 1_000_001]
     finite = errors[np.isfinite(errors)]

@@ -1,0 +1,80 @@
+"""conformal-motion margins: parsing, resolution from a calibration with class margins, per-human margins in
+the controller's step."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.margins import MarginSpec, parse_margins
+from predictors.calibration import calibration_from_errors, save_calibration
+from predictors.conformal_classes import MOTION_CLASSES
+
+
+def test_parse_and_label():
+    assert parse_margins("conformal-motion") == MarginSpec("conformal-motion", alpha=0.1)
+    assert parse_margins("conformal-motion:0.2").label == "cpm0.2"
+    with pytest.raises(PipelineError, match="need the closed-loop calibration"):
+        parse_margins("conformal-motion:0.1:real")
+    assert MarginSpec("conformal").resolve_classes("constant_velocity", 4, None) is None
+
+
+def _store(tmp_path, classes: bool) -> None:
+    """19 samples per class, class c's step-k error i/100 * (c + 1) * k: margins 0.18 (c + 1) k."""
+    base = np.arange(1, 20) / 100.0
+    errors = np.concatenate([np.outer(base * (c + 1), [1.0, 2.0, 3.0, 4.0]) for c in range(4)])
+    block = calibration_from_errors(
+        errors,
+        predictor="constant_velocity",
+        predictor_sha256=None,
+        source="closed-loop",
+        alpha=0.1,
+        data_sha256="0" * 64,
+        classes=np.repeat(np.arange(len(MOTION_CLASSES)), 19) if classes else None,
+    )
+    save_calibration(block, tmp_path)
+
+
+def test_a_calibration_without_class_margins_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    _store(tmp_path, classes=False)
+    with pytest.raises(PipelineError, match="no margins per motion class.*recalibrate"):
+        parse_margins("conformal-motion").resolve_classes("constant_velocity", 4, None)
+
+
+def _margins(controller, obs) -> np.ndarray:
+    return controller._crowd_allowances(obs, np.zeros((1, 4)), np.zeros(1, bool))["human_margins"]
+
+
+def test_the_controller_gives_each_human_its_class_margin(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    _store(tmp_path, classes=True)
+    spec = ControllerSpec("cmpc", "constant_velocity", margins=parse_margins("conformal-motion"))
+    controller = make_controller(spec)
+    assert controller.cfg.human_margins == ()  # nothing for everyone: every human its own
+    described = controller.describe()["config"]["margins"]
+    assert described["label"] == "cpm0.1" and described["classes"]["quantiles"][3][0] == pytest.approx(0.72)
+    # Window of L = 8 positions, 0.4 s apart (2.8 s): human 0 stands, human 1 walks 1 m/s.
+    history = np.zeros((8, 1 + 2, 2))
+    history[:, 2, 0] = np.arange(8) * 0.4
+    obs = SimpleNamespace(history=history, n_robots=1, step=10, dt=0.4)
+    margins = _margins(controller, obs)
+    np.testing.assert_allclose(margins[:, 0], 0.18 * 2 * np.arange(1, 5))  # standing: class 1
+    np.testing.assert_allclose(margins[:, 1], 0.18 * 4 * np.arange(1, 5))  # walking: class 3
+    early = _margins(controller, SimpleNamespace(history=history, n_robots=1, step=3, dt=0.4))
+    np.testing.assert_allclose(early, np.outer(0.18 * np.arange(1, 5), [1, 1]))  # both still "new"
+
+
+@pytest.mark.slow
+def test_an_episode_with_class_margins_runs_and_keeps_its_distance(tmp_path, monkeypatch):
+    from pipelines.loop.episode import run_episode
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    _store(tmp_path, classes=True)
+    results = {}
+    for text in ("none", "conformal-motion"):
+        controller = make_controller(ControllerSpec("cmpc", "constant_velocity", margins=parse_margins(text)))
+        results[text] = run_episode(controller, seed=3, scenario="circle", n_humans=5)
+    assert results["conformal-motion"].metrics.min_distance > results["none"].metrics.min_distance

@@ -1,0 +1,90 @@
+"""Motion classes and class-conditional (Mondrian) conformal margins, against numbers worked by hand."""
+
+import json
+
+import numpy as np
+import pytest
+
+from predictors.calibration import calibration_from_errors, read_calibration_file, save_calibration
+from predictors.conformal_classes import (
+    MOTION_CLASSES,
+    ClassMargins,
+    class_coverage,
+    class_margins,
+    motion_classes,
+)
+from predictors.errors import PredictorError
+
+
+def test_motion_classes_by_hand():
+    """L = 3 positions, tau = 0.5 s: net speed = |x_t - x_{t-2}| / 1 s."""
+    history = np.zeros((3, 4, 2))
+    history[:, 1, 0] = [0.0, 0.02, 0.05]  # 0.05 m/s: standing
+    history[:, 2, 0] = [0.0, 0.3, 0.5]  # 0.5 m/s: slow
+    history[:, 3, 1] = [0.0, -0.6, -1.2]  # 1.2 m/s: walking
+    assert motion_classes(history, 3, 0.5).tolist() == [1, 1, 2, 3]
+    assert motion_classes(history, 2, 0.5).tolist() == [0, 0, 0, 0]  # the window is not full yet
+    assert motion_classes(history, np.array([3, 2, 3, 3]), 0.5).tolist() == [1, 0, 2, 3]
+    with pytest.raises(PredictorError, match="history must have shape"):
+        motion_classes(np.zeros((1, 2, 2)), 1, 0.5)
+
+
+def _errors() -> tuple[np.ndarray, np.ndarray]:
+    """19 samples per class; class c's step-k error i/100 * (c + 1) * k, i = 1..19."""
+    base = np.arange(1, 20) / 100.0
+    rows = [np.outer(base * (c + 1), [1.0, 2.0]) for c in range(len(MOTION_CLASSES))]
+    return np.concatenate(rows), np.repeat(np.arange(len(MOTION_CLASSES)), 19)
+
+
+def test_class_quantiles_by_hand():
+    errors, classes = _errors()
+    margins = class_margins(errors, classes, 0.1)
+    # rank ceil(20 * 0.9) = 18 of 19: 0.18 * (c + 1) * k
+    for c in range(4):
+        assert margins.quantiles[c] == pytest.approx((0.18 * (c + 1), 0.36 * (c + 1)))
+        assert margins.n[c] == (19, 19)
+    per_human = margins.per_human(np.array([3, 0, 1]), 2)
+    np.testing.assert_allclose(per_human, [[0.72, 0.18, 0.36], [1.44, 0.36, 0.72]])
+    cover = class_coverage(errors, classes, margins)
+    assert all(c == pytest.approx((18 / 19, 18 / 19)) for c in cover)
+    # A class with too few samples for alpha gets no guaranteed margin: no class margins at all.
+    assert class_margins(errors[classes != 2], classes[classes != 2], 0.1) is None
+    with pytest.raises(PredictorError, match="classes must index"):
+        class_margins(errors, classes + 1, 0.1)
+    with pytest.raises(PredictorError, match="one per error row"):
+        class_margins(errors, classes[:-1], 0.1)
+
+
+def test_class_margins_travel_in_the_calibration_block(tmp_path):
+    errors, classes = _errors()
+    block = calibration_from_errors(
+        errors,
+        predictor="constant_velocity",
+        predictor_sha256=None,
+        source="closed-loop",
+        alpha=0.1,
+        data_sha256="0" * 64,
+        classes=classes,
+    )
+    save_calibration(block, tmp_path)
+    (again,) = read_calibration_file(tmp_path / "calibrations.json")
+    assert again == block and again.classes is not None
+    # Blocks made before class margins existed still read, with none.
+    document = json.loads((tmp_path / "calibrations.json").read_text())
+    del document["calibrations"][0]["classes"]
+    (tmp_path / "calibrations.json").write_text(json.dumps(document))
+    assert read_calibration_file(tmp_path / "calibrations.json")[0].classes is None
+
+
+def test_class_margins_refuse_what_they_cannot_mean():
+    good = ClassMargins(n=((1,),) * 4, quantiles=((0.1,),) * 4).to_json()
+    with pytest.raises(PredictorError, match="speed edges"):
+        ClassMargins.from_json(good | {"walking_speed": 0.8})
+    with pytest.raises(PredictorError, match="must name the classes"):
+        ClassMargins.from_json(good | {"names": ["a", "b", "c", "d"]})
+    with pytest.raises(PredictorError, match="one row per class"):
+        ClassMargins(n=((1,),) * 3, quantiles=((0.1,),) * 3)
+    with pytest.raises(PredictorError, match="finite metres"):
+        ClassMargins(n=((1,),) * 4, quantiles=((0.1,), (0.1,), (-1.0,), (0.1,)))
+    with pytest.raises(PredictorError, match="horizon is 3"):
+        ClassMargins(n=((1,),) * 4, quantiles=((0.1,),) * 4).per_human(np.zeros(2, int), 3)
