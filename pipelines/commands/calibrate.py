@@ -21,8 +21,10 @@ read-only defaults): the (1 - alpha) split-conformal quantile of the predictor's
 horizon step k = 1..H, used as the margin m_k of
 `--margins conformal:ALPHA[:SOURCE]` (simulate, sweep). Sources: real (the prepared ETH/hotel validation
 scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
-evaluation seed; only humans within --near m of a robot are scored). --holdout measures coverage on data
-the calibration did not see: the test scenes (real) or as many further episodes (closed-loop).
+evaluation seed; only humans within --near m of a robot are scored). A closed-loop block also holds the
+quantiles of each motion class (new, standing, slow, walking), the margins of `--margins
+conformal-motion:ALPHA`. --holdout measures coverage on data the calibration did not see: the test scenes
+(real) or as many further episodes (closed-loop; per motion class too).
 """
 
 
@@ -44,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "calibrate",
         help="conformal prediction margins for a predictor (real scenes or closed-loop episodes)",
         description="Measure a predictor's displacement error per horizon step and store its conformal "
-        "quantiles, the safety margins of `--margins conformal`.",
+        "quantiles, the safety margins of `--margins conformal` and `conformal-motion`.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -1,0 +1,98 @@
+"""Sweeps of the same experiment compared on the crowds they share: success, collision and travel time per
+method and crowd size, and the paired success changes of each run against the first (exact McNemar).
+
+    .venv/bin/python benchmarks/paired_runs.py none=runs/table2-full cpm=runs/t2-cpm cpm+g=runs/t2-cpm-g
+
+Reads each run's ``episodes.csv`` (written by ``crowdmpc sweep``); an episode is identified by (method, number
+of humans, scenario, seed), and only the episodes every run has are compared. Prints a Markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+from pathlib import Path
+
+Key = tuple[str, int, str, int]
+
+
+def load(run: Path) -> dict[Key, dict[str, str]]:
+    path = run / "episodes.csv"
+    if not path.is_file():
+        raise SystemExit(f"{path}: no such file (a `crowdmpc sweep --out` directory has one)")
+    with path.open() as f:
+        return {
+            (r["method"], int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in csv.DictReader(f)
+        }
+
+
+def flag(value: str) -> bool:
+    return value in ("True", "true", "1")
+
+
+def mcnemar(wins: int, losses: int) -> float:
+    """Two-sided exact McNemar p-value of ``wins`` against ``losses`` discordant pairs."""
+    n = wins + losses
+    if n == 0:
+        return 1.0
+    return min(1.0, 2 * sum(math.comb(n, k) for k in range(min(wins, losses) + 1)) / 2**n)
+
+
+def cell(rows: list[dict[str, str]]) -> str:
+    success = [flag(r["success"]) for r in rows]
+    travel = [float(r["travel_time"]) for r in rows if flag(r["success"])]
+    collision = 100 * sum(flag(r["collision"]) for r in rows) / len(rows)
+    mean_travel = f"{sum(travel) / len(travel):.1f}" if travel else "n/a"
+    return f"{100 * sum(success) / len(rows):.1f} / {collision:.1f} / {mean_travel}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("runs", nargs="+", metavar="LABEL=DIR", help="two or more sweep output directories")
+    args = parser.parse_args(argv)
+    runs = {}
+    for item in args.runs:
+        label, sep, directory = item.partition("=")
+        if not sep or not label or not directory:
+            parser.error(f"expected LABEL=DIR, got {item!r}")
+        runs[label] = load(Path(directory))
+    if len(runs) < 2:
+        parser.error("give at least two runs")
+    labels = list(runs)
+    shared = set.intersection(*(set(r) for r in runs.values()))
+    if not shared:
+        raise SystemExit("the runs share no episode (method, humans, scenario, seed)")
+    print(
+        "Success % / collision % / travel time s (successes); paired: success wins / losses against",
+        labels[0],
+    )
+    print(
+        "| method | humans | "
+        + " | ".join(labels)
+        + " | "
+        + " | ".join(f"{x} paired" for x in labels[1:])
+        + " |"
+    )
+    print("|---" * (2 + 2 * len(labels) - 1) + "|")
+    for method, n in sorted({(k[0], k[1]) for k in shared}):
+        keys = sorted(k for k in shared if k[:2] == (method, n))
+        cells = [cell([runs[label][k] for k in keys]) for label in labels]
+        paired = []
+        for label in labels[1:]:
+            wins = sum(
+                flag(runs[label][k]["success"]) and not flag(runs[labels[0]][k]["success"]) for k in keys
+            )
+            losses = sum(
+                flag(runs[labels[0]][k]["success"]) and not flag(runs[label][k]["success"]) for k in keys
+            )
+            paired.append(f"+{wins} / −{losses} (p = {mcnemar(wins, losses):.2g})")
+        print(f"| {method} | {n} ({len(keys)}) | " + " | ".join(cells + paired) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

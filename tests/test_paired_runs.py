@@ -1,0 +1,43 @@
+"""benchmarks/paired_runs.py: sweeps compared on the episodes they share, against numbers worked by hand."""
+
+import csv
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+SPEC = importlib.util.spec_from_file_location(
+    "paired_runs", Path(__file__).resolve().parents[1] / "benchmarks" / "paired_runs.py"
+)
+paired_runs = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(paired_runs)
+FIELDS = ["method", "n_humans", "scenario", "seed", "success", "collision", "travel_time"]
+
+
+def _run(path: Path, outcomes: list[tuple[bool, bool, float]]) -> Path:
+    path.mkdir()
+    with (path / "episodes.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(FIELDS)
+        for seed, (success, collision, travel) in enumerate(outcomes):
+            writer.writerow(["CMPC", 7, "circle", seed, success, collision, travel])
+    return path
+
+
+def test_mcnemar_by_hand():
+    assert paired_runs.mcnemar(0, 0) == 1.0
+    assert paired_runs.mcnemar(3, 0) == pytest.approx(2 / 8)  # 2 * P(X <= 0), X ~ Bin(3, 1/2)
+    assert paired_runs.mcnemar(1, 5) == pytest.approx(2 * 7 / 64)
+
+
+def test_two_runs_on_their_shared_episodes(tmp_path, capsys):
+    a = _run(
+        tmp_path / "a", [(True, False, 10.0), (False, True, 0.0), (True, True, 12.0), (True, False, 9.0)]
+    )
+    b = _run(tmp_path / "b", [(True, False, 11.0), (True, False, 13.0), (False, False, 0.0)])  # 3 shared
+    assert paired_runs.main([f"base={a}", f"new={b}"]) == 0
+    row = capsys.readouterr().out.strip().splitlines()[-1]
+    # base: 2 of 3 succeed, 2 of 3 collide, travel (10 + 12) / 2; new: 2 of 3, 0, (11 + 13) / 2; +1 / -1.
+    assert row == "| CMPC | 7 (3) | 66.7 / 66.7 / 11.0 | 66.7 / 0.0 / 12.0 | +1 / −1 (p = 1) |"
+    with pytest.raises(SystemExit, match="no such file"):
+        paired_runs.main([f"base={a}", f"new={tmp_path}"])
