@@ -337,5 +337,19 @@ class MPCController:
                 "solves": result.solves,
                 "solver_iterations": result.solver_iterations,
                 "converged": result.converged,
+                **_allowances_record(data),
             },
         )
+
+
+def _allowances_record(data: StepData) -> dict[str, Any]:
+    """What the step planned with beyond the paper, for records (MCAP ``/mpc/solver`` extra): each human's
+    margins ``(H, N_h)`` (conformal-motion) and the robots whose Eq. 8 reference was guided, with targets."""
+    out: dict[str, Any] = {}
+    if data.human_margins is not None:
+        out["human_margins"] = np.round(data.human_margins, 4).tolist()
+    if data.targets is not None:
+        guided = np.flatnonzero(np.any(data.targets != data.goals, axis=1))
+        if guided.size:
+            out["guided"] = {int(i): np.round(data.targets[i], 4).tolist() for i in guided}
+    return out

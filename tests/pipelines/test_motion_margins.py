@@ -78,3 +78,37 @@ def test_an_episode_with_class_margins_runs_and_keeps_its_distance(tmp_path, mon
         controller = make_controller(ControllerSpec("cmpc", "constant_velocity", margins=parse_margins(text)))
         results[text] = run_episode(controller, seed=3, scenario="circle", n_humans=5)
     assert results["conformal-motion"].metrics.min_distance > results["none"].metrics.min_distance
+
+
+def test_a_step_records_its_margins_and_guided_robots(tmp_path, monkeypatch):
+    """Robot 0 of a row behind a line of standing humans is guided; every human's margins are in extra."""
+    from crowdsim.env import CrowdEnv
+    from crowdsim.scenarios import Layout
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    _store(tmp_path, classes=True)
+    wall = np.stack([np.arange(-3.0, 1.5, 0.9), np.zeros(5)], axis=1)  # humans standing on their goals
+    layout = Layout(
+        robot_starts=np.array([[0.0, -3.0], [1.0, -5.0]]),
+        robot_goals=np.array([[0.0, 3.0], [5.0, -5.0]]),
+        human_starts=wall,
+        human_goals=wall,
+    )
+    spec = ControllerSpec(
+        "cmpc",
+        "constant_velocity",
+        margins=parse_margins("conformal-motion"),
+        mpc_overrides=(("guidance", "standing"),),
+    )
+    controller = make_controller(spec)
+    env = CrowdEnv()
+    obs = env.reset_layout(layout)
+    controller.reset(obs)
+    for _ in range(8):  # a full window: the humans are "standing" from the 8th observation on
+        out = controller.act(obs)
+        obs, _, _ = env.step(out.accelerations)
+    out = controller.act(obs)
+    assert np.asarray(out.extra["human_margins"]).shape == (4, 5)
+    assert np.allclose(np.asarray(out.extra["human_margins"])[:, 0], 0.18 * 2 * np.arange(1, 5))
+    assert list(out.extra["guided"]) == [0]  # robot 1's way east is free
+    assert out.extra["guided"][0][0] > 1.0  # round the row's right end
