@@ -87,6 +87,9 @@ class Calibration:
     # margins per motion class and step (predictors.conformal_classes); None where the data has no classes
     # (real scenes) or too few samples in a class for alpha
     classes: ClassMargins | None = None
+    # the same per class for the distance-shortfall score (closed-loop only: how much closer a human came to
+    # a robot than predicted, pipelines/experiments/calibrate.py), the margins of conformal-shortfall
+    shortfall: ClassMargins | None = None
 
     def __post_init__(self):
         if not isinstance(self.predictor, str) or not self.predictor:
@@ -105,11 +108,12 @@ class Calibration:
                 f"calibration 'data_sha256' must be 64 lowercase hex digits, got {self.data_sha256!r}"
             )
         self._check_details_and_time()
-        if self.classes is not None and self.classes.horizon != len(self.quantiles):
-            raise PredictorError(
-                f"calibration class margins cover {self.classes.horizon} steps, its quantiles "
-                f"{len(self.quantiles)}"
-            )
+        for extra in (self.classes, self.shortfall):
+            if extra is not None and extra.horizon != len(self.quantiles):
+                raise PredictorError(
+                    f"calibration class margins cover {extra.horizon} steps, its quantiles "
+                    f"{len(self.quantiles)}"
+                )
 
     def _check_steps(self) -> None:
         if not isinstance(self.n, tuple) or not self.n or not all(_is_count(c) for c in self.n):
@@ -152,6 +156,8 @@ class Calibration:
 
     def to_json(self) -> dict:
         classes = {} if self.classes is None else {"classes": self.classes.to_json()}
+        if self.shortfall is not None:
+            classes["shortfall"] = self.shortfall.to_json()
         return {
             "predictor": self.predictor,
             "predictor_sha256": self.predictor_sha256,
@@ -184,6 +190,9 @@ class Calibration:
                 details=values.get("details", {}),
                 created=values["created"],
                 classes=None if values.get("classes") is None else ClassMargins.from_json(values["classes"]),
+                shortfall=(
+                    None if values.get("shortfall") is None else ClassMargins.from_json(values["shortfall"])
+                ),
             )
         except PredictorError as exc:
             raise PredictorError(f"{where}: {exc}") from None
@@ -199,9 +208,11 @@ def calibration_from_errors(
     data_sha256: str,
     details: dict | None = None,
     classes: np.ndarray | None = None,
+    shortfall: np.ndarray | None = None,
 ) -> Calibration:
     """The block for ``errors`` (module layout); refuses a step with too few samples for ``alpha``.
-    ``classes``: the motion class of each error row, for class margins as well (``conformal_classes``)."""
+    ``classes``: the motion class of each error row, for class margins as well (``conformal_classes``);
+    with ``shortfall`` (the rows' distance shortfalls, same layout as ``errors``), its class margins too."""
     quantiles = step_quantiles(errors, alpha)
     counts = step_counts(errors)
     short = [k + 1 for k, q in enumerate(quantiles) if not math.isfinite(q)]
@@ -222,6 +233,7 @@ def calibration_from_errors(
         details=dict(details or {}),
         created=now_iso(),
         classes=None if classes is None else class_margins(errors, classes, alpha),
+        shortfall=None if classes is None or shortfall is None else class_margins(shortfall, classes, alpha),
     )
 
 

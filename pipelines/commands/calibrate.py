@@ -108,7 +108,7 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
     from pipelines.experiments.calibrate import closed_loop_errors, errors_sha256
     from predictors.calibration import calibrations_from_errors
 
-    errors, classes, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
+    errors, classes, shortfall, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
     if errors.shape[1:] != (args.horizon,):
         raise PipelineError(f"the controller predicts {errors.shape[1:]} steps, --horizon is {args.horizon}")
     return calibrations_from_errors(
@@ -120,6 +120,7 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
         data_sha256=errors_sha256(errors, details, classes),
         details=details | {"rows": int(errors.shape[0])},
         classes=classes,
+        shortfall=shortfall,
     )
 
 
@@ -132,8 +133,8 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
     after = dataclasses.replace(
         plan, seed=plan.seed + plan.episodes, margins=parse_margins(args.holdout_margins)
     )
-    errors, classes, _ = closed_loop_errors(after, progress=not args.no_progress)
-    return errors, classes
+    measured = closed_loop_errors(after, progress=not args.no_progress)
+    return measured.errors, measured.classes, measured.shortfall
 
 
 def run(args: argparse.Namespace) -> int:
@@ -167,9 +168,9 @@ def run(args: argparse.Namespace) -> int:
         for block in blocks:
             path = save_calibration(block)
         print(f"wrote {len(blocks)} block(s) to {path}")
-    holdout_classes = None
+    holdout_classes = holdout_shortfall = None
     if args.holdout and args.source == "closed-loop":
-        holdout, holdout_classes = _closed_loop_holdout(args)
+        holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args)
     cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None
     n = ", ".join(str(c) for c in blocks[0].n)
     print(f"{args.predictor}: {args.source} calibration, samples per step {n}")
@@ -179,11 +180,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"held-out: {holdout.shape[0]} samples of the prepared test scenes")
     print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
     class_cover = class_coverage_report(blocks, holdout, holdout_classes)
+    shortfall_cover = class_coverage_report(blocks, holdout_shortfall, holdout_classes, shortfall=True)
     if args.json is not None:
         payload = {
             "blocks": [b.to_json() for b in blocks],
             "holdout_coverage": cover,
             "holdout_class_coverage": class_cover,
+            "holdout_shortfall_coverage": shortfall_cover,
             "holdout_margins": args.holdout_margins if args.holdout else None,
         }
         if holdout is not None:

@@ -101,7 +101,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="allowance for prediction error in the robot-human distance: none (the paper, default), "
         "conformal[:ALPHA[:closed-loop|real]] (needs `crowdmpc calibrate`), conformal-motion[:ALPHA] "
-        "(a margin per human from its motion class), fixed:M1,..,MH (metres)",
+        "or conformal-shortfall[:ALPHA] (a margin per human from its motion class), fixed:M1,..,MH (metres)",
     )
     parser.add_argument("--profile", choices=sorted(PROFILES), help="simulation conventions (default: paper)")
     parser.add_argument(

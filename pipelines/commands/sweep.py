@@ -184,8 +184,8 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         "--margins",
         metavar="SPEC",
         help="safety margins of every method: none (the paper), conformal[:ALPHA[:closed-loop|real]], "
-        "conformal-motion[:ALPHA], fixed:M1,..,MH (default: the experiment's own, none for "
-        "table2/table3/predictors/coupling)",
+        "conformal-motion[:ALPHA], conformal-shortfall[:ALPHA], fixed:M1,..,MH (default: the experiment's "
+        "own, none for table2/table3/predictors/coupling)",
     )
     p.add_argument(
         "--profile",

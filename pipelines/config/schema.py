@@ -243,8 +243,8 @@ CONTROLLER_KEYS: Final = (
         "str",
         None,
         "robot-human allowance for prediction error: none (the paper) | conformal[:ALPHA[:closed-loop|real]] "
-        "| conformal-motion[:ALPHA] | fixed:M1,..,MH (--margins); unset: none in simulate, the experiment's "
-        "own in sweep",
+        "| conformal-motion[:ALPHA] | conformal-shortfall[:ALPHA] | fixed:M1,..,MH (--margins); unset: none "
+        "in simulate, the experiment's own in sweep",
         "none",
     ),
     Key("record_iterations", "bool", False, "record every IBR iteration's prediction (--record-iterations)"),

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import TYPE_CHECKING, Any, Final, NamedTuple, cast
 
 import numpy as np
 
@@ -41,8 +41,16 @@ SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 
 class PredictionErrors:
     """An episode observer that turns each step's prediction into displacement errors ``(n, H)`` (NaN where
-    the episode ended before step ``k``), appended to ``errors`` at the end of every episode, and each row's
-    motion class at prediction time (``predictors.conformal_classes``) to ``classes``."""
+    the episode ended before step ``k``), appended to ``errors`` at the end of every episode, each row's
+    motion class at prediction time (``predictors.conformal_classes``) to ``classes``, and each row's distance
+    shortfall to ``shortfall``.
+
+    The shortfall at step ``k`` is how much closer the human really came to a robot than predicted, measured
+    at the robot's realised position ``r``: ``max_j (|r_j - predicted| - |r_j - realised|)`` over the robots
+    within ``near`` of the prediction, clipped at 0 (NaN when no robot is that near). It is the score that
+    safety needs: if it is at most ``m_k`` and the plan keeps ``d_min + m_k`` from the prediction, the human
+    is at least ``d_min`` away (the triangle inequality makes the displacement error an upper bound of it).
+    """
 
     def __init__(self, near: float = NEAR):
         if not near > 0:
@@ -50,11 +58,16 @@ class PredictionErrors:
         self.near = near
         self.rows: list[np.ndarray] = []
         self.class_rows: list[np.ndarray] = []
+        self.shortfall_rows: list[np.ndarray] = []
         self._made: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
 
     @property
     def errors(self) -> np.ndarray:
         return np.concatenate(self.rows) if self.rows else np.zeros((0, 0))
+
+    @property
+    def shortfall(self) -> np.ndarray:
+        return np.concatenate(self.shortfall_rows) if self.shortfall_rows else np.zeros((0, 0))
 
     @property
     def classes(self) -> np.ndarray:
@@ -75,16 +88,20 @@ class PredictionErrors:
 
     def on_end(self, result: EpisodeResult) -> None:
         truth = np.asarray(result.human_positions, dtype=float)  # (T+1, N, 2)
+        robots = np.asarray(result.robot_positions, dtype=float)  # (T+1, M, 2)
         last = len(truth) - 1
         for step, prediction, close, classes in self._made:
             horizon = len(prediction)
             errors = np.full((int(close.sum()), horizon), math.nan)
+            shortfall = np.full_like(errors, math.nan)
             for k in range(1, horizon + 1):
                 if step + k <= last:
-                    diff = prediction[k - 1, close] - truth[step + k, close]
-                    errors[:, k - 1] = np.linalg.norm(diff, axis=-1)
+                    predicted, realised = prediction[k - 1, close], truth[step + k, close]
+                    errors[:, k - 1] = np.linalg.norm(predicted - realised, axis=-1)
+                    shortfall[:, k - 1] = _shortfall(predicted, realised, robots[step + k], self.near)
             self.rows.append(errors)
             self.class_rows.append(classes)
+            self.shortfall_rows.append(shortfall)
         self._made = []
 
 
@@ -123,11 +140,25 @@ class ClosedLoopPlan:
         ]
 
 
-def closed_loop_errors(
-    plan: ClosedLoopPlan, progress: bool = True
-) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """Run ``plan``'s episodes and return the errors ``(n, H)``, each row's motion class ``(n,)`` and what
-    identifies them."""
+def _shortfall(predicted: np.ndarray, realised: np.ndarray, robots: np.ndarray, near: float) -> np.ndarray:
+    """``(n,)`` distance shortfall of each human (``PredictionErrors``) against the robots at ``robots``."""
+    planned = np.linalg.norm(robots[None] - predicted[:, None], axis=-1)  # (n, M)
+    real = np.linalg.norm(robots[None] - realised[:, None], axis=-1)
+    gap = np.where(planned <= near, planned - real, -np.inf).max(axis=1, initial=-np.inf)
+    return np.where(np.isfinite(gap), np.maximum(gap, 0.0), np.nan)
+
+
+class ClosedLoopErrors(NamedTuple):
+    """What closed-loop calibration episodes measured (``PredictionErrors``)."""
+
+    errors: np.ndarray  # (n, H) displacement errors, m
+    classes: np.ndarray  # (n,) motion class at prediction time
+    shortfall: np.ndarray  # (n, H) distance shortfall, m
+    details: dict[str, Any]  # what identifies the episodes
+
+
+def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoopErrors:
+    """Run ``plan``'s episodes and return what they measured."""
     from tqdm import tqdm
 
     from crowdsim.profiles import make_env_config
@@ -159,7 +190,7 @@ def closed_loop_errors(
         "seeds": [plan.seed, plan.seed + plan.episodes - 1],
         "successes": successes,
     }
-    return observer.errors, observer.classes, details
+    return ClosedLoopErrors(observer.errors, observer.classes, observer.shortfall, details)
 
 
 def errors_sha256(errors: np.ndarray, details: dict[str, Any], classes: np.ndarray | None = None) -> str:
@@ -192,23 +223,26 @@ def format_coverage(
 
 
 def class_coverage_report(
-    blocks: Sequence[Any], holdout: np.ndarray | None, classes: np.ndarray | None
+    blocks: Sequence[Any], holdout: np.ndarray | None, classes: np.ndarray | None, shortfall: bool = False
 ) -> list[list[list[float]]] | None:
-    """Print each block's class margins (``predictors.conformal_classes``) and, given held-out errors with
-    their classes, the coverage within each class; returns that coverage (block, class, step) or None."""
+    """Print each block's class margins (``predictors.conformal_classes``; ``shortfall``: those of the
+    distance-shortfall score) and, given held-out scores with their classes, the coverage within each class;
+    returns that coverage (block, class, step) or None."""
     from predictors.conformal_classes import MOTION_CLASSES, class_coverage
 
     report = []
     for block in blocks:
-        if block.classes is None:
+        table = block.shortfall if shortfall else block.classes
+        if table is None:
             continue
         cover = None
         if holdout is not None and classes is not None:
-            cover = class_coverage(holdout, classes, block.classes)
-        print(f"  alpha {block.alpha:g}, margins per motion class (samples at step 1):")
+            cover = class_coverage(holdout, classes, table)
+        score = "distance shortfall" if shortfall else "displacement"
+        print(f"  alpha {block.alpha:g}, {score} margins per motion class (samples at step 1):")
         for c, name in enumerate(MOTION_CLASSES):
-            margins = ", ".join(f"{q:.3f}" for q in block.classes.quantiles[c])
-            line = f"    {name:<9} n={block.classes.n[c][0]:<6} m_k [m]: {margins}"
+            margins = ", ".join(f"{q:.3f}" for q in table.quantiles[c])
+            line = f"    {name:<9} n={table.n[c][0]:<6} m_k [m]: {margins}"
             if cover is not None:
                 line += " | held-out coverage: " + ", ".join(f"{v:.1%}" for v in cover[c])
             print(line)

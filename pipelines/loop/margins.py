@@ -12,10 +12,16 @@ allowance ``m_k`` per horizon step (``MPCConfig.human_margins``):
 * ``conformal-motion``: ``m_jk`` per human ``j`` and step: the quantile of the human's motion class (new,
   standing, slow, walking; ``predictors.conformal_classes``) at this step, from the same closed-loop
   calibration: coverage within each class, and a standing human no longer gets a walking human's margin;
+* ``conformal-shortfall``: as ``conformal-motion``, but each class's quantile is of the *distance shortfall*
+  (how much closer the human came to a robot than predicted, at the robot's realised position;
+  ``pipelines/experiments/calibrate.py``), the quantity Eq. 11's guarantee needs, rather than of the whole
+  displacement error, which bounds it: humans who yield step away from the robot, and that error needs no
+  margin;
 * ``fixed``: margins given by hand, one per horizon step.
 
 On the command line: ``none``, ``conformal`` (alpha 0.1, closed-loop), ``conformal:0.05``,
-``conformal:0.05:real``, ``conformal-motion[:ALPHA]``, ``fixed:0.05,0.1,0.15,0.2``.
+``conformal:0.05:real``, ``conformal-motion[:ALPHA]``, ``conformal-shortfall[:ALPHA]``,
+``fixed:0.05,0.1,0.15,0.2``.
 """
 
 from __future__ import annotations
@@ -30,9 +36,16 @@ if TYPE_CHECKING:
     from predictors.calibration import Calibration
     from predictors.conformal_classes import ClassMargins
 
-MarginMode = Literal["none", "conformal", "conformal-motion", "fixed"]
+MarginMode = Literal["none", "conformal", "conformal-motion", "conformal-shortfall", "fixed"]
 CalibrationSource = Literal["closed-loop", "real"]
-MARGIN_MODES: Final[tuple[str, ...]] = ("none", "conformal", "conformal-motion", "fixed")
+MARGIN_MODES: Final[tuple[str, ...]] = (
+    "none",
+    "conformal",
+    "conformal-motion",
+    "conformal-shortfall",
+    "fixed",
+)
+PER_HUMAN_MODES: Final[tuple[str, ...]] = ("conformal-motion", "conformal-shortfall")  # margins per class
 CALIBRATION_SOURCES: Final[tuple[str, ...]] = ("closed-loop", "real")
 DEFAULT_ALPHA: Final[float] = 0.1
 MAX_MARGIN: Final[float] = 5.0  # m; a margin beyond this leaves no room to move in a 10 m scene
@@ -63,9 +76,9 @@ class MarginSpec:
                 raise PipelineError(
                     f"fixed margins must be numbers in [0, {MAX_MARGIN}] m, got {list(values)}"
                 )
-        if self.mode == "conformal-motion" and self.source != "closed-loop":
+        if self.mode in PER_HUMAN_MODES and self.source != "closed-loop":
             raise PipelineError(
-                "conformal-motion margins need the closed-loop calibration: real scenes hold no human "
+                f"{self.mode} margins need the closed-loop calibration: real scenes hold no human "
                 "observed for fewer than L steps, so one of the motion classes cannot be calibrated on them"
             )
         if (self.mode == "fixed") != bool(values):
@@ -83,14 +96,14 @@ class MarginSpec:
             return "none"
         if self.mode == "fixed":
             return "fixed" + "_".join(f"{v:g}" for v in self.values)
-        if self.mode == "conformal-motion":
-            return f"cpm{self.alpha:g}"
+        if self.mode in PER_HUMAN_MODES:
+            return f"{'cpm' if self.mode == 'conformal-motion' else 'cps'}{self.alpha:g}"
         return f"cp{self.alpha:g}" + ("" if self.source == "closed-loop" else f"-{self.source}")
 
     def resolve(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[float, ...]:
         """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``: the same
         margins for every human (none for ``conformal-motion``, whose margins ``resolve_classes`` gives)."""
-        if self.mode in ("none", "conformal-motion"):
+        if self.mode == "none" or self.mode in PER_HUMAN_MODES:
             return ()
         if self.mode == "fixed":
             if len(self.values) != horizon:
@@ -101,17 +114,19 @@ class MarginSpec:
         return tuple(self._block(predictor, horizon, sha256).quantiles[:horizon])
 
     def resolve_classes(self, predictor: str | None, horizon: int, sha256: str | None) -> ClassMargins | None:
-        """The margins per motion class for ``conformal-motion``; None for every other mode."""
-        if self.mode != "conformal-motion":
+        """The margins per motion class of ``conformal-motion`` (displacement) and ``conformal-shortfall``
+        (distance shortfall); None for every other mode."""
+        if self.mode not in PER_HUMAN_MODES:
             return None
         block = self._block(predictor, horizon, sha256)
-        if block.classes is None:
+        table = block.classes if self.mode == "conformal-motion" else block.shortfall
+        if table is None:
             raise PipelineError(
-                f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} has no margins per "
-                "motion class (made before they existed, or too few samples in a class for this alpha); "
-                f"recalibrate: crowdmpc calibrate --predictor {predictor} --alpha {self.alpha:g}"
+                f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} has no {self.mode} "
+                "margins per motion class (made before they existed, or too few samples in a class for this "
+                f"alpha); recalibrate: crowdmpc calibrate --predictor {predictor} --alpha {self.alpha:g}"
             )
-        return block.classes
+        return table
 
     def _block(self, predictor: str | None, horizon: int, sha256: str | None) -> Calibration:
         if predictor is None:
@@ -129,7 +144,7 @@ class MarginSpec:
     def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
         """What metadata and records state about the margins actually planned with."""
         out: dict[str, Any] = {"mode": self.mode, "label": self.label, "margins_m": list(resolved)}
-        if self.mode in ("conformal", "conformal-motion"):
+        if self.mode == "conformal" or self.mode in PER_HUMAN_MODES:
             out |= {"alpha": self.alpha, "source": self.source}
         return out
 
@@ -139,7 +154,7 @@ def parse_margins(text: str) -> MarginSpec:
     mode, _, rest = text.strip().partition(":")
     if mode == "none" and not rest:
         return MarginSpec()
-    if mode in ("conformal", "conformal-motion"):
+    if mode == "conformal" or mode in PER_HUMAN_MODES:
         alpha_text, _, source = rest.partition(":")
         alpha = _number(alpha_text, text) if alpha_text else DEFAULT_ALPHA
         return MarginSpec(mode, alpha=alpha, source=source or "closed-loop")  # type: ignore[arg-type]
@@ -147,7 +162,7 @@ def parse_margins(text: str) -> MarginSpec:
         return MarginSpec("fixed", values=tuple(_number(v, text) for v in rest.split(",")))
     raise PipelineError(
         f"bad margins {text!r}; expected none, conformal[:ALPHA[:closed-loop|real]], "
-        "conformal-motion[:ALPHA] or fixed:M1,..,MH (metres)"
+        "conformal-motion[:ALPHA], conformal-shortfall[:ALPHA] or fixed:M1,..,MH (metres)"
     )
 
 

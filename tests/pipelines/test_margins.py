@@ -121,18 +121,27 @@ def test_prediction_errors_by_hand():
     observer.on_step(obs, ControlOutput(accelerations=np.zeros((1, 2)), prediction=prediction), obs)
     observer.on_step(obs, ControlOutput(accelerations=np.zeros((1, 2))), obs)  # no prediction: skipped
     truth = np.array([[[0, 0], [5, 0]], [[1, 0], [5, 0]], [[1, 0.2], [5, 0]], [[1, 0.2], [5, 0]]], float)
-    observer.on_end(SimpleNamespace(human_positions=truth))
+    robots = np.array([[[0, 0]], [[0, 0]], [[1, 1]], [[1, 1]]], float)  # at (1, 1) from step 2 on
+    observer.on_end(SimpleNamespace(human_positions=truth, robot_positions=robots))
     errors = observer.errors
     assert errors.shape == (1, 3)  # only the human within 2 m
     np.testing.assert_allclose(errors[0, :2], [0.1, 0.3])
     assert math.isnan(errors[0, 2])
     assert observer.classes.tolist() == [0]
+    # Distance shortfall at the robot's realised position: k = 1 (step 2), robot (1, 1), predicted (1, 0.1)
+    # 0.9 away, realised (1, 0.2) 0.8 away: 0.1. k = 2 (step 3): predicted (1, 0.5) 0.5 away, realised 0.8
+    # away: the human stayed further than predicted, -0.3, clipped to 0.
+    np.testing.assert_allclose(observer.shortfall[0, :2], [0.1, 0.0], atol=1e-12)
+    assert math.isnan(observer.shortfall[0, 2])
 
 
 @pytest.mark.slow
 def test_closed_loop_errors_of_constant_velocity():
     plan = ClosedLoopPlan("constant_velocity", episodes=2, humans=(3,))
-    errors, classes, details = closed_loop_errors(plan, progress=False)
+    errors, classes, shortfall, details = closed_loop_errors(plan, progress=False)
+    assert shortfall.shape == errors.shape
+    both = np.isfinite(shortfall) & np.isfinite(errors)
+    assert np.all(shortfall[both] <= errors[both] + 1e-12)  # the triangle inequality
     assert classes.shape == (len(errors),) and set(classes.tolist()) <= {0, 1, 2, 3}
     assert errors.ndim == 2 and errors.shape[1] == 4 and len(errors) > 10
     assert details["seeds"] == [1_000_000, 1_000_001]

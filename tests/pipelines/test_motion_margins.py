@@ -16,6 +16,9 @@ from predictors.conformal_classes import MOTION_CLASSES
 def test_parse_and_label():
     assert parse_margins("conformal-motion") == MarginSpec("conformal-motion", alpha=0.1)
     assert parse_margins("conformal-motion:0.2").label == "cpm0.2"
+    assert parse_margins("conformal-shortfall:0.05").label == "cps0.05"
+    with pytest.raises(PipelineError, match="need the closed-loop calibration"):
+        parse_margins("conformal-shortfall:0.1:real")
     with pytest.raises(PipelineError, match="need the closed-loop calibration"):
         parse_margins("conformal-motion:0.1:real")
     assert MarginSpec("conformal").resolve_classes("constant_velocity", 4, None) is None
@@ -40,8 +43,9 @@ def _store(tmp_path, classes: bool) -> None:
 def test_a_calibration_without_class_margins_is_refused(tmp_path, monkeypatch):
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     _store(tmp_path, classes=False)
-    with pytest.raises(PipelineError, match="no margins per motion class.*recalibrate"):
-        parse_margins("conformal-motion").resolve_classes("constant_velocity", 4, None)
+    for mode in ("conformal-motion", "conformal-shortfall"):
+        with pytest.raises(PipelineError, match=f"no {mode} margins per motion class.*recalibrate"):
+            parse_margins(mode).resolve_classes("constant_velocity", 4, None)
 
 
 def _margins(controller, obs) -> np.ndarray:

@@ -65,15 +65,19 @@ def test_class_margins_travel_in_the_calibration_block(tmp_path):
         alpha=0.1,
         data_sha256="0" * 64,
         classes=classes,
+        shortfall=errors / 2,
     )
+    assert block.shortfall.quantiles[3] == pytest.approx((0.36, 0.72))  # half of class 3's 0.72, 1.44
     save_calibration(block, tmp_path)
     (again,) = read_calibration_file(tmp_path / "calibrations.json")
     assert again == block and again.classes is not None
     # Blocks made before class margins existed still read, with none.
     document = json.loads((tmp_path / "calibrations.json").read_text())
     del document["calibrations"][0]["classes"]
+    del document["calibrations"][0]["shortfall"]
     (tmp_path / "calibrations.json").write_text(json.dumps(document))
-    assert read_calibration_file(tmp_path / "calibrations.json")[0].classes is None
+    old = read_calibration_file(tmp_path / "calibrations.json")[0]
+    assert old.classes is None and old.shortfall is None
 
 
 def test_class_margins_refuse_what_they_cannot_mean():
