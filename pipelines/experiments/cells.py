@@ -285,14 +285,19 @@ def _coupled(mode: str) -> ControllerSpec:
 
 
 # The safety experiment: the paper's method (no margin), then conformal margins at decreasing alpha (more
-# coverage, wider margins), one margin per step for everyone and one per motion class ("motion"), CMPC with
-# the paper's predictor at the middle of the paper's range.
+# coverage, wider margins), one margin per step for everyone, one per motion class ("motion"), and one per
+# motion class of the distance shortfall ("shortfall"), CMPC with the paper's predictor at the middle of the
+# paper's range.
 SAFETY_ALPHAS: Final[tuple[float, ...]] = (0.5, 0.2, 0.1, 0.05, 0.01)
 
 
 def _safety_methods() -> tuple[tuple[str, ControllerSpec], ...]:
     methods = [("none", ControllerSpec("cmpc", PAPER_PREDICTOR))]
-    for mode, prefix in (("conformal", ""), ("conformal-motion", "motion ")):
+    for mode, prefix in (
+        ("conformal", ""),
+        ("conformal-motion", "motion "),
+        ("conformal-shortfall", "shortfall "),
+    ):
         for alpha in SAFETY_ALPHAS:
             margins = MarginSpec(mode, alpha=alpha)  # type: ignore[arg-type]
             methods.append(
@@ -370,8 +375,8 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "safety": Experiment(
         name="safety",
-        title="Safety: CMPC without margins (the paper), with conformal margins at decreasing alpha, pooled "
-        "and per motion class",
+        title="Safety: CMPC without margins (the paper), with conformal margins at decreasing alpha: pooled, "
+        "per motion class, per motion class of the distance shortfall",
         methods=_safety_methods(),
         humans=ABLATION_HUMANS,
         margins_swappable=False,

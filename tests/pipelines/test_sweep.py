@@ -117,8 +117,9 @@ def test_margins_profile_and_visibility_are_part_of_every_cell():
         get_experiment("safety").with_margins(MarginSpec())
     safety = get_experiment("safety")
     alphas = ("alpha=0.5", "alpha=0.2", "alpha=0.1", "alpha=0.05", "alpha=0.01")
-    assert safety.method_labels == ("none", *alphas, *(f"motion {a}" for a in alphas))
-    motion = {s.margins.label for _, s in safety.methods[6:]}
+    families = (*alphas, *(f"motion {a}" for a in alphas), *(f"shortfall {a}" for a in alphas))
+    assert safety.method_labels == ("none", *families)
+    motion = {s.margins.label for _, s in safety.methods[6:11]}
     assert motion == {"cpm0.5", "cpm0.2", "cpm0.1", "cpm0.05", "cpm0.01"}
     with pytest.raises(PipelineError, match="unknown profile 'crowdnav'"):
         World("crowdnav")
