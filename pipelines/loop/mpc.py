@@ -137,7 +137,7 @@ class MPCController:
         sha256 = checkpoint_sha256(self.model.name)
         margins = spec.margins.resolve(self.model.name, cfg.horizon, sha256)
         self.cfg = cfg.replace(human_margins=margins)
-        # conformal-motion: a margin per human and step from the human's motion class, chosen every step
+        # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
         self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256)
         check_world(world, self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
@@ -277,7 +277,7 @@ class MPCController:
         return self._output(result, start.kind, data, t0)
 
     def _crowd_allowances(self, obs: Observation, states: np.ndarray, reached: np.ndarray) -> dict[str, Any]:
-        """StepData's ``human_margins`` (conformal-motion: each human's class margins, ``(H, N_h)``) and
+        """StepData's ``human_margins`` (per-class margins: each human's, ``(H, N_h)``) and
         ``targets`` (guidance "standing": around the humans standing still); absent: the configured
         margins for every human, the goals."""
         cfg = self.cfg
