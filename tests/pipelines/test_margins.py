@@ -12,8 +12,9 @@ from pipelines.experiments.calibrate import ClosedLoopPlan, PredictionErrors, cl
 from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.margins import MarginSpec, parse_margins
-from predictors.calibration import calibration_from_errors, save_calibration
+from predictors.calibration import save_calibration
 from predictors.errors import PredictorError
+from tests.calibration_blocks import constant_velocity_block
 
 
 def test_parse_margins():
@@ -47,15 +48,7 @@ def test_resolution_reads_the_calibration_and_checks_the_horizon(tmp_path, monke
         MarginSpec("conformal").resolve("constant_velocity", 4, None)
     # Scores 0.01 .. 0.20 per step k (times k): the 0.9 quantile of 19 samples is the 18th smallest.
     errors = np.outer(np.arange(1, 20) / 100.0, [1.0, 2.0, 3.0, 4.0])
-    block = calibration_from_errors(
-        errors,
-        predictor="constant_velocity",
-        predictor_sha256=None,
-        source="closed-loop",
-        alpha=0.1,
-        data_sha256="0" * 64,
-    )
-    save_calibration(block)
+    save_calibration(constant_velocity_block(errors))
     assert MarginSpec("conformal").resolve("constant_velocity", 4, None) == pytest.approx(
         (0.18, 0.36, 0.54, 0.72)
     )

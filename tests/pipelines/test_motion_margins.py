@@ -9,8 +9,8 @@ import pytest
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.margins import MarginSpec, parse_margins
-from predictors.calibration import calibration_from_errors, save_calibration
-from predictors.conformal_classes import MOTION_CLASSES
+from predictors.calibration import save_calibration
+from tests.calibration_blocks import class_errors, constant_velocity_block
 
 
 def test_parse_and_label():
@@ -26,18 +26,8 @@ def test_parse_and_label():
 
 def _store(tmp_path, classes: bool) -> None:
     """19 samples per class, class c's step-k error i/100 * (c + 1) * k: margins 0.18 (c + 1) k."""
-    base = np.arange(1, 20) / 100.0
-    errors = np.concatenate([np.outer(base * (c + 1), [1.0, 2.0, 3.0, 4.0]) for c in range(4)])
-    block = calibration_from_errors(
-        errors,
-        predictor="constant_velocity",
-        predictor_sha256=None,
-        source="closed-loop",
-        alpha=0.1,
-        data_sha256="0" * 64,
-        classes=np.repeat(np.arange(len(MOTION_CLASSES)), 19) if classes else None,
-    )
-    save_calibration(block, tmp_path)
+    errors, motion = class_errors(4)
+    save_calibration(constant_velocity_block(errors, classes=motion if classes else None), tmp_path)
 
 
 def test_a_calibration_without_class_margins_is_refused(tmp_path, monkeypatch):

@@ -5,15 +5,15 @@ import json
 import numpy as np
 import pytest
 
-from predictors.calibration import calibration_from_errors, read_calibration_file, save_calibration
+from predictors.calibration import read_calibration_file, save_calibration
 from predictors.conformal_classes import (
-    MOTION_CLASSES,
     ClassMargins,
     class_coverage,
     class_margins,
     motion_classes,
 )
 from predictors.errors import PredictorError
+from tests.calibration_blocks import class_errors, constant_velocity_block
 
 
 def test_motion_classes_by_hand():
@@ -29,15 +29,8 @@ def test_motion_classes_by_hand():
         motion_classes(np.zeros((1, 2, 2)), 1, 0.5)
 
 
-def _errors() -> tuple[np.ndarray, np.ndarray]:
-    """19 samples per class; class c's step-k error i/100 * (c + 1) * k, i = 1..19."""
-    base = np.arange(1, 20) / 100.0
-    rows = [np.outer(base * (c + 1), [1.0, 2.0]) for c in range(len(MOTION_CLASSES))]
-    return np.concatenate(rows), np.repeat(np.arange(len(MOTION_CLASSES)), 19)
-
-
 def test_class_quantiles_by_hand():
-    errors, classes = _errors()
+    errors, classes = class_errors(2)
     margins = class_margins(errors, classes, 0.1)
     # rank ceil(20 * 0.9) = 18 of 19: 0.18 * (c + 1) * k
     for c in range(4):
@@ -56,17 +49,8 @@ def test_class_quantiles_by_hand():
 
 
 def test_class_margins_travel_in_the_calibration_block(tmp_path):
-    errors, classes = _errors()
-    block = calibration_from_errors(
-        errors,
-        predictor="constant_velocity",
-        predictor_sha256=None,
-        source="closed-loop",
-        alpha=0.1,
-        data_sha256="0" * 64,
-        classes=classes,
-        shortfall=errors / 2,
-    )
+    errors, classes = class_errors(2)
+    block = constant_velocity_block(errors, classes=classes, shortfall=errors / 2)
     assert block.shortfall.quantiles[3] == pytest.approx((0.36, 0.72))  # half of class 3's 0.72, 1.44
     save_calibration(block, tmp_path)
     (again,) = read_calibration_file(tmp_path / "calibrations.json")
