@@ -146,6 +146,9 @@ class MPCConfig:
     # discs of radius d_min plus their margin, when they block the straight line to the goal (mpc/guidance.py:
     # the local minimum behind a row of standing humans; the closed loop says who stands).
     guidance: Guidance = "none"
+    # Seconds without 0.25 m of progress towards its goal after which a robot stops flocking until it moves
+    # again (mpc/stall.py: a boxed-in robot otherwise holds the whole flock). 0: never (the paper).
+    stall_release_s: float = 0.0
 
     def __post_init__(self):
         for name in ("horizon", "j_max", "solver_max_iter"):
@@ -155,7 +158,7 @@ class MPCConfig:
                 raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
         positive = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi", "epsilon", "delta")
         positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")
-        non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty")
+        non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty", "stall_release_s")
         for name in positive + non_negative:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):

@@ -44,6 +44,8 @@ class StepData:
     human_margins: np.ndarray | None = None
     # (M, 2) m, where Eq. 8's reference heads (mpc/guidance.py); None: the goals (the paper)
     targets: np.ndarray | None = None
+    # (M,) bool, the robots that flock (mpc/stall.py: a stalled robot does not); None: every robot
+    flocking: np.ndarray | None = None
 
     @property
     def n_robots(self) -> int:
@@ -51,11 +53,14 @@ class StepData:
 
     def floc_weights(self, w_floc: float) -> np.ndarray:
         """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
-        has arrived or is pinned (a parked robot must not pull the flock, nor be pulled)."""
+        has arrived, is pinned (a parked robot must not pull the flock, nor be pulled) or does not flock
+        (``flocking``)."""
         m = self.n_robots
         free = np.asarray(self.active, dtype=bool)
         if self.arrived is not None:
             free = free & ~np.asarray(self.arrived, dtype=bool)
+        if self.flocking is not None:
+            free = free & np.asarray(self.flocking, dtype=bool)
         return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
 
     def reference_targets(self) -> np.ndarray:

@@ -287,6 +287,7 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "dmpc_relaxation": "in (0, 1]: the step towards the best response of dmpc_update relaxed",
     "dmpc_stop": "regret (Algorithm 2, lines 12-16) | no_improvement: when DMPC's iterations end",
     "guidance": "none (the paper: Eq. 8 heads for the goal) | standing: around rows of humans standing still",
+    "stall_release_s": "s without 0.25 m of progress before a robot stops flocking (mpc/stall.py); 0: never",
     "coupled_mode": "coupling nlp: auto | exact (the predictor inside the NLP) | first_order",
 }
 MPC_EXCLUDED: Final[tuple[str, ...]] = (*MPC_FROM_WORLD, "human_margins")

@@ -35,6 +35,7 @@ from mpc.fallback import PlanMemory, Start
 from mpc.fastcall import BufferedFunction
 from mpc.guidance import guidance_targets
 from mpc.nlp import StepData
+from mpc.stall import StallWatch
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
@@ -141,6 +142,8 @@ class MPCController:
         self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256)
         check_world(world, self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
+        release = self.cfg.stall_release_s
+        self.stall = StallWatch(release, self.cfg.dt) if release else None
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
         self.solve_exceptions = 0  # control steps whose solve raised (each fell back), since construction
@@ -232,6 +235,8 @@ class MPCController:
         if self.spec.coupling != "nlp":
             self._twin(obs.n_humans, obs.n_robots)
         self.memory.reset()
+        if self.stall is not None:
+            self.stall.reset()
 
     def act(self, obs: Observation) -> ControlOutput:
         t0 = time.perf_counter()
@@ -246,6 +251,7 @@ class MPCController:
             goals=np.asarray(obs.robot_goals, dtype=float),
             active=~reached if cfg.on_goal == "brake" else np.ones(n_robots, dtype=bool),
             arrived=reached,
+            flocking=self._flocking(states, obs.robot_goals, reached),
             **self._crowd_allowances(obs, states, reached),
         )
         if reached.all():  # everyone is there (the episode ends): nothing to optimise
@@ -275,6 +281,10 @@ class MPCController:
                 raise
             return self._exception_output(exc, start, data, t0)
         return self._output(result, start.kind, data, t0)
+
+    def _flocking(self, states: np.ndarray, goals: np.ndarray, reached: np.ndarray) -> np.ndarray | None:
+        """StepData's ``flocking``: every robot but the stalled ones (mpc/stall.py); None without release."""
+        return None if self.stall is None else ~self.stall.update(states[:, :2], goals, reached)
 
     def _crowd_allowances(self, obs: Observation, states: np.ndarray, reached: np.ndarray) -> dict[str, Any]:
         """StepData's ``human_margins`` (per-class margins: each human's, ``(H, N_h)``) and
@@ -343,9 +353,12 @@ class MPCController:
 
 
 def _allowances_record(data: StepData) -> dict[str, Any]:
-    """What the step planned with beyond the paper, for records (MCAP ``/mpc/solver`` extra): each human's
-    margins ``(H, N_h)`` (conformal-motion) and the robots whose Eq. 8 reference was guided, with targets."""
+    """What the step planned with beyond the paper, for records (MCAP ``/mpc/solver`` extra): the robots
+    released from flocking (stalled, mpc/stall.py), each human's margins ``(H, N_h)`` (conformal-motion) and
+    the robots whose Eq. 8 reference was guided, with targets."""
     out: dict[str, Any] = {}
+    if data.flocking is not None and not np.all(data.flocking):
+        out["unflocked"] = np.flatnonzero(~np.asarray(data.flocking, dtype=bool)).tolist()
     if data.human_margins is not None:
         out["human_margins"] = np.round(data.human_margins, 4).tolist()
     if data.targets is not None:

@@ -408,6 +408,29 @@ def test_demo_toml_resolves_to_make_demos_run(monkeypatch):
     assert _resolved(demo) == _resolved(["--config", str(DEMO_TOML.relative_to(REPO)), "simulate"])
 
 
+def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
+    """docs/examples/safe_crossing.toml sets the margins, the guidance, the stall release and DMPC's update
+    that the README's safe-crossing tables were run with, and nothing else."""
+    monkeypatch.chdir(REPO)
+    sets = [
+        "mpc.guidance=standing",
+        "mpc.stall_release_s=4",
+        "mpc.dmpc_update=gauss_seidel",
+        "mpc.dmpc_stop=no_improvement",
+    ]
+    cli = ["simulate", "--controller", "dmpc", "--predictor", "social_lstm_eth"]
+    cli += ["--margins", "conformal-shortfall:0.05", *(w for s in sets for w in ("--set", s))]
+    toml = ["--config", "docs/examples/safe_crossing.toml", "simulate", "--controller", "dmpc"]
+    assert _resolved(toml) == _resolved(cli)
+    spec = _resolved(toml)[0]
+    assert dict(spec.mpc_overrides) == {
+        "guidance": "standing",
+        "stall_release_s": 4.0,
+        "dmpc_update": "gauss_seidel",
+        "dmpc_stop": "no_improvement",
+    }
+
+
 def _without_wall_clock(record: dict) -> dict:
     solver = {k: v for k, v in record["solver"].items() if not k.endswith("_ms")}
     return {**record, "solver": solver}

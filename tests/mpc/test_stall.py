@@ -1,0 +1,75 @@
+"""Stalled robots stop flocking (mpc/stall.py, StepData.flocking), on histories with answers known by hand."""
+
+import numpy as np
+import pytest
+
+from mpc.config import MPCConfig, MPCConfigError
+from mpc.nlp import StepData
+from mpc.stall import StallWatch
+
+GOALS = np.array([[0.0, 10.0], [1.0, 10.0], [2.0, 10.0]])
+
+
+def _positions(y0: float, y1: float, y2: float) -> np.ndarray:
+    return np.array([[0.0, y0], [1.0, y1], [2.0, y2]])
+
+
+def test_a_robot_is_stalled_after_a_window_without_progress():
+    """Window 1.2 s at tau = 0.4 s: three steps. Robot 0 walks 0.3 m a step, robot 1 creeps 0.05 m a step
+    (0.15 m in the window, under 0.25 m), robot 2 stands still but has arrived."""
+    watch = StallWatch(window_s=1.2, dt=0.4)
+    arrived = np.array([False, False, True])
+    for step in range(3):  # the window is not full yet: nobody is stalled
+        stalled = watch.update(_positions(0.3 * step, 0.05 * step, 10.0), GOALS, arrived)
+        np.testing.assert_array_equal(stalled, [False, False, False])
+    stalled = watch.update(_positions(0.9, 0.15, 10.0), GOALS, arrived)
+    np.testing.assert_array_equal(stalled, [False, True, False])
+    # Robot 1 moves again: 0.15 -> 0.5 over the window is 0.35 m of progress.
+    watch.update(_positions(1.2, 0.3, 10.0), GOALS, arrived)
+    watch.update(_positions(1.5, 0.4, 10.0), GOALS, arrived)
+    stalled = watch.update(_positions(1.8, 0.5, 10.0), GOALS, arrived)
+    np.testing.assert_array_equal(stalled, [False, False, False])
+    watch.reset()  # a new episode starts with an empty window
+    np.testing.assert_array_equal(watch.update(_positions(0, 0, 0), GOALS, arrived), [False] * 3)
+
+
+def test_moving_away_from_the_goal_is_no_progress():
+    watch = StallWatch(window_s=0.4, dt=0.4)
+    watch.update(_positions(0, 0, 0), GOALS, np.zeros(3, bool))
+    stalled = watch.update(_positions(-1.0, 0.3, 0.2), GOALS, np.zeros(3, bool))
+    np.testing.assert_array_equal(stalled, [True, False, True])
+
+
+@pytest.mark.parametrize("args", [(0.0, 0.4), (1.0, 0.0), (-1.0, 0.4)])
+def test_bad_windows_are_refused(args):
+    with pytest.raises(ValueError, match="must be > 0"):
+        StallWatch(*args)
+
+
+def test_flocking_weights_leave_out_every_pair_with_a_robot_that_does_not_flock():
+    data = StepData(
+        states=np.zeros((3, 4)),
+        last_actions=np.zeros((3, 2)),
+        goals=GOALS,
+        active=np.ones(3, bool),
+        arrived=np.array([False, False, True]),
+        flocking=np.array([True, False, True]),
+    )
+    # Pairs (0,1), (0,2), (1,2): robot 1 does not flock, robot 2 has arrived.
+    np.testing.assert_array_equal(data.floc_weights(10.0), [0.0, 0.0, 0.0])
+    free = StepData(np.zeros((3, 4)), np.zeros((3, 2)), GOALS, active=np.ones(3, bool))
+    np.testing.assert_array_equal(free.floc_weights(10.0), [10.0, 10.0, 10.0])
+    one_out = StepData(
+        states=np.zeros((3, 4)),
+        last_actions=np.zeros((3, 2)),
+        goals=GOALS,
+        active=np.ones(3, bool),
+        flocking=np.array([True, True, False]),
+    )
+    np.testing.assert_array_equal(one_out.floc_weights(10.0), [10.0, 0.0, 0.0])
+
+
+def test_the_release_window_is_validated_and_off_by_default():
+    assert MPCConfig().stall_release_s == 0.0  # the paper: flocking never released
+    with pytest.raises(MPCConfigError, match="stall_release_s must be >= 0"):
+        MPCConfig(stall_release_s=-1.0)
