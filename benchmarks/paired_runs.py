@@ -4,7 +4,8 @@ method and crowd size, and the paired success changes of each run against the fi
     .venv/bin/python benchmarks/paired_runs.py none=runs/table2-full cpm=runs/t2-cpm cpm+g=runs/t2-cpm-g
 
 Reads each run's ``episodes.csv`` (written by ``crowdmpc sweep``); an episode is identified by (method, number
-of humans, scenario, seed), and only the episodes every run has are compared. Prints a Markdown table.
+of humans, scenario, seed; methods in upper case, as Table II names them and the controllers experiment does
+not), and only the episodes every run has are compared. Prints a Markdown table.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ def load(run: Path) -> dict[Key, dict[str, str]]:
         raise SystemExit(f"{path}: no such file (a `crowdmpc sweep --out` directory has one)")
     with path.open() as f:
         return {
-            (r["method"], int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in csv.DictReader(f)
+            (r["method"].upper(), int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in csv.DictReader(f)
         }
 
 
