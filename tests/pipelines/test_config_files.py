@@ -421,6 +421,7 @@ def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
     cli = ["simulate", "--controller", "dmpc", "--predictor", "social_lstm_eth"]
     cli += ["--margins", "conformal-shortfall:0.05", *(w for s in sets for w in ("--set", s))]
     toml = ["--config", "docs/examples/safe_crossing.toml", "simulate", "--controller", "dmpc"]
+    toml += ["--predictor", "social_lstm_eth"]
     assert _resolved(toml) == _resolved(cli)
     spec = _resolved(toml)[0]
     assert dict(spec.mpc_overrides) == {
