@@ -24,9 +24,8 @@ def load(run: Path) -> dict[Key, dict[str, str]]:
     if not path.is_file():
         raise SystemExit(f"{path}: no such file (a `crowdmpc sweep --out` directory has one)")
     with path.open() as f:
-        return {
-            (r["method"].upper(), int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in csv.DictReader(f)
-        }
+        rows = csv.DictReader(f)
+        return {(r["method"].upper(), int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in rows}
 
 
 def flag(value: str) -> bool:

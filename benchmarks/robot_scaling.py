@@ -18,6 +18,7 @@ and those that fell back (braking). The machine is shared: the load average is p
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py                       # 50 episodes a row
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --episodes 4 --controllers cmpc --robots 3 6 12
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --formation row --json before.json
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --mpc stall_release_s=4 --mpc dmpc_stop=no_improvement
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from crowdsim.env import CrowdEnv
 from crowdsim.metrics import aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
+from mpc.config import MPCConfig, MPCConfigError
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
@@ -62,11 +64,13 @@ def run_row(
     seed: int,
     scenarios: tuple[str, ...],
     formation: str,
+    mpc_overrides: tuple[tuple[str, Any], ...] = (),
 ) -> dict[str, Any]:
     """``episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
     env_config = make_env_config("paper")
     env = CrowdEnv(env_config)
-    mpc = MPCController(ControllerSpec(controller, predictor), distributed=controller == "dmpc")
+    spec = ControllerSpec(controller, predictor, mpc_overrides=mpc_overrides)
+    mpc = MPCController(spec, distributed=controller == "dmpc")
     metrics, times, iterations, fallbacks = [], [], [], 0
     t0 = time.perf_counter()
     try:
@@ -115,6 +119,17 @@ def run_row(
     }
 
 
+def _override(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` as an MPCConfig override: the value as JSON when it parses (numbers), else a string."""
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise ValueError(f"expected KEY=VALUE, got {text!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
 def _json_safe(value: Any) -> Any:
     """NaN and inf as null (strict JSON), tuples as lists."""
     if isinstance(value, dict):
@@ -161,8 +176,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
     parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
     parser.add_argument("--formation", choices=FORMATIONS, default="auto")
+    parser.add_argument(
+        "--mpc",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an MPCConfig override, e.g. stall_release_s=4 or dmpc_update=gauss_seidel (repeatable)",
+    )
     parser.add_argument("--json", help="also write the rows to this file")
     args = parser.parse_args(argv)
+    try:
+        overrides = tuple(_override(text) for text in args.mpc)
+        MPCConfig().replace(**dict(overrides))
+    except (ValueError, MPCConfigError) as exc:
+        parser.error(f"--mpc: {exc}")
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
 
@@ -180,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
                     args.seed,
                     tuple(args.scenarios),
                     args.formation,
+                    overrides,
                 )
             )
     report["load_after"] = os.getloadavg()
@@ -188,6 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
         f"({'/'.join(args.scenarios)}), formation {args.formation}"
+        + "".join(f", {k}={v}" for k, v in overrides)
     )
     print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
     print_table(rows)
