@@ -18,8 +18,8 @@ and those that fell back (braking). The machine is shared: the load average is p
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py                       # 50 episodes a row
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --episodes 4 --controllers cmpc --robots 3 6 12
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --formation row --json before.json
-    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --mpc stall_release_s=4 \
-        --mpc dmpc_update=gauss_seidel --mpc dmpc_stop=no_improvement
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --mpc stall_release_s=4 --robots 12
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --controllers dmpc --mpc dmpc_update=gauss_seidel
 """
 
 from __future__ import annotations
