@@ -105,6 +105,15 @@ def _start_resource_tracker() -> None:
             os.environ["PYTHONWARNINGS"] = saved
 
 
+def worker_environment() -> dict[str, str]:
+    """What a Ray worker's environment must hold: one library thread, and every ``CROWDMPC_*`` variable of the
+    driver (plugins, controllers, zoo, checkpoints, data, compile cache). A local process pool inherits them;
+    actors on a cluster's other nodes start from their own environment and would not find the plugins the
+    driver registered, nor its user zoo."""
+    forwarded = {k: v for k, v in os.environ.items() if k.startswith("CROWDMPC_")}
+    return {**SINGLE_THREAD_ENV, **forwarded}
+
+
 @contextlib.contextmanager
 def _child_environment(values: dict[str, str]) -> Iterator[None]:
     """Environment for processes started inside the block (spawned workers copy it at start)."""
@@ -221,7 +230,7 @@ class RayBackend:
         self._ray = ray
         self._owns_ray = not ray.is_initialized()
         if self._owns_ray:
-            env = {"env_vars": dict(SINGLE_THREAD_ENV)}
+            env = {"env_vars": worker_environment()}
             if address is None:
                 ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
             else:

@@ -581,3 +581,40 @@ def test_jit_is_a_worker_setting_that_leaves_the_cell_alone():
     assert make_controller(ControllerSpec("orca"), jit=True) is not None
     cell = get_experiment("table2").with_predictor("constant_velocity").cells((5,))[0]
     assert "jit" not in cell.key
+
+
+def test_ray_workers_get_the_drivers_crowdmpc_environment(monkeypatch):
+    """Actors on a cluster node start from that node's environment: the driver's plugins and zoo must travel
+    in the runtime_env, with the single-thread settings."""
+    from pipelines.experiments.backends import SINGLE_THREAD_ENV, worker_environment
+
+    monkeypatch.setenv("CROWDMPC_PLUGINS", "my_pkg.nets:MyNet")
+    monkeypatch.setenv("CROWDMPC_ZOO", "/shared/zoo")
+    monkeypatch.setenv("UNRELATED_VARIABLE", "x")
+    env = worker_environment()
+    assert env["CROWDMPC_PLUGINS"] == "my_pkg.nets:MyNet" and env["CROWDMPC_ZOO"] == "/shared/zoo"
+    assert "UNRELATED_VARIABLE" not in env
+    assert all(env[k] == v for k, v in SINGLE_THREAD_ENV.items())
+
+
+def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
+    import types
+
+    from pipelines.experiments.backends import RayBackend, worker_environment
+
+    calls: list[dict] = []
+    fake = types.ModuleType("ray")
+    fake.is_initialized = lambda: False  # type: ignore[attr-defined]
+    fake.init = lambda **kwargs: calls.append(kwargs)  # type: ignore[attr-defined]
+    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: None)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    monkeypatch.setenv("CROWDMPC_CONTROLLERS", "my_pkg.ctl:MyController")
+    RayBackend(2, "none", address="ray://head:10001")
+    assert calls == [
+        {
+            "address": "ray://head:10001",
+            "runtime_env": {"env_vars": worker_environment()},
+            "log_to_driver": False,
+        }
+    ]
+    assert calls[0]["runtime_env"]["env_vars"]["CROWDMPC_CONTROLLERS"] == "my_pkg.ctl:MyController"
