@@ -17,14 +17,17 @@ until it moves again; everything else in the NLP is the paper's.
 from __future__ import annotations
 
 from collections import deque
+from typing import Final
 
 import numpy as np
+
+PROGRESS: Final[float] = 0.25  # m towards the goal within the window that counts as moving (MPCConfig)
 
 
 class StallWatch:
     """Distances to the goals over the last ``window_s / dt`` steps; ``update`` says who is stalled."""
 
-    def __init__(self, window_s: float, dt: float, progress: float = 0.25):
+    def __init__(self, window_s: float, dt: float, progress: float = PROGRESS):
         if window_s <= 0 or dt <= 0 or progress <= 0:
             raise ValueError(f"window_s, dt and progress must be > 0, got {window_s}, {dt}, {progress}")
         self.steps = max(1, round(window_s / dt))
