@@ -4,8 +4,8 @@ method and crowd size, and the paired success changes of each run against the fi
     .venv/bin/python benchmarks/paired_runs.py none=runs/table2-full cpm=runs/t2-cpm cpm+g=runs/t2-cpm-g
 
 Reads each run's ``episodes.csv`` (written by ``crowdmpc sweep``); an episode is identified by (method, number
-of humans, scenario, seed; methods in upper case, as Table II names them and the controllers experiment does
-not), and only the episodes every run has are compared. Prints a Markdown table.
+of humans, scenario, seed; the method's case ignored: Table II names it "CMPC", the controllers experiment
+"cmpc"), and only the episodes every run has are compared. Prints a Markdown table.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ def load(run: Path) -> dict[Key, dict[str, str]]:
         raise SystemExit(f"{path}: no such file (a `crowdmpc sweep --out` directory has one)")
     with path.open() as f:
         rows = csv.DictReader(f)
-        return {(r["method"].upper(), int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in rows}
+        return {(r["method"].casefold(), int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in rows}
 
 
 def flag(value: str) -> bool:
@@ -90,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
                 flag(runs[labels[0]][k]["success"]) and not flag(runs[label][k]["success"]) for k in keys
             )
             paired.append(f"+{wins} / −{losses} (p = {mcnemar(wins, losses):.2g})")
-        print(f"| {method} | {n} ({len(keys)}) | " + " | ".join(cells + paired) + " |")
+        name = runs[labels[0]][keys[0]]["method"]  # as the first run spells it
+        print(f"| {name} | {n} ({len(keys)}) | " + " | ".join(cells + paired) + " |")
     return 0
 
 

@@ -14,13 +14,13 @@ SPEC.loader.exec_module(paired_runs)
 FIELDS = ["method", "n_humans", "scenario", "seed", "success", "collision", "travel_time"]
 
 
-def _run(path: Path, outcomes: list[tuple[bool, bool, float]]) -> Path:
+def _run(path: Path, outcomes: list[tuple[bool, bool, float]], method: str = "CMPC") -> Path:
     path.mkdir()
     with (path / "episodes.csv").open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(FIELDS)
         for seed, (success, collision, travel) in enumerate(outcomes):
-            writer.writerow(["CMPC", 7, "circle", seed, success, collision, travel])
+            writer.writerow([method, 7, "circle", seed, success, collision, travel])
     return path
 
 
@@ -41,3 +41,12 @@ def test_two_runs_on_their_shared_episodes(tmp_path, capsys):
     assert row == "| CMPC | 7 (3) | 66.7 / 66.7 / 11.0 | 66.7 / 0.0 / 12.0 | +1 / −1 (p = 1) |"
     with pytest.raises(SystemExit, match="no such file"):
         paired_runs.main([f"base={a}", f"new={tmp_path}"])
+
+
+def test_a_method_is_the_same_whatever_its_case(tmp_path, capsys):
+    """Table II writes "CMPC", the controllers experiment "cmpc": the same episodes, named as the first run."""
+    a = _run(tmp_path / "a", [(True, False, 10.0), (False, False, 0.0)])
+    b = _run(tmp_path / "b", [(True, False, 12.0), (True, False, 14.0)], method="cmpc")
+    assert paired_runs.main([f"table2={a}", f"controllers={b}"]) == 0
+    row = capsys.readouterr().out.strip().splitlines()[-1]
+    assert row == "| CMPC | 7 (2) | 50.0 / 0.0 / 10.0 | 100.0 / 0.0 / 13.0 | +1 / −0 (p = 1) |"
