@@ -44,7 +44,7 @@ def test_two_runs_on_their_shared_episodes(tmp_path, capsys):
 
 
 def test_a_method_is_the_same_whatever_its_case(tmp_path, capsys):
-    """Table II writes "CMPC", the controllers experiment "cmpc": the same episodes, named as the first run."""
+    """Table II writes "CMPC", the controllers experiment "cmpc": the same episodes, named as run one."""
     a = _run(tmp_path / "a", [(True, False, 10.0), (False, False, 0.0)])
     b = _run(tmp_path / "b", [(True, False, 12.0), (True, False, 14.0)], method="cmpc")
     assert paired_runs.main([f"table2={a}", f"controllers={b}"]) == 0
