@@ -46,27 +46,18 @@ def test_bad_windows_are_refused(args):
         StallWatch(*args)
 
 
+def _data(**kw) -> StepData:
+    return StepData(np.zeros((3, 4)), np.zeros((3, 2)), GOALS, active=np.ones(3, bool), **kw)
+
+
 def test_flocking_weights_leave_out_every_pair_with_a_robot_that_does_not_flock():
-    data = StepData(
-        states=np.zeros((3, 4)),
-        last_actions=np.zeros((3, 2)),
-        goals=GOALS,
-        active=np.ones(3, bool),
-        arrived=np.array([False, False, True]),
-        flocking=np.array([True, False, True]),
-    )
-    # Pairs (0,1), (0,2), (1,2): robot 1 does not flock, robot 2 has arrived.
-    np.testing.assert_array_equal(data.floc_weights(10.0), [0.0, 0.0, 0.0])
-    free = StepData(np.zeros((3, 4)), np.zeros((3, 2)), GOALS, active=np.ones(3, bool))
-    np.testing.assert_array_equal(free.floc_weights(10.0), [10.0, 10.0, 10.0])
-    one_out = StepData(
-        states=np.zeros((3, 4)),
-        last_actions=np.zeros((3, 2)),
-        goals=GOALS,
-        active=np.ones(3, bool),
-        flocking=np.array([True, True, False]),
-    )
+    # Pairs (0,1), (0,2), (1,2) in pair_index order.
+    np.testing.assert_array_equal(_data().floc_weights(10.0), [10.0, 10.0, 10.0])
+    one_out = _data(flocking=np.array([True, True, False]))
     np.testing.assert_array_equal(one_out.floc_weights(10.0), [10.0, 0.0, 0.0])
+    # Robot 1 does not flock and robot 2 has arrived: no pair is left.
+    both = _data(arrived=np.array([False, False, True]), flocking=np.array([True, False, True]))
+    np.testing.assert_array_equal(both.floc_weights(10.0), [0.0, 0.0, 0.0])
 
 
 def test_the_release_window_is_validated_and_off_by_default():
