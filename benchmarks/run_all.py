@@ -26,6 +26,8 @@ Sections
   dmpc_updates  DMPC's update rules (UPDATE:STOP) x local solves serial/threads, circle episodes, 3..12 robots
               (benchmarks/dmpc_scaling.py's ``closed_loop``; quick: 3 and 6 robots, jacobi:regret and
               sequential_accept:no_improvement, 1 episode)
+  ibr         CMPC's step against its floor, jit off and on (social_lstm_eth, 7 humans): the first solve (the
+              floor), the later IBR solves and the rest (benchmarks/ibr_solves.py; quick: 1 episode)
 
 Rows measured here rather than by control_step.py (the baselines, the oracle, robots != 3) time the first
 ``--steps`` control steps of episodes of both scenarios (export, robots and dmpc_updates time whole episodes).
@@ -52,7 +54,7 @@ import numpy as np
 # are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates")
+SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
 SCENARIOS = ("circle", "perpendicular")
 ORACLE_PREDICTOR = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
 TABLE2_EPISODES = 10 * 1000  # the paper: 5 crowd sizes x 2 methods, 500 + 500 episodes per cell
@@ -402,6 +404,20 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                         cell["speedup_median"] = rows["serial"]["median_ms"] / rows["threads"]["median_ms"]
                 updates[f"r{m} {rule}"] = cell
         report["dmpc_updates"] = updates
+
+    if "ibr" in sections:
+        print("CMPC step against its floor, social_lstm_eth, 7 humans", file=sys.stderr)
+        import ibr_solves
+
+        episodes = 1 if quick else 4
+        report["ibr"] = {
+            f"jit {jit}": _timed(
+                f"jit {jit}",
+                lambda on=(jit == "on"): ibr_solves.measure(PAPER_PREDICTOR, 7, episodes, on),
+                errors,
+            )
+            for jit in ("off", "on")
+        }
     report["errors"] = errors
     return report
 
@@ -456,6 +472,15 @@ def table(report: dict[str, Any]) -> str:
                 f"| dmpc {key} threads speed-up (median; same trajectories: {cell['same']}) | "
                 f"x{cell['speedup_median']:.2f} | | |"
             )
+    for key, row in report.get("ibr", {}).items():
+        if not row:
+            lines.append(_row(f"cmpc step split, {key}", None))
+            continue
+        lines.append(
+            f"| cmpc step, {key}: first solve {row['first_solve_ms']:.2f} ms, later solves "
+            f"{row['later_solves_ms']:.2f} ms, step / first solve {row['step_over_first']:.2f}, outside the "
+            f"solves {100 * row['non_solve_share']:.0f} % | {row['step_ms']:.2f} | | |"
+        )
     exported = report.get("export")
     if exported:
         lines += [
