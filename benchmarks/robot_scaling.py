@@ -37,7 +37,7 @@ from crowdsim.env import CrowdEnv
 from crowdsim.metrics import aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
-from mpc.config import MPCConfig, MPCConfigError
+from pipelines.config import ConfigError, load
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
@@ -120,17 +120,6 @@ def run_row(
     }
 
 
-def _override(text: str) -> tuple[str, Any]:
-    """``KEY=VALUE`` as an MPCConfig override: the value as JSON when it parses (numbers), else a string."""
-    key, sep, value = text.partition("=")
-    if not sep or not key:
-        raise ValueError(f"expected KEY=VALUE, got {text!r}")
-    try:
-        return key, json.loads(value)
-    except json.JSONDecodeError:
-        return key, value
-
-
 def _json_safe(value: Any) -> Any:
     """NaN and inf as null (strict JSON), tuples as lists."""
     if isinstance(value, dict):
@@ -182,14 +171,14 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="an MPCConfig override, e.g. stall_release_s=4 or dmpc_update=gauss_seidel (repeatable)",
+        help="an [mpc] value as `crowdmpc --set mpc.KEY=VALUE` takes it, e.g. stall_release_s=4 or "
+        "dmpc_update=gauss_seidel (repeatable)",
     )
     parser.add_argument("--json", help="also write the rows to this file")
     args = parser.parse_args(argv)
-    try:
-        overrides = tuple(_override(text) for text in args.mpc)
-        MPCConfig().replace(**dict(overrides))
-    except (ValueError, MPCConfigError) as exc:
+    try:  # the config files' parser and checks: the values that differ from Table I, validated
+        overrides = load(sets=[f"mpc.{text}" for text in args.mpc]).mpc_overrides()
+    except ConfigError as exc:
         parser.error(f"--mpc: {exc}")
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
