@@ -27,6 +27,7 @@ On the command line: ``none``, ``conformal`` (alpha 0.1, closed-loop), ``conform
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final, Literal
 
@@ -46,6 +47,12 @@ MARGIN_MODES: Final[tuple[str, ...]] = (
     "fixed",
 )
 PER_HUMAN_MODES: Final[tuple[str, ...]] = ("conformal-motion", "conformal-shortfall")  # margins per class
+CALIBRATED_MODES: Final[tuple[str, ...]] = ("conformal", *PER_HUMAN_MODES)  # an alpha and a calibration
+LABEL_PREFIXES: Final[Mapping[str, str]] = {
+    "conformal": "cp",
+    "conformal-motion": "cpm",
+    "conformal-shortfall": "cps",
+}
 CALIBRATION_SOURCES: Final[tuple[str, ...]] = ("closed-loop", "real")
 DEFAULT_ALPHA: Final[float] = 0.1
 MAX_MARGIN: Final[float] = 5.0  # m; a margin beyond this leaves no room to move in a 10 m scene
@@ -91,14 +98,13 @@ class MarginSpec:
     @property
     def label(self) -> str:
         """Short and exact, for cell keys, tables and metadata: ``none``, ``cp0.1``, ``cp0.05-real``,
-        ``fixed0.05_0.1_0.15_0.2``."""
+        ``cpm0.1``, ``cps0.05``, ``fixed0.05_0.1_0.15_0.2``."""
         if self.mode == "none":
             return "none"
         if self.mode == "fixed":
             return "fixed" + "_".join(f"{v:g}" for v in self.values)
-        if self.mode in PER_HUMAN_MODES:
-            return f"{'cpm' if self.mode == 'conformal-motion' else 'cps'}{self.alpha:g}"
-        return f"cp{self.alpha:g}" + ("" if self.source == "closed-loop" else f"-{self.source}")
+        source = "" if self.source == "closed-loop" else f"-{self.source}"  # per-class modes: closed-loop
+        return f"{LABEL_PREFIXES[self.mode]}{self.alpha:g}{source}"
 
     def resolve(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[float, ...]:
         """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``: the same
@@ -144,7 +150,7 @@ class MarginSpec:
     def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
         """What metadata and records state about the margins actually planned with."""
         out: dict[str, Any] = {"mode": self.mode, "label": self.label, "margins_m": list(resolved)}
-        if self.mode == "conformal" or self.mode in PER_HUMAN_MODES:
+        if self.mode in CALIBRATED_MODES:
             out |= {"alpha": self.alpha, "source": self.source}
         return out
 
@@ -154,7 +160,7 @@ def parse_margins(text: str) -> MarginSpec:
     mode, _, rest = text.strip().partition(":")
     if mode == "none" and not rest:
         return MarginSpec()
-    if mode == "conformal" or mode in PER_HUMAN_MODES:
+    if mode in CALIBRATED_MODES:
         alpha_text, _, source = rest.partition(":")
         alpha = _number(alpha_text, text) if alpha_text else DEFAULT_ALPHA
         return MarginSpec(mode, alpha=alpha, source=source or "closed-loop")  # type: ignore[arg-type]

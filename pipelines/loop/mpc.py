@@ -354,7 +354,7 @@ class MPCController:
 
 def _allowances_record(data: StepData) -> dict[str, Any]:
     """What the step planned with beyond the paper, for records (MCAP ``/mpc/solver`` extra): the robots
-    released from flocking (stalled, mpc/stall.py), each human's margins ``(H, N_h)`` (conformal-motion) and
+    released from flocking (stalled, mpc/stall.py), each human's margins ``(H, N_h)`` (per-class modes) and
     the robots whose Eq. 8 reference was guided, with targets."""
     out: dict[str, Any] = {}
     if data.flocking is not None and not np.all(data.flocking):
