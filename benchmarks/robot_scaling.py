@@ -20,6 +20,11 @@ and those that fell back (braking). The machine is shared: the load average is p
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --formation row --json before.json
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --mpc stall_release_s=4 --robots 12
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --controllers dmpc --mpc dmpc_update=gauss_seidel
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --config docs/examples/safe_crossing.toml \
+        --mpc on_goal=yield
+
+``--config`` reads a config file's ``[mpc]`` table and ``[controller]`` margins (``crowdmpc --config``), the
+``--mpc`` values applied over it.
 """
 
 from __future__ import annotations
@@ -38,10 +43,24 @@ from crowdsim.metrics import aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
 from pipelines.config import ConfigError, load
+from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.margins import MarginSpec, parse_margins
 from pipelines.loop.mpc import MPCController
 
 CONTROLLERS = ("cmpc", "dmpc")
+# What this project adds for many robots, beside the paper's method (README, "More robots, more humans"):
+# the stall release (mpc/stall.py), parked robots that yield (mpc/parked.py) and, for DMPC, Gauss-Seidel best
+# responses stopped at the epsilon-Nash test (mpc/dmpc.py). benchmarks/run_all.py's robots section runs both.
+MANY_ROBOTS: dict[str, tuple[tuple[str, Any], ...]] = {
+    "cmpc": (("stall_release_s", 4.0), ("on_goal", "yield")),
+    "dmpc": (
+        ("stall_release_s", 4.0),
+        ("on_goal", "yield"),
+        ("dmpc_update", "gauss_seidel"),
+        ("dmpc_stop", "no_improvement"),
+    ),
+}
 
 
 def step_stats(seconds: list[float]) -> dict[str, float]:
@@ -66,11 +85,12 @@ def run_row(
     scenarios: tuple[str, ...],
     formation: str,
     mpc_overrides: tuple[tuple[str, Any], ...] = (),
+    margins: MarginSpec | None = None,
 ) -> dict[str, Any]:
     """``episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
     env_config = make_env_config("paper")
     env = CrowdEnv(env_config)
-    spec = ControllerSpec(controller, predictor, mpc_overrides=mpc_overrides)
+    spec = ControllerSpec(controller, predictor, mpc_overrides=mpc_overrides, margins=margins or MarginSpec())
     mpc = MPCController(spec, distributed=controller == "dmpc")
     metrics, times, iterations, fallbacks = [], [], [], 0
     t0 = time.perf_counter()
@@ -174,12 +194,15 @@ def main(argv: list[str] | None = None) -> int:
         help="an [mpc] value as `crowdmpc --set mpc.KEY=VALUE` takes it, e.g. stall_release_s=4 or "
         "dmpc_update=gauss_seidel (repeatable)",
     )
+    parser.add_argument("--config", help="a crowdmpc config file: its [mpc] table and [controller] margins")
     parser.add_argument("--json", help="also write the rows to this file")
     args = parser.parse_args(argv)
     try:  # the config files' parser and checks: the values that differ from Table I, validated
-        overrides = load(sets=[f"mpc.{text}" for text in args.mpc]).mpc_overrides()
-    except ConfigError as exc:
-        parser.error(f"--mpc: {exc}")
+        run = load(args.config, sets=[f"mpc.{text}" for text in args.mpc])
+        overrides = run.mpc_overrides()
+        margins = parse_margins(run.controller.margins) if run.controller.margins else MarginSpec()
+    except (ConfigError, PipelineError) as exc:
+        parser.error(f"--config/--mpc: {exc}")
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
 
@@ -198,6 +221,7 @@ def main(argv: list[str] | None = None) -> int:
                     tuple(args.scenarios),
                     args.formation,
                     overrides,
+                    margins,
                 )
             )
     report["load_after"] = os.getloadavg()
@@ -205,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
-        f"({'/'.join(args.scenarios)}), formation {args.formation}"
+        f"({'/'.join(args.scenarios)}), formation {args.formation}, margins {margins.label}"
         + "".join(f", {k}={v}" for k, v in overrides)
     )
     print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")

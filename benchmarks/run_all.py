@@ -21,8 +21,9 @@ Sections
               time, parity with torch (values, Jacobians), the IBR prediction call and the coupled-NLP control
               step over one circle episode (benchmarks/export.py's ``measure``; quick: one model, no episode)
   robots      CMPC and DMPC control step in whole paper-profile episodes with M robots in their formations
-              (3..12, ``auto``), with success rate and fallbacks (benchmarks/robot_scaling.py's ``run_row``;
-              quick: CMPC at 3 and 6 robots, 1 episode)
+              (3..12, ``auto``), with success rate and fallbacks, as the paper and with the many-robot
+              switches (benchmarks/robot_scaling.py's ``run_row`` and ``MANY_ROBOTS``; quick: CMPC at 3 and 6
+              robots, 1 episode)
   dmpc_updates  DMPC's update rules (UPDATE:STOP) x local solves serial/threads, circle episodes, 3..12 robots
               (benchmarks/dmpc_scaling.py's ``closed_loop``; quick: 3 and 6 robots, jacobi:regret and
               sequential_accept:no_improvement, 1 episode)
@@ -198,15 +199,17 @@ def export_rows(model: str, n_humans: int, calls: int, closed_loop: bool) -> dic
     return {row["twin"]: row for row in export.measure(model, n_humans, calls, closed_loop)}
 
 
-def robots_row(controller: str, n_robots: int, n_humans: int, episodes: int) -> dict[str, Any]:
+def robots_row(controller: str, n_robots: int, n_humans: int, episodes: int, variant: str) -> dict[str, Any]:
     """CMPC/DMPC (constant velocity) with ``n_robots`` robots in their formation (``auto``), paper profile,
-    episodes alternating circle/perpendicular from seed 0: benchmarks/robot_scaling.py's run_row."""
+    episodes alternating circle/perpendicular from seed 0: benchmarks/robot_scaling.py's run_row, as the
+    paper (``variant`` "paper") or with robot_scaling.MANY_ROBOTS's switches ("many")."""
     import robot_scaling
 
     scenarios = tuple(robot_scaling.SCENARIOS)
     cv = "constant_velocity"
-    row = robot_scaling.run_row(controller, cv, n_robots, n_humans, episodes, 0, scenarios, "auto")
-    return row | {"method": "robot_scaling.py, whole episodes"}
+    overrides = robot_scaling.MANY_ROBOTS[controller] if variant == "many" else ()
+    row = robot_scaling.run_row(controller, cv, n_robots, n_humans, episodes, 0, scenarios, "auto", overrides)
+    return row | {"method": "robot_scaling.py, whole episodes", "mpc_overrides": dict(overrides)}
 
 
 def dmpc_update_cell(n_robots: int, n_humans: int, rule: str, episodes: int) -> dict[str, Any]:
@@ -378,12 +381,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         episodes = 1 if quick else 2
         robots: dict[str, Any] = {}
         for controller in controllers:
-            for m in robots_scale:
-                robots[f"{controller}_h7_r{m}"] = _timed(
-                    f"{controller}, {m} robots",
-                    lambda c=controller, m=m: robots_row(c, m, 7, episodes),
-                    errors,
-                )
+            for variant in ("paper", "many"):
+                for m in robots_scale:
+                    robots[f"{controller}_{variant}_h7_r{m}"] = _timed(
+                        f"{controller} ({variant}), {m} robots",
+                        lambda c=controller, m=m, v=variant: robots_row(c, m, 7, episodes, v),
+                        errors,
+                    )
         report["robots"] = robots
 
     if "dmpc_updates" in sections:

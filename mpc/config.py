@@ -42,7 +42,7 @@ DMPCUpdate = Literal["jacobi", "gauss_seidel", "relaxed", "sequential_accept"]
 DMPCStop = Literal["regret", "no_improvement"]  # when DMPC's iterations end (MPCConfig.dmpc_stop)
 # coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
 CoupledMode = Literal["auto", "exact", "first_order"]
-OnGoal = Literal["brake", "track"]  # what a robot that has reached its goal does (MPCConfig.on_goal)
+OnGoal = Literal["brake", "track", "yield"]  # what a robot that has reached its goal does (MPCConfig.on_goal)
 SOLVERS: Final[tuple[Solver, ...]] = get_args(Solver)
 PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
 DMPC_UPDATES: Final[tuple[DMPCUpdate, ...]] = get_args(DMPCUpdate)
@@ -81,7 +81,11 @@ class MPCConfig:
     # is then the goal itself, weighted omega_goal / (||s - goal|| + delta) = 1e4 on the goal), so it holds
     # its place unless a human or another robot needs the room; flocking with it is off. "brake": its
     # controls are pinned to braking: it stays exactly where it stopped and can neither dodge a human nor let
-    # a teammate through to a goal closer than ~1.03 m, the distance the Eq. 12 penalty keeps free.
+    # a teammate through to a goal closer than ~1.03 m, the distance the Eq. 12 penalty keeps free. "yield":
+    # "track", but it holds its goal no harder than the farthest teammate still on its way pulls towards its
+    # own: Eq. 7's weight w_goal / (max(||s - goal||, D) + delta), D that teammate's distance to its goal
+    # (pipelines/loop/mpc.py, goal_slack). Robots parked 1.2 m apart otherwise wall off a goal between them
+    # (passing needs 2 x 1.03 m) and hold it with weight 1e4 against the teammate's 10 / D.
     on_goal: OnGoal = "track"
     # --- solver -------------------------------------------------------------------------------------------
     # The solver minimises cost_scale * F. IPOPT's own gradient-based scaling already tames the 1e7 penalty

@@ -63,7 +63,9 @@ def reference_trajectory(
     return ca.horzcat(*points)
 
 
-def goal_cost(positions: Symbolic, reference: Symbolic, position: Symbolic, goal: Symbolic, delta: float):
+def goal_cost(
+    positions: Symbolic, reference: Symbolic, position: Symbolic, goal: Symbolic, delta: Symbolic | float
+):
     """Eq. 7: squared tracking error to the reference, divided by ``||s_t - s_goal|| + delta``."""
     return ca.sum2(ca.sum1((positions - reference) ** 2)) / (ca.norm_2(position - goal) + delta)
 
@@ -127,6 +129,9 @@ class Track:
     positions: Symbolic  # (2, H) at t+1..t+H
     velocities: Symbolic  # (2, H)
     target: Symbolic  # (2, 1) where Eq. 8's reference heads: the goal, or a detour point (mpc/guidance.py)
+    # m added to delta in Eq. 7's weight 1 / (||s_t - s_goal|| + delta): 0 is the paper's; on_goal="yield"
+    # softens a robot parked on its goal so that a teammate can push it aside (mpc/config.py)
+    goal_slack: Symbolic | float = 0.0
 
 
 def make_track(
@@ -136,10 +141,12 @@ def make_track(
     goal: Symbolic,
     dt: float,
     target: Symbolic | None = None,
+    goal_slack: Symbolic | float = 0.0,
 ) -> Track:
     """A robot's track: Eq. 2 rolled out from ``state`` under ``accels``; ``target`` defaults to the goal."""
     positions, velocities = rollout(state, accels, dt)
-    return Track(state, accels, last_action, goal, positions, velocities, goal if target is None else target)
+    target = goal if target is None else target
+    return Track(state, accels, last_action, goal, positions, velocities, target, goal_slack)
 
 
 def individual_cost(
@@ -152,7 +159,7 @@ def individual_cost(
     position = track.state[0:2]
     reference = reference_trajectory(position, track.target, track.accels.shape[1], cfg.dt, cfg.v_max)
     return (
-        cfg.w_goal * goal_cost(track.positions, reference, position, track.goal, cfg.delta)
+        cfg.w_goal * goal_cost(track.positions, reference, position, track.goal, cfg.delta + track.goal_slack)
         + cfg.w_acce * acceleration_cost(track.accels)
         + cfg.w_jerk * jerk_cost(track.accels, track.last_action)
         + cfg.w_coll * human_collision_cost(track.positions, track.velocities, humans, n_humans, cfg, margins)

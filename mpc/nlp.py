@@ -46,6 +46,8 @@ class StepData:
     targets: np.ndarray | None = None
     # (M,) bool, the robots that flock (mpc/stall.py: a stalled robot does not); None: every robot
     flocking: np.ndarray | None = None
+    # (M,) m added to delta in Eq. 7's weight (costs.Track.goal_slack, mpc/parked.py); None: 0 (the paper)
+    goal_slack: np.ndarray | None = None
 
     @property
     def n_robots(self) -> int:
@@ -62,6 +64,15 @@ class StepData:
         if self.flocking is not None:
             free = free & np.asarray(self.flocking, dtype=bool)
         return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
+
+    def goal_slacks(self) -> np.ndarray:
+        """``goal_slack`` as the NLPs' ``(M,)`` parameter, zeros without it."""
+        if self.goal_slack is None:
+            return np.zeros(self.n_robots)
+        slack = np.asarray(self.goal_slack, dtype=float)
+        if slack.shape != (self.n_robots,) or not np.all(np.isfinite(slack) & (slack >= 0)):
+            raise ValueError(f"goal_slack must be finite metres >= 0 of shape {(self.n_robots,)}")
+        return slack
 
     def reference_targets(self) -> np.ndarray:
         """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals."""
@@ -141,16 +152,17 @@ class JointNLP:
         p_last = sym.sym("last_actions", 2 * m)
         p_goal = sym.sym("goals", 2 * m)
         p_target = sym.sym("targets", 2 * m)
+        p_slack = sym.sym("goal_slack", m)
         p_floc = sym.sym("floc_weights", self.n_pairs)
         p_margins = sym.sym("human_margins", h * n_humans)
         p_extra = sym.sym("humans_model", model.n_params)
-        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_floc, p_margins, p_extra)
+        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_slack, p_floc, p_margins, p_extra)
         states = ca.reshape(p_state, 4, m)
         lasts = ca.reshape(p_last, 2, m)
         goals = ca.reshape(p_goal, 2, m)
         targets = ca.reshape(p_target, 2, m)
         tracks = [
-            costs.make_track(states[:, i], a, lasts[:, i], goals[:, i], cfg.dt, targets[:, i])
+            costs.make_track(states[:, i], a, lasts[:, i], goals[:, i], cfg.dt, targets[:, i], p_slack[i])
             for i, a in enumerate(_blocks(u, m, h))
         ]
         # Robots' planned positions (H, M, 2) row-major: column h * M + m of a (2, H * M) matrix.
@@ -180,6 +192,7 @@ class JointNLP:
                 data.last_actions.ravel(),
                 data.goals.ravel(),
                 data.reference_targets().ravel(),
+                data.goal_slacks(),
                 data.floc_weights(self.cfg.w_floc),
                 data.margins(self.cfg, self.n_humans),
                 np.asarray(extra, dtype=float).ravel(),
@@ -268,12 +281,13 @@ class LocalNLP:
         p_last = ca.SX.sym("last_action", 2)
         p_goal = ca.SX.sym("goal", 2)
         p_target = ca.SX.sym("target", 2)
+        p_slack = ca.SX.sym("goal_slack", 1)
         p_floc = ca.SX.sym("floc_weights", n_others)
         p_others = ca.SX.sym("others", 2 * h * n_others)
         p_margins = ca.SX.sym("human_margins", h * n_humans)
         p_humans = ca.SX.sym("humans", 2 * h * n_humans)
-        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_floc, p_others, p_margins, p_humans)
-        track = costs.make_track(p_state, ca.reshape(u, 2, h), p_last, p_goal, cfg.dt, p_target)
+        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_slack, p_floc, p_others, p_margins, p_humans)
+        track = costs.make_track(p_state, ca.reshape(u, 2, h), p_last, p_goal, cfg.dt, p_target, p_slack)
         others = _blocks(p_others, n_others, h)
         humans = ca.reshape(p_humans, 2, h * n_humans)
         weights = [p_floc[k] for k in range(n_others)]
@@ -309,6 +323,7 @@ class LocalNLP:
                 data.last_actions[i],
                 data.goals[i],
                 data.reference_targets()[i],
+                data.goal_slacks()[i : i + 1],
                 np.asarray(weights, dtype=float),
                 np.asarray(positions, dtype=float)[others].ravel(),
                 data.margins(self.cfg, self.n_humans),

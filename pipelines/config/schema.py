@@ -272,7 +272,8 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "epsilon": "epsilon, DMPC improvement and epsilon-Nash threshold, Algorithm 2 (Table I: 1e-3)",
     "d_flock": "d_ij, m, desired robot-robot distance in the flock, Eq. 15 (not in the paper: mpc/config.py)",
     "delta": "delta, goal-normalisation offset (Eq. 7) and norm smoothing (Eq. 15) (not in the paper)",
-    "on_goal": "a robot on its goal: track (stays in the optimisation, holds its place) | brake",
+    "on_goal": "a robot on its goal: track (stays in the optimisation, holds its place) | brake | yield "
+    "(track, holding its goal no harder than the farthest teammate on its way pulls to its own)",
     "cost_scale": "the solver minimises cost_scale * F",
     "solver": "fatrop | ipopt: the interior-point solver of the NLPs with fixed predictions",
     "solver_tol": "the solver's tolerance (Fatrop: KKT error; IPOPT: scaled NLP error)",

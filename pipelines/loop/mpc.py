@@ -35,6 +35,7 @@ from mpc.fallback import PlanMemory, Start
 from mpc.fastcall import BufferedFunction
 from mpc.guidance import guidance_targets
 from mpc.nlp import StepData
+from mpc.parked import yield_slack
 from mpc.stall import StallWatch
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import ControllerSpec
@@ -252,6 +253,9 @@ class MPCController:
             active=~reached if cfg.on_goal == "brake" else np.ones(n_robots, dtype=bool),
             arrived=reached,
             flocking=self._flocking(states, obs.robot_goals, reached),
+            goal_slack=yield_slack(states[:, :2], obs.robot_goals, reached, obs.radius)
+            if cfg.on_goal == "yield"
+            else None,
             **self._crowd_allowances(obs, states, reached),
         )
         if reached.all():  # everyone is there (the episode ends): nothing to optimise
@@ -354,11 +358,15 @@ class MPCController:
 
 def _allowances_record(data: StepData) -> dict[str, Any]:
     """What the step planned with beyond the paper, for records (MCAP ``/mpc/solver`` extra): the robots
-    released from flocking (stalled, mpc/stall.py), each human's margins ``(H, N_h)`` (per-class modes) and
-    the robots whose Eq. 8 reference was guided, with targets."""
+    released from flocking (stalled, mpc/stall.py), the parked robots' yield slack (m, mpc/parked.py), each
+    human's margins ``(H, N_h)`` (per-class modes) and the robots whose Eq. 8 reference was guided, with
+    targets."""
     out: dict[str, Any] = {}
     if data.flocking is not None and not np.all(data.flocking):
         out["unflocked"] = np.flatnonzero(~np.asarray(data.flocking, dtype=bool)).tolist()
+    if data.goal_slack is not None and np.any(data.goal_slack > 0):
+        slack = np.asarray(data.goal_slack)
+        out["yielding"] = {int(i): round(float(slack[i]), 4) for i in np.flatnonzero(slack > 0)}
     if data.human_margins is not None:
         out["human_margins"] = np.round(data.human_margins, 4).tolist()
     if data.targets is not None:
