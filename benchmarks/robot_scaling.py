@@ -12,8 +12,10 @@ Per row: success, collision (robot-human below d_min) and timeout rates in %, me
 successful episodes, the smallest robot-robot distance, the robots that reached their goals (% of all),
 and the control step (``ControlOutput.solve_time_s``: prediction, every solve and the IBR bookkeeping) as
 median / p95 / p99 in ms over every step of every episode, with the steps that ran to j_max IBR iterations
-and those that fell back (braking). The machine is shared: the load average is printed; run it under
-``nice`` and repeat when the figures look noisy.
+and those that fell back (braking); and the failed episodes by how they ended (``failure_kind``: a robot
+pushed off a goal it had reached, a robot stuck short of its goal, or a flock still closing in at the
+limit). The machine is shared: the load average is printed; run it under ``nice`` and repeat when the
+figures look noisy.
 
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py                       # 50 episodes a row
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --episodes 4 --controllers cmpc --robots 3 6 12
@@ -34,12 +36,13 @@ import json
 import math
 import os
 import time
+from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
 
 from crowdsim.env import CrowdEnv
-from crowdsim.metrics import aggregate, episode_metrics
+from crowdsim.metrics import EpisodeMetrics, Trajectory, aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
 from pipelines.config import ConfigError, load
@@ -49,18 +52,15 @@ from pipelines.loop.margins import MarginSpec, parse_margins
 from pipelines.loop.mpc import MPCController
 
 CONTROLLERS = ("cmpc", "dmpc")
-# What this project adds for many robots, beside the paper's method (README, "More robots, more humans"):
-# the stall release (mpc/stall.py), parked robots that yield (mpc/parked.py) and, for DMPC, Gauss-Seidel best
-# responses stopped at the epsilon-Nash test (mpc/dmpc.py). benchmarks/run_all.py's robots section runs both.
-MANY_ROBOTS: dict[str, tuple[tuple[str, Any], ...]] = {
-    "cmpc": (("stall_release_s", 4.0), ("on_goal", "yield")),
-    "dmpc": (
-        ("stall_release_s", 4.0),
-        ("on_goal", "yield"),
-        ("dmpc_update", "gauss_seidel"),
-        ("dmpc_stop", "no_improvement"),
-    ),
-}
+# What this project adds for many robots, beside the paper's method: one source, the example config file
+# (benchmarks/run_all.py's robots section runs both).
+MANY_ROBOTS_TOML = Path(__file__).resolve().parents[1] / "docs" / "examples" / "many_robots.toml"
+
+
+def many_robots() -> tuple[tuple[tuple[str, Any], ...], MarginSpec]:
+    """docs/examples/many_robots.toml's MPC overrides and margins."""
+    run = load(str(MANY_ROBOTS_TOML))
+    return run.mpc_overrides(), parse_margins(run.controller.margins or "none")
 
 
 def step_stats(seconds: list[float]) -> dict[str, float]:
@@ -73,6 +73,29 @@ def step_stats(seconds: list[float]) -> dict[str, float]:
         "p95_ms": float(np.percentile(ms, 95)),
         "p99_ms": float(np.percentile(ms, 99)),
     }
+
+
+FAILURES = ("pushed_off", "stuck", "late")
+CLOSING_WINDOW_S = 10.0  # s, how far back "still closing in" looks
+CLOSING_M = 0.5  # m, the progress over that window that counts as closing in
+
+
+def failure_kind(trajectory: Trajectory, metrics: EpisodeMetrics) -> str | None:
+    """Why a failed episode failed, from its end (None for a success), the first that applies:
+    ``pushed_off``, a robot that had reached its goal is off it at the end; ``stuck``, a robot that never
+    reached its goal came less than CLOSING_M m closer to it over the last CLOSING_WINDOW_S s; ``late``,
+    every robot off its goal was still closing in when time ran out."""
+    if metrics.success:
+        return None
+    offset = np.linalg.norm(trajectory.robot_positions - trajectory.robot_goals[None], axis=-1)  # (T+1, M)
+    off = offset[-1] >= trajectory.radius
+    reached = np.isfinite(np.asarray(metrics.reach_times))
+    if (off & reached).any():
+        return "pushed_off"
+    before = offset[max(0, len(offset) - 1 - round(CLOSING_WINDOW_S / trajectory.dt))]
+    if (off & (before - offset[-1] < CLOSING_M)).any():
+        return "stuck"
+    return "late"
 
 
 def run_row(
@@ -93,6 +116,7 @@ def run_row(
     spec = ControllerSpec(controller, predictor, mpc_overrides=mpc_overrides, margins=margins or MarginSpec())
     mpc = MPCController(spec, distributed=controller == "dmpc")
     metrics, times, iterations, fallbacks = [], [], [], 0
+    kinds: list[str | None] = []
     t0 = time.perf_counter()
     try:
         for i in range(episodes):
@@ -116,7 +140,9 @@ def run_row(
                 iterations.append(out.iterations)
                 fallbacks += out.fallback is not None
                 obs, done, _ = env.step(out.accelerations)
-            metrics.append(episode_metrics(env.trajectory()))
+            trajectory = env.trajectory()
+            metrics.append(episode_metrics(trajectory))
+            kinds.append(failure_kind(trajectory, metrics[-1]))
     finally:
         mpc.close()
     agg = aggregate(metrics)
@@ -135,6 +161,7 @@ def run_row(
         "steps": len(times),
         "j_max_steps": int(sum(it >= mpc.cfg.j_max for it in iterations)),
         "fallback_steps": fallbacks,
+        "failures": {kind: kinds.count(kind) for kind in FAILURES},
         **step_stats(times),
         "wall_s": time.perf_counter() - t0,
     }
@@ -161,7 +188,7 @@ def print_table(rows: list[dict[str, Any]]) -> None:
     head = (
         f"{'ctrl':<5} {'M':>3} {'formation':<9} {'succ%':>6} {'coll%':>6} {'tout%':>6} {'travel s':>8} "
         f"{'min rr m':>8} {'reach%':>6} {'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'steps':>6} "
-        f"{'j_max':>5} {'fallb':>5}"
+        f"{'j_max':>5} {'fallb':>5}  failures: pushed off / stuck / late"
     )
     print(head)
     for r in rows:
@@ -170,7 +197,7 @@ def print_table(rows: list[dict[str, Any]]) -> None:
             f"{r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} {_fmt(r['travel_time_mean'], '8.2f')} "
             f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
             f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
-            f"{r['fallback_steps']:5d}"
+            f"{r['fallback_steps']:5d}  " + " / ".join(str(r["failures"][kind]) for kind in FAILURES)
         )
 
 
@@ -200,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     try:  # the config files' parser and checks: the values that differ from Table I, validated
         run = load(args.config, sets=[f"mpc.{text}" for text in args.mpc])
         overrides = run.mpc_overrides()
-        margins = parse_margins(run.controller.margins) if run.controller.margins else MarginSpec()
+        margins = parse_margins(run.controller.margins or "none")
     except (ConfigError, PipelineError) as exc:
         parser.error(f"--config/--mpc: {exc}")
     if args.episodes < 1:

@@ -42,8 +42,13 @@ more compact of the two: in the same runs it reached its goals as often or more 
 compresses the flock below ``d_ij``: ``benchmarks/robot_scaling.py``). Its humans' sampling also never ran
 dry (20 seeds, 14-22 humans, 4-12 robots), where two rows of 12 did once in 20 seeds at 17 humans (v1).
 
-Arrived robots stay where they are (``crowdsim.env``): the success rule needs every robot on its goal at
-once, and the humans keep seeing them, as in the authors' fork. The layout keeps them out of the way.
+Arrived robots stay in the world (``crowdsim.env``): the success rule needs every robot on its goal at
+once, and the humans keep seeing them, as in the authors' fork. The layout keeps them out of the way only
+while the flock keeps its shape: a crowd that turns or sweeps the flock lets the robots arrive in another
+order, and goals 1.2 m apart are then walled off by the teammates parked around them (passing needs about
+2 x 1.03 m). Spreading the goals to 2.2 m was tried and is worse (CMPC at 12 robots reached all goals in 1
+of 15 episodes: the flocking keeps the last robots short of spread goals); the controller's
+``on_goal="yield"`` (mpc/parked.py) lets parked robots make way instead.
 
 Humans
 ------

@@ -19,6 +19,7 @@ inside a disc, discs that close the robot in): the goal, as without guidance.
 
 from __future__ import annotations
 
+import heapq
 import math
 from typing import Final
 
@@ -39,31 +40,44 @@ def segment_distances(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> np.nd
 
 
 def _shortest_first_corner(start: np.ndarray, goal: np.ndarray, discs: np.ndarray, clearance: float):
-    """The first node after ``start`` on the shortest visibility-graph path to ``goal``, or None."""
+    """The first node after ``start`` on a shortest visibility-graph path to ``goal``, or None.
+
+    A* from the goal towards the start, the straight distance to the start as its heuristic (admissible and
+    consistent, so the path is a shortest one, as Dijkstra's), and an edge tested for visibility only when
+    it would shorten a path to its end node. Testing every edge first cost (16 K)^2 K segment-disc distances:
+    0.5 s a robot among 50 mostly standing humans, 9 ms this way (CMPC, 3 robots, 50 humans: step p99 1.6 s
+    before, 81 ms after, benchmarks/robot_scaling.py). Between equally short paths the first corner may
+    differ from Dijkstra's."""
     angles = np.linspace(0.0, 2 * math.pi, RING_NODES, endpoint=False)
     ring = RING_SCALE * clearance * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     nodes = (discs[:, None, :] + ring[None]).reshape(-1, 2)
     inside = np.linalg.norm(nodes[:, None] - discs[None], axis=-1).min(axis=1) < clearance
     nodes = np.concatenate([start[None], goal[None], nodes[~inside]])
-    n = len(nodes)
-    i, j = np.triu_indices(n, k=1)
-    clear = segment_distances(nodes[i], nodes[j], discs).min(axis=1) >= clearance
-    weight = np.full((n, n), np.inf)
-    length = np.linalg.norm(nodes[i] - nodes[j], axis=-1)
-    weight[i[clear], j[clear]] = weight[j[clear], i[clear]] = length[clear]
-    # Dijkstra from the goal (node 1) on the dense graph; ``parent`` then leads from the start to the goal.
-    dist = np.full(n, np.inf)
+    to_start = np.linalg.norm(nodes - nodes[0], axis=1)
+    dist = np.full(len(nodes), np.inf)  # from the goal (node 1); ``parent`` leads from a node towards it
     dist[1] = 0.0
-    parent = np.full(n, -1)
-    done = np.zeros(n, dtype=bool)
-    for _ in range(n):
-        u = int(np.argmin(np.where(done, np.inf, dist)))
-        if done[u] or not np.isfinite(dist[u]) or u == 0:
-            break
+    parent = np.full(len(nodes), -1)
+    done = np.zeros(len(nodes), dtype=bool)
+    frontier = [(to_start[1], 1)]
+    while frontier:
+        _, u = heapq.heappop(frontier)
+        if done[u]:
+            continue  # an outdated entry: u was reached more cheaply since
+        if u == 0:
+            return nodes[parent[0]]
         done[u] = True
-        better = dist[u] + weight[u] < dist
-        dist[better], parent[better] = dist[u] + weight[u][better], u
-    return None if parent[0] < 0 else nodes[parent[0]]
+        ends = np.flatnonzero(~done)
+        through_u = dist[u] + np.linalg.norm(nodes[ends] - nodes[u], axis=1)
+        shorter = through_u < dist[ends]
+        ends, through_u = ends[shorter], through_u[shorter]
+        if not len(ends):
+            continue
+        visible = segment_distances(np.repeat(nodes[u][None], len(ends), 0), nodes[ends], discs)
+        clear = visible.min(axis=1) >= clearance
+        for v, d in zip(ends[clear].tolist(), through_u[clear].tolist(), strict=True):
+            dist[v], parent[v] = d, u
+            heapq.heappush(frontier, (d + to_start[v], v))
+    return None
 
 
 def guidance_targets(

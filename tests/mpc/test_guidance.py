@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from mpc.guidance import LOOKAHEAD, guidance_targets, segment_distances
+from mpc.guidance import (
+    LOOKAHEAD,
+    RING_NODES,
+    RING_SCALE,
+    _shortest_first_corner,
+    guidance_targets,
+    segment_distances,
+)
 
 
 def test_segment_distances_by_hand():
@@ -49,3 +56,49 @@ def test_no_clearance_no_guidance(clearance):
     np.testing.assert_array_equal(
         guidance_targets(np.zeros((1, 2)), goals, np.array([[0.0, 1.0]]), clearance), goals
     )
+
+
+def _dense_dijkstra_corner(start, goal, discs, clearance):
+    """The first corner by the plain method: every edge of the visibility graph tested, Dijkstra from the
+    goal. The graph is built as in mpc/guidance.py (RING_NODES nodes at RING_SCALE * clearance)."""
+    angles = np.linspace(0.0, 2 * np.pi, RING_NODES, endpoint=False)
+    ring = RING_SCALE * clearance * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    nodes = (discs[:, None, :] + ring[None]).reshape(-1, 2)
+    nodes = nodes[np.linalg.norm(nodes[:, None] - discs[None], axis=-1).min(axis=1) >= clearance]
+    nodes = np.concatenate([start[None], goal[None], nodes])
+    n = len(nodes)
+    weight = np.full((n, n), np.inf)
+    for i in range(n):
+        for j in range(n):
+            if i != j and segment_distances(nodes[i], nodes[j], discs).min() >= clearance:
+                weight[i, j] = np.linalg.norm(nodes[i] - nodes[j])
+    dist, parent, done = np.full(n, np.inf), np.full(n, -1), np.zeros(n, dtype=bool)
+    dist[1] = 0.0
+    while not done.all():
+        u = int(np.argmin(np.where(done, np.inf, dist)))
+        if not np.isfinite(dist[u]):
+            break
+        done[u] = True
+        better = dist[u] + weight[u] < dist
+        dist[better], parent[better] = dist[u] + weight[u][better], u
+    return None if parent[0] < 0 else nodes[parent[0]]
+
+
+def test_the_lazy_search_finds_the_dense_searchs_corner():
+    """A* with edges tested on demand (mpc/guidance.py) against Dijkstra on the fully tested graph, on random
+    scenes whose straight line is blocked: the same first corner, or None for both."""
+    rng = np.random.default_rng(3)
+    compared = 0
+    while compared < 25:
+        discs = rng.uniform(-4.0, 4.0, (int(rng.integers(1, 9)), 2))
+        start, goal, clearance = rng.uniform(-5.0, 5.0, 2), rng.uniform(-5.0, 5.0, 2), rng.uniform(0.6, 1.1)
+        discs = discs[np.linalg.norm(discs - start, axis=1) >= clearance]
+        if not len(discs) or segment_distances(start, goal, discs).min() >= clearance:
+            continue
+        compared += 1
+        expected = _dense_dijkstra_corner(start, goal, discs, clearance)
+        found = _shortest_first_corner(start, goal, discs, clearance)
+        if expected is None:
+            assert found is None
+        else:
+            np.testing.assert_allclose(found, expected, atol=1e-12)

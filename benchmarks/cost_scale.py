@@ -1,0 +1,127 @@
+"""Fatrop's failures and iterations against ``MPCConfig.cost_scale``, on the NLPs the closed loop solves.
+
+IPOPT scales the NLP by its gradients; Fatrop does not, and the 1e7 collision weight (Table I) leaves the
+joint NLP badly scaled once several penalties are active: a Fatrop solve that runs to ``solver_max_iter`` is
+retried with IPOPT (mpc/solvers.py), which costs the failed attempt and a solve that is 3-6x slower. For each
+``--cost-scale`` this runs the same CMPC episodes (constant velocity, ``--config`` settings, episode ``i``:
+seed ``i``, circle for even ``i``, perpendicular for odd) and reads every Fatrop call's statistics: solves,
+failures, iterations of the successful ones, and the step time. The machine is shared: compare the scales
+in one run, and read the ratios.
+
+    nice -n 5 .venv/bin/python benchmarks/cost_scale.py --robots 3 12 --episodes 4
+    nice -n 5 .venv/bin/python benchmarks/cost_scale.py --config docs/examples/safe_crossing.toml
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from crowdsim.env import CrowdEnv
+from crowdsim.metrics import aggregate, episode_metrics
+from crowdsim.profiles import make_env_config
+from mpc import solvers
+from pipelines.config import load
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.margins import parse_margins
+from pipelines.loop.mpc import MPCController
+
+SCENARIOS = ("circle", "perpendicular")
+
+
+def measure(
+    config: str | None, scale: float, n_robots: int, n_humans: int, episodes: int, predictor: str
+) -> dict[str, Any]:
+    run = load(config, sets=[f"mpc.cost_scale={scale}"])
+    margins = parse_margins(run.controller.margins or "none")
+    spec = ControllerSpec("cmpc", predictor, mpc_overrides=run.mpc_overrides(), margins=margins)
+    controller = MPCController(spec, distributed=False)
+    calls: list[tuple[int, bool]] = []  # (Fatrop iterations, success)
+    solve = solvers._Solver.solve
+
+    def recorded(self, *args, **kwargs):
+        out = solve(self, *args, **kwargs)
+        if self._fatrop is not None:
+            stats = self._fatrop.stats()
+            calls.append((int(stats["iter_count"]), bool(stats["success"])))
+        return out
+
+    solvers._Solver.solve = recorded  # type: ignore[method-assign]
+    env = CrowdEnv(make_env_config("paper"))
+    times, metrics = [], []
+    try:
+        for i in range(episodes):
+            obs = env.reset(i, SCENARIOS[i % 2], n_humans, n_robots)
+            controller.reset(obs)
+            done = False
+            while not done:
+                out = controller.act(obs)
+                times.append(out.solve_time_s)
+                obs, done, _ = env.step(out.accelerations)
+            metrics.append(episode_metrics(env.trajectory()))
+    finally:
+        solvers._Solver.solve = solve  # type: ignore[method-assign]
+        controller.close()
+    iterations = np.array([c[0] for c in calls])
+    ok = np.array([c[1] for c in calls], dtype=bool)
+    ms = 1e3 * np.asarray(times)
+    return {
+        "cost_scale": scale,
+        "robots": n_robots,
+        "fatrop_solves": len(calls),
+        "fatrop_failed": int((~ok).sum()),
+        "iterations_median": float(np.median(iterations[ok])) if ok.any() else float("nan"),
+        "iterations_p90": float(np.percentile(iterations[ok], 90)) if ok.any() else float("nan"),
+        "step_median_ms": float(np.median(ms)),
+        "step_p95_ms": float(np.percentile(ms, 95)),
+        "step_p99_ms": float(np.percentile(ms, 99)),
+        "success_rate": aggregate(metrics)["success_rate"],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--config", help="a crowdmpc config file ([mpc] and [controller] margins)")
+    parser.add_argument("--cost-scale", type=float, nargs="+", default=[1.0, 0.01])
+    parser.add_argument("--robots", type=int, nargs="+", default=[3, 12])
+    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--predictor", default="constant_velocity")
+    parser.add_argument("--json", help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    load_before = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    rows = [
+        measure(args.config, scale, m, args.humans, args.episodes, args.predictor)
+        for m in args.robots
+        for scale in args.cost_scale
+    ]
+    print(
+        f"CMPC, {args.predictor}, {args.humans} humans, {args.episodes} episodes a row, config "
+        f"{args.config or 'none (the paper)'}; load {load_before:.2f} -> {os.getloadavg()[0]:.2f}, "
+        f"{time.perf_counter() - t0:.0f} s"
+    )
+    print(f"{'M':>3} {'scale':>6} {'solves':>6} {'failed':>6} {'fail%':>6} {'it med':>6} {'it p90':>6} "
+          f"{'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'succ%':>6}")  # fmt: skip
+    for r in rows:
+        print(
+            f"{r['robots']:>3} {r['cost_scale']:>6g} {r['fatrop_solves']:>6} {r['fatrop_failed']:>6} "
+            f"{100 * r['fatrop_failed'] / max(r['fatrop_solves'], 1):>6.1f} {r['iterations_median']:>6.1f} "
+            f"{r['iterations_p90']:>6.1f} {r['step_median_ms']:>7.1f} {r['step_p95_ms']:>7.1f} "
+            f"{r['step_p99_ms']:>7.1f} {r['success_rate']:>6.1f}"
+        )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"args": vars(args), "rows": rows}, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

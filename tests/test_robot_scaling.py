@@ -1,0 +1,54 @@
+"""benchmarks/robot_scaling.py's failure kinds, on episodes whose ending is set by hand."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+from crowdsim.metrics import Trajectory, episode_metrics
+
+SPEC = importlib.util.spec_from_file_location(
+    "robot_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "robot_scaling.py"
+)
+robot_scaling = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(robot_scaling)
+DT = 0.4
+
+
+def _episode(offsets: np.ndarray) -> Trajectory:
+    """Two robots heading along x for goals at (10, 0) and (10, 5), ``offsets`` (T+1, 2) their distances
+    short of them at every step; one human far away."""
+    steps = len(offsets)
+    goals = np.array([[10.0, 0.0], [10.0, 5.0]])
+    robots = goals[None] - np.stack([offsets, np.zeros_like(offsets)], axis=-1)
+    return Trajectory(
+        robot_positions=robots,
+        robot_velocities=np.zeros_like(robots),
+        human_positions=np.full((steps, 1, 2), 50.0),
+        human_velocities=np.zeros((steps, 1, 2)),
+        robot_goals=goals,
+        human_goals=np.full((1, 2), 50.0),
+        robot_accelerations=np.zeros((steps - 1, 2, 2)),
+        dt=DT,
+        radius=0.3,
+    )
+
+
+def _kind(offsets) -> str | None:
+    trajectory = _episode(np.asarray(offsets, dtype=float))
+    return robot_scaling.failure_kind(trajectory, episode_metrics(trajectory))
+
+
+def test_failure_kinds_by_hand():
+    window = round(robot_scaling.CLOSING_WINDOW_S / DT)  # 25 steps
+    steps = 2 * window
+    closing = np.linspace(6.0, 0.5, steps)  # 5.5 m in 50 steps: 2.75 m in the last 25, still off at the end
+    parked = np.zeros(steps)
+    assert _kind(np.stack([parked, parked], axis=1)) is None  # on their goals from the start: a success
+    assert _kind(np.stack([parked, closing], axis=1)) == "late"
+    # Robot 1 came 0.4 m closer in the last 10 s: less than CLOSING_M, stuck.
+    slow = np.concatenate([np.full(window, 3.0), np.linspace(3.0, 2.6, window)])
+    assert _kind(np.stack([parked, slow], axis=1)) == "stuck"
+    # Robot 0 reached its goal at step 10 and was pushed 0.5 m off; robot 1 still closing: pushed off first.
+    pushed = np.concatenate([np.linspace(2.0, 0.0, 11), np.full(steps - 11, 0.5)])
+    assert _kind(np.stack([pushed, closing], axis=1)) == "pushed_off"
