@@ -41,6 +41,8 @@ def measure(
     margins = parse_margins(run.controller.margins or "none")
     spec = ControllerSpec("cmpc", predictor, mpc_overrides=run.mpc_overrides(), margins=margins)
     controller = MPCController(spec, distributed=False)
+    # A solve's info describes the solver whose result was kept (IPOPT after a Fatrop failure), so Fatrop's
+    # own statistics are read around every call instead.
     calls: list[tuple[int, bool]] = []  # (Fatrop iterations, success)
     solve = solvers._Solver.solve
 
