@@ -17,19 +17,20 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from crowdsim.env import CrowdEnv
-from crowdsim.metrics import aggregate, episode_metrics
-from crowdsim.profiles import make_env_config
 from mpc import solvers
 from pipelines.config import load
-from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import parse_margins
-from pipelines.loop.mpc import MPCController
+
+# robot_scaling.py, the episodes' runner, is imported by name however this is run.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import robot_scaling  # noqa: E402
 
 SCENARIOS = ("circle", "perpendicular")
 
@@ -39,8 +40,6 @@ def measure(
 ) -> dict[str, Any]:
     run = load(config, sets=[f"mpc.cost_scale={scale}"])
     margins = parse_margins(run.controller.margins or "none")
-    spec = ControllerSpec("cmpc", predictor, mpc_overrides=run.mpc_overrides(), margins=margins)
-    controller = MPCController(spec, distributed=False)
     # A solve's info describes the solver whose result was kept (IPOPT after a Fatrop failure), so Fatrop's
     # own statistics are read around every call instead.
     calls: list[tuple[int, bool]] = []  # (Fatrop iterations, success)
@@ -54,24 +53,23 @@ def measure(
         return out
 
     solvers._Solver.solve = recorded  # type: ignore[method-assign]
-    env = CrowdEnv(make_env_config("paper"))
-    times, metrics = [], []
-    try:
-        for i in range(episodes):
-            obs = env.reset(i, SCENARIOS[i % 2], n_humans, n_robots)
-            controller.reset(obs)
-            done = False
-            while not done:
-                out = controller.act(obs)
-                times.append(out.solve_time_s)
-                obs, done, _ = env.step(out.accelerations)
-            metrics.append(episode_metrics(env.trajectory()))
+    try:  # episode i: seed i, circle for even i, perpendicular for odd, the robots in their formation
+        row = robot_scaling.run_row(
+            "cmpc",
+            predictor,
+            n_robots,
+            n_humans,
+            episodes,
+            0,
+            SCENARIOS,
+            "auto",
+            run.mpc_overrides(),
+            margins,
+        )
     finally:
         solvers._Solver.solve = solve  # type: ignore[method-assign]
-        controller.close()
     iterations = np.array([c[0] for c in calls])
     ok = np.array([c[1] for c in calls], dtype=bool)
-    ms = 1e3 * np.asarray(times)
     return {
         "cost_scale": scale,
         "robots": n_robots,
@@ -79,10 +77,10 @@ def measure(
         "fatrop_failed": int((~ok).sum()),
         "iterations_median": float(np.median(iterations[ok])) if ok.any() else float("nan"),
         "iterations_p90": float(np.percentile(iterations[ok], 90)) if ok.any() else float("nan"),
-        "step_median_ms": float(np.median(ms)),
-        "step_p95_ms": float(np.percentile(ms, 95)),
-        "step_p99_ms": float(np.percentile(ms, 99)),
-        "success_rate": aggregate(metrics)["success_rate"],
+        "step_median_ms": row["median_ms"],
+        "step_p95_ms": row["p95_ms"],
+        "step_p99_ms": row["p99_ms"],
+        "success_rate": row["success_rate"],
     }
 
 
