@@ -73,6 +73,7 @@ from mpc.cmpc import IBRResult, PredictFn, finite_prediction
 from mpc.config import MPCConfig
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start
+from mpc.local_params import LocalParams
 from mpc.nlp import JointNLP, LocalNLP, StepData
 from mpc.parallel import cores, run_in_threads
 from mpc.solvers import Solution, better
@@ -160,6 +161,7 @@ class DMPC:
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         lam_x = None if start.lam_x is None else start.lam_x.copy()
         lam_g = None if start.lam_g is None else start.lam_g.copy()
+        step = self.local.step_params(data)  # what the local parameters share across the iterations
         status, converged, first_failure = "ok", False, ""
         used, predictions, potentials = None, [], []
         solves = solver_iterations = iterations = 0
@@ -172,7 +174,7 @@ class DMPC:
             predictions.append(prediction)
             # Lines 3-10: the robots' best responses and the plans they keep (cfg.dmpc_update).
             update = self._update(
-                data, moving, positions, prediction, accels, lam_x, lam_g, start.first_solve(j)
+                step, moving, positions, prediction, accels, lam_x, lam_g, start.first_solve(j)
             )
             new_accels, lam_x, lam_g = update.accels, update.lam_x, update.lam_g
             solves += update.solves
@@ -189,7 +191,7 @@ class DMPC:
                 converged = solved_now and np.array_equal(new_accels, accels)
             else:
                 converged = solved_now and self._at_nash(
-                    data, moving, accels, new_accels, new_positions, prediction
+                    step, moving, accels, new_accels, new_positions, prediction
                 )
             accels, positions = new_accels, new_positions
             if used is not None:
@@ -221,7 +223,7 @@ class DMPC:
 
     def _update(
         self,
-        data: StepData,
+        step: LocalParams,
         moving: np.ndarray,
         positions: np.ndarray,
         prediction: np.ndarray,
@@ -232,24 +234,24 @@ class DMPC:
     ) -> _Update:
         """Lines 3-10 of iteration j from the plans ``accels`` of iteration j-1 (positions ``(M, H, 2)``),
         as ``cfg.dmpc_update`` says (module docstring)."""
-        rule = self.cfg.dmpc_update
+        rule, data = self.cfg.dmpc_update, step.data
         if rule == "gauss_seidel":
-            return self._sweep(data, moving, positions, prediction, accels, lam_x, lam_g, flags)
+            return self._sweep(step, moving, positions, prediction, accels, lam_x, lam_g, flags)
         # Line 4: every robot's best response to the others' plans of iteration j-1 (parallel).
-        params = {i: self.local.params(i, data, positions, prediction) for i in moving}
+        params = dict(zip(moving, step.rows(moving, positions, prediction), strict=True))
         sols, n_solves, n_iterations = self._best_responses(data, moving, params, accels, lam_x, lam_g, flags)
         if rule == "jacobi":
             kept = self._keep_improvements(moving, params, accels, sols, lam_x, lam_g)
         elif rule == "relaxed":
             kept = self._keep_relaxed(moving, params, accels, sols, lam_x, lam_g)
         else:
-            kept = self._accept_in_turn(data, moving, params, prediction, accels, sols, lam_x, lam_g)
+            kept = self._accept_in_turn(step, moving, params, prediction, accels, sols, lam_x, lam_g)
         solved = any(s.success for s in sols)
         return _Update(*kept, solved, n_solves, n_iterations)
 
     def _sweep(
         self,
-        data: StepData,
+        step: LocalParams,
         moving: np.ndarray,
         positions: np.ndarray,
         prediction: np.ndarray,
@@ -260,11 +262,11 @@ class DMPC:
     ) -> _Update:
         """Gauss-Seidel: the robots best-respond one after the other (index order), each to the latest plans,
         and keep an improvement of at least epsilon at once (lines 4-6 for one robot at a time)."""
-        accels, positions = accels.copy(), positions.copy()
+        accels, positions, data = accels.copy(), positions.copy(), step.data
         failure, solved, solves, solver_iterations = "", False, 0, 0
         for i in moving:
             one = np.array([i])
-            params = {i: self.local.params(i, data, positions, prediction)}
+            params = {i: step.row(i, positions, prediction)}
             sols, n_solves, n_iterations = self._best_responses(
                 data, one, params, accels, lam_x, lam_g, flags
             )
@@ -376,7 +378,7 @@ class DMPC:
 
     def _accept_in_turn(
         self,
-        data: StepData,
+        step: LocalParams,
         moving: np.ndarray,
         params: dict,
         prediction: np.ndarray,
@@ -406,11 +408,11 @@ class DMPC:
             if positions is None:  # nothing kept yet: the others' plans are u_-i^(j-1)
                 new_cost, old_cost = sol.cost, old_costs[k]
             else:
-                q = self.local.params(i, data, positions, prediction)
+                q = step.row(i, positions, prediction)
                 new_cost, old_cost = self.local.costs([sol.accels, new_accels[i]], [q, q])
             if accept(new_cost, old_cost, cfg.epsilon):
                 new_accels[i] = sol.accels
-                positions = rollout_numpy(data.states, new_accels, cfg.dt)[0]
+                positions = rollout_numpy(step.data.states, new_accels, cfg.dt)[0]
                 lam_x, lam_g = self._multipliers(i, sol, lam_x, lam_g)
         return new_accels, lam_x, lam_g, failure
 
@@ -428,7 +430,7 @@ class DMPC:
 
     def _at_nash(
         self,
-        data: StepData,
+        step: LocalParams,
         moving: np.ndarray,
         accels: np.ndarray,
         new_accels: np.ndarray,
@@ -437,7 +439,7 @@ class DMPC:
     ) -> bool:
         """Lines 12-16: no robot's new plan is worse, by more than epsilon, than its old one against the
         others' new plans."""
-        new_params = [self.local.params(i, data, new_positions, prediction) for i in moving]
+        new_params = list(step.rows(moving, new_positions, prediction))
         checks = self.local.costs(
             [new_accels[i] for i in moving] + [accels[i] for i in moving], new_params + new_params
         ).reshape(2, len(moving))

@@ -19,7 +19,7 @@ humans' predictions ``(H, N_h, 2)``, their margins ``(H, N_h)`` and the other ro
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
@@ -28,75 +28,9 @@ from mpc import costs
 from mpc.config import MPCConfig
 from mpc.dynamics import braking
 from mpc.fastcall import BufferedFunction
+from mpc.local_params import LocalParams
 from mpc.solvers import SOLVED, Solution, _Solver, better
-
-
-@dataclass(frozen=True)
-class StepData:
-    """What the controller knows at time t, besides the predictions."""
-
-    states: np.ndarray  # (M, 4) [s_x, s_y, v_x, v_y], m and m/s
-    last_actions: np.ndarray  # (M, 2) m/s^2, applied at t-1 (Eq. 10)
-    goals: np.ndarray  # (M, 2) m
-    active: np.ndarray  # (M,) bool; False: controls pinned to braking (a robot parked on its goal)
-    arrived: np.ndarray | None = None  # (M,) bool, has reached its goal: no flocking with it; None: all False
-    # (H, N_h) m added to d_min for each human at each step (Eq. 11); None: cfg.human_margins for everyone
-    human_margins: np.ndarray | None = None
-    # (M, 2) m, where Eq. 8's reference heads (mpc/guidance.py); None: the goals (the paper)
-    targets: np.ndarray | None = None
-    # (M,) bool, the robots that flock (mpc/stall.py: a stalled robot does not); None: every robot
-    flocking: np.ndarray | None = None
-    # (M,) m added to delta in Eq. 7's weight (costs.Track.goal_slack, mpc/parked.py); None: 0 (the paper)
-    goal_slack: np.ndarray | None = None
-
-    @property
-    def n_robots(self) -> int:
-        return len(self.states)
-
-    def floc_weights(self, w_floc: float) -> np.ndarray:
-        """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
-        has arrived, is pinned (a parked robot must not pull the flock, nor be pulled) or does not flock
-        (``flocking``)."""
-        m = self.n_robots
-        free = np.asarray(self.active, dtype=bool)
-        if self.arrived is not None:
-            free = free & ~np.asarray(self.arrived, dtype=bool)
-        if self.flocking is not None:
-            free = free & np.asarray(self.flocking, dtype=bool)
-        return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
-
-    def goal_slacks(self) -> np.ndarray:
-        """``goal_slack`` as the NLPs' ``(M,)`` parameter, zeros without it."""
-        if self.goal_slack is None:
-            return np.zeros(self.n_robots)
-        slack = np.asarray(self.goal_slack, dtype=float)
-        if slack.shape != (self.n_robots,) or not np.all(np.isfinite(slack) & (slack >= 0)):
-            raise ValueError(f"goal_slack must be finite metres >= 0 of shape {(self.n_robots,)}")
-        return slack
-
-    def reference_targets(self) -> np.ndarray:
-        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals."""
-        targets = self.goals if self.targets is None else self.targets
-        targets = np.asarray(targets, dtype=float)
-        if targets.shape != (self.n_robots, 2) or not np.all(np.isfinite(targets)):
-            raise ValueError(
-                f"targets must be finite positions of shape {(self.n_robots, 2)}, got {targets.shape}"
-            )
-        return targets
-
-    def margins(self, cfg: MPCConfig, n_humans: int) -> np.ndarray:
-        """The NLPs' margin parameters: ``human_margins`` row-major, else ``cfg.human_margin(k)`` for every
-        human (all 0 in the paper's method)."""
-        if self.human_margins is None:
-            steps = [cfg.human_margin(k) for k in range(cfg.horizon)]
-            return np.repeat(np.asarray(steps, dtype=float), n_humans)
-        margins = np.asarray(self.human_margins, dtype=float)
-        if margins.shape != (cfg.horizon, n_humans) or not np.all(np.isfinite(margins) & (margins >= 0)):
-            raise ValueError(
-                f"human_margins must be finite metres >= 0 of shape {(cfg.horizon, n_humans)}, got "
-                f"{margins.shape}"
-            )
-        return margins.ravel()
+from mpc.step_data import StepData
 
 
 def _blocks(flat: ca.SX, n_blocks: int, horizon: int) -> list[ca.SX]:
@@ -303,6 +237,7 @@ class LocalNLP:
         self.penalty_fn = ca.Function("penalty", [u, p], [penalty], ["u", "p"], ["penalty"])
         # Called from the thread that runs DMPC only (the solves may run in others).
         self._cost, self._penalty = BufferedFunction(self.cost_fn), BufferedFunction(self.penalty_fn)
+        self._maps: dict[tuple[str, int], BufferedFunction] = {}  # (function, n) -> its map over n pairs
         nlp = {"x": u, "p": p, "f": cfg.cost_scale * C, "g": g}
         # One solver instance per robot when DMPC runs the robots' solves in threads (an instance must not
         # be called from two threads at once); one shared by every robot otherwise (a third of the builds,
@@ -312,24 +247,14 @@ class LocalNLP:
         else:
             self._solvers = [_Solver(f"local_{n_robots}r_{n_humans}h", nlp, cfg)] * n_robots
 
+    def step_params(self, data: StepData) -> LocalParams:
+        """The step's parameters of every robot, for any plans of the others (mpc/local_params.py)."""
+        return LocalParams.build(data, self.cfg, self.n_humans)
+
     def params(self, i: int, data: StepData, positions: np.ndarray, humans: np.ndarray) -> np.ndarray:
-        """Parameters for robot ``i`` given all robots' planned positions ``(M, H, 2)`` (row ``i`` unused)."""
-        others = [j for j in range(self.n_robots) if j != i]
-        floc = data.floc_weights(self.cfg.w_floc)
-        weights = [floc[costs.pair_index(i, j, self.n_robots)] for j in others]
-        return np.concatenate(
-            [
-                data.states[i],
-                data.last_actions[i],
-                data.goals[i],
-                data.reference_targets()[i],
-                data.goal_slacks()[i : i + 1],
-                np.asarray(weights, dtype=float),
-                np.asarray(positions, dtype=float)[others].ravel(),
-                data.margins(self.cfg, self.n_humans),
-                np.asarray(humans, dtype=float).ravel(),
-            ]
-        )
+        """Parameters for robot ``i`` given all robots' planned positions ``(M, H, 2)`` (row ``i`` unused).
+        A loop over a step's iterations builds ``step_params`` once instead."""
+        return self.step_params(data).row(i, positions, humans)
 
     def cost(self, accels_i: np.ndarray, params: np.ndarray) -> float:
         """C_i of robot ``i``'s plan ``accels_i`` ``(H, 2)`` with ``params`` from :meth:`params`."""
@@ -339,13 +264,29 @@ class LocalNLP:
         """The collision part of C_i (weighted robot-human and robot-robot penalties)."""
         return float(self._penalty(accels_i, params)[0][0])
 
-    def costs(self, plans: list[np.ndarray], params: list[np.ndarray]) -> np.ndarray:
-        """``cost`` of each (plan, parameters) pair."""
-        return np.array([self.cost(a, q) for a, q in zip(plans, params, strict=True)])
+    def costs(self, plans: Sequence[np.ndarray], params: Sequence[np.ndarray]) -> np.ndarray:
+        """``cost`` of each (plan, parameters) pair, in one call of C_i mapped over them."""
+        return self._batched(self.cost_fn, plans, params)
 
-    def penalties(self, plans: list[np.ndarray], params: list[np.ndarray]) -> np.ndarray:
-        """``penalty`` of each (plan, parameters) pair."""
-        return np.array([self.penalty(a, q) for a, q in zip(plans, params, strict=True)])
+    def penalties(self, plans: Sequence[np.ndarray], params: Sequence[np.ndarray]) -> np.ndarray:
+        """``penalty`` of each (plan, parameters) pair, in one call."""
+        return self._batched(self.penalty_fn, plans, params)
+
+    def _batched(
+        self, function: ca.Function, plans: Sequence[np.ndarray], params: Sequence[np.ndarray]
+    ) -> np.ndarray:
+        """``function`` of each pair through ``function.map(n)``: a serial map runs the same evaluation per
+        column, so each value equals a single call's bit for bit, at one Python round trip for all n."""
+        n = len(plans)
+        if n != len(params):
+            raise ValueError(f"{n} plans but {len(params)} parameter vectors")
+        if n == 0:
+            return np.zeros(0)
+        key = (function.name(), n)
+        if key not in self._maps:
+            self._maps[key] = BufferedFunction(function.map(n))
+        # Column k of the mapped inputs is pair k: row-major (n, .) stacks are those columns in order.
+        return self._maps[key](np.stack([np.ravel(a) for a in plans]), np.stack(params))[0]
 
     def solve(
         self,

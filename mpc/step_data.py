@@ -1,0 +1,77 @@
+"""What the controller knows at a control step besides the predictions: the NLPs' per-step inputs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpc.config import MPCConfig
+
+
+@dataclass(frozen=True)
+class StepData:
+    """What the controller knows at time t, besides the predictions."""
+
+    states: np.ndarray  # (M, 4) [s_x, s_y, v_x, v_y], m and m/s
+    last_actions: np.ndarray  # (M, 2) m/s^2, applied at t-1 (Eq. 10)
+    goals: np.ndarray  # (M, 2) m
+    active: np.ndarray  # (M,) bool; False: controls pinned to braking (a robot parked on its goal)
+    arrived: np.ndarray | None = None  # (M,) bool, has reached its goal: no flocking with it; None: all False
+    # (H, N_h) m added to d_min for each human at each step (Eq. 11); None: cfg.human_margins for everyone
+    human_margins: np.ndarray | None = None
+    # (M, 2) m, where Eq. 8's reference heads (mpc/guidance.py); None: the goals (the paper)
+    targets: np.ndarray | None = None
+    # (M,) bool, the robots that flock (mpc/stall.py: a stalled robot does not); None: every robot
+    flocking: np.ndarray | None = None
+    # (M,) m added to delta in Eq. 7's weight (costs.Track.goal_slack, mpc/parked.py); None: 0 (the paper)
+    goal_slack: np.ndarray | None = None
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.states)
+
+    def floc_weights(self, w_floc: float) -> np.ndarray:
+        """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
+        has arrived, is pinned (a parked robot must not pull the flock, nor be pulled) or does not flock
+        (``flocking``)."""
+        m = self.n_robots
+        free = np.asarray(self.active, dtype=bool)
+        if self.arrived is not None:
+            free = free & ~np.asarray(self.arrived, dtype=bool)
+        if self.flocking is not None:
+            free = free & np.asarray(self.flocking, dtype=bool)
+        return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
+
+    def goal_slacks(self) -> np.ndarray:
+        """``goal_slack`` as the NLPs' ``(M,)`` parameter, zeros without it."""
+        if self.goal_slack is None:
+            return np.zeros(self.n_robots)
+        slack = np.asarray(self.goal_slack, dtype=float)
+        if slack.shape != (self.n_robots,) or not np.all(np.isfinite(slack) & (slack >= 0)):
+            raise ValueError(f"goal_slack must be finite metres >= 0 of shape {(self.n_robots,)}")
+        return slack
+
+    def reference_targets(self) -> np.ndarray:
+        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals."""
+        targets = self.goals if self.targets is None else self.targets
+        targets = np.asarray(targets, dtype=float)
+        if targets.shape != (self.n_robots, 2) or not np.all(np.isfinite(targets)):
+            raise ValueError(
+                f"targets must be finite positions of shape {(self.n_robots, 2)}, got {targets.shape}"
+            )
+        return targets
+
+    def margins(self, cfg: MPCConfig, n_humans: int) -> np.ndarray:
+        """The NLPs' margin parameters: ``human_margins`` row-major, else ``cfg.human_margin(k)`` for every
+        human (all 0 in the paper's method)."""
+        if self.human_margins is None:
+            steps = [cfg.human_margin(k) for k in range(cfg.horizon)]
+            return np.repeat(np.asarray(steps, dtype=float), n_humans)
+        margins = np.asarray(self.human_margins, dtype=float)
+        if margins.shape != (cfg.horizon, n_humans) or not np.all(np.isfinite(margins) & (margins >= 0)):
+            raise ValueError(
+                f"human_margins must be finite metres >= 0 of shape {(cfg.horizon, n_humans)}, got "
+                f"{margins.shape}"
+            )
+        return margins.ravel()
