@@ -258,7 +258,11 @@ class MPCController:
             else None,
             **self._crowd_allowances(obs, states, reached),
         )
-        if reached.all():  # everyone is there (the episode ends): nothing to optimise
+        # Nothing to optimise when every robot is pinned (on_goal "brake": all have arrived) or stands on
+        # its goal now. "Has arrived once" is not enough: under the simultaneous success rule a robot pushed
+        # off its goal after the last one arrived must get back; braking everyone froze it there.
+        on_goal = np.linalg.norm(states[:, :2] - obs.robot_goals, axis=1) < obs.radius
+        if (reached if cfg.on_goal == "brake" else on_goal).all():
             plan = braking(states, cfg.horizon, cfg.dt, cfg.a_max)
             self.memory.commit(plan, solved=False)
             return ControlOutput(

@@ -59,3 +59,34 @@ def test_goal_slack_divides_eq7_by_distance_plus_delta_plus_slack():
     assert slack == pytest.approx(paper * cfg.delta / (cfg.delta + 0.5), rel=1e-9)
     with pytest.raises(ValueError, match="goal_slack"):
         nlp.potential(accels, StepData(**base, goal_slack=np.array([-1.0])), far)
+
+
+# Both robots have arrived at reset, robot 1 0.25 m from its goal; one shove of 1 m/s^2 (0.08 m further in a
+# step of 0.4 s) takes it outside its 0.3 m radius, moving away at 0.4 m/s.
+BOTH_ARRIVED = Layout(
+    robot_starts=np.array([[-0.6, 0.0], [0.85, 0.0]]),
+    robot_goals=np.array([[-0.6, 0.0], [0.6, 0.0]]),
+    human_starts=np.zeros((0, 2)),
+    human_goals=np.zeros((0, 2)),
+)
+
+
+@pytest.mark.parametrize("on_goal", ["track", "yield"])
+def test_a_robot_pushed_off_its_goal_after_everyone_arrived_gets_back(on_goal):
+    """Every robot has arrived once, but the paper's success rule wants them on their goals at the same
+    step: the controller must bring robot 1 back, not brake everyone (which froze it off its goal)."""
+    controller = make_controller(
+        ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("on_goal", on_goal),))
+    )
+    env = CrowdEnv()
+    obs = env.reset_layout(BOTH_ARRIVED)
+    controller.reset(obs)
+    assert obs.robot_reached.all()
+    obs, done, _ = env.step(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    assert not done and obs.robot_reached.all()
+    assert obs.robot_positions[1, 0] - 0.6 == pytest.approx(0.33)
+    for _ in range(20):
+        obs, done, info = env.step(controller.act(obs).accelerations)
+        if done:
+            break
+    assert done and info["success"]
