@@ -25,13 +25,19 @@ figures look noisy.
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --config docs/examples/safe_crossing.toml \
         --mpc on_goal=yield
 
-``--config`` reads a config file's ``[mpc]`` table and ``[controller]`` margins (``crowdmpc --config``), the
-``--mpc`` values applied over it.
+``--config`` reads a config file's ``[mpc]`` table, ``[controller]`` margins and ``[env]`` goal_assignment
+(``crowdmpc --config``), the ``--mpc`` values applied over it. ``--goals slots`` makes the goals a formation
+to fill (crowdsim/slots.py) instead of one fixed goal per robot (the paper's task, the default); the two are
+different tasks, so their rows are reported side by side, never as one.
+
+    nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --config docs/examples/many_robots.toml \
+        --goals slots --controllers cmpc
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -45,6 +51,7 @@ from crowdsim.env import CrowdEnv
 from crowdsim.metrics import EpisodeMetrics, Trajectory, aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
+from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from pipelines.config import ConfigError, load
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
@@ -109,9 +116,10 @@ def run_row(
     formation: str,
     mpc_overrides: tuple[tuple[str, Any], ...] = (),
     margins: MarginSpec | None = None,
+    goals: GoalAssignment = "fixed",
 ) -> dict[str, Any]:
     """``episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
-    env_config = make_env_config("paper")
+    env_config = dataclasses.replace(make_env_config("paper"), goal_assignment=goals)
     env = CrowdEnv(env_config)
     spec = ControllerSpec(controller, predictor, mpc_overrides=mpc_overrides, margins=margins or MarginSpec())
     mpc = MPCController(spec, distributed=controller == "dmpc")
@@ -151,6 +159,7 @@ def run_row(
         "controller": controller,
         "robots": n_robots,
         "formation": choose_formation(n_robots) if formation == "auto" else formation,
+        "goals": goals,
         "episodes": episodes,
         "success_rate": agg["success_rate"],
         "collision_rate": agg["collision_rate"],
@@ -186,14 +195,16 @@ def _fmt(x: float, spec: str) -> str:
 
 def print_table(rows: list[dict[str, Any]]) -> None:
     head = (
-        f"{'ctrl':<5} {'M':>3} {'formation':<9} {'succ%':>6} {'coll%':>6} {'tout%':>6} {'travel s':>8} "
+        f"{'ctrl':<5} {'M':>3} {'formation':<9} {'goals':<5} {'succ%':>6} {'coll%':>6} {'tout%':>6} "
+        f"{'travel s':>8} "
         f"{'min rr m':>8} {'reach%':>6} {'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'steps':>6} "
         f"{'j_max':>5} {'fallb':>5}  failures: pushed off / stuck / late"
     )
     print(head)
     for r in rows:
         print(
-            f"{r['controller']:<5} {r['robots']:>3} {r['formation']:<9} {r['success_rate']:6.1f} "
+            f"{r['controller']:<5} {r['robots']:>3} {r['formation']:<9} {r['goals']:<5} "
+            f"{r['success_rate']:6.1f} "
             f"{r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} {_fmt(r['travel_time_mean'], '8.2f')} "
             f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
             f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
@@ -221,13 +232,22 @@ def main(argv: list[str] | None = None) -> int:
         help="an [mpc] value as `crowdmpc --set mpc.KEY=VALUE` takes it, e.g. stall_release_s=4 or "
         "dmpc_update=gauss_seidel (repeatable)",
     )
-    parser.add_argument("--config", help="a crowdmpc config file: its [mpc] table and [controller] margins")
+    parser.add_argument(
+        "--config",
+        help="a crowdmpc config file: its [mpc] table, [controller] margins, [env] goal_assignment",
+    )
+    parser.add_argument(
+        "--goals",
+        choices=GOAL_ASSIGNMENTS,
+        help="fixed (the paper) | slots; default: the config's, else fixed",
+    )
     parser.add_argument("--json", help="also write the rows to this file")
     args = parser.parse_args(argv)
     try:  # the config files' parser and checks: the values that differ from Table I, validated
         run = load(args.config, sets=[f"mpc.{text}" for text in args.mpc])
         overrides = run.mpc_overrides()
         margins = parse_margins(run.controller.margins or "none")
+        goals = args.goals or run.env.goal_assignment
     except (ConfigError, PipelineError) as exc:
         parser.error(f"--config/--mpc: {exc}")
     if args.episodes < 1:
@@ -249,6 +269,7 @@ def main(argv: list[str] | None = None) -> int:
                     args.formation,
                     overrides,
                     margins,
+                    goals,
                 )
             )
     report["load_after"] = os.getloadavg()
@@ -256,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
-        f"({'/'.join(args.scenarios)}), formation {args.formation}, margins {margins.label}"
+        f"({'/'.join(args.scenarios)}), formation {args.formation}, goals {goals}, margins {margins.label}"
         + "".join(f", {k}={v}" for k, v in overrides)
     )
     print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")

@@ -22,8 +22,9 @@ Sections
               step over one circle episode (benchmarks/export.py's ``measure``; quick: one model, no episode)
   robots      CMPC and DMPC control step in whole paper-profile episodes with M robots in their formations
               (3..12, ``auto``), with success rate and fallbacks, as the paper and with the many-robot
-              settings (docs/examples/many_robots.toml; benchmarks/robot_scaling.py's ``run_row``; quick: CMPC
-              at 3 and 6 robots, 1 episode)
+              settings (docs/examples/many_robots.toml), and with those settings on the goal-slots task
+              (``slots``: crowdsim/slots.py; benchmarks/robot_scaling.py's ``run_row``; quick: CMPC at 3 and
+              6 robots, 1 episode)
   dmpc_updates  DMPC's update rules (UPDATE:STOP) x local solves serial/threads, circle episodes, 3..12 robots
               (benchmarks/dmpc_scaling.py's ``closed_loop``; quick: 3 and 6 robots, jacobi:regret and
               sequential_accept:no_improvement, 1 episode)
@@ -202,14 +203,18 @@ def export_rows(model: str, n_humans: int, calls: int, closed_loop: bool) -> dic
 def robots_row(controller: str, n_robots: int, n_humans: int, episodes: int, variant: str) -> dict[str, Any]:
     """CMPC/DMPC (constant velocity) with ``n_robots`` robots in their formation (``auto``), paper profile,
     episodes alternating circle/perpendicular from seed 0: benchmarks/robot_scaling.py's run_row, as the
-    paper (``variant`` "paper") or with docs/examples/many_robots.toml ("many")."""
+    paper (``variant`` "paper"), with docs/examples/many_robots.toml ("many"), or with those settings and
+    the goals as slots of the formation ("slots", crowdsim/slots.py: a different task)."""
     import robot_scaling
+
+    from crowdsim.slots import GoalAssignment
 
     scenarios = tuple(robot_scaling.SCENARIOS)
     cv = "constant_velocity"
-    overrides, margins = robot_scaling.many_robots() if variant == "many" else ((), None)
+    overrides, margins = robot_scaling.many_robots() if variant in ("many", "slots") else ((), None)
+    goals: GoalAssignment = "slots" if variant == "slots" else "fixed"
     row = robot_scaling.run_row(
-        controller, cv, n_robots, n_humans, episodes, 0, scenarios, "auto", overrides, margins
+        controller, cv, n_robots, n_humans, episodes, 0, scenarios, "auto", overrides, margins, goals
     )
     return row | {"method": "robot_scaling.py, whole episodes", "mpc_overrides": dict(overrides)}
 
@@ -383,7 +388,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         episodes = 1 if quick else 2
         robots: dict[str, Any] = {}
         for controller in controllers:
-            for variant in ("paper", "many"):
+            for variant in ("paper", "many", "slots"):
                 for m in robots_scale:
                     robots[f"{controller}_{variant}_h7_r{m}"] = _timed(
                         f"{controller} ({variant}), {m} robots",

@@ -27,6 +27,10 @@ step, the fork's ``all(reaching_goal)``; "first_reach" (v1) when every robot has
 least once. Otherwise it ends at the time limit, after ``max_steps`` steps (see ``EnvConfig.max_steps``).
 With no robots at all (synthetic crowds) it ends when every human is within its radius of its goal, or at
 the time limit.
+
+Goals (``goal_assignment``): "fixed" (paper) gives robot ``i`` goal ``i`` for the episode; with "slots" the
+goals are a formation to fill, and after every step each robot holds the goal crowdsim.slots' matching gives
+it (``Observation.robot_goals``, and the trajectory's goals are those held at the end).
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ from crowdsim.errors import SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
 from crowdsim.scenarios import Layout, make_layout
+from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment, match_slots
 from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF, WorldFacts
 
 
@@ -73,6 +78,7 @@ class EnvConfig:
     crossing: Crossing = "paper"  # the humans' start/goal sampling rules (crowdsim.crossings)
     success_rule: SuccessRule = "simultaneous"  # module docstring
     robots_visible: bool = True  # the humans' ORCA sees the robots
+    goal_assignment: GoalAssignment = "fixed"  # "fixed": robot i to goal i (paper); "slots": crowdsim.slots
 
     def __post_init__(self):
         for name in ("dt", "time_limit", "radius", "v_pref", "v_max", "a_max"):
@@ -106,6 +112,11 @@ class EnvConfig:
         if self.success_rule not in SUCCESS_RULES:
             raise SimulationError(
                 f"EnvConfig.success_rule must be one of {list(SUCCESS_RULES)}, got {self.success_rule!r}"
+            )
+        if self.goal_assignment not in GOAL_ASSIGNMENTS:
+            raise SimulationError(
+                f"EnvConfig.goal_assignment must be one of {list(GOAL_ASSIGNMENTS)}, "
+                f"got {self.goal_assignment!r}"
             )
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
@@ -259,6 +270,8 @@ class CrowdEnv:
         self._hp = self._hp + cfg.dt * hv_new
         self._hv = hv_new
         self._step += 1
+        if cfg.goal_assignment == "slots":
+            self._match_slots()
         self._mark_reached()
 
         self._rp_log.append(self._rp)
@@ -304,6 +317,14 @@ class CrowdEnv:
         )
 
     # ---- internals ---------------------------------------------------------------------------------------
+
+    def _match_slots(self) -> None:
+        """Robots take crowdsim.slots' matching of goals; a robot whose goal changed has not reached it."""
+        order = match_slots(self._rp, self._rg)
+        moved = order != np.arange(len(order))
+        if moved.any():
+            self._rg = self._rg[order]
+            self._reach_step[moved] = -1
 
     def _mark_reached(self) -> None:
         inside = np.linalg.norm(self._rp - self._rg, axis=1) < self.config.radius

@@ -176,6 +176,13 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
         "the keys left unset below take its values (--profile)",
     ),
     Key("robots_visible", "bool", True, "the humans' ORCA sees the robots (--visibility visible|invisible)"),
+    Key(
+        "goal_assignment",
+        "str",
+        "fixed",
+        "fixed (robot i to goal i, the paper) | slots (the goals are a formation to fill: each robot holds "
+        "the goal of the least-squared-distance matching, crowdsim/slots.py)",
+    ),
     *(
         Key(
             name,
@@ -197,6 +204,7 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
     }
     settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
     settings["robots_visible"] = values["robots_visible"]
+    settings["goal_assignment"] = values["goal_assignment"]
     env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
     if env.max_steps > MAX_EPISODE_STEPS:
         raise PipelineError(
