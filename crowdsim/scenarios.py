@@ -48,7 +48,10 @@ while the flock keeps its shape: a crowd that turns or sweeps the flock lets the
 order, and goals 1.2 m apart are then walled off by the teammates parked around them (passing needs about
 2 x 1.03 m). Spreading the goals to 2.2 m was tried and is worse (CMPC at 12 robots reached all goals in 1
 of 15 episodes: the flocking keeps the last robots short of spread goals); the controller's
-``on_goal="yield"`` (mpc/parked.py) lets parked robots make way instead.
+``on_goal="yield"`` (mpc/parked.py) lets parked robots make way instead. Where the robots are interchangeable,
+``EnvConfig.goal_assignment="slots"`` (crowdsim/slots.py) makes the goals a formation to fill, so that a late
+robot takes a free slot rather than pass a parked teammate: a different task from the paper's, measured beside
+it (benchmarks/robot_scaling.py ``--goals``).
 
 Humans
 ------

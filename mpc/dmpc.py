@@ -57,6 +57,12 @@ gauss_seidel + no_improvement in 3 of 3 (43 ms), sequential_accept + no_improvem
 iterations than jacobi (5.6 and 6.5 a step against 4.4): the default stays the paper's.
 
 Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements.
+
+Bookkeeping. What robot i's parameters share across a step's iterations (its state, goal, target, slack,
+flocking weights and the humans' margins) is assembled once a step (mpc/local_params.py); an iteration builds
+every robot's vector in one numpy operation and evaluates each set of C_i checks in one call of C_i mapped
+over them (``LocalNLP.costs``). Both give the numbers of one vector and one call per robot bit for bit
+(tests/mpc/test_local_params.py), so trajectories are unchanged.
 """
 
 from __future__ import annotations

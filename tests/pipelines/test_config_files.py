@@ -100,6 +100,8 @@ def test_config_show_of_a_file_and_sets_is_the_effective_config_and_loads_back(t
     effective = load(str(path), ["scenario.humans=5", "controller.margins=conformal:0.05"])
     assert _objects(load(str(shown))) == _objects(effective)
     assert effective.env.time_limit == 25.0 and effective.env.success_rule == "first_reach"
+    assert effective.env.goal_assignment == "fixed"  # the paper's task unless asked
+    assert load(str(path), ["env.goal_assignment=slots"]).env.goal_assignment == "slots"
     # the global options work as well
     assert main(["--config", str(path), "--set", "scenario.humans=5", "config", "show"]) == 0
     assert "humans = 5" in capsys.readouterr().out
@@ -187,6 +189,10 @@ def test_mpc_overrides_are_the_values_that_differ_from_table_i(tmp_path):
             "run.toml: env.profile: unknown profile 'v2'; choose from ['paper', 'v1']",
         ),
         ("[env]\nrobots_visible = 1\n", "run.toml: env.robots_visible: must be a bool, got 1"),
+        (
+            '[env]\ngoal_assignment = "swap"\n',
+            "run.toml: env.goal_assignment: must be one of ['fixed', 'slots'], got 'swap'",
+        ),
         (
             '[env.orca]\nneighbor_dist = "far"\n',
             "run.toml: env.orca.neighbor_dist: must be a number, got 'far'",
