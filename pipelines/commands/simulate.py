@@ -229,6 +229,7 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
         "margins": spec.margins.label,
         "profile": cfg.env.profile,
         "visibility": "visible" if cfg.env.robots_visible else "invisible",
+        "goals": cfg.env.goal_assignment,
         "scenario": cfg.scenario.name,
         "humans": cfg.scenario.humans,
         "robots": cfg.scenario.robots,
@@ -271,10 +272,12 @@ def run(args: argparse.Namespace) -> int:
             recorder.close()
 
     summary = summarize(results)
+    # The paper's task needs no mention; goals as slots is another task and must show in every summary.
+    goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
     header = (
         f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
         f"margins {spec.margins.label} | "
-        f"{run_meta['profile']}/{run_meta['visibility']} | scenario {scenario.name} | "
+        f"{run_meta['profile']}/{run_meta['visibility']} | {goals}scenario {scenario.name} | "
         f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
         f"{sim.seed + sim.episodes - 1}"
     )

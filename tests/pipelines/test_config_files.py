@@ -585,3 +585,13 @@ def test_commands_that_read_no_config_refuse_one(capsys):
         "crowdmpc: error: --config and --set apply to simulate, sweep and config, not zoo; "
         "see 'crowdmpc --help'\n"
     )
+
+
+def test_goal_slots_show_in_the_summary_and_the_run_record(tmp_path, capsys):
+    out = tmp_path / "run.json"
+    argv = ["--set", "env.goal_assignment=slots", "simulate", "--controller", "orca", "--no-progress"]
+    assert main([*argv, "--json", str(out)]) == 0
+    assert "| paper/visible | goals slots | scenario circle |" in capsys.readouterr().out
+    assert json.loads(out.read_text())["run"]["goals"] == "slots"
+    assert main(["simulate", "--controller", "orca", "--no-progress"]) == 0
+    assert "goals" not in capsys.readouterr().out.splitlines()[0]  # the paper's task: no mention
