@@ -32,8 +32,6 @@ from pipelines.loop.margins import parse_margins
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robot_scaling  # noqa: E402
 
-SCENARIOS = ("circle", "perpendicular")
-
 
 def measure(
     config: str | None, scale: float, n_robots: int, n_humans: int, episodes: int, predictor: str
@@ -61,7 +59,7 @@ def measure(
             n_humans,
             episodes,
             0,
-            SCENARIOS,
+            robot_scaling.SCENARIOS,
             "auto",
             run.mpc_overrides(),
             margins,

@@ -196,16 +196,15 @@ def _fmt(x: float, spec: str) -> str:
 def print_table(rows: list[dict[str, Any]]) -> None:
     head = (
         f"{'ctrl':<5} {'M':>3} {'formation':<9} {'goals':<5} {'succ%':>6} {'coll%':>6} {'tout%':>6} "
-        f"{'travel s':>8} "
-        f"{'min rr m':>8} {'reach%':>6} {'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'steps':>6} "
-        f"{'j_max':>5} {'fallb':>5}  failures: pushed off / stuck / late"
+        f"{'travel s':>8} {'min rr m':>8} {'reach%':>6} {'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} "
+        f"{'steps':>6} {'j_max':>5} {'fallb':>5}  failures: pushed off / stuck / late"
     )
     print(head)
     for r in rows:
         print(
             f"{r['controller']:<5} {r['robots']:>3} {r['formation']:<9} {r['goals']:<5} "
-            f"{r['success_rate']:6.1f} "
-            f"{r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} {_fmt(r['travel_time_mean'], '8.2f')} "
+            f"{r['success_rate']:6.1f} {r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} "
+            f"{_fmt(r['travel_time_mean'], '8.2f')} "
             f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
             f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
             f"{r['fallback_steps']:5d}  " + " / ".join(str(r["failures"][kind]) for kind in FAILURES)

@@ -56,13 +56,8 @@ gauss_seidel + no_improvement in 3 of 3 (43 ms), sequential_accept + no_improvem
 34 ms threads). At M = 3 every rule succeeds in 3 of 3, and the repairs with no_improvement take more
 iterations than jacobi (5.6 and 6.5 a step against 4.4): the default stays the paper's.
 
-Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements.
-
-Bookkeeping. What robot i's parameters share across a step's iterations (its state, goal, target, slack,
-flocking weights and the humans' margins) is assembled once a step (mpc/local_params.py); an iteration builds
-every robot's vector in one numpy operation and evaluates each set of C_i checks in one call of C_i mapped
-over them (``LocalNLP.costs``). Both give the numbers of one vector and one call per robot bit for bit
-(tests/mpc/test_local_params.py), so trajectories are unchanged.
+Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements. The
+local parameters of a step are built once (mpc/local_params.py), the C_i checks in one call (LocalNLP.costs).
 """
 
 from __future__ import annotations

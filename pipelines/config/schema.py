@@ -176,13 +176,7 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
         "the keys left unset below take its values (--profile)",
     ),
     Key("robots_visible", "bool", True, "the humans' ORCA sees the robots (--visibility visible|invisible)"),
-    Key(
-        "goal_assignment",
-        "str",
-        "fixed",
-        "fixed (robot i to goal i, the paper) | slots (the goals are a formation to fill: each robot holds "
-        "the goal of the least-squared-distance matching, crowdsim/slots.py)",
-    ),
+    Key("goal_assignment", "str", "fixed", "fixed (robot i to goal i, paper) | slots (crowdsim/slots.py)"),
     *(
         Key(
             name,
@@ -203,8 +197,7 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
         f.name: getattr(base, f.name) for f in fields(EnvConfig) if f.name not in (*ENV_FROM_WORLD, "orca")
     }
     settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
-    settings["robots_visible"] = values["robots_visible"]
-    settings["goal_assignment"] = values["goal_assignment"]
+    settings |= {name: values[name] for name in ("robots_visible", "goal_assignment")}
     env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
     if env.max_steps > MAX_EPISODE_STEPS:
         raise PipelineError(
