@@ -40,6 +40,7 @@ ParallelMode = Literal["serial", "threads"]  # how DMPC runs the robots' local s
 # how a DMPC iteration turns the robots' best responses into the new plans (see mpc/dmpc.py)
 DMPCUpdate = Literal["jacobi", "gauss_seidel", "relaxed", "sequential_accept"]
 DMPCStop = Literal["regret", "no_improvement"]  # when DMPC's iterations end (MPCConfig.dmpc_stop)
+DMPCStart = Literal["shifted", "heading"]  # DMPC's initial strategy u^(0) (MPCConfig.dmpc_start)
 # coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
 CoupledMode = Literal["auto", "exact", "first_order"]
 OnGoal = Literal["brake", "track", "yield"]  # what a robot that has reached its goal does (MPCConfig.on_goal)
@@ -47,6 +48,7 @@ SOLVERS: Final[tuple[Solver, ...]] = get_args(Solver)
 PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
 DMPC_UPDATES: Final[tuple[DMPCUpdate, ...]] = get_args(DMPCUpdate)
 DMPC_STOPS: Final[tuple[DMPCStop, ...]] = get_args(DMPCStop)
+DMPC_STARTS: Final[tuple[DMPCStart, ...]] = get_args(DMPCStart)
 Guidance = Literal["none", "standing"]
 GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
@@ -140,6 +142,11 @@ class MPCConfig:
     # which no robot keeps a new plan, i.e. no best response to the current plans improves by epsilon (the
     # epsilon-Nash definition itself, at u^(j-1)).
     dmpc_stop: DMPCStop = "regret"
+    # DMPC's initial strategy u^(0) (Algorithm 2 leaves it open). "shifted": the previous plan shifted, else
+    # braking; "heading": a step that would start from braking (an episode's first, or one after failures)
+    # starts instead from every robot heading straight for its Eq. 8 target (mpc.fallback.heading_plan) when
+    # that has the lower potential F (mpc/dmpc.py has the measurements).
+    dmpc_start: DMPCStart = "shifted"
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
@@ -187,6 +194,8 @@ class MPCConfig:
             raise MPCConfigError(f"dmpc_update must be one of {DMPC_UPDATES}, got {self.dmpc_update!r}")
         if self.dmpc_stop not in DMPC_STOPS:
             raise MPCConfigError(f"dmpc_stop must be one of {DMPC_STOPS}, got {self.dmpc_stop!r}")
+        if self.dmpc_start not in DMPC_STARTS:
+            raise MPCConfigError(f"dmpc_start must be one of {DMPC_STARTS}, got {self.dmpc_start!r}")
         if not 0 < self.dmpc_relaxation <= 1:
             raise MPCConfigError(f"dmpc_relaxation must be in (0, 1], got {self.dmpc_relaxation!r}")
         if self.on_goal not in ON_GOAL_MODES:

@@ -56,8 +56,23 @@ gauss_seidel + no_improvement in 3 of 3 (43 ms), sequential_accept + no_improvem
 34 ms threads). At M = 3 every rule succeeds in 3 of 3, and the repairs with no_improvement take more
 iterations than jacobi (5.6 and 6.5 a step against 4.4): the default stays the paper's.
 
+The start (``dmpc_start``). Algorithm 2 starts from "an initial guess" u^(0): here the shifted previous plan,
+else braking. From rest a flock of many robots barely leaves braking: a robot stepping forward alone
+stretches its M - 1 flocking terms, so each best response moves it a little. With 12 robots (7 humans, the
+many_robots.toml settings) the flock covered 0.2-1 m in its first 4 s where CMPC covered 2.3 m. ``"heading"``
+starts a step that would start from braking (an episode's first, or one after failures) from every robot
+heading straight for its target instead (``mpc.fallback.heading_plan``), when that plan has the lower F. After
+the first step the two are nearly level in F (2974 from braking, 3012 from heading at 12 robots: the flocking
+terms of the wedge dominate), but the flock leaves moving and its shifted plans keep it moving.
+benchmarks/robot_scaling.py (README, "More robots, more humans"), shifted -> heading, same crowds: 12 robots
+20 -> 45 % (fixed goals), 50 -> 85 % (slots), 20 episodes; 3, 5, 6 robots within 6 points either way on 50
+episodes. At 3 robots the heading start picks the slower formation (middle robot ahead, F 26.4 against 23.3
+from braking: mpc/solvers.py ``_Solver``), travel 1.4-2.1 s longer. Comparing the two starts by F at the end
+of the first step instead keeps braking every time (20 of 20 episodes at 12 robots), so it is not offered.
+
 Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements. The
 local parameters of a step are built once (mpc/local_params.py), the C_i checks in one call (LocalNLP.costs).
+Which best responses an iteration keeps (lines 5-6 and the repairs) is mpc/dmpc_keep.py.
 """
 
 from __future__ import annotations
@@ -65,15 +80,15 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
 from mpc.cmpc import IBRResult, PredictFn, finite_prediction
 from mpc.config import MPCConfig
+from mpc.dmpc_keep import PlanKeeper
 from mpc.dynamics import braking, rollout_numpy
-from mpc.fallback import Start
+from mpc.fallback import Start, heading_plan
 from mpc.local_params import LocalParams
 from mpc.nlp import JointNLP, LocalNLP, StepData
 from mpc.parallel import cores, run_in_threads
@@ -92,17 +107,13 @@ class _Update(NamedTuple):
     solver_iterations: int
 
 
-def accept(new_cost: float, old_cost: float, epsilon: float) -> bool:
-    """Algorithm 2, lines 5-6: a new plan replaces the old one only if it lowers C_i by at least epsilon."""
-    return new_cost <= old_cost - epsilon
-
-
 class DMPC:
     """Algorithm 2 for a fixed problem size; the local NLP (shared by all robots) is built once, here."""
 
     def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int):
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         self.local = LocalNLP(cfg, n_robots, n_humans)
+        self._keeper = PlanKeeper(cfg, self.local, n_robots)
         # Only to report F_t of the final plan, the common currency of CMPC and DMPC.
         self.joint = JointNLP(cfg, n_robots, n_humans)
         self._pool: ThreadPoolExecutor | None = None  # made on first use with dmpc_parallel="threads"
@@ -158,17 +169,22 @@ class DMPC:
         pred_shape = (cfg.horizon, self.n_humans, 2)
         # Indices of the active robots; np.ndarray (as in _restart) so its items pass where an int is taken.
         moving: np.ndarray = np.flatnonzero(np.asarray(data.active, dtype=bool))
-        accels = start.accels.copy()
+        accels, first_prediction, heading = self._initial(data, predict, start, moving)
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
-        lam_x = None if start.lam_x is None else start.lam_x.copy()
-        lam_g = None if start.lam_g is None else start.lam_g.copy()
+        # The shifted multipliers belong to the shifted plan; a heading start solves cold.
+        lam_x = None if start.lam_x is None or heading else start.lam_x.copy()
+        lam_g = None if start.lam_g is None or heading else start.lam_g.copy()
         step = self.local.step_params(data)  # what the local parameters share across the iterations
         status, converged, first_failure = "ok", False, ""
         used, predictions, potentials = None, [], []
         solves = solver_iterations = iterations = 0
         for j in range(1, cfg.j_max + 1):
             iterations = j
-            prediction = finite_prediction(predict(positions.transpose(1, 0, 2)), pred_shape)
+            prediction = (
+                first_prediction  # made for these very plans in _initial
+                if j == 1 and first_prediction is not None
+                else finite_prediction(predict(positions.transpose(1, 0, 2)), pred_shape)
+            )
             if prediction is None:
                 status = "nan_prediction"
                 break
@@ -222,6 +238,32 @@ class DMPC:
             solver_iterations=solver_iterations,
         )
 
+    def _initial(
+        self, data: StepData, predict: PredictFn, start: Start, moving: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+        """u^(0) (``cfg.dmpc_start``), the humans predicted for it when already known, and whether it is the
+        heading plan.
+
+        With "heading", a step that starts from braking gives the moving robots ``heading_plan`` instead if
+        that lowers F under the humans predicted for braking. The potential-lowering updates only ever lower
+        F from u^(0), and from a flock at rest a robot's best response moves it little (a step alone
+        stretches M - 1 flocking terms): without a start that already moves, the flock creeps off over many
+        steps (module docstring). ``start`` itself, the fallback of a step that cannot solve, is unchanged.
+        """
+        cfg = self.cfg
+        accels = start.accels.copy()
+        if cfg.dmpc_start == "shifted" or start.kind != "brake" or len(moving) == 0:
+            return accels, None, False
+        positions = rollout_numpy(data.states, accels, cfg.dt)[0]
+        prediction = finite_prediction(predict(positions.transpose(1, 0, 2)), (cfg.horizon, self.n_humans, 2))
+        if prediction is None:
+            return accels, None, False  # the loop's own prediction reports it
+        heading = accels.copy()
+        heading[moving] = heading_plan(data, cfg)[moving]
+        if self.joint.potential(heading, data, prediction) < self.joint.potential(accels, data, prediction):
+            return heading, None, True
+        return accels, prediction, False
+
     def _update(
         self,
         step: LocalParams,
@@ -242,11 +284,11 @@ class DMPC:
         params = dict(zip(moving, step.rows(moving, positions, prediction), strict=True))
         sols, n_solves, n_iterations = self._best_responses(data, moving, params, accels, lam_x, lam_g, flags)
         if rule == "jacobi":
-            kept = self._keep_improvements(moving, params, accels, sols, lam_x, lam_g)
+            kept = self._keeper.improvements(moving, params, accels, sols, lam_x, lam_g)
         elif rule == "relaxed":
-            kept = self._keep_relaxed(moving, params, accels, sols, lam_x, lam_g)
+            kept = self._keeper.relaxed(moving, params, accels, sols, lam_x, lam_g)
         else:
-            kept = self._accept_in_turn(step, moving, params, prediction, accels, sols, lam_x, lam_g)
+            kept = self._keeper.in_turn(step, moving, params, prediction, accels, sols, lam_x, lam_g)
         solved = any(s.success for s in sols)
         return _Update(*kept, solved, n_solves, n_iterations)
 
@@ -271,7 +313,7 @@ class DMPC:
             sols, n_solves, n_iterations = self._best_responses(
                 data, one, params, accels, lam_x, lam_g, flags
             )
-            accels, lam_x, lam_g, failed = self._keep_improvements(one, params, accels, sols, lam_x, lam_g)
+            accels, lam_x, lam_g, failed = self._keeper.improvements(one, params, accels, sols, lam_x, lam_g)
             positions[i] = rollout_numpy(data.states[one], accels[one], self.cfg.dt)[0][0]
             failure = failure or failed
             solved = solved or sols[0].success
@@ -310,124 +352,6 @@ class DMPC:
             solves += len(extra)
             solver_iterations += sum(s.iterations for s in extra)
         return sols, solves, solver_iterations
-
-    def _keep_improvements(
-        self,
-        moving: np.ndarray,
-        params: dict,
-        accels: np.ndarray,
-        sols: list[Solution],
-        lam_x: np.ndarray | None,
-        lam_g: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
-        """Lines 5-6: keep a new plan only if it lowers C_i(., u_-i^(j-1)) by at least epsilon; a kept plan's
-        multipliers warm-start the robot's next solve. Returns the plans, the multipliers (``lam_x`` and
-        ``lam_g`` updated in place, or made on the first kept plan) and the first failed solve's status."""
-        old_costs = self.local.costs([accels[i] for i in moving], [params[i] for i in moving])
-        return self._keep(moving, accels, sols, old_costs, lam_x, lam_g)
-
-    def _keep(
-        self,
-        moving: np.ndarray,
-        accels: np.ndarray,
-        sols: list[Solution],
-        old_costs: np.ndarray,
-        lam_x: np.ndarray | None,
-        lam_g: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
-        """Robot ``moving[k]`` keeps ``sols[k]`` if its cost ``sol.cost`` is at least epsilon below
-        ``old_costs[k]``, the cost of its plan of iteration j-1 (both against the others' plans of j-1)."""
-        new_accels = accels.copy()
-        first_failure = ""
-        for i, sol, old_cost in zip(moving, sols, old_costs, strict=True):
-            if not sol.success:
-                # A robot whose local solve failed keeps its plan, as if it had not improved; the step
-                # fails only when no local solve ever succeeded (solve).
-                first_failure = first_failure or sol.status
-                continue
-            # The local objective at the solution is C_i(u_i^(j), u_-i^(j-1)).
-            if accept(sol.cost, old_cost, self.cfg.epsilon):
-                new_accels[i] = sol.accels
-                lam_x, lam_g = self._multipliers(i, sol, lam_x, lam_g)
-        return new_accels, lam_x, lam_g, first_failure
-
-    def _keep_relaxed(
-        self,
-        moving: np.ndarray,
-        params: dict,
-        accels: np.ndarray,
-        sols: list[Solution],
-        lam_x: np.ndarray | None,
-        lam_g: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
-        """Lines 5-6 for a relaxed step: the candidate plan is ``u_i^(j-1) + alpha (u_i* - u_i^(j-1))``
-        (``alpha = cfg.dmpc_relaxation``; feasible, as a convex combination of two feasible plans), kept if
-        it lowers C_i(., u_-i^(j-1)) by at least epsilon. Same returns as ``_keep_improvements``."""
-        cfg = self.cfg
-        alpha = cfg.dmpc_relaxation
-        candidates = [
-            accels[i] + alpha * (sol.accels - accels[i]) for i, sol in zip(moving, sols, strict=True)
-        ]
-        checks = self.local.costs(
-            candidates + [accels[i] for i in moving], [params[i] for i in moving] * 2
-        ).reshape(2, len(moving))
-        relaxed = [
-            replace(sol, accels=candidate, cost=float(cost))
-            for sol, candidate, cost in zip(sols, candidates, checks[0], strict=True)
-        ]
-        return self._keep(moving, accels, relaxed, checks[1], lam_x, lam_g)
-
-    def _accept_in_turn(
-        self,
-        step: LocalParams,
-        moving: np.ndarray,
-        params: dict,
-        prediction: np.ndarray,
-        accels: np.ndarray,
-        sols: list[Solution],
-        lam_x: np.ndarray | None,
-        lam_g: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
-        """Lines 5-6 one robot at a time: the best responses (all computed against u^(j-1)) are taken in
-        order of their improvement of C_i(., u_-i^(j-1)), largest first, and each is kept only if it lowers
-        C_i by at least epsilon against the plans kept so far. In an exact potential game a kept plan lowers
-        F by as much as it lowers C_i, so F falls by at least epsilon per kept plan and the loop cannot
-        cycle. Same returns as ``_keep_improvements``."""
-        cfg = self.cfg
-        old_costs = self.local.costs([accels[i] for i in moving], [params[i] for i in moving])
-        gains = [
-            old - sol.cost if sol.success else -math.inf for sol, old in zip(sols, old_costs, strict=True)
-        ]
-        order = sorted(range(len(moving)), key=lambda k: -gains[k])  # stable: ties in robot order
-        new_accels, positions = accels.copy(), None
-        failure = ""
-        for k in order:
-            i, sol = moving[k], sols[k]
-            if not sol.success:
-                failure = failure or sol.status
-                continue
-            if positions is None:  # nothing kept yet: the others' plans are u_-i^(j-1)
-                new_cost, old_cost = sol.cost, old_costs[k]
-            else:
-                q = step.row(i, positions, prediction)
-                new_cost, old_cost = self.local.costs([sol.accels, new_accels[i]], [q, q])
-            if accept(new_cost, old_cost, cfg.epsilon):
-                new_accels[i] = sol.accels
-                positions = rollout_numpy(step.data.states, new_accels, cfg.dt)[0]
-                lam_x, lam_g = self._multipliers(i, sol, lam_x, lam_g)
-        return new_accels, lam_x, lam_g, failure
-
-    def _multipliers(
-        self, i: int, sol: Solution, lam_x: np.ndarray | None, lam_g: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``lam_x``, ``lam_g`` (made on the first kept plan) with robot ``i``'s row set from ``sol``."""
-        h = self.cfg.horizon
-        if lam_x is None or lam_g is None:
-            lam_x = np.zeros((self.n_robots, h, 2))
-            lam_g = np.zeros((self.n_robots, h, 2))
-        lam_x[i] = sol.lam_x.reshape(h, 2)
-        lam_g[i] = sol.lam_g.reshape(h, 2)
-        return lam_x, lam_g
 
     def _at_nash(
         self,

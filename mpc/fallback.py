@@ -40,6 +40,25 @@ class Start:
         return {"restart": first and self.kind != "brake", "explore": first and self.kind == "brake"}
 
 
+def heading_plan(data: StepData, cfg: MPCConfig) -> np.ndarray:
+    """Controls ``(M, H, 2)`` that take every robot straight towards its Eq. 8 target, ignoring everyone else:
+    at each step the acceleration (within ``a_max`` per component) towards the velocity of speed
+    ``min(v_max, distance / dt)`` along the line to the target, then clipped to Eq. 6. A candidate initial
+    strategy (``MPCConfig.dmpc_start``), never a plan applied as it is."""
+    targets = data.reference_targets()
+    positions = np.array(data.states[:, 0:2], dtype=float)
+    velocities = np.array(data.states[:, 2:4], dtype=float)
+    out = np.zeros((data.n_robots, cfg.horizon, 2))
+    for k in range(cfg.horizon):
+        offset = targets - positions
+        distance = np.linalg.norm(offset, axis=1, keepdims=True)
+        wanted = offset / np.maximum(distance, 1e-12) * np.minimum(cfg.v_max, distance / cfg.dt)
+        out[:, k] = np.clip((wanted - velocities) / cfg.dt, -cfg.a_max, cfg.a_max)
+        positions = positions + cfg.dt * velocities + 0.5 * cfg.dt**2 * out[:, k]
+        velocities = velocities + cfg.dt * out[:, k]
+    return clip_to_bounds(data.states, out, cfg.dt, cfg.v_max, cfg.a_max)
+
+
 def shift(values: np.ndarray) -> np.ndarray:
     """Drop the first step of an ``(M, H, 2)`` array and append zeros (zero acceleration keeps velocity)."""
     return np.concatenate([values[:, 1:], np.zeros_like(values[:, :1])], axis=1)

@@ -5,7 +5,8 @@ import pytest
 
 from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
-from mpc.dmpc import DMPC, accept
+from mpc.dmpc import DMPC
+from mpc.dmpc_keep import accept
 from mpc.fallback import PlanMemory, Start
 from mpc.nlp import StepData
 from tests.mpc.loop import drive

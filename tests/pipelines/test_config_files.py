@@ -438,14 +438,16 @@ def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
     }
 
 
-def test_many_robots_toml_is_the_safe_crossing_plus_yield_and_cost_scale(monkeypatch):
-    """docs/examples/many_robots.toml: safe_crossing.toml's settings, parked robots that yield and F / 100 for
-    the solver, what the README's robot-scaling rows were run with, and nothing else."""
+def test_many_robots_toml_is_the_safe_crossing_plus_yield_cost_scale_and_heading(monkeypatch):
+    """docs/examples/many_robots.toml: safe_crossing.toml's settings, parked robots that yield, F / 100 for
+    the solver and DMPC's heading start, what the README's robot-scaling rows were run with, and nothing
+    else."""
     monkeypatch.chdir(REPO)
     safe = _resolved(["--config", "docs/examples/safe_crossing.toml", "simulate", "--controller", "cmpc"])[0]
     many = _resolved(["--config", "docs/examples/many_robots.toml", "simulate", "--controller", "cmpc"])[0]
     assert many.margins == safe.margins
-    assert dict(many.mpc_overrides) == dict(safe.mpc_overrides) | {"on_goal": "yield", "cost_scale": 0.01}
+    more = {"on_goal": "yield", "cost_scale": 0.01, "dmpc_start": "heading"}
+    assert dict(many.mpc_overrides) == dict(safe.mpc_overrides) | more
 
 
 def _without_wall_clock(record: dict) -> dict:
