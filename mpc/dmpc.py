@@ -65,10 +65,11 @@ heading straight for its target instead (``mpc.fallback.heading_plan``), when th
 the first step the two are nearly level in F (2974 from braking, 3012 from heading at 12 robots: the flocking
 terms of the wedge dominate), but the flock leaves moving and its shifted plans keep it moving.
 benchmarks/robot_scaling.py (README, "More robots, more humans"), shifted -> heading, same crowds: 12 robots
-20 -> 45 % (fixed goals), 50 -> 85 % (slots), 20 episodes; 3, 5, 6 robots within 6 points either way on 50
-episodes. At 3 robots the heading start picks the slower formation (middle robot ahead, F 26.4 against 23.3
-from braking: mpc/solvers.py ``_Solver``), travel 1.4-2.1 s longer. Comparing the two starts by F at the end
-of the first step instead keeps braking every time (20 of 20 episodes at 12 robots), so it is not offered.
+18 -> 44 % (fixed goals), 52 -> 82 % (slots), but 2-3 of the 50 episodes within 0.8 m of a human (none
+before); 3, 5, 6 robots within 6 points either way; 50 episodes a row. At 3 robots the heading start picks
+the slower formation (middle robot ahead, F 26.4 against 23.3 from braking: mpc/solvers.py ``_Solver``),
+travel 1.4-2.1 s longer. Comparing the two starts by F at the end of the first step instead keeps braking
+every time (20 of 20 episodes at 12 robots), so it is not offered.
 
 Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements. The
 local parameters of a step are built once (mpc/local_params.py), the C_i checks in one call (LocalNLP.costs).
