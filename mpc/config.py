@@ -40,6 +40,7 @@ ParallelMode = Literal["serial", "threads"]  # how DMPC runs the robots' local s
 # how a DMPC iteration turns the robots' best responses into the new plans (see mpc/dmpc.py)
 DMPCUpdate = Literal["jacobi", "gauss_seidel", "relaxed", "sequential_accept"]
 DMPCStop = Literal["regret", "no_improvement"]  # when DMPC's iterations end (MPCConfig.dmpc_stop)
+DMPCOrder = Literal["index", "nearest_first"]  # Gauss-Seidel's order of the robots (MPCConfig.dmpc_order)
 DMPCStart = Literal["shifted", "heading"]  # DMPC's initial strategy u^(0) (MPCConfig.dmpc_start)
 # coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
 CoupledMode = Literal["auto", "exact", "first_order"]
@@ -49,6 +50,7 @@ PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
 DMPC_UPDATES: Final[tuple[DMPCUpdate, ...]] = get_args(DMPCUpdate)
 DMPC_STOPS: Final[tuple[DMPCStop, ...]] = get_args(DMPCStop)
 DMPC_STARTS: Final[tuple[DMPCStart, ...]] = get_args(DMPCStart)
+DMPC_ORDERS: Final[tuple[DMPCOrder, ...]] = get_args(DMPCOrder)
 Guidance = Literal["none", "standing"]
 GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
@@ -147,6 +149,9 @@ class MPCConfig:
     # starts instead from every robot heading straight for its Eq. 8 target (mpc.fallback.heading_plan) when
     # that has the lower potential F (mpc/dmpc.py has the measurements).
     dmpc_start: DMPCStart = "shifted"
+    # The order of dmpc_update="gauss_seidel"'s best responses in each round: "index" (robot 0 first) or
+    # "nearest_first" (by distance to the Eq. 8 target at the step, nearest first; mpc/dmpc.py).
+    dmpc_order: DMPCOrder = "index"
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
@@ -194,6 +199,13 @@ class MPCConfig:
             raise MPCConfigError(f"dmpc_update must be one of {DMPC_UPDATES}, got {self.dmpc_update!r}")
         if self.dmpc_stop not in DMPC_STOPS:
             raise MPCConfigError(f"dmpc_stop must be one of {DMPC_STOPS}, got {self.dmpc_stop!r}")
+        if self.dmpc_order not in DMPC_ORDERS:
+            raise MPCConfigError(f"dmpc_order must be one of {DMPC_ORDERS}, got {self.dmpc_order!r}")
+        if self.dmpc_order != "index" and self.dmpc_update != "gauss_seidel":
+            raise MPCConfigError(
+                f"dmpc_order {self.dmpc_order!r} orders gauss_seidel's rounds; dmpc_update is "
+                f"{self.dmpc_update!r}"
+            )
         if self.dmpc_start not in DMPC_STARTS:
             raise MPCConfigError(f"dmpc_start must be one of {DMPC_STARTS}, got {self.dmpc_start!r}")
         if not 0 < self.dmpc_relaxation <= 1:

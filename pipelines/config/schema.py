@@ -288,6 +288,7 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "dmpc_update": "jacobi (Algorithm 2) | gauss_seidel | relaxed | sequential_accept: DMPC's update",
     "dmpc_relaxation": "in (0, 1]: the step towards the best response of dmpc_update relaxed",
     "dmpc_stop": "regret (Algorithm 2, lines 12-16) | no_improvement: when DMPC's iterations end",
+    "dmpc_order": "index | nearest_first (to its target): the order of gauss_seidel's best responses",
     "dmpc_start": "DMPC's u^(0): shifted (previous plan, else braking) | heading (not braking if F lower)",
     "guidance": "none (the paper: Eq. 8 heads for the goal) | standing: around rows of humans standing still",
     "stall_release_s": "s without 0.25 m of progress before a robot stops flocking (mpc/stall.py); 0: never",

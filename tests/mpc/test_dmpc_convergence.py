@@ -36,7 +36,7 @@ def test_the_paper_update_is_the_default():
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("dmpc_update", "simultaneous"), ("dmpc_stop", "never"), ("dmpc_relaxation", 0.0)]
+    [("dmpc_update", "simultaneous"), ("dmpc_stop", "never"), ("dmpc_relaxation", 0.0), ("dmpc_order", "far")]
     + [("dmpc_relaxation", 1.5), ("dmpc_relaxation", "0.5")],
 )
 def test_invalid_dmpc_options_are_named(field, value):
@@ -141,3 +141,28 @@ def test_a_failing_local_solve_in_a_thread_raises_after_every_thread_has_stopped
         solver.solve(data, lambda robots_future: no_humans, PlanMemory(cfg).start(data))
     assert running == []
     solver.close()
+
+
+def test_an_order_for_an_update_without_rounds_is_refused():
+    with pytest.raises(MPCConfigError, match="dmpc_order 'nearest_first' orders gauss_seidel's rounds"):
+        MPCConfig(dmpc_order="nearest_first")  # the default update is jacobi
+
+
+@pytest.mark.parametrize(("order", "expected"), [("index", [0, 1, 2]), ("nearest_first", [1, 2, 0])])
+def test_gauss_seidel_solves_in_the_configured_order(order, expected):
+    """Robots 10, 2 and 6 m from their goals: a round goes 0, 1, 2 by index and 1, 2, 0 nearest first."""
+    states = np.array([[0.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0, 0.0], [6.0, 0.0, 0.0, 0.0]])
+    goals = np.array([[0.0, 10.0], [3.0, 2.0], [6.0, 6.0]])
+    data = StepData(states, np.zeros((3, 2)), goals, np.ones(3, dtype=bool))
+    cfg = MPCConfig(dmpc_update="gauss_seidel", dmpc_order=order, j_max=1, multi_start=False)
+    solver = DMPC(cfg, 3, 0)
+    real_solve, solved = solver.local.solve, []
+
+    def recording(i, *args):
+        solved.append(int(i))
+        return real_solve(i, *args)
+
+    solver.local.solve = recording  # type: ignore[method-assign]
+    no_humans = np.zeros((cfg.horizon, 0, 2))
+    solver.solve(data, lambda robots_future: no_humans, PlanMemory(cfg).start(data))
+    assert solved == expected
