@@ -349,7 +349,10 @@ from tests.pipelines.mcap_episode import record_episode
 print("ready", flush=True)
 for seed in range(1000):
     episode = record_episode(Path(sys.argv[1]), seed=seed, steps=12, n_humans=5)
-    print(seed, len(episode.observations), flush=True)
+    # One write a line: under PYTHONUNBUFFERED, print(a, b) makes a write per piece, and a kill between them
+    # would leave half a line.
+    sys.stdout.write(f"{seed} {len(episode.observations)}\\n")
+    sys.stdout.flush()
 """
 
 
@@ -367,7 +370,8 @@ def test_a_recording_killed_at_random_moments_loses_no_finished_episode(tmp_path
         time.sleep(delay)
         child.send_signal(signal.SIGKILL)
         out, _ = child.communicate()
-        finished = {int(seed): int(states) for seed, states in (line.split() for line in out.splitlines())}
+        lines = [line for line in out.splitlines(keepends=True) if line.endswith("\n")]  # whole lines only
+        finished = {int(seed): int(states) for seed, states in (line.split() for line in lines)}
 
         files = {p.name for p in folder.glob("*.mcap")}
         names = {seed: episode_filename("circle", seed) for seed in range(len(finished) + 1)}
