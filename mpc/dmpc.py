@@ -176,11 +176,10 @@ class DMPC:
         pred_shape = (cfg.horizon, self.n_humans, 2)
         # Indices of the active robots; np.ndarray (as in _restart) so its items pass where an int is taken.
         moving: np.ndarray = np.flatnonzero(np.asarray(data.active, dtype=bool))
-        accels, first_prediction, heading = self._initial(data, predict, start, moving)
+        accels, first_prediction = self._initial(data, predict, start, moving)
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
-        # The shifted multipliers belong to the shifted plan; a heading start solves cold.
-        lam_x = None if start.lam_x is None or heading else start.lam_x.copy()
-        lam_g = None if start.lam_g is None or heading else start.lam_g.copy()
+        lam_x = None if start.lam_x is None else start.lam_x.copy()  # None from braking, heading or not
+        lam_g = None if start.lam_g is None else start.lam_g.copy()
         step = self.local.step_params(data)  # what the local parameters share across the iterations
         status, converged, first_failure = "ok", False, ""
         used, predictions, potentials = None, [], []
@@ -247,9 +246,8 @@ class DMPC:
 
     def _initial(
         self, data: StepData, predict: PredictFn, start: Start, moving: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray | None, bool]:
-        """u^(0) (``cfg.dmpc_start``), the humans predicted for it when already known, and whether it is the
-        heading plan.
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """u^(0) (``cfg.dmpc_start``) and the humans predicted for it when already known.
 
         With "heading", a step that starts from braking gives the moving robots ``heading_plan`` instead if
         that lowers F under the humans predicted for braking. The potential-lowering updates only ever lower
@@ -260,16 +258,16 @@ class DMPC:
         cfg = self.cfg
         accels = start.accels.copy()
         if cfg.dmpc_start == "shifted" or start.kind != "brake" or len(moving) == 0:
-            return accels, None, False
+            return accels, None
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         prediction = finite_prediction(predict(positions.transpose(1, 0, 2)), (cfg.horizon, self.n_humans, 2))
         if prediction is None:
-            return accels, None, False  # the loop's own prediction reports it
+            return accels, None  # the loop's own prediction reports it
         heading = accels.copy()
         heading[moving] = heading_plan(data, cfg)[moving]
         if self.joint.potential(heading, data, prediction) < self.joint.potential(accels, data, prediction):
-            return heading, None, True
-        return accels, prediction, False
+            return heading, None
+        return accels, prediction
 
     def _update(
         self,

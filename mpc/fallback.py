@@ -44,7 +44,8 @@ def heading_plan(data: StepData, cfg: MPCConfig) -> np.ndarray:
     """Controls ``(M, H, 2)`` that take every robot straight towards its Eq. 8 target, ignoring everyone else:
     at each step the acceleration (within ``a_max`` per component) towards the velocity of speed
     ``min(v_max, distance / dt)`` along the line to the target, then clipped to Eq. 6. A candidate initial
-    strategy (``MPCConfig.dmpc_start``), never a plan applied as it is."""
+    strategy (``MPCConfig.dmpc_start``): like the shifted plan, DMPC applies it to a robot only if none of
+    that robot's best responses improves on it by epsilon."""
     targets = data.reference_targets()
     positions = np.array(data.states[:, 0:2], dtype=float)
     velocities = np.array(data.states[:, 2:4], dtype=float)
