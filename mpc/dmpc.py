@@ -176,6 +176,9 @@ class DMPC:
         pred_shape = (cfg.horizon, self.n_humans, 2)
         # Indices of the active robots; np.ndarray (as in _restart) so its items pass where an int is taken.
         moving: np.ndarray = np.flatnonzero(np.asarray(data.active, dtype=bool))
+        if cfg.dmpc_order == "nearest_first":  # Gauss-Seidel's order, the same in every round of the step
+            distances = np.linalg.norm(data.states[moving, :2] - data.reference_targets()[moving], axis=1)
+            moving = moving[np.argsort(distances, kind="stable")]
         accels, first_prediction = self._initial(data, predict, start, moving)
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         lam_x = None if start.lam_x is None else start.lam_x.copy()  # None from braking, heading or not
@@ -308,15 +311,12 @@ class DMPC:
         lam_g: np.ndarray | None,
         flags: dict[str, bool],
     ) -> _Update:
-        """Gauss-Seidel: the robots best-respond one after the other (``cfg.dmpc_order``), each to the latest
-        plans, and keep an improvement of at least epsilon at once (lines 4-6 for one robot at a time)."""
+        """Gauss-Seidel: the robots best-respond one after the other, in the order of ``moving``
+        (``cfg.dmpc_order``), each to the latest plans, and keep an improvement of at least epsilon at once
+        (lines 4-6 for one robot at a time)."""
         accels, positions, data = accels.copy(), positions.copy(), step.data
         failure, solved, solves, solver_iterations = "", False, 0, 0
-        order = moving
-        if self.cfg.dmpc_order == "nearest_first":
-            distances = np.linalg.norm(data.states[moving, :2] - data.reference_targets()[moving], axis=1)
-            order = moving[np.argsort(distances, kind="stable")]
-        for i in order:
+        for i in moving:
             one = np.array([i])
             params = {i: step.row(i, positions, prediction)}
             sols, n_solves, n_iterations = self._best_responses(
