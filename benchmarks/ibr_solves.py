@@ -40,6 +40,23 @@ def measure(predictor: str, n_humans: int, episodes: int, jit: bool) -> dict[str
         return result
 
     nlp.solve_multi_start = timed  # type: ignore[method-assign]
+    predictions: list[tuple[str, float]] = []  # ("encode" | "twin", seconds) of the current step
+    predict_fn = controller._predict_fn
+
+    def timed_predict_fn(*args, **kwargs):
+        t0 = time.perf_counter()
+        predict = predict_fn(*args, **kwargs)  # encodes the observed past
+        predictions.append(("encode", time.perf_counter() - t0))
+
+        def timed_predict(plan):
+            t1 = time.perf_counter()
+            result = predict(plan)
+            predictions.append(("twin", time.perf_counter() - t1))
+            return result
+
+        return timed_predict
+
+    controller._predict_fn = timed_predict_fn  # type: ignore[method-assign]
     steps = []
     for seed in range(episodes):
         obs = env.reset(seed, "circle", n_humans, 3)
@@ -47,23 +64,33 @@ def measure(predictor: str, n_humans: int, episodes: int, jit: bool) -> dict[str
         done = False
         while not done:
             solves.clear()
+            predictions.clear()
             out = controller.act(obs)
             if solves:
-                steps.append((out.solve_time_s, list(solves)))
+                encode_s = sum(t for kind, t in predictions if kind == "encode")
+                twin_s = [t for kind, t in predictions if kind == "twin"]
+                steps.append((out.solve_time_s, list(solves), encode_s, twin_s))
             obs, done, _ = env.step(out.accelerations)
-    total = np.array([t for t, _ in steps])
-    first = np.array([s[0][0] for _, s in steps])
-    later = np.array([sum(x[0] for x in s[1:]) for _, s in steps])
+    total = np.array([step[0] for step in steps])
+    first = np.array([step[1][0][0] for step in steps])
+    later = np.array([sum(x[0] for x in step[1][1:]) for step in steps])
+    encode = np.array([step[2] for step in steps])
+    twin = np.array([sum(step[3]) for step in steps])
     return {
         "steps": len(steps),
         "step_ms": 1e3 * float(np.median(total)),
         "first_solve_ms": 1e3 * float(np.median(first)),
         "later_solves_ms": 1e3 * float(np.median(later)),
-        "solves_per_step": float(np.mean([len(s) for _, s in steps])),
-        "first_iterations": float(np.median([s[0][1] for _, s in steps])),
-        "second_iterations": float(np.median([s[1][1] for _, s in steps if len(s) > 1])),
+        "encode_ms": 1e3 * float(np.median(encode)),
+        "twin_ms": 1e3 * float(np.median(twin)),
+        "twin_calls_per_step": float(np.mean([len(step[3]) for step in steps])),
+        "solves_per_step": float(np.mean([len(step[1]) for step in steps])),
+        "first_iterations": float(np.median([step[1][0][1] for step in steps])),
+        "second_iterations": float(np.median([step[1][1][1] for step in steps if len(step[1]) > 1])),
         "step_over_first": float(np.median(total / first)),
+        "bound_over_first": float(np.median((first + later + encode + twin) / first)),
         "non_solve_share": 1.0 - float((first + later).sum() / total.sum()),
+        "bookkeeping_share": 1.0 - float((first + later + encode + twin).sum() / total.sum()),
     }
 
 
@@ -85,6 +112,12 @@ def main(argv: list[str] | None = None) -> int:
         f"{row['later_solves_ms']:.2f} ({row['solves_per_step']:.2f} solves a step; solver iterations "
         f"{row['first_iterations']:.1f} then {row['second_iterations']:.1f}); step / first solve "
         f"{row['step_over_first']:.2f}; outside the solves {100 * row['non_solve_share']:.0f} %"
+    )
+    print(
+        f"predictor: encoding the past {row['encode_ms']:.2f} ms, the twin {row['twin_ms']:.2f} ms "
+        f"({row['twin_calls_per_step']:.2f} calls a step); bookkeeping "
+        f"{100 * row['bookkeeping_share']:.0f} % of the step; without any bookkeeping, step / first solve "
+        f"{row['bound_over_first']:.2f}"
     )
     return 0
 
