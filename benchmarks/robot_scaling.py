@@ -12,9 +12,11 @@ Per row: success, collision (robot-human below d_min) and timeout rates in %, me
 successful episodes, the smallest robot-robot distance, the robots that reached their goals (% of all),
 and the control step (``ControlOutput.solve_time_s``: prediction, every solve and the IBR bookkeeping) as
 median / p95 / p99 in ms over every step of every episode, with the steps that ran to j_max IBR iterations
-and those that fell back (braking); and the failed episodes by how they ended (``failure_kind``: a robot
-pushed off a goal it had reached, a robot stuck short of its goal, or a flock still closing in at the
-limit). The machine is shared: the load average is printed; run it under ``nice`` and repeat when the
+and those that fell back (braking); when the flock was half-way (``halfway_s``, median over the successful
+and over the failed episodes: a failure that gets there late was held up crossing, one that gets there in
+time lost the end); and the failed episodes by how they ended (``failure_kind``: every robot arrived but
+some were pushed off again, a robot stuck short of its goal, or robots still closing in at the limit). The
+machine is shared: the load average is printed; run it under ``nice`` and repeat when the
 figures look noisy.
 
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py                       # 50 episodes a row
@@ -88,21 +90,35 @@ CLOSING_M = 0.5  # m, the progress over that window that counts as closing in
 
 
 def failure_kind(trajectory: Trajectory, metrics: EpisodeMetrics) -> str | None:
-    """Why a failed episode failed, from its end (None for a success), the first that applies:
-    ``pushed_off``, a robot that had reached its goal is off it at the end; ``stuck``, a robot that never
-    reached its goal came less than CLOSING_M m closer to it over the last CLOSING_WINDOW_S s; ``late``,
-    every robot off its goal was still closing in when time ran out."""
+    """Why a failed episode failed, from its end (None for a success). Robots that never reached their goals
+    decide first: ``stuck``, one of them came less than CLOSING_M m closer to it over the last
+    CLOSING_WINDOW_S s; ``late``, all of them were still closing in when time ran out. ``pushed_off``: every
+    robot off its goal at the end had reached it before (they arrived, but never all at once)."""
     if metrics.success:
         return None
     offset = np.linalg.norm(trajectory.robot_positions - trajectory.robot_goals[None], axis=-1)  # (T+1, M)
     off = offset[-1] >= trajectory.radius
-    reached = np.isfinite(np.asarray(metrics.reach_times))
-    if (off & reached).any():
+    never = off & ~np.isfinite(np.asarray(metrics.reach_times))
+    if not never.any():
         return "pushed_off"
     before = offset[max(0, len(offset) - 1 - round(CLOSING_WINDOW_S / trajectory.dt))]
-    if (off & (before - offset[-1] < CLOSING_M)).any():
+    if (never & (before - offset[-1] < CLOSING_M)).any():
         return "stuck"
     return "late"
+
+
+def halfway_s(trajectory: Trajectory) -> float:
+    """When the robots' mean distance to their goals first fell to half its start (s; NaN if it never did):
+    with the travel time, it splits an episode into the crossing and the arrival."""
+    offsets = trajectory.robot_positions - trajectory.robot_goals[None]
+    remaining = np.linalg.norm(offsets, axis=-1).mean(axis=1)
+    below = np.flatnonzero(remaining <= 0.5 * remaining[0])
+    return float(below[0] * trajectory.dt) if below.size else math.nan
+
+
+def _median(values: list[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.median(finite)) if finite else math.nan
 
 
 def run_row(
@@ -125,6 +141,7 @@ def run_row(
     mpc = MPCController(spec, distributed=controller == "dmpc")
     metrics, times, iterations, fallbacks = [], [], [], 0
     kinds: list[str | None] = []
+    halfway: list[float] = []
     t0 = time.perf_counter()
     try:
         for i in range(episodes):
@@ -151,6 +168,7 @@ def run_row(
             trajectory = env.trajectory()
             metrics.append(episode_metrics(trajectory))
             kinds.append(failure_kind(trajectory, metrics[-1]))
+            halfway.append(halfway_s(trajectory))
     finally:
         mpc.close()
     agg = aggregate(metrics)
@@ -171,6 +189,8 @@ def run_row(
         "j_max_steps": int(sum(it >= mpc.cfg.j_max for it in iterations)),
         "fallback_steps": fallbacks,
         "failures": {kind: kinds.count(kind) for kind in FAILURES},
+        "halfway_s_success": _median([h for h, k in zip(halfway, kinds, strict=True) if k is None]),
+        "halfway_s_failed": _median([h for h, k in zip(halfway, kinds, strict=True) if k is not None]),
         **step_stats(times),
         "wall_s": time.perf_counter() - t0,
     }
@@ -197,7 +217,8 @@ def print_table(rows: list[dict[str, Any]]) -> None:
     head = (
         f"{'ctrl':<5} {'M':>3} {'formation':<9} {'goals':<5} {'succ%':>6} {'coll%':>6} {'tout%':>6} "
         f"{'travel s':>8} {'min rr m':>8} {'reach%':>6} {'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} "
-        f"{'steps':>6} {'j_max':>5} {'fallb':>5}  failures: pushed off / stuck / late"
+        f"{'steps':>6} {'j_max':>5} {'fallb':>5} {'half s ok/failed':>16}  "
+        "failures: pushed off / stuck / late"
     )
     print(head)
     for r in rows:
@@ -207,7 +228,9 @@ def print_table(rows: list[dict[str, Any]]) -> None:
             f"{_fmt(r['travel_time_mean'], '8.2f')} "
             f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
             f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
-            f"{r['fallback_steps']:5d}  " + " / ".join(str(r["failures"][kind]) for kind in FAILURES)
+            f"{r['fallback_steps']:5d} {_fmt(r['halfway_s_success'], '7.1f')} / "
+            f"{_fmt(r['halfway_s_failed'], '6.1f')}  "
+            + " / ".join(str(r["failures"][kind]) for kind in FAILURES)
         )
 
 

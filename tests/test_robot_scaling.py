@@ -49,6 +49,20 @@ def test_failure_kinds_by_hand():
     # Robot 1 came 0.4 m closer in the last 10 s: less than CLOSING_M, stuck.
     slow = np.concatenate([np.full(window, 3.0), np.linspace(3.0, 2.6, window)])
     assert _kind(np.stack([parked, slow], axis=1)) == "stuck"
-    # Robot 0 reached its goal at step 10 and was pushed 0.5 m off; robot 1 still closing: pushed off first.
+    # Robot 0 reached its goal at step 10 and was pushed 0.5 m off. With robot 1 still closing in, robot 1's
+    # late arrival is the failure; with robot 1 arriving at step 20, after the push, and staying, the push is.
     pushed = np.concatenate([np.linspace(2.0, 0.0, 11), np.full(steps - 11, 0.5)])
-    assert _kind(np.stack([pushed, closing], axis=1)) == "pushed_off"
+    assert _kind(np.stack([pushed, closing], axis=1)) == "late"
+    assert _kind(np.stack([pushed, slow], axis=1)) == "stuck"
+    arrives = np.concatenate([np.linspace(2.0, 0.0, 21), np.zeros(steps - 21)])
+    assert _kind(np.stack([pushed, arrives], axis=1)) == "pushed_off"
+
+
+def test_halfway_by_hand():
+    steps = 50
+    closing = np.linspace(6.0, 0.5, steps)  # 6 - 5.5 k / 49 <= 3 from k = 27
+    trajectory = _episode(np.stack([closing, closing], axis=1))
+    assert robot_scaling.halfway_s(trajectory) == 27 * DT
+    # Robot 1 stays 6 m off: the mean starts at 6 m and ends at (0.5 + 6) / 2 = 3.25 m, never half of it.
+    held = _episode(np.stack([closing, np.full(steps, 6.0)], axis=1))
+    assert np.isnan(robot_scaling.halfway_s(held))
