@@ -152,6 +152,10 @@ class MPCConfig:
     # The order of dmpc_update="gauss_seidel"'s best responses in each round: "index" (robot 0 first) or
     # "nearest_first" (by distance to the Eq. 8 target at the step, nearest first; mpc/dmpc.py).
     dmpc_order: DMPCOrder = "index"
+    # DMPC: after the step's IBR loop, each stalled robot (stall_release_s) and its nearest teammate solve
+    # the joint NLP over their two plans, the others' fixed, kept when F drops by epsilon (mpc/dmpc_pairs.py:
+    # a late robot in front of a parked teammate is an equilibrium no single best response leaves).
+    dmpc_pairs: bool = False
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
@@ -188,7 +192,7 @@ class MPCConfig:
                 raise MPCConfigError(f"{name} must be > 0, got {value!r}")
             if name in non_negative and value < 0:
                 raise MPCConfigError(f"{name} must be >= 0, got {value!r}")
-        for name in ("warm_start", "multi_start", "jit"):
+        for name in ("warm_start", "multi_start", "jit", "dmpc_pairs"):
             if not isinstance(getattr(self, name), bool):
                 raise MPCConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.solver not in SOLVERS:
@@ -205,6 +209,11 @@ class MPCConfig:
             raise MPCConfigError(
                 f"dmpc_order {self.dmpc_order!r} orders gauss_seidel's rounds; dmpc_update is "
                 f"{self.dmpc_update!r}"
+            )
+        if self.dmpc_pairs and not self.stall_release_s:
+            raise MPCConfigError(
+                "dmpc_pairs moves stalled robots, and stall_release_s = 0 marks none stalled: set "
+                "stall_release_s > 0"
             )
         if self.dmpc_start not in DMPC_STARTS:
             raise MPCConfigError(f"dmpc_start must be one of {DMPC_STARTS}, got {self.dmpc_start!r}")

@@ -94,6 +94,7 @@ import numpy as np
 from mpc.cmpc import IBRResult, PredictFn, finite_prediction
 from mpc.config import MPCConfig
 from mpc.dmpc_keep import PlanKeeper
+from mpc.dmpc_pairs import pair_moves
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import Start, heading_plan
 from mpc.local_params import LocalParams
@@ -229,7 +230,7 @@ class DMPC:
                 break
         if used is None and status == "ok" and first_failure:
             status = first_failure
-        return IBRResult(
+        result = IBRResult(
             accels=accels,
             positions=positions,
             prediction=used,
@@ -246,6 +247,7 @@ class DMPC:
             lam_g=lam_g,
             solver_iterations=solver_iterations,
         )
+        return pair_moves(self.joint, data, result) if cfg.dmpc_pairs else result
 
     def _initial(
         self, data: StepData, predict: PredictFn, start: Start, moving: np.ndarray

@@ -166,15 +166,28 @@ class JointNLP:
         lam_x0: np.ndarray | None = None,
         lam_g0: np.ndarray | None = None,
         explore: bool = False,
+        bounds: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Solution:
         """Solve from the initial guess ``accels0`` ``(M, H, 2)`` (and multipliers, when warm-starting);
-        ``explore``: with both solvers, keeping the lower cost (mpc/solvers.py ``_Solver``)."""
-        lbx, ubx = self.bounds(data)
+        ``explore``: with both solvers, keeping the lower cost (mpc/solvers.py ``_Solver``); ``bounds``:
+        the flat acceleration bounds, ``bounds(data)`` by default."""
+        lbx, ubx = self.bounds(data) if bounds is None else bounds
         x0 = np.clip(np.ravel(accels0), lbx, ubx)
         v = self.cfg.v_max
         p = self.params(data, extra)
         out, stats = self._solver.solve(x0, p, lbx, ubx, -v, v, lam_x0, lam_g0, explore)
         return _solution(out, stats, self.cfg.cost_scale, (self.n_robots, self.cfg.horizon, 2))
+
+    def solve_group(
+        self, data: StepData, extra: np.ndarray, accels: np.ndarray, free: np.ndarray
+    ) -> Solution:
+        """Eq. 17 over the controls of the robots ``free`` (``(M,)`` bool) only, every other robot's plan
+        pinned to its row of ``accels`` ``(M, H, 2)`` (equal bounds, as a parked robot's), from ``accels``:
+        a joint best response of a group (mpc/dmpc_pairs.py)."""
+        lbx, ubx = (b.reshape(accels.shape) for b in self.bounds(data))
+        pinned = ~np.asarray(free, dtype=bool)
+        lbx[pinned] = ubx[pinned] = accels[pinned]
+        return self.solve(data, extra, accels, bounds=(lbx.ravel(), ubx.ravel()))
 
     def solve_multi_start(
         self,

@@ -63,6 +63,7 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "dmpc_relaxation": "in (0, 1]: the step towards the best response of dmpc_update relaxed",
     "dmpc_stop": "regret (Algorithm 2, lines 12-16) | no_improvement: when DMPC's iterations end",
     "dmpc_order": "index | nearest_first (to its target): the order of gauss_seidel's best responses",
+    "dmpc_pairs": "a stalled robot re-plans with the teammate in its way (needs stall_release_s)",
     "dmpc_start": "DMPC's u^(0): shifted (previous plan, else braking) | heading (not braking if F lower)",
     "guidance": "none (the paper: Eq. 8 heads for the goal) | standing: around rows of humans standing still",
     "stall_release_s": "s without 0.25 m of progress before a robot stops flocking (mpc/stall.py); 0: never",
