@@ -9,15 +9,14 @@ in ``--formation`` (default ``auto``, crowdsim.scenarios.choose_formation: then 
 10 m north) for a before/after comparison.
 
 Per row: success, collision (robot-human below d_min) and timeout rates in %, mean travel time over the
-successful episodes, the smallest robot-robot distance, the robots that reached their goals (% of all),
-and the control step (``ControlOutput.solve_time_s``: prediction, every solve and the IBR bookkeeping) as
-median / p95 / p99 in ms over every step of every episode, with the steps that ran to j_max IBR iterations
-and those that fell back (braking); when the flock was half-way (``halfway_s``, median over the successful
-and over the failed episodes: a failure that gets there late was held up crossing, one that gets there in
-time lost the end); and the failed episodes by how they ended (``failure_kind``: every robot arrived but
-some were pushed off again, a robot stuck short of its goal, or robots still closing in at the limit). The
-machine is shared: the load average is printed; run it under ``nice`` and repeat when the
-figures look noisy.
+successful episodes, the smallest robot-robot distance, the robots that reached their goals (% of all), and
+the control step (``ControlOutput.solve_time_s``: prediction, every solve and the IBR bookkeeping) as median /
+p95 / p99 in ms over every step of every episode, with the steps that ran to j_max IBR iterations and those
+that fell back (braking); when the flock was half-way (``halfway_s``, median over the successful and over the
+failed episodes that got half-way: a failure that gets there late was held up crossing, one that gets there in
+time lost the end); and the failed episodes by how they ended (``failure_kind``: every robot arrived but some
+were pushed off again, a robot stuck short of its goal, or robots still closing in at the limit). The machine
+is shared: the load average is printed; run it under ``nice`` and repeat when the figures look noisy.
 
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py                       # 50 episodes a row
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --episodes 4 --controllers cmpc --robots 3 6 12

@@ -152,7 +152,7 @@ class MPCConfig:
     # The order of dmpc_update="gauss_seidel"'s best responses in each round: "index" (robot 0 first) or
     # "nearest_first" (by distance to the Eq. 8 target at the step, nearest first; mpc/dmpc.py).
     dmpc_order: DMPCOrder = "index"
-    # DMPC: after the step's IBR loop, each stalled robot (stall_release_s) and its nearest teammate solve
+    # DMPC: after the step's IBR loop, each stalled robot (stall_release_s) and the teammate in its way solve
     # the joint NLP over their two plans, the others' fixed, kept when F drops by epsilon (mpc/dmpc_pairs.py:
     # a late robot in front of a parked teammate is an equilibrium no single best response leaves).
     dmpc_pairs: bool = False
