@@ -62,7 +62,8 @@ def pair_moves(joint: JointNLP, data: StepData, result: IBRResult) -> IBRResult:
     solved, nobody is stalled or no pair lowers F by epsilon."""
     cfg = joint.cfg
     held = stalled(data)
-    if not result.solved or result.prediction is None or held.size == 0 or not np.isfinite(result.potential):
+    # prediction is None exactly when nothing was solved (IBRResult.solved)
+    if result.prediction is None or held.size == 0 or not np.isfinite(result.potential):
         return result
     accels, potential = result.accels, result.potential
     lam_x, lam_g = result.lam_x, result.lam_g
@@ -75,11 +76,9 @@ def pair_moves(joint: JointNLP, data: StepData, result: IBRResult) -> IBRResult:
         free[[i, j]] = True
         sol = joint.solve_group(data, result.prediction, accels, free)
         solves, iterations = solves + 1, iterations + sol.iterations
-        if not sol.success:
-            continue
-        moved = joint.potential(sol.accels, data, result.prediction)
-        if accept(moved, potential, cfg.epsilon):
-            accels, potential, kept = sol.accels, moved, True
+        # The joint NLP's objective is F itself (as CMPC reads it): sol.cost is F of the pair's new plans.
+        if sol.success and accept(sol.cost, potential, cfg.epsilon):
+            accels, potential, kept = sol.accels, sol.cost, True
             if lam_x is not None and lam_g is not None:
                 lam_x, lam_g = lam_x.copy(), lam_g.copy()
                 lam_x[free] = sol.lam_x.reshape(lam_x.shape)[free]
