@@ -45,12 +45,16 @@ DMPCStart = Literal["shifted", "heading"]  # DMPC's initial strategy u^(0) (MPCC
 # coupling="nlp": the predictor itself inside the NLP, its linearisation, or whichever suits (mpc/coupled.py)
 CoupledMode = Literal["auto", "exact", "first_order"]
 OnGoal = Literal["brake", "track", "yield"]  # what a robot that has reached its goal does (MPCConfig.on_goal)
+FlockingWeight = Literal["per_pair", "per_robot"]  # how w_floc weighs each pair (MPCConfig.flocking_weight)
 SOLVERS: Final[tuple[Solver, ...]] = get_args(Solver)
 PARALLEL_MODES: Final[tuple[ParallelMode, ...]] = get_args(ParallelMode)
 DMPC_UPDATES: Final[tuple[DMPCUpdate, ...]] = get_args(DMPCUpdate)
 DMPC_STOPS: Final[tuple[DMPCStop, ...]] = get_args(DMPCStop)
 DMPC_STARTS: Final[tuple[DMPCStart, ...]] = get_args(DMPCStart)
 DMPC_ORDERS: Final[tuple[DMPCOrder, ...]] = get_args(DMPCOrder)
+FLOCKING_WEIGHTS: Final[tuple[FlockingWeight, ...]] = get_args(FlockingWeight)
+# Table I's weights were set for the paper's 3 robots: each robot's Eq. 15 sums 2 flocking terms.
+PAPER_ROBOTS: Final[int] = 3
 Guidance = Literal["none", "standing"]
 GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
@@ -80,6 +84,13 @@ class MPCConfig:
     # --- omitted by the paper (see the module docstring) ------------------------------------------------
     d_flock: float = world.D_FLOCK  # d_ij, m, desired distance between two robots of the flock, Eq. 15
     delta: float = 1e-3  # delta, goal-normalisation offset (Eq. 7) and norm smoothing (Eq. 15)
+    # --- more robots than the paper's 3 --------------------------------------------------------------------
+    # Eq. 15 gives every pair the weight w_floc, so a robot's flocking terms grow with its M - 1 teammates
+    # while its goal term (Eq. 7) stays one: at 12 robots the flock pulls 5.5x harder against the goal than
+    # in the paper's team of 3, for which Table I was tuned. "per_pair": w_floc on every pair (the paper);
+    # "per_robot": w_floc * 2 / (M - 1) on every pair, so each robot's flocking weighs what it weighs in a
+    # team of 3 whatever M (the same weights at M = 3; a symmetric weight, so Lemma 1's potential game holds).
+    flocking_weight: FlockingWeight = "per_pair"
     # --- robots on their goals (not in the paper, whose episodes end when its single robot arrives) -------
     # "track": a robot that has reached its goal stays in the optimisation with its goal term (the reference
     # is then the goal itself, weighted omega_goal / (||s - goal|| + delta) = 1e4 on the goal), so it holds
@@ -215,6 +226,10 @@ class MPCConfig:
                 "dmpc_pairs moves stalled robots, and stall_release_s = 0 marks none stalled: set "
                 "stall_release_s > 0"
             )
+        if self.flocking_weight not in FLOCKING_WEIGHTS:
+            raise MPCConfigError(
+                f"flocking_weight must be one of {FLOCKING_WEIGHTS}, got {self.flocking_weight!r}"
+            )
         if self.dmpc_start not in DMPC_STARTS:
             raise MPCConfigError(f"dmpc_start must be one of {DMPC_STARTS}, got {self.dmpc_start!r}")
         if not 0 < self.dmpc_relaxation <= 1:
@@ -246,6 +261,12 @@ class MPCConfig:
     def human_margin(self, k: int) -> float:
         """m_k of horizon step ``k`` (0-based), 0 without margins (the paper's Eq. 11)."""
         return self.human_margins[k] if self.human_margins else 0.0
+
+    def pair_floc_weight(self, n_robots: int) -> float:
+        """Eq. 15's weight of one pair of flocking robots in a team of ``n_robots`` (``flocking_weight``)."""
+        if self.flocking_weight == "per_pair" or n_robots < 2:
+            return self.w_floc
+        return self.w_floc * (PAPER_ROBOTS - 1) / (n_robots - 1)
 
     @classmethod
     def from_world(cls, world: WorldFacts, **settings: Any) -> MPCConfig:

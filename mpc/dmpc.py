@@ -69,7 +69,9 @@ benchmarks/robot_scaling.py (README, "More robots, more humans"), shifted -> hea
 before); 3, 5, 6 robots within 6 points either way; 50 episodes a row. At 3 robots the heading start picks
 the slower formation (middle robot ahead, F 26.4 against 23.3 from braking: mpc/solvers.py ``_Solver``),
 travel 1.4-2.1 s longer. Comparing the two starts by F at the end of the first step instead keeps braking
-every time (20 of 20 episodes at 12 robots), so it is not offered.
+every time (20 of 20 episodes at 12 robots), so it is not offered. All of this with the paper's per-pair
+flocking weight; with ``flocking_weight="per_robot"`` (many_robots.toml now) the flock's pull is that of a
+team of 3, and the heading start still helps at 12 robots: 80 -> 92 % (fixed), 90 -> 94 % (slots).
 
 The order of a Gauss-Seidel round (``dmpc_order``): robot index, or nearest to its target first (a parked
 robot answers the late ones' plans before they answer its own). With the heading start and
@@ -80,7 +82,9 @@ of 50 episodes within 0.8 m of a human in most rows where index order had 0-1. N
 Pair moves (``dmpc_pairs``, mpc/dmpc_pairs.py): after the loop, a stalled robot and the teammate in its way
 solve the joint NLP over their two plans, kept when F falls by epsilon; the equilibrium of a late robot in
 front of a parked teammate, which no best response leaves, falls to it. 12 robots 44 -> 56 % (fixed goals),
-82 -> 88 % (slots); 3, 5, 6 robots 566 -> 568 successes of 600 (50 episodes a row). In many_robots.toml.
+82 -> 88 % (slots); 3, 5, 6 robots 566 -> 568 successes of 600 (50 episodes a row), with per-pair
+flocking. With per-robot flocking they add nothing (12 robots 92 % either way on fixed goals, 94 % without
+against 90 % with on slots, at 1.7x the p99 step), so many_robots.toml leaves them off.
 
 Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements. The
 local parameters of a step are built once (mpc/local_params.py), the C_i checks in one call (LocalNLP.costs).

@@ -15,6 +15,9 @@ every other robot's plan fixed, from the current plans and under the humans pred
 plans are kept when they lower F by ``epsilon``, as Algorithm 2 keeps a best response that improves by
 epsilon; the next pair starts from them. It is a block-coordinate step on the same potential whose
 single-robot steps Algorithm 2 takes; the paper's DMPC (``dmpc_pairs = False``, the default) never runs it.
+
+Measured with the paper's per-pair flocking weight: 12 robots 44 -> 56 % (fixed goals), 82 -> 88 % (slots).
+With ``flocking_weight="per_robot"`` it adds nothing measurable at 5, 6 or 12 robots (mpc/dmpc.py).
 """
 
 from __future__ import annotations

@@ -44,7 +44,7 @@ class LocalParams:
                 np.asarray(data.goals, dtype=float),
                 data.reference_targets(),
                 data.goal_slacks()[:, None],
-                data.floc_weights(cfg.w_floc)[pairs],
+                data.floc_weights(cfg.pair_floc_weight(data.n_robots))[pairs],
             ],
             axis=1,
         )

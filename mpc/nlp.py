@@ -127,7 +127,7 @@ class JointNLP:
                 data.goals.ravel(),
                 data.reference_targets().ravel(),
                 data.goal_slacks(),
-                data.floc_weights(self.cfg.w_floc),
+                data.floc_weights(self.cfg.pair_floc_weight(data.n_robots)),
                 data.margins(self.cfg, self.n_humans),
                 np.asarray(extra, dtype=float).ravel(),
             ]
