@@ -190,6 +190,8 @@ def run_row(
         "failures": {kind: kinds.count(kind) for kind in FAILURES},
         "halfway_s_success": _median([h for h, k in zip(halfway, kinds, strict=True) if k is None]),
         "halfway_s_failed": _median([h for h, k in zip(halfway, kinds, strict=True) if k is not None]),
+        # episode i's outcome ("success" or its failure kind), for paired comparisons on the same crowds
+        "outcomes": [kind or "success" for kind in kinds],
         **step_stats(times),
         "wall_s": time.perf_counter() - t0,
     }
@@ -262,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
         choices=GOAL_ASSIGNMENTS,
         help="fixed (the paper) | slots; default: the config's, else fixed",
     )
-    parser.add_argument("--json", help="also write the rows to this file")
+    parser.add_argument("--json", help="also write the rows, with every episode's outcome, to this file")
     args = parser.parse_args(argv)
     try:  # the config files' parser and checks: the values that differ from Table I, validated
         run = load(args.config, sets=[f"mpc.{text}" for text in args.mpc])
