@@ -57,6 +57,10 @@ FLOCKING_WEIGHTS: Final[tuple[FlockingWeight, ...]] = get_args(FlockingWeight)
 PAPER_ROBOTS: Final[int] = 3
 Guidance = Literal["none", "standing"]
 GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
+GuidanceClearance = Literal[
+    "margin", "penalty"
+]  # the standing humans' disc radius (MPCConfig.guidance_clearance)
+GUIDANCE_CLEARANCES: Final[tuple[GuidanceClearance, ...]] = get_args(GuidanceClearance)
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
 ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
 
@@ -179,9 +183,17 @@ class MPCConfig:
     # keeps d_min from the human. Robot-robot (Eq. 12) is unchanged: robots know each other's plans.
     human_margins: tuple[float, ...] = ()
     # Where Eq. 8's reference heads. "none": the goal (the paper). "standing": around humans standing still,
-    # discs of radius d_min plus their margin, when they block the straight line to the goal (mpc/guidance.py:
+    # discs (guidance_clearance, below), when they block the straight line to the goal (mpc/guidance.py:
     # the local minimum behind a row of standing humans; the closed loop says who stands).
     guidance: Guidance = "none"
+    # The radius of guidance's discs. "margin": d_min plus the human's margin, the distance Eq. 11 asks for.
+    # "penalty": the distance Eq. 11's soft penalty keeps in practice, where one step's penalty
+    # w_coll * smax(z) has fallen to w_goal (z = (d_min + m)^2 - d^2, smax ~ exp(mu z) / mu there):
+    # sqrt((d_min + m)^2 + ln(w_coll / (mu w_goal)) / mu), 1.02 m for m = 0.03 with Table I's weights. A
+    # robot between two standing humans 1.7 m apart holds about 1.05 m from each (the penalty's tail), while
+    # "margin"'s 0.83 m discs leave the gap open, so guidance keeps heading it into the gap (README, "More
+    # robots, more humans": the 12-robot runs' stuck robots).
+    guidance_clearance: GuidanceClearance = "margin"
     # Seconds without 0.25 m of progress towards its goal after which a robot stops flocking until it moves
     # again (mpc/stall.py: a boxed-in robot otherwise holds the whole flock). 0: never (the paper).
     stall_release_s: float = 0.0
@@ -238,6 +250,10 @@ class MPCConfig:
             raise MPCConfigError(f"on_goal must be one of {ON_GOAL_MODES}, got {self.on_goal!r}")
         if self.guidance not in GUIDANCE_MODES:
             raise MPCConfigError(f"guidance must be one of {GUIDANCE_MODES}, got {self.guidance!r}")
+        if self.guidance_clearance not in GUIDANCE_CLEARANCES:
+            raise MPCConfigError(
+                f"guidance_clearance must be one of {GUIDANCE_CLEARANCES}, got {self.guidance_clearance!r}"
+            )
         if self.coupled_mode not in COUPLED_MODES:
             raise MPCConfigError(f"coupled_mode must be one of {COUPLED_MODES}, got {self.coupled_mode!r}")
         self._check_margins()
@@ -267,6 +283,14 @@ class MPCConfig:
         if self.flocking_weight == "per_pair" or n_robots < 2:
             return self.w_floc
         return self.w_floc * (PAPER_ROBOTS - 1) / (n_robots - 1)
+
+    def standing_clearance(self, margin: float) -> float:
+        """Guidance's disc radius, m, around a standing human with margin ``margin`` (guidance_clearance)."""
+        radius = self.d_min + margin
+        if self.guidance_clearance == "margin":
+            return radius
+        tail = math.log(self.w_coll / (self.mu * self.w_goal)) / self.mu  # m^2; <= 0: no tail to add
+        return math.sqrt(radius * radius + max(tail, 0.0))
 
     @classmethod
     def from_world(cls, world: WorldFacts, **settings: Any) -> MPCConfig:

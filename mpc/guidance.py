@@ -8,7 +8,8 @@ robots that the crossing flow has pushed sideways end up behind that row. With s
 episodes time out (``social_lstm_eth``, 8 humans, perpendicular, 40 episodes, margins ``fixed:0.1`` on every
 step: all 6 timeouts ended with the whole flock 5-9 m from its goals, behind the humans' goal row).
 
-What. Humans the caller considers standing are discs of radius ``clearance`` (``d_min`` plus their margin).
+What. Humans the caller considers standing are discs of radius ``clearance`` (``d_min`` plus their margin,
+or the distance Eq. 11's soft penalty keeps: ``MPCConfig.standing_clearance``).
 A robot whose straight segment to its goal stays clear of every disc keeps the goal as its target: its NLP is
 exactly the paper's. For a robot whose segment is blocked, the shortest path around the discs is found on a
 visibility graph (nodes on a ring around each disc, edges where the segment between two nodes clears every

@@ -312,7 +312,11 @@ class MPCController:
                 margins[last, standing].max(initial=0.0) if "human_margins" in out else cfg.human_margin(last)
             )
             out["targets"] = guidance_targets(
-                states[:, :2], obs.robot_goals, obs.human_positions[standing], cfg.d_min + margin, ~reached
+                states[:, :2],
+                obs.robot_goals,
+                obs.human_positions[standing],
+                cfg.standing_clearance(float(margin)),
+                ~reached,
             )
         return out
 

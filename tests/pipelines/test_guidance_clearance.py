@@ -1,0 +1,60 @@
+"""Guidance's disc radius (``MPCConfig.guidance_clearance``): d_min plus the margin, or the distance Eq. 11's
+soft penalty keeps in practice. By hand, and a gap between two standing humans that only the second closes."""
+
+import math
+
+import numpy as np
+import pytest
+
+from crowdsim.env import CrowdEnv
+from crowdsim.scenarios import Layout
+from mpc.config import MPCConfig
+from mpc.errors import MPCConfigError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+
+
+def test_clearance_by_hand():
+    """Table I: d_min 0.8, w_coll 1e7, mu 30, w_goal 10. The penalty's tail adds ln(1e7 / 300) / 30 =
+    0.3471 m^2 to (d_min + m)^2: 0.9936 m without margin, 1.0179 m with m = 0.03."""
+    assert MPCConfig().guidance_clearance == "margin"
+    assert MPCConfig().standing_clearance(0.03) == pytest.approx(0.83, abs=1e-12)
+    penalty = MPCConfig(guidance_clearance="penalty")
+    assert penalty.standing_clearance(0.0) == pytest.approx(
+        math.sqrt(0.64 + math.log(1e7 / 300) / 30), rel=1e-12
+    )
+    assert penalty.standing_clearance(0.0) == pytest.approx(0.9936, abs=1e-4)
+    assert penalty.standing_clearance(0.03) == pytest.approx(1.0179, abs=1e-4)
+    # a penalty weaker than the goal term has no tail worth avoiding: the margin's disc
+    assert penalty.replace(w_coll=100.0).standing_clearance(0.03) == pytest.approx(0.83, abs=1e-12)
+    with pytest.raises(MPCConfigError, match="guidance_clearance") as info:
+        MPCConfig(guidance_clearance="wide")
+    assert "'wide'" in str(info.value)
+
+
+def _guided(clearance: str) -> dict:
+    """The 9th step's guided robots: one robot 8 m below a gap of 1.8 m between two standing humans (1.8 >
+    2 x 0.8, < 2 x 0.99), its goal 8 m above it."""
+    humans = np.array([[-0.9, 0.0], [0.9, 0.0]])
+    layout = Layout(
+        robot_starts=np.array([[0.0, -8.0]]),
+        robot_goals=np.array([[0.0, 8.0]]),
+        human_starts=humans,
+        human_goals=humans,
+    )
+    overrides = (("guidance", "standing"), ("guidance_clearance", clearance))
+    controller = make_controller(ControllerSpec("cmpc", "constant_velocity", mpc_overrides=overrides))
+    env = CrowdEnv()
+    obs = env.reset_layout(layout)
+    controller.reset(obs)
+    for _ in range(8):  # a full window: the humans are "standing" from the 8th observation on
+        out = controller.act(obs)
+        obs, _, _ = env.step(out.accelerations)
+    assert obs.robot_positions[0, 1] < -3.0  # still well below the gap
+    return controller.act(obs).extra.get("guided", {})
+
+
+def test_a_gap_open_to_the_margin_discs_is_closed_to_the_penalty_discs():
+    assert _guided("margin") == {}  # the straight line passes 0.9 m from each human: clear of 0.8 m discs
+    guided = _guided("penalty")
+    assert list(guided) == [0]
+    assert abs(guided[0][0]) > 0.9  # round one of the humans, not through the gap
