@@ -57,9 +57,8 @@ FLOCKING_WEIGHTS: Final[tuple[FlockingWeight, ...]] = get_args(FlockingWeight)
 PAPER_ROBOTS: Final[int] = 3
 Guidance = Literal["none", "standing"]
 GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
-GuidanceClearance = Literal[
-    "margin", "penalty"
-]  # the standing humans' disc radius (MPCConfig.guidance_clearance)
+# the radius of guidance's discs around standing humans (MPCConfig.guidance_clearance)
+GuidanceClearance = Literal["margin", "penalty"]
 GUIDANCE_CLEARANCES: Final[tuple[GuidanceClearance, ...]] = get_args(GuidanceClearance)
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
 ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
