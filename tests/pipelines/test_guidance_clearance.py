@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from crowdsim.env import CrowdEnv
 from crowdsim.scenarios import Layout
 from mpc.config import MPCConfig
 from mpc.errors import MPCConfigError
 from pipelines.loop.controllers import ControllerSpec, make_controller
+from tests.pipelines.test_motion_margins import act_once_standing
 
 
 def test_clearance_by_hand():
@@ -43,14 +43,9 @@ def _guided(clearance: str) -> dict:
     )
     overrides = (("guidance", "standing"), ("guidance_clearance", clearance))
     controller = make_controller(ControllerSpec("cmpc", "constant_velocity", mpc_overrides=overrides))
-    env = CrowdEnv()
-    obs = env.reset_layout(layout)
-    controller.reset(obs)
-    for _ in range(8):  # a full window: the humans are "standing" from the 8th observation on
-        out = controller.act(obs)
-        obs, _, _ = env.step(out.accelerations)
+    obs, out = act_once_standing(controller, layout)
     assert obs.robot_positions[0, 1] < -3.0  # still well below the gap
-    return controller.act(obs).extra.get("guided", {})
+    return out.extra.get("guided", {})
 
 
 def test_a_gap_open_to_the_margin_discs_is_closed_to_the_penalty_discs():

@@ -74,9 +74,22 @@ def test_an_episode_with_class_margins_runs_and_keeps_its_distance(tmp_path, mon
     assert results["conformal-motion"].metrics.min_distance > results["none"].metrics.min_distance
 
 
+def act_once_standing(controller, layout):
+    """``(observation, output)`` of ``controller``'s first step at which the humans of ``layout`` who never
+    move count as standing: the 9th (motion classes need a full window of 8 observations)."""
+    from crowdsim.env import CrowdEnv
+
+    env = CrowdEnv()
+    obs = env.reset_layout(layout)
+    controller.reset(obs)
+    for _ in range(8):
+        out = controller.act(obs)
+        obs, _, _ = env.step(out.accelerations)
+    return obs, controller.act(obs)
+
+
 def test_a_step_records_its_margins_and_guided_robots(tmp_path, monkeypatch):
     """Robot 0 of a row behind a line of standing humans is guided; every human's margins are in extra."""
-    from crowdsim.env import CrowdEnv
     from crowdsim.scenarios import Layout
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
@@ -94,14 +107,7 @@ def test_a_step_records_its_margins_and_guided_robots(tmp_path, monkeypatch):
         margins=parse_margins("conformal-motion"),
         mpc_overrides=(("guidance", "standing"),),
     )
-    controller = make_controller(spec)
-    env = CrowdEnv()
-    obs = env.reset_layout(layout)
-    controller.reset(obs)
-    for _ in range(8):  # a full window: the humans are "standing" from the 8th observation on
-        out = controller.act(obs)
-        obs, _, _ = env.step(out.accelerations)
-    out = controller.act(obs)
+    _, out = act_once_standing(make_controller(spec), layout)
     assert np.asarray(out.extra["human_margins"]).shape == (4, 5)
     assert np.allclose(np.asarray(out.extra["human_margins"])[:, 0], 0.18 * 2 * np.arange(1, 5))
     assert list(out.extra["guided"]) == [0]  # robot 1's way east is free
