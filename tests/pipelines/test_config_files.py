@@ -420,6 +420,7 @@ def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
     monkeypatch.chdir(REPO)
     sets = [
         "mpc.guidance=standing",
+        "mpc.guidance_clearance=penalty",
         "mpc.stall_release_s=4",
         "mpc.dmpc_update=gauss_seidel",
         "mpc.dmpc_stop=no_improvement",
@@ -432,6 +433,7 @@ def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
     spec = _resolved(toml)[0]
     assert dict(spec.mpc_overrides) == {
         "guidance": "standing",
+        "guidance_clearance": "penalty",
         "stall_release_s": 4.0,
         "dmpc_update": "gauss_seidel",
         "dmpc_stop": "no_improvement",
@@ -439,15 +441,14 @@ def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
 
 
 def test_many_robots_toml_is_the_safe_crossing_plus_what_a_larger_flock_needs(monkeypatch):
-    """docs/examples/many_robots.toml: safe_crossing.toml's settings, flocking weighed per robot, guidance's
-    discs as wide as the penalty keeps, parked robots that yield, F / 100 for the solver and DMPC's heading
-    start, what the README's robot-scaling rows were run with, and nothing else."""
+    """docs/examples/many_robots.toml: safe_crossing.toml's settings, flocking weighed per robot, parked
+    robots that yield, F / 100 for the solver and DMPC's heading start, what the README's robot-scaling
+    rows were run with, and nothing else."""
     monkeypatch.chdir(REPO)
     safe = _resolved(["--config", "docs/examples/safe_crossing.toml", "simulate", "--controller", "cmpc"])[0]
     many = _resolved(["--config", "docs/examples/many_robots.toml", "simulate", "--controller", "cmpc"])[0]
     assert many.margins == safe.margins
     more = {"on_goal": "yield", "cost_scale": 0.01, "dmpc_start": "heading", "flocking_weight": "per_robot"}
-    more |= {"guidance_clearance": "penalty"}
     assert dict(many.mpc_overrides) == dict(safe.mpc_overrides) | more
 
 
