@@ -1,0 +1,137 @@
+"""Figure of benchmarks/robot_scaling.py's results: success and control-step time against the number of robots
+M and of humans N, one line per controller and task (fixed goals, slots).
+
+    .venv/bin/python benchmarks/plot_scaling.py RUN.json [RUN.json ...] --out docs/robot_scaling.png
+
+Each RUN.json is what ``robot_scaling.py --json`` wrote. Rows that share controller, goals and humans make a
+line against M; rows that share controller, goals and M but differ in humans make a line against N (the
+README's N rows at 3 robots, with the 7-human row of the M runs among them). Success is drawn with the
+collision rate (episodes within 0.8 m of a human) dotted beside it; step times as the median with the p99
+dashed above it, on a log axis, beside the 0.4 s control period that every step must stay under.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, NamedTuple
+
+CONTROL_PERIOD_MS = 400.0  # the paper's dt = 0.4 s: a step slower than this misses its period
+
+
+class Point(NamedTuple):
+    controller: str
+    goals: str
+    robots: int
+    humans: int
+    success: float  # %
+    collision: float  # % of episodes within 0.8 m of a human
+    median_ms: float
+    p99_ms: float
+
+
+def points(reports: Iterable[tuple[str, dict[str, Any]]]) -> list[Point]:
+    """Every row of every report as a point; the same (controller, goals, robots, humans) twice is an error
+    naming both files, since a figure cannot show two measurements as one."""
+    seen: dict[tuple[str, str, int, int], str] = {}
+    out = []
+    for name, report in reports:
+        try:
+            humans = int(report["args"]["humans"])
+            rows = report["rows"]
+            for row in rows:
+                point = Point(
+                    str(row["controller"]),
+                    str(row["goals"]),
+                    int(row["robots"]),
+                    humans,
+                    float(row["success_rate"]),
+                    float(row["collision_rate"]),
+                    float(row["median_ms"]),
+                    float(row["p99_ms"]),
+                )
+                key = point[:4]
+                if key in seen:
+                    raise ValueError(f"{name} and {seen[key]} both hold {key}: give one of them")
+                seen[key] = name
+                out.append(point)
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{name} is not robot_scaling.py --json output (missing {exc})") from None
+    return out
+
+
+def series(pts: list[Point], along: str) -> dict[tuple[str, str, int], list[Point]]:
+    """Lines along ``"robots"`` (keyed by controller, goals, humans) or ``"humans"`` (controller, goals,
+    robots), each sorted along its axis; a group with a single value along the axis is no line."""
+    fixed = "humans" if along == "robots" else "robots"
+    groups: dict[tuple[str, str, int], list[Point]] = {}
+    for p in pts:
+        groups.setdefault((p.controller, p.goals, getattr(p, fixed)), []).append(p)
+    return {
+        key: sorted(group, key=lambda p: getattr(p, along))
+        for key, group in sorted(groups.items())
+        if len({getattr(p, along) for p in group}) > 1
+    }
+
+
+def plot(pts: list[Point], out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex="col")
+    colours = {"cmpc": "tab:blue", "dmpc": "tab:orange"}
+    for col, along in enumerate(("robots", "humans")):
+        lines = series(pts, along)
+        for (controller, goals, other), line in lines.items():
+            x = [getattr(p, along) for p in line]
+            style = {"color": colours.get(controller), "marker": "o" if goals == "fixed" else "s"}
+            task = "fixed goals" if goals == "fixed" else goals
+            label = f"{controller.upper()}, {task}, {other} {'humans' if along == 'robots' else 'robots'}"
+            axes[0, col].plot(x, [p.success for p in line], label=label, **style)
+            axes[0, col].plot(x, [p.collision for p in line], linestyle=":", alpha=0.6, **style)
+            axes[1, col].plot(x, [p.median_ms for p in line], label=f"{label}: median", **style)
+            axes[1, col].plot(x, [p.p99_ms for p in line], linestyle="--", alpha=0.6, **style)
+        axes[0, col].set_ylabel("success % (collision % dotted)")
+        axes[0, col].set_ylim(0, 102)
+        axes[1, col].set_yscale("log")
+        axes[1, col].axhline(CONTROL_PERIOD_MS, color="grey", linewidth=1)
+        axes[1, col].text(axes[1, col].get_xlim()[0], CONTROL_PERIOD_MS * 1.08, " control period 0.4 s")
+        axes[1, col].set_ylabel("control step ms (median, p99 dashed)")
+        axes[1, col].set_xlabel("robots M" if along == "robots" else "humans N")
+        if lines:
+            axes[0, col].legend(fontsize=8)
+        for ax in axes[:, col]:
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_title("against the number of robots")
+    axes[0, 1].set_title("against the number of humans")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("runs", nargs="+", type=Path, help="robot_scaling.py --json files")
+    parser.add_argument("--out", type=Path, required=True, help="the PNG to write")
+    args = parser.parse_args(argv)
+    try:
+        reports = [(str(path), json.loads(path.read_text())) for path in args.runs]
+        pts = points(reports)
+    except (OSError, ValueError) as exc:  # json.JSONDecodeError is a ValueError
+        print(f"plot_scaling: {exc}", file=sys.stderr)
+        return 2
+    plot(pts, args.out)
+    print(f"wrote {args.out} ({len(pts)} rows)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

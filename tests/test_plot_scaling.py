@@ -1,0 +1,76 @@
+"""benchmarks/plot_scaling.py: which of robot_scaling.py's rows make which line, and its errors."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+SPEC = importlib.util.spec_from_file_location(
+    "plot_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "plot_scaling.py"
+)
+plot_scaling = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(plot_scaling)
+
+
+def _report(humans: int, rows: list[tuple[str, str, int, float]]) -> dict:
+    """A robot_scaling.py --json report: rows (controller, goals, robots, success %)."""
+    return {
+        "args": {"humans": humans},
+        "rows": [
+            {
+                "controller": c,
+                "goals": g,
+                "robots": m,
+                "success_rate": s,
+                "collision_rate": 100.0 - s,
+                "median_ms": 2.0 * m,
+                "p99_ms": 10.0 * m,
+            }
+            for c, g, m, s in rows
+        ],
+    }
+
+
+M_RUN = _report(7, [("cmpc", "fixed", 12, 94.0), ("cmpc", "fixed", 3, 100.0), ("dmpc", "slots", 5, 98.0)])
+N_RUNS = [_report(n, [("cmpc", "fixed", 3, s)]) for n, s in ((5, 100.0), (50, 52.0))]
+
+
+def test_rows_join_into_lines_along_robots_and_along_humans():
+    pts = plot_scaling.points([("m.json", M_RUN)] + [(f"n{i}.json", r) for i, r in enumerate(N_RUNS)])
+    assert len(pts) == 5
+    by_robots = plot_scaling.series(pts, "robots")
+    # DMPC has one robot count only: no line; CMPC's two rows at 7 humans, sorted by M.
+    assert list(by_robots) == [("cmpc", "fixed", 7)]
+    assert [(p.robots, p.success, p.collision) for p in by_robots[("cmpc", "fixed", 7)]] == [
+        (3, 100.0, 0.0),
+        (12, 94.0, 6.0),
+    ]
+    # The 3-robot rows at 5, 7 and 50 humans make the line against N, the M run's row among them.
+    by_humans = plot_scaling.series(pts, "humans")
+    assert list(by_humans) == [("cmpc", "fixed", 3)]
+    assert [(p.humans, p.success) for p in by_humans[("cmpc", "fixed", 3)]] == [
+        (5, 100.0),
+        (7, 100.0),
+        (50, 52.0),
+    ]
+
+
+def test_the_same_row_in_two_files_is_named(tmp_path, capsys):
+    with pytest.raises(ValueError, match="a.json and m.json both hold"):
+        plot_scaling.points([("m.json", M_RUN), ("a.json", M_RUN)])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"rows": []}))
+    assert plot_scaling.main([str(bad), "--out", str(tmp_path / "x.png")]) == 2
+    assert "bad.json is not robot_scaling.py --json output" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_main_writes_the_figure(tmp_path):
+    paths = []
+    for i, report in enumerate([M_RUN, *N_RUNS]):
+        paths.append(tmp_path / f"run{i}.json")
+        paths[-1].write_text(json.dumps(report))
+    out = tmp_path / "fig" / "scaling.png"
+    assert plot_scaling.main([*map(str, paths), "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
