@@ -17,7 +17,11 @@ median and of the local-solve phase.
 ``--replay``: the local-solve phase alone, on the iterations recorded from one serial episode of each
 (M, rule): every recorded batch of M local problems is solved by DMPC's serial and threaded code paths
 alternately (the order flips each repetition), so that both see the same load, after one untimed pass; the
-results are compared bit for bit.
+results are compared bit for bit. Then every local problem is timed alone (the least of ``--replay-reps``
+serial solves), and the batches' durations give the speed-up that ``cores()`` threads could reach with no
+overhead at all: taking each batch's jobs in order, as ``mpc.parallel.run_in_threads`` does, and, for
+comparison, longest first with the durations known beforehand. The solves are uneven (a Fatrop failure
+redone by IPOPT costs several ordinary solves), so even the first bound is well under the thread count.
 
 The machine is shared: the load average is printed before and after; run it under ``nice`` and read the
 speed-ups together with the load (a parallel phase needs a free core to be faster).
@@ -30,9 +34,11 @@ speed-ups together with the load (a parallel phase needs a free core to be faste
 from __future__ import annotations
 
 import argparse
+import heapq
 import json
 import os
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -132,6 +138,21 @@ def closed_loop(n_robots: int, n_humans: int, rule: str, modes: list[str], episo
     return {"rows": rows, "same": same}
 
 
+def list_schedule_speedup(durations: np.ndarray, threads: int, longest_first: bool = False) -> float:
+    """Serial time over the time ``threads`` threads take when each idle thread takes the next job of a
+    batch (no overhead), summed over the batches: ``durations`` (batches, jobs) in seconds. With
+    ``longest_first`` the jobs of each batch are taken longest first instead of in order."""
+    serial = parallel = 0.0
+    for batch in np.asarray(durations, dtype=float):
+        order: Sequence[int] = np.argsort(-batch, kind="stable") if longest_first else range(len(batch))
+        free = [0.0] * threads
+        for k in order:
+            heapq.heappush(free, heapq.heappop(free) + batch[k])
+        serial += float(batch.sum())
+        parallel += max(free)
+    return serial / parallel
+
+
 def replay(n_robots: int, n_humans: int, rule: str, reps: int) -> dict[str, Any]:
     """The local-solve phase alone: one serial episode's batches of M problems, serial vs threads."""
     controller = _controller(rule, "serial")
@@ -159,6 +180,13 @@ def replay(n_robots: int, n_humans: int, rule: str, reps: int) -> dict[str, Any]
                 for a, b in zip(outs["serial"], outs["threads"], strict=True)
             )
     threaded.close()
+    alone = np.full((len(batches), n_robots), np.inf)  # each problem timed on its own, the least of reps
+    for _ in range(reps):
+        for b, batch in enumerate(batches):
+            for k, job in enumerate(batch):
+                t0 = time.perf_counter()
+                variants["serial"]([job])
+                alone[b, k] = min(alone[b, k], time.perf_counter() - t0)
     n = reps * len(batches)
     return {
         "batches": len(batches),
@@ -167,6 +195,8 @@ def replay(n_robots: int, n_humans: int, rule: str, reps: int) -> dict[str, Any]
         "threads_ms": seconds["threads"] * 1e3 / n,
         "speedup": seconds["serial"] / seconds["threads"],
         "identical": identical,
+        "bound_in_order": list_schedule_speedup(alone, threaded._helpers + 1),
+        "bound_longest_first": list_schedule_speedup(alone, threaded._helpers + 1, longest_first=True),
     }
 
 
@@ -240,7 +270,9 @@ def main(argv: list[str] | None = None) -> int:
                 rp = cell["replay"]
                 line += (
                     f"; replayed phase {rp['serial_ms']:.2f} -> {rp['threads_ms']:.2f} ms/iteration "
-                    f"(x{rp['speedup']:.2f}, bitwise equal: {rp['identical']})"
+                    f"(x{rp['speedup']:.2f}, bitwise equal: {rp['identical']}); with no overhead at "
+                    f"most x{rp['bound_in_order']:.2f} in order, "
+                    f"x{rp['bound_longest_first']:.2f} longest first"
                 )
             print(line)
     if args.json:

@@ -12,7 +12,10 @@ load 0.6-0.9 on the 2 cores: 1.45x
 (sequential_accept) and 1.57x (jacobi, 13 % of whose solves fall back to IPOPT), identical to the serial
 results bit for bit; in closed loop at M = 6 (load 1.0-1.3) the local-solve phase ran 1.38x and 1.50x
 faster. What is left is Python around each solve (~85 us of the 0.7 ms, under the GIL) and the other
-processes on the cores: the load average decides the speed-up more than the mechanism.
+processes on the cores: the load average decides the speed-up more than the mechanism. And the solves of a
+batch are uneven (a Fatrop failure redone by IPOPT costs several ordinary solves), so even with no overhead
+two threads taking them in order would reach only x1.69 at M = 6 and x1.85 at M = 12 (Jacobi;
+``benchmarks/dmpc_scaling.py --replay`` prints this bound beside the measured x1.55 and x1.72).
 ``"serial"`` is the default because DMPC's long runs are sweeps, whose process workers already occupy every
 core; ``"threads"`` is the faster choice for a single run on a machine with a free core.
 """

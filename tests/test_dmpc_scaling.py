@@ -1,0 +1,31 @@
+"""benchmarks/dmpc_scaling.py's bound on what threads can gain from uneven local solves, by hand."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SPEC = importlib.util.spec_from_file_location(
+    "dmpc_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "dmpc_scaling.py"
+)
+dmpc_scaling = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(dmpc_scaling)
+
+
+def test_one_long_job_last_keeps_two_threads_waiting():
+    # In order: the threads run 1+1+1 and 1+1, then one of them the 6 from t = 2: 8 against 11 serial.
+    # Longest first: 6 on one thread, the five 1s on the other: 6.
+    jobs = np.array([[1.0, 1.0, 1.0, 1.0, 1.0, 6.0]])
+    assert dmpc_scaling.list_schedule_speedup(jobs, 2) == pytest.approx(11 / 8)
+    assert dmpc_scaling.list_schedule_speedup(jobs, 2, longest_first=True) == pytest.approx(11 / 6)
+
+
+def test_batches_add_up_and_even_jobs_reach_the_thread_count():
+    even = np.ones((3, 6))
+    assert dmpc_scaling.list_schedule_speedup(even, 2) == pytest.approx(2.0)
+    assert dmpc_scaling.list_schedule_speedup(even, 3) == pytest.approx(3.0)
+    # Serial 4 + 4 against 2 + 4 with two threads: the batches' times are summed (8 / 6), not their
+    # speed-ups averaged ((2 + 1) / 2).
+    mixed = np.array([[1.0, 1.0, 1.0, 1.0], [4.0, 0.0, 0.0, 0.0]])
+    assert dmpc_scaling.list_schedule_speedup(mixed, 2) == pytest.approx(8 / 6)
