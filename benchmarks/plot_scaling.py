@@ -41,9 +41,8 @@ def points(reports: Iterable[tuple[str, dict[str, Any]]]) -> list[Point]:
     for name, report in reports:
         try:
             humans = int(report["args"]["humans"])
-            rows = report["rows"]
-            for row in rows:
-                point = Point(
+            new = [
+                Point(
                     str(row["controller"]),
                     str(row["goals"]),
                     int(row["robots"]),
@@ -53,13 +52,17 @@ def points(reports: Iterable[tuple[str, dict[str, Any]]]) -> list[Point]:
                     float(row["median_ms"]),
                     float(row["p99_ms"]),
                 )
-                key = point[:4]
-                if key in seen:
-                    raise ValueError(f"{name} and {seen[key]} both hold {key}: give one of them")
-                seen[key] = name
-                out.append(point)
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"{name} is not robot_scaling.py --json output (missing {exc})") from None
+                for row in report["rows"]
+            ]
+        except (KeyError, TypeError, ValueError) as exc:
+            reason = f"no {exc}" if isinstance(exc, KeyError) else str(exc)
+            raise ValueError(f"{name} is not robot_scaling.py --json output ({reason})") from None
+        for point in new:
+            key = point[:4]
+            if key in seen:
+                raise ValueError(f"{name} and {seen[key]} both hold {key}: give one of them")
+            seen[key] = name
+            out.append(point)
     return out
 
 

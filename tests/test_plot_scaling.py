@@ -62,8 +62,11 @@ def test_the_same_row_in_two_files_is_named(tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"rows": []}))
     assert plot_scaling.main([str(bad), "--out", str(tmp_path / "x.png")]) == 2
-    assert "bad.json is not robot_scaling.py --json output" in capsys.readouterr().err
+    assert "bad.json is not robot_scaling.py --json output (no 'args')" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+    wrong = {"args": {"humans": 7}, "rows": [{**M_RUN["rows"][0], "robots": "many"}]}
+    with pytest.raises(ValueError, match="w.json is not robot_scaling.py --json output"):
+        plot_scaling.points([("w.json", wrong)])
 
 
 def test_main_writes_the_figure(tmp_path):
