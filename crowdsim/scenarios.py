@@ -40,9 +40,9 @@ make the back robots pass between the front robots parked on their goals.) ``aut
 more compact of the two: in the same runs it reached its goals as often or more (5 robots 7 of 8 vs 6 of 8;
 7 and 8 robots 3 of 6 each vs 1 and 0 of 6); at 12 robots no layout succeeded (CMPC's all-pairs flocking
 compresses the flock below ``d_ij``: ``benchmarks/robot_scaling.py``; the controller's per-robot flocking
-weight, ``flocking_weight`` in mpc/config.py, is what took 12 robots to 88-94 %). Its humans' sampling
-also never ran dry (20 seeds, 14-22 humans, 4-12 robots), where two rows of 12 did once in 20 seeds at 17
-humans (v1).
+weight, ``flocking_weight`` in mpc/config.py, is what took 12 robots to 88-94 %, and 94-100 % with
+guidance's penalty-wide discs, docs/examples/many_robots.toml). Its humans' sampling also never ran dry (20
+seeds, 14-22 humans, 4-12 robots), where two rows of 12 did once in 20 seeds at 17 humans (v1).
 
 Arrived robots stay in the world (``crowdsim.env``): the success rule needs every robot on its goal at
 once, and the humans keep seeing them, as in the authors' fork. The layout keeps them out of the way only
