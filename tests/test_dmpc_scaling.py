@@ -29,3 +29,21 @@ def test_batches_add_up_and_even_jobs_reach_the_thread_count():
     # speed-ups averaged ((2 + 1) / 2).
     mixed = np.array([[1.0, 1.0, 1.0, 1.0], [4.0, 0.0, 0.0, 0.0]])
     assert dmpc_scaling.list_schedule_speedup(mixed, 2) == pytest.approx(8 / 6)
+
+
+def test_mpc_values_are_parsed_as_set_takes_them_and_the_rows_own_keys_are_refused():
+    assert dmpc_scaling.mpc_overrides(["cost_scale=0.01"]) == (("cost_scale", 0.01),)
+    assert dmpc_scaling.mpc_overrides([]) == ()
+    with pytest.raises(dmpc_scaling.ConfigError, match="dmpc_update: set by --rules"):
+        dmpc_scaling.mpc_overrides(["dmpc_update=gauss_seidel"])
+    with pytest.raises(dmpc_scaling.ConfigError, match="cost_scale: must be > 0"):
+        dmpc_scaling.mpc_overrides(["cost_scale=0"])
+
+
+def test_mpc_values_reach_every_controller_and_the_rule_wins_its_own_keys():
+    controller = dmpc_scaling._controller("jacobi:regret", "serial", (("cost_scale", 0.01),))
+    try:
+        assert controller.cfg.cost_scale == 0.01
+        assert (controller.cfg.dmpc_update, controller.cfg.dmpc_stop) == ("jacobi", "regret")
+    finally:
+        controller.close()
