@@ -16,7 +16,9 @@ Sections
   dmpc        DMPC's local solves in a thread pool vs one after the other (mpc/dmpc.py): the speed-up
   episodes    episodes per minute of one process per controller (Table II's predictor, 7 humans), and of a
               real Table II sweep (5-9 humans) with K workers, with the projected time of the paper's full
-              Table II (10 cells x 1000 episodes) from its rate and from its CPU time per episode
+              Table II (10 cells x 1000 episodes) from its rate and from its CPU time per episode; and
+              the share of a Table II episode spent inside CasADi, with the table's time if the Python
+              around it took none (benchmarks/sweep_floor.py; quick: 2 timed episodes a cell)
   export      the exported CasADi predictors against the hand-written twins (Social-LSTM family): export
               time, parity with torch (values, Jacobians), the IBR prediction call and the coupled-NLP control
               step over one circle episode (benchmarks/export.py's ``measure``; quick: one model, no episode)
@@ -371,6 +373,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             lambda: sweep_rate(paper, per_cell, args.workers),
             errors,
         )
+        import sweep_floor
+
+        report["episodes_per_minute"]["casadi_floor"] = _timed(
+            "table2 episodes inline, time in CasADi",
+            lambda: sweep_floor.summary(sweep_floor.measure(3 if quick else 11), args.workers),
+            errors,
+        )
 
     if "export" in sections:
         print("exported predictors vs hand-written twins, 7 humans, 3 robots, H=4", file=sys.stderr)
@@ -542,6 +551,16 @@ def table(report: dict[str, Any]) -> str:
             lines.append(
                 f"| projected full Table II from that CPU time, {sweep['workers']} workers | "
                 f"{sweep['projected_table2_hours_from_cpu']:.2f} h |"
+            )
+        floor = episodes.get("casadi_floor")
+        if floor:
+            lines.append(
+                f"| table2 episode inline (sweep_floor.py), {floor['episode_ms']:.0f} ms: share in CasADi "
+                f"(solves, predictor, statistics) | {100 * floor['casadi_share']:.1f} % |"
+            )
+            lines.append(
+                f"| projected full Table II with no Python at all, {floor['workers']} workers (at this "
+                f"rate: {floor['table2_min']:.1f} min) | {floor['table2_min_without_python'] / 60:.2f} h |"
             )
         projected = episodes.get("projected_table2_hours_from_one_process")
         if projected is not None:
