@@ -50,6 +50,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +59,8 @@ import numpy as np
 # The sibling benchmark modules (orca_step.py, control_step.py, export.py, robot_scaling.py, dmpc_scaling.py)
 # are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from run_all_table import table  # noqa: E402
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
 SCENARIOS = ("circle", "perpendicular")
@@ -254,14 +257,215 @@ def _timed(label: str, fn: Callable[[], dict[str, Any]], errors: dict[str, str])
     return result
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Run:
+    """What every section reads: the sizes (``--quick``), the steps timed, the sweep's workers, and the
+    errors dict that ``timed`` fills."""
+
+    quick: bool
+    steps: int
+    workers: int
+    sweep_episodes: int | None
+    errors: dict[str, str]
+
+    @property
+    def humans_scale(self) -> tuple[int, ...]:
+        return (5, 20, 50) if self.quick else (5, 9, 20, 50)
+
+    @property
+    def robots_scale(self) -> tuple[int, ...]:
+        return (3, 6) if self.quick else (3, 6, 12)
+
+    def timed(self, label: str, fn: Callable[[], dict[str, Any]]) -> dict[str, Any] | None:
+        return _timed(label, fn, self.errors)
+
+
+CV = "constant_velocity"
+
+
+def simulator_section(run: Run) -> dict[str, Any]:
+    print("simulator step", file=sys.stderr)
+    episodes = 1 if run.quick else 3
+    sim: dict[str, Any] = {}
+    for n in run.humans_scale:
+        sim[f"h{n}_r3"] = run.timed(f"{n} humans, 3 robots", lambda n=n: simulator_step(n, 3, episodes))
+    for m in run.robots_scale:
+        sim[f"h7_r{m}"] = run.timed(f"7 humans, {m} robots", lambda m=m: simulator_step(7, m, episodes))
+    return sim
+
+
+def control_section(run: Run) -> dict[str, Any]:
     from pipelines.loop.controllers import ControllerSpec
 
+    print("control step at 7 humans, 3 robots", file=sys.stderr)
+    episodes, steps = (1 if run.quick else 2), run.steps
+    control: dict[str, Any] = {}
+    for name in ("straight", "orca"):
+        control[name] = run.timed(name, lambda n=name: any_step(ControllerSpec(n), 7, 3, steps))
+    cmpc = run.timed("cmpc + floor", lambda: mpc_step(ControllerSpec("cmpc", CV), 7, episodes, True))
+    control["cmpc"] = cmpc
+    control["floor (joint NLP, fixed prediction)"] = cmpc["floor"] if cmpc else None
+    control["dmpc"] = run.timed("dmpc", lambda: mpc_step(ControllerSpec("dmpc", CV), 7, episodes))
+    for name in _predictors():
+        if name == CV:
+            continue
+        spec = ControllerSpec("cmpc", name)
+        if name == ORACLE_PREDICTOR:  # not a registry predictor: control_step.py cannot build it
+            control[f"cmpc/{name}"] = run.timed(name, lambda s=spec: any_step(s, 7, 3, steps))
+        else:
+            control[f"cmpc/{name}"] = run.timed(name, lambda s=spec: mpc_step(s, 7, episodes))
+    coupled = "social_lstm_soft_eth" if "social_lstm_soft_eth" in _predictors() else CV
+    for mode in ("exact", "first_order"):
+        spec = ControllerSpec("cmpc", coupled, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
+        label = f"cmpc/{coupled}/nlp-{mode}"
+        control[label] = run.timed(label, lambda s=spec: mpc_step(s, 7, episodes))
+    return control
+
+
+def scaling_section(run: Run) -> dict[str, Any]:
+    from pipelines.loop.controllers import ControllerSpec
+
+    print("scaling (constant velocity)", file=sys.stderr)
+    scale: dict[str, Any] = {}
+    for controller in ("cmpc", "dmpc"):
+        spec = ControllerSpec(controller, CV)
+        for n in run.humans_scale:
+            label = f"{controller} {n} humans, 3 robots"
+            scale[f"{controller}_h{n}_r3"] = run.timed(label, lambda s=spec, n=n: mpc_step(s, n, 1))
+        for m in run.robots_scale:
+            label = f"{controller} 7 humans, {m} robots"
+            scale[f"{controller}_h7_r{m}"] = run.timed(
+                label, lambda s=spec, m=m: any_step(s, 7, m, run.steps, 2)
+            )
+    return scale
+
+
+def dmpc_section(run: Run) -> dict[str, Any]:
+    """The same measurement for every robot count (control_step.py's --dmpc-parallel has 3 robots only)."""
+    from pipelines.loop.controllers import ControllerSpec
+
+    print("DMPC: local solves in threads vs serial, 7 humans", file=sys.stderr)
+    speedup: dict[str, Any] = {}
+    for m in run.robots_scale:
+        row = {}
+        for mode in ("serial", "threads"):
+            spec = ControllerSpec("dmpc", CV, mpc_overrides=(("dmpc_parallel", mode),))
+            row[mode] = run.timed(f"{m} robots, {mode}", lambda s=spec, m=m: any_step(s, 7, m, run.steps, 2))
+        if row["serial"] and row["threads"]:
+            row["speedup_median"] = row["serial"]["median_ms"] / row["threads"]["median_ms"]
+        speedup[f"r{m}"] = row
+    return speedup
+
+
+def episodes_section(run: Run) -> dict[str, Any]:
+    """Table II's own predictor, so that the projections are of the table itself."""
+    from pipelines.loop.controllers import ControllerSpec
+
+    paper = PAPER_PREDICTOR if PAPER_PREDICTOR in _predictors() else CV
+    print(f"episodes per minute at 7 humans, {paper}", file=sys.stderr)
+    n_episodes = 2 if run.quick else 4
+    single = {}
+    for name in ("straight", "orca", "cmpc", "dmpc"):
+        spec = ControllerSpec(name, paper)
+        single[name] = run.timed(f"{name}, 1 process", lambda s=spec: episodes_per_minute(s, 7, n_episodes))
+    out: dict[str, Any] = {"one_process": single}
+    if single["cmpc"] and single["dmpc"]:
+        # Half of Table II is CMPC and half DMPC; K workers on K free cores run K episodes at once.
+        minutes = (
+            TABLE2_EPISODES
+            / 2
+            * (1 / single["cmpc"]["episodes_per_minute"] + 1 / single["dmpc"]["episodes_per_minute"])
+        )
+        out["projected_table2_hours_from_one_process"] = minutes / run.workers / 60
+    per_cell = run.sweep_episodes or (2 if run.quick else 6)
+    out["sweep"] = run.timed(
+        f"table2 sweep, 5-9 humans, {run.workers} workers", lambda: sweep_rate(paper, per_cell, run.workers)
+    )
+    import sweep_floor
+
+    out["casadi_floor"] = run.timed(
+        "table2 episodes inline, time in CasADi",
+        lambda: sweep_floor.summary(sweep_floor.measure(3 if run.quick else 11), run.workers),
+    )
+    return out
+
+
+def export_section(run: Run) -> dict[str, Any]:
+    print("exported predictors vs hand-written twins, 7 humans, 3 robots, H=4", file=sys.stderr)
+    import export
+
+    models = ("social_lstm_soft_eth",) if run.quick else export.DEFAULT_MODELS
+    calls = 100 if run.quick else 300
+    return {
+        model: run.timed(model, lambda m=model: export_rows(m, 7, calls, not run.quick)) for model in models
+    }
+
+
+def robots_section(run: Run) -> dict[str, Any]:
+    print("control step against robots in formation, 7 humans, paper profile", file=sys.stderr)
+    controllers = ("cmpc",) if run.quick else ("cmpc", "dmpc")
+    episodes = 1 if run.quick else 2
+    robots: dict[str, Any] = {}
+    for controller in controllers:
+        for variant in ("paper", "many", "slots"):
+            for m in run.robots_scale:
+                robots[f"{controller}_{variant}_h7_r{m}"] = run.timed(
+                    f"{controller} ({variant}), {m} robots",
+                    lambda c=controller, m=m, v=variant: robots_row(c, m, 7, episodes, v),
+                )
+    return robots
+
+
+def dmpc_updates_section(run: Run) -> dict[str, Any]:
+    print("DMPC update rules x serial/threads, 7 humans, circle", file=sys.stderr)
+    import dmpc_scaling
+
+    rules = ("jacobi:regret", "sequential_accept:no_improvement") if run.quick else dmpc_scaling.RULES
+    episodes = 1 if run.quick else 2
+    updates: dict[str, Any] = {}
+    for m in run.robots_scale:
+        for rule in rules:
+            cell = run.timed(f"{m} robots, {rule}", lambda m=m, r=rule: dmpc_update_cell(m, 7, r, episodes))
+            if cell:
+                rows = cell["rows"]
+                if "serial" in rows and "threads" in rows:
+                    cell["speedup_median"] = rows["serial"]["median_ms"] / rows["threads"]["median_ms"]
+            updates[f"r{m} {rule}"] = cell
+    return updates
+
+
+def ibr_section(run: Run) -> dict[str, Any]:
+    print("CMPC step against its floor, social_lstm_eth, 7 humans", file=sys.stderr)
+    import ibr_solves
+
+    episodes = 1 if run.quick else 4
+    return {
+        f"jit {jit}": run.timed(
+            f"jit {jit}", lambda on=(jit == "on"): ibr_solves.measure(PAPER_PREDICTOR, 7, episodes, on)
+        )
+        for jit in ("off", "on")
+    }
+
+
+# Section name -> (its key in the report, what measures it), in the order they run.
+SECTION_RUNS: dict[str, tuple[str, Callable[[Run], dict[str, Any]]]] = {
+    "simulator": ("simulator_step", simulator_section),
+    "control": ("control_step", control_section),
+    "scaling": ("scaling", scaling_section),
+    "dmpc": ("dmpc_parallel", dmpc_section),
+    "episodes": ("episodes_per_minute", episodes_section),
+    "export": ("export", export_section),
+    "robots": ("robots", robots_section),
+    "dmpc_updates": ("dmpc_updates", dmpc_updates_section),
+    "ibr": ("ibr", ibr_section),
+}
+assert tuple(SECTION_RUNS) == SECTIONS
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
     quick = args.quick
     steps = args.steps or (8 if quick else 20)
-    humans_scale = (5, 20, 50) if quick else (5, 9, 20, 50)
-    robots_scale = (3, 6) if quick else (3, 6, 12)
-    errors: dict[str, str] = {}
+    context = Run(quick, steps, args.workers, args.sweep_episodes, errors={})
     report: dict[str, Any] = {
         "machine": {
             "cpus": os.cpu_count(),
@@ -272,305 +476,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         },
         "settings": {"steps": steps, "quick": quick, "workers": args.workers},
     }
-    sections = args.sections
-    cv = "constant_velocity"
-
-    if "simulator" in sections:
-        print("simulator step", file=sys.stderr)
-        episodes = 1 if quick else 3
-        sim: dict[str, Any] = {}
-        for n in humans_scale:
-            sim[f"h{n}_r3"] = _timed(
-                f"{n} humans, 3 robots", lambda n=n: simulator_step(n, 3, episodes), errors
-            )
-        for m in robots_scale:
-            sim[f"h7_r{m}"] = _timed(
-                f"7 humans, {m} robots", lambda m=m: simulator_step(7, m, episodes), errors
-            )
-        report["simulator_step"] = sim
-
-    if "control" in sections:
-        print("control step at 7 humans, 3 robots", file=sys.stderr)
-        episodes = 1 if quick else 2
-        control: dict[str, Any] = {}
-        for name in ("straight", "orca"):
-            control[name] = _timed(name, lambda n=name: any_step(ControllerSpec(n), 7, 3, steps), errors)
-        cmpc = _timed("cmpc + floor", lambda: mpc_step(ControllerSpec("cmpc", cv), 7, episodes, True), errors)
-        control["cmpc"] = cmpc
-        control["floor (joint NLP, fixed prediction)"] = cmpc["floor"] if cmpc else None
-        control["dmpc"] = _timed("dmpc", lambda: mpc_step(ControllerSpec("dmpc", cv), 7, episodes), errors)
-        for name in _predictors():
-            if name == cv:
-                continue
-            spec = ControllerSpec("cmpc", name)
-            if name == ORACLE_PREDICTOR:  # not a registry predictor: control_step.py cannot build it
-                control[f"cmpc/{name}"] = _timed(name, lambda s=spec: any_step(s, 7, 3, steps), errors)
-            else:
-                control[f"cmpc/{name}"] = _timed(name, lambda s=spec: mpc_step(s, 7, episodes), errors)
-        coupled = "social_lstm_soft_eth" if "social_lstm_soft_eth" in _predictors() else cv
-        for mode in ("exact", "first_order"):
-            spec = ControllerSpec("cmpc", coupled, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
-            label = f"cmpc/{coupled}/nlp-{mode}"
-            control[label] = _timed(label, lambda s=spec: mpc_step(s, 7, episodes), errors)
-        report["control_step"] = control
-
-    if "scaling" in sections:
-        print("scaling (constant velocity)", file=sys.stderr)
-        scale: dict[str, Any] = {}
-        for controller in ("cmpc", "dmpc"):
-            spec = ControllerSpec(controller, cv)
-            for n in humans_scale:
-                label = f"{controller} {n} humans, 3 robots"
-                scale[f"{controller}_h{n}_r3"] = _timed(label, lambda s=spec, n=n: mpc_step(s, n, 1), errors)
-            for m in robots_scale:
-                label = f"{controller} 7 humans, {m} robots"
-                scale[f"{controller}_h7_r{m}"] = _timed(
-                    label, lambda s=spec, m=m: any_step(s, 7, m, steps, 2), errors
-                )
-        report["scaling"] = scale
-
-    if "dmpc" in sections:
-        # The same measurement for every robot count (control_step.py's --dmpc-parallel has 3 robots only).
-        print("DMPC: local solves in threads vs serial, 7 humans", file=sys.stderr)
-        speedup: dict[str, Any] = {}
-        for m in robots_scale:
-            row = {}
-            for mode in ("serial", "threads"):
-                spec = ControllerSpec("dmpc", cv, mpc_overrides=(("dmpc_parallel", mode),))
-                row[mode] = _timed(
-                    f"{m} robots, {mode}", lambda s=spec, m=m: any_step(s, 7, m, steps, 2), errors
-                )
-            if row["serial"] and row["threads"]:
-                row["speedup_median"] = row["serial"]["median_ms"] / row["threads"]["median_ms"]
-            speedup[f"r{m}"] = row
-        report["dmpc_parallel"] = speedup
-
-    if "episodes" in sections:
-        # Table II's own predictor, so that the projection is of the table itself.
-        paper = PAPER_PREDICTOR if PAPER_PREDICTOR in _predictors() else cv
-        print(f"episodes per minute at 7 humans, {paper}", file=sys.stderr)
-        n_episodes = 2 if quick else 4
-        single = {}
-        for name in ("straight", "orca", "cmpc", "dmpc"):
-            spec = ControllerSpec(name, paper)
-            single[name] = _timed(
-                f"{name}, 1 process", lambda s=spec: episodes_per_minute(s, 7, n_episodes), errors
-            )
-        report["episodes_per_minute"] = {"one_process": single}
-        if single["cmpc"] and single["dmpc"]:
-            # Half of Table II is CMPC and half DMPC; K workers on K free cores run K episodes at once.
-            minutes = (
-                TABLE2_EPISODES
-                / 2
-                * (1 / single["cmpc"]["episodes_per_minute"] + 1 / single["dmpc"]["episodes_per_minute"])
-            )
-            report["episodes_per_minute"]["projected_table2_hours_from_one_process"] = (
-                minutes / args.workers / 60
-            )
-        per_cell = args.sweep_episodes or (2 if quick else 6)
-        report["episodes_per_minute"]["sweep"] = _timed(
-            f"table2 sweep, 5-9 humans, {args.workers} workers",
-            lambda: sweep_rate(paper, per_cell, args.workers),
-            errors,
-        )
-        import sweep_floor
-
-        report["episodes_per_minute"]["casadi_floor"] = _timed(
-            "table2 episodes inline, time in CasADi",
-            lambda: sweep_floor.summary(sweep_floor.measure(3 if quick else 11), args.workers),
-            errors,
-        )
-
-    if "export" in sections:
-        print("exported predictors vs hand-written twins, 7 humans, 3 robots, H=4", file=sys.stderr)
-        import export
-
-        models = ("social_lstm_soft_eth",) if quick else export.DEFAULT_MODELS
-        calls = 100 if quick else 300
-        report["export"] = {
-            model: _timed(model, lambda m=model: export_rows(m, 7, calls, not quick), errors)
-            for model in models
-        }
-
-    if "robots" in sections:
-        print("control step against robots in formation, 7 humans, paper profile", file=sys.stderr)
-        controllers = ("cmpc",) if quick else ("cmpc", "dmpc")
-        episodes = 1 if quick else 2
-        robots: dict[str, Any] = {}
-        for controller in controllers:
-            for variant in ("paper", "many", "slots"):
-                for m in robots_scale:
-                    robots[f"{controller}_{variant}_h7_r{m}"] = _timed(
-                        f"{controller} ({variant}), {m} robots",
-                        lambda c=controller, m=m, v=variant: robots_row(c, m, 7, episodes, v),
-                        errors,
-                    )
-        report["robots"] = robots
-
-    if "dmpc_updates" in sections:
-        print("DMPC update rules x serial/threads, 7 humans, circle", file=sys.stderr)
-        import dmpc_scaling
-
-        rules = ("jacobi:regret", "sequential_accept:no_improvement") if quick else dmpc_scaling.RULES
-        episodes = 1 if quick else 2
-        updates: dict[str, Any] = {}
-        for m in robots_scale:
-            for rule in rules:
-                cell = _timed(
-                    f"{m} robots, {rule}", lambda m=m, r=rule: dmpc_update_cell(m, 7, r, episodes), errors
-                )
-                if cell:
-                    rows = cell["rows"]
-                    if "serial" in rows and "threads" in rows:
-                        cell["speedup_median"] = rows["serial"]["median_ms"] / rows["threads"]["median_ms"]
-                updates[f"r{m} {rule}"] = cell
-        report["dmpc_updates"] = updates
-
-    if "ibr" in sections:
-        print("CMPC step against its floor, social_lstm_eth, 7 humans", file=sys.stderr)
-        import ibr_solves
-
-        episodes = 1 if quick else 4
-        report["ibr"] = {
-            f"jit {jit}": _timed(
-                f"jit {jit}",
-                lambda on=(jit == "on"): ibr_solves.measure(PAPER_PREDICTOR, 7, episodes, on),
-                errors,
-            )
-            for jit in ("off", "on")
-        }
-    report["errors"] = errors
+    for name, (key, measure) in SECTION_RUNS.items():
+        if name in args.sections:
+            report[key] = measure(context)
+    report["errors"] = context.errors
     return report
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Printing
-# ----------------------------------------------------------------------------------------------------------
-
-
-def _row(label: str, stats: dict[str, Any] | None) -> str:
-    if not stats:
-        return f"| {label} | failed | | |"
-    extra = f"{stats['iterations_mean']:.2f}" if "iterations_mean" in stats else ""
-    return f"| {label} | {stats['median_ms']:.2f} | {stats['p95_ms']:.2f} | {extra} |"
-
-
-def table(report: dict[str, Any]) -> str:
-    lines = [
-        f"machine: {report['machine']['cpus']} CPUs, load {report['machine']['load_average']}, "
-        f"python {report['machine']['python']}",
-        "",
-        "| what | median ms | p95 ms | IBR iterations |",
-        "|---|---|---|---|",
-    ]
-    for key, stats in report.get("simulator_step", {}).items():
-        lines.append(_row(f"simulator step {key}", stats))
-    for key, stats in report.get("control_step", {}).items():
-        lines.append(_row(f"control step {key} (7 humans)", stats))
-    for key, stats in report.get("scaling", {}).items():
-        lines.append(_row(f"control step {key}", stats))
-    for key, row in report.get("dmpc_parallel", {}).items():
-        for mode in ("serial", "threads"):
-            lines.append(_row(f"dmpc {key} {mode}", row.get(mode)))
-        if "speedup_median" in row:
-            lines.append(f"| dmpc {key} threads speed-up (median) | x{row['speedup_median']:.2f} | | |")
-    for key, row in report.get("robots", {}).items():
-        label = f"control step robots {key}"
-        if row:
-            label += (
-                f" ({row['formation']}, {row['episodes']} ep, success {row['success_rate']:.0f}%, "
-                f"collision {row['collision_rate']:.0f}%, fallbacks {row['fallback_steps']}/{row['steps']})"
-            )
-        lines.append(_row(label, row))
-    for key, cell in report.get("dmpc_updates", {}).items():
-        if not cell:
-            lines.append(_row(f"dmpc {key}", None))
-            continue
-        for mode, stats in cell["rows"].items():
-            lines.append(_row(f"dmpc {key} {mode}", stats))
-        if "speedup_median" in cell:
-            lines.append(
-                f"| dmpc {key} threads speed-up (median; same trajectories: {cell['same']}) | "
-                f"x{cell['speedup_median']:.2f} | | |"
-            )
-    for key, row in report.get("ibr", {}).items():
-        if not row:
-            lines.append(_row(f"cmpc step split, {key}", None))
-            continue
-        lines.append(
-            f"| cmpc step, {key}: first solve {row['first_solve_ms']:.2f} ms, later solves "
-            f"{row['later_solves_ms']:.2f} ms, predictor {row['encode_ms'] + row['twin_ms']:.2f} ms, step / "
-            f"first solve {row['step_over_first']:.2f} ({row['bound_over_first']:.2f} without bookkeeping) "
-            f"| {row['step_ms']:.2f} | | |"
-        )
-    exported = report.get("export")
-    if exported:
-        lines += [
-            "",
-            "| exported predictor (7 humans, 3 robots, H=4) | export s | value err | jac err | IBR ms/call "
-            "| NLP step median ms |",
-            "|---|---|---|---|---|---|",
-        ]
-        for model, rows in exported.items():
-            if not rows:
-                lines.append(f"| {model} | failed | | | | |")
-                continue
-            for twin, r in rows.items():
-                lines.append(
-                    f"| {model} {twin} | {r['export_s']:.3f} | {r['value_err']:.1e} | {r['jac_err']:.1e} | "
-                    f"{r['ibr_ms']:.3f} | {r['nlp_ms']:.2f} |"
-                )
-            if "exported" in rows and "hand-written" in rows:
-                e, h = rows["exported"], rows["hand-written"]
-                lines.append(
-                    f"| {model} ratio exported / hand-written (target <= 1.5) | | | | "
-                    f"{e['ibr_ms'] / h['ibr_ms']:.2f} | {e['nlp_ms'] / h['nlp_ms']:.2f} |"
-                )
-    episodes = report.get("episodes_per_minute")
-    if episodes:
-        lines += ["", "| episodes per minute (one process: 7 humans; sweep: 5-9) | value |", "|---|---|"]
-        for name, stats in episodes["one_process"].items():
-            value = f"{stats['episodes_per_minute']:.1f}" if stats else "failed"
-            lines.append(f"| {name}, one process | {value} |")
-        sweep = episodes.get("sweep")
-        if sweep:
-            lines.append(
-                f"| table2 sweep, {sweep['workers']} workers (CMPC+DMPC) | "
-                f"{sweep['steady_episodes_per_minute']:.1f} "
-                f"({sweep['episodes_per_minute']:.1f} with {sweep['startup_s']:.1f} s start-up) |"
-            )
-            lines.append(
-                f"| projected full Table II (10 x 1000 episodes) from the sweep's rate (in a short sweep, "
-                f"mostly the one-off jit builds) | "
-                f"{sweep['projected_table2_hours']:.2f} h |"
-            )
-            lines.append(
-                f"| table2 sweep, CPU per episode once the NLPs are built (jit {sweep['jit']}) | "
-                f"{sweep['steady_cpu_s_per_episode']:.3f} s |"
-            )
-            lines.append(
-                f"| projected full Table II from that CPU time, {sweep['workers']} workers | "
-                f"{sweep['projected_table2_hours_from_cpu']:.2f} h |"
-            )
-        floor = episodes.get("casadi_floor")
-        if floor:
-            lines.append(
-                f"| table2 episode inline (sweep_floor.py), {floor['episode_ms']:.0f} ms: share in CasADi "
-                f"(solves, predictor, statistics) | {100 * floor['casadi_share']:.1f} % |"
-            )
-            lines.append(
-                f"| projected full Table II with no Python at all, {floor['workers']} workers (at this "
-                f"rate: {floor['table2_min']:.1f} min) | {floor['table2_min_without_python'] / 60:.2f} h |"
-            )
-        projected = episodes.get("projected_table2_hours_from_one_process")
-        if projected is not None:
-            lines.append(
-                f"| projected full Table II from the one-process rates, {report['settings']['workers']} "
-                f"workers | {projected:.2f} h |"
-            )
-    if report["errors"]:
-        lines += ["", "not measured: " + "; ".join(f"{k}: {v}" for k, v in report["errors"].items())]
-    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -593,7 +503,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
     report = run(args)
-    print(table(report))
+    print(table(report))  # run_all_table.py
     text = json.dumps(report, indent=1)
     print(text)
     if args.json:
