@@ -95,7 +95,7 @@ class CasadiClock:
 
 
 def part_of(function: Any) -> str:
-    """The part a buffered CasADi function belongs to: a solver by plugin and NLP, else "twin and costs"."""
+    """A buffered CasADi function's part: a solver by plugin and NLP, else "twin and cost maps"."""
     kind = function.class_name()
     if kind in ("FatropInterface", "IpoptInterface"):
         nlp = "joint" if function.name().startswith("joint") else "local"
