@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mpc.fastcall import BufferedFunction
+from predictors.learned import LearnedPredictor
 
 SPEC = importlib.util.spec_from_file_location(
     "sweep_floor", Path(__file__).resolve().parents[1] / "benchmarks" / "sweep_floor.py"
@@ -58,7 +59,7 @@ def test_parts_are_named_by_solver_and_nlp():
 
 
 def test_the_clock_times_calls_made_while_installed_and_undoes_its_patches():
-    init, stats = BufferedFunction.__init__, BufferedFunction.stats
+    init, stats, encoder = BufferedFunction.__init__, BufferedFunction.stats, LearnedPredictor.casadi_encoder
     clock = sweep_floor.CasadiClock()
     clock.install()
     try:
@@ -71,6 +72,7 @@ def test_the_clock_times_calls_made_while_installed_and_undoes_its_patches():
     assert set(clock.now) == {"fatrop local", "solver statistics"}
     assert all(seconds > 0 for seconds in clock.now.values())
     assert (BufferedFunction.__init__, BufferedFunction.stats) == (init, stats)
+    assert LearnedPredictor.casadi_encoder is encoder
     before = dict(clock.now)
     BufferedFunction(_nlpsol("fatrop", "local_y")).call({"x0": [0.0, 0.0]})
     assert clock.now == before  # built after close: not timed
