@@ -244,19 +244,6 @@ def _predictors() -> list[str]:
     return [*available(), ORACLE_PREDICTOR]
 
 
-def _timed(label: str, fn: Callable[[], dict[str, Any]], errors: dict[str, str]) -> dict[str, Any] | None:
-    """Run one measurement; a failure (a missing model, a broken build) is reported, not fatal."""
-    t0 = time.perf_counter()
-    try:
-        result = fn()
-    except Exception as exc:  # noqa: BLE001 - the benchmark reports what it could not measure
-        errors[label] = f"{type(exc).__name__}: {exc}"
-        print(f"  {label}: failed ({errors[label]})", file=sys.stderr)
-        return None
-    print(f"  {label}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
-    return result
-
-
 @dataclass(frozen=True)
 class Run:
     """What every section reads: the sizes (``--quick``), the steps timed, the sweep's workers, and the
@@ -277,7 +264,16 @@ class Run:
         return (3, 6) if self.quick else (3, 6, 12)
 
     def timed(self, label: str, fn: Callable[[], dict[str, Any]]) -> dict[str, Any] | None:
-        return _timed(label, fn, self.errors)
+        """Run one measurement; a failure (a missing model, a broken build) is reported, not fatal."""
+        t0 = time.perf_counter()
+        try:
+            result = fn()
+        except Exception as exc:  # noqa: BLE001 - the benchmark reports what it could not measure
+            self.errors[label] = f"{type(exc).__name__}: {exc}"
+            print(f"  {label}: failed ({self.errors[label]})", file=sys.stderr)
+            return None
+        print(f"  {label}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        return result
 
 
 CV = "constant_velocity"
