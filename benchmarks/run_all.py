@@ -60,12 +60,12 @@ import numpy as np
 # are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import sweep_floor  # noqa: E402
 from run_all_table import table  # noqa: E402
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
 SCENARIOS = ("circle", "perpendicular")
 ORACLE_PREDICTOR = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
-TABLE2_EPISODES = 10 * 1000  # the paper: 5 crowd sizes x 2 methods, 500 + 500 episodes per cell
 PAPER_PREDICTOR = "social_lstm_eth"  # pipelines.experiments.PAPER_PREDICTOR
 
 
@@ -179,18 +179,19 @@ def sweep_rate(predictor: str, episodes_per_cell: int, workers: int) -> dict[str
             steady_cpu.append(record["cpu_s"])
     cpu = float(np.mean(steady_cpu)) if steady_cpu else float("nan")
     steady = outcome.steady_episodes_per_minute
+    full = sweep_floor.table2_episodes()
     return {
         "predictor": predictor,
         "jit": config.jit,
         "steady_cpu_s_per_episode": cpu,
-        "projected_table2_hours_from_cpu": TABLE2_EPISODES * cpu / workers / 3600,
+        "projected_table2_hours_from_cpu": full * cpu / workers / 3600,
         "workers": workers,
         "episodes": outcome.ran,
         "wall_s": outcome.wall_s,
         "startup_s": outcome.startup_s,
         "episodes_per_minute": outcome.episodes_per_minute,
         "steady_episodes_per_minute": steady,
-        "projected_table2_hours": TABLE2_EPISODES / steady / 60.0 if steady else float("nan"),
+        "projected_table2_hours": full / steady / 60.0 if steady else float("nan"),
     }
 
 
@@ -368,7 +369,7 @@ def episodes_section(run: Run) -> dict[str, Any]:
     if single["cmpc"] and single["dmpc"]:
         # Half of Table II is CMPC and half DMPC; K workers on K free cores run K episodes at once.
         minutes = (
-            TABLE2_EPISODES
+            sweep_floor.table2_episodes()
             / 2
             * (1 / single["cmpc"]["episodes_per_minute"] + 1 / single["dmpc"]["episodes_per_minute"])
         )
@@ -377,8 +378,6 @@ def episodes_section(run: Run) -> dict[str, Any]:
     out["sweep"] = run.timed(
         f"table2 sweep, 5-9 humans, {run.workers} workers", lambda: sweep_rate(paper, per_cell, run.workers)
     )
-    import sweep_floor
-
     out["casadi_floor"] = run.timed(
         "table2 episodes inline, time in CasADi",
         lambda: sweep_floor.summary(sweep_floor.measure(3 if run.quick else 11), run.workers),

@@ -32,8 +32,14 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-TABLE2_EPISODES = 10 * 1000  # the paper's Table II: 5 crowd sizes x 2 methods x 1000 episodes
 TARGET_MIN = 15.0  # issue 16's target for the full table on 2 cores
+
+
+def table2_episodes() -> int:
+    """The full Table II: its cells times the paper's episodes per cell (10 x 1000)."""
+    from pipelines.experiments.cells import PAPER_EPISODES_PER_CELL, get_experiment
+
+    return len(get_experiment("table2").cells()) * PAPER_EPISODES_PER_CELL
 
 
 class CasadiClock:
@@ -160,7 +166,7 @@ def summary(rows: list[dict[str, Any]], workers: int) -> dict[str, Any]:
     parts = sorted({k for r in rows for k in r} - {"cell", "wall_s"})
     casadi = {p: sum(r.get(p, 0.0) for r in rows) / n for p in parts}
     in_casadi = sum(casadi.values())
-    minutes = TABLE2_EPISODES / workers / 60
+    minutes = table2_episodes() / workers / 60
     target_s = TARGET_MIN / minutes  # seconds an episode may take for the target
     return {
         "episodes": n,
