@@ -80,6 +80,12 @@ def series(pts: list[Point], along: str) -> dict[tuple[str, str, int], list[Poin
     }
 
 
+def undrawn(pts: list[Point]) -> list[Point]:
+    """The points on no line: alone along both axes (e.g. the single row of a run for one M and one N)."""
+    drawn = {p for along in ("robots", "humans") for line in series(pts, along).values() for p in line}
+    return [p for p in pts if p not in drawn]
+
+
 def plot(pts: list[Point], out: Path) -> None:
     import matplotlib
 
@@ -132,7 +138,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"plot_scaling: {exc}", file=sys.stderr)
         return 2
     plot(pts, args.out)
-    print(f"wrote {args.out} ({len(pts)} rows)")
+    alone = undrawn(pts)
+    print(f"wrote {args.out} ({len(pts) - len(alone)} of {len(pts)} rows drawn)")
+    for p in alone:
+        print(
+            f"  not drawn (no row to make a line with): {p.controller} {p.goals} goals, M={p.robots}, "
+            f"N={p.humans}"
+        )
     return 0
 
 

@@ -3,6 +3,7 @@ episode rates and Table II projections, then what could not be measured."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 
@@ -10,12 +11,10 @@ def table(report: dict[str, Any]) -> str:
     lines = [
         f"machine: {report['machine']['cpus']} CPUs, load {report['machine']['load_average']}, "
         f"python {report['machine']['python']}",
-        "",
-        "| what | median ms | p95 ms | IBR iterations |",
-        "|---|---|---|---|",
     ]
-    lines += _step_rows(report)
-    lines += _formation_rows(report)
+    steps = _step_rows(report) + _formation_rows(report)
+    if steps:  # none when only the export or episode sections ran
+        lines += ["", "| what | median ms | p95 ms | IBR iterations |", "|---|---|---|---|", *steps]
     if report.get("export"):
         lines += _export_rows(report["export"])
     if report.get("episodes_per_minute"):
@@ -123,11 +122,19 @@ def _episode_rows(episodes: dict[str, Any], workers: int) -> list[str]:
             f"({sweep['episodes_per_minute']:.1f} with {sweep['startup_s']:.1f} s start-up) |",
             f"| projected full Table II (10 x 1000 episodes) from the sweep's rate (in a short sweep, "
             f"mostly the one-off jit builds) | {sweep['projected_table2_hours']:.2f} h |",
-            f"| table2 sweep, CPU per episode once the NLPs are built (jit {sweep['jit']}) | "
-            f"{sweep['steady_cpu_s_per_episode']:.3f} s |",
-            f"| projected full Table II from that CPU time, {sweep['workers']} workers | "
-            f"{sweep['projected_table2_hours_from_cpu']:.2f} h |",
         ]
+        if math.isfinite(sweep["steady_cpu_s_per_episode"]):
+            lines += [
+                f"| table2 sweep, CPU per episode once the NLPs are built (jit {sweep['jit']}) | "
+                f"{sweep['steady_cpu_s_per_episode']:.3f} s |",
+                f"| projected full Table II from that CPU time, {sweep['workers']} workers | "
+                f"{sweep['projected_table2_hours_from_cpu']:.2f} h |",
+            ]
+        else:  # each worker's first episode of a cell builds the NLPs and is left out
+            lines.append(
+                "| table2 sweep, CPU per episode once the NLPs are built | not measured: each episode was "
+                "its worker's first of a cell (more --sweep-episodes) |"
+            )
     floor = episodes.get("casadi_floor")
     if floor:
         lines += [
@@ -142,3 +149,7 @@ def _episode_rows(episodes: dict[str, Any], workers: int) -> list[str]:
             f"| projected full Table II from the one-process rates, {workers} workers | {projected:.2f} h |"
         )
     return lines
+
+
+if __name__ == "__main__":
+    raise SystemExit("run_all_table.py holds benchmarks/run_all.py's tables; run benchmarks/run_all.py")

@@ -56,6 +56,18 @@ def test_rows_join_into_lines_along_robots_and_along_humans():
     ]
 
 
+def test_a_row_on_no_line_is_named(tmp_path, capsys):
+    pts = plot_scaling.points([("m.json", M_RUN)] + [(f"n{i}.json", r) for i, r in enumerate(N_RUNS)])
+    # DMPC's slots row at 5 robots is alone along M and along N; every CMPC row is on a line.
+    assert [(p.controller, p.robots, p.humans) for p in plot_scaling.undrawn(pts)] == [("dmpc", 5, 7)]
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(M_RUN))
+    assert plot_scaling.main([str(path), "--out", str(tmp_path / "m.png")]) == 0
+    out = capsys.readouterr().out
+    assert "(2 of 3 rows drawn)" in out
+    assert "not drawn (no row to make a line with): dmpc slots goals, M=5, N=7" in out
+
+
 def test_the_same_row_in_two_files_is_named(tmp_path, capsys):
     with pytest.raises(ValueError, match="a.json and m.json both hold"):
         plot_scaling.points([("m.json", M_RUN), ("a.json", M_RUN)])
