@@ -35,6 +35,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import output_file, run_main, write_json  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 # The predictor ablation as first measured (283 s with jit, 19 s without): its default list then.
 ORIGINAL_SEVEN = (
@@ -116,7 +119,7 @@ def main() -> int:
     parser.add_argument("--episodes-per-cell", type=int, default=2)
     parser.add_argument("--predictors", default=ORIGINAL_SEVEN, help="comma-separated (default: the seven)")
     parser.add_argument("--payback-episodes", type=int, default=8, help="per variant (0: skip that part)")
-    parser.add_argument("--json", type=Path, help="also write the sweeps' numbers here")
+    parser.add_argument("--json", type=output_file, help="also write the sweeps' numbers here")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))
     from mpc import compile_cache
@@ -151,9 +154,9 @@ def main() -> int:
             payback(args.payback_episodes, Path(tmp) / "payback-cache")
     if args.json:
         summary = {k: {f: v for f, v in r.items() if f != "metrics"} for k, r in runs.items()}
-        args.json.write_text(json.dumps(summary, indent=2) + "\n")
+        write_json(args.json, summary)
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(run_main(main))

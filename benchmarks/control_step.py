@@ -21,9 +21,10 @@ under ``nice`` and repeat when the figures look noisy.
 from __future__ import annotations
 
 import argparse
-import json
 import os
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,6 +32,9 @@ import numpy as np
 from crowdsim.env import CrowdEnv
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 
 def _stats(seconds: list[float]) -> dict[str, float]:
@@ -84,16 +88,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--humans", type=int, nargs="+", default=[5, 7, 9])
+    parser.add_argument("--humans", type=human_count, nargs="+", default=[5, 7, 9])
     parser.add_argument("--episodes", type=int, default=3, help="circle episodes per row (seeds 0..)")
-    parser.add_argument("--predictor", default="constant_velocity")
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--dmpc-parallel", action="store_true", help="DMPC serial vs thread pool (7 humans)")
     parser.add_argument(
         "--coupled", action="store_true", help="CMPC with coupling='nlp' (exact, first_order)"
     )
     parser.add_argument("--no-ibr", action="store_true", help="skip the CMPC/DMPC/floor rows")
-    parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+    if args.no_ibr and not args.coupled and not (args.dmpc_parallel and 7 in args.humans):
+        parser.error(
+            "nothing to measure: --no-ibr leaves --coupled and --dmpc-parallel (which runs at 7 humans)"
+        )
 
     report: dict[str, Any] = {"load_before": os.getloadavg()}
     rows: list[tuple[str, dict[str, Any]]] = []
@@ -133,10 +143,9 @@ def main(argv: list[str] | None = None) -> int:
             ratio = rows[rows.index((label, row)) - 1][1]["median_ms"] / row["median_ms"]
             print(f"{'  cmpc / floor (medians)':<26} {ratio:10.2f}")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(report, f, indent=2)
+        write_json(args.json, report)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

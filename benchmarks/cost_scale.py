@@ -15,7 +15,6 @@ in one run, and read the ratios.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -25,18 +24,20 @@ from typing import Any
 import numpy as np
 
 from mpc import solvers
-from pipelines.config import load
+from pipelines.config import RunConfig, load
+from pipelines.errors import PipelineError
 from pipelines.loop.margins import parse_margins
 
 # robot_scaling.py, the episodes' runner, is imported by name however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robot_scaling  # noqa: E402
+from bench_cli import human_count, output_file, predictor_name, robot_count, run_main, write_json  # noqa: E402
 
 
 def measure(
-    config: str | None, scale: float, n_robots: int, n_humans: int, episodes: int, predictor: str
+    run: RunConfig, scale: float, n_robots: int, n_humans: int, episodes: int, predictor: str
 ) -> dict[str, Any]:
-    run = load(config, sets=[f"mpc.cost_scale={scale}"])
+    """The CMPC episodes of one row under ``run`` (a config whose cost_scale is ``scale``)."""
     margins = parse_margins(run.controller.margins or "none")
     # A solve's info describes the solver whose result was kept (IPOPT after a Fatrop failure), so Fatrop's
     # own statistics are read around every call instead.
@@ -88,16 +89,22 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--config", help="a crowdmpc config file ([mpc] and [controller] margins)")
     parser.add_argument("--cost-scale", type=float, nargs="+", default=[1.0, 0.01])
-    parser.add_argument("--robots", type=int, nargs="+", default=[3, 12])
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--robots", type=robot_count, nargs="+", default=[3, 12])
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=int, default=4)
-    parser.add_argument("--predictor", default="constant_velocity")
-    parser.add_argument("--json", help="also write the rows to this file")
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
+    parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+    try:  # every scale's config checked before the first episode
+        runs = {scale: load(args.config, sets=[f"mpc.cost_scale={scale}"]) for scale in args.cost_scale}
+    except PipelineError as exc:  # ConfigError, and what a value's own check raises
+        parser.error(f"--config/--cost-scale: {exc}")
     load_before = os.getloadavg()[0]
     t0 = time.perf_counter()
     rows = [
-        measure(args.config, scale, m, args.humans, args.episodes, args.predictor)
+        measure(runs[scale], scale, m, args.humans, args.episodes, args.predictor)
         for m in args.robots
         for scale in args.cost_scale
     ]
@@ -116,10 +123,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['step_p99_ms']:>7.1f} {r['success_rate']:>6.1f}"
         )
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"args": vars(args), "rows": rows}, f, indent=2)
+        write_json(args.json, {"args": vars(args), "rows": rows})
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -43,10 +43,11 @@ from __future__ import annotations
 
 import argparse
 import heapq
-import json
 import os
+import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,6 +59,9 @@ from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.episode import run_episode
 from pipelines.loop.mpc import MPCController
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, mpc_sets, output_file, robot_count, run_main, write_json  # noqa: E402
 
 PREDICTOR = "constant_velocity"
 Overrides = tuple[tuple[str, Any], ...]
@@ -84,7 +88,7 @@ def _controller(rule: str, parallel: str, extra: Overrides = ()) -> MPCControlle
 def mpc_overrides(texts: Sequence[str]) -> Overrides:
     """``--mpc KEY=VALUE`` values, parsed and checked as ``crowdmpc --set mpc.KEY=VALUE`` (the values that
     differ from Table I); a key the rows vary themselves is an error."""
-    run = load(None, sets=[f"mpc.{text}" for text in texts])
+    run = load(None, sets=mpc_sets(texts))
     clash = sorted(ROW_KEYS & {text.partition("=")[0].strip() for text in texts})
     if clash:
         raise ConfigError(f"{', '.join(clash)}: set by --rules and --parallel, not by --mpc")
@@ -231,8 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--robots", type=int, nargs="+", default=[3, 6])
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--robots", type=robot_count, nargs="+", default=[3, 6])
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=int, default=3, help="circle episodes per row (seeds 0..)")
     parser.add_argument("--rules", nargs="+", default=list(RULES), help="UPDATE:STOP pairs")
     parser.add_argument("--parallel", nargs="+", choices=PARALLEL_MODES, default=list(PARALLEL_MODES))
@@ -245,8 +249,10 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help="an [mpc] value as `crowdmpc --set mpc.KEY=VALUE` takes it, e.g. cost_scale=0.01 (repeatable)",
     )
-    parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
+    if args.episodes < 1 or args.replay_reps < 1:
+        parser.error(f"--episodes and --replay-reps must be >= 1, got {args.episodes}, {args.replay_reps}")
     try:
         extra = mpc_overrides(args.mpc)
     except PipelineError as exc:  # ConfigError and the other errors a value can cause
@@ -315,10 +321,9 @@ def main(argv: list[str] | None = None) -> int:
                 )
             print(line)
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(report, f, indent=2)
+        write_json(args.json, report)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

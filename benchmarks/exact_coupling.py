@@ -16,9 +16,10 @@ plan's true F (the predictor itself, not its linearisation). The machine is shar
 from __future__ import annotations
 
 import argparse
-import json
 import os
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,9 @@ from mpc.coupled import CoupledCMPC
 from mpc.solvers import SOLVED
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 PREDICTOR = "social_lstm_soft_eth"  # the coupling experiment's (pipelines/experiments)
 
@@ -93,11 +97,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--predictor", default=PREDICTOR)
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--predictor", type=predictor_name, default=PREDICTOR)
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--max-iter", type=int, default=100, help="IPOPT iterations of the exact solve")
-    parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
     load = os.getloadavg()[0]
     row = measure(args.predictor, args.humans, args.episodes, args.max_iter)
@@ -121,10 +125,9 @@ def main(argv: list[str] | None = None) -> int:
         f"max {row['F_gain_max']:.2e}"
     )
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(row, f, indent=2)
+        write_json(args.json, row)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -31,6 +31,9 @@ from predictors.export.parity import check_parity, crossing_scene  # noqa: E402
 from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, run_main  # noqa: E402
+
 DEFAULT_MODELS = (
     "social_lstm_eth",
     "social_lstm_soft_eth",
@@ -127,7 +130,7 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--models", default=",".join(DEFAULT_MODELS))
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--calls", type=int, default=300)
     parser.add_argument("--no-closed-loop", action="store_true", help="skip the coupled-NLP episodes")
     args = parser.parse_args()
@@ -157,4 +160,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_main(main))

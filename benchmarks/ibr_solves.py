@@ -15,13 +15,18 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from crowdsim.env import CrowdEnv
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, predictor_name, run_main  # noqa: E402
 
 
 def measure(predictor: str, n_humans: int, episodes: int, jit: bool) -> dict[str, float]:
@@ -98,8 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--predictor", default="social_lstm_eth")
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--predictor", type=predictor_name, default="social_lstm_eth")
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--jit", action="store_true", help="compile the NLP (cached, mpc/compile_cache.py)")
     args = parser.parse_args(argv)
@@ -123,4 +128,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -11,11 +11,16 @@ infeasible case, where ORCA itself gives up collision-freedom), and whether cont
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from crowdsim.baselines import OrcaController
 from crowdsim.env import CrowdEnv
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, robot_count, run_main  # noqa: E402
 
 CONTACT: float = 0.6  # m, sum of the radii
 
@@ -32,8 +37,8 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--scenario", default="circle", choices=("circle", "perpendicular"))
-    parser.add_argument("--humans", type=int, default=9)
-    parser.add_argument("--robots", type=int, default=3)
+    parser.add_argument("--humans", type=human_count, default=9)
+    parser.add_argument("--robots", type=robot_count, default=3)
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
@@ -77,4 +82,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_main(main))

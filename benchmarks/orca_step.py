@@ -15,13 +15,18 @@ from __future__ import annotations
 
 import argparse
 import copy
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from crowdsim.baselines import OrcaController
 from crowdsim.env import CrowdEnv, EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, robot_count, run_main  # noqa: E402
 
 
 def fastest(fn, repeats: int) -> float:
@@ -76,8 +81,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--humans", type=int, nargs="+", default=[5, 9, 20, 50])
-    parser.add_argument("--robots", type=int, default=3)
+    parser.add_argument("--humans", type=human_count, nargs="+", default=[5, 9, 20, 50])
+    parser.add_argument("--robots", type=robot_count, default=3)
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--scenario", default="circle", choices=("circle", "perpendicular"))
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per step; the fastest is kept")
@@ -96,4 +101,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_main(main))

@@ -37,6 +37,9 @@ from predictors.export.parity import crossing_scene  # noqa: E402
 from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, robot_count, run_main  # noqa: E402
+
 
 def per_call_us(function, args: list[np.ndarray], calls: int) -> tuple[float, list[np.ndarray]]:
     """Median microseconds a call, and the outputs as flat arrays."""
@@ -88,8 +91,8 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--model", default="social_lstm_eth")
-    parser.add_argument("--humans", type=int, default=7)
-    parser.add_argument("--robots", type=int, default=3)
+    parser.add_argument("--humans", type=human_count, default=7)
+    parser.add_argument("--robots", type=robot_count, default=3)
     parser.add_argument("--horizon", type=int, default=4)
     parser.add_argument("--calls", type=int, default=300)
     parser.add_argument("--compile", choices=("none", "twin", "encoder", "both"), default="none")
@@ -126,4 +129,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -11,12 +11,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, predictor_name, run_main  # noqa: E402
 
 
 class TimedRecorder(McapEpisodeRecorder):
@@ -68,9 +73,9 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--controller", default="cmpc", choices=["cmpc", "dmpc", "orca", "straight"])
-    parser.add_argument("--predictor", default="constant_velocity")
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--episodes", type=int, default=4)
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--humans", type=human_count, default=7)
     args = parser.parse_args()
     row = measure(args.controller, args.predictor, args.episodes, args.humans)
     print(
@@ -82,4 +87,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_main(main))

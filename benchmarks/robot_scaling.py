@@ -1,4 +1,4 @@
-"""Success, collision, travel time and control-step time against the number of robots.
+r"""Success, collision, travel time and control-step time against the number of robots.
 
 For every number of robots M (``--robots``, default 3 5 6 12) and controller (``--controllers``, default CMPC
 and DMPC with ``--predictor``, default constant velocity), ``--episodes`` episodes (default 50) with
@@ -39,9 +39,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any, cast
@@ -58,6 +58,17 @@ from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec, parse_margins
 from pipelines.loop.mpc import MPCController
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import (  # noqa: E402
+    human_count,
+    mpc_sets,
+    output_file,
+    predictor_name,
+    robot_count,
+    run_main,
+    write_json,
+)
 
 CONTROLLERS = ("cmpc", "dmpc")
 # What this project adds for many robots, beside the paper's method: one source, the example config file
@@ -239,10 +250,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--robots", type=int, nargs="+", default=[3, 5, 6, 12])
+    parser.add_argument("--robots", type=robot_count, nargs="+", default=[3, 5, 6, 12])
     parser.add_argument("--controllers", nargs="+", choices=CONTROLLERS, default=list(CONTROLLERS))
-    parser.add_argument("--predictor", default="constant_velocity")
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=int, default=50, help="episodes per row (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
     parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
@@ -264,10 +275,12 @@ def main(argv: list[str] | None = None) -> int:
         choices=GOAL_ASSIGNMENTS,
         help="fixed (the paper) | slots; default: the config's, else fixed",
     )
-    parser.add_argument("--json", help="also write the rows, with every episode's outcome, to this file")
+    parser.add_argument(
+        "--json", type=output_file, help="also write the rows, with every episode's outcome, to this file"
+    )
     args = parser.parse_args(argv)
     try:  # the config files' parser and checks: the values that differ from Table I, validated
-        run = load(args.config, sets=[f"mpc.{text}" for text in args.mpc])
+        run = load(args.config, sets=mpc_sets(args.mpc))
         overrides = run.mpc_overrides()
         margins = parse_margins(run.controller.margins or "none")
         goals = args.goals or run.env.goal_assignment
@@ -306,10 +319,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
     print_table(rows)
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(_json_safe(report), f, indent=2)
+        write_json(args.json, _json_safe(report))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

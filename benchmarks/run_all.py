@@ -61,6 +61,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import sweep_floor  # noqa: E402
+from bench_cli import output_file, run_main, write_text  # noqa: E402
 from run_all_table import table  # noqa: E402
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
@@ -488,12 +489,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sweep-episodes", type=int, help="episodes per cell of the sweep measurement")
     parser.add_argument(
         "--sections",
-        type=lambda s: tuple(s.split(",")),
+        type=lambda s: tuple(part.strip() for part in s.split(",")),
         default=SECTIONS,
-        help=f"subset of {','.join(SECTIONS)}",
+        metavar="NAME,NAME,...",
+        help=f"comma-separated, from: {', '.join(SECTIONS)}",
     )
-    parser.add_argument("--json", type=Path, help="also write the JSON here")
+    parser.add_argument("--json", type=output_file, help="also write the JSON here")
     args = parser.parse_args(argv)
+    if args.sweep_episodes is not None and args.sweep_episodes < 2:
+        parser.error(f"--sweep-episodes must be >= 2 (a worker's first episode of a cell is not timed), got "
+                     f"{args.sweep_episodes}")  # fmt: skip
     unknown = set(args.sections) - set(SECTIONS)
     if unknown:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
@@ -502,9 +507,9 @@ def main(argv: list[str] | None = None) -> int:
     text = json.dumps(report, indent=1)
     print(text)
     if args.json:
-        args.json.write_text(text + "\n")
+        write_text(args.json, text)
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(run_main(main))

@@ -15,7 +15,6 @@ printed separately (the jit build dominates them).
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 import time
@@ -28,6 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mpc import nlp as nlp_module  # noqa: E402
 from mpc.config import MPCConfig  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 SCENARIOS = ("circle", "perpendicular")
 
@@ -116,10 +118,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--humans", type=int, default=7)
+    parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=int, default=4, help="episodes per controller to record")
-    parser.add_argument("--predictor", default="constant_velocity", help="the predictor of the recorded loop")
-    parser.add_argument("--json", type=Path, help="also write the figures here")
+    parser.add_argument(
+        "--predictor",
+        type=predictor_name,
+        default="constant_velocity",
+        help="the predictor of the recorded loop",
+    )
+    parser.add_argument("--json", type=output_file, help="also write the figures here")
     args = parser.parse_args(argv)
 
     print(
@@ -160,9 +167,9 @@ def main(argv: list[str] | None = None) -> int:
             )
     print("\n".join(lines))
     if args.json:
-        args.json.write_text(json.dumps(report, indent=1) + "\n")
+        write_json(args.json, report, indent=1)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import collections
-import json
 import os
 import sys
 import tempfile
@@ -31,6 +30,8 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import output_file, run_main, write_json  # noqa: E402
 
 TARGET_MIN = 15.0  # issue 16's target for the full table on 2 cores
 
@@ -189,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         "--episodes-per-cell", type=int, default=20, help="one more than is timed (default 20)"
     )
     parser.add_argument("--workers", type=int, default=2, help="cores the projection assumes (default 2)")
-    parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
     if args.episodes_per_cell < 2:
         parser.error(f"--episodes-per-cell must be >= 2 (the first of each cell is not timed), got "
@@ -211,10 +212,9 @@ def main(argv: list[str] | None = None) -> int:
         f"{100 * out['python_cut_needed_for_target']:.0f} % of the Python time gone"
     )
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
+        write_json(args.json, out)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -23,6 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import predictor_name, run_main  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -45,7 +48,7 @@ def main() -> int:
     parser.add_argument("--kills", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--experiment", default="table2")
-    parser.add_argument("--predictor", default="constant_velocity")
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--episodes-per-cell", type=int, default=12)
     args = parser.parse_args()
     rng = random.Random(args.seed)
@@ -78,4 +81,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -1,0 +1,96 @@
+"""The edges every benchmark script shares with ``crowdmpc``.
+
+What a user types is checked when the command line is parsed (one line, exit 2), before any episode runs;
+an error a user can cause later (a config file, a predictor's checkpoint) ends the script as it ends
+``crowdmpc``: one line, exit 2, no traceback (``pipelines.cli.USER_ERRORS``); and a ``--json`` file is written
+where it is asked for, its folder created, as ``crowdmpc simulate --json`` does.
+
+The benchmarks are scripts, not a package: each puts this folder on ``sys.path`` to import this module.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
+from pipelines.cli import USER_ERRORS
+from pipelines.config import ConfigError
+from predictors.registry import available
+
+
+def count_in(what: str, low: int, high: int) -> Callable[[str], int]:
+    """An argparse ``type``: an integer in ``low..high``, else the parser's one-line error naming ``what``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{what} must be an integer in {low}..{high}, got {text!r}")
+        return value
+
+    return parse
+
+
+robot_count = count_in("robots", 1, MAX_ROBOTS)
+human_count = count_in("humans", 0, MAX_HUMANS)
+
+
+def predictor_name(text: str) -> str:
+    """An argparse ``type``: a predictor ``crowdmpc`` knows (registered, or in the shipped or user zoo)."""
+    names = available()
+    if text not in names:
+        raise argparse.ArgumentTypeError(f"unknown predictor {text!r}; choose from {', '.join(names)}")
+    return text
+
+
+def output_file(text: str) -> Path:
+    """An argparse ``type``: a file to write (an existing folder is refused now, not after the run)."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; expected the path of a file to write")
+    return path
+
+
+def mpc_sets(texts: Sequence[str]) -> list[str]:
+    """``--mpc KEY=VALUE`` items as the ``--set mpc.KEY=VALUE`` items the config loader parses; a malformed
+    one is named in ``--mpc``'s own form."""
+    for text in texts:
+        key, equals, _ = text.partition("=")
+        if not equals or not key.strip() or "." in key:
+            raise ConfigError(f"--mpc {text!r}: expected KEY=VALUE of the [mpc] table, e.g. cost_scale=0.01")
+    return [f"mpc.{text}" for text in texts]
+
+
+def _path_as_text(value: Any) -> str:
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+
+def write_text(path: str | Path, text: str) -> None:
+    """``text`` to ``path``, its folder created."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text if text.endswith("\n") else text + "\n")
+
+
+def write_json(path: str | Path, payload: Any, indent: int = 2) -> None:
+    """``payload`` as JSON to ``path`` (paths in it as text), its folder created."""
+    write_text(path, json.dumps(payload, indent=indent, default=_path_as_text))
+
+
+def run_main(main: Callable[[], int | None]) -> int:
+    """A script's ``main()`` (its command line from ``sys.argv``), with the errors a user can cause printed as
+    one line and exit status 2."""
+    try:
+        return int(main() or 0)
+    except USER_ERRORS as exc:
+        print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
+        return 2

@@ -1,0 +1,105 @@
+"""benchmarks/bench_cli.py: what a user types into a benchmark is checked when parsed, a user's error ends a
+script in one line, and --json files land where asked."""
+
+import argparse
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    # Registered before it runs: a module's dataclasses look their annotations up in sys.modules.
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+bench_cli = _load("bench_cli")
+
+
+def test_counts_take_their_range_and_name_themselves():
+    assert [bench_cli.robot_count(t) for t in ("1", "12")] == [1, 12]
+    assert [bench_cli.human_count(t) for t in ("0", "50")] == [0, 50]
+    for bad in ("0", "13", "-1", "3.5", "x"):
+        with pytest.raises(
+            argparse.ArgumentTypeError, match=rf"robots must be an integer in 1\.\.12, got '{bad}'"
+        ):
+            bench_cli.robot_count(bad)
+    with pytest.raises(argparse.ArgumentTypeError, match="humans must be an integer in 0..50, got '51'"):
+        bench_cli.human_count("51")
+
+
+def test_a_predictor_is_checked_against_the_registry_and_the_zoo():
+    assert bench_cli.predictor_name("constant_velocity") == "constant_velocity"
+    assert bench_cli.predictor_name("social_lstm_eth") == "social_lstm_eth"  # a shipped zoo entry
+    with pytest.raises(
+        argparse.ArgumentTypeError, match="unknown predictor 'nosuch'; choose from .*constant_velocity"
+    ):
+        bench_cli.predictor_name("nosuch")
+
+
+def test_an_output_file_may_not_be_a_folder_and_its_folder_is_created(tmp_path):
+    with pytest.raises(argparse.ArgumentTypeError, match="is a folder; expected the path of a file"):
+        bench_cli.output_file(str(tmp_path))
+    path = bench_cli.output_file(str(tmp_path / "new" / "deeper" / "out.json"))
+    bench_cli.write_json(path, {"path": path, "x": [1.5, None]})
+    assert json.loads(path.read_text()) == {"path": str(path), "x": [1.5, None]}
+    assert path.read_text().endswith("\n")
+    with pytest.raises(TypeError, match="set is not JSON serializable"):
+        bench_cli.write_json(tmp_path / "bad.json", {"x": {1}})
+
+
+def test_mpc_items_become_set_items_and_a_malformed_one_is_named_as_typed():
+    assert bench_cli.mpc_sets(["cost_scale=0.01", "w_floc = 2"]) == ["mpc.cost_scale=0.01", "mpc.w_floc = 2"]
+    for bad in ("cost_scale", "=3", "mpc.cost_scale=1"):
+        with pytest.raises(
+            bench_cli.ConfigError, match=f"--mpc '{bad}': expected KEY=VALUE of the \\[mpc\\]"
+        ):
+            bench_cli.mpc_sets([bad])
+
+
+def test_run_main_ends_a_users_error_in_one_line_and_keeps_a_bugs_traceback(capsys):
+    from pipelines.errors import PipelineError
+
+    def users_error() -> int:
+        raise PipelineError("--config x.toml: no such file")
+
+    assert bench_cli.run_main(users_error) == 2
+    assert capsys.readouterr().err.strip().endswith("error: --config x.toml: no such file")
+    assert bench_cli.run_main(lambda: None) == 0
+    assert bench_cli.run_main(lambda: 3) == 3
+
+    def bug() -> int:
+        raise KeyError("a bug")
+
+    with pytest.raises(KeyError):
+        bench_cli.run_main(bug)
+
+
+@pytest.mark.parametrize(
+    ("script", "argv", "message"),
+    [
+        ("robot_scaling", ["--robots", "3", "13"], "argument --robots: robots must be an integer in 1..12"),
+        ("robot_scaling", ["--mpc", "cost_scale"], "--mpc 'cost_scale': expected KEY=VALUE"),
+        ("dmpc_scaling", ["--robots", "0"], "argument --robots: robots must be an integer in 1..12"),
+        ("cost_scale", ["--config", "nope.toml"], "--config nope.toml: no such file"),
+        ("cost_scale", ["--cost-scale", "-1"], "cost_scale: must be > 0"),
+        ("control_step", ["--predictor", "nosuch"], "unknown predictor 'nosuch'"),
+        ("control_step", ["--no-ibr"], "nothing to measure"),
+        ("run_all", ["--sweep-episodes", "1"], "--sweep-episodes must be >= 2"),
+    ],
+)
+def test_a_bad_command_line_stops_before_any_episode(script, argv, message, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # a missing --config is looked up here, and nothing may be written
+    with pytest.raises(SystemExit) as stop:
+        _load(script).main(argv)
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
