@@ -330,7 +330,8 @@ def current_sha256(predictor: str, directory: str | Path | None = None) -> str |
     return entries[predictor].sha256
 
 
-def _recalibrate_hint(predictor: str, source: str, alpha: float) -> str:
+def recalibrate_command(predictor: str, source: str, alpha: float) -> str:
+    """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``."""
     return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha:g}"
 
 
@@ -357,7 +358,7 @@ def find_calibration(
         files = " or ".join(str(p) for p in calibration_files(directory))
         raise PredictorError(
             f"no {source} calibration at alpha={alpha:g} for predictor {predictor!r} in {files}{have}; "
-            f"run: {_recalibrate_hint(predictor, source, alpha)}"
+            f"run: {recalibrate_command(predictor, source, alpha)}"
         )
     path, block = found[0]
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
@@ -365,7 +366,7 @@ def find_calibration(
         raise PredictorError(
             f"{path}: the {source} calibration at alpha={alpha:g} of predictor {predictor!r} was made for "
             f"weights sha256 {block.predictor_sha256}, but the weights now have sha256 {expected}; the "
-            f"weights changed since calibration, recalibrate: {_recalibrate_hint(predictor, source, alpha)}"
+            f"weights changed since calibration, recalibrate: {recalibrate_command(predictor, source, alpha)}"
         )
     return block
 

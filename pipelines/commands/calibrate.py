@@ -138,7 +138,7 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.experiments.calibrate import class_coverage_report, format_coverage
+    from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
     from pipelines.loop.margins import parse_margins
     from pipelines.plain_json import plain
     from predictors.calibration import calibrations_path, save_calibration
@@ -181,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
     print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
     class_cover = class_coverage_report(blocks, holdout, holdout_classes)
     shortfall_cover = class_coverage_report(blocks, holdout_shortfall, holdout_classes, shortfall=True)
+    if args.source == "closed-loop":  # real scenes have no motion classes
+        for line in missing_class_margins(blocks):
+            print(line)
     if args.json is not None:
         payload = {
             "blocks": [b.to_json() for b in blocks],

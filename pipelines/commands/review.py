@@ -141,8 +141,11 @@ def run(args: argparse.Namespace) -> int:
             f"--{name}" for name in ("plot", "times", "animate", "compare") if getattr(args, name)
         ]
         if single_file_only:
+            files = sorted(args.path.glob("*.mcap"))
+            example = f"; give one of its files, e.g. {files[0]}" if files else ""
+            verb = "needs" if len(single_file_only) == 1 else "need"
             raise PipelineError(
-                f"{', '.join(single_file_only)} need one .mcap file, not the folder {args.path}"
+                f"{', '.join(single_file_only)} {verb} one .mcap file, not the folder {args.path}{example}"
             )
         recordings, n_unreadable = _read_folder(args.path, report)
         table, totals = aggregate_table(recordings)

@@ -130,6 +130,14 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
         raise cfg.error(
             "mpc", key, "a sweep compiles by [sweep] jit (--jit auto|on|off), which leaves the cells alone"
         )
+    if key == "w_floc" and value == 0 and len({spec.flocking for _, spec in experiment.methods}) > 1:
+        # w_floc = 0 is flocking off in every method: the comparison would be NF against NF.
+        raise cfg.error(
+            "mpc",
+            key,
+            f"experiment {experiment.name!r} compares flocking on and off; w_floc = 0 turns it off in all "
+            "its methods",
+        )
     methods = []
     for label, spec in experiment.methods:
         own = dict(spec.mpc_overrides)

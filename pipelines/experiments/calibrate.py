@@ -243,9 +243,35 @@ def class_coverage_report(
         for c, name in enumerate(MOTION_CLASSES):
             margins = ", ".join(f"{q:.3f}" for q in table.quantiles[c])
             line = f"    {name:<9} n={table.n[c][0]:<6} m_k [m]: {margins}"
-            if cover is not None:
-                line += " | held-out coverage: " + ", ".join(f"{v:.1%}" for v in cover[c])
+            if cover is not None and all(math.isnan(v) for v in cover[c]):
+                line += " | held-out coverage: no held-out samples in this class"
+            elif cover is not None:
+                line += " | held-out coverage: " + ", ".join(
+                    "-" if math.isnan(v) else f"{v:.1%}" for v in cover[c]
+                )
             print(line)
         if cover is not None:
             report.append([list(row) for row in cover])
     return report if holdout is not None and classes is not None else None
+
+
+def missing_class_margins(blocks: Sequence[Any]) -> list[str]:
+    """A line for each closed-loop block stored without margins per motion class: ``conformal-motion`` and
+    ``conformal-shortfall`` will refuse it (it replaces the shipped block of its predictor and alpha), so the
+    user learns it now rather than at the first episode that asks."""
+    from predictors.conformal import min_samples
+
+    lines = []
+    for block in blocks:
+        missing = [
+            mode
+            for mode, table in (("conformal-motion", block.classes), ("conformal-shortfall", block.shortfall))
+            if table is None
+        ]
+        if missing:
+            lines.append(
+                f"  alpha {block.alpha:g}: no margins per motion class, so {' and '.join(missing)} will "
+                f"refuse this calibration: a class had fewer than {min_samples(block.alpha)} samples at some "
+                "step (more --episodes give them)"
+            )
+    return lines

@@ -127,10 +127,14 @@ class MarginSpec:
         block = self._block(predictor, horizon, sha256)
         table = block.classes if self.mode == "conformal-motion" else block.shortfall
         if table is None:
+            from predictors.calibration import recalibrate_command
+
+            assert predictor is not None  # _block refused None
+            command = recalibrate_command(predictor, self.source, self.alpha)
             raise PipelineError(
                 f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} has no {self.mode} "
                 "margins per motion class (made before they existed, or too few samples in a class for this "
-                f"alpha); recalibrate: crowdmpc calibrate --predictor {predictor} --alpha {self.alpha:g}"
+                f"alpha); recalibrate with enough episodes: {command} --episodes 200"
             )
         return table
 

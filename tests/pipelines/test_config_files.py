@@ -521,6 +521,9 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
     out = capsys.readouterr().out
     assert "cmpc-social_lstm_eth-F-ibr-w_coll=1000000.0-m=none-paper-visible-h5-r3" in out
     assert "dmpc-social_lstm_eth-F-ibr-w_coll=1000000.0-m=none-paper-visible-h5-r3" in out
+    # w_floc = 0 in an experiment that does not compare flocking: every cell takes it
+    assert main([*argv, "--set", "mpc.w_floc=0"]) == 0
+    assert "cmpc-social_lstm_eth-F-ibr-w_floc=0.0-m=none-paper-visible-h5-r3" in capsys.readouterr().out
     # a file of defaults (what `config show` writes) changes no cell
     main(["config", "show"])
     defaults = _write(tmp_path, capsys.readouterr().out, "defaults.toml")
@@ -544,6 +547,11 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
         ("table2", "env.time_limit=20", "--set env.time_limit: 20.0: a sweep's cells run a named profile"),
         ("table2", "world.radius=0.2", "--set world.radius: 0.2: a sweep's cells run a named profile"),
         ("table2", "mpc.jit=true", "--set mpc.jit: a sweep compiles by [sweep] jit"),
+        (
+            "table3",
+            "mpc.w_floc=0",
+            "--set mpc.w_floc: experiment 'table3' compares flocking on and off; w_floc = 0 turns it off",
+        ),  # fmt: skip
         (
             "baselines",
             "controller.predictor=constant_velocity",

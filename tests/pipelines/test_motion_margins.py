@@ -34,8 +34,13 @@ def test_a_calibration_without_class_margins_is_refused(tmp_path, monkeypatch):
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     _store(tmp_path, classes=False)
     for mode in ("conformal-motion", "conformal-shortfall"):
-        with pytest.raises(PipelineError, match=f"no {mode} margins per motion class.*recalibrate"):
+        # The command it names runs as given (the source is required).
+        command = (
+            "crowdmpc calibrate --predictor constant_velocity --source closed-loop --alpha 0.1 --episodes 200"
+        )
+        with pytest.raises(PipelineError, match=f"no {mode} margins per motion class.*recalibrate") as caught:
             parse_margins(mode).resolve_classes("constant_velocity", 4, None)
+        assert str(caught.value).endswith(command)
 
 
 def _margins(controller, obs) -> np.ndarray:
@@ -112,3 +117,21 @@ def test_a_step_records_its_margins_and_guided_robots(tmp_path, monkeypatch):
     assert np.allclose(np.asarray(out.extra["human_margins"])[:, 0], 0.18 * 2 * np.arange(1, 5))
     assert list(out.extra["guided"]) == [0]  # robot 1's way east is free
     assert out.extra["guided"][0][0] > 1.0  # round the row's right end
+
+
+def test_calibrate_names_a_block_stored_without_class_margins_and_an_empty_held_out_class(capsys):
+    from pipelines.experiments.calibrate import class_coverage_report, missing_class_margins
+
+    errors, motion = class_errors(4)
+    full = constant_velocity_block(errors, classes=motion, shortfall=errors)
+    assert missing_class_margins([full]) == []
+    # A class needs 9 samples at alpha 0.1 (ceil(1/0.1 - 1)); here the first has none.
+    few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    (line,) = missing_class_margins([few])
+    assert "conformal-motion and conformal-shortfall will refuse this calibration" in line
+    assert "fewer than 9 samples at some step (more --episodes give them)" in line
+    # Held-out samples of the first class only (its own 19: 18 within 0.18 k), none for the others.
+    class_coverage_report([full], errors[motion == 0], motion[motion == 0])
+    rows = capsys.readouterr().out.splitlines()[1:]
+    assert rows[0].endswith("held-out coverage: 94.7%, 94.7%, 94.7%, 94.7%")
+    assert all(row.endswith("held-out coverage: no held-out samples in this class") for row in rows[1:])

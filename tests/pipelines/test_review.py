@@ -124,7 +124,9 @@ def test_folder_gives_one_row_per_run_and_the_rates(runs, capsys, tmp_path):
     assert totals["episodes"] == 2 and totals["success_rate"] == expected_success
     assert totals["solve_time_max_ms"] == pytest.approx(80.0)
     assert main(["review", str(runs[0].path.parent), "--plot", str(tmp_path / "p.png")]) == 2
-    assert "--plot need one .mcap file" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--plot needs one .mcap file" in err
+    assert f"give one of its files, e.g. {runs[0].path.parent / 'circle_seed000001.mcap'}" in err
 
 
 def test_plot_animation_and_comparison(runs, tmp_path, capsys):
