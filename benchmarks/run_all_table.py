@@ -88,6 +88,11 @@ def _ms(value: float, spec: str) -> str:
     return format(value, spec) if math.isfinite(value) else "not run (--quick)"
 
 
+def _checked(error: float) -> str:
+    """A parity error, or "-" where none is checked (the hand-written twins' Jacobians)."""
+    return f"{error:.1e}" if math.isfinite(error) else "-"
+
+
 def _export_rows(exported: dict[str, Any]) -> list[str]:
     lines = [
         "",
@@ -101,7 +106,7 @@ def _export_rows(exported: dict[str, Any]) -> list[str]:
             continue
         for twin, r in rows.items():
             lines.append(
-                f"| {model} {twin} | {r['export_s']:.3f} | {r['value_err']:.1e} | {r['jac_err']:.1e} | "
+                f"| {model} {twin} | {r['export_s']:.3f} | {r['value_err']:.1e} | {_checked(r['jac_err'])} | "
                 f"{r['ibr_ms']:.3f} | {_ms(r['nlp_ms'], '.2f')} |"
             )
         if "exported" in rows and "hand-written" in rows:
