@@ -12,10 +12,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
@@ -68,10 +71,20 @@ def mpc_sets(texts: Sequence[str]) -> list[str]:
     return [f"mpc.{text}" for text in texts]
 
 
-def _path_as_text(value: Any) -> str:
+def json_safe(value: Any) -> Any:
+    """``value`` as strict JSON takes it: NaN and infinities as null (a figure not measured), numpy scalars as
+    numbers, tuples as lists, paths as text."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
     if isinstance(value, Path):
         return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+    return value
 
 
 def write_text(path: str | Path, text: str) -> None:
@@ -82,8 +95,8 @@ def write_text(path: str | Path, text: str) -> None:
 
 
 def write_json(path: str | Path, payload: Any, indent: int = 2) -> None:
-    """``payload`` as JSON to ``path`` (paths in it as text), its folder created."""
-    write_text(path, json.dumps(payload, indent=indent, default=_path_as_text))
+    """``payload`` as strict JSON (``json_safe``) to ``path``, its folder created."""
+    write_text(path, json.dumps(json_safe(payload), indent=indent, allow_nan=False))
 
 
 def run_main(main: Callable[[], int | None]) -> int:

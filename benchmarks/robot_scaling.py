@@ -208,19 +208,6 @@ def run_row(
     }
 
 
-def _json_safe(value: Any) -> Any:
-    """NaN and inf as null (strict JSON), tuples as lists."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float | np.floating):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
-
-
 def _fmt(x: float, spec: str) -> str:
     return format(x, spec) if math.isfinite(x) else "-".rjust(len(format(0.0, spec)))
 
@@ -319,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
     print_table(rows)
     if args.json:
-        write_json(args.json, _json_safe(report))
+        write_json(args.json, report)
     return 0
 
 

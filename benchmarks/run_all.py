@@ -61,7 +61,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import sweep_floor  # noqa: E402
-from bench_cli import output_file, run_main, write_text  # noqa: E402
+from bench_cli import json_safe, output_file, run_main, write_text  # noqa: E402
 from run_all_table import table  # noqa: E402
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
@@ -504,7 +504,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
     report = run(args)
     print(table(report))  # run_all_table.py
-    text = json.dumps(report, indent=1)
+    text = json.dumps(json_safe(report), indent=1, allow_nan=False)
     print(text)
     if args.json:
         write_text(args.json, text)

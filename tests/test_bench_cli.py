@@ -4,9 +4,11 @@ script in one line, and --json files land where asked."""
 import argparse
 import importlib.util
 import json
+import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
@@ -49,8 +51,9 @@ def test_an_output_file_may_not_be_a_folder_and_its_folder_is_created(tmp_path):
     with pytest.raises(argparse.ArgumentTypeError, match="is a folder; expected the path of a file"):
         bench_cli.output_file(str(tmp_path))
     path = bench_cli.output_file(str(tmp_path / "new" / "deeper" / "out.json"))
-    bench_cli.write_json(path, {"path": path, "x": [1.5, None]})
-    assert json.loads(path.read_text()) == {"path": str(path), "x": [1.5, None]}
+    bench_cli.write_json(path, {"path": path, "x": (1.5, float("nan"), -math.inf), "n": np.int64(3)})
+    # strict JSON: a figure not measured is null, not NaN
+    assert json.loads(path.read_text()) == {"path": str(path), "x": [1.5, None, None], "n": 3}
     assert path.read_text().endswith("\n")
     with pytest.raises(TypeError, match="set is not JSON serializable"):
         bench_cli.write_json(tmp_path / "bad.json", {"x": {1}})
