@@ -256,9 +256,9 @@ def class_coverage_report(
 
 
 def missing_class_margins(blocks: Sequence[Any]) -> list[str]:
-    """A line for each closed-loop block stored without margins per motion class: ``conformal-motion`` and
-    ``conformal-shortfall`` will refuse it (it replaces the shipped block of its predictor and alpha), so the
-    user learns it now rather than at the first episode that asks."""
+    """A line for each closed-loop block without margins per motion class: ``conformal-motion`` and
+    ``conformal-shortfall`` will refuse it (once stored, it takes the place of the shipped block of its
+    predictor and alpha), so the user learns it now rather than at the first episode that asks."""
     from predictors.conformal import min_samples
 
     lines = []
