@@ -22,7 +22,9 @@ import numpy as np
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
+from pipelines.commands import check_writable
 from pipelines.config import ConfigError
+from pipelines.errors import PipelineError
 from predictors.registry import available
 
 
@@ -54,10 +56,15 @@ def predictor_name(text: str) -> str:
 
 
 def output_file(text: str) -> Path:
-    """An argparse ``type``: a file to write (an existing folder is refused now, not after the run)."""
+    """An argparse ``type``: a file that can be written (``crowdmpc``'s check: an existing folder or a place
+    without write access is refused now, not after the run; nothing is created)."""
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text} is a folder; expected the path of a file to write")
+    try:
+        check_writable(path, "file")
+    except PipelineError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return path
 
 

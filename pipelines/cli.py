@@ -49,10 +49,12 @@ EPILOG = """examples:
   crowdmpc --config docs/examples/demo.toml --set mpc.w_coll=1e6 simulate --humans 5
   crowdmpc --plugin my_predictor:MyNet train --model my_predictor:MyNet --data-dir ../shared/data
 
-Plugins: --plugin module:NetClass (before the command; repeatable) registers a predictor net of your own
-(the step contract of predictors/nets/contract.py) as the model kind "module:NetClass", for every command
-and the sweep's workers. The module is imported from the installed packages or the current directory.
-$CROWDMPC_PLUGINS (comma-separated) does the same; installed packages may declare entry points in the group
+Plugins: --plugin module:Class (before the command; repeatable) registers, for every command and the
+sweep's workers, a predictor net of your own (a torch.nn.Module with the step contract of
+predictors/nets/contract.py) as the model kind "module:Class", or a robot controller of your own (a class
+with reset, act, describe and close) as the controller "module:Class" (simulate --controller module:Class).
+The module is imported from the installed packages or the current directory. $CROWDMPC_PLUGINS and
+$CROWDMPC_CONTROLLERS (comma-separated) do the same; installed packages may declare entry points in the group
 "crowdmpc.predictors". Trained models go to the user zoo, $CROWDMPC_ZOO (default
 $XDG_DATA_HOME/crowdmpc/zoo or ~/.local/share/crowdmpc/zoo); the shipped zoo (checkpoints/) is read-only.
 """
@@ -96,7 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
         action=PluginAction,
         default=[],
         metavar="MODULE:CLASS",
-        help="register a predictor net of your own as model kind MODULE:CLASS (repeatable; before COMMAND)",
+        help="register a predictor net (model kind MODULE:CLASS) or a robot controller (controller "
+        "MODULE:CLASS) of your own (repeatable; before COMMAND)",
     )
     # Config files (pipelines/config): also accepted after simulate, sweep and config show.
     parser.add_argument(

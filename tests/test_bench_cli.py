@@ -55,6 +55,12 @@ def test_an_output_file_may_not_be_a_folder_and_its_folder_is_created(tmp_path):
     # strict JSON: a figure not measured is null, not NaN
     assert json.loads(path.read_text()) == {"path": str(path), "x": [1.5, None, None], "n": 3}
     assert path.read_text().endswith("\n")
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    with pytest.raises(
+        argparse.ArgumentTypeError, match=f"file {blocker / 'x.json'}: {blocker} is not a directory"
+    ):
+        bench_cli.output_file(str(blocker / "x.json"))
     with pytest.raises(TypeError, match="set is not JSON serializable"):
         bench_cli.write_json(tmp_path / "bad.json", {"x": {1}})
 

@@ -69,9 +69,10 @@ def test_the_library_packages_take_only_the_world_facts_from_the_simulator():
                 assert not bad, f"{path.relative_to(ROOT)} imports {bad}"
 
 
-# pipelines/ in rooms, each importing only the rooms before it: the closed loop, then its logs, then the
-# experiments built on both, then the command line on top. The shared leaves import no room.
-ROOMS = ("loop", "logs", "experiments", "commands")
+# pipelines/ in rooms, each importing only the rooms before it: the closed loop, the plugins it runs, its
+# logs, the experiments built on them, the config files that name all of these, then the command line on
+# top. The shared leaves import no room.
+ROOMS = ("loop", "plugins", "logs", "experiments", "config", "commands")
 LEAVES = ("errors", "plain_json", "version")
 
 

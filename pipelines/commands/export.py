@@ -6,6 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
+from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 
 # The MPC predicts over 4 steps (Table I); the CasADi function grows with H (its graph unrolls H recursive
@@ -76,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"--out {args.out} is a directory; give the file to write, e.g. {args.name}.casadi"
         )
+    check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     predictor = load_predictor(args.name)
     start = time.perf_counter()
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)

@@ -22,7 +22,7 @@ EPILOG = """examples:
   crowdmpc sweep --experiment predictors --episodes-per-cell 100 --record failures --out runs/predictors
   crowdmpc --plugin my_predictor:MyNet sweep --experiment predictors \\
       --predictors constant_velocity,social_lstm_eth,my_net_eth --episodes-per-cell 20 --out runs/swap
-  crowdmpc --plugin my_controller:MyCtl sweep --experiment controllers \
+  crowdmpc --plugin my_controller:MyCtl sweep --experiment controllers \\
       --controllers cmpc,orca,my_controller:MyCtl --episodes-per-cell 20 --out runs/controllers
   crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3

@@ -185,6 +185,10 @@ def _add(args: argparse.Namespace) -> int:
         )
     # before anything is read: the user zoo, never the shipped one unless a maintainer says --shipped
     root = zoo.checkpoints_dir() if args.shipped else zoo.writable_zoo_dir(args.dir)
+    if not args.weights.is_file():
+        raise PipelineError(
+            f"{args.weights} is not a file; give the weights `crowdmpc train` wrote (NAME.pt)"
+        )
     metrics_path = args.metrics or args.weights.with_suffix(".metrics.json")
     if not metrics_path.is_file():
         raise PipelineError(

@@ -173,6 +173,11 @@ def test_unreadable_checkpoint_files_are_one_line_errors(tmp_path, capsys):
     assert main(["export", "constant_velocity", "--out", str(tmp_path)]) == 2
     assert "is a directory" in capsys.readouterr().err
 
+    # missing weights are named as such, with or without the metrics beside them
+    for extra in ([], ["--metrics", str(tmp_path / "bad.metrics.json")]):
+        assert main(["zoo", "add", str(tmp_path / "nosuch.pt"), *extra]) == 2
+        assert f"{tmp_path / 'nosuch.pt'} is not a file; give the weights" in capsys.readouterr().err
+
 
 def test_test_files_without_train_and_val_are_refused(tmp_path, capsys):
     path = tmp_path / "t.ndjson"

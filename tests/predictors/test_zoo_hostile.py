@@ -517,6 +517,22 @@ def test_export_sizes_are_bounded_and_checked_before_any_work(
     assert not out.exists()
 
 
+def test_export_to_a_place_it_cannot_write_is_refused_before_any_work(tmp_path, zoo_dir, monkeypatch, capsys):
+    import predictors.registry
+
+    def no_load(name):
+        raise AssertionError("a predictor was loaded before --out was checked")
+
+    monkeypatch.setattr(predictors.registry, "load_predictor", no_load)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    code, line = cli(["export", NAME, "--out", str(blocker / "o.casadi")], capsys)
+    assert (code, line) == (
+        2,
+        f"crowdmpc export: error: --out {blocker / 'o.casadi'}: {blocker} is not a directory",
+    )
+
+
 def test_export_at_the_horizon_bound_works(tmp_path, zoo_dir):
     out = tmp_path / "o.casadi"
     assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "100"]) == 0
