@@ -94,6 +94,12 @@ def json_safe(value: Any) -> Any:
     return value
 
 
+def figure(value: float, spec: str) -> str:
+    """``value`` formatted by ``spec`` for a printed table, or "-" in the same width where it was not
+    measured (NaN)."""
+    return format(value, spec) if math.isfinite(value) else "-".rjust(len(format(0.0, spec)))
+
+
 def write_text(path: str | Path, text: str) -> None:
     """``text`` to ``path``, its folder created."""
     path = Path(path)

@@ -32,7 +32,7 @@ from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, run_main  # noqa: E402
+from bench_cli import figure, human_count, run_main  # noqa: E402
 
 DEFAULT_MODELS = (
     "social_lstm_eth",
@@ -125,12 +125,6 @@ def measure(name: str, n_humans: int, calls: int, closed_loop: bool) -> list[dic
     return rows
 
 
-def _figure(value: float, spec: str) -> str:
-    """``value`` in ``spec``, or "-" right-aligned where it was not measured (a hand-written twin's Jacobian,
-    the NLP step under --no-closed-loop)."""
-    return format(value, spec) if np.isfinite(value) else "-".rjust(len(format(0.0, spec)))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -156,12 +150,12 @@ def main() -> None:
         for row in rows:
             print(
                 f"{row['model']:22} {row['twin']:13} {row['export_s']:9.3f} {row['value_err']:10.1e} "
-                f"{_figure(row['jac_err'], '10.1e')} {row['ibr_ms']:8.3f} {_figure(row['nlp_ms'], '8.2f')}"
+                f"{figure(row['jac_err'], '10.1e')} {row['ibr_ms']:8.3f} {figure(row['nlp_ms'], '8.2f')}"
             )
         if len(rows) == 2:
             print(
                 f"{'':22} {'ratio':13} {'':9} {'':10} {'':10} {rows[0]['ibr_ms'] / rows[1]['ibr_ms']:8.2f} "
-                f"{_figure(rows[0]['nlp_ms'] / rows[1]['nlp_ms'], '8.2f')}"
+                f"{figure(rows[0]['nlp_ms'] / rows[1]['nlp_ms'], '8.2f')}"
             )
 
 

@@ -61,6 +61,7 @@ from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    figure,
     human_count,
     mpc_sets,
     output_file,
@@ -208,10 +209,6 @@ def run_row(
     }
 
 
-def _fmt(x: float, spec: str) -> str:
-    return format(x, spec) if math.isfinite(x) else "-".rjust(len(format(0.0, spec)))
-
-
 def print_table(rows: list[dict[str, Any]]) -> None:
     head = (
         f"{'ctrl':<5} {'M':>3} {'formation':<9} {'goals':<5} {'succ%':>6} {'coll%':>6} {'tout%':>6} "
@@ -224,11 +221,11 @@ def print_table(rows: list[dict[str, Any]]) -> None:
         print(
             f"{r['controller']:<5} {r['robots']:>3} {r['formation']:<9} {r['goals']:<5} "
             f"{r['success_rate']:6.1f} {r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} "
-            f"{_fmt(r['travel_time_mean'], '8.2f')} "
+            f"{figure(r['travel_time_mean'], '8.2f')} "
             f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
             f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
-            f"{r['fallback_steps']:5d} {_fmt(r['halfway_s_success'], '7.1f')} / "
-            f"{_fmt(r['halfway_s_failed'], '6.1f')}  "
+            f"{r['fallback_steps']:5d} {figure(r['halfway_s_success'], '7.1f')} / "
+            f"{figure(r['halfway_s_failed'], '6.1f')}  "
             + " / ".join(str(r["failures"][kind]) for kind in FAILURES)
         )
 

@@ -65,6 +65,13 @@ def test_an_output_file_may_not_be_a_folder_and_its_folder_is_created(tmp_path):
         bench_cli.write_json(tmp_path / "bad.json", {"x": {1}})
 
 
+def test_a_figure_not_measured_prints_as_a_dash_of_the_same_width():
+    assert bench_cli.figure(1.5, "8.2f") == "    1.50"
+    assert bench_cli.figure(math.nan, "8.2f") == "       -"
+    assert bench_cli.figure(3e-5, "10.1e") == "   3.0e-05"
+    assert bench_cli.figure(math.nan, "10.1e") == " " * 9 + "-"
+
+
 def test_mpc_items_become_set_items_and_a_malformed_one_is_named_as_typed():
     assert bench_cli.mpc_sets(["cost_scale=0.01", "w_floc = 2"]) == ["mpc.cost_scale=0.01", "mpc.w_floc = 2"]
     for bad in ("cost_scale", "=3", "mpc.cost_scale=1"):
