@@ -15,10 +15,13 @@ if TYPE_CHECKING:
     from pipelines.logs.reader import Recording
 
 EPILOG = """examples:
-  crowdmpc review runs/                                   # one row per episode, then rates over them
-  crowdmpc review runs/circle_seed000000.mcap --plot p.png --times 0,4,8 --animate a.gif
+  crowdmpc review runs/demo/                              # one row per episode, then rates over them
+  crowdmpc review runs/demo/circle_seed000000.mcap --plot p.png --times 0,4,8 --animate a.gif
   crowdmpc review runs/a.mcap --compare other/a.mcap --plot overlay.png
-  crowdmpc review runs/ --check --json review.json        # validate every message against its schema
+  crowdmpc review runs/demo/ --check --json review.json   # validate every message against its schema
+
+The folders are those `make demo` and `crowdmpc simulate --record DIR` write; a folder means the .mcap files
+directly in it, not in its subfolders (a sweep's recordings: DIR/mcap/CELL/).
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
 compression fails) or a message that is not what the review reads is left out, with a warning; --check lists

@@ -18,8 +18,8 @@ from pipelines.config.schema import SECTION_BY_NAME, WRITE_ORDER
 
 HEADER = """\
 # crowdmpc configuration (TOML). Use it with any command that runs episodes:
-#   crowdmpc --config run.toml simulate          (or: crowdmpc simulate --config run.toml)
-#   crowdmpc --config run.toml sweep
+#   crowdmpc --config run.toml simulate --controller cmpc    (or: crowdmpc simulate --config run.toml ...)
+#   crowdmpc --config run.toml sweep --experiment table2 --out runs/table2
 #   crowdmpc config show --config run.toml --set mpc.w_coll=1e6    (the effective config)
 # Precedence, lowest first: these defaults < this file < --set SECTION.KEY=VALUE (in order) < the command's
 # explicit options (--humans 5). A commented-out key is unset: it has no single default (see its comment).

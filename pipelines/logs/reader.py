@@ -337,7 +337,12 @@ def find_recordings(directory: str | Path) -> tuple[list[Path], list[Path]]:
     paths = sorted(directory.glob("*.mcap"))
     unfinished = sorted(directory.glob(f"*.mcap{UNFINISHED_SUFFIX}"))
     if not paths and not unfinished:
-        raise PipelineError(f"no .mcap files in {directory}")
+        # A folder one or two levels up from recordings (runs/ over runs/cmpc/, a sweep's DIR over
+        # DIR/mcap/CELL/) is the usual mistake: name where they are. Two levels at most, not the whole tree.
+        below = [p.parent for pattern in ("*/*.mcap", "*/*/*.mcap") for p in directory.glob(pattern)]
+        holders = sorted(set(below))
+        hint = f"; review one of its subfolders, e.g. {holders[0]}" if holders else ""
+        raise PipelineError(f"no .mcap files in {directory}{hint}")
     return paths, unfinished
 
 

@@ -159,6 +159,18 @@ def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     assert "cannot write a figure of type '(no suffix)'" in capsys.readouterr().err
 
 
+def test_a_folder_above_the_recordings_names_one_that_holds_them(runs, tmp_path, capsys):
+    empty = tmp_path / "nothing"
+    empty.mkdir()
+    assert main(["review", str(empty)]) == 2
+    assert capsys.readouterr().err.strip().endswith(f"no .mcap files in {empty}")
+    inner = tmp_path / "above" / "cmpc"  # as `simulate --record runs/cmpc` leaves runs/
+    inner.mkdir(parents=True)
+    shutil.copy(runs[0].path, inner / runs[0].path.name)
+    assert main(["review", str(tmp_path / "above")]) == 2
+    assert f"review one of its subfolders, e.g. {inner}" in capsys.readouterr().err
+
+
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
 def test_mp4_without_ffmpeg_says_so(runs, tmp_path):
     with pytest.raises(PipelineError, match="needs ffmpeg"):
