@@ -341,7 +341,7 @@ def find_recordings(directory: str | Path) -> tuple[list[Path], list[Path]]:
         # DIR/mcap/CELL/) is the usual mistake: name where they are. Two levels at most, not the whole tree.
         below = [p.parent for pattern in ("*/*.mcap", "*/*/*.mcap") for p in directory.glob(pattern)]
         holders = sorted(set(below))
-        hint = f"; review one of its subfolders, e.g. {holders[0]}" if holders else ""
+        hint = f"; its subfolders hold some, e.g. {holders[0]}" if holders else ""
         raise PipelineError(f"no .mcap files in {directory}{hint}")
     return paths, unfinished
 

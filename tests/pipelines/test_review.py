@@ -168,7 +168,7 @@ def test_a_folder_above_the_recordings_names_one_that_holds_them(runs, tmp_path,
     inner.mkdir(parents=True)
     shutil.copy(runs[0].path, inner / runs[0].path.name)
     assert main(["review", str(tmp_path / "above")]) == 2
-    assert f"review one of its subfolders, e.g. {inner}" in capsys.readouterr().err
+    assert f"its subfolders hold some, e.g. {inner}" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
