@@ -31,7 +31,14 @@ from pipelines.loop.margins import parse_margins
 # robot_scaling.py, the episodes' runner, is imported by name however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robot_scaling  # noqa: E402
-from bench_cli import human_count, output_file, predictor_name, robot_count, run_main, write_json  # noqa: E402
+from bench_cli import (  # noqa: E402
+    human_count,
+    output_file,
+    predictor_name,
+    robot_count,
+    run_main,
+    write_json,
+)
 
 
 def measure(

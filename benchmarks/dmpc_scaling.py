@@ -11,8 +11,9 @@ the other, so that both see the same load; their trajectories must be identical 
 Per row: the control step (``ControlOutput.solve_time_s``) as median / p95 / p99 in ms over every step of
 every episode; IBR iterations per step (mean) and the share of steps that ran to j_max; local solves per
 step; the local-solve phase (``DMPC._solve_all``: every local solve of the step) in ms per step (mean); and
-success / collision / timeout counts. Then, per (M, rule), the threads-over-serial speed-up of the step
-median and of the local-solve phase.
+success / collision / timeout counts (a collision is an episode in which some robot came within d_min of a
+human; it does not end the episode, so an episode can count as both a success and a collision). Then, per
+(M, rule), the threads-over-serial speed-up of the step median and of the local-solve phase.
 
 ``--replay``: the local-solve phase alone, on the iterations recorded from one serial episode of each
 (M, rule): every recorded batch of M local problems is solved by DMPC's serial and threaded code paths

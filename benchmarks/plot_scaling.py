@@ -145,6 +145,9 @@ def main(argv: list[str] | None = None) -> int:
             f"  not drawn (no row to make a line with): {p.controller} {p.goals} goals, M={p.robots}, "
             f"N={p.humans}"
         )
+    for along, what in (("robots", "robots M"), ("humans", "humans N")):
+        if not series(pts, along):
+            print(f"  the panels against {what} are empty: no two rows differ in {what} alone")
     return 0
 
 

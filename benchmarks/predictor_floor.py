@@ -13,7 +13,7 @@ gcc's time and the compiled call.
 gcc on the encoder's expansion takes minutes (about 12 at -O1 for social_lstm_eth, 10 agents), hence opt-in.
 
     nice -n 5 .venv/bin/python benchmarks/predictor_floor.py
-    nice -n 5 .venv/bin/python benchmarks/predictor_floor.py --compile twin --opt -O1
+    nice -n 5 .venv/bin/python benchmarks/predictor_floor.py --compile twin --opt=-O1
 """
 
 from __future__ import annotations
@@ -96,7 +96,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--horizon", type=int, default=4)
     parser.add_argument("--calls", type=int, default=300)
     parser.add_argument("--compile", choices=("none", "twin", "encoder", "both"), default="none")
-    parser.add_argument("--opt", default="-O1", help="gcc's optimisation flag for --compile")
+    parser.add_argument(
+        "--opt",
+        default="-O1",
+        help="gcc's optimisation flag for --compile, given as --opt=-O2 (a bare -O2 reads as an option)",
+    )
     args = parser.parse_args(argv)
     predictor = load_predictor(args.model)
     if not isinstance(predictor, LearnedPredictor):

@@ -56,6 +56,9 @@ from typing import Any
 
 import numpy as np
 
+from pipelines.experiments.cells import PAPER_PREDICTOR
+from predictors.oracle import ORACLE_PREDICTOR
+
 # The sibling benchmark modules (orca_step.py, control_step.py, export.py, robot_scaling.py, dmpc_scaling.py)
 # are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -66,8 +69,6 @@ from run_all_table import table  # noqa: E402
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
 SCENARIOS = ("circle", "perpendicular")
-ORACLE_PREDICTOR = "orca_oracle"  # pipelines.experiments.ORACLE_PREDICTOR
-PAPER_PREDICTOR = "social_lstm_eth"  # pipelines.experiments.PAPER_PREDICTOR
 
 
 def _stats(samples_s: Sequence[float]) -> dict[str, float]:
@@ -241,9 +242,10 @@ def dmpc_update_cell(n_robots: int, n_humans: int, rule: str, episodes: int) -> 
 
 
 def _predictors() -> list[str]:
+    """Every predictor crowdmpc knows; the registry lists the ORCA oracle beside the zoo's models."""
     from predictors.registry import available
 
-    return [*available(), ORACLE_PREDICTOR]
+    return available()
 
 
 @dataclass(frozen=True)

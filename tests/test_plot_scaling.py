@@ -66,6 +66,9 @@ def test_a_row_on_no_line_is_named(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "(2 of 3 rows drawn)" in out
     assert "not drawn (no row to make a line with): dmpc slots goals, M=5, N=7" in out
+    # one run at one crowd size: nothing to draw against N, and the figure says so
+    assert "the panels against humans N are empty: no two rows differ in humans N alone" in out
+    assert "against robots M are empty" not in out
 
 
 def test_the_same_row_in_two_files_is_named(tmp_path, capsys):
