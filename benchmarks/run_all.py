@@ -9,7 +9,7 @@ Sections
               (benchmarks/orca_step.py's ``measure``)
   control     one control step (ControlOutput.solve_time_s: prediction + every solve) per controller, CMPC's
               floor (the joint NLP solved once with the prediction fixed), and CMPC per predictor (every one
-              the registry has, plus the ORCA oracle) and per coupling (benchmarks/control_step.py's
+              the registry has, the ORCA oracle among them) and per coupling (benchmarks/control_step.py's
               ``closed_loop`` for CMPC/DMPC, whole circle-crossing episodes)
   scaling     CMPC and DMPC control step against the number of humans (5..50, control_step.py) and of robots
               (3..12, here: control_step.py has 3 robots)

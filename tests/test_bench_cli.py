@@ -119,3 +119,65 @@ def test_a_bad_command_line_stops_before_any_episode(script, argv, message, caps
     assert stop.value.code == 2
     assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+class _Parsed(Exception):
+    """Raised right after a script's command line is parsed: the example's options exist, nothing runs."""
+
+
+def _help_examples() -> list[tuple[str, list[str]]]:
+    """Every ``.venv/bin/python benchmarks/NAME.py ...`` line of every script's docstring (its --help), as
+    (NAME, argv), continuation lines joined and trailing comments dropped."""
+    import ast
+    import re
+    import shlex
+
+    pattern = re.compile(r"^\s+(?:nice -n \d+ )?\.venv/bin/python benchmarks/(\w+)\.py(.*)$")
+    examples = []
+    for path in sorted(BENCHMARKS.glob("*.py")):
+        doc = (ast.get_docstring(ast.parse(path.read_text())) or "").replace("\\\n", " ")
+        for line in doc.splitlines():
+            match = pattern.match(line)
+            if match and match.group(1) == path.stem:
+                examples.append((path.stem, shlex.split(match.group(2), comments=True)))
+    return examples
+
+
+HELP_EXAMPLES = _help_examples()
+
+
+def test_every_benchmark_with_a_main_has_help_examples():
+    scripts = {p.stem for p in BENCHMARKS.glob("*.py")} - {"bench_cli", "run_all_table"}
+    assert {name for name, _ in HELP_EXAMPLES} == scripts
+
+
+def test_no_help_example_lost_its_line_break():
+    """In a docstring that is not raw, ``\\`` at a line's end joins the lines, leaving a run of spaces before
+    the next option in --help (robot_scaling's examples printed so)."""
+    import ast
+    import re
+
+    for path in sorted(BENCHMARKS.glob("*.py")):
+        for line in (ast.get_docstring(ast.parse(path.read_text())) or "").splitlines():
+            if "benchmarks/" in line and ".venv/bin/python" in line:
+                assert not re.search(r"\S {4,}--", line), (
+                    f"{path.name}: a swallowed line break in {line.strip()}"
+                )
+
+
+@pytest.mark.parametrize(("script", "argv"), HELP_EXAMPLES, ids=[" ".join([s, *a]) for s, a in HELP_EXAMPLES])
+def test_every_help_example_parses_as_printed(script, argv, tmp_path, monkeypatch):
+    """An example's options are the script's (a flag renamed, or a value argparse reads as an option, as
+    ``--opt -O1`` was, fails here); the script stops right after parsing."""
+    parse = argparse.ArgumentParser.parse_args
+
+    def parse_then_stop(self, args=None, namespace=None):
+        parse(self, args, namespace)
+        raise _Parsed
+
+    monkeypatch.chdir(tmp_path)  # an example's output file is checked writable here
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", parse_then_stop)
+    monkeypatch.setattr(sys, "argv", [f"{script}.py", *argv])
+    module = _load(script)
+    with pytest.raises(_Parsed):
+        module.main(argv) if module.main.__code__.co_argcount else module.main()

@@ -8,7 +8,7 @@ EPILOG = """examples:
   crowdmpc config show > run.toml            # every setting with its default and what it means
   crowdmpc config show --config run.toml --set mpc.w_coll=1e6 --set scenario.humans=5
   crowdmpc --config run.toml simulate --controller cmpc   # or: crowdmpc simulate --config run.toml ...
-  crowdmpc --config run.toml --set controller.predictor=social_lstm_eth sweep --experiment table2 \
+  crowdmpc --config run.toml --set controller.predictor=social_lstm_eth sweep --experiment table2 \\
       --out runs/table2
 
 Sections: [world] (tau, L, radius, speeds: shared by the simulator and the MPC), [env] and [env.orca] (the
