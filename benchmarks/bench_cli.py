@@ -18,13 +18,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
 from pipelines.commands import check_writable
 from pipelines.config import ConfigError
 from pipelines.errors import PipelineError
+from pipelines.plain_json import plain
 from predictors.registry import available
 
 
@@ -78,20 +77,17 @@ def mpc_sets(texts: Sequence[str]) -> list[str]:
     return [f"mpc.{text}" for text in texts]
 
 
-def json_safe(value: Any) -> Any:
-    """``value`` as strict JSON takes it: NaN and infinities as null (a figure not measured), numpy scalars as
-    numbers, tuples as lists, paths as text."""
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, float | np.floating):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
+def _path_as_text(value: Any) -> str:
+    """The one type a benchmark's report holds that ``plain`` leaves as it is: a path (``vars(args)``)."""
     if isinstance(value, Path):
         return str(value)
-    return value
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+
+def json_text(payload: Any, indent: int = 2) -> str:
+    """``payload`` as strict JSON: ``pipelines.plain_json.plain`` (NaN as null, numpy as Python), paths as
+    text."""
+    return json.dumps(plain(payload), indent=indent, allow_nan=False, default=_path_as_text)
 
 
 def figure(value: float, spec: str) -> str:
@@ -108,8 +104,8 @@ def write_text(path: str | Path, text: str) -> None:
 
 
 def write_json(path: str | Path, payload: Any, indent: int = 2) -> None:
-    """``payload`` as strict JSON (``json_safe``) to ``path``, its folder created."""
-    write_text(path, json.dumps(json_safe(payload), indent=indent, allow_nan=False))
+    """``payload`` as strict JSON (``json_text``) to ``path``, its folder created."""
+    write_text(path, json_text(payload, indent))
 
 
 def run_main(main: Callable[[], int | None]) -> int:

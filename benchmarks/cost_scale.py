@@ -41,10 +41,8 @@ from bench_cli import (  # noqa: E402
 )
 
 
-def measure(
-    run: RunConfig, scale: float, n_robots: int, n_humans: int, episodes: int, predictor: str
-) -> dict[str, Any]:
-    """The CMPC episodes of one row under ``run`` (a config whose cost_scale is ``scale``)."""
+def measure(run: RunConfig, n_robots: int, n_humans: int, episodes: int, predictor: str) -> dict[str, Any]:
+    """The CMPC episodes of one row under ``run``, whose ``mpc.cost_scale`` is the row's scale."""
     margins = parse_margins(run.controller.margins or "none")
     # A solve's info describes the solver whose result was kept (IPOPT after a Fatrop failure), so Fatrop's
     # own statistics are read around every call instead.
@@ -77,7 +75,7 @@ def measure(
     iterations = np.array([c[0] for c in calls])
     ok = np.array([c[1] for c in calls], dtype=bool)
     return {
-        "cost_scale": scale,
+        "cost_scale": run.mpc.cost_scale,
         "robots": n_robots,
         "fatrop_solves": len(calls),
         "fatrop_failed": int((~ok).sum()),
@@ -111,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     load_before = os.getloadavg()[0]
     t0 = time.perf_counter()
     rows = [
-        measure(runs[scale], scale, m, args.humans, args.episodes, args.predictor)
+        measure(runs[scale], m, args.humans, args.episodes, args.predictor)
         for m in args.robots
         for scale in args.cost_scale
     ]

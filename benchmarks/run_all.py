@@ -43,7 +43,6 @@ printed.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -58,13 +57,14 @@ import numpy as np
 
 from pipelines.experiments.cells import PAPER_PREDICTOR
 from predictors.oracle import ORACLE_PREDICTOR
+from predictors.registry import available
 
 # The sibling benchmark modules (orca_step.py, control_step.py, export.py, robot_scaling.py, dmpc_scaling.py)
 # are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import sweep_floor  # noqa: E402
-from bench_cli import json_safe, output_file, run_main, write_text  # noqa: E402
+from bench_cli import json_text, output_file, run_main, write_text  # noqa: E402
 from run_all_table import table  # noqa: E402
 
 SECTIONS = ("simulator", "control", "scaling", "dmpc", "episodes", "export", "robots", "dmpc_updates", "ibr")
@@ -241,13 +241,6 @@ def dmpc_update_cell(n_robots: int, n_humans: int, rule: str, episodes: int) -> 
 # ----------------------------------------------------------------------------------------------------------
 
 
-def _predictors() -> list[str]:
-    """Every predictor crowdmpc knows; the registry lists the ORCA oracle beside the zoo's models."""
-    from predictors.registry import available
-
-    return available()
-
-
 @dataclass(frozen=True)
 class Run:
     """What every section reads: the sizes (``--quick``), the steps timed, the sweep's workers, and the
@@ -306,7 +299,8 @@ def control_section(run: Run) -> dict[str, Any]:
     control["cmpc"] = cmpc
     control["floor (joint NLP, fixed prediction)"] = cmpc["floor"] if cmpc else None
     control["dmpc"] = run.timed("dmpc", lambda: mpc_step(ControllerSpec("dmpc", CV), 7, episodes))
-    for name in _predictors():
+    names = available()  # every predictor crowdmpc knows, the ORCA oracle among them
+    for name in names:
         if name == CV:
             continue
         spec = ControllerSpec("cmpc", name)
@@ -314,7 +308,7 @@ def control_section(run: Run) -> dict[str, Any]:
             control[f"cmpc/{name}"] = run.timed(name, lambda s=spec: any_step(s, 7, 3, steps))
         else:
             control[f"cmpc/{name}"] = run.timed(name, lambda s=spec: mpc_step(s, 7, episodes))
-    coupled = "social_lstm_soft_eth" if "social_lstm_soft_eth" in _predictors() else CV
+    coupled = "social_lstm_soft_eth" if "social_lstm_soft_eth" in names else CV
     for mode in ("exact", "first_order"):
         spec = ControllerSpec("cmpc", coupled, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
         label = f"cmpc/{coupled}/nlp-{mode}"
@@ -361,7 +355,7 @@ def episodes_section(run: Run) -> dict[str, Any]:
     """Table II's own predictor, so that the projections are of the table itself."""
     from pipelines.loop.controllers import ControllerSpec
 
-    paper = PAPER_PREDICTOR if PAPER_PREDICTOR in _predictors() else CV
+    paper = PAPER_PREDICTOR if PAPER_PREDICTOR in available() else CV
     print(f"episodes per minute at 7 humans, {paper}", file=sys.stderr)
     n_episodes = 2 if run.quick else 4
     single = {}
@@ -506,7 +500,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
     report = run(args)
     print(table(report))  # run_all_table.py
-    text = json.dumps(json_safe(report), indent=1, allow_nan=False)
+    text = json_text(report, indent=1)
     print(text)
     if args.json:
         write_text(args.json, text)
