@@ -234,7 +234,7 @@ class RayBackend:
             if address is None:
                 ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
             else:
-                ray.init(address=address, runtime_env=env, log_to_driver=False)
+                _join_cluster(ray, address, env)
         actor = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actors = [actor.remote(record, jit, scratch_root) for _ in range(workers)]
 
@@ -257,6 +257,18 @@ class RayBackend:
             self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
+
+
+def _join_cluster(ray: Any, address: str, env: dict[str, Any]) -> None:
+    """``ray.init`` on a cluster's address; its failures (no cluster there, an address Ray cannot parse) are
+    one line naming the address: they are the user's input, not a bug."""
+    try:
+        ray.init(address=address, runtime_env=env, log_to_driver=False)
+    except (ConnectionError, ValueError) as exc:
+        raise PipelineError(
+            f"cannot join a Ray cluster at --ray-address {address!r} ({exc}); give the address that "
+            "`ray start --head` printed, or leave --ray-address out for a local Ray"
+        ) from None
 
 
 def _take(it: Iterator[EpisodeTask], n: int) -> list[EpisodeTask]:

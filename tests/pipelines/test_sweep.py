@@ -618,3 +618,28 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
         }
     ]
     assert calls[0]["runtime_env"]["env_vars"]["CROWDMPC_CONTROLLERS"] == "my_pkg.ctl:MyController"
+
+
+@pytest.mark.parametrize(
+    ("failure", "shown"),
+    [
+        (ConnectionError("Failed to connect to Ray cluster at 10.0.0.9:6379"), "Failed to connect"),
+        (ValueError("Invalid address format: head"), "Invalid address format"),
+    ],
+)
+def test_a_ray_address_with_no_cluster_is_one_line_naming_it(monkeypatch, failure, shown):
+    """What Ray 2.60 raises for an address with no cluster behind it, and for one it cannot parse (both met
+    with the real Ray): the user's input, so a PipelineError naming it rather than Ray's traceback."""
+    import types
+
+    from pipelines.experiments.backends import RayBackend
+
+    def init(**_):
+        raise failure
+
+    fake = types.ModuleType("ray")
+    fake.is_initialized = lambda: False  # type: ignore[attr-defined]
+    fake.init = init  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    with pytest.raises(PipelineError, match=f"--ray-address 'head:1' .*{shown}.*ray start --head"):
+        RayBackend(2, "none", address="head:1")
