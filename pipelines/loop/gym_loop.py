@@ -25,6 +25,7 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from crowdsim.gym_env import CrowdNavEnv
+from crowdsim.metrics import episode_metrics
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import Controller
 from pipelines.loop.episode import EpisodeObserver, EpisodeResult
@@ -79,6 +80,9 @@ class _Steps:
     def result(self, base: CrowdNavEnv, meta: Mapping[str, Any], info: Mapping[str, Any]) -> EpisodeResult:
         traj = base.simulator.trajectory()
         episode = base.episode
+        # An outer wrapper (gymnasium's TimeLimit from max_episode_steps) may end the episode before the
+        # environment does; the metrics of the trajectory so far are then what the environment would report.
+        metrics = info.get("episode_metrics")
         return EpisodeResult(
             seed=episode["seed"],
             scenario=episode["scenario"],
@@ -87,7 +91,7 @@ class _Steps:
             controller=str(meta["controller"]),
             predictor=meta["predictor"],
             predictor_sha256=meta["predictor_sha256"],
-            metrics=info["episode_metrics"],
+            metrics=episode_metrics(traj) if metrics is None else metrics,
             robot_positions=traj.robot_positions,
             human_positions=traj.human_positions,
             robot_goals=traj.robot_goals,
@@ -144,7 +148,9 @@ def run_gym_episode(
     return result
 
 
-class ObserveEpisodes(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
+class ObserveEpisodes(
+    gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs
+):
     """Every episode of the wrapped ``crowdmpc/CrowdNav-v0`` (acceleration actions) to ``observers``
     (module docstring).
 
@@ -162,7 +168,9 @@ class ObserveEpisodes(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray
         controller: str = "gym_policy",
         meta: Mapping[str, Any] | None = None,
     ):
-        super().__init__(env)
+        # env.spec can then rebuild the wrapper (gym.make(env.spec)), and check_env accepts it
+        gym.utils.RecordConstructorArgs.__init__(self, observers=observers, controller=controller, meta=meta)
+        gym.Wrapper.__init__(self, env)
         self._base = crowdnav_env(env)
         self.observers = tuple(observers)
         self.controller = controller

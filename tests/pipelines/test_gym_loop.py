@@ -120,3 +120,29 @@ def test_the_docs_example_runs_and_records(tmp_path, capsys):
         "circle_seed000000.mcap",
         "circle_seed000001.mcap",
     ]
+
+
+def test_an_episode_ended_by_gymnasiums_time_limit_is_recorded_whole(tmp_path):
+    """gym.make's max_episode_steps wraps the environment in TimeLimit, which truncates before the environment
+    ends the episode itself, so the last info has no episode_metrics: the record takes the metrics of the
+    trajectory so far (it was a KeyError, and the MCAP file was left without its metrics)."""
+    from gymnasium.utils.env_checker import check_env
+
+    from crowdsim.metrics import episode_metrics
+
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        limited = gym.make(crowdsim.ENV_ID, n_humans=3, n_robots=2, max_episode_steps=5)
+        env = ObserveEpisodes(limited, [recorder])
+        env.reset(seed=0)
+        ends = [env.step(np.zeros((2, 2)))[2:4] for _ in range(5)]
+    assert ends == [(False, False)] * 4 + [(False, True)]
+    (result,) = env.results
+    assert result.metrics == episode_metrics(env.unwrapped.simulator.trajectory())
+    assert result.metrics.n_steps == 5 and not result.metrics.success
+    rec = read_recording(recorder.paths[0])
+    assert not check_recording(rec)[1] and len(rec.data("/episode/metrics")) == 1
+    # and the wrapper keeps its arguments, as gymnasium's own do: check_env takes it, env.spec rebuilds it
+    with pytest.warns(UserWarning, match="different from the unwrapped version"):  # gymnasium's advice
+        check_env(ObserveEpisodes(gym.make(crowdsim.ENV_ID), []), skip_render_check=True)
+    rebuilt = gym.make(VelocityControl(ObserveEpisodes(gym.make(crowdsim.ENV_ID), [], controller="p")).spec)
+    assert isinstance(rebuilt.env, ObserveEpisodes) and rebuilt.env.controller == "p"
