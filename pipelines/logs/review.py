@@ -191,7 +191,11 @@ def aggregate_table(recordings: list[Recording]) -> tuple[str, dict[str, Any]]:
 def _format_totals(t: dict[str, Any]) -> str:
     lines = [
         f"{t['runs']} runs"
-        + (f", {t['runs'] - t['ended']} truncated (no metrics)" if t["ended"] < t["runs"] else "")
+        + (
+            f", {t['runs'] - t['ended']} whose episode did not end (no metrics)"
+            if t["ended"] < t["runs"]
+            else ""
+        )
         + (
             f", {len(t['unusable_metrics'])} with metrics of another format (left out of the rates)"
             if t.get("unusable_metrics")

@@ -103,7 +103,7 @@ def test_cut_at_many_offsets_reads_a_prefix_or_is_reported(episode, tmp_path, ca
         assert "is truncated" in line
         assert path.name in out  # a row of the table
     runs = len(truncated) + 1
-    assert f"\n{runs} runs, {runs - ended} truncated (no metrics)\n" in out
+    assert f"\n{runs} runs, {runs - ended} whose episode did not end (no metrics)\n" in out
     rc, out, _ = review(capsys, folder, "--check")
     assert rc == 1  # the unreadable cuts fail the check; the truncated ones pass it
     assert out.count(" ok\n") == len(truncated) + 1

@@ -185,5 +185,5 @@ def test_folder_with_a_truncated_run(runs, tmp_path, capsys):
     (tmp_path / "b.mcap").write_bytes(data[: len(data) // 3])
     assert main(["review", str(tmp_path)]) == 0
     out, err = capsys.readouterr()
-    assert "2 runs, 1 truncated (no metrics)" in out
+    assert "2 runs, 1 whose episode did not end (no metrics)" in out
     assert "b.mcap is truncated" in err
