@@ -1,8 +1,10 @@
 """Foxglove's SceneUpdate JSON schema, built from its published parts (same field names, types and titles).
 
-It follows Foxglove's published schema (github.com/foxglove/schemas, ``schemas/jsonschema/SceneUpdate.json``)
-field for field, so that Foxglove's 3D panel recognises the ``/scene`` channel by name; like the published
-one it lists no required fields.
+It follows Foxglove's published schema (github.com/foxglove/foxglove-sdk, formerly foxglove/schemas,
+``schemas/jsonschema/SceneUpdate.json``) field for field, so that Foxglove's 3D panel recognises the
+``/scene`` channel by name. Like the published one since October 2025 ("JSONSchema: mark all properties
+required", foxglove-sdk #682), every object requires all its properties (times and durations excepted, as
+there), so the checker (``crowdmpc review --check``) refuses an entity without, say, its ``frame_id``.
 
 Why no ``foxglove-sdk``: it writes Protobuf through its own MCAP writer (a 19 MB compiled wheel) while every
 channel here is JSON for one reader and one checker; the schema below is about a hundred lines of dicts.
@@ -14,7 +16,12 @@ from typing import Any, Final
 
 
 def _object(title: str, properties: dict[str, Any], description: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {"title": title, "type": "object", "properties": properties}
+    out: dict[str, Any] = {
+        "title": title,
+        "type": "object",
+        "properties": properties,
+        "required": list(properties),
+    }
     if description:
         out["description"] = description
     return out
@@ -157,5 +164,5 @@ SCENE_UPDATE: Final = {
         },
         "An update to the entities displayed in a 3D scene",
     ),
-    "$comment": "Foxglove's published schema (github.com/foxglove/schemas)",
+    "$comment": "Foxglove's published schema (github.com/foxglove/foxglove-sdk)",
 }

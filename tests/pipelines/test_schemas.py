@@ -45,7 +45,8 @@ def test_each_violation_is_reported_with_its_path(message, error):
 
 
 def test_one_of_constants_and_unsupported_keywords():
-    line_type = SCENE_UPDATE.schema["properties"]["entities"]["items"]["properties"]["lines"]["items"]
+    line = SCENE_UPDATE.schema["properties"]["entities"]["items"]["properties"]["lines"]["items"]
+    line_type = {"type": "object", "properties": {"type": line["properties"]["type"]}}
     assert validate({"type": 0}, line_type) == []
     assert "matches 0 of the 3 options" in validate({"type": 5}, line_type)[0]
     with pytest.raises(PipelineError, match=r"keyword\(s\) \['pattern'\]"):
@@ -82,3 +83,31 @@ def test_scene_update_follows_foxglove_field_names():
         "size",
         "color",
     ]
+
+
+def test_scene_update_requires_every_property_as_foxglove_does_and_the_recorder_writes_them():
+    """Foxglove's schema marks every property of every object required (foxglove-sdk #682, October 2025;
+    times and durations excepted): an entity without its frame_id is an error, and what the recorder writes
+    for /scene passes."""
+    from pipelines.logs.jsonschema import validate
+
+    def objects(node):
+        if isinstance(node, dict):
+            if node.get("type") == "object" and node.get("title") not in ("time", "duration"):
+                yield node
+            for value in node.values():
+                yield from objects(value)
+
+    found = list(objects(SCENE_UPDATE.schema))
+    assert len(found) > 20 and all(o["required"] == list(o["properties"]) for o in found)
+    entity = SCENE_UPDATE.schema["properties"]["entities"]["items"]
+    message = {
+        "deletions": [],
+        "entities": [{name: [] for name, p in entity["properties"].items() if p.get("type") == "array"}],
+    }
+    message["entities"][0].update(
+        timestamp={"sec": 1, "nsec": 0}, id="robot0", lifetime={"sec": 0, "nsec": 0}, frame_locked=False
+    )
+    assert validate(message, SCENE_UPDATE.schema) == ["$.entities[0]: missing required property 'frame_id'"]
+    message["entities"][0]["frame_id"] = "world"
+    assert validate(message, SCENE_UPDATE.schema) == []
