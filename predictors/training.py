@@ -80,6 +80,15 @@ class _PredictorModule(L.LightningModule):
     def on_train_epoch_end(self) -> None:
         self.log("epoch_time_s", time.perf_counter() - self._epoch_start, prog_bar=True)
 
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        # Lightning keeps no random state in its checkpoints: a resumed run would draw other GAN noise (and
+        # dropout) than an uninterrupted one from the epoch on.
+        checkpoint["crowdmpc_torch_rng"] = torch.get_rng_state()
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        if "crowdmpc_torch_rng" in checkpoint:  # checkpoints written before it was kept have none
+            torch.set_rng_state(checkpoint["crowdmpc_torch_rng"])
+
     def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
         """The loss and metrics of ``batch``; each subclass defines it."""
         raise NotImplementedError

@@ -12,15 +12,16 @@ from torch.utils.data import DataLoader
 
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.locate import protocol_files
-from predictors.data.windows import TrajnetSceneDataset, collate_scenes
+from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 
 
 class TrajnetDataModule(L.LightningDataModule):
     """Train/val/test ``SceneBatch`` loaders over lists of TrajNet++ ndjson files.
 
-    Training batches are shuffled and (with ``augment``) randomly rotated, both seeded by ``seed``;
-    validation and test batches are neither.
+    Training batches are shuffled and (with ``augment``) randomly rotated, both functions of ``seed`` and
+    the epoch (``EpochShuffle``), so a resumed run continues as an uninterrupted one; validation and test
+    batches are neither.
     """
 
     def __init__(
@@ -97,12 +98,14 @@ class TrajnetDataModule(L.LightningDataModule):
                 self._dataset(split)
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        dataset = self._dataset(split)
         return DataLoader(
-            self._dataset(split),
+            dataset,
             batch_size=self.batch_size,
-            shuffle=shuffle,
+            sampler=EpochShuffle(dataset, self.seed) if shuffle else None,
             num_workers=self.num_workers,
             collate_fn=partial(collate_scenes, obs_len=self.obs_len),
+            # the workers' base seeds (the order and angles do not depend on them)
             generator=torch.Generator().manual_seed(self.seed) if shuffle else None,
             persistent_workers=self.num_workers > 0,
         )

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
 import numpy as np
 import torch
-from torch.utils.data import Dataset, get_worker_info
+from torch.utils.data import Dataset, Sampler
 
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.locate import cache_root
@@ -173,9 +174,11 @@ def normalise(xy: np.ndarray, obs_len: int, angle: float | None) -> SceneSample:
 class TrajnetSceneDataset(Dataset):
     """Scenes of one or more TrajNet++ files as normalised ``SceneSample``s.
 
-    With ``augment`` every item is rotated by a random angle. Angles come from a generator seeded with
-    ``seed`` in the main process, and from each DataLoader worker's own torch generator in workers (which
-    torch seeds from the loader's generator, so a seeded loader gives the same angles on every run).
+    With ``augment`` every item is rotated by a random angle, a function of ``(seed, epoch, index)``: the
+    item ``dataset[index, epoch]`` (what ``EpochShuffle`` hands a loader) or ``dataset[index]`` (epoch 0). So
+    the angles are the same in worker processes and in a run resumed at that epoch, and new in every epoch.
+    (They used to come from one generator drawn item after item, which a resumed run restarted: its first
+    epoch repeated epoch 0's angles.)
     """
 
     def __init__(
@@ -202,7 +205,7 @@ class TrajnetSceneDataset(Dataset):
         self.arrays = [load_file_arrays(f, scene_length=scene_length) for f in self.files]
         sizes = np.asarray([len(a) for a in self.arrays], dtype=np.int64)
         self._starts = np.concatenate([[0], np.cumsum(sizes)])
-        self._generator = torch.Generator().manual_seed(seed)
+        self.seed = seed
 
     def __len__(self) -> int:
         return int(self._starts[-1])
@@ -214,17 +217,40 @@ class TrajnetSceneDataset(Dataset):
         k = int(np.searchsorted(self._starts, index, side="right") - 1)
         return k, int(index - self._starts[k])
 
-    def _angle(self) -> float:
-        generator = self._generator if get_worker_info() is None else None
-        return float(torch.rand((), generator=generator)) * 2.0 * math.pi
+    def _angle(self, index: int, epoch: int) -> float:
+        return float(np.random.default_rng([self.seed, epoch, index]).random()) * 2.0 * math.pi
 
-    def __getitem__(self, index: int) -> SceneSample:
+    def __getitem__(self, key: int | tuple[int, int]) -> SceneSample:
+        index, epoch = key if isinstance(key, tuple) else (key, 0)
         k, s = self.locate(index)
         xy = self.arrays[k].scene(s)
         xy = xy[xy.shape[0] - (self.obs_len + self.pred_len) :]  # the prediction is always the scene's end
         present = ~np.isnan(xy).any(axis=-1).all(axis=0)  # drop agents absent from the whole window
         present[0] = True
-        return normalise(xy[:, present], self.obs_len, self._angle() if self.augment else None)
+        return normalise(xy[:, present], self.obs_len, self._angle(index, epoch) if self.augment else None)
+
+
+class EpochShuffle(Sampler[tuple[int, int]]):
+    """A new order of ``dataset``'s items every epoch, a function of ``(seed, epoch)`` as in torch's
+    ``DistributedSampler``, each item keyed ``(index, epoch)`` for its rotation (``TrajnetSceneDataset``).
+    Lightning calls ``set_epoch`` as each epoch starts, after restoring a checkpoint's epoch, so a resumed
+    run shuffles and rotates as an uninterrupted one does. Outside Lightning, call ``set_epoch`` before each
+    epoch, as for torch's sampler."""
+
+    def __init__(self, dataset: TrajnetSceneDataset, seed: int = 0):
+        self.size = len(dataset)
+        self.seed = seed
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __iter__(self) -> Iterator[tuple[int, int]]:
+        order = np.random.default_rng([self.seed, self.epoch]).permutation(self.size)
+        return ((int(i), self.epoch) for i in order)
 
 
 def collate_scenes(samples: list[SceneSample], obs_len: int = OBS_LEN) -> SceneBatch:

@@ -84,6 +84,28 @@ def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
     assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
 
 
+@pytest.mark.parametrize("model", ["social_lstm", "social_gan"])
+def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
+    """One epoch then --resume to two equals two epochs straight, weight for weight: the resumed epoch
+    shuffles and rotates its scenes as epoch 1 does, not as epoch 0 (EpochShuffle), and the GAN draws the
+    same noise (the checkpoint keeps torch's random state). Batches of one scene, so the order matters."""
+    import torch
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    files = ["--train", data, "--val", data, "--test", data]
+
+    def train(out: str, epochs: int, *extra: str) -> dict:
+        args = ["train", "--model", model, *files, "--batch-size", "1", "--step-size", "1", "--seed", "3"]
+        assert main([*args, "--epochs", str(epochs), "--out", out, "--no-progress", *extra]) == 0
+        return torch.load(tmp_path / out / "checkpoints" / "last.ckpt", weights_only=False)["state_dict"]
+
+    straight = train(str(tmp_path / "straight"), 2)
+    train(str(tmp_path / "resumed"), 1)
+    resumed = train(str(tmp_path / "resumed"), 2, "--resume")
+    assert straight.keys() == resumed.keys()
+    assert all(torch.equal(straight[k], resumed[k]) for k in straight)
+
+
 def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, capsys):
     out, _ = trained
     assert main(["zoo", "add", str(out / "walker.pt")]) == 0

@@ -70,11 +70,13 @@ def test_augmentation_is_seeded_and_keeps_distances(tmp_path):
     a = TrajnetSceneDataset([path], augment=True, seed=3)
     b = TrajnetSceneDataset([path], augment=True, seed=3)
     c = TrajnetSceneDataset([path], augment=True, seed=4)
-    draws_a = [a[0].rotation for _ in range(3)]
-    draws_b = [b[0].rotation for _ in range(3)]
+    draws_a = [a[0, epoch].rotation for epoch in range(3)]
+    draws_b = [b[0, epoch].rotation for epoch in range(3)]
     for x, y in zip(draws_a, draws_b, strict=True):
         np.testing.assert_allclose(x, y)
-    assert not np.allclose(draws_a[0], draws_a[1])  # a new angle on every draw
+    assert not np.allclose(draws_a[0], draws_a[1])  # a new angle in every epoch
+    np.testing.assert_array_equal(a[0].rotation, a[0, 0].rotation)  # and the same on a second fetch
+    np.testing.assert_array_equal(a[0, 2].rotation, draws_a[2])
     assert not np.allclose(draws_a[0], c[0].rotation)
     item = a[0]
     np.testing.assert_allclose(item.rotation @ item.rotation.T, np.eye(2), atol=1e-6)
@@ -120,3 +122,23 @@ def test_batch_to_device_returns_a_batch(tmp_path):
     dataset = TrajnetSceneDataset([write_walk_file(tmp_path / "walk.ndjson")])
     batch = collate_scenes([dataset[0]]).to(torch.device("cpu"))
     assert batch.positions.device.type == "cpu" and batch.obs_len == 9
+
+
+def test_epoch_shuffle_is_a_function_of_seed_and_epoch():
+    """A permutation of every item per epoch, each keyed (index, epoch); set_epoch alone decides the
+    order, as Lightning's resume needs (it calls set_epoch after restoring the epoch)."""
+    from predictors.data.windows import EpochShuffle
+
+    class Items:
+        def __len__(self) -> int:
+            return 50
+
+    sampler = EpochShuffle(Items(), seed=3)  # type: ignore[arg-type]
+    orders = []
+    for epoch in (0, 1, 0):
+        sampler.set_epoch(epoch)
+        keys = list(sampler)
+        assert {e for _, e in keys} == {epoch} and sorted(i for i, _ in keys) == list(range(50))
+        orders.append([i for i, _ in keys])
+    assert orders[0] == orders[2] and orders[0] != orders[1]
+    assert len(sampler) == 50 and [i for i, _ in EpochShuffle(Items(), seed=4)] != orders[0]  # type: ignore[arg-type]
