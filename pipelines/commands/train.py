@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import re
 import time
@@ -231,7 +232,10 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
         max_epochs=args.epochs,
         accelerator="cpu",
         devices=1,
-        logger=[CSVLogger(out, name="csv"), TensorBoardLogger(out, name="tensorboard")],
+        logger=[
+            CSVLogger(out, name="csv"),
+            TensorBoardLogger(out, name="tensorboard", default_hp_metric=False),
+        ],
         callbacks=[best],
         deterministic=True,
         enable_progress_bar=not args.no_progress,
@@ -277,7 +281,59 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
     _check_data(files)
-    return _train(args, net_config, name, out, (files, root))
+    settings = run_settings(args, net_config, name, files)
+    if args.resume:
+        name = check_resumed_settings(out, settings, name_given=args.name is not None)
+    return _train(args, net_config, name, out, (files, root), settings)
+
+
+# What fixes a training run: --resume continues it with these, and only --epochs may change.
+SETTINGS_FILE = "train_settings.json"
+
+
+def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:
+    from predictors.models import model_kind
+
+    return {
+        "name": name,
+        "model": args.model,
+        "net_config": model_kind(args.model).config_dict(net_config),
+        "lr": args.lr,
+        "step_size": args.step_size,
+        "loss": args.loss,
+        "seed": args.seed,
+        "batch_size": args.batch_size,
+        "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
+    }
+
+
+def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: bool) -> str:
+    """The run's name; PipelineError when the command asks for other settings than the run in ``out`` was
+    started with: the weights, optimiser and schedule resume from last.ckpt whatever the command says, so the
+    written NAME.json would record settings that never trained them. Runs from before the settings were kept
+    have no file, and are not checked."""
+    path = out / SETTINGS_FILE
+    if not path.is_file():
+        return str(settings["name"])
+    try:
+        recorded = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
+    if not name_given:  # the default name follows the options, which are checked below
+        settings = {**settings, "name": recorded.get("name", settings["name"])}
+    differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
+    if differ:
+        shown = "; ".join(f"{k}: run {_short(recorded[k])}, now {_short(settings[k])}" for k in differ)
+        raise PipelineError(
+            f"--resume: {out} was started with other settings ({shown}); resume with the run's settings "
+            "(only --epochs may change) or start a new run with another --out"
+        )
+    return str(settings["name"])
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _check_data(files: dict[str, list[Path]]) -> None:
@@ -293,7 +349,12 @@ def _check_data(files: dict[str, list[Path]]) -> None:
 
 
 def _train(
-    args: argparse.Namespace, net_config: Any, name: str, out: Path, data_files: tuple[dict, Path | None]
+    args: argparse.Namespace,
+    net_config: Any,
+    name: str,
+    out: Path,
+    data_files: tuple[dict, Path | None],
+    settings: dict[str, Any],
 ) -> int:
     """Lightning's part of ``run``, once every option has been checked."""
     import warnings
@@ -316,6 +377,10 @@ def _train(
     torch.set_num_threads(1)
     warnings.filterwarnings("ignore", message=".*does not have many workers.*")
     warnings.filterwarnings("ignore", message=".*Checkpoint directory.*exists and is not empty.*")
+    # Lightning 2.6's own use of a torch pytree API that torch 2.13 deprecates: nothing a user can act on.
+    warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)", category=FutureWarning)
+    for logger in ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero"):
+        logging.getLogger(logger).addFilter(_no_advertising)
     L.seed_everything(args.seed, workers=True, verbose=False)
 
     data = TrajnetDataModule(
@@ -323,6 +388,9 @@ def _train(
     )
     module = make_module(args.model, net_config, optim)
     trainer, best = _trainer(args, out, ckpt_dir)
+    if not args.resume:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / SETTINGS_FILE).write_text(json.dumps({**settings, "name": name}, indent=2) + "\n")
     started = time.perf_counter()
     trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
     elapsed = time.perf_counter() - started
@@ -336,7 +404,7 @@ def _train(
             "best_checkpoint": Path(best_path).name,
             "seed": args.seed,
             "batch_size": args.batch_size,
-            "optim": optim.__dict__,
+            "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
         }
     }
     weights, _ = save_checkpoint(
@@ -363,6 +431,21 @@ def _train(
     (out / f"{name}.metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
     _print_summary(summary, Path(best_path).name, weights, top_k)
     return 0
+
+
+def _no_advertising(record: logging.LogRecord) -> bool:
+    """Drop Lightning's "Tip: try installing litlogger / litmodels" lines (cloud services, not training)."""
+    return not str(record.msg).startswith("💡 Tip")
+
+
+def trained_loss(module: Any, asked: str) -> str:
+    """The loss the module trained on: the Gaussian NLL needs a Gaussian head (PredictorModule.model_step
+    falls back to L2 on the mean steps), and the GAN has its own."""
+    from predictors.training import GANModule
+
+    if isinstance(module, GANModule):
+        return "variety+adversarial"
+    return asked if getattr(module.net, "head_type", None) == "gaussian" else "l2"
 
 
 def _evaluate_splits(

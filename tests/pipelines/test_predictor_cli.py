@@ -84,6 +84,53 @@ def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
     assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
 
 
+def test_resume_refuses_other_settings_and_keeps_the_runs_name(trained, capsys):
+    """The weights, optimiser and schedule resume from last.ckpt whatever the command says: a resume with
+    another learning rate or net would write a NAME.json recording settings that never trained the weights.
+    Without --name, the run's own name is kept (the default name would follow other options)."""
+    out, args = trained
+    more = [a if a != "1" else "2" for a in args]  # --epochs 2
+    lr = [*more, "--lr", "0.05", "--seed", "7", "--resume"]
+    assert main(lr) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"--resume: {out} was started with other settings (lr: run 0.001, now 0.05; seed: run 0, now 7)"
+        in err
+    )
+    assert err.count("\n") == 1 and "Traceback" not in err
+    hidden = [*more, "--net-config", '{"hidden_dim": 16}', "--resume"]
+    assert main(hidden) == 2 and "net_config: run {" in capsys.readouterr().err
+    unnamed = [a for i, a in enumerate(more) if a != "--name" and more[i - 1] != "--name"]
+    assert main([*unnamed, "--resume"]) == 0
+    assert sorted(p.name for p in out.glob("*.pt")) == ["walker.pt"]
+    recorded = json.loads((out / "walker.json").read_text())
+    assert recorded["training"]["optim"]["lr"] == 0.001 and recorded["training"]["epochs"] == 2
+
+
+def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capfd):
+    """Lightning's litlogger/litmodels tips and its use of a torch API that torch 2.13 deprecates are
+    nothing a user of `crowdmpc train` can act on; they are left out, the run's own lines stay."""
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--epochs", "1"]
+    assert main([*args, "--out", str(tmp_path / "run"), "--no-progress"]) == 0
+    out, err = capfd.readouterr()
+    assert "Tip" not in out + err and "LeafSpec" not in out + err
+    assert "add to the zoo with" in out
+
+
+def test_the_recorded_loss_is_the_one_trained(trained):
+    """A Gaussian loss asked of a net with a point head trains on L2 (PredictorModule.model_step), and the
+    checkpoint says so; soft-pooling Social-LSTM has a Gaussian head and keeps it."""
+    out, _ = trained
+    assert json.loads((out / "walker.json").read_text())["training"]["optim"]["loss"] == "gaussian"
+    from pipelines.commands.train import trained_loss
+    from predictors.training import OptimConfig, make_module
+
+    point = make_module("social_lstm", {"head": "point"}, OptimConfig())
+    assert trained_loss(point, "gaussian") == "l2"
+    assert trained_loss(make_module("social_gan", None, OptimConfig()), "gaussian") == "variety+adversarial"
+
+
 @pytest.mark.parametrize("model", ["social_lstm", "social_gan"])
 def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
     """One epoch then --resume to two equals two epochs straight, weight for weight: the resumed epoch
