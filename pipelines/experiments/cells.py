@@ -28,6 +28,7 @@ from pipelines.experiments.paper import (
 )
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec
+from predictors.oracle import ORACLE_PREDICTOR
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig
@@ -151,7 +152,9 @@ class Experiment:
                 f"{sorted(n for n, e in EXPERIMENTS.items() if e.predictor_swappable)}"
             )
         methods = tuple((label, replace(spec, predictor=predictor)) for label, spec in self.methods)
-        return replace(self, methods=methods)
+        # a title naming the paper's predictor would describe the table wrongly
+        title = self.title.replace(PAPER_PREDICTOR_WORDS, predictor).replace("paper's predictor", predictor)
+        return replace(self, methods=methods, title=title)
 
     def with_predictors(self, predictors: Sequence[str]) -> Experiment:
         """The swap table over ``predictors`` (one method each, labelled by its name, in this order), every
@@ -173,7 +176,8 @@ class Experiment:
             raise PipelineError(f"--predictors names {repeated} more than once")
         template = self.methods[0][1]
         methods = tuple((name, replace(template, predictor=name)) for name in predictors)
-        return replace(self, methods=methods)
+        title = self.title if ORACLE_PREDICTOR in predictors else self.title.replace(ORACLE_WORDS, "")
+        return replace(self, methods=methods, title=title)
 
     def with_controllers(self, controllers: Sequence[str]) -> Experiment:
         """One method per controller (labelled by its name, in this order), each as the experiment's first
@@ -259,8 +263,11 @@ SWAP_PREDICTORS: Final[tuple[str, ...]] = (
     "social_gru_eth",
     "social_attention_eth",
     "social_lstm_synth",
-    "orca_oracle",  # the upper bound: the humans' own ORCA (predictors/oracle.py)
+    ORACLE_PREDICTOR,  # the upper bound: the humans' own ORCA (predictors/oracle.py)
 )
+# Words of titles that hold only for the default methods (Experiment.with_predictor, with_predictors).
+PAPER_PREDICTOR_WORDS: Final[str] = "the paper's predictor"
+ORACLE_WORDS: Final[str] = " (ORCA ground truth as an oracle)"
 # Models of the swap table that came after the first zoo (issue 13): in the default list once a zoo has them.
 LATER_SWAP_PREDICTORS: Final[frozenset[str]] = frozenset({"social_gru_eth", "social_attention_eth"})
 
@@ -347,7 +354,7 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "predictors": Experiment(
         name="predictors",
-        title="Predictor swap: CMPC with each predictor (ORCA ground truth as an oracle)",
+        title=f"Predictor swap: CMPC with each predictor{ORACLE_WORDS}",
         methods=tuple((name, ControllerSpec("cmpc", name)) for name in swap_predictors()),
         humans=ABLATION_HUMANS,
         predictor_swappable=False,
@@ -355,7 +362,7 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "controllers": Experiment(
         name="controllers",
-        title="Controllers: each controller at 7 humans with the paper's predictor",
+        title=f"Controllers: each controller at 7 humans with {PAPER_PREDICTOR_WORDS}",
         methods=tuple((name, ControllerSpec(name, PAPER_PREDICTOR)) for name in SHIPPED_CONTROLLERS),
         humans=ABLATION_HUMANS,
         controller_list=True,

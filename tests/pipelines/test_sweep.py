@@ -643,3 +643,16 @@ def test_a_ray_address_with_no_cluster_is_one_line_naming_it(monkeypatch, failur
     monkeypatch.setitem(sys.modules, "ray", fake)
     with pytest.raises(PipelineError, match=f"--ray-address 'head:1' .*{shown}.*ray start --head"):
         RayBackend(2, "none", address="head:1")
+
+
+def test_a_tables_title_follows_the_predictors_it_runs():
+    """The controllers table says which predictor it ran with, not "the paper's" after --predictor; the
+    predictor swap mentions the oracle only when the oracle is one of its columns."""
+    controllers = get_experiment("controllers")
+    assert controllers.title.endswith("with the paper's predictor")
+    assert controllers.with_predictor("my_net_eth").title.endswith("at 7 humans with my_net_eth")
+    conventions = get_experiment("conventions").with_predictor("constant_velocity")
+    assert conventions.title.endswith("(CMPC, constant_velocity)")
+    swap = get_experiment("predictors")
+    assert swap.with_predictors(["constant_velocity", "orca_oracle"]).title == swap.title
+    assert swap.with_predictors(["constant_velocity"]).title == "Predictor swap: CMPC with each predictor"
