@@ -108,7 +108,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
     if read_manifest(target) is not None:
         return target
     log = log or (lambda msg: print(msg, file=sys.stderr))
-    log(f"preparing {raw} into {target} (first use only; about two minutes)")
+    log(f"preparing {raw} into {target} (first use only; about half a minute)")
     staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
     shutil.rmtree(staging, ignore_errors=True)
     prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log)
