@@ -82,6 +82,9 @@ class OneLineParser(argparse.ArgumentParser):
     the class of their parent (argparse's ``add_subparsers`` default), so every level errs the same way."""
 
     def error(self, message: str) -> NoReturn:
+        if message.startswith("unrecognized arguments:") and "--plugin" in message.split():
+            # `crowdmpc evaluate --plugin m:C ...`: an option of crowdmpc itself, given after the command
+            message += " (--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)"
         self.exit(2, f"{self.prog}: error: {message}; see '{self.prog} --help'\n")
 
 

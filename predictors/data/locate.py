@@ -77,6 +77,15 @@ def read_manifest(directory: Path) -> dict | None:
     return manifest
 
 
+def missing_prepared_files(directory: Path) -> list[str]:
+    """The files a readable manifest of ``directory`` lists that are not there (none if it is unreadable)."""
+    try:
+        files = json.loads((directory / "manifest.json").read_text()).get("files", {})
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [name for name in files if not (directory / name).is_file()] if isinstance(files, dict) else []
+
+
 def raw_ewap_dir(directory: Path) -> Path | None:
     for candidate in (directory / "raw_ewap", directory):
         if all((candidate / seq / "obsmat.txt").is_file() for seq in EWAP_SEQUENCES.values()):
@@ -90,9 +99,11 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
     if read_manifest(directory) is not None:
         return directory
     if (directory / "manifest.json").is_file():
+        missing = missing_prepared_files(directory)
+        what = f"lacks {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}" if missing else ""
         raise PredictorError(
-            f"{directory / 'manifest.json'} exists but the prepared data is incomplete or unreadable; "
-            "re-run `crowdmpc data prepare`"
+            f"{directory / 'manifest.json'} exists but the prepared data is incomplete or unreadable"
+            f"{' (' + what + ')' if what else ''}; re-run `crowdmpc data prepare`"
         )
     raw = raw_ewap_dir(directory)
     if raw is None:

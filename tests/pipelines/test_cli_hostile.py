@@ -87,6 +87,17 @@ def test_a_parser_error_exits_2_from_the_command_line():
     )
 
 
+def test_plugin_after_the_command_says_where_it_goes(capsys):
+    """--plugin is crowdmpc's own option; after the command argparse only says it does not know it."""
+    with pytest.raises(SystemExit) as done:
+        main(["evaluate", "--plugin", "mymod:MyNet", "--predictor", "constant_velocity"])
+    assert done.value.code == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc: error: unrecognized arguments: --plugin mymod:MyNet (--plugin goes before COMMAND: "
+        "crowdmpc --plugin MODULE:CLASS COMMAND ...); see 'crowdmpc --help'\n"
+    )
+
+
 # ----------------------------------------------------------------------------------------------------------
 # 2. Output paths: checked before any work
 # ----------------------------------------------------------------------------------------------------------

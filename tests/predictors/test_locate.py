@@ -98,5 +98,8 @@ def test_unknown_protocol_and_dataset(prepared):
 
 def test_incomplete_prepared_directory_is_not_used(prepared):
     (prepared / "test" / "biwi_eth.ndjson").unlink()
-    with pytest.raises(PredictorError, match="incomplete or unreadable"):
+    with pytest.raises(PredictorError, match=r"incomplete or unreadable \(lacks test/biwi_eth.ndjson\)"):
+        protocol_files(prepared, "paper")
+    (prepared / "manifest.json").write_text("{")  # unreadable: nothing to name
+    with pytest.raises(PredictorError, match="incomplete or unreadable; re-run"):
         protocol_files(prepared, "paper")
