@@ -36,8 +36,10 @@ sets hyper-parameters of the kind's config (a JSON object; unknown keys and bad 
 --pooling and --hidden-dim are short for two of them, for the kinds whose config has them.
 
 Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for --resume), csv/ and
-tensorboard/ logs, and at the end NAME.pt + NAME.json (state_dict + config) with NAME.metrics.json (TrajNet++
-val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair into the user zoo.
+tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (state_dict + config) with
+NAME.metrics.json (TrajNet++ val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair
+into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise); it
+takes the run's settings, of which only --epochs may change.
 """
 
 
