@@ -414,7 +414,10 @@ def _train(
     )
     top_k = 20 if model_kind(args.model).adversarial else None
     metrics = _evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
-    epoch_times = epoch_times_from_csv(trainer.loggers[0].log_dir)
+    # every version: a resumed run logs into a new one (Lightning's CSVLogger), its first epochs in the old
+    epoch_times = [
+        t for log_dir in sorted((out / "csv").glob("version_*")) for t in epoch_times_from_csv(log_dir)
+    ]
     summary = {
         "name": name,
         "model": args.model,
@@ -491,7 +494,7 @@ def _print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int
     )
 
 
-def epoch_times_from_csv(log_dir: str) -> list[float]:
+def epoch_times_from_csv(log_dir: str | Path) -> list[float]:
     """Training epoch wall times logged by the module (``epoch_time_s``)."""
     import csv
 
