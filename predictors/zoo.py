@@ -26,7 +26,8 @@ import importlib.resources
 import json
 import os
 import shutil
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from dataclasses import replace as replace_fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
@@ -288,16 +289,48 @@ def add_to_zoo(
     training: dict | None = None,
     directory: str | Path | None = None,
     shipped: bool = False,
+    replace: bool = False,
 ) -> ZooEntry:
     """Copy a checkpoint pair into the user zoo (``directory``, else ``user_zoo_dir()``) as
-    ``NAME.pt``/``NAME.json`` and record it in its manifest.
+    ``NAME.pt``/``NAME.json`` and record it in its manifest; ``add_entry`` says what it replaced."""
+    entry, _ = add_entry(
+        weights,
+        name=name,
+        protocol=protocol,
+        training_data=training_data,
+        metrics=metrics,
+        training=training,
+        directory=directory,
+        shipped=shipped,
+        replace=replace,
+    )
+    return entry
+
+
+def add_entry(
+    weights: str | Path,
+    *,
+    name: str,
+    protocol: str,
+    training_data: dict,
+    metrics: dict,
+    training: dict | None = None,
+    directory: str | Path | None = None,
+    shipped: bool = False,
+    replace: bool = False,
+) -> tuple[ZooEntry, ZooEntry | None]:
+    """``add_to_zoo``: the entry now in the zoo, and the one it had under ``name`` before (None if none).
 
     The shipped zoo is read-only: a ``directory`` that is (or lies in) it is refused, and so is a ``name`` it
-    has. ``shipped=True`` is the maintainers' way to add a model to the shipped zoo itself (``directory``
-    then defaults to ``checkpoints_dir()``)."""
+    has. A ``name`` the user zoo has already is refused unless ``replace``, except for the very same entry,
+    which is left as it is (returned as both). ``shipped=True`` is the maintainers' way to add a model of a
+    shipped kind to the shipped zoo itself (``directory`` then defaults to ``checkpoints_dir()``)."""
     check_name(name)  # before anything is written: NAME becomes the files' names
+    weights = Path(weights)
+    config = weights.with_suffix(".json")
     if shipped:
         root = checkpoints_dir(directory)
+        _check_shipped_kind(config)
     else:
         root = writable_zoo_dir(directory)
         if name in read_manifest(checkpoints_dir()):
@@ -305,8 +338,6 @@ def add_to_zoo(
                 f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}; "
                 "pick another name"
             )
-    weights = Path(weights)
-    config = weights.with_suffix(".json")
     entries = read_manifest(root)  # refuse to add to a manifest that does not read
     predictor = load_checkpoint(weights, config)  # refuse a pair that does not load
     document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
@@ -327,16 +358,47 @@ def add_to_zoo(
         metrics=metrics,
         training=training or {},
     )
+    previous = entries.get(name)
+    if previous is not None and not shipped and not replace:
+        if previous == entry:
+            return previous, previous  # adding the same thing twice changes nothing
+        # the entry may be the only copy of a model the user trained: never lose it without being asked
+        raise PredictorError(_taken(name, root, previous, entry))
     root.mkdir(parents=True, exist_ok=True)
     # resolved: a symbolic link NAME.pt in the zoo must not make us write elsewhere
     target_weights, target_config = entry.paths(root, root / MANIFEST_NAME)
     if weights.resolve() != target_weights:
         shutil.copyfile(weights, target_weights)
     target_config.write_bytes(config_bytes)
-    entry = replace(entry, sha256=sha256_file(target_weights))  # the copy's, should the source have changed
+    entry = replace_fields(entry, sha256=sha256_file(target_weights))  # the copy's, should the source change
     entries[name] = entry
     write_manifest(entries, root)
-    return entry
+    return entry, previous
+
+
+def _taken(name: str, root: Path, previous: ZooEntry, entry: ZooEntry) -> str:
+    """The refusal of a name the user zoo has: what the entry holds, and how to go on."""
+    same = " (the same weights, with other metrics or settings)" if previous.sha256 == entry.sha256 else ""
+    return (
+        f"the user zoo {root} already has {name!r}: sha256 {previous.sha256[:12]}…, model {previous.model}"
+        f"{same}; add it with --replace to replace that entry, or under another --name"
+    )
+
+
+def _check_shipped_kind(config: Path) -> None:
+    """Refuse a config whose model kind the project does not ship: every clone reads the shipped zoo, and
+    it would then need a module (a plugin's, an entry point's) that the repository lacks."""
+    from predictors.models import shipped as shipped_kinds
+
+    if not config.is_file():
+        return  # load_checkpoint says what is wrong with it
+    model = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config").get("model")
+    kinds = sorted(shipped_kinds())
+    if isinstance(model, str) and model not in kinds:
+        raise PredictorError(
+            f"{config}: model {model!r} is not a kind this project ships ({', '.join(kinds)}), so the "
+            "shipped zoo cannot hold it; add it to your user zoo without --shipped"
+        )
 
 
 def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:

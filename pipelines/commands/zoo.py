@@ -13,15 +13,19 @@ EPILOG = """examples:
   crowdmpc zoo show social_lstm_eth
   crowdmpc zoo verify
   crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt --name my_social_lstm
+  crowdmpc zoo add runs/train/social_lstm_eth_v2/social_lstm_eth_v2.pt --name my_social_lstm --replace
   crowdmpc --plugin my_predictor:MyNet zoo add runs/train/mynet_eth/mynet_eth.pt
   crowdmpc zoo remove my_social_lstm
 
 Two zoos, each NAME.pt (state_dict) + NAME.json (config) per model and a manifest.json with their sha256,
 training data and metrics: the shipped zoo, checkpoints/ (or $CROWDMPC_CHECKPOINTS), read-only; and the user
 zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo, else ~/.local/share/crowdmpc/zoo, or --dir), where
-`add` writes and `remove` deletes. A user model may not take a shipped model's name. A file whose sha256
-differs from its manifest is refused when loaded; `verify` checks every entry of both zoos. A model of a
-plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...).
+`add` writes and `remove` deletes. A user model may not take a shipped model's name. `add` under a name the
+user zoo has already is refused (adding the very same model again changes nothing) unless --replace says to
+replace that entry. The metrics file must be the one `crowdmpc train` wrote for these weights. A file whose
+sha256 differs from its manifest is refused when loaded; `verify` checks every entry of both zoos. A model of
+a plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the shipped
+zoo holds only the kinds the project ships.
 """
 
 
@@ -51,7 +55,12 @@ def register(subparsers) -> None:
         "--metrics",
         type=Path,
         default=None,
-        help="metrics JSON (default NAME.metrics.json beside the weights)",
+        help="metrics JSON of these weights (default NAME.metrics.json beside the weights)",
+    )
+    add.add_argument(
+        "--replace",
+        action="store_true",
+        help="replace the user zoo's entry of the same name (without it, adding a taken name is an error)",
     )
     add.add_argument(
         "--shipped",
@@ -207,14 +216,16 @@ def _add(args: argparse.Namespace) -> int:
     for key in ("training", "training_data", "metrics"):
         if not isinstance(summary.get(key, {}), dict):
             raise PipelineError(f'{metrics_path}: "{key}" must be a JSON object')
-    name = args.name if args.name is not None else summary.get("name") or args.weights.stem
+    # the zoo name is the user's or the checkpoint's: a metrics file may be shared by mistake
+    name = args.name if args.name is not None else args.weights.stem
+    _check_metrics_describe(args.weights, metrics_path, summary)
     # add_to_zoo checks the name before it writes anything
     training = dict(summary.get("training", {}))
     training_data = dict(summary.get("training_data", {}))
     if args.protocol:
         training_data["protocol"] = args.protocol
     training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
-    entry = zoo.add_to_zoo(
+    entry, previous = zoo.add_entry(
         args.weights,
         name=name,
         protocol=args.protocol or summary.get("protocol", "custom"),
@@ -223,7 +234,48 @@ def _add(args: argparse.Namespace) -> int:
         training=training,
         directory=None if args.shipped else root,
         shipped=args.shipped,
+        replace=args.replace,
     )
-    which = "shipped" if args.shipped else "user"
-    print(f"added {entry.name} ({entry.file}, sha256 {entry.sha256[:12]}…) to the {which} zoo {root}")
+    print(_added_line(entry, previous, args, root))
     return 0
+
+
+def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:
+    """What ``zoo add`` did, in one line: added, replaced (and what was there), or nothing."""
+    which = "shipped" if args.shipped else "user"
+    sha = f"sha256 {entry.sha256[:12]}…"
+    if args.shipped or previous is None:
+        return f"added {entry.name} ({entry.file}, {sha}) to the {which} zoo {root}"
+    if not args.replace and previous == entry:
+        return f"{entry.name} is already in the user zoo {root} with these weights ({sha}); nothing changed"
+    return (
+        f"replaced {entry.name} (was sha256 {previous.sha256[:12]}…, model {previous.model}) with "
+        f"{entry.file} ({sha}, model {entry.model}) in the user zoo {root}"
+    )
+
+
+def _check_metrics_describe(weights: Path, metrics_path: Path, summary: dict) -> None:
+    """Refuse a metrics file that `crowdmpc train` wrote for another checkpoint: the zoo entry would list
+    metrics of other weights. Train records the checkpoint's name and model kind, which its config holds too
+    (the config's errors are left to the loading that follows)."""
+    from predictors import checkpoint
+    from predictors.errors import PredictorError
+
+    for key in ("name", "model"):
+        if key in summary and not isinstance(summary[key], str):
+            raise PipelineError(f'{metrics_path}: "{key}" must be a string (the checkpoint\'s {key})')
+    config = weights.with_suffix(".json")
+    if not ({"name", "model"} & summary.keys()) or not config.is_file():
+        return
+    try:
+        document = checkpoint.read_document(config, checkpoint.CONFIG_FORMAT, "crowdmpc predictor config")
+    except PredictorError:
+        return  # add_to_zoo refuses it with the whole story
+    own = {"name": document.get("name", weights.stem), "model": document.get("model")}
+    for key, value in own.items():
+        if key in summary and isinstance(value, str) and summary[key] != value:
+            raise PipelineError(
+                f"{metrics_path} holds the metrics of {key} {summary[key]!r}, not of {weights} ({key} "
+                f"{value!r} in {config.name}); pass the NAME.metrics.json "
+                "`crowdmpc train` wrote beside these weights"
+            )

@@ -316,3 +316,105 @@ def test_configs_from_before_model_kinds_still_load(tmp_path, name, kind, cls):
 def test_the_shipped_gan_loads_as_a_sampling_predictor():
     predictor = zoo.load_zoo("social_gan_eth", REAL_ZOO)
     assert isinstance(predictor, SocialGANPredictor) and predictor.kind == "social_gan"
+
+
+# ------------------------------------------------------- taken names, another run's metrics, shipped kinds
+def retrained(pair: Path, stem: str, config_name: str | None = None) -> Path:
+    """``stem.pt``/``stem.json`` beside ``pair``: other weights (one value changed), the config naming
+    ``config_name`` (default ``stem``), as `crowdmpc train` writes it, and the pair's metrics."""
+    state = torch.load(pair, weights_only=True)
+    key = next(iter(state))
+    state[key] = state[key] + 0.5
+    weights = pair.with_name(f"{stem}.pt")
+    torch.save(state, weights)
+    document = json.loads(pair.with_suffix(".json").read_text())
+    weights.with_suffix(".json").write_text(json.dumps({**document, "name": config_name or stem}))
+    shutil.copyfile(pair.with_suffix(".metrics.json"), weights.with_suffix(".metrics.json"))
+    return weights
+
+
+def test_adding_a_taken_name_is_refused_unless_replace(shipped, user, pair, capsys):
+    assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
+    first = read_manifest(user)["mine"]
+    before = snapshot(user)
+    other = retrained(pair, "other")
+    code, _, err = cli(["zoo", "add", str(other), "--name", "mine"], capsys)
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc zoo: error: the user zoo {user} already has 'mine': sha256 {first.sha256[:12]}…, model "
+        "social_lstm; add it with --replace to replace that entry, or under another --name"
+    )
+    assert snapshot(user) == before
+
+    code, out, _ = cli(["zoo", "add", str(pair), "--name", "mine"], capsys)  # the very same model again
+    assert code == 0 and out == (
+        f"mine is already in the user zoo {user} with these weights (sha256 {first.sha256[:12]}…); "
+        "nothing changed\n"
+    )
+    assert snapshot(user) == before
+
+    code, out, _ = cli(["zoo", "add", str(other), "--name", "mine", "--replace"], capsys)
+    new = read_manifest(user)["mine"]
+    assert code == 0 and out.startswith(f"replaced mine (was sha256 {first.sha256[:12]}…, model social_lstm)")
+    assert new.sha256 == hashlib.sha256(other.read_bytes()).hexdigest() != first.sha256
+    assert set(read_manifest(user)) == {"mine"} and load_predictor("mine").name == "mine"
+
+
+def test_the_same_weights_with_other_metrics_are_refused_too(shipped, user, pair, capsys):
+    assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
+    before = snapshot(user)
+    pair.with_suffix(".metrics.json").write_text(json.dumps({"metrics": {"test": {"ade": 0.4}}}))
+    code, _, err = cli(["zoo", "add", str(pair), "--name", "mine"], capsys)
+    assert code == 2 and "(the same weights, with other metrics or settings); add it with --replace" in err
+    assert snapshot(user) == before and read_manifest(user)["mine"].metrics == {"test": {"ade": 0.5}}
+
+
+def run_metrics(pair: Path, name: str, model: str = "social_lstm") -> Path:
+    """NAME.metrics.json as `crowdmpc train` writes it beside its checkpoint."""
+    path = pair.with_name(f"{name}.metrics.json")
+    path.write_text(json.dumps({"name": name, "model": model, "metrics": {"test": {"ade": 0.5}}}))
+    return path
+
+
+def test_the_zoo_name_is_the_checkpoints_not_the_metrics_files(shipped, user, pair, capsys):
+    best = retrained(pair, "best", config_name="run1")  # run1's checkpoint, its files renamed
+    metrics = run_metrics(pair, "run1")
+    code, out, _ = cli(["zoo", "add", str(best), "--metrics", str(metrics)], capsys)
+    assert code == 0 and out.startswith("added best (best.pt") and zoo.zoo_names(user) == ["best"]
+    assert read_manifest(user)["best"].metrics == {"test": {"ade": 0.5}}
+
+
+@pytest.mark.parametrize(
+    ("metrics_of", "key", "theirs"), [("run1", "name", "'run1'"), ("run2", "model", "'social_gru'")]
+)
+def test_metrics_of_another_checkpoint_are_refused(shipped, user, pair, capsys, metrics_of, key, theirs):
+    for stem in ("run1", "run2"):
+        retrained(pair, stem)
+    metrics = run_metrics(pair, metrics_of, model="social_gru" if key == "model" else "social_lstm")
+    weights = pair.with_name("run2.pt")
+    own = "'run2'" if key == "name" else "'social_lstm'"
+    code, _, err = cli(["zoo", "add", str(weights), "--metrics", str(metrics), "--name", "mine"], capsys)
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc zoo: error: {metrics} holds the metrics of {key} {theirs}, not of {weights} ({key} {own} "
+        "in run2.json); pass the NAME.metrics.json `crowdmpc train` wrote beside these weights"
+    )
+    assert not user.exists()
+
+
+def test_the_shipped_zoo_takes_no_plugin_kind(tmp_path, shipped, user, capsys):
+    weights = toy_pair(tmp_path / "run")
+    weights.with_suffix(".metrics.json").write_text("{}")
+    (tmp_path / "pyproject.toml").write_text("")  # the shipped zoo of a clone, as --shipped requires
+    before = snapshot(shipped)
+    message = (
+        f"{weights.with_suffix('.json')}: model {TOY!r} is not a kind this project ships ("
+        f"{', '.join(sorted(models.shipped()))}), so the shipped zoo cannot hold it; add it to your user zoo "
+        "without --shipped"
+    )
+    code, _, err = cli(["--plugin", TOY, "zoo", "add", str(weights), "--shipped"], capsys)
+    assert code == 2 and one_line(err) == f"crowdmpc zoo: error: {message}"
+    with pytest.raises(PredictorError) as refused:
+        zoo.add_to_zoo(weights, name="toy", protocol="p", training_data={}, metrics={}, shipped=True)
+    assert str(refused.value) == message
+    assert snapshot(shipped) == before and not user.exists()
+    code, _, _ = cli(["--plugin", TOY, "zoo", "add", str(weights)], capsys)  # the user zoo takes it
+    assert code == 0 and zoo.zoo_names(user) == ["toy_eth"]
