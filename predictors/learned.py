@@ -36,6 +36,7 @@ import torch
 from predictors.base import OBS_LEN, check_rollout_inputs, robot_indices
 from predictors.errors import PredictorError
 from predictors.export import TensorSpec, export_function, output_shapes
+from predictors.nets.contract import check_step_contract
 from predictors.nets.social_lstm import SocialLSTM
 from predictors.threads import single_threaded
 
@@ -65,6 +66,9 @@ class LearnedPredictor:
         self.net: Any = copy.deepcopy(net).to(torch.float64).eval()
         for p in self.net.parameters():
             p.requires_grad_(False)
+        # A zoo entry of a net that breaks the step contract fails here, in one line, rather than predicting
+        # broadcast nonsense in a closed loop.
+        check_step_contract(self.net, f"predictor {name!r} (model {self.kind!r})", obs_len=obs_len)
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
         self._encoders: dict[tuple[int, int], ca.Function] = {}
         self._steps: dict[int, ca.Function] = {}

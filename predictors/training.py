@@ -29,6 +29,7 @@ from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.metrics import ade, fde
 from predictors.models import model_kind
+from predictors.nets.contract import check_step_contract, check_training_forward
 from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
 from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
@@ -155,6 +156,11 @@ class PredictorModule(_PredictorModule):
         self.net = kind.build_net(config)
         self.obs_len = obs_len
         self.pred_len = pred_len
+        # Before any epoch: a net that breaks the contract would otherwise train on broadcast shapes (a
+        # one-column step moves x and y alike) or fail deep in Lightning.
+        check_step_contract(self.net, f"model {model!r}", obs_len=obs_len)
+        if defines_forward(self.net):
+            check_training_forward(self.net, f"model {model!r}", obs_len=obs_len, pred_len=pred_len)
 
     def rollout(self, positions: torch.Tensor, mask: torch.Tensor, teacher_forcing: bool):
         """(outputs (B, H, N, K), predicted positions (B, H, N, 2)) of the scenes."""
@@ -217,6 +223,7 @@ class GANModule(_PredictorModule):
         if config.noise_dim < 1 or config.head != "point":
             raise PredictorError(f"the GAN generator needs noise_dim >= 1 and head 'point', got {config}")
         self.net = SocialLSTM(config)
+        check_step_contract(self.net, "model 'social_gan'", obs_len=obs_len)
         self.discriminator = Discriminator(DiscriminatorConfig(**(discriminator_config or {})))
         self.optim = OptimConfig(**optim_config)
         self.obs_len = obs_len

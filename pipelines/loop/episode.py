@@ -2,7 +2,8 @@
 
 Controllers handle their own failures (a solver that fails falls back inside the controller and says so in
 ``ControlOutput.fallback``); anything that escapes a controller or an observer is a bug and propagates with
-its traceback.
+its traceback. A controller's ``act`` that returns no ``ControlOutput`` breaks the plugin contract: a
+PipelineError naming it.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
+from pipelines.errors import PipelineError
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 
@@ -72,6 +74,17 @@ class EpisodeResult:
         )
 
 
+def checked_output(controller: Controller, out: object) -> ControlOutput:
+    """``out`` if it is a ``ControlOutput``; a plugin's ``act`` that returns anything else (its bare
+    accelerations, say) is a one-line PipelineError naming the controller, not an AttributeError later."""
+    if not isinstance(out, ControlOutput):
+        raise PipelineError(
+            f"controller {controller.name!r} ({type(controller).__qualname__}): act() must return a "
+            f"crowdsim.control.ControlOutput, got {type(out).__module__}.{type(out).__qualname__}"
+        )
+    return out
+
+
 def run_episode(
     controller: Controller,
     *,
@@ -116,7 +129,7 @@ def run_episode(
     iterations: list[int] = []
     done = False
     while not done:
-        out = controller.act(obs)
+        out = checked_output(controller, controller.act(obs))
         next_obs, done, _ = env.step(out.accelerations)
         solve_times.append(float(out.solve_time_s))
         statuses.append(str(out.status))

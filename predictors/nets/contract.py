@@ -21,15 +21,36 @@ loss (it is not called ``head`` because nets name their output layer so, as Traj
 Both methods are run by ``predictors.export`` on symbolic tensors to build the net's CasADi twin, so they may
 use shapes in Python freely (``batch, n, _ = cur.shape``; loops over the observed steps) but must not branch
 on tensor values, and must not write into tensors in place (``x[:, 0] = 1``).
+
+A net may define its own training ``forward(positions, mask, obs_len, pred_len, *, teacher_forcing)``
+returning ``(outputs (B, pred_len, N, K), predicted (B, pred_len, N, 2))`` (``predictors.training``);
+without one it is trained through ``nets.rollout``. ``check_step_contract`` and ``check_training_forward``
+run a net once on a small synthetic batch and refuse, in one line, one that breaks this contract: a wrong
+shape would otherwise broadcast silently (a one-column step moves x and y alike) or fail deep in a rollout.
 """
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Literal, Protocol, runtime_checkable
+import inspect
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any, ClassVar, Final, Literal, Protocol, runtime_checkable
 
 import torch
 
+from predictors.errors import PredictorError, short_repr
+from predictors.threads import single_threaded
+
 Head = Literal["gaussian", "point"]
+HEADS: Final[tuple[str, ...]] = ("gaussian", "point")
+GAUSSIAN_WIDTH: Final[int] = 5  # mean (2), sigmas (2), correlation: what losses.gaussian_nll reads
+# The checks' synthetic batch: B and N differ, so a state laid out (N, B, ...) cannot pass as (B, N, ...).
+CHECK_BATCH: Final[int] = 2
+CHECK_AGENTS: Final[int] = 3
+TRAINING_FORWARD: Final[str] = (
+    "forward(positions, mask, obs_len, pred_len, *, teacher_forcing) -> (outputs, predicted)"
+)
+SEE: Final[str] = "(see predictors/nets/contract.py)"
 
 
 @runtime_checkable
@@ -43,3 +64,180 @@ class StepNet(Protocol):
     def encode(self, positions: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, ...]: ...
 
     def decode_step(self, *state_and_inputs: torch.Tensor) -> tuple[torch.Tensor, ...]: ...
+
+
+def synthetic_scene(
+    length: int, *, dtype: torch.dtype = torch.float32, device: torch.device | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(positions (B, length, N, 2), mask (B, length, N))``: agents walking straight lines within a couple
+    of metres of each other (pooling range), all observed. Deterministic: checking a net draws no random
+    numbers, so a seeded training run trains the same weights with the check as without it."""
+    steps = torch.arange(length, dtype=dtype, device=device)[None, :, None, None] * 0.4
+    start = torch.tensor([[-1.5, 0.3], [1.5, -0.2], [0.2, -1.6]], dtype=dtype, device=device)
+    velocity = torch.tensor([[0.9, 0.0], [-0.9, 0.1], [0.1, 0.8]], dtype=dtype, device=device)
+    shift = torch.arange(CHECK_BATCH, dtype=dtype, device=device)[:, None, None, None] * 0.1
+    positions = start + steps * velocity + shift
+    return positions, torch.ones(positions.shape[:3], dtype=torch.bool, device=device)
+
+
+@contextmanager
+def _probing(net: torch.nn.Module) -> Iterator[None]:
+    """Eval mode (no dropout draws, no batch-norm statistics updated) without gradients, on one thread (a
+    tiny batch: torch's pool made the check 100x slower on a shared CPU); every submodule's mode is restored
+    after (a net may keep a frozen part in eval mode)."""
+    modes = [(module, module.training) for module in net.modules()]
+    net.eval()
+    try:
+        with torch.no_grad(), single_threaded():
+            yield
+    finally:
+        for module, training in modes:
+            module.training = training
+
+
+def _call(where: str, what: str, function: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """``function(*args, **kwargs)``; a net that fails on a well-formed batch is the net's fault: one line."""
+    try:
+        return function(*args, **kwargs)
+    except PredictorError:
+        raise
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise PredictorError(
+            f"{where}: {what} failed on a synthetic batch (B={CHECK_BATCH}, N={CHECK_AGENTS}): "
+            f"{type(exc).__name__}: {first[:200]} {SEE}"
+        ) from None
+
+
+def _head_type(net: torch.nn.Module, where: str) -> str:
+    head = getattr(net, "head_type", None)
+    if head not in HEADS:
+        raise PredictorError(f"{where}: head_type must be one of {list(HEADS)}, got {short_repr(head)} {SEE}")
+    return str(head)
+
+
+def _expected_out(head: str, lead: str) -> str:
+    if head == "gaussian":
+        return f"({lead}, {GAUSSIAN_WIDTH}) (mean step, sigmas, correlation)"
+    return f"({lead}, K) with K >= 2 (out[..., :2] is the mean step)"
+
+
+def _check_head(
+    out: Any, lead: tuple[int, ...], head: str, dtype: torch.dtype, where: str, what: str
+) -> None:
+    """``out`` is ``(*lead, K)`` of ``dtype``, with K the head's width (at least the 2 of the mean step)."""
+    names = "B, N" if len(lead) == 2 else "B, pred_len, N"
+    sizes = ", ".join(f"{n}={v}" for n, v in zip(names.split(", "), lead, strict=True))
+    if not isinstance(out, torch.Tensor):
+        raise PredictorError(f"{where}: {what} must be a tensor, got {type(out).__name__} {SEE}")
+    width = out.shape[-1] if out.dim() == len(lead) + 1 and tuple(out.shape[:-1]) == lead else None
+    fits = width == GAUSSIAN_WIDTH if head == "gaussian" else width is not None and width >= 2
+    if not fits:
+        raise PredictorError(
+            f"{where}: {what} must be of shape {_expected_out(head, names)} for a {head!r} head, got "
+            f"{tuple(out.shape)} for {sizes} {SEE}"
+        )
+    if out.dtype != dtype:
+        raise PredictorError(f"{where}: {what} must be {dtype} like the positions, got {out.dtype} {SEE}")
+
+
+def _shape(value: Any) -> str:
+    """A tensor's shape, or what else the net returned in its place."""
+    return str(tuple(value.shape)) if isinstance(value, torch.Tensor) else type(value).__name__
+
+
+def _split(result: Any, where: str, method: str) -> tuple[list[torch.Tensor], Any]:
+    """``(*state, out)`` of what ``method`` returned, each state tensor ``(B, N, ...)``."""
+    if not (isinstance(result, tuple | list) and len(result) >= 2):
+        got = f"{len(result)} values" if isinstance(result, tuple | list) else type(result).__name__
+        raise PredictorError(
+            f"{where}: {method} must return a tuple (*state, out) with at least one state tensor, got {got} "
+            f"{SEE}"
+        )
+    *state, out = result
+    for i, tensor in enumerate(state):
+        if not isinstance(tensor, torch.Tensor) or tuple(tensor.shape[:2]) != (CHECK_BATCH, CHECK_AGENTS):
+            raise PredictorError(
+                f"{where}: {method}'s state tensor {i} must be of shape (B, N, ...), got {_shape(tensor)} "
+                f"for B={CHECK_BATCH}, N={CHECK_AGENTS} {SEE}"
+            )
+    return state, out
+
+
+def _dtype_and_device(net: torch.nn.Module) -> tuple[torch.dtype, torch.device]:
+    """What the net computes in: its first floating parameter's dtype and device (float32 on CPU if none)."""
+    for p in net.parameters():
+        if p.is_floating_point():
+            return p.dtype, p.device
+    return torch.float32, torch.device("cpu")
+
+
+def check_step_contract(net: torch.nn.Module, where: str, *, obs_len: int) -> None:
+    """PredictorError, one line starting with ``where`` (e.g. "model 'mymod:MyNet'"), unless ``net``'s
+    ``encode`` and ``decode_step`` keep the step contract on a synthetic batch of ``obs_len`` steps: every
+    state tensor ``(B, N, ...)``, ``decode_step`` handing back the state it was given in the same shapes and
+    dtypes, ``out`` ``(B, N, K)`` in the positions' dtype with K the head's width."""
+    head = _head_type(net, where)
+    dtype, device = _dtype_and_device(net)
+    positions, mask = synthetic_scene(obs_len, dtype=dtype, device=device)
+    lead = (CHECK_BATCH, CHECK_AGENTS)
+    step_net: Any = net  # its encode and decode_step are no nn.Module methods mypy knows
+    with _probing(net):
+        encoded = _call(where, "encode", step_net.encode, positions, mask)
+        state, out = _split(encoded, where, "encode")
+        _check_head(out, lead, head, dtype, where, "encode's out")
+        inputs = (positions[:, -2], positions[:, -1], mask[:, -1])
+        stepped = _call(where, "decode_step", step_net.decode_step, *state, *inputs)
+        new_state, new_out = _split(stepped, where, "decode_step")
+        _check_head(new_out, lead, head, dtype, where, "decode_step's out")
+    before = [(tuple(t.shape), t.dtype) for t in state]
+    after = [(tuple(t.shape), t.dtype) for t in new_state]
+    if before != after:
+        raise PredictorError(
+            f"{where}: decode_step must return the state it is given, in the same shapes and dtypes: encode "
+            f"gave {_describe(before)}, decode_step returned {_describe(after)} {SEE}"
+        )
+
+
+def _describe(state: list[tuple[tuple[int, ...], torch.dtype]]) -> str:
+    return "[" + ", ".join(f"{shape} {str(dtype).removeprefix('torch.')}" for shape, dtype in state) + "]"
+
+
+def _bare(signature: inspect.Signature) -> str:
+    """``(positions, mask)``: the parameters without their annotations, which only lengthen the line."""
+    empty = inspect.Parameter.empty
+    parameters = [p.replace(annotation=empty) for p in signature.parameters.values()]
+    return str(signature.replace(parameters=parameters, return_annotation=empty))
+
+
+def check_training_forward(net: torch.nn.Module, where: str, *, obs_len: int, pred_len: int) -> None:
+    """PredictorError, one line, unless the net's own ``forward`` is the training rollout: it takes
+    ``TRAINING_FORWARD``'s arguments (as ``PredictorModule.rollout`` passes them) and returns
+    ``(outputs (B, pred_len, N, K), predicted (B, pred_len, N, 2))`` on a synthetic batch."""
+    head = _head_type(net, where)
+    dtype, device = _dtype_and_device(net)
+    positions, mask = synthetic_scene(obs_len + pred_len, dtype=dtype, device=device)
+    args = (positions, mask, obs_len, pred_len)
+    signature = inspect.signature(net.forward)
+    try:
+        signature.bind(*args, teacher_forcing=True)
+    except TypeError:
+        raise PredictorError(
+            f"{where}: {type(net).__name__}.forward{_bare(signature)} is not the training "
+            f"rollout {TRAINING_FORWARD}; give it that signature, or drop forward and the net is trained "
+            "through the generic rollout of encode and decode_step (predictors/nets/rollout.py)"
+        ) from None
+    with _probing(net):
+        result = _call(where, "forward", net, *args, teacher_forcing=True)
+    if not (isinstance(result, tuple | list) and len(result) == 2):
+        raise PredictorError(
+            f"{where}: forward must return (outputs, predicted), got {type(result).__name__} {SEE}"
+        )
+    outputs, predicted = result
+    lead = (CHECK_BATCH, pred_len, CHECK_AGENTS)
+    _check_head(outputs, lead, head, dtype, where, "forward's outputs")
+    if not isinstance(predicted, torch.Tensor) or tuple(predicted.shape) != (*lead, 2):
+        raise PredictorError(
+            f"{where}: forward's predicted positions must be of shape (B, pred_len, N, 2), got "
+            f"{_shape(predicted)} for B={CHECK_BATCH}, pred_len={pred_len}, N={CHECK_AGENTS} {SEE}"
+        )

@@ -199,3 +199,37 @@ def test_a_plugin_that_fails_to_build_is_one_line(capsys):
     register_controller_plugins([nameless])
     with pytest.raises(PipelineError, match="needs a non-empty str name and a predictor"):
         make_controller(ControllerSpec(nameless))
+
+
+def test_a_plugin_whose_act_returns_no_control_output_is_one_line(capsys):
+    bad = "tests.plugins.broken_controllers:ArrayAct"
+    message = (
+        "controller 'array_act' (ArrayAct): act() must return a crowdsim.control.ControlOutput, got "
+        "numpy.ndarray"
+    )
+    argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
+    code, stdout, err = run(capsys, *argv, "--no-progress")
+    assert code == 2 and stdout == ""
+    assert err == f"crowdmpc simulate: error: {message}\n"
+    with pytest.raises(PipelineError) as caught:
+        run_episode(make_controller(ControllerSpec(bad)), seed=0, scenario="circle", n_humans=2)
+    assert str(caught.value) == message
+
+
+def test_the_guides_controller_runs_as_written(tmp_path, monkeypatch, capsys):
+    """docs/extending.md's "Your own controller" example, saved as the user would, through simulate."""
+    guide = (REPO / "docs" / "extending.md").read_text()
+    section = guide.split("## 6. Your own controller", 1)[1]
+    (tmp_path / "my_controller.py").write_text(section.split("```python\n", 1)[1].split("```", 1)[0])
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "my_controller", raising=False)
+    plugin, out = "my_controller:GoStraight", tmp_path / "go.json"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "4", "--episodes", "2"]
+    try:
+        code, _, err = run(capsys, *argv, "--no-progress", "--json", str(out))
+    finally:
+        sys.modules.pop("my_controller", None)
+    assert code == 0, err
+    episodes = json.loads(out.read_text())["episodes"]
+    assert [e["controller"] for e in episodes] == ["go_straight", "go_straight"]
+    assert all(e["metrics"]["success"] and e["predictor"] is None for e in episodes)

@@ -1,0 +1,68 @@
+"""Predictor nets that break the step contract (``predictors.nets.contract``) as a researcher's first try
+might: each is ``ToyNet`` with one mistake. Registered as ``tests.plugins.broken_nets:NAME``; training,
+loading from a zoo and the closed loop refuse each in one line."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from tests.plugins.toy_predictor import ToyConfig, ToyNet
+
+
+class OneColumn(ToyNet):
+    """A 1-column head: ``out`` (B, N, 1), which ``cur + out[..., :2]`` would broadcast to x and y alike."""
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        self.readout = nn.Linear(config.hidden_dim, 1)
+
+
+class FlatOut(ToyNet):
+    """``decode_step``'s ``out`` of shape (B, N): the step's two values folded into one per agent (its
+    ``encode`` is right)."""
+
+    def encode(self, positions, mask):
+        h = positions.new_zeros(positions.shape[0], positions.shape[2], self.config.hidden_dim)
+        return ToyNet.decode_step(self, h, positions[:, -2], positions[:, -1], mask[:, -1])
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, out.sum(-1)
+
+
+class AgentsFirst(ToyNet):
+    """Its state laid out (N, B, H), as ``nn.LSTM`` lays out its hidden state, not (B, N, H)."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h.transpose(0, 1), prev, cur, neighbours)
+        return h.transpose(0, 1), out
+
+    def encode(self, positions, mask):
+        h = positions.new_zeros(positions.shape[2], positions.shape[0], self.config.hidden_dim)
+        return self.decode_step(h, positions[:, -2], positions[:, -1], mask[:, -1])
+
+
+class GaussianOfTwo(ToyNet):
+    """Says it has a Gaussian head (5 values: mean, sigmas, correlation) but outputs only the mean."""
+
+    @property
+    def head_type(self) -> str:
+        return "gaussian"
+
+
+class TorchHabitForward(ToyNet):
+    """A ``forward(positions, mask)`` by torch habit, not the training rollout's signature."""
+
+    def forward(self, positions: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return self.encode(positions, mask)
+
+
+class ForwardReturnsPositions(ToyNet):
+    """The training signature, but ``forward`` returns only the predicted positions."""
+
+    def forward(self, positions, mask, obs_len, pred_len, *, teacher_forcing):
+        from predictors.nets.rollout import teacher_forced_rollout
+
+        args = (positions, mask, obs_len, pred_len)
+        return teacher_forced_rollout(self, *args, teacher_forcing=teacher_forcing)[1]

@@ -1,0 +1,156 @@
+"""A net that breaks the step contract (``predictors.nets.contract``) is refused before training starts and
+when its zoo entry is loaded, in one line naming the model kind and what was expected against what it gave;
+every registered kind, shipped or plugin, passes the same check."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from pipelines.cli import main
+from predictors import models
+from predictors.base import OBS_LEN, PRED_LEN
+from predictors.checkpoint import load_checkpoint, save_checkpoint
+from predictors.errors import PredictorError
+from predictors.models import load_plugin, model_kind, model_kinds
+from predictors.nets.contract import check_step_contract, check_training_forward
+from predictors.training import OptimConfig, PredictorModule, defines_forward, make_module
+from tests.predictors.samples import write_walk_file
+
+BROKEN = "tests.plugins.broken_nets"
+SEE = "(see predictors/nets/contract.py)"
+WINDOW_MLP = "window_mlp:WindowMLP"
+
+
+@pytest.fixture(autouse=True)
+def _fresh_plugins(monkeypatch):
+    monkeypatch.setattr(models, "_PLUGINS", {})
+    monkeypatch.delenv(models.PLUGINS_ENV, raising=False)
+    # the guide's example, registered as a user would from docs/examples
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "docs" / "examples"))
+
+
+def _registered(name: str) -> str:
+    """``BROKEN:name`` registered as a plugin kind; its name."""
+    return load_plugin(f"{BROKEN}:{name}").name
+
+
+# --------------------------------------------------------------------------------------- the good nets
+def _all_kinds() -> list[str]:
+    load_plugin("tests.plugins.toy_predictor:ToyNet")
+    load_plugin(WINDOW_MLP)
+    return sorted(model_kinds())
+
+
+def test_every_registered_kind_and_head_passes_without_touching_the_net_or_the_random_state():
+    for name in _all_kinds():
+        kind = model_kind(name)
+        heads = [{}, {"head": "point"}] if kind.has_field("head") and not kind.adversarial else [{}]
+        for overrides in heads:
+            net = kind.build_net(kind.config(overrides)).train()
+            before = torch.get_rng_state()
+            check_step_contract(net, name, obs_len=OBS_LEN)
+            check_step_contract(net.double(), name, obs_len=OBS_LEN)  # as LearnedPredictor runs it
+            if defines_forward(net) and not kind.adversarial:
+                check_training_forward(net.float(), name, obs_len=OBS_LEN, pred_len=PRED_LEN)
+            # a seeded run trains the same weights with the check as without it, in the mode it asked for
+            assert torch.equal(before, torch.get_rng_state()) and net.training, name
+
+
+# ---------------------------------------------------------------------------------------- the bad nets
+BAD_STEPS = [
+    (
+        "OneColumn",
+        "encode's out must be of shape (B, N, K) with K >= 2 (out[..., :2] is the mean step) for a 'point' "
+        "head, got (2, 3, 1) for B=2, N=3",
+    ),
+    (
+        "FlatOut",
+        "decode_step's out must be of shape (B, N, K) with K >= 2 (out[..., :2] is the mean step) for a "
+        "'point' head, got (2, 3) for B=2, N=3",
+    ),
+    ("AgentsFirst", "encode's state tensor 0 must be of shape (B, N, ...), got (3, 2, 8) for B=2, N=3"),
+    (
+        "GaussianOfTwo",
+        "encode's out must be of shape (B, N, 5) (mean step, sigmas, correlation) for a 'gaussian' head, "
+        "got (2, 3, 2) for B=2, N=3",
+    ),
+]
+
+
+@pytest.mark.parametrize("net, message", BAD_STEPS, ids=[net for net, _ in BAD_STEPS])
+def test_a_net_breaking_the_step_contract_is_refused_before_training(net, message):
+    model = _registered(net)
+    with pytest.raises(PredictorError) as caught:
+        make_module(model, None, OptimConfig())
+    assert str(caught.value) == f"model {model!r}: {message} {SEE}"
+
+
+def test_a_forward_by_torch_habit_names_the_training_signature():
+    model = _registered("TorchHabitForward")
+    with pytest.raises(PredictorError) as caught:
+        PredictorModule(model)
+    assert str(caught.value) == (
+        f"model {model!r}: TorchHabitForward.forward(positions, mask) is not the training rollout "
+        "forward(positions, mask, obs_len, pred_len, *, teacher_forcing) -> (outputs, predicted); give it "
+        "that signature, or drop forward and the net is "
+        "trained through the generic rollout of encode and decode_step (predictors/nets/rollout.py)"
+    )
+
+
+def test_a_forward_returning_only_positions_is_refused():
+    model = _registered("ForwardReturnsPositions")
+    with pytest.raises(PredictorError, match=r"forward must return \(outputs, predicted\), got Tensor"):
+        PredictorModule(model)
+
+
+def test_train_refuses_a_broken_net_in_one_line_before_writing_anything(tmp_path, capsys):
+    model = f"{BROKEN}:OneColumn"
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
+    capsys.readouterr()
+    code = main([*argv, "--epochs", "1", "--out", str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"crowdmpc train: error: model {model!r}: encode's out must be of shape (B, N, K)")
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_saved_broken_net_fails_at_load_not_in_the_closed_loop(tmp_path):
+    model = _registered("OneColumn")
+    kind = model_kind(model)
+    weights, config = save_checkpoint(
+        kind.build_net(kind.config()), model=model, name="one_column", out_dir=tmp_path, obs_len=OBS_LEN
+    )
+    with pytest.raises(PredictorError) as caught:
+        load_checkpoint(weights)
+    assert str(caught.value).startswith(
+        f"{config}: predictor 'one_column' (model {model!r}): encode's out must be of shape (B, N, K) with "
+        "K >= 2"
+    )
+
+
+def test_a_net_that_raises_on_a_wellformed_batch_is_one_line():
+    class Crashes(torch.nn.Module):
+        head_type = "point"
+
+        def encode(self, positions, mask):
+            return positions @ torch.ones(3, 3)  # (..., 2) @ (3, 3): torch's RuntimeError
+
+    with pytest.raises(PredictorError) as caught:
+        check_step_contract(Crashes(), "model 'crashes'", obs_len=OBS_LEN)
+    message = str(caught.value)
+    assert (
+        message.startswith("model 'crashes': encode failed on a synthetic batch (B=2, N=3): RuntimeError: ")
+        and "\n" not in message
+    )
+
+
+@pytest.mark.parametrize("head", ["Gaussian", None])
+def test_a_head_type_that_is_neither_gaussian_nor_point_is_refused(head):
+    net = torch.nn.Linear(2, 2)
+    net.head_type = head  # type: ignore[assignment]
+    with pytest.raises(PredictorError, match=r"model 'x': head_type must be one of \['gaussian', 'point'\]"):
+        check_step_contract(net, "model 'x'", obs_len=OBS_LEN)
