@@ -28,7 +28,7 @@ from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.metrics import episode_metrics
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import Controller
-from pipelines.loop.episode import EpisodeObserver, EpisodeResult
+from pipelines.loop.episode import EpisodeObserver, EpisodeResult, checked_output
 
 
 def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
@@ -135,7 +135,7 @@ def run_gym_episode(
     steps = _Steps()
     done = False
     while not done:
-        out = controller.act(obs)
+        out = checked_output(controller, controller.act(obs))
         _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
         steps.add(out)
         for observer in observers:

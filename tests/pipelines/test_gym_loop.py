@@ -146,3 +146,11 @@ def test_an_episode_ended_by_gymnasiums_time_limit_is_recorded_whole(tmp_path):
         check_env(ObserveEpisodes(gym.make(crowdsim.ENV_ID), []), skip_render_check=True)
     rebuilt = gym.make(VelocityControl(ObserveEpisodes(gym.make(crowdsim.ENV_ID), [], controller="p")).spec)
     assert isinstance(rebuilt.env, ObserveEpisodes) and rebuilt.env.controller == "p"
+
+
+def test_a_controller_whose_act_returns_no_control_output_is_named_through_gym_too():
+    from tests.plugins.broken_controllers import ArrayAct
+
+    env = gym.make(crowdsim.ENV_ID, n_humans=2)
+    with pytest.raises(PipelineError, match=r"controller 'array_act' \(ArrayAct\): act\(\) must return"):
+        run_gym_episode(ArrayAct(None, None), env, seed=0)
