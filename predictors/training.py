@@ -191,6 +191,8 @@ class PredictorModule(_PredictorModule):
     def training_step(self, batch: SceneBatch, batch_idx: int) -> torch.Tensor:
         out = self.model_step(batch, "train")
         self.log("train_loss", out["loss"], prog_bar=True, batch_size=len(batch))
+        # the epoch's mean too: with fewer batches than log_every_n_steps the per-step value is never logged
+        self.log("train_loss_epoch", out["loss"], on_step=False, on_epoch=True, batch_size=len(batch))
         return out["loss"]
 
     def configure_optimizers(self):
@@ -297,6 +299,7 @@ class GANModule(_PredictorModule):
 
         size = len(batch)
         self.log("train_loss", out["loss"], prog_bar=True, batch_size=size)
+        self.log("train_loss_epoch", out["loss"], on_step=False, on_epoch=True, batch_size=size)
         self.log("train_variety", out["variety"], batch_size=size)
         self.log("train_adversarial", out["adversarial"], batch_size=size)
         self.log("train_d_loss", d_loss, prog_bar=True, batch_size=size)

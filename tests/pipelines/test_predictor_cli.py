@@ -60,7 +60,9 @@ def test_train_writes_checkpoint_pair_logs_and_metrics(trained):
     assert set(summary["metrics"]) == {"val", "test"} and summary["metrics"]["test"]["scenes"] == 2
     assert summary["training_data"]["files"]["train"] == summary["training_data"]["files"]["val"]
     assert (out / "checkpoints" / "last.ckpt").is_file()
-    assert list((out / "csv").glob("version_*/metrics.csv"))
+    (log,) = (out / "csv").glob("version_*/metrics.csv")
+    # one batch an epoch, fewer than log_every_n_steps: the epoch's mean loss is logged all the same
+    assert "train_loss_epoch" in log.read_text().splitlines()[0].split(",")
     assert list((out / "tensorboard").glob("version_*/events.out.tfevents.*"))
 
 
