@@ -227,7 +227,8 @@ class RayBackend:
             raise PipelineError(
                 "the Ray backend needs the cluster extra: pip install -e '.[cluster]'"
             ) from None
-        self._ray = ray
+        # Any: Ray's own annotations (checked when the extra is installed) do not follow ray.remote's wrapping
+        self._ray: Any = ray
         self._owns_ray = not ray.is_initialized()
         if self._owns_ray:
             env = {"env_vars": worker_environment()}
@@ -235,8 +236,8 @@ class RayBackend:
                 ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
             else:
                 _join_cluster(ray, address, env)
-        actor = ray.remote(num_cpus=1)(_RayEpisodeWorker)
-        self._actors = [actor.remote(record, jit, scratch_root) for _ in range(workers)]
+        actor: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
+        self._actors: list[Any] = [actor.remote(record, jit, scratch_root) for _ in range(workers)]
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         ray = self._ray
