@@ -3,3 +3,16 @@
 
 class PipelineError(ValueError):
     """Base class of the user-facing errors raised by `pipelines`."""
+
+
+def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
+    """The Ctrl-C behind ``exc``, if it is one a C extension wrapped: a KeyboardInterrupt raised in Python
+    code that CasADi calls back during a solve comes out as ``SystemError('... returned a result with an
+    exception set')`` caused by it, which a handler of solver failures would otherwise take for one."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -37,7 +37,7 @@ from mpc.guidance import guidance_targets
 from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
@@ -287,6 +287,9 @@ class MPCController:
         except Exception as exc:
             if exc is self._predictor_error:
                 raise
+            interrupt = interrupt_behind(exc)
+            if interrupt is not None:  # Ctrl-C during the solve: stop, never record it as a solver failure
+                raise interrupt from None
             return self._exception_output(exc, start, data, t0)
         return self._output(result, start.kind, data, t0)
 

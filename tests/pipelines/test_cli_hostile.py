@@ -446,3 +446,42 @@ def test_a_terminated_sweep_stops_in_order(tmp_path):
     assert list((tmp_path / "tmp").iterdir()) == []
     records = [json.loads(line) for line in (tmp_path / "killed" / EPISODES_FILE).read_text().splitlines()]
     assert len(records) >= 5
+
+
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_ctrl_c_inside_a_solve_stops_instead_of_falling_back(name, monkeypatch):
+    """CasADi hands a Ctrl-C raised in a Python callback during a solve (the predictor's) back as a
+    SystemError caused by the KeyboardInterrupt; it was taken for a solver failure, braked, recorded as
+    "exception: SystemError", and the run went on. It is the interrupt."""
+    from crowdsim.env import CrowdEnv
+
+    def interrupted(self, *args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError(
+                "<built-in function _function_buffer_eval> returned a result with an exception set"
+            ) from exc
+
+    monkeypatch.setattr("mpc.solvers._Solver.solve", interrupted)
+    controller = make_controller(ControllerSpec(name))
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller.reset(obs)
+    with pytest.raises(KeyboardInterrupt):
+        controller.act(obs)
+    assert controller.solve_exceptions == 0
+
+
+def test_interrupt_behind_follows_the_chain_and_nothing_else():
+    from pipelines.errors import interrupt_behind
+
+    ctrl_c = KeyboardInterrupt()
+    wrapped = SystemError("returned a result with an exception set")
+    wrapped.__cause__ = ctrl_c
+    outer = RuntimeError("while solving")
+    outer.__context__ = wrapped
+    assert interrupt_behind(outer) is ctrl_c and interrupt_behind(ctrl_c) is ctrl_c
+    loop = RuntimeError("a")
+    loop.__context__ = SystemError("b")
+    loop.__context__.__context__ = loop  # a cycle ends the walk
+    assert interrupt_behind(loop) is None and interrupt_behind(None) is None
