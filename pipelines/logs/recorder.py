@@ -50,6 +50,18 @@ DEFAULT_COMPRESSION: Final[CompressionType] = _default_compression()
 _ENCODER: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 
 
+def _create(path: Path) -> IO[bytes]:
+    """``path`` opened for writing, never through a symbolic link: one planted at ``<name>.part`` in the
+    folder the user named would make the recording land wherever it points."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        if path.is_symlink():
+            raise PipelineError(f"cannot record to {path}: it is a symbolic link; remove it") from None
+        raise PipelineError(f"cannot record to {path}: {exc.strerror}") from None
+    return os.fdopen(fd, "wb")
+
+
 class McapRecorder:
     """Write JSON messages with JSON schemas to one MCAP file.
 
@@ -82,7 +94,7 @@ class McapRecorder:
         # killed run leaves its chunks in the .part, which `crowdmpc review NAME.part` reads. Creating the
         # file late would still leave a truncated .mcap for any kill after the first chunk.
         self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
-        self._stream: IO[bytes] = open(self.part_path, "wb")  # noqa: SIM115 (closed by close())
+        self._stream: IO[bytes] = _create(self.part_path)
         try:
             self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
             self._writer.start(profile="", library="crowdmpc")

@@ -122,3 +122,20 @@ def test_bad_input_is_refused_with_a_clear_message(tmp_path):
 
 def test_default_compression_is_the_best_installed():
     assert DEFAULT_COMPRESSION is CompressionType.ZSTD  # mcap depends on zstandard and lz4
+
+
+def test_a_symbolic_link_in_place_of_the_unfinished_file_is_refused(tmp_path):
+    """A link planted at NAME.mcap.part would make the recording land wherever it points (it overwrote a
+    file outside the folder the user named)."""
+    outside = tmp_path / "victim.txt"
+    outside.write_text("precious")
+    folder = tmp_path / "recs"
+    folder.mkdir()
+    (folder / "run.mcap.part").symlink_to(outside)
+    with pytest.raises(PipelineError, match=r"run\.mcap\.part: it is a symbolic link; remove it"):
+        McapRecorder(folder / "run.mcap")
+    assert outside.read_text() == "precious"
+    (folder / "run.mcap.part").unlink()
+    (folder / "run.mcap.part").mkdir()  # and whatever else cannot be opened is named, not an OSError
+    with pytest.raises(PipelineError, match=r"cannot record to .*run\.mcap\.part: Is a directory"):
+        McapRecorder(folder / "run.mcap")
