@@ -286,6 +286,7 @@ def run(args: argparse.Namespace) -> int:
     settings = run_settings(args, net_config, name, files)
     if args.resume:
         name = check_resumed_settings(out, settings, name_given=args.name is not None)
+        check_last_checkpoint(last, settings)
     return _train(args, net_config, name, out, (files, root), settings)
 
 
@@ -331,6 +332,31 @@ def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: b
             "(only --epochs may change) or start a new run with another --out"
         )
     return str(settings["name"])
+
+
+def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> None:
+    """PipelineError unless ``last`` is a Lightning checkpoint (read as weights only, as Lightning reads it)
+    of the model kind and net config asked for: a cut, foreign or other-model file otherwise fails inside
+    Lightning with a traceback (a runs' settings file, when there is one, was checked before)."""
+    import torch
+
+    try:
+        checkpoint = torch.load(last, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises RuntimeError, UnpicklingError, EOFError ... for a bad file
+        first = (str(exc).strip().splitlines() or [""])[0][:160]
+        raise PipelineError(
+            f"--resume: {last} is not a readable Lightning checkpoint ({type(exc).__name__}: {first})"
+        ) from None
+    hyper = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
+    if not isinstance(hyper, dict) or "state_dict" not in checkpoint:
+        raise PipelineError(f"--resume: {last} is not a crowdmpc training checkpoint (no hyper-parameters)")
+    asked = {"model": settings["model"], "net_config": settings["net_config"]}
+    held = {"model": hyper.get("model", "social_gan" if "discriminator_config" in hyper else None)}
+    held["net_config"] = hyper.get("net_config")
+    differ = [k for k in asked if held[k] is not None and held[k] != asked[k]]
+    if differ:
+        shown = "; ".join(f"{k}: checkpoint {_short(held[k])}, now {_short(asked[k])}" for k in differ)
+        raise PipelineError(f"--resume: {last} was trained with another model ({shown})")
 
 
 def _short(value: Any) -> str:

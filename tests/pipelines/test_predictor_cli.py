@@ -109,6 +109,25 @@ def test_resume_refuses_other_settings_and_keeps_the_runs_name(trained, capsys):
     assert recorded["training"]["optim"]["lr"] == 0.001 and recorded["training"]["epochs"] == 2
 
 
+def test_resume_from_a_bad_or_foreign_last_checkpoint_is_one_line(trained, capsys):
+    """A cut file, or one of another model (a run from before train_settings.json, so only the checkpoint
+    can tell), failed inside Lightning with a traceback."""
+    out, args = trained
+    more = [*[a if a != "1" else "2" for a in args], "--resume"]
+    last = out / "checkpoints" / "last.ckpt"
+    whole = last.read_bytes()
+    (out / "train_settings.json").unlink()
+    vanilla = [a if a != "social_lstm" else "vanilla_lstm" for a in more]
+    vanilla = [a for i, a in enumerate(vanilla) if a != "--pooling" and vanilla[i - 1] != "--pooling"]
+    assert main(vanilla) == 2
+    err = capsys.readouterr().err
+    assert f'--resume: {last} was trained with another model (model: checkpoint "social_lstm"' in err
+    last.write_bytes(whole[:1000])
+    assert main(more) == 2
+    err = capsys.readouterr().err
+    assert f"--resume: {last} is not a readable Lightning checkpoint (" in err and err.count("\n") == 1
+
+
 def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capfd):
     """Lightning's litlogger/litmodels tips and its use of a torch API that torch 2.13 deprecates are
     nothing a user of `crowdmpc train` can act on; they are left out, the run's own lines stay."""
