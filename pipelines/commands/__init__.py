@@ -4,10 +4,12 @@ so that ``crowdmpc --help`` stays fast."""
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import stat
 import sys
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Final
 
@@ -15,6 +17,8 @@ from pipelines.errors import PipelineError
 
 # The shell's exit status of a process that SIGPIPE ended (128 + 13): what `cmd | head` reports for a C tool.
 CLOSED_PIPE_STATUS: Final[int] = 141
+# A --json report is far smaller; a larger existing file is data, never replaced (check_writable).
+MAX_REPORT_BYTES: Final[int] = 64 * 2**20
 
 
 def humans_list(text: str) -> tuple[int, ...]:
@@ -28,12 +32,22 @@ def humans_list(text: str) -> tuple[int, ...]:
     return values
 
 
-def check_writable(path: Path | None, option: str, *, directory: bool = False) -> None:
+def check_writable(
+    path: Path | None,
+    option: str,
+    *,
+    directory: bool = False,
+    inputs: Iterable[Path] = (),
+    json_only: bool = False,
+) -> None:
     """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
 
     ``directory``: the path is a directory the command creates or writes into, else a file it creates or
     replaces. What does not exist yet is judged by its nearest existing ancestor, which must be a directory
     the command may create entries in; the check creates nothing (a probe file is made and removed at once).
+    A file output is never one of the command's ``inputs`` (``review RUN.mcap --json RUN.mcap`` replaced the
+    recording by its summary), and with ``json_only`` (a ``--json`` report) it replaces only a JSON document:
+    a mistyped name must not overwrite a data file, a recording or weights.
     """
     if path is None:
         return
@@ -42,6 +56,10 @@ def check_writable(path: Path | None, option: str, *, directory: bool = False) -
     if path.exists():
         if directory != path.is_dir():
             raise PipelineError(f"{label}: " + ("not a directory" if directory else "is a directory"))
+        if not directory:
+            _check_not_input(path, label, inputs)
+            if json_only:
+                _check_json_document(path, label)
         try:
             if directory:
                 _probe(path)
@@ -59,6 +77,32 @@ def check_writable(path: Path | None, option: str, *, directory: bool = False) -
         _probe(ancestor)
     except OSError as exc:
         raise PipelineError(f"{label}: cannot create it in {ancestor} ({exc.strerror or exc})") from None
+
+
+def _check_not_input(path: Path, label: str, inputs: Iterable[Path]) -> None:
+    for source in inputs:
+        try:
+            same = os.path.samefile(path, source)
+        except OSError:  # an input that does not exist is its own command's error
+            continue
+        if same:
+            raise PipelineError(f"{label}: that is one of the command's inputs; write the output elsewhere")
+
+
+def _check_json_document(path: Path, label: str) -> None:
+    """Refuse to replace a file that is not empty and is not one JSON document (what a report writes)."""
+    try:
+        size = path.stat().st_size
+        if size == 0:
+            return
+        if size > MAX_REPORT_BYTES:
+            raise ValueError("too large for a report")
+        json.loads(path.read_bytes())
+    except (OSError, ValueError, RecursionError):
+        raise PipelineError(
+            f"{label}: the file exists and is not a JSON report; crowdmpc does not overwrite it (remove it "
+            "or name another file)"
+        ) from None
 
 
 def _probe(directory: Path) -> None:

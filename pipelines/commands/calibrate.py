@@ -150,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"--horizon must be in 1..50 steps, got {args.horizon}")
     if not 1 <= args.episodes <= 100_000:
         raise PipelineError(f"--episodes must be in 1..100000, got {args.episodes}")
-    check_writable(args.json, "--json")
+    check_writable(args.json, "--json", json_only=True)
     if not args.dry_run:  # the user zoo's file (never the shipped zoo's): refused now, not after the episodes
         check_writable(calibrations_path(), "calibrations file")
     sha256 = checkpoint_sha256(args.predictor)

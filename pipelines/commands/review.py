@@ -134,9 +134,11 @@ def run(args: argparse.Namespace) -> int:
         from pipelines.logs.plots import check_animation_path
 
         check_animation_path(args.animate, "--animate")
-    check_writable(args.plot, "--plot")
-    check_writable(args.animate, "--animate")
-    check_writable(args.json, "--json")
+    inputs = [args.path, *(args.path.glob("*.mcap*") if args.path.is_dir() else ())]
+    inputs += [args.compare] if args.compare else []
+    check_writable(args.plot, "--plot", inputs=inputs)
+    check_writable(args.animate, "--animate", inputs=inputs)
+    check_writable(args.json, "--json", inputs=inputs, json_only=True)
     report: dict[str, Any] = {}
     n_unreadable = 0
     if args.path.is_dir():

@@ -128,6 +128,35 @@ def test_check_writable(tmp_path, a_file):
         check_writable(a_file, "--out", directory=True)
 
 
+def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp_path, a_file):
+    """`review RUN.mcap --json RUN.mcap` replaced the recording by its summary, `evaluate --json` a data
+    file: a file output is never one of the inputs, and a --json report replaces only a JSON document."""
+    with pytest.raises(PipelineError, match=rf"^--plot {a_file}: that is one of the command's inputs"):
+        check_writable(a_file, "--plot", inputs=[tmp_path / "missing", a_file])
+    with pytest.raises(PipelineError, match=rf"^--json {a_file}: the file exists and is not a JSON report"):
+        check_writable(a_file, "--json", json_only=True)
+    report = tmp_path / "report.json"
+    for text in ("", '{"ade": 0.6}\n'):  # empty, or a report of an earlier run: replaced
+        report.write_text(text)
+        check_writable(report, "--json", json_only=True)
+    lines = tmp_path / "scenes.ndjson"
+    lines.write_text('{"scene": 1}\n{"scene": 2}\n')  # two documents: data
+    with pytest.raises(PipelineError, match="not a JSON report"):
+        check_writable(lines, "--json", json_only=True)
+    assert a_file.read_text() == "not a directory\n" and lines.read_text().count("\n") == 2
+
+
+def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
+    from tests.pipelines.mcap_episode import record_episode
+
+    run = record_episode(tmp_path, seed=1, steps=3)
+    before = run.path.read_bytes()
+    assert main(["review", str(run.path), "--json", str(run.path)]) == 2
+    assert "that is one of the command's inputs" in capsys.readouterr().err
+    assert main(["review", str(tmp_path), "--json", str(run.path)]) == 2  # a folder's recordings too
+    assert run.path.read_bytes() == before
+
+
 @pytest.mark.parametrize("option", ["--json", "--plot", "--record"])
 def test_simulate_checks_its_outputs_before_the_episodes(option, a_file, capsys, monkeypatch):
     def no_episodes(*args, **kwargs):
