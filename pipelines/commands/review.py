@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -70,7 +71,7 @@ def _times(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(
             f"expected seconds separated by commas, e.g. 0,4,8; got {text!r}"
         ) from None
-    if not times or any(t < 0 for t in times):
+    if not times or not all(math.isfinite(t) and t >= 0 for t in times):  # float() takes "nan" and "inf"
         raise argparse.ArgumentTypeError(f"expected non-negative seconds, e.g. 0,4,8; got {text!r}")
     return times
 

@@ -187,3 +187,10 @@ def test_folder_with_a_truncated_run(runs, tmp_path, capsys):
     out, err = capsys.readouterr()
     assert "2 runs, 1 whose episode did not end (no metrics)" in out
     assert "b.mcap is truncated" in err
+
+
+@pytest.mark.parametrize("times", ["nan", "0,inf", "-1", "a"])
+def test_times_must_be_finite_non_negative_seconds(runs, tmp_path, times, capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", times])
+    assert done.value.code == 2 and "--times" in capsys.readouterr().err
