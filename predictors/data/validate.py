@@ -246,6 +246,7 @@ def parse_ndjson(path: str | Path) -> NdjsonContent:
     rows = np.asarray([(r.frame, r.pedestrian) for r in track_rows], dtype=np.int64).reshape(-1, 2)
     spans = np.asarray([(s, e) for _, _, s, e in scenes.values()], dtype=np.int64).reshape(-1, 2)
     _check_tracks_inside_scenes(path, rows[:, 0], track_lines, spans)
+    _check_no_conflicting_rows(path, track_rows, track_lines)
     _check_primaries_present(path, rows, scenes)
     _check_primaries_observed(path, nan_rows, scenes)
     summary = NdjsonSummary(
@@ -262,6 +263,27 @@ def validate_ndjson(path: str | Path) -> NdjsonSummary:
     """Check every line of a TrajNet++ ndjson file (module doc); raise ``DatasetFormatError`` at the first
     bad one."""
     return parse_ndjson(path).summary
+
+
+def _check_no_conflicting_rows(path: Path, rows: list[TrackRow], lines: list[int]) -> None:
+    """One position per pedestrian and frame (per prediction, in a prediction file): a second row with
+    another position was silently dropped by the reader, so which one a model trained on depended on the
+    order of the lines. A repeated identical row is harmless and passes."""
+    first: dict[tuple, int] = {}  # key -> index of its first row
+    for index, row in enumerate(rows):
+        key = (row.frame, row.pedestrian, row.prediction_number, row.scene_id)
+        k = first.setdefault(key, index)
+        if k != index and not _same_position(rows[k], row):
+            raise DatasetFormatError(
+                path,
+                lines[index],
+                f"pedestrian {row.pedestrian} at frame {row.frame} has another position on line {lines[k]} "
+                f"({_show(rows[k].x)}, {_show(rows[k].y)} against {_show(row.x)}, {_show(row.y)})",
+            )
+
+
+def _same_position(a: TrackRow, b: TrackRow) -> bool:
+    return all(u == v or (math.isnan(u) and math.isnan(v)) for u, v in ((a.x, b.x), (a.y, b.y)))
 
 
 def _check_tracks_inside_scenes(path: Path, frames: np.ndarray, lines: list[int], spans: np.ndarray) -> None:

@@ -111,6 +111,12 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
     "null line": (VALID + ["null"], N + 1, 'exactly one of "scene" or "track"'),
     "UTF-8 byte-order mark": (["\ufeff" + json.dumps(VALID[0])] + VALID[1:], 1, "invalid JSON"),
     "carriage returns only": (["\r".join(json.dumps(r) for r in VALID)], 1, "invalid JSON (Extra data"),
+    # line 2 is pedestrian 1 at frame 0, (0, 0): the reader kept one of the two and dropped the other
+    "a second position for a pedestrian and frame": (
+        VALID + [track(0, 1, 0.3, 0.0)],
+        N + 1,
+        "pedestrian 1 at frame 0 has another position on line 2 (0.0, 0.0 against 0.3, 0.0)",
+    ),
 }
 
 
@@ -381,3 +387,9 @@ def test_cli_train_on_an_empty_file(tmp_path, capsys):
     # checked before Lightning starts: the one line is the whole output
     assert_cli_error(code, err, f"{empty}: holds no scenes")
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_repeated_identical_row_passes(tmp_path):
+    """Only a conflicting repeat is refused: the same row twice says nothing new."""
+    path = write_lines(tmp_path / "twice.ndjson", VALID + [VALID[1]])
+    assert validate_ndjson(path).n_tracks == N
