@@ -10,7 +10,8 @@ to the Reader does not change: the same rows, in the same order, with the same f
 
 Checked: each non-blank line is a JSON object holding exactly one ``scene`` or ``track`` object (blank lines
 are skipped); the keys each needs are present with integer ids/frames and numeric coordinates, all within
-the bounds below; scene ids are unique; every track frame lies within some scene's [s, e]; every scene's
+the bounds below; scene ids are unique; a pedestrian has one position per frame (and prediction; an
+identical repeated row passes); every track frame lies within some scene's [s, e]; every scene's
 primary has a track row in its frame range, and a position (not NaN) at each of those rows. NaN is
 TrajNet++'s own "not observed" for other agents (Python's json and the Reader accept it); an infinity is
 never a position. A file with no records at all is a valid, empty dataset (a split can be empty).
