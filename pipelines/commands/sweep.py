@@ -275,7 +275,7 @@ def _jit_pays(cells, episodes_per_cell: int) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from pipelines.config import command_config
-    from pipelines.experiments.log import EPISODES_FILE, episode_log
+    from pipelines.experiments.log import EPISODES_FILE, check_sweep_directory, episode_log
     from pipelines.experiments.report import write_report
     from pipelines.experiments.sweep import SweepConfig, run_sweep
 
@@ -288,6 +288,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(settings.out or "")
     if not args.dry_run:
         check_writable(out, cfg.label("sweep", "out"), directory=True)
+        check_sweep_directory(out, cfg.label("sweep", "out"))
     check_world(cfg)
     experiment = configured_experiment(cfg)
     config = SweepConfig(
@@ -317,6 +318,7 @@ def run(args: argparse.Namespace) -> int:
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
     if args.dry_run:
+        check_predictors(experiment)  # a plan whose every episode would fail is not fine
         print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
         for cell in cells:
             print(f"  {cell.method:>22}  {cell.n_humans} humans  {cell.key}")

@@ -16,7 +16,9 @@ if TYPE_CHECKING:
 
 def check_predictors(experiment: Experiment) -> None:
     """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
-    in a zoo, and a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit)."""
+    in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
+    loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
+    refusal simulate's one line."""
     from predictors import zoo
     from predictors.errors import PredictorError
     from predictors.models import model_kind
@@ -38,6 +40,7 @@ def check_predictors(experiment: Experiment) -> None:
                 model_kind(located.entry.model)
             except PredictorError as exc:
                 raise PipelineError(f"predictor {name!r} of the {located.source} zoo: {exc}") from None
+            zoo.load_located(located)  # what every worker would do first, and fail at
 
 
 def check_margins(experiment: Experiment) -> None:

@@ -90,12 +90,55 @@ def episode_log(out: Path) -> EpisodeLog:
     return EpisodeLog(out / EPISODES_FILE, check=check_record)
 
 
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+# What the report computes with, as the writer writes it (EpisodeMetrics.as_dict, SolverStats through plain):
+# NaN and inf become null. A value of another type would be counted wrongly ("yes" as a success) or stop the
+# report with a traceback, so a line holding one is refused like any damaged line.
+_KINDS: Final[dict[str, tuple[Callable[[Any], bool], str]]] = {
+    "bool": (lambda v: isinstance(v, bool), "a boolean"),
+    "count": (_count, "a non-negative integer"),
+    "count?": (lambda v: v is None or _count(v), "a non-negative integer or null"),
+    "number": (_number, "a number"),
+    "number?": (lambda v: v is None or _number(v), "a number or null"),
+    "numbers": (
+        lambda v: isinstance(v, list) and all(x is None or _number(x) for x in v),
+        "a list of numbers (or nulls)",
+    ),
+}
+METRIC_KINDS: Final[dict[str, str]] = {
+    **dict.fromkeys(("success", "collision", "contact", "discomfort", "timeout"), "bool"),
+    **dict.fromkeys(("travel_time", "min_distance", "min_distance_robots", "min_distance_humans"), "number?"),
+    **dict.fromkeys(("path_length", "reach_times"), "numbers"),
+    **dict.fromkeys(("discomfort_steps", "n_steps"), "count"),
+    **dict.fromkeys(("collision_steps", "contact_steps"), "count?"),  # absent from records before them
+}
+SOLVER_KINDS: Final[dict[str, str]] = {
+    **dict.fromkeys(("steps", "fallback_steps"), "count"),
+    "total_ms": "number",
+    **dict.fromkeys(("median_ms", "p95_ms", "max_ms", "mean_iterations"), "number?"),
+    "max_iterations": "count?",
+}
+
+
 def check_record(record: dict[str, Any], where: str) -> None:
-    """A line the report can read: the closed loop's episode record and the sweep's cell fields."""
+    """A line the report can read: the closed loop's episode record, the types of its metrics and solver
+    figures, and the sweep's cell fields."""
     try:
         EpisodeRecord.from_dict(record)
     except (PipelineError, SimulationError) as exc:
         raise PipelineError(f"{where}: {exc}; the file is damaged") from None
+    except AttributeError as exc:  # metrics or solver a list or a string: from_dict expects mappings
+        raise PipelineError(f"{where}: not an episode record ({exc}); the file is damaged") from None
+    _check_kinds(record["metrics"], METRIC_KINDS, "metrics", where)
+    _check_kinds(record["solver"], SOLVER_KINDS, "solver", where)
+    _check_kinds(record, {"wall_s": "number", "cpu_s": "number?"}, "", where)
     for name, kind, what in (
         ("cell", str, "a string"),
         ("method", str, "a string"),
@@ -104,6 +147,17 @@ def check_record(record: dict[str, Any], where: str) -> None:
         value = record.get(name)
         if not isinstance(value, kind) or isinstance(value, bool):
             raise PipelineError(f"{where}: record's {name!r} is not {what}; the file is damaged")
+
+
+def _check_kinds(values: dict[str, Any], kinds: dict[str, str], part: str, where: str) -> None:
+    """Each of ``kinds``' fields of ``values`` (of the record's ``part``) is of its kind (``_KINDS``)."""
+    for name, kind in kinds.items():
+        is_kind, what = _KINDS[kind]
+        if not is_kind(values.get(name)):
+            field = f"{part} {name!r}" if part else repr(name)
+            raise PipelineError(
+                f"{where}: record's {field} is not {what} (got {values.get(name)!r:.40}); the file is damaged"
+            )
 
 
 def read_sweep_file(path: Path) -> dict[str, Any]:
@@ -117,6 +171,41 @@ def read_sweep_file(path: Path) -> dict[str, Any]:
     if not (isinstance(meta, dict) and isinstance(meta.get("runs", []), list)):
         raise PipelineError(f"{path}: not a sweep file (expected an object with a list of runs)")
     return meta
+
+
+# What a sweep writes at the top of its directory besides the names above: the report (tables, CSVs, plots:
+# pipelines.experiments.report) and the temporary files replaced into place (".part").
+OWN_SUFFIXES: Final[tuple[str, ...]] = (".csv", ".md", ".png", ".part")
+
+
+def check_sweep_directory(out: Path, option: str = "--out") -> None:
+    """Before anything of ``out`` is read or written: refuse a folder of other files (a sweep would overwrite
+    them with its tables), and any of the sweep's own files that is a symbolic link (the sweep would read,
+    cut and append to a file elsewhere). A missing or empty folder, and a sweep directory, are fine."""
+    if not out.is_dir():
+        return
+    entries = {entry.name: entry for entry in out.iterdir()}
+    if entries.keys() - {LOCK_FILE} and not entries.keys() & {SWEEP_FILE, EPISODES_FILE}:
+        raise PipelineError(
+            f"{option} {out} holds files but no sweep ({SWEEP_FILE}, {EPISODES_FILE}); a sweep would "
+            "overwrite them: choose an empty or new folder"
+        )
+    own = (EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, LOCK_FILE, MCAP_DIR)
+    for name, entry in sorted(entries.items()):
+        if name in own or name.endswith(OWN_SUFFIXES):
+            _refuse_link(entry)
+    if (out / MCAP_DIR).is_dir():
+        for root, dirs, files in os.walk(out / MCAP_DIR):  # a link is listed, never followed
+            for name in sorted(dirs + files):
+                _refuse_link(Path(root) / name)
+
+
+def _refuse_link(path: Path) -> None:
+    if path.is_symlink():
+        raise PipelineError(
+            f"{path} is a symbolic link; a sweep writes only its own files: remove the link or choose "
+            "another --out"
+        )
 
 
 @contextlib.contextmanager

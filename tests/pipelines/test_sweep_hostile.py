@@ -2,15 +2,28 @@
 the line), never a traceback, and nothing of it is overwritten."""
 
 import json
+import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pipelines.cli import main
 from pipelines.errors import PipelineError
 from pipelines.experiments.cells import get_experiment
-from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log
+from pipelines.experiments.log import (
+    EPISODES_FILE,
+    ERRORS_FILE,
+    LOCK_FILE,
+    MCAP_DIR,
+    SWEEP_FILE,
+    episode_log,
+)
+from pipelines.experiments.report import CELLS_CSV, TABLE_MD
 from pipelines.experiments.sweep import SweepConfig, run_sweep
+from predictors.calibration import save_calibration
+from predictors.zoo import add_to_zoo, checkpoints_dir, user_zoo_dir
+from tests.calibration_blocks import constant_velocity_block
 
 ARGV = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1", "--backend",
         "inline", "--no-progress", "--jit", "off"]  # fmt: skip
@@ -76,3 +89,188 @@ def test_a_damaged_record_is_named_by_file_and_line(good, tmp_path, edit, reason
 
 def test_the_records_a_sweep_writes_pass_the_check(good):
     assert len(episode_log(good).load()) == 2
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Record fields of the wrong type: counted wrongly ("yes" a success) or a traceback in the report
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("edit", "reason"),
+    [
+        (lambda r: r["metrics"].update(travel_time="abc"), "metrics 'travel_time' is not a number or null"),
+        (lambda r: r["metrics"].update(success="yes"), "metrics 'success' is not a boolean"),
+        (lambda r: r["metrics"].update(collision=1), "metrics 'collision' is not a boolean"),
+        (lambda r: r["metrics"].update(min_distance=True), "not a number or null"),
+        (lambda r: r["metrics"].update(path_length=["x"]), "metrics 'path_length' is not a list of numbers"),
+        (lambda r: r["metrics"].update(n_steps=2.5), "metrics 'n_steps' is not a non-negative integer"),
+        (lambda r: r["metrics"].update(contact_steps="3"), "'contact_steps' is not a non-negative"),
+        (lambda r: r["solver"].update(median_ms="abc"), "solver 'median_ms' is not a number or null"),
+        (lambda r: r.update(solver="fast"), "not an episode record"),
+        (lambda r: r.pop("wall_s"), "record's 'wall_s' is not a number"),
+    ],
+    ids=["time-string", "success-string", "collision-int", "distance-bool", "path-strings", "steps-float",
+         "count-string", "solver-string-time", "solver-string", "no-wall-time"],
+)  # fmt: skip
+def test_a_record_field_of_the_wrong_type_is_named_by_file_and_line(good, tmp_path, edit, reason):
+    path = _damage(good, tmp_path, edit)
+    with pytest.raises(PipelineError, match=rf"{path}:1: .*{reason}.*the file is damaged"):
+        episode_log(tmp_path).load()
+
+
+def test_the_report_refuses_a_tampered_metric_in_one_line(good, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    _damage(good, out, lambda r: r["metrics"].update(success="yes"))
+    assert main([*ARGV, "--report-only", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"crowdmpc sweep: error: {out / EPISODES_FILE}:1: record's metrics 'success' is not a boolean (got "
+        "'yes'); the file is damaged"
+    ]
+    assert not (out / TABLE_MD).exists() or (out / TABLE_MD).read_bytes() == (good / TABLE_MD).read_bytes()
+
+
+def test_missing_counts_and_null_times_as_the_writer_writes_them_pass(good, tmp_path):
+    def older(record):
+        for name in ("collision_steps", "contact_steps"):
+            record["metrics"].pop(name)  # records written before the counts
+        record["metrics"].update(travel_time=None, min_distance_robots=None, reach_times=[None])
+
+    _damage(good, tmp_path, older)
+    assert len(episode_log(tmp_path).load()) == 2
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The sweep directory: only its own files, never through a link, never a folder of the user's
+# ----------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name",
+    [EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, LOCK_FILE, TABLE_MD, CELLS_CSV, "success_by_method.png",
+     "sweep.json.part", MCAP_DIR, f"{MCAP_DIR}/some-cell"],
+)  # fmt: skip
+@pytest.mark.parametrize("report_only", [False, True], ids=["run", "report-only"])
+def test_a_sweep_file_that_is_a_link_is_refused_before_anything_is_read(
+    good, tmp_path, capsys, name, report_only
+):
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"the victim's line\n{torn")
+    link = out / name
+    if link.exists():
+        link.unlink()
+    link.parent.mkdir(exist_ok=True)
+    link.symlink_to(victim if "mcap" not in name else tmp_path)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and not p.is_symlink()}
+    argv = [*ARGV, "--episodes-per-cell", "2", "--out", str(out)] + (["--report-only"] if report_only else [])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"crowdmpc sweep: error: {link} is a symbolic link; a sweep writes only its own files: remove the "
+        "link or choose another --out"
+    ]
+    assert victim.read_bytes() == b"the victim's line\n{torn"
+    assert before == {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and not p.is_symlink()}
+
+
+def test_a_folder_of_other_files_is_not_a_sweep_directory(tmp_path, capsys):
+    mine = {TABLE_MD: b"my table\n", CELLS_CSV: b"a,b\n1,2\n"}
+    for name, data in mine.items():
+        (tmp_path / name).write_bytes(data)
+    assert main([*ARGV, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"crowdmpc sweep: error: --out {tmp_path} holds files but no sweep (sweep.json, episodes.jsonl); a "
+        "sweep would overwrite them: choose an empty or new folder"
+    ]
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == mine
+    with pytest.raises(PipelineError, match="holds files but no sweep"):
+        run_sweep(_config(tmp_path))
+
+
+def test_an_empty_or_new_folder_and_a_sweep_directory_are_fine(good, tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert main([*ARGV, "--out", str(tmp_path / "empty")]) == 0
+    assert main([*ARGV, "--out", str(tmp_path / "new" / "sweep")]) == 0
+    out = tmp_path / "resumed"
+    shutil.copytree(good, out)
+    assert main([*ARGV, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    assert len(episode_log(out).load()) == 4
+    assert "4/4 episodes recorded (2 this run" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------------------------------------
+# A broken zoo entry: refused by the driver in simulate's line, before any worker starts (and in --dry-run)
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_a_zoo_entry_whose_weights_changed_is_refused_up_front_as_simulate_does(tmp_path, capsys):
+    add_to_zoo(checkpoints_dir() / "vanilla_lstm_eth.pt", name="my_v", protocol="test", training_data={},
+               metrics={})  # fmt: skip
+    weights = user_zoo_dir() / "my_v.pt"
+    data = bytearray(weights.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    weights.write_bytes(bytes(data))
+    small = ["--humans", "1", "--robots", "1"]
+    assert main(["simulate", "--controller", "cmpc", "--predictor", "my_v", *small, "--episodes", "1"]) == 2
+    simulate = capsys.readouterr().err.strip().splitlines()
+    assert len(simulate) == 1 and "but the manifest expects" in simulate[0]
+    sweep = ["sweep", "--experiment", "controllers", "--controllers", "cmpc", "--predictor", "my_v", *small,
+             "--episodes-per-cell", "4", "--backend", "inline", "--no-progress", "--jit", "off"]  # fmt: skip
+    for extra in (["--dry-run"], []):
+        assert main([*sweep, *extra, "--out", str(tmp_path / "sweep")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [simulate[0].replace("crowdmpc simulate:", "crowdmpc sweep:")]
+    assert not (tmp_path / "sweep").exists()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# A recalibration keeps the cell key: its records and new episodes must not mix two margin sets
+# ----------------------------------------------------------------------------------------------------------
+
+MARGINS_ARGV = ["sweep", "--experiment", "controllers", "--controllers", "cmpc", "--predictor",
+                "constant_velocity", "--margins", "conformal", "--humans", "1", "--robots", "1", "--backend",
+                "inline", "--no-progress", "--jit", "off"]  # fmt: skip
+
+
+def _calibrate(scale: float) -> None:
+    """constant_velocity's closed-loop block at alpha 0.1: margins 0.18 k * scale at step k."""
+    save_calibration(
+        constant_velocity_block(np.outer(np.arange(1, 20) / 100.0 * scale, [1.0, 2.0, 3.0, 4.0]))
+    )
+
+
+def test_a_cell_is_not_extended_after_a_recalibration(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    _calibrate(1.0)
+    assert main([*MARGINS_ARGV, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    records = (out / EPISODES_FILE).read_bytes()
+    _calibrate(2.0)  # the same predictor, source and alpha: the same cell key
+    capsys.readouterr()
+    assert main([*MARGINS_ARGV, "--episodes-per-cell", "4", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    cell = "cmpc-constant_velocity-F-ibr-m=cp0.1-paper-visible-h1-r1"
+    assert err == [
+        f"crowdmpc sweep: error: {out / EPISODES_FILE} holds episodes of {cell} planned with margins "
+        "[0.18, 0.36, 0.54, 0.72] m, but the cell's margins are now [0.36, 0.72, 1.08, 1.44] m: they changed "
+        "since the records were made (recalibrated?); use another --out for the new margins"
+    ]
+    assert (out / EPISODES_FILE).read_bytes() == records
+    _calibrate(1.0)  # the records' margins again: the cell extends as before
+    assert main([*MARGINS_ARGV, "--episodes-per-cell", "4", "--out", str(out)]) == 0
+    margins = {tuple(r["config"]["margins"]["margins_m"]) for r in episode_log(out).load().values()}
+    assert margins == {(0.18, 0.36, 0.54, 0.72)}
+
+
+def test_changed_margins_per_motion_class_are_refused_too(good, tmp_path):
+    classes = {"names": ["new", "standing", "slow", "walking"], "quantiles": [[0.1]] * 4}
+    _damage(good, tmp_path, lambda r: r["config"].update(margins={"margins_m": [], "classes": classes}))
+    (tmp_path / SWEEP_FILE).write_bytes((good / SWEEP_FILE).read_bytes())
+    with pytest.raises(
+        PipelineError, match=r"margins \[\] m, but the cell's margins are now \[\] m \(per motion"
+    ):
+        run_sweep(_config(tmp_path))
