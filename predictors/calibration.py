@@ -36,6 +36,7 @@ from predictors.base import DT, Predictor
 from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError, UnknownPredictor
+from predictors.manifest import CALIBRATIONS_NAME  # defined with the zoo's other own files (ZOO_FILES)
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
 from predictors.zoo import (
     checkpoints_dir,
@@ -46,7 +47,6 @@ from predictors.zoo import (
     writable_zoo_dir,
 )
 
-CALIBRATIONS_NAME: Final[str] = "calibrations.json"
 CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
 CALIBRATIONS_VERSION: Final[int] = 1
 SOURCES: Final[tuple[str, ...]] = ("real", "closed-loop")

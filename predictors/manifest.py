@@ -1,12 +1,16 @@
 """A zoo's manifest: ``manifest.json`` lists each model's checkpoint pair (files and their sha256), its
 training data and metrics. ``ZooEntry`` checks every value (a manifest is a file anyone can edit) and keeps
 every file it names inside the zoo's directory; ``predictors.zoo`` reads the shipped and the user zoo
-through it."""
+through it. Besides its models' pairs a zoo keeps files of its own (``ZOO_FILES``), which no model may take
+the name of, and a lock (``zoo_lock``) that serialises the writers of its manifest."""
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -16,6 +20,64 @@ from predictors.errors import PredictorError, short_repr
 
 MANIFEST_FORMAT: Final[str] = "crowdmpc-zoo"
 MANIFEST_NAME: Final[str] = "manifest.json"
+MANIFEST_VERSION: Final[int] = 1  # the layout write_manifest writes, and the newest read_manifest_at reads
+CALIBRATIONS_NAME: Final[str] = "calibrations.json"  # predictors.calibration's blocks, beside the manifest
+LOCK_NAME: Final[str] = ".zoo.lock"  # hidden: NAME_PATTERN names never start with "."
+# The files a zoo keeps besides its models' pairs, and what each holds: a model's NAME.pt / NAME.json must
+# never be written over one of them, nor one be deleted as a model's file.
+ZOO_FILES: Final[dict[str, str]] = {
+    MANIFEST_NAME: "manifest (the list of its models)",
+    CALIBRATIONS_NAME: "conformal calibrations (kept by `crowdmpc calibrate`)",
+    LOCK_NAME: "lock file",
+}
+
+
+def zoo_file(file_name: str) -> str | None:
+    """The zoo's own file that ``file_name`` is, else None. Compared ignoring case: a zoo may lie on a
+    case-insensitive file system (macOS's, Windows'), where Manifest.json is manifest.json."""
+    return next((own for own in ZOO_FILES if own.casefold() == file_name.casefold()), None)
+
+
+def check_model_name(name: str) -> str:
+    """``name`` if it is a safe zoo name (``check_name``) whose files NAME.pt and NAME.json are none of the
+    zoo's own files (``ZOO_FILES``), else PredictorError saying which file it would overwrite."""
+    check_name(name)
+    for file_name in (f"{name}.pt", f"{name}.json"):
+        own = zoo_file(file_name)
+        if own is not None:
+            raise PredictorError(
+                f"zoo name {name!r} is reserved: its file {file_name} would overwrite {own}, the zoo's "
+                f"{ZOO_FILES[own]} (names are compared ignoring case); pick another name"
+            )
+    return name
+
+
+def is_zoo_file(root: Path, path: Path) -> bool:
+    """Whether the resolved ``path`` is one of the zoo ``root``'s own files (``ZOO_FILES``)."""
+    return path.parent == root.resolve() and zoo_file(path.name) is not None
+
+
+@contextmanager
+def zoo_lock(directory: str | Path) -> Iterator[Path]:
+    """Hold the zoo's exclusive lock (``flock`` on ``LOCK_NAME`` in it, made with the directory if need be)
+    for a read-modify-write of its manifest: two writers that both read the old manifest would each write it
+    back with their own change only, and the other's entry would be lost. Yields the directory.
+
+    A lock file rather than the directory itself: on NFS (home directories on clusters) flock is emulated
+    with fcntl locks, which need a file opened for writing."""
+    root = Path(directory)
+    lock = root / LOCK_NAME
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        # O_NOFOLLOW: a symbolic link planted as the lock must not make us create a file elsewhere
+        fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise PredictorError(f"{lock}: cannot lock the zoo ({exc.strerror or exc})") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # waits for the writer that holds it
+        yield root
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def zoo_path(root: Path, relative: object, what: str) -> Path:
@@ -106,6 +168,7 @@ def read_manifest_at(directory: str | Path) -> dict[str, ZooEntry]:
     if not path.is_file():  # a directory, a FIFO, a dangling link: never "an empty zoo"
         raise PredictorError(f"{path}: the zoo manifest is not a regular file")
     document = read_document(path, MANIFEST_FORMAT, "crowdmpc zoo manifest")
+    _check_version(document, path)
     models = document.get("models", [])
     if not isinstance(models, list):
         raise PredictorError(f'{path}: "models" must be a list of entries, got {short_repr(models)}')
@@ -119,16 +182,38 @@ def read_manifest_at(directory: str | Path) -> dict[str, ZooEntry]:
     return entries
 
 
+def _check_version(document: dict, path: Path) -> None:
+    """Refuse a manifest of a layout this code does not know (a newer crowdmpc's): its entries could mean
+    something else, and adding to it would write it back in the old layout. No "version" is version 1."""
+    version = document.get("version", 1)
+    readable = range(1, MANIFEST_VERSION + 1)
+    if type(version) is int and version in readable:  # type(): True is no version
+        return
+    newer = (
+        "; a newer crowdmpc wrote it: upgrade crowdmpc to read it"
+        if type(version) is int and version > 0
+        else ""
+    )
+    raise PredictorError(
+        f'{path}: zoo manifest "version" {short_repr(version)} is not one this crowdmpc reads (version '
+        f"{', '.join(map(str, readable))}){newer}"
+    )
+
+
 def write_manifest(entries: dict[str, ZooEntry], directory: str | Path) -> Path:
-    """Write the manifest of the zoo at ``directory`` (atomically: a temporary file renamed)."""
+    """Write the manifest of the zoo at ``directory`` (atomically: a temporary file renamed). A writer that
+    read the manifest first holds ``zoo_lock`` from that read to this write."""
     path = Path(directory) / MANIFEST_NAME
     path.parent.mkdir(parents=True, exist_ok=True)
     document = {
         "format": MANIFEST_FORMAT,
-        "version": 1,
+        "version": MANIFEST_VERSION,
         "models": [entries[name].to_json() for name in sorted(entries)],
     }
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(document, indent=2) + "\n")
-    tmp.replace(path)
+    try:
+        tmp.write_text(json.dumps(document, indent=2) + "\n")
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)  # a full disk leaves no half-written temporary behind
     return path

@@ -61,6 +61,29 @@ def _parity(predictor, args: argparse.Namespace):
     return require_parity(predictor, args.humans, args.robots, args.horizon)
 
 
+def _check_outside_the_zoos(out: Path) -> None:
+    """Refuse an ``out`` in the shipped or the user zoo (symbolic links followed): their files are what their
+    manifests' sha256 record, and only `crowdmpc zoo add` writes them; an export over NAME.pt would leave an
+    entry that never loads again."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+
+    try:
+        target = out.resolve()
+    except (OSError, RuntimeError):  # a symbolic link loop, in no zoo: check_writable refuses it
+        return
+    for which, locate in (("shipped", zoo.checkpoints_dir), ("user", zoo.user_zoo_dir)):
+        try:
+            root = locate().resolve()
+        except (PredictorError, OSError, RuntimeError):  # no such zoo here, so --out cannot be in it
+            continue
+        if target.is_relative_to(root):
+            raise PipelineError(
+                f"--out {out} lies in the {which} zoo {root}, whose files only `crowdmpc zoo add` writes; "
+                "write the export elsewhere"
+            )
+
+
 def run(args: argparse.Namespace) -> int:
     from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
     from predictors.registry import load_predictor
@@ -77,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"--out {args.out} is a directory; give the file to write, e.g. {args.name}.casadi"
         )
+    _check_outside_the_zoos(args.out)
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     predictor = load_predictor(args.name)
     start = time.perf_counter()

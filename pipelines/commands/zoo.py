@@ -21,8 +21,9 @@ Two zoos, each NAME.pt (state_dict) + NAME.json (config) per model and a manifes
 training data and metrics: the shipped zoo, checkpoints/ (or $CROWDMPC_CHECKPOINTS), read-only; and the user
 zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo, else ~/.local/share/crowdmpc/zoo, or --dir), where
 `add` writes and `remove` deletes. A user model may not take a shipped model's name. `add` under a name the
-user zoo has already is refused (adding the very same model again changes nothing) unless --replace says to
-replace that entry. The metrics file must be the one `crowdmpc train` wrote for these weights. A file whose
+zoo has already is refused (adding the very same model again changes nothing) unless --replace says to replace
+that entry; so is a name whose files would be the zoo's own (manifest, calibrations). Parallel adds and
+removes take turns. The metrics file must be the one `crowdmpc train` wrote for these weights. A file whose
 sha256 differs from its manifest is refused when loaded; `verify` checks every entry of both zoos. A model of
 a plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the shipped
 zoo holds only the kinds the project ships.
@@ -60,7 +61,7 @@ def register(subparsers) -> None:
     add.add_argument(
         "--replace",
         action="store_true",
-        help="replace the user zoo's entry of the same name (without it, adding a taken name is an error)",
+        help="replace the zoo's entry of the same name (without it, adding a taken name is an error)",
     )
     add.add_argument(
         "--shipped",
@@ -244,13 +245,15 @@ def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:
     """What ``zoo add`` did, in one line: added, replaced (and what was there), or nothing."""
     which = "shipped" if args.shipped else "user"
     sha = f"sha256 {entry.sha256[:12]}…"
-    if args.shipped or previous is None:
+    if previous is None:
         return f"added {entry.name} ({entry.file}, {sha}) to the {which} zoo {root}"
     if not args.replace and previous == entry:
-        return f"{entry.name} is already in the user zoo {root} with these weights ({sha}); nothing changed"
+        return (
+            f"{entry.name} is already in the {which} zoo {root} with these weights ({sha}); nothing changed"
+        )
     return (
         f"replaced {entry.name} (was sha256 {previous.sha256[:12]}…, model {previous.model}) with "
-        f"{entry.file} ({sha}, model {entry.model}) in the user zoo {root}"
+        f"{entry.file} ({sha}, model {entry.model}) in the {which} zoo {root}"
     )
 
 

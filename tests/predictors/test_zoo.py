@@ -123,7 +123,7 @@ def test_add_writes_the_user_zoo_and_every_command_sees_both(shipped, user, pair
     code, out, _ = cli(["zoo", "add", str(pair), "--name", "mine"], capsys)
     assert code == 0 and f"to the user zoo {user}" in out
     assert snapshot(shipped) == before
-    assert {"mine.pt", "mine.json", zoo.MANIFEST_NAME} == set(snapshot(user))
+    assert {"mine.pt", "mine.json", zoo.MANIFEST_NAME, manifest.LOCK_NAME} == set(snapshot(user))
 
     assert {NAME, "mine"} <= set(available())
     assert load_predictor("mine").name == "mine" and load_predictor(NAME).name == NAME
@@ -141,7 +141,7 @@ def test_add_writes_the_user_zoo_and_every_command_sees_both(shipped, user, pair
 
     code, out, _ = cli(["zoo", "remove", "mine"], capsys)
     assert code == 0 and out == f"removed mine from the user zoo {user}\n"
-    assert set(snapshot(user)) == {zoo.MANIFEST_NAME} and zoo.zoo_names(user) == []
+    assert set(snapshot(user)) == {zoo.MANIFEST_NAME, manifest.LOCK_NAME} and zoo.zoo_names(user) == []
     with pytest.raises(UnknownPredictor):
         load_predictor("mine")
     assert snapshot(shipped) == before

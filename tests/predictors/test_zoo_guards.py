@@ -1,0 +1,307 @@
+"""What the zoo never lets a command destroy: its own files (manifest, calibrations, lock) under a model's
+name, a shipped model replaced without --replace, entries of parallel adds and removes, zoo files overwritten
+by `crowdmpc export`, and a manifest of a newer layout read as if it were this one's.
+
+Every zoo here lives in tmp_path (checkpoints/ is only read); the parallel cases run real processes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from pipelines.cli import main
+from predictors import manifest, zoo
+from predictors.calibration import CALIBRATIONS_NAME
+from predictors.errors import PredictorError
+
+REPO = Path(__file__).resolve().parents[2]
+REAL_ZOO = REPO / "checkpoints"
+NAME = "social_lstm_eth"
+
+
+# ------------------------------------------------------------------------------------------------ fixtures
+def snapshot(root: Path) -> dict[str, str]:
+    """Every file under ``root`` and its sha256: what "untouched" means."""
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in root.rglob("*")
+        if p.is_file()
+    }
+
+
+def copy_pair(directory: Path, stem: str = NAME) -> Path:
+    """A copy of the real checkpoint pair ``directory/stem.pt``/``.json`` with an empty metrics file."""
+    directory.mkdir(parents=True, exist_ok=True)
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", directory / f"{stem}{suffix}")
+    (directory / f"{stem}.metrics.json").write_text("{}")
+    return directory / f"{stem}.pt"
+
+
+def retrained(pair: Path, stem: str) -> Path:
+    """Other weights (one tensor shifted) beside ``pair``, as `crowdmpc train` would write them."""
+    state = torch.load(pair, weights_only=True)
+    key = next(iter(state))
+    state[key] = state[key] + 0.5
+    weights = pair.with_name(f"{stem}.pt")
+    torch.save(state, weights)
+    document = json.loads(pair.with_suffix(".json").read_text())
+    weights.with_suffix(".json").write_text(json.dumps({**document, "name": stem}))
+    weights.with_suffix(".metrics.json").write_text("{}")
+    return weights
+
+
+@pytest.fixture
+def shipped(tmp_path, monkeypatch) -> Path:
+    """A clone's shipped zoo (--shipped needs the pyproject.toml beside it) holding the real entry NAME
+    and a calibrations file."""
+    root = tmp_path / "checkpoints"
+    copy_pair(root).with_suffix(".metrics.json").unlink()
+    document = json.loads((REAL_ZOO / manifest.MANIFEST_NAME).read_text())
+    document["models"] = [e for e in document["models"] if e["name"] == NAME]
+    (root / manifest.MANIFEST_NAME).write_text(json.dumps(document))
+    (root / CALIBRATIONS_NAME).write_text(
+        '{"format": "crowdmpc-calibrations", "version": 1, "calibrations": []}'
+    )
+    (tmp_path / "pyproject.toml").write_text("")
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(root))
+    return root
+
+
+@pytest.fixture
+def user(tmp_path, monkeypatch) -> Path:
+    """A user zoo with one model ("mine") and the calibrations `crowdmpc calibrate` keeps there."""
+    root = tmp_path / "user"
+    monkeypatch.setenv(zoo.ZOO_ENV, str(root))
+    zoo.add_to_zoo(copy_pair(tmp_path / "run"), name="mine", protocol="p", training_data={}, metrics={})
+    (root / CALIBRATIONS_NAME).write_text(
+        '{"format": "crowdmpc-calibrations", "version": 1, "calibrations": []}'
+    )
+    return root
+
+
+@pytest.fixture
+def pair(tmp_path) -> Path:
+    return copy_pair(tmp_path / "src")
+
+
+def cli(args: list[str], capsys) -> tuple[int, str, str]:
+    """Exit code, stdout, and stderr's one line (asserted to be at most one)."""
+    capsys.readouterr()
+    code = main(args)
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) <= 1, lines
+    return code, captured.out, lines[0] if lines else ""
+
+
+# ------------------------------------------------------------------------------ the zoo's own files' names
+@pytest.mark.parametrize(
+    ("name", "own", "what"),
+    [
+        ("calibrations", CALIBRATIONS_NAME, "conformal calibrations (kept by `crowdmpc calibrate`)"),
+        ("manifest", manifest.MANIFEST_NAME, "manifest (the list of its models)"),
+        ("Calibrations", CALIBRATIONS_NAME, "conformal calibrations (kept by `crowdmpc calibrate`)"),
+        ("MANIFEST", manifest.MANIFEST_NAME, "manifest (the list of its models)"),
+    ],
+)
+@pytest.mark.parametrize("where", ["user", "shipped"])
+def test_a_name_whose_files_are_the_zoos_own_is_refused(shipped, user, pair, capsys, name, own, what, where):
+    root = shipped if where == "shipped" else user
+    before = snapshot(root)
+    code, _, err = cli(
+        ["zoo", "add", str(pair), "--name", name, *(["--shipped"] * (where == "shipped"))], capsys
+    )
+    assert (code, err) == (
+        2,
+        f"crowdmpc zoo: error: zoo name {name!r} is reserved: its file {name}.json would overwrite {own}, "
+        f"the zoo's {what} (names are compared ignoring case); pick another name",
+    )
+    assert snapshot(root) == before
+    with pytest.raises(PredictorError, match="is reserved"):  # --replace does not make it free
+        zoo.add_to_zoo(pair, name=name, protocol="p", training_data={}, metrics={}, replace=True)
+    assert snapshot(root) == before
+
+
+def test_names_that_only_contain_a_reserved_one_are_fine(user, pair, capsys):
+    for name in ("manifest_lstm", "calibrations.v2", "my-manifest"):
+        assert cli(["zoo", "add", str(pair), "--name", name], capsys)[0] == 0
+    assert zoo.zoo_names(user) == ["calibrations.v2", "manifest_lstm", "mine", "my-manifest"]
+    assert all(problem is None for _, problem in zoo.verify(user))
+
+
+def test_removing_an_old_entry_under_a_reserved_name_keeps_the_zoos_files(user, capsys):
+    """An older crowdmpc added "calibrations" over calibrations.json: removing it must not delete the
+    calibrations kept there since."""
+    entries = json.loads((user / manifest.MANIFEST_NAME).read_text())
+    old = {
+        **entries["models"][0],
+        "name": "calibrations",
+        "file": "calibrations.pt",
+        "config": CALIBRATIONS_NAME,
+    }
+    entries["models"].append(old)
+    (user / manifest.MANIFEST_NAME).write_text(json.dumps(entries))
+    shutil.copyfile(user / "mine.pt", user / "calibrations.pt")
+    calibrations = (user / CALIBRATIONS_NAME).read_bytes()
+    code, out, _ = cli(["zoo", "remove", "calibrations"], capsys)
+    assert code == 0 and out == f"removed calibrations from the user zoo {user}\n"
+    assert (user / CALIBRATIONS_NAME).read_bytes() == calibrations and not (user / "calibrations.pt").exists()
+    assert zoo.zoo_names(user) == ["mine"]
+
+
+# --------------------------------------------------------------------------------- the shipped zoo's names
+def test_a_shipped_model_is_replaced_only_with_replace(shipped, pair, capsys):
+    first = zoo.read_manifest(shipped)[NAME]
+    before = snapshot(shipped)
+    other = retrained(pair, "other")
+    code, _, err = cli(["zoo", "add", str(other), "--shipped", "--name", NAME], capsys)
+    assert (code, err) == (
+        2,
+        f"crowdmpc zoo: error: the shipped zoo {shipped} already has {NAME!r}: sha256 {first.sha256[:12]}…, "
+        "model social_lstm; add it with --replace to replace that entry, or under another --name",
+    )
+    assert snapshot(shipped) == before
+
+    code, out, _ = cli(["zoo", "add", str(other), "--shipped", "--name", NAME, "--replace"], capsys)
+    new = zoo.read_manifest(shipped)[NAME]
+    assert code == 0 and out.startswith(
+        f"replaced {NAME} (was sha256 {first.sha256[:12]}…, model social_lstm)"
+    )
+    assert out.rstrip().endswith(f"in the shipped zoo {shipped}")
+    assert new.sha256 == hashlib.sha256(other.read_bytes()).hexdigest() != first.sha256
+
+
+# ---------------------------------------------------------------------------------- parallel adds, removes
+CHILD = """
+import sys, time
+from pathlib import Path
+from pipelines.cli import main
+import predictors.zoo, predictors.learned, torch  # loaded before the start, so that the commands overlap
+ready, go = Path(sys.argv[1]), Path(sys.argv[2])
+ready.touch()
+while not go.exists():
+    time.sleep(0.001)
+sys.exit(main(sys.argv[3:]))
+"""
+
+
+def run_together(commands: list[list[str]], sync: Path) -> list[subprocess.CompletedProcess]:
+    """Run ``crowdmpc`` ``commands`` as processes that each wait, everything imported, for one start signal,
+    so that their reads and writes of the manifest overlap."""
+    sync.mkdir()
+    go = sync / "go"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    processes = [
+        subprocess.Popen(
+            [sys.executable, "-c", CHILD, str(sync / f"ready{i}"), str(go), *command],
+            cwd=REPO,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i, command in enumerate(commands)
+    ]
+    deadline = time.monotonic() + 120
+    while len(list(sync.glob("ready*"))) < len(commands) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    go.touch()
+    results = []
+    for process, command in zip(processes, commands, strict=True):
+        out, err = process.communicate(timeout=120)
+        results.append(subprocess.CompletedProcess(command, process.returncode, out, err))
+    return results
+
+
+def test_parallel_adds_and_removes_all_count(tmp_path, shipped, user, pair):
+    adds = [["zoo", "add", str(pair), "--name", f"race{i}"] for i in range(4)]
+    results = run_together([*adds, ["zoo", "remove", "mine"]], tmp_path / "sync")
+    for result in results:
+        assert result.returncode == 0, result
+    assert [r.stdout.split()[0] for r in results] == ["added"] * 4 + ["removed"]
+
+    names = [f"race{i}" for i in range(4)]
+    assert zoo.zoo_names(user) == names
+    assert all(problem is None for _, problem in zoo.verify(user))
+    own = {manifest.MANIFEST_NAME, CALIBRATIONS_NAME, manifest.LOCK_NAME}
+    assert set(snapshot(user)) == own | {f"{n}{s}" for n in names for s in (".pt", ".json")}  # no orphans
+
+
+def test_a_lock_planted_as_a_symbolic_link_is_refused(tmp_path, user, pair):
+    elsewhere = tmp_path / "elsewhere"
+    (user / manifest.LOCK_NAME).unlink()
+    (user / manifest.LOCK_NAME).symlink_to(elsewhere)
+    with pytest.raises(PredictorError, match=rf"{manifest.LOCK_NAME}: cannot lock the zoo"):
+        zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
+    assert not elsewhere.exists() and zoo.zoo_names(user) == ["mine"]
+
+
+# ------------------------------------------------------------------------------------------ export's --out
+@pytest.mark.parametrize(
+    ("where", "which"),
+    [
+        ("user/mine.pt", "user"),
+        ("user/sub/new.casadi", "user"),
+        ("link/mine.json", "user"),
+        ("shipped", "shipped"),
+    ],
+)
+def test_export_never_writes_into_a_zoo(tmp_path, shipped, user, monkeypatch, capsys, where, which):
+    import predictors.registry
+
+    def no_load(name):
+        raise AssertionError("a predictor was loaded before --out was checked")
+
+    monkeypatch.setattr(predictors.registry, "load_predictor", no_load)
+    (tmp_path / "link").symlink_to(user)
+    out = shipped / f"{NAME}.pt" if where == "shipped" else tmp_path / where
+    root = (shipped if which == "shipped" else user).resolve()
+    before = snapshot(tmp_path)
+    code, _, err = cli(["export", "constant_velocity", "--out", str(out)], capsys)
+    assert (code, err) == (
+        2,
+        f"crowdmpc export: error: --out {out} lies in the {which} zoo {root}, whose files only `crowdmpc zoo "
+        "add` writes; write the export elsewhere",
+    )
+    assert snapshot(tmp_path) == before and all(problem is None for _, problem in zoo.verify_entries())
+
+
+def test_export_beside_a_zoo_still_works(tmp_path, shipped, user):
+    out = tmp_path / "user_exports" / "cv.casadi"  # a sibling whose name starts like the zoo's
+    assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "2"]) == 0
+    assert out.is_file()
+
+
+# ------------------------------------------------------------------------------------- manifest versions
+@pytest.mark.parametrize(
+    ("version", "tail"),
+    [
+        (99, "; a newer crowdmpc wrote it: upgrade crowdmpc to read it"),
+        (2, "; a newer crowdmpc wrote it: upgrade crowdmpc to read it"),
+        (0, ""),
+        ("1", ""),
+        (True, ""),
+    ],
+)
+def test_a_manifest_of_a_version_this_code_does_not_know_is_refused(user, pair, capsys, version, tail):
+    path = user / manifest.MANIFEST_NAME
+    path.write_text(json.dumps({**json.loads(path.read_text()), "version": version}))
+    before = snapshot(user)
+    message = (
+        f'crowdmpc zoo: error: {path}: zoo manifest "version" {version!r} is not one this crowdmpc reads '
+        f"(version 1){tail}"
+    )
+    for command in (["list"], ["add", str(pair), "--name", "other"], ["remove", "mine"]):
+        assert cli(["zoo", *command], capsys)[::2] == (2, message)
+    assert snapshot(user) == before
