@@ -1,9 +1,23 @@
-"""The installed crowdmpc's version: what the CLI prints and every log and sweep records."""
+"""The installed crowdmpc's version and the code it runs: what the CLI prints and every log and sweep records.
+
+``crowdmpc_version()`` is the package's version, which stays 0.1.0 while results change from commit to commit;
+``code_identity()`` adds what tells two codebases apart: the git commit of the source tree (when it is a git
+checkout, as a clone is; None for an installed wheel), whether tracked files differ from it, and the versions
+of the libraries the numbers depend on.
+"""
 
 from __future__ import annotations
 
 import functools
+import subprocess
+import sys
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Final
+
+# Libraries whose versions can change results: the solvers, the networks, the arrays.
+RESULT_LIBRARIES: Final[tuple[str, ...]] = ("casadi", "torch", "numpy")
+SOURCE_ROOT: Final[Path] = Path(__file__).resolve().parents[1]
 
 
 @functools.cache
@@ -13,3 +27,43 @@ def crowdmpc_version() -> str:
         return version("crowdmpc")
     except PackageNotFoundError:  # running from a source tree that was not installed
         return "0+unknown"
+
+
+@functools.cache
+def code_identity() -> dict[str, str | bool | None]:
+    """``{"version", "commit", "dirty", "python", "casadi", "torch", "numpy"}``, looked up once a process."""
+    commit, dirty = _git_state(SOURCE_ROOT)
+    identity: dict[str, str | bool | None] = {
+        "version": crowdmpc_version(),
+        "commit": commit,
+        "dirty": dirty,
+        "python": sys.version.split()[0],
+    }
+    for name in RESULT_LIBRARIES:
+        try:
+            identity[name] = version(name)
+        except PackageNotFoundError:
+            identity[name] = None
+    return identity
+
+
+def _git_state(root: Path) -> tuple[str | None, bool | None]:
+    """(HEAD's commit, whether tracked files differ from it) of ``root``; (None, None) when it is no git
+    checkout or git is missing (an installed wheel: its version is then the identity)."""
+    if not (root / ".git").exists():
+        return None, None
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
+        )
+        status = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None, None
+    if head.returncode != 0 or status.returncode != 0:
+        return None, None
+    return head.stdout.strip(), bool(status.stdout.strip())

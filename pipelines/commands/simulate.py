@@ -305,7 +305,14 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(summary, header))
     if resolved.json is not None:
         resolved.json.parent.mkdir(parents=True, exist_ok=True)
-        payload = {"run": run_meta, "summary": summary, "episodes": [r.record().to_dict() for r in results]}
+        from pipelines.version import code_identity
+
+        payload = {
+            "run": run_meta,
+            "code": code_identity(),
+            "summary": summary,
+            "episodes": [r.record().to_dict() for r in results],
+        }
         resolved.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
         print(f"wrote {resolved.json}")
     if resolved.plot is not None:

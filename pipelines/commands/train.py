@@ -444,9 +444,12 @@ def _train(
     epoch_times = [
         t for log_dir in sorted((out / "csv").glob("version_*")) for t in epoch_times_from_csv(log_dir)
     ]
+    from pipelines.version import code_identity
+
     summary = {
         "name": name,
         "model": args.model,
+        "code": code_identity(),
         "protocol": protocol,
         "training_data": data_record(files, root, protocol),
         "metrics": metrics,

@@ -141,7 +141,7 @@ def _write_atomic(path: Path, data: bytes) -> None:
 
 def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
     """sweep.json: what the directory holds, and a line per run (a directory belongs to one experiment)."""
-    from pipelines.version import crowdmpc_version
+    from pipelines.version import code_identity, crowdmpc_version
 
     path = out / SWEEP_FILE
     meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
@@ -152,10 +152,12 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
         )
     meta["experiment"] = config.experiment.name
     meta["title"] = config.experiment.title
+    _note_other_code(out, meta.get("runs") or [])
     meta.setdefault("runs", []).append(
         {
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "version": crowdmpc_version(),
+            "code": code_identity(),
             "episodes_per_cell": config.episodes_per_cell,
             "humans": list(config.humans or config.experiment.humans),
             "seed": config.seed,
@@ -178,6 +180,27 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
     tmp = path.with_suffix(".json.part")
     tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
     os.replace(tmp, path)
+
+
+def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
+    """Say so when the directory's last run was made by other code (another commit or library versions): its
+    episodes are kept, and a table over both mixes two codebases. Not refused: a resume after a change that
+    leaves results alone (documentation, a benchmark) is the common case. Uncommitted changes are recorded
+    ("dirty") but cannot be compared, so they alone say nothing."""
+    from pipelines.version import code_identity
+
+    before = runs[-1].get("code") if runs and isinstance(runs[-1], dict) else None
+    now = code_identity()
+    if not isinstance(before, dict):
+        return
+    changed = [k for k in now if k != "dirty" and before.get(k) != now[k]]
+    if changed:
+        shown = ", ".join(f"{k} {str(before.get(k))[:12]} -> {str(now[k])[:12]}" for k in changed)
+        print(
+            f"note: {out} holds episodes made by other code ({shown}); they are kept and counted with this "
+            "run's (a new --out keeps one codebase per table)",
+            file=sys.stderr,
+        )
 
 
 def run_sweep(

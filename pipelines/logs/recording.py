@@ -30,7 +30,7 @@ from pipelines.errors import PipelineError
 from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
 from pipelines.plain_json import plain
-from pipelines.version import crowdmpc_version
+from pipelines.version import code_identity
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -255,7 +255,11 @@ class McapEpisodeRecorder:
         self._recorder = McapRecorder(
             path,
             metadata={
-                "crowdmpc": {"version": crowdmpc_version(), "format": FORMAT},
+                # strings as they are (the version reads "0.1.0", not "\"0.1.0\""), the rest in JSON
+                "crowdmpc": {
+                    **{k: v if isinstance(v, str) else json.dumps(v) for k, v in code_identity().items()},
+                    "format": FORMAT,
+                },
                 "episode": episode,
                 "config": _metadata_strings(meta.get("config") or {}),
                 "run": _metadata_strings(self.run_meta),

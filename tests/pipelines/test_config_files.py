@@ -131,6 +131,7 @@ def test_the_command_line_overrides_the_file(tmp_path, capsys):
     assert payload["run"]["humans"] == 1 and payload["run"]["seed"] == 3
     assert [e["n_humans"] for e in payload["episodes"]] == [1]
     assert payload["run"]["controller"] == "straight"
+    assert {"commit", "dirty", "version", "casadi"} <= set(payload["code"])  # the code behind the numbers
 
 
 @pytest.mark.parametrize("profile", ["paper", "v1"])

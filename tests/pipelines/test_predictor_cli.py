@@ -59,6 +59,7 @@ def test_train_writes_checkpoint_pair_logs_and_metrics(trained):
     summary = json.loads((out / "walker.metrics.json").read_text())
     assert set(summary["metrics"]) == {"val", "test"} and summary["metrics"]["test"]["scenes"] == 2
     assert summary["training_data"]["files"]["train"] == summary["training_data"]["files"]["val"]
+    assert "commit" in summary["code"] and summary["code"]["torch"].startswith("2.13")
     assert (out / "checkpoints" / "last.ckpt").is_file()
     (log,) = (out / "csv").glob("version_*/metrics.csv")
     # one batch an epoch, fewer than log_every_n_steps: the epoch's mean loss is logged all the same

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import json
+import platform
+import subprocess
 import time
 from importlib.metadata import version
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +18,8 @@ from pipelines.logs.recording import FORMAT, ROBOT_RGB, McapEpisodeRecorder, epi
 from pipelines.logs.review import check_recording
 from pipelines.loop.record import EpisodeRecord
 from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
+
+REPO = Path(__file__).resolve().parents[2]
 
 NS = 1_000_000_000
 
@@ -135,7 +140,17 @@ def test_episode_metrics_at_the_end(episode, recording):
 
 def test_metadata_present(recording):
     meta = recording.metadata
-    assert meta["crowdmpc"] == {"version": version("crowdmpc"), "format": FORMAT}
+    code = dict(meta["crowdmpc"])
+    assert (code.pop("version"), code.pop("format")) == (version("crowdmpc"), FORMAT)
+    # the code behind the numbers: this clone's commit (a git checkout), and the libraries' versions
+    if (REPO / ".git").exists():
+        commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True)
+        assert code.pop("commit") == commit.stdout.strip() and code.pop("dirty") in ("true", "false")
+    else:  # a copy of the tree without its history: nothing to name
+        assert (code.pop("commit"), code.pop("dirty")) == ("null", "null")
+    assert code == {name: version(name) for name in ("casadi", "torch", "numpy")} | {
+        "python": platform.python_version()
+    }
     episode = dict(meta["episode"])
     assert 0 < time.time_ns() - int(episode.pop("start_time_ns")) < 600 * NS  # wall clock, this session
     assert episode == {
