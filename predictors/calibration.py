@@ -36,7 +36,7 @@ from predictors.base import DT, Predictor
 from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError, UnknownPredictor
-from predictors.manifest import CALIBRATIONS_NAME  # defined with the zoo's other own files (ZOO_FILES)
+from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
 from predictors.zoo import (
     checkpoints_dir,
@@ -303,18 +303,19 @@ def save_calibration(block: Calibration, directory: str | Path | None = None) ->
     """Store ``block`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
     replacing that file's block with the same (predictor, source, alpha); written atomically."""
     path = calibrations_path(directory)
-    kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
-    blocks = sorted([*kept, block], key=Calibration.key)
-    document = {
-        "format": CALIBRATIONS_FORMAT,
-        "version": CALIBRATIONS_VERSION,
-        "calibrations": [b.to_json() for b in blocks],
-    }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
-    tmp.replace(path)
+    # under the zoo's lock: two calibrations that both read the old file would each write back only their own
+    with zoo_lock(path.parent):
+        kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
+        blocks = sorted([*kept, block], key=Calibration.key)
+        document = {
+            "format": CALIBRATIONS_FORMAT,
+            "version": CALIBRATIONS_VERSION,
+            "calibrations": [b.to_json() for b in blocks],
+        }
+        # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
+        tmp.replace(path)
     return path
 
 

@@ -368,3 +368,27 @@ def test_calibrate_real_on_prepared_validation_files(tmp_path):
         assert all(c >= 1 - b.alpha for c in coverage(errors, b.quantiles))  # in-sample, so it must hold
     save_calibration(blocks[0], tmp_path)
     assert find_calibration("constant_velocity", "real", 0.1, tmp_path, sha256=None) == blocks[0]
+
+
+def _save_alphas(directory: str, alphas: list[float], start) -> None:
+    start.wait()  # all at once
+    for alpha in alphas:  # a new block each time: one lost write loses it for good
+        save_calibration(block(alpha=alpha), directory)
+
+
+def test_parallel_calibrations_keep_every_block(tmp_path):
+    """Each save reads the file, replaces its own block and writes it back: without the zoo's lock two
+    writers that read the same old file each wrote back only their own block."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    start = context.Event()
+    shares = [[round(0.001 * (40 * k + i + 1), 3) for i in range(40)] for k in range(4)]
+    workers = [context.Process(target=_save_alphas, args=(str(tmp_path), a, start)) for a in shares]
+    for w in workers:
+        w.start()
+    start.set()
+    for w in workers:
+        w.join(timeout=120)
+    assert [w.exitcode for w in workers] == [0] * len(shares)
+    assert sorted(b.alpha for b in read_calibrations(tmp_path)) == sorted(sum(shares, []))
