@@ -70,9 +70,12 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
     return rows
 
 
-def episode_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) -> list[dict[str, Any]]:
+    """A row per episode, by cell (in ``cells``' order), seed and scenario, the plan's order: episodes.jsonl
+    holds them in the order the workers finished them, so two identical sweeps gave files that differed."""
+    place = {c.key: i for i, c in enumerate(cells)}
     rows = []
-    for r in records:
+    for r in sorted(records, key=lambda r: (place.get(r["cell"], len(place)), r["seed"], str(r["scenario"]))):
         m, s = r["metrics"], r["solver"]
         rows.append(
             {
@@ -128,7 +131,7 @@ def write_report(
     records = [r for r in records if r["cell"] in keys]
     summaries = summarize(experiment, cells, records)
     write_csv(out / CELLS_CSV, cell_rows(summaries))
-    write_csv(out / EPISODES_CSV, episode_rows(records))
+    write_csv(out / EPISODES_CSV, episode_rows(records, cells))
     markdown = markdown_table(experiment, summaries)
     (out / TABLE_MD).write_text(markdown)
     write_csv(out / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))

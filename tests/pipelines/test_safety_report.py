@@ -222,3 +222,12 @@ def test_world_note_of_the_conventions_experiment():
         "(row 'Margins / profile / visibility')."
     )
     assert worlds is not None and worlds[:2] == ["none / v1 / visible", "cp0.1 / v1 / visible"]
+
+
+def test_episodes_csv_is_in_the_plans_order_whatever_order_the_workers_finished_in(tmp_path):
+    safety, cells, records = _safety_records()
+    write_report(tmp_path / "a", safety, cells, records)
+    write_report(tmp_path / "b", safety, cells, records[::-1])
+    first = (tmp_path / "a" / EPISODES_CSV).read_text()
+    assert first == (tmp_path / "b" / EPISODES_CSV).read_text()
+    assert [line.split(",")[0] for line in first.splitlines()[1:4]] == [r["key"] for r in records[:3]]
