@@ -226,8 +226,9 @@ def test_world_note_of_the_conventions_experiment():
 
 def test_episodes_csv_is_in_the_plans_order_whatever_order_the_workers_finished_in(tmp_path):
     safety, cells, records = _safety_records()
-    write_report(tmp_path / "a", safety, cells, records)
-    write_report(tmp_path / "b", safety, cells, records[::-1])
+    for name, order in (("a", records), ("b", records[::-1])):
+        (tmp_path / name).mkdir()
+        write_report(tmp_path / name, safety, cells, order)
     first = (tmp_path / "a" / EPISODES_CSV).read_text()
     assert first == (tmp_path / "b" / EPISODES_CSV).read_text()
     assert [line.split(",")[0] for line in first.splitlines()[1:4]] == [r["key"] for r in records[:3]]
