@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
@@ -56,6 +56,20 @@ from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
 from crowdsim.scenarios import Layout, make_layout
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment, match_slots
 from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF, WorldFacts
+
+# Upper bounds of EnvConfig's times, lengths and speeds: far above any crowd a robot navigates, low enough
+# that positions, step counts and the controllers' arithmetic stay finite (dt = 1e308 overflowed the
+# straight controller's braking distance).
+ENV_BOUNDS: Final[dict[str, tuple[float, str]]] = {
+    "time_limit": (86_400.0, "s"),  # a day; longer runs are more episodes (dt: at most time_limit)
+    "radius": (10.0, "m"),  # a robot or a person, not a building
+    "v_pref": (100.0, "m/s"),  # 360 km/h
+    "v_max": (100.0, "m/s"),
+    "a_max": (1000.0, "m/s^2"),  # 100 g
+}
+MIN_DT: Final[float] = 1e-6  # s: below, (time_limit - timeout_margin) / dt may overflow to inf
+MAX_SPAWN_SEPARATION: Final[float] = 100.0  # m: the scenarios are 10 m across
+MAX_ORCA_RADIUS_MARGIN: Final[float] = 10.0  # m: CrowdNav adds 0.01
 
 
 @dataclass(frozen=True)
@@ -81,15 +95,15 @@ class EnvConfig:
     goal_assignment: GoalAssignment = "fixed"  # "fixed": robot i to goal i (paper); "slots": crowdsim.slots
 
     def __post_init__(self):
-        for name in ("dt", "time_limit", "radius", "v_pref", "v_max", "a_max"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
-                raise SimulationError(f"EnvConfig.{name} must be a finite number > 0, got {value!r}")
+        self._check_sizes()
+        self._check_dt()
         if not (isinstance(self.history_len, int) and self.history_len >= 1):
             raise SimulationError(f"EnvConfig.history_len must be an int >= 1, got {self.history_len!r}")
-        if not self.orca_radius_margin >= 0:
+        margin_ok = isinstance(self.orca_radius_margin, int | float) and np.isfinite(self.orca_radius_margin)
+        if not (margin_ok and 0 <= self.orca_radius_margin <= MAX_ORCA_RADIUS_MARGIN):
             raise SimulationError(
-                f"EnvConfig.orca_radius_margin must be >= 0 m, got {self.orca_radius_margin!r}"
+                f"EnvConfig.orca_radius_margin must be in [0, {MAX_ORCA_RADIUS_MARGIN:g}] m, "
+                f"got {self.orca_radius_margin!r}"
             )
         if not isinstance(self.orca, OrcaParams):
             raise SimulationError(f"EnvConfig.orca must be an OrcaParams, got {type(self.orca).__name__}")
@@ -104,6 +118,10 @@ class EnvConfig:
         if not (isinstance(separation, int | float) and np.isfinite(separation) and separation >= 0):
             raise SimulationError(
                 f"EnvConfig.spawn_separation must be a finite number >= 0 m, got {separation!r}"
+            )
+        if separation > MAX_SPAWN_SEPARATION:
+            raise SimulationError(
+                f"EnvConfig.spawn_separation must be at most {MAX_SPAWN_SEPARATION:g} m, got {separation:g}"
             )
         if self.crossing not in CROSSINGS:
             raise SimulationError(
@@ -120,6 +138,27 @@ class EnvConfig:
             )
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
+
+    def _check_sizes(self) -> None:
+        """The times, lengths and speeds: finite, positive, and within ``ENV_BOUNDS``."""
+        for name in ("dt", *ENV_BOUNDS):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise SimulationError(f"EnvConfig.{name} must be a finite number > 0, got {value!r}")
+        for name, (most, unit) in ENV_BOUNDS.items():
+            if getattr(self, name) > most:
+                raise SimulationError(
+                    f"EnvConfig.{name} must be at most {most:g} {unit}, got {getattr(self, name):g}"
+                )
+
+    def _check_dt(self) -> None:
+        """A step within the episode (``dt <= time_limit``), and not so short that ``max_steps`` overflows."""
+        if self.dt < MIN_DT:
+            raise SimulationError(f"EnvConfig.dt must be at least {MIN_DT:g} s, got {self.dt:g}")
+        if self.dt > self.time_limit:
+            raise SimulationError(
+                f"EnvConfig.dt must be at most time_limit = {self.time_limit:g} s, got {self.dt:g}"
+            )
 
     @classmethod
     def from_world(cls, world: WorldFacts, **settings: Any) -> EnvConfig:

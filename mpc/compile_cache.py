@@ -34,6 +34,7 @@ dozen matrix operations, which CasADi's interpreter already runs as compiled loo
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
@@ -51,6 +52,8 @@ from pathlib import Path
 from typing import Final
 
 import casadi as ca
+
+from mpc.errors import MPCConfigError
 
 try:  # POSIX; without it (Windows) concurrent compiles of one entry are not serialised, only wasted
     import fcntl
@@ -87,10 +90,51 @@ class CompileCacheError(RuntimeError):
     """The cache cannot be used as asked (no compiler, a directory that is not one)."""
 
 
+class CacheLocationError(CompileCacheError, MPCConfigError):
+    """The cache directory cannot hold the cache (a file in its place, no write permission): a setting of the
+    user's ($CROWDMPC_CACHE), which the command line prints as one line (an MPCConfigError)."""
+
+
 def cache_dir() -> Path:
     """``$CROWDMPC_CACHE/compiled``, default ``~/.cache/crowdmpc/compiled`` (not created here)."""
     root = os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "crowdmpc"
     return Path(root).expanduser() / SUBDIR
+
+
+def _nearest_existing(path: Path) -> Path:
+    return next(p for p in (path, *path.parents) if os.path.lexists(p))
+
+
+def _file_in_the_way(path: Path) -> Path | None:
+    """The nearest existing one of ``path`` and its parents when it is no directory (a file, a dangling or
+    looping symbolic link): then ``path`` can be no directory."""
+    existing = _nearest_existing(path)
+    return None if existing.is_dir() else existing
+
+
+def _unwritable(path: Path) -> str | None:
+    """Why the directory ``path`` cannot be written in, creating it (and its parents) when it can."""
+    existing = _nearest_existing(path)
+    if not existing.is_dir():
+        return f"{existing} is not a directory"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):  # a read-only or foreign place
+            return f"{existing} is not writable ({exc.strerror})"
+        return f"{path} cannot be created ({exc.strerror or exc})"
+    if not os.access(path, os.W_OK | os.X_OK):
+        return f"{path} is not writable"
+    return None
+
+
+def _location_error(folder: Path, directory: str | Path | None, problem: str) -> CacheLocationError:
+    """The one-line error about a cache directory that cannot be used (naming $CROWDMPC_CACHE if set)."""
+    if directory is not None:
+        return CacheLocationError(f"the compile cache {folder}: {problem}")
+    root = os.environ.get(CACHE_ENV)
+    named = f"${CACHE_ENV}={root}" if root else f"the compile cache {folder} (default; ${CACHE_ENV} unset)"
+    return CacheLocationError(f"{named}: {problem}; set ${CACHE_ENV} to a writable directory")
 
 
 @dataclass(frozen=True)
@@ -144,14 +188,24 @@ def nlp_key(plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: P
     return _key(f"nlpsol:{plugin}:{','.join(names)}", options, oracle.serialize(), cc, folder)
 
 
-def _directory(directory: str | Path | None) -> Path:
+def _readable_dir(directory: str | Path | None) -> Path:
+    """The cache directory, not created: ``CacheLocationError`` when a file stands where it must be (it is
+    then not "not created yet", nor empty: it cannot be)."""
     path = Path(directory) if directory is not None else cache_dir()
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CompileCacheError(f"cannot create the compile cache {path}: {exc}") from exc
-    if not path.is_dir():
-        raise CompileCacheError(f"the compile cache {path} is not a directory")
+    blocker = _file_in_the_way(path)
+    if blocker is not None:
+        raise _location_error(path, directory, f"{blocker} is not a directory")
+    return path
+
+
+def writable_dir(directory: str | Path | None = None) -> Path:
+    """The cache directory (``directory``, else ``cache_dir()``), created, about to be written in;
+    ``CacheLocationError`` naming $CROWDMPC_CACHE and what is wrong when it cannot be (a caller may check
+    this before starting workers)."""
+    path = Path(directory) if directory is not None else cache_dir()
+    problem = _unwritable(path)
+    if problem is not None:
+        raise _location_error(path, directory, problem)
     return path
 
 
@@ -207,7 +261,7 @@ def nlpsol(
     clash = sorted(set(options) & {"jit", "compiler", "jit_options", "jit_name", "jit_serialize"})
     if clash:
         raise ValueError(f"nlpsol options {clash} are set by the compile cache")
-    folder = _directory(directory)
+    folder = writable_dir(directory)
     key = nlp_key(plugin, nlp, options, cc, folder)
     manifest = folder / f"{key}.casadi"
     solver = _load_solver(manifest)
@@ -291,7 +345,7 @@ def _owned_files(folder: Path) -> list[os.DirEntry]:
 
 def info(directory: str | Path | None = None) -> CacheInfo:
     """The cache's location, entries and size, and what compiles into it."""
-    folder = Path(directory) if directory is not None else cache_dir()
+    folder = _readable_dir(directory)
     files = _owned_files(folder)
     cc = compiler()
     return CacheInfo(
@@ -311,7 +365,7 @@ def clear(directory: str | Path | None = None) -> tuple[int, int]:
     Returns (files removed, bytes freed). A directory that is a symlink is refused: its files live elsewhere.
     A process that loaded an entry keeps using it (an unlinked library stays mapped); the next build compiles.
     """
-    folder = Path(directory) if directory is not None else cache_dir()
+    folder = _readable_dir(directory)
     if folder.is_symlink():
         raise CompileCacheError(f"{folder} is a symlink; not clearing files outside the cache")
     removed = freed = 0

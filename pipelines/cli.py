@@ -63,7 +63,8 @@ $XDG_DATA_HOME/crowdmpc/zoo or ~/.local/share/crowdmpc/zoo); the shipped zoo (ch
 class PluginAction(argparse.Action):
     """``--plugin module:NetClass``: registered as soon as it is parsed (``predictors.models``), so that the
     options after it (``train --model module:NetClass``) can name it, and recorded in ``$CROWDMPC_PLUGINS``
-    for the processes the command starts. A plugin that does not load is a one-line parser error."""
+    for the processes the command starts. A plugin that does not load is a one-line parser error naming
+    --plugin."""
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         from pipelines.plugins import register_plugins
@@ -71,7 +72,7 @@ class PluginAction(argparse.Action):
         try:
             register_plugins([str(values)])
         except PredictorError as exc:
-            parser.error(str(exc))
+            raise argparse.ArgumentError(self, str(exc)) from None
         items = list(getattr(namespace, self.dest, None) or [])
         setattr(namespace, self.dest, [*items, values])
 
@@ -105,8 +106,13 @@ def build_parser() -> argparse.ArgumentParser:
         "MODULE:CLASS) of your own (repeatable; before COMMAND)",
     )
     # Config files (pipelines/config): also accepted after simulate, sweep and config show.
+    # Appended, not stored: a second --config is refused (pipelines/config.config_arguments), not dropped.
     parser.add_argument(
-        "--config", dest="config_file", metavar="FILE", help="a TOML config file (see `crowdmpc config show`)"
+        "--config",
+        dest="config_file",
+        action="append",
+        metavar="FILE",
+        help="a TOML config file (see `crowdmpc config show`)",
     )
     parser.add_argument(
         "--set",
@@ -142,6 +148,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
+    from pipelines.plugins import PluginError, load_environment_plugins
+
+    try:  # before parsing: an option that names a plugin would otherwise report a broken one as its own
+        load_environment_plugins()
+    except PluginError as exc:
+        print(f"crowdmpc: error: {exc}", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:

@@ -7,22 +7,29 @@
   --controller module:Class``) and lists it in ``CROWDMPC_CONTROLLERS``.
 
 Either variable is read by the processes a command starts (sweep workers), so they load the same plugins.
-A plugin that does not load is a ``PluginError``: one line, which the command line prints as a parser error.
+A plugin that does not load is a ``PluginError``: one line, which the command line prints as a parser error;
+``load_environment_plugins`` loads those the variables name up front, so that such an error says which
+variable named the plugin.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import sys
-from collections.abc import Sequence
-from typing import Literal
+from collections.abc import Callable, Iterator, Sequence
+from typing import Final, Literal
 
 from pipelines.errors import PipelineError
+from pipelines.loop.spec import PLUGINS_ENV as CONTROLLERS_ENV
 from pipelines.loop.spec import (
     import_plugin,
     is_controller_class,
     is_plugin_spec,
+    load_controller_plugin,
     register_controller_plugins,
 )
+from predictors import models
 from predictors.errors import PredictorError, short_repr
 
 PluginKind = Literal["model", "controller"]
@@ -40,14 +47,13 @@ def _is_net(obj: object) -> bool:
 def register(spec: str) -> PluginKind:
     """Register the plugin ``module:Class`` (importing its module) as a model kind or a controller, and
     say which."""
-    from predictors import models
-
     if not is_plugin_spec(spec):
         raise PluginError(
             f"plugin {short_repr(spec)} is not of the form module:NetClass or module:Controller"
         )
     try:
-        obj = import_plugin(spec)
+        with _exits_refused(spec):
+            obj = import_plugin(spec)
         if is_controller_class(obj) and not _is_net(obj):
             register_controller_plugins([spec])
             return "controller"
@@ -67,3 +73,39 @@ def register(spec: str) -> PluginKind:
 def register_plugins(specs: Sequence[str]) -> list[PluginKind]:
     """``register`` each of ``specs``, in order (what ``crowdmpc --plugin`` calls)."""
     return [register(spec) for spec in specs]
+
+
+@contextlib.contextmanager
+def _exits_refused(spec: str) -> Iterator[None]:
+    """A plugin module that calls ``sys.exit`` while it is imported is a ``PluginError``, not the end of
+    crowdmpc with the plugin's exit status and no word. Ctrl-C (KeyboardInterrupt) still goes through."""
+    try:
+        yield
+    except SystemExit as exc:
+        module = spec.partition(":")[0]
+        raise PluginError(
+            f"plugin {spec!r}: importing {module!r} failed: it called sys.exit({short_repr(exc.code)}); "
+            "a plugin module defines classes and must not exit"
+        ) from None
+
+
+# The variables that name plugins (what --plugin sets for the processes it starts), and how each is loaded.
+ENVIRONMENT: Final[dict[str, Callable[[str], object]]] = {
+    models.PLUGINS_ENV: models.load_plugin,
+    CONTROLLERS_ENV: load_controller_plugin,
+}
+
+
+def load_environment_plugins() -> None:
+    """Load the plugins ``$CROWDMPC_PLUGINS`` and ``$CROWDMPC_CONTROLLERS`` name (each once; later lookups
+    find them registered). A plugin that does not load is a ``PluginError`` naming the variable: loaded
+    lazily, its error surfaced inside whichever option first looked a name up ("argument --model: ...")."""
+    for variable, load in ENVIRONMENT.items():
+        for spec in (s.strip() for s in os.environ.get(variable, "").split(",")):
+            if not spec:
+                continue
+            try:
+                with _exits_refused(spec):
+                    load(spec)
+            except (PipelineError, PredictorError) as exc:
+                raise PluginError(f"${variable}: {exc}") from None

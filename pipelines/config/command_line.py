@@ -38,11 +38,19 @@ def cli_entries(args: Any, options: Sequence[Option]) -> list[Entry]:
     return entries
 
 
+def _given(value: Any) -> list[Any]:
+    """An option's values: None, one value, or a list (an ``append`` option, given more than once)."""
+    if isinstance(value, list | tuple):
+        return [v for v in value if v]
+    return [value] if value else []
+
+
 def config_arguments(args: Any) -> tuple[str | None, list[str]]:
     """The config file and ``--set`` items of a command line: before the command (``crowdmpc --config F``)
-    or after it (``crowdmpc simulate --config F``); one file at most."""
-    files = [f for f in (getattr(args, "config_file", None), getattr(args, "sub_config_file", None)) if f]
-    if len(files) > 1 and files[0] != files[1]:
+    or after it (``crowdmpc simulate --config F``); one file at most (the same one twice is one)."""
+    given = [*_given(getattr(args, "config_file", None)), *_given(getattr(args, "sub_config_file", None))]
+    files = list(dict.fromkeys(str(f) for f in given))
+    if len(files) > 1:
         raise ConfigError(f"--config given twice ({files[0]}, {files[1]}); one config file per run")
     sets = [*(getattr(args, "config_set", None) or []), *(getattr(args, "sub_config_set", None) or [])]
     return (str(files[0]) if files else None), sets

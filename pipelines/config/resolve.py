@@ -12,6 +12,7 @@ error is one line naming where the value came from, the key and what is expected
 from __future__ import annotations
 
 import difflib
+import errno
 import re
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -111,12 +112,26 @@ def _check_key(prefix: str, section: Section, key: str) -> None:
     raise ConfigError(f"{prefix}: unknown key{hint}; valid keys: {', '.join(section.names)}")
 
 
+def _unreachable(path: Path) -> str | None:
+    """Why ``path`` cannot be looked at (``Path.exists`` says False for a symbolic-link loop too)."""
+    try:
+        path.stat()
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "a symbolic-link loop"
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            return "no such file"
+        return f"cannot read it ({exc.strerror or exc})"
+    return None
+
+
 def read_file(path: str | Path) -> list[Entry]:
     """The entries of a TOML config file, in file order; unknown sections and keys refused."""
     where = str(path)
     p = Path(path)
-    if not p.exists():
-        raise ConfigError(f"--config {where}: no such file")
+    problem = _unreachable(p)
+    if problem is not None:
+        raise ConfigError(f"--config {where}: {problem}")
     if not p.is_file():
         raise ConfigError(f"--config {where}: not a file")
     if p.stat().st_size > MAX_CONFIG_BYTES:
@@ -131,6 +146,8 @@ def read_file(path: str | Path) -> list[Entry]:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{where}: not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise ConfigError(f"{where}: not a config file: arrays or tables nested too deeply") from None
     source = Source("file", where)
     entries: list[Entry] = []
 
@@ -153,6 +170,7 @@ def read_file(path: str | Path) -> list[Entry]:
 
 
 BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@-]+")
+CONTROL: Final[re.Pattern[str]] = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # all but the tab
 
 
 def parse_set(text: str) -> Entry:
@@ -162,6 +180,10 @@ def parse_set(text: str) -> Entry:
     name, raw = name.strip(), raw.strip()
     if not sep or "." not in name:
         raise ConfigError(f"--set {text[:80]!r}: expected SECTION.KEY=VALUE, e.g. mpc.w_coll=1e6")
+    if CONTROL.search(text):  # TOML would read what follows a line break as more keys, silently ignored
+        raise ConfigError(
+            f"--set {text[:80]!r}: a line break or control character; one SECTION.KEY=VALUE per --set"
+        )
     section_name, key = name.rsplit(".", 1)
     section = SECTION_BY_NAME.get(section_name)
     if section is None:
@@ -169,6 +191,8 @@ def parse_set(text: str) -> Entry:
     _check_key(f"--set {name}", section, key)
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
+    except RecursionError:  # tomllib parses nested arrays recursively
+        raise ConfigError(f"--set {name}: the value's arrays or tables are nested too deeply") from None
     except tomllib.TOMLDecodeError:
         if BARE_VALUE.fullmatch(raw) is None:
             raise ConfigError(

@@ -181,8 +181,8 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
     env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
     if env.max_steps > MAX_EPISODE_STEPS:
         raise PipelineError(
-            f"time_limit must be at most {MAX_EPISODE_STEPS} steps of dt = {env.dt} s, got "
-            f"{env.time_limit} s ({env.max_steps} steps)"
+            f"time_limit must be at most {MAX_EPISODE_STEPS} steps of dt = {env.dt:g} s, got "
+            f"{env.time_limit:g} s ({float(env.max_steps):.3g} steps)"
         )
     return env
 

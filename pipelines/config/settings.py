@@ -138,12 +138,7 @@ class SweepSettings:
             raise PipelineError(f"episodes_per_cell must be at least 1, got {n!r}")
         if n > MAX_EPISODES_PER_CELL:
             raise PipelineError(f"episodes_per_cell must be at most {MAX_EPISODES_PER_CELL}, got {n}")
-        if self.humans is not None:
-            if not self.humans or not all(_is_int(h) for h in self.humans):
-                raise PipelineError(f"humans must list positive numbers, got {list(self.humans)}")
-            if not 1 <= min(self.humans) or max(self.humans) > MAX_HUMANS:
-                bad = min(self.humans) if min(self.humans) < 1 else max(self.humans)
-                raise PipelineError(f"humans must be in 1..{MAX_HUMANS}, got {bad}")
+        self._check_humans()
         if not _is_int(self.seed) or self.seed < 0:
             raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
         if self.backend not in BACKENDS:
@@ -157,6 +152,21 @@ class SweepSettings:
         self._check_workers()
         self._check_predictors()
         self._check_controllers()
+
+    def _check_humans(self) -> None:
+        humans = self.humans
+        if humans is None:
+            return
+        if not humans or not all(_is_int(h) for h in humans):
+            text = str(list(humans))
+            shown = text if len(text) <= 80 else text[:77] + "..."
+            raise PipelineError(f"humans must list positive numbers, got {shown}")
+        # Up to the crowd sizes 1..MAX_HUMANS, each once: more is repeats, each a whole column of cells.
+        if len(humans) > MAX_HUMANS:
+            raise PipelineError(f"humans must list at most {MAX_HUMANS} crowd sizes, got {len(humans)}")
+        if not 1 <= min(humans) or max(humans) > MAX_HUMANS:
+            bad = min(humans) if min(humans) < 1 else max(humans)
+            raise PipelineError(f"humans must be in 1..{MAX_HUMANS}, got {bad}")
 
     def _check_workers(self) -> None:
         workers = self.workers

@@ -21,6 +21,7 @@ Protocols (data/README.md explains them):
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -53,12 +54,56 @@ def resolve_data_dir(data_dir: str | Path | None) -> Path:
             )
     path = Path(data_dir).expanduser()
     if not path.is_dir():
-        raise PredictorError(f"data directory {path} does not exist")
+        raise PredictorError(f"data directory {path} {_not_a_directory(path)}")
     return path
 
 
+def _not_a_directory(path: Path) -> str:
+    """Why ``path``, which is no directory, is none: a missing path, a file, or a symbolic-link loop."""
+    try:
+        path.stat()
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "is a symbolic-link loop"
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            return "does not exist"
+        return f"cannot be read ({exc.strerror or exc})"
+    return "is not a directory"
+
+
 def cache_root() -> Path:
+    """``$CROWDMPC_CACHE``, else ``~/.cache/crowdmpc`` (not created here: reading needs no directory)."""
     return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "crowdmpc").expanduser()
+
+
+def writable_cache_dir(*parts: str) -> Path:
+    """``cache_root() / parts``, created, about to be written in; a PredictorError naming $CROWDMPC_CACHE and
+    what is wrong (a file in the way, no permission) when it cannot be, instead of an OSError deep inside
+    the writer about one of its temporary files."""
+    path = cache_root().joinpath(*parts)
+    problem = _unwritable(path)
+    if problem is None:
+        return path
+    root = os.environ.get(CACHE_ENV)
+    named = f"${CACHE_ENV}={root}" if root else f"the cache {cache_root()} (default; ${CACHE_ENV} unset)"
+    raise PredictorError(f"{named}: {problem}; set ${CACHE_ENV} to a writable directory")
+
+
+def _unwritable(path: Path) -> str | None:
+    """Why the directory ``path`` cannot be written in, creating it (and its parents) when it can.
+    (mpc.compile_cache checks its directory alike; mpc does not import predictors.)"""
+    existing = next(p for p in (path, *path.parents) if os.path.lexists(p))
+    if not existing.is_dir():  # a file, or a dangling or looping symbolic link
+        return f"{existing} is not a directory"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):  # a read-only or foreign place
+            return f"{existing} is not writable ({exc.strerror})"
+        return f"{path} cannot be created ({exc.strerror or exc})"
+    if not os.access(path, os.W_OK | os.X_OK):
+        return f"{path} is not writable"
+    return None
 
 
 def read_manifest(directory: Path) -> dict | None:
@@ -118,6 +163,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
     target = cache_root() / "prepared" / digest.hexdigest()[:16]
     if read_manifest(target) is not None:
         return target
+    writable_cache_dir("prepared")
     log = log or (lambda msg: print(msg, file=sys.stderr))
     log(f"preparing {raw} into {target} (first use only; about half a minute)")
     staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")

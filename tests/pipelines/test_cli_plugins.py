@@ -157,7 +157,8 @@ def _toy_checkpoint(tmp_path: Path) -> Path:
 )
 def test_a_bad_plugin_is_a_one_line_error(spec, message, capsys):
     line = parser_error(capsys, "--plugin", spec, "zoo", "list")
-    assert line.startswith(f"crowdmpc: error: {message}") and line.endswith("; see 'crowdmpc --help'")
+    assert line.startswith(f"crowdmpc: error: argument --plugin: {message}"), line
+    assert line.endswith("; see 'crowdmpc --help'"), line
     assert PLUGINS_ENV not in os.environ
 
 

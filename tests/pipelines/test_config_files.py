@@ -337,7 +337,7 @@ def test_errors_from_the_python_api_are_config_errors(tmp_path):
         (
             ["--set", "world.dt=1e-6"],
             "--set world.dt: env.time_limit (unset: the paper profile's 40.0): must be at most 100000 steps "
-            "of dt = 1e-06 s, got 40.0 s (39000000 steps)",
+            "of dt = 1e-06 s, got 40 s (3.9e+07 steps)",
         ),
     ],
 )

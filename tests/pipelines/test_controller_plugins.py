@@ -183,7 +183,7 @@ def test_an_unknown_controller_is_one_line_and_an_unregistered_plugin_is_never_i
 )
 def test_a_bad_plugin_is_a_one_line_parser_error(plugin, message, capsys):
     line = parser_error(capsys, "--plugin", plugin, "simulate", "--controller", "orca")
-    assert line.startswith(f"crowdmpc: error: {message}"), line
+    assert line.startswith(f"crowdmpc: error: argument --plugin: {message}"), line
     assert registry.PLUGINS_ENV not in os.environ
 
 

@@ -1,0 +1,59 @@
+"""The compile cache's directory ($CROWDMPC_CACHE/compiled) checked where it is resolved: a file in its way
+or a read-only place is one line naming $CROWDMPC_CACHE and what is wrong, never "not created yet" or an
+error about a temporary file."""
+
+from __future__ import annotations
+
+import pytest
+
+from mpc import compile_cache
+from mpc.errors import MPCConfigError
+from tests.read_only import read_only_place  # noqa: F401 - a fixture
+
+
+def test_a_file_for_the_cache_is_not_a_directory_for_writing_info_and_clear(tmp_path, monkeypatch):
+    (tmp_path / "file").write_text("x")
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path / "file"))
+    expected = (
+        f"$CROWDMPC_CACHE={tmp_path / 'file'}: {tmp_path / 'file'} is not a directory; set $CROWDMPC_CACHE "
+        "to a writable directory"
+    )
+    for use in (compile_cache.writable_dir, compile_cache.info, compile_cache.clear):
+        with pytest.raises(compile_cache.CacheLocationError) as exc:
+            use()
+        assert str(exc.value) == expected
+        assert isinstance(exc.value, MPCConfigError)  # the command line prints it as one line
+    assert (tmp_path / "file").read_text() == "x"
+
+
+def test_a_file_where_compiled_goes_is_named(tmp_path, monkeypatch):
+    (tmp_path / "compiled").write_text("x")
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path))
+    with pytest.raises(compile_cache.CacheLocationError, match=f"{tmp_path / 'compiled'} is not a directory"):
+        compile_cache.info()
+
+
+def test_a_read_only_place_is_not_writable(read_only_place, monkeypatch):  # noqa: F811
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(read_only_place / "cache"))
+    with pytest.raises(compile_cache.CacheLocationError) as exc:
+        compile_cache.writable_dir()
+    assert str(exc.value).startswith(
+        f"$CROWDMPC_CACHE={read_only_place / 'cache'}: {read_only_place} is not writable ("
+    )
+    assert compile_cache.info().exists is False  # reading a cache that is not there is no error
+
+
+def test_a_usable_cache_is_created_for_writing(tmp_path, monkeypatch):
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path / "new"))
+    assert compile_cache.writable_dir() == tmp_path / "new" / "compiled"
+    assert (tmp_path / "new" / "compiled").is_dir()
+
+
+def test_an_explicit_directory_is_named_as_itself(tmp_path):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(compile_cache.CacheLocationError) as exc:
+        compile_cache.writable_dir(tmp_path / "file" / "sub")
+    assert (
+        str(exc.value)
+        == f"the compile cache {tmp_path / 'file' / 'sub'}: {tmp_path / 'file'} is not a directory"
+    )
