@@ -83,11 +83,12 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.version import code_identity
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.evaluate import EvalConfig, evaluate, format_table
-    from predictors.registry import load_predictor
+    from predictors.registry import checkpoint_sha256, load_predictor
 
-    check_writable(args.json, "--json")
+    check_writable(args.json, "--json", json_only=True)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
     predictor = load_predictor(args.predictor)
     files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
@@ -99,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
         split=args.split,
         data_dir=str(root),
         files_evaluated=[str(p) for p in files[args.split]],
+        # what the numbers depend on beyond the data: the weights, the samples' seed, the code
+        predictor_sha256=checkpoint_sha256(args.predictor),
+        seed=args.seed,
+        code=code_identity(),
     )
     print(f"protocol {args.protocol}, split {args.split}, data {root}")
     print(format_table(result))

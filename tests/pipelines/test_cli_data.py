@@ -111,6 +111,15 @@ def test_prepare_and_evaluate(tmp_path, capsys):
     assert "test/biwi_eth.ndjson" in stdout and "ADE [m]" in stdout
     result = json.loads(report.read_text())
     assert result["protocol"] == "paper" and result["split"] == "test"
+    # what else the numbers depend on: weights (none for constant velocity), the sampling seed, the code
+    assert (result["predictor_sha256"], result["seed"]) == (None, 0) and "commit" in result["code"]
+    data = out / "test" / "biwi_eth.ndjson"
+    before = data.read_bytes()
+    code, _, err = run(
+        capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(out), "--json", str(data)
+    )
+    assert_one_line_error(code, err, "the file exists and is not a JSON report")
+    assert data.read_bytes() == before  # a mistyped --json no longer overwrites the data
     # the walkers keep a constant velocity; only the centimetre rounding of the written files is left
     assert result["overall"]["scenes"] > 0 and result["overall"]["ade"] < 0.05
 
