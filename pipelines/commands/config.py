@@ -23,6 +23,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config",
         dest="sub_config_file",
+        action="append",  # two are refused (config_arguments), not the last one silently kept
         metavar="FILE",
         help="a TOML config file (see `crowdmpc config show`); options given here override it",
     )

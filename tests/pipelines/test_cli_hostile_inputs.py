@@ -154,6 +154,7 @@ def test_two_config_files_before_the_command_are_refused_like_one_before_and_one
     expected = f"crowdmpc config: error: --config given twice ({a}, {b}); one config file per run"
     assert error_line(capsys, "--config", a, "--config", b, "config", "show") == expected
     assert error_line(capsys, "--config", a, "config", "show", "--config", b) == expected
+    assert error_line(capsys, "config", "show", "--config", a, "--config", b) == expected  # both after
 
 
 def test_one_config_file_given_twice_is_one(tmp_path, capsys):
