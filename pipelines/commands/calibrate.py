@@ -81,7 +81,7 @@ def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.real_data import real_errors
 
-    files = protocol_files(args.data_dir, "paper")
+    files = protocol_files(args.data_dir, "paper", progress=not args.no_progress)
     blocks, _ = calibrate_real(
         predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256
     )

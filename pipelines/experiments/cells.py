@@ -362,7 +362,7 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "controllers": Experiment(
         name="controllers",
-        title=f"Controllers: each controller at 7 humans with {PAPER_PREDICTOR_WORDS}",
+        title=f"Controllers: each controller with {PAPER_PREDICTOR_WORDS}",  # the table names its humans
         methods=tuple((name, ControllerSpec(name, PAPER_PREDICTOR)) for name in SHIPPED_CONTROLLERS),
         humans=ABLATION_HUMANS,
         controller_list=True,

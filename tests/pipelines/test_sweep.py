@@ -650,7 +650,7 @@ def test_a_tables_title_follows_the_predictors_it_runs():
     predictor swap mentions the oracle only when the oracle is one of its columns."""
     controllers = get_experiment("controllers")
     assert controllers.title.endswith("with the paper's predictor")
-    assert controllers.with_predictor("my_net_eth").title.endswith("at 7 humans with my_net_eth")
+    assert controllers.with_predictor("my_net_eth").title.endswith("each controller with my_net_eth")
     conventions = get_experiment("conventions").with_predictor("constant_velocity")
     assert conventions.title.endswith("(CMPC, constant_velocity)")
     swap = get_experiment("predictors")
