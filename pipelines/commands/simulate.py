@@ -259,7 +259,7 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.loop.episode import run_episodes, summarize
+    from pipelines.loop.episode import run_episodes
 
     resolved = resolve_run(args)
     cfg, spec = resolved.config, resolved.spec
@@ -276,8 +276,10 @@ def run(args: argparse.Namespace) -> int:
         recorder = McapEpisodeRecorder(
             resolved.record, record_iterations=spec.record_iterations, run_meta=run_meta
         )
+    results: list[EpisodeResult] = []
+    interrupted = False
     try:
-        results = run_episodes(
+        run_episodes(
             spec,
             episodes=sim.episodes,
             seed=sim.seed,
@@ -287,11 +289,34 @@ def run(args: argparse.Namespace) -> int:
             observers_factory=(lambda: (recorder,)) if recorder is not None else None,
             progress=sim.progress,
             env_config=env_config,
+            into=results,
         )
+    except KeyboardInterrupt:
+        if not results:
+            raise
+        interrupted = True  # the finished episodes are reported and written, then the interrupt goes on
     finally:
         if recorder is not None:
             recorder.close()
+    _report(resolved, run_meta, results, recorder, interrupted)
+    if interrupted:
+        raise KeyboardInterrupt
+    return 0
 
+
+def _report(
+    resolved: SimulateRun,
+    run_meta: dict[str, Any],
+    results: list[EpisodeResult],
+    recorder: Any,
+    interrupted: bool,
+) -> None:
+    """The summary table, --json, --plot and the recordings' line of the episodes that ran (when
+    ``interrupted``, those that finished, said so in the header and the JSON)."""
+    from pipelines.loop.episode import summarize
+
+    cfg, spec = resolved.config, resolved.spec
+    scenario, sim, env_config = cfg.scenario, cfg.simulate, cfg.env
     summary = summarize(results)
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
@@ -301,6 +326,7 @@ def run(args: argparse.Namespace) -> int:
         f"{run_meta['profile']}/{run_meta['visibility']} | {goals}scenario {scenario.name} | "
         f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
         f"{sim.seed + sim.episodes - 1}"
+        + (f" | interrupted: {len(results)} episodes finished" if interrupted else "")
     )
     print(format_table(summary, header))
     if resolved.json is not None:
@@ -310,6 +336,7 @@ def run(args: argparse.Namespace) -> int:
         payload = {
             "run": run_meta,
             "code": code_identity(),
+            **({"interrupted": True, "episodes_finished": len(results)} if interrupted else {}),
             "summary": summary,
             "episodes": [r.record().to_dict() for r in results],
         }
@@ -319,7 +346,6 @@ def run(args: argparse.Namespace) -> int:
         _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:
         print(f"wrote {len(recorder.paths)} MCAP file(s) to {resolved.record}")
-    return 0
 
 
 def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:

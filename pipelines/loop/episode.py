@@ -175,16 +175,19 @@ def run_episodes(
     progress: bool = True,
     env_config: EnvConfig = DEFAULT_ENV,
     meta: Mapping[str, Any] | None = None,
+    into: list[EpisodeResult] | None = None,
 ) -> list[EpisodeResult]:
     """``episodes`` episodes with one controller built once from ``spec``; episode ``i`` uses ``seed + i``.
 
     ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file).
+    ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
+    half-way (Ctrl-C) still holds the episodes that finished.
     """
     from tqdm import tqdm
 
     controller = make_controller(spec, env_config)
     run_meta = dict(meta or {})
-    results: list[EpisodeResult] = []
+    results: list[EpisodeResult] = [] if into is None else into
     bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)
     try:
         for i in bar:

@@ -514,3 +514,28 @@ def test_interrupt_behind_follows_the_chain_and_nothing_else():
     loop.__context__ = SystemError("b")
     loop.__context__.__context__ = loop  # a cycle ends the walk
     assert interrupt_behind(loop) is None and interrupt_behind(None) is None
+
+
+def test_ctrl_c_in_simulate_keeps_the_episodes_that_finished(tmp_path, monkeypatch, capsys):
+    """Interrupted in its second episode, simulate reports and writes the first (said so in the header and
+    the JSON) and ends as interrupted; it used to lose every finished episode."""
+    import pipelines.loop.episode as episode
+
+    original = episode.run_episode
+    calls = {"n": 0}
+
+    def second_interrupted(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(episode, "run_episode", second_interrupted)
+    report = tmp_path / "run.json"
+    args = ["simulate", "--controller", "straight", "--humans", "2", "--episodes", "3", "--json", str(report)]
+    assert main([*args, "--no-progress"]) == 130
+    out, err = capsys.readouterr()
+    assert "| interrupted: 1 episodes finished" in out and err.endswith("crowdmpc simulate: interrupted\n")
+    payload = json.loads(report.read_text())
+    assert (payload["interrupted"], payload["episodes_finished"], len(payload["episodes"])) == (True, 1, 1)
+    assert payload["summary"]["episodes"] == 1
