@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from pipelines.errors import PipelineError
 
 EPILOG = """examples:
   crowdmpc config show > run.toml            # every setting with its default and what it means
@@ -10,6 +13,8 @@ EPILOG = """examples:
   crowdmpc --config run.toml simulate --controller cmpc   # or: crowdmpc simulate --config run.toml ...
   crowdmpc --config run.toml --set controller.predictor=social_lstm_eth sweep --experiment table2 \\
       --out runs/table2
+  crowdmpc config show --from-sweep runs/table2 > rerun.toml   # what that sweep ran, with its commit
+  crowdmpc --config rerun.toml sweep --out runs/table2-again
 
 Sections: [world] (tau, L, radius, speeds: shared by the simulator and the MPC), [env] and [env.orca] (the
 simulator), [scenario], [controller], [mpc] (Table I and the solver), [simulate], [sweep]. Precedence, lowest
@@ -53,11 +58,48 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Print the configuration as a TOML file that loads back to the same configuration.",
     )
     add_config_options(show)
+    show.add_argument(
+        "--from-sweep",
+        type=Path,
+        metavar="DIR",
+        help="the config a sweep directory recorded (its sweep.json), to rerun it",
+    )
+    show.add_argument(
+        "--run",
+        type=int,
+        default=None,
+        metavar="K",
+        help="with --from-sweep: the K-th run (default: the last)",
+    )
     show.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from pipelines.config import command_config, render
 
+    if args.from_sweep is not None:
+        return _show_recorded(args)
+    if args.run is not None:
+        raise PipelineError("--run goes with --from-sweep DIR")
     print(render(command_config(args)), end="")
+    return 0
+
+
+def _show_recorded(args: argparse.Namespace) -> int:
+    """The TOML of what a sweep ran (``pipelines.config.recorded``); a config file or --set beside it would
+    make it another run, so they are refused (edit the printed file instead)."""
+    from pipelines.config import render
+    from pipelines.config.command_line import config_arguments
+    from pipelines.config.recorded import provenance, recorded_config, recorded_runs
+
+    path, sets = config_arguments(args)
+    if path is not None or sets:
+        raise PipelineError("--from-sweep prints what the sweep ran: no --config or --set beside it")
+    sweep_file, runs = recorded_runs(args.from_sweep)
+    index = len(runs) if args.run is None else args.run
+    if not 1 <= index <= len(runs):
+        raise PipelineError(f"--run {args.run}: {sweep_file} records runs 1..{len(runs)}")
+    run_line = runs[index - 1]
+    config = recorded_config(sweep_file, run_line, index)
+    print(provenance(sweep_file, run_line, index, len(runs)) + render(config), end="")
     return 0

@@ -1,0 +1,72 @@
+"""``crowdmpc config show --from-sweep DIR``: the TOML that reruns what a sweep directory recorded."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
+
+
+def _metrics(out) -> dict:
+    lines = (out / EPISODES_FILE).read_text().splitlines()
+    return {r["key"]: r["metrics"] for r in map(json.loads, lines)}
+
+
+def test_a_sweep_reruns_from_what_its_directory_records(tmp_path, capsys):
+    """The helper of the reproducibility audit had to write a JSON-to-TOML converter for this."""
+    first = tmp_path / "first"
+    options = ["--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "2", "--seed", "5"]
+    assert main(["sweep", *options, "--backend", "inline", "--no-progress", "--out", str(first)]) == 0
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(first)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith(f"# From {first / SWEEP_FILE}, run 1 of 1 (started ")
+    assert 'experiment = "baselines"' in printed and "episodes_per_cell = 2" in printed
+    rerun = tmp_path / "rerun.toml"
+    rerun.write_text(printed)
+    again = tmp_path / "again"
+    rerun_args = [
+        "--config",
+        str(rerun),
+        "sweep",
+        "--backend",
+        "inline",
+        "--no-progress",
+        "--out",
+        str(again),
+    ]
+    assert main(rerun_args) == 0
+    assert _metrics(again) == _metrics(first) and len(_metrics(first)) == 4  # 2 methods x 2 episodes
+    capsys.readouterr()
+    assert main(["config", "show", "--config", str(rerun)]) == 0  # it loads back to itself
+    assert capsys.readouterr().out == printed.split("\n", 2)[2]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--from-sweep", "{tmp}"], "no sweep.json (not a sweep directory)"),
+        (["--run", "2"], "--run goes with --from-sweep DIR"),
+        (["--from-sweep", "{sweep}", "--run", "3"], "records runs 1..1"),
+        (["--from-sweep", "{sweep}", "--set", "mpc.horizon=5"], "no --config or --set beside it"),
+        (["--from-sweep", "{old}"], "records no config (a sweep from before configs were kept)"),
+        (["--from-sweep", "{damaged}"], "unknown config section 'mcp'; the file is damaged"),
+    ],
+)
+def test_what_it_refuses(tmp_path, capsys, args, message):
+    sweep, old, damaged = tmp_path / "sweep", tmp_path / "old", tmp_path / "damaged"
+    run = {"started": "2026-12-01T00:00:00+0000", "version": "0.1.0"}
+    for folder, line in (
+        (sweep, {**run, "config": {}}),
+        (old, run),
+        (damaged, {**run, "config": {"mcp": {}}}),
+    ):
+        folder.mkdir()
+        (folder / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [line]}))
+    names = {"tmp": tmp_path, "sweep": sweep, "old": old, "damaged": damaged}
+    assert main(["config", "show", *(a.format(**names) for a in args)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
