@@ -60,6 +60,8 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "n_robots": int(ep["n_robots"]) if "n_robots" in ep else None,
         "n_humans": int(ep["n_humans"]) if "n_humans" in ep else None,
         "crowdmpc_version": rec.metadata.get("crowdmpc", {}).get("version"),
+        # the commit that recorded it ("null" for a copy without git history; absent in older recordings)
+        "crowdmpc_commit": rec.metadata.get("crowdmpc", {}).get("commit"),
         "states": len(robots),
         "sim_time_s": robots[-1]["time"] if robots else 0.0,
         "started": _wall_clock(rec.start_time_ns),
@@ -93,6 +95,13 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def _code(summary: dict[str, Any]) -> str:
+    """The version, and the commit when the recording names one."""
+    commit = summary.get("crowdmpc_commit")
+    named = commit if commit not in (None, "", "null") else None
+    return f"{_fmt(summary['crowdmpc_version'])}" + (f" (commit {named[:12]})" if named else "")
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     s = summary["solver"]
     rows: list[tuple[str, Any]] = [
@@ -102,7 +111,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         ("controller", summary["controller"]),
         ("predictor", summary["predictor"]),
         ("predictor sha256", summary["predictor_sha256"]),
-        ("crowdmpc", summary["crowdmpc_version"]),
+        ("crowdmpc", _code(summary)),
         ("recorded", f"{summary['states']} states, {summary['sim_time_s']:.1f} s simulated"),
         ("started", summary["started"]),
     ]

@@ -45,6 +45,11 @@ def test_summary_of_a_finished_run(runs, capsys):
     summary = summarize(read_recording(runs[0].path))
     assert summary["metrics"] == runs[0].result.metrics.as_dict()
     assert summary["solver"]["statuses"] == {"Solve_Succeeded": 3, "ok": 5}
+    from pipelines.version import code_identity
+
+    commit = code_identity()["commit"]  # the recording's code, when this tree is a git checkout
+    (crowdmpc,) = [line for line in out.splitlines() if line.startswith("crowdmpc ")]
+    assert crowdmpc.endswith(f"(commit {commit[:12]})" if commit else code_identity()["version"])
 
 
 @pytest.mark.parametrize("cut", [1, 0.5])
