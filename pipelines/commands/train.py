@@ -283,85 +283,13 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
     _check_data(files)
+    from pipelines.commands.train_resume import check_last_checkpoint, check_resumed_settings, run_settings
+
     settings = run_settings(args, net_config, name, files)
     if args.resume:
         name = check_resumed_settings(out, settings, name_given=args.name is not None)
         check_last_checkpoint(last, settings)
     return _train(args, net_config, name, out, (files, root), settings)
-
-
-# What fixes a training run: --resume continues it with these, and only --epochs may change.
-SETTINGS_FILE = "train_settings.json"
-
-
-def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:
-    from predictors.models import model_kind
-
-    return {
-        "name": name,
-        "model": args.model,
-        "net_config": model_kind(args.model).config_dict(net_config),
-        "lr": args.lr,
-        "step_size": args.step_size,
-        "loss": args.loss,
-        "seed": args.seed,
-        "batch_size": args.batch_size,
-        "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
-    }
-
-
-def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: bool) -> str:
-    """The run's name; PipelineError when the command asks for other settings than the run in ``out`` was
-    started with: the weights, optimiser and schedule resume from last.ckpt whatever the command says, so the
-    written NAME.json would record settings that never trained them. Runs from before the settings were kept
-    have no file, and are not checked."""
-    path = out / SETTINGS_FILE
-    if not path.is_file():
-        return str(settings["name"])
-    try:
-        recorded = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
-    if not name_given:  # the default name follows the options, which are checked below
-        settings = {**settings, "name": recorded.get("name", settings["name"])}
-    differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
-    if differ:
-        shown = "; ".join(f"{k}: run {_short(recorded[k])}, now {_short(settings[k])}" for k in differ)
-        raise PipelineError(
-            f"--resume: {out} was started with other settings ({shown}); resume with the run's settings "
-            "(only --epochs may change) or start a new run with another --out"
-        )
-    return str(settings["name"])
-
-
-def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> None:
-    """PipelineError unless ``last`` is a Lightning checkpoint (read as weights only, as Lightning reads it)
-    of the model kind and net config asked for: a cut, foreign or other-model file otherwise fails inside
-    Lightning with a traceback (a runs' settings file, when there is one, was checked before)."""
-    import torch
-
-    try:
-        checkpoint = torch.load(last, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises RuntimeError, UnpicklingError, EOFError ... for a bad file
-        first = (str(exc).strip().splitlines() or [""])[0][:160]
-        raise PipelineError(
-            f"--resume: {last} is not a readable Lightning checkpoint ({type(exc).__name__}: {first})"
-        ) from None
-    hyper = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
-    if not isinstance(hyper, dict) or "state_dict" not in checkpoint:
-        raise PipelineError(f"--resume: {last} is not a crowdmpc training checkpoint (no hyper-parameters)")
-    asked = {"model": settings["model"], "net_config": settings["net_config"]}
-    held = {"model": hyper.get("model", "social_gan" if "discriminator_config" in hyper else None)}
-    held["net_config"] = hyper.get("net_config")
-    differ = [k for k in asked if held[k] is not None and held[k] != asked[k]]
-    if differ:
-        shown = "; ".join(f"{k}: checkpoint {_short(held[k])}, now {_short(asked[k])}" for k in differ)
-        raise PipelineError(f"--resume: {last} was trained with another model ({shown})")
-
-
-def _short(value: Any) -> str:
-    text = json.dumps(value, sort_keys=True)
-    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _check_data(files: dict[str, list[Path]]) -> None:
@@ -417,6 +345,8 @@ def _train(
     module = make_module(args.model, net_config, optim)
     trainer, best = _trainer(args, out, ckpt_dir)
     if not args.resume:
+        from pipelines.commands.train_resume import SETTINGS_FILE
+
         out.mkdir(parents=True, exist_ok=True)
         (out / SETTINGS_FILE).write_text(json.dumps({**settings, "name": name}, indent=2) + "\n")
     started = time.perf_counter()
