@@ -282,32 +282,11 @@ def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
     return results
 
 
-def add_to_zoo(
-    weights: str | Path,
-    *,
-    name: str,
-    protocol: str,
-    training_data: dict,
-    metrics: dict,
-    training: dict | None = None,
-    directory: str | Path | None = None,
-    shipped: bool = False,
-    replace: bool = False,
-) -> ZooEntry:
+def add_to_zoo(weights: str | Path, **options: Any) -> ZooEntry:
     """Copy a checkpoint pair into the user zoo (``directory``, else ``user_zoo_dir()``) as
-    ``NAME.pt``/``NAME.json`` and record it in its manifest; ``add_entry`` says what it replaced."""
-    entry, _ = add_entry(
-        weights,
-        name=name,
-        protocol=protocol,
-        training_data=training_data,
-        metrics=metrics,
-        training=training,
-        directory=directory,
-        shipped=shipped,
-        replace=replace,
-    )
-    return entry
+    ``NAME.pt``/``NAME.json`` and record it in its manifest: ``add_entry``'s options, without what it
+    replaced."""
+    return add_entry(weights, **options)[0]
 
 
 def add_entry(
