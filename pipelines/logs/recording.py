@@ -63,6 +63,36 @@ def episode_filename(scenario: str, seed: int) -> str:
     return f"{scenario}_seed{seed:06d}.mcap"
 
 
+# What tells two runs' recordings of one (scenario, seed) apart: its file name is the same for both.
+RUN_IDENTITY: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
+
+
+def _check_replaceable(path: Path, episode: Mapping[str, str]) -> None:
+    """Refuse to replace ``path`` when it holds another run's episode (another controller, predictor or
+    crowd): rerunning a command into its folder replaces its own recordings (``make demo``), but a second
+    controller recorded into the same folder silently replaced the first's. A file that is no readable
+    recording is left to the recorder, which replaces it."""
+    if not path.is_file():
+        return
+    try:
+        from mcap.reader import make_reader
+
+        with open(path, "rb") as f:
+            held = next((m.metadata for m in make_reader(f).iter_metadata() if m.name == "episode"), None)
+    except Exception:  # not an MCAP file, or a damaged one: nothing of a run to keep apart
+        return
+    if held is None:
+        return
+    differ = [k for k in RUN_IDENTITY if k in held and held[k] != episode[k]]
+    if differ:
+        was = ", ".join(f"{k} {held[k] or '-'}" for k in differ)
+        now = ", ".join(f"{k} {episode[k] or '-'}" for k in differ)
+        raise PipelineError(
+            f"cannot record to {path}: it holds another run's episode ({was}; this run: {now}); record into "
+            "another folder, or remove it"
+        )
+
+
 def seconds_to_ns(t: float) -> int:
     return int(round(t * 1e9))
 
@@ -252,6 +282,7 @@ class McapEpisodeRecorder:
             "start_time_ns": str(self._start_ns),
         }
         path = self.out_dir / episode_filename(scenario, seed)
+        _check_replaceable(path, episode)
         self._recorder = McapRecorder(
             path,
             metadata={

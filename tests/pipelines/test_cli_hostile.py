@@ -539,3 +539,19 @@ def test_ctrl_c_in_simulate_keeps_the_episodes_that_finished(tmp_path, monkeypat
     payload = json.loads(report.read_text())
     assert (payload["interrupted"], payload["episodes_finished"], len(payload["episodes"])) == (True, 1, 1)
     assert payload["summary"]["episodes"] == 1
+
+
+def test_a_second_controller_does_not_replace_the_firsts_recordings(tmp_path, capsys):
+    """File names identify the episode (scenario, seed) and not the run: a rerun of the same command replaces
+    its own recordings (`make demo`), another controller's run into the same folder is refused."""
+    folder = tmp_path / "runs"
+    base = ["simulate", "--humans", "2", "--episodes", "1", "--no-progress", "--record", str(folder)]
+    assert main([*base, "--controller", "straight"]) == 0
+    first = (folder / "circle_seed000000.mcap").read_bytes()
+    assert main([*base, "--controller", "orca"]) == 2
+    err = capsys.readouterr().err
+    assert "holds another run's episode (controller straight; this run: controller orca)" in err
+    assert (folder / "circle_seed000000.mcap").read_bytes() == first
+    assert main([*base, "--controller", "straight"]) == 0  # the same run again: replaced
+    assert main([*base, "--controller", "straight", "--humans", "3"]) == 2  # another crowd
+    assert "n_humans 2; this run: n_humans 3" in capsys.readouterr().err
