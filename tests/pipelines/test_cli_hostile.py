@@ -144,6 +144,17 @@ def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp
     with pytest.raises(PipelineError, match="not a JSON report"):
         check_writable(lines, "--json", json_only=True)
     assert a_file.read_text() == "not a directory\n" and lines.read_text().count("\n") == 2
+    # and never a JSON file crowdmpc keeps: by its crowdmpc format, or by a sweep's or a training run's name
+    kept = {
+        "manifest.json": '{"format": "crowdmpc-zoo", "version": 1, "models": []}',
+        "sweep.json": '{"experiment": "table2", "runs": []}',
+        "train_settings.json": '{"name": "x"}',
+        "x.metrics.json": '{"name": "x"}',
+    }
+    for name, text in kept.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(PipelineError, match="that is a file crowdmpc keeps"):
+            check_writable(tmp_path / name, "--json", json_only=True)
 
 
 def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
