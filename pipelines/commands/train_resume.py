@@ -42,8 +42,10 @@ def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: b
         return str(settings["name"])
     try:
         recorded = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:
         raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
+    if not isinstance(recorded, dict):
+        raise PipelineError(f"--resume: {path} is not a JSON object of settings; the run's file is damaged")
     if not name_given:  # the default name follows the options, which are checked below
         settings = {**settings, "name": recorded.get("name", settings["name"])}
     differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
@@ -58,8 +60,9 @@ def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: b
 
 def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> None:
     """PipelineError unless ``last`` is a Lightning checkpoint (read as weights only, as Lightning reads it)
-    of the model kind and net config asked for: a cut, foreign or other-model file otherwise fails inside
-    Lightning with a traceback (the run's settings file, when there is one, was checked before)."""
+    trained with the settings asked for (``checkpoint_settings``): a cut, foreign or other-model file
+    otherwise fails inside Lightning with a traceback, and other settings would be recorded for weights they
+    never trained. The checkpoint is the authority even when the run's settings file is gone or damaged."""
     import torch
 
     try:
@@ -72,13 +75,37 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> None:
     hyper = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
     if not isinstance(hyper, dict) or "state_dict" not in checkpoint:
         raise PipelineError(f"--resume: {last} is not a crowdmpc training checkpoint (no hyper-parameters)")
-    asked = {"model": settings["model"], "net_config": settings["net_config"]}
-    held = {"model": hyper.get("model", "social_gan" if "discriminator_config" in hyper else None)}
-    held["net_config"] = hyper.get("net_config")
-    differ = [k for k in asked if held[k] is not None and held[k] != asked[k]]
+    held = checkpoint_settings(hyper, checkpoint.get("datamodule_hyper_parameters"))
+    asked = {**settings, "files": _resolved(settings["files"])}
+    differ = [k for k, v in held.items() if v is not None and v != asked.get(k)]
     if differ:
-        shown = "; ".join(f"{k}: checkpoint {_short(held[k])}, now {_short(asked[k])}" for k in differ)
-        raise PipelineError(f"--resume: {last} was trained with another model ({shown})")
+        shown = "; ".join(f"{k}: checkpoint {_short(held[k])}, now {_short(asked.get(k))}" for k in differ)
+        what = "another model" if {"model", "net_config"} & set(differ) else "other settings"
+        raise PipelineError(
+            f"--resume: {last} was trained with {what} ({shown}); resume with the run's settings (only "
+            "--epochs may change)"
+        )
+
+
+def checkpoint_settings(hyper: dict[str, Any], data: Any) -> dict[str, Any]:
+    """``run_settings``' keys as a training checkpoint holds them (the modules' and the data module's
+    hyper-parameters; None where it holds none, a checkpoint of an older layout)."""
+    held = hyper.get("optim_config")
+    optim: dict[str, Any] = held if isinstance(held, dict) else {}
+    data = data if isinstance(data, dict) else {}
+    files = data.get("files")
+    return {
+        "model": hyper.get("model", "social_gan" if "discriminator_config" in hyper else None),
+        "net_config": hyper.get("net_config"),
+        **{k: optim.get(k) for k in ("lr", "step_size", "loss")},
+        "seed": data.get("seed"),
+        "batch_size": data.get("batch_size"),
+        "files": _resolved(files) if isinstance(files, dict) else None,
+    }
+
+
+def _resolved(files: dict[str, Any]) -> dict[str, list[str]]:
+    return {split: [str(Path(p).resolve()) for p in paths] for split, paths in files.items()}
 
 
 def _short(value: Any) -> str:

@@ -129,6 +129,31 @@ def test_resume_from_a_bad_or_foreign_last_checkpoint_is_one_line(trained, capsy
     assert f"--resume: {last} is not a readable Lightning checkpoint (" in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("settings_file", ["gone", "null", "[1, 2]"])
+def test_resume_checks_the_checkpoints_own_settings_when_the_runs_file_is_gone(
+    trained, capsys, settings_file
+):
+    """last.ckpt holds the optimiser's and the data's settings too: with train_settings.json deleted or
+    damaged, a resume asking for another learning rate, seed or batch is still refused, in one line."""
+    out, args = trained
+    path = out / "train_settings.json"
+    if settings_file == "gone":
+        path.unlink()
+    else:
+        path.write_text(settings_file)
+    more = [*[a if a != "1" else "2" for a in args], "--lr", "0.5", "--seed", "7", "--resume"]
+    assert main(more) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    if settings_file == "gone":
+        assert (
+            "was trained with other settings (lr: checkpoint 0.001, now 0.5; seed: checkpoint 0, now 7)"
+            in err
+        )
+    else:
+        assert "is not a JSON object of settings" in err
+
+
 def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capfd):
     """Lightning's litlogger/litmodels tips and its use of a torch API that torch 2.13 deprecates are
     nothing a user of `crowdmpc train` can act on; they are left out, the run's own lines stay."""
