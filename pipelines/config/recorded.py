@@ -54,10 +54,16 @@ def provenance(path: Path, run: dict[str, Any], index: int, total: int) -> str:
     """Comment lines naming where the config came from and the code that ran it."""
     recorded = run.get("code")
     code: dict[str, Any] = recorded if isinstance(recorded, dict) else {}
-    commit = code.get("commit") or "not recorded"
+    commit = _plain(code.get("commit") or "not recorded")
     dirty = " with uncommitted changes" if code.get("dirty") else ""
     return (
-        f"# From {path}, run {index} of {total} (started {run.get('started', '?')}), crowdmpc "
-        f"{run.get('version', '?')} at commit {commit}{dirty}.\n"
+        f"# From {path}, run {index} of {total} (started {_plain(run.get('started', '?'))}), crowdmpc "
+        f"{_plain(run.get('version', '?'))} at commit {commit}{dirty}.\n"
         "# Its [sweep] out is that directory, where a rerun resumes; give --out NEW to rerun elsewhere.\n"
     )
+
+
+def _plain(value: Any) -> str:
+    """A recorded value inside a comment: one short line (a line break in it would end the comment, and what
+    follows would be read as TOML)."""
+    return " ".join(str(value).split())[:80]

@@ -70,3 +70,19 @@ def test_what_it_refuses(tmp_path, capsys, args, message):
     assert main(["config", "show", *(a.format(**names) for a in args)]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_recorded_values_stay_inside_their_comment(tmp_path, capsys):
+    """A line break in a recorded version or commit ended the comment: what followed was read as TOML."""
+    run = {
+        "started": "2026-12-01\n[mpc]",
+        "version": "0.1.0",
+        "code": {"commit": "abc\n[mpc]\nw_coll = 1.0"},
+        "config": {"sweep": {"experiment": "baselines"}},
+    }
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "at commit abc [mpc] w_coll = 1.0." in printed
+    (tmp_path / "printed.toml").write_text(printed)
+    assert main(["config", "show", "--config", str(tmp_path / "printed.toml")]) == 0
