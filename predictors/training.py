@@ -29,7 +29,7 @@ from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.metrics import ade, fde
 from predictors.models import model_kind
-from predictors.nets.contract import check_step_contract, check_training_forward
+from predictors.nets.contract import check_step_contract, check_trainable, check_training_forward
 from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
 from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
@@ -158,6 +158,7 @@ class PredictorModule(_PredictorModule):
         self.pred_len = pred_len
         # Before any epoch: a net that breaks the contract would otherwise train on broadcast shapes (a
         # one-column step moves x and y alike) or fail deep in Lightning.
+        check_trainable(self.net, f"model {model!r}")
         check_step_contract(self.net, f"model {model!r}", obs_len=obs_len)
         if defines_forward(self.net):
             check_training_forward(self.net, f"model {model!r}", obs_len=obs_len, pred_len=pred_len)

@@ -241,3 +241,18 @@ def check_training_forward(net: torch.nn.Module, where: str, *, obs_len: int, pr
             f"{where}: forward's predicted positions must be of shape (B, pred_len, N, 2), got "
             f"{_shape(predicted)} for B={CHECK_BATCH}, pred_len={pred_len}, N={CHECK_AGENTS} {SEE}"
         )
+
+
+def check_trainable(net: torch.nn.Module, where: str) -> None:
+    """PredictorError, one line, unless ``net`` can be trained on the data module's batches: it has
+    parameters to train, and they are float32 like the batches (a ``.double()`` net passed the step check,
+    which runs in the net's own dtype, then failed in the first batch with a dtype mismatch)."""
+    parameters = [p for p in net.parameters() if p.requires_grad]
+    if not parameters:
+        raise PredictorError(f"{where}: the net has no trainable parameters (nothing to optimise) {SEE}")
+    other = sorted({str(p.dtype) for p in parameters if p.is_floating_point() and p.dtype != torch.float32})
+    if other:
+        raise PredictorError(
+            f"{where}: parameters of {', '.join(other)}; training feeds float32 batches, so keep the net in "
+            f"float32 (the closed loop evaluates it in float64 itself) {SEE}"
+        )

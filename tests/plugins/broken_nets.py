@@ -66,3 +66,21 @@ class ForwardReturnsPositions(ToyNet):
 
         args = (positions, mask, obs_len, pred_len)
         return teacher_forced_rollout(self, *args, teacher_forcing=teacher_forcing)[1]
+
+
+class InFloat64(ToyNet):
+    """Kept in float64 (``.double()``): its step keeps the contract in its own dtype, but training feeds
+    float32 batches."""
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        self.double()
+
+
+class Frozen(ToyNet):
+    """Every parameter frozen: nothing for the optimiser to train."""
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        for p in self.parameters():
+            p.requires_grad_(False)

@@ -88,6 +88,20 @@ def test_a_net_breaking_the_step_contract_is_refused_before_training(net, messag
     assert str(caught.value) == f"model {model!r}: {message} {SEE}"
 
 
+@pytest.mark.parametrize(
+    "net, message",
+    [
+        ("InFloat64", "parameters of torch.float64; training feeds float32 batches"),
+        ("Frozen", "the net has no trainable parameters"),
+    ],
+)
+def test_a_net_training_cannot_use_is_refused_before_training(net, message):
+    """Both passed the step check (run in the net's own dtype), then failed in Lightning with a traceback."""
+    model = _registered(net)
+    with pytest.raises(PredictorError, match=f"model {model!r}: {message}"):
+        make_module(model, None, OptimConfig())
+
+
 def test_a_forward_by_torch_habit_names_the_training_signature():
     model = _registered("TorchHabitForward")
     with pytest.raises(PredictorError) as caught:
