@@ -9,6 +9,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -69,10 +70,15 @@ def zoo_lock(directory: str | Path) -> Iterator[Path]:
     lock = root / LOCK_NAME
     try:
         root.mkdir(parents=True, exist_ok=True)
-        # O_NOFOLLOW: a symbolic link planted as the lock must not make us create a file elsewhere
-        fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o644)
+        # O_NOFOLLOW: a symbolic link planted as the lock must not make us create a file elsewhere;
+        # O_NONBLOCK: a FIFO planted there would block the open forever (no reader)
+        fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
     except OSError as exc:
-        raise PredictorError(f"{lock}: cannot lock the zoo ({exc.strerror or exc})") from None
+        what = "it is a symbolic link" if os.path.islink(lock) else (exc.strerror or str(exc))
+        raise PredictorError(f"{lock}: cannot lock the zoo ({what})") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise PredictorError(f"{lock}: cannot lock the zoo (not a regular file); remove it")
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)  # waits for the writer that holds it
         yield root

@@ -242,9 +242,20 @@ def test_a_lock_planted_as_a_symbolic_link_is_refused(tmp_path, user, pair):
     elsewhere = tmp_path / "elsewhere"
     (user / manifest.LOCK_NAME).unlink()
     (user / manifest.LOCK_NAME).symlink_to(elsewhere)
-    with pytest.raises(PredictorError, match=rf"{manifest.LOCK_NAME}: cannot lock the zoo"):
+    with pytest.raises(
+        PredictorError, match=rf"{manifest.LOCK_NAME}: cannot lock the zoo \(it is a symbolic"
+    ):
         zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
     assert not elsewhere.exists() and zoo.zoo_names(user) == ["mine"]
+
+
+def test_a_lock_planted_as_a_fifo_is_refused_instead_of_waiting_forever(user, pair):
+    """Opening a FIFO for writing blocks until a reader comes: zoo add hung."""
+    (user / manifest.LOCK_NAME).unlink()
+    os.mkfifo(user / manifest.LOCK_NAME)
+    with pytest.raises(PredictorError, match=rf"{manifest.LOCK_NAME}: cannot lock the zoo"):
+        zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
+    assert zoo.zoo_names(user) == ["mine"]
 
 
 # ------------------------------------------------------------------------------------------ export's --out
