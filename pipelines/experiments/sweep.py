@@ -183,19 +183,24 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
 
 
 def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
-    """Say so when the directory's last run was made by other code (another commit or library versions): its
-    episodes are kept, and a table over both mixes two codebases. Not refused: a resume after a change that
-    leaves results alone (documentation, a benchmark) is the common case. Uncommitted changes are recorded
-    ("dirty") but cannot be compared, so they alone say nothing."""
+    """Say so when an earlier run in the directory was made by other code (another commit, other libraries):
+    its episodes are kept, and a table over both mixes two codebases. Not refused: a resume after a change
+    that leaves results alone (documentation, a benchmark) is the common case. Uncommitted changes are
+    recorded ("dirty") but cannot be compared, so they alone say nothing."""
     from pipelines.version import code_identity
 
-    before = runs[-1].get("code") if runs and isinstance(runs[-1], dict) else None
     now = code_identity()
-    if not isinstance(before, dict):
-        return
-    changed = [k for k in now if k != "dirty" and before.get(k) != now[k]]
-    if changed:
-        shown = ", ".join(f"{k} {str(before.get(k))[:12]} -> {str(now[k])[:12]}" for k in changed)
+    # what differs from this run's code, as the first earlier run that differs had it
+    changed: dict[str, Any] = {}
+    for run in runs:
+        before = run.get("code") if isinstance(run, dict) else None
+        if not isinstance(before, dict):  # runs from before the code was recorded cannot be told apart
+            continue
+        for k in now:
+            if k != "dirty" and before.get(k) != now[k]:
+                changed.setdefault(k, before.get(k))
+    if changed:  # every resume says it, not only the first after the change: the mix stays in the directory
+        shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
         print(
             f"note: {out} holds episodes made by other code ({shown}); they are kept and counted with this "
             "run's (a new --out keeps one codebase per table)",

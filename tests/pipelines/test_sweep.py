@@ -674,3 +674,5 @@ def test_each_run_records_its_code_and_a_resume_by_other_code_says_so(tmp_path, 
     err = capsys.readouterr().err
     assert f"note: {tmp_path} holds episodes made by other code (commit 0123456789ab -> " in err
     assert f"casadi 3.6.0 -> {code_identity()['casadi']}" in err
+    run_sweep(_config(tmp_path, 2))  # the mix stays in the directory: every later resume says so
+    assert "note: " in capsys.readouterr().err
