@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from pipelines.commands import check_writable
+from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
 
@@ -212,6 +213,12 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
     check_writable(run.json, config.label("simulate", "json"), json_only=True)
     check_writable(run.plot, config.label("simulate", "plot"))
     check_writable(run.record, config.label("simulate", "record"), directory=True)
+    if run.json is not None and run.plot is not None and run.json.resolve() == run.plot.resolve():
+        # the plot, written last, replaced the JSON report
+        raise PipelineError(
+            f"{config.label('simulate', 'json')} and {config.label('simulate', 'plot')} name the same file "
+            f"{run.json}; give each its own"
+        )
     return run
 
 

@@ -566,3 +566,10 @@ def test_a_second_controller_does_not_replace_the_firsts_recordings(tmp_path, ca
     assert main([*base, "--controller", "straight"]) == 0  # the same run again: replaced
     assert main([*base, "--controller", "straight", "--humans", "3"]) == 2  # another crowd
     assert "n_humans 2; this run: n_humans 3" in capsys.readouterr().err
+
+
+def test_json_and_plot_of_one_simulate_are_two_files(tmp_path, capsys):
+    same = str(tmp_path / "same.png")
+    assert main(["simulate", "--controller", "orca", "--humans", "2", "--json", same, "--plot", same]) == 2
+    assert "--json and --plot name the same file" in capsys.readouterr().err
+    assert not (tmp_path / "same.png").exists()  # refused before the episode
