@@ -103,6 +103,7 @@ def register(subparsers) -> None:
     synth.add_argument(
         "--with-robots", action="store_true", help="include robots (driven straight) in the crowd"
     )
+    synth.add_argument("--replace", action="store_true", help="replace an existing --out file")
     synth.set_defaults(func=run_synth)
 
 
@@ -113,6 +114,7 @@ def run_prepare(args: argparse.Namespace) -> int:
     from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
 
     check_writable(args.out, "--out", directory=True)
+    _check_prepare_target(args.out)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:
         raise PipelineError(
@@ -144,6 +146,19 @@ def run_prepare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_prepare_target(out: Path) -> None:
+    """A prepared directory (its manifest) is prepared again in place; a folder holding other files is
+    refused: its train/val/test files would be replaced by these (a training set was overwritten)."""
+    from predictors.data.locate import read_manifest
+
+    if not out.is_dir() or not any(out.iterdir()) or (out / "manifest.json").is_file() and read_manifest(out):
+        return
+    raise PipelineError(
+        f"--out {out} holds files but no prepared data (manifest.json of `crowdmpc data prepare`); prepare "
+        "into an empty or new folder"
+    )
+
+
 def run_stats(args: argparse.Namespace) -> int:
     from predictors.data.stats import file_stats, format_table, ndjson_files
 
@@ -154,6 +169,9 @@ def run_stats(args: argparse.Namespace) -> int:
 
 def run_synth(args: argparse.Namespace) -> int:
     check_writable(args.out, "--out")
+    if args.out.exists() and args.out.stat().st_size > 0 and not args.replace:
+        # a mistyped --out replaced a training file; the same command regenerates the same bytes anyway
+        raise PipelineError(f"--out {args.out} exists; add --replace to replace it, or name another file")
     try:
         from pipelines.experiments.synth import synthesize
     except ModuleNotFoundError as exc:

@@ -190,3 +190,26 @@ def test_help_shows_an_example(argv, capsys):
         main(argv)
     assert info.value.code == 0
     assert "example" in capsys.readouterr().out
+
+
+def test_synth_and_prepare_do_not_overwrite_other_files(tmp_path, capsys):
+    """`data synth --out` onto an existing training file replaced it; `data prepare --out` into a folder of
+    other files replaced its train/val/test files. A prepared folder is prepared again in place."""
+    train = tmp_path / "train.ndjson"
+    train.write_text('{"scene": {"id": 0, "p": 1, "s": 0, "e": 200}}\n')
+    code, _, err = run(
+        capsys, "data", "synth", "--out", str(train), "--episodes", "1", "--humans", "2", "--seed", "0"
+    )
+    assert_one_line_error(code, err, f"--out {train} exists; add --replace to replace it")
+    assert train.read_text().startswith('{"scene"')
+    other = tmp_path / "mine"
+    (other / "train").mkdir(parents=True)
+    (other / "train" / "biwi_eth.ndjson").write_text("precious\n")
+    raw = write_tiny_ewap(tmp_path / "data")
+    code, _, err = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(other), "--no-tags")
+    assert_one_line_error(code, err, "holds files but no prepared data")
+    assert (other / "train" / "biwi_eth.ndjson").read_text() == "precious\n"
+    prepared = tmp_path / "prepared"
+    for _ in range(2):  # a prepared folder again: fine
+        code, _, _ = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(prepared), "--no-tags")
+        assert code == 0
