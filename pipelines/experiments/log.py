@@ -194,6 +194,8 @@ def check_sweep_directory(out: Path, option: str = "--out") -> None:
     for name, entry in sorted(entries.items()):
         if name in own or name.endswith(OWN_SUFFIXES):
             _refuse_link(entry)
+            if name != MCAP_DIR and entry.is_dir():  # the OS's "Is a directory" named no option
+                raise PipelineError(f"{entry} is a directory where the sweep keeps a file; remove it")
     if (out / MCAP_DIR).is_dir():
         for root, dirs, files in os.walk(out / MCAP_DIR):  # a link is listed, never followed
             for name in sorted(dirs + files):

@@ -53,9 +53,14 @@ def test_a_garbage_sweep_file_is_named_and_left_alone(tmp_path, capsys, content)
     assert (tmp_path / SWEEP_FILE).read_bytes() == content
 
 
-def test_a_sweep_file_that_is_a_folder_is_named(tmp_path):
-    (tmp_path / SWEEP_FILE).mkdir()
-    with pytest.raises(PipelineError, match=f"{tmp_path / SWEEP_FILE}: not a sweep file"):
+@pytest.mark.parametrize("name", [SWEEP_FILE, EPISODES_FILE, CELLS_CSV, f"{SWEEP_FILE}.part"])
+def test_a_sweep_file_that_is_a_folder_is_named(tmp_path, name):
+    """Named before anything is read or run (the OS's "Is a directory" named no option, and for cells.csv
+    came after the episodes)."""
+    if name != SWEEP_FILE:  # a sweep directory, so that it is not refused as a folder of other files
+        (tmp_path / SWEEP_FILE).write_text('{"experiment": "baselines", "runs": []}')
+    (tmp_path / name).mkdir()
+    with pytest.raises(PipelineError, match=f"{tmp_path / name} is a directory where the sweep keeps a file"):
         run_sweep(_config(tmp_path))
 
 
