@@ -33,19 +33,13 @@ from typing import Any, Final
 import numpy as np
 
 from predictors.base import DT, Predictor
+from predictors.checkpoint import read_document
 from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
-from predictors.zoo import (
-    checkpoints_dir,
-    is_shipped,
-    read_document,
-    read_manifest,
-    user_zoo_dir,
-    writable_zoo_dir,
-)
+from predictors.zoo import checkpoints_dir, is_shipped, read_manifest, user_zoo_dir, writable_zoo_dir
 
 CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
 CALIBRATIONS_VERSION: Final[int] = 1

@@ -21,32 +21,20 @@ saying how to register it. A zoo file never makes crowdmpc import code.
 
 from __future__ import annotations
 
-import hashlib
 import importlib.resources
-import json
 import os
-import shutil
 from dataclasses import dataclass
-from dataclasses import replace as replace_fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Final
 
 from predictors.checkpoint import (
-    CONFIG_FORMAT,
-    check_name,
     load_checkpoint,
-    read_document,
 )
 from predictors.errors import PredictorError
-from predictors.hashing import sha256_file
 from predictors.manifest import (
     MANIFEST_NAME,
     ZooEntry,
-    check_model_name,
-    is_zoo_file,
     read_manifest_at,
-    write_manifest,
-    zoo_lock,
 )
 
 if TYPE_CHECKING:
@@ -280,172 +268,3 @@ def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
         except PredictorError as exc:
             results.append((name, str(exc)))
     return results
-
-
-def add_to_zoo(weights: str | Path, **options: Any) -> ZooEntry:
-    """Copy a checkpoint pair into the user zoo (``directory``, else ``user_zoo_dir()``) as
-    ``NAME.pt``/``NAME.json`` and record it in its manifest: ``add_entry``'s options, without what it
-    replaced."""
-    return add_entry(weights, **options)[0]
-
-
-def add_entry(
-    weights: str | Path,
-    *,
-    name: str,
-    protocol: str,
-    training_data: dict,
-    metrics: dict,
-    training: dict | None = None,
-    directory: str | Path | None = None,
-    shipped: bool = False,
-    replace: bool = False,
-) -> tuple[ZooEntry, ZooEntry | None]:
-    """``add_to_zoo``: the entry now in the zoo, and the one it had under ``name`` before (None if none).
-
-    The shipped zoo is read-only: a ``directory`` that is (or lies in) it is refused, and so is a ``name`` it
-    has. A ``name`` the zoo has already is refused unless ``replace``, except for the very same entry, which
-    is left as it is (returned as both); so is a name whose files would be the zoo's own (``ZOO_FILES``).
-    ``shipped=True`` is the maintainers' way to add a model of a shipped kind to the shipped zoo itself
-    (``directory`` then defaults to ``checkpoints_dir()``). Parallel adds and removes take turns
-    (``zoo_lock``): every one's entry is in the manifest they leave."""
-    check_model_name(name)  # before anything is written: NAME becomes the files' names
-    weights = Path(weights)
-    config = weights.with_suffix(".json")
-    if shipped:
-        root = checkpoints_dir(directory)
-        _check_shipped_kind(config)
-    else:
-        root = writable_zoo_dir(directory)
-        if name in read_manifest(checkpoints_dir()):
-            raise PredictorError(
-                f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}; "
-                "pick another name"
-            )
-    entries = read_manifest(root)  # refuse to add to a manifest that does not read
-    entry, config_bytes = _new_entry(
-        weights,
-        name=name,
-        protocol=protocol,
-        training_data=training_data,
-        metrics=metrics,
-        training=training or {},
-    )
-    which = SHIPPED if shipped else USER
-    # checked before the lock, which creates the zoo directory: a refused add writes nothing
-    if _unchanged(entries.get(name), entry, root, which, replace):
-        return entry, entry
-    with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
-        entries = read_manifest(root)
-        previous = entries.get(name)
-        if _unchanged(previous, entry, root, which, replace):
-            return entry, entry
-        entries[name] = _write_pair(weights, config_bytes, entry, root)
-        write_manifest(entries, root)
-    return entries[name], previous
-
-
-def _new_entry(weights: Path, *, name: str, **recorded: Any) -> tuple[ZooEntry, bytes]:
-    """The entry of ``weights`` (and its config) under ``name``, and the config's bytes as the zoo keeps them
-    (named ``name``); ``recorded``: ZooEntry's protocol, training_data, metrics and training. PredictorError
-    when the pair does not load or the entry does not check."""
-    config = weights.with_suffix(".json")
-    predictor = load_checkpoint(weights, config)  # refuse a pair that does not load
-    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
-    if "model" not in document:
-        raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
-    document["name"] = name
-    config_bytes = (json.dumps(document, indent=2) + "\n").encode()
-    entry = ZooEntry(  # checked (name, protocol, metrics ...) before anything is written
-        name=name,
-        cls=type(predictor).__name__,
-        model=document["model"],
-        file=f"{name}.pt",
-        sha256=sha256_file(weights),
-        config=f"{name}.json",
-        config_sha256=hashlib.sha256(config_bytes).hexdigest(),
-        **recorded,
-    )
-    return entry, config_bytes
-
-
-def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: str, replace: bool) -> bool:
-    """Whether the zoo's entry ``previous`` under ``entry``'s name is ``entry`` itself (nothing to write);
-    PredictorError when it is another one and ``replace`` was not asked for."""
-    if previous is None or replace:
-        return False
-    if previous == entry:
-        return True  # adding the same thing twice changes nothing
-    # the entry may be the only copy of a model the user trained (or the paper's predictor, in the shipped
-    # zoo): never lose it without being asked
-    raise PredictorError(_taken(entry.name, root, which, previous, entry))
-
-
-def _write_pair(weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path) -> ZooEntry:
-    """Copy ``weights`` and write the config as ``entry``'s files in ``root``; the entry with the copy's
-    sha256 (should the source have changed since it was hashed)."""
-    # resolved: a symbolic link NAME.pt in the zoo must not make us write elsewhere
-    target_weights, target_config = entry.paths(root, root / MANIFEST_NAME)
-    if weights.resolve() != target_weights:
-        shutil.copyfile(weights, target_weights)
-    target_config.write_bytes(config_bytes)
-    return replace_fields(entry, sha256=sha256_file(target_weights))
-
-
-def _taken(name: str, root: Path, which: str, previous: ZooEntry, entry: ZooEntry) -> str:
-    """The refusal of a name the zoo has: what the entry holds, and how to go on."""
-    same = " (the same weights, with other metrics or settings)" if previous.sha256 == entry.sha256 else ""
-    return (
-        f"the {which} zoo {root} already has {name!r}: sha256 {previous.sha256[:12]}…, model "
-        f"{previous.model}{same}; add it with --replace to replace that entry, or under another --name"
-    )
-
-
-def _check_shipped_kind(config: Path) -> None:
-    """Refuse a config whose model kind the project does not ship: every clone reads the shipped zoo, and
-    it would then need a module (a plugin's, an entry point's) that the repository lacks."""
-    from predictors.models import shipped as shipped_kinds
-
-    if not config.is_file():
-        return  # load_checkpoint says what is wrong with it
-    model = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config").get("model")
-    kinds = sorted(shipped_kinds())
-    if isinstance(model, str) and model not in kinds:
-        raise PredictorError(
-            f"{config}: model {model!r} is not a kind this project ships ({', '.join(kinds)}), so the "
-            "shipped zoo cannot hold it; add it to your user zoo without --shipped"
-        )
-
-
-def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
-    """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its manifest entry,
-    then its files (those no other entry names, and never one of the zoo's own: an entry added under a name
-    reserved since may name one). Returns the entry and the zoo directory."""
-    check_name(name)  # not check_model_name: such an entry must stay removable
-    root = writable_zoo_dir(directory)
-    _entry_to_remove(name, root, read_manifest(root), directory)  # before the lock creates the directory
-    with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
-        entries = read_manifest(root)
-        entry = _entry_to_remove(name, root, entries, directory)
-        del entries[name]
-        manifest = root / MANIFEST_NAME
-        files = set(entry.paths(root, manifest))  # inside the zoo: checked when the manifest was read
-        still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
-        write_manifest(entries, root)
-        for path in files - still_used:
-            if not is_zoo_file(root, path):
-                path.unlink(missing_ok=True)
-    return entry, root
-
-
-def _entry_to_remove(
-    name: str, root: Path, entries: dict[str, ZooEntry], directory: str | Path | None
-) -> ZooEntry:
-    """Entry ``name`` of the user zoo ``root``, or PredictorError saying where it is not."""
-    if name in entries:
-        return entries[name]
-    if directory is None and name in read_manifest(checkpoints_dir()):
-        raise PredictorError(
-            f"{name!r} is a model of the shipped zoo {checkpoints_dir()}, which is read-only"
-        )
-    raise PredictorError(f"the user zoo {root} has no entry {name!r}; it has {sorted(entries)}")

@@ -146,7 +146,7 @@ def format_list(located_entries) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from predictors import zoo
+    from predictors import zoo, zoo_edit
 
     if args.zoo_command == "list":
         entries = zoo.zoo_entries(args.dir)
@@ -176,14 +176,14 @@ def run(args: argparse.Namespace) -> int:
     if args.zoo_command == "add":
         return _add(args)
     if args.zoo_command == "remove":
-        entry, root = zoo.remove_from_zoo(args.name, args.dir)
+        entry, root = zoo_edit.remove_from_zoo(args.name, args.dir)
         print(f"removed {entry.name} from the user zoo {root}")
         return 0
     raise PipelineError(f"unknown zoo action {args.zoo_command!r}")
 
 
 def _add(args: argparse.Namespace) -> int:
-    from predictors import checkpoint, zoo
+    from predictors import checkpoint, zoo, zoo_edit
 
     if args.shipped and args.dir is not None:
         raise PipelineError("--shipped adds to the shipped zoo; it does not go with --dir")
@@ -226,7 +226,7 @@ def _add(args: argparse.Namespace) -> int:
     if args.protocol:
         training_data["protocol"] = args.protocol
     training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
-    entry, previous = zoo.add_entry(
+    entry, previous = zoo_edit.add_entry(
         args.weights,
         name=name,
         protocol=args.protocol or summary.get("protocol", "custom"),

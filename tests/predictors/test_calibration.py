@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from predictors import zoo
+from predictors import manifest, zoo
 from predictors.calibration import (
     CALIBRATIONS_FORMAT,
     CALIBRATIONS_NAME,
@@ -285,12 +285,12 @@ def test_find_calibration_reads_the_current_weights_from_the_zoo(tmp_path):
     entry = zoo.ZooEntry(
         "social_lstm_eth", "SocialLSTMPredictor", "social_lstm", "w.pt", SHA_A, "w.json", SHA_B, "paper"
     )
-    zoo.write_manifest({entry.name: entry}, tmp_path)
+    manifest.write_manifest({entry.name: entry}, tmp_path)
     save_calibration(block(), tmp_path)
     save_calibration(block(predictor="constant_velocity", predictor_sha256=None), tmp_path)
     assert find_calibration("social_lstm_eth", "real", 0.1, tmp_path).predictor_sha256 == SHA_A
     assert find_calibration("constant_velocity", "real", 0.1, tmp_path).predictor_sha256 is None
-    zoo.write_manifest({entry.name: dataclasses.replace(entry, sha256=SHA_B)}, tmp_path)  # retrained
+    manifest.write_manifest({entry.name: dataclasses.replace(entry, sha256=SHA_B)}, tmp_path)  # retrained
     with pytest.raises(PredictorError, match="weights changed since calibration"):
         find_calibration("social_lstm_eth", "real", 0.1, tmp_path)
     save_calibration(block(predictor="gone"), tmp_path)

@@ -26,7 +26,8 @@ from predictors.learned import LearnedPredictor
 from predictors.models import load_plugin, model_kind, model_kinds
 from predictors.oracle import ORACLE_PREDICTOR
 from predictors.registry import PREDICTORS, load_predictor
-from predictors.zoo import add_to_zoo, checkpoints_dir, load_zoo, zoo_names
+from predictors.zoo import checkpoints_dir, load_zoo, zoo_names
+from predictors.zoo_edit import add_to_zoo
 
 HORIZON = 4
 TOL = 1e-6

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import checkpoint, manifest, models, zoo
+from predictors import checkpoint, manifest, models, zoo, zoo_edit
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.learned import LearnedPredictor, SocialGANPredictor
 from predictors.models import load_plugin
@@ -176,12 +176,12 @@ def test_the_shipped_zoo_is_read_only(tmp_path, shipped, pair, monkeypatch, caps
         )
     assert snapshot(shipped) == before
     with pytest.raises(PredictorError, match="which is read-only"):
-        zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={}, directory=shipped)
+        zoo_edit.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={}, directory=shipped)
     assert snapshot(shipped) == before
 
 
 def test_maintainers_add_to_the_shipped_zoo_on_purpose_only(shipped, user, pair):
-    entry = zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={}, shipped=True)
+    entry = zoo_edit.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={}, shipped=True)
     assert (shipped / "other.pt").is_file() and zoo.locate("other").source == zoo.SHIPPED == "shipped"
     assert entry.name in read_manifest(shipped) and not user.exists()
 
@@ -255,7 +255,7 @@ def test_a_plugin_model_goes_through_the_user_zoo(tmp_path, shipped, user, monke
     document = json.loads(weights.with_suffix(".json").read_text())
     assert document["model"] == TOY and document["class"] == "LearnedPredictor"
     assert document["net"] == {"hidden_dim": 4, "radius": 2.0}
-    entry = zoo.add_to_zoo(weights, name="toy_eth", protocol="custom", training_data={}, metrics={})
+    entry = zoo_edit.add_to_zoo(weights, name="toy_eth", protocol="custom", training_data={}, metrics={})
     assert entry.model == TOY and (user / "toy_eth.pt").is_file()
     predictor = load_predictor("toy_eth")
     assert isinstance(predictor, LearnedPredictor) and predictor.kind == TOY and predictor.name == "toy_eth"
@@ -413,7 +413,7 @@ def test_the_shipped_zoo_takes_no_plugin_kind(tmp_path, shipped, user, capsys):
     code, _, err = cli(["--plugin", TOY, "zoo", "add", str(weights), "--shipped"], capsys)
     assert code == 2 and one_line(err) == f"crowdmpc zoo: error: {message}"
     with pytest.raises(PredictorError) as refused:
-        zoo.add_to_zoo(weights, name="toy", protocol="p", training_data={}, metrics={}, shipped=True)
+        zoo_edit.add_to_zoo(weights, name="toy", protocol="p", training_data={}, metrics={}, shipped=True)
     assert str(refused.value) == message
     assert snapshot(shipped) == before and not user.exists()
     code, _, _ = cli(["--plugin", TOY, "zoo", "add", str(weights)], capsys)  # the user zoo takes it

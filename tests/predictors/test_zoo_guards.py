@@ -20,7 +20,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import manifest, zoo
+from predictors import manifest, zoo, zoo_edit
 from predictors.calibration import CALIBRATIONS_NAME
 from predictors.errors import PredictorError
 
@@ -83,7 +83,7 @@ def user(tmp_path, monkeypatch) -> Path:
     """A user zoo with one model ("mine") and the calibrations `crowdmpc calibrate` keeps there."""
     root = tmp_path / "user"
     monkeypatch.setenv(zoo.ZOO_ENV, str(root))
-    zoo.add_to_zoo(copy_pair(tmp_path / "run"), name="mine", protocol="p", training_data={}, metrics={})
+    zoo_edit.add_to_zoo(copy_pair(tmp_path / "run"), name="mine", protocol="p", training_data={}, metrics={})
     (root / CALIBRATIONS_NAME).write_text(
         '{"format": "crowdmpc-calibrations", "version": 1, "calibrations": []}'
     )
@@ -129,7 +129,7 @@ def test_a_name_whose_files_are_the_zoos_own_is_refused(shipped, user, pair, cap
     )
     assert snapshot(root) == before
     with pytest.raises(PredictorError, match="is reserved"):  # --replace does not make it free
-        zoo.add_to_zoo(pair, name=name, protocol="p", training_data={}, metrics={}, replace=True)
+        zoo_edit.add_to_zoo(pair, name=name, protocol="p", training_data={}, metrics={}, replace=True)
     assert snapshot(root) == before
 
 
@@ -187,7 +187,7 @@ CHILD = """
 import sys, time
 from pathlib import Path
 from pipelines.cli import main
-import predictors.zoo, predictors.learned, torch  # loaded before the start, so that the commands overlap
+import predictors.zoo_edit, predictors.learned, torch  # loaded before the start, so that the commands overlap
 ready, go = Path(sys.argv[1]), Path(sys.argv[2])
 ready.touch()
 while not go.exists():
@@ -245,7 +245,7 @@ def test_a_lock_planted_as_a_symbolic_link_is_refused(tmp_path, user, pair):
     with pytest.raises(
         PredictorError, match=rf"{manifest.LOCK_NAME}: cannot lock the zoo \(it is a symbolic"
     ):
-        zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
+        zoo_edit.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
     assert not elsewhere.exists() and zoo.zoo_names(user) == ["mine"]
 
 
@@ -254,7 +254,7 @@ def test_a_lock_planted_as_a_fifo_is_refused_instead_of_waiting_forever(user, pa
     (user / manifest.LOCK_NAME).unlink()
     os.mkfifo(user / manifest.LOCK_NAME)
     with pytest.raises(PredictorError, match=rf"{manifest.LOCK_NAME}: cannot lock the zoo"):
-        zoo.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
+        zoo_edit.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
     assert zoo.zoo_names(user) == ["mine"]
 
 

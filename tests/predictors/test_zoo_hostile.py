@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from pipelines.cli import main
-from predictors import checkpoint, manifest, zoo
+from predictors import checkpoint, manifest, zoo, zoo_edit
 from predictors.errors import CheckpointMismatch, PredictorError
 from predictors.nets.social_gan import DiscriminatorConfig, generator_config
 from predictors.nets.social_lstm import MAX_PARAMETERS, SocialLSTM, SocialLSTMConfig
@@ -100,7 +100,7 @@ def test_zoo_add_refuses_unsafe_names_before_writing(tmp_path, zoo_dir, pair, ca
     assert line.startswith("crowdmpc zoo: error: zoo name ") and "is not allowed" in line
     assert tree(tmp_path) == before  # nothing written, inside the zoo or out of it
     with pytest.raises(PredictorError, match="is not allowed"):
-        zoo.add_to_zoo(pair[0], name=name, protocol="p", training_data={}, metrics={}, directory=zoo_dir)
+        zoo_edit.add_to_zoo(pair[0], name=name, protocol="p", training_data={}, metrics={}, directory=zoo_dir)
 
 
 def test_zoo_add_accepts_a_safe_name(zoo_dir, pair, capsys):
