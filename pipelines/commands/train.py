@@ -149,26 +149,6 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
     return files, prepared_dir(args.data_dir)
 
 
-def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) -> dict:
-    """Training data identity for the zoo: each file's sha256 and one hash over train + val."""
-    import hashlib
-
-    from predictors.hashing import sha256_file
-
-    def label(path: Path) -> str:
-        return str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else path.name
-
-    record: dict[str, Any] = {"protocol": protocol, "files": {}}
-    digest = hashlib.sha256()
-    for split in ("train", "val", "test"):
-        record["files"][split] = {label(p): sha256_file(p) for p in files[split]}
-        if split != "test":
-            for name, sha in sorted(record["files"][split].items()):
-                digest.update(f"{split}/{name}:{sha}\n".encode())
-    record["sha256"] = digest.hexdigest()
-    return record
-
-
 def _net_config(args: argparse.Namespace) -> tuple[str | None, Any]:
     """The pooling (None: the kind has none) and the network config the command line asks for."""
     from predictors.models import model_kind
@@ -318,6 +298,13 @@ def _train(
     import lightning as L
     import torch
 
+    from pipelines.commands.train_report import (
+        data_record,
+        epoch_times_from_csv,
+        evaluate_splits,
+        print_summary,
+        trained_loss,
+    )
     from predictors.base import OBS_LEN
     from predictors.checkpoint import load_checkpoint, save_checkpoint
     from predictors.data.datamodule import TrajnetDataModule
@@ -369,7 +356,7 @@ def _train(
         module.net, model=args.model, name=name, out_dir=out, obs_len=OBS_LEN, extra=extra
     )
     top_k = 20 if model_kind(args.model).adversarial else None
-    metrics = _evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
+    metrics = evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
     # every version: a resumed run logs into a new one (Lightning's CSVLogger), its first epochs in the old
     epoch_times = [
         t for log_dir in sorted((out / "csv").glob("version_*")) for t in epoch_times_from_csv(log_dir)
@@ -393,72 +380,10 @@ def _train(
         },
     }
     (out / f"{name}.metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
-    _print_summary(summary, Path(best_path).name, weights, top_k)
+    print_summary(summary, Path(best_path).name, weights, top_k)
     return 0
 
 
 def _no_advertising(record: logging.LogRecord) -> bool:
     """Drop Lightning's "Tip: try installing litlogger / litmodels" lines (cloud services, not training)."""
     return not str(record.msg).startswith("💡 Tip")
-
-
-def trained_loss(module: Any, asked: str) -> str:
-    """The loss the module trained on: the Gaussian NLL needs a Gaussian head (PredictorModule.model_step
-    falls back to L2 on the mean steps), and the GAN has its own."""
-    from predictors.training import GANModule
-
-    if isinstance(module, GANModule):
-        return "variety+adversarial"
-    return asked if getattr(module.net, "head_type", None) == "gaussian" else "l2"
-
-
-def _evaluate_splits(
-    args: argparse.Namespace, predictor: Any, files: dict[str, Any], root: Any, top_k: int | None
-) -> dict[str, dict[str, Any]]:
-    """ADE/FDE of the trained model on the validation and test files it was given."""
-    from predictors.evaluate import EvalConfig, evaluate
-
-    metrics = {}
-    for split in ("val", "test"):
-        if files[split]:
-            result = evaluate(
-                predictor,
-                files[split],
-                EvalConfig(top_k=top_k, seed=args.seed),
-                progress=not args.no_progress,
-                root=root,
-            )
-            if result["overall"].get("scenes"):  # an empty --test file has nothing to report
-                metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
-    return metrics
-
-
-def _plugin_option(model: str) -> str:
-    """``--plugin MODEL `` when ``model`` is a plugin's kind (later commands must register it too)."""
-    from predictors.models import model_kind
-
-    return f"--plugin {model} " if model_kind(model).source == "plugin" else ""
-
-
-def _print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int | None) -> None:
-    print(f"{summary['name']}: best {best}; weights {weights} (+ .json)")
-    for split, m in summary["metrics"].items():
-        line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
-        if "topk_ade" in m:
-            line += f"  top-{top_k} ADE {m['topk_ade']:.3f}  FDE {m['topk_fde']:.3f}"
-        print(line)
-    print(
-        f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
-        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {weights}`"
-    )
-
-
-def epoch_times_from_csv(log_dir: str | Path) -> list[float]:
-    """Training epoch wall times logged by the module (``epoch_time_s``)."""
-    import csv
-
-    path = Path(log_dir) / "metrics.csv"
-    if not path.is_file():
-        return []
-    with open(path) as f:
-        return [float(row["epoch_time_s"]) for row in csv.DictReader(f) if row.get("epoch_time_s")]

@@ -170,7 +170,7 @@ def test_the_recorded_loss_is_the_one_trained(trained):
     checkpoint says so; soft-pooling Social-LSTM has a Gaussian head and keeps it."""
     out, _ = trained
     assert json.loads((out / "walker.json").read_text())["training"]["optim"]["loss"] == "gaussian"
-    from pipelines.commands.train import trained_loss
+    from pipelines.commands.train_report import trained_loss
     from predictors.training import OptimConfig, make_module
 
     point = make_module("social_lstm", {"head": "point"}, OptimConfig())

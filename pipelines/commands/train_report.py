@@ -1,0 +1,90 @@
+"""What ``crowdmpc train`` records and prints once a run has trained: the training data's identity, the loss
+the module trained on, the TrajNet++ metrics of the best epoch, the epoch times, the closing lines."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) -> dict:
+    """Training data identity for the zoo: each file's sha256 and one hash over train + val."""
+    import hashlib
+
+    from predictors.hashing import sha256_file
+
+    def label(path: Path) -> str:
+        return str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else path.name
+
+    record: dict[str, Any] = {"protocol": protocol, "files": {}}
+    digest = hashlib.sha256()
+    for split in ("train", "val", "test"):
+        record["files"][split] = {label(p): sha256_file(p) for p in files[split]}
+        if split != "test":
+            for name, sha in sorted(record["files"][split].items()):
+                digest.update(f"{split}/{name}:{sha}\n".encode())
+    record["sha256"] = digest.hexdigest()
+    return record
+
+
+def trained_loss(module: Any, asked: str) -> str:
+    """The loss the module trained on: the Gaussian NLL needs a Gaussian head (PredictorModule.model_step
+    falls back to L2 on the mean steps), and the GAN has its own."""
+    from predictors.training import GANModule
+
+    if isinstance(module, GANModule):
+        return "variety+adversarial"
+    return asked if getattr(module.net, "head_type", None) == "gaussian" else "l2"
+
+
+def evaluate_splits(
+    args: argparse.Namespace, predictor: Any, files: dict[str, Any], root: Any, top_k: int | None
+) -> dict[str, dict[str, Any]]:
+    """ADE/FDE of the trained model on the validation and test files it was given."""
+    from predictors.evaluate import EvalConfig, evaluate
+
+    metrics = {}
+    for split in ("val", "test"):
+        if files[split]:
+            result = evaluate(
+                predictor,
+                files[split],
+                EvalConfig(top_k=top_k, seed=args.seed),
+                progress=not args.no_progress,
+                root=root,
+            )
+            if result["overall"].get("scenes"):  # an empty --test file has nothing to report
+                metrics[split] = {k: v for k, v in result["overall"].items() if v is not None}
+    return metrics
+
+
+def _plugin_option(model: str) -> str:
+    """``--plugin MODEL `` when ``model`` is a plugin's kind (later commands must register it too)."""
+    from predictors.models import model_kind
+
+    return f"--plugin {model} " if model_kind(model).source == "plugin" else ""
+
+
+def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int | None) -> None:
+    print(f"{summary['name']}: best {best}; weights {weights} (+ .json)")
+    for split, m in summary["metrics"].items():
+        line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
+        if "topk_ade" in m:
+            line += f"  top-{top_k} ADE {m['topk_ade']:.3f}  FDE {m['topk_fde']:.3f}"
+        print(line)
+    print(
+        f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
+        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {weights}`"
+    )
+
+
+def epoch_times_from_csv(log_dir: str | Path) -> list[float]:
+    """Training epoch wall times logged by the module (``epoch_time_s``)."""
+    import csv
+
+    path = Path(log_dir) / "metrics.csv"
+    if not path.is_file():
+        return []
+    with open(path) as f:
+        return [float(row["epoch_time_s"]) for row in csv.DictReader(f) if row.get("epoch_time_s")]
