@@ -10,7 +10,7 @@ from typing import NoReturn
 
 from crowdsim.errors import SimulationError
 from mpc.errors import MPCConfigError
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.version import crowdmpc_version
 from predictors.errors import PredictorError
 
@@ -168,6 +168,12 @@ def _main(argv: list[str] | None) -> int:
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if interrupt_behind(exc) is None:  # a bug: its traceback
+            raise
+        # Ctrl-C inside a CasADi call outside any solve, handed back as a SystemError caused by it
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
         return 130
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.experiments.cells import EpisodeTask
 from pipelines.loop.controllers import Controller, make_controller
 from pipelines.plain_json import plain
@@ -194,7 +194,10 @@ class EpisodeWorker:
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
             return self._run(task)
-        except Exception:  # a bug or a solver crash in one episode must not end a sweep of thousands
+        except Exception as exc:  # a bug or a solver crash in one episode must not end a sweep of thousands
+            interrupt = interrupt_behind(exc)
+            if interrupt is not None:  # Ctrl-C in CasADi (inline sweeps): the sweep's, not the episode's
+                raise interrupt from None
             return EpisodeOutcome(task.key, error=traceback.format_exc())
 
     def _run(self, task: EpisodeTask) -> EpisodeOutcome:

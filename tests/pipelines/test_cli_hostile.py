@@ -573,3 +573,34 @@ def test_json_and_plot_of_one_simulate_are_two_files(tmp_path, capsys):
     assert main(["simulate", "--controller", "orca", "--humans", "2", "--json", same, "--plot", same]) == 2
     assert "--json and --plot name the same file" in capsys.readouterr().err
     assert not (tmp_path / "same.png").exists()  # refused before the episode
+
+
+def _wrapped_interrupt() -> SystemError:
+    """What CasADi hands back for a Ctrl-C inside one of its calls."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as ctrl_c:
+        wrapped = SystemError("<built-in function> returned a result with an exception set")
+        wrapped.__cause__ = ctrl_c
+        return wrapped
+
+
+def test_ctrl_c_inside_casadi_outside_a_solve_ends_the_command_as_interrupted(monkeypatch, capsys):
+    """Outside the controller's own catch-all (say in the predictor's encoder before a solve) the wrapped
+    interrupt reached the command line as a SystemError traceback, and an inline sweep's worker recorded it
+    as a failed episode and went on."""
+    from pipelines.experiments.worker import EpisodeWorker
+
+    def interrupted(self, task):
+        raise _wrapped_interrupt()
+
+    monkeypatch.setattr(EpisodeWorker, "_run", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        EpisodeWorker("none").run(None)  # type: ignore[arg-type]
+
+    def simulate_interrupted(args):
+        raise _wrapped_interrupt()
+
+    monkeypatch.setattr("pipelines.commands.simulate.run", simulate_interrupted)
+    assert main(["simulate", "--controller", "straight", "--humans", "2", "--no-progress"]) == 130
+    assert capsys.readouterr().err == "crowdmpc simulate: interrupted\n"
