@@ -89,15 +89,13 @@ def _check_not_input(path: Path, label: str, inputs: Iterable[Path]) -> None:
             raise PipelineError(f"{label}: that is one of the command's inputs; write the output elsewhere")
 
 
-# JSON files crowdmpc keeps, which a --json report must never replace: a sweep's and a training run's own
-# files by name, and every document that names a crowdmpc format (zoo manifests, predictor configs,
-# calibrations, prepared data manifests).
-KEPT_JSON_NAMES: Final[frozenset[str]] = frozenset({"sweep.json", "train_settings.json"})
-
-
 def _check_json_document(path: Path, label: str) -> None:
     """Refuse to replace a file that is not empty and is not a JSON report: a data file, or a JSON file
-    crowdmpc keeps (``KEPT_JSON_NAMES``, a document with a crowdmpc "format")."""
+    crowdmpc keeps: a sweep's and a training run's own files by name, and every document that names a
+    crowdmpc format (zoo manifests, predictor configs, calibrations, prepared data manifests)."""
+    from pipelines.commands.train_resume import SETTINGS_FILE
+    from pipelines.experiments.log import SWEEP_FILE
+
     refusal = PipelineError(
         f"{label}: the file exists and is not a JSON report; crowdmpc does not overwrite it (remove it "
         "or name another file)"
@@ -112,7 +110,7 @@ def _check_json_document(path: Path, label: str) -> None:
     except (OSError, ValueError, RecursionError):
         raise refusal from None
     kept = isinstance(document, dict) and str(document.get("format", "")).startswith("crowdmpc")
-    if kept or path.name in KEPT_JSON_NAMES or path.name.endswith(".metrics.json"):
+    if kept or path.name in (SWEEP_FILE, SETTINGS_FILE) or path.name.endswith(".metrics.json"):
         raise PipelineError(
             f"{label}: that is a file crowdmpc keeps (a zoo's, a sweep's or a training run's), not a report; "
             "name another file"
