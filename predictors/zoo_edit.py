@@ -62,12 +62,10 @@ def add_entry(
         _check_shipped_kind(config)
     else:
         root = writable_zoo_dir(directory)
-        if name in read_manifest(checkpoints_dir()):
-            raise PredictorError(
-                f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}; "
-                "pick another name"
-            )
+        _check_not_shipped(name)
     entries = read_manifest(root)  # refuse to add to a manifest that does not read
+    which = SHIPPED if shipped else USER
+    _check_case_clash(name, entries, root, which)
     entry, config_bytes = _new_entry(
         weights,
         name=name,
@@ -76,12 +74,12 @@ def add_entry(
         metrics=metrics,
         training=training or {},
     )
-    which = SHIPPED if shipped else USER
     # checked before the lock, which creates the zoo directory: a refused add writes nothing
     if _unchanged(entries.get(name), entry, root, which, replace):
         return entry, entry
     with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
         entries = read_manifest(root)
+        _check_case_clash(name, entries, root, which)
         previous = entries.get(name)
         if _unchanged(previous, entry, root, which, replace):
             return entry, entry
@@ -135,6 +133,37 @@ def _write_pair(weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path)
         shutil.copyfile(weights, target_weights)
     target_config.write_bytes(config_bytes)
     return replace_fields(entry, sha256=sha256_file(target_weights))
+
+
+def _check_not_shipped(name: str) -> None:
+    """Refuse a user model's ``name`` that the shipped zoo has, in any case: every clone has the shipped
+    model, and two names a reader cannot tell apart would pick one or the other by a letter's case."""
+    shipped_name = _same_ignoring_case(name, read_manifest(checkpoints_dir()))
+    if shipped_name is not None:
+        spelled = "" if shipped_name == name else f" (as {shipped_name!r}: names are compared ignoring case)"
+        raise PredictorError(
+            f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}{spelled}; "
+            "pick another name"
+        )
+
+
+def _same_ignoring_case(name: str, entries: dict[str, ZooEntry]) -> str | None:
+    """The name in ``entries`` that ``name`` is when case is ignored (itself if present), else None."""
+    if name in entries:
+        return name
+    return next((other for other in entries if other.casefold() == name.casefold()), None)
+
+
+def _check_case_clash(name: str, entries: dict[str, ZooEntry], root: Path, which: str) -> None:
+    """Refuse ``name`` when the zoo has it in another case: on a case-insensitive file system (macOS's,
+    Windows') Mine.pt is mine.pt, so adding it would overwrite that entry's weights under its sha256."""
+    other = _same_ignoring_case(name, entries)
+    if other is not None and other != name:
+        raise PredictorError(
+            f"the {which} zoo {root} already has {other!r}, which is {name!r} when case is ignored (their "
+            f"files are the same on a case-insensitive file system); add it as --name {other} --replace to "
+            "replace that entry, or under another --name"
+        )
 
 
 def _taken(name: str, root: Path, which: str, previous: ZooEntry, entry: ZooEntry) -> str:

@@ -359,6 +359,24 @@ def test_adding_a_taken_name_is_refused_unless_replace(shipped, user, pair, caps
     assert set(read_manifest(user)) == {"mine"} and load_predictor("mine").name == "mine"
 
 
+def test_names_that_differ_only_in_case_are_taken(shipped, user, pair, capsys):
+    """On a case-insensitive file system Mine.pt is mine.pt: adding it would overwrite mine's weights."""
+    assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
+    before = snapshot(user)
+    code, _, err = cli(["zoo", "add", str(retrained(pair, "other")), "--name", "Mine"], capsys)
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc zoo: error: the user zoo {user} already has 'mine', which is 'Mine' when case is ignored "
+        "(their files are the same on a case-insensitive file system); add it as --name mine --replace to "
+        "replace that entry, or under another --name"
+    )
+    code, _, err = cli(["zoo", "add", str(pair), "--name", NAME.upper()], capsys)
+    assert code == 2 and one_line(err) == (
+        f"crowdmpc zoo: error: zoo name {NAME.upper()!r} is taken by a model of the shipped zoo {shipped} "
+        f"(as {NAME!r}: names are compared ignoring case); pick another name"
+    )
+    assert snapshot(user) == before and set(read_manifest(user)) == {"mine"}
+
+
 def test_the_same_weights_with_other_metrics_are_refused_too(shipped, user, pair, capsys):
     assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
     before = snapshot(user)
