@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+import casadi
+import numpy as np
 import pytest
 import torch
 
@@ -291,7 +293,17 @@ def test_export_never_writes_into_a_zoo(tmp_path, shipped, user, monkeypatch, ca
 def test_export_beside_a_zoo_still_works(tmp_path, shipped, user):
     out = tmp_path / "user_exports" / "cv.casadi"  # a sibling whose name starts like the zoo's
     assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "2"]) == 0
-    assert out.is_file()
+    f = casadi.Function.load(str(out))
+    assert (f.name_in(), f.name_out()) == (["context", "robots_future"], ["humans_future"])
+    # 7 humans (the default), human i at (i, -2i) m walking (0.5, 1) m/s; 3 robots' plan over 2 steps
+    pos = np.array([[i, -2.0 * i] for i in range(7)])
+    context = np.concatenate([pos.ravel(), np.tile([0.5, 1.0], 7)])
+    got = np.asarray(f(context, np.arange(2 * 3 * 2.0))).reshape(2, 7, 2)
+    # position + (h + 1) tau velocity, tau = 0.4 s: human 1 after 2 steps is at (1 + 0.4, -2 + 0.8)
+    np.testing.assert_allclose(got[1, 1], [1.4, -1.2], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[0, 3], [3.2, -5.6], rtol=0, atol=1e-12)
+    expected = pos[None] + np.array([0.4, 0.8])[:, None, None] * np.array([0.5, 1.0])
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
 
 
 # ------------------------------------------------------------------------------------- manifest versions

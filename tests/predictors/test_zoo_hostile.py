@@ -13,6 +13,8 @@ import re
 import shutil
 from pathlib import Path
 
+import casadi
+import numpy as np
 import pytest
 import torch
 
@@ -536,4 +538,14 @@ def test_export_to_a_place_it_cannot_write_is_refused_before_any_work(tmp_path, 
 def test_export_at_the_horizon_bound_works(tmp_path, zoo_dir):
     out = tmp_path / "o.casadi"
     assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "100"]) == 0
-    assert out.is_file()
+    f = casadi.Function.load(str(out))
+    assert (f.size1_in(0), f.size1_in(1), f.size1_out(0)) == (4 * 7, 100 * 3 * 2, 100 * 7 * 2)
+    # 7 humans (the default), human i at (i, 0) m walking (i, -1) m/s
+    pos = np.array([[float(i), 0.0] for i in range(7)])
+    vel = np.array([[float(i), -1.0] for i in range(7)])
+    got = np.asarray(f(np.concatenate([pos.ravel(), vel.ravel()]), np.zeros(600))).reshape(100, 7, 2)
+    # position + (h + 1) tau velocity, tau = 0.4 s: after 100 steps (40 s) human 2 is at (2 + 80, -40)
+    np.testing.assert_allclose(got[99, 2], [82.0, -40.0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got[0, 6], [6.0 + 2.4, -0.4], rtol=0, atol=1e-12)
+    steps = 0.4 * np.arange(1, 101)[:, None, None]
+    np.testing.assert_allclose(got, pos[None] + steps * vel[None], rtol=0, atol=1e-9)
