@@ -15,6 +15,12 @@ class PredictorError(ValueError):
     """Base class of the user-facing errors raised by `predictors`."""
 
 
+class NoCasadiTwin(PredictorError):
+    """A predictor that has no CasADi function at all (the ORCA oracle): the iterative best response then
+    predicts with it numerically, and the coupled NLP cannot use it. A twin that exists but fails its
+    export or its check against torch is another error (``predictors.export.ExportError``)."""
+
+
 class DatasetFormatError(PredictorError):
     """A dataset file that does not follow the TrajNet++ ndjson format (or raw obsmat.txt)."""
 

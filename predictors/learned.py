@@ -70,6 +70,7 @@ class LearnedPredictor:
         # broadcast nonsense in a closed loop.
         check_step_contract(self.net, f"predictor {name!r} (model {self.kind!r})", obs_len=obs_len)
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
+        self._export_checked = False  # to_casadi's first build is checked against torch (_check_export)
         self._encoders: dict[tuple[int, int], ca.Function] = {}
         self._steps: dict[int, ca.Function] = {}
         # Per agent: each state tensor's trailing dims, and the head output's width (``_layout``).
@@ -275,10 +276,16 @@ class LearnedPredictor:
             )
         key = (n_humans, n_robots, horizon)
         if key not in self._functions:
-            if not self._functions:
-                self._functions[key] = self._prediction(*key)  # the check below builds its own size
-                self._check_export()
-            self._functions.setdefault(key, self._prediction(*key))
+            self._functions[key] = self._prediction(*key)
+            if not self._export_checked:
+                self._export_checked = True  # the check calls to_casadi for its own size
+                try:
+                    self._check_export()
+                except BaseException:
+                    # nothing unchecked may be handed out later: the next call builds and checks again
+                    self._export_checked = False
+                    self._functions.clear()
+                    raise
         return self._functions[key]
 
     def _check_export(self) -> None:

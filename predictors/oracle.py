@@ -30,7 +30,7 @@ import numpy as np
 from crowdsim.env import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
 from predictors.base import check_rollout_inputs
-from predictors.errors import PredictorError
+from predictors.errors import NoCasadiTwin, PredictorError
 
 if TYPE_CHECKING:
     import casadi as ca
@@ -118,13 +118,13 @@ class OrcaOracle:
 
     # The symbolic face of the protocol: ORCA's piecewise linear programs have no useful derivatives.
     def encode(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> np.ndarray:
-        raise PredictorError(_NO_CASADI)
+        raise NoCasadiTwin(_NO_CASADI)
 
     def context_size(self, n_humans: int, n_robots: int) -> int:
-        raise PredictorError(_NO_CASADI)
+        raise NoCasadiTwin(_NO_CASADI)
 
     def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
-        raise PredictorError(_NO_CASADI)
+        raise NoCasadiTwin(_NO_CASADI)
 
 
 _NO_CASADI = (

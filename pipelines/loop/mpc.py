@@ -11,15 +11,17 @@ A robot that has reached its goal (``obs.robot_reached``) holds position and sto
 (``on_goal="track"``) it stays in the optimisation anchored by its goal term, so it keeps still unless a
 human or a teammate needs the room; ``on_goal="brake"`` pins it to braking instead (mpc/config.py).
 A step that cannot solve falls back (mpc/fallback.py) and says so in ``ControlOutput.fallback``; so does a
-step whose solve raised (CasADi reports a failure inside a solver call as a ``RuntimeError``), with status
-``"exception: <type>"`` and the message in ``extra["exception"]``. Only the solve is guarded: an exception
-from the predictor it calls, or from anything else in the step, is a bug and propagates.
+step whose solve raised CasADi's error (a failure inside a solver call is a ``RuntimeError``), with status
+``"exception: <type>"`` and the message in ``extra["exception"]``. Only that is guarded: any other exception
+of the solve (a ``TypeError`` is a bug, not a solver failure), an exception from the predictor it calls, or
+from anything else in the step propagates; so does Ctrl-C, which CasADi hands back inside a ``SystemError``.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,7 +44,7 @@ from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
 from predictors.conformal_classes import MOTION_CLASSES, motion_classes
-from predictors.errors import PredictorError
+from predictors.errors import NoCasadiTwin, PredictorError
 from predictors.registry import checkpoint_sha256, load_predictor
 
 STANDING = MOTION_CLASSES.index("standing")
@@ -190,7 +192,17 @@ class MPCController:
         if key not in self._twins:
             try:
                 function = self.model.to_casadi(n_humans, n_robots, self.cfg.horizon)
-            except PredictorError:
+            except NoCasadiTwin:
+                self._twins[key] = None
+            except PredictorError as exc:
+                # a plugin net with an operation the exporter lacks still runs, in torch; but say so: a
+                # step several times slower, or a twin that disagrees with torch, must not pass unseen
+                warnings.warn(
+                    f"predictor {self.model.name!r}: no CasADi twin ({exc}); the iterative best response "
+                    "predicts with torch instead (slower)",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
                 self._twins[key] = None
             else:
                 self._twins[key] = BufferedFunction(function)
@@ -284,7 +296,7 @@ class MPCController:
                 result = solver.solve(data, context, start)
             else:
                 result = solver.solve(data, predict, start)
-        except Exception as exc:
+        except (RuntimeError, SystemError) as exc:  # CasADi's errors: a failed call; a wrapped Ctrl-C
             if exc is self._predictor_error:
                 raise
             interrupt = interrupt_behind(exc)

@@ -330,6 +330,23 @@ def test_a_raising_solve_between_good_ones_shifts_the_last_plan(monkeypatch):
     assert "ok" in result.statuses and np.isfinite(result.robot_positions).all()
 
 
+def test_a_bug_in_the_solve_is_not_taken_for_a_solver_failure(monkeypatch):
+    """Only CasADi's RuntimeError is a failed solve: a TypeError is a bug, and braking over it would hide it
+    behind the solver-failure statistics of thousands of episodes."""
+    from crowdsim.env import CrowdEnv
+
+    def buggy(self, *args, **kwargs):
+        raise TypeError("unsupported operand type(s) for +: 'NoneType' and 'float'")
+
+    monkeypatch.setattr("mpc.solvers._Solver.solve", buggy)
+    controller = make_controller(ControllerSpec("cmpc"))
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller.reset(obs)
+    with pytest.raises(TypeError, match="unsupported operand"):
+        controller.act(obs)
+    assert controller.solve_exceptions == 0
+
+
 def test_the_step_says_what_the_solve_raised(monkeypatch):
     from crowdsim.env import CrowdEnv
 

@@ -89,3 +89,36 @@ def test_the_oracle_is_a_registered_predictor_that_refuses_the_coupled_nlp():
     assert isinstance(load_predictor("orca_oracle"), OrcaOracle)
     with pytest.raises(PipelineError, match="coupling 'ibr'"):
         make_controller(ControllerSpec("cmpc", "orca_oracle", coupling="nlp"))
+
+
+def test_the_oracle_has_no_twin_and_the_loop_says_nothing_of_it():
+    """NoCasadiTwin is the oracle's by design: the IBR loop predicts with it numerically, silently."""
+    import warnings
+
+    from predictors.errors import NoCasadiTwin
+
+    with pytest.raises(NoCasadiTwin, match="no CasADi twin"):
+        OrcaOracle().to_casadi(2, 3, 4)
+    controller = make_controller(ControllerSpec("cmpc", predictor="orca_oracle"))
+    obs = CrowdEnv().reset(0, "circle", 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        controller.reset(obs)
+        controller.act(obs)
+
+
+def test_a_twin_that_fails_its_check_is_named_and_torch_predicts(monkeypatch):
+    """A twin that exists but disagrees with torch (or uses an operation the exporter lacks) is not the
+    oracle's case: the loop still runs, in torch, and warns instead of passing it by."""
+    from predictors.export import ExportError, parity
+
+    def failing(predictor, *size):
+        raise ExportError("the exported prediction differs from torch by 1.00e-01", predictor.name)
+
+    monkeypatch.setattr(parity, "require_parity", failing)
+    controller = make_controller(ControllerSpec("cmpc", predictor="social_lstm_eth"))
+    obs = CrowdEnv().reset(0, "circle", 2)
+    with pytest.warns(RuntimeWarning, match="'social_lstm_eth': no CasADi twin .*differs from torch"):
+        controller.reset(obs)
+    out = controller.act(obs)
+    assert out.status == "ok" and np.isfinite(out.accelerations).all()

@@ -220,3 +220,39 @@ def test_gan_sample_shapes_reproducibility_and_spread():
 def test_casadi_name_is_always_valid():
     assert casadi_name("social_lstm_eth_h7_r3_H4") == "social_lstm_eth_h7_r3_H4"
     assert casadi_name("7-up__model") == "predictor_7_up_model"
+
+
+def test_an_export_that_fails_its_check_is_never_handed_out(monkeypatch):
+    """A failed parity check must not leave its function behind for the next call (the sweep worker keeps
+    the controller after a failed episode: its next episode would plan with an unchecked export)."""
+    from predictors.export import ExportError, parity
+
+    predictor = social_lstm("soft")
+    failures = {"n": 0}
+
+    def failing(*args):
+        failures["n"] += 1
+        raise ExportError("the exported prediction differs from torch", predictor.name)
+
+    monkeypatch.setattr(parity, "require_parity", failing)
+    for _ in range(2):
+        with pytest.raises(ExportError, match="differs from torch"):
+            predictor.to_casadi(3, 2, HORIZON)
+    assert failures["n"] == 2
+
+
+def test_each_size_is_built_once(monkeypatch):
+    predictor = social_lstm("soft")
+    built: list[tuple[int, int, int]] = []
+    original = predictor._prediction
+
+    def counting(*key):
+        built.append(key)
+        return original(*key)
+
+    monkeypatch.setattr(predictor, "_prediction", counting)
+    first = predictor.to_casadi(3, 2, HORIZON)
+    assert predictor.to_casadi(3, 2, HORIZON) is first
+    predictor.to_casadi(1, 1, HORIZON)
+    # the first call also builds the check's size (predictors.learned.PARITY_SIZE), once
+    assert sorted(built) == sorted([(3, 2, HORIZON), (2, 1, 3), (1, 1, HORIZON)])
