@@ -25,6 +25,7 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
+from mcap.reader import make_reader
 
 from pipelines.errors import PipelineError
 from pipelines.logs.recorder import McapRecorder
@@ -75,11 +76,9 @@ def _check_replaceable(path: Path, episode: Mapping[str, str]) -> None:
     if not path.is_file():
         return
     try:
-        from mcap.reader import make_reader
-
         with open(path, "rb") as f:
             held = next((m.metadata for m in make_reader(f).iter_metadata() if m.name == "episode"), None)
-    except Exception:  # not an MCAP file, or a damaged one: nothing of a run to keep apart
+    except Exception:  # not an MCAP file, or a damaged one (mcap raises many kinds): no run to keep apart
         return
     if held is None:
         return
