@@ -9,6 +9,7 @@ import re
 import sys
 from importlib import metadata
 
+import numpy as np
 import pytest
 import torch
 
@@ -27,6 +28,7 @@ from predictors.models import (
     register_plugins,
 )
 from tests.plugins.toy_predictor import ToyConfig, ToyNet
+from tests.predictors.test_contract import HORIZON, crossing_scene
 
 TOY = "tests.plugins.toy_predictor:ToyNet"
 NEVER = "tests.plugins.never_imported:Net"  # importing that module raises
@@ -221,5 +223,28 @@ def test_an_oversized_net_is_refused_before_memory_is_taken(no_plugins, monkeypa
 
 def test_the_gan_kind_makes_a_sampling_predictor(no_plugins):
     kind = model_kind("social_gan")
+    torch.manual_seed(0)
     predictor = kind.predictor(kind.build_net(kind.config()), name="g", obs_len=9)
     assert isinstance(predictor, SocialGANPredictor) and predictor.kind == "social_gan"
+    check_sampling(predictor)
+
+
+def check_sampling(predictor: SocialGANPredictor) -> None:
+    """``sample`` on the crossing scene (2 robots, 4 humans, H = 4): k = 5 finite futures (k, H, N_h, 2),
+    each different from the others and from the zero-noise rollout, the same again from the same seed and
+    others from another seed; without a plan, the horizon asked for."""
+    history, mask, humans, robots_future = crossing_scene()
+
+    def draw(seed: int) -> np.ndarray:
+        return predictor.sample(history, mask, robots_future, humans, None, 5, np.random.default_rng(seed))
+
+    samples = draw(1)
+    assert samples.shape == (5, HORIZON, 4, 2) and np.isfinite(samples).all()
+    gaps = [np.abs(samples[i] - samples[j]).max() for i in range(5) for j in range(i + 1, 5)]
+    assert min(gaps) > 1e-3  # no two samples alike: each has its own noise
+    rollout = predictor.rollout(history, mask, robots_future, humans)
+    assert np.abs(samples - rollout[None]).max(axis=(1, 2, 3)).min() > 1e-3
+    np.testing.assert_array_equal(draw(1), samples)
+    assert np.abs(draw(2) - samples).max() > 1e-3
+    unplanned = predictor.sample(history, mask, None, humans, 3, 2, np.random.default_rng(1))
+    assert unplanned.shape == (2, 3, 4, 2) and np.isfinite(unplanned).all()

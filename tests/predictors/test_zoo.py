@@ -22,6 +22,7 @@ from predictors.learned import LearnedPredictor, SocialGANPredictor
 from predictors.models import load_plugin
 from predictors.registry import available, checkpoint_sha256, load_predictor
 from predictors.zoo import ZOO_ENV, read_manifest, user_zoo_dir
+from tests.predictors.test_models import check_sampling
 
 REAL_ZOO = Path(__file__).resolve().parents[2] / "checkpoints"
 NAME = "social_lstm_eth"
@@ -316,6 +317,7 @@ def test_configs_from_before_model_kinds_still_load(tmp_path, name, kind, cls):
 def test_the_shipped_gan_loads_as_a_sampling_predictor():
     predictor = zoo.load_zoo("social_gan_eth", REAL_ZOO)
     assert isinstance(predictor, SocialGANPredictor) and predictor.kind == "social_gan"
+    check_sampling(predictor)
 
 
 # ------------------------------------------------------- taken names, another run's metrics, shipped kinds
