@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments.backends import BACKENDS, Backend, make_backend
 from pipelines.experiments.cells import Cell, EpisodeTask, Experiment
@@ -49,8 +50,8 @@ from pipelines.plain_json import plain
 # than fill errors.jsonl with thousands of copies of one traceback.
 FAIL_FAST_ERRORS: Final[int] = 4
 # Upper bounds checked before any worker starts (a typo must not become thousands of failing episodes): the
-# paper runs 100 episodes per cell; workers are Ray actors at most (a local pool is held to its CPUs by the
-# command line, pipelines/commands/sweep.py).
+# paper runs 1000 episodes per cell (cells.PAPER_EPISODES_PER_CELL); workers are Ray actors at most (a local
+# pool is held to its CPUs by the command line, pipelines/commands/sweep.py).
 MAX_EPISODES_PER_CELL: Final[int] = 100_000
 MAX_WORKERS: Final[int] = 4096
 
@@ -62,7 +63,7 @@ class SweepConfig:
     episodes_per_cell: int
     humans: tuple[int, ...] | None = None  # None: the experiment's own
     seed: int = 0
-    n_robots: int = 3
+    n_robots: int = PAPER_ROBOTS
     workers: int = 2
     backend: str = "auto"  # "auto": Ray when installed, else a process pool
     ray_address: str | None = None
@@ -139,10 +140,9 @@ def _write_atomic(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
-def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
-    """sweep.json: what the directory holds, and a line per run (a directory belongs to one experiment)."""
-    from pipelines.version import code_identity, crowdmpc_version
-
+def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
+    """sweep.json's document (empty for a new sweep); PipelineError when it holds another experiment (a
+    directory belongs to one)."""
     path = out / SWEEP_FILE
     meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
     if meta and meta.get("experiment") != config.experiment.name:
@@ -150,6 +150,14 @@ def _update_sweep_file(out: Path, config: SweepConfig, planned: int) -> None:
             f"{out} holds a sweep of experiment {meta.get('experiment')!r}, not {config.experiment.name!r}; "
             "choose another --out"
         )
+    return meta
+
+
+def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int) -> None:
+    """Write sweep.json: ``meta`` with what the directory holds and a line for this run."""
+    from pipelines.version import code_identity, crowdmpc_version
+
+    path = out / SWEEP_FILE
     meta["experiment"] = config.experiment.name
     meta["title"] = config.experiment.title
     _note_other_code(out, meta.get("runs") or [])
@@ -226,11 +234,12 @@ def run_sweep(
     if len(set(keys)) != len(keys):
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
     with sweep_lock(out):
-        _update_sweep_file(out, config, len(tasks))
+        meta = _sweep_meta(out, config)
         log = episode_log(out)
         done = log.load()
         _check_same_predictors(out, tasks, done)
         _check_same_margins(out, tasks, done)
+        _add_run(out, meta, config, len(tasks))  # a refused resume is no run: it leaves no line
         todo = [t for t in tasks if t.key not in done]
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:

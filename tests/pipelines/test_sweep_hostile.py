@@ -266,6 +266,7 @@ def test_a_cell_is_not_extended_after_a_recalibration(tmp_path, capsys):
         "since the records were made (recalibrated?); use another --out for the new margins"
     ]
     assert (out / EPISODES_FILE).read_bytes() == records
+    assert len(json.loads((out / SWEEP_FILE).read_text())["runs"]) == 1  # a refused run leaves no line
     _calibrate(1.0)  # the records' margins again: the cell extends as before
     assert main([*MARGINS_ARGV, "--episodes-per-cell", "4", "--out", str(out)]) == 0
     margins = {tuple(r["config"]["margins"]["margins_m"]) for r in episode_log(out).load().values()}
