@@ -141,16 +141,43 @@ def test_starts_and_goals_keep_the_spacing(m, formation):
         assert d.min() >= TABLE_I.d_flock - TOL and math.isclose(d.min(), TABLE_I.d_flock)
 
 
+def _near_goals(starts, goals):
+    """(i, j): robot i's straight path comes within d_min of robot j's goal."""
+    m = len(starts)
+    return [
+        (i, j)
+        for i in range(m)
+        for j in range(m)
+        if i != j and _segment_point_distance(starts[i], goals[i], goals[j]) < TABLE_I.d_min
+    ]
+
+
 @pytest.mark.parametrize("m, formation", FORMED)
 def test_no_robot_must_pass_a_goal_already_taken(m, formation):
     """A robot's straight path comes within d_min only of goals of robots that start behind it: they travel
-    the same 10 m north, so they get there after it has gone by. The row leaves every goal d_min clear."""
+    the same 10 m north, so they get there after it has gone by. The row leaves every goal d_min clear.
+
+    In the hexagonal formations every robot of a rank behind another is S/2 = 0.6 m to the side of one
+    ahead, less than d_min = 0.8 m: so with 2 robots or more some path passes a goal, and the rule is checked.
+    """
     starts, goals = robot_layout(m, formation)
-    for i in range(m):
-        for j in range(m):
-            if i != j and _segment_point_distance(starts[i], goals[i], goals[j]) < TABLE_I.d_min:
-                assert not _is_row(m, formation), (m, formation, i, j)
-                assert starts[j, 1] <= starts[i, 1] - TABLE_I.d_min, (m, formation, i, j)
+    near = _near_goals(starts, goals)
+    if _is_row(m, formation) or m == 1:
+        assert near == []
+        return
+    assert near, (m, formation)
+    for i, j in near:
+        assert starts[j, 1] <= starts[i, 1] - TABLE_I.d_min, (m, formation, i, j)
+
+
+def test_the_wedges_apex_passes_the_goals_of_the_two_behind_it():
+    """Three robots in a wedge: the apex (robot 1) at x = 0, a rank depth H ahead of robots 0 and 2 at
+    x = -/+S/2; its path x = 0 passes their goals 0.6 m to its side, and they start H = 1.04 m >= d_min
+    behind it."""
+    starts, goals = robot_layout(3, "wedge")
+    np.testing.assert_allclose(starts[:, 0], [-S / 2, 0.0, S / 2], rtol=0, atol=TOL)
+    np.testing.assert_allclose(starts[[0, 2], 1] - starts[1, 1], [-H, -H], rtol=0, atol=TOL)
+    assert _near_goals(starts, goals) == [(1, 0), (1, 2)]
 
 
 def test_bad_formations_name_the_value():
