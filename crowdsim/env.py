@@ -55,7 +55,7 @@ from crowdsim.metrics import Trajectory
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
 from crowdsim.scenarios import Layout, make_layout
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment, match_slots
-from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF, WorldFacts
+from crowdsim.world import A_MAX, DT, OBS_LEN, PAPER_ROBOTS, RADIUS, V_MAX, V_PREF, WorldFacts
 
 # Upper bounds of EnvConfig's times, lengths and speeds: far above any crowd a robot navigates, low enough
 # that positions, step counts and the controllers' arithmetic stay finite (dt = 1e308 overflowed the
@@ -221,7 +221,7 @@ class CrowdEnv:
 
     # ---- episode control ---------------------------------------------------------------------------------
 
-    def reset(self, seed: int, scenario: str, n_humans: int, n_robots: int = 3) -> Observation:
+    def reset(self, seed: int, scenario: str, n_humans: int, n_robots: int = PAPER_ROBOTS) -> Observation:
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise SimulationError(f"seed must be an int >= 0, got {seed!r}")
         cfg = self.config

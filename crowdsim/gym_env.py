@@ -69,7 +69,7 @@ from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.errors import SimulationError
 from crowdsim.metrics import COLLISION_DISTANCE, DISCOMFORT_HORIZON, episode_metrics, segments_intersect
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, geometry_scale
-from crowdsim.world import CIRCLE_RADIUS, SQUARE_WIDTH
+from crowdsim.world import CIRCLE_RADIUS, DT, PAPER_ROBOTS, SQUARE_WIDTH
 
 __all__ = [
     "COLUMNS",
@@ -181,14 +181,14 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
     :param render_mode: None or "rgb_array".
     """
 
-    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 2.5}  # 1 / dt by default
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 1.0 / DT}  # 1 / dt by default
 
     def __init__(
         self,
         *,
         scenario: str = "circle",
         n_humans: int = 5,
-        n_robots: int = 3,
+        n_robots: int = PAPER_ROBOTS,
         max_humans: int | None = None,
         max_robots: int | None = None,
         config: EnvConfig | None = None,

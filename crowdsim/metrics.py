@@ -31,8 +31,9 @@ import numpy as np
 
 from crowdsim.conventions import SUCCESS_RULES, SuccessRule
 from crowdsim.errors import SimulationError
+from crowdsim.world import D_MIN
 
-COLLISION_DISTANCE: Final[float] = 0.8  # m, d_min of Table I: personal-space violation (Section VI)
+COLLISION_DISTANCE: Final[float] = D_MIN  # m, d_min of Table I: personal-space violation (Section VI)
 DISCOMFORT_HORIZON: Final[float] = 1.2  # s, "the proportional factor is chosen as 1.2 s" (Section VI)
 # Fields added after records were first written: EpisodeMetrics.from_dict leaves them None when absent.
 ADDED_COUNTS: Final[tuple[str, ...]] = ("collision_steps", "contact_steps")

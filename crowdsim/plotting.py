@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
 from crowdsim.errors import SimulationError
+from crowdsim.world import RADIUS
 
 # matplotlib's tab10, the order pipelines.logs.recording uses, so robot i has one colour everywhere.
 ROBOT_COLORS = (
@@ -74,7 +75,7 @@ def plot_episode(
     title: str | None = None,
     snapshot_steps: Sequence[int] | None = None,
     *,
-    radius: float = 0.3,
+    radius: float = RADIUS,
     dt: float | None = None,
 ) -> Figure:
     """Trajectories of one episode with the agents drawn to scale at a few snapshot steps.

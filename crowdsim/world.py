@@ -7,7 +7,8 @@ predictor disagrees with the simulator it drives in (``pipelines.loop.mpc.check_
 defaults, which the module constants name for the code that only needs a number. The crowd geometry (circle
 radius, square width) is the same in every simulation profile (``crowdsim.profiles``) and lives here too, and
 so do the two robot-robot distances that the MPC's costs and the robots' formations
-(``crowdsim.scenarios``) must agree on: ``MPCConfig`` takes them as its defaults.
+(``crowdsim.scenarios``) must agree on: ``MPCConfig`` takes them as its defaults, as it takes Table I's
+horizon ``HORIZON``. ``PAPER_ROBOTS`` is the paper's team size, every robot count's default.
 """
 
 from __future__ import annotations
@@ -47,6 +48,14 @@ RADIUS: Final[float] = WORLD.radius
 V_PREF: Final[float] = WORLD.v_pref
 V_MAX: Final[float] = WORLD.v_max
 A_MAX: Final[float] = WORLD.a_max
+
+# Table I's H: the MPC's control and prediction horizon (MPCConfig.horizon's default) and so the number of
+# steps the predictors' margins are made for by default (predictors.real_data.HORIZON). A module constant, not
+# a WorldFacts field: the simulator does not use it, and the MPC may override it per run.
+HORIZON: Final[int] = 4
+# The paper's team of robots: Table I's weights were set for it, each robot's Eq. 15 summing 2 flocking
+# terms; every robot count defaults to it (mpc.config.PAPER_ROBOTS names it too).
+PAPER_ROBOTS: Final[int] = 3
 
 CIRCLE_RADIUS: Final[float] = 5.0  # m, circle crossing (the paper's fork, env_m.config; CrowdNav's is 4 m)
 SQUARE_WIDTH: Final[float] = 10.0  # m, side of the perpendicular-crossing square (env_m.config)

@@ -31,6 +31,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, Final, Literal, get_args
 
 from crowdsim import world
+from crowdsim.world import PAPER_ROBOTS as PAPER_ROBOTS  # Table I's weights were set for it; named here too
 from crowdsim.world import WorldFacts
 from mpc.errors import MPCConfigError
 
@@ -53,10 +54,8 @@ DMPC_STOPS: Final[tuple[DMPCStop, ...]] = get_args(DMPCStop)
 DMPC_STARTS: Final[tuple[DMPCStart, ...]] = get_args(DMPCStart)
 DMPC_ORDERS: Final[tuple[DMPCOrder, ...]] = get_args(DMPCOrder)
 FLOCKING_WEIGHTS: Final[tuple[FlockingWeight, ...]] = get_args(FlockingWeight)
-# Table I's weights were set for the paper's 3 robots: each robot's Eq. 15 sums 2 flocking terms.
-PAPER_ROBOTS: Final[int] = 3
 Guidance = Literal["none", "standing"]
-GUIDANCE_MODES: Final[tuple[str, ...]] = ("none", "standing")
+GUIDANCE_MODES: Final[tuple[Guidance, ...]] = get_args(Guidance)
 # the radius of guidance's discs around standing humans (MPCConfig.guidance_clearance)
 GuidanceClearance = Literal["margin", "penalty"]
 GUIDANCE_CLEARANCES: Final[tuple[GuidanceClearance, ...]] = get_args(GuidanceClearance)
@@ -67,16 +66,15 @@ ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
 @dataclass(frozen=True)
 class MPCConfig:
     # --- Table I ---------------------------------------------------------------------------------------
-    horizon: int = 4  # H, control and prediction horizon (steps)
+    horizon: int = world.HORIZON  # H, control and prediction horizon (steps)
     dt: float = world.DT  # tau, s, sampling time of the double integrator, Eq. 2
     w_goal: float = 10.0  # omega^goal, reference tracking weight, Eqs. 7 and 13
     w_acce: float = 0.1  # omega^acce, acceleration weight, Eqs. 9 and 13
     w_jerk: float = 0.1  # omega^jerk, jerk weight, Eqs. 10 and 13
     w_coll: float = 1e7  # omega^coll, robot-human (Eq. 11, 13) and robot-robot (Eq. 12, 14) penalty weight
     w_floc: float = 10.0  # omega^floc, flocking weight, Eqs. 14 and 15 (0 disables flocking, Table III "NF")
-    v_max: float = (
-        world.V_MAX
-    )  # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
+    # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
+    v_max: float = world.V_MAX
     a_max: float = world.A_MAX  # a_max, m/s^2, bound on each acceleration component, Eq. 6
     rho: float = 0.5  # rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11
     d_min: float = world.D_MIN  # d_min, m, minimum allowed distance, Eqs. 11 and 12
@@ -142,9 +140,8 @@ class MPCConfig:
     # and a joint one 3.3 -> 1.4 ms, for 2.4 and 7.8 s of build (benchmarks/solvers.py). Worth it for
     # sweeps (`crowdmpc sweep --jit auto`, the default), not for one episode.
     jit: bool = False
-    dmpc_parallel: ParallelMode = (
-        "serial"  # "serial" or "threads": how DMPC runs its M local solves per iteration
-    )
+    # "serial" or "threads": how DMPC runs its M local solves per iteration
+    dmpc_parallel: ParallelMode = "serial"
     # DMPC's update (mpc/dmpc.py has the measurements). "jacobi": Algorithm 2 as printed, every robot
     # best-responds to the others' plans of iteration j-1 and keeps its own improvement; "gauss_seidel":
     # the robots solve one after the other, each against the latest plans; "relaxed": Jacobi, each robot

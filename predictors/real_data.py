@@ -11,12 +11,13 @@ from typing import Final
 
 import numpy as np
 
+from crowdsim import world
 from predictors.base import Predictor
 from predictors.errors import PredictorError
 from predictors.evaluate import EvalConfig, EvalScene, load_eval_scenes, predict_scene
 from predictors.hashing import sha256_file
 
-HORIZON: Final[int] = 4  # MPC horizon steps H the margins are made for by default
+HORIZON: Final[int] = world.HORIZON  # MPC horizon steps H the margins are made for by default
 
 
 def validation_files(data_dir: str | Path | None = None) -> list[Path]:

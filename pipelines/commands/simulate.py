@@ -10,8 +10,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
+from crowdsim.world import PAPER_ROBOTS, RADIUS
 from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
@@ -90,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--scenario", choices=sorted(SCENARIOS), help="default: circle")
     parser.add_argument("--humans", type=int, help=f"0..{MAX_HUMANS} (default: 7)")
-    parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: 3)")
+    parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: {PAPER_ROBOTS})")
     parser.add_argument("--episodes", type=int, help="default: 1")
     parser.add_argument("--seed", type=int, help="first episode's seed (default: 0)")
     parser.add_argument(
@@ -139,8 +141,8 @@ def format_table(summary: dict[str, Any], header: str) -> str:
             f"{_fmt(summary['travel_time_mean'], ' s')}  (mean over successes, std "
             f"{_fmt(summary['travel_time_std'], ' s')})",
         ),  # fmt: skip
-        ("collision (<0.8 m)", rate("collision")),
-        ("contact (<0.6 m)", rate("contact")),
+        (f"collision (<{COLLISION_DISTANCE:g} m)", rate("collision")),
+        (f"contact (<{2 * RADIUS:g} m)", rate("contact")),  # the radii touch (crowdsim.metrics)
         ("discomfort", rate("discomfort")),
         (
             "per step",
@@ -251,7 +253,6 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
     for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;
     README, "More robots, more humans"); None otherwise. Only for this project's MPC controllers."""
-    from mpc.config import PAPER_ROBOTS
     from pipelines.loop.mpc import mpc_config
 
     if spec.controller not in ("cmpc", "dmpc") or n_robots <= PAPER_ROBOTS:

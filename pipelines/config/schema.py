@@ -31,7 +31,8 @@ from typing import Any, Final, Literal
 from crowdsim.env import EnvConfig
 from crowdsim.orca import OrcaParams
 from crowdsim.profiles import PROFILES, make_env_config
-from crowdsim.world import WorldFacts
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
+from crowdsim.world import PAPER_ROBOTS, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.config.notes import ENV_NOTES, MPC_NOTES, ORCA_NOTES, WORLD_NOTES
 from pipelines.config.settings import (
@@ -190,8 +191,8 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
 # ---- [scenario] ------------------------------------------------------------------------------------------
 SCENARIO_KEYS: Final = (
     Key("name", "str", "circle", "circle | perpendicular (--scenario)"),
-    Key("humans", "int", 7, "humans in the crowd, 0..50 (--humans)"),
-    Key("robots", "int", 3, "robots, 1..12 (--robots; sweep too)"),
+    Key("humans", "int", 7, f"humans in the crowd, 0..{MAX_HUMANS} (--humans)"),
+    Key("robots", "int", PAPER_ROBOTS, f"robots, 1..{MAX_ROBOTS} (--robots; sweep too)"),
 )
 
 
@@ -264,7 +265,7 @@ def _build_simulate(values: dict[str, Any], built: Mapping[str, Any]) -> Simulat
 
 
 def _sweep_keys() -> tuple[Key, ...]:
-    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL, SHIPPED_CONTROLLERS
 
     return (
         Key(
@@ -317,7 +318,7 @@ def _sweep_keys() -> tuple[Key, ...]:
             "controllers",
             "strs",
             None,
-            "the controllers experiment's columns (--controllers); unset: cmpc, dmpc, orca, straight",
+            f"the controllers experiment's columns (--controllers); unset: {', '.join(SHIPPED_CONTROLLERS)}",
             ["cmpc", "orca"],
         ),
     )

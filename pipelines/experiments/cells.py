@@ -18,6 +18,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments.paper import (
     PAPER_HUMANS,
@@ -65,7 +66,7 @@ class Cell:
     method: str  # the column label, e.g. "CMPC", "NF", "social_lstm_eth"
     spec: ControllerSpec
     n_humans: int
-    n_robots: int = 3
+    n_robots: int = PAPER_ROBOTS
     world: World = World()
 
     def __post_init__(self):
@@ -218,7 +219,7 @@ class Experiment:
             )
         return replace(self, world=world)
 
-    def cells(self, humans: Sequence[int] | None = None, n_robots: int = 3) -> tuple[Cell, ...]:
+    def cells(self, humans: Sequence[int] | None = None, n_robots: int = PAPER_ROBOTS) -> tuple[Cell, ...]:
         """Cells in table order: for each number of humans, every method."""
         return tuple(
             Cell(label, spec, n, n_robots, self.method_worlds.get(label, self.world))
@@ -232,7 +233,7 @@ class Experiment:
         *,
         humans: Sequence[int] | None = None,
         seed: int = 0,
-        n_robots: int = 3,
+        n_robots: int = PAPER_ROBOTS,
     ) -> list[EpisodeTask]:
         """Every episode of the sweep, episode index by episode index across the cells: at any moment of a
         sweep every cell has run (about) the same crowds, so a sweep stopped early still gives a whole table
@@ -277,14 +278,9 @@ def swap_predictors(available: Collection[str] = ()) -> tuple[str, ...]:
     return tuple(name for name in SWAP_PREDICTORS if name not in LATER_SWAP_PREDICTORS or name in available)
 
 
-ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)
+ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)  # the middle of the paper's range
 # The controllers experiment's default columns: the paper's two and the baselines.
-SHIPPED_CONTROLLERS: Final[tuple[str, ...]] = (
-    "cmpc",
-    "dmpc",
-    "orca",
-    "straight",
-)  # the middle of the paper's range
+SHIPPED_CONTROLLERS: Final[tuple[str, ...]] = ("cmpc", "dmpc", "orca", "straight")
 
 
 def _coupled(mode: str) -> ControllerSpec:

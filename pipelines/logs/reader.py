@@ -33,6 +33,7 @@ from mcap.records import Channel as McapChannel
 from mcap.records import Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
+from crowdsim.world import DT, RADIUS
 from pipelines.errors import PipelineError
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
@@ -397,7 +398,9 @@ def _episode_view(rec: Recording) -> EpisodeView:
     m, n = len(robots[0]["positions"]), len(humans[0]["positions"])
     ep = rec.episode()
     times = np.array([r["time"] for r in robots], dtype=float)
-    dt = float(ep["dt"]) if "dt" in ep else float(np.median(np.diff(times))) if len(times) > 1 else 0.4
+    # The "episode" record may lack dt or radius (a log from another writer, or a value that does not parse,
+    # which Recording.episode drops): the recorded times tell dt, else both are the default world's.
+    dt = float(ep["dt"]) if "dt" in ep else float(np.median(np.diff(times))) if len(times) > 1 else DT
     plans = {p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")}
     if any(len(plan) != m for plan in plans.values()):
         raise ValueError(f"a /mpc/plan is not for {m} robots")
@@ -416,5 +419,5 @@ def _episode_view(rec: Recording) -> EpisodeView:
             for p in rec.data("/mpc/prediction")
         },
         dt=dt,
-        radius=float(ep.get("radius", 0.3)),
+        radius=float(ep.get("radius", RADIUS)),
     )

@@ -20,6 +20,7 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
@@ -91,7 +92,7 @@ def run_episode(
     seed: int,
     scenario: str,
     n_humans: int,
-    n_robots: int = 3,
+    n_robots: int = PAPER_ROBOTS,
     env_config: EnvConfig = DEFAULT_ENV,
     observers: Sequence[EpisodeObserver] = (),
     meta: Mapping[str, Any] | None = None,
@@ -170,7 +171,7 @@ def run_episodes(
     seed: int,
     scenario: str,
     n_humans: int,
-    n_robots: int = 3,
+    n_robots: int = PAPER_ROBOTS,
     observers_factory: Callable[[], Iterable[EpisodeObserver]] | None = None,
     progress: bool = True,
     env_config: EnvConfig = DEFAULT_ENV,

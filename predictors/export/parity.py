@@ -11,6 +11,7 @@ import casadi as ca
 import numpy as np
 import torch
 
+from crowdsim.world import DT
 from predictors.export.errors import ExportError
 from predictors.threads import single_threaded
 
@@ -56,11 +57,11 @@ def crossing_scene(
     n = n_humans + n_robots
     start = rng.uniform(-3.0, 3.0, (n, 2))
     velocity = rng.normal(0.0, 1.0, (n, 2))
-    steps = np.arange(obs_len)[:, None, None] * 0.4
+    steps = np.arange(obs_len)[:, None, None] * DT
     history = start[None] + steps * velocity[None] + rng.normal(0.0, 0.02, (obs_len, n, 2))
     future = (
         history[-1, n_humans:][None]
-        + (np.arange(1, horizon + 1)[:, None, None] * 0.4) * velocity[None, n_humans:]
+        + (np.arange(1, horizon + 1)[:, None, None] * DT) * velocity[None, n_humans:]
     )
     return history, np.ones((obs_len, n), dtype=bool), np.arange(n_humans), future
 

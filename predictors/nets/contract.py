@@ -38,6 +38,7 @@ from typing import Any, ClassVar, Final, Literal, Protocol, runtime_checkable
 
 import torch
 
+from crowdsim.world import DT
 from predictors.errors import PredictorError, short_repr
 from predictors.threads import single_threaded
 
@@ -72,7 +73,7 @@ def synthetic_scene(
     """``(positions (B, length, N, 2), mask (B, length, N))``: agents walking straight lines within a couple
     of metres of each other (pooling range), all observed. Deterministic: checking a net draws no random
     numbers, so a seeded training run trains the same weights with the check as without it."""
-    steps = torch.arange(length, dtype=dtype, device=device)[None, :, None, None] * 0.4
+    steps = torch.arange(length, dtype=dtype, device=device)[None, :, None, None] * DT
     start = torch.tensor([[-1.5, 0.3], [1.5, -0.2], [0.2, -1.6]], dtype=dtype, device=device)
     velocity = torch.tensor([[0.9, 0.0], [-0.9, 0.1], [0.1, 0.8]], dtype=dtype, device=device)
     shift = torch.arange(CHECK_BATCH, dtype=dtype, device=device)[:, None, None, None] * 0.1
