@@ -1,0 +1,191 @@
+"""Lightning's part of ``crowdmpc train``, once every option has been checked: fit (or resume), save the best
+epoch as NAME.pt + NAME.json, evaluate it and write NAME.metrics.json. Lightning and torch are imported only
+when a run starts (Lightning prints a banner)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+
+def run_training(
+    args: argparse.Namespace,
+    net_config: Any,
+    name: str,
+    out: Path,
+    data_files: tuple[dict, Path | None],
+    settings: dict[str, Any],
+) -> int:
+    """Lightning's part of ``train.run``, once every option has been checked."""
+    from pipelines.commands.train_report import print_summary
+    from predictors.models import model_kind
+    from predictors.training import OptimConfig
+
+    optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
+    _prepare_process(args.seed)
+    module, best_path, elapsed = _fit(args, net_config, name, out, data_files[0], settings, optim)
+    weights, extra = _save_best(args, module, name, out, best_path, optim)
+    top_k = 20 if model_kind(args.model).adversarial else None
+    summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k)
+    (out / f"{name}.metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print_summary(summary, Path(best_path).name, weights, top_k)
+    return 0
+
+
+def _prepare_process(seed: int) -> None:
+    """One torch thread, Lightning's warnings a user can do nothing about silenced, every seed set."""
+    import warnings
+
+    import lightning as L
+    import torch
+
+    # Tiny tensors on a shared CPU: one thread is faster than torch's pool, which spin-waits for cores.
+    torch.set_num_threads(1)
+    warnings.filterwarnings("ignore", message=".*does not have many workers.*")
+    warnings.filterwarnings("ignore", message=".*Checkpoint directory.*exists and is not empty.*")
+    # Lightning 2.6's own use of a torch pytree API that torch 2.13 deprecates: nothing a user can act on.
+    warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)", category=FutureWarning)
+    for logger in ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero"):
+        logging.getLogger(logger).addFilter(_no_advertising)
+    L.seed_everything(seed, workers=True, verbose=False)
+
+
+def _fit(
+    args: argparse.Namespace,
+    net_config: Any,
+    name: str,
+    out: Path,
+    files: dict,
+    settings: dict[str, Any],
+    optim: Any,
+) -> tuple[Any, str, float]:
+    """Fits (or resumes) the run; returns the module holding the best epoch's weights, that checkpoint's
+    path and the fit's wall time."""
+    import torch
+
+    from predictors.data.datamodule import TrajnetDataModule
+    from predictors.training import make_module
+
+    ckpt_dir = out / "checkpoints"
+    last = ckpt_dir / "last.ckpt"
+    data = TrajnetDataModule(
+        files["train"], files["val"], files["test"], batch_size=args.batch_size, seed=args.seed
+    )
+    module = make_module(args.model, net_config, optim)
+    trainer, best = _trainer(args, out, ckpt_dir)
+    if not args.resume:
+        from pipelines.commands.train_resume import SETTINGS_FILE
+
+        out.mkdir(parents=True, exist_ok=True)
+        (out / SETTINGS_FILE).write_text(json.dumps({**settings, "name": name}, indent=2) + "\n")
+    started = time.perf_counter()
+    trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
+    elapsed = time.perf_counter() - started
+
+    best_path = best.best_model_path or str(last)
+    state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
+    module.load_state_dict(state)
+    return module, best_path, elapsed
+
+
+def _save_best(
+    args: argparse.Namespace, module: Any, name: str, out: Path, best_path: str, optim: Any
+) -> tuple[Path, dict[str, Any]]:
+    """Writes OUT/NAME.pt + NAME.json; returns the weights' path and the training record they carry."""
+    from pipelines.commands.train_report import trained_loss
+    from predictors.base import OBS_LEN
+    from predictors.checkpoint import save_checkpoint
+
+    extra = {
+        "training": {
+            "epochs": args.epochs,
+            "best_checkpoint": Path(best_path).name,
+            "seed": args.seed,
+            "batch_size": args.batch_size,
+            "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
+        }
+    }
+    weights, _ = save_checkpoint(
+        module.net, model=args.model, name=name, out_dir=out, obs_len=OBS_LEN, extra=extra
+    )
+    return weights, extra
+
+
+def _summary(
+    args: argparse.Namespace,
+    name: str,
+    out: Path,
+    data_files: tuple[dict, Path | None],
+    weights: Path,
+    extra: dict[str, Any],
+    elapsed: float,
+    top_k: int | None,
+) -> dict[str, Any]:
+    """NAME.metrics.json: the saved net's split metrics, the data it was trained on and the run's times."""
+    from pipelines.commands.train_report import data_record, epoch_times_from_csv, evaluate_splits
+    from pipelines.version import code_identity
+    from predictors.checkpoint import load_checkpoint
+
+    files, root = data_files
+    protocol = "custom" if args.train is not None or args.val is not None else args.protocol
+    metrics = evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
+    # every version: a resumed run logs into a new one (Lightning's CSVLogger), its first epochs in the old
+    epoch_times = [
+        t for log_dir in sorted((out / "csv").glob("version_*")) for t in epoch_times_from_csv(log_dir)
+    ]
+    return {
+        "name": name,
+        "model": args.model,
+        "code": code_identity(),
+        "protocol": protocol,
+        "training_data": data_record(files, root, protocol),
+        "metrics": metrics,
+        "training": {
+            **extra["training"],
+            "wall_time_s": round(elapsed, 1),
+            "median_epoch_time_s": round(sorted(epoch_times)[len(epoch_times) // 2], 2)
+            if epoch_times
+            else None,
+            "threads": 1,
+        },
+    }
+
+
+def _no_advertising(record: logging.LogRecord) -> bool:
+    """Drop Lightning's "Tip: try installing litlogger / litmodels" lines (cloud services, not training)."""
+    return not str(record.msg).startswith("💡 Tip")
+
+
+def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any]:
+    """Lightning's trainer and the callback that keeps the best checkpoint by validation ADE."""
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
+
+    best = ModelCheckpoint(
+        dirpath=ckpt_dir,
+        filename="best-{epoch:03d}-{val_ade:.4f}",
+        monitor="val_ade",
+        mode="min",
+        save_last=True,
+        save_top_k=1,
+    )
+    trainer = L.Trainer(
+        max_epochs=args.epochs,
+        accelerator="cpu",
+        devices=1,
+        logger=[
+            CSVLogger(out, name="csv"),
+            TensorBoardLogger(out, name="tensorboard", default_hp_metric=False),
+        ],
+        callbacks=[best],
+        deterministic=True,
+        enable_progress_bar=not args.no_progress,
+        enable_model_summary=False,
+        log_every_n_steps=5,
+    )
+    return trainer, best
