@@ -12,8 +12,9 @@ from pipelines.commands.sweep_plan import check_margins, check_predictors, check
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
-    from pipelines.config import Option
-    from pipelines.experiments.cells import Experiment
+    from pipelines.config import Option, RunConfig
+    from pipelines.experiments.cells import Cell, EpisodeTask, Experiment
+    from pipelines.experiments.sweep import SweepConfig
 
 EPILOG = """examples:
   crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
@@ -274,12 +275,37 @@ def _jit_pays(cells, episodes_per_cell: int) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.config import command_config
-    from pipelines.experiments.log import EPISODES_FILE, check_sweep_directory, episode_log
-    from pipelines.experiments.report import write_report
-    from pipelines.experiments.sweep import SweepConfig, run_sweep
+    from pipelines.experiments.log import EPISODES_FILE
 
-    # Every number and name is checked here (pipelines/config), before anything is written or started.
+    cfg, out = _checked_config(args)
+    config = _sweep_config(args, cfg, out)
+    experiment = config.experiment
+    tasks = config.tasks()
+    cells = experiment.cells(config.humans, config.n_robots)
+    if args.dry_run:
+        check_predictors(experiment)  # a plan whose every episode would fail is not fine
+        print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
+        for cell in cells:
+            print(f"  {cell.method:>22}  {cell.n_humans} humans  {cell.key}")
+        return 0
+
+    status = 0
+    if not args.report_only:
+        check_predictors(experiment)
+        check_margins(experiment)
+        status = _run_cells(config)
+    elif not (out / EPISODES_FILE).exists():
+        raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
+    _report(config, cells, tasks)
+    return status
+
+
+def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
+    """The run's configuration and its --out, every number and name checked (pipelines/config) before
+    anything is written or started."""
+    from pipelines.config import command_config
+    from pipelines.experiments.log import check_sweep_directory
+
     cfg = command_config(args, _options())
     settings = cfg.sweep
     for key in ("experiment", "out"):
@@ -290,8 +316,15 @@ def run(args: argparse.Namespace) -> int:
         check_writable(out, cfg.label("sweep", "out"), directory=True)
         check_sweep_directory(out, cfg.label("sweep", "out"))
     check_world(cfg)
+    return cfg, out
+
+
+def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepConfig:
+    from pipelines.experiments.sweep import SweepConfig
+
+    settings = cfg.sweep
     experiment = configured_experiment(cfg)
-    config = SweepConfig(
+    return SweepConfig(
         experiment=experiment,
         out=out,
         episodes_per_cell=settings.episodes_per_cell,
@@ -315,47 +348,48 @@ def run(args: argparse.Namespace) -> int:
         ),
         run_config={"config_file": cfg.path, **cfg.effective()},
     )
-    tasks = config.tasks()
-    cells = experiment.cells(config.humans, config.n_robots)
-    if args.dry_run:
-        check_predictors(experiment)  # a plan whose every episode would fail is not fine
-        print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
-        for cell in cells:
-            print(f"  {cell.method:>22}  {cell.n_humans} humans  {cell.key}")
-        return 0
+
+
+def _run_cells(config: SweepConfig) -> int:
+    """Runs the episodes not yet recorded and says how it went; returns the exit status (1: some episodes
+    raised, 130: interrupted)."""
+    from pipelines.experiments.sweep import run_sweep
 
     status = 0
-    if not args.report_only:
-        check_predictors(experiment)
-        check_margins(experiment)
-        outcome = run_sweep(config)
-        done = outcome.already_done + outcome.ran
-        rate = (
-            f", {outcome.episodes_per_minute:.1f} episodes/min; "
-            f"{outcome.steady_episodes_per_minute:.1f} after {outcome.startup_s:.1f} s of worker start-up"
-            if outcome.ran
-            else ""
-        )
+    outcome = run_sweep(config)
+    done = outcome.already_done + outcome.ran
+    rate = (
+        f", {outcome.episodes_per_minute:.1f} episodes/min; "
+        f"{outcome.steady_episodes_per_minute:.1f} after {outcome.startup_s:.1f} s of worker start-up"
+        if outcome.ran
+        else ""
+    )
+    print(
+        f"{config.experiment.name}: {done}/{outcome.planned} episodes recorded ({outcome.ran} this run in "
+        f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})",
+        file=sys.stderr,
+    )
+    if outcome.errors:
         print(
-            f"{experiment.name}: {done}/{outcome.planned} episodes recorded ({outcome.ran} this run in "
-            f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})",
+            f"{len(outcome.errors)} episodes raised; see {config.out / 'errors.jsonl'} (a rerun retries)",
             file=sys.stderr,
         )
-        if outcome.errors:
-            print(
-                f"{len(outcome.errors)} episodes raised; see {out / 'errors.jsonl'} (a rerun retries)",
-                file=sys.stderr,
-            )
-            status = 1
-        if outcome.interrupted:
-            print("interrupted: rerun the same command to resume", file=sys.stderr)
-            status = 130
-    elif not (out / EPISODES_FILE).exists():
-        raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
+        status = 1
+    if outcome.interrupted:
+        print("interrupted: rerun the same command to resume", file=sys.stderr)
+        status = 130
+    return status
 
+
+def _report(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> None:
+    """Tabulates the planned episodes recorded in --out and projects the plan's CPU time."""
+    from pipelines.experiments.log import episode_log
+    from pipelines.experiments.report import write_report
+
+    out = config.out
     planned = {t.key for t in tasks}
     records = [r for key, r in episode_log(out).load(repair=False).items() if key in planned]
-    report = write_report(out, experiment, cells, records)
+    report = write_report(out, config.experiment, cells, records)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
     cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]
@@ -369,4 +403,3 @@ def run(args: argparse.Namespace) -> int:
             f"{hours:.2f} CPU-hours: {hours / k:.2f} h for {k} workers on {k} free cores",
             file=sys.stderr,
         )
-    return status
