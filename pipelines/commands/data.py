@@ -33,7 +33,12 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     actions = parser.add_subparsers(dest="data_command", metavar="ACTION", required=True)
+    _register_prepare(actions)
+    _register_stats(actions)
+    _register_synth(actions)
 
+
+def _register_prepare(actions) -> None:
     prepare = actions.add_parser(
         "prepare",
         help="raw EWAP obsmat.txt -> TrajNet++ train/val/test ndjson",
@@ -65,6 +70,8 @@ def register(subparsers) -> None:
     )
     prepare.set_defaults(func=run_prepare)
 
+
+def _register_stats(actions) -> None:
     stats = actions.add_parser(
         "stats",
         help="scenes, tracks, pedestrians and agents per scene of every ndjson file in a directory",
@@ -76,6 +83,8 @@ def register(subparsers) -> None:
     stats.add_argument("directory", type=Path, help="directory searched recursively for *.ndjson")
     stats.set_defaults(func=run_stats)
 
+
+def _register_synth(actions) -> None:
     synth = actions.add_parser(
         "synth",
         help="simulate ORCA crowds and write them as TrajNet++ scenes",
