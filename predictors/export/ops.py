@@ -149,25 +149,31 @@ SHAPING: dict[str, Callable[..., Any]] = {
 
 def register() -> None:
     """Enter every supported operation in the dispatch tables (idempotent: the tables are dicts)."""
-    for name, op in ELEMENTWISE.items():
-        handler = unary(op)
-        METHODS[name] = handler
-        for owner in (torch, torch.Tensor):
-            if hasattr(owner, name):
-                HANDLERS[getattr(owner, name)] = handler
-        if hasattr(F, name):
-            HANDLERS[getattr(F, name)] = handler
-    for name, op in BINARY.items():
-        METHODS[name] = op
-        for owner in (torch, torch.Tensor):
-            if hasattr(owner, name):
-                HANDLERS[getattr(owner, name)] = op
-    for name, op in SHAPING.items():
-        METHODS[name] = op
-        for owner in (torch, torch.Tensor):
-            if hasattr(owner, name):
-                HANDLERS[getattr(owner, name)] = op
-    dunder: dict[str, Callable[..., Any]] = {
+    # Named operations: a method of SymTensor, and a handler for each owner that has one of that name
+    # (only the element-wise ones are also in torch.nn.functional).
+    tables: tuple[tuple[dict[str, Callable[..., Any]], tuple[Any, ...], Callable[..., Any] | None], ...] = (
+        (ELEMENTWISE, (torch, torch.Tensor, F), unary),
+        (BINARY, (torch, torch.Tensor), None),
+        (SHAPING, (torch, torch.Tensor), None),
+    )
+    for table, owners, wrap in tables:
+        for name, op in table.items():
+            handler = wrap(op) if wrap is not None else op
+            METHODS[name] = handler
+            for owner in owners:
+                if hasattr(owner, name):
+                    HANDLERS[getattr(owner, name)] = handler
+    for name, op in _operators().items():
+        setattr(SymTensor, name, op)
+        HANDLERS[getattr(torch.Tensor, name)] = op
+    # after the named ones: these reuse the handler registered for torch.relu
+    HANDLERS.update(_functions())
+    METHODS.update(_methods())
+
+
+def _operators() -> dict[str, Callable[..., Any]]:
+    """Python's operators on tensors (``a + b``, ``x[i]``, ``a < b``); reflected ones swap the operands."""
+    return {
         "__add__": add,
         "__radd__": lambda a, b: add(b, a),
         "__sub__": sub,
@@ -196,51 +202,52 @@ def register() -> None:
         "__le__": BINARY["le"],
         "__lt__": BINARY["lt"],
     }
-    for name, op in dunder.items():
-        setattr(SymTensor, name, op)
-        HANDLERS[getattr(torch.Tensor, name)] = op
-    HANDLERS.update(
-        {
-            torch.cat: cat,
-            torch.concat: cat,
-            torch.concatenate: cat,
-            torch.stack: stack,
-            torch.where: where,
-            torch.einsum: einsum,
-            torch.zeros_like: zeros_like,
-            torch.ones_like: ones_like,
-            torch.full_like: full_like,
-            torch.Tensor.to: to,
-            torch.Tensor.type_as: lambda x, other: to(x, other.dtype),
-            F.linear: linear,
-            F.relu: HANDLERS[torch.relu],
-            F.gelu: gelu,
-            F.softplus: softplus,
-            F.leaky_relu: leaky_relu,
-            F.softmax: softmax,
-            F.log_softmax: log_softmax,
-            F.layer_norm: layer_norm,
-            F.scaled_dot_product_attention: scaled_dot_product_attention,
-            F.dropout: dropout,
-            torch.Tensor.detach: identity,
-            torch.Tensor.contiguous: identity,
-            torch.Tensor.clone: identity,
-        }
-    )
-    METHODS.update(
-        {
-            "to": to,
-            "float": lambda x: as_float(x),
-            "double": lambda x: as_float(x),
-            "bool": lambda x: to(x, torch.bool),
-            "type_as": lambda x, other: to(x, other.dtype),
-            "detach": identity,
-            "contiguous": identity,
-            "clone": identity,
-            "new_zeros": new_constant(torch.zeros),
-            "new_ones": new_constant(torch.ones),
-            "new_full": new_full,
-            "add": add,
-            "relu": HANDLERS[torch.relu],
-        }
-    )
+
+
+def _functions() -> dict[Any, Callable[..., Any]]:
+    """Torch functions and tensor methods outside the named tables, keyed by the callable itself."""
+    return {
+        torch.cat: cat,
+        torch.concat: cat,
+        torch.concatenate: cat,
+        torch.stack: stack,
+        torch.where: where,
+        torch.einsum: einsum,
+        torch.zeros_like: zeros_like,
+        torch.ones_like: ones_like,
+        torch.full_like: full_like,
+        torch.Tensor.to: to,
+        torch.Tensor.type_as: lambda x, other: to(x, other.dtype),
+        F.linear: linear,
+        F.relu: HANDLERS[torch.relu],
+        F.gelu: gelu,
+        F.softplus: softplus,
+        F.leaky_relu: leaky_relu,
+        F.softmax: softmax,
+        F.log_softmax: log_softmax,
+        F.layer_norm: layer_norm,
+        F.scaled_dot_product_attention: scaled_dot_product_attention,
+        F.dropout: dropout,
+        torch.Tensor.detach: identity,
+        torch.Tensor.contiguous: identity,
+        torch.Tensor.clone: identity,
+    }
+
+
+def _methods() -> dict[str, Callable[..., Any]]:
+    """Tensor methods beyond the named tables: conversions, copies, and constructors of new tensors."""
+    return {
+        "to": to,
+        "float": lambda x: as_float(x),
+        "double": lambda x: as_float(x),
+        "bool": lambda x: to(x, torch.bool),
+        "type_as": lambda x, other: to(x, other.dtype),
+        "detach": identity,
+        "contiguous": identity,
+        "clone": identity,
+        "new_zeros": new_constant(torch.zeros),
+        "new_ones": new_constant(torch.ones),
+        "new_full": new_full,
+        "add": add,
+        "relu": HANDLERS[torch.relu],
+    }
