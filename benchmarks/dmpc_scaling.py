@@ -233,6 +233,17 @@ def replay(n_robots: int, n_humans: int, rule: str, reps: int, extra: Overrides 
 
 
 def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    extra = _checked(parser, args)
+    report = _measure(args, extra)
+    _print_report(report, args, extra)
+    if args.json:
+        write_json(args.json, report)
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -251,21 +262,30 @@ def main(argv: list[str] | None = None) -> int:
         help="an [mpc] value as `crowdmpc --set mpc.KEY=VALUE` takes it, e.g. cost_scale=0.01 (repeatable)",
     )
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _checked(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Overrides:
+    """The ``--mpc`` overrides, once every number and rule of the command line has been checked (a bad one
+    ends the script through ``parser.error`` before any episode)."""
     if args.episodes < 1 or args.replay_reps < 1:
         parser.error(f"--episodes and --replay-reps must be >= 1, got {args.episodes}, {args.replay_reps}")
     try:
         extra = mpc_overrides(args.mpc)
     except PipelineError as exc:  # ConfigError and the other errors a value can cause
         parser.error(f"--mpc: {exc}")
-
-    report: dict[str, Any] = {"load_before": os.getloadavg(), "cpus": os.cpu_count(), "cells": {}}
-    report["mpc"] = dict(extra)
-    t_start = time.perf_counter()
     for rule in args.rules:
         update, _, stop = rule.partition(":")
         if update not in DMPC_UPDATES or stop not in DMPC_STOPS:
             parser.error(f"rule {rule!r}: UPDATE:STOP with UPDATE in {DMPC_UPDATES}, STOP in {DMPC_STOPS}")
+    return extra
+
+
+def _measure(args: argparse.Namespace, extra: Overrides) -> dict[str, Any]:
+    """Every (M, rule) cell, with the load and wall time around them."""
+    report: dict[str, Any] = {"load_before": os.getloadavg(), "cpus": os.cpu_count(), "cells": {}}
+    report["mpc"] = dict(extra)
+    t_start = time.perf_counter()
     for m in args.robots:
         for rule in args.rules:
             key = f"r{m} {rule}"
@@ -277,7 +297,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"done {key} ({time.perf_counter() - t_start:.0f} s, load {cell['load']:.2f})", flush=True)
     report["load_after"] = os.getloadavg()
     report["wall_s"] = time.perf_counter() - t_start
+    return report
 
+
+def _print_report(report: dict[str, Any], args: argparse.Namespace, extra: Overrides) -> None:
     print(
         f"DMPC, {PREDICTOR}, circle crossing, {args.humans} humans, {args.episodes} episodes per row, "
         f"{report['cpus']} CPUs" + "".join(f", {k}={v}" for k, v in extra)
@@ -321,9 +344,6 @@ def main(argv: list[str] | None = None) -> int:
                     f"x{rp['bound_longest_first']:.2f} longest first"
                 )
             print(line)
-    if args.json:
-        write_json(args.json, report)
-    return 0
 
 
 if __name__ == "__main__":
