@@ -341,9 +341,6 @@ class RunConfig:
     sources: Mapping[tuple[str, str], Source]  # (section, key) -> where a chosen value came from
     path: str | None = None  # the config file, if any
 
-    def is_set(self, section: str, key: str) -> bool:
-        return (section, key) in self.sources
-
     def source(self, section: str, key: str) -> Source | None:
         return self.sources.get((section, key))
 

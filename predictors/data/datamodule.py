@@ -11,7 +11,6 @@ import torch
 from torch.utils.data import DataLoader
 
 from predictors.base import OBS_LEN, PRED_LEN
-from predictors.data.locate import protocol_files
 from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 
@@ -59,13 +58,6 @@ class TrajnetDataModule(L.LightningDataModule):
                 "pred_len": pred_len,
             }
         )
-
-    @classmethod
-    def from_protocol(
-        cls, data_dir: str | Path | None, protocol: str = "paper", dataset: str = "biwi_eth", **kwargs
-    ) -> TrajnetDataModule:
-        files = protocol_files(data_dir, protocol, dataset)
-        return cls(files["train"], files["val"], files["test"], **kwargs)
 
     def _dataset(self, split: str) -> TrajnetSceneDataset:
         if split not in self.datasets:

@@ -16,19 +16,13 @@ import torch
 from torch import nn
 
 from predictors.errors import PredictorError, short_repr
-from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.nets.social_lstm import SocialLSTMConfig
 
 
 def generator_config(pooling: str = "soft", noise_dim: int = 8, **overrides) -> SocialLSTMConfig:
     if noise_dim < 1:
         raise PredictorError(f"a generator needs noise_dim >= 1, got {noise_dim}")
     return SocialLSTMConfig(pooling=pooling, noise_dim=noise_dim, head="point", **overrides)
-
-
-def make_generator(config: SocialLSTMConfig) -> SocialLSTM:
-    if config.noise_dim < 1 or config.head != "point":
-        raise PredictorError(f"a generator needs noise_dim >= 1 and head 'point', got {config}")
-    return SocialLSTM(config)
 
 
 @dataclass(frozen=True)
