@@ -42,12 +42,47 @@ def test_values_beyond_the_bounds_are_refused_in_one_compact_line(settings, mess
     assert str(exc.value) == message
 
 
-def test_the_extremes_accepted_keep_the_straight_controller_finite():
-    """The largest step, speeds and bounds allowed: one episode step stays finite (dt = 1e308 overflowed)."""
+def _extreme_env() -> tuple[CrowdEnv, dict[str, float]]:
     most = {name: bound for name, (bound, _) in ENV_BOUNDS.items() if name != "radius"}
-    env = CrowdEnv(EnvConfig(dt=most["time_limit"], timeout_margin=0.0, **most))
+    return CrowdEnv(EnvConfig(dt=most["time_limit"], timeout_margin=0.0, **most)), most
+
+
+def test_the_extremes_accepted_keep_the_straight_controller_finite():
+    """The largest step, speeds and bounds allowed: one episode step stays finite (dt = 1e308 overflowed) and
+    is the double integrator's: s' = s + tau^2/2 a, v' = tau a from rest, a within the bounds unclipped."""
+    env, most = _extreme_env()
     obs = env.reset(seed=0, scenario="circle", n_humans=5, n_robots=3)
     controller = StraightController(v_max=most["v_max"], a_max=most["a_max"])
-    obs, _, _ = env.step(controller.act(obs).accelerations)
+    a = controller.act(obs).accelerations
+    start = obs.robot_positions
+    obs, _, info = env.step(a)
     assert np.isfinite(obs.robot_positions).all() and np.isfinite(obs.human_positions).all()
+    tau = 86_400.0
+    # from rest the bounds are +-min(a_max, v_max / tau) = +-100 / 86400 m/s^2; the controller asks for
+    # about 2 x 10 m / tau^2 = 2.7e-9 m/s^2 north (a 10 m trip in one step), within them
+    assert np.abs(a).max() < 100 / tau and not info["clipped"].any()
+    np.testing.assert_array_equal(info["accelerations"], a)
+    np.testing.assert_allclose(obs.robot_positions, start + tau**2 / 2 * a, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(obs.robot_velocities, tau * a, rtol=1e-12, atol=0)
+    # so each robot lands (almost) on its goal 10 m north, at about 2 x 10 m / tau = 2.3e-4 m/s
+    np.testing.assert_allclose(obs.robot_positions, obs.robot_goals, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(obs.robot_velocities[:, 1], 20 / tau, rtol=1e-3)
     assert EnvConfig(dt=MIN_DT, time_limit=most["time_limit"]).max_steps > 0  # 8.6e10: still finite
+
+
+def test_the_extremes_clip_the_acceleration_to_the_speed_bound():
+    """tau = 86400 s, v_max = 100 m/s, a_max = 1000 m/s^2, from rest: each component of a is clipped to
+    +-v_max / tau = +-1/864 m/s^2 (the speed bound, far below a_max); then s' = s + tau^2/2 a, v' = tau a."""
+    env, _ = _extreme_env()
+    start = env.reset(seed=0, scenario="circle", n_humans=5, n_robots=3).robot_positions
+    asked = np.array([[1000.0, -1000.0], [5e-4, 0.0], [-1e-3, 2e-3]])
+    obs, _, info = env.step(asked)
+    applied = np.array([[1 / 864, -1 / 864], [5e-4, 0.0], [-1e-3, 1 / 864]])
+    np.testing.assert_allclose(info["accelerations"], applied, rtol=1e-15, atol=0)
+    assert info["clipped"].tolist() == [True, False, True]
+    # v' = 86400 a: (100, -100), (43.2, 0), (-86.4, 100) m/s
+    velocities = [[100.0, -100.0], [43.2, 0.0], [-86.4, 100.0]]
+    np.testing.assert_allclose(obs.robot_velocities, velocities, rtol=1e-12, atol=0)
+    # s' - s = 86400^2 / 2 a: 4.32e6 m at the bound, 1866240 m for 5e-4, -3732480 m for -1e-3
+    moved = [[4.32e6, -4.32e6], [1_866_240.0, 0.0], [-3_732_480.0, 4.32e6]]
+    np.testing.assert_allclose(obs.robot_positions - start, moved, rtol=1e-12, atol=1e-6)
