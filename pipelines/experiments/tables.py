@@ -63,9 +63,9 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         f"Ours: {per_cell} episodes per cell, "
         "half circle and half perpendicular crossing, the same seeds in every cell; "
         f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
-        "interval in brackets; travel time over successful episodes ± the 95% interval of its mean. "
-        "Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) this method "
-        "succeeded and the first one failed / the reverse, with the exact McNemar p-value.",
+        "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "
+        "(Student's t). Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) "
+        "this method succeeded and the first one failed / the reverse, with the exact McNemar p-value.",
         world_line,
     ]
     if any(s.paper for s in columns):

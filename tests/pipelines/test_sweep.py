@@ -29,7 +29,7 @@ from pipelines.experiments.cells import (
 )
 from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, sweep_lock
 from pipelines.experiments.report import CELLS_CSV, write_report
-from pipelines.experiments.summary import summarize, wilson_interval
+from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
 from pipelines.experiments.sweep import SweepConfig, mcap_path, run_sweep
 from pipelines.experiments.tables import markdown_table, mcnemar_exact
 from pipelines.experiments.worker import EpisodeWorker, is_failure
@@ -160,6 +160,23 @@ def test_wilson_interval_hand_values(k, n, lo, hi):
 def test_mcnemar_exact_hand_values(b, c, p):
     assert mcnemar_exact(b, c) == pytest.approx(p)
     assert mcnemar_exact(c, b) == pytest.approx(p)
+
+
+@pytest.mark.parametrize(  # two-sided 95% quantiles of Student's t, from the standard tables
+    ("dof", "t"),
+    [(1, 12.7062), (2, 4.3027), (3, 3.1824), (4, 2.7764), (5, 2.5706), (10, 2.2281), (30, 2.0423),
+     (120, 1.9799), (1000, 1.9623), (1001, 1.9623), (10**6, 1.9600)],
+)  # fmt: skip
+def test_t95_hand_values(dof, t):
+    assert t95(dof) == pytest.approx(t, abs=5e-5)
+
+
+def test_the_travel_time_interval_is_students_t():
+    # two successes, 10 s and 20 s: standard error 5 s, times t95(1) = 12.706 (a normal one would say 9.8)
+    assert _half_width([10.0, 20.0]) == pytest.approx(63.531, abs=1e-3)
+    assert math.isnan(_half_width([10.0]))
+    with pytest.raises(PipelineError, match="at least one degree of freedom"):
+        t95(0)
 
 
 def test_wilson_interval_edges():
@@ -472,8 +489,9 @@ def test_markdown_table_is_laid_out_like_the_paper():
         "| 100.0 [51.0, 100.0] | 100.0 [51.0, 100.0] |"
     )
     assert table[4] == "| &nbsp;&nbsp;paper | **94.0** | 93.4 | **91.9** | 91.8 |"
-    # Mean of 18, 20, 19 = 19.0; sample sd 1.0 -> 1.96 / sqrt(3) = 1.1. One success: no interval.
-    assert table[5] == "| Average travel time (s) | **19.0 ± 1.1** | 21.0 | 18.0 ± 0.0 | 18.0 ± 0.0 |"
+    # Mean of 18, 20, 19 = 19.0; sample sd 1.0 -> t95(2) / sqrt(3) = 4.303 / 1.732 = 2.5. One success: no
+    # interval.
+    assert table[5] == "| Average travel time (s) | **19.0 ± 2.5** | 21.0 | 18.0 ± 0.0 | 18.0 ± 0.0 |"
     assert table[6] == "| &nbsp;&nbsp;paper | **17.9** | 18.1 | **18.6** | 18.7 |"
     assert table[7].startswith(
         "| Collision rate (%) | 25.0 [4.6, 69.9] | 25.0 [4.6, 69.9] | 0.0 [0.0, 49.0] |"
