@@ -110,7 +110,11 @@ def score_scene(
     prediction = np.round(prediction, 2)
     truth_primary = track_rows(truth[obs_len:, 0], future)
     if len(truth_primary) != horizon:
-        raise ValueError("the primary pedestrian must be present at every predicted step")
+        absent = [int(f) for f, xy in zip(future, truth[obs_len:, 0], strict=True) if np.isnan(xy).any()]
+        raise ValueError(
+            "the primary pedestrian (agent 0) must be present at every predicted step; it is absent at "
+            f"frame {absent[0]} ({len(absent)} of {horizon} predicted frames: {absent})"
+        )
     primary = track_rows(prediction[:, 0], future)
     ade_value = tt_metrics.average_l2(truth_primary, primary, n_predictions=horizon)
     fde_value = tt_metrics.final_l2(truth_primary, primary)

@@ -91,14 +91,31 @@ def _check_tracks(tracks: np.ndarray) -> np.ndarray:
     tracks = np.asarray(tracks, dtype=np.float64)
     if tracks.ndim != 2 or tracks.shape[1] != 4:
         raise ValueError(f"tracks must have shape (R, 4) [frame, ped_id, x, y], got {tracks.shape}")
-    if not np.all(np.isfinite(tracks)):
-        raise ValueError("tracks must be finite")
+    bad = np.flatnonzero(~np.isfinite(tracks).all(axis=1))
+    if bad.size:
+        raise ValueError(
+            f"tracks must be finite: tracks[{bad[0]}] = {tracks[bad[0]].tolist()} [frame, ped_id, x, y] "
+            f"({bad.size} of {len(tracks)} rows hold NaN or inf)"
+        )
     ids = tracks[:, :2]
-    if np.any(ids != np.round(ids)):
-        raise ValueError("frame and pedestrian ids in tracks must be integers")
+    bad = np.flatnonzero((ids != np.round(ids)).any(axis=1))
+    if bad.size:
+        raise ValueError(
+            f"frame and pedestrian ids in tracks must be integers: tracks[{bad[0]}] has frame "
+            f"{float(ids[bad[0], 0])!r}, pedestrian {float(ids[bad[0], 1])!r} ({bad.size} of {len(tracks)} "
+            "rows)"
+        )
     keys = ids.astype(np.int64)
-    if len(np.unique(keys, axis=0)) != len(keys):
-        raise ValueError("tracks hold duplicate (frame, pedestrian) rows")
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    first_of_key = first[inverse.ravel()]  # (R,) the first row with each row's (frame, pedestrian)
+    repeats = np.flatnonzero(first_of_key != np.arange(len(keys)))
+    if repeats.size:
+        row = repeats[0]
+        frame, ped = keys[row].tolist()
+        raise ValueError(
+            f"tracks hold {repeats.size} duplicate (frame, pedestrian) rows; the first is tracks[{row}]: "
+            f"frame {frame}, pedestrian {ped}, already at tracks[{first_of_key[row]}]"
+        )
     return tracks
 
 

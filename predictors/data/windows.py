@@ -158,12 +158,17 @@ def rotation_matrix(angle: float) -> np.ndarray:
     return np.asarray([[c, -s], [s, c]], dtype=np.float32)
 
 
-def normalise(xy: np.ndarray, obs_len: int, angle: float | None) -> SceneSample:
+def normalise(xy: np.ndarray, obs_len: int, angle: float | None, *, where: str | None = None) -> SceneSample:
     """Centre ``xy`` ``(T, N, 2)`` (NaN = absent) on the primary's position at step ``obs_len - 1`` and rotate
-    by ``angle`` (radians, counter-clockwise; None = no rotation)."""
+    by ``angle`` (radians, counter-clockwise; None = no rotation). ``where`` (e.g. the file and scene) starts
+    the error message."""
     mask = ~np.isnan(xy).any(axis=-1)
     if not mask[obs_len - 1, 0]:
-        raise PredictorError("the primary pedestrian must be present at the last observed step")
+        seen = np.flatnonzero(mask[:obs_len, 0]).tolist()
+        raise PredictorError(
+            f"{where + ': ' if where else ''}the primary pedestrian (agent 0) must be present at the last "
+            f"observed step {obs_len - 1}; it is absent there (observed at steps {seen} of 0..{obs_len - 1})"
+        )
     origin = xy[obs_len - 1, 0].astype(np.float32)
     rotation = rotation_matrix(angle) if angle is not None else np.eye(2, dtype=np.float32)
     positions = (np.where(mask[..., None], xy, origin) - origin) @ rotation.T
@@ -227,7 +232,12 @@ class TrajnetSceneDataset(Dataset):
         xy = xy[xy.shape[0] - (self.obs_len + self.pred_len) :]  # the prediction is always the scene's end
         present = ~np.isnan(xy).any(axis=-1).all(axis=0)  # drop agents absent from the whole window
         present[0] = True
-        return normalise(xy[:, present], self.obs_len, self._angle(index, epoch) if self.augment else None)
+        return normalise(
+            xy[:, present],
+            self.obs_len,
+            self._angle(index, epoch) if self.augment else None,
+            where=f"{self.files[k]}: scene {int(self.arrays[k].scene_ids[s])}",
+        )
 
 
 class EpochShuffle(Sampler[tuple[int, int]]):

@@ -75,6 +75,18 @@ def test_scene_scores_hand_computed():
     )  # neighbour unpredicted
 
 
+def test_a_primary_missing_from_the_truth_is_refused_naming_the_frames():
+    truth = walking_truth()
+    truth[[13, 17, 18], 0] = np.nan  # predicted steps 4, 8 and 9: frames 130, 170, 180
+    frames = np.arange(0, 210, 10)
+    with pytest.raises(ValueError) as refused:
+        score_scene(truth[9:, :1], [0], truth, frames, obs_len=9)
+    assert str(refused.value) == (
+        "the primary pedestrian (agent 0) must be present at every predicted step; it is absent at frame "
+        "130 (3 of 12 predicted frames: [130, 170, 180])"
+    )
+
+
 def test_top_k_takes_the_best_sample():
     truth = walking_truth()
     frames = np.arange(0, 210, 10)

@@ -114,6 +114,51 @@ def test_write_ndjson_refuses_a_scene_without_its_primary(tmp_path):
         write_ndjson(tmp_path / "x.ndjson", [SceneSpec(0, 5, 0, 200)], walkers())
 
 
+def _spoilt(kind):
+    """walkers() (row 2k + i: frame 10k, pedestrian i + 1 at (0.5k, i)) with bad rows from row 5 on."""
+    tracks = walkers()
+    if kind == "non-finite":
+        tracks[7, 2] = np.nan  # frame 30, pedestrian 2
+        tracks[9, 3] = np.inf
+    elif kind == "fractional":
+        tracks[5, 0] = 20.5  # frame 20, pedestrian 2
+    else:
+        tracks[6, 1] = 2  # frame 30, pedestrian 1 -> 2, as row 7
+        tracks[10, 0] = 10  # frame 50, pedestrian 1 -> frame 10, as row 2
+    return tracks
+
+
+@pytest.mark.parametrize(
+    ("kind", "message"),
+    [
+        (
+            "non-finite",
+            "tracks must be finite: tracks[7] = [30.0, 2.0, nan, 1.0] [frame, ped_id, x, y] "
+            "(2 of 50 rows hold NaN or inf)",
+        ),
+        (
+            "fractional",
+            "frame and pedestrian ids in tracks must be integers: tracks[5] has frame 20.5, pedestrian 2.0 "
+            "(1 of 50 rows)",
+        ),
+        (
+            "duplicate",
+            "tracks hold 2 duplicate (frame, pedestrian) rows; the first is tracks[7]: frame 30, "
+            "pedestrian 2, already at tracks[6]",
+        ),
+    ],
+)
+def test_bad_tracks_are_refused_naming_the_first_bad_row(tmp_path, kind, message):
+    tracks = _spoilt(kind)
+    with pytest.raises(ValueError) as built:
+        build_scenes(tracks, frame_step=10, categorize_scenes=False)
+    assert str(built.value) == message
+    with pytest.raises(ValueError) as written:
+        write_ndjson(tmp_path / "x.ndjson", [SceneSpec(0, 1, 0, 200)], tracks)
+    assert str(written.value) == message
+    assert not (tmp_path / "x.ndjson").exists()
+
+
 def test_split_frames_is_temporal_70_10_20():
     parts = split_frames(np.arange(0, 100, 10))
     assert parts["train"].tolist() == [0, 10, 20, 30, 40, 50, 60]

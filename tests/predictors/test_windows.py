@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import numpy as np
@@ -29,10 +30,33 @@ def test_normalise_centres_on_the_primary_and_rotates():
 
 
 def test_normalise_needs_the_primary_at_the_last_observed_step():
-    xy = np.zeros((3, 1, 2))
-    xy[1] = np.nan
-    with pytest.raises(PredictorError, match="last observed step"):
-        normalise(xy, obs_len=2, angle=None)
+    xy = np.zeros((4, 1, 2))
+    xy[2] = np.nan
+    with pytest.raises(PredictorError) as refused:
+        normalise(xy, obs_len=3, angle=None)
+    assert str(refused.value) == (
+        "the primary pedestrian (agent 0) must be present at the last observed step 2; it is absent there "
+        "(observed at steps [0, 1] of 0..2)"
+    )
+    with pytest.raises(PredictorError) as refused:
+        normalise(xy, obs_len=3, angle=None, where="f.ndjson: scene 4")
+    assert str(refused.value).startswith("f.ndjson: scene 4: the primary pedestrian (agent 0) must be")
+
+
+def test_a_dataset_item_without_its_primary_names_the_file_and_scene(tmp_path):
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    dataset = TrajnetSceneDataset([path])
+    arrays = dataset.arrays[0]
+    xy = arrays.xy.copy()  # the loaded arrays are cached for the process: spoil a copy
+    xy[8, arrays.offsets[1]] = np.nan  # scene 1's primary (pedestrian 2) at the last observed step
+    dataset.arrays[0] = dataclasses.replace(arrays, xy=xy)
+    dataset[0]  # scene 0 is untouched
+    with pytest.raises(PredictorError) as refused:
+        dataset[1]
+    assert str(refused.value) == (
+        f"{path}: scene 1: the primary pedestrian (agent 0) must be present at the last observed step 8; it "
+        "is absent there (observed at steps [0, 1, 2, 3, 4, 5, 6, 7] of 0..8)"
+    )
 
 
 def test_dataset_items_and_batches(tmp_path):
