@@ -117,7 +117,8 @@ class _Solver:
     personal space in 37.5 % of episodes against IPOPT's 10 %. Exploring with both, the 40 episodes give
     IPOPT's results (90 % success, 10 % collision, 16.97 s against 16.96 s travel) at Fatrop's speed.
 
-    IPOPT instances are built when first needed, compiled (``jit``) only when IPOPT is the solver.
+    The cold IPOPT is built with the solver (the first step needs it), the warm one when first needed (a
+    failed Fatrop solve); IPOPT is compiled (``jit``) only when it is the solver.
     ``ipopt_extra``: IPOPT-only settings the NLP needs (the coupled NLP's L-BFGS Hessian); they make IPOPT
     the solver. Separate ``_Solver`` objects of the same NLP can run in separate threads (CasADi releases
     the GIL during a call); one object must not be called from two threads at once (a solver's memory is
@@ -133,6 +134,10 @@ class _Solver:
         if self.primary == "fatrop":
             fatrop = build_nlpsol(name, "fatrop", nlp, fatrop_options(cfg), cfg.jit)
             self._fatrop = BufferedFunction(fatrop)
+            # every episode's first step explores with the cold IPOPT too: built here, with the NLP, not
+            # inside the first episode's first timed step (it made that step 2-5x an episode's later first
+            # steps)
+            self._ipopt(warm=False)
         else:
             self._ipopt(warm=False)
             if cfg.warm_start:

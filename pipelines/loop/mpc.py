@@ -241,12 +241,14 @@ class MPCController:
             raise PipelineError(
                 f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
             )
-        predictor_history(obs, self.model.obs_len)
+        history, mask = predictor_history(obs, self.model.obs_len)
         self._observe(obs)
-        # Build now, not inside the first timed step.
+        # Build now, not inside the first timed step: the solver, the twin, and the exported encoder, which
+        # its first call builds (80 ms for social_lstm_eth); that call's context is memoised for the first
+        # step, which encodes the same past.
         self.solver(obs.n_robots, obs.n_humans)
-        if self.spec.coupling != "nlp":
-            self._twin(obs.n_humans, obs.n_robots)
+        if self.spec.coupling == "nlp" or self._twin(obs.n_humans, obs.n_robots) is not None:
+            self.model.encode(history, mask, np.arange(obs.n_robots, obs.n_robots + obs.n_humans))
         self.memory.reset()
         if self.stall is not None:
             self.stall.reset()
