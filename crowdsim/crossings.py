@@ -26,16 +26,20 @@ paper (the authors' CrowdNav fork, ``crowd_sim/envs/crowd_sim.py``)
 
 ``scale`` (``crowdsim.scenarios.geometry_scale``) enlarges the circle radius, respectively the square's
 vertical extent, for crowds beyond 16 humans; it is 1 for the paper's crowd sizes.
+
+Each convention names the scenarios it samples (``_V1_CANDIDATES``, ``_PAPER_HUMANS``); any other name raises
+``SimulationError``, so a scenario added to ``crowdsim.scenarios.SCENARIOS`` without a sampler fails at reset
+instead of silently running another one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
-from crowdsim.errors import too_crowded
+from crowdsim.errors import SimulationError, too_crowded
 from crowdsim.world import CIRCLE_RADIUS, SQUARE_WIDTH
 
 PAPER_MAX_DRAWS: Final[int] = 100  # crowd_sim.py generate_square_crossing_human: `idx >= 100` gives up
@@ -76,6 +80,12 @@ def _clear(point: np.ndarray, placed: Points, min_dist: float) -> bool:
     return not placed or bool(np.linalg.norm(np.asarray(placed) - point, axis=1).min() >= min_dist)
 
 
+def _no_placer(crossing: str, scenario: str, known: dict[str, Any]) -> SimulationError:
+    return SimulationError(
+        f"crossing {crossing!r} has no sampler for scenario {scenario!r}; choose from {sorted(known)}"
+    )
+
+
 def place_humans_v1(
     scenario: str,
     n_humans: int,
@@ -89,7 +99,9 @@ def place_humans_v1(
     max_tries: int,
 ) -> tuple[Points, Points]:
     """Humans' starts and goals by the v1 rules (module docstring)."""
-    candidate = _V1_CANDIDATES[scenario]
+    candidate = _V1_CANDIDATES.get(scenario)
+    if candidate is None:
+        raise _no_placer("v1", scenario, _V1_CANDIDATES)
     taken = list(robot_starts) + list(robot_goals)
     starts: Points = []
     goals: Points = []
@@ -118,6 +130,56 @@ def _paper_goal_point(rng: np.random.Generator, start: np.ndarray) -> np.ndarray
     return np.array([gx, gy])
 
 
+def _paper_circle_human(
+    rng: np.random.Generator,
+    starts: Points,
+    goals: Points,
+    min_dist: float,
+    v_pref: float,
+    scale: float,
+    max_tries: int,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The fork's circle crossing: redraw until the start clears the placed starts and the goal the placed
+    goals; None after ``max_tries`` draws (the fork never gives up)."""
+    for _ in range(max_tries):
+        start, goal = circle_candidate(rng, v_pref, scale)
+        if _clear(start, starts, min_dist) and _clear(goal, goals, min_dist):
+            return start, goal
+    return None
+
+
+def _paper_perpendicular_human(
+    rng: np.random.Generator,
+    starts: Points,
+    goals: Points,
+    min_dist: float,
+    v_pref: float,
+    scale: float,
+    max_tries: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fork's square crossing: the side, then the start, then the goal, each of the two kept after
+    ``PAPER_MAX_DRAWS`` draws even if too close (``v_pref`` and ``max_tries`` do not act)."""
+    sign = -1.0 if rng.random() > 0.5 else 1.0
+    for _ in range(PAPER_MAX_DRAWS):  # the last draw stands even if it is too close
+        start = _paper_side_point(rng, sign, scale)
+        if _clear(start, starts, min_dist):
+            break
+    for _ in range(PAPER_MAX_DRAWS):
+        goal = _paper_goal_point(rng, start)
+        if _clear(goal, goals, min_dist):
+            break
+    return start, goal
+
+
+PaperHuman = Callable[
+    [np.random.Generator, Points, Points, float, float, float, int], tuple[np.ndarray, np.ndarray] | None
+]
+_PAPER_HUMANS: Final[dict[str, PaperHuman]] = {
+    "circle": _paper_circle_human,
+    "perpendicular": _paper_perpendicular_human,
+}
+
+
 def place_humans_paper(
     scenario: str,
     n_humans: int,
@@ -131,29 +193,18 @@ def place_humans_paper(
     max_tries: int,
 ) -> tuple[Points, Points]:
     """Humans' starts and goals by the fork's rules (module docstring)."""
+    place = _PAPER_HUMANS.get(scenario)
+    if place is None:
+        raise _no_placer("paper", scenario, _PAPER_HUMANS)
     starts: Points = list(robot_starts)  # every placed agent's start, robots first
     goals: Points = list(robot_goals)
     n_robots = len(robot_starts)
     for h in range(n_humans):
-        if scenario == "circle":
-            for _ in range(max_tries):
-                start, goal = circle_candidate(rng, v_pref, scale)
-                if _clear(start, starts, min_dist) and _clear(goal, goals, min_dist):
-                    break
-            else:
-                raise too_crowded(h, n_humans, scenario, n_robots, max_tries)
-        else:
-            sign = -1.0 if rng.random() > 0.5 else 1.0
-            for _ in range(PAPER_MAX_DRAWS):  # the last draw stands even if it is too close
-                start = _paper_side_point(rng, sign, scale)
-                if _clear(start, starts, min_dist):
-                    break
-            for _ in range(PAPER_MAX_DRAWS):
-                goal = _paper_goal_point(rng, start)
-                if _clear(goal, goals, min_dist):
-                    break
-        starts.append(start)
-        goals.append(goal)
+        placed = place(rng, starts, goals, min_dist, v_pref, scale, max_tries)
+        if placed is None:
+            raise too_crowded(h, n_humans, scenario, n_robots, max_tries)
+        starts.append(placed[0])
+        goals.append(placed[1])
     return starts[n_robots:], goals[n_robots:]
 
 

@@ -36,6 +36,7 @@ it (``Observation.robot_goals``, and the trajectory's goals are those held at th
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -50,10 +51,10 @@ from crowdsim.conventions import (
     Crossing,
     SuccessRule,
 )
-from crowdsim.errors import SimulationError
+from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
-from crowdsim.scenarios import Layout, make_layout
+from crowdsim.scenarios import Layout, checked_layout, make_layout, start_overlaps
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment, match_slots
 from crowdsim.world import A_MAX, DT, OBS_LEN, PAPER_ROBOTS, RADIUS, V_MAX, V_PREF, WorldFacts
 
@@ -235,14 +236,30 @@ class CrowdEnv:
             crossing=cfg.crossing,
             spawn_separation=cfg.spawn_separation,
         )
-        return self.reset_layout(layout)
+        return self._start(layout)
 
     def reset_layout(self, layout: Layout) -> Observation:
-        """Start an episode from given starts and goals (everyone at rest), e.g. a hand-built test scene."""
-        names = ("robot_starts", "robot_goals", "human_starts", "human_goals")
-        shapes = [np.shape(getattr(layout, name)) for name in names]
-        if shapes[0] != shapes[1] or shapes[2] != shapes[3] or any(len(s) != 2 or s[1] != 2 for s in shapes):
-            raise SimulationError(f"layout arrays must be (M, 2), (M, 2), (N, 2), (N, 2); got {shapes}")
+        """Start an episode from given starts and goals (everyone at rest), e.g. a hand-built test scene.
+
+        SimulationError names the field and row of a wrong shape or a non-finite coordinate. Starts closer
+        than ``2 radius`` (agents in contact from the first step) only warn (``LayoutWarning``): tests start
+        agents in contact on purpose, and the paper profile's perpendicular sampler keeps overlapping human
+        starts, as the authors' fork does (crowdsim.scenarios); ``reset`` runs its layouts without a warning.
+        """
+        layout = checked_layout(layout)
+        overlaps = start_overlaps(layout, self.config.radius)
+        if overlaps:
+            first, second, distance = overlaps[0]
+            warnings.warn(
+                f"layout: {len(overlaps)} pair(s) of agents start closer than 2 x radius = "
+                f"{2 * self.config.radius:g} m, in contact from the first step, e.g. {first} and {second} "
+                f"{distance:.3g} m apart",
+                LayoutWarning,
+                stacklevel=2,
+            )
+        return self._start(layout)
+
+    def _start(self, layout: Layout) -> Observation:
         self._rp = np.array(layout.robot_starts, dtype=float)
         self._rv = np.zeros_like(self._rp)
         self._ra = np.zeros_like(self._rp)

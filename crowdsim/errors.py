@@ -1,8 +1,13 @@
-"""Errors a user can cause through the simulator (bad scenario, bad sizes); the CLI prints them plainly."""
+"""Errors a user can cause through the simulator (bad scenario, bad sizes); the CLI prints them plainly. And
+the warning of a layout that runs but is probably not what was meant."""
 
 
 class SimulationError(ValueError):
     """Base class of the user-facing errors raised by `crowdsim`."""
+
+
+class LayoutWarning(UserWarning):
+    """A layout the simulator runs but that starts agents in contact (``CrowdEnv.reset_layout``)."""
 
 
 def too_crowded(human: int, n_humans: int, scenario: str, n_robots: int, draws: int) -> SimulationError:

@@ -59,13 +59,37 @@ Humans
 ------
 Sampled by ``crowdsim.crossings`` under the profile's convention (``crossing``: "paper" follows the
 authors' CrowdNav fork, "v1" this project's first simulator), with ``r_i + r_j + spawn_separation`` as the
-minimum separation (1.1 m for "paper", 0.8 m for "v1").
+minimum separation (1.1 m for "paper", 0.8 m for "v1"). What each new human is checked against:
+
+* v1: its start and its goal against every start and goal placed before, the robots' included.
+* paper, circle (the fork): its start only against the placed *starts*, its goal only against the placed
+  *goals*. Humans are clear of the robots' starts, not of their goals: of seeds 0-299 with 3 robots, 125,
+  181 and 228 layouts (5, 7, 9 humans) have a human starting within 2 r = 0.6 m of a robot's goal.
+* paper, perpendicular (the fork): the same checks, but after 100 draws the last start (goal) is kept even
+  if too close (``idx >= 100``). Layouts of seeds 0-99 (3 robots) with two humans starting closer than
+  0.6 m, in contact from the first step: none at 5 and 7 humans, 3 at 9, 14 at 12, 64 at 16, 71 at 20, 99
+  at 50; none in the circle at any size (it redraws up to ``MAX_TRIES``, then raises). Measured with
+  ``.venv/bin/python -c "import numpy as np; from crowdsim.scenarios import make_layout, start_overlaps as o;
+  print([sum(bool(o(make_layout('perpendicular', n, 3, np.random.default_rng(s)))) for s in range(100))
+  for n in (5, 7, 9, 12, 16, 20, 50)])"`` (``make_layout``'s defaults are ``CrowdEnv.reset``'s).
 
 Up to 16 humans (``DENSE_HUMANS``; the paper uses 5-9) the geometry is exactly that of the crossing rules.
 Larger crowds, up to 50 for scaling benchmarks, do not fit it (the rejection sampling runs dry around 20
-humans), so for ``n_humans > 16`` the circle radius, respectively the square's vertical extent, is
-multiplied by ``n_humans / 16``: the humans' starts keep the density of 16 humans. The robots' formation
-never changes with the crowd. Humans are placed clear of the robots' starts and goals, whatever the formation.
+humans, except the paper's perpendicular one, which keeps the overlaps instead), so for ``n_humans > 16``
+the circle radius, respectively the square's vertical extent, is multiplied by ``n_humans / 16``: the
+humans' starts keep the density of 16 humans. In the circle that keeps every start 1.1 m clear; the
+perpendicular crowd keeps the density of its 16 humans *with* their overlaps (above). The robots' formation
+never changes with the crowd.
+
+One seed, one crowd? Across crowd sizes, yes: with the same robots, the first ``n`` humans of a layout of
+``N > n`` humans are the layout of ``n`` humans (while ``N <= DENSE_HUMANS``: beyond, the geometry grows).
+Across numbers of robots, not in the circle: a human drawn near a robot is redrawn, and every later draw
+shifts. Seed 5 with 7 humans: with 3 or 6 robots only humans 4-6 start where they do with 1 robot (the
+1-robot crowd's first human, next to where the 3-robot row stands, is redrawn, humans 1-3 move up one place
+and a new draw takes place 3); of seeds 0-99 only 53 (3 robots), 55 (6) and 26 (12) give the 1-robot crowd
+(v1: 20, 25, 5). The perpendicular crowds start over 3 m from every formation and are the same for every
+number of robots. A robot-scaling comparison "on the same seeds" thus faces other circle crowds at each
+number of robots.
 """
 
 from __future__ import annotations
@@ -91,8 +115,9 @@ ROW_MAX_ROBOTS: Final[int] = 3  # "auto" keeps the row up to this many robots (t
 MAX_HUMANS: Final[int] = 50
 MAX_ROBOTS: Final[int] = 12
 MAX_TRIES: Final[int] = 10_000  # rejection-sampling draws per human before the layout is declared too crowded
-# The most humans whose layouts the 10 m geometry holds reliably (every one of 30 seeds placed 18 humans in
-# both scenarios with 3 robots; 22-24 failed often). More humans enlarge the geometry, see geometry_scale.
+# The most humans the 10 m geometry holds (every one of 30 seeds placed 18 humans in both scenarios with 3
+# robots; 22-24 failed often). "Placed": the perpendicular sampler of the paper profile gives up after 100
+# draws and keeps overlapping starts (module docstring). More humans enlarge the geometry, see geometry_scale.
 DENSE_HUMANS: Final[int] = 16
 
 
@@ -104,6 +129,49 @@ class Layout:
     robot_goals: np.ndarray  # (M, 2) m
     human_starts: np.ndarray  # (N, 2) m
     human_goals: np.ndarray  # (N, 2) m
+
+
+def checked_layout(layout: Layout) -> Layout:
+    """``layout``'s arrays as float copies, or SimulationError naming the field and row that are wrong:
+    shapes ``(M, 2), (M, 2), (N, 2), (N, 2)``, every coordinate finite."""
+    if not isinstance(layout, Layout):
+        raise SimulationError(f"layout must be a crowdsim.scenarios.Layout, got {type(layout).__name__}")
+    arrays = {}
+    for name in ("robot_starts", "robot_goals", "human_starts", "human_goals"):
+        rows = "M" if name.startswith("robot") else "N"
+        try:
+            points = np.array(getattr(layout, name), dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise SimulationError(f"layout.{name} must be a ({rows}, 2) array of numbers: {exc}") from None
+        if points.ndim != 2 or points.shape[1] != 2:
+            raise SimulationError(f"layout.{name} must be a ({rows}, 2) array, got shape {points.shape}")
+        bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+        if len(bad):
+            raise SimulationError(
+                f"layout.{name}[{bad[0]}] is {points[bad[0]].tolist()}: every coordinate must be finite "
+                f"({len(bad)} bad row(s))"
+            )
+        arrays[name] = points
+    for starts, goals in (("robot_starts", "robot_goals"), ("human_starts", "human_goals")):
+        if len(arrays[starts]) != len(arrays[goals]):
+            raise SimulationError(
+                f"layout.{starts} has {len(arrays[starts])} rows but layout.{goals} {len(arrays[goals])}: "
+                "one goal per agent"
+            )
+    return Layout(**arrays)
+
+
+def start_overlaps(layout: Layout, radius: float = RADIUS) -> list[tuple[str, str, float]]:
+    """Pairs of agents whose starts are closer than ``2 radius`` (centre to centre, m): in contact from the
+    first step. Each is ``(agent, agent, distance)``, agent named by its row: ``"human_starts[3]"``."""
+    robots, humans = (np.asarray(p, float).reshape(-1, 2) for p in (layout.robot_starts, layout.human_starts))
+    starts = np.concatenate([robots, humans])
+    names = [f"robot_starts[{i}]" for i in range(len(robots))] + [
+        f"human_starts[{j}]" for j in range(len(humans))
+    ]
+    distance = np.linalg.norm(starts[:, None] - starts[None], axis=-1)
+    first, second = np.nonzero(np.triu(distance < 2.0 * radius, k=1))
+    return [(names[i], names[j], float(distance[i, j])) for i, j in zip(first, second, strict=True)]
 
 
 def choose_formation(n_robots: int) -> Formation:
@@ -162,7 +230,8 @@ def robot_layout(
 
 
 def geometry_scale(n_humans: int) -> float:
-    """1 up to ``DENSE_HUMANS`` humans; beyond, the crowd's extent grows in proportion to their number."""
+    """1 up to ``DENSE_HUMANS`` humans; beyond, the crowd's extent grows in proportion to their number (the
+    density of 16 humans, overlaps of the perpendicular sampler included: module docstring)."""
     return max(1.0, n_humans / DENSE_HUMANS)
 
 

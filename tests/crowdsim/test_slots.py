@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from crowdsim.env import CrowdEnv, EnvConfig
-from crowdsim.errors import SimulationError
+from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.scenarios import Layout
 from crowdsim.slots import SLOT_HYSTERESIS, match_slots
 
@@ -87,7 +87,8 @@ def test_a_robot_whose_goal_changes_has_not_reached_the_new_one():
         human_starts=np.zeros((0, 2)),
         human_goals=np.zeros((0, 2)),
     )
-    obs = env.reset_layout(layout)
+    with pytest.warns(LayoutWarning, match=r"robot_starts\[0\] and robot_starts\[1\] 0.1 m apart"):
+        obs = env.reset_layout(layout)  # in contact on purpose
     assert list(obs.robot_reached) == [True, False]
     obs, _, _ = env.step(np.zeros((2, 2)))
     np.testing.assert_array_equal(obs.robot_goals, layout.robot_goals)
