@@ -396,10 +396,19 @@ def _report(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTas
     if cpu:
         # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
         mean = sum(cpu) / len(cpu)
-        hours = mean * len(tasks) / 3600
+        total = mean * len(tasks)
         k = config.workers
         print(
             f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
-            f"{hours:.2f} CPU-hours: {hours / k:.2f} h for {k} workers on {k} free cores",
+            f"{duration(total)} of CPU: {duration(total / k)} for {k} workers on {k} free cores",
             file=sys.stderr,
         )
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` in the unit that reads best: "42.0 s", "3.5 min", "2.25 h"."""
+    if seconds < 60:
+        return f"{seconds:.1f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.2f} h"

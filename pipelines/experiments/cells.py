@@ -358,7 +358,8 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "controllers": Experiment(
         name="controllers",
-        title=f"Controllers: each controller with {PAPER_PREDICTOR_WORDS}",  # the table names its humans
+        # the table names its humans; ORCA and the straight line plan with no predictor
+        title=f"Controllers: each controller, those that predict the humans with {PAPER_PREDICTOR_WORDS}",
         methods=tuple((name, ControllerSpec(name, PAPER_PREDICTOR)) for name in SHIPPED_CONTROLLERS),
         humans=ABLATION_HUMANS,
         controller_list=True,

@@ -4,9 +4,9 @@ the paper's.
 An experiment over several crowd sizes (Tables II and III) gets ``OUTCOME_vs_humans.png``: the number of
 humans on the x axis, a line per method. An experiment at one crowd size (the predictor swap, coupling,
 safety, ...) gets ``OUTCOME_by_method.png``: a bar per method. Our 95% intervals are the error bars (Wilson
-for the rates, normal for the mean travel time), the paper's figures open squares (dashed lines across
-crowd sizes). The safety plots (closest approaches, the success / collision trade-off) are
-pipelines.experiments.safety_report's.
+for the rates, Student's t for the mean travel time: pipelines.experiments.summary), and each plot's title
+says which; the paper's figures are open squares (dashed lines across crowd sizes). The safety plots
+(closest approaches, the success / collision trade-off) are pipelines.experiments.safety_report's.
 """
 
 from __future__ import annotations
@@ -33,11 +33,17 @@ class Outcome:
     name: str
     ylabel: str
     meaning: str  # a line under the title saying what counts
+    interval: str = "Wilson interval"  # what the error bars are: the 95% interval summary.py gives
 
 
 OUTCOMES: Final[tuple[Outcome, ...]] = (
     Outcome("success", "Success rate (%)", "the robots reach their goals within the time limit"),
-    Outcome("travel_time", "Average travel time (s)", "mean over successful episodes"),
+    Outcome(
+        "travel_time",
+        "Average travel time (s)",
+        "mean over successful episodes",
+        interval="Student's t interval of the mean",
+    ),
     Outcome(
         "collision",
         "Collision rate (%)",
@@ -122,7 +128,8 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     if outcome.name != "travel_time":
         ax.set_ylim(bottom=0.0)
     ax.set_ylabel(outcome.ylabel)
-    ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}", fontsize="medium")
+    bars = f"error bars: our 95% {outcome.interval}"
+    ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
     ax.grid(alpha=0.3)
     return fig
 

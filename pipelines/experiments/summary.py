@@ -76,11 +76,15 @@ class CellSummary:
     collision_step_freq: float
     contact_step_freq: float
     discomfort_step_freq: float
+    # Of the episodes' own statistics, not pooled over all steps as `simulate` and `review` print them: a
+    # record keeps each episode's median and p95, not its steps. The table's label says which.
     step_median_ms: float  # median over episodes of the per-episode median control step
     step_p95_ms: float  # 95th percentile over episodes of the per-episode p95
     step_mean_ms: float  # all control-step time / all steps
+    # nan when no control step ran a solver (``runs_solver`` False: ORCA, straight line)
     iterations_mean: float  # IBR iterations per control step
     fallback_step_rate: float  # % of control steps that fell back
+    runs_solver: bool  # some control step iterated (IBR iterations > 0); the baselines report 0 throughout
     paper: PaperFigures | None
 
     @property
@@ -151,6 +155,8 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
     medians = [s["median_ms"] for s in solver if s["median_ms"] is not None]
     p95s = [s["p95_ms"] for s in solver if s["p95_ms"] is not None]
     iterations = [s["mean_iterations"] for s in solver if s["mean_iterations"] is not None]
+    runs_solver = any(i > 0 for i in iterations)
+    fallbacks = sum(s["fallback_steps"] for s in solver)
     return CellSummary(
         cell=cell,
         episodes=n,
@@ -169,8 +175,10 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
         step_median_ms=float(np.median(medians)) if medians else math.nan,
         step_p95_ms=float(np.percentile(p95s, 95)) if p95s else math.nan,
         step_mean_ms=sum(s["total_ms"] for s in solver) / steps if steps else math.nan,
-        iterations_mean=_mean(iterations),
-        fallback_step_rate=100.0 * sum(s["fallback_steps"] for s in solver) / steps if steps else math.nan,
+        iterations_mean=_mean(iterations) if runs_solver else math.nan,
+        # a controller without a solver has nothing to fall back from (unless it says it did)
+        fallback_step_rate=100.0 * fallbacks / steps if steps and (runs_solver or fallbacks) else math.nan,
+        runs_solver=runs_solver,
         paper=paper,
     )
 

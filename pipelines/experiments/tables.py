@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Final
 
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import SCENARIOS, Experiment
@@ -30,6 +31,12 @@ def paired_success(reference: CellSummary, other: CellSummary) -> tuple[int, int
     gained = sum(other.successes[k] and not reference.successes[k] for k in shared)
     lost = sum(reference.successes[k] and not other.successes[k] for k in shared)
     return gained, lost, mcnemar_exact(gained, lost)
+
+
+# The episodes' own medians and p95s, summarised over the cell's episodes (summary.CellSummary): not the
+# statistic `simulate` and `review` print, pooled over all control steps, which records cannot give.
+STEP_TIME_LABEL: Final[str] = "Control step (ms): median of the episodes' medians / p95 of their p95s"
+NOT_APPLICABLE: Final[str] = "n/a"  # a figure the method has no use for; "—" is one without data
 
 
 def _fmt(x: float | None, digits: int = 1) -> str:
@@ -65,7 +72,12 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
         "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "
         "(Student's t). Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) "
-        "this method succeeded and the first one failed / the reverse, with the exact McNemar p-value.",
+        "this method succeeded and the first one failed / the reverse, with the exact McNemar p-value."
+        + (
+            f" {NOT_APPLICABLE}: a solver's figure for a controller that runs none."
+            if not all(s.runs_solver for s in columns)
+            else ""
+        ),
         world_line,
     ]
     if any(s.paper for s in columns):
@@ -175,9 +187,15 @@ def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
         _row("Success, paired with the group's first method", _paired_texts(groups, columns)),
         _row("Episodes", [str(s.episodes) for s in columns]),
         _row(
-            "Control step median / p95 (ms)",
+            STEP_TIME_LABEL,
             [f"{_fmt(s.step_median_ms, 2)} / {_fmt(s.step_p95_ms, 2)}" for s in columns],
         ),
-        _row("IBR iterations per step (mean)", [_fmt(s.iterations_mean, 2) for s in columns]),
-        _row("Fallback steps (%)", [_fmt(s.fallback_step_rate, 2) for s in columns]),
+        _row("IBR iterations per step (mean)", [_solver_fmt(s, s.iterations_mean) for s in columns]),
+        _row("Fallback steps (%)", [_solver_fmt(s, s.fallback_step_rate) for s in columns]),
     ]
+
+
+def _solver_fmt(s: CellSummary, value: float) -> str:
+    """``value`` of a solver figure; n/a for a controller that runs no solver (ORCA, straight line), whose
+    0 iterations and 0 fallbacks would read as a measurement."""
+    return _fmt(value, 2) if s.runs_solver or not math.isnan(value) else NOT_APPLICABLE

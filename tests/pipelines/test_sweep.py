@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -580,8 +581,12 @@ def test_cli_runs_a_small_sweep_and_reports(tmp_path, capsys):
     assert main([*args, "--backend", "inline", "--no-progress", "--out", str(tmp_path)]) == 0
     captured = capsys.readouterr()
     assert "8/8 episodes recorded" in captured.err
-    assert "the 8 planned episodes take" in captured.err
+    # a projection of seconds reads in seconds, not "0.00 CPU-hours"
+    assert re.search(r"the 8 planned episodes take \d+\.\d s of CPU: \d+\.\d s for \d+ workers", captured.err)
     assert "| Numbers of pedestrians | 5 | 5 | 6 | 6 |" in captured.out
+    # ORCA and the straight line run no solver: their solver figures are not applicable, not 0.00
+    assert "| IBR iterations per step (mean) | n/a | n/a | n/a | n/a |" in captured.out
+    assert "| Fallback steps (%) | n/a | n/a | n/a | n/a |" in captured.out
     assert (tmp_path / "table.md").exists()
 
 
@@ -667,8 +672,13 @@ def test_a_tables_title_follows_the_predictors_it_runs():
     """The controllers table says which predictor it ran with, not "the paper's" after --predictor; the
     predictor swap mentions the oracle only when the oracle is one of its columns."""
     controllers = get_experiment("controllers")
-    assert controllers.title.endswith("with the paper's predictor")
-    assert controllers.with_predictor("my_net_eth").title.endswith("each controller with my_net_eth")
+    # ORCA and the straight line use no predictor: the title does not say they do
+    assert controllers.title.endswith(
+        "each controller, those that predict the humans with the paper's predictor"
+    )
+    assert controllers.with_predictor("my_net_eth").title.endswith(
+        "those that predict the humans with my_net_eth"
+    )
     conventions = get_experiment("conventions").with_predictor("constant_velocity")
     assert conventions.title.endswith("(CMPC, constant_velocity)")
     swap = get_experiment("predictors")

@@ -1,0 +1,119 @@
+"""What a sweep reports about itself: honest CPU time, step-time statistics named for what they are, solver
+figures only for controllers with a solver, and plots that say what their error bars are."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import pytest
+
+import pipelines.loop.episode as episode_module
+from pipelines.commands.sweep import duration
+from pipelines.experiments.cells import get_experiment
+from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
+from pipelines.experiments.summary import summarize
+from pipelines.experiments.tables import STEP_TIME_LABEL, markdown_table
+from pipelines.experiments.worker import EpisodeWorker
+
+BURN_S = 0.5  # CPU seconds a child process burns
+CHILD = f"import time\nt = time.process_time()\nwhile time.process_time() - t < {BURN_S}: pass"
+
+
+def test_episode_cpu_counts_the_child_processes(monkeypatch):
+    """gcc compiling a --jit solver runs as a child process: its CPU is the episode's."""
+    real = episode_module.run_episode
+    own: list[float] = []
+
+    def with_a_compiler(*args, **kwargs):
+        subprocess.run([sys.executable, "-c", CHILD], check=True)
+        start = time.process_time()
+        result = real(*args, **kwargs)
+        own.append(time.process_time() - start)
+        return result
+
+    monkeypatch.setattr(episode_module, "run_episode", with_a_compiler)
+    task = get_experiment("baselines").tasks(1, humans=(5,))[0]
+    outcome = EpisodeWorker().run(task)
+    assert outcome.error is None and outcome.record is not None
+    # the child's BURN_S plus the episode's own CPU: process_time alone gives only the latter (and a little)
+    assert outcome.record["cpu_s"] >= BURN_S + own[0]
+
+
+@pytest.mark.parametrize(
+    ("seconds", "text"),
+    [
+        (0.0, "0.0 s"),
+        (42.04, "42.0 s"),
+        (59.9, "59.9 s"),
+        (60.0, "1.0 min"),
+        (210.0, "3.5 min"),
+        (8100, "2.25 h"),
+    ],
+)
+def test_a_cpu_projection_reads_in_a_unit_that_fits(seconds, text):
+    assert duration(seconds) == text
+
+
+def _record(cell, i: int, iterations: float, fallbacks: int) -> dict:
+    return {
+        "key": f"{cell.key}/{i}",
+        "cell": cell.key,
+        "method": cell.method,
+        "scenario": ("circle", "perpendicular")[i % 2],
+        "seed": i // 2,
+        "metrics": {"success": True, "travel_time": 18.0, "collision": False, "contact": False}
+        | {"discomfort": False, "min_distance": 1.0, "n_steps": 40},
+        "solver": {"steps": 40, "total_ms": 80.0, "median_ms": 2.0, "p95_ms": 3.0, "max_ms": 4.0}
+        | {"mean_iterations": iterations, "max_iterations": int(iterations), "fallback_steps": fallbacks},
+    }
+
+
+def test_a_controller_without_a_solver_has_no_solver_figures():
+    """ORCA reports 0 IBR iterations a step, which is no measurement: n/a, and nan in cells.csv."""
+    experiment = get_experiment("controllers").with_predictor("constant_velocity")
+    cells = [c for c in experiment.cells((5,)) if c.method in ("orca", "cmpc")]
+    records = [
+        _record(c, i, 0.0 if c.method == "orca" else 2.0, 0 if c.method == "orca" else 2)
+        for c in cells
+        for i in range(2)
+    ]
+    summaries = summarize(experiment, cells, records)
+    by_method = {s.cell.method: s for s in summaries}
+    assert not by_method["orca"].runs_solver and by_method["cmpc"].runs_solver
+    assert by_method["orca"].iterations_mean != by_method["orca"].iterations_mean  # nan
+    assert by_method["cmpc"].fallback_step_rate == pytest.approx(5.0)  # 4 of 80 steps
+    table = markdown_table(experiment, summaries)
+    order = [s.cell.method for s in summaries]
+    expected = {"orca": ("n/a", "n/a"), "cmpc": ("2.00", "5.00")}
+    iterations = " | ".join(expected[m][0] for m in order)
+    fallbacks = " | ".join(expected[m][1] for m in order)
+    assert f"| IBR iterations per step (mean) | {iterations} |" in table
+    assert f"| Fallback steps (%) | {fallbacks} |" in table
+    assert "n/a: a solver's figure for a controller that runs none." in table
+
+
+def test_the_step_time_row_names_its_statistic():
+    """Not "median / p95", which `simulate` and `review` use for the statistic pooled over all steps."""
+    table2 = get_experiment("table2")
+    cells = table2.cells((5,))
+    summaries = summarize(table2, cells, [_record(c, i, 2.0, 0) for c in cells for i in range(2)])
+    table = markdown_table(table2, summaries)
+    assert f"| {STEP_TIME_LABEL} | 2.00 / 3.00 | 2.00 / 3.00 |" in table
+    assert "median of the episodes' medians / p95 of their p95s" in STEP_TIME_LABEL
+    assert "n/a" not in table  # every method has a solver: no note either
+
+
+@pytest.mark.parametrize(
+    ("outcome", "interval"),
+    [("success", "95% Wilson interval"), ("travel_time", "95% Student's t interval of the mean")],
+)
+def test_plots_across_crowd_sizes_say_what_their_error_bars_are(outcome, interval):
+    table2 = get_experiment("table2")
+    cells = table2.cells((5, 6))
+    summaries = summarize(table2, cells, [_record(c, i, 2.0, 0) for c in cells for i in range(3)])
+    (chosen,) = [o for o in OUTCOMES if o.name == outcome]
+    ax = outcome_figure(table2, summaries, chosen).axes[0]
+    assert ax.get_xlabel() == "number of humans"
+    assert f"error bars: our {interval}" in ax.get_title()
