@@ -6,8 +6,9 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
@@ -22,7 +23,8 @@ EPILOG = """examples:
   crowdmpc review runs/demo/ --check --json review.json   # validate every message against its schema
 
 The folders are those `make demo` and `crowdmpc simulate --record DIR` write; a folder means the .mcap files
-directly in it, not in its subfolders (a sweep's recordings: DIR/mcap/CELL/).
+directly in it, not in its subfolders (a sweep's recordings: DIR/mcap/CELL/). Runs of different set-ups
+(controller, predictor, numbers of robots and humans) in one folder get one table and aggregate each.
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
 compression fails) or a message that is not what the review reads is left out, with a warning; --check lists
@@ -38,6 +40,19 @@ with --check, 1 when any file has a bad chunk, a bad message, a schema violation
 """
 
 MAX_ERRORS_SHOWN = 20
+# Runs pooled into one aggregate of a folder must share these (a CMPC run beside a straight-line one is two
+# results, not one average).
+GROUP_KEYS: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
+# The units of the episode metrics (crowdsim.metrics.EpisodeMetrics), printed after their names.
+METRIC_UNITS: Final[Mapping[str, str]] = {
+    "travel_time": "s",
+    "min_distance": "m",
+    "min_distance_robots": "m",
+    "min_distance_humans": "m",
+    "min_distance_between_steps": "m",
+    "path_length": "m",
+    "reach_times": "s",
+}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -91,6 +106,28 @@ def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
             print(f"  ... and {len(errors) - MAX_ERRORS_SHOWN} more")
         failed += bool(errors)
     return failed
+
+
+def _groups(recordings: list[Recording], summaries: list[dict[str, Any]]) -> dict[tuple, list[Recording]]:
+    """The recordings by their set-up (``GROUP_KEYS``), in the order of their first run."""
+    groups: dict[tuple, list[Recording]] = {}
+    for rec, summary in zip(recordings, summaries, strict=True):
+        groups.setdefault(tuple(summary[k] for k in GROUP_KEYS), []).append(rec)
+    return groups
+
+
+def _group_name(group: tuple) -> str:
+    controller, predictor, n_robots, n_humans = group
+    return f"{controller}, predictor {predictor or 'none'}, {n_robots} robots, {n_humans} humans"
+
+
+def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
+    """``summary`` for printing: each metric with a unit named with it ("travel_time (s)")."""
+    metrics = summary["metrics"]
+    if metrics is None:
+        return summary
+    named = {f"{k} ({METRIC_UNITS[k]})" if k in METRIC_UNITS else k: v for k, v in metrics.items()}
+    return summary | {"metrics": named}
 
 
 def _read_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording], int]:
@@ -154,13 +191,27 @@ def run(args: argparse.Namespace) -> int:
                 f"{', '.join(single_file_only)} {verb} one .mcap file, not the folder {args.path}{example}"
             )
         recordings, n_unreadable = _read_folder(args.path, report)
-        table, totals = aggregate_table(recordings)
-        print(table)
-        report.update(runs=[summarize(rec) for rec in recordings], totals=totals)
+        report["runs"] = [summarize(rec) for rec in recordings]
+        groups = _groups(recordings, report["runs"])
+        if len(groups) == 1:
+            table, report["totals"] = aggregate_table(recordings)
+            print(table)
+        else:
+            print(
+                f"crowdmpc review: warning: {args.path} holds runs of {len(groups)} different set-ups "
+                f"({'; '.join(_group_name(g) for g in groups)}): one aggregate for each, none over all",
+                file=sys.stderr,
+            )
+            report["groups"] = []
+            for group, members in groups.items():
+                table, totals = aggregate_table(members)
+                print(f"== {_group_name(group)}: {len(members)} run{'s' if len(members) > 1 else ''} ==")
+                print(table + "\n")
+                report["groups"].append(dict(zip(GROUP_KEYS, group, strict=True)) | {"totals": totals})
     else:
         recordings = [read_recording(args.path)]
         summary = summarize(recordings[0])
-        print(format_summary(summary))
+        print(format_summary(_with_units(summary)))
         report["summary"] = summary
     for rec in recordings:
         if rec.warning:

@@ -199,3 +199,30 @@ def test_times_must_be_finite_non_negative_seconds(runs, tmp_path, times, capsys
     with pytest.raises(SystemExit) as done:
         main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", times])
     assert done.value.code == 2 and "--times" in capsys.readouterr().err
+
+
+def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
+    assert main(["review", str(runs[0].path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    metrics = runs[0].result.metrics
+    for name, unit in (("travel_time", "s"), ("min_distance", "m"), ("path_length", "m")):
+        assert any(line.split()[:2] == [name, f"({unit})"] for line in lines), name
+    assert any(line.split()[:2] == ["success", "yes" if metrics.success else "no"] for line in lines)
+
+
+def test_a_folder_of_different_set_ups_gets_an_aggregate_for_each(tmp_path, capsys):
+    """A 4-human and a 5-human run pooled would be one rate over two experiments: one aggregate each."""
+    for seed, humans in ((1, 4), (2, 5), (3, 5)):
+        record_episode(tmp_path, seed=seed, steps=4, n_humans=humans)
+    assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
+    out, err = capsys.readouterr()
+    four, five = (
+        "handmade, predictor constant_velocity, 3 robots, 4 humans",
+        "handmade, predictor constant_velocity, 3 robots, 5 humans",
+    )
+    assert f"holds runs of 2 different set-ups ({four}; {five})" in err
+    assert f"== {four}: 1 run ==" in out and f"== {five}: 2 runs ==" in out
+    assert "\n1 runs\n" in out and "\n2 runs\n" in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert "totals" not in report and len(report["runs"]) == 3
+    assert [(g["n_humans"], g["totals"]["runs"]) for g in report["groups"]] == [(4, 1), (5, 2)]
