@@ -54,7 +54,7 @@ from crowdsim.conventions import (
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import OrcaParams, orca_velocities, preferred_velocities
-from crowdsim.scenarios import Layout, checked_layout, make_layout, start_overlaps
+from crowdsim.scenarios import FORMATIONS, Formation, Layout, checked_layout, make_layout, start_overlaps
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment, match_slots
 from crowdsim.world import A_MAX, DT, OBS_LEN, PAPER_ROBOTS, RADIUS, V_MAX, V_PREF, WorldFacts
 
@@ -94,6 +94,9 @@ class EnvConfig:
     success_rule: SuccessRule = "simultaneous"  # module docstring
     robots_visible: bool = True  # the humans' ORCA sees the robots
     goal_assignment: GoalAssignment = "fixed"  # "fixed": robot i to goal i (paper); "slots": crowdsim.slots
+    # the robots' starts and goals (crowdsim.scenarios): "auto" is the paper's row up to 3 robots, a wedge
+    # from 4; "row", "wedge", "two_rows" choose one for every team size
+    formation: Formation = "auto"
 
     def __post_init__(self):
         self._check_sizes()
@@ -136,6 +139,10 @@ class EnvConfig:
             raise SimulationError(
                 f"EnvConfig.goal_assignment must be one of {list(GOAL_ASSIGNMENTS)}, "
                 f"got {self.goal_assignment!r}"
+            )
+        if self.formation not in FORMATIONS:
+            raise SimulationError(
+                f"EnvConfig.formation must be one of {list(FORMATIONS)}, got {self.formation!r}"
             )
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
@@ -235,6 +242,7 @@ class CrowdEnv:
             v_pref=cfg.v_pref,
             crossing=cfg.crossing,
             spawn_separation=cfg.spawn_separation,
+            formation=cfg.formation,
         )
         return self._start(layout)
 

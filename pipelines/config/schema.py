@@ -158,6 +158,13 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
     ),
     Key("robots_visible", "bool", True, "the humans' ORCA sees the robots (--visibility visible|invisible)"),
     Key("goal_assignment", "str", "fixed", "fixed (robot i to goal i, paper) | slots (crowdsim/slots.py)"),
+    Key(
+        "formation",
+        "str",
+        "auto",
+        "the robots' starts and goals: auto (a row up to 3 robots, a wedge from 4) | row | wedge | two_rows "
+        "(crowdsim/scenarios.py)",
+    ),
     *(
         Key(
             name,
@@ -178,7 +185,7 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
         f.name: getattr(base, f.name) for f in fields(EnvConfig) if f.name not in (*ENV_FROM_WORLD, "orca")
     }
     settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
-    settings |= {name: values[name] for name in ("robots_visible", "goal_assignment")}
+    settings |= {name: values[name] for name in ("robots_visible", "goal_assignment", "formation")}
     env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
     if env.max_steps > MAX_EPISODE_STEPS:
         raise PipelineError(

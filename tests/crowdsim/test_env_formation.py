@@ -1,0 +1,52 @@
+"""``EnvConfig.formation``: the robots' formation chosen for every episode of a run (``[env] formation``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.errors import SimulationError
+from crowdsim.scenarios import make_layout, robot_layout
+from pipelines.cli import main
+
+
+@pytest.mark.parametrize("formation", ["row", "wedge", "two_rows"])
+def test_the_config_formation_places_the_robots(formation):
+    obs = CrowdEnv(EnvConfig(formation=formation)).reset(4, "circle", 5, 6)
+    starts, goals = robot_layout(6, formation)
+    np.testing.assert_array_equal(obs.robot_positions, starts)
+    np.testing.assert_array_equal(obs.robot_goals, goals)
+    # the crowd is sampled as make_layout samples it for that formation, from the same seed
+    layout = make_layout("circle", 5, 6, np.random.default_rng(4), formation=formation)
+    np.testing.assert_array_equal(obs.human_positions, layout.human_starts)
+
+
+def test_auto_is_the_default_and_changes_nothing():
+    default, auto = (
+        CrowdEnv().reset(7, "perpendicular", 7),
+        CrowdEnv(EnvConfig(formation="auto")).reset(7, "perpendicular", 7),
+    )
+    np.testing.assert_array_equal(default.robot_positions, auto.robot_positions)
+    np.testing.assert_array_equal(default.human_positions, auto.human_positions)
+    # auto: the paper's row for 3 robots, a wedge from 4
+    np.testing.assert_array_equal(default.robot_positions, robot_layout(3, "row")[0])
+    np.testing.assert_array_equal(
+        CrowdEnv().reset(0, "circle", 3, 5).robot_positions, robot_layout(5, "wedge")[0]
+    )
+
+
+def test_an_unknown_formation_is_refused():
+    with pytest.raises(SimulationError, match=r"EnvConfig.formation must be one of \['auto', 'row'"):
+        EnvConfig(formation="hexagon")
+
+
+def test_the_formation_comes_from_the_command_line(tmp_path, capsys):
+    report = tmp_path / "run.json"
+    argv = ["--set", "env.formation=two_rows", "simulate", "--controller", "straight", "--robots", "4"]
+    assert main([*argv, "--humans", "1", "--episodes", "1", "--no-progress", "--json", str(report)]) == 0
+    assert '"formation": "two_rows"' in report.read_text()
+    assert main(["--set", "env.formation=hexagon", "simulate", "--controller", "straight"]) == 2
+    assert "env.formation: must be one of ['auto', 'row', 'wedge', 'two_rows'], got 'hexagon'" in (
+        capsys.readouterr().err
+    )
