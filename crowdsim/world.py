@@ -26,7 +26,7 @@ class WorldFacts:
     # L: observed steps every zoo predictor reads. TrajNet++ observes 9 steps; the paper's Table I says 8, but
     # our models are trained on 9, so the simulator keeps 9 rows of history and feeds them exactly that.
     obs_len: int = 9
-    radius: float = 0.3  # m, every robot and human (Table I; CrowdNav's env config)
+    radius: float = 0.3  # m, every robot and human (not in Table I: the authors' CrowdNav env config)
     v_pref: float = 1.0  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav's env config)
     v_max: float = 1.0  # m/s, robot velocity bound per component, Eq. (6)
     a_max: float = 2.0  # m/s^2, robot acceleration bound per component, Eq. (6)

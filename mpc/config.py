@@ -92,7 +92,7 @@ class MPCConfig:
     # "per_robot": w_floc * 2 / (M - 1) on every pair, so each robot's flocking weighs what it weighs in a
     # team of 3 whatever M (the same weights at M = 3; a symmetric weight, so Lemma 1's potential game holds).
     flocking_weight: FlockingWeight = "per_pair"
-    # --- robots on their goals (not in the paper, whose episodes end when its single robot arrives) -------
+    # --- robots on their goals (the paper does not say what one that has arrived does meanwhile) ---------
     # "track": a robot that has reached its goal stays in the optimisation with its goal term (the reference
     # is then the goal itself, weighted omega_goal / (||s - goal|| + delta) = 1e4 on the goal), so it holds
     # its place unless a human or another robot needs the room; flocking with it is off. "brake": its
