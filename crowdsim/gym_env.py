@@ -30,8 +30,13 @@ values from ``env_m.config [reward]``, ``RewardConfig``). With ``d_i`` the close
 CrowdNav's ``point_to_segment_dist``), and ``d = min_i d_i``, the first rule that applies gives it:
 
 1. the step reaches the time limit (``truncated``): 0;
-2. some robot touches a human (``d < 0``): ``collision = -0.25`` (the episode goes on, as in the fork;
-   ``end_on_collision=True`` ends it, as upstream CrowdNav does);
+2. some robot touches a human (``d < 0``): ``collision = -0.25``. By default the episode goes on, as in the
+   fork (``done = False`` after a collision); if the robots also succeed on this step, which ends the
+   episode, the step pays ``collision + success = +0.75``: the fork pays the penalty for the contact and
+   the success reward on the step that ends an episode in success (the next one, there), so every episode
+   ending in success is paid it, here as there. With ``end_on_collision=True`` the contact ends the
+   episode, as upstream CrowdNav does, and comes first: ``-0.25`` only, the success not paid (upstream's
+   ``Collision``);
 3. the robots succeed (the success rule of ``EnvConfig``; ``terminated``): ``success = +1``;
 4. ``d < discomfort_dist = 0.4`` m: ``(d - discomfort_dist) * discomfort_factor * dt``, factor 0.5 /s;
 5. otherwise 0.
@@ -41,13 +46,24 @@ are the team's), for multi-agent learners.
 
 Info: ``"observation"`` is the native ``Observation`` (a ``ComparableObservation``): what the MPC
 controllers and baselines act on, with the positions history the predictors read. ``reset`` adds ``seed``
-(the episode's layout seed), ``scenario``, ``n_humans`` and ``n_robots``. ``step`` adds ``CrowdEnv``'s
-``accelerations`` (applied after clipping), ``clipped`` and ``orca_lp3``, and the new state's metrics as
-``crowdsim.metrics`` counts them per state: ``min_distance`` (robot-human centre distance, m),
-``collision`` (below 0.8 m), ``contact`` (below the sum of the radii), ``discomfort`` (projected paths
-intersect); ``surface_distance`` ``(n_robots,)`` (the ``d_i`` above), ``robot_rewards``, ``reached``,
-``success`` and ``timeout``. The last step adds ``episode_metrics``, the ``EpisodeMetrics`` of the whole
-episode (what ``crowdmpc simulate`` reports).
+(the seed the episode's layout was drawn with; None for ``options["layout"]``, which no seed generated),
+``scenario``, ``n_humans`` and ``n_robots``. ``step`` adds ``n_robots``, ``CrowdEnv``'s ``accelerations``
+(applied after clipping) ``(max_robots, 2)``, ``clipped`` ``(max_robots,)`` and ``orca_lp3``; the new
+state's metrics as ``crowdsim.metrics`` counts them per state: ``min_distance`` (robot-human centre
+distance, m), ``collision`` (below 0.8 m), ``contact`` (below the sum of the radii), ``discomfort``
+(projected paths intersect); the step's, with the relative motion a straight segment, as the reward
+takes it: ``min_distance_between_steps`` (m), ``collision_between_steps`` and ``contact_between_steps``
+(``d < 0``: what costs the collision penalty and, with ``end_on_collision``, ends the episode);
+``surface_distance`` ``(max_robots,)`` (the ``d_i`` above), ``robot_rewards`` ``(max_robots,)``,
+``reached`` ``(max_robots,)``, ``success`` and ``timeout``. The last step adds ``episode_metrics``, the
+``EpisodeMetrics`` of the whole episode (what ``crowdmpc simulate`` reports); an episode that a contact
+ended has ``contact_between_steps`` True there (and ``timeout`` True: it did not succeed), while its
+step-sampled ``contact`` may be False.
+
+Per-robot info arrays have ``max_robots`` rows, as the action and the observation, so that
+``gymnasium.vector`` can stack environments whose episodes have different ``n_robots``: rows past
+``n_robots`` are padding, filled with 0.0 (``accelerations``, ``robot_rewards``), False (``clipped``,
+``reached``) and inf (``surface_distance``: no robot, no human near).
 
 ``render()`` (``render_mode="rgb_array"``) draws the trajectories so far and the agents now
 (``crowdsim.plotting``) into a ``(480, 640, 3)`` uint8 array.
@@ -67,7 +83,13 @@ from crowdsim import ENV_ID
 from crowdsim.conventions import PAPER_DISCOMFORT_DIST
 from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.errors import SimulationError
-from crowdsim.metrics import COLLISION_DISTANCE, DISCOMFORT_HORIZON, episode_metrics, segments_intersect
+from crowdsim.metrics import (
+    COLLISION_DISTANCE,
+    DISCOMFORT_HORIZON,
+    closest_approach,
+    episode_metrics,
+    segments_intersect,
+)
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, geometry_scale
 from crowdsim.world import CIRCLE_RADIUS, DT, PAPER_ROBOTS, SQUARE_WIDTH
 
@@ -81,6 +103,7 @@ __all__ = [
     "ComparableObservation",
     "CrowdNavEnv",
     "RewardConfig",
+    "step_closest",
     "surface_distances",
 ]
 
@@ -115,13 +138,23 @@ class RewardConfig:
                 f"{self.discomfort_dist!r} and {self.discomfort_factor!r}"
             )
 
-    def step_reward(self, surface_distance: float, *, success: bool, timeout: bool, dt: float) -> float:
+    def step_reward(
+        self,
+        surface_distance: float,
+        *,
+        success: bool,
+        timeout: bool,
+        dt: float,
+        contact_ends: bool = False,
+    ) -> float:
         """The reward of one step (the module docstring's rules 1-5): ``surface_distance`` is the closest
-        robot-human boundary distance during the step (m), ``dt`` the step (s)."""
+        robot-human boundary distance during the step (m), ``dt`` the step (s); ``contact_ends``: a contact
+        ends the episode (``end_on_collision``), so the success of the same step is not paid."""
         if timeout:
             return 0.0
         if surface_distance < 0:
-            return float(self.collision)
+            paid = success and not contact_ends
+            return float(self.collision + self.success) if paid else float(self.collision)
         if success:
             return float(self.success)
         if surface_distance < self.discomfort_dist:
@@ -152,18 +185,21 @@ def _count(value: object, name: str, low: int, high: int) -> int:
     return int(value)
 
 
+def step_closest(before: Observation, after: Observation) -> np.ndarray:
+    """``(M, N)`` closest centre distance of each robot to each human during the step, the relative motion
+    taken as the segment from its start to its end (CrowdNav's ``point_to_segment_dist``;
+    ``crowdsim.metrics.closest_approach``, as ``min_distance_between_steps`` takes it)."""
+    start = before.human_positions[None] - before.robot_positions[:, None]  # (M, N, 2) human - robot
+    end = after.human_positions[None] - after.robot_positions[:, None]
+    return closest_approach(start, end)
+
+
 def surface_distances(before: Observation, after: Observation) -> np.ndarray:
-    """``(M,)`` closest boundary distance of each robot to any human during the step, the relative motion
-    taken as the segment from its start to its end (CrowdNav's ``point_to_segment_dist``); inf without
-    humans."""
+    """``(M,)`` closest boundary distance of each robot to any human during the step (``step_closest``
+    less the sum of the radii); inf without humans."""
     if before.n_humans == 0:
         return np.full(before.n_robots, math.inf)
-    p0 = before.human_positions[None] - before.robot_positions[:, None]  # (M, N, 2) human relative to robot
-    d = (after.human_positions[None] - after.robot_positions[:, None]) - p0
-    length2 = np.einsum("mnk,mnk->mn", d, d)
-    t = np.clip(-np.einsum("mnk,mnk->mn", p0, d) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-    closest = np.linalg.norm(p0 + t[..., None] * d, axis=-1)
-    return closest.min(axis=1) - 2.0 * after.radius
+    return step_closest(before, after).min(axis=1) - 2.0 * after.radius
 
 
 class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -177,7 +213,8 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
     :param config: the simulator's settings (default ``EnvConfig()``, the paper's profile;
         ``crowdsim.profiles.make_env_config`` names the others).
     :param reward: the reward's numbers.
-    :param end_on_collision: end the episode (``terminated``) at a robot-human contact, as upstream CrowdNav.
+    :param end_on_collision: end the episode (``terminated``) at a robot-human contact during a step
+        (``info["contact_between_steps"]``), as upstream CrowdNav; its success is then not paid.
     :param render_mode: None or "rgb_array".
     """
 
@@ -250,14 +287,18 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         ``options`` may set ``scenario``, ``n_humans`` (at most ``max_humans``) and ``n_robots`` (1 to
         ``max_robots``) for this episode; the constructor's values are the defaults. Or ``layout``, a
         ``crowdsim.scenarios.Layout`` of starts and goals to start from instead (a hand-built scene; its
-        scenario reads "layout"), alone."""
+        scenario reads "layout", its seed None: no seed draws it), alone. Every reset takes one draw from
+        the generator when ``seed`` is None, a layout's too, so that the episodes after it are the same
+        whichever layouts came between."""
         super().reset(seed=seed)
         chosen = self._episode_options(options)
-        episode_seed = int(self.np_random.integers(0, 2**31 - 1)) if seed is None else int(seed)
+        drawn = int(self.np_random.integers(0, 2**31 - 1)) if seed is None else int(seed)
+        episode_seed: int | None = drawn
         if "layout" in chosen:
             obs = self._sim.reset_layout(chosen.pop("layout"))
+            episode_seed = None
         else:
-            obs = self._sim.reset(episode_seed, chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
+            obs = self._sim.reset(drawn, chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
         self._obs = obs
         self._episode = {"seed": episode_seed, **chosen}
         self._done = False
@@ -276,13 +317,20 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         self._obs = obs
 
         cfg = self.config
-        gaps = surface_distances(before, obs)
+        closest = step_closest(before, obs)  # (M, N) m, within the step
+        swept = float(closest.min()) if closest.size else math.inf
+        gaps = closest.min(axis=1) - 2.0 * cfg.radius if closest.size else np.full(before.n_robots, math.inf)
         contact_in_step = gaps < 0
         success = bool(native.get("success", False))
         timeout = bool(native.get("timeout", False))
-        rule = self.reward_config.step_reward
-        reward = rule(float(gaps.min()), success=success, timeout=timeout, dt=cfg.dt)
-        robot_rewards = np.array([rule(float(g), success=success, timeout=timeout, dt=cfg.dt) for g in gaps])
+
+        def rule(gap: float) -> float:
+            return self.reward_config.step_reward(
+                gap, success=success, timeout=timeout, dt=cfg.dt, contact_ends=self.end_on_collision
+            )
+
+        reward = rule(float(gaps.min()))
+        robot_rewards = np.array([rule(float(g)) for g in gaps])
 
         centre = np.linalg.norm(obs.robot_positions[:, None] - obs.human_positions[None], axis=-1)
         min_distance = float(centre.min()) if centre.size else math.inf
@@ -297,13 +345,19 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         info: dict[str, Any] = {
             "observation": ComparableObservation.of(obs),
             **native,
+            "n_robots": obs.n_robots,
+            "accelerations": self._rows(native["accelerations"], 0.0),
+            "clipped": self._rows(native["clipped"], False),
             "min_distance": min_distance,
             "collision": min_distance < COLLISION_DISTANCE,
             "contact": min_distance < 2.0 * cfg.radius,
             "discomfort": bool(np.any(discomfort)),
-            "surface_distance": gaps,
-            "robot_rewards": robot_rewards,
-            "reached": obs.robot_reached.copy(),
+            "min_distance_between_steps": swept,
+            "collision_between_steps": swept < COLLISION_DISTANCE,
+            "contact_between_steps": bool(contact_in_step.any()),
+            "surface_distance": self._rows(gaps, math.inf),
+            "robot_rewards": self._rows(robot_rewards, 0.0),
+            "reached": self._rows(obs.robot_reached, False),
             "success": success,
             "timeout": timeout,
         }
@@ -326,9 +380,9 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         canvas = FigureCanvasAgg(fig)
         ax = fig.add_axes((0.09, 0.09, 0.6, 0.82))  # room on the right for plot_episode's legend
         last = traj.n_steps
-        title = (
-            f"{self._episode['scenario']}, seed {self._episode['seed']}: t = {last * self.config.dt:.1f} s"
-        )
+        seed = self._episode["seed"]
+        title = f"{self._episode['scenario']}{'' if seed is None else f', seed {seed}'}: "
+        title += f"t = {last * self.config.dt:.1f} s"
         plot_episode(
             traj.robot_positions,
             traj.human_positions,
@@ -408,6 +462,13 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             )
         chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
         return chosen
+
+    def _rows(self, values: np.ndarray, fill: float | bool) -> np.ndarray:
+        """``values`` (one row per robot of the episode) padded to ``max_robots`` rows with ``fill``."""
+        values = np.asarray(values)
+        out = np.full((self.max_robots, *values.shape[1:]), fill, dtype=values.dtype)
+        out[: len(values)] = values
+        return out
 
     def _array(self, obs: Observation) -> np.ndarray:
         out = np.zeros((self.max_robots + self.max_humans, len(COLUMNS)))

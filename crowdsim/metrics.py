@@ -1,6 +1,17 @@
 """The paper's episode metrics (Section VI; DESIGN.md "Crowd simulator"), computed from a recorded trajectory.
 
-Distances are evaluated at the simulation steps (every 0.4 s), as CrowdNav and the paper report them.
+Sampling. ``collision``, ``contact``, ``min_distance`` and the per-step counts evaluate distances at the
+recorded states only, every ``dt = 0.4`` s. That is not what CrowdNav does: its ``step()`` (the paper
+authors' fork, ``crowd_sim.py``, as upstream) takes the closest approach within each step, the relative
+motion of robot and human a straight segment (``point_to_segment_dist``), and CrowdNav's collision is that
+swept distance below the sum of the radii. The paper defines its collision rate as the % of simulations in
+which the minimum robot-pedestrian distance is below 0.8 m and never says where that minimum is evaluated
+(its MPC code is unpublished). ``collision`` stays sampled at the steps, so that episodes compare metric for
+metric with earlier records and Table II runs; the ``*_between_steps`` fields give the between-step figure:
+every agent moves in a straight line between its recorded positions, and the closest approach over each
+step is taken. The between-step distance is never above the sampled one; with 0.4 s steps the two minima
+differ by a few centimetres at most, enough to turn one episode in 20 to 40 into a collision (robots
+accelerating within a step follow a parabola, which the segment approximates).
 
 * success, under the trajectory's ``success_rule`` (``EnvConfig.success_rule``): "simultaneous" (paper
   profile, the authors' CrowdNav fork) when at some step every robot is within its radius of its goal
@@ -8,7 +19,7 @@ Distances are evaluated at the simulation steps (every 0.4 s), as CrowdNav and t
   its goal at some step, each at its own.
 * travel time: the first step at which the rule holds, as a time (NaN unless success). Either way
   ``reach_times`` keeps each robot's own first reach.
-* collision: the minimum robot-human centre distance over the episode is below ``d_min = 0.8`` m.
+* collision: the minimum robot-human centre distance over the recorded states is below ``d_min = 0.8`` m.
 * contact: that minimum is below the sum of the radii (0.6 m): physical contact.
 * per-step counts: ``collision_steps``, ``contact_steps`` and ``discomfort_steps`` count the recorded
   states (rows 0..T) at which the condition holds; ``aggregate`` turns them into frequencies per evaluated
@@ -17,6 +28,12 @@ Distances are evaluated at the simulation steps (every 0.4 s), as CrowdNav and t
   the closed segment from the agent's position to ``position + velocity * 1.2 s`` (length speed x 1.2 s). An
   agent standing still projects a point; touching segments count as intersecting.
 * min distance: robot-human (the collision metric's number); robot-robot and human-human minima are kept too.
+* between steps: ``min_distance_between_steps`` is the robot-human closest approach over the whole episode
+  with linear motion within each step, ``min over k, s in [0, 1] of |d_k + s (d_(k+1) - d_k)|`` for the
+  relative position ``d`` of every robot-human pair (the recorded states included, so it is never above
+  ``min_distance``); ``collision_between_steps`` and ``contact_between_steps`` are it below 0.8 m and below
+  the sum of the radii (CrowdNav's collision, what ``crowdsim.gym_env``'s reward and ``end_on_collision``
+  use).
 * path length: per robot, the length of the polyline through its positions over the whole episode.
 """
 
@@ -37,8 +54,19 @@ COLLISION_DISTANCE: Final[float] = D_MIN  # m, d_min of Table I: personal-space 
 DISCOMFORT_HORIZON: Final[float] = 1.2  # s, "the proportional factor is chosen as 1.2 s" (Section VI)
 # Fields added after records were first written: EpisodeMetrics.from_dict leaves them None when absent.
 ADDED_COUNTS: Final[tuple[str, ...]] = ("collision_steps", "contact_steps")
+BETWEEN_STEPS: Final[tuple[str, ...]] = (
+    "min_distance_between_steps",
+    "collision_between_steps",
+    "contact_between_steps",
+)
+ADDED_FIELDS: Final[tuple[str, ...]] = (*ADDED_COUNTS, *BETWEEN_STEPS)
 # as_dict writes inf as null; for these fields inf is the value without any pair of agents.
-_INF_WHEN_NULL: Final[tuple[str, ...]] = ("min_distance", "min_distance_robots", "min_distance_humans")
+_INF_WHEN_NULL: Final[tuple[str, ...]] = (
+    "min_distance",
+    "min_distance_robots",
+    "min_distance_humans",
+    "min_distance_between_steps",
+)
 
 
 @dataclass(frozen=True)
@@ -88,6 +116,12 @@ class EpisodeMetrics:
     collision_steps: int | None
     contact_steps: int | None
     n_steps: int  # simulation steps in the episode; the trajectory has n_steps + 1 states
+    # Robot-human closest approach with linear motion within each step (m, inf without humans), and it below
+    # 0.8 m, resp. below the sum of the radii (module docstring). None only when rebuilt by from_dict from a
+    # record written before them.
+    min_distance_between_steps: float | None
+    collision_between_steps: bool | None
+    contact_between_steps: bool | None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly (NaN and inf become None)."""
@@ -106,21 +140,23 @@ class EpisodeMetrics:
         """Rebuild from ``as_dict``'s output (e.g. read back from JSON).
 
         null becomes inf for the minimum distances (no pair of agents) and NaN elsewhere (travel time, reach
-        times); lists become tuples. The counts in ``ADDED_COUNTS`` may be absent (records written before
+        times); lists become tuples. The fields in ``ADDED_FIELDS`` may be absent (records written before
         them) and are then None; any other missing key raises SimulationError naming it.
         """
         names = [f.name for f in fields(cls)]
-        missing = [n for n in names if n not in record and n not in ADDED_COUNTS]
+        missing = [n for n in names if n not in record and n not in ADDED_FIELDS]
         if missing:
             raise SimulationError(f"episode metrics record lacks {missing}")
         values: dict[str, Any] = {}
         for name in names:
             value = record.get(name)
-            if name in _INF_WHEN_NULL:
+            if name not in record:  # an added field, absent from an older record
+                value = None
+            elif name in _INF_WHEN_NULL:
                 value = math.inf if value is None else float(value)
             elif isinstance(value, list | tuple):
                 value = tuple(math.nan if v is None else v for v in value)
-            elif value is None and name not in ADDED_COUNTS:
+            elif value is None and name not in ADDED_FIELDS:
                 value = math.nan
             values[name] = value
         return cls(**values)
@@ -137,6 +173,29 @@ def _row_min_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if a.shape[1] == 0 or b.shape[1] == 0:
         return np.full(len(a), math.inf)
     return np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
+
+
+def closest_approach(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """``(...)`` smallest norm on the segment from ``start (..., 2)`` to ``end (..., 2)``: the closest
+    approach of two agents whose relative position moves linearly from ``start`` to ``end``,
+    ``min over s in [0, 1] of |start + s (end - start)|`` (CrowdNav's ``point_to_segment_dist``)."""
+    d = end - start
+    length2 = np.einsum("...k,...k->...", d, d)
+    s = np.clip(-np.einsum("...k,...k->...", start, d) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(start + s[..., None] * d, axis=-1)
+
+
+def min_distance_between_steps(robot_positions: np.ndarray, human_positions: np.ndarray) -> float:
+    """Robot-human closest approach (m) of ``robot_positions (T+1, M, 2)`` and ``human_positions
+    (T+1, N, 2)`` when every agent moves linearly between its recorded positions; the recorded states
+    count too, so it is never above their minimum. inf without a robot or a human."""
+    if robot_positions.shape[1] == 0 or human_positions.shape[1] == 0:
+        return math.inf
+    rel = human_positions[:, None, :, :] - robot_positions[:, :, None, :]  # (T+1, M, N, 2)
+    at_rows = float(np.linalg.norm(rel, axis=-1).min())
+    if len(rel) < 2:
+        return at_rows
+    return min(at_rows, float(closest_approach(rel[:-1], rel[1:]).min()))
 
 
 def _success_step(traj: Trajectory, reach: np.ndarray, rule: str) -> int:
@@ -227,6 +286,7 @@ def episode_metrics(
     reach_times = tuple(seconds(k) if k >= 0 else math.nan for k in reach)
     row_min = _row_min_distance(rp, hp)
     min_rh = float(row_min.min())
+    swept = min_distance_between_steps(rp, hp)
     disc = discomfort_steps(traj, discomfort_horizon)
     return EpisodeMetrics(
         success=success,
@@ -244,6 +304,9 @@ def episode_metrics(
         collision_steps=int((row_min < collision_distance).sum()),
         contact_steps=int((row_min < 2.0 * traj.radius).sum()),
         n_steps=traj.n_steps,
+        min_distance_between_steps=swept,
+        collision_between_steps=swept < collision_distance,
+        contact_between_steps=swept < 2.0 * traj.radius,
     )
 
 
@@ -256,7 +319,9 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
 
     Per-step frequencies in % (``collision_step_freq``, ``contact_step_freq``, ``discomfort_step_freq``):
     the states at which the condition holds over all states evaluated, ``100 sum(x_steps) / sum(n_steps +
-    1)``; NaN when some episode lacks the count (rebuilt from an older record).
+    1)``; NaN when some episode lacks the count (rebuilt from an older record). The between-step rates
+    (``collision_between_steps_rate`` / ``_count``, the same for contact) are NaN, with a NaN count, when
+    some episode lacks the field.
     """
     if not metrics:
         raise SimulationError("aggregate needs at least one episode, got an empty list")
@@ -267,6 +332,11 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
         flags = [bool(getattr(m, name)) for m in metrics]
         out[f"{name}_rate"] = _rate(flags)
         out[f"{name}_count"] = sum(flags)
+    for name in ("collision_between_steps", "contact_between_steps"):
+        values = [getattr(m, name) for m in metrics]
+        known = all(v is not None for v in values)
+        out[f"{name}_rate"] = _rate([bool(v) for v in values]) if known else math.nan
+        out[f"{name}_count"] = sum(bool(v) for v in values) if known else math.nan
     out["travel_time_mean"] = float(np.mean(travel)) if travel else math.nan
     out["travel_time_std"] = float(np.std(travel)) if travel else math.nan
     out["min_distance_mean"] = float(np.mean(min_d))

@@ -132,6 +132,8 @@ def format_table(summary: dict[str, Any], header: str) -> str:
     n = summary["episodes"]
 
     def rate(name: str) -> str:
+        if summary.get(f"{name}_rate") is None or math.isnan(summary[f"{name}_rate"]):
+            return "n/a"  # an episode without the field (an older record)
         return f"{summary[f'{name}_rate']:6.1f} %  ({summary[f'{name}_count']}/{n})"
 
     rows = [
@@ -143,6 +145,8 @@ def format_table(summary: dict[str, Any], header: str) -> str:
         ),  # fmt: skip
         (f"collision (<{COLLISION_DISTANCE:g} m)", rate("collision")),
         (f"contact (<{2 * RADIUS:g} m)", rate("contact")),  # the radii touch (crowdsim.metrics)
+        # the closest approach with linear motion within each step, as CrowdNav takes it (crowdsim.metrics)
+        ("collision between steps", rate("collision_between_steps")),
         ("discomfort", rate("discomfort")),
         (
             "per step",

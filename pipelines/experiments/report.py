@@ -1,7 +1,8 @@
 """From per-episode records to what a reader compares with the paper: CSV, a Markdown table, plots.
 
 ``write_report`` writes them all into a sweep's directory: cells.csv (a row per cell: the paper's metrics with
-their 95% intervals, our safety and solver figures, the paper's figures) and episodes.csv (a row per episode)
+their 95% intervals, our safety figures, among them the collision rate between steps, solver figures, the
+paper's figures) and episodes.csv (a row per episode)
 from here, table.md from pipelines.experiments.tables, a plot per outcome from
 pipelines.experiments.report_plots (``OUTCOME_vs_humans.png``, or ``OUTCOME_by_method.png`` at one crowd
 size), and min_distance_hist.csv with the safety plots from pipelines.experiments.safety_report. The cells'
@@ -27,7 +28,14 @@ EPISODES_CSV: Final[str] = "episodes.csv"
 TABLE_MD: Final[str] = "table.md"
 
 
-def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
+def cell_rows(
+    summaries: Sequence[CellSummary], records: Iterable[dict[str, Any]] = ()
+) -> list[dict[str, Any]]:
+    """A row per cell; ``records`` (the cells' episodes) give the between-step collision rate, empty
+    without them."""
+    metrics: dict[str, list[dict[str, Any]]] = {}
+    for record in records:
+        metrics.setdefault(record["cell"], []).append(record["metrics"])
     rows = []
     for s in summaries:
         row: dict[str, Any] = {
@@ -59,6 +67,7 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "min_distance_mean": s.min_distance_mean,
             "min_distance_median": s.min_distance_median,
             **{f"{k}_step_freq": getattr(s, f"{k}_step_freq") for k in safety.STEP_COUNTS},
+            **_between_steps_columns(metrics.get(s.cell.key, [])),
             "step_median_ms": s.step_median_ms,
             "step_p95_ms": s.step_p95_ms,
             "step_mean_ms": s.step_mean_ms,
@@ -68,6 +77,19 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
         row |= {f"paper_{k}": v for k, v in s.paper_row.items()}
         rows.append(row)
     return rows
+
+
+def _between_steps_columns(metrics: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """cells.csv's collision rate between steps (safety_report.between_steps_rate), as the paper's rates
+    are written: count, %, 95% Wilson interval; empty when some record lacks the field."""
+    count, percent = safety.between_steps_rate(metrics)
+    lo, hi = Rate(count, len(metrics)).interval if count is not None else (None, None)
+    return {
+        "collision_between_steps_count": count,
+        "collision_between_steps_rate": percent,
+        "collision_between_steps_ci_lo": lo,
+        "collision_between_steps_ci_hi": hi,
+    }
 
 
 def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) -> list[dict[str, Any]]:
@@ -93,6 +115,7 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
                 "n_steps": m["n_steps"],
                 # Absent from records written before them: empty cells, not a failed report.
                 **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
+                **{k: m.get(k) for k in ("min_distance_between_steps", "collision_between_steps")},
                 **{k: r.get(k) for k in ("margins", "profile", "visibility")},
                 "step_median_ms": s["median_ms"],
                 "step_p95_ms": s["p95_ms"],
@@ -130,7 +153,7 @@ def write_report(
     keys = {c.key for c in cells}
     records = [r for r in records if r["cell"] in keys]
     summaries = summarize(experiment, cells, records)
-    write_csv(out / CELLS_CSV, cell_rows(summaries))
+    write_csv(out / CELLS_CSV, cell_rows(summaries, records))
     write_csv(out / EPISODES_CSV, episode_rows(records, cells))
     markdown = markdown_table(experiment, summaries)
     (out / TABLE_MD).write_text(markdown)

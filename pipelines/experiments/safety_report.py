@@ -6,6 +6,11 @@ condition holds per evaluated state as well (crowdsim.metrics.aggregate); both a
 frequencies as ``100 sum(x_steps) / sum(n_steps + 1)`` over a cell's episodes. Records written before the
 step counts existed still report, with NaN (printed "—") for what they lack.
 
+Those rates sample distances at the steps (every 0.4 s), as the paper's table is compared; CrowdNav takes the
+closest approach within each step. ``between_steps_rate`` gives the % of a cell's episodes whose closest
+approach with linear motion between steps is below d_min (crowdsim.metrics ``collision_between_steps``),
+cells.csv's ``collision_between_steps_*`` columns; NaN when some record predates the field.
+
 Two plots: the histogram of each episode's minimum robot-human distance, with the contact (0.6 m) and
 personal-space (0.8 m) thresholds drawn, shows whether collisions are near misses or deep intrusions; the
 success / collision trade-off places each method (for the ``safety`` experiment: conformal margins at
@@ -92,6 +97,18 @@ def step_frequency(metrics: Sequence[Mapping[str, Any]], name: str) -> float:
         return math.nan
     # No None left (checked above).
     return 100.0 * sum(cast("list[float]", counts)) / sum(n + 1 for n in cast("list[float]", steps))
+
+
+def between_steps_rate(
+    metrics: Sequence[Mapping[str, Any]], name: str = "collision_between_steps"
+) -> tuple[int | None, float]:
+    """(episodes, % of episodes) in which ``name`` (a crowdsim.metrics ``*_between_steps`` flag) held;
+    (None, NaN) when some episode lacks it (an older record) or there are no episodes."""
+    flags = [m.get(name) for m in metrics]
+    if not flags or any(f is None for f in flags):
+        return None, math.nan
+    count = sum(bool(f) for f in flags)
+    return count, 100.0 * count / len(flags)
 
 
 def min_distances(metrics: Sequence[Mapping[str, Any]]) -> tuple[float, ...]:

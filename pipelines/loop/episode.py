@@ -212,7 +212,8 @@ def run_episodes(
 
 
 def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
-    """Episode metrics (``crowdsim.metrics.aggregate``) and control-step costs over all steps of all episodes.
+    """Episode metrics (``crowdsim.metrics.aggregate``: the rates sampled at the steps, and the collision and
+    contact rates between steps) and control-step costs over all steps of all episodes.
 
     Solve times in ms per control step: median, p95, max; IBR iterations: mean and max; fallback steps.
     """

@@ -1,6 +1,7 @@
 """crowdmpc/CrowdNav-v0: gymnasium's checker, the observation layout, the reward by hand, the episode is
 CrowdEnv's, the time limit, rendering, and the velocity wrapper."""
 
+import math
 import subprocess
 import sys
 import warnings
@@ -112,6 +113,24 @@ def test_the_layout_seed_is_the_simulators():
     assert first["seed"] == again["seed"] and first["observation"] == again["observation"]
 
 
+def test_a_layout_episode_has_no_seed_and_keeps_the_generators_sequence():
+    env = CrowdNavEnv(n_robots=1, n_humans=1, render_mode="rgb_array")
+    env.reset(seed=3)
+    _, plain = env.reset()
+    env.reset(seed=3)
+    _, info = env.reset(options={"layout": one_robot((0.0, 2.0))})
+    assert info["seed"] is None and env.episode["seed"] is None and info["scenario"] == "layout"
+    env.step(np.zeros((1, 2)))
+    assert env.render().shape == (480, 640, 3)  # titled without a seed
+    _, after = env.reset()  # the layout's reset took its draw: the next episode is the same as without it
+    env.reset(seed=3)
+    env.reset()
+    _, again = env.reset()
+    assert after["seed"] == again["seed"] != plain["seed"]
+    _, seeded = env.reset(seed=8, options={"layout": one_robot((0.0, 2.0))})
+    assert seeded["seed"] is None  # seed 8 seeded the generator, not this layout
+
+
 @pytest.mark.parametrize(
     "options, message",
     [
@@ -169,7 +188,11 @@ def test_bad_actions_and_calls_out_of_order_are_refused():
 # ------------------------------------------------------------------------------------------- the reward
 def test_the_reward_rules_in_their_order():
     rule = RewardConfig().step_reward
-    assert rule(-0.1, success=True, timeout=False, dt=0.4) == -0.25  # contact first
+    # contact on the step that succeeds: the fork goes on after a contact, so success is paid too
+    assert rule(-0.1, success=True, timeout=False, dt=0.4) == 0.75
+    # ... unless the contact ends the episode (upstream CrowdNav): contact first, success not paid
+    assert rule(-0.1, success=True, timeout=False, dt=0.4, contact_ends=True) == -0.25
+    assert rule(-0.1, success=False, timeout=False, dt=0.4) == -0.25
     assert rule(0.1, success=True, timeout=False, dt=0.4) == 1.0
     assert rule(0.2, success=False, timeout=False, dt=0.4) == pytest.approx((0.2 - 0.4) * 0.5 * 0.4)
     assert rule(0.4, success=False, timeout=False, dt=0.4) == 0.0  # the discomfort distance itself
@@ -200,6 +223,61 @@ def test_contact_costs_the_collision_penalty_and_may_end_the_episode(end_on_coll
     assert info["surface_distance"] == pytest.approx([-0.1])  # at the start of the step
     assert reward == -0.25 and terminated == end_on_collision and not truncated
     assert ("episode_metrics" in info) == end_on_collision
+
+
+def _at_goal_beside_a_human() -> Layout:
+    """A robot at rest 0.1 m from its goal (inside its 0.3 m radius: it succeeds on the first step), a
+    human standing 0.5 m from it: boundaries overlapping by 0.1 m."""
+    return Layout(np.zeros((1, 2)), np.array([[0.0, -0.1]]), np.array([[0.5, 0.0]]), np.array([[0.5, 0.0]]))
+
+
+@pytest.mark.parametrize("end_on_collision, expected", [(False, -0.25 + 1.0), (True, -0.25)])
+def test_contact_and_success_on_the_same_step(end_on_collision, expected):
+    env = CrowdNavEnv(n_robots=1, n_humans=1, end_on_collision=end_on_collision)
+    env.reset(seed=0, options={"layout": _at_goal_beside_a_human()})
+    _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
+    assert info["surface_distance"] == pytest.approx([-0.1]) and info["success"]
+    assert reward == expected and info["robot_rewards"].tolist() == [expected]
+    assert terminated and not truncated
+    metrics = info["episode_metrics"]
+    assert metrics.success and metrics.contact and metrics.contact_between_steps
+
+
+def _crossing() -> Layout:
+    """Robot from 0 to (15, 0); a human from (4.12, 0.5) west to (-15, 0.5) at 1 m/s (0.4 m a step).
+    Driven by StraightController the robot is at x = 0.16, 0.52, then 0.4 m a step further (1 m/s from the
+    second step): x_k = 0.4 k - 0.28, the human at 4.12 - 0.4 k. Relative x after steps 5 and 6: 0.4 and
+    -0.4; at 0.5 m apart in y, sqrt(0.16 + 0.25) = 0.640 m at both states (no contact: not < 0.6 m), 0.5 m
+    halfway through step 6 (contact, boundaries -0.1 m apart)."""
+    return Layout(
+        np.zeros((1, 2)), np.array([[15.0, 0.0]]), np.array([[4.12, 0.5]]), np.array([[-15.0, 0.5]])
+    )
+
+
+@pytest.mark.parametrize("end_on_collision", [False, True])
+def test_a_contact_between_two_steps_is_reported_as_it_ends_the_episode(end_on_collision):
+    # robots invisible: the human's ORCA walks straight on
+    config = EnvConfig(robots_visible=False)
+    env = CrowdNavEnv(n_robots=1, n_humans=1, config=config, end_on_collision=end_on_collision)
+    _, info = env.reset(options={"layout": _crossing()})
+    robot = StraightController()
+    steps = []
+    for _ in range(6):
+        steps.append(env.step(robot.act(info["observation"]).accelerations))
+        info = steps[-1][4]
+    assert [s[4]["contact_between_steps"] for s in steps] == [False] * 5 + [True]
+    _, reward, terminated, truncated, info = steps[-1]
+    assert info["observation"].robot_positions == pytest.approx(np.array([[2.12, 0.0]]))
+    assert info["observation"].human_positions == pytest.approx(np.array([[1.72, 0.5]]))
+    assert info["min_distance"] == pytest.approx(math.sqrt(0.41)) and not info["contact"]
+    assert info["min_distance_between_steps"] == pytest.approx(0.5) and info["collision_between_steps"]
+    assert info["surface_distance"] == pytest.approx([-0.1]) and reward == -0.25
+    assert terminated == end_on_collision and not truncated
+    if end_on_collision:
+        m = info["episode_metrics"]
+        assert (m.contact, m.collision, m.timeout, m.success) == (False, True, True, False)  # step-sampled
+        assert m.contact_between_steps and m.min_distance_between_steps == pytest.approx(0.5)
+        assert m.min_distance == pytest.approx(math.sqrt(0.41)) and m.n_steps == 6
 
 
 def test_the_time_limit_truncates_with_the_episode_metrics():
@@ -242,8 +320,8 @@ def test_an_episode_is_crowdenvs_and_its_metrics_are_the_simulators():
         np.testing.assert_array_equal(traj.human_positions, expected.human_positions)
         assert info["episode_metrics"] == episode_metrics(expected)
         assert terminated and info["success"]
-        # the blind baseline brushes a human on its last step: the collision penalty comes first
-        assert reward == (-0.25 if (info["surface_distance"] < 0).any() else 1.0)
+        # the blind baseline brushes a human on its last step: the collision penalty and the success
+        assert reward == (-0.25 + 1.0 if info["contact_between_steps"] else 1.0)
 
 
 def test_orca_robots_reach_their_goals_through_the_velocity_wrapper():

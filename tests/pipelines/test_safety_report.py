@@ -14,6 +14,7 @@ from pipelines.experiments.safety_report import (
     MIN_DISTANCE_HIST_CSV,
     MIN_DISTANCE_HIST_PNG,
     SAFETY_TRADEOFF_PNG,
+    between_steps_rate,
     min_distance_counts,
     step_frequency,
     world_note,
@@ -232,3 +233,51 @@ def test_episodes_csv_is_in_the_plans_order_whatever_order_the_workers_finished_
     first = (tmp_path / "a" / EPISODES_CSV).read_text()
     assert first == (tmp_path / "b" / EPISODES_CSV).read_text()
     assert [line.split(",")[0] for line in first.splitlines()[1:4]] == [r["key"] for r in records[:3]]
+
+
+def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
+    """ "none": its two step-sampled collisions (0.5 and 0.7 m) are collisions between steps too, 2 of 3.
+    "alpha=0.5": its first episode, 0.82 m apart at the steps, comes within 0.78 m between two: 1 of 4 =
+    25 % where the step-sampled rate is 0. The Markdown table keeps its rows."""
+    safety, cells, records = _safety_records()
+    records[3]["metrics"]["min_distance"] = 0.82
+    between = {0: 0.5, 2: 0.7, 3: 0.78}  # record -> closest approach between steps (m)
+    for i, r in enumerate(records):
+        r["metrics"]["min_distance_between_steps"] = between.get(i, r["metrics"]["min_distance"])
+        r["metrics"]["collision_between_steps"] = r["metrics"]["min_distance_between_steps"] < 0.8
+    (tmp_path / "before").mkdir()
+    before = [{**r, "metrics": dict(r["metrics"])} for r in records]
+    for r in before:
+        del r["metrics"]["min_distance_between_steps"], r["metrics"]["collision_between_steps"]
+    old = write_report(tmp_path / "before", safety, cells, before)
+    report = write_report(tmp_path, safety, cells, records)
+    assert report.markdown == old.markdown  # the Markdown table does not show it
+    with open(tmp_path / CELLS_CSV) as f:
+        none, half = list(csv.DictReader(f))
+    with open(tmp_path / "before" / CELLS_CSV) as f:
+        none_before, half_before = list(csv.DictReader(f))
+    assert none_before["collision_between_steps_rate"] == ""  # records without the field
+    for now, then in ((none, none_before), (half, half_before)):  # every other column unchanged
+        assert {k: v for k, v in now.items() if "between" not in k} == {
+            k: v for k, v in then.items() if "between" not in k
+        }
+    assert (none["collision_count"], none["collision_between_steps_count"]) == ("2", "2")
+    assert float(none["collision_between_steps_rate"]) == pytest.approx(200.0 / 3)
+    assert (half["collision_count"], half["collision_between_steps_count"]) == ("0", "1")
+    assert float(half["collision_between_steps_rate"]) == 25.0
+    lo, hi = float(half["collision_between_steps_ci_lo"]), float(half["collision_between_steps_ci_hi"])
+    assert lo < 25.0 < hi  # the Wilson interval, as the other rates'
+    with open(tmp_path / EPISODES_CSV) as f:
+        episodes = list(csv.DictReader(f))
+    assert [e["collision_between_steps"] for e in episodes[:4]] == ["True", "False", "True", "True"]
+    assert (episodes[3]["min_distance"], episodes[3]["min_distance_between_steps"]) == ("0.82", "0.78")
+
+
+def test_between_steps_rate_needs_every_record():
+    assert between_steps_rate([{"collision_between_steps": True}, {"collision_between_steps": False}]) == (
+        1,
+        50.0,
+    )
+    count, percent = between_steps_rate([{"collision_between_steps": True}, {}])  # one older record
+    assert count is None and math.isnan(percent)
+    assert math.isnan(between_steps_rate([])[1])

@@ -16,10 +16,15 @@ def test_simulate_orca_prints_the_table_and_writes_json_and_plot(tmp_path, capsy
     assert code == 0
     text = capsys.readouterr().out
     for row in ("success", "travel time", "collision", "contact", "discomfort", "min distance", "solve time",
-                "IBR iterations"):  # fmt: skip
+                "IBR iterations", "collision between steps"):  # fmt: skip
         assert row in text
     payload = json.loads(out_json.read_text())
     assert payload["summary"]["episodes"] == 2
+    summary = payload["summary"]
+    assert summary["collision_between_steps_count"] >= summary["collision_count"]  # never fewer
+    for episode in payload["episodes"]:
+        m = episode["metrics"]
+        assert m["min_distance_between_steps"] <= m["min_distance"]
     assert [e["seed"] for e in payload["episodes"]] == [7, 8]
     assert payload["run"]["controller"] == "orca" and payload["run"]["predictor"] is None
     assert out_png.read_bytes()[:4] == b"\x89PNG"
