@@ -103,6 +103,7 @@ def _count(value: Any) -> bool:
 # report with a traceback, so a line holding one is refused like any damaged line.
 _KINDS: Final[dict[str, tuple[Callable[[Any], bool], str]]] = {
     "bool": (lambda v: isinstance(v, bool), "a boolean"),
+    "bool?": (lambda v: v is None or isinstance(v, bool), "a boolean or null"),
     "count": (_count, "a non-negative integer"),
     "count?": (lambda v: v is None or _count(v), "a non-negative integer or null"),
     "number": (_number, "a number"),
@@ -118,6 +119,8 @@ METRIC_KINDS: Final[dict[str, str]] = {
     **dict.fromkeys(("path_length", "reach_times"), "numbers"),
     **dict.fromkeys(("discomfort_steps", "n_steps"), "count"),
     **dict.fromkeys(("collision_steps", "contact_steps"), "count?"),  # absent from records before them
+    "min_distance_between_steps": "number?",  # these three too
+    **dict.fromkeys(("collision_between_steps", "contact_between_steps"), "bool?"),
 }
 SOLVER_KINDS: Final[dict[str, str]] = {
     **dict.fromkeys(("steps", "fallback_steps"), "count"),

@@ -112,12 +112,15 @@ def test_the_records_a_sweep_writes_pass_the_check(good):
         (lambda r: r["metrics"].update(path_length=["x"]), "metrics 'path_length' is not a list of numbers"),
         (lambda r: r["metrics"].update(n_steps=2.5), "metrics 'n_steps' is not a non-negative integer"),
         (lambda r: r["metrics"].update(contact_steps="3"), "'contact_steps' is not a non-negative"),
+        (lambda r: r["metrics"].update(collision_between_steps="yes"), "_between_steps' is not a boolean"),
+        (lambda r: r["metrics"].update(min_distance_between_steps="0.5"), "_between_steps' is not a number"),
         (lambda r: r["solver"].update(median_ms="abc"), "solver 'median_ms' is not a number or null"),
         (lambda r: r.update(solver="fast"), "not an episode record"),
         (lambda r: r.pop("wall_s"), "record's 'wall_s' is not a number"),
     ],
     ids=["time-string", "success-string", "collision-int", "distance-bool", "path-strings", "steps-float",
-         "count-string", "solver-string-time", "solver-string", "no-wall-time"],
+         "count-string", "between-string", "between-distance-string", "solver-string-time", "solver-string",
+         "no-wall-time"],
 )  # fmt: skip
 def test_a_record_field_of_the_wrong_type_is_named_by_file_and_line(good, tmp_path, edit, reason):
     path = _damage(good, tmp_path, edit)
@@ -140,8 +143,9 @@ def test_the_report_refuses_a_tampered_metric_in_one_line(good, tmp_path, capsys
 
 def test_missing_counts_and_null_times_as_the_writer_writes_them_pass(good, tmp_path):
     def older(record):
-        for name in ("collision_steps", "contact_steps"):
-            record["metrics"].pop(name)  # records written before the counts
+        added = ("min_distance_between_steps", "collision_between_steps", "contact_between_steps")
+        for name in ("collision_steps", "contact_steps", *added):
+            record["metrics"].pop(name)  # records written before the counts and the between-step figures
         record["metrics"].update(travel_time=None, min_distance_robots=None, reach_times=[None])
 
     _damage(good, tmp_path, older)
