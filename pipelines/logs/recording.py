@@ -60,8 +60,10 @@ ROBOT_RGB: Final[tuple[tuple[float, float, float], ...]] = (
 HUMAN_RGB: Final[tuple[float, float, float]] = (0.45, 0.45, 0.45)
 
 
-def episode_filename(scenario: str, seed: int) -> str:
-    return f"{scenario}_seed{seed:06d}.mcap"
+def episode_filename(scenario: str, seed: int | None, unseeded: int = 0) -> str:
+    """The file of an episode: by its seed, or for one no seed drew (a gym episode started from a layout)
+    by its number among those the recorder wrote, ``unseeded``."""
+    return f"{scenario}_seed{seed:06d}.mcap" if seed is not None else f"{scenario}_{unseeded:06d}.mcap"
 
 
 # What tells two runs' recordings of one (scenario, seed) apart: its file name is the same for both.
@@ -231,7 +233,8 @@ class SceneBuilder:
 
 
 class McapEpisodeRecorder:
-    """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode.
+    """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode
+    (``<scenario>_<n:06d>.mcap`` for the n-th one no seed drew: a gym episode started from a layout).
 
     :param out_dir: folder for the files (created if missing).
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
@@ -258,6 +261,7 @@ class McapEpisodeRecorder:
         self._last: Observation | None = None  # the newest state seen
         self._last_written_step = -1
         self._start_ns = 0  # the episode's wall-clock start, ns since the Unix epoch: log time at t = 0
+        self._unseeded = 0  # episodes with no seed (from a layout) written so far: their files' numbers
 
     # -- EpisodeObserver -------------------------------------------------------------------------------------
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
@@ -265,11 +269,11 @@ class McapEpisodeRecorder:
         missing = [key for key in ("seed", "scenario") if key not in meta]
         if missing:
             raise PipelineError(f"recording needs {missing} in the episode meta; got keys {sorted(meta)}")
-        seed, scenario = int(meta["seed"]), str(meta["scenario"])
+        seed, scenario = None if meta["seed"] is None else int(meta["seed"]), str(meta["scenario"])
         n_robots, n_humans = len(obs.robot_positions), len(obs.human_positions)
         self._start_ns = time.time_ns()
         episode = {
-            "seed": str(seed),
+            **({} if seed is None else {"seed": str(seed)}),  # none: no seed drew the episode
             "scenario": scenario,
             "controller": str(meta.get("controller", "")),
             "predictor": str(meta.get("predictor") or ""),
@@ -280,7 +284,8 @@ class McapEpisodeRecorder:
             "radius": repr(float(obs.radius)),
             "start_time_ns": str(self._start_ns),
         }
-        path = self.out_dir / episode_filename(scenario, seed)
+        path = self.out_dir / episode_filename(scenario, seed, self._unseeded)
+        self._unseeded += seed is None
         _check_replaceable(path, episode)
         self._recorder = McapRecorder(
             path,

@@ -162,7 +162,7 @@ EPISODE_METRICS = MessageSchema(
     _record(
         "crowdmpc.EpisodeRecord",
         {
-            "seed": {"type": "integer"},
+            "seed": {"type": ["integer", "null"], "description": "null: no seed drew it (a gym layout)"},
             "scenario": {"type": "string"},
             "n_humans": {"type": "integer", "minimum": 0},
             "n_robots": {"type": "integer", "minimum": 1},

@@ -43,7 +43,7 @@ DEFAULT_ENV: Final[EnvConfig] = EnvConfig()
 class EpisodeResult:
     """One finished episode: who drove, what happened, what it cost, and the trajectories."""
 
-    seed: int
+    seed: int | None  # None: no seed drew the episode (a gym episode started from a layout)
     scenario: str
     n_humans: int
     n_robots: int

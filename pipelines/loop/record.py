@@ -73,7 +73,7 @@ class SolverStats:
 class EpisodeRecord:
     """Who drove, in which episode, what happened and what it cost (no trajectories)."""
 
-    seed: int
+    seed: int | None  # None: no seed drew the episode (a gym episode started from a layout)
     scenario: str
     n_humans: int
     n_robots: int
@@ -95,7 +95,7 @@ class EpisodeRecord:
         try:
             known = SolverStats.__dataclass_fields__
             return cls(
-                seed=int(data["seed"]),
+                seed=None if data["seed"] is None else int(data["seed"]),
                 scenario=str(data["scenario"]),
                 n_humans=int(data["n_humans"]),
                 n_robots=int(data["n_robots"]),

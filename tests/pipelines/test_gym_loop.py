@@ -107,6 +107,35 @@ def test_a_policys_episodes_are_recorded_to_mcap(tmp_path):
     assert len(rec.data("/episode/metrics")) == 1
 
 
+def test_episodes_from_a_layout_are_recorded_without_a_seed(tmp_path):
+    """No seed draws a hand-built scene: its file is numbered, its record says seed null, it reads back."""
+    from crowdsim.scenarios import Layout
+    from pipelines.loop.record import EpisodeRecord
+
+    layout = Layout(
+        np.array([[0.0, -2.0]]), np.array([[0.0, 2.0]]), np.array([[3.0, 0.0]]), np.array([[-3.0, 0.0]])
+    )
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        base = CrowdNavEnv(n_humans=1, n_robots=1, config=EnvConfig(time_limit=2.0, timeout_margin=0.0))
+        env = ObserveEpisodes(base, [recorder], controller="still")
+        for seed in (None, 3, None):
+            env.reset(seed=seed, options={"layout": layout} if seed is None else None)
+            done = False
+            while not done:
+                *_, terminated, truncated, _ = env.step(np.zeros((1, 2)))
+                done = terminated or truncated
+    assert [r.seed for r in env.results] == [None, 3, None]
+    assert [p.name for p in recorder.paths] == [
+        "layout_000000.mcap",
+        "circle_seed000003.mcap",
+        "layout_000001.mcap",
+    ]
+    rec = read_recording(recorder.paths[2])
+    _, errors = check_recording(rec)
+    assert not errors and "seed" not in rec.episode() and rec.episode()["scenario"] == "layout"
+    assert EpisodeRecord.from_dict(rec.data("/episode/metrics")[0]).seed is None
+
+
 def test_the_docs_example_runs_and_records(tmp_path, capsys):
     spec = importlib.util.spec_from_file_location("gym_velocity_policy", EXAMPLE)
     assert spec is not None and spec.loader is not None
