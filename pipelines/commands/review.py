@@ -109,15 +109,30 @@ def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
 
 
 def _groups(recordings: list[Recording], summaries: list[dict[str, Any]]) -> dict[tuple, list[Recording]]:
-    """The recordings by their set-up (``GROUP_KEYS``), in the order of their first run."""
+    """The recordings by their set-up (``GROUP_KEYS``), in the order of their first run. A recording whose
+    set-up is unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own:
+    with one known set-up it counts among its runs, as the folder's one aggregate always counted it."""
     groups: dict[tuple, list[Recording]] = {}
+    unknown: list[Recording] = []
     for rec, summary in zip(recordings, summaries, strict=True):
-        groups.setdefault(tuple(summary[k] for k in GROUP_KEYS), []).append(rec)
+        key = tuple(summary[k] for k in GROUP_KEYS)
+        if summary["controller"] is None:
+            unknown.append(rec)
+        else:
+            groups.setdefault(key, []).append(rec)
+    if unknown and len(groups) == 1:
+        members = next(iter(groups.values()))
+        members.extend(unknown)
+        members.sort(key=recordings.index)  # the folder's order, as before
+    elif unknown:
+        groups[(None,) * len(GROUP_KEYS)] = unknown
     return groups
 
 
 def _group_name(group: tuple) -> str:
     controller, predictor, n_robots, n_humans = group
+    if controller is None:
+        return "set-up unknown (no readable episode metadata)"
     return f"{controller}, predictor {predictor or 'none'}, {n_robots} robots, {n_humans} humans"
 
 

@@ -226,3 +226,18 @@ def test_a_folder_of_different_set_ups_gets_an_aggregate_for_each(tmp_path, caps
     report = json.loads((tmp_path / "r.json").read_text())
     assert "totals" not in report and len(report["runs"]) == 3
     assert [(g["n_humans"], g["totals"]["runs"]) for g in report["groups"]] == [(4, 1), (5, 2)]
+
+
+def test_a_recording_of_unknown_set_up_joins_the_one_known_or_stands_apart(tmp_path, capsys):
+    """A file cut before its metadata names no set-up: with one set-up in the folder it is among its runs
+    (as the folder's one aggregate always counted it); beside two, it is a group of its own, so named."""
+    first = record_episode(tmp_path, seed=1, steps=4, n_humans=4)
+    (tmp_path / "cut.mcap").write_bytes(first.path.read_bytes()[:200])
+    assert main(["review", str(tmp_path)]) == 0
+    out, err = capsys.readouterr()
+    assert "different set-ups" not in err and "\n2 runs, 1 whose episode did not end" in out
+    record_episode(tmp_path, seed=2, steps=4, n_humans=5)
+    assert main(["review", str(tmp_path)]) == 0
+    out, err = capsys.readouterr()
+    assert "holds runs of 3 different set-ups" in err
+    assert "== set-up unknown (no readable episode metadata): 1 run ==" in out
