@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.evaluate import EvalConfig, evaluate, format_table
     from predictors.registry import checkpoint_sha256, load_predictor
+    from predictors.zoo import locate
 
     check_writable(args.json, "--json", json_only=True)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
@@ -105,7 +106,17 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         code=code_identity(),
     )
+    located = locate(args.predictor)
+    trained = None if located is None else located.entry.protocol
+    result["trained_protocol"] = trained  # None: no zoo entry (constant velocity, the oracle)
     print(f"protocol {args.protocol}, split {args.split}, data {root}")
+    if trained is not None and trained != args.protocol:
+        # both protocols score the same test file: the option picks the files, not how the model was trained
+        print(
+            f"note: {args.predictor} was trained under protocol {trained!r}; --protocol {args.protocol} "
+            f"chooses the files scored, so these are not {args.protocol!r} results for this model",
+            file=sys.stderr,
+        )
     print(format_table(result))
     if args.top_k is not None and result["top_k"] is None:
         print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)

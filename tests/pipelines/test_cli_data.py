@@ -213,3 +213,19 @@ def test_synth_and_prepare_do_not_overwrite_other_files(tmp_path, capsys):
     for _ in range(2):  # a prepared folder again: fine
         code, _, _ = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(prepared), "--no-tags")
         assert code == 0
+
+
+def test_evaluate_records_the_protocol_a_zoo_model_was_trained_under(prepared, tmp_path, capsys):
+    """Both protocols score the same test file: --protocol picks the files, not how the model was trained,
+    so a mismatch is said and recorded, never passed for leave-one-out results."""
+    report = tmp_path / "r.json"
+    argv = ["evaluate", "--predictor", "social_lstm_eth", "--data-dir", str(prepared), "--json", str(report)]
+    code, _, err = run(capsys, *argv, "--no-progress")
+    assert code == 0 and "note:" not in err
+    assert json.loads(report.read_text())["trained_protocol"] == "paper"
+    write_walk_file(prepared / "trajnetpp_vita" / "train" / "real_data" / "walk.ndjson")  # what loo trains on
+    code, _, err = run(capsys, *argv, "--no-progress", "--protocol", "loo")
+    assert code == 0, err
+    assert "note: social_lstm_eth was trained under protocol 'paper'; --protocol loo chooses the files" in err
+    result = json.loads(report.read_text())
+    assert (result["protocol"], result["trained_protocol"]) == ("loo", "paper")
