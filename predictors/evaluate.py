@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.base import OBS_LEN, PRED_LEN, Predictor
+from predictors.base import DT, OBS_LEN, PRED_LEN, Predictor
 from predictors.data.trajnet_io import read_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
@@ -74,7 +74,7 @@ def load_eval_scenes(path: str | Path, config: EvalConfig = EvalConfig()) -> lis
     """The scenes of one ndjson file, each cut to its last ``obs_len + pred_len`` steps."""
     length = config.obs_len + config.pred_len
     scenes = []
-    for scene in read_scenes(path):
+    for scene in read_scenes(path, require_fps=1 / DT):
         if len(scene.frames) < length:
             raise DatasetFormatError(
                 path,

@@ -78,11 +78,15 @@ class _CheckedReader(Reader):
         return scene_id, self.track_rows_to_paths(scene.pedestrian, track_rows)
 
 
-def read_scenes(path: str | Path, *, require_length: int | None = None) -> list[Scene]:
+def read_scenes(
+    path: str | Path, *, require_length: int | None = None, require_fps: float | None = None
+) -> list[Scene]:
     """All scenes of a validated file, in file order, read through ``trajnetplusplustools.Reader``.
 
     With ``require_length``, every primary must have exactly that many evenly spaced frames (the 21 steps
     of a TrajNet++ training or ground-truth scene); a shorter or gapped scene raises ``DatasetFormatError``.
+    With ``require_fps``, so does a scene whose row gives another frame rate (one without "fps" passes, as
+    the format allows): the predictors learn and score displacements per step of 1 / fps seconds.
     """
     content = parse_ndjson(path)
     summary = content.summary
@@ -99,6 +103,13 @@ def read_scenes(path: str | Path, *, require_length: int | None = None) -> list[
         agents = np.asarray([p[0].pedestrian for p in paths if p[0].pedestrian in present], dtype=np.int64)
         if require_length is not None:
             _check_length(summary.path, line, scene_id, row.pedestrian, frames, require_length)
+        if require_fps is not None and row.fps is not None and row.fps != require_fps:
+            raise DatasetFormatError(
+                summary.path,
+                line,
+                f"scene {scene_id} is sampled at {row.fps:g} fps, but the predictors step "
+                f"{1 / require_fps:g} s ({require_fps:g} fps); resample the file to {require_fps:g} fps",
+            )
         scenes.append(
             Scene(
                 id=scene_id,

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from predictors.base import OBS_LEN, PRED_LEN
+from predictors.base import DT, OBS_LEN, PRED_LEN
 from predictors.data.locate import cache_root
 from predictors.data.trajnet_io import read_scenes
 from predictors.data.validate import read_error, require_file
@@ -33,7 +33,7 @@ from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 
 SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
-CACHE_VERSION: Final[str] = "scenes-v2"  # bump when FileArrays' layout or the validation changes
+CACHE_VERSION: Final[str] = "scenes-v3"  # bump when FileArrays' layout or the validation changes
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ def load_file_arrays(
                 return arrays
             except (OSError, KeyError, ValueError):
                 pass  # a damaged cache entry is rebuilt below
-    scenes = read_scenes(path, require_length=scene_length)
+    scenes = read_scenes(path, require_length=scene_length, require_fps=1 / DT)
     sizes = np.asarray([s.xy.shape[1] for s in scenes], dtype=np.int64)
     arrays = FileArrays(
         xy=np.concatenate([np.empty((scene_length, 0, 2))] + [s.xy for s in scenes], axis=1).astype(

@@ -166,3 +166,20 @@ def test_epoch_shuffle_is_a_function_of_seed_and_epoch():
         orders.append([i for i, _ in keys])
     assert orders[0] == orders[2] and orders[0] != orders[1]
     assert len(sampler) == 50 and [i for i, _ in EpochShuffle(Items(), seed=4)] != orders[0]  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("reader", ["dataset", "evaluate"])
+def test_scenes_at_another_frame_rate_are_refused(tmp_path, reader, monkeypatch):
+    """The nets learn and are scored on displacements per 0.4 s step: a 25 fps file would train on steps ten
+    times shorter without a word. A scene row without "fps" passes, as the format allows."""
+    from predictors.evaluate import load_eval_scenes
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    records = walk_scene_records()
+    records[0]["scene"]["fps"] = 25.0
+    path = write_lines(tmp_path / "fast.ndjson", records)
+    read = (lambda p: TrajnetSceneDataset([p])) if reader == "dataset" else load_eval_scenes
+    with pytest.raises(DatasetFormatError, match=r"fast.ndjson:1: scene 0 is sampled at 25 fps, but the "):
+        read(path)
+    del records[0]["scene"]["fps"]
+    assert len(read(write_lines(tmp_path / "plain.ndjson", records))) == 1
