@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 import crowdsim
 from crowdsim.baselines import OrcaController, StraightController
 from crowdsim.env import CrowdEnv, EnvConfig
-from crowdsim.errors import SimulationError
+from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.gym_env import (
     COLUMNS,
     GOAL,
@@ -218,7 +218,8 @@ def test_standing_0_3_m_from_a_human_costs_the_discomfort_penalty():
 @pytest.mark.parametrize("end_on_collision", [False, True])
 def test_contact_costs_the_collision_penalty_and_may_end_the_episode(end_on_collision):
     env = CrowdNavEnv(n_robots=1, n_humans=1, end_on_collision=end_on_collision)
-    env.reset(seed=0, options={"layout": one_robot((0.0, 0.5))})  # overlapping by 0.1 m
+    with pytest.warns(LayoutWarning, match="0.5 m apart"):  # overlapping by 0.1 m, on purpose
+        env.reset(seed=0, options={"layout": one_robot((0.0, 0.5))})
     _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
     assert info["surface_distance"] == pytest.approx([-0.1])  # at the start of the step
     assert reward == -0.25 and terminated == end_on_collision and not truncated
@@ -234,7 +235,8 @@ def _at_goal_beside_a_human() -> Layout:
 @pytest.mark.parametrize("end_on_collision, expected", [(False, -0.25 + 1.0), (True, -0.25)])
 def test_contact_and_success_on_the_same_step(end_on_collision, expected):
     env = CrowdNavEnv(n_robots=1, n_humans=1, end_on_collision=end_on_collision)
-    env.reset(seed=0, options={"layout": _at_goal_beside_a_human()})
+    with pytest.warns(LayoutWarning, match="in contact from the first step"):  # on purpose
+        env.reset(seed=0, options={"layout": _at_goal_beside_a_human()})
     _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
     assert info["surface_distance"] == pytest.approx([-0.1]) and info["success"]
     assert reward == expected and info["robot_rewards"].tolist() == [expected]
