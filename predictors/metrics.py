@@ -4,7 +4,9 @@
   steps; FDE: the distance at the last step. Both in metres, averaged over scenes.
 * Col-I (prediction collision): the primary's prediction collides with the *predicted* path of a neighbour.
   Counted only where the model predicted exactly the neighbours the ground truth has (after dropping those
-  that appear only after the observation), as the TrajNet++ evaluator does. Percent of those scenes.
+  that appear only after the observation). Percent of those scenes; the TrajNet++ evaluator instead reports
+  Col-I as -1 for the whole file when any scene's neighbours differ (every scene of the ETH test split
+  matches, so the two agree there).
 * Col-II (ground-truth collision): the primary's prediction collides with a neighbour's *true* path. Percent
   of scenes.
 * A collision is ``trajnetplusplustools.metrics.collision``: over the common frames, consecutive steps are

@@ -1,4 +1,10 @@
-"""Training losses on predicted displacements (TrajNet++ ``lstm/loss.py``) and the GAN's variety loss."""
+"""Training losses on predicted displacements and the GAN's variety loss.
+
+``gaussian_nll`` is the plain bivariate-normal negative log-likelihood of Social-LSTM, not TrajNet++'s
+``lstm/loss.py`` ``PredictionLoss``, which mixes that normal with a wide one and a flat background
+(``-log(0.01 + 0.2 N(mu, 3) + 0.79 N(mu, sigma, rho))``) to bound the cost of an outlier; the shipped models
+were trained with this one.
+"""
 
 from __future__ import annotations
 
