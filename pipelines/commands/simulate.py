@@ -243,6 +243,7 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
         "profile": cfg.env.profile,
         "visibility": "visible" if cfg.env.robots_visible else "invisible",
         "goals": cfg.env.goal_assignment,
+        "formation": cfg.env.formation,
         "scenario": cfg.scenario.name,
         "humans": cfg.scenario.humans,
         "robots": cfg.scenario.robots,
@@ -332,6 +333,7 @@ def _report(
     summary = summarize(results)
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
+    goals += "" if env_config.formation == "auto" else f"formation {env_config.formation} | "
     header = (
         f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
         f"margins {spec.margins.label} | "

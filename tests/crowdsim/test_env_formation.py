@@ -46,6 +46,7 @@ def test_the_formation_comes_from_the_command_line(tmp_path, capsys):
     argv = ["--set", "env.formation=two_rows", "simulate", "--controller", "straight", "--robots", "4"]
     assert main([*argv, "--humans", "1", "--episodes", "1", "--no-progress", "--json", str(report)]) == 0
     assert '"formation": "two_rows"' in report.read_text()
+    assert "| paper/visible | formation two_rows | scenario circle |" in capsys.readouterr().out
     assert main(["--set", "env.formation=hexagon", "simulate", "--controller", "straight"]) == 2
     assert "env.formation: must be one of ['auto', 'row', 'wedge', 'two_rows'], got 'hexagon'" in (
         capsys.readouterr().err
