@@ -176,11 +176,19 @@ def run_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def provenance_path(out: Path) -> Path:
+    """Where ``data synth`` records how it made ``out``: NAME.synth.json beside it (no data glob takes it)."""
+    return out.with_suffix(".synth.json")
+
+
 def run_synth(args: argparse.Namespace) -> int:
     check_writable(args.out, "--out")
-    if args.out.exists() and args.out.stat().st_size > 0 and not args.replace:
-        # a mistyped --out replaced a training file; the same command regenerates the same bytes anyway
-        raise PipelineError(f"--out {args.out} exists; add --replace to replace it, or name another file")
+    provenance = provenance_path(args.out)
+    check_writable(provenance, "--out's provenance file")
+    for path in (args.out, provenance):
+        if path.exists() and path.stat().st_size > 0 and not args.replace:
+            # a mistyped --out replaced a training file; the same command regenerates the same bytes anyway
+            raise PipelineError(f"--out {path} exists; add --replace to replace it, or name another file")
     try:
         from pipelines.experiments.synth import synthesize
     except ModuleNotFoundError as exc:
@@ -195,4 +203,33 @@ def run_synth(args: argparse.Namespace) -> int:
     )
     for key, value in summary.items():
         print(f"{key}: {value}")
+    _write_provenance(args, summary, provenance)
+    print(f"provenance: {provenance}")
     return 0
+
+
+def _write_provenance(args: argparse.Namespace, summary: dict, path: Path) -> None:
+    """The options, the data's sha256 and the code that made it: training records the data's hashes only,
+    and a synthetic set is rebuilt (bit for bit) from these alone."""
+    import hashlib
+    import json
+
+    from pipelines.plain_json import plain
+    from pipelines.version import code_identity
+
+    document = {
+        "format": "crowdmpc-synth",
+        "version": 1,
+        "data": args.out.name,
+        "sha256": hashlib.sha256(args.out.read_bytes()).hexdigest(),
+        "options": {
+            "episodes": args.episodes,
+            "humans": args.humans,
+            "seed": args.seed,
+            "scenario": args.scenario,
+            "with_robots": args.with_robots,
+        },
+        "summary": summary,
+        "code": code_identity(),
+    }
+    path.write_text(json.dumps(plain(document), indent=2) + "\n")

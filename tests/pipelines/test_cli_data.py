@@ -1,5 +1,6 @@
 """``crowdmpc data`` and ``crowdmpc evaluate`` from the command line: results, and one-line errors."""
 
+import hashlib
 import json
 import sys
 import types
@@ -168,6 +169,7 @@ def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
 
     def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False):
         calls.append((out_path, episodes, n_humans, seed, scenario, with_robots))
+        out_path.write_text("scenes\n")
         return {"scenes": 12, "out": str(out_path)}
 
     monkeypatch.setitem(
@@ -178,6 +180,17 @@ def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
     code, stdout, _ = run(capsys, *argv, "--scenario", "perpendicular", "--with-robots")
     assert code == 0 and "scenes: 12" in stdout
     assert calls == [(out, 3, 5, 7, "perpendicular", True)]
+    # how the file was made, beside it: the options, the data's sha256, the code
+    provenance = json.loads((tmp_path / "s.synth.json").read_text())
+    assert provenance["format"] == "crowdmpc-synth" and provenance["data"] == "s.ndjson"
+    assert provenance["options"] == {
+        "episodes": 3, "humans": 5, "seed": 7, "scenario": "perpendicular", "with_robots": True
+    }  # fmt: skip
+    assert provenance["sha256"] == hashlib.sha256(b"scenes\n").hexdigest() and "commit" in provenance["code"]
+    (tmp_path / "s.ndjson").unlink()  # a provenance file left behind is not replaced without --replace
+    code, _, err = run(capsys, *argv)
+    assert_one_line_error(code, err, f"--out {tmp_path / 's.synth.json'} exists; add --replace")
+    assert len(calls) == 1
     with pytest.raises(SystemExit) as exc:  # counts are bounded by the parser
         main([*argv[:5], "0", *argv[6:]])
     assert exc.value.code == 2 and calls == [(out, 3, 5, 7, "perpendicular", True)]
