@@ -11,6 +11,7 @@ defines them; duplicate rows resolve as the Reader resolves them (the later row 
 from __future__ import annotations
 
 import bisect
+import math
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -103,11 +104,16 @@ def read_scenes(
         agents = np.asarray([p[0].pedestrian for p in paths if p[0].pedestrian in present], dtype=np.int64)
         if require_length is not None:
             _check_length(summary.path, line, scene_id, row.pedestrian, frames, require_length)
-        if require_fps is not None and row.fps is not None and row.fps != require_fps:
+        # close, not equal: a writer's 2.5000001 is 2.5 fps; a 10 % faster file is not
+        if (
+            require_fps is not None
+            and row.fps is not None
+            and not math.isclose(row.fps, require_fps, rel_tol=1e-6)
+        ):
             raise DatasetFormatError(
                 summary.path,
                 line,
-                f"scene {scene_id} is sampled at {row.fps:g} fps, but the predictors step "
+                f"scene {scene_id} is sampled at {row.fps!r} fps, but the predictors step "
                 f"{1 / require_fps:g} s ({require_fps:g} fps); resample the file to {require_fps:g} fps",
             )
         scenes.append(

@@ -179,7 +179,9 @@ def test_scenes_at_another_frame_rate_are_refused(tmp_path, reader, monkeypatch)
     records[0]["scene"]["fps"] = 25.0
     path = write_lines(tmp_path / "fast.ndjson", records)
     read = (lambda p: TrajnetSceneDataset([p])) if reader == "dataset" else load_eval_scenes
-    with pytest.raises(DatasetFormatError, match=r"fast.ndjson:1: scene 0 is sampled at 25 fps, but the "):
+    with pytest.raises(DatasetFormatError, match=r"fast.ndjson:1: scene 0 is sampled at 25.0 fps, but the "):
         read(path)
+    records[0]["scene"]["fps"] = 2.5000001  # a writer's rounding is no other frame rate
+    assert len(read(write_lines(tmp_path / "rounded.ndjson", records))) == 1
     del records[0]["scene"]["fps"]
     assert len(read(write_lines(tmp_path / "plain.ndjson", records))) == 1
