@@ -55,6 +55,7 @@ def add_entry(
     (``directory`` then defaults to ``checkpoints_dir()``). Parallel adds and removes take turns
     (``zoo_lock``): every one's entry is in the manifest they leave."""
     check_model_name(name)  # before anything is written: NAME becomes the files' names
+    _check_not_built_in(name)
     weights = Path(weights)
     config = weights.with_suffix(".json")
     if shipped:
@@ -133,6 +134,19 @@ def _write_pair(weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path)
         shutil.copyfile(weights, target_weights)
     target_config.write_bytes(config_bytes)
     return replace_fields(entry, sha256=sha256_file(target_weights))
+
+
+def _check_not_built_in(name: str) -> None:
+    """Refuse the name of a predictor without weights (``registry.PREDICTORS``), in any case: that name
+    loads the built-in, so the entry could never be reached."""
+    from predictors.registry import PREDICTORS
+
+    built_in = next((other for other in PREDICTORS if other.casefold() == name.casefold()), None)
+    if built_in is not None:
+        raise PredictorError(
+            f"zoo name {name!r} is the built-in predictor {built_in!r}, which that name always loads; "
+            "pick another name"
+        )
 
 
 def _check_not_shipped(name: str) -> None:

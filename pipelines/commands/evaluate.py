@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     from pipelines.version import code_identity
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.evaluate import EvalConfig, evaluate, format_table
-    from predictors.registry import checkpoint_sha256, load_predictor
+    from predictors.registry import PREDICTORS, checkpoint_sha256, load_predictor
     from predictors.zoo import locate
 
     check_writable(args.json, "--json", json_only=True)
@@ -106,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         code=code_identity(),
     )
-    located = locate(args.predictor)
+    # the entry the name loads: none for a built-in (constant velocity, the oracle), loaded by name first
+    located = None if args.predictor in PREDICTORS else locate(args.predictor)
     trained = None if located is None else located.entry.protocol
     result["trained_protocol"] = trained  # None: no zoo entry (constant velocity, the oracle)
     print(f"protocol {args.protocol}, split {args.split}, data {root}")

@@ -377,6 +377,10 @@ def test_names_that_differ_only_in_case_are_taken(shipped, user, pair, capsys):
         f"(as {NAME!r}: names are compared ignoring case); pick another name"
     )
     assert snapshot(user) == before and set(read_manifest(user)) == {"mine"}
+    for built_in in ("constant_velocity", "ORCA_Oracle"):  # the name loads the built-in: never the entry
+        code, _, err = cli(["zoo", "add", str(pair), "--name", built_in], capsys)
+        assert code == 2 and f"zoo name {built_in!r} is the built-in predictor" in err
+    assert snapshot(user) == before
 
 
 def test_the_same_weights_with_other_metrics_are_refused_too(shipped, user, pair, capsys):
