@@ -195,7 +195,8 @@ def min_distance_between_steps(robot_positions: np.ndarray, human_positions: np.
     at_rows = float(np.linalg.norm(rel, axis=-1).min())
     if len(rel) < 2:
         return at_rows
-    return min(at_rows, float(closest_approach(rel[:-1], rel[1:]).min()))
+    # np.minimum, not min(): a NaN (an infinite position) must show, not be dropped by argument order
+    return float(np.minimum(at_rows, closest_approach(rel[:-1], rel[1:]).min()))
 
 
 def _success_step(traj: Trajectory, reach: np.ndarray, rule: str) -> int:

@@ -147,6 +147,7 @@ def format_table(summary: dict[str, Any], header: str) -> str:
         (f"contact (<{2 * RADIUS:g} m)", rate("contact")),  # the radii touch (crowdsim.metrics)
         # the closest approach with linear motion within each step, as CrowdNav takes it (crowdsim.metrics)
         ("collision between steps", rate("collision_between_steps")),
+        ("contact between steps", rate("contact_between_steps")),  # what ends a gym episode on contact
         ("discomfort", rate("discomfort")),
         (
             "per step",

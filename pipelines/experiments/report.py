@@ -79,17 +79,23 @@ def cell_rows(
     return rows
 
 
+# crowdsim.metrics' closest approach within each step, and its two flags
+BETWEEN_STEPS_FIELDS: Final[tuple[str, ...]] = (
+    "min_distance_between_steps",
+    "collision_between_steps",
+    "contact_between_steps",
+)
+
+
 def _between_steps_columns(metrics: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """cells.csv's collision rate between steps (safety_report.between_steps_rate), as the paper's rates
-    are written: count, %, 95% Wilson interval; empty when some record lacks the field."""
-    count, percent = safety.between_steps_rate(metrics)
-    lo, hi = Rate(count, len(metrics)).interval if count is not None else (None, None)
-    return {
-        "collision_between_steps_count": count,
-        "collision_between_steps_rate": percent,
-        "collision_between_steps_ci_lo": lo,
-        "collision_between_steps_ci_hi": hi,
-    }
+    """cells.csv's collision and contact rates between steps (safety_report.between_steps_rate), as the
+    paper's rates are written: count, %, 95% Wilson interval; empty when some record lacks the field."""
+    columns: dict[str, Any] = {}
+    for name in BETWEEN_STEPS_FIELDS[1:]:
+        count, percent = safety.between_steps_rate(metrics, name)
+        lo, hi = Rate(count, len(metrics)).interval if count is not None else (None, None)
+        columns |= {f"{name}_count": count, f"{name}_rate": percent, f"{name}_ci_lo": lo, f"{name}_ci_hi": hi}
+    return columns
 
 
 def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) -> list[dict[str, Any]]:
@@ -115,7 +121,7 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
                 "n_steps": m["n_steps"],
                 # Absent from records written before them: empty cells, not a failed report.
                 **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
-                **{k: m.get(k) for k in ("min_distance_between_steps", "collision_between_steps")},
+                **{k: m.get(k) for k in BETWEEN_STEPS_FIELDS},
                 **{k: r.get(k) for k in ("margins", "profile", "visibility")},
                 "step_median_ms": s["median_ms"],
                 "step_p95_ms": s["p95_ms"],

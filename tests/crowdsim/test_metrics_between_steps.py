@@ -126,3 +126,11 @@ def test_aggregate_between_step_rates():
     assert math.isnan(mixed["collision_between_steps_rate"])
     assert math.isnan(mixed["contact_between_steps_count"])
     assert mixed["collision_rate"] == 0.0
+
+
+def test_a_non_finite_position_shows_as_nan_whatever_the_order():
+    """A segment to an infinite position has no closest approach: NaN, never silently the rows' minimum."""
+    robots = np.array([[[0.0, 0.0]], [[np.inf, 0.0]], [[1.0, 0.0]]])
+    humans = np.array([[[5.0, 0.0]], [[5.0, 0.0]], [[5.0, 0.0]]])
+    with np.errstate(invalid="ignore"):  # inf - inf: numpy says so, the result says it too
+        assert math.isnan(min_distance_between_steps(robots, humans))

@@ -245,10 +245,12 @@ def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
     for i, r in enumerate(records):
         r["metrics"]["min_distance_between_steps"] = between.get(i, r["metrics"]["min_distance"])
         r["metrics"]["collision_between_steps"] = r["metrics"]["min_distance_between_steps"] < 0.8
+        r["metrics"]["contact_between_steps"] = r["metrics"]["min_distance_between_steps"] < 0.6
     (tmp_path / "before").mkdir()
     before = [{**r, "metrics": dict(r["metrics"])} for r in records]
     for r in before:
-        del r["metrics"]["min_distance_between_steps"], r["metrics"]["collision_between_steps"]
+        for name in ("min_distance_between_steps", "collision_between_steps", "contact_between_steps"):
+            del r["metrics"][name]
     old = write_report(tmp_path / "before", safety, cells, before)
     report = write_report(tmp_path, safety, cells, records)
     assert report.markdown == old.markdown  # the Markdown table does not show it
@@ -270,6 +272,9 @@ def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
     with open(tmp_path / EPISODES_CSV) as f:
         episodes = list(csv.DictReader(f))
     assert [e["collision_between_steps"] for e in episodes[:4]] == ["True", "False", "True", "True"]
+    assert [e["contact_between_steps"] for e in episodes[:4]] == ["True", "False", "False", "False"]
+    # contact (< 0.6 m) between steps: only the first record's 0.5 m
+    assert (none["contact_between_steps_count"], half["contact_between_steps_count"]) == ("1", "0")
     assert (episodes[3]["min_distance"], episodes[3]["min_distance_between_steps"]) == ("0.82", "0.78")
 
 

@@ -16,7 +16,7 @@ def test_simulate_orca_prints_the_table_and_writes_json_and_plot(tmp_path, capsy
     assert code == 0
     text = capsys.readouterr().out
     for row in ("success", "travel time", "collision", "contact", "discomfort", "min distance", "solve time",
-                "IBR iterations", "collision between steps"):  # fmt: skip
+                "IBR iterations", "collision between steps", "contact between steps"):  # fmt: skip
         assert row in text
     payload = json.loads(out_json.read_text())
     assert payload["summary"]["episodes"] == 2
