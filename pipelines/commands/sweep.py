@@ -397,18 +397,22 @@ def _report(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTas
         # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
         mean = sum(cpu) / len(cpu)
         total = mean * len(tasks)
-        k = config.workers
+        k = 1 if config.backend == "inline" else config.workers  # inline runs one episode at a time
+        workers = f"{k} worker{'s' if k > 1 else ''} on {k} free core{'s' if k > 1 else ''}"
         print(
             f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
-            f"{duration(total)} of CPU: {duration(total / k)} for {k} workers on {k} free cores",
+            f"{duration(total)} of CPU: {duration(total / k)} for {workers}",
             file=sys.stderr,
         )
 
 
 def duration(seconds: float) -> str:
-    """``seconds`` in the unit that reads best: "42.0 s", "3.5 min", "2.25 h"."""
-    if seconds < 60:
+    """``seconds`` in the unit that reads best: "42.0 s", "3.5 min", "2.25 h", "12.5 days". The unit is
+    chosen on the rounded figure, so 59.96 s reads "1.0 min", not "60.0 s"."""
+    if round(seconds, 1) < 60:
         return f"{seconds:.1f} s"
-    if seconds < 3600:
+    if round(seconds / 60, 1) < 60:
         return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.2f} h"
+    if round(seconds / 3600, 2) < 48:
+        return f"{seconds / 3600:.2f} h"
+    return f"{seconds / 86400:.1f} days"

@@ -111,7 +111,7 @@ def _half_width(values: Sequence[float]) -> float:
 def t95(dof: int) -> float:
     """The two-sided 95% quantile of Student's t with ``dof`` degrees of freedom (t95(1) = 12.706,
     t95(4) = 2.776). Exact for dof <= 1000 (bisection on the closed-form P(|T| < t), Abramowitz and Stegun
-    26.7.3-4); beyond, the Cornish-Fisher expansion about Z95, whose error there is below 1e-9."""
+    26.7.3-4); beyond, the Cornish-Fisher expansion about Z95, whose error there is below 3e-9."""
     if dof < 1:
         raise PipelineError(f"t95 needs at least one degree of freedom, got {dof}")
     if dof > 1000:

@@ -582,7 +582,10 @@ def test_cli_runs_a_small_sweep_and_reports(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "8/8 episodes recorded" in captured.err
     # a projection of seconds reads in seconds, not "0.00 CPU-hours"
-    assert re.search(r"the 8 planned episodes take \d+\.\d s of CPU: \d+\.\d s for \d+ workers", captured.err)
+    # inline runs one episode at a time, whatever --workers says
+    assert re.search(
+        r"the 8 planned episodes take (\d+\.\d) s of CPU: \1 s for 1 worker on 1 free core\n", captured.err
+    )
     assert "| Numbers of pedestrians | 5 | 5 | 6 | 6 |" in captured.out
     # ORCA and the straight line run no solver: their solver figures are not applicable, not 0.00
     assert "| IBR iterations per step (mean) | n/a | n/a | n/a | n/a |" in captured.out

@@ -50,6 +50,9 @@ def test_episode_cpu_counts_the_child_processes(monkeypatch):
         (60.0, "1.0 min"),
         (210.0, "3.5 min"),
         (8100, "2.25 h"),
+        (59.96, "1.0 min"),  # the unit is chosen on the rounded figure
+        (3599.9, "1.00 h"),
+        (1e9, "11574.1 days"),
     ],
 )
 def test_a_cpu_projection_reads_in_a_unit_that_fits(seconds, text):
