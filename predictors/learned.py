@@ -71,6 +71,7 @@ class LearnedPredictor:
         check_step_contract(self.net, f"predictor {name!r} (model {self.kind!r})", obs_len=obs_len)
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
         self._export_checked = False  # to_casadi's first build is checked against torch (_check_export)
+        self._export_failure: PredictorError | None = None  # what that check raised: raised again
         self._encoders: dict[tuple[int, int], ca.Function] = {}
         self._steps: dict[int, ca.Function] = {}
         # Per agent: each state tensor's trailing dims, and the head output's width (``_layout``).
@@ -275,14 +276,20 @@ class LearnedPredictor:
                 f"got {n_humans}, {n_robots}, {horizon}"
             )
         key = (n_humans, n_robots, horizon)
+        if self._export_failure is not None:
+            raise self._export_failure  # every size is built the same way: it would fail the same
         if key not in self._functions:
             self._functions[key] = self._prediction(*key)
             if not self._export_checked:
                 self._export_checked = True  # the check calls to_casadi for its own size
                 try:
                     self._check_export()
-                except BaseException:
-                    # nothing unchecked may be handed out later: the next call builds and checks again
+                except PredictorError as exc:
+                    # nothing unchecked may be handed out later, nor rebuilt and checked again per size
+                    self._functions.clear()
+                    self._export_failure = exc
+                    raise
+                except BaseException:  # an interrupt: the next call builds and checks again
                     self._export_checked = False
                     self._functions.clear()
                     raise

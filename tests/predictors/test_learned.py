@@ -235,10 +235,29 @@ def test_an_export_that_fails_its_check_is_never_handed_out(monkeypatch):
         raise ExportError("the exported prediction differs from torch", predictor.name)
 
     monkeypatch.setattr(parity, "require_parity", failing)
-    for _ in range(2):
+    for size in ((3, 2), (3, 2), (5, 1)):
         with pytest.raises(ExportError, match="differs from torch"):
-            predictor.to_casadi(3, 2, HORIZON)
-    assert failures["n"] == 2
+            predictor.to_casadi(*size, HORIZON)
+    assert failures["n"] == 1  # every size is built the same way: checked once, not once a size
+
+
+def test_an_interrupted_export_check_is_made_again(monkeypatch):
+    from predictors.export import parity
+
+    predictor = social_lstm("soft")
+    calls = {"n": 0}
+    original = parity.require_parity
+
+    def interrupted_once(*args):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise KeyboardInterrupt
+        return original(*args)
+
+    monkeypatch.setattr(parity, "require_parity", interrupted_once)
+    with pytest.raises(KeyboardInterrupt):
+        predictor.to_casadi(3, 2, HORIZON)
+    assert predictor.to_casadi(3, 2, HORIZON) is not None and calls["n"] == 2
 
 
 def test_each_size_is_built_once(monkeypatch):
