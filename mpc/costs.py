@@ -233,4 +233,16 @@ def collision_penalty(
         )
         for other in tracks[i + 1 :]:
             total = total + robot_collision_cost(track.positions, other.positions, cfg)
-    return cfg.w_coll * total
+    return dense(cfg.w_coll * total)
+
+
+def dense(expr: Symbolic) -> Symbolic:
+    """``expr`` with its structural zeros made explicit; a dense ``expr`` comes back as the same object.
+
+    A sum over no terms (one robot and no humans: no pair, no human) is a structurally empty 1x1, which
+    mpc/fastcall.py cannot bind to an output buffer. Only that case changes: every other expression, and so
+    every number of the normal case, is left untouched (a plain number too: no robots at all).
+    """
+    if not isinstance(expr, ca.SX | ca.MX | ca.DM) or expr.sparsity().is_dense():
+        return expr
+    return ca.densify(expr)

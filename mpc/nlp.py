@@ -245,6 +245,7 @@ class LocalNLP:
         )
         for positions_j in others:
             penalty = penalty + cfg.w_coll * costs.robot_collision_cost(track.positions, positions_j, cfg)
+        penalty = costs.dense(penalty)  # alone and with no humans: structurally empty (costs.dense)
         g = ca.vec(track.velocities)
         self.cost_fn = ca.Function("C", [u, p], [C], ["u", "p"], ["C"])
         self.penalty_fn = ca.Function("penalty", [u, p], [penalty], ["u", "p"], ["penalty"])

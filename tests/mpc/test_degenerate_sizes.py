@@ -1,0 +1,49 @@
+"""One robot and no humans: no robot pair and no human, so the collision penalty is a sum over nothing.
+
+CasADi makes such a sum a structurally empty 1x1, which mpc/fastcall.py refused to bind ("penalty: output
+penalty is not dense"): the NLPs could not even be built.
+"""
+
+import numpy as np
+import pytest
+
+from mpc import costs
+from mpc.config import MPCConfig
+from mpc.nlp import JointNLP, LocalNLP
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
+
+
+@pytest.mark.parametrize("nlp", [JointNLP, LocalNLP])
+def test_penalty_alone_without_humans_is_a_dense_zero(nlp):
+    problem = nlp(MPCConfig(), n_robots=1, n_humans=0)
+    assert problem.penalty_fn.sparsity_out(0).is_dense()
+
+
+def test_dense_leaves_a_dense_expression_untouched():
+    """The normal case keeps its expression graph (and so every number) as it was."""
+    import casadi as ca
+
+    x = ca.SX.sym("x", 2)
+    expr = ca.sumsqr(x)
+    assert costs.dense(expr) is expr
+    empty = ca.sum2(ca.SX(1, 0))
+    assert not empty.sparsity().is_dense() and costs.dense(empty).sparsity().is_dense()
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [ControllerSpec("cmpc"), ControllerSpec("dmpc"), ControllerSpec("cmpc", coupling="nlp")],
+    ids=["cmpc", "dmpc", "cmpc-nlp"],
+)
+@pytest.mark.parametrize("scenario", ["circle", "perpendicular"])
+def test_one_robot_without_humans_reaches_its_goal(spec, scenario):
+    result = run_episode(make_controller(spec), seed=0, scenario=scenario, n_humans=0, n_robots=1)
+    assert result.metrics.success and not result.metrics.timeout
+    assert all(f is None for f in result.fallbacks)
+    np.testing.assert_allclose(result.robot_positions[-1], result.robot_goals, atol=0.3)
+
+
+def test_no_robots_still_builds():
+    """No tracks at all: the penalty is a plain 0.0, as before."""
+    JointNLP(MPCConfig(), n_robots=0, n_humans=0)
