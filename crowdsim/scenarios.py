@@ -133,16 +133,28 @@ class Layout:
 
 def checked_layout(layout: Layout) -> Layout:
     """``layout``'s arrays as float copies, or SimulationError naming the field and row that are wrong:
-    shapes ``(M, 2), (M, 2), (N, 2), (N, 2)``, every coordinate finite."""
+    shapes ``(M, 2), (M, 2), (N, 2), (N, 2)`` (an empty list or array is ``(0, 2)``: no robots, no humans),
+    real and finite coordinates, at most ``MAX_ROBOTS`` robots and ``MAX_HUMANS`` humans (``check_sizes``'s
+    limits, which ``CrowdEnv.reset`` and the gym wrapper apply too)."""
     if not isinstance(layout, Layout):
         raise SimulationError(f"layout must be a crowdsim.scenarios.Layout, got {type(layout).__name__}")
     arrays = {}
     for name in ("robot_starts", "robot_goals", "human_starts", "human_goals"):
         rows = "M" if name.startswith("robot") else "N"
         try:
-            points = np.array(getattr(layout, name), dtype=float)
+            raw = np.asarray(getattr(layout, name))
+        except (TypeError, ValueError) as exc:  # ragged rows
+            raise SimulationError(f"layout.{name} must be a ({rows}, 2) array of numbers: {exc}") from None
+        if raw.dtype.kind == "c" or (
+            raw.dtype == object and any(isinstance(x, complex | np.complexfloating) for x in raw.flat)
+        ):  # numpy's float conversion would only warn (ComplexWarning) and drop the imaginary parts
+            raise SimulationError(f"layout.{name} must hold real numbers, got {raw.dtype} values")
+        try:
+            points = np.array(raw, dtype=float)
         except (TypeError, ValueError) as exc:
             raise SimulationError(f"layout.{name} must be a ({rows}, 2) array of numbers: {exc}") from None
+        if points.shape == (0,):  # [] or np.array([]): no agents
+            points = points.reshape(0, 2)
         if points.ndim != 2 or points.shape[1] != 2:
             raise SimulationError(f"layout.{name} must be a ({rows}, 2) array, got shape {points.shape}")
         bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
@@ -157,6 +169,16 @@ def checked_layout(layout: Layout) -> Layout:
             raise SimulationError(
                 f"layout.{starts} has {len(arrays[starts])} rows but layout.{goals} {len(arrays[goals])}: "
                 "one goal per agent"
+            )
+    limits = (
+        ("robot_starts", "robots", "MAX_ROBOTS", MAX_ROBOTS),
+        ("human_starts", "humans", "MAX_HUMANS", MAX_HUMANS),
+    )
+    for starts, agents, limit, most in limits:
+        if len(arrays[starts]) > most:
+            raise SimulationError(
+                f"layout.{starts} has {len(arrays[starts])} rows: at most {limit} = {most} {agents} "
+                "(crowdsim.scenarios)"
             )
     return Layout(**arrays)
 
