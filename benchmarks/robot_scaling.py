@@ -4,8 +4,9 @@ For every number of robots M (``--robots``, default 3 5 6 12) and controller (``
 and DMPC with ``--predictor``, default constant velocity), ``--episodes`` episodes (default 50) with
 ``--humans`` humans (default 7) under the paper profile: episode ``i`` runs scenario ``circle`` for even
 ``i`` and ``perpendicular`` for odd ``i`` (``--scenarios`` to change), seed ``--seed + i``. The robots stand
-in ``--formation`` (default ``auto``, crowdsim.scenarios.choose_formation: then episode ``i`` is exactly
-``CrowdEnv.reset(seed, scenario, humans, M)``); ``--formation row`` gives the first layout (1 m row, goals
+in ``--formation`` (default: the config's ``[env] formation``, else ``auto``,
+crowdsim.scenarios.choose_formation); episode ``i`` is ``CrowdEnv(EnvConfig(formation=...)).reset(seed,
+scenario, humans, M)`` under the paper profile. ``--formation row`` gives the first layout (1 m row, goals
 10 m north) for a before/after comparison.
 
 Per row: success, collision (robot-human below d_min) and timeout rates in %, mean travel time over the
@@ -27,9 +28,10 @@ is shared: the load average is printed; run it under ``nice`` and repeat when th
         --mpc on_goal=yield
 
 ``--config`` reads a config file's ``[mpc]`` table, ``[controller]`` margins and ``[env]`` goal_assignment
-(``crowdmpc --config``), the ``--mpc`` values applied over it. ``--goals slots`` makes the goals a formation
-to fill (crowdsim/slots.py) instead of one fixed goal per robot (the paper's task, the default); the two are
-different tasks, so their rows are reported side by side, never as one.
+and formation (``crowdmpc --config``), the ``--mpc`` values applied over it; ``--goals`` and ``--formation``
+win over the file. ``--goals slots`` makes the goals a formation to fill (crowdsim/slots.py) instead of one
+fixed goal per robot (the paper's task, the default); the two are different tasks, so their rows are reported
+side by side, never as one.
 
     nice -n 5 .venv/bin/python benchmarks/robot_scaling.py --config docs/examples/many_robots.toml \
         --goals slots --controllers cmpc
@@ -51,7 +53,7 @@ import numpy as np
 from crowdsim.env import CrowdEnv
 from crowdsim.metrics import EpisodeMetrics, Trajectory, aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
-from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation, make_layout
+from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from pipelines.config import ConfigError, load
 from pipelines.errors import PipelineError
@@ -146,7 +148,14 @@ def run_row(
     goals: GoalAssignment = "fixed",
 ) -> dict[str, Any]:
     """``episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
-    env_config = dataclasses.replace(make_env_config("paper"), goal_assignment=goals)
+    env_config = dataclasses.replace(
+        make_env_config("paper"),
+        goal_assignment=goals,
+        formation=cast(Formation, formation),  # one of FORMATIONS (argparse's choices; EnvConfig checks)
+    )
+    # reset, not reset_layout: the same layouts as make_layout with env_config's settings, without the
+    # LayoutWarning reset_layout gives the paper perpendicular sampler's overlapping starts
+    # (crowdsim.scenarios).
     env = CrowdEnv(env_config)
     spec = ControllerSpec(controller, predictor, mpc_overrides=mpc_overrides, margins=margins or MarginSpec())
     mpc = MPCController(spec, distributed=controller == "dmpc")
@@ -156,18 +165,7 @@ def run_row(
     t0 = time.perf_counter()
     try:
         for i in range(episodes):
-            layout = make_layout(
-                scenarios[i % len(scenarios)],
-                n_humans,
-                n_robots,
-                np.random.default_rng(seed + i),
-                radius=env_config.radius,
-                v_pref=env_config.v_pref,
-                crossing=env_config.crossing,
-                spawn_separation=env_config.spawn_separation,
-                formation=cast(Formation, formation),  # one of FORMATIONS (argparse's choices)
-            )
-            obs = env.reset_layout(layout)
+            obs = env.reset(seed + i, scenarios[i % len(scenarios)], n_humans, n_robots)
             mpc.reset(obs)
             done = False
             while not done:
@@ -241,7 +239,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=50, help="episodes per row (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
     parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    parser.add_argument("--formation", choices=FORMATIONS, default="auto")
+    parser.add_argument(
+        "--formation", choices=FORMATIONS, help="the robots' formation; default: the config's, else auto"
+    )
     parser.add_argument(
         "--mpc",
         action="append",
@@ -252,7 +252,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--config",
-        help="a crowdmpc config file: its [mpc] table, [controller] margins, [env] goal_assignment",
+        help="a crowdmpc config file: its [mpc] table, [controller] margins, [env] goal_assignment and "
+        "formation",
     )
     parser.add_argument(
         "--goals",
@@ -268,6 +269,7 @@ def main(argv: list[str] | None = None) -> int:
         overrides = run.mpc_overrides()
         margins = parse_margins(run.controller.margins or "none")
         goals = args.goals or run.env.goal_assignment
+        formation = args.formation or run.env.formation
     except (ConfigError, PipelineError) as exc:
         parser.error(f"--config/--mpc: {exc}")
     if args.episodes < 1:
@@ -286,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
                     args.episodes,
                     args.seed,
                     tuple(args.scenarios),
-                    args.formation,
+                    formation,
                     overrides,
                     margins,
                     goals,
@@ -297,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
-        f"({'/'.join(args.scenarios)}), formation {args.formation}, goals {goals}, margins {margins.label}"
+        f"({'/'.join(args.scenarios)}), formation {formation}, goals {goals}, margins {margins.label}"
         + "".join(f", {k}={v}" for k, v in overrides)
     )
     print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")

@@ -1,11 +1,13 @@
 """benchmarks/robot_scaling.py's failure kinds, on episodes whose ending is set by hand."""
 
 import importlib.util
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from crowdsim.metrics import Trajectory, episode_metrics
+from crowdsim.scenarios import make_layout, start_overlaps
 
 SPEC = importlib.util.spec_from_file_location(
     "robot_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "robot_scaling.py"
@@ -66,3 +68,43 @@ def test_halfway_by_hand():
     # Robot 1 stays 6 m off: the mean starts at 6 m and ends at (0.5 + 6) / 2 = 3.25 m, never half of it.
     held = _episode(np.stack([closing, np.full(steps, 6.0)], axis=1))
     assert np.isnan(robot_scaling.halfway_s(held))
+
+
+def _formation_passed(monkeypatch, tmp_path, *options: str) -> str:
+    """The formation main() hands run_row, with ``[env] formation = "two_rows"`` in --config."""
+    config = tmp_path / "run.toml"
+    config.write_text('[env]\nformation = "two_rows"\n')
+    seen = []
+
+    def row(*args, **kwargs):
+        seen.append(args[7])  # formation, after controller .. scenarios
+        return {
+            "controller": args[0], "robots": args[2], "formation": args[7], "goals": "fixed",
+            "success_rate": 0.0, "collision_rate": 0.0, "timeout_rate": 0.0, "travel_time_mean": 0.0,
+            "min_distance_robots": 0.0, "reached_pct": 0.0, "median_ms": 0.0, "p95_ms": 0.0, "p99_ms": 0.0,
+            "steps": 0, "j_max_steps": 0, "fallback_steps": 0, "halfway_s_success": 0.0,
+            "halfway_s_failed": 0.0, "failures": dict.fromkeys(robot_scaling.FAILURES, 0),
+        }  # fmt: skip
+
+    monkeypatch.setattr(robot_scaling, "run_row", row)
+    argv = ["--robots", "4", "--episodes", "1", "--controllers", "cmpc", "--config", str(config), *options]
+    assert robot_scaling.main(argv) == 0
+    return seen[0]
+
+
+def test_the_formation_comes_from_the_config_unless_the_option_gives_one(monkeypatch, tmp_path, capsys):
+    assert _formation_passed(monkeypatch, tmp_path) == "two_rows"
+    assert "formation two_rows" in capsys.readouterr().out
+    assert _formation_passed(monkeypatch, tmp_path, "--formation", "wedge") == "wedge"
+    assert "formation wedge" in capsys.readouterr().out
+
+
+def test_the_episodes_are_resets_and_run_the_perpendicular_overlaps_without_a_warning():
+    """Seed 1's 16-human perpendicular crowd keeps two overlapping starts (the paper sampler's 100 draws):
+    CrowdEnv.reset runs it silently, where the layout through reset_layout warned (LayoutWarning)."""
+    layout = make_layout("perpendicular", 16, 1, np.random.default_rng(1))
+    assert start_overlaps(layout)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        row = robot_scaling.run_row("cmpc", "constant_velocity", 1, 16, 1, 1, ("perpendicular",), "auto")
+    assert row["episodes"] == 1 and row["steps"] > 0
