@@ -22,7 +22,7 @@ from __future__ import annotations
 import io
 import json
 import struct
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -121,10 +121,10 @@ class Recording:
         return {k: v for k, v in record.items() if k not in bad}
 
     def config(self) -> dict[str, Any]:
-        return _decoded(self.metadata.get("config", {}))
+        return decode_metadata(self.metadata.get("config", {}))
 
     def run_meta(self) -> dict[str, Any]:
-        return _decoded(self.metadata.get("run", {}))
+        return decode_metadata(self.metadata.get("run", {}))
 
     def data(self, topic: str) -> list[Any]:
         """The messages of ``topic`` that the review can use (see ``LoggedMessage.problem``)."""
@@ -157,7 +157,7 @@ def start_time_ns(metadata: dict[str, dict[str, str]]) -> int:
     return int(metadata.get("episode", {}).get(START_TIME_KEY, "0"))
 
 
-def _decoded(record: dict[str, str]) -> dict[str, Any]:
+def decode_metadata(record: Mapping[str, str]) -> dict[str, Any]:
     """Metadata values are JSON text (pipelines.logs.recording); a value that is not stays a string."""
     out: dict[str, Any] = {}
     for key, text in record.items():

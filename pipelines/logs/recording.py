@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -28,7 +29,8 @@ import numpy as np
 from mcap.reader import make_reader
 
 from pipelines.errors import PipelineError
-from pipelines.logs.recorder import McapRecorder
+from pipelines.logs.reader import decode_metadata
+from pipelines.logs.recorder import UNFINISHED_SUFFIX, McapRecorder
 from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
 from pipelines.plain_json import plain
 from pipelines.version import code_identity
@@ -62,35 +64,87 @@ HUMAN_RGB: Final[tuple[float, float, float]] = (0.45, 0.45, 0.45)
 
 def episode_filename(scenario: str, seed: int | None, unseeded: int = 0) -> str:
     """The file of an episode: by its seed, or for one no seed drew (a gym episode started from a layout)
-    by its number among those the recorder wrote, ``unseeded``."""
+    by its number, ``unseeded``."""
     return f"{scenario}_seed{seed:06d}.mcap" if seed is not None else f"{scenario}_{unseeded:06d}.mcap"
 
 
-# What tells two runs' recordings of one (scenario, seed) apart: its file name is the same for both.
+def next_unseeded(out_dir: Path, scenario: str, written: int = -1) -> int:
+    """The number of the next unseeded episode of ``scenario`` in ``out_dir``: one past the highest of its
+    files there (``<scenario>_NNNNNN.mcap``, unfinished ``.part`` ones too) and ``written``, the highest this
+    recorder wrote. Unlike a seed's, such a number names no scene: the same name may be another episode, so
+    an unseeded episode never replaces a file."""
+    pattern = re.compile(re.escape(scenario) + r"_(\d{6,})\.mcap(?:" + re.escape(UNFINISHED_SUFFIX) + ")?")
+    numbers = [int(m.group(1)) for p in out_dir.iterdir() if (m := pattern.fullmatch(p.name))]
+    return max([written, *numbers]) + 1
+
+
+# What tells two runs' recordings of one (scenario, seed) apart (its file name is the same for both), and
+# two set-ups in `crowdmpc review DIR`: these values of the "episode" metadata, then every setting of the
+# "config" metadata (``run_identity``): the simulator's ("env.formation") and the controller's ("mpc.horizon",
+# "margins.mode", "coupling", "flocking"...).
 RUN_IDENTITY: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
+# Settings added after recordings were made, with the value that recordings made before them ran with.
+UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {"env.formation": "auto"}
+MAX_DIFFERENCES_NAMED: Final = 8  # in the refusal; the rest counted
+MISSING: Final = "(not set)"  # a setting the held recording has and this run has not
 
 
-def _check_replaceable(path: Path, episode: Mapping[str, str]) -> None:
-    """Refuse to replace ``path`` when it holds another run's episode (another controller, predictor or
-    crowd): rerunning a command into its folder replaces its own recordings (``make demo``), but a second
-    controller recorded into the same folder silently replaced the first's. A file that is no readable
+def _flat(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested settings as dotted keys: {"env": {"formation": "row"}} -> {"env.formation": "row"}."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        if isinstance(value, Mapping) and value:
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[str, Any]:
+    """What defines a run's episodes besides scenario and seed: the ``RUN_IDENTITY`` values of its "episode"
+    metadata (strings; those it lacks left out) and its "config" metadata (decoded, as
+    ``pipelines.logs.reader.decode_metadata`` reads it) flattened to dotted keys, where a setting a recording
+    predates takes its ``UNRECORDED_DEFAULTS`` value."""
+    identity: dict[str, Any] = {k: episode[k] for k in RUN_IDENTITY if k in episode}
+    flat = _flat(config)
+    for key, value in UNRECORDED_DEFAULTS.items():
+        flat.setdefault(key, value)
+    return identity | {k: v for k, v in flat.items() if k not in identity}
+
+
+def shown(value: Any) -> str:
+    """A setting's value in a message: text as it is ("-" when empty), anything else as JSON."""
+    if isinstance(value, str):
+        return value or "-"
+    return json.dumps(value, sort_keys=True)
+
+
+def _check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
+    """Refuse to replace ``path`` when it holds another run's episode (another ``run_identity``: controller,
+    predictor, crowd, simulator or controller settings): rerunning a command into its folder replaces its own
+    recordings (``make demo``), but a second controller, or a run with another formation, recorded into the
+    same folder silently replaced the first's. A setting the held recording does not name (recorded before
+    it existed, and not in ``UNRECORDED_DEFAULTS``) tells nothing apart. A file that is no readable
     recording is left to the recorder, which replaces it."""
     if not path.is_file():
         return
     try:
         with open(path, "rb") as f:
-            held = next((m.metadata for m in make_reader(f).iter_metadata() if m.name == "episode"), None)
+            records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
     except Exception:  # not an MCAP file, or a damaged one (mcap raises many kinds): no run to keep apart
         return
-    if held is None:
+    if "episode" not in records:
         return
-    differ = [k for k in RUN_IDENTITY if k in held and held[k] != episode[k]]
+    held = run_identity(records["episode"], decode_metadata(records.get("config", {})))
+    differ = [k for k in held if held[k] != identity.get(k, MISSING)]
     if differ:
-        was = ", ".join(f"{k} {held[k] or '-'}" for k in differ)
-        now = ", ".join(f"{k} {episode[k] or '-'}" for k in differ)
+        named = differ[:MAX_DIFFERENCES_NAMED]
+        more = f", and {len(differ) - len(named)} more" if len(differ) > len(named) else ""
+        was = ", ".join(f"{k} {shown(held[k])}" for k in named)
+        now = ", ".join(f"{k} {shown(identity.get(k, MISSING))}" for k in named)
         raise PipelineError(
-            f"cannot record to {path}: it holds another run's episode ({was}; this run: {now}); record into "
-            "another folder, or remove it"
+            f"cannot record to {path}: it holds another run's episode ({was}{more}; this run: {now}); record "
+            "into another folder, or remove it"
         )
 
 
@@ -233,8 +287,9 @@ class SceneBuilder:
 
 
 class McapEpisodeRecorder:
-    """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode
-    (``<scenario>_<n:06d>.mcap`` for the n-th one no seed drew: a gym episode started from a layout).
+    """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode, replacing the
+    file of a rerun of the same run (refusing another run's: ``run_identity``); ``<scenario>_<n:06d>.mcap``
+    for one no seed drew (a gym episode started from a layout), n one past the highest already in the folder.
 
     :param out_dir: folder for the files (created if missing).
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
@@ -261,7 +316,7 @@ class McapEpisodeRecorder:
         self._last: Observation | None = None  # the newest state seen
         self._last_written_step = -1
         self._start_ns = 0  # the episode's wall-clock start, ns since the Unix epoch: log time at t = 0
-        self._unseeded = 0  # episodes with no seed (from a layout) written so far: their files' numbers
+        self._unseeded: dict[str, int] = {}  # scenario -> the number of its last episode with no seed
 
     # -- EpisodeObserver -------------------------------------------------------------------------------------
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
@@ -284,9 +339,14 @@ class McapEpisodeRecorder:
             "radius": repr(float(obs.radius)),
             "start_time_ns": str(self._start_ns),
         }
-        path = self.out_dir / episode_filename(scenario, seed, self._unseeded)
-        self._unseeded += seed is None
-        _check_replaceable(path, episode)
+        config = _metadata_strings(meta.get("config") or {})
+        if seed is None:  # a number names no scene: never another episode's file
+            number = next_unseeded(self.out_dir, scenario, self._unseeded.get(scenario, -1))
+            self._unseeded[scenario] = number
+            path = self.out_dir / episode_filename(scenario, None, number)
+        else:  # the same scene: replaced when this run recorded it
+            path = self.out_dir / episode_filename(scenario, seed)
+            _check_replaceable(path, run_identity(episode, decode_metadata(config)))
         self._recorder = McapRecorder(
             path,
             metadata={
@@ -296,7 +356,7 @@ class McapEpisodeRecorder:
                     "format": FORMAT,
                 },
                 "episode": episode,
-                "config": _metadata_strings(meta.get("config") or {}),
+                "config": config,
                 "run": _metadata_strings(self.run_meta),
             },
         )

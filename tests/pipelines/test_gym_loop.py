@@ -136,6 +136,36 @@ def test_episodes_from_a_layout_are_recorded_without_a_seed(tmp_path):
     assert EpisodeRecord.from_dict(rec.data("/episode/metrics")[0]).seed is None
 
 
+def test_an_episode_from_a_layout_never_replaces_a_file(tmp_path):
+    """Its number names no scene: a second recorder into the folder numbers on from the highest file there
+    (an unfinished one too), where layout_000000 would have replaced the first run's scene."""
+    from crowdsim.scenarios import Layout
+
+    layout = Layout(
+        np.array([[0.0, -2.0]]), np.array([[0.0, 2.0]]), np.array([[3.0, 0.0]]), np.array([[-3.0, 0.0]])
+    )
+
+    def record(episodes: int) -> list[str]:
+        with McapEpisodeRecorder(tmp_path) as recorder:
+            base = CrowdNavEnv(n_humans=1, n_robots=1, config=EnvConfig(time_limit=0.8, timeout_margin=0.0))
+            env = ObserveEpisodes(base, [recorder], controller="still")
+            for _ in range(episodes):
+                env.reset(options={"layout": layout})
+                done = False
+                while not done:
+                    *_, terminated, truncated, _ = env.step(np.zeros((1, 2)))
+                    done = terminated or truncated
+        return [p.name for p in recorder.paths]
+
+    assert record(2) == ["layout_000000.mcap", "layout_000001.mcap"]
+    first = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert record(1) == ["layout_000002.mcap"]
+    assert all((tmp_path / name).read_bytes() == data for name, data in first.items())
+    (tmp_path / "layout_000005.mcap.part").write_bytes(b"")  # a killed run's
+    (tmp_path / "other_000009.mcap").write_bytes(b"")  # another scenario's numbers are its own
+    assert record(2) == ["layout_000006.mcap", "layout_000007.mcap"]
+
+
 def test_the_docs_example_runs_and_records(tmp_path, capsys):
     spec = importlib.util.spec_from_file_location("gym_velocity_policy", EXAMPLE)
     assert spec is not None and spec.loader is not None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import platform
+import re
 import subprocess
 import time
 from importlib.metadata import version
@@ -205,3 +206,33 @@ def test_misuse_is_reported(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(PipelineError, match="is a file"):
         McapEpisodeRecorder(tmp_path / "file")
+
+
+def test_a_run_of_other_settings_does_not_replace_a_recording_a_rerun_does(tmp_path):
+    """A file name is the episode (scenario, seed), not the run: another simulator or controller setting
+    (formation, horizon) is refused, naming what differs; the same run again replaces its own recording,
+    a recording from before formation existed counts as "auto", and a setting it predates tells nothing."""
+    first = record_episode(tmp_path, seed=1, steps=2)  # env config without formation; horizon 4
+    held = first.path.read_bytes()
+    obs = first.observations[0]
+    env = {"dt": 0.4, "radius": 0.3}
+    wedge = env | {"formation": "wedge"}
+
+    def reset(config: dict) -> None:
+        recorder = McapEpisodeRecorder(tmp_path)
+        recorder.on_reset(obs, {**first.meta, "config": config})
+        recorder.close()
+
+    for config, differs in (
+        ({"env": wedge, "horizon": 4}, "env.formation auto; this run: env.formation wedge"),
+        ({"env": env, "horizon": 5}, "horizon 4; this run: horizon 5"),
+        ({"env": env}, "horizon 4; this run: horizon (not set)"),
+    ):
+        with pytest.raises(PipelineError, match=re.escape(f"holds another run's episode ({differs})")):
+            reset(config)
+        assert first.path.read_bytes() == held
+    reset({"env": {**env, "formation": "auto"}, "horizon": 4})  # the same run, as recorded today
+    assert first.path.read_bytes() != held and not read_recording(first.path).data("/robots")
+    reset({"env": {**env, "formation": "auto", "crossing": "v1"}, "horizon": 4})  # a setting it predates
+    with pytest.raises(PipelineError, match=re.escape("(env.crossing v1; this run: env.crossing paper)")):
+        reset({"env": {**env, "formation": "auto", "crossing": "paper"}, "horizon": 4})
