@@ -7,6 +7,7 @@ import json
 import math
 import sys
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -24,7 +25,10 @@ EPILOG = """examples:
 
 The folders are those `make demo` and `crowdmpc simulate --record DIR` write; a folder means the .mcap files
 directly in it, not in its subfolders (a sweep's recordings: DIR/mcap/CELL/). Runs of different set-ups
-(controller, predictor, numbers of robots and humans) in one folder get one table and aggregate each.
+(controller, predictor, numbers of robots and humans, or any simulator or controller setting the recordings'
+"config" metadata holds: profile, visibility, formation, MPC settings, margins...) in one folder get one
+table and aggregate each, named by what differs. --json writes "groups", one per set-up with its "totals"
+(and "totals" at the top too when the folder holds one set-up).
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
 compression fails) or a message that is not what the review reads is left out, with a warning; --check lists
@@ -40,9 +44,11 @@ with --check, 1 when any file has a bad chunk, a bad message, a schema violation
 """
 
 MAX_ERRORS_SHOWN = 20
-# Runs pooled into one aggregate of a folder must share these (a CMPC run beside a straight-line one is two
-# results, not one average).
-GROUP_KEYS: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
+# Runs pooled into one aggregate of a folder share their run_identity (pipelines.logs.recording), what tells
+# runs apart when recording too (a CMPC run beside a straight-line one, or a row formation beside a wedge,
+# is two results, not one average). A set-up is named by its RUN_IDENTITY values, then by the settings that
+# tell it apart: these whenever they differ, any other only where these leave set-ups alike.
+NAMED_FIRST: Final[tuple[str, ...]] = ("env.profile", "env.robots_visible", "env.formation")
 # The units of the episode metrics (crowdsim.metrics.EpisodeMetrics), printed after their names.
 METRIC_UNITS: Final[Mapping[str, str]] = {
     "travel_time": "s",
@@ -108,32 +114,89 @@ def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
     return failed
 
 
-def _groups(recordings: list[Recording], summaries: list[dict[str, Any]]) -> dict[tuple, list[Recording]]:
-    """The recordings by their set-up (``GROUP_KEYS``), in the order of their first run. A recording whose
+@dataclass
+class SetUp:
+    """Runs of one folder that share their set-up."""
+
+    identity: dict[str, Any] | None  # their run_identity; None: unknown (no readable episode metadata)
+    members: list[Recording]
+
+
+def _identity_key(identity: Mapping[str, Any]) -> str:
+    return json.dumps(identity, sort_keys=True, default=str)
+
+
+def _groups(recordings: list[Recording], summaries: list[dict[str, Any]]) -> list[SetUp]:
+    """The recordings by their set-up (``run_identity``: controller, predictor, crowd, and the simulator's
+    and controller's settings of the "config" metadata), in the order of their first run. A recording whose
     set-up is unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own:
     with one known set-up it counts among its runs, as the folder's one aggregate always counted it."""
-    groups: dict[tuple, list[Recording]] = {}
+    from pipelines.logs.recording import run_identity
+
+    groups: dict[str, SetUp] = {}
     unknown: list[Recording] = []
     for rec, summary in zip(recordings, summaries, strict=True):
-        key = tuple(summary[k] for k in GROUP_KEYS)
         if summary["controller"] is None:
             unknown.append(rec)
-        else:
-            groups.setdefault(key, []).append(rec)
-    if unknown and len(groups) == 1:
-        members = next(iter(groups.values()))
-        members.extend(unknown)
-        members.sort(key=recordings.index)  # the folder's order, as before
+            continue
+        identity = run_identity(rec.episode(), rec.config())
+        groups.setdefault(_identity_key(identity), SetUp(identity, [])).members.append(rec)
+    setups = list(groups.values())
+    if unknown and len(setups) == 1:
+        setups[0].members.extend(unknown)
+        setups[0].members.sort(key=recordings.index)  # the folder's order, as before
     elif unknown:
-        groups[(None,) * len(GROUP_KEYS)] = unknown
-    return groups
+        setups.append(SetUp(None, unknown))
+    return setups
 
 
-def _group_name(group: tuple) -> str:
-    controller, predictor, n_robots, n_humans = group
-    if controller is None:
+def _named_settings(setups: list[SetUp]) -> list[str]:
+    """The settings beyond ``RUN_IDENTITY`` that name the set-ups: each of ``NAMED_FIRST`` whose value
+    differs between them, then, in the order they are recorded in, each other one that tells apart set-ups
+    the ones before it did not (a profile's name stands for the settings that come with it)."""
+    from pipelines.logs.recording import MISSING, RUN_IDENTITY
+
+    known = [s.identity for s in setups if s.identity is not None]
+
+    def kinds(keys: list[str]) -> int:
+        return len({tuple(_identity_key({"v": i.get(k, MISSING)}) for k in keys) for i in known})
+
+    named = [key for key in NAMED_FIRST if kinds([key]) > 1]
+    keys = [*RUN_IDENTITY, *named]
+    for key in dict.fromkeys(k for i in known for k in i if k not in keys):
+        if kinds(keys) == len(known):
+            break
+        if kinds([*keys, key]) > kinds(keys):
+            keys.append(key)
+            named.append(key)
+    return named
+
+
+def _setting(key: str, value: Any) -> str:
+    """A setting in a set-up's name: "formation row", "robots invisible", "mpc.horizon 8"."""
+    from pipelines.logs.recording import MISSING, shown
+
+    if value is MISSING:
+        return f"{key} not recorded"
+    if key == "env.robots_visible" and isinstance(value, bool):
+        return "robots visible" if value else "robots invisible"
+    if key in ("env.profile", "env.formation"):
+        return f"{key.removeprefix('env.')} {shown(value)}"
+    return f"{key} {shown(value)}"
+
+
+def _group_name(setup: SetUp, named: list[str]) -> str:
+    from pipelines.logs.recording import MISSING
+    from pipelines.logs.review import count
+
+    identity = setup.identity
+    if identity is None:
         return "set-up unknown (no readable episode metadata)"
-    return f"{controller}, predictor {predictor or 'none'}, {n_robots} robots, {n_humans} humans"
+    base = (
+        f"{identity.get('controller') or '-'}, predictor {identity.get('predictor') or 'none'}, "
+        f"{count(identity.get('n_robots'), 'robot')}, {count(identity.get('n_humans'), 'human')}"
+    )
+    return ", ".join([base, *(_setting(k, identity.get(k, MISSING)) for k in named)])
 
 
 def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
@@ -174,7 +237,8 @@ def _read_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording],
 def run(args: argparse.Namespace) -> int:
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
     from pipelines.logs.reader import read_recording
-    from pipelines.logs.review import aggregate_table, compare_table, format_summary, summarize
+    from pipelines.logs.recording import RUN_IDENTITY
+    from pipelines.logs.review import aggregate_table, compare_table, count, format_summary, summarize
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
@@ -207,22 +271,32 @@ def run(args: argparse.Namespace) -> int:
             )
         recordings, n_unreadable = _read_folder(args.path, report)
         report["runs"] = [summarize(rec) for rec in recordings]
-        groups = _groups(recordings, report["runs"])
-        if len(groups) == 1:
-            table, report["totals"] = aggregate_table(recordings)
-            print(table)
-        else:
+        setups = _groups(recordings, report["runs"])
+        named = _named_settings(setups)
+        names = [_group_name(setup, named) for setup in setups]
+        if len(setups) > 1:
             print(
-                f"crowdmpc review: warning: {args.path} holds runs of {len(groups)} different set-ups "
-                f"({'; '.join(_group_name(g) for g in groups)}): one aggregate for each, none over all",
+                f"crowdmpc review: warning: {args.path} holds runs of {len(setups)} different set-ups "
+                f"({'; '.join(names)}): one aggregate for each, none over all",
                 file=sys.stderr,
             )
-            report["groups"] = []
-            for group, members in groups.items():
-                table, totals = aggregate_table(members)
-                print(f"== {_group_name(group)}: {len(members)} run{'s' if len(members) > 1 else ''} ==")
-                print(table + "\n")
-                report["groups"].append(dict(zip(GROUP_KEYS, group, strict=True)) | {"totals": totals})
+        by_file = {s["file"]: s for s in report["runs"]}
+        report["groups"] = []
+        for setup, name in zip(setups, names, strict=True):
+            table, totals = aggregate_table(setup.members)
+            if len(setups) > 1:
+                print(f"== {name}: {count(len(setup.members), 'run')} ==")
+            print(table + ("\n" if len(setups) > 1 else ""))
+            first = by_file[str(setup.members[0].path)]
+            identity = setup.identity or {}
+            report["groups"].append(
+                {"name": name}
+                | {k: first[k] for k in RUN_IDENTITY}
+                | {"settings": {k: identity.get(k) for k in named}}
+                | {"files": [str(rec.path) for rec in setup.members], "totals": totals}
+            )
+        if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
+            report["totals"] = report["groups"][0]["totals"]
     else:
         recordings = [read_recording(args.path)]
         summary = summarize(recordings[0])

@@ -95,6 +95,11 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def count(n: Any, noun: str) -> str:
+    """``n noun`` with the noun plural unless n is 1 ("1 run", "2 runs"; "-" for an unknown n)."""
+    return f"{_fmt(n)} {noun}" + ("" if str(n) == "1" else "s")
+
+
 def _code(summary: dict[str, Any]) -> str:
     """The version, and the commit when the recording names one."""
     commit = summary.get("crowdmpc_commit")
@@ -107,7 +112,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     rows: list[tuple[str, Any]] = [
         ("file", summary["file"]),
         ("scenario", f"{_fmt(summary['scenario'])} (seed {_fmt(summary['seed'])})"),
-        ("agents", f"{_fmt(summary['n_robots'])} robots, {_fmt(summary['n_humans'])} humans"),
+        ("agents", f"{count(summary['n_robots'], 'robot')}, {count(summary['n_humans'], 'human')}"),
         ("controller", summary["controller"]),
         ("predictor", summary["predictor"]),
         ("predictor sha256", summary["predictor_sha256"]),
@@ -199,7 +204,7 @@ def aggregate_table(recordings: list[Recording]) -> tuple[str, dict[str, Any]]:
 
 def _format_totals(t: dict[str, Any]) -> str:
     lines = [
-        f"{t['runs']} runs"
+        count(t["runs"], "run")
         + (
             f", {t['runs'] - t['ended']} whose episode did not end (no metrics)"
             if t["ended"] < t["runs"]
@@ -219,6 +224,8 @@ def _format_totals(t: dict[str, Any]) -> str:
         )
         lines += [
             rates,
+            "between steps (straight motion within each step): "
+            + ", ".join(_between_steps_rate(t, name, n) for name in ("collision", "contact")),
             f"travel time {_fmt(t['travel_time_mean'])} s mean over successes "
             f"(std {_fmt(t['travel_time_std'])} s); path length {_fmt(t['path_length_mean'])} m per robot",
             f"min robot-human distance {_fmt(t['min_distance_mean'])} m mean, "
@@ -227,10 +234,18 @@ def _format_totals(t: dict[str, Any]) -> str:
     if "control_steps" in t:
         lines.append(
             f"solve time per control step: median {t['solve_time_median_ms']:.1f} ms, p95 "
-            f"{t['solve_time_p95_ms']:.1f} ms, max {t['solve_time_max_ms']:.1f} ms over {t['control_steps']} "
-            f"steps; fallback steps {t['fallback_steps']}"
+            f"{t['solve_time_p95_ms']:.1f} ms, max {t['solve_time_max_ms']:.1f} ms over "
+            f"{count(t['control_steps'], 'step')}; fallback steps {t['fallback_steps']}"
         )
     return "\n".join(lines)
+
+
+def _between_steps_rate(t: dict[str, Any], name: str, n: int) -> str:
+    """``collision 5.0 % (1/20)``; n/a when some run's metrics predate the between-step fields."""
+    rate, hits = t.get(f"{name}_between_steps_rate"), t.get(f"{name}_between_steps_count")
+    if rate is None or hits is None:
+        return f"{name} n/a (metrics recorded before the between-step figures)"
+    return f"{name} {rate:.1f} % ({hits}/{n})"
 
 
 def _aggregate_metrics(recorded: list[dict[str, Any]]) -> tuple[dict[str, Any], list[int]]:

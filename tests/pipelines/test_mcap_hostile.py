@@ -313,7 +313,7 @@ def test_a_folder_reviews_its_readable_files_and_lists_the_rest(episode, tmp_pat
 
     rc, out, err = review(capsys, tmp_path)
     assert rc == 0
-    assert "good.mcap" in out and "\n1 runs\n" in out
+    assert "good.mcap" in out and "\n1 run\n" in out  # "1 run" (was "1 runs")
     for name in [*unreadable, "x.mcap"]:
         (line,) = lines_naming(err, tmp_path / name)
         assert line.startswith("crowdmpc review: unreadable: "), line

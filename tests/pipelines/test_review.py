@@ -13,9 +13,10 @@ from pipelines.cli import main
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import episode_view, read_recording
 from pipelines.logs.recorder import McapRecorder
+from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.review import summarize
 from pipelines.logs.schemas import ROBOTS
-from tests.pipelines.mcap_episode import record_episode
+from tests.pipelines.mcap_episode import control_output, record_episode
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +126,17 @@ def test_folder_gives_one_row_per_run_and_the_rates(runs, capsys, tmp_path):
     expected_success = sum(r.result.metrics.success for r in runs) * 50.0
     assert f"success {expected_success:.1f} % " in out
     assert "over 16 steps; fallback steps 2" in out  # 8 steps each, one "shifted" fallback per run
-    totals = json.loads((tmp_path / "all.json").read_text())["totals"]
+    between = ", ".join(
+        f"{name} {50.0 * hits:.1f} % ({hits}/2)"
+        for name in ("collision", "contact")
+        for hits in [sum(bool(getattr(r.result.metrics, f"{name}_between_steps")) for r in runs)]
+    )
+    assert f"\nbetween steps (straight motion within each step): {between}\n" in out
+    report = json.loads((tmp_path / "all.json").read_text())
+    totals = report["totals"]
+    (group,) = report["groups"]  # one set-up: "groups" as for several, and "totals" at the top too
+    assert group["totals"] == totals and group["files"] == [str(r.path) for r in runs]
+    assert group["name"] == "handmade, predictor constant_velocity, 3 robots, 4 humans"
     assert totals["episodes"] == 2 and totals["success_rate"] == expected_success
     assert totals["solve_time_max_ms"] == pytest.approx(80.0)
     assert main(["review", str(runs[0].path.parent), "--plot", str(tmp_path / "p.png")]) == 2
@@ -222,10 +233,11 @@ def test_a_folder_of_different_set_ups_gets_an_aggregate_for_each(tmp_path, caps
     )
     assert f"holds runs of 2 different set-ups ({four}; {five})" in err
     assert f"== {four}: 1 run ==" in out and f"== {five}: 2 runs ==" in out
-    assert "\n1 runs\n" in out and "\n2 runs\n" in out
+    assert "\n1 run\n" in out and "\n2 runs\n" in out  # "1 run" (was "1 runs")
     report = json.loads((tmp_path / "r.json").read_text())
     assert "totals" not in report and len(report["runs"]) == 3
     assert [(g["n_humans"], g["totals"]["runs"]) for g in report["groups"]] == [(4, 1), (5, 2)]
+    assert [g["name"] for g in report["groups"]] == [four, five]
 
 
 def test_a_recording_of_unknown_set_up_joins_the_one_known_or_stands_apart(tmp_path, capsys):
@@ -241,3 +253,54 @@ def test_a_recording_of_unknown_set_up_joins_the_one_known_or_stands_apart(tmp_p
     out, err = capsys.readouterr()
     assert "holds runs of 3 different set-ups" in err
     assert "== set-up unknown (no readable episode metadata): 1 run ==" in out
+
+
+def test_runs_under_other_simulator_settings_are_other_set_ups(tmp_path, capsys):
+    """A paper/visible/auto run and a v1/invisible/two_rows one of the same controller and crowd are two
+    experiments: an aggregate each, named by profile, visibility and formation (and never "1 robots")."""
+    import dataclasses
+
+    from crowdsim.profiles import make_env_config
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.episode import run_episode
+
+    controller = make_controller(ControllerSpec("straight"))
+    v1 = dataclasses.replace(make_env_config("v1", "invisible"), formation="two_rows")
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        for seed, env_config in enumerate((make_env_config(), make_env_config(), v1)):
+            run_episode(
+                controller, seed=seed, scenario="circle", n_humans=1, n_robots=1, env_config=env_config,
+                observers=[recorder],
+            )  # fmt: skip
+    assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
+    out, err = capsys.readouterr()
+    paper = "straight, predictor none, 1 robot, 1 human, profile paper, robots visible, formation auto"
+    other = "straight, predictor none, 1 robot, 1 human, profile v1, robots invisible, formation two_rows"
+    assert f"holds runs of 2 different set-ups ({paper}; {other})" in err
+    assert f"== {paper}: 2 runs ==" in out and f"== {other}: 1 run ==" in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert "totals" not in report
+    assert [(g["name"], g["totals"]["runs"]) for g in report["groups"]] == [(paper, 2), (other, 1)]
+    assert report["groups"][1]["settings"] == {
+        "env.profile": "v1",
+        "env.robots_visible": False,
+        "env.formation": "two_rows",
+    }
+
+
+def test_a_controller_setting_tells_set_ups_apart_and_a_formation_not_recorded_is_auto(tmp_path, capsys):
+    """Recordings from before formation existed ran the automatic one: they pool with "auto" runs; another
+    controller setting (the MPC's horizon here) makes another set-up, named by it."""
+    first = record_episode(tmp_path, seed=1, steps=2)  # its env config names no formation
+    obs, after = first.observations[:2]
+    recorder = McapEpisodeRecorder(tmp_path)
+    env = {"dt": 0.4, "radius": 0.3, "formation": "auto"}
+    for seed, horizon in ((2, 4), (3, 6)):
+        recorder.on_reset(obs, {**first.meta, "seed": seed, "config": {"env": env, "horizon": horizon}})
+        recorder.on_step(obs, control_output(obs), after)
+    recorder.close()
+    assert main(["review", str(tmp_path)]) == 0
+    out, err = capsys.readouterr()
+    base = "handmade, predictor constant_velocity, 3 robots, 4 humans"
+    assert f"holds runs of 2 different set-ups ({base}, horizon 4; {base}, horizon 6)" in err
+    assert f"== {base}, horizon 4: 2 runs ==" in out and f"== {base}, horizon 6: 1 run ==" in out
