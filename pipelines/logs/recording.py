@@ -85,6 +85,9 @@ def next_unseeded(out_dir: Path, scenario: str, written: int = -1) -> int:
 RUN_IDENTITY: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
 # Settings added after recordings were made, with the value that recordings made before them ran with.
 UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {"env.formation": "auto"}
+# Settings that change how fast a run goes, not its episodes (jit compiles the same NLP; DMPC's threads give
+# the serial result, tests/mpc): a rerun with another value replaces its recordings, as the same command's.
+SPEED_ONLY: Final[tuple[str, ...]] = ("mpc.jit", "mpc.dmpc_parallel")
 MAX_DIFFERENCES_NAMED: Final = 8  # in the refusal; the rest counted
 MISSING: Final = "(not set)"  # a setting the held recording has and this run has not
 
@@ -109,7 +112,7 @@ def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[
     flat = _flat(config)
     for key, value in UNRECORDED_DEFAULTS.items():
         flat.setdefault(key, value)
-    return identity | {k: v for k, v in flat.items() if k not in identity}
+    return identity | {k: v for k, v in flat.items() if k not in identity and k not in SPEED_ONLY}
 
 
 def shown(value: Any) -> str:

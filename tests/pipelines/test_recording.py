@@ -236,3 +236,21 @@ def test_a_run_of_other_settings_does_not_replace_a_recording_a_rerun_does(tmp_p
     reset({"env": {**env, "formation": "auto", "crossing": "v1"}, "horizon": 4})  # a setting it predates
     with pytest.raises(PipelineError, match=re.escape("(env.crossing v1; this run: env.crossing paper)")):
         reset({"env": {**env, "formation": "auto", "crossing": "paper"}, "horizon": 4})
+
+
+def test_a_setting_of_speed_only_does_not_make_another_run(tmp_path):
+    """jit compiles the same NLP and DMPC's threads give the serial result: a rerun with --set mpc.jit=true
+    replaces its recording as the same command's does; a setting that changes the episodes is refused."""
+    first = record_episode(tmp_path, seed=1, steps=2)
+    obs = first.observations[0]
+    env = {"dt": 0.4, "radius": 0.3, "formation": "auto"}
+
+    def reset(mpc: dict) -> None:
+        recorder = McapEpisodeRecorder(tmp_path)
+        recorder.on_reset(obs, {**first.meta, "config": {"env": env, "horizon": 4, "mpc": mpc}})
+        recorder.close()
+
+    reset({"horizon": 4, "jit": False, "dmpc_parallel": "serial"})
+    reset({"horizon": 4, "jit": True, "dmpc_parallel": "threads"})  # replaced: no refusal
+    with pytest.raises(PipelineError, match=re.escape("(mpc.horizon 4; this run: mpc.horizon 5)")):
+        reset({"horizon": 5, "jit": True, "dmpc_parallel": "threads"})
