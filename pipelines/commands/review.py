@@ -131,7 +131,7 @@ def _groups(recordings: list[Recording], summaries: list[dict[str, Any]]) -> lis
     and controller's settings of the "config" metadata), in the order of their first run. A recording whose
     set-up is unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own:
     with one known set-up it counts among its runs, as the folder's one aggregate always counted it."""
-    from pipelines.logs.recording import run_identity
+    from pipelines.logs.identity import run_identity
 
     groups: dict[str, SetUp] = {}
     unknown: list[Recording] = []
@@ -154,7 +154,7 @@ def _named_settings(setups: list[SetUp]) -> list[str]:
     """The settings beyond ``RUN_IDENTITY`` that name the set-ups: each of ``NAMED_FIRST`` whose value
     differs between them, then, in the order they are recorded in, each other one that tells apart set-ups
     the ones before it did not (a profile's name stands for the settings that come with it)."""
-    from pipelines.logs.recording import MISSING, RUN_IDENTITY
+    from pipelines.logs.identity import MISSING, RUN_IDENTITY
 
     known = [s.identity for s in setups if s.identity is not None]
 
@@ -174,7 +174,7 @@ def _named_settings(setups: list[SetUp]) -> list[str]:
 
 def _setting(key: str, value: Any) -> str:
     """A setting in a set-up's name: "formation row", "robots invisible", "mpc.horizon 8"."""
-    from pipelines.logs.recording import MISSING, shown
+    from pipelines.logs.identity import MISSING, shown
 
     if value is MISSING:
         return f"{key} not recorded"
@@ -186,7 +186,7 @@ def _setting(key: str, value: Any) -> str:
 
 
 def _group_name(setup: SetUp, named: list[str]) -> str:
-    from pipelines.logs.recording import MISSING
+    from pipelines.logs.identity import MISSING
     from pipelines.logs.review import count
 
     identity = setup.identity
@@ -234,11 +234,47 @@ def _read_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording],
     return recordings, len(unreadable)
 
 
+def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording], int]:
+    """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a warning
+    names them when there are several), into ``report``; the recordings and the number of unreadable files."""
+    from pipelines.logs.identity import RUN_IDENTITY
+    from pipelines.logs.review import aggregate_table, count, summarize
+
+    recordings, n_unreadable = _read_folder(folder, report)
+    report["runs"] = [summarize(rec) for rec in recordings]
+    setups = _groups(recordings, report["runs"])
+    named = _named_settings(setups)
+    names = [_group_name(setup, named) for setup in setups]
+    if len(setups) > 1:
+        print(
+            f"crowdmpc review: warning: {folder} holds runs of {len(setups)} different set-ups "
+            f"({'; '.join(names)}): one aggregate for each, none over all",
+            file=sys.stderr,
+        )
+    by_file = {s["file"]: s for s in report["runs"]}
+    report["groups"] = []
+    for setup, name in zip(setups, names, strict=True):
+        table, totals = aggregate_table(setup.members)
+        if len(setups) > 1:
+            print(f"== {name}: {count(len(setup.members), 'run')} ==")
+        print(table + ("\n" if len(setups) > 1 else ""))
+        first = by_file[str(setup.members[0].path)]
+        identity = setup.identity or {}
+        report["groups"].append(
+            {"name": name}
+            | {k: first[k] for k in RUN_IDENTITY}
+            | {"settings": {k: identity.get(k) for k in named}}
+            | {"files": [str(rec.path) for rec in setup.members], "totals": totals}
+        )
+    if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
+        report["totals"] = report["groups"][0]["totals"]
+    return recordings, n_unreadable
+
+
 def run(args: argparse.Namespace) -> int:
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
     from pipelines.logs.reader import read_recording
-    from pipelines.logs.recording import RUN_IDENTITY
-    from pipelines.logs.review import aggregate_table, compare_table, count, format_summary, summarize
+    from pipelines.logs.review import compare_table, format_summary, summarize
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
@@ -269,34 +305,7 @@ def run(args: argparse.Namespace) -> int:
             raise PipelineError(
                 f"{', '.join(single_file_only)} {verb} one .mcap file, not the folder {args.path}{example}"
             )
-        recordings, n_unreadable = _read_folder(args.path, report)
-        report["runs"] = [summarize(rec) for rec in recordings]
-        setups = _groups(recordings, report["runs"])
-        named = _named_settings(setups)
-        names = [_group_name(setup, named) for setup in setups]
-        if len(setups) > 1:
-            print(
-                f"crowdmpc review: warning: {args.path} holds runs of {len(setups)} different set-ups "
-                f"({'; '.join(names)}): one aggregate for each, none over all",
-                file=sys.stderr,
-            )
-        by_file = {s["file"]: s for s in report["runs"]}
-        report["groups"] = []
-        for setup, name in zip(setups, names, strict=True):
-            table, totals = aggregate_table(setup.members)
-            if len(setups) > 1:
-                print(f"== {name}: {count(len(setup.members), 'run')} ==")
-            print(table + ("\n" if len(setups) > 1 else ""))
-            first = by_file[str(setup.members[0].path)]
-            identity = setup.identity or {}
-            report["groups"].append(
-                {"name": name}
-                | {k: first[k] for k in RUN_IDENTITY}
-                | {"settings": {k: identity.get(k) for k in named}}
-                | {"files": [str(rec.path) for rec in setup.members], "totals": totals}
-            )
-        if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
-            report["totals"] = report["groups"][0]["totals"]
+        recordings, n_unreadable = _review_folder(args.path, report)
     else:
         recordings = [read_recording(args.path)]
         summary = summarize(recordings[0])

@@ -1,0 +1,88 @@
+"""What identifies a run's recordings: the episode metadata's controller, predictor and crowd, and every
+setting of its "config" metadata but those of speed only (``run_identity``). A recording is replaced only by a
+rerun of its own run (``check_replaceable``; its file name is the episode's, scenario and seed, the same for
+every run), and ``crowdmpc review DIR`` aggregates per run."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Final
+
+from mcap.reader import make_reader
+
+from pipelines.errors import PipelineError
+from pipelines.logs.reader import decode_metadata
+
+# What tells two runs' recordings of one (scenario, seed) apart (its file name is the same for both), and
+# two set-ups in `crowdmpc review DIR`: these values of the "episode" metadata, then every setting of the
+# "config" metadata (``run_identity``): the simulator's ("env.formation") and the controller's ("mpc.horizon",
+# "margins.mode", "coupling", "flocking"...).
+RUN_IDENTITY: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
+# Settings added after recordings were made, with the value that recordings made before them ran with.
+UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {"env.formation": "auto"}
+# Settings that change how fast a run goes, not its episodes (jit compiles the same NLP; DMPC's threads give
+# the serial result, tests/mpc): a rerun with another value replaces its recordings, as the same command's.
+SPEED_ONLY: Final[tuple[str, ...]] = ("mpc.jit", "mpc.dmpc_parallel")
+MAX_DIFFERENCES_NAMED: Final = 8  # in the refusal; the rest counted
+MISSING: Final = "(not set)"  # a setting the held recording has and this run has not
+
+
+def _flat(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested settings as dotted keys: {"env": {"formation": "row"}} -> {"env.formation": "row"}."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        if isinstance(value, Mapping) and value:
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[str, Any]:
+    """What defines a run's episodes besides scenario and seed: the ``RUN_IDENTITY`` values of its "episode"
+    metadata (strings; those it lacks left out) and its "config" metadata (decoded, as
+    ``pipelines.logs.reader.decode_metadata`` reads it) flattened to dotted keys, where a setting a recording
+    predates takes its ``UNRECORDED_DEFAULTS`` value."""
+    identity: dict[str, Any] = {k: episode[k] for k in RUN_IDENTITY if k in episode}
+    flat = _flat(config)
+    for key, value in UNRECORDED_DEFAULTS.items():
+        flat.setdefault(key, value)
+    return identity | {k: v for k, v in flat.items() if k not in identity and k not in SPEED_ONLY}
+
+
+def shown(value: Any) -> str:
+    """A setting's value in a message: text as it is ("-" when empty), anything else as JSON."""
+    if isinstance(value, str):
+        return value or "-"
+    return json.dumps(value, sort_keys=True)
+
+
+def check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
+    """Refuse to replace ``path`` when it holds another run's episode (another ``run_identity``: controller,
+    predictor, crowd, simulator or controller settings): rerunning a command into its folder replaces its own
+    recordings (``make demo``), but a second controller, or a run with another formation, recorded into the
+    same folder silently replaced the first's. A setting the held recording does not name (recorded before
+    it existed, and not in ``UNRECORDED_DEFAULTS``) tells nothing apart. A file that is no readable
+    recording is left to the recorder, which replaces it."""
+    if not path.is_file():
+        return
+    try:
+        with open(path, "rb") as f:
+            records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    except Exception:  # not an MCAP file, or a damaged one (mcap raises many kinds): no run to keep apart
+        return
+    if "episode" not in records:
+        return
+    held = run_identity(records["episode"], decode_metadata(records.get("config", {})))
+    differ = [k for k in held if held[k] != identity.get(k, MISSING)]
+    if differ:
+        named = differ[:MAX_DIFFERENCES_NAMED]
+        more = f", and {len(differ) - len(named)} more" if len(differ) > len(named) else ""
+        was = ", ".join(f"{k} {shown(held[k])}" for k in named)
+        now = ", ".join(f"{k} {shown(identity.get(k, MISSING))}" for k in named)
+        raise PipelineError(
+            f"cannot record to {path}: it holds another run's episode ({was}{more}; this run: {now}); record "
+            "into another folder, or remove it"
+        )
