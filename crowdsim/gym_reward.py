@@ -1,0 +1,76 @@
+"""The gymnasium env's reward (``crowdsim.gym_env``'s docstring gives its rules) and the distances it is
+computed from: each robot's closest approach to each human during a step, the relative motion a straight
+segment, as CrowdNav's ``point_to_segment_dist`` takes it."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from crowdsim.conventions import PAPER_DISCOMFORT_DIST
+from crowdsim.env import Observation
+from crowdsim.errors import SimulationError
+from crowdsim.metrics import closest_approach
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """The reward's numbers (crowdsim.gym_env's docstring), the CrowdNav fork's ``env_m.config [reward]``."""
+
+    success: float = 1.0  # success_reward, once, on the step the robots succeed
+    collision: float = -0.25  # collision_penalty, per step with a robot-human contact
+    discomfort_dist: float = PAPER_DISCOMFORT_DIST  # m between boundaries (upstream CrowdNav: 0.2)
+    discomfort_factor: float = 0.5  # discomfort_penalty_factor, 1/s (the penalty is scaled by dt)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise SimulationError(f"RewardConfig.{f.name} must be a finite number, got {value!r}")
+        if self.discomfort_dist < 0 or self.discomfort_factor < 0:
+            raise SimulationError(
+                f"RewardConfig.discomfort_dist and discomfort_factor must be >= 0, got "
+                f"{self.discomfort_dist!r} and {self.discomfort_factor!r}"
+            )
+
+    def step_reward(
+        self,
+        surface_distance: float,
+        *,
+        success: bool,
+        timeout: bool,
+        dt: float,
+        contact_ends: bool = False,
+    ) -> float:
+        """The reward of one step (crowdsim.gym_env's rules 1-5): ``surface_distance`` is the closest
+        robot-human boundary distance during the step (m), ``dt`` the step (s); ``contact_ends``: a contact
+        ends the episode (``end_on_collision``), so the success of the same step is not paid."""
+        if timeout:
+            return 0.0
+        if surface_distance < 0:
+            paid = success and not contact_ends
+            return float(self.collision + self.success) if paid else float(self.collision)
+        if success:
+            return float(self.success)
+        if surface_distance < self.discomfort_dist:
+            return float((surface_distance - self.discomfort_dist) * self.discomfort_factor * dt)
+        return 0.0
+
+
+def step_closest(before: Observation, after: Observation) -> np.ndarray:
+    """``(M, N)`` closest centre distance of each robot to each human during the step, the relative motion
+    taken as the segment from its start to its end (CrowdNav's ``point_to_segment_dist``;
+    ``crowdsim.metrics.closest_approach``, as ``min_distance_between_steps`` takes it)."""
+    start = before.human_positions[None] - before.robot_positions[:, None]  # (M, N, 2) human - robot
+    end = after.human_positions[None] - after.robot_positions[:, None]
+    return closest_approach(start, end)
+
+
+def surface_distances(before: Observation, after: Observation) -> np.ndarray:
+    """``(M,)`` closest boundary distance of each robot to any human during the step (``step_closest``
+    less the sum of the radii); inf without humans."""
+    if before.n_humans == 0:
+        return np.full(before.n_robots, math.inf)
+    return step_closest(before, after).min(axis=1) - 2.0 * after.radius
