@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
+from crowdsim.metrics import BETWEEN_STEPS
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Cell, Experiment
 from pipelines.experiments.report_plots import plot_outcomes
@@ -28,14 +29,7 @@ EPISODES_CSV: Final[str] = "episodes.csv"
 TABLE_MD: Final[str] = "table.md"
 
 
-def cell_rows(
-    summaries: Sequence[CellSummary], records: Iterable[dict[str, Any]] = ()
-) -> list[dict[str, Any]]:
-    """A row per cell; ``records`` (the cells' episodes) give the between-step collision rate, empty
-    without them."""
-    metrics: dict[str, list[dict[str, Any]]] = {}
-    for record in records:
-        metrics.setdefault(record["cell"], []).append(record["metrics"])
+def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
     rows = []
     for s in summaries:
         row: dict[str, Any] = {
@@ -67,7 +61,7 @@ def cell_rows(
             "min_distance_mean": s.min_distance_mean,
             "min_distance_median": s.min_distance_median,
             **{f"{k}_step_freq": getattr(s, f"{k}_step_freq") for k in safety.STEP_COUNTS},
-            **_between_steps_columns(metrics.get(s.cell.key, [])),
+            **_between_steps_columns(s),
             "step_median_ms": s.step_median_ms,
             "step_p95_ms": s.step_p95_ms,
             "step_mean_ms": s.step_mean_ms,
@@ -79,21 +73,14 @@ def cell_rows(
     return rows
 
 
-# crowdsim.metrics' closest approach within each step, and its two flags
-BETWEEN_STEPS_FIELDS: Final[tuple[str, ...]] = (
-    "min_distance_between_steps",
-    "collision_between_steps",
-    "contact_between_steps",
-)
-
-
-def _between_steps_columns(metrics: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """cells.csv's collision and contact rates between steps (safety_report.between_steps_rate), as the
-    paper's rates are written: count, %, 95% Wilson interval; empty when some record lacks the field."""
+def _between_steps_columns(s: CellSummary) -> dict[str, Any]:
+    """cells.csv's collision and contact rates between steps, as the paper's rates are written: count, %,
+    95% Wilson interval; empty when some record lacks the field."""
     columns: dict[str, Any] = {}
-    for name in BETWEEN_STEPS_FIELDS[1:]:
-        count, percent = safety.between_steps_rate(metrics, name)
-        lo, hi = Rate(count, len(metrics)).interval if count is not None else (None, None)
+    for name, count in s.between_steps_counts.items():
+        rate = None if count is None else Rate(count, s.episodes)
+        lo, hi = (None, None) if rate is None else rate.interval
+        percent = None if rate is None else rate.percent
         columns |= {f"{name}_count": count, f"{name}_rate": percent, f"{name}_ci_lo": lo, f"{name}_ci_hi": hi}
     return columns
 
@@ -121,7 +108,7 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
                 "n_steps": m["n_steps"],
                 # Absent from records written before them: empty cells, not a failed report.
                 **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
-                **{k: m.get(k) for k in BETWEEN_STEPS_FIELDS},
+                **{k: m.get(k) for k in BETWEEN_STEPS},
                 **{k: r.get(k) for k in ("margins", "profile", "visibility")},
                 "step_median_ms": s["median_ms"],
                 "step_p95_ms": s["p95_ms"],
@@ -159,7 +146,7 @@ def write_report(
     keys = {c.key for c in cells}
     records = [r for r in records if r["cell"] in keys]
     summaries = summarize(experiment, cells, records)
-    write_csv(out / CELLS_CSV, cell_rows(summaries, records))
+    write_csv(out / CELLS_CSV, cell_rows(summaries))
     write_csv(out / EPISODES_CSV, episode_rows(records, cells))
     markdown = markdown_table(experiment, summaries)
     (out / TABLE_MD).write_text(markdown)

@@ -76,6 +76,9 @@ class CellSummary:
     collision_step_freq: float
     contact_step_freq: float
     discomfort_step_freq: float
+    # episodes whose closest approach within a step (crowdsim.metrics) is a collision, resp. contact, by the
+    # flag's name; None when some record predates the field
+    between_steps_counts: dict[str, int | None]
     # Of the episodes' own statistics, not pooled over all steps as `simulate` and `review` print them: a
     # record keeps each episode's median and p95, not its steps. The table's label says which.
     step_median_ms: float  # median over episodes of the per-episode median control step
