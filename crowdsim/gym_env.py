@@ -257,7 +257,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         cfg = self.config
         closest = step_closest(before, obs)  # (M, N) m, within the step
         swept = float(closest.min()) if closest.size else math.inf
-        gaps = closest.min(axis=1) - 2.0 * cfg.radius if closest.size else np.full(before.n_robots, math.inf)
+        gaps = surface_distances(closest, cfg.radius)
         contact_in_step = gaps < 0
         success = bool(native.get("success", False))
         timeout = bool(native.get("timeout", False))

@@ -68,9 +68,9 @@ def step_closest(before: Observation, after: Observation) -> np.ndarray:
     return closest_approach(start, end)
 
 
-def surface_distances(before: Observation, after: Observation) -> np.ndarray:
-    """``(M,)`` closest boundary distance of each robot to any human during the step (``step_closest``
-    less the sum of the radii); inf without humans."""
-    if before.n_humans == 0:
-        return np.full(before.n_robots, math.inf)
-    return step_closest(before, after).min(axis=1) - 2.0 * after.radius
+def surface_distances(closest: np.ndarray, radius: float) -> np.ndarray:
+    """``(M,)`` closest boundary distance of each robot to any human during the step, from ``step_closest``'s
+    ``(M, N)`` centre distances less the sum of the radii; inf without humans."""
+    if closest.shape[1] == 0:
+        return np.full(closest.shape[0], math.inf)
+    return closest.min(axis=1) - 2.0 * radius

@@ -333,7 +333,7 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
         flags = [bool(getattr(m, name)) for m in metrics]
         out[f"{name}_rate"] = _rate(flags)
         out[f"{name}_count"] = sum(flags)
-    for name in ("collision_between_steps", "contact_between_steps"):
+    for name in BETWEEN_STEPS[1:]:  # the two flags
         values = [getattr(m, name) for m in metrics]
         known = all(v is not None for v in values)
         out[f"{name}_rate"] = _rate([bool(v) for v in values]) if known else math.nan

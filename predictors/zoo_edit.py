@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
+from collections.abc import Collection
 from dataclasses import replace as replace_fields
 from pathlib import Path
 from typing import Any
@@ -141,7 +142,7 @@ def _check_not_built_in(name: str) -> None:
     loads the built-in, so the entry could never be reached."""
     from predictors.registry import PREDICTORS
 
-    built_in = next((other for other in PREDICTORS if other.casefold() == name.casefold()), None)
+    built_in = _same_ignoring_case(name, PREDICTORS)
     if built_in is not None:
         raise PredictorError(
             f"zoo name {name!r} is the built-in predictor {built_in!r}, which that name always loads; "
@@ -161,11 +162,11 @@ def _check_not_shipped(name: str) -> None:
         )
 
 
-def _same_ignoring_case(name: str, entries: dict[str, ZooEntry]) -> str | None:
-    """The name in ``entries`` that ``name`` is when case is ignored (itself if present), else None."""
-    if name in entries:
+def _same_ignoring_case(name: str, names: Collection[str]) -> str | None:
+    """The name in ``names`` that ``name`` is when case is ignored (itself if present), else None."""
+    if name in names:
         return name
-    return next((other for other in entries if other.casefold() == name.casefold()), None)
+    return next((other for other in names if other.casefold() == name.casefold()), None)
 
 
 def _check_case_clash(name: str, entries: dict[str, ZooEntry], root: Path, which: str) -> None:

@@ -211,17 +211,17 @@ def run_synth(args: argparse.Namespace) -> int:
 def _write_provenance(args: argparse.Namespace, summary: dict, path: Path) -> None:
     """The options, the data's sha256 and the code that made it: training records the data's hashes only,
     and a synthetic set is rebuilt (bit for bit) from these alone."""
-    import hashlib
     import json
 
     from pipelines.plain_json import plain
     from pipelines.version import code_identity
+    from predictors.hashing import sha256_file
 
     document = {
         "format": "crowdmpc-synth",
         "version": 1,
         "data": args.out.name,
-        "sha256": hashlib.sha256(args.out.read_bytes()).hexdigest(),
+        "sha256": sha256_file(args.out),
         "options": {
             "episodes": args.episodes,
             "humans": args.humans,
