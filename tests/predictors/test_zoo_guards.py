@@ -19,12 +19,12 @@ from pathlib import Path
 import casadi
 import numpy as np
 import pytest
-import torch
 
 from pipelines.cli import main
 from predictors import manifest, zoo, zoo_edit
 from predictors.calibration import CALIBRATIONS_NAME
 from predictors.errors import PredictorError
+from tests.predictors.test_zoo import retrained  # its metrics are the pair's: here an empty file
 
 REPO = Path(__file__).resolve().parents[2]
 REAL_ZOO = REPO / "checkpoints"
@@ -48,19 +48,6 @@ def copy_pair(directory: Path, stem: str = NAME) -> Path:
         shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", directory / f"{stem}{suffix}")
     (directory / f"{stem}.metrics.json").write_text("{}")
     return directory / f"{stem}.pt"
-
-
-def retrained(pair: Path, stem: str) -> Path:
-    """Other weights (one tensor shifted) beside ``pair``, as `crowdmpc train` would write them."""
-    state = torch.load(pair, weights_only=True)
-    key = next(iter(state))
-    state[key] = state[key] + 0.5
-    weights = pair.with_name(f"{stem}.pt")
-    torch.save(state, weights)
-    document = json.loads(pair.with_suffix(".json").read_text())
-    weights.with_suffix(".json").write_text(json.dumps({**document, "name": stem}))
-    weights.with_suffix(".metrics.json").write_text("{}")
-    return weights
 
 
 @pytest.fixture
