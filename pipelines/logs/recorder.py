@@ -50,11 +50,15 @@ DEFAULT_COMPRESSION: Final[CompressionType] = _default_compression()
 _ENCODER: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 
 
-def _create(path: Path) -> IO[bytes]:
+def _create(path: Path, *, new: bool = False) -> IO[bytes]:
     """``path`` opened for writing, never through a symbolic link: one planted at ``<name>.part`` in the
-    folder the user named would make the recording land wherever it points."""
+    folder the user named would make the recording land wherever it points. ``new``: only if nothing has
+    that name (FileExistsError otherwise), atomically, so two processes never both get it."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_EXCL if new else os.O_TRUNC)
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+        fd = os.open(path, flags, 0o644)
+    except FileExistsError:  # only with new (O_EXCL): the caller chooses another name
+        raise
     except OSError as exc:
         if path.is_symlink():
             raise PipelineError(f"cannot record to {path}: it is a symbolic link; remove it") from None
@@ -70,6 +74,10 @@ class McapRecorder:
     :param chunk_size: uncompressed bytes per chunk.
     :param compression: chunk compression; the default is the best codec installed.
     :param metadata: ``{name: {key: value}}`` metadata records written right after the header.
+    :param new: take ``path`` only if it is free: neither it nor ``<path>.part`` exists (FileExistsError
+        otherwise). The ``.part`` is created atomically and ``path`` checked after it, so that of recorders
+        choosing names at the same time in one folder only one gets each (a finished file's ``.part`` is
+        gone before its final name appears).
     """
 
     def __init__(
@@ -79,6 +87,7 @@ class McapRecorder:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         compression: CompressionType = DEFAULT_COMPRESSION,
         metadata: Mapping[str, Mapping[str, str]] | None = None,
+        new: bool = False,
     ):
         if chunk_size <= 0:
             raise PipelineError(f"chunk_size must be a positive number of bytes, got {chunk_size}")
@@ -94,7 +103,11 @@ class McapRecorder:
         # killed run leaves its chunks in the .part, which `crowdmpc review NAME.part` reads. Creating the
         # file late would still leave a truncated .mcap for any kill after the first chunk.
         self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
-        self._stream: IO[bytes] = _create(self.part_path)
+        self._stream: IO[bytes] = _create(self.part_path, new=new)
+        if new and (self.path.exists() or self.path.is_symlink()):
+            self._stream.close()
+            self.part_path.unlink()
+            raise FileExistsError(f"{self.path} exists")
         try:
             self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
             self._writer.start(profile="", library="crowdmpc")

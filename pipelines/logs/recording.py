@@ -219,7 +219,8 @@ class SceneBuilder:
 class McapEpisodeRecorder:
     """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode, replacing the
     file of a rerun of the same run (refusing another run's: ``run_identity``); ``<scenario>_<n:06d>.mcap``
-    for one no seed drew (a gym episode started from a layout), n one past the highest already in the folder.
+    for one no seed drew (a gym episode started from a layout), n one past the highest already in the folder,
+    taken atomically, so recorders sharing a folder never write one file.
 
     :param out_dir: folder for the files (created if missing).
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
@@ -270,30 +271,41 @@ class McapEpisodeRecorder:
             "start_time_ns": str(self._start_ns),
         }
         config = _metadata_strings(meta.get("config") or {})
+        metadata = {
+            # strings as they are (the version reads "0.1.0", not "\"0.1.0\""), the rest in JSON
+            "crowdmpc": {
+                **{k: v if isinstance(v, str) else json.dumps(v) for k, v in code_identity().items()},
+                "format": FORMAT,
+            },
+            "episode": episode,
+            "config": config,
+            "run": _metadata_strings(self.run_meta),
+        }
         if seed is None:  # a number names no scene: never another episode's file
-            number = next_unseeded(self.out_dir, scenario, self._unseeded.get(scenario, -1))
-            self._unseeded[scenario] = number
-            path = self.out_dir / episode_filename(scenario, None, number)
+            self._recorder = self._claim_unseeded(scenario, metadata)
         else:  # the same scene: replaced when this run recorded it
             path = self.out_dir / episode_filename(scenario, seed)
             check_replaceable(path, run_identity(episode, decode_metadata(config)))
-        self._recorder = McapRecorder(
-            path,
-            metadata={
-                # strings as they are (the version reads "0.1.0", not "\"0.1.0\""), the rest in JSON
-                "crowdmpc": {
-                    **{k: v if isinstance(v, str) else json.dumps(v) for k, v in code_identity().items()},
-                    "format": FORMAT,
-                },
-                "episode": episode,
-                "config": config,
-                "run": _metadata_strings(self.run_meta),
-            },
-        )
-        self.paths.append(path)
+            self._recorder = McapRecorder(path, metadata=metadata)
+        self.paths.append(self._recorder.path)
         self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius))
         self._last = obs
         self._last_written_step = -1
+
+    def _claim_unseeded(self, scenario: str, metadata: Mapping[str, Mapping[str, str]]) -> McapRecorder:
+        """The file of the next free number, taken atomically (``McapRecorder(new=True)``): another recorder
+        writing into the folder at the same moment may take a number first, and this one moves past it."""
+        number = self._unseeded.get(scenario, -1)
+        while True:  # ends: every pass moves past a taken number
+            number = next_unseeded(self.out_dir, scenario, number)
+            try:
+                recorder = McapRecorder(
+                    self.out_dir / episode_filename(scenario, None, number), metadata=metadata, new=True
+                )
+            except FileExistsError:
+                continue
+            self._unseeded[scenario] = number
+            return recorder
 
     def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
         rec = self._require_open()

@@ -196,6 +196,30 @@ def test_an_episode_left_without_on_end_is_finished_by_the_next_reset(tmp_path):
     assert [p.name for p in recorder.paths] == ["circle_seed000002.mcap", "circle_seed000003.mcap"]
 
 
+def test_recorders_sharing_a_folder_never_take_one_number(tmp_path, monkeypatch):
+    """Two recorders may list the folder before either has created its file: the one that lists first and
+    creates last must move past the number the other took, whether that one is still writing (its .part) or
+    has finished (its .mcap). A stale listing is forced here: every number looks free."""
+    import pipelines.logs.recording as recording
+
+    monkeypatch.setattr(recording, "next_unseeded", lambda out_dir, scenario, written=-1: written + 1)
+    first = record_episode(tmp_path / "x", steps=1)
+    finished, writing = tmp_path / "circle_000000.mcap", tmp_path / "circle_000001.mcap.part"
+    finished.write_bytes(b"another recorder's finished episode")
+    writing.write_bytes(b"another recorder's episode in progress")
+    recorder = McapEpisodeRecorder(tmp_path)
+    recorder.on_reset(first.observations[0], {**first.meta, "seed": None})
+    recorder.close()
+    assert [p.name for p in recorder.paths] == ["circle_000002.mcap"]
+    assert finished.read_bytes() == b"another recorder's finished episode"
+    assert writing.read_bytes() == b"another recorder's episode in progress"
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == [
+        "circle_000000.mcap",
+        "circle_000001.mcap.part",
+        "circle_000002.mcap",
+    ]
+
+
 def test_misuse_is_reported(tmp_path):
     recorder = McapEpisodeRecorder(tmp_path)
     obs = record_episode(tmp_path / "x", steps=1).observations[0]
