@@ -88,6 +88,14 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)"
     )
+    parser.add_argument(
+        "--limit-batches",
+        type=int,
+        default=None,
+        metavar="N",
+        help="train and validate on the first N batches of each epoch (Lightning's limit_train_batches and "
+        "limit_val_batches): a quick check that a net trains; the checkpoint records it (default: all)",
+    )
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--step-size", type=int, default=10, help="epochs per 10x learning-rate decay")
     parser.add_argument(
@@ -205,6 +213,7 @@ def _check_numbers(args: argparse.Namespace) -> None:
         ("--batch-size", args.batch_size, 65_536),
         ("--step-size", args.step_size, 100_000),
         ("--hidden-dim", args.hidden_dim, 4096),
+        ("--limit-batches", args.limit_batches, 1_000_000),
     ):
         if value is not None and not 1 <= value <= high:
             raise PipelineError(f"{option} must be in 1..{high}, got {value}")

@@ -106,6 +106,8 @@ def _save_best(
             "best_checkpoint": Path(best_path).name,
             "seed": args.seed,
             "batch_size": args.batch_size,
+            # only when set: a checkpoint trained on every batch reads as before
+            **({} if args.limit_batches is None else {"limit_batches": args.limit_batches}),
             "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
         }
     }
@@ -176,6 +178,8 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
     )
     trainer = L.Trainer(
         max_epochs=args.epochs,
+        limit_train_batches=args.limit_batches,
+        limit_val_batches=args.limit_batches,
         accelerator="cpu",
         devices=1,
         logger=[

@@ -28,6 +28,7 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
         "loss": args.loss,
         "seed": args.seed,
         "batch_size": args.batch_size,
+        "limit_batches": args.limit_batches,
         "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
     }
 

@@ -248,6 +248,7 @@ def test_sweep_sizes_are_refused_before_any_worker_starts(options, message, tmp_
         (["--hidden-dim", "0"], "--hidden-dim must be in 1..4096, got 0"),
         (["--hidden-dim", "100000"], "--hidden-dim must be in 1..4096, got 100000"),
         (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
+        (["--limit-batches", "0"], "--limit-batches must be in 1..1000000, got 0"),
     ],
 )
 def test_training_numbers_are_refused_in_one_line(options, message, tmp_path, capsys):

@@ -200,6 +200,31 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
     assert all(torch.equal(straight[k], resumed[k]) for k in straight)
 
 
+def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, capsys):
+    """--limit-batches 1 with batches of one scene: one optimiser step an epoch where the walk file's two
+    scenes give two; the checkpoint says so, and resuming without the option is refused."""
+    import torch
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--batch-size", "1"]
+
+    def steps(out: str, *extra: str) -> int:
+        assert main([*args, "--epochs", "2", "--out", str(tmp_path / out), "--no-progress", *extra]) == 0
+        return torch.load(tmp_path / out / "checkpoints" / "last.ckpt", weights_only=False)["global_step"]
+
+    assert (steps("all"), steps("limited", "--limit-batches", "1")) == (4, 2)
+
+    def training(out: str) -> dict:
+        (weights,) = (tmp_path / out).glob("*.pt")
+        return json.loads(weights.with_suffix(".json").read_text())["training"]
+
+    assert training("limited")["limit_batches"] == 1 and "limit_batches" not in training("all")
+    capsys.readouterr()
+    resumed = [*args, "--epochs", "3", "--out", str(tmp_path / "limited"), "--no-progress", "--resume"]
+    assert main(resumed) == 2
+    assert "limit_batches: run 1, now null" in capsys.readouterr().err
+
+
 def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, capsys):
     out, _ = trained
     assert main(["zoo", "add", str(out / "walker.pt")]) == 0
