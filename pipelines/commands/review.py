@@ -22,12 +22,15 @@ EPILOG = """examples:
   crowdmpc review runs/demo/circle_seed000000.mcap --plot p.png --times 0,4,8 --animate a.gif
   crowdmpc review runs/a.mcap --compare other/a.mcap --plot overlay.png
   crowdmpc review runs/demo/ --check --json review.json   # validate every message against its schema
+  crowdmpc review runs/                                   # runs/cmpc/ and runs/dmpc/: a table each
+  crowdmpc review SWEEP/                                  # a sweep's recordings (SWEEP/mcap/CELL/)
 
-The folders are those `make demo` and `crowdmpc simulate --record DIR` write; a folder means the .mcap files
-directly in it, not in its subfolders (a sweep's recordings: DIR/mcap/CELL/). Runs of different set-ups
-(controller, predictor, numbers of robots and humans, or any simulator or controller setting the recordings'
-"config" metadata holds: profile, visibility, formation, MPC settings, margins...) in one folder get one
-table and aggregate each, named by what differs. --json writes "groups", one per set-up with its "totals"
+The folders are those `make demo`, `crowdmpc simulate --record DIR` and `crowdmpc sweep --record` write; a
+folder means the .mcap files directly in it or, when it holds none, those one and two levels below it (a
+folder of runs' folders, a sweep's DIR or DIR/mcap). Runs of different set-ups (controller, predictor,
+numbers of robots and humans, or any simulator or controller setting the recordings' "config" metadata holds:
+profile, visibility, formation, MPC settings, margins...) get one table and aggregate each, named by what
+differs, their files by their paths below the folder. --json writes "groups", one per set-up with its "totals"
 (and "totals" at the top too when the folder holds one set-up).
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
@@ -48,7 +51,8 @@ MAX_ERRORS_SHOWN = 20
 # runs apart when recording too (a CMPC run beside a straight-line one, or a row formation beside a wedge,
 # is two results, not one average). A set-up is named by its RUN_IDENTITY values, then by the settings that
 # tell it apart: these whenever they differ, any other only where these leave set-ups alike.
-NAMED_FIRST: Final[tuple[str, ...]] = ("env.profile", "env.robots_visible", "env.formation")
+# margins.label ("none", "cp0.05", "cpm0.1") stands for the margins it made (mpc.human_margins, their mode).
+NAMED_FIRST: Final[tuple[str, ...]] = ("env.profile", "env.robots_visible", "env.formation", "margins.label")
 # The units of the episode metrics (crowdsim.metrics.EpisodeMetrics), printed after their names.
 METRIC_UNITS: Final[Mapping[str, str]] = {
     "travel_time": "s",
@@ -182,6 +186,8 @@ def _setting(key: str, value: Any) -> str:
         return "robots visible" if value else "robots invisible"
     if key in ("env.profile", "env.formation"):
         return f"{key.removeprefix('env.')} {shown(value)}"
+    if key == "margins.label":
+        return f"margins {shown(value)}"
     return f"{key} {shown(value)}"
 
 
@@ -254,7 +260,7 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
     by_file = {s["file"]: s for s in report["runs"]}
     report["groups"] = []
     for setup, name in zip(setups, names, strict=True):
-        table, totals = aggregate_table(setup.members)
+        table, totals = aggregate_table(setup.members, root=folder)
         if len(setups) > 1:
             print(f"== {name}: {count(len(setup.members), 'run')} ==")
         print(table + ("\n" if len(setups) > 1 else ""))
@@ -287,7 +293,10 @@ def run(args: argparse.Namespace) -> int:
         from pipelines.logs.plots import check_animation_path
 
         check_animation_path(args.animate, "--animate")
-    inputs = [args.path, *(args.path.glob("*.mcap*") if args.path.is_dir() else ())]
+    below = ("*.mcap*", "*/*.mcap*", "*/*/*.mcap*")  # every file a folder's review may read
+    inputs = [args.path]
+    if args.path.is_dir():
+        inputs += [p for pattern in below for p in args.path.glob(pattern)]
     inputs += [args.compare] if args.compare else []
     check_writable(args.plot, "--plot", inputs=inputs)
     check_writable(args.animate, "--animate", inputs=inputs)

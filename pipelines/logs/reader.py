@@ -333,18 +333,17 @@ def read_recording(path: str | Path) -> Recording:
 
 
 def find_recordings(directory: str | Path) -> tuple[list[Path], list[Path]]:
-    """The ``*.mcap`` entries of ``directory`` (whatever they are) and its unfinished ``*.mcap.part``."""
+    """The ``*.mcap`` entries of ``directory`` (whatever they are) and its unfinished ``*.mcap.part``; when it
+    holds neither, those one and two levels below it (runs/ over runs/cmpc/ and runs/dmpc/, a sweep's DIR
+    over DIR/mcap/CELL/), not the whole tree: a folder of recordings is reviewed as it is, never mixed with
+    its subfolders'."""
     directory = Path(directory)
-    paths = sorted(directory.glob("*.mcap"))
-    unfinished = sorted(directory.glob(f"*.mcap{UNFINISHED_SUFFIX}"))
-    if not paths and not unfinished:
-        # A folder one or two levels up from recordings (runs/ over runs/cmpc/, a sweep's DIR over
-        # DIR/mcap/CELL/) is the usual mistake: name where they are. Two levels at most, not the whole tree.
-        below = [p.parent for pattern in ("*/*.mcap", "*/*/*.mcap") for p in directory.glob(pattern)]
-        holders = sorted(set(below))
-        hint = f"; its subfolders hold some, e.g. {holders[0]}" if holders else ""
-        raise PipelineError(f"no .mcap files in {directory}{hint}")
-    return paths, unfinished
+    for patterns in (("*.mcap",), ("*/*.mcap", "*/*/*.mcap")):
+        paths = sorted(p for pattern in patterns for p in directory.glob(pattern))
+        unfinished = sorted(p for pattern in patterns for p in directory.glob(pattern + UNFINISHED_SUFFIX))
+        if paths or unfinished:
+            return paths, unfinished
+    raise PipelineError(f"no .mcap files in {directory}, nor in the two levels of folders below it")
 
 
 # ------------------------------------------------------------------------------------------------------------

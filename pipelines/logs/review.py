@@ -158,9 +158,10 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
 _RUN_COLUMNS: Final = ("success", "collision", "timeout", "travel_time", "min_distance")
 
 
-def aggregate_table(recordings: list[Recording]) -> tuple[str, dict[str, Any]]:
+def aggregate_table(recordings: list[Recording], root: Path | None = None) -> tuple[str, dict[str, Any]]:
     """One row per run, then crowdsim's rates over the runs whose episode ended, and the control-step costs
-    pooled over every recorded step."""
+    pooled over every recorded step. Runs are named by their path below ``root`` (a sweep's cells hold files
+    of the same names), else by their file's name."""
     summaries = [summarize(rec) for rec in recordings]
     header = [
         "file",
@@ -174,7 +175,7 @@ def aggregate_table(recordings: list[Recording]) -> tuple[str, dict[str, Any]]:
     ]
     rows = [
         [
-            Path(s["file"]).name,
+            str(Path(s["file"]).relative_to(root)) if root is not None else Path(s["file"]).name,
             s["controller"],
             s["predictor"],
             *((s["metrics"] or {}).get(c) for c in _RUN_COLUMNS),

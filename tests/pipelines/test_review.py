@@ -175,16 +175,31 @@ def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     assert "cannot write a figure of type '(no suffix)'" in capsys.readouterr().err
 
 
-def test_a_folder_above_the_recordings_names_one_that_holds_them(runs, tmp_path, capsys):
+def test_a_folder_of_run_folders_is_reviewed_one_and_two_levels_down(runs, tmp_path, capsys):
+    """A folder with no recordings of its own stands for those one and two levels below it (runs/ over
+    runs/cmpc/, a sweep's DIR over DIR/mcap/CELL/), named by their paths below it, since cells hold files of
+    the same names; a folder with recordings of its own is never mixed with its subfolders'."""
     empty = tmp_path / "nothing"
-    empty.mkdir()
+    (empty / "a" / "b" / "c").mkdir(parents=True)
+    (empty / "a" / "b" / "c" / "deep.mcap").write_bytes(runs[0].path.read_bytes())  # three levels: not read
     assert main(["review", str(empty)]) == 2
-    assert capsys.readouterr().err.strip().endswith(f"no .mcap files in {empty}")
-    inner = tmp_path / "above" / "cmpc"  # as `simulate --record runs/cmpc` leaves runs/
-    inner.mkdir(parents=True)
-    shutil.copy(runs[0].path, inner / runs[0].path.name)
-    assert main(["review", str(tmp_path / "above")]) == 2
-    assert f"its subfolders hold some, e.g. {inner}" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"no .mcap files in {empty}, nor in the two levels of folders below it")
+    above = tmp_path / "above"
+    for cell in ("mcap/cell_a", "mcap/cell_b"):  # a sweep's layout: the same file name in two cells
+        (above / cell).mkdir(parents=True)
+        shutil.copy(runs[0].path, above / cell / runs[0].path.name)
+    assert main(["review", str(above), "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    name = runs[0].path.name
+    assert f"mcap/cell_a/{name}" in out and f"mcap/cell_b/{name}" in out and "2 runs" in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["totals"]["runs"] == 2 and len(report["runs"]) == 2
+    assert main(["review", str(above / "mcap")]) == 0
+    assert f"cell_a/{name}" in capsys.readouterr().out
+    shutil.copy(runs[1].path, above / runs[1].path.name)  # now the folder has one of its own
+    assert main(["review", str(above), "--json", str(tmp_path / "r.json")]) == 0
+    assert json.loads((tmp_path / "r.json").read_text())["totals"]["runs"] == 1
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
@@ -304,3 +319,25 @@ def test_a_controller_setting_tells_set_ups_apart_and_a_formation_not_recorded_i
     base = "handmade, predictor constant_velocity, 3 robots, 4 humans"
     assert f"holds runs of 2 different set-ups ({base}, horizon 4; {base}, horizon 6)" in err
     assert f"== {base}, horizon 4: 2 runs ==" in out and f"== {base}, horizon 6: 1 run ==" in out
+
+
+def test_margins_name_a_set_up_by_their_label_not_by_their_numbers(tmp_path, capsys):
+    """A safety sweep's cells differ in margins: "margins cp0.1" names the set-up, not the margins' metres
+    (mpc.human_margins) nor their mode, which the label stands for."""
+    first = record_episode(tmp_path / "x", seed=1, steps=2)  # its folder: its config has no margins
+    obs, after = first.observations[:2]
+    recorder = McapEpisodeRecorder(tmp_path / "runs")
+    for seed, margins, label in ((2, [0.11, 0.23, 0.35, 0.47], "cp0.1"), (3, [], "none")):
+        config = {
+            "env": {"dt": 0.4, "radius": 0.3},
+            "mpc": {"human_margins": margins},
+            "margins": {"mode": "none" if label == "none" else "conformal", "label": label},
+        }
+        recorder.on_reset(obs, {**first.meta, "seed": seed, "config": config})
+        recorder.on_step(obs, control_output(obs), after)
+    recorder.close()
+    assert main(["review", str(tmp_path / "runs")]) == 0
+    out, err = capsys.readouterr()
+    base = "handmade, predictor constant_velocity, 3 robots, 4 humans"
+    assert f"({base}, margins cp0.1; {base}, margins none)" in err and "0.23" not in err
+    assert f"== {base}, margins cp0.1: 1 run ==" in out
