@@ -28,7 +28,7 @@ redone by IPOPT costs several ordinary solves), so even the first bound is well 
 (the rows set ``dmpc_update``, ``dmpc_stop`` and ``dmpc_parallel`` themselves). ``--mpc cost_scale=0.01``
 (docs/examples/many_robots.toml's value) makes the local solves more even, since Fatrop then rarely fails
 and hands a problem to IPOPT: at 6 robots with Jacobi the bound rises from x1.69 to x1.80 and the
-measured speed-up from x1.55 to x1.60 (README, "DMPC's local solves in threads").
+measured speed-up from x1.55 to x1.60 (docs/results.md, "DMPC's local solves in threads").
 
 The machine is shared: the load average is printed before and after; run it under ``nice`` and read the
 speed-ups together with the load (a parallel phase needs a free core to be faster).

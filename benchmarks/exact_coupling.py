@@ -1,15 +1,15 @@
 """Exact coupling (the network inside the joint NLP) against its first-order fixed point.
 
-The coupling experiment (README, "Coupling") gives the exact coupled NLP 5 % success: IPOPT with L-BFGS (the
-network stays an MX call node, mpc/coupled.py) hits its iteration or time limit on most steps and the robots
-brake. This asks whether a better start would rescue it. It runs closed-loop CMPC episodes with first-order
-coupling (the predictor linearised at the plan, re-linearised until F settles; its fixed point is a
-stationary point of the exact problem, mpc/coupled.py) and, at every solved step, solves the exact NLP warm
-from the first-order plan, outside the loop. Printed: the first-order episodes' success and collision rates
-(a collision: some robot within d_min of a human at some step; the episode goes on, so an episode can count
-as both), the exact solves' statuses, IPOPT iterations and time, and how much lower the exact solve's F is
-than the first-order plan's true F (the predictor itself, not its linearisation). The machine is shared: the
-load is printed.
+The coupling experiment (docs/results.md, "Coupling") gives the exact coupled NLP 5 % success: IPOPT with
+L-BFGS (the network stays an MX call node, mpc/coupled.py) hits its iteration or time limit on most steps and
+the robots brake. This asks whether a better start would rescue it. It runs closed-loop CMPC episodes with
+first-order coupling (the predictor linearised at the plan, re-linearised until F settles; its fixed point is
+a stationary point of the exact problem, mpc/coupled.py) and, at every solved step, solves the exact NLP warm
+from the first-order plan, outside the loop. Printed: the first-order episodes' success and collision rates (a
+collision: some robot within d_min of a human at some step; the episode goes on, so an episode can count as
+both), the exact solves' statuses, IPOPT iterations and time, and how much lower the exact solve's F is than
+the first-order plan's true F (the predictor itself, not its linearisation). The machine is shared: the load
+is printed.
 
     nice -n 5 .venv/bin/python benchmarks/exact_coupling.py                      # 4 episodes, 7 humans
     nice -n 5 .venv/bin/python benchmarks/exact_coupling.py --episodes 10 --max-iter 30

@@ -5,8 +5,8 @@ M and of humans N, one line per controller and task (fixed goals, slots).
 
 Each RUN.json is what ``robot_scaling.py --json`` wrote. Rows that share controller, goals and humans make a
 line against M; rows that share controller, goals and M but differ in humans make a line against N (the
-README's N rows at 3 robots, with the 7-human row of the M runs among them). Success is drawn with the
-collision rate (episodes within 0.8 m of a human) dotted beside it; step times as the median with the p99
+N rows of docs/results.md at 3 robots, with the 7-human row of the M runs among them). Success is drawn with
+the collision rate (episodes within 0.8 m of a human) dotted beside it; step times as the median with the p99
 dashed above it, on a log axis, beside the 0.4 s control period that every step must stay under.
 """
 

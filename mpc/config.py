@@ -187,8 +187,8 @@ class MPCConfig:
     # w_coll * smax(z) has fallen to w_goal (z = (d_min + m)^2 - d^2, smax ~ exp(mu z) / mu there):
     # sqrt((d_min + m)^2 + ln(w_coll / (mu w_goal)) / mu), 1.02 m for m = 0.03 with Table I's weights. A
     # robot between two standing humans 1.7 m apart holds about 1.05 m from each (the penalty's tail), while
-    # "margin"'s 0.83 m discs leave the gap open, so guidance keeps heading it into the gap (README, "More
-    # robots, more humans": the 12-robot runs' stuck robots).
+    # "margin"'s 0.83 m discs leave the gap open, so guidance keeps heading it into the gap
+    # (docs/results.md, "More robots, more humans": the 12-robot runs' stuck robots).
     guidance_clearance: GuidanceClearance = "margin"
     # Seconds without 0.25 m of progress towards its goal after which a robot stops flocking until it moves
     # again (mpc/stall.py: a boxed-in robot otherwise holds the whole flock). 0: never (the paper).

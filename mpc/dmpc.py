@@ -64,8 +64,8 @@ starts a step that would start from braking (an episode's first, or one after fa
 heading straight for its target instead (``mpc.fallback.heading_plan``), when that plan has the lower F. After
 the first step the two are nearly level in F (2974 from braking, 3012 from heading at 12 robots: the flocking
 terms of the wedge dominate), but the flock leaves moving and its shifted plans keep it moving.
-benchmarks/robot_scaling.py (README, "More robots, more humans"), shifted -> heading, same crowds: 12 robots
-18 -> 44 % (fixed goals), 52 -> 82 % (slots), but 2-3 of the 50 episodes within 0.8 m of a human (none
+benchmarks/robot_scaling.py (docs/results.md, "More robots, more humans"), shifted -> heading, same crowds: 12
+robots 18 -> 44 % (fixed goals), 52 -> 82 % (slots), but 2-3 of the 50 episodes within 0.8 m of a human (none
 before); 3, 5, 6 robots within 6 points either way; 50 episodes a row. At 3 robots the heading start picks
 the slower formation (middle robot ahead, F 26.4 against 23.3 from braking: mpc/solvers.py ``_Solver``),
 travel 1.4-2.1 s longer. Comparing the two starts by F at the end of the first step instead keeps braking

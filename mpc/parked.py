@@ -4,7 +4,7 @@ Why. Eq. 7 weights a robot's goal term by ``1 / (||s_t - s_goal|| + delta)``: 1e
 teammate D metres from its own. Robots parked on a formation's goals 1.2 m apart then wall off every goal
 between them (passing needs about 2 x 1.03 m, where the Eq. 12 penalty fades), and a teammate that arrives
 late, or was pushed off its goal, waits in front of the wall until the time limit: at 12 robots and 7 humans
-most failed episodes ended so (``benchmarks/robot_scaling.py``; the README has the figures).
+most failed episodes ended so (``benchmarks/robot_scaling.py``; docs/results.md has the figures).
 
 The rule. A parked robot holds its goal no harder than the farthest teammate still on its way pulls towards
 its own: its Eq. 7 weight is ``w_goal / (max(||s_i - g_i||, D) + delta)``, D the largest distance to its

@@ -417,7 +417,7 @@ def test_demo_toml_resolves_to_make_demos_run(monkeypatch):
 
 def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
     """docs/examples/safe_crossing.toml sets the margins, the guidance, the stall release and DMPC's update
-    that the README's safe-crossing tables were run with, and nothing else."""
+    that docs/safe_crossing.md's tables were run with, and nothing else."""
     monkeypatch.chdir(REPO)
     sets = [
         "mpc.guidance=standing",
@@ -443,7 +443,7 @@ def test_safe_crossing_toml_is_the_readmes_command_line(monkeypatch):
 
 def test_many_robots_toml_is_the_safe_crossing_plus_what_a_larger_flock_needs(monkeypatch):
     """docs/examples/many_robots.toml: safe_crossing.toml's settings, flocking weighed per robot, parked
-    robots that yield, F / 100 for the solver and DMPC's heading start, what the README's robot-scaling
+    robots that yield, F / 100 for the solver and DMPC's heading start, what docs/results.md's robot-scaling
     rows were run with, and nothing else."""
     monkeypatch.chdir(REPO)
     safe = _resolved(["--config", "docs/examples/safe_crossing.toml", "simulate", "--controller", "cmpc"])[0]
