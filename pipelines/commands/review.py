@@ -30,8 +30,8 @@ folder means the .mcap files directly in it or, when it holds none, those one an
 folder of runs' folders, a sweep's DIR or DIR/mcap). Runs of different set-ups (controller, predictor,
 numbers of robots and humans, or any simulator or controller setting the recordings' "config" metadata holds:
 profile, visibility, formation, MPC settings, margins...) get one table and aggregate each, named by what
-differs, their files by their paths below the folder. --json writes "groups", one per set-up with its "totals"
-(and "totals" at the top too when the folder holds one set-up).
+differs, their files by their paths below the folder, then a row each side by side. --json writes "groups",
+one per set-up with its "totals" (and "totals" at the top too when the folder holds one set-up).
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
 compression fails) or a message that is not what the review reads is left out, with a warning; --check lists
@@ -191,18 +191,27 @@ def _setting(key: str, value: Any) -> str:
     return f"{key} {shown(value)}"
 
 
-def _group_name(setup: SetUp, named: list[str]) -> str:
+def _group_parts(setup: SetUp, named: list[str]) -> list[str]:
+    """A set-up's name in parts: controller, predictor, crowd, then each named setting."""
     from pipelines.logs.identity import MISSING
     from pipelines.logs.review import count
 
     identity = setup.identity
     if identity is None:
-        return "set-up unknown (no readable episode metadata)"
-    base = (
-        f"{identity.get('controller') or '-'}, predictor {identity.get('predictor') or 'none'}, "
-        f"{count(identity.get('n_robots'), 'robot')}, {count(identity.get('n_humans'), 'human')}"
-    )
-    return ", ".join([base, *(_setting(k, identity.get(k, MISSING)) for k in named)])
+        return ["set-up unknown (no readable episode metadata)"]
+    return [
+        str(identity.get("controller") or "-"),
+        f"predictor {identity.get('predictor') or 'none'}",
+        count(identity.get("n_robots"), "robot"),
+        count(identity.get("n_humans"), "human"),
+        *(_setting(k, identity.get(k, MISSING)) for k in named),
+    ]
+
+
+def _short_names(parts: list[list[str]]) -> list[str]:
+    """Each set-up by what tells it apart from the others (the parts all of them share left out)."""
+    shared = set.intersection(*(set(p) for p in parts))
+    return [", ".join(x for x in p if x not in shared) or ", ".join(p) for p in parts]
 
 
 def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
@@ -244,13 +253,14 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
     """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a warning
     names them when there are several), into ``report``; the recordings and the number of unreadable files."""
     from pipelines.logs.identity import RUN_IDENTITY
-    from pipelines.logs.review import aggregate_table, count, summarize
+    from pipelines.logs.review import aggregate_table, count, setups_table, summarize
 
     recordings, n_unreadable = _read_folder(folder, report)
     report["runs"] = [summarize(rec) for rec in recordings]
     setups = _groups(recordings, report["runs"])
     named = _named_settings(setups)
-    names = [_group_name(setup, named) for setup in setups]
+    parts = [_group_parts(setup, named) for setup in setups]
+    names = [", ".join(p) for p in parts]
     if len(setups) > 1:
         print(
             f"crowdmpc review: warning: {folder} holds runs of {len(setups)} different set-ups "
@@ -274,6 +284,9 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
         )
     if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
         report["totals"] = report["groups"][0]["totals"]
+    else:
+        side_by_side = setups_table(_short_names(parts), [group["totals"] for group in report["groups"]])
+        print(f"== {count(len(setups), 'set-up')} side by side ==\n{side_by_side}")
     return recordings, n_unreadable
 
 

@@ -203,6 +203,34 @@ def aggregate_table(recordings: list[Recording], root: Path | None = None) -> tu
     return _table(header, rows) + "\n\n" + _format_totals(totals), totals
 
 
+def setups_table(names: Sequence[str], totals: Sequence[dict[str, Any]]) -> str:
+    """One row per set-up of a folder: its runs, the rates over those whose episode ended, travel time and
+    the closest approach to a human, and the control step's median and p95; "-" where a set-up has none."""
+
+    def rate(t: dict[str, Any], name: str) -> str:
+        return (
+            "-" if "episodes" not in t else f"{t[f'{name}_rate']:.1f} ({t[f'{name}_count']}/{t['episodes']})"
+        )
+
+    header = ["set-up", "runs", "success %", "collision %", "contact %", "travel time s", "min distance m"]
+    header += ["step median ms", "step p95 ms"]
+    rows = [
+        [
+            name,
+            t["runs"],
+            *(rate(t, k) for k in ("success", "collision", "contact")),
+            t.get("travel_time_mean"),
+            t.get("min_distance_min"),
+            *(
+                None if "control_steps" not in t else round(t[f"solve_time_{k}_ms"], 1)
+                for k in ("median", "p95")
+            ),
+        ]
+        for name, t in zip(names, totals, strict=True)
+    ]
+    return _table(header, rows)
+
+
 def _format_totals(t: dict[str, Any]) -> str:
     lines = [
         count(t["runs"], "run")

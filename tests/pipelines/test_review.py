@@ -341,3 +341,23 @@ def test_margins_name_a_set_up_by_their_label_not_by_their_numbers(tmp_path, cap
     base = "handmade, predictor constant_velocity, 3 robots, 4 humans"
     assert f"({base}, margins cp0.1; {base}, margins none)" in err and "0.23" not in err
     assert f"== {base}, margins cp0.1: 1 run ==" in out
+
+
+def test_set_ups_side_by_side_name_each_by_what_differs(tmp_path, capsys):
+    """After a table per set-up, one row each: named by the parts of its name the others do not share, with
+    the figures of its own aggregate."""
+    for folder, humans in (("a", 3), ("b", 4)):
+        record_episode(tmp_path / folder, seed=1, n_humans=humans, steps=3)
+    assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    groups = json.loads((tmp_path / "r.json").read_text())["groups"]
+    assert [g["n_humans"] for g in groups] == [3, 4]
+    table = out.split("== 2 set-ups side by side ==\n")[1].splitlines()[:4]
+    assert table[0].split("  ")[0] == "set-up"
+    for line, group in zip(table[2:], groups, strict=True):
+        t = group["totals"]
+        cells = line.split()
+        assert cells[:4] == [str(group["n_humans"]), "humans", "1", f"{t['success_rate']:.1f}"]
+        assert cells[4] == f"({t['success_count']}/1)"
+        # printed to 3 significant digits
+        assert float(cells[-2]) == pytest.approx(t["solve_time_median_ms"], rel=5e-3)
