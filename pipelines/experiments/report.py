@@ -12,6 +12,9 @@ summaries, with their Wilson intervals, are pipelines.experiments.summary's.
 from __future__ import annotations
 
 import csv
+import os
+import shutil
+import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +30,7 @@ from pipelines.experiments.tables import markdown_table
 CELLS_CSV: Final[str] = "cells.csv"
 EPISODES_CSV: Final[str] = "episodes.csv"
 TABLE_MD: Final[str] = "table.md"
+STAGING_PREFIX: Final[str] = ".report-"  # the folder a report is written into before its files are renamed
 
 
 def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
@@ -141,17 +145,31 @@ def write_report(
     out: Path, experiment: Experiment, cells: Sequence[Cell], records: Sequence[dict[str, Any]]
 ) -> Report:
     """cells.csv, episodes.csv, table.md, min_distance_hist.csv and the plots in ``out``; ``records`` are
-    those of ``cells``."""
+    those of ``cells``. Each file is written whole into a staging folder in ``out`` and then renamed over its
+    old version, so that an interrupted report (a second Ctrl-C, a kill) leaves every file complete, the
+    previous report's or this one's, never half written; a killed report's staging folder is removed by the
+    next report."""
+    from pipelines.experiments.worker import remove_stale_scratch
+
     out = Path(out)
     keys = {c.key for c in cells}
     records = [r for r in records if r["cell"] in keys]
     summaries = summarize(experiment, cells, records)
-    write_csv(out / CELLS_CSV, cell_rows(summaries))
-    write_csv(out / EPISODES_CSV, episode_rows(records, cells))
     markdown = markdown_table(experiment, summaries)
-    (out / TABLE_MD).write_text(markdown)
-    write_csv(out / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
-    files = [out / CELLS_CSV, out / EPISODES_CSV, out / TABLE_MD, out / safety.MIN_DISTANCE_HIST_CSV]
-    if summaries:
-        files += plot_outcomes(experiment, summaries, out) + safety.plot_safety(experiment, summaries, out)
-    return Report(markdown, tuple(files))
+    remove_stale_scratch(out, STAGING_PREFIX)  # a killed report's; not one another process writes now
+    staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
+    try:
+        write_csv(staging / CELLS_CSV, cell_rows(summaries))
+        write_csv(staging / EPISODES_CSV, episode_rows(records, cells))
+        (staging / TABLE_MD).write_text(markdown)
+        write_csv(staging / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
+        written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]
+        if summaries:
+            plots = plot_outcomes(experiment, summaries, staging)
+            plots += safety.plot_safety(experiment, summaries, staging)
+            written += [plot.name for plot in plots]
+        for name in written:
+            os.replace(staging / name, out / name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return Report(markdown, tuple(out / name for name in written))

@@ -54,7 +54,6 @@ def jit_available() -> bool:
 # CasADi's jit sources and the MCAP files of episodes being recorded. The driver removes it when the run ends;
 # a killed driver (or worker) cannot, so every sweep first removes the roots of drivers that are gone.
 SCRATCH_PREFIX: Final[str] = "crowdmpc-sweep-"
-_SCRATCH_NAME: Final[re.Pattern[str]] = re.compile(re.escape(SCRATCH_PREFIX) + r"(\d+)-")
 
 
 def make_scratch_root() -> Path:
@@ -63,11 +62,13 @@ def make_scratch_root() -> Path:
     return Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-"))
 
 
-def remove_stale_scratch(temp_dir: str | Path | None = None) -> list[Path]:
-    """Remove the scratch roots (in ``temp_dir``, default the system's) whose driver process is gone."""
+def remove_stale_scratch(temp_dir: str | Path | None = None, prefix: str = SCRATCH_PREFIX) -> list[Path]:
+    """Remove the folders ``<prefix><pid>-...`` (in ``temp_dir``, default the system's: the sweeps' scratch
+    roots) whose process is gone."""
+    named = re.compile(re.escape(prefix) + r"(\d+)-")
     removed = []
-    for root in Path(temp_dir or tempfile.gettempdir()).glob(SCRATCH_PREFIX + "*"):
-        match = _SCRATCH_NAME.match(root.name)
+    for root in Path(temp_dir or tempfile.gettempdir()).glob(prefix + "*"):
+        match = named.match(root.name)
         if match is None or not root.is_dir() or _alive(int(match[1])):
             continue
         shutil.rmtree(root, ignore_errors=True)

@@ -132,6 +132,35 @@ def test_several_crowd_sizes_keep_the_vs_humans_names(tmp_path):
     assert not any(name.endswith("_by_method.png") for name in names)
 
 
+def test_an_interrupted_report_leaves_every_file_whole(tmp_path, monkeypatch):
+    """A second Ctrl-C while the report is written (here: in its last plot) leaves the previous report's
+    files as they were, not half written, and no staging folder; a killed report's staging folder (its
+    process gone) is removed by the next report."""
+    import pipelines.experiments.safety_report as safety
+
+    table2 = get_experiment("table2")
+    cells = [c for c in table2.cells() if c.n_humans == 5]
+    first = write_report(tmp_path, table2, cells, _records(table2, {(c.method, 5): EPISODES for c in cells}))
+    before = {p.name: p.read_bytes() for p in first.files}
+    fewer = _records(table2, {(c.method, 5): EPISODES[:1] for c in cells})
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(safety, "plot_safety", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            write_report(tmp_path, table2, cells, fewer)
+    assert {p.name: p.read_bytes() for p in first.files} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / f".report-{dead.pid}-x").mkdir()  # a report killed before it renamed its files
+    again = write_report(tmp_path, table2, cells, fewer)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)
+    assert (tmp_path / "cells.csv").read_bytes() != before["cells.csv"] and again.files == first.files
+
+
 # --------------------------------------------------------------------------------------- animation legend
 def _legend(recording) -> list[str]:
     fig, draw, _ = animation_figure(recording)
