@@ -195,3 +195,67 @@ def test_from_dict_round_trip_and_old_records():
     assert out["collision_rate"] == 100.0
     with pytest.raises(SimulationError, match="min_distance"):
         EpisodeMetrics.from_dict({k: v for k, v in old.items() if k != "min_distance"})
+
+
+def test_a_robot_exactly_its_radius_from_its_goal_has_not_arrived():
+    # Goal (0, 0), radius 0.3: the robot at (0.3, 0) is 0.3 m off, not strictly closer -> not inside under
+    # either rule; one step on at (0.29, 0) it is (row 2, 0.8 s).
+    rp = [[[1.0, 0.0]], [[0.3, 0.0]], [[0.29, 0.0]]]
+    humans = [[[9.0, 9.0]]] * 3
+    for rule in ("simultaneous", "first_reach"):
+        edge = episode_metrics(make_traj(rp[:2], humans[:2], robot_goals=[[0.0, 0.0]], success_rule=rule))
+        assert not edge.success and math.isnan(edge.reach_times[0])
+        m = episode_metrics(make_traj(rp, humans, robot_goals=[[0.0, 0.0]], success_rule=rule))
+        assert m.success and m.travel_time == 0.8 and m.reach_times == (0.8,)
+
+
+def test_first_reach_needs_every_robot():
+    # Robot 0 reaches its goal (0, 2) at row 1; robot 1 stays 2 m from its goal (5, 2): no success under
+    # first_reach either, though one robot arrived.
+    rp = [[[0, 0], [5, 0]], [[0, 2.0], [5, 0.0]]]
+    m = episode_metrics(
+        make_traj(rp, [[[9.0, 9.0]]] * 2, robot_goals=[[0.0, 2.0], [5.0, 2.0]], success_rule="first_reach")
+    )
+    assert not m.success and m.timeout and math.isnan(m.travel_time)
+    assert m.reach_times[0] == 0.4 and math.isnan(m.reach_times[1])
+
+
+def test_discomfort_steps_count_every_state():
+    # Robot at 0 heading east at 1 m/s projects to (1.2, 0). The human at (0.6, 1.0) walks south at 1 m/s
+    # at rows 0 and 1 (projects to (0.6, -0.2): crosses) and stands at row 2 (a point off the path): 2 states.
+    m = episode_metrics(
+        make_traj(
+            [[[0.0, 0.0]]] * 3,
+            [[[0.6, 1.0]]] * 3,
+            robot_vel=[[[1.0, 0.0]]] * 3,
+            human_vel=[[[0.0, -1.0]], [[0.0, -1.0]], [[0.0, 0.0]]],
+            robot_goals=[[9.0, 9.0]],
+        )
+    )
+    assert m.discomfort and m.discomfort_steps == 2
+    assert aggregate([m])["discomfort_step_freq"] == pytest.approx(100.0 * 2 / 3)
+
+
+def test_aggregate_travel_time_spread_distance_mean_and_path_length_over_robots():
+    # a: success at row 1 (0.4 s), path 1.9 m, the standing human 3.0 m off at row 0.
+    # b: success at row 2 (0.8 s), path 1.9 m, the human 0.5 m off at row 0.
+    # c: two robots, goals never reached, paths 1.9 m and 0.9 m (mean 1.4 m), the human 1.0 m off robot 0.
+    a = episode_metrics(make_traj([[[0, 0]], [[0, 1.9]]], [[[3.0, 0.0]]] * 2, robot_goals=[[0.0, 2.0]]))
+    b = episode_metrics(
+        make_traj([[[0, 0]], [[0, 1.0]], [[0, 1.9]]], [[[0.5, 0.0]]] * 3, robot_goals=[[0.0, 2.0]])
+    )
+    c = episode_metrics(
+        make_traj(
+            [[[0, 0], [5, 0]], [[0, 1.9], [5, 0.9]]], [[[1.0, 0.0]]] * 2, robot_goals=[[0.0, 9.0], [5.0, 9.0]]
+        )
+    )
+    out = aggregate([a, b, c])
+    # travel times 0.4 and 0.8 s: mean 0.6, population std (ddof 0) |0.4 - 0.6| = 0.2 (ddof 1 gives 0.283)
+    assert out["travel_time_mean"] == pytest.approx(0.6)
+    assert out["travel_time_std"] == pytest.approx(0.2)
+    # minima 3.0, 0.5, 1.0: mean 1.5, median 1.0, min 0.5
+    assert out["min_distance_mean"] == pytest.approx(1.5)
+    assert out["min_distance_median"] == pytest.approx(1.0)
+    assert out["min_distance_min"] == pytest.approx(0.5)
+    # each episode's mean over its robots, then over episodes: (1.9 + 1.9 + 1.4) / 3
+    assert out["path_length_mean"] == pytest.approx((1.9 + 1.9 + 1.4) / 3)

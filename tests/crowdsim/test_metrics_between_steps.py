@@ -134,3 +134,13 @@ def test_a_non_finite_position_shows_as_nan_whatever_the_order():
     humans = np.array([[[5.0, 0.0]], [[5.0, 0.0]], [[5.0, 0.0]]])
     with np.errstate(invalid="ignore"):  # inf - inf: numpy says so, the result says it too
         assert math.isnan(min_distance_between_steps(robots, humans))
+
+
+def test_never_above_the_sampled_distance_even_by_rounding():
+    # Robot standing at 0; human (0.3, 2.9) -> (0.7, 0.2), closest at the end state: |(0.7, 0.2)| =
+    # 0.7280109889280517 m, while start + 1 * (end - start) rounds to 0.7280109889280518 m. The recorded
+    # states count as they are, so the between-step distance is not the larger float (collision_between_steps
+    # must hold whenever collision does).
+    m = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.3, 2.9]], [[0.7, 0.2]]]))
+    assert m.min_distance == pytest.approx(math.hypot(0.7, 0.2))
+    assert m.min_distance_between_steps <= m.min_distance
