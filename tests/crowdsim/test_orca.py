@@ -260,3 +260,95 @@ def test_3d_program_minimises_the_largest_violation():
         assert np.linalg.norm(new[0]) <= 1.0 + 1e-9
         checked += 1
     assert checked >= 10
+
+
+def test_preferred_velocity_boundaries_are_strict():
+    # CrowdNav scales the goal offset only when it is longer than 1 m: exactly 1 m away gives the raw offset
+    # (1 m/s) even at v_pref = 1.5; the stop radius is strict too: exactly 0.3 m away it still walks.
+    positions = np.zeros((3, 2))
+    goals = np.array([[1.0, 0.0], [0.0, 0.3], [2.0, 0.0]])
+    pref = preferred_velocities(positions, goals, 1.5, stop_radius=0.3)
+    np.testing.assert_allclose(pref, [[1.0, 0.0], [0.0, 0.3], [1.5, 0.0]])
+
+
+def test_neighbour_range_is_strict_and_rows_hold_a_minus_one():
+    # neighbor_dist 3: the agent exactly 3 m away is not a neighbour. With max_neighbors 10 and 3 agents
+    # there are K = min(10, 3 - 1) = 2 slots per row (an agent is never its own neighbour).
+    params = OrcaParams(neighbor_dist=3.0, max_neighbors=10)
+    p = np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 2.0]])
+    idx, valid = nearest_neighbors(p, np.array([0]), params)
+    assert idx.shape == valid.shape == (1, 2)
+    np.testing.assert_array_equal(idx[0], [2, 1])
+    np.testing.assert_array_equal(valid[0], [True, False])
+
+
+def test_unequal_radii_add_up():
+    # As the head-on case with radii 0.3 and 0.5: R = 0.8, w = (-0.8, 0), u = (0.8/5 - 0.8) (-1, 0) =
+    # (0.64, 0): A's line at (0.32, 0), B's at (-0.32, 0) (the same R for both).
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    points, _, _ = orca_halfplanes(p, np.zeros((2, 2)), np.array([0.3, 0.5]), np.arange(2), PARAMS, DT)
+    np.testing.assert_allclose(points[:, 0], [[0.32, 0.0], [-0.32, 0.0]], atol=1e-12)
+
+
+def test_a_max_speed_other_than_one_bounds_the_2d_program():
+    # Head-on as above (A's line v_x <= 0.34), max speed 0.5, preferred (1, 1): the optimum slides up the
+    # line to the 0.5 m/s circle, (0.34, sqrt(0.25 - 0.34^2)) = (0.34, 0.3666).
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    new, lp3 = orca_velocities(
+        p, np.zeros((2, 2)), np.array([[1.0, 1.0]]), 0.3, 0.5, PARAMS, DT, np.array([0])
+    )
+    np.testing.assert_allclose(new[0], [0.34, math.sqrt(0.25 - 0.34**2)], atol=1e-12)
+    assert not lp3[0]
+
+
+def test_parallel_lines_that_leave_room_keep_the_2d_program():
+    # Agent at 0 between W at (-1.9, 0) (nearer: line 0) and E at (2, 0), everyone still.
+    # W: w = (0.38, 0), u = (0.6/5 - 0.38) (1, 0) = (-0.26, 0) -> v_x >= -0.13;
+    # E: w = (-0.4, 0), u = (0.28, 0) -> v_x <= 0.14. Parallel, opposite, with a strip between them:
+    # preferred (1, 0.5) lands on E's line at (0.14, 0.5), no 3-D program.
+    p = np.array([[0.0, 0.0], [2.0, 0.0], [-1.9, 0.0]])
+    new, lp3 = orca_velocities(
+        p, np.zeros((3, 2)), np.array([[1.0, 0.5]]), 0.3, 1.0, PARAMS, DT, np.array([0])
+    )
+    np.testing.assert_allclose(new[0], [0.14, 0.5], atol=1e-12)
+    assert not lp3[0]
+
+
+def test_3d_program_with_two_opposite_parallel_lines():
+    # Overlapping neighbours E and W at 0.4 m: v_x <= -0.25 and v_x >= 0.25 (as in the dense case). The
+    # largest violation max(v_x + 0.25, 0.25 - v_x) is smallest, 0.25, at v_x = 0 whatever v_y.
+    p = np.array([[0.0, 0.0], [0.4, 0.0], [-0.4, 0.0]])
+    new, lp3 = orca_velocities(
+        p, np.zeros((3, 2)), np.array([[0.0, 1.0]]), 0.3, 1.0, PARAMS, DT, np.array([0])
+    )
+    assert lp3[0]
+    assert new[0, 0] == pytest.approx(0.0, abs=1e-12)
+    assert np.linalg.norm(new[0]) <= 1.0 + 1e-12
+
+
+def test_touching_agents_take_the_collision_branch():
+    # A at 0 moving (0, 1), B still at (0.6, 0): exactly touching (|r| = R = 0.6), which RVO2 treats as a
+    # collision: c = u - r / dt = (0, 1) - (1.5, 0) = (-1.5, 1), |c| = sqrt(3.25); direction (c_y, -c_x) / |c|
+    # = (1, 1.5) / sqrt(3.25); point = v + (R / dt - |c|) c / (2 |c|). (The leg branch would give the line
+    # through v along (0, 1).)
+    p = np.array([[0.0, 0.0], [0.6, 0.0]])
+    v = np.array([[0.0, 1.0], [0.0, 0.0]])
+    points, dirs, _ = orca_halfplanes(p, v, np.full(2, 0.3), np.array([0]), PARAMS, DT)
+    c = math.sqrt(3.25)
+    np.testing.assert_allclose(dirs[0, 0], [1.0 / c, 1.5 / c], atol=1e-12)
+    scale = (1.5 - c) / c / 2.0
+    np.testing.assert_allclose(points[0, 0], [-1.5 * scale, 1.0 + scale], atol=1e-12)
+
+
+def test_the_zero_over_zero_overlap_pushes_apart():
+    # A at 0 moving (1, 0) towards B still at (0.4, 0): u = r / dt exactly, RVO2's 0/0 (module docstring).
+    # The unit vector from the neighbour to the agent stands in for c: A's c = (-1, 0), u = (0.6/0.4) c =
+    # (-1.5, 0), line through (1, 0) + u / 2 = (0.25, 0) along (0, 1): v_x <= 0.25; B mirrored: v_x >= 0.75.
+    # Standing still is fine for A; B moves off at 0.75 m/s: 0.4 + 0.4 * 0.75 = 0.7 m apart after the step.
+    p = np.array([[0.0, 0.0], [0.4, 0.0]])
+    v = np.array([[1.0, 0.0], [0.0, 0.0]])
+    points, dirs, _ = orca_halfplanes(p, v, np.full(2, 0.3), np.arange(2), PARAMS, DT)
+    np.testing.assert_allclose(points[:, 0], [[0.25, 0.0], [0.75, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(dirs[:, 0], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12)
+    new, _ = orca_velocities(p, v, np.zeros((2, 2)), 0.3, 1.0, PARAMS, DT)
+    np.testing.assert_allclose(new, [[0.0, 0.0], [0.75, 0.0]], atol=1e-12)
