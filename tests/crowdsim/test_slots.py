@@ -103,3 +103,20 @@ def test_a_robot_whose_goal_changes_has_not_reached_the_new_one():
 def test_unknown_goal_assignment():
     with pytest.raises(SimulationError, match=r"goal_assignment must be one of \['fixed', 'slots'\]"):
         EnvConfig(goal_assignment="swap")  # type: ignore[arg-type]
+
+
+def test_a_gain_equal_to_the_hysteresis_keeps_the_goals():
+    # Goals (-1, 0) and (1, 0), robots at (0.25, 1) and (-0.25, -1): held, 2 x (1.25^2 + 1) = 5.125 m^2;
+    # swapped, 2 x (0.75^2 + 1) = 3.125 m^2, a gain of exactly 2.0 (all binary fractions). The matching must
+    # beat the current one by more than the hysteresis: 2.0 keeps the goals, 1.99 swaps them.
+    goals = np.array([[-1.0, 0.0], [1.0, 0.0]])
+    positions = np.array([[0.25, 1.0], [-0.25, -1.0]])
+    np.testing.assert_array_equal(match_slots(positions, goals, hysteresis=2.0), [0, 1])
+    np.testing.assert_array_equal(match_slots(positions, goals, hysteresis=1.99), [1, 0])
+
+
+def test_points_must_be_2d():
+    with pytest.raises(ValueError, match=r"both be \(M, 2\)"):
+        match_slots(np.zeros((3, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"both be \(M, 2\)"):
+        match_slots(np.zeros(2), np.zeros(2))
