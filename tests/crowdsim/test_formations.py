@@ -117,6 +117,13 @@ def test_the_spacing_can_be_given():
     np.testing.assert_allclose(starts, [[-0.75, h - 5], [-0.25, -h - 5], [0.25, h - 5], [0.75, -h - 5]])
 
 
+def test_the_spacing_may_be_d_min_itself():
+    # The bound is spacing >= d_min (0.8 m): two rows of 2 at 0.8 m, neighbours 0.8 m apart, is allowed.
+    starts, _ = robot_layout(4, "two_rows", spacing=world.D_MIN)
+    d = np.linalg.norm(starts[:, None] - starts[None], axis=-1)[np.triu_indices(4, k=1)]
+    assert d.min() == pytest.approx(world.D_MIN)
+
+
 def test_the_row_can_still_be_chosen_for_any_number():
     starts, goals = robot_layout(12, "row")
     np.testing.assert_array_equal(starts[:, 0], np.arange(12) - 5.5)
@@ -189,6 +196,8 @@ def test_bad_formations_name_the_value():
         robot_layout(4, spacing=0.5)
     with pytest.raises(SimulationError, match="-2"):
         robot_layout(-2)
+    with pytest.raises(SimulationError, match="n_robots must be an int >= 0, got True"):
+        robot_layout(True)  # a bool is no count (True would lay out one robot)
     with pytest.raises(SimulationError, match="'row' has no ranks"):
         rank_sizes("row", 3)
 

@@ -31,6 +31,11 @@ def scene(humans=((3.0, 0.0),), human_goals=None, robots=((0.0, 0.0),), robot_go
         (scene(human_goals=((np.inf, 0.0),)), r"layout.human_goals\[0\] is \[inf, 0.0\]"),
         (scene(robots=((0.0, -np.inf),)), r"layout.robot_starts\[0\] is \[0.0, -inf\]"),
         (scene(robot_goals=((np.nan, np.nan),)), r"layout.robot_goals\[0\] is \[nan, nan\]"),
+        # two bad rows: the first one is named
+        (
+            scene(humans=((3.0, 0.0), (np.nan, 1.0), (4.0, 0.0), (np.inf, 2.0))),
+            r"layout.human_starts\[1\] is \[nan, 1.0\]",
+        ),
     ],
 )
 def test_a_non_finite_start_or_goal_is_refused_by_field_and_row(layout, message):

@@ -198,10 +198,18 @@ def test_bad_sizes_name_the_value(monkeypatch):
         make_layout("circle", -1, 3, rng)
     with pytest.raises(SimulationError, match="2.5"):
         make_layout("circle", 2.5, 3, rng)
+    # bools are ints to Python, but no count (True would silently mean one)
+    with pytest.raises(SimulationError, match="n_humans must be an int, got True"):
+        make_layout("circle", True, 3, rng)
+    with pytest.raises(SimulationError, match="n_robots must be an int, got True"):
+        make_layout("circle", 5, True, rng)
     with pytest.raises(SimulationError, match="crossing 'v2'"):
         make_layout("circle", 5, 3, rng, crossing="v2")
     with pytest.raises(SimulationError, match="spawn_separation.*-1"):
         make_layout("circle", 5, 3, rng, spawn_separation=-1.0)
+    # 0 is allowed (>= 0): the humans then keep only the two radii, 0.6 m, from each other
+    tight = make_layout("circle", 9, 3, rng, spawn_separation=0.0)
+    assert _paper_separation_ok(tight, min_dist=0.6)
     monkeypatch.setattr(scenarios, "MAX_TRIES", 1)
     for crossing in ("paper", "v1"):
         with pytest.raises(SimulationError, match="n_humans=16"):
