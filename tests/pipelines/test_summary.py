@@ -1,0 +1,95 @@
+"""The report's statistics beyond tests/pipelines/test_sweep.py's hand values: the Wilson interval at its
+edges, Student's t against scipy, a cell's rates and solver figures by hand, and the bold mark."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.experiments.cells import get_experiment
+from pipelines.experiments.summary import Rate, summarize_cell, t95, wilson_interval
+from pipelines.experiments.tables import _best
+
+
+@pytest.mark.parametrize("n", [16, 21, 37, 40])
+def test_wilson_interval_stays_inside_0_and_1_at_the_extremes(n):
+    # At 0 of n the centre and the half width are the same number, z^2/(2n) / (1 + z^2/n), computed two ways:
+    # for these n the unclipped lower bound rounds to about -1e-17 (n = 21, 37) and the upper bound at n of n
+    # to 1 + 1e-16 (n = 16, 40). The table prints them; a "-0.0" would read as a bug.
+    lo, _ = wilson_interval(0, n)
+    _, hi = wilson_interval(n, n)
+    assert lo == 0.0 and hi == 1.0
+
+
+def test_wilson_interval_refuses_a_negative_count():
+    with pytest.raises(PipelineError, match="0 <= successes <= n, got -1 of 10"):
+        wilson_interval(-1, 10)
+
+
+@pytest.mark.parametrize("dof", [1, 2, 7, 30, 120, 500, 1000, 1001, 2000, 10**5])
+def test_t95_matches_scipy(dof):
+    # "Exact for dof <= 1000; beyond, Cornish-Fisher with an error below 3e-9" (t95's docstring): the
+    # tolerance 1e-8 would not hold for the expansion below 1000 dof, nor without its 1/dof^2 term
+    # (2.8e-6 at 1001 dof).
+    stats = pytest.importorskip("scipy.stats")
+    assert t95(dof) == pytest.approx(float(stats.t.ppf(0.975, dof)), rel=0, abs=1e-8)
+
+
+def test_a_rate_over_no_episode_is_nan_not_zero():
+    # success_by_scenario has a Rate(0, 0) for a scenario the cell did not run: no figure, not 0 %.
+    empty = Rate(0, 0)
+    assert math.isnan(empty.percent) and all(math.isnan(x) for x in empty.interval)
+    assert Rate(3, 4).percent == 75.0
+
+
+def _record(i: int, *, success: bool, min_distance: float | None, median: float, p95: float, total: float):
+    """One circle episode (seed i) of 10 control steps, with the solver figures given."""
+    return {
+        "scenario": "circle",
+        "seed": i,
+        "metrics": {
+            "success": success,
+            "travel_time": 20.0 if success else None,
+            "collision": False,
+            "contact": False,
+            "discomfort": False,
+            "min_distance": min_distance,
+            "n_steps": 10,
+        },
+        "solver": {
+            "steps": 10,
+            "total_ms": total,
+            "median_ms": median,
+            "p95_ms": p95,
+            "mean_iterations": 2.0,
+            "fallback_steps": 0,
+        },
+    }
+
+
+def test_a_cells_distance_and_solver_figures_by_hand():
+    cell = get_experiment("table2").cells()[0]
+    records = [
+        _record(0, success=True, min_distance=1.0, median=10.0, p95=20.0, total=100.0),
+        _record(1, success=True, min_distance=2.0, median=11.0, p95=30.0, total=110.0),
+        _record(2, success=False, min_distance=None, median=30.0, p95=100.0, total=390.0),  # no human near
+    ]
+    s = summarize_cell(cell, records, None)
+    # the mean of the episodes' minima over the episodes that had one: (1 + 2) / 2, the null is no 0 m
+    assert s.min_distance_mean == pytest.approx(1.5)
+    # median of the episodes' medians 10, 11, 30 -> 11 (their mean would be 17)
+    assert s.step_median_ms == pytest.approx(11.0)
+    # numpy's linear 95th percentile of 20, 30, 100: 30 + (1.9 - 1) x 70 = 93 (the 90th would be 86)
+    assert s.step_p95_ms == pytest.approx(93.0)
+    # all control-step time over all steps: 600 ms / 30 steps (the mean of the totals would be 200)
+    assert s.step_mean_ms == pytest.approx(20.0)
+    assert s.success.count == 2 and s.success.n == 3
+
+
+def test_the_bold_mark_compares_the_printed_values():
+    # 75.04 and 75.01 both print as 75.0: a tie, left unmarked; 75.06 prints as 75.1 and wins.
+    assert _best([75.04, 75.01], higher_is_better=True) == set()
+    assert _best([75.06, 75.01], higher_is_better=True) == {0}
+    assert _best([18.96, 19.04], higher_is_better=False) == set()  # travel time: both 19.0
