@@ -112,6 +112,7 @@ def test_step_frequency_needs_every_count():
     rows = [{"collision_steps": 2, "n_steps": 4}, {"collision_steps": 0, "n_steps": 14}]
     assert step_frequency(rows, "collision") == pytest.approx(100.0 * 2 / 20)
     assert math.isnan(step_frequency([*rows, {"n_steps": 9}], "collision"))  # one old record: no rate
+    assert math.isnan(step_frequency([*rows, {"collision_steps": 1}], "collision"))  # nor without n_steps
     assert math.isnan(step_frequency([], "collision"))
 
 

@@ -79,6 +79,9 @@ def test_a_cells_distance_and_solver_figures_by_hand():
     s = summarize_cell(cell, records, None)
     # the mean of the episodes' minima over the episodes that had one: (1 + 2) / 2, the null is no 0 m
     assert s.min_distance_mean == pytest.approx(1.5)
+    # the null is inf in the histogram's list, and left out of the median: (1 + 2) / 2, not median(1, 2, inf)
+    assert s.min_distances == (1.0, 2.0, math.inf)
+    assert s.min_distance_median == pytest.approx(1.5)
     # median of the episodes' medians 10, 11, 30 -> 11 (their mean would be 17)
     assert s.step_median_ms == pytest.approx(11.0)
     # numpy's linear 95th percentile of 20, 30, 100: 30 + (1.9 - 1) x 70 = 93 (the 90th would be 86)
