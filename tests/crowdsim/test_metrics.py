@@ -259,3 +259,40 @@ def test_aggregate_travel_time_spread_distance_mean_and_path_length_over_robots(
     assert out["min_distance_min"] == pytest.approx(0.5)
     # each episode's mean over its robots, then over episodes: (1.9 + 1.9 + 1.4) / 3
     assert out["path_length_mean"] == pytest.approx((1.9 + 1.9 + 1.4) / 3)
+
+
+def test_human_human_minimum_and_the_discomfort_rate():
+    # Two humans 1.5 m apart at row 0, 2.5 m at row 1; the robot 5 m off. With one human there is no pair.
+    m = episode_metrics(
+        make_traj(
+            [[[0.0, -5.0]]] * 2, [[[0.0, 0.0], [1.5, 0.0]], [[0.0, 0.0], [2.5, 0.0]]], robot_goals=[[9, 9]]
+        )
+    )
+    assert m.min_distance_humans == pytest.approx(1.5) and m.min_distance == pytest.approx(5.0)
+    assert episode_metrics(make_traj([[[0.0, -5.0]]], [[[0.0, 0.0]]])).min_distance_humans == math.inf
+    # the discomfort rate sits beside the others: 1 of 2 episodes (test_discomfort_... above: touching paths)
+    touching = episode_metrics(
+        make_traj([[[0.0, 0.0]]], [[[1.2, 1.2]]], robot_vel=[[[1.0, 0.0]]], human_vel=[[[0.0, -1.0]]])
+    )
+    out = aggregate([touching, m])
+    assert (out["discomfort_count"], out["discomfort_rate"]) == (1, 50.0)
+
+
+def test_the_thresholds_can_be_given():
+    # A human standing 0.7 m from the robot: a collision at d_min 0.8 m, none at 0.6 m. A human 1.0 m ahead
+    # on the robot's 1 m/s path is reached by the projected path at the 1.2 s horizon, not at 0.5 s.
+    near = make_traj([[[0.0, 0.0]]], [[[0.0, 0.7]]], robot_goals=[[9.0, 9.0]])
+    assert episode_metrics(near).collision
+    assert not episode_metrics(near, collision_distance=0.6).collision
+    ahead = make_traj([[[0.0, 0.0]]], [[[1.0, 0.0]]], robot_vel=[[[1.0, 0.0]]], robot_goals=[[9.0, 9.0]])
+    assert episode_metrics(ahead).discomfort
+    assert not episode_metrics(ahead, discomfort_horizon=0.5).discomfort
+
+
+def test_the_mean_travel_time_is_a_mean():
+    # successes at 0.4, 0.4 and 0.8 s: mean 1.6 / 3 = 0.533 s (the median would be 0.4 s)
+    fast = episode_metrics(make_traj([[[0, 0]], [[0, 1.9]]], [[[3.0, 0.0]]] * 2, robot_goals=[[0.0, 2.0]]))
+    slow = episode_metrics(
+        make_traj([[[0, 0]], [[0, 1.0]], [[0, 1.9]]], [[[3.0, 0.0]]] * 3, robot_goals=[[0.0, 2.0]])
+    )
+    assert aggregate([fast, fast, slow])["travel_time_mean"] == pytest.approx(1.6 / 3)

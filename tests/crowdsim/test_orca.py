@@ -352,3 +352,33 @@ def test_the_zero_over_zero_overlap_pushes_apart():
     np.testing.assert_allclose(dirs[:, 0], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12)
     new, _ = orca_velocities(p, v, np.zeros((2, 2)), 0.3, 1.0, PARAMS, DT)
     np.testing.assert_allclose(new, [[0.0, 0.0], [0.75, 0.0]], atol=1e-12)
+
+
+def test_an_overlap_the_max_speed_cannot_undo_goes_away_at_full_speed():
+    # As test_overlapping_agents_move_apart_in_one_step (A's line v_x <= -0.25), but at max speed 0.2 m/s the
+    # disc lies wholly outside the line: the 3-D program from line 0, with nothing to project, returns
+    # max speed times the line's inward normal (1, 0) rotated, i.e. (-0.2, 0) for A and (0.2, 0) for B.
+    p = np.array([[0.0, 0.0], [0.4, 0.0]])
+    new, lp3 = orca_velocities(p, np.zeros((2, 2)), np.zeros((2, 2)), 0.3, 0.2, PARAMS, DT)
+    assert lp3.all()
+    np.testing.assert_allclose(new, [[-0.2, 0.0], [0.2, 0.0]], atol=1e-12)
+
+
+def test_the_time_horizon_is_a_parameter():
+    # The head-on case with time_horizon 2 s: w = 0 - (4, 0)/2 = (-2, 0), on the cut-off circle:
+    # u = (0.6/2 - 2) (-1, 0) = (1.7, 0), A's line at (0.85, 0).
+    params = OrcaParams(time_horizon=2.0)
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    points, _, _ = orca_halfplanes(p, np.zeros((2, 2)), np.full(2, 0.3), np.array([0]), params, DT)
+    np.testing.assert_allclose(points[0, 0], [0.85, 0.0], atol=1e-12)
+
+
+def test_a_neighbour_out_of_range_sets_no_line():
+    # Head-on 4 m apart with neighbor_dist 3 m: the slot exists (K = 1) but is not valid, so A keeps its
+    # preferred velocity (1, 0) instead of the v_x <= 0.34 it would get in range.
+    params = OrcaParams(neighbor_dist=3.0)
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    _, _, counts = orca_halfplanes(p, np.zeros((2, 2)), np.full(2, 0.3), np.arange(2), params, DT)
+    np.testing.assert_array_equal(counts, [0, 0])
+    new, _ = orca_velocities(p, np.zeros((2, 2)), np.array([[1.0, 0.0], [-1.0, 0.0]]), 0.3, 1.0, params, DT)
+    np.testing.assert_allclose(new, [[1.0, 0.0], [-1.0, 0.0]])
