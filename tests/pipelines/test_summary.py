@@ -9,6 +9,7 @@ import pytest
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.cells import get_experiment
+from pipelines.experiments.report import cell_rows
 from pipelines.experiments.summary import Rate, summarize_cell, t95, wilson_interval
 from pipelines.experiments.tables import _best
 
@@ -44,14 +45,16 @@ def test_a_rate_over_no_episode_is_nan_not_zero():
     assert Rate(3, 4).percent == 75.0
 
 
-def _record(i: int, *, success: bool, min_distance: float | None, median: float, p95: float, total: float):
+def _record(
+    i: int, *, success: bool, min_distance: float | None, median: float, p95: float, total: float, time_s=20.0
+):
     """One circle episode (seed i) of 10 control steps, with the solver figures given."""
     return {
         "scenario": "circle",
         "seed": i,
         "metrics": {
             "success": success,
-            "travel_time": 20.0 if success else None,
+            "travel_time": time_s if success else None,
             "collision": False,
             "contact": False,
             "discomfort": False,
@@ -89,6 +92,20 @@ def test_a_cells_distance_and_solver_figures_by_hand():
     # all control-step time over all steps: 600 ms / 30 steps (the mean of the totals would be 200)
     assert s.step_mean_ms == pytest.approx(20.0)
     assert s.success.count == 2 and s.success.n == 3
+
+
+def test_cells_csv_gives_the_travel_time_and_its_interval():
+    # successes in 18 and 20 s (the failure's time is not counted): mean 19 s; sample sd sqrt(2), standard
+    # error 1 s, half width t95(1) x 1 = 12.706 s
+    cell = get_experiment("table2").cells()[0]
+    records = [
+        _record(0, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0, time_s=18.0),
+        _record(1, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0, time_s=20.0),
+        _record(2, success=False, min_distance=1.0, median=1.0, p95=1.0, total=10.0),
+    ]
+    (row,) = cell_rows([summarize_cell(cell, records, None)])
+    assert row["travel_time_mean"] == pytest.approx(19.0)
+    assert row["travel_time_ci"] == pytest.approx(12.7062, abs=1e-4)
 
 
 def test_the_bold_mark_compares_the_printed_values():
