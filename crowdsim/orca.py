@@ -63,6 +63,8 @@ def preferred_velocities(
     positions: np.ndarray, goals: np.ndarray, v_pref: float, stop_radius: float = 0.0
 ) -> np.ndarray:
     """CrowdNav's preferred velocity: ``v_pref`` towards the goal, the raw goal offset (m/s) within 1 m.
+    (CrowdNav's ORCA policy prefers unit speed whatever the agent's v_pref; the two agree at WorldFacts'
+    v_pref = 1 m/s, and here a faster or slower crowd is one setting.)
 
     Agents strictly within ``stop_radius`` of their goal have reached it and prefer to stand still.
     positions, goals: ``(A, 2)`` m. Returns ``(A, 2)`` m/s.
