@@ -183,3 +183,51 @@ def test_margins_leave_the_robot_robot_penalty_alone():
     a, b = ca.DM([[0.0, 0.0], [0.0, 0.0]]), ca.DM([[0.9, 0.9], [0.0, 0.0]])
     paper = MPCConfig(horizon=2)
     assert value(costs.robot_collision_cost(a, b, cfg)) == value(costs.robot_collision_cost(a, b, paper))
+
+
+def test_human_collision_cost_reads_each_steps_own_velocity():
+    """Eq. 11's ``rho ||v_{k+1}||^2`` pairs step k's position with the velocity at the same step."""
+    # H = 2, the robot at the origin, one human 1 m away at both steps; the robot moves at 0.6 m/s at step 1
+    # and stands at step 2: g = 0.64 + 0.5 * 0.36 - 1 = -0.18, then 0.64 - 1 = -0.36.
+    positions = ca.DM.zeros(2, 2)
+    velocities = ca.DM([[0.6, 0.0], [0.0, 0.0]])
+    humans = ca.DM([[1.0, 1.0], [0.0, 0.0]])
+    got = value(costs.human_collision_cost(positions, velocities, humans, 1, CFG))
+    expected = sum(math.log1p(math.exp(30 * g)) / 30 for g in (-0.18, -0.36))
+    assert got == pytest.approx(expected, rel=1e-12)
+
+
+def test_goal_weight_keeps_the_goal_and_adds_the_slack_by_hand():
+    """Eq. 7's weight ``1 / (||s_t - s_goal|| + delta + slack)`` uses the goal even when Eq. 8 heads for a
+    detour target, and adds the track's ``goal_slack`` (on_goal="yield") to ``delta``."""
+    # H = 2, the robot stands still at the origin with zero controls (no accel or jerk cost, no humans).
+    # Target (2, 0): the reference is (0.4, 0), (0.8, 0), so the tracking error is 0.16 + 0.64 = 0.8.
+    # The goal (0, 1) is 1 m away, the target 2 m: only the goal's 1 m may divide.
+    cfg = MPCConfig(horizon=2)
+    zero2 = ca.DM.zeros(2, 2)
+    humans = ca.DM.zeros(2, 0)
+    state, last, goal, target = ca.DM.zeros(4), ca.DM.zeros(2), ca.DM([0.0, 1.0]), ca.DM([2.0, 0.0])
+    track = costs.make_track(state, zero2, last, goal, cfg.dt, target)
+    assert value(costs.individual_cost(track, humans, 0, cfg)) == pytest.approx(10.0 * 0.8 / 1.001)
+    slack = costs.make_track(state, zero2, last, goal, cfg.dt, target, goal_slack=0.5)
+    assert value(costs.individual_cost(slack, humans, 0, cfg)) == pytest.approx(10.0 * 0.8 / 1.501)
+    # goal_cost's own delta argument is the one used (not a constant 1e-3).
+    positions, reference = ca.DM([[0.0], [0.0]]), ca.DM([[0.0], [0.5]])
+    assert value(costs.goal_cost(positions, reference, ca.DM([0, 0]), ca.DM([0, 1]), 0.25)) == pytest.approx(
+        0.25 / 1.25
+    )
+
+
+def test_collision_penalty_counts_robot_robot_and_robot_human_by_hand():
+    """``collision_penalty`` = w_coll (every robot-human term + each robot pair once)."""
+    # H = 1, robots standing at (0, 0) and (0.5, 0), one human at (0, 1):
+    # the robot pair g = 0.64 - 0.25 = 0.39; robot 0 and the human 0.64 - 1 = -0.36; robot 1 and the human
+    # 0.64 - 1.25 = -0.61.
+    cfg = MPCConfig(horizon=1)
+    tracks = [
+        costs.make_track(ca.DM([x, 0, 0, 0]), ca.DM.zeros(2, 1), ca.DM.zeros(2), ca.DM([x, 5]), cfg.dt)
+        for x in (0.0, 0.5)
+    ]
+    humans = ca.DM([[0.0], [1.0]])
+    expected = 1e7 * sum(math.log1p(math.exp(30 * g)) / 30 for g in (0.39, -0.36, -0.61))
+    assert value(costs.collision_penalty(tracks, humans, 1, cfg)) == pytest.approx(expected, rel=1e-12)

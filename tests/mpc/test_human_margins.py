@@ -84,3 +84,29 @@ def test_the_reference_heads_for_the_targets_and_the_goal_weight_keeps_the_goal(
             StepData(data.states, data.last_actions, data.goals, data.active, None, None, east[:1]),
             prediction,
         )
+
+
+def test_the_objectives_see_the_margins_as_the_penalties_do():
+    """The margins enter what the solvers minimise, not only the reported penalty: only the collision terms
+    depend on them, so F(m) - F(0) = penalty(m) - penalty(0), and likewise C_i for a local NLP."""
+    cfg = MPCConfig()
+    h, n = cfg.horizon, 2
+    # Each robot walks with a human 0.9 m east of it: inside d_min + 0.4 = 1.2 m, outside d_min = 0.8 m, so
+    # a 0.4 m margin changes the penalty by ~1e7 * 0.7 per such pair and step.
+    data = _data()
+    accels = np.zeros((2, h, 2))
+    steps = cfg.dt * np.arange(1, h + 1)[:, None]
+    positions = np.stack([data.states[i, :2] + data.states[i, 2:] * steps for i in range(2)])  # (M, H, 2)
+    # Human n walks 0.9 m east of robot n: (H, N_h, 2).
+    prediction = positions.transpose(1, 0, 2) + [0.9, 0.0]
+    zero, wide = _data(np.zeros((h, n))), _data(np.full((h, n), 0.4))
+    joint = JointNLP(cfg, 2, n)
+    d_penalty = joint.penalty(accels, wide, prediction) - joint.penalty(accels, zero, prediction)
+    assert d_penalty > 1e6
+    d_potential = joint.potential(accels, wide, prediction) - joint.potential(accels, zero, prediction)
+    assert d_potential == pytest.approx(d_penalty, rel=1e-9)
+    local = LocalNLP(cfg, 2, n)
+    q_zero, q_wide = (local.params(0, d, positions, prediction) for d in (zero, wide))
+    d_penalty = local.penalty(accels[0], q_wide) - local.penalty(accels[0], q_zero)
+    assert d_penalty > 1e6
+    assert local.cost(accels[0], q_wide) - local.cost(accels[0], q_zero) == pytest.approx(d_penalty, rel=1e-9)
