@@ -43,3 +43,27 @@ def test_clip_to_bounds_keeps_velocity_and_acceleration_within_eq6():
     # Step 1: v = (1.0, 0.8) allows a_x <= 0 and a_y <= (1 - 0.8) / 0.4 = 0.5.
     out = clip_to_bounds(np.array([[0, 0, 0.9, 0.0]]), np.array([[[1.0, 3.0], [1.0, 1.0]]]), 0.4, 1.0, 2.0)
     np.testing.assert_allclose(out[0], [[0.25, 2.0], [0.0, 0.5]])
+
+
+def test_braking_stays_within_a_max_over_several_steps():
+    # v_x = 2 with a_max = 2, tau = 0.4: each step removes at most 0.8 m/s, so -2, -2 (v = 1.2, then 0.4),
+    # then the remaining -0.4 / 0.4 = -1, then rest.
+    out = braking(np.array([[0.0, 0.0, 2.0, 0.0]]), 4, 0.4, 2.0)
+    np.testing.assert_allclose(out[0, :, 0], [-2.0, -2.0, -1.0, 0.0])
+
+
+def test_clip_to_bounds_mirrors_the_bounds_for_negative_velocities():
+    # v_x = -0.9 allows a_x >= (-1 + 0.9) / 0.4 = -0.25; a_y = -3 is clipped to -a_max = -2.
+    # Step 1: v = (-1.0, -0.8) allows a_x >= 0 and a_y >= (-1 + 0.8) / 0.4 = -0.5.
+    out = clip_to_bounds(
+        np.array([[0, 0, -0.9, 0.0]]), np.array([[[-1.0, -3.0], [-1.0, -1.0]]]), 0.4, 1.0, 2.0
+    )
+    np.testing.assert_allclose(out[0], [[-0.25, -2.0], [0.0, -0.5]])
+
+
+def test_clip_to_bounds_brings_an_excess_velocity_back_at_a_max():
+    # v_x = 2 > v_max = 1: reaching v_max in one step would need (1 - 2) / 0.4 = -2.5, beyond a_max = 2, so
+    # a_x = -2 (v_x = 1.2), then (1 - 1.2) / 0.4 = -0.5 reaches v_max; the wanted 0 is never allowed.
+    out = clip_to_bounds(np.array([[0, 0, 2.0, 0.0]]), np.zeros((1, 3, 2)), 0.4, 1.0, 2.0)
+    np.testing.assert_allclose(out[0, :, 0], [-2.0, -0.5, 0.0])
+    np.testing.assert_allclose(out[0, :, 1], 0.0)
