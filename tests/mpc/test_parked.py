@@ -20,3 +20,11 @@ def test_no_slack_once_everyone_is_within_its_radius_or_for_robots_that_never_ar
     np.testing.assert_array_equal(yield_slack(positions, GOALS, np.ones(3, bool), radius=0.3), [0, 0, 0])
     far = GOALS + [[0.0, -2.0], [0.0, -2.0], [0.0, -4.0]]
     np.testing.assert_array_equal(yield_slack(far, GOALS, np.zeros(3, bool), radius=0.3), [0, 0, 0])
+
+
+def test_a_robot_exactly_on_its_radius_has_not_arrived_and_is_yielded_to():
+    # The simulator counts a goal reached strictly within the radius (crowdsim/env.py), so robot 1 exactly
+    # 0.5 m from its goal (radius 0.5) is still on its way: D = 0.5 and robot 0, on its goal, gets slack 0.5.
+    positions = GOALS + [[0.0, 0.0], [0.0, -0.5], [0.0, 0.0]]
+    slack = yield_slack(positions, GOALS, np.array([True, False, True]), radius=0.5)
+    np.testing.assert_array_equal(slack, [0.5, 0.0, 0.5])

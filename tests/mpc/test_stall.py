@@ -64,3 +64,28 @@ def test_the_release_window_is_validated_and_off_by_default():
     assert MPCConfig().stall_release_s == 0.0  # the paper: flocking never released
     with pytest.raises(MPCConfigError, match="stall_release_s must be >= 0"):
         MPCConfig(stall_release_s=-1.0)
+
+
+def test_the_window_is_exactly_window_s_long():
+    """Window 0.4 s at tau = 0.4 s: progress is measured over one step, however long the robot has run.
+    Robot 0 walks 0.2 m a step: 0.2 < 0.25 per window, so it is stalled at every step once the window is
+    full (over two steps it would have made 0.4 m)."""
+    watch = StallWatch(window_s=0.4, dt=0.4)
+    arrived = np.zeros(3, bool)
+    watch.update(_positions(0.0, 0.0, 0.0), GOALS, arrived)
+    for step in range(1, 5):
+        stalled = watch.update(_positions(0.2 * step, 0.3 * step, 0.0), GOALS, arrived)
+        np.testing.assert_array_equal(stalled, [True, False, True])
+
+
+def test_progress_of_exactly_the_threshold_counts_as_moving_and_the_threshold_is_configurable():
+    # 10 -> 9.75 m (exact in binary): 0.25 m is not "less than 0.25 m".
+    watch = StallWatch(window_s=0.4, dt=0.4)
+    watch.update(_positions(0.0, 0.0, 0.0), GOALS, np.zeros(3, bool))
+    stalled = watch.update(_positions(0.25, 0.5, 0.0), GOALS, np.zeros(3, bool))
+    np.testing.assert_array_equal(stalled, [False, False, True])
+    # With progress = 0.6 m, neither 0.25 nor 0.5 m in the window is enough.
+    watch = StallWatch(window_s=0.4, dt=0.4, progress=0.6)
+    watch.update(_positions(0.0, 0.0, 0.0), GOALS, np.zeros(3, bool))
+    stalled = watch.update(_positions(0.25, 0.5, 0.0), GOALS, np.zeros(3, bool))
+    np.testing.assert_array_equal(stalled, [True, True, True])
