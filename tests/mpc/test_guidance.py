@@ -102,3 +102,31 @@ def test_the_lazy_search_finds_the_dense_searchs_corner():
             assert found is None
         else:
             np.testing.assert_allclose(found, expected, atol=1e-12)
+
+
+def test_a_free_line_to_a_near_goal_keeps_the_goal_itself():
+    # The goal 1 m away, nothing in between: the target is the goal, not a point prolonged to LOOKAHEAD
+    # past it (which a detour's target would be).
+    positions, goals = np.array([[0.0, 0.0]]), np.array([[0.0, 1.0]])
+    standing = np.array([[3.0, 0.0]])
+    np.testing.assert_array_equal(guidance_targets(positions, goals, standing, 1.0), goals)
+
+
+def test_one_disc_is_passed_at_its_near_side_node_by_hand():
+    """One human at the origin, clearance 1; the robot at (0.3, -5) heads for (0.3, 5). The ring node at angle
+    0, (1.08, 0), sees both ends: the segment (0.3, -5) -> (1.08, 0) passes the origin at
+    |0.3 * 5 + 5 * 0.78| / sqrt(0.78^2 + 25) = 5.4 / 5.06 = 1.067 m >= 1 (the same to the goal, by symmetry),
+    while the next node round, (0.998, -0.413), is hidden from the goal (0.937 m). That corner is 5.06 m away,
+    beyond LOOKAHEAD, so the target is the corner itself."""
+    target = guidance_targets(np.array([[0.3, -5.0]]), np.array([[0.3, 5.0]]), np.array([[0.0, 0.0]]), 1.0)
+    # 1.08 = RING_SCALE * clearance: the nodes sit 8 % outside the disc.
+    np.testing.assert_allclose(target, [[1.08, 0.0]], atol=1e-12)
+
+
+def test_a_disc_the_robot_stands_in_does_not_hide_the_others():
+    # The robot stands 0.5 m from a human (inside its 0.9 m disc); another human blocks the line further on.
+    # Only the first is ignored: the second is still walked around (a target off the x = 0 line).
+    standing = np.array([[0.0, 0.0], [0.0, -3.0]])
+    target = guidance_targets(np.array([[0.0, -0.5]]), np.array([[0.0, -6.0]]), standing, 0.9)[0]
+    assert abs(target[0]) > 0.5
+    assert segment_distances(np.array([0.0, -0.5]), target, standing[1:]).min() >= 0.9 - 1e-9
