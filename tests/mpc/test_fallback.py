@@ -6,7 +6,7 @@ from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
 from mpc.dmpc import DMPC
 from mpc.dynamics import braking
-from mpc.fallback import PlanMemory
+from mpc.fallback import PlanMemory, Start, heading_plan, shift
 from mpc.nlp import StepData
 
 
@@ -76,3 +76,75 @@ def test_shifted_plan_is_clipped_to_the_bounds_from_the_current_state():
     start = memory.start(data)
     # v_x = 0.9 leaves (1 - 0.9) / 0.4 = 0.25 of acceleration; v_y = -0.9 leaves the full 2.0.
     np.testing.assert_allclose(start.accels[0, 0], [0.25, 2.0])
+
+
+def test_a_parked_robot_brakes_in_the_shifted_start():
+    """Robot 1 is pinned (``active`` False): its part of u^(0) is braking, robot 0's the shifted plan."""
+    cfg = MPCConfig()
+    data = moving_data()
+    memory = PlanMemory(cfg)
+    plan = np.full((2, cfg.horizon, 2), 0.1)
+    memory.commit(plan, solved=True)
+    pinned = StepData(data.states, data.last_actions, data.goals, np.array([True, False]))
+    start = memory.start(pinned)
+    assert start.kind == "shifted"
+    np.testing.assert_allclose(start.accels[0], shift(plan)[0])
+    np.testing.assert_array_equal(start.accels[1], braking(data.states, cfg.horizon, cfg.dt, cfg.a_max)[1])
+
+
+def test_the_multipliers_are_shifted_with_the_plan():
+    """The warm start's multipliers follow the plan: one step shifted at the next start, and each failed step
+    (which applies the shifted plan) shifts them once more."""
+    cfg = MPCConfig()
+    data = moving_data()
+    memory = PlanMemory(cfg)
+    lam_x = np.arange(2 * cfg.horizon * 2, dtype=float).reshape(2, cfg.horizon, 2) + 1.0
+    lam_g = -lam_x
+    memory.commit(np.zeros((2, cfg.horizon, 2)), solved=True, lam_x=lam_x, lam_g=lam_g)
+    start = memory.start(data)
+    np.testing.assert_array_equal(start.lam_x, shift(lam_x))
+    np.testing.assert_array_equal(start.lam_g, shift(lam_g))
+    memory.commit(start.accels, solved=False)
+    start = memory.start(data)
+    np.testing.assert_array_equal(start.lam_x, shift(shift(lam_x)))
+    np.testing.assert_array_equal(start.lam_g, shift(shift(lam_g)))
+    # shift drops step 0 and pads with zeros: step 0 of the twice-shifted multipliers is step 2's.
+    np.testing.assert_array_equal(start.lam_x[:, 0], lam_x[:, 2])
+    np.testing.assert_array_equal(start.lam_x[:, -2:], 0.0)
+
+
+def test_a_plan_for_another_team_size_is_not_shifted():
+    cfg = MPCConfig()
+    memory = PlanMemory(cfg)
+    memory.commit(np.zeros((3, cfg.horizon, 2)), solved=True)
+    assert memory.start(moving_data()).kind == "brake"  # 2 robots now
+
+
+def test_only_the_first_solve_restarts_or_explores():
+    """A step from the shifted plan restarts its first solve from braking when stuck; one that starts from
+    braking explores with both solvers instead; no later solve does either."""
+    accels = np.zeros((1, 4, 2))
+    shifted, brake = Start(accels, "shifted", None, None), Start(accels, "brake", None, None)
+    assert shifted.first_solve(1) == {"restart": True, "explore": False}
+    assert brake.first_solve(1) == {"restart": False, "explore": True}
+    for start in (shifted, brake):
+        assert start.first_solve(2) == {"restart": False, "explore": False}
+
+
+def test_heading_plan_follows_its_own_rollout_and_heads_for_the_targets():
+    """From rest 0.5 m from the target (dt 0.4, a_max 2, v_max 1), along x:
+    k = 0: wanted min(1, 0.5 / 0.4) = 1, a = min(1 / 0.4, 2) = 2; v = 0.8, x = 0.5 * 0.16 * 2 = 0.16.
+    k = 1: 0.34 m left, wanted 0.34 / 0.4 = 0.85, a = (0.85 - 0.8) / 0.4 = 0.125; v = 0.85,
+           x = 0.16 + 0.32 + 0.01 = 0.49.
+    k = 2: 0.01 m left, wanted 0.025, a = (0.025 - 0.85) / 0.4 = -2.0625 -> -2; v = 0.05,
+           x = 0.49 + 0.34 - 0.16 = 0.67.
+    k = 3: 0.17 m past it, wanted -0.425, a = (-0.425 - 0.05) / 0.4 = -1.1875.
+    The goal is elsewhere (10 m north): the plan heads for ``targets``, Eq. 8's target."""
+    cfg = MPCConfig()
+    data = StepData(
+        np.zeros((1, 4)), np.zeros((1, 2)), np.array([[0.0, 10.0]]), np.ones(1, bool),
+        targets=np.array([[0.5, 0.0]]),
+    )  # fmt: skip
+    plan = heading_plan(data, cfg)
+    np.testing.assert_allclose(plan[0, :, 0], [2.0, 0.125, -2.0, -1.1875], atol=1e-12)
+    np.testing.assert_allclose(plan[0, :, 1], 0.0, atol=1e-12)
