@@ -93,3 +93,15 @@ def test_mapped_costs_check_their_inputs():
     with pytest.raises(ValueError, match="2 plans but 1 parameter vectors"):
         local.costs([np.zeros((H, 2))] * 2, [q])
     assert local.costs([], []).shape == (0,)
+
+
+def test_every_robots_flocking_weights_follow_its_pairs():
+    """Robot i's flocking weights are those of its pairs (i, j), j != i in index order; robot 2 has arrived,
+    so every pair with it has weight 0. Robot 0: (0,1), (0,2), (0,3); robot 3: (0,3), (1,3), (2,3)."""
+    rng = np.random.default_rng(0)
+    step = LocalNLP(CFG, M, N).step_params(_data(rng))
+    positions, humans = np.zeros((M, H, 2)), np.zeros((H, N, 2))
+    # state 4 + last action 2 + goal 2 + target 2 + slack 1 = 11 entries before the weights.
+    weights = np.stack([step.row(i, positions, humans)[11 : 11 + M - 1] for i in range(M)])
+    expected = [[7.0, 0.0, 7.0], [7.0, 0.0, 7.0], [0.0, 0.0, 0.0], [7.0, 7.0, 0.0]]
+    np.testing.assert_array_equal(weights, expected)
