@@ -25,7 +25,7 @@ class LocalParams:
     """Every robot's local parameters at one step, for any plans of the others and any predictions."""
 
     data: StepData
-    head: np.ndarray  # (M, 9 + M-1): state, last action, goal, target, slack, flocking weights
+    head: np.ndarray  # (M, 11 + M-1): state, last action, goal, target, slack, flocking weights
     others: np.ndarray  # (M, M-1) int: robot i's others in index order
     margins: np.ndarray  # (H * N_h,) every human's margin at every step, row-major
 
