@@ -37,6 +37,12 @@ def test_conformal_quantile_by_hand():
     assert conformal_quantile(scores, 0.5) == 6.0  # rank ceil(5.5) = 6
 
 
+def test_a_rank_that_is_an_integer_is_not_rounded_up_by_binary_rounding():
+    # n = 9, alpha = 0.7: (n + 1)(1 - alpha) = 3 exactly, but 10 * (1.0 - 0.7) is 3.0000000000000004 in
+    # floating point; the rank is 3 (the third smallest of 1..9), not 4.
+    assert conformal_quantile(np.arange(9.0, 0.0, -1.0), 0.7) == 3.0
+
+
 def test_too_few_samples_give_infinity():
     assert conformal_quantile(np.arange(1.0, 6.0), 0.1) == math.inf  # rank ceil(6 * 0.9) = 6 > 5
     assert conformal_quantile(np.array([]), 0.1) == math.inf
