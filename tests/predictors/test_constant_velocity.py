@@ -30,3 +30,23 @@ def test_rollout_and_casadi_function_agree(seed):
         function(predictor.encode(history, mask, humans), robots_future.reshape(-1))
     ).ravel()
     np.testing.assert_allclose(symbolic, numeric.reshape(-1), rtol=0, atol=1e-9)
+
+
+def test_the_velocity_is_the_last_consecutive_difference():
+    # Agent 0 walks (0, 0) -> (0.4, 0) -> (0.4, 0.8): the last difference, (0, 0.8) / 0.4 = (0, 2) m/s, from
+    # the last position (0.4, 0.8). Agent 1 is seen at steps 0 and 2 but not 1: no two consecutive steps at
+    # the end, so it stands at its last position (3, 3) rather than moving at (3 - 1) / 0.8 m/s.
+    history = np.array([[[0.0, 0.0], [1.0, 1.0]], [[0.4, 0.0], [0.0, 0.0]], [[0.4, 0.8], [3.0, 3.0]]])
+    mask = np.array([[True, True], [True, False], [True, True]])
+    out = ConstantVelocity().rollout(history, mask, None, np.array([0, 1]), horizon=2)
+    np.testing.assert_allclose(out[:, 0], [[0.4, 1.6], [0.4, 2.4]])
+    np.testing.assert_allclose(out[:, 1], [[3.0, 3.0], [3.0, 3.0]])
+
+
+def test_an_agent_never_observed_cannot_be_predicted():
+    history = np.zeros((2, 2, 2))
+    mask = np.array([[True, False], [True, False]])
+    with pytest.raises(ValueError, match="agent 1 is never observed"):
+        ConstantVelocity().rollout(history, mask, None, np.array([0, 1]), horizon=2)
+    with pytest.raises(ValueError, match="obs_len must be >= 1"):
+        ConstantVelocity(obs_len=0)
