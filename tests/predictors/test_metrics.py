@@ -112,3 +112,50 @@ def test_summarize_averages_scenes_and_gives_percentages():
     assert summary["col_ii"] == pytest.approx(100 / 3)
     assert "topk_ade" not in summary
     assert summarize([]) == {"scenes": 0}
+
+
+def test_vectorised_fde_compares_the_last_steps():
+    # Truth moves: the last step's truth is (0, 0), the one before (9, 9); FDE = |(3, 4) - (0, 0)| = 5.
+    pred = np.array([[0.0, 0.0], [3.0, 4.0]])
+    truth = np.array([[9.0, 9.0], [0.0, 0.0]])
+    assert fde(pred, truth) == pytest.approx(5.0)
+
+
+def two_neighbours_truth():
+    """Primary walks +x at 0.5 m/step; neighbour 1 walks 5 m beside it, neighbour 2 0.15 m beside it (within
+    2 x 0.1 m: touching)."""
+    truth = np.zeros((21, 3, 2))
+    truth[:, :, 0] = 0.5 * np.arange(21)[:, None]
+    truth[:, 1, 1], truth[:, 2, 1] = 5.0, 0.15
+    return truth
+
+
+def test_collisions_check_every_neighbour_against_its_own_path():
+    """Col-II: the true path of neighbour 2 (the second) touches the primary's prediction. Col-I: the
+    *predicted* path of neighbour 1 (column 1) touches it, neighbour 2's prediction is 5 m away."""
+    truth, frames = two_neighbours_truth(), np.arange(0, 210, 10)
+    prediction = truth[9:].copy()
+    prediction[:, 1, 1], prediction[:, 2, 1] = -0.15, -5.0
+    score = score_scene(prediction, [0, 1, 2], truth, frames, obs_len=9)
+    assert score.col_ii is True and score.col_i is True
+    # Only the other neighbour's prediction near the primary: no Col-I.
+    prediction[:, 1, 1], prediction[:, 2, 1] = 5.0, -5.0
+    assert score_scene(prediction, [0, 1, 2], truth, frames, obs_len=9).col_i is False
+    # Predicting neighbour 1 only, while the truth has 1 and 2: Col-I does not apply.
+    assert score_scene(prediction[:, :2], [0, 1], truth, frames, obs_len=9).col_i is None
+
+
+def test_predictions_and_samples_are_rounded_to_centimetres():
+    """As the TrajNet++ evaluator does: 4 mm off rounds to the exact truth (the truth is on a 0.5 m grid)."""
+    truth, frames = walking_truth(), np.arange(0, 210, 10)
+    prediction = truth[9:, :2] + [0.004, -0.004]
+    score = score_scene(prediction, [0, 1], truth, frames, obs_len=9, samples=prediction[None])
+    assert score.ade == 0.0 and score.fde == 0.0
+    assert score.topk_ade == 0.0 and score.topk_fde == 0.0
+
+
+def test_summarize_gives_top_k_only_when_every_scene_has_it():
+    with_k = [SceneScore(1.0, 2.0, None, False, 0.5, 1.0), SceneScore(2.0, 3.0, None, False, 1.5, 2.0)]
+    summary = summarize(with_k)
+    assert summary["topk_ade"] == pytest.approx(1.0) and summary["topk_fde"] == pytest.approx(1.5)
+    assert "topk_ade" not in summarize([*with_k, SceneScore(3.0, 4.0, None, False)])
