@@ -1,12 +1,15 @@
 """Algorithm 2 (DMPC): the epsilon rule, the epsilon-Nash stop, and reaching goals."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from mpc.cmpc import CMPC
-from mpc.config import MPCConfig
+from mpc.config import DMPC_UPDATES, MPCConfig
 from mpc.dmpc import DMPC
 from mpc.dmpc_keep import accept
+from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory, Start
 from mpc.nlp import StepData
 from tests.mpc.loop import drive
@@ -84,8 +87,11 @@ def test_close_stops_the_threads_and_a_later_solve_starts_them_again():
     np.testing.assert_allclose(first.accels, again.accels, atol=1e-12)
 
 
-def test_a_failed_local_solve_does_not_fail_a_step_that_solved(monkeypatch):
-    cfg = MPCConfig()
+@pytest.mark.parametrize("update", DMPC_UPDATES)
+def test_a_failed_local_solve_does_not_fail_a_step_that_solved(monkeypatch, update):
+    # Robot 1 fails, robot 0 solves: with Gauss-Seidel robot 1 is the last of the sweep, whose failure must
+    # not hide robot 0's success.
+    cfg = MPCConfig(dmpc_update=update)
     data = data_two_robots()
     solver = DMPC(cfg, 2, 0)
     real_solve = solver.local.solve
@@ -101,3 +107,96 @@ def test_a_failed_local_solve_does_not_fail_a_step_that_solved(monkeypatch):
     monkeypatch.setattr(solver.local, "solve", robot_1_fails)
     result = solver.solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
     assert result.solved and result.status == "ok"
+
+
+def test_a_step_in_which_every_solve_fails_never_converges():
+    """No robot keeps a new plan when every solve fails, but that is no epsilon-Nash equilibrium: the loop
+    runs on to j_max and the step reports the failure."""
+    cfg = MPCConfig(solver_max_iter=0, dmpc_stop="no_improvement", j_max=3)
+    data = data_two_robots()
+    result = DMPC(cfg, 2, 0).solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
+    assert not result.solved and not result.converged
+    assert result.iterations == 3 and result.status == "Maximum_Iterations_Exceeded"
+
+
+def test_the_epsilon_nash_check_holds_only_when_every_robot_passes():
+    """Lines 12-16 on plans made by hand: robot 0 keeps its plan (passes), robot 1's new plan accelerates away
+    from its goal at 1 m/s^2 (its C_i rises by far more than epsilon): not at an equilibrium. With both
+    plans unchanged it is."""
+    cfg = MPCConfig()
+    data = data_two_robots()
+    solver = DMPC(cfg, 2, 0)
+    step = solver.local.step_params(data)
+    moving, nobody = np.arange(2), np.zeros((cfg.horizon, 0, 2))
+    old = np.zeros((2, cfg.horizon, 2))
+    new = old.copy()
+    new[1, :, 1] = -1.0
+    new_positions = rollout_numpy(data.states, new, cfg.dt)[0]
+    assert not solver._at_nash(step, moving, old, new, new_positions, nobody)
+    old_positions = rollout_numpy(data.states, old, cfg.dt)[0]
+    assert solver._at_nash(step, moving, old, old, old_positions, nobody)
+
+
+def test_the_time_limit_ends_the_loop_after_the_iteration_that_passes_it():
+    cfg = MPCConfig(time_limit_s=1e-9)
+    data = data_two_robots()
+    result = DMPC(cfg, 2, 0).solve(data, no_humans(cfg), PlanMemory(cfg).start(data))
+    assert result.iterations == 1 and result.status == "timeout"
+
+
+def _copy(a):
+    return None if a is None else np.array(a)
+
+
+def test_the_first_solves_warm_start_explore_and_restart_as_the_start_asks():
+    """Iteration 1 from a shifted start: each robot's solve is warm-started with its own shifted multipliers;
+    robot 0, which stands on a human (penalty far above restart_penalty), solves again from braking without
+    multipliers (multi_start). From a braking start the first solves explore instead, and later ones don't."""
+    cfg = MPCConfig(j_max=2)
+    data = data_two_robots()
+
+    def human_on_robot_0(robots_future):
+        return np.tile(data.states[None, :1, :2], (cfg.horizon, 1, 1))
+
+    solver = DMPC(cfg, 2, 1)
+    real_solve, calls = solver.local.solve, []
+
+    def recording(i, params, accels0, lam_x0=None, lam_g0=None, explore=False):
+        # copies: the loop later writes kept plans' multipliers into the arrays these are views of
+        calls.append((int(i), accels0.copy(), _copy(lam_x0), _copy(lam_g0), explore))
+        return real_solve(i, params, accels0, lam_x0, lam_g0, explore)
+
+    solver.local.solve = recording  # type: ignore[method-assign]
+    lam_x = np.arange(2 * cfg.horizon * 2, dtype=float).reshape(2, cfg.horizon, 2)
+    shifted = Start(np.zeros((2, cfg.horizon, 2)), "shifted", lam_x, -lam_x)
+    solver.solve(data, human_on_robot_0, shifted)
+    assert [c[0] for c in calls[:3]] == [0, 1, 0]
+    for i in (0, 1):
+        np.testing.assert_array_equal(calls[i][2], lam_x[i])
+        np.testing.assert_array_equal(calls[i][3], -lam_x[i])
+    restart = calls[2]
+    np.testing.assert_array_equal(restart[1], braking(data.states, cfg.horizon, cfg.dt, cfg.a_max)[0])
+    assert restart[2] is None and restart[3] is None
+    assert not any(c[4] for c in calls)
+    calls.clear()
+    solver.solve(data, human_on_robot_0, PlanMemory(cfg).start(data))
+    assert [c[4] for c in calls[:2]] == [True, True]  # braking start: both solvers on the first solves
+    assert not any(c[4] for c in calls[2:]) and len(calls) > 2
+
+
+def test_a_restart_keeps_the_lower_cost_of_the_two_solutions(monkeypatch):
+    """multi_start keeps whichever of the first solution and the one from braking costs less (C_i)."""
+    cfg = MPCConfig()
+    data = data_two_robots()
+    solver = DMPC(cfg, 2, 1)
+    on_robot_0 = np.tile(data.states[None, :1, :2], (cfg.horizon, 1, 1))
+    params = {i: solver.local.params(i, data, np.zeros((2, cfg.horizon, 2)), on_robot_0) for i in (0, 1)}
+    first = solver.local.solve(0, params[0], np.zeros((cfg.horizon, 2)))
+    assert first.success and solver.local.penalty(first.accels, params[0]) > cfg.restart_penalty
+    # The solve from braking (faked) costs 1 more, then 1 less, than the first solution.
+    for shift, keeps_first in ((1.0, True), (-1.0, False)):
+        other = dataclasses.replace(first, accels=first.accels + 0.01, cost=first.cost + shift)
+        monkeypatch.setattr(solver.local, "solve", lambda *args, other=other: other)
+        out, extra = solver._restart(data, np.array([0]), params, [first])
+        assert len(extra) == 1 and extra[0] is other
+        assert out[0] is (first if keeps_first else other)

@@ -53,6 +53,12 @@ def test_jacobi_cycles_between_colliding_and_safe_plans():
     f = np.asarray(result.potentials)
     assert result.iterations == cfg.j_max and not result.converged
     assert np.all(f[0::2] > 1e6) and np.all(f[1::2] < 1e3)  # a period-2 cycle
+    # The step reports F of the plans it returns (the last iteration's), not of an earlier iteration.
+    assert result.potential == f[-1]
+    joint = DMPC(cfg, 3, 0).joint
+    assert result.potential == pytest.approx(
+        joint.potential(result.accels, row_crossing(3), result.prediction)
+    )
 
 
 @pytest.mark.parametrize("update", ["gauss_seidel", "sequential_accept"])

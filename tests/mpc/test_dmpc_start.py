@@ -88,3 +88,18 @@ def test_a_step_that_does_not_start_from_braking_keeps_the_shifted_plan():
         results.append(solve(setting, data, memory))
     assert np.array_equal(results[0].accels, results[1].accels)
     assert results[0].potentials == results[1].potentials
+
+
+def test_the_heading_start_leaves_a_pinned_robot_braking():
+    """The triangle at rest with robot 1 pinned (on_goal="brake") 10 m short of its goal: the heading start is
+    taken for robots 0 and 2, but robot 1 does not play, so its plan stays braking (all zeros from rest)
+    rather than heading for its goal."""
+    triangle = np.array([[0.0, 0.0], [1.2, 0.0], [0.6, 0.6 * np.sqrt(3.0)]])
+    data = at_rest(triangle, triangle + [0.0, 10.0])
+    data = StepData(data.states, data.last_actions, data.goals, np.array([True, False, True]))
+    cfg = MPCConfig(
+        dmpc_update="gauss_seidel", dmpc_stop="no_improvement", j_max=2, on_goal="brake", dmpc_start="heading"
+    )
+    result = solve(cfg, data)
+    np.testing.assert_array_equal(result.accels[1], 0.0)
+    assert np.all(result.accels[[0, 2], 0, 1] > 1.0)  # the others left at once
