@@ -28,6 +28,7 @@ def test_accept_requires_an_improvement_of_epsilon():
     assert accept(9.998, 10.0, 1e-3)
     assert not accept(9.9995, 10.0, 1e-3)  # better, but by less than epsilon
     assert not accept(10.5, 10.0, 1e-3)
+    assert accept(9.0, 10.0, 1.0)  # exactly epsilon better (exact in binary): "at least epsilon" keeps it
 
 
 def test_a_plan_that_does_not_improve_by_epsilon_is_rejected():
