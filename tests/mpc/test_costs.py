@@ -138,15 +138,19 @@ def test_potential_counts_each_pair_once():
     assert c1 + c2 - F == pytest.approx(j12)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_lemma_1_local_gradient_equals_potential_gradient(seed):
-    """dC_i/du_i = dF/du_i (Lemma 1) for random states, plans, goals and predictions, 3 robots, 4 humans."""
+@pytest.mark.parametrize(("seed", "arrived"), [(0, None), (1, None), (2, None), (3, [False, True, False])])
+def test_lemma_1_local_gradient_equals_potential_gradient(seed, arrived):
+    """dC_i/du_i = dF/du_i (Lemma 1) for random states, plans, goals and predictions, 3 robots, 4 humans.
+    With robot 1 arrived the pairs' flocking weights differ ((0,1) and (1,2) 0, (0,2) w_floc): each pair's
+    own weight must reach both F and every C_i."""
     m, n, h = 3, 4, CFG.horizon
     rng = np.random.default_rng(seed)
     joint, local = JointNLP(CFG, m, n), LocalNLP(CFG, m, n)
     states = np.concatenate([rng.uniform(-1.5, 1.5, (m, 2)), rng.uniform(-1, 1, (m, 2))], axis=1)
     # Some robot-robot and robot-human distances inside the penalty zone, so every term contributes.
-    data = StepData(states, rng.uniform(-2, 2, (m, 2)), rng.uniform(-4, 4, (m, 2)), np.ones(m, bool))
+    data = StepData(
+        states, rng.uniform(-2, 2, (m, 2)), rng.uniform(-4, 4, (m, 2)), np.ones(m, bool), arrived=arrived
+    )
     humans = rng.uniform(-2, 2, (h, n, 2))
     accels = rng.uniform(-2, 2, (m, h, 2))
     u = ca.SX.sym("u", 2 * h * m)
@@ -231,3 +235,19 @@ def test_collision_penalty_counts_robot_robot_and_robot_human_by_hand():
     humans = ca.DM([[0.0], [1.0]])
     expected = 1e7 * sum(math.log1p(math.exp(30 * g)) / 30 for g in (0.39, -0.36, -0.61))
     assert value(costs.collision_penalty(tracks, humans, 1, cfg)) == pytest.approx(expected, rel=1e-12)
+
+
+def test_each_weight_multiplies_its_own_term():
+    """Eq. 13 with distinct weights, so that no term can borrow another's: w_goal 1, w_acce 2, w_jerk 3,
+    w_coll 5, on one robot standing at the origin, H = 1, goal (0, 1), the reference 0.4 m towards it, control
+    a_0 = (1, 0) after a_-1 = (0, 0), one human at (1, 0):
+    goal: the position after one step is (0.08, 0) (0.4^2 / 2 * 1), error to (0, 0.4): 0.0064 + 0.16 = 0.1664,
+          divided by 1 + 0.001; acce: 1; jerk: 1;
+    coll: velocity (0.4, 0), g = 0.64 + 0.5 * 0.16 - 0.92^2 = -0.1264, smax(g) = log1p(exp(30 g)) / 30."""
+    cfg = MPCConfig(horizon=1, w_goal=1.0, w_acce=2.0, w_jerk=3.0, w_coll=5.0)
+    track = costs.make_track(ca.DM.zeros(4), ca.DM([1.0, 0.0]), ca.DM.zeros(2), ca.DM([0.0, 1.0]), cfg.dt)
+    g = 0.64 + 0.5 * 0.16 - 0.92**2
+    expected = 0.1664 / 1.001 + 2.0 + 3.0 + 5.0 * math.log1p(math.exp(30 * g)) / 30
+    assert value(costs.individual_cost(track, ca.DM([1.0, 0.0]), 1, cfg)) == pytest.approx(
+        expected, rel=1e-12
+    )
