@@ -201,3 +201,57 @@ def test_a_restart_keeps_the_lower_cost_of_the_two_solutions(monkeypatch):
         out, extra = solver._restart(data, np.array([0]), params, [first])
         assert len(extra) == 1 and extra[0] is other
         assert out[0] is (first if keeps_first else other)
+
+
+def test_each_iteration_predicts_the_humans_for_the_plans_of_the_previous_one():
+    """Algorithm 2, line 2: iteration j predicts from the robots' plans of iteration j-1, given to the
+    predictor as (H, M, 2). The predictor here depends on those plans (one human 3 m east of robot 0's), as a
+    learned one does: iteration 1 predicts for u^(0), iteration 2 for the plans a 1-iteration run returns."""
+    cfg = MPCConfig(j_max=3)
+    data = data_two_robots()
+    calls = []
+
+    def predict(robots_future):
+        calls.append(np.array(robots_future))
+        return robots_future[:, :1] + [3.0, 0.0]
+
+    start = PlanMemory(cfg).start(data)
+    result = DMPC(cfg, 2, 1).solve(data, predict, start)
+    assert result.iterations >= 2 and len(calls) == result.iterations == len(result.predictions)
+    for call, prediction in zip(calls, result.predictions, strict=True):
+        assert call.shape == (cfg.horizon, 2, 2)
+        np.testing.assert_array_equal(prediction, call[:, :1] + [3.0, 0.0])
+    first = rollout_numpy(data.states, start.accels, cfg.dt)[0].transpose(1, 0, 2)
+    np.testing.assert_array_equal(calls[0], first)
+    one = DMPC(cfg.replace(j_max=1), 2, 1).solve(data, predict, start)  # appends to calls after [1]
+    np.testing.assert_array_equal(calls[1], one.positions.transpose(1, 0, 2))
+
+
+def test_an_iteration_in_which_every_solve_fails_keeps_the_last_solved_prediction():
+    """Iteration 1 solves, iteration 2's solves all fail (faked): the step returns iteration 1's plans, with
+    the prediction they were optimised against (iteration 1's, not iteration 2's, which was made for other
+    plans) and F under that prediction."""
+    cfg = MPCConfig(j_max=2)
+    data = data_two_robots()
+    solver = DMPC(cfg, 2, 1)
+    real_solve, count = solver.local.solve, []
+
+    def fails_after_iteration_1(i, *args):
+        count.append(i)
+        sol = real_solve(i, *args)
+        return sol if len(count) <= 2 else dataclasses.replace(sol, status="Fatrop_Failed", success=False)
+
+    solver.local.solve = fails_after_iteration_1  # type: ignore[method-assign]
+
+    def predict(robots_future):
+        # Depends on the plans: one human 0.9 m west of robot 0's plan, near enough for its penalty to differ
+        # between the two iterations' predictions.
+        return robots_future[:, :1] - [0.9, 0.0]
+
+    result = solver.solve(data, predict, PlanMemory(cfg).start(data))
+    assert result.iterations == 2 and result.solved and not result.converged
+    first, second = result.predictions
+    f_first, f_second = (solver.joint.potential(result.accels, data, p) for p in (first, second))
+    assert abs(f_second - f_first) > 1.0
+    np.testing.assert_array_equal(result.prediction, first)
+    assert result.potential == solver.joint.potential(result.accels, data, first)

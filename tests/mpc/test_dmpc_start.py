@@ -6,6 +6,7 @@ import pytest
 
 from mpc.config import MPCConfig
 from mpc.dmpc import DMPC
+from mpc.dynamics import rollout_numpy
 from mpc.errors import MPCConfigError
 from mpc.fallback import PlanMemory, heading_plan
 from mpc.nlp import StepData
@@ -103,3 +104,36 @@ def test_the_heading_start_leaves_a_pinned_robot_braking():
     result = solve(cfg, data)
     np.testing.assert_array_equal(result.accels[1], 0.0)
     assert np.all(result.accels[[0, 2], 0, 1] > 1.0)  # the others left at once
+
+
+def test_the_first_iteration_predicts_for_the_start_it_takes():
+    """The heading start is judged under the humans predicted for braking. Taken, iteration 1 predicts again,
+    for the heading plans; not taken, the braking prediction serves iteration 1 and each later iteration
+    predicts for the plans of the one before (one prediction per iteration)."""
+    calls = []
+
+    def predict(robots_future):  # one human 3 m east of robot 0's plan: depends on the plans
+        calls.append(np.array(robots_future))
+        return robots_future[:, :1] + [3.0, 0.0]
+
+    def run(cfg, data):
+        solver = DMPC(cfg, data.n_robots, 1)
+        try:
+            return solver.solve(data, predict, PlanMemory(cfg).start(data))
+        finally:
+            solver.close()
+
+    triangle = np.array([[0.0, 0.0], [1.2, 0.0], [0.6, 0.6 * np.sqrt(3.0)]])
+    data = at_rest(triangle, triangle + [0.0, 10.0])
+    cfg = MPCConfig(dmpc_update="gauss_seidel", dmpc_stop="no_improvement", j_max=1, dmpc_start="heading")
+    run(cfg, data)
+    assert len(calls) == 2
+    np.testing.assert_array_equal(calls[0], np.repeat(triangle[None], cfg.horizon, axis=0))  # braking at rest
+    heading = rollout_numpy(data.states, heading_plan(data, cfg), cfg.dt)[0].transpose(1, 0, 2)
+    np.testing.assert_array_equal(calls[1], heading)
+    # Two robots swapping places 1 m apart: heading costs more (test above), braking is kept.
+    calls.clear()
+    swap = at_rest([[0.0, 0.0], [1.0, 0.0]], [[1.0, 0.0], [0.0, 0.0]])
+    result = run(cfg.replace(j_max=3), swap)
+    assert result.iterations > 1 and len(calls) == result.iterations
+    np.testing.assert_array_equal(calls[0], np.repeat(swap.states[None, :, :2], cfg.horizon, axis=0))
