@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from mpc.config import MPCConfig
 from mpc.guidance import (
     LOOKAHEAD,
     RING_NODES,
@@ -33,6 +34,9 @@ def test_a_row_across_the_line_is_walked_around_at_its_near_end():
     target = guidance_targets(np.array([[0.0, -3.0]]), np.array([[0.0, 3.0]]), standing, 0.9)[0]
     heading = target - [0.0, -3.0]
     assert heading[0] > 0 and np.linalg.norm(heading) >= LOOKAHEAD - 1e-9
+    # Beyond Eq. 8's reach over the horizon (v_max H tau = 1.6 m), so the reference keeps moving at v_max.
+    cfg = MPCConfig()
+    assert np.linalg.norm(heading) > cfg.v_max * cfg.horizon * cfg.dt
     # The corner it heads for is the ring node past the right end: its line is clear of every disc.
     assert segment_distances(np.array([0.0, -3.0]), target, standing).min() >= 0.9 - 1e-9
     # The mirror image goes round the other end.
@@ -130,3 +134,21 @@ def test_a_disc_the_robot_stands_in_does_not_hide_the_others():
     target = guidance_targets(np.array([[0.0, -0.5]]), np.array([[0.0, -6.0]]), standing, 0.9)[0]
     assert abs(target[0]) > 0.5
     assert segment_distances(np.array([0.0, -0.5]), target, standing[1:]).min() >= 0.9 - 1e-9
+
+
+def test_a_disc_near_the_robot_but_not_around_it_still_blocks():
+    # The robot 1.2 m from a human (outside its 0.9 m disc), the human straight between it and its goal:
+    # only a disc the robot stands in is ignored, so this one is walked around.
+    target = guidance_targets(np.array([[0.0, -1.2]]), np.array([[0.0, 4.0]]), np.array([[0.0, 0.0]]), 0.9)
+    assert abs(target[0, 0]) > 0.5
+
+
+def test_a_near_corner_is_prolonged_beyond_the_references_reach():
+    # The robot 1.24 m from a human (clearance 1) that blocks its way: the first corner, on the ring just
+    # outside the disc (1.05 m away), is nearer than v_max H tau = 1.6 m, so the target lies LOOKAHEAD along
+    # that direction and Eq. 8's reference keeps moving at v_max over the whole horizon.
+    start = np.array([0.3, -1.2])
+    target = guidance_targets(start[None], np.array([[0.3, 5.0]]), np.array([[0.0, 0.0]]), 1.0)[0]
+    cfg = MPCConfig()
+    assert np.linalg.norm(target - start) == pytest.approx(LOOKAHEAD)
+    assert LOOKAHEAD > cfg.v_max * cfg.horizon * cfg.dt
