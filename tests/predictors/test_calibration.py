@@ -85,6 +85,8 @@ def test_coverage_by_hand():
     assert math.isnan(coverage(np.full((2, 1), NAN), (1.0,))[0])  # nothing to cover
     with pytest.raises(PredictorError, match="1 quantiles for errors of 2 horizon steps"):
         coverage(errors, (1.0,))
+    with pytest.raises(PredictorError, match="3 quantiles for errors of 2 horizon steps"):
+        coverage(errors, (1.0, 1.0, 1.0))
 
 
 def test_held_out_coverage_on_exchangeable_data():

@@ -159,3 +159,12 @@ def test_summarize_gives_top_k_only_when_every_scene_has_it():
     summary = summarize(with_k)
     assert summary["topk_ade"] == pytest.approx(1.0) and summary["topk_fde"] == pytest.approx(1.5)
     assert "topk_ade" not in summarize([*with_k, SceneScore(3.0, 4.0, None, False)])
+
+
+def test_a_neighbour_that_appears_only_after_the_observation_is_not_scored():
+    """TrajNet++ drops neighbours absent from every observed step: neighbour 2 walks right beside the primary
+    (0.1 m) from the first predicted step on, yet is no Col-II collision; neighbour 1 is 0.35 m away."""
+    truth = walking_truth()
+    truth[9:, 2] = truth[9:, 0] + [0.0, 0.1]
+    score = score_scene(truth[9:, :1], [0], truth, np.arange(0, 210, 10), obs_len=9)
+    assert score.col_ii is False
