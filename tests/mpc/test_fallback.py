@@ -1,6 +1,7 @@
 """A failing step never ends an episode: shifted previous plan, else braking; the status is recorded."""
 
 import numpy as np
+import pytest
 
 from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
@@ -148,3 +149,26 @@ def test_heading_plan_follows_its_own_rollout_and_heads_for_the_targets():
     plan = heading_plan(data, cfg)
     np.testing.assert_allclose(plan[0, :, 0], [2.0, 0.125, -2.0, -1.1875], atol=1e-12)
     np.testing.assert_allclose(plan[0, :, 1], 0.0, atol=1e-12)
+
+
+def test_reset_forgets_the_solved_actions_of_the_last_episode():
+    # An episode ends with a fresh solved plan; the next one starts with a failing step (braking applied,
+    # committed unsolved): the step after must brake again, not shift that braking plan as if it were solved.
+    cfg = MPCConfig()
+    data = moving_data()
+    memory = PlanMemory(cfg)
+    memory.commit(np.zeros((2, cfg.horizon, 2)), solved=True)
+    memory.reset()
+    brake = memory.start(data)
+    assert brake.kind == "brake"
+    memory.commit(brake.accels, solved=False)
+    assert memory.start(data).kind == "brake"
+
+
+def test_multipliers_must_come_in_pairs():
+    cfg = MPCConfig()
+    memory = PlanMemory(cfg)
+    plan = np.zeros((2, cfg.horizon, 2))
+    memory.commit(plan, solved=True, lam_x=np.zeros_like(plan), lam_g=None)
+    with pytest.raises(RuntimeError, match="commit both multipliers or neither"):
+        memory.commit(plan, solved=False)
