@@ -1,0 +1,209 @@
+"""What a sweep's resume and its records rest on, checked against hand-computed values: the episode log made
+durable line by line, the record types it refuses, the solver figures a record states, the cells' seeds and
+order, and what a rerun says it found done."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.experiments.cells import Cell, Experiment, get_experiment
+from pipelines.experiments.log import EPISODES_FILE, EpisodeLog, episode_log
+from pipelines.experiments.sweep import SweepConfig, run_sweep
+from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.record import SolverStats, step_time_stats
+from pipelines.loop.spec import UnknownController
+
+# ----------------------------------------------------------------------------------------------------------
+# The episode log: each line durable before the next episode is taken
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_each_appended_line_is_on_disk_before_append_returns(tmp_path, monkeypatch):
+    """A kill right after ``append`` must not lose the line (the resume would skip nothing and the episode
+    would silently run again, or worse, the file would end torn in the middle): append fsyncs the file, and
+    does so once the whole line has been written."""
+    log = EpisodeLog(tmp_path / "log.jsonl")
+    synced: list[bytes] = []
+    real_fsync = os.fsync
+
+    def fsync(fd):
+        synced.append((tmp_path / "log.jsonl").read_bytes())  # what the file holds when it is made durable
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    log.append({"key": "a", "x": 1})
+    log.append({"key": "b", "x": 2})
+    assert synced == [b'{"key":"a","x":1}\n', b'{"key":"a","x":1}\n{"key":"b","x":2}\n']
+
+
+def test_the_repair_of_a_torn_tail_is_made_durable(tmp_path, monkeypatch):
+    """The cut-off tail must stay cut off after a crash, or the next append would glue onto the torn bytes."""
+    path = tmp_path / "log.jsonl"
+    path.write_bytes(b'{"key":"a"}\n{"key":"b", "x"')
+    synced: list[bytes] = []
+    monkeypatch.setattr(os, "fsync", lambda fd: synced.append(path.read_bytes()))
+    assert list(EpisodeLog(path).load()) == ["a"]
+    assert synced == [b'{"key":"a"}\n']
+
+
+# Every typed field of a record, written out by hand (not taken from log.METRIC_KINDS, so that a field
+# dropped from the check is noticed): the string "1", which the record's own reading would take for 1 (or
+# True), where each expects a number, count or boolean is refused.
+TYPED_FIELDS = [
+    *(("metrics", name) for name in ("success", "collision", "contact", "discomfort", "timeout")),
+    *(("metrics", name) for name in ("travel_time", "min_distance", "min_distance_robots")),
+    *(("metrics", name) for name in ("min_distance_humans", "path_length", "reach_times")),
+    *(("metrics", name) for name in ("discomfort_steps", "n_steps", "collision_steps", "contact_steps")),
+    ("metrics", "min_distance_between_steps"),
+    ("metrics", "collision_between_steps"),
+    ("metrics", "contact_between_steps"),
+    *(("solver", name) for name in ("steps", "fallback_steps", "total_ms", "median_ms", "p95_ms")),
+    *(("solver", name) for name in ("max_ms", "mean_iterations", "max_iterations")),
+    ("", "wall_s"),
+    ("", "cpu_s"),
+]
+
+
+@pytest.fixture(scope="module")
+def one_record(tmp_path_factory) -> dict:
+    out = tmp_path_factory.mktemp("one")
+    run_sweep(SweepConfig(get_experiment("baselines"), out, 1, humans=(3,), backend="inline", progress=False))
+    return json.loads((out / EPISODES_FILE).read_text().splitlines()[0])
+
+
+@pytest.mark.parametrize(("part", "name"), TYPED_FIELDS, ids=[f"{p or 'rec'}-{n}" for p, n in TYPED_FIELDS])
+def test_every_typed_field_of_a_record_is_checked(one_record, tmp_path, part, name):
+    record = json.loads(json.dumps(one_record))
+    (record[part] if part else record)[name] = "1"
+    (tmp_path / EPISODES_FILE).write_text(json.dumps(record) + "\n")
+    with pytest.raises(PipelineError, match=rf":1: record's {part + ' ' if part else ''}'{name}' is not"):
+        episode_log(tmp_path).load()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Solver figures of a record
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_step_time_stats_hand_values():
+    # 1..20 ms: median (10 + 11) / 2 = 10.5; p95 by linear interpolation at rank 0.95 * 19 = 18.05, between
+    # 19 and 20 ms: 19 + 0.05 = 19.05; max 20. (A mean would be 10.5 too, so the skewed set below tells
+    # median from mean: 1, 1, 1, 1, 16 ms -> median 1, mean 4.)
+    stats = step_time_stats([i / 1000 for i in range(1, 21)])
+    assert stats == pytest.approx({"median_ms": 10.5, "p95_ms": 19.05, "max_ms": 20.0})
+    assert step_time_stats([0.001, 0.001, 0.001, 0.001, 0.016])["median_ms"] == pytest.approx(1.0)
+    assert step_time_stats([]) == {"median_ms": None, "p95_ms": None, "max_ms": None}
+
+
+def test_solver_stats_of_steps_hand_values():
+    stats = SolverStats.of_steps(
+        [0.002, 0.004, 0.012], [3, 1, 2], ["ok", "ok", "fail"], [None, "straight", None]
+    )
+    assert (stats.steps, stats.total_ms) == (3, pytest.approx(18.0))  # 2 + 4 + 12 ms
+    assert (stats.mean_iterations, stats.max_iterations) == (pytest.approx(2.0), 3)  # (3+1+2)/3; max 3
+    assert (stats.median_ms, stats.max_ms) == (pytest.approx(4.0), pytest.approx(12.0))
+    assert stats.p95_ms == pytest.approx(11.2)  # rank 0.95 * 2 = 1.9: 4 + 0.9 * (12 - 4)
+    assert (stats.fallback_steps, dict(stats.statuses), dict(stats.fallbacks)) == (
+        1,
+        {"ok": 2, "fail": 1},
+        {"straight": 1},
+    )
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Cells: the seeds and order of a sweep's episodes, refusals of a bad plan
+# ----------------------------------------------------------------------------------------------------------
+
+
+def test_tasks_go_episode_index_by_episode_index_across_cells():
+    """A sweep stopped early holds (about) the same crowds in every cell: the cells alternate within each
+    episode index, never one cell's episodes all first."""
+    tasks = get_experiment("baselines").tasks(2, humans=(3,), seed=5)
+    straight, orca = (c.key for c in get_experiment("baselines").cells((3,)))
+    assert [(t.cell.key, t.index, t.scenario, t.seed) for t in tasks] == [
+        (straight, 0, "circle", 5),
+        (orca, 0, "circle", 5),
+        (straight, 1, "perpendicular", 5),
+        (orca, 1, "perpendicular", 5),
+    ]
+
+
+def test_a_negative_base_seed_and_empty_cells_are_refused():
+    from pipelines.experiments.cells import scenario_schedule
+
+    assert scenario_schedule(1, seed=0) == [("circle", 0)]  # seed 0 is the default, so it is allowed
+    with pytest.raises(PipelineError, match="base seed must be non-negative, got -1"):
+        scenario_schedule(1, seed=-1)
+    spec = ControllerSpec(controller="orca")
+    assert Cell("ORCA", spec, n_humans=1, n_robots=1).key.endswith("-h1-r1")  # one of each is a cell
+    with pytest.raises(PipelineError, match="at least one human, got n_humans=0"):
+        Cell("ORCA", spec, n_humans=0)
+    with pytest.raises(PipelineError, match="at least one robot, got n_robots=0"):
+        Cell("ORCA", spec, n_humans=3, n_robots=0)
+
+
+def test_an_experiment_with_a_repeated_method_label_is_refused():
+    """Two columns of one label would share a cell key, so their records would mix."""
+    spec = ControllerSpec(controller="orca")
+    with pytest.raises(PipelineError, match=r"needs distinct method labels, got \['A', 'A'\]"):
+        Experiment("x", "X", (("A", spec), ("A", spec)), (3,))
+
+
+def test_with_controllers_refuses_an_unregistered_name_up_front():
+    with pytest.raises(UnknownController):
+        get_experiment("controllers").with_controllers(["orca", "no_such_controller"])
+
+
+# ----------------------------------------------------------------------------------------------------------
+# A rerun: what it found done, plans it refuses, errors after successes
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _config(out: Path, episodes: int, **kw) -> SweepConfig:
+    kw = {"humans": (3,), "backend": "inline", "progress": False} | kw
+    return SweepConfig(get_experiment("baselines"), out, episodes, **kw)
+
+
+def test_already_done_counts_only_this_plans_episodes(tmp_path):
+    """A rerun asking for fewer episodes than the directory holds found 2 of its 2 done (not the 4 held)."""
+    run_sweep(_config(tmp_path, 2))  # 2 cells x 2 episodes
+    again = run_sweep(_config(tmp_path, 1))
+    assert (again.planned, again.already_done, again.ran) == (2, 2, 0)
+
+
+def test_each_run_states_its_base_seed_in_sweep_json(tmp_path):
+    run_sweep(_config(tmp_path, 1, seed=7))
+    meta = json.loads((tmp_path / "sweep.json").read_text())
+    assert meta["runs"][-1]["seed"] == 7
+    assert {r["seed"] for r in episode_log(tmp_path).load().values()} == {7}
+
+
+def test_a_plan_with_an_episode_twice_is_refused(tmp_path):
+    with pytest.raises(PipelineError, match="plans the same episode twice"):
+        run_sweep(_config(tmp_path, 1, humans=(3, 3)))
+    assert not (tmp_path / EPISODES_FILE).exists()
+
+
+def test_errors_after_a_recorded_episode_do_not_stop_the_sweep(tmp_path):
+    """The early stop is for a broken setup (the first episodes all raise); once one episode was recorded,
+    later errors go to errors.jsonl and the sweep goes on."""
+
+    class FirstOnly:
+        name = "fake"
+
+        def run(self, tasks):
+            for i, task in enumerate(tasks):
+                yield EpisodeWorker().run(task) if i == 0 else EpisodeOutcome(task.key, error="boom")
+
+        def close(self):
+            pass
+
+    outcome = run_sweep(_config(tmp_path, 4), backend_factory=lambda config, scratch: FirstOnly())
+    assert (outcome.ran, len(outcome.errors)) == (1, 7)  # 2 cells x 4 episodes: 1 recorded, 7 raised
+    assert len((tmp_path / "errors.jsonl").read_text().splitlines()) == 7
