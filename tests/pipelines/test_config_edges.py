@@ -1,0 +1,76 @@
+"""Config validation at its edges, against hand-computed values: the largest values allowed and the first
+refused, booleans never taken for numbers, what an option chooses though it repeats the default, the
+[env.orca] and formation settings reaching the simulator, and the default seeds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from pipelines.config import ConfigError, load
+from pipelines.config.command_line import Entry
+from pipelines.config.resolve import MAX_CONFIG_BYTES, Source
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [
+        ("world.dt=true", "--set world.dt: must be a number, got True"),
+        ("world.obs_len=true", "--set world.obs_len: must be an integer, got True"),
+        ("env.orca.max_neighbors=true", "--set env.orca.max_neighbors: must be an integer, got True"),
+    ],
+)
+def test_a_boolean_is_no_number(setting, message):
+    """TOML's true is a Python bool, which is an int: taken as 1 it would set dt = 1 s silently."""
+    with pytest.raises(ConfigError, match=f"^{message}$"):
+        load(sets=[setting])
+
+
+def test_the_largest_horizon_is_allowed_and_the_next_refused():
+    assert load(sets=["mpc.horizon=100"]).mpc.horizon == 100  # MOST["mpc.horizon"]
+    with pytest.raises(ConfigError, match="^--set mpc.horizon: must be at most 100, got 101$"):
+        load(sets=["mpc.horizon=101"])
+
+
+def test_the_longest_episode_is_allowed_and_one_step_more_refused():
+    # Paper profile, timeout margin 1 s: steps start at t = k * 0.01 < 1001 - 1 = 1000 s, k = 0..99999, so
+    # 100000 steps (MAX_EPISODE_STEPS); a 1001.01 s limit gives 100001.
+    assert load(sets=["world.dt=0.01", "env.time_limit=1001.0"]).env.max_steps == 100_000
+    with pytest.raises(ConfigError, match="must be at most 100000 steps of dt = 0.01 s, got 1001.01 s"):
+        load(sets=["world.dt=0.01", "env.time_limit=1001.01"])
+
+
+def test_a_config_file_over_one_mebibyte_is_refused(tmp_path):
+    path = tmp_path / "big.toml"
+    path.write_text("#" * MAX_CONFIG_BYTES)  # a comment of exactly 1 MiB: still a config file
+    assert load(str(path)).mpc.horizon == load().mpc.horizon
+    path.write_text("#" * (MAX_CONFIG_BYTES + 1))
+    with pytest.raises(ConfigError, match=f"{MAX_CONFIG_BYTES + 1} bytes; a config file is at most 1 MiB"):
+        load(str(path))
+
+
+def test_an_option_chooses_its_value_even_when_it_is_the_default(tmp_path: Path):
+    """`--formation auto` is a choice (sweep_plan refuses options an experiment fixes); a file that states a
+    default (as `config show` writes every key) chooses nothing, one that states another value does."""
+    default = load().default("env", "formation")
+    assert default == "auto"
+    option = load(cli=[Entry("env", "formation", default, Source("cli", "--formation"))])
+    assert option.chosen("env", "formation") and option.label("env", "formation") == "--formation"
+    path = tmp_path / "run.toml"
+    path.write_text('[env]\nformation = "auto"\n')
+    assert not load(str(path)).chosen("env", "formation")
+    path.write_text('[env]\nformation = "row"\n')
+    assert load(str(path)).chosen("env", "formation")
+    assert not load().chosen("env", "formation")  # nothing given
+
+
+def test_env_orca_and_formation_reach_the_simulator():
+    env = load(sets=["env.orca.max_neighbors=3", 'env.formation="wedge"']).env
+    assert (env.orca.max_neighbors, env.formation) == (3, "wedge")
+
+
+def test_the_default_seeds_are_zero():
+    """Episode i of simulate uses seed 0 + i, a sweep's cells seeds 0 + i // 2: the runs the docs show."""
+    cfg = load()
+    assert (cfg.simulate.seed, cfg.sweep.seed, cfg.simulate.episodes) == (0, 0, 1)
