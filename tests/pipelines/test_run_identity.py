@@ -1,0 +1,80 @@
+"""A run's identity (pipelines.logs.identity) against hand-written values: which episode and config values
+make another run, and what the refusal to replace another run's recording says."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mcap.writer import Writer
+
+from pipelines.errors import PipelineError
+from pipelines.logs.identity import check_replaceable, run_identity, shown
+
+EPISODE = {"controller": "cmpc", "predictor": "constant_velocity", "n_robots": "3", "n_humans": "7"}
+
+
+def test_run_identity_hand_value():
+    """The episode's four values (its scenario and seed name the file, so they are no part of it), the
+    config flattened to dotted keys (an empty table kept as a value), the formation of recordings that
+    predate it, and the speed-only settings left out; a config key named like an episode value does not
+    override the episode's."""
+    episode = EPISODE | {"scenario": "circle", "seed": "4"}
+    config = {
+        "env": {"dt": 0.4},
+        "margins": {},
+        "mpc": {"horizon": 4, "jit": True, "dmpc_parallel": True},
+        "controller": "orca",
+    }
+    assert run_identity(episode, config) == {
+        "controller": "cmpc",
+        "predictor": "constant_velocity",
+        "n_robots": "3",
+        "n_humans": "7",
+        "env.dt": 0.4,
+        "margins": {},
+        "mpc.horizon": 4,
+        "env.formation": "auto",
+    }
+
+
+def _recording(path: Path, episode: dict[str, str] | None, config: dict) -> Path:
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        if episode is not None:
+            writer.add_metadata("episode", episode)
+        writer.add_metadata("config", {k: json.dumps(v) for k, v in config.items()})
+        writer.finish()
+    return path
+
+
+@pytest.mark.parametrize(("name", "other"), [("n_humans", "9"), ("predictor", "social_lstm_eth")])
+def test_another_crowd_or_predictor_is_another_run(tmp_path, name, other):
+    path = _recording(tmp_path / "circle_1.mcap", EPISODE, {"mpc": {"horizon": 4}})
+    check_replaceable(path, run_identity(EPISODE, {"mpc": {"horizon": 4}}))  # its own rerun replaces it
+    with pytest.raises(PipelineError, match=f"holds another run's episode \\({name} "):
+        check_replaceable(path, run_identity(EPISODE | {name: other}, {"mpc": {"horizon": 4}}))
+
+
+def test_the_refusal_names_eight_differences_and_counts_the_rest(tmp_path):
+    held = {f"k{i}": i for i in range(10)}  # ten settings, every one different in this run
+    path = _recording(tmp_path / "circle_1.mcap", EPISODE, held)
+    with pytest.raises(PipelineError) as refusal:
+        check_replaceable(path, run_identity(EPISODE, {k: v + 1 for k, v in held.items()}))
+    message = str(refusal.value)
+    assert "(k0 0, k1 1, k2 2, k3 3, k4 4, k5 5, k6 6, k7 7, and 2 more; this run: k0 1," in message
+
+
+def test_an_empty_setting_is_shown_as_a_dash(tmp_path):
+    path = _recording(tmp_path / "circle_1.mcap", EPISODE, {"note": "x"})
+    with pytest.raises(PipelineError, match=r"\(note x; this run: note -\)"):
+        check_replaceable(path, run_identity(EPISODE, {"note": ""}))
+    assert (shown(""), shown("row"), shown(4), shown(None)) == ("-", "row", "4", "null")
+
+
+def test_a_recording_without_episode_metadata_is_left_to_the_recorder(tmp_path):
+    """No episode, no run to keep apart: the recorder replaces it."""
+    path = _recording(tmp_path / "circle_1.mcap", None, {"mpc": {"horizon": 9}})
+    check_replaceable(path, run_identity(EPISODE, {"mpc": {"horizon": 4}}))
