@@ -124,3 +124,74 @@ def test_every_controller_name_has_its_facts_and_a_builder_and_states_its_predic
             assert set(controller.describe()) >= {"predictor_sha256", "config"}
         finally:
             controller.close()
+
+
+class Scripted:
+    """A controller that stands still, says what it plans with, and notes what the loop calls."""
+
+    name = "scripted"
+    predictor = "constant_velocity"
+
+    def __init__(self, iterations=0, fallback=None):
+        self.calls = []
+        self.iterations, self.fallback = iterations, fallback
+
+    def reset(self, obs):
+        self.calls.append(("reset", obs.step))
+
+    def describe(self):
+        return {"predictor_sha256": "abc123", "config": {"mpc": {"horizon": 4}}, "note": "described"}
+
+    def close(self):
+        self.calls.append(("close", None))
+
+    def act(self, obs):
+        self.calls.append(("act", obs.step))
+        return ControlOutput(
+            accelerations=np.zeros((obs.n_robots, 2)), iterations=self.iterations, fallback=self.fallback
+        )
+
+
+def test_meta_precedence_defaults_then_describe_then_the_callers():
+    """A caller's meta (the CLI's run config) has the last word over what the controller describes, which
+    has it over the loop's defaults; the described sha256 is the result's too (a recording names the weights
+    it ran with). The controller is reset with the first observation before it acts."""
+    spy, controller = Spy(), Scripted()
+    result = run_episode(
+        controller, seed=1, scenario="circle", n_humans=2, observers=[spy],
+        env_config=EnvConfig(time_limit=1.2, timeout_margin=0.0), meta={"note": "caller's", "extra": 1},
+    )  # fmt: skip
+    assert (spy.meta["note"], spy.meta["extra"], spy.meta["predictor_sha256"]) == ("caller's", 1, "abc123")
+    assert spy.meta["config"]["mpc"] == {"horizon": 4} and "env" in spy.meta["config"]
+    assert (result.predictor, result.predictor_sha256) == ("constant_velocity", "abc123")
+    # 1.2 s of 0.4 s steps, no margin: steps at t = 0, 0.4, 0.8
+    assert controller.calls == [("reset", 0), ("act", 0), ("act", 1), ("act", 2)]
+
+
+def test_run_episodes_closes_its_controller_even_when_an_episode_raises(monkeypatch):
+    controller = Scripted()
+    monkeypatch.setattr("pipelines.loop.episode.make_controller", lambda spec, env: controller)
+
+    def broken_observers():
+        raise RuntimeError("observer factory broke")
+
+    with pytest.raises(RuntimeError, match="observer factory broke"):
+        run_episodes(
+            ControllerSpec("orca"), episodes=2, seed=0, scenario="circle", n_humans=2,
+            observers_factory=broken_observers, progress=False,
+        )  # fmt: skip
+    assert controller.calls == [("close", None)]
+
+
+def test_summarize_counts_iterations_and_fallbacks_over_every_episode():
+    short = EnvConfig(time_limit=1.2, timeout_margin=0.0)  # 3 control steps an episode
+    first = run_episode(Scripted(iterations=1), seed=0, scenario="circle", n_humans=2, env_config=short)
+    second = run_episode(
+        Scripted(iterations=4, fallback="brake"), seed=1, scenario="circle", n_humans=2, env_config=short
+    )
+    s = summarize([first, second])
+    # iterations 1, 1, 1, 4, 4, 4: mean 15 / 6 = 2.5, max 4; the second episode's 3 steps fell back
+    assert (s["control_steps"], s["iterations_mean"], s["iterations_max"]) == (6, 2.5, 4)
+    assert s["fallback_steps"] == 3
+    s = summarize([second, first])  # the fallbacks counted wherever they are
+    assert s["fallback_steps"] == 3
