@@ -175,3 +175,81 @@ def test_calibrate_cli_stores_blocks_and_checks_them_on_held_out_episodes(tmp_pa
     assert len(payload["holdout_coverage"]) == 2 and all(0 <= c <= 1 for c in payload["holdout_coverage"][0])
     assert main([*args[:-2], "--holdout-margins", "wide"]) == 2
     assert "bad margins 'wide'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        (lambda: MarginSpec("conformal", alpha=0.0), r"alpha must be a number in \(0, 1\), got 0.0"),
+        (lambda: MarginSpec("conformal", alpha=1.0), r"alpha must be a number in \(0, 1\), got 1.0"),
+        (lambda: MarginSpec("conformal", alpha=True), r"alpha must be a number in \(0, 1\), got True"),
+        (lambda: MarginSpec("fixed", values=(5.01,)), r"must be numbers in \[0, 5.0\] m, got \[5.01\]"),
+        (lambda: MarginSpec("none", values=(0.1,)), "other modes take none"),
+        (lambda: MarginSpec("conformal", values=(0.1,)), "other modes take none"),
+        (lambda: MarginSpec("fixed"), r"fixed margins need values"),
+    ],
+    ids=[
+        "alpha-0",
+        "alpha-1",
+        "alpha-bool",
+        "over-5m",
+        "none-with-values",
+        "conformal-with-values",
+        "fixed-empty",
+    ],
+)
+def test_margin_specs_outside_their_ranges_are_refused(spec, message):
+    """alpha = 0 would ask for the largest error ever seen (infinite with finite data), alpha = 1 for no
+    margin at all; values given to a mode that ignores them would be silently dropped."""
+    with pytest.raises(PipelineError, match=message):
+        spec()
+
+
+def test_margins_at_the_ends_of_their_range_are_kept():
+    # 0 m (no allowance at a step) and 5 m (MAX_MARGIN) are both allowed: the range is closed
+    spec = MarginSpec("fixed", values=(0, 5.0, 0.05, 0.125))
+    assert spec.values == (0.0, 5.0, 0.05, 0.125)
+    # the label names each value exactly (:g), so 0.05 and 0.125 never share a cell key with 0.1 or 0.12
+    assert spec.label == "fixed0_5_0.05_0.125"
+    assert MarginSpec("fixed", values=(0.01,) * 2).label != MarginSpec("fixed", values=(0.0,) * 2).label
+
+
+def test_fixed_margins_longer_than_the_horizon_are_refused():
+    """Five values for a horizon of 4 means the user had another horizon in mind: not cut silently."""
+    with pytest.raises(PipelineError, match=r"one value per horizon step \(4\), got 5"):
+        MarginSpec("fixed", values=(0.1,) * 5).resolve(None, 4, None)
+
+
+def test_a_calibration_one_step_short_of_the_horizon_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    save_calibration(constant_velocity_block(np.outer(np.arange(1, 20) / 100.0, [1.0, 2.0, 3.0, 4.0])))
+    assert len(MarginSpec("conformal").resolve("constant_velocity", 4, None)) == 4
+    with pytest.raises(PipelineError, match="covers 4 steps, the MPC's horizon is 5"):
+        MarginSpec("conformal").resolve("constant_velocity", 5, None)
+
+
+def test_shortfall_margins_come_from_the_shortfall_table(tmp_path, monkeypatch):
+    """conformal-shortfall plans with the distance-shortfall quantiles, conformal-motion with the
+    displacement ones: with shortfalls twice the errors, class c's step-k margin is 0.36 (c + 1) k, not
+    0.18 (c + 1) k (tests/calibration_blocks.class_errors: the 18th smallest of 19 samples)."""
+    from tests.calibration_blocks import class_errors
+
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    errors, motion = class_errors(4)
+    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=2 * errors))
+    moving = MarginSpec("conformal-motion").resolve_classes("constant_velocity", 4, None)
+    short = MarginSpec("conformal-shortfall").resolve_classes("constant_velocity", 4, None)
+    assert moving.quantiles[0][3] == pytest.approx(0.18 * 4)
+    assert short.quantiles[0][3] == pytest.approx(0.36 * 4)
+
+
+def test_describe_states_alpha_and_source_of_calibrated_margins():
+    described = MarginSpec("conformal", alpha=0.05, source="real").describe((0.1, 0.2))
+    assert described == {
+        "mode": "conformal",
+        "label": "cp0.05-real",
+        "margins_m": [0.1, 0.2],
+        "alpha": 0.05,
+        "source": "real",
+    }
+    assert MarginSpec().describe(()) == {"mode": "none", "label": "none", "margins_m": []}
