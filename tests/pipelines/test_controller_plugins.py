@@ -233,3 +233,46 @@ def test_the_guides_controller_runs_as_written(tmp_path, monkeypatch, capsys):
     episodes = json.loads(out.read_text())["episodes"]
     assert [e["controller"] for e in episodes] == ["go_straight", "go_straight"]
     assert all(e["metrics"]["success"] and e["predictor"] is None for e in episodes)
+
+
+def test_the_shipped_controllers_facts():
+    """Which controllers name a predictor in their records and cell keys, and which --jit compiles: the MPCs
+    both, ORCA and straight neither (a wrong fact silently drops --jit, or a predictor from a cell key)."""
+    facts = {name: (k.uses_predictor, k.compiles) for name, k in registry.CONTROLLER_KINDS.items()}
+    assert facts == {
+        "straight": (False, False),
+        "orca": (False, False),
+        "cmpc": (True, True),
+        "dmpc": (True, True),
+    }
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"coupling": "joint"}, r"unknown coupling 'joint'; choose from \['ibr', 'nlp'\]"),
+        ({"margins": "conformal"}, "margins must be a MarginSpec, got 'conformal'"),
+        (
+            {"mpc_overrides": (("human_margins", (0.1,)),)},
+            "through ControllerSpec.margins, not mpc_overrides",
+        ),
+    ],
+    ids=["coupling", "margins-text", "margins-override"],
+)
+def test_a_bad_controller_spec_is_refused(kwargs, message):
+    with pytest.raises(PipelineError, match=message):
+        ControllerSpec("cmpc", **kwargs)
+
+
+def test_registering_a_plugin_keeps_those_listed_before(monkeypatch):
+    """A second --plugin (or one registered after $CROWDMPC_CONTROLLERS named another) must not unlist the
+    first from the worker processes, each listed once."""
+    other = f"{TOYS}:Nameless"
+    monkeypatch.setenv(registry.PLUGINS_ENV, other)
+    register_controller_plugins([TOY, other])
+    assert os.environ[registry.PLUGINS_ENV] == f"{other},{TOY}"
+
+
+def test_a_plugin_spec_is_at_most_200_characters():
+    name = "m" * 198 + ":C"  # 200 characters: MAX_PLUGIN_SPEC
+    assert registry.is_plugin_spec(name) and not registry.is_plugin_spec("m" + name)
