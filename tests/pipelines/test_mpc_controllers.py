@@ -214,3 +214,74 @@ def test_the_mpc_is_built_from_the_simulators_world_and_refuses_to_disagree():
         make_controller(ControllerSpec("cmpc", "social_lstm_eth"), EnvConfig(history_len=5))
     with pytest.raises(PipelineError, match=r"sampled every 0.4 s, the simulator's tau is 0.2 s"):
         make_controller(ControllerSpec("cmpc", "social_lstm_eth"), EnvConfig(dt=0.2))
+
+
+@pytest.mark.parametrize(("name", "flocking"), [("cmpc", True), ("dmpc", False)])
+def test_describe_states_coupling_flocking_and_distribution(name, flocking):
+    """What a recording's "config" metadata says about the controller (and so what tells two runs apart)."""
+    described = make_controller(ControllerSpec(name, flocking=flocking)).describe()
+    config = described["config"]
+    assert (config["coupling"], config["flocking"], config["distributed"]) == (
+        "ibr",
+        flocking,
+        name == "dmpc",
+    )
+    assert (config["mpc"]["w_floc"] == 0.0) == (not flocking)  # NF: omega_floc = 0
+    assert config["margins"] == {"mode": "none", "label": "none", "margins_m": []}
+    assert described["predictor_sha256"] is None  # constant_velocity has no weights
+
+
+def test_an_episode_of_another_time_step_is_refused():
+    """A controller built for tau = 0.4 s must not drive a simulator stepping 0.2 s: its plans, predictions
+    and bounds would all be off by a factor of two."""
+    from crowdsim.env import EnvConfig
+
+    controller = make_controller(ControllerSpec("cmpc"))
+    obs = CrowdEnv(EnvConfig(dt=0.2)).reset(0, "circle", 2)
+    with pytest.raises(PipelineError, match=r"the simulator steps 0.2 s but the MPC plans with tau = 0.4 s"):
+        controller.reset(obs)
+
+
+def test_an_episode_does_not_depend_on_the_episodes_run_before():
+    """Episode results are reproducible from (seed, scenario) alone: a controller reused across episodes
+    starts each from a cold plan memory, as a fresh one does (a warm start from the last episode's plan
+    changes the first solve)."""
+    from crowdsim.env import EnvConfig
+
+    short = EnvConfig(time_limit=2.0, timeout_margin=0.0)  # 5 control steps
+    reused = make_controller(ControllerSpec("cmpc"), short)
+    run_episode(reused, seed=0, scenario="circle", n_humans=3, env_config=short)
+    again = run_episode(reused, seed=1, scenario="perpendicular", n_humans=3, env_config=short)
+    fresh = run_episode(
+        make_controller(ControllerSpec("cmpc"), short), seed=1, scenario="perpendicular", n_humans=3,
+        env_config=short,
+    )  # fmt: skip
+    np.testing.assert_array_equal(again.robot_positions, fresh.robot_positions)
+
+
+def test_an_error_the_predictor_raises_in_the_solve_is_no_solver_failure():
+    """A RuntimeError of the predictor (a bug, a broken plugin net) propagates; only CasADi's own errors
+    fall back (and would hide the bug behind braking robots)."""
+    from predictors.constant_velocity import ConstantVelocity
+    from predictors.errors import NoCasadiTwin
+
+    class Failing(ConstantVelocity):
+        def to_casadi(self, n_humans, n_robots, horizon):
+            raise NoCasadiTwin("none here")  # so that the IBR loop calls rollout
+
+        def rollout(self, *args, **kwargs):
+            raise RuntimeError("the predictor broke")
+
+    controller = MPCController(ControllerSpec("cmpc"), False, predictor=Failing())
+    obs = CrowdEnv().reset(0, "circle", 3)
+    controller.reset(obs)
+    with pytest.raises(RuntimeError, match="the predictor broke"):
+        controller.act(obs)
+
+
+def test_describe_names_the_weights_of_a_trained_predictor():
+    """A record names the checkpoint it planned with, so that a retrained model's runs never mix with it."""
+    from predictors.registry import checkpoint_sha256
+
+    sha256 = make_controller(ControllerSpec("cmpc", "social_lstm_eth")).describe()["predictor_sha256"]
+    assert sha256 == checkpoint_sha256("social_lstm_eth") and len(sha256) == 64
