@@ -52,6 +52,28 @@ def test_the_repair_of_a_torn_tail_is_made_durable(tmp_path, monkeypatch):
     assert synced == [b'{"key":"a"}\n']
 
 
+def test_a_blank_line_is_skipped_and_a_key_must_be_text(tmp_path):
+    """A blank line (an editor's) holds no episode and is no damage; a key that is no string is."""
+    path = tmp_path / "log.jsonl"
+    path.write_bytes(b'{"key":"a"}\n\n{"key":"b"}\n')
+    assert list(EpisodeLog(path).load()) == ["a", "b"]
+    assert path.read_bytes() == b'{"key":"a"}\n\n{"key":"b"}\n'  # nothing cut
+    path.write_bytes(b'{"key":5}\n{"key":"b"}\n')
+    with pytest.raises(PipelineError, match=":1: record has no 'key'; the file is damaged"):
+        EpisodeLog(path).load()
+
+
+def test_a_line_that_is_not_utf8_is_torn_at_the_end_and_damage_elsewhere(tmp_path):
+    """Bytes that are no UTF-8 are one line's error like any other garbage, never a traceback."""
+    path = tmp_path / "log.jsonl"
+    path.write_bytes(b'{"key":"a"}\n{"key":"\xc3("}\n')
+    assert list(EpisodeLog(path).load()) == ["a"]
+    assert path.read_bytes() == b'{"key":"a"}\n'
+    path.write_bytes(b'{"key":"\xc3("}\n{"key":"a"}\n')
+    with pytest.raises(PipelineError, match=":1: not a JSON record .*the file is damaged"):
+        EpisodeLog(path).load()
+
+
 # Every typed field of a record, written out by hand (not taken from log.METRIC_KINDS, so that a field
 # dropped from the check is noticed): the string "1", which the record's own reading would take for 1 (or
 # True), where each expects a number, count or boolean is refused.
