@@ -229,3 +229,67 @@ def test_errors_after_a_recorded_episode_do_not_stop_the_sweep(tmp_path):
     outcome = run_sweep(_config(tmp_path, 4), backend_factory=lambda config, scratch: FirstOnly())
     assert (outcome.ran, len(outcome.errors)) == (1, 7)  # 2 cells x 4 episodes: 1 recorded, 7 raised
     assert len((tmp_path / "errors.jsonl").read_text().splitlines()) == 7
+
+
+class _NoEpisodes:
+    """A backend that runs nothing: what sweep.json states is written before any episode."""
+
+    name = "none"
+
+    def run(self, tasks):
+        return iter(())
+
+    def close(self):
+        pass
+
+
+def test_a_run_line_states_its_plan(tmp_path):
+    """Without --humans the run line names the experiment's crowd sizes (not an empty list), with the
+    number of episodes per cell and of planned episodes: what a reader of sweep.json reruns from."""
+    experiment = get_experiment("baselines")
+    config = SweepConfig(experiment, tmp_path, 3, backend="inline", progress=False)
+    run_sweep(config, backend_factory=lambda config, scratch: _NoEpisodes())
+    run = json.loads((tmp_path / "sweep.json").read_text())["runs"][-1]
+    planned = 3 * len(experiment.methods) * len(experiment.humans)
+    assert (run["humans"], run["episodes_per_cell"], run["planned"]) == (list(experiment.humans), 3, planned)
+
+
+def _rewrite(out: Path, edit) -> None:
+    records = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    for record in records:
+        edit(record)
+    (out / EPISODES_FILE).write_text("".join(json.dumps(r) + "\n" for r in records))
+
+
+def test_records_of_the_zoos_current_weights_extend_their_cell(tmp_path):
+    """The refusal of changed weights compares with the zoo's sha256 now: records that carry it resume."""
+    from predictors.registry import checkpoint_sha256
+
+    sha256 = checkpoint_sha256("social_lstm_eth")
+    assert sha256 is not None
+    run_sweep(_config(tmp_path, 1))
+    _rewrite(tmp_path, lambda r: r.update(predictor="social_lstm_eth", predictor_sha256=sha256))
+    again = run_sweep(_config(tmp_path, 1))
+    assert (again.already_done, again.ran) == (2, 0)
+
+
+def test_records_whose_margins_state_no_values_say_nothing_about_them(tmp_path):
+    """A controller that plans with no margins may describe them without "margins_m" (a plugin's): such
+    records are no evidence of changed margins, and the resume goes on."""
+    run_sweep(_config(tmp_path, 1))
+    _rewrite(tmp_path, lambda r: r.setdefault("config", {}).update(margins={"mode": "none"}))
+    again = run_sweep(_config(tmp_path, 1))
+    assert (again.already_done, again.ran) == (2, 0)
+
+
+def test_uncommitted_changes_alone_are_no_other_code(tmp_path, capsys):
+    """The "dirty" flag cannot be compared (two dirty trees may differ or not): alone it is no other code."""
+    from pipelines.version import code_identity
+
+    run_sweep(_config(tmp_path, 1))
+    meta = json.loads((tmp_path / "sweep.json").read_text())
+    meta["runs"][-1]["code"] = {**code_identity(), "dirty": not code_identity()["dirty"]}
+    (tmp_path / "sweep.json").write_text(json.dumps(meta))
+    capsys.readouterr()
+    run_sweep(_config(tmp_path, 1))
+    assert "note:" not in capsys.readouterr().err
