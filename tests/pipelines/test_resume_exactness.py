@@ -138,6 +138,22 @@ def test_solver_stats_of_steps_hand_values():
     )
 
 
+def test_solver_stats_of_no_steps_say_none_not_zero():
+    """No control step: no time and no iteration count to state (0 would read as "solved in 0 iterations")."""
+    stats = SolverStats.of_steps([], [], [], [])
+    assert (stats.steps, stats.total_ms, stats.mean_iterations, stats.max_iterations) == (0, 0.0, None, None)
+    assert (stats.median_ms, stats.fallback_steps) == (None, 0)
+
+
+def test_a_record_with_solver_figures_added_later_is_still_read(one_record):
+    """A record written by a later version with one more solver figure still loads (the figures it knows)."""
+    from pipelines.loop.record import EpisodeRecord
+
+    record = json.loads(json.dumps(one_record))
+    record["solver"]["energy_j"] = 1.5
+    assert EpisodeRecord.from_dict(record).solver.steps == one_record["solver"]["steps"]
+
+
 # ----------------------------------------------------------------------------------------------------------
 # Cells: the seeds and order of a sweep's episodes, refusals of a bad plan
 # ----------------------------------------------------------------------------------------------------------
