@@ -74,3 +74,20 @@ def test_the_default_seeds_are_zero():
     """Episode i of simulate uses seed 0 + i, a sweep's cells seeds 0 + i // 2: the runs the docs show."""
     cfg = load()
     assert (cfg.simulate.seed, cfg.sweep.seed, cfg.simulate.episodes) == (0, 0, 1)
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [
+        ("world.obs_len=1001", "world.obs_len: must be at most 1000, got 1001"),
+        ("mpc.j_max=1001", "mpc.j_max: must be at most 1000, got 1001"),
+        ("mpc.solver_max_iter=100001", "mpc.solver_max_iter: must be at most 100000, got 100001"),
+        ("mpc.time_limit_s=3600.5", r"mpc.time_limit_s: must be at most 3600.0, got 3600.5"),
+        ("env.orca.max_neighbors=1001", "env.orca.max_neighbors: must be at most 1000, got 1001"),
+    ],
+)
+def test_numbers_that_size_the_work_have_a_ceiling(setting, message):
+    """A typo of a few zeros would allocate a history of a billion rows or run an hour-long solve per step;
+    each such number is refused one past its ceiling (schema.MOST, written out here by hand)."""
+    with pytest.raises(ConfigError, match=f"^--set {message}$"):
+        load(sets=[setting])
