@@ -253,3 +253,11 @@ def test_describe_states_alpha_and_source_of_calibrated_margins():
         "source": "real",
     }
     assert MarginSpec().describe(()) == {"mode": "none", "label": "none", "margins_m": []}
+
+
+def test_calibrated_margins_need_a_predictor_and_specs_may_be_padded():
+    """ORCA with conformal margins has no predictor whose calibration to read: one line saying so. A spec
+    read from a config file may carry spaces around it."""
+    with pytest.raises(PipelineError, match="conformal margins need a predictor; this controller uses none"):
+        MarginSpec("conformal").resolve(None, 4, None)
+    assert parse_margins(" conformal:0.05 ") == MarginSpec("conformal", alpha=0.05)
