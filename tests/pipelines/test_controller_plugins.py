@@ -276,3 +276,19 @@ def test_registering_a_plugin_keeps_those_listed_before(monkeypatch):
 def test_a_plugin_spec_is_at_most_200_characters():
     name = "m" * 198 + ":C"  # 200 characters: MAX_PLUGIN_SPEC
     assert registry.is_plugin_spec(name) and not registry.is_plugin_spec("m" + name)
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        (f"{TOYS}:NoAct", r"NoAct has no act, describe, close \(the Controller protocol"),
+        (f"{TOYS}:A_MAX", "is not a class"),
+        ("not a plugin", "plugin 'not a plugin' is not of the form module:Class"),
+    ],
+    ids=["no-act", "not-a-class", "not-a-spec"],
+)
+def test_a_plugin_listed_in_the_environment_is_checked_like_one_given_to_plugin(spec, message):
+    """$CROWDMPC_CONTROLLERS (set for worker processes, or by hand) skips the CLI's --plugin parsing: the
+    registry itself must refuse what is no controller class, in one line."""
+    with pytest.raises(PipelineError, match=message):
+        registry.load_controller_plugin(spec)

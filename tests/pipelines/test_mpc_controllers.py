@@ -285,3 +285,17 @@ def test_describe_names_the_weights_of_a_trained_predictor():
 
     sha256 = make_controller(ControllerSpec("cmpc", "social_lstm_eth")).describe()["predictor_sha256"]
     assert sha256 == checkpoint_sha256("social_lstm_eth") and len(sha256) == 64
+
+
+def test_close_stops_the_dmpc_solver_threads():
+    """run_episodes closes its controller; DMPC's worker threads must end with it (a sweep worker builds a
+    controller per cell and would otherwise keep every cell's threads alive)."""
+    spec = ControllerSpec("dmpc", mpc_overrides=(("dmpc_parallel", "threads"),))
+    controller = make_controller(spec)
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller.reset(obs)
+    controller.act(obs)
+    solver = controller.solver(obs.n_robots, obs.n_humans)
+    assert solver._pool is not None  # the threads the step used
+    controller.close()
+    assert solver._pool is None
