@@ -163,7 +163,9 @@ def read_file(path: str | Path) -> list[Entry]:
             entries.append(Entry(name, key, value, source))
 
     for name, values in document.items():
-        if name == "env.orca" or name not in SECTION_BY_NAME:  # [env.orca] is written as a table of [env]
+        if name == "env.orca":  # a quoted ["env.orca"]: one name with a dot in it, not the table orca of env
+            raise ConfigError(f'{where}: ["env.orca"] names no section: write [env.orca], without quotes')
+        if name not in SECTION_BY_NAME:
             raise _unknown_section(where, name)
         table(name, values)
     return entries

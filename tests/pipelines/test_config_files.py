@@ -238,6 +238,10 @@ def test_a_bad_value_is_one_line_naming_file_key_and_expectation(
             "run.toml: [mcp]: unknown section; valid sections: [world], [env], [env.orca], ",
         ),
         ("horizon = 4\n", "run.toml: [horizon]: unknown section; valid sections: "),
+        (
+            '["env.orca"]\nneighbor_dist = 5.0\n',
+            'run.toml: ["env.orca"] names no section: write [env.orca], without quotes',
+        ),  # fmt: skip
         ("[mpc]\ndt = 0.2\n", "run.toml: mpc.dt: not a [mpc] key: set it in [world]"),
         (
             "[mpc]\nhuman_margins = [0.1]\n",
