@@ -87,6 +87,21 @@ def test_collate_pads_agents_with_zeros_and_false(tmp_path):
     batch = collate_scenes([dataset[0], dataset[1]])
     assert batch.positions.shape == (2, 21, 3, 2)
     assert not batch.mask[0, :, 1:].any() and (batch.positions[0, :, 1:] == 0).all()
+    # a real agent's absent steps stay False too: the walk's third walker is seen at steps 0..2 only
+    assert batch.mask[1, :, 2].tolist() == [True] * 3 + [False] * 18
+    np.testing.assert_array_equal(batch.mask[1].numpy(), dataset[1].mask)
+
+
+def test_to_world_undoes_a_rotation(tmp_path):
+    # positions = (world - origin) @ R^T, so world = positions @ R + origin; an unrotated batch cannot tell
+    # R from R^T. The walk's primary is at (0.5 t, 0) m, so at step 20 it is at (10, 0) in the world
+    dataset = TrajnetSceneDataset([write_walk_file(tmp_path / "walk.ndjson")], augment=True, seed=3)
+    item = dataset[0]
+    assert not np.allclose(item.rotation, np.eye(2), atol=1e-2)  # the seed draws a real turn
+    batch = collate_scenes([item])
+    world = batch.to_world(batch.positions)
+    np.testing.assert_allclose(world[0, 20, 0].numpy(), [10.0, 0.0], atol=1e-5)
+    np.testing.assert_allclose(world[0, 0, 0].numpy(), [0.0, 0.0], atol=1e-5)
 
 
 def test_augmentation_is_seeded_and_keeps_distances(tmp_path):
@@ -117,6 +132,9 @@ def test_obs_and_pred_lengths_take_the_end_of_the_scene(tmp_path):
     np.testing.assert_allclose(item.origin, [4.0, 0.0])
     with pytest.raises(PredictorError, match="obs_len"):
         TrajnetSceneDataset([tmp_path / "walk.ndjson"], obs_len=10, pred_len=12)
+    # one observed step gives no velocity: every predictor needs two
+    with pytest.raises(PredictorError, match="need obs_len >= 2"):
+        TrajnetSceneDataset([tmp_path / "walk.ndjson"], obs_len=1, pred_len=12)
 
 
 def test_file_arrays_are_cached_in_memory_and_on_disk(tmp_path, monkeypatch):
