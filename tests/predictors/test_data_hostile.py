@@ -88,6 +88,8 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         "'y' is infinite",
     ),
     "x = 1e300": (VALID + [track(0, 2, 1e300, 0.0)], N + 1, "'x' is 1e+300 m, outside the supported range"),
+    # the bound is exclusive: |x| < 1e5 m
+    "y = -1e5 exactly": (VALID + [track(0, 2, 0.0, -1e5)], N + 1, "'y' is -100000.0 m, outside"),
     "x = 10**400 (integer)": (
         VALID + ['{"track": {"f": 0, "p": 2, "x": 1' + "0" * 400 + ', "y": 0}}'],
         N + 1,
@@ -107,6 +109,12 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         N + 1,
         "scene 'fps' must be a number",
     ),
+    # a rate of 0 frames per second has no time step (DT = 1 / fps)
+    "fps is 0": (
+        VALID + ['{"scene": {"id": 9, "p": 1, "s": 0, "e": 200, "fps": 0}}'],
+        N + 1,
+        "scene 'fps' must be a number in (0, 1e+04], got 0",
+    ),
     "track is null": (VALID + ['{"track": null}'], N + 1, '"track" must be a JSON object, got NoneType'),
     "null line": (VALID + ["null"], N + 1, 'exactly one of "scene" or "track"'),
     "UTF-8 byte-order mark": (["\ufeff" + json.dumps(VALID[0])] + VALID[1:], 1, "invalid JSON"),
@@ -116,6 +124,13 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         VALID + [track(0, 1, 0.3, 0.0)],
         N + 1,
         "pedestrian 1 at frame 0 has another position on line 2 (0.0, 0.0 against 0.3, 0.0)",
+    ),
+    # NaN (not observed) against a position is a conflict too: which one the reader kept decided whether
+    # the pedestrian was seen. Line 3 is pedestrian 2 at frame 0, (0, 1); y agrees, only x differs
+    "NaN against a position for a pedestrian and frame": (
+        VALID + ['{"track": {"f": 0, "p": 2, "x": NaN, "y": 1.0}}'],
+        N + 1,
+        "pedestrian 2 at frame 0 has another position on line 3 (0.0, 1.0 against nan, 1.0)",
     ),
 }
 
@@ -191,6 +206,42 @@ def test_a_scene_spanning_a_billion_frames_reads_quickly(tmp_path):
     scenes = read_scenes(write_lines(tmp_path / "long.ndjson", records), require_length=21)
     assert time.perf_counter() - started < 5
     assert scenes[0].frames.tolist() == list(range(0, 201, STEP))
+
+
+def test_a_line_of_exactly_the_cap_passes(tmp_path):
+    """MAX_LINE_BYTES bytes then the newline is within the cap; one byte more is not (test below)."""
+    text = json.dumps(VALID[0])
+    padded = text + " " * (MAX_LINE_BYTES - len(text))  # JSON allows trailing spaces
+    assert len(padded.encode()) == MAX_LINE_BYTES
+    path = write_lines(tmp_path / "padded.ndjson", [padded] + VALID[1:])
+    assert validate_ndjson(path).n_tracks == N - 1
+
+
+def test_a_track_covered_by_an_earlier_longer_scene_passes(tmp_path):
+    """Scene 0 spans frames 0-200 and scene 1 only 20-40: frame 100 is in scene 0 although the scene that
+    starts last before it (scene 1) ended at 40 -- coverage takes the furthest end so far, not the last."""
+    records = VALID[:1] + [scene(1, 1, 20, 40)] + VALID[1:]
+    path = write_lines(tmp_path / "nested.ndjson", records)
+    assert validate_ndjson(path).scene_lines == {0: 1, 1: 2}
+
+
+def test_a_primary_seen_only_at_the_scene_end_frame_is_present(tmp_path):
+    """[s, e] includes e: pedestrian 3 has rows at frames 0, 10 and 20, so a scene 15-20 led by it has one
+    (at 20)."""
+    path = write_lines(tmp_path / "end.ndjson", VALID + [scene(1, 3, 15, 20)])
+    assert sorted(validate_ndjson(path).scene_lines) == [0, 1]
+
+
+def test_predictions_of_one_pedestrian_and_frame_are_no_conflict(tmp_path):
+    """A prediction file holds several predictions (prediction_number) for each pedestrian and frame, and
+    TrajNet++'s scene_id tells apart the scenes sharing a frame: only the same key twice conflicts."""
+    extra = [
+        {"track": {"f": 0, "p": 1, "x": 0.3, "y": 0.0, "prediction_number": 1, "scene_id": 0}},
+        {"track": {"f": 0, "p": 1, "x": 0.4, "y": 0.0, "prediction_number": 2, "scene_id": 0}},
+        {"track": {"f": 0, "p": 1, "x": 0.5, "y": 0.0, "prediction_number": 1, "scene_id": 1}},
+    ]
+    path = write_lines(tmp_path / "predictions.ndjson", VALID + extra)
+    assert validate_ndjson(path).n_tracks == N - 1 + 3
 
 
 def test_a_line_longer_than_the_cap(tmp_path):
