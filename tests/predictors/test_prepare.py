@@ -8,7 +8,7 @@ from predictors.data.prepare import prepare_ewap
 from predictors.data.selfcheck import Reference, compare_with_reference
 from predictors.data.trajnet_io import read_scenes
 from predictors.data.trajnet_scenes import SceneSpec, build_scenes, write_ndjson
-from predictors.errors import DatasetFormatError
+from predictors.errors import DatasetFormatError, PredictorError
 from tests.predictors.samples import write_tiny_ewap
 
 
@@ -166,14 +166,28 @@ def test_split_frames_is_temporal_70_10_20():
     assert parts["test"].tolist() == [80, 90]
 
 
+def test_split_frames_truncates_as_trajnet_does():
+    # TrajNet++'s convert.write cuts at int(n * fraction), a floor: 18 frames give int(12.6) = 12 train,
+    # then int(1.8) = 1 val and the 5 left test (rounding would give 13 train)
+    parts = split_frames(np.arange(18))
+    assert [len(parts[k]) for k in ("train", "val", "test")] == [12, 1, 5]
+    assert parts["val"].tolist() == [12]
+    with pytest.raises(PredictorError, match="sum to <= 1, got train=0.8, val=0.3"):
+        split_frames(np.arange(18), (0.8, 0.3))
+
+
 def test_infer_frame_step():
     assert infer_frame_step(np.array([0, 6, 12, 18, 30, 36])) == 6
+    # the most common step, not the smallest: one odd gap of 5 among steps of 10
+    assert infer_frame_step(np.array([0, 10, 20, 30, 35, 45, 55])) == 10
 
 
 def test_read_obsmat_picks_columns_and_shifts_frames(tmp_path):
     path = tmp_path / "obsmat.txt"
     path.write_bytes(b"  1.0 3.0 1.5 0.0 -2.5 0.1 0.0 0.2\r\n 11.0 3.0 1.6 0.0 -2.4 0.1 0.0 0.2\r\n")
     np.testing.assert_array_equal(read_obsmat(path), [[0, 3, 1.5, -2.5], [10, 3, 1.6, -2.4]])
+    path.write_bytes(b"1 0 1 0 2 0 0 0\n11 0 1 0 2 0 0 0\n")  # ids run from 0 (the bounds are 0..1e9)
+    assert read_obsmat(path)[:, 1].tolist() == [0, 0]
 
 
 @pytest.mark.parametrize(
@@ -182,6 +196,9 @@ def test_read_obsmat_picks_columns_and_shifts_frames(tmp_path):
         (b"1 2 3 4 5 6 7\n", 1, "expected 8 numeric columns, found 7"),
         (b"1 2 3 4 5 6 7 8\n1 2 x 4 5 6 7 8\n", 2, "non-numeric"),
         (b"1.5 2 3 4 5 6 7 8\n", 1, "must be integers"),
+        (b"1 2 3 4 5 6 7 8\n11 2.5 3 4 5 6 7 8\n", 2, "frame 11 and id 2.5 must be integers"),
+        # two pedestrians, but both at one frame: no time step to infer
+        (b"1 2 3 4 5 6 7 8\n1 3 3 4 5 6 7 8\n", None, "annotations at a single frame"),
         (b"1 2 3 4 5 6 7 8\n\n1 2 3 4 5 6 7 8\n", 3, "repeats line 1"),
         (b"1 2 nan 4 5 6 7 8\n", 1, "finite"),
     ],
