@@ -48,6 +48,29 @@ def test_window_with_a_gap_in_the_primary_is_dropped():
     ] * 3 + [2] * 3
 
 
+def _with_steps(steps):
+    """walkers() over 21 rows (one window) with the given frame increments between its rows."""
+    tracks = walkers(n_steps=21)
+    frames = np.concatenate([[0], np.cumsum(steps)])
+    tracks[:, 0] = frames[(tracks[:, 0] // 10).astype(int)]
+    return tracks
+
+
+def test_a_window_is_continuous_by_the_upper_median_step():
+    # 20 increments, ten of 10 frames and ten of 14: the converter's median is the upper one (sorted
+    # index 20 // 2 = 10), 14. So the window is a scene at frame_step 14 (max 14 < 1.5 x 14) and none at
+    # frame_step 10, although the lower median 10 would pass (14 < 1.5 x 10)
+    tracks = _with_steps([10] * 10 + [14] * 10)
+    assert build_scenes(tracks, frame_step=10, categorize_scenes=False) == []
+    assert keys(build_scenes(tracks, frame_step=14, categorize_scenes=False)) == [(1, 0, 240), (2, 0, 240)]
+
+
+def test_a_step_of_exactly_one_and_a_half_times_the_median_is_a_gap():
+    # scene.py continuous_frames keeps a window only if median x 1.5 > max: 10 x 1.5 = 15 is not > 15
+    assert build_scenes(_with_steps([10] * 19 + [15]), frame_step=10, categorize_scenes=False) == []
+    assert len(build_scenes(_with_steps([10] * 19 + [14]), frame_step=10, categorize_scenes=False)) == 2
+
+
 def test_too_little_activity_drops_the_window():
     tracks = walkers()
     tracks = tracks[~((tracks[:, 0] == 100) & (tracks[:, 1] == 2))]
@@ -58,6 +81,12 @@ def test_too_little_activity_drops_the_window():
 def test_pedestrians_in_different_10m_cells_are_not_close():
     assert build_scenes(walkers(spacing=10.0), frame_step=10, categorize_scenes=False) == []
     assert len(build_scenes(walkers(spacing=3.0), frame_step=10, categorize_scenes=False)) == 6
+    # cells are floor(y / 10): y = 4 and 6 share cell 0 (rounding would part them, 0 and 1), y = 9 and 11
+    # are in cells 0 and 1 (rounding would join them in cell 1)
+    for low, close in ((4.0, True), (9.0, False)):
+        tracks = walkers(spacing=2.0)
+        tracks[:, 3] += low
+        assert len(build_scenes(tracks, frame_step=10, categorize_scenes=False)) == (6 if close else 0)
 
 
 def test_a_perfectly_still_primary_is_dropped_but_a_slow_one_is_kept():
@@ -91,6 +120,17 @@ def test_categorisation_tags_and_acceptance():
     assert build_scenes(tracks, frame_step=10) == build_scenes(tracks, frame_step=10)  # deterministic
 
 
+def test_categorisation_reads_centimetres_and_static_means_under_one_metre():
+    # the converter categorises the written file, coordinates rounded to cm: the primary's first window
+    # goes from x = 0.004 (written 0.00) to 0.004 + 20 x 0.0498 = 1.000 (written 1.00). Its displacement is
+    # 0.996 m as given but 1.00 m as written, and type I (static) needs < 1 m: so the scene is not static
+    tracks = walkers(step=0.0498)
+    tracks[:, 2] += 0.004
+    scenes = build_scenes(tracks, frame_step=10, acceptance=None)
+    tags = {(s.primary, s.start_frame): s.tag for s in scenes}
+    assert tags[(1, 0)][0] != 1
+
+
 def test_write_ndjson_rounds_to_centimetres_and_keeps_rows_at_primary_frames(tmp_path):
     tracks = walkers()
     tracks[0, 2] = 0.123456
@@ -107,6 +147,12 @@ def test_write_ndjson_rounds_to_centimetres_and_keeps_rows_at_primary_frames(tmp
     assert lines[2]["track"] == {"f": 0, "p": 1, "x": 0.12, "y": 0.0}
     read = read_scenes(path, require_length=21)
     assert [s.primary for s in read] == [1, 2]
+
+
+def test_write_ndjson_refuses_a_scene_built_at_another_rate(tmp_path):
+    with pytest.raises(ValueError, match="scene 0 was built at 2.5 fps but is written as 5.0 fps"):
+        write_ndjson(tmp_path / "x.ndjson", [SceneSpec(0, 1, 0, 200)], walkers(), fps=5.0)
+    assert not (tmp_path / "x.ndjson").exists()
 
 
 def test_write_ndjson_refuses_a_scene_without_its_primary(tmp_path):
