@@ -9,6 +9,7 @@ from predictors.data.selfcheck import Reference, compare_with_reference
 from predictors.data.trajnet_io import read_scenes
 from predictors.data.trajnet_scenes import SceneSpec, build_scenes, write_ndjson
 from predictors.errors import DatasetFormatError, PredictorError
+from predictors.hashing import sha256_file
 from tests.predictors.samples import write_tiny_ewap
 
 
@@ -277,6 +278,36 @@ def test_prepare_ewap_writes_splits_without_crossing_boundaries(tmp_path):
     assert {k: v["sha256"] for k, v in again["files"].items()} == {
         k: v["sha256"] for k, v in manifest["files"].items()
     }
+
+
+def test_prepare_ewap_manifest_records_what_was_done(tmp_path):
+    """The manifest is how a prepared folder says how it was made: the fractions asked for (and used), each
+    sequence's frame step, each file's first and last frame and its sha256."""
+    raw = write_tiny_ewap(tmp_path)
+    out = tmp_path / "prepared"
+    manifest = prepare_ewap(
+        raw, out, categorize_scenes=False, seed=7, fractions=(0.5, 0.25), log=lambda m: None
+    )
+    parameters = manifest["parameters"]
+    assert parameters["split_fractions"] == {"train": 0.5, "val": 0.25, "test": 0.25}
+    # untagged scenes are never dropped: no acceptance applies, whatever the default
+    assert (parameters["seed"], parameters["categorized"], parameters["acceptance"]) == (7, False, None)
+    # write_tiny_ewap's sequences step by 6 (eth) and 10 (hotel) frames
+    assert {k: v["frame_step"] for k, v in manifest["sources"].items()} == {"biwi_eth": 6, "biwi_hotel": 10}
+    for name, seq in (("biwi_eth", "seq_eth"), ("biwi_hotel", "seq_hotel")):
+        frames = np.unique(read_obsmat(raw / seq / "obsmat.txt")[:, 0])
+        n = len(frames)
+        # split_frames' floor arithmetic by hand: [0, n/2), [n/2, n/2 + n/4), the rest
+        bounds = {"train": (0, n // 2), "val": (n // 2, n // 2 + n // 4), "test": (n // 2 + n // 4, n)}
+        for split, (lo, hi) in bounds.items():
+            info = manifest["files"][f"{split}/{name}.ndjson"]
+            assert info["frames"] == [int(frames[lo]), int(frames[hi - 1])]
+            assert info["sha256"] == sha256_file(out / split / f"{name}.ndjson")
+            assert all(
+                frames[lo] <= s.start and s.end <= frames[hi - 1]
+                for s in read_scenes(out / split / f"{name}.ndjson")
+            )
+    assert json.loads((out / "manifest.json").read_text()) == manifest
 
 
 def test_hotel_reproduces_every_official_scene(shared_data, tmp_path):
