@@ -66,6 +66,74 @@ OPERATIONS = {
         (randn(2, 5),),
     ),
     "log_sqrt_abs": (lambda m, x: torch.log(x.abs() + 1) + torch.sqrt(x**2 + 1), (randn(4, 3),)),
+    # every other registered element-wise operation, weighted apart so that one mapped to another shows;
+    # beta * x crosses softplus's threshold in both directions
+    "unary_rest": (
+        lambda m, x: (
+            torch.rsqrt(x.abs() + 1)
+            + 2 * torch.square(x)
+            + 3 * F.silu(x)
+            + 4 * torch.log1p(x.abs())
+            + 5 * torch.sin(x)
+            + 6 * torch.cos(x)
+            + 7 * torch.erf(x)
+            + 8 * torch.neg(x)
+            + 9 * F.leaky_relu(x, 0.2)
+            + 10 * F.gelu(x, approximate="tanh")
+            + 11 * F.softplus(x, beta=2.0, threshold=1.0)
+        ),
+        (torch.linspace(-2.0, 2.0, 12, dtype=torch.float64).reshape(3, 4),),
+    ),
+    "min_max_clamp": (
+        lambda m, x, y: (
+            torch.maximum(x, y) + 2 * torch.minimum(x, y) + 3 * x.clip(-0.5, 0.5) + torch.clamp(x, min=y)
+        ),
+        (randn(3, 4), randn(3, 4)),
+    ),
+    # ties on purpose (half of y equals x), where >= and > (or <= and <) differ
+    "comparisons": (
+        lambda m, x, y: (
+            x * (x >= y).to(x.dtype)
+            + 2 * x * (x <= y).to(x.dtype)
+            + 4 * x * (x != y).to(x.dtype)
+            + 8 * x * (x == y).to(x.dtype)
+            + 16 * x * (x > y).to(x.dtype)
+            + 32 * x * torch.lt(x, y).to(x.dtype)
+        ),
+        (
+            torch.arange(12, dtype=torch.float64).reshape(3, 4),
+            torch.arange(12, dtype=torch.float64).reshape(3, 4) + torch.tensor([0.0, 1.0, -1.0, 0.0]),
+        ),
+    ),
+    # constants that are not all 0 (or all 1) are real terms, and one that broadcasts x to a larger shape
+    # is one too, all 0 or 1 as it is
+    "constants": (
+        lambda m, x: (
+            x * torch.tensor([1.0, 2.0, 1.0, 1.0])
+            + (x + torch.tensor([0.0, 3.0, 0.0, 0.0]))
+            + (x[:, :1] * torch.ones(3, 4)).sum(-1, keepdim=True)  # 4 x, not x
+            + (x[:, :1] + torch.zeros(3, 4)).sum(-1, keepdim=True)
+        ),
+        (randn(3, 4),),
+    ),
+    "alpha": (
+        lambda m, x, y: torch.add(x, y, alpha=2.0) + 3 * torch.sub(x, y, alpha=0.5),
+        (randn(3, 4), randn(3, 4)),
+    ),
+    # torch.logical_not of a float is x == 0, not 1 - x
+    "logical_not_float": (
+        lambda m, x: x * torch.logical_not(x).to(x.dtype) + torch.logical_not(x).to(x.dtype),
+        (torch.tensor([[0.0, 1.5, -2.0], [0.25, 0.0, 3.0]], dtype=torch.float64),),
+    ),
+    # a plain number on the left: Python calls the tensor's reflected operator with the operands swapped
+    "reflected": (lambda m, x: 2.0 / (x**2 + 1) + 1.5**x + 3.0 - x, (randn(3, 4),)),
+    "method_forms": (
+        lambda m, x, k: (
+            x.where(k[..., None], -2 * x).swapaxes(0, 2)
+            + x.type_as(k).type_as(x).swapaxes(0, 2)  # float -> bool -> float: x != 0 as 0/1
+        ),
+        (randn(2, 3, 2), torch.tensor([[True, False, True], [False, True, True]])),
+    ),
     "linear": (lambda m, x: m.lin(x), (randn(2, 3, 5),), {"lin": nn.Linear(5, 4)}),
     "matmul_batched": (lambda m, x, y: x @ y, (randn(2, 3, 4), randn(2, 4, 5))),
     "matmul_2d": (lambda m, x, y: torch.matmul(x, y), (randn(2, 3, 4), randn(4, 2))),
