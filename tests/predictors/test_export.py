@@ -271,3 +271,62 @@ def test_exported_social_lstm_equals_the_hand_written_twin(pooling):
     x = ca.MX.sym("x", plan.size)
     jac = [ca.Function("j", [x], [ca.jacobian(f(context, x), x)])(plan) for f in (exported, reference)]
     np.testing.assert_allclose(np.asarray(jac[0]), np.asarray(jac[1]), rtol=0, atol=1e-12)
+
+
+class LowerTriangular:
+    """A stand-in for an exported predictor: torch predicts ``L @ plan`` (a lower-triangular ``L``, so its
+    Jacobian is not symmetric and a transposed one shows); the CasADi function predicts the same plus
+    ``value_offset`` on its first output only (the check takes the worst output, not a mean) and ``slope``
+    x (plan - the checked plan), so that its values and its Jacobian differ from torch's by exactly those
+    numbers."""
+
+    name = "lower_triangular"
+    obs_len = 3
+
+    def __init__(self, value_offset: float = 0.0, slope: float = 0.0):
+        self.value_offset, self.slope = value_offset, slope
+
+    def to_casadi(self, n_humans, n_robots, horizon):
+        from predictors.export.parity import crossing_scene
+
+        size = horizon * n_robots * 2
+        at = crossing_scene(n_humans, n_robots, horizon, self.obs_len)[3].ravel()
+        self.matrix = np.tril(np.arange(1.0, size * size + 1).reshape(size, size))
+        context, plan = ca.MX.sym("context", 1), ca.MX.sym("plan", size)
+        first = np.eye(size)[0]
+        out = (
+            ca.mtimes(ca.DM(self.matrix), plan)
+            + self.value_offset * ca.DM(first)
+            + self.slope * (plan - ca.DM(at))
+        )
+        return ca.Function("f", [context, plan], [out])
+
+    def encode(self, history, mask, humans):
+        return np.zeros(1)
+
+    def rollout_tensor(self, history, mask, robots_future, humans):
+        return torch.from_numpy(self.matrix) @ robots_future.reshape(-1)
+
+
+def test_the_parity_check_measures_values_and_jacobians_apart():
+    from predictors.export.parity import PARITY_TOLERANCE, check_parity, require_parity
+
+    assert PARITY_TOLERANCE == 1e-6
+    exact = check_parity(LowerTriangular(), 2, 2, 3)
+    assert exact.worst < 1e-9 and exact.ok()
+    # one output off by 3e-6 m, the Jacobian exact
+    shifted = check_parity(LowerTriangular(value_offset=3e-6), 2, 2, 3)
+    assert shifted.value_error == pytest.approx(3e-6, rel=1e-3) and shifted.jacobian_error < 1e-9
+    # the Jacobian's diagonal off by 2e-6, the values exact at the checked plan
+    tilted = check_parity(LowerTriangular(slope=2e-6), 2, 2, 3)
+    assert tilted.jacobian_error == pytest.approx(2e-6, rel=1e-3) and tilted.value_error < 1e-9
+    for parity in (shifted, tilted):
+        assert parity.worst == max(parity.value_error, parity.jacobian_error) and not parity.ok()
+        assert parity.ok(tolerance=1e-5)
+    assert check_parity(LowerTriangular(value_offset=0.9e-6), 2, 2, 3).ok()  # within 1e-6
+    with pytest.raises(ExportError) as refused:
+        require_parity(LowerTriangular(slope=2e-6), 2, 2, 3)
+    assert "differs from torch by" in str(refused.value) and "2.00e-06 (Jacobians), more than 1e-06" in str(
+        refused.value
+    )
+    assert require_parity(LowerTriangular(value_offset=0.5e-6), 2, 2, 3).ok()
