@@ -280,6 +280,21 @@ def test_a_zoo_file_never_imports_a_module(tmp_path, shipped, user):
     assert "tests.plugins.never_imported" not in sys.modules
 
 
+def test_a_saved_pair_reads_back_as_saved(tmp_path):
+    """float32 weights whatever the net's dtype (the zoo's files are float32), the observed steps asked for
+    (not the default 9), and the name a caller gives over the file's own."""
+    kind = load_plugin(TOY)
+    torch.manual_seed(0)
+    net = kind.build_net(kind.config({"hidden_dim": 4})).double()
+    weights, config = checkpoint.save_checkpoint(net, model=TOY, name="toy_eth", out_dir=tmp_path, obs_len=6)
+    state = torch.load(weights, weights_only=True)
+    assert {t.dtype for t in state.values()} == {torch.float32}
+    assert json.loads(config.read_text())["obs_len"] == 6
+    predictor = checkpoint.load_checkpoint(weights)
+    assert (predictor.obs_len, predictor.name) == (6, "toy_eth")
+    assert checkpoint.load_checkpoint(weights, name="renamed").name == "renamed"
+
+
 def test_save_checkpoint_refuses_what_it_cannot_reload(tmp_path):
     kind = load_plugin(TOY)
     net = kind.build_net(kind.config())

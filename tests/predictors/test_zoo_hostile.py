@@ -211,6 +211,27 @@ def test_tampered_weights_with_the_recorded_sha256_are_refused(tmp_path, zoo_dir
     assert code == 2 and "the manifest expects" in line
 
 
+def test_a_tampered_config_with_the_recorded_sha256_is_refused(tmp_path, zoo_dir, capsys):
+    """The config is half the checkpoint (what net to build, how many steps it observes): the manifest's
+    config_sha256 guards it as sha256 guards the weights."""
+    config = zoo_dir / f"{NAME}.json"
+    document = json.loads(config.read_text())
+    config.write_text(json.dumps({**document, "obs_len": 8}))  # still valid, just not the recorded one
+    with pytest.raises(CheckpointMismatch):
+        zoo.load_zoo(NAME)
+    code, line = cli(["export", NAME, "--out", str(tmp_path / "o.casadi")], capsys)
+    assert code == 2 and "the manifest expects" in line and f"{NAME}.json" in line
+
+
+def test_load_checkpoint_checks_both_expected_hashes(pair):
+    weights, config = pair
+    good = {"expected_sha256": sha256(weights), "expected_config_sha256": sha256(config)}
+    assert checkpoint.load_checkpoint(weights, **good).name == NAME
+    config.write_text(config.read_text() + " ")  # the same document, other bytes
+    with pytest.raises(CheckpointMismatch):
+        checkpoint.load_checkpoint(weights, **good)
+
+
 def test_load_checkpoint_refuses_a_malformed_expected_sha256(pair):
     with pytest.raises(PredictorError, match="must be a sha256"):
         checkpoint.load_checkpoint(pair[0], expected_sha256="not a hash")
@@ -389,6 +410,25 @@ def test_bad_configs_are_refused_naming_the_file_before_a_net_is_built(
     assert text.startswith(f"{config}: ") and message in text and "\n" not in text
     code, line = cli(["zoo", "add", str(weights)], capsys)
     assert code == 2 and line.startswith(f"crowdmpc zoo: error: {config}: ") and message in line
+
+
+def test_obs_len_bounds_are_inclusive(pair):
+    weights, config = pair
+    document = json.loads(config.read_text())
+    config.write_text(json.dumps({**document, "obs_len": checkpoint.MAX_OBS_LEN}))
+    assert checkpoint.load_checkpoint(weights).obs_len == 100  # 2..100 includes 100
+
+
+def test_a_config_over_the_size_cap_is_refused_before_it_is_read(pair):
+    weights, config = pair
+    with config.open("r+b") as handle:  # sparse: no 64 MiB written
+        handle.truncate(checkpoint.MAX_DOCUMENT_BYTES + 1)
+    with pytest.raises(PredictorError) as refused:
+        checkpoint.load_checkpoint(weights)
+    assert str(refused.value) == (
+        f"{config}: {checkpoint.MAX_DOCUMENT_BYTES + 1} bytes, more than the {checkpoint.MAX_DOCUMENT_BYTES} "
+        "a crowdmpc predictor config may have"
+    )
 
 
 @pytest.mark.parametrize(
