@@ -280,6 +280,32 @@ def test_a_zoo_file_never_imports_a_module(tmp_path, shipped, user):
     assert "tests.plugins.never_imported" not in sys.modules
 
 
+def test_a_shipped_name_in_the_user_zoo_reads_as_the_shipped_entry(shipped, user):
+    """The merged listing shows what loads: the shipped entry, not a user entry under the same name."""
+    other = {**real_entry(), "metrics": {"test": {"ade": 9.99}}}
+    write_manifest(user, other)
+    assert read_manifest()[NAME].metrics == real_entry()["metrics"]
+    assert [located.source for located in zoo.zoo_entries()] == [zoo.SHIPPED, zoo.USER]
+
+
+def test_a_user_zoo_set_to_the_shipped_one_is_read_once(shipped, monkeypatch):
+    """$CROWDMPC_ZOO at the shipped zoo: one zoo, whose entries shadow nothing (read twice, every entry
+    would be listed twice and verified as a user entry under a shipped name)."""
+    monkeypatch.setenv(ZOO_ENV, str(shipped))
+    assert zoo.zoo_roots() == [(zoo.SHIPPED, shipped)]
+    assert [(located.entry.name, problem) for located, problem in zoo.verify_entries()] == [(NAME, None)]
+
+
+def test_verify_loads_each_entry_of_a_zoo_directory(shipped, user):
+    """verify checks the files, not just the manifest: weights that no longer match are named."""
+    assert zoo.verify(shipped) == [(NAME, None)]
+    (shipped / f"{NAME}.pt").write_bytes((shipped / f"{NAME}.pt").read_bytes() + b"\0")
+    [(name, problem)] = zoo.verify(shipped)
+    assert name == NAME and problem is not None and "the manifest expects" in problem
+    [(located, problem)] = zoo.verify_entries()  # both zoos (the user zoo is empty)
+    assert located.entry.name == NAME and problem is not None and "the manifest expects" in problem
+
+
 def test_a_saved_pair_reads_back_as_saved(tmp_path):
     """float32 weights whatever the net's dtype (the zoo's files are float32), the observed steps asked for
     (not the default 9), and the name a caller gives over the file's own."""
