@@ -9,9 +9,9 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType
 
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import MAGIC, read_recording
+from pipelines.logs.reader import MAGIC, episode_view, read_recording
 from pipelines.logs.recorder import DEFAULT_COMPRESSION, McapRecorder
-from pipelines.logs.schemas import HUMANS, ROBOTS, MessageSchema
+from pipelines.logs.schemas import HUMANS, PREDICTION, ROBOTS, MessageSchema
 
 ROBOT_MESSAGE = {
     "time": 0.4,
@@ -139,3 +139,50 @@ def test_a_symbolic_link_in_place_of_the_unfinished_file_is_refused(tmp_path):
     (folder / "run.mcap.part").mkdir()  # and whatever else cannot be opened is named, not an OSError
     with pytest.raises(PipelineError, match=r"cannot record to .*run\.mcap\.part: Is a directory"):
         McapRecorder(folder / "run.mcap")
+
+
+def test_a_repeated_metadata_name_reads_as_its_last_record(tmp_path):
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path, metadata={"episode": {"seed": "3"}}) as rec:
+        rec.add_metadata("episode", {"seed": "4"})
+    assert read_recording(path).metadata == {"episode": {"seed": "4"}}
+
+
+def test_log_times_from_a_start_beyond_int64_are_simulation_times(tmp_path):
+    """An MCAP log time is a uint64: a start of 2^63 ns is valid, and every place names a message by its
+    simulation time (log time - start), here 0.4 s."""
+    start = 1 << 63
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path, metadata={"episode": {"start_time_ns": str(start)}}) as rec:
+        rec.write_json("/robots", b"not json", start + 400_000_000, schema=ROBOTS)
+    got = read_recording(path)
+    assert got.problems == [] and got.start_time_ns == start
+    assert got.sim_seconds(start + 400_000_000) == pytest.approx(0.4)
+    [line] = got.message_problems()
+    assert line.startswith("/robots @ 0.400 s: not JSON")
+
+
+def test_episode_view_pairs_states_by_step_and_reads_predictions_as_h_n_2(tmp_path):
+    humans = {**HUMAN_MESSAGE, "positions": [[0.0, 0.0], [1.0, 0.0]], "goals": [[4, 0], [5, 0]]}
+    # H = 3 steps ahead of N = 2 humans: prediction[h][i] = (h, 10 i) so that any reordering shows
+    prediction = [[[float(h), 10.0 * i] for i in range(2)] for h in range(3)]
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path) as rec:  # no "episode" record: dt comes from the recorded times
+        for step in range(3):
+            time = 0.25 * step
+            stamp = {"time": time, "step": step}
+            rec.write("/robots", {**ROBOT_MESSAGE, **stamp}, int(time * 1e9), schema=ROBOTS)
+            if step < 2:  # the run was cut between the last /robots and its /humans
+                rec.write("/humans", {**humans, **stamp}, int(time * 1e9), schema=HUMANS)
+        rec.write(
+            "/mpc/prediction",
+            {"time": 0.0, "step": 0, "positions": prediction, "iterations": []},
+            0,
+            schema=PREDICTION,
+        )
+    view = episode_view(read_recording(path))
+    assert view.steps.tolist() == [0, 1] and view.robot_positions.shape == (2, 2, 2)
+    assert view.human_positions.shape == (2, 2, 2)
+    assert view.dt == pytest.approx(0.25)  # the median step of the times 0, 0.25 (0.4 is the world's default)
+    assert view.predictions[0].shape == (3, 2, 2)
+    assert view.predictions[0].tolist() == prediction  # [h][i], as written
