@@ -186,3 +186,45 @@ def test_episode_view_pairs_states_by_step_and_reads_predictions_as_h_n_2(tmp_pa
     assert view.dt == pytest.approx(0.25)  # the median step of the times 0, 0.25 (0.4 is the world's default)
     assert view.predictions[0].shape == (3, 2, 2)
     assert view.predictions[0].tolist() == prediction  # [h][i], as written
+
+
+def test_publish_time_is_the_log_time_and_both_writers_count(tmp_path):
+    """Foxglove can order by publish time: it is the log time, for write and write_json alike."""
+    path = tmp_path / "a.mcap"
+    with McapRecorder(path) as rec:
+        rec.write("/robots", ROBOT_MESSAGE, 400_000_000, schema=ROBOTS)
+        rec.write_json("/humans", json.dumps(HUMAN_MESSAGE).encode(), 800_000_000, schema=HUMANS)
+        assert rec.message_count == 2
+    with open(path, "rb") as f:
+        times = [(m.log_time, m.publish_time) for _, _, m in make_reader(f).iter_messages()]
+    assert times == [(400_000_000, 400_000_000), (800_000_000, 800_000_000)]
+
+
+def test_a_negative_log_time_or_a_key_that_is_not_text_is_refused(tmp_path):
+    with McapRecorder(tmp_path / "a.mcap") as rec:
+        with pytest.raises(PipelineError, match="non-negative int of ns, got -1"):
+            rec.write("/robots", ROBOT_MESSAGE, -1, schema=ROBOTS)
+        with pytest.raises(PipelineError, match="needs str keys and values"):
+            rec.add_metadata("episode", {3: "seed"})
+
+
+def test_a_longer_left_over_part_file_is_overwritten_not_kept_behind(tmp_path):
+    """A killed run's NAME.mcap.part, longer than the new recording: its tail must not stay after the new
+    file's end (the finished file would then not end with MCAP's magic and read as truncated)."""
+    path = tmp_path / "a.mcap"
+    (tmp_path / "a.mcap.part").write_bytes(b"\0" * 200_000)
+    with McapRecorder(path) as rec:
+        rec.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+    assert path.read_bytes().endswith(MAGIC)
+    got = read_recording(path)
+    assert not got.truncated and got.problems == [] and got.data("/robots") == [ROBOT_MESSAGE]
+
+
+def test_a_new_recording_never_takes_a_name_held_by_a_dangling_link(tmp_path):
+    """new=True takes a name only when nothing has it: a symbolic link to nowhere is something (replacing
+    it would lose whatever the user keeps the link for)."""
+    path = tmp_path / "a.mcap"
+    path.symlink_to(tmp_path / "nowhere")
+    with pytest.raises(FileExistsError):
+        McapRecorder(path, new=True)
+    assert path.is_symlink() and not (tmp_path / "a.mcap.part").exists()
