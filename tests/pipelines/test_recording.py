@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import platform
 import re
@@ -13,9 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from crowdsim.env import CrowdEnv, EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
-from pipelines.logs.recording import FORMAT, ROBOT_RGB, McapEpisodeRecorder, episode_filename
+from pipelines.logs.recording import (
+    FORMAT,
+    ROBOT_RGB,
+    McapEpisodeRecorder,
+    episode_filename,
+    next_unseeded,
+    seconds_to_ns,
+)
 from pipelines.logs.review import check_recording
 from pipelines.loop.record import EpisodeRecord
 from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
@@ -278,3 +287,35 @@ def test_a_setting_of_speed_only_does_not_make_another_run(tmp_path):
     reset({"horizon": 4, "jit": True, "dmpc_parallel": "threads"})  # replaced: no refusal
     with pytest.raises(PipelineError, match=re.escape("(mpc.horizon 4; this run: mpc.horizon 5)")):
         reset({"horizon": 5, "jit": True, "dmpc_parallel": "threads"})
+
+
+def test_simulation_times_become_the_nearest_nanosecond():
+    # a time summed step by step: 0.1 added 8 times is 0.7999999999999999 s, which truncation would log at
+    # 799 999 999 ns, a nanosecond before the step's 0.8 s
+    assert seconds_to_ns(sum([0.1] * 8)) == 800_000_000
+    assert seconds_to_ns(0.4) == 400_000_000
+
+
+def test_the_next_unseeded_number_passes_unfinished_files_and_the_recorders_own(tmp_path):
+    (tmp_path / "circle_000003.mcap.part").write_bytes(b"")  # a run still writing (or killed) holds 3
+    (tmp_path / "circle_000001.mcap").write_bytes(b"")
+    (tmp_path / "other_000009.mcap").write_bytes(b"")  # another scenario's numbers are its own
+    assert next_unseeded(tmp_path, "circle") == 4
+    # this recorder wrote number 7 (since moved away): its next episode is 8, never 7 again
+    assert next_unseeded(tmp_path, "circle", written=7) == 8
+
+
+def test_reached_flags_and_dt_are_recorded_as_observed(tmp_path):
+    """The short episodes above reach no goal and run at the default 0.4 s: here a robot has arrived and the
+    step is 0.25 s, which the "episode" record keeps exactly (review's dt)."""
+    env = CrowdEnv(EnvConfig(time_limit=2.0, timeout_margin=0.0))
+    obs = env.reset(7, "circle", 4, 3)
+    obs = dataclasses.replace(obs, robot_reached=np.array([True, False, True]), dt=0.25)
+    out = control_output(obs)
+    next_obs, _, _ = env.step(out.accelerations)
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        recorder.on_reset(obs, {"seed": 7, "scenario": "circle"})
+        recorder.on_step(obs, out, next_obs)
+    got = read_recording(tmp_path / episode_filename("circle", 7))
+    assert got.metadata["episode"]["dt"] == "0.25"
+    assert got.data("/robots")[0]["reached"] == [True, False, True]
