@@ -395,3 +395,26 @@ def test_a_recording_killed_at_random_moments_loses_no_finished_episode(tmp_path
             assert rc == 2 and err.splitlines()[-1].startswith("crowdmpc review: error: ")
         assert "truncated" not in err and "Traceback" not in err
         assert all(len(lines_naming(err, part)) == 1 for part in parts)
+
+
+def test_messages_written_before_their_channel_keep_their_place(tmp_path):
+    """A writer may put a message before its channel record (the summary repeats the channels): such
+    messages join their topic ahead of the ones after the channel, in file order, and a message whose
+    channel never comes is named, not lost silently."""
+    path = tmp_path / "early.mcap"
+    with path.open("wb") as f:
+        writer = Writer(f, compression=CompressionType.NONE)
+        writer.start(profile="", library="test")
+        schema = writer.register_schema(*_schema(ROBOTS))
+        # mcap's writer numbers channels from 1: the first registered below is 1
+        writer.add_message(1, log_time=0, data=json.dumps(robot(0)).encode(), publish_time=0)
+        for t in (S, 3 * S // 2):  # two on a channel no record describes
+            writer.add_message(7, log_time=t, data=json.dumps(robot(1)).encode(), publish_time=t)
+        assert writer.register_channel("/robots", "json", schema) == 1
+        writer.add_message(1, log_time=2 * S, data=json.dumps(robot(2)).encode(), publish_time=2 * S)
+        writer.finish()
+    got = read_recording(path)
+    assert [m["step"] for m in got.data("/robots")] == [0, 2]
+    assert got.problems == [
+        "2 message(s) on channel id 7 (times 1.000 s to 1.500 s), which no channel record describes: left out"
+    ]
