@@ -1,5 +1,6 @@
 import dataclasses
 import math
+import os
 
 import numpy as np
 import pytest
@@ -151,6 +152,37 @@ def test_file_arrays_are_cached_in_memory_and_on_disk(tmp_path, monkeypatch):
     windows._MEMORY.clear()
     again = load_file_arrays(path)
     np.testing.assert_array_equal(again.xy, arrays.xy)
+
+
+def test_the_cache_is_keyed_by_content_and_scene_length(tmp_path, monkeypatch):
+    """A file rewritten in place (same size) is read anew, and a scene length the file does not have is
+    refused, from memory or from disk, never served from the other length's arrays."""
+    from predictors.data import windows
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    assert load_file_arrays(path).xy[20, 0].tolist() == [10.0, 0.0]  # the primary at 0.5 m per step
+    text = path.read_text()
+    path.write_text(text.replace('"x": 10.0', '"x": 20.0'))  # the same number of bytes
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10**9))  # a later write
+    assert load_file_arrays(path).xy[20, 0].tolist() == [20.0, 0.0]
+    for clear in (False, True):  # from memory, then from the disk cache alone
+        if clear:
+            windows._MEMORY.clear()
+        with pytest.raises(DatasetFormatError, match="has 21 frames, need 20"):
+            load_file_arrays(path, scene_length=20)
+
+
+def test_scene_ids_are_the_files_and_a_damaged_cache_entry_is_rebuilt(tmp_path, monkeypatch):
+    from predictors.data import windows
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    path = write_lines(tmp_path / "four.ndjson", walk_scene_records(sid=4))
+    assert load_file_arrays(path).scene_ids.tolist() == [4]  # as in the file, not a count from 0
+    [entry] = (tmp_path / "cache" / "scenes").glob("*.npz")
+    np.savez(entry, other=np.zeros(1))  # an entry without the arrays (an older layout, a crash)
+    windows._MEMORY.clear()
+    assert load_file_arrays(path).scene_ids.tolist() == [4]
 
 
 def test_dataset_rejects_short_scenes(tmp_path):
