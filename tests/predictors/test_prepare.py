@@ -121,6 +121,46 @@ def test_categorisation_tags_and_acceptance():
     assert build_scenes(tracks, frame_step=10) == build_scenes(tracks, frame_step=10)  # deterministic
 
 
+def test_acceptance_draws_per_seed_primary_and_start():
+    """Each scene draws from its own generator of (seed, primary, start frame): pedestrians 1 and 2 walk
+    side by side over the same frames, yet at acceptance 1/2 they keep different windows, and another seed
+    keeps others."""
+    tracks = walkers(n_steps=41)  # 11 windows each
+
+    def kept(seed):
+        scenes = build_scenes(tracks, frame_step=10, acceptance=(0.5,) * 4, seed=seed)
+        return [{s.start_frame for s in scenes if s.primary == p} for p in (1, 2)]
+
+    first, second = kept(42)
+    assert first != second and 0 < len(first) < 11
+    assert kept(43) != [first, second]
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"chunk_stride": 0}, "chunk_stride >= 1"),
+        ({"acceptance": (1.5, 1.0, 1.0, 1.0)}, "acceptance must be four probabilities"),
+    ],
+)
+def test_build_scenes_refuses_bad_options(options, message):
+    with pytest.raises(ValueError, match=message):
+        build_scenes(walkers(), frame_step=10, **options)
+
+
+def test_a_fractional_pedestrian_id_is_refused():
+    tracks = walkers()
+    tracks[4, 1] = 1.5  # would be truncated into pedestrian 1
+    with pytest.raises(ValueError, match=r"tracks\[4\] has frame 20.0, pedestrian 1.5"):
+        build_scenes(tracks, frame_step=10, categorize_scenes=False)
+
+
+def test_write_ndjson_writes_the_rate_it_is_given(tmp_path):
+    path = tmp_path / "x.ndjson"
+    write_ndjson(path, [SceneSpec(0, 1, 0, 200, fps=5.0)], walkers(), fps=5.0)
+    assert json.loads(path.read_text().splitlines()[0])["scene"]["fps"] == 5.0
+
+
 def test_categorisation_reads_centimetres_and_static_means_under_one_metre():
     # the converter categorises the written file, coordinates rounded to cm: the primary's first window
     # goes from x = 0.004 (written 0.00) to 0.004 + 20 x 0.0498 = 1.000 (written 1.00). Its displacement is
