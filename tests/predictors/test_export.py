@@ -125,6 +125,15 @@ OPERATIONS = {
         lambda m, x: x * torch.logical_not(x).to(x.dtype) + torch.logical_not(x).to(x.dtype),
         (torch.tensor([[0.0, 1.5, -2.0], [0.25, 0.0, 3.0]], dtype=torch.float64),),
     ),
+    # a tensor bound, and a constant mask that is all False (no node: the other branch as it is)
+    "clamp_tensor_max": (
+        lambda m, x, y: torch.clamp(x, max=y) + 2 * torch.clamp(x, min=y),
+        (randn(3, 4), randn(3, 4)),
+    ),
+    "where_all_false": (
+        lambda m, x: torch.where(torch.zeros(3, 4, dtype=torch.bool), x, -2 * x),
+        (randn(3, 4),),
+    ),
     # a plain number on the left: Python calls the tensor's reflected operator with the operands swapped
     "reflected": (lambda m, x: 2.0 / (x**2 + 1) + 1.5**x + 3.0 - x, (randn(3, 4),)),
     "method_forms": (
@@ -210,6 +219,19 @@ def export(fn, *shapes, **modules):
     module = Wrap(fn, **modules).double()
     specs = [TensorSpec(f"x{i}", s) for i, s in enumerate(shapes)]
     return export_function(module, module.forward, specs, ["y"], "f")
+
+
+@pytest.mark.parametrize(
+    ("fn", "message"),
+    [
+        (lambda m, x: torch.div(x, 2.0, rounding_mode="floor"), "division with rounding_mode='floor'"),
+        (lambda m, x: x.to(torch.int64).to(x.dtype), "conversion to torch.int64"),
+    ],
+)
+def test_operations_without_a_smooth_casadi_form_are_refused(fn, message):
+    """Rounding has no derivative for the solver: refused, never exported as plain division or a no-op."""
+    with pytest.raises(ExportError, match=message):
+        export(fn, (3, 4))
 
 
 def test_unsupported_operation_names_the_op_and_the_module():
