@@ -117,6 +117,17 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
     ),
     "track is null": (VALID + ['{"track": null}'], N + 1, '"track" must be a JSON object, got NoneType'),
     "null line": (VALID + ["null"], N + 1, 'exactly one of "scene" or "track"'),
+    "scene and track in one record": (
+        VALID + [{**scene(9, 1, 0, 200), **track(0, 1, 0.0, 0.0)}],
+        N + 1,
+        'exactly one of "scene" or "track"',
+    ),
+    # two tracks outside every scene: the first one is named
+    "tracks after every scene": (
+        VALID + [track(300, 1, 0.0, 0.0), track(400, 1, 0.0, 0.0)],
+        N + 1,
+        "track frame 300 lies outside every scene's [s, e] frame range",
+    ),
     "UTF-8 byte-order mark": (["\ufeff" + json.dumps(VALID[0])] + VALID[1:], 1, "invalid JSON"),
     "carriage returns only": (["\r".join(json.dumps(r) for r in VALID)], 1, "invalid JSON (Extra data"),
     # line 2 is pedestrian 1 at frame 0, (0, 0): the reader kept one of the two and dropped the other
@@ -438,6 +449,13 @@ def test_cli_train_on_an_empty_file(tmp_path, capsys):
     # checked before Lightning starts: the one line is the whole output
     assert_cli_error(code, err, f"{empty}: holds no scenes")
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_scenes_tag_reaches_the_reader(tmp_path):
+    """The tag (TrajNet++ type and sub-types) is what `data stats` counts by type."""
+    records = [scene(0, 1, 0, 200, tag=[3, [2, 4]])] + VALID[1:]
+    [read] = read_scenes(write_lines(tmp_path / "tagged.ndjson", records))
+    assert read.tag == [3, [2, 4]]
 
 
 def test_a_repeated_identical_row_passes(tmp_path):
