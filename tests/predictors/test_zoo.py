@@ -321,6 +321,28 @@ def test_a_saved_pair_reads_back_as_saved(tmp_path):
     assert checkpoint.load_checkpoint(weights, name="renamed").name == "renamed"
 
 
+def test_a_saved_gan_reads_back_as_a_gan_also_as_a_legacy_config(tmp_path):
+    """The config names the GAN's class (load refuses a GAN kind under another class) and keeps what the
+    caller adds (training); a config from before "model" and "name" reads by its class and file name."""
+    kind = models.model_kind("social_gan")
+    net_config = json.loads((REAL_ZOO / "social_gan_eth.json").read_text())["net"]
+    weights, config = checkpoint.save_checkpoint(
+        kind.build_net(net_config),
+        model="social_gan",
+        name="gan",
+        out_dir=tmp_path,
+        obs_len=9,
+        extra={"training": {"epochs": 1}},
+    )
+    document = json.loads(config.read_text())
+    assert (document["class"], document["training"]) == ("SocialGANPredictor", {"epochs": 1})
+    assert isinstance(checkpoint.load_checkpoint(weights), SocialGANPredictor)
+    legacy = {k: v for k, v in document.items() if k not in ("model", "name")}
+    config.write_text(json.dumps(legacy))
+    predictor = checkpoint.load_checkpoint(weights)
+    assert isinstance(predictor, SocialGANPredictor) and predictor.name == "gan"  # NAME.pt's NAME
+
+
 def test_save_checkpoint_refuses_what_it_cannot_reload(tmp_path):
     kind = load_plugin(TOY)
     net = kind.build_net(kind.config())

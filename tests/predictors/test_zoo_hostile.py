@@ -412,6 +412,21 @@ def test_bad_configs_are_refused_naming_the_file_before_a_net_is_built(
     assert code == 2 and line.startswith(f"crowdmpc zoo: error: {config}: ") and message in line
 
 
+def test_a_sparse_tensor_in_the_weights_is_refused(pair):
+    weights, _ = pair
+    state = torch.load(weights, weights_only=True)
+    state["head.bias"] = state["head.bias"].to_sparse()
+    torch.save(state, weights)
+    with pytest.raises(PredictorError, match="'head.bias' is a Tensor, not a dense tensor"):
+        checkpoint.load_checkpoint(weights)
+
+
+def test_a_folder_in_place_of_a_document_is_named(tmp_path):
+    (tmp_path / "manifest.json").mkdir()
+    with pytest.raises(PredictorError, match="manifest.json: not a regular file"):
+        checkpoint.read_document(tmp_path / "manifest.json", "crowdmpc-zoo", "zoo manifest")
+
+
 def test_obs_len_bounds_are_inclusive(pair):
     weights, config = pair
     document = json.loads(config.read_text())
