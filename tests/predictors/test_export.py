@@ -134,6 +134,27 @@ OPERATIONS = {
         lambda m, x: torch.where(torch.zeros(3, 4, dtype=torch.bool), x, -2 * x),
         (randn(3, 4),),
     ),
+    "log_softmax": (lambda m, x: F.log_softmax(x, dim=-1) + 2 * x.log_softmax(1), (randn(2, 3, 3),)),
+    # chunk(3) of 4 columns is 2 + 2 where split(3) would be 3 + 1
+    "movement_rest": (
+        lambda m, x: (
+            torch.cat([x.chunk(3, dim=-1)[0], 2 * x.chunk(3, dim=-1)[1]], -1).sum(1)
+            + x.unbind(1)[0]
+            + 3 * x.unbind(1)[2]
+            + 5 * x[:, :1].squeeze(1)
+            + 7 * x.view(2, 12)[:, :4]
+            + 11 * torch.concat([x.narrow(1, 1, 2), x[:, :1]], dim=1).sum(1)
+        ),
+        (randn(2, 3, 4),),
+    ),
+    # a constant on the left of @ (the tensor's reflected matmul), and tensors made like x
+    "constructors_rmatmul": (
+        lambda m, x: (
+            torch.arange(6.0, dtype=torch.float64).reshape(2, 3) @ x
+            + (torch.full_like(x, 2.5) * x + 3 * x.new_ones(3, 4))[:2]
+        ),
+        (randn(3, 4),),
+    ),
     # a plain number on the left: Python calls the tensor's reflected operator with the operands swapped
     "reflected": (lambda m, x: 2.0 / (x**2 + 1) + 1.5**x + 3.0 - x, (randn(3, 4),)),
     "method_forms": (
