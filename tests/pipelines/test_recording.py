@@ -21,6 +21,7 @@ from pipelines.logs.recording import (
     FORMAT,
     ROBOT_RGB,
     McapEpisodeRecorder,
+    array_json,
     episode_filename,
     next_unseeded,
     seconds_to_ns,
@@ -124,6 +125,9 @@ def test_scene_update_draws_agents_goals_plans_and_predictions(episode, recordin
     np.testing.assert_allclose(plan0, np.vstack([obs.robot_positions[0], out.plan[0]]), atol=5e-4)
     predictions = entities["predictions"]["lines"]
     assert len(predictions) == 4 and len(predictions[0]["points"]) == HORIZON + 1
+    # human 1's strip: from where it stands through its predicted positions, prediction[:, 1] ((H, N, 2))
+    human1 = [[p["x"], p["y"]] for p in predictions[1]["points"]]
+    np.testing.assert_allclose(human1, np.vstack([obs.human_positions[1], out.prediction[:, 1]]), atol=5e-4)
     last = {e["id"]: e for e in scenes[-1].data["entities"]}  # terminal state: no plan any more
     assert last["plans"]["lines"] == [] and len(last["robots"]["spheres"]) == 3
 
@@ -287,6 +291,12 @@ def test_a_setting_of_speed_only_does_not_make_another_run(tmp_path):
     reset({"horizon": 4, "jit": True, "dmpc_parallel": "threads"})  # replaced: no refusal
     with pytest.raises(PipelineError, match=re.escape("(mpc.horizon 4; this run: mpc.horizon 5)")):
         reset({"horizon": 5, "jit": True, "dmpc_parallel": "threads"})
+
+
+def test_array_json_writes_a_non_finite_value_as_null():
+    # "%.6f" % nan is "nan", which no JSON reader takes: the whole message would be lost
+    assert json.loads(array_json(np.array([[np.nan, 1.0], [np.inf, -2.5]]), 6)) == [[None, 1.0], [None, -2.5]]
+    assert array_json(np.array([[0.1234567, 2.0]]), 6) == "[[0.123457,2.000000]]"
 
 
 def test_simulation_times_become_the_nearest_nanosecond():
