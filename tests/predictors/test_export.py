@@ -373,3 +373,18 @@ def test_the_parity_check_measures_values_and_jacobians_apart():
         refused.value
     )
     assert require_parity(LowerTriangular(value_offset=0.5e-6), 2, 2, 3).ok()
+
+
+def test_the_parity_scene_is_a_crowd_with_robots_moving_on():
+    """The check is only as good as its scene: agents that start within the +-3 m square (pooling's reach
+    sees neighbours), robots last, and a plan that starts one step after the last observed position (at
+    t + 1, as every plan the solver hands the predictor)."""
+    from predictors.export.parity import crossing_scene
+
+    history, mask, humans, future = crossing_scene(3, 2, 4, obs_len=5, seed=1)
+    assert history.shape == (5, 5, 2) and future.shape == (4, 2, 2) and mask.all()
+    assert humans.tolist() == [0, 1, 2]
+    assert np.abs(history[0]).max() < 3.0 + 0.1  # the start, plus 0.02 m noise
+    step = future[1] - future[0]  # one step of each robot's constant velocity
+    np.testing.assert_allclose(future[0] - history[-1, 3:], step, atol=1e-12)
+    assert np.abs(step).min() > 0  # they move
