@@ -270,15 +270,15 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
     by_file = {s["file"]: s for s in report["runs"]}
     report["groups"] = []
     for setup, name in zip(setups, names, strict=True):
-        table, totals = aggregate_table(setup.members, root=folder)
+        members = [by_file[str(rec.path)] for rec in setup.members]
+        table, totals = aggregate_table(setup.members, members, root=folder)
         if len(setups) > 1:
             print(f"== {name}: {count(len(setup.members), 'run')} ==")
         print(table + ("\n" if len(setups) > 1 else ""))
-        first = by_file[str(setup.members[0].path)]
         identity = setup.identity or {}
         report["groups"].append(
             {"name": name}
-            | {k: first[k] for k in RUN_IDENTITY}
+            | {k: members[0][k] for k in RUN_IDENTITY}
             | {"settings": {k: identity.get(k) for k in named}}
             | {"files": [str(rec.path) for rec in setup.members], "totals": totals}
         )

@@ -158,11 +158,13 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
 _RUN_COLUMNS: Final = ("success", "collision", "timeout", "travel_time", "min_distance")
 
 
-def aggregate_table(recordings: list[Recording], root: Path | None = None) -> tuple[str, dict[str, Any]]:
+def aggregate_table(
+    recordings: list[Recording], summaries: Sequence[dict[str, Any]], root: Path | None = None
+) -> tuple[str, dict[str, Any]]:
     """One row per run, then crowdsim's rates over the runs whose episode ended, and the control-step costs
-    pooled over every recorded step. Runs are named by their path below ``root`` (a sweep's cells hold files
-    of the same names), else by their file's name."""
-    summaries = [summarize(rec) for rec in recordings]
+    pooled over every recorded step; ``summaries`` are the recordings' ``summarize`` (a folder's review has
+    them already). Runs are named by their path below ``root`` (a sweep's cells hold files of the same
+    names), else by their file's name."""
     header = [
         "file",
         "controller",
