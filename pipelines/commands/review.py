@@ -292,7 +292,7 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
 
 def run(args: argparse.Namespace) -> int:
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
-    from pipelines.logs.reader import read_recording
+    from pipelines.logs.reader import FOLDER_LEVELS, read_recording
     from pipelines.logs.review import compare_table, format_summary, summarize
 
     if args.times and not args.plot:
@@ -306,9 +306,9 @@ def run(args: argparse.Namespace) -> int:
         from pipelines.logs.plots import check_animation_path
 
         check_animation_path(args.animate, "--animate")
-    below = ("*.mcap*", "*/*.mcap*", "*/*/*.mcap*")  # every file a folder's review may read
     inputs = [args.path]
-    if args.path.is_dir():
+    if args.path.is_dir():  # every file a folder's review may read, finished or not
+        below = [pattern + "*" for level in FOLDER_LEVELS for pattern in level]
         inputs += [p for pattern in below for p in args.path.glob(pattern)]
     inputs += [args.compare] if args.compare else []
     check_writable(args.plot, "--plot", inputs=inputs)

@@ -332,13 +332,17 @@ def read_recording(path: str | Path) -> Recording:
     )
 
 
+# Where a folder's recordings are looked for: in it, else one and two levels below it (find_recordings).
+FOLDER_LEVELS: Final[tuple[tuple[str, ...], ...]] = (("*.mcap",), ("*/*.mcap", "*/*/*.mcap"))
+
+
 def find_recordings(directory: str | Path) -> tuple[list[Path], list[Path]]:
     """The ``*.mcap`` entries of ``directory`` (whatever they are) and its unfinished ``*.mcap.part``; when it
     holds neither, those one and two levels below it (runs/ over runs/cmpc/ and runs/dmpc/, a sweep's DIR
     over DIR/mcap/CELL/), not the whole tree: a folder of recordings is reviewed as it is, never mixed with
     its subfolders'."""
     directory = Path(directory)
-    for patterns in (("*.mcap",), ("*/*.mcap", "*/*/*.mcap")):
+    for patterns in FOLDER_LEVELS:
         paths = sorted(p for pattern in patterns for p in directory.glob(pattern))
         unfinished = sorted(p for pattern in patterns for p in directory.glob(pattern + UNFINISHED_SUFFIX))
         if paths or unfinished:
