@@ -14,7 +14,7 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,16 +27,18 @@ from pipelines.plain_json import plain
 from predictors.registry import available
 
 
-def count_in(what: str, low: int, high: int) -> Callable[[str], int]:
-    """An argparse ``type``: an integer in ``low..high``, else the parser's one-line error naming ``what``."""
+def count_in(what: str, low: int, high: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type``: an integer in ``low..high`` (``high`` None: at least ``low``), else the parser's
+    one-line error naming ``what``."""
+    wanted = f"an integer in {low}..{high}" if high is not None else f"an integer >= {low}"
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             value = None
-        if value is None or not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{what} must be an integer in {low}..{high}, got {text!r}")
+        if value is None or value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{what} must be {wanted}, got {text!r}")
         return value
 
     return parse
@@ -44,6 +46,9 @@ def count_in(what: str, low: int, high: int) -> Callable[[str], int]:
 
 robot_count = count_in("robots", 1, MAX_ROBOTS)
 human_count = count_in("humans", 0, MAX_HUMANS)
+# What a run repeats: none of them means nothing to measure (a division by zero or a nan table at the end).
+episode_count = count_in("episodes", 1)
+seed_number = count_in("seed", 0)  # numpy's generators refuse a negative seed
 
 
 def predictor_name(text: str) -> str:
@@ -106,6 +111,15 @@ def write_text(path: str | Path, text: str) -> None:
 def write_json(path: str | Path, payload: Any, indent: int = 2) -> None:
     """``payload`` as strict JSON (``json_text``) to ``path``, its folder created."""
     write_text(path, json_text(payload, indent))
+
+
+def episode_bar(episodes: int, desc: str) -> Iterator[int]:
+    """``range(episodes)`` with a progress bar on stderr, as ``crowdmpc sweep`` shows one: a long benchmark
+    prints its figures only at the end (stdout), and a bar says how far it is. It advances between episodes,
+    outside every timed step, and goes when the loop ends."""
+    from tqdm import tqdm
+
+    return iter(tqdm(range(episodes), desc=desc, unit="ep", file=sys.stderr, leave=False))
 
 
 def run_main(main: Callable[[], int | None]) -> int:

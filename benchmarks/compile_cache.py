@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import output_file, run_main, write_json  # noqa: E402
+from bench_cli import count_in, output_file, run_main, write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 # The predictor ablation as first measured (283 s with jit, 19 s without): its default list then.
@@ -116,9 +116,14 @@ def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--episodes-per-cell", type=int, default=2)
+    parser.add_argument("--episodes-per-cell", type=count_in("episodes per cell", 1), default=2)
     parser.add_argument("--predictors", default=ORIGINAL_SEVEN, help="comma-separated (default: the seven)")
-    parser.add_argument("--payback-episodes", type=int, default=8, help="per variant (0: skip that part)")
+    parser.add_argument(
+        "--payback-episodes",
+        type=count_in("payback episodes", 0),
+        default=8,
+        help="per variant (0: skip that part)",
+    )
     parser.add_argument("--json", type=output_file, help="also write the sweeps' numbers here")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))

@@ -34,7 +34,7 @@ from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import episode_count, human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 
 def _stats(seconds: list[float]) -> dict[str, float]:
@@ -89,7 +89,9 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--humans", type=human_count, nargs="+", default=[5, 7, 9])
-    parser.add_argument("--episodes", type=int, default=3, help="circle episodes per row (seeds 0..)")
+    parser.add_argument(
+        "--episodes", type=episode_count, default=3, help="circle episodes per row (seeds 0..)"
+    )
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--dmpc-parallel", action="store_true", help="DMPC serial vs thread pool (7 humans)")
     parser.add_argument(
@@ -98,8 +100,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-ibr", action="store_true", help="skip the CMPC/DMPC/floor rows")
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
     if args.no_ibr and not args.coupled and not (args.dmpc_parallel and 7 in args.humans):
         parser.error(
             "nothing to measure: --no-ibr leaves --coupled and --dmpc-parallel (which runs at 7 humans)"

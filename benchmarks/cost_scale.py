@@ -32,6 +32,7 @@ from pipelines.loop.margins import parse_margins
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robot_scaling  # noqa: E402
 from bench_cli import (  # noqa: E402
+    episode_count,
     human_count,
     output_file,
     predictor_name,
@@ -96,12 +97,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cost-scale", type=float, nargs="+", default=[1.0, 0.01])
     parser.add_argument("--robots", type=robot_count, nargs="+", default=[3, 12])
     parser.add_argument("--humans", type=human_count, default=7)
-    parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--episodes", type=episode_count, default=4)
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
     try:  # every scale's config checked before the first episode
         runs = {scale: load(args.config, sets=[f"mpc.cost_scale={scale}"]) for scale in args.cost_scale}
     except PipelineError as exc:  # ConfigError, and what a value's own check raises

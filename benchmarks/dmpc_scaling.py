@@ -62,7 +62,17 @@ from pipelines.loop.episode import run_episode
 from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, mpc_sets, output_file, robot_count, run_main, write_json  # noqa: E402
+from bench_cli import (  # noqa: E402
+    count_in,
+    episode_bar,
+    episode_count,
+    human_count,
+    mpc_sets,
+    output_file,
+    robot_count,
+    run_main,
+    write_json,
+)
 
 PREDICTOR = "constant_velocity"
 Overrides = tuple[tuple[str, Any], ...]
@@ -151,7 +161,7 @@ def closed_loop(
     data: dict[str, dict[str, list]] = {m: {"times": [], "its": [], "outcomes": []} for m in modes}
     same = True
     try:
-        for seed in range(episodes):
+        for seed in episode_bar(episodes, f"M={n_robots} {rule}"):
             paths = []
             for mode, controller in controllers.items():
                 result = run_episode(
@@ -249,11 +259,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--robots", type=robot_count, nargs="+", default=[3, 6])
     parser.add_argument("--humans", type=human_count, default=7)
-    parser.add_argument("--episodes", type=int, default=3, help="circle episodes per row (seeds 0..)")
+    parser.add_argument(
+        "--episodes", type=episode_count, default=3, help="circle episodes per row (seeds 0..)"
+    )
     parser.add_argument("--rules", nargs="+", default=list(RULES), help="UPDATE:STOP pairs")
     parser.add_argument("--parallel", nargs="+", choices=PARALLEL_MODES, default=list(PARALLEL_MODES))
     parser.add_argument("--replay", action="store_true", help="also time the local-solve phase alone")
-    parser.add_argument("--replay-reps", type=int, default=3)
+    parser.add_argument("--replay-reps", type=count_in("replay reps", 1), default=3)
     parser.add_argument(
         "--mpc",
         action="append",
@@ -268,8 +280,6 @@ def _parser() -> argparse.ArgumentParser:
 def _checked(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Overrides:
     """The ``--mpc`` overrides, once every number and rule of the command line has been checked (a bad one
     ends the script through ``parser.error`` before any episode)."""
-    if args.episodes < 1 or args.replay_reps < 1:
-        parser.error(f"--episodes and --replay-reps must be >= 1, got {args.episodes}, {args.replay_reps}")
     try:
         extra = mpc_overrides(args.mpc)
     except PipelineError as exc:  # ConfigError and the other errors a value can cause

@@ -34,7 +34,7 @@ from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import count_in, episode_count, human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 PREDICTOR = "social_lstm_soft_eth"  # the coupling experiment's (pipelines/experiments)
 
@@ -101,8 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--predictor", type=predictor_name, default=PREDICTOR)
     parser.add_argument("--humans", type=human_count, default=7)
-    parser.add_argument("--episodes", type=int, default=4)
-    parser.add_argument("--max-iter", type=int, default=100, help="IPOPT iterations of the exact solve")
+    parser.add_argument("--episodes", type=episode_count, default=4)
+    parser.add_argument(
+        "--max-iter", type=count_in("max iter", 1), default=100, help="IPOPT iterations of the exact solve"
+    )
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
     load = os.getloadavg()[0]

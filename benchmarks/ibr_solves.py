@@ -26,7 +26,7 @@ from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, predictor_name, run_main  # noqa: E402
+from bench_cli import episode_count, human_count, predictor_name, run_main  # noqa: E402
 
 
 def measure(predictor: str, n_humans: int, episodes: int, jit: bool) -> dict[str, float]:
@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--predictor", type=predictor_name, default="social_lstm_eth")
     parser.add_argument("--humans", type=human_count, default=7)
-    parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--episodes", type=episode_count, default=4)
     parser.add_argument("--jit", action="store_true", help="compile the NLP (cached, mpc/compile_cache.py)")
     args = parser.parse_args(argv)
     load = os.getloadavg()[0]

@@ -20,7 +20,7 @@ from crowdsim.baselines import OrcaController
 from crowdsim.env import CrowdEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, robot_count, run_main  # noqa: E402
+from bench_cli import episode_bar, episode_count, human_count, robot_count, run_main, seed_number  # noqa: E402
 
 CONTACT: float = 0.6  # m, sum of the radii
 
@@ -39,15 +39,15 @@ def main() -> None:
     parser.add_argument("--scenario", default="circle", choices=("circle", "perpendicular"))
     parser.add_argument("--humans", type=human_count, default=9)
     parser.add_argument("--robots", type=robot_count, default=3)
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=episode_count, default=200)
+    parser.add_argument("--seed", type=seed_number, default=0)
     args = parser.parse_args()
 
     env, controller = CrowdEnv(), OrcaController()
     m = args.robots
     minima = {"any": [], "robot-robot": [], "robot-human": [], "human-human": []}
     lp3_episodes = contact_without_lp3 = timeouts = 0
-    for i in range(args.episodes):
+    for i in episode_bar(args.episodes, f"ORCA {args.scenario} M={m} N={args.humans}"):
         obs = env.reset(args.seed + i, args.scenario, args.humans, m)
         controller.reset(obs)
         done, lp3 = False, [0]  # lp3[k]: humans on the 3-D program in the step that produced row k

@@ -26,7 +26,7 @@ from crowdsim.env import CrowdEnv, EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, robot_count, run_main  # noqa: E402
+from bench_cli import count_in, episode_count, human_count, robot_count, run_main  # noqa: E402
 
 
 def fastest(fn, repeats: int) -> float:
@@ -83,9 +83,11 @@ def main() -> None:
     )
     parser.add_argument("--humans", type=human_count, nargs="+", default=[5, 9, 20, 50])
     parser.add_argument("--robots", type=robot_count, default=3)
-    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--episodes", type=episode_count, default=10)
     parser.add_argument("--scenario", default="circle", choices=("circle", "perpendicular"))
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs per step; the fastest is kept")
+    parser.add_argument(
+        "--repeats", type=count_in("repeats", 1), default=3, help="timed runs per step; the fastest is kept"
+    )
     args = parser.parse_args()
     print(
         f"CrowdEnv.step, {args.scenario} crossing, {args.robots} ORCA robots, {args.episodes} episodes a size"

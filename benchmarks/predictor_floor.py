@@ -38,7 +38,7 @@ from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, robot_count, run_main  # noqa: E402
+from bench_cli import count_in, human_count, robot_count, run_main  # noqa: E402
 
 
 def per_call_us(function, args: list[np.ndarray], calls: int) -> tuple[float, list[np.ndarray]]:
@@ -93,8 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", default="social_lstm_eth")
     parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--robots", type=robot_count, default=3)
-    parser.add_argument("--horizon", type=int, default=4)
-    parser.add_argument("--calls", type=int, default=300)
+    parser.add_argument("--horizon", type=count_in("horizon", 1), default=4)
+    parser.add_argument("--calls", type=count_in("calls", 1), default=300)
     parser.add_argument("--compile", choices=("none", "twin", "encoder", "both"), default="none")
     parser.add_argument(
         "--opt",

@@ -21,7 +21,7 @@ from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, predictor_name, run_main  # noqa: E402
+from bench_cli import episode_count, human_count, predictor_name, run_main  # noqa: E402
 
 
 class TimedRecorder(McapEpisodeRecorder):
@@ -74,7 +74,7 @@ def main() -> None:
     )
     parser.add_argument("--controller", default="cmpc", choices=["cmpc", "dmpc", "orca", "straight"])
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
-    parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--episodes", type=episode_count, default=4)
     parser.add_argument("--humans", type=human_count, default=7)
     args = parser.parse_args()
     row = measure(args.controller, args.predictor, args.episodes, args.humans)

@@ -63,6 +63,8 @@ from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    episode_bar,
+    episode_count,
     figure,
     human_count,
     mpc_sets,
@@ -70,6 +72,7 @@ from bench_cli import (  # noqa: E402
     predictor_name,
     robot_count,
     run_main,
+    seed_number,
     write_json,
 )
 
@@ -164,7 +167,7 @@ def run_row(
     halfway: list[float] = []
     t0 = time.perf_counter()
     try:
-        for i in range(episodes):
+        for i in episode_bar(episodes, f"{controller} M={n_robots} N={n_humans} {goals}"):
             obs = env.reset(seed + i, scenarios[i % len(scenarios)], n_humans, n_robots)
             mpc.reset(obs)
             done = False
@@ -236,8 +239,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--controllers", nargs="+", choices=CONTROLLERS, default=list(CONTROLLERS))
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--humans", type=human_count, default=7)
-    parser.add_argument("--episodes", type=int, default=50, help="episodes per row (default 50)")
-    parser.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
+    parser.add_argument("--episodes", type=episode_count, default=50, help="episodes per row (default 50)")
+    parser.add_argument("--seed", type=seed_number, default=0, help="episode i uses seed + i")
     parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
     parser.add_argument(
         "--formation", choices=FORMATIONS, help="the robots' formation; default: the config's, else auto"
@@ -272,8 +275,6 @@ def main(argv: list[str] | None = None) -> int:
         formation = args.formation or run.env.formation
     except (ConfigError, PipelineError) as exc:
         parser.error(f"--config/--mpc: {exc}")
-    if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
 
     report: dict[str, Any] = {"load_before": os.getloadavg(), "args": vars(args)}
     rows = []

@@ -55,7 +55,7 @@ import numpy as np
 # and this script's parts (run_all_parts/) are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_cli import json_text, output_file, run_main, write_text  # noqa: E402
+from bench_cli import count_in, json_text, output_file, run_main, write_text  # noqa: E402
 from run_all_parts.sections import SECTION_RUNS, Run  # noqa: E402
 from run_all_table import table  # noqa: E402
 
@@ -89,8 +89,15 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--quick", action="store_true", help="fewer steps and sizes")
-    parser.add_argument("--steps", type=int, help="control steps timed per episode (default 20, quick 8)")
-    parser.add_argument("--workers", type=int, default=2, help="workers of the sweep measurement (default 2)")
+    parser.add_argument(
+        "--steps", type=count_in("steps", 1), help="control steps timed per episode (default 20, quick 8)"
+    )
+    parser.add_argument(
+        "--workers",
+        type=count_in("workers", 1),
+        default=2,
+        help="workers of the sweep measurement (default 2)",
+    )
     parser.add_argument("--sweep-episodes", type=int, help="episodes per cell of the sweep measurement")
     parser.add_argument(
         "--sections",

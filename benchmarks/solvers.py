@@ -29,7 +29,7 @@ from mpc import nlp as nlp_module  # noqa: E402
 from mpc.config import MPCConfig  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import episode_count, human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 SCENARIOS = ("circle", "perpendicular")
 
@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--humans", type=human_count, default=7)
-    parser.add_argument("--episodes", type=int, default=4, help="episodes per controller to record")
+    parser.add_argument("--episodes", type=episode_count, default=4, help="episodes per controller to record")
     parser.add_argument(
         "--predictor",
         type=predictor_name,

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import predictor_name, run_main  # noqa: E402
+from bench_cli import count_in, predictor_name, run_main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,11 +45,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--kills", type=int, default=10)
+    parser.add_argument("--kills", type=count_in("kills", 0), default=10)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--experiment", default="table2")
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
-    parser.add_argument("--episodes-per-cell", type=int, default=12)
+    parser.add_argument("--episodes-per-cell", type=count_in("episodes per cell", 1), default=12)
     args = parser.parse_args()
     rng = random.Random(args.seed)
     before = scratch()

@@ -36,6 +36,69 @@ def test_counts_take_their_range_and_name_themselves():
             bench_cli.robot_count(bad)
     with pytest.raises(argparse.ArgumentTypeError, match="humans must be an integer in 0..50, got '51'"):
         bench_cli.human_count("51")
+    assert bench_cli.episode_count("100000") == 100_000  # no upper bound
+    for count, bad, message in (
+        (bench_cli.episode_count, "0", r"episodes must be an integer >= 1, got '0'"),
+        (bench_cli.seed_number, "-1", r"seed must be an integer >= 0, got '-1'"),
+        (bench_cli.count_in("calls", 1), "2.5", r"calls must be an integer >= 1, got '2\.5'"),
+    ):
+        with pytest.raises(argparse.ArgumentTypeError, match=message):
+            count(bad)
+
+
+def test_the_episode_bar_counts_the_episodes_on_stderr_only(capsys):
+    assert list(bench_cli.episode_bar(3, "cmpc M=3")) == [0, 1, 2]
+    out, err = capsys.readouterr()
+    assert out == ""  # stdout holds the figures alone
+    assert "cmpc M=3:   0%" in err and "0/3 [" in err  # tqdm redraws at most every 0.1 s
+    assert err.endswith("\r")  # and clears its line at the end, before the table is printed
+
+
+# Every script's repeat count: zero ended in a division by zero, an empty reduction or a table of nan.
+ZERO_REPEATS = [
+    *[
+        (script, ["--episodes", "0"], "argument --episodes: episodes must be an integer >= 1, got '0'")
+        for script in (
+            "control_step",
+            "cost_scale",
+            "dmpc_scaling",
+            "exact_coupling",
+            "ibr_solves",
+            "orca_contacts",
+            "orca_step",
+            "recording_overhead",
+            "robot_scaling",
+            "solvers",
+        )
+    ],
+    ("robot_scaling", ["--seed", "-1"], "argument --seed: seed must be an integer >= 0"),
+    ("orca_contacts", ["--seed", "-1"], "argument --seed: seed must be an integer >= 0"),
+    ("dmpc_scaling", ["--replay-reps", "0"], "replay reps must be an integer >= 1"),
+    ("exact_coupling", ["--max-iter", "0"], "max iter must be an integer >= 1"),
+    ("orca_step", ["--repeats", "0"], "repeats must be an integer >= 1"),
+    ("export", ["--calls", "0"], "calls must be an integer >= 1"),
+    ("predictor_floor", ["--horizon", "0"], "horizon must be an integer >= 1"),
+    ("run_all", ["--steps", "0"], "steps must be an integer >= 1"),
+    ("run_all", ["--workers", "0"], "workers must be an integer >= 1"),
+    ("compile_cache", ["--payback-episodes", "-1"], "payback episodes must be an integer >= 0"),
+    ("sweep_kills", ["--episodes-per-cell", "0"], "episodes per cell must be an integer >= 1"),
+]
+
+
+@pytest.mark.parametrize(
+    ("script", "argv", "message"), ZERO_REPEATS, ids=[f"{s} {' '.join(a)}" for s, a, _ in ZERO_REPEATS]
+)
+def test_a_count_that_measures_nothing_is_refused_when_parsed(
+    script, argv, message, capsys, tmp_path, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", [f"{script}.py", *argv])  # the scripts whose main() reads sys.argv
+    module = _load(script)
+    with pytest.raises(SystemExit) as stop:
+        module.main(argv) if module.main.__code__.co_argcount else module.main()
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_predictor_is_checked_against_the_registry_and_the_zoo():
