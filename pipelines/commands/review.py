@@ -15,7 +15,7 @@ from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
-    from pipelines.logs.reader import Recording
+    from pipelines.logs.digest import RunDigest
 
 EPILOG = """examples:
   crowdmpc review runs/demo/                              # one row per episode, then rates over them
@@ -101,15 +101,14 @@ def _times(text: str) -> list[float]:
     return times
 
 
-def _check(recordings: list[Recording], report: dict[str, Any]) -> int:
-    from pipelines.logs.review import check_recording
-
+def _check(runs: list[RunDigest], report: dict[str, Any]) -> int:
     failed = 0
-    for rec in recordings:
-        checked, errors = check_recording(rec)
-        report.setdefault("check", {})[str(rec.path)] = {"messages": checked, "errors": errors}
+    for run in runs:
+        assert run.check is not None  # digested with check=True
+        checked, errors = run.check
+        report.setdefault("check", {})[run.file] = {"messages": checked, "errors": errors}
         verdict = "ok" if not errors else f"{len(errors)} invalid"
-        print(f"check {rec.path}: {checked} messages, {verdict}")
+        print(f"check {run.file}: {checked} messages, {verdict}")
         for line in errors[:MAX_ERRORS_SHOWN]:
             print(f"  {line}")
         if len(errors) > MAX_ERRORS_SHOWN:
@@ -123,32 +122,29 @@ class SetUp:
     """Runs of one folder that share their set-up."""
 
     identity: dict[str, Any] | None  # their run_identity; None: unknown (no readable episode metadata)
-    members: list[Recording]
+    members: list[RunDigest]
 
 
 def _identity_key(identity: Mapping[str, Any]) -> str:
     return json.dumps(identity, sort_keys=True, default=str)
 
 
-def _groups(recordings: list[Recording], summaries: list[dict[str, Any]]) -> list[SetUp]:
-    """The recordings by their set-up (``run_identity``: controller, predictor, crowd, and the simulator's
-    and controller's settings of the "config" metadata), in the order of their first run. A recording whose
-    set-up is unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own:
-    with one known set-up it counts among its runs, as the folder's one aggregate always counted it."""
-    from pipelines.logs.identity import run_identity
-
+def _groups(runs: list[RunDigest]) -> list[SetUp]:
+    """The runs by their set-up (``run_identity``: controller, predictor, crowd, and the simulator's and
+    controller's settings of the "config" metadata), in the order of their first run. A run whose set-up is
+    unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own: with one
+    known set-up it counts among its runs, as the folder's one aggregate always counted it."""
     groups: dict[str, SetUp] = {}
-    unknown: list[Recording] = []
-    for rec, summary in zip(recordings, summaries, strict=True):
-        if summary["controller"] is None:
-            unknown.append(rec)
+    unknown: list[RunDigest] = []
+    for run in runs:
+        if run.identity is None:
+            unknown.append(run)
             continue
-        identity = run_identity(rec.episode(), rec.config())
-        groups.setdefault(_identity_key(identity), SetUp(identity, [])).members.append(rec)
+        groups.setdefault(_identity_key(run.identity), SetUp(run.identity, [])).members.append(run)
     setups = list(groups.values())
     if unknown and len(setups) == 1:
         setups[0].members.extend(unknown)
-        setups[0].members.sort(key=recordings.index)  # the folder's order, as before
+        setups[0].members.sort(key=runs.index)  # the folder's order, as before
     elif unknown:
         setups.append(SetUp(None, unknown))
     return setups
@@ -223,8 +219,12 @@ def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
     return summary | {"metrics": named}
 
 
-def _read_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording], int]:
-    """Every readable recording of ``folder`` and how many were not; a line on stderr for each left out."""
+def _read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
+    """Every readable recording of ``folder``, digested (``pipelines.logs.digest``: read one at a time, the
+    messages let go), and how many were not readable; a line on stderr for each left out."""
+    from tqdm import tqdm
+
+    from pipelines.logs.digest import digest
     from pipelines.logs.reader import find_recordings, read_recording
 
     paths, unfinished = find_recordings(folder)
@@ -234,30 +234,31 @@ def _read_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording],
             f"writing); `crowdmpc review {path}` reads what it holds",
             file=sys.stderr,
         )
-    recordings, unreadable = [], {}
-    for path in paths:
+    runs, unreadable = [], {}
+    # a bar on a terminal only (disable=None): a sweep's thousands of files take minutes
+    for path in tqdm(paths, desc=f"reading {folder}", unit="file", leave=False, disable=None):
         try:
-            recordings.append(read_recording(path))
+            runs.append(digest(read_recording(path), check))
         except PipelineError as exc:
             unreadable[str(path)] = str(exc)
-            print(f"crowdmpc review: unreadable: {exc}", file=sys.stderr)
+            tqdm.write(f"crowdmpc review: unreadable: {exc}", file=sys.stderr)
     report.update(unreadable=unreadable, unfinished=[str(p) for p in unfinished])
-    if not recordings:
+    if not runs:
         raise PipelineError(
             f"no readable recording in {folder} ({len(unreadable)} unreadable, {len(unfinished)} unfinished)"
         )
-    return recordings, len(unreadable)
+    return runs, len(unreadable)
 
 
-def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording], int]:
+def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
     """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a warning
-    names them when there are several), into ``report``; the recordings and the number of unreadable files."""
+    names them when there are several), into ``report``; the runs and the number of unreadable files."""
     from pipelines.logs.identity import RUN_IDENTITY
-    from pipelines.logs.review import aggregate_table, count, setups_table, summarize
+    from pipelines.logs.review import aggregate_table, count, setups_table
 
-    recordings, n_unreadable = _read_folder(folder, report)
-    report["runs"] = [summarize(rec) for rec in recordings]
-    setups = _groups(recordings, report["runs"])
+    runs, n_unreadable = _read_folder(folder, report, check)
+    report["runs"] = [run.summary for run in runs]
+    setups = _groups(runs)
     named = _named_settings(setups)
     parts = [_group_parts(setup, named) for setup in setups]
     names = [", ".join(p) for p in parts]
@@ -267,11 +268,10 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
             f"({'; '.join(names)}): one aggregate for each, none over all",
             file=sys.stderr,
         )
-    by_file = {s["file"]: s for s in report["runs"]}
     report["groups"] = []
     for setup, name in zip(setups, names, strict=True):
-        members = [by_file[str(rec.path)] for rec in setup.members]
-        table, totals = aggregate_table(setup.members, members, root=folder)
+        members = [run.summary for run in setup.members]
+        table, totals = aggregate_table(members, [run.solve_times_s for run in setup.members], root=folder)
         if len(setups) > 1:
             print(f"== {name}: {count(len(setup.members), 'run')} ==")
         print(table + ("\n" if len(setups) > 1 else ""))
@@ -280,17 +280,18 @@ def _review_folder(folder: Path, report: dict[str, Any]) -> tuple[list[Recording
             {"name": name}
             | {k: members[0][k] for k in RUN_IDENTITY}
             | {"settings": {k: identity.get(k) for k in named}}
-            | {"files": [str(rec.path) for rec in setup.members], "totals": totals}
+            | {"files": [run.file for run in setup.members], "totals": totals}
         )
     if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
         report["totals"] = report["groups"][0]["totals"]
     else:
         side_by_side = setups_table(_short_names(parts), [group["totals"] for group in report["groups"]])
         print(f"== {count(len(setups), 'set-up')} side by side ==\n{side_by_side}")
-    return recordings, n_unreadable
+    return runs, n_unreadable
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.logs.digest import digest
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
     from pipelines.logs.reader import FOLDER_LEVELS, read_recording
     from pipelines.logs.review import compare_table, format_summary, summarize
@@ -327,22 +328,21 @@ def run(args: argparse.Namespace) -> int:
             raise PipelineError(
                 f"{', '.join(single_file_only)} {verb} one .mcap file, not the folder {args.path}{example}"
             )
-        recordings, n_unreadable = _review_folder(args.path, report)
+        runs, n_unreadable = _review_folder(args.path, report, args.check)
     else:
-        recordings = [read_recording(args.path)]
-        summary = summarize(recordings[0])
-        print(format_summary(_with_units(summary)))
-        report["summary"] = summary
-    for rec in recordings:
-        if rec.warning:
-            print(f"crowdmpc review: warning: {rec.warning}", file=sys.stderr)
-        if rec.problems_warning and not args.check:  # --check lists them all
-            print(f"crowdmpc review: warning: {rec.problems_warning}", file=sys.stderr)
+        rec = read_recording(args.path)
+        runs = [digest(rec, args.check)]
+        print(format_summary(_with_units(runs[0].summary)))
+        report["summary"] = runs[0].summary
+    for run in runs:
+        if run.warning:
+            print(f"crowdmpc review: warning: {run.warning}", file=sys.stderr)
+        if run.problems_warning and not args.check:  # --check lists them all
+            print(f"crowdmpc review: warning: {run.problems_warning}", file=sys.stderr)
 
-    failed = _check(recordings, report) + n_unreadable if args.check else 0
+    failed = _check(runs, report) + n_unreadable if args.check else 0
 
     if not args.path.is_dir():
-        rec = recordings[0]
         other = read_recording(args.compare) if args.compare else None
         if other is not None:
             print()

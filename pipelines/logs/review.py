@@ -159,12 +159,12 @@ _RUN_COLUMNS: Final = ("success", "collision", "timeout", "travel_time", "min_di
 
 
 def aggregate_table(
-    recordings: list[Recording], summaries: Sequence[dict[str, Any]], root: Path | None = None
+    summaries: Sequence[dict[str, Any]], solve_times_s: Sequence[np.ndarray], root: Path | None = None
 ) -> tuple[str, dict[str, Any]]:
     """One row per run, then crowdsim's rates over the runs whose episode ended, and the control-step costs
-    pooled over every recorded step; ``summaries`` are the recordings' ``summarize`` (a folder's review has
-    them already). Runs are named by their path below ``root`` (a sweep's cells hold files of the same
-    names), else by their file's name."""
+    pooled over every recorded step: ``summaries`` are the runs' ``summarize``, ``solve_times_s`` their
+    steps' times (``pipelines.logs.digest``). Runs are named by their path below ``root`` (a sweep's cells
+    hold files of the same names), else by their file's name."""
     header = [
         "file",
         "controller",
@@ -195,13 +195,12 @@ def aggregate_table(
         totals.update(rates)
         if unusable:
             totals["unusable_metrics"] = [ended[i]["file"] for i in unusable]
-    solver = [m for rec in recordings for m in rec.data("/mpc/solver")]
-    if solver:
-        times = step_time_stats([m["solve_time_s"] for m in solver])
-        totals.update({f"solve_time_{k}": v for k, v in times.items()})
-        totals.update(
-            control_steps=len(solver), fallback_steps=sum(m["fallback"] is not None for m in solver)
-        )
+    times = np.concatenate([np.zeros(0), *solve_times_s])
+    if times.size:
+        totals.update({f"solve_time_{k}": v for k, v in step_time_stats(times).items()})
+        # a summary counts its fallbacks by kind over the same /mpc/solver messages
+        fallbacks = sum(sum(s["solver"].get("fallbacks", {}).values()) for s in summaries)
+        totals.update(control_steps=len(times), fallback_steps=fallbacks)
     return _table(header, rows) + "\n\n" + _format_totals(totals), totals
 
 

@@ -1,0 +1,49 @@
+"""What a review keeps of a recording once read: a folder's review reads its files one at a time and lets go.
+
+A ``Recording`` holds every decoded message: about 5 MB in memory for a 121 KB file of a 3-robot, 7-human
+episode (100 such recordings read into one process took 503 MB). A sweep recording every episode (`crowdmpc
+sweep --record all`; Table II has 10 000) read whole would not fit in memory, yet a folder's tables need
+little of each run: its summary, its set-up, its control steps' times (pooled over a set-up), its warnings
+and, with ``--check``, the check's result.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipelines.logs.identity import run_identity
+from pipelines.logs.reader import Recording
+from pipelines.logs.review import check_recording, summarize
+
+
+@dataclass(frozen=True)
+class RunDigest:
+    """One recording as a review uses it after reading."""
+
+    summary: dict[str, Any]  # pipelines.logs.review.summarize
+    identity: dict[str, Any] | None  # run_identity; None: no readable episode metadata (set-up unknown)
+    solve_times_s: np.ndarray  # every control step's /mpc/solver solve_time_s
+    warning: str | None  # Recording.warning (truncated)
+    problems_warning: str | None  # Recording.problems_warning
+    check: tuple[int, list[str]] | None  # check_recording's (checked, errors); None when not asked
+
+    @property
+    def file(self) -> str:
+        return str(self.summary["file"])
+
+
+def digest(rec: Recording, check: bool = False) -> RunDigest:
+    """``rec``'s digest; ``check``: validate every message against its schema now, while it is in memory."""
+    summary = summarize(rec)
+    known = summary["controller"] is not None  # as a folder's set-ups have always been told apart
+    return RunDigest(
+        summary=summary,
+        identity=run_identity(rec.episode(), rec.config()) if known else None,
+        solve_times_s=np.array([m["solve_time_s"] for m in rec.data("/mpc/solver")], dtype=float),
+        warning=rec.warning,
+        problems_warning=rec.problems_warning,
+        check=check_recording(rec) if check else None,
+    )
