@@ -1,0 +1,141 @@
+r"""Peak memory of `crowdmpc review DIR` against the number of recordings, beside reading them all at once.
+
+Records ``--episodes`` episodes (``--controller``, default CMPC, with ``--predictor``, default constant
+velocity, and ``--humans``, default 7; circle and perpendicular in turn, seeds 0..) into a temporary folder
+and copies them until it holds ``--files`` recordings; then, each in a fresh process, (a) ``crowdmpc review
+DIR --json`` (pipelines/logs/digest.py: one recording in memory at a time) and (b) every recording read into
+one list, as a folder's review held them before. Prints each one's peak resident memory (the child's
+``ru_maxrss``) and wall time, and (b)'s memory per recording above the interpreter's: what a review that held
+them would need for a sweep's thousands. The machine is shared: the memory figures do not depend on its
+load, the times do.
+
+    nice -n 10 .venv/bin/python benchmarks/review_memory.py
+    nice -n 10 .venv/bin/python benchmarks/review_memory.py --files 50 200 1000 --episodes 4
+    nice -n 10 .venv/bin/python benchmarks/review_memory.py --controller dmpc --predictor social_lstm_eth \
+        --humans 9
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import (  # noqa: E402
+    count_in,
+    episode_count,
+    human_count,
+    output_file,
+    predictor_name,
+    run_main,
+    write_json,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ("circle", "perpendicular")
+# Each measurement in a process of its own, which prints its peak resident memory (KB) last, on stderr.
+PEAK = "import resource, sys\nprint(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+# (a) the review as a user runs it
+REVIEW = "import sys\nfrom pipelines.cli import main\nmain(['review', sys.argv[1], '--json', sys.argv[2]])\n"
+# the interpreter with the reader loaded and nothing read: the base both stand on
+BASE = "import pipelines.cli, pipelines.logs.digest, pipelines.logs.reader\n"
+# (b) what `review DIR` did before it kept digests: every recording read into one list
+HOLD_ALL = (
+    "import sys\n"
+    "from pipelines.logs.reader import find_recordings, read_recording\n"
+    "held = [read_recording(p) for p in find_recordings(sys.argv[1])[0]]\n"
+)
+
+
+def record(folder: Path, episodes: int, spec: ControllerSpec, humans: int) -> list[Path]:
+    controller = make_controller(spec)
+    recorder = McapEpisodeRecorder(folder)
+    for k in range(episodes):
+        run_episode(controller, seed=k, scenario=SCENARIOS[k % 2], n_humans=humans, observers=(recorder,))
+    return sorted(folder.glob("*.mcap"))
+
+
+def fill(folder: Path, sources: list[Path], files: int) -> None:
+    """Copies of ``sources`` until ``folder`` holds ``files`` recordings (names differ, contents repeat)."""
+    for i in range(len(list(folder.glob("*.mcap"))), files):
+        source = sources[i % len(sources)]
+        shutil.copyfile(source, folder / f"copy{i:06d}_{source.name}")
+
+
+def peak(code: str, *args: str) -> tuple[float, float]:
+    """Peak resident memory (MB) and wall time (s) of ``code`` run with ``args`` in a fresh process."""
+    t0 = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, "-c", code + PEAK, *args],
+        cwd=ROOT,
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+    )
+    return int(done.stderr.split()[-1]) / 1024, time.perf_counter() - t0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--files", type=count_in("files", 1), nargs="+", default=[20, 200])
+    parser.add_argument("--episodes", type=episode_count, default=4, help="distinct episodes recorded")
+    parser.add_argument("--controller", choices=("cmpc", "dmpc"), default="cmpc")
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
+    parser.add_argument("--humans", type=human_count, default=7)
+    parser.add_argument("--json", type=output_file, help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="review-memory-") as tmp:
+        folder = Path(tmp) / "runs"
+        folder.mkdir()
+        sources = record(folder, args.episodes, ControllerSpec(args.controller, args.predictor), args.humans)
+        size_kb = sum(p.stat().st_size for p in sources) / len(sources) / 1e3
+        base_mb, _ = peak(BASE)
+        print(f"episodes recorded: {len(sources)}, {size_kb:.0f} KB a file; interpreter {base_mb:.0f} MB")
+        head = (
+            "files",
+            "review MB",
+            "review s",
+            "all held MB",
+            "held s",
+            "MB a file",
+        )  # held, above the interpreter's
+        print(" ".join(f"{h:>{w}}" for h, w in zip(head, (6, 10, 9, 12, 7, 10), strict=True)))
+        for files in sorted(set(args.files)):
+            fill(folder, sources, files)
+            review_mb, review_s = peak(REVIEW, str(folder), str(Path(tmp) / "r.json"))
+            held_mb, held_s = peak(HOLD_ALL, str(folder))
+            rows.append(
+                {
+                    "files": files,
+                    "review_peak_mb": review_mb,
+                    "review_s": review_s,
+                    "held_peak_mb": held_mb,
+                    "held_s": held_s,
+                }
+            )
+            per_file = (held_mb - base_mb) / files
+            print(
+                f"{files:6d} {review_mb:10.0f} {review_s:9.1f} {held_mb:12.0f} {held_s:7.1f} {per_file:10.2f}"
+            )
+    if args.json:
+        write_json(args.json, {"file_kb": size_kb, "interpreter_mb": base_mb, "rows": rows})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_main(main))

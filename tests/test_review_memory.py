@@ -1,0 +1,41 @@
+"""benchmarks/review_memory.py: the folder's copies, and the figures of one small run."""
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+SPEC = importlib.util.spec_from_file_location(
+    "review_memory", Path(__file__).resolve().parents[1] / "benchmarks" / "review_memory.py"
+)
+review_memory = importlib.util.module_from_spec(SPEC)
+sys.modules["review_memory"] = review_memory
+SPEC.loader.exec_module(review_memory)
+
+
+def test_fill_copies_the_sources_in_turn_up_to_the_count(tmp_path):
+    sources = []
+    for name in ("a.mcap", "b.mcap"):
+        (tmp_path / name).write_bytes(name.encode())
+        sources.append(tmp_path / name)
+    review_memory.fill(tmp_path, sources, 5)
+    files = sorted(tmp_path.glob("*.mcap"))
+    assert len(files) == 5
+    copies = sorted(p for p in files if p.name.startswith("copy"))
+    assert [p.name for p in copies] == ["copy000002_a.mcap", "copy000003_b.mcap", "copy000004_a.mcap"]
+    assert [p.read_bytes() for p in copies] == [b"a.mcap", b"b.mcap", b"a.mcap"]
+    review_memory.fill(tmp_path, sources, 3)  # it holds more already: nothing removed, nothing added
+    assert len(list(tmp_path.glob("*.mcap"))) == 5
+
+
+def test_a_small_run_reports_each_process_peak(tmp_path, capsys):
+    out = tmp_path / "m.json"
+    assert review_memory.main(["--files", "3", "--episodes", "1", "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    (row,) = report["rows"]
+    assert row["files"] == 3 and report["file_kb"] > 0
+    # every process loads the interpreter and the reader; reading adds to it
+    assert report["interpreter_mb"] > 0
+    assert row["review_peak_mb"] >= 0.9 * report["interpreter_mb"]
+    assert row["held_peak_mb"] >= 0.9 * report["interpreter_mb"]
+    assert "episodes recorded: 1," in capsys.readouterr().out
