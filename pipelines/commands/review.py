@@ -143,8 +143,7 @@ def _groups(runs: list[RunDigest]) -> list[SetUp]:
         groups.setdefault(_identity_key(run.identity), SetUp(run.identity, [])).members.append(run)
     setups = list(groups.values())
     if unknown and len(setups) == 1:
-        setups[0].members.extend(unknown)
-        setups[0].members.sort(key=runs.index)  # the folder's order, as before
+        setups[0].members = list(runs)  # every run, in the folder's order, as before
     elif unknown:
         setups.append(SetUp(None, unknown))
     return setups

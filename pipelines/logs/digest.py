@@ -19,7 +19,7 @@ from pipelines.logs.reader import Recording
 from pipelines.logs.review import check_recording, summarize
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # an array field: == would be ambiguous; a digest is itself
 class RunDigest:
     """One recording as a review uses it after reading."""
 

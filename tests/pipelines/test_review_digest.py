@@ -91,3 +91,14 @@ def test_a_folder_with_two_set_ups_pools_each_ones_steps_alone(folder, tmp_path,
     groups = json.loads((tmp_path / "r.json").read_text())["groups"]
     assert [g["totals"]["control_steps"] for g in groups] == [24, 5]
     assert [g["totals"]["solve_time_max_ms"] for g in groups] == pytest.approx([80.0, 50.0])
+
+
+def test_a_run_of_unknown_set_up_keeps_its_place_in_the_one_known_set_up(tmp_path, capsys):
+    first = record_episode(tmp_path, seed=1, steps=4)
+    (tmp_path / "a_cut.mcap").write_bytes(first.path.read_bytes()[:200])  # before its metadata
+    record_episode(tmp_path, seed=2, steps=4)
+    assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
+    (group,) = json.loads((tmp_path / "r.json").read_text())["groups"]
+    names = ["a_cut.mcap", "circle_seed000001.mcap", "circle_seed000002.mcap"]
+    assert group["files"] == [str(tmp_path / name) for name in names]  # the folder's order
+    assert "\n3 runs, 1 whose episode did not end" in capsys.readouterr().out
