@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import math
 import sys
 from pathlib import Path
+
+from pipelines.experiments.tables import mcnemar_exact
 
 Key = tuple[str, int, str, int]
 
@@ -30,14 +31,6 @@ def load(run: Path) -> dict[Key, dict[str, str]]:
 
 def flag(value: str) -> bool:
     return value in ("True", "true", "1")
-
-
-def mcnemar(wins: int, losses: int) -> float:
-    """Two-sided exact McNemar p-value of ``wins`` against ``losses`` discordant pairs."""
-    n = wins + losses
-    if n == 0:
-        return 1.0
-    return min(1.0, 2 * sum(math.comb(n, k) for k in range(min(wins, losses) + 1)) / 2**n)
 
 
 def cell(rows: list[dict[str, str]]) -> str:
@@ -89,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             losses = sum(
                 flag(runs[labels[0]][k]["success"]) and not flag(runs[label][k]["success"]) for k in keys
             )
-            paired.append(f"+{wins} / −{losses} (p = {mcnemar(wins, losses):.2g})")
+            paired.append(f"+{wins} / −{losses} (p = {mcnemar_exact(wins, losses):.2g})")
         name = runs[labels[0]][keys[0]]["method"]  # as the first run spells it
         print(f"| {name} | {n} ({len(keys)}) | " + " | ".join(cells + paired) + " |")
     return 0

@@ -24,12 +24,6 @@ def _run(path: Path, outcomes: list[tuple[bool, bool, float]], method: str = "CM
     return path
 
 
-def test_mcnemar_by_hand():
-    assert paired_runs.mcnemar(0, 0) == 1.0
-    assert paired_runs.mcnemar(3, 0) == pytest.approx(2 / 8)  # 2 * P(X <= 0), X ~ Bin(3, 1/2)
-    assert paired_runs.mcnemar(1, 5) == pytest.approx(2 * 7 / 64)
-
-
 def test_two_runs_on_their_shared_episodes(tmp_path, capsys):
     a = _run(
         tmp_path / "a", [(True, False, 10.0), (False, True, 0.0), (True, True, 12.0), (True, False, 9.0)]

@@ -388,7 +388,9 @@ def _report(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTas
 
     out = config.out
     planned = {t.key for t in tasks}
-    records = [r for key, r in episode_log(out).load(repair=False).items() if key in planned]
+    # the effective config each record carries is half its memory, and no part of the report reads it
+    loaded = episode_log(out).load(repair=False, keep=lambda r: {k: v for k, v in r.items() if k != "config"})
+    records = [r for key, r in loaded.items() if key in planned]
     report = write_report(out, config.experiment, cells, records)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)

@@ -38,39 +38,45 @@ class EpisodeLog:
         self.path = Path(path)
         self.check = check
 
-    def load(self, repair: bool = True) -> dict[str, dict[str, Any]]:
-        """Every complete record by key. A torn tail (bytes after the last newline, or a last line that is not
-        JSON) is ignored and, with ``repair`` (only the sweep holding the lock may), cut off the file so that
-        its episode runs again; a bad line elsewhere or a repeated key means the file was damaged or edited,
-        and is refused."""
+    def load(
+        self, repair: bool = True, keep: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    ) -> dict[str, dict[str, Any]]:
+        """Every complete record by key (``keep(record)``: what to hold of each, after its check). A torn tail
+        (bytes after the last newline, or a last line that is not JSON) is ignored and, with ``repair`` (only
+        the sweep holding the lock may), cut off the file so that its episode runs again; a bad line elsewhere
+        or a repeated key means the file was damaged or edited, and is refused. Read a line at a time."""
         if not self.path.exists():
             return {}
-        data = self.path.read_bytes()
-        lines = data.split(b"\n")[:-1]  # only what a newline ends was fully written
         records: dict[str, dict[str, Any]] = {}
-        good_end = 0
-        for number, line in enumerate(lines, start=1):
-            try:
-                record = json.loads(line) if line.strip() else None
-            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-                if number == len(lines):
-                    break
-                raise PipelineError(
-                    f"{self.path}:{number}: not a JSON record ({exc}); the file is damaged"
-                ) from None
-            if record is not None:
-                key = record.get("key") if isinstance(record, dict) else None
-                if not isinstance(key, str):
-                    raise PipelineError(f"{self.path}:{number}: record has no 'key'; the file is damaged")
-                if self.check is not None:
-                    self.check(record, f"{self.path}:{number}")
-                if key in records:
+        good_end = size = 0
+        bad: tuple[int, Exception] | None = None  # a line that is not JSON: fine only as the last one
+        with open(self.path, "rb") as f:
+            for number, line in enumerate(f, start=1):
+                size += len(line)
+                if not line.endswith(b"\n"):
+                    break  # only what a newline ends was fully written
+                if bad is not None:
                     raise PipelineError(
-                        f"{self.path}:{number}: a second record for {key!r}; the file is damaged"
-                    )
-                records[key] = record
-            good_end += len(line) + 1
-        if repair and good_end < len(data):
+                        f"{self.path}:{bad[0]}: not a JSON record ({bad[1]}); the file is damaged"
+                    ) from None
+                try:
+                    record = json.loads(line) if line.strip() else None
+                except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                    bad = (number, exc)
+                    continue
+                if record is not None:
+                    key = record.get("key") if isinstance(record, dict) else None
+                    if not isinstance(key, str):
+                        raise PipelineError(f"{self.path}:{number}: record has no 'key'; the file is damaged")
+                    if self.check is not None:
+                        self.check(record, f"{self.path}:{number}")
+                    if key in records:
+                        raise PipelineError(
+                            f"{self.path}:{number}: a second record for {key!r}; the file is damaged"
+                        )
+                    records[key] = record if keep is None else keep(record)
+                good_end += len(line)
+        if repair and good_end < size:
             with open(self.path, "r+b") as f:
                 f.truncate(good_end)
                 f.flush()

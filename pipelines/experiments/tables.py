@@ -21,8 +21,13 @@ def mcnemar_exact(b: int, c: int) -> float:
     n = b + c
     if n == 0:
         return 1.0
-    tail = sum(math.comb(n, k) for k in range(min(b, c) + 1)) / 2.0**n
-    return min(1.0, 2.0 * tail)
+    # C(n, k) for k <= min(b, c) built term by term: exact integers, linear in n (math.comb per term was
+    # quadratic), and an integer ratio, which cannot overflow a float as 2.0**n did from n = 1024.
+    term = tail = 1
+    for k in range(min(b, c)):
+        term = term * (n - k) // (k + 1)
+        tail += term
+    return min(1.0, 2 * tail / (1 << n))
 
 
 def paired_success(reference: CellSummary, other: CellSummary) -> tuple[int, int, float]:

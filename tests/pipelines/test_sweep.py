@@ -163,6 +163,20 @@ def test_mcnemar_exact_hand_values(b, c, p):
     assert mcnemar_exact(c, b) == pytest.approx(p)
 
 
+def test_mcnemar_exact_takes_the_discordant_pairs_of_a_large_sweep():
+    """From 1024 discordant pairs 2.0**n overflowed a float and the report of a sweep with a few thousand
+    episodes a cell ended in OverflowError; the tail is now an exact integer ratio."""
+    from fractions import Fraction
+    from math import comb
+
+    for b, c in ((500, 600), (1100, 1200), (3000, 3000)):
+        n = b + c
+        exact = min(Fraction(1), 2 * Fraction(sum(comb(n, k) for k in range(min(b, c) + 1)), 2**n))
+        assert mcnemar_exact(b, c) == pytest.approx(float(exact), rel=1e-12)
+    assert mcnemar_exact(0, 5000) == 0.0  # 2 / 2^5000: below the smallest float
+    assert mcnemar_exact(2500, 2500) == 1.0
+
+
 @pytest.mark.parametrize(  # two-sided 95% quantiles of Student's t, from the standard tables
     ("dof", "t"),
     [(1, 12.7062), (2, 4.3027), (3, 3.1824), (4, 2.7764), (5, 2.5706), (10, 2.2281), (30, 2.0423),
@@ -218,6 +232,22 @@ def test_a_garbled_last_line_counts_as_torn_but_one_in_the_middle_is_refused(tmp
     path.write_bytes(b'{"key": "a"}\n{"key": "a"}\n')
     with pytest.raises(PipelineError, match="a second record for 'a'"):
         EpisodeLog(path).load()
+    path.write_bytes(b'{"key": "a"}\nnot json\n{"key": "b"')  # a bad line, then a torn one: both the tail
+    assert list(EpisodeLog(path).load()) == ["a"]
+    assert path.read_bytes() == b'{"key": "a"}\n'
+
+
+def test_load_keeps_what_keep_makes_of_each_checked_record(tmp_path):
+    """The report holds each record without its effective config (half a record's memory)."""
+    seen = []
+    log = EpisodeLog(tmp_path / EPISODES_FILE, check=lambda record, where: seen.append((dict(record), where)))
+    log.append({"key": "a", "config": {"mpc": {"horizon": 4}}, "x": 1})
+    log.append({"key": "b", "config": {}, "x": 2})
+    kept = log.load(keep=lambda r: {k: v for k, v in r.items() if k != "config"})
+    assert kept == {"a": {"key": "a", "x": 1}, "b": {"key": "b", "x": 2}}
+    assert [where.rsplit(":", 1)[1] for _, where in seen] == ["1", "2"]
+    assert seen[0][0]["config"] == {"mpc": {"horizon": 4}}  # checked whole, before keep
+    assert log.load()["a"]["config"] == {"mpc": {"horizon": 4}}  # the file itself keeps everything
 
 
 # ----------------------------------------------------------------------------------------------------------
