@@ -190,6 +190,7 @@ def run_episodes(
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
     bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)
+    successes = sum(r.metrics.success for r in results)  # counted as they come: a sum per episode was O(N^2)
     try:
         for i in bar:
             observers = tuple(observers_factory()) if observers_factory is not None else ()
@@ -204,7 +205,8 @@ def run_episodes(
                 meta=run_meta,
             )
             results.append(result)
-            rate = 100.0 * sum(r.metrics.success for r in results) / len(results)
+            successes += result.metrics.success
+            rate = 100.0 * successes / len(results)
             bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
     finally:
         controller.close()  # e.g. DMPC's solver threads
