@@ -294,15 +294,18 @@ class McapEpisodeRecorder:
 
     def _claim_unseeded(self, scenario: str, metadata: Mapping[str, Mapping[str, str]]) -> McapRecorder:
         """The file of the next free number, taken atomically (``McapRecorder(new=True)``): another recorder
-        writing into the folder at the same moment may take a number first, and this one moves past it."""
-        number = self._unseeded.get(scenario, -1)
-        while True:  # ends: every pass moves past a taken number
-            number = next_unseeded(self.out_dir, scenario, number)
+        writing into the folder at the same moment may take a number first, and this one moves past it. The
+        folder is listed for a scenario's first file and after such a clash only (a listing per episode made
+        a gym run's recording quadratic in its files: 14 ms an episode at 10 000)."""
+        last = self._unseeded.get(scenario)
+        number = next_unseeded(self.out_dir, scenario) if last is None else last + 1
+        while True:  # ends: every clash moves past a taken number
             try:
                 recorder = McapRecorder(
                     self.out_dir / episode_filename(scenario, None, number), metadata=metadata, new=True
                 )
             except FileExistsError:
+                number = next_unseeded(self.out_dir, scenario, number)
                 continue
             self._unseeded[scenario] = number
             return recorder

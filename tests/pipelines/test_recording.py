@@ -233,6 +233,40 @@ def test_recorders_sharing_a_folder_never_take_one_number(tmp_path, monkeypatch)
     ]
 
 
+def test_an_unseeded_recorder_lists_its_folder_once_a_scenario_and_again_only_after_a_clash(
+    tmp_path, monkeypatch
+):
+    """Listing the folder for every episode made a long gym run's recording quadratic in its files."""
+    import pipelines.logs.recording as recording
+
+    listings = []
+    real = recording.next_unseeded
+
+    def counted(out_dir, scenario, written=-1):
+        listings.append((scenario, written))
+        return real(out_dir, scenario, written)
+
+    monkeypatch.setattr(recording, "next_unseeded", counted)
+    first = record_episode(tmp_path / "x", steps=1)
+    (tmp_path / "circle_000000.mcap").write_bytes(b"an earlier run's")
+    recorder = McapEpisodeRecorder(tmp_path)
+    for _ in range(3):
+        recorder.on_reset(first.observations[0], {**first.meta, "seed": None})
+    assert listings == [("circle", -1)]
+    (tmp_path / "circle_000004.mcap.part").write_bytes(b"another recorder's, taken meanwhile")
+    recorder.on_reset(first.observations[0], {**first.meta, "seed": None})
+    recorder.on_reset(first.observations[0], {**first.meta, "seed": None, "scenario": "perpendicular"})
+    recorder.close()
+    assert listings == [("circle", -1), ("circle", 4), ("perpendicular", -1)]
+    assert [p.name for p in recorder.paths] == [
+        "circle_000001.mcap",
+        "circle_000002.mcap",
+        "circle_000003.mcap",
+        "circle_000005.mcap",
+        "perpendicular_000000.mcap",
+    ]
+
+
 def test_misuse_is_reported(tmp_path):
     recorder = McapEpisodeRecorder(tmp_path)
     obs = record_episode(tmp_path / "x", steps=1).observations[0]
