@@ -14,7 +14,8 @@ from typing import Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import EpisodeView, Recording, episode_view
+from pipelines.logs.reader import Recording
+from pipelines.logs.view import EpisodeView, episode_view
 
 
 def _robot_color(i: int) -> str:

@@ -1,4 +1,4 @@
-"""Reading episode recordings back: every message and metadata record, and the episode as arrays.
+"""Reading episode recordings back: every message and metadata record (the episode as arrays: view.py).
 
 A file is read whole into memory and walked front to back, record by record (mcap's ``StreamReader`` with
 ``emit_chunks``), so that a truncated file (its writer was killed) yields everything up to its last complete
@@ -27,13 +27,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
-import numpy as np
 from mcap.exceptions import EndOfFile
 from mcap.records import Channel as McapChannel
 from mcap.records import Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
-from crowdsim.world import DT, RADIUS
 from pipelines.errors import PipelineError
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
@@ -348,79 +346,3 @@ def find_recordings(directory: str | Path) -> tuple[list[Path], list[Path]]:
         if paths or unfinished:
             return paths, unfinished
     raise PipelineError(f"no .mcap files in {directory}, nor in the two levels of folders below it")
-
-
-# ------------------------------------------------------------------------------------------------------------
-# the episode as arrays
-# ------------------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class EpisodeView:
-    """The recorded states and plans as arrays (state rows are the steps that made it into the file)."""
-
-    times: np.ndarray  # (T,) s
-    steps: np.ndarray  # (T,) int
-    robot_positions: np.ndarray  # (T, M, 2) m
-    human_positions: np.ndarray  # (T, N, 2) m
-    robot_goals: np.ndarray  # (M, 2) m
-    human_goals: np.ndarray  # (N, 2) m
-    plans: dict[int, np.ndarray]  # step -> (M, H, 2) m
-    predictions: dict[int, np.ndarray]  # step -> (H, N, 2) m
-    dt: float  # s
-    radius: float  # m
-
-    def row_at(self, t: float) -> int:
-        """Index of the recorded state nearest to time ``t`` (s)."""
-        return int(np.argmin(np.abs(self.times - t)))
-
-
-def _points(rows: list[Any], n: int) -> np.ndarray:
-    return np.asarray(rows, dtype=float).reshape(n, 2)
-
-
-def episode_view(rec: Recording) -> EpisodeView:
-    """The arrays; PipelineError when the recorded states do not make one episode (sizes that change)."""
-    try:
-        return _episode_view(rec)
-    except PipelineError:
-        raise
-    except ValueError as exc:  # a reshape that does not fit: another agent count in some message
-        raise PipelineError(
-            f"{rec.path}: the recorded states do not make one episode ({exc}); --check tells more"
-        ) from None
-
-
-def _episode_view(rec: Recording) -> EpisodeView:
-    humans = rec.data("/humans")
-    by_step = {h["step"]: h for h in humans}
-    robots = [r for r in rec.data("/robots") if r["step"] in by_step]  # a cut can fall between the two
-    if not robots:
-        raise PipelineError(f"{rec.path} holds no complete state (/robots and /humans) to draw")
-    steps = [r["step"] for r in robots]
-    m, n = len(robots[0]["positions"]), len(humans[0]["positions"])
-    ep = rec.episode()
-    times = np.array([r["time"] for r in robots], dtype=float)
-    # The "episode" record may lack dt or radius (a log from another writer, or a value that does not parse,
-    # which Recording.episode drops): the recorded times tell dt, else both are the default world's.
-    dt = float(ep["dt"]) if "dt" in ep else float(np.median(np.diff(times))) if len(times) > 1 else DT
-    plans = {p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")}
-    if any(len(plan) != m for plan in plans.values()):
-        raise ValueError(f"a /mpc/plan is not for {m} robots")
-    return EpisodeView(
-        times=times,
-        steps=np.array(steps, dtype=int),
-        robot_positions=np.array([_points(r["positions"], m) for r in robots]),
-        human_positions=np.array([_points(by_step[s]["positions"], n) for s in steps]).reshape(
-            len(steps), n, 2
-        ),
-        robot_goals=_points(robots[0]["goals"], m),
-        human_goals=_points(humans[0]["goals"], n),
-        plans=plans,
-        predictions={
-            p["step"]: np.asarray(p["positions"], dtype=float).reshape(-1, n, 2)
-            for p in rec.data("/mpc/prediction")
-        },
-        dt=dt,
-        radius=float(ep.get("radius", RADIUS)),
-    )

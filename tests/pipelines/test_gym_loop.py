@@ -17,9 +17,10 @@ from crowdsim.env import EnvConfig
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_wrappers import VelocityControl
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import episode_view, read_recording
+from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.review import check_recording
+from pipelines.logs.view import episode_view
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.gym_loop import ObserveEpisodes, run_gym_episode

@@ -9,9 +9,10 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType
 
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import MAGIC, episode_view, read_recording
+from pipelines.logs.reader import MAGIC, read_recording
 from pipelines.logs.recorder import DEFAULT_COMPRESSION, McapRecorder
 from pipelines.logs.schemas import HUMANS, PREDICTION, ROBOTS, MessageSchema
+from pipelines.logs.view import episode_view
 
 ROBOT_MESSAGE = {
     "time": 0.4,

@@ -11,11 +11,12 @@ from PIL import Image
 
 from pipelines.cli import main
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import episode_view, read_recording
+from pipelines.logs.reader import read_recording
 from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.review import summarize
 from pipelines.logs.schemas import ROBOTS
+from pipelines.logs.view import episode_view
 from tests.pipelines.mcap_episode import control_output, record_episode
 
 
