@@ -19,14 +19,13 @@ from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import (
     FORMAT,
-    ROBOT_RGB,
     McapEpisodeRecorder,
-    array_json,
     episode_filename,
     next_unseeded,
     seconds_to_ns,
 )
 from pipelines.logs.review import check_recording
+from pipelines.logs.scene import ROBOT_RGB, array_json
 from pipelines.loop.record import EpisodeRecord
 from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
 
