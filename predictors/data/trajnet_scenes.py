@@ -144,11 +144,15 @@ def _candidate_windows(
     rows_at = frame_counts[frame_inverse.ravel()]  # (R,) rows sharing each row's frame
     close = _close_rows(frames, xy)
 
+    # every pedestrian's rows sorted by frame, found once ((frame, pedestrian) is unique: no ties)
+    by_ped = np.lexsort((frames, peds))
+    ped_ids, starts = np.unique(peds[by_ped], return_index=True)
+    stops = np.append(starts[1:], len(by_ped))
     _, first_row = np.unique(peds, return_index=True)
     candidates = []
     for ped in peds[np.sort(first_row)]:  # pedestrians in order of first appearance, like the converter
-        rows = np.flatnonzero(peds == ped)
-        rows = rows[np.argsort(frames[rows], kind="stable")]
+        k = np.searchsorted(ped_ids, ped)
+        rows = by_ped[starts[k] : stops[k]]
         for i in range(0, len(rows) - chunk_size + 1, chunk_stride):
             window = rows[i : i + chunk_size]
             if np.sum((xy[window[0]] - xy[window[-1]]) ** 2) <= min_length:
@@ -289,16 +293,19 @@ def scene_track_rows(scenes: Sequence[SceneSpec], tracks: np.ndarray) -> np.ndar
     tracks = _check_tracks(tracks)
     frames = tracks[:, 0].astype(np.int64)
     peds = tracks[:, 1].astype(np.int64)
-    wanted: set[int] = set()
+    by_ped = np.lexsort((frames, peds))  # rows by pedestrian, then frame: each scene's own rows are a slice
+    ped_sorted, frame_sorted = peds[by_ped], frames[by_ped]
+    wanted: list[np.ndarray] = [np.empty(0, dtype=np.int64)]
     for scene in scenes:
-        own = (peds == scene.primary) & (frames >= scene.start_frame) & (frames <= scene.end_frame)
-        if not own.any():
+        a, b = np.searchsorted(ped_sorted, [scene.primary, scene.primary + 1])
+        lo, hi = a + np.searchsorted(frame_sorted[a:b], [scene.start_frame, scene.end_frame + 1])
+        if lo == hi:
             raise ValueError(
                 f"scene {scene.id}: primary {scene.primary} has no row in frames "
                 f"{scene.start_frame}-{scene.end_frame}"
             )
-        wanted.update(frames[own].tolist())
-    rows = np.flatnonzero(np.isin(frames, np.fromiter(wanted, dtype=np.int64, count=len(wanted))))
+        wanted.append(frame_sorted[lo:hi])
+    rows = np.flatnonzero(np.isin(frames, np.unique(np.concatenate(wanted))))
     return rows[np.argsort(frames[rows], kind="stable")]
 
 
@@ -312,14 +319,16 @@ def write_ndjson(
         if scene.fps != fps:
             raise ValueError(f"scene {scene.id} was built at {scene.fps} fps but is written as {fps} fps")
     rows = scene_track_rows(scenes, tracks)
-    lines = [
-        trajnet(SceneRow(s.id, s.primary, s.start_frame, s.end_frame, fps, s.json_tag())) for s in scenes
-    ]
-    lines.extend(
-        trajnet(TrackRow(int(tracks[r, 0]), int(tracks[r, 1]), float(tracks[r, 2]), float(tracks[r, 3])))
-        for r in rows
-    )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text("".join(line + "\n" for line in lines))
-    tmp.replace(path)  # readers never see a half-written file
+    try:
+        with tmp.open("w") as out:  # a line at a time: a synthetic set of 10^7 rows is GBs as one string
+            for s in scenes:
+                scene = SceneRow(s.id, s.primary, s.start_frame, s.end_frame, fps, s.json_tag())
+                out.write(trajnet(scene) + "\n")
+            for r in rows:
+                row = TrackRow(int(tracks[r, 0]), int(tracks[r, 1]), float(tracks[r, 2]), float(tracks[r, 3]))
+                out.write(trajnet(row) + "\n")
+        tmp.replace(path)  # readers never see a half-written file
+    finally:
+        tmp.unlink(missing_ok=True)  # a write that failed (or was interrupted) half-way leaves nothing
