@@ -267,13 +267,16 @@ def read_calibration_file(path: Path) -> list[Calibration]:
     if not isinstance(blocks, list):
         raise PredictorError(f'{path}: "calibrations" must be a list of blocks, got {blocks!r}')
     result = [Calibration.from_json(b, f"{path}: calibrations[{i}]") for i, b in enumerate(blocks)]
+    seen: dict[tuple[str, str], list[Calibration]] = {}  # (predictor, source) -> its blocks so far
     for i, block in enumerate(result):
         # two blocks for one key would make find_calibration's answer depend on their order
-        if any(other.matches(*block.key()) for other in result[:i]):
+        same = seen.setdefault((block.predictor, block.source), [])
+        if any(other.matches(*block.key()) for other in same):
             raise PredictorError(
                 f"{path}: calibrations[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
                 f"alpha={block.alpha:g}; keep one of them"
             )
+        same.append(block)
     return result
 
 
@@ -281,10 +284,13 @@ def stored_calibrations(directory: str | Path | None = None) -> list[tuple[Path,
     """``(file, block)`` for every block in force (``calibration_files``): a user block hides the shipped
     block of its key."""
     found: list[tuple[Path, Calibration]] = []
+    by_key: dict[tuple[str, str], list[Calibration]] = {}  # (predictor, source) -> blocks found
     for path in calibration_files(directory):
         for block in read_calibration_file(path):
-            if not any(other.matches(*block.key()) for _, other in found):
+            same = by_key.setdefault((block.predictor, block.source), [])
+            if not any(other.matches(*block.key()) for other in same):
                 found.append((path, block))
+                same.append(block)
     return found
 
 

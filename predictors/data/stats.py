@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.data.trajnet_io import read_scenes, validate_ndjson
+from predictors.data.trajnet_io import iter_scenes, validate_ndjson
 from predictors.errors import PredictorError
 
 
@@ -25,19 +25,20 @@ class FileStats:
 
 def file_stats(path: str | Path) -> FileStats:
     summary = validate_ndjson(path)
-    scenes = read_scenes(path)
-    agents = np.asarray([s.xy.shape[1] for s in scenes] or [0])
+    sizes: list[int] = []  # a scene at a time: a large file's scenes are GBs as arrays
     types = [0, 0, 0, 0]
-    for scene in scenes:
+    for scene in iter_scenes(path):
+        sizes.append(scene.xy.shape[1])
         if isinstance(scene.tag, list) and scene.tag and scene.tag[0] in (1, 2, 3, 4):
             types[scene.tag[0] - 1] += 1
+    agents = np.asarray(sizes or [0])
     return FileStats(
         path=Path(path),
-        scenes=len(scenes),
+        scenes=len(sizes),
         tracks=summary.n_tracks,
         pedestrians=len(summary.pedestrians),
         agents_min=int(agents.min()),
-        agents_mean=float(agents.mean()) if scenes else 0.0,
+        agents_mean=float(agents.mean()) if sizes else 0.0,
         agents_max=int(agents.max()),
         types=(types[0], types[1], types[2], types[3]),
     )

@@ -13,6 +13,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,6 +83,13 @@ class _CheckedReader(Reader):
 def read_scenes(
     path: str | Path, *, require_length: int | None = None, require_fps: float | None = None
 ) -> list[Scene]:
+    """``iter_scenes`` as a list."""
+    return list(iter_scenes(path, require_length=require_length, require_fps=require_fps))
+
+
+def iter_scenes(
+    path: str | Path, *, require_length: int | None = None, require_fps: float | None = None
+) -> Iterator[Scene]:
     """All scenes of a validated file, in file order, read through ``trajnetplusplustools.Reader``.
 
     With ``require_length``, every primary must have exactly that many evenly spaced frames (the 21 steps
@@ -92,7 +100,6 @@ def read_scenes(
     content = parse_ndjson(path)
     summary = content.summary
     reader = _CheckedReader(content, scene_type="paths")
-    scenes = []
     for scene_id, paths in reader.scenes():
         row = reader.scenes_by_id[scene_id]
         line = summary.scene_lines[scene_id]
@@ -116,7 +123,7 @@ def read_scenes(
                 f"scene {scene_id} is sampled at {row.fps!r} fps, but the predictors step "
                 f"{1 / require_fps:g} s ({require_fps:g} fps); resample the file to {require_fps:g} fps",
             )
-        scenes.append(
+        yield (
             Scene(
                 id=scene_id,
                 primary=row.pedestrian,
@@ -130,7 +137,6 @@ def read_scenes(
                 line=line,
             )
         )
-    return scenes
 
 
 def _check_length(

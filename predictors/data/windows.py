@@ -27,7 +27,7 @@ from torch.utils.data import Dataset, Sampler
 
 from predictors.base import DT, OBS_LEN, PRED_LEN
 from predictors.data.locate import cache_root
-from predictors.data.trajnet_io import read_scenes
+from predictors.data.trajnet_io import iter_scenes
 from predictors.data.validate import read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
@@ -81,14 +81,16 @@ def load_file_arrays(
                 return arrays
             except (OSError, KeyError, ValueError):
                 pass  # a damaged cache entry is rebuilt below
-    scenes = read_scenes(path, require_length=scene_length, require_fps=1 / DT)
-    sizes = np.asarray([s.xy.shape[1] for s in scenes], dtype=np.int64)
+    # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
+    xys, ids = [np.empty((scene_length, 0, 2), dtype=np.float32)], []
+    for scene in iter_scenes(path, require_length=scene_length, require_fps=1 / DT):
+        xys.append(scene.xy.astype(np.float32))
+        ids.append(scene.id)
+    sizes = np.asarray([xy.shape[1] for xy in xys[1:]], dtype=np.int64)
     arrays = FileArrays(
-        xy=np.concatenate([np.empty((scene_length, 0, 2))] + [s.xy for s in scenes], axis=1).astype(
-            np.float32
-        ),
+        xy=np.concatenate(xys, axis=1),
         offsets=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
-        scene_ids=np.asarray([s.id for s in scenes], dtype=np.int64),
+        scene_ids=np.asarray(ids, dtype=np.int64),
     )
     if disk is not None:
         try:
