@@ -400,3 +400,31 @@ def test_parallel_calibrations_keep_every_block(tmp_path):
         w.join(timeout=120)
     assert [w.exitcode for w in workers] == [0] * len(shares)
     assert sorted(b.alpha for b in read_calibrations(tmp_path)) == sorted(sum(shares, []))
+
+
+def test_a_repeated_key_is_found_among_other_predictors_and_sources(tmp_path):
+    """Blocks are compared within their (predictor, source) only (every earlier block was, quadratic in the
+    blocks); a key repeated with other blocks between, and alpha within the tolerance, is still refused."""
+    path = tmp_path / CALIBRATIONS_NAME
+    blocks = [
+        block(),
+        block(source="closed-loop"),
+        block(predictor="vanilla_lstm_eth"),
+        block(alpha=0.2),
+        block(alpha=0.1 + 5e-13),
+    ]
+    path.write_text(
+        json.dumps(
+            {"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": [b.to_json() for b in blocks]}
+        )
+    )
+    with pytest.raises(
+        PredictorError, match=r"calibrations\[4\] repeats predictor 'social_lstm_eth', source 'real'"
+    ):
+        read_calibrations(tmp_path)
+    path.write_text(
+        json.dumps(
+            {"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": [b.to_json() for b in blocks[:4]]}
+        )
+    )
+    assert read_calibrations(tmp_path) == blocks[:4]
