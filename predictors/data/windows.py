@@ -57,6 +57,15 @@ class FileArrays:
 _MEMORY: dict[tuple[str, int, int, int], FileArrays] = {}
 
 
+def _remember(key: tuple[str, int, int, int], arrays: FileArrays) -> FileArrays:
+    """``arrays`` kept for ``key``, in place of any earlier version of the same file at the same scene
+    length: a long-lived process that rewrites its data (a notebook) would otherwise hold every version."""
+    for old in [k for k in _MEMORY if (k[0], k[3]) == (key[0], key[3])]:
+        del _MEMORY[old]
+    _MEMORY[key] = arrays
+    return arrays
+
+
 def load_file_arrays(
     path: str | Path, *, scene_length: int = SCENE_LENGTH, disk_cache: bool = True
 ) -> FileArrays:
@@ -77,8 +86,7 @@ def load_file_arrays(
             try:
                 with np.load(disk) as data:
                     arrays = FileArrays(data["xy"], data["offsets"], data["scene_ids"])
-                _MEMORY[key] = arrays
-                return arrays
+                return _remember(key, arrays)
             except (OSError, KeyError, ValueError):
                 pass  # a damaged cache entry is rebuilt below
     # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
@@ -100,8 +108,7 @@ def load_file_arrays(
             tmp.replace(disk)
         except OSError:
             pass  # a read-only cache only costs speed
-    _MEMORY[key] = arrays
-    return arrays
+    return _remember(key, arrays)
 
 
 @dataclass(frozen=True)

@@ -166,6 +166,8 @@ def test_the_cache_is_keyed_by_content_and_scene_length(tmp_path, monkeypatch):
     path.write_text(text.replace('"x": 10.0', '"x": 20.0'))  # the same number of bytes
     os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10**9))  # a later write
     assert load_file_arrays(path).xy[20, 0].tolist() == [20.0, 0.0]
+    held = [key for key in windows._MEMORY if key[0] == str(path.resolve())]
+    assert len(held) == 1  # the earlier version let go, not held beside the new one
     for clear in (False, True):  # from memory, then from the disk cache alone
         if clear:
             windows._MEMORY.clear()
