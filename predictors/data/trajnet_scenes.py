@@ -42,6 +42,7 @@ from trajnetplusplustools.interactions import check_interaction, get_interaction
 from trajnetplusplustools.writers import trajnet
 
 from predictors.base import OBS_LEN, PRED_LEN
+from predictors.data.validate import rows_by_pedestrian
 
 # Converter defaults (trajnetplusplusdataset convert.py arguments, scene.py constants).
 CHUNK_SIZE: Final[int] = OBS_LEN + PRED_LEN  # 21 rows = 9 observed + 12 predicted
@@ -144,15 +145,11 @@ def _candidate_windows(
     rows_at = frame_counts[frame_inverse.ravel()]  # (R,) rows sharing each row's frame
     close = _close_rows(frames, xy)
 
-    # every pedestrian's rows sorted by frame, found once ((frame, pedestrian) is unique: no ties)
-    by_ped = np.lexsort((frames, peds))
-    ped_ids, starts = np.unique(peds[by_ped], return_index=True)
-    stops = np.append(starts[1:], len(by_ped))
+    by_ped = rows_by_pedestrian(frames, peds)
     _, first_row = np.unique(peds, return_index=True)
     candidates = []
     for ped in peds[np.sort(first_row)]:  # pedestrians in order of first appearance, like the converter
-        k = np.searchsorted(ped_ids, ped)
-        rows = by_ped[starts[k] : stops[k]]
+        rows = by_ped[int(ped)]
         for i in range(0, len(rows) - chunk_size + 1, chunk_stride):
             window = rows[i : i + chunk_size]
             if np.sum((xy[window[0]] - xy[window[-1]]) ** 2) <= min_length:
@@ -293,18 +290,17 @@ def scene_track_rows(scenes: Sequence[SceneSpec], tracks: np.ndarray) -> np.ndar
     tracks = _check_tracks(tracks)
     frames = tracks[:, 0].astype(np.int64)
     peds = tracks[:, 1].astype(np.int64)
-    by_ped = np.lexsort((frames, peds))  # rows by pedestrian, then frame: each scene's own rows are a slice
-    ped_sorted, frame_sorted = peds[by_ped], frames[by_ped]
+    by_ped = rows_by_pedestrian(frames, peds)
     wanted: list[np.ndarray] = [np.empty(0, dtype=np.int64)]
     for scene in scenes:
-        a, b = np.searchsorted(ped_sorted, [scene.primary, scene.primary + 1])
-        lo, hi = a + np.searchsorted(frame_sorted[a:b], [scene.start_frame, scene.end_frame + 1])
+        own = frames[by_ped.get(scene.primary, np.empty(0, dtype=np.int64))]  # sorted: a scene's rows a slice
+        lo, hi = np.searchsorted(own, [scene.start_frame, scene.end_frame + 1])
         if lo == hi:
             raise ValueError(
                 f"scene {scene.id}: primary {scene.primary} has no row in frames "
                 f"{scene.start_frame}-{scene.end_frame}"
             )
-        wanted.append(frame_sorted[lo:hi])
+        wanted.append(own[lo:hi].copy())  # a view would keep each scene's whole pedestrian alive
     rows = np.flatnonzero(np.isin(frames, np.unique(np.concatenate(wanted))))
     return rows[np.argsort(frames[rows], kind="stable")]
 

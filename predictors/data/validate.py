@@ -309,16 +309,20 @@ def _check_tracks_inside_scenes(path: Path, frames: np.ndarray, lines: list[int]
         )
 
 
+def rows_by_pedestrian(frames: np.ndarray, peds: np.ndarray) -> dict[int, np.ndarray]:
+    """Each pedestrian's row indices, sorted by frame (stable): one sort for all rows, where a scan of every
+    row per pedestrian or per scene is quadratic in a large file (`data synth`'s 1 000 episodes: 48 s)."""
+    if not len(peds):
+        return {}
+    order = np.lexsort((frames, peds))
+    ids, first = np.unique(peds[order], return_index=True)
+    return {int(ped): rows for ped, rows in zip(ids, np.split(order, first[1:]), strict=True)}
+
+
 def _check_primaries_present(
     path: Path, rows: np.ndarray, scenes: dict[int, tuple[int, int, int, int]]
 ) -> None:
-    by_ped: dict[int, np.ndarray] = {}
-    if rows.size:
-        order = np.lexsort((rows[:, 0], rows[:, 1]))
-        peds, first = np.unique(rows[order, 1], return_index=True)
-        for k, ped in enumerate(peds):
-            stop = first[k + 1] if k + 1 < len(first) else len(order)
-            by_ped[int(ped)] = rows[order[first[k] : stop], 0]
+    by_ped = {ped: rows[own, 0] for ped, own in rows_by_pedestrian(rows[:, 0], rows[:, 1]).items()}
     for sid, (lineno, primary, s, e) in scenes.items():
         frames = by_ped.get(primary)
         if frames is None or not np.any((frames >= s) & (frames <= e)):
