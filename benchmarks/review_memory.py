@@ -98,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
+    if min(args.files) < args.episodes:  # the folder holds every recorded episode: the row would mislabel it
+        parser.error(f"--files {min(args.files)}: at least --episodes ({args.episodes}) files are reviewed")
     rows = []
     with tempfile.TemporaryDirectory(prefix="review-memory-") as tmp:
         folder = Path(tmp) / "runs"

@@ -39,3 +39,14 @@ def test_a_small_run_reports_each_process_peak(tmp_path, capsys):
     assert row["review_peak_mb"] >= 0.9 * report["interpreter_mb"]
     assert row["held_peak_mb"] >= 0.9 * report["interpreter_mb"]
     assert "episodes recorded: 1," in capsys.readouterr().out
+
+
+def test_fewer_files_than_recorded_episodes_is_refused(capsys):
+    """The folder holds every recorded episode, so a row of 2 files over 4 recordings would review 4 and
+    divide by 2."""
+    import pytest
+
+    with pytest.raises(SystemExit) as stop:
+        review_memory.main(["--files", "2", "--episodes", "4"])
+    assert stop.value.code == 2
+    assert "--files 2: at least --episodes (4) files are reviewed" in capsys.readouterr().err

@@ -8,6 +8,7 @@ on the crowds both methods ran (the same scenarios and seeds), with the exact Mc
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Sequence
 from typing import Final
 
@@ -18,6 +19,8 @@ from pipelines.experiments.summary import CellSummary, Rate
 
 def mcnemar_exact(b: int, c: int) -> float:
     """Two-sided exact McNemar test: the p-value of ``b`` vs ``c`` discordant pairs under a fair coin."""
+    # Python integers: numpy's int64 would overflow in the terms below and in 1 << n, silently.
+    b, c = operator.index(b), operator.index(c)
     n = b + c
     if n == 0:
         return 1.0

@@ -295,7 +295,7 @@ def scene_track_rows(scenes: Sequence[SceneSpec], tracks: np.ndarray) -> np.ndar
     for scene in scenes:
         own = frames[by_ped.get(scene.primary, np.empty(0, dtype=np.int64))]  # sorted: a scene's rows a slice
         lo, hi = np.searchsorted(own, [scene.start_frame, scene.end_frame + 1])
-        if lo == hi:
+        if lo >= hi:  # lo > hi: a scene that starts after its end
             raise ValueError(
                 f"scene {scene.id}: primary {scene.primary} has no row in frames "
                 f"{scene.start_frame}-{scene.end_frame}"

@@ -177,6 +177,13 @@ def test_mcnemar_exact_takes_the_discordant_pairs_of_a_large_sweep():
     assert mcnemar_exact(2500, 2500) == 1.0
 
 
+def test_mcnemar_exact_takes_numpy_counts_as_python_integers():
+    """int64 counts overflowed in the exact terms and in 1 << n and gave p = 1.0 with a warning."""
+    assert (
+        mcnemar_exact(np.int64(30), np.int64(45)) == mcnemar_exact(30, 45) == pytest.approx(0.10534, abs=1e-5)
+    )
+
+
 @pytest.mark.parametrize(  # two-sided 95% quantiles of Student's t, from the standard tables
     ("dof", "t"),
     [(1, 12.7062), (2, 4.3027), (3, 3.1824), (4, 2.7764), (5, 2.5706), (10, 2.2281), (30, 2.0423),

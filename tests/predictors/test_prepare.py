@@ -387,6 +387,15 @@ def test_scene_rows_and_windows_match_a_row_by_row_reference_on_shuffled_tracks(
     np.testing.assert_array_equal(scene_track_rows(scenes, tracks), reference)
 
 
+def test_a_scene_that_ends_before_it_starts_is_refused():
+    """Its search bounds cross (lo > hi); only lo == hi was refused: its file failed validation."""
+    from predictors.data.trajnet_scenes import SceneSpec, scene_track_rows
+
+    tracks = walkers(n_steps=21, peds=(1,))
+    with pytest.raises(ValueError, match="scene 0: primary 1 has no row in frames 100-50"):
+        scene_track_rows([SceneSpec(0, 1, 100, 50)], tracks)
+
+
 def test_a_write_that_fails_half_way_leaves_no_file(tmp_path, monkeypatch):
     import predictors.data.trajnet_scenes as trajnet_scenes
 
