@@ -49,7 +49,7 @@ def test_no_detour_where_none_can_help_or_for_a_parked_robot():
     positions, goals = np.array([[0.0, -3.0], [0.2, -3.0]]), np.array([[0.0, 3.2], [0.2, 6.0]])
     targets = guidance_targets(positions, goals, standing, 0.9, active=np.array([True, False]))
     np.testing.assert_array_equal(targets, goals)  # robot 0's goal is inside a disc; robot 1 is not guided
-    # A disc the robot already stands in does not block it.
+    # A disc the robot already stands in does not block it from moving away.
     inside = guidance_targets(np.array([[0.0, -0.5]]), np.array([[0.0, -5.0]]), standing, 0.9)
     np.testing.assert_array_equal(inside, [[0.0, -5.0]])
 
@@ -152,3 +152,40 @@ def test_a_near_corner_is_prolonged_beyond_the_references_reach():
     cfg = MPCConfig()
     assert np.linalg.norm(target - start) == pytest.approx(LOOKAHEAD)
     assert LOOKAHEAD > cfg.v_max * cfg.horizon * cfg.dt
+
+
+def test_a_prolonged_target_stops_where_its_line_would_enter_a_disc():
+    """Eq. 8's reference stops on its target, so the target's line must clear every disc. The first corner
+    (0.3 m off the robot) prolonged to LOOKAHEAD ran 0.21 m from the other human here; now it stops where its
+    line touches that human's disc, and on random scenes no target's line enters a disc."""
+    start, goal = np.array([1.8, 2.1]), np.array([0.2, -0.1])
+    humans = np.array([[0.3, 2.0], [1.8, 1.2]])
+    target = guidance_targets(start[None], goal[None], humans, 0.83)[0]
+    assert segment_distances(start, target, humans)[0] == pytest.approx([0.83, 0.8808931], abs=1e-6)
+    assert np.linalg.norm(target - start) < LOOKAHEAD
+    rng = np.random.default_rng(5)
+    guided = 0
+    for _ in range(400):
+        humans = rng.uniform(-3.0, 3.0, (int(rng.integers(2, 12)), 2))
+        start, goal = rng.uniform(-4.0, 4.0, 2), rng.uniform(-4.0, 4.0, 2)
+        target = guidance_targets(start[None], goal[None], humans, 0.83)[0]
+        if np.array_equal(target, goal):
+            continue
+        guided += 1
+        away = np.linalg.norm(humans - start, axis=1)
+        radii = np.minimum(0.83, 0.99 * away)
+        assert (segment_distances(start, target, humans)[0] >= radii - 1e-9).all()
+    assert guided > 100
+
+
+def test_a_robot_just_inside_a_disc_is_still_led_round_the_human():
+    """The penalty's disc (1.018 m) sits where Eq. 11 holds a robot (about 1.05 m), so a robot is often just
+    inside it. Dropping that disc sent a robot at 1.01 m straight at the human while one at 1.03 m was led
+    round; the disc is now shrunk to just inside the robot, and both are led round."""
+    clearance = MPCConfig(guidance_clearance="penalty").standing_clearance(0.03)
+    human, goal = np.zeros((1, 2)), np.array([[0.0, 5.0]])
+    for distance in (1.03, 1.01, 0.7):
+        start = np.array([0.0, -distance])
+        target = guidance_targets(start[None], goal, human, clearance)[0]
+        assert segment_distances(start, target, human)[0, 0] >= 0.99 * min(distance, clearance) - 1e-9
+        assert abs(target[0]) > 0.5
