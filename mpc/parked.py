@@ -9,9 +9,11 @@ most failed episodes ended so (``benchmarks/robot_scaling.py``; docs/results.md 
 The rule. A parked robot holds its goal no harder than the farthest teammate still on its way pulls towards
 its own: its Eq. 7 weight is ``w_goal / (max(||s_i - g_i||, D) + delta)``, D the largest distance to its
 goal of a robot not within its radius of it (0 when every robot is: nothing to yield to). It enters the NLPs
-as ``StepData.goal_slack = max(0, D - ||s_i - g_i||)``, added to delta. The weight is continuous in every
-distance (no switching as a pushed robot leaves its radius), and when the last robot arrives it is the
-paper's again.
+as ``StepData.goal_slack = max(0, D - ||s_i - g_i||)``, added to delta. The weight is continuous in the
+robot's own distance (no switching as a pushed robot leaves its radius). It switches once, by design, in its
+teammates' distances: when the last robot away comes within its radius, D falls from at least the radius to 0
+and every parked robot holds its goal at the paper's weight again (a parameter set between control steps, so
+the NLPs see no discontinuity).
 """
 
 from __future__ import annotations

@@ -10,7 +10,9 @@ centimetres a step and never applying it; with flocking off it left at once.
 
 What. A robot is stalled when it has not arrived and its distance to its goal fell by less than
 ``progress`` m over the last ``window_s`` seconds (robots that have run for less than the window are never
-stalled). The controller drops the flocking weight of every pair with a stalled robot (``StepData.flocking``)
+stalled). Both distances are to the goal it has now: with goals as slots (crowdsim/slots.py) a robot's goal
+can change, and a robot driving to a new slot is moving, one standing still is not. The controller drops
+the flocking weight of every pair with a stalled robot (``StepData.flocking``)
 until it moves again; everything else in the NLP is the paper's.
 """
 
@@ -25,22 +27,24 @@ PROGRESS: Final[float] = 0.25  # m towards the goal within the window that count
 
 
 class StallWatch:
-    """Distances to the goals over the last ``window_s / dt`` steps; ``update`` says who is stalled."""
+    """Positions over the last ``window_s / dt`` steps; ``update`` says who is stalled."""
 
     def __init__(self, window_s: float, dt: float, progress: float = PROGRESS):
         if window_s <= 0 or dt <= 0 or progress <= 0:
             raise ValueError(f"window_s, dt and progress must be > 0, got {window_s}, {dt}, {progress}")
         self.steps = max(1, round(window_s / dt))
         self.progress = progress
-        self._distances: deque[np.ndarray] = deque(maxlen=self.steps + 1)
+        self._positions: deque[np.ndarray] = deque(maxlen=self.steps + 1)
 
     def reset(self) -> None:
-        self._distances.clear()
+        self._positions.clear()
 
     def update(self, positions: np.ndarray, goals: np.ndarray, arrived: np.ndarray) -> np.ndarray:
-        """Record this step's distances; ``(M,)`` True for the robots stalled now."""
-        distance = np.linalg.norm(np.asarray(positions, dtype=float) - np.asarray(goals, dtype=float), axis=1)
-        self._distances.append(distance)
-        if len(self._distances) <= self.steps:
-            return np.zeros(len(distance), dtype=bool)
-        return (self._distances[0] - distance < self.progress) & ~np.asarray(arrived, dtype=bool)
+        """Record this step's positions; ``(M,)`` True for the robots stalled now."""
+        positions, goals = np.array(positions, dtype=float), np.asarray(goals, dtype=float)
+        self._positions.append(positions)
+        if len(self._positions) <= self.steps:
+            return np.zeros(len(positions), dtype=bool)
+        before = np.linalg.norm(self._positions[0] - goals, axis=1)
+        progress = before - np.linalg.norm(positions - goals, axis=1)
+        return (progress < self.progress) & ~np.asarray(arrived, dtype=bool)

@@ -89,3 +89,22 @@ def test_progress_of_exactly_the_threshold_counts_as_moving_and_the_threshold_is
     watch.update(_positions(0.0, 0.0, 0.0), GOALS, np.zeros(3, bool))
     stalled = watch.update(_positions(0.25, 0.5, 0.0), GOALS, np.zeros(3, bool))
     np.testing.assert_array_equal(stalled, [True, True, True])
+
+
+def test_progress_is_towards_the_goal_the_robot_has_now():
+    """With goals as slots a robot's goal can change. Distances stored per step compared the old goal with the
+    new one: a robot parked on its slot and then driving 0.3 m a step to the neighbouring slot (1.2 m away)
+    read as stalled, and one standing still read as moving once its new slot was 1.2 m nearer."""
+    watch = StallWatch(window_s=4.0, dt=0.4)  # many_robots.toml's window: 10 steps
+    old, new = np.array([[0.0, 5.0]]), np.array([[1.2, 5.0]])
+    position = np.array([[0.0, 5.0]])
+    for _ in range(12):
+        watch.update(position, old, np.array([True]))
+    for _ in range(4):
+        position = position + [[0.3, 0.0]]
+        assert not watch.update(position, new, np.array([False]))[0]
+    watch.reset()
+    still = np.zeros((1, 2))
+    for _ in range(12):
+        watch.update(still, np.array([[0.0, 5.0]]), np.array([False]))
+    assert watch.update(still, np.array([[0.0, 3.8]]), np.array([False]))[0]
