@@ -84,6 +84,22 @@ def _check_outside_the_zoos(out: Path) -> None:
             )
 
 
+def _check_replaces_an_export(out: Path) -> None:
+    """An existing file is replaced only if it is empty or a CasADi function file (an earlier export): a
+    mistyped --out must not overwrite a README, a data file or a recording, as --json and --plot do not."""
+    if not out.is_file() or out.stat().st_size == 0:
+        return
+    import casadi as ca
+
+    try:
+        ca.Function.load(str(out))  # its serialization header is checked first: a foreign file fails at once
+    except RuntimeError:
+        raise PipelineError(
+            f"--out {out}: the file exists and is not a CasADi function file; crowdmpc does not overwrite it "
+            "(remove it or name another file)"
+        ) from None
+
+
 def run(args: argparse.Namespace) -> int:
     from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
     from predictors.registry import load_predictor
@@ -102,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
         )
     _check_outside_the_zoos(args.out)
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
+    _check_replaces_an_export(args.out)
     predictor = load_predictor(args.name)
     start = time.perf_counter()
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)

@@ -325,3 +325,22 @@ def test_test_files_without_train_and_val_are_refused(tmp_path, capsys):
     write_walk_file(path)
     assert main(["train", "--model", "vanilla_lstm", "--test", str(path), "--out", str(tmp_path / "o")]) == 2
     assert "--test goes with --train and --val" in capsys.readouterr().err
+
+
+def test_export_replaces_an_earlier_export_but_no_other_file(tmp_path, capsys):
+    """A mistyped --out replaced a README with CasADi's bytes; like --json and --plot, export now replaces
+    only an empty file or its own kind (a CasADi function file)."""
+    readme = tmp_path / "README.md"
+    readme.write_text("# notes\n")
+    assert main(["export", "constant_velocity", "--out", str(readme)]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {readme}: the file exists and is not a CasADi function file" in err
+    assert readme.read_text() == "# notes\n"
+    out = tmp_path / "cv.casadi"
+    assert main(["export", "constant_velocity", "--out", str(out)]) == 0
+    first = out.read_bytes()
+    assert main(["export", "constant_velocity", "--out", str(out), "--humans", "5"]) == 0
+    assert out.read_bytes() != first  # the earlier export replaced by the new one
+    empty = tmp_path / "empty.casadi"
+    empty.touch()
+    assert main(["export", "constant_velocity", "--out", str(empty)]) == 0
