@@ -23,7 +23,10 @@ horizon step k = 1..H, used as the margin m_k of
 scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
 evaluation seed; only humans within --near m of a robot are scored). A closed-loop block also holds the
 quantiles of each motion class (new, standing, slow, walking), the margins of `--margins
-conformal-motion:ALPHA`. --holdout measures coverage on data the calibration did not see: the test scenes
+conformal-motion:ALPHA`, and per class those of the distance shortfall (how much closer a human came to a
+robot than predicted), the margins of `--margins conformal-shortfall:ALPHA`. A block without the per-class
+margins (too few samples in a class) is not stored over one that has them. --holdout measures coverage on
+data the calibration did not see: the test scenes
 (real) or as many further episodes (closed-loop; per motion class too).
 """
 
@@ -46,7 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "calibrate",
         help="conformal prediction margins for a predictor (real scenes or closed-loop episodes)",
         description="Measure a predictor's displacement error per horizon step and store its conformal "
-        "quantiles, the safety margins of `--margins conformal` and `conformal-motion`.",
+        "quantiles, the safety margins of `--margins conformal`, `conformal-motion` and "
+        "`conformal-shortfall`.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -137,6 +141,29 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
     return measured.errors, measured.classes, measured.shortfall
 
 
+def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
+    """Refuse to store a block without margins per motion class in place of one that has them (the shipped
+    block, or the user's earlier one): a short trial run would otherwise make conformal-motion and
+    conformal-shortfall, which docs/examples/safe_crossing.toml plans with, refuse that predictor."""
+    from predictors.calibration import stored_calibrations
+
+    in_force = stored_calibrations()
+    losing = []
+    for block in blocks:
+        for path, old in in_force:
+            if old.matches(*block.key()) and any(
+                new is None and had is not None
+                for new, had in ((block.classes, old.classes), (block.shortfall, old.shortfall))
+            ):
+                losing.append(f"alpha {block.alpha:g} (in force: {path})")
+    if losing:
+        raise PipelineError(
+            f"not stored: {args.predictor}'s {args.source} calibration at {', '.join(losing)} has margins "
+            "per motion class and these blocks have none (too few samples in a class); run more --episodes "
+            "(default 200), or measure without storing with --dry-run"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
     from pipelines.loop.margins import parse_margins
@@ -165,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         blocks, holdout = _closed_loop(args, sha256), None
     if not args.dry_run:  # stored before a held-out run, which may plan with these very margins
+        _check_keeps_class_margins(blocks, args)
         for block in blocks:
             path = save_calibration(block)
         print(f"wrote {len(blocks)} block(s) to {path}")

@@ -135,3 +135,26 @@ def test_calibrate_names_a_block_stored_without_class_margins_and_an_empty_held_
     rows = capsys.readouterr().out.splitlines()[1:]
     assert rows[0].endswith("held-out coverage: 94.7%, 94.7%, 94.7%, 94.7%")
     assert all(row.endswith("held-out coverage: no held-out samples in this class") for row in rows[1:])
+
+
+def test_calibrate_does_not_store_a_block_without_class_margins_over_one_with_them(tmp_path, monkeypatch):
+    """A short trial calibration replaced the block in force (shipped or the user's) by one without margins
+    per motion class, and conformal-shortfall, which safe_crossing.toml plans with, then refused the
+    predictor. Such a block is no longer stored over one that has them; a block that has them, or one that
+    replaces a block without them, is."""
+    from pipelines.commands.calibrate import _check_keeps_class_margins
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    errors, motion = class_errors(4)
+    args = SimpleNamespace(predictor="constant_velocity", source="closed-loop")
+    few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    full = constant_velocity_block(errors, classes=motion, shortfall=errors)
+    assert few.classes is None and few.shortfall is None
+    with pytest.raises(PipelineError, match=r"alpha 0.1 \(in force: .*checkpoints/calibrations.json\)"):
+        _check_keeps_class_margins([few], args)  # the shipped block has them
+    save_calibration(full, tmp_path)
+    with pytest.raises(PipelineError, match=f"not stored: .* alpha 0.1 \\(in force: {tmp_path}"):
+        _check_keeps_class_margins([few], args)
+    _check_keeps_class_margins([full], args)
+    save_calibration(few, tmp_path)  # by hand: the block in force now has none to lose
+    _check_keeps_class_margins([few], args)
