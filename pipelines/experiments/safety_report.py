@@ -151,9 +151,16 @@ def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
         else "robot visibility per column",
     )
     line = f"{parts[0]}; {parts[1]}, {parts[2]}."
-    if len(set(worlds)) == 1:
-        return line, None
-    return line[:-1] + " (row 'Margins / profile / visibility').", [" / ".join(w) for w in worlds]
+    per_column = None
+    if len(set(worlds)) > 1:
+        line = line[:-1] + " (row 'Margins / profile / visibility')."
+        per_column = [" / ".join(w) for w in worlds]
+    # Settings every column shares beside Table I's (a config file's guidance, stall release, ...): without
+    # them a safe-crossing sweep's table read the same as one with the margins alone.
+    shared = set.intersection(*(set(c.spec.mpc_overrides) for c in cells)) if cells else set()
+    if shared:
+        line += " MPC settings: " + ", ".join(f"{k}={v}" for k, v in sorted(shared)) + "."
+    return line, per_column
 
 
 def min_distance_counts(distances: Sequence[float]) -> np.ndarray:

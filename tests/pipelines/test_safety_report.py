@@ -226,6 +226,27 @@ def test_world_note_of_the_conventions_experiment():
     assert worlds is not None and worlds[:2] == ["none / v1 / visible", "cp0.1 / v1 / visible"]
 
 
+def test_world_note_names_the_mpc_settings_every_column_shares():
+    """A safe-crossing sweep's table said only "Margins: cps0.05", like a sweep with the margins alone; the
+    settings every column shares beside Table I's are named, those of one column only are not."""
+    import dataclasses
+
+    def with_settings(cell, *settings):
+        spec = dataclasses.replace(cell.spec, mpc_overrides=(*cell.spec.mpc_overrides, *settings))
+        return dataclasses.replace(cell, spec=spec)
+
+    cells = get_experiment("table2").cells()
+    assert world_note(cells)[0] == "Margins: none; profile paper, robots visible to the humans."
+    shared = (("guidance", "standing"), ("stall_release_s", 4.0))
+    cells = [with_settings(c, *shared, *((("j_max", 5),) if i == 0 else ())) for i, c in enumerate(cells)]
+    line, worlds = world_note(cells)
+    assert line == (
+        "Margins: none; profile paper, robots visible to the humans. "
+        "MPC settings: guidance=standing, stall_release_s=4.0."
+    )
+    assert worlds is None
+
+
 def test_episodes_csv_is_in_the_plans_order_whatever_order_the_workers_finished_in(tmp_path):
     safety, cells, records = _safety_records()
     for name, order in (("a", records), ("b", records[::-1])):
