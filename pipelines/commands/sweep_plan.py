@@ -31,7 +31,7 @@ def check_predictors(experiment: Experiment) -> None:
         hint = "--predictors" if experiment.predictor_list else "--predictor"
         raise PipelineError(
             f"experiment {experiment.name!r} needs predictors {missing} that are not available; "
-            f"available: {sorted(known)} (train or fetch the zoo models, or pass {hint})"
+            f"available: {sorted(known)} (check the names {hint} gives, or train or fetch the zoo models)"
         )
     for name in sorted(wanted):
         located = zoo.locate(name)

@@ -67,7 +67,7 @@ def _plugin_option(model: str) -> str:
 
 
 def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int | None) -> None:
-    print(f"{summary['name']}: best {best}; weights {weights} (+ .json)")
+    print(f"{summary['name']}: best checkpoint {best}; weights {weights} (+ .json)")
     for split, m in summary["metrics"].items():
         line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
         if "topk_ade" in m:

@@ -17,7 +17,7 @@ from pipelines.config.resolve import RunConfig
 from pipelines.config.schema import SECTION_BY_NAME, WRITE_ORDER
 
 HEADER = """\
-# crowdmpc configuration (TOML). Use it with any command that runs episodes:
+# crowdmpc configuration (TOML), for simulate, sweep and config show:
 #   crowdmpc --config run.toml simulate --controller cmpc    (or: crowdmpc simulate --config run.toml ...)
 #   crowdmpc --config run.toml sweep --experiment table2 --out runs/table2
 #   crowdmpc config show --config run.toml --set mpc.w_coll=1e6    (the effective config)
