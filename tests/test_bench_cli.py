@@ -2,28 +2,16 @@
 script in one line, and --json files land where asked."""
 
 import argparse
-import importlib.util
 import json
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+from tests.benchmark_modules import BENCHMARKS, load_benchmark
 
-
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    # Registered before it runs: a module's dataclasses look their annotations up in sys.modules.
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-bench_cli = _load("bench_cli")
+bench_cli = load_benchmark("bench_cli")
 
 
 def test_counts_take_their_range_and_name_themselves():
@@ -93,7 +81,7 @@ def test_a_count_that_measures_nothing_is_refused_when_parsed(
 ):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "argv", [f"{script}.py", *argv])  # the scripts whose main() reads sys.argv
-    module = _load(script)
+    module = load_benchmark(script)
     with pytest.raises(SystemExit) as stop:
         module.main(argv) if module.main.__code__.co_argcount else module.main()
     assert stop.value.code == 2
@@ -178,7 +166,7 @@ def test_run_main_ends_a_users_error_in_one_line_and_keeps_a_bugs_traceback(caps
 def test_a_bad_command_line_stops_before_any_episode(script, argv, message, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # a missing --config is looked up here, and nothing may be written
     with pytest.raises(SystemExit) as stop:
-        _load(script).main(argv)
+        load_benchmark(script).main(argv)
     assert stop.value.code == 2
     assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
@@ -241,6 +229,6 @@ def test_every_help_example_parses_as_printed(script, argv, tmp_path, monkeypatc
     monkeypatch.chdir(tmp_path)  # an example's output file is checked writable here
     monkeypatch.setattr(argparse.ArgumentParser, "parse_args", parse_then_stop)
     monkeypatch.setattr(sys, "argv", [f"{script}.py", *argv])
-    module = _load(script)
+    module = load_benchmark(script)
     with pytest.raises(_Parsed):
         module.main(argv) if module.main.__code__.co_argcount else module.main()

@@ -1,16 +1,11 @@
 """benchmarks/dmpc_scaling.py's bound on what threads can gain from uneven local solves, by hand."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-SPEC = importlib.util.spec_from_file_location(
-    "dmpc_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "dmpc_scaling.py"
-)
-dmpc_scaling = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(dmpc_scaling)
+from tests.benchmark_modules import load_benchmark
+
+dmpc_scaling = load_benchmark("dmpc_scaling")
 
 
 def test_one_long_job_last_keeps_two_threads_waiting():

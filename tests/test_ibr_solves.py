@@ -1,17 +1,9 @@
 """benchmarks/ibr_solves.py: the floor is one bare solve, and every solve of a step is counted."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 from mpc.nlp import JointNLP
+from tests.benchmark_modules import load_benchmark
 
-SPEC = importlib.util.spec_from_file_location(
-    "ibr_solves", Path(__file__).resolve().parents[1] / "benchmarks" / "ibr_solves.py"
-)
-ibr_solves = importlib.util.module_from_spec(SPEC)
-sys.modules["ibr_solves"] = ibr_solves
-SPEC.loader.exec_module(ibr_solves)
+ibr_solves = load_benchmark("ibr_solves")
 
 
 def test_a_restart_from_braking_is_a_later_solve_not_part_of_the_floor(monkeypatch):

@@ -1,16 +1,13 @@
 """benchmarks/paired_runs.py: sweeps compared on the episodes they share, against numbers worked by hand."""
 
 import csv
-import importlib.util
 from pathlib import Path
 
 import pytest
 
-SPEC = importlib.util.spec_from_file_location(
-    "paired_runs", Path(__file__).resolve().parents[1] / "benchmarks" / "paired_runs.py"
-)
-paired_runs = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(paired_runs)
+from tests.benchmark_modules import load_benchmark
+
+paired_runs = load_benchmark("paired_runs")
 FIELDS = ["method", "n_humans", "scenario", "seed", "success", "collision", "travel_time"]
 
 

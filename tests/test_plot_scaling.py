@@ -1,16 +1,12 @@
 """benchmarks/plot_scaling.py: which of robot_scaling.py's rows make which line, and its errors."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-SPEC = importlib.util.spec_from_file_location(
-    "plot_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "plot_scaling.py"
-)
-plot_scaling = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(plot_scaling)
+from tests.benchmark_modules import load_benchmark
+
+plot_scaling = load_benchmark("plot_scaling")
 
 
 def _report(humans: int, rows: list[tuple[str, str, int, float]]) -> dict:

@@ -1,18 +1,12 @@
 """benchmarks/predictor_floor.py: the functions it times are the loop's, and their scalar expansion computes
 the same numbers (else its timings compare different work)."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
 from predictors.registry import load_predictor
+from tests.benchmark_modules import load_benchmark
 
-SPEC = importlib.util.spec_from_file_location(
-    "predictor_floor", Path(__file__).resolve().parents[1] / "benchmarks" / "predictor_floor.py"
-)
-predictor_floor = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(predictor_floor)
+predictor_floor = load_benchmark("predictor_floor")
 
 
 def test_the_encoder_and_twin_are_the_loops_and_their_expansion_agrees():

@@ -1,16 +1,10 @@
 """benchmarks/review_memory.py: the folder's copies, and the figures of one small run."""
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
-SPEC = importlib.util.spec_from_file_location(
-    "review_memory", Path(__file__).resolve().parents[1] / "benchmarks" / "review_memory.py"
-)
-review_memory = importlib.util.module_from_spec(SPEC)
-sys.modules["review_memory"] = review_memory
-SPEC.loader.exec_module(review_memory)
+from tests.benchmark_modules import load_benchmark
+
+review_memory = load_benchmark("review_memory")
 
 
 def test_fill_copies_the_sources_in_turn_up_to_the_count(tmp_path):

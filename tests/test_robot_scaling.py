@@ -1,19 +1,14 @@
 """benchmarks/robot_scaling.py's failure kinds, on episodes whose ending is set by hand."""
 
-import importlib.util
 import warnings
-from pathlib import Path
 
 import numpy as np
 
 from crowdsim.metrics import Trajectory, episode_metrics
 from crowdsim.scenarios import make_layout, start_overlaps
+from tests.benchmark_modules import load_benchmark
 
-SPEC = importlib.util.spec_from_file_location(
-    "robot_scaling", Path(__file__).resolve().parents[1] / "benchmarks" / "robot_scaling.py"
-)
-robot_scaling = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(robot_scaling)
+robot_scaling = load_benchmark("robot_scaling")
 DT = 0.4
 
 

@@ -1,20 +1,14 @@
 """benchmarks/sweep_floor.py: its arithmetic by hand, and its clock on real CasADi functions."""
 
-import importlib.util
-from pathlib import Path
-
 import casadi as ca
 import numpy as np
 import pytest
 
 from mpc.fastcall import BufferedFunction
 from predictors.learned import LearnedPredictor
+from tests.benchmark_modules import load_benchmark
 
-SPEC = importlib.util.spec_from_file_location(
-    "sweep_floor", Path(__file__).resolve().parents[1] / "benchmarks" / "sweep_floor.py"
-)
-sweep_floor = importlib.util.module_from_spec(SPEC)
-SPEC.loader.exec_module(sweep_floor)
+sweep_floor = load_benchmark("sweep_floor")
 
 
 def test_the_projection_and_the_python_cut_by_hand():
