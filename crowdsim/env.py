@@ -140,6 +140,11 @@ class EnvConfig:
                 f"EnvConfig.goal_assignment must be one of {list(GOAL_ASSIGNMENTS)}, "
                 f"got {self.goal_assignment!r}"
             )
+        if self.goal_assignment == "slots" and self.success_rule == "first_reach":
+            raise SimulationError(  # the metrics would judge a reach against the goal held at the end
+                "EnvConfig.goal_assignment 'slots' needs success_rule 'simultaneous' (the paper profile): "
+                "under 'first_reach' a robot may reach a slot it gives up later"
+            )
         if self.formation not in FORMATIONS:
             raise SimulationError(
                 f"EnvConfig.formation must be one of {list(FORMATIONS)}, got {self.formation!r}"

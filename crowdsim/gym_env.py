@@ -36,7 +36,7 @@ CrowdNav's ``point_to_segment_dist``), and ``d = min_i d_i``, the first rule tha
    the success reward on the step that ends an episode in success (the next one, there), so every episode
    ending in success is paid it, here as there. With ``end_on_collision=True`` the contact ends the
    episode, as upstream CrowdNav does, and comes first: ``-0.25`` only, the success not paid (upstream's
-   ``Collision``);
+   ``Collision``); on the last step rule 1 still comes first (``truncated``, 0);
 3. the robots succeed (the success rule of ``EnvConfig``; ``terminated``): ``success = +1``;
 4. ``d < discomfort_dist = 0.4`` m: ``(d - discomfort_dist) * discomfort_factor * dt``, factor 0.5 /s;
 5. otherwise 0.
@@ -277,7 +277,9 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         discomfort = segments_intersect(
             obs.robot_positions[:, None], r_end[:, None], obs.human_positions[None], h_end[None]
         )
-        terminated = success or (self.end_on_collision and bool(contact_in_step.any()))
+        # Rule 1 first, as the fork's Timeout: a contact on the last step ends the episode truncated (and pays
+        # 0), not terminated with the time limit's reward.
+        terminated = success or (self.end_on_collision and bool(contact_in_step.any()) and not timeout)
         truncated = timeout and not terminated
         self._done = terminated or truncated
         info: dict[str, Any] = {

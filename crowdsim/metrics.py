@@ -200,11 +200,13 @@ def min_distance_between_steps(robot_positions: np.ndarray, human_positions: np.
 
 
 def _success_step(traj: Trajectory, reach: np.ndarray, rule: str) -> int:
-    """First row at which ``rule`` holds, -1 if never (module docstring)."""
+    """First row at which ``rule`` holds, -1 if never (module docstring). Never row 0: the simulator judges
+    success after a step, so robots that start on their goals succeed at the first step, or not at all."""
     if rule == "first_reach":
-        return int(reach.max()) if (reach >= 0).all() else -1
+        return max(int(reach.max()), 1) if (reach >= 0).all() else -1
     inside = np.linalg.norm(traj.robot_positions - traj.robot_goals[None], axis=-1) < traj.radius
     together = inside.all(axis=1)
+    together[0] = False
     return int(together.argmax()) if together.any() else -1
 
 

@@ -364,3 +364,15 @@ def test_render_draws_an_rgb_frame():
     assert CrowdNavEnv().render() is None  # no render mode, nothing drawn
     env.close()
     env.close()
+
+
+def test_a_contact_on_the_last_step_ends_the_episode_truncated_as_the_time_limit_comes_first():
+    """Rule 1 (the time limit, 0) comes first, as the fork's Timeout. With end_on_collision a contact on the
+    last step gave terminated=True with the time limit's 0: no penalty and no bootstrap either way."""
+    config = EnvConfig(time_limit=0.4, timeout_margin=0.0)  # one step
+    env = CrowdNavEnv(n_robots=1, n_humans=1, config=config, end_on_collision=True)
+    with pytest.warns(LayoutWarning, match="0.5 m apart"):
+        env.reset(seed=0, options={"layout": one_robot((0.0, 0.5))})
+    _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
+    assert info["surface_distance"] == pytest.approx([-0.1]) and info["timeout"]
+    assert (reward, terminated, truncated) == (0.0, False, True)

@@ -296,3 +296,20 @@ def test_the_mean_travel_time_is_a_mean():
         make_traj([[[0, 0]], [[0, 1.0]], [[0, 1.9]]], [[[3.0, 0.0]]] * 3, robot_goals=[[0.0, 2.0]])
     )
     assert aggregate([fast, fast, slow])["travel_time_mean"] == pytest.approx(1.6 / 3)
+
+
+@pytest.mark.parametrize("rule", ["simultaneous", "first_reach"])
+def test_robots_that_start_on_their_goals_succeed_at_the_first_step_or_not_at_all(rule):
+    """The simulator judges success after a step; the metrics counted the reset state, so a robot that
+    started inside its goal and drove off read as a success in 0 s where the simulator said timeout."""
+    goals = [[0.0, 0.0]]
+    leaving = [[[0.25, 0.0]], [[0.6, 0.0]], [[1.0, 0.0]]]
+    staying = [[[0.25, 0.0]], [[0.25, 0.0]], [[0.25, 0.0]]]
+    humans = [[[9.0, 9.0]]] * 3
+    left = episode_metrics(make_traj(leaving, humans, robot_goals=goals, success_rule=rule))
+    stayed = episode_metrics(make_traj(staying, humans, robot_goals=goals, success_rule=rule))
+    if rule == "simultaneous":
+        assert not left.success
+    else:  # reached at the reset, as the simulator's "has reached it at some point" has it
+        assert left.success and left.travel_time == pytest.approx(0.4)
+    assert stayed.success and stayed.travel_time == pytest.approx(0.4)

@@ -120,3 +120,11 @@ def test_points_must_be_2d():
         match_slots(np.zeros((3, 3)), np.zeros((3, 3)))
     with pytest.raises(ValueError, match=r"both be \(M, 2\)"):
         match_slots(np.zeros(2), np.zeros(2))
+
+
+def test_slots_refuse_the_first_reach_rule():
+    """Under first_reach the metrics judge each robot's reach against the goal it holds at the end, while the
+    simulator forgets a reach when the slot changes hands: a timed-out episode could read as a success."""
+    with pytest.raises(SimulationError, match="'slots' needs success_rule 'simultaneous'"):
+        EnvConfig(goal_assignment="slots", success_rule="first_reach")
+    EnvConfig(goal_assignment="slots")  # the paper profile's rule
