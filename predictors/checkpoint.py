@@ -244,7 +244,12 @@ def check_state_dict(state: object, expected: dict[str, Any], weights: Path, con
             raise PredictorError(
                 f"{weights}: tensor {key!r} has shape {tuple(value.shape)}, the net of {config} needs {want}"
             )
-        if not value.is_floating_point():
-            raise PredictorError(f"{weights}: tensor {key!r} is {value.dtype}, not floating point")
+        if value.dtype not in (torch.float16, torch.bfloat16, torch.float32, torch.float64):
+            # float8 passes is_floating_point but has no isfinite; a meta tensor holds no values at all
+            raise PredictorError(
+                f"{weights}: tensor {key!r} is {value.dtype}, not floating point of 16, 32 or 64 bits"
+            )
+        if value.device.type != "cpu":
+            raise PredictorError(f"{weights}: tensor {key!r} is on device {value.device.type!r}, not the cpu")
         if not bool(torch.isfinite(value).all()):
             raise PredictorError(f"{weights}: tensor {key!r} holds NaN or infinite values")

@@ -50,8 +50,10 @@ def add_entry(
     """``add_to_zoo``: the entry now in the zoo, and the one it had under ``name`` before (None if none).
 
     The shipped zoo is read-only: a ``directory`` that is (or lies in) it is refused, and so is a ``name`` it
-    has. A ``name`` the zoo has already is refused unless ``replace``, except for the very same entry, which
-    is left as it is (returned as both); so is a name whose files would be the zoo's own (``ZOO_FILES``).
+    has. A ``name`` the zoo has already is refused unless ``replace`` (and so is a name whose files would be
+    the zoo's own, ``ZOO_FILES``), except for the very same entry: that is left as it is (the one object
+    returned as both), unless its files in the zoo were damaged since, which are then written again (an
+    equal, new entry returned).
     ``shipped=True`` is the maintainers' way to add a model of a shipped kind to the shipped zoo itself
     (``directory`` then defaults to ``checkpoints_dir()``). Parallel adds and removes take turns
     (``zoo_lock``): every one's entry is in the manifest they leave."""
@@ -120,7 +122,11 @@ def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: st
     if previous is None or replace:
         return False
     if previous == entry:
-        return True  # adding the same thing twice changes nothing
+        # adding the same thing twice changes nothing, unless the zoo's copy was damaged since: rewrite it
+        return all(
+            (root / name).is_file() and sha256_file(root / name) == digest
+            for name, digest in ((entry.file, entry.sha256), (entry.config, entry.config_sha256))
+        )
     # the entry may be the only copy of a model the user trained (or the paper's predictor, in the shipped
     # zoo): never lose it without being asked
     raise PredictorError(_taken(entry.name, root, which, previous, entry))

@@ -4,6 +4,7 @@ respect to the robots' plan, in float64 (``PARITY_TOLERANCE``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Final, Protocol
 
@@ -45,7 +46,8 @@ class Parity:
         return max(self.value_error, self.jacobian_error)
 
     def ok(self, tolerance: float = PARITY_TOLERANCE) -> bool:
-        return self.worst <= tolerance
+        # NaN fails every comparison, and max(0.0, nan) is 0.0: each error is checked on its own
+        return all(math.isfinite(e) and e <= tolerance for e in (self.value_error, self.jacobian_error))
 
 
 def crossing_scene(

@@ -388,3 +388,12 @@ def test_the_parity_scene_is_a_crowd_with_robots_moving_on():
     step = future[1] - future[0]  # one step of each robot's constant velocity
     np.testing.assert_allclose(future[0] - history[-1, 3:], step, atol=1e-12)
     assert np.abs(step).min() > 0  # they move
+
+
+def test_a_nan_error_fails_the_parity_check_whichever_it_is():
+    """max(0.0, nan) is 0.0 in Python: an export with NaN Jacobians passed the check."""
+    from predictors.export.parity import Parity
+
+    assert Parity(0.0, 0.0).ok() and not Parity(0.0, 1e-3).ok()
+    assert not Parity(0.0, float("nan")).ok() and not Parity(float("nan"), 0.0).ok()
+    assert not Parity(float("inf"), 0.0).ok()

@@ -301,6 +301,12 @@ def _weights_cases() -> dict[str, tuple[object, str]]:
             "is torch.bool, not floating",
         ),
         "complex": ({**state, "head.bias": torch.zeros(5, dtype=torch.complex64)}, "not floating point"),
+        # floating point to is_floating_point, but with no isfinite: a traceback before
+        "float8": (
+            {**state, "head.bias": torch.zeros(5).to(torch.float8_e4m3fn)},
+            "is torch.float8_e4m3fn, not floating point of 16, 32 or 64 bits",
+        ),
+        "meta": ({**state, "head.bias": torch.empty(5, device="meta")}, "is on device 'meta', not the cpu"),
     }
 
 
@@ -604,3 +610,25 @@ def test_export_at_the_horizon_bound_works(tmp_path, zoo_dir):
     np.testing.assert_allclose(got[0, 6], [6.0 + 2.4, -0.4], rtol=0, atol=1e-12)
     steps = 0.4 * np.arange(1, 101)[:, None, None]
     np.testing.assert_allclose(got, pos[None] + steps * vel[None], rtol=0, atol=1e-9)
+
+
+def test_adding_the_same_pair_again_rewrites_a_damaged_copy(pair, tmp_path, monkeypatch, capsys):
+    """Adding the same weights twice changes nothing, but a zoo copy damaged since was left damaged ("nothing
+    changed", exit 0) while `zoo verify` reported the sha256 mismatch; it is now written again."""
+    weights, _ = pair
+    root = tmp_path / "fresh"
+    (tmp_path / "shipped").mkdir()
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, str(tmp_path / "shipped"))
+    monkeypatch.setenv(zoo.ZOO_ENV, str(root))
+    assert main(["zoo", "add", str(weights)]) == 0
+    assert main(["zoo", "add", str(weights)]) == 0
+    assert "with these weights" in capsys.readouterr().out.splitlines()[-1]
+    (root / f"{NAME}.pt").write_bytes((root / f"{NAME}.pt").read_bytes()[:100])  # truncated
+    assert main(["zoo", "add", str(weights)]) == 0
+    assert (
+        capsys.readouterr()
+        .out.strip()
+        .endswith("was damaged; wrote it again (sha256 " + (zoo.read_manifest(root)[NAME].sha256[:12] + "…)"))
+    )
+    assert (root / f"{NAME}.pt").read_bytes() == weights.read_bytes()
+    assert main(["zoo", "verify"]) == 0
