@@ -101,7 +101,9 @@ def test_config_show_of_a_file_and_sets_is_the_effective_config_and_loads_back(t
     assert _objects(load(str(shown))) == _objects(effective)
     assert effective.env.time_limit == 25.0 and effective.env.success_rule == "first_reach"
     assert effective.env.goal_assignment == "fixed"  # the paper's task unless asked
-    assert load(str(path), ["env.goal_assignment=slots"]).env.goal_assignment == "slots"
+    assert load(None, ["env.goal_assignment=slots"]).env.goal_assignment == "slots"
+    with pytest.raises(ConfigError, match="env.goal_assignment: .*'slots' needs success_rule 'simultaneous'"):
+        load(str(path), ["env.goal_assignment=slots"])  # v1's first_reach rule
     # the global options work as well
     assert main(["--config", str(path), "--set", "scenario.humans=5", "config", "show"]) == 0
     assert "humans = 5" in capsys.readouterr().out
