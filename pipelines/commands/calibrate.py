@@ -145,15 +145,16 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
     """Refuse to store a block without margins per motion class in place of one that has them (the shipped
     block, or the user's earlier one): a short trial run would otherwise make conformal-motion and
     conformal-shortfall, which docs/examples/safe_crossing.toml plans with, refuse that predictor."""
+    from pipelines.loop.margins import class_tables
     from predictors.calibration import stored_calibrations
 
     in_force = stored_calibrations()
     losing = []
     for block in blocks:
+        new = class_tables(block)
         for path, old in in_force:
             if old.matches(*block.key()) and any(
-                new is None and had is not None
-                for new, had in ((block.classes, old.classes), (block.shortfall, old.shortfall))
+                new[mode] is None and had is not None for mode, had in class_tables(old).items()
             ):
                 losing.append(f"alpha {block.alpha:g} (in force: {path})")
     if losing:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Final, NamedTuple, cast
 import numpy as np
 
 from pipelines.errors import PipelineError
-from pipelines.loop.margins import MarginSpec
+from pipelines.loop.margins import MarginSpec, class_tables
 from predictors.conformal_classes import motion_classes
 
 if TYPE_CHECKING:
@@ -263,11 +263,7 @@ def missing_class_margins(blocks: Sequence[Any]) -> list[str]:
 
     lines = []
     for block in blocks:
-        missing = [
-            mode
-            for mode, table in (("conformal-motion", block.classes), ("conformal-shortfall", block.shortfall))
-            if table is None
-        ]
+        missing = [mode for mode, table in class_tables(block).items() if table is None]
         if missing:
             lines.append(
                 f"  alpha {block.alpha:g}: no margins per motion class, so {' and '.join(missing)} will "

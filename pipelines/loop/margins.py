@@ -58,6 +58,12 @@ DEFAULT_ALPHA: Final[float] = 0.1
 MAX_MARGIN: Final[float] = 5.0  # m; a margin beyond this leaves no room to move in a 10 m scene
 
 
+def class_tables(block: Calibration) -> dict[str, ClassMargins | None]:
+    """A calibration block's margins per motion class, by the mode in ``PER_HUMAN_MODES`` that plans with
+    them (None where the block has none)."""
+    return dict(zip(PER_HUMAN_MODES, (block.classes, block.shortfall), strict=True))
+
+
 @dataclass(frozen=True)
 class MarginSpec:
     """How the controller enlarges the robot-human distance of Eq. 11 (module docstring)."""
@@ -125,7 +131,7 @@ class MarginSpec:
         if self.mode not in PER_HUMAN_MODES:
             return None
         block = self._block(predictor, horizon, sha256)
-        table = block.classes if self.mode == "conformal-motion" else block.shortfall
+        table = class_tables(block)[self.mode]
         if table is None:
             from predictors.calibration import recalibrate_command
 
