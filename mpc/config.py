@@ -129,7 +129,10 @@ class MPCConfig:
     # solver_max_iter, a few ms). A safety net, far above the normal step time, so that results do not depend
     # on the machine's load.
     time_limit_s: float = 1.0
-    warm_start: bool = True  # start every solve from the shifted previous solution (IPOPT: also its duals)
+    # IPOPT (the solver, or Fatrop's fallback) starts from the multipliers of the shifted previous solution
+    # too, with a small barrier parameter. The primal start is the shifted previous plan either way: it is the
+    # IBR loops' u^(0) (Algorithms 1-2); Fatrop takes no multipliers, so only its fallback solves change.
+    warm_start: bool = True
     # The collision penalties make F non-convex, and the shifted previous plan can sit in a basin that has
     # become poor (a gap closing). multi_start: when the first solution of a step still pays more than
     # restart_penalty of collision penalty, solve again from braking and keep the lower cost (CMPC: F;

@@ -131,8 +131,9 @@ class DMPC:
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         self.local = LocalNLP(cfg, n_robots, n_humans)
         self._keeper = PlanKeeper(cfg, self.local, n_robots)
-        # Only to report F_t of the final plan, the common currency of CMPC and DMPC.
-        self.joint = JointNLP(cfg, n_robots, n_humans)
+        # F_t of the final plan (the common currency of CMPC and DMPC) and the heading start's test; solved
+        # only by the pair moves, so its solver is built only for them.
+        self.joint = JointNLP(cfg, n_robots, n_humans, solver=cfg.dmpc_pairs)
         self._pool: ThreadPoolExecutor | None = None  # made on first use with dmpc_parallel="threads"
         # Threads besides the caller's for the local solves: one per further core, at most one per robot.
         self._helpers = max(1, min(n_robots, cores()) - 1)

@@ -74,7 +74,12 @@ class JointNLP:
     robots' planned positions. Its parameters (``extra`` below) close the parameter vector.
     """
 
-    def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int, humans_model=None):
+    def __init__(
+        self, cfg: MPCConfig, n_robots: int, n_humans: int, humans_model=None, *, solver: bool = True
+    ):
+        """``solver=False`` builds only the cost functions (``potential``, ``penalty``): the solver, which
+        takes most of the build (4 of 4.4 s at 12 robots, and a gcc compile with ``jit``), is then built by
+        the first ``solve``. DMPC evaluates F with this NLP and solves it only for its pair moves."""
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         h, m = cfg.horizon, n_robots
         self.n_pairs = m * (m - 1) // 2
@@ -114,8 +119,17 @@ class JointNLP:
             BufferedFunction(self.penalty_fn),
             BufferedFunction(self.potential_fn),
         )
-        nlp = {"x": u, "p": p, "f": cfg.cost_scale * F, "g": g}
-        self._solver = _Solver(f"joint_{m}r_{n_humans}h", nlp, cfg, getattr(model, "ipopt_options", None))
+        self._nlp = {"x": u, "p": p, "f": cfg.cost_scale * F, "g": g}
+        self._ipopt_extra = getattr(model, "ipopt_options", None)
+        self._built: _Solver | None = None
+        if solver:
+            self._solver()
+
+    def _solver(self) -> _Solver:
+        if self._built is None:
+            name = f"joint_{self.n_robots}r_{self.n_humans}h"
+            self._built = _Solver(name, self._nlp, self.cfg, self._ipopt_extra)
+        return self._built
 
     def params(self, data: StepData, extra: np.ndarray) -> np.ndarray:
         """The parameter vector for ``data``; ``extra``: the humans model's parameters (by default the
@@ -175,7 +189,7 @@ class JointNLP:
         x0 = np.clip(np.ravel(accels0), lbx, ubx)
         v = self.cfg.v_max
         p = self.params(data, extra)
-        out, stats = self._solver.solve(x0, p, lbx, ubx, -v, v, lam_x0, lam_g0, explore)
+        out, stats = self._solver().solve(x0, p, lbx, ubx, -v, v, lam_x0, lam_g0, explore)
         return _solution(out, stats, self.cfg.cost_scale, (self.n_robots, self.cfg.horizon, 2))
 
     def solve_group(

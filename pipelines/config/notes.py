@@ -54,7 +54,8 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "solver_tol": "the solver's tolerance (Fatrop: KKT error; IPOPT: scaled NLP error)",
     "solver_max_iter": "iterations per solve; hitting it counts as a failure (fallback)",
     "time_limit_s": "s, wall-time budget of one control step (a safety net, far above the normal step time)",
-    "warm_start": "start every solve from the shifted previous solution",
+    "warm_start": "IPOPT (the solver, or Fatrop's fallback) also starts from the shifted previous solution's "
+    "multipliers (every solve starts from the shifted plan, the IBR loops' u^(0), either way)",
     "multi_start": "solve again from braking when the first solution pays more than restart_penalty",
     "restart_penalty": "collision penalty above which multi_start solves again",
     "jit": "compile the NLPs with gcc (simulate; a sweep compiles by [sweep] jit)",

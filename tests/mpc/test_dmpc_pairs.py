@@ -9,6 +9,7 @@ import pytest
 
 from mpc.cmpc import IBRResult
 from mpc.config import MPCConfig
+from mpc.dmpc import DMPC
 from mpc.dmpc_pairs import blocker, pair_moves, stalled
 from mpc.dynamics import rollout_numpy
 from mpc.errors import MPCConfigError
@@ -152,3 +153,17 @@ def test_a_failed_pair_solve_is_not_kept_but_counted():
     np.testing.assert_array_equal(out.accels, result.accels)
     assert out.potential == 50.0 and out.potentials == result.potentials
     assert out.solves == 10 and out.solver_iterations == 37
+
+
+def test_the_joint_solver_is_built_only_for_the_pair_moves():
+    """DMPC evaluates F with the joint NLP but solves it only in its pair moves; the solver (most of the
+    joint NLP's build, a gcc compile with jit) is built on the first solve, to the same solution."""
+    assert DMPC(CFG, 2, 0).joint._built is None
+    paired = DMPC(CFG.replace(dmpc_pairs=True), 2, 0).joint
+    assert paired._built is not None
+    lazy = DMPC(CFG, 2, 0).joint
+    data = held(at_rest([[0.0, 0.0], [1.0, 0.1]], [[1.0, 0.1], [0.0, 0.0]]), 0)
+    start = np.zeros((2, CFG.horizon, 2))
+    eager, built = (nlp.solve(data, np.zeros((CFG.horizon, 0, 2)), start) for nlp in (paired, lazy))
+    assert lazy._built is not None
+    np.testing.assert_array_equal(built.accels, eager.accels)
