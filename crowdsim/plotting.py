@@ -77,12 +77,14 @@ def plot_episode(
     *,
     radius: float = RADIUS,
     dt: float | None = None,
+    times: Sequence[float] | None = None,
 ) -> Figure:
     """Trajectories of one episode with the agents drawn to scale at a few snapshot steps.
 
     robot_positions ``(T, M, 2)``, human_positions ``(T, N, 2)``, robot_goals ``(M, 2)`` in m. Snapshots
     (rows of the arrays; default five evenly spaced, first and last included) are drawn fainter the earlier
-    they are; with ``dt`` the legend gives their times in seconds. Returns the figure (``ax.figure`` if
+    they are; with ``dt`` the legend gives their times in seconds, row * dt, or with ``times`` (s, one per
+    row) those (a log that lost states has rows that are not steps). Returns the figure (``ax.figure`` if
     ``ax`` is given).
     """
     robot_positions = np.asarray(robot_positions, dtype=float)
@@ -119,7 +121,12 @@ def plot_episode(
     ax.plot(*robot_goals.T, "*", color=GOAL_COLOR, ms=14, mec="k", mew=0.5, zorder=5, label="robot goals")
     ax.plot([], [], "o", mfc="none", mec=HUMAN_COLOR, label="humans")
     if snaps:
-        when = [f"{row * dt:g} s" for row in snaps] if dt is not None else [f"step {row}" for row in snaps]
+        if times is not None:
+            when = [f"{float(times[row]):g} s" for row in snaps]
+        elif dt is not None:
+            when = [f"{row * dt:g} s" for row in snaps]
+        else:
+            when = [f"step {row}" for row in snaps]
         ax.plot([], [], " ", label="snapshots: " + ", ".join(when))
 
     frame_axes(ax, robot_positions, human_positions, robot_goals)

@@ -47,12 +47,18 @@ def check_writable(
     the command may create entries in; the check creates nothing (a probe file is made and removed at once).
     A file output is never one of the command's ``inputs`` (``review RUN.mcap --json RUN.mcap`` replaced the
     recording by its summary), and with ``json_only`` (a ``--json`` report) it replaces only a JSON document:
-    a mistyped name must not overwrite a data file, a recording or weights.
+    a mistyped name must not overwrite a data file, a recording or weights. A file output that is a symbolic
+    link is refused: one planted in a folder would send the output wherever it points.
     """
     if path is None:
         return
     path = Path(path)
     label = f"{option} {path}"
+    if not directory and path.is_symlink():
+        # a link planted in a folder would make the output land wherever it points (even where nothing is)
+        raise PipelineError(
+            f"{label}: is a symbolic link; crowdmpc does not write through one (name its target)"
+        )
     if path.exists():
         if directory != path.is_dir():
             raise PipelineError(f"{label}: " + ("not a directory" if directory else "is a directory"))

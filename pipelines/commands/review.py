@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable
 from pipelines.errors import PipelineError
+from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
     from pipelines.logs.digest import RunDigest
@@ -341,6 +342,9 @@ def run(args: argparse.Namespace) -> int:
 
     failed = _check(runs, report) + n_unreadable if args.check else 0
 
+    for out in (args.plot, args.animate, args.json):
+        if out is not None:  # checked writable above, as other commands' outputs: its folder made here
+            out.parent.mkdir(parents=True, exist_ok=True)
     if not args.path.is_dir():
         other = read_recording(args.compare) if args.compare else None
         if other is not None:
@@ -362,6 +366,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"animation: {args.animate} ({frames} frames)")
 
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        # plain: a hostile or foreign file's NaN metrics would make the report invalid JSON
+        args.json.write_text(json.dumps(plain(report), indent=2, allow_nan=False) + "\n")
         print(f"json: {args.json}")
     return 1 if failed else 0

@@ -52,6 +52,17 @@ def _is_type(value: Any, name: str) -> bool:
     raise PipelineError(f"unsupported JSON schema type {name!r}")
 
 
+def _json_equal(a: Any, b: Any) -> bool:
+    """Equality as JSON Schema means it: Python's ``True == 1`` and ``False == 0`` hold, JSON's do not."""
+    if isinstance(a, bool) or isinstance(b, bool):
+        return isinstance(a, bool) and isinstance(b, bool) and a == b
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_json_equal(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_json_equal(a[k], b[k]) for k in a)
+    return a == b
+
+
 def validate(value: Any, schema: dict[str, Any], path: str = "$") -> list[str]:
     """Every violation of ``schema`` by ``value``, each as ``"<json path>: <reason>"``; empty when valid.
 
@@ -67,9 +78,9 @@ def validate(value: Any, schema: dict[str, Any], path: str = "$") -> list[str]:
         types = schema["type"] if isinstance(schema["type"], list) else [schema["type"]]
         if not any(_is_type(value, t) for t in types):
             return [f"{path}: expected {' or '.join(types)}, got {_describe(value)}"]
-    if "const" in schema and value != schema["const"]:
+    if "const" in schema and not _json_equal(value, schema["const"]):
         errors.append(f"{path}: expected {schema['const']!r}, got {value!r}")
-    if "enum" in schema and value not in schema["enum"]:
+    if "enum" in schema and not any(_json_equal(value, option) for option in schema["enum"]):
         errors.append(f"{path}: {value!r} is not one of {schema['enum']!r}")
     if "oneOf" in schema:
         matches = sum(not validate(value, option, path) for option in schema["oneOf"])

@@ -65,7 +65,7 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
         view.robot_goals,
         snapshot_steps=rows,
         radius=view.radius,
-        dt=view.dt,
+        times=view.times,
     )
     ax = fig.axes[0]
     for k, row in enumerate(rows):

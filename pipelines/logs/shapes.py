@@ -33,6 +33,8 @@ def _array_problem(value: Any, ndim: int) -> str | None:
         array = np.asarray(value, dtype=float)
     except (ValueError, TypeError, OverflowError, RecursionError):
         return "is not a rectangular array of numbers"
+    if array.size == 0 and array.ndim == ndim - 1 and array.shape[-1] == 0:
+        return None  # no agents: json has no shape for (0, 2) or (H, 0, 2), numpy reads (0,) or (H, 0)
     if array.ndim != ndim or array.shape[-1] != 2:
         return f"has shape {array.shape}, expected {ndim} axes ending in 2 (x, y)"
     return None

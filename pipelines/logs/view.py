@@ -79,7 +79,7 @@ def _episode_view(rec: Recording) -> EpisodeView:
         human_goals=_points(humans[0]["goals"], n),
         plans=plans,
         predictions={
-            p["step"]: np.asarray(p["positions"], dtype=float).reshape(-1, n, 2)
+            p["step"]: np.asarray(p["positions"], dtype=float).reshape(len(p["positions"]), n, 2)
             for p in rec.data("/mpc/prediction")
         },
         dt=dt,

@@ -128,6 +128,16 @@ def test_check_writable(tmp_path, a_file):
         check_writable(a_file, "--out", directory=True)
 
 
+def test_a_file_output_is_never_written_through_a_symbolic_link(tmp_path, a_file):
+    """A link planted in a folder (dangling, or to a file) would send the output wherever it points."""
+    for target in (tmp_path / "elsewhere" / "out.json", a_file):
+        link = tmp_path / f"link-{target.name}"
+        link.symlink_to(target)
+        with pytest.raises(PipelineError, match=rf"^--json {link}: is a symbolic link"):
+            check_writable(link, "--json")
+    assert not (tmp_path / "elsewhere").exists() and a_file.read_text() == "not a directory\n"
+
+
 def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp_path, a_file):
     """`review RUN.mcap --json RUN.mcap` replaced the recording by its summary, `evaluate --json` a data
     file: a file output is never one of the inputs, and a --json report replaces only a JSON document."""
@@ -166,6 +176,27 @@ def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
     assert "that is one of the command's inputs" in capsys.readouterr().err
     assert main(["review", str(tmp_path), "--json", str(run.path)]) == 2  # a folder's recordings too
     assert run.path.read_bytes() == before
+
+
+def test_review_writes_into_a_new_folder_and_strict_json(tmp_path, capsys):
+    """The outputs' folders are made, as every other command makes them (the check passed, and the whole
+    review was lost at the end); NaN in a foreign file's metrics is no reason to write invalid JSON."""
+    from pipelines.logs.recorder import McapRecorder
+    from pipelines.logs.schemas import EPISODE_METRICS
+    from tests.pipelines.mcap_episode import record_episode
+
+    run = record_episode(tmp_path, seed=1, steps=3)
+    out = tmp_path / "new" / "deeper"
+    argv = ["review", str(run.path), "--json", str(out / "s.json"), "--plot", str(out / "p.png")]
+    assert main(argv + ["--animate", str(out / "a.gif")]) == 0
+    assert {p.name for p in out.iterdir()} == {"s.json", "p.png", "a.gif"}
+    foreign = tmp_path / "foreign.mcap"
+    with McapRecorder(foreign, metadata={"episode": {"scenario": "circle", "seed": "1"}}) as rec:
+        metrics = b'{"metrics": {"success": true, "travel_time": NaN, "min_distance": Infinity}}'
+        rec.write_json("/episode/metrics", metrics, 0, schema=EPISODE_METRICS)
+    assert main(["review", str(foreign), "--json", str(out / "f.json")]) == 0
+    report = json.loads((out / "f.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+    assert report["summary"]["metrics"]["travel_time"] is None
 
 
 @pytest.mark.parametrize("option", ["--json", "--plot", "--record"])

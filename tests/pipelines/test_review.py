@@ -163,6 +163,17 @@ def test_plot_animation_and_comparison(runs, tmp_path, capsys):
     assert overlay.stat().st_size > 0
 
 
+def test_an_episode_without_humans_passes_the_check_and_draws(tmp_path, capsys):
+    """JSON has no shape for an empty list: numpy reads no humans as (0,) and an empty prediction as (H, 0),
+    which the checks took for malformed arrays, so every message of a crowd-free run was left out."""
+    run = record_episode(tmp_path, n_humans=0, steps=3)
+    assert main(["review", str(run.path), "--check"]) == 0
+    assert "ok" in capsys.readouterr().out
+    view = episode_view(read_recording(run.path))
+    assert view.human_positions.shape == (4, 0, 2) and view.predictions[0].shape == (4, 0, 2)
+    assert main(["review", str(run.path), "--plot", str(tmp_path / "p.png")]) == 0
+
+
 def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_text("hello, not an mcap file")

@@ -49,6 +49,11 @@ def test_one_of_constants_and_unsupported_keywords():
     line_type = {"type": "object", "properties": {"type": line["properties"]["type"]}}
     assert validate({"type": 0}, line_type) == []
     assert "matches 0 of the 3 options" in validate({"type": 5}, line_type)[0]
+    # JSON's true is not 1 (Python's True == 1 let a boolean pass as LINE_LOOP), nor 0 false
+    assert "matches 0 of the 3 options" in validate({"type": True}, line_type)[0]
+    assert validate(0, {"enum": [False]}) and validate(False, {"const": 0})
+    assert validate([1], {"const": [True]})
+    assert validate(1.0, {"const": 1}) == validate([False], {"enum": [[False]]}) == []
     with pytest.raises(PipelineError, match=r"keyword\(s\) \['pattern'\]"):
         validate("a", {"type": "string", "pattern": "a+"})
 
