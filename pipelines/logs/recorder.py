@@ -12,9 +12,10 @@ The file is written as ``<name>.part`` and renamed to ``<name>`` when it is fini
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Final
@@ -53,8 +54,11 @@ _ENCODER: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 def _create(path: Path, *, new: bool = False) -> IO[bytes]:
     """``path`` opened for writing, never through a symbolic link: one planted at ``<name>.part`` in the
     folder the user named would make the recording land wherever it points. ``new``: only if nothing has
-    that name (FileExistsError otherwise), atomically, so two processes never both get it."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_EXCL if new else os.O_TRUNC)
+    that name (FileExistsError otherwise), atomically, so two processes never both get it. Otherwise the
+    file is locked (``flock``, released when the file is closed or its process dies) before it is emptied:
+    two runs recording the same episode into one folder at once wrote one file, and a killed run's ``.part``
+    is still taken over."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_EXCL if new else 0)
     try:
         fd = os.open(path, flags, 0o644)
     except FileExistsError:  # only with new (O_EXCL): the caller chooses another name
@@ -63,6 +67,16 @@ def _create(path: Path, *, new: bool = False) -> IO[bytes]:
         if path.is_symlink():
             raise PipelineError(f"cannot record to {path}: it is a symbolic link; remove it") from None
         raise PipelineError(f"cannot record to {path}: {exc.strerror}") from None
+    if not new:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise PipelineError(
+                f"cannot record to {path}: another run is recording that episode into this folder now; "
+                "record into another folder"
+            ) from None
+        os.ftruncate(fd, 0)
     return os.fdopen(fd, "wb")
 
 
@@ -78,6 +92,9 @@ class McapRecorder:
         otherwise). The ``.part`` is created atomically and ``path`` checked after it, so that of recorders
         choosing names at the same time in one folder only one gets each (a finished file's ``.part`` is
         gone before its final name appears).
+    :param before_rename: called with ``path`` when the file is finished, before it takes that name, while
+        the ``.part`` is still locked: a check that ``path`` may be replaced (another run may have finished a
+        file there since this one started); when it raises, the recording keeps its ``.part`` name.
     """
 
     def __init__(
@@ -88,6 +105,7 @@ class McapRecorder:
         compression: CompressionType = DEFAULT_COMPRESSION,
         metadata: Mapping[str, Mapping[str, str]] | None = None,
         new: bool = False,
+        before_rename: Callable[[Path], None] | None = None,
     ):
         if chunk_size <= 0:
             raise PipelineError(f"chunk_size must be a positive number of bytes, got {chunk_size}")
@@ -103,6 +121,7 @@ class McapRecorder:
         # killed run leaves its chunks in the .part, which `crowdmpc review NAME.part` reads. Creating the
         # file late would still leave a truncated .mcap for any kill after the first chunk.
         self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
+        self._before_rename = before_rename
         self._stream: IO[bytes] = _create(self.part_path, new=new)
         if new and (self.path.exists() or self.path.is_symlink()):
             self._stream.close()
@@ -144,9 +163,12 @@ class McapRecorder:
         self._closed = True
         try:
             self._writer.finish()
+            self._stream.flush()
+            if self._before_rename is not None:
+                self._before_rename(self.path)
+            os.replace(self.part_path, self.path)
         finally:
-            self._stream.close()
-        os.replace(self.part_path, self.path)
+            self._stream.close()  # the lock goes with it, after the rename
 
     # -- writing ---------------------------------------------------------------------------------------------
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:

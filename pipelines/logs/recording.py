@@ -139,8 +139,11 @@ class McapEpisodeRecorder:
             self._recorder = self._claim_unseeded(scenario, metadata)
         else:  # the same scene: replaced when this run recorded it
             path = self.out_dir / episode_filename(scenario, seed)
-            check_replaceable(path, run_identity(episode, decode_metadata(config)))
-            self._recorder = McapRecorder(path, metadata=metadata)
+            identity = run_identity(episode, decode_metadata(config))
+            check_replaceable(path, identity)  # before the episode runs, and again before the file is named
+            self._recorder = McapRecorder(
+                path, metadata=metadata, before_rename=lambda p: check_replaceable(p, identity)
+            )
         self.paths.append(self._recorder.path)
         self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius))
         self._last = obs

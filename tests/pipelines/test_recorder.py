@@ -229,3 +229,36 @@ def test_a_new_recording_never_takes_a_name_held_by_a_dangling_link(tmp_path):
     with pytest.raises(FileExistsError):
         McapRecorder(path, new=True)
     assert path.is_symlink() and not (tmp_path / "a.mcap.part").exists()
+
+
+def test_two_recorders_of_one_episode_at_once_never_write_one_file(tmp_path):
+    """Two runs recording the same seed into one folder at the same time wrote one .part (one run's episode
+    silently replaced by a mix of both, or by the other's): the second is refused while the first records;
+    once it has finished, a rerun replaces its file as before."""
+    path = tmp_path / "a.mcap"
+    first = McapRecorder(path)
+    first.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+    with pytest.raises(PipelineError, match="another run is recording that episode into this folder now"):
+        McapRecorder(path)
+    first.close()
+    assert read_recording(path).data("/robots") == [ROBOT_MESSAGE]
+    with McapRecorder(path) as again:
+        again.write("/robots", ROBOT_MESSAGE, 5, schema=ROBOTS)
+    assert not (tmp_path / "a.mcap.part").exists() and len(read_recording(path).data("/robots")) == 1
+
+
+def test_a_refusal_before_the_rename_keeps_the_recording_unfinished(tmp_path):
+    """``before_rename`` runs when the file is finished (another run may have finished a file under the
+    name since this one began): when it refuses, nothing is replaced and the recording stays as .part."""
+    path = tmp_path / "a.mcap"
+    path.write_bytes(b"another run's file")
+
+    def refuse(name):
+        raise PipelineError(f"cannot record to {name}: it holds another run's episode")
+
+    rec = McapRecorder(path, before_rename=refuse)
+    rec.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+    with pytest.raises(PipelineError, match="another run's episode"):
+        rec.close()
+    assert path.read_bytes() == b"another run's file"
+    assert read_recording(tmp_path / "a.mcap.part").data("/robots") == [ROBOT_MESSAGE]
