@@ -362,8 +362,9 @@ def run(args: argparse.Namespace) -> int:
                 drawn = plot_recording(rec, args.plot, args.times)
                 print(f"plot: {args.plot} (plans at t = {', '.join(f'{t:g}' for t in drawn)} s)")
         if args.animate:
-            frames = animate_recording(rec, args.animate)
-            print(f"animation: {args.animate} ({frames} frames)")
+            frames, every = animate_recording(rec, args.animate)
+            thinned = f", one state in {every}" if every > 1 else ""
+            print(f"animation: {args.animate} ({frames} frames{thinned})")
 
     if args.json:
         # plain: a hostile or foreign file's NaN metrics would make the report invalid JSON

@@ -118,6 +118,11 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
 ANIMATION_SUFFIXES: Final = (".gif", ".mp4")
 
 
+# Pillow's GIF writer holds every frame (about 1.3 MB each at the dpi used): a 10 000-step gym episode
+# needed 13 GB. 300 frames are two minutes of a 0.4 s step at simulated speed.
+MAX_FRAMES: Final[int] = 300
+
+
 def check_animation_path(out: str | Path, option: str = "--animate") -> None:
     """PipelineError unless ``out`` names an animation this machine can write (.gif; .mp4 with ffmpeg):
     checked before the work, as ``crowdsim.plotting.check_figure_path`` is for figures."""
@@ -197,19 +202,24 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     return fig, draw, view
 
 
-def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> int:
-    """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg). Returns the frame count.
+def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> tuple[int, int]:
+    """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg).
 
-    One frame per recorded state, played at ``speed`` times simulated time.
+    One frame per recorded state, played at ``speed`` times simulated time; an episode of more than
+    ``MAX_FRAMES`` states gets every k-th (and its last), played k times faster, so that it keeps its length
+    in seconds. Returns the frame count and k.
     """
     from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 
     out = Path(out)
     check_animation_path(out)
     fig, draw, view = animation_figure(rec)
-    fps = speed / view.dt
-    frames = len(view.times)
-    animation = FuncAnimation(fig, draw, frames=frames, blit=False)
+    every = -(-len(view.times) // MAX_FRAMES)
+    rows = list(range(0, len(view.times), every))
+    if rows[-1] != len(view.times) - 1:
+        rows.append(len(view.times) - 1)
+    fps = speed / (every * view.dt)
+    animation = FuncAnimation(fig, draw, frames=rows, blit=False)
     # matplotlib's stubs say fps: int, but the writers take any positive number (Pillow: 1000 / fps ms a
     # frame, ffmpeg: -r fps); speed / dt is fractional (e.g. 2.5) and must not be rounded.
     writer = (
@@ -218,4 +228,4 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
         else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
     )
     animation.save(out, writer=writer, dpi=80)
-    return frames
+    return len(rows), every

@@ -174,6 +174,19 @@ def test_an_episode_without_humans_passes_the_check_and_draws(tmp_path, capsys):
     assert main(["review", str(run.path), "--plot", str(tmp_path / "p.png")]) == 0
 
 
+def test_a_long_episode_is_animated_in_at_most_max_frames(runs, tmp_path, capsys, monkeypatch):
+    """Pillow holds every frame: a 10 000-step episode needed 13 GB. Past MAX_FRAMES, one state in k (and
+    the last) is drawn, each shown k steps long, so the animation keeps the episode's length."""
+    from pipelines.logs import plots
+
+    monkeypatch.setattr(plots, "MAX_FRAMES", 4)
+    gif = tmp_path / "a.gif"
+    assert main(["review", str(runs[0].path), "--animate", str(gif)]) == 0  # 9 states: 0, 3, 6 and 8
+    assert "(4 frames, one state in 3)" in capsys.readouterr().out
+    with Image.open(gif) as animation:
+        assert animation.n_frames == 4 and animation.info["duration"] == 1200
+
+
 def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_text("hello, not an mcap file")
