@@ -15,9 +15,10 @@ Rows past the episode's ``n_robots`` robots, respectively ``n_humans`` humans, a
 the spaces are fixed at construction for ``max_robots`` and ``max_humans``, and ``reset(options=...)``
 may run smaller episodes (``scenario``, ``n_humans``, ``n_robots``) or a hand-built ``Layout``. Bounds:
 velocities within ``±max(v_max, v_pref)`` (robots per component, humans' ORCA speed); positions and goals
-within ``±position_limit = scene_limit + max(v_max, v_pref) time_limit``, where ``scene_limit = 2 max(circle
-radius, square width) x geometry_scale(max_humans)`` bounds every start and goal (20 m, so 60 m with the
-paper's defaults). Values are clipped into the box, which absorbs rounding only.
+within ``±position_limit = scene_limit + max(v_max, v_pref) T``, where ``scene_limit = 2 max(circle radius,
+square width) x geometry_scale(max_humans)`` bounds every start and goal (20 m, so 60 m with the paper's
+defaults) and ``T = max(time_limit, max_steps dt)`` (the steps outlast the time limit with no margin and a
+time limit that is no whole number of steps). Values are clipped into the box, which absorbs rounding only.
 
 Action: ``Box(-a_max, a_max, (max_robots, 2))``, float64: each robot's acceleration [m/s^2], the native
 action. ``CrowdEnv`` clips it per component to the acceleration and velocity bounds of Eq. (6); rows past
@@ -89,7 +90,7 @@ from crowdsim.metrics import (
     episode_metrics,
     segments_intersect,
 )
-from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, geometry_scale
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, checked_layout, geometry_scale
 from crowdsim.world import CIRCLE_RADIUS, DT, PAPER_ROBOTS, SQUARE_WIDTH
 
 __all__ = [
@@ -197,10 +198,12 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / config.dt}
 
-        # Bounds (module docstring): twice the largest scene, plus the farthest anyone travels per axis.
+        # Bounds (module docstring): twice the largest scene, plus the farthest anyone travels per axis. An
+        # episode runs max_steps steps, which may outlast time_limit (no margin, time_limit / dt not whole).
         speed = max(config.v_max, config.v_pref)
         self.scene_limit = 2.0 * max(CIRCLE_RADIUS, SQUARE_WIDTH) * geometry_scale(self.max_humans)
-        self.position_limit = self.scene_limit + speed * config.time_limit
+        duration = max(config.time_limit, config.max_steps * config.dt)
+        self.position_limit = self.scene_limit + speed * duration
         rows = self.max_robots + self.max_humans
         limit = np.array([self.position_limit] * 2 + [speed] * 2 + [self.position_limit] * 2 + [1.0])
         self._high = np.broadcast_to(limit, (rows, len(COLUMNS))).copy()
@@ -380,8 +383,8 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
                 raise SimulationError(f"reset option 'layout' sets the agents; drop {others}")
             if not isinstance(layout, Layout):
                 raise SimulationError(f"options['layout'] must be a Layout, got {type(layout).__name__}")
-            points = [np.asarray(getattr(layout, f.name), dtype=float) for f in fields(Layout)]
-            if not all(np.all(np.abs(p) <= self.scene_limit) for p in points):  # NaN fails too
+            layout = checked_layout(layout)  # shapes and numbers first: the bounds are read off its arrays
+            if not all(np.all(np.abs(getattr(layout, f.name)) <= self.scene_limit) for f in fields(Layout)):
                 raise SimulationError(
                     f"options['layout']: starts and goals must lie within ±{self.scene_limit:g} m "
                     "(the observation's bounds assume so)"

@@ -1,6 +1,7 @@
 """crowdmpc/CrowdNav-v0: gymnasium's checker, the observation layout, the reward by hand, the episode is
 CrowdEnv's, the time limit, rendering, and the velocity wrapper."""
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -146,6 +147,20 @@ def test_a_layout_episode_has_no_seed_and_keeps_the_generators_sequence():
             "reset option 'layout' sets the agents; drop ['n_humans']",
         ),
         ({"layout": one_robot((0.0, 99.0))}, "options['layout']: starts and goals must lie within ±20 m"),
+        # the layout's own check comes before the bounds: these were numpy's ValueError, and a None field
+        # read as out of bounds
+        (
+            {"layout": dataclasses.replace(one_robot((3.0, 0.0)), human_starts=[[3.0, 0.0], [1.0]])},
+            "layout.human_starts must be a (N, 2) array of numbers: setting an array element with a sequence",
+        ),
+        (
+            {"layout": dataclasses.replace(one_robot((3.0, 0.0)), human_starts=[["a", "b"]])},
+            "layout.human_starts must be a (N, 2) array of numbers: could not convert string to float",
+        ),
+        (
+            {"layout": dataclasses.replace(one_robot((3.0, 0.0)), human_goals=None)},
+            "layout.human_goals must be a (N, 2) array, got shape ()",
+        ),
     ],
 )
 def test_bad_reset_options_are_one_line(options, message):
@@ -293,6 +308,22 @@ def test_the_time_limit_truncates_with_the_episode_metrics():
     assert info["episode_metrics"] == episode_metrics(env.simulator.trajectory())
     assert info["episode_metrics"].n_steps == 5 and info["episode_metrics"].timeout
     assert all("episode_metrics" not in s[4] for s in steps[:-1])
+
+
+def test_the_position_bounds_hold_for_steps_that_outlast_the_time_limit():
+    """No margin and 1.0 / 0.9 not whole: 2 steps, 1.8 s, run past the 1 s limit. The bounds took 1 s of
+    travel, 20 + 100 x 1 = 120 m, and clipped real positions (134 m); they take the 1.8 s the steps last."""
+    config = EnvConfig(dt=0.9, time_limit=1.0, timeout_margin=0.0, v_max=100.0, a_max=1000.0)
+    env = CrowdNavEnv(n_humans=1, config=config)
+    assert config.max_steps == 2 and env.position_limit == pytest.approx(20.0 + 100.0 * 1.8)
+    env.reset(seed=0)
+    done = False
+    while not done:
+        obs, _, terminated, truncated, info = env.step(np.tile([1000.0, 0.0], (3, 1)))
+        done = terminated or truncated
+    np.testing.assert_array_equal(obs[:3, POSITION], info["observation"].robot_positions)
+    assert truncated and obs[:3, 0].max() > 120.0 and env.observation_space.contains(obs)
+    assert CrowdNavEnv().position_limit == 60.0  # 40 s, the paper's: its 98 steps of 0.4 s end before
 
 
 def test_an_episode_is_crowdenvs_and_its_metrics_are_the_simulators():
