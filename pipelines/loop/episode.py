@@ -2,13 +2,12 @@
 
 Controllers handle their own failures (a solver that fails falls back inside the controller and says so in
 ``ControlOutput.fallback``); anything that escapes a controller or an observer is a bug and propagates with
-its traceback. A controller's ``act`` that returns no ``ControlOutput`` breaks the plugin contract: a
-PipelineError naming it.
+its traceback. A controller that breaks the plugin contract (``act`` returning no ``ControlOutput``, or
+one of the wrong shapes; ``describe`` no dict) is a PipelineError naming it (``pipelines.loop.contract``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -21,7 +20,7 @@ from crowdsim.control import ControlOutput
 from crowdsim.env import CrowdEnv, EnvConfig, Observation
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.errors import PipelineError
+from pipelines.loop.contract import checked_description, checked_output, episode_meta
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 
@@ -75,17 +74,6 @@ class EpisodeResult:
         )
 
 
-def checked_output(controller: Controller, out: object) -> ControlOutput:
-    """``out`` if it is a ``ControlOutput``; a plugin's ``act`` that returns anything else (its bare
-    accelerations, say) is a one-line PipelineError naming the controller, not an AttributeError later."""
-    if not isinstance(out, ControlOutput):
-        raise PipelineError(
-            f"controller {controller.name!r} ({type(controller).__qualname__}): act() must return a "
-            f"crowdsim.control.ControlOutput, got {type(out).__module__}.{type(out).__qualname__}"
-        )
-    return out
-
-
 def run_episode(
     controller: Controller,
     *,
@@ -102,25 +90,17 @@ def run_episode(
     The meta given to ``on_reset`` holds seed, scenario, n_humans, n_robots, controller, predictor (the
     controller's), predictor_sha256 and config (the environment's settings, plus what the controller's
     ``describe()`` adds: the MPC's config, the checkpoint's sha256); entries of ``meta`` are added and take
-    precedence.
+    precedence; an entry that would replace one of the episode's own fields (``contract.OWN_FIELDS``) is a
+    PipelineError.
     """
     env = CrowdEnv(env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
     controller.reset(obs)
-    full_meta: dict[str, Any] = {
-        "seed": seed,
-        "scenario": scenario,
-        "n_humans": n_humans,
-        "n_robots": n_robots,
-        "controller": controller.name,
-        "predictor": controller.predictor,
-        "predictor_sha256": None,
-        "config": {"env": dataclasses.asdict(env_config)},
-    }
-    described = dict(controller.describe())
-    full_meta["config"].update(described.pop("config", {}))
-    full_meta.update(described)
-    full_meta.update(meta or {})
+    episode = {"seed": seed, "scenario": scenario, "n_humans": n_humans, "n_robots": n_robots}
+    described = checked_description(controller)
+    full_meta = episode_meta(
+        episode, env_config, controller.name, controller.predictor, described, meta, "run_episode"
+    )
     for observer in observers:
         observer.on_reset(obs, full_meta)
 
@@ -130,7 +110,7 @@ def run_episode(
     iterations: list[int] = []
     done = False
     while not done:
-        out = checked_output(controller, controller.act(obs))
+        out = checked_output(controller, controller.act(obs), obs)
         next_obs, done, _ = env.step(out.accelerations)
         solve_times.append(float(out.solve_time_s))
         statuses.append(str(out.status))

@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -27,8 +26,9 @@ from crowdsim.env import Observation
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.metrics import episode_metrics
 from pipelines.errors import PipelineError
+from pipelines.loop.contract import checked_description, checked_meta, checked_output, episode_meta
 from pipelines.loop.controllers import Controller
-from pipelines.loop.episode import EpisodeObserver, EpisodeResult, checked_output
+from pipelines.loop.episode import EpisodeObserver, EpisodeResult
 
 
 def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
@@ -37,29 +37,6 @@ def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
     if not isinstance(base, CrowdNavEnv):
         raise PipelineError(f"expected a crowdmpc/CrowdNav-v0 environment, got {type(base).__name__}")
     return base
-
-
-def episode_meta(
-    base: CrowdNavEnv,
-    controller: str,
-    predictor: str | None,
-    described: Mapping[str, Any] | None = None,
-    meta: Mapping[str, Any] | None = None,
-) -> dict[str, Any]:
-    """The meta ``on_reset`` gets, as ``run_episode`` builds it: the episode (seed, scenario, sizes), who
-    drives, the environment's config plus what the controller's ``describe()`` adds, then ``meta``."""
-    full: dict[str, Any] = {
-        **base.episode,
-        "controller": controller,
-        "predictor": predictor,
-        "predictor_sha256": None,
-        "config": {"env": dataclasses.asdict(base.config)},
-    }
-    extra = dict(described or {})
-    full["config"].update(extra.pop("config", {}))
-    full.update(extra)
-    full.update(meta or {})
-    return full
 
 
 class _Steps:
@@ -104,6 +81,7 @@ class _Steps:
 
 
 def _padded(accelerations: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The action of ``checked_output``'s ``(n_robots, 2)`` accelerations: rows past them are ignored."""
     action = np.zeros(shape)
     action[: len(accelerations)] = accelerations
     return action
@@ -129,13 +107,16 @@ def run_gym_episode(
     _, info = env.reset(seed=seed, options=options)
     obs: Observation = info["observation"]
     controller.reset(obs)
-    full_meta = episode_meta(base, controller.name, controller.predictor, controller.describe(), meta)
+    described = checked_description(controller)
+    full_meta = episode_meta(
+        base.episode, base.config, controller.name, controller.predictor, described, meta, "run_gym_episode"
+    )
     for observer in observers:
         observer.on_reset(obs, full_meta)
     steps = _Steps()
     done = False
     while not done:
-        out = checked_output(controller, controller.act(obs))
+        out = checked_output(controller, controller.act(obs), obs)
         _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
         steps.add(out)
         for observer in observers:
@@ -157,7 +138,8 @@ class ObserveEpisodes(
     :param env: the environment, possibly wrapped; wrap it in ``VelocityControl`` after this wrapper.
     :param observers: ``EpisodeObserver``\\ s, e.g. an ``McapEpisodeRecorder``.
     :param controller: the name the records give the policy.
-    :param meta: added to each episode's meta (``episode_meta``).
+    :param meta: added to each episode's meta (``contract.episode_meta``); it may not set the episode's own
+        fields (seed, scenario, ...: ``contract.OWN_FIELDS``).
     """
 
     def __init__(
@@ -172,9 +154,14 @@ class ObserveEpisodes(
         gym.utils.RecordConstructorArgs.__init__(self, observers=observers, controller=controller, meta=meta)
         gym.Wrapper.__init__(self, env)
         self._base = crowdnav_env(env)
+        if env.action_space != self._base.action_space:  # it would record velocities as accelerations
+            raise PipelineError(
+                "ObserveEpisodes records the environment's accelerations: wrap VelocityControl around it, "
+                "VelocityControl(ObserveEpisodes(env, ...)), not inside it"
+            )
         self.observers = tuple(observers)
         self.controller = controller
-        self.meta = dict(meta or {})
+        self.meta = checked_meta(meta, "ObserveEpisodes")
         self.results: list[EpisodeResult] = []  # every finished episode, in order
         self._obs: Observation | None = None
         self._meta: dict[str, Any] = {}
@@ -186,7 +173,10 @@ class ObserveEpisodes(
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         self._obs = info["observation"]
-        self._meta = episode_meta(self._base, self.controller, None, None, self.meta)
+        base = self._base
+        self._meta = episode_meta(
+            base.episode, base.config, self.controller, None, None, self.meta, "ObserveEpisodes"
+        )
         self._steps = _Steps()
         for observer in self.observers:
             observer.on_reset(info["observation"], self._meta)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from crowdsim.env import EnvConfig
+from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
 from pipelines.loop.episode import run_episode, run_episodes, summarize
 
@@ -166,6 +167,12 @@ def test_meta_precedence_defaults_then_describe_then_the_callers():
     assert (result.predictor, result.predictor_sha256) == ("constant_velocity", "abc123")
     # 1.2 s of 0.4 s steps, no margin: steps at t = 0, 0.4, 0.8
     assert controller.calls == [("reset", 0), ("act", 0), ("act", 1), ("act", 2)]
+
+
+def test_a_callers_meta_may_not_relabel_the_episode():
+    """run_episodes hands every episode the same meta: a seed there named every recording alike."""
+    with pytest.raises(PipelineError, match=r"run_episode: meta must not set \['seed', 'config'\]"):
+        run_episode(Scripted(), seed=1, scenario="circle", n_humans=2, meta={"seed": 0, "config": {}})
 
 
 def test_run_episodes_closes_its_controller_even_when_an_episode_raises(monkeypatch):

@@ -216,6 +216,45 @@ def test_a_plugin_whose_act_returns_no_control_output_is_one_line(capsys):
     assert str(caught.value) == message
 
 
+BROKEN = "tests.plugins.broken_controllers"
+BROKEN_CONTRACTS = [
+    ("FlatPlan", "act() must return plan of shape (3, H, 2) or None, got shape (5,)"),
+    ("PredictionOfRobots", "act() must return prediction of shape (H, 2, 2) or None, got shape (4, 3, 2)"),
+    ("IterationsNone", "act() must return iterations as an int, got None"),
+    ("StatusNone", "act() must return status as a str, got None"),
+    ("DescribeNone", "describe() must return a dict, got NoneType"),
+    ("ConfigList", "describe()['config'] must be a dict, got list"),
+]
+
+
+@pytest.mark.parametrize("name, problem", BROKEN_CONTRACTS)
+def test_a_plugin_breaking_the_contract_is_one_line_naming_it_in_both_loops(name, problem):
+    """Each was a traceback from the loop's bookkeeping (int(None), dict(None)) or, under --record, from the
+    recorder drawing the plan; the loops now check what they take from a controller in one place."""
+    import gymnasium as gym
+
+    import crowdsim
+    from pipelines.loop.gym_loop import run_gym_episode
+    from tests.plugins import broken_controllers
+
+    controller = getattr(broken_controllers, name)(None, None)
+    message = f"controller {controller.name!r} ({name}): {problem}"
+    with pytest.raises(PipelineError) as caught:
+        run_episode(controller, seed=0, scenario="circle", n_humans=2)
+    assert str(caught.value) == message
+    with pytest.raises(PipelineError) as caught:
+        run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2), seed=0)
+    assert str(caught.value) == message
+
+
+def test_a_wrong_plan_under_record_is_one_line(tmp_path, capsys):
+    bad = f"{BROKEN}:FlatPlan"
+    argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
+    code, stdout, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
+    assert code == 2 and stdout == ""
+    assert err == f"crowdmpc simulate: error: controller 'flat_plan' (FlatPlan): {BROKEN_CONTRACTS[0][1]}\n"
+
+
 def test_the_guides_controller_runs_as_written(tmp_path, monkeypatch, capsys):
     """docs/extending.md's "Your own controller" example, saved as the user would, through simulate."""
     guide = (REPO / "docs" / "extending.md").read_text()

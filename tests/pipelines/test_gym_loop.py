@@ -214,3 +214,57 @@ def test_a_controller_whose_act_returns_no_control_output_is_named_through_gym_t
     env = gym.make(crowdsim.ENV_ID, n_humans=2)
     with pytest.raises(PipelineError, match=r"controller 'array_act' \(ArrayAct\): act\(\) must return"):
         run_gym_episode(ArrayAct(None, None), env, seed=0)
+
+
+@pytest.mark.parametrize(
+    "name, max_robots, got",
+    [
+        ("TooFewRows", None, (2, 2)),  # was padded with zeros: the last robot never moved
+        ("ExtraRow", 4, (4, 2)),  # was cut to the episode's robots: its extra row dropped unseen
+        ("ExtraRow", None, (4, 2)),  # was numpy's ValueError (broadcast)
+    ],
+)
+def test_accelerations_of_the_wrong_rows_are_refused_through_gym_as_by_run_episode(name, max_robots, got):
+    from tests.plugins import broken_controllers
+
+    controller = getattr(broken_controllers, name)(None, None)
+    message = (
+        f"controller '{controller.name}' ({name}): act() must return accelerations of shape (3, 2), "
+        f"a row per robot, got shape {got}"
+    )
+    with pytest.raises(PipelineError) as caught:
+        run_gym_episode(controller, CrowdNavEnv(n_humans=2, max_robots=max_robots), seed=0)
+    assert str(caught.value) == message
+    with pytest.raises(PipelineError) as caught:
+        run_episode(controller, seed=0, scenario="circle", n_humans=2)
+    assert str(caught.value) == message
+
+
+def test_observe_episodes_refuses_meta_that_would_relabel_its_episodes(tmp_path):
+    """A meta seed named every episode's recording: three episodes wrote one file over and over."""
+    clash = r"ObserveEpisodes: meta must not set \['seed', 'scenario'\]: the episode sets seed, scenario"
+    with pytest.raises(PipelineError, match=clash):
+        ObserveEpisodes(CrowdNavEnv(n_humans=2), [], meta={"scenario": "mine", "seed": 0, "note": "fine"})
+    with pytest.raises(PipelineError, match=r"run_gym_episode: meta must not set \['controller'\]"):
+        run_gym_episode(
+            make_controller(ControllerSpec("straight")), CrowdNavEnv(), seed=0, meta={"controller": 1}
+        )
+    seen = Calls()
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        base = CrowdNavEnv(n_humans=2, config=EnvConfig(time_limit=0.8, timeout_margin=0.0))
+        env = ObserveEpisodes(base, [recorder, seen], meta={"experiment": "demo"})
+        for seed in (10, 11):
+            env.reset(seed=seed)
+            while not any(env.step(np.zeros((3, 2)))[2:4]):
+                pass
+    assert [p.name for p in recorder.paths] == ["circle_seed000010.mcap", "circle_seed000011.mcap"]
+    assert (seen.meta["seed"], seen.meta["experiment"]) == (11, "demo")
+
+
+def test_observe_episodes_refuses_velocity_control_inside_it():
+    """Underneath, the actions it saw were velocities, recorded as accelerations."""
+    with pytest.raises(
+        PipelineError, match=r"wrap VelocityControl around it, VelocityControl\(ObserveEpisodes"
+    ):
+        ObserveEpisodes(VelocityControl(CrowdNavEnv(n_humans=2)), [])
+    assert isinstance(VelocityControl(ObserveEpisodes(CrowdNavEnv(n_humans=2), [])).env, ObserveEpisodes)

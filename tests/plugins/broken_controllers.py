@@ -1,10 +1,16 @@
-"""A controller plugin that breaks the documented contract: ``act`` returns the bare accelerations (an
-ndarray) instead of a ``ControlOutput``. Registered as ``tests.plugins.broken_controllers:ArrayAct``."""
+"""Controller plugins that break the documented contract (docs/extending.md, section 6), each in one way:
+``act`` returns the bare accelerations (an ndarray) instead of a ``ControlOutput``, or a ``ControlOutput``
+with a field of the wrong shape or type; ``describe`` returns no dict. Registered as
+``tests.plugins.broken_controllers:ArrayAct`` and so on."""
 
 from __future__ import annotations
 
+import dataclasses
+from typing import Any
+
 import numpy as np
 
+from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from tests.plugins.toy_controller import StraightLine
 
@@ -14,3 +20,67 @@ class ArrayAct(StraightLine):
 
     def act(self, obs: Observation) -> np.ndarray:  # type: ignore[override]
         return super().act(obs).accelerations
+
+
+class TooFewRows(StraightLine):
+    """Accelerations for all robots but the last."""
+
+    name = "too_few_rows"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = super().act(obs)
+        return dataclasses.replace(out, accelerations=out.accelerations[:-1])
+
+
+class ExtraRow(StraightLine):
+    """One row of accelerations too many."""
+
+    name = "extra_row"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = super().act(obs)
+        return dataclasses.replace(out, accelerations=np.vstack([out.accelerations, [[0.5, 0.5]]]))
+
+
+class FlatPlan(StraightLine):
+    name = "flat_plan"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), plan=np.zeros(5))
+
+
+class PredictionOfRobots(StraightLine):
+    """A prediction with a row per robot, not per human."""
+
+    name = "prediction_of_robots"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), prediction=np.zeros((4, obs.n_robots, 2)))
+
+
+class IterationsNone(StraightLine):
+    name = "iterations_none"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), iterations=None)  # type: ignore[arg-type]
+
+
+class StatusNone(StraightLine):
+    name = "status_none"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), status=None)  # type: ignore[arg-type]
+
+
+class DescribeNone(StraightLine):
+    name = "describe_none"
+
+    def describe(self) -> dict[str, Any]:
+        return None  # type: ignore[return-value]
+
+
+class ConfigList(StraightLine):
+    name = "config_list"
+
+    def describe(self) -> dict[str, Any]:
+        return {"config": [1, 2]}

@@ -1,0 +1,139 @@
+"""What the closed loop takes from a controller (docs/extending.md, section 6) and from its caller's meta,
+checked in one place for ``run_episode`` and ``run_gym_episode``.
+
+A plugin that breaks the contract is a one-line PipelineError naming it, raised where the loop receives the
+value: left alone, a wrong value surfaced as a traceback from the simulator, the loop's bookkeeping or the
+MCAP recorder steps later, or (padded into the gym action) as a robot that silently never moved.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, Final
+
+import numpy as np
+
+from crowdsim.control import ControlOutput
+from crowdsim.env import EnvConfig, Observation
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import Controller
+
+# The meta every episode gets from the loop itself. A caller's meta that set one would relabel every episode
+# alike: recordings are named by seed and scenario, so a run's episodes would overwrite one file.
+OWN_FIELDS: Final[tuple[str, ...]] = (
+    "seed",
+    "scenario",
+    "n_humans",
+    "n_robots",
+    "controller",
+    "predictor",
+    "predictor_sha256",
+    "config",
+)
+
+
+def _named(controller: Controller) -> str:
+    return f"controller {controller.name!r} ({type(controller).__qualname__})"
+
+
+def _check_array(
+    controller: Controller, field: str, value: object, shape: tuple[int | None, ...], expected: str
+) -> None:
+    """PipelineError unless ``value`` is an array of numbers of ``shape`` (None: any length there)."""
+    try:
+        array: np.ndarray | None = np.asarray(value)
+    except (TypeError, ValueError):  # ragged rows
+        array = None
+    if (
+        array is not None
+        and array.dtype.kind in "biuf"
+        and array.ndim == len(shape)
+        and all(want is None or want == got for want, got in zip(shape, array.shape, strict=True))
+    ):
+        return
+    got = "ragged rows" if array is None else f"shape {array.shape}"
+    if array is not None and array.dtype.kind not in "biuf":
+        got += f" of {array.dtype} values"
+    raise PipelineError(f"{_named(controller)}: act() must return {field} {expected}, got {got}")
+
+
+def checked_output(controller: Controller, out: object, obs: Observation) -> ControlOutput:
+    """``out`` if it is a ``ControlOutput`` for ``obs``: ``accelerations`` ``(M, 2)``, ``plan`` ``(M, H, 2)``
+    or None, ``prediction`` ``(H, N, 2)`` or None, ``iterations`` an int, ``status`` a str. Anything else
+    (bare accelerations, a row short) is a one-line PipelineError naming the controller."""
+    if not isinstance(out, ControlOutput):
+        raise PipelineError(
+            f"{_named(controller)}: act() must return a crowdsim.control.ControlOutput, got "
+            f"{type(out).__module__}.{type(out).__qualname__}"
+        )
+    m, n = obs.n_robots, obs.n_humans
+    _check_array(
+        controller, "accelerations", out.accelerations, (m, 2), f"of shape ({m}, 2), a row per robot"
+    )
+    if out.plan is not None:
+        _check_array(controller, "plan", out.plan, (m, None, 2), f"of shape ({m}, H, 2) or None")
+    if out.prediction is not None:
+        _check_array(controller, "prediction", out.prediction, (None, n, 2), f"of shape (H, {n}, 2) or None")
+    if isinstance(out.iterations, bool) or not isinstance(out.iterations, int | np.integer):
+        raise PipelineError(
+            f"{_named(controller)}: act() must return iterations as an int, got {out.iterations!r}"
+        )
+    if not isinstance(out.status, str):
+        raise PipelineError(f"{_named(controller)}: act() must return status as a str, got {out.status!r}")
+    return out
+
+
+def checked_description(controller: Controller) -> dict[str, Any]:
+    """``controller.describe()`` as a dict, its ``"config"`` (if any) a dict too; otherwise a one-line
+    PipelineError naming the controller."""
+    described = controller.describe()
+    if not isinstance(described, Mapping):
+        raise PipelineError(
+            f"{_named(controller)}: describe() must return a dict, got {type(described).__name__}"
+        )
+    config = described.get("config", {})
+    if not isinstance(config, Mapping):
+        raise PipelineError(
+            f"{_named(controller)}: describe()['config'] must be a dict, got {type(config).__name__}"
+        )
+    return dict(described)
+
+
+def checked_meta(meta: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
+    """``meta`` as a dict, unless it sets one of the episode's own fields (``OWN_FIELDS``): PipelineError
+    naming ``where`` it was given."""
+    meta = dict(meta or {})
+    clash = [key for key in OWN_FIELDS if key in meta]
+    if clash:
+        raise PipelineError(
+            f"{where}: meta must not set {clash}: the episode sets {', '.join(OWN_FIELDS)} itself; "
+            "give yours other names"
+        )
+    return meta
+
+
+def episode_meta(
+    episode: Mapping[str, Any],
+    env_config: EnvConfig,
+    controller: str,
+    predictor: str | None,
+    described: Mapping[str, Any] | None,
+    meta: Mapping[str, Any] | None,
+    where: str,
+) -> dict[str, Any]:
+    """The meta ``on_reset`` gets: the episode (seed, scenario, sizes), who drives, the environment's
+    config plus what the controller's ``describe()`` adds (``checked_description``), then ``meta``
+    (``checked_meta``), which may not set any of those."""
+    full: dict[str, Any] = {
+        **episode,
+        "controller": controller,
+        "predictor": predictor,
+        "predictor_sha256": None,
+        "config": {"env": dataclasses.asdict(env_config)},
+    }
+    extra = dict(described or {})
+    full["config"].update(extra.pop("config", {}))
+    full.update(extra)
+    full.update(checked_meta(meta, where))
+    return full
