@@ -54,6 +54,13 @@ def check_writable(
         return
     path = Path(path)
     label = f"{option} {path}"
+    try:
+        os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        pass  # judged below
+    except (OSError, ValueError) as exc:  # a name too long, a NUL byte (a TOML escape), no permission
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise PipelineError(f"{label}: not a usable path ({why})") from None
     if not directory and path.is_symlink():
         # a link planted in a folder would make the output land wherever it points (even where nothing is)
         raise PipelineError(

@@ -138,6 +138,17 @@ def test_a_file_output_is_never_written_through_a_symbolic_link(tmp_path, a_file
     assert not (tmp_path / "elsewhere").exists() and a_file.read_text() == "not a directory\n"
 
 
+def test_a_path_the_system_cannot_take_is_refused_before_the_work(tmp_path, capsys):
+    """Path.exists() is False for a NUL byte (reachable by a TOML escape) and raises for a name too long:
+    the check passed, or ended in a traceback, and simulate lost its episodes when it wrote --json."""
+    for bad, why in ((tmp_path / "r\0.json", "embedded null byte"), (tmp_path / ("a" * 300), "too long")):
+        with pytest.raises(PipelineError, match=rf"^--json .*: not a usable path \(.*{why}"):
+            check_writable(bad, "--json")
+    argv = ["simulate", "--controller", "straight", "--humans", "0", "--no-progress"]
+    assert main(argv + ["--set", f'simulate.json="{tmp_path}/r\\u0000.json"']) == 2
+    assert "not a usable path" in capsys.readouterr().err
+
+
 def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp_path, a_file):
     """`review RUN.mcap --json RUN.mcap` replaced the recording by its summary, `evaluate --json` a data
     file: a file output is never one of the inputs, and a --json report replaces only a JSON document."""
