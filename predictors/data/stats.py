@@ -29,8 +29,9 @@ def file_stats(path: str | Path) -> FileStats:
     types = [0, 0, 0, 0]
     for scene in iter_scenes(path):
         sizes.append(scene.xy.shape[1])
-        if isinstance(scene.tag, list) and scene.tag and scene.tag[0] in (1, 2, 3, 4):
-            types[scene.tag[0] - 1] += 1
+        kind = scene_type(scene.tag)
+        if kind is not None:
+            types[kind - 1] += 1
     agents = np.asarray(sizes or [0])
     return FileStats(
         path=Path(path),
@@ -42,6 +43,18 @@ def file_stats(path: str | Path) -> FileStats:
         agents_max=int(agents.max()),
         types=(types[0], types[1], types[2], types[3]),
     )
+
+
+def scene_type(tag: object) -> int | None:
+    """The TrajNet++ type (1..4 for I..IV) of a scene's tag ``[type, [sub-types]]``; None for an untagged
+    scene or any other tag. The Reader passes the tag through unchecked: a float type (2.0) used to end
+    `data stats` in a TypeError, and ``true`` (== 1 in Python) counted as type I."""
+    if not isinstance(tag, list) or not tag:
+        return None
+    kind = tag[0]
+    if isinstance(kind, bool) or not isinstance(kind, int) or not 1 <= kind <= 4:
+        return None
+    return kind
 
 
 def ndjson_files(directory: str | Path) -> list[Path]:

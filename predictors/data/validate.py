@@ -10,11 +10,13 @@ to the Reader does not change: the same rows, in the same order, with the same f
 
 Checked: each non-blank line is a JSON object holding exactly one ``scene`` or ``track`` object (blank lines
 are skipped); the keys each needs are present with integer ids/frames and numeric coordinates, all within
-the bounds below; scene ids are unique; a pedestrian has one position per frame (and prediction; an
-identical repeated row passes); every track frame lies within some scene's [s, e]; every scene's
-primary has a track row in its frame range, and a position (not NaN) at each of those rows. NaN is
-TrajNet++'s own "not observed" for other agents (Python's json and the Reader accept it); an infinity is
-never a position. A file with no records at all is a valid, empty dataset (a split can be empty).
+the bounds below, and a track's optional ``prediction_number`` and ``scene_id`` are null or such integers
+too; scene ids are unique; a pedestrian has one position per frame (the Reader keeps one row per pedestrian
+and frame whatever those two fields say; an identical repeated row passes); every track frame lies within
+some scene's [s, e]; every scene's primary has a track row in its frame range, and a position (not NaN) at
+each of those rows. NaN is TrajNet++'s own "not observed" for other agents (Python's json and the Reader
+accept it); an infinity is never a position. A file with no records at all is a valid, empty dataset (a split
+can be empty).
 """
 
 from __future__ import annotations
@@ -48,6 +50,8 @@ MAX_FPS: Final[float] = 1e4  # no annotation runs at more than 10 kHz
 MAX_LINE_BYTES: Final[int] = 1 << 20
 
 TRACK_KEYS: Final[tuple[str, ...]] = ("f", "p", "x", "y")
+# fields of a TrajNet++ prediction file's tracks, optional: the Reader keeps them on its rows, nothing more
+OPTIONAL_TRACK_KEYS: Final[tuple[str, ...]] = ("prediction_number", "scene_id")
 SCENE_KEYS: Final[tuple[str, ...]] = ("id", "p", "s", "e")
 
 
@@ -129,6 +133,9 @@ def _show(value: object) -> str:
 def _check_track(path: Path, lineno: int, track: dict) -> None:
     _check_int(path, lineno, "track", "f", track["f"], MAX_FRAME)
     _check_int(path, lineno, "track", "p", track["p"], MAX_ID)
+    for key in OPTIONAL_TRACK_KEYS:
+        if track.get(key) is not None:
+            _check_int(path, lineno, "track", key, track[key], MAX_ID)
     for key in ("x", "y"):
         value = track[key]
         if not _is_number(value):
@@ -267,12 +274,14 @@ def validate_ndjson(path: str | Path) -> NdjsonSummary:
 
 
 def _check_no_conflicting_rows(path: Path, rows: list[TrackRow], lines: list[int]) -> None:
-    """One position per pedestrian and frame (per prediction, in a prediction file): a second row with
-    another position was silently dropped by the reader, so which one a model trained on depended on the
-    order of the lines. A repeated identical row is harmless and passes."""
-    first: dict[tuple, int] = {}  # key -> index of its first row
+    """One position per pedestrian and frame: a second row with another position was silently dropped by
+    the reader, so which one a model trained on depended on the order of the lines. The key is the reader's
+    own (``Reader.paths_to_xy`` places a row by pedestrian and frame, ignoring ``prediction_number`` and
+    ``scene_id``, so rows differing only there overwrote each other too). A repeated identical row is
+    harmless and passes."""
+    first: dict[tuple[int, int], int] = {}  # (frame, pedestrian) -> index of its first row
     for index, row in enumerate(rows):
-        key = (row.frame, row.pedestrian, row.prediction_number, row.scene_id)
+        key = (row.frame, row.pedestrian)
         k = first.setdefault(key, index)
         if k != index and not _same_position(rows[k], row):
             raise DatasetFormatError(

@@ -14,8 +14,12 @@ and keeps the arrays: in memory for the process, and on disk under ``<cache>/sce
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import os
+import zipfile
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +37,7 @@ from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 
 SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
-CACHE_VERSION: Final[str] = "scenes-v3"  # bump when FileArrays' layout or the validation changes
+CACHE_VERSION: Final[str] = "scenes-v4"  # bump when FileArrays' layout or the validation changes
 
 
 @dataclass(frozen=True)
@@ -82,13 +86,9 @@ def load_file_arrays(
     disk = None
     if disk_cache:
         disk = cache_root() / "scenes" / f"{digest}-{scene_length}-{CACHE_VERSION}.npz"
-        if disk.is_file():
-            try:
-                with np.load(disk) as data:
-                    arrays = FileArrays(data["xy"], data["offsets"], data["scene_ids"])
-                return _remember(key, arrays)
-            except (OSError, KeyError, ValueError):
-                pass  # a damaged cache entry is rebuilt below
+        arrays = _load_entry(disk, scene_length)
+        if arrays is not None:
+            return _remember(key, arrays)
     # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
     xys, ids = [np.empty((scene_length, 0, 2), dtype=np.float32)], []
     for scene in iter_scenes(path, require_length=scene_length, require_fps=1 / DT):
@@ -101,14 +101,60 @@ def load_file_arrays(
         scene_ids=np.asarray(ids, dtype=np.int64),
     )
     if disk is not None:
-        try:
-            disk.parent.mkdir(parents=True, exist_ok=True)
-            tmp = disk.with_name(f".{disk.name}.tmp.npz")
-            np.savez(tmp, xy=arrays.xy, offsets=arrays.offsets, scene_ids=arrays.scene_ids)
-            tmp.replace(disk)
-        except OSError:
-            pass  # a read-only cache only costs speed
+        _store_entry(disk, arrays)
     return _remember(key, arrays)
+
+
+# What reading a damaged .npz raises (found by garbling and cutting an entry): a cut or garbled zip
+# (BadZipFile, EOFError), a bad CRC or npy header (BadZipFile, ValueError), a missing array (KeyError), a
+# garbled compression method or encryption flag (NotImplementedError, RuntimeError), a member that does not
+# inflate (zlib.error).
+_DAMAGED_ENTRY: Final = (
+    OSError,
+    KeyError,
+    ValueError,
+    EOFError,
+    NotImplementedError,
+    RuntimeError,
+    zipfile.BadZipFile,
+    zlib.error,
+)
+
+
+def _load_entry(disk: Path, scene_length: int) -> FileArrays | None:
+    """The arrays of a disk cache entry, or None when there is none or it is damaged (rebuilt by the
+    caller): a crash, a full disk or another tool can leave any bytes there."""
+    if not disk.is_file():
+        return None
+    try:
+        with np.load(disk) as data:
+            arrays = FileArrays(data["xy"], data["offsets"], data["scene_ids"])
+    except _DAMAGED_ENTRY:
+        return None
+    xy, offsets = arrays.xy, arrays.offsets
+    whole = (
+        xy.ndim == 3
+        and xy.shape[0] == scene_length
+        and xy.shape[2] == 2
+        and offsets.shape == (len(arrays.scene_ids) + 1,)
+        and offsets[-1] == xy.shape[1]
+    )
+    return arrays if whole else None
+
+
+def _store_entry(disk: Path, arrays: FileArrays) -> None:
+    """Writes the entry through a temporary file of this process's own, renamed into place: runs sharing
+    the cache (data loader workers, parallel trainings) each write their own file, where one shared name let
+    one run rename another's half-written file into place, and a reader sees a whole entry or none."""
+    tmp = disk.with_name(f".{disk.name}.{os.getpid()}.tmp")
+    try:
+        disk.parent.mkdir(parents=True, exist_ok=True)
+        with tmp.open("wb") as handle:  # a file object: np.savez would append .npz to a name
+            np.savez(handle, xy=arrays.xy, offsets=arrays.offsets, scene_ids=arrays.scene_ids)
+        tmp.replace(disk)
+    except OSError:  # a read-only or full cache only costs speed
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
 
 
 @dataclass(frozen=True)

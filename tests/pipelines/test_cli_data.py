@@ -65,6 +65,18 @@ def test_stats_total_ignores_files_without_scenes(tmp_path, capsys):
     assert total[:2] == ["total", "2"] and total[4] == "3"  # min agents/scene: the walk's 3, not 0
 
 
+def test_stats_counts_only_integer_scene_types(tmp_path, capsys):
+    """The Reader passes a scene's tag through unchecked: a float type (2.0) ended `data stats` in a
+    TypeError and `true` counted as type I. Only an integer 1..4 is a TrajNet++ type."""
+    for k, tag in enumerate([[2.0, []], [True, []], [3, [1]], [5, []], "III", [4, [1]], [4, []]]):
+        records = walk_scene_records()
+        records[0]["scene"]["tag"] = tag
+        write_lines(tmp_path / f"t{k}.ndjson", records)
+    code, out, err = run(capsys, "data", "stats", str(tmp_path))
+    assert code == 0, err
+    assert out.splitlines()[-1].split()[0] == "total" and out.splitlines()[-1].endswith(" 0/0/1/2")
+
+
 BAD_LINES = {
     "bad json": ('{"track": {"f": 0, "p": 1', "invalid JSON"),
     "missing keys": (json.dumps({"track": {"f": 0, "p": 1}}), "lacks key(s) ['x', 'y']"),
@@ -72,6 +84,15 @@ BAD_LINES = {
     "frame outside every scene": (
         json.dumps(track(9999, 1, 0.0, 0.0)),
         "frame 9999 lies outside every scene",
+    ),
+    # an unhashable value of an optional field ended both commands in a TypeError traceback
+    "prediction_number a list": (
+        json.dumps({"track": {"f": 0, "p": 1, "x": 0.0, "y": 0.0, "prediction_number": [1]}}),
+        "track 'prediction_number' must be an integer, got [1]",
+    ),
+    "scene_id an object": (
+        json.dumps({"track": {"f": 0, "p": 1, "x": 0.0, "y": 0.0, "scene_id": {"a": 1}}}),
+        "track 'scene_id' must be an integer, got {'a': 1}",
     ),
 }
 

@@ -136,6 +136,29 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         N + 1,
         "pedestrian 1 at frame 0 has another position on line 2 (0.0, 0.0 against 0.3, 0.0)",
     ),
+    # the reader places a row by pedestrian and frame alone: rows differing only in a prediction file's
+    # fields (prediction_number, scene_id) overwrote each other as silently
+    "a second position for a pedestrian and frame under another scene_id": (
+        VALID + [{"track": {"f": 0, "p": 1, "x": 0.3, "y": 0.0, "prediction_number": 1, "scene_id": 7}}],
+        N + 1,
+        "pedestrian 1 at frame 0 has another position on line 2 (0.0, 0.0 against 0.3, 0.0)",
+    ),
+    # the optional fields are null or ids; a list or an object ended validation in a TypeError (unhashable)
+    "prediction_number is a list": (
+        VALID + [{"track": {"f": 0, "p": 2, "x": 0.0, "y": 1.0, "prediction_number": [1]}}],
+        N + 1,
+        "track 'prediction_number' must be an integer, got [1]",
+    ),
+    "scene_id is an object": (
+        VALID + [{"track": {"f": 0, "p": 2, "x": 0.0, "y": 1.0, "scene_id": {"a": 1}}}],
+        N + 1,
+        "track 'scene_id' must be an integer, got {'a': 1}",
+    ),
+    "scene_id beyond the id bound": (
+        VALID + [{"track": {"f": 0, "p": 2, "x": 0.0, "y": 1.0, "scene_id": 10**12}}],
+        N + 1,
+        "track 'scene_id' is 1000000000000, outside the supported range",
+    ),
     # NaN (not observed) against a position is a conflict too: which one the reader kept decided whether
     # the pedestrian was seen. Line 3 is pedestrian 2 at frame 0, (0, 1); y agrees, only x differs
     "NaN against a position for a pedestrian and frame": (
@@ -243,16 +266,25 @@ def test_a_primary_seen_only_at_the_scene_end_frame_is_present(tmp_path):
     assert sorted(validate_ndjson(path).scene_lines) == [0, 1]
 
 
-def test_predictions_of_one_pedestrian_and_frame_are_no_conflict(tmp_path):
-    """A prediction file holds several predictions (prediction_number) for each pedestrian and frame, and
-    TrajNet++'s scene_id tells apart the scenes sharing a frame: only the same key twice conflicts."""
-    extra = [
+def test_prediction_fields_are_null_or_ids_and_never_separate_positions(tmp_path):
+    """prediction_number and scene_id may be absent, null or ids, and a row repeating a pedestrian's
+    position at a frame under them passes. Several predictions of one pedestrian and frame are refused: the
+    reader keeps one row per pedestrian and frame whatever those fields say (it used to pass validation and
+    train on whichever row came last)."""
+    same = [
+        {"track": {"f": 0, "p": 1, "x": 0.0, "y": 0.0, "prediction_number": None, "scene_id": 0}},
+        {"track": {"f": 0, "p": 1, "x": 0.0, "y": 0.0, "prediction_number": 2, "scene_id": 5}},
+    ]
+    path = write_lines(tmp_path / "repeats.ndjson", VALID + same)
+    assert validate_ndjson(path).n_tracks == N - 1 + 2
+    predictions = VALID + [
         {"track": {"f": 0, "p": 1, "x": 0.3, "y": 0.0, "prediction_number": 1, "scene_id": 0}},
         {"track": {"f": 0, "p": 1, "x": 0.4, "y": 0.0, "prediction_number": 2, "scene_id": 0}},
-        {"track": {"f": 0, "p": 1, "x": 0.5, "y": 0.0, "prediction_number": 1, "scene_id": 1}},
     ]
-    path = write_lines(tmp_path / "predictions.ndjson", VALID + extra)
-    assert validate_ndjson(path).n_tracks == N - 1 + 3
+    path = write_lines(tmp_path / "predictions.ndjson", predictions)
+    with pytest.raises(DatasetFormatError) as info:
+        read_scenes(path)
+    assert_names_file_and_line(info.value, path, N + 1, "pedestrian 1 at frame 0 has another position")
 
 
 def test_a_line_longer_than_the_cap(tmp_path):
@@ -449,6 +481,23 @@ def test_cli_train_on_an_empty_file(tmp_path, capsys):
     # checked before Lightning starts: the one line is the whole output
     assert_cli_error(code, err, f"{empty}: holds no scenes")
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("split", ["--test", "--val"])
+def test_cli_train_reads_the_evaluated_files_before_training(split, tmp_path, capsys):
+    """A TrajNet++ test/ file (9 observed steps, no ground truth) passes the format check but not the
+    evaluation, which ran after training: the run trained, then ended without metrics. Validation and test
+    files are now read as the evaluation reads them before Lightning starts, and nothing is written."""
+    observed = [r for r in VALID[1:] if r["track"]["f"] <= 8 * STEP]
+    no_truth = write_lines(tmp_path / "test_private.ndjson", [scene(0, 1, 0, 8 * STEP), *observed])
+    walk = str(write_walk_file(tmp_path / "walk.ndjson"))
+    files = {"--train": walk, "--val": walk, "--test": walk, split: str(no_truth)}
+    argv = ["train", "--model", "vanilla_lstm", *[a for kv in files.items() for a in kv]]
+    out = tmp_path / "run"
+    code, _, err = run_cli(capsys, *argv, "--epochs", "1", "--no-progress", "--out", str(out))
+    assert_cli_error(code, err, f"{no_truth}:1: scene 0 has 9 steps, the evaluation needs 21")
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists()
 
 
 def test_a_scenes_tag_reaches_the_reader(tmp_path):

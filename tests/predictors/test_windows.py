@@ -187,6 +187,54 @@ def test_scene_ids_are_the_files_and_a_damaged_cache_entry_is_rebuilt(tmp_path, 
     assert load_file_arrays(path).scene_ids.tolist() == [4]
 
 
+@pytest.mark.parametrize("damage", ["cut in half", "zip garbage", "a flipped byte"])
+def test_a_damaged_cache_entry_of_any_kind_is_rebuilt(damage, tmp_path, monkeypatch):
+    """A cut or garbled .npz raises zipfile.BadZipFile, which the rebuild did not catch: every later
+    `train` on the file ended in that traceback until the cache was cleared by hand."""
+    from predictors.data import windows
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    arrays = load_file_arrays(path)
+    [entry] = (tmp_path / "cache" / "scenes").glob("*.npz")
+    good = entry.read_bytes()
+    spoilt = {
+        "cut in half": good[: len(good) // 2],
+        "zip garbage": b"PK\x03\x04" + b"x" * 100,  # a zip's magic, then nothing of a zip
+        "a flipped byte": good[:200] + bytes([good[200] ^ 0xFF]) + good[201:],  # in xy's data: bad CRC
+    }[damage]
+    entry.write_bytes(spoilt)
+    windows._MEMORY.clear()
+    np.testing.assert_array_equal(load_file_arrays(path).xy, arrays.xy)
+    with np.load(entry) as rebuilt:  # rebuilt in place
+        np.testing.assert_array_equal(rebuilt["xy"], arrays.xy)
+    assert sorted(p.name for p in entry.parent.iterdir()) == [entry.name]  # no temporary file left
+
+
+def test_processes_sharing_the_cache_write_through_their_own_temporary_files(tmp_path, monkeypatch):
+    """The temporary name was the same for every process: two runs building one entry at once wrote into
+    the same file, and one could rename the other's half-written file into place."""
+    from predictors.data import windows
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    used = []
+    real_replace = windows.Path.replace
+
+    def replace(self, target):
+        used.append(self.name)
+        return real_replace(self, target)
+
+    monkeypatch.setattr(windows.Path, "replace", replace)
+    for pid in (101, 202):  # two processes, one after the other
+        monkeypatch.setattr(os, "getpid", lambda pid=pid: pid)
+        windows._MEMORY.clear()
+        for entry in (tmp_path / "cache" / "scenes").glob("*.npz"):
+            entry.unlink()
+        load_file_arrays(path)
+    assert len(used) == 2 and used[0] != used[1]
+
+
 def test_dataset_rejects_short_scenes(tmp_path):
     records = walk_scene_records()
     records[0]["scene"]["e"] = 190
