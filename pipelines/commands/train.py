@@ -18,6 +18,9 @@ from predictors.errors import PredictorError
 DATASET_SUFFIX = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
 # --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
 MAX_NET_CONFIG_CHARS = 65_536
+# Adam's learning rate: these nets train at 1e-3; far above any useful rate, and far below float32's
+# overflow (~3.4e38), where a huge --lr used to end inside Adam with a traceback.
+MAX_LR = 10.0
 
 EPILOG = """examples:
   crowdmpc train --model social_lstm --data-dir ../shared/data --epochs 25
@@ -37,7 +40,9 @@ Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for -
 tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (state_dict + config) with
 NAME.metrics.json (TrajNet++ val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair
 into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise); it
-takes the run's settings, of which only --epochs may change.
+takes the run's settings, of which only --epochs may change, upwards (the count already trained only finishes
+a run that stopped before writing its metrics). --val and --test files are read as the evaluation reads them
+before training starts: a TrajNet++ test/ file without ground truth is refused then, not after training.
 """
 
 
@@ -96,7 +101,9 @@ def register(subparsers) -> None:
         help="train and validate on the first N batches of each epoch (Lightning's limit_train_batches and "
         "limit_val_batches): a quick check that a net trains; the checkpoint records it (default: all)",
     )
-    parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
+    parser.add_argument(
+        "--lr", type=float, default=1e-3, help=f"Adam learning rate, in (0, {MAX_LR:g}] (default 1e-3)"
+    )
     parser.add_argument("--step-size", type=int, default=10, help="epochs per 10x learning-rate decay")
     parser.add_argument(
         "--loss", choices=("gaussian", "l2"), default="gaussian", help="(LSTMs) default gaussian"
@@ -204,8 +211,8 @@ def _parse_net_config(text: str) -> dict[str, Any]:
 
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
-    if not (math.isfinite(args.lr) and args.lr > 0):
-        raise PipelineError(f"--lr must be a finite number > 0, got {args.lr}")
+    if not (math.isfinite(args.lr) and 0 < args.lr <= MAX_LR):
+        raise PipelineError(f"--lr must be a finite number in (0, {MAX_LR:g}], got {args.lr}")
     # Upper bounds far above any sensible run, so that a typo cannot ask for days or for all the memory:
     # the zoo refuses hidden sizes over 4096 (predictors/nets), and ETH/hotel has ~2000 training scenes.
     for option, value, high in (
@@ -239,12 +246,18 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
     _check_data(files)
-    from pipelines.commands.train_resume import check_last_checkpoint, check_resumed_settings, run_settings
+    from pipelines.commands.train_resume import (
+        check_last_checkpoint,
+        check_more_epochs,
+        check_resumed_settings,
+        run_settings,
+    )
 
     settings = run_settings(args, net_config, name, files)
     if args.resume:
         name = check_resumed_settings(out, settings, name_given=args.name is not None)
-        check_last_checkpoint(last, settings)
+        done = check_last_checkpoint(last, settings)
+        check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
     from pipelines.commands.train_fit import run_training
 
     return run_training(args, net_config, name, out, (files, root), settings)
@@ -252,11 +265,17 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_data(files: dict[str, list[Path]]) -> None:
     """Every data file parses and the training and validation splits hold scenes, before Lightning starts
-    (its banner would come before the one-line error)."""
+    (its banner would come before the one-line error). The validation and test files are read as the
+    evaluation of the trained net reads them (scene length, frame rate, spacing): a file it refuses, such as
+    a TrajNet++ test/ file without ground truth, was found only after training, with no metrics written."""
     from predictors.data.validate import validate_ndjson
+    from predictors.evaluate import load_eval_scenes
 
     for split, paths in files.items():
-        summaries = [validate_ndjson(path) for path in paths]
-        if split in ("train", "val") and not any(s.scene_lines for s in summaries):
+        if split == "train":
+            held = [bool(validate_ndjson(path).scene_lines) for path in paths]
+        else:
+            held = [bool(load_eval_scenes(path)) for path in paths]
+        if split in ("train", "val") and not any(held):
             names = ", ".join(str(p) for p in paths)
             raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")

@@ -4,6 +4,7 @@ the module trained on, the TrajNet++ metrics of the best epoch, the epoch times,
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 from typing import Any
 
@@ -14,18 +15,33 @@ def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) 
 
     from predictors.hashing import sha256_file
 
-    def label(path: Path) -> str:
-        return str(path.relative_to(root)) if root is not None and path.is_relative_to(root) else path.name
-
     record: dict[str, Any] = {"protocol": protocol, "files": {}}
     digest = hashlib.sha256()
     for split in ("train", "val", "test"):
-        record["files"][split] = {label(p): sha256_file(p) for p in files[split]}
+        paths = files[split]
+        record["files"][split] = {
+            name: sha256_file(p) for name, p in zip(file_labels(paths, root), paths, strict=True)
+        }
         if split != "test":
             for name, sha in sorted(record["files"][split].items()):
                 digest.update(f"{split}/{name}:{sha}\n".encode())
     record["sha256"] = digest.hexdigest()
     return record
+
+
+def file_labels(paths: list[Path], root: Path | None) -> list[str]:
+    """Each file's name in the record: relative to ``root`` (the prepared data of a protocol), else to the
+    files' common directory, so a single file or files of one directory keep their bare names, and files of
+    one name in two directories (d1/t.ndjson, d2/t.ndjson) stay two entries (by name alone, one replaced the
+    other in the record and in its hash)."""
+    if root is not None and all(p.is_relative_to(root) for p in paths):
+        return [str(p.relative_to(root)) for p in paths]
+    if not paths:
+        return []
+    # lexically absolute, not resolved: a symlinked file keeps the name it was given
+    absolute = [Path(os.path.abspath(p)) for p in paths]
+    common = Path(os.path.commonpath([p.parent for p in absolute]))
+    return [str(p.relative_to(common)) for p in absolute]
 
 
 def trained_loss(module: Any, asked: str) -> str:

@@ -59,11 +59,12 @@ def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: b
     return str(settings["name"])
 
 
-def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> None:
-    """PipelineError unless ``last`` is a Lightning checkpoint (read as weights only, as Lightning reads it)
-    trained with the settings asked for (``checkpoint_settings``): a cut, foreign or other-model file
-    otherwise fails inside Lightning with a traceback, and other settings would be recorded for weights they
-    never trained. The checkpoint is the authority even when the run's settings file is gone or damaged."""
+def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
+    """The epochs ``last`` has finished (None: it does not say); PipelineError unless it is a Lightning
+    checkpoint (read as weights only, as Lightning reads it) trained with the settings asked for
+    (``checkpoint_settings``): a cut, foreign or other-model file otherwise fails inside Lightning with a
+    traceback, and other settings would be recorded for weights they never trained. The checkpoint is the
+    authority even when the run's settings file is gone or damaged."""
     import torch
 
     try:
@@ -85,6 +86,22 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> None:
         raise PipelineError(
             f"--resume: {last} was trained with {what} ({shown}); resume with the run's settings (only "
             "--epochs may change)"
+        )
+    # last.ckpt is written as an epoch's validation ends (ModelCheckpoint's save_last), and Lightning
+    # counts its "epoch" from 0: it has finished epoch + 1
+    epoch = checkpoint.get("epoch")
+    return epoch + 1 if isinstance(epoch, int) and not isinstance(epoch, bool) and epoch >= 0 else None
+
+
+def check_more_epochs(out: Path, epochs: int, done: int | None, finished: bool) -> None:
+    """PipelineError when a resume would train no epoch: Lightning stops at once, and the run's NAME.pt,
+    NAME.json and metrics were written again, recording --epochs where more had trained. The same count
+    as the run's passes while the run is not ``finished`` (no metrics yet: it stopped after training, and
+    this writes what it left out)."""
+    if done is not None and (epochs < done or (epochs == done and finished)):
+        raise PipelineError(
+            f"--resume: {out} has trained {done} epoch{'s' if done != 1 else ''} already; --epochs {epochs} "
+            f"would train none (give more than {done} to continue it)"
         )
 
 

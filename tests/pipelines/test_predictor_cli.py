@@ -11,7 +11,7 @@ import pytest
 from pipelines.cli import main
 from predictors.registry import available, load_predictor
 from predictors.zoo import user_zoo_dir
-from tests.predictors.samples import write_walk_file
+from tests.predictors.samples import walk_scene_records, write_lines, write_walk_file
 
 
 @pytest.fixture(autouse=True)
@@ -85,6 +85,60 @@ def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
     more = [a if a != "1" else "2" for a in args]  # --epochs 2: one more epoch from last.ckpt
     assert main([*more, "--resume"]) == 0
     assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
+
+
+def test_resume_refuses_to_train_no_epoch(trained, capsys):
+    """--resume with --epochs at or below the epochs last.ckpt has finished trained nothing, yet wrote
+    NAME.pt, NAME.json and the metrics again with the smaller count. The same count still finishes a run
+    that stopped before its metrics were written."""
+    out, args = trained
+
+    def resume(epochs: str) -> int:
+        at = args.index("--epochs") + 1
+        return main([*args[:at], epochs, *args[at + 1 :], "--resume"])
+
+    assert resume("2") == 0
+    outputs = [out / f"walker{suffix}" for suffix in (".pt", ".json", ".metrics.json")]
+    before = [p.read_bytes() for p in outputs]
+    capsys.readouterr()
+    for epochs in ("1", "2"):
+        assert resume(epochs) == 2
+        err = capsys.readouterr().err
+        assert err == (
+            f"crowdmpc train: error: --resume: {out} has trained 2 epochs already; --epochs {epochs} would "
+            "train none (give more than 2 to continue it)\n"
+        )
+    assert [p.read_bytes() for p in outputs] == before
+    outputs[2].unlink()  # a run that stopped after training, before its metrics
+    assert resume("2") == 0
+    assert json.loads(outputs[2].read_text())["training"]["epochs"] == 2
+
+
+def test_the_data_record_names_every_file(tmp_path):
+    """Files were recorded by bare name: --train d1/t.ndjson d2/t.ndjson recorded one of them, and the
+    combined hash left the other out. Names are relative to the files' common directory now; one file, or
+    files of one directory, keep their bare names, and a protocol's files their names under its root."""
+    from pipelines.commands.train_report import data_record
+    from predictors.hashing import sha256_file
+
+    first = write_walk_file(tmp_path / "d1" / "t.ndjson")
+    second = write_lines(tmp_path / "d2" / "t.ndjson", walk_scene_records())
+    val = write_walk_file(tmp_path / "d1" / "v.ndjson")
+    files = {"train": [first, second], "val": [val], "test": []}
+    record = data_record(files, None, "custom")
+    assert record["files"] == {
+        "train": {"d1/t.ndjson": sha256_file(first), "d2/t.ndjson": sha256_file(second)},
+        "val": {"v.ndjson": sha256_file(val)},
+        "test": {},
+    }
+    first.write_text(first.read_text() + "\n")  # the hash covers both training files
+    assert data_record(files, None, "custom")["sha256"] != record["sha256"]
+    assert data_record({"train": [val], "val": [val], "test": []}, None, "custom")["files"]["train"] == {
+        "v.ndjson": sha256_file(val)
+    }
+    under_root = data_record({"train": [first], "val": [second], "test": []}, tmp_path, "paper")
+    assert list(under_root["files"]["train"]) == ["d1/t.ndjson"]
+    assert list(under_root["files"]["val"]) == ["d2/t.ndjson"]
 
 
 def test_resume_refuses_other_settings_and_keeps_the_runs_name(trained, capsys):
