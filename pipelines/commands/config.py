@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from pipelines.errors import PipelineError
 
@@ -60,7 +59,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_config_options(show)
     show.add_argument(
         "--from-sweep",
-        type=Path,
         metavar="DIR",
         help="the config a sweep directory recorded (its sweep.json), to rerun it",
     )

@@ -110,9 +110,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
     )
-    parser.add_argument("--json", type=Path, metavar="FILE", help="write the summary and per-episode records")
-    parser.add_argument("--plot", type=Path, metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
-    parser.add_argument("--record", type=Path, metavar="DIR", help="one MCAP file per episode in DIR")
+    parser.add_argument("--json", metavar="FILE", help="write the summary and per-episode records")
+    parser.add_argument("--plot", metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
+    parser.add_argument("--record", metavar="DIR", help="one MCAP file per episode in DIR")
     parser.add_argument(
         "--record-iterations",
         action="store_true",

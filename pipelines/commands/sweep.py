@@ -212,7 +212,6 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--out",
-        type=Path,
         metavar="DIR",
         help="sweep directory, created; resumed (required, here or in --config)",
     )

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, parse_set, read_file, resolve
@@ -13,7 +12,9 @@ from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, pars
 
 @dataclass(frozen=True)
 class Option:
-    """A command-line option that sets a config key when given (its argparse default is None)."""
+    """A command-line option that sets a config key when given (its argparse default is None). A path option
+    takes text, not ``type=Path``: ``Path("")`` is ".", so ``--record ""`` would write to the current
+    directory instead of being refused as the config file's ``record = ""`` is."""
 
     dest: str
     section: str
@@ -32,17 +33,16 @@ def cli_entries(args: Any, options: Sequence[Option]) -> list[Entry]:
             value = option.convert(value)
         if isinstance(value, tuple):
             value = list(value)
-        if isinstance(value, Path):
-            value = str(value)
         entries.append(Entry(option.section, option.key, value, Source("cli", option.flag)))
     return entries
 
 
 def _given(value: Any) -> list[Any]:
-    """An option's values: None, one value, or a list (an ``append`` option, given more than once)."""
+    """An option's values: None, one value, or a list (an ``append`` option, given more than once). An empty
+    one is kept: ``--config ""`` is refused as a missing file, not taken for no file."""
     if isinstance(value, list | tuple):
-        return [v for v in value if v]
-    return [value] if value else []
+        return [v for v in value if v is not None]
+    return [] if value is None else [value]
 
 
 def config_arguments(args: Any) -> tuple[str | None, list[str]]:

@@ -3,7 +3,9 @@ TOML that reruns what a sweep directory holds (each run line of ``sweep.json`` k
 ran with, ``RunConfig.effective``, and the code it ran: ``pipelines.version.code_identity``).
 
 The recorded values go through the same resolver as a config file's (unknown sections and keys, types and
-bounds refused, naming ``sweep.json``), so what comes out loads back to the same run.
+bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Two values are not
+written as recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
+default out (another ``--profile`` then takes its own), and ``[sweep] out`` is the directory read, absolute.
 """
 
 from __future__ import annotations
@@ -12,13 +14,15 @@ from pathlib import Path
 from typing import Any
 
 from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, _check_key, resolve
-from pipelines.config.schema import SECTION_BY_NAME
+from pipelines.config.schema import ENV_PROFILE_KEYS, SECTION_BY_NAME
 
 
-def recorded_runs(directory: Path) -> tuple[Path, list[dict[str, Any]]]:
+def recorded_runs(directory: str | Path) -> tuple[Path, list[dict[str, Any]]]:
     """``(sweep.json's path, its run lines)``; ConfigError when ``directory`` holds no sweep."""
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
 
+    if str(directory) == "":  # Path("") is ".": the current directory, which was not given
+        raise ConfigError("--from-sweep must be a sweep directory, got ''")
     path = Path(directory) / SWEEP_FILE
     if not path.is_file():
         raise ConfigError(f"--from-sweep {directory}: no {SWEEP_FILE} (not a sweep directory)")
@@ -29,7 +33,8 @@ def recorded_runs(directory: Path) -> tuple[Path, list[dict[str, Any]]]:
 
 
 def recorded_config(path: Path, run: dict[str, Any], index: int) -> RunConfig:
-    """The config run ``index`` (1-based) of ``path`` recorded, resolved as a config file would be."""
+    """The config run ``index`` (1-based) of ``path`` recorded, resolved as a config file would be, with
+    ``[sweep] out`` the directory that holds ``path``."""
     where = f"{path} (run {index})"
     values = run.get("config")
     if not isinstance(values, dict):
@@ -37,6 +42,7 @@ def recorded_config(path: Path, run: dict[str, Any], index: int) -> RunConfig:
             f"{where} records no config (a sweep from before configs were kept); rerun it from its options"
         )
     source = Source("file", where)
+    own = _profile_values(values)
     entries: list[Entry] = []
     for name, section in values.items():
         if name == "config_file":  # where the values came from, not a value
@@ -45,9 +51,26 @@ def recorded_config(path: Path, run: dict[str, Any], index: int) -> RunConfig:
             raise ConfigError(f"{where}: unknown config section {name!r}; the file is damaged")
         for key, value in section.items():
             _check_key(source.prefix(name, key), SECTION_BY_NAME[name], key)
-            if value is not None:  # null: unset, as a file leaves it out
+            # null: unset, as a file leaves it out. The profile's own value: unset too (a record holds every
+            # [env] value, RunConfig.effective), or the file would hold the paper profile's time limit,
+            # crossing ... under --profile v1, and a sweep of it would be refused them.
+            if value is not None and not (name == "env" and key in own and own[key] == value):
                 entries.append(Entry(name, key, value, source))
+    # The recorded out may be relative to wherever that sweep started; this directory is where it resumes.
+    entries.append(Entry("sweep", "out", str(Path(path).parent.resolve()), source))
     return resolve(entries, where)
+
+
+def _profile_values(values: dict[str, Any]) -> dict[str, Any]:
+    """The recorded profile's own values of the [env] keys it sets (none when that profile is unknown: the
+    resolver refuses it, naming the file)."""
+    from crowdsim.profiles import PROFILES
+
+    env = values.get("env")
+    default = next(k.default for k in SECTION_BY_NAME["env"].keys if k.name == "profile")  # none recorded
+    name = env.get("profile", default) if isinstance(env, dict) else default
+    profile = PROFILES.get(name) if isinstance(name, str) else None
+    return {} if profile is None else {key: getattr(profile, key) for key in ENV_PROFILE_KEYS}
 
 
 def provenance(path: Path, run: dict[str, Any], index: int, total: int) -> str:

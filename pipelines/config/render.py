@@ -8,10 +8,10 @@ value.
 
 from __future__ import annotations
 
-import json
 import math
+import re
 import textwrap
-from typing import Any
+from typing import Any, Final
 
 from pipelines.config.resolve import RunConfig
 from pipelines.config.schema import SECTION_BY_NAME, WRITE_ORDER
@@ -27,9 +27,15 @@ HEADER = """\
 """
 
 
+# What a TOML basic string cannot hold as it is: the quote, the backslash, control characters (TOML allows
+# the tab; escaped anyway) and DEL. Surrogates (a path's undecodable bytes, from the command line) have no
+# TOML form at all; escaped, they print, and reading the file back refuses them by line and column.
+ESCAPED: Final[re.Pattern[str]] = re.compile(r'["\\\x00-\x1f\x7f\ud800-\udfff]')
+
+
 def toml_value(value: Any) -> str:
-    """``value`` as a TOML value: floats keep a decimal point or exponent, strings JSON-escaped (valid TOML
-    basic strings), lists inline."""
+    """``value`` as a TOML value: floats keep a decimal point or exponent, strings as TOML basic strings,
+    lists inline."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -37,10 +43,22 @@ def toml_value(value: Any) -> str:
     if isinstance(value, float):
         return _toml_float(value)
     if isinstance(value, str):
-        return json.dumps(value)
+        return toml_string(value)
     if isinstance(value, list | tuple):
         return "[" + ", ".join(toml_value(v) for v in value) + "]"
     raise TypeError(f"no TOML form for {value!r}")
+
+
+def toml_string(text: str) -> str:
+    """``text`` as a TOML basic string. Not ``json.dumps``: it writes a character outside the BMP (an emoji
+    in a path) as a UTF-16 surrogate pair, ``\\ud83d\\ude00``, which TOML refuses (no Unicode scalar value);
+    here it is itself, and only what TOML cannot hold is escaped."""
+
+    def escape(match: re.Match[str]) -> str:
+        char = match[0]
+        return "\\" + char if char in '"\\' else f"\\u{ord(char):04x}"
+
+    return '"' + ESCAPED.sub(escape, text) + '"'
 
 
 def _toml_float(x: float) -> str:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import difflib
 import errno
 import re
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -128,6 +129,8 @@ def _unreachable(path: Path) -> str | None:
 def read_file(path: str | Path) -> list[Entry]:
     """The entries of a TOML config file, in file order; unknown sections and keys refused."""
     where = str(path)
+    if where == "":  # Path("") is ".", a directory: say what was given
+        raise ConfigError("--config '': no such file (an empty path)")
     p = Path(path)
     problem = _unreachable(p)
     if problem is not None:
@@ -146,6 +149,8 @@ def read_file(path: str | Path) -> list[Entry]:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{where}: not valid TOML: {exc}") from None
+    except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit
+        raise ConfigError(f"{where}: not a config file: {_long_number()}") from None
     except RecursionError:  # tomllib parses nested arrays and tables recursively
         raise ConfigError(f"{where}: not a config file: arrays or tables nested too deeply") from None
     source = Source("file", where)
@@ -201,7 +206,15 @@ def parse_set(text: str) -> Entry:
                 f'--set {name}: {raw[:80]!r} is not a TOML value (e.g. 1e6, true, "circle", [5, 6])'
             ) from None
         value = raw
+    except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit
+        raise ConfigError(f"--set {name}: {_long_number()}") from None
     return Entry(section.name, key, value, Source("set", "--set"))
+
+
+def _long_number() -> str:
+    """What an integer is that Python will not read or write in decimal (its digit limit; TOML's 0x, 0o and
+    0b integers have none, so they can be longer)."""
+    return f"an integer of more than {sys.get_int_max_str_digits()} digits"
 
 
 # ---- validation ------------------------------------------------------------------------------------------
@@ -234,8 +247,32 @@ def _coerce(key: Key, value: Any) -> tuple[bool, Any]:
 
 
 def _short(value: Any) -> str:
-    text = repr(value)
+    """``value`` in an error line: its repr, cut to 80 characters."""
+    try:
+        text = repr(value)
+    except ValueError:  # an integer (or a list holding one) with more digits than Python writes
+        return _long_number()
     return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _unwritable(value: Any) -> bool:
+    """An integer (or a list holding one) with more digits than Python writes in decimal."""
+    try:
+        repr(value)
+    except ValueError:
+        return True
+    return False
+
+
+def _shortened(message: str, values: Iterable[Any]) -> str:
+    """``message`` (a dataclass's) with each long value it shows in full cut as ``_short`` cuts it: a 900 kB
+    string in a file is no 900 kB error line."""
+    for value in values:  # TOML values, whose repr _value has checked; a list's items shown alone too
+        for shown in (value, *value) if isinstance(value, list | tuple) else (value,):
+            text = repr(shown)
+            if len(text) > 80:
+                message = message.replace(text, _short(shown))
+    return message
 
 
 @dataclass
@@ -251,14 +288,7 @@ class _Resolver:
         for name, raw in chosen.items():
             key = section.key(name)
             assert key is not None  # read_file and parse_set refuse unknown keys
-            ok, value = _coerce(key, raw)
-            if not ok:
-                raise self._kind_error(section, key, raw, values)
-            if key.most is not None and value > key.most:  # a number that sizes the work
-                most = key.most if key.kind == "float" else int(key.most)
-                message = f"{name} must be at most {most}, got {_short(value)}"
-                raise ConfigError(self.sources[(section.name, name)].label(section.name, name, message))
-            values[name] = value
+            values[name] = self._value(section, key, raw, values)
         try:
             obj = section.build(values, self.built)
         except VALUE_ERRORS as exc:
@@ -266,6 +296,26 @@ class _Resolver:
         self.built[section.name] = obj
         self.values[section.name] = values
         return obj
+
+    def _value(self, section: Section, key: Key, raw: Any, values: dict[str, Any]) -> Any:
+        """``raw`` as the dataclass takes it, or the one-line error: a number no record could hold, the wrong
+        type, above the key's ceiling."""
+        label = self.sources[(section.name, key.name)].label
+        if _unwritable(raw):  # config show, and every record's JSON, could not write it
+            raise ConfigError(label(section.name, key.name, _long_number()))
+        try:
+            ok, value = _coerce(key, raw)
+        except OverflowError:  # an integer past the largest float (TOML's 1e400 is inf: "must be finite")
+            message = f"{key.name} must be at most {sys.float_info.max:.2g} in magnitude, got {_short(raw)}"
+            raise ConfigError(label(section.name, key.name, message)) from None
+        if not ok:
+            raise self._kind_error(section, key, raw, values)
+        if key.most is not None and value > key.most:  # a number that sizes the work
+            most = key.most if key.kind == "float" else int(key.most)
+            raise ConfigError(
+                label(section.name, key.name, f"{key.name} must be at most {most}, got {_short(value)}")
+            )
+        return value
 
     def _kind_error(self, section: Section, key: Key, raw: Any, defaults: dict[str, Any]) -> ConfigError:
         """The dataclass's own message for a value of the wrong type when it names the key (MPCConfig's
@@ -275,7 +325,7 @@ class _Resolver:
             section.build({**defaults, key.name: raw}, self.built)
         except VALUE_ERRORS as exc:  # its own wording, when it is about this key and shows the value
             if _named_field(str(exc), section) == key.name and repr(raw) in str(exc):
-                message = str(exc)
+                message = _shortened(str(exc), [raw])
         except (TypeError, ValueError, AttributeError):
             pass
         return ConfigError(self.sources[(section.name, key.name)].label(section.name, key.name, message))
@@ -284,6 +334,7 @@ class _Resolver:
         """A one-line error for a section that does not validate: the key the message names, else the first
         chosen key that breaks it alone, else the last chosen one."""
         chosen = self.chosen.get(section.name, {})
+        message = _shortened(message, [values[name] for name in chosen])
         culprit = _named_field(message, section)
         if culprit is None:
             defaults = {k.name: k.default for k in section.keys}
@@ -355,12 +406,14 @@ class RunConfig:
         return k.default
 
     def chosen(self, section: str, key: str) -> bool:
-        """Whether the run asks for this value: given as an option, or set to something else than the
-        default (a file written by ``config show`` chooses nothing)."""
+        """Whether the run asks for this value: given as an option or a ``--set`` item (each names the value
+        on purpose, the default too, so a sweep refuses ``--set controller.flocking=true`` for table3 as it
+        does ``=false``), or set in a file to something else than the default (a file written by ``config
+        show`` states every default, and chooses nothing by it)."""
         source = self.sources.get((section, key))
         if source is None:
             return False
-        return source.kind == "cli" or self.values[section][key] != self.default(section, key)
+        return source.kind != "file" or self.values[section][key] != self.default(section, key)
 
     def label(self, section: str, key: str) -> str:
         """How an error about this value names it: "run.toml: sweep.out", "--out", "--set sweep.out"."""

@@ -260,9 +260,27 @@ def _build_mpc(values: dict[str, Any], built: Mapping[str, Any]) -> MPCConfig:
 SIMULATE_KEYS: Final = (
     Key("episodes", "int", 1, "episodes; episode i uses seed + i (--episodes)"),
     Key("seed", "int", 0, "the first episode's seed (--seed)"),
-    Key("json", "str", None, "write the summary and per-episode records here (--json)", "runs/run.json"),
-    Key("plot", "str", None, "draw the first episode: PNG, PDF or SVG (--plot)", "runs/episode.png"),
-    Key("record", "str", None, "one MCAP file per episode in this folder (--record)", "runs/mcap"),
+    Key(
+        "json",
+        "str",
+        None,
+        "write the summary and per-episode records here (--json; a leading ~ is the home directory)",
+        "runs/run.json",
+    ),
+    Key(
+        "plot",
+        "str",
+        None,
+        "draw the first episode: PNG, PDF or SVG (--plot; ~ as for json)",
+        "runs/episode.png",
+    ),
+    Key(
+        "record",
+        "str",
+        None,
+        "one MCAP file per episode in this folder (--record; ~ as for json)",
+        "runs/mcap",
+    ),
     Key("progress", "bool", True, "show a progress bar (--no-progress)"),
 )
 
@@ -283,7 +301,12 @@ def _sweep_keys() -> tuple[Key, ...]:
             "table2",
         ),
         Key(
-            "out", "str", None, "the sweep directory, created and resumed (--out; sweep needs one)", "runs/x"
+            "out",
+            "str",
+            None,
+            "the sweep directory, created and resumed (--out; sweep needs one; a leading ~ is the home "
+            "directory)",
+            "runs/x",
         ),
         Key(
             "episodes_per_cell",

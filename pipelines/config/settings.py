@@ -41,6 +41,15 @@ def _is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
+def _home(settings: object, name: str) -> None:
+    """A path setting with a leading ``~`` made the home directory's, as a shell does: ``record = "~/runs"``
+    (no shell reads a config file, nor a quoted --set) wrote a folder named ``~`` here. Set in place: the
+    dataclass is frozen, and this is its own validation."""
+    value = getattr(settings, name)
+    if isinstance(value, str) and value.startswith("~"):
+        object.__setattr__(settings, name, os.path.expanduser(value))
+
+
 @dataclass(frozen=True)
 class ScenarioSettings:
     """What ``simulate`` runs: one scenario, a crowd size, a robot count (a sweep reads ``robots`` only)."""
@@ -109,6 +118,7 @@ class SimulateSettings:
             value = getattr(self, name)
             if value is not None and not (isinstance(value, str) and value):
                 raise PipelineError(f"{name} must be a path, got {value!r}")
+            _home(self, name)
 
 
 @dataclass(frozen=True)
@@ -133,6 +143,7 @@ class SweepSettings:
             raise PipelineError(f"experiment must be one of {sorted(EXPERIMENTS)}, got {self.experiment!r}")
         if self.out is not None and not (isinstance(self.out, str) and self.out):
             raise PipelineError(f"out must be a path, got {self.out!r}")
+        _home(self, "out")
         n = self.episodes_per_cell
         if not _is_int(n) or n < 1:
             raise PipelineError(f"episodes_per_cell must be at least 1, got {n!r}")

@@ -87,6 +87,29 @@ def test_a_tiny_step_is_refused_with_compact_numbers(capsys, monkeypatch):
     assert line.endswith("must be at most 100000 steps of dt = 1e-05 s, got 40 s (3.9e+06 steps)"), line
 
 
+@pytest.mark.parametrize(
+    "item, message",
+    [
+        (f"mpc.w_coll=1{'0' * 400}", "--set mpc.w_coll: must be at most 1.8e+308 in magnitude, got 1000"),
+        (f"mpc.w_coll=1{'0' * 5000}", "--set mpc.w_coll: an integer of more than 4300 digits"),
+        (f"sweep.seed=0x{'f' * 5000}", "--set sweep.seed: an integer of more than 4300 digits"),
+        (f"world.obs_len=0x{'f' * 5000}", "--set world.obs_len: an integer of more than 4300 digits"),
+    ],
+)
+def test_an_integer_past_a_float_or_past_pythons_digit_limit_is_one_line(item, message, capsys):
+    """An OverflowError (float(10**400)) and a ValueError (Python reads at most 4300 digits, TOML's 0x has no
+    such limit but then no record can write it) ended config show in a traceback."""
+    line = error_line(capsys, "--set", item, "config", "show")
+    assert line.startswith(f"crowdmpc config: error: {message}") and len(line) < 200, line
+
+
+def test_a_config_file_with_an_integer_past_pythons_digit_limit_is_one_line(tmp_path, capsys):
+    path = tmp_path / "big.toml"
+    path.write_text(f"[mpc]\nw_coll = 1{'0' * 5000}\n")
+    line = error_line(capsys, "--config", str(path), "config", "show")
+    assert line == f"crowdmpc config: error: {path}: not a config file: an integer of more than 4300 digits"
+
+
 # ---- 3. and 4. counts that allocate or run for days ----------------------------------------------------
 @pytest.mark.parametrize(
     "option, value, expected",
@@ -155,6 +178,34 @@ def test_two_config_files_before_the_command_are_refused_like_one_before_and_one
     assert error_line(capsys, "--config", a, "--config", b, "config", "show") == expected
     assert error_line(capsys, "--config", a, "config", "show", "--config", b) == expected
     assert error_line(capsys, "config", "show", "--config", a, "--config", b) == expected  # both after
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_an_empty_config_path_is_refused_like_a_missing_file(where, capsys):
+    """`--config ""` was dropped as no config at all, and the run went on with the defaults."""
+    argv = ["--config", "", "config", "show"] if where == "before" else ["config", "show", "--config", ""]
+    line = error_line(capsys, *argv)
+    assert line == "crowdmpc config: error: --config '': no such file (an empty path)"
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["simulate", "--controller", "straight", "--json", ""], "crowdmpc simulate: error: --json must"),
+        (["simulate", "--controller", "straight", "--plot", ""], "crowdmpc simulate: error: --plot must"),
+        (["simulate", "--controller", "straight", "--record", ""], "crowdmpc simulate: error: --record must"),
+        (["sweep", "--experiment", "baselines", "--out", ""], "crowdmpc sweep: error: --out must"),
+        (["config", "show", "--from-sweep", ""], "crowdmpc config: error: --from-sweep must"),
+    ],
+)
+def test_an_empty_path_option_is_refused_by_name(argv, expected, tmp_path, capsys, monkeypatch):
+    """argparse's type=Path read "" as ".": `--record ""` wrote MCAP files into the current directory, while
+    the config file's `record = ""` was refused."""
+    _no_work(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    line = error_line(capsys, *argv)
+    assert line.startswith(expected) and line.endswith(", got ''"), line
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_one_config_file_given_twice_is_one(tmp_path, capsys):

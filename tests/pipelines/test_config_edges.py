@@ -91,3 +91,24 @@ def test_numbers_that_size_the_work_have_a_ceiling(setting, message):
     each such number is refused one past its ceiling (schema.MOST, written out here by hand)."""
     with pytest.raises(ConfigError, match=f"^--set {message}$"):
         load(sets=[setting])
+
+
+@pytest.mark.parametrize(
+    ("key", "message"),
+    [
+        ("scenario.name", "scenario.name: must be one of ['circle', 'perpendicular'], got 'xxx"),
+        ("controller.margins", "controller.margins: bad margins 'xxx"),
+        ("mpc.horizon", "mpc.horizon: must be an integer >= 1, got 'xxx"),
+        ("env.profile", "env.profile: unknown profile 'xxx"),
+    ],
+)
+def test_an_error_line_shows_a_long_value_cut(key, message, tmp_path: Path):
+    """The dataclasses' messages show the bad value in full: a 900 kB string in a file was a 900 kB error
+    line. Cut as every other message cuts a value, to 80 characters."""
+    section, name = key.rsplit(".", 1)
+    path = tmp_path / "big.toml"
+    path.write_text(f'[{section}]\n{name} = "{"x" * 900_000}"\n')
+    with pytest.raises(ConfigError) as error:
+        load(str(path))
+    line = str(error.value)
+    assert line.startswith(f"{path}: {message}") and "'" + "x" * 76 + "..." in line and len(line) < 400, line

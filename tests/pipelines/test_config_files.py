@@ -109,6 +109,41 @@ def test_config_show_of_a_file_and_sets_is_the_effective_config_and_loads_back(t
     assert "humans = 5" in capsys.readouterr().out
 
 
+def test_config_show_writes_any_text_so_that_it_loads_back(tmp_path, capsys):
+    """json.dumps wrote an emoji as a UTF-16 surrogate pair (\\ud83d\\ude00), which TOML refuses, and left DEL
+    as it is, which TOML refuses too: what config show printed did not load back."""
+    path, shown = tmp_path / "run.toml", tmp_path / "shown.toml"
+    path.write_text(
+        '[simulate]\nrecord = "runs/\U0001f600 \\u007f\\u0000\\t\\"q\\\\ \\n"\n', encoding="utf-8"
+    )
+    assert load(str(path)).simulate.record == 'runs/\U0001f600 \x7f\x00\t"q\\ \n'
+    assert main(["config", "show", "--config", str(path)]) == 0
+    shown.write_text(capsys.readouterr().out, encoding="utf-8")
+    assert "runs/\U0001f600" in shown.read_text(encoding="utf-8")
+    assert main(["config", "show", "--config", str(shown)]) == 0
+    assert capsys.readouterr().out == shown.read_text(encoding="utf-8")
+    assert _objects(load(str(shown))) == _objects(load(str(path)))
+
+
+def test_a_leading_tilde_in_a_path_setting_is_the_home_directory(tmp_path, capsys, monkeypatch):
+    """No shell reads a config file (nor a quoted --set): `record = "~/runs"` wrote a folder named ~ in the
+    current directory while the message said "wrote ... to ~/runs"."""
+    home, work = tmp_path / "home", tmp_path / "work"
+    home.mkdir(), work.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(work)
+    sets = ["simulate.json=~/a.json", "simulate.plot=~/a.png", "simulate.record=~/runs", "sweep.out=~/sw"]
+    cfg = load(sets=sets)
+    assert (cfg.simulate.json, cfg.simulate.plot) == (str(home / "a.json"), str(home / "a.png"))
+    assert (cfg.simulate.record, cfg.sweep.out) == (str(home / "runs"), str(home / "sw"))
+    assert cfg.values["simulate"]["record"] == "~/runs"  # config show writes what was given
+    path = _write(tmp_path, '[controller]\ncontroller = "straight"\n[simulate]\nrecord = "~/runs"\n')
+    argv = ["--config", str(path), "simulate", "--humans", "0", "--no-progress"]
+    assert main(argv) == 0
+    assert f"wrote 1 MCAP file(s) to {home / 'runs'}" in capsys.readouterr().out
+    assert list(work.iterdir()) == [] and len(list((home / "runs").glob("*.mcap"))) == 1
+
+
 def test_precedence_defaults_file_set_options(tmp_path):
     from pipelines.config.resolve import Entry, Source
 
@@ -544,6 +579,11 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
         (
             "table3",
             "controller.flocking=false",
+            "--set controller.flocking: experiment 'table3' compares its methods' flocking",
+        ),  # fmt: skip
+        (  # the default, named on purpose, as --no-flocking's opposite would be: once silently dropped
+            "table3",
+            "controller.flocking=true",
             "--set controller.flocking: experiment 'table3' compares its methods' flocking",
         ),  # fmt: skip
         (

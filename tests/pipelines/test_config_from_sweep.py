@@ -86,3 +86,50 @@ def test_recorded_values_stay_inside_their_comment(tmp_path, capsys):
     assert "at commit abc [mpc] w_coll = 1.0." in printed
     (tmp_path / "printed.toml").write_text(printed)
     assert main(["config", "show", "--config", str(tmp_path / "printed.toml")]) == 0
+
+
+def _recorded_sweep(directory, sets: list[str]) -> None:
+    """A sweep.json whose run recorded the effective config of ``sets``, as `crowdmpc sweep` records it."""
+    from pipelines.config import load
+
+    run = {"started": "2026-12-01T00:00:00+0000", "version": "0.1.0", "config": load(sets=sets).effective()}
+    directory.mkdir(parents=True)
+    (directory / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
+
+
+def test_the_recorded_profiles_own_values_stay_unset_so_another_profile_takes_its_own(
+    tmp_path, capsys, monkeypatch
+):
+    """A sweep records every [env] value (the paper profile's time limit, crossing ...); printed as settings,
+    they ran under `--profile v1` as the paper's, and `sweep --profile v1` refused them."""
+    from pipelines.config import load
+
+    monkeypatch.chdir(tmp_path)
+    _recorded_sweep(tmp_path / "sweep", ["sweep.experiment=baselines", "sweep.out=sweep", "sweep.humans=[3]"])
+    assert main(["config", "show", "--from-sweep", "sweep"]) == 0
+    printed = capsys.readouterr().out
+    assert 'profile = "paper"' in printed
+    assert "# time_limit = 40.0" in printed and '# crossing = "paper"' in printed  # unset: the profile's
+    rerun = tmp_path / "rerun.toml"
+    rerun.write_text(printed)
+    v1 = ["env.profile=v1"]
+    assert load(str(rerun), v1).env == load(sets=v1).env  # v1's 30 s limit and crossing, not the paper's
+    assert main(["--config", str(rerun), "sweep", "--profile", "v1", "--dry-run"]) == 0
+    assert "straight-none-F-ibr-m=none-v1-visible-h3-r3" in capsys.readouterr().out
+
+
+def test_its_out_is_the_directory_given_wherever_the_sweep_ran_and_the_rerun_starts(
+    tmp_path, capsys, monkeypatch
+):
+    """A sweep run with `--out rel` recorded "rel": the printed file said a rerun resumes there, but a rerun
+    from another directory started a fresh sweep in that directory's rel."""
+    from pipelines.config import load
+
+    _recorded_sweep(tmp_path / "start" / "rel", ["sweep.experiment=baselines", "sweep.out=rel"])
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert main(["config", "show", "--from-sweep", "../start/rel"]) == 0
+    rerun = elsewhere / "rerun.toml"
+    rerun.write_text(capsys.readouterr().out)
+    assert load(str(rerun)).sweep.out == str((tmp_path / "start" / "rel").resolve())
