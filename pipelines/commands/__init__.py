@@ -22,13 +22,17 @@ MAX_REPORT_BYTES: Final[int] = 64 * 2**20
 
 
 def humans_list(text: str) -> tuple[int, ...]:
-    """An argparse type: ``5,6,7`` -> (5, 6, 7), positive integers (``--humans`` of sweep and calibrate)."""
+    """An argparse type: ``5,6,7`` -> (5, 6, 7), positive integers, each once (``--humans`` of sweep and
+    calibrate: a repeat would be a second column of the same cells)."""
     try:
         values = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
     if not values or min(values) < 1:
         raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
+    repeated = next((v for i, v in enumerate(values) if v in values[:i]), None)
+    if repeated is not None:
+        raise argparse.ArgumentTypeError(f"--humans names {repeated} more than once, got {text!r}")
     return values
 
 

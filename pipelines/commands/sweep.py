@@ -13,7 +13,7 @@ from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
     from pipelines.config import Option, RunConfig
-    from pipelines.experiments.cells import Cell, EpisodeTask, Experiment
+    from pipelines.experiments.cells import Experiment
     from pipelines.experiments.sweep import SweepConfig
 
 EPILOG = """examples:
@@ -37,7 +37,9 @@ coupling (CMPC by iterated best response vs the coupled NLP, exact and first-ord
 profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check);
 controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight; --controllers for any
 list, controller plugins included).
---margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling.
+--margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling;
+--margins to the methods of controllers that plan with a predictor (cmpc, dmpc; orca and straight plan
+with none, and run without margins), --profile and --visibility to all of them.
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
 section, `crowdmpc config show` lists every key) and --set SECTION.KEY=VALUE items: defaults < the file <
@@ -216,7 +218,10 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
         help="sweep directory, created; resumed (required, here or in --config)",
     )
     p.add_argument(
-        "--report-only", action="store_true", help="write the table and plots from DIR; run nothing"
+        "--report-only",
+        action="store_true",
+        help="write the table and plots from DIR; run nothing (the experiment must be DIR's; --humans, "
+        "--robots and --seed not given are its last run's)",
     )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -274,10 +279,14 @@ def _jit_pays(cells, episodes_per_cell: int) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
+    from pipelines.experiments.backends import SweepStopped
     from pipelines.experiments.log import EPISODES_FILE
 
     cfg, out = _checked_config(args)
     config = _sweep_config(args, cfg, out)
+    if args.report_only:
+        config = recorded_plan(cfg, config)  # the sweep that is there, not another plan
     experiment = config.experiment
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
@@ -292,10 +301,14 @@ def run(args: argparse.Namespace) -> int:
     if not args.report_only:
         check_predictors(experiment)
         check_margins(experiment)
-        status = _run_cells(config)
+        try:
+            status = _run_cells(config)
+        except SweepStopped:
+            report_stopped(config, cells, tasks)  # what it recorded stands
+            raise
     elif not (out / EPISODES_FILE).exists():
         raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
-    _report(config, cells, tasks)
+    report(config, cells, tasks, report_only=args.report_only)
     return status
 
 
@@ -378,42 +391,3 @@ def _run_cells(config: SweepConfig) -> int:
         print("interrupted: rerun the same command to resume", file=sys.stderr)
         status = 130
     return status
-
-
-def _report(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> None:
-    """Tabulates the planned episodes recorded in --out and projects the plan's CPU time."""
-    from pipelines.experiments.log import episode_log
-    from pipelines.experiments.report import write_report
-
-    out = config.out
-    planned = {t.key for t in tasks}
-    # the effective config each record carries is half its memory, and no part of the report reads it
-    loaded = episode_log(out).load(repair=False, keep=lambda r: {k: v for k, v in r.items() if k != "config"})
-    records = [r for key, r in loaded.items() if key in planned]
-    report = write_report(out, config.experiment, cells, records)
-    print(report.markdown)
-    print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
-    cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]
-    if cpu:
-        # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
-        mean = sum(cpu) / len(cpu)
-        total = mean * len(tasks)
-        k = 1 if config.backend == "inline" else config.workers  # inline runs one episode at a time
-        workers = f"{k} worker{'s' if k > 1 else ''} on {k} free core{'s' if k > 1 else ''}"
-        print(
-            f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
-            f"{duration(total)} of CPU: {duration(total / k)} for {workers}",
-            file=sys.stderr,
-        )
-
-
-def duration(seconds: float) -> str:
-    """``seconds`` in the unit that reads best: "42.0 s", "3.5 min", "2.25 h", "12.5 days". The unit is
-    chosen on the rounded figure, so 59.96 s reads "1.0 min", not "60.0 s"."""
-    if round(seconds, 1) < 60:
-        return f"{seconds:.1f} s"
-    if round(seconds / 60, 1) < 60:
-        return f"{seconds / 60:.1f} min"
-    if round(seconds / 3600, 2) < 48:
-        return f"{seconds / 3600:.2f} h"
-    return f"{seconds / 86400:.1f} days"

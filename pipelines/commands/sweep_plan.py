@@ -12,6 +12,7 @@ from pipelines.errors import PipelineError
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
+    from pipelines.loop.margins import MarginSpec
 
 
 def check_predictors(experiment: Experiment) -> None:
@@ -78,6 +79,7 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     if cfg.controller.margins:
         margins = parse_margins(cfg.controller.margins)
         experiment = _applied(cfg, "controller", "margins", experiment.with_margins, margins)
+        _check_margins_apply(cfg, experiment, margins)
     if cfg.chosen("env", "profile") or cfg.chosen("env", "robots_visible"):
         world = World(
             cfg.env.profile if cfg.chosen("env", "profile") else experiment.world.profile,
@@ -93,6 +95,23 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     for key, value in cfg.mpc_overrides():
         experiment = _with_mpc_override(cfg, experiment, key, value)
     return experiment
+
+
+def _check_margins_apply(cfg: RunConfig, experiment: Experiment, margins: MarginSpec) -> None:
+    """Refuse margins that no method plans with (Experiment.with_margins gives them to the methods that
+    predict the humans), rather than run a sweep that ignores them."""
+    from pipelines.loop.spec import CONTROLLER_KINDS
+
+    if margins.mode == "none" or any(spec.margins == margins for _, spec in experiment.methods):
+        return
+    labels = ", ".join(repr(label) for label, _ in experiment.methods)
+    methods = f"method {labels} plans" if len(experiment.methods) == 1 else f"methods {labels} plan"
+    predicting = ", ".join(name for name, kind in CONTROLLER_KINDS.items() if kind.uses_predictor)
+    option = f"{cfg.label('controller', 'margins')} {cfg.controller.margins}"
+    raise PipelineError(
+        f"{option}: {methods} with no predictor; margins apply to the controllers that do ({predicting}, "
+        "or a plugin with uses_predictor = True)"
+    )
 
 
 def _applied(

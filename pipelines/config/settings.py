@@ -178,6 +178,9 @@ class SweepSettings:
         if not 1 <= min(humans) or max(humans) > MAX_HUMANS:
             bad = min(humans) if min(humans) < 1 else max(humans)
             raise PipelineError(f"humans must be in 1..{MAX_HUMANS}, got {bad}")
+        repeated = next((h for i, h in enumerate(humans) if h in humans[:i]), None)
+        if repeated is not None:
+            raise PipelineError(f"humans must name each crowd size once, got {repeated} more than once")
 
     def _check_workers(self) -> None:
         workers = self.workers

@@ -202,12 +202,18 @@ class Experiment:
         return replace(self, methods=methods)
 
     def with_margins(self, margins: MarginSpec) -> Experiment:
-        """Every method planning with ``margins`` (e.g. Table II with conformal margins)."""
+        """Every method that plans with a predictor planning with ``margins`` (e.g. Table II with conformal
+        margins). Margins widen Eq. 11's distance by an allowance for prediction error: a method that
+        predicts nothing (ORCA, the straight line of the controllers experiment) keeps its own, as it keeps no
+        predictor (``ControllerSpec.predictor_name``), and its cell key says so."""
         if not self.margins_swappable:
             raise PipelineError(
                 f"experiment {self.name!r} fixes each method's margins; --margins does not apply"
             )
-        methods = tuple((label, replace(spec, margins=margins)) for label, spec in self.methods)
+        methods = tuple(
+            (label, replace(spec, margins=margins) if spec.kind.uses_predictor else spec)
+            for label, spec in self.methods
+        )
         return replace(self, methods=methods)
 
     def with_world(self, world: World) -> Experiment:

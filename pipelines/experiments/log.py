@@ -84,11 +84,34 @@ class EpisodeLog:
         return records
 
     def append(self, record: dict[str, Any]) -> None:
-        line = json.dumps(plain(record), allow_nan=False, separators=(",", ":")) + "\n"
+        try:
+            line = json.dumps(plain(record), allow_nan=False, separators=(",", ":")) + "\n"
+        except (TypeError, ValueError) as exc:  # the workers check their records (worker.check_json)
+            key = record.get("key") if isinstance(record, dict) else None
+            raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
         with open(self.path, "ab") as f:
             f.write(line.encode())
             f.flush()
             os.fsync(f.fileno())
+
+
+def error_keys(out: Path) -> set[str]:
+    """The keys of the episodes ``<out>/errors.jsonl`` holds (episodes that raised, each entry a line; a
+    rerun that retries one appends again). A line that is no entry (a torn tail) is passed over: the keys only
+    order a rerun's episodes."""
+    keys: set[str] = set()
+    path = out / ERRORS_FILE
+    if not path.is_file():
+        return keys
+    with open(path, "rb") as f:
+        for line in f:
+            try:
+                entry = json.loads(line)
+            except (json.JSONDecodeError, UnicodeDecodeError):
+                continue
+            if isinstance(entry, dict) and isinstance(entry.get("key"), str):
+                keys.add(entry["key"])
+    return keys
 
 
 def episode_log(out: Path) -> EpisodeLog:

@@ -19,6 +19,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import SCENARIOS, Cell, Experiment, PaperFigures
@@ -189,12 +190,21 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
 def summarize(
     experiment: Experiment, cells: Sequence[Cell], records: Iterable[dict[str, Any]]
 ) -> list[CellSummary]:
-    """One summary per cell that has records, in table order."""
+    """One summary per cell that has records, in table order; the paper's figures beside the cells it has
+    figures for (``paper_figures``)."""
     by_cell: dict[str, list[dict[str, Any]]] = {}
     for record in records:
         by_cell.setdefault(record["cell"], []).append(record)
     return [
-        summarize_cell(cell, by_cell[cell.key], experiment.paper.get((cell.method, cell.n_humans)))
+        summarize_cell(cell, by_cell[cell.key], paper_figures(experiment, cell))
         for cell in cells
         if by_cell.get(cell.key)
     ]
+
+
+def paper_figures(experiment: Experiment, cell: Cell) -> PaperFigures | None:
+    """The paper's figures for ``cell``: its method at its number of humans, with the paper's team of
+    robots (its tables are all of PAPER_ROBOTS robots; another team's figures are not comparable)."""
+    if cell.n_robots != PAPER_ROBOTS:
+        return None
+    return experiment.paper.get((cell.method, cell.n_humans))

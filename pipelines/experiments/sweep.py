@@ -3,8 +3,9 @@
 The driver (``run_sweep``) plans the experiment's episodes, skips every one that ``<out>/episodes.jsonl``
 already holds, hands the rest to a backend and writes each outcome as it comes back. Only the driver writes
 the sweep directory: the records, the MCAP logs a worker kept (each before the record that vouches for it),
-``<out>/errors.jsonl`` for the episodes that raised (a rerun tries them again; a sweep whose first episodes
-all raise is misconfigured and stops), and ``<out>/sweep.json``, what the directory holds and a line per run.
+``<out>/errors.jsonl`` for the episodes that raised (a rerun tries them again, after the episodes never tried;
+a sweep whose first episodes all raise, with no record in the directory, is misconfigured and stops), and
+``<out>/sweep.json``, what the directory holds and a line per run.
 
 The parts, a module each: pipelines.experiments.log (the durable, resumable record log and the lock that
 refuses a second sweep on the same directory), pipelines.experiments.worker (an episode run into a record,
@@ -30,7 +31,7 @@ from typing import Any, Final
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
-from pipelines.experiments.backends import BACKENDS, Backend, make_backend
+from pipelines.experiments.backends import BACKENDS, Backend, SweepStopped, make_backend
 from pipelines.experiments.cells import Cell, EpisodeTask, Experiment
 from pipelines.experiments.log import (
     EPISODES_FILE,
@@ -40,6 +41,7 @@ from pipelines.experiments.log import (
     EpisodeLog,
     check_sweep_directory,
     episode_log,
+    error_keys,
     read_sweep_file,
     sweep_lock,
 )
@@ -47,7 +49,8 @@ from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
 from pipelines.plain_json import plain
 
 # A sweep whose first episodes all raise is misconfigured (a missing model, a broken build): stop it rather
-# than fill errors.jsonl with thousands of copies of one traceback.
+# than fill errors.jsonl with thousands of copies of one traceback. Only while the directory holds no record:
+# once an episode succeeded the setup works, and the episodes that raise are those episodes' own failures.
 FAIL_FAST_ERRORS: Final[int] = 4
 # Upper bounds checked before any worker starts (a typo must not become thousands of failing episodes): the
 # paper runs 1000 episodes per cell (cells.PAPER_EPISODES_PER_CELL); workers are Ray actors at most (a local
@@ -240,7 +243,12 @@ def run_sweep(
         _check_same_predictors(out, tasks, done)
         _check_same_margins(out, tasks, done)
         _add_run(out, meta, config, len(tasks))  # a refused resume is no run: it leaves no line
-        todo = [t for t in tasks if t.key not in done]
+        # Episodes that raised before (errors.jsonl) last: a rerun that extends the sweep runs the new ones
+        # first, rather than stopping on the same failures again.
+        retried = error_keys(out)
+        todo = [t for t in tasks if t.key not in done and t.key not in retried]
+        todo += [t for t in tasks if t.key not in done and t.key in retried]
+        fail_fast = not done  # nothing here ever succeeded: a fresh sweep, or one whose episodes all raised
         del done  # every record parsed (~14 KB each): not held while the workers run
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:
@@ -248,7 +256,9 @@ def run_sweep(
         scratch = make_scratch_root()
         try:
             with _terminate_as_interrupt():
-                _run_tasks(config, todo, log, outcome, backend_factory or _default_backend, str(scratch))
+                _run_tasks(
+                    config, todo, log, outcome, backend_factory or _default_backend, str(scratch), fail_fast
+                )
         except KeyboardInterrupt:
             outcome.interrupted = True
         finally:
@@ -263,8 +273,10 @@ def _run_tasks(
     outcome: SweepOutcome,
     backend_factory: Callable[[SweepConfig, str], Backend],
     scratch: str,
+    fail_fast: bool = True,
 ) -> None:
-    """Start the backend, write every outcome as it comes back, and end the backend."""
+    """Start the backend, write every outcome as it comes back, and end the backend. ``fail_fast``: stop
+    (SweepStopped) when the first FAIL_FAST_ERRORS episodes all raise."""
     out = Path(config.out)
     by_key = {t.key: t for t in todo}
     start = time.perf_counter()
@@ -279,9 +291,9 @@ def _run_tasks(
                 outcome.errors.append(result.key)
                 _append_error(out, task, result.error)
                 bar.set_postfix(errors=len(outcome.errors), refresh=False)
-                if outcome.ran == 0 and len(outcome.errors) >= FAIL_FAST_ERRORS:
+                if fail_fast and outcome.ran == 0 and len(outcome.errors) >= FAIL_FAST_ERRORS:
                     last = result.error.strip().splitlines()[-1]
-                    raise PipelineError(
+                    raise SweepStopped(
                         f"the first {len(outcome.errors)} episodes all raised ({last}); "
                         f"tracebacks in {out / ERRORS_FILE}"
                     )

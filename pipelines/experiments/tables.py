@@ -12,6 +12,7 @@ import operator
 from collections.abc import Sequence
 from typing import Final
 
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import SCENARIOS, Experiment
 from pipelines.experiments.summary import CellSummary, Rate
@@ -88,8 +89,17 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         ),
         world_line,
     ]
+    robots = sorted({s.cell.n_robots for s in columns})
+    if robots != [PAPER_ROBOTS]:
+        teams = ", ".join(map(str, robots))
+        notes.append(f"Robots: {teams} per episode (the paper's tables: {PAPER_ROBOTS}).")
     if any(s.paper for s in columns):
         notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
+    elif experiment.paper:
+        notes.append(
+            f"The paper's figures ({experiment.paper_source}) are for {PAPER_ROBOTS} robots: not shown "
+            "beside these."
+        )
     else:
         notes.append("The paper has no such table.")
     return "\n".join(notes)

@@ -15,6 +15,7 @@ different run than the recorded metrics would mislead; recording costs about 5% 
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import re
 import resource
@@ -155,6 +156,19 @@ def episode_record(
     return {**result.record().to_dict(), **plain(sweep)}
 
 
+def check_json(record: dict[str, Any], task: EpisodeTask) -> None:
+    """Refuse, as this episode's error, a record the driver could not write as JSON (EpisodeLog.append):
+    a plugin controller's ``describe()`` holding a set, say, would otherwise stop the driver at the write and
+    the rest of the sweep with it."""
+    try:
+        json.dumps(plain(record), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise PipelineError(
+            f"controller {task.cell.spec.controller!r}: its episode record is not JSON ({exc}); describe() "
+            "must return JSON values (dicts, lists, strings, numbers, booleans, None)"
+        ) from None
+
+
 def cell_config(controller: Controller, env_config: EnvConfig) -> dict[str, Any]:
     """The effective config of a cell's episodes, as ``run_episode`` puts it in the MCAP "config" metadata:
     the simulator's settings and what the controller's ``describe()`` adds (the MPC's config, coupling,
@@ -248,6 +262,7 @@ class EpisodeWorker:
                 process_cpu_s() - cpu_start,
                 config=self._configs.get(task.cell.key),
             )
+            check_json(record, task)
             mcap = None
             if recorder is not None and (self.record == "all" or is_failure(record["metrics"])):
                 mcap = recorder.paths[-1].read_bytes()

@@ -271,6 +271,27 @@ def test_sweep_sizes_are_refused_before_any_worker_starts(options, message, tmp_
     assert not out.exists()
 
 
+@pytest.mark.parametrize("mode", [[], ["--dry-run"], ["--report-only"]], ids=["run", "dry-run", "report"])
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--humans", "5,6,5"], "argument --humans: --humans names 5 more than once, got '5,6,5'"),
+        (["--set", "sweep.humans=[7,7]"], "--set sweep.humans: must name each crowd size once, got 7 more"),
+    ],
+)
+def test_a_repeated_crowd_size_is_refused_whatever_the_sweep_does(mode, options, message, tmp_path, capsys):
+    """--dry-run and --report-only took --humans 5,5 (a column and a row twice); only a run refused it."""
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "baselines", "--episodes-per-cell", "2", "--out", str(out), *mode]
+    try:
+        code = main([*argv, *options])
+    except SystemExit as exc:  # argparse's error exits; ours return the status
+        code = exc.code
+    assert code == 2
+    assert message in _one_error_line(capsys, "sweep")
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------------------------------------------
 # 4. Training numbers: checked before Lightning
 # ----------------------------------------------------------------------------------------------------------

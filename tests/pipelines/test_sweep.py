@@ -126,6 +126,25 @@ def test_margins_profile_and_visibility_are_part_of_every_cell():
         World("crowdnav")
 
 
+def test_margins_go_to_the_methods_that_predict_and_are_refused_where_none_does(tmp_path, capsys):
+    """The controllers experiment gave --margins to ORCA and the straight line too (in their cell keys), and
+    a run then refused them with "conformal margins need a predictor; this controller uses none", naming
+    neither the option nor the method: with the default list (cmpc, dmpc, orca, straight) always."""
+    controllers = get_experiment("controllers").with_margins(MarginSpec("conformal", alpha=0.1))
+    labels = {label: spec.margins.label for label, spec in controllers.methods}
+    assert labels == {"cmpc": "cp0.1", "dmpc": "cp0.1", "orca": "none", "straight": "none"}
+    argv = ["sweep", "--experiment", "controllers", "--humans", "3", "--margins", "conformal:0.1",
+            "--dry-run", "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    listed = capsys.readouterr().out
+    assert "orca-none-F-ibr-m=none-paper-visible-h3-r3" in listed and "m=cp0.1-paper-visible-h3" in listed
+    assert main([*argv, "--controllers", "orca,straight"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "crowdmpc sweep: error: --margins conformal:0.1: methods 'orca', 'straight' plan with no predictor; "
+        "margins apply to the controllers that do (cmpc, dmpc, or a plugin with uses_predictor = True)"
+    )
+
+
 def test_paper_figures_as_printed():
     assert PAPER_TABLE_II[("CMPC", 7)] == PaperFigures(90.0, 19.1, 1.3, 1.3)
     assert PAPER_TABLE_II[("DMPC", 9)] == PaperFigures(83.9, 20.3, 1.9, 1.8)
@@ -341,6 +360,99 @@ def test_a_cell_is_not_extended_with_other_weights(tmp_path):
         run_sweep(dataclasses.replace(config, episodes_per_cell=2))
 
 
+FAILING = "tests.plugins.failing_controllers"
+
+
+@pytest.fixture
+def plugins(monkeypatch):
+    """Register ``failing_controllers``' plugins here and for the worker processes; none left after."""
+    from pipelines.loop import spec as registry
+
+    monkeypatch.setattr(registry, "_PLUGINS", {})
+
+    def register(*names: str) -> list[str]:
+        specs = [f"{FAILING}:{name}" for name in names]
+        registry.register_controller_plugins(specs)
+        return specs
+
+    return register
+
+
+def _controllers(out: Path, episodes: int, controllers: list[str], **kw) -> SweepConfig:
+    experiment = get_experiment("controllers").with_controllers(controllers)
+    kw = {"humans": (1,), "backend": "inline", "progress": False} | kw
+    return SweepConfig(experiment, out, episodes, **kw)
+
+
+def _sweep_cli(out: Path, controllers: list[str], *options: str) -> list[str]:
+    return ["sweep", "--experiment", "controllers", "--controllers", ",".join(controllers), "--humans", "1",
+            "--jit", "off", "--no-progress", "--out", str(out), *options]  # fmt: skip
+
+
+def test_a_worker_process_that_dies_is_an_episode_error_and_the_sweep_goes_on(tmp_path, plugins, capsys):
+    """A worker process killed (SIGKILL here; a segfault, the OOM killer) broke the pool: the sweep ended in
+    a BrokenProcessPool traceback, losing the episodes in flight, writing no error and no report."""
+    (dies,) = plugins("Dies")
+    argv = _sweep_cli(tmp_path, ["straight", dies], "--episodes-per-cell", "1", "--workers", "1")
+    assert main([*argv, "--backend", "process"]) == 1  # some episodes raised
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "1 episodes raised" in err
+    records = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    errors = [json.loads(line) for line in (tmp_path / ERRORS_FILE).read_text().splitlines()]
+    # straight's episode finished before the other killed the worker: kept; the other is retried by a rerun
+    assert [r["controller"] for r in records.values()] == ["straight"]
+    assert [e["key"].split("/")[0].split("-")[0] for e in errors] == [dies]
+    assert "worker process died (" in errors[0]["error"]  # (killed by SIGKILL): its exit code, when known
+    assert (tmp_path / "table.md").exists()
+
+
+def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, capsys, monkeypatch):
+    """Fresh, the first episodes all failing stop it (fail fast); with records already there, the pool
+    breaking again and again with nothing finishing does, and the report of what is there is written."""
+    (dies,) = plugins("Dies")
+    fresh = _sweep_cli(tmp_path / "fresh", [dies], "--episodes-per-cell", "4", "--workers", "2")
+    assert main([*fresh, "--backend", "process"]) == 2  # one break: the 4 episodes in flight
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith("crowdmpc sweep: error: the first 4 episodes all raised (worker process died")
+    out = tmp_path / "resumed"
+    assert main(_sweep_cli(out, ["straight"], "--episodes-per-cell", "1", "--backend", "inline")) == 0
+    (out / "table.md").unlink()
+    monkeypatch.setattr("pipelines.experiments.backends.MAX_BREAKS_IN_A_ROW", 2)
+    resumed = _sweep_cli(out, ["straight", dies], "--episodes-per-cell", "3", "--workers", "1")
+    assert main([*resumed, "--backend", "process"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("crowdmpc sweep: error: the worker processes died 2 times in a row with no ")
+    assert len((out / ERRORS_FILE).read_text().splitlines()) == 4  # each break: the two tasks in flight
+    assert "| straight |" in (out / "table.md").read_text()
+
+
+def test_a_rerun_runs_new_episodes_before_retrying_those_that_raised(tmp_path, plugins, capsys):
+    """Extending a sweep with 4 episodes that raise every time (retried first) stopped it before any new
+    episode ran ("the first 4 episodes all raised"), and wrote no report: fail fast is for a directory where
+    nothing ever succeeded."""
+    (raises,) = plugins("RaisesOnCircles")
+    first = run_sweep(_controllers(tmp_path, 8, [raises]))
+    assert (first.ran, len(first.errors)) == (4, 4)  # the perpendicular crossings, the circles
+    more = run_sweep(_controllers(tmp_path, 10, [raises]))
+    assert (more.ran, len(more.errors)) == (1, 5)  # the new perpendicular one ran, the new circle raised
+    assert more.errors[0].endswith("/circle/4")  # the new episodes first
+    assert main([*_sweep_cli(tmp_path, [raises], "--episodes-per-cell", "12", "--backend", "inline")]) == 1
+    assert "| Episodes | 6 |" in (tmp_path / "table.md").read_text()
+
+
+def test_a_record_that_is_no_json_is_an_episode_error_naming_the_controller(tmp_path, plugins):
+    """A plugin's describe() holding a set stopped the driver at the write (json.dumps), with a traceback
+    and the rest of the sweep lost."""
+    (bad,) = plugins("SetInDescribe")
+    outcome = run_sweep(_controllers(tmp_path, 2, ["straight", bad]))
+    assert outcome.ran == 2 and len(outcome.errors) == 2
+    error = json.loads((tmp_path / ERRORS_FILE).read_text().splitlines()[0])["error"]
+    assert f"PipelineError: controller {bad!r}: its episode record is not JSON" in error
+    assert "Object of type set is not JSON serializable" in error
+    with pytest.raises(PipelineError, match=r"cannot write the record of 'k' as JSON \(Object of type set"):
+        EpisodeLog(tmp_path / "log.jsonl").append({"key": "k", "modes": {"a"}})
+
+
 @pytest.mark.slow
 def test_the_ray_backend_runs_the_same_sweep(tmp_path):
     pytest.importorskip("ray")  # the [cluster] extra
@@ -454,10 +566,12 @@ def test_killed_twice_then_rerun_gives_every_episode_once(tmp_path):
 # ----------------------------------------------------------------------------------------------------------
 
 
-def _records(experiment, outcomes: dict[tuple[str, int], list[tuple[bool, float, bool, bool]]]):
+def _records(
+    experiment, outcomes: dict[tuple[str, int], list[tuple[bool, float, bool, bool]]], n_robots: int = 3
+):
     """Synthetic records: (method, humans) -> per episode (success, travel time, collision, discomfort)."""
     records = []
-    for cell in experiment.cells():
+    for cell in experiment.cells(n_robots=n_robots):
         for i, (success, time_s, collision, discomfort) in enumerate(
             outcomes.get((cell.method, cell.n_humans), [])
         ):
@@ -542,6 +656,25 @@ def test_markdown_table_is_laid_out_like_the_paper():
         in "\n".join(table)
     )
     assert "| Success circle / perpendicular (%) | 100 / 50 | 50 / 0 | 100 / 100 | 100 / 100 |" in table
+
+
+def test_the_papers_figures_stand_beside_its_own_team_size_only(tmp_path):
+    """With --robots 2 Table II printed the paper's 3-robot figures under each column, in bold, as if
+    comparable (they are looked up by method and humans)."""
+    table2 = get_experiment("table2")
+    cells = table2.cells(n_robots=2)
+    records = _records(table2, TABLE2_EPISODES, n_robots=2)
+    summaries = summarize(table2, cells, records)
+    assert summaries and not any(s.paper for s in summaries)
+    markdown = markdown_table(table2, summaries)
+    assert "paper |" not in markdown and "Robots: 2 per episode (the paper's tables: 3)." in markdown
+    assert "Table II) are for 3 robots: not shown beside these." in markdown
+    write_report(tmp_path, table2, cells, records)
+    assert "paper_success" in (tmp_path / CELLS_CSV).read_text().splitlines()[0]
+    assert (tmp_path / CELLS_CSV).read_text().splitlines()[1].endswith(",,,,")  # no paper figures
+    # the paper's own team: its figures, and no word on robots
+    three = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, TABLE2_EPISODES)))
+    assert "| &nbsp;&nbsp;paper | **94.0** |" in three and "Robots:" not in three
 
 
 def test_report_files(tmp_path):

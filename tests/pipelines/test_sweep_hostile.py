@@ -213,6 +213,28 @@ def test_an_empty_or_new_folder_and_a_sweep_directory_are_fine(good, tmp_path, c
     assert "4/4 episodes recorded (2 this run" in capsys.readouterr().err
 
 
+def test_report_only_tabulates_the_sweep_that_is_there_or_refuses(tmp_path, capsys):
+    """--report-only read the plan from its own options: another --experiment relabelled the records as its
+    methods, and without the run's --humans, --robots and --seed it wrote empty tables over the report."""
+    out = tmp_path / "sweep"
+    run_sweep(SweepConfig(get_experiment("baselines"), out, 1, humans=(3,), seed=7, n_robots=2,
+                          backend="inline", progress=False))  # fmt: skip
+    report = ["sweep", "--report-only", "--no-progress", "--out", str(out)]
+    assert main([*report, "--experiment", "baselines"]) == 0  # humans, robots, seed: the run's
+    table = (out / TABLE_MD).read_text()
+    assert "| Numbers of pedestrians | 3 | 3 |" in table and "| Episodes | 1 | 1 |" in table
+    assert "Robots: 2 per episode" in table
+    capsys.readouterr()
+    for options, message in (
+        (["--experiment", "table2"], f"{out} holds a sweep of experiment 'baselines', not 'table2'"),
+        (["--experiment", "baselines", "--humans", "4"], "holds 2 records, none of them of the cells"),
+    ):
+        assert main([*report, *options]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+        assert (out / TABLE_MD).read_text() == table  # left as it was
+
+
 # ----------------------------------------------------------------------------------------------------------
 # A broken zoo entry: refused by the driver in simulate's line, before any worker starts (and in --dry-run)
 # ----------------------------------------------------------------------------------------------------------

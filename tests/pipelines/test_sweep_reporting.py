@@ -10,7 +10,7 @@ import time
 import pytest
 
 import pipelines.loop.episode as episode_module
-from pipelines.commands.sweep import duration
+from pipelines.commands.sweep_report import duration
 from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
 from pipelines.experiments.summary import summarize

@@ -1,0 +1,134 @@
+"""``crowdmpc sweep``'s report: the table and plots of what a sweep directory holds, after a run or on its
+own (``--report-only``), and the CPU time the planned episodes take.
+
+``--report-only`` tabulates the sweep that is in ``--out``: its experiment is sweep.json's (another would
+label the records as that experiment's methods, since cell keys do not name the experiment), and the crowd
+sizes, team size and seed the command line leaves out are those the sweep's last run recorded, so that the
+plan matches the records; a plan that matches none of them is refused rather than written over the report
+as empty tables.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from typing import TYPE_CHECKING, Any
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.config import RunConfig
+    from pipelines.experiments.cells import Cell, EpisodeTask
+    from pipelines.experiments.sweep import SweepConfig
+
+
+def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
+    """``config`` for ``--report-only``: refused when ``--out`` holds a sweep of another experiment, and
+    with the humans, robots and seed the run did not give (option, config file or --set) taken from the
+    sweep's last run line in sweep.json. A directory without sweep.json keeps ``config`` as it is."""
+    from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
+
+    path = config.out / SWEEP_FILE
+    if not path.is_file():
+        return config
+    meta = read_sweep_file(path)
+    recorded = meta.get("experiment")
+    if recorded is not None and recorded != config.experiment.name:
+        raise PipelineError(
+            f"--report-only: {config.out} holds a sweep of experiment {recorded!r}, not "
+            f"{config.experiment.name!r} (its records would be tabulated as that experiment's methods); "
+            f"give --experiment {recorded}"
+        )
+    runs = [run for run in meta.get("runs", []) if isinstance(run, dict)]
+    if not runs:
+        return config
+    last = runs[-1]
+    changes: dict[str, Any] = {}
+    humans = last.get("humans")
+    if cfg.source("sweep", "humans") is None and isinstance(humans, list) and humans:
+        if all(_is_int(h) for h in humans):
+            changes["humans"] = tuple(humans)
+    for section, key, field in (("sweep", "seed", "seed"), ("scenario", "robots", "n_robots")):
+        value = last.get(field)  # a run line names them as SweepConfig does
+        if cfg.source(section, key) is None and _is_int(value):
+            changes[field] = value
+    return dataclasses.replace(config, **changes)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def report(
+    config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], *, report_only: bool = False
+) -> None:
+    """Tabulates the planned episodes recorded in --out and projects the plan's CPU time. With
+    ``report_only``, records none of which the plan holds are refused (the report is left as it was)."""
+    from pipelines.experiments.log import EPISODES_FILE
+
+    held, records = _planned_records(config, tasks)
+    if report_only and held and not records:
+        out = config.out
+        humans = ",".join(map(str, config.humans or config.experiment.humans))
+        methods = ", ".join(label for label, _ in config.experiment.methods)
+        raise PipelineError(
+            f"--report-only: {out / EPISODES_FILE} holds {held} records, none of them of the cells planned "
+            f"here (experiment {config.experiment.name}, --humans {humans}, --robots {config.n_robots}, "
+            f"--seed {config.seed}, methods {methods}); the report is left as it was: give the options the "
+            f"sweep ran with (`crowdmpc config show --from-sweep {out}` prints them)"
+        )
+    _write(config, cells, tasks, records)
+
+
+def report_stopped(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> None:
+    """The report of a sweep that stopped itself part way (SweepStopped): what it recorded stands. None when
+    the plan has no record yet (a sweep stopped before its first)."""
+    _, records = _planned_records(config, tasks)
+    if records:
+        _write(config, cells, tasks, records)
+
+
+def _planned_records(config: SweepConfig, tasks: list[EpisodeTask]) -> tuple[int, list[dict[str, Any]]]:
+    """(how many records --out holds, those of the planned episodes)."""
+    from pipelines.experiments.log import episode_log
+
+    planned = {t.key for t in tasks}
+    # the effective config each record carries is half its memory, and no part of the report reads it
+    loaded = episode_log(config.out).load(
+        repair=False, keep=lambda r: {k: v for k, v in r.items() if k != "config"}
+    )
+    return len(loaded), [r for key, r in loaded.items() if key in planned]
+
+
+def _write(
+    config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], records: list[dict[str, Any]]
+) -> None:
+    from pipelines.experiments.report import write_report
+
+    report = write_report(config.out, config.experiment, cells, records)
+    print(report.markdown)
+    print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
+    cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]
+    if cpu:
+        # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
+        mean = sum(cpu) / len(cpu)
+        total = mean * len(tasks)
+        k = 1 if config.backend == "inline" else config.workers  # inline runs one episode at a time
+        workers = f"{k} worker{'s' if k > 1 else ''} on {k} free core{'s' if k > 1 else ''}"
+        print(
+            f"CPU per episode {mean:.2f} s (mean of {len(cpu)}); the {len(tasks)} planned episodes take "
+            f"{duration(total)} of CPU: {duration(total / k)} for {workers}",
+            file=sys.stderr,
+        )
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` in the unit that reads best: "42.0 s", "3.5 min", "2.25 h", "12.5 days". The unit is
+    chosen on the rounded figure, so 59.96 s reads "1.0 min", not "60.0 s"."""
+    if round(seconds, 1) < 60:
+        return f"{seconds:.1f} s"
+    if round(seconds / 60, 1) < 60:
+        return f"{seconds / 60:.1f} min"
+    if round(seconds / 3600, 2) < 48:
+        return f"{seconds / 3600:.2f} h"
+    return f"{seconds / 86400:.1f} days"

@@ -1,0 +1,36 @@
+"""Controller plugins that fail as a sweep's episodes may: ``Dies`` ends its own worker process (as a
+segfault in a library or the kernel's OOM killer would), ``RaisesOnCircles`` raises on the circle crossings
+(every other episode of a cell, on every run), ``SetInDescribe`` describes itself with a set (no JSON)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from typing import Any
+
+import numpy as np
+
+from crowdsim.env import Observation
+from tests.plugins.toy_controller import StraightLine
+
+
+class Dies(StraightLine):
+    name = "dies"
+
+    def reset(self, obs: Observation) -> None:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+class RaisesOnCircles(StraightLine):
+    name = "raises_on_circles"
+
+    def reset(self, obs: Observation) -> None:
+        if np.allclose(obs.human_goals, -obs.human_positions, rtol=0, atol=1e-9):  # the circle: goal = -start
+            raise RuntimeError("solver crashed on this crowd")
+
+
+class SetInDescribe(StraightLine):
+    name = "set_in_describe"
+
+    def describe(self) -> dict[str, Any]:
+        return {"predictor_sha256": None, "config": {"modes": {"a", "b"}}}
