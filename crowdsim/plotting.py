@@ -77,7 +77,7 @@ def plot_episode(
     *,
     radius: float = RADIUS,
     dt: float | None = None,
-    times: Sequence[float] | None = None,
+    times: np.ndarray | Sequence[float] | None = None,
 ) -> Figure:
     """Trajectories of one episode with the agents drawn to scale at a few snapshot steps.
 
