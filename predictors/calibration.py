@@ -34,7 +34,7 @@ import numpy as np
 
 from predictors.base import DT, Predictor
 from predictors.checkpoint import read_document
-from predictors.conformal import check_alpha, min_samples, step_counts, step_quantiles
+from predictors.conformal import alpha_text, check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
@@ -212,7 +212,7 @@ def calibration_from_errors(
     short = [k + 1 for k, q in enumerate(quantiles) if not math.isfinite(q)]
     if short:
         raise PredictorError(
-            f"too few {source} samples for alpha={alpha:g} at horizon step(s) {short} "
+            f"too few {source} samples for alpha={alpha_text(alpha)} at horizon step(s) {short} "
             f"(samples per step {list(counts)}, need at least {min_samples(alpha)}); use more data or a "
             "larger alpha"
         )
@@ -274,7 +274,7 @@ def read_calibration_file(path: Path) -> list[Calibration]:
         if any(other.matches(*block.key()) for other in same):
             raise PredictorError(
                 f"{path}: calibrations[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
-                f"alpha={block.alpha:g}; keep one of them"
+                f"alpha={alpha_text(block.alpha)}; keep one of them"
             )
         same.append(block)
     return result
@@ -333,7 +333,7 @@ def current_sha256(predictor: str, directory: str | Path | None = None) -> str |
 
 def recalibrate_command(predictor: str, source: str, alpha: float) -> str:
     """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``."""
-    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha:g}"
+    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}"
 
 
 def find_calibration(
@@ -355,19 +355,20 @@ def find_calibration(
     found = [(path, b) for path, b in stored if b.matches(predictor, source, alpha)]
     if not found:
         others = sorted(b.alpha for _, b in stored if b.predictor == predictor and b.source == source)
-        have = f" (it has alpha {', '.join(f'{a:g}' for a in others)})" if others else ""
+        have = f" (it has alpha {', '.join(alpha_text(a) for a in others)})" if others else ""
         files = " or ".join(str(p) for p in calibration_files(directory))
         raise PredictorError(
-            f"no {source} calibration at alpha={alpha:g} for predictor {predictor!r} in {files}{have}; "
-            f"run: {recalibrate_command(predictor, source, alpha)}"
+            f"no {source} calibration at alpha={alpha_text(alpha)} for predictor {predictor!r} in "
+            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha)}"
         )
     path, block = found[0]
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
+        command = recalibrate_command(predictor, source, alpha)
         raise PredictorError(
-            f"{path}: the {source} calibration at alpha={alpha:g} of predictor {predictor!r} was made for "
-            f"weights sha256 {block.predictor_sha256}, but the weights now have sha256 {expected}; the "
-            f"weights changed since calibration, recalibrate: {recalibrate_command(predictor, source, alpha)}"
+            f"{path}: the {source} calibration at alpha={alpha_text(alpha)} of predictor {predictor!r} was "
+            f"made for weights sha256 {block.predictor_sha256}, but the weights now have sha256 {expected}; "
+            f"the weights changed since calibration, recalibrate: {command}"
         )
     return block
 

@@ -15,31 +15,53 @@ approximate: the coverage measured on held-out data (``coverage``) is what to re
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 from typing import Final
 
 import numpy as np
 
 from predictors.errors import PredictorError
 
-# An alpha written as a decimal (0.1) is not exact in binary, so (n + 1)(1 - alpha) can land a hair above an
-# integer it equals mathematically; without this slack the rank would round up one sample too far.
-_RANK_SLACK: Final[float] = 1e-9
+# The smallest alpha accepted: its finite-sample quantile needs 1/alpha - 1 samples (10^12 here, more than any
+# calibration will have), and alphas closer than 1e-12 are one calibration key (predictors.calibration), so a
+# smaller one could not be told apart from its neighbours, nor from 0.
+MIN_ALPHA: Final[float] = 1e-12
 
 
 def check_alpha(alpha: float, what: str = "alpha") -> float:
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0.0 < alpha < 1.0:
         raise PredictorError(f"{what} must be a number with 0 < alpha < 1, got {alpha!r}")
+    if alpha < MIN_ALPHA:
+        raise PredictorError(
+            f"{what} must be at least {MIN_ALPHA:g} (a finite margin at {alpha!r} needs more than "
+            f"{1 / MIN_ALPHA:.0e} samples), got {alpha!r}"
+        )
     return float(alpha)
 
 
+def alpha_text(alpha: float) -> str:
+    """``alpha`` exactly, as its shortest decimal (``repr``): messages and the commands they advise name the
+    very calibration key, where ``:g`` keeps 6 digits and would print 0.1234567 as 0.123457, another key."""
+    return repr(float(alpha))
+
+
+def _exact(alpha: float) -> Fraction:
+    """``alpha`` as the decimal it prints as (its shortest repr: what the user wrote, 0.1 and not the binary
+    float 0.1000000000000000055...), exactly: (n + 1)(1 - alpha) then lands on an integer exactly when it
+    does in decimal, with no slack that would misplace the rank of alphas written with many digits."""
+    return Fraction(repr(check_alpha(alpha)))
+
+
 def conformal_rank(n: int, alpha: float) -> int:
-    """The 1-based rank ``ceil((n + 1)(1 - alpha))`` of the split-conformal quantile among ``n`` scores."""
-    return math.ceil((n + 1) * (1.0 - check_alpha(alpha)) - _RANK_SLACK)
+    """The 1-based rank ``ceil((n + 1)(1 - alpha))`` of the split-conformal quantile among ``n`` scores (at
+    least 1: 0 < alpha < 1)."""
+    return max(1, math.ceil((n + 1) * (1 - _exact(alpha))))
 
 
 def min_samples(alpha: float) -> int:
-    """The fewest scores for which the quantile at ``alpha`` is finite: ``ceil(1/alpha - 1)``."""
-    return math.ceil(1.0 / check_alpha(alpha) - 1.0 - _RANK_SLACK)
+    """The fewest scores for which the quantile at ``alpha`` is finite, ``ceil(1/alpha - 1)``: the least
+    ``n`` with ``conformal_rank(n, alpha) <= n`` (at least 1)."""
+    return max(1, math.ceil(1 / _exact(alpha) - 1))
 
 
 def conformal_quantile(scores: np.ndarray, alpha: float) -> float:

@@ -16,7 +16,15 @@ from predictors.calibration import (
     read_calibrations,
     save_calibration,
 )
-from predictors.conformal import conformal_quantile, coverage, min_samples, step_counts, step_quantiles
+from predictors.conformal import (
+    check_alpha,
+    conformal_quantile,
+    conformal_rank,
+    coverage,
+    min_samples,
+    step_counts,
+    step_quantiles,
+)
 from predictors.constant_velocity import ConstantVelocity
 from predictors.data.prepare import prepare_ewap
 from predictors.errors import PredictorError, UnknownPredictor
@@ -48,6 +56,65 @@ def test_too_few_samples_give_infinity():
     assert conformal_quantile(np.array([]), 0.1) == math.inf
     assert min_samples(0.1) == 9 and min_samples(0.2) == 4 and min_samples(0.05) == 19
     assert conformal_quantile(np.arange(1.0, 10.0), 0.1) == 9.0  # n = 9 is just enough
+
+
+def test_an_alpha_near_one_takes_the_smallest_score_not_the_largest():
+    """(n + 1)(1 - alpha) below the old fixed slack of 1e-9 made the rank 0, and index -1 read the largest
+    score: the widest margin for the loosest alpha. The rank is at least 1."""
+    scores = np.arange(100.0, 0.0, -1.0)
+    assert conformal_rank(100, 0.99999999999999) == 1
+    assert conformal_quantile(scores, 0.99999999999999) == 1.0
+    assert conformal_quantile(scores, 0.9999999) == 1.0
+    assert conformal_rank(0, 0.5) == 1  # no scores: rank 1 > 0, infinity
+
+
+@pytest.mark.parametrize(("n", "alpha"), [(2, 0.3333333333), (9, 0.0999999999), (99, 0.00999999999)])
+def test_an_alpha_written_with_many_digits_gets_its_exact_rank(n, alpha):
+    """ceil((n + 1)(1 - alpha)) just above n means too few samples: the fixed slack rounded it down to n,
+    a finite margin the definition does not give. min_samples agrees with the rank."""
+    assert conformal_rank(n, alpha) == n + 1
+    assert conformal_quantile(np.arange(1.0, n + 1), alpha) == math.inf
+    assert min_samples(alpha) == n + 1 and conformal_rank(n + 1, alpha) == n + 1
+
+
+@pytest.mark.parametrize("alpha", [0.01, 0.05, 0.1, 0.2, 0.5, 0.7, 0.45, 0.1234567, 0.99999999999999, 1e-12])
+def test_min_samples_is_the_fewest_with_a_finite_rank(alpha):
+    fewest = min_samples(alpha)
+    if fewest < 10**6:
+        assert conformal_rank(fewest, alpha) <= fewest
+    assert conformal_rank(fewest - 1, alpha) > fewest - 1
+
+
+@pytest.mark.parametrize(
+    ("n", "alpha", "rank"),
+    # the shipped blocks' alphas at their sample counts (checkpoints/calibrations.json), by hand, and counts
+    # where (n + 1)(1 - alpha) is an integer, which binary rounding must not push one sample up
+    [
+        (11698, 0.01, 11583),  # 11699 * 0.99 = 11582.01
+        (532, 0.05, 507),  # 533 * 0.95 = 506.35
+        (482, 0.1, 435),  # 483 * 0.9 = 434.7
+        (22263, 0.2, 17812),  # 22264 * 0.8 = 17811.2
+        (10726, 0.5, 5364),  # 10727 * 0.5 = 5363.5
+        (99, 0.01, 99),
+        (19, 0.05, 19),
+        (9, 0.1, 9),
+        (4, 0.2, 4),
+        (1, 0.5, 1),
+        (9, 0.7, 3),
+    ],
+)
+def test_the_ranks_of_the_shipped_alphas_are_unchanged(n, alpha, rank):
+    assert conformal_rank(n, alpha) == rank
+
+
+def test_an_alpha_too_small_for_any_calibration_is_refused_in_one_line():
+    """min_samples(1e-309) overflowed (1 / alpha is inf) into a traceback; below 1e-12 no calibration can
+    have the samples, and alphas that close are one calibration key."""
+    assert min_samples(1e-12) == 10**12 - 1
+    for tiny in (1e-309, 5e-324, 1e-13):
+        for call in (min_samples, check_alpha, lambda a: conformal_rank(10, a)):
+            with pytest.raises(PredictorError, match=r"alpha must be at least 1e-12 .*got "):
+                call(tiny)
 
 
 @pytest.mark.parametrize("alpha", [0.0, 1.0, -0.1, 1.5, True, "0.1"])
@@ -278,6 +345,23 @@ def test_find_calibration(tmp_path):
     )
     with pytest.raises(PredictorError, match=r"\(it has alpha 0.1, 0.2\); run: crowdmpc calibrate"):
         find_calibration("social_lstm_eth", "real", 0.05, tmp_path, sha256=SHA_A)
+
+
+def test_advice_names_an_alpha_of_many_digits_exactly(tmp_path):
+    """The advice printed alpha with :g (6 digits): 0.1234567 became --alpha 0.123457, a block that never
+    matches 0.1234567 (keys match within 1e-12). Following the advice now makes the block asked for."""
+    from predictors.calibration import recalibrate_command
+
+    command = recalibrate_command("constant_velocity", "closed-loop", 0.1234567)
+    assert command.endswith("--alpha 0.1234567")
+    with pytest.raises(PredictorError) as missing:
+        find_calibration("social_lstm_eth", "real", 0.1234567, tmp_path, sha256=SHA_A)
+    assert "alpha=0.1234567 " in str(missing.value) and str(missing.value).endswith("--alpha 0.1234567")
+    made = block(alpha=float(str(missing.value).rsplit(" ", 1)[1]))
+    save_calibration(made, tmp_path)
+    assert find_calibration("social_lstm_eth", "real", 0.1234567, tmp_path, sha256=SHA_A) == made
+    with pytest.raises(PredictorError, match=r"\(it has alpha 0.1234567\)"):
+        find_calibration("social_lstm_eth", "real", 0.5, tmp_path, sha256=SHA_A)
 
 
 def test_find_calibration_refuses_other_weights(tmp_path):
