@@ -6,10 +6,13 @@ import argparse
 import dataclasses
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pipelines.commands import check_writable, humans_list
 from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.loop.margins import MarginSpec
 
 EPILOG = """examples:
   crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.5,0.2,0.1,0.05,0.01
@@ -38,6 +41,17 @@ def _alphas(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"--alpha takes numbers like 0.1,0.05, got {text!r}") from None
     if not values or not all(0.0 < a < 1.0 for a in values):
         raise argparse.ArgumentTypeError(f"--alpha needs numbers in (0, 1), got {text!r}")
+    from predictors.calibration import ALPHA_TOLERANCE
+    from predictors.conformal import MIN_ALPHA
+
+    if min(values) < MIN_ALPHA:  # its margin would need more than 10^12 samples (predictors.conformal)
+        raise argparse.ArgumentTypeError(f"--alpha needs numbers of at least {MIN_ALPHA:g}, got {text!r}")
+    # one block per alpha: a repeat (within the calibration key's tolerance) would be stored once
+    for i, a in enumerate(values):
+        same = [b for b in values[:i] if abs(a - b) <= ALPHA_TOLERANCE]
+        if same:
+            twice = f"{a!r} twice" if same[0] == a else f"{same[0]!r} and {a!r}, one calibration,"
+            raise argparse.ArgumentTypeError(f"--alpha names {twice} in {text!r}; give each alpha once")
     return values
 
 
@@ -57,7 +71,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--predictor", required=True, help="a registered predictor, a zoo entry or orca_oracle")
     p.add_argument("--source", required=True, choices=("real", "closed-loop"))
     p.add_argument("--alpha", type=_alphas, default=(0.1,), metavar="A[,A..]", help="default 0.1")
-    p.add_argument("--horizon", type=int, default=4, help="steps calibrated (the MPC's H, default 4)")
+    p.add_argument(
+        "--horizon",
+        type=int,
+        default=4,
+        help="steps calibrated (the MPC's H, default 4; closed-loop: the MPC's own)",
+    )
     p.add_argument("--data-dir", type=Path, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
     p.add_argument("--episodes", type=int, default=200, help="closed-loop episodes (default 200)")
     p.add_argument("--humans", type=humans_list, default=(5, 6, 7, 8, 9), metavar="5,6,7", help="crowd sizes")
@@ -113,6 +132,11 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
     from predictors.calibration import calibrations_from_errors
 
     errors, classes, shortfall, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
+    if errors.shape[0] == 0:
+        raise PipelineError(
+            f"no human came within --near {args.near:g} m of a robot in {args.episodes} episode(s), so there "
+            "is no error to calibrate; raise --near or --episodes"
+        )
     if errors.shape[1:] != (args.horizon,):
         raise PipelineError(f"the controller predicts {errors.shape[1:]} steps, --horizon is {args.horizon}")
     return calibrations_from_errors(
@@ -147,6 +171,7 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
     conformal-shortfall, which docs/examples/safe_crossing.toml plans with, refuse that predictor."""
     from pipelines.loop.margins import class_tables
     from predictors.calibration import stored_calibrations
+    from predictors.conformal import alpha_text
 
     in_force = stored_calibrations()
     losing = []
@@ -156,7 +181,7 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
             if old.matches(*block.key()) and any(
                 new[mode] is None and had is not None for mode, had in class_tables(old).items()
             ):
-                losing.append(f"alpha {block.alpha:g} (in force: {path})")
+                losing.append(f"alpha {alpha_text(block.alpha)} (in force: {path})")
     if losing:
         raise PipelineError(
             f"not stored: {args.predictor}'s {args.source} calibration at {', '.join(losing)} has margins "
@@ -165,23 +190,72 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
         )
 
 
-def run(args: argparse.Namespace) -> int:
-    from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
-    from pipelines.loop.margins import parse_margins
-    from pipelines.plain_json import plain
-    from predictors.calibration import calibrations_path, save_calibration
-    from predictors.conformal import coverage
-    from predictors.registry import checkpoint_sha256, load_predictor
+def _check_first(args: argparse.Namespace) -> str | None:
+    """Refuse now what would otherwise fail after the calibration episodes; returns the sha256 of the
+    predictor's weights (None for a weightless one)."""
+    from pipelines.loop.margins import MarginSpec, parse_margins
+    from predictors.calibration import calibrations_path, stored_calibrations
+    from predictors.registry import checkpoint_sha256
 
-    parse_margins(args.holdout_margins)  # a typo fails now, not after the calibration episodes
+    holdout_margins = parse_margins(args.holdout_margins)  # a typo fails now
     if not 1 <= args.horizon <= 50:
         raise PipelineError(f"--horizon must be in 1..50 steps, got {args.horizon}")
     if not 1 <= args.episodes <= 100_000:
         raise PipelineError(f"--episodes must be in 1..100000, got {args.episodes}")
+    if args.source == "real" and holdout_margins != MarginSpec():
+        raise PipelineError(
+            "--holdout-margins is for --source closed-loop (held-out episodes plan with them); the held-out "
+            "real scenes were recorded, nothing plans in them: leave it out"
+        )
     check_writable(args.json, "--json", json_only=True)
     if not args.dry_run:  # the user zoo's file (never the shipped zoo's): refused now, not after the episodes
         check_writable(calibrations_path(), "calibrations file")
+        stored_calibrations()  # read as storing will: a file calibrate cannot extend fails now
     sha256 = checkpoint_sha256(args.predictor)
+    if args.source == "closed-loop":
+        _check_closed_loop(args, holdout_margins, sha256)
+    return sha256
+
+
+def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sha256: str | None) -> None:
+    """The horizon the controller predicts, and the held-out margins resolve (from a block stored already,
+    or one this run stores), as the held-out episodes' controller will resolve them."""
+    from pipelines.experiments.calibrate import plan_horizon
+    from pipelines.loop.margins import CALIBRATED_MODES
+    from predictors.calibration import ALPHA_TOLERANCE
+    from predictors.errors import PredictorError
+
+    horizon = plan_horizon(_plan(args))
+    if args.horizon != horizon:
+        raise PipelineError(
+            f"--horizon {args.horizon}: closed-loop calibration measures the {args.controller} MPC's "
+            f"predictions, {horizon} steps (its horizon, which calibrate does not change); use --horizon "
+            f"{horizon}, or calibrate real scenes at {args.horizon} steps: --source real "
+            f"--horizon {args.horizon}"
+        )
+    stored_here = (
+        not args.dry_run
+        and holdout_margins.mode in CALIBRATED_MODES
+        and holdout_margins.source == "closed-loop"
+        and any(abs(holdout_margins.alpha - a) <= ALPHA_TOLERANCE for a in args.alpha)
+    )
+    if not args.holdout or stored_here:
+        return
+    try:
+        holdout_margins.resolve(args.predictor, horizon, sha256)
+        holdout_margins.resolve_classes(args.predictor, horizon, sha256)
+    except (PipelineError, PredictorError) as exc:
+        raise PipelineError(f"--holdout-margins {args.holdout_margins}: {exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
+    from pipelines.plain_json import plain
+    from predictors.calibration import save_calibration
+    from predictors.conformal import coverage
+    from predictors.registry import load_predictor
+
+    sha256 = _check_first(args)
     if args.source == "real":
         from predictors.oracle import ORACLE_PREDICTOR
 

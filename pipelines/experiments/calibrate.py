@@ -9,7 +9,8 @@ the episode is over, where each human really was ``k`` steps later.
 Only humans within ``near`` metres of some robot at prediction time are scored. The margin acts only where
 the robot-human penalty is active; a human walking alone on the far side of the scene is predicted almost
 perfectly by any model, and counting such samples would shrink the quantile without making a crossing any
-safer. ``near = inf`` scores everyone.
+safer. ``near = inf`` scores everyone (stored as ``"near": null`` in a block's details: JSON has no
+infinity).
 
 Seeds: calibration episodes use ``seed, seed + 1, ...`` from ``CALIBRATION_SEED`` (one million); sweeps and
 ``simulate`` use small seeds (a 1000-episode cell uses 0..499), so the two never share a crowd.
@@ -26,11 +27,12 @@ import numpy as np
 
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec, class_tables
+from predictors.conformal import alpha_text
 from predictors.conformal_classes import motion_classes
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
-    from pipelines.loop.controllers import ControlOutput
+    from pipelines.loop.controllers import ControllerSpec, ControlOutput
     from pipelines.loop.episode import EpisodeResult
     from pipelines.loop.spec import ControllerName
 
@@ -131,6 +133,8 @@ class ClosedLoopPlan:
             raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
         if self.controller not in ("cmpc", "dmpc"):
             raise PipelineError(f"calibration runs cmpc or dmpc, got {self.controller!r}")
+        if not self.near > 0:  # NaN too
+            raise PipelineError(f"--near must be > 0 m (inf scores everyone), got {self.near!r}")
 
     def schedule(self) -> list[tuple[str, int, int]]:
         """``(scenario, n_humans, seed)`` of every episode: scenarios alternate, crowd sizes cycle."""
@@ -162,13 +166,11 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
     from tqdm import tqdm
 
     from crowdsim.profiles import make_env_config
-    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.controllers import make_controller
     from pipelines.loop.episode import run_episode
 
     env_config = make_env_config(plan.profile, plan.visibility)
-    # ClosedLoopPlan.__post_init__ admits "cmpc" and "dmpc" only.
-    spec = ControllerSpec(cast("ControllerName", plan.controller), plan.predictor, margins=plan.margins)
-    controller = make_controller(spec, env_config)
+    controller = make_controller(_controller_spec(plan), env_config)
     observer = PredictionErrors(plan.near)
     successes = 0
     try:
@@ -186,11 +188,34 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
     finally:
         controller.close()
     details = asdict(plan) | {
+        "near": near_json(plan.near),
         "margins": plan.margins.label,
         "seeds": [plan.seed, plan.seed + plan.episodes - 1],
         "successes": successes,
     }
     return ClosedLoopErrors(observer.errors, observer.classes, observer.shortfall, details)
+
+
+def _controller_spec(plan: ClosedLoopPlan) -> ControllerSpec:
+    from pipelines.loop.controllers import ControllerSpec
+
+    # ClosedLoopPlan.__post_init__ admits "cmpc" and "dmpc" only.
+    return ControllerSpec(cast("ControllerName", plan.controller), plan.predictor, margins=plan.margins)
+
+
+def plan_horizon(plan: ClosedLoopPlan) -> int:
+    """The steps ``plan``'s controller predicts, so the steps its errors cover: the MPC's horizon under the
+    plan's profile, which calibration does not change."""
+    from crowdsim.profiles import make_env_config
+    from pipelines.loop.mpc import mpc_config
+
+    world = make_env_config(plan.profile, plan.visibility).world()
+    return mpc_config(_controller_spec(plan), world=world).horizon
+
+
+def near_json(near: float) -> float | None:
+    """``near`` as a block's details store it: JSON has no infinity, so null is ``inf`` (everyone scored)."""
+    return near if math.isfinite(near) else None
 
 
 def errors_sha256(errors: np.ndarray, details: dict[str, Any], classes: np.ndarray | None = None) -> str:
@@ -213,7 +238,7 @@ def format_coverage(
     lines = []
     for i, alpha in enumerate(alphas):
         margins = ", ".join(f"{q:.3f}" for q in quantiles[i])
-        line = f"  alpha {alpha:<5g} margins m_k [m]: {margins}"
+        line = f"  alpha {alpha_text(alpha):<5} margins m_k [m]: {margins}"
         if coverage is not None:
             line += f" | held-out coverage (target {1 - alpha:.0%}): " + ", ".join(
                 f"{c:.1%}" for c in coverage[i]
@@ -224,22 +249,24 @@ def format_coverage(
 
 def class_coverage_report(
     blocks: Sequence[Any], holdout: np.ndarray | None, classes: np.ndarray | None, shortfall: bool = False
-) -> list[list[list[float]]] | None:
+) -> list[list[list[float]] | None] | None:
     """Print each block's class margins (``predictors.conformal_classes``; ``shortfall``: those of the
     distance-shortfall score) and, given held-out scores with their classes, the coverage within each class;
-    returns that coverage (block, class, step) or None."""
+    returns that coverage (block, class, step), one entry per block in order (None for a block without class
+    margins, so entry i stays blocks[i]'s), or None without held-out scores."""
     from predictors.conformal_classes import MOTION_CLASSES, class_coverage
 
-    report = []
+    report: list[list[list[float]] | None] = []
     for block in blocks:
         table = block.shortfall if shortfall else block.classes
         if table is None:
+            report.append(None)
             continue
         cover = None
         if holdout is not None and classes is not None:
             cover = class_coverage(holdout, classes, table)
         score = "distance shortfall" if shortfall else "displacement"
-        print(f"  alpha {block.alpha:g}, {score} margins per motion class (samples at step 1):")
+        print(f"  alpha {alpha_text(block.alpha)}, {score} margins per motion class (samples at step 1):")
         for c, name in enumerate(MOTION_CLASSES):
             margins = ", ".join(f"{q:.3f}" for q in table.quantiles[c])
             line = f"    {name:<9} n={table.n[c][0]:<6} m_k [m]: {margins}"
@@ -266,8 +293,8 @@ def missing_class_margins(blocks: Sequence[Any]) -> list[str]:
         missing = [mode for mode, table in class_tables(block).items() if table is None]
         if missing:
             lines.append(
-                f"  alpha {block.alpha:g}: no margins per motion class, so {' and '.join(missing)} will "
-                f"refuse this calibration: a class had fewer than {min_samples(block.alpha)} samples at some "
-                "step (more --episodes give them)"
+                f"  alpha {alpha_text(block.alpha)}: no margins per motion class, so {' and '.join(missing)} "
+                f"will refuse this calibration: a class had fewer than {min_samples(block.alpha)} samples at "
+                "some step (more --episodes give them)"
             )
     return lines

@@ -83,6 +83,10 @@ class MarginSpec:
         alpha = self.alpha
         if isinstance(alpha, bool) or not isinstance(alpha, int | float) or not 0.0 < alpha < 1.0:
             raise PipelineError(f"margin alpha must be a number in (0, 1), got {alpha!r}")
+        from predictors.conformal import MIN_ALPHA
+
+        if alpha < MIN_ALPHA:  # no calibration can have the 10^12 samples its margin needs
+            raise PipelineError(f"margin alpha must be at least {MIN_ALPHA:g}, got {alpha!r}")
         values = tuple(self.values)
         for v in values:
             if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= MAX_MARGIN:
@@ -109,8 +113,10 @@ class MarginSpec:
             return "none"
         if self.mode == "fixed":
             return "fixed" + "_".join(f"{v:g}" for v in self.values)
+        from predictors.conformal import alpha_text
+
         source = "" if self.source == "closed-loop" else f"-{self.source}"  # per-class modes: closed-loop
-        return f"{LABEL_PREFIXES[self.mode]}{self.alpha:g}{source}"
+        return f"{LABEL_PREFIXES[self.mode]}{alpha_text(self.alpha)}{source}"
 
     def resolve(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[float, ...]:
         """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``: the same
@@ -134,13 +140,14 @@ class MarginSpec:
         table = class_tables(block)[self.mode]
         if table is None:
             from predictors.calibration import recalibrate_command
+            from predictors.conformal import alpha_text
 
             assert predictor is not None  # _block refused None
             command = recalibrate_command(predictor, self.source, self.alpha)
             raise PipelineError(
-                f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} has no {self.mode} "
-                "margins per motion class (made before they existed, or too few samples in a class for this "
-                f"alpha); recalibrate with enough episodes: {command} --episodes 200"
+                f"the {self.source} calibration of {predictor!r} at alpha={alpha_text(self.alpha)} has no "
+                f"{self.mode} margins per motion class (made before they existed, or too few samples in a "
+                f"class for this alpha); recalibrate with enough episodes: {command} --episodes 200"
             )
         return table
 
@@ -151,10 +158,7 @@ class MarginSpec:
 
         block = find_calibration(predictor, self.source, self.alpha, sha256=sha256)
         if len(block.quantiles) < horizon:
-            raise PipelineError(
-                f"the {self.source} calibration of {predictor!r} at alpha={self.alpha:g} covers "
-                f"{len(block.quantiles)} steps, the MPC's horizon is {horizon}; recalibrate with that horizon"
-            )
+            raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon))
         return block
 
     def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
@@ -190,3 +194,31 @@ def _number(text: str, whole: str) -> float:
     if not math.isfinite(value):
         raise PipelineError(f"bad margins {whole!r}: {text!r} is not a finite number")
     return value
+
+
+def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int) -> str:
+    """Why a calibration of ``covered`` steps cannot give the margins of a ``horizon``-step MPC, and what
+    does: closed-loop calibration predicts with the MPC's default horizon (``crowdmpc calibrate`` cannot
+    change it), so only real scenes can be calibrated at another horizon, and the per-class modes have
+    none of those."""
+    from predictors.calibration import recalibrate_command
+    from predictors.conformal import alpha_text
+
+    alpha = alpha_text(spec.alpha)
+    why = (
+        f"the {spec.source} calibration of {predictor!r} at alpha={alpha} covers {covered} steps, the MPC's "
+        f"horizon is {horizon}"
+    )
+    real = f"{recalibrate_command(predictor, 'real', spec.alpha)} --horizon {horizon}"
+    if spec.source == "real":
+        return f"{why}; recalibrate the real scenes at that horizon: {real}"
+    closed = (
+        f"closed-loop calibration runs the MPC at its default horizon of {covered} steps, so plan with a "
+        f"horizon of at most {covered} (mpc.horizon)"
+    )
+    if spec.mode in PER_HUMAN_MODES:  # real scenes hold no motion classes (MarginSpec)
+        return f"{why}; {spec.mode} margins come from the closed-loop calibration only, and {closed}"
+    return (
+        f"{why}; {closed}, or calibrate real scenes at {horizon} steps: {real}, and plan with "
+        f"--margins conformal:{alpha}:real"
+    )

@@ -1,5 +1,6 @@
 """Safety margins: parsing, resolution from a calibration, the MPC planning with them, closed-loop errors."""
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -263,3 +264,154 @@ def test_calibrated_margins_need_a_predictor_and_specs_may_be_padded():
     with pytest.raises(PipelineError, match="conformal margins need a predictor; this controller uses none"):
         MarginSpec("conformal").resolve(None, 4, None)
     assert parse_margins(" conformal:0.05 ") == MarginSpec("conformal", alpha=0.05)
+
+
+# ------------------------------------------------------------------------- calibrate: refused before the work
+CALIBRATE = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
+
+
+def _episodes(monkeypatch, errors: np.ndarray | None = None) -> list:
+    """calibrate's closed-loop episodes replaced by synthetic errors (tests/calibration_blocks.class_errors:
+    19 per motion class, shortfall = error) or ``errors``; returns the plans they were asked for."""
+    from pipelines.experiments import calibrate as experiment
+    from tests.calibration_blocks import class_errors
+
+    plans = []
+
+    def measured(plan, progress=True):
+        plans.append(plan)
+        scores, motion = class_errors(4) if errors is None else (errors, np.zeros(len(errors), dtype=int))
+        return experiment.ClosedLoopErrors(scores, motion, scores, {"seeds": [plan.seed, plan.seed]})
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", measured)
+    return plans
+
+
+def _refused(capsys, argv: list[str]) -> str:
+    from pipelines.cli import main
+
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # the parser's own errors (--alpha)
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err
+    return err
+
+
+def test_calibrate_refuses_an_alpha_no_calibration_can_reach(monkeypatch, capsys):
+    """--alpha 1e-309 ran the episodes, then min_samples overflowed into a traceback; margins that small
+    passed parse_margins. Both are refused in one line, before any episode."""
+    plans = _episodes(monkeypatch)
+    err = _refused(capsys, [*CALIBRATE, "--alpha", "0.1,1e-309", "--dry-run"])
+    assert "--alpha needs numbers of at least 1e-12, got '0.1,1e-309'" in err and plans == []
+    with pytest.raises(PipelineError, match="margin alpha must be at least 1e-12, got 1e-13"):
+        parse_margins("conformal:1e-13")
+
+
+def test_calibrate_refuses_a_repeated_alpha(monkeypatch, capsys):
+    """--alpha 0.5,0.5 said "wrote 2 block(s)" and stored one."""
+    plans = _episodes(monkeypatch)
+    assert "--alpha names 0.5 twice in '0.5,0.5'" in _refused(capsys, [*CALIBRATE, "--alpha", "0.5,0.5"])
+    err = _refused(capsys, [*CALIBRATE, "--alpha", "0.1,0.2,0.1000000000000001"])
+    assert "names 0.1 and 0.1000000000000001, one calibration," in err and plans == []
+
+
+def test_calibrate_near_inf_is_stored_as_null(monkeypatch):
+    """near = inf (the module's "scores everyone") ran every episode, then failed to store the block:
+    JSON has no infinity. It is stored as null."""
+    from predictors.calibration import Calibration
+
+    monkeypatch.setattr(
+        "pipelines.loop.episode.run_episode",
+        lambda *a, **k: SimpleNamespace(metrics=SimpleNamespace(success=1)),
+    )
+    details = closed_loop_errors(
+        ClosedLoopPlan("constant_velocity", episodes=1, near=math.inf), False
+    ).details
+    assert details["near"] is None
+    block = constant_velocity_block(np.outer(np.arange(1, 20) / 100.0, [1.0, 2.0, 3.0, 4.0]))
+    assert Calibration.from_json(block.to_json() | {"details": details}, "f").details["near"] is None
+    with pytest.raises(PipelineError, match=r"--near must be > 0 m \(inf scores everyone\), got nan"):
+        ClosedLoopPlan("constant_velocity", near=math.nan)
+
+
+def test_calibrate_says_no_human_came_near(monkeypatch, capsys):
+    """With no human within --near the message blamed the horizon: "the controller predicts (0,) steps"."""
+    _episodes(monkeypatch, errors=np.zeros((0, 0)))
+    err = _refused(capsys, [*CALIBRATE, "--near", "0.001", "--episodes", "3", "--dry-run"])
+    assert err.endswith(
+        "no human came within --near 0.001 m of a robot in 3 episode(s), so there is no error "
+        "to calibrate; raise --near or --episodes"
+    )
+
+
+def test_closed_loop_calibration_refuses_another_horizon_before_the_episodes(monkeypatch, capsys):
+    """The closed loop predicts the MPC's 4 steps: --horizon 6 ran every episode, then failed."""
+    plans = _episodes(monkeypatch)
+    err = _refused(capsys, [*CALIBRATE, "--horizon", "6", "--dry-run"])
+    assert err.endswith("use --horizon 4, or calibrate real scenes at 6 steps: --source real --horizon 6")
+    assert plans == []
+
+
+def test_a_short_calibration_says_what_gives_the_horizon(tmp_path, monkeypatch):
+    """ "recalibrate with that horizon" was impossible for the closed loop; the message names what works."""
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    errors = np.outer(np.arange(1, 20) / 100.0, [1.0, 2.0, 3.0, 4.0])
+    save_calibration(constant_velocity_block(errors))
+    with pytest.raises(PipelineError) as closed:
+        MarginSpec("conformal").resolve("constant_velocity", 6, None)
+    assert (
+        "plan with a horizon of at most 4 (mpc.horizon), or calibrate real scenes at 6 steps: crowdmpc "
+        "calibrate --predictor constant_velocity --source real --alpha 0.1 --horizon 6, and plan with "
+        "--margins conformal:0.1:real" in str(closed.value)
+    )
+    save_calibration(dataclasses.replace(constant_velocity_block(errors), source="real"))
+    with pytest.raises(
+        PipelineError,
+        match="recalibrate the real scenes at that horizon: crowdmpc calibrate "
+        "--predictor constant_velocity --source real --alpha 0.1 --horizon 6$",
+    ):
+        MarginSpec("conformal", source="real").resolve("constant_velocity", 6, None)
+
+
+def test_held_out_margins_are_resolved_before_the_episodes(tmp_path, monkeypatch, capsys):
+    """--holdout-margins conformal:0.3 with --dry-run (nothing stored), or an alpha this run does not
+    calibrate and no block has, failed after the calibration episodes. One this run stores is taken."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    plans = _episodes(monkeypatch)
+    held = [*CALIBRATE, "--holdout", "--holdout-margins", "conformal:0.3"]
+    for extra in (["--alpha", "0.3", "--dry-run"], ["--alpha", "0.5"]):
+        err = _refused(capsys, [*held, *extra])
+        assert "--holdout-margins conformal:0.3: no closed-loop calibration at alpha=0.3" in err
+    assert plans == []
+    from pipelines.cli import main
+
+    assert main([*held, "--alpha", "0.3"]) == 0  # stored by this run, then planned with
+    assert [plan.margins for plan in plans] == [MarginSpec(), MarginSpec("conformal", alpha=0.3)]
+
+
+def test_a_calibrations_file_calibrate_cannot_extend_is_refused_before_the_episodes(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    (tmp_path / "calibrations.json").write_text(
+        '{"format": "crowdmpc-calibrations", "version": 2, "calibrations": []}'
+    )
+    plans = _episodes(monkeypatch)
+    assert 'calibrations.json: unsupported "version" 2, expected 1' in _refused(capsys, [*CALIBRATE])
+    assert plans == []
+    from pipelines.cli import main
+
+    assert main([*CALIBRATE, "--dry-run"]) == 0  # stores nothing, so reads no file
+
+
+def test_real_calibration_refuses_held_out_margins(monkeypatch, capsys):
+    """Held-out real scenes plan nothing: --holdout-margins was ignored, yet recorded in --json."""
+    import pipelines.commands.calibrate as command
+
+    monkeypatch.setattr(command, "_real", lambda *a: pytest.fail("read the scenes"))
+    argv = ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--holdout"]
+    err = _refused(capsys, [*argv, "--holdout-margins", "conformal-motion:0.3", "--dry-run"])
+    assert "--holdout-margins is for --source closed-loop" in err

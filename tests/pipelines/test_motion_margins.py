@@ -1,6 +1,7 @@
 """conformal-motion margins: parsing, resolution from a calibration with class margins, per-human margins in
 the controller's step."""
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -158,3 +159,34 @@ def test_calibrate_does_not_store_a_block_without_class_margins_over_one_with_th
     _check_keeps_class_margins([full], args)
     save_calibration(few, tmp_path)  # by hand: the block in force now has none to lose
     _check_keeps_class_margins([few], args)
+
+
+def test_held_out_class_coverage_stays_with_its_block(capsys):
+    """calibrate --json's holdout_class_coverage and holdout_shortfall_coverage skipped blocks without
+    class margins, so entry i was no longer blocks[i]'s: a block without them has None in its place."""
+    from pipelines.experiments.calibrate import class_coverage_report
+
+    errors, motion = class_errors(4)
+    full = constant_velocity_block(errors, classes=motion, shortfall=errors)
+    few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    assert few.classes is None
+    for shortfall in (False, True):
+        report = class_coverage_report([few, full], errors, motion, shortfall=shortfall)
+        assert report is not None and len(report) == 2 and report[0] is None
+        assert report[1] is not None and report[1][0] == pytest.approx([18 / 19] * 4)
+    assert class_coverage_report([few, full], None, None) is None
+
+
+def test_labels_and_messages_name_an_alpha_of_many_digits_exactly(tmp_path, monkeypatch):
+    """Labels and advice printed alpha with :g: 0.1234567 and 0.1234568 shared the label cpm0.123457 and
+    the advice's --alpha 0.123457 made a block that never matches."""
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
+    assert MarginSpec("conformal-motion", alpha=0.1234567).label == "cpm0.1234567"
+    assert MarginSpec("conformal", alpha=0.1234568).label == "cp0.1234568"
+    errors, motion = class_errors(4)
+    block = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    save_calibration(dataclasses.replace(block, alpha=0.1234567), tmp_path)
+    with pytest.raises(
+        PipelineError, match=r"alpha=0\.1234567 has no conformal-motion .*--alpha 0\.1234567 "
+    ):
+        MarginSpec("conformal-motion", alpha=0.1234567).resolve_classes("constant_velocity", 4, None)
