@@ -45,13 +45,16 @@ def check_predictors(experiment: Experiment) -> None:
 
 
 def check_margins(experiment: Experiment) -> None:
-    """Every method's margins resolve (a calibration that matches the weights) before workers start."""
+    """Every method's margins resolve (a calibration that matches the weights, with per-class margins for the
+    per-human modes) before workers start."""
     from pipelines.loop.mpc import mpc_config
     from predictors.registry import checkpoint_sha256
 
     for _, spec in experiment.methods:
         name = spec.predictor_name
-        spec.margins.resolve(name, mpc_config(spec).horizon, checkpoint_sha256(name))
+        horizon, sha256 = mpc_config(spec).horizon, checkpoint_sha256(name)
+        spec.margins.resolve(name, horizon, sha256)
+        spec.margins.resolve_classes(name, horizon, sha256)
 
 
 def configured_experiment(cfg: RunConfig) -> Experiment:

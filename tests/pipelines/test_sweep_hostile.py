@@ -307,3 +307,14 @@ def test_changed_margins_per_motion_class_are_refused_too(good, tmp_path):
         PipelineError, match=r"margins \[\] m, but the cell's margins are now \[\] m \(per motion"
     ):
         run_sweep(_config(tmp_path))
+
+
+@pytest.mark.parametrize("mode", ["conformal", "conformal-motion", "conformal-shortfall"])
+def test_margins_without_a_calibration_are_refused_before_the_sweep_starts(mode, tmp_path, capsys):
+    """The per-human modes resolve their class margins in the controller only: the check before the workers
+    passed them, and the sweep made its folder, started workers and stopped on its first 4 episodes."""
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--episodes-per-cell", "1"]
+    assert main(argv + ["--margins", f"{mode}:0.3", "--backend", "inline", "--out", str(out)]) == 2
+    assert "no closed-loop calibration at alpha=0.3" in capsys.readouterr().err
+    assert not out.exists()
