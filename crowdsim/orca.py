@@ -40,6 +40,12 @@ import numpy as np
 from crowdsim.errors import SimulationError
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
+# neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
+# crowd; inf, every agent a neighbour, works as it is (inf squared is inf).
+MAX_NEIGHBOR_DIST: Final[float] = 1e6  # m
+# 1 / time_horizon scales the relative positions: 1e-305 s overflowed the velocity obstacles to inf (and
+# gave velocities pointing away from the goal). A microsecond is far below any horizon (CrowdNav: 5 s).
+MIN_TIME_HORIZON: Final[float] = 1e-6  # s
 
 
 @dataclass(frozen=True)
@@ -51,12 +57,18 @@ class OrcaParams:
     time_horizon: float = 5.0  # s, velocity obstacles are truncated at this horizon
 
     def __post_init__(self):
-        if not self.neighbor_dist > 0:
-            raise SimulationError(f"neighbor_dist must be > 0 m, got {self.neighbor_dist!r}")
+        dist = self.neighbor_dist
+        if not (dist > 0 and (dist <= MAX_NEIGHBOR_DIST or dist == math.inf)):
+            raise SimulationError(
+                f"neighbor_dist must be > 0 and at most {MAX_NEIGHBOR_DIST:g} m, or inf (every agent), "
+                f"got {dist!r}"
+            )
         if not (isinstance(self.max_neighbors, int) and self.max_neighbors >= 0):
             raise SimulationError(f"max_neighbors must be an int >= 0, got {self.max_neighbors!r}")
-        if not self.time_horizon > 0:
-            raise SimulationError(f"time_horizon must be > 0 s, got {self.time_horizon!r}")
+        if not self.time_horizon >= MIN_TIME_HORIZON:
+            raise SimulationError(
+                f"time_horizon must be at least {MIN_TIME_HORIZON:g} s, got {self.time_horizon!r}"
+            )
 
 
 def preferred_velocities(

@@ -62,6 +62,27 @@ GUIDANCE_CLEARANCES: Final[tuple[GuidanceClearance, ...]] = get_args(GuidanceCle
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
 ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
 
+# Upper bounds of the numbers that enter the NLP: far above any sensible value, low enough that its cost,
+# gradient and exact Hessian stay finite with all of them at their bounds together (rho = 1e300 made the
+# Hessian Inf, and a Fatrop solve, which has no wall-time limit, ran on for minutes). Measured there (3
+# robots, 2 humans, accelerations up to 10 a_max, positions up to 100 m): |F| up to 2e45, the Hessian 5e36;
+# a short closed loop of CMPC and DMPC took at most 0.1 s a solve. The thresholds that never enter the NLP
+# (xi, epsilon, solver_tol, restart_penalty, stall_release_s) are only compared with: any finite value does.
+MAX_WEIGHT: Final[float] = 1e12  # Table I's largest weight is w_coll = 1e7
+MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
+    **{name: (MAX_WEIGHT, "") for name in ("w_goal", "w_acce", "w_jerk", "w_coll", "w_floc")},
+    "rho": (1e3, " s^2"),  # Table I: 0.5
+    "mu": (1e4, " 1/m^2"),  # Table I: 30; at 1e4 smax is max(z, 0) to within 7e-5 m^2
+    "d_min": (1e3, " m"),  # Table I: 0.8; the scenarios are 10 m across
+    "d_flock": (1e3, " m"),  # 1.2
+    "delta": (1e3, ""),  # 1e-3 (m in Eq. 7, m^2 in Eq. 15)
+    "cost_scale": (1e3, ""),  # 1; docs/examples/many_robots.toml scales F down, by 0.01
+    # the world's facts, as the simulator bounds them (crowdsim/env.py, ENV_BOUNDS; dt: its time limit)
+    "dt": (86_400.0, " s"),
+    "v_max": (100.0, " m/s"),
+    "a_max": (1000.0, " m/s^2"),
+}
+
 
 @dataclass(frozen=True)
 class MPCConfig:
@@ -198,22 +219,7 @@ class MPCConfig:
     stall_release_s: float = 0.0
 
     def __post_init__(self):
-        for name in ("horizon", "j_max", "solver_max_iter"):
-            value = getattr(self, name)
-            minimum = 0 if name == "solver_max_iter" else 1
-            if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-                raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
-        positive = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi", "epsilon", "delta")
-        positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")
-        non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty", "stall_release_s")
-        for name in positive + non_negative:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-                raise MPCConfigError(f"{name} must be a finite number, got {value!r}")
-            if name in positive and value <= 0:
-                raise MPCConfigError(f"{name} must be > 0, got {value!r}")
-            if name in non_negative and value < 0:
-                raise MPCConfigError(f"{name} must be >= 0, got {value!r}")
+        self._check_numbers()
         for name in ("warm_start", "multi_start", "jit", "dmpc_pairs"):
             if not isinstance(getattr(self, name), bool):
                 raise MPCConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -256,6 +262,30 @@ class MPCConfig:
         if self.coupled_mode not in COUPLED_MODES:
             raise MPCConfigError(f"coupled_mode must be one of {COUPLED_MODES}, got {self.coupled_mode!r}")
         self._check_margins()
+
+    def _check_numbers(self) -> None:
+        """The counts, weights, lengths and tolerances: finite, of the right sign, within ``MPC_BOUNDS``."""
+        for name in ("horizon", "j_max", "solver_max_iter"):
+            value = getattr(self, name)
+            minimum = 0 if name == "solver_max_iter" else 1
+            if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+                raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        positive: tuple[str, ...] = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi")
+        positive += ("epsilon", "delta")
+        positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")
+        non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty", "stall_release_s")
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise MPCConfigError(f"{name} must be a finite number, got {value!r}")
+            if name in positive and value <= 0:
+                raise MPCConfigError(f"{name} must be > 0, got {value!r}")
+            if name in non_negative and value < 0:
+                raise MPCConfigError(f"{name} must be >= 0, got {value!r}")
+        for name, (most, unit) in MPC_BOUNDS.items():
+            value = getattr(self, name)
+            if value > most:
+                raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {value!r}")
 
     def _check_margins(self) -> None:
         margins = self.human_margins

@@ -1,6 +1,7 @@
 """ORCA against hand-computed cases, brute-force geometry and an independent optimiser."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -30,6 +31,31 @@ def test_params_validation_names_the_value():
         OrcaParams(max_neighbors=-1)
     with pytest.raises(SimulationError, match="time_horizon.*0"):
         OrcaParams(time_horizon=0.0)
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        # squared: 1e300 passed and ended the first step in OverflowError
+        ({"neighbor_dist": 1e300}, "neighbor_dist must be > 0 and at most 1e+06 m, or inf (every agent)"),
+        ({"neighbor_dist": math.nan}, "neighbor_dist must be > 0"),
+        # 1 / time_horizon scales positions: 1e-305 overflowed the velocity obstacles
+        ({"time_horizon": 1e-305}, "time_horizon must be at least 1e-06 s, got 1e-305"),
+    ],
+)
+def test_lengths_and_times_whose_squares_or_quotients_overflow_are_refused(settings, message):
+    with pytest.raises(SimulationError, match=re.escape(message)):
+        OrcaParams(**settings)
+
+
+def test_every_agent_is_a_neighbour_at_an_infinite_neighbour_distance():
+    # 4 m apart head-on (test_a_neighbour_out_of_range_sets_no_line): a line at 1e6 m and at inf, as at 10 m.
+    p = np.array([[-2.0, 0.0], [2.0, 0.0]])
+    for dist in (1e6, math.inf):
+        _, _, counts = orca_halfplanes(
+            p, np.zeros((2, 2)), np.full(2, 0.3), np.arange(2), OrcaParams(neighbor_dist=dist), DT
+        )
+        np.testing.assert_array_equal(counts, [1, 1])
 
 
 def test_preferred_velocity_unit_far_raw_near_zero_at_goal():

@@ -1,10 +1,14 @@
 """MPCConfig: Table I defaults and validation of every field."""
 
 import math
+import re
 
+import casadi as ca
+import numpy as np
 import pytest
 
-from mpc.config import MPCConfig
+from mpc.config import MPC_BOUNDS, MPCConfig
+from mpc.costs import make_track, potential
 from mpc.errors import MPCConfigError
 
 
@@ -99,3 +103,37 @@ def test_human_margins_are_validated_and_kept_as_a_tuple():
     ):
         with pytest.raises(MPCConfigError, match=match):
             MPCConfig(human_margins=bad)
+
+
+@pytest.mark.parametrize("field", sorted(MPC_BOUNDS))
+def test_numbers_that_enter_the_nlp_are_bounded(field):
+    """rho = 1e300 passed, made the exact Hessian Inf, and a Fatrop solve (no wall-time limit) ran on."""
+    most, _ = MPC_BOUNDS[field]
+    assert getattr(MPCConfig(**{field: most}), field) == most
+    shown = re.escape(f"{most:g}")
+    with pytest.raises(MPCConfigError, match=rf"^{field} must be at most {shown}.*, got 1e\+300$"):
+        MPCConfig(**{field: 1e300})
+
+
+def test_at_every_bound_together_the_nlp_stays_finite():
+    """The potential, its gradient and exact Hessian in the accelerations (what Fatrop and IPOPT evaluate),
+    with every bounded number at its bound, at points beyond the bounds an interior-point iterate may reach
+    (2 robots, 1 human)."""
+    cfg = MPCConfig(**{name: most for name, (most, _) in MPC_BOUNDS.items()})
+    h = cfg.horizon
+    u = ca.SX.sym("u", 2, 2 * h)
+    starts, humans = ca.SX.sym("x", 4, 2), ca.SX.sym("h", 2, h)
+    goals = starts[0:2, :] + ca.repmat(ca.DM([0.0, 6.0]), 1, 2)
+    no_action = ca.DM.zeros(2, 1)
+    tracks = [
+        make_track(starts[:, i], u[:, i * h : (i + 1) * h], no_action, goals[:, i], cfg.dt) for i in (0, 1)
+    ]
+    cost = cfg.cost_scale * potential(tracks, ca.DM([cfg.w_floc]), humans, 1, cfg)
+    hessian, gradient = ca.hessian(cost, ca.vec(u))
+    f = ca.Function("f", [ca.vec(u), starts, humans], [cost, gradient, hessian])
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        accels = rng.uniform(-10.0, 10.0, 4 * h) * cfg.a_max
+        state = np.vstack([rng.uniform(-100.0, 100.0, (2, 2)), rng.uniform(-1.0, 1.0, (2, 2)) * cfg.v_max])
+        for out in f(accels, state, rng.uniform(-100.0, 100.0, (2, h))):
+            assert np.isfinite(out.full()).all()

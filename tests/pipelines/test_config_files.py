@@ -371,6 +371,12 @@ def test_errors_from_the_python_api_are_config_errors(tmp_path):
         (["--set", "mpc.horizon=100000"], "--set mpc.horizon: must be at most 100, got 100000"),
         (["--set", "mpc.j_max=1e9"], "--set mpc.j_max: must be an integer >= 1, got 1000000000.0"),
         (["--set", "env.time_limit=1e9"], "--set env.time_limit: must be at most 3600.0, got 1000000000.0"),
+        # an Inf Hessian: a Fatrop solve ran past time_limit_s for minutes
+        (["--set", "mpc.rho=1e300"], "--set mpc.rho: must be at most 1000 s^2, got 1e+300"),
+        (
+            ["--set", "env.orca.neighbor_dist=1e300"],  # squared: OverflowError in the first ORCA step
+            "--set env.orca.neighbor_dist: must be > 0 and at most 1e+06 m, or inf (every agent), got 1e+300",
+        ),
         (
             ["--set", "env.orca.max_neighbors=100000"],
             "--set env.orca.max_neighbors: must be at most 1000, got 100000",
