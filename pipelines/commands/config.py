@@ -88,7 +88,7 @@ def _show_recorded(args: argparse.Namespace) -> int:
     make it another run, so they are refused (edit the printed file instead)."""
     from pipelines.config import render
     from pipelines.config.command_line import config_arguments
-    from pipelines.config.recorded import provenance, recorded_config, recorded_runs
+    from pipelines.config.recorded import machine_note, provenance, recorded_config, recorded_runs
 
     path, sets = config_arguments(args)
     if path is not None or sets:
@@ -99,5 +99,5 @@ def _show_recorded(args: argparse.Namespace) -> int:
         raise PipelineError(f"--run {args.run}: {sweep_file} records runs 1..{len(runs)}")
     run_line = runs[index - 1]
     config = recorded_config(sweep_file, run_line, index)
-    print(provenance(sweep_file, run_line, index, len(runs)) + render(config), end="")
+    print(provenance(sweep_file, run_line, index, len(runs)) + machine_note(config) + render(config), end="")
     return 0

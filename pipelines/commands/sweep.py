@@ -328,7 +328,20 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
         check_writable(out, cfg.label("sweep", "out"), directory=True)
         check_sweep_directory(out, cfg.label("sweep", "out"))
     check_world(cfg)
+    if not args.report_only:  # a report starts no worker
+        _check_this_machine(cfg)
     return cfg, out
+
+
+def _check_this_machine(cfg: RunConfig) -> None:
+    """The workers a local pool takes here: checked as the sweep is about to run them, not as the config is
+    read (a config recorded by a bigger machine's sweep is read back on any machine)."""
+    from pipelines.config import ConfigError
+
+    problem = cfg.sweep.beyond_this_machine()
+    source = cfg.source("sweep", "workers")
+    if problem is not None:
+        raise ConfigError(problem if source is None else source.label("sweep", "workers", problem))
 
 
 def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepConfig:

@@ -6,15 +6,19 @@ The recorded values go through the same resolver as a config file's (unknown sec
 bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Two values are not
 written as recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
 default out (another ``--profile`` then takes its own), and ``[sweep] out`` is the directory read, absolute.
+This machine's limit on local workers is not applied (the sweep that runs the file applies it): a comment
+says when the recorded workers exceed it.
 """
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
 from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, _check_key, resolve
 from pipelines.config.schema import ENV_PROFILE_KEYS, SECTION_BY_NAME
+from pipelines.config.settings import LOCAL_WORKERS_PER_CPU, available_cpus, local_workers_limit
 
 
 def recorded_runs(directory: str | Path) -> tuple[Path, list[dict[str, Any]]]:
@@ -84,6 +88,20 @@ def provenance(path: Path, run: dict[str, Any], index: int, total: int) -> str:
         f"{_plain(run.get('version', '?'))} at commit {commit}{dirty}.\n"
         "# Its [sweep] out is that directory, where a rerun resumes; give --out NEW to rerun elsewhere.\n"
     )
+
+
+def machine_note(config: RunConfig) -> str:
+    """Comment lines when the recorded workers are more than a local pool takes on this machine: the record
+    reads back anywhere, and a sweep of the printed file here refuses them
+    (``SweepSettings.beyond_this_machine``)."""
+    if config.sweep.beyond_this_machine() is None:
+        return ""
+    text = (
+        f"Its [sweep] workers = {config.sweep.workers} is more than a local pool takes on this machine (at "
+        f"most {local_workers_limit()}: {LOCAL_WORKERS_PER_CPU} per CPU this process may use, "
+        f"{available_cpus()}); give --workers N, or edit it, to rerun here."
+    )
+    return "".join(f"# {line}\n" for line in textwrap.wrap(text, 106))
 
 
 def _plain(value: Any) -> str:

@@ -37,6 +37,11 @@ def available_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def local_workers_limit() -> int:
+    """The most workers a local pool takes on this machine: ``LOCAL_WORKERS_PER_CPU`` per CPU, at least 8."""
+    return max(LOCAL_WORKERS_PER_CPU * available_cpus(), 8)
+
+
 def _is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
@@ -188,15 +193,22 @@ class SweepSettings:
             return
         if not _is_int(workers):
             raise PipelineError(f"workers must be an integer, got {workers!r}")
-        local = self.ray_address is None and self.backend != "inline"
-        most = max(LOCAL_WORKERS_PER_CPU * available_cpus(), 8)
-        if local and workers > most:
-            raise PipelineError(
-                f"workers {workers}: at most {most} here ({LOCAL_WORKERS_PER_CPU} per CPU this process "
-                f"may use, {available_cpus()}); more only queue for the same cores (a Ray cluster takes more)"
-            )
         if not 1 <= workers <= MAX_WORKERS:
             raise PipelineError(f"workers must be at least 1 and at most {MAX_WORKERS}, got {workers}")
+
+    def beyond_this_machine(self) -> str | None:
+        """Why ``workers`` is more than a local pool takes on this machine (None: it is not). Not part of the
+        validation, which holds on every machine: a sweep recorded on a bigger one reads back anywhere
+        (``config show --from-sweep``), and the sweep command applies this before it starts workers."""
+        workers = self.workers
+        local = self.ray_address is None and self.backend != "inline"
+        most = local_workers_limit()
+        if workers is None or not local or workers <= most:
+            return None
+        return (
+            f"workers {workers}: at most {most} here ({LOCAL_WORKERS_PER_CPU} per CPU this process may use, "
+            f"{available_cpus()}); more only queue for the same cores (a Ray cluster takes more)"
+        )
 
     def _check_predictors(self) -> None:
         names = self.predictors

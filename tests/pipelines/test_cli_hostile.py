@@ -256,7 +256,8 @@ def test_every_output_path_is_checked_first(argv, option, a_file, capsys):
         (["--episodes-per-cell", "1000001"], "--episodes-per-cell must be at most 100000, got 1000001"),
         (["--workers", "0"], "--workers must be at least 1 and at most 4096, got 0"),
         (["--workers", "100000", "--backend", "inline"], "--workers must be at least 1 and at most 4096"),
-        (["--workers", "100000"], "--workers 100000: at most "),
+        (["--workers", "100000"], "--workers must be at least 1 and at most 4096, got 100000"),
+        (["--workers", "4000"], "--workers 4000: at most "),  # this machine's limit, 4 per CPU
     ],
 )
 def test_sweep_sizes_are_refused_before_any_worker_starts(options, message, tmp_path, capsys, monkeypatch):

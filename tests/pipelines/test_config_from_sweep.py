@@ -133,3 +133,30 @@ def test_its_out_is_the_directory_given_wherever_the_sweep_ran_and_the_rerun_sta
     rerun = elsewhere / "rerun.toml"
     rerun.write_text(capsys.readouterr().out)
     assert load(str(rerun)).sweep.out == str((tmp_path / "start" / "rel").resolve())
+
+
+def test_a_record_of_more_workers_than_this_machine_takes_reads_back(tmp_path, capsys, monkeypatch):
+    """`sweep --workers 32` on 16 CPUs, read back on 2: this machine's limit was applied to the record, so
+    config show refused it. It prints it, saying so in a comment, and a sweep of the file here refuses."""
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(16)))
+    sets = ["sweep.experiment=baselines", "sweep.humans=[3]", "sweep.workers=32", "sweep.backend=process"]
+    _recorded_sweep(tmp_path / "sweep", sets)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1})
+    assert main(["config", "show", "--from-sweep", str(tmp_path / "sweep")]) == 0
+    printed = capsys.readouterr().out
+    assert "\nworkers = 32 " in printed
+    assert (
+        "# Its [sweep] workers = 32 is more than a local pool takes on this machine (at most 8: 4 per"
+        in printed
+    )
+    rerun = tmp_path / "rerun.toml"
+    rerun.write_text(printed)
+    again = tmp_path / "again"
+    assert main(["--config", str(rerun), "sweep", "--no-progress", "--out", str(again)]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc sweep: error: {rerun}: sweep.workers: workers 32: at most 8 here (4 per CPU this process "
+        "may use, 2); more only queue for the same cores (a Ray cluster takes more)\n"
+    )
+    assert not again.exists()
+    argv = ["--config", str(rerun), "sweep", "--workers", "2", "--dry-run", "--out", str(again)]
+    assert main(argv) == 0  # --workers reruns it here
