@@ -3,14 +3,16 @@
 
 * ``schema``: the sections and keys, each mapped onto the frozen dataclass that validates it;
 * ``settings``: the dataclasses of the run settings that had none (scenario, controller choice, commands);
-* ``resolve``: file + ``--set`` + options -> a validated ``RunConfig``, with one-line errors;
+* ``entries``: a TOML file and ``--set`` items -> entries, each naming where it came from;
+* ``resolve``: the entries -> a validated ``RunConfig``, with one-line errors;
 * ``command_line``: a command's ``--config``, ``--set`` and explicit options -> its ``RunConfig``;
 * ``render``: a ``RunConfig`` as annotated TOML (``crowdmpc config show``).
 """
 
 from pipelines.config.command_line import Option, command_config, load
+from pipelines.config.entries import ConfigError, parse_set, read_file
 from pipelines.config.render import render
-from pipelines.config.resolve import ConfigError, RunConfig, parse_set, read_file, resolve
+from pipelines.config.resolve import RunConfig, resolve
 
 __all__ = [
     "ConfigError",

@@ -7,7 +7,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, parse_set, read_file, resolve
+from pipelines.config.entries import ConfigError, Entry, Source, parse_set, read_file
+from pipelines.config.resolve import RunConfig, resolve
 
 
 @dataclass(frozen=True)

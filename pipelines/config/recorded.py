@@ -16,7 +16,8 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
-from pipelines.config.resolve import ConfigError, Entry, RunConfig, Source, _check_key, resolve
+from pipelines.config.entries import ConfigError, Entry, Source, check_key
+from pipelines.config.resolve import RunConfig, resolve
 from pipelines.config.schema import ENV_PROFILE_KEYS, SECTION_BY_NAME
 from pipelines.config.settings import LOCAL_WORKERS_PER_CPU, available_cpus, local_workers_limit
 
@@ -54,7 +55,7 @@ def recorded_config(path: Path, run: dict[str, Any], index: int) -> RunConfig:
         if name not in SECTION_BY_NAME or not isinstance(section, dict):
             raise ConfigError(f"{where}: unknown config section {name!r}; the file is damaged")
         for key, value in section.items():
-            _check_key(source.prefix(name, key), SECTION_BY_NAME[name], key)
+            check_key(source.prefix(name, key), SECTION_BY_NAME[name], key)
             # null: unset, as a file leaves it out. The profile's own value: unset too (a record holds every
             # [env] value, RunConfig.effective), or the file would hold the paper profile's time limit,
             # crossing ... under --profile v1, and a sweep of it would be refused them.

@@ -1,4 +1,5 @@
-"""Reading a config file, ``--set`` overrides and the command line's options into one validated ``RunConfig``.
+"""A config file's entries, ``--set`` overrides and the command line's options (``pipelines.config.entries``)
+validated into one ``RunConfig``.
 
 Precedence, lowest first: the dataclasses' defaults, the TOML file, ``--set SECTION.KEY=VALUE`` (in order),
 the command's explicit options (``--humans 5``). Every value is checked by the dataclass it belongs to; an
@@ -11,15 +12,11 @@ error is one line naming where the value came from, the key and what is expected
 
 from __future__ import annotations
 
-import difflib
-import errno
 import re
 import sys
-import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Final, Literal
+from typing import Any, Final
 
 from crowdsim.env import EnvConfig
 from crowdsim.errors import SimulationError
@@ -27,6 +24,7 @@ from crowdsim.orca import OrcaParams
 from crowdsim.world import WorldFacts
 from mpc.config import MPCConfig
 from mpc.errors import MPCConfigError
+from pipelines.config.entries import ConfigError, Entry, Source, long_number, reason
 from pipelines.config.schema import SECTION_BY_NAME, SECTIONS, WRITE_ORDER, Key, Section
 from pipelines.config.settings import (
     ControllerSettings,
@@ -37,7 +35,6 @@ from pipelines.config.settings import (
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
-MAX_CONFIG_BYTES: Final[int] = 1 << 20  # a config file is a page of settings, never a megabyte
 # What the dataclasses raise for a bad value.
 VALUE_ERRORS: Final[tuple[type[Exception], ...]] = (
     PipelineError,
@@ -47,177 +44,11 @@ VALUE_ERRORS: Final[tuple[type[Exception], ...]] = (
 )
 
 
-class ConfigError(PipelineError):
-    """A config file, ``--set`` or option that cannot be used: one line naming it."""
-
-
-@dataclass(frozen=True)
-class Source:
-    """Where a value came from: a config file, ``--set``, or a command-line option."""
-
-    kind: Literal["file", "set", "cli"]
-    where: str  # the file's path as given, "--set", or the option ("--humans")
-
-    def label(self, section: str, key: str, message: str) -> str:
-        """The one-line error for ``message`` (a dataclass's, e.g. "horizon must be an integer >= 1, ...")."""
-        if self.kind == "cli":
-            match = _field_prefix(key).match(message)
-            return f"{self.where} {message[match.end() :]}" if match else f"{self.where}: {message}"
-        return f"{self.prefix(section, key)}: {reason(message, key)}"
-
-    def prefix(self, section: str, key: str) -> str:
-        return f"{self.where}: {section}.{key}" if self.kind == "file" else f"--set {section}.{key}"
-
-
-def _field_prefix(key: str) -> re.Pattern[str]:
-    """A dataclass message's leading field name: ``horizon `` or ``EnvConfig.time_limit ``."""
-    return re.compile(rf"(?:[A-Za-z_]\w*\.)?{re.escape(key)} (?=must|\d)")
-
-
-def reason(message: str, key: str) -> str:
-    """``message`` without its leading field name when it states a requirement ("must be ...")."""
-    match = _field_prefix(key).match(message)
-    return message[match.end() :] if match and message[match.end() :].startswith("must") else message
-
-
 def _named_field(message: str, section: Section) -> str | None:
     """The key a dataclass message is about, when it starts with one of the section's keys."""
     match = re.match(r"(?:[A-Za-z_]\w*\.)?(\w+) must", message)
     return match[1] if match and match[1] in section.names else None
 
-
-@dataclass(frozen=True)
-class Entry:
-    section: str
-    key: str
-    value: Any
-    source: Source
-
-
-# ---- reading ---------------------------------------------------------------------------------------------
-
-
-def _unknown_section(where: str, name: str) -> ConfigError:
-    valid = ", ".join(f"[{s}]" for s in WRITE_ORDER)
-    return ConfigError(f"{where}: [{name}]: unknown section; valid sections: {valid}")
-
-
-def _check_key(prefix: str, section: Section, key: str) -> None:
-    """Refuse a key the section does not have, saying where it belongs or which keys are valid."""
-    if section.key(key) is not None:
-        return
-    if key in section.elsewhere:
-        raise ConfigError(f"{prefix}: not a [{section.name}] key: {section.elsewhere[key]}")
-    close = difflib.get_close_matches(key, section.names, n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    raise ConfigError(f"{prefix}: unknown key{hint}; valid keys: {', '.join(section.names)}")
-
-
-def _unreachable(path: Path) -> str | None:
-    """Why ``path`` cannot be looked at (``Path.exists`` says False for a symbolic-link loop too)."""
-    try:
-        path.stat()
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            return "a symbolic-link loop"
-        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
-            return "no such file"
-        return f"cannot read it ({exc.strerror or exc})"
-    return None
-
-
-def read_file(path: str | Path) -> list[Entry]:
-    """The entries of a TOML config file, in file order; unknown sections and keys refused."""
-    where = str(path)
-    if where == "":  # Path("") is ".", a directory: say what was given
-        raise ConfigError("--config '': no such file (an empty path)")
-    p = Path(path)
-    problem = _unreachable(p)
-    if problem is not None:
-        raise ConfigError(f"--config {where}: {problem}")
-    if not p.is_file():
-        raise ConfigError(f"--config {where}: not a file")
-    if p.stat().st_size > MAX_CONFIG_BYTES:
-        raise ConfigError(f"--config {where}: {p.stat().st_size} bytes; a config file is at most 1 MiB")
-    try:
-        text = p.read_bytes().decode("utf-8")
-    except UnicodeDecodeError:
-        raise ConfigError(f"{where}: not UTF-8 text (a TOML file)") from None
-    except OSError as exc:
-        raise ConfigError(f"--config {where}: cannot read it ({exc.strerror or exc})") from None
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{where}: not valid TOML: {exc}") from None
-    except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit
-        raise ConfigError(f"{where}: not a config file: {_long_number()}") from None
-    except RecursionError:  # tomllib parses nested arrays and tables recursively
-        raise ConfigError(f"{where}: not a config file: arrays or tables nested too deeply") from None
-    source = Source("file", where)
-    entries: list[Entry] = []
-
-    def table(name: str, values: Any) -> None:
-        section = SECTION_BY_NAME[name]
-        if not isinstance(values, dict):
-            raise ConfigError(f"{where}: {name}: must be a table ([{name}]), got {values!r}"[:300])
-        for key, value in values.items():
-            if name == "env" and key == "orca":
-                table("env.orca", value)
-                continue
-            _check_key(source.prefix(name, key), section, key)
-            entries.append(Entry(name, key, value, source))
-
-    for name, values in document.items():
-        if name == "env.orca":  # a quoted ["env.orca"]: one name with a dot in it, not the table orca of env
-            raise ConfigError(f'{where}: ["env.orca"] names no section: write [env.orca], without quotes')
-        if name not in SECTION_BY_NAME:
-            raise _unknown_section(where, name)
-        table(name, values)
-    return entries
-
-
-BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@-]+")
-CONTROL: Final[re.Pattern[str]] = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # all but the tab
-
-
-def parse_set(text: str) -> Entry:
-    """``--set SECTION.KEY=VALUE``: VALUE is a TOML value (``1e6``, ``true``, ``"circle"``, ``[5, 6]``); a
-    bare word that is no TOML value (``circle``, ``conformal:0.05``, ``runs/x``) is taken as a string."""
-    name, sep, raw = text.partition("=")
-    name, raw = name.strip(), raw.strip()
-    if not sep or "." not in name:
-        raise ConfigError(f"--set {text[:80]!r}: expected SECTION.KEY=VALUE, e.g. mpc.w_coll=1e6")
-    if CONTROL.search(text):  # TOML would read what follows a line break as more keys, silently ignored
-        raise ConfigError(
-            f"--set {text[:80]!r}: a line break or control character; one SECTION.KEY=VALUE per --set"
-        )
-    section_name, key = name.rsplit(".", 1)
-    section = SECTION_BY_NAME.get(section_name)
-    if section is None:
-        raise _unknown_section(f"--set {name}", section_name)
-    _check_key(f"--set {name}", section, key)
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except RecursionError:  # tomllib parses nested arrays recursively
-        raise ConfigError(f"--set {name}: the value's arrays or tables are nested too deeply") from None
-    except tomllib.TOMLDecodeError:
-        if BARE_VALUE.fullmatch(raw) is None:
-            raise ConfigError(
-                f'--set {name}: {raw[:80]!r} is not a TOML value (e.g. 1e6, true, "circle", [5, 6])'
-            ) from None
-        value = raw
-    except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit
-        raise ConfigError(f"--set {name}: {_long_number()}") from None
-    return Entry(section.name, key, value, Source("set", "--set"))
-
-
-def _long_number() -> str:
-    """What an integer is that Python will not read or write in decimal (its digit limit; TOML's 0x, 0o and
-    0b integers have none, so they can be longer)."""
-    return f"an integer of more than {sys.get_int_max_str_digits()} digits"
-
-
-# ---- validation ------------------------------------------------------------------------------------------
 
 _KIND_TEXT: Final[Mapping[str, str]] = {
     "int": "an integer",
@@ -251,7 +82,7 @@ def _short(value: Any) -> str:
     try:
         text = repr(value)
     except ValueError:  # an integer (or a list holding one) with more digits than Python writes
-        return _long_number()
+        return long_number()
     return text if len(text) <= 80 else text[:77] + "..."
 
 
@@ -302,7 +133,7 @@ class _Resolver:
         type, above the key's ceiling."""
         label = self.sources[(section.name, key.name)].label
         if _unwritable(raw):  # config show, and every record's JSON, could not write it
-            raise ConfigError(label(section.name, key.name, _long_number()))
+            raise ConfigError(label(section.name, key.name, long_number()))
         try:
             ok, value = _coerce(key, raw)
         except OverflowError:  # an integer past the largest float (TOML's 1e400 is inf: "must be finite")

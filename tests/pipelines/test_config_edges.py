@@ -10,7 +10,7 @@ import pytest
 
 from pipelines.config import ConfigError, load
 from pipelines.config.command_line import Entry
-from pipelines.config.resolve import MAX_CONFIG_BYTES, Source
+from pipelines.config.entries import MAX_CONFIG_BYTES, Source
 
 
 @pytest.mark.parametrize(

@@ -145,7 +145,7 @@ def test_a_leading_tilde_in_a_path_setting_is_the_home_directory(tmp_path, capsy
 
 
 def test_precedence_defaults_file_set_options(tmp_path):
-    from pipelines.config.resolve import Entry, Source
+    from pipelines.config.entries import Entry, Source
 
     path = str(_write(tmp_path, "[scenario]\nhumans = 5\nrobots = 2\n"))
     assert load().scenario.humans == 7
