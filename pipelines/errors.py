@@ -1,8 +1,14 @@
-"""Errors a user can cause through the pipelines (bad files, bad options). Printed without a traceback."""
+"""Errors a user can cause through the pipelines (bad files, bad options), and the one a sweep stops itself
+with (SweepStopped). Printed without a traceback."""
 
 
 class PipelineError(ValueError):
     """Base class of the user-facing errors raised by `pipelines`."""
+
+
+class SweepStopped(PipelineError):
+    """A sweep that stopped itself part way (its first episodes all raised, its workers kept dying): what it
+    recorded stands, and gets its report."""
 
 
 def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:

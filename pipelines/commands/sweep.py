@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
 from pipelines.commands.sweep_plan import check_margins, check_predictors, check_world, configured_experiment
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
     from pipelines.config import Option, RunConfig
@@ -280,7 +280,6 @@ def _jit_pays(cells, episodes_per_cell: int) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
-    from pipelines.experiments.backends import SweepStopped
     from pipelines.experiments.log import EPISODES_FILE
 
     cfg, out = _checked_config(args)

@@ -10,7 +10,7 @@ a sweep whose first episodes all raise, with no record in the directory, is misc
 The parts, a module each: pipelines.experiments.log (the durable, resumable record log and the lock that
 refuses a second sweep on the same directory), pipelines.experiments.worker (an episode run into a record,
 with its MCAP log under ``--record``), pipelines.experiments.backends (where the workers run: Ray, a process
-pool, or inline).
+pool (pipelines.experiments.process_backend), or inline).
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from typing import Any, Final
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.errors import PipelineError
-from pipelines.experiments.backends import BACKENDS, Backend, SweepStopped, make_backend
+from pipelines.errors import PipelineError, SweepStopped
+from pipelines.experiments.backends import BACKENDS, Backend, make_backend
 from pipelines.experiments.cells import Cell, EpisodeTask, Experiment
 from pipelines.experiments.log import (
     EPISODES_FILE,

@@ -44,6 +44,12 @@ RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
 # the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
 # MPC controller holds a few CasADi solver instances (megabytes), worth keeping but not without bound.
 CONTROLLER_CACHE: Final[int] = 16
+# Library thread pools inside each worker: the workers are the parallelism.
+SINGLE_THREAD_ENV: Final[dict[str, str]] = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
 
 
 def jit_available() -> bool:

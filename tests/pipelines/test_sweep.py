@@ -417,7 +417,7 @@ def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, c
     out = tmp_path / "resumed"
     assert main(_sweep_cli(out, ["straight"], "--episodes-per-cell", "1", "--backend", "inline")) == 0
     (out / "table.md").unlink()
-    monkeypatch.setattr("pipelines.experiments.backends.MAX_BREAKS_IN_A_ROW", 2)
+    monkeypatch.setattr("pipelines.experiments.process_backend.MAX_BREAKS_IN_A_ROW", 2)
     resumed = _sweep_cli(out, ["straight", dies], "--episodes-per-cell", "3", "--workers", "1")
     assert main([*resumed, "--backend", "process"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -782,7 +782,8 @@ def test_jit_is_a_worker_setting_that_leaves_the_cell_alone():
 def test_ray_workers_get_the_drivers_crowdmpc_environment(monkeypatch):
     """Actors on a cluster node start from that node's environment: the driver's plugins and zoo must travel
     in the runtime_env, with the single-thread settings."""
-    from pipelines.experiments.backends import SINGLE_THREAD_ENV, worker_environment
+    from pipelines.experiments.backends import worker_environment
+    from pipelines.experiments.worker import SINGLE_THREAD_ENV
 
     monkeypatch.setenv("CROWDMPC_PLUGINS", "my_pkg.nets:MyNet")
     monkeypatch.setenv("CROWDMPC_ZOO", "/shared/zoo")

@@ -1,0 +1,268 @@
+"""The process pool's backend: K spawned processes of a ``concurrent.futures`` pool run the sweep's episodes
+(pipelines.experiments.backends picks it when Ray is not installed, or for ``--backend process``).
+
+What it holds: the pool's worker processes (each with one EpisodeWorker, ignoring Ctrl-C, exiting with a
+killed driver), the environment they start with, the resource tracker started quiet, and the break handling:
+a worker process that dies breaks the whole pool, each episode in flight becomes an episode error, a new pool
+runs the rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+from collections.abc import Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Final
+
+from pipelines.errors import SweepStopped
+from pipelines.experiments.cells import EpisodeTask
+from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future
+
+
+# Times a process pool may break (a worker process died) with no episode finishing in between before the sweep
+# stops: every episode then kills its worker, and each new pool costs seconds to start.
+MAX_BREAKS_IN_A_ROW: Final[int] = 3
+BROKEN_POOL_WAIT_S: Final[float] = 30.0  # for the futures of a broken pool to fail (they do at once)
+
+
+_WORKER: EpisodeWorker | None = None  # one per pool process
+
+
+def _exit_with_parent() -> None:
+    """A pool worker whose driver was killed (SIGKILL leaves no time to shut the pool down) exits at once
+    instead of finishing its episode and waiting for work forever."""
+    import multiprocessing
+    from multiprocessing.connection import wait
+
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        wait([parent.sentinel])
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
+
+
+def _init_pool_worker(record: str, jit: bool, scratch_root: str | None) -> None:
+    import signal
+
+    global _WORKER
+    # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _exit_with_parent()
+    scratch = worker_scratch(scratch_root)
+    if jit:
+        os.chdir(
+            scratch
+        )  # CasADi's jit writes its C sources into the current directory (no option for another)
+    _WORKER = EpisodeWorker(record, jit, scratch)
+
+
+def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
+    assert _WORKER is not None, "pool worker used before its initializer ran"
+    return _WORKER.run(task)
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (unless it runs already) so that it does not warn about the
+    pool's semaphores when the driver is killed.
+
+    The pool's queues hold named POSIX semaphores (5; spawn needs names the workers can open), which the
+    driver registers with the tracker, a process of its own, and unregisters when it exits. A driver killed by
+    SIGKILL cannot; the tracker then unlinks them, which is what it is for, and warns "There appear to be 5
+    leaked semaphore objects to clean up at shutdown" on the terminal after the driver is gone. Nothing is
+    left behind, so that warning is noise: the tracker starts with it filtered out (its warning filters come
+    from the environment it starts in). SIGTERM and SIGHUP end a sweep in an orderly way (run_sweep), with no
+    warning either."""
+    from multiprocessing import resource_tracker
+
+    quiet = "ignore:resource_tracker:UserWarning"
+    saved = os.environ.get("PYTHONWARNINGS")
+    os.environ["PYTHONWARNINGS"] = f"{saved},{quiet}" if saved else quiet
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if saved is None:
+            os.environ.pop("PYTHONWARNINGS", None)
+        else:
+            os.environ["PYTHONWARNINGS"] = saved
+
+
+@contextlib.contextmanager
+def _child_environment(values: dict[str, str]) -> Iterator[None]:
+    """Environment for processes started inside the block (spawned workers copy it at start)."""
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update({k: os.environ.get(k, v) for k, v in values.items()})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class ProcessBackend:
+    """K spawned processes of a concurrent.futures pool.
+
+    A worker process that dies (a segfault in a library, the kernel's OOM killer, a plugin calling
+    ``os._exit``) breaks the whole pool: every episode in flight then fails with ``BrokenProcessPool``, and
+    which of them killed it cannot be told. Each of those becomes an episode error (errors.jsonl, retried by a
+    rerun), a new pool takes the rest of the sweep, and the sweep stops when the pool breaks
+    ``MAX_BREAKS_IN_A_ROW`` times with no episode finishing in between (every episode killing its worker)."""
+
+    name = "process"
+
+    def __init__(self, workers: int, record: str, jit: bool = False, scratch_root: str | None = None):
+        self.workers = workers
+        self._initargs = (record, jit, scratch_root)
+        _start_resource_tracker()
+        self._start_pool()
+
+    def _start_pool(self) -> None:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with _child_environment(SINGLE_THREAD_ENV):
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_init_pool_worker,
+                initargs=self._initargs,
+            )
+            # Start every worker now, while the environment above is in force.
+            for future in [self._pool.submit(os.getpid) for _ in range(self.workers)]:
+                future.result()
+        self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
+        self._note_processes()
+        self._pool_ended = False
+
+    def _note_processes(self) -> None:
+        """Add the processes in the pool's table now (it may start one for a task) to ``_processes``: the
+        table is gone once the pool shuts down."""
+        current = (getattr(self._pool, "_processes", None) or {}).values()
+        self._processes += [p for p in current if p not in self._processes]
+
+    def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+        from concurrent.futures import FIRST_COMPLETED, wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        pending = iter(tasks)
+        unsent: list[EpisodeTask] = []  # taken from ``pending`` but refused by a pool that broke meanwhile
+        in_flight: dict[Future[EpisodeOutcome], EpisodeTask] = {}
+        breaks = 0  # pool breaks since an episode last came back
+        while True:
+            broken = self._submit(in_flight, unsent, pending)
+            if not in_flight and not broken:
+                return
+            if not broken:
+                done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+                for future in done:
+                    task = in_flight.pop(future)
+                    try:
+                        outcome = future.result()
+                    except BrokenProcessPool:
+                        in_flight[future] = task  # with the others lost in the break, below
+                        broken = True
+                        continue
+                    breaks = 0
+                    yield outcome
+            if broken:
+                outcomes, finished = self._lost(in_flight)
+                breaks = 0 if finished else breaks + 1
+                yield from outcomes
+                if breaks >= MAX_BREAKS_IN_A_ROW:
+                    raise SweepStopped(
+                        f"the worker processes died {breaks} times in a row with no episode finishing in "
+                        f"between ({self._deaths()}); the episodes lost are in errors.jsonl"
+                    )
+                self._pool_ended = True  # a new one starts for the next task, if there is one
+
+    def _submit(
+        self,
+        in_flight: dict[Future[EpisodeOutcome], EpisodeTask],
+        unsent: list[EpisodeTask],
+        pending: Iterator[EpisodeTask],
+    ) -> bool:
+        """Fill the pool up to two tasks a worker (they keep it busy without queueing the whole sweep: a
+        cancel is quick), starting a new pool after a broken one; True when it turns out broken (the task it
+        refused is kept in ``unsent`` for the next pool: it never ran)."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        while len(in_flight) < 2 * self.workers:
+            task = unsent.pop() if unsent else next(pending, None)
+            if task is None:
+                return False
+            if self._pool_ended:
+                self._start_pool()
+            try:
+                in_flight[self._pool.submit(_run_in_pool, task)] = task
+            except BrokenProcessPool:
+                unsent.append(task)
+                return True
+        return False
+
+    def _lost(self, in_flight: dict[Future[EpisodeOutcome], EpisodeTask]) -> tuple[list[EpisodeOutcome], int]:
+        """The outcomes of the episodes in flight when the pool broke, and how many of them finished before
+        it: an error for each of the others (any of them may be the one that killed its worker)."""
+        from concurrent.futures import wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        # A broken pool fails every future it holds at once; the bound is for one that a submit racing the
+        # break slipped past (the pool's own clean-up does not take its lock), which would never complete.
+        wait(in_flight, timeout=BROKEN_POOL_WAIT_S)
+        self.close()  # every process ended and joined: their exit codes are known
+        deaths = self._deaths()
+        outcomes: list[EpisodeOutcome] = []
+        finished = 0
+        for future, task in in_flight.items():
+            if (
+                future.done()
+                and not future.cancelled()
+                and not isinstance(future.exception(), BrokenProcessPool)
+            ):
+                outcomes.append(future.result())
+                finished += 1
+                continue
+            error = (
+                f"worker process died ({deaths}) while this episode was in flight, with {len(in_flight) - 1} "
+                "other(s) on the same pool; any of them may have ended it (a segfault, the OOM killer, a "
+                "controller exiting); a rerun tries it again"
+            )
+            outcomes.append(EpisodeOutcome(task.key, error=error))
+        in_flight.clear()
+        return outcomes, finished
+
+    def _deaths(self) -> str:
+        """How the pool's processes ended, e.g. "killed by SIGKILL", "exit status 3"."""
+        import signal
+
+        ends = set()
+        for process in self._processes:
+            code = process.exitcode
+            if code is None or code == -signal.SIGTERM:  # alive, or ended by the broken pool's clean-up
+                continue
+            if code >= 0:
+                ends.add(f"exit status {code}")
+            else:
+                known = -code in signal.valid_signals()
+                ends.add(f"killed by {signal.Signals(-code).name if known else f'signal {-code}'}")
+        return ", ".join(sorted(ends)) or "ended abruptly"
+
+    def close(self) -> None:
+        # Cancel what has not started and end the running episodes now: their records were never written, so a
+        # rerun runs them again. (ProcessPoolExecutor has no public way to stop a running call.)
+        self._note_processes()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for process in self._processes:
+            if process.is_alive():
+                process.terminate()
+        for process in self._processes:
+            process.join(timeout=5)
