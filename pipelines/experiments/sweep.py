@@ -10,7 +10,8 @@ a sweep whose first episodes all raise, with no record in the directory, is misc
 The parts, a module each: pipelines.experiments.log (the durable, resumable record log and the lock that
 refuses a second sweep on the same directory), pipelines.experiments.worker (an episode run into a record,
 with its MCAP log under ``--record``), pipelines.experiments.backends (where the workers run: Ray, a process
-pool (pipelines.experiments.process_backend), or inline).
+pool (pipelines.experiments.process_backend), or inline), pipelines.experiments.resume_checks (what a resumed
+sweep's records must match: the predictor weights and margins its cells plan with now).
 """
 
 from __future__ import annotations
@@ -32,9 +33,8 @@ from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import BACKENDS, Backend, make_backend
-from pipelines.experiments.cells import Cell, EpisodeTask, Experiment
+from pipelines.experiments.cells import EpisodeTask, Experiment
 from pipelines.experiments.log import (
-    EPISODES_FILE,
     ERRORS_FILE,
     MCAP_DIR,
     SWEEP_FILE,
@@ -45,6 +45,7 @@ from pipelines.experiments.log import (
     read_sweep_file,
     sweep_lock,
 )
+from pipelines.experiments.resume_checks import check_same_margins, check_same_predictors
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
 from pipelines.plain_json import plain
 
@@ -240,8 +241,8 @@ def run_sweep(
         meta = _sweep_meta(out, config)
         log = episode_log(out)
         done = log.load()
-        _check_same_predictors(out, tasks, done)
-        _check_same_margins(out, tasks, done)
+        check_same_predictors(out, tasks, done)
+        check_same_margins(out, tasks, done)
         _add_run(out, meta, config, len(tasks))  # a refused resume is no run: it leaves no line
         # Episodes that raised before (errors.jsonl) last: a rerun that extends the sweep runs the new ones
         # first, rather than stopping on the same failures again.
@@ -332,74 +333,6 @@ def _terminate_as_interrupt() -> Iterator[None]:
     finally:
         for s, handler in saved.items():
             signal.signal(s, handler)
-
-
-def _check_same_predictors(out: Path, tasks: list[EpisodeTask], done: dict[str, dict[str, Any]]) -> None:
-    """Refuse to extend a cell whose records came from other weights than the zoo holds now (a retrained
-    model): its table would silently mix two predictors."""
-    from predictors.registry import checkpoint_sha256
-
-    current: dict[str | None, str | None] = {}  # predictor name (None in a record without one) -> sha256
-    for task in tasks:
-        record = done.get(task.key)
-        if record is None:
-            continue
-        name = record.get("predictor")
-        if name not in current:
-            current[name] = checkpoint_sha256(name)
-        if record.get("predictor_sha256") != current[name]:
-            raise PipelineError(
-                f"{out / EPISODES_FILE} holds episodes of {task.cell.key} run with predictor {name!r} of "
-                f"sha256 {record.get('predictor_sha256')}, but the zoo's {name!r} is now {current[name]}; "
-                "use another --out for the new weights"
-            )
-
-
-def _check_same_margins(out: Path, tasks: list[EpisodeTask], done: dict[str, dict[str, Any]]) -> None:
-    """Refuse to extend a cell whose records planned with other margins than the cell resolves now (a
-    recalibration under the same alpha and source keeps the cell key): its table would silently mix two
-    margin sets. Records without margins (baselines, records from before the config was kept) say nothing."""
-    current: dict[str, dict[str, Any]] = {}  # cell key -> its margins now
-    for task in tasks:
-        stored = _stored_margins(done.get(task.key))
-        if stored is None:
-            continue
-        key = task.cell.key
-        if key not in current:
-            current[key] = planned_margins(task.cell)
-        if stored != current[key]:
-            was, now = stored["margins_m"], current[key]["margins_m"]
-            raise PipelineError(
-                f"{out / EPISODES_FILE} holds episodes of {key} planned with margins {was} m, but the cell's "
-                f"margins are now {now} m{' (per motion class)' if was == now else ''}: they changed since "
-                "the records were made (recalibrated?); use another --out for the new margins"
-            )
-
-
-def planned_margins(cell: Cell) -> dict[str, Any]:
-    """The margins ``cell``'s MPC plans with now, as its records state them (MPCController.describe's
-    "margins": the same for every human, and per motion class), in their JSON form."""
-    from pipelines.loop.mpc import mpc_config
-    from predictors.registry import checkpoint_sha256
-
-    spec = cell.spec
-    name, sha256 = spec.predictor_name, checkpoint_sha256(spec.predictor_name)
-    horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
-    classes = spec.margins.resolve_classes(name, horizon, sha256)
-    planned = {
-        "margins_m": list(spec.margins.resolve(name, horizon, sha256)),
-        "classes": None if classes is None else classes.to_json(),
-    }
-    return json.loads(json.dumps(plain(planned)))  # as read back from a record
-
-
-def _stored_margins(record: dict[str, Any] | None) -> dict[str, Any] | None:
-    """What ``record`` says its episode planned with, in ``planned_margins``' form; None: it says nothing."""
-    config = record.get("config") if record is not None else None
-    margins = config.get("margins") if isinstance(config, dict) else None
-    if not isinstance(margins, dict) or "margins_m" not in margins:  # a controller that plans with none
-        return None
-    return {"margins_m": margins.get("margins_m"), "classes": margins.get("classes")}
 
 
 def _default_backend(config: SweepConfig, scratch: str) -> Backend:
