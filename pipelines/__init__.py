@@ -7,10 +7,11 @@
 * ``pipelines.logs``: an episode as an MCAP file and back. Message schemas (``schemas``, ``foxglove``,
   ``jsonschema``), the writer (``recorder``), the episode recorder (``recording``), reading (``reader``),
   text review (``review``) and pictures (``plots``).
-* ``pipelines.experiments``: many episodes. The paper's cells (``cells``), the sweep split into its log,
-  worker, backends and driver (``log``, ``worker``, ``backends`` with ``process_backend``, ``sweep`` with
-  ``resume_checks``), the report (``summary``, ``tables``, ``report_plots``, ``report``, ``safety_report``),
-  closed-loop calibration (``calibrate``) and synthetic training data (``synth``).
+* ``pipelines.experiments``: many episodes. The paper's cells (``cells``, with the cell and its episode tasks
+  in ``tasks``), the sweep split into its log, worker, backends and driver (``log``, ``worker``, ``backends``
+  with ``process_backend``, ``sweep`` with ``resume_checks``), the report (``summary``, ``tables``,
+  ``report_plots``, ``report``, ``safety_report``), closed-loop calibration (``calibrate``) and synthetic
+  training data (``synth``).
 * ``pipelines.commands`` and ``pipelines.cli``: the ``crowdmpc`` command line on top of all three.
 
 Shared leaves that import none of the rooms: ``errors``, ``plain_json``, ``version``.

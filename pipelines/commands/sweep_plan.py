@@ -62,7 +62,8 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     margins (--predictors, --predictor, --margins or the config), the profile and visibility, and the
     [controller] and [mpc] values that differ from their defaults (a value the experiment compares across
     its methods is refused)."""
-    from pipelines.experiments.cells import World, get_experiment
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.tasks import World
     from pipelines.loop.margins import parse_margins
 
     experiment = get_experiment(cfg.sweep.experiment or "")

@@ -18,8 +18,8 @@ from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
-    from pipelines.experiments.cells import Cell, EpisodeTask
     from pipelines.experiments.sweep import SweepConfig
+    from pipelines.experiments.tasks import Cell, EpisodeTask
 
 
 def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:

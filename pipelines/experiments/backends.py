@@ -20,8 +20,8 @@ from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
 from pipelines.errors import PipelineError
-from pipelines.experiments.cells import EpisodeTask
 from pipelines.experiments.process_backend import ProcessBackend
+from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
 
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")

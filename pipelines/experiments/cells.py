@@ -1,13 +1,9 @@
-"""The experiments a sweep runs, as data: their cells and their episodes (the paper's figures: ``paper``).
+"""The experiments a sweep runs, as data, and the registry of those the project ships (``EXPERIMENTS``).
 
 An experiment is a table: its columns are *methods* (a label and the ControllerSpec behind it) repeated for
 each number of humans, its rows are the paper's metrics. A *cell* is one method at one crowd size; an
-*episode task* is one seeded scenario run in one cell.
-
-Seeding. Episode ``i`` of every cell of an experiment is the same crowd: scenario ``SCENARIOS[i % 2]`` (so
-any prefix of a cell is half circle and half perpendicular crossing, as the paper's 500 + 500) with seed
-``seed + i // 2``. The circle episodes of a cell are therefore exactly those of
-``crowdmpc simulate --scenario circle --seed S --episodes N/2``, and cells differ only in the controller.
+*episode task* is one seeded scenario run in one cell. The cell, the episode task and the seeding schedule
+are pipelines.experiments.tasks; the paper's figures are pipelines.experiments.paper.
 """
 
 from __future__ import annotations
@@ -15,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
-from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
+from crowdsim.profiles import VISIBILITY
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments.paper import (
@@ -27,88 +23,12 @@ from pipelines.experiments.paper import (
     PAPER_TABLE_III,
     PaperFigures,
 )
+from pipelines.experiments.tasks import Cell, EpisodeTask, World, scenario_schedule
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec
 from predictors.oracle import ORACLE_PREDICTOR
 
-if TYPE_CHECKING:
-    from crowdsim.env import EnvConfig
-
-SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 PAPER_EPISODES_PER_CELL: Final[int] = 1000  # Section VI: 500 circle + 500 perpendicular crossing per cell
-
-
-@dataclass(frozen=True)
-class World:
-    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility."""
-
-    profile: str = "paper"
-    visibility: str = "visible"
-
-    def __post_init__(self):
-        if self.profile not in PROFILES:
-            raise PipelineError(f"unknown profile {self.profile!r}; choose from {sorted(PROFILES)}")
-        if self.visibility not in VISIBILITY:
-            raise PipelineError(f"unknown visibility {self.visibility!r}; choose from {list(VISIBILITY)}")
-
-    @property
-    def label(self) -> str:
-        return f"{self.profile}-{self.visibility}"
-
-    def env_config(self) -> EnvConfig:
-        return make_env_config(self.profile, self.visibility)
-
-
-@dataclass(frozen=True)
-class Cell:
-    """One method at one crowd size: a column of the experiment's table."""
-
-    method: str  # the column label, e.g. "CMPC", "NF", "social_lstm_eth"
-    spec: ControllerSpec
-    n_humans: int
-    n_robots: int = PAPER_ROBOTS
-    world: World = World()
-
-    def __post_init__(self):
-        if self.n_humans < 1:
-            raise PipelineError(f"a cell needs at least one human, got n_humans={self.n_humans}")
-        if self.n_robots < 1:
-            raise PipelineError(f"a cell needs at least one robot, got n_robots={self.n_robots}")
-
-    @property
-    def key(self) -> str:
-        """Everything that defines the cell's episodes, so records of a changed definition never mix."""
-        s = self.spec
-        parts = [s.controller, s.predictor_name or "none", "F" if s.flocking else "NF", s.coupling]
-        parts += [f"{name}={value}" for name, value in s.mpc_overrides]
-        parts += [f"m={s.margins.label}", self.world.label]
-        return "-".join(parts) + f"-h{self.n_humans}-r{self.n_robots}"
-
-
-@dataclass(frozen=True)
-class EpisodeTask:
-    """One episode to run: a cell and a seeded scenario."""
-
-    experiment: str
-    cell: Cell
-    index: int  # episode index within the cell
-    scenario: str
-    seed: int
-
-    @property
-    def key(self) -> str:
-        """The record key in episodes.jsonl: unique within a sweep directory."""
-        return f"{self.cell.key}/{self.scenario}/{self.seed}"
-
-
-def scenario_schedule(episodes: int, seed: int = 0) -> list[tuple[str, int]]:
-    """(scenario, seed) of episodes 0..episodes-1 of every cell: alternate scenarios, seeds count up per
-    scenario, so a cell's first 2k episodes are k circle + k perpendicular crossings."""
-    if episodes < 1:
-        raise PipelineError(f"episodes per cell must be at least 1, got {episodes}")
-    if seed < 0:
-        raise PipelineError(f"the base seed must be non-negative, got {seed}")
-    return [(SCENARIOS[i % 2], seed + i // 2) for i in range(episodes)]
 
 
 @dataclass(frozen=True)

@@ -22,10 +22,11 @@ from typing import Any, Final
 
 from crowdsim.metrics import BETWEEN_STEPS
 from pipelines.experiments import safety_report as safety
-from pipelines.experiments.cells import Cell, Experiment
+from pipelines.experiments.cells import Experiment
 from pipelines.experiments.report_plots import plot_outcomes
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
+from pipelines.experiments.tasks import Cell
 
 CELLS_CSV: Final[str] = "cells.csv"
 EPISODES_CSV: Final[str] = "episodes.csv"

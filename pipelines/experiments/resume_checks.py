@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from pipelines.errors import PipelineError
-from pipelines.experiments.cells import Cell, EpisodeTask
 from pipelines.experiments.log import EPISODES_FILE
+from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
 
 

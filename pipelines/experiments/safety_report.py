@@ -35,7 +35,8 @@ from crowdsim.metrics import BETWEEN_STEPS, COLLISION_DISTANCE
 from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
-    from pipelines.experiments.cells import Cell, Experiment
+    from pipelines.experiments.cells import Experiment
+    from pipelines.experiments.tasks import Cell
 
 
 class _Rate(Protocol):

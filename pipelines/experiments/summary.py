@@ -22,7 +22,8 @@ import numpy as np
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments import safety_report as safety
-from pipelines.experiments.cells import SCENARIOS, Cell, Experiment, PaperFigures
+from pipelines.experiments.cells import Experiment, PaperFigures
+from pipelines.experiments.tasks import SCENARIOS, Cell
 
 Z95: Final[float] = 1.959963984540054  # two-sided 95% standard normal quantile
 

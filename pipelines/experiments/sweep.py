@@ -33,7 +33,7 @@ from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import BACKENDS, Backend, make_backend
-from pipelines.experiments.cells import EpisodeTask, Experiment
+from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
     ERRORS_FILE,
     MCAP_DIR,
@@ -46,6 +46,7 @@ from pipelines.experiments.log import (
     sweep_lock,
 )
 from pipelines.experiments.resume_checks import check_same_margins, check_same_predictors
+from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
 from pipelines.plain_json import plain
 

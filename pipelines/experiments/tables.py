@@ -14,8 +14,9 @@ from typing import Final
 
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.experiments import safety_report as safety
-from pipelines.experiments.cells import SCENARIOS, Experiment
+from pipelines.experiments.cells import Experiment
 from pipelines.experiments.summary import CellSummary, Rate
+from pipelines.experiments.tasks import SCENARIOS
 
 
 def mcnemar_exact(b: int, c: int) -> float:

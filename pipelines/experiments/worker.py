@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, interrupt_behind
-from pipelines.experiments.cells import EpisodeTask
+from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.controllers import Controller, make_controller
 from pipelines.plain_json import plain
 

@@ -11,9 +11,10 @@ from pathlib import Path
 import pytest
 
 from pipelines.errors import PipelineError
-from pipelines.experiments.cells import Cell, Experiment, get_experiment
+from pipelines.experiments.cells import Experiment, get_experiment
 from pipelines.experiments.log import EPISODES_FILE, EpisodeLog, episode_log
 from pipelines.experiments.sweep import SweepConfig, run_sweep
+from pipelines.experiments.tasks import Cell
 from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.record import SolverStats, step_time_stats
@@ -173,7 +174,7 @@ def test_tasks_go_episode_index_by_episode_index_across_cells():
 
 
 def test_a_negative_base_seed_and_empty_cells_are_refused():
-    from pipelines.experiments.cells import scenario_schedule
+    from pipelines.experiments.tasks import scenario_schedule
 
     assert scenario_schedule(1, seed=0) == [("circle", 0)]  # seed 0 is the default, so it is allowed
     with pytest.raises(PipelineError, match="base seed must be non-negative, got -1"):

@@ -24,15 +24,14 @@ from pipelines.experiments.cells import (
     PAPER_TABLE_II,
     PAPER_TABLE_III,
     PaperFigures,
-    World,
     get_experiment,
-    scenario_schedule,
 )
 from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, sweep_lock
 from pipelines.experiments.report import CELLS_CSV, write_report
 from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
 from pipelines.experiments.sweep import SweepConfig, mcap_path, run_sweep
 from pipelines.experiments.tables import markdown_table, mcnemar_exact
+from pipelines.experiments.tasks import World, scenario_schedule
 from pipelines.experiments.worker import EpisodeWorker, is_failure
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.margins import MarginSpec

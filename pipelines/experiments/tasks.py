@@ -1,0 +1,98 @@
+"""What a sweep runs, episode by episode: the cell (one method at one crowd size, under a world's simulation
+conventions), the episode task (one seeded scenario run in one cell) and the seeding schedule they share.
+
+Seeding. Episode ``i`` of every cell of an experiment is the same crowd: scenario ``SCENARIOS[i % 2]`` (so
+any prefix of a cell is half circle and half perpendicular crossing, as the paper's 500 + 500) with seed
+``seed + i // 2``. The circle episodes of a cell are therefore exactly those of
+``crowdmpc simulate --scenario circle --seed S --episodes N/2``, and cells differ only in the controller.
+
+The experiments these make up, and the registry of those the project ships, are pipelines.experiments.cells.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
+from crowdsim.world import PAPER_ROBOTS
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec
+
+if TYPE_CHECKING:
+    from crowdsim.env import EnvConfig
+
+SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
+
+
+@dataclass(frozen=True)
+class World:
+    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility."""
+
+    profile: str = "paper"
+    visibility: str = "visible"
+
+    def __post_init__(self):
+        if self.profile not in PROFILES:
+            raise PipelineError(f"unknown profile {self.profile!r}; choose from {sorted(PROFILES)}")
+        if self.visibility not in VISIBILITY:
+            raise PipelineError(f"unknown visibility {self.visibility!r}; choose from {list(VISIBILITY)}")
+
+    @property
+    def label(self) -> str:
+        return f"{self.profile}-{self.visibility}"
+
+    def env_config(self) -> EnvConfig:
+        return make_env_config(self.profile, self.visibility)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One method at one crowd size: a column of the experiment's table."""
+
+    method: str  # the column label, e.g. "CMPC", "NF", "social_lstm_eth"
+    spec: ControllerSpec
+    n_humans: int
+    n_robots: int = PAPER_ROBOTS
+    world: World = World()
+
+    def __post_init__(self):
+        if self.n_humans < 1:
+            raise PipelineError(f"a cell needs at least one human, got n_humans={self.n_humans}")
+        if self.n_robots < 1:
+            raise PipelineError(f"a cell needs at least one robot, got n_robots={self.n_robots}")
+
+    @property
+    def key(self) -> str:
+        """Everything that defines the cell's episodes, so records of a changed definition never mix."""
+        s = self.spec
+        parts = [s.controller, s.predictor_name or "none", "F" if s.flocking else "NF", s.coupling]
+        parts += [f"{name}={value}" for name, value in s.mpc_overrides]
+        parts += [f"m={s.margins.label}", self.world.label]
+        return "-".join(parts) + f"-h{self.n_humans}-r{self.n_robots}"
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One episode to run: a cell and a seeded scenario."""
+
+    experiment: str
+    cell: Cell
+    index: int  # episode index within the cell
+    scenario: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """The record key in episodes.jsonl: unique within a sweep directory."""
+        return f"{self.cell.key}/{self.scenario}/{self.seed}"
+
+
+def scenario_schedule(episodes: int, seed: int = 0) -> list[tuple[str, int]]:
+    """(scenario, seed) of episodes 0..episodes-1 of every cell: alternate scenarios, seeds count up per
+    scenario, so a cell's first 2k episodes are k circle + k perpendicular crossings."""
+    if episodes < 1:
+        raise PipelineError(f"episodes per cell must be at least 1, got {episodes}")
+    if seed < 0:
+        raise PipelineError(f"the base seed must be non-negative, got {seed}")
+    return [(SCENARIOS[i % 2], seed + i // 2) for i in range(episodes)]
