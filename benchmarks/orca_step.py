@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.baselines import OrcaController
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -81,7 +81,8 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import ENV_ID
-from crowdsim.env import CrowdEnv, EnvConfig, Observation
+from crowdsim.env import CrowdEnv, Observation
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.gym_reward import RewardConfig, step_closest, surface_distances
 from crowdsim.metrics import (

@@ -23,7 +23,7 @@ import dataclasses
 from typing import Final
 
 from crowdsim.conventions import V1_SPAWN_SEPARATION, V1_TIME_LIMIT, V1_TIMEOUT_MARGIN
-from crowdsim.env import EnvConfig
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 
 PROFILES: Final[dict[str, EnvConfig]] = {

@@ -20,7 +20,7 @@ from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
-    from crowdsim.env import EnvConfig
+    from crowdsim.env_config import EnvConfig
     from pipelines.config import Option, RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import EpisodeResult

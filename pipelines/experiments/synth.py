@@ -22,7 +22,8 @@ from typing import Any, Final
 import numpy as np
 
 from crowdsim.baselines import OrcaController
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 
 FRAME_STEP: Final[int] = 10  # frame ids per 0.4 s step (BIWI hotel's numbering in TrajNet++)

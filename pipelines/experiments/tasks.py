@@ -20,7 +20,7 @@ from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
 
 if TYPE_CHECKING:
-    from crowdsim.env import EnvConfig
+    from crowdsim.env_config import EnvConfig
 
 SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 

@@ -36,7 +36,7 @@ from pipelines.loop.controllers import Controller, make_controller
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
-    from crowdsim.env import EnvConfig
+    from crowdsim.env_config import EnvConfig
     from pipelines.loop.episode import EpisodeResult
 
 RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")

@@ -15,7 +15,8 @@ from typing import Any, Final
 import numpy as np
 
 from crowdsim.control import ControlOutput
-from crowdsim.env import EnvConfig, Observation
+from crowdsim.env import Observation
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import Controller
 

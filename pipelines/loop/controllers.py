@@ -41,7 +41,8 @@ from pipelines.loop.spec import (
 )
 
 if TYPE_CHECKING:
-    from crowdsim.env import EnvConfig, Observation
+    from crowdsim.env import Observation
+    from crowdsim.env_config import EnvConfig
 
 # The spec and the controllers' facts live in pipelines.loop.spec (the MPC adapter needs them, and the
 # registry needs the adapter); they are re-exported here, the registry's public face.

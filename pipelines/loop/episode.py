@@ -17,7 +17,8 @@ from typing import Any, Final, Protocol
 import numpy as np
 
 from crowdsim.control import ControlOutput
-from crowdsim.env import CrowdEnv, EnvConfig, Observation
+from crowdsim.env import CrowdEnv, Observation
+from crowdsim.env_config import EnvConfig
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.loop.contract import checked_description, checked_output, episode_meta

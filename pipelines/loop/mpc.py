@@ -50,7 +50,8 @@ from predictors.registry import checkpoint_sha256, load_predictor
 STANDING = MOTION_CLASSES.index("standing")
 
 if TYPE_CHECKING:
-    from crowdsim.env import EnvConfig, Observation
+    from crowdsim.env import Observation
+    from crowdsim.env_config import EnvConfig
 
 
 def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORLD) -> MPCConfig:
@@ -117,7 +118,7 @@ class MPCController:
     ):
         """``env_config``: the simulator's settings, for a predictor that observes it (the ORCA oracle);
         ``predictor``: a predictor object in place of the one ``spec.predictor`` names (tests)."""
-        from crowdsim.env import EnvConfig
+        from crowdsim.env_config import EnvConfig
 
         if distributed and spec.coupling == "nlp":
             raise PipelineError(

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from crowdsim.baselines import StraightController
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.metrics import episode_metrics
 from crowdsim.profiles import PROFILES

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from crowdsim.baselines import StraightController
-from crowdsim.env import ENV_BOUNDS, MIN_DT, CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import ENV_BOUNDS, MIN_DT, EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.profiles import PROFILES, make_env_config
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.scenarios import make_layout, robot_layout
 from pipelines.cli import main

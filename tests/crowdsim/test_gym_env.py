@@ -14,7 +14,8 @@ from gymnasium.utils.env_checker import check_env
 
 import crowdsim
 from crowdsim.baselines import OrcaController, StraightController
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.gym_env import (
     COLUMNS,

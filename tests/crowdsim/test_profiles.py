@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from crowdsim import world
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.orca import preferred_velocities
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config

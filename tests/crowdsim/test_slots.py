@@ -6,7 +6,8 @@ import itertools
 import numpy as np
 import pytest
 
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.scenarios import Layout
 from crowdsim.slots import SLOT_HYSTERESIS, match_slots

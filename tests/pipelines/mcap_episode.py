@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from crowdsim.env import CrowdEnv, EnvConfig, Observation
+from crowdsim.env import CrowdEnv, Observation
+from crowdsim.env_config import EnvConfig
 from crowdsim.metrics import episode_metrics
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.controllers import ControlOutput

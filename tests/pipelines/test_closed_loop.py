@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from crowdsim.env import EnvConfig
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
 from pipelines.loop.episode import run_episode, run_episodes, summarize

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import crowdsim
-from crowdsim.env import EnvConfig
+from crowdsim.env_config import EnvConfig
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_wrappers import VelocityControl
 from pipelines.errors import PipelineError

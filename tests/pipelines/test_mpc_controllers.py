@@ -201,7 +201,7 @@ def test_ibr_predicts_through_the_twin_and_matches_the_torch_rollout(monkeypatch
 
 
 def test_the_mpc_is_built_from_the_simulators_world_and_refuses_to_disagree():
-    from crowdsim.env import EnvConfig
+    from crowdsim.env_config import EnvConfig
     from crowdsim.world import WORLD, WorldFacts
 
     assert EnvConfig().world() == WORLD and EnvConfig.from_world(WORLD) == EnvConfig()
@@ -234,7 +234,7 @@ def test_describe_states_coupling_flocking_and_distribution(name, flocking):
 def test_an_episode_of_another_time_step_is_refused():
     """A controller built for tau = 0.4 s must not drive a simulator stepping 0.2 s: its plans, predictions
     and bounds would all be off by a factor of two."""
-    from crowdsim.env import EnvConfig
+    from crowdsim.env_config import EnvConfig
 
     controller = make_controller(ControllerSpec("cmpc"))
     obs = CrowdEnv(EnvConfig(dt=0.2)).reset(0, "circle", 2)
@@ -246,7 +246,7 @@ def test_an_episode_does_not_depend_on_the_episodes_run_before():
     """Episode results are reproducible from (seed, scenario) alone: a controller reused across episodes
     starts each from a cold plan memory, as a fresh one does (a warm start from the last episode's plan
     changes the first solve)."""
-    from crowdsim.env import EnvConfig
+    from crowdsim.env_config import EnvConfig
 
     short = EnvConfig(time_limit=2.0, timeout_margin=0.0)  # 5 control steps
     reused = make_controller(ControllerSpec("cmpc"), short)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from predictors.errors import PredictorError

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crowdsim.env import CrowdEnv, EnvConfig
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import (

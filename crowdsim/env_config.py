@@ -1,0 +1,167 @@
+"""The simulator's settings: ``EnvConfig`` (time step, time limit, radii, speeds and bounds, the ORCA setup
+and the convention choices of a profile), checked when it is made, and the bounds it checks them against.
+
+The simulator that runs with them (``CrowdEnv``) and what a controller sees (``Observation``) are
+crowdsim.env, which offers ``EnvConfig`` too, as the settings of its ``CrowdEnv``; crowdsim.profiles names
+the convention sets.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+import numpy as np
+
+from crowdsim.conventions import (
+    CROSSINGS,
+    PAPER_SPAWN_SEPARATION,
+    PAPER_TIME_LIMIT,
+    PAPER_TIMEOUT_MARGIN,
+    SUCCESS_RULES,
+    Crossing,
+    SuccessRule,
+)
+from crowdsim.errors import SimulationError
+from crowdsim.orca import OrcaParams
+from crowdsim.scenarios import FORMATIONS, Formation
+from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
+from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF, WorldFacts
+
+# Upper bounds of EnvConfig's times, lengths and speeds: far above any crowd a robot navigates, low enough
+# that positions, step counts and the controllers' arithmetic stay finite (dt = 1e308 overflowed the
+# straight controller's braking distance).
+ENV_BOUNDS: Final[dict[str, tuple[float, str]]] = {
+    "time_limit": (86_400.0, "s"),  # a day; longer runs are more episodes (dt: at most time_limit)
+    "radius": (10.0, "m"),  # a robot or a person, not a building
+    "v_pref": (100.0, "m/s"),  # 360 km/h
+    "v_max": (100.0, "m/s"),
+    "a_max": (1000.0, "m/s^2"),  # 100 g
+}
+MIN_DT: Final[float] = 1e-6  # s: below, (time_limit - timeout_margin) / dt may overflow to inf
+MAX_SPAWN_SEPARATION: Final[float] = 100.0  # m: the scenarios are 10 m across
+MAX_ORCA_RADIUS_MARGIN: Final[float] = 10.0  # m: CrowdNav adds 0.01
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Simulator settings. The defaults are the "paper" profile with visible robots (``crowdsim.profiles``):
+    the paper's Table I, the authors' CrowdNav fork and CrowdNav's ORCA setup."""
+
+    dt: float = DT  # s, tau: simulation step = control period (Table I)
+    time_limit: float = PAPER_TIME_LIMIT  # s, the episode's time limit
+    radius: float = RADIUS  # m, every robot and human
+    v_pref: float = V_PREF  # m/s, humans' preferred speed = their ORCA max speed (CrowdNav)
+    v_max: float = V_MAX  # m/s, robot velocity bound per component, Eq. (6)
+    a_max: float = A_MAX  # m/s^2, robot acceleration bound per component, Eq. (6)
+    history_len: int = OBS_LEN  # L, rows of Observation.history: the predictors' observed length
+    orca: OrcaParams = field(default_factory=OrcaParams)  # neighbour distance, max neighbours, time horizon
+    orca_radius_margin: float = 0.01  # m added to the radius given to ORCA (CrowdNav's "for safety")
+    profile: str = "paper"  # name of the convention set, for records; the fields below are what acts
+    timeout_margin: float = PAPER_TIMEOUT_MARGIN  # s, no step starts at or after time_limit - margin
+    spawn_separation: float = PAPER_SPAWN_SEPARATION  # m added to the two radii between sampled humans
+    crossing: Crossing = "paper"  # the humans' start/goal sampling rules (crowdsim.crossings)
+    success_rule: SuccessRule = "simultaneous"  # crowdsim.env's docstring
+    robots_visible: bool = True  # the humans' ORCA sees the robots
+    goal_assignment: GoalAssignment = "fixed"  # "fixed": robot i to goal i (paper); "slots": crowdsim.slots
+    # the robots' starts and goals (crowdsim.scenarios): "auto" is the paper's row up to 3 robots, a wedge
+    # from 4; "row", "wedge", "two_rows" choose one for every team size
+    formation: Formation = "auto"
+
+    def __post_init__(self):
+        self._check_sizes()
+        self._check_dt()
+        if not (isinstance(self.history_len, int) and self.history_len >= 1):
+            raise SimulationError(f"EnvConfig.history_len must be an int >= 1, got {self.history_len!r}")
+        margin_ok = isinstance(self.orca_radius_margin, int | float) and np.isfinite(self.orca_radius_margin)
+        if not (margin_ok and 0 <= self.orca_radius_margin <= MAX_ORCA_RADIUS_MARGIN):
+            raise SimulationError(
+                f"EnvConfig.orca_radius_margin must be in [0, {MAX_ORCA_RADIUS_MARGIN:g}] m, "
+                f"got {self.orca_radius_margin!r}"
+            )
+        if not isinstance(self.orca, OrcaParams):
+            raise SimulationError(f"EnvConfig.orca must be an OrcaParams, got {type(self.orca).__name__}")
+        if not (isinstance(self.profile, str) and self.profile):
+            raise SimulationError(f"EnvConfig.profile must be a non-empty name, got {self.profile!r}")
+        margin = self.timeout_margin
+        if not (isinstance(margin, int | float) and 0 <= margin < self.time_limit):
+            raise SimulationError(
+                f"EnvConfig.timeout_margin must be in [0, time_limit={self.time_limit}) s, got {margin!r}"
+            )
+        separation = self.spawn_separation
+        if not (isinstance(separation, int | float) and np.isfinite(separation) and separation >= 0):
+            raise SimulationError(
+                f"EnvConfig.spawn_separation must be a finite number >= 0 m, got {separation!r}"
+            )
+        if separation > MAX_SPAWN_SEPARATION:
+            raise SimulationError(
+                f"EnvConfig.spawn_separation must be at most {MAX_SPAWN_SEPARATION:g} m, got {separation:g}"
+            )
+        if self.crossing not in CROSSINGS:
+            raise SimulationError(
+                f"EnvConfig.crossing must be one of {list(CROSSINGS)}, got {self.crossing!r}"
+            )
+        if self.success_rule not in SUCCESS_RULES:
+            raise SimulationError(
+                f"EnvConfig.success_rule must be one of {list(SUCCESS_RULES)}, got {self.success_rule!r}"
+            )
+        if self.goal_assignment not in GOAL_ASSIGNMENTS:
+            raise SimulationError(
+                f"EnvConfig.goal_assignment must be one of {list(GOAL_ASSIGNMENTS)}, "
+                f"got {self.goal_assignment!r}"
+            )
+        if self.goal_assignment == "slots" and self.success_rule == "first_reach":
+            raise SimulationError(  # the metrics would judge a reach against the goal held at the end
+                "EnvConfig.goal_assignment 'slots' needs success_rule 'simultaneous' (the paper profile): "
+                "under 'first_reach' a robot may reach a slot it gives up later"
+            )
+        if self.formation not in FORMATIONS:
+            raise SimulationError(
+                f"EnvConfig.formation must be one of {list(FORMATIONS)}, got {self.formation!r}"
+            )
+        if not isinstance(self.robots_visible, bool | np.bool_):
+            raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
+
+    def _check_sizes(self) -> None:
+        """The times, lengths and speeds: finite, positive, and within ``ENV_BOUNDS``."""
+        for name in ("dt", *ENV_BOUNDS):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise SimulationError(f"EnvConfig.{name} must be a finite number > 0, got {value!r}")
+        for name, (most, unit) in ENV_BOUNDS.items():
+            if getattr(self, name) > most:
+                raise SimulationError(
+                    f"EnvConfig.{name} must be at most {most:g} {unit}, got {getattr(self, name):g}"
+                )
+
+    def _check_dt(self) -> None:
+        """A step within the episode (``dt <= time_limit``), and not so short that ``max_steps`` overflows."""
+        if self.dt < MIN_DT:
+            raise SimulationError(f"EnvConfig.dt must be at least {MIN_DT:g} s, got {self.dt:g}")
+        if self.dt > self.time_limit:
+            raise SimulationError(
+                f"EnvConfig.dt must be at most time_limit = {self.time_limit:g} s, got {self.dt:g}"
+            )
+
+    @classmethod
+    def from_world(cls, world: WorldFacts, **settings: Any) -> EnvConfig:
+        """The simulator for ``world`` (tau, L, radii, speeds, bounds), with ``settings`` for the rest."""
+        facts: dict[str, Any] = {"dt": world.dt, "history_len": world.obs_len, "radius": world.radius}
+        facts |= {"v_pref": world.v_pref, "v_max": world.v_max, "a_max": world.a_max}
+        return cls(**facts, **settings)
+
+    def world(self) -> WorldFacts:
+        """The world facts this simulator runs with (what the MPC and the predictors must agree with)."""
+        return WorldFacts(self.dt, self.history_len, self.radius, self.v_pref, self.v_max, self.a_max)
+
+    @property
+    def max_steps(self) -> int:
+        """Steps before the timeout: those starting at ``t = k dt < time_limit - timeout_margin``.
+
+        The fork checks ``global_time >= time_limit - 1`` before each step, so with 40 s and 0.4 s steps start
+        at t = 0, 0.4, ..., 38.8 and t = 39.2 is a timeout: 98 steps. With no margin (v1) it is
+        ``time_limit / dt``: 75 steps of 0.4 s in 30 s. The 1e-9 absorbs rounding such as 30 / 0.4 =
+        75.00000000000001.
+        """
+        return math.ceil((self.time_limit - self.timeout_margin) / self.dt - 1e-9)
