@@ -68,12 +68,15 @@ Per-robot info arrays have ``max_robots`` rows, as the action and the observatio
 
 ``render()`` (``render_mode="rgb_array"``) draws the trajectories so far and the agents now
 (``crowdsim.plotting``) into a ``(480, 640, 3)`` uint8 array.
+
+The observation's array and bounds and ``ComparableObservation`` are built in crowdsim.gym_observation, the
+reward and the step's distances in crowdsim.gym_reward; this module exports their names.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import Any, Final
 
 import gymnasium as gym
@@ -84,6 +87,16 @@ from crowdsim import ENV_ID
 from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
+from crowdsim.gym_observation import (
+    COLUMNS,
+    GOAL,
+    POSITION,
+    PRESENT,
+    VELOCITY,
+    ComparableObservation,
+    observation_array,
+    observation_bounds,
+)
 from crowdsim.gym_reward import RewardConfig, step_closest, surface_distances
 from crowdsim.metrics import (
     COLLISION_DISTANCE,
@@ -91,8 +104,8 @@ from crowdsim.metrics import (
     episode_metrics,
     segments_intersect,
 )
-from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, checked_layout, geometry_scale
-from crowdsim.world import CIRCLE_RADIUS, DT, PAPER_ROBOTS, SQUARE_WIDTH
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, checked_layout
+from crowdsim.world import DT, PAPER_ROBOTS
 
 __all__ = [
     "COLUMNS",
@@ -108,32 +121,10 @@ __all__ = [
     "surface_distances",
 ]
 
-COLUMNS: Final[tuple[str, ...]] = ("x", "y", "vx", "vy", "goal_x", "goal_y", "present")
-POSITION: Final[slice] = slice(0, 2)  # m
-VELOCITY: Final[slice] = slice(2, 4)  # m/s
-GOAL: Final[slice] = slice(4, 6)  # m; 0 for humans
-PRESENT: Final[int] = 6  # 1.0 for an agent of this episode, 0.0 for a padding row
 RESET_OPTIONS: Final[tuple[str, ...]] = ("scenario", "n_humans", "n_robots", "layout")
 LAYOUT_SCENARIO: Final[str] = "layout"  # the scenario an episode from options["layout"] reports
 RENDER_SIZE: Final[tuple[float, float]] = (8.0, 6.0)  # inches at RENDER_DPI: 640 x 480 pixels
 RENDER_DPI: Final[int] = 80
-
-
-@dataclass(frozen=True, eq=False)
-class ComparableObservation(Observation):
-    """An ``Observation`` that compares equal field by field, arrays exactly (``Observation``'s own ``==``
-    raises on its arrays), so that an info dict holding one can be compared, as gymnasium's checker does."""
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Observation):
-            return NotImplemented
-        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(Observation))
-
-    __hash__ = None  # type: ignore[assignment]
-
-    @classmethod
-    def of(cls, obs: Observation) -> ComparableObservation:
-        return cls(**{f.name: getattr(obs, f.name) for f in fields(Observation)})
 
 
 def _count(value: object, name: str, low: int, high: int) -> int:
@@ -199,17 +190,9 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / config.dt}
 
-        # Bounds (module docstring): twice the largest scene, plus the farthest anyone travels per axis. An
-        # episode runs max_steps steps, which may outlast time_limit (no margin, time_limit / dt not whole).
-        speed = max(config.v_max, config.v_pref)
-        self.scene_limit = 2.0 * max(CIRCLE_RADIUS, SQUARE_WIDTH) * geometry_scale(self.max_humans)
-        duration = max(config.time_limit, config.max_steps * config.dt)
-        self.position_limit = self.scene_limit + speed * duration
-        rows = self.max_robots + self.max_humans
-        limit = np.array([self.position_limit] * 2 + [speed] * 2 + [self.position_limit] * 2 + [1.0])
-        self._high = np.broadcast_to(limit, (rows, len(COLUMNS))).copy()
-        self._low = -self._high
-        self._low[:, PRESENT] = 0.0
+        self.scene_limit, self.position_limit, self._low, self._high = observation_bounds(
+            config, self.max_robots, self.max_humans
+        )
         self.observation_space = spaces.Box(self._low, self._high, dtype=np.float64)
         self.action_space = spaces.Box(-config.a_max, config.a_max, (self.max_robots, 2), dtype=np.float64)
 
@@ -314,31 +297,13 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             return None
         if self._obs is None:
             raise SimulationError("render() called before reset()")
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        from crowdsim.plotting import plot_episode
+        from crowdsim.plotting import render_frame
 
         traj = self._sim.trajectory()
-        fig = Figure(figsize=RENDER_SIZE, dpi=RENDER_DPI)
-        canvas = FigureCanvasAgg(fig)
-        ax = fig.add_axes((0.09, 0.09, 0.6, 0.82))  # room on the right for plot_episode's legend
-        last = traj.n_steps
         seed = self._episode["seed"]
         title = f"{self._episode['scenario']}{'' if seed is None else f', seed {seed}'}: "
-        title += f"t = {last * self.config.dt:.1f} s"
-        plot_episode(
-            traj.robot_positions,
-            traj.human_positions,
-            traj.robot_goals,
-            ax=ax,
-            title=title,
-            snapshot_steps=[last],
-            radius=self.config.radius,
-            dt=self.config.dt,
-        )
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+        title += f"t = {traj.n_steps * self.config.dt:.1f} s"
+        return render_frame(traj, title, size=RENDER_SIZE, dpi=RENDER_DPI)
 
     def close(self) -> None:
         """Nothing is held between calls (each frame is drawn on a figure of its own)."""
@@ -415,11 +380,4 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         return out
 
     def _array(self, obs: Observation) -> np.ndarray:
-        out = np.zeros((self.max_robots + self.max_humans, len(COLUMNS)))
-        m, n = obs.n_robots, obs.n_humans
-        robots, humans = out[:m], out[self.max_robots : self.max_robots + n]
-        robots[:, POSITION], robots[:, VELOCITY] = obs.robot_positions, obs.robot_velocities
-        robots[:, GOAL] = obs.robot_goals
-        humans[:, POSITION], humans[:, VELOCITY] = obs.human_positions, obs.human_velocities
-        robots[:, PRESENT] = humans[:, PRESENT] = 1.0
-        return np.clip(out, self._low, self._high)
+        return observation_array(obs, self.max_robots, self.max_humans, self._low, self._high)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -18,6 +18,9 @@ from matplotlib.patches import Circle
 
 from crowdsim.errors import SimulationError
 from crowdsim.world import RADIUS
+
+if TYPE_CHECKING:
+    from crowdsim.metrics import Trajectory
 
 # matplotlib's tab10, the order pipelines.logs.recording uses, so robot i has one colour everywhere.
 ROBOT_COLORS = (
@@ -134,3 +137,25 @@ def plot_episode(
     if title:
         ax.set_title(title)
     return fig
+
+
+def render_frame(traj: Trajectory, title: str, *, size: tuple[float, float], dpi: int) -> np.ndarray:
+    """``traj``'s trajectories and its agents at the last state, drawn on a figure of ``size`` inches at
+    ``dpi`` into an RGB array, ``(height, width, 3)`` uint8: the gym environment's ``render()``."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = Figure(figsize=size, dpi=dpi)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.09, 0.09, 0.6, 0.82))  # room on the right for plot_episode's legend
+    plot_episode(
+        traj.robot_positions,
+        traj.human_positions,
+        traj.robot_goals,
+        ax=ax,
+        title=title,
+        snapshot_steps=[traj.n_steps],
+        radius=traj.radius,
+        dt=traj.dt,
+    )
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()

@@ -1,0 +1,73 @@
+"""The observation of ``crowdmpc/CrowdNav-v0`` (crowdsim.gym_env, whose docstring documents it, and which
+exports these names): the array's columns, the bounds of its ``Box``, a native ``Observation`` written into
+the array, and the native observation its info carries (``ComparableObservation``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Final
+
+import numpy as np
+
+from crowdsim.env import Observation
+from crowdsim.env_config import EnvConfig
+from crowdsim.scenarios import geometry_scale
+from crowdsim.world import CIRCLE_RADIUS, SQUARE_WIDTH
+
+COLUMNS: Final[tuple[str, ...]] = ("x", "y", "vx", "vy", "goal_x", "goal_y", "present")
+POSITION: Final[slice] = slice(0, 2)  # m
+VELOCITY: Final[slice] = slice(2, 4)  # m/s
+GOAL: Final[slice] = slice(4, 6)  # m; 0 for humans
+PRESENT: Final[int] = 6  # 1.0 for an agent of this episode, 0.0 for a padding row
+
+
+@dataclass(frozen=True, eq=False)
+class ComparableObservation(Observation):
+    """An ``Observation`` that compares equal field by field, arrays exactly (``Observation``'s own ``==``
+    raises on its arrays), so that an info dict holding one can be compared, as gymnasium's checker does."""
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Observation):
+            return NotImplemented
+        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(Observation))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @classmethod
+    def of(cls, obs: Observation) -> ComparableObservation:
+        return cls(**{f.name: getattr(obs, f.name) for f in fields(Observation)})
+
+
+def observation_bounds(
+    config: EnvConfig, max_robots: int, max_humans: int
+) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """``(scene_limit, position_limit, low, high)``: the limits (m) and the box's bounds, one row per agent
+    (``max_robots + max_humans`` rows, ``COLUMNS``)."""
+    # Bounds (gym_env's docstring): twice the largest scene, plus the farthest anyone travels per axis. An
+    # episode runs max_steps steps, which may outlast time_limit (no margin, time_limit / dt not whole).
+    speed = max(config.v_max, config.v_pref)
+    scene_limit = 2.0 * max(CIRCLE_RADIUS, SQUARE_WIDTH) * geometry_scale(max_humans)
+    duration = max(config.time_limit, config.max_steps * config.dt)
+    position_limit = scene_limit + speed * duration
+    rows = max_robots + max_humans
+    limit = np.array([position_limit] * 2 + [speed] * 2 + [position_limit] * 2 + [1.0])
+    high = np.broadcast_to(limit, (rows, len(COLUMNS))).copy()
+    low = -high
+    low[:, PRESENT] = 0.0
+    return scene_limit, position_limit, low, high
+
+
+def observation_array(
+    obs: Observation, max_robots: int, max_humans: int, low: np.ndarray, high: np.ndarray
+) -> np.ndarray:
+    """``obs`` as the environment's array: robots in the first ``max_robots`` rows, then humans, padding rows
+    zero, clipped into ``[low, high]`` (``observation_bounds``)."""
+    out = np.zeros((max_robots + max_humans, len(COLUMNS)))
+    m, n = obs.n_robots, obs.n_humans
+    robots, humans = out[:m], out[max_robots : max_robots + n]
+    robots[:, POSITION], robots[:, VELOCITY] = obs.robot_positions, obs.robot_velocities
+    robots[:, GOAL] = obs.robot_goals
+    humans[:, POSITION], humans[:, VELOCITY] = obs.human_positions, obs.human_velocities
+    robots[:, PRESENT] = humans[:, PRESENT] = 1.0
+    return np.clip(out, low, high)
