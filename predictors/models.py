@@ -152,7 +152,8 @@ class ModelKind:
         return self.net_class(config)
 
     def predictor(self, net: torch.nn.Module, *, name: str, obs_len: int) -> LearnedPredictor:
-        from predictors.learned import LearnedPredictor, SocialGANPredictor
+        from predictors.learned import LearnedPredictor
+        from predictors.social_lstm_predictors import SocialGANPredictor
 
         cls: type[LearnedPredictor] = SocialGANPredictor if self.adversarial else LearnedPredictor
         return cls(net, name=name, obs_len=obs_len, kind=self.name)

@@ -11,9 +11,9 @@ import torch.nn.functional as F
 from torch import nn
 
 from predictors.export import ExportError, TensorSpec, export_function
-from predictors.learned import SocialLSTMPredictor
 from predictors.nets.pooling import GridPooling
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+from predictors.social_lstm_predictors import SocialLSTMPredictor
 from tests.predictors.handwritten.twin import SocialLSTMTwin
 
 

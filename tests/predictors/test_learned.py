@@ -8,10 +8,11 @@ import pytest
 import torch
 
 from predictors.errors import PredictorError
-from predictors.learned import LearnedPredictor, SocialGANPredictor, SocialLSTMPredictor, casadi_name
+from predictors.learned import LearnedPredictor, casadi_name
 from predictors.nets.social_gan import generator_config
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 from predictors.registry import load_predictor
+from predictors.social_lstm_predictors import SocialGANPredictor, SocialLSTMPredictor
 from tests.predictors.test_contract import HORIZON, crossing_scene
 
 ZOO_MODELS = [

@@ -15,7 +15,7 @@ import torch
 
 from predictors import models
 from predictors.errors import PredictorError
-from predictors.learned import LearnedPredictor, SocialGANPredictor
+from predictors.learned import LearnedPredictor
 from predictors.models import (
     ENTRY_POINT_GROUP,
     MAX_PARAMETERS,
@@ -27,6 +27,7 @@ from predictors.models import (
     model_names,
     register_plugins,
 )
+from predictors.social_lstm_predictors import SocialGANPredictor
 from tests.plugins.toy_predictor import ToyConfig, ToyNet
 from tests.predictors.test_contract import HORIZON, crossing_scene
 

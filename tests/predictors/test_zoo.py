@@ -18,9 +18,10 @@ import torch
 from pipelines.cli import main
 from predictors import checkpoint, manifest, models, zoo, zoo_edit
 from predictors.errors import PredictorError, UnknownPredictor
-from predictors.learned import LearnedPredictor, SocialGANPredictor
+from predictors.learned import LearnedPredictor
 from predictors.models import load_plugin
 from predictors.registry import available, checkpoint_sha256, load_predictor
+from predictors.social_lstm_predictors import SocialGANPredictor
 from predictors.zoo import ZOO_ENV, read_manifest, user_zoo_dir
 from tests.predictors.test_models import check_sampling
 
