@@ -3,10 +3,10 @@
 One source, so that the simulator, the MPC and the predictors cannot drift apart. ``WorldFacts`` is the
 object: ``EnvConfig.from_world`` and ``MPCConfig.from_world`` build the simulator's and the MPC's settings
 from one, ``EnvConfig.world()`` reads it back, and the closed loop refuses a controller whose MPC or
-predictor disagrees with the simulator it drives in (``pipelines.loop.mpc.check_world``). ``WORLD`` holds the
-defaults, which the module constants name for the code that only needs a number. The crowd geometry (circle
-radius, square width) is the same in every simulation profile (``crowdsim.profiles``) and lives here too, and
-so do the two robot-robot distances that the MPC's costs and the robots' formations
+predictor disagrees with the simulator it drives in (``pipelines.loop.mpc_setup.check_world``). ``WORLD``
+holds the defaults, which the module constants name for the code that only needs a number. The crowd
+geometry (circle radius, square width) is the same in every simulation profile (``crowdsim.profiles``) and
+lives here too, and so do the two robot-robot distances that the MPC's costs and the robots' formations
 (``crowdsim.scenarios``) must agree on: ``MPCConfig`` takes them as its defaults, as it takes Table I's
 horizon ``HORIZON``. ``PAPER_ROBOTS`` is the paper's team size, every robot count's default.
 """

@@ -9,7 +9,7 @@ The facts the MPC shares with the simulator and the predictors (``tau``, ``v_max
 formations (``crowdsim.scenarios``) are spaced with. Table I's ``L`` (observed steps) is not here: it belongs
 to the predictor (``Predictor.obs_len``, 9 for every zoo model), and the simulator keeps
 ``crowdsim.world.OBS_LEN`` rows of history for it; the closed loop checks that they agree
-(``pipelines.loop.mpc.check_world``).
+(``pipelines.loop.mpc_setup.check_world``).
 
 The two values the paper uses without giving them:
 

@@ -1,9 +1,9 @@
 """What users run, in rooms that import one way (``tests/test_layering.py`` holds them to it):
 
 * ``pipelines.loop``: the closed loop. The controller spec and each controller's facts (``spec``), the
-  registry (``controllers``), the MPC and baseline adapters (``mpc``, ``baselines``), the prediction margins
-  (``margins``), the episode runner (``episode``) and the one episode record every report serialises
-  (``record``).
+  registry (``controllers``), the MPC and baseline adapters (``mpc`` with ``mpc_setup``, ``baselines``), the
+  prediction margins (``margins``), the episode runner (``episode``) and the one episode record every report
+  serialises (``record``).
 * ``pipelines.logs``: an episode as an MCAP file and back. Message schemas (``schemas``, ``foxglove``,
   ``jsonschema``), the writer (``recorder``), the episode recorder (``recording``), reading (``reader``),
   text review (``review``) and pictures (``plots``).

@@ -259,7 +259,7 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
     for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;
     docs/results.md, "More robots, more humans"); None otherwise. Only for this project's MPC controllers."""
-    from pipelines.loop.mpc import mpc_config
+    from pipelines.loop.mpc_setup import mpc_config
 
     if spec.controller not in ("cmpc", "dmpc") or n_robots <= PAPER_ROBOTS:
         return None

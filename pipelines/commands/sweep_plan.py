@@ -47,7 +47,7 @@ def check_predictors(experiment: Experiment) -> None:
 def check_margins(experiment: Experiment) -> None:
     """Every method's margins resolve (a calibration that matches the weights, with per-class margins for the
     per-human modes) before workers start."""
-    from pipelines.loop.mpc import mpc_config
+    from pipelines.loop.mpc_setup import mpc_config
     from predictors.registry import checkpoint_sha256
 
     for _, spec in experiment.methods:

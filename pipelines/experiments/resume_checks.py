@@ -60,7 +60,7 @@ def check_same_margins(out: Path, tasks: list[EpisodeTask], done: dict[str, dict
 def planned_margins(cell: Cell) -> dict[str, Any]:
     """The margins ``cell``'s MPC plans with now, as its records state them (MPCController.describe's
     "margins": the same for every human, and per motion class), in their JSON form."""
-    from pipelines.loop.mpc import mpc_config
+    from pipelines.loop.mpc_setup import mpc_config
     from predictors.registry import checkpoint_sha256
 
     spec = cell.spec

@@ -11,7 +11,8 @@ from mpc.errors import MPCConfigError
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
-from pipelines.loop.mpc import MPCController, mpc_config, predictor_history
+from pipelines.loop.mpc import MPCController
+from pipelines.loop.mpc_setup import mpc_config, predictor_history
 
 
 class Collect:

@@ -1,0 +1,71 @@
+"""What an MPC controller (pipelines.loop.mpc) is built from and checked against: its ``MPCConfig`` from a
+``ControllerSpec`` and the world's facts (``mpc_config``), the check that the MPC, the predictor and the
+simulator agree on the world (``check_world``), and the rows of an observation's history the predictor reads
+(``predictor_history``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from crowdsim.world import WORLD, WorldFacts
+from mpc.config import MPCConfig
+from pipelines.errors import PipelineError
+from pipelines.loop.spec import ControllerSpec
+from predictors.base import DT as PREDICTOR_DT
+from predictors.base import Predictor
+
+if TYPE_CHECKING:
+    from crowdsim.env import Observation
+
+
+def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORLD) -> MPCConfig:
+    """Table I in ``world`` (tau, robot bounds), then ``spec.mpc_overrides``, then ``omega_floc = 0`` when
+    flocking is off.
+
+    ``jit`` compiles the IBR loops' NLPs. The coupled NLP is not compiled: its graph (the network, or a
+    first-order model's 56 x 24 Jacobian of parameters) kept gcc busy for over two minutes per process
+    (measured: 148 s for the first first-order episode of `--experiment coupling`).
+    """
+    cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
+    if jit and spec.coupling == "ibr":
+        cfg = cfg.replace(jit=True)
+    return cfg if spec.flocking else cfg.replace(w_floc=0.0)
+
+
+def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.ndarray]:
+    """The last ``obs_len`` rows of ``obs.history`` ``(L, M+N, 2)`` and an all-True mask.
+
+    The predictor gets exactly the rows it reads: a history shorter than ``obs_len`` is refused (the
+    simulator's ``EnvConfig.history_len`` must be at least the predictor's ``obs_len``), never padded here.
+    Before an episode's first step everyone stood still, which is what the simulator's own history says.
+    """
+    history = np.asarray(obs.history, dtype=float)
+    if len(history) < obs_len:
+        raise PipelineError(
+            f"the predictor reads {obs_len} observed steps but the simulator keeps {len(history)} "
+            f"(EnvConfig.history_len): use history_len >= {obs_len}"
+        )
+    history = history[-obs_len:]
+    return history, np.ones(history.shape[:2], dtype=bool)
+
+
+def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None:
+    """The MPC and the predictor agree with the simulator's world facts (crowdsim/world.py): the control
+    period is the simulation step and the predictor's sampling time, the MPC's robot bounds are the
+    simulator's, and the history holds what the predictor reads."""
+    for name in ("dt", "v_max", "a_max"):
+        ours, theirs = getattr(cfg, name), getattr(world, name)
+        if abs(ours - theirs) > 1e-12:
+            raise PipelineError(f"the simulator's {name} is {theirs} but the MPC's is {ours} (mpc_overrides)")
+    if predictor.obs_len > 1 and abs(world.dt - PREDICTOR_DT) > 1e-12:
+        raise PipelineError(
+            f"the predictors are sampled every {PREDICTOR_DT} s, the simulator's tau is {world.dt} s"
+        )
+    if predictor.obs_len > world.obs_len:
+        raise PipelineError(
+            f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator "
+            f"keeps {world.obs_len} (EnvConfig.history_len): use history_len >= {predictor.obs_len}"
+        )
