@@ -74,7 +74,7 @@ def test_a_failed_fatrop_solve_is_retried_with_ipopt():
     cfg = MPCConfig()
     nlp = JointNLP(cfg, 3, 1)
     stub = FailingFatrop(3 * cfg.horizon * 2)
-    nlp._solver._fatrop = stub
+    nlp._solver()._fatrop = stub
     sol = nlp.solve(crossing_data(), human_walking_south(cfg), np.zeros((3, cfg.horizon, 2)))
     assert stub.calls == 1
     assert sol.success and sol.solver == "ipopt" and sol.status == "Solve_Succeeded"
@@ -93,6 +93,6 @@ def test_ipopt_only_settings_make_ipopt_the_solver():
             return p
 
     nlp = JointNLP(cfg, 3, 1, humans_model=LbfgsModel())
-    assert nlp._solver.primary == "ipopt"
-    assert JointNLP(cfg, 3, 1)._solver.primary == "fatrop"
-    assert JointNLP(MPCConfig(solver="ipopt"), 3, 1)._solver.primary == "ipopt"
+    assert nlp._solver().primary == "ipopt"
+    assert JointNLP(cfg, 3, 1)._solver().primary == "fatrop"
+    assert JointNLP(MPCConfig(solver="ipopt"), 3, 1)._solver().primary == "ipopt"
