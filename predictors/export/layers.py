@@ -54,7 +54,9 @@ def scaled_dot_product_attention(
             mask = operand(m, scores.shape_)
         else:
             scores = add(scores, m)
-    weights = SymTensor(softmax_rows(scores.m, mask), scores.shape_)
+            mask = scores.m != -math.inf  # torch's attention masks by -inf, so these are its masked keys
+    # torch gives a row with every key masked 0 (its _safe_softmax), not softmax's NaN
+    weights = SymTensor(softmax_rows(scores.m, mask, empty_rows_zero=True), scores.shape_)
     return matmul(weights, v)
 
 

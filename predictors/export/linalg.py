@@ -32,7 +32,7 @@ def _to_last(x: SymTensor, dims: Sequence[int]) -> tuple[SymTensor, tuple[int, .
 
 
 def _reduce_dims(x: SymTensor, dim) -> list[int]:
-    if dim is None:
+    if dim is None or (isinstance(dim, (tuple, list)) and not dim):  # torch reduces every dim for dim=[]
         return list(range(x.ndim))
     dims = dim if isinstance(dim, (tuple, list)) else (dim,)
     return sorted(normal_dim(d, x.ndim) for d in dims)
@@ -63,31 +63,51 @@ def _row_max(m):
     return top
 
 
-def softmax_rows(m, mask=None):
-    """Softmax of every row of ``m``; ``mask`` (0/1, same shape) leaves entries out exactly as -inf would."""
+def softmax_rows(m, mask=None, *, empty_rows_zero=False):
+    """Softmax of every row of ``m``; ``mask`` (0/1, same shape) leaves entries out exactly as -inf would.
+
+    A row that ``mask`` leaves empty is 0/0 (NaN, as torch's softmax of all -inf) unless ``empty_rows_zero``
+    (torch's attention, whose softmax gives such a row 0: an agent with no neighbour in range).
+    """
     cols = m.shape[1]
     shifted = m if mask is None else ca.if_else(mask, m, -1e300, False)
     # The shift by the row's maximum changes no value (softmax is shift invariant) but keeps exp finite.
     e = ca.exp(m - ca.repmat(_row_max(shifted), 1, cols))
     if mask is not None:
         e = ca.if_else(mask, e, 0, False)
-    return e / ca.repmat(ca.sum2(e), 1, cols)
+    total = ca.sum2(e)
+    if empty_rows_zero:
+        # a row with an allowed key sums to >= 1 (exp(0) at its maximum): only empty rows are 0
+        total = ca.if_else(total > 0, total, 1, False)
+    return e / ca.repmat(total, 1, cols)
 
 
-def softmax(x, dim=None, _stacklevel=3, dtype=None):
+def log_softmax_rows(m):
+    """``log(softmax)`` of every row as ``m - max - log(sum(exp(m - max)))``: the log of a softmax that has
+    underflowed would be -inf (a logit gap above ~745) where torch's is exact."""
+    cols = m.shape[1]
+    shifted = m - ca.repmat(_row_max(m), 1, cols)
+    return shifted - ca.repmat(ca.log(ca.sum2(ca.exp(shifted))), 1, cols)
+
+
+def _along(rows_fn, x, dim) -> SymTensor:
+    """``rows_fn`` (a map of every row of a matrix) applied along ``dim`` of ``x``."""
     x = as_float(lift(x))
     dim = normal_dim(x.ndim - 1 if dim is None else dim, x.ndim)
     if dim == x.ndim - 1:
-        return SymTensor(softmax_rows(x.m), x.shape_)
+        return SymTensor(rows_fn(x.m), x.shape_)
     order = [d for d in range(x.ndim) if d != dim] + [dim]
     inverse = np.argsort(order).tolist()
     moved = permute(x, tuple(order))
-    return permute(SymTensor(softmax_rows(moved.m), moved.shape_), tuple(inverse))
+    return permute(SymTensor(rows_fn(moved.m), moved.shape_), tuple(inverse))
+
+
+def softmax(x, dim=None, _stacklevel=3, dtype=None):
+    return _along(softmax_rows, x, dim)
 
 
 def log_softmax(x, dim=None, _stacklevel=3, dtype=None):
-    y = softmax(x, dim)
-    return SymTensor(ca.log(y.m), y.shape_)
+    return _along(log_softmax_rows, x, dim)
 
 
 # ------------------------------------------------------------------------------------------- linear algebra
@@ -138,6 +158,11 @@ def einsum(equation: str, *operands):
         )
     inputs, output = equation.split("->")
     specs = inputs.split(",")
+    if any(len(set(spec)) != len(spec) for spec in specs):
+        raise ExportError(
+            f"einsum {equation!r} (a letter repeated within one operand: a diagonal or trace)",
+            current_module(),
+        )
     tensors = [lift(t) for t in operands]
     if len(tensors) == 1:
         (spec,), (x,) = specs, tensors

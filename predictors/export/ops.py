@@ -25,6 +25,7 @@ from predictors.export.elementwise import (
     logical_not,
     mul,
     power,
+    relu,
     sigmoid,
     softplus,
     sub,
@@ -82,7 +83,7 @@ def _logical(op):
 ELEMENTWISE: dict[str, Callable[[Any], Any]] = {
     "tanh": ca.tanh,
     "sigmoid": sigmoid,
-    "relu": lambda m: ca.fmax(m, 0),
+    "relu": relu,
     "exp": ca.exp,
     "log": ca.log,
     "log1p": ca.log1p,

@@ -142,6 +142,23 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
         net.train(was_training)
 
 
+def _traced(net: nn.Module, method: Callable[..., Any], tensors: Sequence[SymTensor]) -> Any:
+    """``method(*tensors)`` inside ``symbolic_run``; torch code that fails on symbols (``torch.tensor`` of
+    them, an index numpy refuses) is an ExportError naming the module, not the traceback of its internals."""
+    with symbolic_run(net):
+        try:
+            return method(*tensors)
+        except ExportError:
+            raise
+        except (RuntimeError, ValueError, TypeError, IndexError) as error:
+            message = (str(error).strip().splitlines() or [""])[0][:200]
+            raise ExportError(
+                f"{type(error).__name__} while tracing ({message}): an operation the exporter does not "
+                "support, or one that fails on these shapes",
+                current_module(),
+            ) from error
+
+
 def _flat_output(value: Any, what: str) -> Any:
     if isinstance(value, (SymTensor, torch.Tensor)):
         return lift(value).flat()
@@ -166,8 +183,7 @@ def export_function(
     tensors = [
         SymTensor.from_flat(s, spec.shape, spec.is_bool) for s, spec in zip(symbols, inputs, strict=True)
     ]
-    with symbolic_run(net):
-        result = method(*tensors)
+    result = _traced(net, method, tensors)
     values = result if isinstance(result, tuple) else (result,)
     if len(values) != len(output_names):
         raise ExportError(
@@ -186,7 +202,6 @@ def output_shapes(
     tensors = [
         SymTensor.from_flat(ca.MX.sym(spec.name, spec.size), spec.shape, spec.is_bool) for spec in inputs
     ]
-    with symbolic_run(net):
-        result = method(*tensors)
+    result = _traced(net, method, tensors)
     values = result if isinstance(result, tuple) else (result,)
     return [tuple(lift(v).shape_) for v in values]

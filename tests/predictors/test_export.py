@@ -201,6 +201,73 @@ OPERATIONS = {
         ),
     ),
     "einsum": (lambda m, w, v: torch.einsum("bijc,bjf->bicf", w, v), (randn(1, 3, 3, 4), randn(1, 3, 2))),
+    # At a tie CasADi's fmax/fmin have slope 0.5; torch's relu has 0 at 0, leaky_relu its negative slope,
+    # clamp 1 at a bound: exact zeros and bounds on purpose.
+    "ties": (
+        lambda m, x: (
+            torch.relu(x) + 2 * F.leaky_relu(x, 0.2) + 3 * torch.clamp(x, -0.5, 0.5) + 5 * x.clamp(min=0.0)
+        ),
+        (torch.tensor([[0.0, 0.5, -0.5, 1.0], [-1.0, 0.0, 0.25, -0.25]], dtype=torch.float64),),
+    ),
+    # The scenarios' formation: robots 2.0 m apart put a neighbour exactly on a cell edge (relu(0)).
+    "soft_grid_pooling_ties": (
+        lambda m, p, h, n: m.pool(h, p, n),
+        (
+            torch.tensor([[[-1.0, -5.0], [0.0, -5.0], [1.0, -5.0], [0.3, -2.0]]], dtype=torch.float64),
+            randn(1, 4, 6),
+            torch.tensor([[True, True, True, True]]),
+        ),
+        {"pool": GridPooling(hidden_dim=6, latent_dim=3, out_dim=4, cell_side=0.8, grid_size=6, soft=True)},
+    ),
+    # symbolic bounds on both sides (below, inside, above, on them), also min > max (torch gives max); the
+    # Jacobian with respect to the bound comes from the swapped order
+    "clamp_symbolic_bounds": (
+        lambda m, x, y: torch.clamp(x, min=y, max=y + 1) + 2 * x.clamp(min=y + 1, max=y),
+        (
+            torch.tensor([[-5.0, 0.5, 3.0, 0.0, 1.0]], dtype=torch.float64),
+            torch.zeros(1, 5, dtype=torch.float64),
+        ),
+    ),
+    "clamp_symbolic_bounds_by_bound": (
+        lambda m, y, x: torch.clamp(x, min=y, max=y + 1) + 2 * x.clamp(min=y + 1, max=y),
+        (
+            torch.zeros(1, 5, dtype=torch.float64),
+            torch.tensor([[-5.0, 0.5, 3.0, 0.0, 1.0]], dtype=torch.float64),
+        ),
+    ),
+    # constant tensor bounds that broadcast (a row of per-column minima, a column of per-row maxima)
+    "clamp_constant_tensor_bounds": (
+        lambda m, x: torch.clamp(
+            x, min=torch.tensor([0.0, -1.0, 0.5, 0.0]), max=torch.tensor([[1.0], [2.0]])
+        ),
+        (torch.tensor([[-0.5, -2.0, 0.7, 3.0], [0.5, 2.5, 0.1, 0.0]], dtype=torch.float64),),
+    ),
+    # a fully masked query row (an agent with nobody in range) is 0 in torch's attention, boolean or -inf mask
+    "attention_empty_row": (
+        lambda m, q, k, v, a: (
+            F.scaled_dot_product_attention(q, k, v, attn_mask=a)
+            + 2
+            * F.scaled_dot_product_attention(
+                q, k, v, attn_mask=torch.tensor([0.0, -float("inf"), 0.0, 0.0])[:, None].expand(4, 4)
+            )
+        ),
+        (
+            randn(1, 2, 4, 3),
+            randn(1, 2, 4, 3),
+            randn(1, 2, 4, 5),
+            torch.tensor([[True, True, False, False], [False] * 4, [True] * 4, [False, False, True, False]]),
+        ),
+    ),
+    # logit gaps beyond exp's range: log(softmax) was -inf (and its Jacobian NaN)
+    "log_softmax_wide": (
+        lambda m, x: F.log_softmax(x, dim=-1) + 2 * F.log_softmax(x, dim=0),
+        (torch.tensor([[0.0, -800.0, 3.0], [1000.0, 0.0, -742.0]], dtype=torch.float64),),
+    ),
+    # torch reduces every dim for an empty dim list
+    "sum_empty_dims": (
+        lambda m, x: x.sum(dim=[]) + 2 * x.mean(dim=(), keepdim=True) + 3 * torch.sum(x, []),
+        (randn(2, 3, 4),),
+    ),
     "lstm_cell": (
         lambda m, x, h, c: m.cell(x, (h, c))[0] + m.cell(x, (h, c))[1],
         (randn(4, 3), randn(4, 5), randn(4, 5)),
@@ -263,6 +330,47 @@ def test_unsupported_operation_names_the_op_and_the_module():
     with pytest.raises(ExportError, match=r"unsupported operation torch\.sort .*module 'inner'") as info:
         export(lambda m, x: m.inner(x), (3, 4), inner=Sorting())
     assert "\n" not in str(info.value)
+
+
+def test_softmax_of_a_row_of_only_minus_inf_stays_nan_as_in_torch():
+    """Only attention gives a fully masked row 0; a plain softmax of all -inf is NaN in torch, and so here."""
+    mask = torch.tensor([[True, False], [False, False]])
+
+    def fn(m, x):
+        return torch.softmax(torch.where(mask, x, -float("inf")), -1)
+
+    x = torch.tensor([[0.3, -0.2], [0.1, 0.5]], dtype=torch.float64)
+    got = np.asarray(export(fn, (2, 2))(x.numpy().ravel())).ravel()
+    expected = fn(None, x).reshape(-1).numpy()
+    assert np.isnan(expected[2:]).all() and np.isnan(got[2:]).all()
+    np.testing.assert_array_equal(got[:2], expected[:2])
+
+
+@pytest.mark.parametrize(
+    ("fn", "message"),
+    [
+        (lambda m, x: m.inner(x), r"einsum 'ii->i' \(a letter repeated within one operand"),
+        (
+            lambda m, x: torch.tensor([x[0, 0], x[0, 1]]),
+            r"TypeError while tracing \(len\(\) of a 0-d tensor\)",
+        ),
+        (lambda m, x: x[:, 7], r"IndexError while tracing .*module 'Wrap'"),
+    ],
+    ids=["einsum_diagonal", "tensor_of_symbols", "index_out_of_range"],
+)
+def test_torch_code_that_fails_on_symbols_is_an_export_error(fn, message):
+    """Torch code that raised while traced (numpy's, torch's own) escaped as a traceback; an einsum diagonal
+    was a ValueError. Each is an ExportError naming the module, in one line."""
+
+    class Diagonal(nn.Module):
+        def forward(self, x):
+            return torch.einsum("ii->i", x)
+
+    with pytest.raises(ExportError, match=message) as info:
+        export(fn, (2, 2), inner=Diagonal())
+    assert "\n" not in str(info.value)
+    if "einsum" in message:
+        assert info.value.module == "inner"
 
 
 def test_data_dependent_branch_is_refused_with_the_module():
