@@ -1,9 +1,12 @@
-"""A directory this process cannot create anything in, for tests of unwritable locations."""
+"""A directory this process cannot create anything in, and a file size limit, for tests of outputs that cannot
+be written."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import resource
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -31,3 +34,16 @@ def read_only_place(tmp_path: Path) -> Iterator[Path]:
         pytest.skip("no read-only place here (root, and /sys accepts mkdir)")
     finally:
         folder.chmod(0o755)  # for pytest's clean-up
+
+
+@contextlib.contextmanager
+def file_size_limit(size: int) -> Iterator[None]:
+    """Writes past ``size`` bytes of any file fail with EFBIG (``ulimit -f``, as a full disk fails them);
+    Python ignores the SIGXFSZ that would otherwise end the process."""
+    assert signal.getsignal(signal.SIGXFSZ) == signal.SIG_IGN
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (size, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))

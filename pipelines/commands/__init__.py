@@ -9,7 +9,7 @@ import os
 import stat
 import sys
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Final
 
@@ -132,6 +132,46 @@ def _check_json_document(path: Path, label: str) -> None:
             f"{label}: that is a file crowdmpc keeps (a zoo's, a sweep's or a training run's), not a report; "
             "name another file"
         )
+
+
+def replace_file(path: Path, write: Callable[[str], object]) -> None:
+    """``write(name)`` fills a new file beside ``path``, which then replaces ``path`` in one rename: a write
+    that fails (a full disk, ``ulimit -f``) leaves an earlier ``path`` as it was, and no half file. The new
+    file gets the mode of the file it replaces (else the umask's). ``OSError`` on failure, the temporary
+    file removed; ``path`` must not be a device or a pipe (the rename would replace the node itself)."""
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    try:
+        if path.is_file():
+            mode = stat.S_IMODE(path.stat().st_mode)
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(name, mode)
+        write(name)
+        os.replace(name, path)
+    finally:
+        if os.path.lexists(name):
+            os.unlink(name)
+
+
+def write_output(path: Path, text: str, option: str) -> None:
+    """Write ``text`` to the user-named output ``path`` (``--json FILE``), whole or not at all; a failure is a
+    one-line PipelineError naming the option (the CLI's message, not an OSError traceback)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if path.exists() and not path.is_file():  # /dev/null, a pipe: written in place, never replaced
+            path.write_text(text)
+            return
+        try:
+            replace_file(path, lambda name: Path(name).write_text(text))
+        except PermissionError:  # a folder without new files but a writable file: in place, as before
+            if not path.is_file():
+                raise
+            path.write_text(text)
+    except OSError as exc:
+        raise PipelineError(f"{option} {path}: could not write it ({exc.strerror or exc})") from None
 
 
 def _probe(directory: Path) -> None:

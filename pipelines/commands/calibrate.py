@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pipelines.commands import check_writable, humans_list
+from pipelines.commands import check_writable, humans_list, write_output
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -297,7 +297,6 @@ def run(args: argparse.Namespace) -> int:
         }
         if holdout is not None:
             payload["holdout_rows"] = int(holdout.shape[0])
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
+        write_output(args.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
         print(f"wrote {args.json}")
     return 0

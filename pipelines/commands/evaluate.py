@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Final
 
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, write_output
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
@@ -122,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
     if args.top_k is not None and result["top_k"] is None:
         print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)
     if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        write_output(args.json, json.dumps(result, indent=2) + "\n", "--json")
         print(f"wrote {args.json}")
     return 0

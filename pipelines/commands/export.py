@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, replace_file
 from pipelines.errors import PipelineError
 
 # The MPC predicts over 4 steps (Table I); the CasADi function grows with H (its graph unrolls H recursive
@@ -100,6 +100,32 @@ def _check_replaces_an_export(out: Path) -> None:
         ) from None
 
 
+def _save(function, out: Path) -> None:
+    """``function`` saved to a file beside ``out``, loaded back and compared, then renamed over ``out``.
+
+    CasADi's ``Function.save`` ignores write errors (a full disk, ``ulimit -f``) and writes in place, so a
+    plain save reported success over a truncated file and destroyed the earlier export at ``out``.
+    """
+    import casadi as ca
+
+    def save_and_check(name: str) -> None:
+        function.save(name)
+        try:
+            written = ca.Function.load(name).serialize()
+        except RuntimeError:  # a cut file does not deserialize
+            written = None
+        if written != function.serialize():
+            raise OSError("the file written does not load back as the function: is the disk full?")
+
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        replace_file(out, save_and_check)
+    except OSError as exc:
+        raise PipelineError(
+            f"--out {out}: could not write it ({exc.strerror or exc}); an earlier file there is unchanged"
+        ) from None
+
+
 def run(args: argparse.Namespace) -> int:
     from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
     from predictors.registry import load_predictor
@@ -116,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"--out {args.out} is a directory; give the file to write, e.g. {args.name}.casadi"
         )
+    if args.out.exists() and not args.out.is_file():  # the export replaces the file; never a device node
+        raise PipelineError(f"--out {args.out} is not a regular file (a device or a pipe); name a file")
     _check_outside_the_zoos(args.out)
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
@@ -124,8 +152,7 @@ def run(args: argparse.Namespace) -> int:
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)
     seconds = time.perf_counter() - start
     parity = _parity(predictor, args)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    function.save(str(args.out))
+    _save(function, args.out)
     size = predictor.context_size(args.humans, args.robots)
     print(
         f"wrote {args.out}: {function.name()} for {args.humans} humans, {args.robots} robots, "

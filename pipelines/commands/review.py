@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, write_output
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 
@@ -368,6 +368,6 @@ def run(args: argparse.Namespace) -> int:
 
     if args.json:
         # plain: a hostile or foreign file's NaN metrics would make the report invalid JSON
-        args.json.write_text(json.dumps(plain(report), indent=2, allow_nan=False) + "\n")
+        write_output(args.json, json.dumps(plain(report), indent=2, allow_nan=False) + "\n", "--json")
         print(f"json: {args.json}")
     return 1 if failed else 0

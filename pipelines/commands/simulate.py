@@ -14,7 +14,7 @@ from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS, RADIUS
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, write_output
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
@@ -345,7 +345,6 @@ def _report(
     )
     print(format_table(summary, header))
     if resolved.json is not None:
-        resolved.json.parent.mkdir(parents=True, exist_ok=True)
         from pipelines.version import code_identity
 
         payload = {
@@ -355,7 +354,7 @@ def _report(
             "summary": summary,
             "episodes": [r.record().to_dict() for r in results],
         }
-        resolved.json.write_text(json.dumps(plain(payload), indent=1) + "\n")
+        write_output(resolved.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
         print(f"wrote {resolved.json}")
     if resolved.plot is not None:
         _plot(resolved.plot, spec.controller, results[0], env_config)

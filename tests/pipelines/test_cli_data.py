@@ -146,6 +146,22 @@ def test_prepare_and_evaluate(tmp_path, capsys):
     assert result["overall"]["scenes"] > 0 and result["overall"]["ade"] < 0.05
 
 
+def test_evaluate_json_that_cannot_be_written_is_one_line(prepared, capsys):
+    """`evaluate --json /dev/full` (a full disk) ended in an OSError traceback after the evaluation."""
+    code, stdout, err = run(
+        capsys,
+        "evaluate",
+        "--predictor",
+        "constant_velocity",
+        "--data-dir",
+        str(prepared),
+        "--json",
+        "/dev/full",
+    )
+    assert "ADE [m]" in stdout  # the table is printed before the report is written
+    assert_one_line_error(code, err, "--json /dev/full: could not write it (No space left on device)")
+
+
 def test_prepare_rejects_a_directory_without_ewap(tmp_path, capsys):
     code, _, err = run(capsys, "data", "prepare", "--raw", str(tmp_path), "--out", str(tmp_path / "o"))
     assert_one_line_error(code, err, "expected a BIWI EWAP directory")

@@ -17,13 +17,14 @@ import numpy as np
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, write_output
 from pipelines.errors import PipelineError
 from pipelines.experiments.log import EPISODES_FILE
 from pipelines.experiments.worker import SCRATCH_PREFIX, remove_stale_scratch
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode, summarize
 from tests.predictors.samples import write_walk_file
+from tests.read_only import file_size_limit
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -176,6 +177,25 @@ def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp
         (tmp_path / name).write_text(text)
         with pytest.raises(PipelineError, match="that is a file crowdmpc keeps"):
             check_writable(tmp_path / name, "--json", json_only=True)
+
+
+def test_a_report_that_cannot_be_written_is_one_line_and_keeps_the_earlier_one(tmp_path):
+    """`--json` on a full disk (/dev/full, ``ulimit -f``) ended the commands in an OSError traceback after
+    the work, the earlier report cut: one PipelineError naming the option, the earlier report whole, no part
+    file left."""
+    with pytest.raises(
+        PipelineError, match=r"^--json /dev/full: could not write it \(No space left on device\)$"
+    ):
+        write_output(Path("/dev/full"), "{}\n", "--json")
+    report = tmp_path / "deeper" / "report.json"
+    write_output(report, '{"ade": 0.6}\n', "--json")  # its folder made
+    with file_size_limit(64), pytest.raises(PipelineError, match=rf"^--json {report}: could not write it"):
+        write_output(report, json.dumps({"ade": list(range(100))}), "--json")
+    assert report.read_text() == '{"ade": 0.6}\n' and [p.name for p in report.parent.iterdir()] == [
+        report.name
+    ]
+    write_output(report, '{"ade": 0.5}\n', "--json")
+    assert report.read_text() == '{"ade": 0.5}\n'
 
 
 def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):

@@ -12,6 +12,7 @@ from pipelines.cli import main
 from predictors.registry import available, load_predictor
 from predictors.zoo import user_zoo_dir
 from tests.predictors.samples import walk_scene_records, write_lines, write_walk_file
+from tests.read_only import file_size_limit
 
 
 @pytest.fixture(autouse=True)
@@ -379,6 +380,24 @@ def test_test_files_without_train_and_val_are_refused(tmp_path, capsys):
     write_walk_file(path)
     assert main(["train", "--model", "vanilla_lstm", "--test", str(path), "--out", str(tmp_path / "o")]) == 2
     assert "--test goes with --train and --val" in capsys.readouterr().err
+
+
+def test_an_export_that_cannot_be_written_fails_and_keeps_the_earlier_one(tmp_path, capsys):
+    """CasADi's save ignores write errors and writes in place: on a full disk (here ``ulimit -f``) export said
+    "wrote" with status 0 over a cut file, the earlier export destroyed. It now writes beside it, loads that
+    back, and only then renames it over; a device is refused (the rename would replace the node)."""
+    out = tmp_path / "cv.casadi"
+    assert main(["export", "constant_velocity", "--out", str(out), "--humans", "1", "--horizon", "1"]) == 0
+    earlier = out.read_bytes()
+    capsys.readouterr()
+    with file_size_limit(len(earlier) + 512):  # the default sizes take several kB
+        code = main(["export", "constant_velocity", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert f"--out {out}: could not write it" in err and "an earlier file there is unchanged" in err
+    assert out.read_bytes() == earlier and sorted(p.name for p in tmp_path.iterdir()) == ["cv.casadi"]
+    assert main(["export", "constant_velocity", "--out", "/dev/full"]) == 2
+    assert "--out /dev/full is not a regular file" in capsys.readouterr().err
 
 
 def test_export_replaces_an_earlier_export_but_no_other_file(tmp_path, capsys):
