@@ -9,12 +9,15 @@ from predictors.base import DT, check_rollout_inputs
 
 
 def last_state(history: np.ndarray, mask: np.ndarray, agents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Last observed position and velocity of each agent in ``agents``: ``(n, 2)`` each.
+    """Position at the current step (the history's last) and velocity of each agent in ``agents``: ``(n, 2)``.
 
     The velocity is the last finite difference between two consecutive observed steps; an agent seen only
-    once (or never twice in a row at the end) gets zero velocity rather than a guess.
+    once (or never twice in a row at the end) gets zero velocity rather than a guess. An agent not seen at the
+    current step is extrapolated to it at that velocity from where it was last seen, as the learned predictors
+    impute it: its forecast would otherwise lag by the steps it was missing.
     """
     agents = np.asarray(agents, dtype=int)
+    current = history.shape[0] - 1
     pos = np.zeros((len(agents), 2))
     vel = np.zeros((len(agents), 2))
     for k, a in enumerate(agents):
@@ -25,6 +28,8 @@ def last_state(history: np.ndarray, mask: np.ndarray, agents: np.ndarray) -> tup
         pos[k] = history[last, a]
         if last >= 1 and mask[last - 1, a]:
             vel[k] = (history[last, a] - history[last - 1, a]) / DT
+        if last < current:  # only then: an agent seen now keeps its observed position bit for bit
+            pos[k] += (current - last) * DT * vel[k]
     return pos, vel
 
 

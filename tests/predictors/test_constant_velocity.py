@@ -43,6 +43,24 @@ def test_the_velocity_is_the_last_consecutive_difference():
     np.testing.assert_allclose(out[:, 1], [[3.0, 3.0], [3.0, 3.0]])
 
 
+def test_a_human_missing_at_the_last_steps_is_extrapolated_to_the_current_step():
+    """Walking +x at 1 m/s, last seen at step 5 of 9: at t + 1 it is at 0.4 * 9 = 3.6 m, not 2.4 (from where
+    it was last seen, three steps late); the learned predictors impute it to the current step the same way.
+    The CasADi function, from encode, agrees."""
+    history = np.zeros((9, 2, 2))
+    history[:, 0, 0] = 0.4 * np.arange(9)
+    history[:, 1] = [5.0, 5.0]
+    mask = np.ones((9, 2), dtype=bool)
+    mask[6:, 0] = False
+    predictor = ConstantVelocity()
+    out = predictor.rollout(history, mask, None, np.array([0, 1]), horizon=3)
+    np.testing.assert_allclose(out[:, 0], [[3.6, 0.0], [4.0, 0.0], [4.4, 0.0]], atol=1e-12)
+    np.testing.assert_array_equal(out[:, 1], [[5.0, 5.0]] * 3)
+    function = predictor.to_casadi(2, 0, 3)
+    symbolic = np.asarray(function(predictor.encode(history, mask, np.array([0, 1])), np.zeros(0))).ravel()
+    np.testing.assert_allclose(symbolic, out.reshape(-1), rtol=0, atol=1e-12)
+
+
 def test_an_agent_never_observed_cannot_be_predicted():
     history = np.zeros((2, 2, 2))
     mask = np.array([[True, False], [True, False]])
