@@ -24,7 +24,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -250,7 +250,6 @@ def run_sweep(
         retried = error_keys(out)
         todo = [t for t in tasks if t.key not in done and t.key not in retried]
         todo += [t for t in tasks if t.key not in done and t.key in retried]
-        fail_fast = not done  # nothing here ever succeeded: a fresh sweep, or one whose episodes all raised
         del done  # every record parsed (~14 KB each): not held while the workers run
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:
@@ -259,7 +258,7 @@ def run_sweep(
         try:
             with _terminate_as_interrupt():
                 _run_tasks(
-                    config, todo, log, outcome, backend_factory or _default_backend, str(scratch), fail_fast
+                    config, todo, log, outcome, backend_factory or _default_backend, str(scratch), retried
                 )
         except KeyboardInterrupt:
             outcome.interrupted = True
@@ -275,10 +274,12 @@ def _run_tasks(
     outcome: SweepOutcome,
     backend_factory: Callable[[SweepConfig, str], Backend],
     scratch: str,
-    fail_fast: bool = True,
+    retried: Collection[str] = (),
 ) -> None:
-    """Start the backend, write every outcome as it comes back, and end the backend. ``fail_fast``: stop
-    (SweepStopped) when the first FAIL_FAST_ERRORS episodes all raise."""
+    """Start the backend, write every outcome as it comes back, and end the backend. Stop (SweepStopped)
+    when no episode has run and FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run)
+    have raised: a broken method or setting, also when it extends a sweep; old failures raising again tell
+    nothing new, and run after the new episodes."""
     out = Path(config.out)
     by_key = {t.key: t for t in todo}
     start = time.perf_counter()
@@ -293,7 +294,8 @@ def _run_tasks(
                 outcome.errors.append(result.key)
                 _append_error(out, task, result.error)
                 bar.set_postfix(errors=len(outcome.errors), refresh=False)
-                if fail_fast and outcome.ran == 0 and len(outcome.errors) >= FAIL_FAST_ERRORS:
+                new_errors = sum(key not in retried for key in outcome.errors)
+                if outcome.ran == 0 and new_errors >= FAIL_FAST_ERRORS:
                     last = result.error.strip().splitlines()[-1]
                     raise SweepStopped(
                         f"the first {len(outcome.errors)} episodes all raised ({last}); "

@@ -439,6 +439,16 @@ def test_a_rerun_runs_new_episodes_before_retrying_those_that_raised(tmp_path, p
     assert "| Episodes | 6 |" in (tmp_path / "table.md").read_text()
 
 
+def test_a_broken_method_added_to_a_sweep_still_stops_early(tmp_path, plugins):
+    """Fail fast counts this run's new episodes: a method that raises every time, added to a folder that holds
+    records, stopped after 4 episodes before the last fix and ran every planned one after it."""
+    (broken,) = plugins("AlwaysRaises")
+    run_sweep(_controllers(tmp_path, 2, ["straight"]))
+    with pytest.raises(PipelineError, match=r"first 4 episodes all raised \(RuntimeError: broken build\)"):
+        run_sweep(_controllers(tmp_path, 50, [broken]))
+    assert len((tmp_path / ERRORS_FILE).read_text().splitlines()) == 4
+
+
 def test_a_record_that_is_no_json_is_an_episode_error_naming_the_controller(tmp_path, plugins):
     """A plugin's describe() holding a set stopped the driver at the write (json.dumps), with a traceback
     and the rest of the sweep lost."""

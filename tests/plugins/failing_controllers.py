@@ -29,6 +29,13 @@ class RaisesOnCircles(StraightLine):
             raise RuntimeError("solver crashed on this crowd")
 
 
+class AlwaysRaises(StraightLine):
+    name = "always_raises"
+
+    def reset(self, obs: Observation) -> None:
+        raise RuntimeError("broken build")
+
+
 class SetInDescribe(StraightLine):
     name = "set_in_describe"
 
