@@ -30,18 +30,24 @@ def data_record(files: dict[str, list[Path]], root: Path | None, protocol: str) 
 
 
 def file_labels(paths: list[Path], root: Path | None) -> list[str]:
-    """Each file's name in the record: relative to ``root`` (the prepared data of a protocol), else to the
-    files' common directory, so a single file or files of one directory keep their bare names, and files of
-    one name in two directories (d1/t.ndjson, d2/t.ndjson) stay two entries (by name alone, one replaced the
-    other in the record and in its hash)."""
-    if root is not None and all(p.is_relative_to(root) for p in paths):
-        return [str(p.relative_to(root)) for p in paths]
-    if not paths:
-        return []
-    # lexically absolute, not resolved: a symlinked file keeps the name it was given
-    absolute = [Path(os.path.abspath(p)) for p in paths]
-    common = Path(os.path.commonpath([p.parent for p in absolute]))
-    return [str(p.relative_to(common)) for p in absolute]
+    """Each file's name in the record: relative to ``root`` (the prepared data of a protocol) when it lies
+    there; the others by their bare names, or, when two share one (d1/t.ndjson, d2/t.ndjson: by name alone,
+    one replaced the other in the record and in its hash), relative to their common directory. A protocol's
+    files outside its prepared data (loo's TrajNet++ files) keep their bare names, so the record does not
+    depend on where they sit."""
+    under = [root is not None and p.is_relative_to(root) for p in paths]
+    outside = [p for p, inside in zip(paths, under, strict=True) if not inside]
+    names = [p.name for p in outside]
+    if len(set(names)) < len(names):
+        # lexically absolute, not resolved: a symlinked file keeps the name it was given
+        absolute = [Path(os.path.abspath(p)) for p in outside]
+        common = Path(os.path.commonpath([p.parent for p in absolute]))
+        names = [str(p.relative_to(common)) for p in absolute]
+    named = iter(names)
+    return [
+        str(p.relative_to(root)) if inside and root else next(named)
+        for p, inside in zip(paths, under, strict=True)
+    ]
 
 
 def trained_loss(module: Any, asked: str) -> str:

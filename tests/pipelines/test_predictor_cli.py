@@ -140,6 +140,11 @@ def test_the_data_record_names_every_file(tmp_path):
     under_root = data_record({"train": [first], "val": [second], "test": []}, tmp_path, "paper")
     assert list(under_root["files"]["train"]) == ["d1/t.ndjson"]
     assert list(under_root["files"]["val"]) == ["d2/t.ndjson"]
+    # loo: files under the protocol's root and files elsewhere; those elsewhere keep their bare names (the
+    # common directory of all of them made the record depend on where the data and the cache sit)
+    elsewhere = write_walk_file(tmp_path / "raw" / "zara.ndjson")
+    mixed = data_record({"train": [first, elsewhere], "val": [], "test": []}, tmp_path / "d1", "loo")
+    assert list(mixed["files"]["train"]) == ["t.ndjson", "zara.ndjson"]
 
 
 def test_resume_refuses_other_settings_and_keeps_the_runs_name(trained, capsys):
