@@ -131,12 +131,16 @@ def _load_entry(disk: Path, scene_length: int) -> FileArrays | None:
             arrays = FileArrays(data["xy"], data["offsets"], data["scene_ids"])
     except _DAMAGED_ENTRY:
         return None
-    xy, offsets = arrays.xy, arrays.offsets
+    xy, offsets, scene_ids = arrays.xy, arrays.offsets, arrays.scene_ids
     whole = (
         xy.ndim == 3
         and xy.shape[0] == scene_length
         and xy.shape[2] == 2
-        and offsets.shape == (len(arrays.scene_ids) + 1,)
+        and scene_ids.ndim == 1
+        and offsets.shape == (scene_ids.size + 1,)
+        and offsets.dtype.kind in "iu"
+        and offsets[0] == 0
+        and bool(np.all(np.diff(offsets) >= 0))
         and offsets[-1] == xy.shape[1]
     )
     return arrays if whole else None

@@ -211,6 +211,25 @@ def test_a_damaged_cache_entry_of_any_kind_is_rebuilt(damage, tmp_path, monkeypa
     assert sorted(p.name for p in entry.parent.iterdir()) == [entry.name]  # no temporary file left
 
 
+@pytest.mark.parametrize("field", ["scene_ids", "offsets"])
+def test_a_cache_entry_whose_arrays_do_not_fit_together_is_rebuilt(field, tmp_path, monkeypatch):
+    """Arrays of the right names but the wrong shapes (a 0-d scene_ids made len() raise a TypeError past the
+    rebuild; offsets that do not start at 0 would slice another scene's rows) are a damaged entry too."""
+    from predictors.data import windows
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    arrays = load_file_arrays(path)
+    [entry] = (tmp_path / "cache" / "scenes").glob("*.npz")
+    bad = {"xy": arrays.xy, "offsets": arrays.offsets, "scene_ids": arrays.scene_ids}
+    shifted = arrays.offsets + (np.arange(arrays.offsets.size) == 0)  # starts at 1, ends where it did
+    bad[field] = np.int64(7) if field == "scene_ids" else shifted
+    with open(entry, "wb") as f:
+        np.savez(f, **bad)
+    windows._MEMORY.clear()
+    np.testing.assert_array_equal(load_file_arrays(path).offsets, arrays.offsets)
+
+
 def test_processes_sharing_the_cache_write_through_their_own_temporary_files(tmp_path, monkeypatch):
     """The temporary name was the same for every process: two runs building one entry at once wrote into
     the same file, and one could rename the other's half-written file into place."""
