@@ -21,6 +21,14 @@ CLOSED_PIPE_STATUS: Final[int] = 141
 MAX_REPORT_BYTES: Final[int] = 64 * 2**20
 
 
+def path_arg(text: str) -> Path:
+    """An option's path: ``Path("")`` is ".", so an empty value (an unset shell variable) read or wrote the
+    current directory."""
+    if not text:
+        raise argparse.ArgumentTypeError("must be a path, got ''")
+    return Path(text)
+
+
 def humans_list(text: str) -> tuple[int, ...]:
     """An argparse type: ``5,6,7`` -> (5, 6, 7), positive integers, each once (``--humans`` of sweep and
     calibrate: a repeat would be a second column of the same cells)."""

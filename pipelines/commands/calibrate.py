@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pipelines.commands import check_writable, humans_list, write_output
+from pipelines.commands import check_writable, humans_list, path_arg, write_output
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -77,7 +76,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=4,
         help="steps calibrated (the MPC's H, default 4; closed-loop: the MPC's own)",
     )
-    p.add_argument("--data-dir", type=Path, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
+    p.add_argument("--data-dir", type=path_arg, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
     p.add_argument("--episodes", type=int, default=200, help="closed-loop episodes (default 200)")
     p.add_argument("--humans", type=humans_list, default=(5, 6, 7, 8, 9), metavar="5,6,7", help="crowd sizes")
     p.add_argument("--seed", type=int, default=CALIBRATION_SEED, help="first closed-loop seed")
@@ -93,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="closed-loop held-out episodes plan with these margins (e.g. conformal:0.1, once stored); "
         "default none, the calibration's own conditions",
     )
-    p.add_argument("--json", type=Path, metavar="FILE", help="write the blocks and coverage as JSON")
+    p.add_argument("--json", type=path_arg, metavar="FILE", help="write the blocks and coverage as JSON")
     p.add_argument("--dry-run", action="store_true", help="measure and print; store nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Final
 
 from crowdsim.scenarios import MAX_HUMANS
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, path_arg
 from pipelines.commands.evaluate import counted
 from pipelines.errors import PipelineError
 
@@ -49,10 +49,10 @@ def _register_prepare(actions) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     prepare.add_argument(
-        "--raw", required=True, type=Path, help="raw_ewap directory (or the directory holding it)"
+        "--raw", required=True, type=path_arg, help="raw_ewap directory (or the directory holding it)"
     )
     prepare.add_argument(
-        "--out", required=True, type=Path, help="output directory for {train,val,test}/*.ndjson"
+        "--out", required=True, type=path_arg, help="output directory for {train,val,test}/*.ndjson"
     )
     prepare.add_argument(
         "--no-check", action="store_true", help="skip the comparison with reference conversions"
@@ -80,7 +80,7 @@ def _register_stats(actions) -> None:
         epilog="example:\n  crowdmpc data stats data/prepared\n",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    stats.add_argument("directory", type=Path, help="directory searched recursively for *.ndjson")
+    stats.add_argument("directory", type=path_arg, help="directory searched recursively for *.ndjson")
     stats.set_defaults(func=run_stats)
 
 
@@ -95,7 +95,7 @@ def _register_synth(actions) -> None:
         "--seed 0\n",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    synth.add_argument("--out", required=True, type=Path, help="ndjson file to write")
+    synth.add_argument("--out", required=True, type=path_arg, help="ndjson file to write")
     synth.add_argument(
         "--episodes",
         required=True,

@@ -6,10 +6,9 @@ import argparse
 import json
 import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import Final
 
-from pipelines.commands import check_writable, write_output
+from pipelines.commands import check_writable, path_arg, write_output
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
@@ -76,7 +75,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--seed", type=counted(0), default=0, help="seed for sampling models (default 0)")
     parser.add_argument(
-        "--json", type=Path, default=None, metavar="FILE", help="also write the results as JSON"
+        "--json", type=path_arg, default=None, metavar="FILE", help="also write the results as JSON"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.commands import check_writable, write_output
+from pipelines.commands import check_writable, path_arg, write_output
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 
@@ -74,19 +74,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("path", type=Path, help="an .mcap file, or a folder of them (aggregate table)")
+    parser.add_argument("path", type=path_arg, help="an .mcap file, or a folder of them (aggregate table)")
     parser.add_argument(
-        "--plot", type=Path, metavar="PNG", help="trajectories with plans (overlay with --compare)"
+        "--plot", type=path_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
     )
     parser.add_argument(
         "--times", type=_times, metavar="T1,T2,..", help="simulated times (s) of the plans drawn by --plot"
     )
-    parser.add_argument("--animate", type=Path, metavar="GIF|MP4", help="the episode as an animation")
+    parser.add_argument("--animate", type=path_arg, metavar="GIF|MP4", help="the episode as an animation")
     parser.add_argument(
-        "--compare", type=Path, metavar="OTHER.mcap", help="side-by-side metrics with this run"
+        "--compare", type=path_arg, metavar="OTHER.mcap", help="side-by-side metrics with this run"
     )
     parser.add_argument("--check", action="store_true", help="validate every message against its schema")
-    parser.add_argument("--json", type=Path, metavar="FILE", help="also write the summary as JSON")
+    parser.add_argument("--json", type=path_arg, metavar="FILE", help="also write the summary as JSON")
     parser.set_defaults(func=run)
 
 

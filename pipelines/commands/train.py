@@ -11,7 +11,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, path_arg
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -82,13 +82,13 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--train",
         nargs="+",
-        type=Path,
+        type=path_arg,
         default=None,
         metavar="FILE",
         help="explicit training ndjson files instead of --protocol (needs --val)",
     )
-    parser.add_argument("--val", nargs="+", type=Path, default=None, metavar="FILE")
-    parser.add_argument("--test", nargs="+", type=Path, default=None, metavar="FILE")
+    parser.add_argument("--val", nargs="+", type=path_arg, default=None, metavar="FILE")
+    parser.add_argument("--test", nargs="+", type=path_arg, default=None, metavar="FILE")
     parser.add_argument("--epochs", type=int, default=25, help="training epochs (default 25)")
     parser.add_argument(
         "--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)"
@@ -112,7 +112,7 @@ def register(subparsers) -> None:
         "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
     )
     parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
-    parser.add_argument("--out", type=Path, default=None, help="run directory (default runs/train/NAME)")
+    parser.add_argument("--out", type=path_arg, default=None, help="run directory (default runs/train/NAME)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
     parser.add_argument("--seed", type=int, default=0, help="seed of weights, shuffling, augmentation")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

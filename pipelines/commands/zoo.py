@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from pipelines.commands import path_arg
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -39,7 +40,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
-        "--dir", type=Path, default=None, help="the user zoo directory (default $CROWDMPC_ZOO, see below)"
+        "--dir", type=path_arg, default=None, help="the user zoo directory (default $CROWDMPC_ZOO, see below)"
     )
     actions = parser.add_subparsers(dest="zoo_command", metavar="ACTION", required=True)
     actions.add_parser("list", help="one line per model of both zoos with its metrics")
@@ -47,14 +48,14 @@ def register(subparsers) -> None:
     show.add_argument("name")
     actions.add_parser("verify", help="check every entry's files against its manifest (exit 1 on a problem)")
     add = actions.add_parser("add", help="copy a trained checkpoint pair into the user zoo")
-    add.add_argument("weights", type=Path, help="NAME.pt written by `crowdmpc train` (beside NAME.json)")
+    add.add_argument("weights", type=path_arg, help="NAME.pt written by `crowdmpc train` (beside NAME.json)")
     add.add_argument("--name", default=None, help="zoo name (default: the checkpoint's own name)")
     add.add_argument(
         "--protocol", default=None, help="protocol label (default: the training run's: paper, loo or custom)"
     )
     add.add_argument(
         "--metrics",
-        type=Path,
+        type=path_arg,
         default=None,
         help="metrics JSON of these weights (default NAME.metrics.json beside the weights)",
     )

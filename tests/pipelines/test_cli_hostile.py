@@ -58,6 +58,12 @@ def _one_error_line(capsys, command: str) -> str:
         (["data", "prepare", "--raw"], "data prepare", "--raw"),
         (["bogus"], "", "COMMAND"),
         (["simulate", "--controller", "orca", "--frobnicate"], "", "--frobnicate"),
+        # an empty path (an unset shell variable) read or wrote the current directory: Path("") is "."
+        (["data", "prepare", "--raw", "r", "--out", ""], "data prepare", "--out: must be a path, got ''"),
+        (["train", "--model", "vanilla_lstm", "--out", ""], "train", "--out: must be a path"),
+        (["review", ""], "review", "path: must be a path"),
+        (["export", "cv", "--out", ""], "export", "--out: must be a path"),
+        (["evaluate", "--predictor", "cv", "--json", ""], "evaluate", "--json: must be a path"),
     ],
 )
 def test_parser_errors_are_one_line_and_point_to_help(argv, command, named, capsys):
