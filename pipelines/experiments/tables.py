@@ -96,11 +96,13 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         notes.append(f"Robots: {teams} per episode (the paper's tables: {PAPER_ROBOTS}).")
     if any(s.paper for s in columns):
         notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
-    elif experiment.paper:
+    elif experiment.paper and robots != [PAPER_ROBOTS]:
         notes.append(
             f"The paper's figures ({experiment.paper_source}) are for {PAPER_ROBOTS} robots: not shown "
             "beside these."
         )
+    elif experiment.paper:
+        notes.append(f"The paper's figures ({experiment.paper_source}) have no column at these crowd sizes.")
     else:
         notes.append("The paper has no such table.")
     return "\n".join(notes)

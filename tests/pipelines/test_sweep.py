@@ -576,11 +576,14 @@ def test_killed_twice_then_rerun_gives_every_episode_once(tmp_path):
 
 
 def _records(
-    experiment, outcomes: dict[tuple[str, int], list[tuple[bool, float, bool, bool]]], n_robots: int = 3
+    experiment,
+    outcomes: dict[tuple[str, int], list[tuple[bool, float, bool, bool]]],
+    n_robots: int = 3,
+    humans: tuple[int, ...] | None = None,
 ):
     """Synthetic records: (method, humans) -> per episode (success, travel time, collision, discomfort)."""
     records = []
-    for cell in experiment.cells(n_robots=n_robots):
+    for cell in experiment.cells(humans, n_robots=n_robots):
         for i, (success, time_s, collision, discomfort) in enumerate(
             outcomes.get((cell.method, cell.n_humans), [])
         ):
@@ -684,6 +687,11 @@ def test_the_papers_figures_stand_beside_its_own_team_size_only(tmp_path):
     # the paper's own team: its figures, and no word on robots
     three = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, TABLE2_EPISODES)))
     assert "| &nbsp;&nbsp;paper | **94.0** |" in three and "Robots:" not in three
+    # the paper's team at crowd sizes it has no column for: that is the reason, not the robots
+    two = table2.cells(humans=(2,))
+    outcomes = {(c.method, 2): [(True, 15.0, False, False)] for c in two}
+    small = markdown_table(table2, summarize(table2, two, _records(table2, outcomes, humans=(2,))))
+    assert "have no column at these crowd sizes" in small and "are for 3 robots" not in small
 
 
 def test_report_files(tmp_path):
