@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from numbers import Real
 from typing import Any, Final
 
 import numpy as np
@@ -60,9 +61,10 @@ def _check_array(
 
 
 def checked_output(controller: Controller, out: object, obs: Observation) -> ControlOutput:
-    """``out`` if it is a ``ControlOutput`` for ``obs``: ``accelerations`` ``(M, 2)``, ``plan`` ``(M, H, 2)``
-    or None, ``prediction`` ``(H, N, 2)`` or None, ``iterations`` an int, ``status`` a str. Anything else
-    (bare accelerations, a row short) is a one-line PipelineError naming the controller."""
+    """``out``, its arrays as float arrays, if it is a ``ControlOutput`` for ``obs``: ``accelerations``
+    ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None, ``iterations`` an int,
+    ``status`` a str, ``fallback`` a str or None, ``solve_time_s`` a number, ``potential`` a number or None.
+    Anything else (bare accelerations, a row short) is a one-line PipelineError naming the controller."""
     if not isinstance(out, ControlOutput):
         raise PipelineError(
             f"{_named(controller)}: act() must return a crowdsim.control.ControlOutput, got "
@@ -82,7 +84,26 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         )
     if not isinstance(out.status, str):
         raise PipelineError(f"{_named(controller)}: act() must return status as a str, got {out.status!r}")
-    return out
+    if out.fallback is not None and not isinstance(out.fallback, str):
+        raise PipelineError(
+            f"{_named(controller)}: act() must return fallback as a str or None, got {out.fallback!r}"
+        )
+    for name, value, may_be_none in (
+        ("solve_time_s", out.solve_time_s, False),
+        ("potential", out.potential, True),
+    ):
+        if not (value is None and may_be_none) and (isinstance(value, bool) or not isinstance(value, Real)):
+            expected = "a number or None" if may_be_none else "a number"
+            raise PipelineError(
+                f"{_named(controller)}: act() must return {name} as {expected}, got {value!r}"
+            )
+    # the loop and the recorder work on float arrays (a list of rows had no .tolist() for the recorder)
+    return dataclasses.replace(
+        out,
+        accelerations=np.asarray(out.accelerations, dtype=float),
+        plan=None if out.plan is None else np.asarray(out.plan, dtype=float),
+        prediction=None if out.prediction is None else np.asarray(out.prediction, dtype=float),
+    )
 
 
 def checked_description(controller: Controller) -> dict[str, Any]:
@@ -97,6 +118,13 @@ def checked_description(controller: Controller) -> dict[str, Any]:
     if not isinstance(config, Mapping):
         raise PipelineError(
             f"{_named(controller)}: describe()['config'] must be a dict, got {type(config).__name__}"
+        )
+    # what a controller states about itself; the episode's seed, scenario and sizes would relabel every
+    # episode alike (their recordings, named by seed and scenario, overwrote one file), as a caller's meta
+    clash = [key for key in OWN_FIELDS if key in described and key not in ("predictor_sha256", "config")]
+    if clash:
+        raise PipelineError(
+            f"{_named(controller)}: describe() must not set {clash}: the episode sets them itself"
         )
     return dict(described)
 

@@ -224,6 +224,10 @@ BROKEN_CONTRACTS = [
     ("StatusNone", "act() must return status as a str, got None"),
     ("DescribeNone", "describe() must return a dict, got NoneType"),
     ("ConfigList", "describe()['config'] must be a dict, got list"),
+    ("SeedInDescribe", "describe() must not set ['seed']: the episode sets them itself"),
+    ("FallbackNumber", "act() must return fallback as a str or None, got 3"),
+    ("SolveTimeNone", "act() must return solve_time_s as a number, got None"),
+    ("PotentialText", "act() must return potential as a number or None, got 'x'"),
 ]
 
 
@@ -245,6 +249,19 @@ def test_a_plugin_breaking_the_contract_is_one_line_naming_it_in_both_loops(name
     with pytest.raises(PipelineError) as caught:
         run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2), seed=0)
     assert str(caught.value) == message
+
+
+def test_accelerations_as_a_list_of_rows_are_taken_and_recorded(tmp_path):
+    """A list of rows is a valid (M, 2) array: the check passed it, and the recorder then called .tolist() on
+    it; the loop hands every observer float arrays."""
+    from pipelines.logs.reader import read_recording
+    from pipelines.logs.recording import McapEpisodeRecorder
+    from tests.plugins import broken_controllers
+
+    recorder = McapEpisodeRecorder(tmp_path)
+    result = run_episode(broken_controllers.RowsAsLists(None, None), seed=0, scenario="circle", n_humans=2,
+                         observers=(recorder,))  # fmt: skip
+    assert result.metrics is not None and read_recording(recorder.paths[0]).data("/robots")
 
 
 def test_a_wrong_plan_under_record_is_one_line(tmp_path, capsys):

@@ -84,3 +84,41 @@ class ConfigList(StraightLine):
 
     def describe(self) -> dict[str, Any]:
         return {"config": [1, 2]}
+
+
+class SeedInDescribe(StraightLine):
+    name = "seed_in_describe"
+
+    def describe(self) -> dict[str, Any]:
+        return {"seed": 0, "predictor_sha256": None, "config": {}}
+
+
+class FallbackNumber(StraightLine):
+    name = "fallback_number"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), fallback=3)  # type: ignore[arg-type]
+
+
+class SolveTimeNone(StraightLine):
+    name = "solve_time_none"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), solve_time_s=None)  # type: ignore[arg-type]
+
+
+class PotentialText(StraightLine):
+    name = "potential_text"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), potential="x")  # type: ignore[arg-type]
+
+
+class RowsAsLists(StraightLine):
+    """Accelerations as a list of rows: a valid array, which the recorder could not .tolist()."""
+
+    name = "rows_as_lists"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = super().act(obs)
+        return dataclasses.replace(out, accelerations=np.asarray(out.accelerations).tolist())
