@@ -24,11 +24,23 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from crowdsim.gym_env import CrowdNavEnv
+from crowdsim.gym_wrappers import VelocityControl
 from crowdsim.metrics import episode_metrics
 from pipelines.errors import PipelineError
 from pipelines.loop.contract import checked_description, checked_meta, checked_output, episode_meta
 from pipelines.loop.controllers import Controller
 from pipelines.loop.episode import EpisodeObserver, EpisodeResult
+
+
+def _takes_accelerations(env: gym.Env[Any, Any], base: CrowdNavEnv) -> bool:
+    """Whether an action given to ``env`` reaches ``base`` as it is: no VelocityControl in between (with
+    a_max equal to v_max its action space is the base's, so comparing spaces let it through)."""
+    layer = env
+    while isinstance(layer, gym.Wrapper):
+        if isinstance(layer, VelocityControl):
+            return False
+        layer = layer.env
+    return env.action_space == base.action_space
 
 
 def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
@@ -99,7 +111,7 @@ def run_gym_episode(
     """One episode of ``controller`` in the gymnasium environment ``env`` (acceleration actions), from
     ``env.reset(seed=seed, options=options)`` to ``terminated`` or ``truncated`` (module docstring)."""
     base = crowdnav_env(env)
-    if env.action_space != base.action_space:
+    if not _takes_accelerations(env, base):
         raise PipelineError(
             "run_gym_episode gives the environment accelerations; pass it without VelocityControl"
         )
@@ -154,7 +166,7 @@ class ObserveEpisodes(
         gym.utils.RecordConstructorArgs.__init__(self, observers=observers, controller=controller, meta=meta)
         gym.Wrapper.__init__(self, env)
         self._base = crowdnav_env(env)
-        if env.action_space != self._base.action_space:  # it would record velocities as accelerations
+        if not _takes_accelerations(env, self._base):  # it would record velocities as accelerations
             raise PipelineError(
                 "ObserveEpisodes records the environment's accelerations: wrap VelocityControl around it, "
                 "VelocityControl(ObserveEpisodes(env, ...)), not inside it"

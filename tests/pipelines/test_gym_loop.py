@@ -268,3 +268,10 @@ def test_observe_episodes_refuses_velocity_control_inside_it():
     ):
         ObserveEpisodes(VelocityControl(CrowdNavEnv(n_humans=2)), [])
     assert isinstance(VelocityControl(ObserveEpisodes(CrowdNavEnv(n_humans=2), [])).env, ObserveEpisodes)
+    # with a_max = v_max the two action spaces are equal: the order is what tells
+    even = CrowdNavEnv(n_humans=2, config=EnvConfig(a_max=1.0, v_max=1.0))
+    assert VelocityControl(even).action_space == even.action_space
+    with pytest.raises(PipelineError, match=r"wrap VelocityControl around it"):
+        ObserveEpisodes(VelocityControl(even), [])
+    with pytest.raises(PipelineError, match=r"pass it without VelocityControl"):
+        run_gym_episode(make_controller(ControllerSpec("straight")), VelocityControl(even), seed=0)
