@@ -406,7 +406,7 @@ def test_a_worker_process_that_dies_is_an_episode_error_and_the_sweep_goes_on(tm
 
 
 def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, capsys, monkeypatch):
-    """Fresh, the first episodes all failing stop it (fail fast); with records already there, the pool
+    """Fresh, the first episodes all failing stop it (fail fast); short of fail fast's 4 episodes, the pool
     breaking again and again with nothing finishing does, and the report of what is there is written."""
     (dies,) = plugins("Dies")
     fresh = _sweep_cli(tmp_path / "fresh", [dies], "--episodes-per-cell", "4", "--workers", "2")
@@ -414,14 +414,14 @@ def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, c
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert line.startswith("crowdmpc sweep: error: the first 4 episodes all raised (worker process died")
     out = tmp_path / "resumed"
-    assert main(_sweep_cli(out, ["straight"], "--episodes-per-cell", "1", "--backend", "inline")) == 0
+    assert main(_sweep_cli(out, ["straight"], "--episodes-per-cell", "3", "--backend", "inline")) == 0
     (out / "table.md").unlink()
     monkeypatch.setattr("pipelines.experiments.process_backend.MAX_BREAKS_IN_A_ROW", 2)
     resumed = _sweep_cli(out, ["straight", dies], "--episodes-per-cell", "3", "--workers", "1")
-    assert main([*resumed, "--backend", "process"]) == 2
+    assert main([*resumed, "--backend", "process"]) == 2  # only the 3 new episodes, each killing its worker
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("crowdmpc sweep: error: the worker processes died 2 times in a row with no ")
-    assert len((out / ERRORS_FILE).read_text().splitlines()) == 4  # each break: the two tasks in flight
+    assert len((out / ERRORS_FILE).read_text().splitlines()) == 3  # the two tasks in flight, then the last
     assert "| straight |" in (out / "table.md").read_text()
 
 
