@@ -125,7 +125,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _fmt(x: float | None, unit: str = "", digits: int = 2) -> str:
-    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}{unit}"
+    # inf: no pair of agents to measure (no humans), as the JSON's null says
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{digits}f}{unit}"
 
 
 def format_table(summary: dict[str, Any], header: str) -> str:
@@ -210,6 +211,20 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         mpc_overrides=config.mpc_overrides(),
         margins=parse_margins(chosen.margins or "none"),
     )
+    if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
+        unused = [
+            f"{config.label('controller', key)} {value}"
+            for key, value, given in (
+                ("margins", chosen.margins, spec.margins.mode != "none"),
+                ("coupling", spec.coupling, spec.coupling != "ibr"),
+            )
+            if given
+        ]
+        if unused:
+            raise PipelineError(
+                f"{' and '.join(unused)}: controller {spec.controller!r} plans with no predictor; "
+                "margins and coupling apply to the controllers that do (cmpc, dmpc)"
+            )
     paths = {name: getattr(config.simulate, name) for name in ("json", "plot", "record")}
     run = SimulateRun(config, spec, **{k: None if v is None else Path(v) for k, v in paths.items()})
     if run.plot is not None:
@@ -226,6 +241,14 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
             f"{config.label('simulate', 'json')} and {config.label('simulate', 'plot')} name the same file "
             f"{run.json}; give each its own"
         )
+    for name in ("json", "plot"):
+        out = getattr(run, name)
+        if out is not None and run.record is not None and out.resolve().is_relative_to(run.record.resolve()):
+            # the recorder makes the folder first, and the file could not be written after every episode
+            raise PipelineError(
+                f"{config.label('simulate', name)} {out} is {config.label('simulate', 'record')}'s folder or "
+                "inside it; give it another path"
+            )
     return run
 
 

@@ -250,6 +250,29 @@ def test_simulate_checks_its_outputs_before_the_episodes(option, a_file, capsys,
 
 
 @pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--json", "{d}/rec", "--record", "{d}/rec"], "--json {d}/rec is --record's folder or inside it"),
+        (["--plot", "{d}/rec/p.png", "--record", "{d}/rec"], "--plot {d}/rec/p.png is --record's folder"),
+        (["--margins", "fixed:0.1,0.1,0.1,0.1"], "--margins fixed:0.1,0.1,0.1,0.1: controller 'orca' plans"),
+        (["--coupling", "nlp"], "--coupling nlp: controller 'orca' plans with no predictor"),
+    ],
+)
+def test_simulate_refuses_what_the_run_could_not_do_before_the_episodes(options, message, tmp_path, capsys,
+                                                                        monkeypatch):  # fmt: skip
+    """An output inside the recording folder failed after every episode (the recorder had made the folder);
+    margins and coupling given to ORCA were printed and recorded as if it had planned with them."""
+
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("an episode ran before the options were checked")
+
+    monkeypatch.setattr("pipelines.loop.episode.run_episodes", no_episodes)
+    argv = ["simulate", "--controller", "orca", "--humans", "3", "--no-progress"]
+    assert main(argv + [o.format(d=tmp_path) for o in options]) == 2
+    assert message.format(d=tmp_path) in _one_error_line(capsys, "simulate")
+
+
+@pytest.mark.parametrize(
     "argv, option",
     [
         (["sweep", "--experiment", "baselines", "--humans", "5", "--episodes-per-cell", "1"], "--out"),

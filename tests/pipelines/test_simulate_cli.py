@@ -69,3 +69,14 @@ def test_an_unknown_predictor_lists_the_zoo_and_the_oracle(capsys):
     assert main(["simulate", "--controller", "cmpc", "--predictor", "nope", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "unknown predictor 'nope'" in err and "'constant_velocity'" in err and "'orca_oracle'" in err
+
+
+def test_a_run_without_humans_prints_no_distance_where_the_json_has_none(tmp_path, capsys):
+    """With no humans the robot-human distance is inf (no pair): the table printed "inf m" where the JSON
+    and review say null / "-"."""
+    out = tmp_path / "h0.json"
+    argv = ["simulate", "--controller", "straight", "--humans", "0", "--no-progress", "--json", str(out)]
+    assert main(argv) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.strip().startswith("min distance"))
+    assert "inf" not in line and "n/a" in line
+    assert json.loads(out.read_text())["summary"]["min_distance_min"] is None
