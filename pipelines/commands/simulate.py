@@ -243,11 +243,11 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         )
     for name in ("json", "plot"):
         out = getattr(run, name)
-        if out is not None and run.record is not None and out.resolve().is_relative_to(run.record.resolve()):
+        if out is not None and run.record is not None and out.resolve() == run.record.resolve():
             # the recorder makes the folder first, and the file could not be written after every episode
             raise PipelineError(
-                f"{config.label('simulate', name)} {out} is {config.label('simulate', 'record')}'s folder or "
-                "inside it; give it another path"
+                f"{config.label('simulate', name)} {out} is {config.label('simulate', 'record')}'s folder; "
+                "give it another path (a file in the folder is fine)"
             )
     return run
 

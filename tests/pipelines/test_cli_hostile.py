@@ -252,15 +252,15 @@ def test_simulate_checks_its_outputs_before_the_episodes(option, a_file, capsys,
 @pytest.mark.parametrize(
     "options, message",
     [
-        (["--json", "{d}/rec", "--record", "{d}/rec"], "--json {d}/rec is --record's folder or inside it"),
-        (["--plot", "{d}/rec/p.png", "--record", "{d}/rec"], "--plot {d}/rec/p.png is --record's folder"),
+        (["--json", "{d}/rec", "--record", "{d}/rec"], "--json {d}/rec is --record's folder; give it"),
+        (["--plot", "{d}/rec.png", "--record", "{d}/rec.png"], "--plot {d}/rec.png is --record's folder"),
         (["--margins", "fixed:0.1,0.1,0.1,0.1"], "--margins fixed:0.1,0.1,0.1,0.1: controller 'orca' plans"),
         (["--coupling", "nlp"], "--coupling nlp: controller 'orca' plans with no predictor"),
     ],
 )
 def test_simulate_refuses_what_the_run_could_not_do_before_the_episodes(options, message, tmp_path, capsys,
                                                                         monkeypatch):  # fmt: skip
-    """An output inside the recording folder failed after every episode (the recorder had made the folder);
+    """An output named as the recording folder failed after every episode (the recorder had made the folder);
     margins and coupling given to ORCA were printed and recorded as if it had planned with them."""
 
     def no_episodes(*args, **kwargs):
