@@ -14,7 +14,6 @@ different run than the recorded metrics would mislead; recording costs about 5% 
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import re
@@ -32,6 +31,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.experiments.tasks import EpisodeTask
+from pipelines.loop.contract import checked_description, episode_config
 from pipelines.loop.controllers import Controller, make_controller
 from pipelines.plain_json import plain
 
@@ -179,9 +179,7 @@ def cell_config(controller: Controller, env_config: EnvConfig) -> dict[str, Any]
     """The effective config of a cell's episodes, as ``run_episode`` puts it in the MCAP "config" metadata:
     the simulator's settings and what the controller's ``describe()`` adds (the MPC's config, coupling,
     flocking, margins)."""
-    config: dict[str, Any] = {"env": dataclasses.asdict(env_config)}
-    config.update(dict(controller.describe()).get("config", {}))
-    return plain(config)
+    return plain(episode_config(env_config, checked_description(controller)))
 
 
 @dataclass

@@ -142,6 +142,13 @@ def checked_meta(meta: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
     return meta
 
 
+def episode_config(env_config: EnvConfig, described: Mapping[str, Any]) -> dict[str, Any]:
+    """The effective config of an episode (the MCAP "config" metadata, a sweep record's "config"): the
+    simulator's settings, then what a ``checked_description`` adds under "config" (the MPC's config,
+    coupling, flocking, margins)."""
+    return {"env": dataclasses.asdict(env_config), **described.get("config", {})}
+
+
 def episode_meta(
     episode: Mapping[str, Any],
     env_config: EnvConfig,
@@ -154,15 +161,14 @@ def episode_meta(
     """The meta ``on_reset`` gets: the episode (seed, scenario, sizes), who drives, the environment's
     config plus what the controller's ``describe()`` adds (``checked_description``), then ``meta``
     (``checked_meta``), which may not set any of those."""
+    extra = dict(described or {})
     full: dict[str, Any] = {
         **episode,
         "controller": controller,
         "predictor": predictor,
         "predictor_sha256": None,
-        "config": {"env": dataclasses.asdict(env_config)},
+        "config": episode_config(env_config, {"config": extra.pop("config", {})}),
     }
-    extra = dict(described or {})
-    full["config"].update(extra.pop("config", {}))
     full.update(extra)
     full.update(checked_meta(meta, where))
     return full
