@@ -4,7 +4,7 @@ The driver (``run_sweep``) plans the experiment's episodes, skips every one that
 already holds, hands the rest to a backend and writes each outcome as it comes back. Only the driver writes
 the sweep directory: the records, the MCAP logs a worker kept (each before the record that vouches for it),
 ``<out>/errors.jsonl`` for the episodes that raised (a rerun tries them again, after the episodes never tried;
-a sweep whose first episodes all raise, with no record in the directory, is misconfigured and stops), and
+a run whose first new episodes all raise, before any runs, is misconfigured and stops), and
 ``<out>/sweep.json``, what the directory holds and a line per run.
 
 The parts, a module each: pipelines.experiments.log (the durable, resumable record log and the lock that

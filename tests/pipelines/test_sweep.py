@@ -427,8 +427,8 @@ def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, c
 
 def test_a_rerun_runs_new_episodes_before_retrying_those_that_raised(tmp_path, plugins, capsys):
     """Extending a sweep with 4 episodes that raise every time (retried first) stopped it before any new
-    episode ran ("the first 4 episodes all raised"), and wrote no report: fail fast is for a directory where
-    nothing ever succeeded."""
+    episode ran ("the first 4 episodes all raised"), and wrote no report: old failures run after the new
+    episodes and do not count towards fail fast."""
     (raises,) = plugins("RaisesOnCircles")
     first = run_sweep(_controllers(tmp_path, 8, [raises]))
     assert (first.ran, len(first.errors)) == (4, 4)  # the perpendicular crossings, the circles
