@@ -27,17 +27,28 @@ from crowdsim.errors import SimulationError
 from crowdsim.orca import OrcaParams
 from crowdsim.scenarios import FORMATIONS, Formation
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
-from crowdsim.world import A_MAX, DT, OBS_LEN, RADIUS, V_MAX, V_PREF, WorldFacts
+from crowdsim.world import (
+    A_MAX,
+    DT,
+    MOST_ACCEL,
+    MOST_SPEED,
+    MOST_TIME,
+    OBS_LEN,
+    RADIUS,
+    V_MAX,
+    V_PREF,
+    WorldFacts,
+)
 
 # Upper bounds of EnvConfig's times, lengths and speeds: far above any crowd a robot navigates, low enough
 # that positions, step counts and the controllers' arithmetic stay finite (dt = 1e308 overflowed the
 # straight controller's braking distance).
 ENV_BOUNDS: Final[dict[str, tuple[float, str]]] = {
-    "time_limit": (86_400.0, "s"),  # a day; longer runs are more episodes (dt: at most time_limit)
+    "time_limit": (MOST_TIME, "s"),  # longer runs are more episodes (dt: at most time_limit)
     "radius": (10.0, "m"),  # a robot or a person, not a building
-    "v_pref": (100.0, "m/s"),  # 360 km/h
-    "v_max": (100.0, "m/s"),
-    "a_max": (1000.0, "m/s^2"),  # 100 g
+    "v_pref": (MOST_SPEED, "m/s"),
+    "v_max": (MOST_SPEED, "m/s"),
+    "a_max": (MOST_ACCEL, "m/s^2"),
 }
 MIN_DT: Final[float] = 1e-6  # s: below, (time_limit - timeout_margin) / dt may overflow to inf
 MAX_SPAWN_SEPARATION: Final[float] = 100.0  # m: the scenarios are 10 m across

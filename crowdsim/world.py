@@ -57,6 +57,13 @@ HORIZON: Final[int] = 4
 # terms; every robot count defaults to it (mpc.config.PAPER_ROBOTS names it too).
 PAPER_ROBOTS: Final[int] = 3
 
+# The largest time, speed and acceleration a run may ask for, far above any sensible one: the simulator
+# (crowdsim.env_config.ENV_BOUNDS) and the MPC (mpc.config.MPC_BOUNDS) both refuse more, so that no setting
+# overflows their arithmetic.
+MOST_TIME: Final[float] = 86_400.0  # s, a day: an episode's time limit, and so any time step
+MOST_SPEED: Final[float] = 100.0  # m/s, 360 km/h
+MOST_ACCEL: Final[float] = 1000.0  # m/s^2, 100 g
+
 CIRCLE_RADIUS: Final[float] = 5.0  # m, circle crossing (the paper's fork, env_m.config; CrowdNav's is 4 m)
 SQUARE_WIDTH: Final[float] = 10.0  # m, side of the perpendicular-crossing square (env_m.config)
 

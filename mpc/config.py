@@ -77,10 +77,10 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
     "d_flock": (1e3, " m"),  # 1.2
     "delta": (1e3, ""),  # 1e-3 (m in Eq. 7, m^2 in Eq. 15)
     "cost_scale": (1e3, ""),  # 1; docs/examples/many_robots.toml scales F down, by 0.01
-    # the world's facts, as the simulator bounds them (crowdsim/env_config.py, ENV_BOUNDS; dt: its time limit)
-    "dt": (86_400.0, " s"),
-    "v_max": (100.0, " m/s"),
-    "a_max": (1000.0, " m/s^2"),
+    # the world's facts, as the simulator bounds them (dt: by its time limit)
+    "dt": (world.MOST_TIME, " s"),
+    "v_max": (world.MOST_SPEED, " m/s"),
+    "a_max": (world.MOST_ACCEL, " m/s^2"),
 }
 
 
