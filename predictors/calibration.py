@@ -47,6 +47,11 @@ SOURCES: Final[tuple[str, ...]] = ("real", "closed-loop")
 ALPHA_TOLERANCE: Final[float] = 1e-12  # alphas closer than this are the same calibration key
 
 
+def same_alpha(a: float, b: float) -> bool:
+    """Whether ``a`` and ``b`` name one calibration key (within ``ALPHA_TOLERANCE``)."""
+    return abs(a - b) <= ALPHA_TOLERANCE
+
+
 def now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
@@ -145,8 +150,7 @@ class Calibration:
         return self.predictor, self.source, self.alpha
 
     def matches(self, predictor: str, source: str, alpha: float) -> bool:
-        same_alpha = abs(self.alpha - alpha) <= ALPHA_TOLERANCE
-        return self.predictor == predictor and self.source == source and same_alpha
+        return self.predictor == predictor and self.source == source and same_alpha(self.alpha, alpha)
 
     def to_json(self) -> dict:
         classes = {} if self.classes is None else {"classes": self.classes.to_json()}

@@ -49,19 +49,19 @@ def _exact(alpha: float) -> Fraction:
     """``alpha`` as the decimal it prints as (its shortest repr: what the user wrote, 0.1 and not the binary
     float 0.1000000000000000055...), exactly: (n + 1)(1 - alpha) then lands on an integer exactly when it
     does in decimal, with no slack that would misplace the rank of alphas written with many digits."""
-    return Fraction(repr(check_alpha(alpha)))
+    return Fraction(alpha_text(check_alpha(alpha)))
 
 
 def conformal_rank(n: int, alpha: float) -> int:
     """The 1-based rank ``ceil((n + 1)(1 - alpha))`` of the split-conformal quantile among ``n`` scores (at
     least 1: 0 < alpha < 1)."""
-    return max(1, math.ceil((n + 1) * (1 - _exact(alpha))))
+    return math.ceil((n + 1) * (1 - _exact(alpha)))
 
 
 def min_samples(alpha: float) -> int:
     """The fewest scores for which the quantile at ``alpha`` is finite, ``ceil(1/alpha - 1)``: the least
     ``n`` with ``conformal_rank(n, alpha) <= n`` (at least 1)."""
-    return max(1, math.ceil(1 / _exact(alpha) - 1))
+    return math.ceil(1 / _exact(alpha) - 1)
 
 
 def conformal_quantile(scores: np.ndarray, alpha: float) -> float:

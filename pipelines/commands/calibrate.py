@@ -40,14 +40,14 @@ def _alphas(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"--alpha takes numbers like 0.1,0.05, got {text!r}") from None
     if not values or not all(0.0 < a < 1.0 for a in values):
         raise argparse.ArgumentTypeError(f"--alpha needs numbers in (0, 1), got {text!r}")
-    from predictors.calibration import ALPHA_TOLERANCE
+    from predictors.calibration import same_alpha
     from predictors.conformal import MIN_ALPHA
 
     if min(values) < MIN_ALPHA:  # its margin would need more than 10^12 samples (predictors.conformal)
         raise argparse.ArgumentTypeError(f"--alpha needs numbers of at least {MIN_ALPHA:g}, got {text!r}")
     # one block per alpha: a repeat (within the calibration key's tolerance) would be stored once
     for i, a in enumerate(values):
-        same = [b for b in values[:i] if abs(a - b) <= ALPHA_TOLERANCE]
+        same = [b for b in values[:i] if same_alpha(a, b)]
         if same:
             twice = f"{a!r} twice" if same[0] == a else f"{same[0]!r} and {a!r}, one calibration,"
             raise argparse.ArgumentTypeError(f"--alpha names {twice} in {text!r}; give each alpha once")
@@ -221,7 +221,7 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
     or one this run stores), as the held-out episodes' controller will resolve them."""
     from pipelines.experiments.calibrate import plan_horizon
     from pipelines.loop.margins import CALIBRATED_MODES
-    from predictors.calibration import ALPHA_TOLERANCE
+    from predictors.calibration import same_alpha
     from predictors.errors import PredictorError
 
     horizon = plan_horizon(_plan(args))
@@ -236,7 +236,7 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
         not args.dry_run
         and holdout_margins.mode in CALIBRATED_MODES
         and holdout_margins.source == "closed-loop"
-        and any(abs(holdout_margins.alpha - a) <= ALPHA_TOLERANCE for a in args.alpha)
+        and any(same_alpha(holdout_margins.alpha, a) for a in args.alpha)
     )
     if not args.holdout or stored_here:
         return
