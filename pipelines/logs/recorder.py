@@ -92,9 +92,10 @@ class McapRecorder:
         otherwise). The ``.part`` is created atomically and ``path`` checked after it, so that of recorders
         choosing names at the same time in one folder only one gets each (a finished file's ``.part`` is
         gone before its final name appears).
-    :param before_rename: called with ``path`` when the file is finished, before it takes that name, while
-        the ``.part`` is still locked: a check that ``path`` may be replaced (another run may have finished a
-        file there since this one started); when it raises, the recording keeps its ``.part`` name.
+    :param before_rename: called with ``path`` on closing, just before the file is finished and takes that
+        name, while the ``.part`` is still locked: a check that ``path`` may be replaced (another run may
+        have finished a file there since this one started); when it raises, the finished recording keeps
+        its ``.part`` name, and ``close`` raises that.
     """
 
     def __init__(
@@ -162,13 +163,26 @@ class McapRecorder:
             return
         self._closed = True
         try:
+            # the check before the footer: between the footer and the rename a killed run leaves a whole
+            # recording named .part, a window kept to a moment (a .part reads as an unfinished recording)
+            refusal = self._refusal()
             self._writer.finish()
             self._stream.flush()
-            if self._before_rename is not None:
-                self._before_rename(self.path)
+            if refusal is not None:
+                raise refusal  # the recording is whole, under its .part name
             os.replace(self.part_path, self.path)
         finally:
             self._stream.close()  # the lock goes with it, after the rename
+
+    def _refusal(self) -> Exception | None:
+        """What ``before_rename`` raised, if it raised."""
+        if self._before_rename is None:
+            return None
+        try:
+            self._before_rename(self.path)
+        except Exception as exc:
+            return exc
+        return None
 
     # -- writing ---------------------------------------------------------------------------------------------
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
