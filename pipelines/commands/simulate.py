@@ -311,7 +311,10 @@ def run(args: argparse.Namespace) -> int:
         from pipelines.logs.recording import McapEpisodeRecorder
 
         recorder = McapEpisodeRecorder(
-            resolved.record, record_iterations=spec.record_iterations, run_meta=run_meta
+            resolved.record,
+            record_iterations=spec.record_iterations,
+            run_meta=run_meta,
+            seeds=range(sim.seed, sim.seed + sim.episodes),
         )
     results: list[EpisodeResult] = []
     interrupted = False

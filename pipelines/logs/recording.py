@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import re
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
@@ -80,6 +80,9 @@ class McapEpisodeRecorder:
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
         keeps them: ``ControllerSpec(record_iterations=True)``).
     :param run_meta: facts about the whole run (command line, sweep cell...), stored in the "run" metadata.
+    :param seeds: the seeds of every episode the run will record, when known: the first episode checks each
+        one's file (``check_replaceable``), so that a folder holding another run's episode at a later seed
+        is refused before any episode runs, not at that episode with the earlier ones' summary lost.
     """
 
     def __init__(
@@ -88,6 +91,7 @@ class McapEpisodeRecorder:
         *,
         record_iterations: bool = False,
         run_meta: Mapping[str, Any] | None = None,
+        seeds: Iterable[int] = (),
     ):
         self.out_dir = Path(out_dir)
         if self.out_dir.exists() and not self.out_dir.is_dir():
@@ -102,6 +106,7 @@ class McapEpisodeRecorder:
         self._last_written_step = -1
         self._start_ns = 0  # the episode's wall-clock start, ns since the Unix epoch: log time at t = 0
         self._unseeded: dict[str, int] = {}  # scenario -> the number of its last episode with no seed
+        self._planned = tuple(int(s) for s in seeds)  # checked at the first seeded episode, then dropped
 
     # -- EpisodeObserver -------------------------------------------------------------------------------------
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
@@ -140,6 +145,9 @@ class McapEpisodeRecorder:
         else:  # the same scene: replaced when this run recorded it
             path = self.out_dir / episode_filename(scenario, seed)
             identity = run_identity(episode, decode_metadata(config))
+            planned, self._planned = self._planned, ()
+            for other in planned:  # the run's identity is every episode's but for the seed
+                check_replaceable(self.out_dir / episode_filename(scenario, other), identity)
             check_replaceable(path, identity)  # before the episode runs, and again before the file is named
             self._recorder = McapRecorder(
                 path, metadata=metadata, before_rename=lambda p: check_replaceable(p, identity)

@@ -702,6 +702,21 @@ def test_a_second_controller_does_not_replace_the_firsts_recordings(tmp_path, ca
     assert "n_humans 2; this run: n_humans 3" in capsys.readouterr().err
 
 
+def test_another_runs_episode_at_a_later_seed_is_refused_before_the_first_episode(tmp_path, capsys):
+    """The refusal comes before any episode runs: at the clashing episode it stopped the run there, and the
+    summary and --json of the episodes before it were never written."""
+    folder, report = tmp_path / "runs", tmp_path / "run.json"
+    base = ["simulate", "--humans", "2", "--no-progress", "--record", str(folder)]
+    assert main([*base, "--controller", "orca", "--episodes", "1", "--seed", "2"]) == 0
+    held = (folder / "circle_seed000002.mcap").read_bytes()
+    capsys.readouterr()
+    assert main([*base, "--controller", "straight", "--episodes", "3", "--json", str(report)]) == 2
+    out, err = capsys.readouterr()
+    assert "circle_seed000002.mcap: it holds another run's episode (controller orca" in err
+    assert sorted(p.name for p in folder.iterdir()) == ["circle_seed000002.mcap"]  # seeds 0 and 1 never ran
+    assert (folder / "circle_seed000002.mcap").read_bytes() == held and not report.exists() and out == ""
+
+
 def test_json_and_plot_of_one_simulate_are_two_files(tmp_path, capsys):
     same = str(tmp_path / "same.png")
     assert main(["simulate", "--controller", "orca", "--humans", "2", "--json", same, "--plot", same]) == 2
