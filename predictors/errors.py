@@ -36,7 +36,7 @@ class UnknownPredictor(PredictorError):
     def __init__(self, name: str, choices: list[str]):
         self.name = name
         self.choices = choices
-        super().__init__(f"unknown predictor {name!r}; choose from {choices}")
+        super().__init__(f"unknown predictor {short_repr(name)}; choose from {choices}")
 
 
 class CheckpointMismatch(PredictorError):

@@ -506,3 +506,10 @@ def test_the_shipped_zoo_takes_no_plugin_kind(tmp_path, shipped, user, capsys):
     assert snapshot(shipped) == before and not user.exists()
     code, _, _ = cli(["--plugin", TOY, "zoo", "add", str(weights)], capsys)  # the user zoo takes it
     assert code == 0 and zoo.zoo_names(user) == ["toy_eth"]
+
+
+def test_an_unknown_predictors_name_is_cut_in_the_message():
+    """A name pasted by mistake (a whole file) must not become a 900 kB error line."""
+    with pytest.raises(UnknownPredictor) as error:
+        load_predictor("x" * 100_000)
+    assert len(str(error.value)) < 1000 and "unknown predictor 'xxx" in str(error.value)
