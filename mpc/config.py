@@ -82,6 +82,10 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
     "v_max": (world.MOST_SPEED, " m/s"),
     "a_max": (world.MOST_ACCEL, " m/s^2"),
 }
+# Lower bounds beyond "> 0": smax(z) = log(exp(mu z) + 1) / mu is log(2) / mu at z = 0, so a sharpness near
+# zero makes every pair's penalty w_coll log(2) / mu wherever the agents are (mu = 1e-300 overflowed the cost
+# to inf and every solve failed); at 1e-3 it is 693 w_coll per pair, finite at every weight's bound.
+MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2")}
 
 
 @dataclass(frozen=True)
@@ -286,6 +290,9 @@ class MPCConfig:
             value = getattr(self, name)
             if value > most:
                 raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {value!r}")
+        for name, (least, unit) in MPC_LEAST.items():
+            if getattr(self, name) < least:
+                raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(self, name)!r}")
 
     def _check_margins(self) -> None:
         margins = self.human_margins

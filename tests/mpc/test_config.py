@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from mpc.config import MPC_BOUNDS, MPCConfig
+from mpc.config import MPC_BOUNDS, MPC_LEAST, MPCConfig
 from mpc.costs import make_track, potential
 from mpc.errors import MPCConfigError
 
@@ -115,11 +115,24 @@ def test_numbers_that_enter_the_nlp_are_bounded(field):
         MPCConfig(**{field: 1e300})
 
 
-def test_at_every_bound_together_the_nlp_stays_finite():
+@pytest.mark.parametrize("field", sorted(MPC_LEAST))
+def test_numbers_that_enter_the_nlp_have_a_least_value(field):
+    """mu = 1e-300 passed "> 0" and overflowed every pair's penalty, log(2) / mu, to inf."""
+    least, _ = MPC_LEAST[field]
+    assert getattr(MPCConfig(**{field: least}), field) == least
+    with pytest.raises(
+        MPCConfigError, match=rf"^{field} must be at least {re.escape(f'{least:g}')}.*, got 1e-300$"
+    ):
+        MPCConfig(**{field: 1e-300})
+
+
+@pytest.mark.parametrize("least", [False, True], ids=["most", "least_and_most"])
+def test_at_every_bound_together_the_nlp_stays_finite(least):
     """The potential, its gradient and exact Hessian in the accelerations (what Fatrop and IPOPT evaluate),
     with every bounded number at its bound, at points beyond the bounds an interior-point iterate may reach
     (2 robots, 1 human)."""
-    cfg = MPCConfig(**{name: most for name, (most, _) in MPC_BOUNDS.items()})
+    bounds = {name: most for name, (most, _) in MPC_BOUNDS.items()}
+    cfg = MPCConfig(**(bounds | ({k: v for k, (v, _) in MPC_LEAST.items()} if least else {})))
     h = cfg.horizon
     u = ca.SX.sym("u", 2, 2 * h)
     starts, humans = ca.SX.sym("x", 4, 2), ca.SX.sym("h", 2, h)
