@@ -5,7 +5,7 @@ Agent layout used throughout the project
 * ``history``: ``(L, N, 2)`` positions in metres of *all* agents over the last ``L`` observed steps
   (row ``L-1`` is the current time ``t``), sampled every ``DT`` seconds.
 * ``mask``: ``(L, N)`` bool, True where the agent was observed (TrajNet++ scenes have partial tracks).
-* ``humans``: 1-D int array of the indices (into ``N``) of the agents whose future is predicted.
+* ``humans``: 1-D int array of the distinct indices (into ``N``) of the agents whose future is predicted.
   Every other index is a robot; robots are taken in increasing index order.
 * ``robots_future``: ``(H, M, 2)`` the robots' planned positions at ``t+1 .. t+H``, or ``None`` when there
   are no robots whose plan is known (dataset evaluation: every agent is predicted by the model).
@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 
 from crowdsim import world
+from predictors.errors import short_repr
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig, Observation
@@ -89,6 +90,34 @@ def robot_indices(n_agents: int, humans: np.ndarray) -> np.ndarray:
     return np.flatnonzero(~is_human)
 
 
+def check_humans(humans: np.ndarray, n_agents: int) -> np.ndarray:
+    """``humans`` as a 1-D integer array of distinct indices into ``n_agents`` agents; ValueError otherwise.
+
+    Each check stops a silent misreading: a repeated index makes that human a neighbour of its own copy (the
+    pooling moves its forecast by centimetres), and a boolean mask ``[True, False, True]`` would be taken for
+    the indices ``[1, 0, 1]``. An empty array selects no one whatever its dtype: ``np.array([])`` is float.
+    """
+    humans = np.asarray(humans)
+    if humans.ndim != 1:
+        raise ValueError(f"humans must be a 1-D array of agent indices, got shape {humans.shape}")
+    if humans.size == 0:
+        return humans.astype(int)
+    if not np.issubdtype(humans.dtype, np.integer):  # bool is not an integer dtype in numpy
+        hint = " (a boolean mask? pass np.flatnonzero(mask))" if humans.dtype == bool else ""
+        raise ValueError(f"humans must be integer agent indices, got dtype {humans.dtype}{hint}")
+    if humans.min() < 0 or humans.max() >= n_agents:
+        raise ValueError(
+            f"humans must be indices into {n_agents} agents (0..{n_agents - 1}), "
+            f"got {short_repr(humans.tolist())}"
+        )
+    values, counts = np.unique(humans, return_counts=True)
+    if (counts > 1).any():
+        raise ValueError(
+            f"humans must be distinct agent indices; {short_repr(values[counts > 1].tolist())} repeated"
+        )
+    return humans
+
+
 def check_rollout_inputs(
     history: np.ndarray,
     mask: np.ndarray,
@@ -101,11 +130,8 @@ def check_rollout_inputs(
         raise ValueError(f"history must have shape (L, N, 2), got {history.shape}")
     if mask.shape != history.shape[:2]:
         raise ValueError(f"mask must have shape {history.shape[:2]}, got {mask.shape}")
-    humans = np.asarray(humans)
     n_agents = history.shape[1]
-    if humans.ndim != 1 or (humans.size and (humans.min() < 0 or humans.max() >= n_agents)):
-        raise ValueError(f"humans must be a 1-D index array into {n_agents} agents, got {humans}")
-    n_robots = n_agents - len(np.unique(humans))
+    n_robots = n_agents - len(check_humans(humans, n_agents))
     if robots_future is None:
         if horizon is None:
             raise ValueError("horizon is required when robots_future is None")

@@ -150,6 +150,34 @@ def test_rollout_without_robots(predictor):
     assert np.isfinite(out).all()
 
 
+@pytest.mark.parametrize(
+    "humans, expected",
+    [
+        # agent 2 twice: it pooled with its own copy (social_lstm_eth moved it by 1.7 cm)
+        (np.array([2, 2, 3]), "humans must be distinct agent indices; [2] repeated"),
+        # a mask of agents 2..5, not indices: it was read as the agents [0, 0, 1, 1, 1, 1]
+        (np.arange(6) >= 2, "humans must be integer agent indices, got dtype bool"),
+        (np.array([2.0, 3.0]), "humans must be integer agent indices, got dtype float64"),
+        (np.array([2, 6]), "humans must be indices into 6 agents (0..5), got [2, 6]"),
+        (np.array([[2, 3]]), "humans must be a 1-D array of agent indices, got shape (1, 2)"),
+    ],
+    ids=["repeated", "bool-mask", "float", "out-of-range", "2-D"],
+)
+def test_rollout_refuses_humans_that_are_not_distinct_indices(predictor, humans, expected):
+    history, mask, _, _ = crossing_scene()
+    with pytest.raises(ValueError) as refused:
+        predictor.rollout(history, mask, None, humans, horizon=HORIZON)
+    assert str(refused.value).startswith(expected)
+
+
+@pytest.mark.parametrize("humans", [np.array([], dtype=int), np.array([])], ids=["int", "float"])
+def test_rollout_of_no_humans(predictor, humans):
+    """Every agent a robot: nothing to predict, from an empty int array or from ``np.array([])`` (float)."""
+    history, mask, _, _ = crossing_scene()
+    robots_future = history[-1][None] + np.zeros((HORIZON, 6, 2))
+    assert predictor.rollout(history, mask, robots_future, humans).shape == (HORIZON, 0, 2)
+
+
 def test_casadi_function_save_load_round_trip(predictor, tmp_path):
     history, mask, humans, robots_future = crossing_scene()
     function = predictor.to_casadi(len(humans), robots_future.shape[1], HORIZON)
