@@ -118,6 +118,16 @@ def check_humans(humans: np.ndarray, n_agents: int) -> np.ndarray:
     return humans
 
 
+def check_horizon(horizon: int, what: str) -> int:
+    """``horizon`` if it is at least one step (``to_casadi``'s bound); ValueError naming ``what`` otherwise.
+
+    A recursion of zero or fewer steps predicts nothing: the learned predictors used to return one step
+    anyway, constant velocity an empty array."""
+    if horizon < 1:
+        raise ValueError(f"{what} must be at least 1 step, got {horizon}")
+    return int(horizon)
+
+
 def check_rollout_inputs(
     history: np.ndarray,
     mask: np.ndarray,
@@ -125,7 +135,7 @@ def check_rollout_inputs(
     humans: np.ndarray,
     horizon: int | None,
 ) -> int:
-    """Validate shapes shared by every predictor; return the horizon H."""
+    """Validate shapes shared by every predictor; return the horizon H (>= 1)."""
     if history.ndim != 3 or history.shape[2] != 2:
         raise ValueError(f"history must have shape (L, N, 2), got {history.shape}")
     if mask.shape != history.shape[:2]:
@@ -135,9 +145,9 @@ def check_rollout_inputs(
     if robots_future is None:
         if horizon is None:
             raise ValueError("horizon is required when robots_future is None")
-        return int(horizon)
+        return check_horizon(horizon, "horizon")
     if robots_future.ndim != 3 or robots_future.shape[1:] != (n_robots, 2):
         raise ValueError(f"robots_future must have shape (H, {n_robots}, 2), got {robots_future.shape}")
     if horizon is not None and horizon != robots_future.shape[0]:
         raise ValueError(f"horizon {horizon} disagrees with robots_future of length {robots_future.shape[0]}")
-    return robots_future.shape[0]
+    return check_horizon(robots_future.shape[0], "robots_future's length H")

@@ -6,8 +6,9 @@ holds even before a zoo exists. A new predictor, or a new kind, inherits it all.
 Checks: shapes and finiteness (with and without a robot plan, robots first as in closed loop and
 interleaved), torch rollout vs the CasADi function (values <= 1e-6 in float64), the Jacobian of the humans'
 prediction with respect to the robot plan (CasADi vs torch autograd, or central differences for predictors
-without torch), the CasADi function's save/load round trip (the export path), the checkpoint round trip, and
-refusal of a checkpoint whose sha256 differs from the manifest.
+without torch), the CasADi function's save/load round trip (the export path), the checkpoint round trip,
+refusal of a checkpoint whose sha256 differs from the manifest, and refusal of humans that are not distinct
+integer indices and of a horizon below one step.
 """
 
 from __future__ import annotations
@@ -176,6 +177,17 @@ def test_rollout_of_no_humans(predictor, humans):
     history, mask, _, _ = crossing_scene()
     robots_future = history[-1][None] + np.zeros((HORIZON, 6, 2))
     assert predictor.rollout(history, mask, robots_future, humans).shape == (HORIZON, 0, 2)
+
+
+def test_rollout_refuses_a_horizon_below_one(predictor):
+    """As ``to_casadi`` does: the learned predictors returned one step for 0 or -2 and raised IndexError for
+    a plan of no steps, constant velocity returned an empty array."""
+    history, mask, humans, robots_future = crossing_scene()
+    for horizon in (0, -2):
+        with pytest.raises(ValueError, match=f"^horizon must be at least 1 step, got {horizon}$"):
+            predictor.rollout(history, mask, None, np.arange(6), horizon=horizon)
+    with pytest.raises(ValueError, match="^robots_future's length H must be at least 1 step, got 0$"):
+        predictor.rollout(history, mask, robots_future[:0], humans)
 
 
 def test_casadi_function_save_load_round_trip(predictor, tmp_path):
