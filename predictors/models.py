@@ -74,9 +74,16 @@ class ModelKind:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     adversarial: bool = False  # trained as a GAN generator (predictors.training.GANModule)
     source: str = "shipped"  # "shipped", "entry point <dist>", or "plugin"
+    # The keys of ``defaults`` that make this kind what it is, each with why. Other defaults are only a
+    # starting point; these no override, command-line option or checkpoint may change: a vanilla_lstm with
+    # grid pooling would be a Social-LSTM under another name (its zoo name, its cells in the experiments).
+    defining: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         check_net_class(self.net_class, self.name)
+        undefined = sorted(set(self.defining) - set(self.defaults))
+        if undefined:
+            raise PredictorError(f"model {self.name!r}: defining keys {undefined} have no value in defaults")
 
     @property
     def config_class(self) -> type:
@@ -97,11 +104,13 @@ class ModelKind:
             raise PredictorError(
                 f"{self.name}: expected a {self.config_class.__name__}, got {type(config).__name__}"
             )
+        self.check_defining(config)  # a checkpoint is never written that its loader would refuse
         to_dict = getattr(config, "to_dict", None)
         return dict(to_dict()) if callable(to_dict) else dataclasses.asdict(cast(Any, config))
 
     def config(self, overrides: Mapping[str, Any] | None = None) -> Any:
-        """This kind's config: the class defaults, then ``defaults``, then ``overrides``; validated."""
+        """This kind's config: the class defaults, then ``defaults``, then ``overrides``; validated. An
+        override may repeat a defining value (a stored config holds them all) but not change it."""
         if overrides is not None and not isinstance(overrides, Mapping):
             return self._config(overrides)  # refused there, in one line
         return self._config({**self.defaults, **(overrides or {})})
@@ -119,11 +128,25 @@ class ModelKind:
             )
         from_dict = getattr(cls, "from_dict", None)
         try:
-            return from_dict(dict(values)) if callable(from_dict) else cls(**values)
+            config = from_dict(dict(values)) if callable(from_dict) else cls(**values)
         except PredictorError:
             raise
         except Exception as exc:  # a plugin's own validation (TypeError, ValueError, an assert ...)
             raise PredictorError(f"{self.name} config: {type(exc).__name__}: {exc}") from None
+        # On the built config, not on ``values``: a checkpoint's "net" without the key gets the class's
+        # default, which need not be this kind's (SocialLSTMConfig pools on a grid by default).
+        self.check_defining(config)
+        return config
+
+    def check_defining(self, config: Any) -> None:
+        """PredictorError naming the key and this kind unless ``config`` keeps every defining value."""
+        for key, why in self.defining.items():
+            found, want = getattr(config, key, None), self.defaults[key]
+            if found != want:
+                raise PredictorError(
+                    f"{key} {short_repr(found)} is not a {self.name}: the kind is defined by {key} {want!r} "
+                    f"({why}); choose another model kind"
+                )
 
     def build_net(self, config: Any) -> torch.nn.Module:
         """The net of ``config`` (a ``config_class`` instance, or a dict validated like ``config``).
@@ -132,7 +155,9 @@ class ModelKind:
         ``MAX_PARAMETERS`` parameters."""
         import torch
 
-        if not isinstance(config, self.config_class):
+        if isinstance(config, self.config_class):
+            self.check_defining(config)  # a dict is checked by _config
+        else:
             config = self._config(config)
         try:
             with torch.device("meta"):
@@ -155,6 +180,7 @@ class ModelKind:
         from predictors.learned import LearnedPredictor
         from predictors.social_lstm_predictors import SocialGANPredictor
 
+        self.check_defining(getattr(net, "config", None))
         cls: type[LearnedPredictor] = SocialGANPredictor if self.adversarial else LearnedPredictor
         return cls(net, name=name, obs_len=obs_len, kind=self.name)
 
@@ -185,7 +211,9 @@ def _shipped() -> dict[str, ModelKind]:
 
     kinds = [
         ModelKind("social_lstm", SocialLSTM, {"pooling": "grid"}),
-        ModelKind("vanilla_lstm", SocialLSTM, {"pooling": "none"}),
+        ModelKind(
+            "vanilla_lstm", SocialLSTM, {"pooling": "none"}, defining={"pooling": "it has no social pooling"}
+        ),
         ModelKind(
             "social_gan", SocialLSTM, {"pooling": "soft", "noise_dim": 8, "head": "point"}, adversarial=True
         ),

@@ -176,8 +176,10 @@ def _net_config(args: argparse.Namespace) -> tuple[str | None, Any]:
     ):
         if value is None:
             continue
-        if not kind.has_field(key) or (key == "pooling" and kind.defaults.get("pooling") == "none"):
-            why = "it has no social pooling" if key == "pooling" else f"its config has no {key}"
+        if not kind.has_field(key) or key in kind.defining:  # the kind fixes it: models.ModelKind.defining
+            why = kind.defining.get(key) or (
+                "it has no social pooling" if key == "pooling" else f"its config has no {key}"
+            )
             raise PipelineError(f"{option} does not apply to {args.model} ({why})")
         if key in overrides:
             raise PipelineError(f"{option} and --net-config both set {key}; give it once")

@@ -261,7 +261,15 @@ def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
             ["--model", "social_attention", "--pooling", "soft"],
             "--pooling does not apply to social_attention",
         ),
-        (["--model", "vanilla_lstm", "--pooling", "soft"], "--pooling does not apply to vanilla_lstm"),
+        (
+            ["--model", "vanilla_lstm", "--pooling", "soft"],
+            "--pooling does not apply to vanilla_lstm (it has no social pooling)",
+        ),
+        (
+            ["--model", "vanilla_lstm", "--net-config", '{"pooling": "grid"}'],
+            "--net-config: vanilla_lstm: pooling 'grid' is not a vanilla_lstm: the kind is defined by "
+            "pooling 'none' (it has no social pooling)",
+        ),
         (
             ["--model", "social_lstm", "--pooling", "max"],
             "the options: social_lstm: pooling 'max' is not one of",

@@ -66,6 +66,31 @@ def test_the_shipped_kinds(no_plugins):
     )
 
 
+def test_a_kind_defining_value_cannot_be_changed(no_plugins):
+    """vanilla_lstm is SocialLSTM without pooling: {"pooling": "grid"} used to train a grid Social-LSTM named
+    vanilla_lstm_eth. Refused from overrides, from a stored "net" that leaves pooling to the class's default
+    (grid), and from a pooled net handed over as it is; a stored config may repeat the defining value."""
+    vanilla, social = model_kind("vanilla_lstm"), model_kind("social_lstm")
+    message = re.escape(
+        "pooling 'grid' is not a vanilla_lstm: the kind is defined by pooling 'none' "
+        "(it has no social pooling)"
+    )
+    with pytest.raises(PredictorError, match=message):
+        vanilla.config({"pooling": "grid"})
+    with pytest.raises(PredictorError, match=message):
+        vanilla.build_net({"hidden_dim": 8})
+    assert vanilla.config({"pooling": "none", "hidden_dim": 8}).pooling == "none"
+    pooled = social.build_net(social.config({"hidden_dim": 8}))
+    with pytest.raises(PredictorError, match=message):
+        vanilla.build_net(pooled.config)
+    with pytest.raises(PredictorError, match=message):
+        vanilla.config_dict(pooled.config)  # what save_checkpoint writes
+    with pytest.raises(PredictorError, match=message):
+        vanilla.predictor(pooled, name="pooled", obs_len=9)
+    # a default only: social_lstm pools either way
+    assert social.config({"pooling": "soft"}).pooling == "soft"
+
+
 @pytest.mark.parametrize("name", ["gpt", "", "Social_LSTM", "social_lstm ", None, 3, ["social_lstm"]])
 def test_an_unknown_name_lists_the_choices(no_plugins, name):
     with pytest.raises(UnknownModel) as refused:

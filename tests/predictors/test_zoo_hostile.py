@@ -390,6 +390,11 @@ def _config_cases() -> dict[str, tuple[dict, str]]:
             "model 'no_such_module_xyz:Net' is a plugin that is not registered",
         ),
         "model_other_kind": ({"model": "social_gru"}, "unknown social_gru config keys ['noise_dim']"),
+        # social_lstm_eth's grid-pooled net under the kind without pooling
+        "model_vanilla_pooled": (
+            {"model": "vanilla_lstm"},
+            "\"net\": pooling 'grid' is not a vanilla_lstm: the kind is defined by pooling 'none'",
+        ),
         "name_dict": ({"name": {"a": 1}}, '"name" must be a string'),
         "format": ({"format": "other"}, "not a crowdmpc predictor config"),
     }
