@@ -21,7 +21,8 @@ Deviations, all outside the behaviour one can observe in a crowd
   not a parameter.
 * Two agents whose relative velocity equals exactly ``relative position / time step`` while overlapping give
   RVO2 a 0/0 (NaN velocity); here that measure-zero case uses the line through the current velocity
-  perpendicular to the two centres (push apart), so a simulation never produces NaN.
+  perpendicular to the two centres (push apart), so a simulation never produces NaN. Two agents at the very
+  same point have no line of centres: the lower index is pushed towards +x and the higher towards -x.
 
 Neighbour geometry and the half-planes of every agent are computed at once with numpy broadcasting; only the
 linear programs, which are sequential by nature, run per agent in plain Python floats (faster than numpy
@@ -165,9 +166,7 @@ def orca_halfplanes(
         degenerate = c_len <= 0.0
         if degenerate.any():
             # The measure-zero 0/0 case (module docstring): the unit vector from the neighbour to the agent.
-            r_len = np.sqrt(dist_sq)
-            apart_x = np.where(r_len > 0.0, -rx / r_len, 1.0)
-            apart_y = np.where(r_len > 0.0, -ry / r_len, 0.0)
+            apart_x, apart_y = _apart(rx, ry, dist_sq, agents, nbr)
             cx = np.where(degenerate, apart_x, cx)
             cy = np.where(degenerate, apart_y, cy)
             c_unit = np.where(degenerate, 1.0, c_len)
@@ -176,15 +175,33 @@ def orca_halfplanes(
         col_scale = (comb_r / dt - c_len) / c_unit
         col_dx, col_dy = cy / c_unit, -cx / c_unit
 
-    colliding = dist_sq <= comb_r_sq
-    dir_x = np.where(colliding, col_dx, np.where(on_cutoff, cut_dx, leg_dx))
-    dir_y = np.where(colliding, col_dy, np.where(on_cutoff, cut_dy, leg_dy))
-    u_x = np.where(colliding, col_scale * cx, np.where(on_cutoff, cut_scale * wx, dot2 * leg_dx - ux))
-    u_y = np.where(colliding, col_scale * cy, np.where(on_cutoff, cut_scale * wy, dot2 * leg_dy - uy))
+        # np.where evaluates every branch: the branches not taken may hold the 0/0 above, hence the errstate.
+        colliding = dist_sq <= comb_r_sq
+        dir_x = np.where(colliding, col_dx, np.where(on_cutoff, cut_dx, leg_dx))
+        dir_y = np.where(colliding, col_dy, np.where(on_cutoff, cut_dy, leg_dy))
+        u_x = np.where(colliding, col_scale * cx, np.where(on_cutoff, cut_scale * wx, dot2 * leg_dx - ux))
+        u_y = np.where(colliding, col_scale * cy, np.where(on_cutoff, cut_scale * wy, dot2 * leg_dy - uy))
     # Reciprocity: each agent takes half of the change that avoids the collision.
     points = np.stack([vix + 0.5 * u_x, viy + 0.5 * u_y], axis=-1)
     directions = np.stack([dir_x, dir_y], axis=-1)
     return points, directions, valid.sum(axis=1)
+
+
+def _apart(
+    rx: np.ndarray, ry: np.ndarray, dist_sq: np.ndarray, agents: np.ndarray, nbr: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The unit vector from each neighbour to its agent, ``(S, K)`` components, for the 0/0 overlap.
+
+    Two agents at the same point have no such vector; there the lower index goes +x and the higher -x, so the
+    two directions of a pair are opposite (as -r / |r| is for distinct points) and the pair separates. One
+    fixed direction for both would push them the same way, and they would never part.
+    """
+    r_len = np.sqrt(dist_sq)
+    distinct = r_len > 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        apart_x = np.where(distinct, -rx / r_len, np.where(agents[:, None] < nbr, 1.0, -1.0))
+        apart_y = np.where(distinct, -ry / r_len, 0.0)
+    return apart_x, apart_y
 
 
 def _lp1(px, py, dx, dy, no, radius, optx, opty, direction_opt):

@@ -2,6 +2,7 @@
 
 import math
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -378,6 +379,22 @@ def test_the_zero_over_zero_overlap_pushes_apart():
     np.testing.assert_allclose(dirs[:, 0], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12)
     new, _ = orca_velocities(p, v, np.zeros((2, 2)), 0.3, 1.0, PARAMS, DT)
     np.testing.assert_allclose(new, [[0.0, 0.0], [0.75, 0.0]], atol=1e-12)
+
+
+def test_two_agents_at_the_same_point_are_pushed_opposite_ways():
+    # A and B both still at 0, both preferring (0, 1): c = u - r / dt = 0 and r = 0, so there is no line of
+    # centres. The lower index takes c = (1, 0): u = (0.6/0.4) c = (1.5, 0), point (0.75, 0), direction
+    # (0, -1), v_x >= 0.75; B mirrored, v_x <= -0.75. The closest velocity to (0, 1) within speed 1 is
+    # (+-0.75, sqrt(1 - 0.75^2)). One direction for both pushed the pair the same way for ever.
+    p = np.zeros((2, 2))
+    v = np.zeros((2, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the branches np.where does not take hold 0/0
+        points, dirs, _ = orca_halfplanes(p, v, np.full(2, 0.3), np.arange(2), PARAMS, DT)
+        new, _ = orca_velocities(p, v, np.array([[0.0, 1.0], [0.0, 1.0]]), 0.3, 1.0, PARAMS, DT)
+    np.testing.assert_allclose(points[:, 0], [[0.75, 0.0], [-0.75, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(dirs[:, 0], [[0.0, -1.0], [0.0, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(new, [[0.75, math.sqrt(0.4375)], [-0.75, math.sqrt(0.4375)]], atol=1e-9)
 
 
 def test_an_overlap_the_max_speed_cannot_undo_goes_away_at_full_speed():
