@@ -37,7 +37,8 @@ CrowdNav's ``point_to_segment_dist``), and ``d = min_i d_i``, the first rule tha
    the success reward on the step that ends an episode in success (the next one, there), so every episode
    ending in success is paid it, here as there. With ``end_on_collision=True`` the contact ends the
    episode, as upstream CrowdNav does, and comes first: ``-0.25`` only, the success not paid (upstream's
-   ``Collision``); on the last step rule 1 still comes first (``truncated``, 0);
+   ``Collision``: ``info["success"]`` and the episode metrics' ``success`` are False); on the last step rule
+   1 still comes first (``truncated``, 0);
 3. the robots succeed (the success rule of ``EnvConfig``; ``terminated``): ``success = +1``;
 4. ``d < discomfort_dist = 0.4`` m: ``(d - discomfort_dist) * discomfort_factor * dt``, factor 0.5 /s;
 5. otherwise 0.
@@ -76,7 +77,7 @@ reward and the step's distances in crowdsim.gym_reward; this module exports thei
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from dataclasses import fields, replace
 from typing import Any, Final
 
 import gymnasium as gym
@@ -101,6 +102,7 @@ from crowdsim.gym_reward import RewardConfig, step_closest, surface_distances
 from crowdsim.metrics import (
     COLLISION_DISTANCE,
     DISCOMFORT_HORIZON,
+    EpisodeMetrics,
     episode_metrics,
     segments_intersect,
 )
@@ -246,8 +248,13 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         swept = float(closest.min()) if closest.size else math.inf
         gaps = surface_distances(closest, cfg.radius)
         contact_in_step = gaps < 0
-        success = bool(native.get("success", False))
         timeout = bool(native.get("timeout", False))
+        # Rule 1 first, as the fork's Timeout: a contact on the last step ends the episode truncated (and pays
+        # 0), not terminated with the time limit's reward.
+        contact_ends = self.end_on_collision and bool(contact_in_step.any()) and not timeout
+        # A contact that ends the episode comes first (upstream CrowdNav's Collision): a step that also brings
+        # the robots to their goals is no success, in the rewards, the info and the episode's metrics alike.
+        success = bool(native.get("success", False)) and not contact_ends
 
         def rule(gap: float) -> float:
             return self.reward_config.step_reward(
@@ -264,9 +271,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         discomfort = segments_intersect(
             obs.robot_positions[:, None], r_end[:, None], obs.human_positions[None], h_end[None]
         )
-        # Rule 1 first, as the fork's Timeout: a contact on the last step ends the episode truncated (and pays
-        # 0), not terminated with the time limit's reward.
-        terminated = success or (self.end_on_collision and bool(contact_in_step.any()) and not timeout)
+        terminated = success or contact_ends
         truncated = timeout and not terminated
         self._done = terminated or truncated
         info: dict[str, Any] = {
@@ -289,7 +294,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             "timeout": timeout,
         }
         if self._done:
-            info["episode_metrics"] = episode_metrics(self._sim.trajectory())
+            info["episode_metrics"] = self._episode_metrics(contact_ends)
         return self._array(obs), reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
@@ -371,6 +376,15 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             )
         chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
         return chosen
+
+    def _episode_metrics(self, contact_ended: bool) -> EpisodeMetrics:
+        """The episode's ``crowdsim.metrics`` metrics with the outcome this environment gave it: those read
+        success off the trajectory alone, which does not show that a contact ended the episode on the step
+        the robots reached their goals. Such an episode did not succeed: timeout True, no travel time."""
+        metrics = episode_metrics(self._sim.trajectory())
+        if contact_ended and metrics.success:
+            return replace(metrics, success=False, timeout=True, travel_time=math.nan)
+        return metrics
 
     def _rows(self, values: np.ndarray, fill: float | bool) -> np.ndarray:
         """``values`` (one row per robot of the episode) padded to ``max_robots`` rows with ``fill``."""

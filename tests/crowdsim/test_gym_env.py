@@ -250,15 +250,39 @@ def _at_goal_beside_a_human() -> Layout:
 
 @pytest.mark.parametrize("end_on_collision, expected", [(False, -0.25 + 1.0), (True, -0.25)])
 def test_contact_and_success_on_the_same_step(end_on_collision, expected):
+    # With end_on_collision the contact comes first (upstream's Collision): no success, reported or paid,
+    # and the episode's metrics say so too (timeout, no travel time), though the robot is at its goal.
     env = CrowdNavEnv(n_robots=1, n_humans=1, end_on_collision=end_on_collision)
     with pytest.warns(LayoutWarning, match="in contact from the first step"):  # on purpose
         env.reset(seed=0, options={"layout": _at_goal_beside_a_human()})
     _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
-    assert info["surface_distance"] == pytest.approx([-0.1]) and info["success"]
+    assert info["surface_distance"] == pytest.approx([-0.1]) and info["reached"].tolist() == [True]
+    assert info["success"] != end_on_collision and not info["timeout"]
     assert reward == expected and info["robot_rewards"].tolist() == [expected]
     assert terminated and not truncated
     metrics = info["episode_metrics"]
-    assert metrics.success and metrics.contact and metrics.contact_between_steps
+    assert metrics.contact and metrics.contact_between_steps and metrics.reach_times == (0.0,)
+    assert (metrics.success, metrics.timeout) == (not end_on_collision, end_on_collision)
+    assert math.isnan(metrics.travel_time) == end_on_collision
+    # What the closed loop reports (crowdsim.metrics of the trajectory) is unchanged: it has no contact rule.
+    assert episode_metrics(env.simulator.trajectory()).success
+
+
+def test_a_contact_that_ends_the_episode_pays_no_robot_the_success():
+    # Two robots at their goals, only the first beside a human: the team's episode ends in collision, so the
+    # second robot, 5 m from anyone, earns 0 (rule 5), not the success the team did not reach.
+    env = CrowdNavEnv(n_robots=2, n_humans=1, end_on_collision=True)
+    layout = Layout(
+        np.array([[0.0, 0.0], [5.0, 0.0]]),
+        np.array([[0.0, -0.1], [5.0, -0.1]]),
+        np.array([[0.5, 0.0]]),
+        np.array([[0.5, 0.0]]),
+    )
+    with pytest.warns(LayoutWarning, match="in contact from the first step"):  # on purpose
+        env.reset(seed=0, options={"layout": layout})
+    _, reward, terminated, _, info = env.step(np.zeros((2, 2)))
+    assert terminated and not info["success"] and info["reached"].tolist() == [True, True]
+    assert reward == -0.25 and info["robot_rewards"].tolist() == [-0.25, 0.0]
 
 
 def _crossing() -> Layout:
