@@ -15,8 +15,9 @@ Rows past the episode's ``n_robots`` robots, respectively ``n_humans`` humans, a
 the spaces are fixed at construction for ``max_robots`` and ``max_humans``, and ``reset(options=...)``
 may run smaller episodes (``scenario``, ``n_humans``, ``n_robots``) or a hand-built ``Layout``. Bounds:
 velocities within ``±max(v_max, v_pref)`` (robots per component, humans' ORCA speed); positions and goals
-within ``±position_limit = scene_limit + max(v_max, v_pref) T``, where ``scene_limit = 2 max(circle radius,
-square width) x geometry_scale(max_humans)`` bounds every start and goal (20 m, so 60 m with the paper's
+within ``±position_limit = scene_limit + max(v_max, v_pref) T``, where ``scene_limit = max(2 L, L + v_pref /
+2)``, ``L = max(circle radius, square width) x geometry_scale(max_humans)``, bounds every start and goal (the
+samplers' noise of up to ``v_pref / 2`` per coordinate is not scaled; 20 m, so 60 m with the paper's
 defaults) and ``T = max(time_limit, max_steps dt)`` (the steps outlast the time limit with no margin and a
 time limit that is no whole number of steps). Values are clipped into the box, which absorbs rounding only.
 

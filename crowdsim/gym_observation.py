@@ -44,10 +44,10 @@ def observation_bounds(
 ) -> tuple[float, float, np.ndarray, np.ndarray]:
     """``(scene_limit, position_limit, low, high)``: the limits (m) and the box's bounds, one row per agent
     (``max_robots + max_humans`` rows, ``COLUMNS``)."""
-    # Bounds (gym_env's docstring): twice the largest scene, plus the farthest anyone travels per axis. An
-    # episode runs max_steps steps, which may outlast time_limit (no margin, time_limit / dt not whole).
+    # Bounds (gym_env's docstring): the scene, plus the farthest anyone travels per axis. An episode runs
+    # max_steps steps, which may outlast time_limit (no margin, time_limit / dt not whole).
     speed = max(config.v_max, config.v_pref)
-    scene_limit = 2.0 * max(CIRCLE_RADIUS, SQUARE_WIDTH) * geometry_scale(max_humans)
+    scene_limit = scene_bound(config.v_pref, max_humans)
     duration = max(config.time_limit, config.max_steps * config.dt)
     position_limit = scene_limit + speed * duration
     rows = max_robots + max_humans
@@ -56,6 +56,17 @@ def observation_bounds(
     low = -high
     low[:, PRESENT] = 0.0
     return scene_limit, position_limit, low, high
+
+
+def scene_bound(v_pref: float, max_humans: int) -> float:
+    """The largest |coordinate| (m) of any start or goal ``make_layout`` draws for up to ``max_humans``
+    humans at human speed ``v_pref`` (m/s): ``max(2 L, L + v_pref / 2)``, ``L = max(circle radius, square
+    width) x geometry_scale(max_humans)``. ``2 L`` holds the robots' formations and the perpendicular sides'
+    fixed offsets; ``L + v_pref / 2`` the noise of up to ``v_pref / 2`` per coordinate that the circle's
+    starts and goals and the v1 perpendicular goals carry (crowdsim.crossings), which the crowd's scale
+    does not scale, so that only a fast crowd (v_pref > L) needs more than ``2 L``."""
+    scene = max(CIRCLE_RADIUS, SQUARE_WIDTH) * geometry_scale(max_humans)
+    return max(2.0 * scene, scene + 0.5 * v_pref)
 
 
 def observation_array(

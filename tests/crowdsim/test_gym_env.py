@@ -351,6 +351,21 @@ def test_the_position_bounds_hold_for_steps_that_outlast_the_time_limit():
     assert CrowdNavEnv().position_limit == 60.0  # 40 s, the paper's: its 98 steps of 0.4 s end before
 
 
+@pytest.mark.parametrize("crossing", ["paper", "v1"])
+def test_the_scene_limit_holds_the_start_noise_of_a_fast_crowd(crossing):
+    """Circle starts carry noise of up to v_pref / 2 per coordinate: at 100 m/s, up to 55 m from the centre,
+    past the 20 m of twice the scene, so the observation clipped them by up to 24 m. The limit is now
+    10 + 100 / 2 = 60 m, and the observation is every start as it is; 20 m still at the paper's 1 m/s."""
+    config = EnvConfig(v_pref=100.0, dt=0.1, time_limit=0.1, timeout_margin=0.0, crossing=crossing)
+    env = CrowdNavEnv(n_humans=5, config=config)
+    assert env.scene_limit == 60.0 and CrowdNavEnv().scene_limit == 20.0
+    for seed in range(20):
+        obs, info = env.reset(seed=seed)
+        native = info["observation"]
+        assert np.abs(native.human_positions).max() <= env.scene_limit
+        np.testing.assert_array_equal(obs[env.max_robots :, POSITION], native.human_positions)
+
+
 def test_an_episode_is_crowdenvs_and_its_metrics_are_the_simulators():
     """The straight-line baseline through the gymnasium API, with its accelerations and with its velocities
     through VelocityControl, drives exactly as through CrowdEnv."""
