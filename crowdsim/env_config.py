@@ -23,7 +23,7 @@ from crowdsim.conventions import (
     Crossing,
     SuccessRule,
 )
-from crowdsim.errors import SimulationError
+from crowdsim.errors import SimulationError, real_number, whole_number
 from crowdsim.orca import OrcaParams
 from crowdsim.scenarios import FORMATIONS, Formation
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
@@ -38,6 +38,7 @@ from crowdsim.world import (
     V_MAX,
     V_PREF,
     WorldFacts,
+    finite_positive,
 )
 
 # Upper bounds of EnvConfig's times, lengths and speeds: far above any crowd a robot navigates, low enough
@@ -83,28 +84,20 @@ class EnvConfig:
     def __post_init__(self):
         self._check_sizes()
         self._check_dt()
-        if not (isinstance(self.history_len, int) and self.history_len >= 1):
-            raise SimulationError(f"EnvConfig.history_len must be an int >= 1, got {self.history_len!r}")
-        margin_ok = isinstance(self.orca_radius_margin, int | float) and np.isfinite(self.orca_radius_margin)
-        if not (margin_ok and 0 <= self.orca_radius_margin <= MAX_ORCA_RADIUS_MARGIN):
-            raise SimulationError(
-                f"EnvConfig.orca_radius_margin must be in [0, {MAX_ORCA_RADIUS_MARGIN:g}] m, "
-                f"got {self.orca_radius_margin!r}"
-            )
+        self._check_margins()
         if not isinstance(self.orca, OrcaParams):
             raise SimulationError(f"EnvConfig.orca must be an OrcaParams, got {type(self.orca).__name__}")
         if not (isinstance(self.profile, str) and self.profile):
             raise SimulationError(f"EnvConfig.profile must be a non-empty name, got {self.profile!r}")
-        margin = self.timeout_margin
-        if not (isinstance(margin, int | float) and 0 <= margin < self.time_limit):
-            raise SimulationError(
-                f"EnvConfig.timeout_margin must be in [0, time_limit={self.time_limit}) s, got {margin!r}"
-            )
-        separation = self.spawn_separation
-        if not (isinstance(separation, int | float) and np.isfinite(separation) and separation >= 0):
-            raise SimulationError(
-                f"EnvConfig.spawn_separation must be a finite number >= 0 m, got {separation!r}"
-            )
+        separation = self._store(
+            "spawn_separation",
+            real_number(
+                "EnvConfig.spawn_separation",
+                self.spawn_separation,
+                "a finite number >= 0 m",
+                lambda s: math.isfinite(s) and s >= 0,
+            ),
+        )
         if separation > MAX_SPAWN_SEPARATION:
             raise SimulationError(
                 f"EnvConfig.spawn_separation must be at most {MAX_SPAWN_SEPARATION:g} m, got {separation:g}"
@@ -134,12 +127,17 @@ class EnvConfig:
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")
 
+    def _store(self, name: str, value: float) -> float:
+        """Set a checked value (frozen: numpy's scalars are stored as Python's) and return it."""
+        object.__setattr__(self, name, value)
+        return value
+
     def _check_sizes(self) -> None:
-        """The times, lengths and speeds: finite, positive, and within ``ENV_BOUNDS``."""
+        """The times, lengths and speeds and L: finite, positive, and within ``ENV_BOUNDS``."""
         for name in ("dt", *ENV_BOUNDS):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
-                raise SimulationError(f"EnvConfig.{name} must be a finite number > 0, got {value!r}")
+            where = f"EnvConfig.{name}"
+            self._store(name, real_number(where, getattr(self, name), "a finite number > 0", finite_positive))
+        self._store("history_len", whole_number("EnvConfig.history_len", self.history_len, "an int >= 1", 1))
         for name, (most, unit) in ENV_BOUNDS.items():
             if getattr(self, name) > most:
                 raise SimulationError(
@@ -154,6 +152,25 @@ class EnvConfig:
             raise SimulationError(
                 f"EnvConfig.dt must be at most time_limit = {self.time_limit:g} s, got {self.dt:g}"
             )
+
+    def _check_margins(self) -> None:
+        """ORCA's radius margin, and the timeout margin within the time limit (checked before)."""
+        most = MAX_ORCA_RADIUS_MARGIN
+        margin = real_number(
+            "EnvConfig.orca_radius_margin",
+            self.orca_radius_margin,
+            f"in [0, {most:g}] m",
+            lambda m: 0 <= m <= most,
+        )
+        self._store("orca_radius_margin", margin)
+        limit = self.time_limit
+        margin = real_number(
+            "EnvConfig.timeout_margin",
+            self.timeout_margin,
+            f"in [0, time_limit={limit}) s",
+            lambda m: 0 <= m < limit,
+        )
+        self._store("timeout_margin", margin)
 
     @classmethod
     def from_world(cls, world: WorldFacts, **settings: Any) -> EnvConfig:

@@ -1,5 +1,12 @@
 """Errors a user can cause through the simulator (bad scenario, bad sizes); the CLI prints them plainly. And
-the warning of a layout that runs but is probably not what was meant."""
+the warning of a layout that runs but is probably not what was meant. And the one check of a number a setting
+takes (``real_number``, ``whole_number``), so that every settings class accepts and refuses the same values.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Callable
 
 
 class SimulationError(ValueError):
@@ -16,3 +23,31 @@ def too_crowded(human: int, n_humans: int, scenario: str, n_robots: int, draws: 
         f"could not place human {human + 1} of n_humans={n_humans} in scenario {scenario!r} with "
         f"{n_robots} robots after {draws} draws; use fewer agents"
     )
+
+
+def real_number(where: str, value: object, expected: str, ok: Callable[[float], bool]) -> float:
+    """``value`` as a plain float, when it is a real number that ``ok`` accepts; else SimulationError
+    "``where`` must be ``expected``, got ``value``". numpy's scalars count (np.float32(0.4) is a time step)
+    and bools do not (True is no length); a plain float keeps numpy's types out of the simulator's
+    arithmetic."""
+    plain = _plain_float(value)
+    if plain is None or not ok(plain):
+        raise SimulationError(f"{where} must be {expected}, got {value!r}")
+    return plain
+
+
+def whole_number(where: str, value: object, expected: str, least: int) -> int:
+    """``value`` as a plain int, when it is an integer (numpy's too, not a bool) of at least ``least``; else
+    SimulationError "``where`` must be ``expected``, got ``value``"."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
+        raise SimulationError(f"{where} must be {expected}, got {value!r}")
+    return int(value)
+
+
+def _plain_float(value: object) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    try:
+        return float(value)
+    except OverflowError:  # an integer past the largest float
+        return None

@@ -11,7 +11,7 @@ import numpy as np
 
 from crowdsim.conventions import PAPER_DISCOMFORT_DIST
 from crowdsim.env import Observation
-from crowdsim.errors import SimulationError
+from crowdsim.errors import SimulationError, real_number
 from crowdsim.metrics import closest_approach
 
 
@@ -26,9 +26,9 @@ class RewardConfig:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-                raise SimulationError(f"RewardConfig.{f.name} must be a finite number, got {value!r}")
+            where = f"RewardConfig.{f.name}"
+            value = real_number(where, getattr(self, f.name), "a finite number", math.isfinite)
+            object.__setattr__(self, f.name, value)  # frozen: numpy's scalars are stored as Python's
         if self.discomfort_dist < 0 or self.discomfort_factor < 0:
             raise SimulationError(
                 f"RewardConfig.discomfort_dist and discomfort_factor must be >= 0, got "

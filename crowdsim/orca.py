@@ -38,7 +38,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError
+from crowdsim.errors import real_number, whole_number
 
 RVO_EPSILON: Final[float] = 1e-5  # RVO2's Definitions.h: tolerance for (almost) parallel lines
 # neighbor_dist is squared (1e300 overflowed the first step): a finite one up to 1000 km, far beyond any
@@ -58,18 +58,23 @@ class OrcaParams:
     time_horizon: float = 5.0  # s, velocity obstacles are truncated at this horizon
 
     def __post_init__(self):
-        dist = self.neighbor_dist
-        if not (dist > 0 and (dist <= MAX_NEIGHBOR_DIST or dist == math.inf)):
-            raise SimulationError(
-                f"neighbor_dist must be > 0 and at most {MAX_NEIGHBOR_DIST:g} m, or inf (every agent), "
-                f"got {dist!r}"
-            )
-        if not (isinstance(self.max_neighbors, int) and self.max_neighbors >= 0):
-            raise SimulationError(f"max_neighbors must be an int >= 0, got {self.max_neighbors!r}")
-        if not self.time_horizon >= MIN_TIME_HORIZON:
-            raise SimulationError(
-                f"time_horizon must be at least {MIN_TIME_HORIZON:g} s, got {self.time_horizon!r}"
-            )
+        # frozen: the checked values are stored back, numpy's scalars as Python's
+        dist = real_number(
+            "OrcaParams.neighbor_dist",
+            self.neighbor_dist,
+            f"> 0 and at most {MAX_NEIGHBOR_DIST:g} m, or inf (every agent)",
+            lambda d: d > 0 and (d <= MAX_NEIGHBOR_DIST or d == math.inf),
+        )
+        object.__setattr__(self, "neighbor_dist", dist)
+        count = whole_number("OrcaParams.max_neighbors", self.max_neighbors, "an int >= 0", 0)
+        object.__setattr__(self, "max_neighbors", count)
+        horizon = real_number(
+            "OrcaParams.time_horizon",
+            self.time_horizon,
+            f"at least {MIN_TIME_HORIZON:g} s",
+            lambda t: t >= MIN_TIME_HORIZON,
+        )
+        object.__setattr__(self, "time_horizon", horizon)
 
 
 def preferred_velocities(

@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Final
 
-from crowdsim.errors import SimulationError
+from crowdsim.errors import real_number, whole_number
 
 
 @dataclass(frozen=True)
@@ -34,11 +34,17 @@ class WorldFacts:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            where = f"WorldFacts.{f.name}"
             if f.name == "obs_len":
-                if not (isinstance(value, int) and value >= 1):
-                    raise SimulationError(f"WorldFacts.obs_len must be an int >= 1, got {value!r}")
-            elif not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise SimulationError(f"WorldFacts.{f.name} must be a finite number > 0, got {value!r}")
+                plain: float = whole_number(where, value, "an int >= 1", 1)
+            else:
+                plain = real_number(where, value, "a finite number > 0", finite_positive)
+            object.__setattr__(self, f.name, plain)  # frozen: stores numpy's scalars as Python's
+
+
+def finite_positive(value: float) -> bool:
+    """A time, length or speed: finite and > 0 (nan is neither)."""
+    return math.isfinite(value) and value > 0
 
 
 WORLD: Final[WorldFacts] = WorldFacts()

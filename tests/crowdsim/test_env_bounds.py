@@ -1,7 +1,10 @@
 """EnvConfig's upper bounds: a step within the episode, times, lengths and speeds far above any crowd but low
-enough that the simulator and the controllers stay finite; the profiles' values stay valid."""
+enough that the simulator and the controllers stay finite; the profiles' values stay valid. And what every
+numeric setting of the settings classes takes: real numbers, numpy's too, never a bool."""
 
 from __future__ import annotations
+
+from dataclasses import fields
 
 import numpy as np
 import pytest
@@ -10,7 +13,10 @@ from crowdsim.baselines import StraightController
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import ENV_BOUNDS, MIN_DT, EnvConfig
 from crowdsim.errors import SimulationError
+from crowdsim.gym_reward import RewardConfig
+from crowdsim.orca import OrcaParams
 from crowdsim.profiles import PROFILES, make_env_config
+from crowdsim.world import WorldFacts
 
 
 @pytest.mark.parametrize("profile", sorted(PROFILES))
@@ -87,3 +93,35 @@ def test_the_extremes_clip_the_acceleration_to_the_speed_bound():
     # s' - s = 86400^2 / 2 a: 4.32e6 m at the bound, 1866240 m for 5e-4, -3732480 m for -1e-3
     moved = [[4.32e6, -4.32e6], [1_866_240.0, 0.0], [-3_732_480.0, 4.32e6]]
     np.testing.assert_allclose(obs.robot_positions - start, moved, rtol=1e-12, atol=1e-6)
+
+
+# Every numeric setting of the simulator's settings classes, with its kind: one check for all (errors.py).
+NUMERIC_SETTINGS = [
+    *((EnvConfig, name, float) for name in ("dt", *ENV_BOUNDS, "orca_radius_margin", "timeout_margin")),
+    (EnvConfig, "spawn_separation", float),
+    (EnvConfig, "history_len", int),
+    *((WorldFacts, f.name, int if f.name == "obs_len" else float) for f in fields(WorldFacts)),
+    (OrcaParams, "neighbor_dist", float),
+    (OrcaParams, "max_neighbors", int),
+    (OrcaParams, "time_horizon", float),
+    *((RewardConfig, f.name, float) for f in fields(RewardConfig)),
+]
+
+
+@pytest.mark.parametrize("cls, name, kind", NUMERIC_SETTINGS)
+def test_a_numeric_setting_takes_numpy_scalars_as_plain_numbers(cls, name, kind):
+    # np.float32(0.4) and np.int64(9) were refused ("must be a finite number > 0, got np.float32(0.4)"); they
+    # are stored as Python's float and int, so no numpy type reaches the simulator's arithmetic.
+    default = getattr(cls(), name)
+    scalar = np.int64(default) if kind is int else np.float32(default)
+    value = getattr(cls(**{name: scalar}), name)
+    assert type(value) is kind and value == kind(scalar)
+
+
+@pytest.mark.parametrize("cls, name, kind", NUMERIC_SETTINGS)
+@pytest.mark.parametrize("bad", [True, "10", None])
+def test_a_numeric_setting_refuses_what_is_no_number_naming_it(cls, name, kind, bad):
+    # True was taken as 1 (dt = 1 s, 98 steps from timeout_margin=True); "10" raised a TypeError from a
+    # comparison that named no field.
+    with pytest.raises(SimulationError, match=rf"^{cls.__name__}\.{name} must be .*, got {bad!r}$"):
+        cls(**{name: bad})

@@ -16,9 +16,9 @@ from pipelines.config.entries import MAX_CONFIG_BYTES, Source
 @pytest.mark.parametrize(
     ("setting", "message"),
     [
-        ("world.dt=true", "--set world.dt: must be a number, got True"),
-        ("world.obs_len=true", "--set world.obs_len: must be an integer, got True"),
-        ("env.orca.max_neighbors=true", "--set env.orca.max_neighbors: must be an integer, got True"),
+        ("world.dt=true", "--set world.dt: must be a finite number > 0, got True"),
+        ("world.obs_len=true", "--set world.obs_len: must be an int >= 1, got True"),
+        ("env.orca.max_neighbors=true", "--set env.orca.max_neighbors: must be an int >= 0, got True"),
     ],
 )
 def test_a_boolean_is_no_number(setting, message):
