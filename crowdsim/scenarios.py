@@ -102,8 +102,8 @@ import numpy as np
 
 from crowdsim.conventions import CROSSINGS, SPAWN_SEPARATION
 from crowdsim.crossings import PLACERS
-from crowdsim.errors import SimulationError
-from crowdsim.world import D_FLOCK, D_MIN, RADIUS, V_PREF
+from crowdsim.errors import SimulationError, real_number
+from crowdsim.world import D_FLOCK, D_MIN, RADIUS, V_PREF, finite_positive
 
 SCENARIOS: Final[tuple[str, ...]] = ("circle", "perpendicular")
 Formation = Literal["auto", "row", "wedge", "two_rows"]  # module docstring
@@ -291,9 +291,16 @@ def make_layout(
     check_sizes(scenario, n_humans, n_robots)
     if crossing not in CROSSINGS:
         raise SimulationError(f"unknown crossing {crossing!r}; choose from {list(CROSSINGS)}")
-    separation = SPAWN_SEPARATION[crossing] if spawn_separation is None else spawn_separation
-    if not (np.isfinite(separation) and separation >= 0):
-        raise SimulationError(f"spawn_separation must be a finite number >= 0 m, got {spawn_separation!r}")
+    # Checked here, not left to the samplers: a nan radius or speed made every draw fail ("could not place
+    # human ... use fewer agents"), and a negative radius was taken.
+    radius = real_number("radius", radius, "a finite number > 0 m", finite_positive)
+    v_pref = real_number("v_pref", v_pref, "a finite number > 0 m/s", finite_positive)
+    separation = real_number(
+        "spawn_separation",
+        SPAWN_SEPARATION[crossing] if spawn_separation is None else spawn_separation,
+        "a finite number >= 0 m",
+        lambda s: math.isfinite(s) and s >= 0,
+    )
     robot_starts, robot_goals = robot_layout(n_robots, formation)
     # Every placed agent has the same radius, so the separation is one number.
     starts, goals = PLACERS[crossing](

@@ -207,6 +207,14 @@ def test_bad_sizes_name_the_value(monkeypatch):
         make_layout("circle", 5, 3, rng, crossing="v2")
     with pytest.raises(SimulationError, match="spawn_separation.*-1"):
         make_layout("circle", 5, 3, rng, spawn_separation=-1.0)
+    # a nan radius or speed failed every draw ("could not place human 1 ...; use fewer agents"), and a
+    # negative radius was taken
+    for name, bad in [("radius", -5.0), ("radius", 0.0), ("radius", np.nan), ("v_pref", np.nan)]:
+        with pytest.raises(SimulationError, match=rf"^{name} must be a finite number > 0 m.*, got {bad!r}$"):
+            make_layout("circle", 5, 3, rng, **{name: bad})
+    for scenario in ("circle", "perpendicular"):
+        with pytest.raises(SimulationError, match=r"^v_pref must be a finite number > 0 m/s, got inf$"):
+            make_layout(scenario, 5, 3, rng, v_pref=np.inf)
     # 0 is allowed (>= 0): the humans then keep only the two radii, 0.6 m, from each other
     tight = make_layout("circle", 9, 3, rng, spawn_separation=0.0)
     assert _paper_separation_ok(tight, min_dist=0.6)
