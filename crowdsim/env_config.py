@@ -190,6 +190,8 @@ class EnvConfig:
         The fork checks ``global_time >= time_limit - 1`` before each step, so with 40 s and 0.4 s steps start
         at t = 0, 0.4, ..., 38.8 and t = 39.2 is a timeout: 98 steps. With no margin (v1) it is
         ``time_limit / dt``: 75 steps of 0.4 s in 30 s. The 1e-9 absorbs rounding such as 30 / 0.4 =
-        75.00000000000001.
+        75.00000000000001. At least 1: t = 0 is always before ``time_limit - timeout_margin`` (the margin is
+        less than the limit), and ``CrowdEnv`` runs that first step whatever the count; the 1e-9 alone made it
+        0 for a margin within 1e-9 steps of the limit.
         """
-        return math.ceil((self.time_limit - self.timeout_margin) / self.dt - 1e-9)
+        return max(1, math.ceil((self.time_limit - self.timeout_margin) / self.dt - 1e-9))

@@ -49,6 +49,14 @@ def test_max_steps_per_profile():
     assert V1.max_steps == 75
     # Margin 1 s of 2 s: steps start at t = 0, 0.4, 0.8 (1.2 >= 1): 3 steps.
     assert EnvConfig(time_limit=2.0).max_steps == 3
+    # A margin 1e-11 s short of the limit: t = 0 still starts a step, and the env runs it; the rounding
+    # tolerance alone made the count 0 (2.5e-11 steps less 1e-9).
+    short = EnvConfig(timeout_margin=40.0 - 1e-11)
+    assert short.max_steps == 1
+    env = CrowdEnv(short)
+    env.reset_layout(one_robot())
+    obs, done, info = env.step(np.zeros((1, 2)))
+    assert done and info["timeout"] and obs.step == short.max_steps
 
 
 def test_paper_episode_times_out_after_98_steps_at_39_2_s():
