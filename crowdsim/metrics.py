@@ -104,7 +104,7 @@ class EpisodeMetrics:
     collision: bool  # min robot-human distance < 0.8 m
     contact: bool  # min robot-human distance < sum of radii
     discomfort: bool  # projected paths of a robot and a human intersected at some step
-    timeout: bool  # not every robot reached its goal
+    timeout: bool  # not success: under "simultaneous" every robot may have reached its goal, but not at once
     min_distance: float  # m, robot-human centre distance (inf without humans)
     min_distance_robots: float  # m, robot-robot (inf with one robot)
     min_distance_humans: float  # m, human-human (inf with fewer than two humans)
