@@ -84,6 +84,8 @@ OWNED: Final[re.Pattern[str]] = re.compile(
     rf"{_KEY}\.(casadi|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.casadi"
 )
 _ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
+# What a cache directory's resolved path may hold: the characters shlex.quote leaves unquoted.
+SHELL_SAFE: Final[str] = "a writable directory whose path has only letters, digits and @%+=:,./-_"
 
 
 class CompileCacheError(RuntimeError):
@@ -128,13 +130,28 @@ def _unwritable(path: Path) -> str | None:
     return None
 
 
-def _location_error(folder: Path, directory: str | Path | None, problem: str) -> CacheLocationError:
+def _shell_unsafe(path: Path) -> str | None:
+    """Why CasADi cannot compile into the directory ``path``, or None: its "shell" compiler pastes the
+    directory into a command line unquoted, so a space (or any character the shell splits on or interprets)
+    makes gcc write its output at another path, outside the cache, and the build fail."""
+    try:
+        resolved = str(path.resolve())
+    except (OSError, RuntimeError):  # a symbolic link loop: _unwritable names it
+        return None
+    if shlex.quote(resolved) == resolved:
+        return None
+    return f"its path {resolved!r} holds a space or shell character, which CasADi passes to gcc unquoted"
+
+
+def _location_error(
+    folder: Path, directory: str | Path | None, problem: str, wanted: str = "a writable directory"
+) -> CacheLocationError:
     """The one-line error about a cache directory that cannot be used (naming $CROWDMPC_CACHE if set)."""
     if directory is not None:
         return CacheLocationError(f"the compile cache {folder}: {problem}")
     root = os.environ.get(CACHE_ENV)
     named = f"${CACHE_ENV}={root}" if root else f"the compile cache {folder} (default; ${CACHE_ENV} unset)"
-    return CacheLocationError(f"{named}: {problem}; set ${CACHE_ENV} to a writable directory")
+    return CacheLocationError(f"{named}: {problem}; set ${CACHE_ENV} to {wanted}")
 
 
 @dataclass(frozen=True)
@@ -203,6 +220,9 @@ def writable_dir(directory: str | Path | None = None) -> Path:
     ``CacheLocationError`` naming $CROWDMPC_CACHE and what is wrong when it cannot be (a caller may check
     this before starting workers)."""
     path = Path(directory) if directory is not None else cache_dir()
+    unsafe = _shell_unsafe(path)  # checked first: such a directory is refused, so it is not created either
+    if unsafe is not None:
+        raise _location_error(path, directory, unsafe, SHELL_SAFE)
     problem = _unwritable(path)
     if problem is not None:
         raise _location_error(path, directory, problem)
@@ -253,7 +273,8 @@ def nlpsol(
     """``casadi.nlpsol(name, plugin, nlp, options)`` compiled with gcc ``-O2``, from the cache when it holds
     this NLP, else compiled now and stored. ``options`` must not set the jit options themselves.
 
-    Raises ``CompileCacheError`` when gcc is not on the PATH or the cache directory cannot be made.
+    Raises ``CompileCacheError`` when gcc is not on the PATH, the compile fails, or the cache directory cannot
+    be made or compiled into (``CacheLocationError``).
     """
     cc = compiler()
     if cc is None:
@@ -273,11 +294,24 @@ def nlpsol(
         if solver is not None:
             return solver
         manifest.unlink(missing_ok=True)  # unloadable (its library was removed): compile again
-        _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
+        try:
+            _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
+        except CompileCacheError:
+            raise
+        except RuntimeError as exc:  # CasADi's: code generation or gcc failed
+            raise CompileCacheError(
+                f"compiling the solver {name!r} into {folder} failed: {_last_line(exc)}"
+            ) from exc
         solver = _load_solver(manifest)
     if solver is None:
         raise CompileCacheError(f"the compiled solver {manifest} was stored but does not load")
     return solver
+
+
+def _last_line(exc: BaseException) -> str:
+    """The last line of a CasADi error (its first lines are the call stack of CasADi's C++ functions)."""
+    lines = [line for line in str(exc).splitlines() if line.strip()]
+    return lines[-1].strip() if lines else type(exc).__name__
 
 
 def _compile_nlpsol(

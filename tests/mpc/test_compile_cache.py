@@ -239,3 +239,22 @@ def test_the_cache_lives_under_crowdmpc_cache(monkeypatch, tmp_path):
     assert compile_cache.cache_dir() == cache_root() / "compiled" == tmp_path / "compiled"
     monkeypatch.delenv(compile_cache.CACHE_ENV)
     assert compile_cache.cache_dir() == cache_root() / "compiled"
+
+
+@needs_gcc
+def test_a_cache_the_shell_would_split_is_refused_and_nothing_is_written_outside_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(compile_cache.CacheLocationError, match="holds a space or shell character"):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT, directory=tmp_path / "my cache")
+    assert list(tmp_path.iterdir()) == []  # gcc used to write tmp_path/"my" (the path before the space)
+
+
+def test_a_failed_compile_is_a_compile_cache_error(cache, monkeypatch, tmp_path):
+    failing = tmp_path / "gcc"
+    failing.write_text("#!/bin/sh\nexit 1\n")
+    failing.chmod(0o755)
+    broken = compile_cache.Compiler(str(failing), "x", ("-O2",))
+    monkeypatch.setattr(compile_cache, "compiler", lambda: broken)
+    with pytest.raises(compile_cache.CompileCacheError, match=r"compiling the solver 's' into .* failed: "):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    assert suffixes(cache) == []  # nothing but the lock left

@@ -57,3 +57,31 @@ def test_an_explicit_directory_is_named_as_itself(tmp_path):
         str(exc.value)
         == f"the compile cache {tmp_path / 'file' / 'sub'}: {tmp_path / 'file'} is not a directory"
     )
+
+
+def test_a_path_the_shell_would_split_is_refused_before_anything_is_made(tmp_path, monkeypatch):
+    # CasADi pastes the directory into gcc's command line unquoted: gcc would write to tmp_path/"my".
+    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path / "my cache"))
+    with pytest.raises(compile_cache.CacheLocationError) as exc:
+        compile_cache.writable_dir()
+    folder = tmp_path / "my cache" / "compiled"
+    assert str(exc.value) == (
+        f"$CROWDMPC_CACHE={tmp_path / 'my cache'}: its path {str(folder)!r} holds a space or shell "
+        f"character, which CasADi passes to gcc unquoted; set $CROWDMPC_CACHE to {compile_cache.SHELL_SAFE}"
+    )
+    assert isinstance(exc.value, MPCConfigError)
+    assert list(tmp_path.iterdir()) == []  # not created
+
+
+def test_a_shell_character_reached_through_a_symlink_is_refused(tmp_path):
+    (tmp_path / "a;b").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "a;b")
+    with pytest.raises(compile_cache.CacheLocationError, match="a;b/compiled.* holds a space or shell"):
+        compile_cache.writable_dir(tmp_path / "link" / "compiled")
+
+
+def test_a_symlink_loop_is_named_as_no_directory(tmp_path):
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    with pytest.raises(compile_cache.CacheLocationError, match=f"{tmp_path / 'a'} is not a directory"):
+        compile_cache.writable_dir(tmp_path / "a" / "compiled")
