@@ -33,13 +33,13 @@ PredictFn = Callable[[np.ndarray], np.ndarray]
 class IBRResult:
     """The outcome of one control step's IBR loop (Algorithm 1 or 2)."""
 
-    accels: np.ndarray  # (M, H, 2) the plan to apply (u^(0) when nothing was solved)
+    accels: np.ndarray  # (M, H, 2) the plan to apply (the fallback Start.accels when nothing was solved)
     positions: np.ndarray  # (M, H, 2) its planned positions at t+1..t+H
     prediction: np.ndarray | None  # (H, N_h, 2) the prediction the plan was optimised against
     potential: float  # F_t (Eq. 16) of the plan under ``prediction`` (nan when nothing was solved)
     iterations: int  # IBR iterations j used
     solves: int  # NLP solves run (CMPC: <= iterations; DMPC: up to M per iteration, then its pair moves)
-    solved: bool  # at least one solve produced the plan (False: ``accels`` is the fallback u^(0))
+    solved: bool  # at least one solve produced the plan (False: ``accels`` is the fallback Start.accels)
     converged: bool  # the stopping test of the algorithm held before j_max
     status: str  # "ok", or the first failure: a solver status (mpc/solvers.py), "nan_prediction", "timeout"
     predictions: tuple[np.ndarray, ...]  # (H, N_h, 2) of every iteration

@@ -240,6 +240,11 @@ class DMPC:
                 break
         if used is None and status == "ok" and first_failure:
             status = first_failure
+        if used is None:
+            # Nothing solved: the step applies its fallback, ``start`` (what the controller labels it),
+            # not a heading u^(0), which ignores the humans. Else u^(0) is start.accels already.
+            accels = start.accels.copy()
+            positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         result = IBRResult(
             accels=accels,
             positions=positions,

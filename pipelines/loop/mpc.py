@@ -312,7 +312,7 @@ class MPCController:
             plan, fallback = result.accels, None
             self.memory.commit(plan, solved=True, lam_x=result.lam_x, lam_g=result.lam_g)
         else:
-            plan, fallback = result.accels, start_kind  # the IBR loops return u^(0) when nothing was solved
+            plan, fallback = result.accels, start_kind  # unsolved: the start (Start.accels)
             self.memory.commit(plan, solved=False)
         return ControlOutput(
             accelerations=plan[:, 0].copy(),

@@ -137,3 +137,18 @@ def test_the_first_iteration_predicts_for_the_start_it_takes():
     result = run(cfg.replace(j_max=3), swap)
     assert result.iterations > 1 and len(calls) == result.iterations
     np.testing.assert_array_equal(calls[0], np.repeat(swap.states[None, :, :2], cfg.horizon, axis=0))
+
+
+@pytest.mark.parametrize("update", ["jacobi", "gauss_seidel"])
+def test_a_step_that_cannot_solve_applies_its_fallback_not_the_heading_plan(update):
+    """Every solve fails (iteration limit 0): the step applies braking, its fallback (Start.kind "brake",
+    what the controller labels it), not the heading plan towards the goals, which ignores the humans."""
+    triangle = np.array([[0.0, 0.0], [1.2, 0.0], [0.6, 0.6 * np.sqrt(3.0)]])
+    data = at_rest(triangle, triangle + [0.0, 10.0])
+    cfg = MPCConfig(dmpc_start="heading", dmpc_update=update, solver_max_iter=0)
+    start = PlanMemory(cfg).start(data)
+    assert start.kind == "brake" and np.any(heading_plan(data, cfg) != start.accels)  # heading differs
+    result = solve(cfg, data)
+    assert not result.solved
+    np.testing.assert_array_equal(result.accels, start.accels)
+    np.testing.assert_array_equal(result.positions, rollout_numpy(data.states, start.accels, cfg.dt)[0])

@@ -111,6 +111,21 @@ def test_forced_solver_failure_falls_back_and_the_episode_goes_on():
     np.testing.assert_allclose(collect.outputs[0].accelerations, 0.0)  # braking from rest
 
 
+def test_a_dmpc_step_that_cannot_solve_applies_the_fallback_it_names():
+    """With the heading start, a step whose every solve fails applies braking, as its label says, not the
+    heading plan (a_max towards the goals, ignoring the humans)."""
+    spec = ControllerSpec("dmpc", mpc_overrides=(("dmpc_start", "heading"), ("solver_max_iter", 0)))
+    controller = MPCController(spec, distributed=True)
+    obs = CrowdEnv().reset(0, "circle", 7, 3)
+    controller.reset(obs)
+    out = controller.act(obs)
+    states = np.concatenate([obs.robot_positions, obs.robot_velocities], axis=1)
+    cfg = controller.cfg
+    assert out.fallback == "brake" and out.status == "Maximum_Iterations_Exceeded"
+    np.testing.assert_array_equal(out.accelerations, braking(states, cfg.horizon, cfg.dt, cfg.a_max)[:, 0])
+    controller.close()
+
+
 def test_robot_on_its_goal_brakes_when_pinned():
     env = CrowdEnv()
     obs = env.reset(0, "circle", 3)
