@@ -45,6 +45,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from functools import cache
@@ -77,11 +78,12 @@ FLAGS: Final[tuple[str, ...]] = ("-O2",)
 COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
 SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
 # The files this module writes, and the only ones ``clear`` removes: <key>.casadi, <key>.<tag>.so (its
-# library), <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o, .tmp-<key>.<tag>.casadi).
+# library), <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o, .tmp-<key>.<tag>.casadi,
+# crowdmpc_jit_<tag>.c: the generated source).
 _KEY = r"[0-9a-f]{64}"
 _TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's
 OWNED: Final[re.Pattern[str]] = re.compile(
-    rf"{_KEY}\.(casadi|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.casadi"
+    rf"{_KEY}\.(casadi|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.casadi|crowdmpc_jit_{_TAG}\.c"
 )
 _ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
 # What a cache directory's resolved path may hold: the characters shlex.quote leaves unquoted.
@@ -314,21 +316,55 @@ def _last_line(exc: BaseException) -> str:
     return lines[-1].strip() if lines else type(exc).__name__
 
 
+# Held while a compile has moved the process into the cache folder (_inside): two threads' compiles must not
+# interleave their moves, or the process would be left in a cache folder.
+_CWD_LOCK = threading.Lock()
+# How the directory to come back to is held: O_PATH (Linux) needs no read permission on it.
+_HERE: Final[int] = getattr(os, "O_PATH", os.O_RDONLY) | getattr(os, "O_DIRECTORY", 0)
+
+
+@contextlib.contextmanager
+def _inside(folder: Path) -> Iterator[None]:
+    """Run with ``folder`` as the process's working directory, then return to the one before (held by a
+    descriptor: found again even if renamed or removed meanwhile).
+
+    Why: CasADi writes a solver's generated source to <jit_name>.c in the working directory (jit_name may not
+    hold a directory, and CasADi 3.8 has no option for one), where it failed when that is not writable and a
+    killed compile left it. The working directory is the whole process's: for the seconds of a compile, a
+    relative path opened by another thread would resolve in ``folder``. Nothing of this project runs beside
+    a compile and opens one: DMPC's other solver threads only solve (builds take solvers._BUILD_LOCK), and
+    episodes, recorders and an inline sweep run in the thread that builds the solvers, before or after the
+    build. A program embedding this module whose own threads open relative paths should keep them apart
+    from a cold compile (or warm the cache first).
+    """
+    with _CWD_LOCK:
+        try:
+            back = os.open(".", _HERE)
+        except OSError as exc:
+            raise CompileCacheError(f"cannot hold the working directory to come back to it ({exc})") from exc
+        try:
+            os.chdir(folder)
+            yield
+        finally:
+            os.fchdir(back)
+            os.close(back)
+
+
 def _compile_nlpsol(
     name: str, plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path, key: str
 ) -> None:
     tag = f"{os.getpid()}_{secrets.token_hex(4)}"
     library = f"{key}.{tag}"
-    # CasADi writes the generated source to <jit_name>.c in the current directory (its CodeGenerator takes
-    # no directory for a solver's functions); the object file and library go to jit_options' directory.
+    # CasADi writes the generated source to <jit_name>.c in the working directory, which is the cache folder
+    # while it compiles (_inside); the object file and library go to jit_options' directory.
     jit_name = f"crowdmpc_jit_{tag}"
-    source = Path.cwd() / f"{jit_name}.c"
+    source = folder / f"{jit_name}.c"
     jit = {
         "jit": True,
         "compiler": "shell",
         "jit_name": jit_name,
         "jit_temp_suffix": False,
-        "jit_cleanup": False,  # we remove the source; CasADi would look for it in the wrong directory
+        "jit_cleanup": False,  # we remove the source; CasADi would look for it where the process is back in
         "jit_serialize": "link",
         "jit_options": {
             "compiler": shlex.quote(cc.path),
@@ -344,7 +380,8 @@ def _compile_nlpsol(
     tmp = folder / f".tmp-{key}.{tag}.casadi"
     published = False
     try:
-        solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
+        with _inside(folder):
+            solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
         solver.save(str(tmp))
         del solver
         published = _publish(tmp, folder / f"{key}.casadi")

@@ -52,7 +52,7 @@ class InlineBackend:
     name = "inline"
 
     def __init__(self, record: str, jit: bool = False, scratch_root: str | None = None):
-        # jit's C sources land in the current directory while the driver runs (removed when it exits).
+        # The driver stays where it is: the compile cache writes jit's C sources into its own folder.
         self.worker = EpisodeWorker(record, jit, worker_scratch(scratch_root))
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:

@@ -202,7 +202,7 @@ def test_info_and_clear_touch_only_our_files(tmp_path):
     folder.mkdir()
     key = "ab" * 32
     ours = [f"{key}.casadi", f"{key}.123_ab12cd34.so", f"{key}.123_ab12cd34.o", f"{key}.lock"]
-    ours.append(f".tmp-{key}.77_0123abcd.casadi")  # what a killed compile leaves
+    ours += [f".tmp-{key}.77_0123abcd.casadi", "crowdmpc_jit_77_0123abcd.c"]  # what a killed compile leaves
     for name in ours:
         (folder / name).write_bytes(b"x" * 10)
     outside = tmp_path / "precious.so"
@@ -212,9 +212,9 @@ def test_info_and_clear_touch_only_our_files(tmp_path):
     (folder / f"{key}.so").write_text("not a name of ours")
     (folder / f"{'ef' * 32}.casadi").mkdir()  # a folder named like an entry
     stats = compile_cache.info(folder)
-    assert (stats.entries, stats.files, stats.size_bytes) == (1, 5, 50)
+    assert (stats.entries, stats.files, stats.size_bytes) == (1, 6, 60)
     assert stats.casadi_version == ca.__version__
-    assert compile_cache.clear(folder) == (5, 50)
+    assert compile_cache.clear(folder) == (6, 60)
     left = [f"{'cd' * 32}.casadi", "notes.txt", f"{'ef' * 32}.casadi", f"{key}.so"]
     assert sorted(p.name for p in folder.iterdir()) == sorted(left)
     assert outside.read_bytes() == b"keep"
@@ -258,3 +258,32 @@ def test_a_failed_compile_is_a_compile_cache_error(cache, monkeypatch, tmp_path)
     with pytest.raises(compile_cache.CompileCacheError, match=r"compiling the solver 's' into .* failed: "):
         compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     assert suffixes(cache) == []  # nothing but the lock left
+
+
+@needs_gcc
+def test_the_generated_source_is_written_in_the_cache_not_the_working_directory(cache, monkeypatch):
+    """CasADi writes <jit_name>.c into the working directory: during the compile that is the cache folder,
+    so nothing appears where the user runs (p2), and an unwritable working directory is no failure (p3)."""
+    work = Path.cwd()
+    seen = []
+    nlpsol = ca.nlpsol
+
+    def watched(*args):  # the compile itself: what the working directory holds right after it
+        solver = nlpsol(*args)
+        seen.append((Path.cwd(), sorted(p.name for p in work.iterdir()), sorted(cache.glob("*.c"))))
+        return solver
+
+    monkeypatch.setattr(ca, "nlpsol", watched)
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    ((inside, in_work, sources),) = seen
+    assert inside == cache.resolve() and in_work == [] and len(sources) == 1
+    assert Path.cwd() == work and list(work.iterdir()) == [] and list(cache.glob("*.c")) == []
+
+
+@needs_gcc
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc, unwritable even for root")
+def test_an_unwritable_working_directory_does_not_stop_a_compile(cache, monkeypatch):
+    monkeypatch.chdir("/proc")
+    solver = compile_cache.nlpsol("s", "ipopt", small_nlp(3.0), IPOPT)
+    assert solver(x0=0, p=[1, 2], lbg=-1, ubg=1)["x"].shape == (2, 1)
+    assert os.getcwd() == "/proc"
