@@ -8,13 +8,17 @@ of an NLP on a machine compiles it and stores it; every later build, in any proc
 Mechanism (CasADi's own, no generated code of ours): a solver built with ``jit_serialize="link"`` serializes
 to a description that names its compiled library instead of carrying source; ``Function.load`` of that
 description loads the library (``Importer(library, "dll")``) without generating or compiling anything. An
-entry is two files in ``$CROWDMPC_CACHE/compiled`` (default ``~/.cache/crowdmpc/compiled``):
+entry is three files in ``$CROWDMPC_CACHE/compiled`` (default ``~/.cache/crowdmpc/compiled``):
 
 * ``<key>.<tag>.so``: the library gcc wrote (``<tag>``: the compiling process and a random suffix, so that
   two processes compiling the same NLP never write the same file);
-* ``<key>.casadi``: the serialized solver naming that library, published only once the library is
-  complete, by a hard link from a temporary file (``os.link`` never replaces: the first finished compile
-  wins, and a reader sees either no entry or a complete one).
+* ``<key>.record``: the library's name, size and SHA-256, and the SHA-256 of the serialized solver, checked
+  before every load: ``Function.load`` maps the library, and one truncated or changed since it was stored
+  kills the process (a bus error, no exception); an entry whose record is missing or disagrees (one stored
+  before records were kept, too) is unloadable and compiled again;
+* ``<key>.casadi``: the serialized solver naming that library, published only once the library and its
+  record are complete, by a hard link from a temporary file (``os.link`` never replaces: the first finished
+  compile wins, and a reader sees either no entry or a complete one).
 
 While a process compiles an entry it holds ``<key>.lock`` (``flock``), so that the other workers of a sweep
 wait for that one compile instead of running their own. Every solver is returned as loaded from its entry,
@@ -78,12 +82,13 @@ FLAGS: Final[tuple[str, ...]] = ("-O2",)
 COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
 SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
 # The files this module writes, and the only ones ``clear`` removes: <key>.casadi, <key>.<tag>.so (its
-# library), <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o, .tmp-<key>.<tag>.casadi,
-# crowdmpc_jit_<tag>.c: the generated source).
+# library), <key>.record, <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o,
+# .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source).
 _KEY = r"[0-9a-f]{64}"
 _TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's
 OWNED: Final[re.Pattern[str]] = re.compile(
-    rf"{_KEY}\.(casadi|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.casadi|crowdmpc_jit_{_TAG}\.c"
+    rf"{_KEY}\.(casadi|record|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.(casadi|record)"
+    rf"|crowdmpc_jit_{_TAG}\.c"
 )
 _ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
 # What a cache directory's resolved path may hold: the characters shlex.quote leaves unquoted.
@@ -259,9 +264,69 @@ def _publish(tmp: Path, final: Path) -> bool:
     return True
 
 
+def _digest(path: Path) -> tuple[int, str]:
+    """The size and SHA-256 of the file ``path`` (OSError when it cannot be read)."""
+    h, size = hashlib.sha256(), 0
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+            size += len(block)
+    return size, h.hexdigest()
+
+
+def _record(manifest: Path, library: Path) -> str:
+    """The record of an entry: what _intact checks before loading it."""
+    size, sha256 = _digest(library)
+    return json.dumps(
+        {"library": library.name, "size": size, "sha256": sha256, "manifest_sha256": _digest(manifest)[1]}
+    )
+
+
+def _recorded_library(manifest: Path, record: object) -> Path | None:
+    """The library a record names, if it is one of this entry's (never a path out of the folder)."""
+    name = record.get("library") if isinstance(record, dict) else None
+    key = re.escape(manifest.name.removesuffix(".casadi"))
+    if not isinstance(name, str) or not re.fullmatch(rf"{key}\.{_TAG}\.so", name):
+        return None
+    return manifest.parent / name
+
+
+def _read_record(manifest: Path) -> object:
+    """The record stored beside ``manifest`` (<key>.record), or None when there is none or it is no JSON."""
+    try:
+        return json.loads(manifest.with_suffix(".record").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _intact(manifest: Path) -> bool:
+    """Whether ``manifest``'s record is there and matches the manifest and, byte for byte, the library it
+    names. The manifest's own hash ties the record to the manifest stored with it."""
+    record = _read_record(manifest)
+    library = _recorded_library(manifest, record)
+    if library is None or not isinstance(record, dict):  # no record: an entry from before records
+        return False
+    try:
+        stored = (record.get("size"), record.get("sha256"))
+        return _digest(manifest)[1] == record.get("manifest_sha256") and _digest(library) == stored
+    except OSError:  # the library is gone
+        return False
+
+
+def _discard(manifest: Path) -> None:
+    """Remove an unloadable entry: its manifest, record and the library the record names (a process that
+    loaded it keeps it mapped). An entry from before records leaves its library to ``clear``."""
+    library = _recorded_library(manifest, _read_record(manifest))
+    manifest.unlink(missing_ok=True)
+    manifest.with_suffix(".record").unlink(missing_ok=True)
+    if library is not None:
+        library.unlink(missing_ok=True)
+
+
 def _load_solver(manifest: Path) -> ca.Function | None:
-    """The solver of an entry, or None when it cannot be loaded (missing, or its library is gone)."""
-    if not manifest.is_file():
+    """The solver of an entry, or None when it cannot be loaded (missing, no record, its library gone or not
+    the one stored: checked first, since loading a truncated library is a bus error)."""
+    if not manifest.is_file() or not _intact(manifest):
         return None
     try:
         return ca.Function.load(str(manifest))
@@ -295,7 +360,7 @@ def nlpsol(
         solver = _load_solver(manifest)
         if solver is not None:
             return solver
-        manifest.unlink(missing_ok=True)  # unloadable (its library was removed): compile again
+        _discard(manifest)  # unloadable (no record, its library removed or changed): compile again
         try:
             _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
         except CompileCacheError:
@@ -378,17 +443,23 @@ def _compile_nlpsol(
         },
     }
     tmp = folder / f".tmp-{key}.{tag}.casadi"
+    record = folder / f".tmp-{key}.{tag}.record"
     published = False
     try:
         with _inside(folder):
             solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
         solver.save(str(tmp))
         del solver
+        record.write_text(_record(tmp, folder / f"{library}.so"))
+        # The record before the manifest: a reader that finds the manifest finds its record. Losing the race
+        # to another compile (no flock) leaves our record beside its manifest: unloadable, compiled again.
+        os.replace(record, folder / f"{key}.record")
         published = _publish(tmp, folder / f"{key}.casadi")
     finally:
         source.unlink(missing_ok=True)
         (folder / f"{library}.o").unlink(missing_ok=True)
         tmp.unlink(missing_ok=True)
+        record.unlink(missing_ok=True)
         if not published:  # failed, or another process published first (no lock): its library is used
             (folder / f"{library}.so").unlink(missing_ok=True)
 

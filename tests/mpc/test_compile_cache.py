@@ -92,7 +92,7 @@ def test_cmpc_solves_the_same_cold_warm_and_without_the_cache(cache, monkeypatch
     assert compiles == ["joint_2r_2h"]  # the Fatrop solver; the IPOPT fallback is not compiled
     warm = cmpc_steps(CMPC(cfg, 2, 2))
     assert compiles == ["joint_2r_2h"]  # loaded, not compiled again
-    assert suffixes(cache) == [".casadi", ".so"]  # one entry: a solver and its library
+    assert suffixes(cache) == [".casadi", ".record", ".so"]  # one entry: a solver, its library and record
     assert not list(Path.cwd().iterdir())  # no generated source left in the working directory
 
     def plain_jit(name, plugin, nlp, options, jit):  # CasADi's own jit, as before the cache
@@ -114,10 +114,11 @@ def test_an_entry_is_a_solver_and_its_library_published_complete(cache):
     solver = compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     files = {p.suffix: p.name for p in cache.iterdir()}
     key = files[".casadi"].removesuffix(".casadi")
-    assert len(key) == 64 and sorted(files) == [".casadi", ".lock", ".so"]
+    assert len(key) == 64 and sorted(files) == [".casadi", ".lock", ".record", ".so"]
     assert files[".lock"] == f"{key}.lock" and files[".so"].startswith(f"{key}.")  # <key>.<pid>_<random>.so
+    assert files[".record"] == f"{key}.record"
     again = compile_cache.nlpsol("another_name", "ipopt", small_nlp(), IPOPT)  # the name is not in the key
-    assert len(list(cache.iterdir())) == 3
+    assert len(list(cache.iterdir())) == 4
     out = [
         s(x0=0, p=[1, 2], lbg=-1, ubg=1) for s in (solver, again, ca.nlpsol("s", "ipopt", small_nlp(), IPOPT))
     ]
@@ -148,6 +149,47 @@ def test_an_entry_whose_library_is_gone_is_compiled_again(cache):
     solver = compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     assert len(list(cache.glob("*.so"))) == 1 and not library.exists()
     assert solver(x0=0, p=[1, 2], lbg=-1, ubg=1)["x"].shape == (2, 1)
+
+
+LOAD = """
+import sys
+sys.path.insert(0, {root!r})
+import casadi as ca
+from mpc import compile_cache
+from tests.mpc.test_compile_cache import IPOPT, small_nlp
+solver = compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT, directory={folder!r})
+print(solver(x0=0, p=[1, 2], lbg=-1, ubg=1)["x"])
+"""
+
+
+def load_in_a_child(folder: Path) -> subprocess.CompletedProcess:
+    """nlpsol of small_nlp() from ``folder`` in a process of its own: loading a truncated library used to be
+    a bus error, which would take pytest with it."""
+    script = LOAD.format(root=str(ROOT), folder=str(folder))
+    return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+
+
+@needs_gcc
+@pytest.mark.parametrize("damage", ["truncate", "flip a byte", "no record", "record of another library"])
+def test_an_entry_whose_library_is_not_the_one_stored_is_compiled_again(cache, damage):
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    (library,) = cache.glob("*.so")
+    (record,) = cache.glob("*.record")
+    data = library.read_bytes()
+    if damage == "truncate":
+        library.write_bytes(data[: len(data) // 3])
+    elif damage == "flip a byte":
+        library.write_bytes(data[:100] + bytes([data[100] ^ 1]) + data[101:])
+    elif damage == "no record":  # an entry stored before records were kept
+        record.unlink()
+    else:
+        record.write_text(record.read_text().replace(library.name, "../elsewhere.so"))
+    child = load_in_a_child(cache)
+    assert child.returncode == 0, child.stderr[-500:]
+    assert len(set(cache.glob("*.so")) - {library}) == 1  # compiled again
+    # The damaged library goes with its entry; one no valid record names is left to `cache clear`.
+    assert library.exists() == (damage in ("no record", "record of another library"))
+    assert compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT) is not None  # the new entry loads
 
 
 @needs_gcc
@@ -191,7 +233,7 @@ def test_concurrent_workers_compile_an_entry_once(cache, tmp_path):
     assert all(child.returncode == 0 for child in children)
     assert sorted(int(o[0]) for o in outputs) == [0, 0, 1]  # one compiled, the others waited and loaded
     assert len({o[1] for o in outputs}) == 1
-    assert suffixes(cache) == [".casadi", ".so"]  # and no temporaries
+    assert suffixes(cache) == [".casadi", ".record", ".so"]  # and no temporaries
 
 
 # --- info and clear -----------------------------------------------------------------------------------------
@@ -202,6 +244,7 @@ def test_info_and_clear_touch_only_our_files(tmp_path):
     folder.mkdir()
     key = "ab" * 32
     ours = [f"{key}.casadi", f"{key}.123_ab12cd34.so", f"{key}.123_ab12cd34.o", f"{key}.lock"]
+    ours += [f"{key}.record", f".tmp-{key}.77_0123abcd.record"]
     ours += [f".tmp-{key}.77_0123abcd.casadi", "crowdmpc_jit_77_0123abcd.c"]  # what a killed compile leaves
     for name in ours:
         (folder / name).write_bytes(b"x" * 10)
@@ -212,9 +255,9 @@ def test_info_and_clear_touch_only_our_files(tmp_path):
     (folder / f"{key}.so").write_text("not a name of ours")
     (folder / f"{'ef' * 32}.casadi").mkdir()  # a folder named like an entry
     stats = compile_cache.info(folder)
-    assert (stats.entries, stats.files, stats.size_bytes) == (1, 6, 60)
+    assert (stats.entries, stats.files, stats.size_bytes) == (1, 8, 80)
     assert stats.casadi_version == ca.__version__
-    assert compile_cache.clear(folder) == (6, 60)
+    assert compile_cache.clear(folder) == (8, 80)
     left = [f"{'cd' * 32}.casadi", "notes.txt", f"{'ef' * 32}.casadi", f"{key}.so"]
     assert sorted(p.name for p in folder.iterdir()) == sorted(left)
     assert outside.read_bytes() == b"keep"
