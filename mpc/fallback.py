@@ -15,12 +15,15 @@ solve (primal and dual: multipliers are shifted the same way), which is why it l
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 
 from mpc.config import MPCConfig
 from mpc.dynamics import braking, clip_to_bounds
 from mpc.nlp import StepData
+
+KINDS: Final[tuple[str, ...]] = ("shifted", "brake")  # Start.kind: what a fallback plan is
 
 
 @dataclass(frozen=True)
@@ -97,13 +100,21 @@ class PlanMemory:
         solved: bool,
         lam_x: np.ndarray | None = None,
         lam_g: np.ndarray | None = None,
+        *,
+        kind: str = "shifted",
     ) -> None:
-        """Record the plan whose first action is applied now; ``solved``: it came out of this step's solve."""
+        """Record the plan whose first action is applied now; ``solved``: it came out of this step's solve.
+        ``kind``, for a plan that did not (``Start.kind``): the shifted previous plan, or braking."""
+        if kind not in KINDS:
+            raise ValueError(f"PlanMemory.commit: kind {kind!r} is none of {list(KINDS)}")
         if solved:
             self._solved_actions = self.cfg.horizon
             self._lam_x, self._lam_g = lam_x, lam_g
+        elif kind == "brake":  # braking came out of no solve: no solved action, no multipliers to warm from
+            self._solved_actions = 0
+            self._lam_x = self._lam_g = None
         else:
-            # A fallback plan is the shifted previous one (one solved action fewer) or braking (none).
+            # The shifted previous plan: one solved action fewer, its multipliers shifted with it.
             self._solved_actions = max(self._solved_actions - 1, 0)
             if self._lam_x is not None:
                 if self._lam_g is None:

@@ -230,7 +230,7 @@ class MPCController:
         on_goal = np.linalg.norm(states[:, :2] - obs.robot_goals, axis=1) < obs.radius
         if (reached if cfg.on_goal == "brake" else on_goal).all():
             plan = braking(states, cfg.horizon, cfg.dt, cfg.a_max)
-            self.memory.commit(plan, solved=False)
+            self.memory.commit(plan, solved=False, kind="brake")
             return ControlOutput(
                 accelerations=plan[:, 0],
                 solve_time_s=time.perf_counter() - t0,
@@ -293,7 +293,7 @@ class MPCController:
         """A solve that raised: the step falls back to its start (the shifted plan, or braking) as for any
         failed solve, and says what was raised."""
         self.solve_exceptions += 1
-        self.memory.commit(start.accels, solved=False)
+        self.memory.commit(start.accels, solved=False, kind=start.kind)
         return ControlOutput(
             accelerations=start.accels[:, 0].copy(),
             solve_time_s=time.perf_counter() - t0,
@@ -313,7 +313,7 @@ class MPCController:
             self.memory.commit(plan, solved=True, lam_x=result.lam_x, lam_g=result.lam_g)
         else:
             plan, fallback = result.accels, start_kind  # unsolved: the start (Start.accels)
-            self.memory.commit(plan, solved=False)
+            self.memory.commit(plan, solved=False, kind=start_kind)
         return ControlOutput(
             accelerations=plan[:, 0].copy(),
             solve_time_s=time.perf_counter() - t0,

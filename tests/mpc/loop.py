@@ -26,7 +26,7 @@ def drive(solver, states: np.ndarray, goals: np.ndarray, steps: int, reach: floa
         start = memory.start(data)
         result = solver.solve(data, lambda robots_future: no_humans, start)
         plan = result.accels if result.solved else start.accels
-        memory.commit(plan, result.solved, result.lam_x, result.lam_g)
+        memory.commit(plan, result.solved, result.lam_x, result.lam_g, kind=start.kind)
         positions, velocities = rollout_numpy(states, plan[:, :1], cfg.dt)
         states = np.concatenate([positions[:, 0], velocities[:, 0]], axis=1)
         last = plan[:, 0]

@@ -172,3 +172,24 @@ def test_multipliers_must_come_in_pairs():
     memory.commit(plan, solved=True, lam_x=np.zeros_like(plan), lam_g=None)
     with pytest.raises(RuntimeError, match="commit both multipliers or neither"):
         memory.commit(plan, solved=False)
+
+
+def test_a_braking_commit_leaves_no_solved_action_nor_multipliers():
+    """After a solve, a step that applies braking (every robot on its goal, or a failure from a braking
+    start): braking came out of no solve, so the next step starts from braking again, cold, not from the
+    shifted braking plan warm-started with the old solve's multipliers."""
+    cfg = MPCConfig()
+    data = moving_data()
+    memory = PlanMemory(cfg)
+    lam = np.arange(2 * cfg.horizon * 2, dtype=float).reshape(2, cfg.horizon, 2)
+    memory.commit(np.full((2, cfg.horizon, 2), 0.3), solved=True, lam_x=lam, lam_g=-lam)
+    memory.commit(braking(data.states, cfg.horizon, cfg.dt, cfg.a_max), solved=False, kind="brake")
+    start = memory.start(data)
+    assert (start.kind, start.lam_x, start.lam_g) == ("brake", None, None)
+    np.testing.assert_array_equal(start.accels, braking(data.states, cfg.horizon, cfg.dt, cfg.a_max))
+
+
+def test_a_commit_of_an_unknown_kind_is_named():
+    memory = PlanMemory(MPCConfig())
+    with pytest.raises(ValueError, match="kind 'braking' is none of"):
+        memory.commit(np.zeros((2, 4, 2)), solved=False, kind="braking")
