@@ -43,14 +43,12 @@ import hashlib
 import json
 import os
 import platform
-import re
 import secrets
 import shlex
 import shutil
 import subprocess
 import sys
-import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -58,12 +56,8 @@ from typing import Final
 
 import casadi as ca
 
+from mpc.cache_entries import ENTRY, OWNED, discard, entry_record, inside, load_solver, locked, publish
 from mpc.errors import MPCConfigError
-
-try:  # POSIX; without it (Windows) concurrent compiles of one entry are not serialised, only wasted
-    import fcntl
-except ImportError:  # pragma: no cover
-    fcntl = None  # type: ignore[assignment]
 
 # The variable and default of predictors.data.locate.cache_root, repeated here: importing predictors would
 # cost mpc a second of imports (trajnetplusplustools) and a dependency it does not otherwise have.
@@ -81,16 +75,6 @@ FLAGS: Final[tuple[str, ...]] = ("-O2",)
 # and 0.19-0.22 s per DMPC episode (0.51 -> 0.30 s).
 COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
 SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
-# The files this module writes, and the only ones ``clear`` removes: <key>.casadi, <key>.<tag>.so (its
-# library), <key>.record, <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o,
-# .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source).
-_KEY = r"[0-9a-f]{64}"
-_TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's
-OWNED: Final[re.Pattern[str]] = re.compile(
-    rf"{_KEY}\.(casadi|record|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.(casadi|record)"
-    rf"|crowdmpc_jit_{_TAG}\.c"
-)
-_ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
 # What a cache directory's resolved path may hold: the characters shlex.quote leaves unquoted.
 SHELL_SAFE: Final[str] = "a writable directory whose path has only letters, digits and @%+=:,./-_"
 
@@ -236,104 +220,6 @@ def writable_dir(directory: str | Path | None = None) -> Path:
     return path
 
 
-@contextlib.contextmanager
-def _locked(path: Path) -> Iterator[None]:
-    """Hold ``path`` (created if missing) exclusively: other processes' and threads' ``_locked`` wait."""
-    if fcntl is None:  # pragma: no cover
-        yield
-        return
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)  # releases the lock
-
-
-def _publish(tmp: Path, final: Path) -> bool:
-    """Move the complete file ``tmp`` to ``final`` unless ``final`` exists; whether ``tmp`` became it."""
-    try:
-        os.link(tmp, final)
-    except FileExistsError:
-        return False
-    except OSError:  # a file system without hard links: replace (both are complete entries)
-        os.replace(tmp, final)
-        return True
-    finally:
-        tmp.unlink(missing_ok=True)
-    return True
-
-
-def _digest(path: Path) -> tuple[int, str]:
-    """The size and SHA-256 of the file ``path`` (OSError when it cannot be read)."""
-    h, size = hashlib.sha256(), 0
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-            size += len(block)
-    return size, h.hexdigest()
-
-
-def _record(manifest: Path, library: Path) -> str:
-    """The record of an entry: what _intact checks before loading it."""
-    size, sha256 = _digest(library)
-    return json.dumps(
-        {"library": library.name, "size": size, "sha256": sha256, "manifest_sha256": _digest(manifest)[1]}
-    )
-
-
-def _recorded_library(manifest: Path, record: object) -> Path | None:
-    """The library a record names, if it is one of this entry's (never a path out of the folder)."""
-    name = record.get("library") if isinstance(record, dict) else None
-    key = re.escape(manifest.name.removesuffix(".casadi"))
-    if not isinstance(name, str) or not re.fullmatch(rf"{key}\.{_TAG}\.so", name):
-        return None
-    return manifest.parent / name
-
-
-def _read_record(manifest: Path) -> object:
-    """The record stored beside ``manifest`` (<key>.record), or None when there is none or it is no JSON."""
-    try:
-        return json.loads(manifest.with_suffix(".record").read_text())
-    except (OSError, ValueError):
-        return None
-
-
-def _intact(manifest: Path) -> bool:
-    """Whether ``manifest``'s record is there and matches the manifest and, byte for byte, the library it
-    names. The manifest's own hash ties the record to the manifest stored with it."""
-    record = _read_record(manifest)
-    library = _recorded_library(manifest, record)
-    if library is None or not isinstance(record, dict):  # no record: an entry from before records
-        return False
-    try:
-        stored = (record.get("size"), record.get("sha256"))
-        return _digest(manifest)[1] == record.get("manifest_sha256") and _digest(library) == stored
-    except OSError:  # the library is gone
-        return False
-
-
-def _discard(manifest: Path) -> None:
-    """Remove an unloadable entry: its manifest, record and the library the record names (a process that
-    loaded it keeps it mapped). An entry from before records leaves its library to ``clear``."""
-    library = _recorded_library(manifest, _read_record(manifest))
-    manifest.unlink(missing_ok=True)
-    manifest.with_suffix(".record").unlink(missing_ok=True)
-    if library is not None:
-        library.unlink(missing_ok=True)
-
-
-def _load_solver(manifest: Path) -> ca.Function | None:
-    """The solver of an entry, or None when it cannot be loaded (missing, no record, its library gone or not
-    the one stored: checked first, since loading a truncated library is a bus error)."""
-    if not manifest.is_file() or not _intact(manifest):
-        return None
-    try:
-        return ca.Function.load(str(manifest))
-    except RuntimeError:
-        return None
-
-
 def nlpsol(
     name: str, plugin: str, nlp: Mapping, options: Mapping, *, directory: str | Path | None = None
 ) -> ca.Function:
@@ -352,15 +238,15 @@ def nlpsol(
     folder = writable_dir(directory)
     key = nlp_key(plugin, nlp, options, cc, folder)
     manifest = folder / f"{key}.casadi"
-    solver = _load_solver(manifest)
+    solver = load_solver(manifest)
     if solver is not None:
         return solver
     # Another process (or thread: flock locks are per open file) compiling this entry is waited for.
-    with _locked(folder / f"{key}.lock"):
-        solver = _load_solver(manifest)
+    with locked(folder / f"{key}.lock"):
+        solver = load_solver(manifest)
         if solver is not None:
             return solver
-        _discard(manifest)  # unloadable (no record, its library removed or changed): compile again
+        discard(manifest)  # unloadable (no record, its library removed or changed): compile again
         try:
             _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
         except CompileCacheError:
@@ -369,7 +255,7 @@ def nlpsol(
             raise CompileCacheError(
                 f"compiling the solver {name!r} into {folder} failed: {_last_line(exc)}"
             ) from exc
-        solver = _load_solver(manifest)
+        solver = load_solver(manifest)
     if solver is None:
         raise CompileCacheError(f"the compiled solver {manifest} was stored but does not load")
     return solver
@@ -381,47 +267,13 @@ def _last_line(exc: BaseException) -> str:
     return lines[-1].strip() if lines else type(exc).__name__
 
 
-# Held while a compile has moved the process into the cache folder (_inside): two threads' compiles must not
-# interleave their moves, or the process would be left in a cache folder.
-_CWD_LOCK = threading.Lock()
-# How the directory to come back to is held: O_PATH (Linux) needs no read permission on it.
-_HERE: Final[int] = getattr(os, "O_PATH", os.O_RDONLY) | getattr(os, "O_DIRECTORY", 0)
-
-
-@contextlib.contextmanager
-def _inside(folder: Path) -> Iterator[None]:
-    """Run with ``folder`` as the process's working directory, then return to the one before (held by a
-    descriptor: found again even if renamed or removed meanwhile).
-
-    Why: CasADi writes a solver's generated source to <jit_name>.c in the working directory (jit_name may not
-    hold a directory, and CasADi 3.8 has no option for one), where it failed when that is not writable and a
-    killed compile left it. The working directory is the whole process's: for the seconds of a compile, a
-    relative path opened by another thread would resolve in ``folder``. Nothing of this project runs beside
-    a compile and opens one: DMPC's other solver threads only solve (builds take solvers._BUILD_LOCK), and
-    episodes, recorders and an inline sweep run in the thread that builds the solvers, before or after the
-    build. A program embedding this module whose own threads open relative paths should keep them apart
-    from a cold compile (or warm the cache first).
-    """
-    with _CWD_LOCK:
-        try:
-            back = os.open(".", _HERE)
-        except OSError as exc:
-            raise CompileCacheError(f"cannot hold the working directory to come back to it ({exc})") from exc
-        try:
-            os.chdir(folder)
-            yield
-        finally:
-            os.fchdir(back)
-            os.close(back)
-
-
 def _compile_nlpsol(
     name: str, plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path, key: str
 ) -> None:
     tag = f"{os.getpid()}_{secrets.token_hex(4)}"
     library = f"{key}.{tag}"
     # CasADi writes the generated source to <jit_name>.c in the working directory, which is the cache folder
-    # while it compiles (_inside); the object file and library go to jit_options' directory.
+    # while it compiles (inside); the object file and library go to jit_options' directory.
     jit_name = f"crowdmpc_jit_{tag}"
     source = folder / f"{jit_name}.c"
     jit = {
@@ -446,15 +298,15 @@ def _compile_nlpsol(
     record = folder / f".tmp-{key}.{tag}.record"
     published = False
     try:
-        with _inside(folder):
+        with inside(folder):
             solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
         solver.save(str(tmp))
         del solver
-        record.write_text(_record(tmp, folder / f"{library}.so"))
+        record.write_text(entry_record(tmp, folder / f"{library}.so"))
         # The record before the manifest: a reader that finds the manifest finds its record. Losing the race
         # to another compile (no flock) leaves our record beside its manifest: unloadable, compiled again.
         os.replace(record, folder / f"{key}.record")
-        published = _publish(tmp, folder / f"{key}.casadi")
+        published = publish(tmp, folder / f"{key}.casadi")
     finally:
         source.unlink(missing_ok=True)
         (folder / f"{library}.o").unlink(missing_ok=True)
@@ -493,7 +345,7 @@ def info(directory: str | Path | None = None) -> CacheInfo:
     return CacheInfo(
         directory=folder,
         exists=folder.is_dir(),
-        entries=sum(1 for e in files if _ENTRY.fullmatch(e.name)),
+        entries=sum(1 for e in files if ENTRY.fullmatch(e.name)),
         files=len(files),
         size_bytes=sum(e.stat(follow_symlinks=False).st_size for e in files),
         casadi_version=ca.__version__,

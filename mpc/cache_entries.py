@@ -1,0 +1,166 @@
+"""What a compile-cache entry is on disk (mpc/compile_cache.py's docstring): the names of the files, the lock
+of a compile, the folder it runs in, publishing a manifest, and the record of the library checked before every
+load, since loading a truncated library kills the process."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import re
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Final
+
+import casadi as ca
+
+try:  # POSIX; without it (Windows) concurrent compiles of one entry are not serialised, only wasted
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None  # type: ignore[assignment]
+
+# The files of the cache, and the only ones compile_cache.clear removes: <key>.casadi, <key>.<tag>.so (its
+# library), <key>.record, <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o,
+# .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source).
+_KEY = r"[0-9a-f]{64}"
+_TAG = r"\d+_[0-9a-f]{8}"  # <pid>_<random>: the compiling process's
+OWNED: Final[re.Pattern[str]] = re.compile(
+    rf"{_KEY}\.(casadi|record|lock)|{_KEY}\.{_TAG}\.(so|o)|\.tmp-{_KEY}\.{_TAG}\.(casadi|record)"
+    rf"|crowdmpc_jit_{_TAG}\.c"
+)
+ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
+
+
+@contextlib.contextmanager
+def locked(path: Path) -> Iterator[None]:
+    """Hold ``path`` (created if missing) exclusively: other processes' and threads' ``locked`` wait."""
+    if fcntl is None:  # pragma: no cover
+        yield
+        return
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def publish(tmp: Path, final: Path) -> bool:
+    """Move the complete file ``tmp`` to ``final`` unless ``final`` exists; whether ``tmp`` became it."""
+    try:
+        os.link(tmp, final)
+    except FileExistsError:
+        return False
+    except OSError:  # a file system without hard links: replace (both are complete entries)
+        os.replace(tmp, final)
+        return True
+    finally:
+        tmp.unlink(missing_ok=True)
+    return True
+
+
+def _digest(path: Path) -> tuple[int, str]:
+    """The size and SHA-256 of the file ``path`` (OSError when it cannot be read)."""
+    h, size = hashlib.sha256(), 0
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+            size += len(block)
+    return size, h.hexdigest()
+
+
+def entry_record(manifest: Path, library: Path) -> str:
+    """The record of an entry: what ``intact`` checks before loading it."""
+    size, sha256 = _digest(library)
+    return json.dumps(
+        {"library": library.name, "size": size, "sha256": sha256, "manifest_sha256": _digest(manifest)[1]}
+    )
+
+
+def _recorded_library(manifest: Path, record: object) -> Path | None:
+    """The library a record names, if it is one of this entry's (never a path out of the folder)."""
+    name = record.get("library") if isinstance(record, dict) else None
+    key = re.escape(manifest.name.removesuffix(".casadi"))
+    if not isinstance(name, str) or not re.fullmatch(rf"{key}\.{_TAG}\.so", name):
+        return None
+    return manifest.parent / name
+
+
+def _readentry_record(manifest: Path) -> object:
+    """The record stored beside ``manifest`` (<key>.record), or None when there is none or it is no JSON."""
+    try:
+        return json.loads(manifest.with_suffix(".record").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def intact(manifest: Path) -> bool:
+    """Whether ``manifest``'s record is there and matches the manifest and, byte for byte, the library it
+    names. The manifest's own hash ties the record to the manifest stored with it."""
+    record = _readentry_record(manifest)
+    library = _recorded_library(manifest, record)
+    if library is None or not isinstance(record, dict):  # no record: an entry from before records
+        return False
+    try:
+        stored = (record.get("size"), record.get("sha256"))
+        return _digest(manifest)[1] == record.get("manifest_sha256") and _digest(library) == stored
+    except OSError:  # the library is gone
+        return False
+
+
+def discard(manifest: Path) -> None:
+    """Remove an unloadable entry: its manifest, record and the library the record names (a process that
+    loaded it keeps it mapped). An entry from before records leaves its library to ``clear``."""
+    library = _recorded_library(manifest, _readentry_record(manifest))
+    manifest.unlink(missing_ok=True)
+    manifest.with_suffix(".record").unlink(missing_ok=True)
+    if library is not None:
+        library.unlink(missing_ok=True)
+
+
+def load_solver(manifest: Path) -> ca.Function | None:
+    """The solver of an entry, or None when it cannot be loaded (missing, no record, its library gone or not
+    the one stored: checked first, since loading a truncated library is a bus error)."""
+    if not manifest.is_file() or not intact(manifest):
+        return None
+    try:
+        return ca.Function.load(str(manifest))
+    except RuntimeError:
+        return None
+
+
+# Held while a compile has moved the process into the cache folder (inside): two threads' compiles must not
+# interleave their moves, or the process would be left in a cache folder.
+_CWD_LOCK = threading.Lock()
+# How the directory to come back to is held: O_PATH (Linux) needs no read permission on it.
+_HERE: Final[int] = getattr(os, "O_PATH", os.O_RDONLY) | getattr(os, "O_DIRECTORY", 0)
+
+
+@contextlib.contextmanager
+def inside(folder: Path) -> Iterator[None]:
+    """Run with ``folder`` as the process's working directory, then return to the one before (held by a
+    descriptor: found again even if renamed or removed meanwhile).
+
+    Why: CasADi writes a solver's generated source to <jit_name>.c in the working directory (jit_name may not
+    hold a directory, and CasADi 3.8 has no option for one), where it failed when that is not writable and a
+    killed compile left it. The working directory is the whole process's: for the seconds of a compile, a
+    relative path opened by another thread would resolve in ``folder``. Nothing of this project runs beside
+    a compile and opens one: DMPC's other solver threads only solve (builds take solvers._BUILD_LOCK), and
+    episodes, recorders and an inline sweep run in the thread that builds the solvers, before or after the
+    build. A program embedding this module whose own threads open relative paths should keep them apart
+    from a cold compile (or warm the cache first).
+    """
+    with _CWD_LOCK:
+        try:
+            back = os.open(".", _HERE)
+        except OSError as exc:
+            # a RuntimeError, as CasADi's own failures: compile_cache.nlpsol makes it a CompileCacheError
+            raise RuntimeError(f"cannot hold the working directory to come back to it ({exc})") from exc
+        try:
+            os.chdir(folder)
+            yield
+        finally:
+            os.fchdir(back)
+            os.close(back)
