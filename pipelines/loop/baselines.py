@@ -2,6 +2,9 @@
 
 ``crowdsim`` knows nothing of predictors or episode metadata, so the facts the ``Controller`` protocol asks
 for are stated here: no predictor, nothing to describe beyond the environment, nothing to release.
+``straight`` and ``orca`` build them for the simulator they will drive, as the MPC is built for it: the
+robot bounds from ``EnvConfig.world()``, and the ORCA robots with the humans' ORCA parameters and radius
+margin.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 if TYPE_CHECKING:
     from crowdsim.control import ControlOutput
     from crowdsim.env import Observation
+    from crowdsim.env_config import EnvConfig
 
 
 class SimulatorBaseline(Protocol):
@@ -41,3 +45,31 @@ class BaselineController:
 
     def close(self) -> None:
         pass
+
+
+def straight(env_config: EnvConfig | None = None) -> BaselineController:
+    """The straight-line robots within ``env_config``'s robot bounds (None: the defaults)."""
+    from crowdsim.baselines import StraightController
+
+    world = _env(env_config).world()
+    return BaselineController(StraightController(v_max=world.v_max, a_max=world.a_max))
+
+
+def orca(env_config: EnvConfig | None = None) -> BaselineController:
+    """The ORCA robots within ``env_config``'s robot bounds, with the ORCA parameters and radius margin its
+    humans get (None: the defaults)."""
+    from crowdsim.baselines import OrcaController
+
+    env = _env(env_config)
+    world = env.world()
+    return BaselineController(
+        OrcaController(
+            v_max=world.v_max, a_max=world.a_max, params=env.orca, radius_margin=env.orca_radius_margin
+        )
+    )
+
+
+def _env(env_config: EnvConfig | None) -> EnvConfig:
+    from crowdsim.env_config import EnvConfig
+
+    return env_config if env_config is not None else EnvConfig()

@@ -93,17 +93,15 @@ Builder = Callable[[ControllerSpec, "EnvConfig | None", bool], Controller]
 
 
 def _straight(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
-    from crowdsim.baselines import StraightController
-    from pipelines.loop.baselines import BaselineController
+    from pipelines.loop.baselines import straight
 
-    return BaselineController(StraightController())
+    return straight(env_config)
 
 
 def _orca(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:
-    from crowdsim.baselines import OrcaController
-    from pipelines.loop.baselines import BaselineController
+    from pipelines.loop.baselines import orca
 
-    return BaselineController(OrcaController())
+    return orca(env_config)
 
 
 def _cmpc(spec: ControllerSpec, env_config: EnvConfig | None, jit: bool) -> Controller:

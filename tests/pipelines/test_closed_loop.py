@@ -110,6 +110,24 @@ def test_env_config_is_used():
     assert result.metrics.n_steps == 5 and result.metrics.timeout
 
 
+def test_the_baselines_drive_within_the_simulators_bounds_and_orca_setup():
+    """ORCA and the straight line are built for env_config, as the MPC is (its world()): the robot bounds,
+    and for ORCA the humans' parameters and radius margin; the defaults without one."""
+    from crowdsim.env import CrowdEnv
+    from crowdsim.orca import OrcaParams
+
+    env_config = EnvConfig(v_max=0.5, a_max=1.0, orca=OrcaParams(time_horizon=2.0), orca_radius_margin=0.05)
+    orca, straight = (make_controller(ControllerSpec(c), env_config).inner for c in ("orca", "straight"))
+    assert (orca.v_max, orca.a_max, orca.params, orca.radius_margin) == (0.5, 1.0, env_config.orca, 0.05)
+    assert (straight.v_max, straight.a_max) == (0.5, 1.0)
+    paper = make_controller(ControllerSpec("orca")).inner
+    assert (paper.v_max, paper.a_max, paper.params, paper.radius_margin) == (1.0, 2.0, OrcaParams(), 0.01)
+    # From rest, ORCA asks for up to v_max / tau = 1.25 m/s^2 towards the goal: clipped to the env's a_max.
+    obs = CrowdEnv(env_config).reset(0, "circle", 5)
+    out = make_controller(ControllerSpec("orca"), env_config).act(obs)
+    assert np.abs(out.accelerations).max() == pytest.approx(1.0)
+
+
 def test_every_controller_name_has_its_facts_and_a_builder_and_states_its_predictor():
     from typing import get_args
 
