@@ -25,13 +25,14 @@ def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORL
     """Table I in ``world`` (tau, robot bounds), then ``spec.mpc_overrides``, then ``omega_floc = 0`` when
     flocking is off.
 
-    ``jit`` compiles the IBR loops' NLPs. The coupled NLP is not compiled: its graph (the network, or a
-    first-order model's 56 x 24 Jacobian of parameters) kept gcc busy for over two minutes per process
-    (measured: 148 s for the first first-order episode of `--experiment coupling`).
+    ``jit`` (or ``jit`` in ``spec.mpc_overrides``, a config file's ``[mpc] jit``) compiles the IBR loops'
+    NLPs. The coupled NLP (``coupling = "nlp"``) is never compiled, whichever asks: jit is set off for it,
+    not refused, so that one config file serves IBR and coupled runs alike (jit changes speed, not results).
+    Its graph (the network, or a first-order model's 56 x 24 Jacobian of parameters) kept gcc busy for over
+    two minutes per process (measured: 148 s for the first first-order episode of `--experiment coupling`).
     """
     cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
-    if jit and spec.coupling == "ibr":
-        cfg = cfg.replace(jit=True)
+    cfg = cfg.replace(jit=spec.coupling == "ibr" and (jit or cfg.jit))
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
 
 

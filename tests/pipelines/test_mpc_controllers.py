@@ -75,6 +75,26 @@ def test_jit_compiles_the_ibr_nlps_only():
     assert not mpc_config(ControllerSpec("cmpc", "social_lstm_soft_eth", coupling="nlp"), jit=True).jit
 
 
+def test_the_coupled_nlp_is_not_compiled_when_the_mpc_overrides_ask_either(monkeypatch):
+    """``[mpc] jit = true`` (mpc_overrides) compiles the IBR NLPs; for the coupled NLP it is set off, so that
+    one config file serves both couplings. Checked where the solvers are built, without running gcc."""
+    import mpc.solvers
+
+    compiled = ControllerSpec("cmpc", mpc_overrides=(("jit", True),))
+    assert mpc_config(compiled).jit
+    coupled = dataclasses.replace(compiled, coupling="nlp")
+    assert not mpc_config(coupled).jit and not mpc_config(coupled, jit=True).jit
+    builds, build = [], mpc.solvers.build_nlpsol
+
+    def spy(name, plugin, nlp, options, jit):
+        builds.append((plugin, jit))
+        return build(name, plugin, nlp, options, False)  # never gcc, even when asked
+
+    monkeypatch.setattr(mpc.solvers, "build_nlpsol", spy)
+    MPCController(coupled, distributed=False).reset(CrowdEnv().reset(0, "circle", 3))
+    assert builds and not any(jit for _, jit in builds)
+
+
 def test_coupled_nlp_is_centralised_only():
     with pytest.raises(PipelineError, match="cmpc"):
         MPCController(ControllerSpec("dmpc", coupling="nlp"), distributed=True)
