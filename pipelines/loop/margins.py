@@ -112,7 +112,7 @@ class MarginSpec:
         if self.mode == "none":
             return "none"
         if self.mode == "fixed":
-            return "fixed" + "_".join(f"{v:g}" for v in self.values)
+            return "fixed" + "_".join(_margin_text(v) for v in self.values)
         from predictors.conformal import alpha_text
 
         source = "" if self.source == "closed-loop" else f"-{self.source}"  # per-class modes: closed-loop
@@ -167,6 +167,14 @@ class MarginSpec:
         if self.mode in CALIBRATED_MODES:
             out |= {"alpha": self.alpha, "source": self.source}
         return out
+
+
+def _margin_text(value: float) -> str:
+    """``value`` exactly and short: ``:g`` where it names the value (``0``, ``5``, ``0.05``: the labels, and
+    so the cell keys, that sweeps wrote before), else the shortest repr (``0.1234561``, which ``:g`` would
+    cut to 0.123456, the label of 0.1234564 too), as ``predictors.conformal.alpha_text`` names alphas."""
+    text = f"{value:g}"
+    return text if float(text) == value else repr(float(value))
 
 
 def parse_margins(text: str) -> MarginSpec:

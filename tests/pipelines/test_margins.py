@@ -212,9 +212,20 @@ def test_margins_at_the_ends_of_their_range_are_kept():
     # 0 m (no allowance at a step) and 5 m (MAX_MARGIN) are both allowed: the range is closed
     spec = MarginSpec("fixed", values=(0, 5.0, 0.05, 0.125))
     assert spec.values == (0.0, 5.0, 0.05, 0.125)
-    # the label names each value exactly (:g), so 0.05 and 0.125 never share a cell key with 0.1 or 0.12
+    # the label names each value exactly, so 0.05 and 0.125 never share a cell key with 0.1 or 0.12
     assert spec.label == "fixed0_5_0.05_0.125"
     assert MarginSpec("fixed", values=(0.01,) * 2).label != MarginSpec("fixed", values=(0.0,) * 2).label
+
+
+def test_fixed_margin_labels_are_exact_beyond_six_digits_and_unchanged_within():
+    """Two margins that differ in the 7th digit are two cells; the labels :g already wrote exactly (the
+    cell keys of existing sweep directories) stay as they were."""
+    a, b = (parse_margins(f"fixed:{m},0.2,0.3,0.4") for m in ("0.1234561", "0.1234564"))
+    assert (a.label, b.label) == ("fixed0.1234561_0.2_0.3_0.4", "fixed0.1234564_0.2_0.3_0.4")
+    assert a.describe(a.values)["label"] == a.label
+    assert parse_margins("fixed:0.1,0.2,0.3,0.4").label == "fixed0.1_0.2_0.3_0.4"
+    assert MarginSpec("fixed", values=(0.0, 1.0, 2.5e-05, 1e-06)).label == "fixed0_1_2.5e-05_1e-06"
+    assert MarginSpec("fixed", values=(1 / 3,)).label == f"fixed{1 / 3!r}"
 
 
 def test_fixed_margins_longer_than_the_horizon_are_refused():
