@@ -68,11 +68,21 @@ class ControllerSpec:
 
     def __post_init__(self) -> None:
         controller_kind(self.controller)  # UnknownController unless some source registers it
+        # Every controller gets a predictor's name (the default, or the user's); predictor_name says
+        # whether it plans with it.
+        if not (isinstance(self.predictor, str) and self.predictor.strip()):
+            raise PipelineError(f"predictor must be a predictor's name (a str), got {self.predictor!r:.60}")
+        for name in ("flocking", "record_iterations"):  # a truthy "no" would turn an option on
+            if not isinstance(getattr(self, name), bool):
+                raise PipelineError(f"{name} must be True or False, got {getattr(self, name)!r:.60}")
         if self.coupling not in COUPLINGS:
             raise PipelineError(f"unknown coupling {self.coupling!r}; choose from {list(COUPLINGS)}")
         if not isinstance(self.margins, MarginSpec):
             raise PipelineError(f"margins must be a MarginSpec, got {self.margins!r}")
-        if any(name == "human_margins" for name, _ in self.mpc_overrides):
+        pairs = self.mpc_overrides
+        if not (isinstance(pairs, tuple) and all(_is_override(pair) for pair in pairs)):
+            raise PipelineError(f"mpc_overrides must be a tuple of (field, value) pairs, got {pairs!r:.60}")
+        if any(name == "human_margins" for name, _ in pairs):
             raise PipelineError("set human margins through ControllerSpec.margins, not mpc_overrides")
 
     @property
@@ -83,6 +93,11 @@ class ControllerSpec:
     def predictor_name(self) -> str | None:
         """The predictor this spec's controller plans with; None for a controller that uses none."""
         return self.predictor if self.kind.uses_predictor else None
+
+
+def _is_override(pair: object) -> bool:
+    """A ``(field, value)`` pair of ``ControllerSpec.mpc_overrides``."""
+    return isinstance(pair, tuple) and len(pair) == 2 and isinstance(pair[0], str)
 
 
 # ---- plugins ---------------------------------------------------------------------------------------------

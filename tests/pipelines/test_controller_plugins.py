@@ -312,8 +312,23 @@ def test_the_shipped_controllers_facts():
             {"mpc_overrides": (("human_margins", (0.1,)),)},
             "through ControllerSpec.margins, not mpc_overrides",
         ),
+        # a truthy "no" would have left flocking on; 123 is no predictor's name
+        ({"flocking": "no"}, "flocking must be True or False, got 'no'"),
+        ({"record_iterations": "yes"}, "record_iterations must be True or False, got 'yes'"),
+        ({"predictor": 123}, r"predictor must be a predictor's name \(a str\), got 123"),
+        ({"predictor": None}, r"predictor must be a predictor's name \(a str\), got None"),
+        ({"mpc_overrides": ("w_goal",)}, r"mpc_overrides must be a tuple of \(field, value\) pairs"),
     ],
-    ids=["coupling", "margins-text", "margins-override"],
+    ids=[
+        "coupling",
+        "margins-text",
+        "margins-override",
+        "flocking",
+        "record-iterations",
+        "predictor-int",
+        "predictor-none",
+        "overrides-not-pairs",
+    ],
 )
 def test_a_bad_controller_spec_is_refused(kwargs, message):
     with pytest.raises(PipelineError, match=message):
