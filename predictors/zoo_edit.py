@@ -143,29 +143,50 @@ def _write_pair(weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path)
     return replace_fields(entry, sha256=sha256_file(target_weights))
 
 
+def user_name_refusal(name: str) -> str | None:
+    """Why ``add_to_zoo`` refuses ``name`` for a user model whatever the user zoo holds (a built-in
+    predictor's name, a shipped model's), else None. ``crowdmpc train``'s zoo hint asks it, so the command it
+    prints is one that ``zoo add`` takes."""
+    return _built_in_refusal(name) or _shipped_refusal(name)
+
+
 def _check_not_built_in(name: str) -> None:
+    refusal = _built_in_refusal(name)
+    if refusal is not None:
+        raise PredictorError(refusal)
+
+
+def _built_in_refusal(name: str) -> str | None:
     """Refuse the name of a predictor without weights (``registry.PREDICTORS``), in any case: that name
     loads the built-in, so the entry could never be reached."""
     from predictors.registry import PREDICTORS
 
     built_in = _same_ignoring_case(name, PREDICTORS)
-    if built_in is not None:
-        raise PredictorError(
-            f"zoo name {name!r} is the built-in predictor {built_in!r}, which that name always loads; "
-            "pick another name"
-        )
+    if built_in is None:
+        return None
+    return (
+        f"zoo name {name!r} is the built-in predictor {built_in!r}, which that name always loads; "
+        "pick another name"
+    )
 
 
 def _check_not_shipped(name: str) -> None:
+    refusal = _shipped_refusal(name)
+    if refusal is not None:
+        raise PredictorError(refusal)
+
+
+def _shipped_refusal(name: str) -> str | None:
     """Refuse a user model's ``name`` that the shipped zoo has, in any case: every clone has the shipped
     model, and two names a reader cannot tell apart would pick one or the other by a letter's case."""
     shipped_name = _same_ignoring_case(name, read_manifest(checkpoints_dir()))
-    if shipped_name is not None:
-        spelled = "" if shipped_name == name else f" (as {shipped_name!r}: names are compared ignoring case)"
-        raise PredictorError(
-            f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}{spelled}; "
-            "pick another name"
-        )
+    if shipped_name is None:
+        return None
+    spelled = "" if shipped_name == name else f" (as {shipped_name!r}: names are compared ignoring case)"
+    return (
+        f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}{spelled}; "
+        "pick another name"
+    )
 
 
 def _same_ignoring_case(name: str, names: Collection[str]) -> str | None:

@@ -4,6 +4,7 @@ the module trained on, the TrajNet++ metrics of the best epoch, the epoch times,
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 from pathlib import Path
 from typing import Any
@@ -97,8 +98,29 @@ def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int 
         print(line)
     print(
         f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
-        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {weights}`"
+        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {weights}{_name_option(weights.stem)}`"
     )
+
+
+def _name_option(name: str) -> str:
+    """`` --name my_NAME`` when ``zoo add`` would refuse the checkpoint's own name ``NAME`` (the default
+    ``--out`` names a model as the shipped one of its kind and protocol: social_lstm_eth), else nothing. The
+    rule is ``zoo_edit.user_name_refusal``'s; a shipped manifest that does not read leaves the hint as it is
+    (``zoo add`` says what is wrong with it)."""
+    from predictors.errors import PredictorError
+    from predictors.zoo_edit import user_name_refusal
+
+    try:
+        if user_name_refusal(name) is None:
+            return ""
+        free = next(
+            candidate
+            for candidate in itertools.chain([f"my_{name}"], (f"my_{name}_{i}" for i in itertools.count(2)))
+            if user_name_refusal(candidate) is None
+        )
+    except PredictorError:
+        return ""
+    return f" --name {free}"
 
 
 def epoch_times_from_csv(log_dir: str | Path) -> list[float]:

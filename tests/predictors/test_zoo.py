@@ -159,6 +159,26 @@ def test_a_user_model_may_not_take_a_shipped_name(shipped, user, pair, capsys):
     assert not user.exists() and snapshot(shipped) == before
 
 
+def test_trains_zoo_hint_is_a_command_zoo_add_takes(shipped, user, pair, capsys):
+    """`crowdmpc train` closes with `crowdmpc zoo add OUT/NAME.pt`; with the default --out, NAME is the
+    shipped model's (social_lstm_eth), which `zoo add` refuses. The hint names a free --name then."""
+    import shlex
+
+    from pipelines.commands.train_report import print_summary
+
+    summary = {"name": NAME, "model": "social_lstm", "metrics": {}, "training": {"median_epoch_time_s": 1.0}}
+    capsys.readouterr()
+    print_summary(summary, "best.ckpt", pair, None)
+    command = capsys.readouterr().out.split("`")[1]
+    assert command == f"crowdmpc zoo add {pair} --name my_{NAME}"
+    code, out, err = cli(shlex.split(command)[1:], capsys)
+    assert code == 0 and f"added my_{NAME} " in out, err
+
+    mine = pair.with_name("mine.pt")  # a name of its own: the hint is the bare command
+    print_summary({**summary, "name": "mine"}, "best.ckpt", mine, None)
+    assert capsys.readouterr().out.split("`")[1] == f"crowdmpc zoo add {mine}"
+
+
 @pytest.mark.parametrize("where", ["env", "env_inside", "env_symlink", "dir_option"])
 def test_the_shipped_zoo_is_read_only(tmp_path, shipped, pair, monkeypatch, capsys, where):
     before = snapshot(shipped)
