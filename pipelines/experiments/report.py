@@ -42,7 +42,7 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "n_humans": s.cell.n_humans,
             "n_robots": s.cell.n_robots,
             "controller": s.cell.spec.controller,
-            "predictor": s.cell.spec.predictor,
+            "predictor": s.cell.spec.predictor_name,  # none for orca, straight: as the records and the key
             "flocking": s.cell.spec.flocking,
             "coupling": s.cell.spec.coupling,
             **safety.world_columns(s.cell),

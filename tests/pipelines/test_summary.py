@@ -108,6 +108,17 @@ def test_cells_csv_gives_the_travel_time_and_its_interval():
     assert row["travel_time_ci"] == pytest.approx(12.7062, abs=1e-4)
 
 
+def test_cells_csv_names_the_predictor_a_cell_plans_with():
+    """A controller that plans with none (orca, straight) has none in cells.csv, as in its records
+    ("predictor": null) and its cell key (orca-none-...): the row named the experiment's --predictor."""
+    experiment = get_experiment("controllers").with_predictor("social_lstm_eth")
+    records = [_record(0, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0)]
+    rows = cell_rows([summarize_cell(cell, records, None) for cell in experiment.cells((5,))])
+    named = {row["method"]: row["predictor"] for row in rows}
+    assert named == {"cmpc": "social_lstm_eth", "dmpc": "social_lstm_eth", "orca": None, "straight": None}
+    assert all(("-none-" in row["cell"]) == (row["predictor"] is None) for row in rows)
+
+
 def test_the_bold_mark_compares_the_printed_values():
     # 75.04 and 75.01 both print as 75.0: a tie, left unmarked; 75.06 prints as 75.1 and wins.
     assert _best([75.04, 75.01], higher_is_better=True) == set()
