@@ -221,7 +221,7 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
         "--report-only",
         action="store_true",
         help="write the table and plots from DIR; run nothing (the experiment must be DIR's; --humans, "
-        "--robots and --seed not given are its last run's)",
+        "--robots, --seed and --episodes-per-cell not given are its last run's)",
     )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -24,8 +24,9 @@ if TYPE_CHECKING:
 
 def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
     """``config`` for ``--report-only``: refused when ``--out`` holds a sweep of another experiment, and
-    with the humans, robots and seed the run did not give (option, config file or --set) taken from the
-    sweep's last run line in sweep.json. A directory without sweep.json keeps ``config`` as it is."""
+    with the humans, robots, seed and episodes per cell the run did not give (option, config file or
+    --set) taken from the sweep's last run line in sweep.json. A directory without sweep.json keeps
+    ``config`` as it is."""
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
 
     path = config.out / SWEEP_FILE
@@ -48,7 +49,11 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
     if cfg.source("sweep", "humans") is None and isinstance(humans, list) and humans:
         if all(_is_int(h) for h in humans):
             changes["humans"] = tuple(humans)
-    for section, key, field in (("sweep", "seed", "seed"), ("scenario", "robots", "n_robots")):
+    for section, key, field in (
+        ("sweep", "seed", "seed"),
+        ("scenario", "robots", "n_robots"),
+        ("sweep", "episodes_per_cell", "episodes_per_cell"),  # the CPU projection is of the run's plan
+    ):
         value = last.get(field)  # a run line names them as SweepConfig does
         if cfg.source(section, key) is None and _is_int(value):
             changes[field] = value

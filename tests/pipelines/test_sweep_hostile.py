@@ -215,15 +215,18 @@ def test_an_empty_or_new_folder_and_a_sweep_directory_are_fine(good, tmp_path, c
 
 def test_report_only_tabulates_the_sweep_that_is_there_or_refuses(tmp_path, capsys):
     """--report-only read the plan from its own options: another --experiment relabelled the records as its
-    methods, and without the run's --humans, --robots and --seed it wrote empty tables over the report."""
+    methods, and without the run's --humans, --robots and --seed it wrote empty tables over the report;
+    without its --episodes-per-cell it projected the CPU time of the default 1000 episodes per cell."""
     out = tmp_path / "sweep"
     run_sweep(SweepConfig(get_experiment("baselines"), out, 1, humans=(3,), seed=7, n_robots=2,
                           backend="inline", progress=False))  # fmt: skip
     report = ["sweep", "--report-only", "--no-progress", "--out", str(out)]
-    assert main([*report, "--experiment", "baselines"]) == 0  # humans, robots, seed: the run's
+    capsys.readouterr()
+    assert main([*report, "--experiment", "baselines"]) == 0  # humans, robots, seed, episodes: the run's
     table = (out / TABLE_MD).read_text()
     assert "| Numbers of pedestrians | 3 | 3 |" in table and "| Episodes | 1 | 1 |" in table
     assert "Robots: 2 per episode" in table
+    assert "; the 2 planned episodes take " in capsys.readouterr().err  # 2 cells x 1 episode
     capsys.readouterr()
     for options, message in (
         (["--experiment", "table2"], f"{out} holds a sweep of experiment 'baselines', not 'table2'"),
