@@ -31,9 +31,19 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     actions = parser.add_subparsers(dest="cache_command", metavar="ACTION", required=True)
-    info = actions.add_parser("info", help="directory, entries, size, CasADi version and compiler")
+    info = actions.add_parser(
+        "info",
+        help="directory, entries, size, CasADi version and compiler",
+        epilog="examples:\n  crowdmpc cache info\n  crowdmpc cache info --json\n",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     info.add_argument("--json", action="store_true", help="print the same as one JSON object")
-    actions.add_parser("clear", help="remove every compiled entry (the next jit build compiles again)")
+    actions.add_parser(
+        "clear",
+        help="remove every compiled entry (the next jit build compiles again)",
+        epilog="example:\n  crowdmpc cache clear\n",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.set_defaults(func=run)
 
 

@@ -40,6 +40,37 @@ def test_the_help_texts_have_examples_of_every_command():
     assert set(COMMANDS) <= {_command(line) for line in EXAMPLES}
 
 
+def _leaves(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
+    """(command words, parser) of every command that runs: one without actions under it (zoo list)."""
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not actions:
+        yield path, parser
+    for action in actions:
+        for name, sub in action.choices.items():
+            yield from _leaves(sub, (*path, name))
+
+
+@pytest.mark.parametrize(
+    ("path", "parser"), [pytest.param(*leaf, id=" ".join(leaf[0])) for leaf in _leaves(build_parser())]
+)
+def test_every_command_that_runs_has_an_example_in_its_own_help(path, parser):
+    """README: "Every command has `--help` with an example". `crowdmpc zoo list --help` printed none: the
+    examples were in `crowdmpc zoo --help` only. Each leaf's epilog has a line that runs it."""
+    epilog = (parser.epilog or "").replace("\\\n", " ")
+    assert "example" in epilog, f"`crowdmpc {' '.join(path)} --help` has no example"
+    assert parser.formatter_class is argparse.RawDescriptionHelpFormatter  # the example keeps its lines
+    runs = [line for line in epilog.splitlines() if _names(line.strip(), path)]
+    assert runs, f"no example in `crowdmpc {' '.join(path)} --help` runs it"
+
+
+def _names(line: str, path: tuple[str, ...]) -> bool:
+    """Whether the example ``line`` runs the command ``path`` (its words, options between them)."""
+    if not line.startswith("crowdmpc "):
+        return False
+    words = iter(shlex.split(line, comments=True))
+    return all(word in words for word in path)
+
+
 def _command(line: str) -> str:
     """The command word of an example (after any --config/--set given before it)."""
     words = shlex.split(line, comments=True)[1:]
