@@ -1,6 +1,7 @@
 """docs/extending.md, run as written: every ``crowdmpc`` command of its bash blocks, in order, in a directory
-holding only the guide's example file, with fewer epochs and episodes (the only edits), each must succeed.
-So the guide cannot go stale: a changed option, a renamed file or a broken step fails this test."""
+holding only the guide's example files (its predictor, and section 6's controller as the page prints it), with
+fewer epochs and episodes (the only edits), each must succeed. So the guide cannot go stale: a changed
+option, a renamed file or a broken step fails this test."""
 
 from __future__ import annotations
 
@@ -39,9 +40,23 @@ def guide_commands() -> list[str]:
     return commands
 
 
+def controller_file() -> str:
+    """Section 6's controller, ``my_controller.py``: the one python block of that section."""
+    text = GUIDE.read_text()
+    section = re.search(r"^## 6\. .*?(?=^## )", text, flags=re.S | re.M)
+    assert section is not None, "docs/extending.md has no section 6"
+    (code,) = re.findall(r"```python\n(.*?)```", section.group(0), flags=re.S)
+    return code
+
+
 def test_the_guide_has_every_step():
-    steps = [shlex.split(c)[3] for c in guide_commands()]  # crowdmpc --plugin X <command>
-    assert steps == ["train", "zoo", "evaluate", "export", "simulate", "sweep"]
+    steps = [shlex.split(c)[1:4] for c in guide_commands()]  # crowdmpc --plugin X <command>
+    mlp, mine = ["--plugin", "window_mlp:WindowMLP"], ["--plugin", "my_controller:GoStraight"]
+    assert steps == [
+        *([*mlp, step] for step in ("train", "zoo", "evaluate", "export", "simulate", "sweep")),
+        *([*mine, step] for step in ("simulate", "sweep")),  # section 6: the controller
+    ]
+    assert "class GoStraight:" in controller_file()
 
 
 def test_the_guide_runs_from_its_own_directory(tmp_path):
@@ -50,7 +65,8 @@ def test_the_guide_runs_from_its_own_directory(tmp_path):
         pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
     work = tmp_path / "my_project"
     work.mkdir()
-    shutil.copy(EXAMPLE, work / EXAMPLE.name)  # the user's file, outside the package
+    shutil.copy(EXAMPLE, work / EXAMPLE.name)  # the user's files, outside the package
+    (work / "my_controller.py").write_text(controller_file())
     env = {
         **os.environ,
         "CROWDMPC_DATA": str(data),
@@ -77,3 +93,7 @@ def test_the_guide_runs_from_its_own_directory(tmp_path):
     assert "window_mlp_eth" in table and "social_lstm_eth" in table
     assert (tmp_path / "zoo" / "window_mlp_eth.pt").is_file()
     assert not (ROOT / "checkpoints" / "window_mlp_eth.pt").exists()
+    assert (
+        "| orca | cmpc | my_controller:GoStraight |"
+        in (work / "runs" / "controllers-mine" / "table.md").read_text()
+    )
