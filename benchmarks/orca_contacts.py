@@ -78,7 +78,7 @@ def main() -> None:
               f" smallest distance {v.min():.3f} m")  # fmt: skip
     print(f"  episodes where some human needed the 3-D linear program: {lp3_episodes} / {n}")
     print(f"  episodes with a contact at a step where no human needed the 3-D program: {contact_without_lp3}")
-    print(f"  episodes that hit the 30 s time limit: {timeouts} / {n}")
+    print(f"  episodes that hit the {env.config.time_limit:g} s time limit: {timeouts} / {n}")
 
 
 if __name__ == "__main__":

@@ -3,8 +3,9 @@ in closed loop (an ablation the paper does not have).
 
 Each episode is one seeded simulator episode (episode ``i`` uses ``seed + i``) sampled every 0.4 s = 2.5 Hz,
 TrajNet++'s rate. Without robots the episode runs until every human is within its radius of its goal (or the
-30 s time limit); with robots, three ORCA-driven robots (``crowdsim.baselines.OrcaController``) join the
-crowd and the episode ends when they have all arrived, as in closed loop.
+time limit, ``EnvConfig.time_limit`` of the config given); with robots, three ORCA-driven robots
+(``crowdsim.baselines.OrcaController``) join the crowd and the episode ends when they have all arrived, as in
+closed loop.
 
 Tracks: frame ids advance by 10 per step, the convention of the BIWI hotel sequence in TrajNet++. Episodes
 occupy disjoint frame ranges and every agent of every episode has its own pedestrian id, so no scene mixes
