@@ -1,6 +1,7 @@
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -105,6 +106,28 @@ def test_min_samples_is_the_fewest_with_a_finite_rank(alpha):
 )
 def test_the_ranks_of_the_shipped_alphas_are_unchanged(n, alpha, rank):
     assert conformal_rank(n, alpha) == rank
+
+
+SHIPPED_ALPHAS = (0.01, 0.05, 0.1, 0.2, 0.5)  # checkpoints/README.md's calibrate commands
+
+
+def test_every_shipped_predictor_has_the_blocks_the_checkpoints_readme_lists():
+    """checkpoints/README.md: closed-loop blocks for every shipped predictor, constant velocity and the
+    oracle included, and real ones for all but the oracle, each for the weights the manifest holds.
+    social_gru_eth and social_attention_eth had no real blocks: `--margins conformal:0.1:real` failed."""
+    from predictors.calibration import read_calibration_file
+    from predictors.registry import PREDICTORS
+
+    shipped = Path(__file__).resolve().parents[2] / "checkpoints"
+    weights = {name: e.sha256 for name, e in zoo.read_manifest(shipped).items()}
+    weights |= dict.fromkeys(PREDICTORS)  # built-ins: no weights
+    blocks = {b.key(): b for b in read_calibration_file(shipped / CALIBRATIONS_NAME)}
+    for name, sha in weights.items():
+        for source in ("closed-loop", "real") if name != "orca_oracle" else ("closed-loop",):
+            for alpha in SHIPPED_ALPHAS:
+                block = blocks.get((name, source, alpha))
+                assert block is not None, f"no shipped {source} block of {name} at alpha {alpha}"
+                assert block.predictor_sha256 == sha, f"{name}'s {source} block is of other weights"
 
 
 def test_an_alpha_too_small_for_any_calibration_is_refused_in_one_line():
