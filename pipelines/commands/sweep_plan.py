@@ -26,7 +26,8 @@ def check_predictors(experiment: Experiment) -> None:
     from predictors.registry import available
 
     known = set(available())
-    wanted = {spec.predictor for _, spec in experiment.methods}
+    # only the predictors some method plans with: an orca or straight column loads none
+    wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
     missing = sorted(wanted - known)
     if missing:
         hint = "--predictors" if experiment.predictor_list else "--predictor"

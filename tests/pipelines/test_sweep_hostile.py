@@ -263,6 +263,17 @@ def test_a_zoo_entry_whose_weights_changed_is_refused_up_front_as_simulate_does(
     assert not (tmp_path / "sweep").exists()
 
 
+def test_a_sweep_of_controllers_that_plan_without_a_predictor_does_not_check_one(tmp_path, capsys):
+    """--predictor names the predictor of the methods that plan with one; orca and straight load none, so a
+    name that is not available refused a sweep of them alone."""
+    sweep = ["sweep", "--experiment", "controllers", "--controllers", "orca,straight", "--predictor", "nope",
+             "--humans", "1", "--robots", "1", "--episodes-per-cell", "1", "--dry-run"]  # fmt: skip
+    assert main([*sweep, "--out", str(tmp_path / "sweep")]) == 0
+    with_cmpc = [*sweep[:4], "orca,cmpc", *sweep[5:]]
+    assert main([*with_cmpc, "--out", str(tmp_path / "sweep2")]) == 2
+    assert "needs predictors ['nope'] that are not available" in capsys.readouterr().err
+
+
 # ----------------------------------------------------------------------------------------------------------
 # A recalibration keeps the cell key: its records and new episodes must not mix two margin sets
 # ----------------------------------------------------------------------------------------------------------
