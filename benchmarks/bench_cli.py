@@ -3,7 +3,8 @@
 What a user types is checked when the command line is parsed (one line, exit 2), before any episode runs;
 an error a user can cause later (a config file, a predictor's checkpoint) ends the script as it ends
 ``crowdmpc``: one line, exit 2, no traceback (``pipelines.cli.USER_ERRORS``); and a ``--json`` file is written
-where it is asked for, its folder created, as ``crowdmpc simulate --json`` does.
+where it is asked for, its folder created, replacing only a JSON report and never one of the script's inputs,
+as ``crowdmpc simulate --json`` does.
 
 The benchmarks are scripts, not a package: each puts this folder on ``sys.path`` to import this module.
 """
@@ -14,7 +15,7 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -60,16 +61,30 @@ def predictor_name(text: str) -> str:
 
 
 def output_file(text: str) -> Path:
-    """An argparse ``type``: a file that can be written (``crowdmpc``'s check: an existing folder or a place
-    without write access is refused now, not after the run; nothing is created)."""
+    """An argparse ``type``: a ``--json`` report's file, checked as ``crowdmpc simulate --json`` checks it: an
+    existing folder, a place without write access, and an existing file that is not a JSON report (a CSV, a
+    config, a recording: a mistyped name must not replace data) are refused now, not after the run; nothing
+    is created. That it is none of the script's input files is checked once they are parsed
+    (``check_not_input``)."""
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text} is a folder; expected the path of a file to write")
     try:
-        check_writable(path, "file")
+        check_writable(path, "file", json_only=True)
     except PipelineError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return path
+
+
+def check_not_input(
+    parser: argparse.ArgumentParser, option: str, path: Path | None, inputs: Iterable[str | Path | None]
+) -> None:
+    """After parsing: the output ``path`` of ``option`` is none of the files the script reads (``--config X
+    --json X`` replaced the config it read, as ``crowdmpc`` refuses), else the parser's one-line error."""
+    try:
+        check_writable(path, option, inputs=[Path(p) for p in inputs if p is not None])
+    except PipelineError as exc:
+        parser.error(str(exc))
 
 
 def mpc_sets(texts: Sequence[str]) -> list[str]:

@@ -32,6 +32,7 @@ from pipelines.loop.margins import parse_margins
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robot_scaling  # noqa: E402
 from bench_cli import (  # noqa: E402
+    check_not_input,
     episode_count,
     human_count,
     output_file,
@@ -101,6 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
+    check_not_input(parser, "--json", args.json, [args.config])
     try:  # every scale's config checked before the first episode
         runs = {scale: load(args.config, sets=[f"mpc.cost_scale={scale}"]) for scale in args.cost_scale}
     except PipelineError as exc:  # ConfigError, and what a value's own check raises

@@ -116,6 +116,36 @@ def test_an_output_file_may_not_be_a_folder_and_its_folder_is_created(tmp_path):
         bench_cli.write_json(tmp_path / "bad.json", {"x": {1}})
 
 
+def test_a_json_report_replaces_only_a_json_report(tmp_path):
+    """As ``crowdmpc simulate --json``: a mistyped --json naming a data file or a config refused it, not
+    replaced it after the run."""
+    data = tmp_path / "episodes.csv"
+    data.write_text("a,b\n1,2\n")
+    with pytest.raises(argparse.ArgumentTypeError, match="the file exists and is not a JSON report"):
+        bench_cli.output_file(str(data))
+    assert data.read_text() == "a,b\n1,2\n"
+    report = tmp_path / "old.json"
+    report.write_text('{"rows": []}')
+    assert bench_cli.output_file(str(report)) == report  # an earlier report is replaced
+
+
+@pytest.mark.parametrize(("script", "measure"), [("robot_scaling", "run_row"), ("cost_scale", "measure")])
+def test_a_json_report_is_none_of_the_scripts_inputs(script, measure, capsys, tmp_path, monkeypatch):
+    config = tmp_path / "empty.toml"  # empty: a file a JSON report may replace, were it not the input
+    config.write_text("")
+    module = load_benchmark(script)
+
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("an episode ran; the command line should have been refused")
+
+    monkeypatch.setattr(module, measure, no_episodes)
+    with pytest.raises(SystemExit) as stop:
+        module.main(["--config", str(config), "--json", str(config)])
+    assert stop.value.code == 2
+    assert "that is one of the command's inputs" in capsys.readouterr().err
+    assert config.read_text() == ""
+
+
 def test_a_figure_not_measured_prints_as_a_dash_of_the_same_width():
     assert bench_cli.figure(1.5, "8.2f") == "    1.50"
     assert bench_cli.figure(math.nan, "8.2f") == "       -"
