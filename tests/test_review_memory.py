@@ -44,3 +44,14 @@ def test_fewer_files_than_recorded_episodes_is_refused(capsys):
         review_memory.main(["--files", "2", "--episodes", "4"])
     assert stop.value.code == 2
     assert "--files 2: at least --episodes (4) files are reviewed" in capsys.readouterr().err
+
+
+def test_a_childs_peak_is_its_own_not_this_processs():
+    """ru_maxrss of a child on Linux starts at the peak of the process it was forked from: every figure was
+    floored at the script's own peak (a DMPC+LSTM recording made a fresh interpreter read 347 MB)."""
+    held = b"\x01" * (256 * 2**20)  # this process's peak above 256 MB, every page touched
+    mb, seconds, read_from = review_memory.peak("")
+    assert len(held) and seconds > 0
+    assert read_from in review_memory.PEAK_SOURCES
+    if read_from == "VmHWM":  # Linux; with ru_maxrss alone (no /proc) the floor is what the header says
+        assert 0 < mb < 128  # a bare interpreter: tens of MB
