@@ -70,3 +70,16 @@ def test_the_clock_times_calls_made_while_installed_and_undoes_its_patches():
     before = dict(clock.now)
     BufferedFunction(_nlpsol("fatrop", "local_y")).call({"x0": [0.0, 0.0]})
     assert clock.now == before  # built after close: not timed
+
+
+def test_a_target_met_already_needs_nothing_cut_and_says_so():
+    """On 8 workers the projection is under 15 min: the cut printed as "-672 % of the Python time gone"."""
+    rows = [{"cell": "a", "wall_s": 0.2, "fatrop local": 0.15}]
+    out = sweep_floor.summary(rows, workers=8)  # 10 000 x 0.2 s / 8 = 4.2 min
+    assert out["python_cut_needed_for_target"] == 0.0
+    assert sweep_floor.target_verdict(out) == "15 min is met at this rate on 8 cores"
+    assert sweep_floor.target_verdict(sweep_floor.summary(rows, workers=2)) == (
+        "15 min needs 40 % of the Python time gone"
+    )
+    above = sweep_floor.summary([{"cell": "a", "wall_s": 0.3, "fatrop joint": 0.25}], workers=2)
+    assert sweep_floor.target_verdict(above) == "15 min is out of reach on 2 cores even with no Python time"
