@@ -47,6 +47,8 @@ def count_in(what: str, low: int, high: int | None = None) -> Callable[[str], in
 
 robot_count = count_in("robots", 1, MAX_ROBOTS)
 human_count = count_in("humans", 0, MAX_HUMANS)
+# A predictor's own benchmark: with no human it has nothing to predict (an empty twin, no scalar to time).
+predicted_humans = count_in("humans", 1, MAX_HUMANS)
 # What a run repeats: none of them means nothing to measure (a division by zero or a nan table at the end).
 episode_count = count_in("episodes", 1)
 seed_number = count_in("seed", 0)  # numpy's generators refuse a negative seed

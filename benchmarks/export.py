@@ -33,7 +33,7 @@ from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, figure, human_count, run_main  # noqa: E402
+from bench_cli import count_in, figure, predicted_humans, run_main  # noqa: E402
 
 DEFAULT_MODELS = (
     "social_lstm_eth",
@@ -131,7 +131,9 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--models", default=",".join(DEFAULT_MODELS))
-    parser.add_argument("--humans", type=human_count, default=7)
+    parser.add_argument(
+        "--humans", type=predicted_humans, default=7, help="at least 1: the twin predicts the humans"
+    )
     parser.add_argument("--calls", type=count_in("calls", 1), default=300)
     parser.add_argument("--no-closed-loop", action="store_true", help="skip the coupled-NLP episodes")
     args = parser.parse_args()

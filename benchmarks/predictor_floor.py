@@ -19,6 +19,7 @@ gcc on the encoder's expansion takes minutes (about 12 at -O1 for social_lstm_et
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import subprocess
 import sys
@@ -33,12 +34,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mpc.compile_cache import compiler  # noqa: E402
 from mpc.fastcall import BufferedFunction  # noqa: E402
+from pipelines.errors import PipelineError  # noqa: E402
 from predictors.export.parity import crossing_scene  # noqa: E402
 from predictors.learned import LearnedPredictor  # noqa: E402
 from predictors.registry import load_predictor  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, human_count, robot_count, run_main  # noqa: E402
+from bench_cli import count_in, figure, predicted_humans, robot_count, run_main  # noqa: E402
 
 
 def per_call_us(function, args: list[np.ndarray], calls: int) -> tuple[float, list[np.ndarray]]:
@@ -68,7 +70,12 @@ def compiled(function: ca.Function, opt: str, folder: Path) -> tuple[ca.Function
     generator.generate(str(folder) + os.sep)
     source, library = folder / f"{name}.c", folder / f"{name}.so"
     start = time.perf_counter()
-    subprocess.run([cc.path, opt, "-fPIC", "-shared", str(source), "-o", str(library)], check=True)
+    command = [cc.path, opt, "-fPIC", "-shared", str(source), "-o", str(library)]
+    done = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, check=False)
+    if done.returncode != 0:  # a flag gcc refuses (--opt=-Qbogus), a full disk: its words, not a traceback
+        said = [line for line in done.stdout.splitlines() if line.strip()]
+        why = next((line for line in said if "error" in line), said[-1] if said else "no message")
+        raise PipelineError(f"gcc {opt} failed on {function.name()}'s C (exit {done.returncode}): {why}")
     seconds = time.perf_counter() - start
     return ca.external(function.name(), str(library)), source.stat().st_size / 1e6, seconds
 
@@ -91,7 +98,9 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--model", default="social_lstm_eth")
-    parser.add_argument("--humans", type=human_count, default=7)
+    parser.add_argument(
+        "--humans", type=predicted_humans, default=7, help="at least 1: the twin predicts the humans"
+    )
     parser.add_argument("--robots", type=robot_count, default=3)
     parser.add_argument("--horizon", type=count_in("horizon", 1), default=4)
     parser.add_argument("--calls", type=count_in("calls", 1), default=300)
@@ -115,9 +124,10 @@ def main(argv: list[str] | None = None) -> int:
         expanded = function.expand()
         scalars = expanded.n_instructions()
         sx_us, sx_out = per_call_us(BufferedFunction(expanded), inputs, max(10, args.calls // 10))
+        per_scalar = figure(1e3 * mx_us / scalars if scalars else math.nan, ".2f")  # none: no arithmetic
         print(
             f"{name:8} MX {function.n_instructions():5d} instructions {mx_us:8.1f} us a call "
-            f"({1e3 * mx_us / scalars:.2f} ns a scalar operation) | SX {scalars:8d} operations "
+            f"({per_scalar} ns a scalar operation) | SX {scalars:8d} operations "
             f"{sx_us:8.1f} us, differs by {largest_difference(mx_out, sx_out):.1e}"
         )
         if name in to_compile[args.compile]:

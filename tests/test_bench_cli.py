@@ -65,6 +65,13 @@ ZERO_REPEATS = [
     ("exact_coupling", ["--max-iter", "0"], "max iter must be an integer >= 1"),
     ("orca_step", ["--repeats", "0"], "repeats must be an integer >= 1"),
     ("export", ["--calls", "0"], "calls must be an integer >= 1"),
+    # no human: an empty twin (a division by zero scalars, an IndexError in the parity check)
+    ("export", ["--humans", "0", "--models", "nosuch"], "humans must be an integer in 1..50, got '0'"),
+    (
+        "predictor_floor",
+        ["--humans", "0", "--calls", "1", "--horizon", "1"],
+        "humans must be an integer in 1..50, got '0'",
+    ),
     ("predictor_floor", ["--horizon", "0"], "horizon must be an integer >= 1"),
     ("run_all", ["--steps", "0"], "steps must be an integer >= 1"),
     ("run_all", ["--workers", "0"], "workers must be an integer >= 1"),

@@ -30,3 +30,18 @@ def test_largest_difference():
     b = [np.array([1.0, 2.5]), np.array([2.0])]
     assert predictor_floor.largest_difference(a, b) == 1.0
     assert predictor_floor.largest_difference(a, a) == 0.0
+
+
+def test_a_flag_gcc_refuses_is_a_users_one_line_error(tmp_path):
+    """--opt=-Qbogus ended in a CalledProcessError traceback."""
+    import casadi as ca
+    import pytest
+
+    from mpc.compile_cache import compiler
+    from pipelines.errors import PipelineError
+
+    if compiler() is None:
+        pytest.skip("no gcc on the PATH")
+    x = ca.SX.sym("x")
+    with pytest.raises(PipelineError, match=r"gcc -Qbogus failed on f's C \(exit \d+\): .*-Qbogus"):
+        predictor_floor.compiled(ca.Function("f", [x], [2 * x]), "-Qbogus", tmp_path)
