@@ -19,6 +19,12 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from pipelines.commands import check_writable
+from pipelines.errors import PipelineError
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import check_not_input, run_main  # noqa: E402
+
 CONTROL_PERIOD_MS = 400.0  # the paper's dt = 0.4 s: a step slower than this misses its period
 
 
@@ -124,19 +130,46 @@ def plot(pts: list[Point], out: Path) -> None:
     plt.close(fig)
 
 
+def figure_file(text: str) -> Path:
+    """An argparse ``type``: the figure's file, its format named by its suffix as matplotlib reads it. A name
+    without one gets ``.png`` here, as matplotlib would have added it (so the path printed is the one
+    written); a suffix matplotlib cannot write (``fig.pdfx``), a folder or a place without write access is
+    refused now, not by a traceback after the runs are read."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    path = Path(text)
+    suffix = path.suffix[1:].lower()
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if not suffix and path.name.strip("."):
+        path = path.with_name(path.name.rstrip(".") + ".png")
+    elif suffix not in formats:
+        known = ", ".join(f".{name}" for name in sorted(formats))
+        raise argparse.ArgumentTypeError(f"{text}: matplotlib writes no {path.suffix!r} file; use {known}")
+    try:
+        check_writable(path, "--out")
+    except PipelineError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("runs", nargs="+", type=Path, help="robot_scaling.py --json files")
-    parser.add_argument("--out", type=Path, required=True, help="the PNG to write")
+    parser.add_argument(
+        "--out",
+        type=figure_file,
+        required=True,
+        help="the figure to write, in the format its suffix names (none: .png is added)",
+    )
     args = parser.parse_args(argv)
+    check_not_input(parser, "--out", args.out, args.runs)
     try:
         reports = [(str(path), json.loads(path.read_text())) for path in args.runs]
         pts = points(reports)
     except (OSError, ValueError) as exc:  # json.JSONDecodeError is a ValueError
-        print(f"plot_scaling: {exc}", file=sys.stderr)
-        return 2
+        raise PipelineError(str(exc)) from None
     plot(pts, args.out)
     alone = undrawn(pts)
     print(f"wrote {args.out} ({len(pts) - len(alone)} of {len(pts)} rows drawn)")
@@ -152,4 +185,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -72,8 +72,10 @@ def test_the_same_row_in_two_files_is_named(tmp_path, capsys):
         plot_scaling.points([("m.json", M_RUN), ("a.json", M_RUN)])
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"rows": []}))
-    assert plot_scaling.main([str(bad), "--out", str(tmp_path / "x.png")]) == 2
-    assert "bad.json is not robot_scaling.py --json output (no 'args')" in capsys.readouterr().err
+    assert plot_scaling.run_main(lambda: plot_scaling.main([str(bad), "--out", str(tmp_path / "x.png")])) == 2
+    assert (
+        "error: " + str(bad) + " is not robot_scaling.py --json output (no 'args')" in capsys.readouterr().err
+    )
     assert not (tmp_path / "x.png").exists()
     wrong = {"args": {"humans": 7}, "rows": [{**M_RUN["rows"][0], "robots": "many"}]}
     with pytest.raises(ValueError, match="w.json is not robot_scaling.py --json output"):
@@ -88,3 +90,33 @@ def test_main_writes_the_figure(tmp_path):
     out = tmp_path / "fig" / "scaling.png"
     assert plot_scaling.main([*map(str, paths), "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_path_printed_is_the_path_written(tmp_path, capsys):
+    """--out X wrote X.png (matplotlib's default format) and printed "wrote X"."""
+    run = tmp_path / "m.json"
+    run.write_text(json.dumps(M_RUN))
+    assert plot_scaling.main([str(run), "--out", str(tmp_path / "fig")]) == 0
+    assert f"wrote {tmp_path / 'fig.png'} (" in capsys.readouterr().out
+    assert [p.name for p in sorted(tmp_path.iterdir())] == ["fig.png", "m.json"]
+    assert plot_scaling.main([str(run), "--out", str(tmp_path / "fig.svg")]) == 0
+    assert (tmp_path / "fig.svg").read_text().lstrip().startswith("<?xml")
+
+
+@pytest.mark.parametrize(
+    ("out", "message"),
+    [
+        ("fig.pdfx", "fig.pdfx: matplotlib writes no '.pdfx' file; use ."),
+        ("m.json", "m.json: matplotlib writes no '.json' file"),
+    ],
+)
+def test_a_format_matplotlib_cannot_write_is_refused_when_parsed(out, message, tmp_path, capsys, monkeypatch):
+    """fig.pdfx ended in matplotlib's traceback, after the runs were read."""
+    monkeypatch.chdir(tmp_path)
+    run = tmp_path / "m.json"
+    run.write_text(json.dumps(M_RUN))
+    with pytest.raises(SystemExit) as stop:
+        plot_scaling.main([str(run), "--out", out])
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == ["m.json"]
