@@ -15,18 +15,38 @@ import csv
 import sys
 from pathlib import Path
 
+from pipelines.errors import PipelineError
 from pipelines.experiments.tables import mcnemar_exact
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import run_main  # noqa: E402
+
 Key = tuple[str, int, str, int]
+
+
+# The columns of episodes.csv this reads: the episode's identity, then its outcome.
+COLUMNS = ("method", "n_humans", "scenario", "seed", "success", "collision", "travel_time")
 
 
 def load(run: Path) -> dict[Key, dict[str, str]]:
     path = run / "episodes.csv"
     if not path.is_file():
-        raise SystemExit(f"{path}: no such file (a `crowdmpc sweep --out` directory has one)")
-    with path.open() as f:
+        raise PipelineError(f"{path}: no such file (a `crowdmpc sweep --out` directory has one)")
+    with path.open(newline="") as f:
         rows = csv.DictReader(f)
-        return {(r["method"].casefold(), int(r["n_humans"]), r["scenario"], int(r["seed"])): r for r in rows}
+        missing = [name for name in COLUMNS if name not in (rows.fieldnames or ())]
+        if missing:
+            raise PipelineError(
+                f"{path}: no column {', '.join(missing)} (not a `crowdmpc sweep` episodes.csv)"
+            )
+        episodes = {}
+        for r in rows:
+            try:
+                key = (r["method"].casefold(), int(r["n_humans"]), r["scenario"], int(r["seed"]))
+            except (AttributeError, TypeError, ValueError):  # a short row (None), a number that is none
+                raise PipelineError(f"{path}, line {rows.line_num}: not an episode's row") from None
+            episodes[key] = r
+        return episodes
 
 
 def flag(value: str) -> bool:
@@ -47,18 +67,21 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("runs", nargs="+", metavar="LABEL=DIR", help="two or more sweep output directories")
     args = parser.parse_args(argv)
-    runs = {}
+    directories: dict[str, Path] = {}
     for item in args.runs:
         label, sep, directory = item.partition("=")
         if not sep or not label or not directory:
             parser.error(f"expected LABEL=DIR, got {item!r}")
-        runs[label] = load(Path(directory))
-    if len(runs) < 2:
+        if label in directories:  # a second run under the label replaced the first, unsaid
+            parser.error(f"label {label!r} is given twice ({directories[label]} and {directory}); one a run")
+        directories[label] = Path(directory)
+    if len(directories) < 2:
         parser.error("give at least two runs")
+    runs = {label: load(directory) for label, directory in directories.items()}
     labels = list(runs)
     shared = set.intersection(*(set(r) for r in runs.values()))
     if not shared:
-        raise SystemExit("the runs share no episode (method, humans, scenario, seed)")
+        raise PipelineError("the runs share no episode (method, humans, scenario, seed)")
     print(
         "Success % / collision % / travel time s (successes); paired: success wins / losses against",
         labels[0],
@@ -89,4 +112,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

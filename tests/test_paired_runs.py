@@ -30,7 +30,7 @@ def test_two_runs_on_their_shared_episodes(tmp_path, capsys):
     row = capsys.readouterr().out.strip().splitlines()[-1]
     # base: 2 of 3 succeed, 2 of 3 collide, travel (10 + 12) / 2; new: 2 of 3, 0, (11 + 13) / 2; +1 / -1.
     assert row == "| CMPC | 7 (3) | 66.7 / 66.7 / 11.0 | 66.7 / 0.0 / 12.0 | +1 / −1 (p = 1) |"
-    with pytest.raises(SystemExit, match="no such file"):
+    with pytest.raises(paired_runs.PipelineError, match="no such file"):
         paired_runs.main([f"base={a}", f"new={tmp_path}"])
 
 
@@ -41,3 +41,35 @@ def test_a_method_is_the_same_whatever_its_case(tmp_path, capsys):
     assert paired_runs.main([f"table2={a}", f"controllers={b}"]) == 0
     row = capsys.readouterr().out.strip().splitlines()[-1]
     assert row == "| CMPC | 7 (2) | 50.0 / 0.0 / 10.0 | 100.0 / 0.0 / 13.0 | +1 / −0 (p = 1) |"
+
+
+@pytest.mark.parametrize(
+    ("labels", "message"),
+    [
+        # the second "base" replaced the first: two runs compared, the first given never read
+        (["base=c", "new=a", "base=a"], "label 'base' is given twice (c and a)"),
+        (["a=a", "a=a"], "label 'a' is given twice"),  # was "give at least two runs"
+    ],
+)
+def test_a_label_given_twice_is_refused(labels, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for name in ("a", "c"):
+        _run(tmp_path / name, [(True, False, 10.0)])
+    with pytest.raises(SystemExit) as stop:
+        paired_runs.main(labels)
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_csv_without_a_column_or_with_a_bad_row_is_a_one_line_error(tmp_path, capsys):
+    """A missing column was a KeyError traceback."""
+    a = _run(tmp_path / "a", [(True, False, 10.0)])
+    short = tmp_path / "short"
+    short.mkdir()
+    (short / "episodes.csv").write_text("method,n_humans,scenario,seed,success\nCMPC,7,circle,0,True\n")
+    assert paired_runs.run_main(lambda: paired_runs.main([f"a={a}", f"b={short}"])) == 2
+    err = capsys.readouterr().err
+    assert f"error: {short / 'episodes.csv'}: no column collision, travel_time (not a `crowdmpc sweep`" in err
+    (short / "episodes.csv").write_text(",".join(FIELDS) + "\nCMPC,seven,circle,0,True,False,1.0\n")
+    assert paired_runs.run_main(lambda: paired_runs.main([f"a={a}", f"b={short}"])) == 2
+    assert f"{short / 'episodes.csv'}, line 2: not an episode's row" in capsys.readouterr().err
