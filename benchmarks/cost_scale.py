@@ -15,6 +15,7 @@ in one run, and read the ratios.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -34,6 +35,7 @@ import robot_scaling  # noqa: E402
 from bench_cli import (  # noqa: E402
     check_not_input,
     episode_count,
+    figure,
     human_count,
     output_file,
     predictor_name,
@@ -122,12 +124,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'M':>3} {'scale':>6} {'solves':>6} {'failed':>6} {'fail%':>6} {'it med':>6} {'it p90':>6} "
           f"{'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'succ%':>6}")  # fmt: skip
     for r in rows:
+        failed = 100 * r["fatrop_failed"] / r["fatrop_solves"] if r["fatrop_solves"] else math.nan
         print(
             f"{r['robots']:>3} {r['cost_scale']:>6g} {r['fatrop_solves']:>6} {r['fatrop_failed']:>6} "
-            f"{100 * r['fatrop_failed'] / max(r['fatrop_solves'], 1):>6.1f} {r['iterations_median']:>6.1f} "
-            f"{r['iterations_p90']:>6.1f} {r['step_median_ms']:>7.1f} {r['step_p95_ms']:>7.1f} "
+            f"{figure(failed, '>6.1f')} {figure(r['iterations_median'], '>6.1f')} "
+            f"{figure(r['iterations_p90'], '>6.1f')} {r['step_median_ms']:>7.1f} {r['step_p95_ms']:>7.1f} "
             f"{r['step_p99_ms']:>7.1f} {r['success_rate']:>6.1f}"
         )
+    if any(not math.isfinite(r["iterations_median"]) for r in rows):  # the config's solver is not Fatrop
+        print("-: none solved by Fatrop in that row (no Fatrop solve, or every one failed)")
     if args.json:
         write_json(args.json, {"args": vars(args), "rows": rows})
     return 0

@@ -18,6 +18,7 @@ is printed.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -119,15 +120,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"exact solves from the first-order plan ({row['steps']} steps, max_iter {args.max_iter}):")
     for status, count in row["statuses"].items():
         print(f"  {status:<32} {count:5d}")
-    print(
-        f"  IPOPT iterations median {row['exact_iterations_median']:.1f}, p90 "
-        f"{row['exact_iterations_p90']:.1f}; time median {row['exact_ms_median']:.0f} ms, p95 "
-        f"{row['exact_ms_p95']:.0f} ms"
+    # No step, or no exact solve that succeeded, leaves a figure unmeasured (NaN): said in words, not "nan".
+    if row["steps"]:
+        print(
+            f"  IPOPT iterations median {row['exact_iterations_median']:.1f}, p90 "
+            f"{row['exact_iterations_p90']:.1f}; time median {row['exact_ms_median']:.0f} ms, p95 "
+            f"{row['exact_ms_p95']:.0f} ms"
+        )
+    else:
+        print("  none solved: the first-order solve never succeeded, so no exact solve was started")
+    gains = (
+        f"median {row['F_gain_median']:.2e}, max {row['F_gain_max']:.2e}"
+        if math.isfinite(row["F_gain_median"])
+        else f"none solved (the exact solve succeeded on none of the {row['steps']} steps)"
     )
-    print(
-        f"  F(first-order plan) - F(exact solution), solved steps: median {row['F_gain_median']:.2e}, "
-        f"max {row['F_gain_max']:.2e}"
-    )
+    print(f"  F(first-order plan) - F(exact solution), solved steps: {gains}")
     if args.json:
         write_json(args.json, row)
     return 0
