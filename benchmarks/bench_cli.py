@@ -89,6 +89,15 @@ def check_not_input(
         parser.error(str(exc))
 
 
+def check_distinct(parser: argparse.ArgumentParser, option: str, values: Sequence[Any]) -> None:
+    """After parsing: each of ``option``'s values once (``crowdmpc sweep --humans``'s rule), else the parser's
+    one-line error. A repeat ran its rows twice and printed them twice, and where the report is keyed by the
+    value, the JSON kept one of them (control_step.py --humans 1 1: 6 rows printed, 3 written)."""
+    repeated = next((v for i, v in enumerate(values) if v in values[:i]), None)
+    if repeated is not None:
+        parser.error(f"{option} names {repeated} more than once")
+
+
 def mpc_sets(texts: Sequence[str]) -> list[str]:
     """``--mpc KEY=VALUE`` items as the ``--set mpc.KEY=VALUE`` items the config loader parses; a malformed
     one is named in ``--mpc``'s own form."""

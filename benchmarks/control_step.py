@@ -34,7 +34,15 @@ from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import episode_count, human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import (  # noqa: E402
+    check_distinct,
+    episode_count,
+    human_count,
+    output_file,
+    predictor_name,
+    run_main,
+    write_json,
+)
 
 
 def _stats(seconds: list[float]) -> dict[str, float]:
@@ -100,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-ibr", action="store_true", help="skip the CMPC/DMPC/floor rows")
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
+    check_distinct(parser, "--humans", args.humans)  # the JSON's rows are keyed by it
     if args.no_ibr and not args.coupled and not (args.dmpc_parallel and 7 in args.humans):
         parser.error(
             "nothing to measure: --no-ibr leaves --coupled and --dmpc-parallel (which runs at 7 humans)"

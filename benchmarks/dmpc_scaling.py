@@ -63,6 +63,7 @@ from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    check_distinct,
     count_in,
     episode_bar,
     episode_count,
@@ -288,6 +289,8 @@ def _checked(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Overr
         extra = mpc_overrides(args.mpc)
     except PipelineError as exc:  # ConfigError and the other errors a value can cause
         parser.error(f"--mpc: {exc}")
+    for option in ("robots", "rules", "parallel"):  # the report's cells and rows are keyed by them
+        check_distinct(parser, f"--{option}", getattr(args, option))
     for rule in args.rules:
         update, _, stop = rule.partition(":")
         if update not in DMPC_UPDATES or stop not in DMPC_STOPS:

@@ -198,6 +198,18 @@ def test_run_main_ends_a_users_error_in_one_line_and_keeps_a_bugs_traceback(caps
         ("control_step", ["--predictor", "nosuch"], "unknown predictor 'nosuch'"),
         ("control_step", ["--no-ibr"], "nothing to measure"),
         ("run_all", ["--sweep-episodes", "1"], "--sweep-episodes must be >= 2"),
+        # a repeat ran twice and printed twice, and the JSON keyed by it kept one (6 rows printed, 3 written)
+        ("control_step", ["--humans", "0", "0", "--episodes", "1"], "--humans names 0 more than once"),
+        (
+            "dmpc_scaling",
+            ["--robots", "1", "1", "--humans", "0", "--episodes", "1", "--parallel", "serial"],
+            "--robots names 1 more than once",
+        ),
+        (
+            "dmpc_scaling",
+            ["--robots", "1", "--humans", "0", "--episodes", "1", "--parallel", "serial", "serial"],
+            "--parallel names serial more than once",
+        ),
     ],
 )
 def test_a_bad_command_line_stops_before_any_episode(script, argv, message, capsys, tmp_path, monkeypatch):
