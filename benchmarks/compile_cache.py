@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, output_file, run_main, write_json  # noqa: E402
+from bench_cli import count_in, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 # The predictor ablation as first measured (283 s with jit, 19 s without): its default list then.
@@ -44,6 +44,21 @@ ORIGINAL_SEVEN = (
     "constant_velocity,vanilla_lstm_eth,social_lstm_eth,social_lstm_soft_eth,social_gan_eth,"
     "social_lstm_synth,orca_oracle"
 )
+
+
+def predictor_names(text: str) -> str:
+    """An argparse ``type``: ``--predictors`` as ``crowdmpc sweep`` takes it (its ``predictor_list``: 1 to
+    the most names a swap table takes, each well-formed), each registered or in a zoo (``predictor_name``),
+    none twice; refused now with the parser's one line, not by the first sweep's exit status."""
+    from pipelines.commands.sweep import predictor_list
+
+    names = predictor_list(text)
+    for name in names:
+        predictor_name(name)
+    repeated = next((name for i, name in enumerate(names) if name in names[:i]), None)
+    if repeated is not None:
+        raise argparse.ArgumentTypeError(f"{repeated!r} is named more than once")
+    return ",".join(names)
 
 
 def run_sweep(out: Path, jit: str, episodes: int, predictors: str, env: dict[str, str]) -> dict[str, Any]:
@@ -117,7 +132,12 @@ def main() -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--episodes-per-cell", type=count_in("episodes per cell", 1), default=2)
-    parser.add_argument("--predictors", default=ORIGINAL_SEVEN, help="comma-separated (default: the seven)")
+    parser.add_argument(
+        "--predictors",
+        type=predictor_names,
+        default=ORIGINAL_SEVEN,
+        help="comma-separated, registered or in a zoo (default: the seven)",
+    )
     parser.add_argument(
         "--payback-episodes",
         type=count_in("payback episodes", 0),

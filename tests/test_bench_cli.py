@@ -77,6 +77,9 @@ ZERO_REPEATS = [
     ("run_all", ["--workers", "0"], "workers must be an integer >= 1"),
     ("compile_cache", ["--payback-episodes", "-1"], "payback episodes must be an integer >= 0"),
     ("sweep_kills", ["--episodes-per-cell", "0"], "episodes per cell must be an integer >= 1"),
+    # a name the sweep does not know failed only in the first sweep, exit 1
+    ("compile_cache", ["--predictors", "nope"], "argument --predictors: unknown predictor 'nope'"),
+    ("compile_cache", ["--predictors", "constant_velocity,,constant_velocity"], "named more than once"),
 ]
 
 
