@@ -23,6 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from pipelines.errors import PipelineError
+from pipelines.experiments.cells import EXPERIMENTS
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import count_in, predictor_name, run_main  # noqa: E402
 
@@ -47,10 +50,19 @@ def main() -> int:
     )
     parser.add_argument("--kills", type=count_in("kills", 0), default=10)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--experiment", default="table2")
-    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
+    parser.add_argument("--experiment", choices=sorted(EXPERIMENTS), default="table2")
+    parser.add_argument(
+        "--predictor",
+        type=predictor_name,
+        help="every method's predictor (default constant_velocity where the experiment can swap it)",
+    )
     parser.add_argument("--episodes-per-cell", type=count_in("episodes per cell", 1), default=12)
     args = parser.parse_args()
+    if not EXPERIMENTS[args.experiment].predictor_swappable:
+        if args.predictor is not None:  # the sweep refuses it in every round
+            parser.error(f"--predictor: experiment {args.experiment!r} has no predictor to replace")
+    elif args.predictor is None:
+        args.predictor = "constant_velocity"
     rng = random.Random(args.seed)
     before = scratch()
     with tempfile.TemporaryDirectory(prefix="sweep-kills-") as tmp:
@@ -69,6 +81,11 @@ def main() -> int:
             proc.wait()
             print(f"kill {k + 1:2d} after {delay:.2f} s: {len(records(out))} records")
         done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+        if done.returncode != 0:  # the sweep's own words: what a "no sweep.json" below would have hidden
+            said = "\n".join(done.stderr.strip().splitlines()[-20:])
+            print(f"the final sweep exited {done.returncode}:\n{said}", file=sys.stderr)
+            if not (out / "sweep.json").is_file():
+                raise PipelineError(f"the sweep failed (exit {done.returncode}) before it planned a run")
         lines = records(out)
         keys, torn = [], 0
         for line in lines:  # the last run repairs a line a kill cut; one left here is a failure

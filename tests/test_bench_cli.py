@@ -77,6 +77,17 @@ ZERO_REPEATS = [
     ("run_all", ["--workers", "0"], "workers must be an integer >= 1"),
     ("compile_cache", ["--payback-episodes", "-1"], "payback episodes must be an integer >= 0"),
     ("sweep_kills", ["--episodes-per-cell", "0"], "episodes per cell must be an integer >= 1"),
+    # an experiment the sweep does not know ended in a FileNotFoundError about sweep.json
+    (
+        "sweep_kills",
+        ["--experiment", "nope", "--kills", "0"],
+        "argument --experiment: invalid choice: 'nope'",
+    ),
+    (
+        "sweep_kills",
+        ["--experiment", "predictors", "--predictor", "constant_velocity", "--kills", "0"],
+        "experiment 'predictors' has no predictor to replace",
+    ),  # fmt: skip
     # a name the sweep does not know failed only in the first sweep, exit 1
     ("compile_cache", ["--predictors", "nope"], "argument --predictors: unknown predictor 'nope'"),
     ("compile_cache", ["--predictors", "constant_velocity,,constant_velocity"], "named more than once"),
@@ -284,3 +295,20 @@ def test_every_help_example_parses_as_printed(script, argv, tmp_path, monkeypatc
     module = load_benchmark(script)
     with pytest.raises(_Parsed):
         module.main(argv) if module.main.__code__.co_argcount else module.main()
+
+
+def test_sweep_kills_reports_the_sweeps_own_error(capsys, monkeypatch):
+    """A sweep that failed before writing sweep.json was reported as FileNotFoundError for sweep.json."""
+    import subprocess
+
+    sweep_kills = load_benchmark("sweep_kills")
+
+    def failed(cmd, **kwargs):
+        return subprocess.CompletedProcess(cmd, 2, "", "crowdmpc sweep: error: the reason the sweep gave\n")
+
+    monkeypatch.setattr(sweep_kills.subprocess, "run", failed)
+    monkeypatch.setattr(sys, "argv", ["sweep_kills.py", "--kills", "0"])
+    assert bench_cli.run_main(sweep_kills.main) == 2
+    err = capsys.readouterr().err
+    assert "the final sweep exited 2:\ncrowdmpc sweep: error: the reason the sweep gave" in err
+    assert "error: the sweep failed (exit 2) before it planned a run" in err
