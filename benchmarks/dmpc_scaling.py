@@ -13,7 +13,8 @@ every episode; IBR iterations per step (mean) and the share of steps that ran to
 step; the local-solve phase (``DMPC._solve_all``: every local solve of the step) in ms per step (mean); and
 success / collision / timeout counts (a collision is an episode in which some robot came within d_min of a
 human; it does not end the episode, so an episode can count as both a success and a collision). Then, per
-(M, rule), the threads-over-serial speed-up of the step median and of the local-solve phase.
+(M, rule), the threads' speed-up (serial / threads: above 1, threads are faster) of the step median and of
+the local-solve phase.
 
 ``--replay``: the local-solve phase alone, on the iterations recorded from one serial episode of each
 (M, rule): every recorded batch of M local problems is solved by DMPC's serial and threaded code paths
@@ -348,7 +349,8 @@ def _print_report(report: dict[str, Any], args: argparse.Namespace, extra: Overr
         if "serial" in rows and "threads" in rows:
             s, t = rows["serial"], rows["threads"]
             line = (
-                f"{'':>2} {'':<32} threads/serial: step median x{s['median_ms'] / t['median_ms']:.2f}, "
+                f"{'':>2} {'':<32} speed-up (serial / threads): step median "
+                f"x{s['median_ms'] / t['median_ms']:.2f}, "
                 f"phase x{s['phase_ms_per_step'] / t['phase_ms_per_step']:.2f}, "
                 f"same trajectories: {cell['same']}"
             )

@@ -42,3 +42,29 @@ def test_mpc_values_reach_every_controller_and_the_rule_wins_its_own_keys():
         assert (controller.cfg.dmpc_update, controller.cfg.dmpc_stop) == ("jacobi", "regret")
     finally:
         controller.close()
+
+
+def test_the_threads_speed_up_is_labelled_serial_over_threads(capsys):
+    """The line read "threads/serial: step median x0.82" for serial / threads (a speed-up below 1: threads
+    slower), the inverse of what it said."""
+    import argparse
+
+    def row(median_ms: float, phase_ms: float) -> dict:
+        return {"median_ms": median_ms, "p95_ms": 1.0, "p99_ms": 1.0, "iterations_mean": 2.0, "at_j_max": 0.0,
+                "solves_per_step": 3.0, "phase_ms_per_step": phase_ms, "success": 1, "collision": 0,
+                "timeout": 0, "episodes": 1}  # fmt: skip
+
+    report = {
+        "cpus": 2,
+        "load_before": (0.0, 0.0, 0.0),
+        "load_after": (0.0, 0.0, 0.0),
+        "wall_s": 1.0,
+        "cells": {
+            "r3 jacobi:regret": {"rows": {"serial": row(8.2, 6.0), "threads": row(10.0, 4.0)}, "same": True}
+        },
+    }
+    args = argparse.Namespace(humans=7, episodes=1)
+    dmpc_scaling._print_report(report, args, ())
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert "speed-up (serial / threads): step median x0.82, phase x1.50, same trajectories: True" in line
+    assert "threads/serial" not in line
