@@ -150,9 +150,18 @@ def episode_bar(episodes: int, desc: str) -> Iterator[int]:
 
 def run_main(main: Callable[[], int | None]) -> int:
     """A script's ``main()`` (its command line from ``sys.argv``), with the errors a user can cause printed as
-    one line and exit status 2."""
+    one line and exit status 2, and a reader that left (``... | head``) ending it quietly, as ``crowdmpc``."""
+    from pipelines.commands import quit_closed_stdout, stdout_reader_left
+
     try:
-        return int(main() or 0)
+        try:
+            return int(main() or 0)
+        finally:
+            sys.stdout.flush()
+    except BrokenPipeError:
+        if not stdout_reader_left():
+            raise
+        return quit_closed_stdout()
     except USER_ERRORS as exc:
         print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
         return 2

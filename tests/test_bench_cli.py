@@ -94,6 +94,22 @@ ZERO_REPEATS = [
 ]
 
 
+def test_a_reader_that_left_ends_a_benchmark_quietly(monkeypatch):
+    """`benchmarks/X.py | head` ended in a BrokenPipeError traceback; crowdmpc's commands end quietly, with
+    the status of a SIGPIPE, and so do the benchmarks. Another pipe's error is a real one."""
+    import pipelines.commands as commands
+
+    def prints_to_a_closed_pipe() -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(commands, "quit_closed_stdout", lambda: commands.CLOSED_PIPE_STATUS)
+    monkeypatch.setattr(commands, "stdout_reader_left", lambda: True)
+    assert bench_cli.run_main(prints_to_a_closed_pipe) == commands.CLOSED_PIPE_STATUS
+    monkeypatch.setattr(commands, "stdout_reader_left", lambda: False)  # a worker's pipe, say
+    with pytest.raises(BrokenPipeError):
+        bench_cli.run_main(prints_to_a_closed_pipe)
+
+
 @pytest.mark.parametrize(
     ("script", "argv", "message"), ZERO_REPEATS, ids=[f"{s} {' '.join(a)}" for s, a, _ in ZERO_REPEATS]
 )
