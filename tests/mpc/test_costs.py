@@ -39,6 +39,10 @@ def test_reference_trajectory_moves_at_v_max_and_stops_on_the_goal():
     # Along (3, 4) / 5: 0.4 * (0.6, 0.8) = (0.24, 0.32) per step.
     ref = costs.reference_trajectory(ca.DM([1, 1]), ca.DM([4, 5]), 2, 0.4, 1.0)
     np.testing.assert_allclose(ref.full(), [[1.24, 1.48], [1.32, 1.64]], atol=1e-12)
+    # A goal 0.5 m away: the direction is the unit (0, 1), so 0.4 m, then the remaining 0.1 m. Dividing by
+    # max(||offset||, 1) instead of by ||offset|| would leave the direction (0, 0.5): 0.2, then 0.35.
+    ref = costs.reference_trajectory(ca.DM([0, 0]), ca.DM([0, 0.5]), 2, 0.4, 1.0)
+    np.testing.assert_allclose(ref.full(), [[0, 0], [0.4, 0.5]], atol=1e-12)
     # Standing on the goal: the reference stays there (no division by zero).
     ref = costs.reference_trajectory(ca.DM([2, 2]), ca.DM([2, 2]), 3, 0.4, 1.0)
     np.testing.assert_allclose(ref.full(), [[2, 2, 2], [2, 2, 2]])
@@ -50,6 +54,10 @@ def test_goal_cost_by_hand():
     reference = ca.DM([[0, 0], [0.4, 0.8]])
     cost = costs.goal_cost(positions, reference, ca.DM([0, 0]), ca.DM([0, 1]), 1e-3)
     assert value(cost) == pytest.approx(0.1 / 1.001)
+    # Eq. 7 divides by the distance to the goal, not its square: error (0, 0.1) -> 0.01, the goal 2 m away
+    # -> 0.01 / (2 + 0.001), not 0.01 / (4 + 0.001). (At 1 m, above, the two are the same.)
+    cost = costs.goal_cost(ca.DM([0, 0.1]), ca.DM([0, 0]), ca.DM([0, 0]), ca.DM([0, 2]), 1e-3)
+    assert value(cost) == pytest.approx(0.01 / 2.001, rel=1e-12)
 
 
 def test_acceleration_and_jerk_costs_by_hand():
@@ -78,6 +86,20 @@ def test_human_collision_cost_pairs_each_step_with_that_steps_humans():
     assert value(cost) == pytest.approx(expected)
 
 
+def test_human_collision_cost_takes_the_robots_position_at_each_step():
+    # H = 2, velocities 0 (so rho ||v||^2 adds nothing); the robot is at (0, 0), then at (5, 0); one human
+    # stands at (5, 0.5) at both steps. Step 1: 25.25 m^2 apart, g = 0.64 - 25.25 = -24.61, smax ~ 0;
+    # step 2: 0.25 m^2 apart, g = 0.64 - 0.25 = 0.39, smax = 0.39 + log1p(exp(-30 * 0.39)) / 30.
+    # Measured from the robot's first position at both steps the human would stay 5 m away: ~ 0.
+    positions = ca.DM([[0.0, 5.0], [0.0, 0.0]])
+    velocities = ca.DM.zeros(2, 2)
+    humans = ca.DM([[5.0, 5.0], [0.5, 0.5]])
+    got = value(costs.human_collision_cost(positions, velocities, humans, 1, CFG))
+    expected = sum(max(g, 0.0) + math.log1p(math.exp(-30 * abs(g))) / 30 for g in (-24.61, 0.39))
+    assert got == pytest.approx(expected, rel=1e-12)
+    assert got > 0.39
+
+
 def test_robot_collision_and_flocking_costs_by_hand():
     a, b = ca.DM([0, 0]), ca.DM([1, 0])
     # g = d_min^2 - d^2 = 0.64 - 1 = -0.36
@@ -86,6 +108,9 @@ def test_robot_collision_and_flocking_costs_by_hand():
     # (sqrt(d^2 + delta) - d_ij)^2 with d = 2: (sqrt(4.001) - 1.2)^2
     far = ca.DM([0, 2])
     assert value(costs.flocking_cost(a, far, CFG)) == pytest.approx((math.sqrt(4.001) - 1.2) ** 2)
+    # Eq. 15 sums over the horizon (no mean): 2 m apart at both of H = 2 steps counts twice.
+    a2, far2 = ca.DM([[0, 0], [0, 0]]), ca.DM([[0, 0], [2, 2]])
+    assert value(costs.flocking_cost(a2, far2, CFG)) == pytest.approx(2 * (math.sqrt(4.001) - 1.2) ** 2)
 
 
 def test_individual_and_shared_costs_are_the_weighted_sums():
@@ -109,6 +134,13 @@ def test_individual_and_shared_costs_are_the_weighted_sums():
     )
     assert shared == pytest.approx(expected)
     assert shared == pytest.approx(value(costs.shared_cost(other, track.positions, 7.0, CFG)))  # J_ij = J_ji
+    # The random robots above are far apart (their collision term is ~1e-22, w_coll could be anything):
+    # a second robot 0.5 m from this one at every step, inside d_min = 0.8 m.
+    near = track.positions + ca.repmat(ca.DM([0.3, 0.4]), 1, 3)
+    collision = value(costs.robot_collision_cost(track.positions, near, CFG))
+    assert collision == pytest.approx(3 * (0.39 + math.log1p(math.exp(-30 * 0.39)) / 30))
+    expected = 1e7 * collision + 7.0 * value(costs.flocking_cost(track.positions, near, CFG))
+    assert value(costs.shared_cost(track.positions, near, 7.0, CFG)) == pytest.approx(expected)
 
 
 def test_pair_index_enumerates_unordered_pairs_row_major():
@@ -251,3 +283,36 @@ def test_each_weight_multiplies_its_own_term():
     assert value(costs.individual_cost(track, ca.DM([1.0, 0.0]), 1, cfg)) == pytest.approx(
         expected, rel=1e-12
     )
+
+
+def test_shared_cost_weights_the_robot_collision_by_hand():
+    """Eq. 14's w_coll multiplies the robot-robot term: H = 1, robots 0.5 m apart, w_coll = 5.
+    g = d_min^2 - d^2 = 0.64 - 0.25 = 0.39, smax(0.39) = 0.39 + log1p(exp(-30 * 0.39)) / 30."""
+    cfg = MPCConfig(horizon=1, w_coll=5.0)
+    a, b = ca.DM([0.0, 0.0]), ca.DM([0.5, 0.0])
+    smax = 0.39 + math.log1p(math.exp(-30 * 0.39)) / 30
+    assert value(costs.shared_cost(a, b, 0.0, cfg)) == pytest.approx(5.0 * smax, rel=1e-12)
+    # with flocking weight 7: + 7 (sqrt(0.25 + 0.001) - 1.2)^2
+    flock = (math.sqrt(0.251) - 1.2) ** 2
+    assert value(costs.shared_cost(a, b, 7.0, cfg)) == pytest.approx(5.0 * smax + 7.0 * flock, rel=1e-12)
+
+
+def test_individual_cost_takes_the_jerk_from_the_last_applied_action():
+    """Eq. 10's a_{t-1} is the track's last action: H = 1, weights 1, the robot standing at the origin with
+    a_0 = (0, 0) after a_-1 = (1, 2), goal (0, 1), no humans.
+    goal: the robot stays at (0, 0), the reference is 0.4 m towards the goal: 0.16 / (1 + 0.001);
+    acce: 0; jerk: (0 - 1)^2 + (0 - 2)^2 = 5 (0 if a_-1 were taken as 0)."""
+    cfg = MPCConfig(horizon=1, w_goal=1.0, w_acce=1.0, w_jerk=1.0, w_coll=1.0)
+    track = costs.make_track(ca.DM.zeros(4), ca.DM.zeros(2, 1), ca.DM([1.0, 2.0]), ca.DM([0.0, 1.0]), cfg.dt)
+    got = value(costs.individual_cost(track, ca.DM.zeros(2, 0), 0, cfg))
+    assert got == pytest.approx(0.16 / 1.001 + 5.0, rel=1e-12)
+
+
+def test_individual_cost_references_at_the_configured_v_max():
+    """Eq. 8's reference advances tau v_max per step with the config's v_max: v_max = 2 m/s, H = 1, weights
+    1, the robot standing at the origin, no controls, goal (0, 5). The reference is 0.4 x 2 = 0.8 m towards
+    the goal, the robot stays: 0.8^2 / (5 + 0.001) (0.4^2 / 5.001 at 1 m/s)."""
+    cfg = MPCConfig(horizon=1, v_max=2.0, w_goal=1.0, w_acce=1.0, w_jerk=1.0, w_coll=1.0)
+    track = costs.make_track(ca.DM.zeros(4), ca.DM.zeros(2, 1), ca.DM.zeros(2), ca.DM([0.0, 5.0]), cfg.dt)
+    got = value(costs.individual_cost(track, ca.DM.zeros(2, 0), 0, cfg))
+    assert got == pytest.approx(0.8**2 / 5.001, rel=1e-12)
