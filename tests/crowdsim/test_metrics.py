@@ -121,6 +121,8 @@ def test_aggregate_rates_and_counts():
     assert out["timeout_count"] == 1
     assert out["travel_time_mean"] == pytest.approx(0.4)
     assert out["min_distance_min"] == pytest.approx(0.5)
+    # the closest episode first: the minimum is over every episode, the first one included (hit 0.5 m, ok 3 m)
+    assert aggregate([hit, ok])["min_distance_min"] == pytest.approx(0.5)
     with pytest.raises(SimulationError, match="empty"):
         aggregate([])
 

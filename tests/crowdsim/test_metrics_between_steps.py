@@ -88,6 +88,18 @@ def test_between_steps_equals_sampled_when_nobody_comes_closer_in_between():
     assert min_distance_between_steps(np.zeros((1, 1, 2)), np.array([[[0.0, 2.0]]])) == 2.0
 
 
+def test_exactly_d_min_or_twice_the_radius_between_steps_is_no_collision_or_contact():
+    """As for the sampled flags, the thresholds are strict: a distance of exactly 0.8 m is no collision, of
+    exactly 0.6 m no contact (though a collision)."""
+    # Robot and human standing 0.8 m apart: 0.8 at both states and in between (no relative motion).
+    m = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.8, 0.0]]] * 2))
+    assert m.min_distance_between_steps == 0.8
+    assert not m.collision_between_steps and not m.collision
+    m = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.6, 0.0]]] * 2))
+    assert m.min_distance_between_steps == 0.6
+    assert m.collision_between_steps and not m.contact_between_steps and not m.contact
+
+
 def test_without_humans_the_distance_is_inf_and_null_round_trips():
     alone = episode_metrics(make_traj([[[0.0, 0.0]], [[0.0, 1.0]]], np.zeros((2, 0, 2))))
     assert alone.min_distance_between_steps == math.inf
