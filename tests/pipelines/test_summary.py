@@ -10,7 +10,7 @@ import pytest
 from pipelines.errors import PipelineError
 from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.report import cell_rows
-from pipelines.experiments.summary import Rate, summarize_cell, t95, wilson_interval
+from pipelines.experiments.summary import Rate, paper_figures, summarize_cell, t95, wilson_interval
 from pipelines.experiments.tables import _best
 
 
@@ -89,9 +89,33 @@ def test_a_cells_distance_and_solver_figures_by_hand():
     assert s.step_median_ms == pytest.approx(11.0)
     # numpy's linear 95th percentile of 20, 30, 100: 30 + (1.9 - 1) x 70 = 93 (the 90th would be 86)
     assert s.step_p95_ms == pytest.approx(93.0)
-    # all control-step time over all steps: 600 ms / 30 steps (the mean of the totals would be 200)
+    # all control-step time over all steps: 600 ms / 30 steps (the mean of the totals would be 200). With 10
+    # steps in every episode this is also the mean of the episodes' means, (10 + 11 + 39) / 3: the test
+    # below tells the two apart.
     assert s.step_mean_ms == pytest.approx(20.0)
     assert s.success.count == 2 and s.success.n == 3
+
+
+def test_the_mean_step_time_pools_every_step_of_the_cell():
+    """step_mean_ms is all control-step time over all steps, so a long episode weighs by its steps: 10 steps
+    of 10 ms (100 ms) and 30 of 30 ms (900 ms) give 1000 ms / 40 steps = 25 ms, not the mean of the episodes'
+    means (10 + 30) / 2 = 20 ms."""
+    cell = get_experiment("table2").cells()[0]
+    short = _record(0, success=True, min_distance=1.0, median=10.0, p95=10.0, total=100.0)
+    long = _record(1, success=True, min_distance=1.0, median=30.0, p95=30.0, total=900.0)
+    long["solver"]["steps"] = 30
+    assert summarize_cell(cell, [short, long], None).step_mean_ms == pytest.approx(25.0)
+
+
+def test_the_papers_figures_go_to_the_papers_team_only():
+    """The paper's tables are all of PAPER_ROBOTS = 3 robots: a team of 2 or of 4 gets none."""
+    table2 = get_experiment("table2")
+    three, two, four = (table2.cells(n_robots=m)[0] for m in (3, 2, 4))
+    assert (three.method, three.n_humans) == (four.method, four.n_humans) == (two.method, two.n_humans)
+    assert paper_figures(table2, three) is table2.paper[(three.method, three.n_humans)]
+    assert paper_figures(table2, three) is not None
+    assert paper_figures(table2, two) is None
+    assert paper_figures(table2, four) is None
 
 
 def test_cells_csv_gives_the_travel_time_and_its_interval():
