@@ -30,7 +30,7 @@ from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, sw
 from pipelines.experiments.report import CELLS_CSV, write_report
 from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
 from pipelines.experiments.sweep import SweepConfig, mcap_path, run_sweep
-from pipelines.experiments.tables import markdown_table, mcnemar_exact
+from pipelines.experiments.tables import markdown_table, mcnemar_exact, paired_success
 from pipelines.experiments.tasks import World, scenario_schedule
 from pipelines.experiments.worker import EpisodeWorker, is_failure
 from pipelines.loop.controllers import ControllerSpec, make_controller
@@ -657,10 +657,17 @@ def test_markdown_table_is_laid_out_like_the_paper():
     # interval.
     assert table[5] == "| Average travel time (s) | **19.0 ± 2.5** | 21.0 | 18.0 ± 0.0 | 18.0 ± 0.0 |"
     assert table[6] == "| &nbsp;&nbsp;paper | **17.9** | 18.1 | **18.6** | 18.7 |"
-    assert table[7].startswith(
-        "| Collision rate (%) | 25.0 [4.6, 69.9] | 25.0 [4.6, 69.9] | 0.0 [0.0, 49.0] |"
+    # Collision and discomfort tie in both groups (1/4 and 0/4): unmarked. The paper's differ, and the lower
+    # is the better: 0.2 < 0.3 and 0.6 < 0.8; 0.5 < 0.6 and 1.2 < 1.5 (test_fewer_collisions_... below has
+    # our own rates differ).
+    assert table[7] == (
+        "| Collision rate (%) | 25.0 [4.6, 69.9] | 25.0 [4.6, 69.9] | 0.0 [0.0, 49.0] | 0.0 [0.0, 49.0] |"
     )
-    assert table[9].startswith("| Discomfort rate (%) |")
+    assert table[8] == "| &nbsp;&nbsp;paper | **0.2** | 0.3 | 0.8 | **0.6** |"
+    assert table[9] == (
+        "| Discomfort rate (%) | 25.0 [4.6, 69.9] | 25.0 [4.6, 69.9] | 0.0 [0.0, 49.0] | 0.0 [0.0, 49.0] |"
+    )
+    assert table[10] == "| &nbsp;&nbsp;paper | **0.5** | 0.6 | **1.2** | 1.5 |"
     assert "| Episodes | 4 | 4 | 4 | 4 |" in table
     # DMPC at 5 failed on crowds 1 and 2 where CMPC succeeded, and won none: 2 * (1/2)^2 = 0.5.
     assert (
@@ -668,6 +675,40 @@ def test_markdown_table_is_laid_out_like_the_paper():
         in "\n".join(table)
     )
     assert "| Success circle / perpendicular (%) | 100 / 50 | 50 / 0 | 100 / 100 | 100 / 100 |" in table
+
+
+def test_fewer_collisions_and_discomforts_are_the_better_method():
+    """Collision and discomfort rates are to be kept low: bold on the method with fewer.
+    CMPC 0 of 4 -> 0.0 [0.0, 49.0]; DMPC 2 of 4 -> 50.0 [15.0, 85.0] (Wilson: centre (0.5 + 1.96^2 / 8) /
+    (1 + 1.96^2 / 4) = 0.5, half width 1.96 sqrt(1/16 + 1.96^2 / 64) / 1.9604 = 0.35)."""
+    table2 = get_experiment("table2")
+    episodes = {
+        ("CMPC", 5): [(True, 18.0, False, False)] * 4,
+        ("DMPC", 5): [(True, 18.0, True, True)] * 2 + [(True, 18.0, False, False)] * 2,
+    }
+    lines = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes))).splitlines()
+    assert "| Collision rate (%) | **0.0 [0.0, 49.0]** | 50.0 [15.0, 85.0] |" in lines
+    assert "| Discomfort rate (%) | **0.0 [0.0, 49.0]** | 50.0 [15.0, 85.0] |" in lines
+
+
+def test_paired_success_counts_only_the_crowds_both_methods_ran():
+    """CMPC succeeded on 4 crowds, DMPC has run 2 of them so far and succeeded on both: no crowd was lost,
+    (0, 0, p = 1); the 2 crowds DMPC has not run are no failures of it."""
+    table2 = get_experiment("table2")
+    episodes = {("CMPC", 5): [(True, 18.0, False, False)] * 4, ("DMPC", 5): [(True, 18.0, False, False)] * 2}
+    reference, other = summarize(table2, table2.cells(), _records(table2, episodes))
+    assert (reference.cell.method, other.cell.method) == ("CMPC", "DMPC")
+    assert paired_success(reference, other) == (0, 0, 1.0)
+    table = markdown_table(table2, [reference, other])
+    assert "| Success, paired with the group's first method | reference | +0 / −0 (p = 1) |" in table
+
+
+def test_the_note_gives_the_range_of_episodes_per_cell():
+    """Cells of 4 and 3 episodes: "3–4" (an en dash), not the largest count alone."""
+    table2 = get_experiment("table2")
+    episodes = {("CMPC", 5): [(True, 18.0, False, False)] * 4, ("DMPC", 5): [(True, 18.0, False, False)] * 3}
+    markdown = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
+    assert "\nOurs: 3\u20134 episodes per cell, half circle and half perpendicular crossing," in markdown
 
 
 def test_the_papers_figures_stand_beside_its_own_team_size_only(tmp_path):

@@ -97,6 +97,19 @@ def test_a_controller_without_a_solver_has_no_solver_figures():
     assert "n/a: a solver's figure for a controller that runs none." in table
 
 
+def test_a_controller_without_a_solver_that_says_it_fell_back_shows_it():
+    """n/a is for a figure a controller has no use for; one that reports fallback steps (0 iterations, 2
+    fallbacks in each of 2 episodes of 40 steps: 4 / 80 = 5 %) shows them."""
+    experiment = get_experiment("controllers").with_predictor("constant_velocity")
+    cells = [c for c in experiment.cells((5,)) if c.method == "orca"]
+    summaries = summarize(experiment, cells, [_record(c, i, 0.0, 2) for c in cells for i in range(2)])
+    (orca,) = summaries
+    assert not orca.runs_solver and orca.fallback_step_rate == pytest.approx(5.0)
+    table = markdown_table(experiment, summaries)
+    assert "| IBR iterations per step (mean) | n/a |" in table
+    assert "| Fallback steps (%) | 5.00 |" in table
+
+
 def test_the_step_time_row_names_its_statistic():
     """Not "median / p95", which `simulate` and `review` use for the statistic pooled over all steps."""
     table2 = get_experiment("table2")
