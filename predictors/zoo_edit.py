@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
 from collections.abc import Collection
 from dataclasses import replace as replace_fields
@@ -87,8 +88,7 @@ def add_entry(
         previous = entries.get(name)
         if _unchanged(previous, entry, root, which, replace):
             return entry, entry
-        entries[name] = _write_pair(weights, config_bytes, entry, root)
-        write_manifest(entries, root)
+        _write_pair(weights, config_bytes, entry, root, entries)
     return entries[name], previous
 
 
@@ -132,15 +132,62 @@ def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: st
     raise PredictorError(_taken(entry.name, root, which, previous, entry))
 
 
-def _write_pair(weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path) -> ZooEntry:
-    """Copy ``weights`` and write the config as ``entry``'s files in ``root``; the entry with the copy's
-    sha256 (should the source have changed since it was hashed)."""
-    # resolved: a symbolic link NAME.pt in the zoo must not make us write elsewhere
-    target_weights, target_config = entry.paths(root, root / MANIFEST_NAME)
-    if weights.resolve() != target_weights:
-        shutil.copyfile(weights, target_weights)
-    target_config.write_bytes(config_bytes)
-    return replace_fields(entry, sha256=sha256_file(target_weights))
+def _write_pair(
+    weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path, entries: dict[str, ZooEntry]
+) -> None:
+    """Copy ``weights`` and write the config as ``entry``'s files in ``root`` and record the entry (with the
+    copy's sha256, should the source have changed since it was hashed) in ``entries`` and the manifest.
+
+    Never written over in place: an add interrupted at any instant (Ctrl-C, a kill, a full disk, a power
+    loss) leaves a manifest whose entries all name files holding what it records. The new pair is written
+    under temporary names (``.NAME.pt.PID.new``) and synced; the manifest then names those; then
+    NAME.pt and NAME.json are replaced by links to them (each in one rename); the manifest then names
+    NAME.pt and NAME.json; and the temporary names go. Until the first manifest switch, the old entry and its
+    files are as they were; after it, the entry's files are never the ones being replaced."""
+    entry.paths(root, root / MANIFEST_NAME)  # refuse a NAME.pt or NAME.json linked to outside the zoo
+    staged = [root / f".{file_name}.{os.getpid()}.new" for file_name in (entry.file, entry.config)]
+    try:
+        with weights.open("rb") as source, staged[0].open("wb") as copy:
+            shutil.copyfileobj(source, copy)
+            copy.flush()
+            os.fsync(copy.fileno())
+        with staged[1].open("wb") as copy:
+            copy.write(config_bytes)
+            copy.flush()
+            os.fsync(copy.fileno())
+        final = replace_fields(entry, sha256=sha256_file(staged[0]))
+        entries[entry.name] = replace_fields(final, file=staged[0].name, config=staged[1].name)
+        write_manifest(entries, root)
+    except BaseException:
+        for path in staged:
+            path.unlink(missing_ok=True)
+        raise
+    # The manifest names the staged pair: NAME.pt and NAME.json are nobody's files until it names them again.
+    # Not entry.paths(): a symbolic link NAME.pt in the zoo is replaced, never the file it points to.
+    for path, file_name in zip(staged, (entry.file, entry.config), strict=True):
+        _replace_with_link(path, root / file_name)
+    entries[entry.name] = final
+    write_manifest(entries, root)
+    for path in staged:
+        path.unlink(missing_ok=True)
+
+
+def _replace_with_link(source: Path, target: Path) -> None:
+    """Make ``target`` hold ``source``'s content in one rename: a hard link to it (a copy where the file
+    system has none), made under a temporary name first."""
+    link = target.with_name(f".{target.name}.{os.getpid()}.link")
+    link.unlink(missing_ok=True)
+    try:
+        try:
+            os.link(source, link)
+        except OSError:  # no hard links here (FAT, some network file systems): a synced copy
+            with source.open("rb") as original, link.open("wb") as copy:
+                shutil.copyfileobj(original, copy)
+                copy.flush()
+                os.fsync(copy.fileno())
+        os.replace(link, target)
+    finally:
+        link.unlink(missing_ok=True)
 
 
 def user_name_refusal(name: str) -> str | None:

@@ -171,6 +171,67 @@ def test_a_shipped_model_is_replaced_only_with_replace(shipped, pair, capsys):
     assert new.sha256 == hashlib.sha256(other.read_bytes()).hexdigest() != first.sha256
 
 
+# ------------------------------------------------------------------------------------ interrupted replaces
+class Interrupted(BaseException):
+    """A Ctrl-C or a kill at that instant (BaseException, as KeyboardInterrupt: no handler catches it)."""
+
+
+def half_copy(source, destination, *_args, **_kwargs):
+    """shutil.copyfile / copyfileobj that writes half the file, then is interrupted."""
+    if isinstance(source, (str, Path)):
+        data = Path(source).read_bytes()
+        Path(destination).write_bytes(data[: len(data) // 2])
+    else:
+        data = source.read()
+        destination.write(data[: len(data) // 2])
+        destination.flush()
+    raise Interrupted
+
+
+def entry_state(root: Path, name: str) -> tuple[str | None, str]:
+    """The zoo's verdict on ``name`` (None: loads, hashes as recorded) and the sha256 its entry records."""
+    problems = dict(zoo.verify(root))
+    return problems[name], zoo.read_manifest(root)[name].sha256
+
+
+def test_a_replace_interrupted_while_copying_keeps_the_old_entry(tmp_path, user, monkeypatch):
+    old = zoo.read_manifest(user)["mine"]
+    new = retrained(copy_pair(tmp_path / "run2"), "mine2")
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(shutil, "copyfile", half_copy)
+        patched.setattr(shutil, "copyfileobj", half_copy)
+        zoo_edit.add_to_zoo(new, name="mine", protocol="p", training_data={}, metrics={}, replace=True)
+    assert entry_state(user, "mine") == (None, old.sha256)
+    assert hashlib.sha256((user / "mine.pt").read_bytes()).hexdigest() == old.sha256
+    # the same command again finishes the replace, and leaves no temporary file
+    zoo_edit.add_to_zoo(new, name="mine", protocol="p", training_data={}, metrics={}, replace=True)
+    assert entry_state(user, "mine") == (None, hashlib.sha256(new.read_bytes()).hexdigest())
+    assert not [p.name for p in user.iterdir() if p.name.startswith(".mine")]
+
+
+@pytest.mark.parametrize("call", [1, 2, 3])
+def test_a_replace_interrupted_at_any_later_step_leaves_a_consistent_entry(tmp_path, user, monkeypatch, call):
+    """Interrupted at the manifest's first write, a rename into place, or its last write: the entry loads
+    and is the old model or the new one."""
+    old = zoo.read_manifest(user)["mine"]
+    new = retrained(copy_pair(tmp_path / "run2"), "mine2")
+    new_sha = hashlib.sha256(new.read_bytes()).hexdigest()
+    calls = []
+    real_replace = os.replace
+
+    def replace(source, target, *args, **kwargs):
+        calls.append(target)  # every rename: the manifest's, and each file's into place
+        if len(calls) == call:
+            raise Interrupted
+        return real_replace(source, target, *args, **kwargs)
+
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(os, "replace", replace)
+        zoo_edit.add_to_zoo(new, name="mine", protocol="p", training_data={}, metrics={}, replace=True)
+    problem, recorded = entry_state(user, "mine")
+    assert problem is None and recorded in (old.sha256, new_sha)
+
+
 # ---------------------------------------------------------------------------------- parallel adds, removes
 CHILD = """
 import sys, time
