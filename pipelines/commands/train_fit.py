@@ -11,6 +11,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pipelines.commands import replace_file
+
 
 def run_training(
     args: argparse.Namespace,
@@ -28,10 +30,14 @@ def run_training(
     optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
     _prepare_process(args.seed)
     module, best_path, elapsed = _fit(args, net_config, name, out, data_files[0], settings, optim)
+    metrics = out / f"{name}.metrics.json"
+    # gone before the weights change: a run stopped before its new metrics are written is visibly unfinished
+    # (--resume then finishes it), never new weights beside the metrics of the old ones
+    metrics.unlink(missing_ok=True)
     weights, extra = _save_best(args, module, name, out, best_path, optim)
     top_k = 20 if model_kind(args.model).adversarial else None
     summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k)
-    (out / f"{name}.metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
+    replace_file(metrics, lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=2) + "\n"))
     print_summary(summary, Path(best_path).name, weights, top_k)
     return 0
 
@@ -95,7 +101,11 @@ def _fit(
 def _save_best(
     args: argparse.Namespace, module: Any, name: str, out: Path, best_path: str, optim: Any
 ) -> tuple[Path, dict[str, Any]]:
-    """Writes OUT/NAME.pt + NAME.json; returns the weights' path and the training record they carry."""
+    """Writes OUT/NAME.pt + NAME.json, each in one rename (written in a temporary folder in OUT first: an
+    interrupted save leaves no half file); returns the weights' path and the training record they carry."""
+    import shutil
+    import tempfile
+
     from pipelines.commands.train_report import trained_loss
     from predictors.base import OBS_LEN
     from predictors.checkpoint import save_checkpoint
@@ -111,10 +121,16 @@ def _save_best(
             "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
         }
     }
-    weights, _ = save_checkpoint(
-        module.net, model=args.model, name=name, out_dir=out, obs_len=OBS_LEN, extra=extra
-    )
-    return weights, extra
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".part", dir=out))
+    try:
+        written = save_checkpoint(
+            module.net, model=args.model, name=name, out_dir=staging, obs_len=OBS_LEN, extra=extra
+        )
+        for path in written:
+            path.replace(out / path.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out / written[0].name, extra
 
 
 def _summary(
@@ -131,6 +147,7 @@ def _summary(
     from pipelines.commands.train_report import data_record, epoch_times_from_csv, evaluate_splits
     from pipelines.version import code_identity
     from predictors.checkpoint import load_checkpoint
+    from predictors.hashing import sha256_file
 
     files, root = data_files
     protocol = "custom" if args.train is not None or args.val is not None else args.protocol
@@ -142,6 +159,8 @@ def _summary(
     return {
         "name": name,
         "model": args.model,
+        # what ties these metrics to their weights: `zoo add` refuses them beside other ones
+        "weights_sha256": sha256_file(weights),
         "code": code_identity(),
         "protocol": protocol,
         "training_data": data_record(files, root, protocol),

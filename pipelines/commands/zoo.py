@@ -289,27 +289,42 @@ def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:
 
 
 def _check_metrics_describe(weights: Path, metrics_path: Path, summary: dict) -> None:
-    """Refuse a metrics file that `crowdmpc train` wrote for another checkpoint: the zoo entry would list
-    metrics of other weights. Train records the checkpoint's name and model kind, which its config holds too
-    (the config's errors are left to the loading that follows)."""
+    """Refuse a metrics file that `crowdmpc train` wrote for other weights: the zoo entry would list metrics
+    of other weights. Train records the weights' sha256 (since this check), and the checkpoint's name, model
+    kind and epochs, which its config holds too (the config's errors are left to the loading that follows).
+    The epochs tell apart a resumed run's new weights from the metrics of its earlier, shorter run."""
     from predictors import checkpoint
     from predictors.errors import PredictorError
+    from predictors.hashing import sha256_file
 
-    for key in ("name", "model"):
+    for key in ("name", "model", "weights_sha256"):
         if key in summary and not isinstance(summary[key], str):
             raise PipelineError(f'{metrics_path}: "{key}" must be a string (the checkpoint\'s {key})')
+    recorded = summary.get("weights_sha256")
+    if recorded is not None and weights.is_file() and recorded != sha256_file(weights):
+        raise PipelineError(
+            f"{metrics_path} holds the metrics of weights with sha256 {recorded[:12]}…, not of {weights} "
+            f"({sha256_file(weights)[:12]}…); pass the NAME.metrics.json `crowdmpc train` wrote beside these "
+            "weights (a run stopped before writing it: finish it with `crowdmpc train --resume`)"
+        )
     config = weights.with_suffix(".json")
-    if not ({"name", "model"} & summary.keys()) or not config.is_file():
+    if not ({"name", "model", "training"} & summary.keys()) or not config.is_file():
         return
     try:
         document = checkpoint.read_document(config, checkpoint.CONFIG_FORMAT, "crowdmpc predictor config")
     except PredictorError:
         return  # add_to_zoo refuses it with the whole story
-    own = {"name": document.get("name", weights.stem), "model": document.get("model")}
+    trained = document.get("training")
+    own = {
+        "name": document.get("name", weights.stem),
+        "model": document.get("model"),
+        "epochs": trained.get("epochs") if isinstance(trained, dict) else None,
+    }
+    claimed = {**summary, "epochs": summary.get("training", {}).get("epochs")}
     for key, value in own.items():
-        if key in summary and isinstance(value, str) and summary[key] != value:
+        if claimed.get(key) is not None and value is not None and claimed[key] != value:
             raise PipelineError(
-                f"{metrics_path} holds the metrics of {key} {summary[key]!r}, not of {weights} ({key} "
+                f"{metrics_path} holds the metrics of {key} {claimed[key]!r}, not of {weights} ({key} "
                 f"{value!r} in {config.name}); pass the NAME.metrics.json "
                 "`crowdmpc train` wrote beside these weights"
             )

@@ -115,6 +115,59 @@ def test_resume_refuses_to_train_no_epoch(trained, capsys):
     assert json.loads(outputs[2].read_text())["training"]["epochs"] == 2
 
 
+class Interrupted(BaseException):
+    """A Ctrl-C or a kill at that instant (BaseException, as KeyboardInterrupt: no handler catches it)."""
+
+
+def resumed_to(args: list[str], epochs: str) -> list[str]:
+    at = args.index("--epochs") + 1
+    return [*args[:at], epochs, *args[at + 1 :], "--resume"]
+
+
+def test_a_resume_interrupted_in_its_evaluation_is_finished_by_resume(trained, tmp_path, monkeypatch, capsys):
+    """Stopped while evaluating its new weights, a resumed run left them beside the metrics of its earlier,
+    shorter run: `zoo add` took those, and the same --resume then refused ("trained 2 epochs already")."""
+    from pipelines.commands import train_report
+
+    out, args = trained
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+
+    def interrupted(*_args, **_kwargs):
+        raise Interrupted
+
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(train_report, "evaluate_splits", interrupted)
+        main(resumed_to(args, "2"))
+    assert not (out / "walker.metrics.json").exists()
+    capsys.readouterr()
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 2
+    assert "walker.metrics.json does not exist" in capsys.readouterr().err
+    assert main(resumed_to(args, "2")) == 0
+    assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 0
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary left behind
+
+
+def test_zoo_add_refuses_the_metrics_of_other_weights(trained, tmp_path, monkeypatch, capsys):
+    """The metrics of a run's first epoch beside its resumed weights: told apart by the weights' sha256 the
+    metrics record, and in a metrics file written before they did, by the epochs."""
+    from predictors.hashing import sha256_file
+
+    out, args = trained
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+    metrics = out / "walker.metrics.json"
+    first = json.loads(metrics.read_text())
+    assert first["weights_sha256"] == sha256_file(out / "walker.pt")
+    assert main(resumed_to(args, "2")) == 0
+    capsys.readouterr()
+    metrics.write_text(json.dumps(first))
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 2
+    assert "holds the metrics of weights with sha256" in capsys.readouterr().err
+    metrics.write_text(json.dumps({k: v for k, v in first.items() if k != "weights_sha256"}))
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 2
+    assert "holds the metrics of epochs 1, not of" in capsys.readouterr().err
+
+
 def test_the_data_record_names_every_file(tmp_path):
     """Files were recorded by bare name: --train d1/t.ndjson d2/t.ndjson recorded one of them, and the
     combined hash left the other out. Names are relative to the files' common directory now; one file, or
