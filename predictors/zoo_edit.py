@@ -301,6 +301,34 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
     return entry, root
 
 
+def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:
+    """Remove the files of model ``name`` that no entry of the user zoo (``directory``, else
+    ``user_zoo_dir()``) names: NAME.pt and NAME.json left by a ``remove_from_zoo`` interrupted after its
+    manifest write, and the temporary copies (.NAME.pt.PID.new, .link) of an interrupted add. Returns the
+    files removed (none: nothing to do) and the zoo directory."""
+    check_name(name)
+    root = writable_zoo_dir(directory)
+    if not root.is_dir():
+        return [], root  # the lock would create it
+    with zoo_lock(root):  # an add in progress holds it: its temporary files are not leftovers
+        entries = read_manifest(root)
+        manifest = root / MANIFEST_NAME
+        owned = {path for entry in entries.values() for path in entry.paths(root, manifest)}
+        candidates = [root / f"{name}.pt", root / f"{name}.json"]
+        for file_name in (f"{name}.pt", f"{name}.json"):
+            for kind in ("new", "link"):
+                candidates.extend(sorted(root.glob(f".{file_name}.*.{kind}")))
+        removed = []
+        for path in candidates:
+            if not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
+                continue
+            if path.resolve() in owned or path in owned:
+                continue
+            path.unlink()
+            removed.append(path)
+    return removed, root
+
+
 def _entry_to_remove(
     name: str, root: Path, entries: dict[str, ZooEntry], directory: str | Path | None
 ) -> ZooEntry:

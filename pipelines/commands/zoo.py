@@ -176,6 +176,7 @@ def format_list(located_entries) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from predictors import zoo, zoo_edit
+    from predictors.errors import PredictorError
 
     if args.zoo_command == "list":
         entries = zoo.zoo_entries(args.dir)
@@ -205,7 +206,16 @@ def run(args: argparse.Namespace) -> int:
     if args.zoo_command == "add":
         return _add(args)
     if args.zoo_command == "remove":
-        entry, root = zoo_edit.remove_from_zoo(args.name, args.dir)
+        try:
+            entry, root = zoo_edit.remove_from_zoo(args.name, args.dir)
+        except PredictorError:
+            # no entry: a remove interrupted after its manifest write may have left the files behind
+            leftovers, root = zoo_edit.remove_leftovers(args.name, args.dir)
+            if not leftovers:
+                raise
+            names = ", ".join(path.name for path in leftovers)
+            print(f"{args.name} has no entry in the user zoo {root}; removed its leftover files {names}")
+            return 0
         print(f"removed {entry.name} from the user zoo {root}")
         return 0
     raise PipelineError(f"unknown zoo action {args.zoo_command!r}")

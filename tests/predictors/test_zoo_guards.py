@@ -232,6 +232,26 @@ def test_a_replace_interrupted_at_any_later_step_leaves_a_consistent_entry(tmp_p
     assert problem is None and recorded in (old.sha256, new_sha)
 
 
+def test_a_remove_interrupted_after_its_manifest_write_is_finished_by_remove(user, monkeypatch, capsys):
+    """The manifest without "mine", its 34 MB of files still there: `zoo remove mine` said "has no entry"
+    and left them for good."""
+
+    def interrupted(*_args, **_kwargs):
+        raise Interrupted
+
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(Path, "unlink", interrupted)  # after the manifest's rename, before the files go
+        zoo_edit.remove_from_zoo("mine", user)
+    assert "mine" not in zoo.read_manifest(user) and (user / "mine.pt").is_file()
+    (user / ".mine.pt.123.new").write_bytes(b"an add's temporary copy")
+    code, out, _ = cli(["zoo", "remove", "mine"], capsys)
+    assert code == 0 and "removed its leftover files mine.pt, mine.json, .mine.pt.123.new" in out
+    own = [CALIBRATIONS_NAME, manifest.MANIFEST_NAME, manifest.LOCK_NAME]
+    assert sorted(p.name for p in user.iterdir()) == sorted(own)
+    code, _, line = cli(["zoo", "remove", "mine"], capsys)
+    assert code == 2 and "has no entry 'mine'" in line
+
+
 # ---------------------------------------------------------------------------------- parallel adds, removes
 CHILD = """
 import sys, time
