@@ -207,7 +207,8 @@ def read_sweep_file(path: Path) -> dict[str, Any]:
 
 # What a sweep writes at the top of its directory besides the names above: the report (tables, CSVs, plots:
 # pipelines.experiments.report) and the temporary files replaced into place (".part").
-OWN_SUFFIXES: Final[tuple[str, ...]] = (".csv", ".md", ".png", ".part")
+PART_SUFFIX: Final[str] = ".part"
+OWN_SUFFIXES: Final[tuple[str, ...]] = (".csv", ".md", ".png", PART_SUFFIX)
 
 
 def check_sweep_directory(out: Path, option: str = "--out") -> None:
@@ -217,7 +218,9 @@ def check_sweep_directory(out: Path, option: str = "--out") -> None:
     if not out.is_dir():
         return
     entries = {entry.name: entry for entry in out.iterdir()}
-    if entries.keys() - {LOCK_FILE} and not entries.keys() & {SWEEP_FILE, EPISODES_FILE}:
+    # the lock and the temporary sweep.json of a sweep stopped while it wrote its first record are its own
+    leftovers = {LOCK_FILE, *(name + PART_SUFFIX for name in (SWEEP_FILE, EPISODES_FILE, ERRORS_FILE))}
+    if entries.keys() - leftovers and not entries.keys() & {SWEEP_FILE, EPISODES_FILE}:
         raise PipelineError(
             f"{option} {out} holds files but no sweep ({SWEEP_FILE}, {EPISODES_FILE}); a sweep would "
             "overwrite them: choose an empty or new folder"

@@ -37,6 +37,7 @@ from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
     ERRORS_FILE,
     MCAP_DIR,
+    PART_SUFFIX,
     SWEEP_FILE,
     EpisodeLog,
     check_sweep_directory,
@@ -137,12 +138,15 @@ def mcap_path(out: Path, task: EpisodeTask) -> Path:
 
 def _write_atomic(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".part")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
@@ -190,9 +194,12 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
             ],
         }
     )
-    tmp = path.with_suffix(".json.part")
-    tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
-    os.replace(tmp, path)
+    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
+    try:
+        tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
+        os.replace(tmp, path)
+    finally:  # stopped before the replace: the half-written file is nobody's
+        tmp.unlink(missing_ok=True)
 
 
 def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:

@@ -2,6 +2,7 @@
 the line), never a traceback, and nothing of it is overwritten."""
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -200,6 +201,27 @@ def test_a_folder_of_other_files_is_not_a_sweep_directory(tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == mine
     with pytest.raises(PipelineError, match="holds files but no sweep"):
         run_sweep(_config(tmp_path))
+
+
+def test_a_sweep_stopped_while_writing_its_first_sweep_file_resumes(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "stopped"
+    real_replace = os.replace
+
+    def stopped(src, dst):
+        if Path(dst).name == SWEEP_FILE:
+            raise KeyboardInterrupt
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(_config(out))
+    monkeypatch.undo()
+    assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]  # the writer took its temporary file away
+    # a SIGKILL leaves it behind: the same command still resumes
+    (out / (SWEEP_FILE + ".part")).write_text('{"runs": [{"start')
+    assert main([*ARGV, "--out", str(out)]) == 0
+    assert len(episode_log(out).load()) == 2
+    assert not (out / (SWEEP_FILE + ".part")).exists()
 
 
 def test_an_empty_or_new_folder_and_a_sweep_directory_are_fine(good, tmp_path, capsys):
