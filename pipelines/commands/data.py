@@ -159,8 +159,11 @@ def _check_prepare_target(out: Path) -> None:
     """A prepared directory (its manifest) is prepared again in place; a folder holding other files is
     refused: its train/val/test files would be replaced by these (a training set was overwritten)."""
     from predictors.data.locate import read_manifest
+    from predictors.data.prepare import INCOMPLETE_MARKER
 
     if not out.is_dir() or not any(out.iterdir()) or (out / "manifest.json").is_file() and read_manifest(out):
+        return
+    if (out / INCOMPLETE_MARKER).is_file():  # a preparation stopped while moving its files in: finish it
         return
     raise PipelineError(
         f"--out {out} holds files but no prepared data (manifest.json of `crowdmpc data prepare`); prepare "
@@ -171,9 +174,24 @@ def _check_prepare_target(out: Path) -> None:
 def run_stats(args: argparse.Namespace) -> int:
     from predictors.data.stats import file_stats, format_table, ndjson_files
 
+    _check_prepared_files(args.directory)
     files = ndjson_files(args.directory)
     print(format_table([file_stats(f) for f in files], root=args.directory))
     return 0
+
+
+def _check_prepared_files(directory: Path) -> None:
+    """A prepared folder whose files are not those its manifest lists (another preparation's beside it, or
+    one stopped on the way) is refused: its statistics would describe neither."""
+    from predictors.data.locate import load_manifest, prepared_mismatch
+    from predictors.data.prepare import INCOMPLETE_MARKER
+
+    manifest = load_manifest(directory) if Path(directory).is_dir() else None
+    what = prepared_mismatch(directory, manifest) if manifest is not None else None
+    if what is None and (Path(directory) / INCOMPLETE_MARKER).is_file():
+        what = "a `data prepare` into it was stopped before it finished"
+    if what is not None:
+        raise PipelineError(f"{directory}: {what}; re-run `crowdmpc data prepare`")
 
 
 def provenance_path(out: Path) -> Path:

@@ -107,28 +107,44 @@ def _unwritable(path: Path) -> str | None:
 
 
 def read_manifest(directory: Path) -> dict | None:
-    """The manifest of a complete prepared directory, else None."""
+    """The manifest of a complete prepared directory, else None: each file it lists is there with the size
+    and sha256 it records (``prepared_mismatch`` says which is not)."""
+    manifest = load_manifest(directory)
+    if manifest is None or prepared_mismatch(directory, manifest) is not None:
+        return None
+    return manifest
+
+
+def load_manifest(directory: Path) -> dict | None:
     manifest_path = directory / "manifest.json"
     if not manifest_path.is_file():
         return None
     try:
         manifest = json.loads(manifest_path.read_text())
-    except (OSError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         return None
     if not isinstance(manifest, dict) or manifest.get("format") != "crowdmpc-prepared":
         return None
-    if not all((directory / name).is_file() for name in manifest.get("files", {})):
+    if not isinstance(manifest.get("files", {}), dict):
         return None
     return manifest
 
 
-def missing_prepared_files(directory: Path) -> list[str]:
-    """The files a readable manifest of ``directory`` lists that are not there (none if it is unreadable)."""
-    try:
-        files = json.loads((directory / "manifest.json").read_text()).get("files", {})
-    except (OSError, ValueError, AttributeError):
-        return []
-    return [name for name in files if not (directory / name).is_file()] if isinstance(files, dict) else []
+def prepared_mismatch(directory: Path, manifest: dict) -> str | None:
+    """How the first file the manifest of ``directory`` lists differs from it (missing, another size or
+    sha256: files of another preparation beside this manifest), or None. Hashing the splits costs about
+    a millisecond per MB, little beside reading them."""
+    for name, entry in manifest.get("files", {}).items():
+        path = directory / name
+        if not path.is_file():
+            return f"lacks {name}"
+        entry = entry if isinstance(entry, dict) else {}
+        size = path.stat().st_size
+        if isinstance(entry.get("bytes"), int) and size != entry["bytes"]:
+            return f"{name} has {size} bytes, the manifest says {entry['bytes']}"
+        if isinstance(entry.get("sha256"), str) and sha256_file(path) != entry["sha256"]:
+            return f"{name} is not the file the manifest lists (sha256 differs)"
+    return None
 
 
 def raw_ewap_dir(directory: Path) -> Path | None:
@@ -144,8 +160,8 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
     if read_manifest(directory) is not None:
         return directory
     if (directory / "manifest.json").is_file():
-        missing = missing_prepared_files(directory)
-        what = f"lacks {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}" if missing else ""
+        manifest = load_manifest(directory)
+        what = prepared_mismatch(directory, manifest) if manifest is not None else None
         raise PredictorError(
             f"{directory / 'manifest.json'} exists but the prepared data is incomplete or unreadable"
             f"{' (' + what + ')' if what else ''}; re-run `crowdmpc data prepare`"

@@ -8,6 +8,8 @@ against TrajNet++'s own files (``predictors.data.selfcheck``).
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import tempfile
 from dataclasses import asdict
 from pathlib import Path
@@ -38,6 +40,10 @@ from predictors.hashing import sha256_file
 
 # Bump when the conversion changes, so cached preparations are rebuilt.
 CONVERTER_VERSION: Final[str] = "crowdmpc-ewap-1"
+MANIFEST: Final[str] = "manifest.json"
+# In a prepared folder while new files are moved in: its manifest is gone and `data prepare` may finish it.
+INCOMPLETE_MARKER: Final[str] = ".prepare-incomplete"
+STAGING_INFIX: Final[str] = ".prepare-"  # .NAME.prepare-PID.tmp beside the folder NAME being prepared
 
 
 def prepare_ewap(
@@ -63,7 +69,32 @@ def prepare_ewap(
         raise PredictorError(
             f"{raw_dir} is not a BIWI EWAP directory: missing {missing} (see data/README.md for the archive)"
         )
-    out_dir.mkdir(parents=True, exist_ok=True)
+    # written into a staging folder beside ``out_dir`` and moved in only when complete (``_install``)
+    staging = out_dir.parent / f".{out_dir.name}{STAGING_INFIX}{os.getpid()}.tmp"
+    _remove_stale_staging(out_dir)
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        staging.mkdir(parents=True)
+        manifest = _prepare_into(staging, raw_dir, sources, acceptance, categorize_scenes, seed, fractions,
+                                 references, progress, log)  # fmt: skip
+        _install(staging, out_dir, manifest)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return manifest
+
+
+def _prepare_into(
+    out_dir: Path,
+    raw_dir: Path,
+    sources: dict[str, Path],
+    acceptance: tuple[float, float, float, float] | None,
+    categorize_scenes: bool,
+    seed: int,
+    fractions: tuple[float, float],
+    references: dict[str, Reference] | None,
+    progress: bool,
+    log,
+) -> dict:
     manifest = _new_manifest(raw_dir, acceptance, categorize_scenes, seed, fractions)
     options = dict(categorize_scenes=categorize_scenes, acceptance=acceptance, seed=seed, progress=progress)
     for name, source in sources.items():
@@ -79,8 +110,47 @@ def prepare_ewap(
         reference = (references or {}).get(name)
         if reference is not None and Path(reference.path).is_file():
             manifest["self_check"][name] = _self_check(name, tracks, reference, frame_step, progress, log)
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    (out_dir / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
     return manifest
+
+
+def _install(staging: Path, out_dir: Path, manifest: dict) -> None:
+    """Move the prepared files of ``staging`` into ``out_dir``, the manifest last. An old manifest goes
+    first, with the marker of an unfinished install put down before it, so that a stop on the way leaves a
+    folder with no manifest (never an old manifest beside new files) that ``data prepare`` may finish."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    marker = out_dir / INCOMPLETE_MARKER
+    marker.touch()
+    (out_dir / MANIFEST).unlink(missing_ok=True)
+    for name in manifest["files"]:
+        (out_dir / name).parent.mkdir(parents=True, exist_ok=True)
+        os.replace(staging / name, out_dir / name)
+    os.replace(staging / MANIFEST, out_dir / MANIFEST)
+    marker.unlink()
+
+
+def _remove_stale_staging(out_dir: Path) -> None:
+    """The staging folders beside ``out_dir`` of preparations killed on the way (their process is gone)."""
+    if not out_dir.parent.is_dir():
+        return
+    prefix = f".{out_dir.name}{STAGING_INFIX}"
+    for entry in out_dir.parent.iterdir():
+        pid = entry.name[len(prefix) : -len(".tmp")]
+        if not (entry.name.startswith(prefix) and entry.name.endswith(".tmp") and pid.isdigit()):
+            continue
+        if entry.is_symlink() or not entry.is_dir() or _alive(int(pid)):
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
 
 
 def _new_manifest(
@@ -138,6 +208,7 @@ def _write_parts(
             "scenes": len(scenes),
             "frames": [first, last],
             "sha256": sha256_file(target),
+            "bytes": target.stat().st_size,
         }
         log(f"{name:<11} {split:<5} frames {first}-{last}: {len(scenes):5d} scenes -> {target}")
     return files

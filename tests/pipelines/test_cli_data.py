@@ -2,6 +2,8 @@
 
 import hashlib
 import json
+import os
+import shutil
 import sys
 import types
 
@@ -12,6 +14,7 @@ from predictors.data.prepare import prepare_ewap
 from tests.predictors.samples import (
     scene,
     track,
+    vouch_for,
     walk_scene_records,
     write_lines,
     write_tiny_ewap,
@@ -107,11 +110,67 @@ def test_malformed_input_is_one_line_and_exit_2(case, command, tmp_path, capsys,
     else:
         path = prepared / "test" / "biwi_eth.ndjson"
         path.write_text(path.read_text() + line + "\n")
+        vouch_for(prepared, "test/biwi_eth.ndjson")  # a file the manifest lists, malformed
         code, _, err = run(
             capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(prepared)
         )
     n_lines = len(path.read_text().splitlines())
     assert_one_line_error(code, err, f"{path}:{n_lines}: ", reason)
+
+
+def _stop_on_second_move(monkeypatch):
+    """os.replace, stopped (Ctrl-C) when a preparation moves its second file into place."""
+    real_replace, moved = os.replace, []
+
+    def replace(src, dst):
+        if ".prepare-" in str(src) and ".prepare-" not in str(dst):  # from the staging folder into place
+            moved.append(dst)
+            if len(moved) == 2:
+                raise KeyboardInterrupt
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+
+
+def test_an_interrupted_prepare_leaves_no_old_manifest_and_is_rerun(tmp_path, capsys, monkeypatch):
+    """A prepare stopped on the way left new files beside the old manifest (read as complete: evaluate and
+    stats ran on mixed data), or, into a new folder, files without a manifest that the rerun refused."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags"]
+    assert run(capsys, *argv)[0] == 0
+    reference = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    for again in (argv, [*argv[:-1], "--keep-all"]):  # a new folder; then in place, with other options
+        _stop_on_second_move(monkeypatch)
+        if again is argv:
+            shutil.rmtree(out)
+        assert run(capsys, *again)[2].strip().splitlines()[-1] == "crowdmpc data: interrupted"
+        monkeypatch.undo()
+        assert not (out / "manifest.json").exists()
+        assert [p.name for p in tmp_path.iterdir() if ".prepare-" in p.name] == []  # the staging is gone
+        code, _, err = run(capsys, "data", "stats", str(out))
+        assert_one_line_error(code, err, "a `data prepare` into it was stopped before it finished")
+        code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(out))
+        assert_one_line_error(code, err, "holds neither prepared splits")
+        assert run(capsys, *again)[0] == 0  # the same command finishes it
+        assert {p.relative_to(out) for p in out.rglob("*") if p.is_file()} == set(reference)
+    assert run(capsys, *argv)[0] == 0
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == reference
+
+
+def test_prepared_files_that_are_not_the_manifests_are_named(tmp_path, capsys):
+    raw = write_tiny_ewap(tmp_path / "data")
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "a"), "--no-tags"]
+    assert run(capsys, *argv)[0] == 0
+    mixed = tmp_path / "a" / "train" / "biwi_eth.ndjson"
+    original = mixed.read_bytes()
+    mixed.write_bytes((tmp_path / "a" / "val" / "biwi_eth.ndjson").read_bytes())  # not the manifest's
+    for argv in (["data", "stats"], ["evaluate", "--predictor", "constant_velocity", "--data-dir"]):
+        code, _, err = run(capsys, *argv, str(tmp_path / "a"))
+        assert_one_line_error(code, err, "train/biwi_eth.ndjson ")
+    mixed.write_bytes(b"[" + original[1:])  # the same size, other bytes
+    code, _, err = run(capsys, "data", "stats", str(tmp_path / "a"))
+    assert_one_line_error(code, err, "train/biwi_eth.ndjson is not the file the manifest lists")
 
 
 def test_stats_without_files(tmp_path, capsys):
@@ -197,6 +256,7 @@ def test_evaluate_on_a_directory_without_data(tmp_path, capsys):
 def test_evaluate_a_scene_file_without_ground_truth(prepared, capsys):
     target = prepared / "test" / "biwi_eth.ndjson"
     write_lines(target, [scene(0, 1, 0, 80)] + [track(10 * k, 1, 0.5 * k, 0.0) for k in range(9)])
+    vouch_for(prepared, "test/biwi_eth.ndjson")
     code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(prepared))
     assert_one_line_error(code, err, f"{target}:1: scene 0 has 9 steps, the evaluation needs 21")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -102,3 +103,12 @@ def shared_data_dir() -> Path | None:
         ).is_file():
             return root
     return None
+
+
+def vouch_for(prepared: Path, name: str) -> None:
+    """Record the file ``name`` of the prepared folder ``prepared`` as it is now in its manifest (which
+    refuses a file that is not the one it lists), so that a test's edit reaches the parser."""
+    manifest = json.loads((prepared / "manifest.json").read_text())
+    data = (prepared / name).read_bytes()
+    manifest["files"][name].update(sha256=hashlib.sha256(data).hexdigest(), bytes=len(data))
+    (prepared / "manifest.json").write_text(json.dumps(manifest))

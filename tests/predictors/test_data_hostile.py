@@ -30,6 +30,7 @@ from tests.predictors.samples import (
     ewap_rows,
     scene,
     track,
+    vouch_for,
     walk_scene_records,
     write_lines,
     write_obsmat,
@@ -434,6 +435,7 @@ def test_cli_evaluate_accepts_a_blank_line(prepared, capsys):
     target = prepared / "test" / "biwi_eth.ndjson"
     lines = target.read_text().splitlines()
     target.write_text("\n".join(lines[:3] + [""] + lines[3:]) + "\n\n")
+    vouch_for(prepared, "test/biwi_eth.ndjson")
     code, out, err = run_cli(
         capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(prepared)
     )
@@ -445,6 +447,7 @@ def test_cli_evaluate_accepts_a_blank_line(prepared, capsys):
 def test_cli_evaluate_reports_a_hostile_file_in_one_line(case, prepared, capsys):
     target = prepared / "test" / "biwi_eth.ndjson"
     _, line, reason = write_bad(target, case)
+    vouch_for(prepared, "test/biwi_eth.ndjson")
     code, _, err = run_cli(
         capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(prepared)
     )
