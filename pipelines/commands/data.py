@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Final
@@ -11,6 +12,8 @@ from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import check_writable, path_arg
 from pipelines.commands.evaluate import counted
 from pipelines.errors import PipelineError
+
+PART_SUFFIX: Final[str] = ".part"  # a file's name until it is complete
 
 # A synthetic episode takes ~30 ms and ~15 kB of scenes (7 humans): 100 000 (as `simulate --episodes`) is most
 # of an hour and 1.5 GB, far more than any training set here; 10^9 ran silently for days.
@@ -204,7 +207,7 @@ def run_synth(args: argparse.Namespace) -> int:
     provenance = provenance_path(args.out)
     check_writable(provenance, "--out's provenance file")
     for path in (args.out, provenance):
-        if path.exists() and path.stat().st_size > 0 and not args.replace:
+        if path.exists() and path.stat().st_size > 0 and not args.replace and not _rerun_of(args, path):
             # a mistyped --out replaced a training file; the same command regenerates the same bytes anyway
             raise PipelineError(f"--out {path} exists; add --replace to replace it, or name another file")
     try:
@@ -216,17 +219,57 @@ def run_synth(args: argparse.Namespace) -> int:
             "synthetic data needs pipelines/experiments/synth.py (the crowd simulator), "
             "which is not installed"
         ) from None
-    summary = synthesize(
-        args.out, args.episodes, args.humans, args.seed, scenario=args.scenario, with_robots=args.with_robots
-    )
+    # The data is made under a temporary name (no data glob takes it) and renamed into place after its
+    # provenance is: data at --out always has its provenance beside it, and the provenance is its own.
+    staged = args.out.with_name(f".{args.out.name}.synth-{os.getpid()}{PART_SUFFIX}")
+    try:
+        summary = synthesize(
+            staged,
+            args.episodes,
+            args.humans,
+            args.seed,
+            scenario=args.scenario,
+            with_robots=args.with_robots,
+        )
+        if "path" in summary:
+            summary["path"] = str(args.out)
+        provenance.unlink(missing_ok=True)  # the old data goes without provenance, never beside the new
+        args.out.unlink(missing_ok=True)
+        _write_provenance(args, summary, provenance, staged)
+        os.replace(staged, args.out)
+    finally:
+        staged.unlink(missing_ok=True)
     for key, value in summary.items():
         print(f"{key}: {value}")
-    _write_provenance(args, summary, provenance)
     print(f"provenance: {provenance}")
     return 0
 
 
-def _write_provenance(args: argparse.Namespace, summary: dict, path: Path) -> None:
+def _rerun_of(args: argparse.Namespace, path: Path) -> bool:
+    """Whether ``path`` is the provenance, without its data, of this very command (one stopped between the
+    two renames): the rerun writes the same, so it need not be told to --replace it."""
+    import json
+
+    if path == args.out or args.out.exists():
+        return False
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        return False
+    return isinstance(document, dict) and document.get("options") == _synth_options(args)
+
+
+def _synth_options(args: argparse.Namespace) -> dict:
+    return {
+        "episodes": args.episodes,
+        "humans": args.humans,
+        "seed": args.seed,
+        "scenario": args.scenario,
+        "with_robots": args.with_robots,
+    }
+
+
+def _write_provenance(args: argparse.Namespace, summary: dict, path: Path, data: Path) -> None:
     """The options, the data's sha256 and the code that made it: training records the data's hashes only,
     and a synthetic set is rebuilt (bit for bit) from these alone."""
     import json
@@ -239,15 +282,14 @@ def _write_provenance(args: argparse.Namespace, summary: dict, path: Path) -> No
         "format": "crowdmpc-synth",
         "version": 1,
         "data": args.out.name,
-        "sha256": sha256_file(args.out),
-        "options": {
-            "episodes": args.episodes,
-            "humans": args.humans,
-            "seed": args.seed,
-            "scenario": args.scenario,
-            "with_robots": args.with_robots,
-        },
+        "sha256": sha256_file(data),
+        "options": _synth_options(args),
         "summary": summary,
         "code": code_identity(),
     }
-    path.write_text(json.dumps(plain(document), indent=2) + "\n")
+    tmp = path.with_name(f".{path.name}{PART_SUFFIX}")
+    try:
+        tmp.write_text(json.dumps(plain(document), indent=2) + "\n")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

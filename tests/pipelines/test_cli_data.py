@@ -276,7 +276,10 @@ def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
     argv = ["data", "synth", "--out", str(out), "--episodes", "3", "--humans", "5", "--seed", "7"]
     code, stdout, _ = run(capsys, *argv, "--scenario", "perpendicular", "--with-robots")
     assert code == 0 and "scenes: 12" in stdout
-    assert calls == [(out, 3, 5, 7, "perpendicular", True)]
+    staged = calls[0][0]  # made beside --out under a temporary name, then renamed into place
+    assert staged.parent == tmp_path and staged.name.endswith(".part") and not staged.exists()
+    assert calls == [(staged, 3, 5, 7, "perpendicular", True)]
+    assert out.read_text() == "scenes\n"
     # how the file was made, beside it: the options, the data's sha256, the code
     provenance = json.loads((tmp_path / "s.synth.json").read_text())
     assert provenance["format"] == "crowdmpc-synth" and provenance["data"] == "s.ndjson"
@@ -290,7 +293,7 @@ def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
     assert len(calls) == 1
     with pytest.raises(SystemExit) as exc:  # counts are bounded by the parser
         main([*argv[:5], "0", *argv[6:]])
-    assert exc.value.code == 2 and calls == [(out, 3, 5, 7, "perpendicular", True)]
+    assert exc.value.code == 2 and calls == [(staged, 3, 5, 7, "perpendicular", True)]
     assert "argument --episodes: expected an integer in 1..100000, got 0" in capsys.readouterr().err
 
 
@@ -300,6 +303,64 @@ def test_help_shows_an_example(argv, capsys):
         main(argv)
     assert info.value.code == 0
     assert "example" in capsys.readouterr().out
+
+
+def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkeypatch, tmp_path, capsys):
+    """`data synth` stopped between renaming the data into place and writing its provenance left data
+    without provenance (the rerun said "exists; add --replace"), or with --replace, the new data beside the
+    old provenance (another seed and sha256)."""
+
+    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False):
+        out_path.write_text(f"scenes of seed {seed}\n")
+        return {"scenes": 1}
+
+    monkeypatch.setitem(
+        sys.modules, "pipelines.experiments.synth", types.SimpleNamespace(synthesize=synthesize)
+    )
+    out = tmp_path / "s.ndjson"
+    provenance = tmp_path / "s.synth.json"
+
+    def argv(seed, *extra):
+        return [
+            "data",
+            "synth",
+            "--out",
+            str(out),
+            "--episodes",
+            "1",
+            "--humans",
+            "2",
+            "--seed",
+            seed,
+            *extra,
+        ]
+
+    def matches() -> bool:
+        document = json.loads(provenance.read_text())
+        return document["sha256"] == hashlib.sha256(out.read_bytes()).hexdigest()
+
+    assert run(capsys, *argv("7"))[0] == 0 and matches()
+    real_replace = os.replace
+    for seed, extra in (("8", ["--replace"]), ("9", [])):
+        if not extra:
+            out.unlink()
+            provenance.unlink()
+
+        def stopped(src, dst):
+            if dst == out:  # stopped between the provenance and the data
+                raise KeyboardInterrupt
+            real_replace(src, dst)
+
+        monkeypatch.setattr(os, "replace", stopped)
+        code, _, err = run(capsys, *argv(seed, *extra))
+        monkeypatch.setattr(os, "replace", real_replace)
+        assert code != 0 and err.strip().splitlines()[-1] == "crowdmpc data: interrupted"
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["s.synth.json"]  # no old data, no temporary
+        assert json.loads(provenance.read_text())["options"]["seed"] == int(seed)
+        code, _, err = run(capsys, *argv(seed, *extra))  # the same command again
+        assert code == 0, err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ndjson", "s.synth.json"] and matches()
+        assert out.read_text() == f"scenes of seed {seed}\n"
 
 
 def test_synth_and_prepare_do_not_overwrite_other_files(tmp_path, capsys):
