@@ -31,6 +31,42 @@ OWNED: Final[re.Pattern[str]] = re.compile(
     rf"|crowdmpc_jit_{_TAG}\.c"
 )
 ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
+# What only a compile under way has, its process's id in the name: a SIGKILLed one's files stay behind.
+_IN_PROGRESS: Final[re.Pattern[str]] = re.compile(
+    rf"(?:{_KEY}\.|\.tmp-{_KEY}\.|crowdmpc_jit_)(?P<pid>\d+)_[0-9a-f]{{8}}\.(?:o|casadi|record|c)"
+)
+
+
+def remove_dead_leftovers(folder: Path) -> int:
+    """Remove the files of compiles whose process is gone (killed: no ``finally`` ran): the generated source
+    (~0.5 MB), object file and temporary manifest and record. Only regular files named as ours, never a
+    symbolic link; a compile of a live process (this one's included) is left alone. Returns how many."""
+    removed = 0
+    with os.scandir(folder) as it:
+        entries = [e for e in it if OWNED.fullmatch(e.name)]
+    for entry in entries:
+        match = _IN_PROGRESS.fullmatch(entry.name)
+        if match is None or _alive(int(match["pid"])) or not entry.is_file(follow_symlinks=False):
+            continue
+        with contextlib.suppress(FileNotFoundError):  # another process removed it first
+            os.unlink(entry.path)
+            removed += 1
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (another user's too); pid 0 or one out of range is nobody's."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except (OverflowError, OSError):
+        return False
+    return True
 
 
 @contextlib.contextmanager

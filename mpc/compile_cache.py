@@ -56,7 +56,17 @@ from typing import Final
 
 import casadi as ca
 
-from mpc.cache_entries import ENTRY, OWNED, discard, entry_record, inside, load_solver, locked, publish
+from mpc.cache_entries import (
+    ENTRY,
+    OWNED,
+    discard,
+    entry_record,
+    inside,
+    load_solver,
+    locked,
+    publish,
+    remove_dead_leftovers,
+)
 from mpc.errors import MPCConfigError
 
 # The variable and default of predictors.data.locate.cache_root, repeated here: importing predictors would
@@ -247,6 +257,7 @@ def nlpsol(
         if solver is not None:
             return solver
         discard(manifest)  # unloadable (no record, its library removed or changed): compile again
+        remove_dead_leftovers(folder)  # what killed compiles left (nothing else removes it)
         try:
             _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
         except CompileCacheError:

@@ -330,3 +330,28 @@ def test_an_unwritable_working_directory_does_not_stop_a_compile(cache, monkeypa
     solver = compile_cache.nlpsol("s", "ipopt", small_nlp(3.0), IPOPT)
     assert solver(x0=0, p=[1, 2], lbg=-1, ubg=1)["x"].shape == (2, 1)
     assert os.getcwd() == "/proc"
+
+
+@needs_gcc
+def test_a_compile_removes_what_killed_compiles_left(cache, tmp_path):
+    """A compile killed by SIGKILL left its generated source (~0.5 MB) and more, and no later run removed
+    them: now a compile removes those of processes that are gone, and only those."""
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
+    gone, live, key = int(dead.stdout), os.getpid(), "ab" * 32
+    cache.mkdir(parents=True)
+    leftovers = [f"crowdmpc_jit_{gone}_0123abcd.c", f"{key}.{gone}_0123abcd.o"]
+    leftovers += [f".tmp-{key}.{gone}_0123abcd.casadi", f".tmp-{key}.{gone}_0123abcd.record"]
+    kept = [f"crowdmpc_jit_{live}_0123abcd.c", f".tmp-{key}.{live}_0123abcd.casadi"]  # a compile under way
+    kept += [f"{key}.{gone}_0123abcd.so", f"notes_{gone}_0123abcd.c"]  # a library; not a name of ours
+    for name in leftovers + kept:
+        (cache / name).write_text("x")
+    outside = tmp_path / "precious.c"
+    outside.write_text("keep")
+    link = cache / f"crowdmpc_jit_{gone}_4567abcd.c"
+    link.symlink_to(outside)
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    names = {p.name for p in cache.iterdir()}
+    assert not names & set(leftovers)
+    assert set(kept) | {link.name} <= names and outside.read_text() == "keep"
