@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Final
@@ -222,6 +223,7 @@ def run_synth(args: argparse.Namespace) -> int:
     # The data is made under a temporary name (no data glob takes it) and renamed into place after its
     # provenance is: data at --out always has its provenance beside it, and the provenance is its own.
     staged = args.out.with_name(f".{args.out.name}.synth-{os.getpid()}{PART_SUFFIX}")
+    _remove_dead_staged(args.out)
     try:
         summary = synthesize(
             staged,
@@ -243,6 +245,25 @@ def run_synth(args: argparse.Namespace) -> int:
         print(f"{key}: {value}")
     print(f"provenance: {provenance}")
     return 0
+
+
+def _remove_dead_staged(out: Path) -> None:
+    """The staged data beside ``out`` of a `data synth` killed before its rename (its process is gone)."""
+    pattern = re.compile(rf"\.{re.escape(out.name)}\.synth-(\d+){re.escape(PART_SUFFIX)}")
+    for entry in out.parent.iterdir() if out.parent.is_dir() else ():
+        match = pattern.fullmatch(entry.name)
+        if match and not entry.is_symlink() and entry.is_file() and not _alive(int(match[1])):
+            entry.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process
+        return True
+    return True
 
 
 def _rerun_of(args: argparse.Namespace, path: Path) -> bool:

@@ -4,6 +4,7 @@ import hashlib
 import json
 import os
 import shutil
+import subprocess
 import sys
 import types
 
@@ -339,7 +340,12 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
         document = json.loads(provenance.read_text())
         return document["sha256"] == hashlib.sha256(out.read_bytes()).hexdigest()
 
+    gone = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)  # fmt: skip
+    killed = tmp_path / f".s.ndjson.synth-{gone}.part"  # what a synth killed before its rename leaves
+    killed.write_text("scenes of a killed synth\n")
     assert run(capsys, *argv("7"))[0] == 0 and matches()
+    assert not killed.exists()
     real_replace = os.replace
     for seed, extra in (("8", ["--replace"]), ("9", [])):
         if not extra:
