@@ -43,6 +43,7 @@ import hashlib
 import json
 import os
 import platform
+import re
 import secrets
 import shlex
 import shutil
@@ -85,8 +86,11 @@ FLAGS: Final[tuple[str, ...]] = ("-O2",)
 # and 0.19-0.22 s per DMPC episode (0.51 -> 0.30 s).
 COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
 SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
-# What a cache directory's resolved path may hold: the characters shlex.quote leaves unquoted.
-SHELL_SAFE: Final[str] = "a writable directory whose path has only letters, digits and @%+=:,./-_"
+# What the shell splits a word on or reads specially: a path holding one is refused (``_shell_unsafe``). Any
+# other character, a non-ASCII letter among them (/home/josé), reaches gcc as it is; a resolved path starts
+# with "/", so a "~" in it is never expanded.
+SHELL_SPECIAL: Final[re.Pattern[str]] = re.compile(r"[\s'\"\\$`;&|<>()*?\[\]#!{}]")
+SHELL_SAFE: Final[str] = "a writable directory whose path has no space and none of '\"\\$`;&|<>()*?[]#!{}"
 
 
 class CompileCacheError(RuntimeError):
@@ -139,7 +143,7 @@ def _shell_unsafe(path: Path) -> str | None:
         resolved = str(path.resolve())
     except (OSError, RuntimeError):  # a symbolic link loop: _unwritable names it
         return None
-    if shlex.quote(resolved) == resolved:
+    if SHELL_SPECIAL.search(resolved) is None:
         return None
     return f"its path {resolved!r} holds a space or shell character, which CasADi passes to gcc unquoted"
 

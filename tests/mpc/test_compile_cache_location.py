@@ -85,3 +85,10 @@ def test_a_symlink_loop_is_named_as_no_directory(tmp_path):
     (tmp_path / "b").symlink_to(tmp_path / "a")
     with pytest.raises(compile_cache.CacheLocationError, match=f"{tmp_path / 'a'} is not a directory"):
         compile_cache.writable_dir(tmp_path / "a" / "compiled")
+
+
+@pytest.mark.parametrize("name", ["café", "a~b", "x=1,y%2@z+"])
+def test_a_path_the_shell_takes_as_it_is_is_accepted(tmp_path, name):
+    """shlex.quote's ASCII-only safe set refused /home/josé, where the default cache lives, and disabled
+    every jit build; only what the shell splits on or interprets is refused."""
+    assert compile_cache.writable_dir(tmp_path / name) == tmp_path / name
