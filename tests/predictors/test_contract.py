@@ -171,6 +171,23 @@ def test_rollout_refuses_humans_that_are_not_distinct_indices(predictor, humans,
     assert str(refused.value).startswith(expected)
 
 
+@pytest.mark.parametrize(
+    "humans, expected",
+    [
+        (np.array([2, 2, 3]), "humans must be distinct agent indices; [2] repeated"),
+        (np.arange(6) >= 2, "humans must be integer agent indices, got dtype bool"),
+    ],
+    ids=["repeated", "bool-mask"],
+)
+def test_encode_refuses_humans_that_are_not_distinct_indices(predictor, humans, expected):
+    """The closed loop predicts through encode and the twin: rollout's refusal alone left that path reading a
+    repeat as a neighbour on itself and a mask as indices."""
+    history, mask, _, _ = crossing_scene()
+    with pytest.raises(ValueError) as refused:
+        predictor.encode(history, mask, humans)
+    assert str(refused.value).startswith(expected)
+
+
 @pytest.mark.parametrize("humans", [np.array([], dtype=int), np.array([])], ids=["int", "float"])
 def test_rollout_of_no_humans(predictor, humans):
     """Every agent a robot: nothing to predict, from an empty int array or from ``np.array([])`` (float)."""
