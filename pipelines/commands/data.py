@@ -162,10 +162,11 @@ def run_prepare(args: argparse.Namespace) -> int:
 def _check_prepare_target(out: Path) -> None:
     """A prepared directory (its manifest) is prepared again in place; a folder holding other files is
     refused: its train/val/test files would be replaced by these (a training set was overwritten)."""
-    from predictors.data.locate import read_manifest
+    from predictors.data.locate import load_manifest
     from predictors.data.prepare import INCOMPLETE_MARKER
 
-    if not out.is_dir() or not any(out.iterdir()) or (out / "manifest.json").is_file() and read_manifest(out):
+    # a manifest of ours, whatever its files now hold: every reader says to prepare such a folder again
+    if not out.is_dir() or not any(out.iterdir()) or load_manifest(out) is not None:
         return
     if (out / INCOMPLETE_MARKER).is_file():  # a preparation stopped while moving its files in: finish it
         return

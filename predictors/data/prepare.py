@@ -7,6 +7,7 @@ against TrajNet++'s own files (``predictors.data.selfcheck``).
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -69,7 +70,9 @@ def prepare_ewap(
         raise PredictorError(
             f"{raw_dir} is not a BIWI EWAP directory: missing {missing} (see data/README.md for the archive)"
         )
-    # written into a staging folder beside ``out_dir`` and moved in only when complete (``_install``)
+    # written into a staging folder beside ``out_dir`` and moved in only when complete (``_install``); beside
+    # the folder a symbolic link names, on its file system when it can be (``_move`` copies across others)
+    out_dir = out_dir.resolve()
     staging = out_dir.parent / f".{out_dir.name}{STAGING_INFIX}{os.getpid()}.tmp"
     _remove_stale_staging(out_dir)
     shutil.rmtree(staging, ignore_errors=True)
@@ -124,9 +127,22 @@ def _install(staging: Path, out_dir: Path, manifest: dict) -> None:
     (out_dir / MANIFEST).unlink(missing_ok=True)
     for name in manifest["files"]:
         (out_dir / name).parent.mkdir(parents=True, exist_ok=True)
-        os.replace(staging / name, out_dir / name)
-    os.replace(staging / MANIFEST, out_dir / MANIFEST)
-    marker.unlink()
+        _move(staging / name, out_dir / name)
+    _move(staging / MANIFEST, out_dir / MANIFEST)
+    marker.unlink(missing_ok=True)  # another preparation into the folder may have finished first
+
+
+def _move(source: Path, target: Path) -> None:
+    """``source`` to ``target`` in one rename; across file systems (``out_dir`` a mount point, such as a
+    container's volume) copied beside ``target`` first, then renamed there."""
+    try:
+        os.replace(source, target)
+    except OSError as exc:
+        if exc.errno != errno.EXDEV:
+            raise
+        part = target.with_name(f"{target.name}.part")
+        shutil.copyfile(source, part)
+        os.replace(part, target)
 
 
 def _remove_stale_staging(out_dir: Path) -> None:

@@ -161,8 +161,8 @@ def test_an_interrupted_prepare_leaves_no_old_manifest_and_is_rerun(tmp_path, ca
 
 def test_prepared_files_that_are_not_the_manifests_are_named(tmp_path, capsys):
     raw = write_tiny_ewap(tmp_path / "data")
-    argv = ["data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "a"), "--no-tags"]
-    assert run(capsys, *argv)[0] == 0
+    prepare = ["data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "a"), "--no-tags"]
+    assert run(capsys, *prepare)[0] == 0
     mixed = tmp_path / "a" / "train" / "biwi_eth.ndjson"
     original = mixed.read_bytes()
     mixed.write_bytes((tmp_path / "a" / "val" / "biwi_eth.ndjson").read_bytes())  # not the manifest's
@@ -172,6 +172,35 @@ def test_prepared_files_that_are_not_the_manifests_are_named(tmp_path, capsys):
     mixed.write_bytes(b"[" + original[1:])  # the same size, other bytes
     code, _, err = run(capsys, "data", "stats", str(tmp_path / "a"))
     assert_one_line_error(code, err, "train/biwi_eth.ndjson is not the file the manifest lists")
+    # what every reader says to do, the prepare in place, is taken (it was refused as "no prepared data")
+    assert run(capsys, *prepare)[0] == 0 and mixed.read_bytes() == original
+    assert run(capsys, "data", "stats", str(tmp_path / "a"))[0] == 0
+
+
+def test_a_prepare_into_another_file_system_copies_its_files_in(tmp_path, capsys, monkeypatch):
+    """--out on another file system than its parent (a mount point, a link to another disk): the moves from
+    the staging folder failed with EXDEV after the old manifest had gone, in a traceback."""
+    import errno
+
+    raw = write_tiny_ewap(tmp_path / "data")
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "a"), "--no-tags"]
+    assert run(capsys, *argv)[0] == 0
+    reference = {p.relative_to(tmp_path / "a"): p.read_bytes() for p in (tmp_path / "a").rglob("*")
+                 if p.is_file()}  # fmt: skip
+    real_replace = os.replace
+
+    def across_devices(src, dst):
+        if ".prepare-" in str(src) and ".prepare-" not in str(dst):
+            raise OSError(errno.EXDEV, "Invalid cross-device link")
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", across_devices)
+    assert run(capsys, *argv)[0] == 0
+    monkeypatch.undo()
+    found = {
+        p.relative_to(tmp_path / "a"): p.read_bytes() for p in (tmp_path / "a").rglob("*") if p.is_file()
+    }
+    assert found == reference
 
 
 def test_stats_without_files(tmp_path, capsys):
