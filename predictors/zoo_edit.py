@@ -281,9 +281,12 @@ def _check_shipped_kind(config: Path) -> None:
 
 
 def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
-    """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its manifest entry,
-    then its files (those no other entry names, and never one of the zoo's own: an entry added under a name
-    reserved since may name one). Returns the entry and the zoo directory."""
+    """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its files (those no
+    other entry names, and never one of the zoo's own: an entry added under a name reserved since may name
+    one) are first renamed to hidden temporaries (.NAME.pt.PID.removed), then the manifest entry goes, then
+    the temporaries. A remove stopped on the way leaves either the entry (its files gone: `zoo remove NAME`
+    again finishes it) or hidden temporaries of ours (``remove_leftovers``), never files that look like a
+    model no entry names. Returns the entry and the zoo directory."""
     check_name(name)  # not check_model_name: such an entry must stay removable
     root = writable_zoo_dir(directory)
     _entry_to_remove(name, root, read_manifest(root), directory)  # before the lock creates the directory
@@ -294,18 +297,23 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
         manifest = root / MANIFEST_NAME
         files = set(entry.paths(root, manifest))  # inside the zoo: checked when the manifest was read
         still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
+        doomed = [path for path in files - still_used if not is_zoo_file(root, path)]
+        parked = [path.with_name(f".{path.name}.{os.getpid()}.removed") for path in doomed]
+        for path, hidden in zip(doomed, parked, strict=True):
+            if path.exists() or path.is_symlink():
+                os.replace(path, hidden)
         write_manifest(entries, root)
-        for path in files - still_used:
-            if not is_zoo_file(root, path):
-                path.unlink(missing_ok=True)
+        for hidden in parked:
+            hidden.unlink(missing_ok=True)
     return entry, root
 
 
 def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:
-    """Remove the files of model ``name`` that no entry of the user zoo (``directory``, else
-    ``user_zoo_dir()``) names: NAME.pt and NAME.json left by a ``remove_from_zoo`` interrupted after its
-    manifest write, and the temporary copies (.NAME.pt.PID.new, .link) of an interrupted add. Returns the
-    files removed (none: nothing to do) and the zoo directory."""
+    """Remove the hidden temporaries of model ``name`` that no entry of the user zoo (``directory``, else
+    ``user_zoo_dir()``) names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add
+    (.NAME.pt.PID.new, .link) stopped on the way. Never NAME.pt or NAME.json: a folder given as the zoo may
+    hold a training run's output, which no entry names either. Returns the files removed (none: nothing to
+    do) and the zoo directory."""
     check_name(name)
     root = writable_zoo_dir(directory)
     if not root.is_dir():
@@ -314,9 +322,9 @@ def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[li
         entries = read_manifest(root)
         manifest = root / MANIFEST_NAME
         owned = {path for entry in entries.values() for path in entry.paths(root, manifest)}
-        candidates = [root / f"{name}.pt", root / f"{name}.json"]
+        candidates = []
         for file_name in (f"{name}.pt", f"{name}.json"):
-            for kind in ("new", "link"):
+            for kind in ("new", "link", "removed"):
                 candidates.extend(sorted(root.glob(f".{file_name}.*.{kind}")))
         removed = []
         for path in candidates:

@@ -242,14 +242,28 @@ def test_a_remove_interrupted_after_its_manifest_write_is_finished_by_remove(use
     with monkeypatch.context() as patched, pytest.raises(Interrupted):
         patched.setattr(Path, "unlink", interrupted)  # after the manifest's rename, before the files go
         zoo_edit.remove_from_zoo("mine", user)
-    assert "mine" not in zoo.read_manifest(user) and (user / "mine.pt").is_file()
+    assert "mine" not in zoo.read_manifest(user) and not (user / "mine.pt").exists()
     (user / ".mine.pt.123.new").write_bytes(b"an add's temporary copy")
     code, out, _ = cli(["zoo", "remove", "mine"], capsys)
-    assert code == 0 and "removed its leftover files mine.pt, mine.json, .mine.pt.123.new" in out
+    pid = os.getpid()
+    listed = f"removed its leftover files .mine.pt.123.new, .mine.pt.{pid}.removed, .mine.json.{pid}.removed"
+    assert code == 0 and listed in out
     own = [CALIBRATIONS_NAME, manifest.MANIFEST_NAME, manifest.LOCK_NAME]
     assert sorted(p.name for p in user.iterdir()) == sorted(own)
     code, _, line = cli(["zoo", "remove", "mine"], capsys)
     assert code == 2 and "has no entry 'mine'" in line
+
+
+def test_remove_never_takes_a_model_no_entry_names(user, tmp_path, capsys):
+    """`zoo --dir RUN remove NAME` on a training run's folder (no manifest entry names its NAME.pt) deleted
+    the trained weights as "leftovers"; it is refused as before, and the files stay."""
+    run = tmp_path / "a_training_run"
+    run.mkdir()
+    (run / "mine.pt").write_bytes(b"trained weights")
+    (run / "mine.json").write_text("{}")
+    code, _, line = cli(["zoo", "--dir", str(run), "remove", "mine"], capsys)
+    assert code == 2 and "has no entry 'mine'" in line
+    assert (run / "mine.pt").read_bytes() == b"trained weights" and (run / "mine.json").is_file()
 
 
 # ---------------------------------------------------------------------------------- parallel adds, removes
