@@ -106,17 +106,20 @@ def _name_option(name: str) -> str:
     """`` --name my_NAME`` when ``zoo add`` would refuse the checkpoint's own name ``NAME`` (the default
     ``--out`` names a model as the shipped one of its kind and protocol: social_lstm_eth), else nothing. The
     rule is ``zoo_edit.user_name_refusal``'s; a shipped manifest that does not read leaves the hint as it is
-    (``zoo add`` says what is wrong with it)."""
+    (``zoo add`` says what is wrong with it). The name suggested is none the user zoo has either (a second
+    run's hint named the first's, which ``zoo add`` then refused)."""
     from predictors.errors import PredictorError
+    from predictors.zoo import user_zoo_dir, zoo_names
     from predictors.zoo_edit import user_name_refusal
 
     try:
         if user_name_refusal(name) is None:
             return ""
+        taken = {held.lower() for held in zoo_names(user_zoo_dir())}
         free = next(
             candidate
             for candidate in itertools.chain([f"my_{name}"], (f"my_{name}_{i}" for i in itertools.count(2)))
-            if user_name_refusal(candidate) is None
+            if user_name_refusal(candidate) is None and candidate.lower() not in taken
         )
     except PredictorError:
         return ""

@@ -173,6 +173,8 @@ def test_trains_zoo_hint_is_a_command_zoo_add_takes(shipped, user, pair, capsys)
     assert command == f"crowdmpc zoo add {pair} --name my_{NAME}"
     code, out, err = cli(shlex.split(command)[1:], capsys)
     assert code == 0 and f"added my_{NAME} " in out, err
+    print_summary(summary, "best.ckpt", pair, None)  # a second run's hint: my_NAME is the user zoo's now
+    assert capsys.readouterr().out.split("`")[1] == f"crowdmpc zoo add {pair} --name my_{NAME}_2"
 
     mine = pair.with_name("mine.pt")  # a name of its own: the hint is the bare command
     print_summary({**summary, "name": "mine"}, "best.ckpt", mine, None)
