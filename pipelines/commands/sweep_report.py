@@ -46,7 +46,8 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
     last = runs[-1]
     changes: dict[str, Any] = {}
     humans = last.get("humans")
-    if cfg.source("sweep", "humans") is None and isinstance(humans, list) and humans:
+    # not chosen: a config file written by `config show` states every default, and asks for none of them
+    if not cfg.chosen("sweep", "humans") and isinstance(humans, list) and humans:
         if all(_is_int(h) for h in humans):
             changes["humans"] = tuple(humans)
     for section, key, field in (
@@ -55,7 +56,7 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
         ("sweep", "episodes_per_cell", "episodes_per_cell"),  # the CPU projection is of the run's plan
     ):
         value = last.get(field)  # a run line names them as SweepConfig does
-        if cfg.source(section, key) is None and _is_int(value):
+        if not cfg.chosen(section, key) and _is_int(value):
             changes[field] = value
     return dataclasses.replace(config, **changes)
 

@@ -249,7 +249,12 @@ def test_report_only_tabulates_the_sweep_that_is_there_or_refuses(tmp_path, caps
     assert "| Numbers of pedestrians | 3 | 3 |" in table and "| Episodes | 1 | 1 |" in table
     assert "Robots: 2 per episode" in table
     assert "; the 2 planned episodes take " in capsys.readouterr().err  # 2 cells x 1 episode
-    capsys.readouterr()
+    shown = tmp_path / "run.toml"  # `config show` writes every default, which asks for none of them
+    assert main(["config", "show"]) == 0
+    shown.write_text(capsys.readouterr().out)
+    assert main(["--config", str(shown), *report, "--experiment", "baselines"]) == 0
+    assert "; the 2 planned episodes take " in capsys.readouterr().err
+    assert (out / TABLE_MD).read_text() == table
     for options, message in (
         (["--experiment", "table2"], f"{out} holds a sweep of experiment 'baselines', not 'table2'"),
         (["--experiment", "baselines", "--humans", "4"], "holds 2 records, none of them of the cells"),
