@@ -250,21 +250,13 @@ def run_synth(args: argparse.Namespace) -> int:
 
 def _remove_dead_staged(out: Path) -> None:
     """The staged data beside ``out`` of a `data synth` killed before its rename (its process is gone)."""
+    from pipelines.experiments.worker import process_alive
+
     pattern = re.compile(rf"\.{re.escape(out.name)}\.synth-(\d+){re.escape(PART_SUFFIX)}")
     for entry in out.parent.iterdir() if out.parent.is_dir() else ():
         match = pattern.fullmatch(entry.name)
-        if match and not entry.is_symlink() and entry.is_file() and not _alive(int(match[1])):
+        if match and not entry.is_symlink() and entry.is_file() and not process_alive(int(match[1])):
             entry.unlink(missing_ok=True)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # another user's process
-        return True
-    return True
 
 
 def _rerun_of(args: argparse.Namespace, path: Path) -> bool:

@@ -76,14 +76,14 @@ def remove_stale_scratch(temp_dir: str | Path | None = None, prefix: str = SCRAT
     removed = []
     for root in Path(temp_dir or tempfile.gettempdir()).glob(prefix + "*"):
         match = named.match(root.name)
-        if match is None or not root.is_dir() or _alive(int(match[1])):
+        if match is None or not root.is_dir() or process_alive(int(match[1])):
             continue
         shutil.rmtree(root, ignore_errors=True)
         removed.append(root)
     return removed
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
     """Whether process ``pid`` runs (a zombie, killed and not yet reaped, does not). A pid the system gave to
     a new process keeps its old root until that process ends too."""
     if pid == os.getpid():
