@@ -33,6 +33,7 @@ from pipelines.loop.margins import parse_margins
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robot_scaling  # noqa: E402
 from bench_cli import (  # noqa: E402
+    check_distinct,
     check_not_input,
     episode_count,
     figure,
@@ -105,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
     check_not_input(parser, "--json", args.json, [args.config])
+    for option in ("cost_scale", "robots"):  # a repeat ran its rows twice
+        check_distinct(parser, f"--{option.replace('_', '-')}", getattr(args, option))
     try:  # every scale's config checked before the first episode
         runs = {scale: load(args.config, sets=[f"mpc.cost_scale={scale}"]) for scale in args.cost_scale}
     except PipelineError as exc:  # ConfigError, and what a value's own check raises

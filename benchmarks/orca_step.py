@@ -27,7 +27,7 @@ from crowdsim.env_config import EnvConfig
 from crowdsim.orca import orca_velocities, preferred_velocities
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, episode_count, human_count, robot_count, run_main  # noqa: E402
+from bench_cli import check_distinct, count_in, episode_count, human_count, robot_count, run_main  # noqa: E402
 
 
 def fastest(fn, repeats: int) -> float:
@@ -78,7 +78,7 @@ def measure(n_humans: int, n_robots: int, episodes: int, scenario: str, repeats:
     }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -89,7 +89,8 @@ def main() -> None:
     parser.add_argument(
         "--repeats", type=count_in("repeats", 1), default=3, help="timed runs per step; the fastest is kept"
     )
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    check_distinct(parser, "--humans", args.humans)  # a repeat ran its row twice
     print(
         f"CrowdEnv.step, {args.scenario} crossing, {args.robots} ORCA robots, {args.episodes} episodes a size"
     )

@@ -63,6 +63,7 @@ from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    check_distinct,
     check_not_input,
     episode_bar,
     episode_count,
@@ -269,6 +270,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     check_not_input(parser, "--json", args.json, [args.config])
+    check_distinct(parser, "--robots", args.robots)  # a repeat ran its row twice
     try:  # the config files' parser and checks: the values that differ from Table I, validated
         run = load(args.config, sets=mpc_sets(args.mpc))
         overrides = run.mpc_overrides()

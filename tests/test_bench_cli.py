@@ -240,6 +240,19 @@ def test_run_main_ends_a_users_error_in_one_line_and_keeps_a_bugs_traceback(caps
             ["--robots", "1", "--humans", "0", "--episodes", "1", "--parallel", "serial", "serial"],
             "--parallel names serial more than once",
         ),
+        # no row is lost there (rows are lists), but the repeat ran and printed twice
+        (
+            "robot_scaling",
+            ["--robots", "1", "1", "--humans", "0", "--episodes", "1"],
+            "--robots names 1 more",
+        ),
+        (
+            "cost_scale",
+            ["--cost-scale", "1", "1", "--episodes", "1"],
+            "--cost-scale names 1.0 more than once",
+        ),
+        ("cost_scale", ["--robots", "1", "1", "--episodes", "1"], "--robots names 1 more than once"),
+        ("orca_step", ["--humans", "0", "0", "--episodes", "1"], "--humans names 0 more than once"),
     ],
 )
 def test_a_bad_command_line_stops_before_any_episode(script, argv, message, capsys, tmp_path, monkeypatch):
