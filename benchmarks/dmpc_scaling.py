@@ -183,7 +183,21 @@ def closed_loop(
             controller.close()
     j_max = next(iter(controllers.values())).cfg.j_max
     rows = {m: _row(d["times"], d["its"], d["outcomes"], clocks[m], j_max) for m, d in data.items()}
-    return {"rows": rows, "same": same}
+    return cell_report(rows, same)
+
+
+def cell_report(rows: dict[str, dict[str, Any]], same: bool) -> dict[str, Any]:
+    """A cell's rows, whether serial and threads drove the same trajectories, and, with both modes, the
+    threads' speed-up (serial / threads) of the step median and of the phase: what the table prints, in the
+    JSON too."""
+    cell: dict[str, Any] = {"rows": rows, "same": same}
+    if "serial" in rows and "threads" in rows:
+        s, t = rows["serial"], rows["threads"]
+        cell["speedup"] = {
+            "step_median": s["median_ms"] / t["median_ms"],
+            "phase": s["phase_ms_per_step"] / t["phase_ms_per_step"],
+        }
+    return cell
 
 
 def list_schedule_speedup(durations: np.ndarray, threads: int, longest_first: bool = False) -> float:
@@ -345,14 +359,11 @@ def _print_report(report: dict[str, Any], args: argparse.Namespace, extra: Overr
                 f"{row['success']:>2}/{row['episodes']:<2} {row['collision']:>2}/{row['episodes']:<2} "
                 f"{row['timeout']:>2}/{row['episodes']:<2}"
             )
-        rows = cell["rows"]
-        if "serial" in rows and "threads" in rows:
-            s, t = rows["serial"], rows["threads"]
+        if "speedup" in cell:
+            speedup = cell["speedup"]
             line = (
-                f"{'':>2} {'':<32} speed-up (serial / threads): step median "
-                f"x{s['median_ms'] / t['median_ms']:.2f}, "
-                f"phase x{s['phase_ms_per_step'] / t['phase_ms_per_step']:.2f}, "
-                f"same trajectories: {cell['same']}"
+                f"{'':>2} {'':<32} speed-up (serial / threads): step median x{speedup['step_median']:.2f}, "
+                f"phase x{speedup['phase']:.2f}, same trajectories: {cell['same']}"
             )
             if "replay" in cell:
                 rp = cell["replay"]

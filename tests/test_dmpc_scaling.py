@@ -60,9 +60,14 @@ def test_the_threads_speed_up_is_labelled_serial_over_threads(capsys):
         "load_after": (0.0, 0.0, 0.0),
         "wall_s": 1.0,
         "cells": {
-            "r3 jacobi:regret": {"rows": {"serial": row(8.2, 6.0), "threads": row(10.0, 4.0)}, "same": True}
+            "r3 jacobi:regret": dmpc_scaling.cell_report(
+                {"serial": row(8.2, 6.0), "threads": row(10.0, 4.0)}, True
+            )
         },
     }
+    # the JSON holds the speed-up the table prints (it held only the rows)
+    speedup = report["cells"]["r3 jacobi:regret"]["speedup"]
+    assert speedup == {"step_median": pytest.approx(0.82), "phase": pytest.approx(1.5)}
     args = argparse.Namespace(humans=7, episodes=1)
     dmpc_scaling._print_report(report, args, ())
     line = capsys.readouterr().out.splitlines()[-1]
