@@ -203,10 +203,8 @@ def dmpc_updates_section(run: Run) -> dict[str, Any]:
     for m in run.robots_scale:
         for rule in rules:
             cell = run.timed(f"{m} robots, {rule}", lambda m=m, r=rule: dmpc_update_cell(m, 7, r, episodes))
-            if cell:
-                rows = cell["rows"]
-                if "serial" in rows and "threads" in rows:
-                    cell["speedup_median"] = rows["serial"]["median_ms"] / rows["threads"]["median_ms"]
+            if cell and "speedup" in cell:  # dmpc_scaling.cell_report's, under the key run_all wrote before
+                cell["speedup_median"] = cell["speedup"]["step_median"]
             updates[f"r{m} {rule}"] = cell
     return updates
 
