@@ -209,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             entry, root = zoo_edit.remove_from_zoo(args.name, args.dir)
         except PredictorError:
-            # no entry: a remove interrupted after its manifest write may have left the files behind
+            # no entry: an add or remove stopped on the way may have left its hidden temporaries
             leftovers, root = zoo_edit.remove_leftovers(args.name, args.dir)
             if not leftovers:
                 raise
