@@ -21,6 +21,14 @@ CLOSED_PIPE_STATUS: Final[int] = 141
 MAX_REPORT_BYTES: Final[int] = 64 * 2**20
 
 
+def examples(*commands: str) -> dict[str, object]:
+    """``add_parser`` keywords for a command's ``--help`` that ends with its example command lines, laid out
+    as written ("example:" / "examples:", each line indented by two spaces)."""
+    heading = "example:" if len(commands) == 1 else "examples:"
+    epilog = heading + "\n" + "".join(f"  {command}\n" for command in commands)
+    return {"epilog": epilog, "formatter_class": argparse.RawDescriptionHelpFormatter}
+
+
 def path_arg(text: str) -> Path:
     """An option's path: ``Path("")`` is ".", so an empty value (an unset shell variable) read or wrote the
     current directory."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from pipelines.commands import examples
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -34,15 +35,13 @@ def register(subparsers) -> None:
     info = actions.add_parser(
         "info",
         help="directory, entries, size, CasADi version and compiler",
-        epilog="examples:\n  crowdmpc cache info\n  crowdmpc cache info --json\n",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **examples("crowdmpc cache info", "crowdmpc cache info --json"),
     )
     info.add_argument("--json", action="store_true", help="print the same as one JSON object")
     actions.add_parser(
         "clear",
         help="remove every compiled entry (the next jit build compiles again)",
-        epilog="example:\n  crowdmpc cache clear\n",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **examples("crowdmpc cache clear"),
     )
     parser.set_defaults(func=run)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from pipelines.commands import examples
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -55,11 +56,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "show",
         help="print the defaults, or the effective config, as TOML",
         description="Print the configuration as a TOML file that loads back to the same configuration.",
-        epilog="examples:\n"
-        "  crowdmpc config show > run.toml\n"
-        "  crowdmpc config show --config run.toml --set mpc.w_coll=1e6 --set scenario.humans=5\n"
-        "  crowdmpc config show --from-sweep runs/table2 > rerun.toml\n",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **examples(
+            "crowdmpc config show > run.toml",
+            "crowdmpc config show --config run.toml --set mpc.w_coll=1e6 --set scenario.humans=5",
+            "crowdmpc config show --from-sweep runs/table2 > rerun.toml",
+        ),
     )
     add_config_options(show)
     show.add_argument(

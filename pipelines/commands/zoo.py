@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from pipelines.commands import path_arg
+from pipelines.commands import examples, path_arg
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -43,33 +43,27 @@ def register(subparsers) -> None:
         "--dir", type=path_arg, default=None, help="the user zoo directory (default $CROWDMPC_ZOO, see below)"
     )
     actions = parser.add_subparsers(dest="zoo_command", metavar="ACTION", required=True)
-    raw = argparse.RawDescriptionHelpFormatter
     actions.add_parser(
         "list",
         help="one line per model of both zoos with its metrics",
-        epilog="examples:\n  crowdmpc zoo list\n  crowdmpc zoo --dir my_zoo list\n",
-        formatter_class=raw,
+        **examples("crowdmpc zoo list", "crowdmpc zoo --dir my_zoo list"),
     )
     show = actions.add_parser(
-        "show",
-        help="the manifest entry of one model",
-        epilog="example:\n  crowdmpc zoo show social_lstm_eth\n",
-        formatter_class=raw,
+        "show", help="the manifest entry of one model", **examples("crowdmpc zoo show social_lstm_eth")
     )
     show.add_argument("name")
     actions.add_parser(
         "verify",
         help="check every entry's files against its manifest (exit 1 on a problem)",
-        epilog="example:\n  crowdmpc zoo verify\n",
-        formatter_class=raw,
+        **examples("crowdmpc zoo verify"),
     )
     add = actions.add_parser(
         "add",
         help="copy a trained checkpoint pair into the user zoo",
-        epilog="examples:\n"
-        "  crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt --name my_social_lstm\n"
-        "  crowdmpc zoo add runs/train/v2/social_lstm_eth.pt --name my_social_lstm --replace\n",
-        formatter_class=raw,
+        **examples(
+            "crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt --name my_social_lstm",
+            "crowdmpc zoo add runs/train/v2/social_lstm_eth.pt --name my_social_lstm --replace",
+        ),
     )
     add.add_argument("weights", type=path_arg, help="NAME.pt written by `crowdmpc train` (beside NAME.json)")
     add.add_argument("--name", default=None, help="zoo name (default: the checkpoint's own name)")
@@ -95,8 +89,7 @@ def register(subparsers) -> None:
     remove = actions.add_parser(
         "remove",
         help="remove a model (and its files) from the user zoo",
-        epilog="example:\n  crowdmpc zoo remove my_social_lstm\n",
-        formatter_class=raw,
+        **examples("crowdmpc zoo remove my_social_lstm"),
     )
     remove.add_argument("name")
     parser.set_defaults(func=run)
