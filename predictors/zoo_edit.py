@@ -147,14 +147,8 @@ def _write_pair(
     entry.paths(root, root / MANIFEST_NAME)  # refuse a NAME.pt or NAME.json linked to outside the zoo
     staged = [root / f".{file_name}.{os.getpid()}.new" for file_name in (entry.file, entry.config)]
     try:
-        with weights.open("rb") as source, staged[0].open("wb") as copy:
-            shutil.copyfileobj(source, copy)
-            copy.flush()
-            os.fsync(copy.fileno())
-        with staged[1].open("wb") as copy:
-            copy.write(config_bytes)
-            copy.flush()
-            os.fsync(copy.fileno())
+        _copy_synced(weights, staged[0])
+        _write_synced(staged[1], config_bytes)
         final = replace_fields(entry, sha256=sha256_file(staged[0]))
         entries[entry.name] = replace_fields(final, file=staged[0].name, config=staged[1].name)
         write_manifest(entries, root)
@@ -181,13 +175,26 @@ def _replace_with_link(source: Path, target: Path) -> None:
         try:
             os.link(source, link)
         except OSError:  # no hard links here (FAT, some network file systems): a synced copy
-            with source.open("rb") as original, link.open("wb") as copy:
-                shutil.copyfileobj(original, copy)
-                copy.flush()
-                os.fsync(copy.fileno())
+            _copy_synced(source, link)
         os.replace(link, target)
     finally:
         link.unlink(missing_ok=True)
+
+
+def _copy_synced(source: Path, target: Path) -> None:
+    """``source`` copied to ``target`` and on disk before the call returns."""
+    with source.open("rb") as original, target.open("wb") as copy:
+        shutil.copyfileobj(original, copy)
+        copy.flush()
+        os.fsync(copy.fileno())
+
+
+def _write_synced(target: Path, data: bytes) -> None:
+    """``data`` written to ``target`` and on disk before the call returns."""
+    with target.open("wb") as copy:
+        copy.write(data)
+        copy.flush()
+        os.fsync(copy.fileno())
 
 
 def user_name_refusal(name: str) -> str | None:
