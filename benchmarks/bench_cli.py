@@ -21,7 +21,7 @@ from typing import Any
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
-from pipelines.commands import check_writable
+from pipelines.commands import check_writable, first_repeat
 from pipelines.config import ConfigError
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
@@ -93,7 +93,7 @@ def check_distinct(parser: argparse.ArgumentParser, option: str, values: Sequenc
     """After parsing: each of ``option``'s values once (``crowdmpc sweep --humans``'s rule), else the parser's
     one-line error. A repeat ran its rows twice and printed them twice, and where the report is keyed by the
     value, the JSON kept one of them (control_step.py --humans 1 1: 6 rows printed, 3 written)."""
-    repeated = next((v for i, v in enumerate(values) if v in values[:i]), None)
+    repeated = first_repeat(values)
     if repeated is not None:
         parser.error(f"{option} names {repeated} more than once")
 

@@ -50,12 +50,13 @@ def predictor_names(text: str) -> str:
     """An argparse ``type``: ``--predictors`` as ``crowdmpc sweep`` takes it (its ``predictor_list``: 1 to
     the most names a swap table takes, each well-formed), each registered or in a zoo (``predictor_name``),
     none twice; refused now with the parser's one line, not by the first sweep's exit status."""
+    from pipelines.commands import first_repeat
     from pipelines.commands.sweep import predictor_list
 
     names = predictor_list(text)
     for name in names:
         predictor_name(name)
-    repeated = next((name for i, name in enumerate(names) if name in names[:i]), None)
+    repeated = first_repeat(names)
     if repeated is not None:
         raise argparse.ArgumentTypeError(f"{repeated!r} is named more than once")
     return ",".join(names)

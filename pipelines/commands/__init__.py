@@ -9,11 +9,13 @@ import os
 import stat
 import sys
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Final
+from typing import Final, TypeVar
 
 from pipelines.errors import PipelineError
+
+T = TypeVar("T")
 
 # The shell's exit status of a process that SIGPIPE ended (128 + 13): what `cmd | head` reports for a C tool.
 CLOSED_PIPE_STATUS: Final[int] = 141
@@ -37,6 +39,11 @@ def path_arg(text: str) -> Path:
     return Path(text)
 
 
+def first_repeat(values: Sequence[T]) -> T | None:
+    """The first value of ``values`` that an earlier one equals, or None (for options naming each once)."""
+    return next((v for i, v in enumerate(values) if v in values[:i]), None)
+
+
 def humans_list(text: str) -> tuple[int, ...]:
     """An argparse type: ``5,6,7`` -> (5, 6, 7), positive integers, each once (``--humans`` of sweep and
     calibrate: a repeat would be a second column of the same cells)."""
@@ -46,7 +53,7 @@ def humans_list(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
     if not values or min(values) < 1:
         raise argparse.ArgumentTypeError(f"--humans needs positive numbers, got {text!r}")
-    repeated = next((v for i, v in enumerate(values) if v in values[:i]), None)
+    repeated = first_repeat(values)
     if repeated is not None:
         raise argparse.ArgumentTypeError(f"--humans names {repeated} more than once, got {text!r}")
     return values
