@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 from collections.abc import Collection
 from dataclasses import replace as replace_fields
@@ -27,6 +28,9 @@ from predictors.manifest import (
     zoo_lock,
 )
 from predictors.zoo import SHIPPED, USER, checkpoints_dir, read_manifest, writable_zoo_dir
+
+# the hidden names an add (_write_pair, _replace_with_link) or a remove gives a model's files on the way
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?:pt|json)\.\d+\.(?:new|link|removed)")
 
 
 def add_to_zoo(weights: str | Path, **options: Any) -> ZooEntry:
@@ -317,8 +321,7 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
 
 def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:
     """Remove the hidden temporaries of model ``name`` that no entry of the user zoo (``directory``, else
-    ``user_zoo_dir()``) names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add
-    (.NAME.pt.PID.new, .link) stopped on the way. Never NAME.pt or NAME.json: a folder given as the zoo may
+    ``user_zoo_dir()``) names (``leftover_files``). Never NAME.pt or NAME.json: a folder given as the zoo may
     hold a training run's output, which no entry names either. Returns the files removed (none: nothing to
     do) and the zoo directory."""
     check_name(name)
@@ -326,22 +329,29 @@ def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[li
     if not root.is_dir():
         return [], root  # the lock would create it
     with zoo_lock(root):  # an add in progress holds it: its temporary files are not leftovers
-        entries = read_manifest(root)
-        manifest = root / MANIFEST_NAME
-        owned = {path for entry in entries.values() for path in entry.paths(root, manifest)}
-        candidates = []
-        for file_name in (f"{name}.pt", f"{name}.json"):
-            for kind in ("new", "link", "removed"):
-                candidates.extend(sorted(root.glob(f".{file_name}.*.{kind}")))
-        removed = []
-        for path in candidates:
-            if not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
-                continue
-            if path.resolve() in owned or path in owned:
-                continue
+        removed = [path for model, path in leftover_files(root) if model == name]
+        for path in removed:
             path.unlink()
-            removed.append(path)
     return removed, root
+
+
+def leftover_files(root: Path) -> list[tuple[str, Path]]:
+    """``(model name, path)`` of each hidden temporary in the zoo ``root`` that no entry of its manifest
+    names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add (.NAME.pt.PID.new, .link)
+    stopped on the way, or of one running now unless the caller holds ``zoo_lock``."""
+    if not root.is_dir():
+        return []
+    manifest = root / MANIFEST_NAME
+    owned = {path for entry in read_manifest(root).values() for path in entry.paths(root, manifest)}
+    found = []
+    for path in sorted(root.iterdir()):
+        match = _TEMPORARY.fullmatch(path.name)
+        if match is None or not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
+            continue
+        if path.resolve() in owned or path in owned:
+            continue
+        found.append((match["name"], path))
+    return found
 
 
 def _entry_to_remove(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 from pathlib import Path
 
 from pipelines.commands import examples, path_arg
@@ -25,9 +26,10 @@ zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo, else ~/.local/share/cro
 zoo has already is refused (adding the very same model again changes nothing) unless --replace says to replace
 that entry; so is a name whose files would be the zoo's own (manifest, calibrations). Parallel adds and
 removes take turns. The metrics file must be the one `crowdmpc train` wrote for these weights. A file whose
-sha256 differs from its manifest is refused when loaded; `verify` checks every entry of both zoos. A model of
-a plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the shipped
-zoo holds only the kinds the project ships.
+sha256 differs from its manifest is refused when loaded; `verify` checks every entry of both zoos and names
+the hidden files an add or remove stopped on the way left in the user zoo (`remove NAME` removes them). A
+model of a plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the
+shipped zoo holds only the kinds the project ships.
 """
 
 
@@ -195,6 +197,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{label}: {'ok' if problem is None else problem}")
         bad = sum(problem is not None for _, problem in results)
         print(f"{len(results) - bad} of {len(results)} entries ok")
+        _report_leftovers(zoo.user_zoo_dir(args.dir), args.dir)
         return 1 if bad else 0
     if args.zoo_command == "add":
         return _add(args)
@@ -212,6 +215,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"removed {entry.name} from the user zoo {root}")
         return 0
     raise PipelineError(f"unknown zoo action {args.zoo_command!r}")
+
+
+def _report_leftovers(root: Path, directory: Path | None) -> None:
+    """Name the hidden files an add or remove stopped on the way left in the user zoo ``root``: no entry
+    names them, so no line above does, and each may be as large as a model."""
+    from predictors import zoo, zoo_edit
+
+    if zoo.is_shipped(root) or not root.is_dir():
+        return
+    option = "" if directory is None else f" --dir {shlex.quote(str(directory))}"
+    for name, path in zoo_edit.leftover_files(root):
+        print(
+            f"{path}: left by an add or remove of {name} that stopped on the way (or is running now); "
+            f"`crowdmpc zoo{option} remove {shlex.quote(name)}` removes it"
+        )
 
 
 def _add(args: argparse.Namespace) -> int:

@@ -246,12 +246,38 @@ def test_a_remove_interrupted_after_its_manifest_write_is_finished_by_remove(use
     (user / ".mine.pt.123.new").write_bytes(b"an add's temporary copy")
     code, out, _ = cli(["zoo", "remove", "mine"], capsys)
     pid = os.getpid()
-    listed = f"removed its leftover files .mine.pt.123.new, .mine.pt.{pid}.removed, .mine.json.{pid}.removed"
+    listed = f"removed its leftover files .mine.json.{pid}.removed, .mine.pt.123.new, .mine.pt.{pid}.removed"
     assert code == 0 and listed in out
     own = [CALIBRATIONS_NAME, manifest.MANIFEST_NAME, manifest.LOCK_NAME]
     assert sorted(p.name for p in user.iterdir()) == sorted(own)
     code, _, line = cli(["zoo", "remove", "mine"], capsys)
     assert code == 2 and "has no entry 'mine'" in line
+
+
+def test_verify_names_the_leftovers_of_a_stopped_remove(user, monkeypatch, capsys):
+    """`zoo verify` listed the entries only: the hidden copies a stopped remove left (as large as the model)
+    were named by no line, and a user learnt of them only by a second `zoo remove mine`."""
+    code, out, _ = cli(["zoo", "verify"], capsys)
+    assert code == 0 and "left by" not in out
+
+    def interrupted(*_args, **_kwargs):
+        raise Interrupted
+
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(Path, "unlink", interrupted)
+        zoo_edit.remove_from_zoo("mine", user)
+    (user / ".other.json.77.link").write_text("{}")
+    (user / ".not_ours.pt.new").write_text("no pid: nobody's temporary")
+    code, out, _ = cli(["zoo", "verify"], capsys)
+    pid = os.getpid()
+    named = [line.split(":")[0] for line in out.splitlines() if "left by" in line]
+    hidden = [f".mine.json.{pid}.removed", f".mine.pt.{pid}.removed", ".other.json.77.link"]
+    assert code == 0 and named == [str(user / name) for name in sorted(hidden)]
+    assert "`crowdmpc zoo remove mine` removes it" in out and "`crowdmpc zoo remove other`" in out
+    code, out, _ = cli(["zoo", "--dir", str(user), "verify"], capsys)
+    assert f"`crowdmpc zoo --dir {user} remove mine` removes it" in out
+    assert cli(["zoo", "remove", "mine"], capsys)[0] == 0
+    assert "remove mine" not in cli(["zoo", "verify"], capsys)[1]
 
 
 def test_remove_never_takes_a_model_no_entry_names(user, tmp_path, capsys):
