@@ -135,16 +135,14 @@ def figure_file(text: str) -> Path:
     without one gets ``.png`` here, as matplotlib would have added it (so the path printed is the one
     written); a suffix matplotlib cannot write (``fig.pdfx``), a folder or a place without write access is
     refused now, not by a traceback after the runs are read."""
-    from matplotlib.backend_bases import FigureCanvasBase
+    from crowdsim.plotting import figure_refusal
 
     path = Path(text)
-    suffix = path.suffix[1:].lower()
-    formats = FigureCanvasBase.get_supported_filetypes()
-    if not suffix and path.name.strip("."):
+    if not path.suffix[1:] and path.name.strip("."):
         path = path.with_name(path.name.rstrip(".") + ".png")
-    elif suffix not in formats:
-        known = ", ".join(f".{name}" for name in sorted(formats))
-        raise argparse.ArgumentTypeError(f"{text}: matplotlib writes no {path.suffix!r} file; use {known}")
+    refusal = figure_refusal(path)
+    if refusal is not None:
+        raise argparse.ArgumentTypeError(f"{text}: {refusal}")
     try:
         check_writable(path, "--out")
     except PipelineError as exc:

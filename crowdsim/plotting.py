@@ -6,10 +6,12 @@ backend whatever backend the process has selected.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
+import matplotlib
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backend_bases import FigureCanvasBase
@@ -44,13 +46,23 @@ def check_figure_path(path: str | Path, option: str) -> None:
 
     Commands check before their (long) runs: ``savefig`` only complains about the format at the very end.
     """
+    refusal = figure_refusal(path)
+    if refusal is not None:
+        raise SimulationError(f"{option} {path}: {refusal}")
+
+
+def figure_refusal(path: str | Path) -> str | None:
+    """Why matplotlib cannot write a figure named ``path`` on this machine, or None. A ``.pgf`` figure is
+    typeset by a TeX system matplotlib runs (``pgf.texsystem``), so it needs one installed."""
     suffix = Path(path).suffix.lower().lstrip(".")
     supported = FigureCanvasBase.get_supported_filetypes()
     if suffix not in supported:
-        raise SimulationError(
-            f"{option} {path}: cannot write a figure of type {suffix or '(no suffix)'!r}; "
-            f"name it with one of {sorted(supported)}"
-        )
+        kind = suffix or "(no suffix)"
+        return f"cannot write a figure of type {kind!r}; name it with one of {sorted(supported)}"
+    tex = str(matplotlib.rcParams["pgf.texsystem"])
+    if suffix == "pgf" and shutil.which(tex) is None:
+        return f"a .pgf figure is typeset by {tex}, which is not installed here; name it .pdf or .svg"
+    return None
 
 
 def frame_axes(ax: Axes, *points: np.ndarray) -> None:

@@ -1,7 +1,9 @@
 """benchmarks/plot_scaling.py: which of robot_scaling.py's rows make which line, and its errors."""
 
 import json
+import shutil
 
+import matplotlib
 import pytest
 
 from tests.benchmark_modules import load_benchmark
@@ -106,13 +108,16 @@ def test_the_path_printed_is_the_path_written(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("out", "message"),
     [
-        ("fig.pdfx", "fig.pdfx: matplotlib writes no '.pdfx' file; use ."),
-        ("m.json", "m.json: matplotlib writes no '.json' file"),
+        ("fig.pdfx", "fig.pdfx: cannot write a figure of type 'pdfx'; name it with one of ["),
+        ("m.json", "m.json: cannot write a figure of type 'json'"),
+        ("fig.pgf", "fig.pgf: a .pgf figure is typeset by xelatex, which is not installed here"),
     ],
 )
 def test_a_format_matplotlib_cannot_write_is_refused_when_parsed(out, message, tmp_path, capsys, monkeypatch):
-    """fig.pdfx ended in matplotlib's traceback, after the runs were read."""
+    """fig.pdfx ended in matplotlib's traceback, after the runs were read; so did fig.pgf without TeX."""
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setitem(matplotlib.rcParams, "pgf.texsystem", "xelatex")
+    monkeypatch.setattr(shutil, "which", lambda _name: None)  # whether or not this machine has TeX
     run = tmp_path / "m.json"
     run.write_text(json.dumps(M_RUN))
     with pytest.raises(SystemExit) as stop:

@@ -1,5 +1,8 @@
 """plot_episode draws what Fig. 2 shows and saves a PNG."""
 
+import shutil
+
+import matplotlib
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
@@ -48,3 +51,17 @@ def test_figure_paths_are_checked_by_suffix():
     check_figure_path("ep.pdf", "--plot")
     with pytest.raises(SimulationError, match=r"--plot ep\.foo: cannot write a figure of type 'foo'"):
         check_figure_path("ep.foo", "--plot")
+
+
+def test_a_pgf_figure_without_its_tex_system_is_refused_before_the_run(monkeypatch):
+    """`simulate --plot ep.pgf` ran every episode and then ended in matplotlib's traceback ("'xelatex' not
+    found"), exit status 1, no figure."""
+    monkeypatch.setitem(matplotlib.rcParams, "pgf.texsystem", "lualatex")
+    installed: list[str] = []
+    monkeypatch.setattr(shutil, "which", lambda name: f"/usr/bin/{name}" if name in installed else None)
+    with pytest.raises(
+        SimulationError, match=r"--plot ep\.pgf: a \.pgf figure is typeset by lualatex, which"
+    ):
+        check_figure_path("ep.pgf", "--plot")
+    installed.append("lualatex")
+    check_figure_path("ep.pgf", "--plot")
