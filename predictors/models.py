@@ -78,12 +78,18 @@ class ModelKind:
     # starting point; these no override, command-line option or checkpoint may change: a vanilla_lstm with
     # grid pooling would be a Social-LSTM under another name (its zoo name, its cells in the experiments).
     defining: Mapping[str, str] = field(default_factory=dict)
+    # Per key, the one value this kind's config may not take, with why: a social_lstm without pooling is
+    # the vanilla_lstm under another name, a social_gan without noise a generator with nothing to vary.
+    excluded: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
 
     def __post_init__(self):
         check_net_class(self.net_class, self.name)
         undefined = sorted(set(self.defining) - set(self.defaults))
         if undefined:
             raise PredictorError(f"model {self.name!r}: defining keys {undefined} have no value in defaults")
+        clashing = sorted(key for key, (value, _) in self.excluded.items() if self.defaults.get(key) == value)
+        if clashing:
+            raise PredictorError(f"model {self.name!r}: its defaults take the excluded values of {clashing}")
 
     @property
     def config_class(self) -> type:
@@ -139,7 +145,8 @@ class ModelKind:
         return config
 
     def check_defining(self, config: Any) -> None:
-        """PredictorError naming the key and this kind unless ``config`` keeps every defining value."""
+        """PredictorError naming the key and this kind unless ``config`` keeps every defining value and
+        takes no excluded one."""
         for key, why in self.defining.items():
             found, want = getattr(config, key, None), self.defaults[key]
             if found != want:
@@ -147,6 +154,9 @@ class ModelKind:
                     f"{key} {short_repr(found)} is not a {self.name}: the kind is defined by {key} {want!r} "
                     f"({why}); choose another model kind"
                 )
+        for key, (value, why) in self.excluded.items():
+            if getattr(config, key, None) == value:
+                raise PredictorError(f"{key} {short_repr(value)} is not a {self.name} ({why})")
 
     def build_net(self, config: Any) -> torch.nn.Module:
         """The net of ``config`` (a ``config_class`` instance, or a dict validated like ``config``).
@@ -210,12 +220,26 @@ def _shipped() -> dict[str, ModelKind]:
     from predictors.nets.social_lstm import SocialLSTM
 
     kinds = [
-        ModelKind("social_lstm", SocialLSTM, {"pooling": "grid"}),
         ModelKind(
-            "vanilla_lstm", SocialLSTM, {"pooling": "none"}, defining={"pooling": "it has no social pooling"}
+            "social_lstm",
+            SocialLSTM,
+            {"pooling": "grid", "noise_dim": 0},
+            defining={"noise_dim": "noise makes it the social_gan generator"},
+            excluded={"pooling": ("none", "without social pooling it is a vanilla_lstm; choose that kind")},
         ),
         ModelKind(
-            "social_gan", SocialLSTM, {"pooling": "soft", "noise_dim": 8, "head": "point"}, adversarial=True
+            "vanilla_lstm",
+            SocialLSTM,
+            {"pooling": "none", "noise_dim": 0},
+            defining={"pooling": "it has no social pooling", "noise_dim": "noise makes it a GAN generator"},
+        ),
+        ModelKind(
+            "social_gan",
+            SocialLSTM,
+            {"pooling": "soft", "noise_dim": 8, "head": "point"},
+            adversarial=True,
+            defining={"head": "its discriminator judges points"},
+            excluded={"noise_dim": (0, "the generator draws its variety from noise; give noise_dim >= 1")},
         ),
         ModelKind("social_gru", SocialGRU),
         ModelKind("social_attention", SocialAttention),

@@ -20,6 +20,7 @@ from predictors.models import (
     ENTRY_POINT_GROUP,
     MAX_PARAMETERS,
     PLUGINS_ENV,
+    ModelKind,
     UnknownModel,
     load_plugin,
     model_kind,
@@ -89,6 +90,60 @@ def test_a_kind_defining_value_cannot_be_changed(no_plugins):
         vanilla.predictor(pooled, name="pooled", obs_len=9)
     # a default only: social_lstm pools either way
     assert social.config({"pooling": "soft"}).pooling == "soft"
+
+
+@pytest.mark.parametrize(
+    ("model", "values", "message"),
+    [
+        (
+            "social_lstm",
+            {"pooling": "none"},
+            "pooling 'none' is not a social_lstm (without social pooling it is a",
+        ),
+        (
+            "social_lstm",
+            {"noise_dim": 4},
+            "noise_dim 4 is not a social_lstm: the kind is defined by noise_dim 0",
+        ),
+        (
+            "vanilla_lstm",
+            {"noise_dim": 2},
+            "noise_dim 2 is not a vanilla_lstm: the kind is defined by noise_dim 0",
+        ),
+        (
+            "social_gan",
+            {"noise_dim": 0},
+            "noise_dim 0 is not a social_gan (the generator draws its variety from",
+        ),
+        (
+            "social_gan",
+            {"head": "gaussian"},
+            "head 'gaussian' is not a social_gan: the kind is defined by head",
+        ),
+    ],
+)
+def test_a_config_that_makes_another_kind_is_refused_by_the_kind(no_plugins, model, values, message):
+    """`train --model social_lstm --pooling none` trained a vanilla LSTM named social_lstm_eth, and with
+    noise_dim 4 a social_lstm carried a noise layer fed zeros; a social_gan without noise or with a Gaussian
+    head got through the config and was refused only once the data were read (with the config's repr)."""
+    kind = model_kind(model)
+    with pytest.raises(PredictorError, match=re.escape(message)):
+        kind.config(values)
+    with pytest.raises(PredictorError, match=re.escape(message)):
+        kind.build_net({**kind.config().to_dict(), **values})  # a checkpoint's stored config
+    assert kind.config({key: kind.config().to_dict()[key] for key in values}) == kind.config()
+
+
+def test_a_kind_whose_defaults_take_an_excluded_value_is_refused(no_plugins):
+    with pytest.raises(
+        PredictorError, match=r"model 'odd': its defaults take the excluded values of \['pooling'\]"
+    ):
+        ModelKind(
+            "odd",
+            type(model_kind("social_lstm").build_net({})),
+            {"pooling": "none"},
+            excluded={"pooling": ("none", "")},
+        )
 
 
 @pytest.mark.parametrize("name", ["gpt", "", "Social_LSTM", "social_lstm ", None, 3, ["social_lstm"]])

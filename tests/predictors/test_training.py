@@ -48,7 +48,8 @@ def fast_dev_trainer() -> L.Trainer:
 @pytest.mark.parametrize("loss", ["gaussian", "l2"])
 def test_social_lstm_module_fast_dev_run(tiny_data, pooling, loss):
     torch.manual_seed(0)
-    module = make_module("social_lstm", SocialLSTMConfig(pooling=pooling), OptimConfig(loss=loss))
+    model = "vanilla_lstm" if pooling == "none" else "social_lstm"  # a social_lstm pools
+    module = make_module(model, SocialLSTMConfig(pooling=pooling), OptimConfig(loss=loss))
     assert isinstance(module, SocialLSTMModule)
     before = [p.detach().clone() for p in module.net.parameters()]
     trainer = fast_dev_trainer()
@@ -181,7 +182,7 @@ def _old_checkpoint(tiny_data, tmp_path, config: SocialLSTMConfig):
         enable_model_summary=False,
         enable_checkpointing=False,
     )
-    module = make_module("social_lstm", config, OptimConfig())
+    module = make_module("vanilla_lstm" if config.pooling == "none" else "social_lstm", config, OptimConfig())
     trainer.fit(module, datamodule=tiny_data)
     path = tmp_path / "old.ckpt"
     trainer.save_checkpoint(path)
