@@ -291,6 +291,8 @@ def _compile_nlpsol(
     # while it compiles (inside); the object file and library go to jit_options' directory.
     jit_name = f"crowdmpc_jit_{tag}"
     source = folder / f"{jit_name}.c"
+    interrupted = folder / f".tmp-{key}.{tag}.interrupted"
+    command = _interruptible(cc.path, interrupted)
     jit = {
         "jit": True,
         "compiler": "shell",
@@ -299,8 +301,8 @@ def _compile_nlpsol(
         "jit_cleanup": False,  # we remove the source; CasADi would look for it where the process is back in
         "jit_serialize": "link",
         "jit_options": {
-            "compiler": shlex.quote(cc.path),
-            "linker": shlex.quote(cc.path),
+            "compiler": command,
+            "linker": command,
             "flags": list(cc.flags),
             "directory": str(folder.resolve()) + os.sep,
             "name": library,
@@ -314,7 +316,12 @@ def _compile_nlpsol(
     published = False
     try:
         with inside(folder):
-            solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
+            try:
+                solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
+            except RuntimeError:
+                if interrupted.exists():  # Ctrl-C, not a failed compile: see _interruptible
+                    raise KeyboardInterrupt from None
+                raise
         solver.save(str(tmp))
         del solver
         record.write_text(entry_record(tmp, folder / f"{library}.so"))
@@ -324,11 +331,27 @@ def _compile_nlpsol(
         published = publish(tmp, folder / f"{key}.casadi")
     finally:
         source.unlink(missing_ok=True)
+        interrupted.unlink(missing_ok=True)
         (folder / f"{library}.o").unlink(missing_ok=True)
         tmp.unlink(missing_ok=True)
         record.unlink(missing_ok=True)
         if not published:  # failed, or another process published first (no lock): its library is used
             (folder / f"{library}.so").unlink(missing_ok=True)
+
+
+def _interruptible(compiler: str, marker: Path) -> str:
+    """The shell command CasADi runs as the compiler and linker: ``compiler`` with the arguments CasADi
+    appends, leaving ``marker`` when a SIGINT stopped it. CasADi runs it with ``system()``, which ignores
+    SIGINT in our process while it waits, so a Ctrl-C during a cold compile reached only gcc and came back
+    as "Compilation failed"; the marker lets ``_compile_nlpsol`` raise KeyboardInterrupt instead. The
+    shell's trap (not an ignore, which gcc would inherit) runs once gcc has ended; 130 is a child ended by
+    SIGINT."""
+    script = (
+        f'trap "stopped=1" INT; "$0" "$@"; status=$?; '
+        f'if [ "$status" -eq 130 ] || [ -n "$stopped" ]; then : > {shlex.quote(str(marker))}; fi; '
+        f'exit "$status"'
+    )
+    return f"/bin/sh -c {shlex.quote(script)} {shlex.quote(compiler)}"
 
 
 @dataclass(frozen=True)

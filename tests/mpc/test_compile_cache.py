@@ -1,9 +1,11 @@
 """The persistent compile cache: compiled once, loaded after, identical solves, safe under concurrency."""
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import casadi as ca
@@ -301,6 +303,55 @@ def test_a_failed_compile_is_a_compile_cache_error(cache, monkeypatch, tmp_path)
     with pytest.raises(compile_cache.CompileCacheError, match=r"compiling the solver 's' into .* failed: "):
         compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     assert suffixes(cache) == []  # nothing but the lock left
+
+
+def fake_compiler(tmp_path: Path, body: str) -> compile_cache.Compiler:
+    script = tmp_path / "gcc"
+    script.write_text(f"#!/bin/sh\n{body}\n")
+    script.chmod(0o755)
+    return compile_cache.Compiler(str(script), "x", ("-O2",))
+
+
+def test_a_compiler_stopped_by_sigint_is_an_interrupt_not_a_failed_compile(cache, monkeypatch, tmp_path):
+    stopped = fake_compiler(tmp_path, "kill -INT $$")
+    monkeypatch.setattr(compile_cache, "compiler", lambda: stopped)
+    with pytest.raises(KeyboardInterrupt):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    assert suffixes(cache) == []  # the marker gone with the other temporaries
+
+
+INTERRUPTED = """
+import sys
+sys.path.insert(0, {root!r})
+from mpc import compile_cache
+from tests.mpc.test_compile_cache import IPOPT, small_nlp
+compile_cache.compiler = lambda: compile_cache.Compiler({gcc!r}, "x", ("-O2",))
+try:
+    compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+except BaseException as exc:
+    print(type(exc).__name__)
+"""
+
+
+def test_ctrl_c_during_a_cold_compile_interrupts_the_program(cache, tmp_path):
+    """CasADi compiles with system(), which ignores SIGINT in the caller while gcc runs: a Ctrl-C stopped gcc
+    alone, and the program went on to report "compiling the solver ... failed" (a sweep: a failed cell)."""
+    started = tmp_path / "started"
+    slow = fake_compiler(tmp_path, f": > {started}; sleep 60")
+    script = tmp_path / "child.py"
+    script.write_text(textwrap.dedent(INTERRUPTED.format(root=str(ROOT), gcc=slow.path)))
+    env = os.environ | {compile_cache.CACHE_ENV: str(cache.parent)}
+    child = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, start_new_session=True
+    )
+    for _ in range(600):
+        if started.exists() or child.poll() is not None:
+            break
+        time.sleep(0.05)
+    os.killpg(child.pid, signal.SIGINT)  # what the terminal sends the foreground process group
+    out, _ = child.communicate(timeout=60)
+    assert out.split() == ["KeyboardInterrupt"]
+    assert suffixes(cache) == []
 
 
 @needs_gcc
