@@ -1,11 +1,11 @@
 """The process pool's backend: K spawned processes of a ``concurrent.futures`` pool run the sweep's episodes
 (pipelines.experiments.backends picks it when Ray is not installed, or for ``--backend process``).
 
-What it holds: the pool's worker processes (each with one EpisodeWorker, ignoring Ctrl-C, exiting with a
-killed driver), the environment they start with, the resource tracker started quiet, and the break handling:
-a worker process that dies breaks the whole pool, each episode in flight becomes an episode error, a new pool
-runs the rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing.
-"""
+What it holds: the pool's worker processes (each with one EpisodeWorker, ignoring Ctrl-C from its start,
+exiting with a killed driver), the environment they start with, the resource tracker started quiet, and the
+break handling: a worker process that dies breaks the whole pool, each episode in flight becomes an episode
+error, a new pool runs the rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing
+finishing."""
 
 from __future__ import annotations
 
@@ -109,6 +109,24 @@ def _child_environment(values: dict[str, str]) -> Iterator[None]:
                 os.environ[k] = v
 
 
+@contextlib.contextmanager
+def _children_ignore_sigint() -> Iterator[None]:
+    """Processes started inside the block ignore SIGINT from their first instruction (an ignored signal
+    stays ignored across exec): a Ctrl-C while a worker still imports (seconds, before its initializer
+    ignores it) printed that worker's KeyboardInterrupt traceback under the driver's "interrupted" line.
+    The driver ignores it too for the milliseconds a spawn takes; only the main thread may set handlers."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 class ProcessBackend:
     """K spawned processes of a concurrent.futures pool.
 
@@ -130,16 +148,17 @@ class ProcessBackend:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        with _child_environment(SINGLE_THREAD_ENV):
+        with _child_environment(SINGLE_THREAD_ENV), _children_ignore_sigint():
             self._pool = ProcessPoolExecutor(
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context("spawn"),
                 initializer=_init_pool_worker,
                 initargs=self._initargs,
             )
-            # Start every worker now, while the environment above is in force.
-            for future in [self._pool.submit(os.getpid) for _ in range(self.workers)]:
-                future.result()
+            # Start every worker now (a spawn pool starts one in each submit), while the block is in force.
+            started = [self._pool.submit(os.getpid) for _ in range(self.workers)]
+        for future in started:
+            future.result()
         self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
         self._note_processes()
         self._pool_ended = False

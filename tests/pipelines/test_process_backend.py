@@ -1,0 +1,54 @@
+"""The process backend's workers and Ctrl-C: the driver alone handles it, from the workers' start."""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import signal
+
+from pipelines.experiments import process_backend
+
+
+def _sigint_handler_at_start(queue) -> None:
+    queue.put(str(signal.getsignal(signal.SIGINT)))  # nothing in this child has set it: what it started with
+
+
+def started_with(ignore: bool) -> str:
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    child = context.Process(target=_sigint_handler_at_start, args=(queue,))
+    if ignore:
+        with process_backend._children_ignore_sigint():
+            child.start()
+    else:
+        child.start()
+    handler = queue.get(timeout=120)
+    child.join(timeout=120)
+    return handler
+
+
+def test_workers_ignore_ctrl_c_from_their_start_and_the_driver_keeps_its_handler():
+    """A Ctrl-C while the workers still imported (before their initializer ignores it) printed each worker's
+    KeyboardInterrupt traceback under the driver's "interrupted: rerun the same command to resume"."""
+    before = signal.getsignal(signal.SIGINT)
+    assert started_with(ignore=True) == str(signal.SIG_IGN)
+    assert signal.getsignal(signal.SIGINT) is before
+    assert started_with(ignore=False) != str(signal.SIG_IGN)  # what a spawn without the block gives
+
+
+def test_the_pool_starts_its_workers_inside_the_block(monkeypatch):
+    real, started = process_backend._children_ignore_sigint, []
+    before = len(multiprocessing.active_children())
+
+    @contextlib.contextmanager
+    def watched():
+        with real():
+            yield
+            started.append(len(multiprocessing.active_children()) - before)
+
+    monkeypatch.setattr(process_backend, "_children_ignore_sigint", watched)
+    backend = process_backend.ProcessBackend(2, "none")
+    try:
+        assert started == [2]
+    finally:
+        backend.close()
