@@ -45,13 +45,9 @@ import os
 import platform
 import re
 import secrets
-import shlex
-import shutil
-import subprocess
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cache
 from pathlib import Path
 from typing import Final
 
@@ -68,6 +64,7 @@ from mpc.cache_entries import (
     publish,
     remove_dead_leftovers,
 )
+from mpc.compiler import COMPILER, Compiler, compiler, interruptible
 from mpc.errors import MPCConfigError
 
 # The variable and default of predictors.data.locate.cache_root, repeated here: importing predictors would
@@ -76,8 +73,6 @@ CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
 SUBDIR: Final[str] = "compiled"
 # Bump when the layout or the key changes: old entries are then never read (``crowdmpc cache clear``).
 FORMAT: Final[int] = 1
-COMPILER: Final[str] = "gcc"  # CasADi's "shell" compiler plugin calls it
-FLAGS: Final[tuple[str, ...]] = ("-O2",)
 # What compiling costs and saves, per NLP, for `crowdmpc sweep --jit auto`, measured by
 # benchmarks/compile_cache.py (3 robots, 7 humans, the shared 2-core machine): a cold compile of CMPC's joint
 # NLP takes 8.2 s of CPU, gcc included (wall 5.1 / 6.7 / 7.8 s at 5 / 7 / 9 humans with the machine at load
@@ -157,31 +152,6 @@ def _location_error(
     root = os.environ.get(CACHE_ENV)
     named = f"${CACHE_ENV}={root}" if root else f"the compile cache {folder} (default; ${CACHE_ENV} unset)"
     return CacheLocationError(f"{named}: {problem}; set ${CACHE_ENV} to {wanted}")
-
-
-@dataclass(frozen=True)
-class Compiler:
-    """The C compiler the jit calls, as the key records it."""
-
-    path: str  # absolute path of gcc
-    version: str  # first line of ``gcc --version``
-    flags: tuple[str, ...]
-
-    def describe(self) -> str:
-        return f"{self.version} ({self.path}) {' '.join(self.flags)}"
-
-
-@cache
-def compiler() -> Compiler | None:
-    """gcc on the PATH, or None (then nothing can be compiled). Asked once per process."""
-    path = shutil.which(COMPILER)
-    if path is None:
-        return None
-    try:
-        out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30, check=True)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return Compiler(path, (out.stdout.splitlines() or ["unknown"])[0].strip(), FLAGS)
 
 
 def _key(kind: str, options: Mapping, payload: str, cc: Compiler, folder: Path) -> str:
@@ -292,7 +262,7 @@ def _compile_nlpsol(
     jit_name = f"crowdmpc_jit_{tag}"
     source = folder / f"{jit_name}.c"
     interrupted = folder / f".tmp-{key}.{tag}.interrupted"
-    command = _interruptible(cc.path, interrupted)
+    command = interruptible(cc.path, interrupted)
     jit = {
         "jit": True,
         "compiler": "shell",
@@ -319,7 +289,7 @@ def _compile_nlpsol(
             try:
                 solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
             except RuntimeError:
-                if interrupted.exists():  # Ctrl-C, not a failed compile: see _interruptible
+                if interrupted.exists():  # Ctrl-C, not a failed compile: see compiler.interruptible
                     raise KeyboardInterrupt from None
                 raise
         solver.save(str(tmp))
@@ -337,21 +307,6 @@ def _compile_nlpsol(
         record.unlink(missing_ok=True)
         if not published:  # failed, or another process published first (no lock): its library is used
             (folder / f"{library}.so").unlink(missing_ok=True)
-
-
-def _interruptible(compiler: str, marker: Path) -> str:
-    """The shell command CasADi runs as the compiler and linker: ``compiler`` with the arguments CasADi
-    appends, leaving ``marker`` when a SIGINT stopped it. CasADi runs it with ``system()``, which ignores
-    SIGINT in our process while it waits, so a Ctrl-C during a cold compile reached only gcc and came back
-    as "Compilation failed"; the marker lets ``_compile_nlpsol`` raise KeyboardInterrupt instead. The
-    shell's trap (not an ignore, which gcc would inherit) runs once gcc has ended; 130 is a child ended by
-    SIGINT."""
-    script = (
-        f'trap "stopped=1" INT; "$0" "$@"; status=$?; '
-        f'if [ "$status" -eq 130 ] || [ -n "$stopped" ]; then : > {shlex.quote(str(marker))}; fi; '
-        f'exit "$status"'
-    )
-    return f"/bin/sh -c {shlex.quote(script)} {shlex.quote(compiler)}"
 
 
 @dataclass(frozen=True)
