@@ -73,6 +73,7 @@ def prepare_ewap(
     # written into a staging folder beside ``out_dir`` and moved in only when complete (``_install``); beside
     # the folder a symbolic link names, on its file system when it can be (``_move`` copies across others)
     out_dir = out_dir.resolve()
+    _check_out_dir(out_dir)
     staging = out_dir.parent / f".{out_dir.name}{STAGING_INFIX}{os.getpid()}.tmp"
     _remove_stale_staging(out_dir)
     shutil.rmtree(staging, ignore_errors=True)
@@ -122,14 +123,33 @@ def _install(staging: Path, out_dir: Path, manifest: dict) -> None:
     first, with the marker of an unfinished install put down before it, so that a stop on the way leaves a
     folder with no manifest (never an old manifest beside new files) that ``data prepare`` may finish."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    for folder in sorted({(out_dir / name).parent for name in manifest["files"]}):
+        folder.mkdir(exist_ok=True)
+    _check_out_dir(out_dir)  # again: a link put down while the files were made
     marker = out_dir / INCOMPLETE_MARKER
-    marker.touch()
+    # O_NOFOLLOW: a link put down since the check is refused (ELOOP), never followed to create its target
+    os.close(os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o644))
     (out_dir / MANIFEST).unlink(missing_ok=True)
     for name in manifest["files"]:
-        (out_dir / name).parent.mkdir(parents=True, exist_ok=True)
         _move(staging / name, out_dir / name)
     _move(staging / MANIFEST, out_dir / MANIFEST)
     marker.unlink(missing_ok=True)  # another preparation into the folder may have finished first
+
+
+def _check_out_dir(out_dir: Path) -> None:
+    """A split folder or the marker of ``out_dir`` that is a symbolic link (or a split that is no folder) is
+    refused: the files moved into a linked val/ replaced those of the folder it named, outside ``out_dir``,
+    and a linked marker was created where it pointed. The files and the manifest are renamed over, so a
+    link in their place is replaced, never followed."""
+    for name in (*SPLITS, INCOMPLETE_MARKER):
+        entry = out_dir / name
+        if entry.is_symlink():
+            raise PredictorError(
+                f"{entry} is a symbolic link; `data prepare` writes only inside {out_dir}: remove the link "
+                "or prepare into another folder"
+            )
+        if name in SPLITS and entry.exists() and not entry.is_dir():
+            raise PredictorError(f"{entry} is not a folder; remove it or prepare into another folder")
 
 
 def _move(source: Path, target: Path) -> None:
@@ -141,6 +161,7 @@ def _move(source: Path, target: Path) -> None:
         if exc.errno != errno.EXDEV:
             raise
         part = target.with_name(f"{target.name}.part")
+        part.unlink(missing_ok=True)  # copyfile would write through a link left there
         shutil.copyfile(source, part)
         os.replace(part, target)
 

@@ -435,3 +435,29 @@ def test_evaluate_records_the_protocol_a_zoo_model_was_trained_under(prepared, t
     assert "note: social_lstm_eth was trained under protocol 'paper'; --protocol loo chooses the files" in err
     result = json.loads(report.read_text())
     assert (result["protocol"], result["trained_protocol"]) == ("loo", "paper")
+
+
+def test_prepare_refuses_a_linked_split_folder_or_marker_and_writes_nothing_outside(tmp_path, capsys):
+    """A symbolic link for val/ in a prepared folder had `data prepare` replace the files of the folder it
+    named; one for the marker of an unfinished prepare had it create the file the link named."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags"]
+    assert run(capsys, *argv)[0] == 0
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "biwi_eth.ndjson").write_text("precious\n")
+    shutil.rmtree(out / "val")
+    (out / "val").symlink_to(victim)
+    code, _, err = run(capsys, *argv)
+    assert_one_line_error(code, err, f"{out / 'val'} is a symbolic link")
+    assert [p.name for p in victim.iterdir()] == ["biwi_eth.ndjson"]
+    assert (victim / "biwi_eth.ndjson").read_text() == "precious\n"
+    (out / "val").unlink()
+    assert run(capsys, *argv)[0] == 0
+    outside = tmp_path / "outside" / "created-by-prepare"
+    outside.parent.mkdir()
+    (out / ".prepare-incomplete").symlink_to(outside)
+    code, _, err = run(capsys, *argv)
+    assert_one_line_error(code, err, f"{out / '.prepare-incomplete'} is a symbolic link")
+    assert not outside.exists() and (out / "manifest.json").is_file()
