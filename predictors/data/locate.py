@@ -25,6 +25,7 @@ import errno
 import hashlib
 import json
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -41,6 +42,9 @@ CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
 VITA_TRAIN: Final[Path] = Path("trajnetpp_vita") / "train" / "real_data"
 PROTOCOLS: Final[tuple[str, ...]] = ("paper", "loo")
 DATASETS: Final[tuple[str, ...]] = tuple(EWAP_SEQUENCES)
+# The names a manifest may list: <split>/<NAME>.ndjson inside its folder, no absolute path, no "..", nothing
+# hidden (a manifest naming /etc/passwd had it opened and hashed).
+SPLIT_FILE: Final[re.Pattern[str]] = re.compile(rf"({'|'.join(SPLITS)})/[^/\\\0.][^/\\\0]*\.ndjson")
 
 
 def resolve_data_dir(data_dir: str | Path | None) -> Path:
@@ -133,8 +137,13 @@ def load_manifest(directory: Path) -> dict | None:
 def prepared_mismatch(directory: Path, manifest: dict) -> str | None:
     """How the first file the manifest of ``directory`` lists differs from it (missing, another size or
     sha256: files of another preparation beside this manifest), or None. Hashing the splits costs about
-    a millisecond per MB, little beside reading them."""
-    for name, entry in manifest.get("files", {}).items():
+    a millisecond per MB, little beside reading them. A name that is no split file is said before any file
+    is opened: a manifest names only files of its own folder."""
+    files = manifest.get("files", {})
+    foreign = next((name for name in files if SPLIT_FILE.fullmatch(name) is None), None)
+    if foreign is not None:
+        return f"manifest.json is malformed: it lists {foreign!r}, not a file <split>/<NAME>.ndjson in it"
+    for name, entry in files.items():
         path = directory / name
         if not path.is_file():
             return f"lacks {name}"

@@ -461,3 +461,20 @@ def test_prepare_refuses_a_linked_split_folder_or_marker_and_writes_nothing_outs
     code, _, err = run(capsys, *argv)
     assert_one_line_error(code, err, f"{out / '.prepare-incomplete'} is a symbolic link")
     assert not outside.exists() and (out / "manifest.json").is_file()
+
+
+@pytest.mark.parametrize("name", ["/etc/passwd", "../outside.ndjson", "train/../../outside.ndjson"])
+def test_a_manifest_listing_a_file_outside_its_folder_is_malformed(name, prepared, capsys, monkeypatch):
+    """A manifest's name was joined to the folder unchecked: `data stats` opened and hashed /etc/passwd."""
+    from predictors.data import locate
+
+    (prepared.parent / "outside.ndjson").write_text("not yours\n")
+    manifest = json.loads((prepared / "manifest.json").read_text())
+    manifest["files"][name] = {"scenes": 1, "frames": [0, 1], "sha256": "0" * 64, "bytes": 10}
+    (prepared / "manifest.json").write_text(json.dumps(manifest))
+    hashed = []
+    monkeypatch.setattr(locate, "sha256_file", lambda path: hashed.append(path) or "0" * 64)
+    for argv in (["data", "stats"], ["evaluate", "--predictor", "constant_velocity", "--data-dir"]):
+        code, _, err = run(capsys, *argv, str(prepared))
+        assert_one_line_error(code, err, f"manifest.json is malformed: it lists {name!r}")
+    assert hashed == []
