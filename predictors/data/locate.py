@@ -193,7 +193,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
     log(f"preparing {raw} into {target} (first use only; about half a minute)")
     staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
     shutil.rmtree(staging, ignore_errors=True)
-    prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log)
+    prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log, log_dir=target)
     try:
         staging.rename(target)
     except OSError:  # another process finished first; its copy is as good as ours

@@ -58,12 +58,16 @@ def prepare_ewap(
     references: dict[str, Reference] | None = None,
     progress: bool = False,
     log=print,
+    log_dir: str | Path | None = None,
 ) -> dict:
     """Convert ``raw_dir/seq_eth`` and ``raw_dir/seq_hotel`` into ``out_dir/{train,val,test}/<name>.ndjson``
     and write ``out_dir/manifest.json``; with ``references`` ({name: a TrajNet++ conversion of the whole
     sequence}) also run the self-check (``compare_with_reference``). Without ``categorize_scenes`` scenes
-    are untagged and none is dropped (much faster; see ``build_scenes``). Returns the manifest."""
+    are untagged and none is dropped (much faster; see ``build_scenes``). The log names each file in
+    ``log_dir`` (default ``out_dir``): a caller that moves ``out_dir`` into place names that place. Returns
+    the manifest."""
     raw_dir, out_dir = Path(raw_dir), Path(out_dir)
+    log_dir = Path(log_dir) if log_dir is not None else out_dir
     sources = {name: raw_dir / seq / "obsmat.txt" for name, seq in EWAP_SEQUENCES.items()}
     missing = [str(p) for p in sources.values() if not p.is_file()]
     if missing:
@@ -80,7 +84,7 @@ def prepare_ewap(
     try:
         staging.mkdir(parents=True)
         manifest = _prepare_into(staging, raw_dir, sources, acceptance, categorize_scenes, seed, fractions,
-                                 references, progress, log)  # fmt: skip
+                                 references, progress, log, log_dir)  # fmt: skip
         _install(staging, out_dir, manifest)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -98,6 +102,7 @@ def _prepare_into(
     references: dict[str, Reference] | None,
     progress: bool,
     log,
+    log_dir: Path,
 ) -> dict:
     manifest = _new_manifest(raw_dir, acceptance, categorize_scenes, seed, fractions)
     options = dict(categorize_scenes=categorize_scenes, acceptance=acceptance, seed=seed, progress=progress)
@@ -110,7 +115,9 @@ def _prepare_into(
             "sha256": sha256_file(source),
             "frame_step": frame_step,
         }
-        manifest["files"].update(_write_parts(name, tracks, parts, frame_step, out_dir, options, log))
+        manifest["files"].update(
+            _write_parts(name, tracks, parts, frame_step, out_dir, options, log, log_dir)
+        )
         reference = (references or {}).get(name)
         if reference is not None and Path(reference.path).is_file():
             manifest["self_check"][name] = _self_check(name, tracks, reference, frame_step, progress, log)
@@ -229,9 +236,11 @@ def _write_parts(
     out_dir: Path,
     scenes_options: dict,
     log,
+    log_dir: Path,
 ) -> dict[str, dict]:
     """Each split part of one sequence as its own ndjson file; scene ids run on across the parts, so a
-    sequence's ids stay unique. Returns the manifest's entries for the files written."""
+    sequence's ids stay unique. Logged as in ``log_dir``, where they will be (``out_dir`` is a staging
+    folder, gone at the end). Returns the manifest's entries for the files written."""
     files: dict[str, dict] = {}
     next_id = 0
     for split in SPLITS:
@@ -247,7 +256,8 @@ def _write_parts(
             "sha256": sha256_file(target),
             "bytes": target.stat().st_size,
         }
-        log(f"{name:<11} {split:<5} frames {first}-{last}: {len(scenes):5d} scenes -> {target}")
+        shown = log_dir / split / target.name
+        log(f"{name:<11} {split:<5} frames {first}-{last}: {len(scenes):5d} scenes -> {shown}")
     return files
 
 

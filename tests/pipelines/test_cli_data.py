@@ -478,3 +478,16 @@ def test_a_manifest_listing_a_file_outside_its_folder_is_malformed(name, prepare
         code, _, err = run(capsys, *argv, str(prepared))
         assert_one_line_error(code, err, f"manifest.json is malformed: it lists {name!r}")
     assert hashed == []
+
+
+def test_prepare_names_each_file_where_it_ends_up(tmp_path, capsys):
+    """Each file's line named the hidden staging folder, removed when the command ended."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    code, stdout, _ = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags")
+    assert code == 0
+    named = [line.rsplit(" -> ", 1)[1] for line in stdout.splitlines() if " -> " in line]
+    assert len(named) == 6 and all(os.path.isfile(path) for path in named)
+    assert {os.path.relpath(path, out) for path in named} == set(
+        json.loads((out / "manifest.json").read_text())["files"]
+    )

@@ -3,6 +3,7 @@ import shutil
 import pytest
 
 from predictors.data import locate
+from predictors.data.ewap import SPLITS
 from predictors.data.locate import prepared_dir, protocol_files, resolve_data_dir
 from predictors.data.prepare import prepare_ewap
 from predictors.errors import PredictorError
@@ -75,8 +76,13 @@ def test_raw_directory_is_prepared_once_into_the_cache(raw_root, monkeypatch, tm
         return prepare_ewap(*args, **{**kwargs, "categorize_scenes": False, "references": {}})
 
     monkeypatch.setattr(locate, "prepare_ewap", fast_prepare)
-    first = prepared_dir(raw_root, log=lambda msg: None, progress=False)
+    logged = []
+    first = prepared_dir(raw_root, log=logged.append, progress=False)
     assert first.parent == tmp_path / "cache" / "prepared"
+    # each file named where it ends up, not in the staging folders it is made in
+    assert [line.rsplit(" -> ", 1)[1] for line in logged if " -> " in line] == [
+        str(first / split / f"{name}.ndjson") for name in ("biwi_eth", "biwi_hotel") for split in SPLITS
+    ]
     assert (first / "test" / "biwi_eth.ndjson").is_file()
     assert prepared_dir(raw_root / "raw_ewap", log=lambda msg: None) == first  # raw_ewap itself works too
     assert len(calls) == 1
