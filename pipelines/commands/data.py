@@ -70,7 +70,11 @@ def _register_prepare(actions) -> None:
         help="skip the TrajNet++ categorisation (a Kalman fit per scene): faster, untagged, nothing dropped",
     )
     prepare.add_argument(
-        "--seed", type=int, default=42, help="seed of the static-scene acceptance (default 42)"
+        "--seed",
+        type=int,
+        default=None,  # None: not typed, so --no-tags can refuse only a seed the user gave
+        help="seed of the TrajNet++ categorisation: the draws of its Kalman fits, which may change a scene's "
+        "type, and of the static-scene acceptance (default 42; not with --no-tags, which draws nothing)",
     )
     prepare.set_defaults(func=run_prepare)
 
@@ -126,6 +130,7 @@ def run_prepare(args: argparse.Namespace) -> int:
     from predictors.data.selfcheck import default_references
     from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
 
+    seed = _prepare_seed(args)
     check_writable(args.out, "--out", directory=True)
     _check_prepare_target(args.out)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
@@ -140,7 +145,7 @@ def run_prepare(args: argparse.Namespace) -> int:
         args.out,
         acceptance=None if args.keep_all else TRAJNETPP_ACCEPTANCE,
         categorize_scenes=not args.no_tags,
-        seed=args.seed,
+        seed=seed,
         references=references,
         progress=sys.stderr.isatty(),
         log=lambda msg: print(msg, flush=True),
@@ -157,6 +162,20 @@ def run_prepare(args: argparse.Namespace) -> int:
             f"{check['reference_scenes']} scenes reproduced exactly"
         )
     return 0
+
+
+def _prepare_seed(args: argparse.Namespace) -> int:
+    """The seed of the categorisation: --seed, else the default (recorded in the manifest even with
+    --no-tags, as it always was). --seed with --no-tags is refused: nothing would be drawn, yet the manifest
+    recorded it as if it had been."""
+    from predictors.data.trajnet_scenes import DEFAULT_SEED
+
+    if args.seed is not None and args.no_tags:
+        raise PipelineError(
+            f"--seed {args.seed} with --no-tags: without the categorisation nothing is drawn; "
+            "drop --seed or --no-tags"
+        )
+    return DEFAULT_SEED if args.seed is None else args.seed
 
 
 def _check_prepare_target(out: Path) -> None:

@@ -491,3 +491,19 @@ def test_prepare_names_each_file_where_it_ends_up(tmp_path, capsys):
     assert {os.path.relpath(path, out) for path in named} == set(
         json.loads((out / "manifest.json").read_text())["files"]
     )
+
+
+def test_prepare_seed_is_refused_with_no_tags_and_said_to_seed_the_categorisation(tmp_path, capsys):
+    """--seed with --no-tags changed nothing yet was recorded in the manifest as if it had; its help named
+    only the acceptance, though it seeds the Kalman fits of the categorisation too (tags under --keep-all)."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags"]
+    code, _, err = run(capsys, *argv, "--seed", "42")
+    assert_one_line_error(code, err, "--seed 42 with --no-tags")
+    assert not out.exists()
+    assert run(capsys, *argv)[0] == 0  # the default seed, recorded as it always was: cache keys unchanged
+    assert json.loads((out / "manifest.json").read_text())["parameters"]["seed"] == 42
+    with pytest.raises(SystemExit):
+        main(["data", "prepare", "--help"])
+    assert "seed of the TrajNet++ categorisation" in " ".join(capsys.readouterr().out.split())
