@@ -8,7 +8,8 @@ A data directory is either
 * or a *raw* directory like the team's shared data: ``raw_ewap/seq_{eth,hotel}/obsmat.txt`` (or the
   ``raw_ewap`` directory itself), optionally with ``trajnetpp_vita/train/real_data/*.ndjson`` beside it.
   The raw annotations are prepared once into ``<cache>/prepared/<content hash>`` (cache:
-  ``$CROWDMPC_CACHE``, else ``~/.cache/crowdmpc``).
+  ``$CROWDMPC_CACHE``, else ``~/.cache/crowdmpc``); an entry whose files are no longer those its manifest
+  lists is prepared again and replaced.
 
 Protocols (data/README.md explains them):
 
@@ -32,6 +33,7 @@ from pathlib import Path
 from typing import Final
 
 from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
+from predictors.data.locking import locked
 from predictors.data.prepare import CONVERTER_VERSION, prepare_ewap
 from predictors.data.selfcheck import default_references
 from predictors.errors import PredictorError
@@ -190,17 +192,54 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
         return target
     writable_cache_dir("prepared")
     log = log or (lambda msg: print(msg, file=sys.stderr))
-    log(f"preparing {raw} into {target} (first use only; about half a minute)")
+    log(f"preparing {raw} into {target} ({_why_prepare(target)}; about half a minute)")
     staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
     shutil.rmtree(staging, ignore_errors=True)
     prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log, log_dir=target)
-    try:
-        staging.rename(target)
-    except OSError:  # another process finished first; its copy is as good as ours
-        shutil.rmtree(staging, ignore_errors=True)
-        if read_manifest(target) is None:
-            raise
+    _install_cache_entry(staging, target)
     return target
+
+
+def _why_prepare(target: Path) -> str:
+    """Why the cache entry ``target``, not a good one, is prepared: first use, or what is wrong with it."""
+    if not os.path.lexists(target):
+        return "first use only"
+    manifest = load_manifest(target)
+    what = (prepared_mismatch(target, manifest) if manifest is not None else None) or "no readable manifest"
+    return f"the cached one is damaged: {what}; it is replaced"
+
+
+def _install_cache_entry(staging: Path, target: Path) -> None:
+    """The fresh preparation ``staging`` renamed to the cache entry ``target``, under a lock beside it. A
+    good entry another process installed meanwhile is kept (it holds the same files); a damaged one (a file
+    edited or lost: ``read_manifest`` refuses it) is moved aside to a hidden name and replaced, where the
+    rename onto it failed on every run. It is only a cache: nothing of the user's is in it."""
+    aside = target.with_name(f".{target.name}.{os.getpid()}.old")
+    try:
+        with locked(target.with_name(f".{target.name}.lock")):
+            if read_manifest(target) is not None:
+                return
+            if os.path.lexists(target):
+                os.rename(target, aside)
+            staging.rename(target)
+    except OSError as exc:
+        if read_manifest(target) is not None:  # a process that takes no lock (an older crowdmpc) installed it
+            return
+        raise PredictorError(
+            f"the cached preparation {target} cannot be replaced ({exc.strerror or exc}); delete it and run "
+            "again"
+        ) from None
+    finally:
+        _remove(staging)
+        _remove(aside)
+
+
+def _remove(path: Path) -> None:
+    """``path`` gone, whatever it is; a link is removed, never what it points to."""
+    if path.is_symlink() or path.is_file():
+        path.unlink(missing_ok=True)
+    else:
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def vita_train_dir(data_dir: Path, prepared: Path) -> Path | None:

@@ -109,3 +109,56 @@ def test_incomplete_prepared_directory_is_not_used(prepared):
     (prepared / "manifest.json").write_text("{")  # unreadable: nothing to name
     with pytest.raises(PredictorError, match="incomplete or unreadable; re-run"):
         protocol_files(prepared, "paper")
+
+
+def _fast_prepare(monkeypatch, then=None):
+    """prepare_ewap without categorisation or self-check, counted; ``then(out)`` runs after each."""
+    calls = []
+
+    def fast_prepare(*args, **kwargs):
+        calls.append(args)
+        manifest = prepare_ewap(*args, **{**kwargs, "categorize_scenes": False, "references": {}})
+        if then is not None:
+            then(args[1])
+        return manifest
+
+    monkeypatch.setattr(locate, "prepare_ewap", fast_prepare)
+    return calls
+
+
+def test_a_damaged_cache_entry_is_prepared_again_and_replaced(raw_root, monkeypatch, tmp_path):
+    """An edited file in the cached preparation made every run prepare again, then fail to rename onto the
+    entry (directory not empty) in a traceback."""
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    calls = _fast_prepare(monkeypatch)
+    entry = prepared_dir(raw_root, log=lambda msg: None, progress=False)
+    good = (entry / "val" / "biwi_eth.ndjson").read_bytes()
+    with (entry / "val" / "biwi_eth.ndjson").open("a") as damaged:
+        damaged.write("junk\n")
+    logged = []
+    assert prepared_dir(raw_root, log=logged.append, progress=False) == entry
+    assert "the cached one is damaged: val/biwi_eth.ndjson has " in logged[0]
+    assert (entry / "val" / "biwi_eth.ndjson").read_bytes() == good
+    assert locate.read_manifest(entry) is not None and len(calls) == 2
+    assert prepared_dir(raw_root, log=lambda msg: None, progress=False) == entry and len(calls) == 2
+    assert sorted(p.name for p in entry.parent.iterdir()) == sorted([entry.name, f".{entry.name}.lock"])
+
+
+def test_a_good_cache_entry_installed_meanwhile_is_kept(raw_root, monkeypatch, tmp_path):
+    """Another process that replaced the damaged entry while this one prepared: this one uses its entry."""
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    _fast_prepare(monkeypatch)
+    entry = prepared_dir(raw_root, log=lambda msg: None, progress=False)
+    theirs = tmp_path / "theirs"
+    shutil.copytree(entry, theirs)
+    (theirs / "installed-by-the-other").touch()
+    (entry / "test" / "biwi_eth.ndjson").unlink()
+
+    def the_other_finishes_first(staging):
+        shutil.rmtree(entry)
+        theirs.rename(entry)
+
+    _fast_prepare(monkeypatch, then=the_other_finishes_first)
+    assert prepared_dir(raw_root, log=lambda msg: None, progress=False) == entry
+    assert (entry / "installed-by-the-other").exists() and locate.read_manifest(entry) is not None
+    assert sorted(p.name for p in entry.parent.iterdir()) == sorted([entry.name, f".{entry.name}.lock"])
