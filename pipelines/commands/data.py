@@ -56,7 +56,11 @@ def _register_prepare(actions) -> None:
         "--raw", required=True, type=path_arg, help="raw_ewap directory (or the directory holding it)"
     )
     prepare.add_argument(
-        "--out", required=True, type=path_arg, help="output directory for {train,val,test}/*.ndjson"
+        "--out",
+        required=True,
+        type=path_arg,
+        help="output directory for {train,val,test}/*.ndjson; a second prepare into it waits for the first "
+        "(a hidden .NAME.prepare.lock beside it)",
     )
     prepare.add_argument(
         "--no-check", action="store_true", help="skip the comparison with reference conversions"
@@ -132,24 +136,25 @@ def run_prepare(args: argparse.Namespace) -> int:
 
     seed = _prepare_seed(args)
     check_writable(args.out, "--out", directory=True)
-    _check_prepare_target(args.out)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:
         raise PipelineError(
             f"--raw {args.raw}: expected a BIWI EWAP directory holding seq_eth/obsmat.txt and "
             "seq_hotel/obsmat.txt"
         )
-    references = {} if args.no_check else default_references(raw)
-    manifest = prepare_ewap(
-        raw,
-        args.out,
-        acceptance=None if args.keep_all else TRAJNETPP_ACCEPTANCE,
-        categorize_scenes=not args.no_tags,
-        seed=seed,
-        references=references,
-        progress=sys.stderr.isatty(),
-        log=lambda msg: print(msg, flush=True),
-    )
+    with _one_prepare_at_a_time(args.out):
+        _check_prepare_target(args.out)
+        references = {} if args.no_check else default_references(raw)
+        manifest = prepare_ewap(
+            raw,
+            args.out,
+            acceptance=None if args.keep_all else TRAJNETPP_ACCEPTANCE,
+            categorize_scenes=not args.no_tags,
+            seed=seed,
+            references=references,
+            progress=sys.stderr.isatty(),
+            log=lambda msg: print(msg, flush=True),
+        )
     if not args.no_check and "biwi_hotel" not in manifest["self_check"]:
         print(
             "self-check skipped: no official biwi_hotel.ndjson found at "
@@ -176,6 +181,19 @@ def _prepare_seed(args: argparse.Namespace) -> int:
             "drop --seed or --no-tags"
         )
     return DEFAULT_SEED if args.seed is None else args.seed
+
+
+def _one_prepare_at_a_time(out: Path):
+    """The lock of preparations into ``out``, a hidden ``.NAME.prepare.lock`` beside the folder (a link's
+    target): two at once each moved their files in, and the last to finish won, over files of the other."""
+    from predictors.data.locking import locked
+
+    folder = out.resolve()
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    return locked(
+        folder.parent / f".{folder.name}.prepare.lock",
+        waiting=lambda: print(f"waiting for another `data prepare` into {out} to finish", flush=True),
+    )
 
 
 def _check_prepare_target(out: Path) -> None:

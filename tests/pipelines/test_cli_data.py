@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 import types
 
 import pytest
@@ -507,3 +508,30 @@ def test_prepare_seed_is_refused_with_no_tags_and_said_to_seed_the_categorisatio
     with pytest.raises(SystemExit):
         main(["data", "prepare", "--help"])
     assert "seed of the TrajNet++ categorisation" in " ".join(capsys.readouterr().out.split())
+
+
+def test_a_prepare_waits_for_another_into_the_same_folder(tmp_path, capsys):
+    """Two prepares into one folder at once each moved their files in; the last to finish won. Another
+    process holds the lock of --out here: the prepare starts only once it lets go."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    out = tmp_path / "prepared"
+    held, released = tmp_path / "held", tmp_path / "released"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", (
+            "import fcntl, pathlib, sys, time\n"
+            "with open(sys.argv[1], 'a') as lock:\n"
+            "    fcntl.flock(lock, fcntl.LOCK_EX)\n"
+            "    pathlib.Path(sys.argv[2]).touch()\n"
+            "    time.sleep(1.5)\n"
+            "    pathlib.Path(sys.argv[3]).touch()\n"
+        ), str(tmp_path / ".prepared.prepare.lock"), str(held), str(released)],
+    )  # fmt: skip
+    try:
+        while not held.exists() and holder.poll() is None:
+            time.sleep(0.02)
+        assert held.exists()
+        code, stdout, _ = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags")
+        assert code == 0 and released.exists()  # it ran after the other let go
+        assert stdout.splitlines()[0] == f"waiting for another `data prepare` into {out} to finish"
+    finally:
+        holder.wait(timeout=30)
