@@ -6,10 +6,8 @@ the name of, and a lock (``zoo_lock``) that serialises the writers of its manife
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
-import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -18,6 +16,7 @@ from typing import Any, Final
 
 from predictors.checkpoint import check_name, check_sha256, read_document
 from predictors.errors import PredictorError, short_repr
+from predictors.locking import locked
 
 MANIFEST_FORMAT: Final[str] = "crowdmpc-zoo"
 MANIFEST_NAME: Final[str] = "manifest.json"
@@ -60,30 +59,16 @@ def is_zoo_file(root: Path, path: Path) -> bool:
 
 @contextmanager
 def zoo_lock(directory: str | Path) -> Iterator[Path]:
-    """Hold the zoo's exclusive lock (``flock`` on ``LOCK_NAME`` in it, made with the directory if need be)
-    for a read-modify-write of its manifest: two writers that both read the old manifest would each write it
-    back with their own change only, and the other's entry would be lost. Yields the directory.
-
-    A lock file rather than the directory itself: on NFS (home directories on clusters) flock is emulated
-    with fcntl locks, which need a file opened for writing."""
+    """Hold the zoo's exclusive lock (``LOCK_NAME`` in it, made with the directory if need be) for a
+    read-modify-write of its manifest: two writers that both read the old manifest would each write it back
+    with their own change only, and the other's entry would be lost. Yields the directory."""
     root = Path(directory)
-    lock = root / LOCK_NAME
     try:
         root.mkdir(parents=True, exist_ok=True)
-        # O_NOFOLLOW: a symbolic link planted as the lock must not make us create a file elsewhere;
-        # O_NONBLOCK: a FIFO planted there would block the open forever (no reader)
-        fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
     except OSError as exc:
-        what = "it is a symbolic link" if os.path.islink(lock) else (exc.strerror or str(exc))
-        raise PredictorError(f"{lock}: cannot lock the zoo ({what})") from None
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        raise PredictorError(f"{lock}: cannot lock the zoo (not a regular file); remove it")
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)  # waits for the writer that holds it
+        raise PredictorError(f"{root / LOCK_NAME}: cannot lock the zoo ({exc.strerror or exc})") from None
+    with locked(root / LOCK_NAME, "lock the zoo"):
         yield root
-    finally:
-        os.close(fd)  # releases the lock
 
 
 def zoo_path(root: Path, relative: object, what: str) -> Path:

@@ -186,12 +186,13 @@ def _prepare_seed(args: argparse.Namespace) -> int:
 def _one_prepare_at_a_time(out: Path):
     """The lock of preparations into ``out``, a hidden ``.NAME.prepare.lock`` beside the folder (a link's
     target): two at once each moved their files in, and the last to finish won, over files of the other."""
-    from predictors.data.locking import locked
+    from predictors.locking import locked
 
     folder = out.resolve()
     folder.parent.mkdir(parents=True, exist_ok=True)
     return locked(
         folder.parent / f".{folder.name}.prepare.lock",
+        "serialise the preparations into it",
         waiting=lambda: print(f"waiting for another `data prepare` into {out} to finish", flush=True),
     )
 

@@ -33,11 +33,11 @@ from pathlib import Path
 from typing import Final
 
 from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
-from predictors.data.locking import locked
 from predictors.data.prepare import CONVERTER_VERSION, prepare_ewap
 from predictors.data.selfcheck import default_references
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
+from predictors.locking import locked
 
 DATA_ENV: Final[str] = "CROWDMPC_DATA"
 CACHE_ENV: Final[str] = "CROWDMPC_CACHE"
@@ -216,7 +216,7 @@ def _install_cache_entry(staging: Path, target: Path) -> None:
     rename onto it failed on every run. It is only a cache: nothing of the user's is in it."""
     aside = target.with_name(f".{target.name}.{os.getpid()}.old")
     try:
-        with locked(target.with_name(f".{target.name}.lock")):
+        with locked(target.with_name(f".{target.name}.lock"), "replace the cached preparation"):
             if read_manifest(target) is not None:
                 return
             if os.path.lexists(target):
