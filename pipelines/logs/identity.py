@@ -10,10 +10,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final
 
-from mcap.reader import make_reader
-
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import decode_metadata
+from pipelines.logs.reader import decode_metadata, read_metadata
 
 # What tells two runs' recordings of one (scenario, seed) apart (its file name is the same for both), and
 # two set-ups in `crowdmpc review DIR`: these values of the "episode" metadata, then every setting of the
@@ -64,14 +62,14 @@ def check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
     predictor, crowd, simulator or controller settings): rerunning a command into its folder replaces its own
     recordings (``make demo``), but a second controller, or a run with another formation, recorded into the
     same folder silently replaced the first's. A setting the held recording does not name (recorded before
-    it existed, and not in ``UNRECORDED_DEFAULTS``) tells nothing apart. A file that is no readable
-    recording is left to the recorder, which replaces it."""
+    it existed, and not in ``UNRECORDED_DEFAULTS``) tells nothing apart. The metadata are read as ``crowdmpc
+    review`` reads them, so that a cut file (a killed run's ``.part``, a copy that stopped) still names its
+    run; a file that is no recording is left to the recorder, which replaces it."""
     if not path.is_file():
         return
     try:
-        with open(path, "rb") as f:
-            records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
-    except Exception:  # not an MCAP file, or a damaged one (mcap raises many kinds): no run to keep apart
+        records = read_metadata(path)
+    except PipelineError:  # not an MCAP file, or cut inside its header: no run to keep apart
         return
     if "episode" not in records:
         return

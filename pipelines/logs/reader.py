@@ -182,10 +182,12 @@ def _seconds(ns: int) -> str:
 
 
 class _Walk:
-    """The records of one file in order, into channels, messages, metadata and problems."""
+    """The records of one file in order, into channels, messages, metadata and problems; ``metadata_only``:
+    into its metadata alone, its chunks left compressed."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, *, metadata_only: bool = False):
         self.path = path
+        self.metadata_only = metadata_only
         self.metadata: dict[str, dict[str, str]] = {}
         self.channels: dict[str, Channel] = {}
         self.messages: dict[str, list[LoggedMessage]] = {}
@@ -195,6 +197,8 @@ class _Walk:
         self._orphans: dict[int, list[Message]] = {}  # channel id -> messages read before its channel
 
     def take(self, record: McapRecord, offset: int) -> None:
+        if self.metadata_only and not isinstance(record, Metadata):
+            return
         if isinstance(record, Chunk):
             try:
                 inner = breakup_chunk(record, validate_crc=True)
@@ -278,6 +282,25 @@ def read_recording(path: str | Path) -> Recording:
     cut inside its header.
     """
     path = Path(path)
+    walk = _Walk(path)
+    complete, stopped_at = _walk_file(path, walk)
+    walk.finish()
+    return Recording(
+        path, walk.metadata, walk.channels, walk.messages, not complete, stopped_at, walk.problems
+    )
+
+
+def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    """The metadata records of ``path`` as ``read_recording`` reads them (a truncated file's too), without
+    decompressing its chunks; the same PipelineError for a file that is no recording at all."""
+    walk = _Walk(Path(path), metadata_only=True)
+    _walk_file(walk.path, walk)
+    return walk.metadata
+
+
+def _walk_file(path: Path, walk: _Walk) -> tuple[bool, str | None]:
+    """Hand every record of ``path`` after its header to ``walk``; whether the file is complete (ends with
+    the closing magic) and what stopped reading early, if anything did."""
     if path.is_dir():
         raise PipelineError(f"{path} is a folder, not a recording")
     if not path.is_file():
@@ -302,7 +325,7 @@ def read_recording(path: str | Path) -> Recording:
     if not isinstance(header, Header):
         raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
 
-    walk, stopped_at = _Walk(path), None
+    stopped_at = None
     while True:
         offset = buffer.tell()
         try:
@@ -324,10 +347,7 @@ def read_recording(path: str | Path) -> Recording:
                 stopped_at = _reason(exc)
             break
         walk.take(record, offset)
-    walk.finish()
-    return Recording(
-        path, walk.metadata, walk.channels, walk.messages, not complete, stopped_at, walk.problems
-    )
+    return complete, stopped_at
 
 
 # Where a folder's recordings are looked for: in it, else one and two levels below it (find_recordings).

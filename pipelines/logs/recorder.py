@@ -51,13 +51,13 @@ DEFAULT_COMPRESSION: Final[CompressionType] = _default_compression()
 _ENCODER: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 
 
-def _create(path: Path, *, new: bool = False) -> IO[bytes]:
+def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None] | None = None) -> IO[bytes]:
     """``path`` opened for writing, never through a symbolic link: one planted at ``<name>.part`` in the
     folder the user named would make the recording land wherever it points. ``new``: only if nothing has
     that name (FileExistsError otherwise), atomically, so two processes never both get it. Otherwise the
     file is locked (``flock``, released when the file is closed or its process dies) before it is emptied:
     two runs recording the same episode into one folder at once wrote one file, and a killed run's ``.part``
-    is still taken over."""
+    is still taken over, once ``may_replace`` (if given) has let it: what it raises goes up, the file kept."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_EXCL if new else 0)
     try:
         fd = os.open(path, flags, 0o644)
@@ -76,7 +76,13 @@ def _create(path: Path, *, new: bool = False) -> IO[bytes]:
                 f"cannot record to {path}: another run is recording that episode into this folder now; "
                 "record into another folder"
             ) from None
-        os.ftruncate(fd, 0)
+        try:
+            if may_replace is not None:
+                may_replace(path)
+            os.ftruncate(fd, 0)
+        except BaseException:
+            os.close(fd)
+            raise
     return os.fdopen(fd, "wb")
 
 
@@ -92,10 +98,12 @@ class McapRecorder:
         otherwise). The ``.part`` is created atomically and ``path`` checked after it, so that of recorders
         choosing names at the same time in one folder only one gets each (a finished file's ``.part`` is
         gone before its final name appears).
-    :param before_rename: called with ``path`` on closing, just before the file is finished and takes that
-        name, while the ``.part`` is still locked: a check that ``path`` may be replaced (another run may
-        have finished a file there since this one started); when it raises, the finished recording keeps
-        its ``.part`` name, and ``close`` raises that.
+    :param may_replace: a check that a file may be replaced, raising if not: called with ``<path>.part``
+        once it is locked, before it is emptied (it may be a killed run's unfinished recording; not with
+        ``new``), where what it raises goes up with the file kept; and with ``path`` on closing, just before
+        the file is finished and takes that name, while the ``.part`` is still locked (another run may have
+        finished a file there since this one started), where a refusal leaves the finished recording its
+        ``.part`` name, and ``close`` raises that.
     """
 
     def __init__(
@@ -106,7 +114,7 @@ class McapRecorder:
         compression: CompressionType = DEFAULT_COMPRESSION,
         metadata: Mapping[str, Mapping[str, str]] | None = None,
         new: bool = False,
-        before_rename: Callable[[Path], None] | None = None,
+        may_replace: Callable[[Path], None] | None = None,
     ):
         if chunk_size <= 0:
             raise PipelineError(f"chunk_size must be a positive number of bytes, got {chunk_size}")
@@ -122,8 +130,8 @@ class McapRecorder:
         # killed run leaves its chunks in the .part, which `crowdmpc review NAME.part` reads. Creating the
         # file late would still leave a truncated .mcap for any kill after the first chunk.
         self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
-        self._before_rename = before_rename
-        self._stream: IO[bytes] = _create(self.part_path, new=new)
+        self._may_replace = may_replace
+        self._stream: IO[bytes] = _create(self.part_path, new=new, may_replace=may_replace)
         if new and (self.path.exists() or self.path.is_symlink()):
             self._stream.close()
             self.part_path.unlink()
@@ -175,11 +183,11 @@ class McapRecorder:
             self._stream.close()  # the lock goes with it, after the rename
 
     def _refusal(self) -> Exception | None:
-        """What ``before_rename`` raised, if it raised."""
-        if self._before_rename is None:
+        """What ``may_replace`` raised for ``path``, if it raised."""
+        if self._may_replace is None:
             return None
         try:
-            self._before_rename(self.path)
+            self._may_replace(self.path)
         except Exception as exc:
             return exc
         return None

@@ -61,6 +61,13 @@ def next_unseeded(out_dir: Path, scenario: str, written: int = -1) -> int:
     return max([written, *numbers]) + 1
 
 
+def _check_episode_files(path: Path, identity: Mapping[str, Any]) -> None:
+    """Refuse to record to ``path`` when it or its unfinished ``.part`` (a killed run's, which ``crowdmpc
+    review`` reads) holds another run's episode (``check_replaceable``)."""
+    check_replaceable(path, identity)
+    check_replaceable(path.with_name(path.name + UNFINISHED_SUFFIX), identity)
+
+
 def seconds_to_ns(t: float) -> int:
     return int(round(t * 1e9))
 
@@ -72,9 +79,10 @@ def _metadata_strings(values: Mapping[str, Any]) -> dict[str, str]:
 
 class McapEpisodeRecorder:
     """An EpisodeObserver writing ``<out_dir>/<scenario>_seed<seed:06d>.mcap`` per episode, replacing the
-    file of a rerun of the same run (refusing another run's: ``run_identity``); ``<scenario>_<n:06d>.mcap``
-    for one no seed drew (a gym episode started from a layout), n one past the highest already in the folder,
-    taken atomically, so recorders sharing a folder never write one file.
+    file of a rerun of the same run, finished or unfinished (``.part``: a killed run's), and refusing
+    another run's (``run_identity``); ``<scenario>_<n:06d>.mcap`` for one no seed drew (a gym episode
+    started from a layout), n one past the highest already in the folder, taken atomically, so recorders
+    sharing a folder never write one file.
 
     :param out_dir: folder for the files (created if missing).
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
@@ -147,10 +155,10 @@ class McapEpisodeRecorder:
             identity = run_identity(episode, decode_metadata(config))
             planned, self._planned = self._planned, ()
             for other in planned:  # the run's identity is every episode's but for the seed
-                check_replaceable(self.out_dir / episode_filename(scenario, other), identity)
-            check_replaceable(path, identity)  # before the episode runs, and again before the file is named
-            self._recorder = McapRecorder(
-                path, metadata=metadata, before_rename=lambda p: check_replaceable(p, identity)
+                _check_episode_files(self.out_dir / episode_filename(scenario, other), identity)
+            _check_episode_files(path, identity)  # before the episode runs, and again as the recorder takes
+            self._recorder = McapRecorder(  # each file (it holds the .part's lock then)
+                path, metadata=metadata, may_replace=lambda p: check_replaceable(p, identity)
             )
         self.paths.append(self._recorder.path)
         self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius))

@@ -248,17 +248,37 @@ def test_two_recorders_of_one_episode_at_once_never_write_one_file(tmp_path):
 
 
 def test_a_refusal_before_the_rename_keeps_the_recording_unfinished(tmp_path):
-    """``before_rename`` runs when the file is finished (another run may have finished a file under the
+    """``may_replace`` runs when the file is finished (another run may have finished a file under the
     name since this one began): when it refuses, nothing is replaced and the recording stays as .part."""
     path = tmp_path / "a.mcap"
     path.write_bytes(b"another run's file")
 
     def refuse(name):
-        raise PipelineError(f"cannot record to {name}: it holds another run's episode")
+        if name == path:
+            raise PipelineError(f"cannot record to {name}: it holds another run's episode")
 
-    rec = McapRecorder(path, before_rename=refuse)
+    rec = McapRecorder(path, may_replace=refuse)
     rec.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
     with pytest.raises(PipelineError, match="another run's episode"):
         rec.close()
     assert path.read_bytes() == b"another run's file"
     assert read_recording(tmp_path / "a.mcap.part").data("/robots") == [ROBOT_MESSAGE]
+
+
+def test_a_refusal_of_the_unfinished_file_keeps_it(tmp_path):
+    """A killed run's ``.part`` is emptied only once ``may_replace`` lets it, with the file locked (another
+    run's unfinished recording was truncated unchecked)."""
+    part = tmp_path / "a.mcap.part"
+    part.write_bytes(b"a killed run's chunks")
+    seen = []
+
+    def refuse(name):
+        seen.append(name)
+        raise PipelineError(f"cannot record to {name}: it holds another run's episode")
+
+    with pytest.raises(PipelineError, match="a.mcap.part: it holds another run's episode"):
+        McapRecorder(tmp_path / "a.mcap", may_replace=refuse)
+    assert seen == [part] and part.read_bytes() == b"a killed run's chunks"
+    with McapRecorder(tmp_path / "a.mcap", may_replace=lambda name: None) as again:  # lock released
+        again.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
+    assert not part.exists() and read_recording(tmp_path / "a.mcap").data("/robots") == [ROBOT_MESSAGE]

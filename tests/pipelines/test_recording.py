@@ -309,6 +309,36 @@ def test_a_run_of_other_settings_does_not_replace_a_recording_a_rerun_does(tmp_p
         reset({"env": {**env, "formation": "auto", "crossing": "paper"}, "horizon": 4})
 
 
+def test_another_runs_unfinished_or_cut_recording_is_refused_and_its_own_runs_replaced(tmp_path):
+    """A killed run leaves its episode in <name>.part, and a copy that stopped leaves a cut <name>; `crowdmpc
+    review` reads both. Another run recording that episode into the folder replaced them unchecked (the
+    .part was not looked at, the cut file's metadata were read through its summary, which it lacks)."""
+    first = record_episode(tmp_path, seed=1, steps=2)
+    whole, obs = first.path.read_bytes(), first.observations[0]
+    part = tmp_path / "circle_seed000001.mcap.part"
+    cut = whole[: len(whole) - 200]
+
+    def reset(controller: str, seed: int = 1, seeds: tuple[int, ...] = ()) -> None:
+        recorder = McapEpisodeRecorder(tmp_path, seeds=seeds)
+        recorder.on_reset(obs, {**first.meta, "seed": seed, "controller": controller})
+        recorder.close()
+
+    for held, content in ((part, whole), (first.path, cut)):
+        first.path.unlink()
+        held.write_bytes(content)
+        assert read_recording(held).truncated == (held == first.path)
+        refusal = re.escape(
+            f"{held}: it holds another run's episode (controller handmade; this run: controller other)"
+        )
+        with pytest.raises(PipelineError, match=refusal):
+            reset("other")
+        with pytest.raises(PipelineError, match=refusal):  # a later seed of the run: before any episode
+            reset("other", seed=2, seeds=(2, 1))
+        assert held.read_bytes() == content and not (tmp_path / "circle_seed000002.mcap").exists()
+        reset("handmade")  # its own run's rerun
+        assert not part.exists() and not read_recording(first.path).truncated
+
+
 def test_a_setting_of_speed_only_does_not_make_another_run(tmp_path):
     """jit compiles the same NLP and DMPC's threads give the serial result: a rerun with --set mpc.jit=true
     replaces its recording as the same command's does; a setting that changes the episodes is refused."""
