@@ -45,10 +45,14 @@ if TYPE_CHECKING:
 FORMAT: Final[str] = "crowdmpc-episode/3"
 
 
-def episode_filename(scenario: str, seed: int | None, unseeded: int = 0) -> str:
+def episode_filename(scenario: str, seed: int | None, unseeded: int = 0, repeat: int = 0) -> str:
     """The file of an episode: by its seed, or for one no seed drew (a gym episode started from a layout)
-    by its number, ``unseeded``."""
-    return f"{scenario}_seed{seed:06d}.mcap" if seed is not None else f"{scenario}_{unseeded:06d}.mcap"
+    by its number, ``unseeded``. ``repeat``: how many episodes of that seed the recorder was handed before
+    this one (a gym loop may reset to one seed again, with other actions), each kept in its own file,
+    ``<scenario>_seed<seed:06d>_<repeat>.mcap`` past the first."""
+    if seed is None:
+        return f"{scenario}_{unseeded:06d}.mcap"
+    return f"{scenario}_seed{seed:06d}" + (f"_{repeat}" if repeat else "") + ".mcap"
 
 
 def next_unseeded(out_dir: Path, scenario: str, written: int = -1) -> int:
@@ -82,7 +86,10 @@ class McapEpisodeRecorder:
     file of a rerun of the same run, finished or unfinished (``.part``: a killed run's), and refusing
     another run's (``run_identity``); ``<scenario>_<n:06d>.mcap`` for one no seed drew (a gym episode
     started from a layout), n one past the highest already in the folder, taken atomically, so recorders
-    sharing a folder never write one file.
+    sharing a folder never write one file. Every episode handed to one recorder keeps its own file: the
+    k-th one of a seed it already recorded (a gym loop resetting to that seed again) is
+    ``<scenario>_seed<seed:06d>_<k>.mcap``, k = 1, 2, ..., under the same rule, so that running the same
+    loop again replaces each of them. ``paths`` lists the files in order, each once.
 
     :param out_dir: folder for the files (created if missing).
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
@@ -114,6 +121,7 @@ class McapEpisodeRecorder:
         self._last_written_step = -1
         self._start_ns = 0  # the episode's wall-clock start, ns since the Unix epoch: log time at t = 0
         self._unseeded: dict[str, int] = {}  # scenario -> the number of its last episode with no seed
+        self._repeats: dict[tuple[str, int], int] = {}  # (scenario, seed) -> episodes of it recorded so far
         self._planned = tuple(int(s) for s in seeds)  # checked at the first seeded episode, then dropped
 
     # -- EpisodeObserver -------------------------------------------------------------------------------------
@@ -150,8 +158,9 @@ class McapEpisodeRecorder:
         }
         if seed is None:  # a number names no scene: never another episode's file
             self._recorder = self._claim_unseeded(scenario, metadata)
-        else:  # the same scene: replaced when this run recorded it
-            path = self.out_dir / episode_filename(scenario, seed)
+        else:  # the same scene: replaced when this run recorded it, in an earlier process
+            repeat = self._repeats.get((scenario, seed), 0)
+            path = self.out_dir / episode_filename(scenario, seed, repeat=repeat)
             identity = run_identity(episode, decode_metadata(config))
             planned, self._planned = self._planned, ()
             for other in planned:  # the run's identity is every episode's but for the seed
@@ -160,6 +169,7 @@ class McapEpisodeRecorder:
             self._recorder = McapRecorder(  # each file (it holds the .part's lock then)
                 path, metadata=metadata, may_replace=lambda p: check_replaceable(p, identity)
             )
+            self._repeats[(scenario, seed)] = repeat + 1
         self.paths.append(self._recorder.path)
         self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius))
         self._last = obs

@@ -7,9 +7,10 @@
   sizes (the environment's ``EpisodeMetrics`` are the ones ``crowdmpc simulate`` reports).
 * ``ObserveEpisodes(env, observers)`` wraps the environment for a policy that is not a ``Controller`` (a
   CrowdNav-style velocity policy under ``crowdsim.gym_wrappers.VelocityControl``): every episode goes to the
-  observers (``pipelines.logs.recording.McapEpisodeRecorder`` records it to MCAP) and ends in an
-  ``EpisodeResult`` in ``results``. The action it sees is the acceleration command; its "solve time" is the
-  wall time from the environment handing out an observation to the next action arriving (the policy's).
+  observers (``pipelines.logs.recording.McapEpisodeRecorder`` records it to MCAP, each episode to its own
+  file, one of a seed reset to again too) and ends in an ``EpisodeResult`` in ``results``. The action it
+  sees is the acceleration command; its "solve time" is the wall time from the environment handing out an
+  observation to the next action arriving (the policy's).
 """
 
 from __future__ import annotations
@@ -148,7 +149,9 @@ class ObserveEpisodes(
     (module docstring).
 
     :param env: the environment, possibly wrapped; wrap it in ``VelocityControl`` after this wrapper.
-    :param observers: ``EpisodeObserver``\\ s, e.g. an ``McapEpisodeRecorder``.
+    :param observers: ``EpisodeObserver``\\ s, e.g. an ``McapEpisodeRecorder``, which names an episode's file
+        by its seed, and one of a seed it already recorded with a count (``circle_seed000005_1.mcap``): every
+        episode keeps its own file.
     :param controller: the name the records give the policy.
     :param meta: added to each episode's meta (``contract.episode_meta``); it may not set the episode's own
         fields (seed, scenario, ...: ``contract.OWN_FIELDS``).

@@ -108,6 +108,35 @@ def test_a_policys_episodes_are_recorded_to_mcap(tmp_path):
     assert len(rec.data("/episode/metrics")) == 1
 
 
+def test_each_episode_of_a_seed_reset_again_keeps_its_own_file(tmp_path):
+    """A gym loop may reset to one seed several times with other actions (or another crowd): each episode
+    took the seed's one file, the earlier ones silently replaced, ``paths`` naming it each time, and one of
+    another crowd was refused as another run's after the environment had reset. The same loop run again (a
+    new recorder: the next process) replaces its own files."""
+
+    def loop() -> tuple[McapEpisodeRecorder, ObserveEpisodes]:
+        with McapEpisodeRecorder(tmp_path) as recorder:
+            base = CrowdNavEnv(n_humans=3, n_robots=2, max_humans=5, config=EnvConfig(time_limit=1.6))
+            env = ObserveEpisodes(base, [recorder], controller="constant")
+            for action, options in ((1.0, None), (-1.0, None), (0.5, {"n_humans": 5})):
+                env.reset(seed=5, options=options)
+                done = False
+                while not done:
+                    *_, terminated, truncated, _ = env.step(np.full((2, 2), action))
+                    done = terminated or truncated
+        return recorder, env
+
+    recorder, env = loop()
+    names = ["circle_seed000005.mcap", "circle_seed000005_1.mcap", "circle_seed000005_2.mcap"]
+    assert [p.name for p in recorder.paths] == names == sorted(p.name for p in tmp_path.iterdir())
+    recordings = [read_recording(p) for p in recorder.paths]
+    for rec, result in zip(recordings, env.results, strict=True):
+        np.testing.assert_allclose(episode_view(rec).robot_positions, result.robot_positions)
+    assert [rec.episode()["n_humans"] for rec in recordings] == ["3", "3", "5"]
+    again, _ = loop()
+    assert [p.name for p in again.paths] == names == sorted(p.name for p in tmp_path.iterdir())
+
+
 def test_episodes_from_a_layout_are_recorded_without_a_seed(tmp_path):
     """No seed draws a hand-built scene: its file is numbered, its record says seed null, it reads back."""
     from crowdsim.scenarios import Layout
