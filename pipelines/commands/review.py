@@ -81,7 +81,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--times", type=_times, metavar="T1,T2,..", help="simulated times (s) of the plans drawn by --plot"
     )
-    parser.add_argument("--animate", type=path_arg, metavar="GIF|MP4", help="the episode as an animation")
+    parser.add_argument(
+        "--animate",
+        type=path_arg,
+        metavar="GIF|MP4",
+        help="the episode as an animation at simulated speed; a frame is shown 0.001 to 655.35 s (a GIF's "
+        "longest), so an episode of steps beyond plays faster or slower, as the output line says",
+    )
     parser.add_argument(
         "--compare", type=path_arg, metavar="OTHER.mcap", help="side-by-side metrics with this run"
     )
@@ -362,9 +368,10 @@ def run(args: argparse.Namespace) -> int:
                 drawn = plot_recording(rec, args.plot, args.times)
                 print(f"plot: {args.plot} (plans at t = {', '.join(f'{t:g}' for t in drawn)} s)")
         if args.animate:
-            frames, every = animate_recording(rec, args.animate)
-            thinned = f", one state in {every}" if every > 1 else ""
-            print(f"animation: {args.animate} ({frames} frames{thinned})")
+            facts = animate_recording(rec, args.animate)
+            thinned = f", one state in {facts.every}" if facts.every > 1 else ""
+            pace = f"; {facts.pace_note}" if facts.pace_note else ""
+            print(f"animation: {args.animate} ({facts.frames} frames{thinned}{pace})")
 
     if args.json:
         # plain: a hostile or foreign file's NaN metrics would make the report invalid JSON

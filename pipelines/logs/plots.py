@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import shutil
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
@@ -121,6 +122,34 @@ ANIMATION_SUFFIXES: Final = (".gif", ".mp4")
 # Pillow's GIF writer holds every frame (about 1.3 MB each at the dpi used): a 10 000-step gym episode
 # needed 13 GB. 300 frames are two minutes of a 0.4 s step at simulated speed.
 MAX_FRAMES: Final[int] = 300
+# The longest a frame is shown, s: a GIF stores a frame's duration as a 16-bit count of centiseconds (a
+# 700 s step, which simulate accepts, overflowed Pillow's writer); an MP4 is held to it too, to play alike.
+MAX_FRAME_S: Final[float] = 655.35
+# The shortest, s: no screen shows 1 000 frames a second (a GIF stores anything under 10 ms as 0 anyway),
+# and a hand-edited dt of 1e-300 would give ffmpeg an infinite frame rate.
+MIN_FRAME_S: Final[float] = 1e-3
+
+
+@dataclass(frozen=True)
+class AnimationFacts:
+    """What ``animate_recording`` wrote."""
+
+    frames: int
+    every: int  # one recorded state in ``every`` is a frame
+    frame_s: float  # how long each frame is shown
+    asked_s: float  # how long it would be at the asked speed: other when beyond MIN_FRAME_S .. MAX_FRAME_S
+
+    @property
+    def pace_note(self) -> str | None:
+        """How much faster or slower than asked it plays, when it does."""
+        if self.frame_s == self.asked_s:
+            return None
+        ratio = self.asked_s / self.frame_s
+        return (
+            f"plays {ratio:.3g}x faster than asked: a frame is shown at most {MAX_FRAME_S:g} s"
+            if ratio > 1
+            else f"plays {1 / ratio:.3g}x slower than asked: a frame is shown at least {MIN_FRAME_S:g} s"
+        )
 
 
 def check_animation_path(out: str | Path, option: str = "--animate") -> None:
@@ -202,12 +231,14 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     return fig, draw, view
 
 
-def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> tuple[int, int]:
+def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) -> AnimationFacts:
     """The episode as a GIF (Pillow) or, for a ``.mp4`` name, an MP4 (needs ffmpeg).
 
     One frame per recorded state, played at ``speed`` times simulated time; an episode of more than
     ``MAX_FRAMES`` states gets every k-th (and its last), played k times faster, so that it keeps its length
-    in seconds. Returns the frame count and k.
+    in seconds. A frame is shown no longer than ``MAX_FRAME_S`` (a GIF's longest) and no shorter than
+    ``MIN_FRAME_S``: an episode of longer (shorter) steps plays faster (slower) than asked, which the
+    returned ``AnimationFacts`` say.
     """
     from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 
@@ -218,14 +249,16 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
     rows = list(range(0, len(view.times), every))
     if rows[-1] != len(view.times) - 1:
         rows.append(len(view.times) - 1)
-    fps = speed / (every * view.dt)
+    asked_s = every * view.dt / speed
+    frame_s = min(max(asked_s, MIN_FRAME_S), MAX_FRAME_S)
+    fps = 1.0 / frame_s
     animation = FuncAnimation(fig, draw, frames=rows, blit=False)
     # matplotlib's stubs say fps: int, but the writers take any positive number (Pillow: 1000 / fps ms a
-    # frame, ffmpeg: -r fps); speed / dt is fractional (e.g. 2.5) and must not be rounded.
+    # frame, ffmpeg: -r fps); 1 / frame_s is fractional (e.g. 2.5) and must not be rounded.
     writer = (
         PillowWriter(fps=fps)  # type: ignore[arg-type]
         if out.suffix.lower() == ".gif"
         else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
     )
     animation.save(out, writer=writer, dpi=80)
-    return len(rows), every
+    return AnimationFacts(len(rows), every, frame_s, asked_s)

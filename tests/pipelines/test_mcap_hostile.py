@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
+from PIL import Image
 
 from pipelines.cli import main
 from pipelines.errors import PipelineError
@@ -294,6 +295,33 @@ def test_states_of_changing_sizes_cannot_be_drawn(tmp_path, capsys):
             rec.write("/humans", {**human, "step": k, "time": 0.4 * k}, k * S, schema=HUMANS)
     rc, _, err = review(capsys, path, "--animate", tmp_path / "a.gif")
     assert rc == 2 and "do not make one episode" in err and str(path) in err
+
+
+@pytest.mark.parametrize(
+    ("dt", "duration_ms", "pace"),
+    [
+        ("700", 655_350, "plays 1.07x faster than asked: a frame is shown at most 655.35 s"),
+        ("1e300", 655_350, "plays 1.53e+297x faster than asked"),
+        ("1e-300", 0, "plays 1e+297x slower than asked: a frame is shown at least 0.001 s"),
+    ],
+)
+def test_an_animation_of_steps_beyond_what_a_gif_holds_plays_at_its_bound(
+    tmp_path, capsys, dt, duration_ms, pace
+):
+    """A GIF holds a frame for at most 65535 centiseconds: a 700 s step (simulate accepts it) or a hand-edited
+    dt of 1e300 ended in Pillow's OverflowError traceback. Frames are held to MIN_FRAME_S .. MAX_FRAME_S, and
+    the output line says how much faster or slower than asked the animation plays (a GIF stores under 10 ms
+    as 0)."""
+    path, gif = tmp_path / "steps.mcap", tmp_path / "a.gif"
+    human = {"positions": [[3.0, 0.0]], "velocities": [[0.0, 0.0]], "goals": [[0.0, 0.0]]}
+    with McapRecorder(path, metadata={"episode": {"dt": dt, "scenario": "circle"}}) as rec:
+        for k in range(2):
+            rec.write("/robots", robot(k), k * S, schema=ROBOTS)
+            rec.write("/humans", {**human, "step": k, "time": 0.4 * k}, k * S, schema=HUMANS)
+    rc, out, err = review(capsys, path, "--animate", gif)
+    assert rc == 0 and err == "" and f"animation: {gif} (2 frames; {pace}" in out
+    with Image.open(gif) as animation:
+        assert animation.n_frames == 2 and animation.info.get("duration", 0) == duration_ms
 
 
 def test_a_folder_reviews_its_readable_files_and_lists_the_rest(episode, tmp_path, capsys):
