@@ -15,6 +15,8 @@ from typing import Any, Final
 
 import numpy as np
 
+from crowdsim.env_config import ENV_BOUNDS
+
 # -- values ------------------------------------------------------------------------------------------------
 
 
@@ -115,10 +117,14 @@ def message_problem(topic: str, message: Any) -> str | None:
 
 _EPISODE_INTS: Final = ("seed", "n_robots", "n_humans")
 _EPISODE_REALS: Final = ("dt", "radius")
+# The simulator's own bound on the radius (crowdsim.env_config): a hand-edited radius of 1e300 passed as a
+# positive number and kept `review --plot` drawing for over a minute.
+_EPISODE_MOST: Final[Mapping[str, tuple[float, str]]] = {"radius": ENV_BOUNDS["radius"]}
 
 
 def episode_metadata_problems(episode: Mapping[str, str]) -> dict[str, str]:
-    """{key: problem} for the values of the "episode" metadata record that the review parses as numbers."""
+    """{key: problem} for the values of the "episode" metadata record that the review parses as numbers: the
+    integers, and dt and radius as positive numbers, the radius within the simulator's bound."""
     problems = {}
     for key in _EPISODE_INTS:
         if key in episode:
@@ -134,4 +140,7 @@ def episode_metadata_problems(episode: Mapping[str, str]) -> dict[str, str]:
                 value = math.nan
             if not (math.isfinite(value) and value > 0):
                 problems[key] = f"{key} = {episode[key]!r} is not a positive number"
+            elif key in _EPISODE_MOST and value > _EPISODE_MOST[key][0]:
+                most, unit = _EPISODE_MOST[key]
+                problems[key] = f"{key} = {episode[key]!r} is beyond the simulator's {most:g} {unit}"
     return problems

@@ -62,8 +62,9 @@ def _episode_view(rec: Recording) -> EpisodeView:
     m, n = len(robots[0]["positions"]), len(humans[0]["positions"])
     ep = rec.episode()
     times = np.array([r["time"] for r in robots], dtype=float)
-    # The "episode" record may lack dt or radius (a log from another writer, or a value that does not parse,
-    # which Recording.episode drops): the recorded times tell dt, else both are the default world's.
+    # The "episode" record may lack dt or radius (a log from another writer, or a value that does not parse
+    # or a radius beyond the simulator's, which Recording.episode drops): the recorded times tell dt, else
+    # both are the default world's.
     dt = float(ep["dt"]) if "dt" in ep else float(np.median(np.diff(times))) if len(times) > 1 else DT
     plans = {p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")}
     if any(len(plan) != m for plan in plans.values()):

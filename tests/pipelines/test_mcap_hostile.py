@@ -324,6 +324,22 @@ def test_an_animation_of_steps_beyond_what_a_gif_holds_plays_at_its_bound(
         assert animation.n_frames == 2 and animation.info.get("duration", 0) == duration_ms
 
 
+def test_a_radius_beyond_the_simulators_is_reported_and_ignored(tmp_path, capsys):
+    """A hand-edited radius of 1e300 passed as a positive number: `review --plot` drew circles that size for
+    over a minute. Past the simulator's bound (10 m) it is a metadata problem, and the plot takes the
+    default radius."""
+    path = tmp_path / "radius.mcap"
+    human = {"positions": [[3.0, 0.0]], "velocities": [[0.0, 0.0]], "goals": [[0.0, 0.0]]}
+    with McapRecorder(path, metadata={"episode": {"radius": "1e300", "scenario": "circle"}}) as rec:
+        for k in range(2):
+            rec.write("/robots", robot(k), k * S, schema=ROBOTS)
+            rec.write("/humans", {**human, "step": k, "time": 0.4 * k}, k * S, schema=HUMANS)
+    problem = "metadata 'episode': radius = '1e300' is beyond the simulator's 10 m; the review ignores radius"
+    assert read_recording(path).problems == [problem]
+    rc, out, err = review(capsys, path, "--plot", tmp_path / "p.png")
+    assert rc == 0 and f"plot: {tmp_path / 'p.png'}" in out and err.strip().endswith(problem)
+
+
 def test_a_folder_reviews_its_readable_files_and_lists_the_rest(episode, tmp_path, capsys):
     good = tmp_path / "good.mcap"
     shutil.copy(episode.path, good)
