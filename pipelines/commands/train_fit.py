@@ -184,10 +184,11 @@ def _no_advertising(record: logging.LogRecord) -> bool:
 def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any]:
     """Lightning's trainer and the callback that keeps the best checkpoint by validation ADE."""
     import lightning as L
-    from lightning.pytorch.callbacks import ModelCheckpoint
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-    best = ModelCheckpoint(
+    from pipelines.commands.train_checkpoint import RunCheckpoint
+
+    best = RunCheckpoint(
         dirpath=ckpt_dir,
         filename="best-{epoch:03d}-{val_ade:.4f}",
         monitor="val_ade",

@@ -313,6 +313,46 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
     assert all(torch.equal(straight[k], resumed[k]) for k in straight)
 
 
+def test_a_moved_run_resumes_as_it_would_in_place(tmp_path, capsys):
+    """Lightning keeps the absolute paths of a run's checkpoints: resumed after its folder was moved, the run
+    forgot its best epoch (a worse later one became NAME.pt), wrote last-v1.ckpt beside an old last.ckpt, and
+    read its best weights from the old folder. A best checkpoint missing from the folder is refused."""
+    import shutil
+
+    import torch
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    args = ["train", "--model", "social_lstm", "--train", data, "--val", data, "--batch-size", "1"]
+
+    def train(out: str, epochs: int, *extra: str) -> int:
+        return main([*args, "--lr", "0.5", "--epochs", str(epochs), "--out", out, "--no-progress", *extra])
+
+    assert train(str(tmp_path / "in_place"), 2) == 0
+    shutil.copytree(tmp_path / "in_place", tmp_path / "moved")
+    (tmp_path / "in_place").rename(tmp_path / "away")  # nothing of the old folder to read while it resumes
+    assert train(str(tmp_path / "moved"), 3, "--resume") == 0
+    (tmp_path / "away").rename(tmp_path / "in_place")
+    assert train(str(tmp_path / "in_place"), 3, "--resume") == 0
+
+    def outcome(run: str) -> tuple:
+        ckpts = tmp_path / run / "checkpoints"
+        last = torch.load(ckpts / "last.ckpt", weights_only=False)
+        weights = torch.load(tmp_path / run / "social_lstm_custom.pt", weights_only=True)
+        return sorted(p.name for p in ckpts.iterdir()), last["epoch"], last["global_step"], weights
+
+    in_place, moved = outcome("in_place"), outcome("moved")
+    assert moved[:3] == in_place[:3]
+    assert all(torch.equal(in_place[3][k], moved[3][k]) for k in in_place[3])
+
+    (best,) = (tmp_path / "moved" / "checkpoints").glob("best-*.ckpt")
+    best.unlink()
+    capsys.readouterr()
+    assert train(str(tmp_path / "moved"), 4, "--resume") == 2
+    err = capsys.readouterr().err
+    assert f"names the run's checkpoint {best.name}, which is not in {best.parent}" in err
+    assert err.count("\n") == 1
+
+
 def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, capsys):
     """--limit-batches 1 with batches of one scene: one optimiser step an epoch where the walk file's two
     scenes give two; the checkpoint says so, and resuming without the option is refused."""
