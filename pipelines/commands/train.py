@@ -266,18 +266,21 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check_data(files: dict[str, list[Path]]) -> None:
-    """Every data file parses and the training and validation splits hold scenes, before Lightning starts
-    (its banner would come before the one-line error). The validation and test files are read as the
-    evaluation of the trained net reads them (scene length, frame rate, spacing): a file it refuses, such as
-    a TrajNet++ test/ file without ground truth, was found only after training, with no metrics written."""
-    from predictors.data.validate import validate_ndjson
+    """Every data file is read as the run will read it, and the training and validation splits hold scenes,
+    before Lightning starts (its banner would come before the one-line error, and a half-made run folder
+    after it). The training and validation files are loaded as the training data module loads them
+    (``load_file_arrays``: scenes of exactly 21 steps), which keeps them for it: read once, not twice. The
+    validation and test files are also read as the evaluation of the trained net reads them (scene length,
+    frame rate, spacing): a file it refuses, such as a TrajNet++ test/ file without ground truth, was found
+    only after training, with no metrics written."""
+    from predictors.data.windows import load_file_arrays
     from predictors.evaluate import load_eval_scenes
 
     for split, paths in files.items():
-        if split == "train":
-            held = [bool(validate_ndjson(path).scene_lines) for path in paths]
-        else:
+        if split != "train":  # first: its message tells a test/ file without ground truth
             held = [bool(load_eval_scenes(path)) for path in paths]
+        if split != "test":
+            held = [len(load_file_arrays(path)) > 0 for path in paths]
         if split in ("train", "val") and not any(held):
             names = ", ".join(str(p) for p in paths)
             raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")

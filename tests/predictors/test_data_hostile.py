@@ -503,6 +503,30 @@ def test_cli_train_reads_the_evaluated_files_before_training(split, tmp_path, ca
     assert not out.exists()
 
 
+def steps_scene(steps: int) -> list[dict]:
+    """One scene whose primary walks ``steps`` evenly spaced frames, a neighbour beside it."""
+    tracks = [track(k * STEP, p, 0.5 * k, p - 1.0) for k in range(steps) for p in (1, 2)]
+    return [scene(0, 1, 0, (steps - 1) * STEP), *tracks]
+
+
+@pytest.mark.parametrize(("split", "steps", "reason"), [("--train", 19, "has 19"), ("--val", 25, "has 25")])
+def test_cli_train_reads_the_training_files_as_the_data_module_before_training(
+    split, steps, reason, tmp_path, capsys
+):
+    """The data module takes scenes of exactly 21 steps, the pre-check did not (a training file only had to
+    parse, a validation file to hold 21 steps or more): such a file was refused after Lightning's banner and
+    left a run folder of logs and settings. Both are now loaded as the data module loads them, first."""
+    odd = write_lines(tmp_path / "odd.ndjson", steps_scene(steps))
+    walk = str(write_walk_file(tmp_path / "walk.ndjson"))
+    files = {"--train": walk, "--val": walk, split: str(odd)}
+    argv = ["train", "--model", "vanilla_lstm", *[a for kv in files.items() for a in kv]]
+    out = tmp_path / "run"
+    code, _, err = run_cli(capsys, *argv, "--epochs", "1", "--no-progress", "--out", str(out))
+    assert_cli_error(code, err, f"{odd}:1: scene 0: primary pedestrian 1 {reason} frames, need 21")
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
 def test_a_scenes_tag_reaches_the_reader(tmp_path):
     """The tag (TrajNet++ type and sub-types) is what `data stats` counts by type."""
     records = [scene(0, 1, 0, 200, tag=[3, [2, 4]])] + VALID[1:]
