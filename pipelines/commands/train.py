@@ -16,6 +16,7 @@ from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
 DATASET_SUFFIX = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
+DEFAULT_PROTOCOL, DEFAULT_DATASET = "paper", "biwi_eth"
 # --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
 MAX_NET_CONFIG_CHARS = 65_536
 # Adam's learning rate: these nets train at 1e-3; far above any useful rate, and far below float32's
@@ -76,9 +77,20 @@ def register(subparsers) -> None:
         metavar="JSON",
         help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'",
     )
+    # None by default, here and below: given with explicit --train/--val files, they are refused
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
-    parser.add_argument("--protocol", default="paper", choices=("paper", "loo"), help="train/val/test files")
-    parser.add_argument("--dataset", default="biwi_eth", choices=tuple(DATASET_SUFFIX), help="test sequence")
+    parser.add_argument(
+        "--protocol",
+        default=None,
+        choices=("paper", "loo"),
+        help=f"train/val/test files (default {DEFAULT_PROTOCOL})",
+    )
+    parser.add_argument(
+        "--dataset",
+        default=None,
+        choices=tuple(DATASET_SUFFIX),
+        help=f"test sequence (default {DEFAULT_DATASET})",
+    )
     parser.add_argument(
         "--train",
         nargs="+",
@@ -236,6 +248,7 @@ def run(args: argparse.Namespace) -> int:
     _check_numbers(args)
     pooling, net_config = _net_config(args)
     explicit = args.train is not None or args.val is not None
+    _protocol_options(args, explicit)
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
     check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
@@ -263,6 +276,29 @@ def run(args: argparse.Namespace) -> int:
     from pipelines.commands.train_fit import run_training
 
     return run_training(args, net_config, name, out, (files, root), settings)
+
+
+def _protocol_options(args: argparse.Namespace, explicit: bool) -> None:
+    """Fills in the defaults of --protocol and --dataset; PipelineError when they or --data-dir are given with
+    explicit --train/--val files, which replace the prepared files those options choose (they were ignored
+    without a word, and the run recorded as "custom"). $CROWDMPC_DATA is no option typed, and passes."""
+    given = [
+        option
+        for option, value in (
+            ("--protocol", args.protocol),
+            ("--dataset", args.dataset),
+            ("--data-dir", args.data_dir),
+        )
+        if value is not None
+    ]
+    if explicit and given:
+        verb = "does" if len(given) == 1 else "do"
+        raise PipelineError(
+            f"{' and '.join(given)} {verb} not go with --train/--val (explicit files replace the prepared "
+            "files of --protocol, --dataset and --data-dir); give one or the other"
+        )
+    args.protocol = args.protocol or DEFAULT_PROTOCOL
+    args.dataset = args.dataset or DEFAULT_DATASET
 
 
 def _check_data(files: dict[str, list[Path]]) -> None:

@@ -480,6 +480,33 @@ def test_test_files_without_train_and_val_are_refused(tmp_path, capsys):
     assert "--test goes with --train and --val" in capsys.readouterr().err
 
 
+def test_protocol_options_with_explicit_files_are_refused(tmp_path, monkeypatch, capsys):
+    """--protocol, --dataset and --data-dir choose the prepared files that --train/--val replace: given with
+    them they were ignored without a word. $CROWDMPC_DATA is no option typed: such a run still trains."""
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    args = [
+        "train",
+        "--model",
+        "vanilla_lstm",
+        "--train",
+        data,
+        "--val",
+        data,
+        "--epochs",
+        "1",
+        "--no-progress",
+    ]
+    for given in (["--protocol", "paper"], ["--dataset", "biwi_hotel"], ["--data-dir", str(tmp_path)]):
+        assert main([*args, *given, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"error: {given[0]} does not go with --train/--val (explicit files replace" in err
+        assert err.count("\n") == 1 and not (tmp_path / "o").exists()
+    assert main([*args, "--protocol", "loo", "--data-dir", "/nonexistent", "--out", str(tmp_path / "o")]) == 2
+    assert "error: --protocol and --data-dir do not go with --train/--val" in capsys.readouterr().err
+    monkeypatch.setenv("CROWDMPC_DATA", str(tmp_path / "nonexistent"))
+    assert main([*args, "--out", str(tmp_path / "o")]) == 0
+
+
 def test_an_export_that_cannot_be_written_fails_and_keeps_the_earlier_one(tmp_path, capsys):
     """CasADi's save ignores write errors and writes in place: on a full disk (here ``ulimit -f``) export said
     "wrote" with status 0 over a cut file, the earlier export destroyed. It now writes beside it, loads that
