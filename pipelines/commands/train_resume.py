@@ -90,8 +90,8 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
             "--epochs may change)"
         )
     check_kept_checkpoints(checkpoint, last)
-    # last.ckpt is written as an epoch's validation ends (ModelCheckpoint's save_last), and Lightning
-    # counts its "epoch" from 0: it has finished epoch + 1
+    # last.ckpt is written as each epoch ends, after its validation (train_checkpoint.RunCheckpoint), and
+    # Lightning counts its "epoch" from 0: it has finished epoch + 1
     epoch = checkpoint.get("epoch")
     return epoch + 1 if isinstance(epoch, int) and not isinstance(epoch, bool) and epoch >= 0 else None
 

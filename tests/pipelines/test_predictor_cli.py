@@ -353,6 +353,25 @@ def test_a_moved_run_resumes_as_it_would_in_place(tmp_path, capsys):
     assert err.count("\n") == 1
 
 
+def test_last_checkpoint_is_every_epochs_own(tmp_path, capsys):
+    """Lightning 2.6 wrote last.ckpt only at an epoch that was a new best: after worse epochs it held an
+    earlier one, so a stopped run resumed from there and an ended run's --resume trained its epochs again."""
+    import torch
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    out = tmp_path / "run"
+    args = ["train", "--model", "social_lstm", "--train", data, "--val", data, "--batch-size", "1"]
+    args += ["--lr", "0.5", "--epochs", "3", "--out", str(out), "--no-progress"]
+    assert main(args) == 0
+    (best,) = (out / "checkpoints").glob("best-*.ckpt")
+    assert not best.name.startswith("best-epoch=002")  # the last epoch is not the best: the case at issue
+    last = torch.load(out / "checkpoints" / "last.ckpt", weights_only=False)
+    assert (last["epoch"], last["global_step"]) == (2, 6)  # three epochs of two batches
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 2
+    assert f"--resume: {out} has trained 3 epochs already" in capsys.readouterr().err
+
+
 def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, capsys):
     """--limit-batches 1 with batches of one scene: one optimiser step an epoch where the walk file's two
     scenes give two; the checkpoint says so, and resuming without the option is refused."""
