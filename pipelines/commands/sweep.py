@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
-from pipelines.commands.sweep_plan import check_margins, check_predictors, check_world, configured_experiment
+from pipelines.commands.sweep_plan import check_margins, check_plan, check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
@@ -290,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
     if args.dry_run:
-        check_predictors(experiment)  # a plan whose every episode would fail is not fine
+        check_plan(experiment)  # a plan whose every episode would fail is not fine
         print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
         for cell in cells:
             print(f"  {cell.method:>22}  {cell.n_humans} humans  {cell.key}")
@@ -298,7 +298,7 @@ def run(args: argparse.Namespace) -> int:
 
     status = 0
     if not args.report_only:
-        check_predictors(experiment)
+        check_plan(experiment)
         check_margins(experiment)
         try:
             status = _run_cells(config)

@@ -1,6 +1,6 @@
 """What a sweep will run, settled before any worker starts: the experiment with the config's choices applied
 to every method (``configured_experiment``), and the checks that refuse, in one line, what would otherwise
-fail once per episode (predictors, margins, world settings a sweep cannot honour)."""
+fail once per episode (predictors, couplings, margins, world settings a sweep cannot honour)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
     from pipelines.loop.margins import MarginSpec
+    from predictors.base import Predictor
 
 
 def check_predictors(experiment: Experiment) -> None:
@@ -43,6 +44,34 @@ def check_predictors(experiment: Experiment) -> None:
             except PredictorError as exc:
                 raise PipelineError(f"predictor {name!r} of the {located.source} zoo: {exc}") from None
             zoo.load_located(located)  # what every worker would do first, and fail at
+
+
+def check_plan(experiment: Experiment) -> None:
+    """The checks a plan passes before any worker starts, in the dry run as in the run: its predictors
+    (``check_predictors``), then the couplings their methods build with them (``check_couplings``)."""
+    check_predictors(experiment)
+    check_couplings(experiment)
+
+
+def check_couplings(experiment: Experiment) -> None:
+    """Every CMPC and DMPC method's coupling is one its controller builds (mpc_setup.check_coupling, the rule
+    the controller applies as it is built), refused with the method named: the coupled NLP given to DMPC
+    (--set controller.coupling=nlp) or with the ORCA oracle (the coupling experiment with --predictor
+    orca_oracle) failed once per episode in errors.jsonl."""
+    from pipelines.loop.mpc_setup import check_coupling
+    from predictors.registry import load_predictor
+
+    loaded: dict[str, Predictor] = {}  # the coupling experiment's two NLP methods share their predictor
+    for label, spec in experiment.methods:
+        if spec.controller not in ("cmpc", "dmpc") or spec.coupling == "ibr":
+            continue
+        distributed = spec.controller == "dmpc"
+        if not distributed and spec.predictor not in loaded:
+            loaded[spec.predictor] = load_predictor(spec.predictor)
+        try:
+            check_coupling(spec, distributed, loaded.get(spec.predictor))
+        except PipelineError as exc:
+            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
 def check_margins(experiment: Experiment) -> None:

@@ -41,7 +41,7 @@ from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
 from pipelines.errors import PipelineError, interrupt_behind
-from pipelines.loop.mpc_setup import check_world, mpc_config, predictor_history
+from pipelines.loop.mpc_setup import check_coupling, check_world, mpc_config, predictor_history
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import ObservingPredictor, Predictor
 from predictors.conformal_classes import MOTION_CLASSES, motion_classes
@@ -71,11 +71,8 @@ class MPCController:
         ``predictor``: a predictor object in place of the one ``spec.predictor`` names (tests)."""
         from crowdsim.env_config import EnvConfig
 
-        if distributed and spec.coupling == "nlp":
-            raise PipelineError(
-                "coupling 'nlp' puts the predictor inside the joint NLP, which is centralised: use it with "
-                "--controller cmpc (dmpc supports coupling 'ibr')"
-            )
+        if distributed:  # refused before a predictor is loaded for it
+            check_coupling(spec, distributed)
         self.spec = spec
         self.name = "dmpc" if distributed else "cmpc"
         self.distributed = distributed
@@ -83,11 +80,7 @@ class MPCController:
         self.model: Predictor = predictor if predictor is not None else load_predictor(spec.predictor)
         self.predictor: str | None = self.model.name
         self._observer = self.model if isinstance(self.model, ObservingPredictor) else None
-        if spec.coupling == "nlp" and self._observer is not None:
-            raise PipelineError(
-                f"the {self.model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "
-                "to put inside the joint NLP"
-            )
+        check_coupling(spec, distributed, self.model)
         world = self.env_config.world()
         cfg = mpc_config(spec, jit, world)
         sha256 = checkpoint_sha256(self.model.name)

@@ -1,7 +1,7 @@
 """What an MPC controller (pipelines.loop.mpc) is built from and checked against: its ``MPCConfig`` from a
 ``ControllerSpec`` and the world's facts (``mpc_config``), the check that the MPC, the predictor and the
-simulator agree on the world (``check_world``), and the rows of an observation's history the predictor reads
-(``predictor_history``).
+simulator agree on the world (``check_world``), the coupling the controller can build (``check_coupling``),
+and the rows of an observation's history the predictor reads (``predictor_history``).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
-from predictors.base import Predictor
+from predictors.base import ObservingPredictor, Predictor
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -34,6 +34,29 @@ def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORL
     cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
     cfg = cfg.replace(jit=spec.coupling == "ibr" and (jit or cfg.jit))
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
+
+
+def check_coupling(spec: ControllerSpec, distributed: bool, model: Predictor | None = None) -> None:
+    """Refuse a coupled NLP (``coupling = "nlp"``) the controller could not build: in DMPC, whose robots each
+    solve their own NLP, or with a predictor that observes the simulator (the ORCA oracle), which has no
+    CasADi twin to put inside it. The controller applies it as it is built, and a sweep to its plan before any
+    worker starts, so that both refuse alike. ``model``: the predictor ``spec.predictor`` names, loaded here
+    when not given (only for the coupled NLP)."""
+    from predictors.registry import load_predictor
+
+    if spec.coupling != "nlp":
+        return
+    if distributed:
+        raise PipelineError(
+            "coupling 'nlp' puts the predictor inside the joint NLP, which is centralised: use it with "
+            "--controller cmpc (dmpc supports coupling 'ibr')"
+        )
+    model = model if model is not None else load_predictor(spec.predictor)
+    if isinstance(model, ObservingPredictor):
+        raise PipelineError(
+            f"the {model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "
+            "to put inside the joint NLP"
+        )
 
 
 def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.ndarray]:

@@ -301,6 +301,28 @@ def test_a_sweep_of_controllers_that_plan_without_a_predictor_does_not_check_one
     assert "needs predictors ['nope'] that are not available" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--set", "controller.coupling=nlp", "sweep", "--experiment", "table2", "--predictor",
+          "constant_velocity"], "method 'DMPC' of experiment 'table2': coupling 'nlp' puts the predictor"),
+        (["sweep", "--experiment", "coupling", "--predictor", "orca_oracle"],
+         "method 'NLP exact' of experiment 'coupling': the orca_oracle predictor works with coupling 'ibr'"),
+    ],
+    ids=["dmpc-nlp", "oracle-nlp"],
+)  # fmt: skip
+def test_a_coupling_no_controller_builds_is_refused_before_the_sweep_starts(argv, message, tmp_path, capsys):
+    """The controller refused it as each episode began: workers started and every episode of the method
+    raised into errors.jsonl; the dry run passed it."""
+    out = tmp_path / "sweep"
+    small = ["--humans", "5", "--episodes-per-cell", "1", "--backend", "inline", "--jit", "off"]
+    for extra in (["--dry-run"], []):
+        assert main([*argv, *small, *extra, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0]
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------------------------------------------
 # A recalibration keeps the cell key: its records and new episodes must not mix two margin sets
 # ----------------------------------------------------------------------------------------------------------
