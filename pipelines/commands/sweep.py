@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
-from pipelines.commands.sweep_plan import check_margins, check_plan, check_world, configured_experiment
+from pipelines.commands.sweep_plan import check_plan, check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
@@ -299,7 +299,6 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     if not args.report_only:
         check_plan(experiment)
-        check_margins(experiment)
         try:
             status = _run_cells(config)
         except SweepStopped:

@@ -48,9 +48,11 @@ def check_predictors(experiment: Experiment) -> None:
 
 def check_plan(experiment: Experiment) -> None:
     """The checks a plan passes before any worker starts, in the dry run as in the run: its predictors
-    (``check_predictors``), then the couplings their methods build with them (``check_couplings``)."""
+    (``check_predictors``), the couplings their methods build with them (``check_couplings``) and the margins
+    they plan with (``check_margins``)."""
     check_predictors(experiment)
     check_couplings(experiment)
+    check_margins(experiment)
 
 
 def check_couplings(experiment: Experiment) -> None:

@@ -375,9 +375,13 @@ def test_changed_margins_per_motion_class_are_refused_too(good, tmp_path):
 @pytest.mark.parametrize("mode", ["conformal", "conformal-motion", "conformal-shortfall"])
 def test_margins_without_a_calibration_are_refused_before_the_sweep_starts(mode, tmp_path, capsys):
     """The per-human modes resolve their class margins in the controller only: the check before the workers
-    passed them, and the sweep made its folder, started workers and stopped on its first 4 episodes."""
+    passed them, and the sweep made its folder, started workers and stopped on its first 4 episodes. The dry
+    run, which did not check margins, passed them too."""
     out = tmp_path / "sweep"
-    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--episodes-per-cell", "1"]
-    assert main(argv + ["--margins", f"{mode}:0.3", "--backend", "inline", "--out", str(out)]) == 2
-    assert "no closed-loop calibration at alpha=0.3" in capsys.readouterr().err
+    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--episodes-per-cell", "1", "--margins",
+            f"{mode}:0.3", "--backend", "inline"]  # fmt: skip
+    for extra in (["--dry-run"], []):
+        assert main([*argv, *extra, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "no closed-loop calibration at alpha=0.3" in err[0]
     assert not out.exists()
