@@ -161,7 +161,8 @@ SOLVER_KINDS: Final[dict[str, str]] = {
 
 def check_record(record: dict[str, Any], where: str) -> None:
     """A line the report can read: the closed loop's episode record, the types of its metrics and solver
-    figures, and the sweep's cell fields."""
+    figures, and the sweep's cell fields. The seed and scenario are checked here, not by from_dict, which
+    takes a null seed (simulate's unseeded episode) and casts both: the report sorts and groups by them."""
     try:
         EpisodeRecord.from_dict(record)
     except (PipelineError, SimulationError) as exc:
@@ -175,6 +176,8 @@ def check_record(record: dict[str, Any], where: str) -> None:
         ("cell", str, "a string"),
         ("method", str, "a string"),
         ("index", int, "an integer"),
+        ("seed", int, "an integer"),
+        ("scenario", str, "a string"),
     ):
         value = record.get(name)
         if not isinstance(value, kind) or isinstance(value, bool):

@@ -118,10 +118,15 @@ def test_the_records_a_sweep_writes_pass_the_check(good):
         (lambda r: r["solver"].update(median_ms="abc"), "solver 'median_ms' is not a number or null"),
         (lambda r: r.update(solver="fast"), "not an episode record"),
         (lambda r: r.pop("wall_s"), "record's 'wall_s' is not a number"),
+        (lambda r: r.update(seed=None), "record's 'seed' is not an integer"),
+        (lambda r: r.update(seed="0"), "record's 'seed' is not an integer"),
+        (lambda r: r.update(seed=0.5), "record's 'seed' is not an integer"),
+        (lambda r: r.update(scenario=["circle"]), "record's 'scenario' is not a string"),
+        (lambda r: r.update(scenario=None), "record's 'scenario' is not a string"),
     ],
     ids=["time-string", "success-string", "collision-int", "distance-bool", "path-strings", "steps-float",
          "count-string", "between-string", "between-distance-string", "solver-string-time", "solver-string",
-         "no-wall-time"],
+         "no-wall-time", "seed-null", "seed-string", "seed-float", "scenario-list", "scenario-null"],
 )  # fmt: skip
 def test_a_record_field_of_the_wrong_type_is_named_by_file_and_line(good, tmp_path, edit, reason):
     path = _damage(good, tmp_path, edit)
