@@ -61,7 +61,8 @@ class EpisodeLog:
                     ) from None
                 try:
                     record = json.loads(line) if line.strip() else None
-                except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                # json's parser recurses: a line nested deeper than the stack is garbage too
+                except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
                     bad = (number, exc)
                     continue
                 if record is not None:
@@ -107,7 +108,7 @@ def error_keys(out: Path) -> set[str]:
         for line in f:
             try:
                 entry = json.loads(line)
-            except (json.JSONDecodeError, UnicodeDecodeError):
+            except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):  # nested past the stack
                 continue
             if isinstance(entry, dict) and isinstance(entry.get("key"), str):
                 keys.add(entry["key"])

@@ -19,6 +19,7 @@ from pipelines.experiments.log import (
     MCAP_DIR,
     SWEEP_FILE,
     episode_log,
+    error_keys,
 )
 from pipelines.experiments.report import CELLS_CSV, TABLE_MD
 from pipelines.experiments.sweep import SweepConfig, run_sweep
@@ -156,6 +157,29 @@ def test_missing_counts_and_null_times_as_the_writer_writes_them_pass(good, tmp_
 
     _damage(good, tmp_path, older)
     assert len(episode_log(tmp_path).load()) == 2
+
+
+DEEP = b"[" * 100_000 + b"]" * 100_000 + b"\n"  # json's parser recurses: a RecursionError, no JSONDecodeError
+
+
+def test_a_deeply_nested_record_is_named_by_file_and_line(good, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    first, second = (good / EPISODES_FILE).read_bytes().splitlines(keepends=True)
+    (out / EPISODES_FILE).write_bytes(first + DEEP + second)
+    assert main([*ARGV, "--report-only", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{out / EPISODES_FILE}:2: not a JSON record (" in err[0]
+    assert err[0].endswith("; the file is damaged")
+
+
+def test_a_deeply_nested_error_entry_is_passed_over(good, tmp_path, capsys):
+    """errors.jsonl only orders a rerun's episodes: a line that is no entry is passed over, this one too."""
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    (out / ERRORS_FILE).write_bytes(b'{"key": "x"}\n' + DEEP)
+    assert error_keys(out) == {"x"}
+    assert main([*ARGV, "--out", str(out)]) == 0
 
 
 # ----------------------------------------------------------------------------------------------------------
