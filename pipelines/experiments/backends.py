@@ -25,6 +25,7 @@ from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
 
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
+RAY_MISSING: Final[str] = "the Ray backend needs the cluster extra: pip install -e '.[cluster]'"
 
 
 class Backend(Protocol):
@@ -92,9 +93,7 @@ class RayBackend:
         try:
             import ray
         except ImportError:
-            raise PipelineError(
-                "the Ray backend needs the cluster extra: pip install -e '.[cluster]'"
-            ) from None
+            raise PipelineError(RAY_MISSING) from None
         # Any: Ray's own annotations (checked when the extra is installed) do not follow ray.remote's wrapping
         self._ray: Any = ray
         self._owns_ray = not ray.is_initialized()
@@ -126,6 +125,19 @@ class RayBackend:
             self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
+
+
+def check_backend(kind: str, workers: int, ray_address: str | None) -> None:
+    """Refuse a backend choice that cannot start, before the sweep writes anything (``make_backend`` checks
+    it again): an unknown kind, no workers, --ray-address without Ray's backend, Ray when not installed."""
+    if kind not in BACKENDS:
+        raise PipelineError(f"unknown backend {kind!r}; choose from {list(BACKENDS)}")
+    if workers < 1:
+        raise PipelineError(f"--workers must be at least 1, got {workers}")
+    if ray_address is not None and kind in ("process", "inline"):
+        raise PipelineError(f"--ray-address needs the Ray backend, not --backend {kind}")
+    if (kind == "ray" or ray_address is not None) and not ray_available():
+        raise PipelineError(RAY_MISSING)
 
 
 def _join_cluster(ray: Any, address: str, env: dict[str, Any]) -> None:
@@ -160,12 +172,7 @@ def make_backend(
 ) -> Backend:
     """``scratch_root``: the driver's folder for the workers' scratch (pipelines.experiments.worker), which
     the driver removes; None: each worker makes its own in the temp directory."""
-    if kind not in BACKENDS:
-        raise PipelineError(f"unknown backend {kind!r}; choose from {list(BACKENDS)}")
-    if workers < 1:
-        raise PipelineError(f"--workers must be at least 1, got {workers}")
-    if ray_address is not None and kind in ("process", "inline"):
-        raise PipelineError(f"--ray-address needs the Ray backend, not --backend {kind}")
+    check_backend(kind, workers, ray_address)
     if kind == "inline":
         return InlineBackend(record, jit, scratch_root)
     if kind == "ray" or (kind == "auto" and (ray_available() or ray_address is not None)):

@@ -5,7 +5,8 @@ already holds, hands the rest to a backend and writes each outcome as it comes b
 the sweep directory: the records, the MCAP logs a worker kept (each before the record that vouches for it),
 ``<out>/errors.jsonl`` for the episodes that raised (a rerun tries them again, after the episodes never tried;
 a run whose first new episodes all raise, before any runs, is misconfigured and stops), and
-``<out>/sweep.json``, what the directory holds and a line per run.
+``<out>/sweep.json``, what the directory holds and a line per run (once its backend has started: a run
+refused before it leaves none).
 
 The parts, a module each: pipelines.experiments.log (the durable, resumable record log and the lock that
 refuses a second sweep on the same directory), pipelines.experiments.worker (an episode run into a record,
@@ -17,6 +18,7 @@ sweep's records must match: the predictor weights and margins its cells plan wit
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import shutil
@@ -32,7 +34,7 @@ from typing import Any, Final
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError, SweepStopped
-from pipelines.experiments.backends import BACKENDS, Backend, make_backend
+from pipelines.experiments.backends import BACKENDS, Backend, check_backend, make_backend
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
     ERRORS_FILE,
@@ -239,6 +241,8 @@ def run_sweep(
     run's folder for the workers' temporary files, which the driver removes when the run ends (and the next
     sweep removes when the driver was killed, pipelines.experiments.worker)."""
     out = Path(config.out)
+    if backend_factory is None:  # a choice refused here leaves no folder, nor a line in sweep.json
+        check_backend(config.backend, config.workers, config.ray_address)
     check_sweep_directory(out)
     out.mkdir(parents=True, exist_ok=True)
     tasks = config.tasks()
@@ -251,7 +255,9 @@ def run_sweep(
         done = log.load()
         check_same_predictors(out, tasks, done)
         check_same_margins(out, tasks, done)
-        _add_run(out, meta, config, len(tasks))  # a refused resume is no run: it leaves no line
+        # A refused resume is no run, nor a backend that could not start: the run's line is added once the
+        # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
+        add_run = functools.partial(_add_run, out, meta, config, len(tasks))
         # Episodes that raised before (errors.jsonl) last: a rerun that extends the sweep runs the new ones
         # first, rather than stopping on the same failures again.
         retried = error_keys(out)
@@ -260,13 +266,13 @@ def run_sweep(
         del done  # every record parsed (~14 KB each): not held while the workers run
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:
+            add_run()
             return outcome
         scratch = make_scratch_root()
         try:
             with _terminate_as_interrupt():
-                _run_tasks(
-                    config, todo, log, outcome, backend_factory or _default_backend, str(scratch), retried
-                )
+                factory = backend_factory or _default_backend
+                _run_tasks(config, todo, log, outcome, factory, str(scratch), retried, started=add_run)
         except KeyboardInterrupt:
             outcome.interrupted = True
         finally:
@@ -282,8 +288,10 @@ def _run_tasks(
     backend_factory: Callable[[SweepConfig, str], Backend],
     scratch: str,
     retried: Collection[str] = (),
+    started: Callable[[], None] = lambda: None,
 ) -> None:
-    """Start the backend, write every outcome as it comes back, and end the backend. Stop (SweepStopped)
+    """Start the backend, call ``started`` (the run's line in sweep.json: a backend that could not start ran
+    nothing), write every outcome as it comes back, and end the backend. Stop (SweepStopped)
     when no episode has run and FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run)
     have raised: a broken method or setting, also when it extends a sweep; old failures raising again tell
     nothing new, and run after the new episodes."""
@@ -293,8 +301,10 @@ def _run_tasks(
     backend = backend_factory(config, scratch)
     outcome.backend = backend.name
     outcome.startup_s = time.perf_counter() - start
-    bar = _progress_bar(config, outcome)
+    bar: Any = None
     try:
+        started()
+        bar = _progress_bar(config, outcome)
         for result in backend.run(todo):
             task = by_key[result.key]
             if result.error is not None:
@@ -320,7 +330,8 @@ def _run_tasks(
             bar.update(1)
     finally:
         outcome.wall_s = time.perf_counter() - start
-        bar.close()
+        if bar is not None:
+            bar.close()
         backend.close()
 
 

@@ -1,6 +1,7 @@
 """A sweep directory that was damaged or edited by hand stops the sweep with one line naming the file (and
 the line), never a traceback, and nothing of it is overwritten."""
 
+import dataclasses
 import json
 import os
 import shutil
@@ -182,6 +183,51 @@ def test_a_deeply_nested_error_entry_is_passed_over(good, tmp_path, capsys):
     assert main([*ARGV, "--out", str(out)]) == 0
 
 
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--backend", "ray"], "the Ray backend needs the cluster extra"),
+        (["--ray-address", "x:1"], "the Ray backend needs the cluster extra"),
+        (["--backend", "process", "--ray-address", "x:1"], "--ray-address needs the Ray backend, not"),
+    ],
+    ids=["ray", "auto-address", "process-address"],
+)
+def test_a_backend_that_cannot_start_leaves_no_run_line(
+    good, tmp_path, capsys, monkeypatch, options, message
+):
+    """The run's line was written before the backend was made: the refused run became the sweep's last, which
+    --report-only and `config show --from-sweep` then took for the sweep's plan."""
+    monkeypatch.setattr("pipelines.experiments.backends.ray_available", lambda: False)
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    before = (out / SWEEP_FILE).read_bytes()
+    argv = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "2",
+            "--no-progress", "--jit", "off", *options]  # fmt: skip
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert (out / SWEEP_FILE).read_bytes() == before
+    assert main([*argv, "--out", str(tmp_path / "new")]) == 2
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_run_line_is_added_once_the_backend_has_started(good, tmp_path):
+    """A backend refused only as it starts (a Ray cluster that cannot be joined) leaves no line either."""
+    out = tmp_path / "sweep"
+    shutil.copytree(good, out)
+    before = (out / SWEEP_FILE).read_bytes()
+    config = dataclasses.replace(_config(out), episodes_per_cell=2)
+
+    def unreachable(config, scratch):
+        raise PipelineError("cannot join a Ray cluster at --ray-address 'x:1'")
+
+    with pytest.raises(PipelineError, match="cannot join"):
+        run_sweep(config, backend_factory=unreachable)
+    assert (out / SWEEP_FILE).read_bytes() == before
+    assert run_sweep(config).ran == 2
+    assert len(json.loads((out / SWEEP_FILE).read_text())["runs"]) == 2
+
+
 # ----------------------------------------------------------------------------------------------------------
 # The sweep directory: only its own files, never through a link, never a folder of the user's
 # ----------------------------------------------------------------------------------------------------------
@@ -242,8 +288,8 @@ def test_a_sweep_stopped_while_writing_its_first_sweep_file_resumes(tmp_path, mo
         real_replace(src, dst)
 
     monkeypatch.setattr(os, "replace", stopped)
-    with pytest.raises(KeyboardInterrupt):
-        run_sweep(_config(out))
+    outcome = run_sweep(_config(out))  # written once the backend has started: an interrupt of the run
+    assert outcome.interrupted and outcome.ran == 0
     monkeypatch.undo()
     assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]  # the writer took its temporary file away
     # a SIGKILL leaves it behind: the same command still resumes
