@@ -45,7 +45,8 @@ Every option can also come from a TOML config file (--config FILE, before or aft
 section, `crowdmpc config show` lists every key) and --set SECTION.KEY=VALUE items: defaults < the file <
 --set < the options given here. [controller] and [mpc] values that differ from their defaults apply to every
 method (and become part of the cell keys); a value the experiment compares across its methods is refused, as
-are [world], [env] and [env.orca] values beyond profile and robots_visible (simulate-only).
+are [world], [env] and [env.orca] values beyond profile and robots_visible, and [scenario] humans and name
+(simulate-only).
 
 Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
 --episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;

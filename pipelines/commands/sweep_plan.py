@@ -212,10 +212,12 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
 
 
 def check_world(cfg: RunConfig) -> None:
-    """A sweep's cells run a named profile (``World``: profile and visibility): refuse the other [world],
-    [env] and [env.orca] values (set to something else than the default) rather than ignore them."""
+    """A sweep's cells run a named profile (``World``: profile and visibility) on the sweep's own crowds:
+    refuse the other [world], [env] and [env.orca] values (set to something else than the default), and
+    [scenario] humans and name (``_check_scenario``), rather than ignore them."""
     from crowdsim.profiles import PROFILES
 
+    _check_scenario(cfg)
     why = (
         "a sweep's cells run a named profile ([env] profile, robots_visible); other [world], [env] and "
         "[env.orca] values apply to simulate only"
@@ -233,3 +235,20 @@ def check_world(cfg: RunConfig) -> None:
         value = cfg.values[section][key]
         if value is not None and value != default:
             raise cfg.error(section, key, f"{value!r}: {why}")
+
+
+# What sets, in a sweep, what a [scenario] key sets in simulate.
+SWEEP_SCENARIO: dict[str, str] = {
+    "humans": "a sweep's crowd sizes are --humans ([sweep] humans)",
+    "name": "a sweep's episodes alternate the circle (even episodes) and perpendicular (odd) scenarios",
+}
+
+
+def _check_scenario(cfg: RunConfig) -> None:
+    """Refuse a [scenario] value the sweep would not read (all but robots), chosen as ``RunConfig.chosen``
+    says: given on the command line, the default too, or set in a file to another value."""
+    for key in cfg.values["scenario"]:
+        if key != "robots" and cfg.chosen("scenario", key):
+            sweep = SWEEP_SCENARIO.get(key, "a sweep plans its own scenarios")
+            value = cfg.values["scenario"][key]
+            raise cfg.error("scenario", key, f"{value!r}: [scenario] {key} applies to simulate only; {sweep}")

@@ -388,8 +388,8 @@ SECTIONS: Final[tuple[Section, ...]] = (
     ),
     Section(
         "scenario",
-        "What simulate runs (crowdsim/scenarios.py); a sweep reads robots only (its episodes alternate the "
-        "two scenarios, its crowd sizes are [sweep] humans).",
+        "What simulate runs (crowdsim/scenarios.py); a sweep reads robots and refuses the others (its "
+        "episodes alternate the two scenarios, its crowd sizes are [sweep] humans).",
         SCENARIO_KEYS,
         _build_scenario,
     ),

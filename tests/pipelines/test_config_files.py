@@ -600,6 +600,18 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
         ),  # fmt: skip
         ("table2", "env.time_limit=20", "--set env.time_limit: 20.0: a sweep's cells run a named profile"),
         ("table2", "world.radius=0.2", "--set world.radius: 0.2: a sweep's cells run a named profile"),
+        (  # ignored: the cells ran at the sweep's crowd sizes
+            "table2",
+            "scenario.humans=9",
+            "--set scenario.humans: 9: [scenario] humans applies to simulate only; a sweep's crowd sizes are "
+            "--humans",
+        ),  # fmt: skip
+        (
+            "table2",
+            "scenario.name=perpendicular",
+            "--set scenario.name: 'perpendicular': [scenario] name applies to simulate only; a sweep's "
+            "episodes alternate",
+        ),  # fmt: skip
         ("table2", "mpc.jit=true", "--set mpc.jit: a sweep compiles by [sweep] jit"),
         (
             "table3",
@@ -632,6 +644,19 @@ def test_a_sweep_refuses_what_it_cannot_apply_in_one_line(experiment, item, mess
     assert main(argv) == 2
     assert _one_error_line(capsys, "sweep").startswith(message)
     assert not out.exists()
+
+
+def test_a_sweep_refuses_a_files_scenario_humans_and_takes_its_default(tmp_path, capsys):
+    """A simulate config's [scenario] humans = 9 ran a sweep at the experiment's crowd sizes without a word;
+    the default (what `config show` writes) chooses nothing."""
+    argv = ["sweep", "--experiment", "table2", "--dry-run", "--out", str(tmp_path / "sweep")]
+    config = _write(tmp_path, "[scenario]\nhumans = 9\n")
+    assert main(["--config", str(config), *argv]) == 2
+    assert _one_error_line(capsys, "sweep").endswith(
+        f"{config}: scenario.humans: 9: [scenario] humans applies to simulate only; a sweep's crowd sizes "
+        "are --humans ([sweep] humans)"
+    )
+    assert main(["--config", str(_write(tmp_path, "[scenario]\nhumans = 7\n")), *argv]) == 0
 
 
 def test_a_sweep_needs_an_experiment_and_a_directory(tmp_path, capsys):
