@@ -213,8 +213,8 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
 
 def check_world(cfg: RunConfig) -> None:
     """A sweep's cells run a named profile (``World``: profile and visibility) on the sweep's own crowds:
-    refuse the other [world], [env] and [env.orca] values (set to something else than the default), and
-    [scenario] humans and name (``_check_scenario``), rather than ignore them."""
+    refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), and [scenario]
+    humans and name (``_check_scenario``), rather than ignore them."""
     from crowdsim.profiles import PROFILES
 
     _check_scenario(cfg)
@@ -232,9 +232,19 @@ def check_world(cfg: RunConfig) -> None:
             if k not in ("profile", "robots_visible")
         ),
     ):
-        value = cfg.values[section][key]
-        if value is not None and value != default:
-            raise cfg.error(section, key, f"{value!r}: {why}")
+        if _asked(cfg, section, key, default):
+            raise cfg.error(section, key, f"{cfg.values[section][key]!r}: {why}")
+
+
+def _asked(cfg: RunConfig, section: str, key: str, default: Any) -> bool:
+    """Whether the run asks for this value, as ``RunConfig.chosen`` tells it but against ``default`` (an
+    [env] value's is the config's profile's): given as an option or ``--set``, the default too, since an
+    experiment's cells may run another profile (conventions' v1 cells kept v1's 30 s limit under ``--set
+    env.time_limit=40.0``, the paper's), or set in a file to another value than the default."""
+    source, value = cfg.sources.get((section, key)), cfg.values[section][key]
+    if source is None or value is None:
+        return False
+    return source.kind != "file" or value != default
 
 
 # What sets, in a sweep, what a [scenario] key sets in simulate.

@@ -599,6 +599,11 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
             "--set mpc.coupled_mode: method 'NLP first-order' of experiment 'coupling' sets coupled_mode",
         ),  # fmt: skip
         ("table2", "env.time_limit=20", "--set env.time_limit: 20.0: a sweep's cells run a named profile"),
+        (  # the paper profile's own limit: conventions' v1 cells kept v1's 30 s, without a word
+            "conventions",
+            "env.time_limit=40.0",
+            "--set env.time_limit: 40.0: a sweep's cells run a named profile",
+        ),  # fmt: skip
         ("table2", "world.radius=0.2", "--set world.radius: 0.2: a sweep's cells run a named profile"),
         (  # ignored: the cells ran at the sweep's crowd sizes
             "table2",
