@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
     from pipelines.loop.margins import MarginSpec
+    from pipelines.loop.spec import ControllerSpec
     from predictors.base import Predictor
 
 
@@ -164,10 +165,12 @@ def _applied(
 
 
 def _with_spec_field(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
-    """Every method's ``ControllerSpec.<key>`` set to ``value``, unless the experiment compares it."""
+    """Every method's ``ControllerSpec.<key>`` set to ``value`` (but the controller kind, only the methods
+    that plan with a predictor: ``_planning``), unless the experiment compares it."""
     import dataclasses
 
-    own = {getattr(spec, key) for _, spec in experiment.methods}
+    applies = _planning(cfg, experiment, "controller", key) if key != "controller" else experiment.methods
+    own = {getattr(spec, key) for _, spec in applies}
     if len(own) > 1:
         raise cfg.error(
             "controller",
@@ -175,8 +178,32 @@ def _with_spec_field(cfg: RunConfig, experiment: Experiment, key: str, value: An
             f"experiment {experiment.name!r} compares its methods' {key} ({sorted(map(str, own))}); "
             "leave it unset for this sweep",
         )
-    methods = tuple((label, dataclasses.replace(spec, **{key: value})) for label, spec in experiment.methods)
+    methods = tuple(
+        (label, dataclasses.replace(spec, **{key: value}) if (label, spec) in applies else spec)
+        for label, spec in experiment.methods
+    )
     return dataclasses.replace(experiment, methods=methods)
+
+
+def _planning(
+    cfg: RunConfig, experiment: Experiment, section: str, key: str
+) -> tuple[tuple[str, ControllerSpec], ...]:
+    """The methods a [controller] or [mpc] value applies to: those that plan with a predictor (ORCA and the
+    straight line have no MPC, and their cell keys took --set mpc.horizon=8 while they ran as before); a
+    value none of them would read is refused, as margins are (``_check_margins_apply``)."""
+    from pipelines.loop.spec import CONTROLLER_KINDS
+
+    planning = tuple((label, spec) for label, spec in experiment.methods if spec.kind.uses_predictor)
+    if not planning:
+        labels = ", ".join(repr(label) for label, _ in experiment.methods)
+        predicting = ", ".join(name for name, kind in CONTROLLER_KINDS.items() if kind.uses_predictor)
+        raise cfg.error(
+            section,
+            key,
+            f"the methods of experiment {experiment.name!r} ({labels}) plan with no predictor; [{section}] "
+            f"{key} applies to the controllers that do ({predicting})",
+        )
+    return planning
 
 
 def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
@@ -196,8 +223,12 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
             f"experiment {experiment.name!r} compares flocking on and off; w_floc = 0 turns it off in all "
             "its methods",
         )
+    applies = _planning(cfg, experiment, "mpc", key)
     methods = []
     for label, spec in experiment.methods:
+        if (label, spec) not in applies:
+            methods.append((label, spec))
+            continue
         own = dict(spec.mpc_overrides)
         if key in own and own[key] != value:
             raise cfg.error(

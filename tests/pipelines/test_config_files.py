@@ -599,6 +599,17 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
             "--set mpc.coupled_mode: method 'NLP first-order' of experiment 'coupling' sets coupled_mode",
         ),  # fmt: skip
         ("table2", "env.time_limit=20", "--set env.time_limit: 20.0: a sweep's cells run a named profile"),
+        (  # ORCA and the straight line have no MPC: their cell keys took horizon=8, their episodes did not
+            "baselines",
+            "mpc.horizon=8",
+            "--set mpc.horizon: the methods of experiment 'baselines' ('straight', 'ORCA') plan with no "
+            "predictor; [mpc] horizon applies to the controllers that do (cmpc, dmpc)",
+        ),  # fmt: skip
+        (
+            "baselines",
+            "controller.flocking=false",
+            "--set controller.flocking: the methods of experiment 'baselines' ('straight', 'ORCA') plan with",
+        ),  # fmt: skip
         (  # the paper profile's own limit: conventions' v1 cells kept v1's 30 s, without a word
             "conventions",
             "env.time_limit=40.0",
@@ -691,3 +702,20 @@ def test_goal_slots_show_in_the_summary_and_the_run_record(tmp_path, capsys):
     assert json.loads(out.read_text())["run"]["goals"] == "slots"
     assert main(["simulate", "--controller", "orca", "--no-progress"]) == 0
     assert "goals" not in capsys.readouterr().out.splitlines()[0]  # the paper's task: no mention
+
+
+def test_a_sweeps_mpc_values_apply_to_the_methods_that_plan_with_a_predictor(tmp_path, capsys):
+    """--set mpc.horizon=8 and controller.flocking=false went into every cell key of the controllers
+    experiment, ORCA's and the straight line's too, though those two ran as before."""
+    argv = ["--set", "mpc.horizon=8", "--set", "controller.flocking=false", "sweep", "--experiment"]
+    argv += ["controllers", "--humans", "5", "--dry-run", "--out", str(tmp_path / "sweep")]
+    assert main(argv) == 0
+    keys = {
+        line.split()[0]: line.split()[-1]
+        for line in capsys.readouterr().out.splitlines()
+        if " humans " in line
+    }
+    assert keys["cmpc"].startswith("cmpc-social_lstm_eth-NF-ibr-horizon=8-")
+    assert keys["dmpc"].startswith("dmpc-social_lstm_eth-NF-ibr-horizon=8-")
+    assert keys["orca"] == "orca-none-F-ibr-m=none-paper-visible-h5-r3"
+    assert keys["straight"] == "straight-none-F-ibr-m=none-paper-visible-h5-r3"
