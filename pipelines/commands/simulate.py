@@ -117,7 +117,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--record-iterations",
         action="store_true",
         default=None,
-        help="record every IBR iteration's prediction",
+        help="record every IBR iteration's prediction in the --record files (cmpc, dmpc)",
     )
     parser.add_argument("--no-progress", action="store_true", default=None, help="no progress bar")
     add_config_options(parser)
@@ -193,6 +193,7 @@ class SimulateRun:
 
 def resolve_run(args: argparse.Namespace) -> SimulateRun:
     """The run's effective config, with every number and output path checked before any work starts."""
+    from pipelines.commands.simulate_checks import check_choices_apply
     from pipelines.config import command_config
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.margins import parse_margins
@@ -211,20 +212,7 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         mpc_overrides=config.mpc_overrides(),
         margins=parse_margins(chosen.margins or "none"),
     )
-    if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
-        unused = [
-            f"{config.label('controller', key)} {value}"
-            for key, value, given in (
-                ("margins", chosen.margins, spec.margins.mode != "none"),
-                ("coupling", spec.coupling, spec.coupling != "ibr"),
-            )
-            if given
-        ]
-        if unused:
-            raise PipelineError(
-                f"{' and '.join(unused)}: controller {spec.controller!r} plans with no predictor; "
-                "margins and coupling apply to the controllers that do (cmpc, dmpc)"
-            )
+    check_choices_apply(config, spec)
     paths = {name: getattr(config.simulate, name) for name in ("json", "plot", "record")}
     run = SimulateRun(config, spec, **{k: None if v is None else Path(v) for k, v in paths.items()})
     if run.plot is not None:

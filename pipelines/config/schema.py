@@ -239,7 +239,12 @@ CONTROLLER_KEYS: Final = (
         "in simulate, the experiment's own in sweep",
         "none",
     ),
-    Key("record_iterations", "bool", False, "record every IBR iteration's prediction (--record-iterations)"),
+    Key(
+        "record_iterations",
+        "bool",
+        False,
+        "record every IBR iteration's prediction in the --record files (cmpc, dmpc; --record-iterations)",
+    ),
 )
 
 

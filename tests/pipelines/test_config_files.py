@@ -411,14 +411,14 @@ def test_simulate_records_the_effective_config_in_json_and_mcap(tmp_path, capsys
         tmp_path, '[controller]\ncontroller = "straight"\n[scenario]\nhumans = 2\n[env]\ntime_limit = 20\n'
     )
     out, rec = tmp_path / "run.json", tmp_path / "rec"
-    argv = ["--config", str(path), "--set", "mpc.w_coll=1e6", "simulate", "--json", str(out)]
+    argv = ["--config", str(path), "--set", "env.orca.max_neighbors=5", "simulate", "--json", str(out)]
     argv += ["--record", str(rec), "--no-progress"]
     assert main(argv) == 0
     run = json.loads(out.read_text())["run"]
     assert run["config_file"] == str(path)
     config = run["config"]
     assert config["env"]["time_limit"] == 20.0 and config["env"]["timeout_margin"] == 1.0  # the profile's
-    assert config["mpc"]["w_coll"] == 1e6 and config["scenario"]["humans"] == 2
+    assert config["env.orca"]["max_neighbors"] == 5 and config["scenario"]["humans"] == 2
     assert set(config) == {"world", "env", "env.orca", "scenario", "controller", "mpc", "simulate", "sweep"}
     (mcap,) = sorted(rec.glob("*.mcap"))
     meta = read_recording(mcap).metadata

@@ -1,0 +1,104 @@
+"""simulate refuses, in one line before any episode, what its controller would ignore: a predictor for ORCA
+and the straight line, flocking, record_iterations and [mpc] values for them (they plan with no MPC), and
+--record-iterations with nothing to record to. Only values the user chose count."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.loop import spec as registry
+
+TOY = "tests.plugins.toy_controller:StraightLine"  # a plugin that plans with no predictor
+RUN = ["--humans", "1", "--no-progress"]
+
+
+def _no_episodes(monkeypatch) -> None:
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("an episode ran before the choices were checked")
+
+    monkeypatch.setattr("pipelines.loop.episode.run_episodes", no_episodes)
+
+
+def _error_line(capsys) -> str:
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and captured.out == "", captured.err
+    return lines[0]
+
+
+NO_PREDICTOR = (
+    "plans with no predictor; predictor, margins and coupling apply to the controllers that do (cmpc, dmpc)"
+)
+NO_MPC = (
+    "plans with no MPC; flocking, record_iterations and [mpc] apply to the controllers that do (cmpc, dmpc)"
+)
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            ["--predictor", "social_lstm_eth"],
+            f"--predictor social_lstm_eth: controller 'orca' {NO_PREDICTOR}",
+        ),
+        (
+            ["--no-flocking", "--record-iterations", "--set", "mpc.horizon=10"],
+            f"--no-flocking, --record-iterations and --set mpc.horizon 10: controller 'orca' {NO_MPC}",
+        ),
+        (
+            ["--set", "controller.flocking=true"],
+            f"--set controller.flocking true: controller 'orca' {NO_MPC}",
+        ),
+        (
+            ["--controller", "straight", "--set", "mpc.w_coll=1e6"],
+            f"--set mpc.w_coll 1000000.0: controller 'straight' {NO_MPC}",
+        ),
+    ],
+)
+def test_what_orca_and_the_straight_line_would_ignore_is_refused(options, message, capsys, monkeypatch):
+    """They were run as if the values did not exist, while the record's config stated them."""
+    _no_episodes(monkeypatch)
+    assert main(["simulate", "--controller", "orca", *RUN, *options]) == 2
+    assert _error_line(capsys) == f"crowdmpc simulate: error: {message}"
+
+
+def test_a_config_file_is_refused_only_for_what_it_changes(tmp_path, capsys, monkeypatch):
+    """A file shared with cmpc may state the defaults (as `config show` writes them): those choose nothing."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "run.toml").write_text("[controller]\nflocking = true\n[mpc]\nhorizon = 4\nw_coll = 1e7\n")
+    out = tmp_path / "run.json"
+    assert main(["--config", "run.toml", "simulate", "--controller", "orca", *RUN, "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["run"]["controller"] == "orca"
+    capsys.readouterr()
+    _no_episodes(monkeypatch)
+    (tmp_path / "run.toml").write_text("[controller]\nflocking = true\n[mpc]\nhorizon = 12\n")
+    assert main(["--config", "run.toml", "simulate", "--controller", "orca", *RUN]) == 2
+    assert (
+        _error_line(capsys)
+        == f"crowdmpc simulate: error: run.toml: mpc.horizon 12: controller 'orca' {NO_MPC}"
+    )
+
+
+def test_record_iterations_needs_a_recording(capsys, monkeypatch):
+    """--record-iterations without --record was accepted and wrote nothing."""
+    _no_episodes(monkeypatch)
+    assert main(["simulate", "--controller", "cmpc", *RUN, "--record-iterations"]) == 2
+    assert _error_line(capsys) == (
+        "crowdmpc simulate: error: --record-iterations: the iterations are written to the MCAP recordings; "
+        "give --record DIR too (or [simulate] record)"
+    )
+
+
+def test_a_plugin_keeps_the_mpc_settings_but_not_a_predictor(capsys, monkeypatch):
+    """A plugin reads the spec as it sees fit (flocking, [mpc]); one that plans with no predictor has none to
+    take."""
+    monkeypatch.setattr(registry, "_PLUGINS", {})
+    monkeypatch.delenv(registry.PLUGINS_ENV, raising=False)
+    argv = ["--plugin", TOY, "simulate", "--controller", TOY, *RUN]
+    assert main([*argv, "--no-flocking", "--set", "mpc.horizon=10"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--predictor", "social_lstm_eth"]) == 2
+    assert _error_line(capsys).endswith(f"--predictor social_lstm_eth: controller '{TOY}' {NO_PREDICTOR}")
