@@ -10,7 +10,8 @@ from typing import Final
 
 WORLD_NOTES: Final[Mapping[str, str]] = {
     "dt": "tau, s: simulation step = control period = the predictors' sampling time (Table I: 0.4 s)",
-    "obs_len": "L, observed steps the predictors read (Table I: 8; the zoo's models are trained on 9)",
+    "obs_len": "L, observed steps the simulator keeps for the predictors: at least each predictor's own "
+    "(Table I: 8; the zoo's models read 9)",
     "radius": "m, every robot and human (CrowdNav)",
     "v_pref": "m/s, the humans' preferred speed = their ORCA max speed (CrowdNav)",
     "v_max": "v_max, m/s, robot velocity bound per component, Eq. 6 (Table I: 1.0 m/s)",

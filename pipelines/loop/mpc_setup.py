@@ -63,14 +63,15 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     """The last ``obs_len`` rows of ``obs.history`` ``(L, M+N, 2)`` and an all-True mask.
 
     The predictor gets exactly the rows it reads: a history shorter than ``obs_len`` is refused (the
-    simulator's ``EnvConfig.history_len`` must be at least the predictor's ``obs_len``), never padded here.
+    simulator's ``EnvConfig.history_len``, which ``[world] obs_len`` sets, must be at least the predictor's
+    ``obs_len``), never padded here.
     Before an episode's first step everyone stood still, which is what the simulator's own history says.
     """
     history = np.asarray(obs.history, dtype=float)
     if len(history) < obs_len:
         raise PipelineError(
             f"the predictor reads {obs_len} observed steps but the simulator keeps {len(history)} "
-            f"(EnvConfig.history_len): use history_len >= {obs_len}"
+            f"(EnvConfig.history_len, from [world] obs_len): {_keep_more(obs_len)}"
         )
     history = history[-obs_len:]
     return history, np.ones(history.shape[:2], dtype=bool)
@@ -91,5 +92,11 @@ def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None
     if predictor.obs_len > world.obs_len:
         raise PipelineError(
             f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator "
-            f"keeps {world.obs_len} (EnvConfig.history_len): use history_len >= {predictor.obs_len}"
+            f"keeps {world.obs_len} ([world] obs_len): {_keep_more(predictor.obs_len)}"
         )
+
+
+def _keep_more(obs_len: int) -> str:
+    """What to do about a history shorter than a predictor reads: [world] obs_len is the one key that sets
+    it (EnvConfig.history_len follows it; [env] refuses history_len)."""
+    return f"set [world] obs_len >= {obs_len} (e.g. --set world.obs_len={obs_len})"

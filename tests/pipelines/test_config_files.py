@@ -322,6 +322,20 @@ def test_a_bad_set_item_is_one_line(item, message, capsys):
     assert _one_error_line(capsys, "simulate").startswith(message)
 
 
+def test_a_history_shorter_than_the_predictor_reads_names_world_obs_len(capsys):
+    """The error told the user to set history_len, which [env] refuses ("set [world] obs_len"); `config
+    show` said obs_len is what the predictors read, while each reads its own count of what it keeps."""
+    argv = ["simulate", "--controller", "cmpc", "--humans", "1", "--no-progress", "--set", "world.obs_len=1"]
+    assert main(argv) == 2
+    assert _one_error_line(capsys, "simulate") == (
+        "the predictor constant_velocity reads 2 observed steps but the simulator keeps 1 ([world] obs_len): "
+        "set [world] obs_len >= 2 (e.g. --set world.obs_len=2)"
+    )
+    assert main(["config", "show"]) == 0
+    (line,) = [line for line in capsys.readouterr().out.splitlines() if line.startswith("obs_len =")]
+    assert "observed steps the simulator keeps for the predictors: at least each predictor's own" in line
+
+
 def test_file_problems_are_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["--config", "nope.toml", "simulate", "--controller", "orca"]) == 2

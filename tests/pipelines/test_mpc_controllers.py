@@ -191,7 +191,8 @@ def test_predictor_history_takes_the_last_rows_and_refuses_to_pad():
     np.testing.assert_array_equal(history, obs.history[-3:])
     full, _ = predictor_history(obs, len(obs.history))
     np.testing.assert_array_equal(full, obs.history)
-    with pytest.raises(PipelineError, match=r"reads 10 observed steps.*keeps 9.*history_len >= 10"):
+    # the key a user sets: [env] refuses history_len ("set [world] obs_len")
+    with pytest.raises(PipelineError, match=r"reads 10 observed steps.*keeps 9.*--set world\.obs_len=10\)$"):
         predictor_history(obs, 10)
 
 
