@@ -67,6 +67,26 @@ def _unknown_section(where: str, name: str) -> ConfigError:
     return ConfigError(f"{where}: [{name}]: unknown section; valid sections: {valid}")
 
 
+def _outside_sections(where: str, name: str) -> ConfigError:
+    """A key written above every table (``horizon = 4`` before ``[mpc]``): the sections that have it, else
+    the closest key of any section."""
+    owners = [s for s in WRITE_ORDER if SECTION_BY_NAME[s].key(name) is not None]
+    if owners:
+        put = " or ".join(f"[{s}]" for s in owners)
+        return ConfigError(f"{where}: {name}: a key outside any section; put it under its section ({put})")
+    owner = {key: s for s in reversed(WRITE_ORDER) for key in SECTION_BY_NAME[s].names}
+    close = difflib.get_close_matches(name, list(owner), n=1)
+    hint = f" (did you mean {close[0]!r} of [{owner[close[0]]}]?)" if close else ""
+    valid = ", ".join(f"[{s}]" for s in WRITE_ORDER)
+    return ConfigError(
+        f"{where}: {name}: a key outside any section, and no section has it{hint}; valid sections: {valid}"
+    )
+
+
+def _is_a_key(name: str) -> bool:
+    return any(section.key(name) is not None for section in SECTION_BY_NAME.values())
+
+
 def check_key(prefix: str, section: Section, key: str) -> None:
     """Refuse a key the section does not have, saying where it belongs or which keys are valid."""
     if section.key(key) is not None:
@@ -135,6 +155,8 @@ def read_file(path: str | Path) -> list[Entry]:
     for name, values in document.items():
         if name == "env.orca":  # a quoted ["env.orca"]: one name with a dot in it, not the table orca of env
             raise ConfigError(f'{where}: ["env.orca"] names no section: write [env.orca], without quotes')
+        if not isinstance(values, dict) and (name not in SECTION_BY_NAME or _is_a_key(name)):
+            raise _outside_sections(where, name)  # a section's name written as a key is one (controller)
         if name not in SECTION_BY_NAME:
             raise _unknown_section(where, name)
         table(name, values)

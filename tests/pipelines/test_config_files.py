@@ -275,7 +275,21 @@ def test_a_bad_value_is_one_line_naming_file_key_and_expectation(
             "[mcp]\nhorizon = 4\n",
             "run.toml: [mcp]: unknown section; valid sections: [world], [env], [env.orca], ",
         ),
-        ("horizon = 4\n", "run.toml: [horizon]: unknown section; valid sections: "),
+        # a key above every table is no section: it belongs under its own
+        ("horizon = 4\n", "run.toml: horizon: a key outside any section; put it under its section ([mpc])"),
+        (
+            'record = "runs/x"\n[mpc]\n',
+            "run.toml: record: a key outside any section; put it under its section ([simulate] or [sweep])",
+        ),  # fmt: skip
+        (
+            'controller = "cmpc"\n',
+            "run.toml: controller: a key outside any section; put it under its section ([controller])",
+        ),  # fmt: skip
+        (
+            "horizn = 4\n",
+            "run.toml: horizn: a key outside any section, and no section has it (did you mean 'horizon' of "
+            "[mpc]?); valid sections: [world], [env], ",
+        ),  # fmt: skip
         (
             '["env.orca"]\nneighbor_dist = 5.0\n',
             'run.toml: ["env.orca"] names no section: write [env.orca], without quotes',
