@@ -25,3 +25,14 @@ def _private_user_zoo(tmp_path_factory, monkeypatch):
     monkeypatch.setenv(ZOO_ENV, str(tmp_path_factory.mktemp("user_zoo")))
     monkeypatch.delenv(PLUGINS_ENV, raising=False)
     monkeypatch.delenv(CONTROLLER_PLUGINS_ENV, raising=False)
+
+
+@pytest.fixture
+def sigint_as_at_a_terminal():
+    """SIGINT delivered to this process, and to the programs it starts, as a terminal's Ctrl-C is: a test
+    run started in the background (``make test &``) inherits SIGINT ignored, and so would every child."""
+    import signal
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

@@ -312,7 +312,9 @@ def fake_compiler(tmp_path: Path, body: str) -> compile_cache.Compiler:
     return compile_cache.Compiler(str(script), "x", ("-O2",))
 
 
-def test_a_compiler_stopped_by_sigint_is_an_interrupt_not_a_failed_compile(cache, monkeypatch, tmp_path):
+def test_a_compiler_stopped_by_sigint_is_an_interrupt_not_a_failed_compile(
+    cache, monkeypatch, tmp_path, sigint_as_at_a_terminal
+):
     stopped = fake_compiler(tmp_path, "kill -INT $$")
     monkeypatch.setattr(compile_cache, "compiler", lambda: stopped)
     with pytest.raises(KeyboardInterrupt):
@@ -333,7 +335,7 @@ except BaseException as exc:
 """
 
 
-def test_ctrl_c_during_a_cold_compile_interrupts_the_program(cache, tmp_path):
+def test_ctrl_c_during_a_cold_compile_interrupts_the_program(cache, tmp_path, sigint_as_at_a_terminal):
     """CasADi compiles with system(), which ignores SIGINT in the caller while gcc runs: a Ctrl-C stopped gcc
     alone, and the program went on to report "compiling the solver ... failed" (a sweep: a failed cell)."""
     started = tmp_path / "started"

@@ -27,7 +27,7 @@ def started_with(ignore: bool) -> str:
     return handler
 
 
-def test_workers_ignore_ctrl_c_from_their_start_and_the_driver_keeps_its_handler():
+def test_workers_ignore_ctrl_c_from_their_start_and_the_driver_keeps_its_handler(sigint_as_at_a_terminal):
     """A Ctrl-C while the workers still imported (before their initializer ignores it) printed each worker's
     KeyboardInterrupt traceback under the driver's "interrupted: rerun the same command to resume"."""
     before = signal.getsignal(signal.SIGINT)
