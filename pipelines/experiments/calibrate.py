@@ -240,11 +240,19 @@ def format_coverage(
         margins = ", ".join(f"{q:.3f}" for q in quantiles[i])
         line = f"  alpha {alpha_text(alpha):<5} margins m_k [m]: {margins}"
         if coverage is not None:
-            line += f" | held-out coverage (target {1 - alpha:.0%}): " + ", ".join(
+            line += f" | held-out coverage (target {coverage_target(alpha)}): " + ", ".join(
                 f"{c:.1%}" for c in coverage[i]
             )
         lines.append(line)
     return "\n".join(lines)
+
+
+def coverage_target(alpha: float) -> str:
+    """``1 - alpha`` in percent, exactly as the alpha is written (0.025: 97.5%, 1e-05: 99.999%): a rounded
+    target (98%, 100%) would misstate the coverage each margin was made for."""
+    from decimal import Decimal
+
+    return f"{(100 * (1 - Decimal(alpha_text(alpha)))).normalize():f}%"
 
 
 def class_coverage_report(

@@ -426,3 +426,13 @@ def test_real_calibration_refuses_held_out_margins(monkeypatch, capsys):
     argv = ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--holdout"]
     err = _refused(capsys, [*argv, "--holdout-margins", "conformal-motion:0.3", "--dry-run"])
     assert "--holdout-margins is for --source closed-loop" in err
+
+
+def test_held_out_coverage_targets_are_printed_exactly():
+    """The target was rounded to a whole percent: alpha 0.025 printed "target 98%", 0.005 "target 100%"."""
+    from pipelines.experiments.calibrate import format_coverage
+
+    alphas = (0.1, 0.025, 0.005, 0.001, 1e-05)
+    text = format_coverage(alphas, [[0.5]] * len(alphas), [[0.9]] * len(alphas))
+    targets = [line.split("(target ")[1].split(")")[0] for line in text.splitlines()]
+    assert targets == ["90%", "97.5%", "99.5%", "99.9%", "99.999%"]
