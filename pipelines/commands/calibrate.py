@@ -283,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
     print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
     class_cover = class_coverage_report(blocks, holdout, holdout_classes)
     shortfall_cover = class_coverage_report(blocks, holdout_shortfall, holdout_classes, shortfall=True)
-    if args.source == "closed-loop":  # real scenes have no motion classes
+    if args.source == "closed-loop":  # a real calibration computes no margins per motion class
         for line in missing_class_margins(blocks):
             print(line)
     if args.json is not None:

@@ -94,10 +94,7 @@ class MarginSpec:
                     f"fixed margins must be numbers in [0, {MAX_MARGIN}] m, got {list(values)}"
                 )
         if self.mode in PER_HUMAN_MODES and self.source != "closed-loop":
-            raise PipelineError(
-                f"{self.mode} margins need the closed-loop calibration: real scenes hold no human "
-                "observed for fewer than L steps, so one of the motion classes cannot be calibrated on them"
-            )
+            raise PipelineError(_closed_loop_only(self.mode))
         if (self.mode == "fixed") != bool(values):
             raise PipelineError(
                 "fixed margins need values (e.g. fixed:0.05,0.1,0.15,0.2); other modes take none"
@@ -204,11 +201,22 @@ def _number(text: str, whole: str) -> float:
     return value
 
 
+def _closed_loop_only(mode: str) -> str:
+    """Why a per-class ``mode`` cannot use the real-data calibration: what that calibration computes."""
+    why = (
+        f"{mode} margins need the closed-loop calibration: the real-data calibration computes one margin per "
+        "horizon step for all humans together (those of conformal:ALPHA:real), none per motion class"
+    )
+    if mode == "conformal-shortfall":  # the shortfall is measured against robots, which real scenes lack
+        why += ", and its scenes hold no robot to measure a distance shortfall against"
+    return why
+
+
 def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int) -> str:
     """Why a calibration of ``covered`` steps cannot give the margins of a ``horizon``-step MPC, and what
     does: closed-loop calibration predicts with the MPC's default horizon (``crowdmpc calibrate`` cannot
-    change it), so only real scenes can be calibrated at another horizon, and the per-class modes have
-    none of those."""
+    change it), so only real scenes can be calibrated at another horizon, and the per-class modes cannot
+    use them (the real-data calibration computes no margins per motion class)."""
     from predictors.calibration import recalibrate_command
     from predictors.conformal import alpha_text
 
@@ -224,7 +232,7 @@ def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int)
         f"closed-loop calibration runs the MPC at its default horizon of {covered} steps, so plan with a "
         f"horizon of at most {covered} (mpc.horizon)"
     )
-    if spec.mode in PER_HUMAN_MODES:  # real scenes hold no motion classes (MarginSpec)
+    if spec.mode in PER_HUMAN_MODES:  # no per-class margins in a real calibration (_closed_loop_only)
         return f"{why}; {spec.mode} margins come from the closed-loop calibration only, and {closed}"
     return (
         f"{why}; {closed}, or calibrate real scenes at {horizon} steps: {real}, and plan with "

@@ -25,6 +25,19 @@ def test_parse_and_label():
     assert MarginSpec("conformal").resolve_classes("constant_velocity", 4, None) is None
 
 
+def test_per_class_margins_on_real_data_are_refused_for_the_true_reason():
+    """The refusal said real scenes hold no human observed for fewer than L steps, so a motion class could
+    not be calibrated on them; they hold every class (ETH/hotel val: new 164, standing 71, slow 43, walking
+    276 rows). The real-data calibration computes no margins per class, which is what the message says."""
+    for mode in ("conformal-motion", "conformal-shortfall"):
+        with pytest.raises(PipelineError) as caught:
+            parse_margins(f"{mode}:0.1:real")
+        message = str(caught.value)
+        assert "real-data calibration computes one margin per horizon step for all humans" in message
+        assert "none per motion class" in message and "fewer than L steps" not in message
+    assert "no robot to measure a distance shortfall" in str(caught.value)
+
+
 def _store(tmp_path, classes: bool) -> None:
     """19 samples per class, class c's step-k error i/100 * (c + 1) * k: margins 0.18 (c + 1) k."""
     errors, motion = class_errors(4)
