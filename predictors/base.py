@@ -48,6 +48,7 @@ if TYPE_CHECKING:
 DT: Final[float] = world.DT
 OBS_LEN: Final[int] = world.OBS_LEN
 PRED_LEN: Final[int] = 12
+SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
 
 
 @runtime_checkable

@@ -57,6 +57,7 @@ def _alphas(text: str) -> tuple[float, ...]:
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.profiles import PROFILES, VISIBILITY
     from pipelines.experiments.calibrate import CALIBRATION_SEED, NEAR
+    from predictors.base import SCENE_LENGTH
 
     p = subparsers.add_parser(
         "calibrate",
@@ -74,7 +75,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--horizon",
         type=int,
         default=4,
-        help="steps calibrated (the MPC's H, default 4; closed-loop: the MPC's own)",
+        help=f"steps calibrated (the MPC's H, default 4; closed-loop: the MPC's own; real: at most the "
+        f"scenes' {SCENE_LENGTH} less the steps the predictor observes)",
     )
     p.add_argument("--data-dir", type=path_arg, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
     p.add_argument("--episodes", type=int, default=200, help="closed-loop episodes (default 200)")
@@ -98,11 +100,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _check_real_horizon(args: argparse.Namespace, predictor: Any) -> None:
+    """A real scene holds the predictor's observed steps and then the --horizon steps scored: a longer
+    horizon is refused here, not as a fault of the first scene file read."""
+    from predictors.base import SCENE_LENGTH
+
+    longest = SCENE_LENGTH - predictor.obs_len
+    if args.horizon > longest:
+        raise PipelineError(
+            f"--horizon {args.horizon}: the real scenes have {SCENE_LENGTH} steps and {args.predictor} "
+            f"observes {predictor.obs_len} of them, so --source real calibrates at most {longest} steps "
+            "for it"
+        )
+
+
 def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple[list, Any]:
     from predictors.calibration import calibrate_real
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.real_data import real_errors
 
+    _check_real_horizon(args, predictor)
     files = protocol_files(args.data_dir, "paper", progress=not args.no_progress)
     blocks, _ = calibrate_real(
         predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256

@@ -29,14 +29,13 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from predictors.base import DT, OBS_LEN, PRED_LEN
+from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH
 from predictors.data.locate import cache_root
 from predictors.data.trajnet_io import iter_scenes
 from predictors.data.validate import read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 
-SCENE_LENGTH: Final[int] = OBS_LEN + PRED_LEN  # steps of a TrajNet++ scene's primary
 CACHE_VERSION: Final[str] = "scenes-v4"  # bump when FileArrays' layout or the validation changes
 
 

@@ -436,3 +436,17 @@ def test_held_out_coverage_targets_are_printed_exactly():
     text = format_coverage(alphas, [[0.5]] * len(alphas), [[0.9]] * len(alphas))
     targets = [line.split("(target ")[1].split(")")[0] for line in text.splitlines()]
     assert targets == ["90%", "97.5%", "99.5%", "99.9%", "99.999%"]
+
+
+def test_real_calibration_refuses_a_horizon_longer_than_the_scenes_before_reading_them(monkeypatch, capsys):
+    """--horizon 13 for social_lstm_eth (9 observed steps) failed in the first scene file, as if the file were
+    at fault ("scene 553 has 21 steps, the evaluation needs 22 ... a test/ file without ground truth?")."""
+    import predictors.data.locate as locate
+
+    monkeypatch.setattr(locate, "protocol_files", lambda *a, **k: pytest.fail("read the scenes"))
+    argv = ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--dry-run", "--no-progress"]
+    err = _refused(capsys, [*argv, "--horizon", "20"])
+    assert err.endswith(
+        "--horizon 20: the real scenes have 21 steps and constant_velocity observes 2 of them, so --source "
+        "real calibrates at most 19 steps for it"
+    )
