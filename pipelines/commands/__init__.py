@@ -66,6 +66,7 @@ def check_writable(
     directory: bool = False,
     inputs: Iterable[Path] = (),
     json_only: bool = False,
+    zoo_own: bool = False,
 ) -> None:
     """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
 
@@ -75,7 +76,9 @@ def check_writable(
     A file output is never one of the command's ``inputs`` (``review RUN.mcap --json RUN.mcap`` replaced the
     recording by its summary), and with ``json_only`` (a ``--json`` report) it replaces only a JSON document:
     a mistyped name must not overwrite a data file, a recording or weights. A file output that is a symbolic
-    link is refused: one planted in a folder would send the output wherever it points.
+    link is refused: one planted in a folder would send the output wherever it points. Nor is an output a
+    zoo's own file (its manifest, calibrations, lock; ``_check_not_zoo_file``), existing or not, unless
+    ``zoo_own``: the command keeps that very file (calibrate's calibrations.json).
     """
     if path is None:
         return
@@ -88,6 +91,8 @@ def check_writable(
     except (OSError, ValueError) as exc:  # a name too long, a NUL byte (a TOML escape), no permission
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise PipelineError(f"{label}: not a usable path ({why})") from None
+    if not zoo_own:
+        _check_not_zoo_file(path, label)
     if not directory and path.is_symlink():
         # a link planted in a folder would make the output land wherever it points (even where nothing is)
         raise PipelineError(
@@ -117,6 +122,41 @@ def check_writable(
         _probe(ancestor)
     except OSError as exc:
         raise PipelineError(f"{label}: cannot create it in {ancestor} ({exc.strerror or exc})") from None
+
+
+def _check_not_zoo_file(path: Path, label: str) -> None:
+    """Refuse ``path`` when it is the user zoo's or the shipped zoo's own file, whether it exists yet or not:
+    a report written there before the zoo made the file (``calibrate --json ZOO/calibrations.json`` on a new
+    zoo) took its place, and every later command that reads the zoo failed on it."""
+    from predictors.errors import PredictorError
+    from predictors.manifest import ZOO_FILES, zoo_file
+    from predictors.zoo import checkpoints_dir, user_zoo_dir
+
+    own = zoo_file(path.name)
+    if own is None:
+        return
+    for zoo_dir in (user_zoo_dir, checkpoints_dir):
+        try:
+            root = zoo_dir()
+        except PredictorError:  # no home directory, no shipped zoo: no such file to protect
+            continue
+        if _same_directory(path.parent, root):
+            raise PipelineError(
+                f"{label}: that is a file of the zoo {root}, its {ZOO_FILES[own]}; name another file"
+            )
+
+
+def _same_directory(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one directory: the same file where both exist (a case-insensitive file
+    system, links), else the same path once resolved (a zoo not made yet)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        pass
+    try:
+        return a.resolve() == b.resolve()
+    except (OSError, RuntimeError):  # a symbolic link loop: not a zoo
+        return False
 
 
 def _check_not_input(path: Path, label: str, inputs: Iterable[Path]) -> None:

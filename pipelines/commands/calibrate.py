@@ -225,7 +225,7 @@ def _check_first(args: argparse.Namespace) -> str | None:
         )
     check_writable(args.json, "--json", json_only=True)
     if not args.dry_run:  # the user zoo's file (never the shipped zoo's): refused now, not after the episodes
-        check_writable(calibrations_path(), "calibrations file")
+        check_writable(calibrations_path(), "calibrations file", zoo_own=True)
         stored_calibrations()  # read as storing will: a file calibrate cannot extend fails now
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "closed-loop":

@@ -23,6 +23,7 @@ from pipelines.experiments.log import EPISODES_FILE
 from pipelines.experiments.worker import SCRATCH_PREFIX, remove_stale_scratch
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode, summarize
+from predictors.manifest import ZOO_FILES
 from tests.predictors.samples import write_walk_file
 from tests.read_only import file_size_limit
 
@@ -183,6 +184,36 @@ def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp
         (tmp_path / name).write_text(text)
         with pytest.raises(PipelineError, match="that is a file crowdmpc keeps"):
             check_writable(tmp_path / name, "--json", json_only=True)
+
+
+@pytest.mark.parametrize(
+    "argv, name",
+    [
+        (
+            ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--json"],
+            "calibrations.json",
+        ),
+        (["evaluate", "--predictor", "constant_velocity", "--json"], "manifest.json"),
+        (["simulate", "--controller", "straight", "--humans", "0", "--json"], "Calibrations.json"),
+    ],
+)
+def test_an_output_is_never_a_zoos_own_file_even_before_the_zoo_made_it(argv, name, capsys):
+    """`calibrate --json ZOO/calibrations.json` on a new zoo stored its blocks, then wrote its report over
+    them, and every conformal command after failed on the file; `evaluate --json ZOO/manifest.json` put a
+    report where the zoo's manifest goes. Only an existing file was looked at."""
+    from predictors.zoo import checkpoints_dir, user_zoo_dir
+
+    zoo = user_zoo_dir()
+    target = zoo / "elsewhere" / ".." / name  # the same file, however it is named
+    assert main([*argv, str(target), "--no-progress"]) == 2
+    line = _one_error_line(capsys, argv[0])
+    assert line.endswith(
+        f"--json {target}: that is a file of the zoo {zoo}, its {ZOO_FILES[name.lower()]}; name another file"
+    )
+    assert list(zoo.iterdir()) == []
+    with pytest.raises(PipelineError, match="that is a file of the zoo"):
+        check_writable(checkpoints_dir() / "manifest.json", "--out")
+    check_writable(zoo / "calibrations.json", "calibrations file", zoo_own=True)  # calibrate's own file
 
 
 def test_a_report_that_cannot_be_written_is_one_line_and_keeps_the_earlier_one(tmp_path):
