@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, humans_list, path_arg, write_output
 from pipelines.errors import PipelineError
@@ -33,6 +33,17 @@ data the calibration did not see: the test scenes
 """
 
 
+CLOSED_LOOP_OPTIONS: Final[tuple[str, ...]] = (
+    "episodes",
+    "humans",
+    "seed",
+    "controller",
+    "profile",
+    "visibility",
+    "near",
+)
+
+
 def _alphas(text: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(",") if v.strip())
@@ -54,9 +65,15 @@ def _alphas(text: str) -> tuple[float, ...]:
     return values
 
 
+def _closed_loop_defaults() -> dict[str, Any]:
+    """The options only closed-loop calibration takes, with the values ClosedLoopPlan gives them."""
+    from pipelines.experiments.calibrate import ClosedLoopPlan
+
+    return {f.name: f.default for f in dataclasses.fields(ClosedLoopPlan) if f.name in CLOSED_LOOP_OPTIONS}
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.profiles import PROFILES, VISIBILITY
-    from pipelines.experiments.calibrate import CALIBRATION_SEED, NEAR
     from predictors.base import SCENE_LENGTH
 
     p = subparsers.add_parser(
@@ -79,13 +96,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f"scenes' {SCENE_LENGTH} less the steps the predictor observes)",
     )
     p.add_argument("--data-dir", type=path_arg, help="raw or prepared data (real; default: $CROWDMPC_DATA)")
-    p.add_argument("--episodes", type=int, default=200, help="closed-loop episodes (default 200)")
-    p.add_argument("--humans", type=humans_list, default=(5, 6, 7, 8, 9), metavar="5,6,7", help="crowd sizes")
-    p.add_argument("--seed", type=int, default=CALIBRATION_SEED, help="first closed-loop seed")
-    p.add_argument("--controller", choices=("cmpc", "dmpc"), default="cmpc")
-    p.add_argument("--profile", choices=sorted(PROFILES), default="paper")
-    p.add_argument("--visibility", choices=VISIBILITY, default="visible")
-    p.add_argument("--near", type=float, default=NEAR, help=f"m, humans scored (default {NEAR})")
+    # closed-loop only: None unless typed, so that _check_sources can refuse one given with --source real
+    default = _closed_loop_defaults()
+    p.add_argument("--episodes", type=int, help=f"closed-loop episodes (default {default['episodes']})")
+    p.add_argument(
+        "--humans",
+        type=humans_list,
+        metavar="5,6,7",
+        help=f"closed-loop crowd sizes (default {','.join(map(str, default['humans']))})",
+    )
+    p.add_argument("--seed", type=int, help=f"first closed-loop seed (default {default['seed']})")
+    p.add_argument(
+        "--controller", choices=("cmpc", "dmpc"), help=f"closed-loop (default {default['controller']})"
+    )
+    p.add_argument("--profile", choices=sorted(PROFILES), help=f"closed-loop (default {default['profile']})")
+    p.add_argument("--visibility", choices=VISIBILITY, help=f"closed-loop (default {default['visibility']})")
+    p.add_argument("--near", type=float, help=f"m, closed-loop humans scored (default {default['near']})")
     p.add_argument("--holdout", action="store_true", help="also measure coverage on held-out data")
     p.add_argument(
         "--holdout-margins",
@@ -206,6 +232,33 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
         )
 
 
+def _check_sources(args: argparse.Namespace, holdout_margins: bool) -> None:
+    """Refuse an option typed for what this run does not do (the other source's, held-out margins without a
+    held-out run): it would be accepted and change nothing."""
+    typed = [f"--{name}" for name in CLOSED_LOOP_OPTIONS if getattr(args, name) is not None]
+    if args.source == "real" and typed:
+        one = len(typed) == 1
+        raise PipelineError(
+            f"{', '.join(typed)} {'is' if one else 'are'} for --source closed-loop (its simulated episodes); "
+            f"--source real measures recorded scenes: leave {'it' if one else 'them'} out"
+        )
+    if args.source == "real" and holdout_margins:
+        raise PipelineError(
+            "--holdout-margins is for --source closed-loop (held-out episodes plan with them); the held-out "
+            "real scenes were recorded, nothing plans in them: leave it out"
+        )
+    if args.source == "closed-loop" and args.data_dir is not None:
+        raise PipelineError(
+            "--data-dir is for --source real (the recorded scenes it reads); --source closed-loop simulates "
+            "its episodes: leave it out"
+        )
+    if holdout_margins and not args.holdout:
+        raise PipelineError(
+            f"--holdout-margins {args.holdout_margins}: the held-out episodes of --holdout plan with these "
+            "margins, and without --holdout none run: add --holdout or leave it out"
+        )
+
+
 def _check_first(args: argparse.Namespace) -> str | None:
     """Refuse now what would otherwise fail after the calibration episodes; returns the sha256 of the
     predictor's weights (None for a weightless one)."""
@@ -214,15 +267,14 @@ def _check_first(args: argparse.Namespace) -> str | None:
     from predictors.registry import checkpoint_sha256
 
     holdout_margins = parse_margins(args.holdout_margins)  # a typo fails now
+    _check_sources(args, holdout_margins != MarginSpec())
+    for name, value in _closed_loop_defaults().items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     if not 1 <= args.horizon <= 50:
         raise PipelineError(f"--horizon must be in 1..50 steps, got {args.horizon}")
     if not 1 <= args.episodes <= 100_000:
         raise PipelineError(f"--episodes must be in 1..100000, got {args.episodes}")
-    if args.source == "real" and holdout_margins != MarginSpec():
-        raise PipelineError(
-            "--holdout-margins is for --source closed-loop (held-out episodes plan with them); the held-out "
-            "real scenes were recorded, nothing plans in them: leave it out"
-        )
     check_writable(args.json, "--json", json_only=True)
     if not args.dry_run:  # the user zoo's file (never the shipped zoo's): refused now, not after the episodes
         check_writable(calibrations_path(), "calibrations file", zoo_own=True)

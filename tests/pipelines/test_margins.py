@@ -450,3 +450,45 @@ def test_real_calibration_refuses_a_horizon_longer_than_the_scenes_before_readin
         "--horizon 20: the real scenes have 21 steps and constant_velocity observes 2 of them, so --source "
         "real calibrates at most 19 steps for it"
     )
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["--source", "real", "--near", "-1", "--episodes", "3", "--controller", "dmpc"],
+            "--episodes, --controller, --near are for --source closed-loop (its simulated episodes); "
+            "--source real measures recorded scenes: leave them out",
+        ),
+        (
+            ["--source", "real", "--seed", "1000000"],
+            "--seed is for --source closed-loop",
+        ),  # the default, typed
+        (["--source", "closed-loop", "--data-dir", "/nonexistent"], "--data-dir is for --source real"),
+        (
+            ["--source", "closed-loop", "--holdout-margins", "fixed:1,1,1,1"],
+            "--holdout-margins fixed:1,1,1,1: the held-out episodes of --holdout plan with these margins, "
+            "and without --holdout none run: add --holdout or leave it out",
+        ),
+    ],
+    ids=["real-closed-loop-options", "real-default-seed", "closed-loop-data-dir", "margins-without-holdout"],
+)
+def test_calibrate_refuses_options_that_would_change_nothing(argv, message, monkeypatch, capsys):
+    """Closed-loop options (even invalid: --near -1) with --source real, --data-dir with closed-loop, and
+    --holdout-margins without --holdout were accepted and ignored: the margins those of a plain run."""
+    import pipelines.commands.calibrate as command
+
+    plans = _episodes(monkeypatch)
+    monkeypatch.setattr(command, "_real", lambda *a: pytest.fail("read the scenes"))
+    base = ["calibrate", "--predictor", "constant_velocity", "--no-progress", "--dry-run"]
+    assert message in _refused(capsys, [*base, *argv]) and plans == []
+
+
+def test_calibrate_fills_the_closed_loop_defaults_it_was_not_given(monkeypatch):
+    """The closed-loop options are None in the parser (to tell a typed one): a run gets ClosedLoopPlan's."""
+    from pipelines.cli import main
+    from pipelines.experiments.calibrate import ClosedLoopPlan
+
+    plans = _episodes(monkeypatch)
+    assert main([*CALIBRATE, "--dry-run", "--holdout-margins", "none"]) == 0
+    assert plans == [ClosedLoopPlan("constant_velocity")]
