@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
+from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.commands import check_writable, humans_list, path_arg, write_output
+from pipelines.commands import check_writable, humans_list, path_arg, replace_file, write_output
 from pipelines.errors import PipelineError
+from predictors.errors import PredictorError
 
 if TYPE_CHECKING:
     from pipelines.loop.margins import MarginSpec
@@ -289,9 +293,6 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
     """The horizon the controller predicts, and the held-out margins resolve (from a block stored already,
     or one this run stores), as the held-out episodes' controller will resolve them."""
     from pipelines.experiments.calibrate import plan_horizon
-    from pipelines.loop.margins import CALIBRATED_MODES
-    from predictors.calibration import same_alpha
-    from predictors.errors import PredictorError
 
     horizon = plan_horizon(_plan(args))
     if args.horizon != horizon:
@@ -301,13 +302,7 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
             f"{horizon}, or calibrate real scenes at {args.horizon} steps: --source real "
             f"--horizon {args.horizon}"
         )
-    stored_here = (
-        not args.dry_run
-        and holdout_margins.mode in CALIBRATED_MODES
-        and holdout_margins.source == "closed-loop"
-        and any(same_alpha(holdout_margins.alpha, a) for a in args.alpha)
-    )
-    if not args.holdout or stored_here:
+    if not args.holdout or _plans_with_new_blocks(args, holdout_margins):
         return
     try:
         holdout_margins.resolve(args.predictor, horizon, sha256)
@@ -316,10 +311,76 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
         raise PipelineError(f"--holdout-margins {args.holdout_margins}: {exc}") from None
 
 
+def _plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec) -> bool:
+    """Whether the held-out episodes plan with margins of a block this run stores (--holdout-margins
+    conformal:A with A one of --alpha), which must then be stored before them."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+    from predictors.calibration import same_alpha
+
+    return (
+        not args.dry_run
+        and args.holdout
+        and args.source == "closed-loop"
+        and holdout_margins.mode in CALIBRATED_MODES
+        and holdout_margins.source == "closed-loop"
+        and any(same_alpha(holdout_margins.alpha, a) for a in args.alpha)
+    )
+
+
+@contextlib.contextmanager
+def _storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
+    """Store ``blocks`` (not with --dry-run) once the held-out run inside has finished: an interrupted or
+    failed command leaves the user's calibrations as they were. When the held-out episodes plan with these
+    blocks they are stored first, and the calibrations file as it was is put back if the run stops."""
+    from pipelines.loop.margins import parse_margins
+    from predictors.calibration import calibrations_path
+
+    if args.dry_run:
+        yield
+        return
+    _check_keeps_class_margins(blocks, args)
+    if not _plans_with_new_blocks(args, parse_margins(args.holdout_margins)):
+        yield
+        _store(blocks)
+        return
+    path = calibrations_path()
+    before = path.read_bytes() if path.exists() else None
+    _store(blocks)
+    try:
+        yield
+    except BaseException:  # Ctrl-C too
+        _put_back(path, before)
+        raise
+
+
+def _store(blocks: list) -> None:
+    from predictors.calibration import save_calibration
+
+    for block in blocks:
+        path = save_calibration(block)
+    print(f"wrote {len(blocks)} block(s) to {path}")
+
+
+def _put_back(path: Path, before: bytes | None) -> None:
+    """``path`` as it was (``before``; None: there was none), under the zoo's lock as calibrate writes it."""
+    from predictors.manifest import zoo_lock
+
+    try:
+        with zoo_lock(path.parent):
+            if before is None:
+                path.unlink(missing_ok=True)
+            else:
+                replace_file(path, lambda name: Path(name).write_bytes(before))
+    except (OSError, PredictorError) as exc:
+        raise PipelineError(
+            f"{path}: the held-out run stopped and its earlier content could not be put back ({exc})"
+        ) from None
+    print(f"the held-out run did not finish: {path} is as it was before this run")
+
+
 def run(args: argparse.Namespace) -> int:
     from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
     from pipelines.plain_json import plain
-    from predictors.calibration import save_calibration
     from predictors.conformal import coverage
     from predictors.registry import load_predictor
 
@@ -334,14 +395,10 @@ def run(args: argparse.Namespace) -> int:
         blocks, holdout = _real(args, load_predictor(args.predictor), sha256)
     else:
         blocks, holdout = _closed_loop(args, sha256), None
-    if not args.dry_run:  # stored before a held-out run, which may plan with these very margins
-        _check_keeps_class_margins(blocks, args)
-        for block in blocks:
-            path = save_calibration(block)
-        print(f"wrote {len(blocks)} block(s) to {path}")
     holdout_classes = holdout_shortfall = None
-    if args.holdout and args.source == "closed-loop":
-        holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args)
+    with _storing(blocks, args):
+        if args.holdout and args.source == "closed-loop":
+            holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args)
     cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None
     n = ", ".join(str(c) for c in blocks[0].n)
     print(f"{args.predictor}: {args.source} calibration, samples per step {n}")

@@ -492,3 +492,38 @@ def test_calibrate_fills_the_closed_loop_defaults_it_was_not_given(monkeypatch):
     plans = _episodes(monkeypatch)
     assert main([*CALIBRATE, "--dry-run", "--holdout-margins", "none"]) == 0
     assert plans == [ClosedLoopPlan("constant_velocity")]
+
+
+@pytest.mark.parametrize("held", ["none", "conformal:0.3"], ids=["stored-after", "stored-first-put-back"])
+def test_an_interrupted_held_out_run_leaves_the_calibrations_as_they_were(
+    held, tmp_path, monkeypatch, capsys
+):
+    """The blocks were stored before the held-out episodes: Ctrl-C during them (rc 130) had already replaced
+    the user's earlier block. They are stored after them, or, when the held-out episodes plan with them,
+    before them and the earlier file is put back."""
+    from pipelines.cli import main
+    from pipelines.experiments import calibrate as experiment
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    path = tmp_path / "calibrations.json"
+    _episodes(monkeypatch)
+    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0
+    earlier = path.read_bytes()
+    calibrate = experiment.closed_loop_errors
+    during = []
+
+    def interrupted(plan, progress=True):
+        if plan.seed == 7 + 200:  # the held-out episodes, after the calibration's
+            during.append(path.read_bytes())
+            raise KeyboardInterrupt
+        return calibrate(plan, progress)
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", interrupted)
+    argv = [*CALIBRATE, "--alpha", "0.3", "--seed", "7", "--holdout"]  # other seeds: another block
+    assert main([*argv, "--holdout-margins", held]) == 130
+    assert path.read_bytes() == earlier
+    assert (during[0] != earlier) == (held != "none")  # planned with the new block, so stored first
+    if held != "none":
+        assert (
+            f"the held-out run did not finish: {path} is as it was before this run" in capsys.readouterr().out
+        )
