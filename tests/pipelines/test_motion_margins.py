@@ -156,7 +156,7 @@ def test_calibrate_does_not_store_a_block_without_class_margins_over_one_with_th
     per motion class, and conformal-shortfall, which safe_crossing.toml plans with, then refused the
     predictor. Such a block is no longer stored over one that has them; a block that has them, or one that
     replaces a block without them, is."""
-    from pipelines.commands.calibrate import _check_keeps_class_margins
+    from pipelines.commands.calibrate_store import _check_keeps_class_margins
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     errors, motion = class_errors(4)
