@@ -45,6 +45,7 @@ import os
 import platform
 import re
 import secrets
+import shlex
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -261,7 +262,8 @@ def _compile_nlpsol(
     # while it compiles (inside); the object file and library go to jit_options' directory.
     jit_name = f"crowdmpc_jit_{tag}"
     source = folder / f"{jit_name}.c"
-    interrupted = folder / f".tmp-{key}.{tag}.interrupted"
+    # resolved: the shell runs inside the folder, where a relative $CROWDMPC_CACHE names another place
+    interrupted = folder.resolve() / f".tmp-{key}.{tag}.interrupted"
     command = interruptible(cc.path, interrupted)
     jit = {
         "jit": True,
@@ -288,10 +290,11 @@ def _compile_nlpsol(
         with inside(folder):
             try:
                 solver = ca.nlpsol(name, plugin, dict(nlp), dict(options) | jit)
-            except RuntimeError:
+            except RuntimeError as exc:
                 if interrupted.exists():  # Ctrl-C, not a failed compile: see compiler.interruptible
                     raise KeyboardInterrupt from None
-                raise
+                # CasADi's "Tried <command>" names gcc, as the user would run it, not our shell around it
+                raise RuntimeError(str(exc).replace(command, shlex.quote(cc.path))) from None
         solver.save(str(tmp))
         del solver
         record.write_text(entry_record(tmp, folder / f"{library}.so"))

@@ -300,9 +300,13 @@ def test_a_failed_compile_is_a_compile_cache_error(cache, monkeypatch, tmp_path)
     failing.chmod(0o755)
     broken = compile_cache.Compiler(str(failing), "x", ("-O2",))
     monkeypatch.setattr(compile_cache, "compiler", lambda: broken)
-    with pytest.raises(compile_cache.CompileCacheError, match=r"compiling the solver 's' into .* failed: "):
+    with pytest.raises(
+        compile_cache.CompileCacheError, match=r"compiling the solver 's' into .* failed: "
+    ) as e:
         compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     assert suffixes(cache) == []  # nothing but the lock left
+    # the compile CasADi tried, as the user would type it: not the shell that watches for Ctrl-C around it
+    assert f'Tried "{failing} -O2 ' in str(e.value) and "trap" not in str(e.value)
 
 
 def fake_compiler(tmp_path: Path, body: str) -> compile_cache.Compiler:
@@ -320,6 +324,19 @@ def test_a_compiler_stopped_by_sigint_is_an_interrupt_not_a_failed_compile(
     with pytest.raises(KeyboardInterrupt):
         compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     assert suffixes(cache) == []  # the marker gone with the other temporaries
+
+
+def test_ctrl_c_in_a_relative_cache_directory_is_an_interrupt(
+    cache, monkeypatch, tmp_path, sigint_as_at_a_terminal
+):
+    """The marker was named relative to the working directory the compile leaves for the cache folder: with
+    $CROWDMPC_CACHE relative, the shell could not write it and the Ctrl-C was a failed compile again."""
+    stopped = fake_compiler(tmp_path, "kill -INT $$")
+    monkeypatch.setattr(compile_cache, "compiler", lambda: stopped)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(KeyboardInterrupt):
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT, directory="relative_cache")
+    assert [p.suffix for p in (tmp_path / "relative_cache").iterdir()] == [".lock"]
 
 
 INTERRUPTED = """
