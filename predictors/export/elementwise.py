@@ -103,9 +103,16 @@ def unary(op: Callable[[Any], Any]) -> Callable[..., SymTensor]:
     return apply
 
 
+# torch's 1 / (1 + exp(-x)) overflows exp(-x) to inf below x = -709.78: the value is still right (0), its
+# derivative 0 * inf is NaN (torch's is 0). With x held at -709 below that, the sigmoid there is 1.2e-308
+# (torch: 0 to 1.2e-308) and its derivative 0 (torch: at most 1.2e-308). The bound goes on the argument, not
+# an if_else on the result: CasADi still rewrites t * (1 / u) as t / u, so the twins keep their values to the
+# bit.
+_SIGMOID_FLOOR = -709.0
+
+
 def sigmoid(m):
-    # exp(-x) overflows to inf for x << 0, and 1 / (1 + inf) is the correct limit 0.
-    return 1 / (1 + ca.exp(-m))
+    return 1 / (1 + ca.exp(-ca.if_else(m > _SIGMOID_FLOOR, m, _SIGMOID_FLOOR, False)))
 
 
 def gelu(x, approximate="none"):

@@ -268,6 +268,16 @@ OPERATIONS = {
         lambda m, x: x.sum(dim=[]) + 2 * x.mean(dim=(), keepdim=True) + 3 * torch.sum(x, []),
         (randn(2, 3, 4),),
     ),
+    # inputs below -709.8, where exp(-x) is inf: 1 / (1 + exp(-x)) had the right value and a NaN derivative
+    "sigmoid_tails": (
+        lambda m, x: torch.sigmoid(x) + 2 * F.silu(x),
+        (torch.tensor([[-800.0, -709.9, -700.0, -1.0], [0.0, 1.0, 700.0, 800.0]], dtype=torch.float64),),
+    ),
+    "saturated_cells": (
+        lambda m, x, h: m.lstm(x, (h, h))[0] + m.lstm(x, (h, h))[1] + m.gru(x, h),
+        (1e4 * randn(4, 3), randn(4, 5)),
+        {"lstm": nn.LSTMCell(3, 5), "gru": nn.GRUCell(3, 5)},
+    ),
     "lstm_cell": (
         lambda m, x, h, c: m.cell(x, (h, c))[0] + m.cell(x, (h, c))[1],
         (randn(4, 3), randn(4, 5), randn(4, 5)),
