@@ -48,7 +48,24 @@ def binary(op: Callable[[Any, Any], Any], a: Any, b: Any, *, is_bool: bool = Fal
     return SymTensor(op(operand(x, shape), operand(y, shape)), shape, is_bool)
 
 
+def _is_mask(value: Any) -> bool:
+    """Whether torch holds ``value`` as bool: a mask, a bool tensor or a Python bool."""
+    if isinstance(value, SymTensor):
+        return value.is_bool
+    if isinstance(value, torch.Tensor):
+        return value.dtype == torch.bool
+    return isinstance(value, (bool, np.bool_))
+
+
+def _mask_op(op: Callable[[Any, Any], Any], a: Any, b: Any) -> SymTensor:
+    return binary(lambda p, q: op(p != 0, q != 0), a, b, is_bool=True)
+
+
 def add(a, b, *, alpha=1):
+    if _is_mask(a) and _is_mask(b):  # torch's sum of two masks is a mask, their or: never 2
+        if alpha != 1:
+            raise ExportError(f"sum of two bool tensors with alpha={alpha!r}", current_module())
+        return _mask_op(ca.logic_or, a, b)
     if alpha != 1:
         b = mul(b, alpha)
     for sym, other in ((a, b), (b, a)):  # x + 0: no node (masks of ones and zeros are common)
@@ -59,10 +76,17 @@ def add(a, b, *, alpha=1):
 
 
 def sub(a, b, *, alpha=1):
+    if _is_mask(a) or _is_mask(b):  # torch raises here: a numeric difference would export code torch refuses
+        raise ExportError(
+            "subtraction with a bool tensor (torch refuses it: invert a mask with ~, compare two with ^)",
+            current_module(),
+        )
     return add(a, mul(b, -alpha) if isinstance(b, SymTensor) else -alpha * constant(b))
 
 
 def mul(a, b):
+    if _is_mask(a) and _is_mask(b):  # torch's product of two masks is a mask, their and
+        return _mask_op(ca.logic_and, a, b)
     for sym, other in ((a, b), (b, a)):  # x * 1: no node
         if isinstance(sym, SymTensor) and _is_constant(other, 1.0):
             if tuple(np.broadcast_shapes(sym.shape_, tuple(np.shape(constant(other))))) == sym.shape_:

@@ -190,6 +190,23 @@ OPERATIONS = {
         ),
         (randn(2, 3, 2), torch.rand(2, 3) > 0.5),
     ),
+    # torch's sum of two masks is their or and their product their and, both masks (a sum was 2 where both
+    # hold); with a number the result is numeric
+    "mask_arithmetic": (
+        lambda m, x, k, j: (
+            x * (k + j).to(x.dtype)
+            + 2 * x * (k * j).to(x.dtype)
+            + 4 * x * (k * j + k + (x > 0)).to(x.dtype)
+            + 8 * x * (k + True).to(x.dtype)
+            + 16 * x * torch.add(j, k).to(x.dtype)
+            + 32 * x * (k + 1).to(x.dtype)
+        ),
+        (
+            randn(2, 4),
+            torch.tensor([[True, True, False, False]] * 2),
+            torch.tensor([[True, False, True, False]] * 2),
+        ),
+    ),
     "layer_norm": (lambda m, x: m.norm(x), (randn(2, 3, 6),), {"norm": nn.LayerNorm(6)}),
     "attention": (
         lambda m, q, k, v, a: F.scaled_dot_product_attention(q, k, v, attn_mask=a),
@@ -330,6 +347,27 @@ def test_operations_without_a_smooth_casadi_form_are_refused(fn, message):
     """Rounding has no derivative for the solver: refused, never exported as plain division or a no-op."""
     with pytest.raises(ExportError, match=message):
         export(fn, (3, 4))
+
+
+@pytest.mark.parametrize(
+    "fn",
+    [
+        lambda m, x, k: x * (k - k),
+        lambda m, x, k: x * (1 - k),
+        lambda m, x, k: x - k,
+        lambda m, x, k: k.sub(x),
+    ],
+    ids=["mask_minus_mask", "one_minus_mask", "float_minus_mask", "sub_method"],
+)
+def test_subtracting_a_mask_is_refused_as_torch_refuses_it(fn):
+    """torch raises on any subtraction with a bool tensor; the exporter subtracted 0/1 values."""
+    module = Wrap(fn).double()
+    specs = [TensorSpec("x", (3,)), TensorSpec("k", (3,), True)]
+    with pytest.raises(ExportError, match=r"subtraction with a bool tensor .*module 'Wrap'") as info:
+        export_function(module, module.forward, specs, ["y"], "f")
+    assert "\n" not in str(info.value)
+    with pytest.raises(RuntimeError, match="Subtraction"):
+        fn(None, randn(3), torch.tensor([True, False, True]))
 
 
 def test_unsupported_operation_names_the_op_and_the_module():
