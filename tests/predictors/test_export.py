@@ -477,7 +477,7 @@ class LowerTriangular:
     Jacobian is not symmetric and a transposed one shows); the CasADi function predicts the same plus
     ``value_offset`` on its first output only (the check takes the worst output, not a mean) and ``slope``
     x (plan - the checked plan), so that its values and its Jacobian differ from torch's by exactly those
-    numbers."""
+    numbers. Its context is the plan of the scene checked (each scene has its own)."""
 
     name = "lower_triangular"
     obs_len = 3
@@ -486,25 +486,56 @@ class LowerTriangular:
         self.value_offset, self.slope = value_offset, slope
 
     def to_casadi(self, n_humans, n_robots, horizon):
-        from predictors.export.parity import crossing_scene
-
+        self.horizon = horizon
         size = horizon * n_robots * 2
-        at = crossing_scene(n_humans, n_robots, horizon, self.obs_len)[3].ravel()
         self.matrix = np.tril(np.arange(1.0, size * size + 1).reshape(size, size))
-        context, plan = ca.MX.sym("context", 1), ca.MX.sym("plan", size)
+        context, plan = ca.MX.sym("context", size), ca.MX.sym("plan", size)
         first = np.eye(size)[0]
         out = (
             ca.mtimes(ca.DM(self.matrix), plan)
             + self.value_offset * ca.DM(first)
-            + self.slope * (plan - ca.DM(at))
+            + self.slope * (plan - context)
+            + self.casadi_extra(plan)
         )
         return ca.Function("f", [context, plan], [out])
 
     def encode(self, history, mask, humans):
-        return np.zeros(1)
+        from predictors.export.parity import crossing_scene, scattered_scene
+
+        n_humans, n_robots = len(humans), history.shape[1] - len(humans)
+        for scene in (crossing_scene, scattered_scene):
+            scene_history, _, _, plan = scene(n_humans, n_robots, self.horizon, self.obs_len)
+            if np.array_equal(scene_history, history):
+                return plan.ravel()
+        raise AssertionError("not a scene of the parity check")
 
     def rollout_tensor(self, history, mask, robots_future, humans):
-        return torch.from_numpy(self.matrix) @ robots_future.reshape(-1)
+        plan = robots_future.reshape(-1)
+        return torch.from_numpy(self.matrix) @ plan + self.torch_extra(plan, mask)
+
+    def casadi_extra(self, plan):
+        return 0
+
+    def torch_extra(self, plan, mask):
+        return 0
+
+
+class GapBlind(LowerTriangular):
+    """Its CasADi function misses a term that torch has for each gap in the history."""
+
+    def torch_extra(self, plan, mask):
+        return 1e-3 * float((~np.asarray(mask)).sum())
+
+
+class OverflowingGate(LowerTriangular):
+    """A gate sigmoid(-plan^2) of every plan entry, in CasADi as 1 / (1 + exp(plan^2)): the same values, and
+    a NaN derivative (0 * inf) once plan^2 passes exp's range, 709.8, a robot beyond 26.6 m of the origin."""
+
+    def casadi_extra(self, plan):
+        return 1 / (1 + ca.exp(plan**2))
+
+    def torch_extra(self, plan, mask):
+        return torch.sigmoid(-(plan**2))
 
 
 def test_the_parity_check_measures_values_and_jacobians_apart():
@@ -544,6 +575,41 @@ def test_the_parity_scene_is_a_crowd_with_robots_moving_on():
     step = future[1] - future[0]  # one step of each robot's constant velocity
     np.testing.assert_allclose(future[0] - history[-1, 3:], step, atol=1e-12)
     assert np.abs(step).min() > 0  # they move
+
+
+def test_the_second_parity_scene_is_scattered_with_gaps_in_the_history():
+    """Agents tens of metres apart, humans seen late or gone for the last two steps (and one in the middle),
+    robots always seen, and the plan still one step after the last observed position."""
+    from predictors.export.parity import crossing_scene, scattered_scene
+
+    history, mask, humans, future = scattered_scene(3, 2, 4, obs_len=9, seed=1)
+    near = crossing_scene(3, 2, 4, obs_len=9, seed=1)
+    assert history.shape == (9, 5, 2) and future.shape == (4, 2, 2) and humans.tolist() == [0, 1, 2]
+    assert mask[:, 0].tolist() == mask[:, 2].tolist() == [False] * 4 + [True] * 5
+    assert mask[:, 1].tolist() == [True] * 3 + [False] + [True] * 3 + [False] * 2
+    assert mask[:, 3:].all()
+    gaps = np.linalg.norm(history[:, :, None] - history[:, None], axis=-1)[:, ~np.eye(5, dtype=bool)]
+    assert gaps.min() > 15.0
+    np.testing.assert_allclose(future[1] - future[0], near[3][1] - near[3][0], atol=1e-12)
+    np.testing.assert_allclose(future[0] - history[-1, 3:], future[1] - future[0], atol=1e-12)
+    for length in range(1, 10):  # every human is seen at least once, whatever the history's length
+        assert scattered_scene(3, 2, 4, obs_len=length)[1].any(axis=0).all()
+
+
+@pytest.mark.parametrize(
+    ("standin", "value_error", "jacobian_error"),
+    [(GapBlind, 3e-3, 0.0), (OverflowingGate, 0.0, float("nan"))],  # 3 gaps: 1 + 2 in 3 steps
+    ids=["gap_blind", "overflowing_gate"],
+)
+def test_the_parity_check_sees_what_only_gaps_or_distance_show(standin, value_error, jacobian_error):
+    """A twin that ignores the history's gaps, or whose derivative overflows with agents far apart, passed a
+    check whose only scene had every agent seen at every step, all within a few metres."""
+    from predictors.export.parity import check_parity
+
+    parity = check_parity(standin(), 2, 1, 3)
+    assert not parity.ok()
+    assert parity.value_error == pytest.approx(value_error, abs=1e-9)
+    np.testing.assert_allclose(parity.jacobian_error, jacobian_error, atol=1e-9)
 
 
 def test_a_nan_error_fails_the_parity_check_whichever_it_is():
