@@ -216,6 +216,8 @@ def gather_like(x: SymTensor, index: np.ndarray, is_bool: bool | None = None) ->
         return x
     in_cols = rows_cols(x.shape_)[1]
     rows, cols = rows_cols(shape)
+    if not index.size:  # an empty slice (x[..., :0]): nothing to gather, and no first row or column to read
+        return SymTensor(type(x.m)(rows, cols), shape, is_bool)
     grid = index.reshape(rows, cols)
     row_of, col_of = np.divmod(grid, in_cols)
     if (row_of == row_of[:, :1]).all() and (col_of == col_of[:1, :]).all():

@@ -3,6 +3,8 @@ MX, and the exported Social-LSTM against the hand-written twin kept as an indepe
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from predictors.export import ExportError, TensorSpec, export_function
+from predictors.learned import LearnedPredictor
 from predictors.nets.pooling import GridPooling
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
 from predictors.social_lstm_predictors import SocialLSTMPredictor
@@ -171,6 +174,17 @@ OPERATIONS = {
         lambda m, x, y: torch.cat([torch.stack([x, y], dim=1), torch.stack([y, x], dim=1)], dim=0).sum(-1),
         (randn(3, 2), randn(3, 2)),
     ),
+    # empty slices (a window of one step drops its whole past: window[..., 2:] of 2 columns), with cat along
+    # the columns, the rows and a middle dim
+    "empty_slices": (
+        lambda m, x: (
+            torch.cat([x[..., 2:], x], -1)
+            + 2 * torch.cat([x[:0], x], 0)
+            + 3 * torch.cat([x, x[:, 3:]], 1)
+            + 4 * x[..., :0].sum(-1, keepdim=True)
+        ),
+        (randn(2, 3, 2),),
+    ),
     "cat_middle": (lambda m, x, y: torch.cat([x, y], dim=1), (randn(2, 3, 2), randn(2, 1, 2))),
     "slice_index": (lambda m, x: x[:, 1:3, ::2] * x[0, -1, 0] + x[:, :2, None, 1], (randn(2, 4, 4),)),
     "shape_ops": (
@@ -316,7 +330,9 @@ def test_operation_matches_torch_in_values_and_jacobians(name):
     check(Wrap(fn, **(modules[0] if modules else {})), *inputs)
 
 
-@pytest.mark.parametrize("name", ["arithmetic", "linear", "lstm_cell", "soft_grid_pooling", "attention"])
+@pytest.mark.parametrize(
+    "name", ["arithmetic", "linear", "lstm_cell", "soft_grid_pooling", "attention", "empty_slices"]
+)
 def test_sx_export_and_mx_function_called_with_sx(name):
     torch.manual_seed(0)
     fn, inputs, *modules = OPERATIONS[name]
@@ -470,6 +486,18 @@ def test_exported_social_lstm_equals_the_hand_written_twin(pooling):
     x = ca.MX.sym("x", plan.size)
     jac = [ca.Function("j", [x], [ca.jacobian(f(context, x), x)])(plan) for f in (exported, reference)]
     np.testing.assert_allclose(np.asarray(jac[0]), np.asarray(jac[1]), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("window", [1, 16])
+def test_the_guides_example_exports_at_both_ends_of_its_window(window, monkeypatch):
+    """docs/examples/window_mlp.py documents windows 1..16; with 1 its step drops the whole past window (an
+    empty slice), which could not be exported. ``to_casadi`` checks parity with torch itself."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "docs" / "examples"))
+    from window_mlp import WindowMLP, WindowMLPConfig
+
+    torch.manual_seed(0)
+    predictor = LearnedPredictor(WindowMLP(WindowMLPConfig(window=window)), name=f"window_mlp_{window}")
+    assert predictor.to_casadi(2, 1, 3).n_in() == 2
 
 
 class LowerTriangular:
