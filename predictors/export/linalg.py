@@ -128,6 +128,8 @@ def linear(x, weight, bias=None):
 
 def matmul(a, b):
     x, y = lift(a), lift(b)
+    if x.ndim == 1 and y.ndim == 1:  # a dot product, 0-d as in torch
+        return reshape(matmul(unsqueeze(x, 0), unsqueeze(y, -1)), ())
     if x.ndim == 1:
         return squeeze(matmul(unsqueeze(x, 0), y), -2)
     if y.ndim == 1:

@@ -22,6 +22,13 @@ from predictors.export.symbolic import (
 
 
 def normal_dim(dim: int, ndim: int) -> int:
+    """``dim`` of a tensor of ``ndim`` dims counted from the front; out of torch's range (a 0-d tensor takes
+    -1 and 0) torch's IndexError, where a wrong dim was otherwise taken as no dim or another one."""
+    bound = max(ndim, 1)
+    if not -bound <= dim < bound:
+        raise IndexError(
+            f"Dimension out of range (expected to be in range of [{-bound}, {bound - 1}], but got {dim})"
+        )
     return dim + ndim if dim < 0 else dim
 
 

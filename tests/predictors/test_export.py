@@ -169,6 +169,11 @@ OPERATIONS = {
     ),
     "linear": (lambda m, x: m.lin(x), (randn(2, 3, 5),), {"lin": nn.Linear(5, 4)}),
     "matmul_batched": (lambda m, x, y: x @ y, (randn(2, 3, 4), randn(2, 4, 5))),
+    # a dot product is 0-d (it was (1,), and cat with a vector failed); a vector times a matrix either side
+    "matmul_vectors": (
+        lambda m, x, y, w: torch.cat([(x @ y).unsqueeze(0), x, x @ w, 2 * torch.matmul(w, y)]) + (x @ y),
+        (randn(3), randn(3), randn(3, 3)),
+    ),
     "matmul_2d": (lambda m, x, y: torch.matmul(x, y), (randn(2, 3, 4), randn(4, 2))),
     "cat_stack": (
         lambda m, x, y: torch.cat([torch.stack([x, y], dim=1), torch.stack([y, x], dim=1)], dim=0).sum(-1),
@@ -419,8 +424,14 @@ def test_softmax_of_a_row_of_only_minus_inf_stays_nan_as_in_torch():
             r"TypeError while tracing \(len\(\) of a 0-d tensor\)",
         ),
         (lambda m, x: x[:, 7], r"IndexError while tracing .*module 'Wrap'"),
+        # a dim out of range was taken as no dim (squeeze) or another one
+        (
+            lambda m, x: x[0].squeeze(-2),
+            r"IndexError while tracing \(Dimension out of range .*\[-1, 0\], but got -2",
+        ),
+        (lambda m, x: x.sum(2), r"IndexError while tracing \(Dimension out of range .*\[-2, 1\], but got 2"),
     ],
-    ids=["einsum_diagonal", "tensor_of_symbols", "index_out_of_range"],
+    ids=["einsum_diagonal", "tensor_of_symbols", "index_out_of_range", "squeeze_dim", "sum_dim"],
 )
 def test_torch_code_that_fails_on_symbols_is_an_export_error(fn, message):
     """Torch code that raised while traced (numpy's, torch's own) escaped as a traceback; an einsum diagonal
