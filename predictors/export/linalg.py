@@ -93,7 +93,7 @@ def log_softmax_rows(m):
 def _along(rows_fn, x, dim) -> SymTensor:
     """``rows_fn`` (a map of every row of a matrix) applied along ``dim`` of ``x``."""
     x = as_float(lift(x))
-    dim = normal_dim(x.ndim - 1 if dim is None else dim, x.ndim)
+    dim = normal_dim(dim, x.ndim)
     if dim == x.ndim - 1:
         return SymTensor(rows_fn(x.m), x.shape_)
     order = [d for d in range(x.ndim) if d != dim] + [dim]
@@ -102,12 +102,21 @@ def _along(rows_fn, x, dim) -> SymTensor:
     return permute(SymTensor(rows_fn(moved.m), moved.shape_), tuple(inverse))
 
 
+def _given(dim, name: str) -> int:
+    if dim is None:  # torch's implicit dim (dim 0 of a 0-, 1- or 3-D input), deprecated, is not the last one
+        raise ExportError(
+            f"{name} without dim (torch's deprecated implicit choice, dim 0 of a 1- or 3-D input): pass dim",
+            current_module(),
+        )
+    return dim
+
+
 def softmax(x, dim=None, _stacklevel=3, dtype=None):
-    return _along(softmax_rows, x, dim)
+    return _along(softmax_rows, x, _given(dim, "softmax"))
 
 
 def log_softmax(x, dim=None, _stacklevel=3, dtype=None):
-    return _along(log_softmax_rows, x, dim)
+    return _along(log_softmax_rows, x, _given(dim, "log_softmax"))
 
 
 # ------------------------------------------------------------------------------------------- linear algebra

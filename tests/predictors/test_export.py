@@ -474,6 +474,15 @@ def test_in_place_write_and_value_reads_are_refused():
         export(lambda m, x: m.mha(x, x, x)[0], (1, 3, 4), mha=attention)
 
 
+@pytest.mark.parametrize("fn", [F.softmax, F.log_softmax])
+def test_softmax_without_dim_is_refused(fn):
+    """torch's implicit dim is 0 for a 1- or 3-D input; the exporter took the last one."""
+    with pytest.raises(ExportError, match=rf"{fn.__name__} without dim .*: pass dim") as info:
+        export(lambda m, x: fn(x), (2, 3, 4))
+    assert "\n" not in str(info.value)
+    assert export(lambda m, x: fn(x, dim=0), (2, 3, 4)) is not None
+
+
 @pytest.mark.parametrize("pooling", ["grid", "soft", "none"])
 def test_exported_social_lstm_equals_the_hand_written_twin(pooling):
     """The independent cross-check: two derivations of the same map agree to rounding."""
