@@ -36,6 +36,17 @@ def rows_cols(shape: tuple[int, ...]) -> tuple[int, int]:
     return math.prod(shape[:-1]), shape[-1]
 
 
+def _in_place(operator: str) -> Callable[..., Any]:
+    def refuse(self, other):
+        raise ExportError(
+            f"in-place arithmetic x {operator} v: torch changes x and every view of it, which an exported "
+            f"function cannot: write x = x {operator[:-1]} v",
+            current_module(),
+        )
+
+    return refuse
+
+
 class SymTensor:
     """A symbolic tensor: ``m`` is the CasADi (SX or MX) 2-D row-major view of a tensor of ``shape``."""
 
@@ -148,6 +159,22 @@ class SymTensor:
             "in-place write x[...] = v: build the tensor with torch.cat, torch.stack or torch.where instead",
             current_module(),
         )
+
+    # torch's x += v changes x itself, and so every view of it and every name bound to it; without these
+    # Python would rebind x alone to x + v, a different graph from torch's
+    __iadd__ = _in_place("+=")
+    __isub__ = _in_place("-=")
+    __imul__ = _in_place("*=")
+    __itruediv__ = _in_place("/=")
+    __ifloordiv__ = _in_place("//=")
+    __imod__ = _in_place("%=")
+    __ipow__ = _in_place("**=")
+    __imatmul__ = _in_place("@=")
+    __iand__ = _in_place("&=")
+    __ior__ = _in_place("|=")
+    __ixor__ = _in_place("^=")
+    __ilshift__ = _in_place("<<=")
+    __irshift__ = _in_place(">>=")
 
     def __getattr__(self, name: str):
         # Only reached for names this class lacks: in-place methods (add_, masked_fill_) and the rest.

@@ -3,6 +3,7 @@ MX, and the exported Social-LSTM against the hand-written twin kept as an indepe
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import casadi as ca
@@ -472,6 +473,42 @@ def test_in_place_write_and_value_reads_are_refused():
     with pytest.raises(ExportError, match="MultiheadAttention|unsupported"):
         attention = nn.MultiheadAttention(4, 1, batch_first=True)
         export(lambda m, x: m.mha(x, x, x)[0], (1, 3, 4), mha=attention)
+
+
+def _halve_a_view(m, x):
+    out = x * 1
+    mean = out[..., :2]
+    mean *= 0.5  # torch halves out's first two columns through the view
+    return out
+
+
+def _accumulate(m, x):
+    total = x * 2
+    total += x
+    return total
+
+
+def _divide(m, x):
+    y = x.sum(-1)
+    y /= 3.0
+    return y
+
+
+def _subtract(m, x):
+    y = x * 2
+    y -= 1.0
+    return y
+
+
+@pytest.mark.parametrize(
+    ("fn", "operator"), [(_halve_a_view, "*="), (_accumulate, "+="), (_divide, "/="), (_subtract, "-=")]
+)
+def test_in_place_arithmetic_is_refused_not_rebound(fn, operator):
+    """``x *= v`` changes torch's x and every view of it; the exporter bound x alone to a new tensor, so a
+    view written to left the tensor it views unchanged."""
+    with pytest.raises(ExportError, match=rf"in-place arithmetic x {re.escape(operator)} v") as info:
+        export(fn, (2, 3))
+    assert "\n" not in str(info.value)
 
 
 @pytest.mark.parametrize("fn", [F.softmax, F.log_softmax])
