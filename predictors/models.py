@@ -22,7 +22,7 @@ import inspect
 import os
 import re
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -78,18 +78,24 @@ class ModelKind:
     # starting point; these no override, command-line option or checkpoint may change: a vanilla_lstm with
     # grid pooling would be a Social-LSTM under another name (its zoo name, its cells in the experiments).
     defining: Mapping[str, str] = field(default_factory=dict)
-    # Per key, the one value this kind's config may not take, with why: a social_lstm without pooling is
-    # the vanilla_lstm under another name, a social_gan without noise a generator with nothing to vary.
-    excluded: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
+    # Per key, the values a new config of this kind may not take (a test of the value) and why: a
+    # social_lstm without pooling is the vanilla_lstm under another name, one with noise the social_gan
+    # generator. Checked where a run makes a config (``config``) and where a checkpoint is written
+    # (``config_dict``), not where a stored one loads: a model trained before a rule existed keeps loading.
+    refused: Mapping[str, tuple[Callable[[Any], bool], str]] = field(default_factory=dict)
 
     def __post_init__(self):
         check_net_class(self.net_class, self.name)
         undefined = sorted(set(self.defining) - set(self.defaults))
         if undefined:
             raise PredictorError(f"model {self.name!r}: defining keys {undefined} have no value in defaults")
-        clashing = sorted(key for key, (value, _) in self.excluded.items() if self.defaults.get(key) == value)
+        clashing = sorted(
+            key
+            for key, (test, _) in self.refused.items()
+            if key in self.defaults and test(self.defaults[key])
+        )
         if clashing:
-            raise PredictorError(f"model {self.name!r}: its defaults take the excluded values of {clashing}")
+            raise PredictorError(f"model {self.name!r}: its defaults take refused values of {clashing}")
 
     @property
     def config_class(self) -> type:
@@ -111,6 +117,7 @@ class ModelKind:
                 f"{self.name}: expected a {self.config_class.__name__}, got {type(config).__name__}"
             )
         self.check_defining(config)  # a checkpoint is never written that its loader would refuse
+        self.check_new(config)
         to_dict = getattr(config, "to_dict", None)
         return dict(to_dict()) if callable(to_dict) else dataclasses.asdict(cast(Any, config))
 
@@ -119,7 +126,9 @@ class ModelKind:
         override may repeat a defining value (a stored config holds them all) but not change it."""
         if overrides is not None and not isinstance(overrides, Mapping):
             return self._config(overrides)  # refused there, in one line
-        return self._config({**self.defaults, **(overrides or {})})
+        config = self._config({**self.defaults, **(overrides or {})})
+        self.check_new(config)
+        return config
 
     def _config(self, values: Mapping[str, Any]) -> Any:
         cls = self.config_class
@@ -144,9 +153,15 @@ class ModelKind:
         self.check_defining(config)
         return config
 
+    def check_new(self, config: Any) -> None:
+        """PredictorError naming the key and this kind when ``config`` takes a value ``refused`` for it."""
+        for key, (test, why) in self.refused.items():
+            value = getattr(config, key, None)
+            if test(value):
+                raise PredictorError(f"{key} {short_repr(value)} is not a {self.name} ({why})")
+
     def check_defining(self, config: Any) -> None:
-        """PredictorError naming the key and this kind unless ``config`` keeps every defining value and
-        takes no excluded one."""
+        """PredictorError naming the key and this kind unless ``config`` keeps every defining value."""
         for key, why in self.defining.items():
             found, want = getattr(config, key, None), self.defaults[key]
             if found != want:
@@ -154,9 +169,6 @@ class ModelKind:
                     f"{key} {short_repr(found)} is not a {self.name}: the kind is defined by {key} {want!r} "
                     f"({why}); choose another model kind"
                 )
-        for key, (value, why) in self.excluded.items():
-            if getattr(config, key, None) == value:
-                raise PredictorError(f"{key} {short_repr(value)} is not a {self.name} ({why})")
 
     def build_net(self, config: Any) -> torch.nn.Module:
         """The net of ``config`` (a ``config_class`` instance, or a dict validated like ``config``).
@@ -223,23 +235,34 @@ def _shipped() -> dict[str, ModelKind]:
         ModelKind(
             "social_lstm",
             SocialLSTM,
-            {"pooling": "grid", "noise_dim": 0},
-            defining={"noise_dim": "noise makes it the social_gan generator"},
-            excluded={"pooling": ("none", "without social pooling it is a vanilla_lstm; choose that kind")},
+            {"pooling": "grid"},
+            refused={
+                "pooling": (
+                    lambda v: v == "none",
+                    "without social pooling it is a vanilla_lstm; choose that kind",
+                ),
+                "noise_dim": (lambda v: v != 0, "noise makes it the social_gan generator; choose that kind"),
+            },
         ),
         ModelKind(
             "vanilla_lstm",
             SocialLSTM,
-            {"pooling": "none", "noise_dim": 0},
-            defining={"pooling": "it has no social pooling", "noise_dim": "noise makes it a GAN generator"},
+            {"pooling": "none"},
+            defining={"pooling": "it has no social pooling"},
+            refused={"noise_dim": (lambda v: v != 0, "noise makes it a GAN generator")},
         ),
         ModelKind(
             "social_gan",
             SocialLSTM,
             {"pooling": "soft", "noise_dim": 8, "head": "point"},
             adversarial=True,
-            defining={"head": "its discriminator judges points"},
-            excluded={"noise_dim": (0, "the generator draws its variety from noise; give noise_dim >= 1")},
+            refused={
+                "noise_dim": (
+                    lambda v: v == 0,
+                    "the generator draws its variety from noise; give noise_dim >= 1",
+                ),
+                "head": (lambda v: v != "point", "its discriminator judges points; give head 'point'"),
+            },
         ),
         ModelKind("social_gru", SocialGRU),
         ModelKind("social_attention", SocialAttention),

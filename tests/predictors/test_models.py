@@ -98,51 +98,49 @@ def test_a_kind_defining_value_cannot_be_changed(no_plugins):
         (
             "social_lstm",
             {"pooling": "none"},
-            "pooling 'none' is not a social_lstm (without social pooling it is a",
+            "pooling 'none' is not a social_lstm (without social pooling it is",
         ),
-        (
-            "social_lstm",
-            {"noise_dim": 4},
-            "noise_dim 4 is not a social_lstm: the kind is defined by noise_dim 0",
-        ),
+        ("social_lstm", {"noise_dim": 4}, "noise_dim 4 is not a social_lstm (noise makes it the social_gan"),
         (
             "vanilla_lstm",
             {"noise_dim": 2},
-            "noise_dim 2 is not a vanilla_lstm: the kind is defined by noise_dim 0",
+            "noise_dim 2 is not a vanilla_lstm (noise makes it a GAN generator)",
         ),
         (
             "social_gan",
             {"noise_dim": 0},
             "noise_dim 0 is not a social_gan (the generator draws its variety from",
         ),
-        (
-            "social_gan",
-            {"head": "gaussian"},
-            "head 'gaussian' is not a social_gan: the kind is defined by head",
-        ),
+        ("social_gan", {"head": "gaussian"}, "head 'gaussian' is not a social_gan (its discriminator judges"),
     ],
 )
-def test_a_config_that_makes_another_kind_is_refused_by_the_kind(no_plugins, model, values, message):
+def test_a_new_config_that_makes_another_kind_is_refused_and_a_stored_one_still_loads(
+    no_plugins, model, values, message, tmp_path
+):
     """`train --model social_lstm --pooling none` trained a vanilla LSTM named social_lstm_eth, and with
     noise_dim 4 a social_lstm carried a noise layer fed zeros; a social_gan without noise or with a Gaussian
-    head got through the config and was refused only once the data were read (with the config's repr)."""
+    head got through the config and was refused only once the data were read (with the config's repr). A
+    checkpoint trained before the rule keeps loading under its kind (its user zoo entry stays usable); no new
+    one is written."""
     kind = model_kind(model)
     with pytest.raises(PredictorError, match=re.escape(message)):
         kind.config(values)
-    with pytest.raises(PredictorError, match=re.escape(message)):
-        kind.build_net({**kind.config().to_dict(), **values})  # a checkpoint's stored config
     assert kind.config({key: kind.config().to_dict()[key] for key in values}) == kind.config()
+    stored = kind.build_net({**kind.config().to_dict(), **values})  # a checkpoint's config, as stored
+    assert all(getattr(stored.config, key) == value for key, value in values.items())
+    with pytest.raises(PredictorError, match=re.escape(message)):
+        kind.config_dict(stored.config)  # what save_checkpoint writes
 
 
-def test_a_kind_whose_defaults_take_an_excluded_value_is_refused(no_plugins):
+def test_a_kind_whose_defaults_take_a_refused_value_is_refused(no_plugins):
     with pytest.raises(
-        PredictorError, match=r"model 'odd': its defaults take the excluded values of \['pooling'\]"
+        PredictorError, match=r"model 'odd': its defaults take refused values of \['pooling'\]"
     ):
         ModelKind(
             "odd",
             type(model_kind("social_lstm").build_net({})),
             {"pooling": "none"},
-            excluded={"pooling": ("none", "")},
+            refused={"pooling": (lambda value: value == "none", "")},
         )
 
 
