@@ -281,7 +281,7 @@ def _jit_pays(cells, episodes_per_cell: int) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
-    from pipelines.experiments.log import EPISODES_FILE
+    from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
     cfg, out = _checked_config(args)
     config = _sweep_config(args, cfg, out)
@@ -307,7 +307,8 @@ def run(args: argparse.Namespace) -> int:
             raise
     elif not (out / EPISODES_FILE).exists():
         raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
-    report(config, cells, tasks, report_only=args.report_only)
+    if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
+        report(config, cells, tasks, report_only=args.report_only)
     return status
 
 

@@ -228,6 +228,22 @@ def test_a_run_line_is_added_once_the_backend_has_started(good, tmp_path):
     assert len(json.loads((out / SWEEP_FILE).read_text())["runs"]) == 2
 
 
+def test_a_sweep_interrupted_before_its_backend_started_resumes(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the workers started: the run line was not written yet, the report was, and the rerun the
+    sweep advised was refused as a folder "holding files but no sweep"."""
+    out = tmp_path / "sweep"
+
+    def interrupted(config, scratch):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patched:
+        patched.setattr("pipelines.experiments.sweep._default_backend", interrupted)
+        assert main([*ARGV, "--out", str(out)]) == 130
+    assert "interrupted: rerun the same command to resume" in capsys.readouterr().err
+    assert main([*ARGV, "--out", str(out)]) == 0
+    assert len(json.loads((out / SWEEP_FILE).read_text())["runs"]) == 1
+
+
 # ----------------------------------------------------------------------------------------------------------
 # The sweep directory: only its own files, never through a link, never a folder of the user's
 # ----------------------------------------------------------------------------------------------------------
