@@ -5,7 +5,7 @@ fail once per episode (predictors, couplings, margins, world settings a sweep ca
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError
 
@@ -247,6 +247,7 @@ def check_world(cfg: RunConfig) -> None:
     refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), and [scenario]
     humans and name (``_check_scenario``), rather than ignore them."""
     from crowdsim.profiles import PROFILES
+    from pipelines.config.schema import ENV_PROFILE_KEYS
 
     _check_scenario(cfg)
     why = (
@@ -258,7 +259,8 @@ def check_world(cfg: RunConfig) -> None:
         *(("world", k, cfg.default("world", k)) for k in cfg.values["world"]),
         *(("env.orca", k, cfg.default("env.orca", k)) for k in cfg.values["env.orca"]),
         *(
-            ("env", k, getattr(profile, k))
+            # a profile's convention is asked for whatever its value: `config show` leaves it unset
+            ("env", k, _ANY if k in ENV_PROFILE_KEYS else getattr(profile, k))
             for k in cfg.values["env"]
             if k not in ("profile", "robots_visible")
         ),
@@ -267,15 +269,20 @@ def check_world(cfg: RunConfig) -> None:
             raise cfg.error(section, key, f"{cfg.values[section][key]!r}: {why}")
 
 
+# The default of a value asked for whenever it is set (``_asked``).
+_ANY: Final = object()
+
+
 def _asked(cfg: RunConfig, section: str, key: str, default: Any) -> bool:
     """Whether the run asks for this value, as ``RunConfig.chosen`` tells it but against ``default`` (an
-    [env] value's is the config's profile's): given as an option or ``--set``, the default too, since an
-    experiment's cells may run another profile (conventions' v1 cells kept v1's 30 s limit under ``--set
-    env.time_limit=40.0``, the paper's), or set in a file to another value than the default."""
+    [env] value's is the config's profile's; ``_ANY``: set at all): given as an option or ``--set``, the
+    default too, since an experiment's cells may run another profile (conventions' v1 cells kept v1's 30 s
+    limit under ``--set env.time_limit=40.0``, the paper's), or set in a file to another value than the
+    default."""
     source, value = cfg.sources.get((section, key)), cfg.values[section][key]
     if source is None or value is None:
         return False
-    return source.kind != "file" or value != default
+    return source.kind != "file" or default is _ANY or value != default
 
 
 # What sets, in a sweep, what a [scenario] key sets in simulate.

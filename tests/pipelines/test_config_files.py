@@ -747,3 +747,18 @@ def test_a_sweeps_mpc_values_apply_to_the_methods_that_plan_with_a_predictor(tmp
     assert keys["dmpc"].startswith("dmpc-social_lstm_eth-NF-ibr-horizon=8-")
     assert keys["orca"] == "orca-none-F-ibr-m=none-paper-visible-h5-r3"
     assert keys["straight"] == "straight-none-F-ibr-m=none-paper-visible-h5-r3"
+
+
+def test_a_sweep_refuses_a_files_profile_convention_and_takes_config_shows_file(tmp_path, capsys):
+    """`[env] time_limit = 40.0` in a file, the paper profile's own value, was taken as no choice, and
+    conventions' v1 cells ran v1's 30 s; `config show` leaves such keys unset: a file that sets one asks."""
+    argv = ["sweep", "--experiment", "conventions", "--dry-run", "--out", str(tmp_path / "sweep")]
+    config = _write(tmp_path, "[env]\ntime_limit = 40.0\n")
+    assert main(["--config", str(config), *argv]) == 2
+    assert _one_error_line(capsys, "sweep").endswith(
+        f"{config}: env.time_limit: 40.0: a sweep's cells run a named profile ([env] profile, "
+        "robots_visible); other [world], [env] and [env.orca] values apply to simulate only"
+    )
+    assert main(["config", "show"]) == 0
+    shown = _write(tmp_path, capsys.readouterr().out)
+    assert main(["--config", str(shown), *argv]) == 0
