@@ -85,8 +85,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--animate",
         type=path_arg,
         metavar="GIF|MP4",
-        help="the episode as an animation at simulated speed; a frame is shown 0.001 to 655.35 s (a GIF's "
-        "longest), so an episode of steps beyond plays faster or slower, as the output line says",
+        help="the episode as an animation at simulated speed; a frame is shown 0.02 s (GIF; MP4 0.001 s) "
+        "to 655.35 s (a GIF's longest), so an episode of steps beyond plays faster or slower, as the output "
+        "line says",
     )
     parser.add_argument(
         "--compare", type=path_arg, metavar="OTHER.mcap", help="side-by-side metrics with this run"

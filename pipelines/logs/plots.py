@@ -125,9 +125,10 @@ MAX_FRAMES: Final[int] = 300
 # The longest a frame is shown, s: a GIF stores a frame's duration as a 16-bit count of centiseconds (a
 # 700 s step, which simulate accepts, overflowed Pillow's writer); an MP4 is held to it too, to play alike.
 MAX_FRAME_S: Final[float] = 655.35
-# The shortest, s: no screen shows 1 000 frames a second (a GIF stores anything under 10 ms as 0 anyway),
-# and a hand-edited dt of 1e-300 would give ffmpeg an infinite frame rate.
+# The shortest, s: no screen shows 1 000 frames a second, and a hand-edited dt of 1e-300 would give ffmpeg an
+# infinite frame rate. A GIF holds whole centiseconds, and viewers show a frame of 0 or 1 for 0.1 s: 0.02 s.
 MIN_FRAME_S: Final[float] = 1e-3
+MIN_GIF_FRAME_S: Final[float] = 0.02
 
 
 @dataclass(frozen=True)
@@ -136,20 +137,19 @@ class AnimationFacts:
 
     frames: int
     every: int  # one recorded state in ``every`` is a frame
-    frame_s: float  # how long each frame is shown
-    asked_s: float  # how long it would be at the asked speed: other when beyond MIN_FRAME_S .. MAX_FRAME_S
+    frame_s: float  # how long each frame is shown: as the file holds it (a GIF's in centiseconds)
+    asked_s: float  # how long it would be at the asked speed
+    least_s: float  # the shortest frame the format shows as asked (MIN_GIF_FRAME_S, MIN_FRAME_S)
 
     @property
     def pace_note(self) -> str | None:
-        """How much faster or slower than asked it plays, when it does."""
-        if self.frame_s == self.asked_s:
-            return None
+        """How much faster or slower than asked it plays, when a bound held it (not a GIF's rounding)."""
         ratio = self.asked_s / self.frame_s
-        return (
-            f"plays {ratio:.3g}x faster than asked: a frame is shown at most {MAX_FRAME_S:g} s"
-            if ratio > 1
-            else f"plays {1 / ratio:.3g}x slower than asked: a frame is shown at least {MIN_FRAME_S:g} s"
-        )
+        if self.asked_s > MAX_FRAME_S:
+            return f"plays {ratio:.3g}x faster than asked: a frame is shown at most {MAX_FRAME_S:g} s"
+        if self.asked_s < self.least_s:
+            return f"plays {1 / ratio:.3g}x slower than asked: a frame is shown at least {self.least_s:g} s"
+        return None
 
 
 def check_animation_path(out: str | Path, option: str = "--animate") -> None:
@@ -237,8 +237,8 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
     One frame per recorded state, played at ``speed`` times simulated time; an episode of more than
     ``MAX_FRAMES`` states gets every k-th (and its last), played k times faster, so that it keeps its length
     in seconds. A frame is shown no longer than ``MAX_FRAME_S`` (a GIF's longest) and no shorter than
-    ``MIN_FRAME_S``: an episode of longer (shorter) steps plays faster (slower) than asked, which the
-    returned ``AnimationFacts`` say.
+    ``MIN_FRAME_S`` (a GIF's: ``MIN_GIF_FRAME_S``, in whole centiseconds): an episode of longer (shorter)
+    steps plays faster (slower) than asked, which the returned ``AnimationFacts`` say.
     """
     from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 
@@ -250,15 +250,20 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
     if rows[-1] != len(view.times) - 1:
         rows.append(len(view.times) - 1)
     asked_s = every * view.dt / speed
-    frame_s = min(max(asked_s, MIN_FRAME_S), MAX_FRAME_S)
+    gif = out.suffix.lower() == ".gif"
+    least_s = MIN_GIF_FRAME_S if gif else MIN_FRAME_S
+    frame_s = min(max(asked_s, least_s), MAX_FRAME_S)
     fps = 1.0 / frame_s
+    if gif:  # whole centiseconds, as the file holds them: matplotlib passes int(1000 / fps) ms, Pillow // 10
+        centiseconds = round(frame_s * 100)
+        frame_s, fps = centiseconds / 100, 1000 / (10 * centiseconds + 0.5)
     animation = FuncAnimation(fig, draw, frames=rows, blit=False)
     # matplotlib's stubs say fps: int, but the writers take any positive number (Pillow: 1000 / fps ms a
     # frame, ffmpeg: -r fps); 1 / frame_s is fractional (e.g. 2.5) and must not be rounded.
     writer = (
         PillowWriter(fps=fps)  # type: ignore[arg-type]
-        if out.suffix.lower() == ".gif"
+        if gif
         else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
     )
     animation.save(out, writer=writer, dpi=80)
-    return AnimationFacts(len(rows), every, frame_s, asked_s)
+    return AnimationFacts(len(rows), every, frame_s, asked_s, least_s)

@@ -302,16 +302,18 @@ def test_states_of_changing_sizes_cannot_be_drawn(tmp_path, capsys):
     [
         ("700", 655_350, "plays 1.07x faster than asked: a frame is shown at most 655.35 s"),
         ("1e300", 655_350, "plays 1.53e+297x faster than asked"),
-        ("1e-300", 0, "plays 1e+297x slower than asked: a frame is shown at least 0.001 s"),
+        ("1e-300", 20, "plays 2e+298x slower than asked: a frame is shown at least 0.02 s"),
+        ("0.005", 20, "plays 4x slower than asked: a frame is shown at least 0.02 s"),  # once a delay of 0
+        ("0.123", 120, ""),  # centiseconds, as the GIF holds them: no note
     ],
 )
 def test_an_animation_of_steps_beyond_what_a_gif_holds_plays_at_its_bound(
     tmp_path, capsys, dt, duration_ms, pace
 ):
     """A GIF holds a frame for at most 65535 centiseconds: a 700 s step (simulate accepts it) or a hand-edited
-    dt of 1e300 ended in Pillow's OverflowError traceback. Frames are held to MIN_FRAME_S .. MAX_FRAME_S, and
-    the output line says how much faster or slower than asked the animation plays (a GIF stores under 10 ms
-    as 0)."""
+    dt of 1e300 ended in Pillow's OverflowError traceback. Frames are held to MIN_GIF_FRAME_S .. MAX_FRAME_S,
+    and the output line says how much faster or slower than asked the animation plays: a step under 10 ms was
+    a delay of 0, which viewers show for 0.1 s, under a note saying 0.001 s."""
     path, gif = tmp_path / "steps.mcap", tmp_path / "a.gif"
     human = {"positions": [[3.0, 0.0]], "velocities": [[0.0, 0.0]], "goals": [[0.0, 0.0]]}
     with McapRecorder(path, metadata={"episode": {"dt": dt, "scenario": "circle"}}) as rec:
@@ -319,7 +321,8 @@ def test_an_animation_of_steps_beyond_what_a_gif_holds_plays_at_its_bound(
             rec.write("/robots", robot(k), k * S, schema=ROBOTS)
             rec.write("/humans", {**human, "step": k, "time": 0.4 * k}, k * S, schema=HUMANS)
     rc, out, err = review(capsys, path, "--animate", gif)
-    assert rc == 0 and err == "" and f"animation: {gif} (2 frames; {pace}" in out
+    shown = f"animation: {gif} (2 frames; {pace}" if pace else f"animation: {gif} (2 frames)\n"
+    assert rc == 0 and err == "" and shown in out
     with Image.open(gif) as animation:
         assert animation.n_frames == 2 and animation.info.get("duration", 0) == duration_ms
 
