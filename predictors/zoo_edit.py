@@ -295,9 +295,10 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
     """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its files (those no
     other entry names, and never one of the zoo's own: an entry added under a name reserved since may name
     one) are first renamed to hidden temporaries (.NAME.pt.PID.removed), then the manifest entry goes, then
-    the temporaries. A remove stopped on the way leaves either the entry (its files gone: `zoo remove NAME`
-    again finishes it) or hidden temporaries of ours (``remove_leftovers``), never files that look like a
-    model no entry names. Returns the entry and the zoo directory."""
+    the temporaries, and those an earlier add or remove of ``name`` left. A remove stopped on the way leaves
+    either the entry (its files gone: `zoo remove NAME` again finishes it) or hidden temporaries of ours
+    (``remove_leftovers``), never files that look like a model no entry names. Returns the entry and the zoo
+    directory."""
     check_name(name)  # not check_model_name: such an entry must stay removable
     root = writable_zoo_dir(directory)
     _entry_to_remove(name, root, read_manifest(root), directory)  # before the lock creates the directory
@@ -316,6 +317,9 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
         write_manifest(entries, root)
         for hidden in parked:
             hidden.unlink(missing_ok=True)
+        for model, path in leftover_files(root):  # an earlier add or remove of it stopped on the way
+            if model == name:
+                path.unlink(missing_ok=True)
     return entry, root
 
 

@@ -27,9 +27,10 @@ zoo has already is refused (adding the very same model again changes nothing) un
 that entry; so is a name whose files would be the zoo's own (manifest, calibrations). Parallel adds and
 removes take turns. The metrics file must be the one `crowdmpc train` wrote for these weights. A file whose
 sha256 differs from its manifest is refused when loaded; `verify` checks every entry of both zoos and names
-the hidden files an add or remove stopped on the way left in the user zoo (`remove NAME` removes them). A
-model of a plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the
-shipped zoo holds only the kinds the project ships.
+the hidden files an add or remove stopped on the way left in the user zoo (`remove --leftovers NAME` removes
+them, keeping the entry; `remove NAME` removes them with it). A model of a plugin's kind loads once the
+plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the shipped zoo holds only the kinds the
+project ships.
 """
 
 
@@ -94,6 +95,12 @@ def register(subparsers) -> None:
         **examples("crowdmpc zoo remove my_social_lstm"),
     )
     remove.add_argument("name")
+    remove.add_argument(
+        "--leftovers",
+        action="store_true",
+        help="remove only the hidden files an add or remove of NAME stopped on the way left (`verify` names "
+        "them); its entry, if it has one, stays",
+    )
     parser.set_defaults(func=run)
 
 
@@ -201,6 +208,11 @@ def run(args: argparse.Namespace) -> int:
         return 1 if bad else 0
     if args.zoo_command == "add":
         return _add(args)
+    if args.zoo_command == "remove" and args.leftovers:
+        leftovers, root = zoo_edit.remove_leftovers(args.name, args.dir)
+        names = ", ".join(path.name for path in leftovers) or "none"
+        print(f"removed the leftover files of {args.name} from the user zoo {root}: {names}")
+        return 0
     if args.zoo_command == "remove":
         try:
             entry, root = zoo_edit.remove_from_zoo(args.name, args.dir)
@@ -228,7 +240,7 @@ def _report_leftovers(root: Path, directory: Path | None) -> None:
     for name, path in zoo_edit.leftover_files(root):
         print(
             f"{path}: left by an add or remove of {name} that stopped on the way (or is running now); "
-            f"`crowdmpc zoo{option} remove {shlex.quote(name)}` removes it"
+            f"`crowdmpc zoo{option} remove --leftovers {shlex.quote(name)}` removes it"
         )
 
 

@@ -273,11 +273,26 @@ def test_verify_names_the_leftovers_of_a_stopped_remove(user, monkeypatch, capsy
     named = [line.split(":")[0] for line in out.splitlines() if "left by" in line]
     hidden = [f".mine.json.{pid}.removed", f".mine.pt.{pid}.removed", ".other.json.77.link"]
     assert code == 0 and named == [str(user / name) for name in sorted(hidden)]
-    assert "`crowdmpc zoo remove mine` removes it" in out and "`crowdmpc zoo remove other`" in out
+    assert "`crowdmpc zoo remove --leftovers mine` removes it" in out and "remove --leftovers other`" in out
     code, out, _ = cli(["zoo", "--dir", str(user), "verify"], capsys)
-    assert f"`crowdmpc zoo --dir {user} remove mine` removes it" in out
-    assert cli(["zoo", "remove", "mine"], capsys)[0] == 0
-    assert "remove mine" not in cli(["zoo", "verify"], capsys)[1]
+    assert f"`crowdmpc zoo --dir {user} remove --leftovers mine` removes it" in out
+    assert cli(["zoo", "remove", "--leftovers", "mine"], capsys)[0] == 0
+    assert "remove --leftovers mine" not in cli(["zoo", "verify"], capsys)[1]
+
+
+def test_the_leftovers_of_a_model_with_an_entry_go_and_the_model_stays(user, capsys):
+    """verify advised `zoo remove mine` for a stale copy beside a live entry "mine": following it deleted the
+    model and left the copy (a second remove took that)."""
+    (user / ".mine.pt.123.new").write_bytes(b"a killed add's copy")
+    code, out, _ = cli(["zoo", "verify"], capsys)
+    assert code == 0 and "`crowdmpc zoo remove --leftovers mine` removes it" in out
+    code, out, _ = cli(["zoo", "remove", "--leftovers", "mine"], capsys)
+    assert code == 0 and out.strip().endswith(": .mine.pt.123.new")
+    assert "mine" in zoo.read_manifest(user) and (user / "mine.pt").is_file()
+    assert not (user / ".mine.pt.123.new").exists()
+    (user / ".mine.pt.124.new").write_bytes(b"another")
+    assert cli(["zoo", "remove", "mine"], capsys)[0] == 0  # the model, and what its adds left
+    assert not (user / ".mine.pt.124.new").exists() and "mine" not in zoo.read_manifest(user)
 
 
 def test_remove_never_takes_a_model_no_entry_names(user, tmp_path, capsys):
