@@ -55,13 +55,15 @@ def figure_refusal(path: str | Path) -> str | None:
     """Why matplotlib cannot write a figure named ``path`` on this machine, or None. A ``.pgf`` figure is
     typeset by a TeX system matplotlib runs (``pgf.texsystem``), so it needs one installed."""
     suffix = Path(path).suffix.lower().lstrip(".")
-    supported = FigureCanvasBase.get_supported_filetypes()
+    supported = set(FigureCanvasBase.get_supported_filetypes())
+    tex = str(matplotlib.rcParams["pgf.texsystem"])
+    if shutil.which(tex) is None:
+        if suffix == "pgf":
+            return f"a .pgf figure is typeset by {tex}, which is not installed here; name it .pdf or .svg"
+        supported.discard("pgf")  # not offered where it would be refused
     if suffix not in supported:
         kind = suffix or "(no suffix)"
         return f"cannot write a figure of type {kind!r}; name it with one of {sorted(supported)}"
-    tex = str(matplotlib.rcParams["pgf.texsystem"])
-    if suffix == "pgf" and shutil.which(tex) is None:
-        return f"a .pgf figure is typeset by {tex}, which is not installed here; name it .pdf or .svg"
     return None
 
 

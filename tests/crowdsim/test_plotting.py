@@ -63,5 +63,10 @@ def test_a_pgf_figure_without_its_tex_system_is_refused_before_the_run(monkeypat
         SimulationError, match=r"--plot ep\.pgf: a \.pgf figure is typeset by lualatex, which"
     ):
         check_figure_path("ep.pgf", "--plot")
+    with pytest.raises(SimulationError, match=r"cannot write a figure of type 'foo'") as refused:
+        check_figure_path("ep.foo", "--plot")
+    assert "'pgf'" not in str(refused.value) and "'pdf'" in str(refused.value)  # not offered, then refused
     installed.append("lualatex")
     check_figure_path("ep.pgf", "--plot")
+    with pytest.raises(SimulationError, match=r"'pgf'"):
+        check_figure_path("ep.foo", "--plot")
