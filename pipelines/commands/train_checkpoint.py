@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
+import torch
 from lightning.pytorch.callbacks import ModelCheckpoint
 
 from pipelines.commands.train_resume import relocated
@@ -12,7 +14,11 @@ from pipelines.commands.train_resume import relocated
 class RunCheckpoint(ModelCheckpoint):
     """Lightning's ModelCheckpoint, resuming a run whose folder was moved or copied as one left in place (the
     paths of its best and last checkpoints are read in its folder now, not in the one they were written in),
-    and writing last.ckpt at every epoch's end."""
+    a run killed between Lightning's removal of its previous best and the epoch's last.ckpt as one killed
+    before that epoch (the best checkpoints last.ckpt names are the ones still in the folder), and writing
+    last.ckpt at every epoch's end. Run with ``enable_version_counter=False``: a run's folder holds its own
+    files only, and an epoch trained again replaces the checkpoint its killed first try left, not -v1 beside
+    it."""
 
     @property
     def state_key(self) -> str:
@@ -21,6 +27,29 @@ class RunCheckpoint(ModelCheckpoint):
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         super().load_state_dict(relocated(state_dict, str(self.dirpath)))
+        self._forget_missing()
+
+    def _forget_missing(self) -> None:
+        """Drops the best checkpoints the state names that are not in the folder, and finds the best and k-th
+        of the rest as Lightning does (``_update_best_and_save``); none left, Lightning finds them again as
+        training goes on. A best is removed only once a better one is saved, after the last.ckpt written
+        before it: a run killed between the two, as kill -9 can, resumes from a last.ckpt naming a removed
+        file (it was refused, or read as the best), and trains the epoch of the better one again."""
+        present = {path: score for path, score in self.best_k_models.items() if os.path.isfile(path)}
+        if len(present) == len(self.best_k_models) and (
+            not self.best_model_path or os.path.isfile(self.best_model_path)
+        ):
+            return
+        best, worst = (min, max) if self.mode == "min" else (max, min)
+        self.best_k_models = present
+        self.best_model_path = best(present, key=present.__getitem__) if present else ""
+        self.best_model_score = present[self.best_model_path] if present else None
+        if present and (self.save_top_k == -1 or len(present) == self.save_top_k):
+            self.kth_best_model_path = worst(present, key=present.__getitem__)
+            self.kth_value = present[self.kth_best_model_path]
+        else:  # fewer than k: Lightning keeps every new one, and has no k-th yet
+            self.kth_best_model_path = ""
+            self.kth_value = torch.tensor(torch.inf if self.mode == "min" else -torch.inf)
 
     # Lightning (2.6) writes last.ckpt only at an epoch that is a new best: a run stopped after a worse epoch
     # resumed from an earlier one, and a run that ended said it had trained fewer epochs than it had (its

@@ -92,6 +92,7 @@ def _fit(
     trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
     elapsed = time.perf_counter() - started
 
+    # a file in --out: the best checkpoint saved or kept (RunCheckpoint: restored only where it is), else last
     best_path = best.best_model_path or str(last)
     state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
@@ -195,6 +196,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
         mode="min",
         save_last=True,
         save_top_k=1,
+        enable_version_counter=False,  # the run's folder is its own (RunCheckpoint)
     )
     trainer = L.Trainer(
         max_epochs=args.epochs,

@@ -89,40 +89,18 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
             f"--resume: {last} was trained with {what} ({shown}); resume with the run's settings (only "
             "--epochs may change)"
         )
-    check_kept_checkpoints(checkpoint, last)
     # last.ckpt is written as each epoch ends, after its validation (train_checkpoint.RunCheckpoint), and
     # Lightning counts its "epoch" from 0: it has finished epoch + 1
     epoch = checkpoint.get("epoch")
     return epoch + 1 if isinstance(epoch, int) and not isinstance(epoch, bool) and epoch >= 0 else None
 
 
-def check_kept_checkpoints(checkpoint: dict[str, Any], last: Path) -> None:
-    """PipelineError unless every checkpoint that ``last`` says the run keeps (its best epoch, itself) is in
-    ``last``'s folder: a resume reads them from there (``relocated``), never from the absolute paths Lightning
-    stored, which name the run's old folder once it was moved or copied."""
-    for name in {Path(path).name for path in kept_checkpoints(checkpoint)}:
-        if not (last.parent / name).is_file():
-            raise PipelineError(
-                f"--resume: {last} names the run's checkpoint {name}, which is not in {last.parent}; put it "
-                "back there or start a new run with another --out"
-            )
-
-
-def kept_checkpoints(checkpoint: dict[str, Any]) -> list[str]:
-    """The paths of the checkpoints the ModelCheckpoint states in a Lightning ``checkpoint`` keep."""
-    states = checkpoint.get("callbacks")
-    paths: list[str] = []
-    for key, state in states.items() if isinstance(states, dict) else ():
-        if str(key).startswith("ModelCheckpoint") and isinstance(state, dict):
-            paths += [p for p in _state_paths(state) if isinstance(p, str) and p]
-    return paths
-
-
 def relocated(state: dict[str, Any], dirpath: str) -> dict[str, Any]:
     """A ModelCheckpoint's ``state`` with every path it keeps moved into ``dirpath``, the run's checkpoint
     folder now: Lightning stores them absolute and restores them only when that folder has not moved, so a
     moved run forgot its best score and wrote last-v1.ckpt, and still read its best weights from the old
-    folder. The run's checkpoints are all in that one folder, so a file's name finds it."""
+    folder. The run's checkpoints are all in that one folder, so a file's name finds it; one not there is
+    forgotten (``RunCheckpoint``), never refused: last.ckpt, the file resumed, is all a resume needs."""
 
     def here(path: Any) -> Any:
         return str(Path(dirpath) / Path(path).name) if isinstance(path, str) and path else path
@@ -131,11 +109,6 @@ def relocated(state: dict[str, Any], dirpath: str) -> dict[str, Any]:
     if isinstance(state.get("best_k_models"), dict):
         moved["best_k_models"] = {here(path): score for path, score in state["best_k_models"].items()}
     return {**state, **moved, "dirpath": dirpath}
-
-
-def _state_paths(state: dict[str, Any]) -> list[Any]:
-    best_k = state.get("best_k_models")
-    return [state.get(key) for key in _PATH_KEYS] + list(best_k if isinstance(best_k, dict) else ())
 
 
 def check_more_epochs(out: Path, epochs: int, done: int | None, finished: bool) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -316,7 +317,8 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
 def test_a_moved_run_resumes_as_it_would_in_place(tmp_path, capsys):
     """Lightning keeps the absolute paths of a run's checkpoints: resumed after its folder was moved, the run
     forgot its best epoch (a worse later one became NAME.pt), wrote last-v1.ckpt beside an old last.ckpt, and
-    read its best weights from the old folder. A best checkpoint missing from the folder is refused."""
+    read its best weights from the old folder. A best checkpoint missing from the folder is forgotten, not
+    refused: the epochs resumed find the best again, and NAME.pt is one of them."""
     import shutil
 
     import torch
@@ -346,11 +348,96 @@ def test_a_moved_run_resumes_as_it_would_in_place(tmp_path, capsys):
 
     (best,) = (tmp_path / "moved" / "checkpoints").glob("best-*.ckpt")
     best.unlink()
-    capsys.readouterr()
-    assert train(str(tmp_path / "moved"), 4, "--resume") == 2
-    err = capsys.readouterr().err
-    assert f"names the run's checkpoint {best.name}, which is not in {best.parent}" in err
-    assert err.count("\n") == 1
+    assert train(str(tmp_path / "moved"), 4, "--resume") == 0
+    kept = json.loads((tmp_path / "moved" / "social_lstm_custom.json").read_text())["training"]
+    assert kept["best_checkpoint"].startswith("best-epoch=003")
+    assert [p.name for p in best.parent.glob("best-*.ckpt")] == [kept["best_checkpoint"]]
+
+
+def test_a_run_killed_between_its_new_best_and_last_checkpoint_resumes(tmp_path, monkeypatch):
+    """Lightning saves an epoch's new best and removes the one before, then last.ckpt is written: a run
+    killed between the two (kill -9 can) resumed from the last.ckpt of the epoch before, which names the
+    removed file, and was refused ("put it back there"). It resumes as a run never killed ends."""
+    import torch
+    from lightning.pytorch.callbacks import ModelCheckpoint
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--test", data]
+    args += ["--batch-size", "1", "--epochs", "2", "--no-progress", "--out"]
+    assert main([*args, str(tmp_path / "straight")]) == 0
+    write_last = ModelCheckpoint._save_last_checkpoint
+
+    def killed(self, trainer, candidates):
+        if trainer.current_epoch == 1:
+            raise Interrupted
+        write_last(self, trainer, candidates)
+
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(ModelCheckpoint, "_save_last_checkpoint", killed)
+        main([*args, str(tmp_path / "killed")])
+    ckpts = tmp_path / "killed" / "checkpoints"
+    last = torch.load(ckpts / "last.ckpt", weights_only=False)
+    (state,) = last["callbacks"].values()
+    assert last["epoch"] == 0 and not (ckpts / Path(state["best_model_path"]).name).exists()  # the case
+    assert [p.name[:14] for p in ckpts.glob("best-*.ckpt")] == ["best-epoch=001"]  # the new best, kept
+    assert main([*args, str(tmp_path / "killed"), "--resume"]) == 0
+
+    def outcome(run: str) -> tuple:
+        weights = torch.load(tmp_path / run / "vanilla_lstm_custom.pt", weights_only=True)
+        metrics = json.loads((tmp_path / run / "vanilla_lstm_custom.metrics.json").read_text())
+        listing = sorted(p.name for p in (tmp_path / run / "checkpoints").iterdir())
+        return listing, metrics["training"]["best_checkpoint"], metrics["metrics"], weights
+
+    straight, resumed = outcome("straight"), outcome("killed")
+    assert resumed[:3] == straight[:3]
+    assert straight[3].keys() == resumed[3].keys()
+    assert all(torch.equal(straight[3][k], resumed[3][k]) for k in straight[3])
+
+
+@pytest.mark.parametrize("mode", ["min", "max"])
+def test_a_resumed_checkpoint_state_keeps_the_best_files_present(tmp_path, mode):
+    """The best and k-th of a resumed state are those of the files still in the folder, as Lightning finds
+    them; with none left there is no best (last.ckpt is read), and a state whose files are all there reads
+    as it was written."""
+    import torch
+
+    from pipelines.commands.train_checkpoint import RunCheckpoint
+
+    def state(*scores: float) -> dict:
+        paths = [str(tmp_path / "old" / f"best-{i}.ckpt") for i in range(len(scores))]
+        best_k = {path: torch.tensor(score) for path, score in zip(paths, scores, strict=True)}
+        best = (min if mode == "min" else max)(best_k, key=best_k.__getitem__)
+        held = {"best_k_models": best_k, "best_model_path": best, "best_model_score": best_k[best]}
+        return {"dirpath": str(tmp_path / "old"), **held}
+
+    def loaded(*scores: float, top_k: int = 3) -> RunCheckpoint:
+        callback = RunCheckpoint(dirpath=tmp_path / "ckpts", monitor="val_ade", mode=mode, save_top_k=top_k)
+        callback.load_state_dict(state(*scores))
+        return callback
+
+    (tmp_path / "ckpts").mkdir()
+    for i in (1, 2):
+        (tmp_path / "ckpts" / f"best-{i}.ckpt").write_bytes(b"")
+    top = loaded(1.0, 2.0, 3.0, top_k=2)  # best-0, the best of all, is gone
+    best, kth = ("best-1", "best-2") if mode == "min" else ("best-2", "best-1")
+    assert (
+        Path(top.best_model_path).name == f"{best}.ckpt"
+        and Path(top.kth_best_model_path).name == f"{kth}.ckpt"
+    )
+    assert top.best_model_score == top.best_k_models[top.best_model_path] and len(top.best_k_models) == 2
+    fewer = loaded(1.0, 2.0, 3.0)  # fewer than k: no k-th yet
+    assert (fewer.kth_best_model_path, float(fewer.kth_value)) == (
+        "",
+        float("inf" if mode == "min" else "-inf"),
+    )
+    (tmp_path / "ckpts" / "best-0.ckpt").write_bytes(b"")
+    assert loaded(1.0, 2.0, 3.0).best_model_path == str(
+        tmp_path / "ckpts" / f"best-{0 if mode == 'min' else 2}.ckpt"
+    )
+    for path in (tmp_path / "ckpts").iterdir():
+        path.unlink()
+    gone = loaded(1.0)
+    assert (gone.best_k_models, gone.best_model_path, gone.best_model_score) == ({}, "", None)
 
 
 def test_last_checkpoint_is_every_epochs_own(tmp_path, capsys):
