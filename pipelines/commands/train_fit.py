@@ -188,10 +188,11 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
     from pipelines.commands.train_checkpoint import RunCheckpoint
+    from pipelines.commands.train_resume import BEST_FILENAME
 
     best = RunCheckpoint(
         dirpath=ckpt_dir,
-        filename="best-{epoch:03d}-{val_ade:.4f}",
+        filename=BEST_FILENAME,
         monitor="val_ade",
         mode="min",
         save_last=True,

@@ -16,6 +16,9 @@ from pipelines.errors import PipelineError
 SETTINGS_FILE = "train_settings.json"
 # The paths of checkpoints a Lightning ModelCheckpoint's state holds, besides its best_k_models' keys.
 _PATH_KEYS = ("best_model_path", "last_model_path", "kth_best_model_path")
+# The best checkpoints' names: Lightning writes "{epoch:03d}" as epoch=001 (train_fit's callback).
+BEST_FILENAME = "best-{epoch:03d}-{val_ade:.4f}"
+BEST_PREFIX = "best-epoch="
 
 
 def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:
@@ -92,15 +95,49 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
     # last.ckpt is written as each epoch ends, after its validation (train_checkpoint.RunCheckpoint), and
     # Lightning counts its "epoch" from 0: it has finished epoch + 1
     epoch = checkpoint.get("epoch")
-    return epoch + 1 if isinstance(epoch, int) and not isinstance(epoch, bool) and epoch >= 0 else None
+    done = epoch + 1 if isinstance(epoch, int) and not isinstance(epoch, bool) and epoch >= 0 else None
+    check_kept_checkpoints(checkpoint, last, done)
+    return done
+
+
+def check_kept_checkpoints(checkpoint: dict[str, Any], last: Path, done: int | None) -> None:
+    """PipelineError unless every best checkpoint ``last`` says the run keeps is in its folder, but in the
+    one state Lightning leaves itself: the next epoch's new best saved and the one before removed, last.ckpt
+    not yet rewritten (a kill -9 between the two; ``RunCheckpoint`` forgets the removed one and trains that
+    epoch again). A best missing otherwise (a run moved or copied without it) would make a worse epoch the
+    run's NAME.pt, which no run that was never stopped would have given."""
+    missing = sorted(
+        {name for name in map(_file_name, kept_checkpoints(checkpoint)) if not (last.parent / name).is_file()}
+    )
+    if not missing or (done is not None and any(last.parent.glob(f"{BEST_PREFIX}{done:03d}-*.ckpt"))):
+        return
+    raise PipelineError(
+        f"--resume: {last} names the run's checkpoint {missing[0]}, which is not in {last.parent}; put it "
+        "back there or start a new run with another --out"
+    )
+
+
+def kept_checkpoints(checkpoint: dict[str, Any]) -> list[str]:
+    """The paths of the best checkpoints the ModelCheckpoint states in a Lightning ``checkpoint`` keep."""
+    states = checkpoint.get("callbacks")
+    paths: list[Any] = []
+    for key, state in states.items() if isinstance(states, dict) else ():
+        if str(key).startswith("ModelCheckpoint") and isinstance(state, dict):
+            best_k = state.get("best_k_models")
+            paths += [state.get("best_model_path"), *(best_k if isinstance(best_k, dict) else ())]
+    return [path for path in paths if isinstance(path, str) and path]
+
+
+def _file_name(path: str) -> str:
+    return Path(path).name
 
 
 def relocated(state: dict[str, Any], dirpath: str) -> dict[str, Any]:
     """A ModelCheckpoint's ``state`` with every path it keeps moved into ``dirpath``, the run's checkpoint
     folder now: Lightning stores them absolute and restores them only when that folder has not moved, so a
     moved run forgot its best score and wrote last-v1.ckpt, and still read its best weights from the old
-    folder. The run's checkpoints are all in that one folder, so a file's name finds it; one not there is
-    forgotten (``RunCheckpoint``), never refused: last.ckpt, the file resumed, is all a resume needs."""
+    folder. The run's checkpoints are all in that one folder, so a file's name finds it (one not there is
+    refused by ``check_kept_checkpoints``, or forgotten by ``RunCheckpoint`` in the state a kill leaves)."""
 
     def here(path: Any) -> Any:
         return str(Path(dirpath) / Path(path).name) if isinstance(path, str) and path else path
