@@ -18,7 +18,7 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.controllers import Controller
 
 # The meta every episode gets from the loop itself. A caller's meta that set one would relabel every episode
@@ -35,8 +35,26 @@ OWN_FIELDS: Final[tuple[str, ...]] = (
 )
 
 
+# The modules of the shipped controllers' classes: what one of them raises is a bug, kept with its traceback.
+SHIPPED_MODULES: Final[frozenset[str]] = frozenset({"pipelines.loop.baselines", "pipelines.loop.mpc"})
+
+
 def _named(controller: Controller) -> str:
     return f"controller {controller.name!r} ({type(controller).__qualname__})"
+
+
+def called(controller: Controller, method: str, *args: Any) -> Any:
+    """``controller.<method>(*args)``. What a plugin's method raises is a one-line PipelineError naming the
+    controller and the method (its traceback kept as the cause, for a sweep's errors.jsonl); a shipped
+    controller's exception, a PipelineError and a Ctrl-C (also one CasADi wrapped) propagate as they are."""
+    try:
+        return getattr(controller, method)(*args)
+    except PipelineError:
+        raise
+    except Exception as exc:
+        if type(controller).__module__ in SHIPPED_MODULES or interrupt_behind(exc) is not None:
+            raise
+        raise PipelineError(f"{_named(controller)}: {method}() raised {type(exc).__name__}: {exc}") from exc
 
 
 def _check_array(
@@ -109,7 +127,7 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
 def checked_description(controller: Controller) -> dict[str, Any]:
     """``controller.describe()`` as a dict, its ``"config"`` (if any) a dict too; otherwise a one-line
     PipelineError naming the controller."""
-    described = controller.describe()
+    described = called(controller, "describe")
     if not isinstance(described, Mapping):
         raise PipelineError(
             f"{_named(controller)}: describe() must return a dict, got {type(described).__name__}"

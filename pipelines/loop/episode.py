@@ -1,9 +1,10 @@
 """The closed loop: scenario -> (controller -> simulator step) until the episode ends -> metrics.
 
 Controllers handle their own failures (a solver that fails falls back inside the controller and says so in
-``ControlOutput.fallback``); anything that escapes a controller or an observer is a bug and propagates with
-its traceback. A controller that breaks the plugin contract (``act`` returning no ``ControlOutput``, or
-one of the wrong shapes; ``describe`` no dict) is a PipelineError naming it (``pipelines.loop.contract``).
+``ControlOutput.fallback``); anything that escapes a shipped controller or an observer is a bug and
+propagates with its traceback. A plugin whose method raises, or a controller that breaks the plugin contract
+(``act`` returning no ``ControlOutput``, or one of the wrong shapes; ``describe`` no dict), is a
+PipelineError naming it (``pipelines.loop.contract``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.loop.contract import checked_description, checked_output, episode_meta
+from pipelines.loop.contract import called, checked_description, checked_output, episode_meta
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 
@@ -96,7 +97,7 @@ def run_episode(
     """
     env = CrowdEnv(env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
-    controller.reset(obs)
+    called(controller, "reset", obs)
     episode = {"seed": seed, "scenario": scenario, "n_humans": n_humans, "n_robots": n_robots}
     described = checked_description(controller)
     full_meta = episode_meta(
@@ -111,7 +112,7 @@ def run_episode(
     iterations: list[int] = []
     done = False
     while not done:
-        out = checked_output(controller, controller.act(obs), obs)
+        out = checked_output(controller, called(controller, "act", obs), obs)
         next_obs, done, _ = env.step(out.accelerations)
         solve_times.append(float(out.solve_time_s))
         statuses.append(str(out.status))
@@ -190,7 +191,7 @@ def run_episodes(
             rate = 100.0 * successes / len(results)
             bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
     finally:
-        controller.close()  # e.g. DMPC's solver threads
+        called(controller, "close")  # e.g. DMPC's solver threads
     return results
 
 

@@ -28,7 +28,13 @@ from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_wrappers import VelocityControl
 from crowdsim.metrics import episode_metrics
 from pipelines.errors import PipelineError
-from pipelines.loop.contract import checked_description, checked_meta, checked_output, episode_meta
+from pipelines.loop.contract import (
+    called,
+    checked_description,
+    checked_meta,
+    checked_output,
+    episode_meta,
+)
 from pipelines.loop.controllers import Controller
 from pipelines.loop.episode import EpisodeObserver, EpisodeResult
 
@@ -119,7 +125,7 @@ def run_gym_episode(
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)
     obs: Observation = info["observation"]
-    controller.reset(obs)
+    called(controller, "reset", obs)
     described = checked_description(controller)
     full_meta = episode_meta(
         base.episode, base.config, controller.name, controller.predictor, described, meta, "run_gym_episode"
@@ -129,7 +135,7 @@ def run_gym_episode(
     steps = _Steps()
     done = False
     while not done:
-        out = checked_output(controller, controller.act(obs), obs)
+        out = checked_output(controller, called(controller, "act", obs), obs)
         _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
         steps.add(out)
         for observer in observers:

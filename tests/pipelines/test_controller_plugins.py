@@ -216,6 +216,58 @@ def test_a_plugin_whose_act_returns_no_control_output_is_one_line(capsys):
     assert str(caught.value) == message
 
 
+FAILING = "tests.plugins.failing_controllers"
+
+
+@pytest.mark.parametrize(
+    "name, problem",
+    [
+        ("AlwaysRaises", "reset() raised RuntimeError: broken build"),
+        ("RaisesInAct", "act() raised RuntimeError: boom in act"),
+        ("RaisesInDescribe", "describe() raised KeyError: 'version'"),
+        ("RaisesInClose", "close() raised OSError: cannot release"),
+    ],
+)
+def test_a_plugin_raising_in_a_method_is_one_line_naming_it_and_the_method(name, problem, capsys):
+    """Each ended simulate with the plugin's traceback, taken for a bug in crowdmpc (a constructor raising was
+    already one line)."""
+    import gymnasium as gym
+
+    import crowdsim
+    from pipelines.loop.gym_loop import run_gym_episode
+    from tests.plugins import failing_controllers
+
+    plugin = f"{FAILING}:{name}"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "1"]
+    code, stdout, err = run(capsys, *argv, "--no-progress")
+    controller = getattr(failing_controllers, name)(None, None)
+    message = f"controller {controller.name!r} ({name}): {problem}"
+    assert (code, stdout, err) == (2, "", f"crowdmpc simulate: error: {message}\n")
+    if name != "RaisesInClose":  # the loops never close the controller they are given
+        with pytest.raises(PipelineError) as caught:
+            run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2), seed=0)
+        assert str(caught.value) == message
+
+
+def test_a_shipped_controller_raising_or_ctrl_c_in_a_plugin_propagate_as_they_are(monkeypatch, capsys):
+    """A shipped controller raising is a bug (its traceback); Ctrl-C in a plugin is the user's interrupt."""
+    from pipelines.loop.baselines import BaselineController
+    from tests.plugins.failing_controllers import InterruptedInAct
+
+    with pytest.raises(KeyboardInterrupt):
+        run_episode(InterruptedInAct(None, None), seed=0, scenario="circle", n_humans=2)
+    plugin = f"{FAILING}:InterruptedInAct"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "1"]
+    assert run(capsys, *argv, "--no-progress")[0] == 130
+
+    def broken(self, obs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(BaselineController, "act", broken)
+    with pytest.raises(RuntimeError, match="a bug"):
+        run_episode(make_controller(ControllerSpec("orca")), seed=0, scenario="circle", n_humans=2)
+
+
 BROKEN = "tests.plugins.broken_controllers"
 BROKEN_CONTRACTS = [
     ("FlatPlan", "act() must return plan of shape (3, H, 2) or None, got shape (5,)"),

@@ -1,6 +1,7 @@
 """Controller plugins that fail as a sweep's episodes may: ``Dies`` ends its own worker process (as a
 segfault in a library or the kernel's OOM killer would), ``RaisesOnCircles`` raises on the circle crossings
-(every other episode of a cell, on every run), ``SetInDescribe`` describes itself with a set (no JSON)."""
+(every other episode of a cell, on every run), ``SetInDescribe`` describes itself with a set (no JSON);
+``RaisesIn...`` raise in one method each, ``InterruptedInAct`` is Ctrl-C in act."""
 
 from __future__ import annotations
 
@@ -41,3 +42,31 @@ class SetInDescribe(StraightLine):
 
     def describe(self) -> dict[str, Any]:
         return {"predictor_sha256": None, "config": {"modes": {"a", "b"}}}
+
+
+class RaisesInAct(StraightLine):
+    name = "raises_in_act"
+
+    def act(self, obs: Observation) -> Any:
+        raise RuntimeError("boom in act")
+
+
+class RaisesInDescribe(StraightLine):
+    name = "raises_in_describe"
+
+    def describe(self) -> dict[str, Any]:
+        raise KeyError("version")
+
+
+class RaisesInClose(StraightLine):
+    name = "raises_in_close"
+
+    def close(self) -> None:
+        raise OSError("cannot release")
+
+
+class InterruptedInAct(StraightLine):
+    name = "interrupted_in_act"
+
+    def act(self, obs: Observation) -> Any:
+        raise KeyboardInterrupt
