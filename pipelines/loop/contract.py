@@ -60,27 +60,32 @@ def called(controller: Controller, method: str, *args: Any) -> Any:
 def _check_array(
     controller: Controller, field: str, value: object, shape: tuple[int | None, ...], expected: str
 ) -> None:
-    """PipelineError unless ``value`` is an array of numbers of ``shape`` (None: any length there)."""
+    """PipelineError unless ``value`` is an array of finite numbers of ``shape`` (None: any length there):
+    integers or floats, not booleans (``a > 0`` was taken for 1 m/s^2)."""
     try:
         array: np.ndarray | None = np.asarray(value)
     except (TypeError, ValueError):  # ragged rows
         array = None
     if (
         array is not None
-        and array.dtype.kind in "biuf"
+        and array.dtype.kind in "iuf"
         and array.ndim == len(shape)
         and all(want is None or want == got for want, got in zip(shape, array.shape, strict=True))
     ):
-        return
+        if np.isfinite(array).all():
+            return
+        bad = array[~np.isfinite(array)].flat[0]
+        raise PipelineError(f"{_named(controller)}: act() must return {field} of finite numbers, got {bad}")
     got = "ragged rows" if array is None else f"shape {array.shape}"
-    if array is not None and array.dtype.kind not in "biuf":
+    if array is not None and array.dtype.kind not in "iuf":
         got += f" of {array.dtype} values"
     raise PipelineError(f"{_named(controller)}: act() must return {field} {expected}, got {got}")
 
 
 def checked_output(controller: Controller, out: object, obs: Observation) -> ControlOutput:
     """``out``, its arrays as float arrays, if it is a ``ControlOutput`` for ``obs``: ``accelerations``
-    ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None, ``iterations`` an int,
+    ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None (finite integers or
+    floats, no booleans), ``iterations`` an int,
     ``status`` a str, ``fallback`` a str or None, ``solve_time_s`` a number, ``potential`` a number or None.
     Anything else (bare accelerations, a row short) is a one-line PipelineError naming the controller."""
     if not isinstance(out, ControlOutput):

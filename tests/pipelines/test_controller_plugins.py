@@ -280,6 +280,13 @@ BROKEN_CONTRACTS = [
     ("FallbackNumber", "act() must return fallback as a str or None, got 3"),
     ("SolveTimeNone", "act() must return solve_time_s as a number, got None"),
     ("PotentialText", "act() must return potential as a number or None, got 'x'"),
+    (
+        "BoolAccelerations",
+        "act() must return accelerations of shape (3, 2), a row per robot, got shape (3, 2) of bool values",
+    ),
+    ("NaNAccelerations", "act() must return accelerations of finite numbers, got nan"),
+    ("InfPlan", "act() must return plan of finite numbers, got inf"),
+    ("NaNPrediction", "act() must return prediction of finite numbers, got nan"),
 ]
 
 

@@ -122,3 +122,37 @@ class RowsAsLists(StraightLine):
     def act(self, obs: Observation) -> ControlOutput:
         out = super().act(obs)
         return dataclasses.replace(out, accelerations=np.asarray(out.accelerations).tolist())
+
+
+class BoolAccelerations(StraightLine):
+    """Whether each component is positive: True was taken for 1 m/s^2."""
+
+    name = "bool_accelerations"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = super().act(obs)
+        return dataclasses.replace(out, accelerations=out.accelerations > 0)
+
+
+class NaNAccelerations(StraightLine):
+    name = "nan_accelerations"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = super().act(obs)
+        return dataclasses.replace(out, accelerations=np.full_like(out.accelerations, np.nan))
+
+
+class InfPlan(StraightLine):
+    name = "inf_plan"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        plan = np.zeros((obs.n_robots, 4, 2))
+        plan[0, 1, 0] = np.inf
+        return dataclasses.replace(super().act(obs), plan=plan)
+
+
+class NaNPrediction(StraightLine):
+    name = "nan_prediction"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), prediction=np.full((4, obs.n_humans, 2), np.nan))
