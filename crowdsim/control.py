@@ -20,7 +20,7 @@ class ControlOutput:
     solve_time_s: float = 0.0  # wall time of the whole control step (prediction + all solves)
     status: str = "ok"  # solver status of the step ("ok" for the baselines)
     iterations: int = 0  # IBR iterations used (0 for the baselines)
-    fallback: str | None = None  # None, "shifted" (previous plan shifted) or "brake"
+    fallback: str | None = None  # None, or the fallback used: the MPCs' "shifted" (previous plan), "brake"
     potential: float | None = None  # F_t, Eq. (16), at the returned plan
     plan: np.ndarray | None = None  # (M, H, 2) planned robot positions at t+1..t+H
     prediction: np.ndarray | None = None  # (H, N_h, 2) predicted human positions used by the final solve

@@ -136,7 +136,10 @@ SOLVER = MessageSchema(
             "solve_time_s": {"type": "number", "minimum": 0},
             "iterations": {"type": "integer", "minimum": 0},
             "potential": {"type": ["number", "null"], "description": "F_t, Eq. (16)"},
-            "fallback": {"type": ["string", "null"], "enum": [None, "shifted", "brake"]},
+            "fallback": {
+                "type": ["string", "null"],
+                "description": 'null, or the fallback used: the MPCs\' "shifted" or "brake", a plugin\'s own',
+            },
             "extra": {"type": "object"},
         },
     ),

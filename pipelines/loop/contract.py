@@ -9,6 +9,7 @@ MCAP recorder steps later, or (padded into the gym action) as a robot that silen
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from numbers import Real
 from typing import Any, Final
@@ -85,9 +86,10 @@ def _check_array(
 def checked_output(controller: Controller, out: object, obs: Observation) -> ControlOutput:
     """``out``, its arrays as float arrays, if it is a ``ControlOutput`` for ``obs``: ``accelerations``
     ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None (finite integers or
-    floats, no booleans), ``iterations`` an int,
-    ``status`` a str, ``fallback`` a str or None, ``solve_time_s`` a number, ``potential`` a number or None.
-    Anything else (bare accelerations, a row short) is a one-line PipelineError naming the controller."""
+    floats, no booleans), ``iterations`` an int >= 0, ``status`` a str, ``fallback`` a str or None (any name:
+    the recording's schema takes a plugin's own), ``solve_time_s`` a finite number >= 0, ``potential`` a
+    number or None. Anything else (bare accelerations, a row short) is a one-line PipelineError naming the
+    controller."""
     if not isinstance(out, ControlOutput):
         raise PipelineError(
             f"{_named(controller)}: act() must return a crowdsim.control.ControlOutput, got "
@@ -117,6 +119,16 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
     ):
         if not (value is None and may_be_none) and (isinstance(value, bool) or not isinstance(value, Real)):
             expected = "a number or None" if may_be_none else "a number"
+            raise PipelineError(
+                f"{_named(controller)}: act() must return {name} as {expected}, got {value!r}"
+            )
+    # the recording's schema: a wall time and a count are finite and never negative (a negative time also
+    # became the summary's median)
+    for name, value, expected in (
+        ("solve_time_s", out.solve_time_s, "a finite number >= 0 (s)"),
+        ("iterations", out.iterations, "an int >= 0"),
+    ):
+        if not (math.isfinite(value) and value >= 0):
             raise PipelineError(
                 f"{_named(controller)}: act() must return {name} as {expected}, got {value!r}"
             )

@@ -287,6 +287,9 @@ BROKEN_CONTRACTS = [
     ("NaNAccelerations", "act() must return accelerations of finite numbers, got nan"),
     ("InfPlan", "act() must return plan of finite numbers, got inf"),
     ("NaNPrediction", "act() must return prediction of finite numbers, got nan"),
+    ("NegativeSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got -5.0"),
+    ("NaNSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got nan"),
+    ("NegativeIterations", "act() must return iterations as an int >= 0, got -1"),
 ]
 
 
@@ -329,6 +332,17 @@ def test_a_wrong_plan_under_record_is_one_line(tmp_path, capsys):
     code, stdout, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
     assert code == 2 and stdout == ""
     assert err == f"crowdmpc simulate: error: controller 'flat_plan' (FlatPlan): {BROKEN_CONTRACTS[0][1]}\n"
+
+
+def test_a_plugins_own_fallback_is_recorded_in_a_file_review_check_passes(tmp_path, capsys):
+    """The guide lets act() say which fallback it used; the recording's schema knew only the MPCs' "shifted"
+    and "brake", so simulate --record wrote files that review --check failed."""
+    plugin = f"{BROKEN}:OwnFallback"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "1"]
+    code, _, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
+    assert code == 0, err
+    code, out, err = run(capsys, "review", str(tmp_path / "rec"), "--check")
+    assert code == 0 and "stop" not in err, out + err
 
 
 def test_the_guides_controller_runs_as_written(tmp_path, monkeypatch, capsys):

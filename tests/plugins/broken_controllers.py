@@ -156,3 +156,35 @@ class NaNPrediction(StraightLine):
 
     def act(self, obs: Observation) -> ControlOutput:
         return dataclasses.replace(super().act(obs), prediction=np.full((4, obs.n_humans, 2), np.nan))
+
+
+class NegativeSolveTime(StraightLine):
+    """A solve time of -5 s: the summary printed a median of -5000 ms."""
+
+    name = "negative_solve_time"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), solve_time_s=-5.0)
+
+
+class NaNSolveTime(StraightLine):
+    name = "nan_solve_time"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), solve_time_s=float("nan"))
+
+
+class NegativeIterations(StraightLine):
+    name = "negative_iterations"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), iterations=-1)
+
+
+class OwnFallback(StraightLine):
+    """Falls back its own way, and says so by its own name."""
+
+    name = "own_fallback"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), fallback="stop")
