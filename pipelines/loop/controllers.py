@@ -139,7 +139,17 @@ def _build_plugin(
     plugin: ControllerPlugin, spec: ControllerSpec, env_config: EnvConfig | None, jit: bool
 ) -> Controller:
     """``plugin.cls(spec, env_config, jit=jit)``; a constructor that fails, or builds something without a
-    ``name`` and a ``predictor``, is a one-line PipelineError naming the plugin."""
+    ``name`` and a ``predictor``, or whose ``predictor`` is not the one the run's records and cell keys name
+    (``spec.predictor`` for a plugin with ``uses_predictor``, else None), is a one-line PipelineError naming
+    the plugin. An unknown ``spec.predictor`` is refused first for a plugin with ``uses_predictor``, as the
+    shipped MPCs refuse it when they load it (``UnknownPredictor``)."""
+    if plugin.kind.uses_predictor:
+        from predictors import zoo
+        from predictors.errors import UnknownPredictor
+        from predictors.registry import PREDICTORS, available
+
+        if spec.predictor not in PREDICTORS and zoo.locate(spec.predictor) is None:  # load_predictor's names
+            raise UnknownPredictor(spec.predictor, available())
     try:
         controller = plugin.cls(spec, env_config, jit=jit)
     except PipelineError:
@@ -153,6 +163,16 @@ def _build_plugin(
         raise PipelineError(
             f"controller {plugin.name!r}: a {plugin.cls.__name__} needs a non-empty str name and a predictor "
             f"(str or None), got name={name!r:.60}, predictor={predictor!r:.60}"
+        )
+    if plugin.kind.uses_predictor and predictor != spec.predictor:
+        raise PipelineError(
+            f"controller {plugin.name!r}: a {plugin.cls.__name__} has uses_predictor = True: its predictor "
+            f"must be spec.predictor {spec.predictor!r:.60}, got {predictor!r:.60}"
+        )
+    if not plugin.kind.uses_predictor and predictor is not None:
+        raise PipelineError(
+            f"controller {plugin.name!r}: a {plugin.cls.__name__} has uses_predictor = False: its predictor "
+            f"must be None, got {predictor!r:.60} (uses_predictor = True plans with spec.predictor)"
         )
     return controller  # type: ignore[no-any-return]
 

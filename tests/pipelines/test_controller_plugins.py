@@ -345,6 +345,44 @@ def test_a_plugins_own_fallback_is_recorded_in_a_file_review_check_passes(tmp_pa
     assert code == 0 and "stop" not in err, out + err
 
 
+@pytest.mark.parametrize(
+    "name, predictor, message",
+    [
+        ("PredictingItsOwn", "constant_velocity",
+         "a PredictingItsOwn has uses_predictor = True: its predictor must be spec.predictor "
+         "'constant_velocity', got 'orca_oracle'"),
+        ("PredictingNone", "orca_oracle",
+         "a PredictingNone has uses_predictor = True: its predictor must be spec.predictor 'orca_oracle', "
+         "got None"),
+        ("HiddenPredictor", None,
+         "a HiddenPredictor has uses_predictor = False: its predictor must be None, got 'constant_velocity' "
+         "(uses_predictor = True plans with spec.predictor)"),
+    ],
+)  # fmt: skip
+def test_a_plugin_naming_another_predictor_than_the_run_is_one_line(name, predictor, message, capsys):
+    """The table and the cell keys named the spec's predictor while episodes.jsonl named the plugin's."""
+    plugin = f"{TOYS}:{name}"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "1"]
+    if predictor is not None:
+        argv += ["--predictor", predictor]
+    code, stdout, err = run(capsys, *argv, "--no-progress")
+    assert (code, stdout, err) == (2, "", f"crowdmpc simulate: error: controller {plugin!r}: {message}\n")
+
+
+def test_a_plugin_planning_with_the_runs_predictor_runs_and_an_unknown_one_is_refused(tmp_path, capsys):
+    """A plugin naming spec.predictor but never loading it ran with --predictor no_such_pred, rc 0, the header
+    naming no_such_pred: an unknown predictor is refused before it is built, as cmpc refuses it."""
+    plugin, out = f"{TOYS}:Predicting", tmp_path / "p.json"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "1"]
+    code, stdout, err = run(capsys, *argv, "--predictor", "orca_oracle", "--no-progress", "--json", str(out))
+    assert code == 0 and stdout.startswith(f"controller {plugin} | predictor orca_oracle |"), err
+    assert [e["predictor"] for e in json.loads(out.read_text())["episodes"]] == ["orca_oracle"]
+    code, stdout, err = run(capsys, *argv, "--predictor", "no_such_pred", "--no-progress")
+    assert (code, stdout) == (2, "")
+    assert err.startswith("crowdmpc simulate: error: unknown predictor 'no_such_pred'; choose from [")
+    assert err == run(capsys, *argv[2:4], "cmpc", *argv[5:], "--predictor", "no_such_pred")[2]
+
+
 def test_the_guides_controller_runs_as_written(tmp_path, monkeypatch, capsys):
     """docs/extending.md's "Your own controller" example, saved as the user would, through simulate."""
     guide = (REPO / "docs" / "extending.md").read_text()

@@ -74,3 +74,41 @@ class Nameless(StraightLine):
     """Builds an object without a name: make_controller refuses it."""
 
     name = ""
+
+
+class Predicting(StraightLine):
+    """Plans with the run's predictor (``uses_predictor``), as the guide says: names ``spec.predictor``."""
+
+    uses_predictor = True
+    name = "predicting"
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False):
+        super().__init__(spec, env_config, jit=jit)
+        self.predictor = spec.predictor
+
+
+class PredictingItsOwn(Predicting):
+    """Names a predictor of its own, whatever the run asks for: the records and the cell keys disagreed."""
+
+    name = "predicting_its_own"
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False):
+        super().__init__(spec, env_config, jit=jit)
+        self.predictor = "orca_oracle"
+
+
+class PredictingNone(Predicting):
+    """States ``uses_predictor`` and names none."""
+
+    name = "predicting_none"
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False):
+        super().__init__(spec, env_config, jit=jit)
+        self.predictor = None
+
+
+class HiddenPredictor(StraightLine):
+    """Names a predictor while stating it uses none (the cell keys say none)."""
+
+    name = "hidden_predictor"
+    predictor = "constant_velocity"  # type: ignore[assignment]
