@@ -9,6 +9,7 @@ MCAP recorder steps later, or (padded into the gym action) as a robot that silen
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Mapping
 from numbers import Real
@@ -21,6 +22,7 @@ from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.controllers import Controller
+from pipelines.plain_json import plain
 
 # The meta every episode gets from the loop itself. A caller's meta that set one would relabel every episode
 # alike: recordings are named by seed and scenario, so a run's episodes would overwrite one file.
@@ -142,8 +144,9 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
 
 
 def checked_description(controller: Controller) -> dict[str, Any]:
-    """``controller.describe()`` as a dict, its ``"config"`` (if any) a dict too; otherwise a one-line
-    PipelineError naming the controller."""
+    """``controller.describe()`` as a dict of JSON values, its ``"config"`` (if any) a dict too, its
+    ``"predictor_sha256"`` (if any) a str or None; otherwise a one-line PipelineError naming the
+    controller."""
     described = called(controller, "describe")
     if not isinstance(described, Mapping):
         raise PipelineError(
@@ -161,6 +164,20 @@ def checked_description(controller: Controller) -> dict[str, Any]:
         raise PipelineError(
             f"{_named(controller)}: describe() must not set {clash}: the episode sets them itself"
         )
+    sha256 = described.get("predictor_sha256")
+    if sha256 is not None and not isinstance(sha256, str):  # the records' and the recordings' schemas
+        raise PipelineError(
+            f"{_named(controller)}: describe()['predictor_sha256'] must be a str or None, got {sha256!r:.60}"
+        )
+    # as the recordings and the sweep's records write it: simulate stringified what JSON cannot hold into
+    # the MCAP ("<object object at 0x...>") where a sweep refused the episode
+    try:
+        json.dumps(plain(described), allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as exc:
+        raise PipelineError(
+            f"{_named(controller)}: describe() must return JSON values (dicts, lists, strings, numbers, "
+            f"booleans, None), got {exc}"
+        ) from None
     return dict(described)
 
 

@@ -290,6 +290,12 @@ BROKEN_CONTRACTS = [
     ("NegativeSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got -5.0"),
     ("NaNSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got nan"),
     ("NegativeIterations", "act() must return iterations as an int >= 0, got -1"),
+    (
+        "ObjectInConfig",
+        "describe() must return JSON values (dicts, lists, strings, numbers, booleans, None), "
+        "got Object of type object is not JSON serializable",
+    ),
+    ("NumberSha256", "describe()['predictor_sha256'] must be a str or None, got 123"),
 ]
 
 

@@ -458,7 +458,7 @@ def test_a_record_that_is_no_json_is_an_episode_error_naming_the_controller(tmp_
     outcome = run_sweep(_controllers(tmp_path, 2, ["straight", bad]))
     assert outcome.ran == 2 and len(outcome.errors) == 2
     error = json.loads((tmp_path / ERRORS_FILE).read_text().splitlines()[0])["error"]
-    assert f"PipelineError: controller {bad!r}: its episode record is not JSON" in error
+    assert "PipelineError: controller 'set_in_describe' (SetInDescribe): describe() must return JSON" in error
     assert "Object of type set is not JSON serializable" in error
     with pytest.raises(PipelineError, match=r"cannot write the record of 'k' as JSON \(Object of type set"):
         EpisodeLog(tmp_path / "log.jsonl").append({"key": "k", "modes": {"a"}})

@@ -188,3 +188,19 @@ class OwnFallback(StraightLine):
 
     def act(self, obs: Observation) -> ControlOutput:
         return dataclasses.replace(super().act(obs), fallback="stop")
+
+
+class ObjectInConfig(StraightLine):
+    """A config value no JSON holds: simulate stringified it into the MCAP, a sweep refused the episode."""
+
+    name = "object_in_config"
+
+    def describe(self) -> dict[str, Any]:
+        return {"predictor_sha256": None, "config": {"speed": object()}}
+
+
+class NumberSha256(StraightLine):
+    name = "number_sha256"
+
+    def describe(self) -> dict[str, Any]:
+        return {"predictor_sha256": 123, "config": {}}
