@@ -175,21 +175,11 @@ class ModelKind:
 
         Its size is counted on the meta device first: no config can make us allocate more than
         ``MAX_PARAMETERS`` parameters."""
-        import torch
-
         if isinstance(config, self.config_class):
             self.check_defining(config)  # a dict is checked by _config
         else:
             config = self._config(config)
-        try:
-            with torch.device("meta"):
-                probe = self.net_class(config)
-        except PredictorError:
-            raise
-        except Exception as exc:  # a plugin's constructor: its fault is the config's or the class's
-            raise PredictorError(
-                f"{self.name}: building the net failed: {type(exc).__name__}: {exc}"
-            ) from None
+        probe = self._meta_net(config)
         count = sum(p.numel() for p in probe.parameters())
         if count > MAX_PARAMETERS:
             raise PredictorError(
@@ -197,6 +187,28 @@ class ModelKind:
                 f"{MAX_PARAMETERS:,} allowed"
             )
         return self.net_class(config)
+
+    def head_type(self, config: Any) -> object:
+        """The ``head_type`` of this kind's net for ``config`` (the contract's "gaussian" or "point"; what
+        training loss it takes): the class's own when it names one, else a net's built on the meta device
+        (a property of the config, as Social-LSTM's ``head``), allocating nothing."""
+        static = inspect.getattr_static(self.net_class, "head_type", None)
+        if isinstance(static, str):
+            return static
+        return getattr(self._meta_net(config), "head_type", None)
+
+    def _meta_net(self, config: Any) -> torch.nn.Module:
+        import torch
+
+        try:
+            with torch.device("meta"):
+                return self.net_class(config)
+        except PredictorError:
+            raise
+        except Exception as exc:  # a plugin's constructor: its fault is the config's or the class's
+            raise PredictorError(
+                f"{self.name}: building the net failed: {type(exc).__name__}: {exc}"
+            ) from None
 
     def predictor(self, net: torch.nn.Module, *, name: str, obs_len: int) -> LearnedPredictor:
         from predictors.learned import LearnedPredictor

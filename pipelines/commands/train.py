@@ -118,7 +118,12 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--step-size", type=int, default=10, help="epochs per 10x learning-rate decay")
     parser.add_argument(
-        "--loss", choices=("gaussian", "l2"), default="gaussian", help="(LSTMs) default gaussian"
+        "--loss",
+        choices=("gaussian", "l2"),
+        default=None,
+        help="training loss of a net with a Gaussian head: gaussian (its negative log-likelihood) or l2 (on "
+        "its mean); a point head trains on l2 only, social_gan on its variety + adversarial loss (default: "
+        "gaussian for Gaussian heads, l2 for point heads; with --resume, the run's)",
     )
     parser.add_argument(
         "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
@@ -205,6 +210,32 @@ def _net_config(args: argparse.Namespace) -> tuple[str | None, Any]:
     return (pooling if isinstance(pooling, str) else None), config
 
 
+def _loss(args: argparse.Namespace, net_config: Any) -> str:
+    """The loss the run trains on: --loss, else the one its net's head takes (gaussian for a Gaussian head,
+    l2 for a point head); PipelineError when --loss names one the net does not train on (it was ignored:
+    ``PredictorModule.model_step`` trains a point head on L2, the GAN on its own loss, whatever it says)."""
+    from predictors.models import model_kind
+
+    kind = model_kind(args.model)
+    if kind.adversarial:
+        if args.loss is not None:
+            raise PipelineError(
+                f"--loss does not apply to {args.model} (a GAN: it trains on its variety + adversarial loss)"
+            )
+        return "l2"
+    try:
+        head = kind.head_type(net_config)
+    except PredictorError as exc:
+        raise PipelineError(f"{args.model}: {exc}") from None
+    if head != "point":  # "gaussian"; any other head is refused by the contract check as the net is built
+        return str(args.loss or "gaussian")
+    if args.loss == "gaussian":
+        raise PipelineError(
+            f"--loss gaussian does not apply to {args.model} (its head_type is 'point': it trains on l2)"
+        )
+    return "l2"
+
+
 def _parse_net_config(text: str) -> dict[str, Any]:
     if len(text) > MAX_NET_CONFIG_CHARS:
         raise PipelineError(
@@ -265,11 +296,16 @@ def run(args: argparse.Namespace) -> int:
         check_last_checkpoint,
         check_more_epochs,
         check_resumed_settings,
+        recorded_loss,
         run_settings,
     )
 
+    loss_typed = args.loss is not None
+    args.loss = _loss(args, net_config)
     settings = run_settings(args, net_config, name, files)
     if args.resume:
+        if not loss_typed:  # the run's own: runs before this default recorded "gaussian" for point heads too
+            settings["loss"] = args.loss = recorded_loss(out, last) or args.loss
         name = check_resumed_settings(out, settings, name_given=args.name is not None)
         done = check_last_checkpoint(last, settings)
         check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())

@@ -19,6 +19,7 @@ _PATH_KEYS = ("best_model_path", "last_model_path", "kth_best_model_path")
 # The best checkpoints' names: Lightning writes "{epoch:03d}" as epoch=001 (train_fit's callback).
 BEST_FILENAME = "best-{epoch:03d}-{val_ade:.4f}"
 BEST_PREFIX = "best-epoch="
+_LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Lightning
 
 
 def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:
@@ -36,6 +37,28 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
         "limit_batches": args.limit_batches,
         "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
     }
+
+
+def recorded_loss(out: Path, last: Path) -> str | None:
+    """The loss the run in ``out`` was started with: its settings file's, else ``last``'s (runs from before
+    that file); None when neither says (the checks of the resume then say what is wrong with them). A resume
+    that types no --loss continues with it: a run started before the default followed the net's head
+    recorded "gaussian" for a point head too, which trained on L2 and is still refused when typed."""
+    try:
+        recorded = json.loads((out / SETTINGS_FILE).read_text())
+    except (OSError, ValueError, RecursionError):
+        recorded = None
+    loss = recorded.get("loss") if isinstance(recorded, dict) else None
+    if loss in _LOSSES:
+        return str(loss)
+    import torch
+
+    try:
+        hyper = torch.load(last, map_location="cpu", weights_only=True).get("hyper_parameters")
+        loss = hyper["optim_config"]["loss"]
+    except Exception:  # refused, with why, by check_last_checkpoint
+        return None
+    return str(loss) if loss in _LOSSES else None
 
 
 def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: bool) -> str:

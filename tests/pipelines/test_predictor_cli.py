@@ -292,6 +292,56 @@ def test_the_recorded_loss_is_the_one_trained(trained):
     assert trained_loss(make_module("social_gan", None, OptimConfig()), "gaussian") == "variety+adversarial"
 
 
+def test_a_loss_the_net_does_not_train_on_is_refused_and_the_default_follows_its_head(tmp_path, capsys):
+    """--loss gaussian of a net with a point head, and any --loss of the GAN, were accepted and ignored (the
+    run trained on L2, or on the GAN's own loss): refused in one line naming the model, before any run folder
+    is made. With no --loss typed, the run trains on, and records, its head's: l2 for a point head."""
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    base = ["train", "--train", data, "--val", data, "--epochs", "1", "--batch-size", "2", "--no-progress"]
+    point = [*base, "--model", "social_lstm", "--net-config", '{"head": "point"}', "--name", "point"]
+    assert main([*point, "--out", str(tmp_path / "point"), "--loss", "gaussian"]) == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc train: error: --loss gaussian does not apply to social_lstm (its head_type is 'point': it "
+        "trains on l2)\n"
+    )
+    assert main([*base, "--model", "social_gan", "--out", str(tmp_path / "gan"), "--loss", "l2"]) == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc train: error: --loss does not apply to social_gan (a GAN: it trains on its variety + "
+        "adversarial loss)\n"
+    )
+    assert not (tmp_path / "point").exists() and not (tmp_path / "gan").exists()
+    assert main([*point, "--out", str(tmp_path / "point")]) == 0
+    assert json.loads((tmp_path / "point" / "train_settings.json").read_text())["loss"] == "l2"
+    assert json.loads((tmp_path / "point" / "point.json").read_text())["training"]["optim"]["loss"] == "l2"
+    capsys.readouterr()
+    assert main([*point, "--out", str(tmp_path / "point"), "--loss", "l2", "--epochs", "2", "--resume"]) == 0
+
+
+def test_a_run_recorded_before_the_loss_followed_the_head_resumes_with_its_own(tmp_path, capsys):
+    """A point-head run started when --loss defaulted to gaussian recorded "gaussian" (and trained on L2):
+    resumed with no --loss it keeps that record, settings file and last.ckpt alike, as a Gaussian-head run
+    recorded "gaussian" does; typed, --loss gaussian is refused there too."""
+    import torch
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    out = tmp_path / "old"
+    args = ["train", "--model", "social_lstm", "--net-config", '{"head": "point"}', "--train", data]
+    args += ["--val", data, "--batch-size", "2", "--no-progress", "--name", "old", "--out", str(out)]
+    assert main([*args, "--epochs", "1"]) == 0
+    settings = out / "train_settings.json"
+    settings.write_text(json.dumps({**json.loads(settings.read_text()), "loss": "gaussian"}))
+    last = out / "checkpoints" / "last.ckpt"
+    checkpoint = torch.load(last, map_location="cpu", weights_only=True)
+    checkpoint["hyper_parameters"]["optim_config"]["loss"] = "gaussian"
+    torch.save(checkpoint, last)
+    capsys.readouterr()
+    assert main([*args, "--epochs", "2", "--loss", "gaussian", "--resume"]) == 2
+    assert "--loss gaussian does not apply to social_lstm" in capsys.readouterr().err
+    assert main([*args, "--epochs", "2", "--resume"]) == 0
+    assert json.loads(settings.read_text())["loss"] == "gaussian"
+    assert json.loads((out / "old.json").read_text())["training"]["optim"]["loss"] == "l2"
+
+
 @pytest.mark.parametrize("model", ["social_lstm", "social_gan"])
 def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
     """One epoch then --resume to two equals two epochs straight, weight for weight: the resumed epoch
