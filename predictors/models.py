@@ -345,7 +345,25 @@ def _environment_plugins() -> None:
 
 
 def _entry_points() -> dict[str, Any]:
-    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+    """The installed entry points of ``ENTRY_POINT_GROUP`` by name, not loaded; PredictorError naming the
+    distribution when one takes a shipped kind's name (the shipped kind ran in its place, without a word,
+    where ``--plugin`` refuses the like)."""
+    points = {}
+    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if entry.name in shipped():
+            raise PredictorError(shadowing(entry, "model"))
+        points[entry.name] = entry
+    return points
+
+
+def shadowing(entry: Any, what: str) -> str:
+    """The one-line refusal of an installed entry point that takes the name of a shipped ``what`` (a model
+    kind, or a controller: ``pipelines.loop.spec``)."""
+    dist = getattr(getattr(entry, "dist", None), "name", None) or "?"
+    return (
+        f"entry point {entry.name!r} ({entry.value}) of distribution {dist!r} would shadow a shipped {what}; "
+        f"rename it in {dist}'s {entry.group!r} entry points or uninstall {dist}"
+    )
 
 
 def model_kinds() -> dict[str, ModelKind]:
@@ -371,6 +389,7 @@ def model_kind(name: object) -> ModelKind:
         raise UnknownModel(name, model_names())
     kinds = shipped()
     if name in kinds:
+        _entry_points()  # refused when one shadows a shipped kind
         return kinds[name]
     if name in _PLUGINS:
         return _PLUGINS[name]

@@ -131,6 +131,7 @@ def make_controller(
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
     compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
     if is_shipped(spec.controller):
+        controller_names()  # PipelineError when an installed entry point takes its name
         return CONTROLLERS[spec.controller](spec, env_config, jit)
     return _build_plugin(controller_plugin(spec.controller), spec, env_config, jit)
 
@@ -180,9 +181,13 @@ def _build_plugin(
 def controller_name(value: str) -> str:
     """``--controller``'s type: ``value`` if some source registers it, else the parser's one-line error
     (argparse's own wording for an unknown name; how to register it for a ``module:Class``)."""
-    if is_shipped(value) or value in controller_names():
+    try:
+        names = controller_names()
+    except PipelineError as exc:  # an installed entry point that takes a shipped controller's name
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if value in names:
         return value
     if is_plugin_spec(value):
         raise argparse.ArgumentTypeError(str(UnknownController(value, [])))
-    choices = ", ".join(repr(name) for name in controller_names())
+    choices = ", ".join(repr(name) for name in names)
     raise argparse.ArgumentTypeError(f"invalid choice: {value!r:.60} (choose from {choices})")

@@ -215,7 +215,17 @@ def _environment_plugins() -> None:
 
 
 def _entry_points() -> dict[str, metadata.EntryPoint]:
-    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP) if not is_shipped(ep.name)}
+    """The installed entry points of ``ENTRY_POINT_GROUP`` by name, not loaded; PipelineError naming the
+    distribution when one takes a shipped controller's name (the shipped one ran in its place, without a
+    word)."""
+    from predictors.models import shadowing
+
+    points = {}
+    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if is_shipped(entry.name):
+            raise PipelineError(shadowing(entry, "controller"))
+        points[entry.name] = entry
+    return points
 
 
 def controller_names() -> list[str]:

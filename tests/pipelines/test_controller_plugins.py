@@ -131,14 +131,39 @@ def test_a_new_process_sees_the_registered_controllers(tmp_path):
 
 def test_an_entry_point_names_a_controller(monkeypatch):
     entry = EntryPoint(name="straight_line", value=TOY, group=registry.ENTRY_POINT_GROUP)
-    shadow = EntryPoint(name="cmpc", value=TOY, group=registry.ENTRY_POINT_GROUP)  # shipped names win
-    monkeypatch.setattr(registry.metadata, "entry_points", lambda group: [entry, shadow])
+    monkeypatch.setattr(registry.metadata, "entry_points", lambda group: [entry])
     assert controller_names() == sorted([*SHIPPED, "straight_line"])
     result = run_episode(
         make_controller(ControllerSpec("straight_line")), seed=0, scenario="circle", n_humans=2
     )
     assert result.metrics.success and registry.controller_plugin("straight_line").source == "entry point ?"
     assert make_controller(ControllerSpec("cmpc")).name == "cmpc"
+
+
+def test_an_installed_entry_point_named_as_a_shipped_controller_is_refused(monkeypatch, tmp_path, capsys):
+    """An installed package declaring ``cmpc = module:Class`` was ignored without a word (the shipped CMPC
+    ran in its place): refused in one line naming the distribution and the entry point, wherever controllers
+    are listed or built, and by simulate's --controller."""
+    from tests.plugins import install_distribution
+
+    group = registry.ENTRY_POINT_GROUP
+    install_distribution(monkeypatch, tmp_path / "site", f"[{group}]\nstraight_line = {TOY}\ncmpc = {TOY}\n")
+    message = (
+        f"entry point 'cmpc' ({TOY}) of distribution 'shadow-pkg' would shadow a shipped controller; "
+        f"rename it in shadow-pkg's '{group}' entry points or uninstall shadow-pkg"
+    )
+    for call in (
+        controller_names,
+        lambda: make_controller(ControllerSpec("cmpc")),
+        lambda: make_controller(ControllerSpec("straight_line")),
+    ):
+        with pytest.raises(PipelineError) as refused:
+            call()
+        assert str(refused.value) == message
+    line = parser_error(capsys, "simulate", "--controller", "cmpc")
+    assert (
+        line == f"crowdmpc simulate: error: argument --controller: {message}; see 'crowdmpc simulate --help'"
+    )
 
 
 # ------------------------------------------------------------------------------------------ bad plugins

@@ -230,12 +230,41 @@ def test_a_class_without_the_step_methods_is_refused(no_plugins, monkeypatch):
 
 # ------------------------------------------------------------------------------------------- entry points
 def test_a_plugin_by_entry_point(no_plugins, monkeypatch):
-    fake_entry_points(monkeypatch, toy_ep=TOY, social_lstm=TOY)
+    fake_entry_points(monkeypatch, toy_ep=TOY)
     assert "toy_ep" in model_names()
     kind = model_kind("toy_ep")
     assert kind.net_class is ToyNet and kind.source.startswith("entry point") and kind.name == "toy_ep"
     assert model_kinds()["toy_ep"] is kind
-    assert model_kind("social_lstm").source == "shipped"  # an entry point never replaces a shipped kind
+    assert model_kind("social_lstm").source == "shipped"
+
+
+def test_an_installed_entry_point_named_as_a_shipped_kind_is_refused(
+    no_plugins, monkeypatch, tmp_path, capsys
+):
+    """An installed package declaring ``social_lstm = module:Net`` was ignored without a word (the shipped
+    kind trained in its place), where ``--plugin`` refuses to shadow one: refused in one line naming the
+    distribution and the entry point, wherever kinds are listed or loaded."""
+    from pipelines.cli import main
+    from tests.plugins import install_distribution
+
+    install_distribution(
+        monkeypatch, tmp_path / "site", f"[{ENTRY_POINT_GROUP}]\ntoy_ep = {TOY}\nsocial_lstm = {TOY}\n"
+    )
+    message = (
+        f"entry point 'social_lstm' ({TOY}) of distribution 'shadow-pkg' would shadow a shipped model; "
+        f"rename it in shadow-pkg's '{ENTRY_POINT_GROUP}' entry points or uninstall shadow-pkg"
+    )
+    for call in (lambda: model_kind("social_lstm"), lambda: model_kind("toy_ep"), model_names, model_kinds):
+        with pytest.raises(PredictorError) as refused:
+            call()
+        assert str(refused.value) == message
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exited:
+        main(["train", "--model", "social_lstm", "--epochs", "1"])
+    assert exited.value.code == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc train: error: argument --model: {message}; see 'crowdmpc train --help'\n"
+    )
 
 
 def test_an_entry_point_that_does_not_load_is_one_line(no_plugins, monkeypatch):
