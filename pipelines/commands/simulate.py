@@ -32,7 +32,8 @@ EPILOG = """examples:
   crowdmpc simulate --controller dmpc --no-flocking --coupling ibr --humans 9 --episodes 50
   crowdmpc --plugin my_predictor:MyNet simulate --controller cmpc --predictor my_net_eth --humans 7
 
-  crowdmpc --config docs/examples/demo.toml simulate --humans 5    # the file's settings, 5 humans
+  crowdmpc --config docs/examples/demo.toml simulate --humans 5 --record runs/demo-h5 \\
+      --plot runs/demo-h5/episode.png    # the file's settings, 5 humans, recorded apart from the demo's
 
 Episode i uses seed S + i. --plot draws the first episode; --record writes one MCAP file per episode.
 Every option can also come from a TOML config file (--config FILE, before or after `simulate`; `crowdmpc
