@@ -46,7 +46,8 @@ EPILOG = """examples:
   crowdmpc data prepare --raw ../shared/data/raw_ewap --out data/prepared
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
   crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario circle --humans 7 --episodes 5
-  crowdmpc --config docs/examples/demo.toml --set mpc.w_coll=1e6 simulate --humans 5 --record runs/demo-w6-h5
+  crowdmpc --config docs/examples/demo.toml --set mpc.w_coll=1e6 simulate --humans 5 \\
+      --record runs/demo-w6-h5 --plot runs/demo-w6-h5/episode.png
   crowdmpc --plugin my_predictor:MyNet train --model my_predictor:MyNet --data-dir ../shared/data
 
 Plugins: --plugin module:Class (before the command; repeatable) registers, for every command and the

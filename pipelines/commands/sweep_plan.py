@@ -48,9 +48,13 @@ def check_predictors(experiment: Experiment) -> None:
 
 
 def check_plan(experiment: Experiment) -> None:
-    """The checks a plan passes before any worker starts, in the dry run as in the run: its predictors
-    (``check_predictors``), the couplings their methods build with them (``check_couplings``) and the margins
-    they plan with (``check_margins``)."""
+    """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
+    controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
+    not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
+    with them (``check_couplings``) and the margins they plan with (``check_margins``)."""
+    from pipelines.loop.spec import controller_names
+
+    controller_names()
     check_predictors(experiment)
     check_couplings(experiment)
     check_margins(experiment)

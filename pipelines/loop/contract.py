@@ -130,9 +130,13 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         ("solve_time_s", out.solve_time_s, "a finite number >= 0 (s)"),
         ("iterations", out.iterations, "an int >= 0"),
     ):
-        if not (math.isfinite(value) and value >= 0):
+        try:
+            fits = math.isfinite(value) and value >= 0
+        except OverflowError:  # an int beyond a float's range (10**400): no step's time or count
+            fits = False
+        if not fits:
             raise PipelineError(
-                f"{_named(controller)}: act() must return {name} as {expected}, got {value!r}"
+                f"{_named(controller)}: act() must return {name} as {expected}, got {value!r:.40}"
             )
     # the loop and the recorder work on float arrays (a list of rows had no .tolist() for the recorder)
     return dataclasses.replace(

@@ -164,6 +164,12 @@ def test_an_installed_entry_point_named_as_a_shipped_controller_is_refused(monke
     assert (
         line == f"crowdmpc simulate: error: argument --controller: {message}; see 'crowdmpc simulate --help'"
     )
+    # a sweep refuses it before any worker (each episode failed with the traceback in errors.jsonl)
+    out = tmp_path / "sweep"
+    sweep = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1"]
+    assert main([*sweep, "--backend", "inline", "--no-progress", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == f"crowdmpc sweep: error: {message}"
+    assert not out.exists()
 
 
 # ------------------------------------------------------------------------------------------ bad plugins
@@ -315,6 +321,7 @@ BROKEN_CONTRACTS = [
     ("NegativeSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got -5.0"),
     ("NaNSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got nan"),
     ("NegativeIterations", "act() must return iterations as an int >= 0, got -1"),
+    ("HugeIterations", f"act() must return iterations as an int >= 0, got {'1' + '0' * 39}"),
     (
         "ObjectInConfig",
         "describe() must return JSON values (dicts, lists, strings, numbers, booleans, None), "

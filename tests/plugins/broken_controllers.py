@@ -181,6 +181,15 @@ class NegativeIterations(StraightLine):
         return dataclasses.replace(super().act(obs), iterations=-1)
 
 
+class HugeIterations(StraightLine):
+    """A count no float holds: checking it as a number overflowed into a traceback."""
+
+    name = "huge_iterations"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), iterations=10**400)
+
+
 class OwnFallback(StraightLine):
     """Falls back its own way, and says so by its own name."""
 
