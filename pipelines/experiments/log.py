@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -121,7 +122,9 @@ def episode_log(out: Path) -> EpisodeLog:
 
 
 def _number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
+    """A finite number: the writer writes NaN and inf as null, and a NaN read back fell in no bin of the
+    minimum-distance histogram and made a cell's mean NaN."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _count(value: Any) -> bool:
@@ -136,11 +139,11 @@ _KINDS: Final[dict[str, tuple[Callable[[Any], bool], str]]] = {
     "bool?": (lambda v: v is None or isinstance(v, bool), "a boolean or null"),
     "count": (_count, "a non-negative integer"),
     "count?": (lambda v: v is None or _count(v), "a non-negative integer or null"),
-    "number": (_number, "a number"),
-    "number?": (lambda v: v is None or _number(v), "a number or null"),
+    "number": (_number, "a finite number"),
+    "number?": (lambda v: v is None or _number(v), "a finite number or null"),
     "numbers": (
         lambda v: isinstance(v, list) and all(x is None or _number(x) for x in v),
-        "a list of numbers (or nulls)",
+        "a list of finite numbers (or nulls)",
     ),
 }
 METRIC_KINDS: Final[dict[str, str]] = {

@@ -3,6 +3,7 @@ the line), never a traceback, and nothing of it is overwritten."""
 
 import dataclasses
 import json
+import math
 import os
 import shutil
 from pathlib import Path
@@ -108,27 +109,30 @@ def test_the_records_a_sweep_writes_pass_the_check(good):
 @pytest.mark.parametrize(
     ("edit", "reason"),
     [
-        (lambda r: r["metrics"].update(travel_time="abc"), "metrics 'travel_time' is not a number or null"),
+        (lambda r: r["metrics"].update(travel_time="abc"), "'travel_time' is not a finite number or null"),
         (lambda r: r["metrics"].update(success="yes"), "metrics 'success' is not a boolean"),
         (lambda r: r["metrics"].update(collision=1), "metrics 'collision' is not a boolean"),
-        (lambda r: r["metrics"].update(min_distance=True), "not a number or null"),
-        (lambda r: r["metrics"].update(path_length=["x"]), "metrics 'path_length' is not a list of numbers"),
+        (lambda r: r["metrics"].update(min_distance=True), "not a finite number or null"),
+        (lambda r: r["metrics"].update(min_distance=math.nan), "'min_distance' is not a finite number"),
+        (lambda r: r["metrics"].update(travel_time=math.inf), "'travel_time' is not a finite number or null"),
+        (lambda r: r["metrics"].update(path_length=["x"]), "'path_length' is not a list of finite numbers"),
         (lambda r: r["metrics"].update(n_steps=2.5), "metrics 'n_steps' is not a non-negative integer"),
         (lambda r: r["metrics"].update(contact_steps="3"), "'contact_steps' is not a non-negative"),
         (lambda r: r["metrics"].update(collision_between_steps="yes"), "_between_steps' is not a boolean"),
-        (lambda r: r["metrics"].update(min_distance_between_steps="0.5"), "_between_steps' is not a number"),
-        (lambda r: r["solver"].update(median_ms="abc"), "solver 'median_ms' is not a number or null"),
+        (lambda r: r["metrics"].update(min_distance_between_steps="0.5"), "_steps' is not a finite number"),
+        (lambda r: r["solver"].update(median_ms="abc"), "solver 'median_ms' is not a finite number or null"),
         (lambda r: r.update(solver="fast"), "not an episode record"),
-        (lambda r: r.pop("wall_s"), "record's 'wall_s' is not a number"),
+        (lambda r: r.pop("wall_s"), "record's 'wall_s' is not a finite number"),
         (lambda r: r.update(seed=None), "record's 'seed' is not an integer"),
         (lambda r: r.update(seed="0"), "record's 'seed' is not an integer"),
         (lambda r: r.update(seed=0.5), "record's 'seed' is not an integer"),
         (lambda r: r.update(scenario=["circle"]), "record's 'scenario' is not a string"),
         (lambda r: r.update(scenario=None), "record's 'scenario' is not a string"),
     ],
-    ids=["time-string", "success-string", "collision-int", "distance-bool", "path-strings", "steps-float",
-         "count-string", "between-string", "between-distance-string", "solver-string-time", "solver-string",
-         "no-wall-time", "seed-null", "seed-string", "seed-float", "scenario-list", "scenario-null"],
+    ids=["time-string", "success-string", "collision-int", "distance-bool", "distance-nan", "time-inf",
+         "path-strings", "steps-float", "count-string", "between-string", "between-distance-string",
+         "solver-string-time", "solver-string", "no-wall-time", "seed-null", "seed-string", "seed-float",
+         "scenario-list", "scenario-null"],
 )  # fmt: skip
 def test_a_record_field_of_the_wrong_type_is_named_by_file_and_line(good, tmp_path, edit, reason):
     path = _damage(good, tmp_path, edit)
