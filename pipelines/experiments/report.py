@@ -23,7 +23,7 @@ from typing import Any, Final
 from crowdsim.metrics import BETWEEN_STEPS
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Experiment
-from pipelines.experiments.report_plots import plot_outcomes
+from pipelines.experiments.report_plots import OUTCOMES, plot_filename, plot_outcomes
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
 from pipelines.experiments.tasks import Cell
@@ -171,6 +171,15 @@ def write_report(
             written += [plot.name for plot in plots]
         for name in written:
             os.replace(staging / name, out / name)
+        for name in sorted(report_plot_names() - set(written)):
+            (out / name).unlink(missing_ok=True)  # an earlier report's, of cells this one does not have
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return Report(markdown, tuple(out / name for name in written))
+
+
+def report_plot_names() -> set[str]:
+    """Every plot a report may write: a report at other crowd sizes leaves its predecessor's none of its own
+    (five *_vs_humans.png of 5 and 6 humans beside a table of 5 contradicted it)."""
+    names = {plot_filename(o.name, by_method=by) for o in OUTCOMES for by in (False, True)}
+    return names | {safety.MIN_DISTANCE_HIST_PNG, safety.SAFETY_TRADEOFF_PNG}

@@ -767,6 +767,21 @@ def test_report_files(tmp_path):
     assert (tmp_path / "success_vs_humans.png").read_bytes().startswith(b"\x89PNG")
 
 
+def test_a_report_at_one_crowd_size_leaves_no_plot_of_the_earlier_ones(tmp_path):
+    """`--report-only --humans 5` after a sweep at 5 and 6 humans wrote *_by_method.png and a table of 5,
+    and left the five *_vs_humans.png of 5 and 6 beside them."""
+    table2 = get_experiment("table2")
+    records = _records(table2, TABLE2_EPISODES)
+    write_report(tmp_path, table2, table2.cells(), records)
+    cells = [cell for cell in table2.cells() if cell.n_humans == 5]
+    report = write_report(
+        tmp_path, table2, cells, [r for r in records if r["cell"] in {c.key for c in cells}]
+    )
+    pngs = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert pngs == sorted(p.name for p in report.files if p.suffix == ".png")
+    assert "success_by_method.png" in pngs and "success_vs_humans.png" not in pngs
+
+
 # ----------------------------------------------------------------------------------------------------------
 # The command line
 # ----------------------------------------------------------------------------------------------------------
