@@ -76,29 +76,35 @@ def _paper(cells: Sequence[CellSummary], name: str) -> list[float | None]:
     return [v if v is not None and math.isfinite(v) else None for v in values]
 
 
-def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> None:
+def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> bool:
+    """The bars; whether any has an error bar (a travel time of fewer than two successes has none)."""
     cells = [next(s for s in summaries if s.cell.method == m) for m in methods]
     y, err = _values(cells, name)
     x = np.arange(len(methods))
     colors = [f"C{k}" for k in range(len(methods))]
-    ax.bar(
-        x, y, yerr=None if np.isnan(err).all() else err, color=colors, capsize=4, label="ours (95% interval)"
-    )
+    drawn = not np.isnan(err).all()
+    ax.bar(x, y, yerr=err if drawn else None, color=colors, capsize=4, label="ours (95% interval)")
     paper = [(k, v) for k, v in enumerate(_paper(cells, name)) if v is not None]
     if paper:
         px, py = zip(*paper, strict=True)
         ax.plot(px, py, ls="none", marker="s", ms=8, mfc="none", mec="k", label="paper")
         ax.legend(fontsize="small")
     ax.set_xticks(x, methods, rotation=30, ha="right")
+    return drawn
 
 
-def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> None:
+def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> bool:
+    """A line per method; whether any point has an error bar. A method with no value at all (no success,
+    for the travel time) is named so in the legend, as the safety trade-off names it."""
+    drawn = False
     for k, method in enumerate(methods):
         cells = sorted((s for s in summaries if s.cell.method == method), key=lambda s: s.cell.n_humans)
         x = np.array([s.cell.n_humans for s in cells], dtype=float)
         y, err = _values(cells, name)
+        drawn = drawn or not np.isnan(err).all()
         color = f"C{k}"
-        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=f"{method} (ours)")
+        label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, no success)"
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=label)
         paper = [
             (s.cell.n_humans, v) for s, v in zip(cells, _paper(cells, name), strict=True) if v is not None
         ]
@@ -108,6 +114,7 @@ def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary
     ax.set_xticks(sorted({s.cell.n_humans for s in summaries}))
     ax.set_xlabel("number of humans")
     ax.legend(fontsize="small")
+    return drawn
 
 
 def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], outcome: Outcome) -> Any:
@@ -121,14 +128,14 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     humans = sorted({s.cell.n_humans for s in summaries})
     fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
     if len(humans) == 1:
-        _draw_by_method(ax, methods, summaries, outcome.name)
+        drawn = _draw_by_method(ax, methods, summaries, outcome.name)
         ax.set_xlabel(f"method ({humans[0]} humans)")
     else:
-        _draw_vs_humans(ax, methods, summaries, outcome.name)
+        drawn = _draw_vs_humans(ax, methods, summaries, outcome.name)
     if outcome.name != "travel_time":
         ax.set_ylim(bottom=0.0)
     ax.set_ylabel(outcome.ylabel)
-    bars = f"error bars: our 95% {outcome.interval}"
+    bars = f"error bars: our 95% {outcome.interval}" if drawn else "no error bars: fewer than two successes"
     ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
     ax.grid(alpha=0.3)
     return fig

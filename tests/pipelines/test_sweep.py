@@ -767,6 +767,31 @@ def test_report_files(tmp_path):
     assert (tmp_path / "success_vs_humans.png").read_bytes().startswith(b"\x89PNG")
 
 
+def test_a_travel_time_plot_says_when_a_method_has_no_success_or_no_error_bar():
+    """Every episode failed: the legend named both methods as drawn, and the title promised Student's t error
+    bars, over an empty plot; one success a cell: the title promised the bars none of its cells has."""
+    from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
+
+    table2 = get_experiment("table2")
+    travel = next(o for o in OUTCOMES if o.name == "travel_time")
+
+    def figure(outcomes):
+        summaries = summarize(table2, table2.cells(), _records(table2, outcomes))
+        fig = outcome_figure(table2, summaries, travel)
+        ax = fig.axes[0]
+        return [t.get_text() for t in ax.get_legend().get_texts()], ax.get_title()
+
+    failed = {(m, h): [(False, 0.0, False, False)] * 2 for m in ("CMPC", "DMPC") for h in (5, 6)}
+    labels, title = figure(failed)
+    assert "CMPC (ours, no success)" in labels and "DMPC (ours, no success)" in labels
+    assert title.endswith("no error bars: fewer than two successes")
+    once = {(m, h): [(True, 20.0, False, False), (False, 0.0, False, False)] for m, h in failed}
+    labels, title = figure(once)
+    assert "CMPC (ours)" in labels and title.endswith("no error bars: fewer than two successes")
+    labels, title = figure(TABLE2_EPISODES)
+    assert title.endswith("error bars: our 95% Student's t interval of the mean")
+
+
 def test_a_report_at_one_crowd_size_leaves_no_plot_of_the_earlier_ones(tmp_path):
     """`--report-only --humans 5` after a sweep at 5 and 6 humans wrote *_by_method.png and a table of 5,
     and left the five *_vs_humans.png of 5 and 6 beside them."""
