@@ -70,7 +70,7 @@ def _unknown_section(where: str, name: str) -> ConfigError:
 def _outside_sections(where: str, name: str) -> ConfigError:
     """A key written above every table (``horizon = 4`` before ``[mpc]``): the sections that have it, else
     the closest key of any section."""
-    owners = [s for s in WRITE_ORDER if SECTION_BY_NAME[s].key(name) is not None]
+    owners = _owners(name)
     if owners:
         put = " or ".join(f"[{s}]" for s in owners)
         return ConfigError(f"{where}: {name}: a key outside any section; put it under its section ({put})")
@@ -83,8 +83,9 @@ def _outside_sections(where: str, name: str) -> ConfigError:
     )
 
 
-def _is_a_key(name: str) -> bool:
-    return any(section.key(name) is not None for section in SECTION_BY_NAME.values())
+def _owners(name: str) -> list[str]:
+    """The sections that have a key ``name``, in the order a file is written."""
+    return [s for s in WRITE_ORDER if SECTION_BY_NAME[s].key(name) is not None]
 
 
 def check_key(prefix: str, section: Section, key: str) -> None:
@@ -155,7 +156,7 @@ def read_file(path: str | Path) -> list[Entry]:
     for name, values in document.items():
         if name == "env.orca":  # a quoted ["env.orca"]: one name with a dot in it, not the table orca of env
             raise ConfigError(f'{where}: ["env.orca"] names no section: write [env.orca], without quotes')
-        if not isinstance(values, dict) and (name not in SECTION_BY_NAME or _is_a_key(name)):
+        if not isinstance(values, dict) and (name not in SECTION_BY_NAME or _owners(name)):
             raise _outside_sections(where, name)  # a section's name written as a key is one (controller)
         if name not in SECTION_BY_NAME:
             raise _unknown_section(where, name)
