@@ -369,9 +369,8 @@ def shadowing(entry: Any, what: str) -> str:
 def model_kinds() -> dict[str, ModelKind]:
     """Every registered kind by name: shipped, then entry points (loaded), then plugins."""
     kinds = shipped()
-    for name in _entry_points():
-        if name not in kinds:
-            kinds[name] = model_kind(name)
+    for name in _entry_points():  # none takes a shipped name: _entry_points refuses that
+        kinds[name] = model_kind(name)
     _environment_plugins()
     kinds.update(_PLUGINS)
     return kinds
