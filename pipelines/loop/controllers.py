@@ -145,12 +145,12 @@ def _build_plugin(
     the plugin. An unknown ``spec.predictor`` is refused first for a plugin with ``uses_predictor``, as the
     shipped MPCs refuse it when they load it (``UnknownPredictor``)."""
     if plugin.kind.uses_predictor:
-        from predictors import zoo
         from predictors.errors import UnknownPredictor
-        from predictors.registry import PREDICTORS, available
+        from predictors.registry import available
 
-        if spec.predictor not in PREDICTORS and zoo.locate(spec.predictor) is None:  # load_predictor's names
-            raise UnknownPredictor(spec.predictor, available())
+        names = available()  # every name load_predictor accepts
+        if spec.predictor not in names:
+            raise UnknownPredictor(spec.predictor, names)
     try:
         controller = plugin.cls(spec, env_config, jit=jit)
     except PipelineError:
