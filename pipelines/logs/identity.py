@@ -10,6 +10,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final
 
+from mcap.reader import make_reader
+
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import decode_metadata, read_metadata
 
@@ -67,11 +69,8 @@ def check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
     run; a file that is no recording is left to the recorder, which replaces it."""
     if not path.is_file():
         return
-    try:
-        records = read_metadata(path)
-    except PipelineError:  # not an MCAP file, or cut inside its header: no run to keep apart
-        return
-    if "episode" not in records:
+    records = _held_metadata(path)
+    if records is None or "episode" not in records:  # not an MCAP file, or cut inside its header
         return
     held = run_identity(records["episode"], decode_metadata(records.get("config", {})))
     differ = [k for k in held if held[k] != identity.get(k, MISSING)]
@@ -84,3 +83,20 @@ def check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
             f"cannot record to {path}: it holds another run's episode ({was}{more}; this run: {now}); record "
             "into another folder, or remove it"
         )
+
+
+def _held_metadata(path: Path) -> dict[str, dict[str, str]] | None:
+    """The metadata records of ``path`` from its summary, read without the data (a complete file, the common
+    case: a walk reads every byte of it), else as ``crowdmpc review`` reads a cut file (``read_metadata``);
+    None for a file that is no recording."""
+    try:
+        with open(path, "rb") as f:
+            records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+        if "episode" in records:
+            return records
+    except Exception:  # noqa: BLE001 (a cut or damaged file: mcap raises many kinds) - walked below
+        pass
+    try:
+        return read_metadata(path)
+    except PipelineError:
+        return None
