@@ -310,17 +310,41 @@ def save_calibration(block: Calibration, directory: str | Path | None = None) ->
     # under the zoo's lock: two calibrations that both read the old file would each write back only their own
     with zoo_lock(path.parent):
         kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
-        blocks = sorted([*kept, block], key=Calibration.key)
-        document = {
-            "format": CALIBRATIONS_FORMAT,
-            "version": CALIBRATIONS_VERSION,
-            "calibrations": [b.to_json() for b in blocks],
-        }
-        # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
-        tmp.replace(path)
+        _write_blocks(path, [*kept, block])
     return path
+
+
+def undo_calibrations(
+    stored: Sequence[Calibration], earlier: Sequence[Calibration] | None, directory: str | Path | None = None
+) -> Path:
+    """Take back the blocks ``stored`` by one run: each key's block in ``earlier`` (the file's blocks before
+    that run, None: there was no file; none of a key: its block is dropped) where the file still holds the
+    one that run stored. Blocks another run stored meanwhile, of other keys or over these, stay."""
+    path = calibrations_path(directory)
+    ours = [b.to_json() for b in stored]
+    with zoo_lock(path.parent):
+        current = read_calibration_file(path)
+        undone = [b for b in current if b.to_json() in ours]
+        kept = [b for b in current if b.to_json() not in ours]
+        back = [e for e in earlier or () if any(e.matches(*u.key()) for u in undone)]
+        if earlier is None and not kept:  # this run made the file
+            path.unlink(missing_ok=True)
+        else:
+            _write_blocks(path, [*kept, *back])
+    return path
+
+
+def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
+    """Write ``blocks`` as ``path``'s whole content (the caller holds the zoo's lock)."""
+    document = {
+        "format": CALIBRATIONS_FORMAT,
+        "version": CALIBRATIONS_VERSION,
+        "calibrations": [b.to_json() for b in sorted(blocks, key=Calibration.key)],
+    }
+    # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
+    tmp.replace(path)
 
 
 def current_sha256(predictor: str, directory: str | Path | None = None) -> str | None:

@@ -1,6 +1,6 @@
 """Storing ``crowdmpc calibrate``'s blocks in the user zoo's calibrations file: after the held-out run, so
 that an interrupted or failed command leaves the user's calibrations as they were, or before it when its
-episodes plan with them, the file as it was put back if the run stops; never a block without margins per
+episodes plan with them, the earlier blocks put back if the run stops; never a block without margins per
 motion class over one that has them."""
 
 from __future__ import annotations
@@ -8,10 +8,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 from collections.abc import Iterator
-from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipelines.commands import replace_file
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -39,9 +37,10 @@ def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec)
 def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
     """Store ``blocks`` (not with --dry-run) once the held-out run inside has finished: an interrupted or
     failed command leaves the user's calibrations as they were. When the held-out episodes plan with these
-    blocks they are stored first, and the calibrations file as it was is put back if the run stops."""
+    blocks they are stored first, and the earlier blocks of their keys are put back if the run stops (blocks
+    another calibrate stored meanwhile stay)."""
     from pipelines.loop.margins import parse_margins
-    from predictors.calibration import calibrations_path
+    from predictors.calibration import calibrations_path, read_calibration_file
 
     if args.dry_run:
         yield
@@ -52,12 +51,12 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
         _store(blocks)
         return
     path = calibrations_path()
-    before = path.read_bytes() if path.exists() else None
+    before = read_calibration_file(path) if path.exists() else None
     _store(blocks)
     try:
         yield
     except BaseException:  # Ctrl-C too
-        _put_back(path, before)
+        _put_back(blocks, before)
         raise
 
 
@@ -69,21 +68,18 @@ def _store(blocks: list) -> None:
     print(f"wrote {len(blocks)} block(s) to {path}")
 
 
-def _put_back(path: Path, before: bytes | None) -> None:
-    """``path`` as it was (``before``; None: there was none), under the zoo's lock as calibrate writes it."""
-    from predictors.manifest import zoo_lock
+def _put_back(blocks: list, before: list | None) -> None:
+    """The calibrations file without ``blocks``: the blocks of their keys in ``before`` (the file's blocks
+    before this run; None: there was no file) back in their place."""
+    from predictors.calibration import undo_calibrations
 
     try:
-        with zoo_lock(path.parent):
-            if before is None:
-                path.unlink(missing_ok=True)
-            else:
-                replace_file(path, lambda name: Path(name).write_bytes(before))
+        path = undo_calibrations(blocks, before)
     except (OSError, PredictorError) as exc:
         raise PipelineError(
-            f"{path}: the held-out run stopped and its earlier content could not be put back ({exc})"
+            f"the held-out run stopped and the calibrations it stored could not be taken back ({exc})"
         ) from None
-    print(f"the held-out run did not finish: {path} is as it was before this run")
+    print(f"the held-out run did not finish: its blocks are taken out of {path}, the earlier ones put back")
 
 
 def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:

@@ -525,5 +525,40 @@ def test_an_interrupted_held_out_run_leaves_the_calibrations_as_they_were(
     assert (during[0] != earlier) == (held != "none")  # planned with the new block, so stored first
     if held != "none":
         assert (
-            f"the held-out run did not finish: {path} is as it was before this run" in capsys.readouterr().out
+            f"the held-out run did not finish: its blocks are taken out of {path}, the earlier ones put back"
+            in capsys.readouterr().out
         )
+
+
+@pytest.mark.parametrize("had_file", [True, False], ids=["earlier-file", "no-file"])
+def test_taking_back_the_held_out_runs_blocks_keeps_a_block_another_calibrate_stored(
+    had_file, tmp_path, monkeypatch
+):
+    """The whole earlier file was written back when the held-out run stopped: a block another calibrate
+    stored in the same zoo meanwhile (here alpha 0.2, while this run's held-out episodes ran) was lost. Only
+    this run's blocks are taken back now; with no earlier file, the file holds the other block alone."""
+    from pipelines.cli import main
+    from pipelines.experiments import calibrate as experiment
+    from predictors.calibration import read_calibration_file, save_calibration
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    path = tmp_path / "calibrations.json"
+    _episodes(monkeypatch)
+    if had_file:
+        assert main([*CALIBRATE, "--alpha", "0.3"]) == 0
+    earlier = read_calibration_file(path) if had_file else []
+    calibrate = experiment.closed_loop_errors
+
+    def interrupted(plan, progress=True):
+        if plan.seed == 7 + 200:  # the held-out episodes: another calibrate stores its block now
+            ours = read_calibration_file(path)
+            save_calibration(dataclasses.replace(ours[-1], alpha=0.2))
+            raise KeyboardInterrupt
+        return calibrate(plan, progress)
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", interrupted)
+    argv = [*CALIBRATE, "--alpha", "0.3", "--seed", "7", "--holdout", "--holdout-margins", "conformal:0.3"]
+    assert main(argv) == 130
+    after = read_calibration_file(path)
+    assert [b.alpha for b in after] == ([0.2, 0.3] if had_file else [0.2])
+    assert [b.to_json() for b in after if b.alpha == 0.3] == [b.to_json() for b in earlier]
