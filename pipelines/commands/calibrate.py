@@ -8,7 +8,7 @@ import json
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, humans_list, path_arg, write_output
-from pipelines.commands.calibrate_store import plans_with_new_blocks, storing
+from pipelines.commands.calibrate_store import plans_with_new_blocks, storing, take_back_killed
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -31,7 +31,9 @@ conformal-motion:ALPHA`, and per class those of the distance shortfall (how much
 robot than predicted), the margins of `--margins conformal-shortfall:ALPHA`. A block without the per-class
 margins (too few samples in a class) is not stored over one that has them. --holdout measures coverage on
 data the calibration did not see: the test scenes
-(real) or as many further episodes (closed-loop; per motion class too).
+(real) or as many further episodes (closed-loop; per motion class too). The blocks are stored after those
+episodes; when they plan with a block this run makes (--holdout-margins conformal:ALPHA with ALPHA one of
+--alpha), it is stored before them and taken back if the run stops, by the next calibrate after a kill -9.
 """
 
 
@@ -255,6 +257,7 @@ def _check_first(args: argparse.Namespace) -> str | None:
     check_writable(args.json, "--json", json_only=True)
     if not args.dry_run:  # the user zoo's file (never the shipped zoo's): refused now, not after the episodes
         check_writable(calibrations_path(), "calibrations file", zoo_own=True)
+        take_back_killed()  # before anything reads the blocks in force
         stored_calibrations()  # read as storing will: a file calibrate cannot extend fails now
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "closed-loop":

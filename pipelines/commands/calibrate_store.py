@@ -1,20 +1,27 @@
 """Storing ``crowdmpc calibrate``'s blocks in the user zoo's calibrations file: after the held-out run, so
 that an interrupted or failed command leaves the user's calibrations as they were, or before it when its
-episodes plan with them, the earlier blocks put back if the run stops; never a block without margins per
-motion class over one that has them."""
+episodes plan with them, the earlier blocks put back if the run stops (by the next calibrate when a kill left
+no chance: ``take_back_killed``); never a block without margins per motion class over one that has them."""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
+import os
+import re
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Final
 
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
 if TYPE_CHECKING:
     from pipelines.loop.margins import MarginSpec
+
+# what a calibrate storing blocks before its held-out run would take back, beside the calibrations file
+_JOURNAL: Final = re.compile(r"\.calibrate-holdout\.(?P<pid>[0-9]+)\.json")
 
 
 def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec) -> bool:
@@ -52,12 +59,59 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
         return
     path = calibrations_path()
     before = read_calibration_file(path) if path.exists() else None
+    journal = _write_journal(path, blocks, before)
     _store(blocks)
     try:
         yield
     except BaseException:  # Ctrl-C too
         _put_back(blocks, before)
+        journal.unlink(missing_ok=True)
         raise
+    journal.unlink(missing_ok=True)
+
+
+def take_back_killed() -> None:
+    """Take back the blocks of each calibrate killed during a held-out run that planned with them (kill -9,
+    a crash: no chance to put them back itself), as its Ctrl-C would have: from the journal it left."""
+    from pipelines.experiments.worker import process_alive
+    from predictors.calibration import Calibration, calibrations_path
+
+    path = calibrations_path()
+    if not path.parent.is_dir():
+        return
+    for journal in sorted(path.parent.iterdir()):
+        match = _JOURNAL.fullmatch(journal.name)
+        if match is None or process_alive(int(match["pid"])):
+            continue
+        try:
+            document = json.loads(journal.read_text())
+            stored = [Calibration.from_json(b, journal) for b in document["stored"]]
+            earlier = document["earlier"]
+            if earlier is not None:
+                earlier = [Calibration.from_json(b, journal) for b in earlier]
+        except (OSError, ValueError, KeyError, TypeError, PredictorError) as exc:
+            raise PipelineError(
+                f"{journal}: a killed calibrate's record of the blocks to take back is unreadable ({exc}); "
+                f"check {path} and remove {journal.name}"
+            ) from None
+        _put_back(stored, earlier, f"a calibrate killed during its held-out run (pid {match['pid']})")
+        journal.unlink(missing_ok=True)
+
+
+def _write_journal(path: Path, blocks: list, before: list | None) -> Path:
+    """The record ``take_back_killed`` reads, durable before any block is stored."""
+    journal = path.with_name(f".calibrate-holdout.{os.getpid()}.json")
+    document = {
+        "stored": [b.to_json() for b in blocks],
+        "earlier": None if before is None else [b.to_json() for b in before],
+    }
+    tmp = journal.with_name(journal.name + ".tmp")
+    with open(tmp, "w") as f:
+        f.write(json.dumps(document, allow_nan=False))
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(journal)
+    return journal
 
 
 def _store(blocks: list) -> None:
@@ -68,18 +122,18 @@ def _store(blocks: list) -> None:
     print(f"wrote {len(blocks)} block(s) to {path}")
 
 
-def _put_back(blocks: list, before: list | None) -> None:
+def _put_back(blocks: list, before: list | None, who: str = "the held-out run") -> None:
     """The calibrations file without ``blocks``: the blocks of their keys in ``before`` (the file's blocks
-    before this run; None: there was no file) back in their place."""
+    before the run ``who`` names; None: there was no file) back in their place."""
     from predictors.calibration import undo_calibrations
 
     try:
         path = undo_calibrations(blocks, before)
     except (OSError, PredictorError) as exc:
         raise PipelineError(
-            f"the held-out run stopped and the calibrations it stored could not be taken back ({exc})"
+            f"{who} stopped and the calibrations it stored could not be taken back ({exc})"
         ) from None
-    print(f"the held-out run did not finish: its blocks are taken out of {path}, the earlier ones put back")
+    print(f"{who} did not finish: its blocks are taken out of {path}, the earlier ones put back")
 
 
 def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:

@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -562,3 +563,61 @@ def test_taking_back_the_held_out_runs_blocks_keeps_a_block_another_calibrate_st
     after = read_calibration_file(path)
     assert [b.alpha for b in after] == ([0.2, 0.3] if had_file else [0.2])
     assert [b.to_json() for b in after if b.alpha == 0.3] == [b.to_json() for b in earlier]
+
+
+def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_the_next(
+    tmp_path, monkeypatch, capsys
+):
+    """A calibrate killed (kill -9) during held-out episodes that planned with its new blocks left them in
+    force for good: only Ctrl-C put the earlier ones back. The journal it wrote before storing them lets the
+    next calibrate take them back."""
+    from pipelines.cli import main
+    from pipelines.experiments import calibrate as experiment
+    from predictors.calibration import read_calibration_file
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    path = tmp_path / "calibrations.json"
+    _episodes(monkeypatch)
+    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0
+    earlier = [b.to_json() for b in read_calibration_file(path)]
+    calibrate = experiment.closed_loop_errors
+
+    def killed(plan, progress=True):
+        if plan.seed == 7 + 200:  # the held-out episodes
+            os._exit(9)
+        return calibrate(plan, progress)
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", killed)
+    argv = [*CALIBRATE, "--alpha", "0.3", "--seed", "7", "--holdout", "--holdout-margins", "conformal:0.3"]
+    pid = os.fork()
+    if pid == 0:  # the calibrate to kill
+        try:
+            main(argv)
+        finally:
+            os._exit(1)
+    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 9
+    assert [b.to_json() for b in read_calibration_file(path)] != earlier  # the killed run's block in force
+    monkeypatch.setattr(experiment, "closed_loop_errors", calibrate)
+    capsys.readouterr()
+    assert main([*CALIBRATE, "--alpha", "0.2"]) == 0
+    assert f"a calibrate killed during its held-out run (pid {pid}) did not finish" in capsys.readouterr().out
+    assert [b.to_json() for b in read_calibration_file(path) if b.alpha == 0.3] == earlier
+    assert not list(tmp_path.glob(".calibrate-holdout.*"))
+
+
+def test_an_unreadable_journal_of_a_killed_calibrate_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
+    from pipelines.cli import main
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    _episodes(monkeypatch)
+    pid = os.fork()
+    if pid == 0:
+        os._exit(0)
+    os.waitpid(pid, 0)  # a pid no process has now
+    journal = tmp_path / f".calibrate-holdout.{pid}.json"
+    journal.write_text('{"stored": [')
+    assert main([*CALIBRATE, "--alpha", "0.2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"crowdmpc calibrate: error: {journal}: a killed calibrate's record")
+    assert "\n" not in err
+    assert not (tmp_path / "calibrations.json").exists()
