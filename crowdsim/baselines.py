@@ -7,8 +7,11 @@ Both have ``name``, ``reset`` and ``act`` and return ``crowdsim.control.ControlO
   ``v_max`` unless braking must begin: the largest next speed ``v'`` from which a constant deceleration
   ``b = a_max / 2`` (half the bound: margin for the per-axis clipping) still stops on the goal after this
   step, ``v'^2 / (2 b) <= d - tau (v + v') / 2`` with ``v`` the current speed towards the goal and ``d`` the
-  distance to it. Eq. (2) integrates piecewise-constant accelerations exactly, so the robot stops on the
-  goal without overshooting.
+  distance to it. ``v'^2 / (2 b)`` is the distance of continuous braking, but the robot stops in whole
+  steps: from ``v' < b tau`` its last step travels ``tau v' / 2``, farther. So it may pass the goal by up
+  to about ``b tau^2 / 8`` (2 cm with Table I's bounds, e.g. on the way to a goal 7 m along each axis)
+  and settles back onto it; where the distances fall on the profile's steps (2 m straight ahead) it stops
+  on the goal exactly.
 * ``orca``: the robots are ORCA agents like the humans (same parameters, same radius margin, preferred
   velocity towards their goals, max speed ``v_max``), each avoiding every other agent with its current
   velocity.

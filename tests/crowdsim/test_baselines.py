@@ -60,3 +60,15 @@ def test_orca_controller_follows_orca_and_avoids_a_human():
     m = episode_metrics(traj)
     assert m.success and m.min_distance > 0.6
     assert np.abs(traj.robot_positions[:, 0, 0]).max() > 0.2  # it stepped aside
+
+
+def test_straight_may_pass_the_goal_by_up_to_b_tau_squared_over_8_and_settles_back():
+    # The braking rule keeps the continuous braking distance v'^2 / (2 b); stopping in whole 0.4 s steps goes
+    # farther. Robot 0 heads for (7, 7) and keeps being controlled while robot 1 travels 20 m: it passes its
+    # goal by 2 cm (b tau^2 / 8 = 1 x 0.16 / 8) along its way, then settles back within millimetres.
+    env = CrowdEnv()
+    obs = env.reset_layout(layout([[0, 0], [-3, 0]], [[7, 7], [-3, 20]]))
+    traj = run(env, StraightController(), obs)
+    past = (traj.robot_positions[:, 0] - [7.0, 7.0]) @ (np.array([1.0, 1.0]) / np.sqrt(2.0))
+    assert 0.019 < past.max() <= 0.0201
+    assert np.abs(traj.robot_positions[-1, 0] - [7.0, 7.0]).max() < 0.005
