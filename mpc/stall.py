@@ -34,7 +34,9 @@ class StallWatch:
             raise ValueError(f"window_s, dt and progress must be > 0, got {window_s}, {dt}, {progress}")
         self.steps = max(1, round(window_s / dt))
         self.progress = progress
-        self._positions: deque[np.ndarray] = deque(maxlen=self.steps + 1)
+        # Trimmed in ``update``, not through ``maxlen``, which must fit a C ssize_t: a window longer than any
+        # episode (stall_release_s = 1e19 s, a valid "never") overflowed it.
+        self._positions: deque[np.ndarray] = deque()
 
     def reset(self) -> None:
         self._positions.clear()
@@ -43,6 +45,8 @@ class StallWatch:
         """Record this step's positions; ``(M,)`` True for the robots stalled now."""
         positions, goals = np.array(positions, dtype=float), np.asarray(goals, dtype=float)
         self._positions.append(positions)
+        if len(self._positions) > self.steps + 1:
+            self._positions.popleft()
         if len(self._positions) <= self.steps:
             return np.zeros(len(positions), dtype=bool)
         before = np.linalg.norm(self._positions[0] - goals, axis=1)

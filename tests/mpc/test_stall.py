@@ -108,3 +108,12 @@ def test_progress_is_towards_the_goal_the_robot_has_now():
     for _ in range(12):
         watch.update(still, np.array([[0.0, 5.0]]), np.array([False]))
     assert watch.update(still, np.array([[0.0, 3.8]]), np.array([False]))[0]
+
+
+def test_a_window_longer_than_any_episode_never_stalls_a_robot():
+    """stall_release_s is any finite number >= 0 (mpc/config.py); 1e19 s made the window's deque length
+    overflow a C ssize_t (OverflowError when the controller was built)."""
+    watch = StallWatch(window_s=1e19, dt=0.4)
+    for _ in range(5):
+        stalled = watch.update(_positions(0, 0, 0), GOALS, np.zeros(3, bool))
+        np.testing.assert_array_equal(stalled, [False, False, False])
