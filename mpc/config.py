@@ -86,6 +86,9 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # zero makes every pair's penalty w_coll log(2) / mu wherever the agents are (mu = 1e-300 overflowed the cost
 # to inf and every solve failed); at 1e-3 it is 693 w_coll per pair, finite at every weight's bound.
 MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2")}
+# The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
+# built), 2**32 wrapped to 0 and every solve failed at once.
+MAX_SOLVER_ITER: Final[int] = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -274,6 +277,11 @@ class MPCConfig:
             minimum = 0 if name == "solver_max_iter" else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
                 raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        if self.solver_max_iter > MAX_SOLVER_ITER:
+            raise MPCConfigError(
+                f"solver_max_iter must be at most {MAX_SOLVER_ITER} (the solvers' int), "
+                f"got {self.solver_max_iter!r}"
+            )
         positive: tuple[str, ...] = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi")
         positive += ("epsilon", "delta")
         positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")

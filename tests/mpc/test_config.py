@@ -150,3 +150,14 @@ def test_at_every_bound_together_the_nlp_stays_finite(least):
         state = np.vstack([rng.uniform(-100.0, 100.0, (2, 2)), rng.uniform(-1.0, 1.0, (2, 2)) * cfg.v_max])
         for out in f(accels, state, rng.uniform(-100.0, 100.0, (2, h))):
             assert np.isfinite(out.full()).all()
+
+
+def test_solver_max_iter_fits_the_solvers_int():
+    """The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options when the NLP was built, 2**32
+    wrapped to 0 and every solve failed."""
+    assert MPCConfig(solver_max_iter=2**31 - 1).solver_max_iter == 2**31 - 1
+    for value in (2**31, 2**32):
+        with pytest.raises(
+            MPCConfigError, match=rf"^solver_max_iter must be at most 2147483647 .*, got {value}$"
+        ):
+            MPCConfig(solver_max_iter=value)
