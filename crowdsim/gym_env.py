@@ -31,21 +31,23 @@ values from ``env_m.config [reward]``, ``RewardConfig``). With ``d_i`` the close
 ``i``'s boundary and any human's during the step (the relative motion taken as a straight segment, as
 CrowdNav's ``point_to_segment_dist``), and ``d = min_i d_i``, the first rule that applies gives it:
 
-1. the step reaches the time limit (``truncated``): 0;
-2. some robot touches a human (``d < 0``): ``collision = -0.25``. By default the episode goes on, as in the
+1. some robot touches a human (``d < 0``): ``collision = -0.25``. By default the episode goes on, as in the
    fork (``done = False`` after a collision); if the robots also succeed on this step, which ends the
    episode, the step pays ``collision + success = +0.75``: the fork pays the penalty for the contact and
    the success reward on the step that ends an episode in success (the next one, there), so every episode
    ending in success is paid it, here as there. With ``end_on_collision=True`` the contact ends the
    episode, as upstream CrowdNav does, and comes first: ``-0.25`` only, the success not paid (upstream's
-   ``Collision``: ``info["success"]`` and the episode metrics' ``success`` are False); on the last step rule
-   1 still comes first (``truncated``, 0);
-3. the robots succeed (the success rule of ``EnvConfig``; ``terminated``): ``success = +1``;
-4. ``d < discomfort_dist = 0.4`` m: ``(d - discomfort_dist) * discomfort_factor * dt``, factor 0.5 /s;
-5. otherwise 0.
+   ``Collision``: ``info["success"]`` and the episode metrics' ``success`` are False);
+2. the robots succeed (the success rule of ``EnvConfig``; ``terminated``): ``success = +1``;
+3. ``d < discomfort_dist = 0.4`` m: ``(d - discomfort_dist) * discomfort_factor * dt``, factor 0.5 /s;
+4. otherwise 0.
 
-``info["robot_rewards"]`` gives each robot the same rule applied to its own ``d_i`` (success and timeout
-are the team's), for multi-agent learners.
+The step that reaches the time limit (``truncated``) is paid by the same rules: the fork's ``Timeout`` (0,
+``done``) comes on a further call, the first to start at ``time_limit - 1`` s or later, whose motion its
+episode never records; the calls before it are the ``max_steps`` steps this environment runs.
+
+``info["robot_rewards"]`` gives each robot the same rules applied to its own ``d_i`` (success is the
+team's), for multi-agent learners.
 
 Info: ``"observation"`` is the native ``Observation`` (a ``ComparableObservation``): what the MPC
 controllers and baselines act on, with the positions history the predictors read. ``reset`` adds ``seed``
@@ -250,16 +252,14 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         gaps = surface_distances(closest, cfg.radius)
         contact_in_step = gaps < 0
         timeout = bool(native.get("timeout", False))
-        # Rule 1 first, as the fork's Timeout: a contact on the last step ends the episode truncated (and pays
-        # 0), not terminated with the time limit's reward.
-        contact_ends = self.end_on_collision and bool(contact_in_step.any()) and not timeout
+        contact_ends = self.end_on_collision and bool(contact_in_step.any())
         # A contact that ends the episode comes first (upstream CrowdNav's Collision): a step that also brings
         # the robots to their goals is no success, in the rewards, the info and the episode's metrics alike.
         success = bool(native.get("success", False)) and not contact_ends
 
         def rule(gap: float) -> float:
             return self.reward_config.step_reward(
-                gap, success=success, timeout=timeout, dt=cfg.dt, contact_ends=self.end_on_collision
+                gap, success=success, dt=cfg.dt, contact_ends=self.end_on_collision
             )
 
         reward = rule(float(gaps.min()))

@@ -40,15 +40,13 @@ class RewardConfig:
         surface_distance: float,
         *,
         success: bool,
-        timeout: bool,
         dt: float,
         contact_ends: bool = False,
     ) -> float:
-        """The reward of one step (crowdsim.gym_env's rules 1-5): ``surface_distance`` is the closest
-        robot-human boundary distance during the step (m), ``dt`` the step (s); ``contact_ends``: a contact
-        ends the episode (``end_on_collision``), so the success of the same step is not paid."""
-        if timeout:
-            return 0.0
+        """The reward of one step, the last one's too (crowdsim.gym_env's rules 1-4): ``surface_distance``
+        is the closest robot-human boundary distance during the step (m), ``dt`` the step (s);
+        ``contact_ends``: a contact ends the episode (``end_on_collision``), so the success of the same step
+        is not paid."""
         if surface_distance < 0:
             paid = success and not contact_ends
             return float(self.collision + self.success) if paid else float(self.collision)

@@ -205,14 +205,13 @@ def test_bad_actions_and_calls_out_of_order_are_refused():
 def test_the_reward_rules_in_their_order():
     rule = RewardConfig().step_reward
     # contact on the step that succeeds: the fork goes on after a contact, so success is paid too
-    assert rule(-0.1, success=True, timeout=False, dt=0.4) == 0.75
+    assert rule(-0.1, success=True, dt=0.4) == 0.75
     # ... unless the contact ends the episode (upstream CrowdNav): contact first, success not paid
-    assert rule(-0.1, success=True, timeout=False, dt=0.4, contact_ends=True) == -0.25
-    assert rule(-0.1, success=False, timeout=False, dt=0.4) == -0.25
-    assert rule(0.1, success=True, timeout=False, dt=0.4) == 1.0
-    assert rule(0.2, success=False, timeout=False, dt=0.4) == pytest.approx((0.2 - 0.4) * 0.5 * 0.4)
-    assert rule(0.4, success=False, timeout=False, dt=0.4) == 0.0  # the discomfort distance itself
-    assert rule(-1.0, success=False, timeout=True, dt=0.4) == 0.0  # CrowdNav: the timeout step earns 0
+    assert rule(-0.1, success=True, dt=0.4, contact_ends=True) == -0.25
+    assert rule(-0.1, success=False, dt=0.4) == -0.25
+    assert rule(0.1, success=True, dt=0.4) == 1.0
+    assert rule(0.2, success=False, dt=0.4) == pytest.approx((0.2 - 0.4) * 0.5 * 0.4)
+    assert rule(0.4, success=False, dt=0.4) == 0.0  # the discomfort distance itself
     with pytest.raises(SimulationError, match="RewardConfig.collision must be a finite number, got nan"):
         RewardConfig(collision=float("nan"))
 
@@ -437,13 +436,17 @@ def test_render_draws_an_rgb_frame():
     env.close()
 
 
-def test_a_contact_on_the_last_step_ends_the_episode_truncated_as_the_time_limit_comes_first():
-    """Rule 1 (the time limit, 0) comes first, as the fork's Timeout. With end_on_collision a contact on the
-    last step gave terminated=True with the time limit's 0: no penalty and no bootstrap either way."""
+@pytest.mark.parametrize("end_on_collision", [False, True])
+def test_the_last_step_is_paid_by_the_rules_as_the_forks_call_before_its_timeout(end_on_collision):
+    """A contact on the step that reaches the time limit paid 0, the fork's Timeout: the fork's Timeout comes
+    on a further call (the first to start at time_limit - 1 s or later), whose motion its episode never
+    records, and the call before it pays the contact (-0.25), ending the episode with end_on_collision
+    (upstream's Collision). So does this environment's last step."""
     config = EnvConfig(time_limit=0.4, timeout_margin=0.0)  # one step
-    env = CrowdNavEnv(n_robots=1, n_humans=1, config=config, end_on_collision=True)
+    env = CrowdNavEnv(n_robots=1, n_humans=1, config=config, end_on_collision=end_on_collision)
     with pytest.warns(LayoutWarning, match="0.5 m apart"):
         env.reset(seed=0, options={"layout": one_robot((0.0, 0.5))})
     _, reward, terminated, truncated, info = env.step(np.zeros((1, 2)))
     assert info["surface_distance"] == pytest.approx([-0.1]) and info["timeout"]
-    assert (reward, terminated, truncated) == (0.0, False, True)
+    assert (reward, terminated, truncated) == (-0.25, end_on_collision, not end_on_collision)
+    assert info["robot_rewards"].tolist() == [-0.25]

@@ -14,8 +14,8 @@ def test_touching_boundaries_are_not_a_contact():
     # CrowdNav's collision is a boundary distance strictly below 0; at exactly 0 the step costs the
     # discomfort penalty (0 - 0.4) * 0.5 * 0.4 = -0.08, not the collision penalty -0.25.
     rule = RewardConfig().step_reward
-    assert rule(0.0, success=False, timeout=False, dt=0.4) == pytest.approx(-0.08)
-    assert rule(0.0, success=True, timeout=False, dt=0.4) == 1.0
+    assert rule(0.0, success=False, dt=0.4) == pytest.approx(-0.08)
+    assert rule(0.0, success=True, dt=0.4) == 1.0
 
 
 def test_surface_distances_by_hand_and_without_humans():
