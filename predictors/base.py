@@ -129,6 +129,25 @@ def check_horizon(horizon: int, what: str) -> int:
     return int(horizon)
 
 
+def check_history(history: np.ndarray, mask: np.ndarray) -> None:
+    """ValueError unless ``history`` is ``(L, N, 2)``, ``mask`` ``(L, N)`` and each observed position finite.
+
+    An unobserved entry may hold anything (TrajNet++ marks absence with NaN). An observed NaN is absence left
+    out of ``mask``: the learned predictors' pooling spread it to every agent's forecast, while their CasADi
+    twin turned it into finite numbers, and constant velocity returned NaN for that agent."""
+    if history.ndim != 3 or history.shape[2] != 2:
+        raise ValueError(f"history must have shape (L, N, 2), got {history.shape}")
+    if mask.shape != history.shape[:2]:
+        raise ValueError(f"mask must have shape {history.shape[:2]}, got {mask.shape}")
+    bad = np.argwhere(mask.astype(bool) & ~np.isfinite(history).all(axis=-1))
+    if bad.size:
+        step, agent = bad[0]
+        raise ValueError(
+            f"history[{step}, {agent}] is {history[step, agent].tolist()}, not a finite position, where mask "
+            f"marks agent {agent} observed ({len(bad)} such entries); mark absent entries False in mask"
+        )
+
+
 def check_rollout_inputs(
     history: np.ndarray,
     mask: np.ndarray,
@@ -136,11 +155,9 @@ def check_rollout_inputs(
     humans: np.ndarray,
     horizon: int | None,
 ) -> int:
-    """Validate shapes shared by every predictor; return the horizon H (>= 1)."""
-    if history.ndim != 3 or history.shape[2] != 2:
-        raise ValueError(f"history must have shape (L, N, 2), got {history.shape}")
-    if mask.shape != history.shape[:2]:
-        raise ValueError(f"mask must have shape {history.shape[:2]}, got {mask.shape}")
+    """Validate shapes shared by every predictor, and that the positions it is given are finite; return the
+    horizon H (>= 1)."""
+    check_history(history, mask)
     n_agents = history.shape[1]
     n_robots = n_agents - len(check_humans(humans, n_agents))
     if robots_future is None:
@@ -149,6 +166,8 @@ def check_rollout_inputs(
         return check_horizon(horizon, "horizon")
     if robots_future.ndim != 3 or robots_future.shape[1:] != (n_robots, 2):
         raise ValueError(f"robots_future must have shape (H, {n_robots}, 2), got {robots_future.shape}")
+    if not np.isfinite(robots_future).all():
+        raise ValueError("robots_future holds a non-finite position; a robot plan is finite positions")
     if horizon is not None and horizon != robots_future.shape[0]:
         raise ValueError(f"horizon {horizon} disagrees with robots_future of length {robots_future.shape[0]}")
     return check_horizon(robots_future.shape[0], "robots_future's length H")

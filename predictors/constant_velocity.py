@@ -5,7 +5,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from predictors.base import DT, check_humans, check_rollout_inputs
+from predictors.base import DT, check_history, check_humans, check_rollout_inputs
 
 
 def last_state(history: np.ndarray, mask: np.ndarray, agents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -48,6 +48,7 @@ class ConstantVelocity:
         return pos[None] + steps * DT * vel[None]
 
     def encode(self, history, mask, humans):
+        check_history(np.asarray(history), np.asarray(mask))  # as rollout
         humans = check_humans(humans, np.shape(history)[1])  # as rollout: a repeat or a mask is refused
         pos, vel = last_state(history, mask, humans)
         return np.concatenate([pos.ravel(), vel.ravel()]).astype(np.float64)

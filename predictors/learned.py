@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 import torch
 
-from predictors.base import OBS_LEN, check_humans, check_rollout_inputs, robot_indices
+from predictors.base import OBS_LEN, check_history, check_humans, check_rollout_inputs, robot_indices
 from predictors.errors import PredictorError
 from predictors.export import TensorSpec, export_function, output_shapes
 from predictors.nets.contract import check_step_contract
@@ -216,6 +216,7 @@ class LearnedPredictor:
     def encode(self, history, mask, humans):
         """The context (layout: this module's docstring), computed by the exported encoder and memoised like
         ``_encoded``."""
+        check_history(np.asarray(history), np.asarray(mask))  # as rollout
         humans = check_humans(humans, np.shape(history)[1])  # as rollout: a repeat or a mask is refused
         key = self._input_key(history, mask, humans, True)
         if self._last_context is None or self._last_context[0] != key:

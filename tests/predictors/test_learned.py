@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from predictors.constant_velocity import ConstantVelocity
 from predictors.errors import PredictorError
 from predictors.learned import LearnedPredictor, casadi_name
 from predictors.nets.social_gan import generator_config
@@ -276,3 +277,25 @@ def test_each_size_is_built_once(monkeypatch):
     predictor.to_casadi(1, 1, HORIZON)
     # the first call also builds the check's size (predictors.learned.PARITY_SIZE), once
     assert sorted(built) == sorted([(3, 2, HORIZON), (2, 1, 3), (1, 1, HORIZON)])
+
+
+@pytest.mark.parametrize("kind", ["social_lstm", "constant_velocity"])
+def test_a_non_finite_observed_position_is_refused_where_unobserved_ones_are_ignored(kind):
+    predictor = social_lstm("grid") if kind == "social_lstm" else ConstantVelocity()
+    # a NaN the mask marks observed was spread by pooling to every human's rollout, while the CasADi
+    # context made finite numbers of it
+    history, mask, humans, robots_future = crossing_scene()
+    history = history.copy()
+    history[3, 4] = np.nan
+    for call in (
+        lambda: predictor.rollout(history, mask, robots_future, humans),
+        lambda: predictor.encode(history, mask, humans),
+    ):
+        with pytest.raises(ValueError, match=r"history\[3, 4\] is \[nan, nan\].*mask marks agent 4 observed"):
+            call()
+    mask = mask.copy()
+    mask[3, 4] = False  # absent there: its value is not read
+    assert np.isfinite(predictor.rollout(history, mask, robots_future, humans)).all()
+    assert np.isfinite(predictor.encode(history, mask, humans)).all()
+    with pytest.raises(ValueError, match="robots_future holds a non-finite position"):
+        predictor.rollout(history, mask, np.where(robots_future > 0, np.inf, robots_future), humans)
