@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.base import DT, OBS_LEN, PRED_LEN, Predictor
+from predictors.base import DT, OBS_LEN, PRED_LEN, ObservingPredictor, Predictor
 from predictors.data.trajnet_io import read_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
@@ -36,12 +36,24 @@ class EvalConfig:
             raise PredictorError(f"--top-k must be >= 1, got {self.top_k}")
 
 
+def check_dataset_predictor(predictor: Predictor) -> None:
+    """PredictorError naming ``predictor`` when it predicts from the simulator's state (an
+    ``ObservingPredictor``, the ORCA oracle): a dataset scene has no goals or velocities to hand it, and its
+    own refusal ("call observe(obs) first") speaks of an API a command-line user never calls."""
+    if isinstance(predictor, ObservingPredictor):
+        raise PredictorError(
+            f"predictor {predictor.name!r} predicts from the simulator's state (goals, velocities), which "
+            "dataset scenes do not have: evaluate a trained predictor or constant_velocity"
+        )
+
+
 def predict_scene(predictor: Predictor, xy: np.ndarray, config: EvalConfig, rng: np.random.Generator | None):
     """``(prediction, agents, samples)`` for one scene ``(obs_len + pred_len, N, 2)`` (NaN = absent).
 
     ``agents`` are the scene's agents observed at least once (the primary, agent 0, first); the predictor
     sees only those, all as humans, and ``prediction`` is ``(pred_len, len(agents), 2)`` in that order.
     """
+    check_dataset_predictor(predictor)
     observed = xy[: config.obs_len]
     seen = ~np.isnan(observed).any(axis=-1)
     agents = np.flatnonzero(seen.any(axis=0))  # an agent that only appears later cannot be predicted
@@ -119,6 +131,7 @@ def evaluate(
     """Per-file and overall (scenes pooled) metrics, as a JSON-ready dict."""
     from tqdm import tqdm
 
+    check_dataset_predictor(predictor)  # before the files are read
     loaded = {Path(path): load_eval_scenes(path, config) for path in files}
     per_file: dict[str, dict] = {}
     all_scores: list[SceneScore] = []

@@ -279,6 +279,12 @@ def test_evaluate_unknown_predictor(prepared, capsys):
     assert_one_line_error(code, err, "unknown predictor 'oracle_of_delphi'")
 
 
+def test_evaluate_refuses_the_orca_oracle_naming_it(prepared, capsys):
+    # it used to fail on the first scene with "call observe(obs) first", an API no command-line user calls
+    code, _, err = run(capsys, "evaluate", "--predictor", "orca_oracle", "--data-dir", str(prepared))
+    assert_one_line_error(code, err, "predictor 'orca_oracle' predicts from the simulator's state")
+
+
 def test_evaluate_on_a_directory_without_data(tmp_path, capsys):
     code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(tmp_path))
     assert_one_line_error(code, err, "neither prepared splits")
