@@ -106,7 +106,8 @@ class LearnedPredictor:
         never = np.flatnonzero(~seen.any(axis=0))
         if never.size:
             raise ValueError(
-                f"agents {order[never].tolist()} are never observed in the history; they cannot be predicted"
+                f"agents {order[never].tolist()} are never observed in the last {self.obs_len} steps of the "
+                f"history (the steps {self.name!r} reads); they cannot be predicted"
             )
         pos[~seen] = 0.0
         last_row = pos.shape[0] - 1

@@ -105,6 +105,18 @@ def test_never_observed_human_is_refused_and_unseen_robot_without_plan_dropped()
     assert out.shape == (3, 5, 2)
 
 
+def test_an_agent_seen_only_before_the_models_window_is_refused_as_such():
+    # it was "never observed in the history", which it was: only not in the last obs_len steps
+    history, mask, humans, robots_future = crossing_scene()
+    predictor = SocialLSTMPredictor(social_lstm("grid").net, name="sl", obs_len=4)
+    mask = mask.copy()
+    mask[-4:, 3] = False
+    with pytest.raises(
+        ValueError, match=r"agents \[3\] are never observed in the last 4 steps of the history"
+    ):
+        predictor.rollout(history, mask, robots_future, humans)
+
+
 def test_rollout_reuses_the_encoding_of_the_same_past():
     history, mask, humans, robots_future = crossing_scene()
     predictor = social_lstm("soft")
