@@ -107,7 +107,7 @@ PROBE = """
 import json, sys
 import crowdmpc_checkpoints, pipelines, predictors
 from predictors import zoo
-from predictors.calibration import calibration_files, read_calibrations
+from predictors.calibration_store import calibration_files, read_calibrations
 print(json.dumps({
     "modules": [m.__file__ for m in (predictors, pipelines, crowdmpc_checkpoints)],
     "project_modules": sorted({

@@ -242,7 +242,7 @@ def _check_first(args: argparse.Namespace) -> str | None:
     """Refuse now what would otherwise fail after the calibration episodes; returns the sha256 of the
     predictor's weights (None for a weightless one)."""
     from pipelines.loop.margins import MarginSpec, parse_margins
-    from predictors.calibration import calibrations_path, stored_calibrations
+    from predictors.calibration_store import calibrations_path, stored_calibrations
     from predictors.registry import checkpoint_sha256
 
     holdout_margins = parse_margins(args.holdout_margins)  # a typo fails now

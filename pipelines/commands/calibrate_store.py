@@ -47,7 +47,7 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
     blocks they are stored first, and the earlier blocks of their keys are put back if the run stops (blocks
     another calibrate stored meanwhile stay)."""
     from pipelines.loop.margins import parse_margins
-    from predictors.calibration import calibrations_path, read_calibration_file
+    from predictors.calibration_store import calibrations_path, read_calibration_file
 
     if args.dry_run:
         yield
@@ -74,7 +74,8 @@ def take_back_killed() -> None:
     """Take back the blocks of each calibrate killed during a held-out run that planned with them (kill -9,
     a crash: no chance to put them back itself), as its Ctrl-C would have: from the journal it left."""
     from pipelines.experiments.worker import process_alive
-    from predictors.calibration import Calibration, calibrations_path
+    from predictors.calibration import Calibration
+    from predictors.calibration_store import calibrations_path
 
     path = calibrations_path()
     if not path.parent.is_dir():
@@ -115,7 +116,7 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> Path:
 
 
 def _store(blocks: list) -> None:
-    from predictors.calibration import save_calibration
+    from predictors.calibration_store import save_calibration
 
     for block in blocks:
         path = save_calibration(block)
@@ -125,7 +126,7 @@ def _store(blocks: list) -> None:
 def _put_back(blocks: list, before: list | None, who: str = "the held-out run") -> None:
     """The calibrations file without ``blocks``: the blocks of their keys in ``before`` (the file's blocks
     before the run ``who`` names; None: there was no file) back in their place."""
-    from predictors.calibration import undo_calibrations
+    from predictors.calibration_store import undo_calibrations
 
     try:
         path = undo_calibrations(blocks, before)
@@ -141,7 +142,7 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
     block, or the user's earlier one): a short trial run would otherwise make conformal-motion and
     conformal-shortfall, which docs/examples/safe_crossing.toml plans with, refuse that predictor."""
     from pipelines.loop.margins import class_tables
-    from predictors.calibration import stored_calibrations
+    from predictors.calibration_store import stored_calibrations
     from predictors.conformal import alpha_text
 
     in_force = stored_calibrations()

@@ -1,6 +1,6 @@
 """Closed-loop calibration data: a predictor's errors inside the MPC, with the humans reacting to the robots.
 
-Real scenes (``predictors.calibration.real_errors``) measure a predictor where it was trained; the
+Real scenes (``predictors.real_data.real_errors``) measure a predictor where it was trained; the
 controller meets it elsewhere: ORCA humans who yield to robots and then close the gap again. So the default
 calibration source is the closed loop itself: CMPC episodes with the paper's method (no margins) on seeds
 disjoint from every evaluation seed, recording at each step the prediction the final solve used and, once

@@ -136,7 +136,7 @@ class MarginSpec:
         block = self._block(predictor, horizon, sha256)
         table = class_tables(block)[self.mode]
         if table is None:
-            from predictors.calibration import recalibrate_command
+            from predictors.calibration_store import recalibrate_command
             from predictors.conformal import alpha_text
 
             assert predictor is not None  # _block refused None
@@ -151,7 +151,7 @@ class MarginSpec:
     def _block(self, predictor: str | None, horizon: int, sha256: str | None) -> Calibration:
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
-        from predictors.calibration import find_calibration
+        from predictors.calibration_store import find_calibration
 
         block = find_calibration(predictor, self.source, self.alpha, sha256=sha256)
         if len(block.quantiles) < horizon:
@@ -217,7 +217,7 @@ def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int)
     does: closed-loop calibration predicts with the MPC's default horizon (``crowdmpc calibrate`` cannot
     change it), so only real scenes can be calibrated at another horizon, and the per-class modes cannot
     use them (the real-data calibration computes no margins per motion class)."""
-    from predictors.calibration import recalibrate_command
+    from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
 
     alpha = alpha_text(spec.alpha)

@@ -14,7 +14,7 @@ from pipelines.experiments.calibrate import ClosedLoopPlan, PredictionErrors, cl
 from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.margins import MarginSpec, parse_margins
-from predictors.calibration import save_calibration
+from predictors.calibration_store import save_calibration
 from predictors.errors import PredictorError
 from tests.calibration_blocks import constant_velocity_block
 
@@ -159,7 +159,7 @@ def test_calibrate_cli_stores_blocks_and_checks_them_on_held_out_episodes(tmp_pa
     import json
 
     from pipelines.cli import main
-    from predictors.calibration import read_calibrations
+    from predictors.calibration_store import read_calibrations
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))  # calibrate writes to the user zoo
     # Alphas the shipped zoo has no block for: two episodes may leave a motion class short of samples, and a
@@ -540,7 +540,7 @@ def test_taking_back_the_held_out_runs_blocks_keeps_a_block_another_calibrate_st
     this run's blocks are taken back now; with no earlier file, the file holds the other block alone."""
     from pipelines.cli import main
     from pipelines.experiments import calibrate as experiment
-    from predictors.calibration import read_calibration_file, save_calibration
+    from predictors.calibration_store import read_calibration_file, save_calibration
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     path = tmp_path / "calibrations.json"
@@ -573,7 +573,7 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
     next calibrate take them back."""
     from pipelines.cli import main
     from pipelines.experiments import calibrate as experiment
-    from predictors.calibration import read_calibration_file
+    from predictors.calibration_store import read_calibration_file
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     path = tmp_path / "calibrations.json"

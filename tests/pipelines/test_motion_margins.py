@@ -10,7 +10,7 @@ import pytest
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.margins import MarginSpec, parse_margins
-from predictors.calibration import save_calibration
+from predictors.calibration_store import save_calibration
 from tests.calibration_blocks import class_errors, constant_velocity_block
 
 

@@ -25,7 +25,7 @@ from pipelines.experiments.log import (
 )
 from pipelines.experiments.report import CELLS_CSV, TABLE_MD
 from pipelines.experiments.sweep import SweepConfig, run_sweep
-from predictors.calibration import save_calibration
+from predictors.calibration_store import save_calibration
 from predictors.zoo import checkpoints_dir, user_zoo_dir
 from predictors.zoo_edit import add_to_zoo
 from tests.calibration_blocks import constant_velocity_block

@@ -7,12 +7,10 @@ import numpy as np
 import pytest
 
 from predictors import manifest, zoo
-from predictors.calibration import (
+from predictors.calibration import Calibration, calibrate_real, calibration_from_errors
+from predictors.calibration_store import (
     CALIBRATIONS_FORMAT,
     CALIBRATIONS_NAME,
-    Calibration,
-    calibrate_real,
-    calibration_from_errors,
     find_calibration,
     read_calibrations,
     save_calibration,
@@ -115,7 +113,7 @@ def test_every_shipped_predictor_has_the_blocks_the_checkpoints_readme_lists():
     """checkpoints/README.md: closed-loop blocks for every shipped predictor, constant velocity and the
     oracle included, and real ones for all but the oracle, each for the weights the manifest holds.
     social_gru_eth and social_attention_eth had no real blocks: `--margins conformal:0.1:real` failed."""
-    from predictors.calibration import read_calibration_file
+    from predictors.calibration_store import read_calibration_file
     from predictors.registry import PREDICTORS
 
     shipped = Path(__file__).resolve().parents[2] / "checkpoints"
@@ -373,7 +371,7 @@ def test_find_calibration(tmp_path):
 def test_advice_names_an_alpha_of_many_digits_exactly(tmp_path):
     """The advice printed alpha with :g (6 digits): 0.1234567 became --alpha 0.123457, a block that never
     matches 0.1234567 (keys match within 1e-12). Following the advice now makes the block asked for."""
-    from predictors.calibration import recalibrate_command
+    from predictors.calibration_store import recalibrate_command
 
     command = recalibrate_command("constant_velocity", "closed-loop", 0.1234567)
     assert command.endswith("--alpha 0.1234567")

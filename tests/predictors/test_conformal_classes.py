@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from predictors.calibration import read_calibration_file, save_calibration
+from predictors.calibration_store import read_calibration_file, save_calibration
 from predictors.conformal_classes import (
     ClassMargins,
     class_coverage,

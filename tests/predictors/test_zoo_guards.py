@@ -22,7 +22,7 @@ import pytest
 
 from pipelines.cli import main
 from predictors import manifest, zoo, zoo_edit
-from predictors.calibration import CALIBRATIONS_NAME
+from predictors.calibration_store import CALIBRATIONS_NAME
 from predictors.errors import PredictorError
 from tests.predictors.test_zoo import retrained  # its metrics are the pair's: here an empty file
 

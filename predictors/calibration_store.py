@@ -1,0 +1,190 @@
+"""Stored conformal calibrations (``predictors.calibration.Calibration`` blocks): ``calibrations.json`` in a
+zoo directory, beside the manifest, so that weightless predictors get a calibration too and recalibrating
+never rewrites the manifest's hashes::
+
+    {"format": "crowdmpc-calibrations", "version": 1, "calibrations": [block, ...]}
+
+one block (``Calibration.to_json``) per (predictor, source, alpha). The shipped zoo's file
+(``predictors.zoo.checkpoints_dir``) holds the calibrations shipped with the models and is never written: a
+user's calibrations go to the user zoo's file (``predictors.zoo.user_zoo_dir``), and a block there replaces
+the shipped block of the same key. Functions given a ``directory`` read and write that directory's file only.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from types import EllipsisType
+from typing import Final
+
+from predictors.calibration import SOURCES, Calibration
+from predictors.checkpoint import read_document
+from predictors.conformal import alpha_text, check_alpha
+from predictors.errors import PredictorError, UnknownPredictor
+from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
+from predictors.zoo import checkpoints_dir, is_shipped, read_manifest, user_zoo_dir, writable_zoo_dir
+
+CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
+CALIBRATIONS_VERSION: Final[int] = 1
+
+
+def calibrations_path(directory: str | Path | None = None) -> Path:
+    """The file ``save_calibration`` writes: in ``directory``, else in the user zoo (PredictorError when the
+    user zoo is the shipped one, which is read-only)."""
+    root = Path(directory) if directory is not None else writable_zoo_dir()
+    return root / CALIBRATIONS_NAME
+
+
+def calibration_files(directory: str | Path | None = None) -> list[Path]:
+    """The files calibrations are read from, the first holding a key winning: ``directory``'s alone, else the
+    user zoo's, then the shipped zoo's (once when they are the same directory)."""
+    if directory is not None:
+        return [Path(directory) / CALIBRATIONS_NAME]
+    user = user_zoo_dir()
+    roots = [checkpoints_dir()] if is_shipped(user) else [user, checkpoints_dir()]
+    return [root / CALIBRATIONS_NAME for root in roots]
+
+
+def read_calibration_file(path: Path) -> list[Calibration]:
+    """Every block of one calibrations file; an absent file means none."""
+    if not path.is_file():
+        return []
+    document = read_document(path, CALIBRATIONS_FORMAT, "crowdmpc calibrations file")
+    if document.get("version") != CALIBRATIONS_VERSION:
+        raise PredictorError(
+            f'{path}: unsupported "version" {document.get("version")!r}, expected {CALIBRATIONS_VERSION}'
+        )
+    blocks = document.get("calibrations", [])
+    if not isinstance(blocks, list):
+        raise PredictorError(f'{path}: "calibrations" must be a list of blocks, got {blocks!r}')
+    result = [Calibration.from_json(b, f"{path}: calibrations[{i}]") for i, b in enumerate(blocks)]
+    seen: dict[tuple[str, str], list[Calibration]] = {}  # (predictor, source) -> its blocks so far
+    for i, block in enumerate(result):
+        # two blocks for one key would make find_calibration's answer depend on their order
+        same = seen.setdefault((block.predictor, block.source), [])
+        if any(other.matches(*block.key()) for other in same):
+            raise PredictorError(
+                f"{path}: calibrations[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
+                f"alpha={alpha_text(block.alpha)}; keep one of them"
+            )
+        same.append(block)
+    return result
+
+
+def stored_calibrations(directory: str | Path | None = None) -> list[tuple[Path, Calibration]]:
+    """``(file, block)`` for every block in force (``calibration_files``): a user block hides the shipped
+    block of its key."""
+    found: list[tuple[Path, Calibration]] = []
+    by_key: dict[tuple[str, str], list[Calibration]] = {}  # (predictor, source) -> blocks found
+    for path in calibration_files(directory):
+        for block in read_calibration_file(path):
+            same = by_key.setdefault((block.predictor, block.source), [])
+            if not any(other.matches(*block.key()) for other in same):
+                found.append((path, block))
+                same.append(block)
+    return found
+
+
+def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
+    """Every block in force: ``directory``'s, else the user zoo's, then the shipped ones not replaced."""
+    return [block for _, block in stored_calibrations(directory)]
+
+
+def save_calibration(block: Calibration, directory: str | Path | None = None) -> Path:
+    """Store ``block`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
+    replacing that file's block with the same (predictor, source, alpha); written atomically."""
+    path = calibrations_path(directory)
+    # under the zoo's lock: two calibrations that both read the old file would each write back only their own
+    with zoo_lock(path.parent):
+        kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
+        _write_blocks(path, [*kept, block])
+    return path
+
+
+def undo_calibrations(
+    stored: Sequence[Calibration], earlier: Sequence[Calibration] | None, directory: str | Path | None = None
+) -> Path:
+    """Take back the blocks ``stored`` by one run: each key's block in ``earlier`` (the file's blocks before
+    that run, None: there was no file; none of a key: its block is dropped) where the file still holds the
+    one that run stored. Blocks another run stored meanwhile, of other keys or over these, stay."""
+    path = calibrations_path(directory)
+    ours = [b.to_json() for b in stored]
+    with zoo_lock(path.parent):
+        current = read_calibration_file(path)
+        undone = [b for b in current if b.to_json() in ours]
+        kept = [b for b in current if b.to_json() not in ours]
+        back = [e for e in earlier or () if any(e.matches(*u.key()) for u in undone)]
+        if earlier is None and not kept:  # this run made the file
+            path.unlink(missing_ok=True)
+        else:
+            _write_blocks(path, [*kept, *back])
+    return path
+
+
+def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
+    """Write ``blocks`` as ``path``'s whole content (the caller holds the zoo's lock)."""
+    document = {
+        "format": CALIBRATIONS_FORMAT,
+        "version": CALIBRATIONS_VERSION,
+        "calibrations": [b.to_json() for b in sorted(blocks, key=Calibration.key)],
+    }
+    # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
+    tmp.replace(path)
+
+
+def current_sha256(predictor: str, directory: str | Path | None = None) -> str | None:
+    """The sha256 of ``predictor``'s weights in the zoo at ``directory``; None for a weightless predictor."""
+    from predictors.registry import PREDICTORS
+
+    if predictor in PREDICTORS:
+        return None
+    entries = read_manifest(directory)
+    if predictor not in entries:
+        raise UnknownPredictor(predictor, sorted(PREDICTORS) + sorted(entries))
+    return entries[predictor].sha256
+
+
+def recalibrate_command(predictor: str, source: str, alpha: float) -> str:
+    """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``."""
+    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}"
+
+
+def find_calibration(
+    predictor: str,
+    source: str,
+    alpha: float,
+    directory: str | Path | None = None,
+    sha256: str | None | EllipsisType = ...,
+) -> Calibration:
+    """The stored block for (predictor, source, alpha), checked against the current weights.
+
+    ``sha256`` is the sha256 the weights have now (None for a weightless predictor); the default ``...``
+    reads it from the zoo manifest in ``directory``. A block made for other weights is refused.
+    """
+    check_alpha(alpha)
+    if source not in SOURCES:
+        raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
+    stored = stored_calibrations(directory)
+    found = [(path, b) for path, b in stored if b.matches(predictor, source, alpha)]
+    if not found:
+        others = sorted(b.alpha for _, b in stored if b.predictor == predictor and b.source == source)
+        have = f" (it has alpha {', '.join(alpha_text(a) for a in others)})" if others else ""
+        files = " or ".join(str(p) for p in calibration_files(directory))
+        raise PredictorError(
+            f"no {source} calibration at alpha={alpha_text(alpha)} for predictor {predictor!r} in "
+            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha)}"
+        )
+    path, block = found[0]
+    expected = current_sha256(predictor, directory) if sha256 is ... else sha256
+    if block.predictor_sha256 != expected:
+        command = recalibrate_command(predictor, source, alpha)
+        raise PredictorError(
+            f"{path}: the {source} calibration at alpha={alpha_text(alpha)} of predictor {predictor!r} was "
+            f"made for weights sha256 {block.predictor_sha256}, but the weights now have sha256 {expected}; "
+            f"the weights changed since calibration, recalibrate: {command}"
+        )
+    return block
