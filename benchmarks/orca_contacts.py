@@ -42,6 +42,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=episode_count, default=200)
     parser.add_argument("--seed", type=seed_number, default=0)
     args = parser.parse_args()
+    if args.robots + args.humans < 2:  # no pair of agents: no distance to take a minimum of
+        parser.error(f"--robots {args.robots} and --humans {args.humans}: at least two agents make a pair")
 
     env, controller = CrowdEnv(), OrcaController()
     m = args.robots

@@ -1,6 +1,8 @@
-"""benchmarks/orca_contacts.py's summary names the time limit its simulator ran."""
+"""benchmarks/orca_contacts.py: its summary names the time limit it ran; one agent (no pair) is refused."""
 
 import sys
+
+import pytest
 
 from crowdsim.env import CrowdEnv
 from crowdsim.env_config import EnvConfig
@@ -19,3 +21,14 @@ def test_the_summary_names_the_time_limit_the_episodes_ran(monkeypatch, capsys):
     monkeypatch.setattr(orca_contacts, "CrowdEnv", lambda: CrowdEnv(EnvConfig(time_limit=25.0)))
     orca_contacts.main()
     assert "episodes that hit the 25 s time limit: " in capsys.readouterr().out
+
+
+def test_a_single_agent_is_refused_when_parsed(monkeypatch, capsys):
+    """One robot and no human have no pair: the episodes ran, then ``d.min()`` of no distance ended the
+    script with numpy's traceback ("zero-size array to reduction operation minimum")."""
+    argv = ["orca_contacts.py", "--humans", "0", "--robots", "1", "--episodes", "1"]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as stop:
+        orca_contacts.main()
+    assert stop.value.code == 2
+    assert "at least two agents make a pair" in capsys.readouterr().err
