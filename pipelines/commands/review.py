@@ -79,7 +79,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--plot", type=path_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
     )
     parser.add_argument(
-        "--times", type=_times, metavar="T1,T2,..", help="simulated times (s) of the plans drawn by --plot"
+        "--times",
+        type=_times,
+        metavar="T1,T2,..",
+        help="simulated times (s) of the plans drawn by --plot (not with --compare)",
     )
     parser.add_argument(
         "--animate",
@@ -305,6 +308,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
+    if args.times and args.compare:  # the overlay draws both runs' paths, no plan: the times went unused
+        raise PipelineError("--times chooses the plans drawn by --plot, and --compare's overlay draws none")
     # every output checked before any file is read: its format, then that it can be written
     if args.plot:
         from crowdsim.plotting import check_figure_path

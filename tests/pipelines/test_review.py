@@ -386,3 +386,14 @@ def test_set_ups_side_by_side_name_each_by_what_differs(tmp_path, capsys):
         assert cells[4] == f"({t['success_count']}/1)"
         # printed to 3 significant digits
         assert float(cells[-2]) == pytest.approx(t["solve_time_median_ms"], rel=5e-3)
+
+
+def test_times_with_compare_is_refused_before_reading(runs, tmp_path, capsys):
+    """--compare's overlay draws both runs' paths and no plan: --times was accepted and went unused, the
+    overlay written as if it had been honoured (exit 0)."""
+    overlay = tmp_path / "overlay.png"
+    argv = ["review", str(runs[0].path), "--compare", str(runs[1].path), "--plot", str(overlay)]
+    assert main([*argv, "--times", "0,1.2"]) == 2
+    assert "--compare's overlay draws none" in capsys.readouterr().err
+    assert not overlay.exists()
+    assert main(argv) == 0 and overlay.exists()  # the overlay itself as before
