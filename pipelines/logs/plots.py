@@ -54,12 +54,12 @@ def _draw_plans(ax: Any, view: EpisodeView, row: int, *, label: bool) -> None:
 def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | None = None) -> list[float]:
     """Trajectories (crowdsim.plotting.plot_episode) with the plans and predictions made at ``times`` (s).
 
-    Returns the times actually drawn (the nearest recorded states).
+    Returns the times actually drawn (the nearest recorded states with a plan or prediction, if any has).
     """
     from crowdsim.plotting import plot_episode
 
     view = episode_view(rec)
-    rows = sorted({view.row_at(t) for t in (times if times else default_times(view))})
+    rows = sorted({view.planned_row_at(t) for t in (times if times else default_times(view))})
     fig = plot_episode(
         view.robot_positions,
         view.human_positions,

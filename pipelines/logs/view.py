@@ -35,6 +35,15 @@ class EpisodeView:
         """Index of the recorded state nearest to time ``t`` (s)."""
         return int(np.argmin(np.abs(self.times - t)))
 
+    def planned_row_at(self, t: float) -> int:
+        """Index of the state nearest to time ``t`` (s) among those with a plan or a prediction, when the
+        recording has any: the final state has neither (no step is taken from it), nor has a cut file's last
+        state, so the nearest state of all could not show what is asked for."""
+        planned = np.flatnonzero([int(s) in self.plans or int(s) in self.predictions for s in self.steps])
+        if planned.size == 0:
+            return self.row_at(t)
+        return int(planned[np.argmin(np.abs(self.times[planned] - t))])
+
 
 def _points(rows: list[Any], n: int) -> np.ndarray:
     return np.asarray(rows, dtype=float).reshape(n, 2)

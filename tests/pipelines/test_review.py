@@ -397,3 +397,15 @@ def test_times_with_compare_is_refused_before_reading(runs, tmp_path, capsys):
     assert "--compare's overlay draws none" in capsys.readouterr().err
     assert not overlay.exists()
     assert main(argv) == 0 and overlay.exists()  # the overlay itself as before
+
+
+def test_plot_times_fall_on_states_with_a_plan(runs, tmp_path, tmp_path_factory, capsys):
+    """The final state has no plan (no step is taken from it): --times at or past the end drew that state
+    and said "plans at t = 3.2 s" with no plan or prediction drawn. Now the nearest state with a plan; a
+    recording without plans keeps the nearest state of all."""
+    png = tmp_path / "p.png"
+    assert main(["review", str(runs[0].path), "--plot", str(png), "--times", "100,3.2,0.5"]) == 0
+    assert "(plans at t = 0.4, 2.8 s)" in capsys.readouterr().out
+    plain = record_episode(tmp_path_factory.mktemp("plain"), seed=1, steps=8, with_plan=False)
+    assert main(["review", str(plain.path), "--plot", str(png), "--times", "100"]) == 0
+    assert "(plans at t = 3.2 s)" in capsys.readouterr().out
