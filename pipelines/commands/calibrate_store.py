@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from pipelines.loop.margins import MarginSpec
 
 # what a calibrate storing blocks before its held-out run would take back, beside the calibrations file
-_JOURNAL: Final = re.compile(r"\.calibrate-holdout\.(?P<pid>[0-9]+)\.json")
+_JOURNAL: Final = re.compile(r"\.calibrate-holdout\.(?P<pid>[0-9]+)\.json(?P<unfinished>\.tmp)?")
 
 
 def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec) -> bool:
@@ -83,6 +83,9 @@ def take_back_killed() -> None:
     for journal in sorted(path.parent.iterdir()):
         match = _JOURNAL.fullmatch(journal.name)
         if match is None or process_alive(int(match["pid"])):
+            continue
+        if match["unfinished"]:  # killed while writing it, before any block was stored
+            journal.unlink(missing_ok=True)
             continue
         try:
             document = json.loads(journal.read_text())
