@@ -90,8 +90,8 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
     ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None (finite integers or
     floats, no booleans), ``iterations`` an int >= 0, ``status`` a str, ``fallback`` a str or None (any name:
     the recording's schema takes a plugin's own), ``solve_time_s`` a finite number >= 0, ``potential`` a
-    number or None. Anything else (bare accelerations, a row short) is a one-line PipelineError naming the
-    controller."""
+    number or None, ``extra`` a dict of JSON values. Anything else (bare accelerations, a row short) is a
+    one-line PipelineError naming the controller."""
     if not isinstance(out, ControlOutput):
         raise PipelineError(
             f"{_named(controller)}: act() must return a crowdsim.control.ControlOutput, got "
@@ -115,6 +115,7 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         raise PipelineError(
             f"{_named(controller)}: act() must return fallback as a str or None, got {out.fallback!r}"
         )
+    _check_extra(controller, out.extra)
     for name, value, may_be_none in (
         ("solve_time_s", out.solve_time_s, False),
         ("potential", out.potential, True),
@@ -145,6 +146,23 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         plan=None if out.plan is None else np.asarray(out.plan, dtype=float),
         prediction=None if out.prediction is None else np.asarray(out.prediction, dtype=float),
     )
+
+
+def _check_extra(controller: Controller, extra: object) -> None:
+    """PipelineError unless ``extra`` is a dict of JSON values, as the recordings write it (``/mpc/solver``'s
+    ``extra`` is an object): a list was written against the schema, which ``review --check`` then refused,
+    and a value JSON cannot hold ended the run in the recorder's error, which named no controller."""
+    if not isinstance(extra, Mapping):
+        raise PipelineError(
+            f"{_named(controller)}: act() must return extra as a dict, got {type(extra).__name__}"
+        )
+    try:
+        json.dumps(plain(extra), allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as exc:
+        raise PipelineError(
+            f"{_named(controller)}: act() must return extra of JSON values (dicts, lists, strings, numbers, "
+            f"booleans, None), got {exc}"
+        ) from None
 
 
 def checked_description(controller: Controller) -> dict[str, Any]:

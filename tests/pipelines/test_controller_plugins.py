@@ -328,6 +328,12 @@ BROKEN_CONTRACTS = [
         "got Object of type object is not JSON serializable",
     ),
     ("NumberSha256", "describe()['predictor_sha256'] must be a str or None, got 123"),
+    ("ExtraList", "act() must return extra as a dict, got list"),
+    (
+        "ObjectInExtra",
+        "act() must return extra of JSON values (dicts, lists, strings, numbers, booleans, None), "
+        "got Object of type object is not JSON serializable",
+    ),
 ]
 
 

@@ -114,6 +114,24 @@ class PotentialText(StraightLine):
         return dataclasses.replace(super().act(obs), potential="x")  # type: ignore[arg-type]
 
 
+class ExtraList(StraightLine):
+    """extra as a list: recorded against /mpc/solver's schema (an object), which review --check refused."""
+
+    name = "extra_list"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), extra=[1, 2])  # type: ignore[arg-type]
+
+
+class ObjectInExtra(StraightLine):
+    """A value JSON cannot hold: the recorder's error, naming no controller."""
+
+    name = "object_in_extra"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), extra={"x": object()})
+
+
 class RowsAsLists(StraightLine):
     """Accelerations as a list of rows: a valid array, which the recorder could not .tolist()."""
 
