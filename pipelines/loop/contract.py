@@ -87,11 +87,12 @@ def _check_array(
 
 def checked_output(controller: Controller, out: object, obs: Observation) -> ControlOutput:
     """``out``, its arrays as float arrays, if it is a ``ControlOutput`` for ``obs``: ``accelerations``
-    ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None (finite integers or
-    floats, no booleans), ``iterations`` an int >= 0, ``status`` a str, ``fallback`` a str or None (any name:
-    the recording's schema takes a plugin's own), ``solve_time_s`` a finite number >= 0, ``potential`` a
-    number or None, ``extra`` a dict of JSON values. Anything else (bare accelerations, a row short) is a
-    one-line PipelineError naming the controller."""
+    ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None and each of
+    ``iteration_predictions`` ``(H, N, 2)`` (finite integers or floats, no booleans), ``iterations`` an
+    int >= 0, ``status`` a str, ``fallback`` a str or None (any name: the recording's schema takes a plugin's
+    own), ``solve_time_s`` a finite number >= 0, ``potential`` a number or None, ``extra`` a dict of JSON
+    values. Anything else (bare accelerations, a row short) is a one-line PipelineError naming the
+    controller."""
     if not isinstance(out, ControlOutput):
         raise PipelineError(
             f"{_named(controller)}: act() must return a crowdsim.control.ControlOutput, got "
@@ -105,6 +106,13 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         _check_array(controller, "plan", out.plan, (m, None, 2), f"of shape ({m}, H, 2) or None")
     if out.prediction is not None:
         _check_array(controller, "prediction", out.prediction, (None, n, 2), f"of shape (H, {n}, 2) or None")
+    if not isinstance(out.iteration_predictions, tuple | list):
+        raise PipelineError(
+            f"{_named(controller)}: act() must return iteration_predictions as a tuple of arrays, got "
+            f"{type(out.iteration_predictions).__name__}"
+        )
+    for each in out.iteration_predictions:  # written by --record-iterations
+        _check_array(controller, "iteration_predictions", each, (None, n, 2), f"of (H, {n}, 2) arrays")
     if isinstance(out.iterations, bool) or not isinstance(out.iterations, int | np.integer):
         raise PipelineError(
             f"{_named(controller)}: act() must return iterations as an int, got {out.iterations!r}"
@@ -145,6 +153,7 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         accelerations=np.asarray(out.accelerations, dtype=float),
         plan=None if out.plan is None else np.asarray(out.plan, dtype=float),
         prediction=None if out.prediction is None else np.asarray(out.prediction, dtype=float),
+        iteration_predictions=tuple(np.asarray(p, dtype=float) for p in out.iteration_predictions),
     )
 
 

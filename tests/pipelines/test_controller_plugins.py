@@ -330,6 +330,11 @@ BROKEN_CONTRACTS = [
     ("NumberSha256", "describe()['predictor_sha256'] must be a str or None, got 123"),
     ("ExtraList", "act() must return extra as a dict, got list"),
     (
+        "IterationText",
+        "act() must return iteration_predictions of (H, 2, 2) arrays, got shape () of <U1 values",
+    ),
+    ("IterationOfRobots", "act() must return iteration_predictions of (H, 2, 2) arrays, got shape (4, 3, 2)"),
+    (
         "ObjectInExtra",
         "act() must return extra of JSON values (dicts, lists, strings, numbers, booleans, None), "
         "got Object of type object is not JSON serializable",

@@ -132,6 +132,25 @@ class ObjectInExtra(StraightLine):
         return dataclasses.replace(super().act(obs), extra={"x": object()})
 
 
+class IterationText(StraightLine):
+    """An iteration's prediction as text: a traceback from the recorder under --record-iterations."""
+
+    name = "iteration_text"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), iteration_predictions=("a",))  # type: ignore[arg-type]
+
+
+class IterationOfRobots(StraightLine):
+    """An iteration's prediction with a row per robot, not per human."""
+
+    name = "iteration_of_robots"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        prediction = np.zeros((4, obs.n_robots, 2))
+        return dataclasses.replace(super().act(obs), iteration_predictions=(prediction,))
+
+
 class RowsAsLists(StraightLine):
     """Accelerations as a list of rows: a valid array, which the recorder could not .tolist()."""
 
