@@ -39,15 +39,22 @@ from pipelines.loop.controllers import Controller
 from pipelines.loop.episode import EpisodeObserver, EpisodeResult
 
 
-def _takes_accelerations(env: gym.Env[Any, Any], base: CrowdNavEnv) -> bool:
-    """Whether an action given to ``env`` reaches ``base`` as it is: no VelocityControl in between (with
-    a_max equal to v_max its action space is the base's, so comparing spaces let it through)."""
+def _action_changer(env: gym.Env[Any, Any], base: CrowdNavEnv) -> str | None:
+    """None when an action given to ``env`` reaches ``base`` as it is: no VelocityControl in between (with
+    a_max equal to v_max its action space is the base's, so comparing spaces let it through) and the base's
+    action space. Otherwise the name of the outermost wrapper that changes the actions, for the message
+    (ClipAction, RescaleAction: the message named VelocityControl whatever the wrapper)."""
+    layers = []
     layer = env
     while isinstance(layer, gym.Wrapper):
-        if isinstance(layer, VelocityControl):
-            return False
+        layers.append(layer)
         layer = layer.env
-    return env.action_space == base.action_space
+    if env.action_space == base.action_space and not any(isinstance(w, VelocityControl) for w in layers):
+        return None
+    for wrapper in layers:
+        if isinstance(wrapper, VelocityControl) or wrapper.action_space != wrapper.env.action_space:
+            return type(wrapper).__name__
+    return type(env).__name__
 
 
 def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
@@ -118,9 +125,11 @@ def run_gym_episode(
     """One episode of ``controller`` in the gymnasium environment ``env`` (acceleration actions), from
     ``env.reset(seed=seed, options=options)`` to ``terminated`` or ``truncated`` (module docstring)."""
     base = crowdnav_env(env)
-    if not _takes_accelerations(env, base):
+    changer = _action_changer(env, base)
+    if changer is not None:
         raise PipelineError(
-            "run_gym_episode gives the environment accelerations; pass it without VelocityControl"
+            f"run_gym_episode gives the environment accelerations; pass it without {changer}, which changes "
+            "the actions"
         )
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)
@@ -175,10 +184,11 @@ class ObserveEpisodes(
         gym.utils.RecordConstructorArgs.__init__(self, observers=observers, controller=controller, meta=meta)
         gym.Wrapper.__init__(self, env)
         self._base = crowdnav_env(env)
-        if not _takes_accelerations(env, self._base):  # it would record velocities as accelerations
+        changer = _action_changer(env, self._base)
+        if changer is not None:  # it would record what the wrapper takes (velocities) as accelerations
             raise PipelineError(
-                "ObserveEpisodes records the environment's accelerations: wrap VelocityControl around it, "
-                "VelocityControl(ObserveEpisodes(env, ...)), not inside it"
+                f"ObserveEpisodes records the environment's accelerations: wrap {changer} around it, "
+                f"{changer}(ObserveEpisodes(env, ...)), not inside it"
             )
         self.observers = tuple(observers)
         self.controller = controller

@@ -304,3 +304,15 @@ def test_observe_episodes_refuses_velocity_control_inside_it():
         ObserveEpisodes(VelocityControl(even), [])
     with pytest.raises(PipelineError, match=r"pass it without VelocityControl"):
         run_gym_episode(make_controller(ControllerSpec("straight")), VelocityControl(even), seed=0)
+
+
+def test_a_wrapper_that_changes_the_actions_is_named_as_it_is_refused():
+    """ClipAction (actions in Box(-inf, inf)) was refused as if it were VelocityControl: 'pass it without
+    VelocityControl', 'wrap VelocityControl around it', with none there. The message names the wrapper."""
+    for wrapper in (gym.wrappers.ClipAction, lambda e: gym.wrappers.RescaleAction(e, -1.0, 1.0)):
+        env = wrapper(gym.make(crowdsim.ENV_ID, n_humans=2))
+        name = type(env).__name__
+        with pytest.raises(PipelineError, match=rf"pass it without {name}, which changes the actions$"):
+            run_gym_episode(make_controller(ControllerSpec("straight")), env, seed=0)
+        with pytest.raises(PipelineError, match=rf"wrap {name} around it, {name}\(ObserveEpisodes\(env"):
+            ObserveEpisodes(env, [])
