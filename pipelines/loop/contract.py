@@ -188,6 +188,11 @@ def checked_description(controller: Controller) -> dict[str, Any]:
         raise PipelineError(
             f"{_named(controller)}: describe()['config'] must be a dict, got {type(config).__name__}"
         )
+    if "env" in config:  # episode_config puts it beside the simulator's settings, which it replaced
+        raise PipelineError(
+            f"{_named(controller)}: describe()['config'] must not set 'env': the simulator's settings are "
+            "recorded there"
+        )
     # what a controller states about itself; the episode's seed, scenario and sizes would relabel every
     # episode alike (their recordings, named by seed and scenario, overwrote one file), as a caller's meta
     clash = [key for key in OWN_FIELDS if key in described and key not in ("predictor_sha256", "config")]

@@ -329,6 +329,7 @@ BROKEN_CONTRACTS = [
     ),
     ("NumberSha256", "describe()['predictor_sha256'] must be a str or None, got 123"),
     ("ExtraList", "act() must return extra as a dict, got list"),
+    ("EnvInConfig", "describe()['config'] must not set 'env': the simulator's settings are recorded there"),
     (
         "IterationText",
         "act() must return iteration_predictions of (H, 2, 2) arrays, got shape () of <U1 values",

@@ -151,6 +151,15 @@ class IterationOfRobots(StraightLine):
         return dataclasses.replace(super().act(obs), iteration_predictions=(prediction,))
 
 
+class EnvInConfig(StraightLine):
+    """describe()["config"]["env"] replaced the simulator's settings in recordings' and records' config."""
+
+    name = "env_in_config"
+
+    def describe(self) -> dict[str, Any]:
+        return {"predictor_sha256": None, "config": {"env": {"dt": 99.0}}}
+
+
 class RowsAsLists(StraightLine):
     """Accelerations as a list of rows: a valid array, which the recorder could not .tolist()."""
 
