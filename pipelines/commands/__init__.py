@@ -124,6 +124,30 @@ def check_writable(
         raise PipelineError(f"{label}: cannot create it in {ancestor} ({exc.strerror or exc})") from None
 
 
+def check_outside_the_zoos(path: Path, option: str, what: str) -> None:
+    """Refuse an output ``path`` in the shipped or the user zoo (symbolic links followed): their files are
+    what their manifests' sha256 record, and only `crowdmpc zoo add` writes them; an export over NAME.pt, or
+    a training run writing its NAME.pt there, left an entry that never loads again. ``what`` is the output
+    the message asks to put elsewhere."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+
+    try:
+        target = path.resolve()
+    except (OSError, RuntimeError):  # a symbolic link loop, in no zoo: check_writable refuses it
+        return
+    for which, locate in (("shipped", zoo.checkpoints_dir), ("user", zoo.user_zoo_dir)):
+        try:
+            root = locate().resolve()
+        except (PredictorError, OSError, RuntimeError):  # no such zoo here, so the path cannot be in it
+            continue
+        if target.is_relative_to(root):
+            raise PipelineError(
+                f"{option} {path} lies in the {which} zoo {root}, whose files only `crowdmpc zoo add` "
+                f"writes; write {what} elsewhere"
+            )
+
+
 def _check_not_zoo_file(path: Path, label: str) -> None:
     """Refuse ``path`` when it is the user zoo's or the shipped zoo's own file, whether it exists yet or not:
     a report written there before the zoo made the file (``calibrate --json ZOO/calibrations.json`` on a new

@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from pipelines.commands import check_writable, path_arg, replace_file
+from pipelines.commands import check_outside_the_zoos, check_writable, path_arg, replace_file
 from pipelines.errors import PipelineError
 
 # The MPC predicts over 4 steps (Table I); the CasADi function grows with H (its graph unrolls H recursive
@@ -59,29 +59,6 @@ def _parity(predictor, args: argparse.Namespace):
     if not isinstance(predictor, LearnedPredictor):
         return None
     return require_parity(predictor, args.humans, args.robots, args.horizon)
-
-
-def _check_outside_the_zoos(out: Path) -> None:
-    """Refuse an ``out`` in the shipped or the user zoo (symbolic links followed): their files are what their
-    manifests' sha256 record, and only `crowdmpc zoo add` writes them; an export over NAME.pt would leave an
-    entry that never loads again."""
-    from predictors import zoo
-    from predictors.errors import PredictorError
-
-    try:
-        target = out.resolve()
-    except (OSError, RuntimeError):  # a symbolic link loop, in no zoo: check_writable refuses it
-        return
-    for which, locate in (("shipped", zoo.checkpoints_dir), ("user", zoo.user_zoo_dir)):
-        try:
-            root = locate().resolve()
-        except (PredictorError, OSError, RuntimeError):  # no such zoo here, so --out cannot be in it
-            continue
-        if target.is_relative_to(root):
-            raise PipelineError(
-                f"--out {out} lies in the {which} zoo {root}, whose files only `crowdmpc zoo add` writes; "
-                "write the export elsewhere"
-            )
 
 
 def _check_replaces_an_export(out: Path) -> None:
@@ -144,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.out.exists() and not args.out.is_file():  # the export replaces the file; never a device node
         raise PipelineError(f"--out {args.out} is not a regular file (a device or a pipe); name a file")
-    _check_outside_the_zoos(args.out)
+    check_outside_the_zoos(args.out, "--out", "the export")
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
     predictor = load_predictor(args.name)

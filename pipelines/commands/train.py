@@ -11,7 +11,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from pipelines.commands import check_writable, path_arg
+from pipelines.commands import check_outside_the_zoos, check_writable, path_arg
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -283,6 +283,7 @@ def run(args: argparse.Namespace) -> int:
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
     check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
+    check_outside_the_zoos(out, "--out", "the training run")
     check_writable(out, "--out", directory=True)
     ckpt_dir = out / "checkpoints"
     last = ckpt_dir / "last.ckpt"

@@ -413,6 +413,25 @@ def test_export_never_writes_into_a_zoo(tmp_path, shipped, user, monkeypatch, ca
     assert snapshot(tmp_path) == before and all(problem is None for _, problem in zoo.verify_entries())
 
 
+@pytest.mark.parametrize(("where", "which"), [("user", "user"), ("link/run", "user"), ("shipped", "shipped")])
+def test_training_never_writes_into_a_zoo(tmp_path, shipped, user, capsys, where, which):
+    """`train --out checkpoints --name social_lstm_eth` wrote its NAME.pt and NAME.json over the shipped
+    entry's (and its checkpoints/, csv/ and settings beside them): `zoo verify` then failed on its sha256.
+    Refused before any data is read, nothing written."""
+    (tmp_path / "link").symlink_to(user)
+    out = shipped if where == "shipped" else tmp_path / where
+    root = (shipped if which == "shipped" else user).resolve()
+    before = snapshot(tmp_path)
+    argv = ["train", "--model", "vanilla_lstm", "--out", str(out), "--name", NAME, "--no-progress"]
+    code, _, err = cli(argv, capsys)
+    assert (code, err) == (
+        2,
+        f"crowdmpc train: error: --out {out} lies in the {which} zoo {root}, whose files only `crowdmpc zoo "
+        "add` writes; write the training run elsewhere",
+    )
+    assert snapshot(tmp_path) == before and all(problem is None for _, problem in zoo.verify_entries())
+
+
 def test_export_beside_a_zoo_still_works(tmp_path, shipped, user):
     out = tmp_path / "user_exports" / "cv.casadi"  # a sibling whose name starts like the zoo's
     assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "2"]) == 0
