@@ -119,6 +119,12 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"--out {args.out} is a directory; give the file to write, e.g. {args.name}.casadi"
         )
+    try:  # CasADi receives a name with undecodable bytes as "", and saving to that fails after the export
+        str(args.out).encode("utf-8")
+    except UnicodeEncodeError:
+        raise PipelineError(
+            f"--out {args.out}: not a UTF-8 file name, which CasADi cannot save to; name another file"
+        ) from None
     if args.out.exists() and not args.out.is_file():  # the export replaces the file; never a device node
         raise PipelineError(f"--out {args.out} is not a regular file (a device or a pipe); name a file")
     check_outside_the_zoos(args.out, "--out", "the export")

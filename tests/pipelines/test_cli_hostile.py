@@ -157,6 +157,24 @@ def test_a_path_the_system_cannot_take_is_refused_before_the_work(tmp_path, caps
     assert "not a usable path" in capsys.readouterr().err
 
 
+def test_export_refuses_a_file_name_casadi_cannot_take_before_the_export(tmp_path):
+    """A name with bytes that are not UTF-8 (Python holds them as surrogates) reaches CasADi's save as "":
+    the export was built, then ended in a RuntimeError traceback ("Error opening stream ''")."""
+    out = bytes(tmp_path) + b"/f\xff.casadi"
+    done = subprocess.run(
+        [sys.executable, "-m", "pipelines.cli", "export", "constant_velocity", "--out", out],
+        cwd=REPO,
+        capture_output=True,
+        timeout=120,
+    )
+    assert (done.returncode, done.stdout) == (2, b"")
+    assert done.stderr == (
+        b"crowdmpc export: error: --out " + out.replace(b"\xff", b"\\udcff") + b": not a UTF-8 file name, "
+        b"which CasADi cannot save to; name another file\n"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_an_output_never_replaces_an_input_nor_a_json_report_a_non_json_file(tmp_path, a_file):
     """`review RUN.mcap --json RUN.mcap` replaced the recording by its summary, `evaluate --json` a data
     file: a file output is never one of the inputs, and a --json report replaces only a JSON document."""
