@@ -86,7 +86,9 @@ SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19
 # other character, a non-ASCII letter among them (/home/josé), reaches gcc as it is; a resolved path starts
 # with "/", so a "~" in it is never expanded.
 SHELL_SPECIAL: Final[re.Pattern[str]] = re.compile(r"[\s'\"\\$`;&|<>()*?\[\]#!{}]")
-SHELL_SAFE: Final[str] = "a writable directory whose path has no space and none of '\"\\$`;&|<>()*?[]#!{}"
+SHELL_SAFE: Final[str] = (
+    "a writable directory whose path is UTF-8 and has no space and none of '\"\\$`;&|<>()*?[]#!{}"
+)
 
 
 class CompileCacheError(RuntimeError):
@@ -139,9 +141,20 @@ def _shell_unsafe(path: Path) -> str | None:
         resolved = str(path.resolve())
     except (OSError, RuntimeError):  # a symbolic link loop: _unwritable names it
         return None
+    if not _utf8(resolved):  # undecodable bytes: CasADi receives "" for the path
+        return f"its path {resolved!r} is not UTF-8, which CasADi cannot pass to gcc"
     if SHELL_SPECIAL.search(resolved) is None:
         return None
     return f"its path {resolved!r} holds a space or shell character, which CasADi passes to gcc unquoted"
+
+
+def _utf8(text: str) -> bool:
+    """Whether ``text`` (a path as Python decodes it, undecodable bytes as surrogates) is valid UTF-8."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _location_error(

@@ -4,6 +4,8 @@ error about a temporary file."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from mpc import compile_cache
@@ -70,6 +72,20 @@ def test_a_path_the_shell_would_split_is_refused_before_anything_is_made(tmp_pat
         f"character, which CasADi passes to gcc unquoted; set $CROWDMPC_CACHE to {compile_cache.SHELL_SAFE}"
     )
     assert isinstance(exc.value, MPCConfigError)
+    assert list(tmp_path.iterdir()) == []  # not created
+
+
+def test_a_path_that_is_not_utf8_is_refused_before_anything_is_made(tmp_path, monkeypatch):
+    """CasADi receives a path holding undecodable bytes (surrogates in Python) as "": gcc's command lost its
+    compiler ("sh: 1: -O2: not found") and every jit build failed, after the folder had been made."""
+    root = os.fsdecode(bytes(tmp_path) + b"/c\xff")
+    monkeypatch.setenv(compile_cache.CACHE_ENV, root)
+    with pytest.raises(compile_cache.CacheLocationError) as exc:
+        compile_cache.writable_dir()
+    assert str(exc.value) == (
+        f"$CROWDMPC_CACHE={root}: its path {root + '/compiled'!r} is not UTF-8, which CasADi cannot pass to "
+        f"gcc; set $CROWDMPC_CACHE to {compile_cache.SHELL_SAFE}"
+    )
     assert list(tmp_path.iterdir()) == []  # not created
 
 
