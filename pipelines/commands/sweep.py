@@ -256,6 +256,17 @@ def _jit(
     return jit_available() and _jit_pays(experiment.cells(humans, n_robots), episodes)
 
 
+def _check_compile_cache(label: str, choice: str) -> None:
+    """The compile cache the workers will compile into, checked (and made) before they start: there an
+    unusable one ($CROWDMPC_CACHE a file, read-only, a path gcc cannot take) raised in every episode."""
+    from mpc.compile_cache import CacheLocationError, writable_dir
+
+    try:
+        writable_dir()
+    except CacheLocationError as exc:
+        raise PipelineError(f"{label} {choice}: {exc}; or use --jit off") from None
+
+
 def _jit_pays(cells, episodes_per_cell: int) -> bool:
     """Whether compiling repays itself: the saving (episodes x saving per episode, mpc.compile_cache's
     measured SAVING_PER_EPISODE_S) is at least one cold compile (COMPILE_S) per NLP the cells may need. Cells
@@ -300,6 +311,8 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     if not args.report_only:
         check_plan(experiment)
+        if config.jit:
+            _check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
         try:
             status = _run_cells(config)
         except SweepStopped:

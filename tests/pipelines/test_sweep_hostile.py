@@ -215,6 +215,26 @@ def test_a_backend_that_cannot_start_leaves_no_run_line(
     assert not (tmp_path / "new").exists()
 
 
+def test_a_compile_cache_that_cannot_be_used_is_refused_before_any_worker(tmp_path, capsys, monkeypatch):
+    """--jit with $CROWDMPC_CACHE a file (or read-only, or a path gcc cannot take) started the workers, and
+    every episode raised the cache's error into errors.jsonl: "0/2 episodes recorded", exit 1. One line now,
+    naming the option and the variable, before the sweep folder is made."""
+    monkeypatch.setattr("pipelines.experiments.worker.jit_available", lambda: True)  # gcc or not
+    (tmp_path / "file").write_text("x")
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "file"))
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--episodes-per-cell", "1", "--backend",
+            "inline", "--no-progress", "--jit", "on", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"crowdmpc sweep: error: --jit on: $CROWDMPC_CACHE={tmp_path / 'file'}: {tmp_path / 'file'} is not a "
+        "directory; set $CROWDMPC_CACHE to a writable directory; or use --jit off"
+    ]
+    assert not out.exists()
+    assert main([*argv, "--dry-run"]) == 0  # nothing compiles: nothing to refuse
+
+
 def test_a_run_line_is_added_once_the_backend_has_started(good, tmp_path):
     """A backend refused only as it starts (a Ray cluster that cannot be joined) leaves no line either."""
     out = tmp_path / "sweep"
