@@ -46,6 +46,13 @@ def _is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
+def _check_int(name: str, value: object) -> None:
+    """Refuse a value that is no integer before its range is checked: "episodes must be >= 1, got 2.0" told
+    of a bound that 2.0 keeps."""
+    if not _is_int(value):
+        raise PipelineError(f"{name} must be an integer, got {value!r}")
+
+
 def _home(settings: object, name: str) -> None:
     """A path setting with a leading ``~`` made the home directory's, as a shell does: ``record = "~/runs"``
     (no shell reads a config file, nor a quoted --set) wrote a folder named ``~`` here. Set in place: the
@@ -64,7 +71,8 @@ class ScenarioSettings:
     robots: int = 3
 
     def __post_init__(self) -> None:
-        if not (_is_int(self.robots) and 1 <= self.robots <= MAX_ROBOTS):
+        _check_int("robots", self.robots)
+        if not 1 <= self.robots <= MAX_ROBOTS:
             raise PipelineError(f"robots must be in 1..{MAX_ROBOTS}, got {self.robots!r}")
         if self.name not in SCENARIOS:
             raise PipelineError(f"name must be one of {list(SCENARIOS)}, got {self.name!r}")
@@ -111,13 +119,15 @@ class SimulateSettings:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        if not _is_int(self.episodes) or self.episodes < 1:
+        _check_int("episodes", self.episodes)
+        if self.episodes < 1:
             raise PipelineError(f"episodes must be >= 1, got {self.episodes!r}")
         if self.episodes > MAX_SIMULATE_EPISODES:
             raise PipelineError(
                 f"episodes must be at most {MAX_SIMULATE_EPISODES} (use crowdmpc sweep), got {self.episodes}"
             )
-        if not _is_int(self.seed) or self.seed < 0:
+        _check_int("seed", self.seed)
+        if self.seed < 0:
             raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
         for name in ("json", "plot", "record"):
             value = getattr(self, name)
@@ -150,12 +160,14 @@ class SweepSettings:
             raise PipelineError(f"out must be a path, got {self.out!r}")
         _home(self, "out")
         n = self.episodes_per_cell
-        if not _is_int(n) or n < 1:
+        _check_int("episodes_per_cell", n)
+        if n < 1:
             raise PipelineError(f"episodes_per_cell must be at least 1, got {n!r}")
         if n > MAX_EPISODES_PER_CELL:
             raise PipelineError(f"episodes_per_cell must be at most {MAX_EPISODES_PER_CELL}, got {n}")
         self._check_humans()
-        if not _is_int(self.seed) or self.seed < 0:
+        _check_int("seed", self.seed)
+        if self.seed < 0:
             raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
         if self.backend not in BACKENDS:
             raise PipelineError(f"backend must be one of {list(BACKENDS)}, got {self.backend!r}")
@@ -176,7 +188,7 @@ class SweepSettings:
         if not humans or not all(_is_int(h) for h in humans):
             text = str(list(humans))
             shown = text if len(text) <= 80 else text[:77] + "..."
-            raise PipelineError(f"humans must list positive numbers, got {shown}")
+            raise PipelineError(f"humans must list positive integers, got {shown}")
         # Up to the crowd sizes 1..MAX_HUMANS, each once: more is repeats, each a whole column of cells.
         if len(humans) > MAX_HUMANS:
             raise PipelineError(f"humans must list at most {MAX_HUMANS} crowd sizes, got {len(humans)}")

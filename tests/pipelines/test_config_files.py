@@ -243,6 +243,16 @@ def test_mpc_overrides_are_the_values_that_differ_from_table_i(tmp_path):
             "run.toml: scenario.name: must be one of ['circle', 'perpendicular'], got 'square'",
         ),  # fmt: skip
         ("[simulate]\nepisodes = 0\n", "run.toml: simulate.episodes: must be >= 1, got 0"),
+        # a float was "must be >= 1, got 2.0" (and seed "must be >= 0, got 5.0"): a bound the value keeps
+        ("[simulate]\nepisodes = 2.0\n", "run.toml: simulate.episodes: must be an integer, got 2.0"),
+        ("[simulate]\nseed = 5.0\n", "run.toml: simulate.seed: must be an integer, got 5.0"),
+        ("[scenario]\nrobots = 2.0\n", "run.toml: scenario.robots: must be an integer, got 2.0"),
+        (
+            "[sweep]\nepisodes_per_cell = 2.0\n",
+            "run.toml: sweep.episodes_per_cell: must be an integer, got 2.0",
+        ),
+        ("[sweep]\nseed = 1.5\n", "run.toml: sweep.seed: must be an integer, got 1.5"),
+        ("[sweep]\nhumans = [5.0]\n", "run.toml: sweep.humans: must list positive integers, got [5.0]"),
         ("[sweep]\nhumans = [5, 60]\n", "run.toml: sweep.humans: must be in 1..50, got 60"),
         (
             '[sweep]\nhumans = "5,6"\n',
