@@ -283,9 +283,11 @@ def run(args: argparse.Namespace) -> int:
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
     check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
-    check_outside_the_zoos(out, "--out", "the training run")
-    check_writable(out, "--out", directory=True)
     ckpt_dir = out / "checkpoints"
+    check_outside_the_zoos(out, "--out", "the training run")
+    # `--out .` in a clone: Lightning's checkpoints/ is the shipped zoo's folder
+    check_outside_the_zoos(ckpt_dir, f"--out {out}: its folder", "the training run")
+    check_writable(out, "--out", directory=True)
     last = ckpt_dir / "last.ckpt"
     if args.resume and not last.is_file():
         raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")

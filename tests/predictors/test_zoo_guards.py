@@ -432,6 +432,20 @@ def test_training_never_writes_into_a_zoo(tmp_path, shipped, user, capsys, where
     assert snapshot(tmp_path) == before and all(problem is None for _, problem in zoo.verify_entries())
 
 
+def test_training_beside_the_shipped_zoo_never_puts_its_checkpoints_into_it(tmp_path, shipped, capsys):
+    """`train --out .` at a clone's top wrote Lightning's last.ckpt and best-*.ckpt into OUT/checkpoints/,
+    which is the shipped zoo's folder."""
+    out = shipped.parent
+    before = snapshot(tmp_path)
+    code, _, err = cli(["train", "--model", "vanilla_lstm", "--out", str(out), "--no-progress"], capsys)
+    assert (code, err) == (
+        2,
+        f"crowdmpc train: error: --out {out}: its folder {shipped} lies in the shipped zoo "
+        f"{shipped.resolve()}, whose files only `crowdmpc zoo add` writes; write the training run elsewhere",
+    )
+    assert snapshot(tmp_path) == before
+
+
 def test_export_beside_a_zoo_still_works(tmp_path, shipped, user):
     out = tmp_path / "user_exports" / "cv.casadi"  # a sibling whose name starts like the zoo's
     assert main(["export", "constant_velocity", "--out", str(out), "--horizon", "2"]) == 0
