@@ -300,6 +300,16 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     return runs, n_unreadable
 
 
+def _check_distinct_outputs(args: argparse.Namespace) -> None:
+    """Each output its own file: written one after the other, the last (--json) replaced the figure."""
+    outputs = [(f"--{name}", getattr(args, name)) for name in ("plot", "animate", "json")]
+    given = [(option, path) for option, path in outputs if path is not None]
+    for i, (option, path) in enumerate(given):
+        for other, other_path in given[i + 1 :]:
+            if path.resolve() == other_path.resolve():
+                raise PipelineError(f"{option} and {other} name the same file {path}; give each its own")
+
+
 def run(args: argparse.Namespace) -> int:
     from pipelines.logs.digest import digest
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
@@ -327,6 +337,7 @@ def run(args: argparse.Namespace) -> int:
     check_writable(args.plot, "--plot", inputs=inputs)
     check_writable(args.animate, "--animate", inputs=inputs)
     check_writable(args.json, "--json", inputs=inputs, json_only=True)
+    _check_distinct_outputs(args)
     report: dict[str, Any] = {}
     n_unreadable = 0
     if args.path.is_dir():

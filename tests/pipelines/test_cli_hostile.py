@@ -264,6 +264,22 @@ def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
     assert run.path.read_bytes() == before
 
 
+@pytest.mark.parametrize(
+    ("first", "second", "name"), [("--plot", "--json", "same.png"), ("--plot", "--animate", "same.gif")]
+)
+def test_two_outputs_of_one_review_are_two_files(tmp_path, capsys, first, second, name):
+    """`review RUN --plot same.png --json same.png` wrote the plot, then the report over it (exit 0, the plot
+    lost), and `--plot a.gif --animate a.gif` the animation over the plot. Refused before any is written."""
+    from tests.pipelines.mcap_episode import record_episode
+
+    run = record_episode(tmp_path / "run", seed=1, steps=3)
+    same = tmp_path / "out" / ".." / name
+    assert main(["review", str(run.path), first, str(same), second, str(tmp_path / name)]) == 2
+    line = _one_error_line(capsys, "review")
+    assert line.endswith(f"{first} and {second} name the same file {same}; give each its own")
+    assert not (tmp_path / name).exists()
+
+
 def test_review_writes_into_a_new_folder_and_strict_json(tmp_path, capsys):
     """The outputs' folders are made, as every other command makes them (the check passed, and the whole
     review was lost at the end); NaN in a foreign file's metrics is no reason to write invalid JSON."""
