@@ -32,8 +32,9 @@ class EpisodeView:
     radius: float  # m
 
     def row_at(self, t: float) -> int:
-        """Index of the recorded state nearest to time ``t`` (s)."""
-        return int(np.argmin(np.abs(self.times - t)))
+        """Index of the recorded state nearest to time ``t`` (s). ``t`` is brought into the recorded span
+        first: past ~1e16 s every distance rounded to ``t`` itself, and the "nearest" state was the first."""
+        return int(np.argmin(np.abs(self.times - np.clip(t, self.times.min(), self.times.max()))))
 
     def planned_row_at(self, t: float) -> int:
         """Index of the state nearest to time ``t`` (s) among those with a plan or a prediction, when the

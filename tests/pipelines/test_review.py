@@ -252,6 +252,15 @@ def test_times_must_be_finite_non_negative_seconds(runs, tmp_path, times, capsys
     assert done.value.code == 2 and "--times" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("t", [1e3, 1e17, 1e308])
+def test_a_time_past_the_episode_draws_its_last_state(runs, t):
+    """`--times 1e17` drew the plans at t = 0 s: |times - 1e17| rounds to 1e17 for every state, and argmin
+    took the first. 8 steps of 0.4 s: the last recorded state is at 3.2 s."""
+    view = episode_view(read_recording(runs[0].path))
+    assert view.row_at(t) == len(view.times) - 1 and view.times[-1] == pytest.approx(3.2)
+    assert view.row_at(1.3) == 3  # 1.2 s, the nearest state within the episode
+
+
 def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
     assert main(["review", str(runs[0].path)]) == 0
     lines = capsys.readouterr().out.splitlines()
