@@ -262,10 +262,9 @@ def _add(args: argparse.Namespace) -> int:
             f"{args.weights} is not a file; give the weights `crowdmpc train` wrote (NAME.pt)"
         )
     metrics_path = args.metrics or args.weights.with_suffix(".metrics.json")
-    if not metrics_path.is_file():
-        raise PipelineError(
-            f"{metrics_path} does not exist; pass --metrics FILE (written by `crowdmpc train`)"
-        )
+    if not metrics_path.is_file():  # a folder or /dev/zero exists, and is no metrics file either
+        why = "is not a file" if metrics_path.exists() else "does not exist"
+        raise PipelineError(f"{metrics_path} {why}; pass --metrics FILE (written by `crowdmpc train`)")
     if metrics_path.stat().st_size > checkpoint.MAX_DOCUMENT_BYTES:
         raise PipelineError(
             f"{metrics_path}: more than the {checkpoint.MAX_DOCUMENT_BYTES} bytes a metrics file may have"

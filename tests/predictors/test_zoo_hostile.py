@@ -562,6 +562,19 @@ def test_zoo_add_refuses_a_bad_metrics_file_before_writing(tmp_path, zoo_dir, pa
     assert tree(tmp_path) == before
 
 
+@pytest.mark.parametrize("where", ["/dev/zero", "folder"])
+def test_zoo_add_names_a_metrics_path_that_is_no_file_as_such(tmp_path, zoo_dir, pair, capsys, where):
+    """`--metrics /dev/zero` (or a folder) was refused as "does not exist", which it does."""
+    metrics = Path(where) if where.startswith("/") else tmp_path
+    before = tree(zoo_dir)
+    code, line = cli(["zoo", "add", str(pair[0]), "--metrics", str(metrics)], capsys)
+    assert (code, line) == (
+        2,
+        f"crowdmpc zoo: error: {metrics} is not a file; pass --metrics FILE (written by `crowdmpc train`)",
+    )
+    assert tree(zoo_dir) == before
+
+
 # ---------------------------------------------------------------------------------------------- export
 @pytest.mark.parametrize(
     "option, value", [("--horizon", 100_000), ("--horizon", 0), ("--horizon", 101), ("--humans", 10**6)]
