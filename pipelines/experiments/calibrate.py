@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Final, NamedTuple, cast
 
 import numpy as np
 
+from crowdsim.scenarios import MAX_HUMANS
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec, class_tables
 from predictors.conformal import alpha_text
@@ -131,6 +132,8 @@ class ClosedLoopPlan:
             raise PipelineError(f"--seed must be >= 0, got {self.seed}")
         if not self.humans or min(self.humans) < 1:
             raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
+        if max(self.humans) > MAX_HUMANS:  # else the episode of that size failed after those before it ran
+            raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
         if self.controller not in ("cmpc", "dmpc"):
             raise PipelineError(f"calibration runs cmpc or dmpc, got {self.controller!r}")
         if not self.near > 0:  # NaN too

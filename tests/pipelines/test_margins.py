@@ -330,6 +330,14 @@ def test_calibrate_refuses_a_repeated_alpha(monkeypatch, capsys):
     assert "names 0.1 and 0.1000000000000001, one calibration," in err and plans == []
 
 
+def test_calibrate_refuses_a_crowd_too_large_before_any_episode(monkeypatch, capsys):
+    """--humans 5,51 ran the 5-human episodes, then the first 51-human one failed, in a message that did not
+    name --humans ("n_humans must be in [0, 50], got 51")."""
+    plans = _episodes(monkeypatch)
+    err = _refused(capsys, [*CALIBRATE, "--humans", "5,51", "--episodes", "3", "--dry-run"])
+    assert err == "crowdmpc calibrate: error: --humans must be in 1..50, got 51" and plans == []
+
+
 def test_calibrate_near_inf_is_stored_as_null(monkeypatch):
     """near = inf (the module's "scores everyone") ran every episode, then failed to store the block:
     JSON has no infinity. It is stored as null."""
