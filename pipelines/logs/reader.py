@@ -303,8 +303,9 @@ def _walk_file(path: Path, walk: _Walk) -> tuple[bool, str | None]:
     the closing magic) and what stopped reading early, if anything did."""
     if path.is_dir():
         raise PipelineError(f"{path} is a folder, not a recording")
-    if not path.is_file():
-        raise PipelineError(f"{path}: no such recording")
+    if not path.is_file():  # /dev/zero or a pipe exists: "no such recording" sent the user looking for it
+        why = "is not a regular file (a device or a pipe)" if path.exists() else "no such recording"
+        raise PipelineError(f"{path}: {why}")
     try:
         data = path.read_bytes()
     except OSError as exc:

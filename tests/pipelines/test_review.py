@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 
 import numpy as np
@@ -198,6 +199,18 @@ def test_unreadable_input_is_a_user_error(tmp_path, capsys):
     capsys.readouterr()
     assert main(["review", str(not_mcap), "--plot", str(tmp_path / "p")]) == 2  # checked before reading
     assert "cannot write a figure of type '(no suffix)'" in capsys.readouterr().err
+
+
+def test_a_device_or_a_pipe_is_named_as_no_regular_file(tmp_path, capsys):
+    """`review /dev/zero` (or a pipe) said "no such recording" of a path that exists."""
+    fifo = tmp_path / "run.mcap"
+    os.mkfifo(fifo)
+    for path in ("/dev/zero", str(fifo)):
+        assert main(["review", path]) == 2
+        err = capsys.readouterr().err
+        assert err == f"crowdmpc review: error: {path}: is not a regular file (a device or a pipe)\n"
+    assert main(["review", str(tmp_path / "missing.mcap")]) == 2
+    assert capsys.readouterr().err.endswith("missing.mcap: no such recording\n")
 
 
 def test_a_folder_of_run_folders_is_reviewed_one_and_two_levels_down(runs, tmp_path, capsys):
