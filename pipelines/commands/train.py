@@ -288,6 +288,12 @@ def run(args: argparse.Namespace) -> int:
     # `--out .` in a clone: Lightning's checkpoints/ is the shipped zoo's folder
     check_outside_the_zoos(ckpt_dir, f"--out {out}: its folder", "the training run")
     check_writable(out, "--out", directory=True)
+    for folder in ("checkpoints", "csv", "tensorboard"):  # Lightning writes into them (train_fit._trainer)
+        if (out / folder).is_symlink():
+            raise PipelineError(
+                f"--out {out}: its {folder} is a symbolic link; crowdmpc does not write through one "
+                "(remove it)"
+            )
     last = ckpt_dir / "last.ckpt"
     if args.resume and not last.is_file():
         raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")

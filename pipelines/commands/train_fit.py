@@ -87,7 +87,9 @@ def _fit(
         from pipelines.commands.train_resume import SETTINGS_FILE
 
         out.mkdir(parents=True, exist_ok=True)
-        (out / SETTINGS_FILE).write_text(json.dumps({**settings, "name": name}, indent=2) + "\n")
+        text = json.dumps({**settings, "name": name}, indent=2) + "\n"
+        # in one rename: a symbolic link planted in --out is replaced, never written through
+        replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
     started = time.perf_counter()
     trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
     elapsed = time.perf_counter() - started

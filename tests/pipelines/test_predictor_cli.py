@@ -279,6 +279,42 @@ def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capf
     assert "add to the zoo with" in out
 
 
+def test_training_never_writes_through_a_link_planted_in_its_folder(tmp_path, capsys):
+    """A train_settings.json link in --out had the run's settings written over the file it points to, and a
+    csv/ link had Lightning's logs written into the folder it points to: the settings now replace the link,
+    and a link in place of one of Lightning's folders is refused before the run."""
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    outside, elsewhere, out = tmp_path / "outside.txt", tmp_path / "elsewhere", tmp_path / "run"
+    outside.write_text("keep me\n")
+    elsewhere.mkdir()
+    out.mkdir()
+    (out / "csv").symlink_to(elsewhere)
+    args = [
+        "train",
+        "--model",
+        "vanilla_lstm",
+        "--train",
+        data,
+        "--val",
+        data,
+        "--epochs",
+        "1",
+        "--out",
+        str(out),
+    ]
+    assert main([*args, "--no-progress"]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc train: error: --out {out}: its csv is a symbolic link; crowdmpc does not write through "
+        "one (remove it)\n"
+    )
+    (out / "csv").unlink()
+    (out / "train_settings.json").symlink_to(outside)
+    assert main([*args, "--no-progress"]) == 0
+    assert outside.read_text() == "keep me\n" and list(elsewhere.iterdir()) == []
+    settings = out / "train_settings.json"
+    assert not settings.is_symlink() and json.loads(settings.read_text())["model"] == "vanilla_lstm"
+
+
 def test_the_recorded_loss_is_the_one_trained(trained):
     """A Gaussian loss asked of a net with a point head trains on L2 (PredictorModule.model_step), and the
     checkpoint says so; soft-pooling Social-LSTM has a Gaussian head and keeps it."""
