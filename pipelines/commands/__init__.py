@@ -21,6 +21,11 @@ T = TypeVar("T")
 CLOSED_PIPE_STATUS: Final[int] = 141
 # A --json report is far smaller; a larger existing file is data, never replaced (check_writable).
 MAX_REPORT_BYTES: Final[int] = 64 * 2**20
+# A file name's limit (NAME_MAX, Linux and macOS file systems), and how much longer than an output's name the
+# temporary names made beside it are: replace_file's ".NAME.XXXXXXXX.part" (+15 bytes), data synth's
+# ".NAME.synth-PID.part" (+20), data prepare's ".NAME.prepare-PID.tmp" (+21, a PID has at most 7 digits).
+NAME_MAX: Final[int] = 255
+TEMPORARY_NAME_ROOM: Final[int] = 21
 
 
 def examples(*commands: str) -> dict[str, object]:
@@ -91,6 +96,11 @@ def check_writable(
     except (OSError, ValueError) as exc:  # a name too long, a NUL byte (a TOML escape), no permission
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise PipelineError(f"{label}: not a usable path ({why})") from None
+    if len(os.fsencode(path.name)) > NAME_MAX - TEMPORARY_NAME_ROOM:  # its own fits; the one beside it not
+        raise PipelineError(
+            f"{label}: not a usable path (a name of at most {NAME_MAX - TEMPORARY_NAME_ROOM} bytes: crowdmpc "
+            "writes it under a longer temporary name first)"
+        )
     if not zoo_own:
         _check_not_zoo_file(path, label)
     if not directory and path.is_symlink():

@@ -157,6 +157,27 @@ def test_a_path_the_system_cannot_take_is_refused_before_the_work(tmp_path, caps
     assert "not a usable path" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--controller", "straight", "--humans", "1", "--no-progress", "--json"],
+        ["data", "synth", "--episodes", "1", "--humans", "2", "--seed", "0", "--out"],
+    ],
+    ids=["simulate-json", "synth-out"],
+)
+def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_path, capsys, argv):
+    """A 240-byte name fits, its temporary ".NAME.XXXXXXXX.part" (or ".NAME.synth-PID.part") does not:
+    simulate ran its episodes and then could not write --json, data synth ended in an OSError traceback."""
+    out = tmp_path / ("a" * 235 + ".json")
+    assert main([*argv, str(out)]) == 2
+    line = _one_error_line(capsys, argv[0])
+    assert line.endswith(
+        f"{argv[-1]} {out}: not a usable path (a name of at most 234 bytes: crowdmpc writes it under a "
+        "longer temporary name first)"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_export_refuses_a_file_name_casadi_cannot_take_before_the_export(tmp_path):
     """A name with bytes that are not UTF-8 (Python holds them as surrogates) reaches CasADi's save as "":
     the export was built, then ended in a RuntimeError traceback ("Error opening stream ''")."""
