@@ -162,12 +162,14 @@ def test_a_path_the_system_cannot_take_is_refused_before_the_work(tmp_path, caps
     [
         ["simulate", "--controller", "straight", "--humans", "1", "--no-progress", "--json"],
         ["data", "synth", "--episodes", "1", "--humans", "2", "--seed", "0", "--out"],
+        ["data", "prepare", "--raw", "raw", "--out"],  # .NAME.prepare-PID.tmp beside the folder
     ],
-    ids=["simulate-json", "synth-out"],
+    ids=["simulate-json", "synth-out", "prepare-out"],
 )
 def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_path, capsys, argv):
-    """A 240-byte name fits, its temporary ".NAME.XXXXXXXX.part" (or ".NAME.synth-PID.part") does not:
-    simulate ran its episodes and then could not write --json, data synth ended in an OSError traceback."""
+    """A 240-byte name fits, its temporary ".NAME.XXXXXXXX.part" (".NAME.synth-PID.part", a prepared
+    folder's ".NAME.prepare-PID.tmp") does not: simulate ran its episodes and then could not write --json,
+    data synth and data prepare ended in an OSError traceback. A folder written into is not staged beside."""
     out = tmp_path / ("a" * 235 + ".json")
     assert main([*argv, str(out)]) == 2
     line = _one_error_line(capsys, argv[0])
@@ -176,6 +178,22 @@ def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_
         "longer temporary name first)"
     )
     assert list(tmp_path.iterdir()) == []
+    record = tmp_path / ("r" * 240)
+    assert (
+        main(
+            [
+                "simulate",
+                "--controller",
+                "straight",
+                "--humans",
+                "0",
+                "--no-progress",
+                "--record",
+                str(record),
+            ]
+        )
+        == 0
+    )
 
 
 def test_export_refuses_a_file_name_casadi_cannot_take_before_the_export(tmp_path):
