@@ -171,11 +171,11 @@ def main() -> int:
         compile_s = runs["cold"]["wall_s"] - runs["warm"]["wall_s"]
         saving = (runs["off"]["wall_s"] - runs["warm"]["wall_s"]) / runs["off"]["episodes"]
         print(f"this sweep: cold - warm {compile_s:.1f} s wall; off - warm {saving:.2f} s wall per episode")
-        from pipelines.commands.sweep import _jit_pays
+        from pipelines.commands.sweep_jit import jit_pays
         from pipelines.experiments.cells import EXPERIMENTS
 
         swap = EXPERIMENTS["predictors"].with_predictors(args.predictors.split(","))
-        print(f"--jit auto would compile: {_jit_pays(swap.cells(), args.episodes_per_cell)}")
+        print(f"--jit auto would compile: {jit_pays(swap.cells(), args.episodes_per_cell)}")
         if args.payback_episodes > 0:
             payback(args.payback_episodes, Path(tmp) / "payback-cache")
     if args.json:

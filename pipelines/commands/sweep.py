@@ -8,12 +8,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
+from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_plan, check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
     from pipelines.config import Option, RunConfig
-    from pipelines.experiments.cells import Experiment
     from pipelines.experiments.sweep import SweepConfig
 
 EPILOG = """examples:
@@ -237,59 +237,6 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _jit(
-    choice: str,
-    label: str,
-    experiment: Experiment,
-    humans: tuple[int, ...] | None,
-    n_robots: int,
-    episodes: int,
-) -> bool:
-    """--jit: on, off, or auto: on when gcc is found and the CPU the compiled solvers save over the run's
-    episodes covers compiling every NLP the run needs (_jit_pays)."""
-    from pipelines.experiments.worker import jit_available
-
-    if choice == "on" and not jit_available():
-        raise PipelineError(f"{label} on needs gcc on the PATH (CasADi compiles with it); use --jit off")
-    if choice != "auto":
-        return choice == "on"
-    return jit_available() and _jit_pays(experiment.cells(humans, n_robots), episodes)
-
-
-def _check_compile_cache(label: str, choice: str) -> None:
-    """The compile cache the workers will compile into, checked (and made) before they start: there an
-    unusable one ($CROWDMPC_CACHE a file, read-only, a path gcc cannot take) raised in every episode."""
-    from mpc.compile_cache import CacheLocationError, writable_dir
-
-    try:
-        writable_dir()
-    except CacheLocationError as exc:
-        raise PipelineError(f"{label} {choice}: {exc}; or use --jit off") from None
-
-
-def _jit_pays(cells, episodes_per_cell: int) -> bool:
-    """Whether compiling repays itself: the saving (episodes x saving per episode, mpc.compile_cache's
-    measured SAVING_PER_EPISODE_S) is at least one cold compile (COMPILE_S) per NLP the cells may need. Cells
-    are counted apart when anything that may change their NLP differs (shared NLPs compile once per machine,
-    so this overestimates); the coupled NLP is not compiled. What the cache already holds is not consulted
-    (its key needs the NLP built): below the threshold a warm cache forgoes ~0.1-0.2 s an episode."""
-    from mpc.compile_cache import COMPILE_S, SAVING_PER_EPISODE_S
-
-    nlps: dict[str, float] = {}
-    saving = 0.0
-    for cell in cells:
-        spec = cell.spec
-        if not spec.kind.compiles or spec.coupling != "ibr":
-            continue
-        nlp = "local" if spec.controller == "dmpc" else "joint"  # a compiling plugin: counted as CMPC
-        per_predictor = spec.predictor if spec.margins.mode != "none" else None  # conformal margins
-        # Not the predictor otherwise, nor flocking: predictions and flocking weights are NLP parameters.
-        identity = (nlp, spec.mpc_overrides, spec.margins, per_predictor, cell.world)
-        nlps[repr((identity, cell.n_robots, cell.n_humans))] = COMPILE_S[nlp]
-        saving += episodes_per_cell * SAVING_PER_EPISODE_S[nlp]
-    return bool(nlps) and saving >= sum(nlps.values())
-
-
 def run(args: argparse.Namespace) -> int:
     from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
@@ -312,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.report_only:
         check_plan(experiment)
         if config.jit:
-            _check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
+            check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
         try:
             status = _run_cells(config)
         except SweepStopped:
@@ -376,7 +323,7 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
         progress=not args.no_progress,
         # nothing to compile (baselines only): gcc is not needed, workers stay where they are
         jit=any(spec.kind.compiles for _, spec in experiment.methods)
-        and _jit(
+        and choose_jit(
             settings.jit,
             cfg.label("sweep", "jit"),
             experiment,

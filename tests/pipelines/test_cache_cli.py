@@ -63,32 +63,32 @@ SEVEN = (
 
 
 def test_auto_compiles_when_the_episodes_repay_the_compiles():
-    from pipelines.commands.sweep import _jit_pays
+    from pipelines.commands.sweep_jit import jit_pays
     from pipelines.experiments.cells import EXPERIMENTS
 
     # Seven predictors share one joint NLP (8 s), 0.1 s saved an episode each: 12 episodes per cell repay it.
     swap = EXPERIMENTS["predictors"].with_predictors(SEVEN).cells()
-    assert not _jit_pays(swap, 2) and not _jit_pays(swap, 11) and _jit_pays(swap, 12)
+    assert not jit_pays(swap, 2) and not jit_pays(swap, 11) and jit_pays(swap, 12)
     # Table II: a joint (8 s) and a local (2.3 s) NLP per crowd size, 0.1 + 0.19 s saved per episode pair.
     table2 = EXPERIMENTS["table2"].cells()
-    assert not _jit_pays(table2, 35) and _jit_pays(table2, 36) and _jit_pays(table2, 1000)
-    assert not _jit_pays(EXPERIMENTS["baselines"].cells(), 1000)  # nothing to compile
+    assert not jit_pays(table2, 35) and jit_pays(table2, 36) and jit_pays(table2, 1000)
+    assert not jit_pays(EXPERIMENTS["baselines"].cells(), 1000)  # nothing to compile
 
 
 def test_auto_is_off_without_gcc_and_on_needs_it(monkeypatch):
-    from pipelines.commands import sweep
+    from pipelines.commands import sweep_jit
     from pipelines.errors import PipelineError
     from pipelines.experiments import worker
     from pipelines.experiments.cells import EXPERIMENTS
 
     experiment = EXPERIMENTS["predictors"].with_predictors(SEVEN)
     monkeypatch.setattr(worker, "jit_available", lambda: True)
-    assert sweep._jit("auto", "--jit", experiment, None, 3, 100)
-    assert not sweep._jit("auto", "--jit", experiment, None, 3, 2)
-    assert sweep._jit("on", "--jit", experiment, None, 3, 2) and not sweep._jit(
+    assert sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
+    assert not sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 2)
+    assert sweep_jit.choose_jit("on", "--jit", experiment, None, 3, 2) and not sweep_jit.choose_jit(
         "off", "--jit", experiment, None, 3, 100
     )
     monkeypatch.setattr(worker, "jit_available", lambda: False)
-    assert not sweep._jit("auto", "--jit", experiment, None, 3, 100)
+    assert not sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
     with pytest.raises(PipelineError, match="needs gcc"):
-        sweep._jit("on", "--jit", experiment, None, 3, 100)
+        sweep_jit.choose_jit("on", "--jit", experiment, None, 3, 100)
