@@ -29,7 +29,7 @@ from crowdsim.scenarios import MAX_HUMANS
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec, class_tables
 from predictors.conformal import alpha_text
-from predictors.conformal_classes import motion_classes
+from predictors.conformal_classes import observed_classes
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -85,8 +85,7 @@ class PredictionErrors:
         gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
         close = gaps.min(axis=1) <= self.near if obs.n_robots else np.ones(obs.n_humans, dtype=bool)
         if close.any():
-            # what the controller saw: the humans' rows of the history, obs.step + 1 positions observed
-            classes = motion_classes(obs.history[:, obs.n_robots :], obs.step + 1, obs.dt)
+            classes = observed_classes(obs)  # what the controller saw, as the controller classifies it
             self._made.append((obs.step, np.asarray(out.prediction, dtype=float), close, classes[close]))
 
     def on_end(self, result: EpisodeResult) -> None:

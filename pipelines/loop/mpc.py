@@ -44,7 +44,7 @@ from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.mpc_setup import check_coupling, check_world, mpc_config, predictor_history
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import ObservingPredictor, Predictor
-from predictors.conformal_classes import MOTION_CLASSES, motion_classes
+from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES, observed_classes
 from predictors.errors import NoCasadiTwin, PredictorError
 from predictors.registry import checkpoint_sha256, load_predictor
 
@@ -88,6 +88,12 @@ class MPCController:
         self.cfg = cfg.replace(human_margins=margins)
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
         self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256)
+        if self.class_margins is not None and world.obs_len < CLASS_WINDOW:
+            raise PipelineError(
+                f"{spec.margins.mode} margins are calibrated for motion classes read from a human's last "
+                f"{CLASS_WINDOW} positions, but the simulator keeps {world.obs_len} ([world] obs_len): set "
+                f"[world] obs_len >= {CLASS_WINDOW} (e.g. --set world.obs_len={CLASS_WINDOW})"
+            )
         check_world(world, self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
         release = self.cfg.stall_release_s
@@ -263,7 +269,7 @@ class MPCController:
         cfg = self.cfg
         if self.class_margins is None and cfg.guidance == "none":
             return {}
-        classes = motion_classes(obs.history[:, obs.n_robots :], obs.step + 1, obs.dt)
+        classes = observed_classes(obs)
         out: dict[str, Any] = {}
         if self.class_margins is not None:
             out["human_margins"] = margins = self.class_margins.per_human(classes, cfg.horizon)

@@ -203,3 +203,35 @@ def test_labels_and_messages_name_an_alpha_of_many_digits_exactly(tmp_path, monk
         PipelineError, match=r"alpha=0\.1234567 has no conformal-motion .*--alpha 0\.1234567 "
     ):
         MarginSpec("conformal-motion", alpha=0.1234567).resolve_classes("constant_velocity", 4, None)
+
+
+def test_a_longer_history_keeps_the_calibrated_class_window(tmp_path, monkeypatch):
+    """Closed-loop calibration classifies from 9 positions (the default world's history). With [world]
+    obs_len = 12 the classes were read from all 12 rows: a human seen 10 times was still "new", and one who
+    has stood for the last 9 positions but walked before them was "slow"; each got that class's margin."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    _store(tmp_path, classes=True)
+    controller = make_controller(
+        ControllerSpec("cmpc", "constant_velocity", margins=parse_margins("conformal-motion"))
+    )
+    history = np.zeros((12, 1 + 2, 2))
+    history[:3, 1, 0] = [-1.2, -0.8, -0.4]  # walked 1 m/s, then stood still for the last 9 positions
+    history[:, 2, 0] = np.arange(12) * 0.4  # walks 1 m/s throughout
+    margins = _margins(controller, SimpleNamespace(history=history, n_robots=1, step=9, dt=0.4))
+    np.testing.assert_allclose(margins[:, 0], 0.18 * 2 * np.arange(1, 5))  # standing: class 1
+    np.testing.assert_allclose(margins[:, 1], 0.18 * 4 * np.arange(1, 5))  # walking: class 3
+
+
+def test_a_history_shorter_than_the_class_window_is_refused(tmp_path, monkeypatch):
+    """With [world] obs_len = 2 the classes were read from one step's motion, not 9 positions."""
+    from crowdsim.env_config import EnvConfig
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    errors, motion = class_errors(4)
+    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=errors), tmp_path)
+    short = dataclasses.replace(EnvConfig(), history_len=2)
+    for mode in ("conformal-motion", "conformal-shortfall"):
+        spec = ControllerSpec("cmpc", "constant_velocity", margins=parse_margins(mode))
+        with pytest.raises(PipelineError, match=r"last 9 positions.*keeps 2.*--set world.obs_len=9"):
+            make_controller(spec, short)
+    make_controller(ControllerSpec("cmpc", "constant_velocity", margins=parse_margins("conformal")), short)
