@@ -152,6 +152,15 @@ class MarginSpec:
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
         from predictors.calibration_store import find_calibration
+        from predictors.oracle import ORACLE_PREDICTOR
+
+        if self.source == "real" and predictor == ORACLE_PREDICTOR:  # `calibrate --source real` refuses it
+            from predictors.conformal import alpha_text
+
+            raise PipelineError(
+                f"the ORCA oracle knows the simulator, not real people, so it has no real calibration: plan "
+                f"with its closed-loop one (--margins conformal:{alpha_text(self.alpha)}) or leave it out"
+            )
 
         block = find_calibration(predictor, self.source, self.alpha, sha256=sha256)
         if len(block.quantiles) < horizon:

@@ -278,6 +278,22 @@ def test_calibrated_margins_need_a_predictor_and_specs_may_be_padded():
     assert parse_margins(" conformal:0.05 ") == MarginSpec("conformal", alpha=0.05)
 
 
+def test_real_margins_of_the_oracle_name_what_runs(tmp_path, monkeypatch, capsys):
+    """No real calibration of the ORCA oracle can exist (`calibrate --source real` refuses it); the refusal
+    said to run exactly that command. It now names the oracle's closed-loop margins."""
+    from pipelines.cli import main
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    with pytest.raises(PipelineError) as caught:
+        parse_margins("conformal:0.05:real").resolve("orca_oracle", 4, None)
+    message = str(caught.value)
+    assert "no real calibration" in message and "--margins conformal:0.05" in message
+    assert "--source real" not in message
+    argv = ["calibrate", "--predictor", "orca_oracle", "--source", "real", "--alpha", "0.05"]
+    assert main(argv) == 2  # what the refusal used to name
+    assert "use --source closed-loop" in capsys.readouterr().err
+
+
 # ------------------------------------------------------------------------- calibrate: refused before the work
 CALIBRATE = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
 
