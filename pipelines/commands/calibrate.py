@@ -269,14 +269,19 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
     """The horizon the controller predicts, and the held-out margins resolve (from a block stored already,
     or one this run stores), as the held-out episodes' controller will resolve them."""
     from pipelines.experiments.calibrate import plan_horizon
+    from predictors.oracle import ORACLE_PREDICTOR
 
     horizon = plan_horizon(_plan(args))
     if args.horizon != horizon:
+        real = (  # run refuses the oracle on real scenes
+            ""
+            if args.predictor == ORACLE_PREDICTOR
+            else f", or calibrate real scenes at {args.horizon} steps: --source real --horizon {args.horizon}"
+        )
         raise PipelineError(
             f"--horizon {args.horizon}: closed-loop calibration measures the {args.controller} MPC's "
             f"predictions, {horizon} steps (its horizon, which calibrate does not change); use --horizon "
-            f"{horizon}, or calibrate real scenes at {args.horizon} steps: --source real "
-            f"--horizon {args.horizon}"
+            f"{horizon}{real}"
         )
     if not args.holdout or plans_with_new_blocks(args, holdout_margins):
         return

@@ -243,6 +243,10 @@ def _short_horizon(spec: MarginSpec, predictor: str, covered: int, horizon: int)
     )
     if spec.mode in PER_HUMAN_MODES:  # no per-class margins in a real calibration (_closed_loop_only)
         return f"{why}; {spec.mode} margins come from the closed-loop calibration only, and {closed}"
+    from predictors.oracle import ORACLE_PREDICTOR
+
+    if predictor == ORACLE_PREDICTOR:  # no real calibration of the oracle (MarginSpec._block)
+        return f"{why}; the ORCA oracle has a closed-loop calibration only, and {closed}"
     return (
         f"{why}; {closed}, or calibrate real scenes at {horizon} steps: {real}, and plan with "
         f"--margins conformal:{alpha}:real"

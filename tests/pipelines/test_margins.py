@@ -294,6 +294,29 @@ def test_real_margins_of_the_oracle_name_what_runs(tmp_path, monkeypatch, capsys
     assert "use --source closed-loop" in capsys.readouterr().err
 
 
+def test_a_short_oracle_calibration_offers_no_real_one(tmp_path, monkeypatch, capsys):
+    """At a horizon past the oracle's closed-loop calibration, simulate and calibrate said to calibrate real
+    scenes instead, which `calibrate --source real` refuses for the oracle."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    with pytest.raises(PipelineError) as caught:
+        parse_margins("conformal:0.1").resolve("orca_oracle", 6, None)
+    message = str(caught.value)
+    assert "plan with a horizon of at most 4 (mpc.horizon)" in message
+    assert "real" not in message.replace("closed-loop calibration only", "")
+    _episodes(monkeypatch)
+    argv = [
+        "calibrate",
+        "--predictor",
+        "orca_oracle",
+        "--source",
+        "closed-loop",
+        "--horizon",
+        "6",
+        "--dry-run",
+    ]
+    assert _refused(capsys, argv).endswith("(its horizon, which calibrate does not change); use --horizon 4")
+
+
 # ------------------------------------------------------------------------- calibrate: refused before the work
 CALIBRATE = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
 
