@@ -17,24 +17,21 @@ than the pooled guarantee (the caveats of ``predictors.conformal`` on exchangeab
 ``MOTION_CLASSES`` (index: name): 0 ``new``, observed for fewer than L positions (its window is not full, so
 its speed is unknown); otherwise by the net speed over the observed window, ``|x_t - x_{t-L+1}| / ((L-1)
 tau)``: 1 ``standing`` below ``STANDING_SPEED``, 2 ``slow`` below ``WALKING_SPEED``, 3 ``walking``. In the
-closed loop (``observed_classes``) L is ``CLASS_WINDOW``, the window closed-loop calibration classifies with,
-whatever history the simulator keeps: a margin is calibrated for one classifier.
+closed loop (``pipelines.loop.margins.observed_classes``) L is ``CLASS_WINDOW``, the window closed-loop
+calibration classifies with, whatever history the simulator keeps: a margin is calibrated for one classifier.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
 import numpy as np
 
 from crowdsim.world import OBS_LEN
 from predictors.conformal import coverage, min_samples, step_counts, step_quantiles
 from predictors.errors import PredictorError
-
-if TYPE_CHECKING:
-    from crowdsim.env import Observation
 
 MOTION_CLASSES: Final[tuple[str, ...]] = ("new", "standing", "slow", "walking")
 STANDING_SPEED: Final[float] = 0.1  # m/s over the observed window: below it, a human "stands"
@@ -58,12 +55,6 @@ def motion_classes(history: np.ndarray, observed: int | np.ndarray, dt: float) -
     classes = np.where(speed < STANDING_SPEED, 1, np.where(speed < WALKING_SPEED, 2, 3))
     new = np.broadcast_to(np.asarray(observed), classes.shape) < window
     return np.where(new, 0, classes).astype(np.int64)
-
-
-def observed_classes(obs: Observation) -> np.ndarray:
-    """The ``MOTION_CLASSES`` index ``(N_h,)`` of ``obs``'s humans from what the controller observes: their
-    last ``CLASS_WINDOW`` positions (fewer where the simulator keeps fewer), ``obs.step + 1`` of them seen."""
-    return motion_classes(obs.history[-CLASS_WINDOW:, obs.n_robots :], obs.step + 1, obs.dt)
 
 
 @dataclass(frozen=True)

@@ -27,9 +27,8 @@ import numpy as np
 
 from crowdsim.scenarios import MAX_HUMANS
 from pipelines.errors import PipelineError
-from pipelines.loop.margins import MarginSpec, class_tables
+from pipelines.loop.margins import MarginSpec, class_tables, observed_classes
 from predictors.conformal import alpha_text
-from predictors.conformal_classes import observed_classes
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation

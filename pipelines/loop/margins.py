@@ -34,6 +34,9 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from crowdsim.env import Observation
     from predictors.calibration import Calibration
     from predictors.conformal_classes import ClassMargins
 
@@ -62,6 +65,14 @@ def class_tables(block: Calibration) -> dict[str, ClassMargins | None]:
     """A calibration block's margins per motion class, by the mode in ``PER_HUMAN_MODES`` that plans with
     them (None where the block has none)."""
     return dict(zip(PER_HUMAN_MODES, (block.classes, block.shortfall), strict=True))
+
+
+def observed_classes(obs: Observation) -> np.ndarray:
+    """The ``MOTION_CLASSES`` index ``(N_h,)`` of ``obs``'s humans from what the controller observes: their
+    last ``CLASS_WINDOW`` positions (fewer where the simulator keeps fewer), ``obs.step + 1`` of them seen."""
+    from predictors.conformal_classes import CLASS_WINDOW, motion_classes
+
+    return motion_classes(obs.history[-CLASS_WINDOW:, obs.n_robots :], obs.step + 1, obs.dt)
 
 
 @dataclass(frozen=True)

@@ -41,10 +41,11 @@ from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
 from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.loop.margins import observed_classes
 from pipelines.loop.mpc_setup import check_coupling, check_world, mpc_config, predictor_history
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import ObservingPredictor, Predictor
-from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES, observed_classes
+from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES
 from predictors.errors import NoCasadiTwin, PredictorError
 from predictors.registry import checkpoint_sha256, load_predictor
 
