@@ -17,6 +17,7 @@ never primaries: only scenes of human primaries are written.
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any, Final
 
@@ -79,7 +80,7 @@ def synthesize(
     static scenes); it costs a Kalman fit (~50 ms) per scene, so it is off by default (tags 0, all kept).
     Returns a summary: counts of episodes, scenes, pedestrians, rows, and episodes that hit the time limit.
     """
-    from predictors.data.trajnet_scenes import build_scenes, write_ndjson
+    from predictors.data.trajnet_scenes import TRAJNET_FPS, build_scenes, write_ndjson
 
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise PipelineError(f"episodes must be an int >= 1, got {episodes!r}")
@@ -87,8 +88,16 @@ def synthesize(
         raise PipelineError(f"n_humans must be an int >= 1, got {n_humans!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise PipelineError(f"seed must be an int >= 0, got {seed!r}")
+    env_config = env_config or EnvConfig()
+    if not math.isclose(env_config.dt * TRAJNET_FPS, 1.0, rel_tol=1e-9):
+        # the scenes are written at TrajNet++'s 2.5 fps, whatever the step: another dt made slower or faster
+        # walkers out of the same frames (dt = 0.2 s wrote 1 m/s pedestrians as 0.4 m/s ones)
+        raise PipelineError(
+            f"env_config.dt must be {1 / TRAJNET_FPS:g} s (TrajNet++ scenes are {TRAJNET_FPS:g} fps), "
+            f"got {env_config.dt:g} s"
+        )
     n_robots = SYNTH_ROBOTS if with_robots else 0
-    env = CrowdEnv(env_config or EnvConfig())
+    env = CrowdEnv(env_config)
     all_tracks: list[np.ndarray] = []
     robot_ids: list[np.ndarray] = []
     frame_offset = id_offset = 0

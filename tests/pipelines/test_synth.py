@@ -5,6 +5,7 @@ import pytest
 import trajnetplusplustools as tt
 
 from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.experiments.synth import synthesize
 
@@ -41,3 +42,11 @@ def test_synth_with_robots_never_makes_a_robot_primary(tmp_path):
 def test_synth_rejects_bad_sizes(tmp_path):
     with pytest.raises(PipelineError, match="episodes.*0"):
         synthesize(tmp_path / "x.ndjson", episodes=0, n_humans=3, seed=0)
+
+
+def test_synth_refuses_a_step_other_than_trajnets(tmp_path):
+    # the scenes are written at 2.5 fps: a 0.2 s step wrote 1 m/s walkers as 0.4 m/s ones
+    out = tmp_path / "x.ndjson"
+    with pytest.raises(PipelineError, match=r"env_config.dt must be 0.4 s .*got 0.2 s"):
+        synthesize(out, episodes=1, n_humans=3, seed=0, env_config=EnvConfig(dt=0.2))
+    assert not out.exists()
