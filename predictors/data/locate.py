@@ -243,12 +243,19 @@ def _remove(path: Path) -> None:
 
 
 def vita_train_dir(data_dir: Path, prepared: Path) -> Path | None:
-    """The TrajNet++ training files: in the data directory, or beside the raw data it was prepared from."""
+    """The TrajNet++ training files: in the data directory, or beside the raw data it was prepared from --
+    the raw data in it, when it is a raw directory (prepared into the cache). A cache entry's own
+    ``source_dir`` is not asked: the entry is keyed by the raw files' content, so it names whichever copy of
+    them was prepared first, and a copy without TrajNet++ files trained on another folder's."""
     candidates = [data_dir / VITA_TRAIN]
-    manifest = read_manifest(prepared) or {}
-    source = manifest.get("source_dir")
-    if source:
-        candidates.append(Path(source).parent / VITA_TRAIN)
+    if prepared == data_dir:
+        source = (read_manifest(prepared) or {}).get("source_dir")
+        beside = Path(source).parent if source else None
+    else:
+        raw = raw_ewap_dir(data_dir)
+        beside = Path(os.path.abspath(raw)).parent if raw is not None else None
+    if beside is not None:
+        candidates.append(beside / VITA_TRAIN)
     for candidate in candidates:
         if candidate.is_dir() and any(candidate.glob("*.ndjson")):
             return candidate

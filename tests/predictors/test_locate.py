@@ -162,3 +162,19 @@ def test_a_good_cache_entry_installed_meanwhile_is_kept(raw_root, monkeypatch, t
     assert prepared_dir(raw_root, log=lambda msg: None, progress=False) == entry
     assert (entry / "installed-by-the-other").exists() and locate.read_manifest(entry) is not None
     assert sorted(p.name for p in entry.parent.iterdir()) == sorted([entry.name, f".{entry.name}.lock"])
+
+
+def test_loo_of_a_raw_copy_finds_only_the_trajnet_files_beside_it(raw_root, monkeypatch, tmp_path):
+    # the cache entry is shared by every copy of the same obsmat files: its source_dir is the first copy's
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(
+        locate, "prepare_ewap", lambda *a, **k: prepare_ewap(*a, **{**k, "categorize_scenes": False})
+    )
+    protocol_files(raw_root, "loo", log=lambda msg: None)
+    copy = tmp_path / "copy"
+    shutil.copytree(raw_root / "raw_ewap", copy / "raw_ewap")
+    with pytest.raises(PredictorError, match="--protocol loo needs the TrajNet"):
+        protocol_files(copy, "loo", log=lambda msg: None)
+    shutil.copytree(raw_root / "trajnetpp_vita", copy / "trajnetpp_vita")
+    files = protocol_files(copy / "raw_ewap", "loo", log=lambda msg: None)
+    assert files["train"][0] == copy / "trajnetpp_vita" / "train" / "real_data" / "crowds_zara01.ndjson"
