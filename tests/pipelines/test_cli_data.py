@@ -380,8 +380,11 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
                               text=True).stdout)  # fmt: skip
     killed = tmp_path / f".s.ndjson.synth-{gone}.part"  # what a synth killed before its rename leaves
     killed.write_text("scenes of a killed synth\n")
+    # and what one killed while writing its scenes leaves: write_ndjson's temporary of the staged file
+    writing = tmp_path / f".{killed.name}.{gone}.tmp"
+    writing.write_text("half the scenes of a killed synth\n")
     assert run(capsys, *argv("7"))[0] == 0 and matches()
-    assert not killed.exists()
+    assert not killed.exists() and not writing.exists()
     real_replace = os.replace
     for seed, extra in (("8", ["--replace"]), ("9", [])):
         if not extra:
