@@ -122,7 +122,10 @@ def _register_synth(actions) -> None:
     )
     synth.add_argument("--scenario", choices=("circle", "perpendicular"), default="circle")
     synth.add_argument(
-        "--with-robots", action="store_true", help="include robots (driven straight) in the crowd"
+        "--with-robots",
+        action="store_true",
+        help="include three robots in the crowd, ORCA agents that avoid the humans on their way to their "
+        "goals (never primaries)",
     )
     synth.add_argument("--replace", action="store_true", help="replace an existing --out file")
     synth.set_defaults(func=run_synth)
