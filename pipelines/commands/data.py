@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Final
 
+from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import check_writable, path_arg
 from pipelines.commands.evaluate import counted
@@ -126,6 +127,13 @@ def _register_synth(actions) -> None:
         action="store_true",
         help="include three robots in the crowd, ORCA agents that avoid the humans on their way to their "
         "goals (never primaries)",
+    )
+    synth.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        default="paper",
+        help="simulation conventions (default paper; v1, the first simulator's, made the shipped "
+        "social_lstm_synth's data)",
     )
     synth.add_argument("--replace", action="store_true", help="replace an existing --out file")
     synth.set_defaults(func=run_synth)
@@ -274,6 +282,7 @@ def run_synth(args: argparse.Namespace) -> int:
             args.seed,
             scenario=args.scenario,
             with_robots=args.with_robots,
+            env_config=make_env_config(args.profile),
         )
         if "path" in summary:
             summary["path"] = str(args.out)
@@ -318,13 +327,15 @@ def _rerun_of(args: argparse.Namespace, path: Path) -> bool:
 
 
 def _synth_options(args: argparse.Namespace) -> dict:
-    return {
+    options = {
         "episodes": args.episodes,
         "humans": args.humans,
         "seed": args.seed,
         "scenario": args.scenario,
         "with_robots": args.with_robots,
     }
+    # the default profile is left out: the options of a set made before --profile stay the same command's
+    return options if args.profile == "paper" else {**options, "profile": args.profile}
 
 
 def _write_provenance(args: argparse.Namespace, summary: dict, path: Path, data: Path) -> None:

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 import types
+from pathlib import Path
 
 import pytest
 
@@ -301,7 +302,7 @@ def test_evaluate_a_scene_file_without_ground_truth(prepared, capsys):
 def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
     calls = []
 
-    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False):
+    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False, env_config=None):
         calls.append((out_path, episodes, n_humans, seed, scenario, with_robots))
         out_path.write_text("scenes\n")
         return {"scenes": 12, "out": str(out_path)}
@@ -361,7 +362,7 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
     without provenance (the rerun said "exists; add --replace"), or with --replace, the new data beside the
     old provenance (another seed and sha256)."""
 
-    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False):
+    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False, env_config=None):
         out_path.write_text(f"scenes of seed {seed}\n")
         return {"scenes": 1}
 
@@ -558,3 +559,18 @@ def test_a_prepare_waits_for_another_into_the_same_folder(tmp_path, capsys):
         assert stdout.splitlines()[0] == f"waiting for another `data prepare` into {out} to finish"
     finally:
         holder.wait(timeout=30)
+
+
+def test_synth_remakes_the_shipped_synth_models_data(tmp_path, capsys):
+    """checkpoints/README.md's commands for social_lstm_synth's data made none of its 18 files (sha256 in the
+    manifest) once the paper profile became the default: those were made by the first simulator, which
+    `data synth` could not choose. --profile v1 makes them again, bit for bit (here the smallest)."""
+    manifest = json.loads((Path(__file__).parents[2] / "checkpoints" / "manifest.json").read_text())
+    (entry,) = [m for m in manifest["models"] if m["name"] == "social_lstm_synth"]
+    out = tmp_path / "circle_h5.ndjson"  # val: the README's 7th command, seed 106000, 3 episodes
+    argv = ["--episodes", "3", "--humans", "5", "--seed", "106000", "--scenario", "circle", "--with-robots"]
+    code, _, err = run(capsys, "data", "synth", "--out", str(out), *argv, "--profile", "v1")
+    assert code == 0, err
+    want = entry["training_data"]["files"]["val"]["circle_h5.ndjson"]
+    assert hashlib.sha256(out.read_bytes()).hexdigest() == want
+    assert json.loads(out.with_suffix(".synth.json").read_text())["options"]["profile"] == "v1"
