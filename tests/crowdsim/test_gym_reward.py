@@ -2,12 +2,13 @@
 by hand (tests/crowdsim/test_gym_env.py checks them through the environment)."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from crowdsim.errors import SimulationError
-from crowdsim.gym_reward import RewardConfig, surface_distances
+from crowdsim.gym_reward import RewardConfig, step_closest, surface_distances
 
 
 def test_touching_boundaries_are_not_a_contact():
@@ -38,3 +39,17 @@ def test_surface_distances_by_hand_and_without_humans():
 def test_bad_reward_numbers(kwargs, message):
     with pytest.raises(SimulationError, match=message):
         RewardConfig(**kwargs)
+
+
+def test_step_closest_moves_the_robot_and_the_human_within_the_step():
+    # The robot drives (0, 0) -> (1, 0) past a human standing at (1, 0.5): relative to the robot the human
+    # goes (1, 0.5) -> (0, 0.5), closest 0.5 m at the step's end. A robot taken as standing at its start
+    # would leave the human at (1, 0.5) throughout: sqrt(1.25) = 1.118 m.
+    before = SimpleNamespace(robot_positions=np.array([[0.0, 0.0]]), human_positions=np.array([[1.0, 0.5]]))
+    after = SimpleNamespace(robot_positions=np.array([[1.0, 0.0]]), human_positions=np.array([[1.0, 0.5]]))
+    np.testing.assert_allclose(step_closest(before, after), [[0.5]])
+    # A human walking (2, 1) -> (-2, 1) past a robot standing at the origin: sqrt(5) m at both ends of the
+    # step, 1 m mid-step at (0, 1).
+    before = SimpleNamespace(robot_positions=np.zeros((1, 2)), human_positions=np.array([[2.0, 1.0]]))
+    after = SimpleNamespace(robot_positions=np.zeros((1, 2)), human_positions=np.array([[-2.0, 1.0]]))
+    np.testing.assert_allclose(step_closest(before, after), [[1.0]])
