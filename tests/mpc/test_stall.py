@@ -40,7 +40,7 @@ def test_moving_away_from_the_goal_is_no_progress():
     np.testing.assert_array_equal(stalled, [True, False, True])
 
 
-@pytest.mark.parametrize("args", [(0.0, 0.4), (1.0, 0.0), (-1.0, 0.4)])
+@pytest.mark.parametrize("args", [(0.0, 0.4), (1.0, 0.0), (-1.0, 0.4), (1.0, 0.4, 0.0), (1.0, 0.4, -0.25)])
 def test_bad_windows_are_refused(args):
     with pytest.raises(ValueError, match="must be > 0"):
         StallWatch(*args)
@@ -117,3 +117,14 @@ def test_a_window_longer_than_any_episode_never_stalls_a_robot():
     for _ in range(5):
         stalled = watch.update(_positions(0, 0, 0), GOALS, np.zeros(3, bool))
         np.testing.assert_array_equal(stalled, [False, False, False])
+
+
+def test_a_window_shorter_than_half_a_step_is_one_step():
+    """stall_release_s = 0.1 s at tau = 0.4 s rounds to no step at all; the window is one step, so a robot
+    walking 0.3 m a step (over 0.25 m) is moving. Compared with itself it would have made 0 m: stalled."""
+    watch = StallWatch(window_s=0.1, dt=0.4)
+    assert watch.steps == 1
+    arrived = np.zeros(3, bool)
+    np.testing.assert_array_equal(watch.update(_positions(0, 0, 0), GOALS, arrived), [False] * 3)
+    stalled = watch.update(_positions(0.3, 0.1, 0.0), GOALS, arrived)
+    np.testing.assert_array_equal(stalled, [False, True, True])
