@@ -322,6 +322,8 @@ BROKEN_CONTRACTS = [
     ("NaNSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got nan"),
     ("NegativeIterations", "act() must return iterations as an int >= 0, got -1"),
     ("HugeIterations", f"act() must return iterations as an int >= 0, got {'1' + '0' * 39}"),
+    ("BoolIterations", "act() must return iterations as an int, got True"),
+    ("BoolSolveTime", "act() must return solve_time_s as a number, got False"),
     (
         "ObjectInConfig",
         "describe() must return JSON values (dicts, lists, strings, numbers, booleans, None), "
@@ -361,6 +363,18 @@ def test_a_plugin_breaking_the_contract_is_one_line_naming_it_in_both_loops(name
     with pytest.raises(PipelineError) as caught:
         run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2), seed=0)
     assert str(caught.value) == message
+
+
+def test_the_callers_meta_takes_precedence_over_what_the_controller_describes():
+    """run_episode's docstring: entries of ``meta`` are added last and take precedence over describe()'s."""
+    from crowdsim.env_config import EnvConfig
+    from pipelines.loop.contract import episode_meta
+
+    episode = {"seed": 3, "scenario": "circle", "n_humans": 2, "n_robots": 3}
+    described = {"note": "controller's", "kept": 1, "config": {"horizon": 8}}
+    full = episode_meta(episode, EnvConfig(), "toy", None, described, {"note": "caller's"}, "test")
+    assert (full["note"], full["kept"], full["seed"]) == ("caller's", 1, 3)
+    assert full["config"]["horizon"] == 8 and full["config"]["env"]["dt"] == 0.4
 
 
 def test_accelerations_as_a_list_of_rows_are_taken_and_recorded(tmp_path):

@@ -227,6 +227,22 @@ class NegativeIterations(StraightLine):
         return dataclasses.replace(super().act(obs), iterations=-1)
 
 
+class BoolIterations(StraightLine):
+    """``a > 0`` for a count: a bool is an int to Python, not a number of iterations."""
+
+    name = "bool_iterations"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), iterations=True)
+
+
+class BoolSolveTime(StraightLine):
+    name = "bool_solve_time"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), solve_time_s=False)
+
+
 class HugeIterations(StraightLine):
     """A count no float holds: checking it as a number overflowed into a traceback."""
 
