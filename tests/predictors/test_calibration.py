@@ -164,6 +164,8 @@ def test_errors_must_be_a_matrix_of_distances():
         step_quantiles(np.ones(5), 0.1)
     with pytest.raises(PredictorError, match="non-negative distances"):
         step_quantiles(np.array([[1.0, -0.5]]), 0.1)
+    with pytest.raises(PredictorError, match=r"shape \(n, H\) with H >= 1, got \(3, 0\)"):
+        step_quantiles(np.zeros((3, 0)), 0.1)  # no horizon step: no margin to plan with
 
 
 def test_coverage_by_hand():
