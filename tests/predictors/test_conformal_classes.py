@@ -29,6 +29,30 @@ def test_motion_classes_by_hand():
         motion_classes(np.zeros((1, 2, 2)), 1, 0.5)
 
 
+def test_motion_class_edges_and_the_window_length_by_hand():
+    """The edges belong to the faster class: exactly 0.1 m/s is slow, exactly 0.6 m/s walks. The speed is over
+    the L - 1 intervals between L positions: L = 3 at tau = 0.5 s is 1 s, so 0.1 m and 0.6 m are those very
+    speeds (over L tau = 1.5 s they would read 0.067 and 0.4 m/s: standing and slow). L = 5 at tau = 0.25 s:
+    0.5 m in 1 s is slow, 0.6 m walks."""
+    history = np.zeros((3, 2, 2))
+    history[-1, 0, 0], history[-1, 1, 0] = 0.1, 0.6
+    assert motion_classes(history, 3, 0.5).tolist() == [2, 3]
+    history = np.zeros((5, 2, 2))
+    history[-1, 0, 0], history[-1, 1, 0] = 0.5, 0.6
+    assert motion_classes(history, 5, 0.25).tolist() == [2, 3]
+
+
+def test_per_human_margins_are_the_first_steps_of_each_humans_class():
+    """Class c's margin at step k is c + k/10 m (k = 1..3); humans of classes walking, new, standing over a
+    2-step horizon: the (H, N) table of the MPC's human_margins."""
+    rows = tuple(tuple(c + k / 10 for k in (1, 2, 3)) for c in range(4))
+    margins = ClassMargins(n=((10, 10, 10),) * 4, quantiles=rows)
+    np.testing.assert_allclose(margins.per_human(np.array([3, 0, 1]), 2), [[3.1, 0.1, 1.1], [3.2, 0.2, 1.2]])
+    assert margins.per_human(np.array([2]), 3).tolist() == [[2.1], [2.2], [2.3]]
+    with pytest.raises(PredictorError, match="class margins cover 3 steps, the MPC's horizon is 4"):
+        margins.per_human(np.array([2]), 4)
+
+
 def test_class_quantiles_by_hand():
     errors, classes = class_errors(2)
     margins = class_margins(errors, classes, 0.1)
