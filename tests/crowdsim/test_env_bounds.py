@@ -32,6 +32,8 @@ def test_the_profiles_are_within_the_bounds(profile, visibility):
         ({"dt": 1e308}, "EnvConfig.dt must be at most time_limit = 40 s, got 1e+308"),
         ({"dt": 41.0}, "EnvConfig.dt must be at most time_limit = 40 s, got 41"),
         ({"dt": 1e-300}, "EnvConfig.dt must be at least 1e-06 s, got 1e-300"),
+        ({"dt": 1e-7}, "EnvConfig.dt must be at least 1e-06 s, got 1e-07"),
+        ({"spawn_separation": 100.5}, "EnvConfig.spawn_separation must be at most 100 m, got 100.5"),
         ({"dt": 5e-324}, "EnvConfig.dt must be at least 1e-06 s, got 4.94066e-324"),
         ({"time_limit": 1e308}, "EnvConfig.time_limit must be at most 86400 s, got 1e+308"),
         ({"radius": 1e308}, "EnvConfig.radius must be at most 10 m, got 1e+308"),
@@ -47,6 +49,22 @@ def test_values_beyond_the_bounds_are_refused_in_one_compact_line(settings, mess
     with pytest.raises(SimulationError) as exc:
         EnvConfig(**settings)
     assert str(exc.value) == message
+
+
+def test_the_edges_of_the_closed_ranges_are_accepted():
+    """No ORCA radius margin, no spawn separation (humans may spawn touching) and the largest separation are
+    valid settings, kept as given."""
+    config = EnvConfig(orca_radius_margin=0.0, spawn_separation=0.0)
+    assert (config.orca_radius_margin, config.spawn_separation) == (0.0, 0.0)
+    assert EnvConfig(spawn_separation=100.0, orca_radius_margin=10.0).spawn_separation == 100.0
+
+
+def test_world_facts_name_each_setting_in_its_place():
+    # Distinct values, so that two settings exchanged (v_pref and v_max are both 1 m/s by default) show.
+    config = EnvConfig(dt=0.2, history_len=6, radius=0.25, v_pref=0.8, v_max=1.2, a_max=0.7)
+    world = config.world()
+    assert world == WorldFacts(dt=0.2, obs_len=6, radius=0.25, v_pref=0.8, v_max=1.2, a_max=0.7)
+    assert EnvConfig.from_world(world) == config
 
 
 def _extreme_env() -> tuple[CrowdEnv, dict[str, float]]:
