@@ -1,0 +1,60 @@
+"""pipelines/experiments/cells.py on its own: the order of a sweep's episodes, the swap table's lists, and the
+paper's count of episodes, by hand."""
+
+import pytest
+
+from pipelines.config.settings import SweepSettings
+from pipelines.errors import PipelineError
+from pipelines.experiments.cells import (
+    LATER_SWAP_PREDICTORS,
+    SWAP_PREDICTORS,
+    Experiment,
+    get_experiment,
+    swap_predictors,
+)
+from pipelines.loop.controllers import ControllerSpec
+
+
+def test_tasks_run_episode_index_by_episode_index_across_the_cells():
+    """Table II at 5 humans, 3 episodes a cell from seed 4: every cell runs episode 0 (circle, seed 4), then
+    episode 1 (perpendicular, seed 4), then episode 2 (circle, seed 5); a sweep stopped early has run the same
+    crowds in every cell."""
+    tasks = get_experiment("table2").tasks(3, humans=(5,), seed=4)
+    got = [(t.index, t.cell.method, t.scenario, t.seed) for t in tasks]
+    assert got == [
+        (0, "CMPC", "circle", 4),
+        (0, "DMPC", "circle", 4),
+        (1, "CMPC", "perpendicular", 4),
+        (1, "DMPC", "perpendicular", 4),
+        (2, "CMPC", "circle", 5),
+        (2, "DMPC", "circle", 5),
+    ]
+
+
+def test_a_predictor_named_twice_is_refused_naming_it():
+    predictors = get_experiment("predictors")
+    with pytest.raises(PipelineError, match=r"--predictors names \['constant_velocity'\] more than once"):
+        predictors.with_predictors(["constant_velocity", "social_lstm_eth", "constant_velocity"])
+    assert [label for label, _ in predictors.with_predictors(["a", "b"]).methods] == ["a", "b"]
+
+
+def test_the_default_swap_table_has_the_later_models_a_zoo_has():
+    assert LATER_SWAP_PREDICTORS == {"social_gru_eth", "social_attention_eth"}
+    without = swap_predictors()
+    assert without == tuple(n for n in SWAP_PREDICTORS if n not in LATER_SWAP_PREDICTORS)
+    with_gru = swap_predictors({"social_gru_eth", "unrelated"})
+    assert with_gru == tuple(n for n in SWAP_PREDICTORS if n != "social_attention_eth")
+
+
+def test_a_sweep_runs_the_papers_episodes_per_cell_by_default():
+    # Section VI: 500 circle + 500 perpendicular crossing episodes in each cell of Tables II and III.
+    assert SweepSettings().episodes_per_cell == 1000
+
+
+def test_an_experiment_needs_distinct_labels_and_some_humans():
+    # Two columns of one label would share a cell key, and so their episodes' records.
+    spec = ControllerSpec("orca")
+    with pytest.raises(PipelineError, match=r"needs distinct method labels, got \['A', 'A'\]"):
+        Experiment("x", "X", methods=(("A", spec), ("A", spec)), humans=(5,))
+    with pytest.raises(PipelineError, match="has no numbers of humans"):
+        Experiment("x", "X", methods=(("A", spec),), humans=())
