@@ -49,12 +49,11 @@ class SocialGANPredictor(LearnedPredictor):
         """``k`` futures, each with its own standard normal noise: ``(k, H, N_h, 2)``."""
         if k < 1:
             raise ValueError(f"k must be >= 1, got {k}")
-        horizon = check_rollout_inputs(np.asarray(history), np.asarray(mask), robots_future, humans, horizon)
-        pos, seen, n_humans = self._prepare(history, mask, humans, keep_robots=robots_future is not None)
+        plans = None if robots_future is None else np.asarray(robots_future, dtype=np.float64)  # as rollout
+        horizon = check_rollout_inputs(np.asarray(history), np.asarray(mask), plans, humans, horizon)
+        pos, seen, n_humans = self._prepare(history, mask, humans, keep_robots=plans is not None)
         noise = torch.from_numpy(rng.standard_normal((k, pos.shape[1], self.config.noise_dim)))
-        future = None
-        if robots_future is not None:
-            future = torch.as_tensor(np.asarray(robots_future, dtype=np.float64))[None].expand(k, -1, -1, -1)
+        future = None if plans is None else torch.from_numpy(plans)[None].expand(k, -1, -1, -1)
         with torch.no_grad(), single_threaded():
             out = self._rollout_tensor(
                 torch.from_numpy(pos)[None].expand(k, -1, -1, -1),

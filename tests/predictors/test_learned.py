@@ -229,6 +229,9 @@ def test_gan_sample_shapes_reproducibility_and_spread():
     assert a.std(axis=0).max() > 1e-3
     with pytest.raises(ValueError, match="k must be >= 1"):
         gan.sample(history, mask, robots_future, humans, None, 0, np.random.default_rng(1))
+    # robots' plans as nested lists, as rollout takes them (sample raised AttributeError: list has no ndim)
+    listed = gan.sample(history, mask, robots_future.tolist(), humans, None, 5, np.random.default_rng(1))
+    np.testing.assert_array_equal(listed, a)
 
 
 def test_casadi_name_is_always_valid():
