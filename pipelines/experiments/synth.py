@@ -97,6 +97,11 @@ def synthesize(
             f"got {env_config.dt:g} s"
         )
     n_robots = SYNTH_ROBOTS if with_robots else 0
+    if n_humans + n_robots < 2:  # refused after every episode had run, when no scene came out
+        raise PipelineError(
+            "1 human without robots makes no TrajNet++ scene (a scene needs two agents' rows over its 21 "
+            "steps): give 2 humans or more (--humans) or the robots (--with-robots)"
+        )
     env = CrowdEnv(env_config)
     all_tracks: list[np.ndarray] = []
     robot_ids: list[np.ndarray] = []

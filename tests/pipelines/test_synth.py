@@ -50,3 +50,18 @@ def test_synth_refuses_a_step_other_than_trajnets(tmp_path):
     with pytest.raises(PipelineError, match=r"env_config.dt must be 0.4 s .*got 0.2 s"):
         synthesize(out, episodes=1, n_humans=3, seed=0, env_config=EnvConfig(dt=0.2))
     assert not out.exists()
+
+
+def test_one_human_without_robots_is_refused_before_any_episode(tmp_path, monkeypatch):
+    """It was refused only after every episode had run (about 6 s for 1000): one agent never gives a scene
+    the two agents' rows it needs."""
+    from pipelines.experiments import synth
+
+    ran = []
+    with monkeypatch.context() as patched:
+        patched.setattr(synth, "episode_tracks", lambda *a: ran.append(a))
+        with pytest.raises(PipelineError, match=r"1 human without robots makes no TrajNet\+\+ scene"):
+            synthesize(tmp_path / "x.ndjson", episodes=1000, n_humans=1, seed=0)
+    assert not ran and not (tmp_path / "x.ndjson").exists()
+    one = synthesize(tmp_path / "y.ndjson", episodes=1, n_humans=1, seed=0, with_robots=True)
+    assert one["scenes"] > 0  # with the robots a human is a primary beside them
