@@ -72,6 +72,11 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
                 f"velocity action must be a {self.action_space.shape} array, got shape {command.shape}"
             )
         m = self._native.n_robots
+        if not np.isfinite(command[:m]).all():  # inf was clipped to a_max, NaN refused as accelerations
+            raise SimulationError(
+                f"velocity action must be finite for the episode's {m} robots, got "
+                f"{int((~np.isfinite(command[:m])).sum())} non-finite entries"
+            )
         accelerations = np.zeros_like(command)
         tracked = (command[:m] - self._native.robot_velocities) / self._period
         accelerations[:m] = np.clip(tracked, -self.a_max, self.a_max)

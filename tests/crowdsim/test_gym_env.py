@@ -423,6 +423,17 @@ def test_the_velocity_tracker_by_hand():
         VelocityControl(gym.make("CartPole-v1"))
 
 
+@pytest.mark.parametrize("bad", [math.inf, math.nan])
+def test_a_non_finite_velocity_command_is_refused_as_such(bad):
+    """inf was clipped to a_max and the robot accelerated at full; NaN was refused as accelerations, which
+    the user never gave. Rows past the episode's robots are ignored, as the tracker ignores them."""
+    env = VelocityControl(CrowdNavEnv(n_robots=2, n_humans=1))
+    env.reset(seed=0, options={"n_robots": 1})
+    with pytest.raises(SimulationError, match="velocity action must be finite for the episode's 1 robots"):
+        env.step(np.array([[bad, 0.0], [0.0, 0.0]]))
+    env.step(np.array([[0.5, 0.0], [bad, bad]]))
+
+
 def test_render_draws_an_rgb_frame():
     env = CrowdNavEnv(n_humans=3, render_mode="rgb_array")
     with pytest.raises(SimulationError, match="before reset"):
