@@ -132,6 +132,17 @@ RENDER_SIZE: Final[tuple[float, float]] = (8.0, 6.0)  # inches at RENDER_DPI: 64
 RENDER_DPI: Final[int] = 80
 
 
+def numbers(action: object, what: str) -> np.ndarray:
+    """``action`` as a float array; SimulationError naming ``what`` when it holds no numbers (numpy's own
+    "could not convert string to float" named nothing)."""
+    try:
+        return np.asarray(action, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise SimulationError(
+            f"{what} must be an array of numbers, got {type(action).__name__} ({exc})"
+        ) from None
+
+
 def _count(value: object, name: str, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or not low <= value <= high:
         raise SimulationError(f"{name} must be an int in [{low}, {high}], got {value!r}")
@@ -239,7 +250,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             raise SimulationError("step() called before reset()")
         if self._done:
             raise SimulationError("step() called after the episode ended; call reset()")
-        a = np.asarray(action, dtype=float)
+        a = numbers(action, "action")
         if a.shape != (self.max_robots, 2):
             raise SimulationError(f"action must be a ({self.max_robots}, 2) array, got shape {a.shape}")
         before = self._obs

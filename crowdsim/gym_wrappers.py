@@ -24,7 +24,7 @@ from gymnasium import spaces
 
 from crowdsim.env import Observation
 from crowdsim.errors import SimulationError
-from crowdsim.gym_env import CrowdNavEnv
+from crowdsim.gym_env import CrowdNavEnv, numbers
 
 
 class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):
@@ -66,7 +66,7 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         """The accelerations that track the commanded velocities ``action`` ``(max_robots, 2)`` m/s."""
         if self._native is None:
             raise SimulationError("step() called before reset()")
-        command = np.asarray(action, dtype=float)
+        command = numbers(action, "velocity action")
         if command.shape != self.action_space.shape:
             raise SimulationError(
                 f"velocity action must be a {self.action_space.shape} array, got shape {command.shape}"

@@ -434,6 +434,18 @@ def test_a_non_finite_velocity_command_is_refused_as_such(bad):
     env.step(np.array([[0.5, 0.0], [bad, bad]]))
 
 
+def test_an_action_of_no_numbers_is_one_line_naming_it():
+    """numpy's "could not convert string to float" named neither the action nor what it must be."""
+    env = CrowdNavEnv(n_robots=1, n_humans=1)
+    env.reset(seed=0)
+    with pytest.raises(SimulationError, match=r"^action must be an array of numbers, got list"):
+        env.step([["a", "b"]])
+    velocity = VelocityControl(CrowdNavEnv(n_robots=1, n_humans=1))
+    velocity.reset(seed=0)
+    with pytest.raises(SimulationError, match=r"^velocity action must be an array of numbers, got dict"):
+        velocity.step({"vx": 1.0})
+
+
 def test_render_draws_an_rgb_frame():
     env = CrowdNavEnv(n_humans=3, render_mode="rgb_array")
     with pytest.raises(SimulationError, match="before reset"):
