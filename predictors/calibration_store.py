@@ -110,17 +110,23 @@ def undo_calibrations(
     that run, None: there was no file; none of a key: its block is dropped) where the file still holds the
     one that run stored. Blocks another run stored meanwhile, of other keys or over these, stay."""
     path = calibrations_path(directory)
-    ours = [b.to_json() for b in stored]
+    ours = {_as_stored(b) for b in stored}
     with zoo_lock(path.parent):
         current = read_calibration_file(path)
-        undone = [b for b in current if b.to_json() in ours]
-        kept = [b for b in current if b.to_json() not in ours]
+        undone = [b for b in current if _as_stored(b) in ours]
+        kept = [b for b in current if _as_stored(b) not in ours]
         back = [e for e in earlier or () if any(e.matches(*u.key()) for u in undone)]
         if earlier is None and not kept:  # this run made the file
             path.unlink(missing_ok=True)
         else:
             _write_blocks(path, [*kept, *back])
     return path
+
+
+def _as_stored(block: Calibration) -> str:
+    """``block`` as the file holds it: a block made in this process may keep tuples in its details (a
+    closed-loop block's ``humans``) where the one read back has lists, and the two must compare equal."""
+    return json.dumps(block.to_json(), sort_keys=True, allow_nan=False)
 
 
 def _write_blocks(path: Path, blocks: list[Calibration]) -> None:

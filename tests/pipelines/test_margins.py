@@ -612,6 +612,38 @@ def test_taking_back_the_held_out_runs_blocks_keeps_a_block_another_calibrate_st
     assert [b.to_json() for b in after if b.alpha == 0.3] == [b.to_json() for b in earlier]
 
 
+def test_a_block_whose_details_hold_a_tuple_is_taken_back_when_the_held_out_run_stops(tmp_path, monkeypatch):
+    """closed_loop_errors' details come from asdict(plan), which keeps the plan's humans a tuple; the block
+    read back from the file has a list there, so the stored block was never recognised as this run's: an
+    interrupted held-out run left it in force (no earlier file: the file stayed) and said it was taken out."""
+    from pipelines.cli import main
+    from pipelines.experiments import calibrate as experiment
+    from tests.calibration_blocks import class_errors
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+
+    def measured(plan, progress=True):
+        if plan.margins.mode != "none":  # the held-out episodes, planning with the stored block
+            assert (tmp_path / "calibrations.json").exists()
+            raise KeyboardInterrupt
+        scores, motion = class_errors(4)
+        return experiment.ClosedLoopErrors(scores, motion, scores, {"humans": plan.humans})
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", measured)
+    argv = [
+        *CALIBRATE,
+        "--alpha",
+        "0.3",
+        "--humans",
+        "5,6",
+        "--holdout",
+        "--holdout-margins",
+        "conformal:0.3",
+    ]
+    assert main(argv) == 130
+    assert not (tmp_path / "calibrations.json").exists()
+
+
 def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_the_next(
     tmp_path, monkeypatch, capsys
 ):
