@@ -196,6 +196,21 @@ def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_
     )
 
 
+def test_a_figure_with_a_long_name_is_written_as_matplotlib_saves_it_under_that_name(tmp_path, capsys):
+    """--plot and --animate are saved by matplotlib under their own names, no temporary beside them: a
+    240-byte name was refused as "crowdmpc writes it under a longer temporary name first"; it does not."""
+    record = tmp_path / "rec"
+    plot = tmp_path / ("p" * 236 + ".png")
+    argv = ["simulate", "--controller", "straight", "--humans", "1", "--no-progress", "--record", str(record)]
+    assert main([*argv, "--plot", str(plot)]) == 0
+    assert plot.stat().st_size > 0
+    plot.unlink()
+    (recording,) = record.glob("*.mcap")
+    animation = tmp_path / ("a" * 236 + ".gif")
+    assert main(["review", str(recording), "--plot", str(plot), "--animate", str(animation)]) == 0
+    assert plot.stat().st_size > 0 and animation.stat().st_size > 0
+
+
 def test_export_refuses_a_file_name_casadi_cannot_take_before_the_export(tmp_path):
     """A name with bytes that are not UTF-8 (Python holds them as surrogates) reaches CasADi's save as "":
     the export was built, then ended in a RuntimeError traceback ("Error opening stream ''")."""
