@@ -22,8 +22,8 @@ CLOSED_PIPE_STATUS: Final[int] = 141
 # A --json report is far smaller; a larger existing file is data, never replaced (check_writable).
 MAX_REPORT_BYTES: Final[int] = 64 * 2**20
 # A file name's limit (NAME_MAX, Linux and macOS file systems), and how much longer than an output's name the
-# temporary names made beside it are: replace_file's ".NAME.XXXXXXXX.part" (+15 bytes), data synth's
-# ".NAME.synth-PID.part" (+20), data prepare's ".NAME.prepare-PID.tmp" (+21, a PID has at most 7 digits).
+# temporary names made beside it are: replace_file's ".NAME.XXXXXXXX.part" (+15 bytes), data prepare's
+# ".NAME.prepare-PID.tmp" (+21, a PID has at most 7 digits); data synth's is longer (its own room).
 NAME_MAX: Final[int] = 255
 TEMPORARY_NAME_ROOM: Final[int] = 21
 
@@ -73,6 +73,7 @@ def check_writable(
     json_only: bool = False,
     zoo_own: bool = False,
     staged_beside: bool | None = None,
+    room: int = TEMPORARY_NAME_ROOM,
 ) -> None:
     """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
 
@@ -86,7 +87,7 @@ def check_writable(
     zoo's own file (its manifest, calibrations, lock; ``_check_not_zoo_file``), existing or not, unless
     ``zoo_own``: the command keeps that very file (calibrate's calibrations.json). ``staged_beside``: the
     output is first made under a longer name beside it (default: a file is, ``replace_file``; a directory
-    is not), so its name must leave room for that one.
+    is not), so its name must leave room for that one: ``room`` bytes.
     """
     if path is None:
         return
@@ -100,10 +101,10 @@ def check_writable(
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise PipelineError(f"{label}: not a usable path ({why})") from None
     staged = not directory if staged_beside is None else staged_beside
-    if staged and len(os.fsencode(path.name)) > NAME_MAX - TEMPORARY_NAME_ROOM:  # fits, but a sibling not
+    if staged and len(os.fsencode(path.name)) > NAME_MAX - room:  # fits, but a sibling not
         raise PipelineError(
-            f"{label}: not a usable path (a name of at most {NAME_MAX - TEMPORARY_NAME_ROOM} bytes: crowdmpc "
-            "writes it under a longer temporary name first)"
+            f"{label}: not a usable path (a name of at most {NAME_MAX - room} bytes: crowdmpc writes it "
+            "under a longer temporary name first)"
         )
     if not zoo_own:
         _check_not_zoo_file(path, label)

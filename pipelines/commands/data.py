@@ -16,6 +16,9 @@ from pipelines.commands.evaluate import counted
 from pipelines.errors import PipelineError
 
 PART_SUFFIX: Final[str] = ".part"  # a file's name until it is complete
+# How much longer than --out's name data synth's longest temporary name is: write_ndjson's own temporary
+# ".STAGED.PID.tmp" of the staged ".NAME.synth-PID.part" (a PID has at most 7 digits)
+SYNTH_NAME_ROOM: Final[int] = len("..") + len(f".synth-{9999999}{PART_SUFFIX}") + len(f".{9999999}.tmp")
 
 # A synthetic episode takes ~30 ms and ~15 kB of scenes (7 humans): 100 000 (as `simulate --episodes`) is most
 # of an hour and 1.5 GB, far more than any training set here; 10^9 ran silently for days.
@@ -254,7 +257,7 @@ def provenance_path(out: Path) -> Path:
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    check_writable(args.out, "--out")
+    check_writable(args.out, "--out", room=SYNTH_NAME_ROOM)
     provenance = provenance_path(args.out)
     check_writable(provenance, "--out's provenance file")
     for path in (args.out, provenance):
