@@ -32,9 +32,13 @@ class EpisodeView:
     radius: float  # m
 
     def row_at(self, t: float) -> int:
-        """Index of the recorded state nearest to time ``t`` (s). ``t`` is brought into the recorded span
-        first: past ~1e16 s every distance rounded to ``t`` itself, and the "nearest" state was the first."""
-        return int(np.argmin(np.abs(self.times - np.clip(t, self.times.min(), self.times.max()))))
+        """Index of the recorded state nearest to time ``t`` (s), ``t`` brought into the recorded span."""
+        return int(np.argmin(np.abs(self.times - self._in_span(t))))
+
+    def _in_span(self, t: float) -> float:
+        """``t`` brought into the recorded span: past ~1e16 s every distance to a state rounded to ``t``
+        itself (or to a float beside it), and the "nearest" state was the first (or an arbitrary one)."""
+        return float(np.clip(t, self.times.min(), self.times.max()))
 
     def planned_row_at(self, t: float) -> int:
         """Index of the state nearest to time ``t`` (s) among those with a plan or a prediction, when the
@@ -43,7 +47,7 @@ class EpisodeView:
         planned = np.flatnonzero([int(s) in self.plans or int(s) in self.predictions for s in self.steps])
         if planned.size == 0:
             return self.row_at(t)
-        return int(planned[np.argmin(np.abs(self.times[planned] - t))])
+        return int(planned[np.argmin(np.abs(self.times[planned] - self._in_span(t)))])
 
 
 def _points(rows: list[Any], n: int) -> np.ndarray:

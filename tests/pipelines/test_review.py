@@ -274,6 +274,15 @@ def test_a_time_past_the_episode_draws_its_last_state(runs, t):
     assert view.row_at(1.3) == 3  # 1.2 s, the nearest state within the episode
 
 
+@pytest.mark.parametrize("t", ["1e3", "1e17", "1e308"])
+def test_a_time_past_the_episode_draws_its_last_plan(runs, tmp_path, t, capsys):
+    """review --plot uses planned_row_at, which took t unclipped: --times 1e17 drew the plans at t = 0 s
+    (on a 13.2 s episode, at 8.4 s) while 1e3 drew the last plan. 8 steps of 0.4 s: the last plan is at
+    2.8 s."""
+    assert main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", t]) == 0
+    assert "(plans at t = 2.8 s)" in capsys.readouterr().out
+
+
 def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
     assert main(["review", str(runs[0].path)]) == 0
     lines = capsys.readouterr().out.splitlines()
