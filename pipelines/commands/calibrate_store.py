@@ -82,7 +82,9 @@ def take_back_killed() -> None:
         return
     for journal in sorted(path.parent.iterdir()):
         match = _JOURNAL.fullmatch(journal.name)
-        if match is None or process_alive(int(match["pid"])):
+        # this run has written no journal yet: one under its own PID is a killed run's whose PID it got (every
+        # run in a fresh container is PID 1), and it would write its own journal over that one
+        if match is None or (int(match["pid"]) != os.getpid() and process_alive(int(match["pid"]))):
             continue
         if match["unfinished"]:  # killed while writing it, before any block was stored
             journal.unlink(missing_ok=True)

@@ -1,6 +1,7 @@
 """Safety margins: parsing, resolution from a calibration, the MPC planning with them, closed-loop errors."""
 
 import dataclasses
+import json
 import math
 import os
 from types import SimpleNamespace
@@ -684,6 +685,26 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
     assert f"a calibrate killed during its held-out run (pid {pid}) did not finish" in capsys.readouterr().out
     assert [b.to_json() for b in read_calibration_file(path) if b.alpha == 0.3] == earlier
     assert not list(tmp_path.glob(".calibrate-holdout.*"))
+
+
+def test_a_killed_calibrates_journal_under_this_runs_own_pid_is_taken_back(tmp_path, monkeypatch, capsys):
+    """In a container every run is PID 1: the journal a killed calibrate left had the next one's PID, which
+    is alive (it is that very run), so its block stayed in force and the new run's journal replaced it."""
+    from pipelines.cli import main
+    from predictors.calibration_store import read_calibration_file
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    path = tmp_path / "calibrations.json"
+    _episodes(monkeypatch)
+    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0  # the killed run's block, over no earlier file
+    (block,) = read_calibration_file(path)
+    journal = tmp_path / f".calibrate-holdout.{os.getpid()}.json"
+    journal.write_text(json.dumps({"stored": [block.to_json()], "earlier": None}))
+    capsys.readouterr()
+    assert main([*CALIBRATE, "--alpha", "0.2"]) == 0
+    assert f"(pid {os.getpid()}) did not finish" in capsys.readouterr().out
+    assert [b.alpha for b in read_calibration_file(path)] == [0.2]
+    assert not journal.exists()
 
 
 def test_an_unreadable_journal_of_a_killed_calibrate_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
