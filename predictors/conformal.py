@@ -3,7 +3,8 @@
 Error layout (used everywhere, also by the closed-loop source): ``errors`` is a float array ``(n, H)``; a row
 is one (human, prediction time) sample and column ``k-1`` is ``|predicted - realised|`` at step ``k`` in
 metres, NaN where the realised position at step ``k`` is unknown (the episode or scene ended). Each column is
-calibrated on its own non-NaN entries. ``predictors.calibration`` stores the quantiles as margins.
+calibrated on its own non-NaN entries. ``predictors.calibration`` makes margin blocks of the quantiles
+(``predictors.calibration_store`` stores them).
 
 What the guarantee is, honestly: for *exchangeable* calibration and test samples, split conformal gives
 marginal coverage ``P(error_k <= m_k) >= 1 - alpha`` for each step ``k`` separately (not jointly over the
