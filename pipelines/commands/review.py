@@ -355,6 +355,8 @@ def run(args: argparse.Namespace) -> int:
         runs, n_unreadable = _review_folder(args.path, report, args.check)
     else:
         rec = read_recording(args.path)
+        # read before anything is printed: a --compare file that cannot be read is the one line, alone
+        other = read_recording(args.compare) if args.compare else None
         runs = [digest(rec, args.check)]
         print(format_summary(_with_units(runs[0].summary)))
         report["summary"] = runs[0].summary
@@ -370,7 +372,6 @@ def run(args: argparse.Namespace) -> int:
         if out is not None:  # checked writable above, as other commands' outputs: its folder made here
             out.parent.mkdir(parents=True, exist_ok=True)
     if not args.path.is_dir():
-        other = read_recording(args.compare) if args.compare else None
         if other is not None:
             print()
             print(compare_table(rec, other))

@@ -440,3 +440,11 @@ def test_plot_times_fall_on_states_with_a_plan(runs, tmp_path, tmp_path_factory,
     plain = record_episode(tmp_path_factory.mktemp("plain"), seed=1, steps=8, with_plan=False)
     assert main(["review", str(plain.path), "--plot", str(png), "--times", "100"]) == 0
     assert "(plans at t = 3.2 s)" in capsys.readouterr().out
+
+
+def test_a_compare_file_that_cannot_be_read_is_the_one_line_alone(runs, tmp_path, capsys):
+    """`review A --compare /dev/zero` printed A's whole summary before the one-line error."""
+    for other in ("/dev/zero", str(tmp_path / "missing.mcap")):
+        assert main(["review", str(runs[0].path), "--compare", other]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and len(err.strip().splitlines()) == 1 and other in err
