@@ -23,9 +23,11 @@ CLOSED_PIPE_STATUS: Final[int] = 141
 MAX_REPORT_BYTES: Final[int] = 64 * 2**20
 # A file name's limit (NAME_MAX, Linux and macOS file systems), and how much longer than an output's name the
 # temporary names made beside it are: replace_file's ".NAME.XXXXXXXX.part" (+15 bytes), data prepare's
-# ".NAME.prepare-PID.tmp" (+21, a PID has at most 7 digits); data synth's is longer (its own room).
+# ".NAME.prepare-PID.tmp" (+21, a PID has at most 7 digits); data synth's is longer (its own room). One room
+# for all (21) refused 236-240-byte names that replace_file writes.
 NAME_MAX: Final[int] = 255
-TEMPORARY_NAME_ROOM: Final[int] = 21
+REPLACE_FILE_ROOM: Final[int] = 15
+PREPARE_ROOM: Final[int] = 21
 
 
 def examples(*commands: str) -> dict[str, object]:
@@ -73,7 +75,7 @@ def check_writable(
     json_only: bool = False,
     zoo_own: bool = False,
     staged_beside: bool | None = None,
-    room: int = TEMPORARY_NAME_ROOM,
+    room: int = REPLACE_FILE_ROOM,
 ) -> None:
     """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
 

@@ -11,7 +11,7 @@ from typing import Final
 
 from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS
-from pipelines.commands import check_writable, path_arg
+from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
 from pipelines.commands.evaluate import counted
 from pipelines.errors import PipelineError
 
@@ -149,7 +149,7 @@ def run_prepare(args: argparse.Namespace) -> int:
     from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
 
     seed = _prepare_seed(args)
-    check_writable(args.out, "--out", directory=True, staged_beside=True)  # .NAME.prepare-PID.tmp
+    check_writable(args.out, "--out", directory=True, staged_beside=True, room=PREPARE_ROOM)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:
         raise PipelineError(

@@ -167,13 +167,14 @@ def test_a_path_the_system_cannot_take_is_refused_before_the_work(tmp_path, caps
     ids=["simulate-json", "synth-out", "prepare-out"],
 )
 def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_path, capsys, argv):
-    """A 240-byte name fits, its temporary ".NAME.XXXXXXXX.part" (".NAME.synth-PID.part", a prepared
+    """A 241-byte name fits, its temporary ".NAME.XXXXXXXX.part" (".NAME.synth-PID.part", a prepared
     folder's ".NAME.prepare-PID.tmp") does not: simulate ran its episodes and then could not write --json,
     data synth and data prepare ended in an OSError traceback. A folder written into is not staged beside."""
-    out = tmp_path / ("a" * 235 + ".json")
+    out = tmp_path / ("a" * 236 + ".json")
     assert main([*argv, str(out)]) == 2
     line = _one_error_line(capsys, argv[0])
-    most = 222 if argv[0] == "data" and argv[1] == "synth" else 234  # synth's own room: the next test
+    # each output's own room: replace_file's +15, data prepare's +21, data synth's +33 (the next test)
+    most = {"simulate": 240, "prepare": 234, "synth": 222}[argv[1] if argv[0] == "data" else argv[0]]
     assert line.endswith(
         f"{argv[-1]} {out}: not a usable path (a name of at most {most} bytes: crowdmpc writes it under a "
         "longer temporary name first)"
@@ -195,6 +196,13 @@ def test_a_name_whose_temporary_name_is_too_long_is_refused_before_the_work(tmp_
         )
         == 0
     )
+
+
+def test_a_json_report_whose_temporary_name_fits_is_written(tmp_path, capsys):
+    """One room for every output (21 bytes) refused a 240-byte --json, whose ".NAME.XXXXXXXX.part" fits."""
+    out = tmp_path / ("a" * 235 + ".json")
+    argv = ["simulate", "--controller", "straight", "--humans", "0", "--no-progress", "--json", str(out)]
+    assert main(argv) == 0 and out.is_file()
 
 
 def test_data_synth_leaves_room_for_the_temporary_of_its_staged_data(tmp_path, capsys):
