@@ -24,6 +24,7 @@ from typing import Final
 import numpy as np
 
 PROGRESS: Final[float] = 0.25  # m towards the goal within the window that counts as moving (MPCConfig)
+NEVER_STEPS: Final[float] = 2.0**62  # a window longer than any episode (EnvConfig's 86400 s at MIN_DT)
 
 
 class StallWatch:
@@ -32,7 +33,9 @@ class StallWatch:
     def __init__(self, window_s: float, dt: float, progress: float = PROGRESS):
         if window_s <= 0 or dt <= 0 or progress <= 0:
             raise ValueError(f"window_s, dt and progress must be > 0, got {window_s}, {dt}, {progress}")
-        self.steps = max(1, round(window_s / dt))
+        # min: past ~7e307 s (0.4 s steps) window_s / dt is inf, which round() cannot make an int; a window of
+        # 2**62 steps is as much a "never" as any longer one
+        self.steps = max(1, round(min(window_s / dt, NEVER_STEPS)))
         self.progress = progress
         # Trimmed in ``update``, not through ``maxlen``, which must fit a C ssize_t: a window longer than any
         # episode (stall_release_s = 1e19 s, a valid "never") overflowed it.

@@ -110,10 +110,12 @@ def test_progress_is_towards_the_goal_the_robot_has_now():
     assert watch.update(still, np.array([[0.0, 3.8]]), np.array([False]))[0]
 
 
-def test_a_window_longer_than_any_episode_never_stalls_a_robot():
+@pytest.mark.parametrize("window_s", [1e19, 1e308])
+def test_a_window_longer_than_any_episode_never_stalls_a_robot(window_s):
     """stall_release_s is any finite number >= 0 (mpc/config.py); 1e19 s made the window's deque length
-    overflow a C ssize_t (OverflowError when the controller was built)."""
-    watch = StallWatch(window_s=1e19, dt=0.4)
+    overflow a C ssize_t (OverflowError when the controller was built), and 1e308 s / 0.4 s is inf, which
+    round() could not make an int (the same OverflowError, from simulate --set mpc.stall_release_s=1e308)."""
+    watch = StallWatch(window_s=window_s, dt=0.4)
     for _ in range(5):
         stalled = watch.update(_positions(0, 0, 0), GOALS, np.zeros(3, bool))
         np.testing.assert_array_equal(stalled, [False, False, False])
