@@ -269,7 +269,7 @@ def test_contact_and_success_on_the_same_step(end_on_collision, expected):
 
 def test_a_contact_that_ends_the_episode_pays_no_robot_the_success():
     # Two robots at their goals, only the first beside a human: the team's episode ends in collision, so the
-    # second robot, 5 m from anyone, earns 0 (rule 5), not the success the team did not reach.
+    # second robot, 5 m from anyone, earns 0 (rule 4), not the success the team did not reach.
     env = CrowdNavEnv(n_robots=2, n_humans=1, end_on_collision=True)
     layout = Layout(
         np.array([[0.0, 0.0], [5.0, 0.0]]),
