@@ -170,7 +170,7 @@ class MarginSpec:
 
             raise PipelineError(
                 f"the ORCA oracle knows the simulator, not real people, so it has no real calibration: plan "
-                f"with its closed-loop one (--margins conformal:{alpha_text(self.alpha)}) or leave it out"
+                f"with its closed-loop one (margins conformal:{alpha_text(self.alpha)}) or leave it out"
             )
 
         block = find_calibration(predictor, self.source, self.alpha, sha256=sha256)
