@@ -1,0 +1,125 @@
+"""pipelines.commands.calibrate_store on its own: when the blocks are stored, what a stopped or killed run
+puts back, and the journal it leaves behind (none once it is done)."""
+
+import os
+from types import SimpleNamespace
+
+import pytest
+
+from pipelines.commands.calibrate_store import (
+    _write_journal,
+    plans_with_new_blocks,
+    storing,
+    take_back_killed,
+)
+from pipelines.errors import PipelineError
+from pipelines.loop.margins import parse_margins
+from predictors.calibration_store import calibrations_path, read_calibration_file, save_calibration
+from tests.calibration_blocks import class_errors, constant_velocity_block
+
+
+def _args(holdout_margins: str = "conformal:0.1") -> SimpleNamespace:
+    """calibrate's arguments for constant_velocity's closed-loop calibration at alpha 0.1 with a held-out run
+    planning with ``holdout_margins``."""
+    return SimpleNamespace(
+        dry_run=False,
+        holdout=True,
+        source="closed-loop",
+        predictor="constant_velocity",
+        alpha=[0.1],
+        holdout_margins=holdout_margins,
+    )
+
+
+def _blocks():
+    """A block with margins per motion class, so that it may replace the shipped one."""
+    errors, motion = class_errors(4)
+    return [constant_velocity_block(errors, classes=motion, shortfall=errors)]
+
+
+def _journals(directory):
+    return sorted(p.name for p in directory.glob(".calibrate-holdout.*"))
+
+
+def test_a_held_out_run_planning_with_the_blocks_stores_them_first_and_leaves_no_journal(
+    tmp_path, monkeypatch
+):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    path = calibrations_path()
+    blocks = _blocks()
+    with storing(blocks, _args()):
+        assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
+        assert _journals(tmp_path) == [f".calibrate-holdout.{os.getpid()}.json"]
+    assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
+    assert _journals(tmp_path) == []
+
+
+def test_a_stopped_held_out_run_with_no_earlier_file_leaves_no_file_and_no_journal(tmp_path, monkeypatch):
+    """There was no calibrations file: taking the blocks back removes the file (an empty one is not "as it
+    was"), and the journal goes with it."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    with pytest.raises(KeyboardInterrupt), storing(_blocks(), _args()):
+        assert calibrations_path().exists()
+        raise KeyboardInterrupt
+    assert not calibrations_path().exists()
+    assert _journals(tmp_path) == []
+
+
+def test_a_block_without_class_margins_is_refused_before_anything_is_stored(tmp_path, monkeypatch):
+    """The shipped constant_velocity block has margins per motion class: a block without them is not stored
+    over it, and the run inside never starts."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    errors, motion = class_errors(4)
+    few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    ran = []
+    for held in ("none", "conformal:0.1"):  # stored after the run, and before it
+        with pytest.raises(PipelineError, match="has margins per motion class"), storing([few], _args(held)):
+            ran.append(held)
+    assert ran == [] and not calibrations_path().exists() and _journals(tmp_path) == []
+
+
+def test_the_journal_of_a_live_calibrate_is_not_taken_back(tmp_path, monkeypatch):
+    """A journal whose calibrate still runs (here: this process) is that run's own business: its blocks stay
+    in force and its journal stays."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    blocks = _blocks()
+    path = save_calibration(blocks[0])
+    _write_journal(path, blocks, None)
+    take_back_killed()
+    assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
+    assert _journals(tmp_path) == [f".calibrate-holdout.{os.getpid()}.json"]
+
+
+def test_a_killed_calibrate_that_found_no_file_leaves_none(tmp_path, monkeypatch, capsys):
+    """The journal records "no earlier file" (null), not "an empty file": taking the blocks back removes the
+    calibrations file the killed run made."""
+    from pipelines.experiments import worker
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    blocks = _blocks()
+    path = calibrations_path()
+    _write_journal(path, blocks, None)
+    save_calibration(blocks[0])
+    monkeypatch.setattr(worker, "process_alive", lambda pid: False)  # as if this process had been killed
+    take_back_killed()
+    assert not path.exists() and _journals(tmp_path) == []
+    assert f"(pid {os.getpid()}) did not finish" in capsys.readouterr().out
+
+
+def test_taking_back_in_a_zoo_not_made_yet_does_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "no" / "zoo"))
+    take_back_killed()
+    assert not (tmp_path / "no").exists()
+
+
+def test_held_out_margins_from_real_data_do_not_plan_with_the_closed_loop_blocks():
+    """The blocks stored first are the ones the held-out run plans with: closed-loop blocks at one of
+    --alpha. Margins calibrated on real data, or at another alpha, or no margins, plan with none of them."""
+    args = _args()
+    assert plans_with_new_blocks(args, parse_margins("conformal:0.1"))
+    assert not plans_with_new_blocks(args, parse_margins("conformal:0.1:real"))
+    assert not plans_with_new_blocks(args, parse_margins("conformal:0.2"))
+    assert not plans_with_new_blocks(args, parse_margins("none"))
+    assert not plans_with_new_blocks(
+        SimpleNamespace(**{**vars(args), "holdout": False}), parse_margins("conformal:0.1")
+    )
