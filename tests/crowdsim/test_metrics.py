@@ -315,3 +315,11 @@ def test_robots_that_start_on_their_goals_succeed_at_the_first_step_or_not_at_al
     else:  # reached at the reset, as the simulator's "has reached it at some point" has it
         assert left.success and left.travel_time == pytest.approx(0.4)
     assert stayed.success and stayed.travel_time == pytest.approx(0.4)
+
+
+def test_an_episode_of_no_step_is_a_timeout_not_a_success():
+    """One recorded state (0 steps), the robot on its goal: success is judged after a step, so none; the
+    episode is a timeout (timeout is "not success"), with no travel time."""
+    m = episode_metrics(make_traj([[[0.0, 0.0]]], [[[3.0, 0.0]]], robot_goals=[[0.0, 0.0]]))
+    assert (m.n_steps, m.success, m.timeout) == (0, False, True)
+    assert math.isnan(m.travel_time) and m.reach_times == (0.0,)
