@@ -168,3 +168,20 @@ def test_a_neighbour_that_appears_only_after_the_observation_is_not_scored():
     truth[9:, 2] = truth[9:, 0] + [0.0, 0.1]
     score = score_scene(truth[9:, :1], [0], truth, np.arange(0, 210, 10), obs_len=9)
     assert score.col_ii is False
+
+
+def test_a_prediction_without_the_primary_first_is_refused():
+    """The predicted agents must start with the primary (agent 0), whose row the scores are of."""
+    truth = walking_truth()
+    frames = np.arange(0, 210, 10)
+    with pytest.raises(ValueError, match=r"primary \(agent 0\) first, got \(12, 2, 2\) for agents \[1, 0\]"):
+        score_scene(truth[9:, [1, 0]], [1, 0], truth, frames, obs_len=9)
+
+
+def test_two_pedestrians_exactly_two_radii_apart_collide():
+    """TrajNet++ counts a distance equal to 2 x 0.1 m as a collision (<=): a neighbour standing 0.2 m
+    beside the primary's path (at x = 0.6, y = 0.2) collides; the exact prefilter must not rule it out."""
+    primary = line([0.0, 0.0], [0.1, 0.0])
+    beside = np.tile([0.6, 0.2], (12, 1))
+    assert tt_metrics.collision(track_rows(primary, FRAMES), track_rows(beside, FRAMES, 1), n_predictions=12)
+    assert collides(primary, beside, FRAMES)
