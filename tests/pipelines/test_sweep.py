@@ -705,6 +705,62 @@ def test_paired_success_counts_only_the_crowds_both_methods_ran():
     assert "| Success, paired with the group's first method | reference | +0 / −0 (p = 1) |" in table
 
 
+def test_crowd_sizes_with_and_without_the_papers_figures_share_one_table():
+    """Table II at 4 and 5 humans: the paper has a column at 5 only. Its rows stay, "—" under the 4-human
+    columns, and the note says what the 'paper' rows are; one predictor is "predictor", not "predictors"."""
+    table2 = get_experiment("table2")
+    cells = table2.cells(humans=(4, 5))
+    outcomes = {(m, n): [(True, 18.0, False, False)] * 2 for m in ("CMPC", "DMPC") for n in (4, 5)}
+    markdown = markdown_table(table2, summarize(table2, cells, _records(table2, outcomes, humans=(4, 5))))
+    lines = markdown.splitlines()
+    assert "| Numbers of pedestrians | 4 | 4 | 5 | 5 |" in lines
+    assert "| &nbsp;&nbsp;paper | — | — | **94.0** | 93.4 |" in lines  # success
+    assert "| &nbsp;&nbsp;paper | — | — | **17.9** | 18.1 |" in lines  # travel time
+    assert "Paper ('paper' rows): 1000 episodes per cell (500 + 500)," in markdown
+    assert "have no column at these crowd sizes" not in markdown
+    assert "; predictor social_lstm_eth. Rates" in markdown
+
+
+def test_a_method_alone_at_its_crowd_size_has_no_reference_to_pair_with():
+    """Only CMPC has episodes: no group of two, "—" in the paired row (not "reference")."""
+    table2 = get_experiment("table2")
+    episodes = {("CMPC", 5): [(True, 18.0, False, False)] * 2}
+    table = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
+    assert "| Success, paired with the group's first method | — |" in table
+
+
+def test_the_paired_p_value_has_two_significant_digits():
+    """CMPC failed once where DMPC succeeded (crowd 4) and succeeded where DMPC failed four times: b = 1,
+    c = 4, p = 2 (C(5, 0) + C(5, 1)) / 2^5 = 12 / 32 = 0.375, printed 0.38."""
+    table2 = get_experiment("table2")
+    episodes = {
+        ("CMPC", 5): [(True, 18.0, False, False)] * 4 + [(False, 0, False, False)],
+        ("DMPC", 5): [(False, 0, False, False)] * 4 + [(True, 18.0, False, False)],
+    }
+    table = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
+    assert "| Success, paired with the group's first method | reference | +1 / −4 (p = 0.38) |" in table
+
+
+def test_the_contact_row_counts_contacts_not_collisions():
+    """Both episodes are collisions (< 0.8 m) without contact (< 0.6 m): 2/2 -> 100.0 [34.2, 100.0] in the
+    collision row, 0/2 -> 0.0 [0.0, 65.8] in the contact row (Wilson: 1.96^2 / (2 + 1.96^2) = 0.658)."""
+    table2 = get_experiment("table2")
+    episodes = {("CMPC", 5): [(True, 18.0, True, False)] * 2}
+    lines = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes))).splitlines()
+    assert "| Collision rate (%) | 100.0 [34.2, 100.0] |" in lines
+    assert "| Contact rate (%) (< 0.6 m) | 0.0 [0.0, 65.8] |" in lines
+
+
+def test_the_note_names_a_method_without_a_predictor_none():
+    """The baselines plan with no predictor: the note says "predictor none", not an empty name."""
+    baselines = get_experiment("baselines")
+    episodes = {(m, 5): [(True, 18.0, False, False)] * 2 for m in ("straight", "ORCA")}
+    markdown = markdown_table(
+        baselines, summarize(baselines, baselines.cells(), _records(baselines, episodes))
+    )
+    assert "; predictor none. Rates" in markdown
+
+
 def test_the_note_gives_the_range_of_episodes_per_cell():
     """Cells of 4 and 3 episodes: "3–4" (an en dash), not the largest count alone."""
     table2 = get_experiment("table2")
