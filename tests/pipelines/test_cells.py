@@ -58,3 +58,33 @@ def test_an_experiment_needs_distinct_labels_and_some_humans():
         Experiment("x", "X", methods=(("A", spec), ("A", spec)), humans=(5,))
     with pytest.raises(PipelineError, match="has no numbers of humans"):
         Experiment("x", "X", methods=(("A", spec),), humans=())
+
+
+def test_swapped_lists_take_every_setting_but_the_swapped_one_from_the_first_method():
+    """with_controllers and with_predictors build each column from the experiment's first method: here
+    constant velocity with flocking off, not the second method's Social-LSTM with flocking on."""
+    first = ControllerSpec("cmpc", "constant_velocity", flocking=False)
+    second = ControllerSpec("dmpc", "social_lstm_eth", flocking=True)
+    methods = (("first", first), ("second", second))
+    controllers = Experiment("c", "C", methods=methods, humans=(5,), controller_list=True)
+    assert controllers.with_controllers(["orca", "dmpc"]).methods == (
+        ("orca", ControllerSpec("orca", "constant_velocity", flocking=False)),
+        ("dmpc", ControllerSpec("dmpc", "constant_velocity", flocking=False)),
+    )
+    predictors = Experiment("p", "P", methods=methods, humans=(5,), predictor_list=True)
+    assert predictors.with_predictors(["social_gan_eth"]).methods == (
+        ("social_gan_eth", ControllerSpec("cmpc", "social_gan_eth", flocking=False)),
+    )
+
+
+def test_an_empty_list_of_controllers_is_refused_naming_the_experiment():
+    with pytest.raises(PipelineError, match=r"^experiment 'controllers' needs at least one controller$"):
+        get_experiment("controllers").with_controllers([])
+
+
+def test_the_coupling_experiment_compares_couplings_with_one_predictor():
+    """IBR and both NLP columns plan with the soft-pooling Social-LSTM (the one with a useful gradient for
+    the NLP): only the coupling differs between the columns."""
+    specs = [spec for _, spec in get_experiment("coupling").methods]
+    assert [s.predictor for s in specs] == ["social_lstm_soft_eth"] * 3
+    assert [s.coupling for s in specs] == ["ibr", "nlp", "nlp"]
