@@ -308,3 +308,21 @@ def test_between_steps_rate_needs_every_record():
     count, percent = between_steps_rate([{"collision_between_steps": True}, {}])  # one older record
     assert count is None and math.isnan(percent)
     assert math.isnan(between_steps_rate([])[1])
+
+
+def test_the_plots_panels_follow_the_crowd_sizes_and_each_the_methods_order():
+    """Panels by number of humans, ascending, whichever method ran which sizes: DMPC at 5 humans and CMPC at
+    6 only still give the 5-human panel first; within a panel the experiment's order (CMPC before DMPC)."""
+    from types import SimpleNamespace
+
+    from pipelines.experiments.safety_report import _by_humans
+
+    def column(method, n):
+        return SimpleNamespace(cell=SimpleNamespace(method=method, n_humans=n))
+
+    table2 = get_experiment("table2")
+    groups = _by_humans(table2, [column("DMPC", 6), column("CMPC", 6), column("DMPC", 5)])
+    assert [(n, [s.cell.method for s in cells]) for n, cells in groups.items()] == [
+        (5, ["DMPC"]),
+        (6, ["CMPC", "DMPC"]),
+    ]
