@@ -132,6 +132,18 @@ def test_cells_csv_gives_the_travel_time_and_its_interval():
     assert row["travel_time_ci"] == pytest.approx(12.7062, abs=1e-4)
 
 
+def test_cells_csv_gives_the_iterations_and_the_fallback_rate_apart():
+    """Two episodes of 10 steps, 2 IBR iterations a step, 3 and 1 fallback steps: 4 of 20 steps fell back,
+    fallback_step_rate 20 %, iterations_mean 2."""
+    cell = get_experiment("table2").cells()[0]
+    records = [_record(i, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0) for i in range(2)]
+    records[0]["solver"]["fallback_steps"] = 3
+    records[1]["solver"]["fallback_steps"] = 1
+    (row,) = cell_rows([summarize_cell(cell, records, None)])
+    assert row["iterations_mean"] == pytest.approx(2.0)
+    assert row["fallback_step_rate"] == pytest.approx(20.0)
+
+
 def test_cells_csv_names_the_predictor_a_cell_plans_with():
     """A controller that plans with none (orca, straight) has none in cells.csv, as in its records
     ("predictor": null) and its cell key (orca-none-...): the row named the experiment's --predictor."""
