@@ -31,6 +31,13 @@ from predictors.oracle import ORACLE_PREDICTOR
 PAPER_EPISODES_PER_CELL: Final[int] = 1000  # Section VI: 500 circle + 500 perpendicular crossing per cell
 
 
+def _as_controller(template: ControllerSpec, controller: str) -> ControllerSpec:
+    """``template`` for ``controller``; margins only where it plans with a predictor (``with_margins``' rule:
+    after ``with_margins``, ORCA's and the straight line's columns took the first method's)."""
+    spec = replace(template, controller=controller)
+    return spec if spec.kind.uses_predictor else replace(spec, margins=MarginSpec())
+
+
 @dataclass(frozen=True)
 class Experiment:
     """A table to reproduce: methods (columns, in table order) x numbers of humans."""
@@ -102,7 +109,8 @@ class Experiment:
 
     def with_controllers(self, controllers: Sequence[str]) -> Experiment:
         """One method per controller (labelled by its name, in this order), each as the experiment's first
-        method (predictor, margins ...) but for its controller; an unregistered name is refused here."""
+        method (predictor, margins ...) but for its controller; one that predicts nothing keeps no margins, as
+        ``with_margins`` leaves it. An unregistered name is refused here."""
         from pipelines.loop.spec import controller_kind
 
         if not self.controller_list:
@@ -118,7 +126,7 @@ class Experiment:
         for name in controllers:
             controller_kind(name)  # UnknownController: one line saying how to register a plugin
         template = self.methods[0][1]
-        methods = tuple((name, replace(template, controller=name)) for name in controllers)
+        methods = tuple((name, _as_controller(template, name)) for name in controllers)
         return replace(self, methods=methods)
 
     def with_margins(self, margins: MarginSpec) -> Experiment:

@@ -88,3 +88,15 @@ def test_the_coupling_experiment_compares_couplings_with_one_predictor():
     specs = [spec for _, spec in get_experiment("coupling").methods]
     assert [s.predictor for s in specs] == ["social_lstm_soft_eth"] * 3
     assert [s.coupling for s in specs] == ["ibr", "nlp", "nlp"]
+
+
+def test_controllers_that_predict_nothing_keep_no_margins_after_with_margins():
+    """with_margins, then with_controllers: ORCA's and the straight line's columns took the first method's
+    margins, which with_margins' own rule leaves off a method that predicts nothing (its cell key said so)."""
+    from pipelines.loop.margins import MarginSpec, parse_margins
+
+    margins = parse_margins("conformal:0.1")
+    experiment = get_experiment("controllers").with_margins(margins)
+    experiment = experiment.with_controllers(["cmpc", "orca", "straight"])
+    kept = {label: spec.margins for label, spec in experiment.methods}
+    assert kept == {"cmpc": margins, "orca": MarginSpec(), "straight": MarginSpec()}
