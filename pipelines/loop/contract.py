@@ -165,13 +165,7 @@ def _check_extra(controller: Controller, extra: object) -> None:
         raise PipelineError(
             f"{_named(controller)}: act() must return extra as a dict, got {type(extra).__name__}"
         )
-    try:
-        json.dumps(plain(extra), allow_nan=False)
-    except (TypeError, ValueError, RecursionError) as exc:
-        raise PipelineError(
-            f"{_named(controller)}: act() must return extra of JSON values (dicts, lists, strings, numbers, "
-            f"booleans, None), got {exc}"
-        ) from None
+    _check_json(controller, extra, "act() must return extra of")
 
 
 def checked_description(controller: Controller) -> dict[str, Any]:
@@ -207,14 +201,20 @@ def checked_description(controller: Controller) -> dict[str, Any]:
         )
     # as the recordings and the sweep's records write it: simulate stringified what JSON cannot hold into
     # the MCAP ("<object object at 0x...>") where a sweep refused the episode
+    _check_json(controller, described, "describe() must return")
+    return dict(described)
+
+
+def _check_json(controller: Controller, value: object, what: str) -> None:
+    """PipelineError ``"<controller>: <what> JSON values (...)"`` unless ``value`` is what the records and
+    the recordings can write."""
     try:
-        json.dumps(plain(described), allow_nan=False)
+        json.dumps(plain(value), allow_nan=False)
     except (TypeError, ValueError, RecursionError) as exc:
         raise PipelineError(
-            f"{_named(controller)}: describe() must return JSON values (dicts, lists, strings, numbers, "
-            f"booleans, None), got {exc}"
+            f"{_named(controller)}: {what} JSON values (dicts, lists, strings, numbers, booleans, None), "
+            f"got {exc}"
         ) from None
-    return dict(described)
 
 
 def checked_meta(meta: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
