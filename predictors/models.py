@@ -195,7 +195,9 @@ class ModelKind:
         static = inspect.getattr_static(self.net_class, "head_type", None)
         if isinstance(static, str):
             return static
-        return getattr(self._meta_net(config), "head_type", None)
+        from predictors.nets.contract import head_type_of
+
+        return head_type_of(self._meta_net(config), f"model {self.name!r}")
 
     def _meta_net(self, config: Any) -> torch.nn.Module:
         import torch

@@ -110,8 +110,19 @@ def _call(where: str, what: str, function: Callable[..., Any], *args: Any, **kwa
         ) from None
 
 
+def head_type_of(net: object, where: str) -> object:
+    """``net.head_type``; a plugin's property that raises (any exception) is the net's fault: one line."""
+    try:
+        return getattr(net, "head_type", None)
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise PredictorError(
+            f"{where}: reading head_type failed: {type(exc).__name__}: {first[:200]} {SEE}"
+        ) from None
+
+
 def _head_type(net: torch.nn.Module, where: str) -> str:
-    head = getattr(net, "head_type", None)
+    head = head_type_of(net, where)
     if head not in HEADS:
         raise PredictorError(f"{where}: head_type must be one of {list(HEADS)}, got {short_repr(head)} {SEE}")
     return str(head)

@@ -84,3 +84,11 @@ class Frozen(ToyNet):
         super().__init__(config)
         for p in self.parameters():
             p.requires_grad_(False)
+
+
+class HeadTypeRaises(ToyNet):
+    """A ``head_type`` property with a bug: it looks its head up in a table that lacks the key."""
+
+    @property
+    def head_type(self) -> str:
+        return {"gaussian": "gaussian"}["point"]

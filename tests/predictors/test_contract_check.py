@@ -132,6 +132,22 @@ def test_train_refuses_a_broken_net_in_one_line_before_writing_anything(tmp_path
     assert not (tmp_path / "run").exists()
 
 
+def test_a_head_type_property_that_raises_is_one_line_in_train_and_in_the_check(tmp_path, capsys):
+    """It was a KeyError traceback: ``train`` reads the head (for its loss) before the contract check."""
+    model = f"{BROKEN}:HeadTypeRaises"
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
+    capsys.readouterr()
+    code = main([*argv, "--epochs", "1", "--out", str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"model {model!r}: reading head_type failed: KeyError: 'point' {SEE}" in err
+    kind = model_kind(model)
+    with pytest.raises(PredictorError) as caught:
+        check_step_contract(kind.build_net(kind.config()), "model 'x'", obs_len=OBS_LEN)
+    assert str(caught.value) == f"model 'x': reading head_type failed: KeyError: 'point' {SEE}"
+
+
 def test_a_saved_broken_net_fails_at_load_not_in_the_closed_loop(tmp_path):
     model = _registered("OneColumn")
     kind = model_kind(model)
