@@ -39,6 +39,9 @@ def test_gaussian_head_bounds():
     assert params[0, 2].item() == pytest.approx(0.01)  # 0.01 + 0.2 * sigmoid(-100)
     assert params[0, 3].item() == pytest.approx(0.21)
     assert params[0, 4].item() == pytest.approx(0.7)
+    # TrajNet++'s Hidden2Normal bounds the correlation to (0, 0.7): never negative (a tanh would allow -0.7)
+    low = gaussian_head(torch.tensor([[0.0, 0.0, 100.0, -100.0, -100.0]]))
+    assert low[0, 2:].tolist() == pytest.approx([0.21, 0.01, 0.0])
 
 
 def primary_prediction(net, positions, mask):
@@ -114,6 +117,18 @@ def test_gaussian_nll_hand_computed():
     # one sigma off along x adds 1/2
     nll = gaussian_nll(params, torch.tensor([[0.1, 0.0]]), torch.ones(1))
     assert nll.item() == pytest.approx(math.log(2 * math.pi * 0.02) + 0.5, abs=1e-6)
+
+
+def test_gaussian_nll_with_correlation_hand_computed():
+    """The correlation terms: rho 0.5, the target one sigma off on both axes, z = (1, 1) or (1, -1).
+
+    NLL = log(2 pi sx sy) + log(1 - rho^2) / 2 + (zx^2 + zy^2 - 2 rho zx zy) / (2 (1 - rho^2))."""
+    params = torch.tensor([[0.0, 0.0, 0.1, 0.2, 0.5]], dtype=torch.float64)
+    base = math.log(2 * math.pi * 0.02) + 0.5 * math.log(0.75)
+    along = gaussian_nll(params, torch.tensor([[0.1, 0.2]], dtype=torch.float64), torch.ones(1))
+    assert along.item() == pytest.approx(base + (2 - 1) / 1.5, abs=1e-12)  # 2/3: the correlation helps
+    across = gaussian_nll(params, torch.tensor([[0.1, -0.2]], dtype=torch.float64), torch.ones(1))
+    assert across.item() == pytest.approx(base + (2 + 1) / 1.5, abs=1e-12)  # 2: against the correlation
 
 
 def test_l2_and_variety_loss_hand_computed():
