@@ -9,6 +9,7 @@ import torch
 
 from predictors.errors import PredictorError
 from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
+from predictors.nets.pooling import cell_weights
 from predictors.nets.social_gan import Discriminator, generator_config
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig, gaussian_head
 
@@ -42,6 +43,21 @@ def test_gaussian_head_bounds():
     # TrajNet++'s Hidden2Normal bounds the correlation to (0, 0.7): never negative (a tanh would allow -0.7)
     low = gaussian_head(torch.tensor([[0.0, 0.0, 100.0, -100.0, -100.0]]))
     assert low[0, 2:].tolist() == pytest.approx([0.21, 0.01, 0.0])
+
+
+def test_hard_grid_bins_a_neighbour_on_a_cell_edge_as_trajnet_floors_it():
+    """Grid 2 x 2 of 1 m cells around agent 0 (u = relative + 1, cell floor(ux) * 2 + floor(uy)): a neighbour
+    on an inner edge goes to the upper cell only, one on the grid's outer edge is out of range."""
+    positions = torch.tensor([[[0.0, 0.0], [0.0, 0.0], [-1.0, 0.0], [1.0, -0.5]]], dtype=torch.float64)
+    weights = cell_weights(
+        positions, torch.ones(1, 4, dtype=torch.bool), cell_side=1.0, grid_size=2, soft=False
+    )
+    assert weights[0, 0].tolist() == [
+        [0.0, 0.0, 0.0, 0.0],  # itself: never pooled
+        [0.0, 0.0, 0.0, 1.0],  # u = (1, 1): cell (1, 1)
+        [0.0, 1.0, 0.0, 0.0],  # u = (0, 1): cell (0, 1)
+        [0.0, 0.0, 0.0, 0.0],  # u = (2, 0.5): beyond the grid
+    ]
 
 
 def primary_prediction(net, positions, mask):
