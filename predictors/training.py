@@ -289,11 +289,7 @@ class GANModule(_PredictorModule):
         self.manual_backward(out["loss"])
         opt_g.step()
 
-        real_logits = self.discriminator(self._trajectory(batch, batch.future[:, :, 0]))
-        fake_logits = self.discriminator(self._trajectory(batch, out["fake"]))
-        d_loss = F.binary_cross_entropy_with_logits(
-            real_logits, torch.ones_like(real_logits)
-        ) + F.binary_cross_entropy_with_logits(fake_logits, torch.zeros_like(fake_logits))
+        d_loss = self.discriminator_loss(batch, out["fake"])
         opt_d.zero_grad()
         self.manual_backward(d_loss)
         opt_d.step()
@@ -304,6 +300,15 @@ class GANModule(_PredictorModule):
         self.log("train_variety", out["variety"], batch_size=size)
         self.log("train_adversarial", out["adversarial"], batch_size=size)
         self.log("train_d_loss", d_loss, prog_bar=True, batch_size=size)
+
+    def discriminator_loss(self, batch: SceneBatch, fake: torch.Tensor) -> torch.Tensor:
+        """Binary cross-entropy of the primary's true trajectories labelled real (1) and of the generated
+        futures ``fake`` (B, H, 2) labelled fake (0), as Social GAN's discriminator is trained."""
+        real_logits = self.discriminator(self._trajectory(batch, batch.future[:, :, 0]))
+        fake_logits = self.discriminator(self._trajectory(batch, fake))
+        return F.binary_cross_entropy_with_logits(
+            real_logits, torch.ones_like(real_logits)
+        ) + F.binary_cross_entropy_with_logits(fake_logits, torch.zeros_like(fake_logits))
 
     def on_train_epoch_end(self) -> None:
         super().on_train_epoch_end()

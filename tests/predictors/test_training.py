@@ -8,8 +8,10 @@ from typing import ClassVar
 import lightning as L
 import pytest
 import torch
+import torch.nn.functional as F
 
 from predictors.data.datamodule import TrajnetDataModule
+from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.models import load_plugin
 from predictors.nets.social_attention import SocialAttention
@@ -223,3 +225,33 @@ def test_resume_from_an_old_checkpoint(tiny_data, tmp_path):
     trainer.fit(module, datamodule=tiny_data, ckpt_path=str(path))
     assert trainer.current_epoch == 2
     assert torch.isfinite(trainer.callback_metrics["train_loss"])
+
+
+class FinalX(torch.nn.Module):
+    """A stand-in discriminator whose logit is the trajectory's final x: hand-computable losses."""
+
+    def forward(self, trajectory: torch.Tensor) -> torch.Tensor:
+        return trajectory[:, -1, 0]
+
+
+def test_gan_losses_are_the_social_gan_definitions_by_hand():
+    """Generator: variety + w * BCE(D(fake), real) = softplus(-logit); discriminator: BCE(D(real), real) +
+    BCE(D(fake), fake) = softplus(-real logit) + softplus(fake logit). Every label and sign here survived
+    mutation of the fast_dev_run test, which checks only that both nets change."""
+    torch.manual_seed(0)
+    module = make_module("social_gan", generator_config(), OptimConfig(variety_k=2, adversarial_weight=0.25))
+    assert isinstance(module, GANModule)
+    module.discriminator = FinalX()
+    steps = torch.arange(21, dtype=torch.float32)[None, :, None, None]
+    positions = torch.cat([0.4 * steps, torch.zeros_like(steps)], dim=-1) + torch.tensor([[[[-3.2, 0.0]]]])
+    mask = torch.ones(1, 21, 1, dtype=torch.bool)
+    batch = SceneBatch(positions, mask, torch.zeros(1, 2), torch.eye(2)[None], obs_len=9)
+    out = module.model_step(batch, "train")
+    fake_x = out["fake"][:, -1, 0]
+    assert out["adversarial"].item() == pytest.approx(F.softplus(-fake_x).mean().item(), rel=1e-6)
+    assert out["loss"].item() == pytest.approx(out["variety"].item() + 0.25 * out["adversarial"].item())
+    real_x = positions[:, -1, 0, 0]  # 0.4 * 20 - 3.2 = 4.8 m
+    assert real_x.item() == pytest.approx(4.8)
+    d_loss = module.discriminator_loss(batch, out["fake"].detach())
+    expected = F.softplus(-real_x).mean() + F.softplus(fake_x.detach()).mean()
+    assert d_loss.item() == pytest.approx(expected.item(), rel=1e-6)
