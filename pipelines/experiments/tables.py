@@ -77,7 +77,7 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
     notes = [
         f"## {experiment.title}",
         "",
-        f"Ours: {per_cell} episodes per cell, "
+        f"Ours: {per_cell} episode{'' if per_cell == '1' else 's'} per cell, "
         "half circle and half perpendicular crossing, the same seeds in every cell; "
         f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
         "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "

@@ -1034,3 +1034,11 @@ def test_each_run_records_its_code_and_a_resume_by_other_code_says_so(tmp_path, 
     assert f"casadi 3.6.0 -> {code_identity()['casadi']}" in err
     run_sweep(_config(tmp_path, 2))  # the mix stays in the directory: every later resume says so
     assert "note: " in capsys.readouterr().err
+
+
+def test_the_note_says_one_episode_per_cell_in_the_singular():
+    """A sweep of --episodes-per-cell 1 said "Ours: 1 episodes per cell"."""
+    table2 = get_experiment("table2")
+    episodes = {("CMPC", 5): [(True, 18.0, False, False)], ("DMPC", 5): [(True, 18.0, False, False)]}
+    markdown = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
+    assert "\nOurs: 1 episode per cell, half circle" in markdown
