@@ -2,6 +2,8 @@
 puts back, and the journal it leaves behind (none once it is done)."""
 
 import os
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import pytest
@@ -79,15 +81,22 @@ def test_a_block_without_class_margins_is_refused_before_anything_is_stored(tmp_
 
 
 def test_the_journal_of_a_live_calibrate_is_not_taken_back(tmp_path, monkeypatch):
-    """A journal whose calibrate still runs (here: this process) is that run's own business: its blocks stay
+    """A journal whose calibrate still runs (here: a sleeping child; this process's own pid is a dead run's,
+    since a run writes its journal only after taking those back) is that run's own business: its blocks stay
     in force and its journal stays."""
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     blocks = _blocks()
     path = save_calibration(blocks[0])
-    _write_journal(path, blocks, None)
-    take_back_killed()
-    assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
-    assert _journals(tmp_path) == [f".calibrate-holdout.{os.getpid()}.json"]
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        journal = _write_journal(path, blocks, None)
+        journal.rename(journal.with_name(f".calibrate-holdout.{live.pid}.json"))
+        take_back_killed()
+        assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
+        assert _journals(tmp_path) == [f".calibrate-holdout.{live.pid}.json"]
+    finally:
+        live.kill()
+        live.wait()
 
 
 def test_a_killed_calibrate_that_found_no_file_leaves_none(tmp_path, monkeypatch, capsys):
