@@ -236,6 +236,14 @@ def _loss(args: argparse.Namespace, net_config: Any) -> str:
     return "l2"
 
 
+def _point_head(args: argparse.Namespace, net_config: Any) -> bool:
+    """Whether the net trains a point head on L2 (``_loss`` has read its head already)."""
+    from predictors.models import model_kind
+
+    kind = model_kind(args.model)
+    return not kind.adversarial and kind.head_type(net_config) == "point"
+
+
 def _parse_net_config(text: str) -> dict[str, Any]:
     if len(text) > MAX_NET_CONFIG_CHARS:
         raise PipelineError(
@@ -313,8 +321,11 @@ def run(args: argparse.Namespace) -> int:
     args.loss = _loss(args, net_config)
     settings = run_settings(args, net_config, name, files)
     if args.resume:
-        if not loss_typed:  # the run's own: runs before this default recorded "gaussian" for point heads too
-            settings["loss"] = args.loss = recorded_loss(out, last) or args.loss
+        recorded = recorded_loss(out, last)
+        # the run's own when none is typed: runs before this default recorded "gaussian" for point heads too,
+        # which trained on L2, so for a point head that record is the "l2" typed, not another setting
+        if not loss_typed or (recorded == "gaussian" and _point_head(args, net_config)):
+            settings["loss"] = args.loss = recorded or args.loss
         name = check_resumed_settings(out, settings, name_given=args.name is not None)
         done = check_last_checkpoint(last, settings)
         check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())

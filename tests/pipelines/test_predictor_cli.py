@@ -356,7 +356,7 @@ def test_a_loss_the_net_does_not_train_on_is_refused_and_the_default_follows_its
 def test_a_run_recorded_before_the_loss_followed_the_head_resumes_with_its_own(tmp_path, capsys):
     """A point-head run started when --loss defaulted to gaussian recorded "gaussian" (and trained on L2):
     resumed with no --loss it keeps that record, settings file and last.ckpt alike, as a Gaussian-head run
-    recorded "gaussian" does; typed, --loss gaussian is refused there too."""
+    recorded "gaussian" does; typed, --loss gaussian is refused there too, and --loss l2 is the same run."""
     import torch
 
     data = str(write_walk_file(tmp_path / "walk.ndjson"))
@@ -376,6 +376,9 @@ def test_a_run_recorded_before_the_loss_followed_the_head_resumes_with_its_own(t
     assert main([*args, "--epochs", "2", "--resume"]) == 0
     assert json.loads(settings.read_text())["loss"] == "gaussian"
     assert json.loads((out / "old.json").read_text())["training"]["optim"]["loss"] == "l2"
+    # typed, --loss l2 is what the run trained on: it was refused as another setting ("run gaussian, now l2")
+    assert main([*args, "--epochs", "3", "--loss", "l2", "--resume"]) == 0
+    assert json.loads(settings.read_text())["loss"] == "gaussian"
 
 
 @pytest.mark.parametrize("model", ["social_lstm", "social_gan"])
