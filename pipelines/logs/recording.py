@@ -91,7 +91,7 @@ class McapEpisodeRecorder:
     ``<scenario>_seed<seed:06d>_<k>.mcap``, k = 1, 2, ..., under the same rule, so that running the same
     loop again replaces each of them. ``paths`` lists the files in order, each once.
 
-    :param out_dir: folder for the files (created if missing).
+    :param out_dir: folder for the files (created at the first episode if missing).
     :param record_iterations: also write the humans' prediction of every IBR iteration (when the controller
         keeps them: ``ControllerSpec(record_iterations=True)``).
     :param run_meta: facts about the whole run (command line, sweep cell...), stored in the "run" metadata.
@@ -111,7 +111,6 @@ class McapEpisodeRecorder:
         self.out_dir = Path(out_dir)
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise PipelineError(f"--record needs a folder; {self.out_dir} is a file")
-        self.out_dir.mkdir(parents=True, exist_ok=True)
         self.record_iterations = record_iterations
         self.run_meta = dict(run_meta or {})
         self.paths: list[Path] = []  # every file started, in order
@@ -127,6 +126,8 @@ class McapEpisodeRecorder:
     # -- EpisodeObserver -------------------------------------------------------------------------------------
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
         self.close()  # an episode that ended without on_end (an exception in the loop) is finished as it is
+        # made for the first episode, not before: a run refused first (a plugin's describe()) leaves no folder
+        self.out_dir.mkdir(parents=True, exist_ok=True)
         missing = [key for key in ("seed", "scenario") if key not in meta]
         if missing:
             raise PipelineError(f"recording needs {missing} in the episode meta; got keys {sorted(meta)}")

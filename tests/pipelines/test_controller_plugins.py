@@ -390,6 +390,15 @@ def test_accelerations_as_a_list_of_rows_are_taken_and_recorded(tmp_path):
     assert result.metrics is not None and read_recording(recorder.paths[0]).data("/robots")
 
 
+def test_a_refused_describe_under_record_leaves_no_folder(tmp_path, capsys):
+    """`simulate --record DIR` made DIR before a plugin's describe() was refused: an empty folder was left."""
+    bad = f"{BROKEN}:DescribeNone"
+    argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
+    code, _, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
+    assert code == 2 and "describe() must return a dict" in err
+    assert not (tmp_path / "rec").exists()
+
+
 def test_a_wrong_plan_under_record_is_one_line(tmp_path, capsys):
     bad = f"{BROKEN}:FlatPlan"
     argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
