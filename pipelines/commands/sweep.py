@@ -321,8 +321,9 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
         ray_address=settings.ray_address,
         record=settings.record,
         progress=not args.no_progress,
-        # nothing to compile (baselines only): gcc is not needed, workers stay where they are
-        jit=any(spec.kind.compiles for _, spec in experiment.methods)
+        # nothing to compile (baselines only), or nothing run (--report-only): gcc is not needed
+        jit=not args.report_only
+        and any(spec.kind.compiles for _, spec in experiment.methods)
         and choose_jit(
             settings.jit,
             cfg.label("sweep", "jit"),

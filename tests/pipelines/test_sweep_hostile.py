@@ -235,6 +235,19 @@ def test_a_compile_cache_that_cannot_be_used_is_refused_before_any_worker(tmp_pa
     assert main([*argv, "--dry-run"]) == 0  # nothing compiles: nothing to refuse
 
 
+def test_report_only_needs_no_gcc_whatever_jit_says(tmp_path, capsys, monkeypatch):
+    """--report-only runs nothing, yet --jit on (as a sweep's recorded config states it) was refused without
+    gcc: "--jit on needs gcc on the PATH", on the machine the report was to be written on."""
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "table2", "--predictor", "constant_velocity", "--humans", "1", "--out",
+            str(out), "--episodes-per-cell", "1", "--backend", "inline", "--no-progress"]  # fmt: skip
+    assert main([*argv, "--jit", "off"]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr("pipelines.experiments.worker.jit_available", lambda: False)  # no gcc here
+    assert main([*argv, "--jit", "on", "--report-only"]) == 0
+    assert "Table II" in (out / TABLE_MD).read_text()
+
+
 def test_a_run_line_is_added_once_the_backend_has_started(good, tmp_path):
     """A backend refused only as it starts (a Ray cluster that cannot be joined) leaves no line either."""
     out = tmp_path / "sweep"
