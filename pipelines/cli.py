@@ -146,6 +146,9 @@ def main(argv: list[str] | None = None) -> int:
         if not stdout_reader_left():  # another pipe (a worker's): a real error
             raise
         return quit_closed_stdout()
+    except KeyboardInterrupt:  # Ctrl-C before a command runs (importing the commands takes a second or two)
+        print("crowdmpc: interrupted", file=sys.stderr)
+        return 130
 
 
 def _main(argv: list[str] | None) -> int:

@@ -895,3 +895,15 @@ def test_ctrl_c_inside_casadi_outside_a_solve_ends_the_command_as_interrupted(mo
     monkeypatch.setattr("pipelines.commands.simulate.run", simulate_interrupted)
     assert main(["simulate", "--controller", "straight", "--humans", "2", "--no-progress"]) == 130
     assert capsys.readouterr().err == "crowdmpc simulate: interrupted\n"
+
+
+def test_ctrl_c_while_the_commands_are_imported_ends_as_interrupted(monkeypatch, capsys):
+    """Ctrl-C in the first second or two of any command (`crowdmpc sweep ...` importing scipy, torch and
+    CasADi to build its parser) printed a KeyboardInterrupt traceback of some library's import, exit 1."""
+
+    def importing(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("pipelines.cli.build_parser", importing)
+    assert main(["sweep", "--experiment", "baselines", "--out", "x"]) == 130
+    assert capsys.readouterr().err == "crowdmpc: interrupted\n"
