@@ -356,8 +356,9 @@ def _run_cells(config: SweepConfig) -> int:
         file=sys.stderr,
     )
     if outcome.errors:
+        raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
         print(
-            f"{len(outcome.errors)} episodes raised; see {config.out / 'errors.jsonl'} (a rerun retries)",
+            f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)",
             file=sys.stderr,
         )
         status = 1

@@ -395,7 +395,7 @@ def test_a_worker_process_that_dies_is_an_episode_error_and_the_sweep_goes_on(tm
     argv = _sweep_cli(tmp_path, ["straight", dies], "--episodes-per-cell", "1", "--workers", "1")
     assert main([*argv, "--backend", "process"]) == 1  # some episodes raised
     err = capsys.readouterr().err
-    assert "Traceback" not in err and "1 episodes raised" in err
+    assert "Traceback" not in err and "1 episode raised; see" in err
     records = EpisodeLog(tmp_path / EPISODES_FILE).load()
     errors = [json.loads(line) for line in (tmp_path / ERRORS_FILE).read_text().splitlines()]
     # straight's episode finished before the other killed the worker: kept; the other is retried by a rerun
