@@ -148,6 +148,9 @@ def _t_central(t: float, dof: int) -> float:
 
 
 def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFigures | None) -> CellSummary:
+    # in the plan's order (seed, scenario), not the order the workers finished: a resumed sweep's cells.csv
+    # differed from an uninterrupted one's in the last digits of its means
+    records = sorted(records, key=lambda r: (r["seed"], str(r["scenario"])))
     n = len(records)
     metrics = [r["metrics"] for r in records]
 

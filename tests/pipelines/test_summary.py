@@ -160,3 +160,16 @@ def test_the_bold_mark_compares_the_printed_values():
     assert _best([75.04, 75.01], higher_is_better=True) == set()
     assert _best([75.06, 75.01], higher_is_better=True) == {0}
     assert _best([18.96, 19.04], higher_is_better=False) == set()  # travel time: both 19.0
+
+
+def test_a_cells_figures_do_not_depend_on_the_order_its_records_finished():
+    """episodes.jsonl holds the episodes in the order the workers finished them: a sweep resumed after Ctrl-C
+    wrote a cells.csv whose travel_time_mean was 15.679999999999998 where the uninterrupted sweep's was
+    15.680000000000001 (the same episodes, summed in another order)."""
+    cell = get_experiment("table2").cells()[0]
+    records = [
+        _record(i, success=True, min_distance=1.0 + i, median=1.0, p95=1.0, total=10.0, time_s=t)
+        for i, t in enumerate((0.1, 0.2, 0.3))
+    ]
+    forward, backward = (cell_rows([summarize_cell(cell, r, None)]) for r in (records, records[::-1]))
+    assert forward == backward
