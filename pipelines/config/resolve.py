@@ -163,7 +163,8 @@ class _Resolver:
 
     def _attribute(self, section: Section, values: dict[str, Any], message: str) -> ConfigError:
         """A one-line error for a section that does not validate: the key the message names, else the first
-        chosen key that breaks it alone, else the last chosen one."""
+        chosen key that breaks it alone, else the last chosen key the message names (a clash of two chosen
+        values), else the last chosen one."""
         chosen = self.chosen.get(section.name, {})
         message = _shortened(message, [values[name] for name in chosen])
         culprit = _named_field(message, section)
@@ -177,8 +178,9 @@ class _Resolver:
                     break
                 except Exception:  # noqa: BLE001 - only locating the key here
                     continue
-        if culprit is None and chosen:
-            culprit = list(chosen)[-1]
+        if culprit is None:  # a clash of chosen values: the last one the message names, else the last one
+            named = [name for name in chosen if re.search(rf"\b{re.escape(name)}\b", message)]
+            culprit = named[-1] if named else (list(chosen)[-1] if chosen else None)
         source = None if culprit is None else self.sources.get((section.name, culprit))
         if source is not None:
             return ConfigError(source.label(section.name, culprit or "", message))

@@ -112,3 +112,11 @@ def test_an_error_line_shows_a_long_value_cut(key, message, tmp_path: Path):
         load(str(path))
     line = str(error.value)
     assert line.startswith(f"{path}: {message}") and "'" + "x" * 76 + "..." in line and len(line) < 400, line
+
+
+def test_a_clash_of_two_chosen_values_names_one_of_them_not_a_bystander():
+    """profile v1 and goal_assignment slots clash (slots needs the paper's success rule), each valid alone;
+    the error named --set env.formation, the last key chosen, which takes no part in it."""
+    sets = ["env.goal_assignment=slots", "env.profile=v1", "env.formation=row"]
+    with pytest.raises(ConfigError, match=r"^--set env\.(goal_assignment|profile): EnvConfig\.goal_"):
+        load(None, sets)
