@@ -53,6 +53,14 @@ def _check_int(name: str, value: object) -> None:
         raise PipelineError(f"{name} must be an integer, got {value!r}")
 
 
+def _check_once(name: str, what: str, names: tuple[str, ...]) -> None:
+    """Refuse a list that names one twice, as ``humans`` is: each name is a column (the experiment refused it
+    later, as "--predictors names [...] more than once" under ``--set sweep.predictors``)."""
+    repeated = next((n for i, n in enumerate(names) if n in names[:i]), None)
+    if repeated is not None:
+        raise PipelineError(f"{name} must name each {what} once, got {repeated[:64]!r} more than once")
+
+
 def _home(settings: object, name: str) -> None:
     """A path setting with a leading ``~`` made the home directory's, as a shell does: ``record = "~/runs"``
     (no shell reads a config file, nor a quoted --set) wrote a folder named ``~`` here. Set in place: the
@@ -235,6 +243,7 @@ class SweepSettings:
         bad = [name for name in names if not isinstance(name, str) or NAME_PATTERN.fullmatch(name) is None]
         if bad:
             raise PipelineError(f"predictors must be predictor names, got {str(bad[0])[:64]!r}")
+        _check_once("predictors", "predictor", names)
 
     def _check_controllers(self) -> None:
         names = self.controllers
@@ -247,6 +256,7 @@ class SweepSettings:
         bad = [name for name in names if not isinstance(name, str) or not 0 < len(name) <= 200]
         if bad:
             raise PipelineError(f"controllers must be controller names, got {str(bad[0])[:64]!r}")
+        _check_once("controllers", "controller", names)
 
     @property
     def n_workers(self) -> int:

@@ -227,7 +227,7 @@ def test_predictors_lists_the_swap_table(tmp_path, capsys):
         ),
         (
             ["--experiment", "predictors", "--predictors", "constant_velocity,constant_velocity"],
-            "--predictors names ['constant_velocity'] more than once",
+            "--predictors must name each predictor once, got 'constant_velocity' more than once",
         ),
         (
             ["--experiment", "predictors", "--predictors", "constant_velocity,nope"],

@@ -4,6 +4,7 @@ refused, booleans never taken for numbers, what an option chooses though it repe
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -120,3 +121,23 @@ def test_a_clash_of_two_chosen_values_names_one_of_them_not_a_bystander():
     sets = ["env.goal_assignment=slots", "env.profile=v1", "env.formation=row"]
     with pytest.raises(ConfigError, match=r"^--set env\.(goal_assignment|profile): EnvConfig\.goal_"):
         load(None, sets)
+
+
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        (
+            'sweep.predictors=["constant_velocity", "constant_velocity"]',
+            "--set sweep.predictors: must name each predictor once, got 'constant_velocity' more than once",
+        ),
+        (
+            'sweep.controllers=["cmpc", "orca", "cmpc"]',
+            "--set sweep.controllers: must name each controller once, got 'cmpc' more than once",
+        ),
+    ],
+)
+def test_a_swap_list_names_each_column_once(setting, message):
+    """As sweep.humans does: config show printed the list, and the sweep refused it as "--set
+    sweep.predictors: --predictors names [...] more than once", naming an option not given."""
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        load(None, [setting])
