@@ -56,7 +56,7 @@ _KIND_TEXT: Final[Mapping[str, str]] = {
     "bool": "true or false",
     "str": "a string",
     "ints": "a list of integers, like [5, 6, 7]",
-    "strs": 'a list of names, like ["constant_velocity", "social_lstm_eth"]',
+    "strs": "a list of names",  # like the key's example (controllers are no predictors' names)
 }
 
 
@@ -151,7 +151,10 @@ class _Resolver:
     def _kind_error(self, section: Section, key: Key, raw: Any, defaults: dict[str, Any]) -> ConfigError:
         """The dataclass's own message for a value of the wrong type when it names the key (MPCConfig's
         "must be an integer >= 1, got 'four'"), else "must be an integer, got 'four'"."""
-        message = f"{key.name} must be {_KIND_TEXT[key.kind]}, got {_short(raw)}"
+        text = _KIND_TEXT[key.kind]
+        if key.kind == "strs" and isinstance(key.example, list):
+            text += ", like [" + ", ".join(f'"{name}"' for name in key.example) + "]"
+        message = f"{key.name} must be {text}, got {_short(raw)}"
         try:
             section.build({**defaults, key.name: raw}, self.built)
         except VALUE_ERRORS as exc:  # its own wording, when it is about this key and shows the value

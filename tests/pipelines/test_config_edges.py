@@ -141,3 +141,17 @@ def test_a_swap_list_names_each_column_once(setting, message):
     sweep.predictors: --predictors names [...] more than once", naming an option not given."""
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
         load(None, [setting])
+
+
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        ("sweep.controllers=cmpc", 'like ["cmpc", "orca"], got \'cmpc\''),
+        ("sweep.predictors=constant_velocity", 'like ["constant_velocity", "social_lstm_eth"], got'),
+    ],
+)
+def test_a_list_of_names_is_asked_for_with_its_own_example(setting, message):
+    """sweep.controllers asked for 'a list of names, like ["constant_velocity", "social_lstm_eth"]', the
+    predictors', as its example."""
+    with pytest.raises(ConfigError, match=f"must be a list of names, {re.escape(message)}"):
+        load(None, [setting])
