@@ -4,7 +4,8 @@ fail once per episode (predictors, couplings, margins, world settings a sweep ca
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError
@@ -158,14 +159,29 @@ def _check_margins_apply(cfg: RunConfig, experiment: Experiment, margins: Margin
 def _applied(
     cfg: RunConfig, section: str, key: str, method: Callable[[Any], Experiment], value: Any
 ) -> Experiment:
-    """``method(value)``, its refusal named by where the value came from when that is no option."""
+    """``method(value)``, its refusal named by where the value came from when that is no option (the
+    experiment's message names the option: "--predictors applies only to ...", said of ``--set
+    sweep.predictors``, named an option not given)."""
     try:
         return method(value)
     except PipelineError as exc:
         source = cfg.source(section, key)
         if source is None or source.kind == "cli":
             raise
-        raise cfg.error(section, key, str(exc)) from None
+        message = str(exc)
+        for option, words in _OPTION_WORDS.items():
+            message = re.sub(rf"{re.escape(option)}\b(?!-)", words, message)
+        raise cfg.error(section, key, message) from None
+
+
+# The options an experiment's refusal names, as a config file or --set names the same values.
+_OPTION_WORDS: Final[Mapping[str, str]] = {
+    "--profile and --visibility": "[env] profile and robots_visible",
+    "--predictors": "[sweep] predictors",
+    "--controllers": "[sweep] controllers",
+    "--predictor": "[controller] predictor",
+    "--margins": "[controller] margins",
+}
 
 
 def _with_spec_field(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:

@@ -242,6 +242,34 @@ def test_bad_predictor_lists_are_one_line(tmp_path, capsys, options, message):
     assert not (tmp_path / "s" / "episodes.jsonl").exists()
 
 
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            ["--experiment", "table2", "--set", 'sweep.predictors=["constant_velocity"]'],
+            "--set sweep.predictors: [sweep] predictors applies only to the experiments ['predictors'], not "
+            "'table2' (use [controller] predictor to replace",
+        ),
+        (
+            ["--experiment", "conventions", "--set", "env.profile=v1"],
+            "--set env.profile: experiment 'conventions' fixes each method's profile and visibility; [env] "
+            "profile and robots_visible do not apply",
+        ),
+        (
+            ["--experiment", "baselines", "--set", "controller.margins=fixed:0.1"],
+            "--set controller.margins: experiment 'baselines' fixes each method's margins; [controller] "
+            "margins does not apply",
+        ),
+    ],
+)
+def test_a_refused_config_value_is_not_called_an_option(tmp_path, capsys, options, message):
+    """The experiment's refusal named the option (--predictors, --profile and --visibility, --margins) of a
+    value set by --set or a config file, none of which was given."""
+    code, _, err = run(capsys, "sweep", *options, "--backend", "inline", "--out", str(tmp_path / "s"))
+    line = one_line(err)
+    assert code == 2 and line.startswith(f"crowdmpc sweep: error: {message}"), line
+
+
 @pytest.mark.parametrize("value", ["../x,a", ",", "a/b", "x" * 65])
 def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
     line = parser_error(
