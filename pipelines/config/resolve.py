@@ -189,8 +189,12 @@ class _Resolver:
             return ConfigError(source.label(section.name, culprit or "", message))
         # A default that clashes with a chosen value (of this section, or of one built before, [world]):
         # "run.toml: env.time_limit: env.timeout_margin (unset: the paper profile's 1.0): must be ...".
-        clash = [((section.name, name), self.sources[(section.name, name)]) for name in chosen]
-        clash = clash or [(k, src) for k, src in self.sources.items() if k[0] in self.built]
+        # The chosen value the message names first ("dt = 0.0001 s" is [world] dt's), not a bystander set
+        # after it (--set env.orca.max_neighbors=5 was blamed for [world] dt's episode length).
+        here = [((section.name, name), self.sources[(section.name, name)]) for name in chosen]
+        before = [(k, src) for k, src in self.sources.items() if k[0] in self.built]
+        said = [(k, src) for k, src in (*before, *here) if re.search(rf"\b{re.escape(k[1])}\b", message)]
+        clash = said or here or before
         lead = ""
         if clash:
             (clash_section, clash_key), src = clash[-1]

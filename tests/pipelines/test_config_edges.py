@@ -155,3 +155,11 @@ def test_a_list_of_names_is_asked_for_with_its_own_example(setting, message):
     predictors', as its example."""
     with pytest.raises(ConfigError, match=f"must be a list of names, {re.escape(message)}"):
         load(None, [setting])
+
+
+@pytest.mark.parametrize("bystander", ["env.orca.max_neighbors=5", "world.radius=0.25", "env.formation=row"])
+def test_a_default_that_clashes_names_the_value_it_clashes_with(bystander):
+    """[world] dt = 0.0001 makes the profile's 40 s episode 400000 steps; the error named whichever value was
+    set after it (--set env.orca.max_neighbors, which takes no part), not --set world.dt."""
+    with pytest.raises(ConfigError, match=r"^--set world\.dt: env\.time_limit \(unset: the paper profile's"):
+        load(None, ["world.dt=0.0001", bystander])
