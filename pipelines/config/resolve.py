@@ -171,8 +171,11 @@ class _Resolver:
         chosen = self.chosen.get(section.name, {})
         message = _shortened(message, [values[name] for name in chosen])
         culprit = _named_field(message, section)
-        if culprit is None:
-            defaults = {k.name: k.default for k in section.keys}
+        defaults = {k.name: k.default for k in section.keys}
+        # The section's defaults break too: a value of a section built before does ([world] dt = 1e-9 is
+        # below EnvConfig's least dt), not this one's chosen values (--set env.time_limit=1e-6 was blamed).
+        earlier = culprit is None and not _builds(section, defaults, self.built)
+        if culprit is None and not earlier:
             for name in chosen:
                 try:
                     section.build({**defaults, name: values[name]}, self.built)
@@ -181,9 +184,9 @@ class _Resolver:
                     break
                 except Exception:  # noqa: BLE001 - only locating the key here
                     continue
-        if culprit is None:  # a clash of chosen values: the last one the message names, else the last one
-            named = [name for name in chosen if re.search(rf"\b{re.escape(name)}\b", message)]
-            culprit = named[-1] if named else (list(chosen)[-1] if chosen else None)
+            if culprit is None:  # a clash of chosen values: the last one the message names, else the last
+                named = [name for name in chosen if re.search(rf"\b{re.escape(name)}\b", message)]
+                culprit = named[-1] if named else (list(chosen)[-1] if chosen else None)
         source = None if culprit is None else self.sources.get((section.name, culprit))
         if source is not None:
             return ConfigError(source.label(section.name, culprit or "", message))
@@ -194,7 +197,7 @@ class _Resolver:
         here = [((section.name, name), self.sources[(section.name, name)]) for name in chosen]
         before = [(k, src) for k, src in self.sources.items() if k[0] in self.built]
         said = [(k, src) for k, src in (*before, *here) if re.search(rf"\b{re.escape(k[1])}\b", message)]
-        clash = said or here or before
+        clash = said or (before if earlier else here) or before
         lead = ""
         if clash:
             (clash_section, clash_key), src = clash[-1]
@@ -203,6 +206,15 @@ class _Resolver:
             return ConfigError(f"{lead}[{section.name}]: {message}")
         shown = f"{section.name}.{culprit} (unset: {_unset_value(section, culprit, values)})"
         return ConfigError(f"{lead}{shown}: {reason(message, culprit)}")
+
+
+def _builds(section: Section, values: dict[str, Any], built: Mapping[str, Any]) -> bool:
+    """Whether ``section`` validates with ``values`` over the sections ``built``."""
+    try:
+        section.build(values, built)
+    except Exception:  # noqa: BLE001 - only asking whether it builds
+        return False
+    return True
 
 
 def _unset_value(section: Section, key: str, values: Mapping[str, Any]) -> str:
