@@ -130,8 +130,12 @@ def check_writable(
         except OSError as exc:
             raise PipelineError(f"{label}: cannot write there ({exc.strerror or exc})") from None
         return
-    ancestor = path.parent
+    ancestor = path
     while not ancestor.exists() and ancestor != ancestor.parent:
+        if ancestor.is_symlink():  # dangling or a loop: nothing can be made through it (mkdir: File exists)
+            raise PipelineError(
+                f"{label}: {ancestor} is a symbolic link to nothing (its target is missing or loops)"
+            )
         ancestor = ancestor.parent
     if not ancestor.is_dir():
         raise PipelineError(f"{label}: {ancestor} is not a directory")

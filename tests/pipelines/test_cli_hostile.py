@@ -146,6 +146,24 @@ def test_a_file_output_is_never_written_through_a_symbolic_link(tmp_path, a_file
     assert not (tmp_path / "elsewhere").exists() and a_file.read_text() == "not a directory\n"
 
 
+def test_an_output_through_a_dangling_or_looping_link_is_refused_before_the_work(tmp_path, capsys):
+    """A dangling link (or a loop) as an output folder, or above one, can be neither written into nor made:
+    `train --out LINK` ended in a FileExistsError traceback from mkdir, after the data had been read."""
+    dangling = tmp_path / "dangling"
+    dangling.symlink_to(tmp_path / "nowhere")
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    for out in (dangling, dangling / "run", loop):
+        with pytest.raises(PipelineError, match=r"is a symbolic link to nothing"):
+            check_writable(out, "--out", directory=True)
+    with pytest.raises(PipelineError, match=rf"^--json {dangling}/r.json: {dangling} is a symbolic link"):
+        check_writable(dangling / "r.json", "--json")
+    assert main(["train", "--model", "vanilla_lstm", "--out", str(dangling), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--out {dangling}: {dangling} is a symbolic link to nothing" in err
+    assert not (tmp_path / "nowhere").exists()
+
+
 def test_a_path_the_system_cannot_take_is_refused_before_the_work(tmp_path, capsys):
     """Path.exists() is False for a NUL byte (reachable by a TOML escape) and raises for a name too long:
     the check passed, or ended in a traceback, and simulate lost its episodes when it wrote --json."""
