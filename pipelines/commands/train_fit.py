@@ -78,9 +78,10 @@ def _fit(
 
     ckpt_dir = out / "checkpoints"
     last = ckpt_dir / "last.ckpt"
-    data = TrajnetDataModule(
-        files["train"], files["val"], files["test"], batch_size=args.batch_size, seed=args.seed
-    )
+    # resolved, as train_settings.json records them: last.ckpt keeps the data module's paths, and relative
+    # ones named other files to a --resume from another folder (refused as "other settings")
+    train, val, test = ([Path(p).resolve() for p in files[split]] for split in ("train", "val", "test"))
+    data = TrajnetDataModule(train, val, test, batch_size=args.batch_size, seed=args.seed)
     module = make_module(args.model, net_config, optim)
     trainer, best = _trainer(args, out, ckpt_dir)
     if not args.resume:

@@ -381,6 +381,24 @@ def test_a_run_recorded_before_the_loss_followed_the_head_resumes_with_its_own(t
     assert json.loads(settings.read_text())["loss"] == "gaussian"
 
 
+def test_a_run_of_relative_files_resumes_from_another_folder(tmp_path, monkeypatch, capsys):
+    """last.ckpt kept the data files as typed: a run of --train walk.ndjson resumed from another folder with
+    --train ../a/walk.ndjson, the same file, was refused as trained with other files (the relative name
+    resolved in the new folder)."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    write_walk_file(tmp_path / "a" / "walk.ndjson")
+    monkeypatch.chdir(tmp_path / "a")
+    args = ["train", "--model", "vanilla_lstm", "--batch-size", "2", "--no-progress"]
+    here = ["--train", "walk.ndjson", "--val", "walk.ndjson"]
+    assert main([*args, *here, "--epochs", "1", "--out", "run"]) == 0
+    monkeypatch.chdir(tmp_path / "b")
+    capsys.readouterr()
+    files = ["--train", "../a/walk.ndjson", "--val", "../a/walk.ndjson"]
+    resumed = main([*args, *files, "--epochs", "2", "--out", "../a/run", "--resume"])
+    assert resumed == 0, capsys.readouterr().err
+
+
 @pytest.mark.parametrize("model", ["social_lstm", "social_gan"])
 def test_a_resumed_run_ends_where_an_uninterrupted_one_does(tmp_path, model):
     """One epoch then --resume to two equals two epochs straight, weight for weight: the resumed epoch
