@@ -302,6 +302,8 @@ def run(args: argparse.Namespace) -> int:
                 f"--out {out}: its {folder} is a symbolic link; crowdmpc does not write through one "
                 "(remove it)"
             )
+        if (out / folder).exists() and not (out / folder).is_dir():  # Lightning's makedirs: a traceback
+            raise PipelineError(f"--out {out}: its {folder} is not a directory (remove it)")
     last = ckpt_dir / "last.ckpt"
     if args.resume and not last.is_file():
         raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")

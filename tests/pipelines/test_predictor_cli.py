@@ -279,6 +279,22 @@ def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capf
     assert "add to the zoo with" in out
 
 
+@pytest.mark.parametrize("folder", ["checkpoints", "csv", "tensorboard"])
+def test_a_file_in_place_of_one_of_the_runs_folders_is_refused_before_the_run(tmp_path, capsys, folder):
+    """A file where Lightning makes its checkpoints/, csv/ or tensorboard/ folder ended the run in a
+    FileExistsError traceback from makedirs (csv/, after the data was read): one line now, nothing written."""
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / folder).write_text("a file\n")
+    args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--epochs", "1"]
+    assert main([*args, "--out", str(out), "--no-progress"]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc train: error: --out {out}: its {folder} is not a directory (remove it)\n"
+    )
+    assert sorted(p.name for p in out.iterdir()) == [folder]
+
+
 def test_training_never_writes_through_a_link_planted_in_its_folder(tmp_path, capsys):
     """A train_settings.json link in --out had the run's settings written over the file it points to, and a
     csv/ link had Lightning's logs written into the folder it points to: the settings now replace the link,
