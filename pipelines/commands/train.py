@@ -167,11 +167,18 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
             raise PipelineError("--train and --val go together (explicit files replace --protocol)")
         files = {"train": list(args.train), "val": list(args.val), "test": list(args.test or [])}
         for split, paths in files.items():
+            seen: dict[Path, Path] = {}
             for path in paths:
                 if not path.exists():
                     raise PipelineError(f"--{split} file {path} does not exist")
                 if not path.is_file():
                     raise PipelineError(f"--{split} {path} is not a data file (a directory or a device)")
+                # twice, its scenes count twice, but the run's data record names it once: the same identity
+                # as a run trained on it once, with other weights
+                again = seen.setdefault(path.resolve(), path)
+                if again is not path:
+                    same = "" if again == path else f" (as {again})"
+                    raise PipelineError(f"--{split} names {path} more than once{same}; give each file once")
         return files, None
     from predictors.data.locate import prepared_dir, protocol_files
 

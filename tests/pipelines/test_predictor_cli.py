@@ -295,6 +295,22 @@ def test_a_file_in_place_of_one_of_the_runs_folders_is_refused_before_the_run(tm
     assert sorted(p.name for p in out.iterdir()) == [folder]
 
 
+def test_a_data_file_named_twice_in_a_split_is_refused(tmp_path, monkeypatch, capsys):
+    """--train walk.ndjson walk.ndjson trained on its scenes twice, and recorded the same training data (the
+    file once, the same sha256) as a run trained on it once, with other weights: refused in one line."""
+    write_walk_file(tmp_path / "walk.ndjson")
+    monkeypatch.chdir(tmp_path)
+    args = ["train", "--model", "vanilla_lstm", "--epochs", "1", "--no-progress", "--out", "run"]
+    assert main([*args, "--train", "walk.ndjson", "walk.ndjson", "--val", "walk.ndjson"]) == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc train: error: --train names walk.ndjson more than once; give each file once\n"
+    )
+    absolute = str(tmp_path / "walk.ndjson")
+    assert main([*args, "--train", "walk.ndjson", "--val", "walk.ndjson", absolute]) == 2
+    assert f"--val names {absolute} more than once (as walk.ndjson); give" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
 def test_training_never_writes_through_a_link_planted_in_its_folder(tmp_path, capsys):
     """A train_settings.json link in --out had the run's settings written over the file it points to, and a
     csv/ link had Lightning's logs written into the folder it points to: the settings now replace the link,
