@@ -293,6 +293,9 @@ def run(args: argparse.Namespace) -> int:
 
     _check_numbers(args)
     pooling, net_config = _net_config(args)
+    # before the data: a --loss the net does not train on is refused before files are read or prepared
+    loss_typed = args.loss is not None
+    args.loss = _loss(args, net_config)
     explicit = args.train is not None or args.val is not None
     _protocol_options(args, explicit)
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
@@ -326,8 +329,6 @@ def run(args: argparse.Namespace) -> int:
         run_settings,
     )
 
-    loss_typed = args.loss is not None
-    args.loss = _loss(args, net_config)
     settings = run_settings(args, net_config, name, files)
     if args.resume:
         recorded = recorded_loss(out, last)

@@ -385,6 +385,17 @@ def test_a_loss_the_net_does_not_train_on_is_refused_and_the_default_follows_its
     assert main([*point, "--out", str(tmp_path / "point"), "--loss", "l2", "--epochs", "2", "--resume"]) == 0
 
 
+def test_a_loss_the_net_does_not_train_on_is_refused_before_the_data_is_read(tmp_path, capsys):
+    """The --loss check came after the data: with the protocol's files it prepared them first (40 s of
+    output and a filled cache), here it named the missing data instead of the option."""
+    missing = str(tmp_path / "no-data")
+    assert main(["train", "--model", "social_gan", "--loss", "l2", "--data-dir", missing]) == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc train: error: --loss does not apply to social_gan (a GAN: it trains on its variety + "
+        "adversarial loss)\n"
+    )
+
+
 def test_a_run_recorded_before_the_loss_followed_the_head_resumes_with_its_own(tmp_path, capsys):
     """A point-head run started when --loss defaulted to gaussian recorded "gaussian" (and trained on L2):
     resumed with no --loss it keeps that record, settings file and last.ckpt alike, as a Gaussian-head run
