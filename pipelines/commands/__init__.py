@@ -74,8 +74,7 @@ def check_writable(
     inputs: Iterable[Path] = (),
     json_only: bool = False,
     zoo_own: bool = False,
-    staged_beside: bool | None = None,
-    room: int = REPLACE_FILE_ROOM,
+    room: int | None = None,
 ) -> None:
     """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
 
@@ -87,9 +86,10 @@ def check_writable(
     a mistyped name must not overwrite a data file, a recording or weights. A file output that is a symbolic
     link is refused: one planted in a folder would send the output wherever it points. Nor is an output a
     zoo's own file (its manifest, calibrations, lock; ``_check_not_zoo_file``), existing or not, unless
-    ``zoo_own``: the command keeps that very file (calibrate's calibrations.json). ``staged_beside``: the
-    output is first made under a longer name beside it (default: a file is, ``replace_file``; a directory
-    is not), so its name must leave room for that one: ``room`` bytes.
+    ``zoo_own``: the command keeps that very file (calibrate's calibrations.json). ``room``: how many bytes
+    longer than the output's name the temporary name it is first made under beside it is, which its name
+    must leave room for (default: ``REPLACE_FILE_ROOM`` for a file, made by ``replace_file``; 0 for a
+    directory, written into; 0 for a file written in place, such as a figure).
     """
     if path is None:
         return
@@ -102,8 +102,9 @@ def check_writable(
     except (OSError, ValueError) as exc:  # a name too long, a NUL byte (a TOML escape), no permission
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise PipelineError(f"{label}: not a usable path ({why})") from None
-    staged = not directory if staged_beside is None else staged_beside
-    if staged and len(os.fsencode(path.name)) > NAME_MAX - room:  # fits, but a sibling not
+    if room is None:
+        room = 0 if directory else REPLACE_FILE_ROOM
+    if room and len(os.fsencode(path.name)) > NAME_MAX - room:  # fits, but a sibling not
         raise PipelineError(
             f"{label}: not a usable path (a name of at most {NAME_MAX - room} bytes: crowdmpc writes it "
             "under a longer temporary name first)"

@@ -149,7 +149,7 @@ def run_prepare(args: argparse.Namespace) -> int:
     from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
 
     seed = _prepare_seed(args)
-    check_writable(args.out, "--out", directory=True, staged_beside=True, room=PREPARE_ROOM)
+    check_writable(args.out, "--out", directory=True, room=PREPARE_ROOM)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:
         raise PipelineError(

@@ -335,8 +335,8 @@ def run(args: argparse.Namespace) -> int:
         inputs += [p for pattern in below for p in args.path.glob(pattern)]
     inputs += [args.compare] if args.compare else []
     # matplotlib writes the figures under their own names, not staged beside them
-    check_writable(args.plot, "--plot", inputs=inputs, staged_beside=False)
-    check_writable(args.animate, "--animate", inputs=inputs, staged_beside=False)
+    check_writable(args.plot, "--plot", inputs=inputs, room=0)
+    check_writable(args.animate, "--animate", inputs=inputs, room=0)
     check_writable(args.json, "--json", inputs=inputs, json_only=True)
     _check_distinct_outputs(args)
     report: dict[str, Any] = {}

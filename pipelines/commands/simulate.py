@@ -222,7 +222,7 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         check_figure_path(run.plot, config.label("simulate", "plot"))
     # Before the episodes, not after them: a path that cannot be written would waste the whole run.
     check_writable(run.json, config.label("simulate", "json"), json_only=True)
-    check_writable(run.plot, config.label("simulate", "plot"), staged_beside=False)  # savefig writes it
+    check_writable(run.plot, config.label("simulate", "plot"), room=0)  # savefig writes it
     check_writable(run.record, config.label("simulate", "record"), directory=True)
     if run.json is not None and run.plot is not None and run.json.resolve() == run.plot.resolve():
         # the plot, written last, replaced the JSON report
