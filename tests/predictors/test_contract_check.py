@@ -120,13 +120,18 @@ def test_a_forward_returning_only_positions_is_refused():
         PredictorModule(model)
 
 
-def test_train_refuses_a_broken_net_in_one_line_before_writing_anything(tmp_path, capsys):
-    model = f"{BROKEN}:OneColumn"
+def _train_plugin(model: str, tmp_path, capsys) -> tuple[int, str]:
+    """``crowdmpc --plugin MODEL train --model MODEL`` on a small file into tmp_path/run: code, stderr."""
     data = write_walk_file(tmp_path / "walk.ndjson")
     argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
     capsys.readouterr()
     code = main([*argv, "--epochs", "1", "--out", str(tmp_path / "run"), "--no-progress"])
-    err = capsys.readouterr().err
+    return code, capsys.readouterr().err
+
+
+def test_train_refuses_a_broken_net_in_one_line_before_writing_anything(tmp_path, capsys):
+    model = f"{BROKEN}:OneColumn"
+    code, err = _train_plugin(model, tmp_path, capsys)
     assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert err.startswith(f"crowdmpc train: error: model {model!r}: encode's out must be of shape (B, N, K)")
     assert not (tmp_path / "run").exists()
@@ -135,11 +140,7 @@ def test_train_refuses_a_broken_net_in_one_line_before_writing_anything(tmp_path
 def test_a_head_type_property_that_raises_is_one_line_in_train_and_in_the_check(tmp_path, capsys):
     """It was a KeyError traceback: ``train`` reads the head (for its loss) before the contract check."""
     model = f"{BROKEN}:HeadTypeRaises"
-    data = write_walk_file(tmp_path / "walk.ndjson")
-    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
-    capsys.readouterr()
-    code = main([*argv, "--epochs", "1", "--out", str(tmp_path / "run"), "--no-progress"])
-    err = capsys.readouterr().err
+    code, err = _train_plugin(model, tmp_path, capsys)
     assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert f"model {model!r}: reading head_type failed: KeyError: 'point' {SEE}" in err
     kind = model_kind(model)
