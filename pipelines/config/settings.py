@@ -27,6 +27,7 @@ LOCAL_WORKERS_PER_CPU: Final[int] = 4
 # A swap table of more predictors than this is no table anyone reads; each is a column of every row.
 MAX_SWAP_PREDICTORS: Final[int] = 64
 JIT_CHOICES: Final[tuple[str, ...]] = ("auto", "on", "off")
+MAX_SEED: Final[int] = 2**63 - 1  # TOML's largest integer
 
 
 def available_cpus() -> int:
@@ -51,6 +52,18 @@ def _check_int(name: str, value: object) -> None:
     of a bound that 2.0 keeps."""
     if not _is_int(value):
         raise PipelineError(f"{name} must be an integer, got {value!r}")
+
+
+def _check_seed(seed: object) -> None:
+    """A seed is written into the run's TOML config, whose integers are 64-bit signed: a larger one would make
+    a file that TOML readers other than Python's refuse."""
+    if not _is_int(seed):
+        raise PipelineError(f"seed must be an integer, got {seed!r}")
+    assert isinstance(seed, int)
+    if seed < 0:
+        raise PipelineError(f"seed must be >= 0, got {seed!r}")
+    if seed > MAX_SEED:
+        raise PipelineError(f"seed must be at most 2**63 - 1 (TOML's largest integer), got {seed!r}")
 
 
 def _check_once(name: str, what: str, names: tuple[str, ...]) -> None:
@@ -134,9 +147,7 @@ class SimulateSettings:
             raise PipelineError(
                 f"episodes must be at most {MAX_SIMULATE_EPISODES} (use crowdmpc sweep), got {self.episodes}"
             )
-        _check_int("seed", self.seed)
-        if self.seed < 0:
-            raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
+        _check_seed(self.seed)
         for name in ("json", "plot", "record"):
             value = getattr(self, name)
             if value is not None and not (isinstance(value, str) and value):
@@ -174,9 +185,7 @@ class SweepSettings:
         if n > MAX_EPISODES_PER_CELL:
             raise PipelineError(f"episodes_per_cell must be at most {MAX_EPISODES_PER_CELL}, got {n}")
         self._check_humans()
-        _check_int("seed", self.seed)
-        if self.seed < 0:
-            raise PipelineError(f"seed must be >= 0, got {self.seed!r}")
+        _check_seed(self.seed)
         if self.backend not in BACKENDS:
             raise PipelineError(f"backend must be one of {list(BACKENDS)}, got {self.backend!r}")
         if self.ray_address is not None and not (isinstance(self.ray_address, str) and self.ray_address):

@@ -51,6 +51,12 @@ def test_a_sweep_runs_the_papers_episodes_per_cell_by_default():
     assert SweepSettings().episodes_per_cell == 1000
 
 
+def test_a_sweep_seed_must_fit_the_toml_config_it_is_written_into():
+    assert SweepSettings(seed=2**63 - 1).seed == 2**63 - 1
+    with pytest.raises(PipelineError, match=r"seed must be at most 2\*\*63 - 1 \(TOML's largest integer\)"):
+        SweepSettings(seed=2**63)
+
+
 def test_an_experiment_needs_distinct_labels_and_some_humans():
     # Two columns of one label would share a cell key, and so their episodes' records.
     spec = ControllerSpec("orca")

@@ -406,6 +406,8 @@ def test_errors_from_the_python_api_are_config_errors(tmp_path):
         (["--robots", "13"], "--robots must be in 1..12, got 13"),
         (["--episodes", "0"], "--episodes must be >= 1, got 0"),
         (["--seed", "-2"], "--seed must be >= 0, got -2"),
+        # written into the run's TOML config, whose integers other readers take as 64-bit signed
+        (["--seed", str(2**63)], f"--seed must be at most 2**63 - 1 (TOML's largest integer), got {2**63}"),
         (["--set", "scenario.humans=100"], "--set scenario.humans: n_humans must be in [0, 50], got 100"),
         (["--set", "mpc.horizon=100000"], "--set mpc.horizon: must be at most 100, got 100000"),
         (["--set", "mpc.j_max=1e9"], "--set mpc.j_max: must be an integer >= 1, got 1000000000.0"),
