@@ -6,6 +6,7 @@ the entries into a ``RunConfig``.
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import errno
 import re
@@ -151,6 +152,12 @@ def read_file(path: str | Path) -> list[Entry]:
                 table("env.orca", value)
                 continue
             check_key(source.prefix(name, key), section, key)
+            date = _date_in(value)
+            if date is not None:
+                raise ConfigError(
+                    f"{source.prefix(name, key)}: must not be a TOML date or time, got {date.isoformat()} "
+                    '(no setting takes one; quote it, "...", for a string)'
+                )
             entries.append(Entry(name, key, value, source))
 
     for name, values in document.items():
@@ -196,7 +203,19 @@ def parse_set(text: str) -> Entry:
         value = raw
     except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit
         raise ConfigError(f"--set {name}: {long_number()}") from None
+    if _date_in(value) is not None and BARE_VALUE.fullmatch(raw):
+        value = raw  # no setting takes a date: --set simulate.json=2026-12-02 names a file, like other words
     return Entry(section.name, key, value, Source("set", "--set"))
+
+
+def _date_in(value: Any) -> datetime.date | datetime.time | None:
+    """The first TOML date or time in ``value`` (arrays searched): tomllib reads 2026-12-02 and 07:32:00 as
+    Python dates and times, which no setting takes, and whose ``repr`` reads as Python, not TOML."""
+    if isinstance(value, datetime.date | datetime.time):
+        return value
+    if isinstance(value, list):
+        return next((d for d in map(_date_in, value) if d is not None), None)
+    return None
 
 
 def long_number() -> str:

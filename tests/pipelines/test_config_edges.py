@@ -66,6 +66,37 @@ def test_an_option_chooses_its_value_even_when_it_is_the_default(tmp_path: Path)
     assert not load().chosen("env", "formation")  # nothing given
 
 
+@pytest.mark.parametrize(
+    "text, shown",
+    [
+        (
+            "[simulate]\njson = 1979-05-27\n",
+            "simulate.json: must not be a TOML date or time, got 1979-05-27 ",
+        ),
+        (
+            "[mpc]\nw_coll = 1979-05-27T07:32:00\n",
+            "mpc.w_coll: must not be a TOML date or time, got 1979-05-27T07",
+        ),
+        (
+            "[scenario]\nhumans = [5, 07:32:00]\n",
+            "scenario.humans: must not be a TOML date or time, got 07:32:00 ",
+        ),
+    ],
+)
+def test_a_toml_date_is_named_in_toml_not_as_a_python_repr(text, shown, tmp_path: Path):
+    """No setting takes a date: the error showed Python's ``datetime.date(1979, 5, 27)`` to a TOML user."""
+    path = tmp_path / "run.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=re.escape(shown)) as error:
+        load(str(path))
+    assert "datetime" not in str(error.value)
+
+
+def test_a_set_value_that_tomllib_reads_as_a_date_is_the_word_given():
+    """``--set simulate.json=2026-12-02`` names a file, as other bare words do; it was refused as a date."""
+    assert load(sets=["simulate.json=2026-12-02"]).simulate.json == "2026-12-02"
+
+
 def test_env_orca_and_formation_reach_the_simulator():
     env = load(sets=["env.orca.max_neighbors=3", 'env.formation="wedge"']).env
     assert (env.orca.max_neighbors, env.formation) == (3, "wedge")
