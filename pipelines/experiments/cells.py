@@ -127,7 +127,10 @@ class Experiment:
             controller_kind(name)  # UnknownController: one line saying how to register a plugin
         template = self.methods[0][1]
         methods = tuple((name, _as_controller(template, name)) for name in controllers)
-        return replace(self, methods=methods)
+        predicting = any(spec.kind.uses_predictor for _, spec in methods)
+        # the clause on the predictor would describe columns that do not exist
+        title = self.title if predicting else self.title.split(PREDICTING_WORDS)[0]
+        return replace(self, methods=methods, title=title)
 
     def with_margins(self, margins: MarginSpec) -> Experiment:
         """Every method that plans with a predictor planning with ``margins`` (e.g. Table II with conformal
@@ -203,6 +206,7 @@ SWAP_PREDICTORS: Final[tuple[str, ...]] = (
 # Words of titles that hold only for the default methods (Experiment.with_predictor, with_predictors).
 PAPER_PREDICTOR_WORDS: Final[str] = "the paper's predictor"
 ORACLE_WORDS: Final[str] = " (ORCA ground truth as an oracle)"
+PREDICTING_WORDS: Final[str] = ", those that predict the humans with "  # and with_controllers
 # Models of the swap table that came after the first zoo (issue 13): in the default list once a zoo has them.
 LATER_SWAP_PREDICTORS: Final[frozenset[str]] = frozenset({"social_gru_eth", "social_attention_eth"})
 
@@ -293,7 +297,7 @@ EXPERIMENTS: dict[str, Experiment] = {
     "controllers": Experiment(
         name="controllers",
         # the table names its humans; ORCA and the straight line plan with no predictor
-        title=f"Controllers: each controller, those that predict the humans with {PAPER_PREDICTOR_WORDS}",
+        title=f"Controllers: each controller{PREDICTING_WORDS}{PAPER_PREDICTOR_WORDS}",
         methods=tuple((name, ControllerSpec(name, PAPER_PREDICTOR)) for name in SHIPPED_CONTROLLERS),
         humans=ABLATION_HUMANS,
         controller_list=True,

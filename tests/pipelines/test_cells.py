@@ -83,6 +83,19 @@ def test_swapped_lists_take_every_setting_but_the_swapped_one_from_the_first_met
     )
 
 
+def test_the_controllers_title_names_a_predictor_only_while_a_column_predicts():
+    """``--controllers orca straight``'s table.md was titled "..., those that predict the humans with the
+    paper's predictor", of columns that predict nothing; with a --predictor as well, that name."""
+    experiment = get_experiment("controllers")
+    assert experiment.with_controllers(["orca", "straight"]).title == "Controllers: each controller"
+    assert experiment.with_controllers(["straight", "dmpc"]).title == experiment.title
+    swapped = experiment.with_controllers(["orca"]).with_predictor("constant_velocity")
+    assert swapped.title == "Controllers: each controller"
+    swapped = experiment.with_predictor("constant_velocity").with_controllers(["cmpc"])
+    assert swapped.title.endswith(", those that predict the humans with constant_velocity")
+    assert swapped.with_controllers(["orca"]).title == "Controllers: each controller"
+
+
 def test_an_empty_list_of_controllers_is_refused_naming_the_experiment():
     with pytest.raises(PipelineError, match=r"^experiment 'controllers' needs at least one controller$"):
         get_experiment("controllers").with_controllers([])
