@@ -7,7 +7,6 @@ import json
 import math
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -48,12 +47,6 @@ with --check, 1 when any file has a bad chunk, a bad message, a schema violation
 """
 
 MAX_ERRORS_SHOWN = 20
-# Runs pooled into one aggregate of a folder share their run_identity (pipelines.logs.recording), what tells
-# runs apart when recording too (a CMPC run beside a straight-line one, or a row formation beside a wedge,
-# is two results, not one average). A set-up is named by its RUN_IDENTITY values, then by the settings that
-# tell it apart: these whenever they differ, any other only where these leave set-ups alike.
-# margins.label ("none", "cp0.05", "cpm0.1") stands for the margins it made (mpc.human_margins, their mode).
-NAMED_FIRST: Final[tuple[str, ...]] = ("env.profile", "env.robots_visible", "env.formation", "margins.label")
 # The units of the episode metrics (crowdsim.metrics.EpisodeMetrics), printed after their names.
 METRIC_UNITS: Final[Mapping[str, str]] = {
     "travel_time": "s",
@@ -128,98 +121,6 @@ def _check(runs: list[RunDigest], report: dict[str, Any]) -> int:
     return failed
 
 
-@dataclass
-class SetUp:
-    """Runs of one folder that share their set-up."""
-
-    identity: dict[str, Any] | None  # their run_identity; None: unknown (no readable episode metadata)
-    members: list[RunDigest]
-
-
-def _identity_key(identity: Mapping[str, Any]) -> str:
-    return json.dumps(identity, sort_keys=True, default=str)
-
-
-def _groups(runs: list[RunDigest]) -> list[SetUp]:
-    """The runs by their set-up (``run_identity``: controller, predictor, crowd, and the simulator's and
-    controller's settings of the "config" metadata), in the order of their first run. A run whose set-up is
-    unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own: with one
-    known set-up it counts among its runs, as the folder's one aggregate always counted it."""
-    groups: dict[str, SetUp] = {}
-    unknown: list[RunDigest] = []
-    for run in runs:
-        if run.identity is None:
-            unknown.append(run)
-            continue
-        groups.setdefault(_identity_key(run.identity), SetUp(run.identity, [])).members.append(run)
-    setups = list(groups.values())
-    if unknown and len(setups) == 1:
-        setups[0].members = list(runs)  # every run, in the folder's order, as before
-    elif unknown:
-        setups.append(SetUp(None, unknown))
-    return setups
-
-
-def _named_settings(setups: list[SetUp]) -> list[str]:
-    """The settings beyond ``RUN_IDENTITY`` that name the set-ups: each of ``NAMED_FIRST`` whose value
-    differs between them, then, in the order they are recorded in, each other one that tells apart set-ups
-    the ones before it did not (a profile's name stands for the settings that come with it)."""
-    from pipelines.logs.identity import MISSING, RUN_IDENTITY
-
-    known = [s.identity for s in setups if s.identity is not None]
-
-    def kinds(keys: list[str]) -> int:
-        return len({tuple(_identity_key({"v": i.get(k, MISSING)}) for k in keys) for i in known})
-
-    named = [key for key in NAMED_FIRST if kinds([key]) > 1]
-    keys = [*RUN_IDENTITY, *named]
-    for key in dict.fromkeys(k for i in known for k in i if k not in keys):
-        if kinds(keys) == len(known):
-            break
-        if kinds([*keys, key]) > kinds(keys):
-            keys.append(key)
-            named.append(key)
-    return named
-
-
-def _setting(key: str, value: Any) -> str:
-    """A setting in a set-up's name: "formation row", "robots invisible", "mpc.horizon 8"."""
-    from pipelines.logs.identity import MISSING, shown
-
-    if value is MISSING:
-        return f"{key} not recorded"
-    if key == "env.robots_visible" and isinstance(value, bool):
-        return "robots visible" if value else "robots invisible"
-    if key in ("env.profile", "env.formation"):
-        return f"{key.removeprefix('env.')} {shown(value)}"
-    if key == "margins.label":
-        return f"margins {shown(value)}"
-    return f"{key} {shown(value)}"
-
-
-def _group_parts(setup: SetUp, named: list[str]) -> list[str]:
-    """A set-up's name in parts: controller, predictor, crowd, then each named setting."""
-    from pipelines.logs.identity import MISSING
-    from pipelines.logs.review import count
-
-    identity = setup.identity
-    if identity is None:
-        return ["set-up unknown (no readable episode metadata)"]
-    return [
-        str(identity.get("controller") or "-"),
-        f"predictor {identity.get('predictor') or 'none'}",
-        count(identity.get("n_robots"), "robot"),
-        count(identity.get("n_humans"), "human"),
-        *(_setting(k, identity.get(k, MISSING)) for k in named),
-    ]
-
-
-def _short_names(parts: list[list[str]]) -> list[str]:
-    """Each set-up by what tells it apart from the others (the parts all of them share left out)."""
-    shared = set.intersection(*(set(p) for p in parts))
-    return [", ".join(x for x in p if x not in shared) or ", ".join(p) for p in parts]
-
-
 def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
     """``summary`` for printing: each metric with a unit named with it ("travel_time (s)")."""
     metrics = summary["metrics"]
@@ -265,12 +166,13 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     names them when there are several), into ``report``; the runs and the number of unreadable files."""
     from pipelines.logs.identity import RUN_IDENTITY
     from pipelines.logs.review import aggregate_table, count, setups_table
+    from pipelines.logs.setups import group_parts, groups, named_settings, short_names
 
     runs, n_unreadable = _read_folder(folder, report, check)
     report["runs"] = [run.summary for run in runs]
-    setups = _groups(runs)
-    named = _named_settings(setups)
-    parts = [_group_parts(setup, named) for setup in setups]
+    setups = groups(runs)
+    named = named_settings(setups)
+    parts = [group_parts(setup, named) for setup in setups]
     names = [", ".join(p) for p in parts]
     if len(setups) > 1:
         print(
@@ -295,7 +197,7 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
         report["totals"] = report["groups"][0]["totals"]
     else:
-        side_by_side = setups_table(_short_names(parts), [group["totals"] for group in report["groups"]])
+        side_by_side = setups_table(short_names(parts), [group["totals"] for group in report["groups"]])
         print(f"== {count(len(setups), 'set-up')} side by side ==\n{side_by_side}")
     return runs, n_unreadable
 
@@ -310,17 +212,15 @@ def _check_distinct_outputs(args: argparse.Namespace) -> None:
                 raise PipelineError(f"{option} and {other} name the same file {path}; give each its own")
 
 
-def run(args: argparse.Namespace) -> int:
-    from pipelines.logs.digest import digest
-    from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
-    from pipelines.logs.reader import FOLDER_LEVELS, read_recording
-    from pipelines.logs.review import compare_table, format_summary, summarize
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Every output checked before any file is read: the options go together, each output's format, then
+    that it can be written without overwriting an input."""
+    from pipelines.logs.reader import FOLDER_LEVELS
 
     if args.times and not args.plot:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
     if args.times and args.compare:  # the overlay draws both runs' paths, no plan: the times went unused
         raise PipelineError("--times chooses the plans drawn by --plot, and --compare's overlay draws none")
-    # every output checked before any file is read: its format, then that it can be written
     if args.plot:
         from crowdsim.plotting import check_figure_path
 
@@ -339,6 +239,15 @@ def run(args: argparse.Namespace) -> int:
     check_writable(args.animate, "--animate", inputs=inputs, room=0)
     check_writable(args.json, "--json", inputs=inputs, json_only=True)
     _check_distinct_outputs(args)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipelines.logs.digest import digest
+    from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
+    from pipelines.logs.reader import read_recording
+    from pipelines.logs.review import compare_table, format_summary, summarize
+
+    _check_outputs(args)
     report: dict[str, Any] = {}
     n_unreadable = 0
     if args.path.is_dir():

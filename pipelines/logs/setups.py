@@ -1,0 +1,107 @@
+"""How ``crowdmpc review DIR`` tells a folder's runs apart: the runs by their set-up (``groups``), and each
+set-up named by what tells it apart from the others (``named_settings``, ``group_parts``, ``short_names``)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Final
+
+from pipelines.logs.identity import MISSING, RUN_IDENTITY, shown
+from pipelines.logs.review import count
+
+if TYPE_CHECKING:
+    from pipelines.logs.digest import RunDigest
+
+# Runs pooled into one aggregate of a folder share their run_identity (pipelines.logs.recording), what tells
+# runs apart when recording too (a CMPC run beside a straight-line one, or a row formation beside a wedge,
+# is two results, not one average). A set-up is named by its RUN_IDENTITY values, then by the settings that
+# tell it apart: these whenever they differ, any other only where these leave set-ups alike.
+# margins.label ("none", "cp0.05", "cpm0.1") stands for the margins it made (mpc.human_margins, their mode).
+NAMED_FIRST: Final[tuple[str, ...]] = ("env.profile", "env.robots_visible", "env.formation", "margins.label")
+
+
+@dataclass
+class SetUp:
+    """Runs of one folder that share their set-up."""
+
+    identity: dict[str, Any] | None  # their run_identity; None: unknown (no readable episode metadata)
+    members: list[RunDigest]
+
+
+def identity_key(identity: Mapping[str, Any]) -> str:
+    return json.dumps(identity, sort_keys=True, default=str)
+
+
+def groups(runs: list[RunDigest]) -> list[SetUp]:
+    """The runs by their set-up (``run_identity``: controller, predictor, crowd, and the simulator's and
+    controller's settings of the "config" metadata), in the order of their first run. A run whose set-up is
+    unknown (cut before its metadata, or metadata that does not parse) is no set-up of its own: with one
+    known set-up it counts among its runs, as the folder's one aggregate always counted it."""
+    by_key: dict[str, SetUp] = {}
+    unknown: list[RunDigest] = []
+    for run in runs:
+        if run.identity is None:
+            unknown.append(run)
+            continue
+        by_key.setdefault(identity_key(run.identity), SetUp(run.identity, [])).members.append(run)
+    setups = list(by_key.values())
+    if unknown and len(setups) == 1:
+        setups[0].members = list(runs)  # every run, in the folder's order, as before
+    elif unknown:
+        setups.append(SetUp(None, unknown))
+    return setups
+
+
+def named_settings(setups: list[SetUp]) -> list[str]:
+    """The settings beyond ``RUN_IDENTITY`` that name the set-ups: each of ``NAMED_FIRST`` whose value
+    differs between them, then, in the order they are recorded in, each other one that tells apart set-ups
+    the ones before it did not (a profile's name stands for the settings that come with it)."""
+    known = [s.identity for s in setups if s.identity is not None]
+
+    def kinds(keys: list[str]) -> int:
+        return len({tuple(identity_key({"v": i.get(k, MISSING)}) for k in keys) for i in known})
+
+    named = [key for key in NAMED_FIRST if kinds([key]) > 1]
+    keys = [*RUN_IDENTITY, *named]
+    for key in dict.fromkeys(k for i in known for k in i if k not in keys):
+        if kinds(keys) == len(known):
+            break
+        if kinds([*keys, key]) > kinds(keys):
+            keys.append(key)
+            named.append(key)
+    return named
+
+
+def setting(key: str, value: Any) -> str:
+    """A setting in a set-up's name: "formation row", "robots invisible", "mpc.horizon 8"."""
+    if value is MISSING:
+        return f"{key} not recorded"
+    if key == "env.robots_visible" and isinstance(value, bool):
+        return "robots visible" if value else "robots invisible"
+    if key in ("env.profile", "env.formation"):
+        return f"{key.removeprefix('env.')} {shown(value)}"
+    if key == "margins.label":
+        return f"margins {shown(value)}"
+    return f"{key} {shown(value)}"
+
+
+def group_parts(setup: SetUp, named: list[str]) -> list[str]:
+    """A set-up's name in parts: controller, predictor, crowd, then each named setting."""
+    identity = setup.identity
+    if identity is None:
+        return ["set-up unknown (no readable episode metadata)"]
+    return [
+        str(identity.get("controller") or "-"),
+        f"predictor {identity.get('predictor') or 'none'}",
+        count(identity.get("n_robots"), "robot"),
+        count(identity.get("n_humans"), "human"),
+        *(setting(k, identity.get(k, MISSING)) for k in named),
+    ]
+
+
+def short_names(parts: list[list[str]]) -> list[str]:
+    """Each set-up by what tells it apart from the others (the parts all of them share left out)."""
+    shared = set.intersection(*(set(p) for p in parts))
+    return [", ".join(x for x in p if x not in shared) or ", ".join(p) for p in parts]
