@@ -78,7 +78,8 @@ def synthesize(
 
     ``categorize`` gives every scene its TrajNet++ type and applies TrajNet++'s acceptance (drops 90 % of
     static scenes); it costs a Kalman fit (~50 ms) per scene, so it is off by default (tags 0, all kept).
-    Returns a summary: counts of episodes, scenes, pedestrians, rows, and episodes that hit the time limit.
+    Returns a summary: counts of episodes, scenes, the pedestrians and rows written, and episodes that hit
+    the time limit.
     """
     from predictors.data.trajnet_scenes import TRAJNET_FPS, build_scenes, write_ndjson
 
@@ -130,7 +131,7 @@ def synthesize(
             f"{scenario!r}; episodes are too short or too sparse"
         )
     out_path = Path(out_path)
-    write_ndjson(out_path, scenes, tracks)
+    written = tracks[write_ndjson(out_path, scenes, tracks)]
     return {
         "path": str(out_path),
         "episodes": episodes,
@@ -138,7 +139,8 @@ def synthesize(
         "humans_per_episode": n_humans,
         "robots_per_episode": n_robots,
         "scenes": len(scenes),
-        "pedestrians": episodes * (n_humans + n_robots),
-        "rows": int(len(tracks)),
+        # what the file holds: an agent, or a row, that no scene needs is simulated but not written
+        "pedestrians": len(np.unique(written[:, 1])),
+        "rows": len(written),
         "timeouts": timeouts,
     }

@@ -307,8 +307,9 @@ def scene_track_rows(scenes: Sequence[SceneSpec], tracks: np.ndarray) -> np.ndar
 
 def write_ndjson(
     path: str | Path, scenes: Sequence[SceneSpec], tracks: np.ndarray, fps: float = TRAJNET_FPS
-) -> None:
-    """Write a TrajNet++ ndjson file: the scene records, then the track rows they need (see module doc)."""
+) -> np.ndarray:
+    """Write a TrajNet++ ndjson file: the scene records, then the track rows they need (see module doc).
+    Returns the indices into ``tracks`` of the rows written (a row no scene needs is not)."""
     path = Path(path)
     tracks = _check_tracks(tracks)
     for scene in scenes:
@@ -328,3 +329,4 @@ def write_ndjson(
         tmp.replace(path)  # readers never see a half-written file
     finally:
         tmp.unlink(missing_ok=True)  # a write that failed (or was interrupted) half-way leaves nothing
+    return rows
