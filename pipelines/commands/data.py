@@ -260,6 +260,7 @@ def run_synth(args: argparse.Namespace) -> int:
     check_writable(args.out, "--out", room=SYNTH_NAME_ROOM)
     provenance = provenance_path(args.out)
     check_writable(provenance, "--out's provenance file")
+    _check_provenance_is_outs(args, provenance)
     for path in (args.out, provenance):
         if path.exists() and path.stat().st_size > 0 and not args.replace and not _rerun_of(args, path):
             # a mistyped --out replaced a training file; the same command regenerates the same bytes anyway
@@ -315,18 +316,40 @@ def _remove_dead_staged(out: Path) -> None:
             entry.unlink(missing_ok=True)
 
 
-def _rerun_of(args: argparse.Namespace, path: Path) -> bool:
-    """Whether ``path`` is the provenance, without its data, of this very command (one stopped between the
-    two renames): the rerun writes the same, so it need not be told to --replace it."""
+def _provenance(path: Path) -> dict | None:
+    """The provenance document at ``path``; None when it is none (missing, unreadable, not JSON)."""
     import json
 
-    if path == args.out or args.out.exists():
-        return False
     try:
         document = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        return None
+    return document if isinstance(document, dict) else None
+
+
+def _rerun_of(args: argparse.Namespace, path: Path) -> bool:
+    """Whether ``path`` is the provenance, without its data, of this very command (one stopped between the
+    two renames): the rerun writes the same, so it need not be told to --replace it."""
+    if path == args.out or args.out.exists():
         return False
-    return isinstance(document, dict) and document.get("options") == _synth_options(args)
+    document = _provenance(path)
+    return (
+        document is not None
+        and document.get("data") == args.out.name
+        and document.get("options") == _synth_options(args)
+    )
+
+
+def _check_provenance_is_outs(args: argparse.Namespace, provenance: Path) -> None:
+    """``--out x.json``'s provenance is named as ``x.ndjson``'s (NAME.synth.json): the one of another data
+    file there is refused, --replace or not (it went, silently, and x.ndjson was left without its own)."""
+    document = _provenance(provenance) if provenance.is_file() else None
+    data = document.get("data") if document is not None else None
+    if isinstance(data, str) and data != args.out.name and (args.out.parent / data).exists():
+        raise PipelineError(
+            f"--out {args.out}: its provenance file {provenance} is that of {args.out.parent / data}, beside "
+            "it; name the output otherwise (e.g. NAME.ndjson)"
+        )
 
 
 def _synth_options(args: argparse.Namespace) -> dict:

@@ -423,6 +423,23 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
         assert out.read_text() == f"scenes of seed {seed}\n"
 
 
+def test_synth_never_takes_another_data_files_provenance(tmp_path, capsys):
+    """``--out x.json`` beside ``x.ndjson`` shares its provenance name, x.synth.json: the same options read
+    as a rerun of this command, so x.ndjson's provenance was replaced by x.json's, silently (and with
+    --replace too). Both are refused; x.ndjson keeps its own."""
+    options = ["--episodes", "1", "--humans", "3", "--seed", "0"]
+    assert run(capsys, "data", "synth", "--out", str(tmp_path / "x.ndjson"), *options)[0] == 0
+    provenance = tmp_path / "x.synth.json"
+    before = provenance.read_text()
+    for extra in ([], ["--replace"]):
+        code, _, err = run(capsys, "data", "synth", "--out", str(tmp_path / "x.json"), *options, *extra)
+        assert_one_line_error(
+            code, err, f"--out {tmp_path / 'x.json'}: its provenance file {provenance} is that of "
+        )
+        assert provenance.read_text() == before and not (tmp_path / "x.json").exists()
+    assert json.loads(before)["data"] == "x.ndjson"
+
+
 def test_synth_and_prepare_do_not_overwrite_other_files(tmp_path, capsys):
     """`data synth --out` onto an existing training file replaced it; `data prepare --out` into a folder of
     other files replaced its train/val/test files. A prepared folder is prepared again in place."""
