@@ -87,7 +87,7 @@ class CellSummary:
     step_p95_ms: float  # 95th percentile over episodes of the per-episode p95
     step_mean_ms: float  # all control-step time / all steps
     # nan when no control step ran a solver (``runs_solver`` False: ORCA, straight line)
-    iterations_mean: float  # IBR iterations per control step
+    iterations_mean: float  # IBR iterations per control step: all iterations / all steps
     fallback_step_rate: float  # % of control steps that fell back
     runs_solver: bool  # some control step iterated (IBR iterations > 0); the baselines report 0 throughout
     paper: PaperFigures | None
@@ -162,8 +162,10 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
     steps = sum(s["steps"] for s in solver)
     medians = [s["median_ms"] for s in solver if s["median_ms"] is not None]
     p95s = [s["p95_ms"] for s in solver if s["p95_ms"] is not None]
-    iterations = [s["mean_iterations"] for s in solver if s["mean_iterations"] is not None]
-    runs_solver = any(i > 0 for i in iterations)
+    # (episode's mean, its steps): weighed by its steps, as `simulate` pools them, not a mean of the means
+    iterations = [(s["mean_iterations"], s["steps"]) for s in solver if s["mean_iterations"] is not None]
+    runs_solver = any(i > 0 for i, _ in iterations)
+    iterated_steps = sum(steps for _, steps in iterations)
     fallbacks = sum(s["fallback_steps"] for s in solver)
     return CellSummary(
         cell=cell,
@@ -183,7 +185,9 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
         step_median_ms=float(np.median(medians)) if medians else math.nan,
         step_p95_ms=float(np.percentile(p95s, 95)) if p95s else math.nan,
         step_mean_ms=sum(s["total_ms"] for s in solver) / steps if steps else math.nan,
-        iterations_mean=_mean(iterations) if runs_solver else math.nan,
+        iterations_mean=(
+            sum(i * steps for i, steps in iterations) / iterated_steps if runs_solver else math.nan
+        ),
         # a controller without a solver has nothing to fall back from (unless it says it did)
         fallback_step_rate=100.0 * fallbacks / steps if steps and (runs_solver or fallbacks) else math.nan,
         runs_solver=runs_solver,

@@ -107,6 +107,18 @@ def test_the_mean_step_time_pools_every_step_of_the_cell():
     assert summarize_cell(cell, [short, long], None).step_mean_ms == pytest.approx(25.0)
 
 
+def test_the_mean_iterations_pool_every_step_of_the_cell():
+    """IBR iterations per step are all iterations over all steps, as `simulate` prints them for the same
+    episodes: 10 steps at 1 iteration and 30 at 5 give (10 + 150) / 40 = 4, not the mean of the episodes'
+    means (1 + 5) / 2 = 3."""
+    cell = get_experiment("table2").cells()[0]
+    short = _record(0, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0)
+    long = _record(1, success=True, min_distance=1.0, median=1.0, p95=1.0, total=30.0)
+    short["solver"]["mean_iterations"] = 1.0
+    long["solver"] |= {"steps": 30, "mean_iterations": 5.0}
+    assert summarize_cell(cell, [short, long], None).iterations_mean == pytest.approx(4.0)
+
+
 def test_the_papers_figures_go_to_the_papers_team_only():
     """The paper's tables are all of PAPER_ROBOTS = 3 robots: a team of 2 or of 4 gets none."""
     table2 = get_experiment("table2")
