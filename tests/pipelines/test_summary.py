@@ -24,6 +24,13 @@ def test_wilson_interval_stays_inside_0_and_1_at_the_extremes(n):
     assert lo == 0.0 and hi == 1.0
 
 
+def test_wilson_interval_is_exactly_0_and_1_at_the_extremes_for_every_n():
+    # 0 of 3 and 0 of 50 left a lower bound of 5.6e-17 (cells.csv: 5.551115123125783e-15 %), 50 of 50 an
+    # upper bound a hair below 1: the exact bounds there are 0 and 1.
+    assert all(wilson_interval(0, n)[0] == 0.0 for n in range(1, 1001))
+    assert all(wilson_interval(n, n)[1] == 1.0 for n in range(1, 1001))
+
+
 def test_wilson_interval_refuses_a_negative_count():
     with pytest.raises(PipelineError, match="0 <= successes <= n, got -1 of 10"):
         wilson_interval(-1, 10)
