@@ -148,7 +148,12 @@ def _summary(
     top_k: int | None,
 ) -> dict[str, Any]:
     """NAME.metrics.json: the saved net's split metrics, the data it was trained on and the run's times."""
-    from pipelines.commands.train_report import data_record, epoch_times_from_csv, evaluate_splits
+    from pipelines.commands.train_report import (
+        data_record,
+        epoch_times_from_csv,
+        evaluate_splits,
+        median_epoch_time,
+    )
     from pipelines.version import code_identity
     from predictors.checkpoint import load_checkpoint
     from predictors.hashing import sha256_file
@@ -172,9 +177,7 @@ def _summary(
         "training": {
             **extra["training"],
             "wall_time_s": round(elapsed, 1),
-            "median_epoch_time_s": round(sorted(epoch_times)[len(epoch_times) // 2], 2)
-            if epoch_times
-            else None,
+            "median_epoch_time_s": median_epoch_time(epoch_times),
             "threads": 1,
         },
     }

@@ -135,3 +135,11 @@ def epoch_times_from_csv(log_dir: str | Path) -> list[float]:
         return []
     with open(path) as f:
         return [float(row["epoch_time_s"]) for row in csv.DictReader(f) if row.get("epoch_time_s")]
+
+
+def median_epoch_time(times: list[float]) -> float | None:
+    """The median of the epochs' times in s, to 0.01 s (None without any): of an even count, the mean of the
+    middle two (``sorted(times)[len // 2]``, the upper one, gave 0.05 s for epochs of 0.047 and 0.033 s)."""
+    import statistics
+
+    return round(statistics.median(times), 2) if times else None

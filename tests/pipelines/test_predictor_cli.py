@@ -149,6 +149,18 @@ def test_a_resume_interrupted_in_its_evaluation_is_finished_by_resume(trained, t
     assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary left behind
 
 
+def test_the_median_epoch_time_of_an_even_count_is_the_mean_of_the_middle_two(trained, monkeypatch):
+    """Epochs of 0.047 and 0.033 s: median 0.04 s; the upper middle time, which metrics.json and the closing
+    line gave, read 0.05 s."""
+    from pipelines.commands import train_report
+
+    out, args = trained
+    monkeypatch.setattr(train_report, "epoch_times_from_csv", lambda _log_dir: [0.047, 0.033])
+    assert main(resumed_to(args, "2")) == 0
+    summary = json.loads((out / "walker.metrics.json").read_text())
+    assert summary["training"]["median_epoch_time_s"] == 0.04
+
+
 def test_zoo_add_refuses_the_metrics_of_other_weights(trained, tmp_path, monkeypatch, capsys):
     """The metrics of a run's first epoch beside its resumed weights: told apart by the weights' sha256 the
     metrics record, and in a metrics file written before they did, by the epochs."""
