@@ -17,7 +17,13 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import SweepStopped
 from pipelines.experiments.tasks import EpisodeTask
-from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
+from pipelines.experiments.worker import (
+    SINGLE_THREAD_ENV,
+    EpisodeOutcome,
+    EpisodeWorker,
+    make_scratch_root,
+    worker_scratch,
+)
 
 if TYPE_CHECKING:
     from concurrent.futures import Future
@@ -139,8 +145,12 @@ class ProcessBackend:
     name = "process"
 
     def __init__(self, workers: int, record: str, jit: bool = False, scratch_root: str | None = None):
+        """``scratch_root``: the folder the workers' scratch folders go in (a sweep's); without one the
+        backend makes its own and removes it on ``close``: a worker's folder of its own would be left behind,
+        since ``close`` terminates the workers (no atexit runs)."""
         self.workers = workers
-        self._initargs = (record, jit, scratch_root)
+        self._own_root = None if scratch_root is not None else make_scratch_root()
+        self._initargs = (record, jit, scratch_root if self._own_root is None else str(self._own_root))
         _start_resource_tracker()
         self._start_pool()
 
@@ -237,7 +247,7 @@ class ProcessBackend:
         # A broken pool fails every future it holds at once; the bound is for one that a submit racing the
         # break slipped past (the pool's own clean-up does not take its lock), which would never complete.
         wait(in_flight, timeout=BROKEN_POOL_WAIT_S)
-        self.close()  # every process ended and joined: their exit codes are known
+        self._end_pool()  # every process ended and joined: their exit codes are known
         deaths = self._deaths()
         outcomes: list[EpisodeOutcome] = []
         finished = 0
@@ -276,6 +286,13 @@ class ProcessBackend:
         return ", ".join(sorted(ends)) or "ended abruptly"
 
     def close(self) -> None:
+        import shutil
+
+        self._end_pool()
+        if self._own_root is not None:
+            shutil.rmtree(self._own_root, ignore_errors=True)
+
+    def _end_pool(self) -> None:
         # Cancel what has not started and end the running episodes now: their records were never written, so a
         # rerun runs them again. (ProcessPoolExecutor has no public way to stop a running call.)
         self._note_processes()

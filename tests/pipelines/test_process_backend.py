@@ -52,3 +52,21 @@ def test_the_pool_starts_its_workers_inside_the_block(monkeypatch):
         assert started == [2]
     finally:
         backend.close()
+
+
+def test_a_pool_without_a_scratch_root_leaves_no_folder_behind(tmp_path, monkeypatch):
+    """Without a sweep's root each worker made a folder of its own in the temp directory, removed at its
+    normal exit; ``close`` terminates the workers, so a pool closed mid-episode left one a worker."""
+    import tempfile
+    import time
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the spawned workers' temp directory
+    monkeypatch.setattr(tempfile, "tempdir", None)  # and the driver's (cached once asked)
+    backend = process_backend.ProcessBackend(2, "none")
+    try:
+        busy = [backend._pool.submit(time.sleep, 30) for _ in range(2)]
+        time.sleep(1.0)  # both workers asleep in their "episode"
+        assert all(f.running() for f in busy)
+    finally:
+        backend.close()
+    assert list(tmp_path.iterdir()) == []
