@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Final
 
 from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
-from predictors.data.prepare import CONVERTER_VERSION, prepare_ewap
+from predictors.data.prepare import CONVERTER_VERSION, STAGING_INFIX, pid_alive, prepare_ewap
 from predictors.data.selfcheck import default_references
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
@@ -194,6 +194,7 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
     log = log or (lambda msg: print(msg, file=sys.stderr))
     log(f"preparing {raw} into {target} ({_why_prepare(target)}; about half a minute)")
     staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
+    _remove_dead_leftovers(target)
     shutil.rmtree(staging, ignore_errors=True)
     prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log, log_dir=target)
     _install_cache_entry(staging, target)
@@ -207,6 +208,21 @@ def _why_prepare(target: Path) -> str:
     manifest = load_manifest(target)
     what = (prepared_mismatch(target, manifest) if manifest is not None else None) or "no readable manifest"
     return f"the cached one is damaged: {what}; it is replaced"
+
+
+def _remove_dead_leftovers(target: Path) -> None:
+    """What preparations of ``target`` killed on the way left beside it: their staging entry, prepare_ewap's
+    staging folder beside that, a damaged entry moved aside. Each name holds its process's pid, the staging
+    folder's twice, so prepare_ewap's own sweep of killed stagings (beside the folder this process names)
+    never matches one of another process, and nothing else removes them."""
+    name, infix = re.escape(target.name), re.escape(STAGING_INFIX)
+    left = re.compile(rf"{name}\.(\d+)\.tmp|\.{name}\.(\d+)\.tmp{infix}\d+\.tmp|\.{name}\.(\d+)\.old")
+    if not target.parent.is_dir():
+        return
+    for entry in target.parent.iterdir():
+        match = left.fullmatch(entry.name)
+        if match is not None and not pid_alive(int(next(pid for pid in match.groups() if pid))):
+            _remove(entry)
 
 
 def _install_cache_entry(staging: Path, target: Path) -> None:

@@ -182,12 +182,12 @@ def _remove_stale_staging(out_dir: Path) -> None:
         pid = entry.name[len(prefix) : -len(".tmp")]
         if not (entry.name.startswith(prefix) and entry.name.endswith(".tmp") and pid.isdigit()):
             continue
-        if entry.is_symlink() or not entry.is_dir() or _alive(int(pid)):
+        if entry.is_symlink() or not entry.is_dir() or pid_alive(int(pid)):
             continue
         shutil.rmtree(entry, ignore_errors=True)
 
 
-def _alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

@@ -164,6 +164,30 @@ def test_a_good_cache_entry_installed_meanwhile_is_kept(raw_root, monkeypatch, t
     assert sorted(p.name for p in entry.parent.iterdir()) == sorted([entry.name, f".{entry.name}.lock"])
 
 
+def test_what_a_killed_preparation_left_in_the_cache_is_removed_by_the_next(raw_root, monkeypatch, tmp_path):
+    """A preparation into the cache killed on the way left its staging folders there for good: each name holds
+    its pid, so prepare_ewap's sweep of killed stagings (beside the folder the next process names, with that
+    process's pid) never matched them. Those of a live process are kept."""
+    import os
+    import subprocess
+    import sys
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    _fast_prepare(monkeypatch)
+    entry = prepared_dir(raw_root, log=lambda msg: None, progress=False)
+    shutil.rmtree(entry)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True)
+    gone, alive = int(dead.stdout), os.getppid()
+    names = [f"{entry.name}.{{}}.tmp", f".{entry.name}.{{}}.tmp.prepare-{{}}.tmp", f".{entry.name}.{{}}.old"]
+    for name in names:
+        for pid in (gone, alive):
+            (entry.parent / name.format(pid, pid)).mkdir()
+            (entry.parent / name.format(pid, pid) / "biwi_eth.ndjson").write_text("half a preparation\n")
+    assert prepared_dir(raw_root, log=lambda msg: None, progress=False) == entry
+    kept = sorted([entry.name, f".{entry.name}.lock"] + [name.format(alive, alive) for name in names])
+    assert sorted(p.name for p in entry.parent.iterdir()) == kept
+
+
 def test_loo_of_a_raw_copy_finds_only_the_trajnet_files_beside_it(raw_root, monkeypatch, tmp_path):
     # the cache entry is shared by every copy of the same obsmat files: its source_dir is the first copy's
     monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
