@@ -156,6 +156,8 @@ def _store_entry(disk: Path, arrays: FileArrays) -> None:
             np.savez(handle, xy=arrays.xy, offsets=arrays.offsets, scene_ids=arrays.scene_ids)
         tmp.replace(disk)
     except OSError:  # a read-only or full cache only costs speed
+        pass
+    finally:  # a write that failed, or a Ctrl-C in it, leaves no temporary (nothing else removes it)
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
 

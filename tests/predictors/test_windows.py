@@ -304,3 +304,21 @@ def test_scenes_at_another_frame_rate_are_refused(tmp_path, reader, monkeypatch)
     assert len(read(write_lines(tmp_path / "rounded.ndjson", records))) == 1
     del records[0]["scene"]["fps"]
     assert len(read(write_lines(tmp_path / "plain.ndjson", records))) == 1
+
+
+def test_a_cache_entry_write_interrupted_leaves_no_temporary(tmp_path, monkeypatch):
+    """A Ctrl-C while an entry was written (seconds for a large synthetic set) left its ``.tmp`` in the
+    cache for good: only an OSError removed it."""
+    from predictors.data import windows
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    path = write_walk_file(tmp_path / "walk.ndjson")
+
+    def interrupted(handle, **arrays):
+        handle.write(b"half an entry")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(windows.np, "savez", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        load_file_arrays(path)
+    assert list((tmp_path / "cache" / "scenes").iterdir()) == []
