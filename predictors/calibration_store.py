@@ -138,8 +138,12 @@ def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
     }
     # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
-    tmp.replace(path)
+    text = json.dumps(document, indent=2, allow_nan=False) + "\n"
+    try:
+        tmp.write_text(text)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)  # a full disk (or a Ctrl-C) leaves no half-written temporary in the zoo
 
 
 def current_sha256(predictor: str, directory: str | Path | None = None) -> str | None:

@@ -283,6 +283,25 @@ def test_storage_round_trip_and_replacement(tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))  # the temp file was renamed into place
 
 
+def test_a_failed_storage_write_leaves_the_file_and_no_temporary(tmp_path, monkeypatch):
+    """A full disk left the half-written ``.calibrations.json.PID.tmp`` in the zoo for good."""
+    import errno
+
+    save_calibration(block(), tmp_path)
+    before = (tmp_path / CALIBRATIONS_NAME).read_bytes()
+
+    def disk_full(self, text):
+        with open(self, "w") as f:
+            f.write(text[:100])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", disk_full)
+    with pytest.raises(OSError, match="No space"):
+        save_calibration(block(alpha=0.05), tmp_path)
+    assert (tmp_path / CALIBRATIONS_NAME).read_bytes() == before
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
 def test_storage_sits_beside_the_manifest_and_leaves_it_alone(tmp_path):
     manifest = tmp_path / zoo.MANIFEST_NAME
     manifest.write_text('{"format": "crowdmpc-zoo", "version": 1, "models": []}\n')
