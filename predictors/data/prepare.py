@@ -120,7 +120,8 @@ def _prepare_into(
         )
         reference = (references or {}).get(name)
         if reference is not None and Path(reference.path).is_file():
-            manifest["self_check"][name] = _self_check(name, tracks, reference, frame_step, progress, log)
+            check = _self_check(name, tracks, reference, frame_step, progress, log, out_dir)
+            manifest["self_check"][name] = check
     (out_dir / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
     return manifest
 
@@ -262,10 +263,12 @@ def _write_parts(
 
 
 def _self_check(
-    name: str, tracks: np.ndarray, reference: Reference, frame_step: int, progress: bool, log
+    name: str, tracks: np.ndarray, reference: Reference, frame_step: int, progress: bool, log, staging: Path
 ) -> dict:
-    """``compare_with_reference`` in a scratch directory, reported through ``log``; the manifest's entry."""
-    with tempfile.TemporaryDirectory(prefix="crowdmpc-selfcheck-") as workdir:
+    """``compare_with_reference`` in a scratch directory, reported through ``log``; the manifest's entry.
+    The scratch is inside ``staging``: a preparation killed meanwhile (``kill``, a timeout) left one in the
+    temp directory that nothing removes, where the next preparation removes a killed one's staging."""
+    with tempfile.TemporaryDirectory(prefix="selfcheck-", dir=staging) as workdir:
         check = compare_with_reference(
             tracks, reference, frame_step=frame_step, workdir=Path(workdir), progress=progress
         )

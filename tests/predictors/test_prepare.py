@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -411,3 +412,35 @@ def test_a_write_that_fails_half_way_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         write_ndjson(tmp_path / "x.ndjson", [SceneSpec(0, 1, 0, 200)], walkers())
     assert list(tmp_path.iterdir()) == []  # neither the file nor its temporary
+
+
+def test_a_preparation_killed_in_its_self_check_leaves_nothing_the_next_does_not_remove(tmp_path):
+    """The self-check's scratch was a folder in the temp directory: a preparation killed there (``kill``,
+    a timeout) left a crowdmpc-selfcheck-* folder that nothing removes. It is inside the staging folder,
+    which the next preparation removes."""
+    import os
+    import subprocess
+    import sys
+
+    raw = write_tiny_ewap(tmp_path / "data")
+    reference = tmp_path / "data" / "reference.ndjson"
+    reference.write_text("")
+    temp, out = tmp_path / "tmp", tmp_path / "prepared"
+    temp.mkdir()
+    killed_in_the_check = (
+        "import os, signal, sys\n"
+        "from pathlib import Path\n"
+        "from predictors.data import prepare\n"
+        "from predictors.data.selfcheck import Reference\n"
+        "def killed(*args, workdir, **kwargs):\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+        "prepare.compare_with_reference = killed\n"
+        "refs = {'biwi_eth': Reference(Path(sys.argv[3]), 'ref', compare_tags=False)}\n"
+        "prepare.prepare_ewap(sys.argv[1], sys.argv[2], categorize_scenes=False, references=refs)\n"
+    )
+    env = {**os.environ, "TMPDIR": str(temp), "PYTHONPATH": str(Path(__file__).parents[2])}
+    args = [sys.executable, "-c", killed_in_the_check, str(raw), str(out), str(reference)]
+    assert subprocess.run(args, env=env, capture_output=True).returncode == -9
+    assert list(temp.iterdir()) == []
+    prepare_ewap(raw, out, categorize_scenes=False, log=lambda msg: None)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "prepared", "tmp"]
