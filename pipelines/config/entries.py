@@ -154,10 +154,7 @@ def read_file(path: str | Path) -> list[Entry]:
             check_key(source.prefix(name, key), section, key)
             date = _date_in(value)
             if date is not None:
-                raise ConfigError(
-                    f"{source.prefix(name, key)}: must not be a TOML date or time, got {date.isoformat()} "
-                    '(no setting takes one; quote it, "...", for a string)'
-                )
+                raise ConfigError(f"{source.prefix(name, key)}: {_NO_DATE} {date.isoformat()} {_QUOTE_IT}")
             entries.append(Entry(name, key, value, source))
 
     for name, values in document.items():
@@ -171,6 +168,8 @@ def read_file(path: str | Path) -> list[Entry]:
     return entries
 
 
+_NO_DATE: Final[str] = "must not be a TOML date or time, got"
+_QUOTE_IT: Final[str] = '(no setting takes one; quote it, "...", for a string)'
 BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@-]+")
 CONTROL: Final[re.Pattern[str]] = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # all but the tab
 
@@ -203,18 +202,22 @@ def parse_set(text: str) -> Entry:
         value = raw
     except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit
         raise ConfigError(f"--set {name}: {long_number()}") from None
-    if _date_in(value) is not None and BARE_VALUE.fullmatch(raw):
+    date = _date_in(value)
+    if date is not None and BARE_VALUE.fullmatch(raw):
         value = raw  # no setting takes a date: --set simulate.json=2026-12-02 names a file, like other words
+    elif date is not None:
+        raise ConfigError(f"--set {name}: {_NO_DATE} {date.isoformat()} {_QUOTE_IT}")
     return Entry(section.name, key, value, Source("set", "--set"))
 
 
 def _date_in(value: Any) -> datetime.date | datetime.time | None:
-    """The first TOML date or time in ``value`` (arrays searched): tomllib reads 2026-12-02 and 07:32:00 as
-    Python dates and times, which no setting takes, and whose ``repr`` reads as Python, not TOML."""
+    """The first TOML date or time in ``value`` (arrays and inline tables searched): tomllib reads 2026-12-02
+    and 07:32:00 as Python dates and times, which no setting takes, and whose ``repr`` reads as Python."""
     if isinstance(value, datetime.date | datetime.time):
         return value
-    if isinstance(value, list):
-        return next((d for d in map(_date_in, value) if d is not None), None)
+    if isinstance(value, list | dict):  # an array, or an inline table
+        items = value.values() if isinstance(value, dict) else value
+        return next((d for d in map(_date_in, items) if d is not None), None)
     return None
 
 

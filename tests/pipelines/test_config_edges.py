@@ -97,6 +97,21 @@ def test_a_set_value_that_tomllib_reads_as_a_date_is_the_word_given():
     assert load(sets=["simulate.json=2026-12-02"]).simulate.json == "2026-12-02"
 
 
+@pytest.mark.parametrize("where", ["file", "set"])
+def test_a_date_inside_an_inline_table_or_a_set_array_is_named_in_toml(where, tmp_path: Path):
+    """An inline table's date was shown as ``{'a': datetime.date(1979, 5, 27)}``, in a file and in --set."""
+    if where == "file":
+        path = tmp_path / "run.toml"
+        path.write_text("[simulate]\njson = {a = 1979-05-27}\n")
+        kwargs: dict = {"path": str(path)}
+    else:
+        kwargs = {"sets": ["simulate.json={a = 1979-05-27}"]}
+    with pytest.raises(ConfigError, match="simulate.json: must not be a TOML date or time, got 1979-05-27 "):
+        load(**kwargs)
+    with pytest.raises(ConfigError, match="scenario.humans: must not be a TOML date or time, got 07:32:00 "):
+        load(sets=["scenario.humans=[5, 07:32:00]"])
+
+
 def test_env_orca_and_formation_reach_the_simulator():
     env = load(sets=["env.orca.max_neighbors=3", 'env.formation="wedge"']).env
     assert (env.orca.max_neighbors, env.formation) == (3, "wedge")
