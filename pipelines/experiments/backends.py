@@ -19,8 +19,8 @@ import os
 from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
-from pipelines.errors import PipelineError
-from pipelines.experiments.process_backend import ProcessBackend
+from pipelines.errors import PipelineError, SweepStopped
+from pipelines.experiments.process_backend import MAX_BREAKS_IN_A_ROW, ProcessBackend
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
 
@@ -103,22 +103,47 @@ class RayBackend:
                 ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
             else:
                 _join_cluster(ray, address, env)
-        actor: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
-        self._actors: list[Any] = [actor.remote(record, jit, scratch_root) for _ in range(workers)]
+        self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
+        self._actor_args = (record, jit, scratch_root)
+        self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+        """Each actor holds two episodes. An actor that dies (a segfault, the OOM killer, a node lost)
+        fails every episode it held: each becomes an episode error (retried by a rerun), a new actor takes
+        its place, and the sweep stops when actors keep dying with no episode finishing in between, as the
+        process backend does."""
         ray = self._ray
         pending = iter(tasks)
-        owner: dict[Any, Any] = {}  # object ref -> actor
-        for actor in self._actors:
-            for task in _take(pending, 2):
-                owner[actor.run.remote(task)] = actor
+        owner: dict[Any, tuple[int, Any, EpisodeTask]] = {}  # object ref -> (slot, actor, task)
+
+        def submit(slot: int, count: int) -> None:
+            for task in _take(pending, count):
+                owner[self._actors[slot].run.remote(task)] = (slot, self._actors[slot], task)
+
+        for slot in range(len(self._actors)):
+            submit(slot, 2)
+        deaths = 0  # actor deaths since an episode last came back
         while owner:
             (ref,), _ = ray.wait(list(owner), num_returns=1)
-            actor = owner.pop(ref)
-            for task in _take(pending, 1):
-                owner[actor.run.remote(task)] = actor
-            yield ray.get(ref)
+            slot, actor, task = owner.pop(ref)
+            try:
+                outcome = ray.get(ref)
+                deaths = 0
+            except ray.exceptions.RayActorError as exc:
+                if self._actors[slot] is actor:  # the first of its episodes to fail: replace it once
+                    deaths += 1
+                    self._actors[slot] = self._actor_class.remote(*self._actor_args)
+                reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                error = f"Ray actor died while this episode was on it ({reason}); a rerun tries it again"
+                outcome = EpisodeOutcome(task.key, error=error)
+            if deaths >= MAX_BREAKS_IN_A_ROW:
+                yield outcome
+                raise SweepStopped(
+                    f"the Ray actors died {deaths} times in a row with no episode finishing in between; "
+                    "the episodes lost are in errors.jsonl"
+                )
+            submit(slot, 2 - sum(1 for s, _, _ in owner.values() if s == slot))
+            yield outcome
 
     def close(self) -> None:
         for actor in self._actors:

@@ -32,7 +32,7 @@ from pipelines.experiments.summary import _half_width, summarize, t95, wilson_in
 from pipelines.experiments.sweep import SweepConfig, mcap_path, run_sweep
 from pipelines.experiments.tables import markdown_table, mcnemar_exact, paired_success
 from pipelines.experiments.tasks import World, scenario_schedule
-from pipelines.experiments.worker import EpisodeWorker, is_failure
+from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, is_failure
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.margins import MarginSpec
 
@@ -403,6 +403,83 @@ def test_a_worker_process_that_dies_is_an_episode_error_and_the_sweep_goes_on(tm
     assert [e["key"].split("/")[0].split("-")[0] for e in errors] == [dies]
     assert "worker process died (" in errors[0]["error"]  # (killed by SIGKILL): its exit code, when known
     assert (tmp_path / "table.md").exists()
+
+
+def test_a_ray_actor_that_dies_is_an_episode_error_and_the_sweep_goes_on(tmp_path, plugins, capsys):
+    """The same with Ray: an actor killed ended the sweep in ActorDiedError's traceback (shown by killing a
+    worker of a running sweep with SIGKILL), writing no error and no report."""
+    pytest.importorskip("ray")  # the [cluster] extra
+    (dies,) = plugins("Dies")
+    argv = _sweep_cli(tmp_path, ["straight", dies], "--episodes-per-cell", "1", "--workers", "1")
+    assert main([*argv, "--backend", "ray"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "1 episode raised; see" in err
+    records = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    errors = [json.loads(line) for line in (tmp_path / ERRORS_FILE).read_text().splitlines()]
+    assert [r["controller"] for r in records.values()] == ["straight"]
+    assert [e["key"].split("/")[0].split("-")[0] for e in errors] == [dies]
+    assert "Ray actor died while this episode was on it" in errors[0]["error"]
+    assert (tmp_path / "table.md").exists()
+
+
+class _FakeActorDied(Exception):
+    pass
+
+
+def _fake_ray(monkeypatch, dies: set[str]) -> list[int]:
+    """A Ray whose actors run an episode at once, each dying on a task whose key is in ``dies`` (and failing
+    every task it held); returns the list of actor ids made, in order."""
+    import types
+
+    made: list[int] = []
+
+    class Ref:
+        def __init__(self, actor, task):
+            self.actor, self.task = actor, task
+
+    class Actor:
+        def __init__(self):
+            self.id, self.dead = len(made), False
+            made.append(self.id)
+            self.run = types.SimpleNamespace(remote=lambda task: Ref(self, task))
+
+    def get(ref):
+        if ref.actor.dead or ref.task.key in dies:
+            ref.actor.dead = True
+            raise _FakeActorDied("The actor died unexpectedly before finishing this task.\n\tpid: 1")
+        return EpisodeOutcome(ref.task.key, record={"key": ref.task.key})
+
+    fake = types.ModuleType("ray")
+    fake.is_initialized = lambda: True  # type: ignore[attr-defined]
+    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: Actor())  # type: ignore[attr-defined]
+    fake.wait = lambda refs, num_returns: (refs[:1], refs[1:])  # type: ignore[attr-defined]
+    fake.get = get  # type: ignore[attr-defined]
+    fake.exceptions = types.SimpleNamespace(RayActorError=_FakeActorDied)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    return made
+
+
+def test_a_dead_ray_actor_fails_its_episodes_and_a_new_one_takes_its_place(monkeypatch):
+    """Without Ray installed too: each episode the dead actor held is an error, the others run, a new actor
+    replaces the dead one once, and actors dying again and again with nothing finishing stop the sweep."""
+    import types
+
+    from pipelines.errors import SweepStopped
+    from pipelines.experiments.backends import RayBackend
+
+    tasks = [types.SimpleNamespace(key=k) for k in "abcdef"]  # all a backend reads of a task
+    made = _fake_ray(monkeypatch, dies={"b"})
+    outcomes = list(RayBackend(1, "none", address=None).run(tasks))
+    assert sorted(o.key for o in outcomes) == list("abcdef")
+    # "a" finished before "b" killed the actor; "c", queued behind "b" on it, is lost with it
+    assert sorted(o.key for o in outcomes if o.error) == ["b", "c"]
+    assert "Ray actor died while this episode was on it (The actor died unexpectedly" in next(
+        o.error for o in outcomes if o.error
+    )
+    assert made == [0, 1]
+    _fake_ray(monkeypatch, dies=set("abcdef"))
+    with pytest.raises(SweepStopped, match="the Ray actors died 3 times in a row"):
+        list(RayBackend(1, "none", address=None).run(tasks))
 
 
 def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, capsys, monkeypatch):
