@@ -1,8 +1,8 @@
 """The MPC's parameters: Table I of the paper, the two values it omits, and the solver's knobs.
 
-Every formulation (joint NLP, local NLPs, coupled NLP) reads the same frozen ``MPCConfig``. Symbols and
-equation numbers are the paper's (Le et al., "Multi-robot cooperative navigation in crowds: a game-theoretic
-learning-based model predictive control approach").
+Every formulation (joint NLP, local NLPs, coupled NLP) reads the same frozen ``MPCConfig``. Symbols are the
+paper's (Le et al., "Multi-robot cooperative navigation in crowds: a game-theoretic learning-based model
+predictive control approach"); equation numbers are the design notes', which README.md maps to the paper's.
 
 The facts the MPC shares with the simulator and the predictors (``tau``, ``v_max``, ``a_max``) default to
 ``crowdsim.world``, their one source; so do ``d_min`` and ``d_flock``, which the robots' start and goal
@@ -106,7 +106,7 @@ class MPCConfig:
     a_max: float = world.A_MAX  # a_max, m/s^2, bound on each acceleration component, Eq. 6
     rho: float = 0.5  # rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11
     d_min: float = world.D_MIN  # d_min, m, minimum allowed distance, Eqs. 11 and 12
-    mu: float = 30.0  # mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, Eq. 12
+    mu: float = 30.0  # mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, the penalty of Eqs. 11-12
     j_max: int = 10  # j_max, maximum IBR iterations, Algorithms 1 and 2
     xi: float = 1e-3  # xi, CMPC convergence threshold on |F^(j) - F^(j-1)|, Algorithm 1
     epsilon: float = 1e-3  # epsilon, DMPC improvement and epsilon-Nash threshold, Algorithm 2

@@ -1,6 +1,6 @@
 """Which robots are stalled: no progress towards their goals over a window, so flocking must not hold them.
 
-Why. Eq. 13's flocking term pulls every pair of robots to ``d_flock``. When one robot of the flock is boxed in
+Why. Eq. 15's flocking term pulls every pair of robots to ``d_flock``. When one robot of the flock is boxed in
 (behind standing humans, in a gap narrower than twice its clearance) the others cannot leave it without
 paying that term, and the whole flock stops: a deadlock of the potential, not of the solver. Measured with
 ``conformal-shortfall:0.05`` margins and guidance at 9 humans (`crowdmpc simulate --controller cmpc

@@ -1,7 +1,7 @@
 """The closed loop commutes with the plane's symmetries: move, turn or mirror a layout, or renumber its
 people, and every robot and human takes the moved path, step by step.
 
-The paper's game has no preferred place, axis or numbering: its costs (Eqs. 10-14) depend on distances,
+The paper's game has no preferred place, axis or numbering: its costs (Eqs. 7-15) depend on distances,
 its bounds (Eq. 6) are per component and symmetric about zero, and Jacobi's best responses (Algorithm 2)
 are taken from the same u^(j-1) whatever the robots' order. So an axis-dependent constant, an
 order-dependent tie-break or a dict/set iteration order in the code shows up here as a path that does not
