@@ -44,6 +44,7 @@ into the user zoo. --resume continues the run as if it had not stopped (same ord
 takes the run's settings, of which only --epochs may change, upwards (the count already trained only finishes
 a run that stopped before writing its metrics). --val and --test files are read as the evaluation reads them
 before training starts: a TrajNet++ test/ file without ground truth is refused then, not after training.
+A second train into an --out where one is running is refused (its lock: OUT/.train.lock).
 """
 
 
@@ -321,27 +322,41 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
     _check_data(files)
+    from pipelines.commands.train_resume import run_settings
+
+    settings = run_settings(args, net_config, name, files)
+    name = _check_out(args, out, settings, net_config, loss_typed)
+    from pipelines.commands.train_fit import run_training
+    from pipelines.commands.train_resume import one_run_at_a_time
+
+    with one_run_at_a_time(out):  # again: a train into --out may have started or ended since the checks
+        name = _check_out(args, out, settings, net_config, loss_typed)
+        return run_training(args, net_config, name, out, (files, root), settings)
+
+
+def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: Any, loss_typed: bool) -> str:
+    """The run's name, once what --out holds is checked: no run unless --resume, else one it continues."""
     from pipelines.commands.train_resume import (
         check_last_checkpoint,
         check_more_epochs,
         check_resumed_settings,
         recorded_loss,
-        run_settings,
     )
 
-    settings = run_settings(args, net_config, name, files)
-    if args.resume:
-        recorded = recorded_loss(out, last)
-        # the run's own when none is typed: runs before this default recorded "gaussian" for point heads too,
-        # which trained on L2, so for a point head that record is the "l2" typed, not another setting
-        if not loss_typed or (recorded == "gaussian" and _point_head(args, net_config)):
-            settings["loss"] = args.loss = recorded or args.loss
-        name = check_resumed_settings(out, settings, name_given=args.name is not None)
-        done = check_last_checkpoint(last, settings)
-        check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
-    from pipelines.commands.train_fit import run_training
-
-    return run_training(args, net_config, name, out, (files, root), settings)
+    last = out / "checkpoints" / "last.ckpt"
+    if not args.resume and last.is_file():
+        raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
+    if not args.resume:
+        return str(settings["name"])
+    recorded = recorded_loss(out, last)
+    # the run's own when none is typed: runs before this default recorded "gaussian" for point heads too,
+    # which trained on L2, so for a point head that record is the "l2" typed, not another setting
+    if not loss_typed or (recorded == "gaussian" and _point_head(args, net_config)):
+        settings["loss"] = args.loss = recorded or args.loss
+    name = check_resumed_settings(out, settings, name_given=args.name is not None)
+    done = check_last_checkpoint(last, settings)
+    check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
+    return name
 
 
 def _protocol_options(args: argparse.Namespace, explicit: bool) -> None:

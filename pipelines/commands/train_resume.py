@@ -20,6 +20,23 @@ _PATH_KEYS = ("best_model_path", "last_model_path", "kth_best_model_path")
 BEST_FILENAME = "best-{epoch:03d}-{val_ade:.4f}"
 BEST_PREFIX = "best-epoch="
 _LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Lightning
+LOCK_FILE = ".train.lock"
+
+
+def one_run_at_a_time(out: Path):
+    """Hold ``out``'s lock (a hidden file made with the folder; a second train is refused) while a run
+    trains: the check that --out holds no run (no last.ckpt until the first epoch ends) let a second train
+    started meanwhile train into the same folder, which ended with one run's settings beside the other's
+    last.ckpt."""
+    from predictors.locking import locked
+
+    def refuse() -> None:
+        raise PipelineError(
+            f"another crowdmpc train is writing to {out}; wait for it or choose another --out"
+        )
+
+    out.mkdir(parents=True, exist_ok=True)
+    return locked(out / LOCK_FILE, "lock the training run", waiting=refuse)
 
 
 def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:

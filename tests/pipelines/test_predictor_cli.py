@@ -89,6 +89,28 @@ def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
     assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
 
 
+def test_a_second_train_into_an_out_a_run_holds_is_refused(tmp_path, capsys):
+    """A run's folder has no last.ckpt until its first epoch ends: a second train started meanwhile (two
+    terminals) passed the 'already holds a training run' check, trained into the same folder and left one
+    run's train_settings.json beside the other's last.ckpt, a run no --resume takes."""
+    import fcntl
+
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    out.mkdir()
+    args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data)]
+    args += ["--epochs", "1", "--out", str(out), "--name", "walker", "--no-progress"]
+    with open(out / ".train.lock", "w") as held:  # as the running train holds it (another open file)
+        fcntl.flock(held, fcntl.LOCK_EX)
+        assert main(args) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc train: error: another crowdmpc train is writing to {out}; wait for it or choose another "
+        "--out\n"
+    )
+    assert sorted(p.name for p in out.iterdir()) == [".train.lock"]  # nothing of a run written
+    assert main(args) == 0  # once the other run has ended
+
+
 def test_resume_refuses_to_train_no_epoch(trained, capsys):
     """--resume with --epochs at or below the epochs last.ckpt has finished trained nothing, yet wrote
     NAME.pt, NAME.json and the metrics again with the smaller count. The same count still finishes a run
@@ -146,7 +168,8 @@ def test_a_resume_interrupted_in_its_evaluation_is_finished_by_resume(trained, t
     assert main(resumed_to(args, "2")) == 0
     assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
     assert main(["zoo", "add", str(out / "walker.pt")]) == 0
-    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary left behind
+    # no temporary left behind; the run's lock stays, as the zoo's (removed, two runs could lock two files)
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".train.lock"]
 
 
 def test_the_median_epoch_time_of_an_even_count_is_the_mean_of_the_middle_two(trained, monkeypatch):
