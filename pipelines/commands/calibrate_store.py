@@ -112,6 +112,7 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> Path:
         "earlier": None if before is None else [b.to_json() for b in before],
     }
     tmp = journal.with_name(journal.name + ".tmp")
+    path.parent.mkdir(parents=True, exist_ok=True)  # a user zoo not made yet: storing the blocks makes it
     with open(tmp, "w") as f:
         f.write(json.dumps(document, allow_nan=False))
         f.flush()

@@ -56,6 +56,19 @@ def test_a_held_out_run_planning_with_the_blocks_stores_them_first_and_leaves_no
     assert _journals(tmp_path) == []
 
 
+def test_a_held_out_run_planning_with_the_blocks_makes_a_user_zoo_not_made_yet(tmp_path, monkeypatch):
+    """A new user's first calibrate --holdout --holdout-margins conformal:A (A one of --alpha) ended in
+    "No such file or directory: .../.calibrate-holdout.PID.json.tmp": the journal was written into the user
+    zoo before storing the blocks made it."""
+    zoo = tmp_path / "zoo"
+    monkeypatch.setenv("CROWDMPC_ZOO", str(zoo))
+    blocks = _blocks()
+    with storing(blocks, _args()):
+        assert _journals(zoo) == [f".calibrate-holdout.{os.getpid()}.json"]
+    assert [b.to_json() for b in read_calibration_file(calibrations_path())] == [b.to_json() for b in blocks]
+    assert _journals(zoo) == []
+
+
 def test_a_stopped_held_out_run_with_no_earlier_file_leaves_no_file_and_no_journal(tmp_path, monkeypatch):
     """There was no calibrations file: taking the blocks back removes the file (an empty one is not "as it
     was"), and the journal goes with it."""
