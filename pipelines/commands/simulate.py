@@ -322,6 +322,8 @@ def run(args: argparse.Namespace) -> int:
         )
     except KeyboardInterrupt:
         if not results:
+            if recorder is not None and recorder.paths:  # no report follows: the cut file would go unsaid
+                print(recorder.written_line(finished=0))
             raise
         interrupted = True  # the finished episodes are reported and written, then the interrupt goes on
     finally:
@@ -374,7 +376,7 @@ def _report(
     if resolved.plot is not None:
         _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:
-        print(f"wrote {len(recorder.paths)} MCAP file(s) to {resolved.record}")
+        print(recorder.written_line(finished=len(results)))
 
 
 def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:

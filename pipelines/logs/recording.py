@@ -260,6 +260,13 @@ class McapEpisodeRecorder:
     ) -> None:
         self.close()
 
+    def written_line(self, finished: int) -> str:
+        """What was recorded, for a run whose first ``finished`` episodes ended. An episode cut short (Ctrl-C)
+        keeps its file, without metrics but named as a whole one's: said, as ``review`` says it."""
+        cut = [path.name for path in self.paths[finished:]]  # one file per episode, in order
+        note = f"; {', '.join(cut)}: cut short, no metrics" if cut else ""
+        return f"wrote {len(self.paths)} MCAP file(s) to {self.out_dir}{note}"
+
     # -- helpers ---------------------------------------------------------------------------------------------
     def _require_open(self) -> McapRecorder:
         if self._recorder is None:

@@ -846,6 +846,35 @@ def test_ctrl_c_in_simulate_keeps_the_episodes_that_finished(tmp_path, monkeypat
     assert payload["summary"]["episodes"] == 1
 
 
+@pytest.mark.parametrize("cut_episode", [1, 2])
+def test_ctrl_c_in_simulate_says_which_recording_it_cut(cut_episode, tmp_path, monkeypatch, capsys):
+    """Ctrl-C in an episode leaves its MCAP file, finished without metrics under a whole episode's name;
+    simulate said "wrote 2 MCAP file(s)" for one finished episode, and nothing when it cut the first."""
+    from crowdsim.env import CrowdEnv
+
+    resets = {"n": 0}
+    original_reset, original_step = CrowdEnv.reset, CrowdEnv.step
+
+    def reset(self, *args, **kwargs):
+        resets["n"] += 1
+        return original_reset(self, *args, **kwargs)
+
+    def step(self, *args, **kwargs):
+        if resets["n"] == cut_episode:
+            raise KeyboardInterrupt  # after the episode's first state is recorded
+        return original_step(self, *args, **kwargs)
+
+    monkeypatch.setattr(CrowdEnv, "reset", reset)
+    monkeypatch.setattr(CrowdEnv, "step", step)
+    folder = tmp_path / "rec"
+    args = ["simulate", "--controller", "straight", "--humans", "2", "--episodes", "3", "--no-progress"]
+    assert main([*args, "--record", str(folder)]) == 130
+    out = capsys.readouterr().out
+    cut = f"circle_seed{cut_episode - 1:06d}.mcap"
+    assert (folder / cut).is_file()
+    assert f"wrote {cut_episode} MCAP file(s) to {folder}; {cut}: cut short, no metrics" in out
+
+
 def test_a_second_controller_does_not_replace_the_firsts_recordings(tmp_path, capsys):
     """File names identify the episode (scenario, seed) and not the run: a rerun of the same command replaces
     its own recordings (`make demo`), another controller's run into the same folder is refused."""
