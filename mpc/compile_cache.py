@@ -221,8 +221,8 @@ def writable_dir(directory: str | Path | None = None) -> Path:
 def nlpsol(
     name: str, plugin: str, nlp: Mapping, options: Mapping, *, directory: str | Path | None = None
 ) -> ca.Function:
-    """``casadi.nlpsol(name, plugin, nlp, options)`` compiled with gcc ``-O2``, from the cache when it holds
-    this NLP, else compiled now and stored. ``options`` must not set the jit options themselves.
+    """``casadi.nlpsol(name, plugin, nlp, options)`` compiled with gcc (``compiler.FLAGS``), from the cache
+    when it holds this NLP, else compiled now and stored. ``options`` must not set the jit options themselves.
 
     Raises ``CompileCacheError`` when gcc is not on the PATH, the compile fails, or the cache directory cannot
     be made or compiled into (``CacheLocationError``).

@@ -425,3 +425,36 @@ def test_a_compile_removes_what_killed_compiles_left(cache, tmp_path):
     names = {p.name for p in cache.iterdir()}
     assert not names & set(leftovers)
     assert set(kept) | {link.name} <= names and outside.read_text() == "keep"
+
+
+def _fma_flags() -> list[str] | None:
+    """The flags that make gcc target a machine with fused multiply-add here: none on aarch64 (its default),
+    -mfma on an x86-64 that has it; None where neither holds."""
+    import platform
+
+    machine = platform.machine()
+    if machine in ("aarch64", "arm64"):
+        return []
+    cpu = Path("/proc/cpuinfo")
+    if machine == "x86_64" and cpu.is_file() and " fma " in f" {cpu.read_text()} ".replace("\n", " "):
+        return ["-mfma"]
+    return None
+
+
+@needs_gcc
+@pytest.mark.skipif(_fma_flags() is None, reason="no fused multiply-add on this machine")
+def test_compiled_code_rounds_as_the_interpreter_on_a_machine_with_fused_multiply_add(tmp_path, monkeypatch):
+    """gcc -O2 fuses c - a * b into one rounding where the target has FMA (aarch64 by default): the jit's
+    numbers then differed from CasADi's interpreter, so --jit changed results, not only the time. With
+    a = 1 + 2^-30, b = 1 - 2^-30, c = 1: a * b rounds to 1 and the difference is 0; fused, 2^-60."""
+    from mpc.compiler import FLAGS
+
+    monkeypatch.chdir(tmp_path)  # CasADi's jit writes its source into the working directory
+    x = ca.SX.sym("x", 3)  # one input: its three loads come first, then the product and the difference
+    flags = [*FLAGS, *(_fma_flags() or [])]
+    options = {"jit": True, "compiler": "shell", "jit_options": {"flags": flags, "verbose": False}}
+    compiled = ca.Function("fused", [x], [x[2] - x[0] * x[1]], options)
+    interpreted = ca.Function("fused", [x], [x[2] - x[0] * x[1]])
+    values = [1.0 + 2.0**-30, 1.0 - 2.0**-30, 1.0]
+    assert float(interpreted(values)) == 0.0
+    assert float(compiled(values)) == 0.0
