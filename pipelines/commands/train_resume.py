@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,11 +25,13 @@ _LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Li
 LOCK_FILE = ".train.lock"
 
 
-def one_run_at_a_time(out: Path):
+@contextmanager
+def one_run_at_a_time(out: Path) -> Iterator[None]:
     """Hold ``out``'s lock (a hidden file made with the folder; a second train is refused) while a run
     trains: the check that --out holds no run (no last.ckpt until the first epoch ends) let a second train
     started meanwhile train into the same folder, which ended with one run's settings beside the other's
-    last.ckpt."""
+    last.ckpt. A run that fails before writing anything (a broken net, refused when its module is built)
+    leaves no folder it made: only its lock would be in it."""
     from predictors.locking import locked
 
     def refuse() -> None:
@@ -35,8 +39,18 @@ def one_run_at_a_time(out: Path):
             f"another crowdmpc train is writing to {out}; wait for it or choose another --out"
         )
 
+    made = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    return locked(out / LOCK_FILE, "lock the training run", waiting=refuse)
+    lock = out / LOCK_FILE
+    with locked(lock, "lock the training run", waiting=refuse):
+        try:
+            yield
+        except BaseException:
+            # Removed while still held: a train that opened the lock meanwhile and tries it now is refused.
+            if made and [p.name for p in out.iterdir()] == [LOCK_FILE]:
+                lock.unlink()
+                out.rmdir()
+            raise
 
 
 def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:
