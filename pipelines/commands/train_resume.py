@@ -9,6 +9,7 @@ import argparse
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
+from itertools import takewhile
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,7 @@ def one_run_at_a_time(out: Path) -> Iterator[None]:
     trains: the check that --out holds no run (no last.ckpt until the first epoch ends) let a second train
     started meanwhile train into the same folder, which ended with one run's settings beside the other's
     last.ckpt. A run that fails before writing anything (a broken net, refused when its module is built)
-    leaves no folder it made: only its lock would be in it."""
+    leaves no folder it made (--out and the parents it needed): only its lock would be in them."""
     from predictors.locking import locked
 
     def refuse() -> None:
@@ -39,7 +40,10 @@ def one_run_at_a_time(out: Path) -> Iterator[None]:
             f"another crowdmpc train is writing to {out}; wait for it or choose another --out"
         )
 
-    made = not out.exists()
+    # Judged on the resolved path: in --out a/x/../../b/run with a/x missing, the existing b does not exist
+    # as named, and an empty b would have been removed with the folders made.
+    target = out.resolve()
+    made = list(takewhile(lambda folder: not folder.exists(), (target, *target.parents)))  # out, then parents
     out.mkdir(parents=True, exist_ok=True)
     lock = out / LOCK_FILE
     with locked(lock, "lock the training run", waiting=refuse):
@@ -49,7 +53,11 @@ def one_run_at_a_time(out: Path) -> Iterator[None]:
             # Removed while still held: a train that opened the lock meanwhile and tries it now is refused.
             if made and [p.name for p in out.iterdir()] == [LOCK_FILE]:
                 lock.unlink()
-                out.rmdir()
+                for folder in made:
+                    try:
+                        folder.rmdir()
+                    except OSError:  # something else was put there meanwhile: not ours to remove
+                        break
             raise
 
 

@@ -137,6 +137,21 @@ def test_train_refuses_a_broken_net_in_one_line_before_writing_anything(tmp_path
     assert not (tmp_path / "run").exists()
 
 
+def test_train_refused_before_writing_removes_the_parents_of_out_it_made(tmp_path, capsys):
+    """--out's folder was removed, but not the missing parents its lock had made (OUT's a/b stayed)."""
+    model = f"{BROKEN}:OneColumn"
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
+    code = main([*argv, "--epochs", "1", "--out", str(tmp_path / "a" / "b" / "run"), "--no-progress"])
+    assert code == 2 and "encode's out must be of shape" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["walk.ndjson"]
+    # an empty folder that was there, named through one not made yet: kept (judged as named, it went too)
+    (tmp_path / "kept").mkdir()
+    out = tmp_path / "x" / ".." / "kept" / "run"
+    assert main([*argv, "--epochs", "1", "--out", str(out), "--no-progress"]) == 2
+    assert (tmp_path / "kept").is_dir() and not (tmp_path / "kept" / "run").exists()
+
+
 def test_a_head_type_property_that_raises_is_one_line_in_train_and_in_the_check(tmp_path, capsys):
     """It was a KeyError traceback: ``train`` reads the head (for its loss) before the contract check."""
     model = f"{BROKEN}:HeadTypeRaises"
