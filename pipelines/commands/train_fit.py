@@ -92,7 +92,12 @@ def _fit(
         # in one rename: a symbolic link planted in --out is replaced, never written through
         replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
     started = time.perf_counter()
-    trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
+    try:
+        trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
+    except SystemExit as stop:
+        # Lightning ends an interrupted fit with sys.exit: 1 for Ctrl-C, 0 for SIGTERM (its SIGTERMException),
+        # which told a script that a killed run had trained. Both are the interrupt the CLI reports (130).
+        raise KeyboardInterrupt from stop
     elapsed = time.perf_counter() - started
 
     # a file in --out: the best checkpoint saved or kept (RunCheckpoint: restored only where it is), else last

@@ -111,6 +111,29 @@ def test_a_second_train_into_an_out_a_run_holds_is_refused(tmp_path, capsys):
     assert main(args) == 0  # once the other run has ended
 
 
+def test_a_train_ended_by_sigterm_is_interrupted_not_a_success(tmp_path, monkeypatch, capsys):
+    """Lightning ends a fit that SIGTERM (``kill``) stopped with SystemExit(0): train exited 0, silently,
+    with no weights written, so ``crowdmpc train ... && crowdmpc zoo add ...`` went on."""
+    import os
+    import signal
+
+    from predictors.training import PredictorModule
+
+    started = PredictorModule.on_train_epoch_start
+
+    def killed(self):
+        started(self)
+        os.kill(os.getpid(), signal.SIGTERM)  # Lightning's handler only notes it; its loop stops at once
+
+    monkeypatch.setattr(PredictorModule, "on_train_epoch_start", killed)
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data)]
+    assert main([*args, "--epochs", "3", "--out", str(out), "--name", "walker", "--no-progress"]) == 130
+    assert capsys.readouterr().err.endswith("crowdmpc train: interrupted\n")
+    assert not (out / "walker.pt").exists()
+
+
 def test_resume_refuses_to_train_no_epoch(trained, capsys):
     """--resume with --epochs at or below the epochs last.ckpt has finished trained nothing, yet wrote
     NAME.pt, NAME.json and the metrics again with the smaller count. The same count still finishes a run
