@@ -26,8 +26,11 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
     except OSError as exc:
-        what = "it is a symbolic link" if os.path.islink(path) else (exc.strerror or str(exc))
-        raise PredictorError(f"{path}: cannot {purpose} ({what})") from None
+        if os.path.islink(path):
+            raise PredictorError(f"{path}: cannot {purpose} (it is a symbolic link)") from None
+        if _planted(path):  # the open's own error said "No such device or address" for a FIFO
+            raise PredictorError(f"{path}: cannot {purpose} (not a regular file); remove it") from None
+        raise PredictorError(f"{path}: cannot {purpose} ({exc.strerror or exc})") from None
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):
             raise PredictorError(f"{path}: cannot {purpose} (not a regular file); remove it")
@@ -40,3 +43,11 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
         yield
     finally:
         os.close(fd)  # releases the lock
+
+
+def _planted(path: Path) -> bool:
+    """Whether something other than a regular file is at ``path`` (a FIFO with no reader, a directory)."""
+    try:
+        return not stat.S_ISREG(os.lstat(path).st_mode)
+    except OSError:
+        return False

@@ -111,6 +111,27 @@ def test_a_second_train_into_an_out_a_run_holds_is_refused(tmp_path, capsys):
     assert main(args) == 0  # once the other run has ended
 
 
+@pytest.mark.parametrize("planted", ["fifo", "directory"])
+def test_a_lock_planted_as_no_regular_file_is_named_so(planted, tmp_path, capsys):
+    """The open's own error was the message: "(No such device or address)" for a FIFO, "(Is a directory)"
+    for a folder, where a lock that opens but is no regular file is "(not a regular file); remove it"."""
+    import os
+
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    out.mkdir()
+    lock = out / ".train.lock"
+    if planted == "fifo":
+        os.mkfifo(lock)
+    else:
+        lock.mkdir()
+    args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data), "--out", str(out)]
+    assert main([*args, "--epochs", "1", "--no-progress"]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc train: error: {lock}: cannot lock the training run (not a regular file); remove it\n"
+    )
+
+
 def test_a_train_ended_by_sigterm_is_interrupted_not_a_success(tmp_path, monkeypatch, capsys):
     """Lightning ends a fit that SIGTERM (``kill``) stopped with SystemExit(0): train exited 0, silently,
     with no weights written, so ``crowdmpc train ... && crowdmpc zoo add ...`` went on."""
