@@ -325,11 +325,10 @@ def run(args: argparse.Namespace) -> int:
     from pipelines.commands.train_resume import run_settings
 
     settings = run_settings(args, net_config, name, files)
-    name = _check_out(args, out, settings, net_config, loss_typed)
     from pipelines.commands.train_fit import run_training
     from pipelines.commands.train_resume import one_run_at_a_time
 
-    with one_run_at_a_time(out):  # again: a train into --out may have started or ended since the checks
+    with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed)
         return run_training(args, net_config, name, out, (files, root), settings)
 
