@@ -22,6 +22,8 @@ from typing import Any
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
 from pipelines.commands import check_writable, first_repeat
+from pipelines.commands.standard_output import STDOUT_TEXT, is_stdout, json_path, write_document
+from pipelines.commands.standard_output import json_on_stdout as json_on_stdout  # the scripts' main()
 from pipelines.config import ConfigError
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
@@ -67,7 +69,9 @@ def output_file(text: str) -> Path:
     existing folder, a place without write access, and an existing file that is not a JSON report (a CSV, a
     config, a recording: a mistyped name must not replace data) are refused now, not after the run; nothing
     is created. That it is none of the script's input files is checked once they are parsed
-    (``check_not_input``)."""
+    (``check_not_input``). "-" is standard output (``standard_output.STDOUT``), as for ``crowdmpc``."""
+    if text == STDOUT_TEXT:
+        return json_path(text)
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text} is a folder; expected the path of a file to write")
@@ -128,10 +132,14 @@ def figure(value: float, spec: str) -> str:
 
 
 def write_text(path: str | Path, text: str) -> None:
-    """``text`` to ``path``, its folder created."""
+    """``text`` to ``path``, its folder created; to standard output for ``--json -`` (``output_file``)."""
+    text = text if text.endswith("\n") else text + "\n"
+    if is_stdout(path):
+        write_document(text, "--json")
+        return
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text if text.endswith("\n") else text + "\n")
+    path.write_text(text)
 
 
 def write_json(path: str | Path, payload: Any, indent: int = 2) -> None:

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import count_in, json_on_stdout, output_file, predictor_name, run_main, write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 # The predictor ablation as first measured (283 s with jit, 19 s without): its default list then.
@@ -147,41 +147,44 @@ def main() -> int:
     )
     parser.add_argument("--json", type=output_file, help="also write the sweeps' numbers here")
     args = parser.parse_args()
-    sys.path.insert(0, str(ROOT))
-    from mpc import compile_cache
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        sys.path.insert(0, str(ROOT))
+        from mpc import compile_cache
 
-    with tempfile.TemporaryDirectory(prefix="compile-cache-bench-") as tmp:
-        env = os.environ | {compile_cache.CACHE_ENV: str(Path(tmp) / "cache")}
-        runs = {}
-        for label, jit in (("cold", "on"), ("warm", "on"), ("off", "off")):
-            runs[label] = run_sweep(Path(tmp) / label, jit, args.episodes_per_cell, args.predictors, env)
-            r = runs[label]
+        with tempfile.TemporaryDirectory(prefix="compile-cache-bench-") as tmp:
+            env = os.environ | {compile_cache.CACHE_ENV: str(Path(tmp) / "cache")}
+            runs = {}
+            for label, jit in (("cold", "on"), ("warm", "on"), ("off", "off")):
+                runs[label] = run_sweep(Path(tmp) / label, jit, args.episodes_per_cell, args.predictors, env)
+                r = runs[label]
+                print(
+                    f"{label:>4} (--jit {jit:>3}): {r['wall_s']:6.1f} s wall, {r['episodes']} episodes using "
+                    f"{r['episode_cpu_s']:5.1f} s CPU; load {r['load_before'][0]:.2f} before, "
+                    f"{r['load_after'][0]:.2f} after",
+                    flush=True,
+                )
+            stats = compile_cache.info(Path(tmp) / "cache" / compile_cache.SUBDIR)
+            print(f"cache: {stats.entries} entries, {stats.size_bytes / 1024:.0f} KiB; {stats.compiler}")
+            base = runs["off"]["metrics"]
+            for label in ("cold", "warm"):
+                same = sum(runs[label]["metrics"].get(k) == m for k, m in base.items())
+                print(f"metrics {label} vs off: {same}/{len(base)} episodes identical")
+            compile_s = runs["cold"]["wall_s"] - runs["warm"]["wall_s"]
+            saving = (runs["off"]["wall_s"] - runs["warm"]["wall_s"]) / runs["off"]["episodes"]
             print(
-                f"{label:>4} (--jit {jit:>3}): {r['wall_s']:6.1f} s wall, {r['episodes']} episodes using "
-                f"{r['episode_cpu_s']:5.1f} s CPU; load {r['load_before'][0]:.2f} before, "
-                f"{r['load_after'][0]:.2f} after",
-                flush=True,
+                f"this sweep: cold - warm {compile_s:.1f} s wall; off - warm {saving:.2f} s wall per episode"
             )
-        stats = compile_cache.info(Path(tmp) / "cache" / compile_cache.SUBDIR)
-        print(f"cache: {stats.entries} entries, {stats.size_bytes / 1024:.0f} KiB; {stats.compiler}")
-        base = runs["off"]["metrics"]
-        for label in ("cold", "warm"):
-            same = sum(runs[label]["metrics"].get(k) == m for k, m in base.items())
-            print(f"metrics {label} vs off: {same}/{len(base)} episodes identical")
-        compile_s = runs["cold"]["wall_s"] - runs["warm"]["wall_s"]
-        saving = (runs["off"]["wall_s"] - runs["warm"]["wall_s"]) / runs["off"]["episodes"]
-        print(f"this sweep: cold - warm {compile_s:.1f} s wall; off - warm {saving:.2f} s wall per episode")
-        from pipelines.commands.sweep_jit import jit_pays
-        from pipelines.experiments.cells import EXPERIMENTS
+            from pipelines.commands.sweep_jit import jit_pays
+            from pipelines.experiments.cells import EXPERIMENTS
 
-        swap = EXPERIMENTS["predictors"].with_predictors(args.predictors.split(","))
-        print(f"--jit auto would compile: {jit_pays(swap.cells(), args.episodes_per_cell)}")
-        if args.payback_episodes > 0:
-            payback(args.payback_episodes, Path(tmp) / "payback-cache")
-    if args.json:
-        summary = {k: {f: v for f, v in r.items() if f != "metrics"} for k, r in runs.items()}
-        write_json(args.json, summary)
-    return 0
+            swap = EXPERIMENTS["predictors"].with_predictors(args.predictors.split(","))
+            print(f"--jit auto would compile: {jit_pays(swap.cells(), args.episodes_per_cell)}")
+            if args.payback_episodes > 0:
+                payback(args.payback_episodes, Path(tmp) / "payback-cache")
+        if args.json:
+            summary = {k: {f: v for f, v in r.items() if f != "metrics"} for k, r in runs.items()}
+            write_json(args.json, summary)
+        return 0
 
 
 if __name__ == "__main__":

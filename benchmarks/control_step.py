@@ -38,6 +38,7 @@ from bench_cli import (  # noqa: E402
     check_distinct,
     episode_count,
     human_count,
+    json_on_stdout,
     output_file,
     predictor_name,
     run_main,
@@ -108,56 +109,58 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-ibr", action="store_true", help="skip the CMPC/DMPC/floor rows")
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
-    check_distinct(parser, "--humans", args.humans)  # the JSON's rows are keyed by it
-    if args.no_ibr and not args.coupled and not (args.dmpc_parallel and 7 in args.humans):
-        parser.error(
-            "nothing to measure: --no-ibr leaves --coupled and --dmpc-parallel (which runs at 7 humans)"
-        )
-
-    report: dict[str, Any] = {"load_before": os.getloadavg()}
-    rows: list[tuple[str, dict[str, Any]]] = []
-    for n in args.humans:
-        if not args.no_ibr:
-            cmpc = closed_loop(ControllerSpec("cmpc", args.predictor), n, args.episodes, floor=True)
-            # the ratio of the two medians (not a median of per-step ratios), printed under the floor's row
-            cmpc["median_over_floor_median"] = cmpc["median_ms"] / cmpc["floor"]["median_ms"]
-            rows.append((f"cmpc      {n} humans", cmpc))
-            rows.append((f"floor     {n} humans", cmpc["floor"]))
-            rows.append(
-                (
-                    f"dmpc      {n} humans",
-                    closed_loop(ControllerSpec("dmpc", args.predictor), n, args.episodes),
-                )
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        check_distinct(parser, "--humans", args.humans)  # the JSON's rows are keyed by it
+        if args.no_ibr and not args.coupled and not (args.dmpc_parallel and 7 in args.humans):
+            parser.error(
+                "nothing to measure: --no-ibr leaves --coupled and --dmpc-parallel (which runs at 7 humans)"
             )
-        if args.dmpc_parallel and n == 7:
-            for mode in ("serial", "threads"):
-                spec = ControllerSpec("dmpc", args.predictor, mpc_overrides=(("dmpc_parallel", mode),))
-                rows.append((f"dmpc {mode:<7} {n} humans", closed_loop(spec, n, args.episodes)))
-        if args.coupled:
-            for mode in ("exact", "first_order"):
-                spec = ControllerSpec(
-                    "cmpc", args.predictor, coupling="nlp", mpc_overrides=(("coupled_mode", mode),)
-                )
-                rows.append((f"nlp {mode:<11} {n} humans", closed_loop(spec, n, args.episodes)))
-    report["load_after"] = os.getloadavg()
-    report["predictor"] = args.predictor
-    report["rows"] = dict(rows)
 
-    print(f"predictor {args.predictor}, 3 robots, circle crossing, {args.episodes} episodes per row")
-    print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
-    print(f"{'row':<30} {'median ms':>10} {'p95 ms':>10} {'steps':>6} {'IBR its':>8} {'solves':>7}")
-    cmpc_row: dict[str, Any] = {}
-    for label, row in rows:
-        its = f"{row['iterations_mean']:8.2f}" if "iterations_mean" in row else " " * 8
-        sol = f"{row['solves_mean']:7.2f}" if "solves_mean" in row else " " * 7
-        print(f"{label:<30} {row['median_ms']:10.2f} {row['p95_ms']:10.2f} {row['steps']:6d} {its} {sol}")
-        if label.startswith("cmpc"):
-            cmpc_row = row
-        if label.startswith("floor"):  # the row after its CMPC row
-            print(f"{'  median cmpc / median floor':<30} {cmpc_row['median_over_floor_median']:10.2f}")
-    if args.json:
-        write_json(args.json, report)
-    return 0
+        report: dict[str, Any] = {"load_before": os.getloadavg()}
+        rows: list[tuple[str, dict[str, Any]]] = []
+        for n in args.humans:
+            if not args.no_ibr:
+                cmpc = closed_loop(ControllerSpec("cmpc", args.predictor), n, args.episodes, floor=True)
+                # the ratio of the two medians (not a median of per-step ratios), printed under the
+                # floor's row
+                cmpc["median_over_floor_median"] = cmpc["median_ms"] / cmpc["floor"]["median_ms"]
+                rows.append((f"cmpc      {n} humans", cmpc))
+                rows.append((f"floor     {n} humans", cmpc["floor"]))
+                rows.append(
+                    (
+                        f"dmpc      {n} humans",
+                        closed_loop(ControllerSpec("dmpc", args.predictor), n, args.episodes),
+                    )
+                )
+            if args.dmpc_parallel and n == 7:
+                for mode in ("serial", "threads"):
+                    spec = ControllerSpec("dmpc", args.predictor, mpc_overrides=(("dmpc_parallel", mode),))
+                    rows.append((f"dmpc {mode:<7} {n} humans", closed_loop(spec, n, args.episodes)))
+            if args.coupled:
+                for mode in ("exact", "first_order"):
+                    spec = ControllerSpec(
+                        "cmpc", args.predictor, coupling="nlp", mpc_overrides=(("coupled_mode", mode),)
+                    )
+                    rows.append((f"nlp {mode:<11} {n} humans", closed_loop(spec, n, args.episodes)))
+        report["load_after"] = os.getloadavg()
+        report["predictor"] = args.predictor
+        report["rows"] = dict(rows)
+
+        print(f"predictor {args.predictor}, 3 robots, circle crossing, {args.episodes} episodes per row")
+        print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
+        print(f"{'row':<30} {'median ms':>10} {'p95 ms':>10} {'steps':>6} {'IBR its':>8} {'solves':>7}")
+        cmpc_row: dict[str, Any] = {}
+        for label, row in rows:
+            its = f"{row['iterations_mean']:8.2f}" if "iterations_mean" in row else " " * 8
+            sol = f"{row['solves_mean']:7.2f}" if "solves_mean" in row else " " * 7
+            print(f"{label:<30} {row['median_ms']:10.2f} {row['p95_ms']:10.2f} {row['steps']:6d} {its} {sol}")
+            if label.startswith("cmpc"):
+                cmpc_row = row
+            if label.startswith("floor"):  # the row after its CMPC row
+                print(f"{'  median cmpc / median floor':<30} {cmpc_row['median_over_floor_median']:10.2f}")
+        if args.json:
+            write_json(args.json, report)
+        return 0
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ from bench_cli import (  # noqa: E402
     episode_count,
     figure,
     human_count,
+    json_on_stdout,
     output_file,
     predictor_name,
     robot_count,
@@ -105,40 +106,41 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
-    check_not_input(parser, "--json", args.json, [args.config])
-    for option in ("cost_scale", "robots"):  # a repeat ran its rows twice
-        check_distinct(parser, f"--{option.replace('_', '-')}", getattr(args, option))
-    try:  # every scale's config checked before the first episode
-        runs = {scale: load(args.config, sets=[f"mpc.cost_scale={scale}"]) for scale in args.cost_scale}
-    except PipelineError as exc:  # ConfigError, and what a value's own check raises
-        parser.error(f"--config/--cost-scale: {exc}")
-    load_before = os.getloadavg()[0]
-    t0 = time.perf_counter()
-    rows = [
-        measure(runs[scale], m, args.humans, args.episodes, args.predictor)
-        for m in args.robots
-        for scale in args.cost_scale
-    ]
-    print(
-        f"CMPC, {args.predictor}, {args.humans} humans, {args.episodes} episodes a row, config "
-        f"{args.config or 'none (the paper)'}; load {load_before:.2f} -> {os.getloadavg()[0]:.2f}, "
-        f"{time.perf_counter() - t0:.0f} s"
-    )
-    print(f"{'M':>3} {'scale':>6} {'solves':>6} {'failed':>6} {'fail%':>6} {'it med':>6} {'it p90':>6} "
-          f"{'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'succ%':>6}")  # fmt: skip
-    for r in rows:
-        failed = 100 * r["fatrop_failed"] / r["fatrop_solves"] if r["fatrop_solves"] else math.nan
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        check_not_input(parser, "--json", args.json, [args.config])
+        for option in ("cost_scale", "robots"):  # a repeat ran its rows twice
+            check_distinct(parser, f"--{option.replace('_', '-')}", getattr(args, option))
+        try:  # every scale's config checked before the first episode
+            runs = {scale: load(args.config, sets=[f"mpc.cost_scale={scale}"]) for scale in args.cost_scale}
+        except PipelineError as exc:  # ConfigError, and what a value's own check raises
+            parser.error(f"--config/--cost-scale: {exc}")
+        load_before = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        rows = [
+            measure(runs[scale], m, args.humans, args.episodes, args.predictor)
+            for m in args.robots
+            for scale in args.cost_scale
+        ]
         print(
-            f"{r['robots']:>3} {r['cost_scale']:>6g} {r['fatrop_solves']:>6} {r['fatrop_failed']:>6} "
-            f"{figure(failed, '>6.1f')} {figure(r['iterations_median'], '>6.1f')} "
-            f"{figure(r['iterations_p90'], '>6.1f')} {r['step_median_ms']:>7.1f} {r['step_p95_ms']:>7.1f} "
-            f"{r['step_p99_ms']:>7.1f} {r['success_rate']:>6.1f}"
+            f"CMPC, {args.predictor}, {args.humans} humans, {args.episodes} episodes a row, config "
+            f"{args.config or 'none (the paper)'}; load {load_before:.2f} -> {os.getloadavg()[0]:.2f}, "
+            f"{time.perf_counter() - t0:.0f} s"
         )
-    if any(not math.isfinite(r["iterations_median"]) for r in rows):  # the config's solver is not Fatrop
-        print("-: none solved by Fatrop in that row (no Fatrop solve, or every one failed)")
-    if args.json:
-        write_json(args.json, {"args": vars(args), "rows": rows})
-    return 0
+        print(f"{'M':>3} {'scale':>6} {'solves':>6} {'failed':>6} {'fail%':>6} {'it med':>6} {'it p90':>6} "
+              f"{'med ms':>7} {'p95 ms':>7} {'p99 ms':>7} {'succ%':>6}")  # fmt: skip
+        for r in rows:
+            failed = 100 * r["fatrop_failed"] / r["fatrop_solves"] if r["fatrop_solves"] else math.nan
+            print(
+                f"{r['robots']:>3} {r['cost_scale']:>6g} {r['fatrop_solves']:>6} {r['fatrop_failed']:>6} "
+                f"{figure(failed, '>6.1f')} {figure(r['iterations_median'], '>6.1f')} "
+                f"{figure(r['iterations_p90'], '>6.1f')} {r['step_median_ms']:>7.1f} "
+                f"{r['step_p95_ms']:>7.1f} {r['step_p99_ms']:>7.1f} {r['success_rate']:>6.1f}"
+            )
+        if any(not math.isfinite(r["iterations_median"]) for r in rows):  # the config's solver is not Fatrop
+            print("-: none solved by Fatrop in that row (no Fatrop solve, or every one failed)")
+        if args.json:
+            write_json(args.json, {"args": vars(args), "rows": rows})
+        return 0
 
 
 if __name__ == "__main__":

@@ -69,6 +69,7 @@ from bench_cli import (  # noqa: E402
     episode_bar,
     episode_count,
     human_count,
+    json_on_stdout,
     mpc_sets,
     output_file,
     robot_count,
@@ -265,12 +266,13 @@ def replay(n_robots: int, n_humans: int, rule: str, reps: int, extra: Overrides 
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
-    extra = _checked(parser, args)
-    report = _measure(args, extra)
-    _print_report(report, args, extra)
-    if args.json:
-        write_json(args.json, report)
-    return 0
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        extra = _checked(parser, args)
+        report = _measure(args, extra)
+        _print_report(report, args, extra)
+        if args.json:
+            write_json(args.json, report)
+        return 0
 
 
 def _parser() -> argparse.ArgumentParser:

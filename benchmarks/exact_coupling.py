@@ -35,7 +35,16 @@ from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.mpc import MPCController
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, episode_count, human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import (  # noqa: E402
+    count_in,
+    episode_count,
+    human_count,
+    json_on_stdout,
+    output_file,
+    predictor_name,
+    run_main,
+    write_json,
+)
 
 PREDICTOR = "social_lstm_soft_eth"  # the coupling experiment's (pipelines/experiments)
 
@@ -108,36 +117,38 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
-    load = os.getloadavg()[0]
-    row = measure(args.predictor, args.humans, args.episodes, args.max_iter)
-    row["load_before"], row["load_after"] = load, os.getloadavg()[0]
-    print(
-        f"{row['predictor']}, {row['humans']} humans, {row['episodes']} episodes of first-order coupling "
-        f"(success {row['first_order_success_rate']:.0f} %, "
-        f"collision {row['first_order_collision_rate']:.0f} %), "
-        f"load {row['load_before']:.2f} -> {row['load_after']:.2f}"
-    )
-    print(f"exact solves from the first-order plan ({row['steps']} steps, max_iter {args.max_iter}):")
-    for status, count in row["statuses"].items():
-        print(f"  {status:<32} {count:5d}")
-    # No step, or no exact solve that succeeded, leaves a figure unmeasured (NaN): said in words, not "nan".
-    if row["steps"]:
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        load = os.getloadavg()[0]
+        row = measure(args.predictor, args.humans, args.episodes, args.max_iter)
+        row["load_before"], row["load_after"] = load, os.getloadavg()[0]
         print(
-            f"  IPOPT iterations median {row['exact_iterations_median']:.1f}, p90 "
-            f"{row['exact_iterations_p90']:.1f}; time median {row['exact_ms_median']:.0f} ms, p95 "
-            f"{row['exact_ms_p95']:.0f} ms"
+            f"{row['predictor']}, {row['humans']} humans, {row['episodes']} episodes of first-order coupling "
+            f"(success {row['first_order_success_rate']:.0f} %, "
+            f"collision {row['first_order_collision_rate']:.0f} %), "
+            f"load {row['load_before']:.2f} -> {row['load_after']:.2f}"
         )
-    else:
-        print("  none solved: the first-order solve never succeeded, so no exact solve was started")
-    gains = (
-        f"median {row['F_gain_median']:.2e}, max {row['F_gain_max']:.2e}"
-        if math.isfinite(row["F_gain_median"])
-        else f"none solved (the exact solve succeeded on none of the {row['steps']} steps)"
-    )
-    print(f"  F(first-order plan) - F(exact solution), solved steps: {gains}")
-    if args.json:
-        write_json(args.json, row)
-    return 0
+        print(f"exact solves from the first-order plan ({row['steps']} steps, max_iter {args.max_iter}):")
+        for status, count in row["statuses"].items():
+            print(f"  {status:<32} {count:5d}")
+        # No step, or no exact solve that succeeded, leaves a figure unmeasured (NaN): said in words, not
+        # "nan".
+        if row["steps"]:
+            print(
+                f"  IPOPT iterations median {row['exact_iterations_median']:.1f}, p90 "
+                f"{row['exact_iterations_p90']:.1f}; time median {row['exact_ms_median']:.0f} ms, p95 "
+                f"{row['exact_ms_p95']:.0f} ms"
+            )
+        else:
+            print("  none solved: the first-order solve never succeeded, so no exact solve was started")
+        gains = (
+            f"median {row['F_gain_median']:.2e}, max {row['F_gain_max']:.2e}"
+            if math.isfinite(row["F_gain_median"])
+            else f"none solved (the exact solve succeeded on none of the {row['steps']} steps)"
+        )
+        print(f"  F(first-order plan) - F(exact solution), solved steps: {gains}")
+        if args.json:
+            write_json(args.json, row)
+        return 0
 
 
 if __name__ == "__main__":

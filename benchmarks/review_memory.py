@@ -36,6 +36,7 @@ from bench_cli import (  # noqa: E402
     count_in,
     episode_count,
     human_count,
+    json_on_stdout,
     output_file,
     predictor_name,
     run_main,
@@ -123,47 +124,55 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
-    if min(args.files) < args.episodes:  # the folder holds every recorded episode: the row would mislabel it
-        parser.error(f"--files {min(args.files)}: at least --episodes ({args.episodes}) files are reviewed")
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="review-memory-") as tmp:
-        folder = Path(tmp) / "runs"
-        folder.mkdir()
-        sources = record(folder, args.episodes, ControllerSpec(args.controller, args.predictor), args.humans)
-        size_kb = sum(p.stat().st_size for p in sources) / len(sources) / 1e3
-        base_mb, _, read_from = peak(BASE)
-        print(f"episodes recorded: {len(sources)}, {size_kb:.0f} KB a file; interpreter {base_mb:.0f} MB")
-        print(f"peak memory: {PEAK_SOURCES[read_from]}")
-        head = (
-            "files",
-            "review MB",
-            "review s",
-            "all held MB",
-            "held s",
-            "MB a file",
-        )  # held, above the interpreter's
-        print(" ".join(f"{h:>{w}}" for h, w in zip(head, (6, 10, 9, 12, 7, 10), strict=True)))
-        for files in sorted(set(args.files)):
-            fill(folder, sources, files)
-            review_mb, review_s, _ = peak(REVIEW, str(folder), str(Path(tmp) / "r.json"))
-            held_mb, held_s, _ = peak(HOLD_ALL, str(folder))
-            rows.append(
-                {
-                    "files": files,
-                    "review_peak_mb": review_mb,
-                    "review_s": review_s,
-                    "held_peak_mb": held_mb,
-                    "held_s": held_s,
-                }
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        if (
+            min(args.files) < args.episodes
+        ):  # the folder holds every recorded episode: the row would mislabel it
+            parser.error(
+                f"--files {min(args.files)}: at least --episodes ({args.episodes}) files are reviewed"
             )
-            per_file = (held_mb - base_mb) / files
-            print(
-                f"{files:6d} {review_mb:10.0f} {review_s:9.1f} {held_mb:12.0f} {held_s:7.1f} {per_file:10.2f}"
+        rows = []
+        with tempfile.TemporaryDirectory(prefix="review-memory-") as tmp:
+            folder = Path(tmp) / "runs"
+            folder.mkdir()
+            sources = record(
+                folder, args.episodes, ControllerSpec(args.controller, args.predictor), args.humans
             )
-    if args.json:
-        report = {"file_kb": size_kb, "interpreter_mb": base_mb, "peak_from": read_from, "rows": rows}
-        write_json(args.json, report)
-    return 0
+            size_kb = sum(p.stat().st_size for p in sources) / len(sources) / 1e3
+            base_mb, _, read_from = peak(BASE)
+            print(f"episodes recorded: {len(sources)}, {size_kb:.0f} KB a file; interpreter {base_mb:.0f} MB")
+            print(f"peak memory: {PEAK_SOURCES[read_from]}")
+            head = (
+                "files",
+                "review MB",
+                "review s",
+                "all held MB",
+                "held s",
+                "MB a file",
+            )  # held, above the interpreter's
+            print(" ".join(f"{h:>{w}}" for h, w in zip(head, (6, 10, 9, 12, 7, 10), strict=True)))
+            for files in sorted(set(args.files)):
+                fill(folder, sources, files)
+                review_mb, review_s, _ = peak(REVIEW, str(folder), str(Path(tmp) / "r.json"))
+                held_mb, held_s, _ = peak(HOLD_ALL, str(folder))
+                rows.append(
+                    {
+                        "files": files,
+                        "review_peak_mb": review_mb,
+                        "review_s": review_s,
+                        "held_peak_mb": held_mb,
+                        "held_s": held_s,
+                    }
+                )
+                per_file = (held_mb - base_mb) / files
+                print(
+                    f"{files:6d} {review_mb:10.0f} {review_s:9.1f} {held_mb:12.0f} {held_s:7.1f} "
+                    f"{per_file:10.2f}"
+                )
+        if args.json:
+            report = {"file_kb": size_kb, "interpreter_mb": base_mb, "peak_from": read_from, "rows": rows}
+            write_json(args.json, report)
+        return 0
 
 
 if __name__ == "__main__":

@@ -69,6 +69,7 @@ from bench_cli import (  # noqa: E402
     episode_count,
     figure,
     human_count,
+    json_on_stdout,
     mpc_sets,
     output_file,
     predictor_name,
@@ -269,49 +270,50 @@ def main(argv: list[str] | None = None) -> int:
         "--json", type=output_file, help="also write the rows, with every episode's outcome, to this file"
     )
     args = parser.parse_args(argv)
-    check_not_input(parser, "--json", args.json, [args.config])
-    check_distinct(parser, "--robots", args.robots)  # a repeat ran its row twice
-    try:  # the config files' parser and checks: the values that differ from Table I, validated
-        run = load(args.config, sets=mpc_sets(args.mpc))
-        overrides = run.mpc_overrides()
-        margins = parse_margins(run.controller.margins or "none")
-        goals = args.goals or run.env.goal_assignment
-        formation = args.formation or run.env.formation
-    except (ConfigError, PipelineError) as exc:
-        parser.error(f"--config/--mpc: {exc}")
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        check_not_input(parser, "--json", args.json, [args.config])
+        check_distinct(parser, "--robots", args.robots)  # a repeat ran its row twice
+        try:  # the config files' parser and checks: the values that differ from Table I, validated
+            run = load(args.config, sets=mpc_sets(args.mpc))
+            overrides = run.mpc_overrides()
+            margins = parse_margins(run.controller.margins or "none")
+            goals = args.goals or run.env.goal_assignment
+            formation = args.formation or run.env.formation
+        except (ConfigError, PipelineError) as exc:
+            parser.error(f"--config/--mpc: {exc}")
 
-    report: dict[str, Any] = {"load_before": os.getloadavg(), "args": vars(args)}
-    rows = []
-    for controller in args.controllers:
-        for m in args.robots:
-            rows.append(
-                run_row(
-                    controller,
-                    args.predictor,
-                    m,
-                    args.humans,
-                    args.episodes,
-                    args.seed,
-                    tuple(args.scenarios),
-                    formation,
-                    overrides,
-                    margins,
-                    goals,
+        report: dict[str, Any] = {"load_before": os.getloadavg(), "args": vars(args)}
+        rows = []
+        for controller in args.controllers:
+            for m in args.robots:
+                rows.append(
+                    run_row(
+                        controller,
+                        args.predictor,
+                        m,
+                        args.humans,
+                        args.episodes,
+                        args.seed,
+                        tuple(args.scenarios),
+                        formation,
+                        overrides,
+                        margins,
+                        goals,
+                    )
                 )
-            )
-    report["load_after"] = os.getloadavg()
-    report["rows"] = rows
+        report["load_after"] = os.getloadavg()
+        report["rows"] = rows
 
-    print(
-        f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
-        f"({'/'.join(args.scenarios)}), formation {formation}, goals {goals}, margins {margins.label}"
-        + "".join(f", {k}={v}" for k, v in overrides)
-    )
-    print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
-    print_table(rows)
-    if args.json:
-        write_json(args.json, report)
-    return 0
+        print(
+            f"predictor {args.predictor}, {args.humans} humans, {args.episodes} episodes per row "
+            f"({'/'.join(args.scenarios)}), formation {formation}, goals {goals}, margins {margins.label}"
+            + "".join(f", {k}={v}" for k, v in overrides)
+        )
+        print(f"load average before {report['load_before'][0]:.2f}, after {report['load_after'][0]:.2f}")
+        print_table(rows)
+        if args.json:
+            write_json(args.json, report)
+        return 0
 
 
 if __name__ == "__main__":

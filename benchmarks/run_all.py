@@ -55,7 +55,7 @@ import numpy as np
 # and this script's parts (run_all_parts/) are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_cli import count_in, json_text, output_file, run_main, write_text  # noqa: E402
+from bench_cli import count_in, is_stdout, json_on_stdout, json_text, output_file, run_main, write_text  # noqa: E402
 from run_all_parts.sections import SECTION_RUNS, Run  # noqa: E402
 from run_all_table import table  # noqa: E402
 
@@ -114,13 +114,15 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(args.sections) - set(SECTIONS)
     if unknown:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
-    report = run(args)
-    print(table(report))  # run_all_table.py
-    text = json_text(report, indent=1)
-    print(text)
-    if args.json:
-        write_text(args.json, text)
-    return 0
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        report = run(args)
+        print(table(report))  # run_all_table.py
+        text = json_text(report, indent=1)
+        if not is_stdout(args.json):  # printed once, on stdout, by write_text
+            print(text)
+        if args.json:
+            write_text(args.json, text)
+        return 0
 
 
 if __name__ == "__main__":

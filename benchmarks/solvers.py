@@ -29,7 +29,15 @@ from mpc import nlp as nlp_module  # noqa: E402
 from mpc.config import MPCConfig  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import episode_count, human_count, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import (  # noqa: E402
+    episode_count,
+    human_count,
+    json_on_stdout,
+    output_file,
+    predictor_name,
+    run_main,
+    write_json,
+)
 
 SCENARIOS = ("circle", "perpendicular")
 
@@ -128,47 +136,47 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--json", type=output_file, help="also write the figures here")
     args = parser.parse_args(argv)
-
-    print(
-        f"recording {args.episodes} DMPC + {args.episodes} CMPC episodes, {args.humans} humans",
-        file=sys.stderr,
-    )
-    problems = record_problems(args.humans, args.episodes, args.predictor)
-    variants = [("ipopt", False), ("fatrop", False)]
-    if shutil.which("gcc"):
-        variants += [("ipopt", True), ("fatrop", True)]
-    report: dict[str, Any] = {"humans": args.humans, "episodes": args.episodes, "results": {}}
-    lines = [
-        "| NLP | solver | problems | ms / solve | iterations | failures | IPOPT retries | "
-        "cost vs IPOPT: within 1e-3 / lower / higher | build s |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for kind in ("local", "joint"):
-        nlp = nlp_of(kind, args.humans)
-        reference = None
-        for solver, jit in variants:
-            label = solver + (" + jit" if jit else "")
-            print(f"{kind}: {label}", file=sys.stderr)
-            result = replay(nlp, MPCConfig(solver=solver, jit=jit), problems[kind])
-            costs = np.asarray(result.pop("costs"))
-            if reference is None:
-                reference = costs
-            diff = costs - reference
-            scale = np.maximum(1.0, np.abs(reference))
-            result["same"] = int(np.sum(np.abs(diff) <= 1e-3 * scale))
-            result["lower"] = int(np.sum(diff < -1e-3 * scale))
-            result["higher"] = int(np.sum(diff > 1e-3 * scale))
-            report["results"][f"{kind}/{label}"] = result
-            retries = "-" if result["ipopt_retries"] is None else str(result["ipopt_retries"])
-            lines.append(
-                f"| {kind} | {label} | {len(costs)} | {result['ms_per_solve']:.3f} | "
-                f"{result['iterations_mean']:.1f} | {result['failures']} | {retries} | "
-                f"{result['same']} / {result['lower']} / {result['higher']} | {result['build_s']:.1f} |"
-            )
-    print("\n".join(lines))
-    if args.json:
-        write_json(args.json, report, indent=1)
-    return 0
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        print(
+            f"recording {args.episodes} DMPC + {args.episodes} CMPC episodes, {args.humans} humans",
+            file=sys.stderr,
+        )
+        problems = record_problems(args.humans, args.episodes, args.predictor)
+        variants = [("ipopt", False), ("fatrop", False)]
+        if shutil.which("gcc"):
+            variants += [("ipopt", True), ("fatrop", True)]
+        report: dict[str, Any] = {"humans": args.humans, "episodes": args.episodes, "results": {}}
+        lines = [
+            "| NLP | solver | problems | ms / solve | iterations | failures | IPOPT retries | "
+            "cost vs IPOPT: within 1e-3 / lower / higher | build s |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for kind in ("local", "joint"):
+            nlp = nlp_of(kind, args.humans)
+            reference = None
+            for solver, jit in variants:
+                label = solver + (" + jit" if jit else "")
+                print(f"{kind}: {label}", file=sys.stderr)
+                result = replay(nlp, MPCConfig(solver=solver, jit=jit), problems[kind])
+                costs = np.asarray(result.pop("costs"))
+                if reference is None:
+                    reference = costs
+                diff = costs - reference
+                scale = np.maximum(1.0, np.abs(reference))
+                result["same"] = int(np.sum(np.abs(diff) <= 1e-3 * scale))
+                result["lower"] = int(np.sum(diff < -1e-3 * scale))
+                result["higher"] = int(np.sum(diff > 1e-3 * scale))
+                report["results"][f"{kind}/{label}"] = result
+                retries = "-" if result["ipopt_retries"] is None else str(result["ipopt_retries"])
+                lines.append(
+                    f"| {kind} | {label} | {len(costs)} | {result['ms_per_solve']:.3f} | "
+                    f"{result['iterations_mean']:.1f} | {result['failures']} | {retries} | "
+                    f"{result['same']} / {result['lower']} / {result['higher']} | {result['build_s']:.1f} |"
+                )
+        print("\n".join(lines))
+        if args.json:
+            write_json(args.json, report, indent=1)
+        return 0
 
 
 if __name__ == "__main__":

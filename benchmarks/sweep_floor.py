@@ -32,7 +32,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import output_file, run_main, write_json  # noqa: E402
+from bench_cli import json_on_stdout, output_file, run_main, write_json  # noqa: E402
 
 TARGET_MIN = 15.0  # issue 16's target for the full table on 2 cores
 
@@ -212,27 +212,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="cores the projection assumes (default 2)")
     parser.add_argument("--json", type=output_file, help="also write the figures to this file")
     args = parser.parse_args(argv)
-    if args.episodes_per_cell < 2:
-        parser.error(f"--episodes-per-cell must be >= 2 (the first of each cell is not timed), got "
-                     f"{args.episodes_per_cell}")  # fmt: skip
-    if args.workers < 1:
-        parser.error(f"--workers must be >= 1, got {args.workers}")
-    load = os.getloadavg()[0]
-    out = summary(measure(args.episodes_per_cell), args.workers)
-    out["load"] = [load, os.getloadavg()[0]]
-    loads = f"load {load:.2f} -> {out['load'][1]:.2f}"
-    print(f"Table II sweep inline: {out['episodes']} timed episodes, {loads}")
-    print(f"episode {out['episode_ms']:.1f} ms, of which in CasADi {100 * out['casadi_share']:.1f} %:")
-    rows = sorted(out["casadi_ms"].items(), key=lambda kv: -kv[1]) + [("Python and numpy", out["python_ms"])]
-    for part, ms in rows:
-        print(f"  {part:<22} {ms:7.1f} ms  {100 * ms / out['episode_ms']:5.1f} %")
-    print(
-        f"full Table II on {args.workers} cores at this rate {out['table2_min']:.1f} min; "
-        f"with no Python at all {out['table2_min_without_python']:.1f} min; {target_verdict(out)}"
-    )
-    if args.json:
-        write_json(args.json, out)
-    return 0
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        if args.episodes_per_cell < 2:
+            parser.error(f"--episodes-per-cell must be >= 2 (the first of each cell is not timed), got "
+                         f"{args.episodes_per_cell}")  # fmt: skip
+        if args.workers < 1:
+            parser.error(f"--workers must be >= 1, got {args.workers}")
+        load = os.getloadavg()[0]
+        out = summary(measure(args.episodes_per_cell), args.workers)
+        out["load"] = [load, os.getloadavg()[0]]
+        loads = f"load {load:.2f} -> {out['load'][1]:.2f}"
+        print(f"Table II sweep inline: {out['episodes']} timed episodes, {loads}")
+        print(f"episode {out['episode_ms']:.1f} ms, of which in CasADi {100 * out['casadi_share']:.1f} %:")
+        rows = sorted(out["casadi_ms"].items(), key=lambda kv: -kv[1]) + [
+            ("Python and numpy", out["python_ms"])
+        ]
+        for part, ms in rows:
+            print(f"  {part:<22} {ms:7.1f} ms  {100 * ms / out['episode_ms']:5.1f} %")
+        print(
+            f"full Table II on {args.workers} cores at this rate {out['table2_min']:.1f} min; "
+            f"with no Python at all {out['table2_min_without_python']:.1f} min; {target_verdict(out)}"
+        )
+        if args.json:
+            write_json(args.json, out)
+        return 0
 
 
 if __name__ == "__main__":

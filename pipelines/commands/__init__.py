@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Final, TypeVar
 
+from pipelines.commands.standard_output import is_stdout, write_document
 from pipelines.errors import PipelineError
 
 T = TypeVar("T")
@@ -89,9 +90,10 @@ def check_writable(
     ``zoo_own``: the command keeps that very file (calibrate's calibrations.json). ``room``: how many bytes
     longer than the output's name the temporary name it is first made under beside it is, which its name
     must leave room for (default: ``REPLACE_FILE_ROOM`` for a file, made by ``replace_file``; 0 for a
-    directory, written into; 0 for a file written in place, such as a figure).
+    directory, written into; 0 for a file written in place, such as a figure). Standard output (``--json
+    -``, ``standard_output.STDOUT``) is no file and needs no check.
     """
-    if path is None:
+    if path is None or is_stdout(path):
         return
     path = Path(path)
     label = f"{option} {path}"
@@ -267,7 +269,11 @@ def replace_file(path: Path, write: Callable[[str], object]) -> None:
 
 def write_output(path: Path, text: str, option: str) -> None:
     """Write ``text`` to the user-named output ``path`` (``--json FILE``), whole or not at all; a failure is a
-    one-line PipelineError naming the option (the CLI's message, not an OSError traceback)."""
+    one-line PipelineError naming the option (the CLI's message, not an OSError traceback). ``STDOUT``
+    (``--json -``): on standard output."""
+    if is_stdout(path):
+        write_document(text, option)
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.exists() and not path.is_file():  # /dev/null, a pipe: written in place, never replaced

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, humans_list, path_arg, write_output
 from pipelines.commands.calibrate_store import plans_with_new_blocks, storing, take_back_killed
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -124,7 +125,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="closed-loop held-out episodes plan with these margins (e.g. conformal:0.1, once stored); "
         "default none, the calibration's own conditions",
     )
-    p.add_argument("--json", type=path_arg, metavar="FILE", help="write the blocks and coverage as JSON")
+    p.add_argument(
+        "--json", type=json_path, metavar="FILE", help="write the blocks and coverage as JSON (-: stdout)"
+    )
     p.add_argument("--dry-run", action="store_true", help="measure and print; store nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -293,6 +296,11 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
 
 
 def run(args: argparse.Namespace) -> int:
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        return _calibrate(args)
+
+
+def _calibrate(args: argparse.Namespace) -> int:
     from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
     from pipelines.plain_json import plain
     from predictors.conformal import coverage
@@ -337,5 +345,6 @@ def run(args: argparse.Namespace) -> int:
         if holdout is not None:
             payload["holdout_rows"] = int(holdout.shape[0])
         write_output(args.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
-        print(f"wrote {args.json}")
+        if not is_stdout(args.json):
+            print(f"wrote {args.json}")
     return 0

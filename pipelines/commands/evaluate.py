@@ -8,7 +8,8 @@ import sys
 from collections.abc import Callable
 from typing import Final
 
-from pipelines.commands import check_writable, path_arg, write_output
+from pipelines.commands import check_writable, write_output
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
@@ -75,13 +76,22 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--seed", type=counted(0), default=0, help="seed for sampling models (default 0)")
     parser.add_argument(
-        "--json", type=path_arg, default=None, metavar="FILE", help="also write the results as JSON"
+        "--json",
+        type=json_path,
+        default=None,
+        metavar="FILE",
+        help="also write the results as JSON (-: standard output)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        return _evaluate(args)
+
+
+def _evaluate(args: argparse.Namespace) -> int:
     from pipelines.version import code_identity
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.evaluate import EvalConfig, evaluate, format_table
@@ -122,5 +132,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)
     if args.json is not None:
         write_output(args.json, json.dumps(result, indent=2) + "\n", "--json")
-        print(f"wrote {args.json}")
+        if not is_stdout(args.json):
+            print(f"wrote {args.json}")
     return 0

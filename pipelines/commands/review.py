@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, path_arg, write_output
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 
@@ -89,7 +90,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--compare", type=path_arg, metavar="OTHER.mcap", help="side-by-side metrics with this run"
     )
     parser.add_argument("--check", action="store_true", help="validate every message against its schema")
-    parser.add_argument("--json", type=path_arg, metavar="FILE", help="also write the summary as JSON")
+    parser.add_argument(
+        "--json", type=json_path, metavar="FILE", help="also write the summary as JSON (-: standard output)"
+    )
     parser.set_defaults(func=run)
 
 
@@ -205,7 +208,7 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
 def _check_distinct_outputs(args: argparse.Namespace) -> None:
     """Each output its own file: written one after the other, the last (--json) replaced the figure."""
     outputs = [(f"--{name}", getattr(args, name)) for name in ("plot", "animate", "json")]
-    given = [(option, path) for option, path in outputs if path is not None]
+    given = [(option, path) for option, path in outputs if path is not None and not is_stdout(path)]
     for i, (option, path) in enumerate(given):
         for other, other_path in given[i + 1 :]:
             if path.resolve() == other_path.resolve():
@@ -242,6 +245,11 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        return _review(args)
+
+
+def _review(args: argparse.Namespace) -> int:
     from pipelines.logs.digest import digest
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
     from pipelines.logs.reader import read_recording
@@ -278,7 +286,8 @@ def run(args: argparse.Namespace) -> int:
     failed = _check(runs, report) + n_unreadable if args.check else 0
 
     for out in (args.plot, args.animate, args.json):
-        if out is not None:  # checked writable above, as other commands' outputs: its folder made here
+        # checked writable above, as other commands' outputs: its folder made here
+        if out is not None and not is_stdout(out):
             out.parent.mkdir(parents=True, exist_ok=True)
     if not args.path.is_dir():
         if other is not None:
@@ -304,5 +313,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         # plain: a hostile or foreign file's NaN metrics would make the report invalid JSON
         write_output(args.json, json.dumps(plain(report), indent=2, allow_nan=False) + "\n", "--json")
-        print(f"json: {args.json}")
+        if not is_stdout(args.json):
+            print(f"json: {args.json}")
     return 1 if failed else 0

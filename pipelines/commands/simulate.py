@@ -15,6 +15,7 @@ from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS, RADIUS
 from pipelines.commands import check_writable, write_output
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
@@ -111,7 +112,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
     )
-    parser.add_argument("--json", metavar="FILE", help="write the summary and per-episode records")
+    parser.add_argument(
+        "--json", metavar="FILE", help="write the summary and per-episode records (-: standard output)"
+    )
     parser.add_argument("--plot", metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
     parser.add_argument("--record", metavar="DIR", help="one MCAP file per episode in DIR")
     parser.add_argument(
@@ -214,8 +217,9 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         margins=parse_margins(chosen.margins or "none"),
     )
     check_choices_apply(config, spec)
-    paths = {name: getattr(config.simulate, name) for name in ("json", "plot", "record")}
-    run = SimulateRun(config, spec, **{k: None if v is None else Path(v) for k, v in paths.items()})
+    paths = {name: getattr(config.simulate, name) for name in ("plot", "record")}
+    json_out = None if config.simulate.json is None else json_path(config.simulate.json)
+    run = SimulateRun(config, spec, json_out, **{k: None if v is None else Path(v) for k, v in paths.items()})
     if run.plot is not None:
         from crowdsim.plotting import check_figure_path
 
@@ -224,14 +228,14 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
     check_writable(run.json, config.label("simulate", "json"), json_only=True)
     check_writable(run.plot, config.label("simulate", "plot"), room=0)  # savefig writes it
     check_writable(run.record, config.label("simulate", "record"), directory=True)
-    if run.json is not None and run.plot is not None and run.json.resolve() == run.plot.resolve():
+    json_file = None if is_stdout(run.json) else run.json
+    if json_file is not None and run.plot is not None and json_file.resolve() == run.plot.resolve():
         # the plot, written last, replaced the JSON report
         raise PipelineError(
             f"{config.label('simulate', 'json')} and {config.label('simulate', 'plot')} name the same file "
             f"{run.json}; give each its own"
         )
-    for name in ("json", "plot"):
-        out = getattr(run, name)
+    for name, out in (("json", json_file), ("plot", run.plot)):
         if out is not None and run.record is not None and out.resolve() == run.record.resolve():
             # the recorder makes the folder first, and the file could not be written after every episode
             raise PipelineError(
@@ -285,9 +289,14 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    resolved = resolve_run(args)
+    with json_on_stdout(resolved.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        return _simulate(resolved)
+
+
+def _simulate(resolved: SimulateRun) -> int:
     from pipelines.loop.episode import run_episodes
 
-    resolved = resolve_run(args)
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
     note = flock_note(spec, scenario.robots)
@@ -372,7 +381,8 @@ def _report(
             "episodes": [r.record().to_dict() for r in results],
         }
         write_output(resolved.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
-        print(f"wrote {resolved.json}")
+        if not is_stdout(resolved.json):
+            print(f"wrote {resolved.json}")
     if resolved.plot is not None:
         _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:

@@ -272,7 +272,8 @@ SIMULATE_KEYS: Final = (
         "json",
         "str",
         None,
-        "write the summary and per-episode records here (--json; a leading ~ is the home directory)",
+        "write the summary and per-episode records here (--json; - is standard output; a leading ~ is the "
+        "home directory)",
         "runs/run.json",
     ),
     Key(
