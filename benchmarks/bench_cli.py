@@ -22,7 +22,7 @@ from typing import Any
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
 from pipelines.commands import check_writable, first_repeat
-from pipelines.commands.standard_output import STDOUT_TEXT, is_stdout, json_path, write_document
+from pipelines.commands.standard_output import is_stdout, json_path, write_document
 from pipelines.commands.standard_output import json_on_stdout as json_on_stdout  # the scripts' main()
 from pipelines.config import ConfigError
 from pipelines.errors import PipelineError
@@ -70,9 +70,9 @@ def output_file(text: str) -> Path:
     config, a recording: a mistyped name must not replace data) are refused now, not after the run; nothing
     is created. That it is none of the script's input files is checked once they are parsed
     (``check_not_input``). "-" is standard output (``standard_output.STDOUT``), as for ``crowdmpc``."""
-    if text == STDOUT_TEXT:
-        return json_path(text)
-    path = Path(text)
+    path = json_path(text)  # "-", and a missing folder's ".." taken away (pipelines/commands/output_paths)
+    if is_stdout(path):
+        return path
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text} is a folder; expected the path of a file to write")
     try:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from pipelines.commands import check_writable
+from pipelines.commands.output_paths import without_missing_parents
 from pipelines.errors import PipelineError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -137,7 +138,7 @@ def figure_file(text: str) -> Path:
     refused now, not by a traceback after the runs are read."""
     from crowdsim.plotting import figure_refusal
 
-    path = Path(text)
+    path = without_missing_parents(Path(text))  # nothing made to follow a ".."
     if not path.suffix[1:] and path.name.strip("."):
         path = path.with_name(path.name.rstrip(".") + ".png")
     refusal = figure_refusal(path)

@@ -13,6 +13,7 @@ from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
 from pipelines.commands.evaluate import counted
+from pipelines.commands.output_paths import output_arg
 from pipelines.errors import PipelineError
 
 PART_SUFFIX: Final[str] = ".part"  # a file's name until it is complete
@@ -62,7 +63,7 @@ def _register_prepare(actions) -> None:
     prepare.add_argument(
         "--out",
         required=True,
-        type=path_arg,
+        type=output_arg,
         help="output directory for {train,val,test}/*.ndjson; a second prepare into it waits for the first "
         "(a hidden .NAME.prepare.lock beside it)",
     )
@@ -111,7 +112,7 @@ def _register_synth(actions) -> None:
         "--seed 0\n",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    synth.add_argument("--out", required=True, type=path_arg, help="ndjson file to write")
+    synth.add_argument("--out", required=True, type=output_arg, help="ndjson file to write")
     synth.add_argument(
         "--episodes",
         required=True,

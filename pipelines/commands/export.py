@@ -6,7 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
-from pipelines.commands import check_outside_the_zoos, check_writable, path_arg, replace_file
+from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
+from pipelines.commands.output_paths import output_arg
 from pipelines.errors import PipelineError
 
 # The MPC predicts over 4 steps (Table I); the CasADi function grows with H (its graph unrolls H recursive
@@ -41,7 +42,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("name", help="registered predictor or model-zoo name")
-    parser.add_argument("--out", required=True, type=path_arg, help="output file (.casadi)")
+    parser.add_argument("--out", required=True, type=output_arg, help="output file (.casadi)")
     parser.add_argument("--humans", type=int, default=7, help="number of humans N_h (default 7)")
     parser.add_argument("--robots", type=int, default=3, help="number of robots M (default 3)")
     parser.add_argument(

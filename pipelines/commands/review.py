@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, path_arg, write_output
+from pipelines.commands.output_paths import output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
@@ -70,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("path", type=path_arg, help="an .mcap file, or a folder of them (aggregate table)")
     parser.add_argument(
-        "--plot", type=path_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
+        "--plot", type=output_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
     )
     parser.add_argument(
         "--times",
@@ -80,7 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--animate",
-        type=path_arg,
+        type=output_arg,
         metavar="GIF|MP4",
         help="the episode as an animation at simulated speed; a frame is shown 0.02 s (GIF; MP4 0.001 s) "
         "to 655.35 s (a GIF's longest), so an episode of steps beyond plays faster or slower, as the output "

@@ -15,6 +15,7 @@ from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS, RADIUS
 from pipelines.commands import check_writable, write_output
+from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
@@ -219,7 +220,8 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
     check_choices_apply(config, spec)
     paths = {name: getattr(config.simulate, name) for name in ("plot", "record")}
     json_out = None if config.simulate.json is None else json_path(config.simulate.json)
-    run = SimulateRun(config, spec, json_out, **{k: None if v is None else Path(v) for k, v in paths.items()})
+    outputs = {k: None if v is None else without_missing_parents(Path(v)) for k, v in paths.items()}
+    run = SimulateRun(config, spec, json_out, **outputs)
     if run.plot is not None:
         from crowdsim.plotting import check_figure_path
 

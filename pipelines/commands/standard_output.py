@@ -12,6 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Final, TextIO
 
+from pipelines.commands.output_paths import without_missing_parents
 from pipelines.errors import PipelineError
 
 # The one value that names standard output. Told apart by identity, not equality: Path("./-") == Path("-"),
@@ -25,14 +26,15 @@ _document: int | TextIO | None = None
 
 
 def json_path(text: str) -> Path:
-    """An option's ``--json`` value (or a config file's): ``STDOUT`` for "-", else the path."""
+    """An option's ``--json`` value (or a config file's): ``STDOUT`` for "-", else the path
+    (``without_missing_parents``)."""
     if text == STDOUT_TEXT:
         return STDOUT
     if not text:
         import argparse
 
         raise argparse.ArgumentTypeError("must be a path or -, got ''")
-    return Path(text)
+    return without_missing_parents(Path(text))
 
 
 def is_stdout(path: object) -> bool:

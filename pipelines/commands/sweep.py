@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
+from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_plan, check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
@@ -283,7 +284,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     for key in ("experiment", "out"):
         if getattr(settings, key) is None:
             args.parser_error(f"the following arguments are required: --{key} (or [sweep] {key})")
-    out = Path(settings.out or "")
+    out = without_missing_parents(Path(settings.out or ""))
     if not args.dry_run:
         check_writable(out, cfg.label("sweep", "out"), directory=True)
         check_sweep_directory(out, cfg.label("sweep", "out"))

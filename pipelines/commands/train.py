@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from pipelines.commands import check_outside_the_zoos, check_writable, path_arg
+from pipelines.commands.output_paths import output_arg
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -130,7 +131,9 @@ def register(subparsers) -> None:
         "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
     )
     parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
-    parser.add_argument("--out", type=path_arg, default=None, help="run directory (default runs/train/NAME)")
+    parser.add_argument(
+        "--out", type=output_arg, default=None, help="run directory (default runs/train/NAME)"
+    )
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
     parser.add_argument("--seed", type=int, default=0, help="seed of weights, shuffling, augmentation")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -1,0 +1,37 @@
+"""The paths a command writes, as it reads them from its options and config: ``..`` after a folder that does
+not exist is taken away with that folder, before anything is made.
+
+``mkdir(parents=True)`` on ``NEW/x/../run`` had to create ``NEW/x`` to follow the ``..``, and left it behind
+empty, whether the command then wrote ``NEW/run`` or refused. Only a missing folder's ``..`` goes: where the
+part before ``..`` exists it stays, so that a symbolic link keeps its meaning (``link/..`` is the parent of
+the link's target, as the OS resolves it, not the folder holding the link). A leaf: commands and the
+benchmark scripts import it, it imports nothing of theirs."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+
+def without_missing_parents(path: Path) -> Path:
+    """``path`` with each ``..`` that follows a folder that does not exist removed along with that folder
+    (``NEW/x/../run`` -> ``NEW/run``); every other part as written. Relative paths are judged from the
+    current directory, as the command will use them."""
+    if ".." not in path.parts:
+        return path
+    kept: list[str] = []
+    for part in path.parts:
+        if part == ".." and kept and kept[-1] != ".." and not os.path.lexists(Path(*kept)):
+            kept.pop()  # nothing there: the OS would make it only to step out of it
+        else:
+            kept.append(part)
+    return Path(*kept) if kept else Path(".")
+
+
+def output_arg(text: str) -> Path:
+    """An argparse ``type`` for an output option: a path, ``without_missing_parents``. An empty value (an
+    unset shell variable) is refused, as ``path_arg`` refuses it: ``Path("")`` is the current directory."""
+    if not text:
+        raise argparse.ArgumentTypeError("must be a path, got ''")
+    return without_missing_parents(Path(text))
