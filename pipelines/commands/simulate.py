@@ -4,18 +4,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
-from crowdsim.world import PAPER_ROBOTS, RADIUS
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable, write_output
 from pipelines.commands.output_paths import without_missing_parents
+from pipelines.commands.simulate_table import format_table, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
@@ -127,58 +126,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-progress", action="store_true", default=None, help="no progress bar")
     add_config_options(parser)
     parser.set_defaults(func=run, parser_error=parser.error)
-
-
-def _fmt(x: float | None, unit: str = "", digits: int = 2) -> str:
-    # inf: no pair of agents to measure (no humans), as the JSON's null says
-    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{digits}f}{unit}"
-
-
-def format_table(summary: dict[str, Any], header: str) -> str:
-    n = summary["episodes"]
-
-    def rate(name: str) -> str:
-        if summary.get(f"{name}_rate") is None or math.isnan(summary[f"{name}_rate"]):
-            return "n/a"  # an episode without the field (an older record)
-        return f"{summary[f'{name}_rate']:6.1f} %  ({summary[f'{name}_count']}/{n})"
-
-    rows = [
-        ("success", rate("success")),
-        (
-            "travel time",
-            f"{_fmt(summary['travel_time_mean'], ' s')}  (mean over successes, std "
-            f"{_fmt(summary['travel_time_std'], ' s')})",
-        ),  # fmt: skip
-        (f"collision (<{COLLISION_DISTANCE:g} m)", rate("collision")),
-        (f"contact (<{2 * RADIUS:g} m)", rate("contact")),  # the radii touch (crowdsim.metrics)
-        # the closest approach with linear motion within each step, as CrowdNav takes it (crowdsim.metrics)
-        ("collision between steps", rate("collision_between_steps")),
-        ("contact between steps", rate("contact_between_steps")),  # what ends a gym episode on contact
-        ("discomfort", rate("discomfort")),
-        (
-            "per step",
-            f"collision {_fmt(summary.get('collision_step_freq'), ' %')}, contact "
-            f"{_fmt(summary.get('contact_step_freq'), ' %')}, discomfort "
-            f"{_fmt(summary.get('discomfort_step_freq'), ' %')} of states",
-        ),  # fmt: skip
-        ("timeout", rate("timeout")),
-        (
-            "min distance",
-            f"{_fmt(summary['min_distance_mean'], ' m')} mean, "
-            f"{_fmt(summary['min_distance_min'], ' m')} min (robot-human)",
-        ),  # fmt: skip
-        ("path length", f"{_fmt(summary['path_length_mean'], ' m')} mean per robot"),
-        (
-            "solve time",
-            f"median {_fmt(summary['solve_time_median_ms'], ' ms')}, "
-            f"p95 {_fmt(summary['solve_time_p95_ms'], ' ms')}, "
-            f"max {_fmt(summary['solve_time_max_ms'], ' ms')} per control step",
-        ),  # fmt: skip
-        ("IBR iterations", f"mean {_fmt(summary['iterations_mean'])}, max {summary['iterations_max']}"),
-        ("fallback steps", f"{summary['fallback_steps']} of {summary['control_steps']}"),
-    ]
-    width = max(len(name) for name, _ in rows)
-    return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
 
 
 @dataclass(frozen=True)
@@ -358,20 +305,10 @@ def _report(
     from pipelines.loop.episode import summarize
 
     cfg, spec = resolved.config, resolved.spec
-    scenario, sim, env_config = cfg.scenario, cfg.simulate, cfg.env
+    env_config = cfg.env
     summary = summarize(results)
-    # The paper's task needs no mention; goals as slots is another task and must show in every summary.
-    goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
-    goals += "" if env_config.formation == "auto" else f"formation {env_config.formation} | "
-    header = (
-        f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
-        f"margins {spec.margins.label} | "
-        f"{run_meta['profile']}/{run_meta['visibility']} | {goals}scenario {scenario.name} | "
-        f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
-        f"{sim.seed + sim.episodes - 1}"
-        + (f" | interrupted: {len(results)} episodes finished" if interrupted else "")
-    )
-    print(format_table(summary, header))
+    finished = len(results) if interrupted else None
+    print(format_table(summary, table_header(cfg, spec, run_meta, finished)))
     if resolved.json is not None:
         from pipelines.version import code_identity
 

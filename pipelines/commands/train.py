@@ -5,7 +5,6 @@ Lightning."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 from pathlib import Path
@@ -13,13 +12,12 @@ from typing import Any
 
 from pipelines.commands import check_outside_the_zoos, check_writable, path_arg
 from pipelines.commands.output_paths import output_arg
+from pipelines.commands.train_net import net_config_of, training_loss, trains_point_head
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
 DATASET_SUFFIX = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
 DEFAULT_PROTOCOL, DEFAULT_DATASET = "paper", "biwi_eth"
-# --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
-MAX_NET_CONFIG_CHARS = 65_536
 # Adam's learning rate: these nets train at 1e-3; far above any useful rate, and far below float32's
 # overflow (~3.4e38), where a huge --lr used to end inside Adam with a traceback.
 MAX_LR = 10.0
@@ -190,89 +188,6 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
     return files, prepared_dir(args.data_dir)
 
 
-def _net_config(args: argparse.Namespace) -> tuple[str | None, Any]:
-    """The pooling (None: the kind has none) and the network config the command line asks for."""
-    from predictors.models import model_kind
-
-    kind = model_kind(args.model)
-    overrides: dict[str, Any] = {}
-    if args.net_config is not None:
-        overrides = _parse_net_config(args.net_config)
-    for option, key, value in (
-        ("--pooling", "pooling", args.pooling),
-        ("--hidden-dim", "hidden_dim", args.hidden_dim),
-    ):
-        if value is None:
-            continue
-        if not kind.has_field(key) or key in kind.defining:  # the kind fixes it: models.ModelKind.defining
-            why = kind.defining.get(key) or (
-                "it has no social pooling" if key == "pooling" else f"its config has no {key}"
-            )
-            raise PipelineError(f"{option} does not apply to {args.model} ({why})")
-        if key in overrides:
-            raise PipelineError(f"{option} and --net-config both set {key}; give it once")
-        overrides[key] = value
-    try:
-        config = kind.config(overrides)
-    except PredictorError as exc:
-        source = "--net-config" if args.net_config is not None else "the options"
-        raise PipelineError(f"{source}: {args.model}: {exc}") from None
-    pooling = getattr(config, "pooling", None)
-    return (pooling if isinstance(pooling, str) else None), config
-
-
-def _loss(args: argparse.Namespace, net_config: Any) -> str:
-    """The loss the run trains on: --loss, else the one its net's head takes (gaussian for a Gaussian head,
-    l2 for a point head); PipelineError when --loss names one the net does not train on (it was ignored:
-    ``PredictorModule.model_step`` trains a point head on L2, the GAN on its own loss, whatever it says)."""
-    from predictors.models import model_kind
-
-    kind = model_kind(args.model)
-    if kind.adversarial:
-        if args.loss is not None:
-            raise PipelineError(
-                f"--loss does not apply to {args.model} (a GAN: it trains on its variety + adversarial loss)"
-            )
-        return "l2"
-    try:
-        head = kind.head_type(net_config)
-    except PredictorError as exc:
-        raise PipelineError(f"{args.model}: {exc}") from None
-    if head != "point":  # "gaussian"; any other head is refused by the contract check as the net is built
-        return str(args.loss or "gaussian")
-    if args.loss == "gaussian":
-        raise PipelineError(
-            f"--loss gaussian does not apply to {args.model} (its head_type is 'point': it trains on l2)"
-        )
-    return "l2"
-
-
-def _point_head(args: argparse.Namespace, net_config: Any) -> bool:
-    """Whether the net trains a point head on L2 (``_loss`` has read its head already)."""
-    from predictors.models import model_kind
-
-    kind = model_kind(args.model)
-    return not kind.adversarial and kind.head_type(net_config) == "point"
-
-
-def _parse_net_config(text: str) -> dict[str, Any]:
-    if len(text) > MAX_NET_CONFIG_CHARS:
-        raise PipelineError(
-            f"--net-config: {len(text)} characters, more than the {MAX_NET_CONFIG_CHARS} allowed"
-        )
-    try:
-        values = json.loads(text)
-    except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
-        raise PipelineError(f"--net-config: not valid JSON ({exc})") from None
-    except RecursionError:
-        raise PipelineError("--net-config: not valid JSON (nested too deeply)") from None
-    if not isinstance(values, dict):
-        raise PipelineError(
-            f"--net-config must be a JSON object like '{{\"hidden_dim\": 64}}', got {text[:60]!r}"
-        )
-    return values
-
-
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
     if not (math.isfinite(args.lr) and 0 < args.lr <= MAX_LR):
@@ -296,10 +211,10 @@ def run(args: argparse.Namespace) -> int:
     from predictors.checkpoint import check_name
 
     _check_numbers(args)
-    pooling, net_config = _net_config(args)
+    pooling, net_config = net_config_of(args)
     # before the data: a --loss the net does not train on is refused before files are read or prepared
     loss_typed = args.loss is not None
-    args.loss = _loss(args, net_config)
+    args.loss = training_loss(args, net_config)
     explicit = args.train is not None or args.val is not None
     _protocol_options(args, explicit)
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
@@ -353,7 +268,7 @@ def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: 
     recorded = recorded_loss(out, last)
     # the run's own when none is typed: runs before this default recorded "gaussian" for point heads too,
     # which trained on L2, so for a point head that record is the "l2" typed, not another setting
-    if not loss_typed or (recorded == "gaussian" and _point_head(args, net_config)):
+    if not loss_typed or (recorded == "gaussian" and trains_point_head(args, net_config)):
         settings["loss"] = args.loss = recorded or args.loss
     name = check_resumed_settings(out, settings, name_given=args.name is not None)
     done = check_last_checkpoint(last, settings)

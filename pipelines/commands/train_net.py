@@ -1,0 +1,98 @@
+"""``crowdmpc train``'s network: the net config the command line asks for (--model, --net-config,
+--pooling, --hidden-dim) and the loss it trains on (--loss), checked before Lightning is imported or a data
+file read."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from pipelines.errors import PipelineError
+from predictors.errors import PredictorError
+
+# --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
+MAX_NET_CONFIG_CHARS = 65_536
+
+
+def net_config_of(args: argparse.Namespace) -> tuple[str | None, Any]:
+    """The pooling (None: the kind has none) and the network config the command line asks for."""
+    from predictors.models import model_kind
+
+    kind = model_kind(args.model)
+    overrides: dict[str, Any] = {}
+    if args.net_config is not None:
+        overrides = parse_net_config(args.net_config)
+    for option, key, value in (
+        ("--pooling", "pooling", args.pooling),
+        ("--hidden-dim", "hidden_dim", args.hidden_dim),
+    ):
+        if value is None:
+            continue
+        if not kind.has_field(key) or key in kind.defining:  # the kind fixes it: models.ModelKind.defining
+            why = kind.defining.get(key) or (
+                "it has no social pooling" if key == "pooling" else f"its config has no {key}"
+            )
+            raise PipelineError(f"{option} does not apply to {args.model} ({why})")
+        if key in overrides:
+            raise PipelineError(f"{option} and --net-config both set {key}; give it once")
+        overrides[key] = value
+    try:
+        config = kind.config(overrides)
+    except PredictorError as exc:
+        source = "--net-config" if args.net_config is not None else "the options"
+        raise PipelineError(f"{source}: {args.model}: {exc}") from None
+    pooling = getattr(config, "pooling", None)
+    return (pooling if isinstance(pooling, str) else None), config
+
+
+def training_loss(args: argparse.Namespace, net_config: Any) -> str:
+    """The loss the run trains on: --loss, else the one its net's head takes (gaussian for a Gaussian head,
+    l2 for a point head); PipelineError when --loss names one the net does not train on (it was ignored:
+    ``PredictorModule.model_step`` trains a point head on L2, the GAN on its own loss, whatever it says)."""
+    from predictors.models import model_kind
+
+    kind = model_kind(args.model)
+    if kind.adversarial:
+        if args.loss is not None:
+            raise PipelineError(
+                f"--loss does not apply to {args.model} (a GAN: it trains on its variety + adversarial loss)"
+            )
+        return "l2"
+    try:
+        head = kind.head_type(net_config)
+    except PredictorError as exc:
+        raise PipelineError(f"{args.model}: {exc}") from None
+    if head != "point":  # "gaussian"; any other head is refused by the contract check as the net is built
+        return str(args.loss or "gaussian")
+    if args.loss == "gaussian":
+        raise PipelineError(
+            f"--loss gaussian does not apply to {args.model} (its head_type is 'point': it trains on l2)"
+        )
+    return "l2"
+
+
+def trains_point_head(args: argparse.Namespace, net_config: Any) -> bool:
+    """Whether the net trains a point head on L2 (``training_loss`` has read its head already)."""
+    from predictors.models import model_kind
+
+    kind = model_kind(args.model)
+    return not kind.adversarial and kind.head_type(net_config) == "point"
+
+
+def parse_net_config(text: str) -> dict[str, Any]:
+    if len(text) > MAX_NET_CONFIG_CHARS:
+        raise PipelineError(
+            f"--net-config: {len(text)} characters, more than the {MAX_NET_CONFIG_CHARS} allowed"
+        )
+    try:
+        values = json.loads(text)
+    except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
+        raise PipelineError(f"--net-config: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise PipelineError("--net-config: not valid JSON (nested too deeply)") from None
+    if not isinstance(values, dict):
+        raise PipelineError(
+            f"--net-config must be a JSON object like '{{\"hidden_dim\": 64}}', got {text[:60]!r}"
+        )
+    return values
