@@ -24,6 +24,7 @@ from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.loop.contract import called, checked_description, checked_output, episode_meta
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
+from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 
 
@@ -111,16 +112,18 @@ def run_episode(
     fallbacks: list[str | None] = []
     iterations: list[int] = []
     done = False
-    while not done:
-        out = checked_output(controller, called(controller, "act", obs), obs)
-        next_obs, done, _ = env.step(out.accelerations)
-        solve_times.append(float(out.solve_time_s))
-        statuses.append(str(out.status))
-        fallbacks.append(out.fallback)
-        iterations.append(int(out.iterations))
-        for observer in observers:
-            observer.on_step(obs, out, next_obs)
-        obs = next_obs
+    with interrupts_between_steps() as interrupt:  # CasADi's own Ctrl-C lines: see pipelines.loop.interrupt
+        while not done:
+            out = checked_output(controller, called(controller, "act", obs), obs)
+            next_obs, done, _ = env.step(out.accelerations)
+            solve_times.append(float(out.solve_time_s))
+            statuses.append(str(out.status))
+            fallbacks.append(out.fallback)
+            iterations.append(int(out.iterations))
+            for observer in observers:
+                observer.on_step(obs, out, next_obs)
+            obs = next_obs
+            interrupt.check()
 
     traj = env.trajectory()
     result = EpisodeResult(

@@ -37,6 +37,7 @@ from pipelines.loop.contract import (
 )
 from pipelines.loop.controllers import Controller
 from pipelines.loop.episode import EpisodeObserver, EpisodeResult
+from pipelines.loop.interrupt import interrupts_between_steps
 
 
 def _action_changer(env: gym.Env[Any, Any], base: CrowdNavEnv) -> str | None:
@@ -143,14 +144,16 @@ def run_gym_episode(
         observer.on_reset(obs, full_meta)
     steps = _Steps()
     done = False
-    while not done:
-        out = checked_output(controller, called(controller, "act", obs), obs)
-        _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
-        steps.add(out)
-        for observer in observers:
-            observer.on_step(obs, out, info["observation"])
-        obs = info["observation"]
-        done = terminated or truncated
+    with interrupts_between_steps() as interrupt:  # as run_episode's loop
+        while not done:
+            out = checked_output(controller, called(controller, "act", obs), obs)
+            _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
+            steps.add(out)
+            for observer in observers:
+                observer.on_step(obs, out, info["observation"])
+            obs = info["observation"]
+            done = terminated or truncated
+            interrupt.check()
     result = steps.result(base, full_meta, info)
     for observer in observers:
         observer.on_end(result)
