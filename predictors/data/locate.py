@@ -192,13 +192,29 @@ def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True
         return target
     writable_cache_dir("prepared")
     log = log or (lambda msg: print(msg, file=sys.stderr))
-    log(f"preparing {raw} into {target} ({_why_prepare(target)}; about half a minute)")
-    staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
-    _remove_dead_leftovers(target)
-    shutil.rmtree(staging, ignore_errors=True)
-    prepare_ewap(raw, staging, references=default_references(raw), progress=progress, log=log, log_dir=target)
-    _install_cache_entry(staging, target)
+    # Held for the whole preparation: two `train` runs started at once on an empty cache each prepared the
+    # same entry (half a minute of CPU apiece); the second now waits and takes the first's.
+    with locked(
+        _entry_lock(target),
+        "prepare the cached data",
+        waiting=lambda: log(f"waiting for another process preparing {target}"),
+    ):
+        if read_manifest(target) is not None:
+            return target
+        log(f"preparing {raw} into {target} ({_why_prepare(target)}; about half a minute)")
+        staging = target.with_name(f"{target.name}.{os.getpid()}.tmp")
+        _remove_dead_leftovers(target)
+        shutil.rmtree(staging, ignore_errors=True)
+        prepare_ewap(
+            raw, staging, references=default_references(raw), progress=progress, log=log, log_dir=target
+        )
+        _install_cache_entry(staging, target)
     return target
+
+
+def _entry_lock(target: Path) -> Path:
+    """The lock file beside the cache entry ``target``."""
+    return target.with_name(f".{target.name}.lock")
 
 
 def _why_prepare(target: Path) -> str:
@@ -226,18 +242,18 @@ def _remove_dead_leftovers(target: Path) -> None:
 
 
 def _install_cache_entry(staging: Path, target: Path) -> None:
-    """The fresh preparation ``staging`` renamed to the cache entry ``target``, under a lock beside it. A
-    good entry another process installed meanwhile is kept (it holds the same files); a damaged one (a file
-    edited or lost: ``read_manifest`` refuses it) is moved aside to a hidden name and replaced, where the
-    rename onto it failed on every run. It is only a cache: nothing of the user's is in it."""
+    """The fresh preparation ``staging`` renamed to the cache entry ``target``, under the caller's lock
+    (``_entry_lock``). A good entry already there (installed without that lock) is kept (it holds the same
+    files); a damaged one (a file edited or lost: ``read_manifest``
+    refuses it) is moved aside to a hidden name and replaced, where the rename onto it failed on every run. It
+    is only a cache: nothing of the user's is in it."""
     aside = target.with_name(f".{target.name}.{os.getpid()}.old")
     try:
-        with locked(target.with_name(f".{target.name}.lock"), "replace the cached preparation"):
-            if read_manifest(target) is not None:
-                return
-            if os.path.lexists(target):
-                os.rename(target, aside)
-            staging.rename(target)
+        if read_manifest(target) is not None:
+            return
+        if os.path.lexists(target):
+            os.rename(target, aside)
+        staging.rename(target)
     except OSError as exc:
         if read_manifest(target) is not None:  # a process that takes no lock (an older crowdmpc) installed it
             return

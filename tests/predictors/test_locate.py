@@ -164,6 +164,42 @@ def test_a_good_cache_entry_installed_meanwhile_is_kept(raw_root, monkeypatch, t
     assert sorted(p.name for p in entry.parent.iterdir()) == sorted([entry.name, f".{entry.name}.lock"])
 
 
+def test_two_preparations_of_one_cache_entry_at_once_prepare_once(raw_root, monkeypatch, tmp_path):
+    """Two `train` runs started at once on an empty cache each prepared the same entry (half a minute of CPU
+    apiece, one entry left): the second now waits for the first's and takes it."""
+    import threading
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    first_preparing, second_waiting = threading.Event(), threading.Event()
+
+    def hold_until_the_second_waits(out):
+        first_preparing.set()
+        second_waiting.wait(timeout=5)
+
+    calls = _fast_prepare(monkeypatch, then=hold_until_the_second_waits)
+    logs: dict[str, list[str]] = {"first": [], "second": []}
+    entries: dict[str, object] = {}
+
+    def second_log(msg):
+        logs["second"].append(msg)
+        if msg.startswith("waiting for another process"):
+            second_waiting.set()
+
+    def run(name, log):
+        entries[name] = prepared_dir(raw_root, log=log, progress=False)
+
+    first = threading.Thread(target=run, args=("first", logs["first"].append))
+    first.start()
+    assert first_preparing.wait(timeout=30)
+    second = threading.Thread(target=run, args=("second", second_log))
+    second.start()
+    first.join(timeout=60)
+    second.join(timeout=60)
+    assert len(calls) == 1
+    assert entries["first"] == entries["second"] and locate.read_manifest(entries["first"]) is not None
+    assert [m.split(" ")[0] for m in logs["second"]] == ["waiting"]
+
+
 def test_what_a_killed_preparation_left_in_the_cache_is_removed_by_the_next(raw_root, monkeypatch, tmp_path):
     """A preparation into the cache killed on the way left its staging folders there for good: each name holds
     its pid, so prepare_ewap's sweep of killed stagings (beside the folder the next process names, with that
