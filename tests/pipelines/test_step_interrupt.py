@@ -15,6 +15,15 @@ from pipelines.loop.episode import run_episode
 from pipelines.loop.gym_loop import run_gym_episode
 
 
+@pytest.fixture(autouse=True)
+def python_default_sigint():
+    """Python's own SIGINT handler, as a program run from a terminal has it; a test run started in the
+    background (`make test &`, nohup, some CI runners) inherits SIGINT ignored, which the loop keeps."""
+    saved = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, saved)
+
+
 class _Steps:
     def __init__(self) -> None:
         self.steps = 0
@@ -94,3 +103,12 @@ def test_a_handler_of_the_callers_own_is_kept():
         assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
     finally:
         signal.signal(signal.SIGINT, saved)
+
+
+def test_sigint_ignored_by_the_caller_stays_ignored():
+    """A background job (`cmd &` in a script, nohup) starts with SIGINT ignored: the loop leaves it so."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    controller, acts = _signalled("straight", at_step=2)
+    result = _episode(controller, _Steps(), gym_loop=False)
+    assert result.metrics.success and set(acts) == {"finished"}
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
