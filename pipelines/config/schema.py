@@ -23,10 +23,9 @@ those keys. ``[mpc]`` also refuses ``human_margins`` (margins are ``[controller]
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
-from typing import Any, Final, Literal
+from collections.abc import Mapping
+from dataclasses import fields
+from typing import Any, Final
 
 from crowdsim.env import EnvConfig
 from crowdsim.orca import OrcaParams
@@ -34,6 +33,7 @@ from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS, WorldFacts
 from mpc.config import MPCConfig
+from pipelines.config.keys import MAX_EPISODE_STEPS, MOST, Key, Section, keys_of, kind_of
 from pipelines.config.notes import ENV_NOTES, MPC_NOTES, ORCA_NOTES, WORLD_NOTES
 from pipelines.config.settings import (
     ControllerSettings,
@@ -44,80 +44,8 @@ from pipelines.config.settings import (
 )
 from pipelines.errors import PipelineError
 
-Kind = Literal["int", "float", "bool", "str", "ints", "strs"]
-
-
-@dataclass(frozen=True)
-class Key:
-    name: str
-    kind: Kind
-    default: Any  # None: no single default (printed commented out, with `example`)
-    note: str  # the comment `config show` prints: symbol, unit, equation, Table I value, CLI option
-    example: Any = None  # the commented-out value of a key without a default
-    most: float | None = None  # an upper bound on a number that sizes work (MOST)
-
-
-@dataclass(frozen=True)
-class Section:
-    name: str  # "mpc", "env.orca"
-    doc: str  # the comment above the section
-    keys: tuple[Key, ...]
-    # values (every key: default or chosen) and the sections built before -> the validated object
-    build: Callable[[dict[str, Any], Mapping[str, Any]], Any]
-    elsewhere: Mapping[str, str] = dataclasses.field(default_factory=dict)  # refused key -> where it goes
-
-    def key(self, name: str) -> Key | None:
-        return next((k for k in self.keys if k.name == name), None)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(k.name for k in self.keys)
-
-
-def _kind(value: Any) -> Kind:
-    if isinstance(value, bool):
-        return "bool"
-    if isinstance(value, int):
-        return "int"
-    if isinstance(value, float):
-        return "float"
-    if isinstance(value, str):
-        return "str"
-    raise TypeError(f"no config kind for {value!r}")
-
-
-# Numbers that size the work (NLP size, iterations, history rows, ORCA neighbours, episode length) are
-# bounded before anything runs; the dataclasses only require them positive. Far above any sensible value.
-# (Numbers whose huge or tiny values overflow the arithmetic are bounded by their dataclass, for every
-# caller: mpc.config.MPC_BOUNDS and MPC_LEAST, crowdsim.env_config.ENV_BOUNDS, OrcaParams' neighbor_dist
-# and time_horizon.)
-MOST: Final[Mapping[str, float]] = {
-    "world.obs_len": 1000,
-    "env.time_limit": 3600.0,  # s: an hour-long episode
-    "env.orca.max_neighbors": 1000,
-    "mpc.horizon": 100,
-    "mpc.j_max": 1000,
-    "mpc.solver_max_iter": 100_000,
-    "mpc.time_limit_s": 3600.0,
-}
-MAX_EPISODE_STEPS: Final[int] = 100_000  # time_limit / dt
-
-
-def _keys_of(obj: Any, names: tuple[str, ...], notes: Mapping[str, str], section: str) -> tuple[Key, ...]:
-    return tuple(
-        Key(
-            name,
-            _kind(getattr(obj, name)),
-            getattr(obj, name),
-            notes[name],
-            most=MOST.get(f"{section}.{name}"),
-        )
-        for name in names
-    )
-
-
 # ---- [world] ---------------------------------------------------------------------------------------------
-WORLD_KEYS: Final = _keys_of(WorldFacts(), tuple(f.name for f in fields(WorldFacts)), WORLD_NOTES, "world")
+WORLD_KEYS: Final = keys_of(WorldFacts(), tuple(f.name for f in fields(WorldFacts)), WORLD_NOTES, "world")
 
 
 def _build_world(values: dict[str, Any], built: Mapping[str, Any]) -> WorldFacts:
@@ -125,7 +53,7 @@ def _build_world(values: dict[str, Any], built: Mapping[str, Any]) -> WorldFacts
 
 
 # ---- [env.orca] ------------------------------------------------------------------------------------------
-ORCA_KEYS: Final = _keys_of(OrcaParams(), tuple(f.name for f in fields(OrcaParams)), ORCA_NOTES, "env.orca")
+ORCA_KEYS: Final = keys_of(OrcaParams(), tuple(f.name for f in fields(OrcaParams)), ORCA_NOTES, "env.orca")
 
 
 def _build_orca(values: dict[str, Any], built: Mapping[str, Any]) -> OrcaParams:
@@ -171,7 +99,7 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
     *(
         Key(
             name,
-            _kind(getattr(EnvConfig(), name)),
+            kind_of(getattr(EnvConfig(), name)),
             None,
             _profile_note(name),
             getattr(EnvConfig(), name),
@@ -255,7 +183,7 @@ def _build_controller(values: dict[str, Any], built: Mapping[str, Any]) -> Contr
 # ---- [mpc] -----------------------------------------------------------------------------------------------
 MPC_FROM_WORLD: Final[tuple[str, ...]] = ("dt", "v_max", "a_max")
 MPC_EXCLUDED: Final[tuple[str, ...]] = (*MPC_FROM_WORLD, "human_margins")
-MPC_KEYS: Final = _keys_of(
+MPC_KEYS: Final = keys_of(
     MPCConfig(), tuple(f.name for f in fields(MPCConfig) if f.name not in MPC_EXCLUDED), MPC_NOTES, "mpc"
 )
 

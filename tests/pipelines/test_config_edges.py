@@ -135,7 +135,7 @@ def test_the_default_seeds_are_zero():
 )
 def test_numbers_that_size_the_work_have_a_ceiling(setting, message):
     """A typo of a few zeros would allocate a history of a billion rows or run an hour-long solve per step;
-    each such number is refused one past its ceiling (schema.MOST, written out here by hand)."""
+    each such number is refused one past its ceiling (keys.MOST, written out here by hand)."""
     with pytest.raises(ConfigError, match=f"^--set {message}$"):
         load(sets=[setting])
 
