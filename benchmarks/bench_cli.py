@@ -165,7 +165,8 @@ def run_main(main: Callable[[], int | None]) -> int:
         try:
             return int(main() or 0)
         finally:
-            sys.stdout.flush()
+            if sys.stdout is not None:  # None: started with standard output closed (`>&-`)
+                sys.stdout.flush()
     except BrokenPipeError:
         if not stdout_reader_left():
             raise

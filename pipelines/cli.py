@@ -141,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             return _main(argv)
         finally:
-            sys.stdout.flush()
+            if sys.stdout is not None:  # None: started with standard output closed (`>&-`)
+                sys.stdout.flush()
     except BrokenPipeError:
         if not stdout_reader_left():  # another pipe (a worker's): a real error
             raise

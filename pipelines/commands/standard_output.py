@@ -53,6 +53,8 @@ def json_on_stdout(path: Path | None) -> Iterator[None]:
         yield
         return
     stream = sys.stdout
+    if stream is None:  # started with descriptor 1 closed (`>&-`): Python then has no sys.stdout
+        raise PipelineError("--json -: standard output is closed; name a file instead")
     stream.flush()
     saved = _divert_descriptor(stream)
     _document = stream if saved is None else saved

@@ -124,6 +124,25 @@ def test_a_failed_write_on_stdout_is_one_line(argv, prefix, tmp_path):
 
 
 @pytest.mark.parametrize(
+    ("argv", "prefix"),
+    [
+        (["-m", "pipelines.cli", *QUICK_SIMULATE, "--no-progress"], "crowdmpc simulate: error: "),
+        (
+            [str(BENCHMARKS / "cost_scale.py"), "--robots", "1", "--humans", "0", "--episodes", "1"],
+            "cost_scale.py: error: ",
+        ),
+    ],
+    ids=["simulate", "benchmark"],
+)
+def test_json_on_a_closed_stdout_is_one_line(argv, prefix, tmp_path):
+    # `>&-`: Python starts with sys.stdout None, which the diversion and the final flush took for a stream
+    done = _run([*argv, "--json", "-"], tmp_path, stdout=None, preexec_fn=lambda: os.close(1))
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == [f"{prefix}--json -: standard output is closed; name a file instead"]
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
     "argv",
     [
         ["cost_scale.py", "--robots", "1", "--humans", "0", "--episodes", "1", "--cost-scale", "1"],
