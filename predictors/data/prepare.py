@@ -195,7 +195,18 @@ def pid_alive(pid: int) -> bool:
         return False
     except OSError:  # another user's process: alive
         return True
-    return True
+    return not _zombie(pid)
+
+
+def _zombie(pid: int) -> bool:
+    """Whether ``pid`` ended and waits for its parent to reap it: ``kill(pid, 0)`` still finds it, yet it
+    prepares nothing more. A preparer killed holding the cache entry's lock is one at the very moment the
+    waiter takes that lock, and its staging was then kept for good. False where there is no /proc."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rfind(")") + 2 :].startswith("Z")  # the state follows the command name in brackets
 
 
 def _new_manifest(

@@ -1,4 +1,5 @@
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -222,6 +223,31 @@ def test_what_a_killed_preparation_left_in_the_cache_is_removed_by_the_next(raw_
     assert prepared_dir(raw_root, log=lambda msg: None, progress=False) == entry
     kept = sorted([entry.name, f".{entry.name}.lock"] + [name.format(alive, alive) for name in names])
     assert sorted(p.name for p in entry.parent.iterdir()) == kept
+
+
+def test_a_killed_lock_holders_staging_is_removed_by_the_waiter(raw_root, monkeypatch, tmp_path):
+    """The waiter takes the entry's lock as the killed holder's descriptors close, before its parent reaps it:
+    a zombie, which kill(pid, 0) finds, so its staging was taken for a live process's and kept for good."""
+    import subprocess
+    import sys
+    import time
+
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    _fast_prepare(monkeypatch)
+    entry = prepared_dir(raw_root, log=lambda msg: None, progress=False)
+    shutil.rmtree(entry)
+    holder = subprocess.Popen([sys.executable, "-c", "pass"])  # ended, not yet reaped: a zombie
+    stat = Path(f"/proc/{holder.pid}/stat")
+    deadline = time.monotonic() + 30
+    while " Z " not in stat.read_text() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    left = entry.parent / f".{entry.name}.{holder.pid}.tmp.prepare-{holder.pid}.tmp"
+    left.mkdir()
+    try:
+        assert prepared_dir(raw_root, log=lambda msg: None, progress=False) == entry
+    finally:
+        holder.wait()
+    assert sorted(p.name for p in entry.parent.iterdir()) == sorted([entry.name, f".{entry.name}.lock"])
 
 
 def test_loo_of_a_raw_copy_finds_only_the_trajnet_files_beside_it(raw_root, monkeypatch, tmp_path):
