@@ -102,7 +102,8 @@ def test_a_path_to_a_file_named_dash_still_writes_that_file(tmp_path):
     assert "success" in done.stdout and "summary" in json.loads((tmp_path / "-").read_text())
 
 
-@pytest.mark.parametrize(
+# A command and a benchmark script, with the prefix of their one-line errors.
+ONE_LINE_RUNS = pytest.mark.parametrize(
     ("argv", "prefix"),
     [
         (["-m", "pipelines.cli", *QUICK_SIMULATE, "--no-progress"], "crowdmpc simulate: error: "),
@@ -113,6 +114,9 @@ def test_a_path_to_a_file_named_dash_still_writes_that_file(tmp_path):
     ],
     ids=["simulate", "benchmark"],
 )
+
+
+@ONE_LINE_RUNS
 def test_a_failed_write_on_stdout_is_one_line(argv, prefix, tmp_path):
     with open("/dev/full", "w") as full:
         done = _run([*argv, "--json", "-"], tmp_path, stdout=full, stderr=subprocess.PIPE)
@@ -123,17 +127,7 @@ def test_a_failed_write_on_stdout_is_one_line(argv, prefix, tmp_path):
     )
 
 
-@pytest.mark.parametrize(
-    ("argv", "prefix"),
-    [
-        (["-m", "pipelines.cli", *QUICK_SIMULATE, "--no-progress"], "crowdmpc simulate: error: "),
-        (
-            [str(BENCHMARKS / "cost_scale.py"), "--robots", "1", "--humans", "0", "--episodes", "1"],
-            "cost_scale.py: error: ",
-        ),
-    ],
-    ids=["simulate", "benchmark"],
-)
+@ONE_LINE_RUNS
 def test_json_on_a_closed_stdout_is_one_line(argv, prefix, tmp_path):
     # `>&-`: Python starts with sys.stdout None, which the diversion and the final flush took for a stream
     done = _run([*argv, "--json", "-"], tmp_path, stdout=None, preexec_fn=lambda: os.close(1))
