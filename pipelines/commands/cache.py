@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 
-from pipelines.commands import examples
+from pipelines.commands import check_writable, examples, write_output
+from pipelines.commands.standard_output import is_stdout, json_path
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
   crowdmpc cache info
   crowdmpc cache info --json
+  crowdmpc cache info --json cache.json
   crowdmpc cache clear
 
 With jit (`crowdmpc sweep --jit auto|on`), each NLP is compiled with gcc once per machine and stored in
@@ -37,7 +39,14 @@ def register(subparsers) -> None:
         help="directory, entries, size, CasADi version and compiler",
         **examples("crowdmpc cache info", "crowdmpc cache info --json"),
     )
-    info.add_argument("--json", action="store_true", help="print the same as one JSON object")
+    info.add_argument(
+        "--json",
+        nargs="?",
+        const="-",
+        type=json_path,
+        metavar="FILE",
+        help="the same as one JSON object, on standard output (no FILE, or -) or into FILE",
+    )
     actions.add_parser(
         "clear",
         help="remove every compiled entry (the next jit build compiles again)",
@@ -55,9 +64,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.cache_command == "info":
         stats = compile_cache.info()
-        if args.json:
+        if args.json is not None:
+            check_writable(args.json, "--json", json_only=True)
             fields = {**stats.__dict__, "directory": str(stats.directory)}
-            print(json.dumps(fields, indent=2))
+            write_output(args.json, json.dumps(fields, indent=2) + "\n", "--json")
+            if not is_stdout(args.json):
+                print(f"wrote {args.json}")
             return 0
         where = str(stats.directory) + ("" if stats.exists else " (not created yet)")
         print(f"directory: {where}")

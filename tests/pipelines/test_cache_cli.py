@@ -39,6 +39,20 @@ def test_info_counts_entries_and_clear_removes_only_ours(folder, capsys):
     assert [p.name for p in folder.iterdir()] == ["README"]
 
 
+def test_info_json_takes_a_file_as_every_other_json_option(folder, tmp_path, capsys):
+    """``--json`` was a flag printing to stdout, where every other command's ``--json`` names a file or -."""
+    assert main(["cache", "info", "--json", "-"]) == 0
+    on_stdout = json.loads(capsys.readouterr().out)
+    report = tmp_path / "new" / "cache.json"
+    assert main(["cache", "info", "--json", str(report)]) == 0
+    assert capsys.readouterr().out == f"wrote {report}\n"
+    assert json.loads(report.read_text()) == on_stdout and on_stdout["directory"] == str(folder)
+    data = tmp_path / "data.csv"
+    data.write_text("a,b\n")
+    assert main(["cache", "info", "--json", str(data)]) == 2
+    assert "is not a JSON report" in capsys.readouterr().err and data.read_text() == "a,b\n"
+
+
 def test_clear_of_a_symlinked_cache_is_a_one_line_error(folder, tmp_path, capsys):
     target = tmp_path / "elsewhere"
     target.mkdir()
