@@ -22,7 +22,7 @@ from typing import Any
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from pipelines.cli import USER_ERRORS
 from pipelines.commands import check_writable, first_repeat
-from pipelines.commands.standard_output import is_stdout, json_path, write_document
+from pipelines.commands.standard_output import hold_standard_descriptors, is_stdout, json_path, write_document
 from pipelines.commands.standard_output import json_on_stdout as json_on_stdout  # the scripts' main()
 from pipelines.config import ConfigError
 from pipelines.errors import PipelineError
@@ -161,6 +161,7 @@ def run_main(main: Callable[[], int | None]) -> int:
     one line and exit status 2, and a reader that left (``... | head``) ending it quietly, as ``crowdmpc``."""
     from pipelines.commands import quit_closed_stdout, stdout_reader_left
 
+    hold_standard_descriptors()
     try:
         try:
             return int(main() or 0)

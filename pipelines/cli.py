@@ -136,7 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     """The ``crowdmpc`` command. Its output flushed here, so that a reader that left (``crowdmpc review ... |
     head``) ends the command quietly, with the status of a SIGPIPE, instead of a BrokenPipeError traceback."""
     from pipelines.commands import quit_closed_stdout, stdout_reader_left
+    from pipelines.commands.standard_output import hold_standard_descriptors
 
+    hold_standard_descriptors()
     try:
         try:
             return _main(argv)

@@ -42,6 +42,13 @@ def is_stdout(path: object) -> bool:
     return path is STDOUT
 
 
+def shown(path: Path) -> str:
+    """``path`` as a message names it: a file called "-" in the working directory as "./-", since
+    ``Path("./-")`` prints as "-", which reads as standard output ("wrote -" after ``--json ./-``)."""
+    text = str(path)
+    return "./-" if text == STDOUT_TEXT else text
+
+
 @contextlib.contextmanager
 def json_on_stdout(path: Path | None) -> Iterator[None]:
     """Around a run whose JSON output is ``path``: when that is ``STDOUT``, whatever else the run prints goes
@@ -101,3 +108,21 @@ def write_document(text: str, option: str) -> None:
         raise PipelineError(
             f"{option} -: could not write to standard output ({exc.strerror or exc})"
         ) from None
+
+
+def hold_standard_descriptors() -> None:
+    """For a program started with a standard descriptor closed (``>&-``, ``2>&-``): /dev/null on it, as a
+    daemon does, so that no file the run opens takes its number (with ``2>&-`` the MCAP log was descriptor 2,
+    and whatever a C library or child process writes on stderr went into the log), and a sys.stderr that can
+    be written when Python had none (a progress bar wrote to None and ended the run with status 1).
+    sys.stdout stays None: ``--json -`` then refuses in one line (``json_on_stdout``)."""
+    for fd in (0, 1, 2):  # in order: os.open takes the lowest free number, so each lands on its own
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+    if sys.stderr is None:
+        sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")  # noqa: SIM115 (the process's)

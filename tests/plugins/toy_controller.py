@@ -8,6 +8,7 @@ is shorter; the acceleration that reaches it in one step is clipped to the bound
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
@@ -45,6 +46,18 @@ class StraightLine:
 
     def close(self) -> None:
         pass
+
+
+class StderrNoise(StraightLine):
+    """Writes on descriptors 1 and 2 at each step, below Python, as a C library's messages (CasADi's on
+    std::cout and std::cerr) or a child process's do."""
+
+    NOISE = b"toy controller: a C library's warning\n"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        for fd in (1, 2):
+            os.write(fd, self.NOISE)
+        return super().act(obs)
 
 
 class NoAct:
