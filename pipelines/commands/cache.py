@@ -6,7 +6,7 @@ import argparse
 import json
 
 from pipelines.commands import check_writable, examples, write_output
-from pipelines.commands.standard_output import is_stdout, json_path
+from pipelines.commands.standard_output import is_stdout, json_path, shown
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
             fields = {**stats.__dict__, "directory": str(stats.directory)}
             write_output(args.json, json.dumps(fields, indent=2) + "\n", "--json")
             if not is_stdout(args.json):
-                print(f"wrote {args.json}")
+                print(f"wrote {shown(args.json)}")
             return 0
         where = str(stats.directory) + ("" if stats.exists else " (not created yet)")
         print(f"directory: {where}")

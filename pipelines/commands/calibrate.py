@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, humans_list, path_arg, write_output
 from pipelines.commands.calibrate_store import plans_with_new_blocks, storing, take_back_killed
-from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -346,5 +346,5 @@ def _calibrate(args: argparse.Namespace) -> int:
             payload["holdout_rows"] = int(holdout.shape[0])
         write_output(args.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
         if not is_stdout(args.json):
-            print(f"wrote {args.json}")
+            print(f"wrote {shown(args.json)}")
     return 0

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from typing import Final
 
 from pipelines.commands import check_writable, write_output
-from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
@@ -133,5 +133,5 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_output(args.json, json.dumps(result, indent=2) + "\n", "--json")
         if not is_stdout(args.json):
-            print(f"wrote {args.json}")
+            print(f"wrote {shown(args.json)}")
     return 0

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, path_arg, write_output
 from pipelines.commands.output_paths import output_arg
-from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
 
@@ -315,5 +315,5 @@ def _review(args: argparse.Namespace) -> int:
         # plain: a hostile or foreign file's NaN metrics would make the report invalid JSON
         write_output(args.json, json.dumps(plain(report), indent=2, allow_nan=False) + "\n", "--json")
         if not is_stdout(args.json):
-            print(f"json: {args.json}")
+            print(f"json: {shown(args.json)}")
     return 1 if failed else 0

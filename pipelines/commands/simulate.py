@@ -15,7 +15,7 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable, write_output
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_table import format_table, table_header
-from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
@@ -321,7 +321,7 @@ def _report(
         }
         write_output(resolved.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
         if not is_stdout(resolved.json):
-            print(f"wrote {resolved.json}")
+            print(f"wrote {shown(resolved.json)}")
     if resolved.plot is not None:
         _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:

@@ -96,10 +96,16 @@ def test_review_json_goes_alone_to_stdout(recording, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_path_to_a_file_named_dash_still_writes_that_file(tmp_path):
-    done = _run(["-m", "pipelines.cli", *QUICK_SIMULATE, "--no-progress", "--json", "./-"], tmp_path)
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [([*QUICK_SIMULATE, "--no-progress"], "summary"), (["cache", "info"], "directory")],
+    ids=["simulate", "cache-info"],
+)
+def test_a_path_to_a_file_named_dash_still_writes_that_file(argv, field, tmp_path):
+    done = _run(["-m", "pipelines.cli", *argv, "--json", "./-"], tmp_path)
     assert done.returncode == 0, done.stderr
-    assert "success" in done.stdout and "summary" in json.loads((tmp_path / "-").read_text())
+    assert field in json.loads((tmp_path / "-").read_text())
+    assert done.stdout.splitlines()[-1] == "wrote ./-"  # not "wrote -", which reads as standard output
 
 
 # A command and a benchmark script, with the prefix of their one-line errors.
