@@ -9,6 +9,7 @@ PipelineError naming it (``pipelines.loop.contract``).
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -165,7 +166,9 @@ def run_episodes(
 ) -> list[EpisodeResult]:
     """``episodes`` episodes with one controller built once from ``spec``; episode ``i`` uses ``seed + i``.
 
-    ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file).
+    ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file);
+    when that episode raises (Ctrl-C, a plugin's error), its observers that have a ``close`` are closed
+    before the exception goes on (a recorder finishes its file as it is).
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
@@ -179,16 +182,20 @@ def run_episodes(
     try:
         for i in bar:
             observers = tuple(observers_factory()) if observers_factory is not None else ()
-            result = run_episode(
-                controller,
-                seed=seed + i,
-                scenario=scenario,
-                n_humans=n_humans,
-                n_robots=n_robots,
-                env_config=env_config,
-                observers=observers,
-                meta=run_meta,
-            )
+            try:
+                result = run_episode(
+                    controller,
+                    seed=seed + i,
+                    scenario=scenario,
+                    n_humans=n_humans,
+                    n_robots=n_robots,
+                    env_config=env_config,
+                    observers=observers,
+                    meta=run_meta,
+                )
+            except BaseException:
+                _close_quietly(observers)
+                raise
             results.append(result)
             successes += result.metrics.success
             rate = 100.0 * successes / len(results)
@@ -215,3 +222,15 @@ def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
     out["fallback_steps"] = int(sum(f is not None for r in results for f in r.fallbacks))
     out["statuses"] = dict(Counter(s for r in results for s in r.statuses))
     return out
+
+
+def _close_quietly(observers: Iterable[EpisodeObserver]) -> None:
+    """Close the observers of an episode that raised. Nobody else can: the factory made them inside
+    ``run_episodes``, and the traceback a notebook keeps (``sys.last_traceback``) kept a recorder's
+    ``.part`` open and locked, so that running the cell again was refused as "another run is recording
+    that episode". What a ``close`` raises is dropped: the episode's own exception is the one to see."""
+    for observer in observers:
+        close = getattr(observer, "close", None)
+        if callable(close):
+            with contextlib.suppress(Exception):
+                close()

@@ -1,0 +1,73 @@
+"""crowdmpc as a library in one long-lived process (a notebook, a training loop, a parameter search): what a
+call holds must be released when it returns or raises, so that the next call in the same process works
+and nothing builds up."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from pipelines.logs.recording import McapEpisodeRecorder
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.episode import run_episodes
+
+
+def _open_files_under(folder: Path) -> list[str]:
+    """The files of this process's descriptors that lie in ``folder``."""
+    found = []
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:  # the descriptor listdir itself used, closed since
+            continue
+        if target.startswith(str(folder)):
+            found.append(target)
+    return found
+
+
+class _CtrlCAtStep:
+    """Ctrl-C landing in the ``at``-th step of an episode."""
+
+    def __init__(self, at: int) -> None:
+        self.at, self.steps = at, 0
+
+    def on_reset(self, obs, meta) -> None:
+        pass
+
+    def on_step(self, obs, out, next_obs) -> None:
+        self.steps += 1
+        if self.steps == self.at:
+            raise KeyboardInterrupt
+
+    def on_end(self, result) -> None:
+        pass
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="reads the process's descriptors in /proc")
+def test_an_interrupted_run_releases_the_recording_its_factory_made(tmp_path):
+    """A notebook keeps the traceback of a cell interrupted by Ctrl-C (``sys.last_traceback``), and with it
+    the recorder ``observers_factory`` made: its ``.part`` stayed open and locked, and running the cell
+    again in the same process was refused as "another run is recording that episode into this folder"."""
+
+    def run(*extra):
+        return run_episodes(
+            ControllerSpec("orca"),
+            episodes=2,
+            seed=0,
+            scenario="circle",
+            n_humans=3,
+            n_robots=2,
+            observers_factory=lambda: (McapEpisodeRecorder(tmp_path), *extra),
+            progress=False,
+        )
+
+    with pytest.raises(KeyboardInterrupt) as caught:  # kept, as the notebook keeps it
+        run(_CtrlCAtStep(3))
+    assert _open_files_under(tmp_path) == []
+    results = run()  # the cell run again
+    assert [r.seed for r in results] == [0, 1]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["circle_seed000000.mcap", "circle_seed000001.mcap"]
+    assert _open_files_under(tmp_path) == []
+    assert caught.value is not None
