@@ -8,14 +8,16 @@
 * ``ObserveEpisodes(env, observers)`` wraps the environment for a policy that is not a ``Controller`` (a
   CrowdNav-style velocity policy under ``crowdsim.gym_wrappers.VelocityControl``): every episode goes to the
   observers (``pipelines.logs.recording.McapEpisodeRecorder`` records it to MCAP, each episode to its own
-  file, one of a seed reset to again too) and ends in an ``EpisodeResult`` in ``results``. The action it
-  sees is the acceleration command; its "solve time" is the wall time from the environment handing out an
-  observation to the next action arriving (the policy's).
+  file, one of a seed reset to again too) and ends in an ``EpisodeResult`` in ``results`` (the last
+  ``buffer_length``, 100 by default, as gymnasium's ``RecordEpisodeStatistics`` keeps its queues). The
+  action it sees is the acceleration command; its "solve time" is the wall time from the environment
+  handing out an observation to the next action arriving (the policy's).
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -173,6 +175,9 @@ class ObserveEpisodes(
     :param controller: the name the records give the policy.
     :param meta: added to each episode's meta (``contract.episode_meta``); it may not set the episode's own
         fields (seed, scenario, ...: ``contract.OWN_FIELDS``).
+    :param buffer_length: how many of the latest episodes ``results`` keeps (None: every one).
+        Each holds its episode's trajectories, so keeping every one made a training loop's memory grow
+        without end: 12 KB an episode at 7 humans, over a gigabyte per 10^5 episodes.
     """
 
     def __init__(
@@ -182,9 +187,16 @@ class ObserveEpisodes(
         *,
         controller: str = "gym_policy",
         meta: Mapping[str, Any] | None = None,
+        buffer_length: int | None = 100,
     ):
+        if buffer_length is not None and (
+            isinstance(buffer_length, bool) or not isinstance(buffer_length, int) or buffer_length < 1
+        ):
+            raise PipelineError(f"buffer_length must be an int >= 1 or None, got {buffer_length!r:.60}")
         # env.spec can then rebuild the wrapper (gym.make(env.spec)), and check_env accepts it
-        gym.utils.RecordConstructorArgs.__init__(self, observers=observers, controller=controller, meta=meta)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, observers=observers, controller=controller, meta=meta, buffer_length=buffer_length
+        )
         gym.Wrapper.__init__(self, env)
         self._base = crowdnav_env(env)
         changer = _action_changer(env, self._base)
@@ -196,7 +208,7 @@ class ObserveEpisodes(
         self.observers = tuple(observers)
         self.controller = controller
         self.meta = checked_meta(meta, "ObserveEpisodes")
-        self.results: list[EpisodeResult] = []  # every finished episode, in order
+        self.results: deque[EpisodeResult] = deque(maxlen=buffer_length)  # the latest finished, in order
         self._obs: Observation | None = None
         self._meta: dict[str, Any] = {}
         self._steps = _Steps()

@@ -7,11 +7,16 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from crowdsim.env_config import EnvConfig
+from crowdsim.gym_env import CrowdNavEnv
+from pipelines.errors import PipelineError
 from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.episode import run_episodes
+from pipelines.loop.gym_loop import ObserveEpisodes
 
 
 def _open_files_under(folder: Path) -> list[str]:
@@ -71,3 +76,34 @@ def test_an_interrupted_run_releases_the_recording_its_factory_made(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["circle_seed000000.mcap", "circle_seed000001.mcap"]
     assert _open_files_under(tmp_path) == []
     assert caught.value is not None
+
+
+def _episodes(env: ObserveEpisodes, seeds: range) -> None:
+    for seed in seeds:
+        env.reset(seed=seed)
+        done = False
+        while not done:
+            *_, terminated, truncated, _ = env.step(np.zeros((2, 2)))
+            done = terminated or truncated
+
+
+def test_a_training_loop_keeps_the_latest_episodes_not_every_one():
+    """``ObserveEpisodes.results`` kept every finished episode with its trajectories: a training loop's
+    memory grew by 12 KB an episode (7 humans), without end. Now the latest ``buffer_length``."""
+
+    def observed(**kwargs) -> ObserveEpisodes:
+        base = CrowdNavEnv(n_humans=2, n_robots=2, config=EnvConfig(time_limit=0.8, timeout_margin=0.0))
+        return ObserveEpisodes(base, [], **kwargs)
+
+    env = observed()
+    _episodes(env, range(150))
+    assert len(env.results) == 100 and [r.seed for r in env.results] == list(range(50, 150))
+    env = observed(buffer_length=3)
+    _episodes(env, range(5))
+    assert [r.seed for r in env.results] == [2, 3, 4]
+    env = observed(buffer_length=None)  # every one, on request
+    _episodes(env, range(120))
+    assert len(env.results) == 120
+    for bad in (0, -1, True, 2.5, "10"):
+        with pytest.raises(PipelineError, match="buffer_length must be an int >= 1 or None"):
+            observed(buffer_length=bad)
