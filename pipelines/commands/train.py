@@ -38,7 +38,8 @@ sets hyper-parameters of the kind's config (a JSON object; unknown keys and bad 
 
 Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for --resume), csv/ and
 tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (state_dict + config) with
-NAME.metrics.json (TrajNet++ val/test metrics of the best epoch). `crowdmpc zoo add OUT/NAME.pt` puts the pair
+NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net's top-20 drawn as
+`crowdmpc evaluate --top-k 20` draws it, whatever --seed). `crowdmpc zoo add OUT/NAME.pt` puts the pair
 into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise); it
 takes the run's settings, of which only --epochs may change, upwards (the count already trained only finishes
 a run that stopped before writing its metrics). --val and --test files are read as the evaluation reads them

@@ -73,7 +73,10 @@ def evaluate_splits(
             result = evaluate(
                 predictor,
                 files[split],
-                EvalConfig(top_k=top_k, seed=args.seed),
+                # evaluate's own sampling seed, not the training --seed: the top-k stored (and shown by `zoo
+                # list`) is then what `crowdmpc evaluate --top-k K` prints, and nets trained with different
+                # seeds are scored on the same noise
+                EvalConfig(top_k=top_k),
                 progress=not args.no_progress,
                 root=root,
             )
