@@ -108,7 +108,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--humans",
         type=humans_list,
         metavar="5,6,7",
-        help=f"closed-loop crowd sizes (default {','.join(map(str, default['humans']))})",
+        help="closed-loop crowd sizes, cycled smallest first whatever their order "
+        f"(default {','.join(map(str, default['humans']))})",
     )
     p.add_argument("--seed", type=int, help=f"first closed-loop seed (default {default['seed']})")
     p.add_argument(

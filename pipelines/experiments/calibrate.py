@@ -132,6 +132,9 @@ class ClosedLoopPlan:
             raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
         if max(self.humans) > MAX_HUMANS:  # else the episode of that size failed after those before it ran
             raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
+        # A set of crowd sizes, as a sweep's --humans: 7,5 gave the seeds other sizes than 5,7 (another
+        # calibration of the same episodes' kind), and the block recorded the order as typed.
+        object.__setattr__(self, "humans", tuple(sorted(self.humans)))
         if self.controller not in ("cmpc", "dmpc"):
             raise PipelineError(f"calibration runs cmpc or dmpc, got {self.controller!r}")
         if not self.near > 0:  # NaN too
