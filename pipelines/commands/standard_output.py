@@ -91,7 +91,9 @@ def write_document(text: str, option: str) -> None:
     """``text`` on the run's real standard output. A reader that left is the caller's BrokenPipeError (the
     CLI ends quietly on it); any other failure (``> /dev/full``) is a one-line PipelineError naming
     ``option``."""
-    target: int | TextIO = sys.stdout if _document is None else _document
+    target: int | TextIO | None = sys.stdout if _document is None else _document
+    if target is None:  # started with descriptor 1 closed, a command without json_on_stdout (cache info)
+        raise PipelineError(f"{option} -: standard output is closed; name a file instead")
     try:
         if isinstance(target, int):
             # written straight to the descriptor: a failed buffered write would be flushed, and fail,

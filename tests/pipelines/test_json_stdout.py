@@ -142,6 +142,18 @@ def test_json_on_a_closed_stdout_is_one_line(argv, prefix, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("json_args", [["--json", "-"], ["--json"]], ids=["dash", "bare"])
+def test_cache_info_json_on_a_closed_stdout_is_one_line(json_args, monkeypatch, tmp_path):
+    # cache info writes its document without json_on_stdout, whose check for sys.stdout None it never met:
+    # write_document wrote to None, an AttributeError traceback and status 1
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path / "cache"))
+    argv = ["-m", "pipelines.cli", "cache", "info", *json_args]
+    done = _run(argv, tmp_path, stdout=None, preexec_fn=lambda: os.close(1))
+    assert done.returncode == 2
+    message = "crowdmpc cache: error: --json -: standard output is closed; name a file instead"
+    assert done.stderr.splitlines() == [message]
+
+
 @pytest.mark.parametrize(
     "argv",
     [
