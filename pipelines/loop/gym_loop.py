@@ -17,7 +17,6 @@
 from __future__ import annotations
 
 import time
-from collections import deque
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -208,7 +207,9 @@ class ObserveEpisodes(
         self.observers = tuple(observers)
         self.controller = controller
         self.meta = checked_meta(meta, "ObserveEpisodes")
-        self.results: deque[EpisodeResult] = deque(maxlen=buffer_length)  # the latest finished, in order
+        # a list, trimmed, not a deque(maxlen=...): users slice it (results[-10:]) and compare it with lists
+        self.results: list[EpisodeResult] = []  # the latest finished, in order
+        self.buffer_length = buffer_length
         self._obs: Observation | None = None
         self._meta: dict[str, Any] = {}
         self._steps = _Steps()
@@ -245,6 +246,8 @@ class ObserveEpisodes(
         if terminated or truncated:
             result = self._steps.result(self._base, self._meta, info)
             self.results.append(result)
+            if self.buffer_length is not None and len(self.results) > self.buffer_length:
+                del self.results[: len(self.results) - self.buffer_length]
             for observer in self.observers:
                 observer.on_end(result)
         self._handed_out = time.perf_counter()

@@ -107,3 +107,14 @@ def test_a_training_loop_keeps_the_latest_episodes_not_every_one():
     for bad in (0, -1, True, 2.5, "10"):
         with pytest.raises(PipelineError, match="buffer_length must be an int >= 1 or None"):
             observed(buffer_length=bad)
+
+
+def test_the_kept_episodes_are_still_a_list():
+    """``results`` was a list, and a deque(maxlen=...) that kept the latest episodes refused what users do
+    with one: ``env.results[-10:]`` raised TypeError, and ``env.results == []`` was False when empty."""
+    base = CrowdNavEnv(n_humans=2, n_robots=2, config=EnvConfig(time_limit=0.8, timeout_margin=0.0))
+    env = ObserveEpisodes(base, [], buffer_length=3)
+    assert env.results == []
+    _episodes(env, range(5))
+    assert [r.seed for r in env.results[-2:]] == [3, 4]
+    assert [r.seed for r in env.results + []] == [2, 3, 4]
