@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import numbers
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -188,10 +189,7 @@ class ObserveEpisodes(
         meta: Mapping[str, Any] | None = None,
         buffer_length: int | None = 100,
     ):
-        if buffer_length is not None and (
-            isinstance(buffer_length, bool) or not isinstance(buffer_length, int) or buffer_length < 1
-        ):
-            raise PipelineError(f"buffer_length must be an int >= 1 or None, got {buffer_length!r:.60}")
+        buffer_length = _checked_length(buffer_length)
         # env.spec can then rebuild the wrapper (gym.make(env.spec)), and check_env accepts it
         gym.utils.RecordConstructorArgs.__init__(
             self, observers=observers, controller=controller, meta=meta, buffer_length=buffer_length
@@ -252,3 +250,13 @@ class ObserveEpisodes(
                 observer.on_end(result)
         self._handed_out = time.perf_counter()
         return obs, reward, terminated, truncated, info
+
+
+def _checked_length(value: object) -> int | None:
+    """``buffer_length`` as an int, or None. Any integral type counts: a count computed with numpy
+    (``np.int64``) is no ``int`` and was refused."""
+    if value is None:
+        return None
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool) and int(value) >= 1:
+        return int(value)
+    raise PipelineError(f"buffer_length must be an int >= 1 or None, got {value!r:.60}")

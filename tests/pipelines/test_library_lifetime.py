@@ -118,3 +118,14 @@ def test_the_kept_episodes_are_still_a_list():
     _episodes(env, range(5))
     assert [r.seed for r in env.results[-2:]] == [3, 4]
     assert [r.seed for r in env.results + []] == [2, 3, 4]
+
+
+def test_a_numpy_integer_is_a_buffer_length():
+    """A length computed with numpy (``np.int64``) is no ``int``: it was refused as "must be an int"."""
+    base = CrowdNavEnv(n_humans=2, n_robots=2, config=EnvConfig(time_limit=0.8, timeout_margin=0.0))
+    env = ObserveEpisodes(base, [], buffer_length=np.int64(2))
+    _episodes(env, range(3))
+    assert [r.seed for r in env.results] == [1, 2] and type(env.buffer_length) is int
+    for bad in (np.int64(0), np.float64(2.0), np.bool_(True)):
+        with pytest.raises(PipelineError, match="buffer_length must be an int >= 1 or None"):
+            ObserveEpisodes(base, [], buffer_length=bad)
