@@ -157,10 +157,12 @@ class Experiment:
         return replace(self, world=world)
 
     def cells(self, humans: Sequence[int] | None = None, n_robots: int = PAPER_ROBOTS) -> tuple[Cell, ...]:
-        """Cells in table order: for each number of humans, every method."""
+        """Cells in table order: for each number of humans, smallest first, every method. Sorted: ``--humans
+        6,5`` listed the 6-human rows of cells.csv, episodes.csv and episodes.jsonl first, where table.md and
+        the plots go by crowd size and 5,6 gives the same episodes."""
         return tuple(
             Cell(label, spec, n, n_robots, self.method_worlds.get(label, self.world))
-            for n in (humans or self.humans)
+            for n in sorted(humans or self.humans)
             for label, spec in self.methods
         )
 

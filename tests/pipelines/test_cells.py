@@ -31,6 +31,15 @@ def test_tasks_run_episode_index_by_episode_index_across_the_cells():
     ]
 
 
+def test_crowd_sizes_run_and_report_smallest_first_whatever_their_order():
+    """``--humans 6,5`` gave the 6-human rows first in cells.csv, episodes.csv and episodes.jsonl; 5,6 runs
+    the same episodes, and table.md and the plots go by crowd size."""
+    table2 = get_experiment("table2")
+    assert table2.cells((6, 5)) == table2.cells((5, 6))
+    assert [c.n_humans for c in table2.cells((7, 5, 6))] == [5, 5, 6, 6, 7, 7]
+    assert table2.tasks(2, humans=(6, 5)) == table2.tasks(2, humans=(5, 6))
+
+
 def test_a_predictor_named_twice_is_refused_naming_it():
     predictors = get_experiment("predictors")
     with pytest.raises(PipelineError, match=r"--predictors names \['constant_velocity'\] more than once"):
