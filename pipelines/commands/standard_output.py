@@ -117,7 +117,7 @@ def hold_standard_descriptors() -> None:
     daemon does, so that no file the run opens takes its number (with ``2>&-`` the MCAP log was descriptor 2,
     and whatever a C library or child process writes on stderr went into the log), and a sys.stderr that can
     be written when Python had none (a progress bar wrote to None and ended the run with status 1).
-    sys.stdout stays None: ``--json -`` then refuses in one line (``json_on_stdout``)."""
+    sys.stdout stays None: ``--json -`` then refuses in one line (``json_on_stdout``, ``write_document``)."""
     for fd in (0, 1, 2):  # in order: os.open takes the lowest free number, so each lands on its own
         try:
             os.fstat(fd)
