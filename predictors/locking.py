@@ -1,5 +1,5 @@
 """An exclusive lock on a file for a ``with`` block: how the writers of a zoo's manifest, and preparations
-of one data folder, wait for each other.
+of one data folder, wait for each other; and whether the process a leftover file names still runs.
 
 A lock file rather than the folder itself: on NFS (home directories on clusters) flock is emulated with fcntl
 locks, which need a file opened for writing. The file stays once released: removing it would let a waiter
@@ -51,3 +51,28 @@ def _planted(path: Path) -> bool:
         return not stat.S_ISREG(os.lstat(path).st_mode)
     except OSError:
         return False
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs: what a staging folder, a journal or a scratch folder named by its
+    writer's pid is judged by (kept while its writer runs, removed once it is gone). Another user's process
+    counts as running; a zombie, ended and not yet reaped, does not."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return not _zombie(pid)
+
+
+def _zombie(pid: int) -> bool:
+    """Whether ``pid`` ended and waits for its parent to reap it: ``kill(pid, 0)`` still finds it, yet it
+    writes nothing more. A preparer killed holding the cache entry's lock is one at the very moment the
+    waiter takes that lock, and its staging was then kept for good. False where there is no /proc."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            stat = f.read()
+    except OSError:
+        return False
+    return stat[stat.rfind(")") + 2 :].startswith("Z")  # the state follows the command name in brackets

@@ -73,9 +73,9 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
 def take_back_killed() -> None:
     """Take back the blocks of each calibrate killed during a held-out run that planned with them (kill -9,
     a crash: no chance to put them back itself), as its Ctrl-C would have: from the journal it left."""
-    from pipelines.experiments.worker import process_alive
     from predictors.calibration import Calibration
     from predictors.calibration_store import calibrations_path
+    from predictors.locking import pid_alive
 
     path = calibrations_path()
     if not path.parent.is_dir():
@@ -84,7 +84,7 @@ def take_back_killed() -> None:
         match = _JOURNAL.fullmatch(journal.name)
         # this run has written no journal yet: one under its own PID is a killed run's whose PID it got (every
         # run in a fresh container is PID 1), and it would write its own journal over that one
-        if match is None or (int(match["pid"]) != os.getpid() and process_alive(int(match["pid"]))):
+        if match is None or (int(match["pid"]) != os.getpid() and pid_alive(int(match["pid"]))):
             continue
         if match["unfinished"]:  # killed while writing it, before any block was stored
             journal.unlink(missing_ok=True)

@@ -307,13 +307,13 @@ def _remove_dead_staged(out: Path) -> None:
     """The staged data beside ``out`` of a `data synth` killed before its rename (its process is gone), and
     the writer's own temporary of it (``.STAGED.PID.tmp``, ``write_ndjson``) when it was killed while writing:
     that one was left there for good."""
-    from pipelines.experiments.worker import process_alive
+    from predictors.locking import pid_alive
 
     staged = rf"\.{re.escape(out.name)}\.synth-(\d+){re.escape(PART_SUFFIX)}"
     patterns = (re.compile(staged), re.compile(rf"\.{staged}\.\1\.tmp"))
     for entry in out.parent.iterdir() if out.parent.is_dir() else ():
         match = next((m for m in (p.fullmatch(entry.name) for p in patterns) if m), None)
-        if match and not entry.is_symlink() and entry.is_file() and not process_alive(int(match[1])):
+        if match and not entry.is_symlink() and entry.is_file() and not pid_alive(int(match[1])):
             entry.unlink(missing_ok=True)
 
 

@@ -34,6 +34,7 @@ from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
 from pipelines.loop.controllers import Controller, make_controller
 from pipelines.plain_json import plain
+from predictors.locking import pid_alive
 
 if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig
@@ -76,29 +77,11 @@ def remove_stale_scratch(temp_dir: str | Path | None = None, prefix: str = SCRAT
     removed = []
     for root in Path(temp_dir or tempfile.gettempdir()).glob(prefix + "*"):
         match = named.match(root.name)
-        if match is None or not root.is_dir() or process_alive(int(match[1])):
+        if match is None or not root.is_dir() or pid_alive(int(match[1])):
             continue
         shutil.rmtree(root, ignore_errors=True)
         removed.append(root)
     return removed
-
-
-def process_alive(pid: int) -> bool:
-    """Whether process ``pid`` runs (a zombie, killed and not yet reaped, does not). A pid the system gave to
-    a new process keeps its old root until that process ends too."""
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):  # not Linux, or gone meanwhile
-        return True
 
 
 def worker_scratch(root: str | Path | None) -> str:

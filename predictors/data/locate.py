@@ -33,11 +33,11 @@ from pathlib import Path
 from typing import Final
 
 from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
-from predictors.data.prepare import CONVERTER_VERSION, STAGING_INFIX, pid_alive, prepare_ewap
+from predictors.data.prepare import CONVERTER_VERSION, STAGING_INFIX, prepare_ewap
 from predictors.data.selfcheck import default_references
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
-from predictors.locking import locked
+from predictors.locking import locked, pid_alive
 
 DATA_ENV: Final[str] = "CROWDMPC_DATA"
 CACHE_ENV: Final[str] = "CROWDMPC_CACHE"

@@ -38,6 +38,7 @@ from predictors.data.trajnet_scenes import (
 )
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
+from predictors.locking import pid_alive
 
 # Bump when the conversion changes, so cached preparations are rebuilt.
 CONVERTER_VERSION: Final[str] = "crowdmpc-ewap-1"
@@ -186,27 +187,6 @@ def _remove_stale_staging(out_dir: Path) -> None:
         if entry.is_symlink() or not entry.is_dir() or pid_alive(int(pid)):
             continue
         shutil.rmtree(entry, ignore_errors=True)
-
-
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # another user's process: alive
-        return True
-    return not _zombie(pid)
-
-
-def _zombie(pid: int) -> bool:
-    """Whether ``pid`` ended and waits for its parent to reap it: ``kill(pid, 0)`` still finds it, yet it
-    prepares nothing more. A preparer killed holding the cache entry's lock is one at the very moment the
-    waiter takes that lock, and its staging was then kept for good. False where there is no /proc."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat[stat.rfind(")") + 2 :].startswith("Z")  # the state follows the command name in brackets
 
 
 def _new_manifest(

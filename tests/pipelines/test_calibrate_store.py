@@ -115,14 +115,14 @@ def test_the_journal_of_a_live_calibrate_is_not_taken_back(tmp_path, monkeypatch
 def test_a_killed_calibrate_that_found_no_file_leaves_none(tmp_path, monkeypatch, capsys):
     """The journal records "no earlier file" (null), not "an empty file": taking the blocks back removes the
     calibrations file the killed run made."""
-    from pipelines.experiments import worker
+    from predictors import locking
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     blocks = _blocks()
     path = calibrations_path()
     _write_journal(path, blocks, None)
     save_calibration(blocks[0])
-    monkeypatch.setattr(worker, "process_alive", lambda pid: False)  # as if this process had been killed
+    monkeypatch.setattr(locking, "pid_alive", lambda pid: False)  # as if this process had been killed
     take_back_killed()
     assert not path.exists() and _journals(tmp_path) == []
     assert f"(pid {os.getpid()}) did not finish" in capsys.readouterr().out
