@@ -18,6 +18,7 @@ from predictors.base import DT, OBS_LEN, PRED_LEN, ObservingPredictor, Predictor
 from predictors.data.trajnet_io import read_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
+from predictors.progress import progress_bar
 
 
 @dataclass(frozen=True)
@@ -129,19 +130,17 @@ def evaluate(
     root: Path | None = None,
 ) -> dict:
     """Per-file and overall (scenes pooled) metrics, as a JSON-ready dict."""
-    from tqdm import tqdm
-
     check_dataset_predictor(predictor)  # before the files are read
     loaded = {Path(path): load_eval_scenes(path, config) for path in files}
     per_file: dict[str, dict] = {}
     all_scores: list[SceneScore] = []
     # disable=None: a bar on a terminal only, so logs and pipes stay clean
-    with tqdm(
+    with progress_bar(
         total=sum(len(s) for s in loaded.values()),
         desc=f"evaluating {predictor.name}",
         unit="scene",
         leave=False,
-        disable=None if progress else True,
+        show=None if progress else False,
     ) as bar:
         for path, scenes in loaded.items():
             scores = score_scenes(predictor, scenes, config, bar)

@@ -29,6 +29,7 @@ from crowdsim.scenarios import MAX_HUMANS
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec, class_tables, observed_classes
 from predictors.conformal import alpha_text
+from predictors.progress import progress_bar
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -167,8 +168,6 @@ class ClosedLoopErrors(NamedTuple):
 
 def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoopErrors:
     """Run ``plan``'s episodes and return what they measured."""
-    from tqdm import tqdm
-
     from crowdsim.profiles import make_env_config
     from pipelines.loop.controllers import make_controller
     from pipelines.loop.episode import run_episode
@@ -178,7 +177,7 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
     observer = PredictionErrors(plan.near)
     successes = 0
     try:
-        bar = tqdm(plan.schedule(), desc=f"calibrating {plan.predictor}", unit="ep", disable=not progress)
+        bar = progress_bar(plan.schedule(), desc=f"calibrating {plan.predictor}", unit="ep", show=progress)
         for scenario, n_humans, seed in bar:
             result = run_episode(
                 controller,

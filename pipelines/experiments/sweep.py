@@ -52,6 +52,7 @@ from pipelines.experiments.resume_checks import check_same_margins, check_same_p
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
 from pipelines.plain_json import plain
+from predictors.progress import progress_bar
 
 # A sweep whose first episodes all raise is misconfigured (a missing model, a broken build): stop it rather
 # than fill errors.jsonl with thousands of copies of one traceback. Only while the directory holds no record:
@@ -369,14 +370,12 @@ def _append_error(out: Path, task: EpisodeTask, error: str) -> None:
 
 
 def _progress_bar(config: SweepConfig, outcome: SweepOutcome) -> Any:
-    from tqdm import tqdm
-
-    return tqdm(
+    return progress_bar(
         total=outcome.planned,
         initial=outcome.already_done,
         unit="ep",
         desc=config.experiment.name,
-        disable=not config.progress,
+        show=config.progress,
         file=sys.stderr,
         dynamic_ncols=True,
         smoothing=0.05,  # episodes vary in length: average the rate over many for a steady ETA

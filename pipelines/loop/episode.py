@@ -27,6 +27,7 @@ from pipelines.loop.contract import called, checked_description, checked_output,
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
+from predictors.progress import progress_bar
 
 
 class EpisodeObserver(Protocol):
@@ -172,12 +173,10 @@ def run_episodes(
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
-    from tqdm import tqdm
-
     controller = make_controller(spec, env_config)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
-    bar = tqdm(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", disable=not progress)
+    bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
     successes = sum(r.metrics.success for r in results)  # counted as they come: a sum per episode was O(N^2)
     try:
         for i in bar:

@@ -43,6 +43,7 @@ from trajnetplusplustools.writers import trajnet
 
 from predictors.base import OBS_LEN, PRED_LEN
 from predictors.data.validate import rows_by_pedestrian
+from predictors.progress import progress_bar
 
 # Converter defaults (trajnetplusplusdataset convert.py arguments, scene.py constants).
 CHUNK_SIZE: Final[int] = OBS_LEN + PRED_LEN  # 21 rows = 9 observed + 12 predicted
@@ -260,9 +261,9 @@ def build_scenes(
         union_frames = np.unique(np.concatenate([frames[w] for _, w in candidates]))
         iterator: Iterable = enumerate(candidates)
         if progress:
-            from tqdm import tqdm
-
-            iterator = tqdm(iterator, total=len(candidates), desc="categorising", unit="scene", leave=False)
+            iterator = progress_bar(
+                iterator, total=len(candidates), desc="categorising", unit="scene", leave=False, show=True
+            )
         for k, (primary, window) in iterator:
             start, end = int(frames[window[0]]), int(frames[window[-1]])
             paths = _scene_paths(tracks, union_frames, primary, start, end)

@@ -58,3 +58,27 @@ def test_what_is_written_on_a_closed_descriptor_stays_out_of_the_log(closed, tmp
         env=os.environ | {"PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert check.returncode == 0, check.stdout + check.stderr
+
+
+LIBRARY_RUN = """
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.episode import run_episodes
+results = run_episodes(ControllerSpec(controller="orca"), episodes=2, seed=0, scenario="circle", n_humans=2)
+print("episodes", len(results))
+"""
+
+
+def test_the_library_draws_no_bar_where_python_has_no_stderr(tmp_path):
+    # a program importing crowdmpc (pythonw, a service) holds no descriptor for it: run_episodes'
+    # progress bar, on by default, failed at its first write (AttributeError on None), status 1
+    done = _run(["-c", LIBRARY_RUN], tmp_path, closed=2)
+    assert done.returncode == 0 and "episodes 2" in done.stdout
+
+
+@pytest.mark.parametrize("show", [True, None])
+def test_a_progress_bar_without_stderr_is_off(show, monkeypatch):
+    from predictors.progress import progress_bar
+
+    monkeypatch.setattr(sys, "stderr", None)
+    bar = progress_bar(range(3), show=show, desc="x")
+    assert list(bar) == [0, 1, 2] and bar.disable
