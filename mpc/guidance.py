@@ -8,19 +8,19 @@ robots that the crossing flow has pushed sideways end up behind that row. With s
 episodes time out (``social_lstm_eth``, 8 humans, perpendicular, 40 episodes, margins ``fixed:0.1`` on every
 step: all 6 timeouts ended with the whole flock 5-9 m from its goals, behind the humans' goal row).
 
-What. Humans the caller considers standing are discs of radius ``clearance`` (``d_min`` plus their margin,
-or the distance Eq. 11's soft penalty keeps: ``MPCConfig.standing_clearance``).
-A robot whose straight segment to its goal stays clear of every disc keeps the goal as its target: its NLP is
-exactly the paper's. For a robot whose segment is blocked, the shortest path around the discs is found on a
-visibility graph (nodes on a ring around each disc, edges where the segment between two nodes clears every
-disc: the shortest path among discs bends only at their boundaries), and the reference heads for that path's
-first corner, prolonged to ``LOOKAHEAD`` m so that the reference keeps moving at ``v_max``, but no further
-than where the prolonged line would enter a disc (Eq. 8's reference stops on its target; a prolongation into a
-disc led the reference through a human in 7 % of guided cases on random scenes). A robot already inside a
-disc (pushed there, or held just inside by the soft penalty) keeps that disc shrunk to just inside its own
-distance, so it is led round the human, not straight through it, and guidance does not flip as the robot
-crosses the disc's edge. No path (a goal inside a disc, discs that close the robot in): the goal, as without
-guidance.
+What. Humans the caller considers standing are discs of radius ``clearance`` (``d_min`` plus their margin, or
+the distance Eq. 11's soft penalty keeps: ``MPCConfig.standing_clearance``). A robot whose straight segment to
+its goal stays clear of every disc keeps the goal as its target: its NLP is exactly the paper's. For a robot
+whose segment is blocked, the shortest path around the discs is found on a visibility graph (nodes on a ring
+around each disc, edges where the segment between two nodes clears every disc: the shortest path among discs
+bends only at their boundaries), and the reference heads for that path's first corner, prolonged to
+``lookahead`` (a step past what the horizon covers at ``v_max``, at least ``LOOKAHEAD``) so that the reference
+keeps moving at ``v_max``, but no further than where the prolonged line would enter a disc (Eq. 8's reference
+stops on its target; a prolongation into a disc led the reference through a human in 7 % of guided cases on
+random scenes). A robot already inside a disc (pushed there, or held just inside by the soft penalty) keeps
+that disc shrunk to just inside its own distance, so it is led round the human, not straight through it, and
+guidance does not flip as the robot crosses the disc's edge. No path (a goal inside a disc, discs that close
+the robot in): the goal, as without guidance.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 
 RING_NODES: Final[int] = 16  # nodes around each disc
 RING_SCALE: Final[float] = 1.08  # ring radius / clearance: nodes sit just outside the disc
-LOOKAHEAD: Final[float] = 2.0  # m, the target's distance at least; above v_max * H * tau = 1.6 m (Table I)
+LOOKAHEAD: Final[float] = 2.0  # m, the target's distance at least: v_max (H + 1) tau with Table I's values
 INSIDE_SHRINK: Final[float] = 0.99  # a disc around the robot: radius this fraction of the robot's distance
 
 
@@ -91,16 +91,26 @@ def _shortest_first_corner(
     return None
 
 
+def lookahead(v_max: float, horizon: int, dt: float) -> float:
+    """How far, m, a guided target lies at least: one step beyond what Eq. 8's reference covers in the
+    horizon at ``v_max``, so that the reference never stops short of the horizon's end. Table I's values
+    (1 m/s, 4 steps of 0.4 s) give ``LOOKAHEAD``; a fixed 2 m stopped the reference of a 15-step horizon
+    after 5 of its steps, and that of a 2 m/s robot halfway through its 3rd of 4."""
+    return max(LOOKAHEAD, v_max * dt * (horizon + 1))
+
+
 def guidance_targets(
     positions: np.ndarray,
     goals: np.ndarray,
     standing: np.ndarray,
     clearance: float,
     active: np.ndarray | None = None,
+    reach: float = LOOKAHEAD,
 ) -> np.ndarray:
     """Eq. 8's target ``(M, 2)`` for each robot (module docstring): its goal, or where to head around the
     ``standing`` humans ``(K, 2)``, discs of radius ``clearance`` m. ``active``: the robots to guide (default
-    all)."""
+    all); ``reach``: the target's distance at least (``lookahead`` of the MPC's bounds and horizon), where
+    the goal is further (``LOOKAHEAD`` always)."""
     positions, goals = np.asarray(positions, dtype=float), np.asarray(goals, dtype=float)
     targets = goals.copy()
     standing = np.asarray(standing, dtype=float).reshape(-1, 2)
@@ -125,8 +135,11 @@ def guidance_targets(
         distance = float(np.linalg.norm(heading))
         if distance > 1e-9:
             direction = heading / distance
-            reach = min(max(distance, LOOKAHEAD), _first_entry(start, direction, discs, radii, distance))
-            targets[r] = start + direction * reach
+            # beyond LOOKAHEAD, no further than the goal is: a long horizon's reach must not send the
+            # reference metres past a goal that a short detour reaches
+            least = max(LOOKAHEAD, min(reach, float(np.linalg.norm(goal - start))))
+            ahead = min(max(distance, least), _first_entry(start, direction, discs, radii, distance))
+            targets[r] = start + direction * ahead
     return targets
 
 

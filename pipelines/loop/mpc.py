@@ -36,7 +36,7 @@ from mpc.dmpc import DMPC
 from mpc.dynamics import braking, rollout_numpy
 from mpc.fallback import PlanMemory, Start
 from mpc.fastcall import BufferedFunction
-from mpc.guidance import guidance_targets
+from mpc.guidance import guidance_targets, lookahead
 from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
@@ -286,6 +286,7 @@ class MPCController:
                 obs.human_positions[standing],
                 cfg.standing_clearance(float(margin)),
                 ~reached,
+                lookahead(cfg.v_max, cfg.horizon, cfg.dt),
             )
         return out
 

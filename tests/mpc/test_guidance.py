@@ -189,3 +189,19 @@ def test_a_robot_just_inside_a_disc_is_still_led_round_the_human():
         target = guidance_targets(start[None], goal, human, clearance)[0]
         assert segment_distances(start, target, human)[0, 0] >= 0.99 * min(distance, clearance) - 1e-9
         assert abs(target[0]) > 0.5
+
+
+def test_a_long_horizons_target_lies_no_further_than_the_goal():
+    """``lookahead`` grows with the horizon (6.4 m at 15 steps of 0.4 s at 1 m/s), but a target past the
+    goal's distance would send the reference beyond a goal a short detour reaches: the target lies at most
+    as far as the goal (at least LOOKAHEAD, Table I's prolongation, as before)."""
+    from mpc.guidance import lookahead
+
+    assert lookahead(1.0, 4, 0.4) == LOOKAHEAD  # Table I: exactly the constant
+    reach = lookahead(1.0, 15, 0.4)
+    assert reach == pytest.approx(6.4)
+    start, human = np.array([0.3, -1.2]), np.array([[0.0, 0.0]])
+    for goal_y, expected in ((2.0, 3.2), (3.5, 4.7), (9.0, 6.4)):
+        goal = np.array([[0.3, goal_y]])
+        target = guidance_targets(start[None], goal, human, 1.0, reach=reach)[0]
+        assert np.linalg.norm(target - start) == pytest.approx(expected, abs=1e-9)

@@ -53,3 +53,38 @@ def test_a_gap_open_to_the_margin_discs_is_closed_to_the_penalty_discs():
     guided = _guided("penalty")
     assert list(guided) == [0]
     assert abs(guided[0][0]) > 0.9  # round one of the humans, not through the gap
+
+
+@pytest.mark.parametrize(("horizon", "v_max", "start"), [(4, 1.0, -3.0), (15, 1.0, -6.0), (4, 2.0, -8.0)])
+def test_a_guided_target_lies_beyond_the_horizons_reach(horizon, v_max, start):
+    """Eq. 8's reference stops on its target, so a guided target nearer than the horizon covers at v_max
+    stops the reference short of the horizon's end. A target was prolonged to 2 m whatever the horizon and
+    the bound: here it was the corner itself, 3.16 m ahead at 15 steps (the reference stood still over its
+    last 7) and 2.81 m ahead at 2 m/s (its 4th step at half speed). One robot behind a standing human,
+    nothing else to enter: the target is v_max (H + 1) tau ahead, at least 2 m.
+    ``start``: where the robot is still below the human at the first guided step."""
+    from crowdsim.env import CrowdEnv
+    from crowdsim.env_config import EnvConfig
+
+    human = np.array([[0.0, 0.0]])
+    layout = Layout(
+        robot_starts=np.array([[0.3, start]]),
+        robot_goals=np.array([[0.3, 6.0]]),
+        human_starts=human,
+        human_goals=human,
+    )
+    env_config = EnvConfig(v_max=v_max, robots_visible=False)  # the human stands whatever comes
+    overrides = (("guidance", "standing"), ("horizon", horizon))
+    controller = make_controller(ControllerSpec("cmpc", mpc_overrides=overrides), env_config)
+    env = CrowdEnv(env_config)
+    obs = env.reset_layout(layout)
+    controller.reset(obs)
+    for _ in range(8):  # motion classes need 8 observations before the human counts as standing
+        obs, _, _ = env.step(controller.act(obs).accelerations)
+    out = controller.act(obs)
+    guided = out.extra.get("guided", {})
+    assert list(guided) == [0]
+    ahead = float(np.linalg.norm(np.array(guided[0]) - obs.robot_positions[0]))
+    expected = max(2.0, v_max * (horizon + 1) * 0.4)
+    assert ahead == pytest.approx(expected, abs=1e-3)
+    assert ahead > v_max * horizon * 0.4
