@@ -37,7 +37,9 @@ def _fmt(x: float | None, unit: str = "", digits: int = 2) -> str:
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{digits}f}{unit}"
 
 
-def format_table(summary: dict[str, Any], header: str) -> str:
+def format_table(summary: dict[str, Any], header: str, radius: float = RADIUS) -> str:
+    """The printed summary; ``radius`` (m): the run's agents', whose sum is the contact threshold that the
+    metrics used (crowdsim.metrics; [world] radius may differ from the default)."""
     n = summary["episodes"]
 
     def rate(name: str) -> str:
@@ -53,7 +55,7 @@ def format_table(summary: dict[str, Any], header: str) -> str:
             f"{_fmt(summary['travel_time_std'], ' s')})",
         ),  # fmt: skip
         (f"collision (<{COLLISION_DISTANCE:g} m)", rate("collision")),
-        (f"contact (<{2 * RADIUS:g} m)", rate("contact")),  # the radii touch (crowdsim.metrics)
+        (f"contact (<{2 * radius:g} m)", rate("contact")),  # the radii touch (crowdsim.metrics)
         # the closest approach with linear motion within each step, as CrowdNav takes it (crowdsim.metrics)
         ("collision between steps", rate("collision_between_steps")),
         ("contact between steps", rate("contact_between_steps")),  # what ends a gym episode on contact
