@@ -42,7 +42,13 @@ from mpc.parked import yield_slack
 from mpc.stall import StallWatch
 from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.margins import observed_classes
-from pipelines.loop.mpc_setup import check_coupling, check_world, mpc_config, predictor_history
+from pipelines.loop.mpc_setup import (
+    check_coupling,
+    check_margins_world,
+    check_world,
+    mpc_config,
+    predictor_history,
+)
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import ObservingPredictor, Predictor
 from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES
@@ -83,6 +89,7 @@ class MPCController:
         self._observer = self.model if isinstance(self.model, ObservingPredictor) else None
         check_coupling(spec, distributed, self.model)
         world = self.env_config.world()
+        check_margins_world(spec, world)  # before the calibration is looked up: the cause, not a symptom
         cfg = mpc_config(spec, jit, world)
         sha256 = checkpoint_sha256(self.model.name)
         margins = spec.margins.resolve(self.model.name, cfg.horizon, sha256)

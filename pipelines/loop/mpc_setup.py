@@ -1,6 +1,7 @@
 """What an MPC controller (pipelines.loop.mpc) is built from and checked against: its ``MPCConfig`` from a
 ``ControllerSpec`` and the world's facts (``mpc_config``), the check that the MPC, the predictor and the
-simulator agree on the world (``check_world``), the coupling the controller can build (``check_coupling``),
+simulator agree on the world (``check_world``), that calibrated margins were measured at its tau
+(``check_margins_world``), the coupling the controller can build (``check_coupling``),
 and the rows of an observation's history the predictor reads (``predictor_history``).
 """
 
@@ -13,6 +14,7 @@ import numpy as np
 from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
+from pipelines.loop.margins import CALIBRATED_MODES
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
@@ -93,6 +95,19 @@ def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None
         raise PipelineError(
             f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator "
             f"keeps {world.obs_len} ([world] obs_len): {_keep_more(predictor.obs_len)}"
+        )
+
+
+def check_margins_world(spec: ControllerSpec, world: WorldFacts) -> None:
+    """Calibrated margins are quantiles of the prediction error k steps of the predictors' sampling time
+    ahead: real scenes are TrajNet++'s 2.5 Hz, and `crowdmpc calibrate`'s closed loop runs the default world.
+    At another tau the MPC's step k is another time ahead (and conformal-motion's classes read another
+    window), so such margins are refused there; only the ORCA oracle plans at another tau (check_world)."""
+    if spec.margins.mode in CALIBRATED_MODES and abs(world.dt - PREDICTOR_DT) > 1e-12:
+        raise PipelineError(
+            f"{spec.margins.mode} margins are calibrated per step of {PREDICTOR_DT} s but the simulator's "
+            f"tau is {world.dt} s ([world] dt): set --set world.dt={PREDICTOR_DT}, or give fixed margins "
+            "(--margins fixed:M1,..,MH)"
         )
 
 

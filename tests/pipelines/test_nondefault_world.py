@@ -21,3 +21,23 @@ def test_the_printed_contact_threshold_is_the_runs_sum_of_radii(tmp_path, capsys
     assert all(e["contact"] == (e["min_distance"] < 2 * radius) for e in episodes)
     if radius != 0.3:  # some episode whose contact only the run's threshold explains
         assert any(e["contact"] and e["min_distance"] >= 0.6 for e in episodes)
+
+
+@pytest.mark.parametrize("margins", ["conformal", "conformal-motion", "conformal-shortfall"])
+def test_calibrated_margins_are_refused_at_another_tau(margins):
+    """Every calibration measures errors k steps of 0.4 s ahead (TrajNet++'s 2.5 Hz, or `crowdmpc calibrate`'s
+    default world). The ORCA oracle, the one predictor that plans at another tau, planned at tau = 0.25 s
+    with its closed-loop margins [0, 2.8e-6, 0.0065, 0.0267] m: the errors 0.4 to 1.6 s ahead applied 0.25 to
+    1 s ahead. Fixed margins, given per step, stay allowed."""
+    from crowdsim.env_config import EnvConfig
+    from pipelines.errors import PipelineError
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.margins import parse_margins
+
+    spec = ControllerSpec("cmpc", "orca_oracle", margins=parse_margins(margins))
+    with pytest.raises(
+        PipelineError, match=r"per step of 0.4 s but the simulator's tau is 0.25 s \(\[world\] dt\)"
+    ):
+        make_controller(spec, EnvConfig(dt=0.25))
+    fixed = ControllerSpec("cmpc", "orca_oracle", margins=parse_margins("fixed:0,0,0.01,0.03"))
+    assert make_controller(fixed, EnvConfig(dt=0.25)).cfg.human_margins == (0.0, 0.0, 0.01, 0.03)
