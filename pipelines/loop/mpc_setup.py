@@ -18,6 +18,7 @@ from pipelines.loop.margins import CALIBRATED_MODES
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
+from predictors.oracle import ORACLE_PREDICTOR
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -88,8 +89,10 @@ def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None
         if abs(ours - theirs) > 1e-12:
             raise PipelineError(f"the simulator's {name} is {theirs} but the MPC's is {ours} (mpc_overrides)")
     if predictor.obs_len > 1 and abs(world.dt - PREDICTOR_DT) > 1e-12:
-        raise PipelineError(
-            f"the predictors are sampled every {PREDICTOR_DT} s, the simulator's tau is {world.dt} s"
+        raise PipelineError(  # a predictor reading no history (the ORCA oracle) plans at any tau
+            f"the predictor {predictor.name} reads positions sampled every {PREDICTOR_DT} s, the "
+            f"simulator's tau is {world.dt} s ([world] dt): set --set world.dt={PREDICTOR_DT}, or plan "
+            f"with {ORACLE_PREDICTOR}"
         )
     if predictor.obs_len > world.obs_len:
         raise PipelineError(

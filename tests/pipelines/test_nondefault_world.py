@@ -41,3 +41,18 @@ def test_calibrated_margins_are_refused_at_another_tau(margins):
         make_controller(spec, EnvConfig(dt=0.25))
     fixed = ControllerSpec("cmpc", "orca_oracle", margins=parse_margins("fixed:0,0,0.01,0.03"))
     assert make_controller(fixed, EnvConfig(dt=0.25)).cfg.human_margins == (0.0, 0.0, 0.01, 0.03)
+
+
+@pytest.mark.parametrize("predictor", ["constant_velocity", "social_lstm_eth"])
+def test_a_predictor_at_another_tau_is_refused_naming_it_and_the_key(capsys, predictor):
+    """The refusal said "the predictors are sampled every 0.4 s, the simulator's tau is 0.2 s": neither which
+    predictor nor which setting, nor what would run."""
+    argv = ["simulate", "--controller", "cmpc", "--predictor", predictor, "--set", "world.dt=0.2"]
+    assert main([*argv, "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert f"the predictor {predictor} reads positions sampled every 0.4 s" in err[0]
+    assert (
+        "the simulator's tau is 0.2 s ([world] dt): set --set world.dt=0.4, or plan with orca_oracle"
+        in err[0]
+    )
