@@ -302,6 +302,7 @@ def make_layout(
         lambda s: math.isfinite(s) and s >= 0,
     )
     robot_starts, robot_goals = robot_layout(n_robots, formation)
+    _check_robot_spacing(robot_starts, radius, formation, n_robots)
     # Every placed agent has the same radius, so the separation is one number.
     starts, goals = PLACERS[crossing](
         scenario,
@@ -320,3 +321,21 @@ def make_layout(
         human_starts=np.asarray(starts, dtype=float).reshape(n_humans, 2),
         human_goals=np.asarray(goals, dtype=float).reshape(n_humans, 2),
     )
+
+
+def _check_robot_spacing(starts: np.ndarray, radius: float, formation: Formation, n_robots: int) -> None:
+    """Refuse a radius at which the formation's neighbours overlap: its spacing (1 m in the row, d_ij in the
+    others) does not follow [world] radius, the simulator has no robot-robot contact, and the metrics count
+    robot-human contact only, so robots 1 m apart at radius 0.55 m drove the whole episode inside each other
+    and the run reported success without a contact. Goals are the starts moved, so the starts tell."""
+    if len(starts) < 2:
+        return
+    gaps = np.linalg.norm(starts[:, None] - starts[None], axis=-1)
+    closest = float(gaps[np.triu_indices(len(starts), k=1)].min())
+    if closest < 2.0 * radius - 1e-9:  # the lattice's sqrt(3) / 2 puts "1.2 m" neighbours 1e-16 closer
+        chosen = choose_formation(n_robots) if formation == "auto" else formation
+        raise SimulationError(
+            f"radius {radius:g} m: the {chosen} formation of {n_robots} robots puts neighbours {closest:g} m "
+            f"apart, in contact from the start (2 x radius = {2.0 * radius:g} m); use [world] radius <= "
+            f"{closest / 2.0:g} m, or another [env] formation"
+        )

@@ -52,3 +52,39 @@ def test_the_formation_comes_from_the_command_line(tmp_path, capsys):
     assert "env.formation: must be one of ['auto', 'row', 'wedge', 'two_rows'], got 'hexagon'" in (
         capsys.readouterr().err
     )
+
+
+@pytest.mark.parametrize(
+    ("formation", "n_robots", "radius", "spacing"),
+    [("row", 3, 0.55, 1.0), ("auto", 2, 0.501, 1.0), ("wedge", 4, 0.61, 1.2), ("two_rows", 4, 0.7, 1.2)],
+)
+def test_a_radius_at_which_the_formations_robots_overlap_is_refused(formation, n_robots, radius, spacing):
+    """The formations' spacing does not follow the radius, the simulator has no robot-robot contact and the
+    metrics count robot-human contact only: at radius 0.55 m the row's robots, 1 m apart, drove a whole
+    episode inside each other and `simulate` reported success without a contact."""
+    env = CrowdEnv(EnvConfig(radius=radius, formation=formation))
+    with pytest.raises(SimulationError, match=rf"neighbours {spacing:g} m apart, in contact from the start"):
+        env.reset(0, "circle", 3, n_robots)
+    # touching is not overlapping; a single robot has no neighbour
+    CrowdEnv(EnvConfig(radius=spacing / 2, formation=formation)).reset(0, "circle", 3, n_robots)
+    CrowdEnv(EnvConfig(radius=radius, formation=formation)).reset(0, "circle", 3, 1)
+
+
+def test_the_overlap_refusal_is_one_line_naming_the_setting(capsys):
+    argv = [
+        "simulate",
+        "--controller",
+        "straight",
+        "--humans",
+        "3",
+        "--set",
+        "world.radius=0.55",
+        "--no-progress",
+    ]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "crowdmpc simulate: error: radius 0.55 m: the row formation of 3 robots puts neighbours 1 m apart, "
+        "in contact from the start (2 x radius = 1.1 m); use [world] radius <= 0.5 m, or another [env] "
+        "formation"
+    ]
