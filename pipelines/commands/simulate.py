@@ -308,7 +308,8 @@ def _report(
     env_config = cfg.env
     summary = summarize(results)
     finished = len(results) if interrupted else None
-    print(format_table(summary, table_header(cfg, spec, run_meta, finished), env_config.radius))
+    header = table_header(cfg, spec, run_meta, finished)
+    print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
     if resolved.json is not None:
         from pipelines.version import code_identity
 

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.world import RADIUS
+
+# The statuses of control steps that the MPC's wall-time budget (mpc.time_limit_s) cut short: the IBR loop
+# stopped at it ("timeout", mpc/cmpc.py, dmpc.py, coupled.py) or a solve ran past it (IPOPT's status, which
+# mpc/solvers.py gives a Fatrop solve too).
+BUDGET_STATUSES: Final[tuple[str, ...]] = ("timeout", "Maximum_WallTime_Exceeded")
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -37,9 +42,12 @@ def _fmt(x: float | None, unit: str = "", digits: int = 2) -> str:
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{digits}f}{unit}"
 
 
-def format_table(summary: dict[str, Any], header: str, radius: float = RADIUS) -> str:
+def format_table(
+    summary: dict[str, Any], header: str, radius: float = RADIUS, time_limit_s: float | None = None
+) -> str:
     """The printed summary; ``radius`` (m): the run's agents', whose sum is the contact threshold that the
-    metrics used (crowdsim.metrics; [world] radius may differ from the default)."""
+    metrics used (crowdsim.metrics; [world] radius may differ from the default); ``time_limit_s``: the MPC's
+    wall-time budget, named in a row of the steps it cut short (shown only when some were)."""
     n = summary["episodes"]
 
     def rate(name: str) -> str:
@@ -82,5 +90,17 @@ def format_table(summary: dict[str, Any], header: str, radius: float = RADIUS) -
         ("IBR iterations", f"mean {_fmt(summary['iterations_mean'])}, max {summary['iterations_max']}"),
         ("fallback steps", f"{summary['fallback_steps']} of {summary['control_steps']}"),
     ]
+    # The budget is far above a step's time at Table I's horizon; a long horizon or a slow predictor reaches
+    # it, and then what those steps planned depends on the machine's speed and load.
+    cut = sum(int(summary.get("statuses", {}).get(status, 0)) for status in BUDGET_STATUSES)
+    if cut:
+        limit = "" if time_limit_s is None else f" = {time_limit_s:g} s"
+        rows.append(
+            (
+                "wall-time budget",
+                f"{cut} of {summary['control_steps']} steps cut short at mpc.time_limit_s{limit}: their "
+                "plans depend on this machine's speed",
+            )
+        )
     width = max(len(name) for name, _ in rows)
     return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
