@@ -24,7 +24,8 @@ from crowdsim.world import RADIUS
 if TYPE_CHECKING:
     from crowdsim.metrics import Trajectory
 
-# matplotlib's tab10, the order pipelines.logs.recording uses, so robot i has one colour everywhere.
+# matplotlib's tab10, the order pipelines.logs.recording uses, so robot i has one colour everywhere, then
+# black and yellow: tab10 alone repeated robot 0's and 1's colours for robots 10 and 11 (MAX_ROBOTS is 12).
 ROBOT_COLORS = (
     "#1f77b4",
     "#ff7f0e",
@@ -36,6 +37,8 @@ ROBOT_COLORS = (
     "#7f7f7f",
     "#bcbd22",
     "#17becf",
+    "#000000",
+    "#ffe119",
 )
 HUMAN_COLOR = "0.35"
 GOAL_COLOR = "red"

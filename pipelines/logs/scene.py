@@ -17,8 +17,9 @@ from pipelines.plain_json import plain
 
 FRAME_ID: Final[str] = "world"
 
-# crowdsim.plotting.ROBOT_COLORS (matplotlib's tab10) as RGB, so that the 3D panel and the plots colour
-# robot i alike (copied: importing the plotting module costs half a second; a test keeps the two equal).
+# crowdsim.plotting.ROBOT_COLORS (matplotlib's tab10, then black and yellow) as RGB, so that the 3D panel
+# and the plots colour robot i alike (copied: importing the plotting module costs half a second; a test
+# keeps the two equal).
 ROBOT_RGB: Final[tuple[tuple[float, float, float], ...]] = (
     (0.122, 0.467, 0.706),
     (1.000, 0.498, 0.055),
@@ -30,6 +31,8 @@ ROBOT_RGB: Final[tuple[tuple[float, float, float], ...]] = (
     (0.498, 0.498, 0.498),
     (0.737, 0.741, 0.133),
     (0.090, 0.745, 0.812),
+    (0.000, 0.000, 0.000),
+    (1.000, 0.882, 0.098),
 )
 HUMAN_RGB: Final[tuple[float, float, float]] = (0.45, 0.45, 0.45)
 

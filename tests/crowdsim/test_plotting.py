@@ -70,3 +70,18 @@ def test_a_pgf_figure_without_its_tex_system_is_refused_before_the_run(monkeypat
     check_figure_path("ep.pgf", "--plot")
     with pytest.raises(SimulationError, match=r"'pgf'"):
         check_figure_path("ep.foo", "--plot")
+
+
+def test_every_robot_of_the_largest_team_has_its_own_colour():
+    """With 12 robots (docs/examples/many_robots.toml) robots 10 and 11 were drawn in robot 0's and robot
+    1's tab10 colours: two blue and two orange paths, told apart by nothing."""
+    from crowdsim.plotting import GOAL_COLOR, HUMAN_COLOR
+    from crowdsim.scenarios import MAX_ROBOTS
+
+    t = np.linspace(0, 1, 5)[:, None, None]
+    robots = np.arange(MAX_ROBOTS)[None, :, None] * np.array([1.0, 0.0]) + t * np.array([0.0, 10.0])
+    fig = plot_episode(robots, np.zeros((5, 0, 2)), robots[-1])
+    paths = [line for line in fig.axes[0].lines if line.get_label()[len("robot ") :].isdigit()]
+    colours = {matplotlib.colors.to_hex(line.get_color()) for line in paths}
+    assert len(paths) == len(colours) == MAX_ROBOTS
+    assert not colours & {matplotlib.colors.to_hex(c) for c in (GOAL_COLOR, HUMAN_COLOR)}
