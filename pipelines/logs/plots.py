@@ -56,6 +56,13 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
 
     Returns the times actually drawn (the nearest recorded states with a plan or prediction, if any has).
     """
+    fig, drawn = recording_figure(rec, times)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
+    return drawn
+
+
+def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tuple[Any, list[float]]:
+    """``plot_recording``'s figure and the times drawn."""
     from crowdsim.plotting import plot_episode
 
     view = episode_view(rec)
@@ -76,19 +83,28 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
     if rec.truncated:
         ax.text(0.01, 0.01, "TRUNCATED FILE", transform=ax.transAxes, color="red", fontsize=9)
     _dedupe_legend(ax)
-    fig.savefig(out, dpi=120, bbox_inches="tight")
-    return drawn
+    return fig, drawn
 
 
 def _dedupe_legend(ax: Any, *, below: bool = False) -> None:
+    """The legend, each label once, outside the axes so that it hides nothing drawn: below them, or at
+    their right as crowdsim.plotting.plot_episode places its own (loc="best" inside the axes covered a
+    12-robot team's goals and paths, having no free corner left)."""
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=True))
-    if unique and below:  # under the axes: nothing drawn is hidden
+    if unique and below:
         ax.legend(
             unique.values(), unique.keys(), loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=7
         )
     elif unique:
-        ax.legend(unique.values(), unique.keys(), loc="best", fontsize=7)
+        ax.legend(
+            unique.values(),
+            unique.keys(),
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            fontsize=7,
+            framealpha=0.8,
+        )
 
 
 def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:

@@ -448,3 +448,18 @@ def test_a_compare_file_that_cannot_be_read_is_the_one_line_alone(runs, tmp_path
         assert main(["review", str(runs[0].path), "--compare", other]) == 2
         out, err = capsys.readouterr()
         assert out == "" and len(err.strip().splitlines()) == 1 and other in err
+
+
+def test_the_plots_legend_hides_nothing_drawn(runs):
+    """`review RUN --plot` moved plot_episode's legend into the axes (loc="best"): on a 12-robot run it
+    covered the goals and several paths. It stands beside the axes now, as simulate --plot's does."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from pipelines.logs.plots import recording_figure
+
+    fig, _ = recording_figure(read_recording(runs[0].path))
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[0]
+    legend = ax.get_legend()
+    assert {"plan", "prediction", "robot goals"} <= {t.get_text() for t in legend.get_texts()}
+    assert not legend.get_window_extent().overlaps(ax.get_window_extent())
