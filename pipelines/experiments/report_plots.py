@@ -93,25 +93,38 @@ def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary
     return drawn
 
 
+def _dodges(methods: list[str], sizes: list[int]) -> dict[str, float]:
+    """Each method's shift along the x axis, in humans: methods with equal values at a crowd size (all at
+    100 % success, say) drew their points, error bars and lines on top of each other, so that only the last
+    one drawn showed. The methods spread over a fifth of the closest two crowd sizes' gap, centred on it."""
+    gap = min(np.diff(sizes), default=1)
+    step = 0.2 * gap / max(len(methods) - 1, 1)
+    return {m: (k - (len(methods) - 1) / 2) * step for k, m in enumerate(methods)}
+
+
 def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> bool:
     """A line per method; whether any point has an error bar. A method with no value at all (no success,
     for the travel time) is named so in the legend, as the safety trade-off names it."""
     drawn = False
+    sizes = sorted({s.cell.n_humans for s in summaries})
+    dodge = _dodges(methods, sizes)
     for k, method in enumerate(methods):
         cells = sorted((s for s in summaries if s.cell.method == method), key=lambda s: s.cell.n_humans)
-        x = np.array([s.cell.n_humans for s in cells], dtype=float)
+        x = np.array([s.cell.n_humans for s in cells], dtype=float) + dodge[method]
         y, err = _values(cells, name)
         drawn = drawn or not np.isnan(err).all()
         color = f"C{k}"
         label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, no success)"
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=label)
         paper = [
-            (s.cell.n_humans, v) for s, v in zip(cells, _paper(cells, name), strict=True) if v is not None
+            (s.cell.n_humans + dodge[method], v)
+            for s, v in zip(cells, _paper(cells, name), strict=True)
+            if v is not None
         ]
         if paper:
             px, py = zip(*paper, strict=True)
             ax.plot(px, py, ls="--", marker="s", mfc="none", color=color, label=f"{method} (paper)")
-    ax.set_xticks(sorted({s.cell.n_humans for s in summaries}))
+    ax.set_xticks(sizes)
     ax.set_xlabel("number of humans")
     ax.legend(fontsize="small")
     return drawn

@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 import pipelines.loop.episode as episode_module
@@ -133,3 +134,20 @@ def test_plots_across_crowd_sizes_say_what_their_error_bars_are(outcome, interva
     ax = outcome_figure(table2, summaries, chosen).axes[0]
     assert ax.get_xlabel() == "number of humans"
     assert f"error bars: our {interval}" in ax.get_title()
+
+
+def test_methods_with_equal_rates_stay_apart_across_crowd_sizes():
+    """`sweep --experiment controllers --humans 5,7,20 --episodes-per-cell 2`: dmpc, orca and straight all
+    succeeded in every episode, and their lines, points and error bars lay on top of each other: the plot
+    showed straight's and cmpc's alone while its legend named four methods. Each method is shifted a little
+    along x now (the ticks stay on the crowd sizes)."""
+    experiment = get_experiment("controllers").with_predictor("constant_velocity")
+    cells = experiment.cells((5, 7, 20))
+    summaries = summarize(experiment, cells, [_record(c, i, 2.0, 0) for c in cells for i in range(2)])
+    success = next(o for o in OUTCOMES if o.name == "success")
+    ax = outcome_figure(experiment, summaries, success).axes[0]
+    points = [tuple(c.lines[0].get_xdata()) for c in ax.containers]
+    assert len(points) == len(set(points)) == len(experiment.method_labels)
+    for xs in points:
+        assert np.allclose(xs, (5, 7, 20), atol=0.25)
+    assert list(ax.get_xticks()) == [5, 7, 20]
