@@ -14,7 +14,7 @@ from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable, write_output
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.simulate_table import format_table, table_header
+from pipelines.commands.simulate_table import format_table, plot_title, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
@@ -332,12 +332,7 @@ def _report(
 def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:
     from crowdsim.plotting import plot_episode
 
-    m = first.metrics
-    title = (
-        f"{controller}, {first.scenario}, seed {first.seed}: "
-        + (f"success in {m.travel_time:g} s" if m.success else "timeout")
-        + f", min robot-human distance {m.min_distance:.2f} m"
-    )
+    title = plot_title(controller, first)
     fig = plot_episode(
         first.robot_positions,
         first.human_positions,

@@ -1,4 +1,5 @@
-"""``crowdmpc simulate``'s printed summary: the header line naming the run and the metrics table."""
+"""``crowdmpc simulate``'s printed summary: the header line naming the run and the metrics table; and the
+title of its --plot."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ BUDGET_STATUSES: Final[tuple[str, ...]] = ("timeout", "Maximum_WallTime_Exceeded
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import EpisodeResult
 
 
 def table_header(
@@ -104,3 +106,25 @@ def format_table(
         )
     width = max(len(name) for name, _ in rows)
     return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
+
+
+def plot_title(controller: str, episode: EpisodeResult) -> str:
+    """What the --plot figure shows: who drove (with its predictor), the crowd, the seed; then how it ended
+    and how close a robot came to a human, with the collision or contact the metrics counted. The title
+    once named neither predictor nor crowd, called a run through a human a "success" with nothing more,
+    and gave "min robot-human distance inf m" for an episode without humans."""
+    m = episode.metrics
+    who = controller + (f" with {episode.predictor}" if episode.predictor else "")
+    seed = "" if episode.seed is None else f", seed {episode.seed}"
+    robots = f"{episode.n_robots} robot" + ("s" if episode.n_robots != 1 else "")
+    crowd = f"{episode.scenario}, {robots}, {episode.n_humans} humans{seed}"
+    outcome = f"success in {m.travel_time:g} s" if m.success else "timeout"
+    if episode.n_humans == 0:
+        closest = "no humans"
+    else:
+        closest = f"min robot-human distance {m.min_distance:.2f} m"
+        if m.contact:
+            closest += ": contact"
+        elif m.collision:
+            closest += f": collision (< {COLLISION_DISTANCE:g} m)"
+    return f"{who}, {crowd}\n{outcome}, {closest}"
