@@ -139,7 +139,8 @@ def plot_episode(
             disc.set_zorder(4)
             ax.add_patch(disc)
     ax.plot(*robot_goals.T, "*", color=GOAL_COLOR, ms=14, mec="k", mew=0.5, zorder=5, label="robot goals")
-    ax.plot([], [], "o", mfc="none", mec=HUMAN_COLOR, label="humans")
+    if n_humans:  # no legend entry for what is not drawn (an episode without a crowd)
+        ax.plot([], [], "o", mfc="none", mec=HUMAN_COLOR, label="humans")
     if snaps:
         if times is not None:
             when = [f"{float(times[row]):g} s" for row in snaps]

@@ -184,15 +184,18 @@ def _animation_legend(fig: Any, view: EpisodeView) -> None:
     from matplotlib.lines import Line2D
 
     robot = _robot_color(0)
-    entries = [
-        Line2D([], [], ls="none", marker="o", ms=9, mfc=robot, mec="k", mew=0.5, label="robot"),
-        Line2D([], [], ls="none", marker="o", ms=9, mfc="none", mec=HUMAN_COLOR, mew=1.2, label="human"),
+    entries = [Line2D([], [], ls="none", marker="o", ms=9, mfc=robot, mec="k", mew=0.5, label="robot")]
+    if view.human_positions.shape[1]:  # an episode without a crowd draws none
+        entries.append(
+            Line2D([], [], ls="none", marker="o", ms=9, mfc="none", mec=HUMAN_COLOR, mew=1.2, label="human")
+        )
+    entries += [
         Line2D([], [], ls="none", marker="*", ms=12, mfc=GOAL_COLOR, mec="k", mew=0.5, label="robot goal"),
         Line2D([], [], ls="-", color=robot, lw=1.0, alpha=0.6, label="robot path"),
     ]
     if view.plans:
         entries.append(Line2D([], [], ls="--", color=robot, lw=1.2, label="robot plan"))
-    if view.predictions:
+    if view.predictions and view.human_positions.shape[1]:
         entries.append(Line2D([], [], ls=":", color=HUMAN_COLOR, lw=1.0, label="predicted human path"))
     fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
 

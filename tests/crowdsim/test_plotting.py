@@ -85,3 +85,9 @@ def test_every_robot_of_the_largest_team_has_its_own_colour():
     colours = {matplotlib.colors.to_hex(line.get_color()) for line in paths}
     assert len(paths) == len(colours) == MAX_ROBOTS
     assert not colours & {matplotlib.colors.to_hex(c) for c in (GOAL_COLOR, HUMAN_COLOR)}
+
+
+def test_an_episode_without_humans_has_no_humans_in_its_legend():
+    """The legend listed "humans" beside a plot of one robot in an empty room."""
+    fig = plot_episode(np.zeros((2, 1, 2)), np.zeros((2, 0, 2)), np.ones((1, 2)))
+    assert "humans" not in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]

@@ -173,6 +173,14 @@ def test_an_episode_without_humans_passes_the_check_and_draws(tmp_path, capsys):
     view = episode_view(read_recording(run.path))
     assert view.human_positions.shape == (4, 0, 2) and view.predictions[0].shape == (4, 0, 2)
     assert main(["review", str(run.path), "--plot", str(tmp_path / "p.png")]) == 0
+    # and no legend names humans, which neither the plot nor the animation draws
+    from pipelines.logs.plots import animation_figure, recording_figure
+
+    fig, _ = recording_figure(read_recording(run.path))
+    assert not {"humans", "prediction"} & {t.get_text() for t in fig.axes[0].get_legend().get_texts()}
+    fig, _, _ = animation_figure(read_recording(run.path))
+    labels = {t.get_text() for t in fig.legends[0].get_texts()}
+    assert "robot plan" in labels and not {"human", "predicted human path"} & labels
 
 
 def test_a_long_episode_is_animated_in_at_most_max_frames(runs, tmp_path, capsys, monkeypatch):
