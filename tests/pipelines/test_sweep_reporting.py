@@ -151,3 +151,17 @@ def test_methods_with_equal_rates_stay_apart_across_crowd_sizes():
     for xs in points:
         assert np.allclose(xs, (5, 7, 20), atol=0.25)
     assert list(ax.get_xticks()) == [5, 7, 20]
+
+
+def test_a_travel_time_axis_shows_no_negative_times():
+    """Two successes of 10 and 20 s: the Student's t interval of the mean, 15 +- 63.5 s, reached -48 s, and
+    the axis went down to it."""
+    experiment = get_experiment("controllers").with_predictor("constant_velocity")
+    cells = experiment.cells((5, 7))
+    records = [_record(c, i, 2.0, 0) for c in cells for i in range(2)]
+    for k, record in enumerate(records):
+        record["metrics"]["travel_time"] = 10.0 + 10.0 * (k % 2)
+    summaries = summarize(experiment, cells, records)
+    travel = next(o for o in OUTCOMES if o.name == "travel_time")
+    ax = outcome_figure(experiment, summaries, travel).axes[0]
+    assert ax.get_ylim()[0] == 0.0
