@@ -79,11 +79,21 @@ def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tu
     for k, row in enumerate(rows):
         _draw_plans(ax, view, row, label=k == 0)
     drawn = [float(view.times[r]) for r in rows]
-    ax.set_title(f"{rec.label}\nplans and predictions at t = {', '.join(f'{t:g}' for t in drawn)} s")
+    # What the file holds: an ORCA or straight run records neither plans nor predictions, and its title
+    # promised them all the same.
+    shown = [what for what, has in (("plans", view.plans), ("predictions", _has_predictions(view))) if has]
+    ax.set_title(
+        f"{rec.label}\n{' and '.join(shown) or 'agents'} at t = {', '.join(f'{t:g}' for t in drawn)} s"
+    )
     if rec.truncated:
         ax.text(0.01, 0.01, "TRUNCATED FILE", transform=ax.transAxes, color="red", fontsize=9)
     _dedupe_legend(ax)
     return fig, drawn
+
+
+def _has_predictions(view: EpisodeView) -> bool:
+    """Whether the file holds predictions of a human (a crowd-free run records empty ones)."""
+    return bool(view.predictions) and view.human_positions.shape[1] > 0
 
 
 def _dedupe_legend(ax: Any, *, below: bool = False) -> None:
@@ -195,7 +205,7 @@ def _animation_legend(fig: Any, view: EpisodeView) -> None:
     ]
     if view.plans:
         entries.append(Line2D([], [], ls="--", color=robot, lw=1.2, label="robot plan"))
-    if view.predictions and view.human_positions.shape[1]:
+    if _has_predictions(view):
         entries.append(Line2D([], [], ls=":", color=HUMAN_COLOR, lw=1.0, label="predicted human path"))
     fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
 

@@ -471,3 +471,15 @@ def test_the_plots_legend_hides_nothing_drawn(runs):
     legend = ax.get_legend()
     assert {"plan", "prediction", "robot goals"} <= {t.get_text() for t in legend.get_texts()}
     assert not legend.get_window_extent().overlaps(ax.get_window_extent())
+
+
+def test_the_plots_title_promises_plans_only_when_the_file_has_them(runs, tmp_path):
+    """`review` of an ORCA run (6 robots, 50 humans) was titled "plans and predictions at t = 0, 13.2, 26 s"
+    over a plot with neither: ORCA records none."""
+    from pipelines.logs.plots import recording_figure
+
+    planned, _ = recording_figure(read_recording(runs[0].path), [0.0])
+    assert planned.axes[0].get_title().endswith("\nplans and predictions at t = 0 s")
+    bare = record_episode(tmp_path, with_plan=False, steps=3)
+    fig, _ = recording_figure(read_recording(bare.path), [0.0])
+    assert fig.axes[0].get_title().endswith("\nagents at t = 0 s")
