@@ -24,14 +24,13 @@ nothing from the report that builds on it.
 from __future__ import annotations
 
 import math
-import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 import numpy as np
 
-from crowdsim.metrics import BETWEEN_STEPS, COLLISION_DISTANCE
+from crowdsim.metrics import BETWEEN_STEPS
 from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
@@ -185,150 +184,9 @@ def min_distance_hist_rows(summaries: Sequence[SafetyColumn]) -> list[dict[str, 
     return rows
 
 
-# ----------------------------------------------------------------------------------------------------------
-# Plots
-# ----------------------------------------------------------------------------------------------------------
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")  # reports are written by sweeps on machines without a display
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _panels(plt, count: int, size: tuple[float, float], title: str, **kwargs):
-    """A figure with ``count`` panels in rows of at most three, the unused ones hidden, and ``title`` wrapped
-    to the figure's width (experiment titles are longer than one panel is wide)."""
-    ncols = min(3, count)
-    nrows = math.ceil(count / ncols)
-    fig, axes = plt.subplots(
-        nrows,
-        ncols,
-        figsize=(size[0] * ncols, size[1] * nrows),
-        squeeze=False,
-        layout="constrained",
-        **kwargs,
-    )
-    for ax in axes.flat[count:]:
-        ax.set_visible(False)
-    fig.suptitle(textwrap.fill(title, width=int(12 * size[0] * ncols)), fontsize="medium")
-    return fig, list(axes.flat[:count])
-
-
-def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dict[int, list[SafetyColumn]]:
-    """Summaries per number of humans, each list in the experiment's method order."""
-    order = {label: k for k, label in enumerate(experiment.method_labels)}
-    groups: dict[int, list[SafetyColumn]] = {}
-    for s in sorted(summaries, key=lambda s: (s.cell.n_humans, order.get(s.cell.method, len(order)))):
-        groups.setdefault(s.cell.n_humans, []).append(s)
-    return groups
-
-
-def _method_colors(experiment: Experiment) -> dict[str, str]:
-    """One colour per method, the same in every panel and plot."""
-    return {label: f"C{k % 10}" for k, label in enumerate(experiment.method_labels)}
-
-
-def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[SafetyColumn], path: Path) -> Path:
-    """Step histograms of each episode's minimum robot-human distance, one per method, overlaid on shared
-    bins; one panel per number of humans, since a larger crowd shifts the whole distribution."""
-    plt = _pyplot()
-    groups = _by_humans(experiment, summaries)
-    colors = _method_colors(experiment)
-    fig, axes = _panels(plt, len(groups), (5.0, 3.6), experiment.title, sharex=True, sharey=True)
-    for ax, (n, cells) in zip(axes, groups.items(), strict=True):
-        for s in cells:
-            counts = min_distance_counts(s.min_distances)
-            beyond = f", {counts[-1]} beyond {HIST_MAX:g} m" if counts[-1] else ""
-            label = f"{s.cell.method} ({s.episodes}{beyond})"
-            ax.stairs(counts[:-1], HIST_EDGES, color=colors.get(s.cell.method), lw=1.3, label=label)
-        ax.axvline(CONTACT_DISTANCE, color="k", ls=":", lw=1, label=f"contact ({CONTACT_DISTANCE:g} m)")
-        ax.axvline(COLLISION_DISTANCE, color="k", ls="--", lw=1, label=f"d_min ({COLLISION_DISTANCE:g} m)")
-        ax.set_xlim(0.0, HIST_MAX)
-        ax.set_title(f"{n} humans", fontsize="medium")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize="x-small", title="method (episodes)", title_fontsize="x-small")
-    fig.supxlabel("episode's minimum robot-human distance (m)")
-    fig.supylabel("episodes")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-_LABEL_CORNERS: Final[tuple[tuple[int, int], ...]] = ((5, 5), (5, -5), (-5, 5), (-5, -5))  # points
-
-
-def _annotation(s: SafetyColumn) -> str:
-    time = s.travel_time_mean
-    return f"{s.cell.method}, {time:.1f} s" if time == time else f"{s.cell.method}, no success"
-
-
-def plot_safety_tradeoff(
-    experiment: Experiment, summaries: Sequence[SafetyColumn], path: Path
-) -> Path | None:
-    """Success against collision rate per method, both with their 95% Wilson intervals, one panel per
-    number of humans that has at least two methods to trade off; None (nothing written) when none has."""
-    groups = {n: cells for n, cells in _by_humans(experiment, summaries).items() if len(cells) >= 2}
-    if not groups:
-        return None
-    plt = _pyplot()
-    colors = _method_colors(experiment)
-    fig, axes = _panels(plt, len(groups), (5.6, 4.2), experiment.title)
-    for ax, (n, cells) in zip(axes, groups.items(), strict=True):
-        for k, s in enumerate(cells):
-            x, y = s.collision.percent, s.success.percent
-            (x_lo, x_hi), (y_lo, y_hi) = s.collision.interval, s.success.interval
-            color = colors.get(s.cell.method)
-            ax.errorbar(
-                x,
-                y,
-                # Clipped at 0: at a rate of exactly 0 or 100 % the Wilson bound can round past it.
-                xerr=[[max(0.0, x - x_lo)], [max(0.0, x_hi - x)]],
-                yerr=[[max(0.0, y - y_lo)], [max(0.0, y_hi - y)]],
-                fmt="o",
-                color=color,
-                capsize=3,
-            )
-            # Neighbouring methods (e.g. close alphas) often sit close together: their labels take turns
-            # at the four corners of the point, on a translucent box so that crossings stay legible.
-            dx, dy = _LABEL_CORNERS[k % len(_LABEL_CORNERS)]
-            ax.annotate(
-                _annotation(s),
-                (x, y),
-                xytext=(dx, dy),
-                textcoords="offset points",
-                ha="left" if dx > 0 else "right",
-                va="bottom" if dy > 0 else "top",
-                fontsize="x-small",
-                color=color,
-                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
-                zorder=10,  # above every method's error bars, drawn later
-            )
-        ax.axvline(
-            COLLISION_TARGET,
-            color="grey",
-            ls="--",
-            lw=1,
-            label=f"{COLLISION_TARGET:g} % collisions: the paper's Table II stays below",
-        )
-        ax.set_xlim(left=min(-0.5, ax.get_xlim()[0]))
-        ax.set_xlabel(f"collision rate (%), < {COLLISION_DISTANCE:g} m")
-        ax.set_ylabel("success rate (%)")
-        ax.set_title(
-            f"{n} humans: mean travel time of successful episodes beside each method", fontsize="small"
-        )
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize="x-small", loc="lower right")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
 def plot_safety(experiment: Experiment, summaries: Sequence[SafetyColumn], out: Path) -> list[Path]:
-    """The safety plots in ``out`` (the trade-off only where two methods share a crowd size)."""
-    written = [plot_min_distance_hist(experiment, summaries, out / MIN_DISTANCE_HIST_PNG)]
-    tradeoff = plot_safety_tradeoff(experiment, summaries, out / SAFETY_TRADEOFF_PNG)
-    return written + ([tradeoff] if tradeoff else [])
+    """The safety plots in ``out`` (the trade-off only where two methods share a crowd size): drawn by
+    pipelines.experiments.safety_plots."""
+    from pipelines.experiments.safety_plots import plot_safety as draw
+
+    return draw(experiment, summaries, out)

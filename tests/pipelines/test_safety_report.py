@@ -315,7 +315,7 @@ def test_the_plots_panels_follow_the_crowd_sizes_and_each_the_methods_order():
     6 only still give the 5-human panel first; within a panel the experiment's order (CMPC before DMPC)."""
     from types import SimpleNamespace
 
-    from pipelines.experiments.safety_report import _by_humans
+    from pipelines.experiments.safety_plots import _by_humans
 
     def column(method, n):
         return SimpleNamespace(cell=SimpleNamespace(method=method, n_humans=n))
@@ -326,3 +326,36 @@ def test_the_plots_panels_follow_the_crowd_sizes_and_each_the_methods_order():
         (5, ["DMPC"]),
         (6, ["CMPC", "DMPC"]),
     ]
+
+
+def _drawn(fig):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    return fig.canvas.get_renderer()
+
+
+def test_the_safety_experiments_sixteen_methods_fit_their_plots():
+    """`sweep --experiment safety --episodes-per-cell 2`: the histogram's legend of 16 methods, inside the
+    panel, ran over its top and the figure's title; the trade-off wrote 16 labels around the two points the
+    methods shared, one over the other. The legends stand beside the panels now, inside the figure, and
+    the trade-off names the methods there instead (a panel of few methods keeps its labels)."""
+    from pipelines.experiments.safety_plots import min_distance_hist_figure, safety_tradeoff_figure
+
+    safety = get_experiment("safety")
+    cells = safety.cells()
+    records = [_record(c, i, 1.0 + 0.1 * i, 20, (i, 0, 0)) for c in cells for i in range(2)]
+    summaries = summarize(safety, cells, records)
+    for fig in (min_distance_hist_figure(safety, summaries), safety_tradeoff_figure(safety, summaries)):
+        renderer = _drawn(fig)
+        (ax,) = fig.axes
+        legend = ax.get_legend()
+        assert len(legend.get_texts()) >= len(cells)
+        box, page = legend.get_window_extent(renderer), fig.bbox
+        assert not box.overlaps(ax.get_window_extent(renderer))
+        assert not box.overlaps(fig._suptitle.get_window_extent(renderer))
+        assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and box.y1 <= page.y1
+    assert not ax.texts  # no label beside a point
+    few = [s for s in summaries if s.cell.method in ("none", "alpha=0.5")]
+    (ax,) = safety_tradeoff_figure(safety, few).axes
+    assert sorted(t.get_text() for t in ax.texts) == ["alpha=0.5, 15.5 s", "none, 15.5 s"]
