@@ -54,6 +54,17 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
 )
 
 
+def method_style(k: int) -> dict[str, str]:
+    """The ``k``-th method's colour, line style and marker: matplotlib's ten colours, then dashed lines and
+    triangles for the next ten, dotted and diamonds after (the safety experiment's 16 methods drew 6 pairs
+    of lines and points in one colour, told apart by nothing). Squares are the paper's."""
+    return {
+        "color": f"C{k % 10}",
+        "ls": ("-", "--", ":")[k // 10 % 3],
+        "marker": ("o", "^", "D")[k // 10 % 3],
+    }
+
+
 def plot_filename(outcome: str, *, by_method: bool) -> str:
     """``OUTCOME_by_method.png`` for an experiment at one crowd size, else ``OUTCOME_vs_humans.png``."""
     return f"{outcome}_by_method.png" if by_method else f"{outcome}_vs_humans.png"
@@ -113,9 +124,10 @@ def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary
         x = np.array([s.cell.n_humans for s in cells], dtype=float) + dodge[method]
         y, err = _values(cells, name)
         drawn = drawn or not np.isnan(err).all()
-        color = f"C{k}"
+        style = method_style(k)
+        color = style["color"]
         label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, no success)"
-        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=label)
+        ax.errorbar(x, y, yerr=err, capsize=3, label=label, **style)
         paper = [
             (s.cell.n_humans + dodge[method], v)
             for s, v in zip(cells, _paper(cells, name), strict=True)

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
+from pipelines.experiments.report_plots import method_style
 from pipelines.experiments.safety_report import (
     COLLISION_TARGET,
     CONTACT_DISTANCE,
@@ -84,8 +85,8 @@ def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dic
 
 
 def _method_styles(experiment: Experiment) -> dict[str, dict[str, str]]:
-    """One colour per method, the same in every panel and plot."""
-    return {label: {"color": f"C{k % 10}"} for k, label in enumerate(experiment.method_labels)}
+    """One style per method, the same in every panel and plot (report_plots.method_style)."""
+    return {label: method_style(k) for k, label in enumerate(experiment.method_labels)}
 
 
 def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> Any:

@@ -359,3 +359,21 @@ def test_the_safety_experiments_sixteen_methods_fit_their_plots():
     few = [s for s in summaries if s.cell.method in ("none", "alpha=0.5")]
     (ax,) = safety_tradeoff_figure(safety, few).axes
     assert sorted(t.get_text() for t in ax.texts) == ["alpha=0.5, 15.5 s", "none, 15.5 s"]
+
+
+def test_each_of_the_safety_experiments_methods_has_its_own_look():
+    """With matplotlib's ten colours, "motion alpha=0.01" was drawn as "none" (both C0), and five more pairs
+    alike, in the histogram and the trade-off: lines and points that no legend could tell apart."""
+    from matplotlib.colors import to_hex
+
+    from pipelines.experiments.safety_plots import min_distance_hist_figure, safety_tradeoff_figure
+
+    safety = get_experiment("safety")
+    cells = safety.cells()
+    summaries = summarize(safety, cells, [_record(c, i, 1.0, 20) for c in cells for i in range(2)])
+    (ax,) = min_distance_hist_figure(safety, summaries).axes
+    steps = [p for p in ax.patches if p.get_label().split(" (")[0] in safety.method_labels]
+    assert len({(to_hex(p.get_edgecolor()), p.get_linestyle()) for p in steps}) == len(cells)
+    (ax,) = safety_tradeoff_figure(safety, summaries).axes
+    points = [c.lines[0] for c in ax.containers]
+    assert len({(to_hex(p.get_color()), p.get_marker()) for p in points}) == len(cells)
