@@ -92,6 +92,8 @@ def _method_styles(experiment: Experiment) -> dict[str, dict[str, str]]:
 def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> Any:
     """Step histograms of each episode's minimum robot-human distance, one per method, overlaid on shared
     bins; one panel per number of humans, since a larger crowd shifts the whole distribution."""
+    from matplotlib.ticker import MaxNLocator
+
     plt = _pyplot()
     groups = _by_humans(experiment, summaries)
     styles = _method_styles(experiment)
@@ -115,6 +117,9 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
         _beside(ax, title="method (episodes)", title_fontsize="x-small")
     fig.supxlabel("episode's minimum robot-human distance (m)")
     fig.supylabel("episodes")
+    # Counts: whole ticks (two episodes a cell were read against ticks of 0.25 episodes). Shared y axes: one
+    # locator serves every panel.
+    axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))
     return fig
 
 

@@ -377,3 +377,17 @@ def test_each_of_the_safety_experiments_methods_has_its_own_look():
     (ax,) = safety_tradeoff_figure(safety, summaries).axes
     points = [c.lines[0] for c in ax.containers]
     assert len({(to_hex(p.get_color()), p.get_marker()) for p in points}) == len(cells)
+
+
+def test_the_histogram_counts_episodes_in_whole_ticks():
+    """Two episodes a cell: the y axis ("episodes") was ticked 0, 0.25, 0.5, ..., 2."""
+    from pipelines.experiments.safety_plots import min_distance_hist_figure
+
+    table2 = get_experiment("table2")
+    cells = table2.cells((5, 6))
+    summaries = summarize(table2, cells, [_record(c, i, 1.0, 20) for c in cells for i in range(2)])
+    fig = min_distance_hist_figure(table2, summaries)
+    _drawn(fig)
+    for ax in fig.axes:
+        ticks = ax.get_yticks()
+        assert len(ticks) >= 2 and all(t == int(t) for t in ticks)
