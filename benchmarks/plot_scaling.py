@@ -6,7 +6,8 @@ M and of humans N, one line per controller and task (fixed goals, slots).
 Each RUN.json is what ``robot_scaling.py --json`` wrote. Rows that share controller, goals and humans make a
 line against M; rows that share controller, goals and M but differ in humans make a line against N (the
 N rows of docs/results.md at 3 robots, with the 7-human row of the M runs among them). Success is drawn with
-the collision rate (episodes within 0.8 m of a human) dotted beside it; step times as the median with the p99
+its 95% Wilson interval (from each row's episodes; a report without them gets none) and the collision rate
+(episodes within 0.8 m of a human) dotted beside it; step times as the median with the p99
 dashed above it, on a log axis, beside the 0.4 s control period that every step must stay under.
 """
 
@@ -17,7 +18,7 @@ import json
 import sys
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 from pipelines.commands import check_writable
 from pipelines.commands.output_paths import without_missing_parents
@@ -38,6 +39,7 @@ class Point(NamedTuple):
     collision: float  # % of episodes within 0.8 m of a human
     median_ms: float
     p99_ms: float
+    episodes: int | None = None  # the row's episodes (older reports lack it: no interval drawn)
 
 
 def points(reports: Iterable[tuple[str, dict[str, Any]]]) -> list[Point]:
@@ -58,6 +60,7 @@ def points(reports: Iterable[tuple[str, dict[str, Any]]]) -> list[Point]:
                     float(row["collision_rate"]),
                     float(row["median_ms"]),
                     float(row["p99_ms"]),
+                    int(row["episodes"]) if "episodes" in row else None,
                 )
                 for row in report["rows"]
             ]
@@ -93,7 +96,33 @@ def undrawn(pts: list[Point]) -> list[Point]:
     return [p for p in pts if p not in drawn]
 
 
+def success_errors(line: list[Point]) -> list[list[float]] | None:
+    """The 95% Wilson interval of each point's success rate as (below, above) distances in %, or None when
+    a row does not give its episodes: a rate of 50 episodes was drawn bare, so that 94 % and 100 % looked
+    apart when their intervals overlap."""
+    from pipelines.experiments.summary import wilson_interval
+
+    if any(p.episodes is None for p in line):
+        return None
+    below, above = [], []
+    for p in line:
+        n = cast(int, p.episodes)
+        lo, hi = wilson_interval(round(p.success * n / 100.0), n)
+        below.append(max(0.0, p.success - 100.0 * lo))
+        above.append(max(0.0, 100.0 * hi - p.success))
+    return [below, above]
+
+
 def plot(pts: list[Point], out: Path) -> None:
+    fig = figure(pts)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=90)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+
+
+def figure(pts: list[Point]) -> Any:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -108,11 +137,13 @@ def plot(pts: list[Point], out: Path) -> None:
             style = {"color": colours.get(controller), "marker": "o" if goals == "fixed" else "s"}
             task = "fixed goals" if goals == "fixed" else goals
             label = f"{controller.upper()}, {task}, {other} {'humans' if along == 'robots' else 'robots'}"
-            axes[0, col].plot(x, [p.success for p in line], label=label, **style)
+            axes[0, col].errorbar(
+                x, [p.success for p in line], yerr=success_errors(line), capsize=3, label=label, **style
+            )
             axes[0, col].plot(x, [p.collision for p in line], linestyle=":", alpha=0.6, **style)
             axes[1, col].plot(x, [p.median_ms for p in line], label=f"{label}: median", **style)
             axes[1, col].plot(x, [p.p99_ms for p in line], linestyle="--", alpha=0.6, **style)
-        axes[0, col].set_ylabel("success % (collision % dotted)")
+        axes[0, col].set_ylabel("success % (95% Wilson interval)\ncollision % dotted")
         axes[0, col].set_ylim(0, 102)
         axes[1, col].set_yscale("log")
         axes[1, col].axhline(CONTROL_PERIOD_MS, color="grey", linewidth=1)
@@ -126,9 +157,7 @@ def plot(pts: list[Point], out: Path) -> None:
     axes[0, 0].set_title("against the number of robots")
     axes[0, 1].set_title("against the number of humans")
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
+    return fig
 
 
 def figure_file(text: str) -> Path:
