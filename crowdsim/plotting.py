@@ -148,7 +148,9 @@ def plot_episode(
             when = [f"{row * dt:g} s" for row in snaps]
         else:
             when = [f"step {row}" for row in snaps]
-        ax.plot([], [], " ", label="snapshots: " + ", ".join(when))
+        # Which ring is when: the snapshots are drawn fainter the earlier they are.
+        order = ", faint to solid" if len(snaps) > 1 else ""
+        ax.plot([], [], " ", label=f"snapshots{order}: " + ", ".join(when))
 
     frame_axes(ax, robot_positions, human_positions, robot_goals)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.8)

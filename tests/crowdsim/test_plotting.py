@@ -31,7 +31,9 @@ def test_plot_episode_draws_filled_robots_and_hollow_humans(tmp_path):
     assert len(circles) == 3 * (2 + 1)
     assert sum(c.get_fill() for c in circles) == 3 * 2  # robots filled, humans hollow
     assert all(c.get_radius() == 0.3 for c in circles)
-    assert "0 s, 2 s, 4 s" in " ".join(t.get_text() for t in ax.get_legend().get_texts())
+    # which ring is when: the legend says the earlier are fainter (it gave the times alone)
+    legend = " ".join(t.get_text() for t in ax.get_legend().get_texts())
+    assert "snapshots, faint to solid: 0 s, 2 s, 4 s" in legend
     # the rows of a log that lost states are not steps: their own times
     gappy = plot_episode(robots, humans, goals, snapshot_steps=[5], dt=0.4, times=np.arange(11) * 0.4 + 6)
     assert "snapshots: 8 s" in " ".join(t.get_text() for t in gappy.axes[0].get_legend().get_texts())
