@@ -210,6 +210,12 @@ def _animation_legend(fig: Any, view: EpisodeView) -> None:
     fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
 
 
+def clock_decimals(dt: float) -> int:
+    """Decimals that show every multiple of ``dt`` (s) as it is, 1 to 3: with one, a 0.25 s step's clock
+    read 0.2, 0.8, 1.2 s at 0.25, 0.75, 1.25 s."""
+    return next((d for d in (1, 2) if abs(round(dt, d) - dt) < 1e-9), 3)
+
+
 def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], EpisodeView]:
     """The animation's figure, its frame function (recorded state ``row`` -> changed artists) and the view."""
     from matplotlib.figure import Figure
@@ -233,6 +239,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     plans = [ax.plot([], [], "--", color=_robot_color(i), lw=1.2)[0] for i in range(m)]
     predictions = [ax.plot([], [], ":", color=HUMAN_COLOR, lw=1.0)[0] for _ in range(n)]
     clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
+    decimals = clock_decimals(view.dt)
     _animation_legend(fig, view)
 
     def draw(row: int) -> list[Any]:
@@ -254,7 +261,9 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
                 else np.empty((0, 2))
             )
             line.set_data(pts[:, 0], pts[:, 1])
-        clock.set_text(f"t = {view.times[row]:.1f} s" + ("   (truncated file)" if rec.truncated else ""))
+        clock.set_text(
+            f"t = {view.times[row]:.{decimals}f} s" + ("   (truncated file)" if rec.truncated else "")
+        )
         return [*robots, *humans, *trails, *plans, *predictions, clock]
 
     return fig, draw, view

@@ -483,3 +483,20 @@ def test_the_plots_title_promises_plans_only_when_the_file_has_them(runs, tmp_pa
     bare = record_episode(tmp_path, with_plan=False, steps=3)
     fig, _ = recording_figure(read_recording(bare.path), [0.0])
     assert fig.axes[0].get_title().endswith("\nagents at t = 0 s")
+
+
+def test_the_animations_clock_shows_the_recorded_times(runs, monkeypatch):
+    """With a 0.25 s step (`--set world.dt=0.25`) the clock read "t = 0.2 s", "0.8 s", "1.2 s" at 0.25,
+    0.75 and 1.25 s: one decimal, rounded."""
+    import dataclasses
+
+    import pipelines.logs.plots as plots
+
+    def quarter_steps(rec):
+        view = episode_view(rec)
+        return dataclasses.replace(view, times=view.steps * 0.25, dt=0.25)
+
+    monkeypatch.setattr(plots, "episode_view", quarter_steps)
+    _, draw, _ = plots.animation_figure(read_recording(runs[0].path))
+    assert [draw(row)[-1].get_text() for row in (1, 3, 5)] == ["t = 0.25 s", "t = 0.75 s", "t = 1.25 s"]
+    assert [plots.clock_decimals(dt) for dt in (0.4, 0.1, 0.25, 0.05, 0.125)] == [1, 1, 2, 2, 3]
