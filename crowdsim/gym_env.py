@@ -319,7 +319,8 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         traj = self._sim.trajectory()
         seed = self._episode["seed"]
         title = f"{self._episode['scenario']}{'' if seed is None else f', seed {seed}'}: "
-        title += f"t = {traj.n_steps * self.config.dt:.1f} s"
+        # As the legend's snapshot time: all its digits (":.1f" titled a 0.25 s step "t = 0.2 s").
+        title += f"t = {round(traj.n_steps * self.config.dt, 6):g} s"
         return render_frame(traj, title, size=RENDER_SIZE, dpi=RENDER_DPI)
 
     def close(self) -> None:

@@ -473,3 +473,17 @@ def test_the_last_step_is_paid_by_the_rules_as_the_forks_call_before_its_timeout
     assert info["surface_distance"] == pytest.approx([-0.1]) and info["timeout"]
     assert (reward, terminated, truncated) == (-0.25, end_on_collision, not end_on_collision)
     assert info["robot_rewards"].tolist() == [-0.25]
+
+
+def test_the_frames_title_gives_the_time_as_the_legend_does(monkeypatch):
+    """A 0.25 s step's first frame was titled "t = 0.2 s" beside the legend's "snapshots: 0.25 s"."""
+    import crowdsim.plotting
+
+    titles = []
+    monkeypatch.setattr(crowdsim.plotting, "render_frame", lambda traj, title, **kw: titles.append(title))
+    env = CrowdNavEnv(n_humans=3, render_mode="rgb_array", config=EnvConfig(dt=0.25))
+    env.reset(seed=1)
+    for _ in range(3):
+        env.step(np.zeros((3, 2)))
+        env.render()
+    assert [t.split(": ")[-1] for t in titles] == ["t = 0.25 s", "t = 0.5 s", "t = 0.75 s"]
