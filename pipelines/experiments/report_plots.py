@@ -54,6 +54,10 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
 )
 
 
+FIGSIZE: Final[tuple[float, float]] = (6.4, 4.4)  # in
+MAX_LEGEND_INSIDE: Final[int] = 8  # legend entries that a plot of FIGSIZE holds inside its axes
+
+
 def method_style(k: int) -> dict[str, str]:
     """The ``k``-th method's colour, line style and marker: matplotlib's ten colours, then dashed lines and
     triangles for the next ten, dotted and diamonds after (the safety experiment's 16 methods drew 6 pairs
@@ -138,8 +142,20 @@ def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary
             ax.plot(px, py, ls="--", marker="s", mfc="none", color=color, label=f"{method} (paper)")
     ax.set_xticks(sizes)
     ax.set_xlabel("number of humans")
-    ax.legend(fontsize="small")
+    _legend(ax)
     return drawn
+
+
+def _legend(ax: Any) -> None:
+    """The legend where matplotlib finds room for it in the axes, or, past ``MAX_LEGEND_INSIDE`` entries,
+    beside them on a figure widened for it: the safety experiment's 16 methods across crowd sizes made a
+    legend that covered the middle of the plot, lines and all."""
+    entries = len(ax.get_legend_handles_labels()[1])
+    if entries <= MAX_LEGEND_INSIDE:
+        ax.legend(fontsize="small")
+        return
+    ax.figure.set_size_inches(FIGSIZE[0] + 2.8, max(FIGSIZE[1], 1.2 + 0.2 * entries))
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
 
 
 def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], outcome: Outcome) -> Any:
@@ -151,7 +167,7 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
 
     methods = [m for m in experiment.method_labels if any(s.cell.method == m for s in summaries)]
     humans = sorted({s.cell.n_humans for s in summaries})
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    fig, ax = plt.subplots(figsize=FIGSIZE, layout="constrained")
     if len(humans) == 1:
         drawn = _draw_by_method(ax, methods, summaries, outcome.name)
         ax.set_xlabel(f"method ({humans[0]} humans)")

@@ -165,3 +165,25 @@ def test_a_travel_time_axis_shows_no_negative_times():
     travel = next(o for o in OUTCOMES if o.name == "travel_time")
     ax = outcome_figure(experiment, summaries, travel).axes[0]
     assert ax.get_ylim()[0] == 0.0
+
+
+def test_a_legend_of_many_methods_stands_beside_the_plot():
+    """The safety experiment at 5 and 7 humans: a legend of 16 methods, put where matplotlib found the
+    least data, covered the middle of success_vs_humans.png. Past 8 entries it stands beside the axes; Table
+    II's four stay inside, on a figure of the usual size."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    success = next(o for o in OUTCOMES if o.name == "success")
+    for name, inside in (("safety", False), ("table2", True)):
+        experiment = get_experiment(name)
+        cells = experiment.cells((5, 7))
+        summaries = summarize(experiment, cells, [_record(c, i, 2.0, 0) for c in cells for i in range(2)])
+        fig = outcome_figure(experiment, summaries, success)
+        FigureCanvasAgg(fig).draw()
+        (ax,) = fig.axes
+        legend = ax.get_legend()
+        assert legend.get_window_extent().overlaps(ax.get_window_extent()) == inside
+        assert (tuple(fig.get_size_inches()) == (6.4, 4.4)) == inside
+        if not inside:
+            assert len(legend.get_texts()) == len(experiment.method_labels)
+            assert fig.bbox.contains(legend.get_window_extent().x1 - 1, legend.get_window_extent().y0 + 1)
