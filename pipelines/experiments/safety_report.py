@@ -14,7 +14,8 @@ cells.csv's ``collision_between_steps_*`` columns; NaN when some record predates
 Two plots: the histogram of each episode's minimum robot-human distance, with the contact (0.6 m) and
 personal-space (0.8 m) thresholds drawn, shows whether collisions are near misses or deep intrusions; the
 success / collision trade-off places each method (for the ``safety`` experiment: conformal margins at
-decreasing alpha) against the collision target, its mean travel time written beside it.
+decreasing alpha) against the collision target, its mean travel time written beside it (in the legend past
+four methods). pipelines.experiments.safety_plots draws them.
 
 It reads a cell's summary through ``SafetyColumn`` (``pipelines.experiments.summary.CellSummary`` is one)
 and imports
