@@ -63,10 +63,13 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
 
 def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tuple[Any, list[float]]:
     """``plot_recording``'s figure and the times drawn."""
-    from crowdsim.plotting import plot_episode
+    from crowdsim.plotting import default_snapshots, plot_episode
 
     view = episode_view(rec)
-    rows = sorted({view.planned_row_at(t) for t in (times if times else default_times(view))})
+    if times or view.plans or _has_predictions(view):
+        rows = sorted({view.planned_row_at(t) for t in (times if times else default_times(view))})
+    else:  # nothing planned to show: the agents as simulate --plot draws them, the last state included
+        rows = default_snapshots(len(view.times))
     fig = plot_episode(
         view.robot_positions,
         view.human_positions,

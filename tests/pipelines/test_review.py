@@ -500,3 +500,15 @@ def test_the_animations_clock_shows_the_recorded_times(runs, monkeypatch):
     _, draw, _ = plots.animation_figure(read_recording(runs[0].path))
     assert [draw(row)[-1].get_text() for row in (1, 3, 5)] == ["t = 0.25 s", "t = 0.75 s", "t = 1.25 s"]
     assert [plots.clock_decimals(dt) for dt in (0.4, 0.1, 0.25, 0.05, 0.125)] == [1, 1, 2, 2, 3]
+
+
+def test_a_run_without_plans_is_drawn_to_its_end(tmp_path):
+    """The default times are those of plans (the last state has none): a straight or ORCA run was drawn
+    at 0, 3.6 and 6.8 s of 10.4 s, the robots never shown at their goals. Without plans it gets
+    simulate --plot's snapshots, the last state among them."""
+    from pipelines.logs.plots import recording_figure
+
+    bare = record_episode(tmp_path, with_plan=False, steps=8)
+    _, drawn = recording_figure(read_recording(bare.path))
+    view = episode_view(read_recording(bare.path))
+    assert drawn[0] == 0.0 and drawn[-1] == view.times[-1] and len(drawn) == 5
