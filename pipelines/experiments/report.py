@@ -5,8 +5,9 @@ their 95% intervals, our safety figures, among them the collision rate between s
 paper's figures) and episodes.csv (a row per episode)
 from here, table.md from pipelines.experiments.tables, a plot per outcome from
 pipelines.experiments.report_plots (``OUTCOME_vs_humans.png``, or ``OUTCOME_by_method.png`` at one crowd
-size), and min_distance_hist.csv with the safety plots from pipelines.experiments.safety_report. The cells'
-summaries, with their Wilson intervals, are pipelines.experiments.summary's.
+size), min_distance_hist.csv from pipelines.experiments.safety_report and the safety plots from
+pipelines.experiments.safety_plots. The cells' summaries, with their Wilson intervals, are
+pipelines.experiments.summary's.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from crowdsim.metrics import BETWEEN_STEPS
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.report_plots import OUTCOMES, plot_filename, plot_outcomes
+from pipelines.experiments.safety_plots import plot_safety
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
 from pipelines.experiments.tasks import Cell
@@ -167,7 +169,7 @@ def write_report(
         written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]
         if summaries:
             plots = plot_outcomes(experiment, summaries, staging)
-            plots += safety.plot_safety(experiment, summaries, staging)
+            plots += plot_safety(experiment, summaries, staging)
             written += [plot.name for plot in plots]
         for name in written:
             os.replace(staging / name, out / name)

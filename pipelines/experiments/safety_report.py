@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 import numpy as np
@@ -35,7 +34,6 @@ from crowdsim.metrics import BETWEEN_STEPS
 from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
-    from pipelines.experiments.cells import Experiment
     from pipelines.experiments.tasks import Cell
 
 
@@ -183,11 +181,3 @@ def min_distance_hist_rows(summaries: Sequence[SafetyColumn]) -> list[dict[str, 
         for lo, hi, count in zip(HIST_EDGES, upper, min_distance_counts(s.min_distances), strict=True):
             rows.append(cell | {"bin_lo_m": float(lo), "bin_hi_m": float(hi), "episodes": int(count)})
     return rows
-
-
-def plot_safety(experiment: Experiment, summaries: Sequence[SafetyColumn], out: Path) -> list[Path]:
-    """The safety plots in ``out`` (the trade-off only where two methods share a crowd size): drawn by
-    pipelines.experiments.safety_plots."""
-    from pipelines.experiments.safety_plots import plot_safety as draw
-
-    return draw(experiment, summaries, out)
