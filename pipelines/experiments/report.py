@@ -22,10 +22,10 @@ from pathlib import Path
 from typing import Any, Final
 
 from crowdsim.metrics import BETWEEN_STEPS
+from pipelines.experiments import safety_plots
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.report_plots import OUTCOMES, plot_filename, plot_outcomes
-from pipelines.experiments.safety_plots import plot_safety
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
 from pipelines.experiments.tasks import Cell
@@ -169,7 +169,7 @@ def write_report(
         written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]
         if summaries:
             plots = plot_outcomes(experiment, summaries, staging)
-            plots += plot_safety(experiment, summaries, staging)
+            plots += safety_plots.plot_safety(experiment, summaries, staging)
             written += [plot.name for plot in plots]
         for name in written:
             os.replace(staging / name, out / name)

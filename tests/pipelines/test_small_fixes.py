@@ -136,7 +136,7 @@ def test_an_interrupted_report_leaves_every_file_whole(tmp_path, monkeypatch):
     """A second Ctrl-C while the report is written (here: in its last plot) leaves the previous report's
     files as they were, not half written, and no staging folder; a killed report's staging folder (its
     process gone) is removed by the next report."""
-    import pipelines.experiments.safety_report as safety
+    import pipelines.experiments.safety_plots as safety
 
     table2 = get_experiment("table2")
     cells = [c for c in table2.cells() if c.n_humans == 5]
