@@ -303,8 +303,7 @@ def _review(args: argparse.Namespace) -> int:
                 plot_compare(rec, other, args.plot)
                 print(f"overlay plot: {args.plot}")
             else:
-                drawn = plot_recording(rec, args.plot, args.times)
-                print(f"plot: {args.plot} (plans at t = {', '.join(f'{t:g}' for t in drawn)} s)")
+                print(f"plot: {args.plot} ({plot_recording(rec, args.plot, args.times)})")
         if args.animate:
             facts = animate_recording(rec, args.animate)
             thinned = f", one state in {facts.every}" if facts.every > 1 else ""

@@ -51,14 +51,16 @@ def _draw_plans(ax: Any, view: EpisodeView, row: int, *, label: bool) -> None:
                     label="prediction" if label and j == 0 else None)  # fmt: skip
 
 
-def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | None = None) -> list[float]:
+def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | None = None) -> str:
     """Trajectories (crowdsim.plotting.plot_episode) with the plans and predictions made at ``times`` (s).
 
-    Returns the times actually drawn (the nearest recorded states with a plan or prediction, if any has).
+    Returns what was drawn and when, as the figure's title ends: "plans and predictions at t = 0, 1.2 s"
+    (the nearest recorded states with a plan or prediction, if any has), or "agents at t = ..." for a run
+    that records neither.
     """
-    fig, drawn = recording_figure(rec, times)
+    fig, _ = recording_figure(rec, times)
     fig.savefig(out, dpi=120, bbox_inches="tight")
-    return drawn
+    return str(fig.axes[0].get_title()).splitlines()[-1]
 
 
 def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tuple[Any, list[float]]:

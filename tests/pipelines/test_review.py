@@ -154,7 +154,9 @@ def test_plot_animation_and_comparison(runs, tmp_path, capsys):
         == 0
     )
     out = capsys.readouterr().out
-    assert "plans at t = 0, 1.2, 2.4 s" in out  # 2.5 s is no state: the nearest one, 2.4 s, is drawn
+    assert (
+        "(plans and predictions at t = 0, 1.2, 2.4 s)" in out
+    )  # 2.5 s is no state: the nearest one, 2.4 s, is drawn
     assert Image.open(png).size[0] > 300
     with Image.open(gif) as animation:
         assert animation.n_frames == 9 and animation.info["duration"] == 400  # one frame per 0.4 s step
@@ -288,7 +290,7 @@ def test_a_time_past_the_episode_draws_its_last_plan(runs, tmp_path, t, capsys):
     (on a 13.2 s episode, at 8.4 s) while 1e3 drew the last plan. 8 steps of 0.4 s: the last plan is at
     2.8 s."""
     assert main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", t]) == 0
-    assert "(plans at t = 2.8 s)" in capsys.readouterr().out
+    assert "(plans and predictions at t = 2.8 s)" in capsys.readouterr().out
 
 
 def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
@@ -444,10 +446,10 @@ def test_plot_times_fall_on_states_with_a_plan(runs, tmp_path, tmp_path_factory,
     recording without plans keeps the nearest state of all."""
     png = tmp_path / "p.png"
     assert main(["review", str(runs[0].path), "--plot", str(png), "--times", "100,3.2,0.5"]) == 0
-    assert "(plans at t = 0.4, 2.8 s)" in capsys.readouterr().out
+    assert "(plans and predictions at t = 0.4, 2.8 s)" in capsys.readouterr().out
     plain = record_episode(tmp_path_factory.mktemp("plain"), seed=1, steps=8, with_plan=False)
     assert main(["review", str(plain.path), "--plot", str(png), "--times", "100"]) == 0
-    assert "(plans at t = 3.2 s)" in capsys.readouterr().out
+    assert "(agents at t = 3.2 s)" in capsys.readouterr().out  # it records no plan: said "plans"
 
 
 def test_a_compare_file_that_cannot_be_read_is_the_one_line_alone(runs, tmp_path, capsys):

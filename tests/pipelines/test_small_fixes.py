@@ -240,7 +240,7 @@ def test_files_with_log_times_from_zero_still_read_and_review(episode, tmp_path,
     plot = tmp_path / "old.png"
     assert main(["review", str(old.path), "--plot", str(plot), "--times", "0.8"]) == 0
     out = capsys.readouterr().out
-    assert "plans at t = 0.8 s" in out
+    assert "at t = 0.8 s)" in out
     assert [line.split() for line in out.splitlines() if line.startswith("started")] == [["started", "-"]]
     assert plot.read_bytes().startswith(b"\x89PNG")
 
