@@ -1,6 +1,7 @@
 """The between-step metrics (linear motion within each step) on constructed trajectories, by hand; the
 step-sampled ones beside them keep their values."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,6 +16,7 @@ from crowdsim.metrics import (
     episode_metrics,
     min_distance_between_steps,
 )
+from tests.same_metrics import same_metrics
 
 
 def make_traj(robot_pos, human_pos) -> Trajectory:
@@ -106,12 +108,12 @@ def test_without_humans_the_distance_is_inf_and_null_round_trips():
     assert not alone.collision_between_steps and not alone.contact_between_steps
     record = alone.as_dict()
     assert record["min_distance_between_steps"] is None  # JSON has no inf
-    assert EpisodeMetrics.from_dict(record) == alone
+    assert same_metrics(EpisodeMetrics.from_dict(record), alone)
 
 
 def test_round_trip_and_older_records():
     m = episode_metrics(make_traj([[[-0.5, 0.0]], [[0.5, 0.0]]], [[[0.5, 0.0]], [[-0.5, 0.0]]]))
-    assert EpisodeMetrics.from_dict(m.as_dict()) == m
+    assert same_metrics(EpisodeMetrics.from_dict(m.as_dict()), m)
     old = {k: v for k, v in m.as_dict().items() if k not in ADDED_FIELDS}
     rebuilt = EpisodeMetrics.from_dict(old)
     assert rebuilt.min_distance_between_steps is None
@@ -156,3 +158,17 @@ def test_never_above_the_sampled_distance_even_by_rounding():
     m = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.3, 2.9]], [[0.7, 0.2]]]))
     assert m.min_distance == pytest.approx(math.hypot(0.7, 0.2))
     assert m.min_distance_between_steps <= m.min_distance
+
+
+def test_a_failed_episodes_metrics_compare_equal_however_their_nan_was_made():
+    """A failed episode's travel_time is NaN: its records compare equal with tests.same_metrics, not with
+    ``==`` (NaN != NaN; the dataclass's ``==`` gave True only for the very same NaN object, and on 3.13 not
+    even then)."""
+    m = episode_metrics(make_traj([[[0.0, 0.0]], [[0.0, 1.0]]], [[[3.0, 0.0]], [[3.0, 1.0]]]))
+    assert not m.success and math.isnan(m.travel_time) and math.isnan(m.reach_times[0])
+    other_nan = dataclasses.replace(m, travel_time=float("nan"), reach_times=(float("nan"),))
+    assert other_nan != m and same_metrics(other_nan, m)
+    assert same_metrics(EpisodeMetrics.from_dict(m.as_dict()), m)
+    assert not same_metrics(dataclasses.replace(m, travel_time=1.0), m)
+    assert not same_metrics(dataclasses.replace(m, reach_times=(1.0,)), m)
+    assert not same_metrics(dataclasses.replace(m, n_steps=2), m)
