@@ -4,6 +4,9 @@ import dataclasses
 import json
 import math
 import os
+import subprocess
+import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -18,6 +21,8 @@ from pipelines.loop.margins import MarginSpec, parse_margins
 from predictors.calibration_store import save_calibration
 from predictors.errors import PredictorError
 from tests.calibration_blocks import constant_velocity_block
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_parse_margins():
@@ -653,7 +658,6 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
     force for good: only Ctrl-C put the earlier ones back. The journal it wrote before storing them lets the
     next calibrate take them back."""
     from pipelines.cli import main
-    from pipelines.experiments import calibrate as experiment
     from predictors.calibration_store import read_calibration_file
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
@@ -661,24 +665,27 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
     _episodes(monkeypatch)
     assert main([*CALIBRATE, "--alpha", "0.3"]) == 0
     earlier = [b.to_json() for b in read_calibration_file(path)]
-    calibrate = experiment.closed_loop_errors
-
-    def killed(plan, progress=True):
-        if plan.seed == 7 + 200:  # the held-out episodes
-            os._exit(9)
-        return calibrate(plan, progress)
-
-    monkeypatch.setattr(experiment, "closed_loop_errors", killed)
+    # The calibrate to kill, in a process of its own with _episodes' synthetic errors: a fork of this process,
+    # which has other threads by now, may deadlock in the child (Python 3.12+ warns: DeprecationWarning).
+    script = (
+        "import os, sys\n"
+        "from pipelines.cli import main\n"
+        "from pipelines.experiments import calibrate as experiment\n"
+        "from tests.calibration_blocks import class_errors\n"
+        "def killed(plan, progress=True):\n"
+        "    if plan.seed == 7 + 200:  # the held-out episodes\n"
+        "        os._exit(9)\n"
+        "    scores, motion = class_errors(4)\n"
+        "    return experiment.ClosedLoopErrors(scores, motion, scores, {'seeds': [plan.seed, plan.seed]})\n"
+        "experiment.closed_loop_errors = killed\n"
+        "sys.exit(main(sys.argv[1:]))\n"
+    )
     argv = [*CALIBRATE, "--alpha", "0.3", "--seed", "7", "--holdout", "--holdout-margins", "conformal:0.3"]
-    pid = os.fork()
-    if pid == 0:  # the calibrate to kill
-        try:
-            main(argv)
-        finally:
-            os._exit(1)
-    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 9
+    child = subprocess.Popen([sys.executable, "-c", script, *argv], cwd=REPO, stderr=subprocess.PIPE)
+    _, err = child.communicate(timeout=300)
+    assert child.returncode == 9, err
+    pid = child.pid
     assert [b.to_json() for b in read_calibration_file(path)] != earlier  # the killed run's block in force
-    monkeypatch.setattr(experiment, "closed_loop_errors", calibrate)
     capsys.readouterr()
     unfinished = tmp_path / f".calibrate-holdout.{pid}.json.tmp"  # as one killed while writing its journal
     unfinished.write_text('{"stored": [')
@@ -713,10 +720,9 @@ def test_an_unreadable_journal_of_a_killed_calibrate_is_one_line_naming_it(tmp_p
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     _episodes(monkeypatch)
-    pid = os.fork()
-    if pid == 0:
-        os._exit(0)
-    os.waitpid(pid, 0)  # a pid no process has now
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    pid = gone.pid  # a pid no process has now
     journal = tmp_path / f".calibrate-holdout.{pid}.json"
     journal.write_text('{"stored": [')
     assert main([*CALIBRATE, "--alpha", "0.2"]) == 2
