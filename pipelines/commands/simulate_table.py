@@ -117,7 +117,8 @@ def plot_title(controller: str, episode: EpisodeResult) -> str:
     who = controller + (f" with {episode.predictor}" if episode.predictor else "")
     seed = "" if episode.seed is None else f", seed {episode.seed}"
     robots = f"{episode.n_robots} robot" + ("s" if episode.n_robots != 1 else "")
-    crowd = f"{episode.scenario}, {robots}, {episode.n_humans} humans{seed}"
+    humans = f"{episode.n_humans} human" + ("s" if episode.n_humans != 1 else "")
+    crowd = f"{episode.scenario}, {robots}, {humans}{seed}"
     outcome = f"success in {m.travel_time:g} s" if m.success else "timeout"
     if episode.n_humans == 0:
         closest = "no humans"

@@ -105,3 +105,17 @@ def test_the_plots_title_names_the_run_and_what_happened(tmp_path, capsys, monke
         "straight, circle, 3 robots, 7 humans, seed 0\n"
         "success in 10.4 s, min robot-human distance 0.51 m: contact",
     ]
+
+
+def test_the_plots_title_counts_one_human_in_the_singular(tmp_path, capsys, monkeypatch):
+    import crowdsim.plotting
+
+    titles = []
+    draw = crowdsim.plotting.plot_episode
+    monkeypatch.setattr(
+        crowdsim.plotting, "plot_episode", lambda *a, **k: titles.append(k["title"]) or draw(*a, **k)
+    )
+    plot = ["--plot", str(tmp_path / "ep.png"), "--no-progress", "--seed", "0"]
+    assert main(["simulate", "--controller", "straight", "--robots", "1", "--humans", "1", *plot]) == 0
+    capsys.readouterr()
+    assert titles[0].startswith("straight, circle, 1 robot, 1 human, seed 0\n")  # said "1 humans"
