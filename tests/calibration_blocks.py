@@ -26,3 +26,12 @@ def constant_velocity_block(errors: np.ndarray, **extra) -> Calibration:
         data_sha256="0" * 64,
         **extra,
     )
+
+
+def synthetic_closed_loop(plan, errors: np.ndarray | None = None):
+    """What calibrate's closed-loop episodes (``pipelines.experiments.calibrate.closed_loop_errors``) return
+    for ``plan``, made up: ``class_errors(4)`` (19 per motion class, shortfall = error) or ``errors``."""
+    from pipelines.experiments.calibrate import ClosedLoopErrors
+
+    scores, motion = class_errors(4) if errors is None else (errors, np.zeros(len(errors), dtype=int))
+    return ClosedLoopErrors(scores, motion, scores, {"seeds": [plan.seed, plan.seed]})

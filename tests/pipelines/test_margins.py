@@ -332,14 +332,13 @@ def _episodes(monkeypatch, errors: np.ndarray | None = None) -> list:
     """calibrate's closed-loop episodes replaced by synthetic errors (tests/calibration_blocks.class_errors:
     19 per motion class, shortfall = error) or ``errors``; returns the plans they were asked for."""
     from pipelines.experiments import calibrate as experiment
-    from tests.calibration_blocks import class_errors
+    from tests.calibration_blocks import synthetic_closed_loop
 
     plans = []
 
     def measured(plan, progress=True):
         plans.append(plan)
-        scores, motion = class_errors(4) if errors is None else (errors, np.zeros(len(errors), dtype=int))
-        return experiment.ClosedLoopErrors(scores, motion, scores, {"seeds": [plan.seed, plan.seed]})
+        return synthetic_closed_loop(plan, errors)
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
     return plans
@@ -671,12 +670,11 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
         "import os, sys\n"
         "from pipelines.cli import main\n"
         "from pipelines.experiments import calibrate as experiment\n"
-        "from tests.calibration_blocks import class_errors\n"
+        "from tests.calibration_blocks import synthetic_closed_loop\n"
         "def killed(plan, progress=True):\n"
         "    if plan.seed == 7 + 200:  # the held-out episodes\n"
         "        os._exit(9)\n"
-        "    scores, motion = class_errors(4)\n"
-        "    return experiment.ClosedLoopErrors(scores, motion, scores, {'seeds': [plan.seed, plan.seed]})\n"
+        "    return synthetic_closed_loop(plan)\n"
         "experiment.closed_loop_errors = killed\n"
         "sys.exit(main(sys.argv[1:]))\n"
     )
