@@ -1,5 +1,6 @@
 """The installable package: pyproject.toml lists every package, and a wheel built from a copy of the sources,
-installed into a fresh virtual environment and run outside the clone, has the shipped model zoo and runs.
+installed into a fresh virtual environment and run outside the clone, has the shipped model zoo, runs, and
+shows its types to mypy.
 
 The fresh environment takes the heavy dependencies (torch, CasADi, ...) from the running interpreter's
 site-packages through a ``.pth`` line: a plain path line adds that directory to ``sys.path`` without
@@ -45,6 +46,12 @@ def test_pyproject_lists_every_package_and_maps_the_shipped_zoo():
     assert listed - on_disk == {zoo.CHECKPOINTS_PACKAGE}
     assert setuptools["package-dir"] == {zoo.CHECKPOINTS_PACKAGE: zoo.CHECKPOINTS_DIRNAME}
     assert (ROOT / zoo.CHECKPOINTS_DIRNAME / "__init__.py").is_file()  # a regular package: files() is a Path
+
+
+def test_every_source_package_is_marked_typed():
+    """PEP 561: without ``py.typed`` mypy treats an installed package as untyped and a user's own code that
+    imports it fails to check (``import-not-found``); the subpackages are covered by their top package's."""
+    assert [tree for tree in SOURCE_TREES if not (ROOT / tree / "py.typed").is_file()] == []
 
 
 def test_a_clone_reads_its_own_checkpoints(monkeypatch):
@@ -177,3 +184,31 @@ def test_the_wheel_runs_outside_the_clone(tmp_path):
 
     after = {p: p.stat().st_mtime_ns for p in (site / zoo.CHECKPOINTS_PACKAGE).iterdir() if p.is_file()}
     assert after == before  # nothing written into the installed package
+    _check_types_seen_by_mypy(bin_dir / "python", work)
+
+
+# A user's code with two type errors that mypy can see only through the installed package's annotations.
+USER_CODE = """
+from crowdsim.world import RADIUS
+from mpc.config import MPCConfig
+
+radius: str = RADIUS
+MPCConfig(horizon="13")
+"""
+
+
+def _check_types_seen_by_mypy(python: Path, work: Path) -> None:
+    """mypy, run on a user's file against the fresh environment, finds the wheel's modules and their types."""
+    if importlib.util.find_spec("mypy") is None:
+        return  # the dev extra brings mypy; a bare install has nothing to check with
+    user = work / "user_code.py"
+    user.write_text(USER_CODE)
+    command = [sys.executable, "-m", "mypy", "--python-executable", str(python), "--no-error-summary"]
+    command += ["--cache-dir", str(work / "mypy_cache"), user.name]
+    done = subprocess.run(command, capture_output=True, text=True, cwd=work)
+    errors = sorted(line.split("error: ")[1] for line in done.stdout.splitlines() if "error: " in line)
+    assert errors == [
+        'Argument "horizon" to "MPCConfig" has incompatible type "str"; expected "int"  [arg-type]',
+        'Incompatible types in assignment (expression has type "float", variable has type "str")'
+        "  [assignment]",
+    ], done.stdout + done.stderr
