@@ -66,7 +66,7 @@ def _build_wheel(tmp: Path) -> Path:
     it). With ``build`` installed: sdist first, then the wheel from the sdist, as CI does; else pip wheel."""
     src = tmp / "src"
     src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy2(ROOT / name, src / name)
     for tree in (*SOURCE_TREES, zoo.CHECKPOINTS_DIRNAME):
         shutil.copytree(ROOT / tree, src / tree, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
@@ -145,6 +145,10 @@ def test_the_wheel_runs_outside_the_clone(tmp_path):
         "package data missing from the wheel: see [tool.setuptools.package-data]"
     )
     assert not any(n.startswith(("tests/", "benchmarks/", "checkpoints/", "data/")) for n in names)
+    # MIT asks that copies keep the licence text: pyproject's license-files puts it in the wheel's metadata
+    (licence,) = [n for n in names if n.endswith(".dist-info/licenses/LICENSE")]
+    with zipfile.ZipFile(wheel) as archive:
+        assert archive.read(licence) == (ROOT / "LICENSE").read_bytes()
 
     bin_dir, site = _fresh_env(tmp_path, wheel)
     work = tmp_path / "work"  # outside the clone, so that the clone is not on sys.path through the cwd
