@@ -54,6 +54,14 @@ def test_every_source_package_is_marked_typed():
     assert [tree for tree in SOURCE_TREES if not (ROOT / tree / "py.typed").is_file()] == []
 
 
+def test_citation_file_names_the_version_and_licence_pyproject_declares():
+    """CITATION.cff repeats two of pyproject's facts; a release that bumps one must bump the other."""
+    project = _pyproject()["project"]
+    top_level = [line for line in (ROOT / "CITATION.cff").read_text().splitlines() if line[:1].isalpha()]
+    fields = dict(line.split(": ", 1) for line in top_level if ": " in line)
+    assert (fields["version"], fields["license"]) == (project["version"], project["license"])
+
+
 def test_a_clone_reads_its_own_checkpoints(monkeypatch):
     monkeypatch.delenv(zoo.CHECKPOINTS_ENV, raising=False)
     assert zoo.checkpoints_dir() == ROOT / zoo.CHECKPOINTS_DIRNAME
