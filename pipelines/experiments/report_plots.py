@@ -159,15 +159,16 @@ def _legend(ax: Any) -> None:
 
 
 def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], outcome: Outcome) -> Any:
-    """The pyplot figure of one outcome: by method at one crowd size, else against the number of humans."""
-    import matplotlib
+    """The figure of one outcome: by method at one crowd size, else against the number of humans.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    A ``matplotlib.figure.Figure``, as crowdsim.plotting's: no pyplot, so that a report written from a
+    notebook neither switches its backend nor adds to its open figures (savefig renders with Agg)."""
+    from matplotlib.figure import Figure
 
     methods = [m for m in experiment.method_labels if any(s.cell.method == m for s in summaries)]
     humans = sorted({s.cell.n_humans for s in summaries})
-    fig, ax = plt.subplots(figsize=FIGSIZE, layout="constrained")
+    fig = Figure(figsize=FIGSIZE, layout="constrained")
+    ax = fig.add_subplot()
     if len(humans) == 1:
         drawn = _draw_by_method(ax, methods, summaries, outcome.name)
         ax.set_xlabel(f"method ({humans[0]} humans)")
@@ -185,17 +186,11 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
 
 def plot_outcomes(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
     """One plot per outcome (``OUTCOMES``) in ``out``, named by ``plot_filename``; returns their paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     by_method = len({s.cell.n_humans for s in summaries}) == 1
     written = []
     for outcome in OUTCOMES:
         fig = outcome_figure(experiment, summaries, outcome)
         path = out / plot_filename(outcome.name, by_method=by_method)
         fig.savefig(path, dpi=120)
-        plt.close(fig)
         written.append(path)
     return written

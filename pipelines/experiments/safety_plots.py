@@ -37,28 +37,18 @@ LEGEND_WIDTH: Final[float] = 2.6  # in, added to a panel whose legend stands bes
 _LABEL_CORNERS: Final[tuple[tuple[int, int], ...]] = ((5, 5), (5, -5), (-5, 5), (-5, -5))  # points
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")  # reports are written by sweeps on machines without a display
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _panels(plt, count: int, size: tuple[float, float], title: str, **kwargs):
+def _panels(count: int, size: tuple[float, float], title: str, **kwargs):
     """A figure with ``count`` panels in rows of at most three, the unused ones hidden, and ``title`` wrapped
-    to the figure's width (experiment titles are longer than one panel is wide)."""
+    to the figure's width (experiment titles are longer than one panel is wide).
+
+    A ``matplotlib.figure.Figure``, not pyplot's: a report written from a notebook neither switches its
+    backend (this module called ``matplotlib.use("Agg")``) nor adds to its open figures."""
+    from matplotlib.figure import Figure
+
     ncols = min(3, count)
     nrows = math.ceil(count / ncols)
-    fig, axes = plt.subplots(
-        nrows,
-        ncols,
-        figsize=(size[0] * ncols, size[1] * nrows),
-        squeeze=False,
-        layout="constrained",
-        **kwargs,
-    )
+    fig = Figure(figsize=(size[0] * ncols, size[1] * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, **kwargs)
     for ax in axes.flat[count:]:
         ax.set_visible(False)
     fig.suptitle(textwrap.fill(title, width=int(12 * size[0] * ncols)), fontsize="medium")
@@ -94,12 +84,11 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
     bins; one panel per number of humans, since a larger crowd shifts the whole distribution."""
     from matplotlib.ticker import MaxNLocator
 
-    plt = _pyplot()
     groups = _by_humans(experiment, summaries)
     styles = _method_styles(experiment)
     entries = max(len(cells) for cells in groups.values()) + 3  # + the two thresholds and the title
     size = (5.0 + LEGEND_WIDTH, _height(3.6, entries))
-    fig, axes = _panels(plt, len(groups), size, experiment.title, sharex=True, sharey=True)
+    fig, axes = _panels(len(groups), size, experiment.title, sharex=True, sharey=True)
     for ax, (n, cells) in zip(axes, groups.items(), strict=True):
         for s in cells:
             counts = min_distance_counts(s.min_distances)
@@ -126,7 +115,6 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
 def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[SafetyColumn], path: Path) -> Path:
     fig = min_distance_hist_figure(experiment, summaries)
     fig.savefig(path, dpi=120)
-    _pyplot().close(fig)
     return path
 
 
@@ -177,12 +165,11 @@ def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyCol
     groups = {n: cells for n, cells in _by_humans(experiment, summaries).items() if len(cells) >= 2}
     if not groups:
         return None
-    plt = _pyplot()
     styles = _method_styles(experiment)
     most = max(len(cells) for cells in groups.values())
     annotated = most <= MAX_ANNOTATED
     size = (5.6, 4.2) if annotated else (5.6 + LEGEND_WIDTH, _height(4.2, most + 1))
-    fig, axes = _panels(plt, len(groups), size, experiment.title)
+    fig, axes = _panels(len(groups), size, experiment.title)
     for ax, (n, cells) in zip(axes, groups.items(), strict=True):
         for k, s in enumerate(cells):
             corner = k % len(_LABEL_CORNERS) if annotated else None
@@ -215,7 +202,6 @@ def plot_safety_tradeoff(
     if fig is None:
         return None
     fig.savefig(path, dpi=120)
-    _pyplot().close(fig)
     return path
 
 

@@ -187,3 +187,43 @@ def test_a_legend_of_many_methods_stands_beside_the_plot():
         if not inside:
             assert len(legend.get_texts()) == len(experiment.method_labels)
             assert fig.bbox.contains(legend.get_window_extent().x1 - 1, legend.get_window_extent().y0 + 1)
+
+
+# A notebook's session: its own backend (Jupyter's inline one; "svg" stands for it here) and a figure open.
+_USER_SESSION = """
+import matplotlib
+matplotlib.use("svg")
+import matplotlib.pyplot as plt
+from pathlib import Path
+import sys
+sys.path.insert(0, {tests!r})
+from test_sweep_reporting import _record
+from pipelines.experiments.cells import get_experiment
+from pipelines.experiments.report import write_report
+from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
+from pipelines.experiments.safety_plots import min_distance_hist_figure, safety_tradeoff_figure
+from pipelines.experiments.summary import summarize
+
+mine = plt.figure()
+experiment = get_experiment("controllers").with_predictor("constant_velocity")
+cells = experiment.cells((5,))
+records = [_record(c, i, 1.0, 0) | {{"n_humans": 5, "wall_s": 1.0}} for c in cells for i in range(2)]
+summaries = summarize(experiment, cells, records)
+figures = [outcome_figure(experiment, summaries, o) for o in OUTCOMES]
+figures += [min_distance_hist_figure(experiment, summaries), safety_tradeoff_figure(experiment, summaries)]
+report = write_report(Path({out!r}), experiment, cells, records)
+print(matplotlib.get_backend(), plt.get_fignums() == [mine.number], len(report.files))
+"""
+
+
+def test_a_report_leaves_the_callers_matplotlib_alone(tmp_path):
+    """A sweep's report, written from a notebook, switched the whole process to the Agg backend
+    (``matplotlib.use("Agg")``): the notebook's inline figures stopped showing. Its figures also went into
+    pyplot's list of open figures (``*_figure`` ones stayed there, 7 a report). The report's figures are
+    ``matplotlib.figure.Figure``s now, as crowdsim.plotting's are: no backend chosen, no pyplot state."""
+    from pathlib import Path
+
+    script = _USER_SESSION.format(tests=str(Path(__file__).parent), out=str(tmp_path))
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["svg", "True", "11"]
