@@ -72,6 +72,18 @@ class Recording:
     stopped_at: str | None = None  # what ended reading early (truncated files)
     problems: list[str] = field(default_factory=list)  # bad chunks, bad metadata, corruption (not messages)
 
+    def __repr__(self) -> str:
+        # Not the dataclass's: it printed every message, hundreds of kB for one episode, where a notebook
+        # shows the value of a cell's last line.
+        messages = sum(len(m) for m in self.messages.values())
+        problems = len(self.problems) + len(self.message_problems())
+        state = "truncated" if self.truncated else "complete"
+        topics = len(self.messages)
+        return (
+            f"Recording({str(self.path)!r}, {self.label!r}, {messages} messages on {topics} topics, {state}, "
+            f"{problems} problems)"
+        )
+
     @property
     def warning(self) -> str | None:
         if not self.truncated:
