@@ -314,6 +314,17 @@ def import_class(spec: str, what: str = "plugin") -> object:
     return getattr(module, class_name)
 
 
+def reloaded_class(spec: str, registered: object) -> object | None:
+    """The class ``module:Class`` names now, when its module, imported, holds another one than
+    ``registered``: the user reloaded it after an edit (``importlib.reload``, in a notebook), and registering
+    it again must take the edited class, where the first one stayed registered and the edit never ran.
+    None when it holds ``registered``, or is not imported (nothing is imported here)."""
+    module_name, _, class_name = spec.partition(":")
+    module = sys.modules.get(module_name)
+    current = getattr(module, class_name, None) if module is not None else None
+    return None if current is None or current is registered else current
+
+
 def load_plugin(spec: str) -> ModelKind:
     """Register ``module:NetClass`` (importing the module) and return its kind, named ``spec``.
 
@@ -321,8 +332,9 @@ def load_plugin(spec: str) -> ModelKind:
     one-file plugin next to where they work needs no install."""
     if not isinstance(spec, str) or len(spec) > MAX_PLUGIN_SPEC or PLUGIN_PATTERN.fullmatch(spec) is None:
         raise PredictorError(f"plugin {short_repr(spec)} is not of the form module:NetClass")
-    if spec in _PLUGINS:
-        return _PLUGINS[spec]
+    known = _PLUGINS.get(spec)
+    if known is not None and reloaded_class(spec, known.net_class) is None:
+        return known
     if spec in shipped():
         raise PredictorError(f"plugin {spec!r} would shadow a shipped model")
     cls = import_class(spec, "plugin")

@@ -191,9 +191,16 @@ def plugin_kind(cls: object, name: str) -> ControllerKind:
 
 
 def load_controller_plugin(spec: str) -> ControllerPlugin:
-    """Register the controller class ``module:Class`` (importing its module) under the name ``spec``."""
-    if spec in _PLUGINS:
-        return _PLUGINS[spec]
+    """Register the controller class ``module:Class`` (importing its module) under the name ``spec``.
+
+    Registering it again keeps the registration while the module holds the same class, and takes the new
+    class once the module was reloaded (``importlib.reload`` after an edit, in a notebook): the first class
+    stayed registered, and the edited code never ran."""
+    from predictors.models import reloaded_class
+
+    known = _PLUGINS.get(spec)
+    if known is not None and reloaded_class(spec, known.cls) is None:
+        return known
     cls = import_plugin(spec)
     plugin = ControllerPlugin(spec, cls, plugin_kind(cls, spec), "plugin")  # type: ignore[arg-type]
     _PLUGINS[spec] = plugin

@@ -547,3 +547,49 @@ def test_a_plugin_listed_in_the_environment_is_checked_like_one_given_to_plugin(
     registry itself must refuse what is no controller class, in one line."""
     with pytest.raises(PipelineError, match=message):
         registry.load_controller_plugin(spec)
+
+
+_EDITED_CONTROLLER = """
+class Mine:
+    name = "mine_{version}"
+    predictor = None
+    def __init__(self, spec, env_config, *, jit=False): pass
+    def reset(self, obs): pass
+    def act(self, obs): raise NotImplementedError
+    def describe(self): return {{}}
+    def close(self): pass
+"""
+_EDITED_NET = """
+from tests.plugins.toy_predictor import ToyNet
+class Mine(ToyNet):
+    version = {version}
+"""
+
+
+@pytest.mark.parametrize(("text", "lookup"), [(_EDITED_CONTROLLER, "controller"), (_EDITED_NET, "model")])
+def test_registering_a_reloaded_plugin_again_takes_its_new_class(tmp_path, monkeypatch, text, lookup):
+    """A notebook: register my_plugin:Mine, edit my_plugin.py, importlib.reload(my_plugin), register it again.
+    The registry kept the class of the first registration, so the edited code never ran (nor any error
+    said so); registering again now takes the module's class as it is, and one not reloaded stays as it
+    was registered."""
+    import importlib
+
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "my_plugin", raising=False)
+    source = tmp_path / "my_plugin.py"
+    source.write_text(text.format(version=1))
+    try:
+        assert plugins.register("my_plugin:Mine") == lookup
+        module = importlib.import_module("my_plugin")
+        first = module.Mine
+        assert plugins.register("my_plugin:Mine") == lookup  # the cell run again, nothing edited
+        source.write_text(text.format(version=2))
+        importlib.reload(module)
+        assert module.Mine is not first
+        plugins.register("my_plugin:Mine")
+    finally:
+        sys.modules.pop("my_plugin", None)
+    if lookup == "controller":
+        assert registry.controller_plugin("my_plugin:Mine").cls is module.Mine
+    else:
+        assert models.model_kind("my_plugin:Mine").net_class is module.Mine
