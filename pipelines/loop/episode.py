@@ -21,7 +21,9 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
+from crowdsim.errors import SimulationError
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
+from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.loop.contract import called, checked_description, checked_output, episode_meta
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
@@ -90,7 +92,8 @@ def run_episode(
     observers: Sequence[EpisodeObserver] = (),
     meta: Mapping[str, Any] | None = None,
 ) -> EpisodeResult:
-    """Run one episode to its end (every robot at its goal, or the time limit).
+    """Run one episode to its end (every robot at its goal, or the time limit). SimulationError, before
+    anything runs, for a scenario or size the simulator refuses, or no robot (``n_robots`` >= 1).
 
     The meta given to ``on_reset`` holds seed, scenario, n_humans, n_robots, controller, predictor (the
     controller's), predictor_sha256 and config (the environment's settings, plus what the controller's
@@ -98,6 +101,9 @@ def run_episode(
     precedence; an entry that would replace one of the episode's own fields (``contract.OWN_FIELDS``) is a
     PipelineError.
     """
+    check_sizes(scenario, n_humans, n_robots)
+    if n_robots < 1:  # the simulator runs crowds alone; an episode's metrics are its robots'
+        raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
     env = CrowdEnv(env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
     called(controller, "reset", obs)

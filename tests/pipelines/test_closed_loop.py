@@ -222,3 +222,18 @@ def test_summarize_counts_iterations_and_fallbacks_over_every_episode():
     assert s["fallback_steps"] == 3
     s = summarize([second, first])  # the fallbacks counted wherever they are
     assert s["fallback_steps"] == 3
+
+
+@pytest.mark.parametrize("controller", ["orca", "dmpc"])
+def test_an_episode_without_robots_is_refused_before_it_starts(controller):
+    """``run_episode(..., n_robots=0)``: ORCA and CMPC ran the whole episode (29 steps, observers and all)
+    and then failed in the metrics ("need at least one robot"); DMPC failed in CasADi ("Dimensions must be
+    non-negative, got -1-by-1"). The simulator takes crowds without robots (its check says "n_robots must
+    be in [0, 12]"); an episode's record is the robots'."""
+    from crowdsim.errors import SimulationError
+
+    spy = Spy()
+    with pytest.raises(SimulationError, match=r"^run_episode: n_robots must be in \[1, 12\], got 0$"):
+        run_episode(make_controller(ControllerSpec(controller)), seed=0, scenario="circle", n_humans=3,
+                    n_robots=0, observers=[spy])  # fmt: skip
+    assert spy.calls == []
