@@ -188,7 +188,10 @@ def load_checkpoint(
     if not 2 <= obs_len <= MAX_OBS_LEN:
         raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
     try:
-        net = kind.build_net(document.get("net", {}))  # validated, and bounded before memory is taken
+        # The initial weights, replaced by the checkpoint's below, are drawn from a fork of torch's global
+        # generator: a caller who seeded torch gets the same random numbers after a load as without it.
+        with torch.random.fork_rng(devices=[]):
+            net = kind.build_net(document.get("net", {}))  # validated, and bounded before memory is taken
     except PredictorError as exc:
         raise PredictorError(f'{config}: "net": {exc}') from None
     expected_state = net.state_dict()

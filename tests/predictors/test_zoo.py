@@ -535,3 +535,15 @@ def test_an_unknown_predictors_name_is_cut_in_the_message():
     with pytest.raises(UnknownPredictor) as error:
         load_predictor("x" * 100_000)
     assert len(str(error.value)) < 1000 and "unknown predictor 'xxx" in str(error.value)
+
+
+@pytest.mark.parametrize("name", ["social_lstm_eth", "social_gan_eth"])
+def test_loading_a_model_leaves_torchs_random_numbers_alone(name):
+    """A notebook seeds torch for its own work, then loads a zoo model: building the net drew its initial
+    weights, which the checkpoint replaces at once, from torch's global generator, so the notebook's next
+    random numbers were others than without the load."""
+    torch.manual_seed(0)
+    expected = torch.rand(3)
+    torch.manual_seed(0)
+    load_predictor(name)
+    assert torch.equal(torch.rand(3), expected)
