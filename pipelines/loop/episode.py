@@ -13,7 +13,7 @@ import contextlib
 import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Final, Protocol
 
 import numpy as np
@@ -57,14 +57,15 @@ class EpisodeResult:
     predictor: str | None
     predictor_sha256: str | None
     metrics: EpisodeMetrics
-    robot_positions: np.ndarray  # (T+1, M, 2) m
-    human_positions: np.ndarray  # (T+1, N, 2) m
-    robot_goals: np.ndarray  # (M, 2) m
-    human_goals: np.ndarray  # (N, 2) m
-    solve_times_s: np.ndarray  # (T,) s, wall time of each control step
-    statuses: tuple[str, ...]  # (T,) solver status per control step
-    fallbacks: tuple[str | None, ...]  # (T,) None or the fallback used
-    iterations: np.ndarray  # (T,) int, IBR iterations per control step
+    # Not in the repr: a notebook showing a result printed every one of them (30 kB for one episode).
+    robot_positions: np.ndarray = field(repr=False)  # (T+1, M, 2) m
+    human_positions: np.ndarray = field(repr=False)  # (T+1, N, 2) m
+    robot_goals: np.ndarray = field(repr=False)  # (M, 2) m
+    human_goals: np.ndarray = field(repr=False)  # (N, 2) m
+    solve_times_s: np.ndarray = field(repr=False)  # (T,) s, wall time of each control step
+    statuses: tuple[str, ...] = field(repr=False)  # (T,) solver status per control step
+    fallbacks: tuple[str | None, ...] = field(repr=False)  # (T,) None or the fallback used
+    iterations: np.ndarray = field(repr=False)  # (T,) int, IBR iterations per control step
 
     def record(self) -> EpisodeRecord:
         """The episode without its trajectories: what every report and log serialises."""
