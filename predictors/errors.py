@@ -31,12 +31,20 @@ class DatasetFormatError(PredictorError):
         where = f"{self.path}:{line}" if line is not None else self.path
         super().__init__(f"{where}: {reason}")
 
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        # Built from its facts, not its message: a process pool sends a job's exception back pickled, and
+        # BaseException's pickle calls the class with the message alone (a TypeError, the pool broken).
+        return type(self), (self.path, self.line, self.reason)
+
 
 class UnknownPredictor(PredictorError):
     def __init__(self, name: str, choices: list[str]):
         self.name = name
         self.choices = choices
         super().__init__(f"unknown predictor {short_repr(name)}; choose from {choices}")
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (self.name, self.choices)  # see DatasetFormatError.__reduce__
 
 
 class CheckpointMismatch(PredictorError):
@@ -50,3 +58,6 @@ class CheckpointMismatch(PredictorError):
             f"checkpoint {self.path} has sha256 {found}, but the manifest expects {expected}; "
             "the file is corrupt or was replaced — restore it or re-run `crowdmpc zoo verify`"
         )
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (self.path, self.expected, self.found)  # see DatasetFormatError.__reduce__

@@ -64,6 +64,9 @@ class UnknownModel(PredictorError):
             f"--plugin module:NetClass (or ${PLUGINS_ENV}, or an entry point in {ENTRY_POINT_GROUP!r})"
         )
 
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (self.name, self.choices)  # see predictors.errors.DatasetFormatError.__reduce__
+
 
 @dataclass(frozen=True)
 class ModelKind:

@@ -138,6 +138,11 @@ class UnknownController(PipelineError):
             f"module:Class (or ${PLUGINS_ENV}, or an entry point in {ENTRY_POINT_GROUP!r})"
         )
 
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        # Built from its facts: a process pool sends a job's exception back pickled, and BaseException's
+        # pickle calls the class with the message alone (a TypeError, the pool broken).
+        return type(self), (self.name, self.choices)
+
 
 _PLUGINS: dict[str, ControllerPlugin] = {}
 

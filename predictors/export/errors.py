@@ -19,3 +19,6 @@ class ExportError(PredictorError):
         self.what = what
         self.module = module
         super().__init__(f"cannot export: {what} (in module {module!r})")
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (self.what, self.module)  # see predictors.errors.DatasetFormatError.__reduce__
