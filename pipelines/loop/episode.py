@@ -25,10 +25,13 @@ from crowdsim.errors import SimulationError
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
+from pipelines.errors import PipelineError
 from pipelines.loop.contract import called, checked_description, checked_output, episode_meta
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
+from pipelines.loop.spec import CONTROLLER_METHODS
+from predictors.errors import short_repr
 from predictors.progress import progress_bar
 
 
@@ -102,6 +105,7 @@ def run_episode(
     precedence; an entry that would replace one of the episode's own fields (``contract.OWN_FIELDS``) is a
     PipelineError.
     """
+    _check_controller(controller)
     check_sizes(scenario, n_humans, n_robots)
     if n_robots < 1:  # the simulator runs crowds alone; an episode's metrics are its robots'
         raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
@@ -180,6 +184,14 @@ def run_episodes(
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
+    if not isinstance(spec, ControllerSpec):
+        raise PipelineError(
+            f"run_episodes takes a ControllerSpec (e.g. ControllerSpec('cmpc')) and builds the controller, "
+            f"got {short_repr(spec)}"
+        )
+    # numpy integers too, as seeds and sizes are taken (a notebook's counts often come from numpy)
+    if isinstance(episodes, bool) or not isinstance(episodes, int | np.integer) or episodes < 0:
+        raise PipelineError(f"run_episodes: episodes must be an int >= 0, got {short_repr(episodes)}")
     controller = make_controller(spec, env_config)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
@@ -209,6 +221,22 @@ def run_episodes(
     finally:
         called(controller, "close")  # e.g. DMPC's solver threads
     return results
+
+
+def _check_controller(controller: object) -> None:
+    """PipelineError unless ``controller`` has the protocol's methods (a spec or a name given in its place,
+    in a notebook, failed on an attribute deep inside)."""
+    if isinstance(controller, ControllerSpec):
+        raise PipelineError(
+            "run_episode takes a controller built by make_controller(spec), not the ControllerSpec "
+            "(run_episodes takes the spec)"
+        )
+    missing = [m for m in (*CONTROLLER_METHODS, "name", "predictor") if not hasattr(controller, m)]
+    if missing:
+        raise PipelineError(
+            f"run_episode: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
+            "(build one with make_controller(ControllerSpec(...)))"
+        )
 
 
 def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:

@@ -249,3 +249,22 @@ def test_an_episode_result_shows_itself_in_one_line():
     start = "EpisodeResult(seed=3, scenario='circle', n_humans=5, n_robots=3, controller='orca', predictor="
     assert text.startswith(start)
     assert repr(result.metrics) in text
+
+
+def test_a_spec_where_a_controller_goes_and_the_other_way_round_are_named():
+    """In a notebook, ``run_episode(ControllerSpec("cmpc"), ...)`` ended in "AttributeError: 'ControllerSpec'
+    object has no attribute 'name'", and ``run_episodes("cmpc", ...)`` in "'str' object has no attribute
+    'controller'"; ``episodes=-1`` ran nothing without a word and ``episodes=2.5`` was a TypeError of
+    range(). Each is a PipelineError saying what the function takes."""
+    kwargs = {"seed": 0, "scenario": "circle", "n_humans": 3}
+    with pytest.raises(PipelineError, match=r"^run_episode takes a controller built by make_controller"):
+        run_episode(ControllerSpec("cmpc"), **kwargs)
+    with pytest.raises(PipelineError, match=r"^run_episode: 'cmpc' is no controller: it has no reset, act"):
+        run_episode("cmpc", **kwargs)
+    with pytest.raises(PipelineError, match=r"^run_episodes takes a ControllerSpec .*, got 'cmpc'$"):
+        run_episodes("cmpc", episodes=1, progress=False, **kwargs)
+    for episodes in (-1, 2.5, True):
+        with pytest.raises(PipelineError, match=r"^run_episodes: episodes must be an int >= 0, got "):
+            run_episodes(ControllerSpec("orca"), episodes=episodes, progress=False, **kwargs)
+    assert run_episodes(ControllerSpec("orca"), episodes=0, progress=False, **kwargs) == []
+    assert len(run_episodes(ControllerSpec("orca"), episodes=np.int64(1), progress=False, **kwargs)) == 1
