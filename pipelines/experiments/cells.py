@@ -9,9 +9,9 @@ are pipelines.experiments.tasks; the paper's figures are pipelines.experiments.p
 from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
-from typing import Final
+from typing import Any, Final
 
 from crowdsim.profiles import VISIBILITY
 from crowdsim.world import PAPER_ROBOTS
@@ -67,6 +67,14 @@ class Experiment:
             raise PipelineError(f"experiment {self.name!r} needs distinct method labels, got {labels}")
         if not self.humans:
             raise PipelineError(f"experiment {self.name!r} has no numbers of humans")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # A read-only mapping cannot be pickled nor deep-copied: a SweepConfig sent to a background process
+        # (multiprocessing's spawn) failed with "cannot pickle 'mappingproxy' object". Sent as plain dicts,
+        # made read-only again.
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values["paper"], values["method_worlds"] = dict(self.paper), dict(self.method_worlds)
+        return _rebuilt_experiment, (values,)
 
     @property
     def method_labels(self) -> tuple[str, ...]:
@@ -211,6 +219,12 @@ ORACLE_WORDS: Final[str] = " (ORCA ground truth as an oracle)"
 PREDICTING_WORDS: Final[str] = ", those that predict the humans with "  # and with_controllers
 # Models of the swap table that came after the first zoo (issue 13): in the default list once a zoo has them.
 LATER_SWAP_PREDICTORS: Final[frozenset[str]] = frozenset({"social_gru_eth", "social_attention_eth"})
+
+
+def _rebuilt_experiment(values: dict[str, Any]) -> Experiment:
+    """An ``Experiment`` from ``Experiment.__reduce__``'s values."""
+    read_only = {k: MappingProxyType(values[k]) for k in ("paper", "method_worlds")}
+    return Experiment(**{**values, **read_only})
 
 
 def swap_predictors(available: Collection[str] = ()) -> tuple[str, ...]:

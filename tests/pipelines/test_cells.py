@@ -128,3 +128,20 @@ def test_controllers_that_predict_nothing_keep_no_margins_after_with_margins():
     experiment = experiment.with_controllers(["cmpc", "orca", "straight"])
     kept = {label: spec.margins for label, spec in experiment.methods}
     assert kept == {"cmpc": margins, "orca": MarginSpec(), "straight": MarginSpec()}
+
+
+@pytest.mark.parametrize("name", ["table2", "conventions"])
+def test_an_experiment_pickles_and_copies(name):
+    """A notebook running a sweep in a background process (``multiprocessing``'s spawn pickles the
+    SweepConfig), or ``copy.deepcopy`` of a config: "cannot pickle 'mappingproxy' object" (the paper's
+    figures and the per-method worlds). Back from the pickle, an experiment is equal and still read-only."""
+    import copy
+    import pickle
+    from types import MappingProxyType
+
+    from pipelines.experiments.cells import EXPERIMENTS
+
+    experiment = EXPERIMENTS[name]
+    for back in (pickle.loads(pickle.dumps(experiment)), copy.deepcopy(experiment)):
+        assert back == experiment
+        assert isinstance(back.paper, MappingProxyType) and isinstance(back.method_worlds, MappingProxyType)
