@@ -306,6 +306,7 @@ def import_class(spec: str, what: str = "plugin") -> object:
     if cwd not in sys.path:
         sys.path.append(cwd)
     module_name, _, class_name = spec.partition(":")
+    imported_before = module_name in sys.modules
     try:
         module = importlib.import_module(module_name)
     except Exception as exc:  # a plugin module that does not import: say which and why, in one line
@@ -313,7 +314,15 @@ def import_class(spec: str, what: str = "plugin") -> object:
             f"{what} {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
         ) from None
     if not hasattr(module, class_name):
-        raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}")
+        # A notebook that wrote the class after a first try: import_module hands back the module as it
+        # was first imported, and the refusal repeated itself with nothing saying why.
+        reload = (
+            f"; if you added it since the module was imported, importlib.reload({module_name}) first (Python "
+            "keeps a module as it was first imported)"
+            if imported_before
+            else ""
+        )
+        raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}{reload}")
     return getattr(module, class_name)
 
 

@@ -593,3 +593,26 @@ def test_registering_a_reloaded_plugin_again_takes_its_new_class(tmp_path, monke
         assert registry.controller_plugin("my_plugin:Mine").cls is module.Mine
     else:
         assert models.model_kind("my_plugin:Mine").net_class is module.Mine
+
+
+def test_a_class_added_to_an_imported_module_is_told_to_reload_it(tmp_path, monkeypatch):
+    """A notebook registers my_plugin:Mine before writing the class, then writes it and registers again:
+    "module 'my_plugin' has no 'Mine'" both times, with nothing saying that Python keeps the module as it
+    was first imported. The second refusal says to reload it; the first, from a fresh import, does not."""
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "my_plugin", raising=False)
+    source = tmp_path / "my_plugin.py"
+    source.write_text("")
+    try:
+        with pytest.raises(plugins.PluginError) as first:
+            plugins.register("my_plugin:Mine")
+        source.write_text(_EDITED_CONTROLLER.format(version=1))
+        with pytest.raises(plugins.PluginError) as second:
+            plugins.register("my_plugin:Mine")
+    finally:
+        sys.modules.pop("my_plugin", None)
+    assert str(first.value) == "plugin 'my_plugin:Mine': module 'my_plugin' has no 'Mine'"
+    assert str(second.value) == (
+        "plugin 'my_plugin:Mine': module 'my_plugin' has no 'Mine'; if you added it since the module was "
+        "imported, importlib.reload(my_plugin) first (Python keeps a module as it was first imported)"
+    )
