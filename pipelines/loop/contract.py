@@ -60,6 +60,19 @@ def called(controller: Controller, method: str, *args: Any) -> Any:
         raise PipelineError(f"{_named(controller)}: {method}() raised {type(exc).__name__}: {exc}") from exc
 
 
+def handed_out(obs: Observation) -> Observation:
+    """``obs`` with copies of its arrays: what the loops hand a controller's ``reset`` and ``act``. The loops
+    hand the observation itself to their observers after ``act``, and a controller that changed its arrays in
+    place (the scene centred on a robot, ``obs.human_positions -= centre``) moved the positions the recorder
+    then wrote, while the metrics, from the simulator, stayed right."""
+    arrays: dict[str, Any] = {
+        field.name: np.array(value)
+        for field in dataclasses.fields(obs)
+        if isinstance(value := getattr(obs, field.name), np.ndarray)
+    }
+    return dataclasses.replace(obs, **arrays)
+
+
 def _check_array(
     controller: Controller, field: str, value: object, shape: tuple[int | None, ...], expected: str
 ) -> None:

@@ -26,7 +26,13 @@ from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
-from pipelines.loop.contract import called, checked_description, checked_output, episode_meta
+from pipelines.loop.contract import (
+    called,
+    checked_description,
+    checked_output,
+    episode_meta,
+    handed_out,
+)
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
@@ -111,7 +117,7 @@ def run_episode(
         raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
     env = CrowdEnv(env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
-    called(controller, "reset", obs)
+    called(controller, "reset", handed_out(obs))
     episode = {"seed": seed, "scenario": scenario, "n_humans": n_humans, "n_robots": n_robots}
     described = checked_description(controller)
     full_meta = episode_meta(
@@ -127,7 +133,7 @@ def run_episode(
     done = False
     with interrupts_between_steps() as interrupt:  # CasADi's own Ctrl-C lines: see pipelines.loop.interrupt
         while not done:
-            out = checked_output(controller, called(controller, "act", obs), obs)
+            out = checked_output(controller, called(controller, "act", handed_out(obs)), obs)
             next_obs, done, _ = env.step(out.accelerations)
             solve_times.append(float(out.solve_time_s))
             statuses.append(str(out.status))

@@ -36,6 +36,7 @@ from pipelines.loop.contract import (
     checked_meta,
     checked_output,
     episode_meta,
+    handed_out,
 )
 from pipelines.loop.controllers import Controller
 from pipelines.loop.episode import EpisodeObserver, EpisodeResult
@@ -137,7 +138,7 @@ def run_gym_episode(
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)
     obs: Observation = info["observation"]
-    called(controller, "reset", obs)
+    called(controller, "reset", handed_out(obs))
     described = checked_description(controller)
     full_meta = episode_meta(
         base.episode, base.config, controller.name, controller.predictor, described, meta, "run_gym_episode"
@@ -148,7 +149,7 @@ def run_gym_episode(
     done = False
     with interrupts_between_steps() as interrupt:  # as run_episode's loop
         while not done:
-            out = checked_output(controller, called(controller, "act", obs), obs)
+            out = checked_output(controller, called(controller, "act", handed_out(obs)), obs)
             _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))
             steps.add(out)
             for observer in observers:
@@ -217,14 +218,15 @@ class ObserveEpisodes(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        self._obs = info["observation"]
+        # the observers' own copy: the policy may change info["observation"] in place (handed_out)
+        self._obs = handed_out(info["observation"])
         base = self._base
         self._meta = episode_meta(
             base.episode, base.config, self.controller, None, None, self.meta, "ObserveEpisodes"
         )
         self._steps = _Steps()
         for observer in self.observers:
-            observer.on_reset(info["observation"], self._meta)
+            observer.on_reset(self._obs, self._meta)
         self._handed_out = time.perf_counter()
         return obs, info
 
@@ -237,10 +239,10 @@ class ObserveEpisodes(
             accelerations=np.array(action, dtype=float)[: before.n_robots], solve_time_s=elapsed
         )
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._obs = info["observation"]
+        self._obs = handed_out(info["observation"])
         self._steps.add(out)
         for observer in self.observers:
-            observer.on_step(before, out, info["observation"])
+            observer.on_step(before, out, self._obs)
         if terminated or truncated:
             result = self._steps.result(self._base, self._meta, info)
             self.results.append(result)

@@ -616,3 +616,67 @@ def test_a_class_added_to_an_imported_module_is_told_to_reload_it(tmp_path, monk
         "plugin 'my_plugin:Mine': module 'my_plugin' has no 'Mine'; if you added it since the module was "
         "imported, importlib.reload(my_plugin) first (Python keeps a module as it was first imported)"
     )
+
+
+def test_a_plugin_changing_its_observation_in_place_changes_no_recording(tmp_path):
+    """A controller that centres the scene on a robot in place (``obs.human_positions -= centre``) changed
+    the observation the loop then handed the recorder: the MCAP's /robots and /humans (and review's plots)
+    showed the moved positions while the metrics, from the simulator, were right. Each controller method
+    gets a copy of its own, in both loops."""
+    import gymnasium as gym
+
+    import crowdsim
+    from pipelines.logs.recording import McapEpisodeRecorder
+    from pipelines.loop.gym_loop import run_gym_episode
+    from tests.plugins import broken_controllers
+    from tests.plugins.toy_controller import StraightLine
+
+    def recorded(controller, folder, gym_loop):
+        recorder = McapEpisodeRecorder(tmp_path / folder)
+        if gym_loop:
+            env = gym.make(crowdsim.ENV_ID, n_humans=2)
+            run_gym_episode(controller, env, seed=0, observers=(recorder,))
+        else:
+            run_episode(controller, seed=0, scenario="circle", n_humans=2, observers=(recorder,))
+        return _recorded_positions(recorder.paths[0])
+
+    for gym_loop in (False, True):
+        plain = recorded(StraightLine(None, None), f"plain{gym_loop}", gym_loop)
+        centred = recorded(broken_controllers.CentresInPlace(None, None), f"centred{gym_loop}", gym_loop)
+        assert centred == plain
+
+
+def test_a_gym_policy_changing_info_observation_in_place_changes_no_recording(tmp_path):
+    """``ObserveEpisodes`` recorded the observation it handed the policy in ``info``: a policy centring it in
+    place moved the recorded positions of the step before."""
+    import gymnasium as gym
+
+    import crowdsim
+    from pipelines.logs.recording import McapEpisodeRecorder
+    from pipelines.loop.gym_loop import ObserveEpisodes
+    from tests.plugins import broken_controllers
+    from tests.plugins.toy_controller import StraightLine
+
+    def recorded(folder, centre):
+        policy = StraightLine(None, None)
+        recorder = McapEpisodeRecorder(tmp_path / folder)
+        env = ObserveEpisodes(gym.make(crowdsim.ENV_ID, n_humans=2), [recorder])
+        _, info = env.reset(seed=0)
+        done = False
+        while not done:
+            action = policy.act(info["observation"]).accelerations
+            if centre:
+                broken_controllers.centre_in_place(info["observation"])
+            _, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        return _recorded_positions(recorder.paths[0])
+
+    assert recorded("centred", True) == recorded("plain", False)
+
+
+def _recorded_positions(path: Path) -> list[tuple[int, list]]:
+    """Each step's recorded robot and human positions of the MCAP file ``path``."""
+    from pipelines.logs.reader import read_recording
+
+    recording = read_recording(path)
+    return [(m["step"], m["positions"]) for topic in ("/robots", "/humans") for m in recording.data(topic)]

@@ -275,3 +275,26 @@ class NumberSha256(StraightLine):
 
     def describe(self) -> dict[str, Any]:
         return {"predictor_sha256": 123, "config": {}}
+
+
+def centre_in_place(obs: Observation) -> None:
+    """The scene centred on the first robot, in place, as research code does (``positions -= centre``)."""
+    centre = obs.robot_positions[0].copy()
+    for positions in (obs.robot_positions, obs.robot_goals, obs.human_positions, obs.human_goals):
+        positions -= centre
+    obs.history[...] -= centre
+
+
+class CentresInPlace(StraightLine):
+    """Centres its observation in place (``centre_in_place``) in reset and in act. The recorder was handed
+    the same observation: the recordings' positions moved with it."""
+
+    name = "centres_in_place"
+
+    def reset(self, obs: Observation) -> None:
+        centre_in_place(obs)
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = super().act(obs)  # from the true positions: the episode itself is the straight line's
+        centre_in_place(obs)
+        return out
