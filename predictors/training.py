@@ -29,7 +29,12 @@ from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.metrics import ade, fde
 from predictors.models import model_kind
-from predictors.nets.contract import check_step_contract, check_trainable, check_training_forward
+from predictors.nets.contract import (
+    check_step_contract,
+    check_step_contract_in_float64,
+    check_trainable,
+    check_training_forward,
+)
 from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
 from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
@@ -160,6 +165,7 @@ class PredictorModule(_PredictorModule):
         # one-column step moves x and y alike) or fail deep in Lightning.
         check_trainable(self.net, f"model {model!r}")
         check_step_contract(self.net, f"model {model!r}", obs_len=obs_len)
+        check_step_contract_in_float64(self.net, f"model {model!r}", obs_len=obs_len)
         if defines_forward(self.net):
             check_training_forward(self.net, f"model {model!r}", obs_len=obs_len, pred_len=pred_len)
 

@@ -31,6 +31,7 @@ shape would otherwise broadcast silently (a one-column step moves x and y alike)
 
 from __future__ import annotations
 
+import copy
 import inspect
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -209,6 +210,17 @@ def check_step_contract(net: torch.nn.Module, where: str, *, obs_len: int) -> No
             f"{where}: decode_step must return the state it is given, in the same shapes and dtypes: encode "
             f"gave {_describe(before)}, decode_step returned {_describe(after)} {SEE}"
         )
+
+
+def check_step_contract_in_float64(net: torch.nn.Module, where: str, *, obs_len: int) -> None:
+    """``check_step_contract`` on a float64 copy of ``net``, as ``LearnedPredictor`` runs it in the closed
+    loop and the export: a step that casts its output or its state (``out.float()``) keeps the contract in the
+    float32 it trains in, and was refused only when the trained weights were loaded, after the whole run."""
+    if _dtype_and_device(net)[0] == torch.float64:
+        return  # the check in the net's own dtype was this one
+    twin = copy.deepcopy(net).to(torch.float64)
+    where = f"{where} in float64 (as the closed loop and the export run it)"
+    check_step_contract(twin, where, obs_len=obs_len)
 
 
 def _describe(state: list[tuple[tuple[int, ...], torch.dtype]]) -> str:

@@ -92,3 +92,12 @@ class HeadTypeRaises(ToyNet):
     @property
     def head_type(self) -> str:
         return {"gaussian": "gaussian"}["point"]
+
+
+class CastsToFloat32(ToyNet):
+    """Its step output cast with ``.float()`` (a habit from float32 training): it keeps the contract in the
+    float32 it trains in, and breaks it in the float64 the closed loop and the export run it in."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, out.float()

@@ -102,6 +102,20 @@ def test_a_net_training_cannot_use_is_refused_before_training(net, message):
         make_module(model, None, OptimConfig())
 
 
+def test_a_net_breaking_the_contract_only_in_float64_is_refused_before_training(tmp_path, capsys):
+    """``out.float()`` in decode_step passed the check in the float32 training runs in; the whole training
+    ran, and only then did train's evaluation, loading the weights in float64, refuse them."""
+    model = _registered("CastsToFloat32")
+    with pytest.raises(PredictorError) as caught:
+        make_module(model, None, OptimConfig())
+    assert str(caught.value) == (
+        f"model {model!r} in float64 (as the closed loop and the export run it): encode's out must be "
+        f"torch.float64 like the positions, got torch.float32 {SEE}"
+    )
+    code, err = _train_plugin(f"{BROKEN}:CastsToFloat32", tmp_path, capsys)
+    assert code == 2 and "in float64" in err and not (tmp_path / "run").exists(), err
+
+
 def test_a_forward_by_torch_habit_names_the_training_signature():
     model = _registered("TorchHabitForward")
     with pytest.raises(PredictorError) as caught:
