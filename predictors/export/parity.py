@@ -36,12 +36,21 @@ class Exported(Protocol):
 
 
 PARITY_TOLERANCE: Final[float] = 1e-6
+# What the check compares, as Parity.nonfinite names them.
+NONFINITE_ORDER: Final[tuple[str, ...]] = (
+    "torch's prediction",
+    "the export's prediction",
+    "torch's Jacobian",
+    "the export's Jacobian",
+)
 
 
 @dataclass(frozen=True)
 class Parity:
     value_error: float  # max |CasADi - torch| over the predicted positions, metres
     jacobian_error: float  # max |dCasADi/dplan - dtorch/dplan|
+    # which of torch's and the export's values and Jacobians hold NaN or inf (then an error above is NaN)
+    nonfinite: tuple[str, ...] = ()
 
     @property
     def worst(self) -> float:
@@ -103,14 +112,16 @@ def check_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: int
         _errors(predictor, function, scene(n_humans, n_robots, horizon, predictor.obs_len, seed))
         for scene in (crossing_scene, scattered_scene)
     ]
-    value_error, jacobian_error = (float(np.max(e)) for e in zip(*errors, strict=True))  # np.max keeps NaN
-    return Parity(value_error=value_error, jacobian_error=jacobian_error)
+    value_error, jacobian_error = (float(np.max(e)) for e in zip(*(e[:2] for e in errors), strict=True))
+    nonfinite = tuple(name for name in NONFINITE_ORDER if any(name in e[2] for e in errors))
+    return Parity(value_error=value_error, jacobian_error=jacobian_error, nonfinite=nonfinite)
 
 
 def _errors(
     predictor: Exported, function: Any, scene: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-) -> tuple[float, float]:
-    """The largest differences of ``function``'s prediction and its Jacobian from torch's on ``scene``."""
+) -> tuple[float, float, tuple[str, ...]]:
+    """The largest differences of ``function``'s prediction and its Jacobian from torch's on ``scene``, and
+    which of the four (``NONFINITE_ORDER``) hold NaN or inf."""
     history, mask, humans, future = scene
     context = predictor.encode(history, mask, humans)
     plan = ca.MX.sym("plan", future.size)
@@ -129,15 +140,26 @@ def _errors(
             if future.size
             else np.zeros((0, 0))
         )
+    arrays = dict(zip(NONFINITE_ORDER, (torch_value, value, torch_jac, jac), strict=True))
     return (
         float(np.abs(value.ravel() - torch_value).max(initial=0.0)),
         float(np.abs(jac.reshape(torch_jac.shape) - torch_jac).max(initial=0.0)),
+        tuple(name for name, array in arrays.items() if not np.isfinite(array).all()),
     )
 
 
 def require_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: int) -> Parity:
     """``check_parity``, or ExportError when it exceeds ``PARITY_TOLERANCE``."""
     parity = check_parity(predictor, n_humans, n_robots, horizon)
+    if any(name.startswith("torch's") for name in parity.nonfinite):
+        # not a disagreement with torch: the net itself evaluates or differentiates where it cannot
+        raise ExportError(
+            f"{' and '.join(parity.nonfinite)} with respect to the robots' plan hold NaN or inf on the "
+            "parity scenes: the net evaluates or differentiates an operation where it is infinite (sqrt "
+            "of 0, as of an agent's squared distance to itself; 1/x or log at 0): keep its argument from 0 "
+            "(sqrt(d2 + 1e-12)); masking the result afterwards (torch.where, * 0) still leaves NaN gradients",
+            predictor.name,
+        )
     if not parity.ok():
         raise ExportError(
             f"the exported prediction differs from torch by {parity.value_error:.2e} (values) and "

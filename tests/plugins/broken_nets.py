@@ -101,3 +101,17 @@ class CastsToFloat32(ToyNet):
     def decode_step(self, h, prev, cur, neighbours):
         h, out = super().decode_step(h, prev, cur, neighbours)
         return h, out.float()
+
+
+class SqrtDistance(ToyNet):
+    """Weighs its neighbours by their distance, ``sqrt`` of the squared one: 0 for an agent and itself,
+    where sqrt's derivative is infinite. Its values are right; its Jacobian with respect to the robots' plan
+    is NaN in torch and in its CasADi twin alike."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        rel = cur[:, None, :, :] - cur[:, :, None, :]
+        weight = torch.exp(-torch.sqrt((rel * rel).sum(-1)) / self.config.radius)
+        weight = weight * neighbours[:, None, :].to(cur.dtype)
+        social = (weight[..., None] * rel).sum(2) / (weight.sum(2)[..., None] + 1.0)
+        h = torch.tanh(self.embed(torch.cat([cur - prev, social], dim=-1)) + self.recur(h))
+        return h, self.readout(h)

@@ -704,3 +704,26 @@ def test_a_nan_error_fails_the_parity_check_whichever_it_is():
     assert Parity(0.0, 0.0).ok() and not Parity(0.0, 1e-3).ok()
     assert not Parity(0.0, float("nan")).ok() and not Parity(float("nan"), 0.0).ok()
     assert not Parity(float("inf"), 0.0).ok()
+
+
+def test_a_jacobian_that_is_nan_in_torch_too_is_named_so_not_called_a_difference():
+    """A net differentiating sqrt at 0 (an agent's distance to itself) has NaN Jacobians in torch and in the
+    export alike: the refusal said the export "differs from torch by nan", which sent its author looking for
+    an exporter bug."""
+    from predictors.export.parity import check_parity, require_parity
+    from predictors.learned import LearnedPredictor
+    from tests.plugins.broken_nets import SqrtDistance
+    from tests.plugins.toy_predictor import ToyConfig
+
+    predictor = LearnedPredictor(SqrtDistance(ToyConfig()), name="sqrt_distance")
+    predictor._export_checked = True  # the first export's own check would refuse it before this one
+    parity = check_parity(predictor, 2, 1, 3)
+    assert parity.value_error < 1e-9 and parity.nonfinite == ("torch's Jacobian", "the export's Jacobian")
+    with pytest.raises(ExportError) as refused:
+        require_parity(predictor, 2, 1, 3)
+    message = str(refused.value)
+    assert message.startswith(
+        "cannot export: torch's Jacobian and the export's Jacobian with respect to the robots' plan hold NaN "
+        "or inf"
+    ), message
+    assert "differs" not in message and "sqrt" in message and "\n" not in message
