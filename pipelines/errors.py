@@ -11,6 +11,16 @@ class SweepStopped(PipelineError):
     recorded stands, and gets its report."""
 
 
+class EpisodeFailed(PipelineError):
+    """A ``PipelineError`` raised inside one episode of ``run_episodes`` (a plugin breaking its contract or
+    raising), with the episode that failed named first: ``simulate --seed SEED --episodes 1`` reruns it."""
+
+    def __init__(self, seed: int, scenario: str, error: PipelineError):
+        super().__init__(f"episode seed {seed} ({scenario}): {error}")
+        self.seed = seed
+        self.scenario = scenario
+
+
 def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
     """The Ctrl-C behind ``exc``, if it is one a C extension wrapped: a KeyboardInterrupt raised in Python
     code that CasADi calls back during a solve comes out as ``SystemError('... returned a result with an

@@ -16,7 +16,7 @@ from pipelines.commands import check_writable, write_output
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_table import format_table, plot_title, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
-from pipelines.errors import PipelineError
+from pipelines.errors import EpisodeFailed, PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.plain_json import plain
 
@@ -265,6 +265,7 @@ def _simulate(resolved: SimulateRun) -> int:
         )
     results: list[EpisodeResult] = []
     interrupted = False
+    failure: PipelineError | None = None
     try:
         run_episodes(
             spec,
@@ -284,12 +285,18 @@ def _simulate(resolved: SimulateRun) -> int:
                 print(recorder.written_line(finished=0))
             raise
         interrupted = True  # the finished episodes are reported and written, then the interrupt goes on
+    except PipelineError as exc:  # a plugin's, in an episode (EpisodeFailed) or in close() after the last
+        if not results:
+            raise
+        failure = exc  # as an interrupt: the finished episodes are reported, then the error's line
     finally:
         if recorder is not None:
             recorder.close()
-    _report(resolved, run_meta, results, recorder, interrupted)
+    _report(resolved, run_meta, results, recorder, interrupted, failure)
     if interrupted:
         raise KeyboardInterrupt
+    if failure is not None:
+        raise failure
     return 0
 
 
@@ -299,16 +306,18 @@ def _report(
     results: list[EpisodeResult],
     recorder: Any,
     interrupted: bool,
+    failure: PipelineError | None = None,
 ) -> None:
     """The summary table, --json, --plot and the recordings' line of the episodes that ran (when
-    ``interrupted``, those that finished, said so in the header and the JSON)."""
+    ``interrupted`` or stopped by ``failure``, those that finished, said so in the header and the JSON)."""
     from pipelines.loop.episode import summarize
 
     cfg, spec = resolved.config, resolved.spec
     env_config = cfg.env
     summary = summarize(results)
-    finished = len(results) if interrupted else None
-    header = table_header(cfg, spec, run_meta, finished)
+    finished = len(results) if interrupted or failure is not None else None
+    stopped = "interrupted" if interrupted else "stopped by an error"
+    header = table_header(cfg, spec, run_meta, finished, stopped)
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
     if resolved.json is not None:
         from pipelines.version import code_identity
@@ -317,6 +326,7 @@ def _report(
             "run": run_meta,
             "code": code_identity(),
             **({"interrupted": True, "episodes_finished": len(results)} if interrupted else {}),
+            **({"failed": _failed(failure), "episodes_finished": len(results)} if failure else {}),
             "summary": summary,
             "episodes": [r.record().to_dict() for r in results],
         }
@@ -327,6 +337,12 @@ def _report(
         _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:
         print(recorder.written_line(finished=len(results)))
+
+
+def _failed(failure: PipelineError) -> dict[str, Any]:
+    """The JSON's record of the error that stopped a run: the failing episode's seed (None: it came after
+    the last episode, from the controller's close()) and the error's line."""
+    return {"seed": failure.seed if isinstance(failure, EpisodeFailed) else None, "error": str(failure)}
 
 
 def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:

@@ -21,10 +21,14 @@ if TYPE_CHECKING:
 
 
 def table_header(
-    cfg: RunConfig, spec: ControllerSpec, run_meta: dict[str, Any], finished: int | None = None
+    cfg: RunConfig,
+    spec: ControllerSpec,
+    run_meta: dict[str, Any],
+    finished: int | None = None,
+    stopped: str = "interrupted",
 ) -> str:
     """The line above the table: controller, predictor, margins, conventions, task and the seeds run;
-    ``finished``: the episodes that ended before an interrupt (None: not interrupted)."""
+    ``finished``: the episodes that ended before the run was ``stopped`` (None: it was not)."""
     scenario, sim, env_config = cfg.scenario, cfg.simulate, cfg.env
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
@@ -35,7 +39,7 @@ def table_header(
         f"{run_meta['profile']}/{run_meta['visibility']} | {goals}scenario {scenario.name} | "
         f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
         f"{sim.seed + sim.episodes - 1}"
-        + (f" | interrupted: {finished} episodes finished" if finished is not None else "")
+        + (f" | {stopped}: {finished} episodes finished" if finished is not None else "")
     )
 
 

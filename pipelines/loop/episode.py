@@ -25,7 +25,7 @@ from crowdsim.errors import SimulationError
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.errors import PipelineError
+from pipelines.errors import EpisodeFailed, PipelineError
 from pipelines.loop.contract import (
     called,
     checked_description,
@@ -186,7 +186,8 @@ def run_episodes(
 
     ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file);
     when that episode raises (Ctrl-C, a plugin's error), its observers that have a ``close`` are closed
-    before the exception goes on (a recorder finishes its file as it is).
+    before the exception goes on (a recorder finishes its file as it is); a ``PipelineError`` goes on as an
+    ``EpisodeFailed`` naming the episode's seed.
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
@@ -217,6 +218,9 @@ def run_episodes(
                     observers=observers,
                     meta=run_meta,
                 )
+            except PipelineError as exc:  # a plugin's: which episode, so that it can be rerun alone
+                _close_quietly(observers)
+                raise EpisodeFailed(seed + i, scenario, exc) from exc
             except BaseException:
                 _close_quietly(observers)
                 raise

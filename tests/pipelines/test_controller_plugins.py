@@ -241,7 +241,7 @@ def test_a_plugin_whose_act_returns_no_control_output_is_one_line(capsys):
     argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
     code, stdout, err = run(capsys, *argv, "--no-progress")
     assert code == 2 and stdout == ""
-    assert err == f"crowdmpc simulate: error: {message}\n"
+    assert err == f"crowdmpc simulate: error: episode seed 0 (circle): {message}\n"
     with pytest.raises(PipelineError) as caught:
         run_episode(make_controller(ControllerSpec(bad)), seed=0, scenario="circle", n_humans=2)
     assert str(caught.value) == message
@@ -273,7 +273,11 @@ def test_a_plugin_raising_in_a_method_is_one_line_naming_it_and_the_method(name,
     code, stdout, err = run(capsys, *argv, "--no-progress")
     controller = getattr(failing_controllers, name)(None, None)
     message = f"controller {controller.name!r} ({name}): {problem}"
-    assert (code, stdout, err) == (2, "", f"crowdmpc simulate: error: {message}\n")
+    if name == "RaisesInClose":  # after the last episode, which is reported
+        assert (code, err) == (2, f"crowdmpc simulate: error: {message}\n") and "success" in stdout
+    else:
+        first = f"crowdmpc simulate: error: episode seed 0 (circle): {message}\n"
+        assert (code, stdout, err) == (2, "", first)
     if name != "RaisesInClose":  # the loops never close the controller they are given
         with pytest.raises(PipelineError) as caught:
             run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2), seed=0)
@@ -404,7 +408,8 @@ def test_a_wrong_plan_under_record_is_one_line(tmp_path, capsys):
     argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
     code, stdout, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
     assert code == 2 and stdout == ""
-    assert err == f"crowdmpc simulate: error: controller 'flat_plan' (FlatPlan): {BROKEN_CONTRACTS[0][1]}\n"
+    problem = f"controller 'flat_plan' (FlatPlan): {BROKEN_CONTRACTS[0][1]}"
+    assert err == f"crowdmpc simulate: error: episode seed 0 (circle): {problem}\n"
 
 
 def test_a_plugins_own_fallback_is_recorded_in_a_file_review_check_passes(tmp_path, capsys):
@@ -680,3 +685,22 @@ def _recorded_positions(path: Path) -> list[tuple[int, list]]:
 
     recording = read_recording(path)
     return [(m["step"], m["positions"]) for topic in ("/robots", "/humans") for m in recording.data(topic)]
+
+
+def test_a_plugin_failing_in_a_later_episode_keeps_the_finished_ones_and_names_the_seed(tmp_path, capsys):
+    """A plugin failing in episode 3 of 4 ended simulate with its one line, which named no episode, and
+    without the summary or --json of the two episodes that had finished: a long run was lost, and its
+    failure could not be rerun alone. It now reports those (as after Ctrl-C) and names the failing seed."""
+    plugin = f"{FAILING}:NaNInThirdEpisode"
+    report = tmp_path / "run.json"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "4"]
+    code, out, err = run(capsys, *argv, "--seed", "10", "--json", str(report), "--no-progress")
+    problem = (
+        "episode seed 12 (circle): controller 'nan_in_third_episode' (NaNInThirdEpisode): act() must return "
+        "accelerations of finite numbers, got nan"
+    )
+    assert (code, err) == (2, f"crowdmpc simulate: error: {problem}\n")
+    assert "| stopped by an error: 2 episodes finished" in out
+    payload = json.loads(report.read_text())
+    assert payload["failed"] == {"seed": 12, "error": problem} and payload["episodes_finished"] == 2
+    assert [e["seed"] for e in payload["episodes"]] == [10, 11] and payload["summary"]["episodes"] == 2

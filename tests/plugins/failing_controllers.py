@@ -70,3 +70,23 @@ class InterruptedInAct(StraightLine):
 
     def act(self, obs: Observation) -> Any:
         raise KeyboardInterrupt
+
+
+class NaNInThirdEpisode(StraightLine):
+    """Returns a NaN acceleration at step 4 of the third episode it runs: research code that fails on one
+    crowd of many."""
+
+    name = "nan_in_third_episode"
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.episodes = 0
+
+    def reset(self, obs: Observation) -> None:
+        self.episodes += 1
+
+    def act(self, obs: Observation) -> Any:
+        out = super().act(obs)
+        if self.episodes == 3 and obs.step == 4:
+            out.accelerations[0, 0] = np.nan
+        return out
