@@ -1,12 +1,14 @@
-"""The checkpoint callback of ``crowdmpc train`` (imported with Lightning, when a run starts)."""
+"""The callbacks of ``crowdmpc train``: its checkpoints, and its stop on divergence (imported with Lightning,
+when a run starts)."""
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any
 
 import torch
-from lightning.pytorch.callbacks import ModelCheckpoint
+from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 
 from pipelines.commands.train_resume import relocated
 
@@ -68,3 +70,20 @@ class RunCheckpoint(ModelCheckpoint):
         # skipped too when this step is saved already: a new best writes last.ckpt with it
         if not self._should_skip_saving_checkpoint(trainer):
             self._save_last_checkpoint(trainer, self._monitor_candidates(trainer))
+
+
+class StopOnDivergence(Callback):
+    """Stops the fit after the first epoch whose mean training loss is not finite, and says which. One NaN
+    gradient leaves NaN in Adam's moments and in every weight it steps, so no later epoch recovers: a
+    diverged run trained on to its last epoch, then wrote NaN weights. ModelCheckpoint keeps the best epoch
+    before it (it never takes a NaN score for a better one)."""
+
+    def __init__(self) -> None:
+        self.epoch: int | None = None  # the epoch whose loss was not finite
+        self.loss = math.nan
+
+    def on_train_epoch_end(self, trainer: Any, pl_module: Any) -> None:
+        loss = trainer.callback_metrics.get("train_loss_epoch")
+        if loss is not None and not bool(torch.isfinite(loss).all()) and self.epoch is None:
+            self.epoch, self.loss = trainer.current_epoch, float(loss)
+            trainer.should_stop = True

@@ -7,11 +7,14 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from pipelines.commands import replace_file
+from pipelines.errors import PipelineError
 
 
 def run_training(
@@ -83,7 +86,7 @@ def _fit(
     train, val, test = ([Path(p).resolve() for p in files[split]] for split in ("train", "val", "test"))
     data = TrajnetDataModule(train, val, test, batch_size=args.batch_size, seed=args.seed)
     module = make_module(args.model, net_config, optim)
-    trainer, best = _trainer(args, out, ckpt_dir)
+    trainer, best, divergence = _trainer(args, out, ckpt_dir)
     if not args.resume:
         from pipelines.commands.train_resume import SETTINGS_FILE
 
@@ -99,12 +102,31 @@ def _fit(
         # which told a script that a killed run had trained. Both are the interrupt the CLI reports (130).
         raise KeyboardInterrupt from stop
     elapsed = time.perf_counter() - started
+    _check_divergence(args, divergence, best)
 
     # a file in --out: the best checkpoint saved or kept (RunCheckpoint: restored only where it is), else last
     best_path = best.best_model_path or str(last)
     state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
     return module, best_path, elapsed
+
+
+def _check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> None:
+    """PipelineError when the fit stopped on a non-finite loss (``StopOnDivergence``) before any epoch
+    validated to a finite ADE: its weights are NaN, and were written, then refused on reading back as "tensor
+    ... holds NaN", which named neither the cause nor the epoch. With a finite best epoch before it, that
+    epoch's weights are saved as usual, and a line says why the run stopped early."""
+    if divergence.epoch is None:
+        return
+    what = f"the training loss was {divergence.loss} in epoch {divergence.epoch}"
+    score = best.best_model_score
+    if score is None or not math.isfinite(float(score)):
+        raise PipelineError(
+            f"model {args.model!r}: training diverged: {what}, and no epoch before it validated; no weights "
+            f"written. A net whose steps are NaN (a division, log or sqrt at 0, such as an agent's distance "
+            f"to itself) or a learning rate too high (--lr {args.lr:g}) does this"
+        )
+    print(f"training stopped: {what}; the best epoch before it is kept", file=sys.stderr)
 
 
 def _save_best(
@@ -193,12 +215,13 @@ def _no_advertising(record: logging.LogRecord) -> bool:
     return not str(record.msg).startswith("💡 Tip")
 
 
-def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any]:
-    """Lightning's trainer and the callback that keeps the best checkpoint by validation ADE."""
+def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any, Any]:
+    """Lightning's trainer, the callback that keeps the best checkpoint by validation ADE, and the one that
+    stops a diverged fit."""
     import lightning as L
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-    from pipelines.commands.train_checkpoint import RunCheckpoint
+    from pipelines.commands.train_checkpoint import RunCheckpoint, StopOnDivergence
     from pipelines.commands.train_resume import BEST_FILENAME
 
     best = RunCheckpoint(
@@ -220,10 +243,10 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
             CSVLogger(out, name="csv"),
             TensorBoardLogger(out, name="tensorboard", default_hp_metric=False),
         ],
-        callbacks=[best],
+        callbacks=[best, divergence := StopOnDivergence()],
         deterministic=True,
         enable_progress_bar=not args.no_progress,
         enable_model_summary=False,
         log_every_n_steps=5,
     )
-    return trainer, best
+    return trainer, best, divergence

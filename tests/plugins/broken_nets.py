@@ -115,3 +115,14 @@ class SqrtDistance(ToyNet):
         social = (weight[..., None] * rel).sum(2) / (weight.sum(2)[..., None] + 1.0)
         h = torch.tanh(self.embed(torch.cat([cur - prev, social], dim=-1)) + self.recur(h))
         return h, self.readout(h)
+
+
+class DividesByItsOwnDistance(ToyNet):
+    """Repels each agent from everyone by ``1 / d^2``, itself included (``d = 0``): its steps are NaN, its
+    loss NaN from the first batch, its weights NaN after the first optimiser step."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        rel = cur[:, None, :, :] - cur[:, :, None, :]
+        push = (rel / (rel * rel).sum(-1, keepdim=True)).sum(2)
+        h = torch.tanh(self.embed(torch.cat([cur - prev, push], dim=-1)) + self.recur(h))
+        return h, self.readout(h)

@@ -214,3 +214,23 @@ def test_a_head_type_that_is_neither_gaussian_nor_point_is_refused(head):
     net.head_type = head  # type: ignore[assignment]
     with pytest.raises(PredictorError, match=r"model 'x': head_type must be one of \['gaussian', 'point'\]"):
         check_step_contract(net, "model 'x'", obs_len=OBS_LEN)
+
+
+def test_a_training_whose_loss_is_nan_stops_after_that_epoch_in_one_line_and_writes_no_weights(
+    tmp_path, capsys
+):
+    """It trained every epoch on NaN, wrote NaN weights as OUT/NAME.pt, and only then failed, on reading
+    them back, with "tensor 'embed.weight' holds NaN or infinite values", which named neither the cause nor
+    the epoch."""
+    model = f"{BROKEN}:DividesByItsOwnDistance"
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
+    code = main([*argv, "--epochs", "3", "--out", str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith(
+        f"crowdmpc train: error: model {model!r}: training diverged: the training loss was nan in epoch 0, "
+        "and no epoch before it validated"
+    ), err
+    epochs = (tmp_path / "run" / "csv" / "version_0" / "metrics.csv").read_text().splitlines()[1:]
+    assert {line.split(",")[0] for line in epochs} == {"0"}  # stopped after the first epoch
+    assert not list((tmp_path / "run").glob("*.pt"))
