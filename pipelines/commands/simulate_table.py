@@ -13,6 +13,8 @@ from crowdsim.world import RADIUS
 # stopped at it ("timeout", mpc/cmpc.py, dmpc.py, coupled.py) or a solve ran past it (IPOPT's status, which
 # mpc/solvers.py gives a Fatrop solve too).
 BUDGET_STATUSES: Final[tuple[str, ...]] = ("timeout", "Maximum_WallTime_Exceeded")
+# The status of a control step whose prediction held NaN or inf (the MPCs then fall back).
+NAN_PREDICTION: Final[str] = "nan_prediction"
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -106,6 +108,17 @@ def format_table(
                 "wall-time budget",
                 f"{cut} of {summary['control_steps']} steps cut short at mpc.time_limit_s{limit}: their "
                 "plans depend on this machine's speed",
+            )
+        )
+    # A predictor returning NaN or inf (mpc/cmpc.py, dmpc.py, coupled.py) is a bug in it, not its quality:
+    # those steps' plans are the fallback's, and the metrics above read as the predictor's without this row.
+    nan_steps = int(summary.get("statuses", {}).get(NAN_PREDICTION, 0))
+    if nan_steps:
+        rows.append(
+            (
+                "NaN predictions",
+                f"{nan_steps} of {summary['control_steps']} steps fell back: the predictor returned NaN or "
+                "inf there",
             )
         )
     width = max(len(name) for name, _ in rows)

@@ -119,3 +119,21 @@ def test_the_plots_title_counts_one_human_in_the_singular(tmp_path, capsys, monk
     assert main(["simulate", "--controller", "straight", "--robots", "1", "--humans", "1", *plot]) == 0
     capsys.readouterr()
     assert titles[0].startswith("straight, circle, 1 robot, 1 human, seed 0\n")  # said "1 humans"
+
+
+def test_steps_whose_prediction_was_nan_are_printed():
+    """A plugin predictor returning NaN when two agents come close made CMPC fall back on 110 of 145 steps
+    (status "nan_prediction"): the JSON's statuses held it, the printed table said only "fallback steps 110
+    of 145", and its metrics read as the predictor's. A run without such steps prints no such row."""
+    from pipelines.commands.simulate_table import format_table
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import run_episodes, summarize
+
+    summary = summarize(run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle",
+                                     n_humans=2, progress=False))  # fmt: skip
+    assert "NaN predictions" not in format_table(summary, "header")
+    summary["statuses"], summary["control_steps"] = {"ok": 35, "nan_prediction": 110}, 145
+    assert (
+        "NaN predictions          110 of 145 steps fell back: the predictor returned NaN or inf there"
+        in format_table(summary, "header")
+    )
