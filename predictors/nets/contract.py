@@ -122,6 +122,29 @@ def head_type_of(net: object, where: str) -> object:
         ) from None
 
 
+def _unchanged(
+    where: str,
+    what: str,
+    arguments: dict[str, torch.Tensor],
+    function: Callable[..., Any],
+    *args: Any,
+    **kwargs: Any,
+) -> Any:
+    """``_call(where, what, function, *args, **kwargs)``, refusing a method that writes into a tensor it was
+    handed (torch counts every in-place change of a tensor and its views in ``_version``): ``positions -=
+    centre`` in ``encode`` changed the caller's tensor, in training the batch itself, so that a net trained
+    and was validated on moved scenes without a word."""
+    before = {name: tensor._version for name, tensor in arguments.items()}
+    result = _call(where, what, function, *args, **kwargs)
+    changed = [name for name, tensor in arguments.items() if tensor._version != before[name]]
+    if changed:
+        raise PredictorError(
+            f"{where}: {what} changed its argument {changed[0]} in place: the caller's tensor (in training, "
+            f"the batch) changes with it; compute on a new tensor, x = x - v rather than x -= v {SEE}"
+        )
+    return result
+
+
 def _head_type(net: torch.nn.Module, where: str) -> str:
     head = head_type_of(net, where)
     if head not in HEADS:
@@ -196,11 +219,15 @@ def check_step_contract(net: torch.nn.Module, where: str, *, obs_len: int) -> No
     lead = (CHECK_BATCH, CHECK_AGENTS)
     step_net: Any = net  # its encode and decode_step are no nn.Module methods mypy knows
     with _probing(net):
-        encoded = _call(where, "encode", step_net.encode, positions, mask)
+        arguments = {"positions": positions, "mask": mask}
+        encoded = _unchanged(where, "encode", arguments, step_net.encode, positions, mask)
         state, out = _split(encoded, where, "encode")
         _check_head(out, lead, head, dtype, where, "encode's out")
-        inputs = (positions[:, -2], positions[:, -1], mask[:, -1])
-        stepped = _call(where, "decode_step", step_net.decode_step, *state, *inputs)
+        # copies, not views of positions: a view shares its base's count of changes, and would be named too
+        inputs = (positions[:, -2].clone(), positions[:, -1].clone(), mask[:, -1].clone())
+        arguments = {f"state tensor {i}": t for i, t in enumerate(state)}
+        arguments.update(zip(("prev", "cur", "neighbours"), inputs, strict=True))
+        stepped = _unchanged(where, "decode_step", arguments, step_net.decode_step, *state, *inputs)
         new_state, new_out = _split(stepped, where, "decode_step")
         _check_head(new_out, lead, head, dtype, where, "decode_step's out")
     before = [(tuple(t.shape), t.dtype) for t in state]
@@ -252,7 +279,8 @@ def check_training_forward(net: torch.nn.Module, where: str, *, obs_len: int, pr
             "through the generic rollout of encode and decode_step (predictors/nets/rollout.py)"
         ) from None
     with _probing(net):
-        result = _call(where, "forward", net, *args, teacher_forcing=True)
+        arguments = {"positions": positions, "mask": mask}
+        result = _unchanged(where, "forward", arguments, net, *args, teacher_forcing=True)
     if not (isinstance(result, tuple | list) and len(result) == 2):
         raise PredictorError(
             f"{where}: forward must return (outputs, predicted), got {type(result).__name__} {SEE}"

@@ -126,3 +126,32 @@ class DividesByItsOwnDistance(ToyNet):
         push = (rel / (rel * rel).sum(-1, keepdim=True)).sum(2)
         h = torch.tanh(self.embed(torch.cat([cur - prev, push], dim=-1)) + self.recur(h))
         return h, self.readout(h)
+
+
+class CentresInPlace(ToyNet):
+    """``encode`` centres the scene on its agents' mean last position in place (``positions -= c``): the
+    caller's tensor changes with it. In training that is the batch itself, so the net was trained and
+    validated against moved scenes (val ADE 9.3 m where the same net without it reaches 3.5 m), silently."""
+
+    def encode(self, positions, mask):
+        positions -= positions[:, -1:].mean(dim=2, keepdim=True)
+        return super().encode(positions, mask)
+
+
+class StepsStateInPlace(ToyNet):
+    """``decode_step`` adds to its state in place (``h += ...``): the state the caller handed it changes."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h += 0.0
+        return super().decode_step(h, prev, cur, neighbours)
+
+
+class ForwardCentresInPlace(ToyNet):
+    """Its own training ``forward`` centres the batch in place before the generic rollout."""
+
+    def forward(self, positions, mask, obs_len, pred_len, *, teacher_forcing):
+        from predictors.nets.rollout import teacher_forced_rollout
+
+        positions -= positions[:, obs_len - 1 : obs_len].mean(dim=2, keepdim=True)
+        args = (positions, mask, obs_len, pred_len)
+        return teacher_forced_rollout(self, *args, teacher_forcing=teacher_forcing)

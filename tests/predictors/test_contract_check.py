@@ -116,6 +116,24 @@ def test_a_net_breaking_the_contract_only_in_float64_is_refused_before_training(
     assert code == 2 and "in float64" in err and not (tmp_path / "run").exists(), err
 
 
+@pytest.mark.parametrize(
+    "net, message",
+    [
+        ("CentresInPlace", "encode changed its argument positions in place"),
+        ("StepsStateInPlace", "decode_step changed its argument state tensor 0 in place"),
+        ("ForwardCentresInPlace", "forward changed its argument positions in place"),
+    ],
+)
+def test_a_net_changing_its_inputs_in_place_is_refused_before_training(net, message):
+    """``positions -= centre`` in encode changed the training batch itself: the net trained and validated
+    on moved scenes without a word (only the export refused the in-place operation, after training)."""
+    model = _registered(net)
+    with pytest.raises(PredictorError) as caught:
+        make_module(model, None, OptimConfig())
+    assert str(caught.value).startswith(f"model {model!r}: {message}: ")
+    assert "x = x - v" in str(caught.value)
+
+
 def test_a_forward_by_torch_habit_names_the_training_signature():
     model = _registered("TorchHabitForward")
     with pytest.raises(PredictorError) as caught:
