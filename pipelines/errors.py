@@ -12,10 +12,10 @@ class SweepStopped(PipelineError):
 
 
 class EpisodeFailed(PipelineError):
-    """A ``PipelineError`` raised inside one episode of ``run_episodes`` (a plugin breaking its contract or
+    """A user's error raised inside one episode of ``run_episodes`` (a plugin breaking its contract or
     raising), with the episode that failed named first: ``simulate --seed SEED --episodes 1`` reruns it."""
 
-    def __init__(self, seed: int, scenario: str, error: PipelineError):
+    def __init__(self, seed: int, scenario: str, error: Exception):
         super().__init__(f"episode seed {seed} ({scenario}): {error}")
         self.seed = seed
         self.scenario = scenario

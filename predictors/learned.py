@@ -133,8 +133,29 @@ class LearnedPredictor:
     def _encode_torch(self, pos: torch.Tensor, seen: torch.Tensor, noise: torch.Tensor | None = None):
         """``net.encode``: ``(*state, out)``; only a generator takes noise."""
         if noise is not None:
-            return self.net.encode(pos, seen, noise)
-        return self.net.encode(pos, seen)
+            return self._net_call("encode", pos, seen, noise)
+        return self._net_call("encode", pos, seen)
+
+    def _net_call(self, method: str, *args: Any) -> Any:
+        """``net.<method>(*args)``. What a plugin's net raises is a one-line PredictorError naming the
+        predictor, its model and the scene's size (the contract's check ran it on 3 agents; a net written for
+        small scenes meets 10 in the closed loop), its traceback kept as the cause for a sweep's errors.jsonl;
+        left alone, it ended simulate with a traceback through the MPC, as a bug in crowdmpc. A shipped net's
+        exception is such a bug, and propagates as it is."""
+        try:
+            return getattr(self.net, method)(*args)
+        except Exception as exc:
+            from predictors.models import shipped  # the registry imports this module
+
+            if self.kind in shipped():
+                raise
+            agents = args[0].shape[-2]  # positions (B, L, N, 2), or prev (B, N, 2) after the state
+            if method == "decode_step":
+                agents = args[-1].shape[-1]  # neighbours (B, N)
+            raise PredictorError(
+                f"predictor {self.name!r} (model {self.kind!r}): {method} raised {type(exc).__name__}: "
+                f"{exc} (on a scene of {agents} agents)"
+            ) from exc
 
     def _decode(self, encoded, pos, seen, n_humans, robots_future, horizon) -> torch.Tensor:
         """The recursion after the encoder: what the CasADi prediction function computes."""
@@ -150,7 +171,7 @@ class LearnedPredictor:
 
         positions.append(advance(out[..., :2], 0))
         for k in range(1, horizon):
-            *state_list, out = self.net.decode_step(*state, positions[-2], positions[-1], present)
+            *state_list, out = self._net_call("decode_step", *state, positions[-2], positions[-1], present)
             state = tuple(state_list)
             positions.append(advance(out[..., :2], k))
         return torch.stack(positions[1:], dim=1)[:, :, :n_humans]

@@ -37,7 +37,7 @@ from pipelines.loop.controllers import Controller, ControllerSpec, make_controll
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 from pipelines.loop.spec import CONTROLLER_METHODS
-from predictors.errors import short_repr
+from predictors.errors import PredictorError, short_repr
 from predictors.progress import progress_bar
 
 
@@ -186,8 +186,9 @@ def run_episodes(
 
     ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file);
     when that episode raises (Ctrl-C, a plugin's error), its observers that have a ``close`` are closed
-    before the exception goes on (a recorder finishes its file as it is); a ``PipelineError`` goes on as an
-    ``EpisodeFailed`` naming the episode's seed.
+    before the exception goes on (a recorder finishes its file as it is); a ``PipelineError`` (a controller
+    plugin's) or a ``PredictorError`` (a net plugin's) goes on as an ``EpisodeFailed`` naming the episode's
+    seed.
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
@@ -218,7 +219,7 @@ def run_episodes(
                     observers=observers,
                     meta=run_meta,
                 )
-            except PipelineError as exc:  # a plugin's: which episode, so that it can be rerun alone
+            except (PipelineError, PredictorError) as exc:  # a plugin's: the episode, to rerun it alone
                 _close_quietly(observers)
                 raise EpisodeFailed(seed + i, scenario, exc) from exc
             except BaseException:

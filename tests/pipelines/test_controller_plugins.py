@@ -704,3 +704,29 @@ def test_a_plugin_failing_in_a_later_episode_keeps_the_finished_ones_and_names_t
     payload = json.loads(report.read_text())
     assert payload["failed"] == {"seed": 12, "error": problem} and payload["episodes_finished"] == 2
     assert [e["seed"] for e in payload["episodes"]] == [10, 11] and payload["summary"]["episodes"] == 2
+
+
+def test_a_plugin_nets_error_in_a_later_episode_keeps_the_finished_ones_and_names_the_seed(
+    monkeypatch, capsys
+):
+    """A plugin net raising inside the MPC comes out of the episode as a PredictorError naming the predictor
+    (LearnedPredictor), not a PipelineError: it is named by its episode and stops the run as one."""
+    import pipelines.loop.episode as episode
+    from predictors.errors import PredictorError
+
+    original, calls = episode.run_episode, {"n": 0}
+
+    def second_fails(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise PredictorError("predictor 'mine' (model 'my:Net'): encode raised ValueError: no")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(episode, "run_episode", second_fails)
+    argv = ["simulate", "--controller", "straight", "--humans", "2", "--episodes", "3", "--no-progress"]
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and "| stopped by an error: 1 episodes finished" in out
+    assert err == (
+        "crowdmpc simulate: error: episode seed 1 (circle): predictor 'mine' (model 'my:Net'): encode raised "
+        "ValueError: no\n"
+    )

@@ -155,3 +155,13 @@ class ForwardCentresInPlace(ToyNet):
         positions -= positions[:, obs_len - 1 : obs_len].mean(dim=2, keepdim=True)
         args = (positions, mask, obs_len, pred_len)
         return teacher_forced_rollout(self, *args, teacher_forcing=teacher_forcing)
+
+
+class RaisesOnCrowds(ToyNet):
+    """Written for small scenes: refuses more than 5 agents with its own ValueError. The contract's check
+    (3 agents) passes it; the closed loop, with 7 humans and 3 robots, meets it."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        if cur.shape[1] > 5:
+            raise ValueError(f"my pooling grid holds at most 5 agents, got {cur.shape[1]}")
+        return super().decode_step(h, prev, cur, neighbours)

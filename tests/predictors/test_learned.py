@@ -314,3 +314,32 @@ def test_a_non_finite_observed_position_is_refused_where_unobserved_ones_are_ign
     assert np.isfinite(predictor.encode(history, mask, humans)).all()
     with pytest.raises(ValueError, match="robots_future holds a non-finite position"):
         predictor.rollout(history, mask, np.where(robots_future > 0, np.inf, robots_future), humans)
+
+
+def test_a_plugin_net_raising_on_a_scene_is_one_line_naming_the_predictor_and_a_shipped_one_is_a_bug(
+    monkeypatch,
+):
+    """A plugin net's own exception in the closed loop ended simulate with a traceback through the MPC, as a
+    bug in crowdmpc would: the controller plugins' exceptions were one line naming them, the nets' were not.
+    A shipped net's exception is still a bug: its traceback."""
+    from tests.plugins.broken_nets import RaisesOnCrowds
+    from tests.plugins.toy_predictor import ToyConfig
+
+    kind = "tests.plugins.broken_nets:RaisesOnCrowds"
+    predictor = LearnedPredictor(RaisesOnCrowds(ToyConfig()), name="crowds", kind=kind)
+    history, mask, humans, robots_future = crossing_scene()  # 6 agents
+    with pytest.raises(PredictorError) as caught:
+        predictor.rollout(history, mask, robots_future, humans)
+    assert str(caught.value) == (
+        f"predictor 'crowds' (model {kind!r}): encode raised ValueError: my pooling grid holds at most 5 "
+        "agents, got 6 (on a scene of 6 agents)"
+    )
+    assert isinstance(caught.value.__cause__, ValueError)  # the traceback a sweep's errors.jsonl keeps
+
+    def broken(*args):
+        raise RuntimeError("a bug")
+
+    shipped = social_lstm("soft")
+    monkeypatch.setattr(shipped.net, "encode", broken)
+    with pytest.raises(RuntimeError, match="a bug"):
+        shipped.rollout(history, mask, robots_future, humans)
