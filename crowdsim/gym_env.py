@@ -254,7 +254,13 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         if a.shape != (self.max_robots, 2):
             raise SimulationError(f"action must be a ({self.max_robots}, 2) array, got shape {a.shape}")
         before = self._obs
-        obs, done, native = self._sim.step(a[: before.n_robots])
+        m = before.n_robots
+        if not np.isfinite(a[:m]).all():  # the simulator refused it as "robot_accelerations", not the action
+            raise SimulationError(
+                f"action must be finite for the episode's {m} robots, got "
+                f"{int((~np.isfinite(a[:m])).sum())} non-finite entries"
+            )
+        obs, done, native = self._sim.step(a[:m])
         self._obs = obs
 
         cfg = self.config

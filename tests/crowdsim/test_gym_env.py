@@ -488,3 +488,15 @@ def test_the_frames_title_gives_the_time_as_the_legend_does(monkeypatch):
         env.step(np.zeros((3, 2)))
         env.render()
     assert [t.split(": ")[-1] for t in titles] == ["t = 0.25 s", "t = 0.5 s", "t = 0.75 s"]
+
+
+@pytest.mark.parametrize("bad", [math.inf, math.nan])
+def test_a_non_finite_action_is_refused_as_the_action(bad):
+    """It was refused by the simulator as "robot_accelerations must be a finite (1, 2) array", a name the
+    gym user never gave (the velocity wrapper names its action); rows past the episode's robots are
+    ignored, as they always were."""
+    env = CrowdNavEnv(n_robots=2, n_humans=1)
+    env.reset(seed=0, options={"n_robots": 1})
+    with pytest.raises(SimulationError, match=r"^action must be finite for the episode's 1 robots, got 1 "):
+        env.step(np.array([[bad, 0.0], [0.0, 0.0]]))
+    env.step(np.array([[0.5, 0.0], [bad, bad]]))
