@@ -76,8 +76,8 @@ def handed_out(obs: Observation) -> Observation:
 def _check_array(
     controller: Controller, field: str, value: object, shape: tuple[int | None, ...], expected: str
 ) -> None:
-    """PipelineError unless ``value`` is an array of finite numbers of ``shape`` (None: any length there):
-    integers or floats, not booleans (``a > 0`` was taken for 1 m/s^2)."""
+    """PipelineError unless ``value`` is an array of finite numbers of ``shape`` (None: any length >= 1
+    there, the steps): integers or floats, not booleans (``a > 0`` was taken for 1 m/s^2)."""
     try:
         array: np.ndarray | None = np.asarray(value)
     except (TypeError, ValueError):  # ragged rows
@@ -88,6 +88,12 @@ def _check_array(
         and array.ndim == len(shape)
         and all(want is None or want == got for want, got in zip(shape, array.shape, strict=True))
     ):
+        if any(want is None and got == 0 for want, got in zip(shape, array.shape, strict=True)):
+            # no steps: recorded as positions of shape (0,), which review --check refused, --plot crashed on
+            raise PipelineError(
+                f"{_named(controller)}: act() must return {field} of at least one step (H >= 1) or None, got "
+                f"shape {array.shape}"
+            )
         if np.isfinite(array).all():
             return
         bad = array[~np.isfinite(array)].flat[0]

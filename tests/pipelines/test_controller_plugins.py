@@ -307,6 +307,11 @@ BROKEN = "tests.plugins.broken_controllers"
 BROKEN_CONTRACTS = [
     ("FlatPlan", "act() must return plan of shape (3, H, 2) or None, got shape (5,)"),
     ("PredictionOfRobots", "act() must return prediction of shape (H, 2, 2) or None, got shape (4, 3, 2)"),
+    ("EmptyPlan", "act() must return plan of at least one step (H >= 1) or None, got shape (3, 0, 2)"),
+    (
+        "EmptyPrediction",
+        "act() must return prediction of at least one step (H >= 1) or None, got shape (0, 2, 2)",
+    ),
     ("IterationsNone", "act() must return iterations as an int, got None"),
     ("StatusNone", "act() must return status as a str, got None"),
     ("DescribeNone", "describe() must return a dict, got NoneType"),

@@ -298,3 +298,21 @@ class CentresInPlace(StraightLine):
         out = super().act(obs)  # from the true positions: the episode itself is the straight line's
         centre_in_place(obs)
         return out
+
+
+class EmptyPlan(StraightLine):
+    """A plan and a prediction of no steps (H = 0), for "nothing planned": written into the recording as
+    positions of shape (0,), which review --check refused and review --plot crashed on (numpy's concatenate
+    error). None says "no plan"."""
+
+    name = "empty_plan"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), plan=np.zeros((obs.n_robots, 0, 2)))
+
+
+class EmptyPrediction(StraightLine):
+    name = "empty_prediction"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return dataclasses.replace(super().act(obs), prediction=np.zeros((0, obs.n_humans, 2)))
