@@ -170,7 +170,7 @@ def import_plugin(spec: str) -> object:
         text = repr(spec) if len(repr(spec)) <= 60 else f"{repr(spec)[:57]}..."
         raise PipelineError(f"plugin {text} is not of the form module:Class")
     from predictors.errors import PredictorError
-    from predictors.models import import_class
+    from predictors.plugin_import import import_class
 
     try:
         return import_class(spec, "plugin")
@@ -201,7 +201,7 @@ def load_controller_plugin(spec: str) -> ControllerPlugin:
     Registering it again keeps the registration while the module holds the same class, and takes the new
     class once the module was reloaded (``importlib.reload`` after an edit, in a notebook): the first class
     stayed registered, and the edited code never ran."""
-    from predictors.models import reloaded_class
+    from predictors.plugin_import import reloaded_class
 
     known = _PLUGINS.get(spec)
     if known is not None and reloaded_class(spec, known.cls) is None:
@@ -230,7 +230,7 @@ def _entry_points() -> dict[str, metadata.EntryPoint]:
     """The installed entry points of ``ENTRY_POINT_GROUP`` by name, not loaded; PipelineError naming the
     distribution when one takes a shipped controller's name (the shipped one ran in its place, without a
     word)."""
-    from predictors.models import shadowing
+    from predictors.plugin_import import shadowing
 
     points = {}
     for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):

@@ -1,0 +1,62 @@
+"""Importing user code named ``module:Class``: the step shared by net plugins (``predictors.models``) and
+controller plugins (``pipelines.loop.spec``), whose registries keep what it imports.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+from typing import Any
+
+from predictors.errors import PredictorError
+
+
+def import_class(spec: str, what: str = "plugin") -> object:
+    """What ``module:Class`` names (the form is the caller's to check), importing the module from the
+    installed packages or, after them, the current directory, as ``python -m`` would: a user's one-file
+    plugin next to where they work needs no install, and never shadows an installed module. PredictorError
+    in one line, naming ``what`` and ``spec``, when it cannot. Shared by net and controller plugins."""
+    cwd = str(Path.cwd())
+    if cwd not in sys.path:
+        sys.path.append(cwd)
+    module_name, _, class_name = spec.partition(":")
+    imported_before = module_name in sys.modules
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # a plugin module that does not import: say which and why, in one line
+        raise PredictorError(
+            f"{what} {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
+        ) from None
+    if not hasattr(module, class_name):
+        # A notebook that wrote the class after a first try: import_module hands back the module as it
+        # was first imported, and the refusal repeated itself with nothing saying why.
+        reload = (
+            f"; if you added it since the module was imported, importlib.reload({module_name}) first (Python "
+            "keeps a module as it was first imported)"
+            if imported_before
+            else ""
+        )
+        raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}{reload}")
+    return getattr(module, class_name)
+
+
+def reloaded_class(spec: str, registered: object) -> object | None:
+    """The class ``module:Class`` names now, when its module, imported, holds another one than
+    ``registered``: the user reloaded it after an edit (``importlib.reload``, in a notebook), and registering
+    it again must take the edited class, where the first one stayed registered and the edit never ran.
+    None when it holds ``registered``, or is not imported (nothing is imported here)."""
+    module_name, _, class_name = spec.partition(":")
+    module = sys.modules.get(module_name)
+    current = getattr(module, class_name, None) if module is not None else None
+    return None if current is None or current is registered else current
+
+
+def shadowing(entry: Any, what: str) -> str:
+    """The one-line refusal of an installed entry point that takes the name of a shipped ``what`` (a model
+    kind, or a controller: ``pipelines.loop.spec``)."""
+    dist = getattr(getattr(entry, "dist", None), "name", None) or "?"
+    return (
+        f"entry point {entry.name!r} ({entry.value}) of distribution {dist!r} would shadow a shipped {what}; "
+        f"rename it in {dist}'s {entry.group!r} entry points or uninstall {dist}"
+    )
