@@ -8,17 +8,23 @@ import sys
 from collections.abc import Callable
 from typing import Final
 
-from pipelines.commands import check_writable, write_output
+from pipelines.commands import check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
+from pipelines.errors import PipelineError
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
   crowdmpc evaluate --predictor constant_velocity --data-dir data/prepared --protocol loo --json cv_loo.json
+  crowdmpc evaluate --predictor social_lstm_eth --test my_data/test_a.ndjson my_data/test_b.ndjson
 
 protocols (data/README.md):
   paper  train = ETH + Hotel train splits, val = their val splits, test = ETH test split
   loo    train = zara01, zara03, students001, students003 (TrajNet++) + Hotel train split,
          val = Hotel val split, test = the same ETH test split
+
+--test FILE.. scores your own TrajNet++ ndjson files instead (scenes of 9 + 12 steps at 2.5 fps, the last
+21 steps of a longer scene; data/README.md); --data-dir, --protocol, --dataset and --split choose the
+prepared files and do not go with it.
 """
 
 
@@ -60,12 +66,26 @@ def register(subparsers) -> None:
         "crowdmpc --plugin module:NetClass evaluate ...)",
     )
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
+    # defaults filled in by _choose_files: None tells an option typed from its default, which --test refuses
     parser.add_argument(
-        "--dataset", default="biwi_eth", choices=("biwi_eth", "biwi_hotel"), help="test sequence"
+        "--dataset", default=None, choices=("biwi_eth", "biwi_hotel"), help="test sequence (default biwi_eth)"
     )
-    parser.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to score")
     parser.add_argument(
-        "--protocol", default="paper", choices=("paper", "loo"), help="which files form the split"
+        "--split", default=None, choices=("train", "val", "test"), help="split to score (default test)"
+    )
+    parser.add_argument(
+        "--protocol",
+        default=None,
+        choices=("paper", "loo"),
+        help="which files form the split (default paper)",
+    )
+    parser.add_argument(
+        "--test",
+        nargs="+",
+        type=path_arg,
+        default=None,
+        metavar="FILE",
+        help="score these TrajNet++ ndjson files (e.g. your own data) instead of a protocol's split",
     )
     parser.add_argument(
         "--top-k",
@@ -99,16 +119,20 @@ def _evaluate(args: argparse.Namespace) -> int:
     from predictors.zoo import locate
 
     check_writable(args.json, "--json", json_only=True)
+    _choose_files(args)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
     predictor = load_predictor(args.predictor)
-    files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
-    root = prepared_dir(args.data_dir)
+    if args.test is not None:
+        files, root = {"test": list(args.test)}, None
+    else:
+        files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
+        root = prepared_dir(args.data_dir)
     result = evaluate(predictor, files[args.split], config, progress=not args.no_progress, root=root)
     result.update(
         protocol=args.protocol,
         dataset=args.dataset,
         split=args.split,
-        data_dir=str(root),
+        data_dir=None if root is None else str(root),
         files_evaluated=[str(p) for p in files[args.split]],
         # what the numbers depend on beyond the data: the weights, the samples' seed, the code
         predictor_sha256=checkpoint_sha256(args.predictor),
@@ -119,8 +143,11 @@ def _evaluate(args: argparse.Namespace) -> int:
     located = None if args.predictor in PREDICTORS else locate(args.predictor)
     trained = None if located is None else located.entry.protocol
     result["trained_protocol"] = trained  # None: no zoo entry (constant velocity, the oracle)
-    print(f"protocol {args.protocol}, split {args.split}, data {root}")
-    if trained is not None and trained != args.protocol:
+    if root is None:
+        print(f"files given with --test ({len(files['test'])})")
+    else:
+        print(f"protocol {args.protocol}, split {args.split}, data {root}")
+    if trained is not None and root is not None and trained != args.protocol:
         # both protocols score the same test file: the option picks the files, not how the model was trained
         print(
             f"note: {args.predictor} was trained under protocol {trained!r}; --protocol {args.protocol} "
@@ -135,3 +162,23 @@ def _evaluate(args: argparse.Namespace) -> int:
         if not is_stdout(args.json):
             print(f"wrote {shown(args.json)}")
     return 0
+
+
+def _choose_files(args: argparse.Namespace) -> None:
+    """Fills in the defaults of --protocol, --dataset and --split, or with --test the record of explicit
+    files (protocol "custom", as `train --train/--val` records it); PipelineError when an option that
+    chooses prepared files is typed with --test: it would be ignored without a word."""
+    choosing = (("--data-dir", args.data_dir), ("--protocol", args.protocol), ("--dataset", args.dataset))
+    if args.test is None:
+        args.protocol = args.protocol or "paper"
+        args.dataset = args.dataset or "biwi_eth"
+        args.split = args.split or "test"
+        return
+    given = [option for option, value in (*choosing, ("--split", args.split)) if value is not None]
+    if given:
+        verb = "does" if len(given) == 1 else "do"
+        raise PipelineError(
+            f"{' and '.join(given)} {verb} not go with --test (its files replace the prepared files those "
+            "options choose); give one or the other"
+        )
+    args.protocol, args.dataset, args.split = "custom", None, "test"

@@ -591,3 +591,42 @@ def test_synth_remakes_the_shipped_synth_models_data(tmp_path, capsys):
     want = entry["training_data"]["files"]["val"]["circle_h5.ndjson"]
     assert hashlib.sha256(out.read_bytes()).hexdigest() == want
     assert json.loads(out.with_suffix(".synth.json").read_text())["options"]["profile"] == "v1"
+
+
+def test_evaluate_scores_files_given_with_test(tmp_path, monkeypatch, capsys):
+    """A researcher's own TrajNet++ files: evaluate had no way to score them (only a protocol's split of the
+    prepared ETH/Hotel data), so a zoo model could not be scored on them at all. The walkers keep a constant
+    velocity, so constant velocity scores 0 on both scenes of each file."""
+    monkeypatch.delenv("CROWDMPC_DATA", raising=False)  # no data directory is needed
+    first, second = write_walk_file(tmp_path / "a.ndjson"), write_walk_file(tmp_path / "b.ndjson")
+    report = tmp_path / "r.json"
+    code, stdout, _ = run(
+        capsys,
+        "evaluate",
+        "--predictor",
+        "constant_velocity",
+        "--test",
+        str(first),
+        str(second),
+        "--json",
+        str(report),
+    )
+    assert code == 0
+    assert str(first) in stdout and str(second) in stdout and "overall" in stdout
+    result = json.loads(report.read_text())
+    assert (result["protocol"], result["dataset"], result["data_dir"]) == ("custom", None, None)
+    assert result["files_evaluated"] == [str(first), str(second)]
+    assert result["overall"]["scenes"] == 4 and result["overall"]["ade"] == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("option", [["--protocol", "loo"], ["--dataset", "biwi_hotel"], ["--split", "val"]])
+def test_evaluate_test_files_refuse_the_options_that_choose_prepared_files(option, tmp_path, capsys):
+    data = write_walk_file(tmp_path / "a.ndjson")
+    code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--test", str(data), *option)
+    assert_one_line_error(code, err, f"{option[0]} does not go with --test")
+
+
+def test_evaluate_test_file_that_is_missing_is_one_line(tmp_path, capsys):
+    missing = tmp_path / "nope.ndjson"
+    code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--test", str(missing))
+    assert_one_line_error(code, err, f"{missing}", "no such file")
