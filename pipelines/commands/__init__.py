@@ -47,6 +47,22 @@ def path_arg(text: str) -> Path:
     return Path(text)
 
 
+def check_data_files(option: str, paths: Sequence[Path]) -> None:
+    """PipelineError in one line unless every path of ``option`` (train's --train, --val, --test, evaluate's
+    --test) names an existing regular file, each once: a file named twice, even as another path to it, counts
+    its scenes twice while a record names it once."""
+    seen: dict[Path, Path] = {}
+    for path in paths:
+        if not path.exists():
+            raise PipelineError(f"{option} file {path} does not exist")
+        if not path.is_file():
+            raise PipelineError(f"{option} {path} is not a data file (a directory or a device)")
+        again = seen.setdefault(path.resolve(), path)
+        if again is not path:
+            same = "" if again == path else f" (as {again})"
+            raise PipelineError(f"{option} names {path} more than once{same}; give each file once")
+
+
 def first_repeat(values: Sequence[T]) -> T | None:
     """The first value of ``values`` that an earlier one equals, or None (for options naming each once)."""
     return next((v for i, v in enumerate(values) if v in values[:i]), None)

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Callable
 from typing import Final
 
-from pipelines.commands import check_writable, path_arg, write_output
+from pipelines.commands import check_data_files, check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 
@@ -181,4 +181,5 @@ def _choose_files(args: argparse.Namespace) -> None:
             f"{' and '.join(given)} {verb} not go with --test (its files replace the prepared files those "
             "options choose); give one or the other"
         )
+    check_data_files("--test", args.test)  # a file named twice was scored twice in "overall"
     args.protocol, args.dataset, args.split = "custom", None, "test"

@@ -10,7 +10,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from pipelines.commands import check_outside_the_zoos, check_writable, path_arg
+from pipelines.commands import check_data_files, check_outside_the_zoos, check_writable, path_arg
 from pipelines.commands.output_paths import output_arg
 from pipelines.commands.train_net import net_config_of, training_loss, trains_point_head
 from pipelines.errors import PipelineError
@@ -170,18 +170,9 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
             raise PipelineError("--train and --val go together (explicit files replace --protocol)")
         files = {"train": list(args.train), "val": list(args.val), "test": list(args.test or [])}
         for split, paths in files.items():
-            seen: dict[Path, Path] = {}
-            for path in paths:
-                if not path.exists():
-                    raise PipelineError(f"--{split} file {path} does not exist")
-                if not path.is_file():
-                    raise PipelineError(f"--{split} {path} is not a data file (a directory or a device)")
-                # twice, its scenes count twice, but the run's data record names it once: the same identity
-                # as a run trained on it once, with other weights
-                again = seen.setdefault(path.resolve(), path)
-                if again is not path:
-                    same = "" if again == path else f" (as {again})"
-                    raise PipelineError(f"--{split} names {path} more than once{same}; give each file once")
+            # twice, its scenes count twice, but the run's data record names it once: the same identity as a
+            # run trained on it once, with other weights
+            check_data_files(f"--{split}", paths)
         return files, None
     from predictors.data.locate import prepared_dir, protocol_files
 

@@ -629,4 +629,14 @@ def test_evaluate_test_files_refuse_the_options_that_choose_prepared_files(optio
 def test_evaluate_test_file_that_is_missing_is_one_line(tmp_path, capsys):
     missing = tmp_path / "nope.ndjson"
     code, _, err = run(capsys, "evaluate", "--predictor", "constant_velocity", "--test", str(missing))
-    assert_one_line_error(code, err, f"{missing}", "no such file")
+    assert_one_line_error(code, err, f"--test file {missing} does not exist")
+
+
+def test_evaluate_test_file_named_twice_is_refused(tmp_path, monkeypatch, capsys):
+    """Named twice (here as a relative and an absolute path), its scenes were scored twice in "overall"."""
+    data = write_walk_file(tmp_path / "a.ndjson")
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(
+        capsys, "evaluate", "--predictor", "constant_velocity", "--test", "a.ndjson", str(data)
+    )
+    assert_one_line_error(code, err, f"--test names {data} more than once (as a.ndjson)")
