@@ -155,7 +155,9 @@ def run_prepare(args: argparse.Namespace) -> int:
     if raw is None:
         raise PipelineError(
             f"--raw {args.raw}: expected a BIWI EWAP directory holding seq_eth/obsmat.txt and "
-            "seq_hotel/obsmat.txt"
+            "seq_hotel/obsmat.txt; other data (e.g. 'frame ped x y' text) has no converter here: write it "
+            "as TrajNet++ ndjson and give it to train --train/--val or evaluate --test (data/README.md, "
+            "'Your own data')"
         )
     with _one_prepare_at_a_time(args.out):
         _check_prepare_target(args.out)

@@ -255,7 +255,8 @@ def test_evaluate_json_that_cannot_be_written_is_one_line(prepared, capsys):
 
 def test_prepare_rejects_a_directory_without_ewap(tmp_path, capsys):
     code, _, err = run(capsys, "data", "prepare", "--raw", str(tmp_path), "--out", str(tmp_path / "o"))
-    assert_one_line_error(code, err, "expected a BIWI EWAP directory")
+    # a researcher's other raw data (Social-GAN's 'frame ped x y' text) is told the way in
+    assert_one_line_error(code, err, "expected a BIWI EWAP directory", "evaluate --test", "Your own data")
 
 
 def test_prepare_reports_a_malformed_obsmat_line(tmp_path, capsys):
