@@ -136,10 +136,11 @@ class MPCConfig:
     # (measured with IPOPT: no speed-up from scaling F by 1e-2 or 1e-4; only looser solutions, since tol
     # applies to the scaled problem). Fatrop does not scale, and with margins and several robots the active
     # penalties leave it short of solver_max_iter, retried with IPOPT: `benchmarks/cost_scale.py --config
-    # docs/examples/safe_crossing.toml --robots 3 12` gives 9.7 % of Fatrop solves failing at 3 robots and
-    # 17.9 % at 12 with F, 0.9 % and 1.3 % with F / 100 (p95 step at 12 robots 297 -> 112 ms). The paper's
-    # method fails on 1 solve in ~700 either way, so the default leaves F as it is and reproduces it exactly;
-    # docs/examples/many_robots.toml sets 0.01.
+    # docs/examples/safe_crossing.toml --robots 3 12 --episodes 4` gives 9.7 % of Fatrop solves failing at 3
+    # robots and 21.0 % at 12 with F, 1.1 % and 1.3 % with F / 100 (p95 step at 12 robots 288 -> 114 ms, load
+    # 0.9-1.0; docs/results.md, "Fatrop and cost_scale", measured since that file sets guidance_clearance =
+    # "penalty"). The paper's method fails on 1 solve in ~700 either way, so the default leaves F as it is and
+    # reproduces it exactly; docs/examples/many_robots.toml sets 0.01.
     cost_scale: float = 1.0
     # "fatrop" or "ipopt": the interior-point solver of every NLP built from fixed predictions (joint and
     # local). Fatrop with a dense single stage solves these small NLPs (8 or 24 accelerations) 2-3.5x faster
