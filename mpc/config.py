@@ -143,10 +143,10 @@ class MPCConfig:
     # reproduces it exactly; docs/examples/many_robots.toml sets 0.01.
     cost_scale: float = 1.0
     # "fatrop" or "ipopt": the interior-point solver of every NLP built from fixed predictions (joint and
-    # local). Fatrop with a dense single stage solves these small NLPs (8 or 24 accelerations) 2-3.5x faster
+    # local). Fatrop with a dense single stage solves these small NLPs (8 or 24 accelerations) 2-4x faster
     # than IPOPT, whose MUMPS factorisation costs ~0.3 ms an iteration here, and finds the same solutions:
-    # `benchmarks/solvers.py` on 2413 recorded DMPC local problems (3 robots, 7 humans) gives 0.92 vs 3.2 ms
-    # a solve, the cost within 1e-3 of IPOPT's on 2409; on 230 joint ones 3.3 vs 7.1 ms, 226 the same. A
+    # `benchmarks/solvers.py` on 2250 recorded DMPC local problems (3 robots, 7 humans) gives 0.76 vs 2.9 ms
+    # a solve, the cost within 1e-3 of IPOPT's on 2248; on 277 joint ones 3.3 vs 7.7 ms, 270 the same. A
     # Fatrop solve that fails is retried with IPOPT, and a step that starts from braking asks both
     # (mpc/solvers.py, _Solver, has why). The coupled NLP with a network inside always uses IPOPT (it needs
     # IPOPT's L-BFGS Hessian, mpc/coupled.py).
@@ -168,9 +168,9 @@ class MPCConfig:
     # DMPC: each robot's C_i). Measured on recorded steps: braking found a much lower F in ~1.5 % of steps.
     multi_start: bool = True
     restart_penalty: float = 1.0
-    # Compile the NLP's functions with the system C compiler (gcc): with Fatrop a local solve 0.92 -> 0.50 ms
-    # and a joint one 3.3 -> 1.4 ms, for 2.4 and 7.8 s of build (benchmarks/solvers.py). Worth it for
-    # sweeps (`crowdmpc sweep --jit auto`, the default), not for one episode.
+    # Compile the NLP's functions with the system C compiler (gcc): with Fatrop a local solve 0.76 -> 0.48 ms
+    # and a joint one 3.3 -> 1.4 ms, for 4.1 and 9.1 s of build (benchmarks/solvers.py, load 2.5). Worth it
+    # for sweeps (`crowdmpc sweep --jit auto`, the default), not for one episode.
     jit: bool = False
     # "serial" or "threads": how DMPC runs its M local solves per iteration
     dmpc_parallel: ParallelMode = "serial"
