@@ -9,7 +9,8 @@
   the robots (``[robot] visible = true``) and stop at their goals.
 * ``"v1"``: this project's first simulator, bit for bit: 30 s time limit without margin (75 steps), 0.8 m
   spawn separation, its own perpendicular geometry, success once every robot has reached its goal at least
-  once.
+  once. Only its history is longer (9 rows, ``world.OBS_LEN``, where the first simulator kept 8), which
+  changes the episodes of a network predictor (docs/results.md, Table III).
 
 Where the robots start and end is not public; both profiles keep ``crowdsim.scenarios.robot_layout``'s
 formation (the row up to 3 robots), which isolates the published conventions. Visibility is chosen
