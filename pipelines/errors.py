@@ -15,10 +15,16 @@ class EpisodeFailed(PipelineError):
     """A user's error raised inside one episode of ``run_episodes`` (a plugin breaking its contract or
     raising), with the episode that failed named first: ``simulate --seed SEED --episodes 1`` reruns it."""
 
-    def __init__(self, seed: int, scenario: str, error: Exception):
+    def __init__(self, seed: int, scenario: str, error: Exception | str):
         super().__init__(f"episode seed {seed} ({scenario}): {error}")
         self.seed = seed
         self.scenario = scenario
+        self.error = str(error)  # its line: the error itself travels as the cause, which pickle drops
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        # Built from its facts, as predictors.errors.DatasetFormatError: a process pool sends a job's
+        # exception back pickled, and BaseException's pickle calls the class with the message alone.
+        return type(self), (self.seed, self.scenario, self.error)
 
 
 def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:

@@ -7,6 +7,7 @@ import pickle
 
 import pytest
 
+from pipelines.errors import EpisodeFailed, PipelineError
 from pipelines.loop.spec import UnknownController
 from predictors.errors import CheckpointMismatch, DatasetFormatError, UnknownPredictor
 from predictors.export.errors import ExportError
@@ -22,6 +23,7 @@ ERRORS = [
     ExportError("unsupported operation torch.sort", "ranker"),
     UnknownController("cmcp", ["cmpc", "dmpc"]),
     UnknownController("my_controller:GoStraight", ["cmpc"]),
+    EpisodeFailed(12, "circle", PipelineError("controller 'go': act() raised ValueError: boom")),
 ]
 
 
