@@ -111,14 +111,16 @@ def format_table(
             )
         )
     # A predictor returning NaN or inf (mpc/cmpc.py, dmpc.py, coupled.py) is a bug in it, not its quality:
-    # those steps' plans are the fallback's, and the metrics above read as the predictor's without this row.
+    # it ends the step's iterations, and the metrics above read as the predictor's without this row. Not every
+    # such step fell back: one whose NaN came after a solved iteration keeps that iteration's plan (its status
+    # is still nan_prediction), so the row names the prediction and leaves the count of fallbacks to its row.
     nan_steps = int(summary.get("statuses", {}).get(NAN_PREDICTION, 0))
     if nan_steps:
         rows.append(
             (
                 "NaN predictions",
-                f"{nan_steps} of {summary['control_steps']} steps fell back: the predictor returned NaN or "
-                "inf there",
+                f"{nan_steps} of {summary['control_steps']} steps stopped at a NaN or inf prediction (a step "
+                "with no solved iteration before it fell back)",
             )
         )
     width = max(len(name) for name, _ in rows)

@@ -134,6 +134,37 @@ def test_steps_whose_prediction_was_nan_are_printed():
     assert "NaN predictions" not in format_table(summary, "header")
     summary["statuses"], summary["control_steps"] = {"ok": 35, "nan_prediction": 110}, 145
     assert (
-        "NaN predictions          110 of 145 steps fell back: the predictor returned NaN or inf there"
-        in format_table(summary, "header")
+        "NaN predictions          110 of 145 steps stopped at a NaN or inf prediction (a step with no solved "
+        "iteration before it fell back)" in format_table(summary, "header")
     )
+
+
+def test_the_nan_row_does_not_say_every_such_step_fell_back():
+    """A step whose prediction turned NaN after an iteration had solved keeps that iteration's plan: status
+    "nan_prediction", no fallback. The row said "N of M steps fell back" for all of them, beside a "fallback
+    steps" row that (rightly) did not count them."""
+    import numpy as np
+
+    from mpc.cmpc import CMPC
+    from mpc.config import MPCConfig
+    from mpc.fallback import PlanMemory
+    from pipelines.commands.simulate_table import format_table
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import run_episodes, summarize
+    from tests.mpc.test_fallback import moving_data
+
+    cfg, data, calls = MPCConfig(), moving_data(), []
+
+    def finite_then_nan(robots_future):  # the first IBR iteration's prediction finite, the next NaN
+        calls.append(robots_future)
+        value = 0.01 * robots_future.mean() if len(calls) == 1 else np.nan
+        return np.full((cfg.horizon, 1, 2), value) + [5.0, -5.0]
+
+    result = CMPC(cfg, 2, 1).solve(data, finite_then_nan, PlanMemory(cfg).start(data))
+    assert result.status == "nan_prediction" and result.solved  # kept the solved plan: no fallback
+    summary = summarize(run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle",
+                                     n_humans=2, progress=False))  # fmt: skip
+    summary["statuses"] = {"ok": summary["control_steps"] - 1, "nan_prediction": 1}
+    summary["fallback_steps"] = 0
+    row = next(line for line in format_table(summary, "h").splitlines() if "NaN" in line)
+    assert "fell back:" not in row and "steps fell back" not in row
