@@ -74,23 +74,27 @@ def synthetic_scene(
     """``(positions (B, length, N, 2), mask (B, length, N))``: agents walking straight lines within a couple
     of metres of each other (pooling range), all observed. Deterministic: checking a net draws no random
     numbers, so a seeded training run trains the same weights with the check as without it."""
-    steps = torch.arange(length, dtype=dtype, device=device)[None, :, None, None] * DT
-    start = torch.tensor([[-1.5, 0.3], [1.5, -0.2], [0.2, -1.6]], dtype=dtype, device=device)
-    velocity = torch.tensor([[0.9, 0.0], [-0.9, 0.1], [0.1, 0.8]], dtype=dtype, device=device)
-    shift = torch.arange(CHECK_BATCH, dtype=dtype, device=device)[:, None, None, None] * 0.1
-    positions = start + steps * velocity + shift
-    return positions, torch.ones(positions.shape[:3], dtype=torch.bool, device=device)
+    # Ordinary tensors even under the caller's torch.inference_mode(): the in-place check (_unchanged) reads
+    # their count of changes, which inference tensors do not keep (a RuntimeError on loading a zoo model).
+    with torch.inference_mode(False):
+        steps = torch.arange(length, dtype=dtype, device=device)[None, :, None, None] * DT
+        start = torch.tensor([[-1.5, 0.3], [1.5, -0.2], [0.2, -1.6]], dtype=dtype, device=device)
+        velocity = torch.tensor([[0.9, 0.0], [-0.9, 0.1], [0.1, 0.8]], dtype=dtype, device=device)
+        shift = torch.arange(CHECK_BATCH, dtype=dtype, device=device)[:, None, None, None] * 0.1
+        positions = start + steps * velocity + shift
+        return positions, torch.ones(positions.shape[:3], dtype=torch.bool, device=device)
 
 
 @contextmanager
 def _probing(net: torch.nn.Module) -> Iterator[None]:
     """Eval mode (no dropout draws, no batch-norm statistics updated) without gradients, on one thread (a
     tiny batch: torch's pool made the check 100x slower on a shared CPU); every submodule's mode is restored
-    after (a net may keep a frozen part in eval mode)."""
+    after (a net may keep a frozen part in eval mode). Outside the caller's inference mode, if any: the state
+    tensors encode makes are checked for in-place changes (_unchanged), which inference tensors cannot be."""
     modes = [(module, module.training) for module in net.modules()]
     net.eval()
     try:
-        with torch.no_grad(), single_threaded():
+        with torch.inference_mode(False), torch.no_grad(), single_threaded():
             yield
     finally:
         for module, training in modes:

@@ -252,3 +252,17 @@ def test_a_training_whose_loss_is_nan_stops_after_that_epoch_in_one_line_and_wri
     epochs = (tmp_path / "run" / "csv" / "version_0" / "metrics.csv").read_text().splitlines()[1:]
     assert {line.split(",")[0] for line in epochs} == {"0"}  # stopped after the first epoch
     assert not list((tmp_path / "run").glob("*.pt"))
+
+
+def test_a_model_loads_and_an_in_place_change_is_still_refused_under_inference_mode():
+    """The in-place check reads torch's count of a tensor's changes (``_version``), which tensors made under
+    ``torch.inference_mode()`` do not keep: a notebook loading a zoo model inside it, which worked before the
+    check, ended in "RuntimeError: Inference tensors do not track version counter". The check makes its own
+    tensors outside inference mode, so it loads, and still sees an in-place change there."""
+    from predictors.registry import load_predictor
+
+    with torch.inference_mode():
+        assert load_predictor("social_lstm_eth").name == "social_lstm_eth"
+        model = _registered("CentresInPlace")
+        with pytest.raises(PredictorError, match="encode changed its argument positions in place"):
+            check_step_contract(model_kind(model).build_net({}), f"model {model!r}", obs_len=OBS_LEN)
