@@ -111,7 +111,7 @@ def run_episode(
     precedence; an entry that would replace one of the episode's own fields (``contract.OWN_FIELDS``) is a
     PipelineError.
     """
-    _check_controller(controller)
+    check_controller(controller)
     check_sizes(scenario, n_humans, n_robots)
     if n_robots < 1:  # the simulator runs crowds alone; an episode's metrics are its robots'
         raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
@@ -234,18 +234,19 @@ def run_episodes(
     return results
 
 
-def _check_controller(controller: object) -> None:
+def check_controller(controller: object, where: str = "run_episode") -> None:
     """PipelineError unless ``controller`` has the protocol's methods (a spec or a name given in its place,
-    in a notebook, failed on an attribute deep inside)."""
+    in a notebook, failed on an attribute deep inside); ``where``: the function it was given to (run_episode,
+    run_gym_episode)."""
     if isinstance(controller, ControllerSpec):
+        takes_spec = " (run_episodes takes the spec)" if where == "run_episode" else ""
         raise PipelineError(
-            "run_episode takes a controller built by make_controller(spec), not the ControllerSpec "
-            "(run_episodes takes the spec)"
+            f"{where} takes a controller built by make_controller(spec), not the ControllerSpec{takes_spec}"
         )
     missing = [m for m in (*CONTROLLER_METHODS, "name", "predictor") if not hasattr(controller, m)]
     if missing:
         raise PipelineError(
-            f"run_episode: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
+            f"{where}: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
             "(build one with make_controller(ControllerSpec(...)))"
         )
 

@@ -39,7 +39,7 @@ from pipelines.loop.contract import (
     handed_out,
 )
 from pipelines.loop.controllers import Controller
-from pipelines.loop.episode import EpisodeObserver, EpisodeResult
+from pipelines.loop.episode import EpisodeObserver, EpisodeResult, check_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 
 
@@ -128,6 +128,7 @@ def run_gym_episode(
 ) -> EpisodeResult:
     """One episode of ``controller`` in the gymnasium environment ``env`` (acceleration actions), from
     ``env.reset(seed=seed, options=options)`` to ``terminated`` or ``truncated`` (module docstring)."""
+    check_controller(controller, "run_gym_episode")  # a spec given in its place, as run_episode refuses it
     base = crowdnav_env(env)
     changer = _action_changer(env, base)
     if changer is not None:

@@ -317,3 +317,12 @@ def test_a_wrapper_that_changes_the_actions_is_named_as_it_is_refused():
             run_gym_episode(make_controller(ControllerSpec("straight")), env, seed=0)
         with pytest.raises(PipelineError, match=rf"wrap {name} around it, {name}\(ObserveEpisodes\(env"):
             ObserveEpisodes(env, [])
+
+
+def test_run_gym_episode_names_a_spec_or_a_name_given_for_the_controller():
+    """run_episode refuses a ControllerSpec or a name in place of the controller in one line; the same slip in
+    run_gym_episode ended in "AttributeError: 'ControllerSpec' object has no attribute 'name'"."""
+    with pytest.raises(PipelineError, match=r"^run_gym_episode takes a controller built by make_controller"):
+        run_gym_episode(ControllerSpec("orca"), CrowdNavEnv(), seed=0)
+    with pytest.raises(PipelineError, match=r"^run_gym_episode: .orca. is no controller: it has no reset"):
+        run_gym_episode("orca", CrowdNavEnv(), seed=0)  # type: ignore[arg-type]
