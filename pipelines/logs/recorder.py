@@ -15,6 +15,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import weakref
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
@@ -51,6 +52,12 @@ DEFAULT_COMPRESSION: Final[CompressionType] = _default_compression()
 _ENCODER: Final = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 
 
+# This process's recorders, so that a refusal can name the case a notebook meets, a recorder left open by a
+# cell that raised (its traceback keeps it alive), apart from another program's run. Weak: one collected
+# without close() has closed its file, and with it its lock.
+_OPEN: weakref.WeakSet[McapRecorder] = weakref.WeakSet()
+
+
 def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None] | None = None) -> IO[bytes]:
     """``path`` opened for writing, never through a symbolic link: one planted at ``<name>.part`` in the
     folder the user named would make the recording land wherever it points. ``new``: only if nothing has
@@ -72,8 +79,14 @@ def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
+            here = (
+                " (here: a recorder this program opened and has not closed, such as one an episode that "
+                "raised left open; close() it, or open recorders with `with`)"
+                if any(not r.closed and r.part_path.absolute() == path.absolute() for r in _OPEN)
+                else ""
+            )
             raise PipelineError(
-                f"cannot record to {path}: another run is recording that episode into this folder now; "
+                f"cannot record to {path}: another run is recording that episode into this folder now{here}; "
                 "record into another folder"
             ) from None
         try:
@@ -146,6 +159,7 @@ class McapRecorder:
         self._schema_ids: dict[tuple[str, bytes], int] = {}  # one schema record shared by the topics using it
         self._closed = False
         self.message_count = 0
+        _OPEN.add(self)
         for name, data in (metadata or {}).items():
             self.add_metadata(name, data)
 

@@ -282,3 +282,31 @@ def test_a_refusal_of_the_unfinished_file_keeps_it(tmp_path):
     with McapRecorder(tmp_path / "a.mcap", may_replace=lambda name: None) as again:  # lock released
         again.write("/robots", ROBOT_MESSAGE, 0, schema=ROBOTS)
     assert not part.exists() and read_recording(tmp_path / "a.mcap").data("/robots") == [ROBOT_MESSAGE]
+
+
+def test_a_recorder_this_program_left_open_is_named_in_the_refusal(tmp_path):
+    """A notebook cell whose episode raised keeps its recorder (and the .part's lock) alive in the traceback;
+    running the cell again was refused as another run recording, which sent the user looking for another
+    program. The refusal says when the holder is a recorder of this program, and not for a lock held by
+    anything else (a raw flock here stands in for another program's run)."""
+    import fcntl
+    import os
+
+    path = tmp_path / "a.mcap"
+    left_open = McapRecorder(path)
+    with pytest.raises(PipelineError) as refused:
+        McapRecorder(path)
+    assert "(here: a recorder this program opened and has not closed" in str(refused.value)
+    left_open.close()
+
+    fd = os.open(tmp_path / "a.mcap.part", os.O_WRONLY | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(PipelineError) as other:
+            McapRecorder(path)
+    finally:
+        os.close(fd)
+    assert str(other.value) == (
+        f"cannot record to {tmp_path / 'a.mcap.part'}: another run is recording that episode into this "
+        "folder now; record into another folder"
+    )
