@@ -13,7 +13,8 @@ from crowdsim.world import RADIUS
 # stopped at it ("timeout", mpc/cmpc.py, dmpc.py, coupled.py) or a solve ran past it (IPOPT's status, which
 # mpc/solvers.py gives a Fatrop solve too).
 BUDGET_STATUSES: Final[tuple[str, ...]] = ("timeout", "Maximum_WallTime_Exceeded")
-# The status of a control step whose prediction held NaN or inf (the MPCs then fall back).
+# The status of a control step whose prediction held NaN or inf (it falls back unless an iteration before
+# the NaN had solved: format_table).
 NAN_PREDICTION: Final[str] = "nan_prediction"
 
 if TYPE_CHECKING:
