@@ -44,6 +44,7 @@ from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.margins import observed_classes
 from pipelines.loop.mpc_setup import (
     check_coupling,
+    check_history,
     check_margins_world,
     check_world,
     mpc_config,
@@ -200,6 +201,7 @@ class MPCController:
             raise PipelineError(
                 f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
             )
+        check_history(obs)
         history, mask = predictor_history(obs, self.model.obs_len)
         self._observe(obs)
         # Build now, not inside the first timed step: the solver, the twin, and the exported encoder, which
@@ -214,6 +216,7 @@ class MPCController:
 
     def act(self, obs: Observation) -> ControlOutput:
         t0 = time.perf_counter()
+        check_history(obs)
         self._observe(obs)
         cfg = self.cfg
         n_robots, n_humans = obs.n_robots, obs.n_humans

@@ -2,7 +2,8 @@
 ``ControllerSpec`` and the world's facts (``mpc_config``), the check that the MPC, the predictor and the
 simulator agree on the world (``check_world``), that calibrated margins were measured at its tau
 (``check_margins_world``), the coupling the controller can build (``check_coupling``),
-and the rows of an observation's history the predictor reads (``predictor_history``).
+that an observation's history is the one of its agents (``check_history``), and the rows of that history
+the predictor reads (``predictor_history``).
 """
 
 from __future__ import annotations
@@ -78,6 +79,37 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
         )
     history = history[-obs_len:]
     return history, np.ones(history.shape[:2], dtype=bool)
+
+
+def check_history(obs: Observation) -> None:
+    """``obs.history`` is ``(L, M+N, 2)`` and its row -1 is ``obs.robot_positions`` then
+    ``obs.human_positions``, else a PipelineError naming the first agent that differs.
+
+    The predictor reads the history and the MPC the positions: an observation built outside the simulator (a
+    tracker's, on a real robot) whose history keeps a human who left, misses one who came, or lags a step
+    was otherwise planned with silently, or failed deep in the predictor. The simulator's agree exactly."""
+    history = np.asarray(obs.history)
+    agents = obs.n_robots + obs.n_humans
+    if history.ndim != 3 or history.shape[1:] != (agents, 2):
+        raise PipelineError(
+            f"obs.history has shape {history.shape}, expected (L, {agents}, 2): the last L positions of the "
+            f"{obs.n_robots} robots then the {obs.n_humans} humans, in the order of robot_positions and "
+            "human_positions"
+        )
+    now = np.concatenate([obs.robot_positions, obs.human_positions]).astype(float)
+    differs = ~np.all(np.abs(history[-1] - now) <= 1e-9, axis=1)  # NaN differs
+    if differs.any():
+        i = int(np.flatnonzero(differs)[0])
+        who, field = (
+            (f"robot {i}", "robot_positions")
+            if i < obs.n_robots
+            else (f"human {i - obs.n_robots}", "human_positions")
+        )
+        raise PipelineError(
+            f"obs.history[-1] (now) is not the agents' positions: {who} is at {history[-1, i].tolist()} "
+            f"there but at {now[i].tolist()} in {field} ({int(differs.sum())} agent(s) differ); row -1 of "
+            "the history must be the current positions, robots first"
+        )
 
 
 def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None:

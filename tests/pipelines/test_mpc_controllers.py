@@ -166,7 +166,10 @@ def test_robot_on_its_goal_holds_position_when_tracking(name):
     obs = env.reset(0, "circle", 0)
     positions = obs.robot_positions.copy()
     positions[0] = obs.robot_goals[0]
-    obs = dataclasses.replace(obs, robot_positions=positions, robot_reached=np.array([True, False, False]))
+    history = np.broadcast_to(positions, obs.history.shape)  # it has stood there (no humans)
+    obs = dataclasses.replace(
+        obs, robot_positions=positions, history=history, robot_reached=np.array([True, False, False])
+    )
     controller = make_controller(ControllerSpec(name))
     controller.reset(obs)
     out = controller.act(obs)
@@ -336,3 +339,36 @@ def test_close_stops_the_dmpc_solver_threads():
     assert solver._pool is not None  # the threads the step used
     controller.close()
     assert solver._pool is None
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda o: {"history": o.history[:, :-1]}, r"obs\.history has shape \(9, 6, 2\).*\(L, 7, 2\)"),
+        (lambda o: {"history": o.history[:, :, :1]}, r"obs\.history has shape \(9, 7, 1\)"),
+        (lambda o: {"history": o.history[-1]}, r"obs\.history has shape \(7, 2\)"),
+        (lambda o: {"history": o.history + 1.0}, r"obs\.history\[-1\].*robot 0.*robot_positions"),
+        (
+            lambda o: {"human_positions": o.human_positions + np.array([[0.0, 0.0]] * 3 + [[0.0, 0.5]])},
+            r"obs\.history\[-1\].*human 3.*human_positions",
+        ),
+        (
+            lambda o: {"human_positions": np.where(np.arange(4)[:, None] == 1, np.nan, o.human_positions)},
+            r"obs\.history\[-1\].*human 1.*\[nan, nan\]",
+        ),
+    ],
+)
+def test_a_hand_built_observation_whose_history_disagrees_with_it_is_refused(change, match):
+    """An observation built outside the simulator (a tracker on a real robot): the predictor reads
+    ``history``, the MPC ``robot_positions``; a history with a column too few or too many (a human who left,
+    kept) or whose row "now" is not the positions (a stale or reordered history) was planned with silently,
+    or failed deep in the predictor ("could not broadcast (544,) into (477,)")."""
+    env = CrowdEnv()
+    obs = env.reset(0, "circle", 4)
+    controller = make_controller(ControllerSpec("cmpc"))
+    controller.reset(obs)
+    bad = dataclasses.replace(obs, **change(obs))
+    with pytest.raises(PipelineError, match=match):
+        controller.reset(bad)
+    with pytest.raises(PipelineError, match=match):
+        controller.act(bad)
