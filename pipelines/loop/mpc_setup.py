@@ -73,9 +73,11 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     """
     history = np.asarray(obs.history, dtype=float)
     if len(history) < obs_len:
+        # the observation may be a tracker's: say what it needs, then the simulator's key
         raise PipelineError(
-            f"the predictor reads {obs_len} observed steps but the simulator keeps {len(history)} "
-            f"(EnvConfig.history_len, from [world] obs_len): {_keep_more(obs_len)}"
+            f"the predictor reads {obs_len} observed steps but obs.history holds {len(history)} rows (an "
+            f"observation built outside the simulator needs {obs_len}; the simulator keeps "
+            f"EnvConfig.history_len, from [world] obs_len): {_keep_more(obs_len)}"
         )
     history = history[-obs_len:]
     return history, np.ones(history.shape[:2], dtype=bool)

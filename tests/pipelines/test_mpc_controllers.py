@@ -195,7 +195,14 @@ def test_predictor_history_takes_the_last_rows_and_refuses_to_pad():
     full, _ = predictor_history(obs, len(obs.history))
     np.testing.assert_array_equal(full, obs.history)
     # the key a user sets: [env] refuses history_len ("set [world] obs_len")
-    with pytest.raises(PipelineError, match=r"reads 10 observed steps.*keeps 9.*--set world\.obs_len=10\)$"):
+    with pytest.raises(
+        PipelineError, match=r"reads 10 observed steps.*holds 9 rows.*--set world\.obs_len=10\)$"
+    ):
+        predictor_history(obs, 10)
+    # an observation built outside the simulator is told what its history needs, not only the simulator's key
+    with pytest.raises(
+        PipelineError, match=r"obs\.history holds 9 rows.*built outside the simulator needs 10"
+    ):
         predictor_history(obs, 10)
 
 
