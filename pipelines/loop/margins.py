@@ -69,10 +69,23 @@ def class_tables(block: Calibration) -> dict[str, ClassMargins | None]:
 
 def observed_classes(obs: Observation) -> np.ndarray:
     """The ``MOTION_CLASSES`` index ``(N_h,)`` of ``obs``'s humans from what the controller observes: their
-    last ``CLASS_WINDOW`` positions (fewer where the simulator keeps fewer), ``obs.step + 1`` of them seen."""
+    last ``CLASS_WINDOW`` positions (fewer where the simulator keeps fewer), ``obs.human_observed`` of them
+    seen (None: ``obs.step + 1`` for all). A tracker's human who entered late has a padded past: counted as
+    seen since the start it was classed "standing" or "slow", with their small margins, not "new"."""
+    import numpy as np
+
     from predictors.conformal_classes import CLASS_WINDOW, motion_classes
 
-    return motion_classes(obs.history[-CLASS_WINDOW:, obs.n_robots :], obs.step + 1, obs.dt)
+    seen: int | np.ndarray = obs.step + 1
+    observed = getattr(obs, "human_observed", None)  # an object with the older fields (tests' namespaces)
+    if observed is not None:
+        seen = np.asarray(observed)
+        if seen.shape != (obs.n_humans,) or not np.issubdtype(seen.dtype, np.integer):
+            raise PipelineError(
+                f"obs.human_observed must be {obs.n_humans} ints, one per human (positions observed), got "
+                f"{seen.dtype} of shape {seen.shape}"
+            )
+    return motion_classes(obs.history[-CLASS_WINDOW:, obs.n_robots :], seen, obs.dt)
 
 
 @dataclass(frozen=True)

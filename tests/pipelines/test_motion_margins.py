@@ -235,3 +235,35 @@ def test_a_history_shorter_than_the_class_window_is_refused(tmp_path, monkeypatc
         with pytest.raises(PipelineError, match=r"last 9 positions.*keeps 2.*--set world.obs_len=9"):
             make_controller(spec, short)
     make_controller(ControllerSpec("cmpc", "constant_velocity", margins=parse_margins("conformal")), short)
+
+
+def _late_human(step, observed=None):
+    """3 robots and one human walking at 1.25 m/s who entered the sensor range one step ago, its past padded
+    with its first position as the simulator pads (a tracker's observation)."""
+    from crowdsim.env import Observation
+
+    robots = np.array([[-4.0, 0.0], [-4.0, 1.0], [-4.0, -1.0]])
+    history = np.zeros((9, 4, 2))
+    history[:, :3] = robots
+    history[:, 3] = [0.0, 2.5]
+    history[-1, 3] = [0.0, 2.0]
+    return Observation(
+        time=step * 0.4, step=step, robot_positions=robots, robot_velocities=np.zeros((3, 2)),
+        robot_goals=-robots, robot_last_actions=np.zeros((3, 2)), robot_reached=np.zeros(3, bool),
+        human_positions=history[-1, 3:], human_velocities=np.array([[0.0, -1.25]]),
+        human_goals=history[-1, 3:], history=history, radius=0.3, dt=0.4, human_observed=observed,
+    )  # fmt: skip
+
+
+def test_a_human_tracked_for_two_steps_is_new_whatever_the_episode_step():
+    """Counted as seen since step 0 (``obs.step + 1``), a human who entered late had a padded past that read
+    as "slow" (or "standing" when seen once): a small margin instead of the "new" class's large one."""
+    from pipelines.loop.margins import observed_classes
+    from predictors.conformal_classes import MOTION_CLASSES
+
+    assert MOTION_CLASSES[observed_classes(_late_human(1))[0]] == "new"
+    assert MOTION_CLASSES[observed_classes(_late_human(50, np.array([2])))[0]] == "new"
+    assert MOTION_CLASSES[observed_classes(_late_human(50))[0]] == "slow"  # None: the simulator's count
+    refused = r"obs\.human_observed must be 1 ints.*got float64 of shape \(1,\)"
+    with pytest.raises(PipelineError, match=refused):
+        observed_classes(_late_human(50, np.array([2.0])))
