@@ -77,9 +77,8 @@ def observed_classes(obs: Observation) -> np.ndarray:
     from predictors.conformal_classes import CLASS_WINDOW, motion_classes
 
     seen: int | np.ndarray = obs.step + 1
-    observed = getattr(obs, "human_observed", None)  # an object with the older fields (tests' namespaces)
-    if observed is not None:
-        seen = np.asarray(observed)
+    if obs.human_observed is not None:
+        seen = np.asarray(obs.human_observed)
         if seen.shape != (obs.n_humans,) or not np.issubdtype(seen.dtype, np.integer):
             raise PipelineError(
                 f"obs.human_observed must be {obs.n_humans} ints, one per human (positions observed), got "

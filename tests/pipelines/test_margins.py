@@ -115,6 +115,7 @@ def test_prediction_errors_by_hand():
         human_positions=np.array([[1.0, 0.0], [5.0, 0.0]]),  # the second human is 5 m from the robot
         robot_positions=np.array([[0.0, 0.0]]),
         history=np.zeros((8, 3, 2)),  # 2 positions observed of a window of 8: the "new" class
+        human_observed=None,  # the simulator's: step + 1
         dt=0.4,
     )
     prediction = np.array([[[1.0, 0.1], [5.0, 0.0]], [[1.0, 0.5], [5.0, 0.0]], [[1.0, 0.9], [5.0, 0.0]]])

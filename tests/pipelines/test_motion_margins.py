@@ -72,11 +72,13 @@ def test_the_controller_gives_each_human_its_class_margin(tmp_path, monkeypatch)
     # Window of L = 8 positions, 0.4 s apart (2.8 s): human 0 stands, human 1 walks 1 m/s.
     history = np.zeros((8, 1 + 2, 2))
     history[:, 2, 0] = np.arange(8) * 0.4
-    obs = SimpleNamespace(history=history, n_robots=1, step=10, dt=0.4)
+    obs = SimpleNamespace(history=history, human_observed=None, n_robots=1, step=10, dt=0.4)
     margins = _margins(controller, obs)
     np.testing.assert_allclose(margins[:, 0], 0.18 * 2 * np.arange(1, 5))  # standing: class 1
     np.testing.assert_allclose(margins[:, 1], 0.18 * 4 * np.arange(1, 5))  # walking: class 3
-    early = _margins(controller, SimpleNamespace(history=history, n_robots=1, step=3, dt=0.4))
+    early = _margins(
+        controller, SimpleNamespace(history=history, human_observed=None, n_robots=1, step=3, dt=0.4)
+    )
     np.testing.assert_allclose(early, np.outer(0.18 * np.arange(1, 5), [1, 1]))  # both still "new"
 
 
@@ -217,7 +219,9 @@ def test_a_longer_history_keeps_the_calibrated_class_window(tmp_path, monkeypatc
     history = np.zeros((12, 1 + 2, 2))
     history[:3, 1, 0] = [-1.2, -0.8, -0.4]  # walked 1 m/s, then stood still for the last 9 positions
     history[:, 2, 0] = np.arange(12) * 0.4  # walks 1 m/s throughout
-    margins = _margins(controller, SimpleNamespace(history=history, n_robots=1, step=9, dt=0.4))
+    margins = _margins(
+        controller, SimpleNamespace(history=history, human_observed=None, n_robots=1, step=9, dt=0.4)
+    )
     np.testing.assert_allclose(margins[:, 0], 0.18 * 2 * np.arange(1, 5))  # standing: class 1
     np.testing.assert_allclose(margins[:, 1], 0.18 * 4 * np.arange(1, 5))  # walking: class 3
 
