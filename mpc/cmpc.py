@@ -103,6 +103,10 @@ class CMPC:
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         self.nlp = JointNLP(cfg, n_robots, n_humans)
 
+    def build_all(self) -> None:
+        """Build every solver instance a solve may call, not only those the first step needs."""
+        self.nlp.build_all()
+
     def solve(self, data: StepData, predict: PredictFn, start: Start) -> IBRResult:
         cfg = self.cfg
         t0 = time.perf_counter()

@@ -127,6 +127,10 @@ class CoupledCMPC:
             )
         self.nlp = JointNLP(cfg, n_robots, n_humans, humans_model=self.model)
 
+    def build_all(self) -> None:
+        """Build every solver instance a solve may call, not only those the first step needs."""
+        self.nlp.build_all()
+
     def _predict(self, context: np.ndarray, positions: np.ndarray) -> np.ndarray | None:
         """``f(context, r)`` numerically for planned positions ``(M, H, 2)``; None when not finite."""
         robots_future = positions.transpose(1, 0, 2).ravel()

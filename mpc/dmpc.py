@@ -138,6 +138,12 @@ class DMPC:
         # Threads besides the caller's for the local solves: one per further core, at most one per robot.
         self._helpers = max(1, min(n_robots, cores()) - 1)
 
+    def build_all(self) -> None:
+        """Build every solver instance a solve may call, not only those the first step needs."""
+        self.local.build_all()
+        if self.cfg.dmpc_pairs:
+            self.joint.build_all()
+
     def close(self) -> None:
         """Stop the solver threads; a later solve starts them again."""
         if self._pool is not None:

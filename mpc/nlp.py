@@ -131,6 +131,10 @@ class JointNLP:
             self._built = _Solver(name, self._nlp, self.cfg, self._ipopt_extra)
         return self._built
 
+    def build_all(self) -> None:
+        """Build every solver instance a solve may call (``_Solver.build_all``)."""
+        self._solver().build_all()
+
     def params(self, data: StepData, extra: np.ndarray) -> np.ndarray:
         """The parameter vector for ``data``; ``extra``: the humans model's parameters (by default the
         predictions ``(H, N_h, 2)``)."""
@@ -274,6 +278,11 @@ class LocalNLP:
             self._solvers = [_Solver(f"local_{n_robots}r_{n_humans}h_{i}", nlp, cfg) for i in range(n_robots)]
         else:
             self._solvers = [_Solver(f"local_{n_robots}r_{n_humans}h", nlp, cfg)] * n_robots
+
+    def build_all(self) -> None:
+        """Build every solver instance a solve may call (``_Solver.build_all``), once per distinct solver."""
+        for solver in {id(s): s for s in self._solvers}.values():
+            solver.build_all()
 
     def step_params(self, data: StepData) -> LocalParams:
         """The step's parameters of every robot, for any plans of the others (mpc/local_params.py)."""

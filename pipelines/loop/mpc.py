@@ -49,6 +49,8 @@ from pipelines.loop.mpc_setup import (
     check_world,
     mpc_config,
     predictor_history,
+    prepare_sizes,
+    standing_history,
 )
 from pipelines.loop.spec import ControllerSpec
 from predictors.base import ObservingPredictor, Predictor
@@ -59,6 +61,8 @@ from predictors.registry import checkpoint_sha256, load_predictor
 STANDING = MOTION_CLASSES.index("standing")
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from crowdsim.env import Observation
     from crowdsim.env_config import EnvConfig
 
@@ -145,6 +149,24 @@ class MPCController:
             else:
                 self._solvers[key] = CMPC(self.cfg, n_robots, n_humans)
         return self._solvers[key]
+
+    def prepare(self, n_robots: int, n_humans: Iterable[int]) -> dict[tuple[int, int], float]:
+        """Build now, before a control loop, what the first step meeting each size would build inside
+        itself: the NLP (compiled with ``jit``) and every solver instance a solve may call, the predictor's
+        CasADi twin and its exported encoder. On a real robot the number of humans changes as people come
+        and go; a step meeting a size not prepared builds it (seconds with ``jit`` and a cold cache).
+        Returns the seconds each size took, ``(n_robots, n_humans) -> s``; a size built already costs ~0.
+        """
+        sizes = prepare_sizes(n_robots, n_humans)
+        seconds: dict[tuple[int, int], float] = {}
+        for m, n in sizes:
+            t0 = time.perf_counter()
+            self.solver(m, n).build_all()
+            if self.spec.coupling == "nlp" or self._twin(n, m) is not None:
+                history = standing_history(m + n, self.model.obs_len)
+                self.model.encode(history, np.ones(history.shape[:2], dtype=bool), np.arange(m, m + n))
+            seconds[(m, n)] = time.perf_counter() - t0
+        return seconds
 
     def _twin(self, n_humans: int, n_robots: int) -> BufferedFunction | None:
         """The predictor's CasADi twin for this size, or None for a predictor without one (the oracle)."""

@@ -22,6 +22,8 @@ from predictors.base import ObservingPredictor, Predictor
 from predictors.oracle import ORACLE_PREDICTOR
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from crowdsim.env import Observation
 
 
@@ -152,3 +154,32 @@ def _keep_more(obs_len: int) -> str:
     """What to do about a history shorter than a predictor reads: [world] obs_len is the one key that sets
     it (EnvConfig.history_len follows it; [env] refuses history_len)."""
     return f"set [world] obs_len >= {obs_len} (e.g. --set world.obs_len={obs_len})"
+
+
+def prepare_sizes(n_robots: int, n_humans: Iterable[int]) -> list[tuple[int, int]]:
+    """``MPCController.prepare``'s sizes, ``(n_robots, n)`` for each ``n`` of ``n_humans`` in order, or a
+    PipelineError naming the value that is not a count (robots >= 1, humans >= 0)."""
+    if isinstance(n_humans, int | np.integer):
+        raise PipelineError(
+            f"n_humans must be the numbers of humans to prepare for (e.g. range(0, 16) or [7]), got the "
+            f"int {n_humans}"
+        )
+    if not _is_count(n_robots) or n_robots < 1:
+        raise PipelineError(f"n_robots must be an int >= 1, got {n_robots!r}")
+    sizes = []
+    for n in n_humans:
+        if not _is_count(n) or n < 0:
+            raise PipelineError(f"each number of humans must be an int >= 0, got {n!r} in n_humans")
+        sizes.append((int(n_robots), int(n)))
+    return sizes
+
+
+def _is_count(value: object) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+
+def standing_history(n_agents: int, obs_len: int) -> np.ndarray:
+    """A history ``(obs_len, n_agents, 2)`` of agents standing 2 m apart in a row: what ``prepare`` encodes
+    to build a predictor's encoder for that many agents (its numbers are not used)."""
+    row = np.stack([2.0 * np.arange(n_agents), np.zeros(n_agents)], axis=1)
+    return np.broadcast_to(row, (obs_len, n_agents, 2)).copy()
