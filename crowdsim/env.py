@@ -71,8 +71,9 @@ class Observation:
     history: np.ndarray  # (history_len, M+N, 2) last positions, robots first; row -1 = now; padded at start
     radius: float  # m, every agent
     dt: float  # s
-    # (N,) int, the positions of each human really observed, padding excluded (a tracker's track lengths);
-    # None: step + 1 for every human, as in the simulator, where all are present from the start
+    # (N,) int, the positions of each human really observed, padding excluded (a tracker's track lengths; the
+    # MPC replaces the padding, predictors/backfill.py); None: step + 1 for every human, as in the simulator,
+    # where all are present from the start
     human_observed: np.ndarray | None = None
 
     @property

@@ -15,8 +15,9 @@ import numpy as np
 from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
-from pipelines.loop.margins import CALIBRATED_MODES
+from pipelines.loop.margins import CALIBRATED_MODES, human_observed
 from pipelines.loop.spec import ControllerSpec
+from predictors.backfill import backfill
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
 from predictors.oracle import ORACLE_PREDICTOR
@@ -71,7 +72,9 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     The predictor gets exactly the rows it reads: a history shorter than ``obs_len`` is refused (the
     simulator's ``EnvConfig.history_len``, which ``[world] obs_len`` sets, must be at least the predictor's
     ``obs_len``), never padded here.
-    Before an episode's first step everyone stood still, which is what the simulator's own history says.
+    Before an episode's first step everyone stood still, which is what the simulator's own history says. A
+    tracker's human observed for fewer rows (``obs.human_observed``) has the rows before its track, which are
+    no observation, filled by ``predictors.backfill``: the track extended back at its mean velocity.
     """
     history = np.asarray(obs.history, dtype=float)
     if len(history) < obs_len:
@@ -82,6 +85,9 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
             f"EnvConfig.history_len, from [world] obs_len): {_keep_more(obs_len)}"
         )
     history = history[-obs_len:]
+    observed = human_observed(obs)
+    if observed is not None:  # a tracker's late arrivals: their padded rows become their tracks extended back
+        history = backfill(history, np.concatenate([np.full(obs.n_robots, obs_len), observed]))
     return history, np.ones(history.shape[:2], dtype=bool)
 
 

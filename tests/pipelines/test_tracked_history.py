@@ -1,0 +1,37 @@
+"""A tracker's late arrival (``obs.human_observed`` below the predictor's ``obs_len``): the MPC's predictor
+reads the track extended back, not the padding; the simulator's observations (None) are read as they are."""
+
+import numpy as np
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.mpc_setup import predictor_history
+from tests.pipelines.test_motion_margins import _late_human
+
+
+def test_the_padding_before_a_short_track_becomes_the_track_extended_back():
+    # the human: padded at (0, 2.5) in rows 0-7, then (0, 2.0); tracked 2 positions -> 0.5 m a step along -y
+    history, mask = predictor_history(_late_human(50, np.array([2])), 9)
+    np.testing.assert_allclose(history[:, 3], [[0.0, 2.5 + 0.5 * (7 - t)] for t in range(8)] + [[0.0, 2.0]])
+    observation = _late_human(50)
+    np.testing.assert_array_equal(history[:, :3], observation.history[:, :3])  # robots: their own odometry
+    assert mask.all()
+    np.testing.assert_array_equal(predictor_history(observation, 9)[0], observation.history)  # None: as is
+
+
+def test_a_social_lstm_predicts_the_late_arrival_walking_at_its_tracked_speed():
+    """Padded, the tracked 0.5 m a step read as a start from standing: 0.15 m a step predicted."""
+    controller = make_controller(ControllerSpec("cmpc", "social_lstm_eth"))
+    steps = {}
+    for observed in (None, np.array([2])):
+        obs = _late_human(50, observed)
+        controller.reset(obs)
+        prediction = controller.act(obs).prediction[:, 0]
+        steps[observed is None] = np.linalg.norm(np.diff(prediction, axis=0), axis=1).mean()
+    assert steps[False] == pytest.approx(0.5, abs=0.05) and steps[True] < 0.2
+
+
+def test_a_count_below_one_is_refused_naming_the_human():
+    with pytest.raises(PipelineError, match=r"human_observed must be >= 1 .* got 0 for human 0"):
+        predictor_history(_late_human(50, np.array([0])), 9)
