@@ -1,0 +1,95 @@
+"""A robot team that sees only the humans near it: any controller, fed what a range-limited tracker gives.
+
+The simulator hands a controller every human, observed since the episode began. A robot's sensors see the
+people within some range, and its tracker starts a track when someone comes into view. ``RangeLimited``
+wraps a controller so that it sees, each step, only the humans within ``radius`` of some robot, each with
+the rows of history since its track began: the rows before are padded with the first tracked position, as
+a tracker pads, and ``obs.human_observed`` holds the track lengths (``report_tracks=False``: None, so the
+padding reads as the human's past, as it does for a tracker that does not report them). A human who leaves
+the range and comes back starts a new track. A human in range at the episode's first step counts as tracked
+through the whole history: the simulator's humans stood there before it, in view. The episode's metrics
+stay the simulator's, over every human.
+
+What the wrapped controller returns for the humans it saw is mapped to nothing: ``prediction`` and
+``iteration_predictions`` are dropped (they are of the visible humans only; the loop checks them against
+every human), and ``extra["visible"]`` lists the humans it planned around.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from crowdsim.control import ControlOutput
+    from crowdsim.env import Observation
+    from pipelines.loop.controllers import Controller
+
+
+class RangeLimited:
+    """``inner`` fed the humans within ``radius`` metres of some robot (module docstring)."""
+
+    def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
+        if isinstance(radius, bool) or not isinstance(radius, int | float) or not radius > 0:
+            raise PipelineError(f"sensor radius must be a number of metres > 0, got {radius!r}")
+        self.inner, self.radius, self.report_tracks = inner, float(radius), report_tracks
+        self.name, self.predictor = inner.name, inner.predictor
+        self._in_view: np.ndarray = np.zeros(0, dtype=bool)  # per human, at the last step sensed
+        self._track_start: np.ndarray = np.zeros(0, dtype=int)  # per human in view: the step its track began
+
+    def reset(self, obs: Observation) -> None:
+        self._in_view = self._visible(obs)
+        # in view before the episode too, standing where the history has them
+        self._track_start = np.full(obs.n_humans, obs.step - len(obs.history) + 1)
+        self.inner.reset(self.sensed(obs))
+
+    def act(self, obs: Observation) -> ControlOutput:
+        out = self.inner.act(self.sensed(obs))
+        visible = np.flatnonzero(self._in_view)
+        return dataclasses.replace(
+            out,
+            prediction=None,
+            iteration_predictions=(),
+            extra={**out.extra, "visible": visible.tolist()},
+        )
+
+    def describe(self) -> dict[str, Any]:
+        described = self.inner.describe()
+        sensing = {"radius_m": self.radius, "report_tracks": self.report_tracks}
+        return {**described, "config": {**described.get("config", {}), "sensing": sensing}}
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def sensed(self, obs: Observation) -> Observation:
+        """``obs`` as the tracker gives it: the visible humans, their padded tracks and track lengths."""
+        visible = self._visible(obs)
+        if len(self._in_view) != obs.n_humans:  # act without reset: no track yet
+            self._in_view, self._track_start = np.zeros(obs.n_humans, bool), np.zeros(obs.n_humans, int)
+        # a track goes on while its human stays in view; one who left and came back starts a new one
+        self._track_start = np.where(self._in_view, self._track_start, obs.step)
+        self._in_view = visible
+        humans = np.flatnonzero(visible)
+        tracked = obs.step - self._track_start[humans] + 1  # positions observed, the current one included
+        m, length = obs.n_robots, len(obs.history)
+        history = np.concatenate([obs.history[:, :m], obs.history[:, m + humans]], axis=1)
+        for column, k in enumerate(tracked, start=m):
+            if k < length:
+                history[: length - k, column] = history[length - k, column]
+        return dataclasses.replace(
+            obs,
+            human_positions=obs.human_positions[humans],
+            human_velocities=obs.human_velocities[humans],
+            human_goals=obs.human_goals[humans],
+            history=history,
+            human_observed=tracked.astype(np.int64) if self.report_tracks else None,
+        )
+
+    def _visible(self, obs: Observation) -> np.ndarray:
+        """``(N,)`` bool: the humans within ``radius`` of some robot."""
+        distance = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
+        return (distance <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, bool)

@@ -1,0 +1,93 @@
+"""RangeLimited: a controller fed the humans within a radius of some robot, with a tracker's tracks."""
+
+import numpy as np
+import pytest
+
+from crowdsim.env import Observation
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode
+from pipelines.loop.sensing import RangeLimited
+
+
+def observation(step, humans, history_len=4):
+    """One robot at the origin and humans at ``humans`` (N, 2), each walked +0.1 m a step along x to there."""
+    humans = np.asarray(humans, dtype=float)
+    agents = np.concatenate([[[0.0, 0.0]], humans])
+    walk = np.zeros((history_len, len(agents), 2))
+    walk[:, 1:, 0] = 0.1 * np.arange(-history_len + 1, 1)[:, None]
+    n = len(humans)
+    return Observation(
+        time=0.4 * step, step=step, robot_positions=agents[:1], robot_velocities=np.zeros((1, 2)),
+        robot_goals=np.array([[5.0, 0.0]]), robot_last_actions=np.zeros((1, 2)),
+        robot_reached=np.zeros(1, bool),
+        human_positions=humans, human_velocities=np.tile([0.25, 0.0], (n, 1)), human_goals=humans + 1.0,
+        history=agents[None] + walk, radius=0.3, dt=0.4,
+    )  # fmt: skip
+
+
+class Keep:
+    """A controller that keeps what it was handed."""
+
+    name, predictor = "keep", None
+
+    def reset(self, obs):
+        self.seen = obs
+
+    def act(self, obs):
+        from crowdsim.control import ControlOutput
+
+        self.seen = obs
+        return ControlOutput(accelerations=np.zeros((obs.n_robots, 2)), extra={"own": 1})
+
+    def describe(self):
+        return {"predictor_sha256": None, "config": {"own": 2}}
+
+    def close(self):
+        pass
+
+
+def test_only_the_humans_in_range_are_seen_with_their_tracks_padded_and_counted():
+    sensor = RangeLimited(Keep(), radius=3.0)
+    far, near = [5.0, 0.0], [0.0, 2.5]
+    first = observation(10, [[1.0, 0.0], far, near])
+    sensor.reset(first)
+    seen = sensor.inner.seen
+    np.testing.assert_array_equal(seen.human_positions, [[1.0, 0.0], near])
+    # in view from the episode's start: tracked through the whole history, which is kept
+    np.testing.assert_array_equal(seen.human_observed, [4, 4])
+    np.testing.assert_array_equal(seen.history, first.history[:, [0, 1, 3]])
+    # two steps later the far human has come near and the first left: a new track, a longer one, one gone
+    out = sensor.act(observation(12, [[9.0, 0.0], [2.0, 0.0], near]))
+    seen = sensor.inner.seen
+    np.testing.assert_array_equal(seen.human_positions, [[2.0, 0.0], near])
+    np.testing.assert_array_equal(seen.human_observed, [1, 6])
+    np.testing.assert_allclose(seen.history[:, 1], np.tile([2.0, 0.0], (4, 1)))  # padded with where it is
+    np.testing.assert_allclose(seen.history[:, 2, 0], [-0.3, -0.2, -0.1, 0.0])  # as walked
+    np.testing.assert_array_equal(seen.history[:, 0], 0.0)  # the robot's own rows as they are
+    assert out.extra == {"own": 1, "visible": [1, 2]} and out.prediction is None
+    sensor.act(observation(13, [[1.0, 0.0], [2.0, 0.0], near]))
+    seen = sensor.inner.seen
+    np.testing.assert_array_equal(seen.human_observed, [1, 2, 7])  # the first is back: a new track
+    np.testing.assert_allclose(seen.history[:, 2, 0], [1.9, 1.9, 1.9, 2.0])  # tracked 2 of 4 rows
+
+
+def test_without_reported_tracks_the_padding_reads_as_the_past_and_the_description_says_so():
+    sensor = RangeLimited(Keep(), radius=3.0, report_tracks=False)
+    sensor.reset(observation(10, [[1.0, 0.0]]))
+    assert sensor.inner.seen.human_observed is None
+    assert sensor.describe()["config"] == {"own": 2, "sensing": {"radius_m": 3.0, "report_tracks": False}}
+
+
+@pytest.mark.parametrize("radius", [0.0, -1.0, float("nan"), True, "3"])
+def test_a_radius_that_is_no_distance_is_refused(radius):
+    with pytest.raises(PipelineError, match="sensor radius must be a number of metres > 0"):
+        RangeLimited(Keep(), radius)
+
+
+def test_an_mpc_runs_a_whole_episode_through_the_sensor():
+    controller = make_controller(ControllerSpec("cmpc", "social_lstm_eth"))
+    controller.prepare(3, range(0, 4))
+    result = run_episode(RangeLimited(controller, 2.0), seed=0, scenario="circle", n_humans=3)
+    assert result.metrics.n_steps > 10 and result.controller == "cmpc"
+    assert result.human_positions.shape[1] == 3  # the metrics are the simulator's, over every human
