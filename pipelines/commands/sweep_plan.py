@@ -52,13 +52,15 @@ def check_plan(experiment: Experiment) -> None:
     """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
-    with them (``check_couplings``) and the margins they plan with (``check_margins``)."""
+    with them (``check_couplings``), the margins they plan with (``check_margins``) and the MPC's d_min
+    against the agents' contact distance (``check_contact_distances``)."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
     check_predictors(experiment)
     check_couplings(experiment)
     check_margins(experiment)
+    check_contact_distances(experiment)
 
 
 def check_couplings(experiment: Experiment) -> None:
@@ -78,6 +80,23 @@ def check_couplings(experiment: Experiment) -> None:
             loaded[spec.predictor] = load_predictor(spec.predictor)
         try:
             check_coupling(spec, distributed, loaded.get(spec.predictor))
+        except PipelineError as exc:
+            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+
+
+def check_contact_distances(experiment: Experiment) -> None:
+    """Every CMPC and DMPC method's d_min keeps agents out of contact in the sweep's world (the default one:
+    a sweep refuses [world] values), as the controller checks it as it is built
+    (``mpc_setup.check_contact_distance``); refused here with the method named, not once per episode in
+    errors.jsonl."""
+    from crowdsim.world import WORLD
+    from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
+
+    for label, spec in experiment.methods:
+        if spec.controller not in ("cmpc", "dmpc"):
+            continue
+        try:
+            check_contact_distance(WORLD, mpc_config(spec))
         except PipelineError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 

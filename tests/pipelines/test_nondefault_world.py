@@ -71,3 +71,41 @@ def test_steps_the_wall_time_budget_cut_short_are_printed(tmp_path, capsys):
     assert expected in capsys.readouterr().out
     assert main(argv) == 0
     assert "wall-time budget" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("settings", "d_min", "contact"),
+    [(["mpc.d_min=0.5"], "0.5", "0.6"), (["world.radius=0.45"], "0.8", "0.9")],
+    ids=["d_min-below", "radius-above"],
+)
+def test_an_mpc_whose_d_min_is_below_the_contact_distance_is_refused(capsys, settings, d_min, contact):
+    """Eqs. 11 and 12 keep d_min between centres; below the sum of the radii that distance is a contact, which
+    the MPC then accepts in its plans: `--set mpc.d_min=0.5` ran (9 humans, seeds 0-5: within 0.8 m of a human
+    in 6 of 6 episodes, in contact in 1), and so did `--set world.radius=0.45` under Table I's 0.8 m."""
+    argv = ["simulate", "--controller", "cmpc", "--humans", "3", "--no-progress"]
+    for item in settings:
+        argv += ["--set", item]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    contact_line = f"the MPC's d_min {d_min} m is below the contact distance 2 x [world] radius = {contact} m"
+    assert contact_line in err[0]
+    assert f"set [mpc] d_min >= {contact}" in err[0]
+
+
+def test_d_min_at_the_contact_distance_and_baselines_with_any_radius_still_run(capsys):
+    """The refusal is the MPC's: d_min equal to 2 x radius plans no contact, and straight and ORCA robots
+    plan with no d_min."""
+    argv = ["simulate", "--humans", "3", "--no-progress"]
+    assert main([*argv, "--controller", "cmpc", "--set", "mpc.d_min=0.6"]) == 0
+    assert main([*argv, "--controller", "orca", "--set", "world.radius=0.45"]) == 0
+
+
+def test_make_controller_refuses_an_mpc_whose_d_min_is_below_the_contact_distance():
+    from crowdsim.env_config import EnvConfig
+    from pipelines.errors import PipelineError
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+
+    spec = ControllerSpec("dmpc", "constant_velocity", mpc_overrides=(("d_min", 1.0),))
+    with pytest.raises(PipelineError, match=r"d_min 1 m is below the contact distance .* = 1.1 m"):
+        make_controller(spec, EnvConfig(radius=0.55))

@@ -451,6 +451,23 @@ def test_a_coupling_no_controller_builds_is_refused_before_the_sweep_starts(argv
     assert not out.exists()
 
 
+def test_a_d_min_below_the_contact_distance_is_refused_before_the_sweep_starts(tmp_path, capsys):
+    """`--set mpc.d_min=0.5` (below 2 x radius = 0.6 m: the MPC accepts contact) ran every episode of a sweep
+    (CMPC, 9 humans: within 0.8 m of a human in 6 of 6 episodes). d_min at the contact distance is allowed."""
+    out = tmp_path / "sweep"
+    sweep = ["sweep", "--experiment", "controllers", "--humans", "1", "--robots", "1", "--episodes-per-cell",
+             "1", "--backend", "inline", "--jit", "off",
+             "--set", "mpc.d_min=0.5", "--no-progress"]  # fmt: skip
+    for extra in (["--dry-run"], []):
+        assert main([*sweep, "--controllers", "orca,cmpc", *extra, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1
+        assert "method 'cmpc' of experiment 'controllers': the MPC's d_min 0.5 m is below" in err[0]
+    assert not out.exists()
+    at_contact = [*sweep[:-2], "mpc.d_min=0.6", "--no-progress"]
+    assert main([*at_contact, "--controllers", "orca,cmpc", "--dry-run", "--out", str(out)]) == 0
+
+
 # ----------------------------------------------------------------------------------------------------------
 # A recalibration keeps the cell key: its records and new episodes must not mix two margin sets
 # ----------------------------------------------------------------------------------------------------------
