@@ -111,7 +111,7 @@ def place_humans_v1(
             if _clear(start, taken, min_dist) and _clear(goal, taken, min_dist):
                 break
         else:
-            raise too_crowded(h, n_humans, scenario, len(robot_starts), max_tries)
+            raise too_crowded(h, n_humans, scenario, len(robot_starts), max_tries, min_dist)
         starts.append(start)
         goals.append(goal)
         taken += [start, goal]
@@ -202,7 +202,7 @@ def place_humans_paper(
     for h in range(n_humans):
         placed = place(rng, starts, goals, min_dist, v_pref, scale, max_tries)
         if placed is None:
-            raise too_crowded(h, n_humans, scenario, n_robots, max_tries)
+            raise too_crowded(h, n_humans, scenario, n_robots, max_tries, min_dist)
         starts.append(placed[0])
         goals.append(placed[1])
     return starts[n_robots:], goals[n_robots:]

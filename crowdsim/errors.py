@@ -17,11 +17,16 @@ class LayoutWarning(UserWarning):
     """A layout the simulator runs but that starts agents in contact (``CrowdEnv.reset_layout``)."""
 
 
-def too_crowded(human: int, n_humans: int, scenario: str, n_robots: int, draws: int) -> SimulationError:
-    """The error of a layout whose rejection sampling ran dry (``human`` counts from 0)."""
+def too_crowded(
+    human: int, n_humans: int, scenario: str, n_robots: int, draws: int, min_dist: float
+) -> SimulationError:
+    """The error of a layout whose rejection sampling ran dry (``human`` counts from 0). It states the
+    distance the draws had to keep and what sets it: with one human and one robot, "use fewer agents" was
+    no advice when a large spawn_separation was the cause."""
     return SimulationError(
         f"could not place human {human + 1} of n_humans={n_humans} in scenario {scenario!r} with "
-        f"{n_robots} robots after {draws} draws; use fewer agents"
+        f"{n_robots} robots after {draws} draws, each start and goal {min_dist:g} m apart (2 x radius + "
+        "spawn_separation); use fewer agents, or a smaller spawn_separation or radius"
     )
 
 

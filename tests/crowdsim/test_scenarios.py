@@ -223,3 +223,16 @@ def test_bad_sizes_name_the_value(monkeypatch):
         with pytest.raises(SimulationError, match="n_humans=16"):
             make_layout("circle", 16, 3, rng, crossing=crossing)
     make_layout("perpendicular", 16, 3, rng)  # the fork's square crossing gives up, never fails
+
+
+@pytest.mark.parametrize("crossing", ["paper", "v1"])
+def test_a_layout_too_spread_to_sample_names_the_distance_it_asked_for(crossing):
+    """`--set env.spawn_separation=50 --humans 1 --robots 1` said "could not place human 1 of n_humans=1 ...
+    with 1 robots ...; use fewer agents": there were no fewer to use. The distance the draws must keep, and
+    what sets it, are what the user can change."""
+    rng = np.random.default_rng(0)
+    with pytest.raises(SimulationError) as caught:
+        make_layout("circle", 1, 1, rng, crossing=crossing, spawn_separation=50.0)
+    message = str(caught.value)
+    assert "each start and goal 50.6 m apart (2 x radius + spawn_separation)" in message
+    assert message.endswith("use fewer agents, or a smaller spawn_separation or radius")
