@@ -56,14 +56,20 @@ def groups(runs: list[RunDigest]) -> list[SetUp]:
 
 def named_settings(setups: list[SetUp]) -> list[str]:
     """The settings beyond ``RUN_IDENTITY`` that name the set-ups: each of ``NAMED_FIRST`` whose value
-    differs between them, then, in the order they are recorded in, each other one that tells apart set-ups
-    the ones before it did not (a profile's name stands for the settings that come with it)."""
+    differs between the set-ups that record it, then, in the order they are recorded in, each other one that
+    tells apart set-ups the ones before it did not (a profile's name stands for the settings that come with
+    it)."""
     known = [s.identity for s in setups if s.identity is not None]
 
     def kinds(keys: list[str]) -> int:
         return len({tuple(identity_key({"v": i.get(k, MISSING)}) for k in keys) for i in known})
 
-    named = [key for key in NAMED_FIRST if kinds([key]) > 1]
+    def recorded_kinds(key: str) -> int:
+        """Values among the set-ups that record ``key``: a controller that has no such setting (ORCA's
+        margins) is told apart by its name, not by "margins not recorded"."""
+        return len({identity_key({"v": i[key]}) for i in known if key in i})
+
+    named = [key for key in NAMED_FIRST if recorded_kinds(key) > 1]
     keys = [*RUN_IDENTITY, *named]
     for key in dict.fromkeys(k for i in known for k in i if k not in keys):
         if kinds(keys) == len(known):
@@ -77,7 +83,7 @@ def named_settings(setups: list[SetUp]) -> list[str]:
 def setting(key: str, value: Any) -> str:
     """A setting in a set-up's name: "formation row", "robots invisible", "mpc.horizon 8"."""
     if value is MISSING:
-        return f"{key} not recorded"
+        return f"{'margins' if key == 'margins.label' else key.removeprefix('env.')} not recorded"
     if key == "env.robots_visible" and isinstance(value, bool):
         return "robots visible" if value else "robots invisible"
     if key in ("env.profile", "env.formation"):

@@ -409,6 +409,37 @@ def test_margins_name_a_set_up_by_their_label_not_by_their_numbers(tmp_path, cap
     assert f"== {base}, margins cp0.1: 1 run ==" in out
 
 
+def test_margins_only_one_controller_records_do_not_name_the_set_ups(tmp_path, capsys):
+    """`review runs/` over `simulate --controller cmpc --record runs/cmpc` and `--controller orca --record
+    runs/orca` named the ORCA set-up "orca, predictor none, margins.label not recorded": ORCA plans with no
+    margins and records none, and the controllers already tell the two apart. Margins that differ among
+    the set-ups that record them still name each, a set-up without them as "margins not recorded"."""
+    first = record_episode(tmp_path / "x", seed=1, steps=2)
+    obs, after = first.observations[:2]
+    env = {"dt": 0.4, "radius": 0.3}
+    runs = (
+        ("mpc_like", {"env": env, "margins": {"mode": "none", "label": "none"}}),
+        ("baseline", {"env": env}),  # no margins recorded
+    )
+    recorder = McapEpisodeRecorder(tmp_path / "runs")
+    for seed, (controller, config) in enumerate(runs, start=2):
+        recorder.on_reset(obs, {**first.meta, "seed": seed, "controller": controller, "config": config})
+        recorder.on_step(obs, control_output(obs), after)
+    recorder.close()
+    assert main(["review", str(tmp_path / "runs")]) == 0
+    out, err = capsys.readouterr()
+    tail = "predictor constant_velocity, 3 robots, 4 humans"
+    assert f"(mpc_like, {tail}; baseline, {tail})" in err and "not recorded" not in out + err
+    recorder = McapEpisodeRecorder(tmp_path / "runs")  # a second MPC set-up, other margins
+    config = {"env": env, "margins": {"mode": "conformal", "label": "cp0.1"}}
+    recorder.on_reset(obs, {**first.meta, "seed": 4, "controller": "mpc_like", "config": config})
+    recorder.on_step(obs, control_output(obs), after)
+    recorder.close()
+    assert main(["review", str(tmp_path / "runs")]) == 0
+    err = capsys.readouterr().err
+    assert f"mpc_like, {tail}, margins none; baseline, {tail}, margins not recorded; mpc_like" in err
+
+
 def test_set_ups_side_by_side_name_each_by_what_differs(tmp_path, capsys):
     """After a table per set-up, one row each: named by the parts of its name the others do not share, with
     the figures of its own aggregate."""
