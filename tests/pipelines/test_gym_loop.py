@@ -326,3 +326,30 @@ def test_run_gym_episode_names_a_spec_or_a_name_given_for_the_controller():
         run_gym_episode(ControllerSpec("orca"), CrowdNavEnv(), seed=0)
     with pytest.raises(PipelineError, match=r"^run_gym_episode: .orca. is no controller: it has no reset"):
         run_gym_episode("orca", CrowdNavEnv(), seed=0)  # type: ignore[arg-type]
+
+
+def test_the_own_layout_example_runs_two_controllers_that_review_compares(tmp_path, capsys):
+    """docs/examples/own_layout.py: a hand-made corridor (one human standing) through the gymnasium
+    environment, each controller's episodes recorded in a folder of its own, which `crowdmpc review` sets
+    side by side."""
+    from pipelines.cli import main
+
+    path = EXAMPLE.parent / "own_layout.py"
+    spec = importlib.util.spec_from_file_location("own_layout", path)
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    out = tmp_path / "runs"
+    example.main(str(out), ("cmpc", "orca"))
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split(",")[0] for line in lines[:6]] == ["cmpc"] * 3 + ["orca"] * 3
+    assert all("success True" in line for line in lines[:6])  # the corridor is passable, by both
+    assert lines[-1] == f"wrote {out}: crowdmpc review {out}"
+    for name in ("cmpc", "orca"):
+        assert sorted(p.name for p in (out / name).iterdir()) == [f"layout_00000{i}.mcap" for i in range(3)]
+    assert main(["review", str(out)]) == 0
+    table = capsys.readouterr().out.split("== 2 set-ups side by side ==\n")[1].splitlines()
+    assert [row.split("  ")[0] for row in table[2:4]] == [
+        "cmpc, predictor constant_velocity",
+        "orca, predictor none",
+    ]
