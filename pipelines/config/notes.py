@@ -41,7 +41,10 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "w_coll": "omega^coll, robot-human (Eq. 11) and robot-robot (Eq. 12) penalty weight (Table I: 1e7)",
     "w_floc": "omega^floc, flocking weight, Eqs. 14 and 15 (Table I: 10; 0 disables flocking)",
     "rho": "rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11 (Table I: 0.5)",
-    "d_min": "d_min, m, minimum allowed distance, Eqs. 11 and 12 (Table I: 0.8 m)",
+    "d_min": (
+        "d_min, m, minimum allowed centre distance, Eqs. 11 and 12, at least 2 x [world] radius "
+        "(Table I: 0.8 m; the collision rate counts 0.8 m whatever it is)"
+    ),
     "mu": "mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, penalty of Eqs. 11-12 (Table I: 30)",
     "j_max": "j_max, maximum IBR iterations, Algorithms 1 and 2 (Table I: 10)",
     "xi": "xi, CMPC convergence threshold on |F^(j) - F^(j-1)|, Algorithm 1 (Table I: 1e-3)",

@@ -109,3 +109,11 @@ def test_make_controller_refuses_an_mpc_whose_d_min_is_below_the_contact_distanc
     spec = ControllerSpec("dmpc", "constant_velocity", mpc_overrides=(("d_min", 1.0),))
     with pytest.raises(PipelineError, match=r"d_min 1 m is below the contact distance .* = 1.1 m"):
         make_controller(spec, EnvConfig(radius=0.55))
+
+
+def test_config_show_says_what_d_min_must_be_and_what_the_collision_rate_counts(capsys):
+    """A study that changes [mpc] d_min or [world] radius reads the bound CMPC and DMPC enforce, and that the
+    collision rate stays Table I's 0.8 m, from the annotated defaults."""
+    assert main(["config", "show"]) == 0
+    line = next(row for row in capsys.readouterr().out.splitlines() if row.startswith("d_min = "))
+    assert "at least 2 x [world] radius" in line and "the collision rate counts 0.8 m" in line
