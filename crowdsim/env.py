@@ -49,7 +49,7 @@ from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import orca_velocities, preferred_velocities
-from crowdsim.scenarios import Layout, checked_layout, make_layout, start_overlaps
+from crowdsim.scenarios import Layout, checked_layout, make_layout, robot_goal_overlaps, start_overlaps
 from crowdsim.slots import match_slots
 from crowdsim.world import PAPER_ROBOTS
 
@@ -120,15 +120,27 @@ class CrowdEnv:
         than ``2 radius`` (agents in contact from the first step) only warn (``LayoutWarning``): tests start
         agents in contact on purpose, and the paper profile's perpendicular sampler keeps overlapping human
         starts, as the authors' fork does (crowdsim.scenarios); ``reset`` runs its layouts without a warning.
+        Robot goals closer than ``2 radius`` warn too: robots standing on both would overlap.
         """
         layout = checked_layout(layout)
+        contact = 2 * self.config.radius
         overlaps = start_overlaps(layout, self.config.radius)
         if overlaps:
             first, second, distance = overlaps[0]
             warnings.warn(
-                f"layout: {len(overlaps)} pair(s) of agents start closer than 2 x radius = "
-                f"{2 * self.config.radius:g} m, in contact from the first step, e.g. {first} and {second} "
-                f"{distance:.3g} m apart",
+                f"layout: {len(overlaps)} pair(s) of agents start closer than 2 x radius = {contact:g} m, in "
+                f"contact from the first step, e.g. {first} and {second} {distance:.3g} m apart",
+                LayoutWarning,
+                stacklevel=2,
+            )
+        # The simulator has no robot-robot contact and the metrics count robot-human contact only: robots
+        # driven onto one goal "succeeded" inside each other, and an MPC keeping d_min timed out unexplained.
+        shared = robot_goal_overlaps(layout, self.config.radius)
+        if shared:
+            first, second, distance = shared[0]
+            warnings.warn(
+                f"layout: {len(shared)} pair(s) of robot goals closer than 2 x radius = {contact:g} m: "
+                f"robots on both goals would overlap, e.g. {first} and {second} {distance:.3g} m apart",
                 LayoutWarning,
                 stacklevel=2,
             )

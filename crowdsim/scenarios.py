@@ -187,13 +187,24 @@ def start_overlaps(layout: Layout, radius: float = RADIUS) -> list[tuple[str, st
     """Pairs of agents whose starts are closer than ``2 radius`` (centre to centre, m): in contact from the
     first step. Each is ``(agent, agent, distance)``, agent named by its row: ``"human_starts[3]"``."""
     robots, humans = (np.asarray(p, float).reshape(-1, 2) for p in (layout.robot_starts, layout.human_starts))
-    starts = np.concatenate([robots, humans])
     names = [f"robot_starts[{i}]" for i in range(len(robots))] + [
         f"human_starts[{j}]" for j in range(len(humans))
     ]
-    distance = np.linalg.norm(starts[:, None] - starts[None], axis=-1)
-    first, second = np.nonzero(np.triu(distance < 2.0 * radius, k=1))
-    return [(names[i], names[j], float(distance[i, j])) for i, j in zip(first, second, strict=True)]
+    return _closer_than(np.concatenate([robots, humans]), names, 2.0 * radius)
+
+
+def robot_goal_overlaps(layout: Layout, radius: float = RADIUS) -> list[tuple[str, str, float]]:
+    """Pairs of robot goals closer than ``2 radius`` (m), as ``start_overlaps`` names them: robots standing
+    on both would overlap. Humans' goals may be shared: a human stops within its radius of its goal, and ORCA
+    keeps the others off it."""
+    goals = np.asarray(layout.robot_goals, float).reshape(-1, 2)
+    return _closer_than(goals, [f"robot_goals[{i}]" for i in range(len(goals))], 2.0 * radius)
+
+
+def _closer_than(points: np.ndarray, names: list[str], distance: float) -> list[tuple[str, str, float]]:
+    gaps = np.linalg.norm(points[:, None] - points[None], axis=-1)
+    first, second = np.nonzero(np.triu(gaps < distance, k=1))
+    return [(names[i], names[j], float(gaps[i, j])) for i, j in zip(first, second, strict=True)]
 
 
 def choose_formation(n_robots: int) -> Formation:

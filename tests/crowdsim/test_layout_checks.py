@@ -88,6 +88,28 @@ def test_starts_exactly_two_radii_apart_do_not_warn():
         CrowdEnv().reset_layout(scene(humans=((0.6, 0.0), (0.0, 5.0))))  # a human on the robot's goal: fine
 
 
+def test_robot_goals_in_contact_warn_naming_the_pair():
+    """Two robots given one goal ran silently: straight-line robots reached it "with success" 0.02 m apart
+    (the simulator has no robot-robot contact, the metrics count robot-human contact only), and CMPC, whose
+    Eq. 12 keeps them d_min apart, timed out with no word why. Goals 2 radii apart, and humans' goals, do not
+    warn."""
+    layout = scene(
+        robots=((-1.0, 0.0), (1.0, 0.0), (0.0, -2.0)), robot_goals=((0.0, 5.0), (0.0, 5.0), (0.4, 5.0))
+    )
+    with pytest.warns(LayoutWarning) as caught:
+        CrowdEnv().reset_layout(layout)
+    assert [str(w.message) for w in caught] == [
+        "layout: 3 pair(s) of robot goals closer than 2 x radius = 0.6 m: robots on both goals would "
+        "overlap, e.g. robot_goals[0] and robot_goals[1] 0 m apart"
+    ]
+    apart = scene(robots=((-1.0, 0.0), (1.0, 0.0)), robot_goals=((0.0, 5.0), (0.6, 5.0)))
+    shared = scene(humans=((3.0, 0.0), (4.0, 0.0)), human_goals=((-3.0, 0.0), (-3.0, 0.0)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        CrowdEnv().reset_layout(apart)
+        CrowdEnv().reset_layout(shared)
+
+
 def test_reset_runs_the_perpendicular_samplers_overlaps_silently_but_reset_layout_warns():
     # seed 0..: the first 16-human perpendicular layout whose human starts overlap (the fork's 100 draws)
     seed = next(
