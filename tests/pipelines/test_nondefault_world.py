@@ -117,3 +117,37 @@ def test_config_show_says_what_d_min_must_be_and_what_the_collision_rate_counts(
     assert main(["config", "show"]) == 0
     line = next(row for row in capsys.readouterr().out.splitlines() if row.startswith("d_min = "))
     assert "at least 2 x [world] radius" in line and "the collision rate counts 0.8 m" in line
+
+
+def test_a_config_file_run_from_python_is_the_simulate_run(tmp_path):
+    """README, "Your own study": pipelines.config.load, the spec built from it and run_episodes give the
+    episodes `crowdmpc --config FILE simulate` gives, metric for metric (a non-default world and MPC)."""
+    from pipelines.config import load
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import run_episodes
+    from pipelines.loop.margins import parse_margins
+
+    config = tmp_path / "run.toml"
+    config.write_text("[world]\nradius = 0.35\n[scenario]\nhumans = 4\n[mpc]\nd_min = 0.9\n")
+    cfg = load(str(config), ["scenario.robots=2"])
+    spec = ControllerSpec(
+        "dmpc",
+        "constant_velocity",
+        mpc_overrides=cfg.mpc_overrides(),
+        margins=parse_margins(cfg.controller.margins or "none"),
+    )
+    results = run_episodes(
+        spec,
+        episodes=2,
+        seed=0,
+        scenario=cfg.scenario.name,
+        n_humans=cfg.scenario.humans,
+        n_robots=cfg.scenario.robots,
+        env_config=cfg.env,
+        progress=False,
+    )
+    out = tmp_path / "run.json"
+    argv = ["--config", str(config), "--set", "scenario.robots=2", "simulate", "--controller", "dmpc"]
+    assert main([*argv, "--episodes", "2", "--no-progress", "--json", str(out)]) == 0
+    recorded = [e["metrics"] for e in json.loads(out.read_text())["episodes"]]
+    assert [r.record().metrics.as_dict() for r in results] == recorded
