@@ -65,7 +65,9 @@ class Entry:
 
 def _unknown_section(where: str, name: str) -> ConfigError:
     valid = ", ".join(f"[{s}]" for s in WRITE_ORDER)
-    return ConfigError(f"{where}: [{name}]: unknown section; valid sections: {valid}")
+    close = difflib.get_close_matches(name, list(WRITE_ORDER), n=1)
+    hint = f" (did you mean [{close[0]}]?)" if close and "." in name else ""
+    return ConfigError(f"{where}: [{name}]: unknown section{hint}; valid sections: {valid}")
 
 
 def _outside_sections(where: str, name: str) -> ConfigError:
@@ -151,6 +153,9 @@ def read_file(path: str | Path) -> list[Entry]:
             if name == "env" and key == "orca":
                 table("env.orca", value)
                 continue
+            # A table that is no key's value ([env.orcaa]): [env.orca] is the only one there is.
+            if isinstance(value, dict) and section.key(key) is None:
+                raise _unknown_section(where, f"{name}.{key}")
             check_key(source.prefix(name, key), section, key)
             date = _date_in(value)
             if date is not None:

@@ -319,6 +319,12 @@ def test_a_bad_value_is_one_line_naming_file_key_and_expectation(
             "run.toml: not valid TOML: Cannot declare ('mpc',) twice (at line 3, column 5)",
         ),
         ("mpc = 3\n", "run.toml: mpc: must be a table ([mpc]), got 3"),
+        # a misspelt sub-table was "env.orcaa: unknown key; valid keys: profile, ...", which lists no table
+        (
+            "[env.orcaa]\nneighbor_dist = 5.0\n",
+            "run.toml: [env.orcaa]: unknown section (did you mean [env.orca]?); valid sections: [world], ",
+        ),  # fmt: skip
+        ("[mpc.fatrop]\ntol = 1\n", "run.toml: [mpc.fatrop]: unknown section; valid sections: [world], "),
     ],
 )
 def test_a_bad_key_section_or_syntax_is_one_line(text, message, tmp_path, capsys, monkeypatch):
