@@ -30,9 +30,10 @@ class BaselineController:
 
     predictor: str | None = None
 
-    def __init__(self, inner: SimulatorBaseline):
+    def __init__(self, inner: SimulatorBaseline, env_config: EnvConfig | None = None):
         self.inner = inner
         self.name = inner.name
+        self.env_config = env_config  # the simulator it was built for (the loops refuse another world)
 
     def reset(self, obs: Observation) -> None:
         self.inner.reset(obs)
@@ -51,8 +52,9 @@ def straight(env_config: EnvConfig | None = None) -> BaselineController:
     """The straight-line robots within ``env_config``'s robot bounds (None: the defaults)."""
     from crowdsim.baselines import StraightController
 
-    world = _env(env_config).world()
-    return BaselineController(StraightController(v_max=world.v_max, a_max=world.a_max))
+    env = _env(env_config)
+    world = env.world()
+    return BaselineController(StraightController(v_max=world.v_max, a_max=world.a_max), env)
 
 
 def orca(env_config: EnvConfig | None = None) -> BaselineController:
@@ -65,7 +67,8 @@ def orca(env_config: EnvConfig | None = None) -> BaselineController:
     return BaselineController(
         OrcaController(
             v_max=world.v_max, a_max=world.a_max, params=env.orca, radius_margin=env.orca_radius_margin
-        )
+        ),
+        env,
     )
 
 

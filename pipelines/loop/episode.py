@@ -112,6 +112,7 @@ def run_episode(
     PipelineError.
     """
     check_controller(controller)
+    check_built_for(controller, env_config, "run_episode")
     check_sizes(scenario, n_humans, n_robots)
     if n_robots < 1:  # the simulator runs crowds alone; an episode's metrics are its robots'
         raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
@@ -249,6 +250,42 @@ def check_controller(controller: object, where: str = "run_episode") -> None:
             f"{where}: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
             "(build one with make_controller(ControllerSpec(...)))"
         )
+
+
+WORLD_UNITS: Final[dict[str, str]] = {
+    "dt": "s",
+    "obs_len": "steps",
+    "radius": "m",
+    "v_pref": "m/s",
+    "v_max": "m/s",
+    "a_max": "m/s^2",
+}
+
+
+def check_built_for(controller: object, env_config: EnvConfig, where: str) -> None:
+    """PipelineError when ``controller`` was built for a simulator of other world facts than ``env_config``
+    (the shipped controllers keep theirs as ``env_config``; a plugin without one is not checked). Built by
+    ``make_controller(spec)`` for the default world and run in a slower or larger-bodied one, an MPC planned
+    at the default speed (the simulator clipping every plan) and with a d_min checked against the default
+    radius, silently; only another tau was refused, at reset."""
+    built = getattr(controller, "env_config", None)
+    if not isinstance(built, EnvConfig):
+        return
+    there, here = built.world(), env_config.world()
+    differ = [
+        f"{name} {getattr(there, name):g} {unit} there, {getattr(here, name):g} here"
+        for name, unit in WORLD_UNITS.items()
+        if getattr(there, name) != getattr(here, name)
+    ]
+    if differ:
+        raise PipelineError(
+            f"{where}: the controller {controller_label(controller)} was built for another world "
+            f"({'; '.join(differ)}): build it with make_controller(spec, env_config) for this simulator"
+        )
+
+
+def controller_label(controller: object) -> str:
+    return repr(getattr(controller, "name", type(controller).__name__))
 
 
 def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:

@@ -39,7 +39,7 @@ from pipelines.loop.contract import (
     handed_out,
 )
 from pipelines.loop.controllers import Controller
-from pipelines.loop.episode import EpisodeObserver, EpisodeResult, check_controller
+from pipelines.loop.episode import EpisodeObserver, EpisodeResult, check_built_for, check_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 
 
@@ -136,6 +136,7 @@ def run_gym_episode(
             f"run_gym_episode gives the environment accelerations; pass it without {changer}, which changes "
             "the actions"
         )
+    check_built_for(controller, base.config, "run_gym_episode")
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)
     obs: Observation = info["observation"]

@@ -151,3 +151,30 @@ def test_a_config_file_run_from_python_is_the_simulate_run(tmp_path):
     assert main([*argv, "--episodes", "2", "--no-progress", "--json", str(out)]) == 0
     recorded = [e["metrics"] for e in json.loads(out.read_text())["episodes"]]
     assert [r.record().metrics.as_dict() for r in results] == recorded
+
+
+def test_a_controller_built_for_another_world_is_refused_by_the_loops():
+    """make_controller(spec) builds for the default world; run in a simulator of v_max 0.5 m/s and radius
+    0.45 m it ran silently, its MPC planning at 1 m/s (the simulator clipping every plan) and keeping Table
+    I's d_min inside the contact distance: only another tau was refused (at reset). The loops know both
+    worlds; an environment of the same world but other settings (a time limit) still runs."""
+    import gymnasium as gym
+
+    import crowdsim
+    from crowdsim.env_config import EnvConfig
+    from pipelines.errors import PipelineError
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.episode import run_episode
+    from pipelines.loop.gym_loop import run_gym_episode
+
+    other = EnvConfig(v_max=0.5, radius=0.45)
+    message = r"built for another world \(radius 0.3 m there, 0.45 here; v_max 1 m/s there, 0.5 here\)"
+    for name in ("cmpc", "orca"):
+        controller = make_controller(ControllerSpec(name, "constant_velocity"))
+        with pytest.raises(PipelineError, match="run_episode: .*" + message):
+            run_episode(controller, seed=0, scenario="circle", n_humans=2, env_config=other)
+        with pytest.raises(PipelineError, match="run_gym_episode: .*" + message):
+            run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2, config=other), seed=0)
+    controller = make_controller(ControllerSpec("straight"))
+    longer = EnvConfig(time_limit=60.0)
+    assert run_episode(controller, seed=0, scenario="circle", n_humans=2, env_config=longer).metrics.success
