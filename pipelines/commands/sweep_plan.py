@@ -96,7 +96,7 @@ def check_contact_distances(experiment: Experiment) -> None:
         if spec.controller not in ("cmpc", "dmpc"):
             continue
         try:
-            check_contact_distance(WORLD, mpc_config(spec))
+            check_contact_distance(WORLD, mpc_config(spec), radius_settable=False)  # check_world: no [world]
         except PipelineError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 

@@ -145,18 +145,19 @@ def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None
         )
 
 
-def check_contact_distance(world: WorldFacts, cfg: MPCConfig) -> None:
+def check_contact_distance(world: WorldFacts, cfg: MPCConfig, radius_settable: bool = True) -> None:
     """Eqs. 11 and 12 keep ``d_min`` between the centres of a robot and a human or a teammate; below the sum
     of their radii that distance is a contact, which the MPC then accepts in its plans (``--set
     mpc.d_min=0.5``, 9 humans, seeds 0-5: within 0.8 m of a human in 6 of 6 episodes, in contact in 1). A
-    d_min equal to ``2 radius`` is allowed: agents that touch without overlapping."""
+    d_min equal to ``2 radius`` is allowed: agents that touch without overlapping. ``radius_settable``: the
+    run may change [world] radius (a sweep may not), so the message offers it."""
     contact = 2.0 * world.radius
     if cfg.d_min < contact - 1e-12:
         raise PipelineError(
             f"the MPC's d_min {cfg.d_min:g} m is below the contact distance 2 x [world] radius = "
             f"{contact:g} m: its plans would touch humans and teammates (Eqs. 11 and 12 keep d_min between "
-            f"centres); set [mpc] d_min >= {contact:g} (--set mpc.d_min={contact:g}), or a smaller [world] "
-            "radius"
+            f"centres); set [mpc] d_min >= {contact:g} (--set mpc.d_min={contact:g})"
+            + (", or a smaller [world] radius" if radius_settable else "")
         )
 
 

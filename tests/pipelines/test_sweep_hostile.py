@@ -463,6 +463,7 @@ def test_a_d_min_below_the_contact_distance_is_refused_before_the_sweep_starts(t
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1
         assert "method 'cmpc' of experiment 'controllers': the MPC's d_min 0.5 m is below" in err[0]
+        assert err[0].endswith("(--set mpc.d_min=0.6)")  # not "a smaller [world] radius": a sweep refuses it
     assert not out.exists()
     at_contact = [*sweep[:-2], "mpc.d_min=0.6", "--no-progress"]
     assert main([*at_contact, "--controllers", "orca,cmpc", "--dry-run", "--out", str(out)]) == 0
