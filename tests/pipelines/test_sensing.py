@@ -91,3 +91,12 @@ def test_an_mpc_runs_a_whole_episode_through_the_sensor():
     result = run_episode(RangeLimited(controller, 2.0), seed=0, scenario="circle", n_humans=3)
     assert result.metrics.n_steps > 10 and result.controller == "cmpc"
     assert result.human_positions.shape[1] == 3  # the metrics are the simulator's, over every human
+
+
+def test_the_loop_refuses_a_wrapped_controller_built_for_another_world():
+    from crowdsim.env_config import EnvConfig
+
+    sensor = RangeLimited(make_controller(ControllerSpec("orca")), 3.0)
+    slow = EnvConfig(v_max=0.5)
+    with pytest.raises(PipelineError, match="built for another world"):
+        run_episode(sensor, seed=0, scenario="circle", n_humans=3, env_config=slow)
