@@ -165,8 +165,10 @@ def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
     return meta
 
 
-def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int) -> None:
-    """Write sweep.json: ``meta`` with what the directory holds and a line for this run."""
+def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int) -> int:
+    """Write sweep.json: ``meta`` with what the directory holds and a line for this run; return the run's
+    number, counted from 1 as ``config show --from-sweep DIR --run N`` counts them (``runs[N - 1]``), which
+    each record of the run keeps as its ``run``."""
     from pipelines.version import code_identity, crowdmpc_version
 
     path = out / SWEEP_FILE
@@ -203,6 +205,7 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
         os.replace(tmp, path)
     finally:  # stopped before the replace: the half-written file is nobody's
         tmp.unlink(missing_ok=True)
+    return len(meta["runs"])
 
 
 def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
@@ -289,10 +292,11 @@ def _run_tasks(
     backend_factory: Callable[[SweepConfig, str], Backend],
     scratch: str,
     retried: Collection[str] = (),
-    started: Callable[[], None] = lambda: None,
+    started: Callable[[], int] = lambda: 1,
 ) -> None:
     """Start the backend, call ``started`` (the run's line in sweep.json: a backend that could not start ran
-    nothing), write every outcome as it comes back, and end the backend. Stop (SweepStopped)
+    nothing; it returns the run's number), write every outcome as it comes back, each record with that
+    number as its ``run``, and end the backend. Stop (SweepStopped)
     when no episode has run and FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run)
     have raised: a broken method or setting, also when it extends a sweep; old failures raising again tell
     nothing new, and run after the new episodes."""
@@ -304,7 +308,7 @@ def _run_tasks(
     outcome.startup_s = time.perf_counter() - start
     bar: Any = None
     try:
-        started()
+        run = started()
         bar = _progress_bar(config, outcome)
         for result in backend.run(todo):
             task = by_key[result.key]
@@ -326,7 +330,9 @@ def _run_tasks(
                 )
             if result.mcap is not None:
                 _write_atomic(mcap_path(out, task), result.mcap)  # before the record that vouches for it
-            log.append(result.record)
+            # which run of sweep.json, hence which code, made it: a resume by other code keeps the earlier
+            # episodes (_note_other_code), and the lines' order alone does not say where one run ends
+            log.append(result.record | {"run": run})
             outcome.ran += 1
             bar.update(1)
     finally:

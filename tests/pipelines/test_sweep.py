@@ -1105,6 +1105,20 @@ def test_each_run_records_its_code_and_a_resume_by_other_code_says_so(tmp_path, 
     assert "note: " in capsys.readouterr().err
 
 
+def test_each_record_names_the_run_that_made_it(tmp_path):
+    """A resume by other code keeps the earlier episodes (above), so each line must say which run of
+    sweep.json, and with it which code, made it: before, only the order of the lines hinted at it."""
+    run_sweep(_config(tmp_path, 1))
+    run_sweep(_config(tmp_path, 1))  # nothing to run: a run line, no record
+    run_sweep(_config(tmp_path, 2))
+    runs = json.loads((tmp_path / "sweep.json").read_text())["runs"]
+    records = EpisodeLog(tmp_path / EPISODES_FILE).load().values()
+    assert len(runs) == 3
+    made_by = sorted((r["scenario"], r["run"]) for r in records)
+    assert made_by == [("circle", 1)] * 2 + [("perpendicular", 3)] * 2  # as config show --run counts them
+    assert all(runs[r["run"] - 1]["code"]["commit"] == runs[0]["code"]["commit"] for r in records)
+
+
 def test_the_note_says_one_episode_per_cell_in_the_singular():
     """A sweep of --episodes-per-cell 1 said "Ours: 1 episodes per cell"."""
     table2 = get_experiment("table2")
