@@ -113,7 +113,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
     )
     parser.add_argument(
-        "--json", metavar="FILE", help="write the summary and per-episode records (-: standard output)"
+        "--json",
+        metavar="FILE",
+        help="write the summary and per-episode records (-: standard output; fields: docs/outputs.md)",
     )
     parser.add_argument("--plot", metavar="FILE", help="draw the first episode (PNG, PDF, SVG)")
     parser.add_argument("--record", metavar="DIR", help="one MCAP file per episode in DIR")

@@ -54,7 +54,7 @@ Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are n
 retried on rerun), cells.csv, episodes.csv, table.md, a plot per outcome (success, travel_time, collision,
 contact, discomfort) named OUTCOME_vs_humans.png, or OUTCOME_by_method.png for an experiment at one crowd
 size, min_distance_hist.csv/.png, safety_tradeoff.png, sweep.json, and with --record the MCAP logs in
-DIR/mcap/<cell>/.
+DIR/mcap/<cell>/. Every field and column of these files, with its unit and meaning: docs/outputs.md.
 """
 
 

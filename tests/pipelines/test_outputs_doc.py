@@ -1,0 +1,119 @@
+"""docs/outputs.md, the reference of what the commands write, against what they do write: every field,
+column, topic and metadata key of a small sweep, a simulate --json, a recording and a review --json is named
+there, and its MCAP example runs as printed."""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import json
+import re
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from pipelines.cli import main
+from pipelines.logs.schemas import CHANNELS
+
+REPO = Path(__file__).resolve().parents[2]
+DOC = REPO / "docs" / "outputs.md"
+# cells.csv and the summaries write four columns per rate; the doc names the rate and the four suffixes once
+FAMILY = ("_count", "_rate", "_ci_lo", "_ci_hi")
+
+
+def _documented() -> set[str]:
+    return set(re.findall(r"`([^`\s]+)`", DOC.read_text()))
+
+
+def _undocumented(names, documented: set[str]) -> list[str]:
+    def named(name: str) -> bool:
+        if name in documented:
+            return True
+        return any(name.endswith(s) and name[: -len(s)] in documented for s in FAMILY)
+
+    return sorted(n for n in set(names) if not named(n))
+
+
+def _strict(text: str):
+    def refuse(constant: str):
+        raise ValueError(f"bare {constant} in JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory) -> Path:
+    """A recorded baselines sweep, a recorded CMPC simulate with --json, and a review --json of it."""
+    root = tmp_path_factory.mktemp("outputs")
+    sweep = [
+        "sweep",
+        "--experiment",
+        "baselines",
+        "--humans",
+        "3",
+        "--episodes-per-cell",
+        "1",
+        "--no-progress",
+    ]
+    assert main([*sweep, "--backend", "inline", "--record", "all", "--out", str(root / "sw")]) == 0
+    simulate = ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "2"]
+    outputs = ["--json", str(root / "sim.json"), "--record", str(root / "runs/d"), "--no-progress"]
+    assert main([*simulate, *outputs]) == 0
+    assert main(["review", str(root / "runs/d"), "--json", str(root / "review.json")]) == 0
+    return root
+
+
+def test_every_record_field_and_sweep_file_is_documented(outputs):
+    doc = _documented()
+    record = _strict((outputs / "sw/episodes.jsonl").read_text().splitlines()[0])
+    assert _undocumented([*record, *record["metrics"], *record["solver"]], doc) == []
+    sweep = _strict((outputs / "sw/sweep.json").read_text())
+    assert _undocumented([*sweep, *sweep["runs"][0], *sweep["runs"][0]["code"]], doc) == []
+    files = [p.name for p in (outputs / "sw").iterdir() if not p.name.endswith(".png")]
+    assert _undocumented(files, doc) == []
+
+
+@pytest.mark.parametrize("name", ["cells.csv", "episodes.csv", "min_distance_hist.csv"])
+def test_every_csv_column_is_documented(outputs, name):
+    with open(outputs / "sw" / name, newline="") as f:
+        header = next(csv.reader(f))
+    assert _undocumented(header, _documented()) == []
+
+
+def test_every_simulate_and_review_field_is_documented(outputs):
+    doc = _documented()
+    sim = _strict((outputs / "sim.json").read_text())
+    assert _undocumented([*sim, *sim["run"], *sim["code"], *sim["summary"]], doc) == []
+    review = _strict((outputs / "review.json").read_text())
+    names = [*review, *review["runs"][0], *review["runs"][0]["solver"], *review["groups"][0]]
+    assert _undocumented([*names, *review["totals"]], doc) == []
+
+
+def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outputs):
+    doc = _documented()
+    with open(outputs / "runs/d/circle_seed000000.mcap", "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        topics = [c.topic for c in summary.channels.values()]
+        schemas = [s.name for s in summary.schemas.values()]
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert sorted(topics) == sorted(CHANNELS)
+    fields = [f for s in CHANNELS.values() if s.name.startswith("crowdmpc.") for f in s.schema["properties"]]
+    keys = [k for name in ("crowdmpc", "episode") for k in metadata[name]]
+    assert _undocumented([*topics, *schemas, *fields, *metadata, *keys], doc) == []
+
+
+def test_the_mcap_example_runs_as_printed(outputs, monkeypatch):
+    example = re.search(r"```python\n(.*?)```", DOC.read_text(), re.S)
+    assert example is not None
+    monkeypatch.chdir(outputs)
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        exec(compile(example.group(1), str(DOC), "exec"), {})
+    commit, controller, horizon = printed.getvalue().splitlines()[0].split()
+    assert (controller, horizon) == ("cmpc", "4") and commit
+    assert re.search(r"^\d+ states; robot 0 starts at \[.*\] m$", printed.getvalue().splitlines()[1])
+    assert re.search(r"^success (True|False) min distance \d", printed.getvalue().splitlines()[2])
