@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -222,6 +223,26 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
     }
 
 
+class EpisodeConfigs:
+    """An observer keeping each episode's effective config, in the order the episodes start: the "config"
+    its recording's metadata and a sweep's line hold (``contract.episode_config``: the simulator's settings,
+    the MPC's config, the margins in metres). ``run``'s "config" is the config file's form, which names the
+    margins as given (``conformal:0.1``), not the metres the zoo's calibration gave them, which
+    recalibrating changes."""
+
+    def __init__(self) -> None:
+        self.configs: list[dict[str, Any]] = []
+
+    def on_reset(self, obs: Any, meta: Mapping[str, Any]) -> None:
+        self.configs.append(plain(meta["config"]))
+
+    def on_step(self, obs: Any, out: Any, next_obs: Any) -> None:
+        pass
+
+    def on_end(self, result: Any) -> None:
+        pass
+
+
 def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
     for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;
@@ -265,6 +286,8 @@ def _simulate(resolved: SimulateRun) -> int:
             run_meta=run_meta,
             seeds=range(sim.seed, sim.seed + sim.episodes),
         )
+    configs = EpisodeConfigs()
+    observers = (configs,) if recorder is None else (recorder, configs)
     results: list[EpisodeResult] = []
     interrupted = False
     failure: PipelineError | None = None
@@ -276,7 +299,7 @@ def _simulate(resolved: SimulateRun) -> int:
             scenario=scenario.name,
             n_humans=scenario.humans,
             n_robots=scenario.robots,
-            observers_factory=(lambda: (recorder,)) if recorder is not None else None,
+            observers_factory=lambda: observers,
             progress=sim.progress,
             env_config=env_config,
             into=results,
@@ -294,7 +317,7 @@ def _simulate(resolved: SimulateRun) -> int:
     finally:
         if recorder is not None:
             recorder.close()
-    _report(resolved, run_meta, results, recorder, interrupted, failure)
+    _report(resolved, run_meta, results, configs.configs, recorder, interrupted, failure)
     if interrupted:
         raise KeyboardInterrupt
     if failure is not None:
@@ -306,12 +329,14 @@ def _report(
     resolved: SimulateRun,
     run_meta: dict[str, Any],
     results: list[EpisodeResult],
+    configs: list[dict[str, Any]],
     recorder: Any,
     interrupted: bool,
     failure: PipelineError | None = None,
 ) -> None:
     """The summary table, --json, --plot and the recordings' line of the episodes that ran (when
-    ``interrupted`` or stopped by ``failure``, those that finished, said so in the header and the JSON)."""
+    ``interrupted`` or stopped by ``failure``, those that finished, said so in the header and the JSON).
+    ``configs``: each episode's effective config, in the order they started (EpisodeConfigs)."""
     from pipelines.loop.episode import summarize
 
     cfg, spec = resolved.config, resolved.spec
@@ -330,7 +355,11 @@ def _report(
             **({"interrupted": True, "episodes_finished": len(results)} if interrupted else {}),
             **({"failed": _failed(failure), "episodes_finished": len(results)} if failure else {}),
             "summary": summary,
-            "episodes": [r.record().to_dict() for r in results],
+            # an episode that started and did not finish (Ctrl-C, a plugin's error) has a config, no result
+            "episodes": [
+                r.record().to_dict() | {"config": c}
+                for r, c in zip(results, configs[: len(results)], strict=True)
+            ],
         }
         write_output(resolved.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
         if not is_stdout(resolved.json):

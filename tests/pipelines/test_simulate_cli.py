@@ -43,6 +43,25 @@ def test_simulate_records_one_mcap_per_episode(tmp_path, capsys):
     ]
 
 
+def test_each_json_episode_keeps_the_config_it_ran_with_as_its_recording_and_a_sweep_line_do(tmp_path):
+    """--json kept the margins as the option's text ("conformal:0.1"), not the metres the MPC planned with,
+    which come from the zoo's calibrations and change when it is recalibrated; the recording's "config"
+    metadata and a sweep line's "config" had them. Each episode now carries that same "config"."""
+    from mcap.reader import make_reader
+
+    out_json, rec = tmp_path / "run.json", tmp_path / "rec"
+    code = main(
+        ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "2",
+         "--margins", "fixed:0.1,0.2,0.3,0.4", "--json", str(out_json), "--record", str(rec), "--no-progress"]
+    )  # fmt: skip
+    assert code == 0
+    (episode,) = json.loads(out_json.read_text())["episodes"]
+    assert episode["config"]["margins"]["margins_m"] == [0.1, 0.2, 0.3, 0.4]
+    with open(rec / "circle_seed000000.mcap", "rb") as f:
+        recorded = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["config"]
+    assert episode["config"] == {key: json.loads(value) for key, value in recorded.items()}
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
