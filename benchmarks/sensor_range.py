@@ -11,7 +11,7 @@ robot-human distance and the mean travel time of the successes. The metrics are 
 every human.
 
     nice -n 5 .venv/bin/python benchmarks/sensor_range.py
-    nice -n 5 .venv/bin/python benchmarks/sensor_range.py --radii 3 --episodes 20 --margins conformal-motion
+    nice -n 5 .venv/bin/python benchmarks/sensor_range.py --config docs/examples/safe_crossing.toml --radii 3
 """
 
 from __future__ import annotations
@@ -85,6 +85,8 @@ def print_rows(rows: list[dict[str, Any]]) -> None:
 
 
 def main() -> None:
+    from pipelines.config import ConfigError, load
+    from pipelines.errors import PipelineError
     from pipelines.loop.controllers import ControllerSpec, make_controller
     from pipelines.loop.margins import parse_margins
     from pipelines.loop.sensing import RangeLimited
@@ -94,7 +96,10 @@ def main() -> None:
     )
     parser.add_argument("--controller", choices=("cmpc", "dmpc"), default="cmpc")
     parser.add_argument("--predictor", type=predictor_name, default="social_lstm_eth")
-    parser.add_argument("--margins", type=parse_margins, default=parse_margins("none"))
+    parser.add_argument(
+        "--config",
+        help="a crowdmpc config file: its [controller] margins and [mpc] table (default: the paper's)",
+    )
     parser.add_argument("--radii", type=radius, nargs="+", default=[4.0, 3.0, 2.0])
     parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--episodes", type=episode_count, default=100, help="episodes per row")
@@ -102,11 +107,19 @@ def main() -> None:
     parser.add_argument("--json", type=output_file, help="write the rows to this file ('-': stdout)")
     args = parser.parse_args()
     with json_on_stdout(args.json):
-        spec = ControllerSpec(args.controller, args.predictor, margins=args.margins)
+        try:  # the config files' parser and checks
+            run = load(args.config)
+            margins = parse_margins(run.controller.margins or "none")
+            spec = ControllerSpec(
+                args.controller, args.predictor, mpc_overrides=run.mpc_overrides(), margins=margins
+            )
+        except (ConfigError, PipelineError) as exc:
+            parser.error(f"--config: {exc}")
         controller = make_controller(spec)
         controller.prepare(3, range(args.humans + 1))  # type: ignore[attr-defined]  # every crowd in view
-        print(f"{args.controller}, {args.predictor}, margins {args.margins.label}, "
-              f"{args.humans} humans, {args.episodes} episodes a row")  # fmt: skip
+        print(f"{args.controller}, {args.predictor}, margins {margins.label}"
+              + "".join(f", {k}={v}" for k, v in spec.mpc_overrides)
+              + f", {args.humans} humans, {args.episodes} episodes a row")  # fmt: skip
         rows = [run_row(controller, "full observation", args.episodes, args.seed, args.humans)]
         for r in args.radii:
             for report in (True, False):
