@@ -10,7 +10,9 @@ the range and comes back starts a new track. A human in range at the episode's f
 through the whole history: the simulator's humans stood there before it, in view. The episode's metrics
 stay the simulator's, over every human.
 
-What the wrapped controller returns for the humans it saw is mapped to nothing: ``prediction`` and
+The number of humans in view changes from step to step, and an MPC builds an NLP per number: prepare them
+first (``MPCController.prepare(n_robots, range(n_humans + 1))``), or the first step meeting each size builds
+it. What the wrapped controller returns for the humans it saw is mapped to nothing: ``prediction`` and
 ``iteration_predictions`` are dropped (they are of the visible humans only; the loop checks them against
 every human), and ``extra["visible"]`` lists the humans it planned around.
 """
