@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -66,6 +65,8 @@ def _options() -> tuple[Option, ...]:
         Option("plot", "simulate", "plot", "--plot"),
         Option("record", "simulate", "record", "--record"),
         Option("no_progress", "simulate", "progress", "--no-progress", lambda v: not v),
+        Option("sensor_range", "simulate", "sensor_range", "--sensor-range"),
+        Option("no_sensor_tracks", "simulate", "sensor_tracks", "--no-sensor-tracks", lambda v: not v),
     )
 
 
@@ -125,6 +126,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         default=None,
         help="record every IBR iteration's prediction in the --record files (cmpc, dmpc)",
+    )
+    parser.add_argument(
+        "--sensor-range",
+        type=float,
+        metavar="M",
+        help="the controller sees only the humans within M metres of some robot, each from when it came into "
+        "view, as a tracker gives them (docs/extending.md, section 7; default: every human)",
+    )
+    parser.add_argument(
+        "--no-sensor-tracks",
+        action="store_true",
+        default=None,
+        help="with --sensor-range: the tracker reports no track lengths (a late arrival's padded past reads "
+        "as its own)",
     )
     parser.add_argument("--no-progress", action="store_true", default=None, help="no progress bar")
     add_config_options(parser)
@@ -223,26 +238,6 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
     }
 
 
-class EpisodeConfigs:
-    """An observer keeping each episode's effective config, in the order the episodes start: the "config"
-    its recording's metadata and a sweep's line hold (``contract.episode_config``: the simulator's settings,
-    the MPC's config, the margins in metres). ``run``'s "config" is the config file's form, which names the
-    margins as given (``conformal:0.1``), not the metres the zoo's calibration gave them, which
-    recalibrating changes."""
-
-    def __init__(self) -> None:
-        self.configs: list[dict[str, Any]] = []
-
-    def on_reset(self, obs: Any, meta: Mapping[str, Any]) -> None:
-        self.configs.append(plain(meta["config"]))
-
-    def on_step(self, obs: Any, out: Any, next_obs: Any) -> None:
-        pass
-
-    def on_end(self, result: Any) -> None:
-        pass
-
-
 def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
     for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;
@@ -286,6 +281,8 @@ def _simulate(resolved: SimulateRun) -> int:
             run_meta=run_meta,
             seeds=range(sim.seed, sim.seed + sim.episodes),
         )
+    from pipelines.loop.record import EpisodeConfigs
+
     configs = EpisodeConfigs()
     observers = (configs,) if recorder is None else (recorder, configs)
     results: list[EpisodeResult] = []
@@ -303,6 +300,8 @@ def _simulate(resolved: SimulateRun) -> int:
             progress=sim.progress,
             env_config=env_config,
             into=results,
+            sensor_range=sim.sensor_range,
+            sensor_tracks=sim.sensor_tracks,
         )
     except KeyboardInterrupt:
         if not results:

@@ -70,6 +70,11 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
             "MPC",
             "flocking, record_iterations and [mpc]",
         )
+    if not config.simulate.sensor_tracks and config.simulate.sensor_range is None:
+        raise PipelineError(
+            f"{_shown(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
+            "--sensor-range M too (or [simulate] sensor_range)"
+        )
     if spec.record_iterations and config.simulate.record is None:
         raise PipelineError(
             f"{config.label('controller', 'record_iterations')}: the iterations are written to the MCAP "

@@ -283,12 +283,13 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
 
 def check_world(cfg: RunConfig) -> None:
     """A sweep's cells run a named profile (``World``: profile and visibility) on the sweep's own crowds:
-    refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), and [scenario]
-    humans and name (``_check_scenario``), rather than ignore them."""
+    refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), [scenario] humans
+    and name (``_check_scenario``) and a sensor range (``_check_sensing``), rather than ignore them."""
     from crowdsim.profiles import PROFILES
     from pipelines.config.schema import ENV_PROFILE_KEYS
 
     _check_scenario(cfg)
+    _check_sensing(cfg)
     why = (
         "a sweep's cells run a named profile ([env] profile, robots_visible); other [world], [env] and "
         "[env.orca] values apply to simulate only"
@@ -339,3 +340,17 @@ def _check_scenario(cfg: RunConfig) -> None:
             sweep = SWEEP_SCENARIO.get(key, "a sweep plans its own scenarios")
             value = cfg.values["scenario"][key]
             raise cfg.error("scenario", key, f"{value!r}: [scenario] {key} applies to simulate only; {sweep}")
+
+
+def _check_sensing(cfg: RunConfig) -> None:
+    """Refuse [simulate] sensor_range and sensor_tracks, chosen: a sweep's controllers see every human, and
+    a sweep run as if behind a sensor would record full-observation episodes under a sensor's name."""
+    for key in ("sensor_range", "sensor_tracks"):
+        if cfg.chosen("simulate", key):
+            value = cfg.values["simulate"][key]
+            raise cfg.error(
+                "simulate",
+                key,
+                f"{value!r}: [simulate] {key} applies to simulate only; a sweep's controllers see every "
+                "human (benchmarks/sensor_range.py compares sensor ranges on paired episodes)",
+            )

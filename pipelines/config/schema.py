@@ -219,6 +219,21 @@ SIMULATE_KEYS: Final = (
         "runs/mcap",
     ),
     Key("progress", "bool", True, "show a progress bar (--no-progress)"),
+    Key(
+        "sensor_range",
+        "float",
+        None,
+        "m: the controller sees only the humans within this distance of some robot, each from when it came "
+        "into view, as a tracker gives them (pipelines/loop/sensing.py; --sensor-range); unset: every human",
+        3.0,
+    ),
+    Key(
+        "sensor_tracks",
+        "bool",
+        True,
+        "with sensor_range: the tracker reports its track lengths, from which the MPC fills a late arrival's "
+        "past (--no-sensor-tracks)",
+    ),
 )
 
 

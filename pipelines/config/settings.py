@@ -6,6 +6,7 @@ messages start with the field's name ("episodes must be >= 1, got 0"), which the
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Final
@@ -138,6 +139,8 @@ class SimulateSettings:
     plot: str | None = None  # the first episode's figure
     record: str | None = None  # a folder of one MCAP file per episode
     progress: bool = True
+    sensor_range: float | None = None  # m; None: the controller sees every human (pipelines/loop/sensing.py)
+    sensor_tracks: bool = True  # with sensor_range: the tracker reports its track lengths
 
     def __post_init__(self) -> None:
         _check_int("episodes", self.episodes)
@@ -153,6 +156,13 @@ class SimulateSettings:
             if value is not None and not (isinstance(value, str) and value):
                 raise PipelineError(f"{name} must be a path, got {value!r}")
             _home(self, name)
+        sensed = self.sensor_range
+        if sensed is not None and (
+            isinstance(sensed, bool) or not isinstance(sensed, int | float) or not 0 < sensed < math.inf
+        ):
+            raise PipelineError(f"sensor_range must be a number of metres > 0, got {sensed!r}")
+        if not isinstance(self.sensor_tracks, bool):
+            raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")
 
 
 @dataclass(frozen=True)

@@ -182,8 +182,14 @@ def run_episodes(
     env_config: EnvConfig = DEFAULT_ENV,
     meta: Mapping[str, Any] | None = None,
     into: list[EpisodeResult] | None = None,
+    sensor_range: float | None = None,
+    sensor_tracks: bool = True,
 ) -> list[EpisodeResult]:
     """``episodes`` episodes with one controller built once from ``spec``; episode ``i`` uses ``seed + i``.
+
+    ``sensor_range``: the controller sees only the humans within that many metres of some robot, as a tracker
+    gives them, reporting its track lengths with ``sensor_tracks`` (pipelines.loop.sensing.RangeLimited); an
+    MPC's NLPs for every number of humans in view are built before the first episode.
 
     ``observers_factory()`` is called once per episode (fresh observers for each, e.g. a recorder per file);
     when that episode raises (Ctrl-C, a plugin's error), its observers that have a ``close`` are closed
@@ -202,6 +208,8 @@ def run_episodes(
     if isinstance(episodes, bool) or not isinstance(episodes, int | np.integer) or episodes < 0:
         raise PipelineError(f"run_episodes: episodes must be an int >= 0, got {short_repr(episodes)}")
     controller = make_controller(spec, env_config)
+    if sensor_range is not None:
+        controller = _sensing(controller, sensor_range, sensor_tracks, n_robots, n_humans)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
@@ -233,6 +241,17 @@ def run_episodes(
     finally:
         called(controller, "close")  # e.g. DMPC's solver threads
     return results
+
+
+def _sensing(controller: Controller, radius: float, tracks: bool, n_robots: int, n_humans: int) -> Controller:
+    """``controller`` behind a sensor of range ``radius`` (RangeLimited), an MPC's every crowd size built."""
+    from pipelines.loop.mpc import MPCController
+    from pipelines.loop.sensing import RangeLimited
+
+    sensed = RangeLimited(controller, radius, report_tracks=tracks)  # refuses a radius that is no distance
+    if isinstance(controller, MPCController):
+        controller.prepare(n_robots, range(n_humans + 1))  # inside the steps, builds would count as solves
+    return sensed
 
 
 def check_controller(controller: object, where: str = "run_episode") -> None:

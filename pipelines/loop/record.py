@@ -107,3 +107,23 @@ class EpisodeRecord:
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise PipelineError(f"not an episode record ({type(exc).__name__}: {exc})") from None
+
+
+class EpisodeConfigs:
+    """An observer keeping each episode's effective config, in the order the episodes start: the "config"
+    its recording's metadata and a sweep's line hold (``contract.episode_config``: the simulator's settings,
+    the MPC's config, the margins in metres). ``run``'s "config" is the config file's form, which names the
+    margins as given (``conformal:0.1``), not the metres the zoo's calibration gave them, which
+    recalibrating changes."""
+
+    def __init__(self) -> None:
+        self.configs: list[dict[str, Any]] = []
+
+    def on_reset(self, obs: Any, meta: Mapping[str, Any]) -> None:
+        self.configs.append(plain(meta["config"]))
+
+    def on_step(self, obs: Any, out: Any, next_obs: Any) -> None:
+        pass
+
+    def on_end(self, result: Any) -> None:
+        pass

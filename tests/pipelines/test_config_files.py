@@ -675,6 +675,13 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
             "episodes alternate",
         ),  # fmt: skip
         ("table2", "mpc.jit=true", "--set mpc.jit: a sweep compiles by [sweep] jit"),
+        (  # a sweep run "behind a sensor" would record full-observation episodes under the sensor's name
+            "table2",
+            "simulate.sensor_range=3",
+            "--set simulate.sensor_range: 3.0: [simulate] sensor_range applies to simulate only; a sweep's "
+            "controllers see every human",
+        ),  # fmt: skip
+        ("table2", "simulate.sensor_tracks=false", "--set simulate.sensor_tracks: False: [simulate]"),
         (
             "table3",
             "mpc.w_floc=0",

@@ -1,0 +1,72 @@
+"""``crowdmpc simulate --sensor-range M [--no-sensor-tracks]``: the controller behind a range-limited tracker
+(pipelines.loop.sensing), from the command line and a config file."""
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+
+RUN = [
+    "simulate",
+    "--controller",
+    "cmpc",
+    "--predictor",
+    "social_lstm_eth",
+    "--humans",
+    "4",
+    "--episodes",
+    "2",
+]
+
+
+def _episodes(tmp_path, name, *options):
+    out = tmp_path / f"{name}.json"
+    assert main([*RUN, *options, "--no-progress", "--json", str(out)]) == 0
+    return json.loads(out.read_text())["episodes"]
+
+
+def test_a_range_that_sees_everyone_from_the_start_is_the_full_observation_and_is_recorded(tmp_path):
+    full = _episodes(tmp_path, "full")
+    wide = _episodes(tmp_path, "wide", "--sensor-range", "30")
+    assert [e["metrics"] for e in wide] == [e["metrics"] for e in full]
+    assert [e["config"]["sensing"] for e in wide] == [{"radius_m": 30.0, "report_tracks": True}] * 2
+    assert "sensing" not in full[0]["config"]
+
+
+def test_a_short_range_plans_around_fewer_humans_and_the_tracks_switch_is_recorded(tmp_path):
+    near = _episodes(tmp_path, "near", "--sensor-range", "1.5", "--no-sensor-tracks")
+    full = _episodes(tmp_path, "full")
+    assert [e["metrics"] for e in near] != [e["metrics"] for e in full]
+    assert near[0]["config"]["sensing"] == {"radius_m": 1.5, "report_tracks": False}
+
+
+def test_a_config_file_sets_the_sensor(tmp_path):
+    config = tmp_path / "run.toml"
+    config.write_text("[simulate]\nsensor_range = 30\nsensor_tracks = false\n")
+    (episode, _) = _episodes(tmp_path, "file", "--config", str(config))
+    assert episode["config"]["sensing"] == {"radius_m": 30.0, "report_tracks": False}
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--sensor-range", "0"], "--sensor-range must be a number of metres > 0, got 0.0"),
+        (["--sensor-range", "inf"], "--sensor-range must be a number of metres > 0, got inf"),
+        (["--sensor-range", "nan"], "--sensor-range must be a number of metres > 0, got nan"),
+        (
+            ["--no-sensor-tracks"],
+            "--no-sensor-tracks: track lengths are a sensor's; give --sensor-range M too",
+        ),
+        (["--set", "simulate.sensor_range=true"], "simulate.sensor_range"),
+    ],
+)
+def test_a_sensor_that_is_no_distance_is_a_one_line_error(options, message, capsys, monkeypatch):
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("an episode ran before the options were checked")
+
+    monkeypatch.setattr("pipelines.loop.episode.run_episodes", no_episodes)
+    assert main([*RUN, *options, "--no-progress"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.splitlines()) == 1
+    assert message in captured.err
