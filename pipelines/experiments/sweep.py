@@ -218,15 +218,19 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     now = code_identity()
     # what differs from this run's code, as the first earlier run that differs had it
     changed: dict[str, Any] = {}
+    unrecorded = False
     for run in runs:
         before = run.get("code") if isinstance(run, dict) else None
-        if not isinstance(before, dict):  # runs from before the code was recorded cannot be told apart
+        if not isinstance(before, dict):  # a run from before the code was recorded (4a16d16): code unknown,
+            unrecorded = True  # and results changed through many commits since, so it is no same code
             continue
         for k in now:
             if k != "dirty" and before.get(k) != now[k]:
                 changed.setdefault(k, before.get(k))
-    if changed:  # every resume says it, not only the first after the change: the mix stays in the directory
-        shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
+    shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
+    if unrecorded:
+        shown = f"code not recorded -> commit {str(now['commit'])[:12]}" + (f", {shown}" if shown else "")
+    if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
         print(
             f"note: {out} holds episodes made by other code ({shown}); they are kept and counted with this "
             "run's (a new --out keeps one codebase per table)",

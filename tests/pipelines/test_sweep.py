@@ -1119,6 +1119,20 @@ def test_each_record_names_the_run_that_made_it(tmp_path):
     assert all(runs[r["run"] - 1]["code"]["commit"] == runs[0]["code"]["commit"] for r in records)
 
 
+def test_a_resume_of_a_sweep_whose_code_went_unrecorded_says_so(tmp_path, capsys):
+    """A run line from before 4a16d16 holds no "code": its episodes were made by code that cannot be told
+    apart from this run's, so a resume mixed them in without a word (a sweep of that era, resumed by the
+    current code, printed no note); it says the earlier code is unknown."""
+    run_sweep(_config(tmp_path, 1))
+    meta = json.loads((tmp_path / "sweep.json").read_text())
+    del meta["runs"][0]["code"]  # as such a version wrote it
+    (tmp_path / "sweep.json").write_text(json.dumps(meta))
+    capsys.readouterr()
+    run_sweep(_config(tmp_path, 2))
+    err = capsys.readouterr().err
+    assert f"note: {tmp_path} holds episodes made by other code (code not recorded -> commit " in err
+
+
 def test_the_note_says_one_episode_per_cell_in_the_singular():
     """A sweep of --episodes-per-cell 1 said "Ours: 1 episodes per cell"."""
     table2 = get_experiment("table2")
