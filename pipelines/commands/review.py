@@ -187,6 +187,7 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     report["groups"] = []
     for setup, name in zip(setups, names, strict=True):
         members = [run.summary for run in setup.members]
+        _warn_mixed_code(folder, name, members)
         table, totals = aggregate_table(members, [run.solve_times_s for run in setup.members], root=folder)
         if len(setups) > 1:
             print(f"== {name}: {count(len(setup.members), 'run')} ==")
@@ -204,6 +205,24 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
         side_by_side = setups_table(short_names(parts), [group["totals"] for group in report["groups"]])
         print(f"== {count(len(setups), 'set-up')} side by side ==\n{side_by_side}")
     return runs, n_unreadable
+
+
+def _warn_mixed_code(folder: Path, name: str, members: list[dict[str, Any]]) -> None:
+    """Warn when one set-up's runs were recorded by different commits (or some by code that recorded none,
+    before 4a16d16): its aggregate pools two codebases' results, as a sweep resumed by other code says."""
+    commits = {_commit_shown(m.get("crowdmpc_commit")): None for m in members}
+    if len(commits) > 1:
+        print(
+            f"crowdmpc review: warning: {folder} holds runs recorded by different code "
+            f"({', '.join(commits)}) pooled in the aggregate of {name}; record them again with one version "
+            "to compare like with like",
+            file=sys.stderr,
+        )
+
+
+def _commit_shown(commit: object) -> str:
+    """A recording's commit as the warning names it; none for one made outside git or before it was kept."""
+    return f"commit {str(commit)[:12]}" if commit not in (None, "", "null") else "commit not recorded"
 
 
 def _check_distinct_outputs(args: argparse.Namespace) -> None:

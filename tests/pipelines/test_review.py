@@ -302,6 +302,28 @@ def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
     assert any(line.split()[:2] == ["success", "yes" if metrics.success else "no"] for line in lines)
 
 
+def test_a_folder_of_runs_recorded_by_different_code_says_so(tmp_path, capsys, monkeypatch):
+    """A run recorded before an upgrade beside one recorded after it, same set-up: review DIR pooled them into
+    one aggregate without a word (a 4a16d16^ recording, which names no commit, beside a f01a943 one), where a
+    resumed sweep says its episodes are mixed; a warning names the commits of the set-up's runs."""
+    import pipelines.logs.recording as recording
+    from pipelines.version import code_identity
+
+    record_episode(tmp_path, seed=1, steps=4)
+    now = code_identity()
+    monkeypatch.setattr(recording, "code_identity", lambda: {**now, "commit": "0123456789abcdef"})
+    record_episode(tmp_path, seed=2, steps=4)
+    assert main(["review", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "runs recorded by different code" in err and "commit 0123456789ab" in err
+    monkeypatch.undo()
+    for other in tmp_path.glob("*seed000002*"):
+        other.unlink()
+    record_episode(tmp_path, seed=2, steps=4)  # both by this code: nothing to say
+    assert main(["review", str(tmp_path)]) == 0
+    assert "different code" not in capsys.readouterr().err
+
+
 def test_a_folder_of_different_set_ups_gets_an_aggregate_for_each(tmp_path, capsys):
     """A 4-human and a 5-human run pooled would be one rate over two experiments: one aggregate each."""
     for seed, humans in ((1, 4), (2, 5), (3, 5)):
