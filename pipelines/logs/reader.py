@@ -34,6 +34,7 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
 from pipelines.errors import PipelineError
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
+from pipelines.logs.schemas import EPISODE_FORMAT
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
 
 MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
@@ -252,6 +253,12 @@ class _Walk:
             topic_messages[:0] = [self._decoded(channel.topic, m) for m in orphans]
         for key, problem in episode_metadata_problems(self.metadata.get("episode", {})).items():
             self.problems.append(f"metadata 'episode': {problem}; the review ignores {key}")
+        recorded = self.metadata.get("crowdmpc", {}).get("format")
+        if recorded is not None and recorded != EPISODE_FORMAT:  # absent: not a crowdmpc recorder's file
+            self.problems.append(
+                f"recorded in format {recorded!r}; this crowdmpc reads {EPISODE_FORMAT!r}: its channels may "
+                "mean other things, review it with the crowdmpc version that recorded it"
+            )
         bad_start = _start_time_problem(self.metadata)
         if bad_start is not None:
             self.problems.append(f"metadata 'episode': {bad_start}; times are log times from 0")

@@ -31,7 +31,16 @@ from pipelines.logs.identity import check_replaceable, run_identity
 from pipelines.logs.reader import decode_metadata
 from pipelines.logs.recorder import UNFINISHED_SUFFIX, McapRecorder
 from pipelines.logs.scene import PLAN_DECIMALS, SceneBuilder, array_json
-from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, PLAN, PREDICTION, ROBOTS, SCENE_UPDATE, SOLVER
+from pipelines.logs.schemas import (
+    EPISODE_FORMAT,
+    EPISODE_METRICS,
+    HUMANS,
+    PLAN,
+    PREDICTION,
+    ROBOTS,
+    SCENE_UPDATE,
+    SOLVER,
+)
 from pipelines.plain_json import plain
 from pipelines.version import code_identity
 
@@ -40,9 +49,7 @@ if TYPE_CHECKING:
     from pipelines.loop.controllers import ControlOutput
     from pipelines.loop.episode import EpisodeResult
 
-# bump when a channel's meaning changes; 2: /episode/metrics is the EpisodeRecord (pipelines/loop/record.py);
-# 3: log times are wall clock, episode start_time_ns + simulation time (before: simulation time from 0)
-FORMAT: Final[str] = "crowdmpc-episode/3"
+FORMAT: Final[str] = EPISODE_FORMAT  # what this recorder writes (pipelines.logs.schemas says what it means)
 
 
 def episode_filename(scenario: str, seed: int | None, unseeded: int = 0, repeat: int = 0) -> str:

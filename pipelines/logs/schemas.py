@@ -17,6 +17,10 @@ from pipelines.logs import foxglove
 
 SCHEMA_ENCODING: Final[str] = "jsonschema"  # MCAP's well-known schema encoding for JSON schemas
 MESSAGE_ENCODING: Final[str] = "json"
+# An episode file's layout, in its "crowdmpc" metadata; bump when a channel's meaning changes; 2:
+# /episode/metrics is the EpisodeRecord (pipelines/loop/record.py); 3: log times are wall clock, episode
+# start_time_ns + simulation time (before: simulation time from 0). The reader flags a file of another.
+EPISODE_FORMAT: Final[str] = "crowdmpc-episode/3"
 
 
 @dataclass(frozen=True, eq=False)

@@ -302,6 +302,20 @@ def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
     assert any(line.split()[:2] == ["success", "yes" if metrics.success else "no"] for line in lines)
 
 
+def test_a_recording_of_another_format_is_reviewed_with_a_warning(tmp_path, capsys, monkeypatch):
+    """The recorder writes its format ("crowdmpc-episode/3", bumped when a channel's meaning changes) into the
+    file's "crowdmpc" metadata, but nothing read it: a crowdmpc-episode/4 file was reviewed, --check "ok", as
+    if its channels meant what this version's do; it is a problem of the file, named with its format."""
+    import pipelines.logs.recording as recording
+
+    monkeypatch.setattr(recording, "FORMAT", "crowdmpc-episode/4")
+    run = record_episode(tmp_path, seed=1, steps=4)
+    monkeypatch.undo()
+    assert main(["review", str(run.path), "--check"]) == 1
+    out, err = capsys.readouterr()
+    assert "recorded in format 'crowdmpc-episode/4'; this crowdmpc reads 'crowdmpc-episode/3'" in out + err
+
+
 def test_a_folder_of_runs_recorded_by_different_code_says_so(tmp_path, capsys, monkeypatch):
     """A run recorded before an upgrade beside one recorded after it, same set-up: review DIR pooled them into
     one aggregate without a word (a 4a16d16^ recording, which names no commit, beside a f01a943 one), where a
