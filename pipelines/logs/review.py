@@ -309,6 +309,7 @@ def compare_table(a: Recording, b: Recording) -> str:
         ["controller", sa["controller"], sb["controller"]],
         ["predictor", sa["predictor"], sb["predictor"]],
         ["scenario", f"{sa['scenario']} {sa['seed']}", f"{sb['scenario']} {sb['seed']}"],
+        ["crowdmpc", _code(sa), _code(sb)],  # a run before an upgrade beside one after it: which is which
     ]
     rows += [[name, ma.get(name), mb.get(name)] for name in dict.fromkeys([*ma, *mb])]
     for key in ("median_ms", "p95_ms", "max_ms", "mean_iterations"):

@@ -316,6 +316,22 @@ def test_a_recording_of_another_format_is_reviewed_with_a_warning(tmp_path, caps
     assert "recorded in format 'crowdmpc-episode/4'; this crowdmpc reads 'crowdmpc-episode/3'" in out + err
 
 
+def test_compare_names_the_code_that_recorded_each_run(tmp_path, capsys, monkeypatch):
+    """`review A --compare B` of a run recorded before an upgrade and one after it set their metrics side by
+    side without saying which code made either (A's summary above names A's alone, B's nowhere)."""
+    import pipelines.logs.recording as recording
+    from pipelines.version import code_identity
+
+    a = record_episode(tmp_path / "a", seed=1, steps=4)
+    monkeypatch.setattr(recording, "code_identity", lambda: {**code_identity(), "commit": "0123456789abcdef"})
+    b = record_episode(tmp_path / "b", seed=1, steps=4)
+    monkeypatch.undo()
+    assert main(["review", str(a.path), "--compare", str(b.path)]) == 0
+    table = capsys.readouterr().out.split(f"A: {a.path.name}")[1]  # the side-by-side table, after A's summary
+    (row,) = [line for line in table.splitlines() if line.startswith("crowdmpc ")]
+    assert row.split()[-2:] == ["(commit", "0123456789ab)"]
+
+
 def test_a_folder_of_runs_recorded_by_different_code_says_so(tmp_path, capsys, monkeypatch):
     """A run recorded before an upgrade beside one recorded after it, same set-up: review DIR pooled them into
     one aggregate without a word (a 4a16d16^ recording, which names no commit, beside a f01a943 one), where a
