@@ -38,6 +38,8 @@ class RangeLimited:
     def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
         if isinstance(radius, bool) or not isinstance(radius, int | float) or not radius > 0:
             raise PipelineError(f"sensor radius must be a number of metres > 0, got {radius!r}")
+        if not isinstance(report_tracks, bool):  # a truthy "no" would report them
+            raise PipelineError(f"report_tracks must be True or False, got {report_tracks!r}")
         self.inner, self.radius, self.report_tracks = inner, float(radius), report_tracks
         self.name, self.predictor = inner.name, inner.predictor
         # the simulator it was built for, which the loops check (pipelines.loop.episode.check_built_for)

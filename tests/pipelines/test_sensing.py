@@ -85,6 +85,11 @@ def test_a_radius_that_is_no_distance_is_refused(radius):
         RangeLimited(Keep(), radius)
 
 
+def test_report_tracks_must_be_a_bool():
+    with pytest.raises(PipelineError, match="report_tracks must be True or False, got 'no'"):
+        RangeLimited(Keep(), 3.0, report_tracks="no")
+
+
 def test_an_mpc_runs_a_whole_episode_through_the_sensor():
     controller = make_controller(ControllerSpec("cmpc", "social_lstm_eth"))
     controller.prepare(3, range(0, 4))
