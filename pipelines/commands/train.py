@@ -249,6 +249,7 @@ def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: 
         check_last_checkpoint,
         check_more_epochs,
         check_resumed_settings,
+        note_other_code,
         recorded_loss,
     )
 
@@ -265,6 +266,7 @@ def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: 
     name = check_resumed_settings(out, settings, name_given=args.name is not None)
     done = check_last_checkpoint(last, settings)
     check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
+    note_other_code(out)
     return name
 
 

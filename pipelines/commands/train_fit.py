@@ -91,7 +91,10 @@ def _fit(
         from pipelines.commands.train_resume import SETTINGS_FILE
 
         out.mkdir(parents=True, exist_ok=True)
-        text = json.dumps({**settings, "name": name}, indent=2) + "\n"
+        from pipelines.version import code_identity
+
+        # the code too, which a resume compares with its own (train_resume.note_other_code)
+        text = json.dumps({**settings, "name": name, "code": code_identity()}, indent=2) + "\n"
         # in one rename: a symbolic link planted in --out is replaced, never written through
         replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
     started = time.perf_counter()

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from itertools import takewhile
@@ -124,6 +125,33 @@ def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: b
             "(only --epochs may change) or start a new run with another --out"
         )
     return str(settings["name"])
+
+
+def note_other_code(out: Path) -> None:
+    """Say so when the run in ``out`` was started by other code than this resume's (another commit, other
+    libraries; "dirty" alone cannot be compared), or by code that recorded none: the epochs so far were
+    trained by it, the next by this code, and NAME.metrics.json names this code only. Not refused, as a
+    sweep's resume is not: a change that leaves training alone (documentation, a benchmark) is common."""
+    from pipelines.version import code_identity
+
+    try:
+        recorded = json.loads((out / SETTINGS_FILE).read_text())
+    except (OSError, ValueError, RecursionError):  # no file (a run from before it was kept): no note
+        return
+    if not isinstance(recorded, dict):
+        return
+    now, before = code_identity(), recorded.get("code")
+    if not isinstance(before, dict):
+        shown = f"code not recorded -> commit {str(now['commit'])[:12]}"
+    else:
+        changed = [k for k in now if k != "dirty" and before.get(k) != now[k]]
+        shown = ", ".join(f"{k} {str(before.get(k))[:12]} -> {str(now[k])[:12]}" for k in changed)
+    if shown:
+        print(
+            f"note: --resume: {out} was started by other code ({shown}); its epochs so far were trained by "
+            "that code and the next by this one, and the metrics file will name this code only",
+            file=sys.stderr,
+        )
 
 
 def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:

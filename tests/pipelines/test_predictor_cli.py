@@ -89,6 +89,29 @@ def test_train_refuses_to_overwrite_and_resumes(trained, capsys):
     assert json.loads((out / "walker.metrics.json").read_text())["training"]["epochs"] == 2
 
 
+def test_a_resume_by_other_code_says_so_and_one_by_the_same_code_does_not(trained, capsys):
+    """train_settings.json recorded no code, so a run begun by one commit and resumed by another trained on
+    without a word, and its metrics file named the resuming commit only."""
+    out, args = trained
+    settings_file = out / "train_settings.json"
+    settings = json.loads(settings_file.read_text())
+    assert (
+        settings["code"]["commit"] == json.loads((out / "walker.metrics.json").read_text())["code"]["commit"]
+    )
+    capsys.readouterr()
+    assert main([*[a if a != "1" else "2" for a in args], "--resume"]) == 0
+    assert "note: --resume" not in capsys.readouterr().err
+    settings["code"]["commit"] = "0123456789abcdef"
+    settings_file.write_text(json.dumps(settings))
+    assert main([*[a if a != "1" else "3" for a in args], "--resume"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: --resume: {out} was started by other code (commit 0123456789ab -> " in err
+    del settings["code"]
+    settings_file.write_text(json.dumps(settings))
+    assert main([*[a if a != "1" else "4" for a in args], "--resume"]) == 0
+    assert "(code not recorded -> commit " in capsys.readouterr().err
+
+
 def test_a_second_train_into_an_out_a_run_holds_is_refused(tmp_path, capsys):
     """A run's folder has no last.ckpt until its first epoch ends: a second train started meanwhile (two
     terminals) passed the 'already holds a training run' check, trained into the same folder and left one
