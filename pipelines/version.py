@@ -11,9 +11,10 @@ from __future__ import annotations
 import functools
 import subprocess
 import sys
+from collections.abc import Iterable
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 # Libraries whose versions can change results: the solvers, the networks, the arrays.
 RESULT_LIBRARIES: Final[tuple[str, ...]] = ("casadi", "torch", "numpy")
@@ -45,6 +46,28 @@ def code_identity() -> dict[str, str | bool | None]:
         except PackageNotFoundError:
             identity[name] = None
     return identity
+
+
+def code_changes(earlier: Iterable[Any]) -> str:
+    """What differs between this process's code and the ``code_identity()``s earlier runs recorded, as the
+    resume notes name it: "commit 0123456789ab -> 89abcdef0123, torch ..." (each key as the first earlier
+    identity that differs had it), led by "code not recorded -> commit ..." when one is no identity (a run
+    from before the code was recorded); "" when every one is this code. "dirty" is not compared: uncommitted
+    changes are recorded but cannot be told apart."""
+    now = code_identity()
+    changed: dict[str, Any] = {}
+    unrecorded = False
+    for before in earlier:
+        if not isinstance(before, dict):
+            unrecorded = True
+            continue
+        for k in now:
+            if k != "dirty" and before.get(k) != now[k]:
+                changed.setdefault(k, before.get(k))
+    shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
+    if unrecorded:
+        shown = f"code not recorded -> commit {str(now['commit'])[:12]}" + (f", {shown}" if shown else "")
+    return shown
 
 
 def _git_state(root: Path) -> tuple[str | None, bool | None]:

@@ -132,7 +132,7 @@ def note_other_code(out: Path) -> None:
     libraries; "dirty" alone cannot be compared), or by code that recorded none: the epochs so far were
     trained by it, the next by this code, and NAME.metrics.json names this code only. Not refused, as a
     sweep's resume is not: a change that leaves training alone (documentation, a benchmark) is common."""
-    from pipelines.version import code_identity
+    from pipelines.version import code_changes
 
     try:
         recorded = json.loads((out / SETTINGS_FILE).read_text())
@@ -140,12 +140,7 @@ def note_other_code(out: Path) -> None:
         return
     if not isinstance(recorded, dict):
         return
-    now, before = code_identity(), recorded.get("code")
-    if not isinstance(before, dict):
-        shown = f"code not recorded -> commit {str(now['commit'])[:12]}"
-    else:
-        changed = [k for k in now if k != "dirty" and before.get(k) != now[k]]
-        shown = ", ".join(f"{k} {str(before.get(k))[:12]} -> {str(now[k])[:12]}" for k in changed)
+    shown = code_changes([recorded.get("code")])
     if shown:
         print(
             f"note: --resume: {out} was started by other code ({shown}); its epochs so far were trained by "

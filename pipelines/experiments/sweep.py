@@ -213,23 +213,11 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     its episodes are kept, and a table over both mixes two codebases. Not refused: a resume after a change
     that leaves results alone (documentation, a benchmark) is the common case. Uncommitted changes are
     recorded ("dirty") but cannot be compared, so they alone say nothing."""
-    from pipelines.version import code_identity
+    from pipelines.version import code_changes
 
-    now = code_identity()
-    # what differs from this run's code, as the first earlier run that differs had it
-    changed: dict[str, Any] = {}
-    unrecorded = False
-    for run in runs:
-        before = run.get("code") if isinstance(run, dict) else None
-        if not isinstance(before, dict):  # a run from before the code was recorded (4a16d16): code unknown,
-            unrecorded = True  # and results changed through many commits since, so it is no same code
-            continue
-        for k in now:
-            if k != "dirty" and before.get(k) != now[k]:
-                changed.setdefault(k, before.get(k))
-    shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
-    if unrecorded:
-        shown = f"code not recorded -> commit {str(now['commit'])[:12]}" + (f", {shown}" if shown else "")
+    # a run from before the code was recorded (4a16d16) has none: code unknown, and results changed through
+    # many commits since, so it is no same code
+    shown = code_changes(run.get("code") if isinstance(run, dict) else None for run in runs)
     if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
         print(
             f"note: {out} holds episodes made by other code ({shown}); they are kept and counted with this "
