@@ -36,13 +36,10 @@ def primary_errors(predictor, xy: np.ndarray, tracked: int | None, fill: str) ->
     """ADE and FDE (m) of agent 0 in one scene ``(obs_len + H, N, 2)`` (NaN = absent), tracked for its last
     ``tracked`` observed positions (None: all), the rows before filled by ``fill``."""
     from predictors.backfill import backfill
+    from predictors.evaluate import observed_history
 
     length = predictor.obs_len
-    observed = xy[:length]
-    seen = ~np.isnan(observed).any(axis=-1)
-    agents = np.flatnonzero(seen.any(axis=0))
-    mask = seen[:, agents].copy()
-    history = np.where(mask[..., None], observed[:, agents], 0.0)
+    history, mask, agents = observed_history(xy, length)  # as `crowdmpc evaluate` hands a scene over
     if tracked is not None:
         gap = length - tracked
         if fill == "standing":

@@ -55,11 +55,7 @@ def predict_scene(predictor: Predictor, xy: np.ndarray, config: EvalConfig, rng:
     sees only those, all as humans, and ``prediction`` is ``(pred_len, len(agents), 2)`` in that order.
     """
     check_dataset_predictor(predictor)
-    observed = xy[: config.obs_len]
-    seen = ~np.isnan(observed).any(axis=-1)
-    agents = np.flatnonzero(seen.any(axis=0))  # an agent that only appears later cannot be predicted
-    mask = seen[:, agents]
-    history = np.where(mask[..., None], observed[:, agents], 0.0)
+    history, mask, agents = observed_history(xy, config.obs_len)
     humans = np.arange(len(agents))
     prediction = np.asarray(predictor.rollout(history, mask, None, humans, horizon=config.pred_len))
     expected = (config.pred_len, len(agents), 2)
@@ -73,6 +69,16 @@ def predict_scene(predictor: Predictor, xy: np.ndarray, config: EvalConfig, rng:
             predictor.sample(history, mask, None, humans, config.pred_len, config.top_k, rng)
         )
     return prediction, agents, samples
+
+
+def observed_history(xy: np.ndarray, obs_len: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(history, mask, agents)`` of a scene ``(T, N, 2)`` (NaN = absent): its first ``obs_len`` steps of the
+    agents observed in them (``agents``, the primary first), absent entries 0 with ``mask`` False."""
+    observed = xy[:obs_len]
+    seen = ~np.isnan(observed).any(axis=-1)
+    agents = np.flatnonzero(seen.any(axis=0))  # an agent that only appears later cannot be predicted
+    mask = seen[:, agents]
+    return np.where(mask[..., None], observed[:, agents], 0.0), mask, agents
 
 
 @dataclass(frozen=True)
