@@ -85,6 +85,19 @@ class Observation:
         return len(self.human_positions)
 
 
+def _warn_pairs(pairs: list[tuple[str, str, float]], what: str, radius: float, meaning: str) -> None:
+    """A LayoutWarning, to ``reset_layout``'s caller, naming how many ``pairs`` (``crowdsim.scenarios``'
+    ``(name, name, distance)``) of ``what`` are closer than ``2 radius``, what that means, and the first."""
+    if pairs:
+        first, second, distance = pairs[0]
+        warnings.warn(
+            f"layout: {len(pairs)} pair(s) of {what} closer than 2 x radius = {2 * radius:g} m{meaning}, "
+            f"e.g. {first} and {second} {distance:.3g} m apart",
+            LayoutWarning,
+            stacklevel=3,
+        )
+
+
 class CrowdEnv:
     """ORCA humans and double-integrator robots (module docstring). Not thread-safe; one episode at a time."""
 
@@ -123,27 +136,15 @@ class CrowdEnv:
         Robot goals closer than ``2 radius`` warn too: robots standing on both would overlap.
         """
         layout = checked_layout(layout)
-        contact = 2 * self.config.radius
-        overlaps = start_overlaps(layout, self.config.radius)
-        if overlaps:
-            first, second, distance = overlaps[0]
-            warnings.warn(
-                f"layout: {len(overlaps)} pair(s) of agents start closer than 2 x radius = {contact:g} m, in "
-                f"contact from the first step, e.g. {first} and {second} {distance:.3g} m apart",
-                LayoutWarning,
-                stacklevel=2,
-            )
+        radius = self.config.radius
+        _warn_pairs(
+            start_overlaps(layout, radius), "agents start", radius, ", in contact from the first step"
+        )
         # The simulator has no robot-robot contact and the metrics count robot-human contact only: robots
         # driven onto one goal "succeeded" inside each other, and an MPC keeping d_min timed out unexplained.
-        shared = robot_goal_overlaps(layout, self.config.radius)
-        if shared:
-            first, second, distance = shared[0]
-            warnings.warn(
-                f"layout: {len(shared)} pair(s) of robot goals closer than 2 x radius = {contact:g} m: "
-                f"robots on both goals would overlap, e.g. {first} and {second} {distance:.3g} m apart",
-                LayoutWarning,
-                stacklevel=2,
-            )
+        _warn_pairs(
+            robot_goal_overlaps(layout, radius), "robot goals", radius, ": robots on both goals would overlap"
+        )
         return self._start(layout)
 
     def _start(self, layout: Layout) -> Observation:
