@@ -161,12 +161,19 @@ class MPCController:
         seconds: dict[tuple[int, int], float] = {}
         for m, n in sizes:
             t0 = time.perf_counter()
-            self.solver(m, n).build_all()
-            if self.spec.coupling == "nlp" or self._twin(n, m) is not None:
-                history = standing_history(m + n, self.model.obs_len)
-                self.model.encode(history, np.ones(history.shape[:2], dtype=bool), np.arange(m, m + n))
+            self._build(m, n, standing_history(m + n, self.model.obs_len)).build_all()
             seconds[(m, n)] = time.perf_counter() - t0
         return seconds
+
+    def _build(self, n_robots: int, n_humans: int, history: np.ndarray) -> CMPC | DMPC | CoupledCMPC:
+        """The solver of this size, the predictor's twin and its exported encoder, which its first call
+        builds (80 ms for social_lstm_eth), by encoding ``history``: the context is memoised for a step that
+        encodes the same past."""
+        solver = self.solver(n_robots, n_humans)
+        if self.spec.coupling == "nlp" or self._twin(n_humans, n_robots) is not None:
+            mask = np.ones(history.shape[:2], dtype=bool)
+            self.model.encode(history, mask, np.arange(n_robots, n_robots + n_humans))
+        return solver
 
     def _twin(self, n_humans: int, n_robots: int) -> BufferedFunction | None:
         """The predictor's CasADi twin for this size, or None for a predictor without one (the oracle)."""
@@ -224,14 +231,10 @@ class MPCController:
                 f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
             )
         check_history(obs)
-        history, mask = predictor_history(obs, self.model.obs_len)
+        history, _ = predictor_history(obs, self.model.obs_len)
         self._observe(obs)
-        # Build now, not inside the first timed step: the solver, the twin, and the exported encoder, which
-        # its first call builds (80 ms for social_lstm_eth); that call's context is memoised for the first
-        # step, which encodes the same past.
-        self.solver(obs.n_robots, obs.n_humans)
-        if self.spec.coupling == "nlp" or self._twin(obs.n_humans, obs.n_robots) is not None:
-            self.model.encode(history, mask, np.arange(obs.n_robots, obs.n_robots + obs.n_humans))
+        # Build now, not inside the first timed step; the first step encodes the same past.
+        self._build(obs.n_robots, obs.n_humans, history)
         self.memory.reset()
         if self.stall is not None:
             self.stall.reset()
