@@ -29,6 +29,8 @@ EPILOG = """examples:
   crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
   crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
+  crowdmpc sweep --experiment sensing --episodes-per-cell 100 --out runs/sensing
+  crowdmpc sweep --experiment table2 --sensor-range 3 --humans 7 --episodes-per-cell 100 --out runs/t2-3m
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
 figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle; by
@@ -37,10 +39,12 @@ coupling (CMPC by iterated best response vs the coupled NLP, exact and first-ord
 (CMPC without margins and with conformal margins at alpha 0.5 .. 0.01, 7 humans); conventions (simulation
 profile x robot visibility x margins, 7 humans); baselines (straight and ORCA robots, a quick check);
 controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight; --controllers for any
-list, controller plugins included).
+list, controller plugins included); sensing (CMPC given every human vs behind a sensor of 4, 3 and 2 m
+with track lengths, and 3 m without, 7 humans).
 --margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling;
 --margins to the methods of controllers that plan with a predictor (cmpc, dmpc; orca and straight plan
-with none, and run without margins), --profile and --visibility to all of them.
+with none, and run without margins), --profile and --visibility to all of them. --sensor-range puts every
+method's controller behind a sensor (all but the sensing experiment).
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
 section, `crowdmpc config show` lists every key) and --set SECTION.KEY=VALUE items: defaults < the file <
@@ -80,6 +84,8 @@ def _options() -> tuple[Option, ...]:
         Option("margins", "controller", "margins", "--margins"),
         Option("profile", "env", "profile", "--profile"),
         Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
+        Option("sensor_range", "simulate", "sensor_range", "--sensor-range"),
+        Option("no_sensor_tracks", "simulate", "sensor_tracks", "--no-sensor-tracks", lambda v: not v),
     )
 
 
@@ -201,6 +207,19 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         "--visibility",
         choices=VISIBILITY,
         help="whether the humans' ORCA sees the robots (default visible, as the authors' fork)",
+    )
+    p.add_argument(
+        "--sensor-range",
+        type=float,
+        metavar="M",
+        help="every method's controller sees only the humans within M metres of some robot, as a tracker "
+        "gives them ([simulate] sensor_range; default: every human; the sensing experiment compares ranges)",
+    )
+    p.add_argument(
+        "--no-sensor-tracks",
+        action="store_true",
+        default=None,
+        help="with --sensor-range: the tracker reports no track lengths",
     )
 
 

@@ -150,6 +150,8 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
         )
         key = "profile" if cfg.chosen("env", "profile") else "robots_visible"
         experiment = _applied(cfg, "env", key, experiment.with_world, world)
+    if cfg.chosen("simulate", "sensor_range") or cfg.chosen("simulate", "sensor_tracks"):
+        experiment = _with_sensing(cfg, experiment)
     for key in ("controller", "coupling", "flocking", "record_iterations"):
         if cfg.chosen("controller", key):
             experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
@@ -200,6 +202,7 @@ _OPTION_WORDS: Final[Mapping[str, str]] = {
     "--controllers": "[sweep] controllers",
     "--predictor": "[controller] predictor",
     "--margins": "[controller] margins",
+    "--sensor-range and --no-sensor-tracks": "[simulate] sensor_range and sensor_tracks",
 }
 
 
@@ -284,12 +287,11 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
 def check_world(cfg: RunConfig) -> None:
     """A sweep's cells run a named profile (``World``: profile and visibility) on the sweep's own crowds:
     refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), [scenario] humans
-    and name (``_check_scenario``) and a sensor range (``_check_sensing``), rather than ignore them."""
+    and name (``_check_scenario``), rather than ignore them."""
     from crowdsim.profiles import PROFILES
     from pipelines.config.schema import ENV_PROFILE_KEYS
 
     _check_scenario(cfg)
-    _check_sensing(cfg)
     why = (
         "a sweep's cells run a named profile ([env] profile, robots_visible); other [world], [env] and "
         "[env.orca] values apply to simulate only"
@@ -342,15 +344,18 @@ def _check_scenario(cfg: RunConfig) -> None:
             raise cfg.error("scenario", key, f"{value!r}: [scenario] {key} applies to simulate only; {sweep}")
 
 
-def _check_sensing(cfg: RunConfig) -> None:
-    """Refuse [simulate] sensor_range and sensor_tracks, chosen: a sweep's controllers see every human, and
-    a sweep run as if behind a sensor would record full-observation episodes under a sensor's name."""
-    for key in ("sensor_range", "sensor_tracks"):
-        if cfg.chosen("simulate", key):
-            value = cfg.values["simulate"][key]
-            raise cfg.error(
-                "simulate",
-                key,
-                f"{value!r}: [simulate] {key} applies to simulate only; a sweep's controllers see every "
-                "human (benchmarks/sensor_range.py compares sensor ranges on paired episodes)",
-            )
+def _with_sensing(cfg: RunConfig, experiment: Experiment) -> Experiment:
+    """Every method behind the sensor of [simulate] sensor_range (--sensor-range), as simulate runs it."""
+    sensed = cfg.simulate.sensor_range
+    if sensed is None:
+        if cfg.simulate.sensor_tracks:  # the default, given: nothing to apply
+            return experiment
+        raise cfg.error(
+            "simulate",
+            "sensor_tracks",
+            "track lengths are a sensor's; give --sensor-range M too (or [simulate] sensor_range)",
+        )
+    key = "sensor_range" if cfg.chosen("simulate", "sensor_range") else "sensor_tracks"
+    return _applied(
+        cfg, "simulate", key, lambda r: experiment.with_sensing(r, cfg.simulate.sensor_tracks), sensed
+    )

@@ -156,13 +156,39 @@ class Experiment:
         return replace(self, methods=methods)
 
     def with_world(self, world: World) -> Experiment:
-        """Every cell simulated under ``world`` (profile and visibility)."""
-        if self.method_worlds:
+        """Every cell simulated under ``world``'s profile and visibility, each keeping what it senses."""
+        if any(
+            self._conventions(own) != self._conventions(self.world) for own in self.method_worlds.values()
+        ):
             raise PipelineError(
                 f"experiment {self.name!r} fixes each method's profile and visibility; --profile and "
                 "--visibility do not apply"
             )
-        return replace(self, world=world)
+
+        def conventions(own: World) -> World:
+            return replace(own, profile=world.profile, visibility=world.visibility)
+
+        worlds = {label: conventions(own) for label, own in self.method_worlds.items()}
+        return replace(self, world=conventions(self.world), method_worlds=MappingProxyType(worlds))
+
+    def with_sensing(self, sensor_range: float, sensor_tracks: bool = True) -> Experiment:
+        """Every method's controller behind a sensor of ``sensor_range`` m, track lengths given or not
+        (``World.sensing``): e.g. Table II for robots that see 3 m around them."""
+        if any(own.sensor_range != self.world.sensor_range for own in self.method_worlds.values()):
+            raise PipelineError(
+                f"experiment {self.name!r} compares sensor ranges across its methods; --sensor-range and "
+                "--no-sensor-tracks do not apply"
+            )
+        world = self.world.sensing(sensor_range, sensor_tracks)  # refuses a range that is no distance
+        worlds = {
+            label: own.sensing(sensor_range, sensor_tracks) for label, own in self.method_worlds.items()
+        }
+        title = f"{self.title}; controllers behind a {world.sensing_label} sensor"
+        return replace(self, title=title, world=world, method_worlds=MappingProxyType(worlds))
+
+    @staticmethod
+    def _conventions(world: World) -> tuple[str, str]:
+        return world.profile, world.visibility
 
     def cells(self, humans: Sequence[int] | None = None, n_robots: int = PAPER_ROBOTS) -> tuple[Cell, ...]:
         """Cells in table order: for each number of humans, smallest first, every method. Sorted: ``--humans
@@ -278,6 +304,23 @@ def _convention_methods() -> tuple[tuple[tuple[str, ControllerSpec], ...], Mappi
 
 _CONVENTION_METHODS, _CONVENTION_WORLDS = _convention_methods()
 
+# What a robot that sees a few metres loses: CMPC with the paper's predictor given every human, then only
+# those within each range of some robot (each from when it came into view, its track length given, so the
+# MPC extends a short track back: predictors.backfill), and at the middle range without the track lengths.
+SENSOR_RANGES: Final[tuple[float, ...]] = (4.0, 3.0, 2.0)
+UNTRACKED_RANGE: Final[float] = 3.0
+
+
+def _sensing_methods() -> tuple[tuple[tuple[str, ControllerSpec], ...], Mapping[str, World]]:
+    spec = ControllerSpec("cmpc", PAPER_PREDICTOR)
+    worlds = {f"{r:g} m": World().sensing(r) for r in SENSOR_RANGES}
+    worlds[f"{UNTRACKED_RANGE:g} m untracked"] = World().sensing(UNTRACKED_RANGE, sensor_tracks=False)
+    labels = ("full", *worlds)
+    return tuple((label, spec) for label in labels), MappingProxyType(worlds)
+
+
+_SENSING_METHODS, _SENSING_WORLDS = _sensing_methods()
+
 
 EXPERIMENTS: dict[str, Experiment] = {
     "table2": Experiment(
@@ -346,6 +389,14 @@ EXPERIMENTS: dict[str, Experiment] = {
         humans=ABLATION_HUMANS,
         method_worlds=_CONVENTION_WORLDS,
         margins_swappable=False,
+    ),
+    "sensing": Experiment(
+        name="sensing",
+        title="Sensing: CMPC given every human vs behind a sensor of each range (a tracker's humans, with "
+        "their track lengths, and without them at the middle range), the paper's predictor",
+        methods=_SENSING_METHODS,
+        humans=ABLATION_HUMANS,
+        method_worlds=_SENSING_WORLDS,
     ),
     "baselines": Experiment(
         name="baselines",

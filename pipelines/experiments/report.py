@@ -116,7 +116,9 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
                 # Absent from records written before them: empty cells, not a failed report.
                 **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
                 **{k: m.get(k) for k in BETWEEN_STEPS},
-                **{k: r.get(k) for k in ("margins", "profile", "visibility")},
+                **{
+                    k: r.get(k) for k in ("margins", "profile", "visibility", "sensor_range", "sensor_tracks")
+                },
                 "step_median_ms": s["median_ms"],
                 "step_p95_ms": s["p95_ms"],
                 "step_max_ms": s["max_ms"],

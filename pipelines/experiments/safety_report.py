@@ -134,25 +134,38 @@ def world_columns(cell: Cell) -> dict[str, str]:
         "margins": cell.spec.margins.label,
         "profile": cell.world.profile,
         "visibility": cell.world.visibility,
+        "sensing": cell.world.sensing_label,
     }
 
 
+def world_row_label(cells: Sequence[Cell]) -> str:
+    """The table's row of each column's conventions; sensing named only where some column senses, so that
+    the tables of full observation read as before sensing existed."""
+    sensed = any(c.world.sensor_range is not None for c in cells)
+    return "Margins / profile / visibility" + (" / sensing" if sensed else "")
+
+
 def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
-    """The table notes' line on margins, profile and visibility, and, when they differ across the columns,
-    each column's "margins / profile / visibility" for a row of its own (else None)."""
-    worlds = [tuple(world_columns(c).values()) for c in cells]
-    margins, profiles, visibilities = (sorted(set(values)) for values in zip(*worlds, strict=True))
-    parts = (
+    """The table notes' line on margins, profile, visibility (and sensing, where some column senses), and,
+    when they differ across the columns, each column's "margins / profile / visibility" for a row of its
+    own (``world_row_label``; else None)."""
+    label = world_row_label(cells)
+    names = [name.lower() for name in label.split(" / ")]
+    worlds = [tuple(world_columns(c)[name] for name in names) for c in cells]
+    margins, profiles, visibilities, *sensings = (sorted(set(values)) for values in zip(*worlds, strict=True))
+    parts = [
         f"Margins: {margins[0]}" if len(margins) == 1 else "Margins: per column",
         f"profile {profiles[0]}" if len(profiles) == 1 else "profile per column",
         f"robots {visibilities[0]} to the humans"
         if len(visibilities) == 1
         else "robot visibility per column",
-    )
-    line = f"{parts[0]}; {parts[1]}, {parts[2]}."
+    ]
+    for sensing in sensings:
+        parts.append(f"sensor range {sensing[0]}" if len(sensing) == 1 else "sensing per column")
+    line = f"{parts[0]}; " + ", ".join(parts[1:]) + "."
     per_column = None
     if len(set(worlds)) > 1:
-        line = line[:-1] + " (row 'Margins / profile / visibility')."
+        line = line[:-1] + f" (row '{label}')."
         per_column = [" / ".join(w) for w in worlds]
     # Settings every column shares beside Table I's (a config file's guidance, stall release, ...): without
     # them a safe-crossing sweep's table read the same as one with the margins alone.

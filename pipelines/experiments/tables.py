@@ -123,7 +123,7 @@ def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> 
     ]
     world_line, worlds = safety.world_note([s.cell for s in columns])
     if worlds:
-        lines.append("| Margins / profile / visibility | " + " | ".join(worlds) + " |")
+        lines.append(f"| {safety.world_row_label([s.cell for s in columns])} | " + " | ".join(worlds) + " |")
     lines += _metric_rows(groups, columns)
     lines += _detail_rows(groups, columns)
     return _table_notes(experiment, columns, world_line) + "\n\n" + "\n".join(lines) + "\n"

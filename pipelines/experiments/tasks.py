@@ -11,7 +11,8 @@ The experiments these make up, and the registry of those the project ships, are 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
@@ -27,20 +28,50 @@ SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
 
 @dataclass(frozen=True)
 class World:
-    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility."""
+    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility, and
+    what the controller sees of it: every human, or (``sensor_range`` in m) those within that range of some
+    robot as a tracker gives them, with their track lengths unless ``sensor_tracks`` is False
+    (pipelines.loop.sensing.RangeLimited)."""
 
     profile: str = "paper"
     visibility: str = "visible"
+    sensor_range: float | None = None
+    sensor_tracks: bool = True
 
     def __post_init__(self):
         if self.profile not in PROFILES:
             raise PipelineError(f"unknown profile {self.profile!r}; choose from {sorted(PROFILES)}")
         if self.visibility not in VISIBILITY:
             raise PipelineError(f"unknown visibility {self.visibility!r}; choose from {list(VISIBILITY)}")
+        sensed = self.sensor_range
+        if sensed is not None and (
+            isinstance(sensed, bool) or not isinstance(sensed, int | float) or not 0 < sensed < math.inf
+        ):
+            raise PipelineError(f"a sensor range must be a number of metres > 0, got {sensed!r}")
+        if not isinstance(self.sensor_tracks, bool):
+            raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")
+        if not self.sensor_tracks and sensed is None:
+            raise PipelineError("sensor_tracks = false needs a sensor range: track lengths are a sensor's")
 
     @property
     def label(self) -> str:
-        return f"{self.profile}-{self.visibility}"
+        """Part of the cell key; a world that sees every human keeps the label of the sweeps before sensing,
+        so that they resume into the same cells."""
+        label = f"{self.profile}-{self.visibility}"
+        if self.sensor_range is not None:
+            label += f"-sensed{self.sensor_range:.12g}m" + ("" if self.sensor_tracks else "-notracks")
+        return label
+
+    @property
+    def sensing_label(self) -> str:
+        """What the controller sees, as the report names it: "every human", "3 m", "3 m untracked"."""
+        if self.sensor_range is None:
+            return "every human"
+        return f"{self.sensor_range:.12g} m" + ("" if self.sensor_tracks else " untracked")
+
+    def sensing(self, sensor_range: float | None, sensor_tracks: bool = True) -> World:
+        """This world seen through a sensor of ``sensor_range`` m (None: every human)."""
+        return replace(self, sensor_range=sensor_range, sensor_tracks=sensor_tracks)
 
     def env_config(self) -> EnvConfig:
         return make_env_config(self.profile, self.visibility)

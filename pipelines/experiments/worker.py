@@ -136,6 +136,9 @@ def episode_record(
         "margins": spec.margins.label,
         "profile": world.profile,
         "visibility": world.visibility,
+        # what the controller saw: null, every human; else the sensor's range (m) and whether it gave tracks
+        "sensor_range": world.sensor_range,
+        "sensor_tracks": None if world.sensor_range is None else world.sensor_tracks,
         "wall_s": wall_s,
         "cpu_s": cpu_s,
         "worker": f"{socket.gethostname()}:{os.getpid()}",
@@ -194,8 +197,15 @@ class EpisodeWorker:
         if key in self._controllers:
             self._controllers.move_to_end(key)
             return self._controllers[key]
-        env_config = task.cell.world.env_config()
-        controller = make_controller(task.cell.spec, env_config, jit=self.jit)
+        cell = task.cell
+        env_config = cell.world.env_config()
+        controller = make_controller(cell.spec, env_config, jit=self.jit)
+        if cell.world.sensor_range is not None:
+            from pipelines.loop.episode import behind_sensor
+
+            controller = behind_sensor(
+                controller, cell.world.sensor_range, cell.world.sensor_tracks, cell.n_robots, cell.n_humans
+            )
         self.builds += 1
         self._controllers[key] = controller
         self._configs[key] = cell_config(controller, env_config)

@@ -209,7 +209,7 @@ def run_episodes(
         raise PipelineError(f"run_episodes: episodes must be an int >= 0, got {short_repr(episodes)}")
     controller = make_controller(spec, env_config)
     if sensor_range is not None:
-        controller = _sensing(controller, sensor_range, sensor_tracks, n_robots, n_humans)
+        controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
@@ -243,8 +243,11 @@ def run_episodes(
     return results
 
 
-def _sensing(controller: Controller, radius: float, tracks: bool, n_robots: int, n_humans: int) -> Controller:
-    """``controller`` behind a sensor of range ``radius`` (RangeLimited), an MPC's every crowd size built."""
+def behind_sensor(
+    controller: Controller, radius: float, tracks: bool, n_robots: int, n_humans: int
+) -> Controller:
+    """``controller`` behind a sensor of range ``radius`` (RangeLimited), an MPC's every crowd size up to
+    ``n_humans`` built, for ``n_robots`` robots."""
     from pipelines.loop.mpc import MPCController
     from pipelines.loop.sensing import RangeLimited
 
