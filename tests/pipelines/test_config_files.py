@@ -675,13 +675,17 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
             "episodes alternate",
         ),  # fmt: skip
         ("table2", "mpc.jit=true", "--set mpc.jit: a sweep compiles by [sweep] jit"),
-        (  # a sweep run "behind a sensor" would record full-observation episodes under the sensor's name
-            "table2",
+        (  # its columns are sensor ranges
+            "sensing",
             "simulate.sensor_range=3",
-            "--set simulate.sensor_range: 3.0: [simulate] sensor_range applies to simulate only; a sweep's "
-            "controllers see every human",
+            "--set simulate.sensor_range: experiment 'sensing' compares sensor ranges across its methods; "
+            "[simulate] sensor_range and sensor_tracks do not apply",
         ),  # fmt: skip
-        ("table2", "simulate.sensor_tracks=false", "--set simulate.sensor_tracks: False: [simulate]"),
+        (
+            "table2",
+            "simulate.sensor_tracks=false",
+            "--set simulate.sensor_tracks: track lengths are a sensor's; give --sensor-range M too",
+        ),
         (
             "table3",
             "mpc.w_floc=0",
