@@ -31,6 +31,7 @@ EPILOG = """examples:
   crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
   crowdmpc sweep --experiment sensing --episodes-per-cell 100 --out runs/sensing
   crowdmpc sweep --experiment table2 --sensor-range 3 --humans 7 --episodes-per-cell 100 --out runs/t2-3m
+  crowdmpc sweep --experiment table2 --vary mpc.d_min=0.8,0.9,1.0 --humans 7 --out runs/t2-dmin
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
 figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle; by
@@ -86,6 +87,7 @@ def _options() -> tuple[Option, ...]:
         Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
         Option("sensor_range", "simulate", "sensor_range", "--sensor-range"),
         Option("no_sensor_tracks", "simulate", "sensor_tracks", "--no-sensor-tracks", lambda v: not v),
+        Option("vary", "sweep", "vary", "--vary"),
     )
 
 
@@ -207,6 +209,12 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         "--visibility",
         choices=VISIBILITY,
         help="whether the humans' ORCA sees the robots (default visible, as the authors' fork)",
+    )
+    p.add_argument(
+        "--vary",
+        metavar="mpc.KEY=V1,V2",
+        help="a column per value of one [mpc] setting beside each method that plans with a predictor, on the "
+        "same crowds (a value that is Table I's is the cell of a sweep without --vary)",
     )
     p.add_argument(
         "--sensor-range",

@@ -155,8 +155,26 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     for key in ("controller", "coupling", "flocking", "record_iterations"):
         if cfg.chosen("controller", key):
             experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
+    return _with_mpc_settings(cfg, experiment)
+
+
+def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
+    """The [mpc] values that differ from Table I, and the varied one (--vary) in its place among them: the
+    overrides of a cell stay in the [mpc] table's order, so that a varied value's cell is the one ``--set``
+    makes (the same key, the same episodes)."""
+    from pipelines.commands.sweep_vary import varied, with_values
+
+    vary = varied(cfg)
+    order = list(cfg.values["mpc"])
     for key, value in cfg.mpc_overrides():
+        if vary is not None and order.index(vary.key) < order.index(key):
+            experiment = with_values(
+                experiment, vary, cfg.default("mpc", vary.key), cfg.label("sweep", "vary")
+            )
+            vary = None
         experiment = _with_mpc_override(cfg, experiment, key, value)
+    if vary is not None:
+        experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), cfg.label("sweep", "vary"))
     return experiment
 
 

@@ -303,6 +303,13 @@ def _sweep_keys() -> tuple[Key, ...]:
             f"the controllers experiment's columns (--controllers); unset: {', '.join(SHIPPED_CONTROLLERS)}",
             ["cmpc", "orca"],
         ),
+        Key(
+            "vary",
+            "str",
+            None,
+            "a column per value of one [mpc] setting beside each method that plans (--vary); unset: none",
+            "mpc.d_min=0.8,0.9,1.0",
+        ),
     )
 
 

@@ -181,8 +181,11 @@ class SweepSettings:
     jit: str = "auto"
     predictors: tuple[str, ...] | None = None  # the predictors experiment's list; None: the shipped one
     controllers: tuple[str, ...] | None = None  # the controllers experiment's list; None: the shipped one
+    vary: str | None = None  # "mpc.KEY=V1,V2,..": a column per value (pipelines/commands/sweep_vary.py)
 
     def __post_init__(self) -> None:
+        if self.vary is not None and not (isinstance(self.vary, str) and "=" in self.vary):
+            raise PipelineError(f"vary must read mpc.KEY=V1,V2,..., got {self.vary!r}")
         if self.experiment is not None and self.experiment not in EXPERIMENTS:
             raise PipelineError(f"experiment must be one of {sorted(EXPERIMENTS)}, got {self.experiment!r}")
         if self.out is not None and not (isinstance(self.out, str) and self.out):

@@ -1,0 +1,138 @@
+"""``sweep --vary mpc.KEY=V1,V2,..`` ([sweep] vary): a column per value of one [mpc] setting beside each
+method that plans with a predictor, on the same crowds, in one table.
+
+Each column is the cell ``--set mpc.KEY=V`` makes (its key, its episodes): a value that is Table I's adds
+nothing to the cell, whose episodes are those of the sweep without ``--vary``, so a study can extend a sweep
+already run. Every value is checked as ``--set`` checks it, with the run's other settings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, Final
+
+from pipelines.config.entries import ConfigError, Entry, Source, check_key, parse_set
+from pipelines.config.schema import SECTION_BY_NAME
+
+if TYPE_CHECKING:
+    from pipelines.config import RunConfig
+    from pipelines.experiments.cells import Experiment
+    from pipelines.experiments.paper import PaperFigures
+    from pipelines.experiments.tasks import World
+    from pipelines.loop.controllers import ControllerSpec
+
+MAX_VALUES: Final[int] = 12  # each value is a whole column of cells per method and crowd size
+
+
+@dataclasses.dataclass(frozen=True)
+class Varied:
+    """The [mpc] key a sweep varies, and its values as the MPC takes them, in the order given."""
+
+    key: str
+    values: tuple[Any, ...]
+
+
+def varied(cfg: RunConfig) -> Varied | None:
+    """[sweep] vary parsed and every value checked, or None when the run varies nothing."""
+    text = cfg.sweep.vary
+    if text is None:
+        return None
+    where = cfg.label("sweep", "vary")
+    name, _, raw = text.partition("=")
+    section, _, key = name.strip().rpartition(".")
+    if section != "mpc":
+        raise ConfigError(
+            f"{where} {text!r}: only an [mpc] setting varies (mpc.KEY=V1,V2,...); the margins, predictors, "
+            "controllers and sensor ranges have experiments of their own (safety, predictors, controllers, "
+            "sensing)"
+        )
+    check_key(f"{where} {text!r}", SECTION_BY_NAME["mpc"], key)
+    if key == "jit":
+        raise ConfigError(f"{where}: a sweep compiles by [sweep] jit (--jit), which leaves the cells alone")
+    if cfg.chosen("mpc", key):
+        raise ConfigError(f"{where} and {cfg.label('mpc', key)} both set mpc.{key}: give its values once")
+    items = [item.strip() for item in raw.split(",")]
+    if len(items) < 2 or not all(items):
+        raise ConfigError(f"{where} {text!r}: expected mpc.{key}=V1,V2,... with at least two values")
+    if len(items) > MAX_VALUES:
+        raise ConfigError(f"{where}: at most {MAX_VALUES} values, got {len(items)}")
+    values = tuple(_checked(cfg, where, key, item) for item in items)
+    repeated = next((item for i, item in enumerate(items) if values[i] in values[:i]), None)
+    if repeated is not None:
+        raise ConfigError(f"{where}: value {repeated} is given more than once")
+    return Varied(key, values)
+
+
+def _checked(cfg: RunConfig, where: str, key: str, item: str) -> Any:
+    """``item`` as the MPC takes it, checked as ``--set mpc.KEY=item`` is, with the run's other settings
+    (a d_min below the contact distance, a horizon the predictor cannot cover ...)."""
+    from pipelines.config.resolve import resolve
+
+    try:
+        entry = parse_set(f"mpc.{key}={item}")
+    except ConfigError as exc:
+        raise ConfigError(str(exc).replace(f"--set mpc.{key}", f"{where} value {item}")) from None
+    own = [
+        Entry(section, name, _as_written(cfg.values[section][name]), source)
+        for (section, name), source in cfg.sources.items()
+    ]
+    probe = resolve([*own, dataclasses.replace(entry, source=Source("cli", f"{where} value {item}"))])
+    return probe.values["mpc"][key]
+
+
+def _as_written(value: Any) -> Any:
+    """A resolved value as an entry gives it (lists were made tuples)."""
+    return list(value) if isinstance(value, tuple) else value
+
+
+def shown(value: Any) -> str:
+    """A value as a column label shows it: ``0.8``, ``8``, ``standing``, ``true``."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) -> Experiment:
+    """A method per value after each method that plans with a predictor (labelled ``CMPC d_min=1.0``, the
+    values in the order given), the others (orca, straight) once; a value that is Table I's (``table_i``)
+    adds nothing to the cell, and its columns keep the paper's figures."""
+    key, name = vary.key, experiment.name
+    labels = ", ".join(repr(label) for label, _ in experiment.methods)
+    if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
+        raise ConfigError(
+            f"{where}: the methods of experiment {name!r} ({labels}) plan with no predictor; [mpc] {key} "
+            "applies to the controllers that do"
+        )
+    if key == "w_floc" and 0 in vary.values and len({spec.flocking for _, spec in experiment.methods}) > 1:
+        raise ConfigError(
+            f"{where}: experiment {name!r} compares flocking on and off; w_floc = 0 turns it off in all its "
+            "methods"
+        )
+    methods: list[tuple[str, ControllerSpec]] = []
+    worlds: dict[str, World] = {}
+    paper: dict[tuple[str, int], PaperFigures] = {}
+    for label, spec in experiment.methods:
+        own = dict(spec.mpc_overrides)
+        if key in own and spec.kind.uses_predictor:
+            raise ConfigError(
+                f"{where}: method {label!r} of experiment {name!r} sets {key} = {own[key]!r} itself; vary "
+                "another setting"
+            )
+        columns: list[tuple[str, tuple[tuple[str, Any], ...]]] = [(label, ())]  # orca, straight: no MPC
+        if spec.kind.uses_predictor:
+            columns = [
+                (f"{label} {key}={shown(v)}", () if v == table_i else ((key, v),)) for v in vary.values
+            ]
+        for column, extra in columns:
+            methods.append((column, dataclasses.replace(spec, mpc_overrides=(*spec.mpc_overrides, *extra))))
+            if label in experiment.method_worlds:
+                worlds[column] = experiment.method_worlds[label]
+            if not extra:  # the paper's figures are of Table I's settings
+                paper |= {(column, n): fig for (of, n), fig in experiment.paper.items() if of == label}
+    title = f"{experiment.title}; {key} = {', '.join(shown(v) for v in vary.values)}"
+    return dataclasses.replace(
+        experiment,
+        title=title,
+        methods=tuple(methods),
+        method_worlds=MappingProxyType(worlds),
+        paper=MappingProxyType(paper),
+    )

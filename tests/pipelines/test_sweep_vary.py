@@ -1,0 +1,135 @@
+"""``sweep --vary mpc.KEY=V1,V2`` ([sweep] vary): a column per value of one [mpc] setting, each the cell
+``--set mpc.KEY=V`` makes, Table I's value the cell of a sweep without it."""
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands.sweep_plan import configured_experiment
+from pipelines.config import load
+from pipelines.experiments.cells import get_experiment
+
+SWEEP = ["sweep", "--humans", "5", "--episodes-per-cell", "2", "--dry-run"]
+
+
+def _plan(capsys, *options: str) -> dict[str, str]:
+    """The dry run's cells: method label -> cell key."""
+    assert main([*SWEEP, *options]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
+    return {" ".join(row[:-3]): row[-1] for row in rows}
+
+
+def test_a_column_per_value_each_the_cell_set_makes_table_is_value_the_plain_cell(tmp_path, capsys):
+    out = ["--out", str(tmp_path / "sw")]
+    varied = _plan(capsys, "--experiment", "table2", "--vary", "mpc.d_min=0.8,1.2", *out)
+    assert list(varied) == ["CMPC d_min=0.8", "CMPC d_min=1.2", "DMPC d_min=0.8", "DMPC d_min=1.2"]
+    plain = _plan(capsys, "--experiment", "table2", *out)
+    assert varied["CMPC d_min=0.8"] == plain["CMPC"]  # Table I's 0.8: a sweep's cell without --vary
+    assert (
+        varied["DMPC d_min=1.2"]
+        == _plan(capsys, "--experiment", "table2", "--set", "mpc.d_min=1.2", *out)["DMPC"]
+    )
+
+
+def test_the_varied_key_keeps_its_place_among_the_other_mpc_settings(tmp_path, capsys):
+    """Cell keys list the [mpc] overrides in the table's order: a varied value given before or after other
+    settings must make the key --set makes, or the sweep would not find the episodes already run."""
+    out = ["--out", str(tmp_path / "sw")]
+    common = ["--experiment", "table2", "--set", "mpc.horizon=8", "--set", "mpc.j_max=5", *out]
+    # w_coll and d_min come between horizon and j_max in [mpc]
+    for key, value, cell in (
+        ("w_coll", "1e5", "horizon=8-w_coll=100000.0-j_max=5"),
+        ("d_min", "1.0", "horizon=8-d_min=1.0-j_max=5"),
+    ):
+        default = str(load().default("mpc", key))
+        varied = _plan(capsys, *common, "--vary", f"mpc.{key}={default},{value}")
+        alone = _plan(capsys, *common, "--set", f"mpc.{key}={value}")
+        assert varied[f"CMPC {key}={float(value)}"] == alone["CMPC"]
+        assert alone["CMPC"] == f"cmpc-social_lstm_eth-F-ibr-{cell}-m=none-paper-visible-h5-r3"
+
+
+def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays_on_table_is_columns():
+    cfg = load(sets=["sweep.experiment=controllers", 'sweep.vary="mpc.horizon=6,8"'])
+    labels = configured_experiment(cfg).method_labels
+    assert labels == (
+        "cmpc horizon=6",
+        "cmpc horizon=8",
+        "dmpc horizon=6",
+        "dmpc horizon=8",
+        "orca",
+        "straight",
+    )
+    cfg = load(sets=["sweep.experiment=table2", 'sweep.vary="mpc.d_min=1.0,0.8"'])
+    experiment = configured_experiment(cfg)
+    assert experiment.title.endswith("; d_min = 1.0, 0.8")
+    assert {label for label, _ in experiment.paper} == {"CMPC d_min=0.8", "DMPC d_min=0.8"}
+    assert experiment.paper["CMPC d_min=0.8", 5] == get_experiment("table2").paper["CMPC", 5]
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            ["--vary", "mpc.d_min=1.0"],
+            "--vary 'mpc.d_min=1.0': expected mpc.d_min=V1,V2,... with at least two",
+        ),
+        (["--vary", "mpc.d_min=1.0,1.0"], "--vary: value 1.0 is given more than once"),
+        (["--vary", "mpc.d_min=1.0,abc"], "--vary value abc must be a finite number, got 'abc'"),
+        (["--vary", "mpc.horizon=6,8.5"], "--vary value 8.5 must be an integer >= 1, got 8.5"),
+        (["--vary", "mpc.dmin=1,2"], "--vary 'mpc.dmin=1,2': unknown key (did you mean 'd_min'?)"),
+        (["--vary", "env.dt=0.1,0.2"], "--vary 'env.dt=0.1,0.2': only an [mpc] setting varies"),
+        (["--vary", "mpc.jit=true,false"], "--vary: a sweep compiles by [sweep] jit"),
+        (
+            ["--vary", "mpc.d_min=1,2", "--set", "mpc.d_min=1.5"],
+            "--vary and --set mpc.d_min both set mpc.d_min",
+        ),
+        (["--vary", "nothing"], "--vary must read mpc.KEY=V1,V2,..., got 'nothing'"),
+        (
+            ["--vary", "mpc.d_min=0.5,1.0"],
+            "method 'CMPC d_min=0.5' of experiment 'table2': the MPC's d_min 0.5 m",
+        ),
+        (
+            ["--experiment", "baselines", "--vary", "mpc.d_min=1,2"],
+            "--vary: the methods of experiment 'baselines' ('straight', 'ORCA') plan with no predictor",
+        ),
+        (
+            ["--experiment", "table3", "--vary", "mpc.w_floc=0,10"],
+            "--vary: experiment 'table3' compares flocking on and off; w_floc = 0 turns it off",
+        ),
+        (
+            ["--experiment", "coupling", "--vary", "mpc.coupled_mode=exact,first_order"],
+            "--vary: method 'NLP exact' of experiment 'coupling' sets coupled_mode = 'exact' itself",
+        ),
+    ],
+)
+def test_a_vary_that_cannot_apply_is_one_line(tmp_path, capsys, options, message):
+    experiment = [] if "--experiment" in options else ["--experiment", "table2"]
+    assert main([*SWEEP, *experiment, *options, "--out", str(tmp_path / "sw")]) != 0
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / "sw").exists()
+
+
+def test_a_config_files_vary_is_named_by_the_file(tmp_path, capsys):
+    config = tmp_path / "run.toml"
+    config.write_text('[sweep]\nexperiment = "table2"\nvary = "mpc.horizon=6,x"\n')
+    assert main(["--config", str(config), *SWEEP, "--out", str(tmp_path / "sw")]) != 0
+    assert f"{config}: sweep.vary value x must be an integer" in capsys.readouterr().err
+
+
+def test_a_varied_sweep_reuses_the_episodes_of_table_is_value_and_runs_the_others(tmp_path, capsys):
+    out = tmp_path / "sw"
+    run = ["sweep", "--experiment", "table2", "--predictor", "constant_velocity", "--humans", "3"]
+    run += ["--episodes-per-cell", "2", "--backend", "inline", "--no-progress", "--out", str(out)]
+    assert main(run) == 0
+    assert main([*run, "--vary", "mpc.d_min=0.8,1.0"]) == 0
+    err = capsys.readouterr().err
+    assert "8/8 episodes recorded (4 this run" in err
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert sorted({r["method"] for r in records}) == ["CMPC", "CMPC d_min=1.0", "DMPC", "DMPC d_min=1.0"]
+    assert {r["config"]["mpc"]["d_min"] for r in records if r["method"].endswith("1.0")} == {1.0}
+    table = (out / "table.md").read_text()
+    assert (
+        "| Metrics \\ Methods | CMPC d_min=0.8 | CMPC d_min=1.0 | DMPC d_min=0.8 | DMPC d_min=1.0 |" in table
+    )
