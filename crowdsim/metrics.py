@@ -35,6 +35,10 @@ accelerating within a step follow a parabola, which the segment approximates).
   the sum of the radii (CrowdNav's collision, what ``crowdsim.gym_env``'s reward and ``end_on_collision``
   use).
 * path length: per robot, the length of the polyline through its positions over the whole episode.
+* robot-robot contact (not a metric of the paper, whose metrics are all robot-human): ``robot_contact``, the
+  minimum robot-robot centre distance over the recorded states (``min_distance_robots``) is below the sum of
+  the radii, two robots touching; ``robot_contact_steps`` counts the recorded states at which some pair of
+  robots is that close. Sampled at the steps as ``contact``; False and 0 with one robot.
 """
 
 from __future__ import annotations
@@ -59,7 +63,10 @@ BETWEEN_STEPS: Final[tuple[str, ...]] = (
     "collision_between_steps",
     "contact_between_steps",
 )
-ADDED_FIELDS: Final[tuple[str, ...]] = (*ADDED_COUNTS, *BETWEEN_STEPS)
+ROBOT_CONTACT: Final[tuple[str, ...]] = ("robot_contact", "robot_contact_steps")
+ADDED_FIELDS: Final[tuple[str, ...]] = (*ADDED_COUNTS, *BETWEEN_STEPS, *ROBOT_CONTACT)
+# The episode flags among the added fields: aggregate's rate of each is NaN when some episode lacks it.
+ADDED_FLAGS: Final[tuple[str, ...]] = (*BETWEEN_STEPS[1:], ROBOT_CONTACT[0])
 # as_dict writes inf as null; for these fields inf is the value without any pair of agents.
 _INF_WHEN_NULL: Final[tuple[str, ...]] = (
     "min_distance",
@@ -122,6 +129,11 @@ class EpisodeMetrics:
     min_distance_between_steps: float | None
     collision_between_steps: bool | None
     contact_between_steps: bool | None
+    # Two robots touched: min robot-robot distance < sum of radii, at the recorded states (not in the paper);
+    # and the states (rows 0..T) at which some pair did. None only when rebuilt by from_dict from a record
+    # written before them.
+    robot_contact: bool | None
+    robot_contact_steps: int | None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly (NaN and inf become None)."""
@@ -173,6 +185,16 @@ def _row_min_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if a.shape[1] == 0 or b.shape[1] == 0:
         return np.full(len(a), math.inf)
     return np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
+
+
+def _row_min_robot_distance(robot_positions: np.ndarray) -> np.ndarray:
+    """(T,) smallest centre distance at each row between two different robots of ``robot_positions (T, M,
+    2)``; inf with fewer than two robots."""
+    if robot_positions.shape[1] < 2:
+        return np.full(len(robot_positions), math.inf)
+    d = np.linalg.norm(robot_positions[:, :, None, :] - robot_positions[:, None, :, :], axis=-1)
+    iu = np.triu_indices(robot_positions.shape[1], k=1)
+    return cast(np.ndarray, d[:, iu[0], iu[1]].min(axis=1))
 
 
 def closest_approach(start: np.ndarray, end: np.ndarray) -> np.ndarray:
@@ -291,6 +313,7 @@ def episode_metrics(
     min_rh = float(row_min.min())
     swept = min_distance_between_steps(rp, hp)
     disc = discomfort_steps(traj, discomfort_horizon)
+    min_rr = _min_pair_distance(rp, rp, same=True)
     return EpisodeMetrics(
         success=success,
         travel_time=seconds(done_step) if success else math.nan,
@@ -299,7 +322,7 @@ def episode_metrics(
         discomfort=bool(disc.any()),
         timeout=not success,
         min_distance=min_rh,
-        min_distance_robots=_min_pair_distance(rp, rp, same=True),
+        min_distance_robots=min_rr,
         min_distance_humans=_min_pair_distance(hp, hp, same=True),
         path_length=tuple(float(x) for x in np.linalg.norm(np.diff(rp, axis=0), axis=-1).sum(axis=0)),
         reach_times=reach_times,
@@ -310,6 +333,8 @@ def episode_metrics(
         min_distance_between_steps=swept,
         collision_between_steps=swept < collision_distance,
         contact_between_steps=swept < 2.0 * traj.radius,
+        robot_contact=min_rr < 2.0 * traj.radius,
+        robot_contact_steps=int((_row_min_robot_distance(rp) < 2.0 * traj.radius).sum()),
     )
 
 
@@ -324,7 +349,8 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
     the states at which the condition holds over all states evaluated, ``100 sum(x_steps) / sum(n_steps +
     1)``; NaN when some episode lacks the count (rebuilt from an older record). The between-step rates
     (``collision_between_steps_rate`` / ``_count``, the same for contact) are NaN, with a NaN count, when
-    some episode lacks the field.
+    some episode lacks the field; so are ``robot_contact_rate`` / ``_count`` (two robots touched, not a
+    metric of the paper) and ``robot_contact_step_freq`` (its states, as the per-step frequencies above).
     """
     if not metrics:
         raise SimulationError("aggregate needs at least one episode, got an empty list")
@@ -335,7 +361,7 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
         flags = [bool(getattr(m, name)) for m in metrics]
         out[f"{name}_rate"] = _rate(flags)
         out[f"{name}_count"] = sum(flags)
-    for name in BETWEEN_STEPS[1:]:  # the two flags
+    for name in ADDED_FLAGS:
         values = [getattr(m, name) for m in metrics]
         known = all(v is not None for v in values)
         out[f"{name}_rate"] = _rate([bool(v) for v in values]) if known else math.nan
@@ -346,7 +372,7 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
     out["min_distance_min"] = float(np.min(min_d))
     out["min_distance_median"] = float(np.median(min_d))
     states = sum(m.n_steps + 1 for m in metrics)
-    for name in ("collision", "contact", "discomfort"):
+    for name in ("collision", "contact", "discomfort", "robot_contact"):
         counts = [getattr(m, f"{name}_steps") for m in metrics]
         missing = any(c is None for c in counts)
         out[f"{name}_step_freq"] = math.nan if missing else 100.0 * sum(counts) / states
