@@ -154,6 +154,8 @@ METRIC_KINDS: Final[dict[str, str]] = {
     **dict.fromkeys(("collision_steps", "contact_steps"), "count?"),  # absent from records before them
     "min_distance_between_steps": "number?",  # these three too
     **dict.fromkeys(("collision_between_steps", "contact_between_steps"), "bool?"),
+    "robot_contact": "bool?",  # robot-robot contact (not in the paper): absent from records before it
+    "robot_contact_steps": "count?",
 }
 SOLVER_KINDS: Final[dict[str, str]] = {
     **dict.fromkeys(("steps", "fallback_steps"), "count"),

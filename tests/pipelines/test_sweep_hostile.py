@@ -120,6 +120,8 @@ def test_the_records_a_sweep_writes_pass_the_check(good):
         (lambda r: r["metrics"].update(contact_steps="3"), "'contact_steps' is not a non-negative"),
         (lambda r: r["metrics"].update(collision_between_steps="yes"), "_between_steps' is not a boolean"),
         (lambda r: r["metrics"].update(min_distance_between_steps="0.5"), "_steps' is not a finite number"),
+        (lambda r: r["metrics"].update(robot_contact="yes"), "'robot_contact' is not a boolean"),
+        (lambda r: r["metrics"].update(robot_contact_steps=-1), "'robot_contact_steps' is not a non-neg"),
         (lambda r: r["solver"].update(median_ms="abc"), "solver 'median_ms' is not a finite number or null"),
         (lambda r: r.update(solver="fast"), "not an episode record"),
         (lambda r: r.pop("wall_s"), "record's 'wall_s' is not a finite number"),
@@ -131,6 +133,7 @@ def test_the_records_a_sweep_writes_pass_the_check(good):
     ],
     ids=["time-string", "success-string", "collision-int", "distance-bool", "distance-nan", "time-inf",
          "path-strings", "steps-float", "count-string", "between-string", "between-distance-string",
+         "robot-contact-string", "robot-contact-steps-negative",
          "solver-string-time", "solver-string", "no-wall-time", "seed-null", "seed-string", "seed-float",
          "scenario-list", "scenario-null"],
 )  # fmt: skip
@@ -156,8 +159,8 @@ def test_the_report_refuses_a_tampered_metric_in_one_line(good, tmp_path, capsys
 def test_missing_counts_and_null_times_as_the_writer_writes_them_pass(good, tmp_path):
     def older(record):
         added = ("min_distance_between_steps", "collision_between_steps", "contact_between_steps")
-        for name in ("collision_steps", "contact_steps", *added):
-            record["metrics"].pop(name)  # records written before the counts and the between-step figures
+        for name in ("collision_steps", "contact_steps", *added, "robot_contact", "robot_contact_steps"):
+            record["metrics"].pop(name)  # records from before the counts, between-step figures, robot contact
         record["metrics"].update(travel_time=None, min_distance_robots=None, reach_times=[None])
 
     _damage(good, tmp_path, older)
