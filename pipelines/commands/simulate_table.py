@@ -77,6 +77,12 @@ def format_table(
         ("collision between steps", rate("collision_between_steps")),
         ("contact between steps", rate("contact_between_steps")),  # what ends a gym episode on contact
         ("discomfort", rate("discomfort")),
+        # Not a metric of the paper (its metrics are all robot-human): two robots touched (crowdsim.metrics).
+        (
+            "robot-robot contact",
+            f"{rate('robot_contact')}, {_fmt(summary.get('robot_contact_step_freq'), ' %')} of states: two "
+            f"robots closer than {2 * radius:g} m (not in the paper)",
+        ),
         (
             "per step",
             f"collision {_fmt(summary.get('collision_step_freq'), ' %')}, contact "

@@ -187,3 +187,45 @@ def test_the_nan_row_does_not_say_every_such_step_fell_back():
     summary["fallback_steps"] = 0
     row = next(line for line in format_table(summary, "h").splitlines() if "NaN" in line)
     assert "fell back:" not in row and "steps fell back" not in row
+
+
+SWAP = "tests.plugins.toy_controller:SwapGoals"  # two robots heading for each other's goal cross halfway
+
+
+def test_the_summary_shows_robot_robot_contact(tmp_path, capsys, monkeypatch):
+    """Two robots that touched each other were counted as nothing: the metrics were all robot-human, and an
+    episode of robots passing 0.24 m apart read as a clean success. The row is not one of the paper's."""
+    from pipelines.loop import spec as registry
+
+    monkeypatch.setattr(registry, "_PLUGINS", {})
+    monkeypatch.delenv(registry.PLUGINS_ENV, raising=False)
+    out = tmp_path / "swap.json"
+    argv = ["--plugin", SWAP, "simulate", "--controller", SWAP, "--humans", "0", "--robots", "2",
+            "--episodes", "1", "--no-progress", "--json", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    (row,) = [line for line in capsys.readouterr().out.splitlines() if "robot-robot contact" in line]
+    m = json.loads(out.read_text())["episodes"][0]["metrics"]
+    assert m["robot_contact"] and m["robot_contact_steps"] > 0 and m["min_distance_robots"] < 0.6
+    states = m["n_steps"] + 1  # the row's frequency: the touching states of all states
+    assert row.split() == ["robot-robot", "contact", "100.0", "%", "(1/1),",
+                           f"{100 * m['robot_contact_steps'] / states:.2f}", "%", "of", "states:", "two",
+                           "robots", "closer", "than", "0.6", "m", "(not", "in", "the", "paper)"]  # fmt: skip
+    summary = json.loads(out.read_text())["summary"]
+    assert (summary["robot_contact_count"], summary["robot_contact_rate"]) == (1, 100.0)
+    assert (summary["contact_count"], summary["success_count"]) == (0, 0)  # no human; none at its own goal
+
+
+def test_the_robot_contact_row_reads_n_a_for_older_records():
+    """A summary over records from before the field (aggregate's NaN) prints n/a, not 0 %."""
+    from pipelines.commands.simulate_table import format_table
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import run_episodes, summarize
+
+    summary = summarize(run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle",
+                                     n_humans=0, n_robots=3, progress=False))  # fmt: skip
+    (row,) = [line for line in format_table(summary, "h").splitlines() if "robot-robot" in line]
+    assert "  0.0 %  (0/1), 0.00 % of states: two robots closer than 0.6 m" in row  # 1 m apart, a row of 3
+    summary |= {"robot_contact_rate": float("nan"), "robot_contact_count": float("nan")}
+    summary["robot_contact_step_freq"] = float("nan")
+    (row,) = [line for line in format_table(summary, "h").splitlines() if "robot-robot" in line]
+    assert row.split()[2:6] == ["n/a,", "n/a", "of", "states:"]

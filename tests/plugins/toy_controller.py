@@ -8,6 +8,7 @@ is shorter; the acceleration that reaches it in one step is clipped to the bound
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from typing import Any
@@ -125,3 +126,14 @@ class HiddenPredictor(StraightLine):
 
     name = "hidden_predictor"
     predictor = "constant_velocity"  # type: ignore[assignment]
+
+
+class SwapGoals(StraightLine):
+    """Heads each robot for the goal of the robot at the other end of the team (robot ``i`` for goal
+    ``M - 1 - i``): two robots side by side cross each other's path halfway, blind to each other, and touch
+    (robot-robot contact); none reaches its own goal."""
+
+    name = "swap_goals"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        return super().act(dataclasses.replace(obs, robot_goals=obs.robot_goals[::-1]))
