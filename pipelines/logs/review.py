@@ -256,6 +256,7 @@ def _format_totals(t: dict[str, Any]) -> str:
             rates,
             "between steps (straight motion within each step): "
             + ", ".join(_between_steps_rate(t, name, n) for name in ("collision", "contact")),
+            _robot_contact(t, n),
             f"travel time {_fmt(t['travel_time_mean'])} s mean over successes "
             f"(std {_fmt(t['travel_time_std'])} s); path length {_fmt(t['path_length_mean'])} m per robot",
             f"min robot-human distance {_fmt(t['min_distance_mean'])} m mean, "
@@ -276,6 +277,18 @@ def _between_steps_rate(t: dict[str, Any], name: str, n: int) -> str:
     if rate is None or hits is None:
         return f"{name} n/a (metrics recorded before the between-step figures)"
     return f"{name} {rate:.1f} % ({hits}/{n})"
+
+
+def _robot_contact(t: dict[str, Any], n: int) -> str:
+    """Robots touching each other (crowdsim.metrics' ``robot_contact``, not a metric of the paper): episodes
+    and states; n/a when some run's metrics predate the field."""
+    rate, hits, states = (t.get(f"robot_contact_{k}") for k in ("rate", "count", "step_freq"))
+    figures = (
+        "n/a (metrics recorded before it)" if rate is None or hits is None else f"{rate:.1f} % ({hits}/{n})"
+    )
+    if states is not None:
+        figures += f", {states:.2f} % of states"
+    return f"robot-robot contact (two robots touching, not in the paper): {figures}"
 
 
 def _aggregate_metrics(recorded: list[dict[str, Any]]) -> tuple[dict[str, Any], list[int]]:

@@ -611,3 +611,60 @@ def test_a_recording_shows_itself_in_one_short_line(runs):
         f"Recording({str(runs[0].path)!r}, {rec.label!r}, {messages} messages on {len(rec.messages)} topics, "
         "complete, 0 problems)"
     )
+
+
+def _swap_sides(out_dir) -> None:
+    """Two straight-line robots swapping sides 0.24 m apart sideways, no human, recorded into ``out_dir``."""
+    import gymnasium as gym
+
+    import crowdsim
+    from crowdsim.env import EnvConfig
+    from crowdsim.scenarios import Layout
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.gym_loop import run_gym_episode
+
+    config = EnvConfig()
+    env = gym.make(crowdsim.ENV_ID, n_humans=0, n_robots=2, config=config)
+    layout = Layout(
+        robot_starts=[[-4.0, 0.12], [4.0, -0.12]],
+        robot_goals=[[4.0, 0.12], [-4.0, -0.12]],
+        human_starts=[],
+        human_goals=[],
+    )
+    controller = make_controller(ControllerSpec("straight"), config)
+    with McapEpisodeRecorder(out_dir) as recorder:
+        run_gym_episode(controller, env, seed=0, options={"layout": layout}, observers=[recorder])
+
+
+def test_folder_totals_say_when_robots_touched(tmp_path, capsys):
+    """Two robots passing 0.34 m apart (sampled; sum of the radii 0.6 m) reviewed as a clean success: the
+    rates were all robot-human. The totals say it now, marked as not a metric of the paper."""
+    _swap_sides(tmp_path)
+    (path,) = tmp_path.glob("*.mcap")
+    m = summarize(read_recording(path))["metrics"]
+    assert m["success"] and m["robot_contact"] and m["min_distance_robots"] < 0.6
+    assert (m["robot_contact_steps"], m["n_steps"]) == (1, 21)  # one state of 22 closer than 0.6 m
+    assert main(["review", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "\nrobot-robot contact (two robots touching, not in the paper): 100.0 % (1/1), 4.55 % of states\n"
+        in out
+    )
+
+
+def test_robot_contact_reads_n_a_for_recordings_before_it(runs):
+    from pipelines.logs.review import aggregate_table
+
+    summaries = [summarize(read_recording(r.path)) for r in runs]
+    text, totals = aggregate_table(summaries, [])
+    assert (
+        "robot-robot contact (two robots touching, not in the paper): 0.0 % (0/2), 0.00 % of states" in text
+    )
+    for s in summaries:
+        del s["metrics"]["robot_contact"], s["metrics"]["robot_contact_steps"]
+    text, totals = aggregate_table(summaries, [])
+    assert (
+        "robot-robot contact (two robots touching, not in the paper): n/a (metrics recorded before it)"
+        in text
+    )
+    assert totals["robot_contact_rate"] is None and totals["contact_count"] == 0  # the others still count
