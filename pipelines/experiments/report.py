@@ -2,7 +2,7 @@
 
 ``write_report`` writes them all into a sweep's directory: cells.csv (a row per cell: the paper's metrics with
 their 95% intervals, our safety figures, among them the collision rate between steps, solver figures, the
-paper's figures) and episodes.csv (a row per episode)
+paper's figures; the robot-robot contact rate, not in the paper) and episodes.csv (a row per episode)
 from here, table.md from pipelines.experiments.tables, a plot per outcome from
 pipelines.experiments.report_plots (``OUTCOME_vs_humans.png``, or ``OUTCOME_by_method.png`` at one crowd
 size), min_distance_hist.csv from pipelines.experiments.safety_report and the safety plots from
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-from crowdsim.metrics import BETWEEN_STEPS
+from crowdsim.metrics import BETWEEN_STEPS, ROBOT_CONTACT
 from pipelines.experiments import safety_plots
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Experiment
@@ -68,7 +68,7 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "min_distance_mean": s.min_distance_mean,
             "min_distance_median": s.min_distance_median,
             **{f"{k}_step_freq": getattr(s, f"{k}_step_freq") for k in safety.STEP_COUNTS},
-            **_between_steps_columns(s),
+            **_added_flag_columns(s),
             "step_median_ms": s.step_median_ms,
             "step_p95_ms": s.step_p95_ms,
             "step_mean_ms": s.step_mean_ms,
@@ -80,11 +80,12 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
     return rows
 
 
-def _between_steps_columns(s: CellSummary) -> dict[str, Any]:
-    """cells.csv's collision and contact rates between steps, as the paper's rates are written: count, %,
-    95% Wilson interval; empty when some record lacks the field."""
+def _added_flag_columns(s: CellSummary) -> dict[str, Any]:
+    """cells.csv's collision and contact rates between steps and robot-robot contact rate (not in the
+    paper), as the paper's rates are written: count, %, 95% Wilson interval; empty when some record lacks the
+    field."""
     columns: dict[str, Any] = {}
-    for name, count in s.between_steps_counts.items():
+    for name, count in s.added_flag_counts.items():
         rate = None if count is None else Rate(count, s.episodes)
         lo, hi = (None, None) if rate is None else rate.interval
         percent = None if rate is None else rate.percent
@@ -116,6 +117,7 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
                 # Absent from records written before them: empty cells, not a failed report.
                 **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
                 **{k: m.get(k) for k in BETWEEN_STEPS},
+                **{k: m.get(k) for k in ROBOT_CONTACT},
                 **{
                     k: r.get(k) for k in ("margins", "profile", "visibility", "sensor_range", "sensor_tracks")
                 },

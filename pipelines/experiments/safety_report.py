@@ -9,7 +9,9 @@ step counts existed still report, with NaN (printed "—") for what they lack.
 Those rates sample distances at the steps (every 0.4 s), as the paper's table is compared; CrowdNav takes the
 closest approach within each step. ``between_steps_rate`` gives the % of a cell's episodes whose closest
 approach with linear motion between steps is below d_min (crowdsim.metrics ``collision_between_steps``),
-cells.csv's ``collision_between_steps_*`` columns; NaN when some record predates the field.
+cells.csv's ``collision_between_steps_*`` columns; NaN when some record predates the field. The same goes
+for robots touching each other (``robot_contact``, not a metric of the paper): cells.csv's
+``robot_contact_*`` columns and ``robot_contact_step_freq``.
 
 Two plots: the histogram of each episode's minimum robot-human distance, with the contact (0.6 m) and
 personal-space (0.8 m) thresholds drawn, shows whether collisions are near misses or deep intrusions; the
@@ -30,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 import numpy as np
 
-from crowdsim.metrics import BETWEEN_STEPS
+from crowdsim.metrics import ADDED_FLAGS
 from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
@@ -71,13 +73,12 @@ MIN_DISTANCE_HIST_PNG: Final[str] = "min_distance_hist.png"
 MIN_DISTANCE_HIST_CSV: Final[str] = "min_distance_hist.csv"
 SAFETY_TRADEOFF_PNG: Final[str] = "safety_tradeoff.png"
 
-STEP_COUNTS: Final[tuple[str, ...]] = ("collision", "contact", "discomfort")  # each a metrics "<name>_steps"
+# each a metrics "<name>_steps"; robot_contact is robots touching each other, not a metric of the paper
+STEP_COUNTS: Final[tuple[str, ...]] = ("collision", "contact", "discomfort", "robot_contact")
 CONTACT_DISTANCE: Final[float] = 2.0 * RADIUS  # m, the radii touch: crowdsim.metrics' contact
 # The collision rate the trade-off plot measures methods against: the paper's Table II stays below it at
 # every crowd size (at most 1.9 %; Table III's NF column reaches 2.4 % at 9 humans).
 COLLISION_TARGET: Final[float] = 2.0  # %
-# crowdsim.metrics' flags of the closest approach within each step, counted per cell like the paper's rates
-BETWEEN_STEPS_FLAGS: Final[tuple[str, ...]] = BETWEEN_STEPS[1:]
 HIST_BIN_WIDTH: Final[float] = 0.05  # m
 HIST_MAX: Final[float] = 3.0  # m; farther minima (and episodes without humans) share one overflow bin
 # Rounded so that the CSV reads 0.05, 0.1, ... rather than accumulated floating-point sums.
@@ -103,8 +104,9 @@ def step_frequency(metrics: Sequence[Mapping[str, Any]], name: str) -> float:
 def between_steps_rate(
     metrics: Sequence[Mapping[str, Any]], name: str = "collision_between_steps"
 ) -> tuple[int | None, float]:
-    """(episodes, % of episodes) in which ``name`` (a crowdsim.metrics ``*_between_steps`` flag) held;
-    (None, NaN) when some episode lacks it (an older record) or there are no episodes."""
+    """(episodes, % of episodes) in which ``name`` (a crowdsim.metrics flag added after the first records:
+    a ``*_between_steps`` flag, ``robot_contact``) held; (None, NaN) when some episode lacks it (an older
+    record) or there are no episodes."""
     flags = [m.get(name) for m in metrics]
     if not flags or any(f is None for f in flags):
         return None, math.nan
@@ -124,7 +126,8 @@ def safety_figures(metrics: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     return {f"{name}_step_freq": step_frequency(metrics, name) for name in STEP_COUNTS} | {
         "min_distance_median": float(np.median(finite)) if finite else math.nan,
         "min_distances": distances,
-        "between_steps_counts": {name: between_steps_rate(metrics, name)[0] for name in BETWEEN_STEPS_FLAGS},
+        # the flags added after the first records, counted per cell like the paper's rates
+        "added_flag_counts": {name: between_steps_rate(metrics, name)[0] for name in ADDED_FLAGS},
     }
 
 

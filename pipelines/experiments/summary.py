@@ -82,9 +82,11 @@ class CellSummary:
     collision_step_freq: float
     contact_step_freq: float
     discomfort_step_freq: float
-    # episodes whose closest approach within a step (crowdsim.metrics) is a collision, resp. contact, by the
-    # flag's name; None when some record predates the field
-    between_steps_counts: dict[str, int | None]
+    robot_contact_step_freq: float  # two robots touching (crowdsim.metrics), not a metric of the paper
+    # episodes in which a flag added after the first records held, by its name (crowdsim.metrics.ADDED_FLAGS:
+    # the closest approach within a step a collision, resp. contact; robots touching each other); None when
+    # some record predates the field
+    added_flag_counts: dict[str, int | None]
     # Of the episodes' own statistics, not pooled over all steps as `simulate` and `review` print them: a
     # record keeps each episode's median and p95, not its steps. The table's label says which.
     step_median_ms: float  # median over episodes of the per-episode median control step

@@ -58,6 +58,13 @@ def _rate_cell(r: Rate) -> str:
     return f"{_fmt(r.percent)} [{_fmt(lo)}, {_fmt(hi)}]" if r.n else "—"
 
 
+def _added_rate_cell(s: CellSummary, name: str) -> str:
+    """A rate of a flag added after the first records (crowdsim.metrics.ADDED_FLAGS), as ``_rate_cell``;
+    "—" when some record of the cell predates it."""
+    count = s.added_flag_counts.get(name)
+    return "—" if count is None else _rate_cell(Rate(count, s.episodes))
+
+
 def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
     """Indices of the best value (as printed, one decimal) in a group; none when every method ties or the
     group has one member, as the paper leaves ties unmarked."""
@@ -195,10 +202,14 @@ def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummar
 
 
 def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
-    """What the paper does not print: contact, per-step collisions, closest approach, success per scenario,
-    the paired comparison, and what the controller cost."""
+    """What the paper does not print: contact, robots touching each other, per-step collisions, closest
+    approach, success per scenario, the paired comparison, and what the controller cost."""
     return [
         _row("Contact rate (%) (< 0.6 m)", [_rate_cell(s.contact) for s in columns]),
+        _row(
+            "Robot-robot contact rate (%) (< 0.6 m; not in the paper)",
+            [_added_rate_cell(s, "robot_contact") for s in columns],
+        ),
         _row("Collision per step (%)", [_fmt(s.collision_step_freq, 2) for s in columns]),
         _row("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns]),
         _row(

@@ -391,3 +391,60 @@ def test_the_histogram_counts_episodes_in_whole_ticks():
     for ax in fig.axes:
         ticks = ax.get_yticks()
         assert len(ticks) >= 2 and all(t == int(t) for t in ticks)
+
+
+ROBOT_ROW = "| Robot-robot contact rate (%) (< 0.6 m; not in the paper) |"
+
+
+def test_robot_robot_contact_in_cells_csv_episodes_csv_and_the_table(tmp_path):
+    """Robots touching each other (not a metric of the paper). "none": robot-robot contact steps 2, 0, 1 of
+    10, 20, 30 states -> 2 of 3 episodes, 3 of 60 states = 5 %; "alpha=0.5": none, 0 of 4. Records from before
+    the field read empty / "—"; every other column and row stays as it was."""
+    from pipelines.experiments.summary import wilson_interval
+
+    safety, cells, records = _safety_records()
+    before = [{**r, "metrics": dict(r["metrics"])} for r in records]
+    for r, steps in zip(records, (2, 0, 1, 0, 0, 0, 0), strict=True):
+        r["metrics"] |= {"robot_contact": steps > 0, "robot_contact_steps": steps}
+    (tmp_path / "before").mkdir()
+    old = write_report(tmp_path / "before", safety, cells, before)
+    report = write_report(tmp_path, safety, cells, records)
+    with open(tmp_path / CELLS_CSV) as f:
+        none, half = list(csv.DictReader(f))
+    with open(tmp_path / "before" / CELLS_CSV) as f:
+        none_before, half_before = list(csv.DictReader(f))
+    assert (none["robot_contact_count"], half["robot_contact_count"]) == ("2", "0")
+    assert (
+        float(none["robot_contact_rate"]) == pytest.approx(200.0 / 3)
+        and float(half["robot_contact_rate"]) == 0
+    )
+    assert (
+        float(none["robot_contact_step_freq"]) == pytest.approx(5.0)
+        and half["robot_contact_step_freq"] == "0.0"
+    )
+    lo, hi = (100.0 * x for x in wilson_interval(2, 3))
+    assert (
+        float(none["robot_contact_ci_lo"]) == pytest.approx(lo) and float(none["robot_contact_ci_hi"]) == hi
+    )
+    robot = ("robot_contact_count", "robot_contact_rate", "robot_contact_ci_lo", "robot_contact_ci_hi")
+    assert [none_before[k] for k in (*robot, "robot_contact_step_freq")] == [""] * 5
+    for now, then in ((none, none_before), (half, half_before)):  # every other column unchanged
+        assert {k: v for k, v in now.items() if "robot_contact" not in k} == {
+            k: v for k, v in then.items() if "robot_contact" not in k
+        }
+    with open(tmp_path / EPISODES_CSV) as f:
+        episodes = list(csv.DictReader(f))
+    assert [(e["robot_contact"], e["robot_contact_steps"]) for e in episodes[:3]] == [
+        ("True", "2"),
+        ("False", "0"),
+        ("True", "1"),
+    ]
+    (row,) = [line for line in report.markdown.splitlines() if line.startswith(ROBOT_ROW)]
+    assert row.split(" | ")[1:] == [
+        f"66.7 [{lo:.1f}, {hi:.1f}]",
+        f"0.0 [0.0, {100 * wilson_interval(0, 4)[1]:.1f}] |",
+    ]
+    (row_before,) = [line for line in old.markdown.splitlines() if line.startswith(ROBOT_ROW)]
+    assert row_before == f"{ROBOT_ROW} — | — |"
+    others = [line for line in report.markdown.splitlines() if not line.startswith(ROBOT_ROW)]
+    assert others == [line for line in old.markdown.splitlines() if not line.startswith(ROBOT_ROW)]
