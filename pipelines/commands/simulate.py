@@ -266,9 +266,15 @@ def _simulate(resolved: SimulateRun) -> int:
 
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
-    note = flock_note(spec, scenario.robots)
-    if note is not None:
-        print(note, file=sys.stderr)
+    from pipelines.commands.simulate_checks import goal_room_note
+
+    notes = (
+        flock_note(spec, scenario.robots),
+        goal_room_note(spec, scenario.robots, cfg.env.formation, formation_settable=True),
+    )
+    for note in notes:
+        if note is not None:
+            print(note, file=sys.stderr)
     env_config = cfg.env
     run_meta = _run_meta(resolved)
     recorder = None

@@ -1,0 +1,56 @@
+"""The note on a d_min that leaves two robots no room at their goals (simulate, sweep): the MPC keeps every
+pair d_min apart, and the row of 3 puts their goals 1.0 m apart, so a d_min study's 1.0 m column timed out
+in every episode for a reason no metric names."""
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands.simulate_checks import goal_room_note
+from pipelines.loop.controllers import ControllerSpec
+
+
+def _spec(controller: str = "cmpc", d_min: float | None = None) -> ControllerSpec:
+    overrides = () if d_min is None else (("d_min", d_min),)
+    return ControllerSpec(controller, "constant_velocity", mpc_overrides=overrides)
+
+
+@pytest.mark.parametrize(
+    "spec, robots, formation",
+    [
+        (_spec(), 3, "auto"),  # Table I's 0.8 m, goals 1.0 m apart
+        (_spec(d_min=0.98), 3, "row"),
+        (_spec(d_min=1.1), 3, "wedge"),  # the wedge's goals are d_flock = 1.2 m apart
+        (_spec("orca"), 3, "row"),  # no MPC
+        (_spec(d_min=2.0), 1, "row"),  # no pair
+    ],
+)
+def test_no_note_where_the_goals_leave_room(spec, robots, formation):
+    assert goal_room_note(spec, robots, formation, formation_settable=True) is None
+
+
+def test_the_note_names_the_distance_the_formation_and_where_to_widen_it():
+    note = goal_room_note(_spec(d_min=1.0), 3, "auto", formation_settable=True)
+    assert note is not None and note.startswith(
+        "note: the MPC's d_min 1 m is not below the 1 m between two robots' goals (row of 3)"
+    )
+    assert note.endswith("; [env] formation wedge spaces them 1.2 m apart")
+    # a sweep cannot change the formation; the wedge of 4 robots puts neighbours 1.2 m apart
+    assert goal_room_note(_spec("dmpc", 1.0), 3, "row", formation_settable=False).endswith(
+        "DMPC in none at 1.1)"
+    )
+    wedge = goal_room_note(_spec(d_min=1.2), 4, "auto", formation_settable=True)
+    assert wedge is not None and "1.2 m between two robots' goals (wedge of 4)" in wedge
+    assert "[env] formation" not in wedge
+
+
+def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
+    args = ["simulate", "--controller", "cmpc", "--humans", "0", "--episodes", "1", "--no-progress"]
+    assert main([*args, "--set", "mpc.d_min=0.9"]) == 0
+    assert "note: the MPC's d_min" not in capsys.readouterr().err
+    assert main([*args, "--set", "mpc.d_min=1.0"]) == 0
+    assert capsys.readouterr().err.count("note: the MPC's d_min 1 m is not below") == 1
+    sweep = ["sweep", "--experiment", "table2", "--humans", "5,6", "--episodes-per-cell", "2", "--dry-run"]
+    assert main([*sweep, "--vary", "mpc.d_min=0.8,1.0", "--out", str(tmp_path / "sw")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note: method 'CMPC d_min=1.0': the MPC's d_min 1 m") == 1
+    assert err.count("note: method 'DMPC d_min=1.0'") == 1 and "d_min=0.8'" not in err
