@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipelines.errors import PipelineError
+from pipelines.loop.contract import called, checked_description, checked_output
 
 if TYPE_CHECKING:
     from crowdsim.control import ControlOutput
@@ -51,10 +52,13 @@ class RangeLimited:
         self._in_view = self._visible(obs)
         # in view before the episode too, standing where the history has them
         self._track_start = np.full(obs.n_humans, obs.step - len(obs.history) + 1)
-        self.inner.reset(self.sensed(obs))
+        called(self.inner, "reset", self.sensed(obs))
 
     def act(self, obs: Observation) -> ControlOutput:
-        out = self.inner.act(self.sensed(obs))
+        # The inner controller through the loop's contract, as if unwrapped: a plugin's error or broken
+        # output is its own one-line PipelineError, a shipped controller's exception a bug with its traceback
+        sensed = self.sensed(obs)
+        out = checked_output(self.inner, called(self.inner, "act", sensed), sensed)
         visible = np.flatnonzero(self._in_view)
         return dataclasses.replace(
             out,
@@ -64,12 +68,12 @@ class RangeLimited:
         )
 
     def describe(self) -> dict[str, Any]:
-        described = self.inner.describe()
+        described = checked_description(self.inner)
         sensing = {"radius_m": self.radius, "report_tracks": self.report_tracks}
         return {**described, "config": {**described.get("config", {}), "sensing": sensing}}
 
     def close(self) -> None:
-        self.inner.close()
+        called(self.inner, "close")
 
     def sensed(self, obs: Observation) -> Observation:
         """``obs`` as the tracker gives it: the visible humans, their padded tracks and track lengths."""

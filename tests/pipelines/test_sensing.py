@@ -105,3 +105,33 @@ def test_the_loop_refuses_a_wrapped_controller_built_for_another_world():
     slow = EnvConfig(v_max=0.5)
     with pytest.raises(PipelineError, match="built for another world"):
         run_episode(sensor, seed=0, scenario="circle", n_humans=3, env_config=slow)
+
+
+class NoOutput(Keep):
+    def act(self, obs):
+        return np.zeros((obs.n_robots, 2))  # bare accelerations
+
+
+class ListDescribed(Keep):
+    def describe(self):
+        return ["not", "a", "dict"]
+
+
+class Raises(Keep):
+    def act(self, obs):
+        raise ValueError("boom")
+
+
+@pytest.mark.parametrize(
+    "plugin, message",
+    [
+        (NoOutput, r"\(NoOutput\): act\(\) must return a crowdsim.control.ControlOutput, got numpy.ndarray"),
+        (ListDescribed, r"\(ListDescribed\): describe\(\) must return a dict, got list"),
+        (Raises, r"\(Raises\): act\(\) raised ValueError: boom"),
+    ],
+)
+def test_a_wrapped_plugin_that_breaks_the_contract_is_told_as_unwrapped(plugin, message):
+    # behind the sensor it read "(RangeLimited): act() raised AttributeError: 'numpy.ndarray' object has no
+    # attribute 'extra'" and "describe() raised TypeError: 'list' object is not a mapping"
+    with pytest.raises(PipelineError, match=message):
+        run_episode(RangeLimited(plugin(), 3.0), seed=0, scenario="circle", n_humans=2)
