@@ -39,7 +39,11 @@ OWN_FIELDS: Final[tuple[str, ...]] = (
 
 
 # The modules of the shipped controllers' classes: what one of them raises is a bug, kept with its traceback.
-SHIPPED_MODULES: Final[frozenset[str]] = frozenset({"pipelines.loop.baselines", "pipelines.loop.mpc"})
+# RangeLimited (sensing) calls the controller it wraps through ``called`` itself: what reaches the loop from
+# it is a plugin's PipelineError already, or a shipped controller's bug.
+SHIPPED_MODULES: Final[frozenset[str]] = frozenset(
+    {"pipelines.loop.baselines", "pipelines.loop.mpc", "pipelines.loop.sensing"}
+)
 
 
 def _named(controller: Controller) -> str:

@@ -135,3 +135,17 @@ def test_a_wrapped_plugin_that_breaks_the_contract_is_told_as_unwrapped(plugin, 
     # attribute 'extra'" and "describe() raised TypeError: 'list' object is not a mapping"
     with pytest.raises(PipelineError, match=message):
         run_episode(RangeLimited(plugin(), 3.0), seed=0, scenario="circle", n_humans=2)
+
+
+def test_a_shipped_controllers_exception_behind_the_sensor_is_a_bug_with_its_traceback(monkeypatch):
+    # it became "controller 'orca' (RangeLimited): act() raised TypeError: ..." as a plugin's error, which
+    # run_episodes turned into a one-line EpisodeFailed without the traceback
+    from crowdsim.baselines import OrcaController
+
+    def bug(self, *args, **kwargs):
+        raise TypeError("a bug in a shipped controller")
+
+    monkeypatch.setattr(OrcaController, "act", bug)
+    sensor = RangeLimited(make_controller(ControllerSpec("orca")), 3.0)
+    with pytest.raises(TypeError, match="a bug in a shipped controller"):
+        run_episode(sensor, seed=0, scenario="circle", n_humans=2)
