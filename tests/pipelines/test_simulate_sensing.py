@@ -70,3 +70,13 @@ def test_a_sensor_that_is_no_distance_is_a_one_line_error(options, message, caps
     captured = capsys.readouterr()
     assert captured.out == "" and len(captured.err.splitlines()) == 1
     assert message in captured.err
+
+
+def test_the_printed_summary_names_the_sensor(capsys):
+    # it read "controller cmpc | predictor social_lstm_eth | margins none | paper/visible | scenario circle
+    # | ...", the line of a full observation's run
+    assert main([*RUN[:-1], "1", "--sensor-range", "2.5", "--no-sensor-tracks", "--no-progress"]) == 0
+    header = capsys.readouterr().out.splitlines()[0]
+    assert "| sensor 2.5 m without tracks | scenario circle |" in header
+    assert main([*RUN[:-1], "1", "--no-progress"]) == 0
+    assert "sensor" not in capsys.readouterr().out.splitlines()[0]
