@@ -80,3 +80,13 @@ def test_the_printed_summary_names_the_sensor(capsys):
     assert "| sensor 2.5 m without tracks | scenario circle |" in header
     assert main([*RUN[:-1], "1", "--no-progress"]) == 0
     assert "sensor" not in capsys.readouterr().out.splitlines()[0]
+
+
+def test_iterations_to_record_behind_a_sensor_are_refused(tmp_path, capsys, monkeypatch):
+    # accepted, rc 0, and the recordings held no /mpc/prediction at all: the sensor drops the predictions
+    monkeypatch.setattr("pipelines.loop.episode.run_episodes", None)  # no episode may run
+    options = ["--sensor-range", "3", "--record", str(tmp_path / "rec"), "--record-iterations"]
+    assert main([*RUN, *options, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1
+    assert "--record-iterations: a controller behind --sensor-range records no predictions" in err
