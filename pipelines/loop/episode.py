@@ -207,6 +207,11 @@ def run_episodes(
     # numpy integers too, as seeds and sizes are taken (a notebook's counts often come from numpy)
     if isinstance(episodes, bool) or not isinstance(episodes, int | np.integer) or episodes < 0:
         raise PipelineError(f"run_episodes: episodes must be an int >= 0, got {short_repr(episodes)}")
+    if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
+        raise PipelineError(
+            f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
+            "sensor_range too (metres)"
+        )
     controller = make_controller(spec, env_config)
     if sensor_range is not None:
         controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans)

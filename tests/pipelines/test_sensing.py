@@ -149,3 +149,13 @@ def test_a_shipped_controllers_exception_behind_the_sensor_is_a_bug_with_its_tra
     sensor = RangeLimited(make_controller(ControllerSpec("orca")), 3.0)
     with pytest.raises(TypeError, match="a bug in a shipped controller"):
         run_episode(sensor, seed=0, scenario="circle", n_humans=2)
+
+
+@pytest.mark.parametrize("tracks", [False, "no"])
+def test_run_episodes_refuses_track_settings_without_a_sensor(tracks):
+    # the episodes ran with every human seen, without a word, where simulate refuses --no-sensor-tracks alone
+    from pipelines.loop.episode import run_episodes
+
+    with pytest.raises(PipelineError, match="sensor_tracks=.* is a sensor's setting; give sensor_range too"):
+        run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2,
+                     progress=False, sensor_tracks=tracks)  # fmt: skip
