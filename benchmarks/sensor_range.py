@@ -47,7 +47,9 @@ def radius(text: str) -> float:
     except ValueError:
         value = math.nan
     if not value > 0 or math.isinf(value):
-        raise argparse.ArgumentTypeError(f"a sensor radius must be a number of metres > 0, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"a sensor radius must be a finite number of metres > 0, got {text!r}"
+        )
     return value
 
 

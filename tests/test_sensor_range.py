@@ -30,5 +30,7 @@ def test_a_row_for_full_observation_and_two_per_radius(tmp_path, monkeypatch, ca
 
 @pytest.mark.parametrize("text", ["0", "-2", "inf", "nan", "x"])
 def test_a_radius_that_is_no_finite_distance_is_refused(text):
-    with pytest.raises(argparse.ArgumentTypeError, match="a sensor radius must be a number of metres > 0"):
+    with pytest.raises(
+        argparse.ArgumentTypeError, match="a sensor radius must be a finite number of metres > 0"
+    ):
         sensor_range.radius(text)

@@ -160,7 +160,7 @@ class SimulateSettings:
         if sensed is not None and (
             isinstance(sensed, bool) or not isinstance(sensed, int | float) or not 0 < sensed < math.inf
         ):
-            raise PipelineError(f"sensor_range must be a number of metres > 0, got {sensed!r}")
+            raise PipelineError(f"sensor_range must be a finite number of metres > 0, got {sensed!r}")
         if not isinstance(self.sensor_tracks, bool):
             raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")
 

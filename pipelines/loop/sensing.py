@@ -20,6 +20,7 @@ every human), and ``extra["visible"]`` lists the humans it planned around.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,8 +38,9 @@ class RangeLimited:
     """``inner`` fed the humans within ``radius`` metres of some robot (module docstring)."""
 
     def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
-        if isinstance(radius, bool) or not isinstance(radius, int | float) or not radius > 0:
-            raise PipelineError(f"sensor radius must be a number of metres > 0, got {radius!r}")
+        # finite, as simulate's sensor_range: an endless range is no sensor (leave the controller unwrapped)
+        if isinstance(radius, bool) or not isinstance(radius, int | float) or not 0 < radius < math.inf:
+            raise PipelineError(f"sensor radius must be a finite number of metres > 0, got {radius!r}")
         if not isinstance(report_tracks, bool):  # a truthy "no" would report them
             raise PipelineError(f"report_tracks must be True or False, got {report_tracks!r}")
         self.inner, self.radius, self.report_tracks = inner, float(radius), report_tracks

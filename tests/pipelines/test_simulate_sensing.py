@@ -51,9 +51,9 @@ def test_a_config_file_sets_the_sensor(tmp_path):
 @pytest.mark.parametrize(
     "options, message",
     [
-        (["--sensor-range", "0"], "--sensor-range must be a number of metres > 0, got 0.0"),
-        (["--sensor-range", "inf"], "--sensor-range must be a number of metres > 0, got inf"),
-        (["--sensor-range", "nan"], "--sensor-range must be a number of metres > 0, got nan"),
+        (["--sensor-range", "0"], "--sensor-range must be a finite number of metres > 0, got 0.0"),
+        (["--sensor-range", "inf"], "--sensor-range must be a finite number of metres > 0, got inf"),
+        (["--sensor-range", "nan"], "--sensor-range must be a finite number of metres > 0, got nan"),
         (
             ["--no-sensor-tracks"],
             "--no-sensor-tracks: track lengths are a sensor's; give --sensor-range M too",
