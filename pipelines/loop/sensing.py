@@ -7,7 +7,10 @@ the rows of history since its track began: the rows before are padded with the f
 a tracker pads, and ``obs.human_observed`` holds the track lengths (``report_tracks=False``: None, so the
 padding reads as the human's past, as it does for a tracker that does not report them). A human who leaves
 the range and comes back starts a new track. A human in range at the episode's first step counts as tracked
-through the whole history: the simulator's humans stood there before it, in view. The episode's metrics
+through the whole history: the simulator's humans stood there before it, in view. (So per-class margins,
+conformal-motion and -shortfall, class such a human by its motion from the first step, where the full
+observation counts it ``step + 1`` times observed, "new", for 8 steps: a range that sees everyone plans as
+the full observation only with margins of no classes, or without the track lengths.) The episode's metrics
 stay the simulator's, over every human.
 
 The number of humans in view changes from step to step, and an MPC builds an NLP per number: prepare them
