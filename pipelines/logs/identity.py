@@ -20,8 +20,14 @@ from pipelines.logs.reader import decode_metadata, read_metadata
 # "config" metadata (``run_identity``): the simulator's ("env.formation") and the controller's ("mpc.horizon",
 # "margins.mode", "coupling", "flocking"...).
 RUN_IDENTITY: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "n_humans")
-# Settings added after recordings were made, with the value that recordings made before them ran with.
-UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {"env.formation": "auto"}
+# Settings added after recordings were made, with the value that recordings made before them ran with; and
+# the sensor's, which a run without one does not record (pipelines.loop.sensing adds them): null, every human
+# seen. Left out, a --sensor-range run silently replaced the full observation's recordings in their folder.
+UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {
+    "env.formation": "auto",
+    "sensing.radius_m": None,
+    "sensing.report_tracks": None,
+}
 # Settings that change how fast a run goes, not its episodes (jit compiles the same NLP; DMPC's threads give
 # the serial result, tests/mpc): a rerun with another value replaces its recordings, as the same command's.
 SPEED_ONLY: Final[tuple[str, ...]] = ("mpc.jit", "mpc.dmpc_parallel")

@@ -36,6 +36,8 @@ def test_run_identity_hand_value():
         "margins": {},
         "mpc.horizon": 4,
         "env.formation": "auto",
+        "sensing.radius_m": None,
+        "sensing.report_tracks": None,
     }
 
 
@@ -78,3 +80,15 @@ def test_a_recording_without_episode_metadata_is_left_to_the_recorder(tmp_path):
     """No episode, no run to keep apart: the recorder replaces it."""
     path = _recording(tmp_path / "circle_1.mcap", None, {"mpc": {"horizon": 9}})
     check_replaceable(path, run_identity(EPISODE, {"mpc": {"horizon": 4}}))
+
+
+def test_a_sensed_run_does_not_replace_the_full_observations_recording(tmp_path):
+    """A run without a sensor records no "sensing": a --sensor-range run into its folder replaced its files
+    without a word (the held recording named nothing the new run differed in), the reverse refused."""
+    path = _recording(tmp_path / "circle_1.mcap", EPISODE, {"mpc": {"horizon": 4}})
+    sensed = {"mpc": {"horizon": 4}, "sensing": {"radius_m": 2.0, "report_tracks": True}}
+    with pytest.raises(
+        PipelineError, match=r"another run's episode \(sensing.radius_m null, sensing.report_"
+    ):
+        check_replaceable(path, run_identity(EPISODE, sensed))
+    check_replaceable(path, run_identity(EPISODE, {"mpc": {"horizon": 4}}))  # its own rerun replaces it
