@@ -5,9 +5,12 @@ people within some range, and its tracker starts a track when someone comes into
 wraps a controller so that it sees, each step, only the humans within ``radius`` of some robot, each with
 the rows of history since its track began: the rows before are padded with the first tracked position, as
 a tracker pads, and ``obs.human_observed`` holds the track lengths (``report_tracks=False``: None, so the
-padding reads as the human's past, as it does for a tracker that does not report them). A human who leaves
-the range and comes back starts a new track. A human in range at the episode's first step counts as tracked
-through the whole history: the simulator's humans stood there before it, in view. (So per-class margins,
+padding reads as the human's past, as it does for a tracker that does not report them). Only the history is
+the tracker's: ``human_velocities`` and ``human_goals`` stay the simulator's, exact from a human's first
+step in view (the networks read the history alone; the ORCA robots and the ORCA oracle read both, and so
+see more than a tracker could). A human who leaves the range and comes back starts a new track. A human in
+range at the episode's first step counts as tracked through the whole history: the simulator's humans
+stood there before it, in view. (So per-class margins,
 conformal-motion and -shortfall, class such a human by its motion from the first step, where the full
 observation counts it ``step + 1`` times observed, "new", for 8 steps: a range that sees everyone plans as
 the full observation only with margins of no classes, or without the track lengths.) The episode's metrics
