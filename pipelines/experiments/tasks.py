@@ -47,7 +47,7 @@ class World:
         if sensed is not None and (
             isinstance(sensed, bool) or not isinstance(sensed, int | float) or not 0 < sensed < math.inf
         ):
-            raise PipelineError(f"a sensor range must be a number of metres > 0, got {sensed!r}")
+            raise PipelineError(f"a sensor range must be a finite number of metres > 0, got {sensed!r}")
         if not isinstance(self.sensor_tracks, bool):
             raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")
         if not self.sensor_tracks and sensed is None:

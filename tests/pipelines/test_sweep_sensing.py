@@ -32,7 +32,7 @@ def test_a_world_that_sees_every_human_keeps_the_key_of_the_sweeps_before_sensin
 
 @pytest.mark.parametrize("value", [0, -1.0, math.nan, math.inf, True, "3"])
 def test_a_sensor_range_that_is_no_distance_is_refused(value):
-    with pytest.raises(PipelineError, match=r"a sensor range must be a number of metres > 0, got"):
+    with pytest.raises(PipelineError, match=r"a sensor range must be a finite number of metres > 0, got"):
         World(sensor_range=value)
 
 
@@ -167,7 +167,10 @@ def test_sweep_sensor_range_runs_every_method_behind_the_sensor_and_reports_it(t
             ["--experiment", "table2", "--no-sensor-tracks"],
             "--no-sensor-tracks: track lengths are a sensor's; give --sensor-range M too",
         ),
-        (["--experiment", "table2", "--sensor-range", "0"], "--sensor-range must be a number of metres > 0"),
+        (
+            ["--experiment", "table2", "--sensor-range", "0"],
+            "--sensor-range must be a finite number of metres > 0",
+        ),
     ],
 )
 def test_sweep_refuses_a_sensor_it_cannot_apply(tmp_path, capsys, options, message):
