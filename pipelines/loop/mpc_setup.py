@@ -9,6 +9,7 @@ the predictor reads (``predictor_history``).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,8 +25,6 @@ from predictors.base import ObservingPredictor, Predictor
 from predictors.oracle import ORACLE_PREDICTOR
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
-
     from crowdsim.env import Observation
 
 
@@ -190,6 +189,11 @@ def prepare_sizes(n_robots: int, n_humans: Iterable[int]) -> list[tuple[int, int
         )
     if not _is_count(n_robots) or n_robots < 1:
         raise PipelineError(f"n_robots must be an int >= 1, got {n_robots!r}")
+    if not isinstance(n_humans, Iterable):  # None: iterating it raised a bare TypeError
+        raise PipelineError(
+            f"n_humans must be the numbers of humans to prepare for (e.g. range(0, 16) or [7]), got "
+            f"{n_humans!r:.60}"
+        )
     sizes = []
     for n in n_humans:
         if not _is_count(n) or n < 0:

@@ -56,6 +56,7 @@ def test_build_all_builds_the_warm_ipopt_a_failed_fatrop_solve_would_build(nlp, 
         (3, [2, -1], "each number of humans must be an int >= 0, got -1 in n_humans"),
         (3, [1.5], "got 1.5 in n_humans"),
         (3, "7", "got '7' in n_humans"),
+        (3, None, "n_humans must be the numbers of humans to prepare for .* got None"),
     ],
 )
 def test_prepare_refuses_sizes_that_are_not_counts(n_robots, n_humans, match):
