@@ -10,6 +10,7 @@ import json
 import os
 import re
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Final
@@ -35,12 +36,18 @@ ENTRY: Final[re.Pattern[str]] = re.compile(rf"{_KEY}\.casadi")
 _IN_PROGRESS: Final[re.Pattern[str]] = re.compile(
     rf"(?:{_KEY}\.|\.tmp-{_KEY}\.|crowdmpc_jit_)(?P<pid>\d+)_[0-9a-f]{{8}}\.(?:o|casadi|record|c)"
 )
+# How old such a file must be before a compile of a pid not running here counts as killed. The pid says
+# nothing of a compile on another machine sharing the cache ($CROWDMPC_CACHE in a cluster's home directory,
+# jobs on several nodes): its files were removed while its gcc ran, and its episodes raised. A compile uses
+# each of these files within seconds of writing it; what a killed one left waits an hour more.
+LEFTOVER_AGE_S: Final[float] = 3600.0
 
 
 def remove_dead_leftovers(folder: Path) -> int:
     """Remove the files of compiles whose process is gone (killed: no ``finally`` ran): the generated source
-    (~0.5 MB), object file and temporary manifest and record. Only regular files named as ours, never a
-    symbolic link; a compile of a live process (this one's included) is left alone. Returns how many."""
+    (~0.5 MB), object file and temporary manifest and record, once ``LEFTOVER_AGE_S`` old. Only regular files
+    named as ours, never a symbolic link; a compile of a live process (this one's included) is left alone.
+    Returns how many."""
     removed = 0
     with os.scandir(folder) as it:
         entries = [e for e in it if OWNED.fullmatch(e.name)]
@@ -48,10 +55,20 @@ def remove_dead_leftovers(folder: Path) -> int:
         match = _IN_PROGRESS.fullmatch(entry.name)
         if match is None or _alive(int(match["pid"])) or not entry.is_file(follow_symlinks=False):
             continue
+        if _younger_than(entry, LEFTOVER_AGE_S):  # maybe another machine's compile under way
+            continue
         with contextlib.suppress(FileNotFoundError):  # another process removed it first
             os.unlink(entry.path)
             removed += 1
     return removed
+
+
+def _younger_than(entry: os.DirEntry, seconds: float) -> bool:
+    """Whether ``entry`` was last written less than ``seconds`` ago (or is gone already)."""
+    try:
+        return time.time() - entry.stat(follow_symlinks=False).st_mtime < seconds
+    except FileNotFoundError:  # another process removed it first
+        return True
 
 
 def _alive(pid: int) -> bool:

@@ -245,7 +245,7 @@ def nlpsol(
         if solver is not None:
             return solver
         discard(manifest)  # unloadable (no record, its library removed or changed): compile again
-        remove_dead_leftovers(folder)  # what killed compiles left (nothing else removes it)
+        remove_dead_leftovers(folder)  # what killed compiles left an hour ago (nothing else removes it)
         try:
             _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
         except CompileCacheError:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mpc import compile_cache, solvers
+from mpc.cache_entries import LEFTOVER_AGE_S, remove_dead_leftovers
 from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
 from mpc.fallback import PlanMemory
@@ -420,6 +421,8 @@ def test_a_compile_removes_what_killed_compiles_left(cache, tmp_path):
     kept += [f"{key}.{gone}_0123abcd.so", f"notes_{gone}_0123abcd.c"]  # a library; not a name of ours
     for name in leftovers + kept:
         (cache / name).write_text("x")
+    for name in leftovers:  # killed more than LEFTOVER_AGE_S ago (a recent one: test_..._another_machine)
+        os.utime(cache / name, (time.time() - 2 * LEFTOVER_AGE_S,) * 2)
     outside = tmp_path / "precious.c"
     outside.write_text("keep")
     link = cache / f"crowdmpc_jit_{gone}_4567abcd.c"
@@ -428,6 +431,22 @@ def test_a_compile_removes_what_killed_compiles_left(cache, tmp_path):
     names = {p.name for p in cache.iterdir()}
     assert not names & set(leftovers)
     assert set(kept) | {link.name} <= names and outside.read_text() == "keep"
+
+
+def test_the_files_of_a_compile_on_another_machine_are_left_alone(tmp_path):
+    """Jobs on several nodes sharing $CROWDMPC_CACHE (a cluster's home directory): a compile there has a pid
+    no process here has, and every compile here removed its files as a killed compile's while its gcc ran
+    (cc1: "crowdmpc_jit_<tag>.c: No such file or directory", its episodes raised). Only old ones go now."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True)
+    gone, key = int(dead.stdout), "ab" * 32
+    names = [f"crowdmpc_jit_{gone}_0123abcd.c", f"{key}.{gone}_0123abcd.o"]
+    names.append(f".tmp-{key}.{gone}_0123abcd.casadi")
+    for name in names:
+        (tmp_path / name).write_text("x")
+    assert remove_dead_leftovers(tmp_path) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
+    os.utime(tmp_path / names[0], (time.time() - 2 * LEFTOVER_AGE_S,) * 2)
+    assert remove_dead_leftovers(tmp_path) == 1 and not (tmp_path / names[0]).exists()
 
 
 def _fma_flags() -> list[str] | None:
