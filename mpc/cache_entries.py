@@ -100,6 +100,37 @@ def locked(path: Path) -> Iterator[None]:
         os.close(fd)  # releases the lock
 
 
+@contextlib.contextmanager
+def unless_locked(path: Path) -> Iterator[bool]:
+    """Hold ``path``, an existing lock file, if nobody holds it now (True), else hold nothing (False): what
+    ``compile_cache.clear`` asks of an entry before removing its files, which a compile under way needs.
+    A lock file that is gone, or another file (a symbolic link), is held by nobody."""
+    if fcntl is None:  # pragma: no cover
+        yield True
+        return
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW)
+    except OSError:
+        yield True
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def entry_key(name: str) -> str | None:
+    """The key of the entry a file of ours (``OWNED``) belongs to; None for a generated source, whose name
+    holds only the compiling process's tag."""
+    match = re.search(_KEY, name)
+    return match.group() if match else None
+
+
 def publish(tmp: Path, final: Path) -> bool:
     """Move the complete file ``tmp`` to ``final`` unless ``final`` exists; whether ``tmp`` became it."""
     try:

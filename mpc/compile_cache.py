@@ -58,12 +58,14 @@ from mpc.cache_entries import (
     ENTRY,
     OWNED,
     discard,
+    entry_key,
     entry_record,
     inside,
     load_solver,
     locked,
     publish,
     remove_dead_leftovers,
+    unless_locked,
 )
 from mpc.compiler import COMPILER, Compiler, compiler, interruptible
 from mpc.errors import MPCConfigError
@@ -362,19 +364,42 @@ def info(directory: str | Path | None = None) -> CacheInfo:
     )
 
 
-def clear(directory: str | Path | None = None) -> tuple[int, int]:
+def clear(directory: str | Path | None = None) -> tuple[int, int, int]:
     """Remove the files of ours in the cache directory (not the directory, nor anything else in it).
 
-    Returns (files removed, bytes freed). A directory that is a symlink is refused: its files live elsewhere.
-    A process that loaded an entry keeps using it (an unlinked library stays mapped); the next build compiles.
+    Returns (files removed, bytes freed, entries left): an entry another process compiles now (it holds the
+    entry's lock) keeps its files, and the generated sources stay with it, or that compile fails (gcc or the
+    linker finds its file gone, or the entry it stored does not load). A directory that is a symlink is
+    refused: its files live elsewhere. A process that loaded an entry keeps using it (an unlinked library
+    stays mapped); the next build compiles.
     """
     folder = _readable_dir(directory)
     if folder.is_symlink():
         raise CompileCacheError(f"{folder} is a symlink; not clearing files outside the cache")
-    removed = freed = 0
+    by_key: dict[str | None, list[os.DirEntry]] = {}
     for entry in _owned_files(folder):
-        size = entry.stat(follow_symlinks=False).st_size
-        with contextlib.suppress(FileNotFoundError):
+        by_key.setdefault(entry_key(entry.name), []).append(entry)
+    sources = by_key.pop(None, [])  # no key in their name: whose they are is unknown
+    removed = freed = 0
+    busy = 0
+    for key, files in sorted(by_key.items()):
+        # held while its files go, the lock file last: a compile starting now waits, then compiles anew
+        with unless_locked(folder / f"{key}.lock") as free:
+            if not free:
+                busy += 1
+                continue
+            files.sort(key=lambda e: e.name.endswith(".lock"))
+            removed, freed = _remove(files, removed, freed)
+    if not busy:
+        removed, freed = _remove(sources, removed, freed)
+    return removed, freed, busy
+
+
+def _remove(files: list[os.DirEntry], removed: int, freed: int) -> tuple[int, int]:
+    """Unlink ``files``, adding to the count ``removed`` and the bytes ``freed`` of those unlinked."""
+    for entry in files:
+        with contextlib.suppress(FileNotFoundError):  # another process removed it first
+            size = entry.stat(follow_symlinks=False).st_size
             os.unlink(entry.path)
             removed += 1
             freed += size

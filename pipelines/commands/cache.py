@@ -21,7 +21,7 @@ library (<key>.<tag>.so). Every later build, in any worker of any run, loads it 
 hashes the NLP's expression graph, the solver and its options, the CasADi version and the compiler with its
 flags, so an entry is never used for anything else; a CasADi or gcc upgrade starts new entries (clear the
 old ones). `clear` removes the cache's own files only, never a symlink or what it points to; a run that
-already loaded an entry keeps using it.
+already loaded an entry keeps using it, and an entry another process is compiling now is left to it.
 """
 
 
@@ -78,8 +78,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"compiler:  {stats.compiler}")
         return 0
     try:
-        removed, freed = compile_cache.clear()
+        removed, freed, busy = compile_cache.clear()
     except compile_cache.CompileCacheError as exc:
         raise PipelineError(str(exc)) from exc
-    print(f"removed {removed} files ({_size(freed)}) from {compile_cache.cache_dir()}")
+    left = (
+        f"; left {busy} entr{'y' if busy == 1 else 'ies'} another process is compiling now (clear again once "
+        "it is done)"
+        if busy
+        else ""
+    )
+    print(f"removed {removed} files ({_size(freed)}) from {compile_cache.cache_dir()}{left}")
     return 0

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mpc import compile_cache, solvers
-from mpc.cache_entries import LEFTOVER_AGE_S, remove_dead_leftovers
+from mpc.cache_entries import LEFTOVER_AGE_S, locked, remove_dead_leftovers
 from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
 from mpc.fallback import PlanMemory
@@ -260,11 +260,28 @@ def test_info_and_clear_touch_only_our_files(tmp_path):
     stats = compile_cache.info(folder)
     assert (stats.entries, stats.files, stats.size_bytes) == (1, 8, 80)
     assert stats.casadi_version == ca.__version__
-    assert compile_cache.clear(folder) == (8, 80)
+    assert compile_cache.clear(folder) == (8, 80, 0)
     left = [f"{'cd' * 32}.casadi", "notes.txt", f"{'ef' * 32}.casadi", f"{key}.so"]
     assert sorted(p.name for p in folder.iterdir()) == sorted(left)
     assert outside.read_bytes() == b"keep"
     assert compile_cache.info(folder).entries == 0
+
+
+def test_clear_leaves_an_entry_another_process_compiles_now(tmp_path):
+    """`crowdmpc cache clear` while a sweep compiled removed the compile's files under it ("ld: cannot find
+    <key>.<tag>.o", "cc1: fatal error: crowdmpc_jit_<tag>.c: No such file or directory") and its episodes
+    raised. The compile holds its entry's lock (another open file here: flock locks are per open file)."""
+    busy, done = "ab" * 32, "cd" * 32
+    compiling = [f"{busy}.lock", "crowdmpc_jit_77_0123abcd.c", f"{busy}.77_0123abcd.o"]
+    compiling += [f".tmp-{busy}.77_0123abcd.casadi", f"{busy}.77_0123abcd.so"]
+    stored = [f"{done}.lock", f"{done}.casadi", f"{done}.record", f"{done}.55_89abcdef.so"]
+    for name in compiling + stored:
+        (tmp_path / name).write_bytes(b"x" * 10)
+    with locked(tmp_path / f"{busy}.lock"):
+        assert compile_cache.clear(tmp_path) == (4, 40, 1)
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted(compiling)
+    assert compile_cache.clear(tmp_path) == (5, 50, 0)  # once it is done
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_clear_refuses_a_cache_directory_that_is_a_symlink(tmp_path):

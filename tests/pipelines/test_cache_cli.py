@@ -6,6 +6,7 @@ import casadi as ca
 import pytest
 
 from mpc import compile_cache
+from mpc.cache_entries import locked
 from pipelines.cli import main
 
 
@@ -37,6 +38,19 @@ def test_info_counts_entries_and_clear_removes_only_ours(folder, capsys):
     assert main(["cache", "clear"]) == 0
     assert capsys.readouterr().out == f"removed 3 files (2.9 KiB) from {folder}\n"
     assert [p.name for p in folder.iterdir()] == ["README"]
+
+
+def test_clear_says_it_left_an_entry_being_compiled(folder, capsys):
+    folder.mkdir(parents=True)
+    key = "0123456789abcdef" * 4
+    (folder / f"{key}.77_0123abcd.o").write_bytes(b"o" * 100)
+    with locked(folder / f"{key}.lock"):  # another process's compile of that entry
+        assert main(["cache", "clear"]) == 0
+    assert capsys.readouterr().out == (
+        f"removed 0 files (0 B) from {folder}; left 1 entry another process is compiling now "
+        "(clear again once it is done)\n"
+    )
+    assert (folder / f"{key}.77_0123abcd.o").exists()
 
 
 def test_info_json_takes_a_file_as_every_other_json_option(folder, tmp_path, capsys):
