@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import fcntl
 import json
 import os
 import re
@@ -59,21 +60,23 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
         return
     path = calibrations_path()
     before = read_calibration_file(path) if path.exists() else None
-    journal = _write_journal(path, blocks, before)
-    _store(blocks)
+    journal, held = _write_journal(path, blocks, before)
     try:
-        yield
-    except BaseException:  # Ctrl-C too
-        _put_back(blocks, before)
-        journal.unlink(missing_ok=True)
-        raise
-    journal.unlink(missing_ok=True)
+        _store(blocks)
+        try:
+            yield
+        except BaseException:  # Ctrl-C too
+            _put_back(blocks, before)
+            raise
+        finally:
+            journal.unlink(missing_ok=True)
+    finally:
+        os.close(held)  # the journal's lock, once it is gone
 
 
 def take_back_killed() -> None:
     """Take back the blocks of each calibrate killed during a held-out run that planned with them (kill -9,
     a crash: no chance to put them back itself), as its Ctrl-C would have: from the journal it left."""
-    from predictors.calibration import Calibration
     from predictors.calibration_store import calibrations_path
     from predictors.locking import pid_alive
 
@@ -86,26 +89,59 @@ def take_back_killed() -> None:
         # run in a fresh container is PID 1), and it would write its own journal over that one
         if match is None or (int(match["pid"]) != os.getpid() and pid_alive(int(match["pid"]))):
             continue
-        if match["unfinished"]:  # killed while writing it, before any block was stored
-            journal.unlink(missing_ok=True)
-            continue
+        with _unless_held(journal) as free:
+            if free:
+                _take_back(journal, match, path)
+
+
+@contextlib.contextmanager
+def _unless_held(journal: Path) -> Iterator[bool]:
+    """Hold ``journal``'s lock if its calibrate no longer does (True), else hold nothing (False). The writer
+    holds it until its run ends, on whatever machine: a pid names a process of one machine only, and a
+    calibrate sharing the user zoo from another node (a cluster's home directory) took back the blocks of a
+    run still going, whose planning and result then had none. False too for a journal another calibrate
+    took back meanwhile (gone)."""
+    try:
+        fd = os.open(journal, os.O_RDWR | os.O_NOFOLLOW)
+    except OSError:
+        yield False
+        return
+    try:
         try:
-            document = json.loads(journal.read_text())
-            stored = [Calibration.from_json(b, journal) for b in document["stored"]]
-            earlier = document["earlier"]
-            if earlier is not None:
-                earlier = [Calibration.from_json(b, journal) for b in earlier]
-        except (OSError, ValueError, KeyError, TypeError, PredictorError) as exc:
-            raise PipelineError(
-                f"{journal}: a killed calibrate's record of the blocks to take back is unreadable ({exc}); "
-                f"check {path} and remove {journal.name}"
-            ) from None
-        _put_back(stored, earlier, f"a calibrate killed during its held-out run (pid {match['pid']})")
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)
+
+
+def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:
+    """Put back what the killed calibrate of ``journal`` stored in the calibrations file ``path``."""
+    from predictors.calibration import Calibration
+
+    if match["unfinished"]:  # killed while writing it, before any block was stored
         journal.unlink(missing_ok=True)
+        return
+    try:
+        document = json.loads(journal.read_text())
+        stored = [Calibration.from_json(b, journal) for b in document["stored"]]
+        earlier = document["earlier"]
+        if earlier is not None:
+            earlier = [Calibration.from_json(b, journal) for b in earlier]
+    except (OSError, ValueError, KeyError, TypeError, PredictorError) as exc:
+        raise PipelineError(
+            f"{journal}: a killed calibrate's record of the blocks to take back is unreadable ({exc}); "
+            f"check {path} and remove {journal.name}"
+        ) from None
+    _put_back(stored, earlier, f"a calibrate killed during its held-out run (pid {match['pid']})")
+    journal.unlink(missing_ok=True)
 
 
-def _write_journal(path: Path, blocks: list, before: list | None) -> Path:
-    """The record ``take_back_killed`` reads, durable before any block is stored."""
+def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path, int]:
+    """The record ``take_back_killed`` reads, durable before any block is stored, and a descriptor holding
+    its lock (``_unless_held``), taken before it has its name: the caller closes it once its run ends."""
     journal = path.with_name(f".calibrate-holdout.{os.getpid()}.json")
     document = {
         "stored": [b.to_json() for b in blocks],
@@ -113,12 +149,18 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> Path:
     }
     tmp = journal.with_name(journal.name + ".tmp")
     path.parent.mkdir(parents=True, exist_ok=True)  # a user zoo not made yet: storing the blocks makes it
-    with open(tmp, "w") as f:
-        f.write(json.dumps(document, allow_nan=False))
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(journal)
-    return journal
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        with open(fd, "w", closefd=False) as f:
+            f.write(json.dumps(document, allow_nan=False))
+            f.flush()
+            os.fsync(fd)
+        tmp.replace(journal)
+    except BaseException:
+        os.close(fd)
+        raise
+    return journal, fd
 
 
 def _store(blocks: list) -> None:

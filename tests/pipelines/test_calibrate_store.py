@@ -102,7 +102,8 @@ def test_the_journal_of_a_live_calibrate_is_not_taken_back(tmp_path, monkeypatch
     path = save_calibration(blocks[0])
     live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
-        journal = _write_journal(path, blocks, None)
+        journal, held = _write_journal(path, blocks, None)
+        os.close(held)  # the pid alone says it runs
         journal.rename(journal.with_name(f".calibrate-holdout.{live.pid}.json"))
         take_back_killed()
         assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
@@ -120,12 +121,34 @@ def test_a_killed_calibrate_that_found_no_file_leaves_none(tmp_path, monkeypatch
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     blocks = _blocks()
     path = calibrations_path()
-    _write_journal(path, blocks, None)
+    os.close(_write_journal(path, blocks, None)[1])  # killed: its lock went with it
     save_calibration(blocks[0])
     monkeypatch.setattr(locking, "pid_alive", lambda pid: False)  # as if this process had been killed
     take_back_killed()
     assert not path.exists() and _journals(tmp_path) == []
     assert f"(pid {os.getpid()}) did not finish" in capsys.readouterr().out
+
+
+def test_the_journal_of_a_calibrate_on_another_machine_is_not_taken_back(tmp_path, monkeypatch, capsys):
+    """A calibrate on another node sharing the user zoo (a cluster's home directory) has a pid no process
+    here has: a calibrate started here took back the blocks of its held-out run while that still ran ("a
+    calibrate killed during its held-out run (pid N) did not finish"), and they were gone when it ended. The
+    writer holds its journal's lock until its run ends; once it is released (the run killed), the blocks go.
+    """
+    from predictors import locking
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    blocks = _blocks()
+    path = calibrations_path()
+    journal, held = _write_journal(path, blocks, None)
+    save_calibration(blocks[0])
+    monkeypatch.setattr(locking, "pid_alive", lambda pid: False)  # its pid: no process here
+    take_back_killed()
+    assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
+    assert _journals(tmp_path) == [journal.name] and capsys.readouterr().out == ""
+    os.close(held)
+    take_back_killed()
+    assert not path.exists() and _journals(tmp_path) == []
 
 
 def test_taking_back_in_a_zoo_not_made_yet_does_nothing(tmp_path, monkeypatch):
