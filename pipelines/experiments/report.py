@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import shutil
 import tempfile
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +36,12 @@ CELLS_CSV: Final[str] = "cells.csv"
 EPISODES_CSV: Final[str] = "episodes.csv"
 TABLE_MD: Final[str] = "table.md"
 STAGING_PREFIX: Final[str] = ".report-"  # the folder a report is written into before its files are renamed
+# How long ago a report's staging folder (STAGING_PREFIX<pid>-...) must have been written last before a
+# later report removes it as a killed report's, its pid running nothing here. That pid names a process of one
+# machine only: a report on another machine sharing the sweep folder (a job's report on a cluster node while
+# `sweep --report-only` runs on the login node) had its folder removed under it ("No such file or
+# directory: 'OUT/.report-PID-.../safety_tradeoff.png'"). A report writes into its folder for seconds.
+STALE_STAGING_S: Final[float] = 3600.0
 
 
 def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
@@ -156,14 +164,12 @@ def write_report(
     old version, so that an interrupted report (a second Ctrl-C, a kill) leaves every file complete, the
     previous report's or this one's, never half written; a killed report's staging folder is removed by the
     next report."""
-    from pipelines.experiments.worker import remove_stale_scratch
-
     out = Path(out)
     keys = {c.key for c in cells}
     records = [r for r in records if r["cell"] in keys]
     summaries = summarize(experiment, cells, records)
     markdown = markdown_table(experiment, summaries)
-    remove_stale_scratch(out, STAGING_PREFIX)  # a killed report's; not one another process writes now
+    _remove_killed_staging(out)  # not one another process writes now
     staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
     try:
         write_csv(staging / CELLS_CSV, cell_rows(summaries))
@@ -182,6 +188,24 @@ def write_report(
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return Report(markdown, tuple(out / name for name in written))
+
+
+def _remove_killed_staging(out: Path) -> None:
+    """The staging folders in ``out`` of reports killed on the way: their process is not running here, and
+    they were last written ``STALE_STAGING_S`` ago (a report elsewhere may be writing a newer one)."""
+    from predictors.locking import pid_alive
+
+    named = re.compile(re.escape(STAGING_PREFIX) + r"(\d+)-")
+    for folder in out.glob(STAGING_PREFIX + "*"):
+        match = named.match(folder.name)
+        if match is None or folder.is_symlink() or not folder.is_dir() or pid_alive(int(match[1])):
+            continue
+        try:
+            if time.time() - folder.stat().st_mtime < STALE_STAGING_S:
+                continue
+        except OSError:  # another report removed it first
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def report_plot_names() -> set[str]:

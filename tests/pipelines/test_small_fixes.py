@@ -3,6 +3,7 @@ MCAP log times (old 0-based files still read), and review's output paths checked
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -15,7 +16,7 @@ from mcap.writer import Writer
 from pipelines import commands
 from pipelines.cli import main
 from pipelines.experiments.cells import get_experiment
-from pipelines.experiments.report import write_report
+from pipelines.experiments.report import STALE_STAGING_S, write_report
 from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
 from pipelines.experiments.summary import summarize as summarize_cells
 from pipelines.logs.plots import animation_figure
@@ -155,10 +156,27 @@ def test_an_interrupted_report_leaves_every_file_whole(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    (tmp_path / f".report-{dead.pid}-x").mkdir()  # a report killed before it renamed its files
+    killed = tmp_path / f".report-{dead.pid}-x"  # a report killed before it renamed its files, an hour ago
+    killed.mkdir()
+    os.utime(killed, (time.time() - STALE_STAGING_S - 60,) * 2)
     again = write_report(tmp_path, table2, cells, fewer)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)
     assert (tmp_path / "cells.csv").read_bytes() != before["cells.csv"] and again.files == first.files
+
+
+def test_a_report_leaves_the_staging_folder_of_a_report_on_another_machine(tmp_path):
+    """Two reports of one sweep folder from two machines (a job's on a cluster node, `sweep --report-only`
+    on the login node): the other's staging folder has a pid no process here has, and was removed under it
+    as a killed report's ("No such file or directory: 'OUT/.report-PID-.../safety_tradeoff.png'")."""
+    table2 = get_experiment("table2")
+    cells = [c for c in table2.cells() if c.n_humans == 5]
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    elsewhere = tmp_path / f".report-{dead.pid}-x"  # its pid: no process here
+    elsewhere.mkdir()
+    (elsewhere / "cells.csv").write_text("being written")
+    write_report(tmp_path, table2, cells, _records(table2, {(c.method, 5): EPISODES for c in cells}))
+    assert (elsewhere / "cells.csv").read_text() == "being written"
 
 
 # --------------------------------------------------------------------------------------- animation legend
