@@ -11,6 +11,7 @@ import fcntl
 import json
 import os
 import re
+import secrets
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -21,8 +22,13 @@ from predictors.errors import PredictorError
 if TYPE_CHECKING:
     from pipelines.loop.margins import MarginSpec
 
-# what a calibrate storing blocks before its held-out run would take back, beside the calibrations file
-_JOURNAL: Final = re.compile(r"\.calibrate-holdout\.(?P<pid>[0-9]+)\.json(?P<unfinished>\.tmp)?")
+# what a calibrate storing blocks before its held-out run would take back, beside the calibrations file:
+# .calibrate-holdout.PID-RANDOM.json (.PID.json before the RANDOM). The pid alone was no run's own name: two
+# containers sharing a user zoo run every calibrate as PID 1, and the one that ended first removed the
+# journal of the other (which had written over its own), whose blocks then stayed in force once it was killed.
+_JOURNAL: Final = re.compile(
+    r"\.calibrate-holdout\.(?P<pid>[0-9]+)(?:-[0-9a-f]{8})?\.json(?P<unfinished>\.tmp)?"
+)
 
 
 def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec) -> bool:
@@ -142,7 +148,7 @@ def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:
 def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path, int]:
     """The record ``take_back_killed`` reads, durable before any block is stored, and a descriptor holding
     its lock (``_unless_held``), taken before it has its name: the caller closes it once its run ends."""
-    journal = path.with_name(f".calibrate-holdout.{os.getpid()}.json")
+    journal = path.with_name(f".calibrate-holdout.{os.getpid()}-{secrets.token_hex(4)}.json")
     document = {
         "stored": [b.to_json() for b in blocks],
         "earlier": None if before is None else [b.to_json() for b in before],

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import pytest
 
 from pipelines.commands.calibrate_store import (
+    _JOURNAL,
     _write_journal,
     plans_with_new_blocks,
     storing,
@@ -51,7 +52,7 @@ def test_a_held_out_run_planning_with_the_blocks_stores_them_first_and_leaves_no
     blocks = _blocks()
     with storing(blocks, _args()):
         assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
-        assert _journals(tmp_path) == [f".calibrate-holdout.{os.getpid()}.json"]
+        assert [_JOURNAL.fullmatch(name)["pid"] for name in _journals(tmp_path)] == [str(os.getpid())]
     assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
     assert _journals(tmp_path) == []
 
@@ -64,7 +65,7 @@ def test_a_held_out_run_planning_with_the_blocks_makes_a_user_zoo_not_made_yet(t
     monkeypatch.setenv("CROWDMPC_ZOO", str(zoo))
     blocks = _blocks()
     with storing(blocks, _args()):
-        assert _journals(zoo) == [f".calibrate-holdout.{os.getpid()}.json"]
+        assert [_JOURNAL.fullmatch(name)["pid"] for name in _journals(zoo)] == [str(os.getpid())]
     assert [b.to_json() for b in read_calibration_file(calibrations_path())] == [b.to_json() for b in blocks]
     assert _journals(zoo) == []
 
@@ -149,6 +150,17 @@ def test_the_journal_of_a_calibrate_on_another_machine_is_not_taken_back(tmp_pat
     os.close(held)
     take_back_killed()
     assert not path.exists() and _journals(tmp_path) == []
+
+
+def test_two_runs_of_one_pid_keep_two_journals(tmp_path, monkeypatch, capsys):
+    """Two containers sharing a user zoo run every calibrate as PID 1: the journal named by the pid alone
+    was the same file for both, and the run that ended first removed it; the other, killed in its held-out
+    run, then left its blocks in force. Each run's journal is its own now."""
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    with storing(_blocks(), _args()):
+        with storing(_blocks(), _args()):  # the same pid, as in two containers
+            assert len(_journals(tmp_path)) == 2
+        assert len(_journals(tmp_path)) == 1  # the first ended: its journal went, the second's stayed
 
 
 def test_taking_back_in_a_zoo_not_made_yet_does_nothing(tmp_path, monkeypatch):
