@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import EllipsisType
 from typing import Final
@@ -92,12 +92,17 @@ def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
     return [block for _, block in stored_calibrations(directory)]
 
 
-def save_calibration(block: Calibration, directory: str | Path | None = None) -> Path:
+def save_calibration(
+    block: Calibration, directory: str | Path | None = None, check: Callable[[], None] | None = None
+) -> Path:
     """Store ``block`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
-    replacing that file's block with the same (predictor, source, alpha); written atomically."""
+    replacing that file's block with the same (predictor, source, alpha); written atomically. ``check()``
+    runs under the lock, on the file as this write finds it, and what it raises stops the write."""
     path = calibrations_path(directory)
     # under the zoo's lock: two calibrations that both read the old file would each write back only their own
     with zoo_lock(path.parent):
+        if check is not None:
+            check()
         kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
         _write_blocks(path, [*kept, block])
     return path

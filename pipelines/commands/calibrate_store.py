@@ -59,19 +59,19 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
     if args.dry_run:
         yield
         return
-    _check_keeps_class_margins(blocks, args)
+    _check_keeps_class_margins(blocks, args)  # now, not after the held-out run; and again as they are stored
     if not plans_with_new_blocks(args, parse_margins(args.holdout_margins)):
         yield
-        _store(blocks)
+        _store(blocks, args)
         return
     path = calibrations_path()
     before = read_calibration_file(path) if path.exists() else None
     journal, held = _write_journal(path, blocks, before)
     try:
-        _store(blocks)
         try:
+            _store(blocks, args)
             yield
-        except BaseException:  # Ctrl-C too
+        except BaseException:  # Ctrl-C too, and a refusal of a block (another calibrate stored one since)
             _put_back(blocks, before)
             raise
         finally:
@@ -169,11 +169,14 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path,
     return journal, fd
 
 
-def _store(blocks: list) -> None:
+def _store(blocks: list, args: argparse.Namespace) -> None:
+    """Store ``blocks``, each refused (``_check_keeps_class_margins``) under the lock it is written under: a
+    calibrate running meanwhile (another job on the same user zoo) may have stored a block with margins per
+    motion class since this one checked, before its held-out run, and a short trial replaced it."""
     from predictors.calibration_store import save_calibration
 
     for block in blocks:
-        path = save_calibration(block)
+        path = save_calibration(block, check=lambda: _check_keeps_class_margins(blocks, args))
     print(f"wrote {len(blocks)} block(s) to {path}")
 
 

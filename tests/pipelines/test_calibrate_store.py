@@ -94,6 +94,36 @@ def test_a_block_without_class_margins_is_refused_before_anything_is_stored(tmp_
     assert ran == [] and not calibrations_path().exists() and _journals(tmp_path) == []
 
 
+@pytest.mark.parametrize("held", ["none", "conformal:0.1"], ids=["stored-after", "stored-before"])
+def test_a_block_with_class_margins_stored_meanwhile_stays(tmp_path, monkeypatch, held):
+    """Checked only at first: a full calibrate (margins per motion class) that stored its block during a
+    short trial's held-out run had it replaced by the trial's block without them (two `calibrate --alpha
+    0.002` at once, 60 and 20 episodes: the 20's block in force). Now checked again under the lock each block
+    is stored under; refused before a held-out run that plans with it, nothing of the trial stays behind."""
+    from pipelines.commands import calibrate_store
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path / "shipped"))  # no shipped block in force
+    errors, motion = class_errors(4)
+    few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    (full,) = _blocks()
+    write_journal = calibrate_store._write_journal
+
+    def full_stored_first(*args):  # another calibrate stores its block just after this one's first check
+        save_calibration(full)
+        return write_journal(*args)
+
+    monkeypatch.setattr(calibrate_store, "_write_journal", full_stored_first)
+    ran = []
+    with pytest.raises(PipelineError, match="has margins per motion class"), storing([few], _args(held)):
+        ran.append(held)
+        if held == "none":
+            save_calibration(full)  # another calibrate, during this one's held-out run
+    assert ran == ([] if held != "none" else [held])
+    assert [b.to_json() for b in read_calibration_file(calibrations_path())] == [full.to_json()]
+    assert _journals(tmp_path / "zoo") == []
+
+
 def test_the_journal_of_a_live_calibrate_is_not_taken_back(tmp_path, monkeypatch):
     """A journal whose calibrate still runs (here: a sleeping child; this process's own pid is a dead run's,
     since a run writes its journal only after taking those back) is that run's own business: its blocks stay
