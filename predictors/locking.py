@@ -45,6 +45,31 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
         os.close(fd)  # releases the lock
 
 
+@contextmanager
+def unless_held(path: Path, gone: bool) -> Iterator[bool]:
+    """Hold ``path``, a lock file its writer holds while it runs, if nobody holds it now (True), else hold
+    nothing (False); ``gone``: the answer for a file that is not there, or is no regular file. Unlike a pid,
+    a lock tells a writer on another machine sharing the folder (a cluster's home directory) from a
+    finished one."""
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        yield gone
+        return
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            yield gone
+            return
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)  # releases the lock
+
+
 def _planted(path: Path) -> bool:
     """Whether something other than a regular file is at ``path`` (a FIFO with no reader, a directory)."""
     try:

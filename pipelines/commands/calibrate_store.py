@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Final
 
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
+from predictors.locking import pid_alive, unless_held
 
 if TYPE_CHECKING:
     from pipelines.loop.margins import MarginSpec
@@ -84,7 +85,6 @@ def take_back_killed() -> None:
     """Take back the blocks of each calibrate killed during a held-out run that planned with them (kill -9,
     a crash: no chance to put them back itself), as its Ctrl-C would have: from the journal it left."""
     from predictors.calibration_store import calibrations_path
-    from predictors.locking import pid_alive
 
     path = calibrations_path()
     if not path.parent.is_dir():
@@ -95,32 +95,11 @@ def take_back_killed() -> None:
         # run in a fresh container is PID 1), and it would write its own journal over that one
         if match is None or (int(match["pid"]) != os.getpid() and pid_alive(int(match["pid"]))):
             continue
-        with _unless_held(journal) as free:
+        # the writer holds the journal's lock until its run ends, on whatever machine: a pid names a process
+        # of one machine only; a journal another calibrate took back meanwhile is gone (not free)
+        with unless_held(journal, gone=False) as free:
             if free:
                 _take_back(journal, match, path)
-
-
-@contextlib.contextmanager
-def _unless_held(journal: Path) -> Iterator[bool]:
-    """Hold ``journal``'s lock if its calibrate no longer does (True), else hold nothing (False). The writer
-    holds it until its run ends, on whatever machine: a pid names a process of one machine only, and a
-    calibrate sharing the user zoo from another node (a cluster's home directory) took back the blocks of a
-    run still going, whose planning and result then had none. False too for a journal another calibrate
-    took back meanwhile (gone)."""
-    try:
-        fd = os.open(journal, os.O_RDWR | os.O_NOFOLLOW)
-    except OSError:
-        yield False
-        return
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            yield False
-            return
-        yield True
-    finally:
-        os.close(fd)
 
 
 def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:
@@ -147,7 +126,8 @@ def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:
 
 def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path, int]:
     """The record ``take_back_killed`` reads, durable before any block is stored, and a descriptor holding
-    its lock (``_unless_held``), taken before it has its name: the caller closes it once its run ends."""
+    its lock (``predictors.locking.unless_held``), taken before it has its name: the caller closes it once
+    its run ends."""
     journal = path.with_name(f".calibrate-holdout.{os.getpid()}-{secrets.token_hex(4)}.json")
     document = {
         "stored": [b.to_json() for b in blocks],

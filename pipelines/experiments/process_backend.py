@@ -22,6 +22,7 @@ from pipelines.experiments.worker import (
     EpisodeOutcome,
     EpisodeWorker,
     make_scratch_root,
+    release_scratch_root,
     worker_scratch,
 )
 
@@ -286,11 +287,9 @@ class ProcessBackend:
         return ", ".join(sorted(ends)) or "ended abruptly"
 
     def close(self) -> None:
-        import shutil
-
         self._end_pool()
         if self._own_root is not None:
-            shutil.rmtree(self._own_root, ignore_errors=True)
+            release_scratch_root(self._own_root)
 
     def _end_pool(self) -> None:
         # Cancel what has not started and end the running episodes now: their records were never written, so a

@@ -21,7 +21,6 @@ import contextlib
 import functools
 import json
 import os
-import shutil
 import signal
 import sys
 import threading
@@ -50,7 +49,7 @@ from pipelines.experiments.log import (
 )
 from pipelines.experiments.resume_checks import check_same_margins, check_same_predictors
 from pipelines.experiments.tasks import EpisodeTask
-from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root
+from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root, release_scratch_root
 from pipelines.plain_json import plain
 from predictors.progress import progress_bar
 
@@ -272,7 +271,7 @@ def run_sweep(
         except KeyboardInterrupt:
             outcome.interrupted = True
         finally:
-            shutil.rmtree(scratch, ignore_errors=True)
+            release_scratch_root(scratch)
     return outcome
 
 

@@ -725,6 +725,10 @@ def _sweep(out: Path, tmp: Path, episodes: int, *extra: str) -> list[str]:
     ]
 
 
+def _worker_folders(root: Path) -> list[Path]:
+    return [p for p in root.iterdir() if p.is_dir()]
+
+
 def _start_and_signal(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, str, list[Path]]:
     """A process-pool sweep with its temp directory in ``tmp_path/tmp``, sent ``sig`` once it has recorded
     a few episodes; its stderr (read to the end: until the resource tracker, which shares it, is gone too)
@@ -750,14 +754,14 @@ def _start_and_signal(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, str, 
             when the pool first needs it: the first may record its five before the second is up)."""
             roots = list(tmp.glob(SCRATCH_PREFIX + f"{proc.pid}-*"))
             recorded = log.exists() and log.read_bytes().count(b"\n") >= 5
-            return recorded and len(roots) == 1 and len(list(roots[0].iterdir())) == 2
+            return recorded and len(roots) == 1 and len(_worker_folders(roots[0])) == 2
 
         while not started():
             assert proc.poll() is None, proc.stderr.read()
             assert time.monotonic() < deadline, "the sweep made no progress"
             time.sleep(0.02)
         roots = list(tmp.glob(SCRATCH_PREFIX + f"{proc.pid}-*"))
-        assert len(roots) == 1 and len(list(roots[0].iterdir())) == 2  # a folder per worker
+        assert len(roots) == 1 and len(_worker_folders(roots[0])) == 2  # a folder per worker, and the lock
         os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=30)
         return proc, err, roots
@@ -968,3 +972,35 @@ def test_ctrl_c_while_the_commands_are_imported_ends_as_interrupted(monkeypatch,
     monkeypatch.setattr("pipelines.cli.build_parser", importing)
     assert main(["sweep", "--experiment", "baselines", "--out", "x"]) == 130
     assert capsys.readouterr().err == "crowdmpc: interrupted\n"
+
+
+def test_a_scratch_root_whose_driver_holds_its_lock_is_kept_whatever_its_pid(tmp_path):
+    """A driver on another machine sharing the temp folder has a pid that names no process here: its root is
+    kept while its lock is held, and removed once released (a dead driver's)."""
+    import fcntl
+
+    from pipelines.experiments.worker import DRIVER_LOCK
+
+    elsewhere = tmp_path / f"{SCRATCH_PREFIX}{_dead_pid()}-node2"
+    (elsewhere / "worker-1-x").mkdir(parents=True)
+    fd = os.open(elsewhere / DRIVER_LOCK, os.O_WRONLY | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # another open file description: flock tells them apart
+        assert remove_stale_scratch(tmp_path) == [] and elsewhere.exists()
+    finally:
+        os.close(fd)
+    assert remove_stale_scratch(tmp_path) == [elsewhere] and not elsewhere.exists()
+
+
+def test_this_drivers_scratch_root_holds_its_lock_until_released(tmp_path, monkeypatch):
+    import tempfile
+
+    from pipelines.experiments.worker import DRIVER_LOCK, make_scratch_root, release_scratch_root
+    from predictors.locking import unless_held
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    root = make_scratch_root()
+    with unless_held(root / DRIVER_LOCK, gone=True) as free:
+        assert not free
+    release_scratch_root(root)
+    assert not root.exists()
