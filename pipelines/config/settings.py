@@ -6,7 +6,6 @@ messages start with the field's name ("episodes must be >= 1, got 0"), which the
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from typing import Final
@@ -17,6 +16,7 @@ from pipelines.experiments.backends import BACKENDS
 from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
 from pipelines.experiments.sweep import MAX_EPISODES_PER_CELL, MAX_WORKERS
 from pipelines.experiments.worker import RECORD_POLICIES
+from pipelines.loop.sensing import is_sensor_range
 from pipelines.loop.spec import COUPLINGS, ControllerSpec
 
 MAX_SIMULATE_EPISODES: Final[int] = (
@@ -157,9 +157,7 @@ class SimulateSettings:
                 raise PipelineError(f"{name} must be a path, got {value!r}")
             _home(self, name)
         sensed = self.sensor_range
-        if sensed is not None and (
-            isinstance(sensed, bool) or not isinstance(sensed, int | float) or not 0 < sensed < math.inf
-        ):
+        if sensed is not None and not is_sensor_range(sensed):
             raise PipelineError(f"sensor_range must be a finite number of metres > 0, got {sensed!r}")
         if not isinstance(self.sensor_tracks, bool):
             raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")

@@ -11,7 +11,6 @@ The experiments these make up, and the registry of those the project ships, are 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Final
 
@@ -19,6 +18,7 @@ from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.sensing import is_sensor_range
 
 if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig
@@ -44,9 +44,7 @@ class World:
         if self.visibility not in VISIBILITY:
             raise PipelineError(f"unknown visibility {self.visibility!r}; choose from {list(VISIBILITY)}")
         sensed = self.sensor_range
-        if sensed is not None and (
-            isinstance(sensed, bool) or not isinstance(sensed, int | float) or not 0 < sensed < math.inf
-        ):
+        if sensed is not None and not is_sensor_range(sensed):
             raise PipelineError(f"a sensor range must be a finite number of metres > 0, got {sensed!r}")
         if not isinstance(self.sensor_tracks, bool):
             raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")

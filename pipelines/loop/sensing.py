@@ -40,12 +40,17 @@ if TYPE_CHECKING:
     from pipelines.loop.controllers import Controller
 
 
+def is_sensor_range(value: object) -> bool:
+    """A sensor's range: a finite number of metres > 0 (an endless range is no sensor: leave the controller
+    unwrapped), not a bool; what RangeLimited, [simulate] sensor_range and a sweep's World accept."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < math.inf
+
+
 class RangeLimited:
     """``inner`` fed the humans within ``radius`` metres of some robot (module docstring)."""
 
     def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
-        # finite, as simulate's sensor_range: an endless range is no sensor (leave the controller unwrapped)
-        if isinstance(radius, bool) or not isinstance(radius, int | float) or not 0 < radius < math.inf:
+        if not is_sensor_range(radius):
             raise PipelineError(f"sensor radius must be a finite number of metres > 0, got {radius!r}")
         if not isinstance(report_tracks, bool):  # a truthy "no" would report them
             raise PipelineError(f"report_tracks must be True or False, got {report_tracks!r}")
