@@ -9,7 +9,10 @@ from pipelines.errors import PipelineError
 from pipelines.loop.spec import CONTROLLER_KINDS, is_shipped
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from pipelines.config import RunConfig
+    from pipelines.experiments.tasks import Cell
     from pipelines.loop.controllers import ControllerSpec
 
 # The shipped MPCs: the controllers that read flocking, record_iterations and [mpc].
@@ -117,3 +120,14 @@ def goal_room_note(
         f"{n_robots}), and it keeps them d_min apart: they may never stand on their goals at once (3 robots "
         f"in the row, no humans: CMPC reached them in no episode at d_min 1.0, DMPC in none at 1.1){hint}"
     )
+
+
+def goal_room_notes(cells: Iterable[Cell]) -> list[str]:
+    """A sweep's ``goal_room_note`` lines, once per method, each naming it."""
+    notes: dict[str, str] = {}
+    for cell in cells:
+        formation = cell.world.env_config().formation
+        note = goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False)
+        if note is not None and cell.method not in notes:
+            notes[cell.method] = note.replace("note: ", f"note: method {cell.method!r}: ", 1)
+    return list(notes.values())

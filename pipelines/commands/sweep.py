@@ -266,6 +266,7 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.commands.simulate_checks import goal_room_notes
     from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
@@ -277,7 +278,8 @@ def run(args: argparse.Namespace) -> int:
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
     if not args.report_only:
-        _note_goal_room(cells)
+        for note in goal_room_notes(cells):
+            print(note, file=sys.stderr)
     if args.dry_run:
         check_plan(experiment)  # a plan whose every episode would fail is not fine
         print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
@@ -300,19 +302,6 @@ def run(args: argparse.Namespace) -> int:
     if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
         report(config, cells, tasks, report_only=args.report_only)
     return status
-
-
-def _note_goal_room(cells) -> None:
-    """simulate's note on a d_min that leaves two robots no room at their goals, once per method."""
-    from pipelines.commands.simulate_checks import goal_room_note
-
-    said = set()
-    for cell in cells:
-        formation = cell.world.env_config().formation
-        note = goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False)
-        if note is not None and cell.method not in said:
-            said.add(cell.method)
-            print(f"{note.replace('note: ', f'note: method {cell.method!r}: ', 1)}", file=sys.stderr)
 
 
 def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
