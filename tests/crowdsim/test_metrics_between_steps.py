@@ -19,9 +19,10 @@ from crowdsim.metrics import (
 from tests.same_metrics import same_metrics
 
 
-def make_traj(robot_pos, human_pos) -> Trajectory:
+def make_traj(robot_pos, human_pos=None) -> Trajectory:
+    """A trajectory of the given positions (``human_pos`` None: no humans), standing, goals never reached."""
     rp = np.asarray(robot_pos, dtype=float)
-    hp = np.asarray(human_pos, dtype=float)
+    hp = np.zeros((len(rp), 0, 2)) if human_pos is None else np.asarray(human_pos, dtype=float)
     return Trajectory(
         robot_positions=rp,
         robot_velocities=np.zeros_like(rp),

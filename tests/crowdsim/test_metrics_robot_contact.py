@@ -4,27 +4,11 @@ them keep their values."""
 
 import math
 
-import numpy as np
 import pytest
 
 from crowdsim.metrics import ROBOT_CONTACT, EpisodeMetrics, Trajectory, aggregate, episode_metrics
+from tests.crowdsim.test_metrics_between_steps import make_traj
 from tests.same_metrics import same_metrics
-
-
-def make_traj(robot_pos, human_pos=None) -> Trajectory:
-    rp = np.asarray(robot_pos, dtype=float)
-    hp = np.zeros((len(rp), 0, 2)) if human_pos is None else np.asarray(human_pos, dtype=float)
-    return Trajectory(
-        robot_positions=rp,
-        robot_velocities=np.zeros_like(rp),
-        human_positions=hp,
-        human_velocities=np.zeros_like(hp),
-        robot_goals=np.full((rp.shape[1], 2), 50.0),  # never reached
-        human_goals=hp[-1],
-        robot_accelerations=np.zeros((len(rp) - 1, rp.shape[1], 2)),
-        dt=0.4,
-        radius=0.3,
-    )
 
 
 def pair(gaps) -> Trajectory:
