@@ -9,8 +9,9 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
 from pipelines.commands.output_paths import without_missing_parents
+from pipelines.commands.sweep_checks import check_plan
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
-from pipelines.commands.sweep_plan import check_plan, check_world, configured_experiment
+from pipelines.commands.sweep_plan import check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
@@ -30,7 +31,6 @@ EPILOG = """examples:
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
   crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
   crowdmpc sweep --experiment sensing --episodes-per-cell 100 --out runs/sensing
-  crowdmpc sweep --experiment table2 --sensor-range 3 --humans 7 --episodes-per-cell 100 --out runs/t2-3m
   crowdmpc sweep --experiment table2 --vary mpc.d_min=0.8,0.9,1.0 --humans 7 --out runs/t2-dmin
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
@@ -213,8 +213,8 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--vary",
         metavar="mpc.KEY=V1,V2",
-        help="a column per value of one [mpc] setting beside each method that plans with a predictor, on the "
-        "same crowds (a value that is Table I's is the cell of a sweep without --vary)",
+        help="a column per value of one [mpc] setting (or controller.margins=M1,M2) beside each method that "
+        "plans with a predictor, on the same crowds (Table I's value, margins none, is a plain sweep's cell)",
     )
     p.add_argument(
         "--sensor-range",

@@ -1,9 +1,11 @@
-"""``sweep --vary mpc.KEY=V1,V2,..`` ([sweep] vary): a column per value of one [mpc] setting beside each
-method that plans with a predictor, on the same crowds, in one table.
+"""``sweep --vary mpc.KEY=V1,V2,..`` or ``--vary controller.margins=M1,M2,..`` ([sweep] vary): a column per
+value of one [mpc] setting, or per margins, beside each method that plans with a predictor, on the same
+crowds, in one table.
 
-Each column is the cell ``--set mpc.KEY=V`` makes (its key, its episodes): a value that is Table I's adds
-nothing to the cell, whose episodes are those of the sweep without ``--vary``, so a study can extend a sweep
-already run. Every value is checked as ``--set`` checks it, with the run's other settings.
+Each column is the cell ``--set mpc.KEY=V`` (``--margins M``) makes (its key, its episodes): a value that is
+Table I's (margins none) adds nothing to the cell, whose episodes are those of the sweep without ``--vary``,
+so a study can extend a sweep already run. Every value is checked as ``--set`` (``--margins``) checks it,
+with the run's other settings.
 """
 
 from __future__ import annotations
@@ -27,8 +29,10 @@ MAX_VALUES: Final[int] = 12  # each value is a whole column of cells per method 
 
 @dataclasses.dataclass(frozen=True)
 class Varied:
-    """The [mpc] key a sweep varies, and its values as the MPC takes them, in the order given."""
+    """The setting a sweep varies (``section.key``: an [mpc] key, or controller.margins), and its values as
+    the MPC takes them (MarginSpecs for the margins), in the order given."""
 
+    section: str
     key: str
     values: tuple[Any, ...]
 
@@ -41,27 +45,68 @@ def varied(cfg: RunConfig) -> Varied | None:
     where = cfg.label("sweep", "vary")
     name, _, raw = text.partition("=")
     section, _, key = name.strip().rpartition(".")
-    if section != "mpc":
+    if (section, key) == ("controller", "margins"):
+        if cfg.chosen("controller", "margins"):
+            raise ConfigError(
+                f"{where} and {cfg.label('controller', 'margins')} both set the margins: give them once"
+            )
+        items = _margin_items(raw)
+    elif section == "mpc":
+        check_key(f"{where} {text!r}", SECTION_BY_NAME["mpc"], key)
+        if key == "jit":
+            raise ConfigError(
+                f"{where}: a sweep compiles by [sweep] jit (--jit), which leaves the cells alone"
+            )
+        if cfg.chosen("mpc", key):
+            raise ConfigError(f"{where} and {cfg.label('mpc', key)} both set mpc.{key}: give its values once")
+        items = [item.strip() for item in raw.split(",")]
+    else:
         raise ConfigError(
-            f"{where} {text!r}: only an [mpc] setting varies (mpc.KEY=V1,V2,...); the margins, predictors, "
-            "controllers and sensor ranges have experiments of their own (safety, predictors, controllers, "
-            "sensing)"
+            f"{where} {text!r}: only an [mpc] setting (mpc.KEY=V1,V2,...) or the margins (controller.margins="
+            "M1,M2,...) vary; the predictors, controllers and sensor ranges have experiments of their own "
+            "(predictors, controllers, sensing)"
         )
-    check_key(f"{where} {text!r}", SECTION_BY_NAME["mpc"], key)
-    if key == "jit":
-        raise ConfigError(f"{where}: a sweep compiles by [sweep] jit (--jit), which leaves the cells alone")
-    if cfg.chosen("mpc", key):
-        raise ConfigError(f"{where} and {cfg.label('mpc', key)} both set mpc.{key}: give its values once")
-    items = [item.strip() for item in raw.split(",")]
     if len(items) < 2 or not all(items):
-        raise ConfigError(f"{where} {text!r}: expected mpc.{key}=V1,V2,... with at least two values")
+        raise ConfigError(f"{where} {text!r}: expected {section}.{key}=V1,V2,... with at least two values")
     if len(items) > MAX_VALUES:
         raise ConfigError(f"{where}: at most {MAX_VALUES} values, got {len(items)}")
-    values = tuple(_checked(cfg, where, key, item) for item in items)
+    check = _margins if section == "controller" else _checked
+    values = tuple(check(cfg, where, key, item) for item in items)
     repeated = next((item for i, item in enumerate(items) if values[i] in values[:i]), None)
     if repeated is not None:
         raise ConfigError(f"{where}: value {repeated} is given more than once")
-    return Varied(key, values)
+    return Varied(section, key, values)
+
+
+def _margin_items(raw: str) -> list[str]:
+    """The margins of ``M1,M2,..``: fixed margins hold commas themselves (``fixed:0.1,0.1,0.1,0.1``), so a
+    bare number continues the fixed margins before it (no margins value is a bare number)."""
+    items: list[str] = []
+    for token in (t.strip() for t in raw.split(",")):
+        if items and items[-1].startswith("fixed:") and _is_number(token):
+            items[-1] += "," + token
+        else:
+            items.append(token)
+    return items
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _margins(cfg: RunConfig, where: str, key: str, item: str) -> Any:
+    """``item`` as ``--margins`` takes it."""
+    from pipelines.errors import PipelineError
+    from pipelines.loop.margins import parse_margins
+
+    try:
+        return parse_margins(item)
+    except PipelineError as exc:
+        raise ConfigError(f"{where} value {item}: {exc}") from None
 
 
 def _checked(cfg: RunConfig, where: str, key: str, item: str) -> Any:
@@ -87,46 +132,42 @@ def _as_written(value: Any) -> Any:
 
 
 def shown(value: Any) -> str:
-    """A value as a column label shows it: ``0.8``, ``8``, ``standing``, ``true``."""
+    """A value as a column label shows it: ``0.8``, ``8``, ``standing``, ``true``, margins by their label
+    (``cp0.1``)."""
+    from pipelines.loop.margins import MarginSpec
+
+    if isinstance(value, MarginSpec):
+        return value.label
     return str(value).lower() if isinstance(value, bool) else str(value)
 
 
 def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) -> Experiment:
-    """A method per value after each method that plans with a predictor (labelled ``CMPC d_min=1.0``, the
-    values in the order given), the others (orca, straight) once; a value that is Table I's (``table_i``)
-    adds nothing to the cell, and its columns keep the paper's figures."""
+    """A method per value after each method that plans with a predictor (labelled ``CMPC d_min=1.0``,
+    ``CMPC margins=cp0.1``, the values in the order given), the others (orca, straight) once; a value that is
+    Table I's (``table_i``; margins none) adds nothing to the cell, and its columns keep the paper's
+    figures."""
     key, name = vary.key, experiment.name
-    labels = ", ".join(repr(label) for label, _ in experiment.methods)
-    if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
-        raise ConfigError(
-            f"{where}: the methods of experiment {name!r} ({labels}) plan with no predictor; [mpc] {key} "
-            "applies to the controllers that do"
-        )
-    if key == "w_floc" and 0 in vary.values and len({spec.flocking for _, spec in experiment.methods}) > 1:
-        raise ConfigError(
-            f"{where}: experiment {name!r} compares flocking on and off; w_floc = 0 turns it off in all its "
-            "methods"
-        )
+    _check_applies(experiment, vary, where)
     methods: list[tuple[str, ControllerSpec]] = []
     worlds: dict[str, World] = {}
     paper: dict[tuple[str, int], PaperFigures] = {}
     for label, spec in experiment.methods:
         own = dict(spec.mpc_overrides)
-        if key in own and spec.kind.uses_predictor:
+        if vary.section == "mpc" and key in own and spec.kind.uses_predictor:
             raise ConfigError(
                 f"{where}: method {label!r} of experiment {name!r} sets {key} = {own[key]!r} itself; vary "
                 "another setting"
             )
-        columns: list[tuple[str, tuple[tuple[str, Any], ...]]] = [(label, ())]  # orca, straight: no MPC
+        columns = [(label, spec)]  # orca, straight: no MPC
         if spec.kind.uses_predictor:
             columns = [
-                (f"{label} {key}={shown(v)}", () if v == table_i else ((key, v),)) for v in vary.values
+                (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]
-        for column, extra in columns:
-            methods.append((column, dataclasses.replace(spec, mpc_overrides=(*spec.mpc_overrides, *extra))))
+        for column, column_spec in columns:
+            methods.append((column, column_spec))
             if label in experiment.method_worlds:
                 worlds[column] = experiment.method_worlds[label]
-            if not extra:  # the paper's figures are of Table I's settings
+            if column_spec == spec:  # the paper's figures are of Table I's settings
                 paper |= {(column, n): fig for (of, n), fig in experiment.paper.items() if of == label}
     title = f"{experiment.title}; {key} = {', '.join(shown(v) for v in vary.values)}"
     return dataclasses.replace(
@@ -136,3 +177,29 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
         method_worlds=MappingProxyType(worlds),
         paper=MappingProxyType(paper),
     )
+
+
+def _with_value(spec: ControllerSpec, vary: Varied, value: Any, table_i: Any) -> ControllerSpec:
+    """``spec`` with the varied setting at ``value``: Table I's adds no override to the cell."""
+    if vary.section == "controller":
+        return dataclasses.replace(spec, margins=value)
+    extra = () if value == table_i else ((vary.key, value),)
+    return dataclasses.replace(spec, mpc_overrides=(*spec.mpc_overrides, *extra))
+
+
+def _check_applies(experiment: Experiment, vary: Varied, where: str) -> None:
+    """Refuse a variation no method would run, or one that undoes what the experiment compares."""
+    key, name = vary.key, experiment.name
+    labels = ", ".join(repr(label) for label, _ in experiment.methods)
+    if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
+        raise ConfigError(
+            f"{where}: the methods of experiment {name!r} ({labels}) plan with no predictor; "
+            f"[{vary.section}] {key} applies to the controllers that do"
+        )
+    if vary.section == "controller" and not experiment.margins_swappable:
+        raise ConfigError(f"{where}: experiment {name!r} fixes each method's margins; they do not vary")
+    if key == "w_floc" and 0 in vary.values and len({spec.flocking for _, spec in experiment.methods}) > 1:
+        raise ConfigError(
+            f"{where}: experiment {name!r} compares flocking on and off; w_floc = 0 turns it off in all its "
+            "methods"
+        )

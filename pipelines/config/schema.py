@@ -307,7 +307,8 @@ def _sweep_keys() -> tuple[Key, ...]:
             "vary",
             "str",
             None,
-            "a column per value of one [mpc] setting beside each method that plans (--vary); unset: none",
+            "a column per value of one [mpc] setting, or controller.margins, beside each method that plans "
+            "(--vary); unset: none",
             "mpc.d_min=0.8,0.9,1.0",
         ),
     )

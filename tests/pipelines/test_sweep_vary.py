@@ -78,7 +78,10 @@ def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays
         (["--vary", "mpc.d_min=1.0,abc"], "--vary value abc must be a finite number, got 'abc'"),
         (["--vary", "mpc.horizon=6,8.5"], "--vary value 8.5 must be an integer >= 1, got 8.5"),
         (["--vary", "mpc.dmin=1,2"], "--vary 'mpc.dmin=1,2': unknown key (did you mean 'd_min'?)"),
-        (["--vary", "env.dt=0.1,0.2"], "--vary 'env.dt=0.1,0.2': only an [mpc] setting varies"),
+        (
+            ["--vary", "env.dt=0.1,0.2"],
+            "--vary 'env.dt=0.1,0.2': only an [mpc] setting (mpc.KEY=V1,V2,...) or the margins",
+        ),
         (["--vary", "mpc.jit=true,false"], "--vary: a sweep compiles by [sweep] jit"),
         (
             ["--vary", "mpc.d_min=1,2", "--set", "mpc.d_min=1.5"],
@@ -109,6 +112,58 @@ def test_a_vary_that_cannot_apply_is_one_line(tmp_path, capsys, options, message
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (tmp_path / "sw").exists()
+
+
+def test_the_margins_vary_each_the_cell_margins_makes_fixed_margins_keeping_their_commas(tmp_path, capsys):
+    out = ["--out", str(tmp_path / "sw")]
+    margins = "none,conformal:0.1,fixed:0.1,0.1,0.1,0.1"
+    varied = _plan(capsys, "--experiment", "table2", "--vary", f"controller.margins={margins}", *out)
+    assert list(varied)[:3] == [
+        "CMPC margins=none",
+        "CMPC margins=cp0.1",
+        "CMPC margins=fixed0.1_0.1_0.1_0.1",
+    ]
+    for value, column in (("conformal:0.1", "cp0.1"), ("fixed:0.1,0.1,0.1,0.1", "fixed0.1_0.1_0.1_0.1")):
+        alone = _plan(capsys, "--experiment", "table2", "--margins", value, *out)
+        assert varied[f"DMPC margins={column}"] == alone["DMPC"]
+    assert varied["CMPC margins=none"] == _plan(capsys, "--experiment", "table2", *out)["CMPC"]
+    cfg = load(sets=["sweep.experiment=table2", 'sweep.vary="controller.margins=conformal:0.1,none"'])
+    experiment = configured_experiment(cfg)
+    assert {label for label, _ in experiment.paper} == {"CMPC margins=none", "DMPC margins=none"}
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (
+            ["--experiment", "safety", "--vary", "controller.margins=none,conformal"],
+            "--vary: experiment 'safety' fixes each method's margins; they do not vary",
+        ),
+        (
+            ["--experiment", "table2", "--vary", "controller.margins=none,bogus"],
+            "--vary value bogus: bad margins 'bogus'; expected none",
+        ),
+        (
+            [
+                "--experiment",
+                "table2",
+                "--vary",
+                "controller.margins=none,conformal",
+                "--margins",
+                "conformal",
+            ],
+            "--vary and --margins both set the margins: give them once",
+        ),
+        (
+            ["--experiment", "table2", "--vary", "controller.margins=conformal:0.1,conformal:0.10"],
+            "--vary: value conformal:0.10 is given more than once",
+        ),
+    ],
+)
+def test_margins_that_cannot_vary_are_one_line(tmp_path, capsys, options, message):
+    assert main([*SWEEP, *options, "--out", str(tmp_path / "sw")]) != 0
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
 
 
 def test_a_config_files_vary_is_named_by_the_file(tmp_path, capsys):

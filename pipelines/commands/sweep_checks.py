@@ -1,0 +1,109 @@
+"""The checks a sweep's plan passes before any worker starts (``check_plan``), each refusing in one line, with
+the method named, what would otherwise fail once per episode in errors.jsonl: predictors, couplings, margins,
+the MPC's d_min."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.experiments.cells import Experiment
+    from predictors.base import Predictor
+
+
+def check_predictors(experiment: Experiment) -> None:
+    """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
+    in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
+    loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
+    refusal simulate's one line."""
+    from predictors import zoo
+    from predictors.errors import PredictorError
+    from predictors.models import model_kind
+    from predictors.registry import available
+
+    known = set(available())
+    # only the predictors some method plans with: an orca or straight column loads none
+    wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
+    missing = sorted(wanted - known)
+    if missing:
+        hint = "--predictors" if experiment.predictor_list else "--predictor"
+        raise PipelineError(
+            f"experiment {experiment.name!r} needs predictors {missing} that are not available; "
+            f"available: {sorted(known)} (check the names {hint} gives, or train or fetch the zoo models)"
+        )
+    for name in sorted(wanted):
+        located = zoo.locate(name)
+        if located is not None:
+            try:
+                model_kind(located.entry.model)
+            except PredictorError as exc:
+                raise PipelineError(f"predictor {name!r} of the {located.source} zoo: {exc}") from None
+            zoo.load_located(located)  # what every worker would do first, and fail at
+
+
+def check_plan(experiment: Experiment) -> None:
+    """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
+    controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
+    not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
+    with them (``check_couplings``), the margins they plan with (``check_margins``) and the MPC's d_min
+    against the agents' contact distance (``check_contact_distances``)."""
+    from pipelines.loop.spec import controller_names
+
+    controller_names()
+    check_predictors(experiment)
+    check_couplings(experiment)
+    check_margins(experiment)
+    check_contact_distances(experiment)
+
+
+def check_couplings(experiment: Experiment) -> None:
+    """Every CMPC and DMPC method's coupling is one its controller builds (mpc_setup.check_coupling, the rule
+    the controller applies as it is built), refused with the method named: the coupled NLP given to DMPC
+    (--set controller.coupling=nlp) or with the ORCA oracle (the coupling experiment with --predictor
+    orca_oracle) failed once per episode in errors.jsonl."""
+    from pipelines.loop.mpc_setup import check_coupling
+    from predictors.registry import load_predictor
+
+    loaded: dict[str, Predictor] = {}  # the coupling experiment's two NLP methods share their predictor
+    for label, spec in experiment.methods:
+        if spec.controller not in ("cmpc", "dmpc") or spec.coupling == "ibr":
+            continue
+        distributed = spec.controller == "dmpc"
+        if not distributed and spec.predictor not in loaded:
+            loaded[spec.predictor] = load_predictor(spec.predictor)
+        try:
+            check_coupling(spec, distributed, loaded.get(spec.predictor))
+        except PipelineError as exc:
+            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+
+
+def check_contact_distances(experiment: Experiment) -> None:
+    """Every CMPC and DMPC method's d_min keeps agents out of contact in the sweep's world (the default one:
+    a sweep refuses [world] values), as the controller checks it as it is built
+    (``mpc_setup.check_contact_distance``); refused here with the method named, not once per episode in
+    errors.jsonl."""
+    from crowdsim.world import WORLD
+    from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
+
+    for label, spec in experiment.methods:
+        if spec.controller not in ("cmpc", "dmpc"):
+            continue
+        try:
+            check_contact_distance(WORLD, mpc_config(spec), radius_settable=False)  # check_world: no [world]
+        except PipelineError as exc:
+            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+
+
+def check_margins(experiment: Experiment) -> None:
+    """Every method's margins resolve (a calibration that matches the weights, with per-class margins for the
+    per-human modes) before workers start."""
+    from pipelines.loop.mpc_setup import mpc_config
+    from predictors.registry import checkpoint_sha256
+
+    for _, spec in experiment.methods:
+        name = spec.predictor_name
+        horizon, sha256 = mpc_config(spec).horizon, checkpoint_sha256(name)
+        spec.margins.resolve(name, horizon, sha256)
+        spec.margins.resolve_classes(name, horizon, sha256)
