@@ -133,11 +133,16 @@ def _as_written(value: Any) -> Any:
 
 def shown(value: Any) -> str:
     """A value as a column label shows it: ``0.8``, ``8``, ``standing``, ``true``, margins by their label
-    (``cp0.1``)."""
+    (``cp0.1``); a float as ``config show`` writes it (``1e7``, where ``str`` gave ``10000000.0``: w_coll's
+    columns read as counts of zeros)."""
     from pipelines.loop.margins import MarginSpec
 
     if isinstance(value, MarginSpec):
         return value.label
+    if isinstance(value, float):
+        from pipelines.config.render import toml_value
+
+        return toml_value(value)
     return str(value).lower() if isinstance(value, bool) else str(value)
 
 

@@ -188,3 +188,11 @@ def test_a_varied_sweep_reuses_the_episodes_of_table_is_value_and_runs_the_other
     assert (
         "| Metrics \\ Methods | CMPC d_min=0.8 | CMPC d_min=1.0 | DMPC d_min=0.8 | DMPC d_min=1.0 |" in table
     )
+
+
+def test_a_float_column_is_labelled_as_config_show_writes_the_value(tmp_path, capsys):
+    """str(1e7) is 10000000.0: w_coll's columns read as counts of zeros; config show writes 1e7."""
+    out = ["--out", str(tmp_path / "sw")]
+    varied = _plan(capsys, "--experiment", "table2", "--vary", "mpc.w_coll=1e6,1e7,1e8", *out)
+    assert list(varied)[:3] == ["CMPC w_coll=1e6", "CMPC w_coll=1e7", "CMPC w_coll=1e8"]
+    assert varied["CMPC w_coll=1e8"].startswith("cmpc-social_lstm_eth-F-ibr-w_coll=100000000.0-")  # keys kept
