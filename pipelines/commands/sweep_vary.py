@@ -72,9 +72,11 @@ def varied(cfg: RunConfig) -> Varied | None:
         raise ConfigError(f"{where}: at most {MAX_VALUES} values, got {len(items)}")
     check = _margins if section == "controller" else _checked
     values = tuple(check(cfg, where, key, item) for item in items)
-    repeated = next((item for i, item in enumerate(items) if values[i] in values[:i]), None)
+    repeated = next((i for i in range(len(items)) if values[i] in values[:i]), None)
     if repeated is not None:
-        raise ConfigError(f"{where}: value {repeated} is given more than once")
+        first = items[values.index(values[repeated])]
+        same = "" if first == items[repeated] else f" ({first} again: both {shown(values[repeated])})"
+        raise ConfigError(f"{where}: value {items[repeated]} is given more than once{same}")
     return Varied(section, key, values)
 
 

@@ -75,6 +75,10 @@ def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays
             "--vary 'mpc.d_min=1.0': expected mpc.d_min=V1,V2,... with at least two",
         ),
         (["--vary", "mpc.d_min=1.0,1.0"], "--vary: value 1.0 is given more than once"),
+        (
+            ["--vary", "mpc.w_coll=1e5,1e6,100000"],
+            "--vary: value 100000 is given more than once (1e5 again: both 100000.0)",
+        ),
         (["--vary", "mpc.d_min=1.0,abc"], "--vary value abc must be a finite number, got 'abc'"),
         (["--vary", "mpc.horizon=6,8.5"], "--vary value 8.5 must be an integer >= 1, got 8.5"),
         (["--vary", "mpc.dmin=1,2"], "--vary 'mpc.dmin=1,2': unknown key (did you mean 'd_min'?)"),
