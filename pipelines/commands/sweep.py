@@ -283,8 +283,9 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         check_plan(experiment)  # a plan whose every episode would fail is not fine
         print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
+        width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
         for cell in cells:
-            print(f"  {cell.method:>22}  {cell.n_humans} humans  {cell.key}")
+            print(f"  {cell.method:>{width}}  {cell.n_humans} humans  {cell.key}")
         return 0
 
     status = 0

@@ -200,3 +200,10 @@ def test_a_float_column_is_labelled_as_config_show_writes_the_value(tmp_path, ca
     varied = _plan(capsys, "--experiment", "table2", "--vary", "mpc.w_coll=1e6,1e7,1e8", *out)
     assert list(varied)[:3] == ["CMPC w_coll=1e6", "CMPC w_coll=1e7", "CMPC w_coll=1e8"]
     assert varied["CMPC w_coll=1e8"].startswith("cmpc-social_lstm_eth-F-ibr-w_coll=100000000.0-")  # keys kept
+
+
+def test_the_dry_run_lines_up_labels_longer_than_the_paper_methods(tmp_path, capsys):
+    options = ["--experiment", "sensing", "--vary", "mpc.horizon=4,3", "--out", str(tmp_path / "sw")]
+    assert main([*SWEEP, *options]) == 0
+    lines = capsys.readouterr().out.splitlines()[1:]
+    assert len({line.index(" humans ") for line in lines}) == 1, lines  # '3 m untracked horizon=4' is 23
