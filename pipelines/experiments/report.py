@@ -103,15 +103,19 @@ def _added_flag_columns(s: CellSummary) -> dict[str, Any]:
 
 def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) -> list[dict[str, Any]]:
     """A row per episode, by cell (in ``cells``' order), seed and scenario, the plan's order: episodes.jsonl
-    holds them in the order the workers finished them, so two identical sweeps gave files that differed."""
+    holds them in the order the workers finished them, so two identical sweeps gave files that differed.
+    ``method`` is the plan's label of the cell, as cells.csv and table.md name it: a record keeps the label
+    of the run that recorded it, so a cell resumed under another one (a plain sweep's "CMPC", extended by
+    ``--vary``'s "CMPC horizon=4") read as two methods."""
     place = {c.key: i for i, c in enumerate(cells)}
+    label = {c.key: c.method for c in cells}
     rows = []
     for r in sorted(records, key=lambda r: (place.get(r["cell"], len(place)), r["seed"], str(r["scenario"]))):
         m, s = r["metrics"], r["solver"]
         rows.append(
             {
                 "key": r["key"],
-                "method": r["method"],
+                "method": label.get(r["cell"], r["method"]),
                 "n_humans": r["n_humans"],
                 "scenario": r["scenario"],
                 "seed": r["seed"],

@@ -1,6 +1,7 @@
 """``sweep --vary mpc.KEY=V1,V2`` ([sweep] vary): a column per value of one [mpc] setting, each the cell
 ``--set mpc.KEY=V`` makes, Table I's value the cell of a sweep without it."""
 
+import csv
 import json
 
 import pytest
@@ -191,6 +192,13 @@ def test_a_varied_sweep_reuses_the_episodes_of_table_is_value_and_runs_the_other
     table = (out / "table.md").read_text()
     assert (
         "| Metrics \\ Methods | CMPC d_min=0.8 | CMPC d_min=1.0 | DMPC d_min=0.8 | DMPC d_min=1.0 |" in table
+    )
+    # episodes.csv names each episode by its column, as cells.csv does, whichever run recorded it
+    with (out / "episodes.csv").open() as f:
+        methods = [row["method"] for row in csv.DictReader(f)]
+    assert (
+        methods
+        == ["CMPC d_min=0.8"] * 2 + ["CMPC d_min=1.0"] * 2 + ["DMPC d_min=0.8"] * 2 + ["DMPC d_min=1.0"] * 2
     )
 
 
