@@ -98,6 +98,10 @@ def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays
             "method 'CMPC d_min=0.5' of experiment 'table2': the MPC's d_min 0.5 m",
         ),
         (
+            ["--margins", "conformal:0.1", "--vary", "mpc.horizon=4,6"],
+            "method 'CMPC horizon=6' of experiment 'table2': the closed-loop calibration of",
+        ),
+        (
             ["--experiment", "baselines", "--vary", "mpc.d_min=1,2"],
             "--vary: the methods of experiment 'baselines' ('straight', 'ORCA') plan with no predictor",
         ),
