@@ -56,6 +56,9 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
 
 FIGSIZE: Final[tuple[float, float]] = (6.4, 4.4)  # in
 MAX_LEGEND_INSIDE: Final[int] = 8  # legend entries that a plot of FIGSIZE holds inside its axes
+# in of width per bar: labels slanted at 30 degrees lie half the spacing apart, and a line of text is about
+# 0.17 in; FIGSIZE's axes give 14 bars that much, --vary's 24 (12 values x CMPC, DMPC) wrote over each other
+BAR_WIDTH_IN: Final[float] = 0.36
 
 
 def method_style(k: int) -> dict[str, str]:
@@ -170,6 +173,7 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     fig = Figure(figsize=FIGSIZE, layout="constrained")
     ax = fig.add_subplot()
     if len(humans) == 1:
+        fig.set_size_inches(max(FIGSIZE[0], 1.3 + BAR_WIDTH_IN * len(methods)), FIGSIZE[1])
         drawn = _draw_by_method(ax, methods, summaries, outcome.name)
         ax.set_xlabel(f"method ({humans[0]} humans)")
     else:
