@@ -83,7 +83,22 @@ def report(
             f"--seed {config.seed}, methods {methods}); the report is left as it was: give the options the "
             f"sweep ran with (`crowdmpc config show --from-sweep {out}` prints them)"
         )
+    if report_only:
+        _note_unrun_cells(cells, records)
     _write(config, cells, tasks, records)
+
+
+def _note_unrun_cells(cells: tuple[Cell, ...], records: list[dict[str, Any]]) -> None:
+    """Say which planned cells --out holds no episode of: the table leaves their columns out, so a value
+    added to --vary (or a crowd size to --humans) and reported before it ran vanished without a word."""
+    recorded = {r["cell"] for r in records}
+    unrun = [f"{c.method!r} ({c.n_humans} humans)" for c in cells if c.key not in recorded]
+    if unrun:
+        print(
+            f"note: --report-only: no episode of {len(unrun)} planned cells, left out of the table: "
+            f"{', '.join(unrun)}; run the sweep without --report-only to run them",
+            file=sys.stderr,
+        )
 
 
 def report_stopped(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> None:

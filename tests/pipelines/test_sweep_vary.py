@@ -219,3 +219,20 @@ def test_the_dry_run_lines_up_labels_longer_than_the_paper_methods(tmp_path, cap
     assert main([*SWEEP, *options]) == 0
     lines = capsys.readouterr().out.splitlines()[1:]
     assert len({line.index(" humans ") for line in lines}) == 1, lines  # '3 m untracked horizon=4' is 23
+
+
+def test_report_only_names_the_columns_it_has_no_episode_of(tmp_path, capsys):
+    """A value added to --vary and reported before it ran: its columns vanished from the table silently."""
+    out = tmp_path / "sw"
+    run = ["sweep", "--experiment", "table2", "--predictor", "constant_velocity", "--humans", "3"]
+    run += ["--episodes-per-cell", "2", "--backend", "inline", "--no-progress", "--out", str(out)]
+    assert main(run) == 0
+    capsys.readouterr()
+    assert main([*run, "--vary", "mpc.horizon=4,3", "--report-only"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        "note: --report-only: no episode of 2 planned cells, left out of the table: 'CMPC horizon=3' "
+        "(3 humans), 'DMPC horizon=3' (3 humans); run the sweep without --report-only to run them" in err
+    )
+    assert main([*run, "--report-only"]) == 0
+    assert "no episode of" not in capsys.readouterr().err
