@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.sweep_checks import check_plan
+from pipelines.commands.sweep_checks import check_plan, goal_room_notes
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
@@ -266,7 +266,6 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.simulate_checks import goal_room_notes
     from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 

@@ -6,10 +6,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from pipelines.commands.simulate_checks import goal_room_note
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from pipelines.experiments.cells import Experiment
+    from pipelines.experiments.tasks import Cell
     from predictors.base import Predictor
 
 
@@ -112,3 +116,15 @@ def check_margins(experiment: Experiment) -> None:
             spec.margins.resolve_classes(name, horizon, sha256)
         except PipelineError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+
+
+def goal_room_notes(cells: Iterable[Cell]) -> list[str]:
+    """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals), once per
+    method, each naming it."""
+    notes: dict[str, str] = {}
+    for cell in cells:
+        formation = cell.world.env_config().formation
+        note = goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False)
+        if note is not None and cell.method not in notes:
+            notes[cell.method] = note.replace("note: ", f"note: method {cell.method!r}: ", 1)
+    return list(notes.values())
