@@ -74,6 +74,21 @@ def planned_margins(cell: Cell) -> dict[str, Any]:
     return json.loads(json.dumps(plain(planned)))  # as read back from a record
 
 
+def resume_fields(record: dict[str, Any]) -> dict[str, Any]:
+    """What the checks above read of a record: its predictor, the predictor's sha256 and the margins its
+    config states. A sweep holds every finished record while it plans the rest; a whole parsed record (~14 KB
+    of Python objects, its effective config half of it) held 1.7 GB at 100,000 episodes before the first new
+    one ran; these fields, 0.26 GB."""
+    kept: dict[str, Any] = {}
+    for name in ("predictor", "predictor_sha256"):
+        if name in record:
+            kept[name] = record[name]
+    config = record.get("config")
+    if isinstance(config, dict) and "margins" in config:  # else _stored_margins finds none: says nothing
+        kept["config"] = {"margins": config["margins"]}
+    return kept
+
+
 def _stored_margins(record: dict[str, Any] | None) -> dict[str, Any] | None:
     """What ``record`` says its episode planned with, in ``planned_margins``' form; None: it says nothing."""
     config = record.get("config") if record is not None else None

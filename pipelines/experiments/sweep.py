@@ -47,7 +47,7 @@ from pipelines.experiments.log import (
     read_sweep_file,
     sweep_lock,
 )
-from pipelines.experiments.resume_checks import check_same_margins, check_same_predictors
+from pipelines.experiments.resume_checks import check_same_margins, check_same_predictors, resume_fields
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root, release_scratch_root
 from pipelines.plain_json import plain
@@ -247,7 +247,7 @@ def run_sweep(
     with sweep_lock(out):
         meta = _sweep_meta(out, config)
         log = episode_log(out)
-        done = log.load()
+        done = log.load(keep=resume_fields)  # its key and what the checks read; not the whole record
         check_same_predictors(out, tasks, done)
         check_same_margins(out, tasks, done)
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
@@ -258,7 +258,7 @@ def run_sweep(
         retried = error_keys(out)
         todo = [t for t in tasks if t.key not in done and t.key not in retried]
         todo += [t for t in tasks if t.key not in done and t.key in retried]
-        del done  # every record parsed (~14 KB each): not held while the workers run
+        del done  # not held while the workers run
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:
             add_run()
