@@ -275,6 +275,26 @@ def test_load_keeps_what_keep_makes_of_each_checked_record(tmp_path):
     assert log.load()["a"]["config"] == {"mpc": {"horizon": 4}}  # the file itself keeps everything
 
 
+def test_the_report_holds_each_record_without_its_config_and_with_shared_field_names(tmp_path):
+    """json.loads makes new strings of a line's field names: held per record, they were half its memory."""
+    from pipelines.commands.sweep_report import _planned_records
+
+    config = SweepConfig(
+        get_experiment("baselines"), tmp_path, 2, humans=(3,), backend="inline", progress=False
+    )
+    run_sweep(config)
+    held, records = _planned_records(config, config.tasks())
+    assert held == len(records) == 4
+    whole = EpisodeLog(tmp_path / EPISODES_FILE).load()
+    for record in records:  # the same record, less its config
+        assert record == {k: v for k, v in whole[record["key"]].items() if k != "config"}
+    first, *others = records
+    for other in others:
+        for part in (None, "metrics", "solver"):
+            names, other_names = (first, other) if part is None else (first[part], other[part])
+            assert all(a is b for a, b in zip(names, other_names, strict=True))
+
+
 # ----------------------------------------------------------------------------------------------------------
 # Running sweeps (in this process: the inline backend, the same worker as the pools)
 # ----------------------------------------------------------------------------------------------------------
