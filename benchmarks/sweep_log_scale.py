@@ -1,0 +1,163 @@
+r"""Time and peak memory of reading a sweep's episode log at 10 to 1000 times the paper's Table II.
+
+Runs a small real sweep (``--experiment``, default table2, at ``--humans`` 5, 2 episodes a cell, inline) in a
+temporary folder, then, for each of ``--episodes`` (the whole log: split evenly over the experiment's cells),
+writes a sweep directory holding that many records, each a copy of a real one under the plan's next key
+(cell, scenario, seed as the schedule gives them), so that every line passes the log's checks, and sweep.json
+with the plan's episodes per cell. In that directory, each in a fresh process: (a) ``crowdmpc sweep
+--report-only`` (pipelines/experiments/log.py, summary, report, tables, the plots: the tables and plots of
+every cell) and (b) a resume of the whole plan (``run_sweep``: loads the log, checks the finished episodes'
+predictors and margins, finds nothing to run). Prints each one's wall time and peak resident memory (the
+child's own, as benchmarks/review_memory.py reads it) and the log's size. The machine is shared: the memory
+figures do not depend on its load, the times do. A million records take ~2.6 GB of disk for table2.
+
+    nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py
+    nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py --episodes 10000 100000 1000000
+    nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py --experiment baselines --episodes 1000 \
+        --json scale.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import count_in, human_count, json_on_stdout, output_file, run_main, write_json  # noqa: E402
+from review_memory import PEAK_SOURCES, peak  # noqa: E402
+
+from pipelines.experiments.cells import EXPERIMENTS  # noqa: E402
+from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE  # noqa: E402
+from pipelines.experiments.tasks import scenario_schedule  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SEED_EPISODES = 2  # a cell's real episodes: a circle and a perpendicular crossing
+# (b) the resume of a sweep whose every planned episode is recorded, as `crowdmpc sweep` runs it
+RESUME = (
+    "import sys\n"
+    "from pathlib import Path\n"
+    "from pipelines.experiments.cells import get_experiment\n"
+    "from pipelines.experiments.sweep import SweepConfig, run_sweep\n"
+    "name, out, per_cell, humans = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])\n"
+    "config = SweepConfig(get_experiment(name), out, per_cell, humans=(humans,), backend='inline', "
+    "progress=False, jit=False)\n"
+    "outcome = run_sweep(config)\n"
+    "assert outcome.ran == 0 and outcome.already_done == outcome.planned, outcome\n"
+)
+
+
+def seed_sweep(out: Path, experiment: str, humans: int) -> None:
+    """The real records to copy: ``SEED_EPISODES`` episodes a cell, run as a user runs them."""
+    command = [sys.executable, "-m", "pipelines.cli", "sweep", "--experiment", experiment, "--humans"]
+    command += [str(humans), "--episodes-per-cell", str(SEED_EPISODES), "--backend", "inline"]
+    command += ["--no-progress", "--jit", "off", "--out", str(out)]
+    env = os.environ | {"PYTHONPATH": str(ROOT)}
+    subprocess.run(
+        command, cwd=ROOT, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )
+
+
+def multiply(seed: Path, out: Path, per_cell: int) -> int:
+    """``out`` as a sweep directory of ``per_cell`` episodes in each of ``seed``'s cells, every record a copy
+    of one of ``seed``'s under the key the plan gives episode i; returns the log's size in bytes."""
+    out.mkdir(parents=True, exist_ok=True)
+    meta = json.loads((seed / SWEEP_FILE).read_text())
+    run = meta["runs"][-1]
+    run["episodes_per_cell"] = per_cell
+    run["planned"] = per_cell * len(run["cells"])
+    (out / SWEEP_FILE).write_text(json.dumps(meta, indent=1) + "\n")
+    templates: dict[str, list[dict[str, Any]]] = {}
+    with open(seed / EPISODES_FILE) as f:
+        for line in f:
+            record = json.loads(line)
+            templates.setdefault(record["cell"], []).append(record)
+    for records in templates.values():
+        records.sort(key=lambda r: r["index"])
+    schedule = scenario_schedule(per_cell, run["seed"])
+    with open(out / EPISODES_FILE, "w") as f:
+        for i, (scenario, seed_number) in enumerate(schedule):
+            for cell, records in templates.items():
+                record = records[i % len(records)]  # the same scenario: index i % 2 is its own
+                copy = record | {"index": i, "seed": seed_number, "scenario": scenario}
+                copy["key"] = f"{cell}/{scenario}/{seed_number}"
+                f.write(json.dumps(copy, separators=(",", ":")) + "\n")
+    return (out / EPISODES_FILE).stat().st_size
+
+
+def report_code(experiment: str) -> str:
+    """(a): ``crowdmpc sweep --report-only`` of the folder given as the first argument."""
+    return (
+        "import contextlib, io, sys\n"
+        "from pipelines.cli import main\n"
+        f"argv = ['sweep', '--experiment', {experiment!r}, '--out', sys.argv[1], '--report-only']\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
+        "    assert main(argv) == 0\n"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--episodes",
+        type=count_in("episodes", 1),
+        nargs="+",
+        default=[10_000, 100_000],
+        help="records in the log, all cells together (default: 10000 100000)",
+    )
+    parser.add_argument("--experiment", choices=sorted(EXPERIMENTS), default="table2")
+    parser.add_argument("--humans", type=human_count, default=5, help="one crowd size (default 5)")
+    parser.add_argument("--json", type=output_file, help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        cells = len(EXPERIMENTS[args.experiment].cells((args.humans,)))
+        rows = []
+        with tempfile.TemporaryDirectory(prefix="sweep-log-scale-") as tmp:
+            seed = Path(tmp) / "seed"
+            seed_sweep(seed, args.experiment, args.humans)
+            print(
+                f"{args.experiment}, {cells} cells at {args.humans} humans; records copied from a real sweep"
+            )
+            head = ("episodes", "log MB", "report s", "report MB", "resume s", "resume MB")
+            widths = (9, 8, 9, 10, 9, 10)
+            print(" ".join(f"{h:>{w}}" for h, w in zip(head, widths, strict=True)))
+            read_from = ""
+            for episodes in sorted(set(args.episodes)):
+                per_cell = max(1, episodes // cells)
+                folder = Path(tmp) / f"log{episodes}"
+                size = multiply(seed, folder, per_cell)
+                report_mb, report_s, read_from = peak(report_code(args.experiment), str(folder))
+                resume_mb, resume_s, _ = peak(
+                    RESUME, args.experiment, str(folder), str(per_cell), str(args.humans)
+                )
+                row = {
+                    "episodes": per_cell * cells,
+                    "log_mb": size / 1e6,
+                    "report_s": report_s,
+                    "report_peak_mb": report_mb,
+                    "resume_s": resume_s,
+                    "resume_peak_mb": resume_mb,
+                }
+                rows.append(row)
+                print(
+                    f"{row['episodes']:9d} {row['log_mb']:8.1f} {report_s:9.1f} {report_mb:10.0f} "
+                    f"{resume_s:9.1f} {resume_mb:10.0f}"
+                )
+                shutil.rmtree(folder)  # the next, larger log is not written beside this one
+            print(f"peak memory: {PEAK_SOURCES[read_from]}")
+        if args.json:
+            write_json(args.json, {"experiment": args.experiment, "humans": args.humans, "rows": rows})
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_main(main))

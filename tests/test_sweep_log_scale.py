@@ -1,0 +1,33 @@
+"""benchmarks/sweep_log_scale.py: its log is the plan's and passes the log's checks; one small run."""
+
+import json
+
+from pipelines.experiments.cells import get_experiment
+from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log
+from pipelines.experiments.sweep import SweepConfig, run_sweep
+from tests.benchmark_modules import load_benchmark
+
+sweep_log_scale = load_benchmark("sweep_log_scale")
+
+
+def test_a_multiplied_log_holds_every_planned_episode_and_passes_the_checks(tmp_path):
+    seed = tmp_path / "seed"
+    experiment = get_experiment("baselines")
+    run_sweep(SweepConfig(experiment, seed, 2, humans=(3,), backend="inline", progress=False))
+    out = tmp_path / "big"
+    size = sweep_log_scale.multiply(seed, out, 7)
+    assert size == (out / EPISODES_FILE).stat().st_size
+    records = episode_log(out).load(repair=False)  # every line checked
+    config = SweepConfig(experiment, out, 7, humans=(3,), backend="inline", progress=False)
+    assert set(records) == {t.key for t in config.tasks()}
+    assert json.loads((out / SWEEP_FILE).read_text())["runs"][-1]["episodes_per_cell"] == 7
+    assert run_sweep(config).ran == 0  # the resume finds the plan done
+
+
+def test_a_small_run_prints_and_writes_its_figures(tmp_path, capsys):
+    out = tmp_path / "scale.json"
+    argv = ["--experiment", "baselines", "--humans", "3", "--episodes", "4", "--json", str(out)]
+    assert sweep_log_scale.main(argv) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["episodes"] == 4 and row["report_peak_mb"] > 0 and row["resume_peak_mb"] > 0
+    assert "report MB" in capsys.readouterr().out
