@@ -13,12 +13,13 @@ pipelines.experiments.summary's.
 from __future__ import annotations
 
 import csv
+import itertools
 import os
 import re
 import shutil
 import tempfile
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -101,18 +102,18 @@ def _added_flag_columns(s: CellSummary) -> dict[str, Any]:
     return columns
 
 
-def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) -> list[dict[str, Any]]:
+def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) -> Iterator[dict[str, Any]]:
     """A row per episode, by cell (in ``cells``' order), seed and scenario, the plan's order: episodes.jsonl
     holds them in the order the workers finished them, so two identical sweeps gave files that differed.
     ``method`` is the plan's label of the cell, as cells.csv and table.md name it: a record keeps the label
     of the run that recorded it, so a cell resumed under another one (a plain sweep's "CMPC", extended by
-    ``--vary``'s "CMPC horizon=4") read as two methods."""
+    ``--vary``'s "CMPC horizon=4") read as two methods. Made as they are written: a list of them all was
+    0.85 KB an episode beside the records (85 MB at 100,000 episodes, benchmarks/sweep_log_scale.py)."""
     place = {c.key: i for i, c in enumerate(cells)}
     label = {c.key: c.method for c in cells}
-    rows = []
     for r in sorted(records, key=lambda r: (place.get(r["cell"], len(place)), r["seed"], str(r["scenario"]))):
         m, s = r["metrics"], r["solver"]
-        rows.append(
+        yield (
             {
                 "key": r["key"],
                 "method": label.get(r["cell"], r["method"]),
@@ -142,16 +143,21 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
                 "cell": r["cell"],
             }
         )
-    return rows
 
 
-def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+def write_csv(path: Path, rows: Iterable[dict[str, Any]]) -> None:
+    """``rows`` as CSV, the first row's keys the header (an empty file for no rows); None and NaN empty."""
+    rows = iter(rows)
     with open(path, "w", newline="") as f:
-        if not rows:
+        first = next(rows, None)
+        if first is None:
             return
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(f, fieldnames=list(first))
         writer.writeheader()
-        writer.writerows({k: ("" if v is None or v != v else v) for k, v in row.items()} for row in rows)
+        writer.writerows(
+            {k: ("" if v is None or v != v else v) for k, v in row.items()}
+            for row in itertools.chain([first], rows)
+        )
 
 
 @dataclass(frozen=True)
