@@ -1,7 +1,8 @@
 r"""Time and peak memory of reading a sweep's episode log at 10 to 1000 times the paper's Table II.
 
-Runs a small real sweep (``--experiment``, default table2, at ``--humans`` 5, 2 episodes a cell, inline) in a
-temporary folder, then, for each of ``--episodes`` (the whole log: split evenly over the experiment's cells),
+Runs a small real sweep (``--experiment``, default table2, at ``--humans``, default 5; 2 episodes a cell,
+inline) in a temporary folder. Then, for each of ``--episodes`` (the whole log, split evenly over the cells,
+at most 100,000 a cell as a sweep takes: a million table2 records need its 10 cells, --humans 5 6 7 8 9),
 writes a sweep directory holding that many records, each a copy of a real one under the plan's next key
 (cell, scenario, seed as the schedule gives them), so that every line passes the log's checks, and sweep.json
 with the plan's episodes per cell. In that directory, each in a fresh process: (a) ``crowdmpc sweep
@@ -9,10 +10,12 @@ with the plan's episodes per cell. In that directory, each in a fresh process: (
 every cell) and (b) a resume of the whole plan (``run_sweep``: loads the log, checks the finished episodes'
 predictors and margins, finds nothing to run). Prints each one's wall time and peak resident memory (the
 child's own, as benchmarks/review_memory.py reads it) and the log's size. The machine is shared: the memory
-figures do not depend on its load, the times do. A million records take ~2.6 GB of disk for table2.
+figures do not depend on its load, the times do. A million records take ~2.6 GB of disk for table2. A child
+that fails prints its own error.
 
     nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py
-    nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py --episodes 10000 100000 1000000
+    nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py --episodes 10000 100000 1000000 \
+        --humans 5 6 7 8 9
     nice -n 10 .venv/bin/python benchmarks/sweep_log_scale.py --experiment baselines --episodes 1000 \
         --json scale.json
 """
@@ -36,6 +39,7 @@ from review_memory import PEAK_SOURCES, peak  # noqa: E402
 
 from pipelines.experiments.cells import EXPERIMENTS  # noqa: E402
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE  # noqa: E402
+from pipelines.experiments.sweep import MAX_EPISODES_PER_CELL  # noqa: E402
 from pipelines.experiments.tasks import scenario_schedule  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,18 +50,19 @@ RESUME = (
     "from pathlib import Path\n"
     "from pipelines.experiments.cells import get_experiment\n"
     "from pipelines.experiments.sweep import SweepConfig, run_sweep\n"
-    "name, out, per_cell, humans = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])\n"
-    "config = SweepConfig(get_experiment(name), out, per_cell, humans=(humans,), backend='inline', "
+    "name, out, per_cell = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])\n"
+    "humans = tuple(int(h) for h in sys.argv[4].split(','))\n"
+    "config = SweepConfig(get_experiment(name), out, per_cell, humans=humans, backend='inline', "
     "progress=False, jit=False)\n"
     "outcome = run_sweep(config)\n"
     "assert outcome.ran == 0 and outcome.already_done == outcome.planned, outcome\n"
 )
 
 
-def seed_sweep(out: Path, experiment: str, humans: int) -> None:
+def seed_sweep(out: Path, experiment: str, humans: str) -> None:
     """The real records to copy: ``SEED_EPISODES`` episodes a cell, run as a user runs them."""
     command = [sys.executable, "-m", "pipelines.cli", "sweep", "--experiment", experiment, "--humans"]
-    command += [str(humans), "--episodes-per-cell", str(SEED_EPISODES), "--backend", "inline"]
+    command += [humans, "--episodes-per-cell", str(SEED_EPISODES), "--backend", "inline"]
     command += ["--no-progress", "--jit", "off", "--out", str(out)]
     env = os.environ | {"PYTHONPATH": str(ROOT)}
     subprocess.run(
@@ -98,9 +103,19 @@ def report_code(experiment: str) -> str:
         "import contextlib, io, sys\n"
         "from pipelines.cli import main\n"
         f"argv = ['sweep', '--experiment', {experiment!r}, '--out', sys.argv[1], '--report-only']\n"
-        "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
-        "    assert main(argv) == 0\n"
+        "with contextlib.redirect_stdout(io.StringIO()):  # the table; its errors go to stderr\n"
+        "    status = main(argv)\n"
+        "if status:\n"
+        "    sys.exit(status)\n"
     )
+
+
+def measured(code: str, *args: str) -> tuple[float, float, str]:
+    """review_memory's ``peak``; a child that fails shows its own error, not only its exit status."""
+    try:
+        return peak(code, *args)
+    except subprocess.CalledProcessError as exc:
+        raise RuntimeError(f"the measured process failed: {exc.stderr.strip()[-2000:]}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -115,18 +130,22 @@ def main(argv: list[str] | None = None) -> int:
         help="records in the log, all cells together (default: 10000 100000)",
     )
     parser.add_argument("--experiment", choices=sorted(EXPERIMENTS), default="table2")
-    parser.add_argument("--humans", type=human_count, default=5, help="one crowd size (default 5)")
+    parser.add_argument("--humans", type=human_count, nargs="+", default=[5], help="crowd sizes (default 5)")
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
     with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
-        cells = len(EXPERIMENTS[args.experiment].cells((args.humans,)))
+        cells = len(EXPERIMENTS[args.experiment].cells(args.humans))
+        if max(args.episodes) // cells > MAX_EPISODES_PER_CELL:  # sweep.json's plan would be refused
+            parser.error(
+                f"--episodes {max(args.episodes)}: {max(args.episodes) // cells} a cell over {cells} cells, "
+                f"beyond the {MAX_EPISODES_PER_CELL} a sweep takes; give more --humans"
+            )
+        humans = ",".join(map(str, sorted(set(args.humans))))
         rows = []
         with tempfile.TemporaryDirectory(prefix="sweep-log-scale-") as tmp:
             seed = Path(tmp) / "seed"
-            seed_sweep(seed, args.experiment, args.humans)
-            print(
-                f"{args.experiment}, {cells} cells at {args.humans} humans; records copied from a real sweep"
-            )
+            seed_sweep(seed, args.experiment, humans)
+            print(f"{args.experiment}, {cells} cells at {humans} humans; records copied from a real sweep")
             head = ("episodes", "log MB", "report s", "report MB", "resume s", "resume MB")
             widths = (9, 8, 9, 10, 9, 10)
             print(" ".join(f"{h:>{w}}" for h, w in zip(head, widths, strict=True)))
@@ -135,10 +154,8 @@ def main(argv: list[str] | None = None) -> int:
                 per_cell = max(1, episodes // cells)
                 folder = Path(tmp) / f"log{episodes}"
                 size = multiply(seed, folder, per_cell)
-                report_mb, report_s, read_from = peak(report_code(args.experiment), str(folder))
-                resume_mb, resume_s, _ = peak(
-                    RESUME, args.experiment, str(folder), str(per_cell), str(args.humans)
-                )
+                report_mb, report_s, read_from = measured(report_code(args.experiment), str(folder))
+                resume_mb, resume_s, _ = measured(RESUME, args.experiment, str(folder), str(per_cell), humans)
                 row = {
                     "episodes": per_cell * cells,
                     "log_mb": size / 1e6,
@@ -155,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
                 shutil.rmtree(folder)  # the next, larger log is not written beside this one
             print(f"peak memory: {PEAK_SOURCES[read_from]}")
         if args.json:
-            write_json(args.json, {"experiment": args.experiment, "humans": args.humans, "rows": rows})
+            write_json(args.json, {"experiment": args.experiment, "humans": humans, "rows": rows})
         return 0
 
 

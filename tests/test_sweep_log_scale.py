@@ -31,3 +31,13 @@ def test_a_small_run_prints_and_writes_its_figures(tmp_path, capsys):
     (row,) = json.loads(out.read_text())["rows"]
     assert row["episodes"] == 4 and row["report_peak_mb"] > 0 and row["resume_peak_mb"] > 0
     assert "report MB" in capsys.readouterr().out
+
+
+def test_more_episodes_a_cell_than_a_sweep_takes_are_refused_before_any_run(capsys):
+    """sweep.json's plan would be refused by --report-only itself; seen as a bare exit status 1 before."""
+    import pytest
+
+    with pytest.raises(SystemExit) as stop:
+        sweep_log_scale.main(["--episodes", "1000000"])  # table2 at 5 humans: 2 cells
+    assert stop.value.code == 2
+    assert "500000 a cell over 2 cells" in capsys.readouterr().err
