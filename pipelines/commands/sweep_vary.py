@@ -24,6 +24,9 @@ if TYPE_CHECKING:
     from pipelines.experiments.tasks import World
     from pipelines.loop.controllers import ControllerSpec
 
+# The [mpc] keys of the flocking term (Eq. 15) alone: a method without it (table3's NF) keeps one column, not
+# a column per value that would run the same episodes again.
+FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight"})
 MAX_VALUES: Final[int] = 12  # each value is a whole column of cells per method and crowd size
 
 
@@ -165,8 +168,8 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
                 f"{where}: method {label!r} of experiment {name!r} sets {key} = {own[key]!r} itself; vary "
                 "another setting"
             )
-        columns = [(label, spec)]  # orca, straight: no MPC
-        if spec.kind.uses_predictor:
+        columns = [(label, spec)]  # orca, straight: no MPC; NF: no flocking term to weigh
+        if spec.kind.uses_predictor and (spec.flocking or key not in FLOCKING_KEYS):
             columns = [
                 (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]

@@ -175,6 +175,14 @@ def test_margins_that_cannot_vary_are_one_line(tmp_path, capsys, options, messag
     assert message in err and "Traceback" not in err
 
 
+def test_a_method_without_flocking_keeps_one_column_when_the_flocking_term_varies():
+    """table3's NF plans without Eq. 15: a column per w_floc ran the same episodes again under new keys."""
+    cfg = load(sets=["sweep.experiment=table3", 'sweep.vary="mpc.w_floc=5,10"'])
+    experiment = configured_experiment(cfg)
+    assert experiment.method_labels == ("F w_floc=5.0", "F w_floc=10.0", "NF")
+    assert dict(experiment.methods)["NF"] == dict(get_experiment("table3").methods)["NF"]
+
+
 def test_a_config_files_vary_is_named_by_the_file(tmp_path, capsys):
     config = tmp_path / "run.toml"
     config.write_text('[sweep]\nexperiment = "table2"\nvary = "mpc.horizon=6,x"\n')
