@@ -224,7 +224,8 @@ SIMULATE_KEYS: Final = (
         "float",
         None,
         "m: the controller sees only the humans within this distance of some robot, each from when it came "
-        "into view, as a tracker gives them (pipelines/loop/sensing.py; --sensor-range); unset: every human",
+        "into view, as a tracker gives them (pipelines/loop/sensing.py; --sensor-range; a sweep puts every "
+        "method behind it); unset: every human",
         3.0,
     ),
     Key(
