@@ -31,7 +31,8 @@ EPILOG = """examples:
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
   crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
   crowdmpc sweep --experiment sensing --episodes-per-cell 100 --out runs/sensing
-  crowdmpc sweep --experiment table2 --vary mpc.d_min=0.8,0.9,1.0 --humans 7 --out runs/t2-dmin
+  crowdmpc sweep --experiment table2 --vary mpc.d_min=0.8,0.9 --vary controller.margins=none,conformal:0.1 \\
+      --humans 7 --out runs/t2-grid
 
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
 figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle; by
@@ -87,7 +88,7 @@ def _options() -> tuple[Option, ...]:
         Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
         Option("sensor_range", "simulate", "sensor_range", "--sensor-range"),
         Option("no_sensor_tracks", "simulate", "sensor_tracks", "--no-sensor-tracks", lambda v: not v),
-        Option("vary", "sweep", "vary", "--vary"),
+        Option("vary", "sweep", "vary", "--vary", ";".join),
     )
 
 
@@ -212,9 +213,10 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--vary",
+        action="append",
         metavar="mpc.KEY=V1,V2",
-        help="a column per value of one [mpc] setting (or controller.margins=M1,M2) beside each method that "
-        "plans with a predictor, on the same crowds (Table I's value, margins none, is a plain sweep's cell)",
+        help="a column per value of an [mpc] setting (or controller.margins=M1,M2) beside each method that "
+        "plans, on the same crowds (Table I's value is a plain sweep's cell); again: every combination",
     )
     p.add_argument(
         "--sensor-range",
@@ -389,10 +391,7 @@ def _run_cells(config: SweepConfig) -> int:
     )
     if outcome.errors:
         raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
-        print(
-            f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)",
-            file=sys.stderr,
-        )
+        print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
         status = 1
     if outcome.interrupted:
         print("interrupted: rerun the same command to resume", file=sys.stderr)

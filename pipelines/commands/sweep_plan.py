@@ -81,25 +81,25 @@ def _check_sensed_iterations(cfg: RunConfig, experiment: Experiment) -> None:
 
 
 def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
-    """The [mpc] values that differ from Table I, and the varied one (--vary) in its place among them: the
-    overrides of a cell stay in the [mpc] table's order, so that a varied value's cell is the one ``--set``
-    makes (the same key, the same episodes)."""
+    """The [mpc] values that differ from Table I, and the varied ones (--vary) each in its place among them:
+    the overrides of a cell stay in the [mpc] table's order, so that a varied value's cell is the one
+    ``--set`` makes (the same key, the same episodes); varied margins first, as they have no place there."""
     from pipelines.commands.sweep_vary import varied, with_values
 
-    vary = varied(cfg)
-    if vary is not None and vary.section == "controller":  # the margins: no place among the overrides
-        experiment = with_values(experiment, vary, None, cfg.label("sweep", "vary"))
-        vary = None
+    where = cfg.label("sweep", "vary")
+    settings = varied(cfg)
+    for vary in settings:
+        if vary.section == "controller":
+            experiment = with_values(experiment, vary, None, where)
     order = list(cfg.values["mpc"])
+    pending = sorted((v for v in settings if v.section == "mpc"), key=lambda v: order.index(v.key))
     for key, value in cfg.mpc_overrides():
-        if vary is not None and order.index(vary.key) < order.index(key):
-            experiment = with_values(
-                experiment, vary, cfg.default("mpc", vary.key), cfg.label("sweep", "vary")
-            )
-            vary = None
+        while pending and order.index(pending[0].key) < order.index(key):
+            vary = pending.pop(0)
+            experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), where)
         experiment = _with_mpc_override(cfg, experiment, key, value)
-    if vary is not None:
-        experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), cfg.label("sweep", "vary"))
+    for vary in pending:
+        experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), where)
     return experiment
 
 

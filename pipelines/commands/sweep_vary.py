@@ -11,6 +11,7 @@ with the run's other settings.
 from __future__ import annotations
 
 import dataclasses
+import math
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Final
 
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
 # The [mpc] keys of the flocking term (Eq. 15) alone: a method without it (table3's NF) keeps one column, not
 # a column per value that would run the same episodes again.
 FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight"})
-MAX_VALUES: Final[int] = 12  # each value is a whole column of cells per method and crowd size
+MAX_VALUES: Final[int] = 12  # each value (each combination) is a whole column of cells per method and size
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,12 +41,28 @@ class Varied:
     values: tuple[Any, ...]
 
 
-def varied(cfg: RunConfig) -> Varied | None:
-    """[sweep] vary parsed and every value checked, or None when the run varies nothing."""
-    text = cfg.sweep.vary
-    if text is None:
-        return None
+def varied(cfg: RunConfig) -> tuple[Varied, ...]:
+    """[sweep] vary parsed and every value checked: one setting, or several separated by ";" (``--vary``
+    given again) for a grid of every combination; () when the run varies nothing."""
+    if cfg.sweep.vary is None:
+        return ()
     where = cfg.label("sweep", "vary")
+    settings = tuple(_one_setting(cfg, where, part.strip()) for part in cfg.sweep.vary.split(";"))
+    names = [f"{v.section}.{v.key}" for v in settings]
+    twice = next((name for i, name in enumerate(names) if name in names[:i]), None)
+    if twice is not None:
+        raise ConfigError(f"{where}: {twice} varies twice; give its values once")
+    columns = math.prod(len(v.values) for v in settings)
+    if columns > MAX_VALUES:
+        raise ConfigError(
+            f"{where}: {' x '.join(str(len(v.values)) for v in settings)} = {columns} columns per method; at "
+            f"most {MAX_VALUES}"
+        )
+    return settings
+
+
+def _one_setting(cfg: RunConfig, where: str, text: str) -> Varied:
+    """One ``section.key=V1,V2,..`` of [sweep] vary, every value checked."""
     name, _, raw = text.partition("=")
     section, _, key = name.strip().rpartition(".")
     if (section, key) == ("controller", "margins"):

@@ -309,7 +309,7 @@ def _sweep_keys() -> tuple[Key, ...]:
             "str",
             None,
             "a column per value of one [mpc] setting, or controller.margins, beside each method that plans "
-            "(--vary); unset: none",
+            "(--vary); several separated by ';': a column per combination; unset: none",
             "mpc.d_min=0.8,0.9,1.0",
         ),
     )

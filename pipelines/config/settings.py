@@ -179,7 +179,8 @@ class SweepSettings:
     jit: str = "auto"
     predictors: tuple[str, ...] | None = None  # the predictors experiment's list; None: the shipped one
     controllers: tuple[str, ...] | None = None  # the controllers experiment's list; None: the shipped one
-    vary: str | None = None  # "mpc.KEY=V1,V2,..": a column per value (pipelines/commands/sweep_vary.py)
+    # "mpc.KEY=V1,V2,..": a column per value, ";" between settings: a grid (pipelines/commands/sweep_vary.py)
+    vary: str | None = None
 
     def __post_init__(self) -> None:
         if self.vary is not None and not (isinstance(self.vary, str) and "=" in self.vary):

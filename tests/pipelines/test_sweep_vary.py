@@ -183,6 +183,47 @@ def test_a_method_without_flocking_keeps_one_column_when_the_flocking_term_varie
     assert dict(experiment.methods)["NF"] == dict(get_experiment("table3").methods)["NF"]
 
 
+def test_vary_again_makes_a_grid_each_cell_the_one_the_options_make(tmp_path, capsys):
+    """Two settings: a column per combination, margins then [mpc] values in the label, and each cell the one
+    --set and --margins make; two [mpc] keys each in its place among a set one."""
+    out = ["--out", str(tmp_path / "sw")]
+    grid = ["--vary", "mpc.d_min=0.8,0.9", "--vary", "controller.margins=none,conformal:0.1"]
+    varied = _plan(capsys, "--experiment", "table2", *grid, *out)
+    assert list(varied)[:4] == [
+        "CMPC margins=none d_min=0.8",
+        "CMPC margins=none d_min=0.9",
+        "CMPC margins=cp0.1 d_min=0.8",
+        "CMPC margins=cp0.1 d_min=0.9",
+    ]
+    alone = _plan(
+        capsys, "--experiment", "table2", "--set", "mpc.d_min=0.9", "--margins", "conformal:0.1", *out
+    )
+    assert varied["DMPC margins=cp0.1 d_min=0.9"] == alone["DMPC"]
+    common = ["--experiment", "table2", "--set", "mpc.w_coll=1e5", *out]
+    two = _plan(capsys, *common, "--vary", "mpc.d_min=0.8,0.9", "--vary", "mpc.horizon=4,3")
+    both = _plan(capsys, *common, "--set", "mpc.horizon=3", "--set", "mpc.d_min=0.9")
+    assert two["CMPC horizon=3 d_min=0.9"] == both["CMPC"]  # labelled in the [mpc] table's order too
+    assert (
+        both["CMPC"]
+        == "cmpc-social_lstm_eth-F-ibr-horizon=3-w_coll=100000.0-d_min=0.9-m=none-paper-visible-h5-r3"
+    )
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--vary", "mpc.d_min=0.8,0.9", "--vary", "mpc.d_min=1.0,1.1"], "--vary: mpc.d_min varies twice"),
+        (
+            ["--vary", "mpc.d_min=0.8,0.85,0.9,0.95", "--vary", "mpc.horizon=2,3,4,5"],
+            "--vary: 4 x 4 = 16 columns per method; at most 12",
+        ),
+    ],
+)
+def test_a_grid_that_cannot_be_is_one_line(tmp_path, capsys, options, message):
+    assert main([*SWEEP, "--experiment", "table2", *options, "--out", str(tmp_path / "sw")]) != 0
+    assert message in capsys.readouterr().err
+
+
 def test_a_config_files_vary_is_named_by_the_file(tmp_path, capsys):
     config = tmp_path / "run.toml"
     config.write_text('[sweep]\nexperiment = "table2"\nvary = "mpc.horizon=6,x"\n')
