@@ -141,19 +141,23 @@ def world_columns(cell: Cell) -> dict[str, str]:
     }
 
 
-def world_row_label(cells: Sequence[Cell]) -> str:
-    """The table's row of each column's conventions; sensing named only where some column senses, so that
-    the tables of full observation read as before sensing existed."""
+def _world_names(cells: Sequence[Cell]) -> tuple[str, ...]:
+    """The ``world_columns`` the table names; sensing only where some column senses, so that the tables of
+    full observation read as before sensing existed."""
     sensed = any(c.world.sensor_range is not None for c in cells)
-    return "Margins / profile / visibility" + (" / sensing" if sensed else "")
+    return ("margins", "profile", "visibility") + (("sensing",) if sensed else ())
+
+
+def world_row_label(cells: Sequence[Cell]) -> str:
+    """The table's row of each column's conventions: "Margins / profile / visibility[ / sensing]"."""
+    return " / ".join(_world_names(cells)).capitalize()
 
 
 def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
     """The table notes' line on margins, profile, visibility (and sensing, where some column senses), and,
     when they differ across the columns, each column's "margins / profile / visibility" for a row of its
     own (``world_row_label``; else None)."""
-    label = world_row_label(cells)
-    names = [name.lower() for name in label.split(" / ")]
+    names = _world_names(cells)
     worlds = [tuple(world_columns(c)[name] for name in names) for c in cells]
     margins, profiles, visibilities, *sensings = (sorted(set(values)) for values in zip(*worlds, strict=True))
     parts = [
@@ -168,7 +172,7 @@ def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
     line = f"{parts[0]}; " + ", ".join(parts[1:]) + "."
     per_column = None
     if len(set(worlds)) > 1:
-        line = line[:-1] + f" (row '{label}')."
+        line = line[:-1] + f" (row '{world_row_label(cells)}')."
         per_column = [" / ".join(w) for w in worlds]
     # Settings every column shares beside Table I's (a config file's guidance, stall release, ...): without
     # them a safe-crossing sweep's table read the same as one with the margins alone.
