@@ -100,7 +100,7 @@ def remove_stale_scratch(temp_dir: str | Path | None = None, prefix: str = SCRAT
     removed = []
     for root in Path(temp_dir or tempfile.gettempdir()).glob(prefix + "*"):
         match = named.match(root.name)
-        if match is None or not root.is_dir() or pid_alive(int(match[1])) or root in _HELD:
+        if match is None or not root.is_dir() or pid_alive(int(match[1])):  # this driver's own too
             continue
         with unless_held(root / DRIVER_LOCK, gone=True) as free:
             if not free:  # a driver on another machine sharing the folder
