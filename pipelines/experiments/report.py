@@ -15,10 +15,8 @@ from __future__ import annotations
 import csv
 import itertools
 import os
-import re
 import shutil
 import tempfile
-import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -174,12 +172,15 @@ def write_report(
     old version, so that an interrupted report (a second Ctrl-C, a kill) leaves every file complete, the
     previous report's or this one's, never half written; a killed report's staging folder is removed by the
     next report."""
+    from pipelines.experiments.worker import remove_stale_scratch
+
     out = Path(out)
     keys = {c.key for c in cells}
     records = [r for r in records if r["cell"] in keys]
     summaries = summarize(experiment, cells, records)
     markdown = markdown_table(experiment, summaries)
-    _remove_killed_staging(out)  # not one another process writes now
+    # a killed report's: not one another process writes now, here or on another machine
+    remove_stale_scratch(out, STAGING_PREFIX, older_than_s=STALE_STAGING_S)
     staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
     try:
         write_csv(staging / CELLS_CSV, cell_rows(summaries))
@@ -198,24 +199,6 @@ def write_report(
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return Report(markdown, tuple(out / name for name in written))
-
-
-def _remove_killed_staging(out: Path) -> None:
-    """The staging folders in ``out`` of reports killed on the way: their process is not running here, and
-    they were last written ``STALE_STAGING_S`` ago (a report elsewhere may be writing a newer one)."""
-    from predictors.locking import pid_alive
-
-    named = re.compile(re.escape(STAGING_PREFIX) + r"(\d+)-")
-    for folder in out.glob(STAGING_PREFIX + "*"):
-        match = named.match(folder.name)
-        if match is None or folder.is_symlink() or not folder.is_dir() or pid_alive(int(match[1])):
-            continue
-        try:
-            if time.time() - folder.stat().st_mtime < STALE_STAGING_S:
-                continue
-        except OSError:  # another report removed it first
-            continue
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def report_plot_names() -> set[str]:

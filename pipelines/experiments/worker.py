@@ -90,17 +90,26 @@ def release_scratch_root(root: Path) -> None:
         os.close(fd)
 
 
-def remove_stale_scratch(temp_dir: str | Path | None = None, prefix: str = SCRATCH_PREFIX) -> list[Path]:
+def remove_stale_scratch(
+    temp_dir: str | Path | None = None, prefix: str = SCRATCH_PREFIX, older_than_s: float = 0.0
+) -> list[Path]:
     """Remove the folders ``<prefix><pid>-...`` (in ``temp_dir``, default the system's: the sweeps' scratch
-    roots) whose driver is gone: its process is not running here, and nobody holds its ``DRIVER_LOCK`` (a
-    root without one, made before the lock, is judged by the pid alone)."""
+    roots) whose writer is gone: its process is not running here, the folder was last written
+    ``older_than_s`` ago or more (a writer without a lock, on another machine sharing the folder, may still
+    be writing it: a report's staging folder), and nobody holds its ``DRIVER_LOCK`` (a root without one, made
+    before the lock, is judged by the pid alone)."""
     from predictors.locking import unless_held
 
     named = re.compile(re.escape(prefix) + r"(\d+)-")
     removed = []
     for root in Path(temp_dir or tempfile.gettempdir()).glob(prefix + "*"):
         match = named.match(root.name)
-        if match is None or not root.is_dir() or pid_alive(int(match[1])):  # this driver's own too
+        if match is None or root.is_symlink() or not root.is_dir() or pid_alive(int(match[1])):
+            continue  # this process's own too: its pid is alive
+        try:
+            if older_than_s and time.time() - root.stat().st_mtime < older_than_s:
+                continue
+        except OSError:  # another process removed it first
             continue
         with unless_held(root / DRIVER_LOCK, gone=True) as free:
             if not free:  # a driver on another machine sharing the folder
