@@ -59,11 +59,13 @@ distance, m), ``collision`` (below 0.8 m), ``contact`` (below the sum of the rad
 (projected paths intersect); the step's, with the relative motion a straight segment, as the reward
 takes it: ``min_distance_between_steps`` (m), ``collision_between_steps`` and ``contact_between_steps``
 (``d < 0``: what costs the collision penalty and, with ``end_on_collision``, ends the episode);
-``surface_distance`` ``(max_robots,)`` (the ``d_i`` above), ``robot_rewards`` ``(max_robots,)``,
-``reached`` ``(max_robots,)``, ``success`` and ``timeout``. The last step adds ``episode_metrics``, the
-``EpisodeMetrics`` of the whole episode (what ``crowdmpc simulate`` reports); an episode that a contact
-ended has ``contact_between_steps`` True there (and ``timeout`` True: it did not succeed), while its
-step-sampled ``contact`` may be False.
+two robots touching (not in the paper, nor in the reward): ``min_distance_robots`` (m, inf with one robot)
+and ``robot_contact`` at the new state, ``min_distance_robots_between_steps`` and
+``robot_contact_between_steps`` over the step; ``surface_distance`` ``(max_robots,)`` (the ``d_i``
+above), ``robot_rewards`` ``(max_robots,)``, ``reached`` ``(max_robots,)``, ``success`` and ``timeout``.
+The last step adds ``episode_metrics``, the ``EpisodeMetrics`` of the whole episode (what ``crowdmpc
+simulate`` reports); an episode that a contact ended has ``contact_between_steps`` True there (and
+``timeout`` True: it did not succeed), while its step-sampled ``contact`` may be False.
 
 Per-robot info arrays have ``max_robots`` rows, as the action and the observation, so that
 ``gymnasium.vector`` can stack environments whose episodes have different ``n_robots``: rows past
@@ -101,7 +103,7 @@ from crowdsim.gym_observation import (
     observation_array,
     observation_bounds,
 )
-from crowdsim.gym_reward import RewardConfig, step_closest, surface_distances
+from crowdsim.gym_reward import RewardConfig, robot_pair_info, step_closest, surface_distances
 from crowdsim.metrics import (
     COLLISION_DISTANCE,
     DISCOMFORT_HORIZON,
@@ -305,6 +307,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             "min_distance_between_steps": swept,
             "collision_between_steps": swept < COLLISION_DISTANCE,
             "contact_between_steps": bool(contact_in_step.any()),
+            **robot_pair_info(before, obs, cfg.radius),
             "surface_distance": self._rows(gaps, math.inf),
             "robot_rewards": self._rows(robot_rewards, 0.0),
             "reached": self._rows(obs.robot_reached, False),

@@ -12,7 +12,7 @@ import numpy as np
 from crowdsim.conventions import PAPER_DISCOMFORT_DIST
 from crowdsim.env import Observation
 from crowdsim.errors import SimulationError, real_number
-from crowdsim.metrics import closest_approach
+from crowdsim.metrics import closest_approach, min_robot_distance_between_steps
 
 
 @dataclass(frozen=True)
@@ -72,3 +72,18 @@ def surface_distances(closest: np.ndarray, radius: float) -> np.ndarray:
     if closest.shape[1] == 0:
         return np.full(closest.shape[0], math.inf)
     return closest.min(axis=1) - 2.0 * radius
+
+
+def robot_pair_info(before: Observation, after: Observation, radius: float) -> dict[str, float | bool]:
+    """A step's robot-robot figures for the info (not in the paper, nor in the reward): at the new state,
+    ``min_distance_robots`` (m, inf with one robot) and ``robot_contact`` (below the sum of the radii); over
+    the step, the relative motion a straight segment, ``min_distance_robots_between_steps`` and
+    ``robot_contact_between_steps``, as ``crowdsim.metrics`` counts them for the episode."""
+    now = min_robot_distance_between_steps(after.robot_positions[None])
+    swept = min_robot_distance_between_steps(np.stack([before.robot_positions, after.robot_positions]))
+    return {
+        "min_distance_robots": now,
+        "robot_contact": now < 2.0 * radius,
+        "min_distance_robots_between_steps": swept,
+        "robot_contact_between_steps": swept < 2.0 * radius,
+    }

@@ -38,7 +38,10 @@ accelerating within a step follow a parabola, which the segment approximates).
 * robot-robot contact (not a metric of the paper, whose metrics are all robot-human): ``robot_contact``, the
   minimum robot-robot centre distance over the recorded states (``min_distance_robots``) is below the sum of
   the radii, two robots touching; ``robot_contact_steps`` counts the recorded states at which some pair of
-  robots is that close. Sampled at the steps as ``contact``; False and 0 with one robot.
+  robots is that close. Sampled at the steps as ``contact``; False and 0 with one robot. Between steps as
+  for robot-human: ``min_distance_robots_between_steps`` is the robot-robot closest approach with linear
+  motion within each step (inf with one robot), ``robot_contact_between_steps`` it below the sum of the radii:
+  two robots that cross within a step touch there while no recorded state shows it.
 """
 
 from __future__ import annotations
@@ -63,16 +66,22 @@ BETWEEN_STEPS: Final[tuple[str, ...]] = (
     "collision_between_steps",
     "contact_between_steps",
 )
-ROBOT_CONTACT: Final[tuple[str, ...]] = ("robot_contact", "robot_contact_steps")
+ROBOT_CONTACT: Final[tuple[str, ...]] = (
+    "robot_contact",
+    "robot_contact_steps",
+    "min_distance_robots_between_steps",
+    "robot_contact_between_steps",
+)
 ADDED_FIELDS: Final[tuple[str, ...]] = (*ADDED_COUNTS, *BETWEEN_STEPS, *ROBOT_CONTACT)
 # The episode flags among the added fields: aggregate's rate of each is NaN when some episode lacks it.
-ADDED_FLAGS: Final[tuple[str, ...]] = (*BETWEEN_STEPS[1:], ROBOT_CONTACT[0])
+ADDED_FLAGS: Final[tuple[str, ...]] = (*BETWEEN_STEPS[1:], ROBOT_CONTACT[0], ROBOT_CONTACT[3])
 # as_dict writes inf as null; for these fields inf is the value without any pair of agents.
 _INF_WHEN_NULL: Final[tuple[str, ...]] = (
     "min_distance",
     "min_distance_robots",
     "min_distance_humans",
     "min_distance_between_steps",
+    "min_distance_robots_between_steps",
 )
 
 
@@ -134,6 +143,10 @@ class EpisodeMetrics:
     # written before them.
     robot_contact: bool | None
     robot_contact_steps: int | None
+    # Robot-robot closest approach with linear motion within each step (m, inf with one robot) and it below
+    # the sum of the radii; None only when rebuilt from a record written before them.
+    min_distance_robots_between_steps: float | None
+    robot_contact_between_steps: bool | None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly (NaN and inf become None)."""
@@ -187,13 +200,13 @@ def _row_min_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
 
 
-def _row_min_robot_distance(robot_positions: np.ndarray) -> np.ndarray:
-    """(T,) smallest centre distance at each row between two different robots of ``robot_positions (T, M,
-    2)``; inf with fewer than two robots."""
-    if robot_positions.shape[1] < 2:
-        return np.full(len(robot_positions), math.inf)
-    d = np.linalg.norm(robot_positions[:, :, None, :] - robot_positions[:, None, :, :], axis=-1)
-    iu = np.triu_indices(robot_positions.shape[1], k=1)
+def _row_min_within(positions: np.ndarray) -> np.ndarray:
+    """(T,) smallest centre distance at each row between two different agents of ``positions (T, P, 2)``
+    (robots with robots, humans with humans); inf with fewer than two agents."""
+    if positions.shape[1] < 2:
+        return np.full(len(positions), math.inf)
+    d = np.linalg.norm(positions[:, :, None, :] - positions[:, None, :, :], axis=-1)
+    iu = np.triu_indices(positions.shape[1], k=1)
     return cast(np.ndarray, d[:, iu[0], iu[1]].min(axis=1))
 
 
@@ -207,18 +220,32 @@ def closest_approach(start: np.ndarray, end: np.ndarray) -> np.ndarray:
     return np.linalg.norm(start + s[..., None] * d, axis=-1)
 
 
+def _swept_min(rel: np.ndarray) -> float:
+    """Closest approach of the relative positions ``rel (T+1, ..., 2)`` of agent pairs, each moving
+    linearly between its rows; the rows count too."""
+    at_rows = float(np.linalg.norm(rel, axis=-1).min())
+    if len(rel) < 2:
+        return at_rows
+    # np.minimum, not min(): a NaN (an infinite position) must show, not be dropped by argument order
+    return float(np.minimum(at_rows, closest_approach(rel[:-1], rel[1:]).min()))
+
+
 def min_distance_between_steps(robot_positions: np.ndarray, human_positions: np.ndarray) -> float:
     """Robot-human closest approach (m) of ``robot_positions (T+1, M, 2)`` and ``human_positions
     (T+1, N, 2)`` when every agent moves linearly between its recorded positions; the recorded states
     count too, so it is never above their minimum. inf without a robot or a human."""
     if robot_positions.shape[1] == 0 or human_positions.shape[1] == 0:
         return math.inf
-    rel = human_positions[:, None, :, :] - robot_positions[:, :, None, :]  # (T+1, M, N, 2)
-    at_rows = float(np.linalg.norm(rel, axis=-1).min())
-    if len(rel) < 2:
-        return at_rows
-    # np.minimum, not min(): a NaN (an infinite position) must show, not be dropped by argument order
-    return float(np.minimum(at_rows, closest_approach(rel[:-1], rel[1:]).min()))
+    return _swept_min(human_positions[:, None, :, :] - robot_positions[:, :, None, :])  # (T+1, M, N, 2)
+
+
+def min_robot_distance_between_steps(robot_positions: np.ndarray) -> float:
+    """Robot-robot closest approach (m) of ``robot_positions (T+1, M, 2)``, as
+    ``min_distance_between_steps`` takes robot-human; inf with fewer than two robots."""
+    if robot_positions.shape[1] < 2:
+        return math.inf
+    first, second = np.triu_indices(robot_positions.shape[1], k=1)
+    return _swept_min(robot_positions[:, second] - robot_positions[:, first])  # (T+1, pairs, 2)
 
 
 def _success_step(traj: Trajectory, reach: np.ndarray, rule: str) -> int:
@@ -230,17 +257,6 @@ def _success_step(traj: Trajectory, reach: np.ndarray, rule: str) -> int:
     together = inside.all(axis=1)
     together[0] = False
     return int(together.argmax()) if together.any() else -1
-
-
-def _min_pair_distance(a: np.ndarray, b: np.ndarray, same: bool) -> float:
-    """Smallest centre distance over time between agents of ``a (T, P, 2)`` and ``b (T, Q, 2)``."""
-    if a.shape[1] == 0 or b.shape[1] == 0 or (same and a.shape[1] < 2):
-        return math.inf
-    d = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1)
-    if same:
-        iu = np.triu_indices(a.shape[1], k=1)
-        d = d[:, iu[0], iu[1]]
-    return float(d.min())
 
 
 def _cross(ax, ay, bx, by):
@@ -313,7 +329,9 @@ def episode_metrics(
     min_rh = float(row_min.min())
     swept = min_distance_between_steps(rp, hp)
     disc = discomfort_steps(traj, discomfort_horizon)
-    min_rr = _min_pair_distance(rp, rp, same=True)
+    row_rr = _row_min_within(rp)
+    min_rr = float(row_rr.min())
+    swept_rr = min_robot_distance_between_steps(rp)
     return EpisodeMetrics(
         success=success,
         travel_time=seconds(done_step) if success else math.nan,
@@ -323,7 +341,7 @@ def episode_metrics(
         timeout=not success,
         min_distance=min_rh,
         min_distance_robots=min_rr,
-        min_distance_humans=_min_pair_distance(hp, hp, same=True),
+        min_distance_humans=float(_row_min_within(hp).min()),
         path_length=tuple(float(x) for x in np.linalg.norm(np.diff(rp, axis=0), axis=-1).sum(axis=0)),
         reach_times=reach_times,
         discomfort_steps=int(disc.sum()),
@@ -334,7 +352,9 @@ def episode_metrics(
         collision_between_steps=swept < collision_distance,
         contact_between_steps=swept < 2.0 * traj.radius,
         robot_contact=min_rr < 2.0 * traj.radius,
-        robot_contact_steps=int((_row_min_robot_distance(rp) < 2.0 * traj.radius).sum()),
+        robot_contact_steps=int((row_rr < 2.0 * traj.radius).sum()),
+        min_distance_robots_between_steps=swept_rr,
+        robot_contact_between_steps=swept_rr < 2.0 * traj.radius,
     )
 
 
@@ -350,7 +370,8 @@ def aggregate(metrics: list[EpisodeMetrics]) -> dict[str, float | int]:
     1)``; NaN when some episode lacks the count (rebuilt from an older record). The between-step rates
     (``collision_between_steps_rate`` / ``_count``, the same for contact) are NaN, with a NaN count, when
     some episode lacks the field; so are ``robot_contact_rate`` / ``_count`` (two robots touched, not a
-    metric of the paper) and ``robot_contact_step_freq`` (its states, as the per-step frequencies above).
+    metric of the paper), ``robot_contact_between_steps_rate`` / ``_count`` and ``robot_contact_step_freq``
+    (its states, as the per-step frequencies above).
     """
     if not metrics:
         raise SimulationError("aggregate needs at least one episode, got an empty list")

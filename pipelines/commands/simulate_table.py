@@ -83,8 +83,9 @@ def format_table(
         # Not a metric of the paper (its metrics are all robot-human): two robots touched (crowdsim.metrics).
         (
             "robot-robot contact",
-            f"{rate('robot_contact')}, {_fmt(summary.get('robot_contact_step_freq'), ' %')} of states: two "
-            f"robots closer than {2 * radius:g} m (not in the paper)",
+            f"{rate('robot_contact')}, {_fmt(summary.get('robot_contact_step_freq'), ' %')} of states, "
+            f"between steps {rate('robot_contact_between_steps').strip()}: two robots closer than "
+            f"{2 * radius:g} m (not in the paper)",
         ),
         (
             "per step",
@@ -139,7 +140,8 @@ def format_table(
 
 def plot_title(controller: str, episode: EpisodeResult) -> str:
     """What the --plot figure shows: who drove (with its predictor), the crowd, the seed; then how it ended
-    and how close a robot came to a human, with the collision or contact the metrics counted. The title
+    and how close a robot came to a human, with the collision or contact the metrics counted, and two robots
+    touching each other, at their closest (between steps where the record has it). The title
     once named neither predictor nor crowd, called a run through a human a "success" with nothing more,
     and gave "min robot-human distance inf m" for an episode without humans."""
     m = episode.metrics
@@ -157,4 +159,8 @@ def plot_title(controller: str, episode: EpisodeResult) -> str:
             closest += ": contact"
         elif m.collision:
             closest += f": collision (< {COLLISION_DISTANCE:g} m)"
+    # two robots that touched (not a metric of the paper) read as a clean run without this
+    if m.robot_contact or m.robot_contact_between_steps:
+        swept = m.min_distance_robots_between_steps
+        closest += f"; robots touched ({m.min_distance_robots if swept is None else swept:.2f} m apart)"
     return f"{who}, {crowd}\n{outcome}, {closest}"

@@ -156,6 +156,8 @@ METRIC_KINDS: Final[dict[str, str]] = {
     **dict.fromkeys(("collision_between_steps", "contact_between_steps"), "bool?"),
     "robot_contact": "bool?",  # robot-robot contact (not in the paper): absent from records before it
     "robot_contact_steps": "count?",
+    "min_distance_robots_between_steps": "number?",  # and its between-step figures, before them
+    "robot_contact_between_steps": "bool?",
 }
 SOLVER_KINDS: Final[dict[str, str]] = {
     **dict.fromkeys(("steps", "fallback_steps"), "count"),

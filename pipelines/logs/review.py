@@ -281,13 +281,16 @@ def _between_steps_rate(t: dict[str, Any], name: str, n: int) -> str:
 
 def _robot_contact(t: dict[str, Any], n: int) -> str:
     """Robots touching each other (crowdsim.metrics' ``robot_contact``, not a metric of the paper): episodes
-    and states; n/a when some run's metrics predate the field."""
+    and states, then episodes between steps; n/a when some run's metrics predate the field."""
     rate, hits, states = (t.get(f"robot_contact_{k}") for k in ("rate", "count", "step_freq"))
     figures = (
         "n/a (metrics recorded before it)" if rate is None or hits is None else f"{rate:.1f} % ({hits}/{n})"
     )
     if states is not None:
         figures += f", {states:.2f} % of states"
+    rate, hits = (t.get(f"robot_contact_between_steps_{k}") for k in ("rate", "count"))
+    if rate is not None and hits is not None:  # absent before the figure existed: nothing to add
+        figures += f"; between steps {rate:.1f} % ({hits}/{n})"
     return f"robot-robot contact (two robots touching, not in the paper): {figures}"
 
 

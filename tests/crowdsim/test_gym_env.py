@@ -322,6 +322,31 @@ def test_a_contact_between_two_steps_is_reported_as_it_ends_the_episode(end_on_c
         assert m.min_distance == pytest.approx(math.sqrt(0.41)) and m.n_steps == 6
 
 
+def test_two_robots_crossing_within_a_step_touch_between_steps_in_the_info_not_in_the_reward():
+    # _crossing's geometry with a second robot for the human: robot 1 from (3.84, 0.5) west at the same
+    # speed, x = 4.12 - 0.4 k; relative x after steps 5 and 6 is 0.4 and -0.4 (0.640 m apart at both states),
+    # 0.5 m halfway through step 6. The one human stands 10 m away.
+    layout = Layout(
+        np.array([[0.0, 0.0], [3.84, 0.5]]),
+        np.array([[15.0, 0.0], [-15.0, 0.5]]),
+        np.array([[0.0, 10.0]]),
+        np.array([[0.0, 10.0]]),
+    )
+    env = CrowdNavEnv(n_robots=2, n_humans=1)
+    _, info = env.reset(options={"layout": layout})
+    robot = StraightController()
+    steps = []
+    for _ in range(7):
+        steps.append(env.step(robot.act(info["observation"]).accelerations))
+        info = steps[-1][4]
+    assert [s[4]["robot_contact_between_steps"] for s in steps] == [False] * 5 + [True, False]
+    assert not any(s[4]["robot_contact"] for s in steps) and [s[1] for s in steps] == [0.0] * 7
+    five, six, seven = (s[4] for s in steps[4:])
+    assert five["min_distance_robots"] == pytest.approx(math.sqrt(0.41)) == six["min_distance_robots"]
+    assert six["min_distance_robots_between_steps"] == pytest.approx(0.5)
+    assert seven["min_distance_robots_between_steps"] == pytest.approx(math.sqrt(0.41))  # its start
+
+
 def test_the_time_limit_truncates_with_the_episode_metrics():
     config = EnvConfig(time_limit=2.0, timeout_margin=0.0)  # 5 steps of 0.4 s
     env = CrowdNavEnv(n_humans=2, config=config)

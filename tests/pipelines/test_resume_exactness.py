@@ -88,6 +88,8 @@ TYPED_FIELDS = [
     ("metrics", "contact_between_steps"),
     ("metrics", "robot_contact"),
     ("metrics", "robot_contact_steps"),
+    ("metrics", "min_distance_robots_between_steps"),
+    ("metrics", "robot_contact_between_steps"),
     *(("solver", name) for name in ("steps", "fallback_steps", "total_ms", "median_ms", "p95_ms")),
     *(("solver", name) for name in ("max_ms", "mean_iterations", "max_iterations")),
     ("", "wall_s"),

@@ -647,9 +647,10 @@ def test_folder_totals_say_when_robots_touched(tmp_path, capsys):
     assert main(["review", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert (
-        "\nrobot-robot contact (two robots touching, not in the paper): 100.0 % (1/1), 4.55 % of states\n"
-        in out
+        "\nrobot-robot contact (two robots touching, not in the paper): 100.0 % (1/1), 4.55 % of states; "
+        "between steps 100.0 % (1/1)\n" in out
     )
+    assert m["robot_contact_between_steps"] and m["min_distance_robots_between_steps"] < 0.34
 
 
 def test_robot_contact_reads_n_a_for_recordings_before_it(runs):
@@ -658,8 +659,14 @@ def test_robot_contact_reads_n_a_for_recordings_before_it(runs):
     summaries = [summarize(read_recording(r.path)) for r in runs]
     text, totals = aggregate_table(summaries, [])
     assert (
-        "robot-robot contact (two robots touching, not in the paper): 0.0 % (0/2), 0.00 % of states" in text
+        "robot-robot contact (two robots touching, not in the paper): 0.0 % (0/2), 0.00 % of states; "
+        "between steps 0.0 % (0/2)\n" in text
     )
+    for s in summaries:  # a recording of the thirty-fourth session: robot contact at the states only
+        del s["metrics"]["robot_contact_between_steps"], s["metrics"]["min_distance_robots_between_steps"]
+    text, totals = aggregate_table(summaries, [])
+    before = "robot-robot contact (two robots touching, not in the paper): 0.0 % (0/2), 0.00 % of states\n"
+    assert before in text
     for s in summaries:
         del s["metrics"]["robot_contact"], s["metrics"]["robot_contact_steps"]
     text, totals = aggregate_table(summaries, [])

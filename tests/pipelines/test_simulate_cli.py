@@ -203,16 +203,44 @@ def test_the_summary_shows_robot_robot_contact(tmp_path, capsys, monkeypatch):
     argv = ["--plugin", SWAP, "simulate", "--controller", SWAP, "--humans", "0", "--robots", "2",
             "--episodes", "1", "--no-progress", "--json", str(out)]  # fmt: skip
     assert main(argv) == 0
-    (row,) = [line for line in capsys.readouterr().out.splitlines() if "robot-robot contact" in line]
+    lines = capsys.readouterr().out.splitlines()
+    (row,) = [line for line in lines if "robot-robot contact" in line]
     m = json.loads(out.read_text())["episodes"][0]["metrics"]
     assert m["robot_contact"] and m["robot_contact_steps"] > 0 and m["min_distance_robots"] < 0.6
     states = m["n_steps"] + 1  # the row's frequency: the touching states of all states
     assert row.split() == ["robot-robot", "contact", "100.0", "%", "(1/1),",
-                           f"{100 * m['robot_contact_steps'] / states:.2f}", "%", "of", "states:", "two",
-                           "robots", "closer", "than", "0.6", "m", "(not", "in", "the", "paper)"]  # fmt: skip
+                           f"{100 * m['robot_contact_steps'] / states:.2f}", "%", "of", "states,", "between",
+                           "steps", "100.0", "%", "(1/1):", "two", "robots", "closer", "than", "0.6", "m",
+                           "(not", "in", "the", "paper)"]  # fmt: skip
+    assert m["robot_contact_between_steps"]
+    assert m["min_distance_robots_between_steps"] <= m["min_distance_robots"]
     summary = json.loads(out.read_text())["summary"]
     assert (summary["robot_contact_count"], summary["robot_contact_rate"]) == (1, 100.0)
     assert (summary["contact_count"], summary["success_count"]) == (0, 0)  # no human; none at its own goal
+
+
+def test_the_plots_title_says_when_robots_touched(tmp_path, capsys, monkeypatch):
+    """Two robots crossing 0.24 m apart read "success ..., no humans" on the figure, as a clean run."""
+    import crowdsim.plotting
+    from pipelines.loop import spec as registry
+
+    monkeypatch.setattr(registry, "_PLUGINS", {})
+    monkeypatch.delenv(registry.PLUGINS_ENV, raising=False)
+    titles = []
+    draw = crowdsim.plotting.plot_episode
+    monkeypatch.setattr(
+        crowdsim.plotting, "plot_episode", lambda *a, **k: titles.append(k["title"]) or draw(*a, **k)
+    )
+    out, png = tmp_path / "swap.json", tmp_path / "swap.png"
+    argv = ["--plugin", SWAP, "simulate", "--controller", SWAP, "--humans", "0", "--robots", "2",
+            "--episodes", "1", "--no-progress", "--json", str(out), "--plot", str(png)]  # fmt: skip
+    assert main(argv) == 0
+    capsys.readouterr()
+    m = json.loads(out.read_text())["episodes"][0]["metrics"]
+    closest = m["min_distance_robots_between_steps"]
+    assert closest < m["min_distance_robots"] < 0.6  # the crossing falls between two recorded states
+    (title,) = titles
+    assert title.endswith(f"no humans; robots touched ({closest:.2f} m apart)")
 
 
 def test_the_robot_contact_row_reads_n_a_for_older_records():
@@ -224,8 +252,10 @@ def test_the_robot_contact_row_reads_n_a_for_older_records():
     summary = summarize(run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle",
                                      n_humans=0, n_robots=3, progress=False))  # fmt: skip
     (row,) = [line for line in format_table(summary, "h").splitlines() if "robot-robot" in line]
-    assert "  0.0 %  (0/1), 0.00 % of states: two robots closer than 0.6 m" in row  # 1 m apart, a row of 3
+    # 1 m apart, a row of 3
+    assert "  0.0 %  (0/1), 0.00 % of states, between steps 0.0 %  (0/1): two robots closer than 0.6 m" in row
     summary |= {"robot_contact_rate": float("nan"), "robot_contact_count": float("nan")}
     summary["robot_contact_step_freq"] = float("nan")
+    summary |= {f"robot_contact_between_steps_{k}": float("nan") for k in ("rate", "count")}
     (row,) = [line for line in format_table(summary, "h").splitlines() if "robot-robot" in line]
-    assert row.split()[2:6] == ["n/a,", "n/a", "of", "states:"]
+    assert row.split()[2:10] == ["n/a,", "n/a", "of", "states,", "between", "steps", "n/a:", "two"]

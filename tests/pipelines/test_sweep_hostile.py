@@ -159,7 +159,8 @@ def test_the_report_refuses_a_tampered_metric_in_one_line(good, tmp_path, capsys
 def test_missing_counts_and_null_times_as_the_writer_writes_them_pass(good, tmp_path):
     def older(record):
         added = ("min_distance_between_steps", "collision_between_steps", "contact_between_steps")
-        for name in ("collision_steps", "contact_steps", *added, "robot_contact", "robot_contact_steps"):
+        added += ("robot_contact", "robot_contact_steps", "min_distance_robots_between_steps")
+        for name in ("collision_steps", "contact_steps", *added, "robot_contact_between_steps"):
             record["metrics"].pop(name)  # records from before the counts, between-step figures, robot contact
         record["metrics"].update(travel_time=None, min_distance_robots=None, reach_times=[None])
 
