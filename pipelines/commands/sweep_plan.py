@@ -193,8 +193,10 @@ def _planning(
 
 def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: Any) -> Experiment:
     """Every method's MPC with ``key = value`` (ControllerSpec.mpc_overrides, part of the cell keys), unless
-    a method sets that key itself."""
+    a method sets that key itself; a key of the flocking term only in the methods that flock."""
     import dataclasses
+
+    from pipelines.commands.sweep_vary import FLOCKING_KEYS
 
     if key == "jit":
         raise cfg.error(
@@ -209,6 +211,15 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
             "its methods",
         )
     applies = _planning(cfg, experiment, "mpc", key)
+    if key in FLOCKING_KEYS:  # NF plans with w_floc = 0: the key would re-run its episodes under a new key
+        applies = tuple((label, spec) for label, spec in applies if spec.flocking)
+        if not applies:
+            raise cfg.error(
+                "mpc",
+                key,
+                f"the methods of experiment {experiment.name!r} plan without the flocking term (NF), which "
+                f"{key} shapes",
+            )
     methods = []
     for label, spec in experiment.methods:
         if (label, spec) not in applies:

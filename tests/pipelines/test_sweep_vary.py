@@ -183,6 +183,28 @@ def test_a_method_without_flocking_keeps_one_column_when_the_flocking_term_varie
     assert dict(experiment.methods)["NF"] == dict(get_experiment("table3").methods)["NF"]
 
 
+def test_a_set_flocking_key_leaves_the_method_without_flocking_alone():
+    """--set mpc.w_floc=5 keyed table3's NF cell with w_floc=5 though NF plans with w_floc = 0: the same
+    episodes ran again under a new key, and never matched the sweep without --set."""
+    for setting in ("mpc.w_floc=5", "mpc.d_flock=1.5", 'mpc.flocking_weight="per_robot"'):
+        experiment = configured_experiment(load(sets=["sweep.experiment=table3", setting]))
+        methods = dict(experiment.methods)
+        assert methods["NF"] == dict(get_experiment("table3").methods)["NF"], setting
+        key = setting.split("=")[0].split(".")[1]
+        assert key in dict(methods["F"].mpc_overrides), setting
+
+
+def test_a_flocking_key_for_methods_that_never_flock_is_one_line(tmp_path, capsys, monkeypatch):
+    from pipelines.experiments.cells import EXPERIMENTS, Experiment
+
+    nf = Experiment("nf_only", "NF only", (("NF", dict(get_experiment("table3").methods)["NF"]),), (3,))
+    monkeypatch.setitem(EXPERIMENTS, "nf_only", nf)
+    code = main(["sweep", "--experiment", "nf_only", "--set", "mpc.w_floc=5", "--out", str(tmp_path / "s")])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert "experiment 'nf_only' plan without the flocking term (NF), which w_floc shapes" in err
+
+
 def test_vary_again_makes_a_grid_each_cell_the_one_the_options_make(tmp_path, capsys):
     """Two settings: a column per combination, margins then [mpc] values in the label, and each cell the one
     --set and --margins make; two [mpc] keys each in its place among a set one."""
