@@ -84,7 +84,7 @@ def format_table(
         (
             "robot-robot contact",
             f"{rate('robot_contact')}, {_fmt(summary.get('robot_contact_step_freq'), ' %')} of states, "
-            f"between steps {rate('robot_contact_between_steps').strip()}: two robots closer than "
+            f"between steps {' '.join(rate('robot_contact_between_steps').split())}: two robots closer than "
             f"{2 * radius:g} m (not in the paper)",
         ),
         (

@@ -253,7 +253,7 @@ def test_the_robot_contact_row_reads_n_a_for_older_records():
                                      n_humans=0, n_robots=3, progress=False))  # fmt: skip
     (row,) = [line for line in format_table(summary, "h").splitlines() if "robot-robot" in line]
     # 1 m apart, a row of 3
-    assert "  0.0 %  (0/1), 0.00 % of states, between steps 0.0 %  (0/1): two robots closer than 0.6 m" in row
+    assert "  0.0 %  (0/1), 0.00 % of states, between steps 0.0 % (0/1): two robots closer than 0.6 m" in row
     summary |= {"robot_contact_rate": float("nan"), "robot_contact_count": float("nan")}
     summary["robot_contact_step_freq"] = float("nan")
     summary |= {f"robot_contact_between_steps_{k}": float("nan") for k in ("rate", "count")}
