@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from predictors import zoo
-from predictors.base import Predictor
+from predictors.base import PRED_LEN, Predictor
 from predictors.constant_velocity import ConstantVelocity
 from predictors.errors import UnknownPredictor
 
@@ -40,6 +40,20 @@ def checkpoint_sha256(name: str | None) -> str | None:
         return None
     located = zoo.locate(name)
     return located.entry.sha256 if located is not None else None
+
+
+def trained_prediction_length(name: str | None) -> int | None:
+    """Steps ahead a zoo model was trained to predict: its manifest's ``training.pred_len``, else
+    ``PRED_LEN`` (TrajNet++'s 12, the only length ``crowdmpc train`` trained before it recorded one); None for
+    predictors that learned nothing (constant velocity, the oracle) and names in no zoo."""
+    if name is None or name in PREDICTORS:
+        return None
+    located = zoo.locate(name)
+    if located is None:
+        return None
+    value = located.entry.training.get("pred_len", PRED_LEN)
+    # a manifest is a file anyone can edit: a value that is no length reads as the one train uses
+    return value if isinstance(value, int) and not isinstance(value, bool) and value >= 1 else PRED_LEN
 
 
 def load_predictor(name: str) -> Predictor:

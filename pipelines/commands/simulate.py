@@ -266,11 +266,12 @@ def _simulate(resolved: SimulateRun) -> int:
 
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
-    from pipelines.commands.simulate_checks import goal_room_note
+    from pipelines.commands.simulate_checks import goal_room_note, horizon_note
 
     notes = (
         flock_note(spec, scenario.robots),
         goal_room_note(spec, scenario.robots, cfg.env.formation, formation_settable=True),
+        horizon_note(spec),
     )
     for note in notes:
         if note is not None:

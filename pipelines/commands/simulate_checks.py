@@ -129,3 +129,23 @@ def goal_room_note(
         f"({shape} of {n_robots}), and it keeps them d_min apart, which can keep them from standing on their "
         f"goals at once: the episodes then time out (measured thresholds: docs/extending.md){hint}"
     )
+
+
+def horizon_note(spec: ControllerSpec) -> str | None:
+    """A line for an MPC that plans further ahead than its learned predictor was trained to predict, None
+    otherwise: the net rolls out past its training length, which nothing else would say (TrajNet++ trains
+    12 steps; Table I's horizon is 8)."""
+    from pipelines.loop.mpc_setup import mpc_config
+    from predictors.base import DT
+    from predictors.registry import trained_prediction_length
+
+    if spec.controller not in MPC_CONTROLLERS or not is_shipped(spec.controller):
+        return None
+    trained = trained_prediction_length(spec.predictor_name)
+    horizon = mpc_config(spec).horizon
+    if trained is None or horizon <= trained:
+        return None
+    return (
+        f"note: the MPC plans {horizon} steps ahead and {spec.predictor_name!r} was trained to predict "
+        f"{trained} ({trained * DT:g} s): its steps {trained + 1}..{horizon} are extrapolated"
+    )

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from pipelines.commands.simulate_checks import goal_room_note
+from pipelines.commands.simulate_checks import goal_room_note, horizon_note
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -119,12 +119,19 @@ def check_margins(experiment: Experiment) -> None:
 
 
 def goal_room_notes(cells: Iterable[Cell]) -> list[str]:
-    """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals), once per
-    method, each naming it."""
-    notes: dict[str, str] = {}
+    """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals) and
+    ``horizon_note`` lines (a plan longer than the learned predictor's training), each once per method,
+    naming it."""
+    notes: dict[tuple[str, int], str] = {}
     for cell in cells:
         formation = cell.world.env_config().formation
-        note = goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False)
-        if note is not None and cell.method not in notes:
-            notes[cell.method] = note.replace("note: ", f"note: method {cell.method!r}: ", 1)
+        for kind, note in enumerate(
+            (
+                goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
+                horizon_note(cell.spec),
+            )
+        ):
+            if note is not None:
+                named = note.replace("note: ", f"note: method {cell.method!r}: ", 1)
+                notes.setdefault((cell.method, kind), named)
     return list(notes.values())

@@ -150,6 +150,7 @@ def _save_best(
             "best_checkpoint": Path(best_path).name,
             "seed": args.seed,
             "batch_size": args.batch_size,
+            "pred_len": module.pred_len,  # steps it learned to predict: a longer MPC horizon extrapolates
             # only when set: a checkpoint trained on every batch reads as before
             **({} if args.limit_batches is None else {"limit_batches": args.limit_batches}),
             "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},

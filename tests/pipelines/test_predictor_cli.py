@@ -731,6 +731,7 @@ def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, cap
         return json.loads(weights.with_suffix(".json").read_text())["training"]
 
     assert training("limited")["limit_batches"] == 1 and "limit_batches" not in training("all")
+    assert training("all")["pred_len"] == 12  # what the MPC's horizon note compares with
     capsys.readouterr()
     resumed = [*args, "--epochs", "3", "--out", str(tmp_path / "limited"), "--no-progress", "--resume"]
     assert main(resumed) == 2
