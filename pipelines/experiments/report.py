@@ -43,8 +43,27 @@ STAGING_PREFIX: Final[str] = ".report-"  # the folder a report is written into b
 STALE_STAGING_S: Final[float] = 3600.0
 
 
+def mpc_columns(cells: Sequence[Cell]) -> dict[str, dict[str, Any]]:
+    """cells.csv's ``mpc.KEY`` columns: one per [mpc] key some cell overrides (``--set``, ``--vary``, an
+    experiment's own), in the order first met, each cell's value as its MPC plans with it (Table I's where the
+    cell does not set it, 0 for w_floc without flocking), empty for a controller without the project's MPC;
+    none for a sweep of Table I's settings. A d_min study plots ``mpc.d_min`` against ``collision_rate``
+    instead of parsing the value out of ``method``."""
+    from pipelines.loop.mpc_setup import mpc_config
+    from pipelines.loop.spec import is_shipped
+
+    keys = list(dict.fromkeys(key for c in cells for key, _ in c.spec.mpc_overrides if key != "jit"))
+    columns: dict[str, dict[str, Any]] = {}
+    for c in cells:
+        planned = c.spec.kind.uses_predictor and is_shipped(c.spec.controller)
+        config = mpc_config(c.spec) if planned and keys else None
+        columns[c.key] = {f"mpc.{key}": None if config is None else getattr(config, key) for key in keys}
+    return columns
+
+
 def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
     rows = []
+    settings = mpc_columns([s.cell for s in summaries])
     for s in summaries:
         row: dict[str, Any] = {
             "method": s.cell.method,
@@ -55,6 +74,7 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "flocking": s.cell.spec.flocking,
             "coupling": s.cell.spec.coupling,
             **safety.world_columns(s.cell),
+            **settings[s.cell.key],
             "cell": s.cell.key,
             "episodes": s.episodes,
         }

@@ -205,6 +205,24 @@ def test_a_flocking_key_for_methods_that_never_flock_is_one_line(tmp_path, capsy
     assert "experiment 'nf_only' plan without the flocking term (NF), which w_floc shapes" in err
 
 
+def test_cells_csv_gives_each_cell_its_planned_value_and_none_to_a_controller_without_an_mpc():
+    from pipelines.experiments.report import mpc_columns
+
+    cfg = load(sets=["sweep.experiment=table3", 'sweep.vary="mpc.w_floc=5,10"', "sweep.humans=[3]"])
+    cells = configured_experiment(cfg).cells((3,), 3)
+    # NF plans with w_floc = 0 whatever the sweep varies; Table I's 10 is no override of its cell
+    assert [(c.method, mpc_columns(cells)[c.key]) for c in cells] == [
+        ("F w_floc=5.0", {"mpc.w_floc": 5.0}),
+        ("F w_floc=10.0", {"mpc.w_floc": 10.0}),
+        ("NF", {"mpc.w_floc": 0.0}),
+    ]
+    cfg = load(sets=["sweep.experiment=controllers", 'sweep.controllers=["cmpc", "orca"]', "mpc.horizon=6"])
+    cells = configured_experiment(cfg).cells((3,), 3)
+    assert [mpc_columns(cells)[c.key] for c in cells] == [{"mpc.horizon": 6}, {"mpc.horizon": None}]
+    table_i = mpc_columns(get_experiment("table2").cells((3,), 3))
+    assert list(table_i.values()) == [{}, {}]  # Table I's settings: no column
+
+
 def test_vary_again_makes_a_grid_each_cell_the_one_the_options_make(tmp_path, capsys):
     """Two settings: a column per combination, margins then [mpc] values in the label, and each cell the one
     --set and --margins make; two [mpc] keys each in its place among a set one."""
@@ -275,6 +293,16 @@ def test_a_varied_sweep_reuses_the_episodes_of_table_is_value_and_runs_the_other
         methods
         == ["CMPC d_min=0.8"] * 2 + ["CMPC d_min=1.0"] * 2 + ["DMPC d_min=0.8"] * 2 + ["DMPC d_min=1.0"] * 2
     )
+    # cells.csv gives the value a column of its own, Table I's 0.8 where the cell adds no override
+    with (out / "cells.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [(row["method"], row["mpc.d_min"]) for row in rows] == [
+        ("CMPC d_min=0.8", "0.8"),
+        ("CMPC d_min=1.0", "1.0"),
+        ("DMPC d_min=0.8", "0.8"),
+        ("DMPC d_min=1.0", "1.0"),
+    ]
+    assert list(rows[0]).index("mpc.d_min") == list(rows[0]).index("cell") - 1
 
 
 def test_a_float_column_is_labelled_as_config_show_writes_the_value(tmp_path, capsys):
