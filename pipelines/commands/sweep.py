@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, humans_list
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.sweep_checks import check_plan, goal_room_notes
+from pipelines.commands.sweep_checks import check_plan, method_notes
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
@@ -279,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
     tasks = config.tasks()
     cells = experiment.cells(config.humans, config.n_robots)
     if not args.report_only:
-        for note in goal_room_notes(cells):
+        for note in method_notes(cells):
             print(note, file=sys.stderr)
     if args.dry_run:
         check_plan(experiment)  # a plan whose every episode would fail is not fine

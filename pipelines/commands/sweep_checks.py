@@ -118,7 +118,7 @@ def check_margins(experiment: Experiment) -> None:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
-def goal_room_notes(cells: Iterable[Cell]) -> list[str]:
+def method_notes(cells: Iterable[Cell]) -> list[str]:
     """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals) and
     ``horizon_note`` lines (a plan longer than the learned predictor's training), each once per method,
     naming it."""
