@@ -153,12 +153,20 @@ class ProcessBackend:
         self._own_root = None if scratch_root is not None else make_scratch_root()
         self._initargs = (record, jit, scratch_root if self._own_root is None else str(self._own_root))
         _start_resource_tracker()
-        self._start_pool()
+        try:
+            self._start_pool()
+        except SweepStopped:
+            if self._own_root is not None:
+                release_scratch_root(self._own_root)
+            raise
 
     def _start_pool(self) -> None:
+        """Start the pool's workers; SweepStopped when they die before taking any work."""
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
+        from concurrent.futures.process import BrokenProcessPool
 
+        self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
         with _child_environment(SINGLE_THREAD_ENV), _children_ignore_sigint():
             self._pool = ProcessPoolExecutor(
                 max_workers=self.workers,
@@ -168,11 +176,25 @@ class ProcessBackend:
             )
             # Start every worker now (a spawn pool starts one in each submit), while the block is in force.
             started = [self._pool.submit(os.getpid) for _ in range(self.workers)]
-        for future in started:
-            future.result()
-        self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
         self._note_processes()
+        try:
+            for future in started:
+                future.result()
+        except BrokenProcessPool:
+            self._end_pool()  # every process joined: their exit codes are known
+            raise SweepStopped(self._died_starting()) from None
         self._pool_ended = False
+
+    def _died_starting(self) -> str:
+        """Why no worker started. Each spawned worker imports the driver's main script before anything else:
+        a script that calls run_sweep outside ``if __name__ == "__main__":`` calls it again in every worker,
+        where it failed on the driver's lock of --out ("another sweep is writing to ..."), and the driver
+        ended in a BrokenProcessPool traceback."""
+        return (
+            f"the worker processes ended as they started, before any episode ({self._deaths()}); their "
+            "messages are above. A script that runs a sweep must do so under "
+            'if __name__ == "__main__": (every worker process imports it first: multiprocessing\'s spawn)'
+        )
 
     def _note_processes(self) -> None:
         """Add the processes in the pool's table now (it may start one for a task) to ``_processes``: the

@@ -235,6 +235,7 @@ def run_sweep(
     ``backend_factory(config, scratch_root)``: the backend (default: ``config``'s); ``scratch_root`` is this
     run's folder for the workers' temporary files, which the driver removes when the run ends (and the next
     sweep removes when the driver was killed, pipelines.experiments.worker)."""
+    _refuse_in_worker_start()
     out = Path(config.out)
     if backend_factory is None:  # a choice refused here leaves no folder, nor a line in sweep.json
         check_backend(config.backend, config.workers, config.ray_address)
@@ -273,6 +274,22 @@ def run_sweep(
         finally:
             release_scratch_root(scratch)
     return outcome
+
+
+def _refuse_in_worker_start() -> None:
+    """A process pool's worker imports the driver's main script as it starts (multiprocessing's spawn, the
+    pool's start method on every OS): a script that calls run_sweep outside ``if __name__ == "__main__":``
+    calls it again there, and each worker failed on the driver's lock of --out, "another sweep is writing
+    to ...", which sent the user looking for a sweep that was not there."""
+    import multiprocessing
+
+    # what multiprocessing's own check (spawn._check_not_importing_main) reads: set while a child imports
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise PipelineError(
+            "run_sweep was called while a sweep worker process started: each one imports the script that "
+            'runs the sweep first; call run_sweep under if __name__ == "__main__": (as '
+            "docs/examples/own_experiment.py does)"
+        )
 
 
 def _run_tasks(

@@ -6,6 +6,9 @@ import contextlib
 import multiprocessing
 import signal
 
+import pytest
+
+from pipelines.errors import SweepStopped
 from pipelines.experiments import process_backend
 
 
@@ -69,4 +72,17 @@ def test_a_pool_without_a_scratch_root_leaves_no_folder_behind(tmp_path, monkeyp
         assert all(f.running() for f in busy)
     finally:
         backend.close()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_workers_that_die_as_they_start_stop_the_sweep_in_one_line(tmp_path, monkeypatch):
+    """Workers that die before taking any work (here their initializer raises, after which a pool worker
+    exits with status 0; a script without ``if __name__ == "__main__":`` around its sweep makes them exit with
+    status 1) ended the driver in a BrokenProcessPool traceback, its own scratch root left behind."""
+    import tempfile
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the spawned workers' temp directory
+    monkeypatch.setattr(tempfile, "tempdir", None)  # and the driver's (cached once asked)
+    with pytest.raises(SweepStopped, match=r"ended as they started.*\(exit status 0\).*__main__"):
+        process_backend.ProcessBackend(1, "no such policy")
     assert list(tmp_path.iterdir()) == []

@@ -327,6 +327,18 @@ def test_a_rerun_runs_only_what_is_missing_and_extends(tmp_path):
     assert meta["experiment"] == "baselines" and len(meta["runs"]) == 3
 
 
+def test_a_sweep_called_as_a_worker_imports_the_script_says_to_guard_it(tmp_path, monkeypatch):
+    """A script that runs a sweep outside ``if __name__ == "__main__":`` runs it again in every pool worker as
+    the worker imports it (multiprocessing's spawn sets ``_inheriting`` meanwhile): each worker failed on the
+    driver's lock, "another sweep is writing to ...", a sweep that was not there."""
+    import multiprocessing
+
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    with pytest.raises(PipelineError, match=r'run_sweep under if __name__ == "__main__":'):
+        run_sweep(_config(tmp_path / "out", 1))
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_worker_builds_each_controller_once_per_cell():
     worker = EpisodeWorker()
     tasks = get_experiment("baselines").tasks(3, humans=(5,))
