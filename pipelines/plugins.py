@@ -28,6 +28,7 @@ from pipelines.loop.spec import (
     is_plugin_spec,
     load_controller_plugin,
     register_controller_plugins,
+    registered_controller_plugins,
 )
 from predictors import models
 from predictors.errors import PredictorError, short_repr
@@ -109,3 +110,21 @@ def load_environment_plugins() -> None:
                     load(spec)
             except (PipelineError, PredictorError) as exc:
                 raise PluginError(f"${variable}: {exc}") from None
+
+
+def plugin_environment() -> dict[str, str]:
+    """The plugin variables a process this one starts needs: each lists what it lists now and every plugin
+    registered here. A sweep's pool workers are spawned (on every OS), so they hold nothing this process
+    imported: a script that registered with ``load_controller_plugin`` or ``load_plugin`` (which list
+    nothing) had every episode refused in the workers ("... is a plugin that is not registered"), where
+    the same sweep inline ran."""
+    registered = {
+        models.PLUGINS_ENV: models.registered_plugins(),
+        CONTROLLERS_ENV: registered_controller_plugins(),
+    }
+    environment = {}
+    for variable, specs in registered.items():
+        listed = [s.strip() for s in os.environ.get(variable, "").split(",") if s.strip()]
+        if listed or specs:
+            environment[variable] = ",".join(dict.fromkeys([*listed, *specs]))
+    return environment

@@ -322,6 +322,12 @@ def register_plugins(specs: list[str] | tuple[str, ...]) -> list[ModelKind]:
     return kinds
 
 
+def registered_plugins() -> list[str]:
+    """The plugins ``module:NetClass`` registered in this process (``--plugin``, its variable, or
+    ``load_plugin`` from Python, which lists none), in their order; entry points are not among them."""
+    return [name for name, kind in _PLUGINS.items() if kind.source == "plugin"]
+
+
 def _environment_plugins() -> None:
     for spec in os.environ.get(PLUGINS_ENV, "").split(","):
         if spec.strip():

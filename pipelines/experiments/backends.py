@@ -40,11 +40,14 @@ class Backend(Protocol):
 
 def worker_environment() -> dict[str, str]:
     """What a Ray worker's environment must hold: one library thread, and every ``CROWDMPC_*`` variable of the
-    driver (plugins, controllers, zoo, checkpoints, data, compile cache). A local process pool inherits them;
-    actors on a cluster's other nodes start from their own environment and would not find the plugins the
-    driver registered, nor its user zoo."""
+    driver (plugins, controllers, zoo, checkpoints, data, compile cache), its plugin variables listing every
+    plugin registered in the driver (pipelines.plugins.plugin_environment). A local process pool inherits
+    them; actors on a cluster's other nodes start from their own environment and would not find the plugins
+    the driver registered, nor its user zoo."""
+    from pipelines.plugins import plugin_environment
+
     forwarded = {k: v for k, v in os.environ.items() if k.startswith("CROWDMPC_")}
-    return {**SINGLE_THREAD_ENV, **forwarded}
+    return {**SINGLE_THREAD_ENV, **forwarded, **plugin_environment()}
 
 
 class InlineBackend:

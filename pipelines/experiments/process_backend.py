@@ -101,11 +101,20 @@ def _start_resource_tracker() -> None:
             os.environ["PYTHONWARNINGS"] = saved
 
 
+def _worker_environment() -> dict[str, str]:
+    """What the workers' environment holds beyond this process's: one library thread (unless the user set
+    a variable of it), and every plugin registered here (pipelines.plugins.plugin_environment: spawned,
+    they hold nothing this process imported)."""
+    from pipelines.plugins import plugin_environment
+
+    return {k: os.environ.get(k, v) for k, v in SINGLE_THREAD_ENV.items()} | plugin_environment()
+
+
 @contextlib.contextmanager
 def _child_environment(values: dict[str, str]) -> Iterator[None]:
     """Environment for processes started inside the block (spawned workers copy it at start)."""
     saved = {k: os.environ.get(k) for k in values}
-    os.environ.update({k: os.environ.get(k, v) for k, v in values.items()})
+    os.environ.update(values)
     try:
         yield
     finally:
@@ -167,7 +176,7 @@ class ProcessBackend:
         from concurrent.futures.process import BrokenProcessPool
 
         self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
-        with _child_environment(SINGLE_THREAD_ENV), _children_ignore_sigint():
+        with _child_environment(_worker_environment()), _children_ignore_sigint():
             self._pool = ProcessPoolExecutor(
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context("spawn"),

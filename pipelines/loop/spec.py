@@ -220,6 +220,13 @@ def register_controller_plugins(specs: Sequence[str]) -> list[ControllerPlugin]:
     return plugins
 
 
+def registered_controller_plugins() -> list[str]:
+    """The controller plugins ``module:Class`` registered in this process (``--plugin``, its variable, or
+    ``load_controller_plugin`` from Python, which lists none), in their order; entry points are not among
+    them."""
+    return [name for name, plugin in _PLUGINS.items() if plugin.source == "plugin"]
+
+
 def _environment_plugins() -> None:
     for spec in os.environ.get(PLUGINS_ENV, "").split(","):
         if spec.strip():

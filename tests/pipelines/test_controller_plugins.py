@@ -735,3 +735,24 @@ def test_a_plugin_nets_error_in_a_later_episode_keeps_the_finished_ones_and_name
         "crowdmpc simulate: error: episode seed 1 (circle): predictor 'mine' (model 'my:Net'): encode raised "
         "ValueError: no\n"
     )
+
+
+def test_plugins_registered_from_python_reach_the_sweeps_worker_processes(monkeypatch):
+    """``load_controller_plugin`` and ``load_plugin`` register in this process and list nothing in the
+    variables; a sweep's pool workers are spawned (on every OS), holding nothing this process imported: every
+    episode of a script that registered that way was refused in the workers ("is a plugin that is not
+    registered"), where the same sweep ran inline."""
+    from pipelines.experiments.process_backend import ProcessBackend
+
+    monkeypatch.delenv(NETS_ENV, raising=False)
+    registry.load_controller_plugin(TOY)
+    models.load_plugin(NET)
+    backend = ProcessBackend(1, "none")
+    try:
+        in_worker = backend._pool.submit(registry.controller_kind, TOY).result(timeout=120)
+        assert in_worker == registry.controller_kind(TOY)
+        # the net's variable as well (its lookup, as the controller's above, would import torch: seconds)
+        assert backend._pool.submit(os.getenv, NETS_ENV).result(timeout=120) == NET
+    finally:
+        backend.close()
+    assert registry.PLUGINS_ENV not in os.environ and NETS_ENV not in os.environ  # the driver's unchanged

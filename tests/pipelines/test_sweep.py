@@ -1084,14 +1084,22 @@ def test_ray_workers_get_the_drivers_crowdmpc_environment(monkeypatch):
     in the runtime_env, with the single-thread settings."""
     from pipelines.experiments.backends import worker_environment
     from pipelines.experiments.worker import SINGLE_THREAD_ENV
+    from pipelines.loop import spec as controllers
+    from predictors import models
 
+    monkeypatch.setattr(models, "_PLUGINS", {})  # none registered by an earlier test
+    monkeypatch.setattr(controllers, "_PLUGINS", {})
+    monkeypatch.delenv(controllers.PLUGINS_ENV, raising=False)
     monkeypatch.setenv("CROWDMPC_PLUGINS", "my_pkg.nets:MyNet")
     monkeypatch.setenv("CROWDMPC_ZOO", "/shared/zoo")
     monkeypatch.setenv("UNRELATED_VARIABLE", "x")
     env = worker_environment()
     assert env["CROWDMPC_PLUGINS"] == "my_pkg.nets:MyNet" and env["CROWDMPC_ZOO"] == "/shared/zoo"
-    assert "UNRELATED_VARIABLE" not in env
+    assert "UNRELATED_VARIABLE" not in env and controllers.PLUGINS_ENV not in env
     assert all(env[k] == v for k, v in SINGLE_THREAD_ENV.items())
+    # one registered from Python (load_controller_plugin lists it nowhere) travels as well
+    controllers.load_controller_plugin("tests.plugins.toy_controller:StraightLine")
+    assert worker_environment()[controllers.PLUGINS_ENV] == "tests.plugins.toy_controller:StraightLine"
 
 
 def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
