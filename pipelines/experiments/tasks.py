@@ -12,6 +12,7 @@ The experiments these make up, and the registry of those the project ships, are 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
@@ -111,9 +112,12 @@ class EpisodeTask:
     scenario: str
     seed: int
 
-    @property
+    @cached_property
     def key(self) -> str:
-        """The record key in episodes.jsonl: unique within a sweep directory."""
+        """The record key in episodes.jsonl: unique within a sweep directory. Kept once computed, and sent
+        with the task (pickled with it): a worker process where the cell's plugin controller does not load
+        (a class defined in a notebook, which a spawned worker cannot import) could not compute it for the
+        episode's error, and the sweep's driver ended in that traceback."""
         return f"{self.cell.key}/{self.scenario}/{self.seed}"
 
 

@@ -756,3 +756,23 @@ def test_plugins_registered_from_python_reach_the_sweeps_worker_processes(monkey
     finally:
         backend.close()
     assert registry.PLUGINS_ENV not in os.environ and NETS_ENV not in os.environ  # the driver's unchanged
+
+
+def test_a_worker_that_cannot_look_a_plugin_up_returns_the_episodes_error(monkeypatch):
+    """A task's key names its controller's predictor, which for a plugin takes the plugin's class: a worker
+    process where the plugin does not load (a class defined in a notebook, which a spawned worker cannot
+    import) raised again computing the key for the error, so the exception left the worker and the sweep's
+    driver ended in a traceback instead of errors.jsonl. The key the driver computed travels with the task."""
+    import pickle
+
+    from pipelines.experiments.tasks import Cell, EpisodeTask
+    from pipelines.experiments.worker import EpisodeWorker
+
+    registry.load_controller_plugin(TOY)
+    task = EpisodeTask("mine", Cell("toy", ControllerSpec(TOY), 2), 0, "circle", 0)
+    key = task.key  # the driver plans with it
+    monkeypatch.setattr(registry, "_PLUGINS", {})  # a worker process: the plugin never loaded
+    sent = pickle.loads(pickle.dumps(task))
+    outcome = EpisodeWorker("none").run(sent)
+    assert outcome.key == key and outcome.record is None
+    assert "is a plugin that is not registered" in outcome.error.strip().splitlines()[-1]
