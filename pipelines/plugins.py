@@ -124,7 +124,29 @@ def plugin_environment() -> dict[str, str]:
     }
     environment = {}
     for variable, specs in registered.items():
+        for spec in specs:
+            _check_importable_elsewhere(spec)
         listed = [s.strip() for s in os.environ.get(variable, "").split(",") if s.strip()]
         if listed or specs:
             environment[variable] = ",".join(dict.fromkeys([*listed, *specs]))
     return environment
+
+
+def _check_importable_elsewhere(spec: str) -> None:
+    """PipelineError unless a new interpreter can import ``spec``'s class. One of an interactive session's
+    ``__main__`` (a notebook, ``python -c``: no file, no module name) it cannot: a spawned worker's
+    ``__main__`` is its own, so every episode failed there, those of the shipped controllers too (their
+    build lists the plugins), with "module '__main__' has no ...". A script's ``__main__`` (or that of
+    ``python -m``) each worker imports again, and finds the class."""
+    module, _, name = spec.partition(":")
+    main = sys.modules.get("__main__")
+    if module != "__main__" or getattr(main, "__spec__", None) is not None:
+        return
+    path = getattr(main, "__file__", None)
+    if isinstance(path, str) and os.path.isfile(path):
+        return
+    raise PipelineError(
+        f"plugin {spec!r} is a class of this interactive session (a notebook, python -c), which the sweep's "
+        f"worker processes cannot import (each is a new interpreter); put it in a module file and register "
+        f"'module:{name}', or run the sweep with backend 'inline'"
+    )

@@ -159,6 +159,7 @@ class ProcessBackend:
         backend makes its own and removes it on ``close``: a worker's folder of its own would be left behind,
         since ``close`` terminates the workers (no atexit runs)."""
         self.workers = workers
+        self._environment = _worker_environment()  # refuses a plugin the workers cannot import
         self._own_root = None if scratch_root is not None else make_scratch_root()
         self._initargs = (record, jit, scratch_root if self._own_root is None else str(self._own_root))
         _start_resource_tracker()
@@ -176,7 +177,7 @@ class ProcessBackend:
         from concurrent.futures.process import BrokenProcessPool
 
         self._processes: list[Any] = []  # the pool's processes, kept: their exit codes say how they died
-        with _child_environment(_worker_environment()), _children_ignore_sigint():
+        with _child_environment(self._environment), _children_ignore_sigint():
             self._pool = ProcessPoolExecutor(
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context("spawn"),

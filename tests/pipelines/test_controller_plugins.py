@@ -776,3 +776,24 @@ def test_a_worker_that_cannot_look_a_plugin_up_returns_the_episodes_error(monkey
     outcome = EpisodeWorker("none").run(sent)
     assert outcome.key == key and outcome.record is None
     assert "is a plugin that is not registered" in outcome.error.strip().splitlines()[-1]
+
+
+def test_a_plugin_of_an_interactive_session_is_refused_before_workers_start(monkeypatch, tmp_path):
+    """A notebook's class, registered as ``__main__:Class``, runs inline; a spawned worker's ``__main__`` is
+    its own, so every episode of a pool's sweep failed, the shipped controllers' too, with "module
+    '__main__' has no ...". A script's ``__main__`` the workers import again: that one is fine."""
+    import types
+
+    from pipelines.experiments.process_backend import ProcessBackend
+    from tests.plugins.toy_controller import StraightLine
+
+    session = types.ModuleType("__main__")  # a notebook's: no file, no module name
+    session.StraightLine = StraightLine
+    monkeypatch.setitem(sys.modules, "__main__", session)
+    registry.load_controller_plugin("__main__:StraightLine")
+    with pytest.raises(PipelineError, match=r"'__main__:StraightLine' is a class of this interactive"):
+        ProcessBackend(1, "none")
+    script = tmp_path / "run.py"
+    script.write_text("")
+    session.__file__ = str(script)  # a script's
+    assert plugins.plugin_environment()[registry.PLUGINS_ENV] == "__main__:StraightLine"
