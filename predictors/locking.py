@@ -35,14 +35,25 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
         if not stat.S_ISREG(os.fstat(fd).st_mode):
             raise PredictorError(f"{path}: cannot {purpose} (not a regular file); remove it")
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            if waiting is not None:
-                waiting()
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            _lock(fd, waiting)
+        except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP: not a bug of ours
+            raise PredictorError(
+                f"{path}: cannot {purpose} ({exc.strerror}: its file system does not lock files; an NFS "
+                "mount without its lock daemon?)"
+            ) from None
         yield
     finally:
         os.close(fd)  # releases the lock
+
+
+def _lock(fd: int, waiting: Callable[[], None] | None) -> None:
+    """Lock ``fd`` exclusively, calling ``waiting`` first when another process holds it."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        if waiting is not None:
+            waiting()
+        fcntl.flock(fd, fcntl.LOCK_EX)
 
 
 @contextmanager

@@ -268,6 +268,12 @@ def sweep_lock(out: Path) -> Iterator[None]:
             raise PipelineError(
                 f"another sweep is writing to {out}; wait for it or choose another --out"
             ) from None
+        except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP: not a bug of ours
+            raise PipelineError(
+                f"cannot lock {out / LOCK_FILE} ({exc.strerror}): the file system of --out does not lock "
+                "files (an NFS mount without its lock daemon?), which keeps a second sweep from writing the "
+                "same directory; choose an --out on one that does"
+            ) from None
         try:
             yield
         finally:

@@ -155,6 +155,27 @@ def test_a_lock_planted_as_no_regular_file_is_named_so(planted, tmp_path, capsys
     )
 
 
+def test_a_lock_on_a_file_system_that_does_not_lock_is_one_line(tmp_path, monkeypatch, capsys):
+    """On an NFS mount without its lock daemon flock fails with ENOLCK ("No locks available"): every
+    ``locked`` (a training run, a zoo's manifest, a data preparation) ended in that OSError's traceback."""
+    import errno
+    import fcntl
+    import os
+
+    def no_locks(fd, operation):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data), "--out", str(out)]
+    assert main([*args, "--epochs", "1", "--no-progress"]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc train: error: {out / '.train.lock'}: cannot lock the training run (No locks available: "
+        "its file system does not lock files; an NFS mount without its lock daemon?)\n"
+    )
+
+
 def test_a_train_ended_by_sigterm_is_interrupted_not_a_success(tmp_path, monkeypatch, capsys):
     """Lightning ends a fit that SIGTERM (``kill``) stopped with SystemExit(0): train exited 0, silently,
     with no weights written, so ``crowdmpc train ... && crowdmpc zoo add ...`` went on."""

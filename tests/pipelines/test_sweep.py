@@ -369,6 +369,26 @@ def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_pat
     assert EpisodeLog(tmp_path / EPISODES_FILE).load() == {}
 
 
+def test_an_out_whose_file_system_does_not_lock_is_one_line(tmp_path, monkeypatch, capsys):
+    """On an NFS mount without its lock daemon flock fails with ENOLCK ("No locks available"): the sweep
+    ended in that OSError's traceback."""
+    import errno
+    import fcntl
+
+    def no_locks(fd, operation):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    out = tmp_path / "runs"
+    args = ["sweep", "--experiment", "baselines", "--episodes-per-cell", "1", "--humans", "5"]
+    assert main([*args, "--backend", "inline", "--no-progress", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc sweep: error: cannot lock {out / '.sweep.lock'} (No locks available): the file system of "
+        "--out does not lock files (an NFS mount without its lock daemon?), which keeps a second sweep from "
+        "writing the same directory; choose an --out on one that does\n"
+    )
+
+
 def test_one_directory_one_sweep_at_a_time_and_one_experiment(tmp_path):
     with sweep_lock(tmp_path), pytest.raises(PipelineError, match="another sweep is writing"):
         run_sweep(_config(tmp_path, 1))
