@@ -89,6 +89,12 @@ def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None
                 f"cannot record to {path}: another run is recording that episode into this folder now{here}; "
                 "record into another folder"
             ) from None
+        except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP: not a bug of ours
+            os.close(fd)
+            raise PipelineError(
+                f"cannot record to {path}: {exc.strerror} (its file system does not lock files; an NFS mount "
+                "without its lock daemon?); record into a folder on one that does"
+            ) from None
         try:
             if may_replace is not None:
                 may_replace(path)

@@ -231,6 +231,25 @@ def test_a_new_recording_never_takes_a_name_held_by_a_dangling_link(tmp_path):
     assert path.is_symlink() and not (tmp_path / "a.mcap.part").exists()
 
 
+def test_a_folder_whose_file_system_does_not_lock_is_one_line(tmp_path, monkeypatch):
+    """On an NFS mount without its lock daemon flock fails with ENOLCK ("No locks available"): ``simulate
+    --record`` there ended in that OSError's traceback; the .part it opened is closed, not left open."""
+    import errno
+    import fcntl
+    import os
+
+    def no_locks(fd, operation):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    with pytest.raises(PipelineError) as refused:
+        McapRecorder(tmp_path / "a.mcap")
+    assert str(refused.value) == (
+        f"cannot record to {tmp_path / 'a.mcap.part'}: No locks available (its file system does not lock "
+        "files; an NFS mount without its lock daemon?); record into a folder on one that does"
+    )
+
+
 def test_two_recorders_of_one_episode_at_once_never_write_one_file(tmp_path):
     """Two runs recording the same seed into one folder at the same time wrote one .part (one run's episode
     silently replaced by a mix of both, or by the other's): the second is refused while the first records;
