@@ -8,7 +8,7 @@ are pipelines.experiments.tasks; the paper's figures are pipelines.experiments.p
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 from typing import Any, Final
@@ -95,21 +95,8 @@ class Experiment:
     def with_predictors(self, predictors: Sequence[str]) -> Experiment:
         """The swap table over ``predictors`` (one method each, labelled by its name, in this order), every
         method as the experiment's first (controller, margins ...) but for its predictor."""
-        if not self.predictor_list:
-            raise PipelineError(
-                f"--predictors applies only to the experiments "
-                f"{sorted(n for n, e in EXPERIMENTS.items() if e.predictor_list)}, not {self.name!r}"
-                + (
-                    " (use --predictor to replace every method's predictor)"
-                    if self.predictor_swappable
-                    else ""
-                )
-            )
-        if not predictors:
-            raise PipelineError(f"experiment {self.name!r} needs at least one predictor")
-        repeated = sorted({name for name in predictors if list(predictors).count(name) > 1})
-        if repeated:
-            raise PipelineError(f"--predictors names {repeated} more than once")
+        hint = " (use --predictor to replace every method's predictor)" if self.predictor_swappable else ""
+        self._check_list("--predictors", "predictor", predictors, lambda e: e.predictor_list, hint)
         template = self.methods[0][1]
         methods = tuple((name, replace(template, predictor=name)) for name in predictors)
         title = self.title if ORACLE_PREDICTOR in predictors else self.title.replace(ORACLE_WORDS, "")
@@ -121,16 +108,7 @@ class Experiment:
         ``with_margins`` leaves it. An unregistered name is refused here."""
         from pipelines.loop.spec import controller_kind
 
-        if not self.controller_list:
-            raise PipelineError(
-                f"--controllers applies only to the experiments "
-                f"{sorted(n for n, e in EXPERIMENTS.items() if e.controller_list)}, not {self.name!r}"
-            )
-        if not controllers:
-            raise PipelineError(f"experiment {self.name!r} needs at least one controller")
-        repeated = sorted({name for name in controllers if list(controllers).count(name) > 1})
-        if repeated:
-            raise PipelineError(f"--controllers names {repeated} more than once")
+        self._check_list("--controllers", "controller", controllers, lambda e: e.controller_list)
         for name in controllers:
             controller_kind(name)  # UnknownController: one line saying how to register a plugin
         template = self.methods[0][1]
@@ -139,6 +117,27 @@ class Experiment:
         # the clause on the predictor would describe columns that do not exist
         title = self.title if predicting else self.title.split(PREDICTING_WORDS)[0]
         return replace(self, methods=methods, title=title)
+
+    def _check_list(
+        self,
+        option: str,
+        what: str,
+        names: Sequence[str],
+        lists: Callable[[Experiment], bool],
+        hint: str = "",
+    ) -> None:
+        """``option`` (``--predictors``, ``--controllers``) naming one method each: refused on an experiment
+        whose methods it does not list (``lists``), and when ``names`` is empty or repeats a name."""
+        if not lists(self):
+            allowed = sorted(n for n, e in EXPERIMENTS.items() if lists(e))
+            raise PipelineError(
+                f"{option} applies only to the experiments {allowed}, not {self.name!r}{hint}"
+            )
+        if not names:
+            raise PipelineError(f"experiment {self.name!r} needs at least one {what}")
+        repeated = sorted({name for name in names if list(names).count(name) > 1})
+        if repeated:
+            raise PipelineError(f"{option} names {repeated} more than once")
 
     def with_margins(self, margins: MarginSpec) -> Experiment:
         """Every method that plans with a predictor planning with ``margins`` (e.g. Table II with conformal
