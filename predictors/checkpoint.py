@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     import torch
 
     from predictors.learned import LearnedPredictor
+    from predictors.models import ModelKind
 
 # The predictor classes a config's informational "class" may name: the generic one, the Social-LSTM class of
 # the shipped checkpoints (written before model kinds), and the GAN generator's (a kind with ``adversarial``).
@@ -150,22 +151,43 @@ def load_checkpoint(
     config's types and ranges before any net is built (its size counted on the meta device), the weights'
     size before they are read, then that they are a state_dict of finite float tensors of the net's shapes.
     """
-    import torch
-
-    from predictors.models import model_kind
-
     weights = Path(weights)
     config = Path(config) if config is not None else weights.with_suffix(".json")
     for path, expected in ((weights, expected_sha256), (config, expected_config_sha256)):
-        if not path.exists():
-            raise PredictorError(f"checkpoint file {path} does not exist")
-        if not path.is_file():
-            raise PredictorError(f"checkpoint file {path} is not a regular file")
-        if expected is not None:
-            found = sha256_file(path)
-            if found != check_sha256(expected, f"the expected sha256 of {path}"):
-                raise CheckpointMismatch(path, expected, found)
+        _check_file(path, expected)
     document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
+    kind = _config_kind(document, config)
+    own_name = document.get("name", weights.stem)
+    if not isinstance(own_name, str):
+        raise PredictorError(f'{config}: "name" must be a string, got {short_repr(own_name)}')
+    obs_len = document.get("obs_len", OBS_LEN)
+    if isinstance(obs_len, bool) or not isinstance(obs_len, int):
+        raise PredictorError(f'{config}: "obs_len" must be an integer, got {short_repr(obs_len)}')
+    if not 2 <= obs_len <= MAX_OBS_LEN:
+        raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
+    net = _loaded_net(kind, document, weights, config)
+    try:
+        return kind.predictor(net, name=name or own_name, obs_len=obs_len)
+    except PredictorError as exc:
+        raise PredictorError(f"{config}: {exc}") from None
+
+
+def _check_file(path: Path, expected: str | None) -> None:
+    """PredictorError unless ``path`` is a regular file of sha256 ``expected`` (when one is expected)."""
+    if not path.exists():
+        raise PredictorError(f"checkpoint file {path} does not exist")
+    if not path.is_file():
+        raise PredictorError(f"checkpoint file {path} is not a regular file")
+    if expected is not None:
+        found = sha256_file(path)
+        if found != check_sha256(expected, f"the expected sha256 of {path}"):
+            raise CheckpointMismatch(path, expected, found)
+
+
+def _config_kind(document: dict, config: Path) -> ModelKind:
+    """The registered model kind the config ``document`` names, agreeing with its informational "class"."""
+    from predictors.models import model_kind
+
     cls_name = document.get("class")
     if cls_name is not None and (not isinstance(cls_name, str) or cls_name not in PREDICTOR_CLASS_NAMES):
         raise PredictorError(
@@ -179,14 +201,14 @@ def load_checkpoint(
         raise PredictorError(f'{config}: "model": {exc}') from None
     if cls_name is not None and (cls_name == "SocialGANPredictor") != kind.adversarial:
         raise PredictorError(f'{config}: "model" {kind.name!r} does not go with "class" {cls_name!r}')
-    own_name = document.get("name", weights.stem)
-    if not isinstance(own_name, str):
-        raise PredictorError(f'{config}: "name" must be a string, got {short_repr(own_name)}')
-    obs_len = document.get("obs_len", OBS_LEN)
-    if isinstance(obs_len, bool) or not isinstance(obs_len, int):
-        raise PredictorError(f'{config}: "obs_len" must be an integer, got {short_repr(obs_len)}')
-    if not 2 <= obs_len <= MAX_OBS_LEN:
-        raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
+    return kind
+
+
+def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) -> torch.nn.Module:
+    """The net of ``document``'s "net", built and bounded before any memory is taken, with the weights of
+    ``weights`` once their size and every tensor are checked."""
+    import torch
+
     try:
         # The initial weights, replaced by the checkpoint's below, are drawn from a fork of torch's global
         # generator: a caller who seeded torch gets the same random numbers after a load as without it.
@@ -214,10 +236,7 @@ def load_checkpoint(
         net.load_state_dict(state, strict=True)
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:  # not expected after the checks above
         raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from None
-    try:
-        return kind.predictor(net, name=name or own_name, obs_len=obs_len)
-    except PredictorError as exc:
-        raise PredictorError(f"{config}: {exc}") from None
+    return net
 
 
 def check_state_dict(state: object, expected: dict[str, Any], weights: Path, config: Path) -> None:
