@@ -109,12 +109,21 @@ def format_table(
         ("IBR iterations", f"mean {_fmt(summary['iterations_mean'])}, max {summary['iterations_max']}"),
         ("fallback steps", f"{summary['fallback_steps']} of {summary['control_steps']}"),
     ]
+    rows += _cut_short_rows(summary, time_limit_s)
+    width = max(len(name) for name, _ in rows)
+    return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
+
+
+def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list[tuple[str, str]]:
+    """The rows shown only when some steps were cut short: by the MPC's wall-time budget, by a NaN
+    prediction."""
+    found: list[tuple[str, str]] = []
     # The budget is far above a step's time at Table I's horizon; a long horizon or a slow predictor reaches
     # it, and then what those steps planned depends on the machine's speed and load.
     cut = sum(int(summary.get("statuses", {}).get(status, 0)) for status in BUDGET_STATUSES)
     if cut:
         limit = "" if time_limit_s is None else f" = {time_limit_s:g} s"
-        rows.append(
+        found.append(
             (
                 "wall-time budget",
                 f"{cut} of {summary['control_steps']} steps cut short at mpc.time_limit_s{limit}: their "
@@ -127,15 +136,14 @@ def format_table(
     # is still nan_prediction), so the row names the prediction and leaves the count of fallbacks to its row.
     nan_steps = int(summary.get("statuses", {}).get(NAN_PREDICTION, 0))
     if nan_steps:
-        rows.append(
+        found.append(
             (
                 "NaN predictions",
                 f"{nan_steps} of {summary['control_steps']} steps stopped at a NaN or inf prediction (a step "
                 "with no solved iteration before it fell back)",
             )
         )
-    width = max(len(name) for name, _ in rows)
-    return "\n".join([header] + [f"  {name:<{width}}  {text}" for name, text in rows])
+    return found
 
 
 def plot_title(controller: str, episode: EpisodeResult) -> str:
