@@ -63,6 +63,30 @@ def episode_tracks(
     return tracks, steps, bool(info.get("success", False))
 
 
+def _check_request(episodes: int, n_humans: int, n_robots: int, seed: int, env_config: EnvConfig) -> None:
+    """PipelineError, before any episode runs, for a request ``synthesize`` cannot write scenes for."""
+    from predictors.data.trajnet_scenes import TRAJNET_FPS
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise PipelineError(f"episodes must be an int >= 1, got {episodes!r}")
+    if isinstance(n_humans, bool) or not isinstance(n_humans, int) or n_humans < 1:
+        raise PipelineError(f"n_humans must be an int >= 1, got {n_humans!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise PipelineError(f"seed must be an int >= 0, got {seed!r}")
+    if not math.isclose(env_config.dt * TRAJNET_FPS, 1.0, rel_tol=1e-9):
+        # the scenes are written at TrajNet++'s 2.5 fps, whatever the step: another dt made slower or faster
+        # walkers out of the same frames (dt = 0.2 s wrote 1 m/s pedestrians as 0.4 m/s ones)
+        raise PipelineError(
+            f"env_config.dt must be {1 / TRAJNET_FPS:g} s (TrajNet++ scenes are {TRAJNET_FPS:g} fps), "
+            f"got {env_config.dt:g} s"
+        )
+    if n_humans + n_robots < 2:  # refused after every episode had run, when no scene came out
+        raise PipelineError(
+            "1 human without robots makes no TrajNet++ scene (a scene needs two agents' rows over its 21 "
+            "steps): give 2 humans or more (--humans) or the robots (--with-robots)"
+        )
+
+
 def synthesize(
     out_path: str | Path,
     episodes: int,
@@ -81,28 +105,11 @@ def synthesize(
     Returns a summary: counts of episodes, scenes, the pedestrians and rows written, and episodes that hit
     the time limit.
     """
-    from predictors.data.trajnet_scenes import TRAJNET_FPS, build_scenes, write_ndjson
+    from predictors.data.trajnet_scenes import build_scenes, write_ndjson
 
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise PipelineError(f"episodes must be an int >= 1, got {episodes!r}")
-    if isinstance(n_humans, bool) or not isinstance(n_humans, int) or n_humans < 1:
-        raise PipelineError(f"n_humans must be an int >= 1, got {n_humans!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise PipelineError(f"seed must be an int >= 0, got {seed!r}")
     env_config = env_config or EnvConfig()
-    if not math.isclose(env_config.dt * TRAJNET_FPS, 1.0, rel_tol=1e-9):
-        # the scenes are written at TrajNet++'s 2.5 fps, whatever the step: another dt made slower or faster
-        # walkers out of the same frames (dt = 0.2 s wrote 1 m/s pedestrians as 0.4 m/s ones)
-        raise PipelineError(
-            f"env_config.dt must be {1 / TRAJNET_FPS:g} s (TrajNet++ scenes are {TRAJNET_FPS:g} fps), "
-            f"got {env_config.dt:g} s"
-        )
     n_robots = SYNTH_ROBOTS if with_robots else 0
-    if n_humans + n_robots < 2:  # refused after every episode had run, when no scene came out
-        raise PipelineError(
-            "1 human without robots makes no TrajNet++ scene (a scene needs two agents' rows over its 21 "
-            "steps): give 2 humans or more (--humans) or the robots (--with-robots)"
-        )
+    _check_request(episodes, n_humans, n_robots, seed, env_config)
     env = CrowdEnv(env_config)
     all_tracks: list[np.ndarray] = []
     robot_ids: list[np.ndarray] = []
