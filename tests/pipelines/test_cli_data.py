@@ -14,6 +14,7 @@ import pytest
 
 from pipelines.cli import main
 from predictors.data.prepare import prepare_ewap
+from tests.cli_calls import run_cli as run
 from tests.predictors.samples import (
     scene,
     track,
@@ -36,12 +37,6 @@ def prepared(tmp_path):
     out = tmp_path / "prepared"
     prepare_ewap(raw, out, categorize_scenes=False, log=lambda msg: None)
     return out
-
-
-def run(capsys, *argv):
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_one_line_error(code, err, *fragments):

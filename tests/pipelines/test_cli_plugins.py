@@ -19,6 +19,8 @@ from predictors.data.prepare import prepare_ewap
 from predictors.models import PLUGINS_ENV
 from predictors.registry import load_predictor
 from predictors.zoo import user_zoo_dir, zoo_names
+from tests.cli_calls import one_line, parser_error
+from tests.cli_calls import run_cli as run
 from tests.predictors.samples import write_tiny_ewap, write_walk_file
 
 REPO = Path(__file__).resolve().parents[2]
@@ -29,31 +31,6 @@ NEVER = "tests.plugins.never_imported:Net"  # importing that module raises
 @pytest.fixture(autouse=True)
 def _private_dirs(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
-
-
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
-def one_line(err: str) -> str:
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    return lines[0]
-
-
-def parser_error(capsys, *argv: str) -> str:
-    """The one line of an argparse error (exit 2)."""
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        main(list(argv))
-    assert exc.value.code == 2
-    captured = capsys.readouterr()
-    assert captured.out == ""
-    return one_line(captured.err)
 
 
 # ---------------------------------------------------------------------------------------------- the flow

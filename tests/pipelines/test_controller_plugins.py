@@ -28,6 +28,8 @@ from pipelines.loop.episode import run_episode
 from predictors import models
 from predictors.models import PLUGINS_ENV as NETS_ENV
 from predictors.models import model_names
+from tests.cli_calls import parser_error
+from tests.cli_calls import run_cli as run
 
 REPO = Path(__file__).resolve().parents[2]
 TOYS = "tests.plugins.toy_controller"
@@ -44,26 +46,6 @@ def _fresh_registries(monkeypatch, tmp_path_factory):
     monkeypatch.setattr(models, "_PLUGINS", {})
     monkeypatch.delenv(registry.PLUGINS_ENV, raising=False)
     monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
-
-
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
-def parser_error(capsys, *argv: str) -> str:
-    """The one line of an argparse error (exit 2)."""
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        main(list(argv))
-    assert exc.value.code == 2
-    captured = capsys.readouterr()
-    assert captured.out == "" and "Traceback" not in captured.err
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1, captured.err
-    return lines[0]
 
 
 # ---------------------------------------------------------------------------------------------- the flow

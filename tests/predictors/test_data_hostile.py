@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipelines.cli import main
 from predictors.data.datamodule import TrajnetDataModule
 from predictors.data.ewap import read_obsmat
 from predictors.data.prepare import prepare_ewap
@@ -25,6 +24,7 @@ from predictors.data.validate import MAX_LINE_BYTES
 from predictors.data.windows import load_file_arrays
 from predictors.errors import DatasetFormatError, PredictorError
 from predictors.evaluate import load_eval_scenes
+from tests.cli_calls import run_cli
 from tests.predictors.samples import (
     STEP,
     ewap_rows,
@@ -414,12 +414,6 @@ def prepared(tmp_path):
     out = tmp_path / "prepared"
     prepare_ewap(write_tiny_ewap(tmp_path / "data"), out, categorize_scenes=False, log=lambda msg: None)
     return out
-
-
-def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_cli_error(code: int, err: str, *expected: str) -> None:

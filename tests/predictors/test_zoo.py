@@ -23,6 +23,7 @@ from predictors.models import load_plugin
 from predictors.registry import available, checkpoint_sha256, load_predictor
 from predictors.social_lstm_predictors import SocialGANPredictor
 from predictors.zoo import ZOO_ENV, read_manifest, user_zoo_dir
+from tests.cli_calls import one_line
 from tests.predictors.test_models import check_sampling
 
 REAL_ZOO = Path(__file__).resolve().parents[2] / "checkpoints"
@@ -97,12 +98,6 @@ def cli(args: list[str], capsys) -> tuple[int, str, str]:
     code = main(args)
     captured = capsys.readouterr()
     return code, captured.out, captured.err
-
-
-def one_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    return lines[0]
 
 
 # ------------------------------------------------------------------------------------------- where it is
