@@ -1,4 +1,5 @@
-"""Checks shared by the nets' frozen configs (``SocialGRUConfig``, ``SocialAttentionConfig``).
+"""Checks shared by the nets' frozen configs (``SocialGRUConfig``, ``SocialAttentionConfig``; the oldest,
+``SocialLSTMConfig``, keeps its own range messages but shares the type message and the JSON object's reading).
 
 A config comes from a JSON file that anyone can edit, so every field's type and range is checked in
 ``__post_init__`` before a tensor is allocated: a float, bool or string size would otherwise reach torch (a

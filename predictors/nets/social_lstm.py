@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 from torch import nn
 
 from predictors.errors import PredictorError, short_repr
+from predictors.nets.config_checks import config_from_dict, config_to_dict, wrong_type
 from predictors.nets.pooling import POOLINGS, GridPooling, pooling_for
 from predictors.nets.rollout import teacher_forced_rollout
 
@@ -48,7 +49,7 @@ SIZE_BOUNDS: dict[str, tuple[int, int]] = {
 # 1000 saturate every unit.
 FLOAT_BOUNDS: dict[str, float] = {"cell_side": 100.0, "input_scale": 1000.0}
 MAX_PARAMETERS = 10_000_000
-WRONG_TYPE = "Social-LSTM config holds a value of the wrong type"
+LABEL = "Social-LSTM"
 
 
 @dataclass(frozen=True)
@@ -74,9 +75,7 @@ class SocialLSTMConfig:
         # would otherwise reach torch (a traceback) or a comparison (a TypeError).
         for name in ("pooling", "head"):
             if not isinstance(getattr(self, name), str):
-                raise PredictorError(
-                    f"{WRONG_TYPE}: {name} must be a string, got {short_repr(getattr(self, name))}"
-                )
+                raise wrong_type(LABEL, name, "a string", getattr(self, name))
         if self.pooling not in POOLINGS:
             raise PredictorError(f"pooling {short_repr(self.pooling)} is not one of {list(POOLINGS)}")
         if self.head not in HEADS:
@@ -84,7 +83,7 @@ class SocialLSTMConfig:
         for name, (low, high) in SIZE_BOUNDS.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-                raise PredictorError(f"{WRONG_TYPE}: {name} must be an integer, got {short_repr(value)}")
+                raise wrong_type(LABEL, name, "an integer", value)
             if not low <= value <= high:
                 if name == "embedding_dim" and value <= N_TAGS:
                     raise PredictorError(f"embedding_dim must be > {N_TAGS} (start-tag slots), got {value}")
@@ -92,7 +91,7 @@ class SocialLSTMConfig:
         for name, high_f in FLOAT_BOUNDS.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
-                raise PredictorError(f"{WRONG_TYPE}: {name} must be a number, got {short_repr(value)}")
+                raise wrong_type(LABEL, name, "a number", value)
             if not math.isfinite(value):
                 raise PredictorError(f"{name} must be a finite number, got {value!r}")
             if not 0 < value <= high_f:
@@ -124,20 +123,11 @@ class SocialLSTMConfig:
         return count
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, values: dict) -> SocialLSTMConfig:
-        if not isinstance(values, dict):
-            raise PredictorError(f"a Social-LSTM config must be a JSON object, got {short_repr(values)}")
-        unknown = sorted(set(values) - set(cls.__dataclass_fields__))
-        if unknown:
-            shown = short_repr(unknown, 200)
-            raise PredictorError(
-                f"unknown Social-LSTM config keys {shown}; expected a subset of "
-                f"{sorted(cls.__dataclass_fields__)}"
-            )
-        return cls(**values)  # __post_init__ checks every value's type and range
+        return config_from_dict(cls, values, LABEL)
 
 
 def gaussian_head(raw: torch.Tensor) -> torch.Tensor:
