@@ -57,6 +57,24 @@ def register(subparsers) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    _net_options(parser)
+    _data_options(parser)
+    _optimisation_options(parser)
+    parser.add_argument(
+        "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
+    )
+    parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
+    parser.add_argument(
+        "--out", type=output_arg, default=None, help="run directory (default runs/train/NAME)"
+    )
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
+    parser.add_argument("--seed", type=int, default=0, help="seed of weights, shuffling, augmentation")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def _net_options(parser: argparse.ArgumentParser) -> None:
+    """What to train: the model kind and its hyper-parameters."""
     parser.add_argument(
         "--model",
         required=True,
@@ -78,6 +96,10 @@ def register(subparsers) -> None:
         metavar="JSON",
         help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'",
     )
+
+
+def _data_options(parser: argparse.ArgumentParser) -> None:
+    """Which scenes: prepared files by protocol and dataset, or explicit files."""
     # None by default, here and below: given with explicit --train/--val files, they are refused
     parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
     parser.add_argument(
@@ -102,6 +124,10 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--val", nargs="+", type=path_arg, default=None, metavar="FILE")
     parser.add_argument("--test", nargs="+", type=path_arg, default=None, metavar="FILE")
+
+
+def _optimisation_options(parser: argparse.ArgumentParser) -> None:
+    """How long and how fast: epochs, batches, learning rate and its decay, the loss."""
     parser.add_argument("--epochs", type=int, default=25, help="training epochs (default 25)")
     parser.add_argument(
         "--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)"
@@ -126,17 +152,6 @@ def register(subparsers) -> None:
         "its mean); a point head trains on l2 only, social_gan on its variety + adversarial loss (default: "
         "gaussian for Gaussian heads, l2 for point heads; with --resume, the run's)",
     )
-    parser.add_argument(
-        "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
-    )
-    parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
-    parser.add_argument(
-        "--out", type=output_arg, default=None, help="run directory (default runs/train/NAME)"
-    )
-    parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
-    parser.add_argument("--seed", type=int, default=0, help="seed of weights, shuffling, augmentation")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.set_defaults(func=run)
 
 
 def model_name(text: str) -> str:
