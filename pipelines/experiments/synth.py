@@ -67,12 +67,9 @@ def _check_request(episodes: int, n_humans: int, n_robots: int, seed: int, env_c
     """PipelineError, before any episode runs, for a request ``synthesize`` cannot write scenes for."""
     from predictors.data.trajnet_scenes import TRAJNET_FPS
 
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise PipelineError(f"episodes must be an int >= 1, got {episodes!r}")
-    if isinstance(n_humans, bool) or not isinstance(n_humans, int) or n_humans < 1:
-        raise PipelineError(f"n_humans must be an int >= 1, got {n_humans!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise PipelineError(f"seed must be an int >= 0, got {seed!r}")
+    for name, value, least in (("episodes", episodes, 1), ("n_humans", n_humans, 1), ("seed", seed, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise PipelineError(f"{name} must be an int >= {least}, got {value!r}")
     if not math.isclose(env_config.dt * TRAJNET_FPS, 1.0, rel_tol=1e-9):
         # the scenes are written at TrajNet++'s 2.5 fps, whatever the step: another dt made slower or faster
         # walkers out of the same frames (dt = 0.2 s wrote 1 m/s pedestrians as 0.4 m/s ones)
