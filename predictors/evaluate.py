@@ -19,6 +19,7 @@ from predictors.data.trajnet_io import read_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
 from predictors.progress import progress_bar
+from predictors.text_table import aligned_lines
 
 
 @dataclass(frozen=True)
@@ -188,15 +189,8 @@ def format_table(result: dict) -> str:
     rows = [row(name, m) for name, m in result["files"].items()]
     if len(result["files"]) > 1:
         rows.append(row("overall", result["overall"]))
-    widths = [max(len(r[k]) for r in [header, *rows]) for k in range(len(header))]
-
-    def fmt(r):
-        return "  ".join(
-            c.ljust(w) if k == 0 else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths, strict=True))
-        )
-
     title = (
         f"{result['predictor']}: {result['obs_len']} observed -> {result['pred_len']} predicted steps "
         "(TrajNet++ metrics, primary pedestrian)"
     )
-    return "\n".join([title, fmt(header), "  ".join("-" * w for w in widths), *map(fmt, rows)])
+    return "\n".join([title, *aligned_lines(header, rows)])

@@ -9,6 +9,7 @@ import numpy as np
 
 from predictors.data.trajnet_io import iter_scenes, validate_ndjson
 from predictors.errors import PredictorError
+from predictors.text_table import aligned_lines
 
 
 @dataclass(frozen=True)
@@ -104,11 +105,4 @@ def format_table(stats: list[FileStats], root: str | Path | None = None) -> str:
                 "/".join(map(str, types)),
             )
         )
-    widths = [max(len(r[k]) for r in [header, *rows]) for k in range(len(header))]
-
-    def fmt(r):
-        return "  ".join(
-            c.ljust(w) if k == 0 else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths, strict=True))
-        )
-
-    return "\n".join([fmt(header), "  ".join("-" * w for w in widths), *map(fmt, rows)])
+    return "\n".join(aligned_lines(header, rows))
