@@ -88,7 +88,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "line says",
     )
     parser.add_argument(
-        "--compare", type=path_arg, metavar="OTHER.mcap", help="side-by-side metrics with this run"
+        "--compare",
+        type=path_arg,
+        metavar="OTHER.mcap",
+        help="side-by-side metrics with this run, and each setting in which the two differ",
     )
     parser.add_argument("--check", action="store_true", help="validate every message against its schema")
     parser.add_argument(

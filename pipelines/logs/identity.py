@@ -13,7 +13,7 @@ from typing import Any, Final
 from mcap.reader import make_reader
 
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import decode_metadata, read_metadata
+from pipelines.logs.reader import Recording, decode_metadata, read_metadata
 
 # What tells two runs' recordings of one (scenario, seed) apart (its file name is the same for both), and
 # two set-ups in `crowdmpc review DIR`: these values of the "episode" metadata, then every setting of the
@@ -56,6 +56,16 @@ def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[
     for key, value in UNRECORDED_DEFAULTS.items():
         flat.setdefault(key, value)
     return identity | {k: v for k, v in flat.items() if k not in identity and k not in SPEED_ONLY}
+
+
+def differing_settings(a: Recording, b: Recording) -> list[tuple[str, Any, Any]]:
+    """(setting, A's value, B's value) of each ``run_identity`` value beyond controller and predictor that
+    both recordings name and that differs: what ``crowdmpc review A --compare B`` shows of two runs of one
+    scene, whose file names are the same (``--set mpc.w_coll=1e6`` beside the demo). A setting only one of
+    them has (an MPC weight beside ORCA) is told by the controller, not by a row of "not set"."""
+    ia, ib = (run_identity(rec.episode(), rec.config()) for rec in (a, b))
+    own_rows = ("controller", "predictor")
+    return [(k, ia[k], ib[k]) for k in ia if k in ib and k not in own_rows and ia[k] != ib[k]]
 
 
 def shown(value: Any) -> str:

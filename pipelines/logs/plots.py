@@ -15,6 +15,7 @@ from typing import Any, Final
 import numpy as np
 
 from pipelines.errors import PipelineError
+from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
 from pipelines.logs.view import EpisodeView, episode_view
 
@@ -128,6 +129,7 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
 
     fig = Figure(figsize=(7, 7))
     ax = fig.add_subplot()
+    labels = _compare_labels(a, b)
     for rec, style, alpha in ((a, "-", 1.0), (b, "--", 0.8)):
         view = episode_view(rec)
         tag = "A" if rec is a else "B"
@@ -136,7 +138,7 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
                     label=f"{tag} humans" if j == 0 else None)  # fmt: skip
         for i in range(view.robot_positions.shape[1]):
             ax.plot(*view.robot_positions[:, i].T, style, color=_robot_color(i), lw=2.0, alpha=alpha,
-                    label=f"{tag}: {rec.label}" if i == 0 else None)  # fmt: skip
+                    label=f"{tag}: {labels[tag]}" if i == 0 else None)  # fmt: skip
         ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
@@ -145,6 +147,16 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
     ax.set_title("A solid, B dashed")
     _dedupe_legend(ax, below=True)
     fig.savefig(out, dpi=120, bbox_inches="tight")
+
+
+def _compare_labels(a: Recording, b: Recording) -> dict[str, str]:
+    """Each run's legend entry: controller, predictor, scene, and the settings in which the two differ (the
+    two runs of one scene with another MPC weight read the same without them)."""
+    differ = differing_settings(a, b)
+    return {
+        tag: " / ".join([rec.label, *(f"{key} {shown(values[i])}" for key, *values in differ)])
+        for i, (tag, rec) in enumerate((("A", a), ("B", b)))
+    }
 
 
 ANIMATION_SUFFIXES: Final = (".gif", ".mp4")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from datetime import UTC, datetime
@@ -18,6 +19,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.jsonschema import unsupported_keywords, validate
 from pipelines.logs.reader import Channel, LoggedMessage, Recording
 from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING
@@ -327,12 +329,25 @@ def compare_table(a: Recording, b: Recording) -> str:
         ["scenario", f"{sa['scenario']} {sa['seed']}", f"{sb['scenario']} {sb['seed']}"],
         ["crowdmpc", _code(sa), _code(sb)],  # a run before an upgrade beside one after it: which is which
     ]
+    rows += [[key, shown(va), shown(vb)] for key, va, vb in differing_settings(a, b)]
     rows += [[name, ma.get(name), mb.get(name)] for name in dict.fromkeys([*ma, *mb])]
     for key in ("median_ms", "p95_ms", "max_ms", "mean_iterations"):
         rows.append([key, sa["solver"].get(key), sb["solver"].get(key)])
     rows.append(["fallbacks", sa["solver"].get("fallbacks"), sb["solver"].get("fallbacks")])
     rows.append(["truncated", sa["truncated"], sb["truncated"]])
-    return _table(["", f"A: {a.path.name}", f"B: {b.path.name}"], rows)
+    name_a, name_b = compare_names(a, b)
+    return _table(["", f"A: {name_a}", f"B: {name_b}"], rows)
+
+
+def compare_names(a: Recording, b: Recording) -> tuple[str, str]:
+    """The two files by name, or, where the names are the same (one scene and seed recorded by two runs into
+    two folders, the usual comparison), by their paths from the folder they share: both columns read
+    "A: circle_seed000000.mcap" and "B: circle_seed000000.mcap" before."""
+    if a.path.name != b.path.name:
+        return a.path.name, b.path.name
+    pa, pb = a.path.resolve(), b.path.resolve()
+    shared = len(os.path.commonpath([pa, pb]).rstrip(os.sep)) + 1 if pa.anchor == pb.anchor else 0
+    return str(pa)[shared:] or str(a.path), str(pb)[shared:] or str(b.path)
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -61,8 +61,10 @@ def record_episode(
     record_iterations: bool = False,
     with_plan: bool = True,
     end: bool = True,
+    config: dict | None = None,
 ) -> RecordedEpisode:
-    """Run ``steps`` steps (or to the end of the episode) through a McapEpisodeRecorder."""
+    """Run ``steps`` steps (or to the end of the episode) through a McapEpisodeRecorder (``config``: more
+    settings of its "config" metadata)."""
     env = CrowdEnv(EnvConfig(time_limit=steps * 0.4, timeout_margin=0.0))
     obs = env.reset(seed, scenario, n_humans, n_robots)
     meta = {
@@ -73,7 +75,7 @@ def record_episode(
         "controller": "handmade",
         "predictor": "constant_velocity",
         "predictor_sha256": "ab" * 32,
-        "config": {"env": {"dt": 0.4, "radius": 0.3}, "horizon": HORIZON},
+        "config": {"env": {"dt": 0.4, "radius": 0.3}, "horizon": HORIZON, **(config or {})},
     }
     recorder = McapEpisodeRecorder(out_dir, record_iterations=record_iterations, run_meta={"argv": ["test"]})
     recorder.on_reset(obs, meta)

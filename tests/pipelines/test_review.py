@@ -327,9 +327,37 @@ def test_compare_names_the_code_that_recorded_each_run(tmp_path, capsys, monkeyp
     b = record_episode(tmp_path / "b", seed=1, steps=4)
     monkeypatch.undo()
     assert main(["review", str(a.path), "--compare", str(b.path)]) == 0
-    table = capsys.readouterr().out.split(f"A: {a.path.name}")[1]  # the side-by-side table, after A's summary
+    table = capsys.readouterr().out.split(f"A: a/{a.path.name}")[
+        1
+    ]  # the side-by-side table, after A's summary
     (row,) = [line for line in table.splitlines() if line.startswith("crowdmpc ")]
     assert row.split()[-2:] == ["(commit", "0123456789ab)"]
+
+
+def test_compare_tells_two_runs_of_one_scene_apart(tmp_path, capsys, monkeypatch):
+    """The demo beside a rerun with `--set mpc.w_coll=1e6` into runs/demo-w6 (README): both files are
+    circle_seed000000.mcap, so the table's columns read "A: circle_seed000000.mcap" and "B: ..." alike, the
+    overlay's legend "A: cmpc / social_lstm_eth / circle / seed 0" and "B:" the same, and neither said that
+    w_coll differed. The columns name the folders; a row and the legend name each differing setting."""
+    import pipelines.logs.plots as plots
+
+    a = record_episode(tmp_path / "demo", seed=1, steps=4, config={"mpc": {"w_coll": 1e7, "horizon": 4}})
+    b = record_episode(tmp_path / "demo-w6", seed=1, steps=4, config={"mpc": {"w_coll": 1e6, "horizon": 4}})
+    labels = []
+    monkeypatch.setattr(
+        plots, "_dedupe_legend", lambda ax, below: labels.extend(ax.get_legend_handles_labels()[1])
+    )
+    overlay = tmp_path / "o.png"
+    assert main(["review", str(a.path), "--compare", str(b.path), "--plot", str(overlay)]) == 0
+    table = capsys.readouterr().out.split("A: demo/circle_seed000001.mcap")[1]
+    assert "B: demo-w6/circle_seed000001.mcap" in table.splitlines()[0]
+    rows = {line.split()[0]: line.split()[1:] for line in table.splitlines()[2:] if line.strip()}
+    assert rows["mpc.w_coll"] == ["10000000.0", "1000000.0"]
+    assert "mpc.horizon" not in rows  # the same in both: no row
+    assert [label for label in labels if label.startswith(("A:", "B:"))] == [
+        "A: handmade / constant_velocity / circle / seed 1 / mpc.w_coll 10000000.0",
+        "B: handmade / constant_velocity / circle / seed 1 / mpc.w_coll 1000000.0",
+    ]
 
 
 def test_a_folder_of_runs_recorded_by_different_code_says_so(tmp_path, capsys, monkeypatch):
