@@ -106,6 +106,17 @@ def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outp
     assert _undocumented([*topics, *schemas, *fields, *metadata, *keys], doc) == []
 
 
+def test_a_single_file_review_json_is_documented(outputs):
+    """`review FILE --json` wrote `summary`, `compare` (with --compare) and `check` (with --check), which the
+    doc did not name: it described `review DIR --json` alone."""
+    recording = next((outputs / "runs/d").glob("*.mcap"))
+    argv = ["review", str(recording), "--compare", str(recording), "--check"]
+    assert main([*argv, "--json", str(outputs / "review_file.json")]) == 0
+    review = _strict((outputs / "review_file.json").read_text())
+    names = [*review, *review["summary"], *next(iter(review["check"].values()))]
+    assert _undocumented(names, _documented()) == []
+
+
 def test_the_mcap_example_runs_as_printed(outputs, monkeypatch):
     example = re.search(r"```python\n(.*?)```", DOC.read_text(), re.S)
     assert example is not None
