@@ -88,7 +88,8 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         "half circle and half perpendicular crossing, the same seeds in every cell; "
         f"predictor{'s' if len(predictors) > 1 else ''} {', '.join(predictors)}. Rates with their 95% Wilson "
         "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "
-        "(Student's t). Bold: the better method at each number of pedestrians. Paired: episodes (same crowd) "
+        "(Student's t). Bold: the better method at each number of pedestrians, in the paper's four rows "
+        "(success, travel time, collision, discomfort). Paired: episodes (same crowd) "
         "this method succeeded and the first one failed / the reverse, with the exact McNemar p-value."
         + (
             f" {NOT_APPLICABLE}: a solver's figure for a controller that runs none."

@@ -122,6 +122,21 @@ def test_the_step_time_row_names_its_statistic():
     assert "n/a" not in table  # every method has a solver: no note either
 
 
+def test_the_note_says_which_rows_mark_the_better_method():
+    """The note read "Bold: the better method at each number of pedestrians", and a 50-episode CMPC/DMPC
+    sweep printed contact 0.0 beside 2.0 unmarked: only the paper's four rows are marked."""
+    table2 = get_experiment("table2")
+    cells = table2.cells((5,))
+    records = [_record(c, i, 2.0, 0) for c in cells for i in range(2)]
+    records[-1]["metrics"] |= {"collision": True, "contact": True}  # the last method's: worse in both
+    table = markdown_table(table2, summarize(table2, cells, records))
+    rows = {line.split(" | ")[0].lstrip("| "): line for line in table.splitlines() if line.startswith("| ")}
+    assert "**" in rows["Collision rate (%)"] and "**" not in rows["Contact rate (%) (< 0.6 m)"]
+    assert (
+        "Bold: the better method at each number of pedestrians, in the paper's four rows (success, " in table
+    )
+
+
 @pytest.mark.parametrize(
     ("outcome", "interval"),
     [("success", "95% Wilson interval"), ("travel_time", "95% Student's t interval of the mean")],
