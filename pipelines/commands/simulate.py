@@ -102,7 +102,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-flocking", action="store_true", default=None, help="omega_floc = 0 (Table III, NF)"
     )
-    parser.add_argument("--coupling", choices=COUPLINGS, help="default: ibr")
+    parser.add_argument(
+        "--coupling",
+        choices=COUPLINGS,
+        help="ibr (default): iterative best response to the humans' predictions, Algorithms 1 and 2; nlp: "
+        "the predictor inside CMPC's joint NLP, coupled prediction and planning (cmpc only)",
+    )
     parser.add_argument(
         "--margins",
         metavar="SPEC",

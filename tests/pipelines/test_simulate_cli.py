@@ -84,6 +84,18 @@ def test_unknown_scenario_is_rejected_by_the_parser():
     assert exc.value.code == 2
 
 
+def test_the_coupling_help_says_what_its_choices_are(capsys):
+    """`--coupling {ibr,nlp}` read "default: ibr": neither word is expanded in simulate's help, nor "IBR"
+    anywhere a newcomer reads before the summary's "IBR iterations" row."""
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    coupling = text.split("--coupling {ibr,nlp} ")[1].split(" --margins")[0]
+    assert (
+        "iterative best response" in coupling and "predictor inside" in coupling and "cmpc only" in coupling
+    )
+
+
 def test_an_unknown_predictor_lists_the_zoo_and_the_oracle(capsys):
     assert main(["simulate", "--controller", "cmpc", "--predictor", "nope", "--no-progress"]) == 2
     err = capsys.readouterr().err
