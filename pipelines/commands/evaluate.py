@@ -25,6 +25,11 @@ protocols (data/README.md):
 --test FILE.. scores your own TrajNet++ ndjson files instead (scenes of 9 + 12 steps at 2.5 fps, the last
 21 steps of a longer scene; data/README.md); --data-dir, --protocol, --dataset and --split choose the
 prepared files and do not go with it.
+
+metrics (TrajNet++'s, of each scene's primary pedestrian; data/README.md):
+  ADE, FDE     average and final displacement error over the 12 predicted steps, m
+  Col-I        % of scenes where the primary's prediction collides with a neighbour's prediction
+  Col-II       % of scenes where it collides with a neighbour's true path
 """
 
 

@@ -923,3 +923,14 @@ def test_export_replaces_an_earlier_export_but_no_other_file(tmp_path, capsys):
     empty = tmp_path / "empty.casadi"
     empty.touch()
     assert main(["export", "constant_velocity", "--out", str(empty)]) == 0
+
+
+def test_evaluate_help_says_what_its_columns_are(capsys):
+    """`evaluate` prints ADE, FDE, Col-I and Col-II; its help named the protocols but none of the metrics
+    (docs/results.md's table neither): Col-I and Col-II were defined in data/README.md alone."""
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    metrics = capsys.readouterr().out.split("metrics (")[1]
+    for line in ("ADE, FDE     average and final displacement error", "Col-I        % of scenes", "Col-II"):
+        assert line in metrics, line
+    assert "prediction collides with a neighbour's prediction" in metrics and "true path" in metrics
