@@ -11,10 +11,16 @@ as empty tables.
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pipelines.errors import PipelineError
+from pipelines.experiments.cell_columns import FLOATS, CellColumns, Column
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -72,11 +78,12 @@ def report(
     ``report_only``, records none of which the plan holds are refused (the report is left as it was)."""
     from pipelines.experiments.log import EPISODES_FILE
 
-    held, records = _planned_records(config, tasks)
-    if report_only and held and not records:
+    log = read_log(config, cells, tasks)
+    if report_only and log.held and not log.planned:
         out = config.out
         humans = ",".join(map(str, config.humans or config.experiment.humans))
         methods = ", ".join(label for label, _ in config.experiment.methods)
+        held = log.held
         raise PipelineError(
             f"--report-only: {out / EPISODES_FILE} holds {held} records, none of them of the cells planned "
             f"here (experiment {config.experiment.name}, --humans {humans}, --robots {config.n_robots}, "
@@ -84,14 +91,14 @@ def report(
             f"sweep ran with (`crowdmpc config show --from-sweep {out}` prints them)"
         )
     if report_only:
-        _note_unrun_cells(cells, records)
-    _write(config, cells, tasks, records)
+        _note_unrun_cells(cells, log.cells)
+    _write(config, cells, tasks, log)
 
 
-def _note_unrun_cells(cells: tuple[Cell, ...], records: list[dict[str, Any]]) -> None:
-    """Say which planned cells --out holds no episode of: the table leaves their columns out, so a value
-    added to --vary (or a crowd size to --humans) and reported before it ran vanished without a word."""
-    recorded = {r["cell"] for r in records}
+def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
+    """Say which planned cells --out holds no episode of (``recorded``: the cells of its planned records):
+    the table leaves their columns out, so a value added to --vary (or a crowd size to --humans) and
+    reported before it ran vanished without a word."""
     unrun = [f"{c.method!r} ({c.n_humans} humans)" for c in cells if c.key not in recorded]
     if unrun:
         print(
@@ -104,41 +111,74 @@ def _note_unrun_cells(cells: tuple[Cell, ...], records: list[dict[str, Any]]) ->
 def report_stopped(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> None:
     """The report of a sweep that stopped itself part way (SweepStopped): what it recorded stands. None when
     the plan has no record yet (a sweep stopped before its first)."""
-    _, records = _planned_records(config, tasks)
-    if records:
-        _write(config, cells, tasks, records)
+    log = read_log(config, cells, tasks)
+    if log.planned:
+        _write(config, cells, tasks, log)
 
 
-def _planned_records(config: SweepConfig, tasks: list[EpisodeTask]) -> tuple[int, list[dict[str, Any]]]:
-    """(how many records --out holds, those of the planned episodes)."""
+@dataclass
+class LogRead:
+    """What the report takes of a sweep's log, read a record at a time: a report that held every record
+    (its config left out) held 3.7 KB an episode, 4.1 GB at a million (benchmarks/sweep_log_scale.py)."""
+
+    held: int = 0  # records in the log
+    planned: int = 0  # of those, the plan's episodes
+    cells: set[str] = dataclasses.field(default_factory=set)  # the cells of those
+    # of the plan's episodes of ``cells``' cells (those the report tabulates), by cell key
+    columns: dict[str, CellColumns] = dataclasses.field(default_factory=dict)
+    cpu: Column = dataclasses.field(
+        default_factory=lambda: Column(FLOATS)
+    )  # each planned record's cpu_s that is set
+
+
+def read_log(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
+    """--out's episodes.jsonl as the report reads it, checked as a sweep loads it."""
     from pipelines.experiments.log import episode_log
 
     planned = {t.key for t in tasks}
-    loaded = episode_log(config.out).load(repair=False, keep=report_fields)
-    return len(loaded), [r for key, r in loaded.items() if key in planned]
+    tabulated = {c.key for c in cells}
+    log = LogRead()
+    for offset, line, record in episode_log(config.out).scan(repair=False):
+        log.held += 1
+        if record["key"] not in planned:
+            continue
+        log.planned += 1
+        log.cells.add(record["cell"])
+        if record.get("cpu_s") is not None:
+            log.cpu.append(record["cpu_s"])
+        if record["cell"] in tabulated:
+            log.columns.setdefault(record["cell"], CellColumns()).add(record, offset, zlib.crc32(line))
+    return log
 
 
-def report_fields(record: dict[str, Any]) -> dict[str, Any]:
-    """``record`` as the report holds it: without its effective config, which is half its memory and which
-    no part of the report reads, and with its field names shared by every record. json.loads makes new
-    strings of the names for each line, and the ~60 names of the record, its metrics and its solver figures
-    were half of what remained: 6.7 KB a record held, 3.4 KB shared (670 MB and 340 MB at 100,000 episodes,
-    benchmarks/sweep_log_scale.py)."""
-    kept = {sys.intern(k): v for k, v in record.items() if k != "config"}
-    for part in ("metrics", "solver"):  # check_record has made them mappings
-        kept[part] = {sys.intern(k): v for k, v in kept[part].items()}
-    return kept
+def episode_rows(path: Path, cells: tuple[Cell, ...], log: LogRead) -> Iterator[dict[str, Any]]:
+    """episodes.csv's rows, in the plan's order (report.episode_rows'), each made of its record read again
+    from the log at its offset: a line that changed since (the log was replaced) is refused."""
+    from pipelines.experiments.report import episode_row
+
+    with open(path, "rb") as f:
+        for cell in cells:
+            for offset, crc in log.columns[cell.key].lines() if cell.key in log.columns else ():
+                f.seek(offset)
+                line = f.readline()
+                if zlib.crc32(line) != crc:
+                    raise PipelineError(
+                        f"{path} changed while the report read it (the record at byte {offset}); report again"
+                    )
+                yield episode_row(json.loads(line), cell.method)
 
 
-def _write(
-    config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], records: list[dict[str, Any]]
-) -> None:
-    from pipelines.experiments.report import write_report
+def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], log: LogRead) -> None:
+    from pipelines.experiments.log import EPISODES_FILE
+    from pipelines.experiments.report import write_report_of
+    from pipelines.experiments.summary import summarize_columns
 
-    report = write_report(config.out, config.experiment, cells, records)
+    summaries = summarize_columns(config.experiment, cells, log.columns)
+    rows = episode_rows(config.out / EPISODES_FILE, cells, log)
+    report = write_report_of(config.out, config.experiment, summaries, rows)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
-    cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]
+    cpu = [log.cpu[i] for i in range(len(log.cpu))]
     if cpu:
         # CPU time, unlike wall time, does not depend on what else runs on the machine: an honest projection.
         mean = sum(cpu) / len(cpu)

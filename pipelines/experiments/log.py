@@ -12,6 +12,7 @@ The names of the directory's other files are here too, so that every module name
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import math
 import os
@@ -42,17 +43,25 @@ class EpisodeLog:
     def load(
         self, repair: bool = True, keep: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     ) -> dict[str, dict[str, Any]]:
-        """Every complete record by key (``keep(record)``: what to hold of each, after its check). A torn tail
+        """Every complete record by key (``keep(record)``: what to hold of each, after its check), as ``scan``
+        reads them."""
+        return {record["key"]: record if keep is None else keep(record) for _, _, record in self.scan(repair)}
+
+    def scan(self, repair: bool = True) -> Iterator[tuple[int, bytes, dict[str, Any]]]:
+        """Every complete record, checked, in the file's order, with its line and the line's offset: what
+        ``load`` holds, a record at a time (a report of a million records held 4.1 GB of them). A torn tail
         (bytes after the last newline, or a last line that is not JSON) is ignored and, with ``repair`` (only
-        the sweep holding the lock may), cut off the file so that its episode runs again; a bad line elsewhere
-        or a repeated key means the file was damaged or edited, and is refused. Read a line at a time."""
+        the sweep holding the lock may), cut off the file once every record was read, so that its episode
+        runs again; a bad line elsewhere or a repeated key means the file was damaged or edited, and is
+        refused. Read a line at a time."""
         if not self.path.exists():
-            return {}
-        records: dict[str, dict[str, Any]] = {}
+            return
+        seen: set[int] = set()  # each key's hash: the keys themselves were ~100 B a record
         good_end = size = 0
         bad: tuple[int, Exception] | None = None  # a line that is not JSON: fine only as the last one
         with open(self.path, "rb") as f:
             for number, line in enumerate(f, start=1):
+                offset = size
                 size += len(line)
                 if not line.endswith(b"\n"):
                     break  # only what a newline ends was fully written
@@ -72,18 +81,27 @@ class EpisodeLog:
                         raise PipelineError(f"{self.path}:{number}: record has no 'key'; the file is damaged")
                     if self.check is not None:
                         self.check(record, f"{self.path}:{number}")
-                    if key in records:
+                    if hash(key) in seen and self._key_before(key, number):
                         raise PipelineError(
                             f"{self.path}:{number}: a second record for {key!r}; the file is damaged"
                         )
-                    records[key] = record if keep is None else keep(record)
+                    seen.add(hash(key))
+                    yield offset, line, record
                 good_end += len(line)
         if repair and good_end < size:
             with open(self.path, "r+b") as f:
                 f.truncate(good_end)
                 f.flush()
                 os.fsync(f.fileno())
-        return records
+
+    def _key_before(self, key: str, number: int) -> bool:
+        """Whether a line before line ``number`` is a record of ``key``: two keys' hashes may be equal."""
+        with open(self.path, "rb") as f:
+            for line in itertools.islice(f, number - 1):
+                record = json.loads(line) if line.strip() else None  # read once already: JSON all
+                if isinstance(record, dict) and record.get("key") == key:
+                    return True
+        return False
 
     def append(self, record: dict[str, Any]) -> None:
         try:

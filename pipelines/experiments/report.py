@@ -130,37 +130,38 @@ def episode_rows(records: Iterable[dict[str, Any]], cells: Sequence[Cell] = ()) 
     place = {c.key: i for i, c in enumerate(cells)}
     label = {c.key: c.method for c in cells}
     for r in sorted(records, key=lambda r: (place.get(r["cell"], len(place)), r["seed"], str(r["scenario"]))):
-        m, s = r["metrics"], r["solver"]
-        yield (
-            {
-                "key": r["key"],
-                "method": label.get(r["cell"], r["method"]),
-                "n_humans": r["n_humans"],
-                "scenario": r["scenario"],
-                "seed": r["seed"],
-                "success": m["success"],
-                "travel_time": m["travel_time"],
-                "collision": m["collision"],
-                "contact": m["contact"],
-                "discomfort": m["discomfort"],
-                "min_distance": m["min_distance"],
-                "n_steps": m["n_steps"],
-                # Absent from records written before them: empty cells, not a failed report.
-                **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
-                **{k: m.get(k) for k in BETWEEN_STEPS},
-                **{k: m.get(k) for k in ROBOT_CONTACT},
-                **{
-                    k: r.get(k) for k in ("margins", "profile", "visibility", "sensor_range", "sensor_tracks")
-                },
-                "step_median_ms": s["median_ms"],
-                "step_p95_ms": s["p95_ms"],
-                "step_max_ms": s["max_ms"],
-                "mean_iterations": s["mean_iterations"],
-                "fallback_steps": s["fallback_steps"],
-                "wall_s": r["wall_s"],
-                "cell": r["cell"],
-            }
-        )
+        yield episode_row(r, label.get(r["cell"], r["method"]))
+
+
+def episode_row(r: dict[str, Any], method: str) -> dict[str, Any]:
+    """episodes.csv's row of record ``r``, of the cell the plan labels ``method``."""
+    m, s = r["metrics"], r["solver"]
+    return {
+        "key": r["key"],
+        "method": method,
+        "n_humans": r["n_humans"],
+        "scenario": r["scenario"],
+        "seed": r["seed"],
+        "success": m["success"],
+        "travel_time": m["travel_time"],
+        "collision": m["collision"],
+        "contact": m["contact"],
+        "discomfort": m["discomfort"],
+        "min_distance": m["min_distance"],
+        "n_steps": m["n_steps"],
+        # Absent from records written before them: empty cells, not a failed report.
+        **{k: m.get(k) for k in ("collision_steps", "contact_steps")},
+        **{k: m.get(k) for k in BETWEEN_STEPS},
+        **{k: m.get(k) for k in ROBOT_CONTACT},
+        **{k: r.get(k) for k in ("margins", "profile", "visibility", "sensor_range", "sensor_tracks")},
+        "step_median_ms": s["median_ms"],
+        "step_p95_ms": s["p95_ms"],
+        "step_max_ms": s["max_ms"],
+        "mean_iterations": s["mean_iterations"],
+        "fallback_steps": s["fallback_steps"],
+        "wall_s": r["wall_s"],
+        "cell": r["cell"],
+    }
 
 
 def write_csv(path: Path, rows: Iterable[dict[str, Any]]) -> None:
@@ -192,19 +193,29 @@ def write_report(
     old version, so that an interrupted report (a second Ctrl-C, a kill) leaves every file complete, the
     previous report's or this one's, never half written; a killed report's staging folder is removed by the
     next report."""
+    keys = {c.key for c in cells}
+    records = [r for r in records if r["cell"] in keys]
+    return write_report_of(
+        out, experiment, summarize(experiment, cells, records), episode_rows(records, cells)
+    )
+
+
+def write_report_of(
+    out: Path, experiment: Experiment, summaries: Sequence[CellSummary], rows: Iterable[dict[str, Any]]
+) -> Report:
+    """``write_report`` of the cells' ``summaries`` and episodes.csv's ``rows`` (``episode_row``'s, in the
+    plan's order): a report that reads a sweep's log once more for the rows rather than holding its records
+    (pipelines.commands.sweep_report)."""
     from pipelines.experiments.worker import remove_stale_scratch
 
     out = Path(out)
-    keys = {c.key for c in cells}
-    records = [r for r in records if r["cell"] in keys]
-    summaries = summarize(experiment, cells, records)
     markdown = markdown_table(experiment, summaries)
     # a killed report's: not one another process writes now, here or on another machine
     remove_stale_scratch(out, STAGING_PREFIX, older_than_s=STALE_STAGING_S)
     staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
     try:
         write_csv(staging / CELLS_CSV, cell_rows(summaries))
-        write_csv(staging / EPISODES_CSV, episode_rows(records, cells))
+        write_csv(staging / EPISODES_CSV, rows)
         (staging / TABLE_MD).write_text(markdown)
         write_csv(staging / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
         written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]

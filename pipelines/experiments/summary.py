@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, Final
 
@@ -22,6 +22,7 @@ import numpy as np
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments import safety_report as safety
+from pipelines.experiments.cell_columns import CellColumns
 from pipelines.experiments.cells import Experiment, PaperFigures
 from pipelines.experiments.tasks import SCENARIOS, Cell
 
@@ -213,6 +214,18 @@ def summarize(
         summarize_cell(cell, by_cell[cell.key], paper_figures(experiment, cell))
         for cell in cells
         if by_cell.get(cell.key)
+    ]
+
+
+def summarize_columns(
+    experiment: Experiment, cells: Sequence[Cell], columns: Mapping[str, CellColumns]
+) -> list[CellSummary]:
+    """``summarize`` of records held as columns, by cell key (pipelines.experiments.cell_columns): a cell's
+    episodes are made records one cell at a time, and only of the fields the summary reads."""
+    return [
+        summarize_cell(cell, columns[cell.key].episodes(), paper_figures(experiment, cell))
+        for cell in cells
+        if cell.key in columns and len(columns[cell.key])
     ]
 
 
