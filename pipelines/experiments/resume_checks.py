@@ -15,46 +15,87 @@ from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
 
 
-def check_same_predictors(out: Path, tasks: list[EpisodeTask], done: dict[str, dict[str, Any]]) -> None:
-    """Refuse to extend a cell whose records came from other weights than the zoo holds now (a retrained
-    model): its table would silently mix two predictors."""
-    from predictors.registry import checkpoint_sha256
+class ResumeChecks:
+    """What a resumed sweep reads of the records it extends, a record at a time (``add``), and the checks
+    (``check``): which planned episodes are recorded, and the predictor weights and the margins their records
+    state, each distinct value once with the first planned episode that states it. A resume held each
+    record's key and these fields, 1.2 KB an episode before its first new one ran; now a byte an episode and,
+    while the log is read, the plan's index by key: a resume of 100,000 recorded episodes with nothing left
+    to run (benchmarks/sweep_log_scale.py's) peaked at 256 MB, now 154 MB."""
 
-    current: dict[str | None, str | None] = {}  # predictor name (None in a record without one) -> sha256
-    for task in tasks:
-        record = done.get(task.key)
-        if record is None:
-            continue
-        name = record.get("predictor")
-        if name not in current:
-            current[name] = checkpoint_sha256(name)
-        if record.get("predictor_sha256") != current[name]:
-            raise PipelineError(
-                f"{out / EPISODES_FILE} holds episodes of {task.cell.key} run with predictor {name!r} of "
-                f"sha256 {record.get('predictor_sha256')}, but the zoo's {name!r} is now {current[name]}; "
-                "use another --out for the new weights"
-            )
+    def __init__(self, out: Path, tasks: list[EpisodeTask]):
+        self.out = out
+        self.tasks = tasks
+        self._index = {t.key: i for i, t in enumerate(tasks)}
+        self.done = bytearray(len(tasks))  # 1 where the log holds the planned episode
+        # (predictor, its sha256) as JSON -> (first plan index, predictor, sha256)
+        self._predictors: dict[str, tuple[int, Any, Any]] = {}
+        # (cell key, its margins as JSON) -> (first plan index, margins)
+        self._margins: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
+
+    def add(self, record: dict[str, Any]) -> None:
+        i = self._index.get(record["key"])
+        if i is None:  # not of the plan: neither run nor checked
+            return
+        self.done[i] = 1
+        name, sha256 = record.get("predictor"), record.get("predictor_sha256")
+        _keep_first(self._predictors, json.dumps([name, sha256], sort_keys=True), (i, name, sha256))
+        stored = _stored_margins(record)
+        if stored is not None:
+            key = (self.tasks[i].cell.key, json.dumps(stored, sort_keys=True))
+            _keep_first(self._margins, key, (i, stored))
+
+    def recorded(self, i: int) -> bool:
+        return bool(self.done[i])
+
+    def check(self) -> None:
+        """The predictors, then the margins: each planned episode's record, in the plan's order."""
+        self._index.clear()  # not held while the workers run
+        self._check_predictors()
+        self._check_margins()
+
+    def _check_predictors(self) -> None:
+        """Refuse to extend a cell whose records came from other weights than the zoo holds now (a retrained
+        model): its table would silently mix two predictors."""
+        from predictors.registry import checkpoint_sha256
+
+        current: dict[str | None, str | None] = {}  # predictor name (None in a record without one) -> sha256
+        log = self.out / EPISODES_FILE
+        for i, name, sha256 in sorted(self._predictors.values(), key=lambda first: first[0]):
+            if name not in current:
+                current[name] = checkpoint_sha256(name)
+            if sha256 != current[name]:
+                raise PipelineError(
+                    f"{log} holds episodes of {self.tasks[i].cell.key} run with predictor {name!r} of "
+                    f"sha256 {sha256}, but the zoo's {name!r} is now {current[name]}; "
+                    "use another --out for the new weights"
+                )
+
+    def _check_margins(self) -> None:
+        """Refuse to extend a cell whose records planned with other margins than the cell resolves now (a
+        recalibration under the same alpha and source keeps the cell key): its table would silently mix two
+        margin sets. Records without margins (baselines, records from before the config was kept) say
+        nothing."""
+        current: dict[str, dict[str, Any]] = {}  # cell key -> its margins now
+        log = self.out / EPISODES_FILE
+        for i, stored in sorted(self._margins.values(), key=lambda first: first[0]):
+            key = self.tasks[i].cell.key
+            if key not in current:
+                current[key] = planned_margins(self.tasks[i].cell)
+            if stored != current[key]:
+                was, now = stored["margins_m"], current[key]["margins_m"]
+                per_class = " (per motion class)" if was == now else ""
+                raise PipelineError(
+                    f"{log} holds episodes of {key} planned with margins {was} m, but the cell's "
+                    f"margins are now {now} m{per_class}: they changed since "
+                    "the records were made (recalibrated?); use another --out for the new margins"
+                )
 
 
-def check_same_margins(out: Path, tasks: list[EpisodeTask], done: dict[str, dict[str, Any]]) -> None:
-    """Refuse to extend a cell whose records planned with other margins than the cell resolves now (a
-    recalibration under the same alpha and source keeps the cell key): its table would silently mix two
-    margin sets. Records without margins (baselines, records from before the config was kept) say nothing."""
-    current: dict[str, dict[str, Any]] = {}  # cell key -> its margins now
-    for task in tasks:
-        stored = _stored_margins(done.get(task.key))
-        if stored is None:
-            continue
-        key = task.cell.key
-        if key not in current:
-            current[key] = planned_margins(task.cell)
-        if stored != current[key]:
-            was, now = stored["margins_m"], current[key]["margins_m"]
-            raise PipelineError(
-                f"{out / EPISODES_FILE} holds episodes of {key} planned with margins {was} m, but the cell's "
-                f"margins are now {now} m{' (per motion class)' if was == now else ''}: they changed since "
-                "the records were made (recalibrated?); use another --out for the new margins"
-            )
+def _keep_first(firsts: dict[Any, tuple[Any, ...]], key: Any, value: tuple[Any, ...]) -> None:
+    """``firsts[key]``: the ``value`` of the smallest plan index (its first item)."""
+    if key not in firsts or value[0] < firsts[key][0]:
+        firsts[key] = value
 
 
 def planned_margins(cell: Cell) -> dict[str, Any]:
@@ -72,21 +113,6 @@ def planned_margins(cell: Cell) -> dict[str, Any]:
         "classes": None if classes is None else classes.to_json(),
     }
     return json.loads(json.dumps(plain(planned)))  # as read back from a record
-
-
-def resume_fields(record: dict[str, Any]) -> dict[str, Any]:
-    """What the checks above read of a record: its predictor, the predictor's sha256 and the margins its
-    config states. A sweep holds every finished record while it plans the rest; a whole parsed record (~14 KB
-    of Python objects, its effective config half of it) held 1.7 GB at 100,000 episodes before the first new
-    one ran; these fields, 0.26 GB."""
-    kept: dict[str, Any] = {}
-    for name in ("predictor", "predictor_sha256"):
-        if name in record:
-            kept[name] = record[name]
-    config = record.get("config")
-    if isinstance(config, dict) and "margins" in config:  # else _stored_margins finds none: says nothing
-        kept["config"] = {"margins": config["margins"]}
-    return kept
 
 
 def _stored_margins(record: dict[str, Any] | None) -> dict[str, Any] | None:

@@ -47,7 +47,7 @@ from pipelines.experiments.log import (
     read_sweep_file,
     sweep_lock,
 )
-from pipelines.experiments.resume_checks import check_same_margins, check_same_predictors, resume_fields
+from pipelines.experiments.resume_checks import ResumeChecks
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root, release_scratch_root
 from pipelines.plain_json import plain
@@ -248,18 +248,18 @@ def run_sweep(
     with sweep_lock(out):
         meta = _sweep_meta(out, config)
         log = episode_log(out)
-        done = log.load(keep=resume_fields)  # its key and what the checks read; not the whole record
-        check_same_predictors(out, tasks, done)
-        check_same_margins(out, tasks, done)
+        recorded = ResumeChecks(out, tasks)
+        for _, _, record in log.scan():  # a record at a time: not held
+            recorded.add(record)
+        recorded.check()
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
         # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
         add_run = functools.partial(_add_run, out, meta, config, len(tasks))
         # Episodes that raised before (errors.jsonl) last: a rerun that extends the sweep runs the new ones
         # first, rather than stopping on the same failures again.
         retried = error_keys(out)
-        todo = [t for t in tasks if t.key not in done and t.key not in retried]
-        todo += [t for t in tasks if t.key not in done and t.key in retried]
-        del done  # not held while the workers run
+        left = [t for i, t in enumerate(tasks) if not recorded.recorded(i)]
+        todo = [t for t in left if t.key not in retried] + [t for t in left if t.key in retried]
         outcome = SweepOutcome(planned=len(tasks), already_done=len(tasks) - len(todo))
         if not todo:
             add_run()

@@ -412,31 +412,6 @@ def test_a_cell_is_not_extended_with_other_weights(tmp_path):
         run_sweep(dataclasses.replace(config, episodes_per_cell=2))
 
 
-def test_a_resume_holds_of_each_record_only_what_its_checks_read(tmp_path, monkeypatch):
-    """A sweep of 100,000 episodes held 1.7 GB of parsed records before its first new episode."""
-    import pipelines.experiments.sweep as sweep_module
-
-    config = SweepConfig(
-        get_experiment("baselines"), tmp_path, 1, humans=(3,), backend="inline", progress=False
-    )
-    run_sweep(config)
-    path = tmp_path / EPISODES_FILE
-    records = [json.loads(line) for line in path.read_text().splitlines()]
-    for r in records:  # what a planning method's record states besides its large config
-        r["config"] = {"margins": {"margins_m": [0.1], "classes": None}, "mpc": {"horizon": 4}}
-    path.write_text("".join(json.dumps(r) + "\n" for r in records))
-    held = {}
-    monkeypatch.setattr(sweep_module, "check_same_margins", lambda out, tasks, done: held.update(done))
-    run_sweep(dataclasses.replace(config, episodes_per_cell=2))
-    assert set(held) == {r["key"] for r in records}
-    for r in records:
-        assert held[r["key"]] == {
-            "predictor": r["predictor"],
-            "predictor_sha256": r["predictor_sha256"],
-            "config": {"margins": {"margins_m": [0.1], "classes": None}},
-        }
-
-
 FAILING = "tests.plugins.failing_controllers"
 
 
