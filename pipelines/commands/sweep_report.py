@@ -156,16 +156,19 @@ def episode_rows(path: Path, cells: tuple[Cell, ...], log: LogRead) -> Iterator[
     from the log at its offset: a line that changed since (the log was replaced) is refused."""
     from pipelines.experiments.report import episode_row
 
+    # each cell once, at its last place and with its last label, as report.episode_rows sorts and labels
+    place = {c.key: i for i, c in enumerate(cells)}
+    label = {c.key: c.method for c in cells}
     with open(path, "rb") as f:
-        for cell in cells:
-            for offset, crc in log.columns[cell.key].lines() if cell.key in log.columns else ():
+        for key in sorted(place, key=place.__getitem__):
+            for offset, crc in log.columns[key].lines() if key in log.columns else ():
                 f.seek(offset)
                 line = f.readline()
                 if zlib.crc32(line) != crc:
                     raise PipelineError(
                         f"{path} changed while the report read it (the record at byte {offset}); report again"
                     )
-                yield episode_row(json.loads(line), cell.method)
+                yield episode_row(json.loads(line), label[key])
 
 
 def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], log: LogRead) -> None:

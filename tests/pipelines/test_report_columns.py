@@ -6,6 +6,7 @@ read the same way."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import math
@@ -219,3 +220,18 @@ def test_a_resume_names_the_first_planned_episode_whose_margins_changed_whatever
     path.write_text(_lines(records))
     with pytest.raises(PipelineError, match=rf"episodes of {first_cell} planned with margins \[0.3\] m"):
         run_sweep(config)
+
+
+def test_episodes_csv_of_a_log_lists_a_cell_named_twice_once_as_of_records_held_whole(tmp_path):
+    """report.episode_rows sorts by a cell's place (its last) and labels it with its last label."""
+    from pipelines.commands.sweep_report import episode_rows
+    from pipelines.experiments.report import episode_rows as held_rows
+
+    config = _multiplied(_sweep(tmp_path / "seed"), tmp_path / "log", 3, shuffle=True)
+    first, second = config.experiment.cells(config.humans, config.n_robots)
+    cells = (first, second, dataclasses.replace(first, method="again"))
+    log = read_log(config, cells, config.tasks())
+    rows = list(episode_rows(config.out / EPISODES_FILE, cells, log))
+    records = EpisodeLog(config.out / EPISODES_FILE).load().values()
+    assert rows == list(held_rows(records, cells)) and len(rows) == 6
+    assert [r["method"] for r in rows] == [second.method] * 3 + ["again"] * 3
