@@ -16,13 +16,15 @@ from array import array
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any, Final
 
+from crowdsim.metrics import ADDED_FLAGS
+
 # The fields a cell's summary reads (summary.summarize_cell, safety_report.safety_figures), by their kind.
 FLOATS: Final[str] = "d"
 COUNTS: Final[str] = "q"
 FLAGS: Final[str] = "b"
 METRIC_COLUMNS: Final[dict[str, str]] = {
     **dict.fromkeys(("success", "collision", "contact", "discomfort"), FLAGS),
-    **dict.fromkeys(("collision_between_steps", "contact_between_steps", "robot_contact"), FLAGS),
+    **dict.fromkeys(ADDED_FLAGS, FLAGS),  # the flags added after the first records, counted per cell
     **dict.fromkeys(("travel_time", "min_distance"), FLOATS),
     **dict.fromkeys(
         ("n_steps", "collision_steps", "contact_steps", "discomfort_steps", "robot_contact_steps"), COUNTS
