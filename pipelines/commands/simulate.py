@@ -243,23 +243,6 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
     }
 
 
-def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
-    """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
-    for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;
-    docs/results.md, "More robots, more humans"); None otherwise. Only for this project's MPC controllers."""
-    from pipelines.loop.mpc_setup import mpc_config
-
-    if spec.controller not in ("cmpc", "dmpc") or n_robots <= PAPER_ROBOTS:
-        return None
-    cfg = mpc_config(spec)
-    if cfg.flocking_weight != "per_pair" or cfg.w_floc == 0:
-        return None
-    return (
-        f"note: {n_robots} robots under the paper's per-pair flocking weight, set for {PAPER_ROBOTS}; "
-        "--set mpc.flocking_weight=per_robot (in docs/examples/many_robots.toml) weighs it per robot"
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     resolved = resolve_run(args)
     with json_on_stdout(resolved.json):  # --json -: the JSON alone on stdout, the rest on stderr
@@ -271,7 +254,7 @@ def _simulate(resolved: SimulateRun) -> int:
 
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
-    from pipelines.commands.simulate_checks import goal_room_note, horizon_note
+    from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note
 
     notes = (
         flock_note(spec, scenario.robots),

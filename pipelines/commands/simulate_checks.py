@@ -1,11 +1,14 @@
 """``crowdmpc simulate``'s refusal of choices its controller would ignore: a value accepted must change the
-run, so the ones that could not are one-line errors before any episode."""
+run, so the ones that could not are one-line errors before any episode. And its notes (``sweep``'s too, once
+per method) on choices that run but may not do what was meant: a flock larger than the paper's under its
+per-pair weight, a d_min that leaves robots no room at their goals, a horizon past the predictor's
+training."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Final
 
-from crowdsim.world import D_FLOCK
+from crowdsim.world import D_FLOCK, PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import CONTROLLER_KINDS, is_shipped
 
@@ -148,4 +151,21 @@ def horizon_note(spec: ControllerSpec) -> str | None:
     return (
         f"note: the MPC plans {horizon} steps ahead and {spec.predictor_name!r} was trained to predict "
         f"{trained} ({trained * DT:g} s): its steps {trained + 1}..{horizon} are extrapolated"
+    )
+
+
+def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
+    """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
+    for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;
+    docs/results.md, "More robots, more humans"); None otherwise. Only for this project's MPC controllers."""
+    from pipelines.loop.mpc_setup import mpc_config
+
+    if spec.controller not in ("cmpc", "dmpc") or n_robots <= PAPER_ROBOTS:
+        return None
+    cfg = mpc_config(spec)
+    if cfg.flocking_weight != "per_pair" or cfg.w_floc == 0:
+        return None
+    return (
+        f"note: {n_robots} robots under the paper's per-pair flocking weight, set for {PAPER_ROBOTS}; "
+        "--set mpc.flocking_weight=per_robot (in docs/examples/many_robots.toml) weighs it per robot"
     )
