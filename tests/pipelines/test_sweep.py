@@ -1110,6 +1110,11 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
     fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: None)  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
     monkeypatch.setenv("CROWDMPC_CONTROLLERS", "my_pkg.ctl:MyController")
+    # the plugins earlier tests registered in this process travel too (plugin_environment): none here
+    from pipelines.loop import spec as controllers
+
+    kept = {name: p for name, p in controllers._PLUGINS.items() if p.source != "plugin"}
+    monkeypatch.setattr(controllers, "_PLUGINS", kept)
     RayBackend(2, "none", address="ray://head:10001")
     assert calls == [
         {
