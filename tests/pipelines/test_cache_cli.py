@@ -80,6 +80,8 @@ def test_cache_needs_an_action(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["cache"])
     assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the following arguments are required: ACTION" in err
 
 
 # --- the --jit auto rule of crowdmpc sweep ------------------------------------------------------------------

@@ -268,11 +268,21 @@ def test_folder_with_a_truncated_run(runs, tmp_path, capsys):
     assert "b.mcap is truncated" in err
 
 
-@pytest.mark.parametrize("times", ["nan", "0,inf", "-1", "a"])
-def test_times_must_be_finite_non_negative_seconds(runs, tmp_path, times, capsys):
+@pytest.mark.parametrize(
+    "times, expected",
+    [
+        ("nan", "non-negative seconds"),
+        ("0,inf", "non-negative seconds"),
+        ("-1", "non-negative seconds"),
+        ("a", "seconds separated by commas"),
+    ],
+)
+def test_times_must_be_finite_non_negative_seconds(runs, tmp_path, times, expected, capsys):
     with pytest.raises(SystemExit) as done:
         main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", times])
-    assert done.value.code == 2 and "--times" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert done.value.code == 2 and err.count("\n") == 1
+    assert f"argument --times: expected {expected}, e.g. 0,4,8; got '{times}'" in err
 
 
 @pytest.mark.parametrize("t", [1e3, 1e17, 1e308])

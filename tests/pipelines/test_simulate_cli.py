@@ -78,10 +78,13 @@ def test_bad_options_are_one_line_errors(args, message, capsys):
     assert message in err and "Traceback" not in err
 
 
-def test_unknown_scenario_is_rejected_by_the_parser():
+def test_unknown_scenario_is_rejected_by_the_parser(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["simulate", "--controller", "orca", "--scenario", "square"])
     assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "argument --scenario: invalid choice: 'square' (choose from 'circle', 'perpendicular')" in err
 
 
 def test_the_coupling_help_says_what_its_choices_are(capsys):

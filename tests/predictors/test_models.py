@@ -302,7 +302,7 @@ def test_bad_configs_are_refused(no_plugins, kind, values, message):
         model_kind(kind).config(values)
     assert message in str(refused.value) and "\n" not in str(refused.value)
     if isinstance(values, dict):  # a dict given to build_net is validated the same way
-        with pytest.raises(PredictorError):
+        with pytest.raises(PredictorError, match=re.escape(message)):
             model_kind(kind).build_net({**values})
 
 

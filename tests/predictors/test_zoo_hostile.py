@@ -228,7 +228,7 @@ def test_load_checkpoint_checks_both_expected_hashes(pair):
     good = {"expected_sha256": sha256(weights), "expected_config_sha256": sha256(config)}
     assert checkpoint.load_checkpoint(weights, **good).name == NAME
     config.write_text(config.read_text() + " ")  # the same document, other bytes
-    with pytest.raises(CheckpointMismatch):
+    with pytest.raises(CheckpointMismatch, match=rf"checkpoint {re.escape(str(config))} has sha256"):
         checkpoint.load_checkpoint(weights, **good)
 
 
