@@ -18,6 +18,13 @@ from pipelines.loop.episode import run_episode
 def test_penalty_alone_without_humans_is_a_dense_zero(nlp):
     problem = nlp(MPCConfig(), n_robots=1, n_humans=0)
     assert problem.penalty_fn.sparsity_out(0).is_dense()
+    assert _penalty_anywhere(problem.penalty_fn) == 0.0  # nothing to collide with, whatever the plan
+
+
+def _penalty_anywhere(penalty_fn) -> float:
+    """The penalty at a random plan and parameters (no human and no robot pair: no value should matter)."""
+    rng = np.random.default_rng(0)
+    return float(penalty_fn(*(rng.normal(size=penalty_fn.size_in(i)) for i in range(2))))
 
 
 def test_dense_leaves_a_dense_expression_untouched():
@@ -46,4 +53,4 @@ def test_one_robot_without_humans_reaches_its_goal(spec, scenario):
 
 def test_no_robots_still_builds():
     """No tracks at all: the penalty is a plain 0.0, as before."""
-    JointNLP(MPCConfig(), n_robots=0, n_humans=0)
+    assert _penalty_anywhere(JointNLP(MPCConfig(), n_robots=0, n_humans=0).penalty_fn) == 0.0

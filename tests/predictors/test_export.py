@@ -517,7 +517,8 @@ def test_softmax_without_dim_is_refused(fn):
     with pytest.raises(ExportError, match=rf"{fn.__name__} without dim .*: pass dim") as info:
         export(lambda m, x: fn(x), (2, 3, 4))
     assert "\n" not in str(info.value)
-    assert export(lambda m, x: fn(x, dim=0), (2, 3, 4)) is not None
+    torch.manual_seed(0)
+    check(Wrap(lambda m, x: fn(x, dim=0)), randn(2, 3, 4))  # dim 0 given: exported as dim 0, not the last
 
 
 @pytest.mark.parametrize("pooling", ["grid", "soft", "none"])
