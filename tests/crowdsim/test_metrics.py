@@ -43,6 +43,12 @@ P = np.array  # short alias for hand-written points
         ((0, 0), (1.2, 0), (0.5, 0), (0.5, 0), True),  # a standing agent on the path
         ((0, 0), (1.2, 0), (0.5, 0.1), (0.5, 0.1), False),  # a standing agent beside it
         ((0, 0), (0, 0), (0, 0), (0, 0), True),  # two standing agents at the same point
+        # oblique paths: an axis-aligned one has a zero component, which hides a wrong cross product, and its
+        # bounding box is the segment itself, which hides a collinearity test left out
+        ((0, 0), (2, 2), (0, 2), (2, 0), True),  # crossing at (1, 1)
+        ((0, 0), (2, 2), (0, 2), (0.9, 1.1), False),  # stops 0.14 m short of the diagonal
+        ((0, 0), (2, 2), (1, 1), (1, 1), True),  # a standing agent on the diagonal
+        ((0, 0), (2, 2), (1, 0.5), (1, 0.5), False),  # inside the diagonal's bounding box, off its line
     ],
 )
 def test_segments_intersect(p1, q1, p2, q2, expected):
