@@ -86,6 +86,11 @@ def _alive(pid: int) -> bool:
     return True
 
 
+class NoLocks(OSError):
+    """``locked``'s file system does not lock files: the caller names the folder to move (its ``filename``
+    is the lock file)."""
+
+
 @contextlib.contextmanager
 def locked(path: Path) -> Iterator[None]:
     """Hold ``path`` (created if missing) exclusively: other processes' and threads' ``locked`` wait."""
@@ -94,7 +99,10 @@ def locked(path: Path) -> Iterator[None]:
         return
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP
+            raise NoLocks(exc.errno, exc.strerror, str(path)) from None
         yield
     finally:
         os.close(fd)  # releases the lock
@@ -104,7 +112,8 @@ def locked(path: Path) -> Iterator[None]:
 def unless_locked(path: Path) -> Iterator[bool]:
     """Hold ``path``, an existing lock file, if nobody holds it now (True), else hold nothing (False): what
     ``compile_cache.clear`` asks of an entry before removing its files, which a compile under way needs.
-    A lock file that is gone, or another file (a symbolic link), is held by nobody."""
+    A lock file that is gone, or another file (a symbolic link), is held by nobody; on a file system that
+    does not lock files nobody can tell, and the entry counts as held."""
     if fcntl is None:  # pragma: no cover
         yield True
         return
@@ -116,7 +125,7 @@ def unless_locked(path: Path) -> Iterator[bool]:
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+        except OSError:  # held (BlockingIOError), or a file system that cannot say (ENOLCK): keep the files
             yield False
             return
         yield True

@@ -57,6 +57,7 @@ import casadi as ca
 from mpc.cache_entries import (
     ENTRY,
     OWNED,
+    NoLocks,
     discard,
     entry_key,
     entry_record,
@@ -241,6 +242,18 @@ def nlpsol(
     solver = load_solver(manifest)
     if solver is not None:
         return solver
+    try:
+        return _compile_locked(name, plugin, nlp, options, cc, folder, key)
+    except NoLocks as exc:
+        problem = f"cannot lock {exc.filename} ({exc.strerror}): its file system does not lock files"
+        raise _location_error(folder, directory, problem, "a folder on a file system that does") from None
+
+
+def _compile_locked(
+    name: str, plugin: str, nlp: Mapping, options: Mapping, cc: Compiler, folder: Path, key: str
+) -> ca.Function:
+    """The entry ``key`` of ``folder``, compiled now unless another process stored it meanwhile."""
+    manifest = folder / f"{key}.casadi"
     # Another process (or thread: flock locks are per open file) compiling this entry is waited for.
     with locked(folder / f"{key}.lock"):
         solver = load_solver(manifest)

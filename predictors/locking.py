@@ -61,7 +61,8 @@ def unless_held(path: Path, gone: bool) -> Iterator[bool]:
     """Hold ``path``, a lock file its writer holds while it runs, if nobody holds it now (True), else hold
     nothing (False); ``gone``: the answer for a file that is not there, or is no regular file. Unlike a pid,
     a lock tells a writer on another machine sharing the folder (a cluster's home directory) from a
-    finished one."""
+    finished one. On a file system that does not lock files (an NFS mount without its lock daemon) nobody can
+    tell, and the file counts as held: what it guards is kept, never removed under a writer."""
     try:
         fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
@@ -73,7 +74,7 @@ def unless_held(path: Path, gone: bool) -> Iterator[bool]:
             return
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+        except OSError:  # held (BlockingIOError), or a file system that cannot say (ENOLCK): keep the files
             yield False
             return
         yield True

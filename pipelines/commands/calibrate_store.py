@@ -137,7 +137,15 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path,
     path.parent.mkdir(parents=True, exist_ok=True)  # a user zoo not made yet: storing the blocks makes it
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP
+            tmp.unlink(missing_ok=True)
+            raise PipelineError(
+                f"{tmp}: cannot lock calibrate's journal ({exc.strerror}: its file system does not lock "
+                "files; an NFS mount without its lock daemon?); set $CROWDMPC_ZOO to a folder on one that "
+                "does"
+            ) from None
         with open(fd, "w", closefd=False) as f:
             f.write(json.dumps(document, allow_nan=False))
             f.flush()
