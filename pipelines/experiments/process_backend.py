@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 # stops: every episode then kills its worker, and each new pool costs seconds to start.
 MAX_BREAKS_IN_A_ROW: Final[int] = 3
 BROKEN_POOL_WAIT_S: Final[float] = 30.0  # for the futures of a broken pool to fail (they do at once)
+STARTING_EXIT_S: Final[float] = 5.0  # for workers that died starting to finish exiting (they do at once)
 
 
 _WORKER: EpisodeWorker | None = None  # one per pool process
@@ -191,6 +192,10 @@ class ProcessBackend:
             for future in started:
                 future.result()
         except BrokenProcessPool:
+            # They are exiting: their own status, not the SIGTERM _end_pool sends one still alive (on a loaded
+            # machine the pool breaks before the last has gone, and the message read "ended abruptly").
+            for process in self._processes:
+                process.join(timeout=STARTING_EXIT_S)
             self._end_pool()  # every process joined: their exit codes are known
             raise SweepStopped(self._died_starting()) from None
         self._pool_ended = False

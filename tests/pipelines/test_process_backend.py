@@ -83,6 +83,10 @@ def test_workers_that_die_as_they_start_stop_the_sweep_in_one_line(tmp_path, mon
 
     monkeypatch.setenv("TMPDIR", str(tmp_path))  # the spawned workers' temp directory
     monkeypatch.setattr(tempfile, "tempdir", None)  # and the driver's (cached once asked)
-    with pytest.raises(SweepStopped, match=r"ended as they started.*\(exit status 0\).*__main__"):
+    # "ended abruptly" where the pool's own thread ended a worker still exiting before its status was read
+    # (the whole suite on 2 loaded cores, once in three runs): the line and its hint stand either way
+    with pytest.raises(
+        SweepStopped, match=r"ended as they started.*\((exit status 0|ended abruptly)\).*__main__"
+    ):
         process_backend.ProcessBackend(1, "no such policy")
     assert list(tmp_path.iterdir()) == []
