@@ -10,14 +10,11 @@ from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.world import D_FLOCK, PAPER_ROBOTS
 from pipelines.errors import PipelineError
-from pipelines.loop.spec import CONTROLLER_KINDS, is_shipped
+from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
-
-# The shipped MPCs: the controllers that read flocking, record_iterations and [mpc].
-MPC_CONTROLLERS = tuple(name for name, kind in CONTROLLER_KINDS.items() if kind.uses_predictor)
 
 
 def _shown(config: RunConfig, section: str, key: str, value: Any) -> str:
@@ -113,7 +110,7 @@ def goal_room_note(
     from crowdsim.scenarios import choose_formation, robot_layout
     from pipelines.loop.mpc_setup import mpc_config
 
-    if spec.controller not in MPC_CONTROLLERS or not is_shipped(spec.controller) or n_robots < 2:
+    if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
         return None
     shape = choose_formation(n_robots) if formation == "auto" else formation
     goals = robot_layout(n_robots, shape)[1]  # type: ignore[arg-type]  # EnvConfig checked the name
@@ -142,7 +139,7 @@ def horizon_note(spec: ControllerSpec) -> str | None:
     from predictors.base import DT
     from predictors.registry import trained_prediction_length
 
-    if spec.controller not in MPC_CONTROLLERS or not is_shipped(spec.controller):
+    if spec.controller not in MPC_CONTROLLERS:
         return None
     trained = trained_prediction_length(spec.predictor_name)
     horizon = mpc_config(spec).horizon
@@ -160,7 +157,7 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     docs/results.md, "More robots, more humans"); None otherwise. Only for this project's MPC controllers."""
     from pipelines.loop.mpc_setup import mpc_config
 
-    if spec.controller not in ("cmpc", "dmpc") or n_robots <= PAPER_ROBOTS:
+    if spec.controller not in MPC_CONTROLLERS or n_robots <= PAPER_ROBOTS:
         return None
     cfg = mpc_config(spec)
     if cfg.flocking_weight != "per_pair" or cfg.w_floc == 0:

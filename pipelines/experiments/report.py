@@ -50,13 +50,12 @@ def mpc_columns(cells: Sequence[Cell]) -> dict[str, dict[str, Any]]:
     none for a sweep of Table I's settings. A d_min study plots ``mpc.d_min`` against ``collision_rate``
     instead of parsing the value out of ``method``."""
     from pipelines.loop.mpc_setup import mpc_config
-    from pipelines.loop.spec import is_shipped
+    from pipelines.loop.spec import MPC_CONTROLLERS
 
     keys = list(dict.fromkeys(key for c in cells for key, _ in c.spec.mpc_overrides if key != "jit"))
     columns: dict[str, dict[str, Any]] = {}
     for c in cells:
-        planned = c.spec.kind.uses_predictor and is_shipped(c.spec.controller)
-        config = mpc_config(c.spec) if planned and keys else None
+        config = mpc_config(c.spec) if keys and c.spec.controller in MPC_CONTROLLERS else None
         columns[c.key] = {f"mpc.{key}": None if config is None else getattr(config, key) for key in keys}
     return columns
 

@@ -52,6 +52,11 @@ CONTROLLER_KINDS: Final[Mapping[ControllerName, ControllerKind]] = {
     "cmpc": ControllerKind(uses_predictor=True, compiles=True),
     "dmpc": ControllerKind(uses_predictor=True, compiles=True),
 }
+# The shipped MPCs: the controllers that read flocking, record_iterations and [mpc] (a plugin reads the spec
+# as it sees fit).
+MPC_CONTROLLERS: Final[tuple[ControllerName, ...]] = tuple(
+    name for name, kind in CONTROLLER_KINDS.items() if kind.uses_predictor
+)
 
 
 @dataclass(frozen=True)
