@@ -196,7 +196,7 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
     a method sets that key itself; a key of the flocking term only in the methods that flock."""
     import dataclasses
 
-    from pipelines.commands.sweep_vary import FLOCKING_KEYS
+    from pipelines.commands.sweep_vary import reads_setting
 
     if key == "jit":
         raise cfg.error(
@@ -211,15 +211,14 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
             "its methods",
         )
     applies = _planning(cfg, experiment, "mpc", key)
-    if key in FLOCKING_KEYS:  # NF plans with w_floc = 0: the key would re-run its episodes under a new key
-        applies = tuple((label, spec) for label, spec in applies if spec.flocking)
-        if not applies:
-            raise cfg.error(
-                "mpc",
-                key,
-                f"the methods of experiment {experiment.name!r} plan without the flocking term (NF), which "
-                f"{key} shapes",
-            )
+    applies = tuple((label, spec) for label, spec in applies if reads_setting(spec, key))
+    if not applies:  # they all plan (_planning refuses otherwise), none of them flocks
+        raise cfg.error(
+            "mpc",
+            key,
+            f"the methods of experiment {experiment.name!r} plan without the flocking term (NF), which "
+            f"{key} shapes",
+        )
     methods = []
     for label, spec in experiment.methods:
         if (label, spec) not in applies:

@@ -31,6 +31,13 @@ FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking
 MAX_VALUES: Final[int] = 12  # each value (each combination) is a whole column of cells per method and size
 
 
+def reads_setting(spec: ControllerSpec, key: str) -> bool:
+    """Whether ``spec``'s controller plans with the ``[mpc]`` ``key`` (or the margins): ORCA and the straight
+    line have no MPC, and a method without flocking (table3's NF, w_floc = 0) no flocking term to weigh, so
+    a value of theirs would only run the same episodes again under a new cell key."""
+    return spec.kind.uses_predictor and (spec.flocking or key not in FLOCKING_KEYS)
+
+
 @dataclasses.dataclass(frozen=True)
 class Varied:
     """The setting a sweep varies (``section.key``: an [mpc] key, or controller.margins), and its values as
@@ -185,8 +192,8 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
                 f"{where}: method {label!r} of experiment {name!r} sets {key} = {own[key]!r} itself; vary "
                 "another setting"
             )
-        columns = [(label, spec)]  # orca, straight: no MPC; NF: no flocking term to weigh
-        if spec.kind.uses_predictor and (spec.flocking or key not in FLOCKING_KEYS):
+        columns = [(label, spec)]
+        if reads_setting(spec, key):
             columns = [
                 (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]
