@@ -203,13 +203,23 @@ def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummar
 
 
 def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
-    """What the paper does not print: contact, robots touching each other, per-step collisions, closest
-    approach, success per scenario, the paired comparison, and what the controller cost."""
+    """What the paper does not print: contact, robots touching each other, collisions and robot contact
+    between steps, per-step collisions, closest approach, success per scenario, the paired comparison,
+    and what the controller cost."""
     return [
         _row("Contact rate (%) (< 0.6 m)", [_rate_cell(s.contact) for s in columns]),
         _row(
             "Robot-robot contact rate (%) (< 0.6 m; not in the paper)",
             [_added_rate_cell(s, "robot_contact") for s in columns],
+        ),
+        # straight motion within each step (crowdsim.metrics): a crossing the 0.4 s states step over
+        _row(
+            "Collision between steps (%) (not in the paper)",
+            [_added_rate_cell(s, "collision_between_steps") for s in columns],
+        ),
+        _row(
+            "Robot-robot contact between steps (%)",
+            [_added_rate_cell(s, "robot_contact_between_steps") for s in columns],
         ),
         _row("Collision per step (%)", [_fmt(s.collision_step_freq, 2) for s in columns]),
         _row("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns]),

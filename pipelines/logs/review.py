@@ -207,21 +207,24 @@ def aggregate_table(
 
 
 def setups_table(names: Sequence[str], totals: Sequence[dict[str, Any]]) -> str:
-    """One row per set-up of a folder: its runs, the rates over those whose episode ended, travel time and
-    the closest approach to a human, and the control step's median and p95; "-" where a set-up has none."""
+    """One row per set-up of a folder: its runs, the rates over those whose episode ended (robot contact is
+    two robots touching, not in the paper), travel time and the closest approach to a human, and the
+    control step's median and p95; "-" where a set-up has none."""
 
     def rate(t: dict[str, Any], name: str) -> str:
-        return (
-            "-" if "episodes" not in t else f"{t[f'{name}_rate']:.1f} ({t[f'{name}_count']}/{t['episodes']})"
-        )
+        if "episodes" not in t:
+            return "-"
+        if t.get(f"{name}_rate") is None:  # a figure added later, which some run's metrics predate
+            return "n/a"
+        return f"{t[f'{name}_rate']:.1f} ({t[f'{name}_count']}/{t['episodes']})"
 
-    header = ["set-up", "runs", "success %", "collision %", "contact %", "travel time s", "min distance m"]
-    header += ["step median ms", "step p95 ms"]
+    header = ["set-up", "runs", "success %", "collision %", "contact %", "robot contact %", "travel time s"]
+    header += ["min distance m", "step median ms", "step p95 ms"]
     rows = [
         [
             name,
             t["runs"],
-            *(rate(t, k) for k in ("success", "collision", "contact")),
+            *(rate(t, k) for k in ("success", "collision", "contact", "robot_contact")),
             t.get("travel_time_mean"),
             t.get("min_distance_min"),
             *(

@@ -546,6 +546,8 @@ def test_set_ups_side_by_side_name_each_by_what_differs(tmp_path, capsys):
         cells = line.split()
         assert cells[:4] == [str(group["n_humans"]), "humans", "1", f"{t['success_rate']:.1f}"]
         assert cells[4] == f"({t['success_count']}/1)"
+        # robots touching each other, after contact: its rate and count
+        assert cells[9:11] == [f"{t['robot_contact_rate']:.1f}", f"({t['robot_contact_count']}/1)"]
         # printed to 3 significant digits
         assert float(cells[-2]) == pytest.approx(t["solve_time_median_ms"], rel=5e-3)
 
@@ -713,3 +715,20 @@ def test_robot_contact_reads_n_a_for_recordings_before_it(runs):
         in text
     )
     assert totals["robot_contact_rate"] is None and totals["contact_count"] == 0  # the others still count
+
+
+def test_set_ups_side_by_side_say_n_a_for_robot_contact_their_runs_predate():
+    """A set-up whose runs' metrics predate robot contact (None in the totals, from NaN) reads "n/a" in that
+    column, one without ended episodes "-"; the other rates as before."""
+    from pipelines.logs.review import setups_table
+
+    rates = {
+        f"{k}_{x}": v for k in ("success", "collision", "contact") for x, v in (("rate", 50.0), ("count", 1))
+    }
+    old = {"runs": 2, "episodes": 2, **rates, "robot_contact_rate": None, "robot_contact_count": None}
+    new = {**old, "robot_contact_rate": 0.0, "robot_contact_count": 0}
+    lines = setups_table(["old", "new", "none"], [old, new, {"runs": 1}]).splitlines()
+    header = [cell.strip() for cell in lines[0].split("  ") if cell.strip()]
+    assert header[:6] == ["set-up", "runs", "success %", "collision %", "contact %", "robot contact %"]
+    assert lines[2].split()[8] == "n/a" and lines[3].split()[8:10] == ["0.0", "(0/2)"]
+    assert lines[4].split()[5] == "-"

@@ -260,7 +260,7 @@ def test_episodes_csv_is_in_the_plans_order_whatever_order_the_workers_finished_
 def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
     """ "none": its two step-sampled collisions (0.5 and 0.7 m) are collisions between steps too, 2 of 3.
     "alpha=0.5": its first episode, 0.82 m apart at the steps, comes within 0.78 m between two: 1 of 4 =
-    25 % where the step-sampled rate is 0. The Markdown table keeps its rows."""
+    25 % where the step-sampled rate is 0. The Markdown table changes in its between-step row only."""
     safety, cells, records = _safety_records()
     records[3]["metrics"]["min_distance"] = 0.82
     between = {0: 0.5, 2: 0.7, 3: 0.78}  # record -> closest approach between steps (m)
@@ -275,7 +275,12 @@ def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
             del r["metrics"][name]
     old = write_report(tmp_path / "before", safety, cells, before)
     report = write_report(tmp_path, safety, cells, records)
-    assert report.markdown == old.markdown  # the Markdown table does not show it
+    row = "| Collision between steps (%) (not in the paper) |"
+    (now_row,) = [line for line in report.markdown.splitlines() if line.startswith(row)]
+    assert now_row.split(" | ")[1].startswith("66.7 [") and now_row.split(" | ")[2].startswith("25.0 [")
+    assert [line for line in report.markdown.splitlines() if not line.startswith(row)] == [
+        line for line in old.markdown.splitlines() if not line.startswith(row)
+    ]
     with open(tmp_path / CELLS_CSV) as f:
         none, half = list(csv.DictReader(f))
     with open(tmp_path / "before" / CELLS_CSV) as f:
@@ -448,3 +453,30 @@ def test_robot_robot_contact_in_cells_csv_episodes_csv_and_the_table(tmp_path):
     assert row_before == f"{ROBOT_ROW} — | — |"
     others = [line for line in report.markdown.splitlines() if not line.startswith(ROBOT_ROW)]
     assert others == [line for line in old.markdown.splitlines() if not line.startswith(ROBOT_ROW)]
+
+
+def test_between_step_rows_of_the_table():
+    """Collisions and robot contact between steps (straight motion within each step) by hand: "none" 1 of 3
+    episodes collide between steps and 2 of 3 robot pairs touch; "alpha=0.5" none of 4. Records from before
+    the fields read "—"."""
+    from pipelines.experiments.summary import wilson_interval
+
+    safety, cells, records = _safety_records()
+    old = markdown_table(safety, summarize(safety, cells, records)).splitlines()
+    for r, (collides, touches) in zip(
+        records, [(True, True), (False, True), (False, False)] + [(False,) * 2] * 4, strict=True
+    ):
+        r["metrics"] |= {"collision_between_steps": collides, "robot_contact_between_steps": touches}
+    table = markdown_table(safety, summarize(safety, cells, records)).splitlines()
+
+    def cell(k: int, n: int) -> str:
+        lo, hi = (100.0 * x for x in wilson_interval(k, n))
+        return f"{100.0 * k / n:.1f} [{lo:.1f}, {hi:.1f}]"
+
+    none_half = {"collision": (cell(1, 3), cell(0, 4)), "robot": (cell(2, 3), cell(0, 4))}
+    assert (
+        f"| Collision between steps (%) (not in the paper) | {' | '.join(none_half['collision'])} |" in table
+    )
+    assert f"| Robot-robot contact between steps (%) | {' | '.join(none_half['robot'])} |" in table
+    assert "| Collision between steps (%) (not in the paper) | — | — |" in old
+    assert "| Robot-robot contact between steps (%) | — | — |" in old
