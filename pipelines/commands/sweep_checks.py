@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from pipelines.commands.simulate_checks import goal_room_note, horizon_note
+from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -119,9 +119,9 @@ def check_margins(experiment: Experiment) -> None:
 
 
 def method_notes(cells: Iterable[Cell]) -> list[str]:
-    """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals) and
-    ``horizon_note`` lines (a plan longer than the learned predictor's training), each once per method,
-    naming it."""
+    """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals),
+    ``horizon_note`` lines (a plan longer than the learned predictor's training) and ``flock_note`` lines
+    (a team larger than the paper's under its per-pair flocking weight), each once per method, naming it."""
     notes: dict[tuple[str, int], str] = {}
     for cell in cells:
         formation = cell.world.env_config().formation
@@ -129,6 +129,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             (
                 goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
                 horizon_note(cell.spec),
+                flock_note(cell.spec, cell.n_robots),
             )
         ):
             if note is not None:

@@ -83,7 +83,8 @@ def _check_sensed_iterations(cfg: RunConfig, experiment: Experiment) -> None:
 def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
     """The [mpc] values that differ from Table I, and the varied ones (--vary) each in its place among them:
     the overrides of a cell stay in the [mpc] table's order, so that a varied value's cell is the one
-    ``--set`` makes (the same key, the same episodes); varied margins first, as they have no place there."""
+    ``--set`` makes (the same key, the same episodes); varied margins first, as they have no place there,
+    and varied robots last, as they are no controller's."""
     from pipelines.commands.sweep_vary import varied, with_values
 
     where = cfg.label("sweep", "vary")
@@ -100,6 +101,9 @@ def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
         experiment = _with_mpc_override(cfg, experiment, key, value)
     for vary in pending:
         experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), where)
+    for vary in settings:  # last: every column the others made, at each number of robots
+        if vary.section == "scenario":
+            experiment = with_values(experiment, vary, None, where)
     return experiment
 
 

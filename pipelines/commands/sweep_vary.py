@@ -1,11 +1,12 @@
-"""``sweep --vary mpc.KEY=V1,V2,..`` or ``--vary controller.margins=M1,M2,..`` ([sweep] vary): a column per
-value of one [mpc] setting, or per margins, beside each method that plans with a predictor, on the same
-crowds, in one table.
+"""``sweep --vary mpc.KEY=V1,V2,..``, ``--vary controller.margins=M1,M2,..`` or ``--vary
+scenario.robots=M1,M2,..`` ([sweep] vary): a column per value of one [mpc] setting, or per margins, beside
+each method that plans with a predictor, on the same crowds, or per number of robots beside every method, on
+the same seeds (the humans are placed clear of each team), in one table.
 
-Each column is the cell ``--set mpc.KEY=V`` (``--margins M``) makes (its key, its episodes): a value that is
-Table I's (margins none) adds nothing to the cell, whose episodes are those of the sweep without ``--vary``,
-so a study can extend a sweep already run. Every value is checked as ``--set`` (``--margins``) checks it,
-with the run's other settings.
+Each column is the cell ``--set mpc.KEY=V`` (``--margins M``, ``--robots M``) makes (its key, its
+episodes): a value that is Table I's (margins none, the paper's 3 robots) adds nothing to the cell, whose
+episodes are those of the sweep without ``--vary``, so a study can extend a sweep already run. Every value
+is checked as ``--set`` (``--margins``, ``--robots``) checks it, with the run's other settings.
 """
 
 from __future__ import annotations
@@ -87,18 +88,24 @@ def _one_setting(cfg: RunConfig, where: str, text: str) -> Varied:
         if cfg.chosen("mpc", key):
             raise ConfigError(f"{where} and {cfg.label('mpc', key)} both set mpc.{key}: give its values once")
         items = [item.strip() for item in raw.split(",")]
+    elif (section, key) == ("scenario", "robots"):
+        if cfg.chosen("scenario", "robots"):
+            raise ConfigError(
+                f"{where} and {cfg.label('scenario', 'robots')} both set the robots: give them once"
+            )
+        items = [item.strip() for item in raw.split(",")]
     else:
         raise ConfigError(
-            f"{where} {text!r}: only an [mpc] setting (mpc.KEY=V1,V2,...) or the margins (controller.margins="
-            "M1,M2,...) vary; the predictors, controllers and sensor ranges have experiments of their own "
-            "(predictors, controllers, sensing)"
+            f"{where} {text!r}: only an [mpc] setting (mpc.KEY=V1,V2,...), the margins (controller.margins="
+            "M1,M2,...) or the robots (scenario.robots=M1,M2,...) vary; the predictors, controllers and "
+            "sensor ranges have experiments of their own (predictors, controllers, sensing)"
         )
     if len(items) < 2 or not all(items):
         raise ConfigError(f"{where} {text!r}: expected {section}.{key}=V1,V2,... with at least two values")
     if len(items) > MAX_VALUES:
         raise ConfigError(f"{where}: at most {MAX_VALUES} values, got {len(items)}")
     check = _margins if section == "controller" else _checked
-    values = tuple(check(cfg, where, key, item) for item in items)
+    values = tuple(check(cfg, where, f"{section}.{key}", item) for item in items)
     repeated = next((i for i in range(len(items)) if values[i] in values[:i]), None)
     if repeated is not None:
         first = items[values.index(values[repeated])]
@@ -127,7 +134,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _margins(cfg: RunConfig, where: str, key: str, item: str) -> Any:
+def _margins(cfg: RunConfig, where: str, name: str, item: str) -> Any:
     """``item`` as ``--margins`` takes it."""
     from pipelines.errors import PipelineError
     from pipelines.loop.margins import parse_margins
@@ -138,21 +145,22 @@ def _margins(cfg: RunConfig, where: str, key: str, item: str) -> Any:
         raise ConfigError(f"{where} value {item}: {exc}") from None
 
 
-def _checked(cfg: RunConfig, where: str, key: str, item: str) -> Any:
-    """``item`` as the MPC takes it, checked as ``--set mpc.KEY=item`` is, with the run's other settings
-    (a d_min below the contact distance, a horizon the predictor cannot cover ...)."""
+def _checked(cfg: RunConfig, where: str, name: str, item: str) -> Any:
+    """``item`` as the run takes ``name`` (``mpc.KEY``, ``scenario.robots``), checked as ``--set
+    name=item`` is, with the run's other settings (a d_min below the contact distance, a horizon the
+    predictor cannot cover, robots out of range ...)."""
     from pipelines.config.resolve import resolve
 
     try:
-        entry = parse_set(f"mpc.{key}={item}")
+        entry = parse_set(f"{name}={item}")
     except ConfigError as exc:
-        raise ConfigError(str(exc).replace(f"--set mpc.{key}", f"{where} value {item}")) from None
+        raise ConfigError(str(exc).replace(f"--set {name}", f"{where} value {item}")) from None
     own = [
-        Entry(section, name, _as_written(cfg.values[section][name]), source)
-        for (section, name), source in cfg.sources.items()
+        Entry(section, key, _as_written(cfg.values[section][key]), source)
+        for (section, key), source in cfg.sources.items()
     ]
     probe = resolve([*own, dataclasses.replace(entry, source=Source("cli", f"{where} value {item}"))])
-    return probe.values["mpc"][key]
+    return probe.values[entry.section][entry.key]
 
 
 def _as_written(value: Any) -> Any:
@@ -179,11 +187,13 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
     """A method per value after each method that plans with a predictor (labelled ``CMPC d_min=1.0``,
     ``CMPC margins=cp0.1``, the values in the order given), the others (orca, straight) once; a value that is
     Table I's (``table_i``; margins none) adds nothing to the cell, and its columns keep the paper's
-    figures."""
+    figures. A number of robots gives every method a column per value (``ORCA robots=6``): the cell the
+    sweep's ``--robots`` makes, with the paper's figures only beside its 3 (summary.paper_figures)."""
     key, name = vary.key, experiment.name
     _check_applies(experiment, vary, where)
     methods: list[tuple[str, ControllerSpec]] = []
     worlds: dict[str, World] = {}
+    robots: dict[str, int] = {}
     paper: dict[tuple[str, int], PaperFigures] = {}
     for label, spec in experiment.methods:
         own = dict(spec.mpc_overrides)
@@ -193,14 +203,18 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
                 "another setting"
             )
         columns = [(label, spec)]
-        if reads_setting(spec, key):
+        if vary.section == "scenario" or reads_setting(spec, key):
             columns = [
                 (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]
-        for column, column_spec in columns:
+        for k, (column, column_spec) in enumerate(columns):
             methods.append((column, column_spec))
             if label in experiment.method_worlds:
                 worlds[column] = experiment.method_worlds[label]
+            if vary.section == "scenario":
+                robots[column] = vary.values[k]
+            elif label in experiment.method_robots:
+                robots[column] = experiment.method_robots[label]
             if column_spec == spec:  # the paper's figures are of Table I's settings
                 paper |= {(column, n): fig for (of, n), fig in experiment.paper.items() if of == label}
     title = f"{experiment.title}; {key} = {', '.join(shown(v) for v in vary.values)}"
@@ -209,12 +223,16 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
         title=title,
         methods=tuple(methods),
         method_worlds=MappingProxyType(worlds),
+        method_robots=MappingProxyType(robots),
         paper=MappingProxyType(paper),
     )
 
 
 def _with_value(spec: ControllerSpec, vary: Varied, value: Any, table_i: Any) -> ControllerSpec:
-    """``spec`` with the varied setting at ``value``: Table I's adds no override to the cell."""
+    """``spec`` with the varied setting at ``value``: Table I's adds no override to the cell, and the
+    number of robots is the cell's, not the controller's."""
+    if vary.section == "scenario":
+        return spec
     if vary.section == "controller":
         return dataclasses.replace(spec, margins=value)
     extra = () if value == table_i else ((vary.key, value),)
@@ -225,6 +243,8 @@ def _check_applies(experiment: Experiment, vary: Varied, where: str) -> None:
     """Refuse a variation no method would run, or one that undoes what the experiment compares."""
     key, name = vary.key, experiment.name
     labels = ", ".join(repr(label) for label, _ in experiment.methods)
+    if vary.section == "scenario":  # every controller drives robots
+        return
     if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
         raise ConfigError(
             f"{where}: the methods of experiment {name!r} ({labels}) plan with no predictor; "

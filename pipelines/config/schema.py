@@ -308,8 +308,9 @@ def _sweep_keys() -> tuple[Key, ...]:
             "vary",
             "str",
             None,
-            "a column per value of one [mpc] setting, or controller.margins, beside each method that plans "
-            "(--vary); several separated by ';': a column per combination; unset: none",
+            "a column per value of one [mpc] setting, or controller.margins, beside each method that plans, "
+            "or of scenario.robots beside every method (--vary); several separated by ';': a column per "
+            "combination; unset: none",
             "mpc.d_min=0.8,0.9,1.0",
         ),
     )

@@ -29,6 +29,8 @@ from pipelines.loop.margins import MarginSpec
 from predictors.oracle import ORACLE_PREDICTOR
 
 PAPER_EPISODES_PER_CELL: Final[int] = 1000  # Section VI: 500 circle + 500 perpendicular crossing per cell
+# Experiment's mappings, read-only (MappingProxyType), which pickling sends as dicts
+READ_ONLY_FIELDS: Final[tuple[str, ...]] = ("paper", "method_worlds", "method_robots")
 
 
 def _as_controller(template: ControllerSpec, controller: str) -> ControllerSpec:
@@ -52,6 +54,8 @@ class Experiment:
     predictor_swappable: bool = True
     world: World = World()  # the conventions of every cell, unless `method_worlds` names the method's own
     method_worlds: Mapping[str, World] = field(default_factory=lambda: MappingProxyType({}))
+    # a method's own number of robots (``--vary scenario.robots``), else the sweep's (--robots)
+    method_robots: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
     # False when the methods' margins are part of the comparison (safety, conventions): no `--margins`.
     margins_swappable: bool = True
     # True when the methods are one per predictor, labelled by its name (the swap table): `--predictors`
@@ -73,7 +77,8 @@ class Experiment:
         # (multiprocessing's spawn) failed with "cannot pickle 'mappingproxy' object". Sent as plain dicts,
         # made read-only again.
         values = {f.name: getattr(self, f.name) for f in fields(self)}
-        values["paper"], values["method_worlds"] = dict(self.paper), dict(self.method_worlds)
+        for name in READ_ONLY_FIELDS:
+            values[name] = dict(values[name])
         return _rebuilt_experiment, (values,)
 
     @property
@@ -190,11 +195,18 @@ class Experiment:
         return world.profile, world.visibility
 
     def cells(self, humans: Sequence[int] | None = None, n_robots: int = PAPER_ROBOTS) -> tuple[Cell, ...]:
-        """Cells in table order: for each number of humans, smallest first, every method. Sorted: ``--humans
+        """Cells in table order: for each number of humans, smallest first, every method, each with
+        ``n_robots`` robots unless ``method_robots`` gives its own. Sorted: ``--humans
         6,5`` listed the 6-human rows of cells.csv, episodes.csv and episodes.jsonl first, where table.md and
         the plots go by crowd size and 5,6 gives the same episodes."""
         return tuple(
-            Cell(label, spec, n, n_robots, self.method_worlds.get(label, self.world))
+            Cell(
+                label,
+                spec,
+                n,
+                self.method_robots.get(label, n_robots),
+                self.method_worlds.get(label, self.world),
+            )
             for n in sorted(humans or self.humans)
             for label, spec in self.methods
         )
@@ -248,7 +260,7 @@ LATER_SWAP_PREDICTORS: Final[frozenset[str]] = frozenset({"social_gru_eth", "soc
 
 def _rebuilt_experiment(values: dict[str, Any]) -> Experiment:
     """An ``Experiment`` from ``Experiment.__reduce__``'s values."""
-    read_only = {k: MappingProxyType(values[k]) for k in ("paper", "method_worlds")}
+    read_only = {k: MappingProxyType(values[k]) for k in READ_ONLY_FIELDS}
     return Experiment(**{**values, **read_only})
 
 

@@ -191,6 +191,7 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
                     "key": c.key,
                     "method": c.method,
                     "n_humans": c.n_humans,
+                    "n_robots": c.n_robots,
                     **asdict(c.spec),
                     **asdict(c.world),
                 }

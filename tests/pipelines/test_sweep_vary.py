@@ -85,7 +85,7 @@ def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays
         (["--vary", "mpc.dmin=1,2"], "--vary 'mpc.dmin=1,2': unknown key (did you mean 'd_min'?)"),
         (
             ["--vary", "env.dt=0.1,0.2"],
-            "--vary 'env.dt=0.1,0.2': only an [mpc] setting (mpc.KEY=V1,V2,...) or the margins",
+            "--vary 'env.dt=0.1,0.2': only an [mpc] setting (mpc.KEY=V1,V2,...), the margins",
         ),
         (["--vary", "mpc.jit=true,false"], "--vary: a sweep compiles by [sweep] jit"),
         (

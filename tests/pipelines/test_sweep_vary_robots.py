@@ -1,0 +1,133 @@
+"""`sweep --vary scenario.robots=M1,M2`: a column per number of robots beside every method, each the cell
+`--robots M` makes."""
+
+from __future__ import annotations
+
+import csv
+import json
+import pickle
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands.sweep_plan import configured_experiment
+from pipelines.config import load
+from pipelines.experiments.cells import get_experiment
+
+SWEEP = ["sweep", "--humans", "5", "--episodes-per-cell", "2", "--dry-run"]
+
+
+def _plan(capsys, *options: str) -> dict[str, str]:
+    """The dry run's cells: method label -> cell key."""
+    assert main([*SWEEP, *options]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
+    return {" ".join(row[:-3]): row[-1] for row in rows}
+
+
+def test_every_method_gets_a_column_per_number_of_robots_each_the_cell_robots_makes(tmp_path, capsys):
+    """ORCA and the straight line drive robots too: a column each, where an [mpc] value leaves them one."""
+    out = ["--out", str(tmp_path / "sw")]
+    varied = _plan(capsys, "--experiment", "controllers", "--vary", "scenario.robots=2,5", *out)
+    assert list(varied) == [
+        f"{method} robots={m}" for method in ("cmpc", "dmpc", "orca", "straight") for m in (2, 5)
+    ]
+    for m in (2, 5):
+        alone = _plan(capsys, "--experiment", "controllers", "--robots", str(m), *out)
+        assert {label: key for label, key in varied.items() if label.endswith(f"={m}")} == {
+            f"{label} robots={m}": key for label, key in alone.items()
+        }
+    assert varied["orca robots=5"] == "orca-none-F-ibr-m=none-paper-visible-h5-r5"
+
+
+def test_robots_vary_last_in_a_grid_and_keep_the_paper_beside_three():
+    """With an [mpc] value: every combination, robots last in the label; the paper's figures stay on the
+    columns of Table I's settings, and the summary shows them only beside 3 robots (summary.paper_figures)."""
+    from pipelines.experiments.summary import paper_figures
+
+    sets = ["sweep.experiment=table2", 'sweep.vary="mpc.d_min=0.8,0.9;scenario.robots=3,6"']
+    experiment = configured_experiment(load(sets=sets))
+    assert experiment.method_labels[:4] == (
+        "CMPC d_min=0.8 robots=3",
+        "CMPC d_min=0.8 robots=6",
+        "CMPC d_min=0.9 robots=3",
+        "CMPC d_min=0.9 robots=6",
+    )
+    assert experiment.title.endswith("; d_min = 0.8, 0.9; robots = 3, 6")
+    cells = {(c.method, c.n_humans): c for c in experiment.cells((5,), n_robots=4)}
+    assert [cells[f"CMPC d_min=0.8 robots={m}", 5].n_robots for m in (3, 6)] == [3, 6]
+    paper = get_experiment("table2").paper["CMPC", 5]
+    assert paper_figures(experiment, cells["CMPC d_min=0.8 robots=3", 5]) == paper
+    assert paper_figures(experiment, cells["CMPC d_min=0.8 robots=6", 5]) is None
+    assert paper_figures(experiment, cells["CMPC d_min=0.9 robots=3", 5]) is None  # not Table I's d_min
+    # sent to a worker process (spawn) and back, the robots stay the columns' own, read-only
+    again = pickle.loads(pickle.dumps(experiment))
+    assert again.method_robots == experiment.method_robots
+    with pytest.raises(TypeError):
+        again.method_robots["CMPC d_min=0.8 robots=3"] = 4  # type: ignore[index]
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--vary", "scenario.robots=3,4", "--robots", "5"], "--vary and --robots both set the robots"),
+        (["--vary", "scenario.robots=3,0"], "--vary value 0 must be in 1..12, got 0"),
+        (["--vary", "scenario.robots=3,13"], "--vary value 13 must be in 1..12, got 13"),
+        (["--vary", "scenario.robots=3,2.5"], "--vary value 2.5 must be an integer"),
+        (["--vary", "scenario.robots=3,3"], "--vary: value 3 is given more than once"),
+        (["--vary", "scenario.robots=3"], "expected scenario.robots=V1,V2,... with at least two values"),
+        (["--vary", "scenario.humans=3,4"], "or the robots (scenario.robots=M1,M2,...) vary"),
+    ],
+)
+def test_robots_that_cannot_vary_are_one_line(tmp_path, capsys, options, message):
+    assert main([*SWEEP, "--experiment", "table2", *options, "--out", str(tmp_path / "sw")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_robots_sweep_reuses_the_plain_sweeps_episodes_and_records_each_cells_team(tmp_path, capsys):
+    """The 3-robot columns are the plain sweep's cells: only the 2-robot ones run. cells.csv, episodes.jsonl
+    and sweep.json give each cell its own team; the table's note lists them."""
+    out = tmp_path / "sw"
+    run = ["sweep", "--experiment", "table2", "--predictor", "constant_velocity", "--humans", "3"]
+    run += ["--episodes-per-cell", "2", "--backend", "inline", "--no-progress", "--out", str(out)]
+    assert main(run) == 0
+    assert main([*run, "--vary", "scenario.robots=3,2"]) == 0
+    assert "8/8 episodes recorded (4 this run" in capsys.readouterr().err
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    teams = {
+        (r["method"], r["key"].split("/")[0].rsplit("-", 1)[1], len(r["metrics"]["path_length"]))
+        for r in records
+    }
+    assert teams == {
+        ("CMPC", "r3", 3),
+        ("DMPC", "r3", 3),
+        ("CMPC robots=2", "r2", 2),
+        ("DMPC robots=2", "r2", 2),
+    }
+    with (out / "cells.csv").open() as f:
+        rows = [(row["method"], row["n_robots"]) for row in csv.DictReader(f)]
+    assert rows == [
+        ("CMPC robots=3", "3"),
+        ("CMPC robots=2", "2"),
+        ("DMPC robots=3", "3"),
+        ("DMPC robots=2", "2"),
+    ]
+    last = json.loads((out / "sweep.json").read_text())["runs"][-1]
+    assert [(c["method"], str(c["n_robots"])) for c in last["cells"]] == rows
+    table = (out / "table.md").read_text()
+    assert "Robots: 2, 3 per episode (the paper's tables: 3)." in table
+    assert "| Metrics \\ Methods | CMPC robots=3 | CMPC robots=2 | DMPC robots=3 | DMPC robots=2 |" in table
+
+
+def test_the_sweep_notes_a_team_larger_than_the_papers_under_the_per_pair_weight(tmp_path, capsys):
+    """simulate's flock note, once per method whose cells have more than 3 robots and flock per pair."""
+    out = ["--out", str(tmp_path / "sw")]
+    assert main([*SWEEP, "--experiment", "table3", "--vary", "scenario.robots=3,4", *out]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "flocking weight" in line]
+    assert notes == [
+        "note: method 'F robots=4': 4 robots under the paper's per-pair flocking weight, set for 3; "
+        "--set mpc.flocking_weight=per_robot (in docs/examples/many_robots.toml) weighs it per robot"
+    ]  # not table3's NF, which does not flock
+    per_robot = ["--set", "mpc.flocking_weight=per_robot"]
+    assert main([*SWEEP, "--experiment", "table3", "--robots", "4", *per_robot, *out]) == 0
+    assert "flocking weight" not in capsys.readouterr().err
