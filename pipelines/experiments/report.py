@@ -4,10 +4,10 @@
 their 95% intervals, our safety figures, among them the collision rate between steps, solver figures, the
 paper's figures; the robot-robot contact rate, not in the paper) and episodes.csv (a row per episode)
 from here, table.md from pipelines.experiments.tables, a plot per outcome from
-pipelines.experiments.report_plots (``OUTCOME_vs_humans.png``, or ``OUTCOME_by_method.png`` at one crowd
-size), min_distance_hist.csv from pipelines.experiments.safety_report and the safety plots from
-pipelines.experiments.safety_plots. The cells' summaries, with their Wilson intervals, are
-pipelines.experiments.summary's.
+pipelines.experiments.report_plots (``OUTCOME_vs_humans.png``; at one crowd size ``OUTCOME_vs_robots.png``
+where the robots vary, else ``OUTCOME_by_method.png``), min_distance_hist.csv from
+pipelines.experiments.safety_report and the safety plots from pipelines.experiments.safety_plots. The cells'
+summaries, with their Wilson intervals, are pipelines.experiments.summary's.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from crowdsim.metrics import BETWEEN_STEPS, ROBOT_CONTACT
 from pipelines.experiments import safety_plots
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Experiment
-from pipelines.experiments.report_plots import OUTCOMES, plot_filename, plot_outcomes
+from pipelines.experiments.report_plots import OUTCOMES, PLOT_AXES, plot_filename, plot_outcomes
 from pipelines.experiments.summary import CellSummary, Rate, summarize
 from pipelines.experiments.tables import markdown_table
 from pipelines.experiments.tasks import Cell
@@ -234,5 +234,5 @@ def write_report_of(
 def report_plot_names() -> set[str]:
     """Every plot a report may write: a report at other crowd sizes leaves its predecessor's none of its own
     (five *_vs_humans.png of 5 and 6 humans beside a table of 5 contradicted it)."""
-    names = {plot_filename(o.name, by_method=by) for o in OUTCOMES for by in (False, True)}
+    names = {plot_filename(o.name, axis) for o in OUTCOMES for axis in PLOT_AXES}
     return names | {safety.MIN_DISTANCE_HIST_PNG, safety.SAFETY_TRADEOFF_PNG}

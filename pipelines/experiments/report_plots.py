@@ -2,8 +2,10 @@
 the paper's.
 
 An experiment over several crowd sizes (Tables II and III) gets ``OUTCOME_vs_humans.png``: the number of
-humans on the x axis, a line per method. An experiment at one crowd size (the predictor swap, coupling,
-safety, ...) gets ``OUTCOME_by_method.png``: a bar per method. Our 95% intervals are the error bars (Wilson
+humans on the x axis, a line per method. One at one crowd size whose columns vary the number of robots
+(``--vary scenario.robots``) gets ``OUTCOME_vs_robots.png``: the number of robots on the x axis, a line per
+method the columns share. Any other at one crowd size (the predictor swap, coupling, safety, ...) gets
+``OUTCOME_by_method.png``: a bar per method. Our 95% intervals are the error bars (Wilson
 for the rates, Student's t for the mean travel time: pipelines.experiments.summary), and each plot's title
 says which; the paper's figures are open squares (dashed lines across crowd sizes). The safety plots
 (closest approaches, the success / collision trade-off) are pipelines.experiments.safety_report's.
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 import math
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -72,9 +74,20 @@ def method_style(k: int) -> dict[str, str]:
     }
 
 
-def plot_filename(outcome: str, *, by_method: bool) -> str:
-    """``OUTCOME_by_method.png`` for an experiment at one crowd size, else ``OUTCOME_vs_humans.png``."""
-    return f"{outcome}_by_method.png" if by_method else f"{outcome}_vs_humans.png"
+PLOT_AXES: Final[tuple[str, ...]] = ("humans", "robots", "method")  # what a report's plots are drawn against
+
+
+def plot_axis(summaries: Sequence[CellSummary]) -> str:
+    """What the plots go against: the number of humans where the cells have several, else the number of
+    robots where they have several, else the methods."""
+    if len({s.cell.n_humans for s in summaries}) > 1:
+        return "humans"
+    return "robots" if len({s.cell.n_robots for s in summaries}) > 1 else "method"
+
+
+def plot_filename(outcome: str, axis: str) -> str:
+    """``OUTCOME_by_method.png``, ``OUTCOME_vs_humans.png`` or ``OUTCOME_vs_robots.png`` (``plot_axis``)."""
+    return f"{outcome}_by_method.png" if axis == "method" else f"{outcome}_vs_{axis}.png"
 
 
 def _values(cells: Sequence[CellSummary], name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -120,15 +133,19 @@ def _dodges(methods: list[str], sizes: list[int]) -> dict[str, float]:
     return {m: (k - (len(methods) - 1) / 2) * step for k, m in enumerate(methods)}
 
 
-def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> bool:
-    """A line per method; whether any point has an error bar. A method with no value at all (no success,
-    for the travel time) is named so in the legend, as the safety trade-off names it."""
+def _draw_vs(
+    ax: Any, lines: dict[str, list[CellSummary]], name: str, size: Callable[[CellSummary], int], axis: str
+) -> bool:
+    """A line per method (``lines``: its cells) against ``size`` of their cells; whether any point has an
+    error bar. A method with no value at all (no success, for the travel time) is named so in the legend,
+    as the safety trade-off names it."""
     drawn = False
-    sizes = sorted({s.cell.n_humans for s in summaries})
+    sizes = sorted({size(s) for cells in lines.values() for s in cells})
+    methods = list(lines)
     dodge = _dodges(methods, sizes)
     for k, method in enumerate(methods):
-        cells = sorted((s for s in summaries if s.cell.method == method), key=lambda s: s.cell.n_humans)
-        x = np.array([s.cell.n_humans for s in cells], dtype=float) + dodge[method]
+        cells = sorted(lines[method], key=size)
+        x = np.array([size(s) for s in cells], dtype=float) + dodge[method]
         y, err = _values(cells, name)
         drawn = drawn or not np.isnan(err).all()
         style = method_style(k)
@@ -136,7 +153,7 @@ def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary
         label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, no success)"
         ax.errorbar(x, y, yerr=err, capsize=3, label=label, **style)
         paper = [
-            (s.cell.n_humans + dodge[method], v)
+            (size(s) + dodge[method], v)
             for s, v in zip(cells, _paper(cells, name), strict=True)
             if v is not None
         ]
@@ -144,9 +161,23 @@ def _draw_vs_humans(ax: Any, methods: list[str], summaries: Sequence[CellSummary
             px, py = zip(*paper, strict=True)
             ax.plot(px, py, ls="--", marker="s", mfc="none", color=color, label=f"{method} (paper)")
     ax.set_xticks(sizes)
-    ax.set_xlabel("number of humans")
+    ax.set_xlabel(f"number of {axis}")
     _legend(ax)
     return drawn
+
+
+def _lines(
+    experiment: Experiment, methods: list[str], summaries: Sequence[CellSummary], axis: str
+) -> dict[str, list[CellSummary]]:
+    """Each line's cells: a method's across crowd sizes; against robots, the columns that differ only in
+    their number of robots (``CMPC robots=3``, ``CMPC robots=6`` make the line ``CMPC``)."""
+    lines: dict[str, list[CellSummary]] = {}
+    for method in methods:
+        line = method
+        if axis == "robots" and method in experiment.method_robots:
+            line = method.removesuffix(f" robots={experiment.method_robots[method]}")
+        lines.setdefault(line, []).extend(s for s in summaries if s.cell.method == method)
+    return lines
 
 
 def _legend(ax: Any) -> None:
@@ -162,22 +193,26 @@ def _legend(ax: Any) -> None:
 
 
 def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], outcome: Outcome) -> Any:
-    """The figure of one outcome: by method at one crowd size, else against the number of humans.
+    """The figure of one outcome: against the number of humans or of robots, else by method (``plot_axis``).
 
     A ``matplotlib.figure.Figure``, as crowdsim.plotting's: no pyplot, so that a report written from a
     notebook neither switches its backend nor adds to its open figures (savefig renders with Agg)."""
     from matplotlib.figure import Figure
 
     methods = [m for m in experiment.method_labels if any(s.cell.method == m for s in summaries)]
-    humans = sorted({s.cell.n_humans for s in summaries})
+    axis = plot_axis(summaries)
     fig = Figure(figsize=FIGSIZE, layout="constrained")
     ax = fig.add_subplot()
-    if len(humans) == 1:
+    if axis == "method":
         fig.set_size_inches(max(FIGSIZE[0], 1.3 + BAR_WIDTH_IN * len(methods)), FIGSIZE[1])
         drawn = _draw_by_method(ax, methods, summaries, outcome.name)
-        ax.set_xlabel(f"method ({humans[0]} humans)")
+        ax.set_xlabel(f"method ({summaries[0].cell.n_humans} humans)")
     else:
-        drawn = _draw_vs_humans(ax, methods, summaries, outcome.name)
+        size = (lambda s: s.cell.n_humans) if axis == "humans" else (lambda s: s.cell.n_robots)
+        lines = _lines(experiment, methods, summaries, axis)
+        drawn = _draw_vs(ax, lines, outcome.name, size, axis)
+        if axis == "robots":
+            ax.set_xlabel(f"number of robots ({summaries[0].cell.n_humans} humans)")
     # Rates from 0; a travel time above 0 too: a Student's t interval of few successes reaches below it
     # (14.4 +- 15.2 s over 2), and the axis showed travel times of -20 s.
     ax.set_ylim(bottom=0.0 if outcome.name != "travel_time" else max(0.0, ax.get_ylim()[0]))
@@ -190,11 +225,11 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
 
 def plot_outcomes(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
     """One plot per outcome (``OUTCOMES``) in ``out``, named by ``plot_filename``; returns their paths."""
-    by_method = len({s.cell.n_humans for s in summaries}) == 1
+    axis = plot_axis(summaries)
     written = []
     for outcome in OUTCOMES:
         fig = outcome_figure(experiment, summaries, outcome)
-        path = out / plot_filename(outcome.name, by_method=by_method)
+        path = out / plot_filename(outcome.name, axis)
         fig.savefig(path, dpi=120)
         written.append(path)
     return written

@@ -131,3 +131,31 @@ def test_the_sweep_notes_a_team_larger_than_the_papers_under_the_per_pair_weight
     per_robot = ["--set", "mpc.flocking_weight=per_robot"]
     assert main([*SWEEP, "--experiment", "table3", "--robots", "4", *per_robot, *out]) == 0
     assert "flocking weight" not in capsys.readouterr().err
+
+
+def test_one_crowd_size_over_several_teams_plots_each_outcome_against_the_robots(tmp_path):
+    """A line per method the columns share ("CMPC robots=3" and "CMPC robots=6" make "CMPC") at x = 3 and
+    6 robots (each method shifted by its dodge), the paper's mark at 3 only; files OUTCOME_vs_robots.png."""
+    from pipelines.experiments.report import write_report
+    from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
+    from pipelines.experiments.summary import summarize
+    from tests.pipelines.test_small_fixes import EPISODES, _records
+
+    sets = ["sweep.experiment=table2", 'sweep.vary="scenario.robots=3,6"']
+    experiment = configured_experiment(load(sets=sets))
+    cells = [c for c in experiment.cells() if c.n_humans == 5]
+    records = _records(experiment, {(c.method, 5): EPISODES for c in cells})
+    names = {p.name for p in write_report(tmp_path, experiment, cells, records).files if p.suffix == ".png"}
+    assert {f"{o.name}_vs_robots.png" for o in OUTCOMES} <= names
+    assert not any(name.endswith(("_by_method.png", "_vs_humans.png")) for name in names)
+    success = next(o for o in OUTCOMES if o.name == "success")
+    ax = outcome_figure(experiment, summarize(experiment, cells, records), success).axes[0]
+    handles, labels = ax.get_legend_handles_labels()  # an errorbar's handle holds its data line first
+    lines = {label: h if hasattr(h, "get_xdata") else h[0] for h, label in zip(handles, labels, strict=True)}
+    assert sorted(lines) == ["CMPC (ours)", "CMPC (paper)", "DMPC (ours)", "DMPC (paper)"]
+    ours = lines["CMPC (ours)"].get_xdata()
+    dodge = ours[0] - 3
+    assert list(ours) == [3 + dodge, 6 + dodge] and dodge < 0  # CMPC left of DMPC
+    assert list(lines["CMPC (paper)"].get_xdata()) == [3 + dodge]
+    assert list(lines["CMPC (ours)"].get_ydata()) == pytest.approx([200 / 3] * 2)  # 2 of 3 succeeded
+    assert ax.get_xlabel() == "number of robots (5 humans)" and list(ax.get_xticks()) == [3, 6]
