@@ -15,7 +15,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import SweepStopped
+from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import (
     SINGLE_THREAD_ENV,
@@ -102,6 +102,29 @@ def _start_resource_tracker() -> None:
             os.environ["PYTHONWARNINGS"] = saved
 
 
+def _check_main_is_a_file() -> None:
+    """Refuse a main script the spawned workers cannot read: each one runs the driver's ``__main__`` file
+    again before anything else (multiprocessing.spawn's ``init_main_from_path``), and a script piped in
+    (``python - < script.py``, ``__file__`` ``<stdin>``) is no file: every worker died of Python's own
+    FileNotFoundError, and the one-line stop blamed a missing ``if __name__ == "__main__":``."""
+    import sys
+
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if main is None or getattr(main, "__spec__", None) is not None or path is None:
+        return  # `python -m`, `-c`, a notebook: the workers import nothing from a path
+    import multiprocessing.process
+
+    # as spawn resolves it: from the folder this process started in (untyped in multiprocessing's stubs)
+    where = os.path.join(getattr(multiprocessing.process, "ORIGINAL_DIR", None) or "", path)
+    if not os.path.isfile(where):
+        raise PipelineError(
+            f"the sweep's worker processes run this program's main script {path!r} again as they start "
+            "(multiprocessing's spawn), and it is no file they can read; run the script from a file, or "
+            "sweep with backend 'inline'"
+        )
+
+
 def _worker_environment() -> dict[str, str]:
     """What the workers' environment holds beyond this process's: one library thread (unless the user set
     a variable of it), and every plugin registered here (pipelines.plugins.plugin_environment: spawned,
@@ -160,6 +183,7 @@ class ProcessBackend:
         backend makes its own and removes it on ``close``: a worker's folder of its own would be left behind,
         since ``close`` terminates the workers (no atexit runs)."""
         self.workers = workers
+        _check_main_is_a_file()
         self._environment = _worker_environment()  # refuses a plugin the workers cannot import
         self._own_root = None if scratch_root is not None else make_scratch_root()
         self._initargs = (record, jit, scratch_root if self._own_root is None else str(self._own_root))

@@ -90,3 +90,32 @@ def test_workers_that_die_as_they_start_stop_the_sweep_in_one_line(tmp_path, mon
     ):
         process_backend.ProcessBackend(1, "no such policy")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_main_script_piped_in_is_refused_before_any_worker_starts(tmp_path, monkeypatch):
+    """`python - < script.py`: every spawned worker runs the main script's path again, '<stdin>' is none,
+    and they all died of FileNotFoundError under a line blaming a missing __main__ guard. A main script
+    that is a file, or `python -m` (a module spec), starts the pool as before."""
+    import sys
+    import types
+
+    from pipelines.errors import PipelineError
+
+    def fake_main(file: str, spec: object = None) -> None:
+        main = types.ModuleType("__main__")
+        main.__file__, main.__spec__ = file, spec  # type: ignore[assignment]
+        monkeypatch.setitem(sys.modules, "__main__", main)
+
+    started = []
+    monkeypatch.setattr(process_backend.ProcessBackend, "_start_pool", lambda self: started.append(self))
+    fake_main("<stdin>")
+    with pytest.raises(PipelineError, match=r"main script '<stdin>' .* no file they can read.*'inline'"):
+        process_backend.ProcessBackend(1, "none", scratch_root=str(tmp_path))
+    assert started == []
+    script = tmp_path / "study.py"
+    script.write_text("")
+    fake_main(str(script))
+    process_backend.ProcessBackend(1, "none", scratch_root=str(tmp_path))
+    fake_main("<stdin>", spec=types.SimpleNamespace(name="study"))
+    process_backend.ProcessBackend(1, "none", scratch_root=str(tmp_path))
+    assert len(started) == 2
