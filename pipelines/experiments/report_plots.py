@@ -1,5 +1,5 @@
 """The report's plots, one per outcome: success, travel time, collision, contact and discomfort, ours beside
-the paper's.
+the paper's, and what a control step costs (the median, bars up to the p95).
 
 An experiment over several crowd sizes (Tables II and III) gets ``OUTCOME_vs_humans.png``: the number of
 humans on the x axis, a line per method. One at one crowd size whose columns vary the number of robots
@@ -36,6 +36,7 @@ class Outcome:
     ylabel: str
     meaning: str  # a line under the title saying what counts
     interval: str = "Wilson interval"  # what the error bars are: the 95% interval summary.py gives
+    bars: str | None = None  # the title's line on the bars where they are no 95% interval of ours
 
 
 OUTCOMES: Final[tuple[Outcome, ...]] = (
@@ -53,6 +54,13 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
     ),
     Outcome("contact", "Contact rate (%)", "a robot touching a human (closer than the sum of their radii)"),
     Outcome("discomfort", "Discomfort rate (%)", "a robot's projected path crossing a human's"),
+    # what a control step costs (prediction, solves, bookkeeping): the scale study's figure against robots
+    Outcome(
+        "control_step",
+        "Control step (ms)",
+        "median of the episodes' median steps",
+        bars="bars up to the p95 of the episodes' p95 steps; the period is 400 ms",
+    ),
 )
 
 
@@ -92,6 +100,10 @@ def plot_filename(outcome: str, axis: str) -> str:
 
 def _values(cells: Sequence[CellSummary], name: str) -> tuple[np.ndarray, np.ndarray]:
     """Our values and their error bars, (2, K) below/above (nan where there is none)."""
+    if name == "control_step":
+        y = np.array([s.step_median_ms for s in cells], dtype=float)
+        above = np.array([s.step_p95_ms for s in cells], dtype=float) - y
+        return y, np.vstack([np.zeros_like(y), above])
     if name == "travel_time":
         y = np.array([s.travel_time_mean for s in cells], dtype=float)
         half = np.array([s.travel_time_ci for s in cells], dtype=float)
@@ -218,6 +230,7 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     ax.set_ylim(bottom=0.0 if outcome.name != "travel_time" else max(0.0, ax.get_ylim()[0]))
     ax.set_ylabel(outcome.ylabel)
     bars = f"error bars: our 95% {outcome.interval}" if drawn else "no error bars: fewer than two successes"
+    bars = outcome.bars or bars
     ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
     ax.grid(alpha=0.3)
     return fig

@@ -945,6 +945,7 @@ def test_report_files(tmp_path):
         "collision_vs_humans.png",
         "contact_vs_humans.png",
         "discomfort_vs_humans.png",
+        "control_step_vs_humans.png",
         "min_distance_hist.csv",
         "min_distance_hist.png",
         "safety_tradeoff.png",

@@ -241,7 +241,7 @@ def test_a_report_leaves_the_callers_matplotlib_alone(tmp_path):
     script = _USER_SESSION.format(tests=str(Path(__file__).parent), out=str(tmp_path))
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["svg", "True", "11"]
+    assert done.stdout.split() == ["svg", "True", "12"]
 
 
 def test_bars_of_many_methods_keep_their_labels_apart():

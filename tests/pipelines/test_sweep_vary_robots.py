@@ -159,3 +159,24 @@ def test_one_crowd_size_over_several_teams_plots_each_outcome_against_the_robots
     assert list(lines["CMPC (paper)"].get_xdata()) == [3 + dodge]
     assert list(lines["CMPC (ours)"].get_ydata()) == pytest.approx([200 / 3] * 2)  # 2 of 3 succeeded
     assert ax.get_xlabel() == "number of robots (5 humans)" and list(ax.get_xticks()) == [3, 6]
+
+
+def test_the_control_step_plot_gives_the_median_with_a_bar_up_to_the_p95():
+    """Every synthetic episode's step: median 10 ms, p95 20 ms -> each point at 10, its bar from 10 to 20."""
+    from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
+    from pipelines.experiments.summary import summarize
+    from tests.pipelines.test_small_fixes import EPISODES, _records
+
+    experiment = configured_experiment(
+        load(sets=["sweep.experiment=table2", 'sweep.vary="scenario.robots=3,6"'])
+    )
+    cells = [c for c in experiment.cells() if c.n_humans == 5]
+    records = _records(experiment, {(c.method, 5): EPISODES for c in cells})
+    step = next(o for o in OUTCOMES if o.name == "control_step")
+    ax = outcome_figure(experiment, summarize(experiment, cells, records), step).axes[0]
+    handles, labels = ax.get_legend_handles_labels()
+    assert labels == ["CMPC (ours)", "DMPC (ours)"]  # the paper gives no step time
+    for line, _caps, (bars,) in handles:
+        assert list(line.get_ydata()) == [10.0, 10.0]
+        assert [tuple(seg[:, 1]) for seg in bars.get_segments()] == [(10.0, 20.0)] * 2
+    assert "bars up to the p95" in ax.get_title() and ax.get_ylabel() == "Control step (ms)"
