@@ -196,9 +196,9 @@ class Experiment:
 
     def cells(self, humans: Sequence[int] | None = None, n_robots: int = PAPER_ROBOTS) -> tuple[Cell, ...]:
         """Cells in table order: for each number of humans, smallest first, every method, each with
-        ``n_robots`` robots unless ``method_robots`` gives its own. Sorted: ``--humans
-        6,5`` listed the 6-human rows of cells.csv, episodes.csv and episodes.jsonl first, where table.md and
-        the plots go by crowd size and 5,6 gives the same episodes."""
+        ``n_robots`` robots unless ``method_robots`` gives its own. Sorted: ``--humans 6,5`` listed the
+        6-human rows of cells.csv, episodes.csv and episodes.jsonl first, where table.md and the plots go by
+        crowd size and 5,6 gives the same episodes."""
         return tuple(
             Cell(
                 label,
