@@ -2,7 +2,8 @@
 
 The shipped experiments (``crowdmpc sweep --experiment ...``) are ``pipelines.experiments.cells.Experiment``
 values: methods (a column label and a ``ControllerSpec``) times numbers of humans, each method optionally
-under a ``World`` of its own (profile, visibility, a sensor range). Here: CMPC with the constant-velocity
+under a ``World`` of its own (profile, visibility, a sensor range: ``method_worlds``) and with a team of its
+own (``method_robots={"ORCA 6": 6}``, else the sweep's ``n_robots``). Here: CMPC with the constant-velocity
 predictor given every human, behind a 3 m sensor, and behind it with fixed 0.1 m margins, next to ORCA,
 at 5 humans. ``run_sweep`` runs what ``OUT/episodes.jsonl`` lacks (run it again with more episodes and it
 extends the table), and ``write_report`` writes the table, CSVs and plots ``crowdmpc sweep`` writes.
