@@ -121,18 +121,21 @@ def check_margins(experiment: Experiment) -> None:
 def method_notes(cells: Iterable[Cell]) -> list[str]:
     """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals),
     ``horizon_note`` lines (a plan longer than the learned predictor's training) and ``flock_note`` lines
-    (a team larger than the paper's under its per-pair flocking weight), each once per method, naming it."""
-    notes: dict[tuple[str, int], str] = {}
+    (a team larger than the paper's under its per-pair flocking weight), each once, naming the methods it
+    applies to: a grid of --vary columns printed the same line for each of eight methods."""
+    methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     for cell in cells:
         formation = cell.world.env_config().formation
-        for kind, note in enumerate(
-            (
-                goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
-                horizon_note(cell.spec),
-                flock_note(cell.spec, cell.n_robots),
-            )
+        for note in (
+            goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
+            horizon_note(cell.spec),
+            flock_note(cell.spec, cell.n_robots),
         ):
-            if note is not None:
-                named = note.replace("note: ", f"note: method {cell.method!r}: ", 1)
-                notes.setdefault((cell.method, kind), named)
-    return list(notes.values())
+            if note is not None and cell.method not in methods.setdefault(note, []):
+                methods[note].append(cell.method)
+    return [
+        note.replace(
+            "note: ", f"note: method{'s' if len(named) > 1 else ''} {', '.join(map(repr, named))}: ", 1
+        )
+        for note, named in methods.items()
+    ]

@@ -55,5 +55,6 @@ def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
     sweep = ["sweep", "--experiment", "table2", "--humans", "5,6", "--episodes-per-cell", "2", "--dry-run"]
     assert main([*sweep, "--vary", "mpc.d_min=0.8,1.0", "--out", str(tmp_path / "sw")]) == 0
     err = capsys.readouterr().err
-    assert err.count("note: method 'CMPC d_min=1.0': the MPC's d_min 1 m") == 1
-    assert err.count("note: method 'DMPC d_min=1.0'") == 1 and "d_min=0.8'" not in err
+    # one line naming both methods it applies to
+    assert err.count("note: methods 'CMPC d_min=1.0', 'DMPC d_min=1.0': the MPC's d_min 1 m") == 1
+    assert err.count("the MPC's d_min") == 1 and "d_min=0.8'" not in err

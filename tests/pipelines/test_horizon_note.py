@@ -61,12 +61,11 @@ def test_a_recorded_training_length_is_the_one_compared(monkeypatch):
     )
 
 
-def test_a_sweep_says_it_once_per_method(tmp_path, capsys):
+def test_a_sweep_says_it_once_naming_the_methods(tmp_path, capsys):
     argv = ["sweep", "--experiment", "table2", "--set", "mpc.horizon=14", "--dry-run", "--out", str(tmp_path)]
     assert main(argv) == 0
     notes = [line for line in capsys.readouterr().err.splitlines() if "trained to predict" in line]
     assert notes == [
-        f"note: method {m!r}: the MPC plans 14 steps ahead and 'social_lstm_eth' was trained to predict 12 "
-        "(4.8 s): its steps 13..14 are extrapolated"
-        for m in ("CMPC", "DMPC")
+        "note: methods 'CMPC', 'DMPC': the MPC plans 14 steps ahead and 'social_lstm_eth' was trained to "
+        "predict 12 (4.8 s): its steps 13..14 are extrapolated"
     ]
