@@ -5,7 +5,9 @@ not built builds its NLP, solvers, predictor twin and encoder inside itself (doc
 ``prepare(robots, humans)`` builds them first. This prints the seconds per size, without jit, or with
 ``--jit`` twice: on a private, empty compile cache (what a robot's first start pays) and then from it, in a
 second controller (every later start). The user's cache is not touched. The load average is printed with
-each run: the machine is shared.
+each run: the machine is shared. With each run, the resident memory (``VmRSS``) the sizes added: the
+controller keeps every size it built for as long as it lives (a loop that varies the crowd holds one per size
+met), and gives it back when dropped, to the process's allocator (``rss_mb`` is None without /proc).
 
     nice -n 5 .venv/bin/python benchmarks/prepare.py                          # CMPC, 0..15 humans, no jit
     nice -n 5 .venv/bin/python benchmarks/prepare.py --jit --humans 5 7 9
@@ -33,25 +35,41 @@ from bench_cli import (  # noqa: E402
 )
 
 
+def resident_mb() -> float | None:
+    """This process's resident memory now (``VmRSS``), MB; None without /proc (macOS)."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
 def prepare_once(controller: str, predictor: str, robots: int, humans: list[int], jit: bool) -> dict:
-    """A new controller's ``prepare`` of every size, timed; the load average around it."""
+    """A new controller's ``prepare`` of every size, timed; the load average around it; the resident memory
+    the sizes added (``rss_mb``): what the controller holds while it lives."""
     from pipelines.loop.controllers import ControllerSpec, make_controller
 
     built = make_controller(ControllerSpec(controller, predictor), jit=jit)
-    load_before, t0 = os.getloadavg()[0], time.perf_counter()
+    load_before, rss_before, t0 = os.getloadavg()[0], resident_mb(), time.perf_counter()
     seconds = built.prepare(robots, humans)  # type: ignore[attr-defined]  # MPCController's
     total = time.perf_counter() - t0
+    rss_after = resident_mb()
     built.close()
     return {
         "seconds": {str(n): s for (_, n), s in seconds.items()},
         "total_s": total,
         "load": [load_before, os.getloadavg()[0]],
+        "rss_mb": None if rss_before is None or rss_after is None else rss_after - rss_before,
     }
 
 
 def print_run(label: str, run: dict) -> None:
     sizes = run["seconds"]
-    print(f"{label}: {run['total_s']:.2f} s for {len(sizes)} sizes (load {run['load'][0]:.2f} -> "
+    held = "" if run["rss_mb"] is None else f", {run['rss_mb']:+.0f} MB resident"
+    print(f"{label}: {run['total_s']:.2f} s for {len(sizes)} sizes{held} (load {run['load'][0]:.2f} -> "
           f"{run['load'][1]:.2f})")  # fmt: skip
     print("  humans  " + " ".join(f"{n:>6}" for n in sizes))
     print("  s       " + " ".join(f"{s:>6.2f}" for s in sizes.values()))

@@ -20,3 +20,16 @@ def test_each_size_is_prepared_once_in_the_order_given(tmp_path, monkeypatch, ca
     assert figures["no_jit"]["total_s"] >= sum(seconds.values())
     printed = capsys.readouterr().out
     assert "no jit: " in printed and "for 2 sizes" in printed
+
+
+def test_the_memory_the_sizes_hold_is_reported(tmp_path, monkeypatch, capsys):
+    """What a long-lived loop varying the crowd pays per size met (docs/extending.md, section 7): the
+    resident memory the controller's sizes added, printed and in the JSON."""
+    out = tmp_path / "prepare.json"
+    argv = ["--controller", "cmpc", "--predictor", "constant_velocity", "--robots", "2", "--humans", "3"]
+    monkeypatch.setattr(sys, "argv", ["prepare.py", *argv, "--json", str(out)])
+    prepare.main()
+    held = json.loads(out.read_text())["no_jit"]["rss_mb"]
+    assert held is None or held > 0  # an NLP and its solvers take megabytes; None without /proc
+    if held is not None:
+        assert " MB resident" in capsys.readouterr().out
