@@ -225,6 +225,48 @@ def test_a_json_report_whose_temporary_name_fits_is_written(tmp_path, capsys):
     assert main(argv) == 0 and out.is_file()
 
 
+_KILLED_WRITER = """
+import sys, time
+from pathlib import Path
+from pipelines.commands import replace_file
+replace_file(Path(sys.argv[1]), lambda name: (Path(name).write_text("half"), print("writing", flush=True),
+                                             time.sleep(60)))
+"""
+
+
+def test_the_temporaries_of_killed_writers_are_removed_by_the_next_write(tmp_path):
+    """An export or --json file written by a run killed before its rename (kill -9, SIGTERM: no finally runs)
+    left its ".NAME.XXXXXXXX.part" beside the output for good, one more per kill, each as large as the output
+    (an export's CasADi file). The next write of that output removes them; never a temporary a live writer
+    holds locked, nor one just made (its writer may not have locked it yet)."""
+    out = tmp_path / "report.json"
+    writer = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WRITER, str(out)], stdout=subprocess.PIPE, text=True
+    )
+    assert writer.stdout is not None and writer.stdout.readline() == "writing\n"
+    live = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WRITER, str(out)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert live.stdout is not None and live.stdout.readline() == "writing\n"
+        writer.kill()
+        writer.wait()
+        temporaries = set(tmp_path.glob(".report.json.*.part"))
+        assert len(temporaries) == 2
+        old = time.time() - 3600
+        for path in temporaries:  # both written an hour ago: only the lock tells the live one apart
+            os.utime(path, (old, old))
+        fresh = tmp_path / ".report.json.abcdefgh.part"  # unlocked, but made just now
+        fresh.write_text("")
+        write_output(out, "{}", "--json")
+        assert json.loads(out.read_text()) == {}
+        left = set(tmp_path.glob(".report.json.*.part"))
+        assert fresh in left and len(left) == 2  # the live writer's and the fresh one
+    finally:
+        live.kill()
+        live.wait()
+
+
 def test_data_synth_leaves_room_for_the_temporary_of_its_staged_data(tmp_path, capsys):
     """write_ndjson writes the staged ".NAME.synth-PID.part" under ".STAGED.PID.tmp" first, 33 bytes longer
     than --out's name with 7-digit PIDs: a 230-byte --out (passing the 234-byte limit, its provenance too)
