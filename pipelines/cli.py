@@ -8,11 +8,7 @@ import importlib.util
 import sys
 from typing import NoReturn
 
-from crowdsim.errors import SimulationError
-from mpc.errors import MPCConfigError
 from pipelines.errors import PipelineError, interrupt_behind
-from pipelines.version import crowdmpc_version
-from predictors.errors import PredictorError
 
 # The order in which subcommands are listed by --help.
 COMMANDS = (
@@ -29,18 +25,35 @@ COMMANDS = (
     "config",
 )
 
-# Errors a user can cause: printed as one line, exit code 2, no traceback. Anything else is a bug and keeps
-# its traceback.
-USER_ERRORS: tuple[type[BaseException], ...] = (
-    PredictorError,
-    SimulationError,
-    MPCConfigError,
-    PipelineError,
-    FileNotFoundError,
-    NotADirectoryError,
-    IsADirectoryError,
-    PermissionError,
-)
+
+def user_errors() -> tuple[type[BaseException], ...]:
+    """Errors a user can cause: printed as one line, exit code 2, no traceback. Anything else is a bug and
+    keeps its traceback. Imported when asked for, not with this module: the packages of the other errors
+    import numpy and gymnasium (a third of a second, more from a cold disk), which ran before ``main`` could
+    catch a Ctrl-C, and a Ctrl-C then printed a library's KeyboardInterrupt traceback, or numpy's "Importing
+    the numpy C-extensions failed" advice with exit 1."""
+    from crowdsim.errors import SimulationError
+    from mpc.errors import MPCConfigError
+    from predictors.errors import PredictorError
+
+    return (
+        PredictorError,
+        SimulationError,
+        MPCConfigError,
+        PipelineError,
+        FileNotFoundError,
+        NotADirectoryError,
+        IsADirectoryError,
+        PermissionError,
+    )
+
+
+def __getattr__(name: str) -> object:
+    """``USER_ERRORS``, the tuple of ``user_errors()``, made when first read (``benchmarks/bench_cli.py``)."""
+    if name == "USER_ERRORS":
+        return user_errors()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 EPILOG = """examples:
   crowdmpc data prepare --raw ../shared/data/raw_ewap --out data/prepared
@@ -69,6 +82,7 @@ class PluginAction(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         from pipelines.plugins import register_plugins
+        from predictors.errors import PredictorError
 
         try:
             register_plugins([str(values)])
@@ -97,6 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    from pipelines.version import crowdmpc_version  # importlib.metadata: not before main catches a Ctrl-C
+
     parser.add_argument("--version", action="version", version=f"crowdmpc {crowdmpc_version()}")
     parser.add_argument(
         "--plugin",
@@ -171,12 +187,12 @@ def _main(argv: list[str] | None) -> int:
         parser.error(f"--config and --set apply to simulate, sweep and config, not {args.command}")
     try:
         return int(args.func(args) or 0)
-    except USER_ERRORS as exc:
-        print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # first: the clause below may import its errors' packages
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except user_errors() as exc:
+        print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
+        return 2
     except Exception as exc:
         if interrupt_behind(exc) is None:  # a bug: its traceback
             raise

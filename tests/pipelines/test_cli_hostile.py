@@ -1016,6 +1016,23 @@ def test_ctrl_c_while_the_commands_are_imported_ends_as_interrupted(monkeypatch,
     assert capsys.readouterr().err == "crowdmpc: interrupted\n"
 
 
+def test_the_cli_module_imports_no_library_before_main_can_catch_ctrl_c():
+    """`crowdmpc ...` imports pipelines.cli before main runs, and main's Ctrl-C handling covers only what
+    follows: its top-level imports of the other packages' errors pulled in numpy and gymnasium (a third of
+    a second), so a Ctrl-C then printed a KeyboardInterrupt traceback of numpy's import, or numpy's
+    "Importing the numpy C-extensions failed" advice with exit 1."""
+    probe = (
+        "import sys, pipelines.cli\n"
+        "libraries = ('numpy', 'gymnasium', 'crowdsim', 'mpc', 'predictors')\n"
+        "print(sorted(m for m in libraries if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout == "[]\n"
+    from pipelines.cli import USER_ERRORS  # still there for benchmarks/bench_cli.py
+
+    assert PipelineError in USER_ERRORS
+
+
 def test_a_scratch_root_whose_driver_holds_its_lock_is_kept_whatever_its_pid(tmp_path):
     """A driver on another machine sharing the temp folder has a pid that names no process here: its root is
     kept while its lock is held, and removed once released (a dead driver's)."""
