@@ -65,8 +65,21 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
         yield
         _store(blocks, args)
         return
+    from pipelines.experiments.sweep import terminate_as_interrupt
+
     path = calibrations_path()
     before = read_calibration_file(path) if path.exists() else None
+    # A SIGTERM (`timeout`, a job scheduler) or SIGHUP ran no finally: the blocks stayed in force for every
+    # simulate and sweep until the next calibrate found the journal. As Ctrl-C, they are put back now.
+    with terminate_as_interrupt():
+        yield from _stored_for_the_run(blocks, args, path, before)
+
+
+def _stored_for_the_run(
+    blocks: list, args: argparse.Namespace, path: Path, before: list | None
+) -> Iterator[None]:
+    """``storing``'s case of a held-out run that plans with ``blocks``: stored before it, journalled, and
+    the earlier blocks ``before`` put back if it stops."""
     journal, held = _write_journal(path, blocks, before)
     try:
         try:

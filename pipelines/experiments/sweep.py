@@ -267,7 +267,7 @@ def run_sweep(
             return outcome
         scratch = make_scratch_root()
         try:
-            with _terminate_as_interrupt():
+            with terminate_as_interrupt():
                 factory = backend_factory or _default_backend
                 _run_tasks(config, todo, log, outcome, factory, str(scratch), retried, started=add_run)
         except KeyboardInterrupt:
@@ -352,10 +352,11 @@ def _run_tasks(
 
 
 @contextlib.contextmanager
-def _terminate_as_interrupt() -> Iterator[None]:
+def terminate_as_interrupt() -> Iterator[None]:
     """SIGTERM (``kill``) and SIGHUP (a closed terminal) end the sweep like Ctrl-C: the workers are stopped,
-    the scratch removed, multiprocessing's semaphores released, and a rerun resumes. Only the main thread may
-    set signal handlers; elsewhere (a sweep run from a thread) the default actions stay."""
+    the scratch removed, multiprocessing's semaphores released, and a rerun resumes (calibrate's held-out run
+    too: its blocks are taken back). Only the main thread may set signal handlers; elsewhere (a sweep run
+    from a thread) the default actions stay."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -81,6 +81,35 @@ def test_a_stopped_held_out_run_with_no_earlier_file_leaves_no_file_and_no_journ
     assert _journals(tmp_path) == []
 
 
+_TERMINATED_RUN = """
+import os, signal
+from types import SimpleNamespace
+from pipelines.commands.calibrate_store import storing
+from tests.calibration_blocks import class_errors, constant_velocity_block
+errors, motion = class_errors(4)
+blocks = [constant_velocity_block(errors, classes=motion, shortfall=errors)]
+args = SimpleNamespace(dry_run=False, holdout=True, source="closed-loop", predictor="constant_velocity",
+                       alpha=[0.1], holdout_margins="conformal:0.1")
+try:
+    with storing(blocks, args):
+        os.kill(os.getpid(), signal.SIGTERM)  # `timeout` or a job scheduler, during the held-out episodes
+except KeyboardInterrupt:
+    print("interrupted")
+"""
+
+
+def test_a_terminated_held_out_run_puts_the_earlier_blocks_back(tmp_path):
+    """SIGTERM (`timeout`, a job scheduler's stop) ran no finally: the blocks a calibrate stored for its
+    held-out run stayed in force, so every simulate and sweep with --margins conformal:A planned with the
+    unfinished run's margins until the next calibrate found its journal. It now ends the run as Ctrl-C does:
+    the earlier blocks are put back (here: no file, as before) and no journal stays."""
+    zoo = tmp_path / "zoo"
+    env = {**os.environ, "CROWDMPC_ZOO": str(zoo)}
+    done = subprocess.run([sys.executable, "-c", _TERMINATED_RUN], env=env, capture_output=True, text=True)
+    assert done.stdout.splitlines()[-1:] == ["interrupted"], done.stderr[-2000:]
+    assert not (zoo / "calibrations.json").exists() and _journals(zoo) == []
+
+
 def test_a_block_without_class_margins_is_refused_before_anything_is_stored(tmp_path, monkeypatch):
     """The shipped constant_velocity block has margins per motion class: a block without them is not stored
     over it, and the run inside never starts."""
