@@ -156,6 +156,7 @@ def _save_best(
             "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
         }
     }
+    _remove_killed_staging(out, name)
     staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".part", dir=out))
     try:
         written = save_checkpoint(
@@ -166,6 +167,19 @@ def _save_best(
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return out / written[0].name, extra
+
+
+def _remove_killed_staging(out: Path, name: str) -> None:
+    """Remove the staging folders (.NAME.XXXXXXXX.part) of saves in ``out`` that a kill stopped (kill -9, or
+    SIGTERM, which runs no finally): each held a copy of the weights, and stayed through every later run. No
+    other save can be running into ``out``: the caller holds its lock (``one_run_at_a_time``)."""
+    import re
+    import shutil
+
+    staging = re.compile(rf"\.{re.escape(name)}\.[a-z0-9_]{{8}}\.part")
+    for entry in out.iterdir():
+        if staging.fullmatch(entry.name) and entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
 
 
 def _summary(

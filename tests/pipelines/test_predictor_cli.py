@@ -934,3 +934,18 @@ def test_evaluate_help_says_what_its_columns_are(capsys):
     for line in ("ADE, FDE     average and final displacement error", "Col-I        % of scenes", "Col-II"):
         assert line in metrics, line
     assert "prediction collides with a neighbour's prediction" in metrics and "true path" in metrics
+
+
+def test_a_save_stopped_by_a_kill_leaves_no_staging_folder_past_the_next_run(trained):
+    """train writes NAME.pt and NAME.json into a staging folder in --out (.NAME.XXXXXXXX.part) and renames
+    them out of it; a kill -9 or SIGTERM there (no finally runs) left the folder, with a copy of the
+    weights, through every later run. The next save into --out, which holds the run's lock, removes it."""
+    out, args = trained
+    killed = out / ".walker.k1ll3d_0.part"
+    killed.mkdir()
+    (killed / "walker.pt").write_bytes(b"weights of the killed save")
+    other = out / ".walker.part"  # not a staging folder's name: not ours to remove
+    other.mkdir()
+    epochs = args.index("--epochs") + 1
+    assert main([*args[:epochs], "2", *args[epochs + 1 :], "--resume"]) == 0
+    assert not killed.exists() and other.is_dir()
