@@ -8,7 +8,7 @@ import importlib.util
 import sys
 from typing import NoReturn
 
-from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.errors import PipelineError, interrupt_behind, storage_refusal
 
 # The order in which subcommands are listed by --help.
 COMMANDS = (
@@ -192,6 +192,11 @@ def _main(argv: list[str] | None) -> int:
         return 130
     except user_errors() as exc:
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if (refusal := storage_refusal(exc)) is None:  # not a full disk: a bug, with its traceback
+            raise
+        print(f"crowdmpc {args.command}: error: {refusal}", file=sys.stderr)
         return 2
     except Exception as exc:
         if interrupt_behind(exc) is None:  # a bug: its traceback

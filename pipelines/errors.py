@@ -1,6 +1,15 @@
 """Errors a user can cause through the pipelines (bad files, bad options), and the one a sweep stops itself
 with (SweepStopped). Printed without a traceback."""
 
+from __future__ import annotations
+
+import errno
+
+# The errno of a write that the storage refused: a full disk (ENOSPC), a quota (EDQUOT), a file size limit
+# (EFBIG, `ulimit -f`), a file system remounted read-only (EROFS). None is a bug of ours: the user frees space
+# and runs the command again, so the CLI says so in one line rather than in a traceback.
+STORAGE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+
 
 class PipelineError(ValueError):
     """Base class of the user-facing errors raised by `pipelines`."""
@@ -38,3 +47,15 @@ def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return None
+
+
+def storage_refusal(exc: BaseException) -> str | None:
+    """The one line that ends a command whose write the storage refused (``STORAGE_ERRNOS``): the file when
+    the error names it, the cause, and what to do; None for any other error (a bug keeps its traceback)."""
+    if not isinstance(exc, OSError) or exc.errno not in STORAGE_ERRNOS:
+        return None
+    where = f" {exc.filename}" if exc.filename is not None else ""
+    return (
+        f"could not write{where} ({exc.strerror or exc}); free space (or raise the quota, or `ulimit -f`) "
+        "and run the command again"
+    )

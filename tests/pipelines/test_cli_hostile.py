@@ -5,6 +5,7 @@ and a killed sweep's scratch removed by the next one."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import signal
@@ -18,7 +19,7 @@ import pytest
 
 from pipelines.cli import main
 from pipelines.commands import check_writable, write_output
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, storage_refusal
 from pipelines.experiments.log import EPISODES_FILE
 from pipelines.experiments.worker import SCRATCH_PREFIX, remove_stale_scratch
 from pipelines.loop.controllers import ControllerSpec, make_controller
@@ -392,6 +393,34 @@ def test_a_report_that_cannot_be_written_is_one_line_and_keeps_the_earlier_one(t
     ]
     write_output(report, '{"ade": 0.5}\n', "--json")
     assert report.read_text() == '{"ade": 0.5}\n'
+
+
+def test_a_write_the_disk_refuses_ends_the_command_in_one_line(tmp_path, capsys):
+    """A full disk, a quota or `ulimit -f` met by a write with no option of its own behind it (here data
+    synth's scenes; a sweep's report, a zoo's manifest, a checkpoint) ended the command in an OSError
+    traceback: one line with the cause and what to do, exit code 2, nothing left behind."""
+    out = tmp_path / "synth.ndjson"
+    argv = ["data", "synth", "--episodes", "2", "--humans", "3", "--seed", "0", "--out", str(out)]
+    with file_size_limit(4096):
+        code = main(argv)
+    assert code == 2
+    line = capsys.readouterr().err.strip()
+    assert "\n" not in line and line.startswith("crowdmpc data: error: could not write"), line
+    assert line.endswith(
+        "(File too large); free space (or raise the quota, or `ulimit -f`) and run the command again"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_os_error_that_is_no_full_disk_keeps_its_traceback():
+    """Only the storage's refusals are the user's to fix: any other OSError is a bug of ours."""
+    assert storage_refusal(OSError(errno.EBADF, "Bad file descriptor")) is None
+    assert storage_refusal(ValueError("x")) is None
+    full = OSError(errno.ENOSPC, "No space left on device", "/scratch/episodes.jsonl")
+    assert storage_refusal(full) == (
+        "could not write /scratch/episodes.jsonl (No space left on device); free space (or raise the quota, "
+        "or `ulimit -f`) and run the command again"
+    )
 
 
 def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
