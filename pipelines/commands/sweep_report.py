@@ -159,6 +159,8 @@ def episode_rows(path: Path, cells: tuple[Cell, ...], log: LogRead) -> Iterator[
     # each cell once, at its last place and with its last label, as report.episode_rows sorts and labels
     place = {c.key: i for i, c in enumerate(cells)}
     label = {c.key: c.method for c in cells}
+    if not log.columns:  # no episode to read: a new sweep whose every episode raised has no log to open
+        return
     with open(path, "rb") as f:
         for key in sorted(place, key=place.__getitem__):
             for offset, crc in log.columns[key].lines() if key in log.columns else ():

@@ -2,6 +2,7 @@
 the line), never a traceback, and nothing of it is overwritten."""
 
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -237,6 +238,29 @@ def test_a_compile_cache_that_cannot_be_used_is_refused_before_any_worker(tmp_pa
     ]
     assert not out.exists()
     assert main([*argv, "--dry-run"]) == 0  # nothing compiles: nothing to refuse
+
+
+def test_a_new_sweep_whose_few_episodes_all_raised_says_so_without_a_missing_log(
+    tmp_path, capsys, monkeypatch
+):
+    """Fewer episodes than stop a sweep early, all raising (a compile cache on a full disk: each compile's
+    ENOSPC): its report then opened episodes.jsonl, which no episode had made, and the sweep ended in
+    "error: [Errno 2] No such file or directory: .../episodes.jsonl" after pointing at errors.jsonl. The
+    errors' line stands alone now, with exit code 1 and a report of no episodes."""
+
+    def broken(spec, env_config=None, *, jit=False):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr("pipelines.experiments.worker.make_controller", broken)
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "controllers", "--controllers", "cmpc", "--predictor",
+            "constant_velocity", "--humans", "3", "--episodes-per-cell", "2", "--backend", "inline",
+            "--no-progress", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert f"2 episodes raised; see {out / ERRORS_FILE}" in err
+    assert "error:" not in err and not (out / EPISODES_FILE).exists()
+    assert (out / TABLE_MD).is_file()
 
 
 def test_report_only_needs_no_gcc_whatever_jit_says(tmp_path, capsys, monkeypatch):
