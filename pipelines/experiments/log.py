@@ -109,10 +109,17 @@ class EpisodeLog:
         except (TypeError, ValueError) as exc:  # the workers check their records (worker.check_json)
             key = record.get("key") if isinstance(record, dict) else None
             raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
-        with open(self.path, "ab") as f:
-            f.write(line.encode())
-            f.flush()
-            os.fsync(f.fileno())
+        try:
+            with open(self.path, "ab") as f:
+                f.write(line.encode())
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:  # a full disk, a quota, `ulimit -f`: a torn last line, which a resume cuts
+            key = record.get("key")
+            raise PipelineError(
+                f"{self.path}: could not append the record of {key!r} ({exc.strerror or exc}); the episodes "
+                "recorded before it are kept: free space and run the same sweep again to resume"
+            ) from None
 
 
 def error_keys(out: Path) -> set[str]:

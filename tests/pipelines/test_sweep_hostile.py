@@ -21,6 +21,7 @@ from pipelines.experiments.log import (
     LOCK_FILE,
     MCAP_DIR,
     SWEEP_FILE,
+    EpisodeLog,
     episode_log,
     error_keys,
 )
@@ -30,6 +31,7 @@ from predictors.calibration_store import save_calibration
 from predictors.zoo import checkpoints_dir, user_zoo_dir
 from predictors.zoo_edit import add_to_zoo
 from tests.calibration_blocks import constant_velocity_block
+from tests.read_only import file_size_limit
 
 ARGV = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1", "--backend",
         "inline", "--no-progress", "--jit", "off"]  # fmt: skip
@@ -238,6 +240,25 @@ def test_a_compile_cache_that_cannot_be_used_is_refused_before_any_worker(tmp_pa
     ]
     assert not out.exists()
     assert main([*argv, "--dry-run"]) == 0  # nothing compiles: nothing to refuse
+
+
+def test_a_record_the_disk_refuses_names_the_log_and_a_resume_keeps_the_earlier_ones(tmp_path):
+    """An episode's record met by a full disk (here `ulimit -f`) ended the sweep in an OSError traceback,
+    twice over (the failed flush raised again as the file closed): one line now naming the log, the
+    record and that a rerun resumes; the rerun's read cuts the torn line and keeps the earlier records."""
+    log = EpisodeLog(tmp_path / EPISODES_FILE)
+    log.append({"key": "a", "x": 1})
+    size = log.path.stat().st_size
+    with file_size_limit(size + 20), pytest.raises(PipelineError) as caught:
+        log.append({"key": "b", "x": list(range(100))})
+    assert str(caught.value) == (
+        f"{log.path}: could not append the record of 'b' (File too large); the episodes recorded before it "
+        "are kept: free space and run the same sweep again to resume"
+    )
+    assert log.path.stat().st_size == size + 20  # the torn line
+    assert log.load() == {"a": {"key": "a", "x": 1}} and log.path.stat().st_size == size
+    log.append({"key": "b", "x": 2})
+    assert set(log.load()) == {"a", "b"}
 
 
 def test_a_new_sweep_whose_few_episodes_all_raised_says_so_without_a_missing_log(
