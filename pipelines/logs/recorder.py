@@ -158,6 +158,9 @@ class McapRecorder:
         try:
             self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
             self._writer.start(profile="", library="crowdmpc")
+        except OSError as exc:
+            self._stream.close()
+            raise self._unwritten(exc) from None
         except BaseException:
             self._stream.close()
             raise
@@ -191,16 +194,27 @@ class McapRecorder:
             return
         self._closed = True
         try:
-            # the check before the footer: between the footer and the rename a killed run leaves a whole
-            # recording named .part, a window kept to a moment (a .part reads as an unfinished recording)
-            refusal = self._refusal()
-            self._writer.finish()
-            self._stream.flush()
-            if refusal is not None:
-                raise refusal  # the recording is whole, under its .part name
-            os.replace(self.part_path, self.path)
-        finally:
-            self._stream.close()  # the lock goes with it, after the rename
+            try:
+                # the check before the footer: between the footer and the rename a killed run leaves a whole
+                # recording named .part, a window kept to a moment (a .part reads as an unfinished recording)
+                refusal = self._refusal()
+                self._writer.finish()
+                self._stream.flush()
+                if refusal is not None:
+                    raise refusal  # the recording is whole, under its .part name
+                os.replace(self.part_path, self.path)
+            finally:
+                self._stream.close()  # the lock goes with it, after the rename
+        except OSError as exc:
+            raise self._unwritten(exc) from None
+
+    def _unwritten(self, exc: OSError) -> PipelineError:
+        """A write of the file that failed (a full disk, a quota, `ulimit -f`): one line naming it, not
+        mcap's OSError traceback; what was written stays in the ``.part``, an unfinished recording."""
+        return PipelineError(
+            f"cannot record to {self.part_path}: {exc.strerror or exc} (the recording is unfinished); free "
+            "space and run it again"
+        )
 
     def _refusal(self) -> Exception | None:
         """What ``may_replace`` raised for ``path``, if it raised."""
@@ -219,7 +233,10 @@ class McapRecorder:
         bad = {k: v for k, v in data.items() if not isinstance(k, str) or not isinstance(v, str)}
         if bad:
             raise PipelineError(f"metadata {name!r} needs str keys and values; got {bad!r}")
-        self._writer.add_metadata(name, dict(data))
+        try:
+            self._writer.add_metadata(name, dict(data))
+        except OSError as exc:
+            raise self._unwritten(exc) from None
 
     def write(
         self, topic: str, message: Mapping[str, Any], log_time_ns: int, *, schema: MessageSchema
@@ -231,8 +248,7 @@ class McapRecorder:
             data = _ENCODER.encode(message).encode()
         except (TypeError, ValueError) as exc:  # a numpy array, a NaN, ...
             raise PipelineError(f"message on {topic!r} at {log_time_ns} ns is not plain JSON: {exc}") from exc
-        self._writer.add_message(channel_id, log_time=log_time_ns, data=data, publish_time=log_time_ns)
-        self.message_count += 1
+        self._add_message(channel_id, log_time_ns, data)
 
     def write_json(self, topic: str, data: bytes, log_time_ns: int, *, schema: MessageSchema) -> None:
         """Like ``write`` for a message already encoded as JSON text (hot paths that format it directly).
@@ -240,7 +256,13 @@ class McapRecorder:
         The text is not parsed here; ``crowdmpc review --check`` validates it.
         """
         channel_id = self._channel_id(topic, schema, log_time_ns)
-        self._writer.add_message(channel_id, log_time=log_time_ns, data=data, publish_time=log_time_ns)
+        self._add_message(channel_id, log_time_ns, data)
+
+    def _add_message(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
+        try:  # a chunk is written out when full: the write that may meet a full disk
+            self._writer.add_message(channel_id, log_time=log_time_ns, data=data, publish_time=log_time_ns)
+        except OSError as exc:
+            raise self._unwritten(exc) from None
         self.message_count += 1
 
     def _channel_id(self, topic: str, schema: MessageSchema, log_time_ns: int) -> int:

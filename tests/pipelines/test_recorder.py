@@ -13,6 +13,7 @@ from pipelines.logs.reader import MAGIC, read_recording
 from pipelines.logs.recorder import DEFAULT_COMPRESSION, McapRecorder
 from pipelines.logs.schemas import HUMANS, PREDICTION, ROBOTS, MessageSchema
 from pipelines.logs.view import episode_view
+from tests.read_only import file_size_limit
 
 ROBOT_MESSAGE = {
     "time": 0.4,
@@ -329,3 +330,19 @@ def test_a_recorder_this_program_left_open_is_named_in_the_refusal(tmp_path):
         f"cannot record to {tmp_path / 'a.mcap.part'}: another run is recording that episode into this "
         "folder now; record into another folder"
     )
+
+
+def test_a_write_the_disk_refuses_names_the_unfinished_recording(tmp_path):
+    """A chunk (or the footer) met by a full disk, a quota or `ulimit -f` ended `simulate --record` in
+    mcap's OSError traceback: one line now naming the ``.part`` it was writing, which keeps what was
+    written, and no file under the final name."""
+    path = tmp_path / "a.mcap"
+    part = tmp_path / "a.mcap.part"
+    expected = f"^cannot record to {part}: File too large \\(the recording is unfinished\\); free space"
+    rec = McapRecorder(path, chunk_size=1024, compression=CompressionType.NONE)
+    with file_size_limit(4096), pytest.raises(PipelineError, match=expected):
+        for k in range(100):
+            rec.write("/robots", {**ROBOT_MESSAGE, "step": k}, k, schema=ROBOTS)
+    with file_size_limit(part.stat().st_size), pytest.raises(PipelineError, match=expected):
+        rec.close()  # the summary and footer no longer fit
+    assert rec.closed and not path.exists() and part.stat().st_size > 0
