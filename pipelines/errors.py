@@ -54,7 +54,10 @@ def storage_refusal(exc: BaseException) -> str | None:
     the error names it, the cause, and what to do; None for any other error (a bug keeps its traceback)."""
     if not isinstance(exc, OSError) or exc.errno not in STORAGE_ERRNOS:
         return None
-    where = f" {exc.filename}" if exc.filename is not None else ""
+    # a copy's (shutil.move across file systems, as Lightning's checkpoint save does) names its source first,
+    # and the file that could not be written second
+    target = exc.filename2 if exc.filename2 is not None else exc.filename
+    where = f" {target}" if target is not None else ""
     return (
         f"could not write{where} ({exc.strerror or exc}); free space (or raise the quota, or `ulimit -f`) "
         "and run the command again"

@@ -421,6 +421,9 @@ def test_an_os_error_that_is_no_full_disk_keeps_its_traceback():
         "could not write /scratch/episodes.jsonl (No space left on device); free space (or raise the quota, "
         "or `ulimit -f`) and run the command again"
     )
+    # shutil's copy names the source it read first: the refused file is the second
+    copy = OSError(errno.ENOSPC, "No space left on device", "/tmp/tmpabc", None, "/runs/ckpt/last.ckpt")
+    assert storage_refusal(copy).startswith("could not write /runs/ckpt/last.ckpt (No space")
 
 
 def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
