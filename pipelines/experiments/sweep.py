@@ -147,6 +147,11 @@ def _write_atomic(path: Path, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+    except OSError as exc:  # a full disk, a quota, `ulimit -f`: a write's OSError names no file
+        raise PipelineError(
+            f"{path}: could not write the episode's recording ({exc.strerror or exc}); the episodes recorded "
+            "before it are kept: free space and run the same sweep again to resume"
+        ) from None
     finally:
         tmp.unlink(missing_ok=True)
 

@@ -261,6 +261,23 @@ def test_a_record_the_disk_refuses_names_the_log_and_a_resume_keeps_the_earlier_
     assert set(log.load()) == {"a", "b"}
 
 
+def test_a_recording_the_disk_refuses_names_it_and_leaves_no_part(tmp_path):
+    """`sweep --record` on a full disk ended in "could not write (No space left on device)" at best, naming
+    no file (a write's OSError has none): one line naming the episode's recording now, no .part left, an
+    earlier recording of that name as it was."""
+    from pipelines.experiments.sweep import _write_atomic
+
+    path = tmp_path / MCAP_DIR / "a.mcap"
+    _write_atomic(path, b"old")
+    with file_size_limit(100), pytest.raises(PipelineError) as caught:
+        _write_atomic(path, bytes(1000))
+    assert str(caught.value) == (
+        f"{path}: could not write the episode's recording (File too large); the episodes recorded before it "
+        "are kept: free space and run the same sweep again to resume"
+    )
+    assert path.read_bytes() == b"old" and [p.name for p in path.parent.iterdir()] == ["a.mcap"]
+
+
 def test_a_new_sweep_whose_few_episodes_all_raised_says_so_without_a_missing_log(
     tmp_path, capsys, monkeypatch
 ):
