@@ -314,13 +314,25 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
         for path, hidden in zip(doomed, parked, strict=True):
             if path.exists() or path.is_symlink():
                 os.replace(path, hidden)
-        write_manifest(entries, root)
+        try:
+            write_manifest(entries, root)
+        except OSError:  # a full disk, a quota: the manifest as it was, so the entry's files go back
+            _put_back(doomed, parked)
+            raise
         for hidden in parked:
             hidden.unlink(missing_ok=True)
         for model, path in leftover_files(root):  # an earlier add or remove of it stopped on the way
             if model == name:
                 path.unlink(missing_ok=True)
     return entry, root
+
+
+def _put_back(doomed: list[Path], parked: list[Path]) -> None:
+    """The files of an entry a remove had parked, back under their names: the manifest that would have
+    dropped the entry could not be written, and an entry whose files are gone loads nowhere."""
+    for path, hidden in zip(doomed, parked, strict=True):
+        if os.path.lexists(hidden):
+            os.replace(hidden, path)
 
 
 def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:

@@ -25,6 +25,7 @@ from predictors import manifest, zoo, zoo_edit
 from predictors.calibration_store import CALIBRATIONS_NAME
 from predictors.errors import PredictorError
 from tests.predictors.test_zoo import retrained  # its metrics are the pair's: here an empty file
+from tests.read_only import file_size_limit
 
 REPO = Path(__file__).resolve().parents[2]
 REAL_ZOO = REPO / "checkpoints"
@@ -254,6 +255,20 @@ def test_a_remove_interrupted_after_its_manifest_write_is_finished_by_remove(use
     assert sorted(p.name for p in user.iterdir()) == sorted(own)
     code, _, line = cli(["zoo", "remove", "mine"], capsys)
     assert code == 2 and "has no entry 'mine'" in line
+
+
+def test_a_remove_whose_manifest_the_disk_refuses_leaves_the_entry_whole(user, capsys):
+    """`zoo remove mine` on a full disk (here `ulimit -f`, below the manifest's size) renamed the model's
+    files away, then failed to write the manifest: "mine" was still listed, its files gone (every command
+    using it said "checkpoint file .../mine.pt does not exist"), and two hidden copies left. The files go
+    back now: the zoo as it was, and one line."""
+    before = snapshot(user)
+    with file_size_limit(16):  # the manifest without "mine" is longer
+        code, _, line = cli(["zoo", "remove", "mine"], capsys)
+    assert (
+        code == 2 and line.startswith("crowdmpc zoo: error: could not write") and "(File too large)" in line
+    )
+    assert snapshot(user) == before and zoo.verify(user)[-1] == ("mine", None)
 
 
 def test_verify_names_the_leftovers_of_a_stopped_remove(user, monkeypatch, capsys):
