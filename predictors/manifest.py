@@ -205,6 +205,11 @@ def write_manifest(entries: dict[str, ZooEntry], directory: str | Path) -> Path:
     try:
         tmp.write_text(json.dumps(document, indent=2) + "\n")
         tmp.replace(path)
+    except OSError as exc:
+        if exc.filename is not None:  # a name is given already (the temporary's, at its open or rename)
+            raise
+        # a write's error names no file: the manifest's, for the CLI's line (a full disk: "could not write")
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     finally:
         tmp.unlink(missing_ok=True)  # a full disk leaves no half-written temporary behind
     return path

@@ -271,6 +271,14 @@ def test_a_remove_whose_manifest_the_disk_refuses_leaves_the_entry_whole(user, c
     assert snapshot(user) == before and zoo.verify(user)[-1] == ("mine", None)
 
 
+def test_a_manifest_the_disk_refuses_is_named(user, capsys):
+    """A write's OSError names no file: the full disk's line said "could not write (File too large)" of a
+    zoo add or remove, leaving the user to guess which file; it names the zoo's manifest now."""
+    with file_size_limit(16):
+        code, _, line = cli(["zoo", "remove", "mine"], capsys)
+    assert code == 2 and f"could not write {user / manifest.MANIFEST_NAME} (File too large)" in line
+
+
 def test_verify_names_the_leftovers_of_a_stopped_remove(user, monkeypatch, capsys):
     """`zoo verify` listed the entries only: the hidden copies a stopped remove left (as large as the model)
     were named by no line, and a user learnt of them only by a second `zoo remove mine`."""
