@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.data.trajnet_io import iter_scenes, validate_ndjson
+from predictors.data.trajnet_io import scenes_of
+from predictors.data.validate import parse_ndjson
 from predictors.errors import PredictorError
 from predictors.text_table import aligned_lines
 
@@ -25,10 +26,11 @@ class FileStats:
 
 
 def file_stats(path: str | Path) -> FileStats:
-    summary = validate_ndjson(path)
+    content = parse_ndjson(path)  # once: the scenes are built from the rows it checked
+    summary = content.summary
     sizes: list[int] = []  # a scene at a time: a large file's scenes are GBs as arrays
     types = [0, 0, 0, 0]
-    for scene in iter_scenes(path):
+    for scene in scenes_of(content):
         sizes.append(scene.xy.shape[1])
         kind = scene_type(scene.tag)
         if kind is not None:

@@ -36,6 +36,7 @@ __all__ = [
     "NdjsonSummary",
     "Scene",
     "read_scenes",
+    "scenes_of",
     "validate_ndjson",
 ]
 
@@ -97,7 +98,14 @@ def iter_scenes(
     With ``require_fps``, so does a scene whose row gives another frame rate (one without "fps" passes, as
     the format allows): the predictors learn and score displacements per step of 1 / fps seconds.
     """
-    content = parse_ndjson(path)
+    yield from scenes_of(parse_ndjson(path), require_length=require_length, require_fps=require_fps)
+
+
+def scenes_of(
+    content: NdjsonContent, *, require_length: int | None = None, require_fps: float | None = None
+) -> Iterator[Scene]:
+    """``iter_scenes`` of a file ``parse_ndjson`` has already read: a caller that needs its summary too
+    (``data stats``) parses it once, not twice."""
     summary = content.summary
     reader = _CheckedReader(content, scene_type="paths")
     for scene_id, paths in reader.scenes():
