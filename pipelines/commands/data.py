@@ -236,7 +236,8 @@ def run_stats(args: argparse.Namespace) -> int:
 
     _check_prepared_files(args.directory)
     files = ndjson_files(args.directory)
-    print(format_table([file_stats(f) for f in files], root=args.directory))
+    # a bar on a terminal only (None), so that a piped table stays clean
+    print(format_table([file_stats(f, progress=None) for f in files], root=args.directory))
     return 0
 
 
