@@ -246,7 +246,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.resume and last.is_file():
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
-    _check_data(files)
+    _check_data(files, progress=False if args.no_progress else None)
     from pipelines.commands.train_resume import run_settings
 
     settings = run_settings(args, net_config, name, files)
@@ -308,14 +308,15 @@ def _protocol_options(args: argparse.Namespace, explicit: bool) -> None:
     args.dataset = args.dataset or DEFAULT_DATASET
 
 
-def _check_data(files: dict[str, list[Path]]) -> None:
+def _check_data(files: dict[str, list[Path]], progress: bool | None = False) -> None:
     """Every data file is read as the run will read it, and the training and validation splits hold scenes,
     before Lightning starts (its banner would come before the one-line error, and a half-made run folder
     after it). The training and validation files are loaded as the training data module loads them
     (``load_file_arrays``: scenes of exactly 21 steps), which keeps them for it: read once, not twice. The
     validation and test files are also read as the evaluation of the trained net reads them (scene length,
     frame rate, spacing): a file it refuses, such as a TrajNet++ test/ file without ground truth, was found
-    only after training, with no metrics written."""
+    only after training, with no metrics written. ``progress``: a bar while a file's scenes are built (None:
+    on a terminal only), the first read of a large file being a minute of silence otherwise."""
     from predictors.data.windows import load_file_arrays
     from predictors.evaluate import load_eval_scenes
 
@@ -323,7 +324,7 @@ def _check_data(files: dict[str, list[Path]]) -> None:
         if split != "train":  # first: its message tells a test/ file without ground truth
             held = [bool(load_eval_scenes(path)) for path in paths]
         if split != "test":
-            held = [len(load_file_arrays(path)) > 0 for path in paths]
+            held = [len(load_file_arrays(path, progress=progress)) > 0 for path in paths]
         if split in ("train", "val") and not any(held):
             names = ", ".join(str(p) for p in paths)
             raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")

@@ -7,7 +7,7 @@ index 0. Positions are expressed in a scene frame: translated so that the primar
 -- pedestrian motion has no preferred heading, so rotations are free extra data. Missing entries (an agent
 absent at a step) are 0 with ``mask`` False, never NaN.
 
-Loading parses each file once (through ``trajnet_io.read_scenes``, i.e. ``trajnetplusplustools.Reader``)
+Loading parses each file once (through ``trajnet_io.scenes_of``, i.e. ``trajnetplusplustools.Reader``)
 and keeps the arrays: in memory for the process, and on disk under ``<cache>/scenes/<sha256 of the file>``
 (``$CROWDMPC_CACHE`` or ``~/.cache/crowdmpc``) so the next run skips parsing.
 """
@@ -31,10 +31,11 @@ from torch.utils.data import Dataset, Sampler
 
 from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH
 from predictors.data.locate import cache_root
-from predictors.data.trajnet_io import iter_scenes
-from predictors.data.validate import read_error, require_file
+from predictors.data.trajnet_io import scenes_of
+from predictors.data.validate import parse_ndjson, read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
+from predictors.progress import progress_bar
 
 CACHE_VERSION: Final[str] = "scenes-v4"  # bump when FileArrays' layout or the validation changes
 
@@ -70,9 +71,15 @@ def _remember(key: tuple[str, int, int, int], arrays: FileArrays) -> FileArrays:
 
 
 def load_file_arrays(
-    path: str | Path, *, scene_length: int = SCENE_LENGTH, disk_cache: bool = True
+    path: str | Path,
+    *,
+    scene_length: int = SCENE_LENGTH,
+    disk_cache: bool = True,
+    progress: bool | None = False,
 ) -> FileArrays:
-    """The scenes of ``path`` as arrays; every primary must span ``scene_length`` evenly spaced frames."""
+    """The scenes of ``path`` as arrays; every primary must span ``scene_length`` evenly spaced frames.
+    ``progress``: a bar over the scenes while they are built (None: on a terminal only); a cached file has
+    none to show. Building costs time in scenes x agents: a file of dense crowds takes a minute."""
     path = require_file(path)
     try:
         stat = path.stat()
@@ -90,7 +97,16 @@ def load_file_arrays(
             return _remember(key, arrays)
     # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
     xys, ids = [np.empty((scene_length, 0, 2), dtype=np.float32)], []
-    for scene in iter_scenes(path, require_length=scene_length, require_fps=1 / DT):
+    content = parse_ndjson(path)
+    scenes = progress_bar(
+        scenes_of(content, require_length=scene_length, require_fps=1 / DT),
+        total=len(content.summary.scene_lines),
+        desc=f"reading {path.name}",
+        unit="scene",
+        leave=False,
+        show=progress,
+    )
+    for scene in scenes:
         xys.append(scene.xy.astype(np.float32))
         ids.append(scene.id)
     sizes = np.asarray([xy.shape[1] for xy in xys[1:]], dtype=np.int64)
