@@ -13,15 +13,7 @@ from pipelines.cli import main
 from pipelines.commands.sweep_plan import configured_experiment
 from pipelines.config import load
 from pipelines.experiments.cells import get_experiment
-
-SWEEP = ["sweep", "--humans", "5", "--episodes-per-cell", "2", "--dry-run"]
-
-
-def _plan(capsys, *options: str) -> dict[str, str]:
-    """The dry run's cells: method label -> cell key."""
-    assert main([*SWEEP, *options]) == 0
-    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
-    return {" ".join(row[:-3]): row[-1] for row in rows}
+from tests.pipelines.test_sweep_vary import SWEEP, _plan
 
 
 def test_every_method_gets_a_column_per_number_of_robots_each_the_cell_robots_makes(tmp_path, capsys):
