@@ -226,6 +226,12 @@ def write_report_of(
             os.replace(staging / name, out / name)
         for name in sorted(report_plot_names() - set(written)):
             (out / name).unlink(missing_ok=True)  # an earlier report's, of cells this one does not have
+    except OSError as exc:
+        if exc.filename is not None:
+            raise
+        # a write's error names no file (a full disk, `ulimit -f`): the report's folder, for the CLI's line;
+        # the files renamed before it are this report's, the others the earlier one's, each whole
+        raise OSError(exc.errno, exc.strerror, str(out)) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return Report(markdown, tuple(out / name for name in written))

@@ -292,3 +292,22 @@ def test_review_checks_its_output_paths_before_reading(tmp_path, capsys, option,
     assert main(["review", str(missing), option, str(blocked / name)]) == 2
     err = capsys.readouterr().err
     assert message.format(blocked=blocked) in err and "no such recording" not in err
+
+
+def test_a_report_the_disk_refuses_names_its_folder_and_keeps_the_earlier_one(tmp_path):
+    """A full disk (here `ulimit -f`) failed the report with an OSError naming no file, and the CLI's line
+    said "could not write (File too large)"; it names the report's folder, whose earlier files stay whole."""
+    import errno
+
+    from tests.read_only import file_size_limit
+
+    table2 = get_experiment("table2")
+    cells = [c for c in table2.cells() if c.n_humans == 5]
+    records = _records(table2, {(c.method, 5): EPISODES for c in cells})
+    write_report(tmp_path, table2, cells, records)
+    before = (tmp_path / "table.md").read_text()
+    with file_size_limit(1024), pytest.raises(OSError) as refused:
+        write_report(tmp_path, table2, cells, records)
+    assert (refused.value.errno, refused.value.filename) == (errno.EFBIG, str(tmp_path))
+    assert (tmp_path / "table.md").read_text() == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging folder left
