@@ -208,6 +208,10 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
     try:
         tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
         os.replace(tmp, path)
+    except OSError as exc:  # a full disk: a write's error names no file, the CLI's line then none
+        if exc.filename is not None:
+            raise
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     finally:  # stopped before the replace: the half-written file is nobody's
         tmp.unlink(missing_ok=True)
     return len(meta["runs"])

@@ -597,3 +597,19 @@ def test_margins_without_a_calibration_are_refused_before_the_sweep_starts(mode,
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "no closed-loop calibration at alpha=0.3" in err[0]
     assert not out.exists()
+
+
+def test_a_run_line_the_disk_refuses_names_sweep_json_and_keeps_it(tmp_path, capsys):
+    """A rerun whose new line of sweep.json met a full disk (here `ulimit -f`) said "could not write (File too
+    large)", naming no file: now sweep.json, which stays as it was."""
+    out = tmp_path / "sw"
+    argv = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "2"]
+    argv += ["--backend", "inline", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    before = (out / SWEEP_FILE).read_text()
+    capsys.readouterr()
+    with file_size_limit(len(before) + 10):  # a second run's line does not fit
+        assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"crowdmpc sweep: error: could not write {out / SWEEP_FILE} (File too large)")
+    assert (out / SWEEP_FILE).read_text() == before
