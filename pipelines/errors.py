@@ -3,7 +3,9 @@ with (SweepStopped). Printed without a traceback."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
+from collections.abc import Iterator
 
 # The errno of a write that the storage refused: a full disk (ENOSPC), a quota (EDQUOT), a file size limit
 # (EFBIG, `ulimit -f`), a file system remounted read-only (EROFS). None is a bug of ours: the user frees space
@@ -62,3 +64,16 @@ def storage_refusal(exc: BaseException) -> str | None:
         f"could not write{where} ({exc.strerror or exc}); free space (or raise the quota, or `ulimit -f`) "
         "and run the command again"
     )
+
+
+@contextlib.contextmanager
+def writes_named(path: object) -> Iterator[None]:
+    """An ``OSError`` of a write inside the block that names no file (a full disk fails ``write`` itself,
+    whose error carries none) raised again naming ``path``, the output it was making, so that the CLI's
+    line (``storage_refusal``) says which; one that names a file already passes as it is."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is not None:
+            raise
+        raise OSError(exc.errno, exc.strerror, str(path)) from None

@@ -14,7 +14,7 @@ from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
 from pipelines.commands.evaluate import counted
 from pipelines.commands.output_paths import output_arg
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, writes_named
 
 PART_SUFFIX: Final[str] = ".part"  # a file's name until it is complete
 # How much longer than --out's name data synth's longest temporary name is: write_ndjson's own temporary
@@ -159,7 +159,8 @@ def run_prepare(args: argparse.Namespace) -> int:
             "as TrajNet++ ndjson and give it to train --train/--val or evaluate --test (data/README.md, "
             "'Your own data')"
         )
-    with _one_prepare_at_a_time(args.out):
+    # a full disk's error names --out (a write's names no file)
+    with _one_prepare_at_a_time(args.out), writes_named(args.out):
         _check_prepare_target(args.out)
         references = {} if args.no_check else default_references(raw)
         manifest = prepare_ewap(
@@ -282,24 +283,25 @@ def run_synth(args: argparse.Namespace) -> int:
     # provenance is: data at --out always has its provenance beside it, and the provenance is its own.
     staged = args.out.with_name(f".{args.out.name}.synth-{os.getpid()}{PART_SUFFIX}")
     _remove_dead_staged(args.out)
-    try:
-        summary = synthesize(
-            staged,
-            args.episodes,
-            args.humans,
-            args.seed,
-            scenario=args.scenario,
-            with_robots=args.with_robots,
-            env_config=make_env_config(args.profile),
-        )
-        if "path" in summary:
-            summary["path"] = str(args.out)
-        provenance.unlink(missing_ok=True)  # the old data goes without provenance, never beside the new
-        args.out.unlink(missing_ok=True)
-        _write_provenance(args, summary, provenance, staged)
-        os.replace(staged, args.out)
-    finally:
-        staged.unlink(missing_ok=True)
+    with writes_named(args.out):  # a full disk's error names --out (a write's names no file)
+        try:
+            summary = synthesize(
+                staged,
+                args.episodes,
+                args.humans,
+                args.seed,
+                scenario=args.scenario,
+                with_robots=args.with_robots,
+                env_config=make_env_config(args.profile),
+            )
+            if "path" in summary:
+                summary["path"] = str(args.out)
+            provenance.unlink(missing_ok=True)  # the old data goes without provenance, never beside the new
+            args.out.unlink(missing_ok=True)
+            _write_provenance(args, summary, provenance, staged)
+            os.replace(staged, args.out)
+        finally:
+            staged.unlink(missing_ok=True)
     for key, value in summary.items():
         print(f"{key}: {value}")
     print(f"provenance: {provenance}")

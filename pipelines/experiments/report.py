@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from crowdsim.metrics import BETWEEN_STEPS, ROBOT_CONTACT
+from pipelines.errors import writes_named
 from pipelines.experiments import safety_plots
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import Experiment
@@ -212,29 +213,38 @@ def write_report_of(
     # a killed report's: not one another process writes now, here or on another machine
     remove_stale_scratch(out, STAGING_PREFIX, older_than_s=STALE_STAGING_S)
     staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
-    try:
-        write_csv(staging / CELLS_CSV, cell_rows(summaries))
-        write_csv(staging / EPISODES_CSV, rows)
-        (staging / TABLE_MD).write_text(markdown)
-        write_csv(staging / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
-        written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]
-        if summaries:
-            plots = plot_outcomes(experiment, summaries, staging)
-            plots += safety_plots.plot_safety(experiment, summaries, staging)
-            written += [plot.name for plot in plots]
-        for name in written:
-            os.replace(staging / name, out / name)
-        for name in sorted(report_plot_names() - set(written)):
-            (out / name).unlink(missing_ok=True)  # an earlier report's, of cells this one does not have
-    except OSError as exc:
-        if exc.filename is not None:
-            raise
-        # a write's error names no file (a full disk, `ulimit -f`): the report's folder, for the CLI's line;
-        # the files renamed before it are this report's, the others the earlier one's, each whole
-        raise OSError(exc.errno, exc.strerror, str(out)) from None
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    # a full disk's error names the report's folder: the files renamed before it are this report's, the
+    # others the earlier one's, each whole
+    with writes_named(out):
+        try:
+            written = _write_staged(staging, experiment, summaries, rows, markdown)
+            for name in written:
+                os.replace(staging / name, out / name)
+            for name in sorted(report_plot_names() - set(written)):
+                (out / name).unlink(missing_ok=True)  # an earlier report's, of cells this one does not have
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     return Report(markdown, tuple(out / name for name in written))
+
+
+def _write_staged(
+    staging: Path,
+    experiment: Experiment,
+    summaries: Sequence[CellSummary],
+    rows: Iterable[dict[str, Any]],
+    markdown: str,
+) -> list[str]:
+    """Every file of the report into ``staging``; their names."""
+    write_csv(staging / CELLS_CSV, cell_rows(summaries))
+    write_csv(staging / EPISODES_CSV, rows)
+    (staging / TABLE_MD).write_text(markdown)
+    write_csv(staging / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
+    written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]
+    if summaries:
+        plots = plot_outcomes(experiment, summaries, staging)
+        plots += safety_plots.plot_safety(experiment, summaries, staging)
+        written += [plot.name for plot in plots]
+    return written
 
 
 def report_plot_names() -> set[str]:

@@ -32,7 +32,7 @@ from typing import Any, Final
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.errors import PipelineError, SweepStopped
+from pipelines.errors import PipelineError, SweepStopped, writes_named
 from pipelines.experiments.backends import BACKENDS, Backend, check_backend, make_backend
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
@@ -205,15 +205,12 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
         }
     )
     tmp = path.with_suffix(path.suffix + PART_SUFFIX)
-    try:
-        tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
-        os.replace(tmp, path)
-    except OSError as exc:  # a full disk: a write's error names no file, the CLI's line then none
-        if exc.filename is not None:
-            raise
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
-    finally:  # stopped before the replace: the half-written file is nobody's
-        tmp.unlink(missing_ok=True)
+    with writes_named(path):  # a full disk's error names sweep.json, which stays as it was
+        try:
+            tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
+            os.replace(tmp, path)
+        finally:  # stopped before the replace: the half-written file is nobody's
+            tmp.unlink(missing_ok=True)
     return len(meta["runs"])
 
 

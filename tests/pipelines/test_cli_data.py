@@ -667,3 +667,22 @@ def test_evaluate_test_file_named_twice_is_refused(tmp_path, monkeypatch, capsys
         capsys, "evaluate", "--predictor", "constant_velocity", "--test", "a.ndjson", str(data)
     )
     assert_one_line_error(code, err, f"--test names {data} more than once (as a.ndjson)")
+
+
+@pytest.mark.parametrize("command", ["synth", "prepare"])
+def test_data_the_disk_refuses_names_out(tmp_path, capsys, command):
+    """A full disk (here `ulimit -f`) ended `data synth` and `data prepare` in "could not write (File too
+    large)", naming nothing: the line names --out now, and nothing is left at it."""
+    from tests.read_only import file_size_limit
+
+    out = tmp_path / ("s.ndjson" if command == "synth" else "prepared")
+    if command == "synth":
+        argv = ["data", "synth", "--out", str(out), "--episodes", "2", "--humans", "3", "--seed", "0"]
+    else:
+        raw = Path(os.environ.get("CROWDMPC_DATA", "../shared/data")) / "raw_ewap"
+        argv = ["data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags", "--no-check"]
+    with file_size_limit(200):
+        assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"crowdmpc data: error: could not write {out.resolve()} (File too large)")
+    assert not out.exists() or not any(out.iterdir())
