@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.data.trajnet_io import scenes_of
+from predictors.data.trajnet_io import shown_scenes
 from predictors.data.validate import parse_ndjson
 from predictors.errors import PredictorError
-from predictors.progress import progress_bar
 from predictors.text_table import aligned_lines
 
 
@@ -33,15 +32,7 @@ def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
     summary = content.summary
     sizes: list[int] = []  # a scene at a time: a large file's scenes are GBs as arrays
     types = [0, 0, 0, 0]
-    scenes = progress_bar(
-        scenes_of(content),
-        total=len(summary.scene_lines),
-        desc=f"reading {Path(path).name}",
-        unit="scene",
-        leave=False,
-        show=progress,
-    )
-    for scene in scenes:
+    for scene in shown_scenes(content, progress):
         sizes.append(scene.xy.shape[1])
         kind = scene_type(scene.tag)
         if kind is not None:

@@ -16,6 +16,7 @@ from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from trajnetplusplustools import Reader
@@ -29,6 +30,7 @@ from predictors.data.validate import (
     validate_ndjson,
 )
 from predictors.errors import DatasetFormatError
+from predictors.progress import progress_bar
 
 __all__ = [
     "SCENE_KEYS",
@@ -37,6 +39,7 @@ __all__ = [
     "Scene",
     "read_scenes",
     "scenes_of",
+    "shown_scenes",
     "validate_ndjson",
 ]
 
@@ -99,6 +102,19 @@ def iter_scenes(
     the format allows): the predictors learn and score displacements per step of 1 / fps seconds.
     """
     yield from scenes_of(parse_ndjson(path), require_length=require_length, require_fps=require_fps)
+
+
+def shown_scenes(content: NdjsonContent, progress: bool | None, **requirements: Any) -> Iterator[Scene]:
+    """``scenes_of`` (with its ``requirements``) behind a bar over the file's scenes; ``progress`` None: on a
+    terminal only. Building a scene costs time in its rows: a file of dense crowds takes a minute or more."""
+    return progress_bar(
+        scenes_of(content, **requirements),
+        total=len(content.summary.scene_lines),
+        desc=f"reading {content.summary.path.name}",
+        unit="scene",
+        leave=False,
+        show=progress,
+    )
 
 
 def scenes_of(

@@ -31,11 +31,10 @@ from torch.utils.data import Dataset, Sampler
 
 from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH
 from predictors.data.locate import cache_root
-from predictors.data.trajnet_io import scenes_of
+from predictors.data.trajnet_io import shown_scenes
 from predictors.data.validate import parse_ndjson, read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
-from predictors.progress import progress_bar
 
 CACHE_VERSION: Final[str] = "scenes-v4"  # bump when FileArrays' layout or the validation changes
 
@@ -98,15 +97,7 @@ def load_file_arrays(
     # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
     xys, ids = [np.empty((scene_length, 0, 2), dtype=np.float32)], []
     content = parse_ndjson(path)
-    scenes = progress_bar(
-        scenes_of(content, require_length=scene_length, require_fps=1 / DT),
-        total=len(content.summary.scene_lines),
-        desc=f"reading {path.name}",
-        unit="scene",
-        leave=False,
-        show=progress,
-    )
-    for scene in scenes:
+    for scene in shown_scenes(content, progress, require_length=scene_length, require_fps=1 / DT):
         xys.append(scene.xy.astype(np.float32))
         ids.append(scene.id)
     sizes = np.asarray([xy.shape[1] for xy in xys[1:]], dtype=np.int64)
