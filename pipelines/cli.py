@@ -185,8 +185,11 @@ def _main(argv: list[str] | None) -> int:
         return 2
     if (args.config_file or args.config_set) and args.command not in ("simulate", "sweep", "config"):
         parser.error(f"--config and --set apply to simulate, sweep and config, not {args.command}")
+    from pipelines.loop.interrupt import terminate_as_interrupt
+
     try:
-        return int(args.func(args) or 0)
+        with terminate_as_interrupt():  # `kill`, `timeout`: what Ctrl-C keeps is kept (finished episodes)
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:  # first: the clause below may import its errors' packages
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -65,7 +65,7 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
         yield
         _store(blocks, args)
         return
-    from pipelines.experiments.sweep import terminate_as_interrupt
+    from pipelines.loop.interrupt import terminate_as_interrupt
 
     path = calibrations_path()
     before = read_calibration_file(path) if path.exists() else None

@@ -17,15 +17,12 @@ sweep's records must match: the predictor weights and margins its cells plan wit
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
 import os
-import signal
 import sys
-import threading
 import time
-from collections.abc import Callable, Collection, Iterator, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -50,6 +47,7 @@ from pipelines.experiments.log import (
 from pipelines.experiments.resume_checks import ResumeChecks
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root, release_scratch_root
+from pipelines.loop.interrupt import terminate_as_interrupt
 from pipelines.plain_json import plain
 from predictors.progress import progress_bar
 
@@ -355,28 +353,6 @@ def _run_tasks(
         if bar is not None:
             bar.close()
         backend.close()
-
-
-@contextlib.contextmanager
-def terminate_as_interrupt() -> Iterator[None]:
-    """SIGTERM (``kill``) and SIGHUP (a closed terminal) end the sweep like Ctrl-C: the workers are stopped,
-    the scratch removed, multiprocessing's semaphores released, and a rerun resumes (calibrate's held-out run
-    too: its blocks are taken back). Only the main thread may set signal handlers; elsewhere (a sweep run
-    from a thread) the default actions stay."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt(signal.Signals(signum).name)
-
-    signals = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
-    saved = {s: signal.signal(s, interrupt) for s in signals}
-    try:
-        yield
-    finally:
-        for s, handler in saved.items():
-            signal.signal(s, handler)
 
 
 def _default_backend(config: SweepConfig, scratch: str) -> Backend:

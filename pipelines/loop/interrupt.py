@@ -9,6 +9,10 @@ second Ctrl-C before then is raised at once, for a user who will not wait.
 
 Only in the main thread (the only one that may set a handler) and only while SIGINT has Python's default
 handler: a program, a sweep worker or a test that set its own keeps it, and gets the interrupt as before.
+
+SIGTERM (``kill``, ``timeout``, a job scheduler's stop) and SIGHUP (a closed terminal) are taken as a Ctrl-C
+(``terminate_as_interrupt``): the default action ended the process at once, with no finally run, so an
+interrupted ``crowdmpc simulate`` lost the episodes it had finished and left its MCAP log as a ``.part``.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import signal
 import threading
 from collections.abc import Iterator
 from types import FrameType
+from typing import Any
 
 
 class StepInterrupt:
@@ -55,3 +60,29 @@ def interrupts_between_steps() -> Iterator[StepInterrupt]:
     finally:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     step.check()  # noted after the last step's check, the block ending normally
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP end the block like Ctrl-C: a sweep stops its workers, removes its scratch and
+    resumes on a rerun; calibrate takes its blocks back; simulate reports the episodes it finished. During an
+    episode's step the signal is noted as a Ctrl-C is (``interrupts_between_steps``), so that CasADi prints
+    nothing of its own. Only the main thread may set signal handlers; elsewhere the default actions stay."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        step = getattr(signal.getsignal(signal.SIGINT), "__self__", None)  # interrupts_between_steps' note
+        if isinstance(step, StepInterrupt):
+            step.note(signal.SIGINT, frame)
+            return
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    signals = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    saved = {s: signal.signal(s, interrupt) for s in signals}
+    try:
+        yield
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)

@@ -1,10 +1,16 @@
 """Ctrl-C during an episode is raised where the step in progress ends (pipelines/loop/interrupt.py): CasADi's
-own check inside a solve wrote "KeyboardInterrupt" (or IPOPT's warning) on stderr above the CLI's one line."""
+own check inside a solve wrote "KeyboardInterrupt" (or IPOPT's warning) on stderr above the CLI's one line.
+SIGTERM and SIGHUP, under terminate_as_interrupt (every CLI command), are taken the same way."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
@@ -13,6 +19,9 @@ import crowdsim
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.gym_loop import run_gym_episode
+from pipelines.loop.interrupt import terminate_as_interrupt
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(autouse=True)
@@ -38,8 +47,8 @@ class _Steps:
         pass
 
 
-def _signalled(name: str, at_step: int, signals: int = 1):
-    """A shipped controller whose ``act`` sends itself ``signals`` SIGINTs at step ``at_step`` and then does
+def _signalled(name: str, at_step: int, signals: int = 1, sig: int = signal.SIGINT):
+    """A shipped controller whose ``act`` sends itself ``signals`` ``sig`` at step ``at_step`` and then does
     its work (a solve, for cmpc): ``acts`` says how far each call got."""
     controller = make_controller(ControllerSpec(name))
     act = controller.act
@@ -49,7 +58,7 @@ def _signalled(name: str, at_step: int, signals: int = 1):
         acts.append("started")
         if len(acts) == at_step:
             for _ in range(signals):
-                os.kill(os.getpid(), signal.SIGINT)
+                os.kill(os.getpid(), sig)
         out = act(obs)
         acts[-1] = "finished"
         return out
@@ -112,3 +121,44 @@ def test_sigint_ignored_by_the_caller_stays_ignored():
     result = _episode(controller, _Steps(), gym_loop=False)
     assert result.metrics.success and set(acts) == {"finished"}
     assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_terminate_is_raised_when_the_step_in_progress_ends(sig):
+    controller, acts = _signalled("cmpc", at_step=3, sig=sig)
+    observer = _Steps()
+    with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt):
+        _episode(controller, observer, gym_loop=False)
+    assert acts == ["finished"] * 3 and observer.steps == 3
+    assert signal.getsignal(sig) is signal.SIG_DFL  # the caller's handler back
+
+
+def test_a_terminate_outside_an_episode_is_raised_at_once():
+    with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler runs in the main thread before the sleep's end
+
+
+@pytest.mark.slow
+def test_a_terminated_simulate_keeps_the_episodes_that_finished(tmp_path):
+    """`kill` or `timeout` ended simulate at once: no line, the episodes it had finished lost (no --json
+    written) and the episode in progress left as an MCAP ``.part``. It now ends as a Ctrl-C does."""
+    record, report = tmp_path / "rec", tmp_path / "run.json"
+    command = [sys.executable, "-m", "pipelines.cli", "simulate", "--controller", "straight", "--humans", "2"]
+    command += ["--episodes", "1000", "--record", str(record), "--json", str(report), "--no-progress"]
+    proc = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not list(record.glob("*.mcap")):
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, "no episode finished"
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and err.endswith("crowdmpc simulate: interrupted\n"), err
+    payload = json.loads(report.read_text())
+    assert payload["interrupted"] and payload["episodes_finished"] >= 1
+    assert payload["episodes_finished"] == len(payload["episodes"]) and "| interrupted: " in out
+    assert not list(record.glob("*.part"))
