@@ -5,16 +5,19 @@ when a run starts (Lightning prints a banner)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from pipelines.commands import replace_file
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, writes_named
 
 
 def run_training(
@@ -99,7 +102,9 @@ def _fit(
         replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
     started = time.perf_counter()
     try:
-        trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
+        # a full disk fails TensorBoard's event write, whose error names no file
+        with writes_named(out), _writer_thread_errors_left_to_the_fit():
+            trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
     except SystemExit as stop:
         # Lightning ends an interrupted fit with sys.exit: 1 for Ctrl-C, 0 for SIGTERM (its SIGTERMException),
         # which told a script that a killed run had trained. Both are the interrupt the CLI reports (130).
@@ -112,6 +117,28 @@ def _fit(
     state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
     return module, best_path, elapsed
+
+
+@contextlib.contextmanager
+def _writer_thread_errors_left_to_the_fit() -> Iterator[None]:
+    """TensorBoard's event writer thread, failing (a full disk), printed its own traceback around the CLI's
+    one line; it keeps the error and hands it to the fit on its next flush or close, where it ends the run
+    as any write's failure does. Its print alone is dropped; every other thread's error is printed."""
+    printed = threading.excepthook
+
+    def hook(failure: threading.ExceptHookArgs) -> None:
+        if not (
+            type(failure.thread).__name__ == "_AsyncWriterThread"
+            and type(failure.thread).__module__.startswith("tensorboard.")
+            and isinstance(failure.exc_value, OSError)
+        ):
+            printed(failure)
+
+    threading.excepthook = hook
+    try:
+        yield
+    finally:
+        threading.excepthook = printed
 
 
 def _check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> None:
