@@ -46,6 +46,7 @@ import platform
 import re
 import secrets
 import shlex
+import shutil
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -85,6 +86,9 @@ FORMAT: Final[int] = 1
 # and 0.19-0.22 s per DMPC episode (0.51 -> 0.30 s).
 COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
 SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
+# Free space a compile may need: its C source, object, library and entry; the largest entry measured (CMPC,
+# 12 robots) is 27 MB, 23 of them its .casadi. Below it, gcc's "No space left" failed every episode.
+COMPILE_ROOM_BYTES: Final[int] = 64 * 2**20
 # What the shell splits a word on or reads specially: a path holding one is refused (``_shell_unsafe``). Any
 # other character, a non-ASCII letter among them (/home/josé), reaches gcc as it is; a resolved path starts
 # with "/", so a "~" in it is never expanded.
@@ -111,6 +115,11 @@ def cache_dir() -> Path:
 
 def _nearest_existing(path: Path) -> Path:
     return next(p for p in (path, *path.parents) if os.path.lexists(p))
+
+
+def free_bytes(directory: str | Path | None = None) -> int:
+    """Free space on the file system the cache is (or would be made) on, for this user."""
+    return shutil.disk_usage(_nearest_existing(Path(directory) if directory else cache_dir())).free
 
 
 def _file_in_the_way(path: Path) -> Path | None:

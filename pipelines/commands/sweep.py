@@ -261,10 +261,10 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
         "--jit",
         choices=JIT_CHOICES,
         help="compile the MPC NLPs with gcc, once per machine ($CROWDMPC_CACHE/compiled, `crowdmpc cache "
-        "info`): 2-8 s a first compile, later runs load it; solves then ~2x faster, ~0.1 s CPU saved a CMPC "
-        "episode, ~0.2 s a DMPC one. auto (the default): on when gcc is found and the run's episodes repay "
-        "compiling each NLP it needs (8 s CPU joint, 2.3 s local, counted per distinct cell settings): from "
-        "12 episodes per cell for the 7-predictor swap, 36 for table2; a warm cache is not consulted",
+        "info`): 2-8 s a first compile; solves ~2x faster, ~0.1 s CPU saved a CMPC episode, ~0.2 s a DMPC "
+        "one. auto (the default): on when gcc is found, the cache's disk has 64 MB free and the episodes "
+        "repay compiling each NLP (8 s CPU joint, 2.3 s local, per distinct cell settings; from 12 episodes "
+        "a cell for the 7-predictor swap, 36 for table2); a warm cache is not consulted",
     )
 
 

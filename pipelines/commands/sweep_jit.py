@@ -27,18 +27,39 @@ def choose_jit(
         raise PipelineError(f"{label} on needs gcc on the PATH (CasADi compiles with it); use --jit off")
     if choice != "auto":
         return choice == "on"
-    return jit_available() and jit_pays(experiment.cells(humans, n_robots), episodes)
+    return (
+        jit_available()
+        and jit_pays(experiment.cells(humans, n_robots), episodes)
+        and _room_short_by() is None  # off rather than a run whose every compile fails
+    )
+
+
+def _room_short_by() -> str | None:
+    """Why the compile cache's file system has no room for a compile, or None when it has."""
+    from mpc.compile_cache import COMPILE_ROOM_BYTES, cache_dir, free_bytes
+
+    free = free_bytes()
+    if free >= COMPILE_ROOM_BYTES:
+        return None
+    return (
+        f"the compile cache {cache_dir()} has {free / 2**20:.1f} MB free, under the "
+        f"{COMPILE_ROOM_BYTES // 2**20} MB a compile may need: free space, set $CROWDMPC_CACHE to a folder "
+        "with room"
+    )
 
 
 def check_compile_cache(label: str, choice: str) -> None:
     """The compile cache the workers will compile into, checked (and made) before they start: there an
-    unusable one ($CROWDMPC_CACHE a file, read-only, a path gcc cannot take) raised in every episode."""
+    unusable one ($CROWDMPC_CACHE a file, read-only, a path gcc cannot take, a full disk) raised in every
+    episode."""
     from mpc.compile_cache import CacheLocationError, writable_dir
 
     try:
         writable_dir()
     except CacheLocationError as exc:
         raise PipelineError(f"{label} {choice}: {exc}; or use --jit off") from None
+    if (short := _room_short_by()) is not None:  # gcc's "No space left" then failed every episode
+        raise PipelineError(f"{label} {choice}: {short}, or use --jit off")
 
 
 def jit_pays(cells, episodes_per_cell: int) -> bool:

@@ -122,3 +122,44 @@ def test_auto_is_off_without_gcc_and_on_needs_it(monkeypatch):
     assert not sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
     with pytest.raises(PipelineError, match="needs gcc"):
         sweep_jit.choose_jit("on", "--jit", experiment, None, 3, 100)
+
+
+def test_a_cache_without_room_for_a_compile_is_refused_by_on_and_turns_auto_off(
+    folder, tmp_path, monkeypatch, capsys
+):
+    """gcc's "No space left on device" failed every episode of a `--jit on` sweep, one error a compile, with
+    gcc's messages over the terminal; auto chose such a run as readily."""
+    import shutil
+
+    from pipelines.commands import sweep_jit
+    from pipelines.experiments import worker
+    from pipelines.experiments.cells import EXPERIMENTS
+
+    # the nearest folder that exists: the cache is made only when a compile comes
+    assert compile_cache.free_bytes() == shutil.disk_usage(tmp_path).free
+    room = compile_cache.COMPILE_ROOM_BYTES
+    monkeypatch.setattr(worker, "jit_available", lambda: True)
+    experiment = EXPERIMENTS["predictors"].with_predictors(SEVEN)
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda: room)
+    assert sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda: room - 1)
+    assert not sweep_jit.choose_jit("auto", "--jit", experiment, None, 3, 100)
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda: room // 2)
+    out = tmp_path / "sweep"
+    args = [
+        "sweep",
+        "--experiment",
+        "controllers",
+        "--episodes-per-cell",
+        "2",
+        "--jit",
+        "on",
+        "--out",
+        str(out),
+    ]
+    assert main(args) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc sweep: error: --jit on: the compile cache {folder} has 32.0 MB free, under the 64 MB a "
+        "compile may need: free space, set $CROWDMPC_CACHE to a folder with room, or use --jit off\n"
+    )
+    assert not out.exists()
