@@ -275,6 +275,8 @@ def _compile_locked(
         except CompileCacheError:
             raise
         except RuntimeError as exc:  # CasADi's: code generation or gcc failed
+            if free_bytes(folder) < COMPILE_ROOM_BYTES:  # gcc's "No space left" came as "Compilation failed"
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(folder)) from exc
             raise CompileCacheError(
                 f"compiling the solver {name!r} into {folder} failed: {_last_line(exc)}"
             ) from exc

@@ -339,6 +339,26 @@ def test_a_failed_compile_is_a_compile_cache_error(cache, monkeypatch, tmp_path)
     assert f'Tried "{failing} -O2 ' in str(e.value) and "trap" not in str(e.value)
 
 
+def test_a_compile_failed_for_want_of_space_is_a_full_disk_naming_the_cache(cache, monkeypatch, tmp_path):
+    """gcc's "No space left on device" reached the user as "Compilation failed" with a traceback (a
+    CompileCacheError is no user error); the CLI says a full disk in one line, naming the folder."""
+    import errno
+
+    failing = tmp_path / "gcc"
+    failing.write_text("#!/bin/sh\necho 'Fatal error: No space left on device' >&2\nexit 1\n")
+    failing.chmod(0o755)
+    full = compile_cache.Compiler(str(failing), "x", ("-O2",))
+    monkeypatch.setattr(compile_cache, "compiler", lambda: full)
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda folder: compile_cache.COMPILE_ROOM_BYTES - 1)
+    with pytest.raises(OSError) as e:
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    assert (e.value.errno, e.value.filename) == (errno.ENOSPC, str(cache))
+    assert suffixes(cache) == []
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda folder: compile_cache.COMPILE_ROOM_BYTES)
+    with pytest.raises(compile_cache.CompileCacheError, match="Compilation failed"):  # gcc failed with room
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+
+
 def fake_compiler(tmp_path: Path, body: str) -> compile_cache.Compiler:
     script = tmp_path / "gcc"
     script.write_text(f"#!/bin/sh\n{body}\n")
