@@ -149,7 +149,7 @@ def main() -> int:
     args = parser.parse_args()
     with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
         sys.path.insert(0, str(ROOT))
-        from mpc import compile_cache
+        from mpc import cache_admin, compile_cache
 
         with tempfile.TemporaryDirectory(prefix="compile-cache-bench-") as tmp:
             env = os.environ | {compile_cache.CACHE_ENV: str(Path(tmp) / "cache")}
@@ -163,7 +163,7 @@ def main() -> int:
                     f"{r['load_after'][0]:.2f} after",
                     flush=True,
                 )
-            stats = compile_cache.info(Path(tmp) / "cache" / compile_cache.SUBDIR)
+            stats = cache_admin.info(Path(tmp) / "cache" / compile_cache.SUBDIR)
             print(f"cache: {stats.entries} entries, {stats.size_bytes / 1024:.0f} KiB; {stats.compiler}")
             base = runs["off"]["metrics"]
             for label in ("cold", "warm"):

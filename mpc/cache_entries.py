@@ -22,7 +22,7 @@ try:  # POSIX; without it (Windows) concurrent compiles of one entry are not ser
 except ImportError:  # pragma: no cover
     fcntl = None  # type: ignore[assignment]
 
-# The files of the cache, and the only ones compile_cache.clear removes: <key>.casadi, <key>.<tag>.so (its
+# The files of the cache, and the only ones cache_admin.clear removes: <key>.casadi, <key>.<tag>.so (its
 # library), <key>.record, <key>.lock, and what an interrupted compile leaves (<key>.<tag>.o,
 # .tmp-<key>.<tag>.casadi and .record, crowdmpc_jit_<tag>.c: the generated source).
 _KEY = r"[0-9a-f]{64}"
@@ -111,7 +111,7 @@ def locked(path: Path) -> Iterator[None]:
 @contextlib.contextmanager
 def unless_locked(path: Path) -> Iterator[bool]:
     """Hold ``path``, an existing lock file, if nobody holds it now (True), else hold nothing (False): what
-    ``compile_cache.clear`` asks of an entry before removing its files, which a compile under way needs.
+    ``cache_admin.clear`` asks of an entry before removing its files, which a compile under way needs.
     A lock file that is gone, or another file (a symbolic link), is held by nobody; on a file system that
     does not lock files nobody can tell, and the entry counts as held."""
     if fcntl is None:  # pragma: no cover

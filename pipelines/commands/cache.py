@@ -60,10 +60,10 @@ def _size(n: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mpc import compile_cache
+    from mpc import cache_admin, compile_cache
 
     if args.cache_command == "info":
-        stats = compile_cache.info()
+        stats = cache_admin.info()
         if args.json is not None:
             check_writable(args.json, "--json", json_only=True)
             fields = {**stats.__dict__, "directory": str(stats.directory)}
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"compiler:  {stats.compiler}")
         return 0
     try:
-        removed, freed, busy = compile_cache.clear()
+        removed, freed, busy = cache_admin.clear()
     except compile_cache.CompileCacheError as exc:
         raise PipelineError(str(exc)) from exc
     left = (

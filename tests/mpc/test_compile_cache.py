@@ -12,7 +12,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from mpc import compile_cache, solvers
+from mpc import cache_admin, compile_cache, solvers
 from mpc.cache_entries import LEFTOVER_AGE_S, locked, remove_dead_leftovers
 from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
@@ -269,14 +269,14 @@ def test_info_and_clear_touch_only_our_files(tmp_path):
     (folder / "notes.txt").write_text("not ours")
     (folder / f"{key}.so").write_text("not a name of ours")
     (folder / f"{'ef' * 32}.casadi").mkdir()  # a folder named like an entry
-    stats = compile_cache.info(folder)
+    stats = cache_admin.info(folder)
     assert (stats.entries, stats.files, stats.size_bytes) == (1, 8, 80)
     assert stats.casadi_version == ca.__version__
-    assert compile_cache.clear(folder) == (8, 80, 0)
+    assert cache_admin.clear(folder) == (8, 80, 0)
     left = [f"{'cd' * 32}.casadi", "notes.txt", f"{'ef' * 32}.casadi", f"{key}.so"]
     assert sorted(p.name for p in folder.iterdir()) == sorted(left)
     assert outside.read_bytes() == b"keep"
-    assert compile_cache.info(folder).entries == 0
+    assert cache_admin.info(folder).entries == 0
 
 
 def test_clear_leaves_an_entry_another_process_compiles_now(tmp_path):
@@ -290,9 +290,9 @@ def test_clear_leaves_an_entry_another_process_compiles_now(tmp_path):
     for name in compiling + stored:
         (tmp_path / name).write_bytes(b"x" * 10)
     with locked(tmp_path / f"{busy}.lock"):
-        assert compile_cache.clear(tmp_path) == (4, 40, 1)
+        assert cache_admin.clear(tmp_path) == (4, 40, 1)
         assert sorted(p.name for p in tmp_path.iterdir()) == sorted(compiling)
-    assert compile_cache.clear(tmp_path) == (5, 50, 0)  # once it is done
+    assert cache_admin.clear(tmp_path) == (5, 50, 0)  # once it is done
     assert list(tmp_path.iterdir()) == []
 
 
@@ -303,7 +303,7 @@ def test_clear_refuses_a_cache_directory_that_is_a_symlink(tmp_path):
     link = tmp_path / "compiled"
     link.symlink_to(target)
     with pytest.raises(compile_cache.CompileCacheError, match="symlink"):
-        compile_cache.clear(link)
+        cache_admin.clear(link)
     assert (target / f"{'ab' * 32}.casadi").exists()
 
 

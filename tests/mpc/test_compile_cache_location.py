@@ -8,7 +8,7 @@ import os
 
 import pytest
 
-from mpc import compile_cache
+from mpc import cache_admin, compile_cache
 from mpc.errors import MPCConfigError
 from tests.read_only import read_only_place  # noqa: F401 - a fixture
 
@@ -20,7 +20,7 @@ def test_a_file_for_the_cache_is_not_a_directory_for_writing_info_and_clear(tmp_
         f"$CROWDMPC_CACHE={tmp_path / 'file'}: {tmp_path / 'file'} is not a directory; set $CROWDMPC_CACHE "
         "to a writable directory"
     )
-    for use in (compile_cache.writable_dir, compile_cache.info, compile_cache.clear):
+    for use in (compile_cache.writable_dir, cache_admin.info, cache_admin.clear):
         with pytest.raises(compile_cache.CacheLocationError) as exc:
             use()
         assert str(exc.value) == expected
@@ -32,7 +32,7 @@ def test_a_file_where_compiled_goes_is_named(tmp_path, monkeypatch):
     (tmp_path / "compiled").write_text("x")
     monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path))
     with pytest.raises(compile_cache.CacheLocationError, match=f"{tmp_path / 'compiled'} is not a directory"):
-        compile_cache.info()
+        cache_admin.info()
 
 
 def test_a_read_only_place_is_not_writable(read_only_place, monkeypatch):  # noqa: F811
@@ -42,7 +42,7 @@ def test_a_read_only_place_is_not_writable(read_only_place, monkeypatch):  # noq
     assert str(exc.value).startswith(
         f"$CROWDMPC_CACHE={read_only_place / 'cache'}: {read_only_place} is not writable ("
     )
-    assert compile_cache.info().exists is False  # reading a cache that is not there is no error
+    assert cache_admin.info().exists is False  # reading a cache that is not there is no error
 
 
 def test_a_usable_cache_is_created_for_writing(tmp_path, monkeypatch):
