@@ -90,7 +90,8 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "
         "(Student's t). Bold: the better method at each number of pedestrians, in the paper's four rows "
         "(success, travel time, collision, discomfort). Paired: episodes (same crowd) "
-        "this method succeeded and the first one failed / the reverse, with the exact McNemar p-value."
+        f"this method succeeded and the first one{_team_note(columns)} failed / the reverse, with the exact "
+        "McNemar p-value."
         + (
             f" {NOT_APPLICABLE}: a solver's figure for a controller that runs none."
             if not all(s.runs_solver for s in columns)
@@ -114,6 +115,12 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
     else:
         notes.append("The paper has no such table.")
     return "\n".join(notes)
+
+
+def _team_note(columns: Sequence[CellSummary]) -> str:
+    """Whom a column is paired with, where the columns differ in their number of robots (``_paired_texts``);
+    nothing where they all have the same team."""
+    return " with as many robots" if len({s.cell.n_robots for s in columns}) > 1 else ""
 
 
 def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> str:
@@ -190,12 +197,16 @@ def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
 
 
 def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
-    """Each column's successes paired with those of its group's first method (the reference)."""
+    """Each column's successes paired with those of the first method of its group with as many robots (the
+    reference): a seed's circle crowd depends on the number of robots (crowdsim.scenarios), so a column of
+    another team ran other crowds, and ``--vary scenario.robots`` paired "CMPC robots=6" with "CMPC
+    robots=3" as if on the same ones."""
     paired = []
     for s in columns:
-        reference = groups[s.cell.n_humans][0]
+        team = [c for c in groups[s.cell.n_humans] if c.cell.n_robots == s.cell.n_robots]
+        reference = team[0]
         if s is reference:
-            paired.append("reference" if len(groups[s.cell.n_humans]) > 1 else "—")
+            paired.append("reference" if len(team) > 1 else "—")
         else:
             gained, lost, p = paired_success(reference, s)
             paired.append(f"+{gained} / −{lost} (p = {p:.2g})")

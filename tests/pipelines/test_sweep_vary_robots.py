@@ -172,3 +172,39 @@ def test_the_control_step_plot_gives_the_median_with_a_bar_up_to_the_p95():
         assert list(line.get_ydata()) == [10.0, 10.0]
         assert [tuple(seg[:, 1]) for seg in bars.get_segments()] == [(10.0, 20.0)] * 2
     assert "bars up to the p95" in ax.get_title() and ax.get_ylabel() == "Control step (ms)"
+
+
+def test_success_is_paired_only_with_a_column_of_as_many_robots():
+    """A seed's circle crowd depends on the number of robots (crowdsim.scenarios: seed 4, 5 humans, has
+    other humans beside 1 robot than beside 3), so "CMPC robots=6" is no pair of "CMPC robots=3": each team
+    has its own reference, CMPC of its team, and DMPC is paired with it. Hand-made outcomes, 4 crowds each:
+    CMPC robots=3 succeeds on all, DMPC robots=3 fails crowds 0 and 1 (+0 / −2, p = 2 (1/2)^2 = 0.5);
+    CMPC robots=6 fails all, DMPC robots=6 succeeds on crowd 3 (+1 / −0, p = 1). Paired with CMPC robots=3,
+    CMPC robots=6 read "+0 / −4 (p = 0.12)" and DMPC robots=6 "+0 / −3 (p = 0.25)", losses on crowds they
+    never faced."""
+    import numpy as np
+
+    from crowdsim.scenarios import make_layout
+    from pipelines.experiments.summary import summarize
+    from pipelines.experiments.tables import markdown_table
+    from tests.pipelines.test_small_fixes import _records
+
+    one, three = (make_layout("circle", 5, m, np.random.default_rng(4)).human_starts for m in (1, 3))
+    assert not np.allclose(one, three)
+    sets = ["sweep.experiment=table2", 'sweep.vary="scenario.robots=3,6"']
+    experiment = configured_experiment(load(sets=sets))
+    cells = [c for c in experiment.cells() if c.n_humans == 5]
+    won, lost = (True, False, False, False), (False, False, False, False)
+    outcomes = {
+        ("CMPC robots=3", 5): [won] * 4,
+        ("DMPC robots=3", 5): [lost, lost, won, won],
+        ("CMPC robots=6", 5): [lost] * 4,
+        ("DMPC robots=6", 5): [lost, lost, lost, won],
+    }
+    table = markdown_table(experiment, summarize(experiment, cells, _records(experiment, outcomes)))
+    assert "| Metrics \\ Methods | CMPC robots=3 | CMPC robots=6 | DMPC robots=3 | DMPC robots=6 |" in table
+    assert (
+        "| Success, paired with the group's first method | reference | reference | +0 / −2 (p = 0.5) "
+        "| +1 / −0 (p = 1) |"
+    ) in table
+    assert "this method succeeded and the first one with as many robots failed / the reverse" in table
