@@ -33,7 +33,9 @@ folder of runs' folders, a sweep's DIR or DIR/mcap). Runs of different set-ups (
 numbers of robots and humans, or any simulator or controller setting the recordings' "config" metadata holds:
 profile, visibility, formation, MPC settings, margins...) get one table and aggregate each, named by what
 differs, their files by their paths below the folder, then a row each side by side. --json writes "groups",
-one per set-up with its "totals" (and "totals" at the top too when the folder holds one set-up).
+one per set-up with its "totals" (and "totals" at the top too when the folder holds one set-up). A sweep
+recorded with --record failures kept its failed episodes only: a warning says that its rates here are over
+those, and its table.md has the sweep's.
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
 compression fails) or a message that is not what the review reads is left out, with a warning; --check lists
@@ -176,6 +178,7 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     from pipelines.logs.setups import group_parts, groups, named_settings, short_names
 
     runs, n_unreadable = _read_folder(folder, report, check)
+    _warn_failures_only(folder)
     report["runs"] = [run.summary for run in runs]
     setups = groups(runs)
     named = named_settings(setups)
@@ -208,6 +211,41 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
         side_by_side = setups_table(short_names(parts), [group["totals"] for group in report["groups"]])
         print(f"== {count(len(setups), 'set-up')} side by side ==\n{side_by_side}")
     return runs, n_unreadable
+
+
+def _warn_failures_only(folder: Path) -> None:
+    """Warn when ``folder`` is a sweep's recordings (its DIR, DIR/mcap or DIR/mcap/CELL) and some run of the
+    sweep kept only its failed episodes (``--record failures``): rates over those runs are over a selection
+    (a sweep with 19 collisions in 20 episodes reviewed as "collision 100.0 % (19/19)"), not the sweep's."""
+    from pipelines.experiments.log import MCAP_DIR, SWEEP_FILE, read_sweep_file
+
+    here = folder.resolve()
+    candidates = [here] + [
+        up
+        for up, name in ((here.parent, here.name), (here.parent.parent, here.parent.name))
+        if name == MCAP_DIR
+    ]
+    sweep = next((c for c in candidates if (c / SWEEP_FILE).is_file()), None)
+    if sweep is None:
+        return
+    try:
+        runs = read_sweep_file(sweep / SWEEP_FILE).get("runs", [])
+    except PipelineError:  # not ours to judge here: the review reads the recordings, not the sweep
+        return
+    if "failures" in {_record_policy(run) for run in runs}:
+        print(
+            f"crowdmpc review: warning: {sweep} kept the recordings of its failed episodes only (sweep "
+            "--record failures: not every robot arrived, or a robot came within 0.8 m of a human), so the "
+            "rates below are over those, not the sweep's: its table.md and cells.csv give those",
+            file=sys.stderr,
+        )
+
+
+def _record_policy(run: object) -> object:
+    """What one run of sweep.json recorded (its config's ``sweep.record``); None where it does not say."""
+    for key in ("config", "sweep", "record"):
+        run = run.get(key) if isinstance(run, dict) else None
+    return run
 
 
 def _warn_mixed_code(folder: Path, name: str, members: list[dict[str, Any]]) -> None:

@@ -732,3 +732,25 @@ def test_set_ups_side_by_side_say_n_a_for_robot_contact_their_runs_predate():
     assert header[:6] == ["set-up", "runs", "success %", "collision %", "contact %", "robot contact %"]
     assert lines[2].split()[8] == "n/a" and lines[3].split()[8:10] == ["0.0", "(0/2)"]
     assert lines[4].split()[5] == "-"
+
+
+def test_a_sweeps_recordings_of_its_failures_only_say_their_rates_are_not_the_sweeps(runs, tmp_path, capsys):
+    """`sweep --record failures` keeps the episodes where not every robot arrived or a robot came within
+    0.8 m of a human: reviewed, a straight-line sweep of 20 episodes with 19 collisions (95 %) read
+    "collision 100.0 % (19/19)", unsaid that the runs are a selection. Reviewed as the sweep's DIR, DIR/mcap
+    or DIR/mcap/CELL, a warning says so; a sweep that kept every episode, or any other folder, gets none."""
+    sweep = tmp_path / "sweep"
+    (sweep / "mcap" / "cell_a").mkdir(parents=True)
+    shutil.copy(runs[0].path, sweep / "mcap" / "cell_a" / runs[0].path.name)
+    policies = ("all", "failures")  # a sweep extended by a second run that kept only its failures
+    meta = {"runs": [{"config": {"sweep": {"record": policy}}} for policy in policies]}
+    (sweep / "sweep.json").write_text(json.dumps(meta))
+    for folder in (sweep, sweep / "mcap", sweep / "mcap" / "cell_a"):
+        assert main(["review", str(folder)]) == 0
+        err = capsys.readouterr().err
+        assert f"crowdmpc review: warning: {sweep} kept the recordings of its failed episodes only" in err
+        assert "not the sweep's: its table.md and cells.csv give those" in err
+    meta["runs"] = meta["runs"][:1]
+    (sweep / "sweep.json").write_text(json.dumps(meta))
+    assert main(["review", str(sweep)]) == 0
+    assert "failed episodes only" not in capsys.readouterr().err
