@@ -236,7 +236,8 @@ def _detail_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
         _row("Min robot-human distance, median (m)", [_fmt(s.min_distance_median, 2) for s in columns]),
         _row(
             "Success circle / perpendicular (%)",
-            [" / ".join(_fmt(s.success_by_scenario[sc].percent, 0) for sc in SCENARIOS) for s in columns],
+            # one decimal as every rate here: without, 199 of 200 read "100", a scenario without a failure
+            [" / ".join(_fmt(s.success_by_scenario[sc].percent) for sc in SCENARIOS) for s in columns],
         ),
         _row("Success, paired with the group's first method", _paired_texts(groups, columns)),
         _row("Episodes", [str(s.episodes) for s in columns]),

@@ -798,7 +798,10 @@ def test_markdown_table_is_laid_out_like_the_paper():
         "| Success, paired with the group's first method | reference | +0 / −2 (p = 0.5) | reference |"
         in "\n".join(table)
     )
-    assert "| Success circle / perpendicular (%) | 100 / 50 | 50 / 0 | 100 / 100 | 100 / 100 |" in table
+    assert (
+        "| Success circle / perpendicular (%) | 100.0 / 50.0 | 50.0 / 0.0 | 100.0 / 100.0 | 100.0 / 100.0 |"
+        in table
+    )
 
 
 def test_fewer_collisions_and_discomforts_are_the_better_method():
@@ -813,6 +816,17 @@ def test_fewer_collisions_and_discomforts_are_the_better_method():
     lines = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes))).splitlines()
     assert "| Collision rate (%) | **0.0 [0.0, 49.0]** | 50.0 [15.0, 85.0] |" in lines
     assert "| Discomfort rate (%) | **0.0 [0.0, 49.0]** | 50.0 [15.0, 85.0] |" in lines
+
+
+def test_success_per_scenario_below_100_percent_never_reads_100():
+    """200 circle crowds, 199 successes: 99.5 %, which the row printed without decimals as "100", the figure
+    of a scenario without a failure (at the paper's 500 circle episodes, 2 failures read "100" too). One
+    decimal, as every other rate of the table: 99.5 / 100.0."""
+    table2 = get_experiment("table2")
+    won, lost = (True, 18.0, False, False), (False, 0, False, False)
+    episodes = {("CMPC", 5): [lost] + [won] * 399}  # episode 0 is circle crowd 0
+    table = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
+    assert "| Success circle / perpendicular (%) | 99.5 / 100.0 |" in table
 
 
 def test_paired_success_counts_only_the_crowds_both_methods_ran():
