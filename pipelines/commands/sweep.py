@@ -47,7 +47,8 @@ with track lengths, and 3 m without, 7 humans).
 --margins to the methods of controllers that plan with a predictor (cmpc, dmpc; orca and straight plan
 with none, and run without margins), --profile and --visibility to all of them. --sensor-range puts every
 method's controller behind a sensor (all but the sensing experiment).
-Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2).
+Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2)
+where the cells have the same number of robots and profile: another team or profile draws other humans.
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
 section, `crowdmpc config show` lists every key) and --set SECTION.KEY=VALUE items: defaults < the file <
 --set < the options given here. [controller] and [mpc] values that differ from their defaults apply to every

@@ -301,7 +301,8 @@ def _safety_methods() -> tuple[tuple[str, ControllerSpec], ...]:
 
 
 # How much of the gap to the paper's collision rates each convention explains: profile x visibility x
-# margins, CMPC with the paper's predictor, the same crowds in every cell.
+# margins, CMPC with the paper's predictor, the same seeds in every cell (the same crowds within a profile:
+# the two profiles draw their humans differently, crowdsim.scenarios).
 def _convention_methods() -> tuple[tuple[tuple[str, ControllerSpec], ...], Mapping[str, World]]:
     methods, worlds = [], {}
     for profile in ("v1", "paper"):

@@ -90,8 +90,8 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         "interval in brackets; travel time over successful episodes ± the 95% interval of its mean "
         "(Student's t). Bold: the better method at each number of pedestrians, in the paper's four rows "
         "(success, travel time, collision, discomfort). Paired: episodes (same crowd) "
-        f"this method succeeded and the first one{_team_note(columns)} failed / the reverse, with the exact "
-        "McNemar p-value."
+        f"this method succeeded and the first one{_crowds_note(columns)} failed / the reverse, with the "
+        "exact McNemar p-value."
         + (
             f" {NOT_APPLICABLE}: a solver's figure for a controller that runs none."
             if not all(s.runs_solver for s in columns)
@@ -117,10 +117,19 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
     return "\n".join(notes)
 
 
-def _team_note(columns: Sequence[CellSummary]) -> str:
-    """Whom a column is paired with, where the columns differ in their number of robots (``_paired_texts``);
-    nothing where they all have the same team."""
-    return " with as many robots" if len({s.cell.n_robots for s in columns}) > 1 else ""
+def _crowds(s: CellSummary) -> tuple[int, str]:
+    """What decides a column's crowds beside the seed, the scenario and the number of humans
+    (crowdsim.scenarios): its number of robots (a human drawn near a robot is redrawn) and its profile (the
+    spawn separation and crossing band it draws with). Visibility, sensing and margins do not."""
+    return s.cell.n_robots, s.cell.world.profile
+
+
+def _crowds_note(columns: Sequence[CellSummary]) -> str:
+    """Whom a column is paired with, where the columns do not all run the same crowds (``_paired_texts``);
+    nothing where they do."""
+    if len({_crowds(s) for s in columns}) == 1:
+        return ""
+    return " on the same crowds (as many robots, the same profile)"
 
 
 def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> str:
@@ -197,16 +206,16 @@ def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
 
 
 def _paired_texts(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:
-    """Each column's successes paired with those of the first method of its group with as many robots (the
-    reference): a seed's circle crowd depends on the number of robots (crowdsim.scenarios), so a column of
-    another team ran other crowds, and ``--vary scenario.robots`` paired "CMPC robots=6" with "CMPC
-    robots=3" as if on the same ones."""
+    """Each column's successes paired with those of the first method of its group that ran the same crowds
+    (the reference; ``_crowds``): a column of another team or profile ran other crowds from the same seeds,
+    and ``--vary scenario.robots`` paired "CMPC robots=6" with "CMPC robots=3", the conventions experiment
+    "paper/visible/none" with "v1/visible/none", as if on the same ones."""
     paired = []
     for s in columns:
-        team = [c for c in groups[s.cell.n_humans] if c.cell.n_robots == s.cell.n_robots]
-        reference = team[0]
+        same = [c for c in groups[s.cell.n_humans] if _crowds(c) == _crowds(s)]
+        reference = same[0]
         if s is reference:
-            paired.append("reference" if len(team) > 1 else "—")
+            paired.append("reference" if len(same) > 1 else "—")
         else:
             gained, lost, p = paired_success(reference, s)
             paired.append(f"+{gained} / −{lost} (p = {p:.2g})")

@@ -829,6 +829,42 @@ def test_success_per_scenario_below_100_percent_never_reads_100():
     assert "| Success circle / perpendicular (%) | 99.5 / 100.0 |" in table
 
 
+def test_success_is_paired_only_with_a_column_of_the_same_profile():
+    """The conventions experiment's paper profile draws other crowds from a seed than v1 (its spawn separation
+    and crossing band: seed 1, 7 humans, circle), so "paper/visible/none" is no pair of "v1/visible/none"
+    (the group's first column): each profile has its own reference, and visibility and margins, which do
+    not change the crowds, are paired within it. Hand-made outcomes, 4 crowds each: v1/visible/none and
+    paper/visible/cp0.1 succeed on all, paper/visible/none fails crowds 0 and 1. Paired with v1/visible/none,
+    paper/visible/none read "+0 / −2 (p = 0.5)" and paper/visible/cp0.1 "+0 / −0 (p = 1)"; with
+    paper/visible/none, the latter is "+2 / −0 (p = 0.5)"."""
+    from crowdsim.scenarios import make_layout
+
+    paper, v1 = (
+        make_layout("circle", 7, 3, np.random.default_rng(1), crossing=crossing).human_starts
+        for crossing in ("paper", "v1")
+    )
+    assert not np.allclose(paper, v1)
+    conventions = get_experiment("conventions")
+    won, lost = (True, 18.0, False, False), (False, 0, False, False)
+    episodes = {(label, 7): [won] * 4 for label in conventions.method_labels}
+    episodes["paper/visible/none", 7] = [lost, lost, won, won]
+    records = _records(conventions, episodes)
+    lines = markdown_table(conventions, summarize(conventions, conventions.cells(), records)).splitlines()
+    header = next(line for line in lines if line.startswith("| Metrics"))
+    assert header.startswith("| Metrics \\ Methods | v1/visible/none | v1/visible/cp0.1 | v1/invisible/")
+    paired = next(line for line in lines if line.startswith("| Success, paired"))
+    assert paired.split(" | ")[1:] == [
+        "reference",
+        "+0 / −0 (p = 1)",
+        "+0 / −0 (p = 1)",
+        "+0 / −0 (p = 1)",
+        "reference",
+        "+2 / −0 (p = 0.5)",
+        "+2 / −0 (p = 0.5)",
+        "+2 / −0 (p = 0.5) |",
+    ]
+
+
 def test_paired_success_counts_only_the_crowds_both_methods_ran():
     """CMPC succeeded on 4 crowds, DMPC has run 2 of them so far and succeeded on both: no crowd was lost,
     (0, 0, p = 1); the 2 crowds DMPC has not run are no failures of it."""

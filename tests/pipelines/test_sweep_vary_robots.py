@@ -207,4 +207,4 @@ def test_success_is_paired_only_with_a_column_of_as_many_robots():
         "| Success, paired with the group's first method | reference | reference | +0 / −2 (p = 0.5) "
         "| +1 / −0 (p = 1) |"
     ) in table
-    assert "this method succeeded and the first one with as many robots failed / the reverse" in table
+    assert "and the first one on the same crowds (as many robots, the same profile) failed / the" in table
