@@ -5,13 +5,17 @@ method and crowd size, and the paired success changes of each run against the fi
 
 Reads each run's ``episodes.csv`` (written by ``crowdmpc sweep``); an episode is identified by (method, number
 of humans, scenario, seed; the method's case ignored: Table II names it "CMPC", the controllers experiment
-"cmpc"), and only the episodes every run has are compared. Prints a Markdown table.
+"cmpc") and by what else decides its crowd, the profile and the number of robots (another profile or team
+draws other humans from the seed: crowdsim.scenarios; the ``profile`` column and the ``-rN`` ending the cell
+key, blank in a file written before them), and only the episodes every run has are compared. Prints a Markdown
+table.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import re
 import sys
 from pathlib import Path
 
@@ -21,7 +25,7 @@ from pipelines.experiments.tables import mcnemar_exact
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import run_main  # noqa: E402
 
-Key = tuple[str, int, str, int]
+Key = tuple[str, int, str, int, str, str]
 
 
 # The columns of episodes.csv this reads: the episode's identity, then its outcome.
@@ -42,11 +46,18 @@ def load(run: Path) -> dict[Key, dict[str, str]]:
         episodes = {}
         for r in rows:
             try:
-                key = (r["method"].casefold(), int(r["n_humans"]), r["scenario"], int(r["seed"]))
+                key = (r["method"].casefold(), int(r["n_humans"]), r["scenario"], int(r["seed"]), *crowd(r))
             except (AttributeError, TypeError, ValueError):  # a short row (None), a number that is none
                 raise PipelineError(f"{path}, line {rows.line_num}: not an episode's row") from None
             episodes[key] = r
         return episodes
+
+
+def crowd(row: dict[str, str]) -> tuple[str, str]:
+    """The row's profile and number of robots (the cell key ends in ``-rN``, docs/outputs.md): with the seed,
+    the scenario and the humans, what decides the crowd; blank where the file predates the columns."""
+    robots = re.search(r"-r(\d+)$", row.get("cell") or "")
+    return row.get("profile") or "", robots.group(1) if robots else ""
 
 
 def flag(value: str) -> bool:
@@ -81,7 +92,10 @@ def main(argv: list[str] | None = None) -> int:
     labels = list(runs)
     shared = set.intersection(*(set(r) for r in runs.values()))
     if not shared:
-        raise PipelineError("the runs share no episode (method, humans, scenario, seed)")
+        raise PipelineError(
+            "the runs share no episode (method, humans, scenario, seed, profile, robots: another profile or "
+            "number of robots draws other crowds from the same seeds)"
+        )
     print(
         "Success % / collision % / travel time s (successes); paired: success wins / losses against",
         labels[0],

@@ -73,3 +73,30 @@ def test_a_csv_without_a_column_or_with_a_bad_row_is_a_one_line_error(tmp_path, 
     (short / "episodes.csv").write_text(",".join(FIELDS) + "\nCMPC,seven,circle,0,True,False,1.0\n")
     assert paired_runs.run_main(lambda: paired_runs.main([f"a={a}", f"b={short}"])) == 2
     assert f"{short / 'episodes.csv'}, line 2: not an episode's row" in capsys.readouterr().err
+
+
+def test_runs_of_another_profile_or_team_share_no_crowd(tmp_path, capsys):
+    """The paper profile and v1 draw other humans from a seed, and so do 3 and 6 robots (crowdsim.scenarios):
+    a table2 sweep under --profile v1 was paired with one under paper episode by episode ("+1 / −1" at 9
+    humans), as if on the same crowds. The profile column and the cell key's robots ("-r3") are part of an
+    episode's identity: such runs share none, which is an error naming them; runs of one profile and team
+    pair as before."""
+
+    def run(name: str, profile: str, robots: int) -> Path:
+        path = tmp_path / name
+        path.mkdir()
+        with (path / "episodes.csv").open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow([*FIELDS, "profile", "cell"])
+            for seed, success in enumerate((True, False)):
+                cell = f"cmpc-social_lstm_eth-F-ibr-m=none-{profile}-visible-h7-r{robots}"
+                writer.writerow(["CMPC", 7, "circle", seed, success, False, 10.0, profile, cell])
+        return path
+
+    paper, v1, six = run("paper", "paper", 3), run("v1", "v1", 3), run("six", "paper", 6)
+    for other in (v1, six):
+        with pytest.raises(paired_runs.PipelineError, match=r"share no episode .*profile, robots"):
+            paired_runs.main([f"a={paper}", f"b={other}"])
+    again = run("again", "paper", 3)
+    assert paired_runs.main([f"a={paper}", f"b={again}"]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1].endswith("| +0 / −0 (p = 1) |")
