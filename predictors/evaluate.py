@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from predictors.base import DT, OBS_LEN, PRED_LEN, ObservingPredictor, Predictor
-from predictors.data.trajnet_io import read_scenes
+from predictors.data.trajnet_io import scenes_of
+from predictors.data.validate import NdjsonContent, parse_ndjson
 from predictors.errors import DatasetFormatError, PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
 from predictors.progress import progress_bar
@@ -92,9 +93,16 @@ class EvalScene:
 
 def load_eval_scenes(path: str | Path, config: EvalConfig = EvalConfig()) -> list[EvalScene]:
     """The scenes of one ndjson file, each cut to its last ``obs_len + pred_len`` steps."""
+    return eval_scenes_of(parse_ndjson(path), config)
+
+
+def eval_scenes_of(content: NdjsonContent, config: EvalConfig = EvalConfig()) -> list[EvalScene]:
+    """``load_eval_scenes`` of a file ``parse_ndjson`` has already read: ``crowdmpc train`` builds the data
+    module's arrays from the same parse."""
+    path = content.summary.path
     length = config.obs_len + config.pred_len
     scenes = []
-    for scene in read_scenes(path, require_fps=1 / DT):
+    for scene in scenes_of(content, require_fps=1 / DT):
         if len(scene.frames) < length:
             raise DatasetFormatError(
                 path,
@@ -139,6 +147,19 @@ def evaluate(
     """Per-file and overall (scenes pooled) metrics, as a JSON-ready dict."""
     check_dataset_predictor(predictor)  # before the files are read
     loaded = {Path(path): load_eval_scenes(path, config) for path in files}
+    return evaluate_scenes(predictor, loaded, config, progress=progress, root=root)
+
+
+def evaluate_scenes(
+    predictor: Predictor,
+    loaded: dict[Path, list[EvalScene]],
+    config: EvalConfig = EvalConfig(),
+    *,
+    progress: bool = True,
+    root: Path | None = None,
+) -> dict:
+    """``evaluate`` of files already read (``load_eval_scenes`` with the same ``config``), by their paths."""
+    check_dataset_predictor(predictor)
     per_file: dict[str, dict] = {}
     all_scores: list[SceneScore] = []
     # disable=None: a bar on a terminal only, so logs and pipes stay clean

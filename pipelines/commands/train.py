@@ -246,7 +246,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.resume and last.is_file():
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
-    _check_data(files, progress=False if args.no_progress else None)
+    evaluated = _check_data(files, progress=False if args.no_progress else None)
     from pipelines.commands.train_resume import run_settings
 
     settings = run_settings(args, net_config, name, files)
@@ -255,7 +255,7 @@ def run(args: argparse.Namespace) -> int:
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed)
-        return run_training(args, net_config, name, out, (files, root), settings)
+        return run_training(args, net_config, name, out, (files, root), settings, evaluated)
 
 
 def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: Any, loss_typed: bool) -> str:
@@ -308,23 +308,35 @@ def _protocol_options(args: argparse.Namespace, explicit: bool) -> None:
     args.dataset = args.dataset or DEFAULT_DATASET
 
 
-def _check_data(files: dict[str, list[Path]], progress: bool | None = False) -> None:
+def _check_data(files: dict[str, list[Path]], progress: bool | None = False) -> dict[Path, list[Any]]:
     """Every data file is read as the run will read it, and the training and validation splits hold scenes,
     before Lightning starts (its banner would come before the one-line error, and a half-made run folder
     after it). The training and validation files are loaded as the training data module loads them
-    (``load_file_arrays``: scenes of exactly 21 steps), which keeps them for it: read once, not twice. The
-    validation and test files are also read as the evaluation of the trained net reads them (scene length,
-    frame rate, spacing): a file it refuses, such as a TrajNet++ test/ file without ground truth, was found
-    only after training, with no metrics written. ``progress``: a bar while a file's scenes are built (None:
-    on a terminal only), the first read of a large file being a minute of silence otherwise."""
+    (``load_file_arrays``: scenes of exactly 21 steps), which keeps them for it. The validation and test
+    files are also read as the evaluation of the trained net reads them (scene length, frame rate, spacing):
+    a file it refuses, such as a TrajNet++ test/ file without ground truth, was found only after training,
+    with no metrics written. Returns those scenes by path, for that evaluation: each file is parsed once
+    (the validation file was parsed three times, the test file twice). ``progress``: a bar while a file's
+    scenes are built (None: on a terminal only), the first read of a large file being a minute of silence
+    otherwise."""
+    from predictors.data.validate import parse_ndjson
     from predictors.data.windows import load_file_arrays
-    from predictors.evaluate import load_eval_scenes
+    from predictors.evaluate import eval_scenes_of
 
+    evaluated: dict[Path, list[Any]] = {}
     for split, paths in files.items():
-        if split != "train":  # first: its message tells a test/ file without ground truth
-            held = [bool(load_eval_scenes(path)) for path in paths]
-        if split != "test":
-            held = [len(load_file_arrays(path, progress=progress)) > 0 for path in paths]
+        held = []
+        for path in paths:
+            # a training file's arrays may come from the disk cache, unparsed; the evaluation's scenes may
+            # not (a test file that is also the validation file has them already)
+            content = None if split == "train" or path in evaluated else parse_ndjson(path)
+            if content is not None:  # first: its message tells a test/ file without ground truth
+                evaluated[path] = eval_scenes_of(content)
+            if split != "train":
+                held.append(len(evaluated[path]))
+            if split != "test":
+                held.append(len(load_file_arrays(path, progress=progress, content=content)))
         if split in ("train", "val") and not any(held):
             names = ", ".join(str(p) for p in paths)
             raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")
+    return evaluated

@@ -27,8 +27,10 @@ def run_training(
     out: Path,
     data_files: tuple[dict, Path | None],
     settings: dict[str, Any],
+    evaluated: dict[Path, list[Any]] | None = None,
 ) -> int:
-    """Lightning's part of ``train.run``, once every option has been checked."""
+    """Lightning's part of ``train.run``, once every option has been checked; ``evaluated``: the validation
+    and test files' scenes as the evaluation reads them, by path (read by ``train._check_data``)."""
     from pipelines.commands.train_report import print_summary
     from predictors.models import model_kind
     from predictors.training import OptimConfig
@@ -42,7 +44,7 @@ def run_training(
     metrics.unlink(missing_ok=True)
     weights, extra = _save_best(args, module, name, out, best_path, optim)
     top_k = 20 if model_kind(args.model).adversarial else None
-    summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k)
+    summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k, evaluated)
     replace_file(metrics, lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=2) + "\n"))
     print_summary(summary, Path(best_path).name, weights, top_k)
     return 0
@@ -218,6 +220,7 @@ def _summary(
     extra: dict[str, Any],
     elapsed: float,
     top_k: int | None,
+    evaluated: dict[Path, list[Any]] | None = None,
 ) -> dict[str, Any]:
     """NAME.metrics.json: the saved net's split metrics, the data it was trained on and the run's times."""
     from pipelines.commands.train_report import (
@@ -232,7 +235,7 @@ def _summary(
 
     files, root = data_files
     protocol = "custom" if args.train is not None or args.val is not None else args.protocol
-    metrics = evaluate_splits(args, load_checkpoint(weights), files, root, top_k)
+    metrics = evaluate_splits(args, load_checkpoint(weights), files, root, top_k, evaluated)
     # every version: a resumed run logs into a new one (Lightning's CSVLogger), its first epochs in the old
     epoch_times = [
         t for log_dir in sorted((out / "csv").glob("version_*")) for t in epoch_times_from_csv(log_dir)

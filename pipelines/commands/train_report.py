@@ -62,17 +62,24 @@ def trained_loss(module: Any, asked: str) -> str:
 
 
 def evaluate_splits(
-    args: argparse.Namespace, predictor: Any, files: dict[str, Any], root: Any, top_k: int | None
+    args: argparse.Namespace,
+    predictor: Any,
+    files: dict[str, Any],
+    root: Any,
+    top_k: int | None,
+    evaluated: dict[Path, list[Any]] | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """ADE/FDE of the trained model on the validation and test files it was given."""
-    from predictors.evaluate import EvalConfig, evaluate
+    """ADE/FDE of the trained model on the validation and test files it was given; ``evaluated``: their
+    scenes by path, as ``load_eval_scenes`` read them (a file not in it is read here)."""
+    from predictors.evaluate import EvalConfig, evaluate_scenes, load_eval_scenes
 
+    evaluated = evaluated or {}
     metrics = {}
     for split in ("val", "test"):
         if files[split]:
-            result = evaluate(
+            result = evaluate_scenes(
                 predictor,
-                files[split],
+                {Path(p): evaluated[p] if p in evaluated else load_eval_scenes(p) for p in files[split]},
                 # evaluate's own sampling seed, not the training --seed: the top-k stored (and shown by `zoo
                 # list`) is then what `crowdmpc evaluate --top-k K` prints, and nets trained with different
                 # seeds are scored on the same noise

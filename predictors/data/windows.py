@@ -32,7 +32,7 @@ from torch.utils.data import Dataset, Sampler
 from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH
 from predictors.data.locate import cache_root
 from predictors.data.trajnet_io import shown_scenes
-from predictors.data.validate import parse_ndjson, read_error, require_file
+from predictors.data.validate import NdjsonContent, parse_ndjson, read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 
@@ -75,10 +75,13 @@ def load_file_arrays(
     scene_length: int = SCENE_LENGTH,
     disk_cache: bool = True,
     progress: bool | None = False,
+    content: NdjsonContent | None = None,
 ) -> FileArrays:
     """The scenes of ``path`` as arrays; every primary must span ``scene_length`` evenly spaced frames.
     ``progress``: a bar over the scenes while they are built (None: on a terminal only); a cached file has
-    none to show. Building costs time in scenes x agents: a file of dense crowds takes a minute."""
+    none to show. Building costs time in scenes x agents: a file of dense crowds takes a minute.
+    ``content``: ``path`` as ``parse_ndjson`` read it, when the caller has parsed it already (``crowdmpc
+    train`` evaluates its validation files too): built from, not parsed again."""
     path = require_file(path)
     try:
         stat = path.stat()
@@ -96,7 +99,7 @@ def load_file_arrays(
             return _remember(key, arrays)
     # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
     xys, ids = [np.empty((scene_length, 0, 2), dtype=np.float32)], []
-    content = parse_ndjson(path)
+    content = parse_ndjson(path) if content is None else content
     for scene in shown_scenes(content, progress, require_length=scene_length, require_fps=1 / DT):
         xys.append(scene.xy.astype(np.float32))
         ids.append(scene.id)

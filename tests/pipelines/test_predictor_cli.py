@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import json
 from pathlib import Path
 
@@ -432,6 +433,41 @@ def test_a_data_file_named_twice_in_a_split_is_refused(tmp_path, monkeypatch, ca
     assert main([*args, "--train", "walk.ndjson", "--val", "walk.ndjson", absolute]) == 2
     assert f"--val names {absolute} more than once (as walk.ndjson); give" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+def test_train_parses_each_data_file_once(tmp_path, monkeypatch):
+    """The check before training read the validation file as the evaluation reads it and again as the data
+    module does, and the evaluation after training read the validation and test files once more: three
+    parses of --val and two of --test. The check's parse now serves all three, with the same metrics."""
+    import predictors.data.trajnet_io
+    import predictors.data.windows
+    import predictors.evaluate
+    from predictors.checkpoint import load_checkpoint
+    from predictors.data import validate
+    from predictors.evaluate import evaluate
+
+    real, parsed = validate.parse_ndjson, collections.Counter()
+
+    def counting(path):
+        parsed[Path(path).name] += 1
+        return real(path)
+
+    for module in (validate, predictors.data.trajnet_io, predictors.data.windows, predictors.evaluate):
+        if getattr(module, "parse_ndjson", None) is real:
+            monkeypatch.setattr(module, "parse_ndjson", counting)
+    files = {split: write_walk_file(tmp_path / f"{split}.ndjson") for split in ("train", "val", "test")}
+    for blank_lines, path in enumerate(files.values()):  # other bytes: each file its own disk-cache entry
+        path.write_text(path.read_text() + "\n" * blank_lines)
+    options = [a for split, path in files.items() for a in (f"--{split}", str(path))]
+    out = tmp_path / "run"
+    argv = ["train", "--model", "vanilla_lstm", *options, "--epochs", "1", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    assert parsed == {"train.ndjson": 1, "val.ndjson": 1, "test.ndjson": 1}
+    metrics = json.loads((out / "vanilla_lstm_custom.metrics.json").read_text())["metrics"]
+    net = load_checkpoint(out / "vanilla_lstm_custom.pt")
+    for split in ("val", "test"):
+        scored = evaluate(net, [files[split]], progress=False)["overall"]
+        assert metrics[split] == {k: v for k, v in scored.items() if v is not None}
 
 
 def test_training_never_writes_through_a_link_planted_in_its_folder(tmp_path, capsys):
