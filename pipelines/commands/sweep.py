@@ -15,8 +15,11 @@ from pipelines.commands.sweep_plan import check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
+    from pipelines.commands.sweep_report import LogRead
     from pipelines.config import Option, RunConfig
     from pipelines.experiments.sweep import SweepConfig
+
+INTERRUPTED = 130  # the exit status of a sweep stopped by Ctrl-C or SIGTERM, as the CLI's (pipelines.cli)
 
 EPILOG = """examples:
   crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
@@ -270,7 +273,7 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.sweep_report import recorded_plan, report, report_stopped
+    from pipelines.commands.sweep_report import LogRead, recorded_plan, report, report_stopped
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
     cfg, out = _checked_config(args)
@@ -292,19 +295,25 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     status = 0
+    log: LogRead | None = None  # None: the report reads the log
     if not args.report_only:
         check_plan(experiment)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
+        # what the report takes of the log, filled as the sweep reads its records and appends new ones: the
+        # log is read once (and its planned lines once more, by offset, for episodes.csv), not scanned again
+        log = LogRead.of_plan(cells, tasks)
         try:
-            status = _run_cells(config)
+            status = _run_cells(config, log)
         except SweepStopped:
-            report_stopped(config, cells, tasks)  # what it recorded stands
+            report_stopped(config, cells, tasks, log)  # what it recorded stands
             raise
+        if status == INTERRUPTED:  # a record appended as the interrupt came may not have reached ``log``
+            log = None
     elif not (out / EPISODES_FILE).exists():
         raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
     if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
-        report(config, cells, tasks, report_only=args.report_only)
+        report(config, cells, tasks, report_only=args.report_only, log=log)
     return status
 
 
@@ -372,13 +381,13 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
     )
 
 
-def _run_cells(config: SweepConfig) -> int:
+def _run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
     """Runs the episodes not yet recorded and says how it went; returns the exit status (1: some episodes
-    raised, 130: interrupted)."""
+    raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run appends."""
     from pipelines.experiments.sweep import run_sweep
 
     status = 0
-    outcome = run_sweep(config)
+    outcome = run_sweep(config, records=None if log is None else log.add)
     done = outcome.already_done + outcome.ran
     rate = (
         f", {outcome.episodes_per_minute:.1f} episodes/min; "
@@ -397,5 +406,5 @@ def _run_cells(config: SweepConfig) -> int:
         status = 1
     if outcome.interrupted:
         print("interrupted: rerun the same command to resume", file=sys.stderr)
-        status = 130
+        status = INTERRUPTED
     return status

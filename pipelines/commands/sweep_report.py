@@ -14,7 +14,7 @@ import dataclasses
 import json
 import sys
 import zlib
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -72,13 +72,20 @@ def _is_int(value: Any) -> bool:
 
 
 def report(
-    config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], *, report_only: bool = False
+    config: SweepConfig,
+    cells: tuple[Cell, ...],
+    tasks: list[EpisodeTask],
+    *,
+    report_only: bool = False,
+    log: LogRead | None = None,
 ) -> None:
     """Tabulates the planned episodes recorded in --out and projects the plan's CPU time. With
-    ``report_only``, records none of which the plan holds are refused (the report is left as it was)."""
+    ``report_only``, records none of which the plan holds are refused (the report is left as it was).
+    ``log``: what the sweep read and appended of the log (``LogRead.of_plan`` fed by ``run_sweep``), else
+    the log is read here."""
     from pipelines.experiments.log import EPISODES_FILE
 
-    log = read_log(config, cells, tasks)
+    log = read_log(config, cells, tasks) if log is None else log
     if report_only and log.held and not log.planned:
         out = config.out
         humans = ",".join(map(str, config.humans or config.experiment.humans))
@@ -108,10 +115,12 @@ def _note_unrun_cells(cells: tuple[Cell, ...], recorded: set[str]) -> None:
         )
 
 
-def report_stopped(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> None:
+def report_stopped(
+    config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask], log: LogRead | None = None
+) -> None:
     """The report of a sweep that stopped itself part way (SweepStopped): what it recorded stands. None when
-    the plan has no record yet (a sweep stopped before its first)."""
-    log = read_log(config, cells, tasks)
+    the plan has no record yet (a sweep stopped before its first). ``log``: as ``report``'s."""
+    log = read_log(config, cells, tasks) if log is None else log
     if log.planned:
         _write(config, cells, tasks, log)
 
@@ -129,25 +138,34 @@ class LogRead:
     cpu: Column = dataclasses.field(
         default_factory=lambda: Column(FLOATS)
     )  # each planned record's cpu_s that is set
+    planned_keys: Collection[str] = ()  # the plan's episodes' keys
+    tabulated: Collection[str] = ()  # the keys of the cells the report tabulates
+
+    @classmethod
+    def of_plan(cls, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
+        """Nothing read yet, of the plan of ``tasks`` tabulated as ``cells``: ``add`` each record."""
+        return cls(planned_keys={t.key for t in tasks}, tabulated={c.key for c in cells})
+
+    def add(self, offset: int, line: bytes, record: dict[str, Any]) -> None:
+        """The log's record ``record``, its line ``line`` at byte ``offset`` (``EpisodeLog.scan``'s)."""
+        self.held += 1
+        if record["key"] not in self.planned_keys:
+            return
+        self.planned += 1
+        self.cells.add(record["cell"])
+        if record.get("cpu_s") is not None:
+            self.cpu.append(record["cpu_s"])
+        if record["cell"] in self.tabulated:
+            self.columns.setdefault(record["cell"], CellColumns()).add(record, offset, zlib.crc32(line))
 
 
 def read_log(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
     """--out's episodes.jsonl as the report reads it, checked as a sweep loads it."""
     from pipelines.experiments.log import episode_log
 
-    planned = {t.key for t in tasks}
-    tabulated = {c.key for c in cells}
-    log = LogRead()
+    log = LogRead.of_plan(cells, tasks)
     for offset, line, record in episode_log(config.out).scan(repair=False):
-        log.held += 1
-        if record["key"] not in planned:
-            continue
-        log.planned += 1
-        log.cells.add(record["cell"])
-        if record.get("cpu_s") is not None:
-            log.cpu.append(record["cpu_s"])
-        if record["cell"] in tabulated:
-            log.columns.setdefault(record["cell"], CellColumns()).add(record, offset, zlib.crc32(line))
+        log.add(offset, line, record)
     return log
 
 

@@ -103,15 +103,19 @@ class EpisodeLog:
                     return True
         return False
 
-    def append(self, record: dict[str, Any]) -> None:
+    def append(self, record: dict[str, Any]) -> tuple[int, bytes]:
+        """Writes ``record`` as the log's last line; returns that line and its offset, as ``scan`` gives
+        them."""
         try:
             line = json.dumps(plain(record), allow_nan=False, separators=(",", ":")) + "\n"
         except (TypeError, ValueError) as exc:  # the workers check their records (worker.check_json)
             key = record.get("key") if isinstance(record, dict) else None
             raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
+        data = line.encode()
         try:
             with open(self.path, "ab") as f:
-                f.write(line.encode())
+                offset = os.fstat(f.fileno()).st_size  # one writer: the sweep holding the lock
+                f.write(data)
                 f.flush()
                 os.fsync(f.fileno())
         except OSError as exc:  # a full disk, a quota, `ulimit -f`: a torn last line, which a resume cuts
@@ -120,6 +124,7 @@ class EpisodeLog:
                 f"{self.path}: could not append the record of {key!r} ({exc.strerror or exc}); the episodes "
                 "recorded before it are kept: free space and run the same sweep again to resume"
             ) from None
+        return offset, data
 
 
 def error_keys(out: Path) -> set[str]:

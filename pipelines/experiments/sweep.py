@@ -234,12 +234,16 @@ def run_sweep(
     config: SweepConfig,
     *,
     backend_factory: Callable[[SweepConfig, str], Backend] | None = None,
+    records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
 ) -> SweepOutcome:
     """Run every planned episode that ``<out>/episodes.jsonl`` does not hold yet.
 
     ``backend_factory(config, scratch_root)``: the backend (default: ``config``'s); ``scratch_root`` is this
     run's folder for the workers' temporary files, which the driver removes when the run ends (and the next
-    sweep removes when the driver was killed, pipelines.experiments.worker)."""
+    sweep removes when the driver was killed, pipelines.experiments.worker). ``records(offset, line,
+    record)``: called with each record of the log as ``EpisodeLog.scan`` gives it, those it held as the
+    resume reads them, then each this run appends (read back from its line): the report of the run
+    (``crowdmpc sweep``) needs not read the log again."""
     _refuse_in_worker_start()
     out = Path(config.out)
     if backend_factory is None:  # a choice refused here leaves no folder, nor a line in sweep.json
@@ -254,8 +258,10 @@ def run_sweep(
         meta = _sweep_meta(out, config)
         log = episode_log(out)
         recorded = ResumeChecks(out, tasks)
-        for _, _, record in log.scan():  # a record at a time: not held
+        for offset, line, record in log.scan():  # a record at a time: not held
             recorded.add(record)
+            if records is not None:
+                records(offset, line, record)
         recorded.check()
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
         # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
@@ -273,7 +279,17 @@ def run_sweep(
         try:
             with terminate_as_interrupt():
                 factory = backend_factory or _default_backend
-                _run_tasks(config, todo, log, outcome, factory, str(scratch), retried, started=add_run)
+                _run_tasks(
+                    config,
+                    todo,
+                    log,
+                    outcome,
+                    factory,
+                    str(scratch),
+                    retried,
+                    started=add_run,
+                    records=records,
+                )
         except KeyboardInterrupt:
             outcome.interrupted = True
         finally:
@@ -306,6 +322,7 @@ def _run_tasks(
     scratch: str,
     retried: Collection[str] = (),
     started: Callable[[], int] = lambda: 1,
+    records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
 ) -> None:
     """Start the backend, call ``started`` (the run's line in sweep.json: a backend that could not start ran
     nothing; it returns the run's number), write every outcome as it comes back, each record with that
@@ -345,7 +362,9 @@ def _run_tasks(
                 _write_atomic(mcap_path(out, task), result.mcap)  # before the record that vouches for it
             # which run of sweep.json, hence which code, made it: a resume by other code keeps the earlier
             # episodes (_note_other_code), and the lines' order alone does not say where one run ends
-            log.append(result.record | {"run": run})
+            offset, line = log.append(result.record | {"run": run})
+            if records is not None:
+                records(offset, line, _read_back(log, line, result.key))
             outcome.ran += 1
             bar.update(1)
     finally:
@@ -353,6 +372,16 @@ def _run_tasks(
         if bar is not None:
             bar.close()
         backend.close()
+
+
+def _read_back(log: EpisodeLog, line: bytes, key: str) -> dict[str, Any]:
+    """The record of the line just appended to ``log``, as a scan of the log reads and checks it: a worker's
+    record as written (its numpy floats plain floats, its tuples lists), which the report of the run takes
+    without reading the log again."""
+    record = json.loads(line)
+    if log.check is not None:
+        log.check(record, f"{log.path} (the record of {key!r} this run appended)")
+    return record
 
 
 def _default_backend(config: SweepConfig, scratch: str) -> Backend:

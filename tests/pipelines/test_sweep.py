@@ -1110,6 +1110,29 @@ def test_cli_runs_a_small_sweep_and_reports(tmp_path, capsys):
     assert (tmp_path / "table.md").exists()
 
 
+def test_a_resumed_sweep_scans_its_log_once_and_reports_as_its_log_reads(tmp_path, monkeypatch, capsys):
+    """A resume scanned episodes.jsonl to find what it holds, and its report scanned it again after the run
+    (JSON and checks of every record twice). The report now takes what the resume read and the run appended:
+    one scan, and the same files as a report of the log read afresh (--report-only)."""
+    args = ["sweep", "--experiment", "baselines", "--humans", "5", "--backend", "inline", "--no-progress"]
+    args += ["--out", str(tmp_path)]
+    assert main([*args, "--episodes-per-cell", "1"]) == 0
+    scans, scan = [], EpisodeLog.scan
+
+    def counted(log, repair=True):
+        scans.append(log.path.name)
+        yield from scan(log, repair)
+
+    monkeypatch.setattr(EpisodeLog, "scan", counted)
+    assert main([*args, "--episodes-per-cell", "3"]) == 0
+    assert scans == [EPISODES_FILE]
+    written = {name: (tmp_path / name).read_bytes() for name in ("cells.csv", "episodes.csv", "table.md")}
+    assert written["episodes.csv"].count(b"\n") == 1 + 2 * 3
+    capsys.readouterr()
+    assert main([*args, "--episodes-per-cell", "3", "--report-only"]) == 0
+    assert {name: (tmp_path / name).read_bytes() for name in written} == written
+
+
 def test_controller_spec_of_cells_is_validated():
     with pytest.raises(PipelineError):
         ControllerSpec("nope")
