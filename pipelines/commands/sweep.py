@@ -62,9 +62,10 @@ are [world], [env] and [env.orca] values beyond profile and robots_visible, and 
 Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
 --episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;
 retried on rerun), cells.csv, episodes.csv, table.md, a plot per outcome (success, travel_time, collision,
-contact, discomfort, control_step) named OUTCOME_vs_humans.png, at one crowd size OUTCOME_vs_robots.png
-(--vary scenario.robots) or OUTCOME_by_method.png, min_distance_hist.csv/.png, safety_tradeoff.png,
-sweep.json, and with --record the MCAP logs in DIR/mcap/<cell>/. Every file's fields: docs/outputs.md.
+contact, discomfort, control_step, and robot_contact where robots can touch: not in the paper) named
+OUTCOME_vs_humans.png, at one crowd size OUTCOME_vs_robots.png (--vary scenario.robots) or
+OUTCOME_by_method.png, min_distance_hist.csv/.png, safety_tradeoff.png, sweep.json, and with --record the
+MCAP logs in DIR/mcap/<cell>/. Every file's fields: docs/outputs.md.
 """
 
 

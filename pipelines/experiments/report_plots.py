@@ -1,5 +1,6 @@
 """The report's plots, one per outcome: success, travel time, collision, contact and discomfort, ours beside
-the paper's, and what a control step costs (the median, bars up to the p95).
+the paper's, what a control step costs (the median, bars up to the p95), and, where some cell ran more than
+one robot and recorded it, robots touching each other (``robot_contact``, not a metric of the paper).
 
 An experiment over several crowd sizes (Tables II and III) gets ``OUTCOME_vs_humans.png``: the number of
 humans on the x axis, a line per method. One at one crowd size whose columns vary the number of robots
@@ -22,9 +23,11 @@ from typing import Any, Final
 
 import numpy as np
 
-from crowdsim.metrics import COLLISION_DISTANCE
+from crowdsim.metrics import ADDED_FLAGS, COLLISION_DISTANCE
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.summary import CellSummary, Rate
+
+ROBOT_CONTACT_FLAG: Final[str] = "robot_contact"  # crowdsim.metrics' flag: two robots touched in the episode
 
 
 @dataclass(frozen=True)
@@ -37,6 +40,8 @@ class Outcome:
     meaning: str  # a line under the title saying what counts
     interval: str = "Wilson interval"  # what the error bars are: the 95% interval summary.py gives
     bars: str | None = None  # the title's line on the bars where they are no 95% interval of ours
+    missing: str = "no success"  # what a method without any value has (the legend's words)
+    no_bars: str = "fewer than two successes"  # why a plot has no error bar at all (the title's words)
 
 
 OUTCOMES: Final[tuple[Outcome, ...]] = (
@@ -54,6 +59,14 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
     ),
     Outcome("contact", "Contact rate (%)", "a robot touching a human (closer than the sum of their radii)"),
     Outcome("discomfort", "Discomfort rate (%)", "a robot's projected path crossing a human's"),
+    # robot-robot: plotted only where some cell ran several robots and recorded it (plotted_outcomes)
+    Outcome(
+        ROBOT_CONTACT_FLAG,
+        "Robot-robot contact rate (%), not in the paper",
+        "two robots touching (closer than the sum of their radii); not in the paper",
+        missing="not recorded",
+        no_bars="not recorded",
+    ),
     # what a control step costs (prediction, solves, bookkeeping): the scale study's figure against robots
     Outcome(
         "control_step",
@@ -62,6 +75,16 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
         bars="bars up to the p95 of the episodes' p95 steps; the period is 400 ms",
     ),
 )
+
+
+def plotted_outcomes(summaries: Sequence[CellSummary]) -> tuple[Outcome, ...]:
+    """``OUTCOMES`` a report of ``summaries`` plots: robot-robot contact only where a cell ran more than one
+    robot and its records hold the flag (those written before it do not): with one robot it cannot
+    happen, and a plot of nothing but cells that lack it would be empty."""
+    robots = any(
+        s.cell.n_robots > 1 and s.added_flag_counts.get(ROBOT_CONTACT_FLAG) is not None for s in summaries
+    )
+    return tuple(o for o in OUTCOMES if o.name != ROBOT_CONTACT_FLAG or robots)
 
 
 FIGSIZE: Final[tuple[float, float]] = (6.4, 4.4)  # in
@@ -108,10 +131,20 @@ def _values(cells: Sequence[CellSummary], name: str) -> tuple[np.ndarray, np.nda
         y = np.array([s.travel_time_mean for s in cells], dtype=float)
         half = np.array([s.travel_time_ci for s in cells], dtype=float)
         return y, np.vstack([half, half])
-    rates: list[Rate] = [getattr(s, name) for s in cells]
-    y = np.array([r.percent for r in rates], dtype=float)
-    bounds = np.array([r.interval for r in rates], dtype=float).reshape(-1, 2).T
-    return y, np.abs(bounds - y)
+    rates = [_rate(s, name) for s in cells]
+    y = np.array([math.nan if r is None else r.percent for r in rates], dtype=float)
+    bounds = np.array([(math.nan, math.nan) if r is None else r.interval for r in rates], dtype=float)
+    return y, np.abs(bounds.reshape(-1, 2).T - y)
+
+
+def _rate(s: CellSummary, name: str) -> Rate | None:
+    """The cell's rate ``name``; for a flag added after the first records (robot-robot contact), None when
+    some record of the cell predates it, as the table's "—" (tables._added_rate_cell)."""
+    if name not in ADDED_FLAGS:
+        rate: Rate = getattr(s, name)
+        return rate
+    count = s.added_flag_counts.get(name)
+    return None if count is None else Rate(count, s.episodes)
 
 
 def _paper(cells: Sequence[CellSummary], name: str) -> list[float | None]:
@@ -119,14 +152,19 @@ def _paper(cells: Sequence[CellSummary], name: str) -> list[float | None]:
     return [v if v is not None and math.isfinite(v) else None for v in values]
 
 
-def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary], name: str) -> bool:
-    """The bars; whether any has an error bar (a travel time of fewer than two successes has none)."""
+def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary], outcome: Outcome) -> bool:
+    """The bars; whether any has an error bar (a travel time of fewer than two successes has none). A method
+    without a value has its slot say why (``outcome.missing``) rather than stand empty like a rate of 0."""
+    name = outcome.name
     cells = [next(s for s in summaries if s.cell.method == m) for m in methods]
     y, err = _values(cells, name)
     x = np.arange(len(methods))
     colors = [f"C{k}" for k in range(len(methods))]
     drawn = not np.isnan(err).all()
     ax.bar(x, y, yerr=err if drawn else None, color=colors, capsize=4, label="ours (95% interval)")
+    if name == ROBOT_CONTACT_FLAG:
+        for k in np.flatnonzero(np.isnan(y)):
+            ax.text(x[k], 0.0, outcome.missing, rotation=90, ha="center", va="bottom", fontsize="x-small")
     paper = [(k, v) for k, v in enumerate(_paper(cells, name)) if v is not None]
     if paper:
         px, py = zip(*paper, strict=True)
@@ -146,11 +184,16 @@ def _dodges(methods: list[str], sizes: list[int]) -> dict[str, float]:
 
 
 def _draw_vs(
-    ax: Any, lines: dict[str, list[CellSummary]], name: str, size: Callable[[CellSummary], int], axis: str
+    ax: Any,
+    lines: dict[str, list[CellSummary]],
+    outcome: Outcome,
+    size: Callable[[CellSummary], int],
+    axis: str,
 ) -> bool:
     """A line per method (``lines``: its cells) against ``size`` of their cells; whether any point has an
     error bar. A method with no value at all (no success, for the travel time) is named so in the legend,
     as the safety trade-off names it."""
+    name = outcome.name
     drawn = False
     sizes = sorted({size(s) for cells in lines.values() for s in cells})
     methods = list(lines)
@@ -162,7 +205,7 @@ def _draw_vs(
         drawn = drawn or not np.isnan(err).all()
         style = method_style(k)
         color = style["color"]
-        label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, no success)"
+        label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, {outcome.missing})"
         ax.errorbar(x, y, yerr=err, capsize=3, label=label, **style)
         paper = [
             (size(s) + dodge[method], v)
@@ -217,19 +260,19 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     ax = fig.add_subplot()
     if axis == "method":
         fig.set_size_inches(max(FIGSIZE[0], 1.3 + BAR_WIDTH_IN * len(methods)), FIGSIZE[1])
-        drawn = _draw_by_method(ax, methods, summaries, outcome.name)
+        drawn = _draw_by_method(ax, methods, summaries, outcome)
         ax.set_xlabel(f"method ({summaries[0].cell.n_humans} humans)")
     else:
         size = (lambda s: s.cell.n_humans) if axis == "humans" else (lambda s: s.cell.n_robots)
         lines = _lines(experiment, methods, summaries, axis)
-        drawn = _draw_vs(ax, lines, outcome.name, size, axis)
+        drawn = _draw_vs(ax, lines, outcome, size, axis)
         if axis == "robots":
             ax.set_xlabel(f"number of robots ({summaries[0].cell.n_humans} humans)")
     # Rates from 0; a travel time above 0 too: a Student's t interval of few successes reaches below it
     # (14.4 +- 15.2 s over 2), and the axis showed travel times of -20 s.
     ax.set_ylim(bottom=0.0 if outcome.name != "travel_time" else max(0.0, ax.get_ylim()[0]))
     ax.set_ylabel(outcome.ylabel)
-    bars = f"error bars: our 95% {outcome.interval}" if drawn else "no error bars: fewer than two successes"
+    bars = f"error bars: our 95% {outcome.interval}" if drawn else f"no error bars: {outcome.no_bars}"
     bars = outcome.bars or bars
     ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
     ax.grid(alpha=0.3)
@@ -237,10 +280,11 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
 
 
 def plot_outcomes(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:
-    """One plot per outcome (``OUTCOMES``) in ``out``, named by ``plot_filename``; returns their paths."""
+    """One plot per outcome (``plotted_outcomes``) in ``out``, named by ``plot_filename``; returns their
+    paths."""
     axis = plot_axis(summaries)
     written = []
-    for outcome in OUTCOMES:
+    for outcome in plotted_outcomes(summaries):
         fig = outcome_figure(experiment, summaries, outcome)
         path = out / plot_filename(outcome.name, axis)
         fig.savefig(path, dpi=120)

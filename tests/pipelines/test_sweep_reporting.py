@@ -204,6 +204,74 @@ def test_a_legend_of_many_methods_stands_beside_the_plot():
             assert fig.bbox.contains(legend.get_window_extent().x1 - 1, legend.get_window_extent().y0 + 1)
 
 
+def _touching(cells, touched: dict[str, list[bool] | None]) -> list[dict]:
+    """Records of ``cells``, four each, whose ``robot_contact`` is ``touched[method]`` episode by episode
+    (None: records from before the flag, which have none)."""
+    records = []
+    for c in cells:
+        for i in range(4):
+            record = _record(c, i, 2.0, 0) | {"n_humans": c.n_humans, "wall_s": 1.0}
+            if touched[c.method] is not None:
+                record["metrics"]["robot_contact"] = touched[c.method][i]
+            records.append(record)
+    return records
+
+
+def test_robot_contact_is_plotted_beside_the_other_safety_rates(tmp_path):
+    """Robots touching each other (``robot_contact``, not a metric of the paper) was in cells.csv and
+    table.md but in no plot, where collision, contact and discomfort each have one. orca touched in 1 of 4
+    episodes (25 %), straight in 3 of 4 (75 %); cmpc's records predate the flag: no bar, said so, as the
+    table's "—"."""
+    from pipelines.experiments.report import write_report
+    from pipelines.experiments.summary import wilson_interval
+
+    experiment = get_experiment("controllers").with_predictor("constant_velocity")
+    cells = [c for c in experiment.cells((5,)) if c.method in ("cmpc", "orca", "straight")]
+    touched = {"orca": [True, False, False, False], "straight": [True, True, True, False], "cmpc": None}
+    records = _touching(cells, touched)
+    report = write_report(tmp_path, experiment, cells, records)
+    assert "robot_contact_by_method.png" in {p.name for p in report.files}
+    assert (tmp_path / "robot_contact_by_method.png").read_bytes().startswith(b"\x89PNG")
+    summaries = summarize(experiment, cells, records)
+    (outcome,) = [o for o in OUTCOMES if o.name == "robot_contact"]
+    ax = outcome_figure(experiment, summaries, outcome).axes[0]
+    methods = [t.get_text() for t in ax.get_xticklabels()]
+    assert methods == ["cmpc", "orca", "straight"]
+    from matplotlib.container import BarContainer
+
+    (bars,) = [c for c in ax.containers if isinstance(c, BarContainer)]
+    heights = [bar.get_height() for bar in bars]
+    assert np.isnan(heights[0]) and heights[1:] == [25.0, 75.0]
+    # the error bars: each rate's 95% Wilson interval
+    segments = bars.errorbar.lines[2][0].get_segments()
+    for k, hits in ((1, 1), (2, 3)):
+        low, high = (100.0 * b for b in wilson_interval(hits, 4))
+        assert segments[k][:, 1] == pytest.approx([low, high])
+    assert "not in the paper" in ax.get_ylabel() and "not in the paper" in ax.get_title()
+    assert "not recorded" in [t.get_text() for t in ax.texts]
+    # across crowd sizes: a line per method, cmpc's named as not recorded
+    cells = [c for c in experiment.cells((5, 7)) if c.method in ("cmpc", "orca", "straight")]
+    summaries = summarize(experiment, cells, _touching(cells, touched))
+    ax = outcome_figure(experiment, summaries, outcome).axes[0]
+    lines = {c.get_label(): c.lines[0].get_ydata() for c in ax.containers}
+    assert list(lines["orca (ours)"]) == [25.0, 25.0] and list(lines["straight (ours)"]) == [75.0, 75.0]
+    assert np.isnan(lines["cmpc (ours, not recorded)"]).all()
+
+
+def test_robot_contact_has_no_plot_with_one_robot_or_without_its_records(tmp_path):
+    """One robot cannot touch another, and records from before the flag do not hold it: no plot of nothing."""
+    from pipelines.experiments.report import write_report
+
+    experiment = get_experiment("controllers").with_predictor("constant_velocity")
+    flagged = {"cmpc": [False] * 4, "dmpc": [False] * 4, "orca": [True] * 4, "straight": [False] * 4}
+    for n_robots, touched in ((1, flagged), (3, dict.fromkeys(flagged))):
+        cells = experiment.cells((5,), n_robots=n_robots)
+        (tmp_path / str(n_robots)).mkdir()
+        report = write_report(tmp_path / str(n_robots), experiment, cells, _touching(cells, touched))
+        assert "robot_contact_by_method.png" not in {p.name for p in report.files}
+        assert "collision_by_method.png" in {p.name for p in report.files}
+
+
 # A notebook's session: its own backend (Jupyter's inline one; "svg" stands for it here) and a figure open.
 _USER_SESSION = """
 import matplotlib
