@@ -265,6 +265,7 @@ def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: 
         check_more_epochs,
         check_resumed_settings,
         note_other_code,
+        read_run_settings,
         recorded_loss,
     )
 
@@ -273,15 +274,16 @@ def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: 
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     if not args.resume:
         return str(settings["name"])
-    recorded = recorded_loss(out, last)
+    recorded = read_run_settings(out)
+    loss = recorded_loss(recorded, last)
     # the run's own when none is typed: runs before this default recorded "gaussian" for point heads too,
     # which trained on L2, so for a point head that record is the "l2" typed, not another setting
-    if not loss_typed or (recorded == "gaussian" and trains_point_head(args, net_config)):
-        settings["loss"] = args.loss = recorded or args.loss
-    name = check_resumed_settings(out, settings, name_given=args.name is not None)
+    if not loss_typed or (loss == "gaussian" and trains_point_head(args, net_config)):
+        settings["loss"] = args.loss = loss or args.loss
+    name = check_resumed_settings(out, recorded, settings, name_given=args.name is not None)
     done = check_last_checkpoint(last, settings)
     check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
-    note_other_code(out)
+    note_other_code(out, recorded)
     return name
 
 

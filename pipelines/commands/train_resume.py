@@ -79,16 +79,30 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
     }
 
 
-def recorded_loss(out: Path, last: Path) -> str | None:
-    """The loss the run in ``out`` was started with: its settings file's, else ``last``'s (runs from before
-    that file); None when neither says (the checks of the resume then say what is wrong with them). A resume
-    that types no --loss continues with it: a run started before the default followed the net's head
-    recorded "gaussian" for a point head too, which trained on L2 and is still refused when typed."""
+def read_run_settings(out: Path) -> dict[str, Any] | None:
+    """The settings the run in ``out`` was started with (its train_settings.json); None when it has none (a
+    run from before the file was kept); PipelineError when the file is no readable JSON object, which the
+    run wrote: it was damaged. Read once by a resume, whose loss, checks and note on the code all take it
+    (each read it again)."""
+    path = out / SETTINGS_FILE
+    if not path.is_file():
+        return None
     try:
-        recorded = json.loads((out / SETTINGS_FILE).read_text())
-    except (OSError, ValueError, RecursionError):
-        recorded = None
-    loss = recorded.get("loss") if isinstance(recorded, dict) else None
+        recorded = json.loads(path.read_text())
+    except (OSError, ValueError, RecursionError) as exc:
+        raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
+    if not isinstance(recorded, dict):
+        raise PipelineError(f"--resume: {path} is not a JSON object of settings; the run's file is damaged")
+    return recorded
+
+
+def recorded_loss(recorded: dict[str, Any] | None, last: Path) -> str | None:
+    """The loss the run was started with: its settings' (``read_run_settings``), else ``last``'s (runs
+    from before that file); None when neither says (the checks of the resume then say what is wrong with
+    them). A resume that types no --loss continues with it: a run started before the default followed the
+    net's head recorded "gaussian" for a point head too, which trained on L2 and is still refused when
+    typed."""
+    loss = recorded.get("loss") if recorded is not None else None
     if loss in _LOSSES:
         return str(loss)
     import torch
@@ -101,20 +115,15 @@ def recorded_loss(out: Path, last: Path) -> str | None:
     return str(loss) if loss in _LOSSES else None
 
 
-def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: bool) -> str:
+def check_resumed_settings(
+    out: Path, recorded: dict[str, Any] | None, settings: dict[str, Any], *, name_given: bool
+) -> str:
     """The run's name; PipelineError when the command asks for other settings than the run in ``out`` was
-    started with: the weights, optimiser and schedule resume from last.ckpt whatever the command says, so the
-    written NAME.json would record settings that never trained them. Runs from before the settings were kept
-    have no file, and are not checked."""
-    path = out / SETTINGS_FILE
-    if not path.is_file():
+    started with (``recorded``, ``read_run_settings``): the weights, optimiser and schedule resume from
+    last.ckpt whatever the command says, so the written NAME.json would record settings that never trained
+    them. Runs from before the settings were kept have none, and are not checked."""
+    if recorded is None:
         return str(settings["name"])
-    try:
-        recorded = json.loads(path.read_text())
-    except (OSError, ValueError, RecursionError) as exc:
-        raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
-    if not isinstance(recorded, dict):
-        raise PipelineError(f"--resume: {path} is not a JSON object of settings; the run's file is damaged")
     if not name_given:  # the default name follows the options, which are checked below
         settings = {**settings, "name": recorded.get("name", settings["name"])}
     differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
@@ -127,18 +136,15 @@ def check_resumed_settings(out: Path, settings: dict[str, Any], *, name_given: b
     return str(settings["name"])
 
 
-def note_other_code(out: Path) -> None:
-    """Say so when the run in ``out`` was started by other code than this resume's (another commit, other
-    libraries; "dirty" alone cannot be compared), or by code that recorded none: the epochs so far were
-    trained by it, the next by this code, and NAME.metrics.json names this code only. Not refused, as a
-    sweep's resume is not: a change that leaves training alone (documentation, a benchmark) is common."""
+def note_other_code(out: Path, recorded: dict[str, Any] | None) -> None:
+    """Say so when the run in ``out`` was started (``recorded``: its settings) by other code than this
+    resume's (another commit, other libraries; "dirty" alone cannot be compared), or by code that recorded
+    none: the epochs so far were trained by it, the next by this code, and NAME.metrics.json names this code
+    only. Not refused, as a sweep's resume is not: a change that leaves training alone (documentation, a
+    benchmark) is common. No settings (a run from before they were kept): no note."""
     from pipelines.version import code_changes
 
-    try:
-        recorded = json.loads((out / SETTINGS_FILE).read_text())
-    except (OSError, ValueError, RecursionError):  # no file (a run from before it was kept): no note
-        return
-    if not isinstance(recorded, dict):
+    if recorded is None:
         return
     shown = code_changes([recorded.get("code")])
     if shown:

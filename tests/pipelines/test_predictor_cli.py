@@ -200,6 +200,22 @@ def test_a_train_ended_by_sigterm_is_interrupted_not_a_success(tmp_path, monkeyp
     assert not (out / "walker.pt").exists()
 
 
+def test_a_resume_reads_the_runs_settings_once(trained, monkeypatch):
+    """The resume's loss, its check of the settings and its note on the code each read train_settings.json:
+    three reads of one file. It is read once and handed to each."""
+    out, args = trained
+    reads, real = [], Path.read_text
+
+    def counted(path, *a, **k):
+        if path.name == "train_settings.json":
+            reads.append(path)
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(Path, "read_text", counted)
+    assert main([*[a if a != "1" else "2" for a in args], "--resume"]) == 0
+    assert reads == [out / "train_settings.json"]
+
+
 def test_resume_refuses_to_train_no_epoch(trained, capsys):
     """--resume with --epochs at or below the epochs last.ckpt has finished trained nothing, yet wrote
     NAME.pt, NAME.json and the metrics again with the smaller count. The same count still finishes a run
