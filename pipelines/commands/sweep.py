@@ -19,8 +19,6 @@ if TYPE_CHECKING:
     from pipelines.config import Option, RunConfig
     from pipelines.experiments.sweep import SweepConfig
 
-INTERRUPTED = 130  # the exit status of a sweep stopped by Ctrl-C or SIGTERM, as the CLI's (pipelines.cli)
-
 EPILOG = """examples:
   crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
   crowdmpc sweep --experiment table2 --predictor constant_velocity --humans 7 --episodes-per-cell 4 \\
@@ -274,7 +272,14 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.sweep_report import LogRead, recorded_plan, report, report_stopped
+    from pipelines.commands.sweep_report import (
+        INTERRUPTED,
+        LogRead,
+        recorded_plan,
+        report,
+        report_stopped,
+        run_cells,
+    )
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
     cfg, out = _checked_config(args)
@@ -305,7 +310,7 @@ def run(args: argparse.Namespace) -> int:
         # log is read once (and its planned lines once more, by offset, for episodes.csv), not scanned again
         log = LogRead.of_plan(cells, tasks)
         try:
-            status = _run_cells(config, log)
+            status = run_cells(config, log)
         except SweepStopped:
             report_stopped(config, cells, tasks, log)  # what it recorded stands
             raise
@@ -380,32 +385,3 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
         ),
         run_config={"config_file": cfg.path, **cfg.effective()},
     )
-
-
-def _run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
-    """Runs the episodes not yet recorded and says how it went; returns the exit status (1: some episodes
-    raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run appends."""
-    from pipelines.experiments.sweep import run_sweep
-
-    status = 0
-    outcome = run_sweep(config, records=None if log is None else log.add)
-    done = outcome.already_done + outcome.ran
-    rate = (
-        f", {outcome.episodes_per_minute:.1f} episodes/min; "
-        f"{outcome.steady_episodes_per_minute:.1f} after {outcome.startup_s:.1f} s of worker start-up"
-        if outcome.ran
-        else ""
-    )
-    print(
-        f"{config.experiment.name}: {done}/{outcome.planned} episodes recorded ({outcome.ran} this run in "
-        f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})",
-        file=sys.stderr,
-    )
-    if outcome.errors:
-        raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
-        print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
-        status = 1
-    if outcome.interrupted:
-        print("interrupted: rerun the same command to resume", file=sys.stderr)
-        status = INTERRUPTED
-    return status

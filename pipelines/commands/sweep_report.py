@@ -1,5 +1,5 @@
-"""``crowdmpc sweep``'s report: the table and plots of what a sweep directory holds, after a run or on its
-own (``--report-only``), and the CPU time the planned episodes take.
+"""``crowdmpc sweep``'s report: how a run went (``run_cells``), the table and plots of what a sweep directory
+holds, after a run or on its own (``--report-only``), and the CPU time the planned episodes take.
 
 ``--report-only`` tabulates the sweep that is in ``--out``: its experiment is sweep.json's (another would
 label the records as that experiment's methods, since cell keys do not name the experiment), and the crowd
@@ -26,6 +26,9 @@ if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.experiments.sweep import SweepConfig
     from pipelines.experiments.tasks import Cell, EpisodeTask
+
+
+INTERRUPTED = 130  # the exit status of a sweep stopped by Ctrl-C or SIGTERM, as the CLI's (pipelines.cli)
 
 
 def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
@@ -225,3 +228,32 @@ def duration(seconds: float) -> str:
     if round(seconds / 3600, 2) < 48:
         return f"{seconds / 3600:.2f} h"
     return f"{seconds / 86400:.1f} days"
+
+
+def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
+    """Runs the episodes not yet recorded and says how it went; returns the exit status (1: some episodes
+    raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run appends."""
+    from pipelines.experiments.sweep import run_sweep
+
+    status = 0
+    outcome = run_sweep(config, records=None if log is None else log.add)
+    done = outcome.already_done + outcome.ran
+    rate = (
+        f", {outcome.episodes_per_minute:.1f} episodes/min; "
+        f"{outcome.steady_episodes_per_minute:.1f} after {outcome.startup_s:.1f} s of worker start-up"
+        if outcome.ran
+        else ""
+    )
+    print(
+        f"{config.experiment.name}: {done}/{outcome.planned} episodes recorded ({outcome.ran} this run in "
+        f"{outcome.wall_s:.0f} s{rate}, backend {outcome.backend or '-'})",
+        file=sys.stderr,
+    )
+    if outcome.errors:
+        raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
+        print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
+        status = 1
+    if outcome.interrupted:
+        print("interrupted: rerun the same command to resume", file=sys.stderr)
+        status = INTERRUPTED
+    return status
