@@ -254,12 +254,14 @@ def _simulate(resolved: SimulateRun) -> int:
 
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
-    from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note
+    from pipelines.commands import simulate_checks as checks
 
+    visibility = "visible" if cfg.env.robots_visible else "invisible"
     notes = (
-        flock_note(spec, scenario.robots),
-        goal_room_note(spec, scenario.robots, cfg.env.formation, formation_settable=True),
-        horizon_note(spec),
+        checks.flock_note(spec, scenario.robots),
+        checks.goal_room_note(spec, scenario.robots, cfg.env.formation, formation_settable=True),
+        checks.horizon_note(spec),
+        checks.calibration_world_note(spec, cfg.env.profile, visibility),
     )
     for note in notes:
         if note is not None:

@@ -166,3 +166,36 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
         f"note: {n_robots} robots under the paper's per-pair flocking weight, set for {PAPER_ROBOTS}; "
         "--set mpc.flocking_weight=per_robot (in docs/examples/many_robots.toml) weighs it per robot"
     )
+
+
+def calibration_world_note(spec: ControllerSpec, profile: str, visibility: str) -> str | None:
+    """A line for closed-loop conformal margins calibrated under other conventions than the run's (the
+    profile, the robots' visibility), None otherwise: one block is stored per predictor and alpha, the
+    humans' motion its margins cover is that of the conventions it ran under, and a run under others planned
+    with it silently. Not refused: an experiment may hold the margins fixed across conventions (conventions,
+    docs/safe_crossing.md)."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+    from predictors.calibration_store import find_calibration, recalibrate_command
+    from predictors.conformal import alpha_text
+    from predictors.errors import PredictorError
+    from predictors.registry import checkpoint_sha256
+
+    margins, name = spec.margins, spec.predictor_name
+    if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES:
+        return None
+    if margins.source != "closed-loop" or name is None:
+        return None
+    try:
+        block = find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
+    except PredictorError:  # no such block, or other weights: refused with its own line where margins resolve
+        return None
+    measured = (block.details.get("profile"), block.details.get("visibility"))
+    if None in measured or measured == (profile, visibility):
+        return None
+    command = recalibrate_command(name, margins.source, margins.alpha)
+    return (
+        f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
+        f"under profile {measured[0]} with robots {measured[1]}, this run is {profile} with robots "
+        f"{visibility}: their coverage here is not measured ({command} --profile {profile} --visibility "
+        f"{visibility} measures it, replacing that block)"
+    )

@@ -6,7 +6,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note
+from pipelines.commands.simulate_checks import (
+    calibration_world_note,
+    flock_note,
+    goal_room_note,
+    horizon_note,
+)
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -120,8 +125,9 @@ def check_margins(experiment: Experiment) -> None:
 
 def method_notes(cells: Iterable[Cell]) -> list[str]:
     """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals),
-    ``horizon_note`` lines (a plan longer than the learned predictor's training) and ``flock_note`` lines
-    (a team larger than the paper's under its per-pair flocking weight), each once, naming the methods it
+    ``horizon_note`` lines (a plan longer than the learned predictor's training), ``flock_note`` lines
+    (a team larger than the paper's under its per-pair flocking weight) and ``calibration_world_note`` lines
+    (margins calibrated under other conventions), each once, naming the methods it
     applies to: a grid of --vary columns printed the same line for each of eight methods."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     for cell in cells:
@@ -130,6 +136,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
             horizon_note(cell.spec),
             flock_note(cell.spec, cell.n_robots),
+            calibration_world_note(cell.spec, cell.world.profile, cell.world.visibility),
         ):
             if note is not None and cell.method not in methods.setdefault(note, []):
                 methods[note].append(cell.method)
