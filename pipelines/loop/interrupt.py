@@ -67,7 +67,8 @@ def terminate_as_interrupt() -> Iterator[None]:
     """SIGTERM and SIGHUP end the block like Ctrl-C: a sweep stops its workers, removes its scratch and
     resumes on a rerun; calibrate takes its blocks back; simulate reports the episodes it finished. During an
     episode's step the signal is noted as a Ctrl-C is (``interrupts_between_steps``), so that CasADi prints
-    nothing of its own. Only the main thread may set signal handlers; elsewhere the default actions stay."""
+    nothing of its own. A signal the caller ignores (SIGHUP under ``nohup``) stays ignored. Only the main
+    thread may set signal handlers; elsewhere the default actions stay."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -80,6 +81,8 @@ def terminate_as_interrupt() -> Iterator[None]:
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
     signals = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    # one the caller ignores stays ignored: `nohup crowdmpc sweep ...` is meant to outlive its terminal
+    signals = [s for s in signals if signal.getsignal(s) is not signal.SIG_IGN]
     saved = {s: signal.signal(s, interrupt) for s in signals}
     try:
         yield

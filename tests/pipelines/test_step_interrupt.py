@@ -123,8 +123,18 @@ def test_sigint_ignored_by_the_caller_stays_ignored():
     assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
 
 
+@pytest.fixture
+def default_terminate():
+    """SIGTERM and SIGHUP with their default actions, as a program run from a terminal has them; a test run
+    under `nohup` inherits SIGHUP ignored."""
+    saved = {s: signal.signal(s, signal.SIG_DFL) for s in (signal.SIGTERM, signal.SIGHUP)}
+    yield
+    for s, handler in saved.items():
+        signal.signal(s, handler)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
-def test_a_terminate_is_raised_when_the_step_in_progress_ends(sig):
+def test_a_terminate_is_raised_when_the_step_in_progress_ends(sig, default_terminate):
     controller, acts = _signalled("cmpc", at_step=3, sig=sig)
     observer = _Steps()
     with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt):
@@ -133,7 +143,21 @@ def test_a_terminate_is_raised_when_the_step_in_progress_ends(sig):
     assert signal.getsignal(sig) is signal.SIG_DFL  # the caller's handler back
 
 
-def test_a_terminate_outside_an_episode_is_raised_at_once():
+def test_a_hangup_the_caller_ignores_stays_ignored(default_terminate):
+    """`nohup crowdmpc sweep ...` starts with SIGHUP ignored, to outlive its terminal: the sweep had taken
+    the hangup as a Ctrl-C all the same."""
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    controller, acts = _signalled("straight", at_step=2, sig=signal.SIGHUP)
+    with terminate_as_interrupt():
+        try:
+            result = _episode(controller, _Steps(), gym_loop=False)
+        except KeyboardInterrupt:  # what would otherwise stop pytest itself
+            pytest.fail("the hangup the caller ignores was raised as a Ctrl-C")
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    assert result.metrics.success and set(acts) == {"finished"}
+
+
+def test_a_terminate_outside_an_episode_is_raised_at_once(default_terminate):
     with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt, match="SIGTERM"):
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(5)  # the handler runs in the main thread before the sleep's end
