@@ -70,10 +70,12 @@ def storage_refusal(exc: BaseException) -> str | None:
 def writes_named(path: object) -> Iterator[None]:
     """An ``OSError`` of a write inside the block that names no file (a full disk fails ``write`` itself,
     whose error carries none) raised again naming ``path``, the output it was making, so that the CLI's
-    line (``storage_refusal``) says which; one that names a file already passes as it is."""
+    line (``storage_refusal``) says which; one that names a file already passes as it is, and so does one
+    without an errno (a library's ``OSError("...")``, ``io.UnsupportedOperation``): no write the system
+    refused, a bug whose traceback read "[Errno None] None: 'PATH'", its message and type gone."""
     try:
         yield
     except OSError as exc:
-        if exc.filename is not None:
+        if exc.filename is not None or exc.errno is None:
             raise
         raise OSError(exc.errno, exc.strerror, str(path)) from None

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io
 import json
 import os
 import signal
@@ -19,7 +20,7 @@ import pytest
 
 from pipelines.cli import main
 from pipelines.commands import check_writable, write_output
-from pipelines.errors import PipelineError, storage_refusal
+from pipelines.errors import PipelineError, storage_refusal, writes_named
 from pipelines.experiments.log import EPISODES_FILE
 from pipelines.experiments.worker import SCRATCH_PREFIX, remove_stale_scratch
 from pipelines.loop.controllers import ControllerSpec, make_controller
@@ -1095,3 +1096,17 @@ def test_this_drivers_scratch_root_holds_its_lock_until_released(tmp_path, monke
         assert not free
     release_scratch_root(root)
     assert not root.exists()
+
+
+@pytest.mark.parametrize("error", [OSError("the codec refused the frame"), io.UnsupportedOperation("read")])
+def test_writes_named_passes_an_oserror_without_an_errno_as_it_is(error):
+    """writes_named names the output in a write's error that names no file (a full disk): an OSError with
+    no errno is no refused write but a bug, and was raised again as "[Errno None] None: 'PATH'", its type
+    and message gone (the context suppressed). A full disk's is still named."""
+
+    with pytest.raises(type(error)) as raised, writes_named("/runs/report"):
+        raise error
+    assert raised.value is error
+    with pytest.raises(OSError) as full, writes_named("/runs/report"):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    assert (full.value.errno, full.value.filename) == (errno.ENOSPC, "/runs/report")
