@@ -103,6 +103,8 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
     if robots != [PAPER_ROBOTS]:
         teams = ", ".join(map(str, robots))
         notes.append(f"Robots: {teams} per episode (the paper's tables: {PAPER_ROBOTS}).")
+        if len(robots) > 1:
+            notes[-1] += " Bold among the columns of one team: another team is another task."
     if any(s.paper for s in columns):
         notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
     elif experiment.paper and robots != [PAPER_ROBOTS]:
@@ -164,13 +166,15 @@ def _bolded(
     values: list[float],
     higher_is_better: bool,
 ) -> list[str]:
-    """``texts`` (one per column), the best of each group of columns by ``values`` in bold."""
-    out = []
+    """``texts`` (one per column), the best of each group of columns by ``values`` in bold: of a crowd size's
+    columns, those of one team (``--vary scenario.robots``: another team is another task, not a rival
+    method, and its crowds are others)."""
+    bold: set[int] = set()
     for n in sorted(groups):
-        idx = [columns.index(s) for s in groups[n]]
-        best = _best([values[i] for i in idx], higher_is_better)
-        out += [f"**{texts[i]}**" if j in best else texts[i] for j, i in enumerate(idx)]
-    return out
+        for team in sorted({s.cell.n_robots for s in groups[n]}):
+            idx = [columns.index(s) for s in groups[n] if s.cell.n_robots == team]
+            bold |= {idx[j] for j in _best([values[i] for i in idx], higher_is_better)}
+    return [f"**{text}**" if i in bold else text for i, text in enumerate(texts)]
 
 
 def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary]) -> list[str]:

@@ -209,3 +209,31 @@ def test_success_is_paired_only_with_a_column_of_as_many_robots():
         "| +1 / −0 (p = 1) |"
     ) in table
     assert "and the first one on the same crowds (as many robots, the same profile) failed / the" in table
+
+
+def test_the_table_bolds_and_pairs_a_column_only_against_its_own_team():
+    """Table II at 5 humans, robots 3 and 6: the humans are placed clear of each team, so a 6-robot episode
+    is another crowd than the 3-robot one of its seed (circle seed 3 at 7 humans differs already between 2
+    and 3 robots). Each team's first column is its reference: 'CMPC robots=6' was paired with 'CMPC
+    robots=3' (+0 / −3 on 'the same crowds'), and bold picked the best of all four columns, robots
+    mixed."""
+    from pipelines.experiments.summary import summarize
+    from pipelines.experiments.tables import markdown_table
+    from tests.pipelines.test_small_fixes import _records
+
+    experiment = configured_experiment(
+        load(sets=["sweep.experiment=table2", 'sweep.vary="scenario.robots=3,6"'])
+    )
+    cells = [c for c in experiment.cells() if c.n_humans == 5]
+    assert [c.method for c in cells] == ["CMPC robots=3", "CMPC robots=6", "DMPC robots=3", "DMPC robots=6"]
+    won, lost = (True, False, False, False), (False, False, False, False)
+    outcomes = {"CMPC robots=3": [won] * 3, "CMPC robots=6": [lost] * 3}
+    outcomes |= {"DMPC robots=3": [won, won, lost], "DMPC robots=6": [won, lost, lost]}
+    records = _records(experiment, {(m, 5): episodes for m, episodes in outcomes.items()})
+    table = markdown_table(experiment, summarize(experiment, cells, records))
+    paired = "| Success, paired with the group's first method |"
+    assert f"{paired} reference | reference | +0 / −1 (p = 1) | +1 / −0 (p = 1) |" in table.splitlines()
+    success = next(line for line in table.splitlines() if line.startswith("| Success rate (%) |"))
+    # CMPC robots=3 (3 of 3) is the best of the 3-robot columns, DMPC robots=6 (1 of 3) of the 6-robot ones
+    assert [text.startswith("**") for text in success.split(" | ")[1:]] == [True, False, False, True]
+    assert "Bold among the columns of one team" in table
