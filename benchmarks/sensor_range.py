@@ -6,9 +6,9 @@ a human's rows before it came into view are padded with its first tracked positi
 lengths are given (``human_observed``: the MPC extends each short track back, ``predictors.backfill``) or
 not (the padding then reads as the human's past: standing, then starting). Episodes are paired: the same
 seeds and scenarios (circle and perpendicular in turn) in every row. Prints success and collision rates
-(the paper's: a robot-human distance below 0.8 m) with 95 % Wilson intervals, the median smallest
-robot-human distance and the mean travel time of the successes. The metrics are the simulator's, over
-every human.
+(the paper's: a robot-human distance below 0.8 m), the collision rate with its 95 % Wilson interval, the
+median smallest robot-human distance and the mean travel time of the successes. The metrics are the
+simulator's, over every human.
 
     nice -n 5 .venv/bin/python benchmarks/sensor_range.py
     nice -n 5 .venv/bin/python benchmarks/sensor_range.py --config docs/examples/safe_crossing.toml --radii 3
