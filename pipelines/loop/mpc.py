@@ -101,6 +101,7 @@ class MPCController:
         self.cfg = cfg.replace(human_margins=margins)
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
         self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256)
+        self.calibration = spec.margins.calibration(self.model.name, sha256)
         if self.class_margins is not None and world.obs_len < CLASS_WINDOW:
             raise PipelineError(
                 f"{spec.margins.mode} margins are calibrated for motion classes read from a human's last "
@@ -132,7 +133,8 @@ class MPCController:
                 "flocking": self.spec.flocking,
                 "distributed": self.distributed,
                 "margins": self.spec.margins.describe(self.cfg.human_margins)
-                | ({} if self.class_margins is None else {"classes": self.class_margins.to_json()}),
+                | ({} if self.class_margins is None else {"classes": self.class_margins.to_json()})
+                | ({} if self.calibration is None else {"calibration": self.calibration}),
             },
         }
 

@@ -277,6 +277,28 @@ def test_describe_states_alpha_and_source_of_calibrated_margins():
     assert MarginSpec().describe(()) == {"mode": "none", "label": "none", "margins_m": []}
 
 
+def test_a_record_names_the_calibration_its_margins_came_from():
+    """One block is kept per predictor and alpha, and a recalibration replaces it: a record said which alpha
+    and source, not which block (when it was made, from what data, under which conventions)."""
+    from predictors.calibration_store import find_calibration
+
+    block = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    spec = ControllerSpec("cmpc", "social_lstm_eth", margins=parse_margins("conformal"))
+    controller = make_controller(spec)
+    assert controller.describe()["config"]["margins"]["calibration"] == {
+        "created": block.created,
+        "data_sha256": block.data_sha256,
+        "profile": "paper",
+        "visibility": "visible",
+        "controller": "cmpc",
+    }
+    real = MarginSpec("conformal", alpha=0.1, source="real").calibration("constant_velocity", None)
+    assert real is not None and set(real) == {"created", "data_sha256"}  # real scenes: no conventions
+    assert MarginSpec().calibration("social_lstm_eth", None) is None
+    fixed = make_controller(ControllerSpec("cmpc", margins=parse_margins("fixed:0.1,0.1,0.1,0.1")))
+    assert "calibration" not in fixed.describe()["config"]["margins"]
+
+
 def test_calibrated_margins_need_a_predictor_and_specs_may_be_padded():
     """ORCA with conformal margins has no predictor whose calibration to read: one line saying so. A spec
     read from a config file may carry spaces around it."""
