@@ -42,23 +42,30 @@ class StepInterrupt:
             raise KeyboardInterrupt
 
 
+_stepping: StepInterrupt | None = None  # the episode's, in the main thread, while its steps run
+
+
 @contextlib.contextmanager
 def interrupts_between_steps() -> Iterator[StepInterrupt]:
     """Around an episode's steps: a Ctrl-C is raised by the ``check()`` that follows it (one a step), or on
-    leaving the block, so none is lost; with another SIGINT handler in place, or off the main thread, as
-    before (``check()`` then never raises)."""
+    leaving the block, so none is lost; with another SIGINT handler in place (or SIGINT ignored) that handler
+    keeps Ctrl-C, and ``check()`` raises only a SIGTERM or SIGHUP noted by ``terminate_as_interrupt``; off the
+    main thread as before (``check()`` then never raises)."""
     step = StepInterrupt()
-    if (
-        threading.current_thread() is not threading.main_thread()
-        or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
-    ):
+    if threading.current_thread() is not threading.main_thread():
         yield step
         return
-    signal.signal(signal.SIGINT, step.note)
+    global _stepping
+    outer, _stepping = _stepping, step  # terminate_as_interrupt's note, whatever SIGINT's handler
+    takes_ctrl_c = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    if takes_ctrl_c:
+        signal.signal(signal.SIGINT, step.note)
     try:
         yield step
     finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _stepping = outer
+        if takes_ctrl_c:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     step.check()  # noted after the last step's check, the block ending normally
 
 
@@ -74,9 +81,10 @@ def terminate_as_interrupt() -> Iterator[None]:
         return
 
     def interrupt(signum: int, frame: Any) -> None:
-        step = getattr(signal.getsignal(signal.SIGINT), "__self__", None)  # interrupts_between_steps' note
-        if isinstance(step, StepInterrupt):
-            step.note(signal.SIGINT, frame)
+        # the episode's step in progress, even where SIGINT is not the loop's (ignored by a background job's
+        # shell): raised in CasADi's solve, it printed CasADi's own "KeyboardInterrupt" above the CLI's line
+        if _stepping is not None:
+            _stepping.note(signal.SIGINT, frame)
             return
         raise KeyboardInterrupt(signal.Signals(signum).name)
 

@@ -143,6 +143,18 @@ def test_a_terminate_is_raised_when_the_step_in_progress_ends(sig, default_termi
     assert signal.getsignal(sig) is signal.SIG_DFL  # the caller's handler back
 
 
+def test_a_terminate_with_sigint_ignored_is_raised_when_the_step_in_progress_ends(default_terminate):
+    """`crowdmpc simulate ... &` in a script starts with SIGINT ignored, so the loop installs no note of its
+    own; a `kill` then raised KeyboardInterrupt inside CasADi's solve, which printed "KeyboardInterrupt" of
+    its own above the CLI's line."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    controller, acts = _signalled("cmpc", at_step=3, sig=signal.SIGTERM)
+    with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt):
+        _episode(controller, _Steps(), gym_loop=False)
+    assert acts == ["finished"] * 3  # the third step's solve ran to its end
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
 def test_a_hangup_the_caller_ignores_stays_ignored(default_terminate):
     """`nohup crowdmpc sweep ...` starts with SIGHUP ignored, to outlive its terminal: the sweep had taken
     the hangup as a Ctrl-C all the same."""
