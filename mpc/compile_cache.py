@@ -264,13 +264,15 @@ def _compile_locked(
             return solver
         discard(manifest)  # unloadable (no record, its library removed or changed): compile again
         remove_dead_leftovers(folder)  # what killed compiles left an hour ago (nothing else removes it)
+        # before gcc runs: on a full disk it printed its own errors (a source cut short) above the CLI's line
+        _room_for_a_compile(folder)
         try:
             _compile_nlpsol(name, plugin, nlp, options, cc, folder, key)
         except CompileCacheError:
             raise
         except RuntimeError as exc:  # CasADi's: code generation or gcc failed
-            if free_bytes(folder) < COMPILE_ROOM_BYTES:  # gcc's "No space left" came as "Compilation failed"
-                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(folder)) from exc
+            # the disk filled meanwhile: gcc's "No space left" came as "Compilation failed"
+            _room_for_a_compile(folder, exc)
             raise CompileCacheError(
                 f"compiling the solver {name!r} into {folder} failed: {_last_line(exc)}"
             ) from exc
@@ -278,6 +280,13 @@ def _compile_locked(
     if solver is None:
         raise CompileCacheError(f"the compiled solver {manifest} was stored but does not load")
     return solver
+
+
+def _room_for_a_compile(folder: Path, failure: BaseException | None = None) -> None:
+    """OSError ENOSPC naming ``folder`` when its file system has less than COMPILE_ROOM_BYTES free (the CLI's
+    one line on a full disk), as the sweep's up-front check refuses --jit on."""
+    if free_bytes(folder) < COMPILE_ROOM_BYTES:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(folder)) from failure
 
 
 def _last_line(exc: BaseException) -> str:

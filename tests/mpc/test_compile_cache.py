@@ -345,11 +345,13 @@ def test_a_compile_failed_for_want_of_space_is_a_full_disk_naming_the_cache(cach
     import errno
 
     failing = tmp_path / "gcc"
-    failing.write_text("#!/bin/sh\necho 'Fatal error: No space left on device' >&2\nexit 1\n")
+    ran = tmp_path / "gcc-ran"
+    failing.write_text(f"#!/bin/sh\ntouch {ran}\necho 'Fatal error: No space left on device' >&2\nexit 1\n")
     failing.chmod(0o755)
     full = compile_cache.Compiler(str(failing), "x", ("-O2",))
     monkeypatch.setattr(compile_cache, "compiler", lambda: full)
-    monkeypatch.setattr(compile_cache, "free_bytes", lambda folder: compile_cache.COMPILE_ROOM_BYTES - 1)
+    room = compile_cache.COMPILE_ROOM_BYTES
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda folder: room - ran.exists())  # gcc filled it
     with pytest.raises(OSError) as e:
         compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
     assert (e.value.errno, e.value.filename) == (errno.ENOSPC, str(cache))
@@ -357,6 +359,24 @@ def test_a_compile_failed_for_want_of_space_is_a_full_disk_naming_the_cache(cach
     monkeypatch.setattr(compile_cache, "free_bytes", lambda folder: compile_cache.COMPILE_ROOM_BYTES)
     with pytest.raises(compile_cache.CompileCacheError, match="Compilation failed"):  # gcc failed with room
         compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+
+
+def test_no_compile_starts_without_room_for_it(cache, monkeypatch, tmp_path, capfd):
+    """simulate --set mpc.jit=true with the cache's disk full printed gcc's errors on the source it had cut
+    short above the CLI's line: under COMPILE_ROOM_BYTES free, no compile starts (as the sweep's check)."""
+    import errno
+
+    ran = tmp_path / "gcc-ran"
+    script = tmp_path / "gcc"
+    script.write_text(f"#!/bin/sh\ntouch {ran}\necho 'x.c:1:1: error: expected declaration' >&2\nexit 1\n")
+    script.chmod(0o755)
+    monkeypatch.setattr(compile_cache, "compiler", lambda: compile_cache.Compiler(str(script), "x", ("-O2",)))
+    monkeypatch.setattr(compile_cache, "free_bytes", lambda folder: compile_cache.COMPILE_ROOM_BYTES - 1)
+    with pytest.raises(OSError) as e:
+        compile_cache.nlpsol("s", "ipopt", small_nlp(), IPOPT)
+    assert (e.value.errno, e.value.filename) == (errno.ENOSPC, str(cache))
+    assert not ran.exists() and "error:" not in capfd.readouterr().err
+    assert suffixes(cache) == []
 
 
 def fake_compiler(tmp_path: Path, body: str) -> compile_cache.Compiler:
