@@ -65,6 +65,9 @@ def _prepare_process(seed: int) -> None:
     warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)", category=FutureWarning)
     for logger in ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero"):
         logging.getLogger(logger).addFilter(_no_advertising)
+    # its SIGTERM handler's "[rank: 0] Received SIGTERM: 15", printed above the CLI's one line: a `kill` ends
+    # the run as Ctrl-C does (pipelines.loop.interrupt), and Ctrl-C prints no such line
+    logging.getLogger("lightning.pytorch.trainer.connectors.signal_connector").setLevel(logging.WARNING)
     L.seed_everything(seed, workers=True, verbose=False)
 
 

@@ -1001,3 +1001,29 @@ def test_a_save_stopped_by_a_kill_leaves_no_staging_folder_past_the_next_run(tra
     epochs = args.index("--epochs") + 1
     assert main([*args[:epochs], "2", *args[epochs + 1 :], "--resume"]) == 0
     assert not killed.exists() and other.is_dir()
+
+
+def test_a_terminated_training_prints_the_interrupt_alone(tmp_path, monkeypatch, capfd):
+    """`kill` during a fit: Lightning's own SIGTERM handler logged "[rank: 0] Received SIGTERM: 15" above the
+    CLI's line, which a Ctrl-C at the same moment does not print (README: as Ctrl-C does)."""
+    import os
+    import signal
+
+    from predictors.data.datamodule import TrajnetDataModule
+
+    loader = TrajnetDataModule.train_dataloader
+
+    def killed(self):
+        os.kill(os.getpid(), signal.SIGTERM)  # under Lightning's handler, which calls the CLI's after its own
+        return loader(self)
+
+    monkeypatch.setattr(TrajnetDataModule, "train_dataloader", killed)
+    saved = signal.signal(signal.SIGTERM, signal.SIG_DFL)  # as a shell starts it (not ignored)
+    try:
+        data = str(write_walk_file(tmp_path / "walk.ndjson"))
+        args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--epochs", "1"]
+        assert main([*args, "--out", str(tmp_path / "run"), "--no-progress"]) == 130
+    finally:
+        signal.signal(signal.SIGTERM, saved)
+    err = capfd.readouterr().err
+    assert "Received SIGTERM" not in err and err.endswith("crowdmpc train: interrupted\n"), err
