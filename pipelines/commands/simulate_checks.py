@@ -192,10 +192,26 @@ def calibration_world_note(spec: ControllerSpec, profile: str, visibility: str) 
     measured = (block.details.get("profile"), block.details.get("visibility"))
     if None in measured or measured == (profile, visibility):
         return None
-    command = recalibrate_command(name, margins.source, margins.alpha)
+    command = recalibrate_command(name, margins.source, margins.alpha) + _block_options(block)
     return (
         f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
         f"under profile {measured[0]} with robots {measured[1]}, this run is {profile} with robots "
         f"{visibility}: their coverage here is not measured ({command} --profile {profile} --visibility "
         f"{visibility} measures it, replacing that block)"
     )
+
+
+def _block_options(block: Any) -> str:
+    """``calibrate``'s options that made ``block`` but for its conventions: the command the note gives makes
+    the same calibration (its horizon, episodes, crowds, controller, seed and scoring range) under the
+    run's, not the defaults' (200 episodes, horizon 4, CMPC)."""
+    details = block.details
+    near = details.get("near", 3.0)
+    options = [f"--horizon {len(block.quantiles)}"]
+    for option, key in (("--episodes", "episodes"), ("--seed", "seed"), ("--controller", "controller")):
+        if key in details:
+            options.append(f"{option} {details[key]}")
+    if isinstance(details.get("humans"), list):
+        options.append("--humans " + ",".join(str(h) for h in details["humans"]))
+    options.append(f"--near {'inf' if near is None else f'{near:g}'}")  # null: everyone scored
+    return " " + " ".join(options)

@@ -44,12 +44,23 @@ def test_no_note_where_it_does_not_apply(spec, profile, visibility):
 
 
 def test_the_note_names_both_conventions_and_the_command_that_measures_the_runs():
+    """The command makes the block again under the run's conventions: its own horizon, episodes, seed,
+    controller, crowds and scoring range, not calibrate's defaults."""
     assert calibration_world_note(_spec("conformal-shortfall:0.1"), "v1", "invisible") == (
         "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated under profile paper "
         "with robots visible, this run is v1 with robots invisible: their coverage here is not measured "
-        "(crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --profile v1 "
+        "(crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --horizon 4 "
+        "--episodes 200 --seed 1000000 --controller cmpc --humans 5,6,7,8,9 --near 3 --profile v1 "
         "--visibility invisible measures it, replacing that block)"
     )
+
+
+def test_the_command_carries_a_users_block_of_its_own_settings():
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    details = shipped.details | {"controller": "dmpc", "humans": [7], "episodes": 40, "near": None}
+    save_calibration(dataclasses.replace(shipped, details=details))
+    note = calibration_world_note(_spec("conformal:0.1"), "v1", "visible") or ""
+    assert "--episodes 40 --seed 1000000 --controller dmpc --humans 7 --near inf --profile v1" in note
 
 
 def test_a_users_block_of_other_conventions_is_noted_under_the_paper_profile(capsys):
