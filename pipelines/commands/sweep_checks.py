@@ -130,7 +130,13 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     (margins calibrated under other conventions), each once, naming the methods it
     applies to: a grid of --vary columns printed the same line for each of eight methods."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
+    seen: set[str] = set()
     for cell in cells:
+        # a method's cells differ only in their crowd size, which no note reads: each looked at once (the
+        # calibration note reads the calibrations file)
+        if cell.method in seen:
+            continue
+        seen.add(cell.method)
         formation = cell.world.env_config().formation
         for note in (
             goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
@@ -138,8 +144,8 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             flock_note(cell.spec, cell.n_robots),
             calibration_world_note(cell.spec, cell.world.profile, cell.world.visibility),
         ):
-            if note is not None and cell.method not in methods.setdefault(note, []):
-                methods[note].append(cell.method)
+            if note is not None:
+                methods.setdefault(note, []).append(cell.method)
     return [
         note.replace(
             "note: ", f"note: method{'s' if len(named) > 1 else ''} {', '.join(map(repr, named))}: ", 1
