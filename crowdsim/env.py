@@ -32,6 +32,12 @@ Goals (``goal_assignment``): "fixed" (paper) gives robot ``i`` goal ``i`` for th
 goals are a formation to fill, and after every step each robot holds the goal crowdsim.slots' matching gives
 it (``Observation.robot_goals``, and the trajectory's goals are those held at the end).
 
+Replayed crowds (``EnvConfig.crowd`` "eth" or "hotel", crowdsim.replay): the humans are real tracks, played
+back row by row instead of step 1 and 3; ``reset`` draws the window and the pedestrians from the seed, and
+the ``Recording`` is given to ``CrowdEnv`` (pipelines.loop.replay_data reads it from the BIWI data).
+``Observation.human_present`` and ``Trajectory.human_present`` say which humans are tracked at each step;
+the others stand where their track begins or ends, and the metrics leave them out.
+
 This module holds what a controller sees (``Observation``) and the simulator (``CrowdEnv``); their settings,
 ``EnvConfig`` and the bounds it checks, are crowdsim.env_config (``EnvConfig`` is importable from here too,
 as ``CrowdEnv``'s argument: plugins and pipelines.config take it from here).
@@ -49,7 +55,15 @@ from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import orca_velocities, preferred_velocities
-from crowdsim.scenarios import Layout, checked_layout, make_layout, robot_goal_overlaps, start_overlaps
+from crowdsim.replay import Recording, ReplayEpisode, replay_episode
+from crowdsim.scenarios import (
+    Layout,
+    check_sizes,
+    checked_layout,
+    make_layout,
+    robot_goal_overlaps,
+    start_overlaps,
+)
 from crowdsim.slots import match_slots
 from crowdsim.world import PAPER_ROBOTS
 
@@ -75,6 +89,8 @@ class Observation:
     # MPC replaces the padding, predictors/backfill.py); None: step + 1 for every human, as in the simulator,
     # where all are present from the start
     human_observed: np.ndarray | None = None
+    # (N,) bool, the humans tracked now in a replayed crowd (crowdsim.replay); None: every human is there
+    human_present: np.ndarray | None = None
 
     @property
     def n_robots(self) -> int:
@@ -101,11 +117,27 @@ def _warn_pairs(pairs: list[tuple[str, str, float]], what: str, radius: float, m
 class CrowdEnv:
     """ORCA humans and double-integrator robots (module docstring). Not thread-safe; one episode at a time."""
 
-    def __init__(self, config: EnvConfig = EnvConfig()):  # noqa: B008 (frozen: one shared default is safe)
+    def __init__(
+        self,
+        config: EnvConfig = EnvConfig(),  # noqa: B008 (frozen: one shared default is safe)
+        recording: Recording | None = None,
+    ):
         if not isinstance(config, EnvConfig):
             raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
+        if config.crowd == "orca" and recording is not None:
+            raise SimulationError(
+                "a recording replays a crowd: give it with EnvConfig(crowd='eth' or 'hotel'), not 'orca'"
+            )
+        if config.crowd != "orca":
+            if not isinstance(recording, Recording) or recording.name != config.crowd:
+                raise SimulationError(
+                    f"crowd {config.crowd!r} needs its Recording (named {config.crowd!r}), got "
+                    f"{type(recording).__name__}; pipelines.loop.replay_data.recording reads it"
+                )
         self.config = config
+        self.recording = recording
         self._started = False
+        self._replay: ReplayEpisode | None = None
 
     # ---- episode control ---------------------------------------------------------------------------------
 
@@ -113,6 +145,20 @@ class CrowdEnv:
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise SimulationError(f"seed must be an int >= 0, got {seed!r}")
         cfg = self.config
+        if self.recording is not None:
+            check_sizes(scenario, n_humans, n_robots)
+            episode = replay_episode(
+                self.recording,
+                scenario,
+                int(n_humans),
+                int(n_robots),
+                cfg.max_steps,
+                np.random.default_rng(seed),
+                radius=cfg.radius,
+                past=cfg.history_len - 1,
+                formation=cfg.formation,
+            )
+            return self._start_replay(episode)
         layout = make_layout(
             scenario,
             n_humans,
@@ -135,6 +181,11 @@ class CrowdEnv:
         starts, as the authors' fork does (crowdsim.scenarios); ``reset`` runs its layouts without a warning.
         Robot goals closer than ``2 radius`` warn too: robots standing on both would overlap.
         """
+        if self.recording is not None:
+            raise SimulationError(  # a layout's humans walk by ORCA; a replayed crowd's walk their tracks
+                f"reset_layout places ORCA humans; crowd {self.config.crowd!r} is replayed: use "
+                "reset(seed, scenario, n_humans, n_robots)"
+            )
         layout = checked_layout(layout)
         radius = self.config.radius
         _warn_pairs(
@@ -163,6 +214,15 @@ class CrowdEnv:
         self._hp_log, self._hv_log = [self._hp], [self._hv]
         self._ra_log: list[np.ndarray] = []
         self._started = True
+        self._replay = None
+        return self._observation()
+
+    def _start_replay(self, episode: ReplayEpisode) -> Observation:
+        now = episode.past
+        self._start(Layout(episode.robot_starts, episode.robot_goals, episode.positions[now], episode.goals))
+        self._replay = episode
+        self._hv = episode.velocities[now]
+        self._hv_log = [self._hv]
         return self._observation()
 
     def step(self, robot_accelerations: np.ndarray) -> tuple[Observation, bool, dict[str, Any]]:
@@ -184,24 +244,10 @@ class CrowdEnv:
                 f"with {int((~np.isfinite(a)).sum())} non-finite entries"
             )
 
-        # Humans decide from the current state of everyone they see (before any agent moves).
-        if cfg.robots_visible:
-            positions = np.concatenate([self._rp, self._hp])
-            velocities = np.concatenate([self._rv, self._hv])
-            humans = np.arange(m, m + len(self._hp))
+        if self._replay is not None:  # real tracks played back: nobody in them reacts
+            hv_new, lp3 = self._replay.velocities[self._replay.past + self._step + 1], np.zeros(0, dtype=bool)
         else:
-            positions, velocities, humans = self._hp, self._hv, np.arange(len(self._hp))
-        pref = preferred_velocities(self._hp, self._hg, cfg.v_pref, stop_radius=cfg.radius)
-        hv_new, lp3 = orca_velocities(
-            positions,
-            velocities,
-            pref,
-            cfg.radius + cfg.orca_radius_margin,
-            cfg.v_pref,
-            cfg.orca,
-            cfg.dt,
-            agents=humans,
-        )
+            hv_new, lp3 = self._orca_velocities()
 
         # Robots: clip the acceleration so that |a| <= a_max and |v + dt a| <= v_max, per component.
         lo = np.maximum(-cfg.a_max, (-cfg.v_max - self._rv) / cfg.dt)
@@ -211,7 +257,10 @@ class CrowdEnv:
         self._rp = self._rp + cfg.dt * self._rv + 0.5 * cfg.dt**2 * a_applied
         self._rv = rv_new
         self._ra = a_applied
-        self._hp = self._hp + cfg.dt * hv_new
+        if self._replay is None:
+            self._hp = self._hp + cfg.dt * hv_new
+        else:  # where the recording has it (its step, not dt times a rounded velocity)
+            self._hp = self._replay.positions[self._replay.past + self._step + 1]
         self._hv = hv_new
         self._step += 1
         if cfg.goal_assignment == "slots":
@@ -258,9 +307,32 @@ class CrowdEnv:
             dt=self.config.dt,
             radius=self.config.radius,
             success_rule=self.config.success_rule,
+            human_present=self._replay_rows(),
         )
 
     # ---- internals ---------------------------------------------------------------------------------------
+
+    def _orca_velocities(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every human's ORCA velocity, decided from the current state of everyone it sees (before any
+        agent moves), and which humans' linear program was infeasible."""
+        cfg, m = self.config, len(self._rp)
+        if cfg.robots_visible:
+            positions = np.concatenate([self._rp, self._hp])
+            velocities = np.concatenate([self._rv, self._hv])
+            humans = np.arange(m, m + len(self._hp))
+        else:
+            positions, velocities, humans = self._hp, self._hv, np.arange(len(self._hp))
+        pref = preferred_velocities(self._hp, self._hg, cfg.v_pref, stop_radius=cfg.radius)
+        return orca_velocities(
+            positions,
+            velocities,
+            pref,
+            cfg.radius + cfg.orca_radius_margin,
+            cfg.v_pref,
+            cfg.orca,
+            cfg.dt,
+            agents=humans,
+        )
 
     def _match_slots(self) -> None:
         """Robots take crowdsim.slots' matching of goals; a robot whose goal changed has not reached it."""
@@ -290,10 +362,35 @@ class CrowdEnv:
             history=rows,
             radius=self.config.radius,
             dt=self.config.dt,
+            **self._replay_now(),
         )
+
+    def _replay_rows(self) -> np.ndarray | None:
+        """(T+1, N) a replayed crowd's presence at each step so far; None for ORCA's."""
+        if self._replay is None:
+            return None
+        return self._replay.present[self._replay.past : self._replay.past + self._step + 1].copy()
+
+    def _replay_now(self) -> dict[str, np.ndarray]:
+        """A replayed crowd's presence and track lengths now, as Observation's fields (none for ORCA's)."""
+        if self._replay is None:
+            return {}
+        row = self._replay.past + self._step
+        return {
+            "human_present": self._replay.present[row].copy(),
+            "human_observed": self._replay.observed[row].copy(),
+        }
 
     def _positions_history(self) -> np.ndarray:
         length = self.config.history_len
+        if (
+            self._replay is not None
+        ):  # the humans' rows, with the past before the episode, are the recording's
+            robots = self._rp_log[-length:]
+            robots = [robots[0]] * (length - len(robots)) + robots
+            now = self._replay.past + self._step
+            humans = self._replay.positions[now + 1 - length : now + 1]
+            return np.stack([np.concatenate([r, h]) for r, h in zip(robots, humans, strict=True)])
         recent = list(zip(self._rp_log[-length:], self._hp_log[-length:], strict=True))
         # At the start of an episode the missing past is the initial position repeated (standing still).
         recent = [recent[0]] * (length - len(recent)) + recent

@@ -25,6 +25,7 @@ from crowdsim.conventions import (
 )
 from crowdsim.errors import SimulationError, real_number, whole_number
 from crowdsim.orca import OrcaParams
+from crowdsim.replay import CROWDS, RECORDED_DT
 from crowdsim.scenarios import FORMATIONS, Formation
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from crowdsim.world import (
@@ -80,6 +81,10 @@ class EnvConfig:
     # the robots' starts and goals (crowdsim.scenarios): "auto" is the paper's row up to 3 robots, a wedge
     # from 4; "row", "wedge", "two_rows" choose one for every team size
     formation: Formation = "auto"
+    # who the humans are: "orca" (the paper's simulated crowd) or a replayed BIWI sequence, "eth" or "hotel",
+    # or its test split alone, "eth_test" or "hotel_test" (crowdsim.replay: real tracks played back, not
+    # reacting to anyone)
+    crowd: str = "orca"
 
     def __post_init__(self):
         self._check_sizes()
@@ -123,6 +128,13 @@ class EnvConfig:
         if self.formation not in FORMATIONS:
             raise SimulationError(
                 f"EnvConfig.formation must be one of {list(FORMATIONS)}, got {self.formation!r}"
+            )
+        if self.crowd not in CROWDS:
+            raise SimulationError(f"EnvConfig.crowd must be one of {list(CROWDS)}, got {self.crowd!r}")
+        if self.crowd != "orca" and not math.isclose(self.dt, RECORDED_DT, rel_tol=1e-9):
+            raise SimulationError(  # the tracks are played back row by row, at their own rate
+                f"EnvConfig.crowd {self.crowd!r} replays steps of {RECORDED_DT:g} s, so dt must be "
+                f"{RECORDED_DT:g} s, got {self.dt:g}"
             )
         if not isinstance(self.robots_visible, bool | np.bool_):
             raise SimulationError(f"EnvConfig.robots_visible must be a bool, got {self.robots_visible!r}")

@@ -28,6 +28,8 @@ accelerating within a step follow a parabola, which the segment approximates).
   the closed segment from the agent's position to ``position + velocity * 1.2 s`` (length speed x 1.2 s). An
   agent standing still projects a point; touching segments count as intersecting.
 * min distance: robot-human (the collision metric's number); robot-robot and human-human minima are kept too.
+* replayed crowds (``Trajectory.human_present``, crowdsim.replay): a human counts only at the rows where it
+  is tracked, and between steps only over a step it is tracked at both ends.
 * between steps: ``min_distance_between_steps`` is the robot-human closest approach over the whole episode
   with linear motion within each step, ``min over k, s in [0, 1] of |d_k + s (d_(k+1) - d_k)|`` for the
   relative position ``d`` of every robot-human pair (the recorded states included, so it is never above
@@ -99,6 +101,8 @@ class Trajectory:
     dt: float  # s
     radius: float  # m, every agent
     success_rule: SuccessRule = "simultaneous"  # how success is decided (module docstring), EnvConfig's
+    # (T+1, N) bool, the humans tracked at each row of a replayed crowd (crowdsim.replay); None: all, always
+    human_present: np.ndarray | None = None
 
     def __post_init__(self):
         if self.success_rule not in SUCCESS_RULES:
@@ -193,19 +197,26 @@ def first_reach_steps(robot_positions: np.ndarray, robot_goals: np.ndarray, radi
     return np.where(inside.any(axis=0), inside.argmax(axis=0), -1)
 
 
-def _row_min_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(T,) smallest centre distance at each row between agents of ``a (T, P, 2)`` and ``b (T, Q, 2)``."""
+def _row_min_distance(a: np.ndarray, b: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
+    """(T,) smallest centre distance at each row between agents of ``a (T, P, 2)`` and ``b (T, Q, 2)``, of
+    ``b``'s agents only those ``present (T, Q)`` at the row (None: all)."""
     if a.shape[1] == 0 or b.shape[1] == 0:
         return np.full(len(a), math.inf)
-    return np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
+    d = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1)
+    if present is not None:
+        d = np.where(present[:, None, :], d, math.inf)
+    return d.min(axis=(1, 2))
 
 
-def _row_min_within(positions: np.ndarray) -> np.ndarray:
+def _row_min_within(positions: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
     """(T,) smallest centre distance at each row between two different agents of ``positions (T, P, 2)``
-    (robots with robots, humans with humans); inf with fewer than two agents."""
+    (robots with robots, humans with humans), both ``present (T, P)`` there (None: all); inf with fewer
+    than two agents."""
     if positions.shape[1] < 2:
         return np.full(len(positions), math.inf)
     d = np.linalg.norm(positions[:, :, None, :] - positions[:, None, :, :], axis=-1)
+    if present is not None:
+        d = np.where(present[:, :, None] & present[:, None, :], d, math.inf)
     iu = np.triu_indices(positions.shape[1], k=1)
     return cast(np.ndarray, d[:, iu[0], iu[1]].min(axis=1))
 
@@ -220,23 +231,35 @@ def closest_approach(start: np.ndarray, end: np.ndarray) -> np.ndarray:
     return np.linalg.norm(start + s[..., None] * d, axis=-1)
 
 
-def _swept_min(rel: np.ndarray) -> float:
+def _swept_min(rel: np.ndarray, present: np.ndarray | None = None) -> float:
     """Closest approach of the relative positions ``rel (T+1, ..., 2)`` of agent pairs, each moving
-    linearly between its rows; the rows count too."""
-    at_rows = float(np.linalg.norm(rel, axis=-1).min())
+    linearly between its rows; the rows count too. ``present (T+1, ...)``: the pairs that exist at each row
+    (None: all); a segment counts where its pair exists at both ends."""
+    at_rows = np.linalg.norm(rel, axis=-1)
+    if present is not None:
+        at_rows = np.where(present, at_rows, math.inf)
+    nearest = float(at_rows.min())
     if len(rel) < 2:
-        return at_rows
+        return nearest
+    swept = closest_approach(rel[:-1], rel[1:])
+    if present is not None:
+        swept = np.where(present[:-1] & present[1:], swept, math.inf)
     # np.minimum, not min(): a NaN (an infinite position) must show, not be dropped by argument order
-    return float(np.minimum(at_rows, closest_approach(rel[:-1], rel[1:]).min()))
+    return float(np.minimum(nearest, swept.min()))
 
 
-def min_distance_between_steps(robot_positions: np.ndarray, human_positions: np.ndarray) -> float:
+def min_distance_between_steps(
+    robot_positions: np.ndarray, human_positions: np.ndarray, present: np.ndarray | None = None
+) -> float:
     """Robot-human closest approach (m) of ``robot_positions (T+1, M, 2)`` and ``human_positions
     (T+1, N, 2)`` when every agent moves linearly between its recorded positions; the recorded states
-    count too, so it is never above their minimum. inf without a robot or a human."""
+    count too, so it is never above their minimum. ``present (T+1, N)``: the humans there at each row
+    (a replayed crowd's; None: all). inf without a robot or a human."""
     if robot_positions.shape[1] == 0 or human_positions.shape[1] == 0:
         return math.inf
-    return _swept_min(human_positions[:, None, :, :] - robot_positions[:, :, None, :])  # (T+1, M, N, 2)
+    rel = human_positions[:, None, :, :] - robot_positions[:, :, None, :]  # (T+1, M, N, 2)
+    pairs = None if present is None else np.broadcast_to(present[:, None, :], rel.shape[:-1])
+    return _swept_min(rel, pairs)
 
 
 def min_robot_distance_between_steps(robot_positions: np.ndarray) -> float:
@@ -299,6 +322,8 @@ def discomfort_steps(traj: Trajectory, horizon: float = DISCOMFORT_HORIZON) -> n
     r_end = rp + horizon * traj.robot_velocities
     h_end = hp + horizon * traj.human_velocities
     hit = segments_intersect(rp[:, :, None], r_end[:, :, None], hp[:, None], h_end[:, None])  # (T+1, M, N)
+    if traj.human_present is not None:
+        hit &= traj.human_present[:, None, :]
     # any() over axes of a 3-D array is an array; numpy types it as "bool | ndarray" for any input.
     return cast(np.ndarray, hit.any(axis=(1, 2)))
 
@@ -325,9 +350,10 @@ def episode_metrics(
         return round(float(k * traj.dt), 9)
 
     reach_times = tuple(seconds(k) if k >= 0 else math.nan for k in reach)
-    row_min = _row_min_distance(rp, hp)
+    present = traj.human_present
+    row_min = _row_min_distance(rp, hp, present)
     min_rh = float(row_min.min())
-    swept = min_distance_between_steps(rp, hp)
+    swept = min_distance_between_steps(rp, hp, present)
     disc = discomfort_steps(traj, discomfort_horizon)
     row_rr = _row_min_within(rp)
     min_rr = float(row_rr.min())
@@ -341,7 +367,7 @@ def episode_metrics(
         timeout=not success,
         min_distance=min_rh,
         min_distance_robots=min_rr,
-        min_distance_humans=float(_row_min_within(hp).min()),
+        min_distance_humans=float(_row_min_within(hp, present).min()),
         path_length=tuple(float(x) for x in np.linalg.norm(np.diff(rp, axis=0), axis=-1).sum(axis=0)),
         reach_times=reach_times,
         discomfort_steps=int(disc.sum()),

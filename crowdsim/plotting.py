@@ -73,7 +73,8 @@ def figure_refusal(path: str | Path) -> str | None:
 def frame_axes(ax: Axes, *points: np.ndarray) -> None:
     """Equal-aspect metric axes showing every ``(..., 2)`` point given, with a 1 m margin."""
     everything = np.concatenate([np.reshape(p, (-1, 2)) for p in points])
-    lo, hi = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
+    # nanmin: a replayed crowd's absent humans are NaN (plot_episode)
+    lo, hi = np.nanmin(everything, axis=0) - 1.0, np.nanmax(everything, axis=0) + 1.0
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
@@ -98,6 +99,7 @@ def plot_episode(
     radius: float = RADIUS,
     dt: float | None = None,
     times: np.ndarray | Sequence[float] | None = None,
+    human_present: np.ndarray | None = None,
 ) -> Figure:
     """Trajectories of one episode with the agents drawn to scale at a few snapshot steps.
 
@@ -105,10 +107,13 @@ def plot_episode(
     (rows of the arrays; default five evenly spaced, first and last included) are drawn fainter the earlier
     they are; with ``dt`` the legend gives their times in seconds, row * dt, or with ``times`` (s, one per
     row) those (a log that lost states has rows that are not steps). Returns the figure (``ax.figure`` if
-    ``ax`` is given).
+    ``ax`` is given). ``human_present`` ``(T, N)`` bool: a replayed crowd's tracked humans at each row
+    (crowdsim.replay); the others are not drawn there.
     """
     robot_positions = np.asarray(robot_positions, dtype=float)
     human_positions = np.asarray(human_positions, dtype=float)
+    if human_present is not None:
+        human_positions = np.where(np.asarray(human_present, dtype=bool)[..., None], human_positions, np.nan)
     robot_goals = np.asarray(robot_goals, dtype=float)
     n_rows, n_robots = robot_positions.shape[:2]
     n_humans = human_positions.shape[1]
@@ -130,6 +135,8 @@ def plot_episode(
     for k, row in enumerate(snaps):
         alpha = 0.25 + 0.75 * (k + 1) / len(snaps)
         for j in range(n_humans):
+            if np.isnan(human_positions[row, j]).any():  # not tracked at that row
+                continue
             ring = Circle(human_positions[row, j], radius, fill=False, ec=HUMAN_COLOR, lw=1.0, alpha=alpha)
             ring.set_zorder(3)
             ax.add_patch(ring)

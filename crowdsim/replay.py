@@ -1,0 +1,230 @@
+"""Real pedestrians replayed: a recorded crowd (BIWI ETH or Hotel) as the simulator's humans, beside ORCA's.
+
+ORCA's humans are the paper's crowd, and a learned predictor trained on real people meets there a motion it
+never saw: a crowd that walks straight at its preferred speed and yields to everyone at once. A replayed
+crowd is the other test: the humans are real tracks, played back exactly, at their own speeds, in groups,
+stopping and turning as they did. They do not react to the robots (nobody in the recording saw one), so a
+robot that cuts in front of a person is not avoided; the metrics say how close it came.
+
+A ``Recording`` is a sequence's tracks on its time grid, NaN where a pedestrian is not tracked. An episode
+(``replay_episode``) takes a window of it as long as the episode may last, moved and turned so that the
+robots' usual task (``crowdsim.scenarios.robot_layout``: from y = -5 m to y = +5 m around x = 0) crosses the
+recording's centre (the median tracked position) and meets its main flow (the principal axis of the
+pedestrians' steps): across it in the "perpendicular" scenario, along it (head-on with half the people,
+behind the others) in "circle". Of the pedestrians tracked in the window, the ``n_humans`` whose tracks come
+closest to the robots' corridor are the crowd; the others are left out (they do not react to anyone, so
+nobody's motion depends on them). The seed draws the window among those that hold that many pedestrians and
+no pedestrian within ``2 radius + START_CLEARANCE`` of a robot's start at the first step.
+
+A pedestrian is present from the first row of the window where the recording tracks it to the last; before,
+it stands at its first tracked position, after at its last, with zero velocity (``ReplayEpisode.present``
+says which rows are real). Velocities are the recorded steps, ``(p_k - p_{k-1}) / dt``, zero at the row it
+appears. The window starts ``past`` rows early (``history_len - 1``): the people walking at the first step
+have their real past in the observed history, as a tracker would have it, not a standstill. The simulator
+hands the mask and the track lengths to its caller (``Observation.human_present``, ``human_observed``); the
+metrics count only present humans, and the closed loop shows a controller only those
+(``pipelines.loop.sensing``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+from crowdsim.errors import SimulationError
+from crowdsim.scenarios import Formation, robot_layout
+
+# The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
+# split, which no shipped net was trained or validated on (pipelines.loop.replay_data)
+REPLAYED: Final[tuple[str, ...]] = ("eth", "hotel", "eth_test", "hotel_test")
+CROWDS: Final[tuple[str, ...]] = ("orca", *REPLAYED)  # EnvConfig.crowd
+RECORDED_DT: Final[float] = 0.4  # s, BIWI's annotation rate (2.5 fps), so the only tau a replay runs at
+START_CLEARANCE: Final[float] = 0.2  # m beyond 2 radius between a robot's start and a present pedestrian
+WINDOW_TRIES: Final[int] = 200  # windows drawn before an episode is declared impossible
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A sequence's tracks: ``positions[k, j]`` is pedestrian ``j`` at ``frames[k]`` (NaN: not tracked)."""
+
+    name: str
+    frames: np.ndarray  # (F,) int, sorted: the frame ids of the grid's rows
+    frame_step: int  # frame ids between consecutive annotated steps (ETH 6, Hotel 10)
+    positions: np.ndarray  # (F, P, 2) m, NaN where a pedestrian is not tracked
+    dt: float = RECORDED_DT
+
+    @classmethod
+    def from_rows(cls, name: str, rows: np.ndarray, frame_step: int, dt: float = RECORDED_DT) -> Recording:
+        """From ``rows (R, 4)`` of frame, pedestrian, x, y (``predictors.data.ewap.read_obsmat``'s). A frame
+        of the grid that no row names is a row with nobody tracked (BIWI lists only frames with someone in
+        view); frames off the grid (ETH's ids shift by 3 part way) start a grid of their own, and no window
+        spans two (``window_starts``)."""
+        rows = np.asarray(rows, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != 4 or len(rows) == 0 or not np.isfinite(rows).all():
+            raise SimulationError(f"recording {name!r}: rows must be a finite (R, 4) array with R >= 1")
+        if isinstance(frame_step, bool) or not isinstance(frame_step, int) or frame_step < 1:
+            raise SimulationError(f"recording {name!r}: frame_step must be an int >= 1, got {frame_step!r}")
+        frames = _grid(np.unique(rows[:, 0].astype(np.int64)), frame_step)
+        people, person_of = np.unique(rows[:, 1].astype(np.int64), return_inverse=True)
+        positions = np.full((len(frames), len(people), 2), np.nan)
+        positions[np.searchsorted(frames, rows[:, 0].astype(np.int64)), person_of] = rows[:, 2:4]
+        return cls(name, frames, frame_step, positions, float(dt))
+
+    def window_starts(self, steps: int) -> np.ndarray:
+        """Rows ``k`` whose next ``steps`` rows follow each other on the frame grid (one grid, no jump)."""
+        if len(self.frames) <= steps:
+            return np.zeros(0, dtype=int)
+        span = self.frames[steps:] - self.frames[:-steps]
+        return np.flatnonzero(span == steps * self.frame_step)
+
+    def flow(self) -> tuple[np.ndarray, np.ndarray]:
+        """The crowd's centre (median tracked position) and main direction (unit principal axis of its
+        pedestrians' steps, turned to point along +x, or +y when it is the y axis: an eigenvector's sign is
+        the solver's)."""
+        tracked = self.positions[np.isfinite(self.positions[..., 0])]
+        steps = np.diff(self.positions, axis=0).reshape(-1, 2)
+        steps = steps[np.isfinite(steps).all(axis=1)]
+        if len(tracked) == 0 or len(steps) == 0:
+            raise SimulationError(f"recording {self.name!r} has no pedestrian tracked on two steps")
+        _, vectors = np.linalg.eigh(steps.T @ steps)
+        direction = vectors[:, -1]
+        if direction[0] < 0 or (direction[0] == 0 and direction[1] < 0):
+            direction = -direction
+        return np.median(tracked, axis=0), direction
+
+
+@dataclass(frozen=True)
+class ReplayEpisode:
+    """One episode's robots and replayed humans, in the simulator's frame (module docstring)."""
+
+    robot_starts: np.ndarray  # (M, 2) m
+    robot_goals: np.ndarray  # (M, 2) m
+    # Rows past + k are the episode's step k; the first ``past`` rows are the observed history before it.
+    positions: np.ndarray  # (past+T+1, N, 2) m, held at the first / last tracked position outside the track
+    velocities: np.ndarray  # (past+T+1, N, 2) m/s, the recorded steps; zero where absent and where it appears
+    present: np.ndarray  # (past+T+1, N) bool, tracked at that row
+    observed: np.ndarray  # (past+T+1, N) int, tracked rows in a row up to this one (0 where absent)
+    goals: np.ndarray  # (N, 2) m, each pedestrian's last tracked position in the window
+    past: int  # rows before the episode's first step
+    start_row: int  # the recording's row of the episode's first step
+    people: np.ndarray  # (N,) int, the pedestrians' columns in the recording
+
+
+def replay_episode(
+    recording: Recording,
+    scenario: str,
+    n_humans: int,
+    n_robots: int,
+    steps: int,
+    rng: np.random.Generator,
+    *,
+    radius: float,
+    past: int = 0,
+    formation: Formation = "auto",
+) -> ReplayEpisode:
+    """A window of ``steps + 1`` rows of ``recording``, after ``past`` rows of history, with ``n_humans``
+    pedestrians near the robots' path (module docstring); SimulationError when ``WINDOW_TRIES`` draws find
+    none."""
+    robot_starts, robot_goals = robot_layout(n_robots, formation)
+    turned = _turned(recording, scenario)
+    starts = recording.window_starts(past + steps)
+    if len(starts) == 0:
+        raise SimulationError(
+            f"recording {recording.name!r} has no {past + steps + 1} consecutive steps (an episode of "
+            f"{steps * recording.dt:g} s after {past} of observed history): shorten [env] time_limit"
+        )
+    corridor = np.concatenate([robot_starts, robot_goals]) if n_robots else np.zeros((1, 2))
+    low, high = corridor.min(axis=0), corridor.max(axis=0)
+    most = 0
+    for _ in range(WINDOW_TRIES):
+        first = int(starts[rng.integers(len(starts))]) + past
+        window = turned[first : first + steps + 1]
+        tracked = np.isfinite(window[..., 0])
+        candidates = np.flatnonzero(tracked.any(axis=0))
+        most = max(most, len(candidates))
+        if len(candidates) < n_humans:
+            continue
+        # distance of each tracked position to the box the robots' starts and goals span
+        gap = np.linalg.norm(np.maximum(np.maximum(low - window, window - high), 0.0), axis=-1)
+        closest = np.where(tracked, gap, np.inf)[:, candidates].min(axis=0)
+        people = np.sort(candidates[np.argsort(closest, kind="stable")[:n_humans]])
+        if _clear_start(window[0, people], robot_starts, radius):
+            rows = turned[first - past : first + steps + 1, people]
+            return _episode(rows, robot_starts, robot_goals, past, first, people, recording.dt)
+    raise SimulationError(
+        f"recording {recording.name!r}: no window of {steps * recording.dt:g} s in {WINDOW_TRIES} draws "
+        f"holds {n_humans} pedestrians and leaves the robots' starts clear (the most found: {most}); use "
+        "fewer humans"
+    )
+
+
+def _grid(frames: np.ndarray, step: int) -> np.ndarray:
+    """``frames`` (sorted, distinct) with the frames of their grid that are missing between two of them: a
+    gap that is a whole number of steps is filled, one that is not (another grid) is left."""
+    filled = [frames[:1]]
+    for before, after in zip(frames[:-1], frames[1:], strict=True):
+        if (after - before) % step == 0:
+            filled.append(np.arange(before + step, after + 1, step))
+        else:
+            filled.append(np.array([after]))
+    return np.concatenate(filled)
+
+
+def _turned(recording: Recording, scenario: str) -> np.ndarray:
+    """``recording.positions`` moved to the centre and turned so that its main flow runs along x
+    ("perpendicular": across the robots' path) or y ("circle": along it)."""
+    centre, direction = recording.flow()
+    target = math.pi / 2 if scenario == "circle" else 0.0
+    angle = target - math.atan2(direction[1], direction[0])
+    c, s = math.cos(angle), math.sin(angle)
+    rotation = np.array([[c, -s], [s, c]])
+    return (recording.positions - centre) @ rotation.T
+
+
+def _clear_start(first_row: np.ndarray, robot_starts: np.ndarray, radius: float) -> bool:
+    """No pedestrian tracked at the first row within ``2 radius + START_CLEARANCE`` of a robot's start."""
+    if len(robot_starts) == 0 or len(first_row) == 0:
+        return True
+    distance = np.linalg.norm(first_row[:, None] - robot_starts[None], axis=-1)
+    return bool(np.all(np.isnan(distance) | (distance >= 2.0 * radius + START_CLEARANCE)))
+
+
+def _episode(
+    window: np.ndarray,
+    robot_starts: np.ndarray,
+    robot_goals: np.ndarray,
+    past: int,
+    first: int,
+    people: np.ndarray,
+    dt: float,
+) -> ReplayEpisode:
+    """The chosen pedestrians' rows held outside their tracks, their velocities, presence and track
+    lengths."""
+    present = np.isfinite(window[..., 0])
+    observed = np.zeros(present.shape, dtype=np.int64)
+    observed[0] = present[0]
+    for k in range(1, len(present)):  # rows in a row: a track that ends and starts again counts afresh
+        observed[k] = np.where(present[k], observed[k - 1] + 1, 0)
+    rows = np.arange(len(window))[:, None]
+    first_row = present.argmax(axis=0)
+    last_row = len(window) - 1 - present[::-1].argmax(axis=0)
+    held = np.clip(rows, first_row, last_row)  # (T+1, N): the tracked row each row shows
+    positions = window[held, np.arange(window.shape[1])]
+    velocities = np.zeros_like(positions)
+    moving = present[1:] & present[:-1]
+    velocities[1:] = np.where(moving[..., None], (positions[1:] - positions[:-1]) / dt, 0.0)
+    return ReplayEpisode(
+        robot_starts=robot_starts,
+        robot_goals=robot_goals,
+        positions=positions,
+        velocities=velocities,
+        present=present,
+        observed=observed,
+        goals=positions[-1].copy(),
+        past=past,
+        start_row=first,
+        people=people,
+    )
