@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from crowdsim.profiles import PROFILES, VISIBILITY
+from crowdsim.replay import CROWDS
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable, write_output
@@ -56,6 +57,7 @@ def _options() -> tuple[Option, ...]:
         Option("record_iterations", "controller", "record_iterations", "--record-iterations"),
         Option("profile", "env", "profile", "--profile"),
         Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
+        Option("crowd", "env", "crowd", "--crowd"),
         Option("scenario", "scenario", "name", "--scenario"),
         Option("humans", "scenario", "humans", "--humans"),
         Option("robots", "scenario", "robots", "--robots"),
@@ -118,6 +120,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--profile", choices=sorted(PROFILES), help="simulation conventions (default: paper)")
     parser.add_argument(
         "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
+    )
+    parser.add_argument(
+        "--crowd",
+        choices=CROWDS,
+        help="orca (default) | BIWI's people replayed: eth, hotel, or their test splits eth_test, hotel_test",
     )
     parser.add_argument(
         "--json",
@@ -233,6 +240,7 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
         "visibility": "visible" if cfg.env.robots_visible else "invisible",
         "goals": cfg.env.goal_assignment,
         "formation": cfg.env.formation,
+        "crowd": cfg.env.crowd,
         "scenario": cfg.scenario.name,
         "humans": cfg.scenario.humans,
         "robots": cfg.scenario.robots,
@@ -383,6 +391,7 @@ def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConf
         title=title,
         radius=env_config.radius,
         dt=env_config.dt,
+        human_present=first.human_present,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120, bbox_inches="tight")

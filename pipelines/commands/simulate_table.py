@@ -36,6 +36,7 @@ def table_header(
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
     goals += "" if env_config.formation == "auto" else f"formation {env_config.formation} | "
+    goals += "" if env_config.crowd == "orca" else f"crowd {env_config.crowd} (replayed) | "
     # a controller behind a sensor saw fewer humans than the metrics count: a result of another set-up
     if sim.sensor_range is not None:
         goals += f"sensor {sim.sensor_range:g} m{'' if sim.sensor_tracks else ' without tracks'} | "

@@ -47,7 +47,8 @@ with track lengths, and 3 m without, 7 humans).
 --margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling;
 --margins to the methods of controllers that plan with a predictor (cmpc, dmpc; orca and straight plan
 with none, and run without margins), --profile and --visibility to all of them. --sensor-range puts every
-method's controller behind a sensor (all but the sensing experiment).
+method's controller behind a sensor (all but the sensing experiment); --crowd eth|hotel replays BIWI's
+pedestrians as every cell's humans (crowdsim/replay.py).
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2)
 where the cells have the same number of robots and profile: another team or profile draws other humans.
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
@@ -89,6 +90,7 @@ def _options() -> tuple[Option, ...]:
         Option("margins", "controller", "margins", "--margins"),
         Option("profile", "env", "profile", "--profile"),
         Option("visibility", "env", "robots_visible", "--visibility", lambda v: v == "visible"),
+        Option("crowd", "env", "crowd", "--crowd"),
         Option("sensor_range", "simulate", "sensor_range", "--sensor-range"),
         Option("no_sensor_tracks", "simulate", "sensor_tracks", "--no-sensor-tracks", lambda v: not v),
         Option("vary", "sweep", "vary", "--vary", ";".join),
@@ -177,6 +179,7 @@ def predictor_list(text: str) -> tuple[str, ...]:
 def _add_method_options(p: argparse.ArgumentParser) -> None:
     """What replaces the experiment's own choices for every method."""
     from crowdsim.profiles import PROFILES, VISIBILITY
+    from crowdsim.replay import CROWDS
 
     p.add_argument(
         "--predictor",
@@ -213,6 +216,11 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         "--visibility",
         choices=VISIBILITY,
         help="whether the humans' ORCA sees the robots (default visible, as the authors' fork)",
+    )
+    p.add_argument(
+        "--crowd",
+        choices=CROWDS,
+        help="orca (default) | BIWI's people replayed: eth, hotel, or their test splits eth_test, hotel_test",
     )
     p.add_argument(
         "--vary",

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping
+from dataclasses import replace
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError
@@ -55,6 +57,8 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
         experiment = _applied(cfg, "env", key, experiment.with_world, world)
     if cfg.chosen("simulate", "sensor_range") or cfg.chosen("simulate", "sensor_tracks"):
         experiment = _with_sensing(cfg, experiment)
+    if cfg.env.crowd != "orca":
+        experiment = _with_crowd(experiment, cfg.env.crowd)
     for key in ("controller", "coupling", "flocking", "record_iterations"):
         if cfg.chosen("controller", key):
             experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
@@ -250,8 +254,8 @@ def check_world(cfg: RunConfig) -> None:
 
     _check_scenario(cfg)
     why = (
-        "a sweep's cells run a named profile ([env] profile, robots_visible); other [world], [env] and "
-        "[env.orca] values apply to simulate only"
+        "a sweep's cells run a named profile ([env] profile, robots_visible) among a crowd ([env] crowd); "
+        "other [world], [env] and [env.orca] values apply to simulate only"
     )
     profile = PROFILES[cfg.env.profile]
     for section, key, default in (
@@ -261,7 +265,7 @@ def check_world(cfg: RunConfig) -> None:
             # a profile's convention is asked for whatever its value: `config show` leaves it unset
             ("env", k, _ANY if k in ENV_PROFILE_KEYS else getattr(profile, k))
             for k in cfg.values["env"]
-            if k not in ("profile", "robots_visible")
+            if k not in ("profile", "robots_visible", "crowd")
         ),
     ):
         if _asked(cfg, section, key, default):
@@ -299,6 +303,18 @@ def _check_scenario(cfg: RunConfig) -> None:
             sweep = SWEEP_SCENARIO.get(key, "a sweep plans its own scenarios")
             value = cfg.values["scenario"][key]
             raise cfg.error("scenario", key, f"{value!r}: [scenario] {key} applies to simulate only; {sweep}")
+
+
+def _with_crowd(experiment: Experiment, crowd: str) -> Experiment:
+    """Every cell among the humans of ``crowd`` (--crowd): a BIWI sequence replayed (crowdsim.replay); the
+    cells' keys name it, so they never mix with ORCA's."""
+    worlds = {label: replace(own, crowd=crowd) for label, own in experiment.method_worlds.items()}
+    return replace(
+        experiment,
+        title=f"{experiment.title}; among the {crowd.upper()} pedestrians replayed",
+        world=replace(experiment.world, crowd=crowd),
+        method_worlds=MappingProxyType(worlds),
+    )
 
 
 def _with_sensing(cfg: RunConfig, experiment: Experiment) -> Experiment:

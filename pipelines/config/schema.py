@@ -96,6 +96,13 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
         "the robots' starts and goals: auto (a row up to 3 robots, a wedge from 4) | row | wedge | two_rows "
         "(crowdsim/scenarios.py)",
     ),
+    Key(
+        "crowd",
+        "str",
+        "orca",
+        "the humans: orca (simulated, the paper's) | eth | hotel | eth_test | hotel_test (BIWI's pedestrians "
+        "replayed, not reacting; _test: the TrajNet++ test split alone; crowdsim/replay.py) (--crowd)",
+    ),
     *(
         Key(
             name,
@@ -116,7 +123,7 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
         f.name: getattr(base, f.name) for f in fields(EnvConfig) if f.name not in (*ENV_FROM_WORLD, "orca")
     }
     settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
-    settings |= {name: values[name] for name in ("robots_visible", "goal_assignment", "formation")}
+    settings |= {name: values[name] for name in ("robots_visible", "goal_assignment", "formation", "crowd")}
     env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
     if env.max_steps > MAX_EPISODE_STEPS:
         raise PipelineError(

@@ -18,6 +18,7 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
+from crowdsim.replay import CROWDS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
@@ -40,6 +41,7 @@ class World:
     visibility: str = "visible"
     sensor_range: float | None = None
     sensor_tracks: bool = True
+    crowd: str = "orca"  # EnvConfig.crowd: ORCA's humans, or a BIWI sequence replayed (crowdsim.replay)
 
     def __post_init__(self):
         if self.profile not in PROFILES:
@@ -53,15 +55,17 @@ class World:
             raise PipelineError(f"sensor_tracks must be true or false, got {self.sensor_tracks!r}")
         if not self.sensor_tracks and sensed is None:
             raise PipelineError("sensor_tracks = false needs a sensor range: track lengths are a sensor's")
+        if self.crowd not in CROWDS:
+            raise PipelineError(f"unknown crowd {self.crowd!r}; choose from {list(CROWDS)}")
 
     @property
     def label(self) -> str:
-        """Part of the cell key; a world that sees every human keeps the label of the sweeps before sensing,
-        so that they resume into the same cells."""
+        """Part of the cell key; a world that sees every human of ORCA's crowd keeps the label of the sweeps
+        before sensing and replays, so that they resume into the same cells."""
         label = f"{self.profile}-{self.visibility}"
         if self.sensor_range is not None:
             label += f"-sensed{self.sensor_range:.12g}m" + ("" if self.sensor_tracks else "-notracks")
-        return label
+        return label if self.crowd == "orca" else f"{label}-{self.crowd}"
 
     @property
     def sensing_label(self) -> str:
@@ -75,7 +79,7 @@ class World:
         return replace(self, sensor_range=sensor_range, sensor_tracks=sensor_tracks)
 
     def env_config(self) -> EnvConfig:
-        return make_env_config(self.profile, self.visibility)
+        return replace(make_env_config(self.profile, self.visibility), crowd=self.crowd)
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ different run than the recorded metrics would mislead; recording costs about 5% 
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import resource
@@ -235,11 +236,12 @@ class EpisodeWorker:
         cell = task.cell
         env_config = cell.world.env_config()
         controller = make_controller(cell.spec, env_config, jit=self.jit)
-        if cell.world.sensor_range is not None:
+        if cell.world.sensor_range is not None or cell.world.crowd != "orca":  # a replay: the tracked humans
             from pipelines.loop.episode import behind_sensor
 
+            radius = math.inf if cell.world.sensor_range is None else cell.world.sensor_range
             controller = behind_sensor(
-                controller, cell.world.sensor_range, cell.world.sensor_tracks, cell.n_robots, cell.n_humans
+                controller, radius, cell.world.sensor_tracks, cell.n_robots, cell.n_humans
             )
         self.builds += 1
         self._controllers[key] = controller

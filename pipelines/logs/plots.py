@@ -266,6 +266,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
             trails[i].set_data(view.robot_positions[: row + 1, i, 0], view.robot_positions[: row + 1, i, 1])
         for j, patch in enumerate(humans):
             patch.center = view.human_positions[row, j]
+            patch.set_visible(not np.isnan(view.human_positions[row, j]).any())  # a replay's, not tracked
         plan = view.plans.get(step)
         for i, line in enumerate(plans):
             pts = np.vstack([view.robot_positions[row, i], plan[i]]) if plan is not None else np.empty((0, 2))

@@ -234,7 +234,13 @@ class McapEpisodeRecorder:
         }
         rec.write("/mpc/solver", solver, t_ns, schema=SOLVER)
         scene = builder.update(
-            t_ns, obs.robot_positions, obs.robot_goals, obs.human_positions, plan, prediction
+            t_ns,
+            obs.robot_positions,
+            obs.robot_goals,
+            obs.human_positions,
+            plan,
+            prediction,
+            obs.human_present,
         )
         rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
         self._last = next_obs
@@ -246,7 +252,13 @@ class McapEpisodeRecorder:
         if last.step > self._last_written_step:  # the terminal state, reached by the last step
             self._write_state(rec, last, t_ns, {"time": float(last.time), "step": int(last.step)}, None, None)
             scene = builder.update(
-                t_ns, last.robot_positions, last.robot_goals, last.human_positions, None, None
+                t_ns,
+                last.robot_positions,
+                last.robot_goals,
+                last.human_positions,
+                None,
+                None,
+                last.human_present,
             )
             rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
         rec.write("/episode/metrics", episode_summary(result), t_ns, schema=EPISODE_METRICS)
@@ -311,6 +323,8 @@ class McapEpisodeRecorder:
             "velocities": obs.human_velocities.tolist(),
             "goals": obs.human_goals.tolist(),
         }
+        if obs.human_present is not None:
+            humans["present"] = obs.human_present.tolist()
         rec.write("/humans", humans, t_ns, schema=HUMANS)
         self._last_written_step = int(obs.step)
 

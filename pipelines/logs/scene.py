@@ -89,6 +89,8 @@ class SceneBuilder:
         rgb = [ROBOT_RGB[i % len(ROBOT_RGB)] for i in range(n_robots)]
         self._robots = self._sphere_template([_color(c, 1.0) for c in rgb], agent, radius)
         self._humans = self._sphere_template([_color(HUMAN_RGB, 0.8)] * n_humans, agent, radius)
+        self._agent, self._radius = agent, radius
+        self._tracked: dict[int, str] = {}  # humans tracked -> their template (replayed crowds)
         self._goals = self._sphere_template(
             [_color(c, 0.6) for c in rgb], {"x": 0.25, "y": 0.25, "z": 0.05}, 0.025
         )
@@ -127,6 +129,16 @@ class SceneBuilder:
             )  # fmt: skip
         return self._lines[key]
 
+    def _human_spheres(self, positions: np.ndarray, present: np.ndarray | None) -> str:
+        """The humans' spheres: every one, or those a replayed crowd tracks now (the others are not there)."""
+        if present is None:
+            return self._humans % tuple(positions.ravel().tolist())
+        shown = positions[np.asarray(present, dtype=bool)]
+        if len(shown) not in self._tracked:
+            colors = [_color(HUMAN_RGB, 0.8)] * len(shown)
+            self._tracked[len(shown)] = self._sphere_template(colors, self._agent, self._radius)
+        return self._tracked[len(shown)] % tuple(shown.ravel().tolist())
+
     def _entity(self, eid: str, stamp: str, spheres: str = "", lines: str = "") -> str:
         head, before_spheres, before_lines, tail = self._entity_parts[eid]
         return head + stamp + before_spheres + spheres + before_lines + lines + tail
@@ -139,6 +151,7 @@ class SceneBuilder:
         human_positions: np.ndarray,  # (N, 2)
         plan: np.ndarray | None,  # (M, H, 2)
         prediction: np.ndarray | None,  # (H, N, 2)
+        human_present: np.ndarray | None = None,  # (N,) a replayed crowd's humans tracked now
     ) -> bytes:
         sec, nsec = divmod(log_time_ns, 1_000_000_000)
         stamp = f'{{"sec":{sec},"nsec":{nsec}}}'
@@ -157,7 +170,7 @@ class SceneBuilder:
         entities = ",".join(
             (
                 self._entity("robots", stamp, self._robots % tuple(robot_positions.ravel().tolist())),
-                self._entity("humans", stamp, self._humans % tuple(human_positions.ravel().tolist())),
+                self._entity("humans", stamp, self._human_spheres(human_positions, human_present)),
                 self._entity("goals", stamp, self._goals % tuple(robot_goals.ravel().tolist())),
                 self._entity("plans", stamp, lines=plan_lines),
                 self._entity("predictions", stamp, lines=prediction_lines),

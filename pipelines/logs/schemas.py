@@ -99,7 +99,13 @@ HUMANS = MessageSchema(
             "positions": {**_POINTS, "description": "(N, 2) m"},
             "velocities": {**_POINTS, "description": "(N, 2) m/s"},
             "goals": {**_POINTS, "description": "(N, 2) m"},
+            "present": {
+                "type": "array",
+                "items": {"type": "boolean"},
+                "description": "(N,) a replayed crowd's humans tracked now; absent: every human is there",
+            },
         },
+        optional=("present",),
     ),
 )
 

@@ -19,7 +19,13 @@ if TYPE_CHECKING:
 # is two results, not one average). A set-up is named by its RUN_IDENTITY values, then by the settings that
 # tell it apart: these whenever they differ, any other only where these leave set-ups alike.
 # margins.label ("none", "cp0.05", "cpm0.1") stands for the margins it made (mpc.human_margins, their mode).
-NAMED_FIRST: Final[tuple[str, ...]] = ("env.profile", "env.robots_visible", "env.formation", "margins.label")
+NAMED_FIRST: Final[tuple[str, ...]] = (
+    "env.crowd",
+    "env.profile",
+    "env.robots_visible",
+    "env.formation",
+    "margins.label",
+)
 
 
 @dataclass
@@ -81,12 +87,12 @@ def named_settings(setups: list[SetUp]) -> list[str]:
 
 
 def setting(key: str, value: Any) -> str:
-    """A setting in a set-up's name: "formation row", "robots invisible", "mpc.horizon 8"."""
+    """A setting in a set-up's name: "crowd eth", "formation row", "robots invisible", "mpc.horizon 8"."""
     if value is MISSING:
         return f"{'margins' if key == 'margins.label' else key.removeprefix('env.')} not recorded"
     if key == "env.robots_visible" and isinstance(value, bool):
         return "robots visible" if value else "robots invisible"
-    if key in ("env.profile", "env.formation"):
+    if key in ("env.crowd", "env.profile", "env.formation"):
         return f"{key.removeprefix('env.')} {shown(value)}"
     if key == "margins.label":
         return f"margins {shown(value)}"

@@ -23,7 +23,9 @@ class EpisodeView:
     times: np.ndarray  # (T,) s
     steps: np.ndarray  # (T,) int
     robot_positions: np.ndarray  # (T, M, 2) m
-    human_positions: np.ndarray  # (T, N, 2) m
+    human_positions: (
+        np.ndarray
+    )  # (T, N, 2) m; NaN where a replayed crowd's human is not tracked (/humans present)
     robot_goals: np.ndarray  # (M, 2) m
     human_goals: np.ndarray  # (N, 2) m
     plans: dict[int, np.ndarray]  # step -> (M, H, 2) m
@@ -83,13 +85,16 @@ def _episode_view(rec: Recording) -> EpisodeView:
     plans = {p["step"]: np.asarray(p["positions"], dtype=float) for p in rec.data("/mpc/plan")}
     if any(len(plan) != m for plan in plans.values()):
         raise ValueError(f"a /mpc/plan is not for {m} robots")
+    human_positions = np.array([_points(by_step[s]["positions"], n) for s in steps]).reshape(len(steps), n, 2)
+    for row, s in enumerate(steps):  # a replayed crowd: the humans not tracked then are not there
+        present = by_step[s].get("present")
+        if isinstance(present, list) and len(present) == n:
+            human_positions[row, ~np.asarray(present, dtype=bool)] = np.nan
     return EpisodeView(
         times=times,
         steps=np.array(steps, dtype=int),
         robot_positions=np.array([_points(r["positions"], m) for r in robots]),
-        human_positions=np.array([_points(by_step[s]["positions"], n) for s in steps]).reshape(
-            len(steps), n, 2
-        ),
+        human_positions=human_positions,
         robot_goals=_points(robots[0]["goals"], m),
         human_goals=_points(humans[0]["goals"], n),
         plans=plans,

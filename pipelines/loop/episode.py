@@ -23,6 +23,7 @@ from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
 from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
+from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import EpisodeFailed, PipelineError
@@ -75,6 +76,8 @@ class EpisodeResult:
     statuses: tuple[str, ...] = field(repr=False)  # (T,) solver status per control step
     fallbacks: tuple[str | None, ...] = field(repr=False)  # (T,) None or the fallback used
     iterations: np.ndarray = field(repr=False)  # (T,) int, IBR iterations per control step
+    # (T+1, N) bool, a replayed crowd's tracked humans at each row (crowdsim.replay); None: all, always
+    human_present: np.ndarray | None = field(default=None, repr=False)
 
     def record(self) -> EpisodeRecord:
         """The episode without its trajectories: what every report and log serialises."""
@@ -116,7 +119,8 @@ def run_episode(
     check_sizes(scenario, n_humans, n_robots)
     if n_robots < 1:  # the simulator runs crowds alone; an episode's metrics are its robots'
         raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
-    env = CrowdEnv(env_config)
+    env = CrowdEnv(env_config, replayed_recording(env_config))
+    controller = behind_tracks(controller, env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
     called(controller, "reset", handed_out(obs))
     episode = {"seed": seed, "scenario": scenario, "n_humans": n_humans, "n_robots": n_robots}
@@ -163,6 +167,7 @@ def run_episode(
         statuses=tuple(statuses),
         fallbacks=tuple(fallbacks),
         iterations=np.asarray(iterations, dtype=int),
+        human_present=traj.human_present,
     )
     for observer in observers:
         observer.on_end(result)
@@ -213,8 +218,9 @@ def run_episodes(
             "sensor_range too (metres)"
         )
     controller = make_controller(spec, env_config)
-    if sensor_range is not None:
-        controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans)
+    if sensor_range is not None or env_config.crowd != "orca":  # a replay's: the humans it tracks now
+        radius = math.inf if sensor_range is None else sensor_range
+        controller = behind_sensor(controller, radius, sensor_tracks, n_robots, n_humans)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
@@ -260,6 +266,25 @@ def behind_sensor(
     if isinstance(controller, MPCController):
         controller.prepare(n_robots, range(n_humans + 1))  # inside the steps, builds would count as solves
     return sensed
+
+
+def replayed_recording(env_config: EnvConfig) -> Recording | None:
+    """The recording a replayed crowd plays back (pipelines.loop.replay_data), None for ORCA's crowd."""
+    if env_config.crowd == "orca":
+        return None
+    from pipelines.loop.replay_data import recording
+
+    return recording(env_config.crowd)
+
+
+def behind_tracks(controller: Controller, env_config: EnvConfig) -> Controller:
+    """``controller`` shown only the humans a replayed crowd tracks now (RangeLimited at every distance),
+    unless a sensor already does that; ``controller`` itself for ORCA's crowd, where every human is there."""
+    from pipelines.loop.sensing import RangeLimited
+
+    if env_config.crowd == "orca" or isinstance(controller, RangeLimited):
+        return controller
+    return RangeLimited(controller, math.inf)
 
 
 def check_controller(controller: object, where: str = "run_episode") -> None:

@@ -16,6 +16,11 @@ observation counts it ``step + 1`` times observed, "new", for 8 steps: a range t
 the full observation only with margins of no classes, or without the track lengths.) The episode's metrics
 stay the simulator's, over every human.
 
+In a replayed crowd (``obs.human_present``, crowdsim.replay) a human is in view only while the recording
+tracks it: its track begins when it appears. ``RangeLimited(inner, math.inf)`` is that alone, every tracked
+human at any distance (what the closed loop wraps a controller in for a replayed crowd; no sensor, so it
+adds nothing to the controller's description).
+
 The number of humans in view changes from step to step, and an MPC builds an NLP per number: prepare them
 first (``MPCController.prepare(n_robots, range(n_humans + 1))``), or the first step meeting each size builds
 it. What the wrapped controller returns for the humans it saw is mapped to nothing: ``prediction`` and
@@ -50,7 +55,7 @@ class RangeLimited:
     """``inner`` fed the humans within ``radius`` metres of some robot (module docstring)."""
 
     def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
-        if not is_sensor_range(radius):
+        if not (is_sensor_range(radius) or radius == math.inf):  # inf: the tracked humans of a replay
             raise PipelineError(f"sensor radius must be a finite number of metres > 0, got {radius!r}")
         if not isinstance(report_tracks, bool):  # a truthy "no" would report them
             raise PipelineError(f"report_tracks must be True or False, got {report_tracks!r}")
@@ -63,8 +68,11 @@ class RangeLimited:
 
     def reset(self, obs: Observation) -> None:
         self._in_view = self._visible(obs)
-        # in view before the episode too, standing where the history has them
-        self._track_start = np.full(obs.n_humans, obs.step - len(obs.history) + 1)
+        # in view before the episode too, standing where the history has them; in a replayed crowd, tracked
+        # as long as the recording says
+        length = len(obs.history)
+        before = length if obs.human_observed is None else np.minimum(obs.human_observed, length)
+        self._track_start = obs.step - before + 1 + np.zeros(obs.n_humans, dtype=int)
         called(self.inner, "reset", self.sensed(obs))
 
     def act(self, obs: Observation) -> ControlOutput:
@@ -82,6 +90,8 @@ class RangeLimited:
 
     def describe(self) -> dict[str, Any]:
         described = checked_description(self.inner)
+        if self.radius == math.inf:  # no sensor: the replay's tracks, which the simulator's config names
+            return described
         sensing = {"radius_m": self.radius, "report_tracks": self.report_tracks}
         return {**described, "config": {**described.get("config", {}), "sensing": sensing}}
 
@@ -110,9 +120,11 @@ class RangeLimited:
             human_goals=obs.human_goals[humans],
             history=history,
             human_observed=tracked.astype(np.int64) if self.report_tracks else None,
+            human_present=None,  # every human handed on is there
         )
 
     def _visible(self, obs: Observation) -> np.ndarray:
-        """``(N,)`` bool: the humans within ``radius`` of some robot."""
+        """``(N,)`` bool: the humans within ``radius`` of some robot, and tracked now in a replayed crowd."""
         distance = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
-        return (distance <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, bool)
+        near = (distance <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, bool)
+        return near if obs.human_present is None else near & obs.human_present

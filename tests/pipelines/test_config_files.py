@@ -786,7 +786,8 @@ def test_a_sweep_refuses_a_files_profile_convention_and_takes_config_shows_file(
     assert main(["--config", str(config), *argv]) == 2
     assert _one_error_line(capsys, "sweep").endswith(
         f"{config}: env.time_limit: 40.0: a sweep's cells run a named profile ([env] profile, "
-        "robots_visible); other [world], [env] and [env.orca] values apply to simulate only"
+        "robots_visible) among a crowd ([env] crowd); other [world], [env] and [env.orca] values apply to "
+        "simulate only"
     )
     assert main(["config", "show"]) == 0
     shown = _write(tmp_path, capsys.readouterr().out)

@@ -79,7 +79,7 @@ def test_without_reported_tracks_the_padding_reads_as_the_past_and_the_descripti
     assert sensor.describe()["config"] == {"own": 2, "sensing": {"radius_m": 3.0, "report_tracks": False}}
 
 
-@pytest.mark.parametrize("radius", [0.0, -1.0, float("nan"), float("inf"), True, "3"])
+@pytest.mark.parametrize("radius", [0.0, -1.0, float("nan"), -float("inf"), True, "3"])
 def test_a_radius_that_is_no_distance_is_refused(radius):
     with pytest.raises(PipelineError, match="sensor radius must be a finite number of metres > 0"):
         RangeLimited(Keep(), radius)

@@ -1,0 +1,63 @@
+"""The recordings a replayed crowd plays back (``[env] crowd = "eth" | "hotel" | "eth_test" | "hotel_test"``,
+crowdsim.replay), read from the raw BIWI annotations of the data directory (``$CROWDMPC_DATA``:
+``raw_ewap/seq_eth/obsmat.txt``).
+
+Read as TrajNet++'s converter reads them (predictors.data.ewap), once per process and data directory: a
+sweep's worker runs thousands of episodes from one recording. The raw files, not the prepared TrajNet++
+scenes: those cut the tracks into 8-second windows, and an episode lasts up to 40 s.
+
+The shipped nets were trained under the ``paper`` protocol on the first 70 % of the frames of both sequences
+(and validated on the next 10 %): a whole sequence replays people they have seen. "eth_test" and
+"hotel_test" replay the last 20 % alone, the TrajNet++ test split (``predictors.data.ewap.split_frames``),
+which none of them saw: ETH's is 116 s, Hotel's 144 s, so their episodes' windows overlap more.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+
+from crowdsim.replay import Recording
+from pipelines.errors import PipelineError
+
+SEQUENCES: Final[dict[str, str]] = {
+    "eth": "seq_eth",
+    "hotel": "seq_hotel",
+    "eth_test": "seq_eth",
+    "hotel_test": "seq_hotel",
+}
+
+
+def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
+    """The ``Recording`` of ``crowd`` ("eth" or "hotel") from ``data_dir`` (default: ``$CROWDMPC_DATA``);
+    PipelineError naming what is missing, DatasetFormatError for a broken file."""
+    from predictors.data.locate import raw_ewap_dir, resolve_data_dir
+
+    if crowd not in SEQUENCES:
+        raise PipelineError(f"crowd {crowd!r} is no recording; choose from {list(SEQUENCES)}")
+    directory = resolve_data_dir(data_dir).resolve()
+    raw = raw_ewap_dir(directory)
+    if raw is None:
+        raise PipelineError(
+            f"crowd {crowd!r} replays the raw BIWI tracks, and the data directory {directory} holds no "
+            f"raw_ewap/{SEQUENCES[crowd]}/obsmat.txt (a prepared directory keeps only 8 s scenes); set "
+            "CROWDMPC_DATA to the folder holding raw_ewap/ (data/README.md)"
+        )
+    path = raw / SEQUENCES[crowd] / "obsmat.txt"
+    return _read(crowd, path, os.stat(path).st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4)
+def _read(crowd: str, path: Path, mtime_ns: int) -> Recording:
+    """One file's recording, kept while the file is unchanged (``mtime_ns`` is part of the key)."""
+    from predictors.data.ewap import infer_frame_step, read_obsmat, split_frames
+
+    rows = read_obsmat(path)
+    step = infer_frame_step(rows[:, 0])  # of the whole sequence: the test split's gaps must not change it
+    if crowd.endswith("_test"):
+        rows = rows[np.isin(rows[:, 0].astype(np.int64), split_frames(rows[:, 0])["test"])]
+    return Recording.from_rows(crowd, rows, step)

@@ -1,0 +1,122 @@
+"""A replayed crowd in the closed loop (``[env] crowd = "eth" | "hotel"``): the recording read from the BIWI
+data, a controller shown only the humans tracked now, the command line and the sweep's cells naming it."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from crowdsim.env import EnvConfig, Observation
+from pipelines.errors import PipelineError
+from pipelines.loop.episode import run_episode
+from pipelines.loop.replay_data import recording
+from pipelines.loop.sensing import RangeLimited
+from tests.cli_calls import one_line, parser_error, run_cli
+from tests.pipelines.test_sensing import Keep, observation
+from tests.predictors.samples import shared_data_dir
+
+
+@pytest.fixture
+def data(monkeypatch):
+    root = shared_data_dir()
+    if root is None:
+        pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
+    monkeypatch.setenv("CROWDMPC_DATA", str(root))
+    return root
+
+
+def tracked(obs, present, observed):
+    """``obs`` of a replayed crowd: which humans are tracked now, and for how many rows."""
+    return Observation(
+        **{**obs.__dict__, "human_present": np.array(present), "human_observed": np.array(observed)}
+    )
+
+
+def test_without_a_range_the_controller_sees_the_tracked_humans_with_their_track_lengths():
+    sensor = RangeLimited(Keep(), math.inf)
+    first = tracked(observation(10, [[1.0, 0.0], [50.0, 0.0], [0.0, 2.5]]), [True, True, False], [2, 9, 0])
+    sensor.reset(first)
+    seen = sensor.inner.seen
+    np.testing.assert_array_equal(seen.human_positions, [[1.0, 0.0], [50.0, 0.0]])  # any distance
+    np.testing.assert_array_equal(seen.human_observed, [2, 4])  # the track's rows, at most the history's
+    np.testing.assert_allclose(seen.history[:, 1, 0], [0.9, 0.9, 0.9, 1.0])  # padded before its track
+    assert seen.human_present is None  # all it is handed are there
+    # the third appears: a track of its own from now
+    sensor.act(
+        tracked(observation(11, [[1.0, 0.0], [50.0, 0.0], [0.0, 2.5]]), [True, True, True], [3, 10, 1])
+    )
+    np.testing.assert_array_equal(sensor.inner.seen.human_observed, [3, 5, 1])
+    assert (
+        sensor.describe() == Keep().describe()
+    )  # no sensor to record: the simulator's config names the crowd
+
+
+def test_the_recording_is_read_once_and_a_data_folder_without_raw_tracks_is_named(data, tmp_path):
+    eth = recording("eth")
+    assert recording("eth") is eth and eth.frame_step == 6 and eth.positions.shape[1] == 360
+    assert recording("hotel").frame_step == 10
+    # the test split alone: the last 20 % of the frames (predictors.data.ewap.split_frames), on ETH's grid
+    held_out = recording("eth_test")
+    assert held_out.frame_step == 6 and 100 < held_out.positions.shape[1] < 360
+    assert held_out.frames[0] > eth.frames[int(0.79 * len(eth.frames))]
+    with pytest.raises(PipelineError, match=f"{tmp_path} holds no raw_ewap/seq_eth/obsmat.txt"):
+        recording("eth", tmp_path)
+    with pytest.raises(PipelineError, match="crowd 'zara' is no recording"):
+        recording("zara")
+
+
+class Counting(Keep):
+    """Keep, counting the humans handed over at each call."""
+
+    def __init__(self):
+        self.counts = []
+
+    def act(self, obs):
+        self.counts.append(obs.n_humans)
+        return super().act(obs)
+
+
+def test_an_episode_among_replayed_people_shows_the_controller_only_those_tracked_now(data):
+    controller = Counting()
+    result = run_episode(
+        controller, seed=3, scenario="perpendicular", n_humans=10, env_config=EnvConfig(crowd="eth")
+    )
+    present = result.human_present
+    assert present.shape == result.human_positions.shape[:2] and present.shape[1] == 10
+    assert controller.counts == present[:-1].sum(axis=1).tolist()
+    assert 0 < present.sum(axis=1).max() < 10  # people come and go
+    assert result.metrics.n_steps == len(controller.counts)
+
+
+def test_simulate_names_the_replayed_crowd_and_records_it(data, tmp_path, capsys):
+    out = tmp_path / "run.json"
+    argv = ["simulate", "--controller", "cmpc", "--crowd", "eth", "--humans", "6", "--episodes", "1"]
+    code, stdout, _ = run_cli(capsys, *argv, "--no-progress", "--json", str(out))
+    assert code == 0 and "| crowd eth (replayed) |" in stdout
+    record = json.loads(out.read_text())
+    assert record["run"]["crowd"] == "eth" and record["episodes"][0]["config"]["env"]["crowd"] == "eth"
+    assert "sensing" not in record["episodes"][0]["config"]
+
+
+def test_a_crowd_that_is_none_is_refused_in_one_line(capsys):
+    assert "invalid choice: 'zara'" in parser_error(
+        capsys, "simulate", "--controller", "cmpc", "--crowd", "zara"
+    )
+    code, _, err = run_cli(capsys, "simulate", "--controller", "cmpc", "--set", "env.crowd=zara")
+    assert one_line(err).endswith(
+        "--set env.crowd: must be one of ['orca', 'eth', 'hotel', 'eth_test', 'hotel_test'], got 'zara'"
+    )
+    assert code == 2
+
+
+def test_a_sweeps_cells_among_a_replayed_crowd_have_keys_of_their_own():
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+
+    cfg = load(sets=["env.crowd=hotel", "sweep.experiment=table2"])
+    experiment = configured_experiment(cfg)
+    cells = experiment.cells([5])
+    assert cells and all(c.key.endswith("-paper-visible-hotel-h5-r3") for c in cells)
+    assert all(c.world.env_config().crowd == "hotel" for c in cells)
+    assert "among the HOTEL pedestrians replayed" in experiment.title
