@@ -11,7 +11,7 @@ from typing import Any
 
 import sweep_floor
 
-from pipelines.experiments.cells import PAPER_PREDICTOR
+from pipelines.experiments.methods import PAPER_PREDICTOR
 from predictors.oracle import ORACLE_PREDICTOR
 from predictors.registry import available
 from run_all_parts.measurements import (

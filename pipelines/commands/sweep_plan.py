@@ -32,7 +32,7 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     if cfg.sweep.predictors is not None:
         experiment = _applied(cfg, "sweep", "predictors", experiment.with_predictors, cfg.sweep.predictors)
     elif experiment.predictor_list:
-        from pipelines.experiments.cells import swap_predictors
+        from pipelines.experiments.methods import swap_predictors
         from predictors.registry import available
 
         experiment = experiment.with_predictors(swap_predictors(available()))

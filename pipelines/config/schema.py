@@ -250,7 +250,8 @@ def _build_simulate(values: dict[str, Any], built: Mapping[str, Any]) -> Simulat
 
 
 def _sweep_keys() -> tuple[Key, ...]:
-    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL, SHIPPED_CONTROLLERS
+    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+    from pipelines.experiments.methods import SHIPPED_CONTROLLERS
 
     return (
         Key(

@@ -3,19 +3,32 @@
 An experiment is a table: its columns are *methods* (a label and the ControllerSpec behind it) repeated for
 each number of humans, its rows are the paper's metrics. A *cell* is one method at one crowd size; an
 *episode task* is one seeded scenario run in one cell. The cell, the episode task and the seeding schedule
-are pipelines.experiments.tasks; the paper's figures are pipelines.experiments.paper.
+are pipelines.experiments.tasks; the paper's figures are pipelines.experiments.paper; the methods the shipped
+experiments compare (the paper's predictor, the swap table's list, the ablations' columns) are
+pipelines.experiments.methods.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 from typing import Any, Final
 
-from crowdsim.profiles import VISIBILITY
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
+from pipelines.experiments.methods import (
+    CONVENTION_METHODS,
+    CONVENTION_WORLDS,
+    COUPLING_PREDICTOR,
+    PAPER_PREDICTOR,
+    SENSING_METHODS,
+    SENSING_WORLDS,
+    SHIPPED_CONTROLLERS,
+    coupled_method,
+    safety_methods,
+    swap_predictors,
+)
 from pipelines.experiments.paper import (
     PAPER_HUMANS,
     PAPER_REFERENCE,
@@ -232,30 +245,10 @@ class Experiment:
         ]
 
 
-# Table II and III use the paper's predictor, Social-LSTM trained on ETH (grid pooling as in TrajNet++);
-# `crowdmpc sweep --predictor constant_velocity` runs the same tables with the baseline.
-PAPER_PREDICTOR: Final[str] = "social_lstm_eth"
-# The coupled NLP needs a useful gradient of the prediction with respect to the robots' plan: soft pooling.
-COUPLING_PREDICTOR: Final[str] = "social_lstm_soft_eth"
-# The predictor-swap ablation: every zoo model the predictors issues train, the baseline, and the oracle.
-# `crowdmpc sweep --experiment predictors --predictors a,b,c` swaps any others (a user zoo's, a plugin's).
-SWAP_PREDICTORS: Final[tuple[str, ...]] = (
-    "constant_velocity",
-    "vanilla_lstm_eth",
-    "social_lstm_eth",
-    "social_lstm_soft_eth",
-    "social_gan_eth",
-    "social_gru_eth",
-    "social_attention_eth",
-    "social_lstm_synth",
-    ORACLE_PREDICTOR,  # the upper bound: the humans' own ORCA (predictors/oracle.py)
-)
 # Words of titles that hold only for the default methods (Experiment.with_predictor, with_predictors).
 PAPER_PREDICTOR_WORDS: Final[str] = "the paper's predictor"
 ORACLE_WORDS: Final[str] = " (ORCA ground truth as an oracle)"
 PREDICTING_WORDS: Final[str] = ", those that predict the humans with "  # and with_controllers
-# Models of the swap table that came after the first zoo (issue 13): in the default list once a zoo has them.
-LATER_SWAP_PREDICTORS: Final[frozenset[str]] = frozenset({"social_gru_eth", "social_attention_eth"})
 
 
 def _rebuilt_experiment(values: dict[str, Any]) -> Experiment:
@@ -264,75 +257,7 @@ def _rebuilt_experiment(values: dict[str, Any]) -> Experiment:
     return Experiment(**{**values, **read_only})
 
 
-def swap_predictors(available: Collection[str] = ()) -> tuple[str, ...]:
-    """The default swap table: ``SWAP_PREDICTORS``, less the later models not in ``available``."""
-    return tuple(name for name in SWAP_PREDICTORS if name not in LATER_SWAP_PREDICTORS or name in available)
-
-
 ABLATION_HUMANS: Final[tuple[int, ...]] = (7,)  # the middle of the paper's range
-# The controllers experiment's default columns: the paper's two and the baselines.
-SHIPPED_CONTROLLERS: Final[tuple[str, ...]] = ("cmpc", "dmpc", "orca", "straight")
-
-
-def _coupled(mode: str) -> ControllerSpec:
-    return ControllerSpec("cmpc", COUPLING_PREDICTOR, coupling="nlp", mpc_overrides=(("coupled_mode", mode),))
-
-
-# The safety experiment: the paper's method (no margin), then conformal margins at decreasing alpha (more
-# coverage, wider margins), one margin per step for everyone, one per motion class ("motion"), and one per
-# motion class of the distance shortfall ("shortfall"), CMPC with the paper's predictor at the middle of the
-# paper's range.
-SAFETY_ALPHAS: Final[tuple[float, ...]] = (0.5, 0.2, 0.1, 0.05, 0.01)
-
-
-def _safety_methods() -> tuple[tuple[str, ControllerSpec], ...]:
-    methods = [("none", ControllerSpec("cmpc", PAPER_PREDICTOR))]
-    for mode, prefix in (
-        ("conformal", ""),
-        ("conformal-motion", "motion "),
-        ("conformal-shortfall", "shortfall "),
-    ):
-        for alpha in SAFETY_ALPHAS:
-            margins = MarginSpec(mode, alpha=alpha)  # type: ignore[arg-type]
-            methods.append(
-                (f"{prefix}alpha={alpha:g}", ControllerSpec("cmpc", PAPER_PREDICTOR, margins=margins))
-            )
-    return tuple(methods)
-
-
-# How much of the gap to the paper's collision rates each convention explains: profile x visibility x
-# margins, CMPC with the paper's predictor, the same seeds in every cell (the same crowds within a profile:
-# the two profiles draw their humans differently, crowdsim.scenarios).
-def _convention_methods() -> tuple[tuple[tuple[str, ControllerSpec], ...], Mapping[str, World]]:
-    methods, worlds = [], {}
-    for profile in ("v1", "paper"):
-        for visibility in VISIBILITY:
-            for margins in (MarginSpec(), MarginSpec("conformal")):
-                label = f"{profile}/{visibility}/{margins.label}"
-                methods.append((label, ControllerSpec("cmpc", PAPER_PREDICTOR, margins=margins)))
-                worlds[label] = World(profile, visibility)
-    return tuple(methods), MappingProxyType(worlds)
-
-
-_CONVENTION_METHODS, _CONVENTION_WORLDS = _convention_methods()
-
-# What a robot that sees a few metres loses: CMPC with the paper's predictor given every human, then only
-# those within each range of some robot (each from when it came into view, its track length given, so the
-# MPC extends a short track back: predictors.backfill), and at the middle range without the track lengths.
-SENSOR_RANGES: Final[tuple[float, ...]] = (4.0, 3.0, 2.0)
-UNTRACKED_RANGE: Final[float] = 3.0
-
-
-def _sensing_methods() -> tuple[tuple[tuple[str, ControllerSpec], ...], Mapping[str, World]]:
-    spec = ControllerSpec("cmpc", PAPER_PREDICTOR)
-    worlds = {f"{r:g} m": World().sensing(r) for r in SENSOR_RANGES}
-    worlds[f"{UNTRACKED_RANGE:g} m untracked"] = World().sensing(UNTRACKED_RANGE, sensor_tracks=False)
-    labels = ("full", *worlds)
-    return tuple((label, spec) for label in labels), MappingProxyType(worlds)
-
-
-_SENSING_METHODS, _SENSING_WORLDS = _sensing_methods()
-
 
 EXPERIMENTS: dict[str, Experiment] = {
     "table2": Experiment(
@@ -381,8 +306,8 @@ EXPERIMENTS: dict[str, Experiment] = {
             # mpc/coupled.py's two models of the humans, named explicitly (its default "auto" picks one by the
             # network's size): the network itself inside the NLP, and its linearisation at the current plan,
             # re-linearised until F settles (nearly the cost of fixed predictions, with the exact gradient).
-            ("NLP exact", _coupled("exact")),
-            ("NLP first-order", _coupled("first_order")),
+            ("NLP exact", coupled_method("exact")),
+            ("NLP first-order", coupled_method("first_order")),
         ),
         humans=ABLATION_HUMANS,
     ),
@@ -390,25 +315,25 @@ EXPERIMENTS: dict[str, Experiment] = {
         name="safety",
         title="Safety: CMPC without margins (the paper), with conformal margins at decreasing alpha: pooled, "
         "per motion class, per motion class of the distance shortfall",
-        methods=_safety_methods(),
+        methods=safety_methods(),
         humans=ABLATION_HUMANS,
         margins_swappable=False,
     ),
     "conventions": Experiment(
         name="conventions",
         title="Conventions: simulation profile x robot visibility x margins (CMPC, paper's predictor)",
-        methods=_CONVENTION_METHODS,
+        methods=CONVENTION_METHODS,
         humans=ABLATION_HUMANS,
-        method_worlds=_CONVENTION_WORLDS,
+        method_worlds=CONVENTION_WORLDS,
         margins_swappable=False,
     ),
     "sensing": Experiment(
         name="sensing",
         title="Sensing: CMPC given every human vs behind a sensor of each range (a tracker's humans, with "
         "their track lengths, and without them at the middle range), the paper's predictor",
-        methods=_SENSING_METHODS,
+        methods=SENSING_METHODS,
         humans=ABLATION_HUMANS,
-        method_worlds=_SENSING_WORLDS,
+        method_worlds=SENSING_WORLDS,
     ),
     "baselines": Experiment(
         name="baselines",

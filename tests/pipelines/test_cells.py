@@ -1,17 +1,12 @@
-"""pipelines/experiments/cells.py on its own: the order of a sweep's episodes, the swap table's lists, and the
-paper's count of episodes, by hand."""
+"""pipelines/experiments/cells.py on its own: the order of a sweep's episodes, the swap table's lists
+(pipelines/experiments/methods.py), and the paper's count of episodes, by hand."""
 
 import pytest
 
 from pipelines.config.settings import SweepSettings
 from pipelines.errors import PipelineError
-from pipelines.experiments.cells import (
-    LATER_SWAP_PREDICTORS,
-    SWAP_PREDICTORS,
-    Experiment,
-    get_experiment,
-    swap_predictors,
-)
+from pipelines.experiments.cells import Experiment, get_experiment
+from pipelines.experiments.methods import LATER_SWAP_PREDICTORS, SWAP_PREDICTORS, swap_predictors
 from pipelines.loop.controllers import ControllerSpec
 
 

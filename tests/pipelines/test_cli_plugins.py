@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from pipelines.cli import main
-from pipelines.experiments.cells import SWAP_PREDICTORS, swap_predictors
+from pipelines.experiments.methods import SWAP_PREDICTORS, swap_predictors
 from predictors import models
 from predictors.data.prepare import prepare_ewap
 from predictors.models import PLUGINS_ENV
