@@ -16,7 +16,8 @@ import numpy as np
 
 from pipelines.logs.identity import run_identity
 from pipelines.logs.reader import Recording
-from pipelines.logs.review import check_recording, summarize
+from pipelines.logs.review import summarize
+from pipelines.logs.schema_check import check_recording
 
 
 @dataclass(frozen=True, eq=False)  # an array field: == would be ambiguous; a digest is itself

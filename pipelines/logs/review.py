@@ -1,14 +1,13 @@
-"""Reviewing episode recordings as text: one run's summary, a table over runs, A/B comparison, schema check.
+"""Reviewing episode recordings as text: one run's summary, a table over runs, A/B comparison.
 
 The summary takes the solver statistics from the per-step ``/mpc/solver`` messages rather than from
 ``/episode/metrics``, so that a truncated file (whose episode never ended) still reports them; the rates over
-runs are crowdsim's own aggregate, over the runs whose episode ended. The check validates each message
-against the schema stored in the file, not the one this version of crowdmpc would write.
+runs are crowdsim's own aggregate, over the runs whose episode ended. The schema check of a recording
+(``--check``) is pipelines.logs.schema_check.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections import Counter
@@ -20,14 +19,8 @@ from typing import Any, Final
 import numpy as np
 
 from pipelines.logs.identity import differing_settings, shown
-from pipelines.logs.jsonschema import unsupported_keywords, validate
-from pipelines.logs.reader import Channel, LoggedMessage, Recording
-from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING
+from pipelines.logs.reader import Recording
 from pipelines.loop.episode import step_time_stats
-
-# ------------------------------------------------------------------------------------------------------------
-# summary
-# ------------------------------------------------------------------------------------------------------------
 
 
 def _solver_stats(rec: Recording) -> dict[str, Any]:
@@ -351,72 +344,3 @@ def compare_names(a: Recording, b: Recording) -> tuple[str, str]:
     pa, pb = a.path.resolve(), b.path.resolve()
     shared = len(os.path.commonpath([pa, pb]).rstrip(os.sep)) + 1 if pa.anchor == pb.anchor else 0
     return str(pa)[shared:] or str(a.path), str(pb)[shared:] or str(b.path)
-
-
-# ------------------------------------------------------------------------------------------------------------
-# schema check
-# ------------------------------------------------------------------------------------------------------------
-
-
-def check_recording(rec: Recording) -> tuple[int, list[str]]:
-    """Validate every message against its channel's schema as stored in the file: (checked, errors).
-
-    The errors begin with what reading found (bad chunks, bad metadata, corrupt records); then, per message,
-    its schema violations, or why the review left it out when the schema lets it pass (not JSON, or lacking
-    what the review reads under a schema that does not require it).
-    """
-    errors = list(rec.problems)
-    checked = 0
-    for topic, channel in rec.channels.items():
-        messages = rec.messages[topic]
-        try:
-            n, topic_errors = _check_topic(topic, channel, messages, rec.start_time_ns)
-        except (ValueError, TypeError, AttributeError, KeyError, IndexError, RecursionError) as exc:
-            # the file's schema is JSON but no schema (e.g. "required": 5): nothing on the topic is checked
-            n, topic_errors = 0, [f"{topic}: schema {channel.schema_name!r} is malformed ({exc!r})"]
-            topic_errors += [
-                f"{m.where(topic, rec.start_time_ns)}: {m.problem}" for m in messages if m.problem
-            ]
-        checked += n
-        errors += topic_errors
-    return checked, errors
-
-
-def _check_topic(
-    topic: str, channel: Channel, messages: list[LoggedMessage], start_time_ns: int
-) -> tuple[int, list[str]]:
-    """Checked messages and errors of one topic; messages named by their simulation time (``start_time_ns``:
-    the file's log time of the episode start)."""
-    unusable = [f"{m.where(topic, start_time_ns)}: {m.problem}" for m in messages if m.problem]
-    if channel.message_encoding != MESSAGE_ENCODING or channel.schema_encoding != SCHEMA_ENCODING:
-        return 0, [
-            f"{topic}: encoding {channel.message_encoding!r} / schema {channel.schema_encoding!r}, "
-            f"expected {MESSAGE_ENCODING!r} / {SCHEMA_ENCODING!r}",
-            *unusable,
-        ]
-    try:
-        schema = json.loads(channel.schema_data)
-    except (ValueError, RecursionError) as exc:
-        return 0, [f"{topic}: schema {channel.schema_name!r} is not JSON ({exc})", *unusable]
-    if not isinstance(schema, dict):
-        return 0, [f"{topic}: schema {channel.schema_name!r} is not a JSON object", *unusable]
-    unchecked = unsupported_keywords(schema)
-    if unchecked:
-        return 0, [
-            f"{topic}: schema {channel.schema_name!r} uses keywords not checked here: {unchecked}",
-            *unusable,
-        ]
-    checked, errors = 0, []
-    for message in messages:
-        if message.data is None:  # not JSON
-            errors.append(f"{message.where(topic, start_time_ns)}: {message.problem}")
-            continue
-        checked += 1
-        violations = [
-            f"{message.where(topic, start_time_ns)} ({channel.schema_name}): {problem}"
-            for problem in validate(message.data, schema)
-        ]
-        if not violations and message.problem:
-            violations.append(f"{message.where(topic, start_time_ns)}: {message.problem}")
-        errors += violations
-    return checked, errors

@@ -19,7 +19,7 @@ from crowdsim.gym_wrappers import VelocityControl
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import McapEpisodeRecorder
-from pipelines.logs.review import check_recording
+from pipelines.logs.schema_check import check_recording
 from pipelines.logs.view import episode_view
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode

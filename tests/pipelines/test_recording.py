@@ -25,8 +25,8 @@ from pipelines.logs.recording import (
     next_unseeded,
     seconds_to_ns,
 )
-from pipelines.logs.review import check_recording
 from pipelines.logs.scene import ROBOT_RGB, array_json
+from pipelines.logs.schema_check import check_recording
 from pipelines.loop.record import EpisodeRecord
 from tests.pipelines.mcap_episode import HORIZON, control_output, record_episode
 

@@ -15,7 +15,8 @@ from pipelines.logs import reader
 from pipelines.logs.digest import digest
 from pipelines.logs.identity import run_identity
 from pipelines.logs.reader import read_recording
-from pipelines.logs.review import check_recording, summarize
+from pipelines.logs.review import summarize
+from pipelines.logs.schema_check import check_recording
 from tests.pipelines.mcap_episode import record_episode
 
 

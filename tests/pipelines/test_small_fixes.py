@@ -21,7 +21,8 @@ from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
 from pipelines.experiments.summary import summarize as summarize_cells
 from pipelines.logs.plots import animation_figure
 from pipelines.logs.reader import read_recording
-from pipelines.logs.review import check_recording, summarize
+from pipelines.logs.review import summarize
+from pipelines.logs.schema_check import check_recording
 from tests.pipelines.mcap_episode import record_episode
 
 ROOT = Path(__file__).resolve().parents[2]
