@@ -135,7 +135,8 @@ def episodes_timed(clock: CasadiClock, rows: list[dict[str, Any]]) -> Iterator[N
 def measure(episodes_per_cell: int) -> list[dict[str, Any]]:
     """Every episode of a Table II sweep run inline, first episode of each cell left out."""
     from pipelines.experiments.cells import get_experiment
-    from pipelines.experiments.sweep import SweepConfig, run_sweep
+    from pipelines.experiments.sweep import run_sweep
+    from pipelines.experiments.sweep_config import SweepConfig
     from pipelines.experiments.worker import jit_available
 
     clock, rows = CasadiClock(), list[dict[str, Any]]()

@@ -39,7 +39,7 @@ from review_memory import PEAK_SOURCES, peak  # noqa: E402
 
 from pipelines.experiments.cells import EXPERIMENTS  # noqa: E402
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE  # noqa: E402
-from pipelines.experiments.sweep import MAX_EPISODES_PER_CELL  # noqa: E402
+from pipelines.experiments.sweep_config import MAX_EPISODES_PER_CELL  # noqa: E402
 from pipelines.experiments.tasks import scenario_schedule  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,7 +49,8 @@ RESUME = (
     "import sys\n"
     "from pathlib import Path\n"
     "from pipelines.experiments.cells import get_experiment\n"
-    "from pipelines.experiments.sweep import SweepConfig, run_sweep\n"
+    "from pipelines.experiments.sweep import run_sweep\n"
+    "from pipelines.experiments.sweep_config import SweepConfig\n"
     "name, out, per_cell = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])\n"
     "humans = tuple(int(h) for h in sys.argv[4].split(','))\n"
     "config = SweepConfig(get_experiment(name), out, per_cell, humans=humans, backend='inline', "

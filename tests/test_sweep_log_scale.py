@@ -4,7 +4,8 @@ import json
 
 from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log
-from pipelines.experiments.sweep import SweepConfig, run_sweep
+from pipelines.experiments.sweep import run_sweep
+from pipelines.experiments.sweep_config import SweepConfig
 from tests.benchmark_modules import load_benchmark
 
 sweep_log_scale = load_benchmark("sweep_log_scale")

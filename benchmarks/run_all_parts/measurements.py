@@ -96,7 +96,8 @@ def sweep_rate(predictor: str, episodes_per_cell: int, workers: int) -> dict[str
     of a cell (it builds and compiles the NLPs): the cost per episode a long sweep approaches."""
     from pipelines.experiments.cells import get_experiment
     from pipelines.experiments.log import EPISODES_FILE, EpisodeLog
-    from pipelines.experiments.sweep import SweepConfig, run_sweep
+    from pipelines.experiments.sweep import run_sweep
+    from pipelines.experiments.sweep_config import SweepConfig
     from pipelines.experiments.worker import jit_available
 
     experiment = get_experiment("table2").with_predictor(predictor)

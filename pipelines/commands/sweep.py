@@ -17,7 +17,7 @@ from pipelines.errors import PipelineError, SweepStopped
 if TYPE_CHECKING:
     from pipelines.commands.sweep_report import LogRead
     from pipelines.config import Option, RunConfig
-    from pipelines.experiments.sweep import SweepConfig
+    from pipelines.experiments.sweep_config import SweepConfig
 
 EPILOG = """examples:
   crowdmpc sweep --experiment table2 --episodes-per-cell 100 --workers 2 --out runs/table2
@@ -364,7 +364,7 @@ def _check_this_machine(cfg: RunConfig) -> None:
 
 
 def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepConfig:
-    from pipelines.experiments.sweep import SweepConfig
+    from pipelines.experiments.sweep_config import SweepConfig
 
     settings = cfg.sweep
     experiment = configured_experiment(cfg)

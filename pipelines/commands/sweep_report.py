@@ -24,7 +24,7 @@ from pipelines.experiments.cell_columns import FLOATS, CellColumns, Column
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
-    from pipelines.experiments.sweep import SweepConfig
+    from pipelines.experiments.sweep_config import SweepConfig
     from pipelines.experiments.tasks import Cell, EpisodeTask
 
 

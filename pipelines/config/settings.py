@@ -14,7 +14,7 @@ from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS, check_sizes
 from pipelines.errors import PipelineError
 from pipelines.experiments.backends import BACKENDS
 from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
-from pipelines.experiments.sweep import MAX_EPISODES_PER_CELL, MAX_WORKERS
+from pipelines.experiments.sweep_config import MAX_EPISODES_PER_CELL, MAX_WORKERS
 from pipelines.experiments.worker import RECORD_POLICIES
 from pipelines.loop.sensing import is_sensor_range
 from pipelines.loop.spec import COUPLINGS, ControllerSpec

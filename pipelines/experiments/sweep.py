@@ -12,7 +12,9 @@ The parts, a module each: pipelines.experiments.log (the durable, resumable reco
 refuses a second sweep on the same directory), pipelines.experiments.worker (an episode run into a record,
 with its MCAP log under ``--record``), pipelines.experiments.backends (where the workers run: Ray, a process
 pool (pipelines.experiments.process_backend), or inline), pipelines.experiments.resume_checks (what a resumed
-sweep's records must match: the predictor weights and margins its cells plan with now).
+sweep's records must match: the predictor weights and margins its cells plan with now). The configuration,
+``SweepConfig`` and its bounds, is pipelines.experiments.sweep_config; ``SweepConfig`` is importable from here
+too, beside ``run_sweep`` (docs/examples/own_experiment.py).
 """
 
 from __future__ import annotations
@@ -22,16 +24,13 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
-from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
-from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError, SweepStopped, writes_named
-from pipelines.experiments.backends import BACKENDS, Backend, check_backend, make_backend
-from pipelines.experiments.cells import Experiment
+from pipelines.experiments.backends import Backend, check_backend, make_backend
 from pipelines.experiments.log import (
     ERRORS_FILE,
     MCAP_DIR,
@@ -45,8 +44,9 @@ from pipelines.experiments.log import (
     sweep_lock,
 )
 from pipelines.experiments.resume_checks import ResumeChecks
+from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tasks import EpisodeTask
-from pipelines.experiments.worker import RECORD_POLICIES, make_scratch_root, release_scratch_root
+from pipelines.experiments.worker import make_scratch_root, release_scratch_root
 from pipelines.loop.interrupt import terminate_as_interrupt
 from pipelines.plain_json import plain
 from predictors.progress import progress_bar
@@ -55,54 +55,6 @@ from predictors.progress import progress_bar
 # than fill errors.jsonl with thousands of copies of one traceback. Only while the directory holds no record:
 # once an episode succeeded the setup works, and the episodes that raise are those episodes' own failures.
 FAIL_FAST_ERRORS: Final[int] = 4
-# Upper bounds checked before any worker starts (a typo must not become thousands of failing episodes): the
-# paper runs 1000 episodes per cell (cells.PAPER_EPISODES_PER_CELL); workers are Ray actors at most (a local
-# pool is held to its CPUs by the command line, pipelines/commands/sweep.py).
-MAX_EPISODES_PER_CELL: Final[int] = 100_000
-MAX_WORKERS: Final[int] = 4096
-
-
-@dataclass(frozen=True)
-class SweepConfig:
-    experiment: Experiment
-    out: Path
-    episodes_per_cell: int
-    humans: tuple[int, ...] | None = None  # None: the experiment's own
-    seed: int = 0
-    n_robots: int = PAPER_ROBOTS
-    workers: int = 2
-    backend: str = "auto"  # "auto": Ray when installed, else a process pool
-    ray_address: str | None = None
-    record: str = "none"  # RECORD_POLICIES
-    progress: bool = True
-    jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
-    # The run's effective config (pipelines/config: every section, and the file it came from), for sweep.json.
-    run_config: Mapping[str, Any] | None = field(default=None, compare=False)
-
-    def __post_init__(self):
-        if self.episodes_per_cell < 1:
-            raise PipelineError(f"--episodes-per-cell must be at least 1, got {self.episodes_per_cell}")
-        if self.episodes_per_cell > MAX_EPISODES_PER_CELL:
-            raise PipelineError(
-                f"--episodes-per-cell must be at most {MAX_EPISODES_PER_CELL}, got {self.episodes_per_cell}"
-            )
-        if not 1 <= self.workers <= MAX_WORKERS:
-            raise PipelineError(f"--workers must be at least 1 and at most {MAX_WORKERS}, got {self.workers}")
-        if not 1 <= self.n_robots <= MAX_ROBOTS:
-            raise PipelineError(f"--robots must be in 1..{MAX_ROBOTS}, got {self.n_robots}")
-        if self.record not in RECORD_POLICIES:
-            raise PipelineError(f"unknown --record {self.record!r}; choose from {list(RECORD_POLICIES)}")
-        if self.backend not in BACKENDS:
-            raise PipelineError(f"unknown backend {self.backend!r}; choose from {list(BACKENDS)}")
-        if self.humans is not None and (not self.humans or min(self.humans) < 1):
-            raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
-        if self.humans is not None and max(self.humans) > MAX_HUMANS:
-            raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
-
-    def tasks(self) -> list[EpisodeTask]:
-        return self.experiment.tasks(
-            self.episodes_per_cell, humans=self.humans, seed=self.seed, n_robots=self.n_robots
-        )
 
 
 @dataclass

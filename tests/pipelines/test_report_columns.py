@@ -24,7 +24,8 @@ from pipelines.experiments.cell_columns import COUNTS, FLAGS, FLOATS, Column
 from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, EpisodeLog
 from pipelines.experiments.report import write_report
-from pipelines.experiments.sweep import SweepConfig, run_sweep
+from pipelines.experiments.sweep import run_sweep
+from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tasks import scenario_schedule
 
 REPORT_FILES = ("cells.csv", "episodes.csv", "table.md", "min_distance_hist.csv")

@@ -13,7 +13,8 @@ import pytest
 from pipelines.errors import PipelineError
 from pipelines.experiments.cells import Experiment, get_experiment
 from pipelines.experiments.log import EPISODES_FILE, EpisodeLog, episode_log
-from pipelines.experiments.sweep import SweepConfig, run_sweep
+from pipelines.experiments.sweep import run_sweep
+from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tasks import Cell
 from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker
 from pipelines.loop.controllers import ControllerSpec

@@ -29,7 +29,8 @@ from pipelines.experiments.cells import (
 from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, sweep_lock
 from pipelines.experiments.report import CELLS_CSV, write_report
 from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
-from pipelines.experiments.sweep import SweepConfig, mcap_path, run_sweep
+from pipelines.experiments.sweep import mcap_path, run_sweep
+from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tables import markdown_table, mcnemar_exact, paired_success
 from pipelines.experiments.tasks import World, scenario_schedule
 from pipelines.experiments.worker import EpisodeOutcome, EpisodeWorker, is_failure

@@ -26,7 +26,8 @@ from pipelines.experiments.log import (
     error_keys,
 )
 from pipelines.experiments.report import CELLS_CSV, TABLE_MD
-from pipelines.experiments.sweep import SweepConfig, run_sweep
+from pipelines.experiments.sweep import run_sweep
+from pipelines.experiments.sweep_config import SweepConfig
 from predictors.calibration_store import save_calibration
 from predictors.zoo import checkpoints_dir, user_zoo_dir
 from predictors.zoo_edit import add_to_zoo

@@ -1,0 +1,73 @@
+"""What a sweep is asked to run (``SweepConfig``): the experiment, where its directory is, how many episodes a
+cell, crowd sizes, seed, robots, workers, backend and recording, each checked against its bounds when the
+config is made, before any directory or worker exists.
+
+Apart from the driver that runs it (pipelines.experiments.sweep, ``run_sweep``): the command line's config
+files check their values against the same bounds (pipelines.config.settings) without importing the driver.
+``SweepConfig`` is importable from pipelines.experiments.sweep too, beside ``run_sweep``
+(docs/examples/own_experiment.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
+from crowdsim.world import PAPER_ROBOTS
+from pipelines.errors import PipelineError
+from pipelines.experiments.backends import BACKENDS
+from pipelines.experiments.cells import Experiment
+from pipelines.experiments.tasks import EpisodeTask
+from pipelines.experiments.worker import RECORD_POLICIES
+
+# Upper bounds checked before any worker starts (a typo must not become thousands of failing episodes): the
+# paper runs 1000 episodes per cell (cells.PAPER_EPISODES_PER_CELL); workers are Ray actors at most (a local
+# pool is held to its CPUs by the command line, pipelines/commands/sweep.py).
+MAX_EPISODES_PER_CELL: Final[int] = 100_000
+MAX_WORKERS: Final[int] = 4096
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    experiment: Experiment
+    out: Path
+    episodes_per_cell: int
+    humans: tuple[int, ...] | None = None  # None: the experiment's own
+    seed: int = 0
+    n_robots: int = PAPER_ROBOTS
+    workers: int = 2
+    backend: str = "auto"  # "auto": Ray when installed, else a process pool
+    ray_address: str | None = None
+    record: str = "none"  # RECORD_POLICIES
+    progress: bool = True
+    jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
+    # The run's effective config (pipelines/config: every section, and the file it came from), for sweep.json.
+    run_config: Mapping[str, Any] | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        if self.episodes_per_cell < 1:
+            raise PipelineError(f"--episodes-per-cell must be at least 1, got {self.episodes_per_cell}")
+        if self.episodes_per_cell > MAX_EPISODES_PER_CELL:
+            raise PipelineError(
+                f"--episodes-per-cell must be at most {MAX_EPISODES_PER_CELL}, got {self.episodes_per_cell}"
+            )
+        if not 1 <= self.workers <= MAX_WORKERS:
+            raise PipelineError(f"--workers must be at least 1 and at most {MAX_WORKERS}, got {self.workers}")
+        if not 1 <= self.n_robots <= MAX_ROBOTS:
+            raise PipelineError(f"--robots must be in 1..{MAX_ROBOTS}, got {self.n_robots}")
+        if self.record not in RECORD_POLICIES:
+            raise PipelineError(f"unknown --record {self.record!r}; choose from {list(RECORD_POLICIES)}")
+        if self.backend not in BACKENDS:
+            raise PipelineError(f"unknown backend {self.backend!r}; choose from {list(BACKENDS)}")
+        if self.humans is not None and (not self.humans or min(self.humans) < 1):
+            raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
+        if self.humans is not None and max(self.humans) > MAX_HUMANS:
+            raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
+
+    def tasks(self) -> list[EpisodeTask]:
+        return self.experiment.tasks(
+            self.episodes_per_cell, humans=self.humans, seed=self.seed, n_robots=self.n_robots
+        )
