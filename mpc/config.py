@@ -191,7 +191,7 @@ class MPCConfig:
     # DMPC's initial strategy u^(0) (Algorithm 2 leaves it open). "shifted": the previous plan shifted, else
     # braking; "heading": a step that would start from braking (an episode's first, or one after failures)
     # starts instead from every robot heading straight for its Eq. 8 target (mpc.fallback.heading_plan) when
-    # that has the lower potential F (mpc/dmpc.py has the measurements).
+    # that has the lower potential F (mpc/dmpc_start.py has the measurements).
     dmpc_start: DMPCStart = "shifted"
     # The order of dmpc_update="gauss_seidel"'s best responses in each round: "index" (robot 0 first) or
     # "nearest_first" (by distance to the Eq. 8 target at the step, nearest first; mpc/dmpc.py).

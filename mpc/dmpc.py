@@ -56,22 +56,8 @@ gauss_seidel + no_improvement in 3 of 3 (43 ms), sequential_accept + no_improvem
 34 ms threads). At M = 3 every rule succeeds in 3 of 3, and the repairs with no_improvement take more
 iterations than jacobi (5.6 and 6.5 a step against 4.4): the default stays the paper's.
 
-The start (``dmpc_start``). Algorithm 2 starts from "an initial guess" u^(0): here the shifted previous plan,
-else braking. From rest a flock of many robots barely leaves braking: a robot stepping forward alone
-stretches its M - 1 flocking terms, so each best response moves it a little. With 12 robots (7 humans, the
-many_robots.toml settings) the flock covered 0.2-1 m in its first 4 s where CMPC covered 2.3 m. ``"heading"``
-starts a step that would start from braking (an episode's first, or one after failures) from every robot
-heading straight for its target instead (``mpc.fallback.heading_plan``), when that plan has the lower F. After
-the first step the two are nearly level in F (2974 from braking, 3012 from heading at 12 robots: the flocking
-terms of the wedge dominate), but the flock leaves moving and its shifted plans keep it moving.
-benchmarks/robot_scaling.py (docs/results.md, "More robots, more humans"), shifted -> heading, same crowds: 12
-robots 18 -> 44 % (fixed goals), 52 -> 82 % (slots), but 2-3 of the 50 episodes within 0.8 m of a human (none
-before); 3, 5, 6 robots within 6 points either way; 50 episodes a row. At 3 robots the heading start picks
-the slower formation (middle robot ahead, F 26.4 against 23.3 from braking: mpc/solvers.py ``_Solver``),
-travel 1.4-2.1 s longer. Comparing the two starts by F at the end of the first step instead keeps braking
-every time (20 of 20 episodes at 12 robots), so it is not offered. All of this with the paper's per-pair
-flocking weight; with ``flocking_weight="per_robot"`` (many_robots.toml now) the flock's pull is that of a
-team of 3, and the heading start still helps at 12 robots: 80 -> 92 % (fixed), 90 -> 94 % (slots).
+The start (``dmpc_start``): Algorithm 2 leaves u^(0) open; the shifted previous plan, else braking, or with
+"heading" every robot heading for its target where that lowers F: mpc/dmpc_start.py, with its measurements.
 
 The order of a Gauss-Seidel round (``dmpc_order``): robot index, or nearest to its target first (a parked
 robot answers the late ones' plans before they answer its own). With the heading start and
@@ -104,8 +90,9 @@ from mpc.cmpc import IBRResult, PredictFn, finite_prediction
 from mpc.config import MPCConfig
 from mpc.dmpc_keep import PlanKeeper
 from mpc.dmpc_pairs import pair_moves
+from mpc.dmpc_start import initial_strategy
 from mpc.dynamics import braking, rollout_numpy
-from mpc.fallback import Start, heading_plan
+from mpc.fallback import Start
 from mpc.local_params import LocalParams
 from mpc.nlp import JointNLP, LocalNLP, StepData
 from mpc.parallel import cores, run_in_threads
@@ -196,7 +183,7 @@ class DMPC:
         if cfg.dmpc_order == "nearest_first":  # Gauss-Seidel's order, the same in every round of the step
             distances = np.linalg.norm(data.states[moving, :2] - data.reference_targets()[moving], axis=1)
             moving = moving[np.argsort(distances, kind="stable")]
-        accels, first_prediction = self._initial(data, predict, start, moving)
+        accels, first_prediction = initial_strategy(cfg, self.joint, data, predict, start, moving)
         positions = rollout_numpy(data.states, accels, cfg.dt)[0]
         lam_x = None if start.lam_x is None else start.lam_x.copy()  # None from braking, heading or not
         lam_g = None if start.lam_g is None else start.lam_g.copy()
@@ -207,7 +194,7 @@ class DMPC:
         for j in range(1, cfg.j_max + 1):
             iterations = j
             prediction = (
-                first_prediction  # made for these very plans in _initial
+                first_prediction  # made for these very plans by initial_strategy
                 if j == 1 and first_prediction is not None
                 else finite_prediction(predict(positions.transpose(1, 0, 2)), pred_shape)
             )
@@ -269,31 +256,6 @@ class DMPC:
             solver_iterations=solver_iterations,
         )
         return pair_moves(self.joint, data, result) if cfg.dmpc_pairs else result
-
-    def _initial(
-        self, data: StepData, predict: PredictFn, start: Start, moving: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """u^(0) (``cfg.dmpc_start``) and the humans predicted for it when already known.
-
-        With "heading", a step that starts from braking gives the moving robots ``heading_plan`` instead if
-        that lowers F under the humans predicted for braking. The potential-lowering updates only ever lower
-        F from u^(0), and from a flock at rest a robot's best response moves it little (a step alone
-        stretches M - 1 flocking terms): without a start that already moves, the flock creeps off over many
-        steps (module docstring). ``start`` itself, the fallback of a step that cannot solve, is unchanged.
-        """
-        cfg = self.cfg
-        accels = start.accels.copy()
-        if cfg.dmpc_start == "shifted" or start.kind != "brake" or len(moving) == 0:
-            return accels, None
-        positions = rollout_numpy(data.states, accels, cfg.dt)[0]
-        prediction = finite_prediction(predict(positions.transpose(1, 0, 2)), (cfg.horizon, self.n_humans, 2))
-        if prediction is None:
-            return accels, None  # the loop's own prediction reports it
-        heading = accels.copy()
-        heading[moving] = heading_plan(data, cfg)[moving]
-        if self.joint.potential(heading, data, prediction) < self.joint.potential(accels, data, prediction):
-            return heading, None
-        return accels, prediction
 
     def _update(
         self,
