@@ -10,9 +10,9 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from crowdsim.conventions import PAPER_DISCOMFORT_DIST
+from crowdsim.distances import closest_approach, min_robot_distance_between_steps
 from crowdsim.env import Observation
 from crowdsim.errors import SimulationError, real_number
-from crowdsim.metrics import closest_approach, min_robot_distance_between_steps
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class RewardConfig:
 def step_closest(before: Observation, after: Observation) -> np.ndarray:
     """``(M, N)`` closest centre distance of each robot to each human during the step, the relative motion
     taken as the segment from its start to its end (CrowdNav's ``point_to_segment_dist``;
-    ``crowdsim.metrics.closest_approach``, as ``min_distance_between_steps`` takes it)."""
+    ``crowdsim.distances.closest_approach``, as ``min_distance_between_steps`` takes it)."""
     start = before.human_positions[None] - before.robot_positions[:, None]  # (M, N, 2) human - robot
     end = after.human_positions[None] - after.robot_positions[:, None]
     return closest_approach(start, end)

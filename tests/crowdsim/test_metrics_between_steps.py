@@ -7,15 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from crowdsim.metrics import (
-    ADDED_FIELDS,
-    EpisodeMetrics,
-    Trajectory,
-    aggregate,
-    closest_approach,
-    episode_metrics,
-    min_distance_between_steps,
-)
+from crowdsim.distances import closest_approach, min_distance_between_steps
+from crowdsim.metrics import ADDED_FIELDS, EpisodeMetrics, Trajectory, aggregate, episode_metrics
 from tests.same_metrics import same_metrics
 
 
