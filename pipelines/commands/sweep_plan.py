@@ -309,9 +309,12 @@ def _with_crowd(experiment: Experiment, crowd: str) -> Experiment:
     """Every cell among the humans of ``crowd`` (--crowd): a BIWI sequence replayed (crowdsim.replay); the
     cells' keys name it, so they never mix with ORCA's."""
     worlds = {label: replace(own, crowd=crowd) for label, own in experiment.method_worlds.items()}
+    title = f"{experiment.title}; among the {crowd.upper()} pedestrians replayed"
+    if any(spec.predictor == "orca_oracle" for _, spec in experiment.methods):
+        title += " (where orca_oracle is no oracle: it predicts ORCA humans)"
     return replace(
         experiment,
-        title=f"{experiment.title}; among the {crowd.upper()} pedestrians replayed",
+        title=title,
         world=replace(experiment.world, crowd=crowd),
         method_worlds=MappingProxyType(worlds),
     )

@@ -169,6 +169,9 @@ def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
     ]
     for sensing in sensings:
         parts.append(f"sensor range {sensing[0]}" if len(sensing) == 1 else "sensing per column")
+    crowds = sorted({c.world.crowd for c in cells})
+    if crowds != ["orca"]:  # a replayed crowd sees no robot: its visibility setting does nothing
+        parts[2] = f"humans replayed from BIWI {', '.join(crowds)} (reacting to no one)"
     line = f"{parts[0]}; " + ", ".join(parts[1:]) + "."
     per_column = None
     if len(set(worlds)) > 1:

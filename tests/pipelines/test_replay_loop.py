@@ -120,3 +120,17 @@ def test_a_sweeps_cells_among_a_replayed_crowd_have_keys_of_their_own():
     assert cells and all(c.key.endswith("-paper-visible-hotel-h5-r3") for c in cells)
     assert all(c.world.env_config().crowd == "hotel" for c in cells)
     assert "among the HOTEL pedestrians replayed" in experiment.title
+
+
+def test_a_replayed_sweeps_table_says_who_the_humans_are_and_that_the_oracle_is_none():
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+    from pipelines.experiments.safety_report import world_note
+
+    experiment = configured_experiment(load(sets=["env.crowd=eth_test", "sweep.experiment=predictors"]))
+    assert experiment.title.endswith("(where orca_oracle is no oracle: it predicts ORCA humans)")
+    line, per_column = world_note(experiment.cells([7]))
+    assert line == "Margins: none; profile paper, humans replayed from BIWI eth_test (reacting to no one)."
+    assert per_column is None
+    ordinary, _ = world_note(configured_experiment(load(sets=["sweep.experiment=predictors"])).cells([7]))
+    assert ordinary == "Margins: none; profile paper, robots visible to the humans."
