@@ -11,10 +11,13 @@ A ``Recording`` is a sequence's tracks on its time grid, NaN where a pedestrian 
 robots' usual task (``crowdsim.scenarios.robot_layout``: from y = -5 m to y = +5 m around x = 0) crosses the
 recording's centre (the median tracked position) and meets its main flow (the principal axis of the
 pedestrians' steps): across it in the "perpendicular" scenario, along it (head-on with half the people,
-behind the others) in "circle". Of the pedestrians tracked in the window, the ``n_humans`` whose tracks come
-closest to the robots' corridor are the crowd; the others are left out (they do not react to anyone, so
-nobody's motion depends on them). The seed draws the window among those that hold that many pedestrians and
-no pedestrian within ``2 radius + START_CLEARANCE`` of a robot's start at the first step.
+behind the others) in "circle". Of the pedestrians tracked in the window's first ``SELECT_S`` seconds, the
+``n_humans`` whose tracks come closest to the robots' corridor then are the crowd; the others are left out
+(they do not react to anyone, so nobody's motion depends on them). People cross BIWI's views in
+seconds: ``n_humans`` counts the people who come by, not those there at once (10 people: 2-4 at a time
+on average over the first 20 s, docs/replayed_crowds.md). The seed draws the window among those that
+hold that many pedestrians and no pedestrian within ``2 radius + START_CLEARANCE`` of a robot's start at
+the first step.
 
 A pedestrian is present from the first row of the window where the recording tracks it to the last; before,
 it stands at its first tracked position, after at its last, with zero velocity (``ReplayEpisode.present``
@@ -43,6 +46,9 @@ REPLAYED: Final[tuple[str, ...]] = ("eth", "hotel", "eth_test", "hotel_test")
 CROWDS: Final[tuple[str, ...]] = ("orca", *REPLAYED)  # EnvConfig.crowd
 RECORDED_DT: Final[float] = 0.4  # s, BIWI's annotation rate (2.5 fps), so the only tau a replay runs at
 START_CLEARANCE: Final[float] = 0.2  # m beyond 2 radius between a robot's start and a present pedestrian
+# s of the window in which an episode's people are chosen: twice the 10 s a robot at 1 m/s takes across,
+# so that they are about while the robots cross (an episode of the paper's 40 s limit ends in 14-21 s)
+SELECT_S: Final[float] = 20.0
 WINDOW_TRIES: Final[int] = 200  # windows drawn before an episode is declared impossible
 
 
@@ -138,10 +144,11 @@ def replay_episode(
         )
     corridor = np.concatenate([robot_starts, robot_goals]) if n_robots else np.zeros((1, 2))
     low, high = corridor.min(axis=0), corridor.max(axis=0)
+    chosen_rows = min(steps, round(SELECT_S / recording.dt)) + 1
     most = 0
     for _ in range(WINDOW_TRIES):
         first = int(starts[rng.integers(len(starts))]) + past
-        window = turned[first : first + steps + 1]
+        window = turned[first : first + chosen_rows]
         tracked = np.isfinite(window[..., 0])
         candidates = np.flatnonzero(tracked.any(axis=0))
         most = max(most, len(candidates))
@@ -155,9 +162,9 @@ def replay_episode(
             rows = turned[first - past : first + steps + 1, people]
             return _episode(rows, robot_starts, robot_goals, past, first, people, recording.dt)
     raise SimulationError(
-        f"recording {recording.name!r}: no window of {steps * recording.dt:g} s in {WINDOW_TRIES} draws "
-        f"holds {n_humans} pedestrians and leaves the robots' starts clear (the most found: {most}); use "
-        "fewer humans"
+        f"recording {recording.name!r}: no window in {WINDOW_TRIES} draws has {n_humans} pedestrians in "
+        f"its first {(chosen_rows - 1) * recording.dt:g} s and the robots' starts clear (the most found: "
+        f"{most}); use fewer humans"
     )
 
 
