@@ -168,12 +168,14 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     )
 
 
-def calibration_world_note(spec: ControllerSpec, profile: str, visibility: str) -> str | None:
+def calibration_world_note(
+    spec: ControllerSpec, profile: str, visibility: str, crowd: str = "orca"
+) -> str | None:
     """A line for closed-loop conformal margins calibrated under other conventions than the run's (the
-    profile, the robots' visibility), None otherwise: one block is stored per predictor and alpha, the
-    humans' motion its margins cover is that of the conventions it ran under, and a run under others planned
-    with it silently. Not refused: an experiment may hold the margins fixed across conventions (conventions,
-    docs/safe_crossing.md)."""
+    profile, the robots' visibility) or among other humans (a replayed ``crowd``: calibrate runs ORCA's),
+    None otherwise: one block is stored per predictor and alpha, the humans' motion its margins cover is
+    that of the conventions it ran under, and a run under others planned with it silently. Not refused: an
+    experiment may hold the margins fixed across conventions (conventions, docs/safe_crossing.md)."""
     from pipelines.loop.margins import CALIBRATED_MODES
     from predictors.calibration_store import find_calibration, recalibrate_command
     from predictors.conformal import alpha_text
@@ -189,6 +191,11 @@ def calibration_world_note(spec: ControllerSpec, profile: str, visibility: str) 
         block = find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
     except PredictorError:  # no such block, or other weights: refused with its own line where margins resolve
         return None
+    if crowd != "orca":  # whatever the conventions: calibrate's episodes are ORCA's crowds
+        return (
+            f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
+            f"among ORCA's humans, this run replays BIWI's {crowd}: their coverage here is not measured"
+        )
     measured = (block.details.get("profile"), block.details.get("visibility"))
     if None in measured or measured == (profile, visibility):
         return None

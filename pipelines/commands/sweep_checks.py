@@ -142,7 +142,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
             horizon_note(cell.spec),
             flock_note(cell.spec, cell.n_robots),
-            calibration_world_note(cell.spec, cell.world.profile, cell.world.visibility),
+            calibration_world_note(cell.spec, cell.world.profile, cell.world.visibility, cell.world.crowd),
         ):
             if note is not None:
                 methods.setdefault(note, []).append(cell.method)

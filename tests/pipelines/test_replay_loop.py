@@ -134,3 +134,20 @@ def test_a_replayed_sweeps_table_says_who_the_humans_are_and_that_the_oracle_is_
     assert per_column is None
     ordinary, _ = world_note(configured_experiment(load(sets=["sweep.experiment=predictors"])).cells([7]))
     assert ordinary == "Margins: none; profile paper, robots visible to the humans."
+
+
+def test_closed_loop_margins_among_a_replayed_crowd_are_noted_as_not_measured_there():
+    from pipelines.commands.simulate_checks import calibration_world_note
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.margins import parse_margins
+
+    spec = ControllerSpec("cmpc", "social_lstm_eth", margins=parse_margins("conformal:0.1"))
+    assert calibration_world_note(spec, "paper", "visible") is None  # calibrated under these conventions
+    note = calibration_world_note(spec, "paper", "visible", "eth_test")
+    assert note == (
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated among ORCA's "
+        "humans, this run replays BIWI's eth_test: their coverage here is not measured"
+    )
+    assert (
+        calibration_world_note(ControllerSpec("cmpc", "social_lstm_eth"), "paper", "visible", "eth") is None
+    )
