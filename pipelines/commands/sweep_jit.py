@@ -79,10 +79,11 @@ def jit_pays(cells, episodes_per_cell: int) -> bool:
         nlp = "local" if spec.controller == "dmpc" else "joint"  # a compiling plugin: counted as CMPC
         per_predictor = spec.predictor if spec.margins.mode != "none" else None  # conformal margins
         # Not the predictor otherwise, nor flocking: predictions and flocking weights are NLP parameters, nor
-        # what the controller senses; behind a sensor, it meets every number of humans up to the cell's.
+        # what the controller senses; behind a sensor, or among a replayed crowd's comings and goings, it
+        # meets every number of humans up to the cell's.
         world = (cell.world.profile, cell.world.visibility)
         identity = (nlp, spec.mpc_overrides, spec.margins, per_predictor, world)
-        sensed = cell.world.sensor_range is not None
+        sensed = cell.world.sensor_range is not None or cell.world.crowd != "orca"
         for n_humans in range(cell.n_humans + 1) if sensed else (cell.n_humans,):
             nlps[repr((identity, cell.n_robots, n_humans))] = COMPILE_S[nlp]
         saving += episodes_per_cell * SAVING_PER_EPISODE_S[nlp]

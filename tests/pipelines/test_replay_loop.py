@@ -151,3 +151,20 @@ def test_closed_loop_margins_among_a_replayed_crowd_are_noted_as_not_measured_th
     assert (
         calibration_world_note(ControllerSpec("cmpc", "social_lstm_eth"), "paper", "visible", "eth") is None
     )
+
+
+def test_compiling_counts_every_crowd_size_a_replayed_cell_meets():
+    """Among a replayed crowd a CMPC meets 0..n humans as people come and go, an NLP each, as behind a
+    sensor: --jit auto counts them all."""
+    import dataclasses
+
+    from mpc.compile_cache import COMPILE_S, SAVING_PER_EPISODE_S
+    from pipelines.commands.sweep_jit import jit_pays
+    from pipelines.experiments.tasks import Cell, World
+    from pipelines.loop.controllers import ControllerSpec
+
+    full = Cell("CMPC", ControllerSpec("cmpc", "social_lstm_eth"), 7)
+    replayed = dataclasses.replace(full, world=World(crowd="eth_test"))
+    episodes = math.ceil(COMPILE_S["joint"] / SAVING_PER_EPISODE_S["joint"])  # one NLP's compile, not eight
+    assert jit_pays([full], episodes) and not jit_pays([replayed], episodes)
+    assert jit_pays([replayed], 8 * episodes)
