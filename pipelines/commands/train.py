@@ -133,6 +133,14 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
         "--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)"
     )
     parser.add_argument(
+        "--batching",
+        choices=("shuffled", "by_size"),  # predictors.data.batching.BATCHINGS, without importing torch
+        default="shuffled",
+        help="how an epoch's shuffled scenes are cut into batches: shuffled (as they come, as TrajNet++) or "
+        "by_size (buckets of scenes of similar agent counts: less padding, faster epochs, other weights; "
+        "recorded in the checkpoint) (default shuffled)",
+    )
+    parser.add_argument(
         "--limit-batches",
         type=int,
         default=None,

@@ -92,7 +92,9 @@ def _fit(
     # resolved, as train_settings.json records them: last.ckpt keeps the data module's paths, and relative
     # ones named other files to a --resume from another folder (refused as "other settings")
     train, val, test = ([Path(p).resolve() for p in files[split]] for split in ("train", "val", "test"))
-    data = TrajnetDataModule(train, val, test, batch_size=args.batch_size, seed=args.seed)
+    data = TrajnetDataModule(
+        train, val, test, batch_size=args.batch_size, seed=args.seed, batching=args.batching
+    )
     module = make_module(args.model, net_config, optim)
     trainer, best, divergence = _trainer(args, out, ckpt_dir)
     if not args.resume:
@@ -182,6 +184,7 @@ def _save_best(
             "best_checkpoint": Path(best_path).name,
             "seed": args.seed,
             "batch_size": args.batch_size,
+            "batching": args.batching,  # how the scenes were cut into batches (predictors.data.batching)
             "pred_len": module.pred_len,  # steps it learned to predict: a longer MPC horizon extrapolates
             # only when set: a checkpoint trained on every batch reads as before
             **({} if args.limit_batches is None else {"limit_batches": args.limit_batches}),

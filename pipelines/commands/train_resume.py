@@ -74,6 +74,7 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
         "loss": args.loss,
         "seed": args.seed,
         "batch_size": args.batch_size,
+        "batching": args.batching,
         "limit_batches": args.limit_batches,
         "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
     }
@@ -264,6 +265,8 @@ def checkpoint_settings(hyper: dict[str, Any], data: Any) -> dict[str, Any]:
         **{k: optim.get(k) for k in ("lr", "step_size", "loss")},
         "seed": data.get("seed"),
         "batch_size": data.get("batch_size"),
+        # a data module from before --batching batched as "shuffled" does
+        "batching": data.get("batching", "shuffled") if data else None,
         "files": _resolved(files) if isinstance(files, dict) else None,
     }
 

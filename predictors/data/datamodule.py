@@ -11,6 +11,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from predictors.base import OBS_LEN, PRED_LEN
+from predictors.data.batching import BySizeBatches, check_batching
 from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes
 from predictors.errors import DatasetFormatError, PredictorError
 
@@ -20,7 +21,8 @@ class TrajnetDataModule(L.LightningDataModule):
 
     Training batches are shuffled and (with ``augment``) randomly rotated, both functions of ``seed`` and
     the epoch (``EpochShuffle``), so a resumed run continues as an uninterrupted one; validation and test
-    batches are neither.
+    batches are neither. ``batching`` cuts the training batches (``predictors.data.batching``): "shuffled"
+    as the shuffled order comes, "by_size" from buckets of scenes of similar agent counts.
     """
 
     def __init__(
@@ -34,6 +36,7 @@ class TrajnetDataModule(L.LightningDataModule):
         num_workers: int = 0,
         obs_len: int = OBS_LEN,
         pred_len: int = PRED_LEN,
+        batching: str = "shuffled",
     ):
         super().__init__()
         if batch_size < 1:
@@ -47,6 +50,7 @@ class TrajnetDataModule(L.LightningDataModule):
         self.num_workers = num_workers
         self.obs_len = obs_len
         self.pred_len = pred_len
+        self.batching = check_batching(batching)
         self.datasets: dict[str, TrajnetSceneDataset] = {}
         self.save_hyperparameters(
             {
@@ -56,6 +60,7 @@ class TrajnetDataModule(L.LightningDataModule):
                 "seed": seed,
                 "obs_len": obs_len,
                 "pred_len": pred_len,
+                "batching": batching,
             }
         )
 
@@ -91,6 +96,17 @@ class TrajnetDataModule(L.LightningDataModule):
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         dataset = self._dataset(split)
+        if shuffle and self.batching == "by_size":
+            return DataLoader(
+                dataset,
+                batch_sampler=BySizeBatches(
+                    EpochShuffle(dataset, self.seed), dataset.agent_counts(), self.batch_size
+                ),
+                num_workers=self.num_workers,
+                collate_fn=partial(collate_scenes, obs_len=self.obs_len),
+                generator=torch.Generator().manual_seed(self.seed),
+                persistent_workers=self.num_workers > 0,
+            )
         return DataLoader(
             dataset,
             batch_size=self.batch_size,

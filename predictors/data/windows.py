@@ -292,6 +292,20 @@ class TrajnetSceneDataset(Dataset):
         k = int(np.searchsorted(self._starts, index, side="right") - 1)
         return k, int(index - self._starts[k])
 
+    def agent_counts(self) -> np.ndarray:
+        """(len,) int64: the agents of every item as ``__getitem__`` returns it (those present somewhere in
+        the window, the primary always), without normalising any scene: what a batch pads to its largest."""
+        steps = self.obs_len + self.pred_len
+        counts = []
+        for arrays in self.arrays:
+            window = arrays.xy[arrays.xy.shape[0] - steps :]
+            present = ~np.isnan(window).any(axis=-1).all(axis=0)
+            starts, ends = arrays.offsets[:-1], arrays.offsets[1:]
+            present[starts[ends > starts]] = True
+            total = np.concatenate([[0], np.cumsum(present, dtype=np.int64)])
+            counts.append(total[ends] - total[starts])
+        return np.concatenate(counts) if counts else np.zeros(0, dtype=np.int64)
+
     def _angle(self, index: int, epoch: int) -> float:
         return float(np.random.default_rng([self.seed, epoch, index]).random()) * 2.0 * math.pi
 

@@ -49,6 +49,19 @@ def write_walk_file(path: Path) -> Path:
     return write_lines(path, records)
 
 
+def write_crowds(path: Path) -> Path:
+    """Five scenes of 3, 1, 2, 3 and 4 agents, for batches of scenes of unlike sizes: the walk above (its
+    third pedestrian there for 3 steps only is still an agent of the window), then scenes of a primary and
+    0 to 3 walkers beside it."""
+    records: list[dict] = walk_scene_records(sid=0, start=0)
+    for n in range(1, 5):
+        start = 1000 * n
+        records.append(scene(n, 10 * n, start, start + 20 * STEP))
+        for k in range(21):
+            records += [track(start + k * STEP, 10 * n + a, 0.5 * k, float(a)) for a in range(n)]
+    return write_lines(path, records)
+
+
 def ewap_rows(n_frames: int, frame_step: int, pairs_every: int = 12, steps: int = 23) -> np.ndarray:
     """Raw obsmat rows (8 columns, 1-based frames) of pairs of pedestrians crossing a square.
 
