@@ -74,6 +74,7 @@ ZERO_REPEATS = [
     ),
     ("predictor_floor", ["--horizon", "0"], "horizon must be an integer >= 1"),
     ("run_all", ["--steps", "0"], "steps must be an integer >= 1"),
+    ("batching", ["--epochs", "0"], "argument --epochs: epochs must be an integer >= 1, got '0'"),
     ("run_all", ["--workers", "0"], "workers must be an integer >= 1"),
     ("compile_cache", ["--payback-episodes", "-1"], "payback episodes must be an integer >= 0"),
     ("sweep_kills", ["--episodes-per-cell", "0"], "episodes per cell must be an integer >= 1"),
