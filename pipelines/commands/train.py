@@ -26,6 +26,7 @@ EPILOG = """examples:
   crowdmpc train --model social_lstm --data-dir ../shared/data --epochs 25
   crowdmpc train --model social_lstm --pooling soft --data-dir ../shared/data --out runs/train/sl_soft
   crowdmpc train --model social_lstm --data-dir ../shared/data --out runs/train/sl --resume
+  crowdmpc train --model social_lstm --data-dir ../shared/data --batching by_size   # less padding
   crowdmpc train --model social_lstm --train data/synth/train.ndjson --val data/synth/val.ndjson \\
       --test data/synth/test.ndjson --name my_lstm_synth    # files from `crowdmpc data synth --out ...`
   crowdmpc train --model social_attention --net-config '{"heads": 2}' --data-dir ../shared/data

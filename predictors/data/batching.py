@@ -1,13 +1,13 @@
 """How ``crowdmpc train`` cuts an epoch's scenes into batches (``--batching``).
 
 A batch is padded to its largest scene (``collate_scenes``): the ETH + Hotel training scenes hold 3 to 28
-agents (11.6 on average), so a batch of 8 drawn at random pads most of its agent slots, and the nets step
-through every slot. ``"shuffled"`` (the default, as TrajNet++ trains) cuts the epoch's shuffled order
-(``EpochShuffle``) into batches as it comes. ``"by_size"`` (``BySizeBatches``) is the usual bucket
-iterator: the same shuffled order, cut into chunks of ``bucket_batches`` batches, each chunk sorted by agent
-count and cut into batches, the batches then shuffled. Its batches hold scenes of similar size (less
-padding, faster epochs) but no longer mix dense and sparse scenes, so it trains other weights than
-"shuffled" from the same seed.
+agents (11.6 on average), so a batch of 8 drawn at random holds 0.62 padded agent slots per real agent
+(benchmarks/batching.py), and the nets step through every slot. ``"shuffled"`` (the default, as TrajNet++
+trains) cuts the epoch's shuffled order (``EpochShuffle``) into batches as it comes. ``"by_size"``
+(``BySizeBatches``) is the usual bucket iterator: the same shuffled order, cut into chunks of
+``bucket_batches`` batches, each chunk sorted by agent count and cut into batches, the batches then
+shuffled. Its batches hold scenes of similar size (less padding, faster epochs) but no longer mix dense and
+sparse scenes, so it trains other weights than "shuffled" from the same seed.
 """
 
 from __future__ import annotations
