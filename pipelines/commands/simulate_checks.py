@@ -134,7 +134,7 @@ def goal_room_note(
 def horizon_note(spec: ControllerSpec) -> str | None:
     """A line for an MPC that plans further ahead than its learned predictor was trained to predict, None
     otherwise: the net rolls out past its training length, which nothing else would say (TrajNet++ trains
-    12 steps; Table I's horizon is 8)."""
+    12 steps; Table I's horizon H is 4)."""
     from pipelines.loop.mpc_setup import mpc_config
     from predictors.base import DT
     from predictors.registry import trained_prediction_length
