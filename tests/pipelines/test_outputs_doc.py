@@ -91,6 +91,18 @@ def test_every_simulate_and_review_field_is_documented(outputs):
     assert _undocumented([*names, *review["totals"]], doc) == []
 
 
+def test_review_totals_lack_only_the_summary_fields_the_doc_says(outputs):
+    """`review --json`'s totals were documented as "the summary's fields above", but hold no iteration counts
+    or statuses (those are per run, under its `solver`): a reader looking for `iterations_mean` there found
+    none. The doc names the summary fields the totals leave out; they must be exactly the ones left out."""
+    pattern = r"`totals` \(the summary's fields above but (.*?), which each run's"
+    said = re.search(pattern, DOC.read_text(), re.S)
+    assert said is not None, "outputs.md does not say which summary fields review's totals leave out"
+    summary = _strict((outputs / "sim.json").read_text())["summary"]
+    totals = _strict((outputs / "review.json").read_text())["totals"]
+    assert set(re.findall(r"`([^`]+)`", said.group(1))) == set(summary) - set(totals)
+
+
 def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outputs):
     doc = _documented()
     with open(outputs / "runs/d/circle_seed000000.mcap", "rb") as f:
