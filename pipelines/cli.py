@@ -66,10 +66,11 @@ EPILOG = """examples:
 Plugins: --plugin module:Class (before the command; repeatable) registers, for every command and the
 sweep's workers, a predictor net of your own (a torch.nn.Module with the step contract of
 predictors/nets/contract.py) as the model kind "module:Class", or a robot controller of your own (a class
-with reset, act, describe and close) as the controller "module:Class" (simulate --controller module:Class).
-The module is imported from the installed packages or the current directory. $CROWDMPC_PLUGINS and
-$CROWDMPC_CONTROLLERS (comma-separated) do the same; installed packages may declare entry points in the group
-"crowdmpc.predictors". Trained models go to the user zoo, $CROWDMPC_ZOO (default
+with name, predictor, reset, act, describe and close: docs/extending.md, section 6) as the controller
+"module:Class" (simulate --controller module:Class). The module is imported from the installed packages or
+the current directory. $CROWDMPC_PLUGINS and $CROWDMPC_CONTROLLERS (comma-separated) do the same; installed
+packages may declare entry points in the groups "crowdmpc.predictors" (nets) and "crowdmpc.controllers"
+(controllers). Trained models go to the user zoo, $CROWDMPC_ZOO (default
 $XDG_DATA_HOME/crowdmpc/zoo or ~/.local/share/crowdmpc/zoo); the shipped zoo (checkpoints/) is read-only.
 """
 

@@ -779,3 +779,16 @@ def test_a_plugin_of_an_interactive_session_is_refused_before_workers_start(monk
     script.write_text("")
     session.__file__ = str(script)  # a script's
     assert plugins.plugin_environment()[registry.PLUGINS_ENV] == "__main__:StraightLine"
+
+
+def test_the_top_level_help_names_both_entry_point_groups_and_the_whole_protocol(capsys):
+    """`crowdmpc --help` told plugin authors that installed packages declare entry points in the group
+    "crowdmpc.predictors" only, so a controller package had no way to learn of "crowdmpc.controllers", and
+    that a controller is a class with reset, act, describe and close, while one without `name` and
+    `predictor` is refused (test_a_plugin_naming_another_predictor_than_the_run_is_one_line)."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f'"{models.ENTRY_POINT_GROUP}"' in text
+    assert f'"{registry.ENTRY_POINT_GROUP}"' in text
+    assert "name, predictor, reset, act, describe and close" in text
