@@ -95,12 +95,24 @@ def test_review_totals_lack_only_the_summary_fields_the_doc_says(outputs):
     """`review --json`'s totals were documented as "the summary's fields above", but hold no iteration counts
     or statuses (those are per run, under its `solver`): a reader looking for `iterations_mean` there found
     none. The doc names the summary fields the totals leave out; they must be exactly the ones left out."""
-    pattern = r"`totals` \(the summary's fields above but (.*?), which each run's"
-    said = re.search(pattern, DOC.read_text(), re.S)
+    pattern = r"`totals` only when .*? the summary's fields above but (.*?), which each run's"
+    said = re.search(pattern, " ".join(DOC.read_text().split()))
     assert said is not None, "outputs.md does not say which summary fields review's totals leave out"
     summary = _strict((outputs / "sim.json").read_text())["summary"]
     totals = _strict((outputs / "review.json").read_text())["totals"]
     assert set(re.findall(r"`([^`]+)`", said.group(1))) == set(summary) - set(totals)
+
+
+def test_review_json_of_several_set_ups_has_totals_per_group_only(tmp_path):
+    """outputs.md listed a top-level `totals` in every `review DIR --json`; with two set-ups in the folder
+    there is none (each group has its own), as review's --help says: a reader's `review["totals"]` failed."""
+    for controller in ("orca", "straight"):
+        argv = ["simulate", "--controller", controller, "--humans", "1", "--no-progress"]
+        assert main([*argv, "--record", str(tmp_path / "runs" / controller)]) == 0
+    assert main(["review", str(tmp_path / "runs"), "--json", str(tmp_path / "review.json")]) == 0
+    review = _strict((tmp_path / "review.json").read_text())
+    assert "totals" not in review and all("totals" in group for group in review["groups"])
+    assert "`totals` only when the folder holds one set-up" in " ".join(DOC.read_text().split())
 
 
 def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outputs):
