@@ -16,7 +16,7 @@ EPILOG = """examples:
   crowdmpc zoo verify
   crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt --name my_social_lstm
   crowdmpc zoo add runs/train/social_lstm_eth_v2/social_lstm_eth_v2.pt --name my_social_lstm --replace
-  crowdmpc --plugin my_predictor:MyNet zoo add runs/train/mynet_eth/mynet_eth.pt
+  crowdmpc --plugin my_predictor:MyNet zoo add runs/train/my_net_eth/my_net_eth.pt
   crowdmpc zoo remove my_social_lstm
 
 Two zoos, each NAME.pt (state_dict) + NAME.json (config) per model and a manifest.json with their sha256,

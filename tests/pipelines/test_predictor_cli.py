@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import collections
 import json
+import re
 from pathlib import Path
 
 import casadi as ca
@@ -1027,3 +1028,23 @@ def test_a_terminated_training_prints_the_interrupt_alone(tmp_path, monkeypatch,
         signal.signal(signal.SIGTERM, saved)
     err = capfd.readouterr().err
     assert "Received SIGTERM" not in err and err.endswith("crowdmpc train: interrupted\n"), err
+
+
+@pytest.mark.parametrize("command", ["zoo", "simulate", "sweep"])
+def test_help_examples_name_the_plugin_model_train_writes(command, capsys):
+    """`zoo --help` added `runs/train/mynet_eth/mynet_eth.pt` after training `my_predictor:MyNet`, whose run
+    writes `runs/train/my_net_eth/my_net_eth.pt` (train's default name splits the class name's words): the
+    example stopped on "is not a file". Every help example naming that model must use train's name."""
+    from pipelines.commands.train import default_name
+
+    name = default_name("my_predictor:MyNet", None, "biwi_eth", explicit_files=False)
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    lines = capsys.readouterr().out.replace("\\\n", " ").splitlines()  # an example's continued lines as one
+    examples = [line for line in lines if "my_predictor:MyNet" in line]
+    assert examples, f"{command} --help has no example with the plugin"
+    text = " ".join(examples)
+    named = set(re.findall(r"\b(my_?net\w*_eth)\b", text))
+    assert named <= {name}, f"{command} --help names {sorted(named)}; train writes {name!r}"
+    if command == "zoo":
+        assert f"runs/train/{name}/{name}.pt" in text
