@@ -45,11 +45,11 @@ margins, 7 humans); baselines (straight and ORCA robots, a quick check);
 controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight; --controllers for any
 list, controller plugins included); sensing (CMPC given every human vs behind a sensor of 4, 3 and 2 m
 with track lengths, and 3 m without, 7 humans).
---margins, --profile and --visibility apply to every method of table2, table3, predictors and coupling;
---margins to the methods of controllers that plan with a predictor (cmpc, dmpc; orca and straight plan
-with none, and run without margins), --profile and --visibility to all of them. --sensor-range puts every
-method's controller behind a sensor (all but the sensing experiment); --crowd eth|hotel replays BIWI's
-pedestrians as every cell's humans (crowdsim/replay.py).
+--margins applies to every method that plans with a predictor (of controllers: cmpc and dmpc; orca and
+straight plan with none, and run without margins); baselines, conventions and safety fix their methods'
+margins and refuse it. --profile and --visibility apply to every method; conventions fixes them and refuses
+both. --sensor-range puts every method's controller behind a sensor (all but the sensing experiment);
+--crowd eth|hotel|eth_test|hotel_test replays BIWI's pedestrians as every cell's humans (crowdsim/replay.py).
 Episode i of every cell is the same crowd (circle for even i, perpendicular for odd i, seed --seed + i // 2)
 where the cells have the same number of robots and profile: another team or profile draws other humans.
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]

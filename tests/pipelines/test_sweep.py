@@ -1298,3 +1298,31 @@ def test_the_note_says_one_episode_per_cell_in_the_singular():
     episodes = {("CMPC", 5): [(True, 18.0, False, False)], ("DMPC", 5): [(True, 18.0, False, False)]}
     markdown = markdown_table(table2, summarize(table2, table2.cells(), _records(table2, episodes)))
     assert "\nOurs: 1 episode per cell, half circle" in markdown
+
+
+def test_the_help_names_the_experiments_that_refuse_margins_and_conventions(capsys):
+    """sweep --help said --margins, --profile and --visibility apply to table2, table3, predictors and
+    coupling (and controllers), as if the others refused them: sensing takes all three, safety and baselines
+    --profile and --visibility; only baselines, conventions and safety refuse --margins, and conventions
+    alone --profile and --visibility. The help names exactly the experiments that refuse each."""
+    from pipelines.experiments.tasks import World
+    from pipelines.loop.margins import parse_margins
+
+    with pytest.raises(SystemExit):
+        main(["sweep", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    said = re.search(r"; ([\w, ]+) fix their methods' margins and refuse it\. .*?; (\w+) fixes them", text)
+    assert said is not None, "sweep --help does not say which experiments refuse --margins and --profile"
+
+    def refuses(change) -> bool:
+        try:
+            change()
+        except PipelineError:
+            return True
+        return False
+
+    margins = parse_margins("conformal:0.1")
+    no_margins = {name for name, e in EXPERIMENTS.items() if refuses(lambda e=e: e.with_margins(margins))}
+    fixed = {name for name, e in EXPERIMENTS.items() if refuses(lambda e=e: e.with_world(World("v1")))}
+    assert set(re.split(r", | and ", said.group(1))) == no_margins
+    assert {said.group(2)} == fixed
