@@ -9,6 +9,7 @@ import csv
 import io
 import json
 import re
+import shlex
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,7 @@ from pipelines.logs.schemas import CHANNELS
 
 REPO = Path(__file__).resolve().parents[2]
 DOC = REPO / "docs" / "outputs.md"
+README = REPO / "README.md"
 # cells.csv and the summaries write four columns per rate; the doc names the rate and the four suffixes once
 FAMILY = ("_count", "_rate", "_ci_lo", "_ci_hi")
 
@@ -58,9 +60,13 @@ def outputs(tmp_path_factory) -> Path:
         "--no-progress",
     ]
     assert main([*sweep, "--backend", "inline", "--record", "all", "--out", str(root / "sw")]) == 0
-    simulate = ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "2"]
-    outputs = ["--json", str(root / "sim.json"), "--record", str(root / "runs/d"), "--no-progress"]
-    assert main([*simulate, *outputs]) == 0
+    # the README's recorded simulate, whose runs/d the MCAP example below reads, with one episode of its 10
+    (line,) = [line for line in README.read_text().splitlines() if line.endswith(" --record runs/d")]
+    simulate = shlex.split(
+        line.replace("--episodes 10", "--episodes 1").replace("runs/d", str(root / "runs/d"))
+    )
+    outputs = ["--json", str(root / "sim.json"), "--no-progress"]
+    assert simulate[0] == "crowdmpc" and main([*simulate[1:], *outputs]) == 0
     assert main(["review", str(root / "runs/d"), "--json", str(root / "review.json")]) == 0
     return root
 
@@ -117,7 +123,7 @@ def test_review_json_of_several_set_ups_has_totals_per_group_only(tmp_path):
 
 def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outputs):
     doc = _documented()
-    with open(outputs / "runs/d/circle_seed000000.mcap", "rb") as f:
+    with open(outputs / "runs/d/perpendicular_seed000000.mcap", "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
         assert summary is not None
@@ -149,6 +155,6 @@ def test_the_mcap_example_runs_as_printed(outputs, monkeypatch):
     with contextlib.redirect_stdout(printed):
         exec(compile(example.group(1), str(DOC), "exec"), {})
     commit, controller, horizon = printed.getvalue().splitlines()[0].split()
-    assert (controller, horizon) == ("cmpc", "4") and commit
+    assert (controller, horizon) == ("dmpc", "4") and commit
     assert re.search(r"^\d+ states; robot 0 starts at \[.*\] m$", printed.getvalue().splitlines()[1])
     assert re.search(r"^success (True|False) min distance \d", printed.getvalue().splitlines()[2])
