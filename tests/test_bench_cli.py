@@ -55,6 +55,7 @@ ZERO_REPEATS = [
             "orca_contacts",
             "orca_step",
             "recording_overhead",
+            "replay_contacts",
             "robot_scaling",
             "solvers",
         )

@@ -1,0 +1,81 @@
+"""Who walks into whom among a replayed crowd: each contact's speeds and where it happens.
+
+Replayed people do not react to the robots (crowdsim.replay), so a contact is either a robot that drove into
+someone or someone who walked into a robot that could not get away. For the closest robot-human pair of
+each episode with contact (< 0.6 m, among tracked people), at the state where it is closest: the person's
+speed and the robot's over the step before, and the robot's distance from its start and its goal.
+
+    nice -n 10 .venv/bin/python benchmarks/replay_contacts.py --crowd hotel_test --humans 10 --episodes 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from crowdsim.env import EnvConfig
+from crowdsim.replay import REPLAYED
+from pipelines.loop.controllers import ControllerSpec
+from pipelines.loop.episode import EpisodeResult, run_episodes
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import episode_count, human_count, predictor_name, run_main, seed_number  # noqa: E402
+
+CONTACT: float = 0.6  # m, the sum of the radii
+STANDING: float = 0.2  # m/s: a person slower than this over the step stands
+
+
+def contact_at(result: EpisodeResult) -> tuple[float, float, float, float] | None:
+    """Person's and robot's speed (m/s), the robot's distance from its start and goal (m) at the closest
+    robot-human approach of ``result`` among tracked people; None without contact."""
+    present = result.human_present
+    d = np.linalg.norm(result.human_positions[:, None] - result.robot_positions[:, :, None], axis=-1)
+    d = np.where(present[:, None, :], d, np.inf)
+    if d.min() >= CONTACT:
+        return None
+    k, i, j = np.unravel_index(np.argmin(d), d.shape)
+    before = max(int(k) - 1, 0)
+    dt = 0.4
+    human = float(np.linalg.norm(result.human_positions[k, j] - result.human_positions[before, j])) / dt
+    robot = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_positions[before, i])) / dt
+    start = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_positions[0, i]))
+    goal = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_goals[i]))
+    return human, robot, start, goal
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--crowd", default="eth_test", choices=REPLAYED)
+    parser.add_argument("--humans", type=human_count, default=10)
+    parser.add_argument("--episodes", type=episode_count, default=20, help="per scenario")
+    parser.add_argument("--seed", type=seed_number, default=0)
+    parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")
+    args = parser.parse_args()
+    config = EnvConfig(crowd=args.crowd)
+    people = f"{args.humans} people of {args.crowd}"
+    print(f"CMPC with {args.predictor} among {people}, {args.episodes} episodes each")
+    for scenario in ("circle", "perpendicular"):
+        spec = ControllerSpec("cmpc", args.predictor)
+        results = run_episodes(
+            spec, episodes=args.episodes, seed=args.seed, scenario=scenario, n_humans=args.humans,
+            env_config=config, progress=False,
+        )  # fmt: skip
+        rows = np.array([c for c in map(contact_at, results) if c is not None]).reshape(-1, 4)
+        line = f"{scenario:13s} contact in {len(rows)} of {len(results)} episodes"
+        if len(rows):
+            human, robot, start, goal = np.median(rows, axis=0)
+            line += (
+                f"; medians: person {human:.2f} m/s, robot {robot:.2f} m/s, {start:.1f} m from its start and "
+                f"{goal:.1f} m from its goal; person standing in {int((rows[:, 0] < STANDING).sum())}, robot "
+                f"within 1 m of its goal in {int((rows[:, 3] < 1.0).sum())}"
+            )
+        print(line)
+
+
+if __name__ == "__main__":
+    sys.exit(run_main(main))

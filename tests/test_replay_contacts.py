@@ -1,0 +1,52 @@
+"""benchmarks/replay_contacts.py: each contact's speeds and place among a replayed crowd, counting only the
+people tracked then."""
+
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from tests.benchmark_modules import load_benchmark
+from tests.predictors.samples import shared_data_dir
+
+replay_contacts = load_benchmark("replay_contacts")
+
+
+def episode(present):
+    """One robot from (0, 0) up to (0, 0.4) and on, goal (0, 5); a person walking down x = 0.5 at 1 m/s,
+    0.5 m from the robot at row 1 (contact), and one standing on the robot's start, tracked as ``present``."""
+    robot = np.array([[[0.0, 0.0]], [[0.0, 0.4]], [[0.0, 0.8]]])
+    walker = [[0.5, 0.8], [0.5, 0.4], [0.5, 0.0]]
+    humans = np.array([[w, [0.0, 0.0]] for w in walker])
+    return SimpleNamespace(
+        robot_positions=robot,
+        human_positions=humans,
+        robot_goals=np.array([[0.0, 5.0]]),
+        human_present=present,
+    )
+
+
+def test_the_contact_is_the_closest_tracked_approach_with_its_speeds_and_place():
+    walking_only = np.array([[True, False]] * 3)
+    human, robot, start, goal = replay_contacts.contact_at(episode(walking_only))
+    # closest at row 1: 0.5 m; each moved 0.4 m in the 0.4 s before
+    assert (human, robot) == pytest.approx((1.0, 1.0)) and (start, goal) == pytest.approx((0.4, 4.6))
+    # the person standing on the start is not there: untracked, no contact with it
+    assert replay_contacts.contact_at(episode(np.array([[False, False]] * 3))) is None
+    human, robot, _, _ = replay_contacts.contact_at(episode(np.array([[False, True]] * 3)))
+    assert (human, robot) == (0.0, 0.0)  # tracked, it is the contact: at row 0, standing
+
+
+def test_it_runs_and_reports_each_scenario(monkeypatch, capsys):
+    root = shared_data_dir()
+    if root is None:
+        pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
+    monkeypatch.setenv("CROWDMPC_DATA", str(root))
+    argv = ["replay_contacts.py", "--crowd", "eth_test", "--humans", "3", "--episodes", "1"]
+    monkeypatch.setattr(sys, "argv", argv)
+    replay_contacts.main()
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "CMPC with constant_velocity among 3 people of eth_test, 1 episodes each"
+    assert [line.split()[0] for line in out[1:]] == ["circle", "perpendicular"]
+    assert all(" of 1 episodes" in line for line in out[1:])
