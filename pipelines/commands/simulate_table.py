@@ -40,10 +40,11 @@ def table_header(
     # a controller behind a sensor saw fewer humans than the metrics count: a result of another set-up
     if sim.sensor_range is not None:
         goals += f"sensor {sim.sensor_range:g} m{'' if sim.sensor_tracks else ' without tracks'} | "
+    # a replayed crowd sees no robot: the visibility does nothing there
+    conventions = run_meta["profile"] + ("" if env_config.crowd != "orca" else f"/{run_meta['visibility']}")
     return (
         f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
-        f"margins {spec.margins.label} | "
-        f"{run_meta['profile']}/{run_meta['visibility']} | {goals}scenario {scenario.name} | "
+        f"margins {spec.margins.label} | {conventions} | {goals}scenario {scenario.name} | "
         f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
         f"{sim.seed + sim.episodes - 1}"
         + (f" | {stopped}: {finished} episodes finished" if finished is not None else "")

@@ -93,7 +93,7 @@ def test_simulate_names_the_replayed_crowd_and_records_it(data, tmp_path, capsys
     out = tmp_path / "run.json"
     argv = ["simulate", "--controller", "cmpc", "--crowd", "eth", "--humans", "6", "--episodes", "1"]
     code, stdout, _ = run_cli(capsys, *argv, "--no-progress", "--json", str(out))
-    assert code == 0 and "| crowd eth (replayed) |" in stdout
+    assert code == 0 and "| margins none | paper | crowd eth (replayed) | scenario circle |" in stdout
     record = json.loads(out.read_text())
     assert record["run"]["crowd"] == "eth" and record["episodes"][0]["config"]["env"]["crowd"] == "eth"
     assert "sensing" not in record["episodes"][0]["config"]
