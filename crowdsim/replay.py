@@ -145,7 +145,7 @@ def replay_episode(
     corridor = np.concatenate([robot_starts, robot_goals]) if n_robots else np.zeros((1, 2))
     low, high = corridor.min(axis=0), corridor.max(axis=0)
     chosen_rows = min(steps, round(SELECT_S / recording.dt)) + 1
-    most = 0
+    most = blocked = 0
     for _ in range(WINDOW_TRIES):
         first = int(starts[rng.integers(len(starts))]) + past
         window = turned[first : first + chosen_rows]
@@ -161,10 +161,12 @@ def replay_episode(
         if _clear_start(window[0, people], robot_starts, radius):
             rows = turned[first - past : first + steps + 1, people]
             return _episode(rows, robot_starts, robot_goals, past, first, people, recording.dt)
+        blocked += 1
     raise SimulationError(
         f"recording {recording.name!r}: no window in {WINDOW_TRIES} draws has {n_humans} pedestrians in "
         f"its first {(chosen_rows - 1) * recording.dt:g} s and the robots' starts clear (the most found: "
-        f"{most}); use fewer humans"
+        f"{most}; {blocked} draws with enough had someone within {2.0 * radius + START_CLEARANCE:g} m of a "
+        "start); use fewer humans"
     )
 
 

@@ -83,11 +83,33 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
             f"{config.label('simulate', 'sensor_range')} records no predictions (they are of the humans in "
             "view only); record without the iterations, or without the sensor"
         )
+    if spec.record_iterations and config.env.crowd != "orca":  # the loop's filter drops them too
+        raise PipelineError(
+            f"{config.label('controller', 'record_iterations')}: among a replayed crowd "
+            f"({config.label('env', 'crowd')} {config.env.crowd}) a controller records no predictions (they "
+            "are of the people tracked now only); record without the iterations"
+        )
+    check_recording(config)
     if spec.record_iterations and config.simulate.record is None:
         raise PipelineError(
             f"{config.label('controller', 'record_iterations')}: the iterations are written to the MCAP "
             "recordings; give --record DIR too (or [simulate] record)"
         )
+
+
+def check_recording(config: RunConfig) -> None:
+    """Read a replayed crowd's recording before any work (pipelines.loop.replay_data: once per process),
+    its refusal named by the option that chose the crowd: a missing data folder stopped simulate at its
+    first episode, after the controller's build, in words naming an option simulate does not have."""
+    if config.env.crowd == "orca":
+        return
+    from pipelines.loop.replay_data import recording
+    from predictors.errors import PredictorError
+
+    try:
+        recording(config.env.crowd)
+    except (PipelineError, PredictorError) as exc:
+        raise PipelineError(f"{config.label('env', 'crowd')} {config.env.crowd}: {exc}") from None
 
 
 # How close to the closest two robots' goals d_min may come before the note: no measured rule holds for

@@ -68,19 +68,21 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
 
 
 def _check_sensed_iterations(cfg: RunConfig, experiment: Experiment) -> None:
-    """Refuse record_iterations for methods behind a sensor, as simulate does: RangeLimited drops the
-    predictions (of the humans in view only), so their recordings would hold none."""
-    sensed = [
-        label
-        for label, spec in experiment.methods
-        if spec.record_iterations and experiment.method_worlds.get(label, experiment.world).sensor_range
-    ]
+    """Refuse record_iterations for methods behind a sensor or among a replayed crowd, as simulate does:
+    RangeLimited drops the predictions (of the humans in view only), so their recordings would hold none."""
+
+    def filtered(label: str) -> bool:
+        world = experiment.method_worlds.get(label, experiment.world)
+        return world.sensor_range is not None or world.crowd != "orca"
+
+    sensed = [label for label, spec in experiment.methods if spec.record_iterations and filtered(label)]
     if sensed:
         raise cfg.error(
             "controller",
             "record_iterations",
-            f"methods {sensed} of experiment {experiment.name!r} run behind a sensor, whose controllers "
-            "record no predictions (they are of the humans in view only); record without the iterations",
+            f"methods {sensed} of experiment {experiment.name!r} run behind a sensor or among a replayed "
+            "crowd, whose controllers record no predictions (they are of the humans in view only); record "
+            "without the iterations",
         )
 
 
@@ -250,9 +252,11 @@ def check_world(cfg: RunConfig) -> None:
     refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), [scenario] humans
     and name (``_check_scenario``), rather than ignore them."""
     from crowdsim.profiles import PROFILES
+    from pipelines.commands.simulate_checks import check_recording
     from pipelines.config.schema import ENV_PROFILE_KEYS
 
     _check_scenario(cfg)
+    check_recording(cfg)
     why = (
         "a sweep's cells run a named profile ([env] profile, robots_visible) among a crowd ([env] crowd); "
         "other [world], [env] and [env.orca] values apply to simulate only"

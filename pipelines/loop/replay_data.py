@@ -35,10 +35,15 @@ SEQUENCES: Final[dict[str, str]] = {
 def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
     """The ``Recording`` of ``crowd`` ("eth" or "hotel") from ``data_dir`` (default: ``$CROWDMPC_DATA``);
     PipelineError naming what is missing, DatasetFormatError for a broken file."""
-    from predictors.data.locate import raw_ewap_dir, resolve_data_dir
+    from predictors.data.locate import DATA_ENV, raw_ewap_dir, resolve_data_dir
 
     if crowd not in SEQUENCES:
         raise PipelineError(f"crowd {crowd!r} is no recording; choose from {list(SEQUENCES)}")
+    if data_dir is None and not os.environ.get(DATA_ENV):
+        raise PipelineError(
+            f"crowd {crowd!r} replays the raw BIWI tracks: set {DATA_ENV} to the folder holding raw_ewap/ "
+            "(data/README.md)"
+        )
     directory = resolve_data_dir(data_dir).resolve()
     raw = raw_ewap_dir(directory)
     if raw is None:

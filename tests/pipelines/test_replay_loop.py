@@ -168,3 +168,29 @@ def test_compiling_counts_every_crowd_size_a_replayed_cell_meets():
     episodes = math.ceil(COMPILE_S["joint"] / SAVING_PER_EPISODE_S["joint"])  # one NLP's compile, not eight
     assert jit_pays([full], episodes) and not jit_pays([replayed], episodes)
     assert jit_pays([replayed], 8 * episodes)
+
+
+def test_a_replayed_run_without_its_data_or_with_iterations_is_refused_before_any_work(
+    monkeypatch, tmp_path, capsys
+):
+    monkeypatch.delenv("CROWDMPC_DATA", raising=False)
+    run = ["simulate", "--controller", "cmpc", "--episodes", "1", "--no-progress"]
+    code, out, err = run_cli(capsys, *run, "--crowd", "eth")
+    assert code == 2 and out == ""  # no episode ran
+    assert one_line(err).endswith(
+        "--crowd eth: crowd 'eth' replays the raw BIWI tracks: set CROWDMPC_DATA to the folder holding "
+        "raw_ewap/ (data/README.md)"
+    )
+    monkeypatch.setenv("CROWDMPC_DATA", str(tmp_path))
+    sweep = ["sweep", "--experiment", "table2", "--set", "env.crowd=hotel", "--out", str(tmp_path / "s")]
+    code, _, err = run_cli(capsys, *sweep)
+    assert code == 2 and not (tmp_path / "s").exists()
+    named = "--set env.crowd hotel: crowd 'hotel' replays the raw BIWI tracks, and the data directory"
+    assert f"{named} {tmp_path} holds no raw_ewap/seq_hotel/obsmat.txt" in one_line(err)
+    code, _, err = run_cli(
+        capsys, *run, "--crowd", "eth", "--record-iterations", "--record", str(tmp_path / "r")
+    )
+    assert code == 2 and one_line(err).endswith(
+        "--record-iterations: among a replayed crowd (--crowd eth) a controller records no predictions (they "
+        "are of the people tracked now only); record without the iterations"
+    )

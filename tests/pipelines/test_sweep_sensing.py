@@ -170,7 +170,8 @@ def test_sweep_sensor_range_runs_every_method_behind_the_sensor_and_reports_it(t
         (
             ["--experiment", "sensing", "--set", "controller.record_iterations=true"],
             "--set controller.record_iterations: methods ['4 m', '3 m', '2 m', '3 m untracked'] of "
-            "experiment 'sensing' run behind a sensor, whose controllers record no predictions",
+            "experiment 'sensing' run behind a sensor or among a replayed crowd, whose controllers record no "
+            "predictions",
         ),
         (
             ["--experiment", "table2", "--sensor-range", "0"],
