@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Final
 
 import numpy as np
@@ -87,6 +88,25 @@ class Recording:
         return np.flatnonzero(span == steps * self.frame_step)
 
     def flow(self) -> tuple[np.ndarray, np.ndarray]:
+        """The crowd's centre and main direction (``_flow``), computed once: a whole sequence's take 15 ms,
+        and every episode's reset turns the recording by them."""
+        return self._flow
+
+    def turned(self, scenario: str) -> np.ndarray:
+        """``positions`` moved to the centre and turned so that the main flow runs along x ("perpendicular":
+        across the robots' path) or y ("circle": along it); kept per scenario (a whole sequence's take 20 ms,
+        an episode's reset needs one)."""
+        kept = self.__dict__.setdefault("_turned", {})  # frozen: the cache is no field
+        if scenario not in kept:
+            centre, direction = self.flow()
+            target = math.pi / 2 if scenario == "circle" else 0.0
+            angle = target - math.atan2(direction[1], direction[0])
+            c, s = math.cos(angle), math.sin(angle)
+            kept[scenario] = (self.positions - centre) @ np.array([[c, -s], [s, c]]).T
+        return kept[scenario]
+
+    @cached_property
+    def _flow(self) -> tuple[np.ndarray, np.ndarray]:
         """The crowd's centre (median tracked position) and main direction (unit principal axis of its
         pedestrians' steps, turned to point along +x, or +y when it is the y axis: an eigenvector's sign is
         the solver's)."""
@@ -135,7 +155,7 @@ def replay_episode(
     pedestrians near the robots' path (module docstring); SimulationError when ``WINDOW_TRIES`` draws find
     none."""
     robot_starts, robot_goals = robot_layout(n_robots, formation)
-    turned = _turned(recording, scenario)
+    turned = recording.turned(scenario)
     starts = recording.window_starts(past + steps)
     if len(starts) == 0:
         raise SimulationError(
@@ -180,17 +200,6 @@ def _grid(frames: np.ndarray, step: int) -> np.ndarray:
         else:
             filled.append(np.array([after]))
     return np.concatenate(filled)
-
-
-def _turned(recording: Recording, scenario: str) -> np.ndarray:
-    """``recording.positions`` moved to the centre and turned so that its main flow runs along x
-    ("perpendicular": across the robots' path) or y ("circle": along it)."""
-    centre, direction = recording.flow()
-    target = math.pi / 2 if scenario == "circle" else 0.0
-    angle = target - math.atan2(direction[1], direction[0])
-    c, s = math.cos(angle), math.sin(angle)
-    rotation = np.array([[c, -s], [s, c]])
-    return (recording.positions - centre) @ rotation.T
 
 
 def _clear_start(first_row: np.ndarray, robot_starts: np.ndarray, radius: float) -> bool:
