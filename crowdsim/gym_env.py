@@ -76,13 +76,14 @@ Per-robot info arrays have ``max_robots`` rows, as the action and the observatio
 (``crowdsim.plotting``) into a ``(480, 640, 3)`` uint8 array.
 
 The observation's array and bounds and ``ComparableObservation`` are built in crowdsim.gym_observation, the
-reward and the step's distances in crowdsim.gym_reward; this module exports their names.
+reward and the step's distances in crowdsim.gym_reward; this module exports their names. ``reset``'s options
+are checked in crowdsim.gym_options.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import fields, replace
+from dataclasses import replace
 from typing import Any, Final
 
 import gymnasium as gym
@@ -103,6 +104,7 @@ from crowdsim.gym_observation import (
     observation_array,
     observation_bounds,
 )
+from crowdsim.gym_options import episode_options
 from crowdsim.gym_reward import RewardConfig, robot_pair_info, step_closest, surface_distances
 from crowdsim.metrics import (
     COLLISION_DISTANCE,
@@ -111,7 +113,7 @@ from crowdsim.metrics import (
     episode_metrics,
     segments_intersect,
 )
-from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, Layout, check_sizes, checked_layout
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, check_sizes
 from crowdsim.world import DT, PAPER_ROBOTS
 
 __all__ = [
@@ -128,8 +130,6 @@ __all__ = [
     "surface_distances",
 ]
 
-RESET_OPTIONS: Final[tuple[str, ...]] = ("scenario", "n_humans", "n_robots", "layout")
-LAYOUT_SCENARIO: Final[str] = "layout"  # the scenario an episode from options["layout"] reports
 RENDER_SIZE: Final[tuple[float, float]] = (8.0, 6.0)  # inches at RENDER_DPI: 640 x 480 pixels
 RENDER_DPI: Final[int] = 80
 
@@ -234,7 +234,8 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         the generator when ``seed`` is None, a layout's too, so that the episodes after it are the same
         whichever layouts came between."""
         super().reset(seed=seed)
-        chosen = self._episode_options(options)
+        defaults = {"scenario": self.scenario, "n_humans": self.n_humans, "n_robots": self.n_robots}
+        chosen = episode_options(options, defaults, self.scene_limit, self.max_humans, self.max_robots)
         drawn = int(self.np_random.integers(0, 2**31 - 1)) if seed is None else int(seed)
         episode_seed: int | None = drawn
         if "layout" in chosen:
@@ -355,49 +356,6 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         return dict(self._episode)
 
     # ---- internals ---------------------------------------------------------------------------------------
-
-    def _episode_options(self, options: dict[str, Any] | None) -> dict[str, Any]:
-        chosen: dict[str, Any] = {
-            "scenario": self.scenario,
-            "n_humans": self.n_humans,
-            "n_robots": self.n_robots,
-        }
-        if options is None:
-            return chosen
-        if not isinstance(options, dict):
-            raise SimulationError(f"reset options must be a dict, got {type(options).__name__}")
-        unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
-        if unknown:
-            raise SimulationError(f"unknown reset options {unknown}; choose from {list(RESET_OPTIONS)}")
-        if "layout" in options:
-            layout = options["layout"]
-            others = sorted(k for k in options if k != "layout")
-            if others:
-                raise SimulationError(f"reset option 'layout' sets the agents; drop {others}")
-            if not isinstance(layout, Layout):
-                raise SimulationError(f"options['layout'] must be a Layout, got {type(layout).__name__}")
-            layout = checked_layout(layout)  # shapes and numbers first: the bounds are read off its arrays
-            if not all(np.all(np.abs(getattr(layout, f.name)) <= self.scene_limit) for f in fields(Layout)):
-                raise SimulationError(
-                    f"options['layout']: starts and goals must lie within ±{self.scene_limit:g} m "
-                    "(the observation's bounds assume so)"
-                )
-            sizes = {"n_humans": len(layout.human_starts), "n_robots": len(layout.robot_starts)}
-            chosen = {"scenario": LAYOUT_SCENARIO, **sizes, "layout": layout}
-        else:
-            chosen.update(options)
-            check_sizes(chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
-        if chosen["n_humans"] > self.max_humans:
-            raise SimulationError(
-                f"options: n_humans={chosen['n_humans']} exceeds this environment's max_humans="
-                f"{self.max_humans}; make it with max_humans={chosen['n_humans']}"
-            )
-        if not 1 <= chosen["n_robots"] <= self.max_robots:
-            raise SimulationError(
-                f"options: n_robots must be in [1, max_robots={self.max_robots}], got {chosen['n_robots']}"
-            )
-        chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
-        return chosen
 
     def _episode_metrics(self, contact_ended: bool) -> EpisodeMetrics:
         """The episode's ``crowdsim.metrics`` metrics with the outcome this environment gave it: those read

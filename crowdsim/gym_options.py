@@ -1,0 +1,65 @@
+"""The reset options of ``crowdmpc/CrowdNav-v0`` (crowdsim.gym_env, whose ``reset`` documents them): the
+episode's scenario and sizes, or a hand-built ``Layout``, checked against the environment's spaces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from typing import Any, Final
+
+import numpy as np
+
+from crowdsim.errors import SimulationError
+from crowdsim.scenarios import Layout, check_sizes, checked_layout
+
+RESET_OPTIONS: Final[tuple[str, ...]] = ("scenario", "n_humans", "n_robots", "layout")
+LAYOUT_SCENARIO: Final[str] = "layout"  # the scenario an episode from options["layout"] reports
+
+
+def episode_options(
+    options: dict[str, Any] | None,
+    defaults: dict[str, Any],
+    scene_limit: float,
+    max_humans: int,
+    max_robots: int,
+) -> dict[str, Any]:
+    """The episode's ``scenario``, ``n_humans`` and ``n_robots`` (and ``layout`` for a hand-built one):
+    ``defaults`` (the constructor's) updated by ``options``; SimulationError for options the environment's
+    spaces (``scene_limit`` m, ``max_humans``, ``max_robots``) cannot hold."""
+    chosen = dict(defaults)
+    if options is None:
+        return chosen
+    if not isinstance(options, dict):
+        raise SimulationError(f"reset options must be a dict, got {type(options).__name__}")
+    unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
+    if unknown:
+        raise SimulationError(f"unknown reset options {unknown}; choose from {list(RESET_OPTIONS)}")
+    if "layout" in options:
+        layout = options["layout"]
+        others = sorted(k for k in options if k != "layout")
+        if others:
+            raise SimulationError(f"reset option 'layout' sets the agents; drop {others}")
+        if not isinstance(layout, Layout):
+            raise SimulationError(f"options['layout'] must be a Layout, got {type(layout).__name__}")
+        layout = checked_layout(layout)  # shapes and numbers first: the bounds are read off its arrays
+        if not all(np.all(np.abs(getattr(layout, f.name)) <= scene_limit) for f in fields(Layout)):
+            raise SimulationError(
+                f"options['layout']: starts and goals must lie within ±{scene_limit:g} m "
+                "(the observation's bounds assume so)"
+            )
+        sizes = {"n_humans": len(layout.human_starts), "n_robots": len(layout.robot_starts)}
+        chosen = {"scenario": LAYOUT_SCENARIO, **sizes, "layout": layout}
+    else:
+        chosen.update(options)
+        check_sizes(chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
+    if chosen["n_humans"] > max_humans:
+        raise SimulationError(
+            f"options: n_humans={chosen['n_humans']} exceeds this environment's max_humans="
+            f"{max_humans}; make it with max_humans={chosen['n_humans']}"
+        )
+    if not 1 <= chosen["n_robots"] <= max_robots:
+        raise SimulationError(
+            f"options: n_robots must be in [1, max_robots={max_robots}], got {chosen['n_robots']}"
+        )
+    chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
+    return chosen
