@@ -185,6 +185,11 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         config = EnvConfig() if config is None else config
         if not isinstance(config, EnvConfig):
             raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
+        if config.crowd != "orca":  # its observation has no room for people who come and go
+            raise SimulationError(
+                f"the gymnasium environment runs ORCA's crowds; crowd {config.crowd!r} is replayed by the "
+                "closed loop (simulate, sweep, run_episodes: docs/replayed_crowds.md)"
+            )
         reward = RewardConfig() if reward is None else reward
         if not isinstance(reward, RewardConfig):
             raise SimulationError(f"reward must be a RewardConfig, got {type(reward).__name__}")

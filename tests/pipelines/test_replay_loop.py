@@ -194,3 +194,13 @@ def test_a_replayed_run_without_its_data_or_with_iterations_is_refused_before_an
         "--record-iterations: among a replayed crowd (--crowd eth) a controller records no predictions (they "
         "are of the people tracked now only); record without the iterations"
     )
+
+
+def test_the_gymnasium_environment_says_it_runs_orcas_crowds_only():
+    from crowdsim.errors import SimulationError
+    from crowdsim.gym_env import CrowdNavEnv
+
+    with pytest.raises(
+        SimulationError, match="runs ORCA's crowds; crowd 'hotel' is replayed by the closed loop"
+    ):
+        CrowdNavEnv(config=EnvConfig(crowd="hotel"))
