@@ -146,14 +146,17 @@ def test_the_cycle_check_finds_a_cycle(tmp_path, monkeypatch):
         layering.test_no_import_cycles_anywhere()
 
 
-# STYLE: modules small and named for what they hold. The subcommands grow with every option, so theirs is
-# checked: a command past this moves a cohesive piece into a module of its own (train_net, simulate_table).
-MAX_COMMAND_LINES = 400
+# STYLE: modules small and named for what they hold. A module past this moves a cohesive piece into a module
+# of its own (train_net, simulate_table, experiments/methods, crowdsim/distances): the subcommands were
+# checked first, as they grow with every option; five modules of the packages had passed 400 unchecked.
+MAX_MODULE_LINES = 400
 
 
-def test_the_command_modules_stay_small():
+def test_the_modules_stay_small():
     sizes = {
-        path.name: len(path.read_text().splitlines())
-        for path in sorted((ROOT / "pipelines" / "commands").glob("*.py"))
+        str(path.relative_to(ROOT)): len(path.read_text().splitlines())
+        for package in ("crowdsim", "mpc", "predictors", "pipelines")
+        for path in sorted((ROOT / package).rglob("*.py"))
     }
-    assert not {name: n for name, n in sizes.items() if n > MAX_COMMAND_LINES}
+    assert len(sizes) > 150  # every module of the four packages, subpackages included
+    assert not {name: n for name, n in sizes.items() if n > MAX_MODULE_LINES}
