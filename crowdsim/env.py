@@ -32,11 +32,12 @@ Goals (``goal_assignment``): "fixed" (paper) gives robot ``i`` goal ``i`` for th
 goals are a formation to fill, and after every step each robot holds the goal crowdsim.slots' matching gives
 it (``Observation.robot_goals``, and the trajectory's goals are those held at the end).
 
-Replayed crowds (``EnvConfig.crowd`` "eth" or "hotel", crowdsim.replay): the humans are real tracks, played
-back row by row instead of step 1 and 3; ``reset`` draws the window and the pedestrians from the seed, and
-the ``Recording`` is given to ``CrowdEnv`` (pipelines.loop.replay_data reads it from the BIWI data).
-``Observation.human_present`` and ``Trajectory.human_present`` say which humans are tracked at each step;
-the others stand where their track begins or ends, and the metrics leave them out.
+Replayed crowds (``EnvConfig.crowd`` "eth", "hotel", "eth_test" or "hotel_test", crowdsim.replay): the
+humans are real tracks, played back row by row instead of steps 1 and 3; ``reset`` draws the window and the
+pedestrians from the seed, and the ``Recording`` is given to ``CrowdEnv`` (pipelines.loop.replay_data reads
+it from the BIWI data). ``Observation.human_present`` and ``Trajectory.human_present`` say which humans are
+tracked at each step; the others stand where their track begins or ends, and the metrics leave them out.
+A controller must be handed the tracked ones alone, as the closed loop does (pipelines.loop.sensing).
 
 This module holds what a controller sees (``Observation``) and the simulator (``CrowdEnv``); their settings,
 ``EnvConfig`` and the bounds it checks, are crowdsim.env_config (``EnvConfig`` is importable from here too,
@@ -55,7 +56,7 @@ from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.metrics import Trajectory
 from crowdsim.orca import orca_velocities, preferred_velocities
-from crowdsim.replay import Recording, ReplayEpisode, replay_episode
+from crowdsim.replay import REPLAYED, Recording, ReplayEpisode, replay_episode
 from crowdsim.scenarios import (
     Layout,
     check_sizes,
@@ -126,7 +127,8 @@ class CrowdEnv:
             raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
         if config.crowd == "orca" and recording is not None:
             raise SimulationError(
-                "a recording replays a crowd: give it with EnvConfig(crowd='eth' or 'hotel'), not 'orca'"
+                f"a recording replays a crowd: give it with EnvConfig(crowd=...) one of {list(REPLAYED)}, "
+                "not 'orca'"
             )
         if config.crowd != "orca":
             if not isinstance(recording, Recording) or recording.name != config.crowd:
@@ -383,9 +385,7 @@ class CrowdEnv:
 
     def _positions_history(self) -> np.ndarray:
         length = self.config.history_len
-        if (
-            self._replay is not None
-        ):  # the humans' rows, with the past before the episode, are the recording's
+        if self._replay is not None:  # the humans' rows, the past before the episode too, are the recording's
             robots = self._rp_log[-length:]
             robots = [robots[0]] * (length - len(robots)) + robots
             now = self._replay.past + self._step

@@ -85,6 +85,12 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
             f"EnvConfig.history_len, from [world] obs_len): {_keep_more(obs_len)}"
         )
     history = history[-obs_len:]
+    if obs.human_present is not None and not np.all(obs.human_present):
+        raise PipelineError(
+            "the observation holds humans a replayed crowd does not track now (obs.human_present False): "
+            "hand the controller the tracked ones, as the closed loop does (pipelines.loop.sensing."
+            "RangeLimited(controller, math.inf))"
+        )
     observed = human_observed(obs)
     if observed is not None:  # a tracker's late arrivals: their padded rows become their tracks extended back
         history = backfill(history, np.concatenate([np.full(obs.n_robots, obs_len), observed]))

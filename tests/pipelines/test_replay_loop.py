@@ -204,3 +204,20 @@ def test_the_gymnasium_environment_says_it_runs_orcas_crowds_only():
         SimulationError, match="runs ORCA's crowds; crowd 'hotel' is replayed by the closed loop"
     ):
         CrowdNavEnv(config=EnvConfig(crowd="hotel"))
+
+
+def test_an_mpc_handed_people_who_are_not_there_says_how_the_loop_hands_them(data):
+    from crowdsim.env import CrowdEnv
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.replay_data import recording as read
+
+    env = CrowdEnv(EnvConfig(crowd="eth_test"), read("eth_test"))
+    obs = env.reset(0, "circle", 10, 3)
+    assert not obs.human_present.all()  # someone comes later
+    controller = make_controller(ControllerSpec("cmpc"))
+    with pytest.raises(PipelineError, match=r"does not track now .*RangeLimited\(controller, math.inf\)"):
+        controller.reset(obs)
+        controller.act(obs)
+    wrapped = RangeLimited(controller, math.inf)
+    wrapped.reset(obs)
+    assert wrapped.act(obs).accelerations.shape == (3, 2)
