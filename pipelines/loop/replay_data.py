@@ -9,7 +9,7 @@ scenes: those cut the tracks into 8-second windows, and an episode lasts up to 4
 The shipped nets were trained under the ``paper`` protocol on the first 70 % of the frames of both sequences
 (and validated on the next 10 %): a whole sequence replays people they have seen. "eth_test" and
 "hotel_test" replay the last 20 % alone, the TrajNet++ test split (``predictors.data.ewap.split_frames``),
-which none of them saw: ETH's is 116 s, Hotel's 144 s, so their episodes' windows overlap more.
+which none of them saw: ETH's spans 143 s, Hotel's 147 s, so their episodes' windows overlap more.
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ SEQUENCES: Final[dict[str, str]] = {
 
 
 def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
-    """The ``Recording`` of ``crowd`` ("eth" or "hotel") from ``data_dir`` (default: ``$CROWDMPC_DATA``);
-    PipelineError naming what is missing, DatasetFormatError for a broken file."""
+    """The ``Recording`` of ``crowd`` (a key of ``SEQUENCES``) from ``data_dir`` (default:
+    ``$CROWDMPC_DATA``); PipelineError naming what is missing, DatasetFormatError for a broken file."""
     from predictors.data.locate import DATA_ENV, raw_ewap_dir, resolve_data_dir
 
     if crowd not in SEQUENCES:
