@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdsim.replay import REPLAYED, Recording
+from crowdsim.replay import REPLAYED, Recording, track_lengths
 from crowdsim.world import HORIZON, OBS_LEN
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -38,22 +38,13 @@ GROUPS = {
 SHIPPED = ("constant_velocity", "vanilla_lstm_eth", "social_lstm_eth", "social_gan_eth", "social_lstm_synth")
 
 
-def tracked_run(tracked: np.ndarray) -> np.ndarray:
-    """``(F, P)`` int: the rows in a row each person has been tracked up to each row (0 where not)."""
-    run = np.zeros(tracked.shape, dtype=np.int64)
-    run[0] = tracked[0]
-    for k in range(1, len(tracked)):
-        run[k] = np.where(tracked[k], run[k - 1] + 1, 0)
-    return run
-
-
 def cases(
     rec: Recording, obs_len: int, horizon: int, every: int
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per evaluated row: the history ``(obs_len, N, 2)`` of everyone tracked there (held before their
     track), their track lengths ``(N,)`` and the true future ``(horizon, N, 2)`` (NaN where not tracked)."""
     tracked = np.isfinite(rec.positions[..., 0])
-    run = tracked_run(tracked)
+    run = track_lengths(tracked)
     out = []
     for t in range(obs_len - 1, len(rec.frames) - horizon, every):
         span = rec.frames[t + horizon] - rec.frames[t - obs_len + 1]

@@ -190,6 +190,16 @@ def replay_episode(
     )
 
 
+def track_lengths(present: np.ndarray) -> np.ndarray:
+    """``(F, P)`` int: the rows in a row each person of ``present (F, P)`` has been tracked up to each row,
+    0 where not (a track that ends and starts again counts afresh)."""
+    lengths = np.zeros(present.shape, dtype=np.int64)
+    lengths[0] = present[0]
+    for k in range(1, len(present)):
+        lengths[k] = np.where(present[k], lengths[k - 1] + 1, 0)
+    return lengths
+
+
 def _grid(frames: np.ndarray, step: int) -> np.ndarray:
     """``frames`` (sorted, distinct) with the frames of their grid that are missing between two of them: a
     gap that is a whole number of steps is filled, one that is not (another grid) is left."""
@@ -222,10 +232,7 @@ def _episode(
     """The chosen pedestrians' rows held outside their tracks, their velocities, presence and track
     lengths."""
     present = np.isfinite(window[..., 0])
-    observed = np.zeros(present.shape, dtype=np.int64)
-    observed[0] = present[0]
-    for k in range(1, len(present)):  # rows in a row: a track that ends and starts again counts afresh
-        observed[k] = np.where(present[k], observed[k - 1] + 1, 0)
+    observed = track_lengths(present)
     rows = np.arange(len(window))[:, None]
     first_row = present.argmax(axis=0)
     last_row = len(window) - 1 - present[::-1].argmax(axis=0)
