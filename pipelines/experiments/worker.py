@@ -15,7 +15,6 @@ different run than the recorded metrics would mislead; recording costs about 5% 
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
 import resource
@@ -233,16 +232,14 @@ class EpisodeWorker:
         if key in self._controllers:
             self._controllers.move_to_end(key)
             return self._controllers[key]
-        cell = task.cell
-        env_config = cell.world.env_config()
-        controller = make_controller(cell.spec, env_config, jit=self.jit)
-        if cell.world.sensor_range is not None or cell.world.crowd != "orca":  # a replay: the tracked humans
-            from pipelines.loop.episode import behind_sensor
+        from pipelines.loop.episode import behind_sensor
 
-            radius = math.inf if cell.world.sensor_range is None else cell.world.sensor_range
-            controller = behind_sensor(
-                controller, radius, cell.world.sensor_tracks, cell.n_robots, cell.n_humans
-            )
+        cell, world = task.cell, task.cell.world
+        env_config = world.env_config()
+        controller = make_controller(cell.spec, env_config, jit=self.jit)
+        controller = behind_sensor(
+            controller, world.sensor_range, world.sensor_tracks, cell.n_robots, cell.n_humans, world.crowd
+        )
         self.builds += 1
         self._controllers[key] = controller
         self._configs[key] = cell_config(controller, env_config)

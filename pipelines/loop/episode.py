@@ -218,9 +218,7 @@ def run_episodes(
             "sensor_range too (metres)"
         )
     controller = make_controller(spec, env_config)
-    if sensor_range is not None or env_config.crowd != "orca":  # a replay's: the humans it tracks now
-        radius = math.inf if sensor_range is None else sensor_range
-        controller = behind_sensor(controller, radius, sensor_tracks, n_robots, n_humans)
+    controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans, env_config.crowd)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
@@ -255,13 +253,22 @@ def run_episodes(
 
 
 def behind_sensor(
-    controller: Controller, radius: float, tracks: bool, n_robots: int, n_humans: int
+    controller: Controller,
+    radius: float | None,
+    tracks: bool,
+    n_robots: int,
+    n_humans: int,
+    crowd: str = "orca",
 ) -> Controller:
-    """``controller`` behind a sensor of range ``radius`` (RangeLimited), an MPC's every crowd size up to
-    ``n_humans`` built, for ``n_robots`` robots."""
+    """``controller`` behind a sensor of range ``radius`` (RangeLimited), and among a replayed ``crowd``
+    shown only the people tracked now (at every distance when ``radius`` is None), an MPC's every crowd size
+    up to ``n_humans`` built, for ``n_robots`` robots; ``controller`` itself with neither."""
     from pipelines.loop.mpc import MPCController
     from pipelines.loop.sensing import RangeLimited
 
+    if radius is None and crowd == "orca":
+        return controller
+    radius = math.inf if radius is None else radius
     sensed = RangeLimited(controller, radius, report_tracks=tracks)  # refuses a radius that is no distance
     if isinstance(controller, MPCController):
         controller.prepare(n_robots, range(n_humans + 1))  # inside the steps, builds would count as solves
