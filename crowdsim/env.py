@@ -37,17 +37,19 @@ humans are real tracks, played back row by row instead of steps 1 and 3; ``reset
 pedestrians from the seed, and the ``Recording`` is given to ``CrowdEnv`` (pipelines.loop.replay_data reads
 it from the BIWI data). ``Observation.human_present`` and ``Trajectory.human_present`` say which humans are
 tracked at each step; the others stand where their track begins or ends, and the metrics leave them out.
-A controller must be handed the tracked ones alone, as the closed loop does (pipelines.loop.sensing).
+A controller must be handed the tracked ones alone, as the closed loop does (pipelines.loop.sensing). The
+reactive replays ("eth_reactive", ..., crowdsim.reaction) bend the tracks where ORCA has a person yield to a
+robot (with ``robots_visible``; unseen robots leave the plain replay).
 
-This module holds what a controller sees (``Observation``) and the simulator (``CrowdEnv``); their settings,
-``EnvConfig`` and the bounds it checks, are crowdsim.env_config (``EnvConfig`` is importable from here too,
-as ``CrowdEnv``'s argument: plugins and pipelines.config take it from here).
+This module holds the simulator (``CrowdEnv``); what a controller sees (``Observation``) is
+crowdsim.observation, its settings (``EnvConfig`` and the bounds it checks) crowdsim.env_config; both are
+importable from here too, as ``CrowdEnv``'s argument and answer: plugins and pipelines.config take them from
+here.
 """
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,8 +57,10 @@ import numpy as np
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import LayoutWarning, SimulationError
 from crowdsim.metrics import Trajectory
+from crowdsim.observation import Observation
 from crowdsim.orca import orca_velocities, preferred_velocities
-from crowdsim.replay import REPLAYED, Recording, ReplayEpisode, replay_episode
+from crowdsim.reaction import reactive_step, reacts
+from crowdsim.replay import REPLAYED, Recording, ReplayEpisode, recorded, replay_episode
 from crowdsim.scenarios import (
     Layout,
     check_sizes,
@@ -67,39 +71,6 @@ from crowdsim.scenarios import (
 )
 from crowdsim.slots import match_slots
 from crowdsim.world import PAPER_ROBOTS
-
-
-@dataclass(frozen=True)
-class Observation:
-    """What a controller sees at one step (robots first, then humans, everywhere agents are stacked)."""
-
-    time: float  # s since episode start
-    step: int
-    robot_positions: np.ndarray  # (M, 2) m
-    robot_velocities: np.ndarray  # (M, 2) m/s
-    robot_goals: np.ndarray  # (M, 2) m
-    robot_last_actions: np.ndarray  # (M, 2) m/s^2, last applied (clipped) acceleration, zeros at start
-    robot_reached: np.ndarray  # (M,) bool, robot has reached its goal (within its radius)
-    human_positions: np.ndarray  # (N, 2) m
-    human_velocities: np.ndarray  # (N, 2) m/s
-    human_goals: np.ndarray  # (N, 2) m
-    history: np.ndarray  # (history_len, M+N, 2) last positions, robots first; row -1 = now; padded at start
-    radius: float  # m, every agent
-    dt: float  # s
-    # (N,) int, the positions of each human really observed, padding excluded (a tracker's track lengths; the
-    # MPC replaces the padding, predictors/backfill.py); None: step + 1 for every human, as in the simulator,
-    # where all are present from the start
-    human_observed: np.ndarray | None = None
-    # (N,) bool, the humans tracked now in a replayed crowd (crowdsim.replay); None: every human is there
-    human_present: np.ndarray | None = None
-
-    @property
-    def n_robots(self) -> int:
-        return len(self.robot_positions)
-
-    @property
-    def n_humans(self) -> int:
-        return len(self.human_positions)
 
 
 def _warn_pairs(pairs: list[tuple[str, str, float]], what: str, radius: float, meaning: str) -> None:
@@ -131,9 +102,10 @@ class CrowdEnv:
                 "not 'orca'"
             )
         if config.crowd != "orca":
-            if not isinstance(recording, Recording) or recording.name != config.crowd:
+            name = recorded(config.crowd)
+            if not isinstance(recording, Recording) or recording.name != name:
                 raise SimulationError(
-                    f"crowd {config.crowd!r} needs its Recording (named {config.crowd!r}), got "
+                    f"crowd {config.crowd!r} needs its Recording (named {name!r}), got "
                     f"{type(recording).__name__}; pipelines.loop.replay_data.recording reads it"
                 )
         self.config = config
@@ -246,10 +218,7 @@ class CrowdEnv:
                 f"with {int((~np.isfinite(a)).sum())} non-finite entries"
             )
 
-        if self._replay is not None:  # real tracks played back: nobody in them reacts
-            hv_new, lp3 = self._replay.velocities[self._replay.past + self._step + 1], np.zeros(0, dtype=bool)
-        else:
-            hv_new, lp3 = self._orca_velocities()
+        hp_new, hv_new, lp3 = self._humans_next()
 
         # Robots: clip the acceleration so that |a| <= a_max and |v + dt a| <= v_max, per component.
         lo = np.maximum(-cfg.a_max, (-cfg.v_max - self._rv) / cfg.dt)
@@ -259,11 +228,7 @@ class CrowdEnv:
         self._rp = self._rp + cfg.dt * self._rv + 0.5 * cfg.dt**2 * a_applied
         self._rv = rv_new
         self._ra = a_applied
-        if self._replay is None:
-            self._hp = self._hp + cfg.dt * hv_new
-        else:  # where the recording has it (its step, not dt times a rounded velocity)
-            self._hp = self._replay.positions[self._replay.past + self._step + 1]
-        self._hv = hv_new
+        self._hp, self._hv = hp_new, hv_new
         self._step += 1
         if cfg.goal_assignment == "slots":
             self._match_slots()
@@ -313,6 +278,29 @@ class CrowdEnv:
         )
 
     # ---- internals ---------------------------------------------------------------------------------------
+
+    def _humans_next(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The humans' positions and velocities one step on, decided from the current state of everyone
+        (before any agent moves), and which humans' ORCA linear program was infeasible."""
+        cfg = self.config
+        if self._replay is None:
+            velocities, lp3 = self._orca_velocities()
+            return self._hp + cfg.dt * velocities, velocities, lp3
+        row = self._replay.past + self._step
+        if reacts(cfg.crowd) and cfg.robots_visible:
+            return reactive_step(
+                self._replay,
+                row,
+                self._hp,
+                self._hv,
+                self._rp,
+                self._rv,
+                radius=cfg.radius + cfg.orca_radius_margin,
+                params=cfg.orca,
+                dt=cfg.dt,
+            )
+        # real tracks played back, where the recording has them (its step, not dt times a rounded velocity)
+        return self._replay.positions[row + 1], self._replay.velocities[row + 1], np.zeros(0, dtype=bool)
 
     def _orca_velocities(self) -> tuple[np.ndarray, np.ndarray]:
         """Every human's ORCA velocity, decided from the current state of everyone it sees (before any
@@ -385,11 +373,10 @@ class CrowdEnv:
 
     def _positions_history(self) -> np.ndarray:
         length = self.config.history_len
-        if self._replay is not None:  # the humans' rows, the past before the episode too, are the recording's
+        if self._replay is not None:  # the humans' rows before the episode are the recording's
             robots = self._rp_log[-length:]
             robots = [robots[0]] * (length - len(robots)) + robots
-            now = self._replay.past + self._step
-            humans = self._replay.positions[now + 1 - length : now + 1]
+            humans = (list(self._replay.positions[self._step : self._replay.past]) + self._hp_log)[-length:]
             return np.stack([np.concatenate([r, h]) for r, h in zip(robots, humans, strict=True)])
         recent = list(zip(self._rp_log[-length:], self._hp_log[-length:], strict=True))
         # At the start of an episode the missing past is the initial position repeated (standing still).

@@ -95,9 +95,10 @@ def preferred_velocities(
 
 
 def nearest_neighbors(
-    positions: np.ndarray, agents: np.ndarray, params: OrcaParams
+    positions: np.ndarray, agents: np.ndarray, params: OrcaParams, seen: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The neighbours of each agent in ``agents``, nearest first, as RVO2's k-d tree query returns them.
+    """The neighbours of each agent in ``agents``, nearest first, as RVO2's k-d tree query returns them;
+    only agents in ``seen`` (default: all) are anyone's neighbours.
 
     Returns ``(index (S, K), valid (S, K))`` with ``K = min(max_neighbors, A - 1)``; the valid entries of a
     row form a prefix. Distance ties keep the lower index first.
@@ -109,6 +110,10 @@ def nearest_neighbors(
     diff = positions[None, :, :] - positions[agents, None, :]
     dist_sq = np.einsum("sai,sai->sa", diff, diff)
     dist_sq[np.arange(len(agents)), agents] = np.inf  # an agent is not its own neighbour
+    if seen is not None:
+        unseen = np.ones(n_agents, dtype=bool)
+        unseen[seen] = False
+        dist_sq[:, unseen] = np.inf  # never below neighbor_dist squared, even an infinite one
     order = np.argsort(dist_sq, axis=1, kind="stable")[:, :k]
     valid = np.take_along_axis(dist_sq, order, axis=1) < params.neighbor_dist**2
     return order, valid
@@ -121,15 +126,17 @@ def orca_halfplanes(
     agents: np.ndarray,
     params: OrcaParams,
     dt: float,
+    seen: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The ORCA lines of every agent in ``agents`` against its neighbours, in RVO2's order.
+    """The ORCA lines of every agent in ``agents`` against its neighbours (among ``seen``, default all), in
+    RVO2's order.
 
     positions, velocities: ``(A, 2)``; radii: ``(A,)`` m (the radius RVO2 is given). A line is a point and a
     unit direction; the permitted velocities lie on its left (``det(direction, point - v) <= 0``).
     Returns ``points (S, K, 2)``, ``directions (S, K, 2)`` and ``counts (S,)``: row ``s`` holds
     ``counts[s]`` valid lines, the rest is padding.
     """
-    nbr, valid = nearest_neighbors(positions, agents, params)
+    nbr, valid = nearest_neighbors(positions, agents, params, seen)
     # Component arrays (S, K): cheaper than (S, K, 2) stacks for the few agents of a crowd.
     px, py = positions[:, 0], positions[:, 1]
     vx, vy = velocities[:, 0], velocities[:, 1]
@@ -300,10 +307,12 @@ def orca_velocities(
     params: OrcaParams,
     dt: float,
     agents: np.ndarray | None = None,
+    seen: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """New velocities of ``agents`` (default: all) as one RVO2 ``doStep`` would compute them.
 
-    positions, velocities: ``(A, 2)`` current state of every agent (each avoids all the others);
+    positions, velocities: ``(A, 2)`` current state of every agent (each avoids all the others, or those in
+    ``seen`` alone: a replayed person sees the robots, crowdsim.reaction);
     pref_velocities: ``(S, 2)`` for the agents in ``agents``; radii, max_speeds: scalars or ``(A,)``.
     dt is the simulation time step (used only when agents already overlap).
     Returns ``(velocities (S, 2), used_lp3 (S,) bool)``.
@@ -324,7 +333,7 @@ def orca_velocities(
     if len(agents) == 0 or n_agents < 2:
         return start, used_lp3
 
-    points, directions, counts = orca_halfplanes(positions, velocities, radii, agents, params, dt)
+    points, directions, counts = orca_halfplanes(positions, velocities, radii, agents, params, dt, seen)
     k = points.shape[1]
     slot_valid = np.arange(k)[None, :] < counts[:, None]
     off = points - start[:, None, :]

@@ -4,7 +4,9 @@ ORCA's humans are the paper's crowd, and a learned predictor trained on real peo
 never saw: a crowd that walks straight at its preferred speed and yields to everyone at once. A replayed
 crowd is the other test: the humans are real tracks, played back exactly, at their own speeds, in groups,
 stopping and turning as they did. They do not react to the robots (nobody in the recording saw one), so a
-robot that cuts in front of a person is not avoided; the metrics say how close it came.
+robot that cuts in front of a person is not avoided; the metrics say how close it came. The reactive
+replays (``REACTIVE``: "eth_reactive", ..., "hotel_test_reactive") play the same episodes with people who
+yield to the robots as ORCA's humans do (crowdsim.reaction).
 
 A ``Recording`` is a sequence's tracks on its time grid, NaN where a pedestrian is not tracked. An episode
 (``replay_episode``) takes a window of it as long as the episode may last, moved and turned so that the
@@ -44,7 +46,10 @@ from crowdsim.scenarios import Formation, robot_layout
 # The BIWI EWAP sequences seq_eth and seq_hotel, whole or their last 20 % of frames alone: the TrajNet++ test
 # split, which no shipped net was trained or validated on (pipelines.loop.replay_data)
 REPLAYED: Final[tuple[str, ...]] = ("eth", "hotel", "eth_test", "hotel_test")
-CROWDS: Final[tuple[str, ...]] = ("orca", *REPLAYED)  # EnvConfig.crowd
+# The same recordings with people who yield to the robots (crowdsim.reaction), "eth_test_reactive" etc.
+REACTIVE_SUFFIX: Final[str] = "_reactive"
+REACTIVE: Final[tuple[str, ...]] = tuple(name + REACTIVE_SUFFIX for name in REPLAYED)
+CROWDS: Final[tuple[str, ...]] = ("orca", *REPLAYED, *REACTIVE)  # EnvConfig.crowd
 RECORDED_DT: Final[float] = 0.4  # s, BIWI's annotation rate (2.5 fps), so the only tau a replay runs at
 START_CLEARANCE: Final[float] = 0.2  # m beyond 2 radius between a robot's start and a present pedestrian
 # s of the window in which an episode's people are chosen: twice the 10 s a robot at 1 m/s takes across,
@@ -188,6 +193,16 @@ def replay_episode(
         f"{most}; {blocked} draws with enough had someone within {2.0 * radius + START_CLEARANCE:g} m of a "
         "start); use fewer humans"
     )
+
+
+def recorded(crowd: str) -> str | None:
+    """The recording ``crowd`` (one of ``CROWDS``) plays back, e.g. "eth_test" for "eth_test_reactive";
+    None for ORCA's crowd."""
+    if crowd not in CROWDS:
+        raise SimulationError(f"crowd must be one of {list(CROWDS)}, got {crowd!r}")
+    if crowd == "orca":
+        return None
+    return crowd.removesuffix(REACTIVE_SUFFIX)
 
 
 def track_lengths(present: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ import math
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
+from crowdsim.reaction import reacts
 from crowdsim.world import RADIUS
 
 # The statuses of control steps that the MPC's wall-time budget (mpc.time_limit_s) cut short: the IBR loop
@@ -36,12 +37,15 @@ def table_header(
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
     goals += "" if env_config.formation == "auto" else f"formation {env_config.formation} | "
-    goals += "" if env_config.crowd == "orca" else f"crowd {env_config.crowd} (replayed) | "
+    reactive = reacts(env_config.crowd)
+    if env_config.crowd != "orca":
+        goals += f"crowd {env_config.crowd} ({'replayed, yielding' if reactive else 'replayed'}) | "
     # a controller behind a sensor saw fewer humans than the metrics count: a result of another set-up
     if sim.sensor_range is not None:
         goals += f"sensor {sim.sensor_range:g} m{'' if sim.sensor_tracks else ' without tracks'} | "
-    # a replayed crowd sees no robot: the visibility does nothing there
-    conventions = run_meta["profile"] + ("" if env_config.crowd != "orca" else f"/{run_meta['visibility']}")
+    # a plain replayed crowd sees no robot: the visibility does nothing there
+    seeing = env_config.crowd == "orca" or reactive
+    conventions = run_meta["profile"] + (f"/{run_meta['visibility']}" if seeing else "")
     return (
         f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
         f"margins {spec.margins.label} | {conventions} | {goals}scenario {scenario.name} | "

@@ -312,8 +312,12 @@ def _check_scenario(cfg: RunConfig) -> None:
 def _with_crowd(experiment: Experiment, crowd: str) -> Experiment:
     """Every cell among the humans of ``crowd`` (--crowd): a BIWI sequence replayed (crowdsim.replay); the
     cells' keys name it, so they never mix with ORCA's."""
+    from crowdsim.replay import REACTIVE_SUFFIX
+
     worlds = {label: replace(own, crowd=crowd) for label, own in experiment.method_worlds.items()}
-    title = f"{experiment.title}; among the {crowd.upper()} pedestrians replayed"
+    recorded = crowd.removesuffix(REACTIVE_SUFFIX)
+    title = f"{experiment.title}; among the {recorded.upper()} pedestrians replayed"
+    title += ", yielding to the robots" if crowd.endswith(REACTIVE_SUFFIX) else ""
     if any(spec.predictor == "orca_oracle" for _, spec in experiment.methods):
         title += " (where orca_oracle is no oracle: it predicts ORCA humans)"
     return replace(

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 import numpy as np
 
 from crowdsim.metrics import ADDED_FLAGS
+from crowdsim.reaction import reacts
 from crowdsim.world import RADIUS
 
 if TYPE_CHECKING:
@@ -170,8 +171,10 @@ def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
     for sensing in sensings:
         parts.append(f"sensor range {sensing[0]}" if len(sensing) == 1 else "sensing per column")
     crowds = sorted({c.world.crowd for c in cells})
-    if crowds != ["orca"]:  # a replayed crowd sees no robot: its visibility setting does nothing
+    if crowds != ["orca"] and not any(map(reacts, crowds)):  # they see no robot: the visibility does nothing
         parts[2] = f"humans replayed from BIWI {', '.join(crowds)} (reacting to no one)"
+    elif crowds != ["orca"]:  # the reactive replays yield to the robots they see, as ORCA's humans do
+        parts.insert(2, f"humans replayed from BIWI {', '.join(crowds)} (yielding to visible robots)")
     line = f"{parts[0]}; " + ", ".join(parts[1:]) + "."
     per_column = None
     if len(set(worlds)) > 1:

@@ -1,6 +1,6 @@
 """The recordings a replayed crowd plays back (``[env] crowd = "eth" | "hotel" | "eth_test" | "hotel_test"``,
-crowdsim.replay), read from the raw BIWI annotations of the data directory (``$CROWDMPC_DATA``:
-``raw_ewap/seq_eth/obsmat.txt``).
+or their reactive replays "eth_reactive", ..., crowdsim.replay), read from the raw BIWI annotations of the
+data directory (``$CROWDMPC_DATA``: ``raw_ewap/seq_eth/obsmat.txt``).
 
 Read as TrajNet++'s converter reads them (predictors.data.ewap), once per process and data directory: a
 sweep's worker runs thousands of episodes from one recording. The raw files, not the prepared TrajNet++
@@ -21,7 +21,7 @@ from typing import Final
 
 import numpy as np
 
-from crowdsim.replay import Recording
+from crowdsim.replay import REACTIVE, REACTIVE_SUFFIX, Recording
 from pipelines.errors import PipelineError
 
 SEQUENCES: Final[dict[str, str]] = {
@@ -33,12 +33,15 @@ SEQUENCES: Final[dict[str, str]] = {
 
 
 def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
-    """The ``Recording`` of ``crowd`` (a key of ``SEQUENCES``) from ``data_dir`` (default:
-    ``$CROWDMPC_DATA``); PipelineError naming what is missing, DatasetFormatError for a broken file."""
+    """The ``Recording`` of ``crowd`` (a key of ``SEQUENCES``, or its reactive replay: "eth_test_reactive"
+    plays "eth_test") from ``data_dir`` (default: ``$CROWDMPC_DATA``); PipelineError naming what is missing,
+    DatasetFormatError for a broken file."""
     from predictors.data.locate import DATA_ENV, raw_ewap_dir, resolve_data_dir
 
-    if crowd not in SEQUENCES:
-        raise PipelineError(f"crowd {crowd!r} is no recording; choose from {list(SEQUENCES)}")
+    replayed = [*SEQUENCES, *REACTIVE]
+    if crowd not in replayed:
+        raise PipelineError(f"crowd {crowd!r} is no recording; choose from {replayed}")
+    crowd = crowd.removesuffix(REACTIVE_SUFFIX)
     if data_dir is None and not os.environ.get(DATA_ENV):
         raise PipelineError(
             f"crowd {crowd!r} replays the raw BIWI tracks: set {DATA_ENV} to the folder holding raw_ewap/ "

@@ -105,7 +105,8 @@ def test_a_crowd_that_is_none_is_refused_in_one_line(capsys):
     )
     code, _, err = run_cli(capsys, "simulate", "--controller", "cmpc", "--set", "env.crowd=zara")
     assert one_line(err).endswith(
-        "--set env.crowd: must be one of ['orca', 'eth', 'hotel', 'eth_test', 'hotel_test'], got 'zara'"
+        "--set env.crowd: must be one of ['orca', 'eth', 'hotel', 'eth_test', 'hotel_test', 'eth_reactive', "
+        "'hotel_reactive', 'eth_test_reactive', 'hotel_test_reactive'], got 'zara'"
     )
     assert code == 2
 

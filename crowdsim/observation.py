@@ -1,0 +1,41 @@
+"""What a controller sees at one step: ``Observation``, ``CrowdEnv``'s answer (crowdsim.env, which offers it
+too: plugins import it from there)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a controller sees at one step (robots first, then humans, everywhere agents are stacked)."""
+
+    time: float  # s since episode start
+    step: int
+    robot_positions: np.ndarray  # (M, 2) m
+    robot_velocities: np.ndarray  # (M, 2) m/s
+    robot_goals: np.ndarray  # (M, 2) m
+    robot_last_actions: np.ndarray  # (M, 2) m/s^2, last applied (clipped) acceleration, zeros at start
+    robot_reached: np.ndarray  # (M,) bool, robot has reached its goal (within its radius)
+    human_positions: np.ndarray  # (N, 2) m
+    human_velocities: np.ndarray  # (N, 2) m/s
+    human_goals: np.ndarray  # (N, 2) m
+    history: np.ndarray  # (history_len, M+N, 2) last positions, robots first; row -1 = now; padded at start
+    radius: float  # m, every agent
+    dt: float  # s
+    # (N,) int, the positions of each human really observed, padding excluded (a tracker's track lengths; the
+    # MPC replaces the padding, predictors/backfill.py); None: step + 1 for every human, as in the simulator,
+    # where all are present from the start
+    human_observed: np.ndarray | None = None
+    # (N,) bool, the humans tracked now in a replayed crowd (crowdsim.replay); None: every human is there
+    human_present: np.ndarray | None = None
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.robot_positions)
+
+    @property
+    def n_humans(self) -> int:
+        return len(self.human_positions)
