@@ -1,9 +1,14 @@
 """Who walks into whom among a replayed crowd: each contact's speeds and where it happens.
 
 Replayed people do not react to the robots (crowdsim.replay), so a contact is either a robot that drove into
-someone or someone who walked into a robot that could not get away. For the closest robot-human pair of
-each episode with contact (< 0.6 m, among tracked people), at the state where it is closest: the person's
-speed and the robot's over the step before, and the robot's distance from its start and its goal.
+someone or someone who walked into a robot that could not get away; a reactive replay's people
+(``--crowd eth_test_reactive``, crowdsim.reaction) yield as ORCA's humans do, and the contacts left are
+those both sides failed to avoid. Among a reactive crowd it also says how far the robots pushed people off
+their tracks (against the plain replay's same episodes, whose people are the recording's).
+
+For the closest robot-human pair of each episode with contact (< 0.6 m, among tracked people), at the state
+where it is closest: the person's speed and the robot's over the step before, and the robot's distance from
+its start and its goal.
 
     nice -n 10 .venv/bin/python benchmarks/replay_contacts.py --crowd hotel_test --humans 10 --episodes 20
 """
@@ -17,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.env import EnvConfig
-from crowdsim.replay import REPLAYED
+from crowdsim.reaction import reacts
+from crowdsim.replay import REACTIVE, REPLAYED, recorded
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.episode import EpisodeResult, run_episodes
 
@@ -46,11 +52,19 @@ def contact_at(result: EpisodeResult) -> tuple[float, float, float, float] | Non
     return human, robot, start, goal
 
 
+def deflection(result: EpisodeResult, plain: EpisodeResult) -> float:
+    """The farthest (m) any tracked person of ``result`` (a reactive replay) was from where ``plain`` (the
+    same episode replayed plainly: the recording) has them, over the steps both ran."""
+    steps = min(len(result.human_positions), len(plain.human_positions))
+    off = np.linalg.norm(result.human_positions[:steps] - plain.human_positions[:steps], axis=-1)
+    return float(np.where(result.human_present[:steps], off, 0.0).max(initial=0.0))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--crowd", default="eth_test", choices=REPLAYED)
+    parser.add_argument("--crowd", default="eth_test", choices=(*REPLAYED, *REACTIVE))
     parser.add_argument("--humans", type=human_count, default=10)
     parser.add_argument("--episodes", type=episode_count, default=20, help="per scenario")
     parser.add_argument("--seed", type=seed_number, default=0)
@@ -65,6 +79,19 @@ def main() -> None:
             spec, episodes=args.episodes, seed=args.seed, scenario=scenario, n_humans=args.humans,
             env_config=config, progress=False,
         )  # fmt: skip
+        if reacts(args.crowd):
+            plain_config = EnvConfig(crowd=str(recorded(args.crowd)))
+            plain = run_episodes(
+                spec, episodes=args.episodes, seed=args.seed, scenario=scenario, n_humans=args.humans,
+                env_config=plain_config, progress=False,
+            )  # fmt: skip
+            pushed = np.array([deflection(r, p) for r, p in zip(results, plain, strict=True)])
+            print(
+                f"{scenario:13s} people pushed off their tracks: by more than 0.1 m in "
+                f"{int((pushed > 0.1).sum())} of {len(pushed)} episodes; the farthest, median "
+                f"{np.median(pushed):.2f} m, "
+                f"largest {pushed.max():.2f} m"
+            )
         rows = np.array([c for c in map(contact_at, results) if c is not None]).reshape(-1, 4)
         line = f"{scenario:13s} contact in {len(rows)} of {len(results)} episodes"
         if len(rows):

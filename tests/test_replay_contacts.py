@@ -50,3 +50,29 @@ def test_it_runs_and_reports_each_scenario(monkeypatch, capsys):
     assert out[0] == "CMPC with constant_velocity among 3 people of eth_test, 1 episodes each"
     assert [line.split()[0] for line in out[1:]] == ["circle", "perpendicular"]
     assert all(" of 1 episodes" in line for line in out[1:])
+
+
+def test_how_far_people_were_pushed_counts_tracked_people_over_the_steps_both_ran():
+    plain = episode(np.array([[True, True]] * 3))
+    pushed = SimpleNamespace(**{**plain.__dict__, "human_positions": plain.human_positions.copy()})
+    pushed.human_positions[1, 0] += [0.3, 0.0]
+    pushed.human_positions[2, 1] += [0.0, 0.9]  # the standing person, untracked at row 2
+    pushed.human_present = np.array([[True, True], [True, True], [True, False]])
+    assert replay_contacts.deflection(pushed, plain) == pytest.approx(0.3)
+    shorter = SimpleNamespace(
+        human_positions=plain.human_positions[:1], human_present=plain.human_present[:1]
+    )
+    assert replay_contacts.deflection(pushed, shorter) == 0.0
+
+
+def test_among_a_reactive_crowd_it_says_how_far_people_were_pushed(monkeypatch, capsys):
+    root = shared_data_dir()
+    if root is None:
+        pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
+    monkeypatch.setenv("CROWDMPC_DATA", str(root))
+    argv = ["replay_contacts.py", "--crowd", "eth_test_reactive", "--humans", "3", "--episodes", "1"]
+    monkeypatch.setattr(sys, "argv", argv)
+    replay_contacts.main()
+    out = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in out[1:]] == ["circle", "circle", "perpendicular", "perpendicular"]
+    assert "people pushed off their tracks: by more than 0.1 m in " in out[1]
