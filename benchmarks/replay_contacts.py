@@ -34,9 +34,11 @@ CONTACT: float = 0.6  # m, the sum of the radii
 STANDING: float = 0.2  # m/s: a person slower than this over the step stands
 
 
-def contact_at(result: EpisodeResult) -> tuple[float, float, float, float] | None:
+def contact_at(result: EpisodeResult) -> tuple[float, float, float, float, float] | None:
     """Person's and robot's speed (m/s), the robot's distance from its start and goal (m) at the closest
-    robot-human approach of ``result`` among tracked people; None without contact."""
+    robot-human approach of ``result`` among tracked people, and 1.0 where the person's track began (after
+    the first state) within contact of a robot, else 0.0: someone the recording shows first on top of a robot,
+    whom no controller could have seen coming; None without contact."""
     present = result.human_present
     d = np.linalg.norm(result.human_positions[:, None] - result.robot_positions[:, :, None], axis=-1)
     d = np.where(present[:, None, :], d, np.inf)
@@ -49,7 +51,13 @@ def contact_at(result: EpisodeResult) -> tuple[float, float, float, float] | Non
     robot = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_positions[before, i])) / dt
     start = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_positions[0, i]))
     goal = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_goals[i]))
-    return human, robot, start, goal
+    untracked = np.flatnonzero(~present[: k + 1, j])
+    first = int(untracked[-1]) + 1 if len(untracked) else 0  # the row this track began
+    appeared = first > 0 and bool(
+        np.linalg.norm(result.robot_positions[first] - result.human_positions[first, j], axis=1).min()
+        < CONTACT
+    )
+    return human, robot, start, goal, float(appeared)
 
 
 def deflection(result: EpisodeResult, plain: EpisodeResult) -> float:
@@ -92,14 +100,15 @@ def main() -> None:
                 f"{np.median(pushed):.2f} m, "
                 f"largest {pushed.max():.2f} m"
             )
-        rows = np.array([c for c in map(contact_at, results) if c is not None]).reshape(-1, 4)
+        rows = np.array([c for c in map(contact_at, results) if c is not None]).reshape(-1, 5)
         line = f"{scenario:13s} contact in {len(rows)} of {len(results)} episodes"
         if len(rows):
-            human, robot, start, goal = np.median(rows, axis=0)
+            human, robot, start, goal, _ = np.median(rows, axis=0)
             line += (
                 f"; medians: person {human:.2f} m/s, robot {robot:.2f} m/s, {start:.1f} m from its start and "
                 f"{goal:.1f} m from its goal; person standing in {int((rows[:, 0] < STANDING).sum())}, robot "
-                f"within 1 m of its goal in {int((rows[:, 3] < 1.0).sum())}"
+                f"within 1 m of its goal in {int((rows[:, 3] < 1.0).sum())}; the person appearing in contact "
+                f"in {int(rows[:, 4].sum())}"
             )
         print(line)
 

@@ -29,13 +29,26 @@ def episode(present):
 
 def test_the_contact_is_the_closest_tracked_approach_with_its_speeds_and_place():
     walking_only = np.array([[True, False]] * 3)
-    human, robot, start, goal = replay_contacts.contact_at(episode(walking_only))
+    human, robot, start, goal, appeared = replay_contacts.contact_at(episode(walking_only))
     # closest at row 1: 0.5 m; each moved 0.4 m in the 0.4 s before
     assert (human, robot) == pytest.approx((1.0, 1.0)) and (start, goal) == pytest.approx((0.4, 4.6))
+    assert appeared == 0.0  # tracked from the first state, 1.0 m from the robot then
     # the person standing on the start is not there: untracked, no contact with it
     assert replay_contacts.contact_at(episode(np.array([[False, False]] * 3))) is None
-    human, robot, _, _ = replay_contacts.contact_at(episode(np.array([[False, True]] * 3)))
+    human, robot, _, _, _ = replay_contacts.contact_at(episode(np.array([[False, True]] * 3)))
     assert (human, robot) == (0.0, 0.0)  # tracked, it is the contact: at row 0, standing
+
+
+def test_a_contact_with_someone_whose_track_begins_within_contact_is_told_apart():
+    # the walker's track begins at row 1, 0.5 m from the robot: the contact came with the person
+    appears = np.array([[False, False], [True, False], [True, False]])
+    assert replay_contacts.contact_at(episode(appears))[4] == 1.0
+    # a track that began at row 1 out of contact (the robot 2 m away then) is an ordinary contact
+    far = episode(appears)
+    far.robot_positions = far.robot_positions.copy()
+    far.robot_positions[1] = [[0.0, -1.6]]
+    far.robot_positions[2] = [[0.2, 0.0]]
+    assert replay_contacts.contact_at(far)[4] == 0.0
 
 
 def test_it_runs_and_reports_each_scenario(monkeypatch, capsys):
