@@ -41,7 +41,7 @@ def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
     replayed = [*SEQUENCES, *REACTIVE]
     if crowd not in replayed:
         raise PipelineError(f"crowd {crowd!r} is no recording; choose from {replayed}")
-    crowd = crowd.removesuffix(REACTIVE_SUFFIX)
+    sequence = SEQUENCES[crowd.removesuffix(REACTIVE_SUFFIX)]
     if data_dir is None and not os.environ.get(DATA_ENV):
         raise PipelineError(
             f"crowd {crowd!r} replays the raw BIWI tracks: set {DATA_ENV} to the folder holding raw_ewap/ "
@@ -52,11 +52,11 @@ def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
     if raw is None:
         raise PipelineError(
             f"crowd {crowd!r} replays the raw BIWI tracks, and the data directory {directory} holds no "
-            f"raw_ewap/{SEQUENCES[crowd]}/obsmat.txt (a prepared directory keeps only 8 s scenes); set "
+            f"raw_ewap/{sequence}/obsmat.txt (a prepared directory keeps only 8 s scenes); set "
             "CROWDMPC_DATA to the folder holding raw_ewap/ (data/README.md)"
         )
-    path = raw / SEQUENCES[crowd] / "obsmat.txt"
-    return _read(crowd, path, os.stat(path).st_mtime_ns)
+    path = raw / sequence / "obsmat.txt"
+    return _read(crowd.removesuffix(REACTIVE_SUFFIX), path, os.stat(path).st_mtime_ns)
 
 
 @functools.lru_cache(maxsize=4)

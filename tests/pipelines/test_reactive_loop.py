@@ -8,6 +8,7 @@ import numpy as np
 
 from crowdsim.env import EnvConfig
 from pipelines.loop.episode import run_episode
+from pipelines.loop.replay_data import recording
 from tests.cli_calls import run_cli
 from tests.pipelines.test_replay_loop import Counting, data  # noqa: F401 (data: a fixture)
 
@@ -20,6 +21,7 @@ def test_a_reactive_episode_plays_the_plain_replays_people_and_bends_their_track
         for crowd in ("eth", "eth_reactive")
     }
     plain, reactive = runs["eth"], runs["eth_reactive"]
+    assert recording("eth_reactive") is recording("eth")  # one recording, read once
     np.testing.assert_array_equal(reactive.human_present, plain.human_present)  # the same people, window
     steps = min(len(plain.human_positions), len(reactive.human_positions))
     off = np.linalg.norm(reactive.human_positions[:steps] - plain.human_positions[:steps], axis=-1)
@@ -34,6 +36,15 @@ def test_simulate_names_the_reactive_crowd_with_the_robots_visibility(data, tmp_
     assert code == 0 and header in stdout
     record = json.loads(out.read_text())
     assert record["episodes"][0]["config"]["env"]["crowd"] == "eth_reactive"
+
+
+def test_a_reactive_crowd_without_its_data_is_refused_by_its_own_name(monkeypatch, capsys):
+    monkeypatch.delenv("CROWDMPC_DATA", raising=False)
+    code, _, err = run_cli(capsys, "simulate", "--controller", "cmpc", "--crowd", "hotel_test_reactive")
+    assert code == 2 and err.strip().endswith(
+        "--crowd hotel_test_reactive: crowd 'hotel_test_reactive' replays the raw BIWI tracks: set "
+        "CROWDMPC_DATA to the folder holding raw_ewap/ (data/README.md)"
+    )
 
 
 def test_a_reactive_sweep_has_keys_and_a_note_of_its_own():
