@@ -108,7 +108,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--coupling",
         choices=COUPLINGS,
         help="ibr (default): iterative best response to the humans' predictions, Algorithms 1 and 2; nlp: "
-        "the predictor inside CMPC's joint NLP, coupled prediction and planning (cmpc only)",
+        "the predictor inside CMPC's joint NLP, coupled prediction and planning (cmpc only); none: predict, "
+        "then plan, the predictor blind to the robots (the ablation of the coupling)",
     )
     parser.add_argument(
         "--margins",

@@ -46,8 +46,11 @@ def table_header(
     # a plain replayed crowd sees no robot: the visibility does nothing there
     seeing = env_config.crowd == "orca" or reactive
     conventions = run_meta["profile"] + (f"/{run_meta['visibility']}" if seeing else "")
+    # beside the paper's method (Algorithms 1 and 2 with flocking) another method: it must show
+    method = "" if spec.coupling == "ibr" else f"coupling {spec.coupling} | "
+    method += "" if spec.flocking or spec.predictor_name is None else "no flocking | "
     return (
-        f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | "
+        f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | {method}"
         f"margins {spec.margins.label} | {conventions} | {goals}scenario {scenario.name} | "
         f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
         f"{sim.seed + sim.episodes - 1}"

@@ -74,7 +74,7 @@ def jit_pays(cells, episodes_per_cell: int) -> bool:
     saving = 0.0
     for cell in cells:
         spec = cell.spec
-        if not spec.kind.compiles or spec.coupling != "ibr":
+        if not spec.kind.compiles or spec.coupling == "nlp":
             continue
         nlp = "local" if spec.controller == "dmpc" else "joint"  # a compiling plugin: counted as CMPC
         per_predictor = spec.predictor if spec.margins.mode != "none" else None  # conformal margins

@@ -163,7 +163,7 @@ CONTROLLER_KEYS: Final = (
         "the experiment's own in sweep",
         "constant_velocity",
     ),
-    Key("coupling", "str", "ibr", "ibr (Algorithms 1 and 2) | nlp (the predictor inside the joint NLP)"),
+    Key("coupling", "str", "ibr", "ibr (Alg. 1, 2) | nlp (predictor in the NLP) | none (robots unseen)"),
     Key("flocking", "bool", True, "false: omega^floc = 0 (Table III, NF; --no-flocking)"),
     Key(
         "margins",

@@ -5,7 +5,9 @@ humans) and reused across episodes. Per step: the observation becomes the solver
 predictions come from the predictor on the last ``predictor.obs_len`` rows of ``obs.history`` (robots first,
 then humans) with the robots' planned positions as ``robots_future``: its CasADi twin evaluated numerically
 on ``predictor.encode`` of that history (``rollout`` for a predictor without a twin, the ORCA oracle), or,
-for ``coupling="nlp"``, the same twin inside the NLP.
+for ``coupling="nlp"``, the same twin inside the NLP. ``coupling="none"`` shows the predictor the humans'
+rows alone: predictions that do not answer the robots' plans (predict, then plan; the IBR loop then stops
+at its second solve).
 
 A robot that has reached its goal (``obs.robot_reached``) holds position and stops flocking: by default
 (``on_goal="track"``) it stays in the optimisation anchored by its goal term, so it keeps still unless a
@@ -53,6 +55,7 @@ from pipelines.loop.mpc_setup import (
     standing_history,
 )
 from pipelines.loop.spec import ControllerSpec
+from pipelines.loop.step_record import allowances_record
 from predictors.base import ObservingPredictor, Predictor
 from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES
 from predictors.errors import NoCasadiTwin, PredictorError
@@ -172,10 +175,18 @@ class MPCController:
         builds (80 ms for social_lstm_eth), by encoding ``history``: the context is memoised for a step that
         encodes the same past."""
         solver = self.solver(n_robots, n_humans)
-        if self.spec.coupling == "nlp" or self._twin(n_humans, n_robots) is not None:
-            mask = np.ones(history.shape[:2], dtype=bool)
-            self.model.encode(history, mask, np.arange(n_robots, n_robots + n_humans))
+        mask = np.ones(history.shape[:2], dtype=bool)
+        history, mask, humans, seen = self._seen(history, mask, np.arange(n_robots, n_robots + n_humans))
+        if self.spec.coupling == "nlp" or self._twin(n_humans, seen) is not None:
+            self.model.encode(history, mask, humans)
         return solver
+
+    def _seen(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> tuple[Any, Any, Any, int]:
+        """The predictor's history, mask, humans and robots: all, or the humans' alone for coupling "none"."""
+        m = history.shape[1] - len(humans)  # the robots come first
+        if self.spec.coupling != "none":
+            return history, mask, humans, m
+        return history[:, m:], mask[:, m:], humans - m, 0
 
     def _twin(self, n_humans: int, n_robots: int) -> BufferedFunction | None:
         """The predictor's CasADi twin for this size, or None for a predictor without one (the oracle)."""
@@ -199,7 +210,7 @@ class MPCController:
                 self._twins[key] = BufferedFunction(function)
         return self._twins[key]
 
-    def _predict_fn(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray, n_robots: int):
+    def _predict_fn(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray):
         """The IBR loop's ``predict``: robots' planned positions ``(H, M, 2)`` -> humans' ``(H, N_h, 2)``.
 
         Through the predictor's CasADi twin on ``encode`` of the past when it has one: the contract test
@@ -208,11 +219,13 @@ class MPCController:
         What it raises is remembered, so that ``act`` lets it through instead of taking it for the solver's.
         """
         n_humans = len(humans)
+        history, mask, humans, n_robots = self._seen(history, mask, humans)
         twin = self._twin(n_humans, n_robots)
         context = None if twin is None else self.model.encode(history, mask, humans)
         shape = (self.cfg.horizon, n_humans, 2)
 
         def predict(robots_future: np.ndarray) -> np.ndarray:
+            robots_future = robots_future[:, :n_robots]  # none of them with coupling "none"
             try:
                 if twin is None:
                     return self.model.rollout(history, mask, robots_future, humans)
@@ -280,7 +293,7 @@ class MPCController:
         if isinstance(solver, CoupledCMPC):
             context = self.model.encode(history, mask, humans)
         else:
-            predict = self._predict_fn(history, mask, humans, n_robots)
+            predict = self._predict_fn(history, mask, humans)
         self._predictor_error = None
         try:  # the solve alone
             if isinstance(solver, CoupledCMPC):
@@ -366,26 +379,6 @@ class MPCController:
                 "solves": result.solves,
                 "solver_iterations": result.solver_iterations,
                 "converged": result.converged,
-                **_allowances_record(data),
+                **allowances_record(data),
             },
         )
-
-
-def _allowances_record(data: StepData) -> dict[str, Any]:
-    """What the step planned with beyond the paper, for records (MCAP ``/mpc/solver`` extra): the robots
-    released from flocking (stalled, mpc/stall.py), the parked robots' yield slack (m, mpc/parked.py), each
-    human's margins ``(H, N_h)`` (per-class modes) and the robots whose Eq. 8 reference was guided, with
-    targets."""
-    out: dict[str, Any] = {}
-    if data.flocking is not None and not np.all(data.flocking):
-        out["unflocked"] = np.flatnonzero(~np.asarray(data.flocking, dtype=bool)).tolist()
-    if data.goal_slack is not None and np.any(data.goal_slack > 0):
-        slack = np.asarray(data.goal_slack)
-        out["yielding"] = {int(i): round(float(slack[i]), 4) for i in np.flatnonzero(slack > 0)}
-    if data.human_margins is not None:
-        out["human_margins"] = np.round(data.human_margins, 4).tolist()
-    if data.targets is not None:
-        guided = np.flatnonzero(np.any(data.targets != data.goals, axis=1))
-        if guided.size:
-            out["guided"] = {int(i): np.round(data.targets[i], 4).tolist() for i in guided}
-    return out

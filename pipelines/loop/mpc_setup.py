@@ -39,26 +39,32 @@ def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORL
     two minutes per process (measured: 148 s for the first first-order episode of `--experiment coupling`).
     """
     cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
-    cfg = cfg.replace(jit=spec.coupling == "ibr" and (jit or cfg.jit))
+    cfg = cfg.replace(jit=spec.coupling != "nlp" and (jit or cfg.jit))
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
 
 
 def check_coupling(spec: ControllerSpec, distributed: bool, model: Predictor | None = None) -> None:
     """Refuse a coupled NLP (``coupling = "nlp"``) the controller could not build: in DMPC, whose robots each
     solve their own NLP, or with a predictor that observes the simulator (the ORCA oracle), which has no
-    CasADi twin to put inside it. The controller applies it as it is built, and a sweep to its plan before any
-    worker starts, so that both refuse alike. ``model``: the predictor ``spec.predictor`` names, loaded here
-    when not given (only for the coupled NLP)."""
+    CasADi twin to put inside it; and predictions blind to the robots (``coupling = "none"``) from that
+    predictor, whose humans see them. The controller applies it as it is built, and a sweep to its plan before
+    any worker starts, so that both refuse alike. ``model``: the predictor ``spec.predictor`` names, loaded
+    here when not given (not for "ibr")."""
     from predictors.registry import load_predictor
 
-    if spec.coupling != "nlp":
+    if spec.coupling == "ibr":
         return
-    if distributed:
+    if spec.coupling == "nlp" and distributed:
         raise PipelineError(
             "coupling 'nlp' puts the predictor inside the joint NLP, which is centralised: use it with "
             "--controller cmpc (dmpc supports coupling 'ibr')"
         )
     model = model if model is not None else load_predictor(spec.predictor)
+    if isinstance(model, ObservingPredictor) and spec.coupling == "none":
+        raise PipelineError(
+            f"the {model.name} predictor predicts the simulator's humans, who see the robots: coupling "
+            "'none' takes a predictor that predicts from the past alone"
+        )
     if isinstance(model, ObservingPredictor):
         raise PipelineError(
             f"the {model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "

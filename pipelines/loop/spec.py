@@ -34,7 +34,9 @@ from pipelines.loop.margins import MarginSpec
 # The shipped controllers. Literal rather than Enum: the values travel unchanged through argparse, JSON
 # records and MCAP metadata. A plugin's name is any other registered string.
 ControllerName = Literal["straight", "orca", "cmpc", "dmpc"]
-Coupling = Literal["ibr", "nlp"]  # "ibr": Algorithm 1/2; "nlp": the predictor inside the joint NLP
+# "ibr": Algorithm 1/2; "nlp": the predictor inside the joint NLP; "none": predict, then plan (the predictor
+# never sees the robots, so its predictions do not answer their plans: the ablation of the paper's coupling)
+Coupling = Literal["ibr", "nlp", "none"]
 COUPLINGS: Final[tuple[Coupling, ...]] = get_args(Coupling)
 
 

@@ -344,7 +344,10 @@ def test_a_bad_key_section_or_syntax_is_one_line(text, message, tmp_path, capsys
         ("horizon=4", "--set 'horizon=4': expected SECTION.KEY=VALUE"),
         ("mpc.horizn=4", "--set mpc.horizn: unknown key (did you mean 'horizon'?)"),
         ("controller.margins=bogus", "--set controller.margins: bad margins 'bogus'"),
-        ("controller.coupling=mpc", "--set controller.coupling: must be one of ['ibr', 'nlp'], got 'mpc'"),
+        (
+            "controller.coupling=mpc",
+            "--set controller.coupling: must be one of ['ibr', 'nlp', 'none'], got 'mpc'",
+        ),
     ],
 )
 def test_a_bad_set_item_is_one_line(item, message, capsys):

@@ -241,7 +241,7 @@ def test_ibr_predicts_through_the_twin_and_matches_the_torch_rollout(monkeypatch
         raise AssertionError("the IBR loop called the torch rollout")
 
     monkeypatch.setattr(controller.model, "rollout", no_rollout)
-    predict = controller._predict_fn(history, mask, humans, obs.n_robots)
+    predict = controller._predict_fn(history, mask, humans)
     np.testing.assert_allclose(predict(robots_future), reference, rtol=0, atol=1e-9)
     # the robots' plan reaches the humans' prediction
     assert not np.allclose(predict(robots_future + 1.0), reference, atol=1e-6)

@@ -93,10 +93,11 @@ def test_the_coupling_help_says_what_its_choices_are(capsys):
     with pytest.raises(SystemExit):
         main(["simulate", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    coupling = text.split("--coupling {ibr,nlp} ")[1].split(" --margins")[0]
+    coupling = text.split("--coupling {ibr,nlp,none} ")[1].split(" --margins")[0]
     assert (
         "iterative best response" in coupling and "predictor inside" in coupling and "cmpc only" in coupling
     )
+    assert "none: predict, then plan, the predictor blind to the robots" in coupling
 
 
 def test_an_unknown_predictor_lists_the_zoo_and_the_oracle(capsys):
