@@ -191,6 +191,8 @@ class MPCController:
     def _twin(self, n_humans: int, n_robots: int) -> BufferedFunction | None:
         """The predictor's CasADi twin for this size, or None for a predictor without one (the oracle)."""
         key = (n_humans, n_robots)
+        if key not in self._twins and n_humans + n_robots == 0:  # coupling "none", nobody in sight
+            self._twins[key] = None
         if key not in self._twins:
             try:
                 function = self.model.to_casadi(n_humans, n_robots, self.cfg.horizon)
@@ -220,9 +222,11 @@ class MPCController:
         """
         n_humans = len(humans)
         history, mask, humans, n_robots = self._seen(history, mask, humans)
+        shape = (self.cfg.horizon, n_humans, 2)
+        if n_humans + n_robots == 0:  # coupling "none" with nobody in sight: no one to predict
+            return lambda robots_future: np.zeros(shape)
         twin = self._twin(n_humans, n_robots)
         context = None if twin is None else self.model.encode(history, mask, humans)
-        shape = (self.cfg.horizon, n_humans, 2)
 
         def predict(robots_future: np.ndarray) -> np.ndarray:
             robots_future = robots_future[:, :n_robots]  # none of them with coupling "none"

@@ -70,3 +70,29 @@ def test_predicting_then_planning_compiles_its_nlps_as_the_paper_s_coupling_does
     # the same NLPs as the paper's (predictions are parameters), so the same episodes repay them
     assert [jit_pays(blind, n) for n in (35, 36)] == [jit_pays(cells, n) for n in (35, 36)] == [False, True]
     assert not jit_pays(nlp, 1000)  # the coupled NLP is never compiled
+
+
+@pytest.mark.parametrize(
+    "predictor",
+    [
+        "vanilla_lstm_eth",
+        "social_lstm_eth",
+        "social_lstm_soft_eth",
+        "social_gan_eth",
+        "social_gru_eth",
+        "social_attention_eth",
+    ],
+)
+def test_every_shipped_net_predicts_blind_through_its_twin_and_nobody_needs_none(predictor):
+    """Among a replayed crowd the MPC is built for every crowd size from 0: predicting blind, 0 humans is
+    nobody at all, which no net exports (a cell of the predictors sweep failed on it) and none is needed."""
+    import warnings
+
+    controller = make_controller(ControllerSpec("cmpc", predictor, coupling="none"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # "no CasADi twin ... predicts with torch instead" would be one
+        controller.prepare(3, range(4))
+    assert all(controller._twin(n, 0) is not None for n in (1, 2, 3))
+    obs = walking_crowd()
+    predict = controller._predict_fn(*predictor_history(obs, controller.model.obs_len), np.arange(3, 3))
+    assert predict(np.zeros((4, 3, 2))).shape == (4, 0, 2)
