@@ -7,17 +7,22 @@ extended back at its mean velocity (``predictors.backfill``, what the MPC does w
 every mask True, no robot. Prints the average displacement error over the horizon (the MPC's 4 steps by
 default) and at its last step, for the people tracked for at least TrajNet++'s 9 rows, for 2 to 8 (come into
 view lately: part of their history is filled in) and for 1 (just come: nothing is known of their motion, so
-every predictor has them stand), the same people for every predictor.
+every predictor has them stand), the same people for every predictor. ``--by speed`` groups the people
+tracked for 9 rows or more by their speed over the last row instead, and prints beside the ADE how much
+farther than they went each predictor had them go by the horizon (m; negative: not as far): constant
+velocity's guess for people who slow down or speed up, the nets' learned one.
 
     nice -n 10 .venv/bin/python benchmarks/replay_prediction.py --crowd eth_test
     nice -n 10 .venv/bin/python benchmarks/replay_prediction.py --crowd hotel_test \\
         --predictors constant_velocity social_lstm_eth --every 4
+    nice -n 10 .venv/bin/python benchmarks/replay_prediction.py --crowd eth_test --by speed
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +40,8 @@ GROUPS = {
     "1": (1, 1),
     "all": (1, 10**9),
 }
+# m/s over the last observed row, for --by speed (the people tracked for OBS_LEN rows or more)
+SPEEDS = {"< 0.5": (0.0, 0.5), "0.5..1": (0.5, 1.0), "1..1.5": (1.0, 1.5), ">= 1.5": (1.5, np.inf)}
 SHIPPED = ("constant_velocity", "vanilla_lstm_eth", "social_lstm_eth", "social_gan_eth", "social_lstm_synth")
 
 
@@ -61,21 +68,37 @@ def cases(
     return out
 
 
-def errors(predictor, cases_: list, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per scored person: ADE and FDE over the horizon (m), and its track length."""
+@dataclass(frozen=True)
+class Scores:
+    """Per scored person (tracked through the horizon), in the order of the cases."""
+
+    ade: np.ndarray  # m, over the horizon
+    fde: np.ndarray  # m, at its last step
+    run: np.ndarray  # rows tracked up to the predicted row
+    speed: np.ndarray  # m/s over the last observed row (0 for a person just come)
+    overshoot: np.ndarray  # m, predicted minus true distance from now to the horizon's last position
+
+
+def errors(predictor, cases_: list, horizon: int, dt: float = 0.4) -> Scores:
+    """Each scored person's errors, track length and speed (``Scores``); ``dt``: the recording's step."""
     from predictors.backfill import backfill
 
-    ade, fde, run = [], [], []
+    columns: list[list[float]] = [[], [], [], [], []]
     for history, observed, future in cases_:
         filled = backfill(history, np.maximum(observed, 1))
         mask = np.ones(filled.shape[:2], dtype=bool)
         predicted = predictor.rollout(filled, mask, None, np.arange(filled.shape[1]), horizon=horizon)
         whole = np.isfinite(future[..., 0]).all(axis=0)  # tracked through the horizon: scored
         gap = np.linalg.norm(predicted - future, axis=-1)[:, whole]
-        ade += gap.mean(axis=0).tolist()
-        fde += gap[-1].tolist()
-        run += observed[whole].tolist()
-    return np.array(ade), np.array(fde), np.array(run)
+        now = filled[-1, whole]
+        went = np.linalg.norm(future[-1, whole] - now, axis=-1)
+        speed = np.linalg.norm(filled[-1] - filled[-2], axis=-1)[whole] / dt
+        overshoot = np.linalg.norm(predicted[-1, whole] - now, axis=-1) - went
+        for column, values in zip(
+            columns, (gap.mean(axis=0), gap[-1], observed[whole], speed, overshoot), strict=True
+        ):
+            column += values.tolist()
+    return Scores(*(np.array(column) for column in columns))
 
 
 def main() -> None:
@@ -86,28 +109,40 @@ def main() -> None:
     parser.add_argument("--predictors", nargs="+", type=predictor_name, default=list(SHIPPED))
     parser.add_argument("--horizon", type=count_in("horizon", 1, 12), default=HORIZON)
     parser.add_argument("--every", type=count_in("every", 1), default=1, help="evaluate every k-th row")
+    parser.add_argument("--by", choices=("track", "speed"), default="track", help="group by (docstring)")
     args = parser.parse_args()
     from pipelines.loop.replay_data import recording
     from predictors.registry import load_predictor
 
     rec = recording(args.crowd)
-    print(
-        f"{args.crowd}: {args.horizon} steps ahead, every {args.every} row(s); ADE / FDE (m) by rows tracked"
-    )
-    print(f"{'predictor':22s}" + "".join(f"{name:>16s}" for name in GROUPS))
+    groups = GROUPS if args.by == "track" else SPEEDS
+    what = "ADE / FDE (m) by rows tracked"
+    if args.by == "speed":
+        what = f"ADE / overshoot (m) by speed (m/s) of the people tracked >= {OBS_LEN} rows"
+    print(f"{args.crowd}: {args.horizon} steps ahead, every {args.every} row(s); {what}")
+    print(f"{'predictor':22s}" + "".join(f"{name:>16s}" for name in groups))
     for name in args.predictors:
         predictor = load_predictor(name)
         # one window for every predictor (TrajNet++'s 9 rows, more for a net that reads more): each scores
         # the same people at the same rows
         length = max(OBS_LEN, predictor.obs_len)
-        ade, fde, run = errors(predictor, cases(rec, length, args.horizon, args.every), args.horizon)
+        scores = errors(predictor, cases(rec, length, args.horizon, args.every), args.horizon, rec.dt)
+        chosen = [grouped(scores, args.by, group) for group in groups.values()]
+        second, sign = (scores.fde, "") if args.by == "track" else (scores.overshoot, "+")
         cells = [
-            f"{ade[chosen].mean():.3f} / {fde[chosen].mean():.3f}" if chosen.any() else "-"
-            for chosen in (in_group(run, group) for group in GROUPS.values())
+            f"{scores.ade[c].mean():.3f} / {second[c].mean():{sign}.3f}" if c.any() else "-" for c in chosen
         ]
         print(f"{name:22s}" + "".join(f"{cell:>16s}" for cell in cells))
-    counts = (int(in_group(run, group).sum()) for group in GROUPS.values())
-    print("people scored: " + ", ".join(f"{name} {n}" for name, n in zip(GROUPS, counts, strict=True)))
+    counts = (int(c.sum()) for c in chosen)
+    print("people scored: " + ", ".join(f"{name} {n}" for name, n in zip(groups, counts, strict=True)))
+
+
+def grouped(scores: Scores, by: str, group: tuple[float, float]) -> np.ndarray:
+    """The scored people of ``group``: track lengths within its bounds (inclusive), or, among those tracked
+    for ``OBS_LEN`` rows or more, speeds in ``[low, high)``."""
+    if by == "track":
+        return in_group(scores.run, (int(group[0]), int(group[1])))
+    return (scores.run >= OBS_LEN) & (scores.speed >= group[0]) & (scores.speed < group[1])
 
 
 def in_group(run: np.ndarray, group: tuple[int, int]) -> np.ndarray:

@@ -38,11 +38,29 @@ def test_each_case_holds_the_rows_before_a_track_and_its_length():
 
 def test_constant_velocity_is_exact_on_straight_walks_once_it_has_seen_two_rows():
     cases = replay_prediction.cases(walkers(), obs_len=3, horizon=2, every=1)
-    ade, fde, run = replay_prediction.errors(load_predictor("constant_velocity"), cases, horizon=2)
+    scores = replay_prediction.errors(load_predictor("constant_velocity"), cases, horizon=2)
+    ade, fde, run = scores.ade, scores.fde, scores.run
     assert len(ade) == len(run) == 8  # person 1 at six rows, person 2 at its two with a whole future
     np.testing.assert_allclose(ade[run >= 2], 0.0, atol=1e-12)
     # just come, it stands: 0.2 and 0.4 m behind
     np.testing.assert_allclose((ade[run == 1], fde[run == 1]), ([0.3], [0.4]))
+    # rows 2..7 in order, person 1 then 2 at each: person 1 walks 1 m/s; person 2 is 0 m/s just come (row 6,
+    # predicted to stand, it went 0.4 m: 0.4 short), 0.5 m/s once seen twice
+    np.testing.assert_allclose(scores.speed, [1.0] * 5 + [0.0, 1.0, 0.5])
+    np.testing.assert_allclose(scores.overshoot, [0.0] * 5 + [-0.4, 0.0, 0.0], atol=1e-12)
+
+
+def test_by_speed_groups_the_people_tracked_long_enough_by_how_fast_they_went():
+    scores = replay_prediction.Scores(
+        ade=np.array([0.1, 0.2, 0.3, 0.4]),
+        fde=np.zeros(4),
+        run=np.array([9, 9, 3, 12]),
+        speed=np.array([0.2, 1.5, 1.7, 1.49]),
+        overshoot=np.zeros(4),
+    )
+    groups = replay_prediction.SPEEDS
+    picked = [replay_prediction.grouped(scores, "speed", g).nonzero()[0].tolist() for g in groups.values()]
+    assert picked == [[0], [], [3], [1]]  # the third, tracked 3 rows, is in none
 
 
 def test_it_prints_every_group_for_each_predictor(monkeypatch, capsys):
@@ -64,3 +82,8 @@ def test_it_prints_every_group_for_each_predictor(monkeypatch, capsys):
     out = capsys.readouterr().out.splitlines()
     assert out[1].split() == ["predictor", ">=", "9", "2..8", "1", "all"]
     assert out[2].startswith("constant_velocity") and out[3].startswith("people scored: >= 9 ")
+    monkeypatch.setattr(sys, "argv", [*argv, "--by", "speed"])
+    replay_prediction.main()
+    out = capsys.readouterr().out.splitlines()
+    assert out[1].split() == ["predictor", "<", "0.5", "0.5..1", "1..1.5", ">=", "1.5"]
+    assert out[3].startswith("people scored: < 0.5 ")
