@@ -83,7 +83,7 @@ class EnvConfig:
     formation: Formation = "auto"
     # who the humans are: "orca" (the paper's simulated crowd) or a replayed BIWI sequence, "eth" or "hotel",
     # or its test split alone, "eth_test" or "hotel_test" (crowdsim.replay: real tracks played back, not
-    # reacting to anyone)
+    # reacting to anyone), or one yielding to the robots, "eth_test_reactive", ... (crowdsim.reaction)
     crowd: str = "orca"
 
     def __post_init__(self):

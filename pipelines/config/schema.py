@@ -101,7 +101,8 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
         "str",
         "orca",
         "the humans: orca (simulated, the paper's) | eth | hotel | eth_test | hotel_test (BIWI's pedestrians "
-        "replayed, not reacting; _test: the TrajNet++ test split alone; crowdsim/replay.py) (--crowd)",
+        "replayed, not reacting; _test: the TrajNet++ test split alone; crowdsim/replay.py), each also "
+        "_reactive (yielding to the robots: crowdsim/reaction.py) (--crowd)",
     ),
     *(
         Key(
