@@ -19,6 +19,7 @@ from pipelines.commands.simulate_table import format_table, plot_title, table_he
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import EpisodeFailed, PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
+from pipelines.loop.replay_data import CROWD_HELP
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
@@ -123,11 +124,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
     )
-    parser.add_argument(
-        "--crowd",
-        choices=CROWDS,
-        help="orca (default) | BIWI's people replayed: eth, hotel, or their test splits eth_test, hotel_test",
-    )
+    parser.add_argument("--crowd", choices=CROWDS, help=CROWD_HELP)
     parser.add_argument(
         "--json",
         metavar="FILE",

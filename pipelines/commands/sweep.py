@@ -181,6 +181,7 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
     """What replaces the experiment's own choices for every method."""
     from crowdsim.profiles import PROFILES, VISIBILITY
     from crowdsim.replay import CROWDS
+    from pipelines.loop.replay_data import CROWD_HELP
 
     p.add_argument(
         "--predictor",
@@ -218,11 +219,7 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         choices=VISIBILITY,
         help="whether the humans' ORCA sees the robots (default visible, as the authors' fork)",
     )
-    p.add_argument(
-        "--crowd",
-        choices=CROWDS,
-        help="orca (default) | BIWI's people replayed: eth, hotel, or their test splits eth_test, hotel_test",
-    )
+    p.add_argument("--crowd", choices=CROWDS, help=CROWD_HELP)
     p.add_argument(
         "--vary",
         action="append",

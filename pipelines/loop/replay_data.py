@@ -24,6 +24,11 @@ import numpy as np
 from crowdsim.replay import REACTIVE, REACTIVE_SUFFIX, Recording
 from pipelines.errors import PipelineError
 
+# --crowd's help, simulate's and sweep's
+CROWD_HELP: Final[str] = (
+    "orca (default) | BIWI's people replayed: eth, hotel, or their test splits eth_test, hotel_test; each "
+    "_reactive: yielding to the robots (docs/replayed_crowds.md)"
+)
 SEQUENCES: Final[dict[str, str]] = {
     "eth": "seq_eth",
     "hotel": "seq_hotel",
