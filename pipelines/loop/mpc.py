@@ -181,7 +181,9 @@ class MPCController:
             self.model.encode(history, mask, humans)
         return solver
 
-    def _seen(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray) -> tuple[Any, Any, Any, int]:
+    def _seen(
+        self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """The predictor's history, mask, humans and robots: all, or the humans' alone for coupling "none"."""
         m = history.shape[1] - len(humans)  # the robots come first
         if self.spec.coupling != "none":
