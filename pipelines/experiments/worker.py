@@ -41,10 +41,9 @@ if TYPE_CHECKING:
     from pipelines.loop.episode import EpisodeResult
 
 RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
-# Controllers a worker keeps built at once, and one spare place (EpisodeWorker.controller). Tasks come
-# interleaved across the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with
-# room to spare; each MPC controller holds a few CasADi solver instances (megabytes; among a replayed crowd of
-# 20 an NLP per crowd size, ~300 MB), worth keeping but not without bound.
+# Controllers a worker keeps built at once (least recently used dropped first). Tasks come interleaved across
+# the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
+# MPC controller holds a few CasADi solver instances (megabytes), worth keeping but not without bound.
 CONTROLLER_CACHE: Final[int] = 16
 # Library thread pools inside each worker: the workers are the parallelism.
 SINGLE_THREAD_ENV: Final[dict[str, str]] = {
@@ -226,7 +225,6 @@ class EpisodeWorker:
         self.scratch = scratch
         self._controllers: OrderedDict[str, Controller] = OrderedDict()
         self._configs: dict[str, dict[str, Any]] = {}  # cell key -> cell_config, built with its controller
-        self._spare: str | None = None  # the cell held beyond CONTROLLER_CACHE, until another needs the place
         self.builds = 0  # controllers built so far (a test checks the reuse)
 
     def controller(self, task: EpisodeTask) -> Controller:
@@ -243,17 +241,11 @@ class EpisodeWorker:
             controller, world.sensor_range, world.sensor_tracks, cell.n_robots, cell.n_humans, world.crowd
         )
         self.builds += 1
-        if len(self._controllers) >= CONTROLLER_CACHE + (self._spare is not None):
-            # Full: keep the cells held and give the newcomer the spare place. The cells come in turn
-            # (Experiment.tasks), so dropping the least recently used dropped each cell just before its next
-            # episode: with more cells than places every episode built its controller (18 replayed cells at
-            # 10 and 20 people: 900 episodes in 782 s, 450 of the 10-people cells alone in 87 s).
-            if self._spare is not None:
-                self._controllers.pop(self._spare)
-                self._configs.pop(self._spare)
-            self._spare = key
         self._controllers[key] = controller
         self._configs[key] = cell_config(controller, env_config)
+        while len(self._controllers) > CONTROLLER_CACHE:
+            dropped, _ = self._controllers.popitem(last=False)
+            self._configs.pop(dropped, None)
         return controller
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:

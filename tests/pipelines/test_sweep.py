@@ -349,22 +349,6 @@ def test_a_worker_builds_each_controller_once_per_cell():
     assert worker.builds == 2
 
 
-def test_a_worker_with_more_cells_than_room_keeps_those_it_holds_and_rebuilds_one_place(monkeypatch):
-    """Cells come in turn, one episode each a round: dropping the least recently used controller dropped
-    each just before its next episode, so with more cells than room every episode built its controller."""
-    from pipelines.experiments import worker as worker_module
-
-    monkeypatch.setattr(worker_module, "CONTROLLER_CACHE", 2)
-    worker = EpisodeWorker()
-    tasks = get_experiment("baselines").tasks(3, humans=(5, 6))  # 4 cells, 3 rounds
-    assert len({t.cell.key for t in tasks}) == 4
-    for task in tasks:
-        assert worker.run(task).error is None
-        assert len(worker._controllers) <= 3  # two held and the spare
-    # the first two cells built once; the other two take turns in the spare place: 2 + 2 x 3 (LRU: 12)
-    assert worker.builds == 8
-
-
 def test_record_failures_keeps_the_mcap_logs_of_failed_episodes(tmp_path):
     run_sweep(_config(tmp_path, 2, record="failures"))
     records = EpisodeLog(tmp_path / EPISODES_FILE).load()
