@@ -17,6 +17,9 @@ from typing import Any, Final
 
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
+
+# the module, not the name: CONTROLLER_CACHE read when tasks are planned (a test shrinks it)
+from pipelines.experiments import worker as episode_worker
 from pipelines.experiments.methods import (
     CONVENTION_METHODS,
     CONVENTION_WORLDS,
@@ -235,14 +238,29 @@ class Experiment:
         """Every episode of the sweep, episode index by episode index across the cells: at any moment of a
         sweep every cell has run (about) the same crowds, so a sweep stopped early still gives a whole table
         compared on the same crowds, and the progress bar's rate (a stationary mix of cells) gives an honest
-        ETA. Workers keep every cell's controller built (worker.CONTROLLER_CACHE)."""
+        ETA. A sweep of more cells than a worker keeps controllers built (worker.CONTROLLER_CACHE) runs them
+        in groups of consecutive cells (``cell_groups``), each group's episodes interleaved and the groups
+        one after the other: interleaved across all of them, every worker cycled through every cell and
+        rebuilt most controllers for every episode (a replayed crowd's, ~300 MB at 20 people, takes seconds);
+        within a group it builds each once."""
         schedule = scenario_schedule(episodes_per_cell, seed)
-        cells = self.cells(humans, n_robots)
         return [
             EpisodeTask(self.name, cell, i, scenario, s)
+            for group in cell_groups(self.cells(humans, n_robots), episode_worker.CONTROLLER_CACHE)
             for i, (scenario, s) in enumerate(schedule)
-            for cell in cells
+            for cell in group
         ]
+
+
+def cell_groups(cells: Sequence[Cell], most: int) -> list[Sequence[Cell]]:
+    """``cells`` in consecutive groups of at most ``most`` (one group when they fit), as even as can be: 21
+    cells by 16 in 11 + 10, not 16 + 5, so that a sweep stopped in its second group has more of it."""
+    if len(cells) <= most:
+        return [cells]
+    count = -(-len(cells) // most)
+    size, longer = divmod(len(cells), count)  # the first ``longer`` groups take one cell more
+    starts = [g * size + min(g, longer) for g in range(count + 1)]
+    return [cells[a:b] for a, b in zip(starts, starts[1:], strict=False)]
 
 
 # Words of titles that hold only for the default methods (Experiment.with_predictor, with_predictors).

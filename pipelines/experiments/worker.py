@@ -2,8 +2,9 @@
 
 Every backend (pipelines.experiments.backends) runs the same ``EpisodeWorker``: it builds a cell's controller
 once and reuses it for every episode of that cell it gets (tasks come interleaved across the cells, episode
-index by episode index), and returns a JSON-ready record (plus the MCAP bytes of a kept log) to the driver. A
-failing episode (an exception in the controller) does not stop the sweep: the worker hands back its traceback,
+index by episode index, in groups of at most CONTROLLER_CACHE cells: Experiment.tasks), and returns a
+JSON-ready record (plus the MCAP bytes of a kept log) to the driver. A failing episode (an exception in the
+controller) does not stop the sweep: the worker hands back its traceback,
 which the driver writes to ``<out>/errors.jsonl`` and not to the records, so a rerun tries it again.
 
 Recording (``--record failures|all``) happens *during* the run: the worker records every episode to a scratch
@@ -42,8 +43,9 @@ if TYPE_CHECKING:
 
 RECORD_POLICIES: Final[tuple[str, ...]] = ("none", "failures", "all")
 # Controllers a worker keeps built at once (least recently used dropped first). Tasks come interleaved across
-# the cells, so this holds every cell of the largest experiment (Tables II/III: 10) with room to spare; each
-# MPC controller holds a few CasADi solver instances (megabytes), worth keeping but not without bound.
+# groups of at most this many cells (Experiment.tasks), so a worker builds each cell's once; this holds every
+# cell of the largest paper experiment (Tables II/III: 10). An MPC controller holds a few CasADi solver
+# instances (megabytes), a replayed crowd's one per crowd size (~300 MB at 20 people): not without bound.
 CONTROLLER_CACHE: Final[int] = 16
 # Library thread pools inside each worker: the workers are the parallelism.
 SINGLE_THREAD_ENV: Final[dict[str, str]] = {

@@ -5,8 +5,9 @@ import pytest
 
 from pipelines.config.settings import SweepSettings
 from pipelines.errors import PipelineError
-from pipelines.experiments.cells import Experiment, get_experiment
+from pipelines.experiments.cells import Experiment, cell_groups, get_experiment
 from pipelines.experiments.methods import LATER_SWAP_PREDICTORS, SWAP_PREDICTORS, swap_predictors
+from pipelines.experiments.worker import EpisodeWorker
 from pipelines.loop.controllers import ControllerSpec
 
 
@@ -24,6 +25,32 @@ def test_tasks_run_episode_index_by_episode_index_across_the_cells():
         (2, "CMPC", "circle", 5),
         (2, "DMPC", "circle", 5),
     ]
+
+
+def test_a_worker_builds_each_cell_once_in_a_sweep_of_more_cells_than_it_keeps(monkeypatch):
+    """Tasks interleaved across more cells than a worker keeps controllers built (CONTROLLER_CACHE) made it
+    rebuild most of them for every episode: a replayed crowd's at 20 people is ~300 MB and seconds to prepare
+    (27 replayed cells, 108 episodes, docs/replayed_crowds.md: 140 s, 88-92 s grouped). Grouped by the cache,
+    each cell's controller is built once, and every episode still runs, each once."""
+    monkeypatch.setattr("pipelines.experiments.worker.CONTROLLER_CACHE", 3)
+    tasks = get_experiment("baselines").tasks(2, humans=(5, 6))  # 4 constant-velocity cells: 2 groups of 2
+    assert len({t.cell.key for t in tasks}) == 4
+    worker = EpisodeWorker()
+    outcomes = [worker.run(t) for t in tasks]
+    assert all(o.error is None for o in outcomes)
+    assert worker.builds == 4  # interleaved across the 4 cells, every one of the 8 episodes built one
+    assert sorted(t.key for t in tasks) == sorted(
+        t.key for t in get_experiment("baselines").tasks(2, humans=(5, 6))
+    )
+
+
+def test_cells_are_grouped_evenly_and_only_past_the_cache():
+    cells = list(range(21))
+    assert [len(g) for g in cell_groups(cells, 16)] == [11, 10]
+    assert [x for g in cell_groups(cells, 16) for x in g] == cells
+    assert cell_groups(cells, 21) == [cells]
+    assert [len(g) for g in cell_groups(cells, 5)] == [5, 4, 4, 4, 4]
+    assert [len(g) for g in cell_groups(cells[:20], 5)] == [5, 5, 5, 5]
 
 
 def test_crowd_sizes_run_and_report_smallest_first_whatever_their_order():
