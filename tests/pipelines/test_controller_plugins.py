@@ -482,7 +482,7 @@ def test_the_shipped_controllers_facts():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"coupling": "joint"}, r"unknown coupling 'joint'; choose from \['ibr', 'nlp'\]"),
+        ({"coupling": "joint"}, r"unknown coupling 'joint'; choose from \['ibr', 'nlp', 'none'\]"),
         ({"margins": "conformal"}, "margins must be a MarginSpec, got 'conformal'"),
         (
             {"mpc_overrides": (("human_margins", (0.1,)),)},
