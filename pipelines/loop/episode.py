@@ -128,15 +128,15 @@ def run_episode(
     full_meta = episode_meta(
         episode, env_config, controller.name, controller.predictor, described, meta, "run_episode"
     )
-    for observer in observers:
-        observer.on_reset(obs, full_meta)
-
     solve_times: list[float] = []
     statuses: list[str] = []
     fallbacks: list[str | None] = []
     iterations: list[int] = []
     done = False
     with interrupts_between_steps() as interrupt:  # CasADi's own Ctrl-C lines: see pipelines.loop.interrupt
+        # the observers' starts too: a recorder opening its .part, interrupted there, left it behind
+        for observer in observers:
+            observer.on_reset(obs, full_meta)
         while not done:
             out = checked_output(controller, called(controller, "act", handed_out(obs)), obs)
             next_obs, done, _ = env.step(out.accelerations)

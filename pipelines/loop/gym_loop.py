@@ -145,11 +145,11 @@ def run_gym_episode(
     full_meta = episode_meta(
         base.episode, base.config, controller.name, controller.predictor, described, meta, "run_gym_episode"
     )
-    for observer in observers:
-        observer.on_reset(obs, full_meta)
     steps = _Steps()
     done = False
-    with interrupts_between_steps() as interrupt:  # as run_episode's loop
+    with interrupts_between_steps() as interrupt:  # as run_episode's loop, the observers' starts too
+        for observer in observers:
+            observer.on_reset(obs, full_meta)
         while not done:
             out = checked_output(controller, called(controller, "act", handed_out(obs)), obs)
             _, _, terminated, truncated, info = env.step(_padded(out.accelerations, shape))

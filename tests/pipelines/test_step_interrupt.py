@@ -198,3 +198,31 @@ def test_a_terminated_simulate_keeps_the_episodes_that_finished(tmp_path):
     assert payload["interrupted"] and payload["episodes_finished"] >= 1
     assert payload["episodes_finished"] == len(payload["episodes"]) and "| interrupted: " in out
     assert not list(record.glob("*.part"))
+
+
+class _SignalledStart(_Steps):
+    """An observer that is sent SIGINT while it starts (a recorder opening its file) and then finishes."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.started = False
+
+    def on_reset(self, obs, meta) -> None:
+        signal.raise_signal(signal.SIGINT)
+        self.started = True  # a file opened here would be the observer's to finish, not left half-made
+
+
+def test_a_ctrl_c_while_an_observer_starts_is_raised_after_the_first_step():
+    """The recorder opens the episode's .part in on_reset, which ran before the block that notes Ctrl-C:
+    SIGTERM there (simulate's test sends it as the first file is finished) raised inside the recorder's
+    constructor, before it held the file, and the .part was left behind."""
+    observer = _SignalledStart()
+    with pytest.raises(KeyboardInterrupt):
+        run_episode(
+            make_controller(ControllerSpec("straight")),
+            seed=0,
+            scenario="circle",
+            n_humans=2,
+            observers=(observer,),
+        )
+    assert observer.started and observer.steps == 1
