@@ -51,15 +51,20 @@ def test_a_contact_with_someone_whose_track_begins_within_contact_is_told_apart(
     assert replay_contacts.contact_at(far)[4] == 0.0
 
 
-def test_it_runs_and_reports_each_scenario(monkeypatch, capsys):
+def run_main(monkeypatch, capsys, crowd: str) -> list[str]:
+    """The benchmark's lines for 3 people of ``crowd``, 1 episode a scenario (skipped without the data)."""
     root = shared_data_dir()
     if root is None:
         pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
     monkeypatch.setenv("CROWDMPC_DATA", str(root))
-    argv = ["replay_contacts.py", "--crowd", "eth_test", "--humans", "3", "--episodes", "1"]
+    argv = ["replay_contacts.py", "--crowd", crowd, "--humans", "3", "--episodes", "1"]
     monkeypatch.setattr(sys, "argv", argv)
     replay_contacts.main()
-    out = capsys.readouterr().out.splitlines()
+    return capsys.readouterr().out.splitlines()
+
+
+def test_it_runs_and_reports_each_scenario(monkeypatch, capsys):
+    out = run_main(monkeypatch, capsys, "eth_test")
     assert out[0] == "CMPC with constant_velocity among 3 people of eth_test, 1 episodes each"
     assert [line.split()[0] for line in out[1:]] == ["circle", "perpendicular"]
     assert all(" of 1 episodes" in line for line in out[1:])
@@ -79,13 +84,6 @@ def test_how_far_people_were_pushed_counts_tracked_people_over_the_steps_both_ra
 
 
 def test_among_a_reactive_crowd_it_says_how_far_people_were_pushed(monkeypatch, capsys):
-    root = shared_data_dir()
-    if root is None:
-        pytest.skip("shared data (../shared/data or $CROWDMPC_DATA) not available")
-    monkeypatch.setenv("CROWDMPC_DATA", str(root))
-    argv = ["replay_contacts.py", "--crowd", "eth_test_reactive", "--humans", "3", "--episodes", "1"]
-    monkeypatch.setattr(sys, "argv", argv)
-    replay_contacts.main()
-    out = capsys.readouterr().out.splitlines()
+    out = run_main(monkeypatch, capsys, "eth_test_reactive")
     assert [line.split()[0] for line in out[1:]] == ["circle", "circle", "perpendicular", "perpendicular"]
     assert "people pushed off their tracks: by more than 0.1 m in " in out[1]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from crowdsim.env import CrowdEnv
+from pipelines.experiments.methods import ORACLE_PREDICTOR, SWAP_PREDICTORS
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.mpc_setup import predictor_history
 from tests.cli_calls import one_line, run_cli
@@ -73,15 +74,7 @@ def test_predicting_then_planning_compiles_its_nlps_as_the_paper_s_coupling_does
 
 
 @pytest.mark.parametrize(
-    "predictor",
-    [
-        "vanilla_lstm_eth",
-        "social_lstm_eth",
-        "social_lstm_soft_eth",
-        "social_gan_eth",
-        "social_gru_eth",
-        "social_attention_eth",
-    ],
+    "predictor", [p for p in SWAP_PREDICTORS if p not in ("constant_velocity", ORACLE_PREDICTOR)]
 )
 def test_every_shipped_net_predicts_blind_through_its_twin_and_nobody_needs_none(predictor):
     """Among a replayed crowd the MPC is built for every crowd size from 0: predicting blind, 0 humans is
