@@ -212,17 +212,12 @@ class _SignalledStart(_Steps):
         self.started = True  # a file opened here would be the observer's to finish, not left half-made
 
 
-def test_a_ctrl_c_while_an_observer_starts_is_raised_after_the_first_step():
+@pytest.mark.parametrize("gym_loop", [False, True], ids=["run_episode", "run_gym_episode"])
+def test_a_ctrl_c_while_an_observer_starts_is_raised_after_the_first_step(gym_loop):
     """The recorder opens the episode's .part in on_reset, which ran before the block that notes Ctrl-C:
     SIGTERM there (simulate's test sends it as the first file is finished) raised inside the recorder's
     constructor, before it held the file, and the .part was left behind."""
     observer = _SignalledStart()
     with pytest.raises(KeyboardInterrupt):
-        run_episode(
-            make_controller(ControllerSpec("straight")),
-            seed=0,
-            scenario="circle",
-            n_humans=2,
-            observers=(observer,),
-        )
+        _episode(make_controller(ControllerSpec("straight")), observer, gym_loop)
     assert observer.started and observer.steps == 1
