@@ -4,6 +4,15 @@
 keyword arguments below). The dynamics, the humans and the episode end are ``CrowdEnv``'s, unchanged: an
 episode of this environment with seed ``s`` is the episode ``crowdmpc simulate`` runs with seed ``s``.
 
+Replayed crowds: ``config=EnvConfig(crowd="eth_test")`` (any of ``crowdsim.replay.CROWDS`` but "orca") with
+``recording=`` the ``Recording`` it plays (``pipelines.loop.replay_data.recording("eth_test")`` reads it from
+the BIWI data). The humans are then real people (crowdsim.replay; the "_reactive" crowds yield to the robots,
+crowdsim.reaction) and ``n_humans`` counts those who come by during an episode: a human's row is present
+(1.0) only while that person is tracked, and all zeros otherwise, as padding; the reward and the info's
+robot-human figures leave untracked people out, as the episode's metrics do (``info["observation"]`` still
+holds everyone, with ``human_present``). The human rows' bounds are the recording's
+(``crowdsim.gym_observation.human_limits``); ``options["layout"]`` is refused (a layout's humans are ORCA's).
+
 Observation: ``Box`` of shape ``(max_robots + max_humans, 7)``, float64, one row per agent, robots first
 (rows ``0..max_robots-1``), then humans. Columns (``COLUMNS``; named slices ``POSITION``, ``VELOCITY``,
 ``GOAL`` and the index ``PRESENT``):
@@ -105,14 +114,15 @@ from crowdsim.gym_observation import (
     observation_bounds,
 )
 from crowdsim.gym_options import episode_options
-from crowdsim.gym_reward import RewardConfig, robot_pair_info, step_closest, surface_distances
-from crowdsim.metrics import (
-    COLLISION_DISTANCE,
-    DISCOMFORT_HORIZON,
-    EpisodeMetrics,
-    episode_metrics,
-    segments_intersect,
+from crowdsim.gym_reward import (
+    RewardConfig,
+    robot_pair_info,
+    state_info,
+    step_closest,
+    surface_distances,
 )
+from crowdsim.metrics import COLLISION_DISTANCE, EpisodeMetrics, episode_metrics
+from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, check_sizes
 from crowdsim.world import DT, PAPER_ROBOTS
 
@@ -152,7 +162,7 @@ def _count(value: object, name: str, low: int, high: int) -> int:
 
 
 class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
-    """ORCA crowd, double-integrator robots, CrowdNav's reward (module docstring).
+    """ORCA's or a replayed crowd, double-integrator robots, CrowdNav's reward (module docstring).
 
     :param scenario: "circle" or "perpendicular", the default of ``reset``.
     :param n_humans: humans per episode (default of ``reset``).
@@ -165,6 +175,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
     :param end_on_collision: end the episode (``terminated``) at a robot-human contact during a step
         (``info["contact_between_steps"]``), as upstream CrowdNav; its success is then not paid.
     :param render_mode: None or "rgb_array".
+    :param recording: the ``Recording`` a replayed ``config.crowd`` plays (None for ORCA's crowd).
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 1.0 / DT}  # 1 / dt by default
@@ -181,15 +192,12 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         reward: RewardConfig | None = None,
         end_on_collision: bool = False,
         render_mode: str | None = None,
+        recording: Recording | None = None,
     ):
         config = EnvConfig() if config is None else config
         if not isinstance(config, EnvConfig):
             raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
-        if config.crowd != "orca":  # its observation has no room for people who come and go
-            raise SimulationError(
-                f"the gymnasium environment runs ORCA's crowds; crowd {config.crowd!r} is replayed by the "
-                "closed loop (simulate, sweep, run_episodes: docs/replayed_crowds.md)"
-            )
+        self._sim = CrowdEnv(config, recording)  # refuses a recording that is not the crowd's
         reward = RewardConfig() if reward is None else reward
         if not isinstance(reward, RewardConfig):
             raise SimulationError(f"reward must be a RewardConfig, got {type(reward).__name__}")
@@ -214,12 +222,11 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         self.metadata = {**self.metadata, "render_fps": 1.0 / config.dt}
 
         self.scene_limit, self.position_limit, self._low, self._high = observation_bounds(
-            config, self.max_robots, self.max_humans
+            config, self.max_robots, self.max_humans, recording
         )
         self.observation_space = spaces.Box(self._low, self._high, dtype=np.float64)
         self.action_space = spaces.Box(-config.a_max, config.a_max, (self.max_robots, 2), dtype=np.float64)
 
-        self._sim = CrowdEnv(config)
         self._obs: Observation | None = None
         self._episode: dict[str, Any] = {}
         self._done = False
@@ -241,6 +248,11 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         super().reset(seed=seed)
         defaults = {"scenario": self.scenario, "n_humans": self.n_humans, "n_robots": self.n_robots}
         chosen = episode_options(options, defaults, self.scene_limit, self.max_humans, self.max_robots)
+        if "layout" in chosen and self._sim.recording is not None:  # before the draw: nothing changes
+            raise SimulationError(
+                f"options['layout'] places ORCA humans; crowd {self.config.crowd!r} is replayed (its "
+                "episodes come from the seed, scenario, n_humans and n_robots)"
+            )
         drawn = int(self.np_random.integers(0, 2**31 - 1)) if seed is None else int(seed)
         episode_seed: int | None = drawn
         if "layout" in chosen:
@@ -290,13 +302,6 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         reward = rule(float(gaps.min()))
         robot_rewards = np.array([rule(float(g)) for g in gaps])
 
-        centre = np.linalg.norm(obs.robot_positions[:, None] - obs.human_positions[None], axis=-1)
-        min_distance = float(centre.min()) if centre.size else math.inf
-        r_end = obs.robot_positions + DISCOMFORT_HORIZON * obs.robot_velocities
-        h_end = obs.human_positions + DISCOMFORT_HORIZON * obs.human_velocities
-        discomfort = segments_intersect(
-            obs.robot_positions[:, None], r_end[:, None], obs.human_positions[None], h_end[None]
-        )
         terminated = success or contact_ends
         truncated = timeout and not terminated
         self._done = terminated or truncated
@@ -306,10 +311,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             "n_robots": obs.n_robots,
             "accelerations": self._rows(native["accelerations"], 0.0),
             "clipped": self._rows(native["clipped"], False),
-            "min_distance": min_distance,
-            "collision": min_distance < COLLISION_DISTANCE,
-            "contact": min_distance < 2.0 * cfg.radius,
-            "discomfort": bool(np.any(discomfort)),
+            **state_info(obs, cfg.radius),
             "min_distance_between_steps": swept,
             "collision_between_steps": swept < COLLISION_DISTANCE,
             "contact_between_steps": bool(contact_in_step.any()),

@@ -13,6 +13,7 @@ from crowdsim.conventions import PAPER_DISCOMFORT_DIST
 from crowdsim.distances import closest_approach, min_robot_distance_between_steps
 from crowdsim.env import Observation
 from crowdsim.errors import SimulationError, real_number
+from crowdsim.metrics import COLLISION_DISTANCE, DISCOMFORT_HORIZON, segments_intersect
 
 
 @dataclass(frozen=True)
@@ -60,10 +61,15 @@ class RewardConfig:
 def step_closest(before: Observation, after: Observation) -> np.ndarray:
     """``(M, N)`` closest centre distance of each robot to each human during the step, the relative motion
     taken as the segment from its start to its end (CrowdNav's ``point_to_segment_dist``;
-    ``crowdsim.distances.closest_approach``, as ``min_distance_between_steps`` takes it)."""
+    ``crowdsim.distances.closest_approach``, as ``min_distance_between_steps`` takes it). A replayed
+    crowd's human counts only over a step it is tracked at both ends (``crowdsim.metrics``): inf otherwise."""
     start = before.human_positions[None] - before.robot_positions[:, None]  # (M, N, 2) human - robot
     end = after.human_positions[None] - after.robot_positions[:, None]
-    return closest_approach(start, end)
+    closest = closest_approach(start, end)
+    if before.human_present is not None and after.human_present is not None:
+        both = np.asarray(before.human_present, dtype=bool) & np.asarray(after.human_present, dtype=bool)
+        closest = np.where(both[None], closest, np.inf)
+    return closest
 
 
 def surface_distances(closest: np.ndarray, radius: float) -> np.ndarray:
@@ -86,4 +92,25 @@ def robot_pair_info(before: Observation, after: Observation, radius: float) -> d
         "robot_contact": now < 2.0 * radius,
         "min_distance_robots_between_steps": swept,
         "robot_contact_between_steps": swept < 2.0 * radius,
+    }
+
+
+def state_info(obs: Observation, radius: float) -> dict[str, float | bool]:
+    """A state's robot-human figures for the info, as ``crowdsim.metrics`` counts them per state:
+    ``min_distance`` (centres, m; inf without humans), ``collision`` (below ``COLLISION_DISTANCE``),
+    ``contact`` (below the sum of the radii) and ``discomfort`` (projected paths intersect). A replayed
+    crowd's humans not tracked now are left out, as the metrics leave them."""
+    humans = np.arange(obs.n_humans) if obs.human_present is None else np.flatnonzero(obs.human_present)
+    hp, hv = obs.human_positions[humans], obs.human_velocities[humans]
+    rp, rv = obs.robot_positions, obs.robot_velocities
+    centre = np.linalg.norm(rp[:, None] - hp[None], axis=-1)
+    min_distance = float(centre.min()) if centre.size else math.inf
+    discomfort = segments_intersect(
+        rp[:, None], (rp + DISCOMFORT_HORIZON * rv)[:, None], hp[None], (hp + DISCOMFORT_HORIZON * hv)[None]
+    )
+    return {
+        "min_distance": min_distance,
+        "collision": min_distance < COLLISION_DISTANCE,
+        "contact": min_distance < 2.0 * radius,
+        "discomfort": bool(np.any(discomfort)),
     }

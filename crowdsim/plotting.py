@@ -183,6 +183,7 @@ def render_frame(traj: Trajectory, title: str, *, size: tuple[float, float], dpi
         snapshot_steps=[traj.n_steps],
         radius=traj.radius,
         dt=traj.dt,
+        human_present=traj.human_present,
     )
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()

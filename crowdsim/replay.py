@@ -110,6 +110,23 @@ class Recording:
             kept[scenario] = (self.positions - centre) @ np.array([[c, -s], [s, c]]).T
         return kept[scenario]
 
+    def extent(self) -> tuple[float, float]:
+        """``(distance, speed)``: the farthest any tracked position lies from the crowd's centre (m; every
+        episode's replayed positions lie within it, ``turned`` only moves and turns them) and the fastest
+        recorded step on the frame grid (m/s; the largest replayed velocity), bounds for an observation
+        space (crowdsim.gym_observation)."""
+        return self._extent
+
+    @cached_property
+    def _extent(self) -> tuple[float, float]:
+        centre, _ = self.flow()
+        offsets = np.linalg.norm(self.positions - centre, axis=-1)
+        # steps between rows on one grid only: no window spans a jump (window_starts), nor does a velocity
+        on_grid = np.diff(self.frames) == self.frame_step
+        steps = np.linalg.norm(np.diff(self.positions, axis=0), axis=-1)[on_grid]
+        fastest = np.nanmax(steps, initial=0.0) / self.dt
+        return float(np.nanmax(offsets)), float(fastest)
+
     @cached_property
     def _flow(self) -> tuple[np.ndarray, np.ndarray]:
         """The crowd's centre (median tracked position) and main direction (unit principal axis of its

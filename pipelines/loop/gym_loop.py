@@ -1,6 +1,8 @@
 """The closed loop through gymnasium's API: ``crowdmpc/CrowdNav-v0`` (``crowdsim.gym_env``) driven by a
 ``Controller`` or by any policy, with the closed loop's observers and records.
 
+* ``make_env(config, **kwargs)`` is ``gym.make("crowdmpc/CrowdNav-v0", ...)`` with the recording a replayed
+  crowd plays (``EnvConfig(crowd="eth_test")``) read from the data.
 * ``run_gym_episode(controller, env, seed=...)`` is ``run_episode`` through ``env.reset`` / ``env.step``:
   the controller acts on ``info["observation"]`` and its accelerations are the action. The episode, its
   ``EpisodeResult`` and what the observers see are those of ``run_episode`` with the same seed, scenario and
@@ -24,8 +26,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from crowdsim import ENV_ID
 from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
+from crowdsim.env_config import EnvConfig
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_wrappers import VelocityControl
 from crowdsim.metrics import episode_metrics
@@ -39,7 +43,14 @@ from pipelines.loop.contract import (
     handed_out,
 )
 from pipelines.loop.controllers import Controller
-from pipelines.loop.episode import EpisodeObserver, EpisodeResult, check_built_for, check_controller
+from pipelines.loop.episode import (
+    EpisodeObserver,
+    EpisodeResult,
+    behind_tracks,
+    check_built_for,
+    check_controller,
+    replayed_recording,
+)
 from pipelines.loop.interrupt import interrupts_between_steps
 
 
@@ -59,6 +70,18 @@ def _action_changer(env: gym.Env[Any, Any], base: CrowdNavEnv) -> str | None:
         if isinstance(wrapper, VelocityControl) or wrapper.action_space != wrapper.env.action_space:
             return type(wrapper).__name__
     return type(env).__name__
+
+
+def make_env(config: EnvConfig | None = None, **kwargs: Any) -> gym.Env[np.ndarray, np.ndarray]:
+    """``gym.make(crowdsim.ENV_ID, config=config, **kwargs)`` with, for a replayed ``config.crowd``, the
+    ``Recording`` it plays, read from the BIWI data (``$CROWDMPC_DATA``; pipelines.loop.replay_data): the
+    environment among real people in one call, ``make_env(EnvConfig(crowd="eth_test"), n_humans=10)``."""
+    config = EnvConfig() if config is None else config
+    if not isinstance(config, EnvConfig):  # before reading anything: the environment says it too
+        raise PipelineError(f"make_env: config must be an EnvConfig, got {type(config).__name__}")
+    if "recording" in kwargs:
+        raise PipelineError("make_env reads the recording of config.crowd itself; give no recording=")
+    return gym.make(ENV_ID, config=config, recording=replayed_recording(config), **kwargs)
 
 
 def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
@@ -107,6 +130,7 @@ class _Steps:
             statuses=tuple(self.statuses),
             fallbacks=tuple(self.fallbacks),
             iterations=np.asarray(self.iterations, dtype=int),
+            human_present=traj.human_present,
         )
 
 
@@ -137,6 +161,7 @@ def run_gym_episode(
             "the actions"
         )
     check_built_for(controller, base.config, "run_gym_episode")
+    controller = behind_tracks(controller, base.config)  # among a replayed crowd, the people tracked now
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)
     obs: Observation = info["observation"]

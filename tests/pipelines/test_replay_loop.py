@@ -197,16 +197,6 @@ def test_a_replayed_run_without_its_data_or_with_iterations_is_refused_before_an
     )
 
 
-def test_the_gymnasium_environment_says_it_runs_orcas_crowds_only():
-    from crowdsim.errors import SimulationError
-    from crowdsim.gym_env import CrowdNavEnv
-
-    with pytest.raises(
-        SimulationError, match="runs ORCA's crowds; crowd 'hotel' is replayed by the closed loop"
-    ):
-        CrowdNavEnv(config=EnvConfig(crowd="hotel"))
-
-
 def test_an_mpc_handed_people_who_are_not_there_says_how_the_loop_hands_them(data):
     from crowdsim.env import CrowdEnv
     from pipelines.loop.controllers import ControllerSpec, make_controller
