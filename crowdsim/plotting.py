@@ -24,21 +24,23 @@ from crowdsim.world import RADIUS
 if TYPE_CHECKING:
     from crowdsim.metrics import Trajectory
 
-# matplotlib's tab10, the order pipelines.logs.recording uses, so robot i has one colour everywhere, then
-# black and yellow: tab10 alone repeated robot 0's and 1's colours for robots 10 and 11 (MAX_ROBOTS is 12).
+# Okabe and Ito's colour-blind-safe palette first (robots 0-7: blue, orange, bluish green, reddish purple, sky
+# blue, vermillion, yellow, black; tab10's green and red for robots 2 and 3 look alike to the red-green
+# colour-blind, about one man in twelve), then brown, wine, olive and indigo for up to
+# MAX_ROBOTS = 12, none of them the humans' grey. pipelines.logs.scene colours robot i alike.
 ROBOT_COLORS = (
-    "#1f77b4",
-    "#ff7f0e",
-    "#2ca02c",
-    "#d62728",
-    "#9467bd",
-    "#8c564b",
-    "#e377c2",
-    "#7f7f7f",
-    "#bcbd22",
-    "#17becf",
+    "#0072B2",
+    "#E69F00",
+    "#009E73",
+    "#CC79A7",
+    "#56B4E9",
+    "#D55E00",
+    "#F0E442",
     "#000000",
-    "#ffe119",
+    "#8C564B",
+    "#882255",
+    "#999933",
+    "#332288",
 )
 HUMAN_COLOR = "0.35"
 GOAL_COLOR = "red"

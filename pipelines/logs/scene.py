@@ -17,22 +17,22 @@ from pipelines.plain_json import plain
 
 FRAME_ID: Final[str] = "world"
 
-# crowdsim.plotting.ROBOT_COLORS (matplotlib's tab10, then black and yellow) as RGB, so that the 3D panel
-# and the plots colour robot i alike (copied: importing the plotting module costs half a second; a test
-# keeps the two equal).
+# crowdsim.plotting.ROBOT_COLORS (Okabe and Ito's colour-blind-safe palette, then four more) as RGB, so that
+# the 3D panel and the plots colour robot i alike (copied: importing the plotting module costs half a second;
+# a test keeps the two equal).
 ROBOT_RGB: Final[tuple[tuple[float, float, float], ...]] = (
-    (0.122, 0.467, 0.706),
-    (1.000, 0.498, 0.055),
-    (0.173, 0.627, 0.173),
-    (0.839, 0.153, 0.157),
-    (0.580, 0.404, 0.741),
-    (0.549, 0.337, 0.294),
-    (0.890, 0.467, 0.761),
-    (0.498, 0.498, 0.498),
-    (0.737, 0.741, 0.133),
-    (0.090, 0.745, 0.812),
+    (0.000, 0.447, 0.698),
+    (0.902, 0.624, 0.000),
+    (0.000, 0.620, 0.451),
+    (0.800, 0.475, 0.655),
+    (0.337, 0.706, 0.914),
+    (0.835, 0.369, 0.000),
+    (0.941, 0.894, 0.259),
     (0.000, 0.000, 0.000),
-    (1.000, 0.882, 0.098),
+    (0.549, 0.337, 0.294),
+    (0.533, 0.133, 0.333),
+    (0.600, 0.600, 0.200),
+    (0.200, 0.133, 0.533),
 )
 HUMAN_RGB: Final[tuple[float, float, float]] = (0.45, 0.45, 0.45)
 

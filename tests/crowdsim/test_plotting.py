@@ -93,3 +93,42 @@ def test_an_episode_without_humans_has_no_humans_in_its_legend():
     """The legend listed "humans" beside a plot of one robot in an empty room."""
     fig = plot_episode(np.zeros((2, 1, 2)), np.zeros((2, 0, 2)), np.ones((1, 2)))
     assert "humans" not in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+
+
+# Machado, Oliveira and Fernandes (2009), severity 1: what a dichromat sees, on linear RGB
+DICHROMAT = {
+    "deuteranopia": [
+        [0.367322, 0.860646, -0.227968],
+        [0.280085, 0.672501, 0.047413],
+        [-0.01182, 0.04294, 0.968881],
+    ],
+    "protanopia": [
+        [0.152286, 1.052583, -0.204868],
+        [0.114503, 0.786281, 0.099216],
+        [-0.003882, -0.048116, 1.051998],
+    ],
+}
+
+
+def cielab(hex_colour: str, seen: np.ndarray) -> np.ndarray:
+    """``hex_colour`` as a viewer with the linear-RGB matrix ``seen`` sees it, in CIELAB (D65)."""
+    srgb = np.array(matplotlib.colors.to_rgb(hex_colour))
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    xyz_matrix = [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]
+    xyz = np.asarray(xyz_matrix) @ np.clip(seen @ linear, 0.0, 1.0) / [0.95047, 1.0, 1.08883]
+    f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16 / 116)
+    return np.array([116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])])
+
+
+@pytest.mark.parametrize("vision", ["normal", *DICHROMAT])
+def test_the_first_eight_robots_colours_stay_apart_for_red_green_colour_blind_readers(vision):
+    """tab10's green and red (robots 2 and 3) were 7.3 apart (CIELAB, delta E 1976) under simulated
+    deuteranopia, its orange and green 4.6 under protanopia: one colour to about one man in twelve."""
+    from crowdsim.plotting import ROBOT_COLORS
+
+    seen = np.eye(3) if vision == "normal" else np.asarray(DICHROMAT[vision])
+    labs = [cielab(c, seen) for c in ROBOT_COLORS[:8]]
+    closest = min(np.linalg.norm(a - b) for i, a in enumerate(labs) for b in labs[i + 1 :])
+    assert closest > 15.0
+    tab10 = [cielab(c, seen) for c in ("#2ca02c", "#d62728", "#ff7f0e")]  # the check tells them apart
+    assert vision == "normal" or min(np.linalg.norm(tab10[0] - t) for t in tab10[1:]) < 8.0
