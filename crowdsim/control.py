@@ -23,6 +23,8 @@ class ControlOutput:
     fallback: str | None = None  # None, or the fallback used: the MPCs' "shifted" (previous plan), "brake"
     potential: float | None = None  # F_t, Eq. (16), at the returned plan
     plan: np.ndarray | None = None  # (M, H, 2) planned robot positions at t+1..t+H
-    prediction: np.ndarray | None = None  # (H, N_h, 2) predicted human positions used by the final solve
+    # (H, N_h, 2) predicted human positions used by the final solve; a human all NaN was not predicted (out of
+    # the controller's view: pipelines.loop.sensing)
+    prediction: np.ndarray | None = None
     iteration_predictions: tuple[np.ndarray, ...] = ()  # (H, N_h, 2) per IBR iteration, when asked
     extra: dict[str, Any] = field(default_factory=dict)  # controller-specific numbers (JSON-serialisable)

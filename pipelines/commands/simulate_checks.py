@@ -41,7 +41,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     with no predictor, and flocking, record_iterations or an [mpc] value for ORCA and the straight line,
     which plan with no MPC. Only values the user chose count (``RunConfig.chosen``: a config file shared
     with cmpc may state the defaults); a plugin reads the spec as it sees fit, so only its predictor facts
-    are checked. Then ``record_iterations`` behind a sensor or without ``record``: nothing would write it."""
+    are checked. Then ``record_iterations`` without ``record``: nothing would write it."""
     if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
         chosen = config.controller
         _refuse(
@@ -75,19 +75,6 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         raise PipelineError(
             f"{_shown(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
             "--sensor-range M too (or [simulate] sensor_range)"
-        )
-    if spec.record_iterations and config.simulate.sensor_range is not None:
-        # RangeLimited drops the predictions: they are of the humans in view, the recording's of every human
-        raise PipelineError(
-            f"{config.label('controller', 'record_iterations')}: a controller behind "
-            f"{config.label('simulate', 'sensor_range')} records no predictions (they are of the humans in "
-            "view only); record without the iterations, or without the sensor"
-        )
-    if spec.record_iterations and config.env.crowd != "orca":  # the loop's filter drops them too
-        raise PipelineError(
-            f"{config.label('controller', 'record_iterations')}: among a replayed crowd "
-            f"({config.label('env', 'crowd')} {config.env.crowd}) a controller records no predictions (they "
-            "are of the people tracked now only); record without the iterations"
         )
     check_recording(config)
     if spec.record_iterations and config.simulate.record is None:

@@ -62,28 +62,7 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     for key in ("controller", "coupling", "flocking", "record_iterations"):
         if cfg.chosen("controller", key):
             experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
-    experiment = _with_mpc_settings(cfg, experiment)
-    _check_sensed_iterations(cfg, experiment)
-    return experiment
-
-
-def _check_sensed_iterations(cfg: RunConfig, experiment: Experiment) -> None:
-    """Refuse record_iterations for methods behind a sensor or among a replayed crowd, as simulate does:
-    RangeLimited drops the predictions (of the humans in view only), so their recordings would hold none."""
-
-    def filtered(label: str) -> bool:
-        world = experiment.method_worlds.get(label, experiment.world)
-        return world.sensor_range is not None or world.crowd != "orca"
-
-    sensed = [label for label, spec in experiment.methods if spec.record_iterations and filtered(label)]
-    if sensed:
-        raise cfg.error(
-            "controller",
-            "record_iterations",
-            f"methods {sensed} of experiment {experiment.name!r} run behind a sensor or among a replayed "
-            "crowd, whose controllers record no predictions (they are of the humans in view only); record "
-            "without the iterations",
-        )
+    return _with_mpc_settings(cfg, experiment)
 
 
 def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:

@@ -18,6 +18,7 @@ Seeds: calibration episodes use ``seed, seed + 1, ...`` from ``CALIBRATION_SEED`
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -82,15 +83,22 @@ class PredictionErrors:
     def on_step(self, obs: Observation, out: ControlOutput, next_obs: Observation) -> None:
         if out.prediction is None or obs.n_humans == 0:
             return
+        prediction = np.asarray(out.prediction, dtype=float)
+        # the humans predicted: all of them, or those in view (a replayed crowd's tracked people, NaN else)
+        predicted = np.isfinite(prediction).all(axis=(0, 2))
         gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
         close = gaps.min(axis=1) <= self.near if obs.n_robots else np.ones(obs.n_humans, dtype=bool)
+        close &= predicted
         if close.any():
-            classes = observed_classes(obs)  # what the controller saw, as the controller classifies it
-            self._made.append((obs.step, np.asarray(out.prediction, dtype=float), close, classes[close]))
+            # what the controller saw, as the controller classifies it
+            classes = observed_classes(_of_humans(obs, np.flatnonzero(predicted)))
+            self._made.append((obs.step, prediction, close, classes[close[predicted]]))
 
     def on_end(self, result: EpisodeResult) -> None:
         truth = np.asarray(result.human_positions, dtype=float)  # (T+1, N, 2)
         robots = np.asarray(result.robot_positions, dtype=float)  # (T+1, M, 2)
+        if result.human_present is not None:  # a replayed crowd: no truth where a person is not tracked
+            truth = np.where(np.asarray(result.human_present, dtype=bool)[..., None], truth, math.nan)
         last = len(truth) - 1
         for step, prediction, close, classes in self._made:
             horizon = len(prediction)
@@ -147,6 +155,24 @@ class ClosedLoopPlan:
             (SCENARIOS[i % 2], self.humans[(i // 2) % len(self.humans)], self.seed + i)
             for i in range(self.episodes)
         ]
+
+
+def _of_humans(obs: Observation, humans: np.ndarray) -> Observation:
+    """``obs`` with only ``humans`` (indices), as a controller shown those alone sees it: their positions,
+    velocities, history and track lengths (a replayed crowd's people in view, whose track lengths the
+    recording gives as pipelines.loop.sensing's tracker counts them)."""
+    if len(humans) == obs.n_humans:
+        return obs
+    m = obs.n_robots
+    return dataclasses.replace(
+        obs,
+        human_positions=obs.human_positions[humans],
+        human_velocities=obs.human_velocities[humans],
+        human_goals=obs.human_goals[humans],
+        history=np.concatenate([obs.history[:, :m], obs.history[:, m + humans]], axis=1),
+        human_observed=None if obs.human_observed is None else obs.human_observed[humans],
+        human_present=None,
+    )
 
 
 def _shortfall(predicted: np.ndarray, realised: np.ndarray, robots: np.ndarray, near: float) -> np.ndarray:

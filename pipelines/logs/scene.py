@@ -96,7 +96,7 @@ class SceneBuilder:
         )
         self._plan_colors = [_dumps(_color(c, 0.9)) for c in rgb]
         self._prediction_colors = [_dumps(_color(HUMAN_RGB, 0.6))] * n_humans
-        self._lines: dict[tuple[str, int], str] = {}  # (kind, points per strip) -> template
+        self._lines: dict[tuple[str, int, int], str] = {}  # (kind, points per strip, strips) -> template
         # Each entity: a head before its timestamp, a middle before its spheres, one before its lines, a tail.
         self._entity_parts = {
             eid: (
@@ -118,7 +118,7 @@ class SceneBuilder:
         )  # fmt: skip
 
     def _line_template(self, kind: str, colors: list[str], thickness: float, n_points: int) -> str:
-        key = (kind, n_points)
+        key = (kind, n_points, len(colors))
         if key not in self._lines:
             points = ",".join([_POINT] * n_points)
             self._lines[key] = ",".join(
@@ -161,9 +161,15 @@ class SceneBuilder:
             tracks = np.concatenate([robot_positions[:, None, :], plan], axis=1)
             template = self._line_template("plan", self._plan_colors, 0.05, tracks.shape[1])
             plan_lines = template % tuple(tracks.ravel().tolist())
-        if prediction is not None and prediction.shape[1] > 0 and np.isfinite(prediction).all():
-            tracks = np.concatenate([human_positions[:, None, :], np.swapaxes(prediction, 0, 1)], axis=1)
-            template = self._line_template("prediction", self._prediction_colors, 0.03, tracks.shape[1])
+        if prediction is not None:
+            # the humans predicted (a controller behind a sensor, or among a replayed crowd, predicts those
+            # in view: NaN for the others)
+            predicted = np.flatnonzero(np.isfinite(prediction).all(axis=(0, 2)))
+            tracks = np.concatenate(
+                [human_positions[predicted, None, :], np.swapaxes(prediction[:, predicted], 0, 1)], axis=1
+            )
+            colors = self._prediction_colors[: len(predicted)]
+            template = self._line_template("prediction", colors, 0.03, tracks.shape[1])
             prediction_lines = template % tuple(tracks.ravel().tolist())
         # Every entity is sent at every step (also those that do not move): after a seek, Foxglove only shows
         # what was published near the new time.

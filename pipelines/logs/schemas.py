@@ -48,6 +48,14 @@ _NUMBER: Final = {"type": "number"}
 _POINT2: Final = {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2}
 _POINTS: Final = {"type": "array", "items": _POINT2}  # (K, 2)
 _TRACKS: Final = {"type": "array", "items": _POINTS}  # (A, H, 2) or (H, N, 2)
+# (H, N, 2) predicted positions, null for a human not predicted (out of a controller's view)
+_PREDICTED_POINT: Final = {
+    "type": "array",
+    "items": {"type": ["number", "null"]},
+    "minItems": 2,
+    "maxItems": 2,
+}
+_PREDICTED: Final = {"type": "array", "items": {"type": "array", "items": _PREDICTED_POINT}}
 
 
 def _record(title: str, properties: dict[str, Any], optional: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -126,10 +134,14 @@ PREDICTION = MessageSchema(
         "crowdmpc.Prediction",
         {
             **_STAMP,
-            "positions": {**_TRACKS, "description": "(H, N_h, 2) m, used by the final solve (to 1e-6 m)"},
+            "positions": {
+                **_PREDICTED,
+                "description": "(H, N_h, 2) m, used by the final solve (to 1e-6 m); null: a human not "
+                "predicted (out of the controller's view)",
+            },
             "iterations": {
                 "type": "array",
-                "items": _TRACKS,
+                "items": _PREDICTED,
                 "description": "(H, N_h, 2) per IBR iteration; empty unless iterations are recorded",
             },
         },

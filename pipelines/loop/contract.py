@@ -78,10 +78,17 @@ def handed_out(obs: Observation) -> Observation:
 
 
 def _check_array(
-    controller: Controller, field: str, value: object, shape: tuple[int | None, ...], expected: str
+    controller: Controller,
+    field: str,
+    value: object,
+    shape: tuple[int | None, ...],
+    expected: str,
+    *,
+    humans_axis: int | None = None,
 ) -> None:
     """PipelineError unless ``value`` is an array of finite numbers of ``shape`` (None: any length >= 1
-    there, the steps): integers or floats, not booleans (``a > 0`` was taken for 1 m/s^2)."""
+    there, the steps): integers or floats, not booleans (``a > 0`` was taken for 1 m/s^2). With
+    ``humans_axis``, a human whose every entry is NaN is one not predicted (unseen: sensing.RangeLimited)."""
     try:
         array: np.ndarray | None = np.asarray(value)
     except (TypeError, ValueError):  # ragged rows
@@ -98,10 +105,17 @@ def _check_array(
                 f"{_named(controller)}: act() must return {field} of at least one step (H >= 1) or None, got "
                 f"shape {array.shape}"
             )
-        if np.isfinite(array).all():
+        finite = np.isfinite(array)
+        if humans_axis is not None:
+            others = tuple(a for a in range(array.ndim) if a != humans_axis)
+            finite |= np.expand_dims(np.isnan(array).all(axis=others), others)
+        if finite.all():
             return
-        bad = array[~np.isfinite(array)].flat[0]
-        raise PipelineError(f"{_named(controller)}: act() must return {field} of finite numbers, got {bad}")
+        bad = array[~finite].flat[0]
+        whole = " (NaN only for every entry of a human not predicted)" if humans_axis is not None else ""
+        raise PipelineError(
+            f"{_named(controller)}: act() must return {field} of finite numbers{whole}, got {bad}"
+        )
     got = "ragged rows" if array is None else f"shape {array.shape}"
     if array is not None and array.dtype.kind not in "iuf":
         got += f" of {array.dtype} values"
@@ -111,7 +125,8 @@ def _check_array(
 def checked_output(controller: Controller, out: object, obs: Observation) -> ControlOutput:
     """``out``, its arrays as float arrays, if it is a ``ControlOutput`` for ``obs``: ``accelerations``
     ``(M, 2)``, ``plan`` ``(M, H, 2)`` or None, ``prediction`` ``(H, N, 2)`` or None and each of
-    ``iteration_predictions`` ``(H, N, 2)`` (finite integers or floats, no booleans), ``iterations`` an
+    ``iteration_predictions`` ``(H, N, 2)`` (finite integers or floats, no booleans; a prediction's human
+    all NaN is one not predicted, e.g. out of a sensor's view), ``iterations`` an
     int >= 0, ``status`` a str, ``fallback`` a str or None (any name: the recording's schema takes a plugin's
     own), ``solve_time_s`` a finite number >= 0, ``potential`` a number or None, ``extra`` a dict of JSON
     values. Anything else (bare accelerations, a row short) is a one-line PipelineError naming the
@@ -128,14 +143,23 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
     if out.plan is not None:
         _check_array(controller, "plan", out.plan, (m, None, 2), f"of shape ({m}, H, 2) or None")
     if out.prediction is not None:
-        _check_array(controller, "prediction", out.prediction, (None, n, 2), f"of shape (H, {n}, 2) or None")
+        _check_array(
+            controller,
+            "prediction",
+            out.prediction,
+            (None, n, 2),
+            f"of shape (H, {n}, 2) or None",
+            humans_axis=1,
+        )
     if not isinstance(out.iteration_predictions, tuple | list):
         raise PipelineError(
             f"{_named(controller)}: act() must return iteration_predictions as a tuple of arrays, got "
             f"{type(out.iteration_predictions).__name__}"
         )
     for each in out.iteration_predictions:  # written by --record-iterations
-        _check_array(controller, "iteration_predictions", each, (None, n, 2), f"of (H, {n}, 2) arrays")
+        _check_array(
+            controller, "iteration_predictions", each, (None, n, 2), f"of (H, {n}, 2) arrays", humans_axis=1
+        )
     if isinstance(out.iterations, bool) or not isinstance(out.iterations, int | np.integer):
         raise PipelineError(
             f"{_named(controller)}: act() must return iterations as an int, got {out.iterations!r}"

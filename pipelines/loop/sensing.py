@@ -23,9 +23,10 @@ adds nothing to the controller's description).
 
 The number of humans in view changes from step to step, and an MPC builds an NLP per number: prepare them
 first (``MPCController.prepare(n_robots, range(n_humans + 1))``), or the first step meeting each size builds
-it. What the wrapped controller returns for the humans it saw is mapped to nothing: ``prediction`` and
-``iteration_predictions`` are dropped (they are of the visible humans only; the loop checks them against
-every human), and ``extra["visible"]`` lists the humans it planned around.
+it. What the wrapped controller predicts for the humans it saw goes back to their places among every human:
+``prediction`` and ``iteration_predictions`` are ``(H, N, 2)`` with NaN for the humans out of view (not
+predicted), so that a recording shows them and calibration scores them, and ``extra["visible"]`` lists the
+humans it planned around.
 """
 
 from __future__ import annotations
@@ -83,8 +84,12 @@ class RangeLimited:
         visible = np.flatnonzero(self._in_view)
         return dataclasses.replace(
             out,
-            prediction=None,
-            iteration_predictions=(),
+            prediction=None
+            if out.prediction is None
+            else _every_human(out.prediction, visible, obs.n_humans),
+            iteration_predictions=tuple(
+                _every_human(p, visible, obs.n_humans) for p in out.iteration_predictions
+            ),
             extra={**out.extra, "visible": visible.tolist()},
         )
 
@@ -128,3 +133,11 @@ class RangeLimited:
         distance = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
         near = (distance <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, bool)
         return near if obs.human_present is None else near & obs.human_present
+
+
+def _every_human(prediction: np.ndarray, visible: np.ndarray, n_humans: int) -> np.ndarray:
+    """``(H, n_humans, 2)``: the ``(H, len(visible), 2)`` prediction of the humans in view at their places
+    among every human, NaN for the others (not predicted: pipelines.loop.contract)."""
+    every = np.full((len(prediction), n_humans, 2), np.nan)
+    every[:, visible] = prediction
+    return every

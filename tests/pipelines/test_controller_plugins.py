@@ -308,7 +308,11 @@ BROKEN_CONTRACTS = [
     ),
     ("NaNAccelerations", "act() must return accelerations of finite numbers, got nan"),
     ("InfPlan", "act() must return plan of finite numbers, got inf"),
-    ("NaNPrediction", "act() must return prediction of finite numbers, got nan"),
+    (
+        "NaNPrediction",
+        "act() must return prediction of finite numbers (NaN only for every entry of a human not predicted), "
+        "got nan",
+    ),
     ("NegativeSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got -5.0"),
     ("NaNSolveTime", "act() must return solve_time_s as a finite number >= 0 (s), got nan"),
     ("NegativeIterations", "act() must return iterations as an int >= 0, got -1"),

@@ -124,7 +124,7 @@ def test_prediction_errors_by_hand():
     observer.on_step(obs, ControlOutput(accelerations=np.zeros((1, 2))), obs)  # no prediction: skipped
     truth = np.array([[[0, 0], [5, 0]], [[1, 0], [5, 0]], [[1, 0.2], [5, 0]], [[1, 0.2], [5, 0]]], float)
     robots = np.array([[[0, 0]], [[0, 0]], [[1, 1]], [[1, 1]]], float)  # at (1, 1) from step 2 on
-    observer.on_end(SimpleNamespace(human_positions=truth, robot_positions=robots))
+    observer.on_end(SimpleNamespace(human_positions=truth, robot_positions=robots, human_present=None))
     errors = observer.errors
     assert errors.shape == (1, 3)  # only the human within 2 m
     np.testing.assert_allclose(errors[0, :2], [0.1, 0.3])
@@ -135,6 +135,33 @@ def test_prediction_errors_by_hand():
     # away: the human stayed further than predicted, -0.3, clipped to 0.
     np.testing.assert_allclose(observer.shortfall[0, :2], [0.1, 0.0], atol=1e-12)
     assert math.isnan(observer.shortfall[0, 2])
+
+
+def test_prediction_errors_score_the_people_predicted_while_they_are_tracked():
+    """A replayed crowd's step: person 2 is not tracked (not predicted: NaN, and a track length of 0, which
+    classing every human refused), person 1 has just appeared (class new) and leaves after one step (no truth
+    at k = 2), person 0 has stood for 9 rows (class standing). All three are within ``near``."""
+    from crowdsim.env import Observation
+
+    obs = Observation(
+        time=0.4, step=1, robot_positions=np.zeros((1, 2)), robot_velocities=np.zeros((1, 2)),
+        robot_goals=np.ones((1, 2)), robot_last_actions=np.zeros((1, 2)), robot_reached=np.array([False]),
+        human_positions=np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]]), human_velocities=np.zeros((3, 2)),
+        human_goals=np.zeros((3, 2)), history=np.zeros((8, 4, 2)), radius=0.3, dt=0.4,
+        human_observed=np.array([9, 1, 0]), human_present=np.array([True, True, False]),
+    )  # fmt: skip
+    prediction = np.array([[[1.0, 0.1], [0.0, 1.5], [np.nan] * 2], [[1.0, 0.2], [0.0, 2.0], [np.nan] * 2]])
+    observer = PredictionErrors(near=2.0)
+    observer.on_reset(obs, {})
+    observer.on_step(obs, ControlOutput(accelerations=np.zeros((1, 2)), prediction=prediction), obs)
+    truth = np.zeros((4, 3, 2))
+    truth[:, 0], truth[:, 1], truth[:, 2] = [1.0, 0.0], [0.0, 1.2], [-1.0, 0.0]
+    present = np.array([[True, False, False], [True, True, False], [True, True, True], [True, False, True]])
+    observer.on_end(
+        SimpleNamespace(human_positions=truth, robot_positions=np.zeros((4, 1, 2)), human_present=present)
+    )
+    np.testing.assert_allclose(observer.errors, [[0.1, 0.2], [0.3, math.nan]])  # person 2 never scored
+    assert observer.classes.tolist() == [1, 0]
 
 
 @pytest.mark.slow

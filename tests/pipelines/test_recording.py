@@ -132,6 +132,24 @@ def test_scene_update_draws_agents_goals_plans_and_predictions(episode, recordin
     assert last["plans"]["lines"] == [] and len(last["robots"]["spheres"]) == 3
 
 
+def test_the_scene_draws_the_predictions_of_the_humans_predicted_only():
+    """A human out of a controller's view is NaN in its prediction; the scene drew no prediction at all
+    then (every strip needs numbers), now a strip per human predicted, each its own."""
+    from pipelines.logs.scene import SceneBuilder
+
+    builder = SceneBuilder(1, 3, 0.3)
+    humans = np.array([[1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+    prediction = np.array(
+        [[[1.0, 1.0], [np.nan, np.nan], [3.0, 1.0]], [[1.0, 2.0], [np.nan, np.nan], [3.0, 2.0]]]
+    )
+    scene = json.loads(builder.update(0, np.zeros((1, 2)), np.ones((1, 2)), humans, None, prediction))
+    (lines,) = [e["lines"] for e in scene["entities"] if e["id"] == "predictions"]
+    strips = [[[p["x"], p["y"]] for p in line["points"]] for line in lines]
+    assert strips == [[[1.0, 0.0], [1.0, 1.0], [1.0, 2.0]], [[3.0, 0.0], [3.0, 1.0], [3.0, 2.0]]]
+    none = json.loads(builder.update(0, np.zeros((1, 2)), np.ones((1, 2)), humans, None, prediction * np.nan))
+    assert [e["lines"] for e in none["entities"] if e["id"] == "predictions"] == [[]]
+
+
 def test_episode_metrics_at_the_end(episode, recording):
     (message,) = recording.messages["/episode/metrics"]
     assert recording.sim_seconds(message.log_time_ns) == 2.0  # the terminal state's time, 5 steps of 0.4 s

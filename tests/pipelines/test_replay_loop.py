@@ -171,9 +171,7 @@ def test_compiling_counts_every_crowd_size_a_replayed_cell_meets():
     assert jit_pays([replayed], 8 * episodes)
 
 
-def test_a_replayed_run_without_its_data_or_with_iterations_is_refused_before_any_work(
-    monkeypatch, tmp_path, capsys
-):
+def test_a_replayed_run_without_its_data_is_refused_before_any_work(monkeypatch, tmp_path, capsys):
     monkeypatch.delenv("CROWDMPC_DATA", raising=False)
     run = ["simulate", "--controller", "cmpc", "--episodes", "1", "--no-progress"]
     code, out, err = run_cli(capsys, *run, "--crowd", "eth")
@@ -188,13 +186,23 @@ def test_a_replayed_run_without_its_data_or_with_iterations_is_refused_before_an
     assert code == 2 and not (tmp_path / "s").exists()
     named = "--set env.crowd hotel: crowd 'hotel' replays the raw BIWI tracks, and the data directory"
     assert f"{named} {tmp_path} holds no raw_ewap/seq_hotel/obsmat.txt" in one_line(err)
-    code, _, err = run_cli(
-        capsys, *run, "--crowd", "eth", "--record-iterations", "--record", str(tmp_path / "r")
-    )
-    assert code == 2 and one_line(err).endswith(
-        "--record-iterations: among a replayed crowd (--crowd eth) a controller records no predictions (they "
-        "are of the people tracked now only); record without the iterations"
-    )
+
+
+def test_a_replayed_run_records_its_predictions_of_the_people_tracked_now(data, tmp_path, capsys):
+    """Refused before (--record-iterations), and the recordings held no /mpc/prediction: the loop's filter
+    dropped them. Now a person not tracked is null in each message, and everyone tracked is predicted."""
+    from pipelines.logs.reader import read_recording
+    from pipelines.logs.schema_check import check_recording
+
+    run = ["simulate", "--controller", "cmpc", "--crowd", "eth_test", "--humans", "8", "--episodes", "1"]
+    code, _, _ = run_cli(capsys, *run, "--record", str(tmp_path), "--record-iterations", "--no-progress")
+    assert code == 0
+    rec = read_recording(next(tmp_path.glob("*.mcap")))
+    assert check_recording(rec)[1] == []
+    present = [h["present"] for h in rec.data("/humans")]
+    predicted = [[row[0] is not None for row in p["positions"][0]] for p in rec.data("/mpc/prediction")]
+    assert predicted == present[: len(predicted)] and not all(map(all, present))
+    assert all(len(p["iterations"]) >= 1 for p in rec.data("/mpc/prediction"))
 
 
 def test_an_mpc_handed_people_who_are_not_there_says_how_the_loop_hands_them(data):

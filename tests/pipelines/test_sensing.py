@@ -72,6 +72,34 @@ def test_only_the_humans_in_range_are_seen_with_their_tracks_padded_and_counted(
     np.testing.assert_allclose(seen.history[:, 2, 0], [1.9, 1.9, 1.9, 2.0])  # tracked 2 of 4 rows
 
 
+class Predicting(Keep):
+    """Keep, predicting each human it is handed to stay where it is, at 2 steps and 3 IBR iterations."""
+
+    def act(self, obs):
+        import dataclasses
+
+        out = super().act(obs)
+        held = np.repeat(obs.human_positions[None], 2, axis=0)
+        return dataclasses.replace(out, prediction=held, iteration_predictions=(held, held + 1.0, held))
+
+
+def test_the_prediction_of_the_humans_in_view_goes_back_to_their_places_nan_for_the_others():
+    """It was dropped (None): a recording behind a sensor showed no prediction, calibration scored none."""
+    sensor = RangeLimited(Predicting(), radius=3.0)
+    obs = observation(10, [[1.0, 0.0], [5.0, 0.0], [0.0, 2.5]])
+    sensor.reset(obs)
+    out = sensor.act(obs)
+    expected = np.array([[[1.0, 0.0], [np.nan, np.nan], [0.0, 2.5]]] * 2)
+    np.testing.assert_array_equal(out.prediction, expected)
+    assert len(out.iteration_predictions) == 3
+    np.testing.assert_array_equal(out.iteration_predictions[1], expected + 1.0)
+    assert out.extra["visible"] == [0, 2]
+    # through the loop's contract, which refuses a NaN anywhere but in a whole human's rows
+    from pipelines.loop.contract import checked_output
+
+    assert checked_output(sensor, out, obs) is not None
+
+
 def test_without_reported_tracks_the_padding_reads_as_the_past_and_the_description_says_so():
     sensor = RangeLimited(Keep(), radius=3.0, report_tracks=False)
     sensor.reset(observation(10, [[1.0, 0.0]]))

@@ -3,6 +3,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from pipelines.cli import main
@@ -82,11 +83,24 @@ def test_the_printed_summary_names_the_sensor(capsys):
     assert "sensor" not in capsys.readouterr().out.splitlines()[0]
 
 
-def test_iterations_to_record_behind_a_sensor_are_refused(tmp_path, capsys, monkeypatch):
-    # accepted, rc 0, and the recordings held no /mpc/prediction at all: the sensor drops the predictions
-    monkeypatch.setattr("pipelines.loop.episode.run_episodes", None)  # no episode may run
+def test_a_controller_behind_a_sensor_records_its_predictions_of_the_humans_in_view(tmp_path, capsys):
+    """It was refused (--record-iterations) or recorded no /mpc/prediction at all: the sensor dropped the
+    predictions. Now each message holds every human, null for those out of view, and passes the schema."""
+    from pipelines.logs.reader import read_recording
+    from pipelines.logs.schema_check import check_recording
+    from pipelines.logs.view import episode_view
+
     options = ["--sensor-range", "3", "--record", str(tmp_path / "rec"), "--record-iterations"]
-    assert main([*RUN, *options, "--no-progress"]) == 2
-    err = capsys.readouterr().err
-    assert len(err.splitlines()) == 1
-    assert "--record-iterations: a controller behind --sensor-range records no predictions" in err
+    assert main([*RUN[:-1], "1", *options, "--no-progress"]) == 0
+    capsys.readouterr()
+    (path,) = (tmp_path / "rec").glob("*.mcap")
+    rec = read_recording(path)
+    assert check_recording(rec)[1] == []
+    messages = rec.data("/mpc/prediction")
+    assert len(messages) == len(rec.data("/mpc/solver")) and all(m["iterations"] for m in messages)
+    seen = [[row[0] is not None for row in m["positions"][0]] for m in messages]
+    assert all(len(s) == 4 for s in seen) and any(all(s) for s in seen) and not all(map(all, seen))
+    visible = [m["extra"]["visible"] for m in rec.data("/mpc/solver")]
+    assert [[j for j, s in enumerate(row) if s] for row in seen] == visible  # the humans in view, no other
+    first = episode_view(rec).predictions[0]  # read back, null as NaN: humans 1 to 3 out of view at first
+    assert first.shape[1:] == (4, 2) and np.isfinite(first[:, 0]).all() and np.isnan(first[:, 1:]).all()

@@ -168,12 +168,6 @@ def test_sweep_sensor_range_runs_every_method_behind_the_sensor_and_reports_it(t
             "--no-sensor-tracks: track lengths are a sensor's; give --sensor-range M too",
         ),
         (
-            ["--experiment", "sensing", "--set", "controller.record_iterations=true"],
-            "--set controller.record_iterations: methods ['4 m', '3 m', '2 m', '3 m untracked'] of "
-            "experiment 'sensing' run behind a sensor or among a replayed crowd, whose controllers record no "
-            "predictions",
-        ),
-        (
             ["--experiment", "table2", "--sensor-range", "0"],
             "--sensor-range must be a finite number of metres > 0",
         ),

@@ -198,10 +198,14 @@ class InfPlan(StraightLine):
 
 
 class NaNPrediction(StraightLine):
+    """One coordinate NaN: a human all NaN is one not predicted (out of view), this one is broken."""
+
     name = "nan_prediction"
 
     def act(self, obs: Observation) -> ControlOutput:
-        return dataclasses.replace(super().act(obs), prediction=np.full((4, obs.n_humans, 2), np.nan))
+        prediction = np.zeros((4, obs.n_humans, 2))
+        prediction[0, 0, 1] = np.nan
+        return dataclasses.replace(super().act(obs), prediction=prediction)
 
 
 class NegativeSolveTime(StraightLine):
