@@ -203,7 +203,9 @@ def calibration_world_note(
     if crowd != "orca":  # whatever the conventions: calibrate's episodes are ORCA's crowds
         return (
             f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
-            f"among ORCA's humans, this run replays BIWI's {crowd}: their coverage here is not measured"
+            f"among ORCA's humans, this run replays BIWI's {crowd}: there they cover less than calibrated at "
+            "the first horizon steps (docs/replayed_crowds.md; conformal:ALPHA:real, calibrated on real "
+            "people, covers more)"
         )
     measured = (block.details.get("profile"), block.details.get("visibility"))
     if None in measured or measured == (profile, visibility):

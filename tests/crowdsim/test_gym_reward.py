@@ -45,11 +45,19 @@ def test_step_closest_moves_the_robot_and_the_human_within_the_step():
     # The robot drives (0, 0) -> (1, 0) past a human standing at (1, 0.5): relative to the robot the human
     # goes (1, 0.5) -> (0, 0.5), closest 0.5 m at the step's end. A robot taken as standing at its start
     # would leave the human at (1, 0.5) throughout: sqrt(1.25) = 1.118 m.
-    before = SimpleNamespace(robot_positions=np.array([[0.0, 0.0]]), human_positions=np.array([[1.0, 0.5]]))
-    after = SimpleNamespace(robot_positions=np.array([[1.0, 0.0]]), human_positions=np.array([[1.0, 0.5]]))
+    before = SimpleNamespace(
+        human_present=None, robot_positions=np.array([[0.0, 0.0]]), human_positions=np.array([[1.0, 0.5]])
+    )
+    after = SimpleNamespace(
+        human_present=None, robot_positions=np.array([[1.0, 0.0]]), human_positions=np.array([[1.0, 0.5]])
+    )
     np.testing.assert_allclose(step_closest(before, after), [[0.5]])
     # A human walking (2, 1) -> (-2, 1) past a robot standing at the origin: sqrt(5) m at both ends of the
     # step, 1 m mid-step at (0, 1).
-    before = SimpleNamespace(robot_positions=np.zeros((1, 2)), human_positions=np.array([[2.0, 1.0]]))
-    after = SimpleNamespace(robot_positions=np.zeros((1, 2)), human_positions=np.array([[-2.0, 1.0]]))
+    before = SimpleNamespace(
+        human_present=None, robot_positions=np.zeros((1, 2)), human_positions=np.array([[2.0, 1.0]])
+    )
+    after = SimpleNamespace(
+        human_present=None, robot_positions=np.zeros((1, 2)), human_positions=np.array([[-2.0, 1.0]])
+    )
     np.testing.assert_allclose(step_closest(before, after), [[1.0]])

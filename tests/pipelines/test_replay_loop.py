@@ -137,7 +137,7 @@ def test_a_replayed_sweeps_table_says_who_the_humans_are_and_that_the_oracle_is_
     assert ordinary == "Margins: none; profile paper, robots visible to the humans."
 
 
-def test_closed_loop_margins_among_a_replayed_crowd_are_noted_as_not_measured_there():
+def test_closed_loop_margins_among_a_replayed_crowd_are_noted_as_covering_less_there():
     from pipelines.commands.simulate_checks import calibration_world_note
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.margins import parse_margins
@@ -147,7 +147,9 @@ def test_closed_loop_margins_among_a_replayed_crowd_are_noted_as_not_measured_th
     note = calibration_world_note(spec, "paper", "visible", "eth_test")
     assert note == (
         "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated among ORCA's "
-        "humans, this run replays BIWI's eth_test: their coverage here is not measured"
+        "humans, this run replays BIWI's eth_test: there they cover less than calibrated at the first "
+        "horizon steps (docs/replayed_crowds.md; conformal:ALPHA:real, calibrated on real people, covers "
+        "more)"
     )
     assert (
         calibration_world_note(ControllerSpec("cmpc", "social_lstm_eth"), "paper", "visible", "eth") is None
