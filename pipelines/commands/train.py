@@ -7,12 +7,18 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
 from pipelines.commands import check_data_files, check_outside_the_zoos, check_writable, path_arg
 from pipelines.commands.output_paths import output_arg
-from pipelines.commands.train_net import net_config_of, training_loss, trains_point_head
+from pipelines.commands.train_net import (
+    net_config_of,
+    resumed_net_config,
+    training_loss,
+    trains_point_head,
+)
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
@@ -41,12 +47,18 @@ Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for -
 tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (state_dict + config) with
 NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net's top-20 drawn as
 `crowdmpc evaluate --top-k 20` draws it, whatever --seed). `crowdmpc zoo add OUT/NAME.pt` puts the pair
-into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise); it
-takes the run's settings, of which only --epochs may change, upwards (the count already trained only finishes
-a run that stopped before writing its metrics). --val and --test files are read as the evaluation reads them
-before training starts: a TrajNet++ test/ file without ground truth is refused then, not after training.
+into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise): an
+option left out takes the run's setting, one typed must be the run's, and only --epochs may change, upwards
+(the count already trained only finishes a run that stopped before writing its metrics). --val and --test
+files are read as the evaluation reads them before training starts: a TrajNet++ test/ file without ground
+truth is refused then, not after training.
 A second train into an --out where one is running is refused (its lock: OUT/.train.lock).
 """
+
+
+# Each option so marked has no parser default: left out on --resume, the run's value goes on
+# (train_resume.RUN_OPTIONS holds the defaults of a new run).
+RESUMED = "; with --resume, the run's"
 
 
 def register(subparsers) -> None:
@@ -69,7 +81,12 @@ def register(subparsers) -> None:
         "--out", type=output_arg, default=None, help="run directory (default runs/train/NAME)"
     )
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from last.ckpt")
-    parser.add_argument("--seed", type=int, default=0, help="seed of weights, shuffling, augmentation")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of weights, shuffling, augmentation (default 0)" + RESUMED,
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -89,13 +106,14 @@ def _net_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="social pooling: grid (hard, TrajNet++) or soft (bilinear, differentiable); "
         "default grid for social_lstm, soft for social_gan and social_gru; not for vanilla_lstm, and only "
-        "for kinds whose config has a pooling",
+        "for kinds whose config has a pooling; with --resume, the run's",
     )
     parser.add_argument(
         "--net-config",
         default=None,
         metavar="JSON",
-        help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'",
+        help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'; with "
+        "--resume and none of --pooling, --hidden-dim and --net-config, the run's",
     )
 
 
@@ -131,15 +149,15 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
     """How long and how fast: epochs, batches, learning rate and its decay, the loss."""
     parser.add_argument("--epochs", type=int, default=25, help="training epochs (default 25)")
     parser.add_argument(
-        "--batch-size", type=int, default=8, help="scenes per batch (default 8, as TrajNet++)"
+        "--batch-size", type=int, default=None, help="scenes per batch (default 8, as TrajNet++)" + RESUMED
     )
     parser.add_argument(
         "--batching",
         choices=("shuffled", "by_size"),  # predictors.data.batching.BATCHINGS, without importing torch
-        default="shuffled",
+        default=None,
         help="how an epoch's shuffled scenes are cut into batches: shuffled (as they come, as TrajNet++) or "
         "by_size (buckets of scenes of similar agent counts: less padding, faster epochs, other weights; "
-        "recorded in the checkpoint) (default shuffled)",
+        "recorded in the checkpoint) (default shuffled)" + RESUMED,
     )
     parser.add_argument(
         "--limit-batches",
@@ -147,12 +165,21 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="N",
         help="train and validate on the first N batches of each epoch (Lightning's limit_train_batches and "
-        "limit_val_batches): a quick check that a net trains; the checkpoint records it (default: all)",
+        "limit_val_batches): a quick check that a net trains; the checkpoint records it (default: all)"
+        + RESUMED,
     )
     parser.add_argument(
-        "--lr", type=float, default=1e-3, help=f"Adam learning rate, in (0, {MAX_LR:g}] (default 1e-3)"
+        "--lr",
+        type=float,
+        default=None,
+        help=f"Adam learning rate, in (0, {MAX_LR:g}] (default 1e-3)" + RESUMED,
     )
-    parser.add_argument("--step-size", type=int, default=10, help="epochs per 10x learning-rate decay")
+    parser.add_argument(
+        "--step-size",
+        type=int,
+        default=None,
+        help="epochs per 10x learning-rate decay (default 10)" + RESUMED,
+    )
     parser.add_argument(
         "--loss",
         choices=("gaussian", "l2"),
@@ -224,18 +251,25 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.commands.train_resume import checkpoint_record, read_run_settings, take_run_options
     from predictors.checkpoint import check_name
 
-    _check_numbers(args)
     pooling, net_config = net_config_of(args)
-    # before the data: a --loss the net does not train on is refused before files are read or prepared
-    loss_typed = args.loss is not None
-    args.loss = training_loss(args, net_config)
     explicit = args.train is not None or args.val is not None
     _protocol_options(args, explicit)
     name = args.name or default_name(args.model, pooling, args.dataset, explicit)
     check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
+    # A resume goes on with the run's settings wherever the command line leaves one out (read once: a run's
+    # settings never change once it exists); the checks below refuse one typed otherwise.
+    recorded = read_run_settings(out) if args.resume else None
+    started = checkpoint_record(out) if args.resume and recorded is None else recorded
+    taken = take_run_options(args, started)
+    pooling, net_config, net_taken = resumed_net_config(args, started, pooling, net_config)
+    _check_numbers(args)
+    # before the data: a --loss the net does not train on is refused before files are read or prepared
+    loss_typed = args.loss is not None
+    args.loss = training_loss(args, net_config)
     ckpt_dir = out / "checkpoints"
     check_outside_the_zoos(out, "--out", "the training run")
     # `--out .` in a clone: Lightning's checkpoints/ is the shipped zoo's folder
@@ -263,18 +297,28 @@ def run(args: argparse.Namespace) -> int:
     from pipelines.commands.train_resume import one_run_at_a_time
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
-        name = _check_out(args, out, settings, net_config, loss_typed)
+        name = _check_out(args, out, settings, net_config, loss_typed, recorded)
+        if taken or net_taken:
+            shown = [f"{key} {getattr(args, key)}" for key in taken] + ["its net config"] * net_taken
+            print(f"--resume: {out} goes on with the run's {', '.join(shown)}", file=sys.stderr)
         return run_training(args, net_config, name, out, (files, root), settings, evaluated)
 
 
-def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: Any, loss_typed: bool) -> str:
-    """The run's name, once what --out holds is checked: no run unless --resume, else one it continues."""
+def _check_out(
+    args: argparse.Namespace,
+    out: Path,
+    settings: dict,
+    net_config: Any,
+    loss_typed: bool,
+    recorded: dict[str, Any] | None,
+) -> str:
+    """The run's name, once what --out holds is checked: no run unless --resume, else one it continues
+    (``recorded``: its settings file, ``train_resume.read_run_settings``)."""
     from pipelines.commands.train_resume import (
         check_last_checkpoint,
         check_more_epochs,
         check_resumed_settings,
         note_other_code,
-        read_run_settings,
         recorded_loss,
     )
 
@@ -283,7 +327,6 @@ def _check_out(args: argparse.Namespace, out: Path, settings: dict, net_config: 
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     if not args.resume:
         return str(settings["name"])
-    recorded = read_run_settings(out)
     loss = recorded_loss(recorded, last)
     # the run's own when none is typed: runs before this default recorded "gaussian" for point heads too,
     # which trained on L2, so for a point head that record is the "l2" typed, not another setting

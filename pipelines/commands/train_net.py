@@ -46,6 +46,28 @@ def net_config_of(args: argparse.Namespace) -> tuple[str | None, Any]:
     return (pooling if isinstance(pooling, str) else None), config
 
 
+def resumed_net_config(
+    args: argparse.Namespace, recorded: dict[str, Any] | None, pooling: str | None, config: Any
+) -> tuple[str | None, Any, bool]:
+    """``(pooling, config, taken)``: on a resume that types none of --pooling, --hidden-dim and --net-config,
+    the net config the run was started with (``recorded``'s), else the one the command line asks for
+    (``pooling``, ``config``: ``net_config_of``'s); ``taken``: whether it is the run's and differs from the
+    one the command line asks for (which a resume names). A recorded config of another model, or one the
+    kind now refuses, is not taken: the checks of the resume name the difference."""
+    from predictors.models import model_kind
+
+    typed = any(value is not None for value in (args.pooling, args.hidden_dim, args.net_config))
+    held = recorded.get("net_config") if recorded is not None else None
+    if typed or not args.resume or not isinstance(held, dict):
+        return pooling, config, False
+    try:
+        run = model_kind(args.model).config(held)
+    except PredictorError:
+        return pooling, config, False
+    recorded_pooling = getattr(run, "pooling", None)
+    return (recorded_pooling if isinstance(recorded_pooling, str) else None), run, run != config
+
+
 def training_loss(args: argparse.Namespace, net_config: Any) -> str:
     """The loss the run trains on: --loss, else the one its net's head takes (gaussian for a Gaussian head,
     l2 for a point head); PipelineError when --loss names one the net does not train on (it was ignored:

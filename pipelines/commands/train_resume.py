@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from itertools import takewhile
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from pipelines.errors import PipelineError
 
@@ -25,6 +25,24 @@ BEST_FILENAME = "best-{epoch:03d}-{val_ade:.4f}"
 BEST_PREFIX = "best-epoch="
 _LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Lightning
 LOCK_FILE = ".train.lock"
+# The options a resume takes from its run when they are not typed, and their defaults for a new run: the
+# parser's defaults are None, so that an option typed can be told from one left out (--batch-size 8 typed on
+# the resume of a run at 2 is refused; left out, the run's 2 goes on). Types as the run records them.
+RUN_OPTIONS: Final[dict[str, Any]] = {
+    "lr": 1e-3,
+    "step_size": 10,
+    "batch_size": 8,
+    "batching": "shuffled",
+    "seed": 0,
+}
+_RECORDED_TYPES: Final[dict[str, tuple[type, ...]]] = {
+    "lr": (float, int),
+    "step_size": (int,),
+    "batch_size": (int,),
+    "batching": (str,),
+    "seed": (int,),
+    "limit_batches": (int,),
+}
 
 
 @contextmanager
@@ -95,6 +113,42 @@ def read_run_settings(out: Path) -> dict[str, Any] | None:
     if not isinstance(recorded, dict):
         raise PipelineError(f"--resume: {path} is not a JSON object of settings; the run's file is damaged")
     return recorded
+
+
+def checkpoint_record(out: Path) -> dict[str, Any] | None:
+    """What the last.ckpt of the run in ``out`` says it was trained with (``checkpoint_settings``, the values
+    it holds): the settings a resume goes on with for a run from before its settings file was kept; None
+    where it cannot be read (``check_last_checkpoint`` then says why)."""
+    import torch
+
+    try:
+        checkpoint = torch.load(out / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True)
+        hyper, data = checkpoint["hyper_parameters"], checkpoint.get("datamodule_hyper_parameters")
+        held = checkpoint_settings(hyper, data)
+    except Exception:
+        return None
+    return {key: value for key, value in held.items() if value is not None}
+
+
+def take_run_options(args: argparse.Namespace, recorded: dict[str, Any] | None) -> list[str]:
+    """Each of ``RUN_OPTIONS`` and --limit-batches the command line left out: on a resume the run's
+    (``recorded``: its settings file, else ``checkpoint_record``), else the default. Returns those taken
+    from the run that differ from the default (which a resume names). A recorded value of the wrong type (a
+    damaged file) is not taken: the default then differs from the run's, and ``check_resumed_settings``
+    refuses the resume naming both."""
+    taken = []
+    run = recorded if args.resume and recorded is not None else {}
+    for key in (*RUN_OPTIONS, "limit_batches"):
+        if getattr(args, key) is not None:
+            continue
+        value = run.get(key)
+        if isinstance(value, _RECORDED_TYPES[key]) and not isinstance(value, bool):
+            setattr(args, key, value)
+            if value != RUN_OPTIONS.get(key):
+                taken.append(key)
+        else:
+            setattr(args, key, RUN_OPTIONS.get(key))
+    return taken
 
 
 def recorded_loss(recorded: dict[str, Any] | None, last: Path) -> str | None:

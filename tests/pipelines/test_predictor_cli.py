@@ -409,6 +409,30 @@ def test_resume_checks_the_checkpoints_own_settings_when_the_runs_file_is_gone(
         assert "is not a JSON object of settings" in err
 
 
+def _without(args: list[str], *options: str) -> list[str]:
+    """``args`` without each of ``options`` and its value."""
+    return [a for i, a in enumerate(args) if a not in options and (i == 0 or args[i - 1] not in options)]
+
+
+@pytest.mark.parametrize("settings_file", ["kept", "gone"])
+def test_a_resume_goes_on_with_the_settings_it_leaves_out(trained, capsys, settings_file):
+    """Every setting had to be typed again: a resume of the soft-pooling run at batch 2 without --pooling or
+    --batch-size was refused (the default grid net, batch 8). Left out, each is the run's: from its settings
+    file, or from its last.ckpt for a run from before that file."""
+    out, args = trained
+    left_out = ["--pooling", "--batch-size", "--name"]
+    if settings_file == "gone":
+        (out / "train_settings.json").unlink()
+        left_out.remove("--name")  # the name is the settings file's alone
+    lean = _without([a if a != "1" else "2" for a in args], *left_out)
+    assert main([*lean, "--resume"]) == 0
+    err = capsys.readouterr().err
+    assert f"--resume: {out} goes on with the run's batch_size 2, its net config\n" in err
+    recorded = json.loads((out / "walker.json").read_text())
+    assert recorded["net"]["pooling"] == "soft" and recorded["training"]["epochs"] == 2
+    assert recorded["training"]["batch_size"] == 2
+
+
 def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capfd):
     """Lightning's litlogger/litmodels tips and its use of a torch API that torch 2.13 deprecates are
     nothing a user of `crowdmpc train` can act on; they are left out, the run's own lines stay."""
@@ -788,7 +812,8 @@ def test_last_checkpoint_is_every_epochs_own(tmp_path, capsys):
 
 def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, capsys):
     """--limit-batches 1 with batches of one scene: one optimiser step an epoch where the walk file's two
-    scenes give two; the checkpoint says so, and resuming without the option is refused."""
+    scenes give two; the checkpoint says so, a resume without the option goes on with it (it was refused:
+    the option had to be typed again), and one typing another is refused."""
     import torch
 
     data = str(write_walk_file(tmp_path / "walk.ndjson"))
@@ -808,8 +833,15 @@ def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, cap
     assert training("all")["pred_len"] == 12  # what the MPC's horizon note compares with
     capsys.readouterr()
     resumed = [*args, "--epochs", "3", "--out", str(tmp_path / "limited"), "--no-progress", "--resume"]
-    assert main(resumed) == 2
-    assert "limit_batches: run 1, now null" in capsys.readouterr().err
+    assert main([*resumed, "--limit-batches", "2"]) == 2
+    assert "limit_batches: run 1, now 2" in capsys.readouterr().err
+    assert main(resumed) == 0
+    assert (
+        f"--resume: {tmp_path / 'limited'} goes on with the run's limit_batches 1" in capsys.readouterr().err
+    )
+    assert (
+        torch.load(tmp_path / "limited" / "checkpoints" / "last.ckpt", weights_only=False)["global_step"] == 3
+    )
 
 
 def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, capsys):

@@ -32,7 +32,11 @@ def test_the_command_offers_the_batchings_the_data_module_knows():
     train.register(parser.add_subparsers())
     (command,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     (option,) = [a for a in command.choices["train"]._actions if a.dest == "batching"]
-    assert tuple(option.choices) == BATCHINGS and option.default == "shuffled"
+    # no parser default, so that a resume can tell it left out (train_resume.RUN_OPTIONS holds the default)
+    from pipelines.commands.train_resume import RUN_OPTIONS
+
+    assert tuple(option.choices) == BATCHINGS and option.default is None
+    assert RUN_OPTIONS["batching"] == "shuffled"
 
 
 def _args(data: str, out, *extra: str) -> list[str]:
@@ -77,8 +81,9 @@ def test_a_resumed_by_size_run_ends_where_an_uninterrupted_one_does(tmp_path):
     assert not all(torch.equal(straight[k], shuffled[k]) for k in straight)
 
 
-def test_a_resume_asking_for_other_batching_is_refused(tmp_path, capsys):
-    """As for any other setting: the run's batching or none. A run from before --batching (no record in its
+def test_a_resume_goes_on_with_the_runs_batching_and_refuses_another(tmp_path, capsys):
+    """As for any other setting: left out, the run's batching (it was refused: "shuffled" had to be typed
+    away by typing by_size again); typed, the run's or none. A run from before --batching (no record in its
     settings file nor in its last.ckpt) batched as "shuffled": resumed by_size, it is refused too."""
     import torch
 
@@ -86,8 +91,12 @@ def test_a_resume_asking_for_other_batching_is_refused(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(_args(data, out, "--epochs", "1", "--batching", "by_size")) == 0
     capsys.readouterr()
-    assert main(_args(data, out, "--epochs", "2", "--resume")) == 2
+    assert main(_args(data, out, "--epochs", "2", "--batching", "shuffled", "--resume")) == 2
     assert 'batching: run "by_size", now "shuffled"' in capsys.readouterr().err
+    assert main(_args(data, out, "--epochs", "2", "--resume")) == 0
+    assert f"--resume: {out} goes on with the run's batching by_size\n" in capsys.readouterr().err
+    checkpoint = torch.load(out / "checkpoints" / "last.ckpt", weights_only=False)
+    assert checkpoint["datamodule_hyper_parameters"]["batching"] == "by_size" and checkpoint["epoch"] == 1
 
     old = tmp_path / "old"
     assert main(_args(data, old, "--epochs", "1")) == 0
