@@ -8,6 +8,7 @@ the first step took the robots elsewhere than the default did.
 
     nice -n 5 .venv/bin/python benchmarks/first_step.py        # 40 episodes, social_lstm_eth, 7 humans
     nice -n 5 .venv/bin/python benchmarks/first_step.py --predictor constant_velocity --scenario perpendicular
+    nice -n 5 .venv/bin/python benchmarks/first_step.py --profile v1
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def fatrop_alone() -> Iterator[None]:
 
 def run_mode(mode: str, args: argparse.Namespace) -> list[Any]:
     """The episodes of one ``mode`` (``MODES``)."""
+    from crowdsim.profiles import make_env_config
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import run_episodes
 
@@ -68,6 +70,7 @@ def run_mode(mode: str, args: argparse.Namespace) -> list[Any]:
             scenario=args.scenario,
             n_humans=args.humans,
             progress=True,
+            env_config=make_env_config(args.profile, "visible"),
         )
 
     if mode != "fatrop_alone":
@@ -96,13 +99,16 @@ def main() -> None:
     parser.add_argument("--humans", type=human_count, default=7)
     parser.add_argument("--scenario", choices=("circle", "perpendicular"), default="circle")
     parser.add_argument("--seed", type=seed_number, default=0)
+    parser.add_argument(
+        "--profile", choices=("paper", "v1"), default="paper", help="the simulator's conventions"
+    )
     parser.add_argument("--json", type=output_file, default=None, metavar="FILE")
     args = parser.parse_args()
     runs = {mode: run_mode(mode, args) for mode in MODES}
     default_paths = [r.robot_positions[1] for r in runs["default"]]
     report: dict[str, Any] = {"predictor": args.predictor, "episodes": args.episodes, "modes": {}}
     print(
-        f"CMPC, {args.predictor}, {args.humans} humans, {args.scenario}, seeds {args.seed}.."
+        f"CMPC, {args.predictor}, {args.humans} humans, {args.scenario}, {args.profile}, seeds {args.seed}.."
         f"{args.seed + args.episodes - 1}: success / collision / contact %, travel s; first step elsewhere"
     )
     for mode, results in runs.items():

@@ -111,11 +111,11 @@ class _Solver:
     With Fatrop, a solve goes to Fatrop, and to IPOPT (warm when given multipliers) only if Fatrop fails. A
     solve with ``explore`` (the first solve of a step that starts from braking: an episode's first step, or
     one after failures) goes to both, and the lower cost wins. From a standing start the NLP has several
-    local minima, and the one the first step picks sets the robots' formation for the episode: measured on
-    40 CMPC episodes (social_lstm_eth, 7 humans), IPOPT from the first step's zero start reaches F = 23.3
-    (outer robots ahead) where Fatrop reaches 26.4 (middle robot ahead), and Fatrop alone then violates
-    personal space in 37.5 % of episodes against IPOPT's 10 %. Exploring with both, the 40 episodes give
-    IPOPT's results (90 % success, 10 % collision, 16.97 s against 16.96 s travel) at Fatrop's speed.
+    local minima, and the one the first step picks sets the robots' formation for the episode:
+    ``benchmarks/first_step.py`` (40 CMPC episodes, social_lstm_eth, 7 humans; docs/results.md) has Fatrop
+    alone take the first step elsewhere in 27-40 of 40, into 37.5 % collisions against 27.5 % under the v1
+    conventions and 0.6-2.4 s more travel under the paper's; exploring with both gives IPOPT's episodes to
+    within 0.1 s of travel, at Fatrop's speed.
 
     The cold IPOPT is built with the solver (the first step needs it), the warm one when first needed (a
     failed Fatrop solve); IPOPT is compiled (``jit``) only when it is the solver.

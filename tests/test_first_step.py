@@ -37,7 +37,7 @@ def test_the_script_runs_the_three_ways_on_the_same_seeds(tmp_path):
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    assert lines[0].startswith("CMPC, constant_velocity, 3 humans, circle, seeds 0..0: ")
+    assert lines[0].startswith("CMPC, constant_velocity, 3 humans, circle, paper, seeds 0..0: ")
     assert [line.split()[0] for line in lines[1:]] == list(first_step.MODES)
     report = json.loads(out.read_text())
     assert report["modes"]["default"]["first_step_elsewhere"] == 0  # the default against itself
