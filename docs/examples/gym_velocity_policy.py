@@ -2,20 +2,21 @@
 
 Every robot heads for its goal at 1 m/s and is pushed away from each human within 2 m, the harder the
 closer (a social-force flavour). Run it from the repository root:
-``python docs/examples/gym_velocity_policy.py [EPISODES] [OUT_DIR]``; then ``crowdmpc review OUT_DIR``
-(or open the files in Foxglove).
+``python docs/examples/gym_velocity_policy.py [EPISODES] [OUT_DIR] [CROWD]``; then ``crowdmpc review
+OUT_DIR`` (or open the files in Foxglove). CROWD is ORCA's (``orca``, the default) or one of the replayed
+BIWI crowds, e.g. ``eth_test`` (real people, read from ``$CROWDMPC_DATA``), where a person's row is present
+only while tracked: the policy reads the ``present`` column, so it runs among either unchanged.
 """
 
 import sys
 
-import gymnasium as gym
 import numpy as np
 
-import crowdsim  # registers crowdmpc/CrowdNav-v0
+from crowdsim.env_config import EnvConfig
 from crowdsim.gym_env import GOAL, POSITION, PRESENT
 from crowdsim.gym_wrappers import VelocityControl
 from pipelines.logs.recording import McapEpisodeRecorder
-from pipelines.loop.gym_loop import ObserveEpisodes
+from pipelines.loop.gym_loop import ObserveEpisodes, make_env
 
 
 def policy(obs: np.ndarray, n_robots: int) -> np.ndarray:
@@ -30,9 +31,12 @@ def policy(obs: np.ndarray, n_robots: int) -> np.ndarray:
     return np.clip(heading + push, -1.0, 1.0)  # the velocity bound, per component
 
 
-def main(episodes: int = 3, out_dir: str = "runs/gym_velocity_policy", n_humans: int = 7) -> None:
+def main(
+    episodes: int = 3, out_dir: str = "runs/gym_velocity_policy", crowd: str = "orca", n_humans: int = 7
+) -> None:
     with McapEpisodeRecorder(out_dir) as recorder:
-        base = gym.make(crowdsim.ENV_ID, n_humans=n_humans)
+        # gym.make("crowdmpc/CrowdNav-v0", ...) once crowdsim is imported; make_env reads a replay's recording
+        base = make_env(EnvConfig(crowd=crowd), n_humans=n_humans)
         env = VelocityControl(ObserveEpisodes(base, [recorder], controller="velocity_policy"))
         for seed in range(episodes):
             obs, _ = env.reset(seed=seed)
@@ -48,4 +52,4 @@ def main(episodes: int = 3, out_dir: str = "runs/gym_velocity_policy", n_humans:
 
 
 if __name__ == "__main__":
-    main(*(int(a) if a.isdigit() else a for a in sys.argv[1:3]))  # type: ignore[arg-type]
+    main(*(int(a) if a.isdigit() else a for a in sys.argv[1:4]))  # type: ignore[arg-type]

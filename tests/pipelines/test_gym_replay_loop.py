@@ -69,3 +69,22 @@ def test_make_env_names_what_it_cannot_do(data, monkeypatch):  # noqa: F811
     monkeypatch.delenv("CROWDMPC_DATA")
     with pytest.raises(PipelineError, match="crowd 'hotel_test' replays the raw BIWI tracks: set CROWDMPC"):
         make_env(EnvConfig(crowd="hotel_test"))
+
+
+def test_the_docs_velocity_policy_runs_among_real_people(data, tmp_path, capsys):  # noqa: F811
+    import importlib.util
+
+    from tests.pipelines.test_gym_loop import EXAMPLE
+
+    spec = importlib.util.spec_from_file_location("gym_velocity_policy", EXAMPLE)
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    example.main(episodes=1, out_dir=str(tmp_path / "runs"), crowd="eth_test", n_humans=8)
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("seed 0: return ") and out[-1] == f"wrote 1 MCAP files to {tmp_path / 'runs'}"
+    from pipelines.logs.reader import read_recording
+
+    (path,) = (tmp_path / "runs").glob("*.mcap")
+    present = [h["present"] for h in read_recording(path).data("/humans")]
+    assert len(present[0]) == 8 and not all(map(all, present))  # the recording keeps who was tracked
