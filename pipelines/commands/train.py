@@ -48,10 +48,10 @@ tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (stat
 NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net's top-20 drawn as
 `crowdmpc evaluate --top-k 20` draws it, whatever --seed). `crowdmpc zoo add OUT/NAME.pt` puts the pair
 into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise): an
-option left out takes the run's setting, one typed must be the run's, and only --epochs may change, upwards
-(the count already trained only finishes a run that stopped before writing its metrics). --val and --test
-files are read as the evaluation reads them before training starts: a TrajNet++ test/ file without ground
-truth is refused then, not after training.
+option left out takes the run's setting (but for the data files and --out: name them as the run did), one
+typed must be the run's, and only --epochs may change, upwards (the count already trained only finishes a run
+that stopped before writing its metrics). --val and --test files are read as the evaluation reads them before
+training starts: a TrajNet++ test/ file without ground truth is refused then, not after training.
 A second train into an --out where one is running is refused (its lock: OUT/.train.lock).
 """
 
@@ -74,7 +74,10 @@ def register(subparsers) -> None:
     _data_options(parser)
     _optimisation_options(parser)
     parser.add_argument(
-        "--hidden-dim", type=int, default=None, help="hidden size, for kinds whose config has hidden_dim"
+        "--hidden-dim",
+        type=int,
+        default=None,
+        help="hidden size, for kinds whose config has hidden_dim" + RESUMED,
     )
     parser.add_argument("--name", default=None, help="checkpoint name (default e.g. social_lstm_soft_eth)")
     parser.add_argument(
@@ -113,7 +116,7 @@ def _net_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="JSON",
         help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'; with "
-        "--resume and none of --pooling, --hidden-dim and --net-config, the run's",
+        "--resume, over the run's config (each one left out is the run's)",
     )
 
 
@@ -299,7 +302,8 @@ def run(args: argparse.Namespace) -> int:
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed, recorded)
         if taken or net_taken:
-            shown = [f"{key} {getattr(args, key)}" for key in taken] + ["its net config"] * net_taken
+            shown = [f"{key} {getattr(args, key)}" for key in taken]
+            shown += [f"{'its ' if taken else ''}net config"] * net_taken
             print(f"--resume: {out} goes on with the run's {', '.join(shown)}", file=sys.stderr)
         return run_training(args, net_config, name, out, (files, root), settings, evaluated)
 

@@ -15,8 +15,9 @@ from predictors.errors import PredictorError
 MAX_NET_CONFIG_CHARS = 65_536
 
 
-def net_config_of(args: argparse.Namespace) -> tuple[str | None, Any]:
-    """The pooling (None: the kind has none) and the network config the command line asks for."""
+def net_config_of(args: argparse.Namespace, base: dict[str, Any] | None = None) -> tuple[str | None, Any]:
+    """The pooling (None: the kind has none) and the network config the command line asks for: its options
+    over ``base`` (a resumed run's recorded config), else over the kind's defaults."""
     from predictors.models import model_kind
 
     kind = model_kind(args.model)
@@ -38,7 +39,7 @@ def net_config_of(args: argparse.Namespace) -> tuple[str | None, Any]:
             raise PipelineError(f"{option} and --net-config both set {key}; give it once")
         overrides[key] = value
     try:
-        config = kind.config(overrides)
+        config = kind.config({**(base or {}), **overrides})
     except PredictorError as exc:
         source = "--net-config" if args.net_config is not None else "the options"
         raise PipelineError(f"{source}: {args.model}: {exc}") from None
@@ -49,23 +50,24 @@ def net_config_of(args: argparse.Namespace) -> tuple[str | None, Any]:
 def resumed_net_config(
     args: argparse.Namespace, recorded: dict[str, Any] | None, pooling: str | None, config: Any
 ) -> tuple[str | None, Any, bool]:
-    """``(pooling, config, taken)``: on a resume that types none of --pooling, --hidden-dim and --net-config,
-    the net config the run was started with (``recorded``'s), else the one the command line asks for
-    (``pooling``, ``config``: ``net_config_of``'s); ``taken``: whether it is the run's and differs from the
-    one the command line asks for (which a resume names). A recorded config of another model, or one the
-    kind now refuses, is not taken: the checks of the resume name the difference."""
+    """``(pooling, config, taken)``: on a resume, the net config the run was started with (``recorded``'s)
+    with what --pooling, --hidden-dim and --net-config type over it, else the one the command line asks for
+    (``pooling``, ``config``: ``net_config_of``'s); ``taken``: whether it differs from the latter (which a
+    resume names). Over the run's config rather than the kind's defaults, so that a resume typing
+    --hidden-dim alone keeps the run's soft pooling, and one typing a value other than the run's is refused
+    by the checks of the resume naming it. A recorded config of another model, or one the kind now refuses,
+    is not taken: those checks name the difference."""
     from predictors.models import model_kind
 
-    typed = any(value is not None for value in (args.pooling, args.hidden_dim, args.net_config))
     held = recorded.get("net_config") if recorded is not None else None
-    if typed or not args.resume or not isinstance(held, dict):
+    if not args.resume or not isinstance(held, dict):
         return pooling, config, False
     try:
-        run = model_kind(args.model).config(held)
-    except PredictorError:
+        model_kind(args.model).config(held)
+        run_pooling, run = net_config_of(args, base=held)
+    except (PredictorError, PipelineError):  # the options were checked alone by the first net_config_of
         return pooling, config, False
-    recorded_pooling = getattr(run, "pooling", None)
-    return (recorded_pooling if isinstance(recorded_pooling, str) else None), run, run != config
+    return run_pooling, run, run != config
 
 
 def training_loss(args: argparse.Namespace, net_config: Any) -> str:

@@ -183,7 +183,7 @@ def check_resumed_settings(
         settings = {**settings, "name": recorded.get("name", settings["name"])}
     differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
     if differ:
-        shown = "; ".join(f"{k}: run {_short(recorded[k])}, now {_short(settings[k])}" for k in differ)
+        shown = "; ".join(f"{k}: {_compared('run', recorded[k], settings[k])}" for k in differ)
         raise PipelineError(
             f"--resume: {out} was started with other settings ({shown}); resume with the run's settings "
             "(only --epochs may change) or start a new run with another --out"
@@ -232,7 +232,7 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
     asked = {**settings, "files": _resolved(settings["files"])}
     differ = [k for k, v in held.items() if v is not None and v != asked.get(k)]
     if differ:
-        shown = "; ".join(f"{k}: checkpoint {_short(held[k])}, now {_short(asked.get(k))}" for k in differ)
+        shown = "; ".join(f"{k}: {_compared('checkpoint', held[k], asked.get(k))}" for k in differ)
         what = "another model" if {"model", "net_config"} & set(differ) else "other settings"
         raise PipelineError(
             f"--resume: {last} was trained with {what} ({shown}); resume with the run's settings (only "
@@ -332,3 +332,13 @@ def _resolved(files: dict[str, Any]) -> dict[str, list[str]]:
 def _short(value: Any) -> str:
     text = json.dumps(value, sort_keys=True)
     return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _compared(source: str, run: Any, now: Any) -> str:
+    """A setting's two values as a refusal shows them ("run 0.001, now 0.05"); two dicts (a net config,
+    the files) by the keys they differ in, which a whole config cut at 80 characters hid (a net's
+    hidden_dim comes after ten keys)."""
+    if isinstance(run, dict) and isinstance(now, dict):
+        keys = [k for k in {**run, **now} if run.get(k, ...) != now.get(k, ...)]
+        run, now = ({k: v[k] for k in keys if k in v} for v in (run, now))
+    return f"{source} {_short(run)}, now {_short(now)}"

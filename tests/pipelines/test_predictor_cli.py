@@ -433,6 +433,26 @@ def test_a_resume_goes_on_with_the_settings_it_leaves_out(trained, capsys, setti
     assert recorded["training"]["batch_size"] == 2
 
 
+def test_a_resume_typing_some_net_options_keeps_the_runs_others(trained, capsys):
+    """--hidden-dim or --net-config typed alone on a resume was laid over the kind's defaults: the soft run
+    resumed with its own hidden size 32 was refused as a grid net. Laid over the run's config now, the soft
+    pooling left out goes on; a typed hidden size other than the run's is still refused, naming the net."""
+    out, args = trained
+    more = _without([a if a != "1" else "2" for a in args], "--pooling")  # --epochs 2
+    assert main([*more, "--hidden-dim", "16", "--resume"]) == 2
+    err = capsys.readouterr().err
+    shown = 'net_config: run {"hidden_dim": 32}, now {"hidden_dim": 16}); '
+    assert f"--resume: {out} was started with other settings ({shown}" in err and err.count("\n") == 1
+    assert main([*more, "--net-config", '{"hidden_dim": 32}', "--resume"]) == 0
+    assert f"--resume: {out} goes on with the run's net config\n" in capsys.readouterr().err
+    recorded = json.loads((out / "walker.json").read_text())
+    assert recorded["net"]["pooling"] == "soft" and recorded["net"]["hidden_dim"] == 32
+    assert recorded["training"]["epochs"] == 2
+    more = [*_without(more, "--epochs"), "--epochs", "3"]
+    assert main([*more, "--hidden-dim", "32", "--pooling", "soft", "--resume"]) == 0  # as the run's
+    assert "goes on with the run's" not in capsys.readouterr().err
+
+
 def test_training_prints_no_advertising_nor_upstream_deprecations(tmp_path, capfd):
     """Lightning's litlogger/litmodels tips and its use of a torch API that torch 2.13 deprecates are
     nothing a user of `crowdmpc train` can act on; they are left out, the run's own lines stay."""
