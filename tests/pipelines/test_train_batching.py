@@ -112,3 +112,39 @@ def test_a_resume_goes_on_with_the_runs_batching_and_refuses_another(tmp_path, c
     assert main(_args(data, old, "--epochs", "2", "--batching", "by_size", "--resume")) == 2
     assert 'batching: checkpoint "shuffled", now "by_size"' in capsys.readouterr().err
     assert main(_args(data, old, "--epochs", "2", "--resume")) == 0
+
+
+def test_a_resume_of_only_epochs_goes_on_with_every_setting_of_the_run(tmp_path, capsys):
+    """A run at batch 2, seed 5, by_size, lr 2e-3, decay every epoch and hidden size 16, resumed with
+    nothing but its files, --out and --epochs, was refused (the defaults 8, 0, shuffled, 1e-3, 10 and 32
+    against the run's); it goes on with each of the run's now, and a typed --batch-size 3 is still refused,
+    naming it."""
+    import torch
+
+    data = str(write_crowds(tmp_path / "crowds.ndjson"))
+    out = tmp_path / "run"
+    files = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--test", data]
+    lean = [*files, "--out", str(out), "--no-progress"]
+    run = ["--batch-size", "2", "--seed", "5", "--batching", "by_size", "--lr", "0.002", "--step-size", "1"]
+    assert main([*lean, *run, "--hidden-dim", "16", "--epochs", "1"]) == 0
+    capsys.readouterr()
+    assert main([*lean, "--epochs", "2", "--resume"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        f"--resume: {out} goes on with the run's lr 0.002, step_size 1, batch_size 2, batching by_size, "
+        "seed 5, its net config\n" in err
+    )
+    checkpoint = torch.load(out / "checkpoints" / "last.ckpt", weights_only=False)
+    assert checkpoint["epoch"] == 1  # two epochs finished: the resume trained one
+    data_module = checkpoint["datamodule_hyper_parameters"]
+    assert (data_module["batch_size"], data_module["seed"], data_module["batching"]) == (2, 5, "by_size")
+    hyper = checkpoint["hyper_parameters"]
+    assert (hyper["optim_config"]["lr"], hyper["optim_config"]["step_size"]) == (0.002, 1)
+    assert hyper["net_config"]["hidden_dim"] == 16
+    training = json.loads((out / "vanilla_lstm_custom.json").read_text())["training"]
+    assert (training["batch_size"], training["seed"], training["batching"]) == (2, 5, "by_size")
+
+    assert main([*lean, "--epochs", "3", "--batch-size", "3", "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert f"--resume: {out} was started with other settings (batch_size: run 2, now 3); " in err
+    assert err.count("\n") == 1 and "Traceback" not in err
