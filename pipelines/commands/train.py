@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import math
 import re
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +17,19 @@ from pipelines.commands.train_net import (
     resumed_net_config,
     training_loss,
     trains_point_head,
+)
+from pipelines.commands.train_resume import (
+    check_last_checkpoint,
+    check_more_epochs,
+    check_resumed_settings,
+    checkpoint_record,
+    note_other_code,
+    one_run_at_a_time,
+    read_run_settings,
+    recorded_loss,
+    run_settings,
+    say_taken,
+    take_run_options,
 )
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
@@ -236,7 +248,7 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
 
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
-    if not (math.isfinite(args.lr) and 0 < args.lr <= MAX_LR):
+    if args.lr is not None and not (math.isfinite(args.lr) and 0 < args.lr <= MAX_LR):
         raise PipelineError(f"--lr must be a finite number in (0, {MAX_LR:g}], got {args.lr}")
     # Upper bounds far above any sensible run, so that a typo cannot ask for days or for all the memory:
     # the zoo refuses hidden sizes over 4096 (predictors/nets), and ETH/hotel has ~2000 training scenes.
@@ -249,14 +261,14 @@ def _check_numbers(args: argparse.Namespace) -> None:
     ):
         if value is not None and not 1 <= value <= high:
             raise PipelineError(f"{option} must be in 1..{high}, got {value}")
-    if not 0 <= args.seed < 2**32:  # Lightning would replace one outside numpy's range by 0, with a warning
+    if args.seed is not None and not 0 <= args.seed < 2**32:  # Lightning makes one outside numpy's range 0
         raise PipelineError(f"--seed must be in 0..{2**32 - 1}, got {args.seed}")
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.train_resume import checkpoint_record, read_run_settings, take_run_options
     from predictors.checkpoint import check_name
 
+    _check_numbers(args)  # those typed; the ones a resume takes from its run are checked again below
     pooling, net_config = net_config_of(args)
     explicit = args.train is not None or args.val is not None
     _protocol_options(args, explicit)
@@ -293,18 +305,13 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
     evaluated = _check_data(files, progress=False if args.no_progress else None)
-    from pipelines.commands.train_resume import run_settings
 
     settings = run_settings(args, net_config, name, files)
     from pipelines.commands.train_fit import run_training
-    from pipelines.commands.train_resume import one_run_at_a_time
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed, recorded)
-        if taken or net_taken:
-            shown = [f"{key} {getattr(args, key)}" for key in taken]
-            shown += [f"{'its ' if taken else ''}net config"] * net_taken
-            print(f"--resume: {out} goes on with the run's {', '.join(shown)}", file=sys.stderr)
+        say_taken(out, args, taken, net_taken)
         return run_training(args, net_config, name, out, (files, root), settings, evaluated)
 
 
@@ -318,13 +325,6 @@ def _check_out(
 ) -> str:
     """The run's name, once what --out holds is checked: no run unless --resume, else one it continues
     (``recorded``: its settings file, ``train_resume.read_run_settings``)."""
-    from pipelines.commands.train_resume import (
-        check_last_checkpoint,
-        check_more_epochs,
-        check_resumed_settings,
-        note_other_code,
-        recorded_loss,
-    )
 
     last = out / "checkpoints" / "last.ckpt"
     if not args.resume and last.is_file():

@@ -151,6 +151,15 @@ def take_run_options(args: argparse.Namespace, recorded: dict[str, Any] | None) 
     return taken
 
 
+def say_taken(out: Path, args: argparse.Namespace, taken: list[str], net_taken: bool) -> None:
+    """Name on stderr what a resume took from its run (``take_run_options``' ``taken``, and its net config
+    when ``net_taken``): values the command line did not give, which the run will train with."""
+    if taken or net_taken:
+        shown = [f"{key} {getattr(args, key)}" for key in taken]
+        shown += [f"{'its ' if taken else ''}net config"] * net_taken
+        print(f"--resume: {out} goes on with the run's {', '.join(shown)}", file=sys.stderr)
+
+
 def recorded_loss(recorded: dict[str, Any] | None, last: Path) -> str | None:
     """The loss the run was started with: its settings' (``read_run_settings``), else ``last``'s (runs
     from before that file); None when neither says (the checks of the resume then say what is wrong with
