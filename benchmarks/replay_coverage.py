@@ -47,32 +47,35 @@ from bench_cli import (  # noqa: E402
 
 SEED = 1_100_000  # after the shipped calibrations' 1,000,000..1,000,099 and every evaluation seed
 MARGINS = ("conformal:0.1", "conformal:0.1:real", "conformal-motion:0.1", "conformal-shortfall:0.05")
-SCENARIOS = ("circle", "perpendicular")
 
 
 def scores(
     predictor: str, crowd: str, plan_with: str, episodes: int, humans: list[int], seed: int, near: float
 ) -> tuple[Any, dict[str, Any]]:
-    """The ``PredictionErrors`` of ``episodes`` CMPC episodes among ``crowd``, and their outcome."""
+    """The ``PredictionErrors`` of ``episodes`` CMPC episodes among ``crowd``, on calibration's schedule
+    (``ClosedLoopPlan.schedule``: scenarios alternating, crowd sizes cycling), and their outcome."""
     from crowdsim.profiles import make_env_config
-    from pipelines.experiments.calibrate import PredictionErrors
+    from pipelines.experiments.calibrate import ClosedLoopPlan, PredictionErrors
     from pipelines.loop.controllers import ControllerSpec, make_controller
     from pipelines.loop.episode import behind_sensor, run_episode
     from pipelines.loop.margins import parse_margins
 
-    env_config = dataclasses.replace(make_env_config("paper", "visible"), crowd=crowd)
-    spec = ControllerSpec("cmpc", predictor, margins=parse_margins(plan_with))
-    controller = make_controller(spec, env_config)
+    plan = ClosedLoopPlan(
+        predictor, episodes, seed, tuple(humans), near=near, margins=parse_margins(plan_with)
+    )
+    env_config = dataclasses.replace(make_env_config(plan.profile, plan.visibility), crowd=crowd)
+    controller = make_controller(ControllerSpec("cmpc", predictor, margins=plan.margins), env_config)
     # among a replayed crowd, shown the people tracked now, its NLP of every count built first
-    controller = behind_sensor(controller, None, True, 3, max(humans), crowd)
-    observer = PredictionErrors(near)
+    controller = behind_sensor(controller, None, True, 3, max(plan.humans), crowd)
+    observer = PredictionErrors(plan.near)
     outcome = {"episodes": episodes, "success": 0, "collision": 0}
+    schedule = plan.schedule()
     try:
         for i in episode_bar(episodes, crowd):
-            scenario, n_humans = SCENARIOS[i % 2], humans[(i // 2) % len(humans)]
+            scenario, n_humans, episode_seed = schedule[i]
             result = run_episode(
                 controller,
-                seed=seed + i,
+                seed=episode_seed,
                 scenario=scenario,
                 n_humans=n_humans,
                 env_config=env_config,
