@@ -10,8 +10,18 @@ import re
 from pathlib import Path
 from typing import Any
 
-from pipelines.commands import check_data_files, check_outside_the_zoos, check_writable, path_arg
+from pipelines.commands import check_outside_the_zoos, check_writable
 from pipelines.commands.output_paths import output_arg
+from pipelines.commands.train_data import (
+    DATASET_SUFFIX,
+    DEFAULT_DATASET,
+    check_data,
+    data_options,
+    data_settings,
+    protocol_options,
+    resolve_files,
+    take_run_data,
+)
 from pipelines.commands.train_net import (
     net_config_of,
     resumed_net_config,
@@ -34,8 +44,6 @@ from pipelines.commands.train_resume import (
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 
-DATASET_SUFFIX = {"biwi_eth": "eth", "biwi_hotel": "hotel"}
-DEFAULT_PROTOCOL, DEFAULT_DATASET = "paper", "biwi_eth"
 # Adam's learning rate: these nets train at 1e-3; far above any useful rate, and far below float32's
 # overflow (~3.4e38), where a huge --lr used to end inside Adam with a traceback.
 MAX_LR = 10.0
@@ -59,11 +67,12 @@ Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for -
 tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (state_dict + config) with
 NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net's top-20 drawn as
 `crowdmpc evaluate --top-k 20` draws it, whatever --seed). `crowdmpc zoo add OUT/NAME.pt` puts the pair
-into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise): an
-option left out takes the run's setting (but for the data files and --out: name them as the run did), one
-typed must be the run's, and only --epochs may change, upwards (the count already trained only finishes a run
-that stopped before writing its metrics). --val and --test files are read as the evaluation reads them before
-training starts: a TrajNet++ test/ file without ground truth is refused then, not after training.
+into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise):
+an option left out takes the run's setting (its data files, protocol, dataset and data directory too, unless
+a data option is typed; --out names the run), one typed must be the run's, and only --epochs may change,
+upwards (the count already trained only finishes a run that stopped before writing its metrics). --val and
+--test files are read as the evaluation reads them before training starts: a TrajNet++ test/ file without
+ground truth is refused then, not after training.
 A second train into an --out where one is running is refused (its lock: OUT/.train.lock).
 """
 
@@ -83,7 +92,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     _net_options(parser)
-    _data_options(parser)
+    data_options(parser)
     _optimisation_options(parser)
     parser.add_argument(
         "--hidden-dim",
@@ -130,34 +139,6 @@ def _net_options(parser: argparse.ArgumentParser) -> None:
         help="hyper-parameters over the kind's defaults, a JSON object, e.g. '{\"hidden_dim\": 64}'; with "
         "--resume, over the run's config (each one left out is the run's)",
     )
-
-
-def _data_options(parser: argparse.ArgumentParser) -> None:
-    """Which scenes: prepared files by protocol and dataset, or explicit files."""
-    # None by default, here and below: given with explicit --train/--val files, they are refused
-    parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
-    parser.add_argument(
-        "--protocol",
-        default=None,
-        choices=("paper", "loo"),
-        help=f"train/val/test files (default {DEFAULT_PROTOCOL})",
-    )
-    parser.add_argument(
-        "--dataset",
-        default=None,
-        choices=tuple(DATASET_SUFFIX),
-        help=f"test sequence (default {DEFAULT_DATASET})",
-    )
-    parser.add_argument(
-        "--train",
-        nargs="+",
-        type=path_arg,
-        default=None,
-        metavar="FILE",
-        help="explicit training ndjson files instead of --protocol (needs --val)",
-    )
-    parser.add_argument("--val", nargs="+", type=path_arg, default=None, metavar="FILE")
-    parser.add_argument("--test", nargs="+", type=path_arg, default=None, metavar="FILE")
 
 
 def _optimisation_options(parser: argparse.ArgumentParser) -> None:
@@ -227,25 +208,6 @@ def default_name(model: str, pooling: str | None, dataset: str, explicit_files: 
     return f"{stem[:48]}{variant}_{suffix}"
 
 
-def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
-    """The train/val/test files and the directory their names are relative to (None: as given)."""
-    if args.test is not None and args.train is None and args.val is None:
-        raise PipelineError("--test goes with --train and --val (explicit files replace --protocol)")
-    if args.train is not None or args.val is not None:
-        if not args.train or not args.val:
-            raise PipelineError("--train and --val go together (explicit files replace --protocol)")
-        files = {"train": list(args.train), "val": list(args.val), "test": list(args.test or [])}
-        for split, paths in files.items():
-            # twice, its scenes count twice, but the run's data record names it once: the same identity as a
-            # run trained on it once, with other weights
-            check_data_files(f"--{split}", paths)
-        return files, None
-    from predictors.data.locate import prepared_dir, protocol_files
-
-    files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
-    return files, prepared_dir(args.data_dir)
-
-
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
     if args.lr is not None and not (math.isfinite(args.lr) and 0 < args.lr <= MAX_LR):
@@ -271,8 +233,8 @@ def run(args: argparse.Namespace) -> int:
     _check_numbers(args)  # those typed; the ones a resume takes from its run are checked again below
     pooling, net_config = net_config_of(args)
     explicit = args.train is not None or args.val is not None
-    _protocol_options(args, explicit)
-    name = args.name or default_name(args.model, pooling, args.dataset, explicit)
+    protocol_options(args, explicit)
+    name = args.name or default_name(args.model, pooling, args.dataset or DEFAULT_DATASET, explicit)
     check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
     # A resume goes on with the run's settings wherever the command line leaves one out (read once: a run's
@@ -280,6 +242,7 @@ def run(args: argparse.Namespace) -> int:
     recorded = read_run_settings(out) if args.resume else None
     started = checkpoint_record(out) if args.resume and recorded is None else recorded
     taken = take_run_options(args, started)
+    data_taken = take_run_data(args, recorded)
     pooling, net_config, net_taken = resumed_net_config(args, started, pooling, net_config)
     _check_numbers(args)
     # before the data: a --loss the net does not train on is refused before files are read or prepared
@@ -304,14 +267,14 @@ def run(args: argparse.Namespace) -> int:
     if not args.resume and last.is_file():
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
     files, root = resolve_files(args)
-    evaluated = _check_data(files, progress=False if args.no_progress else None)
+    evaluated = check_data(files, progress=False if args.no_progress else None)
 
-    settings = run_settings(args, net_config, name, files)
+    settings = {**run_settings(args, net_config, name, files), **data_settings(args)}
     from pipelines.commands.train_fit import run_training
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed, recorded)
-        say_taken(out, args, taken, net_taken)
+        say_taken(out, args, taken, net_taken, data_taken)
         return run_training(args, net_config, name, out, (files, root), settings, evaluated)
 
 
@@ -341,60 +304,3 @@ def _check_out(
     check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
     note_other_code(out, recorded)
     return name
-
-
-def _protocol_options(args: argparse.Namespace, explicit: bool) -> None:
-    """Fills in the defaults of --protocol and --dataset; PipelineError when they or --data-dir are given with
-    explicit --train/--val files, which replace the prepared files those options choose (they were ignored
-    without a word, and the run recorded as "custom"). $CROWDMPC_DATA is no option typed, and passes."""
-    given = [
-        option
-        for option, value in (
-            ("--protocol", args.protocol),
-            ("--dataset", args.dataset),
-            ("--data-dir", args.data_dir),
-        )
-        if value is not None
-    ]
-    if explicit and given:
-        verb = "does" if len(given) == 1 else "do"
-        raise PipelineError(
-            f"{' and '.join(given)} {verb} not go with --train/--val (explicit files replace the prepared "
-            "files of --protocol, --dataset and --data-dir); give one or the other"
-        )
-    args.protocol = args.protocol or DEFAULT_PROTOCOL
-    args.dataset = args.dataset or DEFAULT_DATASET
-
-
-def _check_data(files: dict[str, list[Path]], progress: bool | None = False) -> dict[Path, list[Any]]:
-    """Every data file is read as the run will read it, and the training and validation splits hold scenes,
-    before Lightning starts (its banner would come before the one-line error, and a half-made run folder
-    after it). The training and validation files are loaded as the training data module loads them
-    (``load_file_arrays``: scenes of exactly 21 steps), which keeps them for it. The validation and test
-    files are also read as the evaluation of the trained net reads them (scene length, frame rate, spacing):
-    a file it refuses, such as a TrajNet++ test/ file without ground truth, was found only after training,
-    with no metrics written. Returns those scenes by path, for that evaluation: each file is parsed once
-    (the validation file was parsed three times, the test file twice). ``progress``: a bar while a file's
-    scenes are built (None: on a terminal only), the first read of a large file being a minute of silence
-    otherwise."""
-    from predictors.data.validate import parse_ndjson
-    from predictors.data.windows import load_file_arrays
-    from predictors.evaluate import eval_scenes_of
-
-    evaluated: dict[Path, list[Any]] = {}
-    for split, paths in files.items():
-        held = []
-        for path in paths:
-            # a training file's arrays may come from the disk cache, unparsed; the evaluation's scenes may
-            # not (a test file that is also the validation file has them already)
-            content = None if split == "train" or path in evaluated else parse_ndjson(path)
-            if content is not None:  # first: its message tells a test/ file without ground truth
-                evaluated[path] = eval_scenes_of(content)
-            if split != "train":
-                held.append(len(evaluated[path]))
-            if split != "test":
-                held.append(len(load_file_arrays(path, progress=progress, content=content)))
-        if split in ("train", "val") and not any(held):
-            names = ", ".join(str(p) for p in paths)
-            raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")
-    return evaluated

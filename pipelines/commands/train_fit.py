@@ -30,7 +30,7 @@ def run_training(
     evaluated: dict[Path, list[Any]] | None = None,
 ) -> int:
     """Lightning's part of ``train.run``, once every option has been checked; ``evaluated``: the validation
-    and test files' scenes as the evaluation reads them, by path (read by ``train._check_data``)."""
+    and test files' scenes as the evaluation reads them, by path (read by ``train_data.check_data``)."""
     from pipelines.commands.train_report import print_summary
     from predictors.models import model_kind
     from predictors.training import OptimConfig

@@ -25,6 +25,10 @@ BEST_FILENAME = "best-{epoch:03d}-{val_ade:.4f}"
 BEST_PREFIX = "best-epoch="
 _LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Lightning
 LOCK_FILE = ".train.lock"
+# What a resume names by a noun alone (say_taken), rather than as an option and its value
+_NOUNS: Final[tuple[str, ...]] = ("net config", "data files")
+# Recorded but not compared on a resume: the files a data directory gives are (train_data.data_settings)
+_NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir",)
 # The options a resume takes from its run when they are not typed, and their defaults for a new run: the
 # parser's defaults are None, so that an option typed can be told from one left out (--batch-size 8 typed on
 # the resume of a run at 2 is refused; left out, the run's 2 goes on). Types as the run records them.
@@ -151,12 +155,16 @@ def take_run_options(args: argparse.Namespace, recorded: dict[str, Any] | None) 
     return taken
 
 
-def say_taken(out: Path, args: argparse.Namespace, taken: list[str], net_taken: bool) -> None:
-    """Name on stderr what a resume took from its run (``take_run_options``' ``taken``, and its net config
-    when ``net_taken``): values the command line did not give, which the run will train with."""
-    if taken or net_taken:
-        shown = [f"{key} {getattr(args, key)}" for key in taken]
-        shown += [f"{'its ' if taken else ''}net config"] * net_taken
+def say_taken(
+    out: Path, args: argparse.Namespace, taken: list[str], net_taken: bool, data_taken: list[str]
+) -> None:
+    """Name on stderr what a resume took from its run (``take_run_options``' ``taken``, its net config when
+    ``net_taken``, and ``train_data.take_run_data``'s ``data_taken``): values the command line did not
+    give, which the run will train with."""
+    shown = [f"{key} {getattr(args, key)}" for key in taken] + ["net config"] * net_taken + data_taken
+    if shown:
+        # "the run's batch_size 2, its net config": a name after the first values reads as the run's too
+        shown = [shown[0]] + [f"its {s}" if s in _NOUNS else s for s in shown[1:]]
         print(f"--resume: {out} goes on with the run's {', '.join(shown)}", file=sys.stderr)
 
 
@@ -190,7 +198,7 @@ def check_resumed_settings(
         return str(settings["name"])
     if not name_given:  # the default name follows the options, which are checked below
         settings = {**settings, "name": recorded.get("name", settings["name"])}
-    differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
+    differ = [k for k in settings if k in recorded and k not in _NOT_COMPARED and recorded[k] != settings[k]]
     if differ:
         shown = "; ".join(f"{k}: {_compared('run', recorded[k], settings[k])}" for k in differ)
         raise PipelineError(
@@ -349,5 +357,17 @@ def _compared(source: str, run: Any, now: Any) -> str:
     hidden_dim comes after ten keys)."""
     if isinstance(run, dict) and isinstance(now, dict):
         keys = [k for k in {**run, **now} if run.get(k, ...) != now.get(k, ...)]
-        run, now = ({k: v[k] for k in keys if k in v} for v in (run, now))
+        run, now = ({k: _file_names(v[k], (run, now), k) for k in keys if k in v} for v in (run, now))
     return f"{source} {_short(run)}, now {_short(now)}"
+
+
+def _file_names(value: Any, both: tuple[dict, dict], key: str) -> Any:
+    """A split's files by their names where the names tell the run's from the command's (the folders,
+    shown whole, pushed the names past the 80 characters shown); any other value as it is."""
+    names = []
+    for side in both:
+        held = side.get(key)
+        if not isinstance(held, list) or not all(isinstance(p, str) for p in held):
+            return value
+        names.append([Path(p).name for p in held])
+    return [Path(p).name for p in value] if names[0] != names[1] else value
