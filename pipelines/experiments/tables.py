@@ -66,14 +66,15 @@ def _added_rate_cell(s: CellSummary, name: str) -> str:
 
 
 def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
-    """Indices of the best value (as printed, one decimal) in a group; none when every method ties or the
-    group has one member, as the paper leaves ties unmarked."""
+    """Indices of the best value (as printed, one decimal) in a group; none when every method with a value
+    ties, as the paper leaves ties unmarked, or fewer than two have one: a travel time beside a method with
+    no success (NaN) was bold against nothing."""
     finite = [(i, round(v, 1)) for i, v in enumerate(values) if not math.isnan(v)]
-    if len(values) < 2 or not finite:
+    if len(finite) < 2:
         return set()
     best = (max if higher_is_better else min)(v for _, v in finite)
     winners = {i for i, v in finite if v == best}
-    return winners if len(winners) < len(values) else set()
+    return winners if len(winners) < len(finite) else set()
 
 
 def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_line: str) -> str:

@@ -179,6 +179,11 @@ def test_the_bold_mark_compares_the_printed_values():
     assert _best([75.04, 75.01], higher_is_better=True) == set()
     assert _best([75.06, 75.01], higher_is_better=True) == {0}
     assert _best([18.96, 19.04], higher_is_better=False) == set()  # travel time: both 19.0
+    # a method without a success has no travel time: nothing to beat, and a tie of the others is a tie
+    nan = float("nan")
+    assert _best([20.0, nan], higher_is_better=False) == set()
+    assert _best([20.0, 20.04, nan], higher_is_better=False) == set()
+    assert _best([20.0, 21.0, nan], higher_is_better=False) == {0}
 
 
 def test_a_cells_figures_do_not_depend_on_the_order_its_records_finished():
