@@ -13,11 +13,14 @@ predicted, against its class's margin. The shipped closed-loop blocks were calib
 this script's seeds start at 1,100,000 (``--seed``), so ``orca`` is a held-out check of the calibration and
 each replayed crowd (docs/replayed_crowds.md) the question. The robots plan with ``--plan-with`` (default
 ``none``: the paper's method, as calibration runs). A replayed crowd's ``--humans`` count the people who come
-by in an episode, not those there at once.
+by in an episode, not those there at once. ``--sensor-range M`` puts the robots behind a sensor of that range
+(``pipelines.loop.sensing``): they see and predict the people within M m of a robot, from their tracks since
+they came into view, and each is scored, and classed for the per-class margins, as the controller saw it.
 
     nice -n 5 .venv/bin/python benchmarks/replay_coverage.py --predictor social_lstm_eth --episodes 50
     nice -n 5 .venv/bin/python benchmarks/replay_coverage.py --predictor constant_velocity \\
         --crowds orca hotel_test --plan-with conformal-shortfall:0.05
+    nice -n 5 .venv/bin/python benchmarks/replay_coverage.py --predictor social_lstm_eth --sensor-range 4
 """
 
 from __future__ import annotations
@@ -50,10 +53,18 @@ MARGINS = ("conformal:0.1", "conformal:0.1:real", "conformal-motion:0.1", "confo
 
 
 def scores(
-    predictor: str, crowd: str, plan_with: str, episodes: int, humans: list[int], seed: int, near: float
+    predictor: str,
+    crowd: str,
+    plan_with: str,
+    episodes: int,
+    humans: list[int],
+    seed: int,
+    near: float,
+    sensor_range: float | None = None,
 ) -> tuple[Any, dict[str, Any]]:
-    """The ``PredictionErrors`` of ``episodes`` CMPC episodes among ``crowd``, on calibration's schedule
-    (``ClosedLoopPlan.schedule``: scenarios alternating, crowd sizes cycling), and their outcome."""
+    """The ``PredictionErrors`` of ``episodes`` CMPC episodes among ``crowd`` (behind a sensor of
+    ``sensor_range`` m, None: none), on calibration's schedule (``ClosedLoopPlan.schedule``: scenarios
+    alternating, crowd sizes cycling), and their outcome."""
     from crowdsim.profiles import make_env_config
     from pipelines.experiments.calibrate import ClosedLoopPlan, PredictionErrors
     from pipelines.loop.controllers import ControllerSpec, make_controller
@@ -66,7 +77,7 @@ def scores(
     env_config = dataclasses.replace(make_env_config(plan.profile, plan.visibility), crowd=crowd)
     controller = make_controller(ControllerSpec("cmpc", predictor, margins=plan.margins), env_config)
     # among a replayed crowd, shown the people tracked now, its NLP of every count built first
-    controller = behind_sensor(controller, None, True, 3, max(plan.humans), crowd)
+    controller = behind_sensor(controller, sensor_range, True, 3, max(plan.humans), crowd)
     observer = PredictionErrors(plan.near)
     outcome = {"episodes": episodes, "success": 0, "collision": 0}
     schedule = plan.schedule()
@@ -119,18 +130,41 @@ def main() -> None:
     parser.add_argument("--humans", nargs="+", type=count_in("humans", 1, 50), default=[5, 6, 7, 8, 9])
     parser.add_argument("--seed", type=seed_number, default=SEED)
     parser.add_argument("--near", type=float, default=3.0, help="m: humans scored within this of a robot")
+    parser.add_argument(
+        "--sensor-range",
+        type=float,
+        default=None,
+        metavar="M",
+        help="m: the robots see this far (default: all)",
+    )
     parser.add_argument("--json", type=output_file, default=None, metavar="FILE")
     args = parser.parse_args()
+    from pipelines.loop.sensing import is_sensor_range
+
+    if args.sensor_range is not None and not is_sensor_range(args.sensor_range):
+        parser.error(f"--sensor-range must be a finite number of metres > 0, got {args.sensor_range}")
     from mpc.config import MPCConfig
     from pipelines.loop.margins import parse_margins
 
     for text in (*args.margins, args.plan_with):
         parse_margins(text)  # a typo is one line now, not after the episodes
     horizon = MPCConfig().horizon
-    report: dict[str, Any] = {"predictor": args.predictor, "plan_with": args.plan_with, "crowds": {}}
+    report: dict[str, Any] = {
+        "predictor": args.predictor,
+        "plan_with": args.plan_with,
+        "sensor_range": args.sensor_range,
+        "crowds": {},
+    }
     for crowd in args.crowds:
         observer, outcome = scores(
-            args.predictor, crowd, args.plan_with, args.episodes, args.humans, args.seed, args.near
+            args.predictor,
+            crowd,
+            args.plan_with,
+            args.episodes,
+            args.humans,
+            args.seed,
+            args.near,
+            args.sensor_range,
         )
         shares = {margins: coverage(observer, margins, args.predictor, horizon) for margins in args.margins}
         scored = int(np.isfinite(observer.errors[:, 0]).sum()) if observer.errors.size else 0
@@ -141,9 +175,11 @@ def main() -> None:
 
 
 def print_report(report: dict[str, Any], horizon: int) -> None:
+    sensor = report.get("sensor_range")
+    behind = f", behind a sensor of {sensor:g} m" if sensor is not None else ""
     print(
-        f"{report['predictor']}, planning with margins {report['plan_with']}: coverage at k = 1..{horizon} "
-        "(target 1 - alpha)"
+        f"{report['predictor']}, planning with margins {report['plan_with']}{behind}: coverage at k = "
+        f"1..{horizon} (target 1 - alpha)"
     )
     for crowd, measured in report["crowds"].items():
         print(

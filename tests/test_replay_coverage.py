@@ -64,3 +64,23 @@ def test_the_script_reports_each_crowd_and_writes_its_json(tmp_path):
         [*run, "--margins", "conformal:1.5"], capture_output=True, text=True, timeout=120, cwd=ROOT
     )
     assert typo.returncode == 2 and len(typo.stderr.splitlines()) == 1 and "Traceback" not in typo.stderr
+    assert report["sensor_range"] is None
+
+
+def test_the_script_scores_behind_a_sensor(tmp_path):
+    out = tmp_path / "coverage.json"
+    run = [sys.executable, str(BENCHMARKS / "replay_coverage.py"), "--predictor", "constant_velocity"]
+    done = subprocess.run(
+        [*run, "--crowds", "orca", "--episodes", "2", "--margins", "conformal-motion:0.1", "--sensor-range",
+         "2.5", "--json", str(out)],
+        capture_output=True, text=True, timeout=300, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("constant_velocity, planning with margins none, behind a sensor of 2.5 m: ")
+    report = json.loads(out.read_text())
+    assert report["sensor_range"] == 2.5 and report["crowds"]["orca"]["scored_at_k1"] > 0
+    for bad in ("0", "inf", "nan"):
+        refused = subprocess.run(
+            [*run, "--sensor-range", bad], capture_output=True, text=True, timeout=120, cwd=ROOT
+        )
+        assert refused.returncode == 2 and "--sensor-range must be" in refused.stderr

@@ -90,8 +90,12 @@ class PredictionErrors:
         close = gaps.min(axis=1) <= self.near if obs.n_robots else np.ones(obs.n_humans, dtype=bool)
         close &= predicted
         if close.any():
-            # what the controller saw, as the controller classifies it
-            classes = observed_classes(_of_humans(obs, np.flatnonzero(predicted)))
+            # what the controller saw, as the controller classifies it: behind a sensor, by the tracker's
+            # track lengths (classed by the simulator's, a person just come into view was not "new")
+            shown = _of_humans(obs, np.flatnonzero(predicted))
+            if "tracked" in out.extra:
+                shown = dataclasses.replace(shown, human_observed=_tracked(out.extra, predicted))
+            classes = observed_classes(shown)
             self._made.append((obs.step, prediction, close, classes[close[predicted]]))
 
     def on_end(self, result: EpisodeResult) -> None:
@@ -155,6 +159,15 @@ class ClosedLoopPlan:
             (SCENARIOS[i % 2], self.humans[(i // 2) % len(self.humans)], self.seed + i)
             for i in range(self.episodes)
         ]
+
+
+def _tracked(extra: Mapping[str, Any], predicted: np.ndarray) -> np.ndarray | None:
+    """The track lengths a sensed controller was given (``pipelines.loop.sensing``: ``extra["tracked"]`` of
+    the humans ``extra["visible"]``) of the humans ``predicted``; None where it was given none."""
+    if extra["tracked"] is None:
+        return None
+    lengths = dict(zip(extra["visible"], extra["tracked"], strict=True))
+    return np.array([lengths[i] for i in np.flatnonzero(predicted)], dtype=np.int64)
 
 
 def _of_humans(obs: Observation, humans: np.ndarray) -> Observation:

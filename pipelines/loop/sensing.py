@@ -25,8 +25,9 @@ The number of humans in view changes from step to step, and an MPC builds an NLP
 first (``MPCController.prepare(n_robots, range(n_humans + 1))``), or the first step meeting each size builds
 it. What the wrapped controller predicts for the humans it saw goes back to their places among every human:
 ``prediction`` and ``iteration_predictions`` are ``(H, N, 2)`` with NaN for the humans out of view (not
-predicted), so that a recording shows them and calibration scores them, and ``extra["visible"]`` lists the
-humans it planned around.
+predicted), so that a recording shows them and calibration scores them; ``extra["visible"]`` lists the
+humans it planned around and ``extra["tracked"]`` their track lengths as the controller was given them (None
+with ``report_tracks=False``), by which calibration's scorer classes them as the controller did.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class RangeLimited:
         self.env_config = getattr(inner, "env_config", None)
         self._in_view: np.ndarray = np.zeros(0, dtype=bool)  # per human, at the last step sensed
         self._track_start: np.ndarray = np.zeros(0, dtype=int)  # per human in view: the step its track began
+        self._tracked: list[int] | None = None  # the track lengths handed on at the last step sensed
 
     def reset(self, obs: Observation) -> None:
         self._in_view = self._visible(obs)
@@ -90,7 +92,7 @@ class RangeLimited:
             iteration_predictions=tuple(
                 _every_human(p, visible, obs.n_humans) for p in out.iteration_predictions
             ),
-            extra={**out.extra, "visible": visible.tolist()},
+            extra={**out.extra, "visible": visible.tolist(), "tracked": self._tracked},
         )
 
     def describe(self) -> dict[str, Any]:
@@ -113,6 +115,7 @@ class RangeLimited:
         self._in_view = visible
         humans = np.flatnonzero(visible)
         tracked = obs.step - self._track_start[humans] + 1  # positions observed, the current one included
+        self._tracked = tracked.tolist() if self.report_tracks else None
         m, length = obs.n_robots, len(obs.history)
         history = np.concatenate([obs.history[:, :m], obs.history[:, m + humans]], axis=1)
         for column, k in enumerate(tracked, start=m):

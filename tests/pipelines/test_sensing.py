@@ -65,7 +65,7 @@ def test_only_the_humans_in_range_are_seen_with_their_tracks_padded_and_counted(
     np.testing.assert_allclose(seen.history[:, 1], np.tile([2.0, 0.0], (4, 1)))  # padded with where it is
     np.testing.assert_allclose(seen.history[:, 2, 0], [-0.3, -0.2, -0.1, 0.0])  # as walked
     np.testing.assert_array_equal(seen.history[:, 0], 0.0)  # the robot's own rows as they are
-    assert out.extra == {"own": 1, "visible": [1, 2]} and out.prediction is None
+    assert out.extra == {"own": 1, "visible": [1, 2], "tracked": [1, 6]} and out.prediction is None
     sensor.act(observation(13, [[1.0, 0.0], [2.0, 0.0], near]))
     seen = sensor.inner.seen
     np.testing.assert_array_equal(seen.human_observed, [1, 2, 7])  # the first is back: a new track
@@ -94,6 +94,7 @@ def test_the_prediction_of_the_humans_in_view_goes_back_to_their_places_nan_for_
     assert len(out.iteration_predictions) == 3
     np.testing.assert_array_equal(out.iteration_predictions[1], expected + 1.0)
     assert out.extra["visible"] == [0, 2]
+    assert out.extra["tracked"] == [4, 4]  # seen through the whole history of 4 positions
     # through the loop's contract, which refuses a NaN anywhere but in a whole human's rows
     from pipelines.loop.contract import checked_output
 
@@ -104,6 +105,7 @@ def test_without_reported_tracks_the_padding_reads_as_the_past_and_the_descripti
     sensor = RangeLimited(Keep(), radius=3.0, report_tracks=False)
     sensor.reset(observation(10, [[1.0, 0.0]]))
     assert sensor.inner.seen.human_observed is None
+    assert sensor.act(observation(11, [[1.0, 0.0]])).extra["tracked"] is None  # as the controller was told
     assert sensor.describe()["config"] == {"own": 2, "sensing": {"radius_m": 3.0, "report_tracks": False}}
 
 
@@ -187,3 +189,30 @@ def test_run_episodes_refuses_track_settings_without_a_sensor(tracks):
     with pytest.raises(PipelineError, match="sensor_tracks=.* is a sensor's setting; give sensor_range too"):
         run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2,
                      progress=False, sensor_tracks=tracks)  # fmt: skip
+
+
+def test_calibrations_scorer_classes_people_behind_a_sensor_as_the_controller_did():
+    """A person come into view at step 10 is "new" to the controller (a track of one position); the scorer
+    classed it by the simulator's observation, seen since the episode began, as slow. The one in view
+    throughout (9 positions tracked, a full window of 8) is slow to both: 0.1 m a step is 0.25 m/s."""
+    from types import SimpleNamespace
+
+    from pipelines.experiments.calibrate import PredictionErrors
+    from pipelines.loop.margins import observed_classes
+
+    sensor = RangeLimited(Predicting(), radius=3.0)
+    before, now = observation(9, [[1.0, 0.0], [5.0, 0.0]], 8), observation(10, [[1.1, 0.0], [2.5, 0.0]], 8)
+    sensor.reset(before)
+    observer = PredictionErrors(near=3.0)
+    observer.on_reset(now, {})
+    out = sensor.act(now)
+    assert out.extra["tracked"] == [9, 1] and sensor.inner.seen.human_observed.tolist() == [9, 1]
+    assert observed_classes(sensor.inner.seen).tolist() == [2, 0]  # the controller's
+    assert observed_classes(now).tolist() == [2, 2]  # the simulator's observation
+    observer.on_step(now, out, now)
+    truth = np.broadcast_to(now.human_positions, (13, 2, 2))
+    observer.on_end(
+        SimpleNamespace(human_positions=truth, robot_positions=np.zeros((13, 1, 2)), human_present=None)
+    )
+    assert observer.classes.tolist() == [2, 0]
+    np.testing.assert_allclose(observer.errors, np.zeros((2, 2)))  # it predicts them to stay: they do
