@@ -219,6 +219,34 @@ def calibration_world_note(
     )
 
 
+# What docs/replayed_crowds.md measured behind a 3 m sensor, by calibration source (social_lstm_eth and
+# constant velocity, alpha 0.1; benchmarks/replay_coverage.py --sensor-range 3)
+_MEASURED_BEHIND = {
+    "closed-loop": "alpha=0.1 covered 0.85-0.87 among ORCA's humans, where 0.90 was calibrated",
+    "real": "alpha=0.1 covered 0.85-0.92 among BIWI's people, 0.93-0.99 with every person in view",
+}
+
+
+def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str | None:
+    """A line for calibrated margins behind a sensor (``sensor_range`` m; None: every human seen), None
+    otherwise: every calibration, closed-loop or real, was made with every person in view, and behind a
+    sensor a person just come into view is predicted from a track of one or two positions, which those
+    margins cover less (measured at 3 m: docs/replayed_crowds.md). Not refused: the safe configuration
+    kept its collision rate behind a 3 m sensor among ORCA's humans (docs/extending.md)."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+    from predictors.conformal import alpha_text
+
+    margins = spec.margins
+    if sensor_range is None or spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES:
+        return None
+    return (
+        f"note: the {margins.source} margins of {spec.predictor_name!r} at alpha={alpha_text(margins.alpha)} "
+        f"were calibrated with every person in view; behind a sensor of {sensor_range:g} m a person just "
+        "come into view is predicted from a short track, and they cover less than calibrated (docs/"
+        f'replayed_crowds.md, "Behind a sensor": at 3 m, {_MEASURED_BEHIND[margins.source]})'
+    )
+
+
 def _block_options(block: Any) -> str:
     """``calibrate``'s options that made ``block`` but for its conventions: the command the note gives makes
     the same calibration (its horizon, episodes, crowds, controller, seed and scoring range) under the

@@ -11,6 +11,7 @@ from pipelines.commands.simulate_checks import (
     flock_note,
     goal_room_note,
     horizon_note,
+    sensor_margins_note,
 )
 from pipelines.errors import PipelineError
 
@@ -126,8 +127,9 @@ def check_margins(experiment: Experiment) -> None:
 def method_notes(cells: Iterable[Cell]) -> list[str]:
     """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals),
     ``horizon_note`` lines (a plan longer than the learned predictor's training), ``flock_note`` lines
-    (a team larger than the paper's under its per-pair flocking weight) and ``calibration_world_note`` lines
-    (margins calibrated under other conventions), each once, naming the methods it
+    (a team larger than the paper's under its per-pair flocking weight), ``calibration_world_note`` lines
+    (margins calibrated under other conventions) and ``sensor_margins_note`` lines (calibrated margins
+    behind a sensor), each once, naming the methods it
     applies to: a grid of --vary columns printed the same line for each of eight methods."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
@@ -143,6 +145,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             horizon_note(cell.spec),
             flock_note(cell.spec, cell.n_robots),
             calibration_world_note(cell.spec, cell.world.profile, cell.world.visibility, cell.world.crowd),
+            sensor_margins_note(cell.spec, cell.world.sensor_range),
         ):
             if note is not None:
                 methods.setdefault(note, []).append(cell.method)

@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands.simulate_checks import calibration_world_note
+from pipelines.commands.simulate_checks import calibration_world_note, sensor_margins_note
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import parse_margins
 from predictors.calibration_store import find_calibration, save_calibration
@@ -83,4 +83,49 @@ def test_a_sweep_says_it_once_naming_the_methods(tmp_path, capsys):
         ["note", " method 'v1/visible/cp0.1'"],
         ["note", " method 'v1/invisible/cp0.1'"],
         ["note", " method 'paper/invisible/cp0.1'"],
+    ]
+
+
+@pytest.mark.parametrize(
+    ("spec", "sensor_range"),
+    [
+        (_spec("conformal:0.1"), None),  # every human seen: the calibration's own view
+        (_spec("none"), 3.0),
+        (_spec("fixed:0.1,0.1,0.1,0.1,0.1,0.1,0.1,0.1"), 3.0),  # metres chosen, not calibrated
+        (ControllerSpec("orca", margins=parse_margins("conformal:0.1")), 3.0),
+    ],
+)
+def test_no_sensor_note_where_it_does_not_apply(spec, sensor_range):
+    assert sensor_margins_note(spec, sensor_range) is None
+
+
+def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_there(tmp_path, capsys):
+    """Every calibration was made with every person in view: behind a sensor, people just come into view are
+    predicted from short tracks, and the margins covered less (docs/replayed_crowds.md, "Behind a sensor")."""
+    assert sensor_margins_note(_spec("conformal-shortfall:0.05", "dmpc"), 2.5) == (
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.05 were calibrated with every person "
+        "in view; behind a sensor of 2.5 m a person just come into view is predicted from a short track, and "
+        'they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at 3 m, alpha=0.1 '
+        "covered 0.85-0.87 among ORCA's humans, where 0.90 was calibrated)"
+    )
+    assert "among BIWI's people" in (sensor_margins_note(_spec("conformal:0.1:real"), 3) or "")
+    args = ["simulate", "--controller", "cmpc", "--predictor", "social_lstm_eth", "--humans", "1"]
+    assert main([*args, "--margins", "conformal:0.1", "--sensor-range", "3", "--no-progress"]) == 0
+    assert capsys.readouterr().err.count("were calibrated with every person in view") == 1
+    sweep = [
+        "sweep",
+        "--experiment",
+        "sensing",
+        "--margins",
+        "conformal:0.1",
+        "--dry-run",
+        "--out",
+        str(tmp_path),
+    ]
+    assert main(sweep) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "with every person in view" in line]
+    assert [note.split(":")[1] for note in notes] == [
+        " method '4 m'",
+        " methods '3 m', '3 m untracked'",
+        " method '2 m'",
     ]
