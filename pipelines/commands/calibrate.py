@@ -20,13 +20,16 @@ EPILOG = """examples:
   crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.5,0.2,0.1,0.05,0.01
   crowdmpc calibrate --predictor constant_velocity --source real --alpha 0.1 --holdout
   crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --episodes 20 --dry-run
+  crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --sensor-range 3 --holdout
 
 Each alpha gives one block in the user zoo's calibrations.json ($CROWDMPC_ZOO; the shipped zoo's blocks are
 read-only defaults): the (1 - alpha) split-conformal quantile of the predictor's displacement error at each
 horizon step k = 1..H, used as the margin m_k of
 `--margins conformal:ALPHA[:SOURCE]` (simulate, sweep). Sources: real (the prepared ETH/hotel validation
 scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
-evaluation seed; only humans within --near m of a robot are scored). A closed-loop block also holds the
+evaluation seed; only humans within --near m of a robot are scored; with --sensor-range the robots see the
+humans within that range, tracked since they came into view, and the block, which replaces the one of robots
+that see everyone, records the range). A closed-loop block also holds the
 quantiles of each motion class (new, standing, slow, walking), the margins of `--margins
 conformal-motion:ALPHA`, and per class those of the distance shortfall (how much closer a human came to a
 robot than predicted), the margins of `--margins conformal-shortfall:ALPHA`. A block without the per-class
@@ -46,6 +49,7 @@ CLOSED_LOOP_OPTIONS: Final[tuple[str, ...]] = (
     "profile",
     "visibility",
     "near",
+    "sensor_range",
 )
 
 
@@ -118,6 +122,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", choices=sorted(PROFILES), help=f"closed-loop (default {default['profile']})")
     p.add_argument("--visibility", choices=VISIBILITY, help=f"closed-loop (default {default['visibility']})")
     p.add_argument("--near", type=float, help=f"m, closed-loop humans scored (default {default['near']})")
+    p.add_argument(
+        "--sensor-range",
+        type=float,
+        metavar="M",
+        help="closed-loop robots behind a sensor of M m, as `simulate --sensor-range` (default: every human "
+        "seen)",
+    )
     p.add_argument("--holdout", action="store_true", help="also measure coverage on held-out data")
     p.add_argument(
         "--holdout-margins",
@@ -174,6 +185,7 @@ def _plan(args: argparse.Namespace) -> Any:
         profile=args.profile,
         visibility=args.visibility,
         near=args.near,
+        sensor_range=args.sensor_range,
     )
 
 
@@ -218,7 +230,7 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
 def _check_sources(args: argparse.Namespace, holdout_margins: bool) -> None:
     """Refuse an option typed for what this run does not do (the other source's, held-out margins without a
     held-out run): it would be accepted and change nothing."""
-    typed = [f"--{name}" for name in CLOSED_LOOP_OPTIONS if getattr(args, name) is not None]
+    typed = [f"--{name.replace('_', '-')}" for name in CLOSED_LOOP_OPTIONS if getattr(args, name) is not None]
     if args.source == "real" and typed:
         one = len(typed) == 1
         raise PipelineError(

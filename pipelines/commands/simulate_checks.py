@@ -228,29 +228,56 @@ _MEASURED_BEHIND = {
 
 
 def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str | None:
-    """A line for calibrated margins behind a sensor (``sensor_range`` m; None: every human seen), None
-    otherwise: every calibration, closed-loop or real, was made with every person in view, and behind a
-    sensor a person just come into view is predicted from a track of one or two positions, which those
-    margins cover less (measured at 3 m: docs/replayed_crowds.md). Not refused: the safe configuration
+    """A line for calibrated margins made with another view of the humans than the run's (``sensor_range`` m;
+    None: every human seen), None otherwise. A calibration records the sensor its robots were behind
+    (``calibrate --sensor-range``; none for a real one or one made before the option): made with every
+    person in view, its margins cover less behind a sensor, where a person just come into view is
+    predicted from a track of one or two positions (measured at 3 m: docs/replayed_crowds.md); made behind
+    a sensor, they are wider than a robot that sees everyone needs. Not refused: the safe configuration
     kept its collision rate behind a 3 m sensor among ORCA's humans (docs/extending.md)."""
     from pipelines.loop.margins import CALIBRATED_MODES
+    from predictors.calibration_store import find_calibration, recalibrate_command
     from predictors.conformal import alpha_text
+    from predictors.errors import PredictorError
+    from predictors.registry import checkpoint_sha256
 
-    margins = spec.margins
-    if sensor_range is None or spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES:
+    margins, name = spec.margins, spec.predictor_name
+    if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES or name is None:
         return None
+    try:
+        block = find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
+    except PredictorError:  # no such block, or other weights: refused with its own line where margins resolve
+        return None
+    made = block.details.get("sensor_range") if margins.source == "closed-loop" else None
+    if made == sensor_range:
+        return None
+    alpha = alpha_text(margins.alpha)
+    seen = "with every person in view" if made is None else f"behind a sensor of {made:g} m"
+    if sensor_range is None:
+        return (
+            f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated {seen}, this run's "
+            "robots see every human: they are wider than it needs where people come into view"
+        )
+    command = ""
+    if margins.source == "closed-loop":
+        options = _block_options(block, sensor=False)
+        command = (
+            f"; {recalibrate_command(name, margins.source, margins.alpha)}{options} --sensor-range "
+            f"{sensor_range:g} calibrates behind this run's, replacing that block"
+        )
+    measured = _MEASURED_BEHIND[margins.source] if made is None else "not measured"
     return (
-        f"note: the {margins.source} margins of {spec.predictor_name!r} at alpha={alpha_text(margins.alpha)} "
-        f"were calibrated with every person in view; behind a sensor of {sensor_range:g} m a person just "
-        "come into view is predicted from a short track, and they cover less than calibrated (docs/"
-        f'replayed_crowds.md, "Behind a sensor": at 3 m, {_MEASURED_BEHIND[margins.source]})'
+        f"note: the {margins.source} margins of {name!r} at alpha={alpha} were calibrated {seen}; behind a "
+        f"sensor of {sensor_range:g} m a person just come into view is predicted from a short track, and "
+        f'they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at 3 m, {measured})'
+        f"{command}"
     )
 
 
-def _block_options(block: Any) -> str:
+def _block_options(block: Any, sensor: bool = True) -> str:
     """``calibrate``'s options that made ``block`` but for its conventions: the command the note gives makes
-    the same calibration (its horizon, episodes, crowds, controller, seed and scoring range) under the
-    run's, not the defaults' (200 episodes, horizon 4, CMPC)."""
+    the same calibration (its horizon, episodes, crowds, controller, seed, scoring range and, unless
+    ``sensor`` is False, sensor range) under the run's, not the defaults' (200 episodes, horizon 4, CMPC)."""
     details = block.details
     near = details.get("near", 3.0)
     options = [f"--horizon {len(block.quantiles)}"]
@@ -260,4 +287,6 @@ def _block_options(block: Any) -> str:
     if isinstance(details.get("humans"), list):
         options.append("--humans " + ",".join(str(h) for h in details["humans"]))
     options.append(f"--near {'inf' if near is None else f'{near:g}'}")  # null: everyone scored
+    if sensor and isinstance(details.get("sensor_range"), int | float):  # its robots behind a sensor
+        options.append(f"--sensor-range {details['sensor_range']:g}")
     return " " + " ".join(options)

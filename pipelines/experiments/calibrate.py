@@ -29,6 +29,7 @@ import numpy as np
 from crowdsim.scenarios import MAX_HUMANS
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec, class_tables, observed_classes
+from pipelines.loop.sensing import is_sensor_range
 from predictors.conformal import alpha_text
 from predictors.progress import progress_bar
 
@@ -131,6 +132,10 @@ class ClosedLoopPlan:
     profile: str = "paper"
     visibility: str = "visible"
     near: float = NEAR
+    # The robots behind a sensor of this range (m; pipelines.loop.sensing), None: they see every human. Its
+    # margins then cover the people who come into view, predicted from short tracks, as such a robot meets
+    # them (docs/replayed_crowds.md, "Behind a sensor"); recorded in a block's details only when set.
+    sensor_range: float | None = None
     # What the controller plans with while the errors are measured: none for a calibration (the paper's
     # method); a held-out check may plan with the calibrated margins, to see whether the coverage survives
     # the change they make to how the robots, and so the humans, move.
@@ -152,6 +157,10 @@ class ClosedLoopPlan:
             raise PipelineError(f"calibration runs cmpc or dmpc, got {self.controller!r}")
         if not self.near > 0:  # NaN too
             raise PipelineError(f"--near must be > 0 m (inf scores everyone), got {self.near!r}")
+        if self.sensor_range is not None and not is_sensor_range(self.sensor_range):
+            raise PipelineError(
+                f"--sensor-range must be a finite number of metres > 0, got {self.sensor_range!r}"
+            )
 
     def schedule(self) -> list[tuple[str, int, int]]:
         """``(scenario, n_humans, seed)`` of every episode: scenarios alternate, crowd sizes cycle."""
@@ -208,11 +217,14 @@ class ClosedLoopErrors(NamedTuple):
 def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoopErrors:
     """Run ``plan``'s episodes and return what they measured."""
     from crowdsim.profiles import make_env_config
+    from crowdsim.world import PAPER_ROBOTS
     from pipelines.loop.controllers import make_controller
-    from pipelines.loop.episode import run_episode
+    from pipelines.loop.episode import behind_sensor, run_episode
 
     env_config = make_env_config(plan.profile, plan.visibility)
     controller = make_controller(_controller_spec(plan), env_config)
+    # behind the sensor, the NLP of every crowd size in view built before the first episode
+    controller = behind_sensor(controller, plan.sensor_range, True, PAPER_ROBOTS, max(plan.humans))
     observer = PredictionErrors(plan.near)
     successes = 0
     try:
@@ -235,6 +247,8 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
         "seeds": [plan.seed, plan.seed + plan.episodes - 1],
         "successes": successes,
     }
+    if plan.sensor_range is None:  # the blocks of every robot seeing everyone, as made before the option
+        del details["sensor_range"]
     return ClosedLoopErrors(observer.errors, observer.classes, observer.shortfall, details)
 
 

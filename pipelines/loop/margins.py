@@ -206,11 +206,13 @@ class MarginSpec:
     def calibration(self, predictor: str | None, sha256: str | None) -> dict[str, Any] | None:
         """Which stored calibration the margins come from, for the records: when it was made, its data's
         sha256 and, closed-loop, the conventions its episodes ran under (one block is kept per predictor and
-        alpha: a recalibration replaces it). None for margins that need none."""
+        alpha: a recalibration replaces it), with the sensor range its robots were behind where they were.
+        None for margins that need none."""
         if self.mode not in CALIBRATED_MODES:
             return None
         block = self._block(predictor, 0, sha256)
-        keys = ("profile", "visibility", "controller") if block.source == "closed-loop" else ()
+        closed_loop = block.source == "closed-loop"
+        keys = ("profile", "visibility", "controller", "sensor_range") if closed_loop else ()
         return {"created": block.created, "data_sha256": block.data_sha256} | {
             k: block.details[k] for k in keys if k in block.details
         }

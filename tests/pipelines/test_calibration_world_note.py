@@ -106,9 +106,13 @@ def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_the
         "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.05 were calibrated with every person "
         "in view; behind a sensor of 2.5 m a person just come into view is predicted from a short track, and "
         'they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at 3 m, alpha=0.1 '
-        "covered 0.85-0.87 among ORCA's humans, where 0.90 was calibrated)"
+        "covered 0.85-0.87 among ORCA's humans, where 0.90 was calibrated); crowdmpc calibrate --predictor "
+        "social_lstm_eth --source closed-loop --alpha 0.05 --horizon 4 --episodes 200 --seed 1000000 "
+        "--controller cmpc --humans 5,6,7,8,9 --near 3 --sensor-range 2.5 calibrates behind this run's, "
+        "replacing that block"
     )
-    assert "among BIWI's people" in (sensor_margins_note(_spec("conformal:0.1:real"), 3) or "")
+    real = sensor_margins_note(_spec("conformal:0.1:real"), 3) or ""
+    assert "among BIWI's people" in real and "crowdmpc calibrate" not in real  # no real one behind a sensor
     args = ["simulate", "--controller", "cmpc", "--predictor", "social_lstm_eth", "--humans", "1"]
     assert main([*args, "--margins", "conformal:0.1", "--sensor-range", "3", "--no-progress"]) == 0
     assert capsys.readouterr().err.count("were calibrated with every person in view") == 1
@@ -129,3 +133,27 @@ def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_the
         " methods '3 m', '3 m untracked'",
         " method '2 m'",
     ]
+
+
+def test_margins_calibrated_behind_a_sensor_are_noted_where_the_run_sees_otherwise():
+    """`calibrate --sensor-range 3` records the range in its block: a run behind the same sensor plans with
+    it silently; one that sees everyone, or behind another range, is told, with the command for its own."""
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    save_calibration(dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0}))
+    spec = _spec("conformal-motion:0.1")
+    assert sensor_margins_note(spec, 3.0) is None
+    assert sensor_margins_note(spec, None) == (
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated behind a sensor of "
+        "3 m, this run's robots see every human: they are wider than it needs where people come into view"
+    )
+    four = sensor_margins_note(spec, 4.0) or ""
+    assert four.startswith(
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated behind a sensor of "
+        "3 m; behind a sensor of 4 m a person just come into view"
+    )
+    assert '"Behind a sensor": at 3 m, not measured);' in four
+    assert four.endswith("--near 3 --sensor-range 4 calibrates behind this run's, replacing that block")
+    assert "--sensor-range 3" not in four
+    # the conventions note's command makes the same block under the run's conventions: behind its sensor
+    world = calibration_world_note(spec, "v1", "visible") or ""
+    assert "--near 3 --sensor-range 3 --profile v1 --visibility visible measures it" in world

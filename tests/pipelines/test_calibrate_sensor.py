@@ -1,0 +1,74 @@
+"""`crowdmpc calibrate --sensor-range M`: closed-loop margins made with the robots behind a sensor, as a robot
+that sees M m meets people (docs/replayed_crowds.md, "Behind a sensor"), the range recorded in the block."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pipelines.cli import main
+from pipelines.errors import PipelineError
+from pipelines.experiments.calibrate import ClosedLoopPlan, closed_loop_errors
+from predictors.calibration_store import read_calibrations
+
+CALIBRATE = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
+
+
+@pytest.fixture(autouse=True)
+def _private_zoo(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+
+
+def test_the_episodes_run_behind_the_sensor_and_only_then_the_details_say_so():
+    """The same two episodes: behind a 2 m sensor a person is scored from when a robot comes within 2 m of
+    them, predicted from the track since (constant velocity from a padded track of one position predicts
+    them to stand); with every human seen, from the start, and the details hold no sensor key (the blocks
+    made before the option, unchanged)."""
+    full = closed_loop_errors(ClosedLoopPlan("constant_velocity", episodes=2, humans=(5,)), progress=False)
+    behind = closed_loop_errors(
+        ClosedLoopPlan("constant_velocity", episodes=2, humans=(5,), sensor_range=2.0), progress=False
+    )
+    assert "sensor_range" not in full.details and behind.details["sensor_range"] == 2.0
+    assert behind.errors.shape[1] == full.errors.shape[1] == 4
+    assert len(behind.errors) < len(full.errors)  # within 3 m of a robot and seen: within 2 m
+    # "new" (track shorter than the class window) is far more common behind the sensor
+    assert np.mean(behind.classes == 0) > np.mean(full.classes == 0)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, math.inf, math.nan, True])
+def test_a_range_that_is_no_distance_is_refused(bad):
+    with pytest.raises(PipelineError, match="--sensor-range must be a finite number of metres > 0"):
+        ClosedLoopPlan("constant_velocity", sensor_range=bad)
+
+
+def test_calibrate_stores_the_range_and_refuses_it_where_it_changes_nothing(tmp_path, capsys):
+    out = tmp_path / "c.json"
+    argv = [*CALIBRATE, "--alpha", "0.45", "--episodes", "2", "--humans", "4", "--sensor-range", "2.5"]
+    assert main([*argv, "--json", str(out)]) == 0
+    (block,) = read_calibrations(tmp_path / "zoo")
+    assert block.details["sensor_range"] == 2.5 and block.alpha == 0.45
+    assert json.loads(out.read_text())["blocks"][0]["details"]["sensor_range"] == 2.5
+    capsys.readouterr()
+    real = ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--sensor-range", "3"]
+    assert main(real) == 2
+    err = capsys.readouterr().err
+    assert "--sensor-range is for --source closed-loop" in err and err.count("\n") == 1
+    assert main([*CALIBRATE, "--sensor-range", "0", "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "--sensor-range must be a finite number of metres > 0, got 0.0" in err and "Traceback" not in err
+
+
+def test_a_record_names_the_sensor_its_margins_were_calibrated_behind():
+    import dataclasses
+
+    from pipelines.loop.margins import parse_margins
+    from predictors.calibration_store import find_calibration, save_calibration
+
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    save_calibration(dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0}))
+    from predictors.registry import checkpoint_sha256
+
+    margins = parse_margins("conformal-shortfall:0.1")
+    recorded = margins.calibration("social_lstm_eth", checkpoint_sha256("social_lstm_eth")) or {}
+    assert recorded["sensor_range"] == 3.0 and recorded["profile"] == "paper"
