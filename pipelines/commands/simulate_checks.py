@@ -256,7 +256,8 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
     if sensor_range is None:
         return (
             f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated {seen}, this run's "
-            "robots see every human: they are wider than it needs where people come into view"
+            "robots see every human: made for people just come into view, they are wider than it needs "
+            '(docs/replayed_crowds.md, "Behind a sensor")'
         )
     command = ""
     if margins.source == "closed-loop":

@@ -144,7 +144,8 @@ def test_margins_calibrated_behind_a_sensor_are_noted_where_the_run_sees_otherwi
     assert sensor_margins_note(spec, 3.0) is None
     assert sensor_margins_note(spec, None) == (
         "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated behind a sensor of "
-        "3 m, this run's robots see every human: they are wider than it needs where people come into view"
+        "3 m, this run's robots see every human: made for people just come into view, they are wider than it "
+        'needs (docs/replayed_crowds.md, "Behind a sensor")'
     )
     four = sensor_margins_note(spec, 4.0) or ""
     assert four.startswith(
