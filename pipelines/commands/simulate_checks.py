@@ -233,7 +233,8 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
     (``calibrate --sensor-range``; none for a real one or one made before the option): made with every
     person in view, its margins cover less behind a sensor, where a person just come into view is
     predicted from a track of one or two positions (measured at 3 m: docs/replayed_crowds.md); made behind
-    a sensor, they are wider than a robot that sees everyone needs. Not refused: the safe configuration
+    a sensor, they are wider than a robot that sees everyone needs, and behind another range their coverage
+    is not measured. Not refused: the safe configuration
     kept its collision rate behind a 3 m sensor among ORCA's humans (docs/extending.md)."""
     from pipelines.loop.margins import CALIBRATED_MODES
     from predictors.calibration_store import find_calibration, recalibrate_command
@@ -252,12 +253,11 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
     if made == sensor_range:
         return None
     alpha = alpha_text(margins.alpha)
-    seen = "with every person in view" if made is None else f"behind a sensor of {made:g} m"
     if sensor_range is None:
         return (
-            f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated {seen}, this run's "
-            "robots see every human: made for people just come into view, they are wider than it needs "
-            '(docs/replayed_crowds.md, "Behind a sensor")'
+            f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated behind a sensor of "
+            f"{made:g} m, this run's robots see every human: made for people just come into view, they are "
+            'wider than it needs (docs/replayed_crowds.md, "Behind a sensor")'
         )
     command = ""
     if margins.source == "closed-loop":
@@ -266,12 +266,16 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
             f"; {recalibrate_command(name, margins.source, margins.alpha)}{options} --sensor-range "
             f"{sensor_range:g} calibrates behind this run's, replacing that block"
         )
-    measured = _MEASURED_BEHIND[margins.source] if made is None else "not measured"
+    if made is not None:  # behind another range: more or fewer people come into view, by how much unmeasured
+        return (
+            f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated behind a sensor of "
+            f"{made:g} m, this run's is {sensor_range:g} m: their coverage here is not measured{command}"
+        )
     return (
-        f"note: the {margins.source} margins of {name!r} at alpha={alpha} were calibrated {seen}; behind a "
-        f"sensor of {sensor_range:g} m a person just come into view is predicted from a short track, and "
-        f'they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at 3 m, {measured})'
-        f"{command}"
+        f"note: the {margins.source} margins of {name!r} at alpha={alpha} were calibrated with every person "
+        f"in view; behind a sensor of {sensor_range:g} m a person just come into view is predicted from a "
+        'short track, and they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at '
+        f"3 m, {_MEASURED_BEHIND[margins.source]}){command}"
     )
 
 
