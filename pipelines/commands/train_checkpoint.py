@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from typing import Any
 
 import torch
@@ -87,3 +88,30 @@ class StopOnDivergence(Callback):
         if loss is not None and not bool(torch.isfinite(loss).all()) and self.epoch is None:
             self.epoch, self.loss = trainer.current_epoch, float(loss)
             trainer.should_stop = True
+
+
+class TrainingClock(Callback):
+    """The seconds a run has trained, kept in its checkpoints: NAME.metrics.json's ``wall_time_s`` of a
+    resumed run counted its last part alone. ``before``: its earlier parts' seconds as its last.ckpt holds
+    them, each from its fit's start to that checkpoint (a killed part's time after its last checkpoint went
+    with the epoch it was training, which the resume trains again). A last.ckpt from before the clock holds
+    none: its run counts from the resume, as before."""
+
+    def __init__(self) -> None:
+        self.before = 0.0
+        self._started: float | None = None
+
+    def on_fit_start(self, trainer: Any, pl_module: Any) -> None:
+        self._started = time.perf_counter()
+
+    def state_dict(self) -> dict[str, float]:
+        return {"seconds": self.before + self.this_part()}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        seconds = state_dict.get("seconds")
+        if isinstance(seconds, int | float) and not isinstance(seconds, bool) and 0 <= seconds < math.inf:
+            self.before = float(seconds)
+
+    def this_part(self) -> float:
+        """The seconds since this fit started (0 before it has)."""
+        return 0.0 if self._started is None else time.perf_counter() - self._started

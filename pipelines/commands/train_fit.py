@@ -96,7 +96,7 @@ def _fit(
         train, val, test, batch_size=args.batch_size, seed=args.seed, batching=args.batching
     )
     module = make_module(args.model, net_config, optim)
-    trainer, best, divergence = _trainer(args, out, ckpt_dir)
+    trainer, best, divergence, clock = _trainer(args, out, ckpt_dir)
     if not args.resume:
         from pipelines.commands.train_resume import SETTINGS_FILE
 
@@ -116,7 +116,8 @@ def _fit(
         # Lightning ends an interrupted fit with sys.exit: 1 for Ctrl-C, 0 for SIGTERM (its SIGTERMException),
         # which told a script that a killed run had trained. Both are the interrupt the CLI reports (130).
         raise KeyboardInterrupt from stop
-    elapsed = time.perf_counter() - started
+    # with the run's earlier parts, for a resume (their seconds came back from last.ckpt)
+    elapsed = clock.before + time.perf_counter() - started
     _check_divergence(args, divergence, best)
 
     # a file in --out: the best checkpoint saved or kept (RunCheckpoint: restored only where it is), else last
@@ -269,13 +270,13 @@ def _no_advertising(record: logging.LogRecord) -> bool:
     return not str(record.msg).startswith("💡 Tip")
 
 
-def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any, Any]:
-    """Lightning's trainer, the callback that keeps the best checkpoint by validation ADE, and the one that
-    stops a diverged fit."""
+def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any, Any, Any]:
+    """Lightning's trainer, the callback that keeps the best checkpoint by validation ADE, the one that
+    stops a diverged fit, and the run's clock."""
     import lightning as L
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-    from pipelines.commands.train_checkpoint import RunCheckpoint, StopOnDivergence
+    from pipelines.commands.train_checkpoint import RunCheckpoint, StopOnDivergence, TrainingClock
     from pipelines.commands.train_resume import BEST_FILENAME
 
     best = RunCheckpoint(
@@ -297,10 +298,10 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
             CSVLogger(out, name="csv"),
             TensorBoardLogger(out, name="tensorboard", default_hp_metric=False),
         ],
-        callbacks=[best, divergence := StopOnDivergence()],
+        callbacks=[best, divergence := StopOnDivergence(), clock := TrainingClock()],
         deterministic=True,
         enable_progress_bar=not args.no_progress,
         enable_model_summary=False,
         log_every_n_steps=5,
     )
-    return trainer, best, divergence
+    return trainer, best, divergence, clock
