@@ -261,8 +261,8 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--report-only",
         action="store_true",
-        help="write the table and plots from DIR; run nothing (the experiment must be DIR's; --humans, "
-        "--robots, --seed and --episodes-per-cell not given are its last run's)",
+        help="write the table and plots from DIR; run nothing (without --config, every setting not typed "
+        "is the one DIR's last run recorded, --experiment too)",
     )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -333,9 +333,11 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     """The run's configuration and its --out, every number and name checked (pipelines/config) before
     anything is written or started."""
     from pipelines.config import command_config
+    from pipelines.config.recorded import report_config
     from pipelines.experiments.log import check_sweep_directory
 
-    cfg = command_config(args, _options())
+    # a report of the sweep in --out: its recorded config beneath what is typed
+    cfg = report_config(args, _options()) if args.report_only else command_config(args, _options())
     settings = cfg.sweep
     for key in ("experiment", "out"):
         if getattr(settings, key) is None:

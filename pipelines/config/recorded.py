@@ -13,13 +13,17 @@ says when the recorded workers exceed it.
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pipelines.config.entries import ConfigError, Entry, Source, check_key
+from pipelines.config.entries import ConfigError, Entry, Source, check_key, parse_set
 from pipelines.config.resolve import RunConfig, resolve
 from pipelines.config.schema import ENV_PROFILE_KEYS, SECTION_BY_NAME
 from pipelines.config.settings import LOCAL_WORKERS_PER_CPU, available_cpus, local_workers_limit
+
+if TYPE_CHECKING:
+    from pipelines.config.command_line import Option
 
 
 def recorded_runs(directory: str | Path) -> tuple[Path, list[dict[str, Any]]]:
@@ -40,6 +44,34 @@ def recorded_runs(directory: str | Path) -> tuple[Path, list[dict[str, Any]]]:
 def recorded_config(path: Path, run: dict[str, Any], index: int) -> RunConfig:
     """The config run ``index`` (1-based) of ``path`` recorded, resolved as a config file would be, with
     ``[sweep] out`` the directory that holds ``path``."""
+    where = f"{path} (run {index})"
+    return resolve(recorded_entries(path, run, index), where)
+
+
+def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
+    """``sweep --report-only``'s config: the sweep's own, as the last run line of its sweep.json recorded
+    it, beneath the --set items and options typed, when no --config file is given (a report of a sweep run
+    with --predictor, --margins or --crowd asked for them again, or found none of its records); else, or
+    for a sweep from before configs were kept, the command line's alone (``command_config``)."""
+    from pipelines.config.command_line import cli_entries, command_config, config_arguments
+    from pipelines.experiments.log import SWEEP_FILE
+
+    typed = command_config(args, options)  # checked as it stands first: a typo is named as typed
+    path, sets = config_arguments(args)
+    held = None if typed.sweep.out is None else Path(typed.sweep.out) / SWEEP_FILE
+    # a link is not read: the sweep's checks refuse it as they refuse one in a run (nothing read first)
+    if path is not None or held is None or held.is_symlink() or not held.is_file():
+        return typed
+    sweep_file, runs = recorded_runs(typed.sweep.out)
+    if not isinstance(runs[-1].get("config"), dict):
+        return typed
+    entries = recorded_entries(sweep_file, runs[-1], len(runs))
+    entries += [parse_set(text) for text in sets] + list(cli_entries(args, options))
+    return resolve(entries, f"{sweep_file} (run {len(runs)})")
+
+
+def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]:
+    """The entries of the config run ``index`` of ``path`` recorded (``recorded_config``)."""
     where = f"{path} (run {index})"
     values = run.get("config")
     if not isinstance(values, dict):
@@ -63,7 +95,7 @@ def recorded_config(path: Path, run: dict[str, Any], index: int) -> RunConfig:
                 entries.append(Entry(name, key, value, source))
     # The recorded out may be relative to wherever that sweep started; this directory is where it resumes.
     entries.append(Entry("sweep", "out", str(Path(path).parent.resolve()), source))
-    return resolve(entries, where)
+    return entries
 
 
 def _profile_values(values: dict[str, Any]) -> dict[str, Any]:

@@ -614,3 +614,27 @@ def test_a_run_line_the_disk_refuses_names_sweep_json_and_keeps_it(tmp_path, cap
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith(f"crowdmpc sweep: error: could not write {out / SWEEP_FILE} (File too large)")
     assert (out / SWEEP_FILE).read_text() == before
+
+
+def test_report_only_takes_the_sweeps_recorded_config_for_what_is_not_typed(tmp_path, capsys):
+    """A sweep run with --predictor, --margins, --humans and --robots: `--report-only --out DIR` alone
+    tabulated none of its records (refused: "none of them of the cells planned here") until every option
+    was typed again. Its last run's recorded config now stands beneath what is typed; a --config file
+    replaces it, as it replaces any recorded setting."""
+    out = tmp_path / "sw"
+    run = ["sweep", "--experiment", "table2", "--predictor", "constant_velocity", "--humans", "2"]
+    run += ["--robots", "2", "--margins", "fixed:0.1,0.1,0.1,0.1", "--seed", "3", "--episodes-per-cell", "1"]
+    assert main([*run, "--backend", "inline", "--no-progress", "--out", str(out)]) == 0
+    table = (out / TABLE_MD).read_text()
+    (out / TABLE_MD).unlink()
+    capsys.readouterr()
+    assert main(["sweep", "--report-only", "--no-progress", "--out", str(out)]) == 0
+    assert (out / TABLE_MD).read_text() == table
+    assert main(["sweep", "--report-only", "--no-progress", "--out", str(out), "--humans", "3"]) == 2
+    assert "none of them of the cells planned here" in capsys.readouterr().err  # typed: the command's
+    shown = tmp_path / "run.toml"
+    assert main(["config", "show"]) == 0
+    shown.write_text(capsys.readouterr().out)
+    report = ["--config", str(shown), "sweep", "--experiment", "table2", "--report-only", "--out", str(out)]
+    assert main(report) == 2
+    assert "none of them of the cells planned here" in capsys.readouterr().err
