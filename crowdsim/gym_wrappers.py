@@ -12,6 +12,13 @@ it: the command is reached as fast as the acceleration bound allows, with no ove
 the velocity bound of Eq. (6); rows past the episode's robots are ignored. ``crowdsim.baselines`` turns its
 desired velocities into accelerations by this same rule, so a baseline's velocities through this wrapper
 drive exactly as the baseline does.
+
+``SensorRange`` shows a policy what a robot team with a range-limited sensor sees: the humans farther than
+``radius`` metres from every robot become padding rows (all zeros, present 0), as people out of view are;
+the reward, the info's figures and the episode's metrics stay the simulator's, over every human, as behind
+``crowdmpc simulate --sensor-range`` (``pipelines.loop.sensing``, whose visibility rule this is: within
+``radius`` of some robot, tracked now in a replayed crowd). It shows positions and velocities, not a
+tracker's history.
 """
 
 from __future__ import annotations
@@ -81,3 +88,51 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         tracked = (command[:m] - self._native.robot_velocities) / self._period
         accelerations[:m] = np.clip(tracked, -self.a_max, self.a_max)
         return accelerations
+
+
+class SensorRange(
+    gym.ObservationWrapper[np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs
+):
+    """The humans beyond ``radius`` m of every robot as padding rows (module docstring).
+
+    :param env: a ``crowdmpc/CrowdNav-v0`` environment, possibly wrapped.
+    :param radius: the sensor's range in m, finite and > 0.
+    """
+
+    def __init__(self, env: gym.Env[np.ndarray, np.ndarray], *, radius: float):
+        gym.utils.RecordConstructorArgs.__init__(self, radius=radius)
+        gym.ObservationWrapper.__init__(self, env)
+        base = env.unwrapped
+        if not isinstance(base, CrowdNavEnv):
+            raise SimulationError(f"SensorRange wraps a CrowdNavEnv, got {type(base).__name__}")
+        if isinstance(radius, bool) or not isinstance(radius, int | float) or not 0 < radius < np.inf:
+            raise SimulationError(f"radius must be a finite number of metres > 0, got {radius!r}")
+        self.radius = float(radius)
+        self._robots = base.max_robots
+        self._native: Observation | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._native = info["observation"]
+        return self.observation(obs), info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._native = info["observation"]
+        return self.observation(obs), reward, terminated, truncated, info
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """``observation`` with the rows of the humans out of view zeroed, judged on the simulator's own
+        positions (the array's are clipped to its bounds)."""
+        if self._native is None:
+            raise SimulationError("observation() called before reset()")
+        obs = self._native
+        gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
+        seen = (gaps <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, dtype=bool)
+        if obs.human_present is not None:
+            seen &= np.asarray(obs.human_present, dtype=bool)
+        out = observation.copy()
+        out[self._robots : self._robots + obs.n_humans][~seen] = 0.0
+        return out

@@ -1,0 +1,71 @@
+"""``SensorRange``: a policy shown the humans within a sensor's range of some robot, the others as padding,
+by the rule ``crowdmpc simulate --sensor-range`` sees them (``pipelines.loop.sensing.RangeLimited``)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import crowdsim
+from crowdsim.errors import SimulationError
+from crowdsim.gym_env import CrowdNavEnv
+from crowdsim.gym_observation import PRESENT
+from crowdsim.gym_wrappers import SensorRange, VelocityControl
+from crowdsim.scenarios import Layout
+from tests.crowdsim.test_gym_env import WRAPPED, checked
+
+
+def test_check_env_passes_the_sensor_wrapper():
+    checked(SensorRange(gym.make(crowdsim.ENV_ID, render_mode="rgb_array"), radius=2.0), expected=(WRAPPED,))
+    checked(VelocityControl(SensorRange(gym.make(crowdsim.ENV_ID), radius=3)), expected=(WRAPPED,))
+
+
+def test_the_humans_out_of_range_are_padding_and_the_reward_is_the_full_ones():
+    """A robot at the origin; humans standing 1.9 m and 2.1 m away: behind 2 m the second is a row of zeros,
+    the first is as the plain environment shows it, and so are the robot's rows and the reward."""
+    point = np.array([[0.0, 1.9], [2.1, 0.0]])
+    layout = Layout(np.zeros((1, 2)), np.array([[0.0, -5.0]]), point, point)
+    plain = CrowdNavEnv(n_robots=1, n_humans=2)
+    sensed = SensorRange(CrowdNavEnv(n_robots=1, n_humans=2), radius=2.0)
+    full, _ = plain.reset(options={"layout": layout})
+    seen, _ = sensed.reset(options={"layout": layout})
+    robots = plain.max_robots
+    np.testing.assert_array_equal(seen[:robots], full[:robots])
+    np.testing.assert_array_equal(seen[robots], full[robots])
+    assert full[robots + 1, PRESENT] == 1.0 and not seen[robots + 1].any()
+    action = np.zeros(plain.action_space.shape)
+    full_step, seen_step = plain.step(action), sensed.step(action)
+    assert full_step[1:4] == seen_step[1:4]  # reward, terminated, truncated: the simulator's
+    assert not seen_step[0][robots + 1].any() and seen_step[0][robots].any()
+
+
+def test_the_view_is_the_closed_loops_sensor():
+    """Over a seeded episode, the rows shown are those of the humans RangeLimited hands its controller."""
+    from types import SimpleNamespace
+
+    from pipelines.loop.sensing import RangeLimited
+
+    env = SensorRange(CrowdNavEnv(n_humans=7), radius=3.0)
+    rule = RangeLimited(SimpleNamespace(name="none", predictor=None), 3.0)
+    obs, info = env.reset(seed=5)
+    robots = env.unwrapped.max_robots
+    both = set()
+    for _ in range(30):
+        native = info["observation"]
+        shown = obs[robots : robots + native.n_humans, PRESENT] == 1.0
+        np.testing.assert_array_equal(shown, rule._visible(native))
+        both |= set(shown.tolist())
+        obs, _, terminated, truncated, info = env.step(np.zeros(env.action_space.shape))
+        if terminated or truncated:
+            break
+    assert both == {True, False}  # people in view and out of it, both met
+
+
+@pytest.mark.parametrize("radius", [0.0, -1.0, float("inf"), float("nan"), True, "3"])
+def test_a_range_that_is_no_distance_is_refused(radius):
+    with pytest.raises(SimulationError, match="radius must be a finite number of metres > 0"):
+        SensorRange(CrowdNavEnv(), radius=radius)
+
+
+def test_it_wraps_the_crowd_environment_only():
+    with pytest.raises(SimulationError, match="SensorRange wraps a CrowdNavEnv"):
+        SensorRange(gym.make("CartPole-v1"), radius=3.0)
