@@ -82,8 +82,11 @@ def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tu
         times=view.times,
     )
     ax = fig.axes[0]
+    sensor = sensor_radius(rec)
     for k, row in enumerate(rows):
         _draw_plans(ax, view, row, label=k == 0)
+        if sensor is not None:
+            _draw_sensor(ax, view, row, sensor, label=k == 0)
     drawn = [float(view.times[r]) for r in rows]
     # What the file holds: an ORCA or straight run records neither plans nor predictions, and its title
     # promised them all the same.
@@ -100,6 +103,28 @@ def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tu
 def _has_predictions(view: EpisodeView) -> bool:
     """Whether the file holds predictions of a human (a crowd-free run records empty ones)."""
     return bool(view.predictions) and view.human_positions.shape[1] > 0
+
+
+def sensor_radius(rec: Recording) -> float | None:
+    """The range of the sensor the controller was behind (its config's ``sensing``, pipelines.loop.sensing),
+    None for a run that saw every human (or a file that does not say)."""
+    sensing = rec.config().get("sensing")
+    radius = sensing.get("radius_m") if isinstance(sensing, dict) else None
+    if isinstance(radius, int | float) and not isinstance(radius, bool) and 0 < radius < np.inf:
+        return float(radius)
+    return None
+
+
+def _draw_sensor(ax: Any, view: EpisodeView, row: int, radius: float, *, label: bool) -> None:
+    """Each robot's sensor range at state ``row``: a dashed circle in its colour (a human outside every
+    circle was not seen then)."""
+    from matplotlib.patches import Circle
+
+    for i, centre in enumerate(view.robot_positions[row]):
+        ax.add_patch(
+            Circle(centre, radius, fill=False, ls="--", lw=0.8, ec=_robot_color(i), alpha=0.5, zorder=2,
+                   label=f"sensor range ({radius:g} m)" if label and i == 0 else None)
+        )  # fmt: skip
 
 
 def _dedupe_legend(ax: Any, *, below: bool = False) -> None:
@@ -205,9 +230,10 @@ def check_animation_path(out: str | Path, option: str = "--animate") -> None:
         raise PipelineError("an .mp4 needs ffmpeg, which is not installed here; ask for a .gif instead")
 
 
-def _animation_legend(fig: Any, view: EpisodeView) -> None:
+def _animation_legend(fig: Any, view: EpisodeView, sensor: float | None = None) -> None:
     """What each mark is, under the axes (nothing drawn is hidden): robots in their own colours (robot 0's
-    stands for all), humans, goals, the paths so far, and plans and predictions when the file has them."""
+    stands for all), humans, goals, the paths so far, plans and predictions when the file has them, and the
+    range of the sensor the controller was behind."""
     from matplotlib.lines import Line2D
 
     robot = _robot_color(0)
@@ -224,6 +250,10 @@ def _animation_legend(fig: Any, view: EpisodeView) -> None:
         entries.append(Line2D([], [], ls="--", color=robot, lw=1.2, label="robot plan"))
     if _has_predictions(view):
         entries.append(Line2D([], [], ls=":", color=HUMAN_COLOR, lw=1.0, label="predicted human path"))
+    if sensor is not None:
+        entries.append(
+            Line2D([], [], ls="--", color=robot, lw=0.8, alpha=0.5, label=f"sensor range ({sensor:g} m)")
+        )
     fig.legend(handles=entries, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
 
 
@@ -250,19 +280,31 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     ax.plot(*view.robot_goals.T, "*", color=GOAL_COLOR, mec="k", mew=0.5, ms=14, zorder=1)
     robots = [Circle((0, 0), view.radius, fc=_robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]
     humans = [Circle((0, 0), view.radius, fill=False, ec=HUMAN_COLOR, lw=1.2, zorder=3) for _ in range(n)]
-    for patch in robots + humans:
+    sensor = sensor_radius(rec)
+    ranges = (
+        []
+        if sensor is None
+        else [
+            Circle((0, 0), sensor, fill=False, ls="--", lw=0.8, ec=_robot_color(i), alpha=0.5, zorder=2)
+            for i in range(m)
+        ]
+    )
+    for patch in robots + humans + ranges:
         ax.add_patch(patch)
     trails = [ax.plot([], [], "-", color=_robot_color(i), lw=1.0, alpha=0.6)[0] for i in range(m)]
     plans = [ax.plot([], [], "--", color=_robot_color(i), lw=1.2)[0] for i in range(m)]
     predictions = [ax.plot([], [], ":", color=HUMAN_COLOR, lw=1.0)[0] for _ in range(n)]
     clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
     decimals = clock_decimals(view.dt)
-    _animation_legend(fig, view)
+    _animation_legend(fig, view, sensor)
 
     def draw(row: int) -> list[Any]:
         step = int(view.steps[row])
         for i, patch in enumerate(robots):
             patch.center = view.robot_positions[row, i]
+        for i, patch in enumerate(ranges):
+            patch.center = view.robot_positions[row, i]
+        for i in range(m):
             trails[i].set_data(view.robot_positions[: row + 1, i, 0], view.robot_positions[: row + 1, i, 1])
         for j, patch in enumerate(humans):
             patch.center = view.human_positions[row, j]
@@ -282,7 +324,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
         clock.set_text(
             f"t = {view.times[row]:.{decimals}f} s" + ("   (truncated file)" if rec.truncated else "")
         )
-        return [*robots, *humans, *trails, *plans, *predictions, clock]
+        return [*robots, *ranges, *humans, *trails, *plans, *predictions, clock]
 
     return fig, draw, view
 

@@ -104,3 +104,31 @@ def test_a_controller_behind_a_sensor_records_its_predictions_of_the_humans_in_v
     assert [[j for j, s in enumerate(row) if s] for row in seen] == visible  # the humans in view, no other
     first = episode_view(rec).predictions[0]  # read back, null as NaN: humans 1 to 3 out of view at first
     assert first.shape[1:] == (4, 2) and np.isfinite(first[:, 0]).all() and np.isnan(first[:, 1:]).all()
+    # review draws each robot's sensor range (the recorded config's sensing): a dashed circle of 3 m around
+    # each robot at each snapshot of the plot, following the robots in the animation
+    from matplotlib.patches import Circle
+
+    from pipelines.logs.plots import animation_figure, recording_figure, sensor_radius
+
+    assert sensor_radius(rec) == 3.0
+    fig, drawn = recording_figure(rec)
+    ranges = [p for p in fig.axes[0].patches if isinstance(p, Circle) and p.radius == 3.0]
+    assert len(ranges) == 3 * len(drawn)  # robots x snapshots
+    assert "sensor range (3 m)" in {t.get_text() for t in fig.axes[0].get_legend().get_texts()}
+    fig, draw, view = animation_figure(rec)
+    assert "sensor range (3 m)" in {t.get_text() for t in fig.legends[0].get_texts()}
+    circles = [p for p in fig.axes[0].patches if isinstance(p, Circle) and p.radius == 3.0]
+    draw(5)
+    assert [tuple(c.center) for c in circles] == [tuple(p) for p in view.robot_positions[5]]
+
+
+def test_a_run_that_sees_everyone_draws_no_sensor(tmp_path, capsys):
+    from pipelines.logs.plots import recording_figure, sensor_radius
+    from pipelines.logs.reader import read_recording
+
+    assert main([*RUN[:-1], "1", "--record", str(tmp_path / "rec"), "--no-progress"]) == 0
+    (path,) = (tmp_path / "rec").glob("*.mcap")
+    rec = read_recording(path)
+    assert sensor_radius(rec) is None
+    fig, _ = recording_figure(rec)
+    assert not any("sensor" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
