@@ -62,7 +62,10 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
     # a link is not read: the sweep's checks refuse it as they refuse one in a run (nothing read first)
     if path is not None or held is None or held.is_symlink() or not held.is_file():
         return typed
-    sweep_file, runs = recorded_runs(held.parent)
+    try:
+        sweep_file, runs = recorded_runs(held.parent)
+    except ConfigError:  # no run line yet (a sweep stopped before its first): the typed plan, as before
+        return typed
     if not isinstance(runs[-1].get("config"), dict):
         return typed
     entries = recorded_entries(sweep_file, runs[-1], len(runs))

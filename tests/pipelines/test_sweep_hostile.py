@@ -638,3 +638,14 @@ def test_report_only_takes_the_sweeps_recorded_config_for_what_is_not_typed(tmp_
     report = ["--config", str(shown), "sweep", "--experiment", "table2", "--report-only", "--out", str(out)]
     assert main(report) == 2
     assert "none of them of the cells planned here" in capsys.readouterr().err
+
+
+def test_report_only_of_a_sweep_file_with_no_run_yet_says_what_is_missing(tmp_path, capsys):
+    """A sweep.json of no run line (one stopped before its first) was read as a recorded config and refused
+    in `config show --from-sweep`'s words; the report goes on from what is typed, and says what is missing."""
+    out = tmp_path / "sw"
+    out.mkdir()
+    (out / SWEEP_FILE).write_text('{"runs": []}\n')
+    assert main(["sweep", "--experiment", "table2", "--report-only", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "episodes.jsonl does not exist: nothing to report" in err and "--from-sweep" not in err
