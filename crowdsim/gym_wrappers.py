@@ -108,31 +108,17 @@ class SensorRange(
         if isinstance(radius, bool) or not isinstance(radius, int | float) or not 0 < radius < np.inf:
             raise SimulationError(f"radius must be a finite number of metres > 0, got {radius!r}")
         self.radius = float(radius)
-        self._robots = base.max_robots
-        self._native: Observation | None = None
-
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._native = info["observation"]
-        return self.observation(obs), info
-
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        self._native = info["observation"]
-        return self.observation(obs), reward, terminated, truncated, info
+        self._base = base
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         """``observation`` with the rows of the humans out of view zeroed, judged on the simulator's own
-        positions (the array's are clipped to its bounds)."""
-        if self._native is None:
-            raise SimulationError("observation() called before reset()")
-        obs = self._native
+        state (``CrowdNavEnv.observation``: the array's positions are clipped to its bounds)."""
+        obs = self._base.observation
         gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
         seen = (gaps <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, dtype=bool)
         if obs.human_present is not None:
             seen &= np.asarray(obs.human_present, dtype=bool)
         out = observation.copy()
-        out[self._robots : self._robots + obs.n_humans][~seen] = 0.0
+        rows = self._base.max_robots
+        out[rows : rows + obs.n_humans][~seen] = 0.0
         return out
