@@ -106,7 +106,7 @@ def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_the
         "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.05 were calibrated with every person "
         "in view; behind a sensor of 2.5 m a person just come into view is predicted from a short track, and "
         'they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at 3 m, alpha=0.1 '
-        "covered 0.85-0.87 among ORCA's humans, where 0.90 was calibrated); crowdmpc calibrate --predictor "
+        "covered 0.83-0.87 among ORCA's humans, where 0.90 was calibrated); crowdmpc calibrate --predictor "
         "social_lstm_eth --source closed-loop --alpha 0.05 --horizon 4 --episodes 200 --seed 1000000 "
         "--controller cmpc --humans 5,6,7,8,9 --near 3 --sensor-range 2.5 calibrates behind this run's, "
         "replacing that block"
