@@ -9,6 +9,7 @@ solver messages carry their simulation time too ("time", s, and "step"). Channel
   /mpc/prediction       the humans' predicted positions, per IBR iteration when asked (predicting controllers)
   /mpc/solver           status, wall time, IBR iterations, potential F_t, fallback
   /scene                foxglove.SceneUpdate: agents as spheres, goals, plans and predictions as line strips
+                        (behind a sensor, a ring of its range per robot)
   /episode/metrics      once, at the end
 Metadata records: "crowdmpc" (version, format), "episode" (seed, scenario, controller, predictor, checkpoint
 sha256, sizes, start_time_ns), "config" and "run" (JSON-encoded values).
@@ -17,6 +18,7 @@ sha256, sizes, start_time_ns), "config" and "run" (JSON-encoded values).
 from __future__ import annotations
 
 import json
+import math
 import re
 import time
 from collections.abc import Iterable, Mapping
@@ -179,7 +181,7 @@ class McapEpisodeRecorder:
             )
             self._repeats[(scenario, seed)] = repeat + 1
         self.paths.append(self._recorder.path)
-        self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius))
+        self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius), _sensor_range(meta.get("config")))
         self._last = obs
         self._last_written_step = -1
 
@@ -332,3 +334,13 @@ class McapEpisodeRecorder:
 def episode_summary(result: EpisodeResult) -> dict[str, Any]:
     """The /episode/metrics message: the closed loop's ``EpisodeRecord``, as every report serialises it."""
     return result.record().to_dict()
+
+
+def _sensor_range(config: Any) -> float | None:
+    """The range of the sensor a controller's config says it is behind (``sensing.radius_m``,
+    pipelines.loop.sensing), None without one: /scene then draws its ring around each robot."""
+    sensing = config.get("sensing") if isinstance(config, Mapping) else None
+    radius = sensing.get("radius_m") if isinstance(sensing, Mapping) else None
+    if isinstance(radius, int | float) and not isinstance(radius, bool) and 0 < radius < math.inf:
+        return float(radius)
+    return None

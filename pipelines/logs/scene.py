@@ -72,7 +72,8 @@ _IDENTITY: Final = _dumps({"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0})
 _ORIGIN: Final = '{"position":{"x":0.0,"y":0.0,"z":0.0},"orientation":' + _IDENTITY + "}"
 _LINE_Z: Final = 0.02  # m, just above the ground so lines are not hidden by it
 _POINT: Final = "{" + _SCENE_XY + ',"z":' + repr(_LINE_Z) + "}"
-_ENTITY_IDS: Final = ("robots", "humans", "goals", "plans", "predictions")
+_ENTITY_IDS: Final = ("robots", "humans", "goals", "plans", "predictions", "sensors")
+_RING_POINTS: Final = 32  # a sensor's range drawn as a closed strip of this many segments
 
 
 class SceneBuilder:
@@ -80,10 +81,11 @@ class SceneBuilder:
 
     Entities: "robots" and "humans" (spheres of the agents' diameter standing on the ground), "goals" (flat
     discs in the robots' colours), "plans" (a line strip per robot from its position through its plan) and
-    "predictions" (a line strip per human through its predicted positions), all in the "world" frame.
+    "predictions" (a line strip per human through its predicted positions), all in the "world" frame; behind
+    a sensor (``sensor_range`` m), "sensors": a ring of that radius per robot, in its colour.
     """
 
-    def __init__(self, n_robots: int, n_humans: int, radius: float):
+    def __init__(self, n_robots: int, n_humans: int, radius: float, sensor_range: float | None = None):
         diameter = 2.0 * radius
         agent = {"x": diameter, "y": diameter, "z": diameter}
         rgb = [ROBOT_RGB[i % len(ROBOT_RGB)] for i in range(n_robots)]
@@ -95,6 +97,13 @@ class SceneBuilder:
             [_color(c, 0.6) for c in rgb], {"x": 0.25, "y": 0.25, "z": 0.05}, 0.025
         )
         self._plan_colors = [_dumps(_color(c, 0.9)) for c in rgb]
+        self._sensor_colors = [_dumps(_color(c, 0.5)) for c in rgb]
+        angles = np.linspace(0.0, 2.0 * np.pi, _RING_POINTS + 1)  # the last point closes the ring
+        self._ring = (
+            None
+            if sensor_range is None
+            else sensor_range * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        )
         self._prediction_colors = [_dumps(_color(HUMAN_RGB, 0.6))] * n_humans
         self._lines: dict[tuple[str, int, int], str] = {}  # (kind, points per strip, strips) -> template
         # Each entity: a head before its timestamp, a middle before its spheres, one before its lines, a tail.
@@ -173,13 +182,16 @@ class SceneBuilder:
             prediction_lines = template % tuple(tracks.ravel().tolist())
         # Every entity is sent at every step (also those that do not move): after a seek, Foxglove only shows
         # what was published near the new time.
-        entities = ",".join(
-            (
-                self._entity("robots", stamp, self._robots % tuple(robot_positions.ravel().tolist())),
-                self._entity("humans", stamp, self._human_spheres(human_positions, human_present)),
-                self._entity("goals", stamp, self._goals % tuple(robot_goals.ravel().tolist())),
-                self._entity("plans", stamp, lines=plan_lines),
-                self._entity("predictions", stamp, lines=prediction_lines),
-            )
-        )
+        parts = [
+            self._entity("robots", stamp, self._robots % tuple(robot_positions.ravel().tolist())),
+            self._entity("humans", stamp, self._human_spheres(human_positions, human_present)),
+            self._entity("goals", stamp, self._goals % tuple(robot_goals.ravel().tolist())),
+            self._entity("plans", stamp, lines=plan_lines),
+            self._entity("predictions", stamp, lines=prediction_lines),
+        ]
+        if self._ring is not None:  # a run that sees everyone sends no such entity
+            rings = robot_positions[:, None, :] + self._ring[None]
+            template = self._line_template("sensor", self._sensor_colors, 0.02, rings.shape[1])
+            parts.append(self._entity("sensors", stamp, lines=template % tuple(rings.ravel().tolist())))
+        entities = ",".join(parts)
         return ('{"deletions":[],"entities":[' + entities + "]}").encode()

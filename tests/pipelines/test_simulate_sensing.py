@@ -120,6 +120,14 @@ def test_a_controller_behind_a_sensor_records_its_predictions_of_the_humans_in_v
     circles = [p for p in fig.axes[0].patches if isinstance(p, Circle) and p.radius == 3.0]
     draw(5)
     assert [tuple(c.center) for c in circles] == [tuple(p) for p in view.robot_positions[5]]
+    # and Foxglove's /scene a closed ring of 3 m per robot, around it at every step (1 mm rounding)
+    for message, robots in zip(rec.data("/scene"), view.robot_positions, strict=False):
+        (sensors,) = [e for e in message["entities"] if e["id"] == "sensors"]
+        assert len(sensors["lines"]) == 3
+        for line, robot in zip(sensors["lines"], robots, strict=True):
+            ring = np.array([[p["x"], p["y"]] for p in line["points"]])
+            assert len(ring) == 33 and np.allclose(ring[0], ring[-1], atol=2e-3)
+            assert np.allclose(np.linalg.norm(ring - robot, axis=1), 3.0, atol=3e-3)
 
 
 def test_a_run_that_sees_everyone_draws_no_sensor(tmp_path, capsys):
@@ -132,3 +140,4 @@ def test_a_run_that_sees_everyone_draws_no_sensor(tmp_path, capsys):
     assert sensor_radius(rec) is None
     fig, _ = recording_figure(rec)
     assert not any("sensor" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
+    assert not any(e["id"] == "sensors" for m in rec.data("/scene") for e in m["entities"])
