@@ -114,10 +114,7 @@ class SensorRange(
         """``observation`` with the rows of the humans out of view zeroed, judged on the simulator's own
         state (``CrowdNavEnv.observation``: the array's positions are clipped to its bounds)."""
         obs = self._base.observation
-        gaps = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
-        seen = (gaps <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, dtype=bool)
-        if obs.human_present is not None:
-            seen &= np.asarray(obs.human_present, dtype=bool)
+        seen = obs.humans_in_view(self.radius)
         out = observation.copy()
         rows = self._base.max_robots
         out[rows : rows + obs.n_humans][~seen] = 0.0

@@ -39,3 +39,12 @@ class Observation:
     @property
     def n_humans(self) -> int:
         return len(self.human_positions)
+
+    def humans_in_view(self, radius: float) -> np.ndarray:
+        """``(N,)`` bool: the humans within ``radius`` m of some robot, and tracked now in a replayed crowd;
+        what a sensor of that range sees (pipelines.loop.sensing, crowdsim.gym_wrappers.SensorRange)."""
+        if not self.n_robots:
+            return np.zeros(self.n_humans, dtype=bool)
+        distance = np.linalg.norm(self.human_positions[:, None] - self.robot_positions[None], axis=-1)
+        near = (distance <= radius).any(axis=1)
+        return near if self.human_present is None else near & np.asarray(self.human_present, dtype=bool)

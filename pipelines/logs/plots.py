@@ -108,23 +108,27 @@ def _has_predictions(view: EpisodeView) -> bool:
 def sensor_radius(rec: Recording) -> float | None:
     """The range of the sensor the controller was behind (its config's ``sensing``, pipelines.loop.sensing),
     None for a run that saw every human (or a file that does not say)."""
-    sensing = rec.config().get("sensing")
-    radius = sensing.get("radius_m") if isinstance(sensing, dict) else None
-    if isinstance(radius, int | float) and not isinstance(radius, bool) and 0 < radius < np.inf:
-        return float(radius)
-    return None
+    from pipelines.loop.sensing import recorded_sensor_range
+
+    return recorded_sensor_range(rec.config())
 
 
 def _draw_sensor(ax: Any, view: EpisodeView, row: int, radius: float, *, label: bool) -> None:
     """Each robot's sensor range at state ``row``: a dashed circle in its colour (a human outside every
     circle was not seen then)."""
-    from matplotlib.patches import Circle
-
     for i, centre in enumerate(view.robot_positions[row]):
         ax.add_patch(
-            Circle(centre, radius, fill=False, ls="--", lw=0.8, ec=_robot_color(i), alpha=0.5, zorder=2,
-                   label=f"sensor range ({radius:g} m)" if label and i == 0 else None)
-        )  # fmt: skip
+            _sensor_circle(centre, radius, i, f"sensor range ({radius:g} m)" if label and i == 0 else None)
+        )
+
+
+def _sensor_circle(centre: Any, radius: float, robot: int, label: str | None = None) -> Any:
+    """Robot ``robot``'s sensor range around ``centre``, dashed in its colour (plot and animation)."""
+    from matplotlib.patches import Circle
+
+    return Circle(
+        centre, radius, fill=False, ls="--", lw=0.8, ec=_robot_color(robot), alpha=0.5, zorder=2, label=label
+    )
 
 
 def _dedupe_legend(ax: Any, *, below: bool = False) -> None:
@@ -281,14 +285,7 @@ def animation_figure(rec: Recording) -> tuple[Any, Callable[[int], list[Any]], E
     robots = [Circle((0, 0), view.radius, fc=_robot_color(i), ec="k", lw=0.5, zorder=3) for i in range(m)]
     humans = [Circle((0, 0), view.radius, fill=False, ec=HUMAN_COLOR, lw=1.2, zorder=3) for _ in range(n)]
     sensor = sensor_radius(rec)
-    ranges = (
-        []
-        if sensor is None
-        else [
-            Circle((0, 0), sensor, fill=False, ls="--", lw=0.8, ec=_robot_color(i), alpha=0.5, zorder=2)
-            for i in range(m)
-        ]
-    )
+    ranges = [] if sensor is None else [_sensor_circle((0, 0), sensor, i) for i in range(m)]
     for patch in robots + humans + ranges:
         ax.add_patch(patch)
     trails = [ax.plot([], [], "-", color=_robot_color(i), lw=1.0, alpha=0.6)[0] for i in range(m)]

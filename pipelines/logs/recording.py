@@ -18,7 +18,6 @@ sha256, sizes, start_time_ns), "config" and "run" (JSON-encoded values).
 from __future__ import annotations
 
 import json
-import math
 import re
 import time
 from collections.abc import Iterable, Mapping
@@ -181,7 +180,10 @@ class McapEpisodeRecorder:
             )
             self._repeats[(scenario, seed)] = repeat + 1
         self.paths.append(self._recorder.path)
-        self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius), _sensor_range(meta.get("config")))
+        from pipelines.loop.sensing import recorded_sensor_range  # not at import: it loads casadi
+
+        sensor = recorded_sensor_range(meta.get("config"))  # behind a sensor: /scene draws its rings
+        self._scene = SceneBuilder(n_robots, n_humans, float(obs.radius), sensor)
         self._last = obs
         self._last_written_step = -1
 
@@ -334,13 +336,3 @@ class McapEpisodeRecorder:
 def episode_summary(result: EpisodeResult) -> dict[str, Any]:
     """The /episode/metrics message: the closed loop's ``EpisodeRecord``, as every report serialises it."""
     return result.record().to_dict()
-
-
-def _sensor_range(config: Any) -> float | None:
-    """The range of the sensor a controller's config says it is behind (``sensing.radius_m``,
-    pipelines.loop.sensing), None without one: /scene then draws its ring around each robot."""
-    sensing = config.get("sensing") if isinstance(config, Mapping) else None
-    radius = sensing.get("radius_m") if isinstance(sensing, Mapping) else None
-    if isinstance(radius, int | float) and not isinstance(radius, bool) and 0 < radius < math.inf:
-        return float(radius)
-    return None

@@ -47,6 +47,14 @@ if TYPE_CHECKING:
     from pipelines.loop.controllers import Controller
 
 
+def recorded_sensor_range(config: object) -> float | None:
+    """The range a controller's recorded config says it was behind (``describe()``'s ``sensing.radius_m``,
+    which ``RangeLimited`` adds), None for one that saw every human or a config that does not say."""
+    sensing = config.get("sensing") if isinstance(config, dict) else None
+    radius = sensing.get("radius_m") if isinstance(sensing, dict) else None
+    return float(radius) if isinstance(radius, int | float) and is_sensor_range(radius) else None
+
+
 def is_sensor_range(value: object) -> bool:
     """A sensor's range: a finite number of metres > 0 (an endless range is no sensor: leave the controller
     unwrapped), not a bool; what RangeLimited, [simulate] sensor_range and a sweep's World accept."""
@@ -133,9 +141,7 @@ class RangeLimited:
 
     def _visible(self, obs: Observation) -> np.ndarray:
         """``(N,)`` bool: the humans within ``radius`` of some robot, and tracked now in a replayed crowd."""
-        distance = np.linalg.norm(obs.human_positions[:, None] - obs.robot_positions[None], axis=-1)
-        near = (distance <= self.radius).any(axis=1) if obs.n_robots else np.zeros(obs.n_humans, bool)
-        return near if obs.human_present is None else near & obs.human_present
+        return obs.humans_in_view(self.radius)
 
 
 def _every_human(prediction: np.ndarray, visible: np.ndarray, n_humans: int) -> np.ndarray:
