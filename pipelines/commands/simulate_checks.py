@@ -185,20 +185,12 @@ def calibration_world_note(
     None otherwise: one block is stored per predictor and alpha, the humans' motion its margins cover is
     that of the conventions it ran under, and a run under others planned with it silently. Not refused: an
     experiment may hold the margins fixed across conventions (conventions, docs/safe_crossing.md)."""
-    from pipelines.loop.margins import CALIBRATED_MODES
-    from predictors.calibration_store import find_calibration, recalibrate_command
+    from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
-    from predictors.errors import PredictorError
-    from predictors.registry import checkpoint_sha256
 
     margins, name = spec.margins, spec.predictor_name
-    if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES:
-        return None
-    if margins.source != "closed-loop" or name is None:
-        return None
-    try:
-        block = find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
-    except PredictorError:  # no such block, or other weights: refused with its own line where margins resolve
+    block = _planned_block(spec) if margins.source == "closed-loop" else None
+    if block is None or name is None:
         return None
     if crowd != "orca":  # whatever the conventions: calibrate's episodes are ORCA's crowds
         return (
@@ -236,18 +228,12 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
     a sensor, they are wider than a robot that sees everyone needs, and behind another range their coverage
     is not measured. Not refused: the safe configuration
     kept its collision rate behind a 3 m sensor among ORCA's humans (docs/extending.md)."""
-    from pipelines.loop.margins import CALIBRATED_MODES
-    from predictors.calibration_store import find_calibration, recalibrate_command
+    from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
-    from predictors.errors import PredictorError
-    from predictors.registry import checkpoint_sha256
 
     margins, name = spec.margins, spec.predictor_name
-    if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES or name is None:
-        return None
-    try:
-        block = find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
-    except PredictorError:  # no such block, or other weights: refused with its own line where margins resolve
+    block = _planned_block(spec)
+    if block is None or name is None:
         return None
     made = block.details.get("sensor_range") if margins.source == "closed-loop" else None
     if made == sensor_range:
@@ -277,6 +263,24 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
         'short track, and they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at '
         f"3 m, {_MEASURED_BEHIND[margins.source]}){command}"
     )
+
+
+def _planned_block(spec: ControllerSpec) -> Any:
+    """The stored calibration block an MPC's calibrated margins plan with, None for other margins or
+    controllers, or where there is none (or it is of other weights: refused with its own line where the
+    margins resolve); the notes above read its details."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+    from predictors.calibration_store import find_calibration
+    from predictors.errors import PredictorError
+    from predictors.registry import checkpoint_sha256
+
+    margins, name = spec.margins, spec.predictor_name
+    if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES or name is None:
+        return None
+    try:
+        return find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
+    except PredictorError:
+        return None
 
 
 def _block_options(block: Any, sensor: bool = True) -> str:
