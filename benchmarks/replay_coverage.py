@@ -75,7 +75,9 @@ def scores(
         predictor, episodes, seed, tuple(humans), near=near, margins=parse_margins(plan_with)
     )
     env_config = dataclasses.replace(make_env_config(plan.profile, plan.visibility), crowd=crowd)
-    controller = make_controller(ControllerSpec("cmpc", predictor, margins=plan.margins), env_config)
+    controller = make_controller(
+        ControllerSpec("cmpc", predictor, margins=plan.margins).behind(sensor_range), env_config
+    )
     # among a replayed crowd, shown the people tracked now, its NLP of every count built first
     controller = behind_sensor(controller, sensor_range, True, 3, max(plan.humans), crowd)
     observer = PredictionErrors(plan.near)
@@ -139,7 +141,7 @@ def main() -> None:
     )
     parser.add_argument("--json", type=output_file, default=None, metavar="FILE")
     args = parser.parse_args()
-    from pipelines.loop.sensing import is_sensor_range
+    from crowdsim.world import is_sensor_range
 
     if args.sensor_range is not None and not is_sensor_range(args.sensor_range):
         parser.error(f"--sensor-range must be a finite number of metres > 0, got {args.sensor_range}")

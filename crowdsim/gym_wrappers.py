@@ -32,6 +32,7 @@ from gymnasium import spaces
 from crowdsim.env import Observation
 from crowdsim.errors import SimulationError
 from crowdsim.gym_env import CrowdNavEnv, numbers
+from crowdsim.world import is_sensor_range
 
 
 class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):
@@ -105,7 +106,7 @@ class SensorRange(
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
             raise SimulationError(f"SensorRange wraps a CrowdNavEnv, got {type(base).__name__}")
-        if isinstance(radius, bool) or not isinstance(radius, int | float) or not 0 < radius < np.inf:
+        if not is_sensor_range(radius):
             raise SimulationError(f"radius must be a finite number of metres > 0, got {radius!r}")
         self.radius = float(radius)
         self._base = base

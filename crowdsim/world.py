@@ -47,6 +47,13 @@ def finite_positive(value: float) -> bool:
     return math.isfinite(value) and value > 0
 
 
+def is_sensor_range(value: object) -> bool:
+    """A sensor's range: a finite number of metres > 0 (an endless range is no sensor: leave the controller
+    unwrapped), not a bool; what a controller's sensor (pipelines.loop.sensing), the gymnasium wrapper
+    ``SensorRange`` and a calibration made behind a sensor accept."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < math.inf
+
+
 WORLD: Final[WorldFacts] = WorldFacts()
 DT: Final[float] = WORLD.dt
 OBS_LEN: Final[int] = WORLD.obs_len

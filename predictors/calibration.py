@@ -20,6 +20,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from crowdsim.world import is_sensor_range
 from predictors.base import DT, Predictor
 from predictors.conformal import alpha_text, check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
@@ -114,6 +115,16 @@ class Calibration:
     def _check_details_and_time(self) -> None:
         if not isinstance(self.details, dict):
             raise PredictorError(f"calibration 'details' must be a JSON object, got {self.details!r}")
+        made = self.details.get("sensor_range")
+        if made is not None and not is_sensor_range(made):
+            raise PredictorError(
+                f"calibration 'details.sensor_range' must be a finite number of metres > 0 (or absent: every "
+                f"human in view), got {made!r}"
+            )
+        if made is not None and self.source != "closed-loop":  # real scenes were recorded, not sensed
+            raise PredictorError(
+                f"calibration 'details.sensor_range' is for closed-loop blocks, this one is {self.source!r}"
+            )
         try:
             json.dumps(self.details, allow_nan=False)
         except (TypeError, ValueError) as exc:
@@ -129,11 +140,28 @@ class Calibration:
     def horizon(self) -> int:
         return len(self.quantiles)
 
-    def key(self) -> tuple[str, str, float]:
-        return self.predictor, self.source, self.alpha
+    @property
+    def sensor_range(self) -> float | None:
+        """The range in metres of the sensor a closed-loop calibration's robots were behind (``calibrate
+        --sensor-range``), None where they saw every human (and for real scenes)."""
+        made = self.details.get("sensor_range")
+        return None if made is None else float(made)
+
+    def key(self) -> tuple[str, str, float, float | None]:
+        """What one block is stored per: blocks made behind different sensors, or with every human in view,
+        stand side by side, and a controller plans with the one made behind its own sensor."""
+        return self.predictor, self.source, self.alpha, self.sensor_range
 
     def matches(self, predictor: str, source: str, alpha: float) -> bool:
+        """Whether this block is of ``predictor``, ``source`` and ``alpha``, behind whatever sensor."""
         return self.predictor == predictor and self.source == source and same_alpha(self.alpha, alpha)
+
+    def same_key(self, other: Calibration) -> bool:
+        """Whether ``other`` is stored in this block's place (``key``; alphas within ``ALPHA_TOLERANCE``)."""
+        return (
+            self.matches(other.predictor, other.source, other.alpha)
+            and self.sensor_range == other.sensor_range
+        )
 
     def to_json(self) -> dict:
         classes = {} if self.classes is None else {"classes": self.classes.to_json()}

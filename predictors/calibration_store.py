@@ -4,10 +4,12 @@ never rewrites the manifest's hashes::
 
     {"format": "crowdmpc-calibrations", "version": 1, "calibrations": [block, ...]}
 
-one block (``Calibration.to_json``) per (predictor, source, alpha). The shipped zoo's file
-(``predictors.zoo.checkpoints_dir``) holds the calibrations shipped with the models and is never written: a
-user's calibrations go to the user zoo's file (``predictors.zoo.user_zoo_dir``), and a block there replaces
-the shipped block of the same key. Functions given a ``directory`` read and write that directory's file only.
+one block (``Calibration.to_json``) per (predictor, source, alpha, sensor range: ``Calibration.key``; a
+closed-loop block made behind a sensor stands beside the one made with every human in view). The shipped
+zoo's file (``predictors.zoo.checkpoints_dir``) holds the calibrations shipped with the models and is never
+written: a user's calibrations go to the user zoo's file (``predictors.zoo.user_zoo_dir``), and a block
+there replaces the shipped block of the same key. Functions given a ``directory`` read and write that
+directory's file only.
 """
 
 from __future__ import annotations
@@ -64,10 +66,10 @@ def read_calibration_file(path: Path) -> list[Calibration]:
     for i, block in enumerate(result):
         # two blocks for one key would make find_calibration's answer depend on their order
         same = seen.setdefault((block.predictor, block.source), [])
-        if any(other.matches(*block.key()) for other in same):
+        if any(other.same_key(block) for other in same):
             raise PredictorError(
                 f"{path}: calibrations[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
-                f"alpha={alpha_text(block.alpha)}; keep one of them"
+                f"alpha={alpha_text(block.alpha)}{_behind(block.sensor_range)}; keep one of them"
             )
         same.append(block)
     return result
@@ -81,7 +83,7 @@ def stored_calibrations(directory: str | Path | None = None) -> list[tuple[Path,
     for path in calibration_files(directory):
         for block in read_calibration_file(path):
             same = by_key.setdefault((block.predictor, block.source), [])
-            if not any(other.matches(*block.key()) for other in same):
+            if not any(other.same_key(block) for other in same):
                 found.append((path, block))
                 same.append(block)
     return found
@@ -96,14 +98,14 @@ def save_calibration(
     block: Calibration, directory: str | Path | None = None, check: Callable[[], None] | None = None
 ) -> Path:
     """Store ``block`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
-    replacing that file's block with the same (predictor, source, alpha); written atomically. ``check()``
+    replacing that file's block with the same key (``Calibration.key``); written atomically. ``check()``
     runs under the lock, on the file as this write finds it, and what it raises stops the write."""
     path = calibrations_path(directory)
     # under the zoo's lock: two calibrations that both read the old file would each write back only their own
     with zoo_lock(path.parent):
         if check is not None:
             check()
-        kept = [b for b in read_calibration_file(path) if not b.matches(*block.key())]
+        kept = [b for b in read_calibration_file(path) if not b.same_key(block)]
         _write_blocks(path, [*kept, block])
     return path
 
@@ -120,7 +122,7 @@ def undo_calibrations(
         current = read_calibration_file(path)
         undone = [b for b in current if _as_stored(b) in ours]
         kept = [b for b in current if _as_stored(b) not in ours]
-        back = [e for e in earlier or () if any(e.matches(*u.key()) for u in undone)]
+        back = [e for e in earlier or () if any(e.same_key(u) for u in undone)]
         if earlier is None and not kept:  # this run made the file
             path.unlink(missing_ok=True)
         else:
@@ -134,12 +136,22 @@ def _as_stored(block: Calibration) -> str:
     return json.dumps(block.to_json(), sort_keys=True, allow_nan=False)
 
 
+def _file_order(block: Calibration) -> tuple[str, str, float, float]:
+    """``block.key()`` as a sort key: the block with every human in view before those behind sensors."""
+    return block.predictor, block.source, block.alpha, block.sensor_range or 0.0
+
+
+def _behind(sensor_range: float | None) -> str:
+    """`` behind a 3 m sensor`` for a block made behind one, nothing for one with every human in view."""
+    return "" if sensor_range is None else f" behind a {sensor_range:g} m sensor"
+
+
 def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
     """Write ``blocks`` as ``path``'s whole content (the caller holds the zoo's lock)."""
     document = {
         "format": CALIBRATIONS_FORMAT,
         "version": CALIBRATIONS_VERSION,
-        "calibrations": [b.to_json() for b in sorted(blocks, key=Calibration.key)],
+        "calibrations": [b.to_json() for b in sorted(blocks, key=_file_order)],
     }
     # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
@@ -163,9 +175,11 @@ def current_sha256(predictor: str, directory: str | Path | None = None) -> str |
     return entries[predictor].sha256
 
 
-def recalibrate_command(predictor: str, source: str, alpha: float) -> str:
-    """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``."""
-    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}"
+def recalibrate_command(predictor: str, source: str, alpha: float, sensor_range: float | None = None) -> str:
+    """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``, behind
+    a sensor of ``sensor_range`` m where given."""
+    sensor = "" if sensor_range is None else f" --sensor-range {sensor_range:g}"
+    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}{sensor}"
 
 
 def find_calibration(
@@ -174,11 +188,16 @@ def find_calibration(
     alpha: float,
     directory: str | Path | None = None,
     sha256: str | None | EllipsisType = ...,
+    sensor_range: float | None = None,
 ) -> Calibration:
-    """The stored block for (predictor, source, alpha), checked against the current weights.
+    """The stored block for (predictor, source, alpha) that a controller behind a sensor of ``sensor_range``
+    m (None: seeing every human) plans with, checked against the current weights.
 
-    ``sha256`` is the sha256 the weights have now (None for a weightless predictor); the default ``...``
-    reads it from the zoo manifest in ``directory``. A block made for other weights is refused.
+    Of the blocks made behind different sensors, the one made behind ``sensor_range`` is taken, else the one
+    made with every human in view, else the one behind the nearest range (the notes of
+    ``pipelines.commands.simulate_checks`` say when the view differs). ``sha256`` is the sha256 the weights
+    have now (None for a weightless predictor); the default ``...`` reads it from the zoo manifest in
+    ``directory``. A block made for other weights is refused.
     """
     check_alpha(alpha)
     if source not in SOURCES:
@@ -187,19 +206,30 @@ def find_calibration(
     found = [(path, b) for path, b in stored if b.matches(predictor, source, alpha)]
     if not found:
         others = sorted(b.alpha for _, b in stored if b.predictor == predictor and b.source == source)
-        have = f" (it has alpha {', '.join(alpha_text(a) for a in others)})" if others else ""
+        have = f" (it has alpha {', '.join(alpha_text(a) for a in sorted(set(others)))})" if others else ""
         files = " or ".join(str(p) for p in calibration_files(directory))
         raise PredictorError(
             f"no {source} calibration at alpha={alpha_text(alpha)} for predictor {predictor!r} in "
-            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha)}"
+            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha, sensor_range)}"
         )
-    path, block = found[0]
+    path, block = min(found, key=lambda found: view_distance(found[1].sensor_range, sensor_range))
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
-        command = recalibrate_command(predictor, source, alpha)
+        command = recalibrate_command(predictor, source, alpha, block.sensor_range)
         raise PredictorError(
-            f"{path}: the {source} calibration at alpha={alpha_text(alpha)} of predictor {predictor!r} was "
-            f"made for weights sha256 {block.predictor_sha256}, but the weights now have sha256 {expected}; "
-            f"the weights changed since calibration, recalibrate: {command}"
+            f"{path}: the {source} calibration at alpha={alpha_text(alpha)}{_behind(block.sensor_range)} of "
+            f"predictor {predictor!r} was made for weights sha256 {block.predictor_sha256}, but the weights "
+            f"now have sha256 {expected}; the weights changed since calibration, recalibrate: {command}"
         )
     return block
+
+
+def view_distance(made: float | None, wanted: float | None) -> tuple[int, float, float]:
+    """How far a block made behind ``made`` m (None: every human in view) is from the view ``wanted``: the
+    same view first, then every human in view, then the nearest range (for ``wanted`` None: the longest; of
+    two as near, the shorter, whose margins are the wider: the safe side)."""
+    if made == wanted:
+        return 0, 0.0, 0.0
+    if made is None:
+        return 1, 0.0, 0.0
+    return 2, -made if wanted is None else abs(made - wanted), made

@@ -28,9 +28,9 @@ horizon step k = 1..H, used as the margin m_k of
 `--margins conformal:ALPHA[:SOURCE]` (simulate, sweep). Sources: real (the prepared ETH/hotel validation
 scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
 evaluation seed; only humans within --near m of a robot are scored; with --sensor-range the robots see the
-humans within that range, tracked since they came into view, and the block, which replaces the one of robots
-that see everyone, records the range). A closed-loop block also holds the
-quantiles of each motion class (new, standing, slow, walking), the margins of `--margins
+humans within that range, tracked since they came into view, and the block records the range: it is stored
+beside the one of robots that see everyone, and runs behind that sensor plan with it). A closed-loop block
+also holds the quantiles of each motion class (new, standing, slow, walking), the margins of `--margins
 conformal-motion:ALPHA`, and per class those of the distance shortfall (how much closer a human came to a
 robot than predicted), the margins of `--margins conformal-shortfall:ALPHA`. A block without the per-class
 margins (too few samples in a class) is not stored over one that has them. --holdout measures coverage on
@@ -301,9 +301,10 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
         )
     if not args.holdout or plans_with_new_blocks(args, holdout_margins):
         return
+    planned = holdout_margins.behind(args.sensor_range)  # as the held-out episodes' controller resolves them
     try:
-        holdout_margins.resolve(args.predictor, horizon, sha256)
-        holdout_margins.resolve_classes(args.predictor, horizon, sha256)
+        planned.resolve(args.predictor, horizon, sha256)
+        planned.resolve_classes(args.predictor, horizon, sha256)
     except (PipelineError, PredictorError) as exc:
         raise PipelineError(f"--holdout-margins {args.holdout_margins}: {exc}") from None
 

@@ -196,22 +196,26 @@ def _put_back(blocks: list, before: list | None, who: str = "the held-out run") 
 
 
 def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
-    """Refuse to store a block without margins per motion class in place of one that has them (the shipped
-    block, or the user's earlier one): a short trial run would otherwise make conformal-motion and
+    """Refuse to store a block without margins per motion class where runs with its view of the humans plan
+    with one that has them (the shipped block, the user's earlier one, or, behind a sensor not calibrated for
+    yet, the one made with every human in view): a short trial run would otherwise make conformal-motion and
     conformal-shortfall, which docs/examples/safe_crossing.toml plans with, refuse that predictor."""
     from pipelines.loop.margins import class_tables
-    from predictors.calibration_store import stored_calibrations
+    from predictors.calibration_store import stored_calibrations, view_distance
     from predictors.conformal import alpha_text
 
     in_force = stored_calibrations()
     losing = []
     for block in blocks:
         new = class_tables(block)
-        for path, old in in_force:
-            if old.matches(*block.key()) and any(
-                new[mode] is None and had is not None for mode, had in class_tables(old).items()
-            ):
-                losing.append(f"alpha {alpha_text(block.alpha)} (in force: {path})")
+        planned = [
+            (path, old) for path, old in in_force if old.matches(block.predictor, block.source, block.alpha)
+        ]
+        if not planned:
+            continue
+        path, old = min(planned, key=lambda found: view_distance(found[1].sensor_range, block.sensor_range))
+        if any(new[mode] is None and had is not None for mode, had in class_tables(old).items()):
+            losing.append(f"alpha {alpha_text(block.alpha)} (in force: {path})")
     if losing:
         raise PipelineError(
             f"not stored: {args.predictor}'s {args.source} calibration at {', '.join(losing)} has margins "

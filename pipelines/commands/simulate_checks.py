@@ -178,18 +178,23 @@ def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
 
 
 def calibration_world_note(
-    spec: ControllerSpec, profile: str, visibility: str, crowd: str = "orca"
+    spec: ControllerSpec,
+    profile: str,
+    visibility: str,
+    crowd: str = "orca",
+    sensor_range: float | None = None,
 ) -> str | None:
     """A line for closed-loop conformal margins calibrated under other conventions than the run's (the
     profile, the robots' visibility) or among other humans (a replayed ``crowd``: calibrate runs ORCA's),
-    None otherwise: one block is stored per predictor and alpha, the humans' motion its margins cover is
-    that of the conventions it ran under, and a run under others planned with it silently. Not refused: an
-    experiment may hold the margins fixed across conventions (conventions, docs/safe_crossing.md)."""
+    None otherwise: one block is stored per predictor, alpha and sensor range (the block planned with
+    behind ``sensor_range`` m is read), the humans' motion its margins cover is that of the conventions it
+    ran under, and a run under others planned with it silently. Not refused: an experiment may hold the
+    margins fixed across conventions (conventions, docs/safe_crossing.md)."""
     from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
 
     margins, name = spec.margins, spec.predictor_name
-    block = _planned_block(spec) if margins.source == "closed-loop" else None
+    block = _planned_block(spec.behind(sensor_range)) if margins.source == "closed-loop" else None
     if block is None or name is None:
         return None
     if crowd != "orca":  # whatever the conventions: calibrate's episodes are ORCA's crowds
@@ -222,8 +227,9 @@ _MEASURED_BEHIND = {
 def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str | None:
     """A line for calibrated margins made with another view of the humans than the run's (``sensor_range`` m;
     None: every human seen), None otherwise. A calibration records the sensor its robots were behind
-    (``calibrate --sensor-range``; none for a real one or one made before the option): made with every
-    person in view, its margins cover less behind a sensor, where a person just come into view is
+    (``calibrate --sensor-range``; none for a real one or one made before the option), and a run plans with
+    the block made behind its own sensor where one is stored (``find_calibration``), else with another: made
+    with every person in view, its margins cover less behind a sensor, where a person just come into view is
     predicted from a track of one or two positions (measured at 3 m: docs/replayed_crowds.md); made behind
     a sensor, they are wider than a robot that sees everyone needs, and behind another range their coverage
     is not measured. Not refused: the safe configuration
@@ -231,26 +237,29 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
     from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
 
-    margins, name = spec.margins, spec.predictor_name
-    block = _planned_block(spec)
+    margins, name = spec.margins.behind(sensor_range), spec.predictor_name
+    block = _planned_block(spec.behind(sensor_range))
     if block is None or name is None:
         return None
-    made = block.details.get("sensor_range") if margins.source == "closed-loop" else None
+    made = block.sensor_range
     if made == sensor_range:
         return None
     alpha = alpha_text(margins.alpha)
+    command = ""
+    if margins.source == "closed-loop":  # a real calibration has no sensor: recorded people, all in view
+        own = "with every person in view" if sensor_range is None else "behind this run's sensor"
+        options = _block_options(block, sensor=False)
+        if sensor_range is not None:
+            options += f" --sensor-range {sensor_range:g}"
+        command = (
+            f"; {recalibrate_command(name, margins.source, margins.alpha)}{options} calibrates {own}, "
+            "stored beside that block"
+        )
     if sensor_range is None:
         return (
             f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated behind a sensor of "
             f"{made:g} m, this run's robots see every human: made for people just come into view, they are "
-            'wider than it needs (docs/replayed_crowds.md, "Behind a sensor")'
-        )
-    command = ""
-    if margins.source == "closed-loop":
-        options = _block_options(block, sensor=False)
-        command = (
-            f"; {recalibrate_command(name, margins.source, margins.alpha)}{options} --sensor-range "
-            f"{sensor_range:g} calibrates behind this run's, replacing that block"
+            f'wider than it needs (docs/replayed_crowds.md, "Behind a sensor"){command}'
         )
     if made is not None:  # behind another range: more or fewer people come into view, by how much unmeasured
         return (
@@ -266,7 +275,8 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
 
 
 def _planned_block(spec: ControllerSpec) -> Any:
-    """The stored calibration block an MPC's calibrated margins plan with, None for other margins or
+    """The stored calibration block an MPC's calibrated margins plan with (behind ``margins.sensor_range``:
+    ``ControllerSpec.behind``), None for other margins or
     controllers, or where there is none (or it is of other weights: refused with its own line where the
     margins resolve); the notes above read its details."""
     from pipelines.loop.margins import CALIBRATED_MODES
@@ -278,7 +288,13 @@ def _planned_block(spec: ControllerSpec) -> Any:
     if spec.controller not in MPC_CONTROLLERS or margins.mode not in CALIBRATED_MODES or name is None:
         return None
     try:
-        return find_calibration(name, margins.source, margins.alpha, sha256=checkpoint_sha256(name))
+        return find_calibration(
+            name,
+            margins.source,
+            margins.alpha,
+            sha256=checkpoint_sha256(name),
+            sensor_range=margins.sensor_range,
+        )
     except PredictorError:
         return None
 

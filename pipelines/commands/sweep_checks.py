@@ -117,9 +117,10 @@ def check_margins(experiment: Experiment) -> None:
     for label, spec in experiment.methods:
         name = spec.predictor_name
         horizon, sha256 = mpc_config(spec).horizon, checkpoint_sha256(name)
+        margins = spec.margins.behind(experiment.method_worlds.get(label, experiment.world).sensor_range)
         try:
-            spec.margins.resolve(name, horizon, sha256)
-            spec.margins.resolve_classes(name, horizon, sha256)
+            margins.resolve(name, horizon, sha256)
+            margins.resolve_classes(name, horizon, sha256)
         except PipelineError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
@@ -144,7 +145,13 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
             horizon_note(cell.spec),
             flock_note(cell.spec, cell.n_robots),
-            calibration_world_note(cell.spec, cell.world.profile, cell.world.visibility, cell.world.crowd),
+            calibration_world_note(
+                cell.spec,
+                cell.world.profile,
+                cell.world.visibility,
+                cell.world.crowd,
+                cell.world.sensor_range,
+            ),
             sensor_margins_note(cell.spec, cell.world.sensor_range),
         ):
             if note is not None:

@@ -11,12 +11,12 @@ from dataclasses import dataclass
 from typing import Final
 
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS, check_sizes
+from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 from pipelines.experiments.backends import BACKENDS
 from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
 from pipelines.experiments.sweep_config import MAX_EPISODES_PER_CELL, MAX_WORKERS
 from pipelines.experiments.worker import RECORD_POLICIES
-from pipelines.loop.sensing import is_sensor_range
 from pipelines.loop.spec import COUPLINGS, ControllerSpec
 
 MAX_SIMULATE_EPISODES: Final[int] = (

@@ -27,9 +27,9 @@ from typing import TYPE_CHECKING, Any, Final, NamedTuple, cast
 import numpy as np
 
 from crowdsim.scenarios import MAX_HUMANS
+from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import MarginSpec, class_tables, observed_classes
-from pipelines.loop.sensing import is_sensor_range
 from predictors.conformal import alpha_text
 from predictors.progress import progress_bar
 
@@ -222,7 +222,7 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
     from pipelines.loop.episode import behind_sensor, run_episode
 
     env_config = make_env_config(plan.profile, plan.visibility)
-    controller = make_controller(_controller_spec(plan), env_config)
+    controller = make_controller(_controller_spec(plan).behind(plan.sensor_range), env_config)
     # behind the sensor, the NLP of every crowd size in view built before the first episode
     controller = behind_sensor(controller, plan.sensor_range, True, PAPER_ROBOTS, max(plan.humans))
     observer = PredictionErrors(plan.near)
@@ -349,7 +349,8 @@ def class_coverage_report(
 def missing_class_margins(blocks: Sequence[Any]) -> list[str]:
     """A line for each closed-loop block without margins per motion class: ``conformal-motion`` and
     ``conformal-shortfall`` will refuse it (once stored, it takes the place of the shipped block of its
-    predictor and alpha), so the user learns it now rather than at the first episode that asks."""
+    predictor, alpha and view of the humans), so the user learns it now rather than at the first episode
+    that asks."""
     from predictors.conformal import min_samples
 
     lines = []

@@ -19,10 +19,9 @@ from typing import TYPE_CHECKING, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
 from crowdsim.replay import CROWDS
-from crowdsim.world import PAPER_ROBOTS
+from crowdsim.world import PAPER_ROBOTS, is_sensor_range
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
-from pipelines.loop.sensing import is_sensor_range
 
 if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig

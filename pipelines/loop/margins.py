@@ -28,9 +28,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Final, Literal
 
+from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -108,6 +109,10 @@ class MarginSpec:
     alpha: float = DEFAULT_ALPHA  # conformal: miscoverage level, 0 < alpha < 1
     source: CalibrationSource = "closed-loop"  # conformal: which calibration
     values: tuple[float, ...] = ()  # fixed: m_1..m_H in metres
+    # calibrated modes: the range (m) of the sensor the robots plan behind, None: they see every human. Not
+    # part of the margins' text or label (the world's sensing is): the loop sets it (``behind``), and the
+    # block made behind that sensor is planned with where one is stored (find_calibration)
+    sensor_range: float | None = None
 
     def __post_init__(self):
         if self.mode not in MARGIN_MODES:
@@ -131,12 +136,25 @@ class MarginSpec:
                 )
         if self.mode in PER_HUMAN_MODES and self.source != "closed-loop":
             raise PipelineError(_closed_loop_only(self.mode))
+        if self.sensor_range is not None and not is_sensor_range(self.sensor_range):
+            raise PipelineError(
+                "margins' sensor_range must be a finite number of metres > 0 (or None: every human seen), "
+                f"got {self.sensor_range!r}"
+            )
         if (self.mode == "fixed") != bool(values):
             raise PipelineError(
                 "fixed margins need values (e.g. fixed:0.05,0.1,0.15,0.2); other modes take none"
             )
         object.__setattr__(self, "values", tuple(float(v) for v in values))
         object.__setattr__(self, "alpha", float(alpha))
+
+    def behind(self, sensor_range: float | None) -> MarginSpec:
+        """These margins for robots behind a sensor of ``sensor_range`` m (None: seeing every human): a
+        calibrated mode plans with the block made behind that sensor where one is stored; the others are
+        returned as they are."""
+        if self.mode not in CALIBRATED_MODES or sensor_range == self.sensor_range:
+            return self
+        return replace(self, sensor_range=None if sensor_range is None else float(sensor_range))
 
     @property
     def label(self) -> str:
@@ -176,7 +194,7 @@ class MarginSpec:
             from predictors.conformal import alpha_text
 
             assert predictor is not None  # _block refused None
-            command = recalibrate_command(predictor, self.source, self.alpha)
+            command = recalibrate_command(predictor, self.source, self.alpha, block.sensor_range)
             raise PipelineError(
                 f"the {self.source} calibration of {predictor!r} at alpha={alpha_text(self.alpha)} has no "
                 f"{self.mode} margins per motion class (made before they existed, or too few samples in a "
@@ -198,15 +216,18 @@ class MarginSpec:
                 f"with its closed-loop one (margins conformal:{alpha_text(self.alpha)}) or leave it out"
             )
 
-        block = find_calibration(predictor, self.source, self.alpha, sha256=sha256)
+        block = find_calibration(
+            predictor, self.source, self.alpha, sha256=sha256, sensor_range=self.sensor_range
+        )
         if len(block.quantiles) < horizon:
             raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon))
         return block
 
     def calibration(self, predictor: str | None, sha256: str | None) -> dict[str, Any] | None:
         """Which stored calibration the margins come from, for the records: when it was made, its data's
-        sha256 and, closed-loop, the conventions its episodes ran under (one block is kept per predictor and
-        alpha: a recalibration replaces it), with the sensor range its robots were behind where they were.
+        sha256 and, closed-loop, the conventions its episodes ran under (one block is kept per predictor,
+        alpha and sensor range: a recalibration replaces it), with the sensor range its robots were behind
+        where they were.
         None for margins that need none."""
         if self.mode not in CALIBRATED_MODES:
             return None

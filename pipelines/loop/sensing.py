@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 from pipelines.loop.contract import called, checked_description, checked_output
 
@@ -53,12 +54,6 @@ def recorded_sensor_range(config: object) -> float | None:
     sensing = config.get("sensing") if isinstance(config, dict) else None
     radius = sensing.get("radius_m") if isinstance(sensing, dict) else None
     return float(radius) if isinstance(radius, int | float) and is_sensor_range(radius) else None
-
-
-def is_sensor_range(value: object) -> bool:
-    """A sensor's range: a finite number of metres > 0 (an endless range is no sensor: leave the controller
-    unwrapped), not a bool; what RangeLimited, [simulate] sensor_range and a sweep's World accept."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < math.inf
 
 
 class RangeLimited:

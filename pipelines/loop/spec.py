@@ -24,7 +24,7 @@ import inspect
 import os
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import metadata
 from typing import Any, Final, Literal, TypeGuard, get_args
 
@@ -95,6 +95,12 @@ class ControllerSpec:
     @property
     def kind(self) -> ControllerKind:
         return controller_kind(self.controller)
+
+    def behind(self, sensor_range: float | None) -> ControllerSpec:
+        """This spec for robots behind a sensor of ``sensor_range`` m (None: seeing every human): calibrated
+        margins plan with the block made behind that sensor where one is stored (``MarginSpec.behind``)."""
+        margins = self.margins.behind(sensor_range)
+        return self if margins is self.margins else replace(self, margins=margins)
 
     @property
     def predictor_name(self) -> str | None:

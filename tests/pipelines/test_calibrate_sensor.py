@@ -69,6 +69,47 @@ def test_a_record_names_the_sensor_its_margins_were_calibrated_behind():
     save_calibration(dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0}))
     from predictors.registry import checkpoint_sha256
 
-    margins = parse_margins("conformal-shortfall:0.1")
-    recorded = margins.calibration("social_lstm_eth", checkpoint_sha256("social_lstm_eth")) or {}
+    margins, sha256 = parse_margins("conformal-shortfall:0.1"), checkpoint_sha256("social_lstm_eth")
+    recorded = margins.behind(3.0).calibration("social_lstm_eth", sha256) or {}
     assert recorded["sensor_range"] == 3.0 and recorded["profile"] == "paper"
+    # seeing every human, the block made so (the shipped one), which was stored beside it
+    full_view = margins.calibration("social_lstm_eth", sha256) or {}
+    assert "sensor_range" not in full_view and full_view["created"] == shipped.created
+
+
+def test_a_run_behind_the_sensor_plans_with_its_block_and_one_seeing_everyone_with_the_other(tmp_path):
+    """After `calibrate --sensor-range 3` both blocks of alpha 0.1 are in force: simulate behind the 3 m
+    sensor records the sensor's block and its margins, and without a sensor the shipped block's, as before."""
+    import dataclasses
+
+    from predictors.calibration_store import find_calibration, save_calibration
+
+    shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
+    wider = tuple(q + 0.25 for q in shipped.quantiles)
+    save_calibration(
+        dataclasses.replace(shipped, quantiles=wider, details={**shipped.details, "sensor_range": 3.0})
+    )
+    argv = ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "1"]
+    planned = {}
+    for sensor in ([], ["--sensor-range", "3"]):
+        out = tmp_path / f"run{len(sensor)}.json"
+        assert main([*argv, "--margins", "conformal:0.1", *sensor, "--no-progress", "--json", str(out)]) == 0
+        (episode,) = json.loads(out.read_text())["episodes"]
+        margins = episode["config"]["margins"]
+        planned[bool(sensor)] = (margins["margins_m"], margins["calibration"].get("sensor_range"))
+    assert planned[False] == (list(shipped.quantiles), None)
+    assert planned[True] == (list(wider), 3.0)
+
+
+def test_a_sensor_block_without_class_margins_is_not_stored_where_runs_behind_it_plan_with_them(capsys):
+    """Behind a sensor not calibrated for yet, runs plan with the shipped block of every human in view, which
+    has margins per motion class: a short trial behind the sensor (too few samples in a class) would make
+    conformal-motion refuse there, so it is not stored, as it is not over a block of its own key."""
+    from predictors.calibration_store import find_calibration
+
+    argv = [*CALIBRATE, "--alpha", "0.1", "--episodes", "2", "--humans", "4", "--sensor-range", "2.5"]
+    assert find_calibration("constant_velocity", "closed-loop", 0.1, sensor_range=2.5).classes is not None
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "not stored: constant_velocity's closed-loop calibration at alpha 0.1 (in force: " in err
+    assert not any(b.sensor_range for b in read_calibrations())  # nothing stored: the shipped blocks alone

@@ -1,6 +1,6 @@
 """The note on closed-loop margins calibrated under other conventions than the run's (simulate, sweep): one
-block is stored per predictor and alpha, and a run under another profile or visibility planned with it
-without a word about its coverage there."""
+block is stored per predictor, alpha and sensor range, and a run under another profile or visibility
+planned with it without a word about its coverage there."""
 
 import dataclasses
 
@@ -108,8 +108,8 @@ def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_the
         'they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at 3 m, alpha=0.1 '
         "covered 0.83-0.87 among ORCA's humans, where 0.90 was calibrated); crowdmpc calibrate --predictor "
         "social_lstm_eth --source closed-loop --alpha 0.05 --horizon 4 --episodes 200 --seed 1000000 "
-        "--controller cmpc --humans 5,6,7,8,9 --near 3 --sensor-range 2.5 calibrates behind this run's, "
-        "replacing that block"
+        "--controller cmpc --humans 5,6,7,8,9 --near 3 --sensor-range 2.5 calibrates behind this run's "
+        "sensor, stored beside that block"
     )
     real = sensor_margins_note(_spec("conformal:0.1:real"), 3) or ""
     assert "among BIWI's people" in real and "crowdmpc calibrate" not in real  # no real one behind a sensor
@@ -137,23 +137,41 @@ def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_the
 
 def test_margins_calibrated_behind_a_sensor_are_noted_where_the_run_sees_otherwise():
     """`calibrate --sensor-range 3` records the range in its block: a run behind the same sensor plans with
-    it silently; one that sees everyone, or behind another range, is told, with the command for its own."""
+    it silently; one that sees everyone, or behind another range, with no block of its own view, is told,
+    with the command for its own. (Alpha 0.15: the shipped zoo has no block of every human in view there.)"""
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    behind = {**shipped.details, "sensor_range": 3.0}
+    save_calibration(dataclasses.replace(shipped, alpha=0.15, details=behind))
+    spec = _spec("conformal-motion:0.15")
+    assert sensor_margins_note(spec, 3.0) is None
+    command = (
+        "crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.15 --horizon 4 "
+        "--episodes 200 --seed 1000000 --controller cmpc --humans 5,6,7,8,9 --near 3"
+    )
+    assert sensor_margins_note(spec, None) == (
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.15 were calibrated behind a sensor of "
+        "3 m, this run's robots see every human: made for people just come into view, they are wider than it "
+        f'needs (docs/replayed_crowds.md, "Behind a sensor"); {command} calibrates with every person in '
+        "view, stored beside that block"
+    )
+    assert sensor_margins_note(spec, 4.0) == (
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.15 were calibrated behind a sensor of "
+        f"3 m, this run's is 4 m: their coverage here is not measured; {command} --sensor-range 4 calibrates "
+        "behind this run's sensor, stored beside that block"
+    )
+    # the conventions note's command makes the same block under the run's conventions: behind its sensor
+    world = calibration_world_note(spec, "v1", "visible", sensor_range=3.0) or ""
+    assert "--near 3 --sensor-range 3 --profile v1 --visibility visible measures it" in world
+
+
+def test_a_block_made_behind_the_runs_sensor_stands_beside_the_one_of_every_human_in_view():
+    """Both blocks of alpha 0.1 in force: a run behind the 3 m sensor plans with its block, silently; a run
+    that sees everyone, or is behind a 4 m sensor, with the shipped one (noted behind the 4 m sensor)."""
     shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
     save_calibration(dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0}))
     spec = _spec("conformal-motion:0.1")
-    assert sensor_margins_note(spec, 3.0) is None
-    assert sensor_margins_note(spec, None) == (
-        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated behind a sensor of "
-        "3 m, this run's robots see every human: made for people just come into view, they are wider than it "
-        'needs (docs/replayed_crowds.md, "Behind a sensor")'
-    )
-    assert sensor_margins_note(spec, 4.0) == (
-        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated behind a sensor of "
-        "3 m, this run's is 4 m: their coverage here is not measured; crowdmpc calibrate --predictor "
-        "social_lstm_eth --source closed-loop --alpha 0.1 --horizon 4 --episodes 200 --seed 1000000 "
-        "--controller cmpc --humans 5,6,7,8,9 --near 3 --sensor-range 4 calibrates behind this run's, "
-        "replacing that block"
-    )
-    # the conventions note's command makes the same block under the run's conventions: behind its sensor
-    world = calibration_world_note(spec, "v1", "visible") or ""
-    assert "--near 3 --sensor-range 3 --profile v1 --visibility visible measures it" in world
+    assert sensor_margins_note(spec, 3.0) is None and sensor_margins_note(spec, None) is None
+    assert "were calibrated with every person in view" in (sensor_margins_note(spec, 4.0) or "")
+    v1 = calibration_world_note(spec, "v1", "visible", sensor_range=3.0) or ""
+    assert "--sensor-range 3 --profile v1" in v1
+    assert "--sensor-range" not in (calibration_world_note(spec, "v1", "visible") or "-")

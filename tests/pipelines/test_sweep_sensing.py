@@ -189,3 +189,36 @@ def test_a_config_files_sensor_applies_to_a_sweep_and_its_refusal_names_the_file
     assert main([*args, "--experiment", "sensing", "--out", str(tmp_path / "b")]) != 0
     err = capsys.readouterr().err
     assert "simulate.sensor_range" in err and "[simulate] sensor_range and sensor_tracks do not apply" in err
+
+
+def test_each_column_of_the_sensing_experiment_plans_with_the_block_of_its_own_sensor(
+    tmp_path, monkeypatch, capsys
+):
+    """With a block calibrated behind 3 m stored beside the shipped one, the sensing experiment's two 3 m
+    columns plan with it and the others with the shipped block; resuming the sweep finds the same margins
+    (pipelines.experiments.resume_checks), and a later block of another view changes only its columns'."""
+    from predictors.calibration_store import find_calibration, save_calibration
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    wider = tuple(q + 0.25 for q in shipped.quantiles)
+    save_calibration(
+        dataclasses.replace(shipped, quantiles=wider, details={**shipped.details, "sensor_range": 3.0})
+    )
+    out = tmp_path / "sw"
+    args = ["sweep", "--experiment", "sensing", "--humans", "1", "--margins", "conformal:0.1"]
+    args += ["--backend", "inline", "--no-progress", "--out", str(out), "--episodes-per-cell"]
+    assert main([*args, "1"]) == 0
+    lines = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    planned = {r["method"]: tuple(r["config"]["margins"]["margins_m"]) for r in lines}
+    assert planned == {"full": shipped.quantiles, "4 m": shipped.quantiles, "2 m": shipped.quantiles} | {
+        "3 m": wider,
+        "3 m untracked": wider,
+    }
+    assert main([*args, "2"]) == 0  # resumed: the margins each cell plans with agree with its records
+    behind_2m = {**shipped.details, "sensor_range": 2.0}
+    save_calibration(dataclasses.replace(shipped, quantiles=wider[::-1], details=behind_2m))
+    capsys.readouterr()
+    assert main([*args, "3"]) == 2  # the 2 m column's margins changed
+    err = capsys.readouterr().err
+    assert "-sensed2m-h1-r3 planned with margins" in err and "they changed since" in err

@@ -123,7 +123,7 @@ def test_every_shipped_predictor_has_the_blocks_the_checkpoints_readme_lists():
     for name, sha in weights.items():
         for source in ("closed-loop", "real") if name != "orca_oracle" else ("closed-loop",):
             for alpha in SHIPPED_ALPHAS:
-                block = blocks.get((name, source, alpha))
+                block = blocks.get((name, source, alpha, None))  # the shipped: every human seen
                 assert block is not None, f"no shipped {source} block of {name} at alpha {alpha}"
                 assert block.predictor_sha256 == sha, f"{name}'s {source} block is of other weights"
 
@@ -370,6 +370,59 @@ def test_bad_block_and_duplicates_in_the_file_are_explained(tmp_path):
     path.write_text(json.dumps({"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": twice}))
     with pytest.raises(PredictorError, match=r"calibrations\[1\] repeats predictor 'social_lstm_eth'"):
         read_calibrations(tmp_path)
+
+
+def behind(sensor_range: float | None, **changes) -> Calibration:
+    """A closed-loop block made behind a sensor of ``sensor_range`` m (None: every human in view)."""
+    details = {"episodes": 200} | ({} if sensor_range is None else {"sensor_range": sensor_range})
+    return block(source="closed-loop", details=details, **changes)
+
+
+def test_blocks_behind_different_sensors_stand_side_by_side_and_a_run_takes_its_own_view(tmp_path):
+    """One block per (predictor, source, alpha, sensor range): a calibration behind a 3 m sensor no longer
+    replaces the one made with every human in view. A run takes the block of its own view, else the one
+    with every human in view, else the nearest range (seeing everyone: the longest)."""
+    for made in (None, 3.0, 5.0):
+        save_calibration(behind(made, quantiles=(0.1, 0.2, 0.3, made or 0.4)), tmp_path)
+    assert [b.sensor_range for b in read_calibrations(tmp_path)] == [None, 3.0, 5.0]  # file order
+    assert save_calibration(behind(3.0), tmp_path)  # a recalibration behind 3 m replaces that block alone
+    assert [b.quantiles[-1] for b in read_calibrations(tmp_path)] == [0.4, 0.6, 5.0]
+
+    def planned(wanted: float | None, directory=tmp_path) -> float | None:
+        found = find_calibration("social_lstm_eth", "closed-loop", 0.1, directory, SHA_A, wanted)
+        return found.sensor_range
+
+    assert [planned(r) for r in (None, 3.0, 5.0, 4.0, 2.0)] == [None, 3.0, 5.0, None, None]
+    only_sensors = tmp_path / "sensors"
+    only_sensors.mkdir()
+    for made in (3.0, 5.0):
+        save_calibration(behind(made), only_sensors)
+    assert [planned(r, only_sensors) for r in (None, 3.5, 4.5, 4.0, 9.0)] == [5.0, 3.0, 5.0, 3.0, 5.0]
+    stale = tmp_path / "stale"
+    save_calibration(behind(3.0, predictor_sha256=SHA_B), stale)
+    with pytest.raises(PredictorError) as changed:
+        find_calibration("social_lstm_eth", "closed-loop", 0.1, stale, SHA_A, 3.0)
+    assert "calibration at alpha=0.1 behind a 3 m sensor of predictor 'social_lstm_eth'" in str(changed.value)
+    assert str(changed.value).endswith("--alpha 0.1 --sensor-range 3")  # the command remakes that block
+
+
+def test_a_sensor_range_must_be_a_distance_of_a_closed_loop_block(tmp_path):
+    for bad in (0, -1.0, math.inf, "3", True):
+        with pytest.raises(PredictorError, match="'details.sensor_range' must be a finite number of metres"):
+            behind(bad)  # type: ignore[arg-type]
+    with pytest.raises(
+        PredictorError, match="'details.sensor_range' is for closed-loop blocks, this one is 'real'"
+    ):
+        block(details={"sensor_range": 3.0})
+    twice = [behind(3.0).to_json(), behind(3.0).to_json(), behind(None).to_json()]
+    path = tmp_path / CALIBRATIONS_NAME
+    path.write_text(json.dumps({"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": twice}))
+    with pytest.raises(
+        PredictorError, match=r"calibrations\[1\] repeats .* alpha=0.1 behind a 3 m sensor; keep"
+    ):
+        read_calibrations(tmp_path)
+    path.write_text(json.dumps({"format": CALIBRATIONS_FORMAT, "version": 1, "calibrations": twice[1:]}))
+    assert [b.sensor_range for b in read_calibrations(tmp_path)] == [3.0, None]
 
 
 def test_find_calibration(tmp_path):
