@@ -26,7 +26,15 @@ from predictors.checkpoint import read_document
 from predictors.conformal import alpha_text, check_alpha
 from predictors.errors import PredictorError, UnknownPredictor
 from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
-from predictors.zoo import checkpoints_dir, is_shipped, read_manifest, user_zoo_dir, writable_zoo_dir
+from predictors.zoo import (
+    SHIPPED,
+    USER,
+    checkpoints_dir,
+    is_shipped,
+    read_manifest,
+    user_zoo_dir,
+    writable_zoo_dir,
+)
 
 CALIBRATIONS_FORMAT: Final[str] = "crowdmpc-calibrations"
 CALIBRATIONS_VERSION: Final[int] = 1
@@ -40,13 +48,21 @@ def calibrations_path(directory: str | Path | None = None) -> Path:
 
 
 def calibration_files(directory: str | Path | None = None) -> list[Path]:
-    """The files calibrations are read from, the first holding a key winning: ``directory``'s alone, else the
-    user zoo's, then the shipped zoo's (once when they are the same directory)."""
+    """The files calibrations are read from, the first holding a key winning: ``directory``'s alone, else
+    ``zoo_calibration_files()``."""
     if directory is not None:
         return [Path(directory) / CALIBRATIONS_NAME]
-    user = user_zoo_dir()
-    roots = [checkpoints_dir()] if is_shipped(user) else [user, checkpoints_dir()]
-    return [root / CALIBRATIONS_NAME for root in roots]
+    return [path for _, path in zoo_calibration_files()]
+
+
+def zoo_calibration_files(user_dir: str | Path | None = None) -> list[tuple[str, Path]]:
+    """``(zoo, file)`` of the user zoo's calibrations (``user_dir``, else ``$CROWDMPC_ZOO``'s), then the
+    shipped zoo's (once when they are the same directory), the first holding a key winning."""
+    user = user_zoo_dir(user_dir)
+    roots = (
+        [(SHIPPED, checkpoints_dir())] if is_shipped(user) else [(USER, user), (SHIPPED, checkpoints_dir())]
+    )
+    return [(zoo, root / CALIBRATIONS_NAME) for zoo, root in roots]
 
 
 def read_calibration_file(path: Path) -> list[Calibration]:
@@ -78,9 +94,15 @@ def read_calibration_file(path: Path) -> list[Calibration]:
 def stored_calibrations(directory: str | Path | None = None) -> list[tuple[Path, Calibration]]:
     """``(file, block)`` for every block in force (``calibration_files``): a user block hides the shipped
     block of its key."""
+    return blocks_in_force(calibration_files(directory))
+
+
+def blocks_in_force(files: Sequence[Path]) -> list[tuple[Path, Calibration]]:
+    """``(file, block)`` for every block of ``files`` but those a block of the same key in an earlier file
+    hides."""
     found: list[tuple[Path, Calibration]] = []
     by_key: dict[tuple[str, str], list[Calibration]] = {}  # (predictor, source) -> blocks found
-    for path in calibration_files(directory):
+    for path in files:
         for block in read_calibration_file(path):
             same = by_key.setdefault((block.predictor, block.source), [])
             if not any(other.same_key(block) for other in same):

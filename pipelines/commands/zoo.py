@@ -14,6 +14,7 @@ EPILOG = """examples:
   crowdmpc zoo list
   crowdmpc zoo show social_lstm_eth
   crowdmpc zoo verify
+  crowdmpc zoo calibrations --predictor social_lstm_eth
   crowdmpc zoo add runs/train/social_lstm_eth/social_lstm_eth.pt --name my_social_lstm
   crowdmpc zoo add runs/train/social_lstm_eth_v2/social_lstm_eth_v2.pt --name my_social_lstm --replace
   crowdmpc --plugin my_predictor:MyNet zoo add runs/train/my_net_eth/my_net_eth.pt
@@ -38,7 +39,8 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "zoo",
         help="the model zoos of trained predictors (shipped, and your own)",
-        description="List, show, verify, add and remove trained predictors of the model zoos.",
+        description="List, show, verify, add and remove trained predictors of the model zoos; list their "
+        "calibrations.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -60,6 +62,12 @@ def register(subparsers) -> None:
         help="check every entry's files against its manifest (exit 1 on a problem)",
         **examples("crowdmpc zoo verify"),
     )
+    calibrations = actions.add_parser(
+        "calibrations",
+        help="one line per conformal calibration block in force (crowdmpc calibrate), of both zoos",
+        **examples("crowdmpc zoo calibrations", "crowdmpc zoo calibrations --predictor social_lstm_eth"),
+    )
+    calibrations.add_argument("--predictor", default=None, help="only this predictor's blocks")
     add = actions.add_parser(
         "add",
         help="copy a trained checkpoint pair into the user zoo",
@@ -206,6 +214,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{len(results) - bad} of {len(results)} entries ok")
         _report_leftovers(zoo.user_zoo_dir(args.dir), args.dir)
         return 1 if bad else 0
+    if args.zoo_command == "calibrations":
+        from pipelines.commands.zoo_calibrations import run_calibrations
+
+        return run_calibrations(args.dir, args.predictor)
     if args.zoo_command == "add":
         return _add(args)
     if args.zoo_command == "remove" and args.leftovers:

@@ -1,0 +1,61 @@
+"""`crowdmpc zoo calibrations`: the calibration blocks in force, one line each, with the zoo each comes from
+and whether its weights are the zoo's."""
+
+import dataclasses
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands.zoo_calibrations import calibration_table
+from predictors.calibration_store import find_calibration, save_calibration
+
+
+@pytest.fixture(autouse=True)
+def _private_zoo(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+
+
+def _rows(predictor: str = "social_lstm_eth") -> dict[tuple[str, str, str, str], list[str]]:
+    """The table's rows by (source, alpha, view, zoo)."""
+    header, *rows = calibration_table(None, predictor)
+    assert header[:4] == ["predictor", "source", "alpha", "view"] and header[-1] == "zoo"
+    return {(r[1], r[2], r[3], r[-1]): r for r in rows}
+
+
+def test_the_shipped_blocks_are_listed_with_their_margins():
+    rows = _rows()
+    assert len(rows) == 10  # closed-loop and real, at five alphas each
+    closed = rows["closed-loop", "0.1", "every human", "shipped"]
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    assert closed[4] == " / ".join(f"{q:.2f}" for q in shipped.quantiles)
+    assert closed[5:8] == [str(min(shipped.n)), "motion, shortfall", "ok"]
+    assert rows["real", "0.1", "recorded", "shipped"][6] == "-"  # no classes in recorded scenes
+
+
+def test_user_blocks_come_first_hide_the_shipped_block_of_their_key_and_say_whose_weights_they_are():
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    behind = {**shipped.details, "sensor_range": 3.0}
+    save_calibration(dataclasses.replace(shipped, details=behind, quantiles=(0.5, 0.5, 0.5, 0.5)))
+    save_calibration(dataclasses.replace(shipped, alpha=0.05, predictor_sha256="f" * 64))  # other weights
+    save_calibration(dataclasses.replace(shipped, predictor="gone", predictor_sha256=None))
+    header, *rows = calibration_table(None)
+    assert [(r[0], r[2], r[3], r[7], r[-1]) for r in rows[:3]] == [
+        ("gone", "0.1", "every human", "no model", "user"),
+        ("social_lstm_eth", "0.05", "every human", "other", "user"),
+        ("social_lstm_eth", "0.1", "3 m sensor", "ok", "user"),
+    ]
+    mine = _rows()
+    assert mine["closed-loop", "0.1", "3 m sensor", "user"][4] == "0.50 / 0.50 / 0.50 / 0.50"
+    assert ("closed-loop", "0.1", "every human", "shipped") in mine  # beside it: another view
+    assert ("closed-loop", "0.05", "every human", "shipped") not in mine  # hidden by the user's block
+    assert len(mine) == 11
+
+
+def test_the_command_prints_the_table_and_refuses_an_unknown_predictor_in_one_line(capsys):
+    assert main(["zoo", "calibrations", "--predictor", "constant_velocity"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("predictor ") and set(out[1]) <= {"-", " "}
+    assert len(out) == 2 + 10 + 1 and all(line.startswith("constant_velocity ") for line in out[2:-1])
+    assert main(["zoo", "calibrations", "--predictor", "social_lstm"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown predictor 'social_lstm'; choose from" in err and err.count("\n") == 1
