@@ -65,9 +65,19 @@ def register(subparsers) -> None:
     calibrations = actions.add_parser(
         "calibrations",
         help="one line per conformal calibration block in force (crowdmpc calibrate), of both zoos",
-        **examples("crowdmpc zoo calibrations", "crowdmpc zoo calibrations --predictor social_lstm_eth"),
+        **examples(
+            "crowdmpc zoo calibrations",
+            "crowdmpc zoo calibrations --predictor social_lstm_eth --plot margins.png",
+        ),
     )
     calibrations.add_argument("--predictor", default=None, help="only this predictor's blocks")
+    calibrations.add_argument(
+        "--plot",
+        type=path_arg,
+        default=None,
+        metavar="FILE.png",
+        help="also draw the predictor's margins against the horizon step (needs --predictor)",
+    )
     add = actions.add_parser(
         "add",
         help="copy a trained checkpoint pair into the user zoo",
@@ -217,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
     if args.zoo_command == "calibrations":
         from pipelines.commands.zoo_calibrations import run_calibrations
 
-        return run_calibrations(args.dir, args.predictor)
+        return run_calibrations(args.dir, args.predictor, args.plot)
     if args.zoo_command == "add":
         return _add(args)
     if args.zoo_command == "remove" and args.leftovers:

@@ -10,7 +10,9 @@ plans with it).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
+
+from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
     from predictors.calibration import Calibration
@@ -89,9 +91,59 @@ def format_table(rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def run_calibrations(user_dir: Path | None, predictor: str | None) -> int:
+def plot_margins(blocks: list[Calibration], title: str) -> Any:
+    """A figure of ``blocks``' margins against the horizon step, a panel per source (closed-loop, real), a
+    colour per alpha and a line style per view of the humans. A ``matplotlib.figure.Figure``, not
+    pyplot's: a notebook's backend and open figures stay as they were."""
+    from matplotlib.figure import Figure
+
+    from crowdsim.world import DT
+    from predictors.conformal import alpha_text
+
+    sources = [s for s in ("closed-loop", "real") if any(b.source == s for b in blocks)]
+    alphas = sorted({b.alpha for b in blocks})
+    ranges = sorted({b.sensor_range for b in blocks if b.sensor_range is not None})
+    fig = Figure(figsize=(5.0 * len(sources), 3.8), layout="constrained")
+    axes = fig.subplots(1, len(sources), squeeze=False, sharey=True)[0]
+    for ax, source in zip(axes, sources, strict=True):
+        ours = sorted(
+            (b for b in blocks if b.source == source), key=lambda b: (b.alpha, b.sensor_range or 0.0)
+        )
+        for block in ours:
+            steps = range(1, block.horizon + 1)
+            made = block.sensor_range
+            view = "" if made is None else f", {made:g} m sensor"
+            ax.plot(
+                steps,
+                block.quantiles,
+                marker="o",
+                color=f"C{alphas.index(block.alpha) % 10}",
+                linestyle=_DASHES[(0 if made is None else 1 + ranges.index(made)) % len(_DASHES)],
+                label=f"alpha {alpha_text(block.alpha)}{view}",
+            )
+        horizon = max(b.horizon for b in blocks if b.source == source)
+        ax.set_xticks(range(1, horizon + 1))
+        ax.set_xlabel(f"horizon step k (x {DT:g} s)")
+        ax.set_title({"closed-loop": "closed-loop episodes", "real": "recorded scenes (real)"}[source])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="x-small")
+    axes[0].set_ylabel("margin m_k (m)")
+    fig.suptitle(title, fontsize="medium")
+    return fig
+
+
+_DASHES = ("-", "--", ":", "-.")  # every human in view, then each sensor range, shortest first
+
+
+def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | None = None) -> int:
     from predictors.calibration_store import zoo_calibration_files
 
+    if plot is not None:
+        from pipelines.commands import check_writable
+
+        if predictor is None:
+            raise PipelineError("--plot draws one predictor's blocks: add --predictor NAME")
+        check_writable(plot, "--plot", room=0)
     rows = calibration_table(user_dir, predictor)
     if len(rows) == 1:
         where = " or ".join(str(path) for _, path in zoo_calibration_files(user_dir))
@@ -111,6 +163,14 @@ def run_calibrations(user_dir: Path | None, predictor: str | None) -> int:
         )
         return 0
     print(format_table(rows))
+    if plot is not None:
+        from predictors.calibration_store import blocks_in_force
+
+        files = [path for _, path in zoo_calibration_files(user_dir)]
+        blocks = [block for _, block in blocks_in_force(files) if block.predictor == predictor]
+        figure = plot_margins(blocks, f"Conformal margins of {predictor} (crowdmpc zoo calibrations)")
+        figure.savefig(plot, dpi=120)
+        print(f"wrote {plot}")
     print(
         "margins: the (1 - alpha) quantile of the displacement error at horizon steps 1..H, those of "
         "--margins conformal:ALPHA[:SOURCE]; per class: the block also holds those of conformal-motion and "

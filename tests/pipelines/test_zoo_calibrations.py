@@ -59,3 +59,24 @@ def test_the_command_prints_the_table_and_refuses_an_unknown_predictor_in_one_li
     assert main(["zoo", "calibrations", "--predictor", "social_lstm"]) == 2
     err = capsys.readouterr().err
     assert "unknown predictor 'social_lstm'; choose from" in err and err.count("\n") == 1
+
+
+def test_the_plot_draws_each_block_of_the_predictor_by_alpha_and_view(tmp_path, capsys):
+    from pipelines.commands.zoo_calibrations import plot_margins
+
+    shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
+    behind = dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0})
+    real = find_calibration("constant_velocity", "real", 0.1)
+    figure = plot_margins([behind, real, shipped], "title")
+    closed, recorded = figure.axes
+    lines = {line.get_label(): line for line in closed.get_lines()}
+    assert list(lines) == ["alpha 0.1", "alpha 0.1, 3 m sensor"]  # every human in view first
+    assert [lines["alpha 0.1"].get_linestyle(), lines["alpha 0.1, 3 m sensor"].get_linestyle()] == ["-", "--"]
+    assert tuple(lines["alpha 0.1"].get_ydata()) == shipped.quantiles
+    assert [tuple(line.get_ydata()) for line in recorded.get_lines()] == [real.quantiles]
+    save_calibration(behind)
+    out = tmp_path / "margins.png"
+    assert main(["zoo", "calibrations", "--predictor", "constant_velocity", "--plot", str(out)]) == 0
+    assert out.read_bytes().startswith(b"\x89PNG") and f"wrote {out}" in capsys.readouterr().out
+    assert main(["zoo", "calibrations", "--plot", str(out)]) == 2
+    assert "--plot draws one predictor's blocks: add --predictor NAME" in capsys.readouterr().err
