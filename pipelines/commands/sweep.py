@@ -55,9 +55,10 @@ where the cells have the same number of robots and profile: another team or prof
 Every option can also come from a TOML config file (--config FILE, before or after `sweep`; its [sweep]
 section, `crowdmpc config show` lists every key) and --set SECTION.KEY=VALUE items: defaults < the file <
 --set < the options given here. [controller] and [mpc] values that differ from their defaults apply to every
-method (and become part of the cell keys); a value the experiment compares across its methods is refused, as
-are [world], [env] and [env.orca] values beyond profile and robots_visible, and [scenario] humans and name
-(simulate-only).
+method, and [env] and [env.orca] values (the humans' ORCA, the time limit, the formation, ...) to every cell
+over its profile's (each becomes part of the cell keys; e.g. --set env.orca.time_horizon=2); a value the
+experiment compares across its methods is refused, as are [world] values (the world facts the controllers
+and predictors are built for) and [scenario] humans and name (simulate-only).
 
 Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
 --episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;

@@ -59,6 +59,9 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
         experiment = _with_sensing(cfg, experiment)
     if cfg.env.crowd != "orca":
         experiment = _with_crowd(experiment, cfg.env.crowd)
+    settings = env_settings(cfg)
+    if settings:
+        experiment = experiment.with_env(settings)
     for key in ("controller", "coupling", "flocking", "record_iterations"):
         if cfg.chosen("controller", key):
             experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
@@ -227,22 +230,32 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
 
 
 def check_world(cfg: RunConfig) -> None:
-    """A sweep's cells run a named profile (``World``: profile and visibility) on the sweep's own crowds:
-    refuse the other [world], [env] and [env.orca] values the run asks for (``_asked``), [scenario] humans
-    and name (``_check_scenario``), rather than ignore them."""
-    from crowdsim.profiles import PROFILES
+    """A sweep's cells share Table I's world facts: refuse the [world] values the run asks for (``_asked``),
+    [scenario] humans and name (``_check_scenario``), rather than ignore them. ([env] and [env.orca] apply
+    to every cell: ``env_settings``.)"""
     from pipelines.commands.simulate_checks import check_recording
-    from pipelines.config.schema import ENV_PROFILE_KEYS
 
     _check_scenario(cfg)
     check_recording(cfg)
     why = (
-        "a sweep's cells run a named profile ([env] profile, robots_visible) among a crowd ([env] crowd); "
-        "other [world], [env] and [env.orca] values apply to simulate only"
+        "a sweep's cells share Table I's world facts (time step, history, radius, bounds), which the "
+        "controllers and predictors are built for; [world] values apply to simulate only"
     )
+    for key in cfg.values["world"]:
+        if _asked(cfg, "world", key, cfg.default("world", key)):
+            raise cfg.error("world", key, f"{cfg.values['world'][key]!r}: {why}")
+
+
+def env_settings(cfg: RunConfig) -> dict[str, Any]:
+    """The [env] and [env.orca] values the run asks for (``_asked``) beside the profile, visibility and
+    crowd, by ``World.env_settings``' keys ("orca." for [env.orca]): every cell runs with them, its key
+    naming them."""
+    from crowdsim.profiles import PROFILES
+    from pipelines.config.schema import ENV_PROFILE_KEYS
+
     profile = PROFILES[cfg.env.profile]
+    asked = {}
     for section, key, default in (
-        *(("world", k, cfg.default("world", k)) for k in cfg.values["world"]),
         *(("env.orca", k, cfg.default("env.orca", k)) for k in cfg.values["env.orca"]),
         *(
             # a profile's convention is asked for whatever its value: `config show` leaves it unset
@@ -252,7 +265,8 @@ def check_world(cfg: RunConfig) -> None:
         ),
     ):
         if _asked(cfg, section, key, default):
-            raise cfg.error(section, key, f"{cfg.values[section][key]!r}: {why}")
+            asked[("orca." if section == "env.orca" else "") + key] = cfg.values[section][key]
+    return asked
 
 
 # The default of a value asked for whenever it is set (``_asked``).

@@ -206,6 +206,16 @@ class Experiment:
         title = f"{self.title}; controllers behind a {world.sensing_label} sensor"
         return replace(self, title=title, world=world, method_worlds=MappingProxyType(worlds))
 
+    def with_env(self, settings: dict[str, Any]) -> Experiment:
+        """Every cell simulated with the simulator ``settings`` over its profile's (``World.with_env``: a
+        sweep's [env] and [env.orca]), e.g. the humans' ORCA time horizon, or a longer time limit."""
+        worlds = {label: own.with_env(settings) for label, own in self.method_worlds.items()}
+        shown = ", ".join(f"{key} = {value}" for key, value in sorted(settings.items()))
+        title = f"{self.title}; simulator {shown}"
+        return replace(
+            self, title=title, world=self.world.with_env(settings), method_worlds=MappingProxyType(worlds)
+        )
+
     @staticmethod
     def _conventions(world: World) -> tuple[str, str]:
         return world.profile, world.visibility

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
 from crowdsim.replay import CROWDS
@@ -27,6 +27,21 @@ if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig
 
 SCENARIOS: Final[tuple[str, str]] = ("circle", "perpendicular")
+# What a sweep's [env] and [env.orca] may set over a cell's profile: what shapes the humans and the episode,
+# not the world facts the controllers and predictors share ([world]) nor what the World names itself
+ENV_SETTINGS: Final[tuple[str, ...]] = (
+    "crossing",
+    "formation",
+    "goal_assignment",
+    "orca.max_neighbors",
+    "orca.neighbor_dist",
+    "orca.time_horizon",
+    "orca_radius_margin",
+    "spawn_separation",
+    "success_rule",
+    "time_limit",
+    "timeout_margin",
+)
 
 
 @dataclass(frozen=True)
@@ -41,6 +56,9 @@ class World:
     sensor_range: float | None = None
     sensor_tracks: bool = True
     crowd: str = "orca"  # EnvConfig.crowd: ORCA's humans, or a BIWI sequence replayed (crowdsim.replay)
+    # simulator settings over the profile's, sorted: ("time_limit", 60.0), ("orca.time_horizon", 2.0), ... (an
+    # EnvConfig field, or "orca." and an OrcaParams field; ENV_SETTINGS), the sweep's [env] and [env.orca]
+    env_settings: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self):
         if self.profile not in PROFILES:
@@ -56,6 +74,23 @@ class World:
             raise PipelineError("sensor_tracks = false needs a sensor range: track lengths are a sensor's")
         if self.crowd not in CROWDS:
             raise PipelineError(f"unknown crowd {self.crowd!r}; choose from {list(CROWDS)}")
+        self._check_env_settings()
+
+    def _check_env_settings(self) -> None:
+        pairs = self.env_settings
+        if not (isinstance(pairs, tuple) and all(isinstance(p, tuple) and len(p) == 2 for p in pairs)):
+            raise PipelineError(f"env_settings must be a tuple of (key, value) pairs, got {pairs!r:.80}")
+        unknown = sorted(k for k, _ in pairs if k not in ENV_SETTINGS)
+        if unknown:
+            raise PipelineError(f"unknown simulator settings {unknown}; a sweep sets {list(ENV_SETTINGS)}")
+        if [k for k, _ in pairs] != sorted({k for k, _ in pairs}):  # one order: one cell key
+            raise PipelineError(f"env_settings must name each key once, sorted, got {[k for k, _ in pairs]}")
+        from crowdsim.errors import SimulationError
+
+        try:
+            self.env_config()
+        except SimulationError as exc:
+            raise PipelineError(f"simulator settings {dict(pairs)}: {exc}") from None
 
     @property
     def label(self) -> str:
@@ -64,7 +99,8 @@ class World:
         label = f"{self.profile}-{self.visibility}"
         if self.sensor_range is not None:
             label += f"-sensed{self.sensor_range:.12g}m" + ("" if self.sensor_tracks else "-notracks")
-        return label if self.crowd == "orca" else f"{label}-{self.crowd}"
+        label = label if self.crowd == "orca" else f"{label}-{self.crowd}"
+        return "-".join([label, *(f"{key}={value}" for key, value in self.env_settings)])
 
     @property
     def sensing_label(self) -> str:
@@ -78,7 +114,14 @@ class World:
         return replace(self, sensor_range=sensor_range, sensor_tracks=sensor_tracks)
 
     def env_config(self) -> EnvConfig:
-        return replace(make_env_config(self.profile, self.visibility), crowd=self.crowd)
+        config = make_env_config(self.profile, self.visibility)
+        orca = {k.removeprefix("orca."): v for k, v in self.env_settings if k.startswith("orca.")}
+        env = {k: v for k, v in self.env_settings if not k.startswith("orca.")}
+        return replace(config, crowd=self.crowd, orca=replace(config.orca, **orca), **env)
+
+    def with_env(self, settings: dict[str, Any]) -> World:
+        """This world with the simulator ``settings`` (``env_settings``' keys) over its own."""
+        return replace(self, env_settings=tuple(sorted({**dict(self.env_settings), **settings}.items())))
 
 
 @dataclass(frozen=True)

@@ -647,7 +647,6 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
             "mpc.coupled_mode=exact",
             "--set mpc.coupled_mode: method 'NLP first-order' of experiment 'coupling' sets coupled_mode",
         ),  # fmt: skip
-        ("table2", "env.time_limit=20", "--set env.time_limit: 20.0: a sweep's cells run a named profile"),
         (  # ORCA and the straight line have no MPC: their cell keys took horizon=8, their episodes did not
             "baselines",
             "mpc.horizon=8",
@@ -659,12 +658,19 @@ def test_a_sweep_applies_mpc_values_to_every_method_as_part_of_the_cell(tmp_path
             "controller.flocking=false",
             "--set controller.flocking: the methods of experiment 'baselines' ('straight', 'ORCA') plan with",
         ),  # fmt: skip
-        (  # the paper profile's own limit: conventions' v1 cells kept v1's 30 s, without a word
-            "conventions",
-            "env.time_limit=40.0",
-            "--set env.time_limit: 40.0: a sweep's cells run a named profile",
+        (
+            "table2",
+            "world.radius=0.2",
+            "--set world.radius: 0.2: a sweep's cells share Table I's world facts (time step, history, "
+            "radius, bounds), which the controllers and predictors are built for; [world] values apply to "
+            "simulate only",
         ),  # fmt: skip
-        ("table2", "world.radius=0.2", "--set world.radius: 0.2: a sweep's cells run a named profile"),
+        (  # a cell's humans and episodes: checked as simulate checks them, each profile's with its own
+            "conventions",
+            'env.goal_assignment="slots"',
+            "simulator settings {'goal_assignment': 'slots'}: EnvConfig.goal_assignment 'slots' needs "
+            "success_rule 'simultaneous'",
+        ),  # fmt: skip
         (  # ignored: the cells ran at the sweep's crowd sizes
             "table2",
             "scenario.humans=9",
@@ -781,17 +787,29 @@ def test_a_sweeps_mpc_values_apply_to_the_methods_that_plan_with_a_predictor(tmp
     assert keys["straight"] == "straight-none-F-ibr-m=none-paper-visible-h5-r3"
 
 
-def test_a_sweep_refuses_a_files_profile_convention_and_takes_config_shows_file(tmp_path, capsys):
+def test_a_sweep_applies_a_files_profile_convention_to_every_cell_and_takes_config_shows_file(
+    tmp_path, capsys
+):
     """`[env] time_limit = 40.0` in a file, the paper profile's own value, was taken as no choice, and
-    conventions' v1 cells ran v1's 30 s; `config show` leaves such keys unset: a file that sets one asks."""
-    argv = ["sweep", "--experiment", "conventions", "--dry-run", "--out", str(tmp_path / "sweep")]
+    conventions' v1 cells ran v1's 30 s; `config show` leaves such keys unset: a file that sets one asks, and
+    every cell, v1's too, runs it, its key naming it."""
+    argv = [
+        "sweep",
+        "--experiment",
+        "conventions",
+        "--humans",
+        "5",
+        "--dry-run",
+        "--out",
+        str(tmp_path / "sw"),
+    ]
     config = _write(tmp_path, "[env]\ntime_limit = 40.0\n")
-    assert main(["--config", str(config), *argv]) == 2
-    assert _one_error_line(capsys, "sweep").endswith(
-        f"{config}: env.time_limit: 40.0: a sweep's cells run a named profile ([env] profile, "
-        "robots_visible) among a crowd ([env] crowd); other [world], [env] and [env.orca] values apply to "
-        "simulate only"
-    )
+    assert main(["--config", str(config), *argv]) == 0
+    keys = [line.split()[-1] for line in capsys.readouterr().out.splitlines() if " humans " in line]
+    assert len(keys) == 8 and all(key.endswith("-time_limit=40.0-h5-r3") for key in keys)
+    assert sum("-v1-" in key for key in keys) == 4
     assert main(["config", "show"]) == 0
     shown = _write(tmp_path, capsys.readouterr().out)
     assert main(["--config", str(shown), *argv]) == 0
+    keys = [line.split()[-1] for line in capsys.readouterr().out.splitlines() if " humans " in line]
+    assert len(keys) == 8 and not any("time_limit" in key for key in keys)

@@ -1,0 +1,66 @@
+"""A sweep's [env] and [env.orca] values (``World.env_settings``): every cell simulated with them over its
+profile's, its key naming them, its episodes simulate's with the same settings; [world] stays refused."""
+
+import json
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.errors import PipelineError
+from pipelines.experiments.tasks import ENV_SETTINGS, World
+
+
+def test_settings_reach_the_simulator_and_the_key_and_none_keep_the_old_key():
+    world = World(profile="v1").with_env({"time_limit": 50.0, "orca.time_horizon": 2.0})
+    assert world.env_settings == (("orca.time_horizon", 2.0), ("time_limit", 50.0))  # sorted: one key
+    assert world.label == "v1-visible-orca.time_horizon=2.0-time_limit=50.0"
+    env = world.env_config()
+    assert (env.time_limit, env.orca.time_horizon, env.orca.neighbor_dist, env.profile) == (
+        50.0,
+        2.0,
+        10.0,
+        "v1",
+    )
+    assert env.success_rule == "first_reach"  # the rest stays v1's
+    assert World().label == "paper-visible" and World().env_config() == World().with_env({}).env_config()
+    sensed = World(crowd="eth_test").sensing(3.0).with_env({"formation": "wedge"})
+    assert sensed.label == "paper-visible-sensed3m-eth_test-formation=wedge"
+    assert set(ENV_SETTINGS) >= {"crossing", "formation", "orca.max_neighbors", "time_limit"}
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"dt": 0.2}, r"unknown simulator settings \['dt'\]; a sweep sets \["),
+        ({"orca.time_horizon": 0.0}, "OrcaParams.time_horizon must be at least"),
+        ({"crossing": "diagonal"}, "EnvConfig.crossing must be one of"),
+    ],
+)
+def test_a_setting_the_simulator_refuses_is_refused_in_one_line(settings, message):
+    with pytest.raises(PipelineError, match=message):
+        World().with_env(settings)
+    with pytest.raises(PipelineError, match="each key once, sorted"):
+        World(env_settings=(("time_limit", 50.0), ("crossing", "v1")))
+
+
+def test_a_sweep_runs_its_env_settings_as_simulate_does_and_says_so(tmp_path):
+    sets = ["--set", "env.orca.time_horizon=2", "--set", "env.time_limit=50"]
+    out = tmp_path / "sw"
+    sweep = ["sweep", "--experiment", "table2", "--humans", "5", "--episodes-per-cell", "1", "--backend"]
+    assert main([*sets, *sweep, "inline", "--no-progress", "--out", str(out)]) == 0
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    cmpc = next(r for r in records if r["controller"] == "cmpc")
+    assert cmpc["cell"].endswith("-paper-visible-orca.time_horizon=2.0-time_limit=50.0-h5-r3")
+    assert (
+        cmpc["config"]["env"]["orca"]["time_horizon"] == 2.0 and cmpc["config"]["env"]["time_limit"] == 50.0
+    )
+    table = (out / "table.md").read_text()
+    assert "; simulator orca.time_horizon = 2.0, time_limit = 50.0" in table.splitlines()[0]
+    assert "Simulator settings over the profile's: orca.time_horizon=2.0, time_limit=50.0." in table
+    simulate = ["simulate", "--controller", "cmpc", "--predictor", "social_lstm_eth", "--humans", "5"]
+    simulate += ["--scenario", "circle", "--seed", "0", "--no-progress"]
+    for settings, equal in ((sets, True), ([], False)):
+        path = tmp_path / f"sim{len(settings)}.json"
+        assert main([*settings, *simulate, "--json", str(path)]) == 0
+        (episode,) = json.loads(path.read_text())["episodes"]
+        assert (episode["metrics"] == cmpc["metrics"]) is equal  # the settings act: without them, other
