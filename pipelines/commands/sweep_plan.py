@@ -89,8 +89,8 @@ def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
         experiment = _with_mpc_override(cfg, experiment, key, value)
     for vary in pending:
         experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), where)
-    for vary in settings:  # last: every column the others made, at each number of robots
-        if vary.section == "scenario":
+    for vary in settings:  # last: every column the others made, at each simulator value, number of robots
+        if vary.section in ("env", "env.orca", "scenario"):
             experiment = with_values(experiment, vary, None, where)
     return experiment
 

@@ -1,12 +1,15 @@
-"""``sweep --vary mpc.KEY=V1,V2,..``, ``--vary controller.margins=M1,M2,..`` or ``--vary
-scenario.robots=M1,M2,..`` ([sweep] vary): a column per value of one [mpc] setting, or per margins, beside
-each method that plans with a predictor, on the same crowds, or per number of robots beside every method, on
-the same seeds (the humans are placed clear of each team), in one table.
+"""``sweep --vary mpc.KEY=V1,V2,..``, ``--vary controller.margins=M1,M2,..``, ``--vary
+scenario.robots=M1,M2,..`` or ``--vary env[.orca].KEY=V1,V2,..`` ([sweep] vary): a column per value of one
+[mpc] setting, or per margins, beside each method that plans with a predictor, on the same crowds, or per
+number of robots beside every method, on the same seeds (the humans are placed clear of each team), or per
+value of a simulator setting (the humans' ORCA, the time limit, ...: ``World.env_settings``) beside every
+method, in one table.
 
-Each column is the cell ``--set mpc.KEY=V`` (``--margins M``, ``--robots M``) makes (its key, its
-episodes): a value that is Table I's (margins none, the paper's 3 robots) adds nothing to the cell, whose
-episodes are those of the sweep without ``--vary``, so a study can extend a sweep already run. Every value
-is checked as ``--set`` (``--margins``, ``--robots``) checks it, with the run's other settings.
+Each column is the cell ``--set mpc.KEY=V`` (``--margins M``, ``--robots M``, ``--set env.KEY=V``) makes
+(its key, its episodes): a value that is Table I's (margins none, the paper's 3 robots, the profile's own
+simulator value) adds nothing to the cell, whose episodes are those of the sweep without ``--vary``, so a
+study can extend a sweep already run. Every value is checked as ``--set`` (``--margins``, ``--robots``)
+checks it, with the run's other settings.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.config.entries import ConfigError, Entry, Source, check_key, parse_set
 from pipelines.config.schema import SECTION_BY_NAME
+from pipelines.experiments.tasks import ENV_SETTINGS
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -30,6 +34,7 @@ if TYPE_CHECKING:
 # a column per value that would run the same episodes again.
 FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight"})
 MAX_VALUES: Final[int] = 12  # each value (each combination) is a whole column of cells per method and size
+ENV_SECTIONS: Final[tuple[str, str]] = ("env", "env.orca")  # their keys in ENV_SETTINGS vary every method
 
 
 def reads_setting(spec: ControllerSpec, key: str) -> bool:
@@ -94,11 +99,18 @@ def _one_setting(cfg: RunConfig, where: str, text: str) -> Varied:
                 f"{where} and {cfg.label('scenario', 'robots')} both set the robots: give them once"
             )
         items = [item.strip() for item in raw.split(",")]
+    elif section in ENV_SECTIONS and env_name(section, key) in ENV_SETTINGS:
+        if cfg.chosen(section, key):
+            raise ConfigError(
+                f"{where} and {cfg.label(section, key)} both set {section}.{key}: give its values once"
+            )
+        items = [item.strip() for item in raw.split(",")]
     else:
         raise ConfigError(
             f"{where} {text!r}: only an [mpc] setting (mpc.KEY=V1,V2,...), the margins (controller.margins="
-            "M1,M2,...) or the robots (scenario.robots=M1,M2,...) vary; the predictors, controllers and "
-            "sensor ranges have experiments of their own (predictors, controllers, sensing)"
+            "M1,M2,...), the robots (scenario.robots=M1,M2,...) or a simulator setting (env.KEY or "
+            f"env.orca.KEY, one of {', '.join(ENV_SETTINGS)}) vary; the predictors, controllers and sensor "
+            "ranges have experiments of their own (predictors, controllers, sensing)"
         )
     if len(items) < 2 or not all(items):
         raise ConfigError(f"{where} {text!r}: expected {section}.{key}=V1,V2,... with at least two values")
@@ -112,6 +124,11 @@ def _one_setting(cfg: RunConfig, where: str, text: str) -> Varied:
         same = "" if first == items[repeated] else f" ({first} again: both {shown(values[repeated])})"
         raise ConfigError(f"{where}: value {items[repeated]} is given more than once{same}")
     return Varied(section, key, values)
+
+
+def env_name(section: str, key: str) -> str:
+    """The ``World.env_settings`` name of the [env] or [env.orca] ``key``: time_limit, orca.time_horizon."""
+    return f"orca.{key}" if section == "env.orca" else key
 
 
 def _margin_items(raw: str) -> list[str]:
@@ -191,6 +208,9 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
     sweep's ``--robots`` makes, with the paper's figures only beside its 3 (summary.paper_figures)."""
     key, name = vary.key, experiment.name
     _check_applies(experiment, vary, where)
+    simulator = vary.section in ENV_SECTIONS
+    if simulator:
+        key = env_name(vary.section, key)
     methods: list[tuple[str, ControllerSpec]] = []
     worlds: dict[str, World] = {}
     robots: dict[str, int] = {}
@@ -203,19 +223,21 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
                 "another setting"
             )
         columns = [(label, spec)]
-        if vary.section == "scenario" or reads_setting(spec, key):
+        if vary.section == "scenario" or simulator or reads_setting(spec, key):
             columns = [
                 (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]
+        base = experiment.method_worlds.get(label, experiment.world)
         for k, (column, column_spec) in enumerate(columns):
             methods.append((column, column_spec))
-            if label in experiment.method_worlds:
-                worlds[column] = experiment.method_worlds[label]
+            world = _with_simulator(base, key, vary.values[k]) if simulator else base
+            if label in experiment.method_worlds or world != base:
+                worlds[column] = world
             if vary.section == "scenario":
                 robots[column] = vary.values[k]
             elif label in experiment.method_robots:
                 robots[column] = experiment.method_robots[label]
-            if column_spec == spec:  # the paper's figures are of Table I's settings
+            if column_spec == spec and world == base:  # the paper's figures are of Table I's settings
                 paper |= {(column, n): fig for (of, n), fig in experiment.paper.items() if of == label}
     title = f"{experiment.title}; {key} = {', '.join(shown(v) for v in vary.values)}"
     return dataclasses.replace(
@@ -228,10 +250,18 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
     )
 
 
+def _with_simulator(world: World, key: str, value: Any) -> World:
+    """``world`` simulated with the setting ``key`` (``World.env_settings``' name) at ``value``: the value it
+    has already (its profile's, or the run's ``--set``) adds nothing to the cell."""
+    env = world.env_config()
+    current = getattr(env.orca, key.removeprefix("orca.")) if key.startswith("orca.") else getattr(env, key)
+    return world if current == value else world.with_env({key: value})
+
+
 def _with_value(spec: ControllerSpec, vary: Varied, value: Any, table_i: Any) -> ControllerSpec:
     """``spec`` with the varied setting at ``value``: Table I's adds no override to the cell, and the
-    number of robots is the cell's, not the controller's."""
-    if vary.section == "scenario":
+    number of robots and the simulator's settings are the cell's, not the controller's."""
+    if vary.section == "scenario" or vary.section in ENV_SECTIONS:
         return spec
     if vary.section == "controller":
         return dataclasses.replace(spec, margins=value)
@@ -243,7 +273,7 @@ def _check_applies(experiment: Experiment, vary: Varied, where: str) -> None:
     """Refuse a variation no method would run, or one that undoes what the experiment compares."""
     key, name = vary.key, experiment.name
     labels = ", ".join(repr(label) for label, _ in experiment.methods)
-    if vary.section == "scenario":  # every controller drives robots
+    if vary.section == "scenario" or vary.section in ENV_SECTIONS:  # every controller drives robots
         return
     if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
         raise ConfigError(

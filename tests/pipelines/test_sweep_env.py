@@ -64,3 +64,55 @@ def test_a_sweep_runs_its_env_settings_as_simulate_does_and_says_so(tmp_path):
         assert main([*settings, *simulate, "--json", str(path)]) == 0
         (episode,) = json.loads(path.read_text())["episodes"]
         assert (episode["metrics"] == cmpc["metrics"]) is equal  # the settings act: without them, other
+
+
+def _keys(capsys) -> dict[str, str]:
+    """A dry run's cell key by column label."""
+    lines = [line for line in capsys.readouterr().out.splitlines() if " humans " in line]
+    return {line.split(" humans ")[0].rsplit(maxsplit=1)[0].strip(): line.split()[-1] for line in lines}
+
+
+def test_vary_a_simulator_setting_gives_every_method_a_column_per_value(tmp_path, capsys):
+    """The profile's own value (ORCA's 5 s) is the cell without --vary; ORCA and the straight line vary too
+    (the humans are everyone's)."""
+    sweep = ["sweep", "--humans", "7", "--dry-run", "--out", str(tmp_path / "sw"), "--experiment"]
+    assert main([*sweep, "table2", "--vary", "env.orca.time_horizon=2,5"]) == 0
+    plain = "social_lstm_eth-F-ibr-m=none-paper-visible"
+    assert _keys(capsys) == {
+        "CMPC orca.time_horizon=2.0": f"cmpc-{plain}-orca.time_horizon=2.0-h7-r3",
+        "CMPC orca.time_horizon=5.0": f"cmpc-{plain}-h7-r3",
+        "DMPC orca.time_horizon=2.0": f"dmpc-{plain}-orca.time_horizon=2.0-h7-r3",
+        "DMPC orca.time_horizon=5.0": f"dmpc-{plain}-h7-r3",
+    }
+    grid = ["--vary", "env.time_limit=30,60", "--vary", "mpc.d_min=0.8,0.9"]
+    assert main([*sweep, "baselines", "--vary", "env.time_limit=30,60"]) == 0
+    assert sorted(_keys(capsys)) == [
+        "ORCA time_limit=30.0",
+        "ORCA time_limit=60.0",
+        "straight time_limit=30.0",
+        "straight time_limit=60.0",
+    ]
+    assert main([*sweep, "table2", *grid]) == 0
+    keys = _keys(capsys)
+    assert len(keys) == 8 and keys["CMPC d_min=0.9 time_limit=60.0"].endswith(
+        "d_min=0.9-m=none-paper-visible-time_limit=60.0-h7-r3"
+    )
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (
+            ["--set", "env.orca.time_horizon=2", "--vary", "env.orca.time_horizon=2,5"],
+            "--vary and --set env.orca.time_horizon both set env.orca.time_horizon: give its values once",
+        ),
+        (["--vary", "env.profile=paper,v1"], "only an [mpc] setting (mpc.KEY=V1,V2,...), the margins"),
+        (["--vary", "env.orca.time_horizon=2,0"], "--vary value 0 must be at least 1e-06 s, got 0.0"),
+        (["--vary", "env.crossing=paper,diagonal"], "--vary value diagonal must be one of"),
+    ],
+)
+def test_a_simulator_variation_that_cannot_run_is_refused_in_one_line(options, message, tmp_path, capsys):
+    argv = ["sweep", "--experiment", "table2", "--dry-run", "--out", str(tmp_path / "sw"), *options]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1

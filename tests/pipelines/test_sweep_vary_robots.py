@@ -67,7 +67,10 @@ def test_robots_vary_last_in_a_grid_and_keep_the_paper_beside_three():
         (["--vary", "scenario.robots=3,2.5"], "--vary value 2.5 must be an integer"),
         (["--vary", "scenario.robots=3,3"], "--vary: value 3 is given more than once"),
         (["--vary", "scenario.robots=3"], "expected scenario.robots=V1,V2,... with at least two values"),
-        (["--vary", "scenario.humans=3,4"], "or the robots (scenario.robots=M1,M2,...) vary"),
+        (
+            ["--vary", "scenario.humans=3,4"],
+            "the robots (scenario.robots=M1,M2,...) or a simulator setting (env.KEY or env.orca.KEY",
+        ),
     ],
 )
 def test_robots_that_cannot_vary_are_one_line(tmp_path, capsys, options, message):
