@@ -46,9 +46,10 @@ ENV_SETTINGS: Final[tuple[str, ...]] = (
 
 @dataclass(frozen=True)
 class World:
-    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility, and
-    what the controller sees of it: every human, or (``sensor_range`` in m) those within that range of some
-    robot as a tracker gives them, with their track lengths unless ``sensor_tracks`` is False
+    """The simulation conventions of a cell: a profile of crowdsim.profiles and the robots' visibility, the
+    crowd (ORCA's humans or a replay), simulator values over the profile's (``env_settings``), and what the
+    controller sees of it: every human, or (``sensor_range`` in m) those within that range of some robot as
+    a tracker gives them, with their track lengths unless ``sensor_tracks`` is False
     (pipelines.loop.sensing.RangeLimited)."""
 
     profile: str = "paper"
