@@ -125,6 +125,12 @@ class Calibration:
             raise PredictorError(
                 f"calibration 'details.sensor_range' is for closed-loop blocks, this one is {self.source!r}"
             )
+        tracks = self.details.get("sensor_tracks", True)
+        if not isinstance(tracks, bool) or (tracks is False and made is None):
+            raise PredictorError(
+                "calibration 'details.sensor_tracks' must be true or false, and false only beside a "
+                f"sensor_range (track lengths are a sensor's), got {tracks!r}"
+            )
         try:
             json.dumps(self.details, allow_nan=False)
         except (TypeError, ValueError) as exc:
@@ -147,10 +153,17 @@ class Calibration:
         made = self.details.get("sensor_range")
         return None if made is None else float(made)
 
-    def key(self) -> tuple[str, str, float, float | None]:
-        """What one block is stored per: blocks made behind different sensors, or with every human in view,
-        stand side by side, and a controller plans with the one made behind its own sensor."""
-        return self.predictor, self.source, self.alpha, self.sensor_range
+    @property
+    def sensor_tracks(self) -> bool:
+        """Whether the tracker of the sensor the robots were behind reported its track lengths
+        (``calibrate --no-sensor-tracks``: not); True for a block made with every human in view."""
+        return self.details.get("sensor_tracks", True) is not False
+
+    def key(self) -> tuple[str, str, float, float | None, bool]:
+        """What one block is stored per: blocks made behind different sensors (with or without the track
+        lengths), or with every human in view, stand side by side, and a controller plans with the one made
+        behind its own sensor."""
+        return self.predictor, self.source, self.alpha, self.sensor_range, self.sensor_tracks
 
     def matches(self, predictor: str, source: str, alpha: float) -> bool:
         """Whether this block is of ``predictor``, ``source`` and ``alpha``, behind whatever sensor."""
@@ -158,10 +171,7 @@ class Calibration:
 
     def same_key(self, other: Calibration) -> bool:
         """Whether ``other`` is stored in this block's place (``key``; alphas within ``ALPHA_TOLERANCE``)."""
-        return (
-            self.matches(other.predictor, other.source, other.alpha)
-            and self.sensor_range == other.sensor_range
-        )
+        return self.matches(other.predictor, other.source, other.alpha) and self.key()[3:] == other.key()[3:]
 
     def to_json(self) -> dict:
         classes = {} if self.classes is None else {"classes": self.classes.to_json()}

@@ -85,7 +85,7 @@ def read_calibration_file(path: Path) -> list[Calibration]:
         if any(other.same_key(block) for other in same):
             raise PredictorError(
                 f"{path}: calibrations[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
-                f"alpha={alpha_text(block.alpha)}{_behind(block.sensor_range)}; keep one of them"
+                f"alpha={alpha_text(block.alpha)}{_behind(*block.key()[3:])}; keep one of them"
             )
         same.append(block)
     return result
@@ -158,14 +158,18 @@ def _as_stored(block: Calibration) -> str:
     return json.dumps(block.to_json(), sort_keys=True, allow_nan=False)
 
 
-def _file_order(block: Calibration) -> tuple[str, str, float, float]:
-    """``block.key()`` as a sort key: the block with every human in view before those behind sensors."""
-    return block.predictor, block.source, block.alpha, block.sensor_range or 0.0
+def _file_order(block: Calibration) -> tuple[str, str, float, float, bool]:
+    """``block.key()`` as a sort key: the block with every human in view before those behind sensors, the
+    tracker's track lengths given before not."""
+    return block.predictor, block.source, block.alpha, block.sensor_range or 0.0, not block.sensor_tracks
 
 
-def _behind(sensor_range: float | None) -> str:
-    """`` behind a 3 m sensor`` for a block made behind one, nothing for one with every human in view."""
-    return "" if sensor_range is None else f" behind a {sensor_range:g} m sensor"
+def _behind(sensor_range: float | None, tracks: bool = True) -> str:
+    """`` behind a 3 m sensor`` (``untracked``: its tracker reporting no track lengths) for a block made
+    behind one, nothing for one with every human in view."""
+    if sensor_range is None:
+        return ""
+    return f" behind a {sensor_range:g} m sensor" + ("" if tracks else " without track lengths")
 
 
 def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
@@ -197,10 +201,13 @@ def current_sha256(predictor: str, directory: str | Path | None = None) -> str |
     return entries[predictor].sha256
 
 
-def recalibrate_command(predictor: str, source: str, alpha: float, sensor_range: float | None = None) -> str:
+def recalibrate_command(
+    predictor: str, source: str, alpha: float, sensor_range: float | None = None, sensor_tracks: bool = True
+) -> str:
     """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``, behind
-    a sensor of ``sensor_range`` m where given."""
+    a sensor of ``sensor_range`` m (reporting no track lengths unless ``sensor_tracks``) where given."""
     sensor = "" if sensor_range is None else f" --sensor-range {sensor_range:g}"
+    sensor += "" if sensor_range is None or sensor_tracks else " --no-sensor-tracks"
     return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}{sensor}"
 
 
@@ -211,12 +218,15 @@ def find_calibration(
     directory: str | Path | None = None,
     sha256: str | None | EllipsisType = ...,
     sensor_range: float | None = None,
+    sensor_tracks: bool = True,
 ) -> Calibration:
     """The stored block for (predictor, source, alpha) that a controller behind a sensor of ``sensor_range``
-    m (None: seeing every human) plans with, checked against the current weights.
+    m (None: seeing every human), given the track lengths or not (``sensor_tracks``), plans with, checked
+    against the current weights.
 
-    Of the blocks made behind different sensors, the one made behind ``sensor_range`` is taken, else the one
-    made with every human in view, else the one behind the nearest range (the notes of
+    Of the blocks made behind different sensors, the one made behind ``sensor_range`` is taken (with the
+    track lengths as the run has them, else without), else the one made with every human in view, else the
+    one behind the nearest range (the notes of
     ``pipelines.commands.simulate_checks`` say when the view differs). ``sha256`` is the sha256 the weights
     have now (None for a weightless predictor); the default ``...`` reads it from the zoo manifest in
     ``directory``. A block made for other weights is refused.
@@ -225,6 +235,7 @@ def find_calibration(
     if source not in SOURCES:
         raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
     stored = stored_calibrations(directory)
+    wanted = (sensor_range, sensor_tracks)
     found = [(path, b) for path, b in stored if b.matches(predictor, source, alpha)]
     if not found:
         others = sorted(b.alpha for _, b in stored if b.predictor == predictor and b.source == source)
@@ -232,26 +243,34 @@ def find_calibration(
         files = " or ".join(str(p) for p in calibration_files(directory))
         raise PredictorError(
             f"no {source} calibration at alpha={alpha_text(alpha)} for predictor {predictor!r} in "
-            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha, sensor_range)}"
+            f"{files}{have}; run: {recalibrate_command(predictor, source, alpha, *wanted)}"
         )
-    path, block = min(found, key=lambda found: view_distance(found[1].sensor_range, sensor_range))
+    path, block = min(found, key=lambda found: view_distance(found[1].key()[3:], wanted))
     expected = current_sha256(predictor, directory) if sha256 is ... else sha256
     if block.predictor_sha256 != expected:
-        command = recalibrate_command(predictor, source, alpha, block.sensor_range)
+        command = recalibrate_command(predictor, source, alpha, block.sensor_range, block.sensor_tracks)
+        behind = _behind(block.sensor_range, block.sensor_tracks)
         raise PredictorError(
-            f"{path}: the {source} calibration at alpha={alpha_text(alpha)}{_behind(block.sensor_range)} of "
+            f"{path}: the {source} calibration at alpha={alpha_text(alpha)}{behind} of "
             f"predictor {predictor!r} was made for weights sha256 {block.predictor_sha256}, but the weights "
             f"now have sha256 {expected}; the weights changed since calibration, recalibrate: {command}"
         )
     return block
 
 
-def view_distance(made: float | None, wanted: float | None) -> tuple[int, float, float]:
-    """How far a block made behind ``made`` m (None: every human in view) is from the view ``wanted``: the
-    same view first, then every human in view, then the nearest range (for ``wanted`` None: the longest; of
-    two as near, the shorter, whose margins are the wider: the safe side)."""
+def view_distance(
+    made: tuple[float | None, bool], wanted: tuple[float | None, bool]
+) -> tuple[int, float, bool, float]:
+    """How far a block made behind ``made`` (range in m, None: every human in view; track lengths given) is
+    from the view ``wanted``: the same view first, then the same range with the track lengths the other way,
+    then every human in view, then the nearest range (for a ``wanted`` range None: the longest; of two as
+    near, the shorter, whose margins are the wider: the safe side)."""
+    (made_range, made_tracks), (wanted_range, wanted_tracks) = made, wanted
     if made == wanted:
-        return 0, 0.0, 0.0
-    if made is None:
-        return 1, 0.0, 0.0
-    return 2, -made if wanted is None else abs(made - wanted), made
+        return 0, 0.0, False, 0.0
+    if made_range == wanted_range:
+        return 1, 0.0, False, 0.0
+    if made_range is None:
+        return 2, 0.0, False, 0.0
+    near = -made_range if wanted_range is None else abs(made_range - wanted_range)
+    return 3, near, made_tracks != wanted_tracks, made_range

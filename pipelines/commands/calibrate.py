@@ -28,8 +28,9 @@ horizon step k = 1..H, used as the margin m_k of
 `--margins conformal:ALPHA[:SOURCE]` (simulate, sweep). Sources: real (the prepared ETH/hotel validation
 scenes), closed-loop (CMPC episodes with no margins on seeds from 1,000,000 on, disjoint from every
 evaluation seed; only humans within --near m of a robot are scored; with --sensor-range the robots see the
-humans within that range, tracked since they came into view, and the block records the range: it is stored
-beside the one of robots that see everyone, and runs behind that sensor plan with it). A closed-loop block
+humans within that range, tracked since they came into view (--no-sensor-tracks: their track lengths not
+given), and the block records the sensor: it is stored beside the one of robots that see everyone, and runs
+behind that sensor plan with it). A closed-loop block
 also holds the quantiles of each motion class (new, standing, slow, walking), the margins of `--margins
 conformal-motion:ALPHA`, and per class those of the distance shortfall (how much closer a human came to a
 robot than predicted), the margins of `--margins conformal-shortfall:ALPHA`. A block without the per-class
@@ -50,6 +51,7 @@ CLOSED_LOOP_OPTIONS: Final[tuple[str, ...]] = (
     "visibility",
     "near",
     "sensor_range",
+    "sensor_tracks",
 )
 
 
@@ -72,6 +74,11 @@ def _alphas(text: str) -> tuple[float, ...]:
             twice = f"{a!r} twice" if same[0] == a else f"{same[0]!r} and {a!r}, one calibration,"
             raise argparse.ArgumentTypeError(f"--alpha names {twice} in {text!r}; give each alpha once")
     return values
+
+
+def _option(name: str) -> str:
+    """The option that sets ``name``: ``--sensor-range``, and ``--no-sensor-tracks`` for sensor_tracks."""
+    return "--no-sensor-tracks" if name == "sensor_tracks" else f"--{name.replace('_', '-')}"
 
 
 def _closed_loop_defaults() -> dict[str, Any]:
@@ -128,6 +135,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="M",
         help="closed-loop robots behind a sensor of M m, as `simulate --sensor-range` (default: every human "
         "seen)",
+    )
+    p.add_argument(
+        "--no-sensor-tracks",
+        dest="sensor_tracks",
+        action="store_const",
+        const=False,
+        help="with --sensor-range: its tracker reports no track lengths, as `simulate --no-sensor-tracks`",
     )
     p.add_argument("--holdout", action="store_true", help="also measure coverage on held-out data")
     p.add_argument(
@@ -186,6 +200,7 @@ def _plan(args: argparse.Namespace) -> Any:
         visibility=args.visibility,
         near=args.near,
         sensor_range=args.sensor_range,
+        sensor_tracks=args.sensor_tracks,
     )
 
 
@@ -230,7 +245,7 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
 def _check_sources(args: argparse.Namespace, holdout_margins: bool) -> None:
     """Refuse an option typed for what this run does not do (the other source's, held-out margins without a
     held-out run): it would be accepted and change nothing."""
-    typed = [f"--{name.replace('_', '-')}" for name in CLOSED_LOOP_OPTIONS if getattr(args, name) is not None]
+    typed = [_option(name) for name in CLOSED_LOOP_OPTIONS if getattr(args, name) is not None]
     if args.source == "real" and typed:
         one = len(typed) == 1
         raise PipelineError(
@@ -301,7 +316,8 @@ def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sh
         )
     if not args.holdout or plans_with_new_blocks(args, holdout_margins):
         return
-    planned = holdout_margins.behind(args.sensor_range)  # as the held-out episodes' controller resolves them
+    # as the held-out episodes' controller resolves them
+    planned = holdout_margins.behind(args.sensor_range, args.sensor_tracks)
     try:
         planned.resolve(args.predictor, horizon, sha256)
         planned.resolve_classes(args.predictor, horizon, sha256)

@@ -213,7 +213,7 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
         ]
         if not planned:
             continue
-        path, old = min(planned, key=lambda found: view_distance(found[1].sensor_range, block.sensor_range))
+        path, old = min(planned, key=lambda found: view_distance(found[1].key()[3:], block.key()[3:]))
         if any(new[mode] is None and had is not None for mode, had in class_tables(old).items()):
             losing.append(f"alpha {alpha_text(block.alpha)} (in force: {path})")
     if losing:

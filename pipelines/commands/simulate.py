@@ -268,8 +268,10 @@ def _simulate(resolved: SimulateRun) -> int:
         checks.flock_note(spec, scenario.robots),
         checks.goal_room_note(spec, scenario.robots, cfg.env.formation, formation_settable=True),
         checks.horizon_note(spec),
-        checks.calibration_world_note(spec, cfg.env.profile, visibility, cfg.env.crowd, sim.sensor_range),
-        checks.sensor_margins_note(spec, sim.sensor_range),
+        checks.calibration_world_note(
+            spec, cfg.env.profile, visibility, cfg.env.crowd, sim.sensor_range, sim.sensor_tracks
+        ),
+        checks.sensor_margins_note(spec, sim.sensor_range, sim.sensor_tracks),
     )
     for note in notes:
         if note is not None:

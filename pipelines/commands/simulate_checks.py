@@ -183,6 +183,7 @@ def calibration_world_note(
     visibility: str,
     crowd: str = "orca",
     sensor_range: float | None = None,
+    sensor_tracks: bool = True,
 ) -> str | None:
     """A line for closed-loop conformal margins calibrated under other conventions than the run's (the
     profile, the robots' visibility) or among other humans (a replayed ``crowd``: calibrate runs ORCA's),
@@ -194,7 +195,8 @@ def calibration_world_note(
     from predictors.conformal import alpha_text
 
     margins, name = spec.margins, spec.predictor_name
-    block = _planned_block(spec.behind(sensor_range)) if margins.source == "closed-loop" else None
+    planned = spec.behind(sensor_range, sensor_tracks)
+    block = _planned_block(planned) if margins.source == "closed-loop" else None
     if block is None or name is None:
         return None
     if crowd != "orca":  # whatever the conventions: calibrate's episodes are ORCA's crowds
@@ -224,7 +226,9 @@ _MEASURED_BEHIND = {
 }
 
 
-def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str | None:
+def sensor_margins_note(
+    spec: ControllerSpec, sensor_range: float | None, sensor_tracks: bool = True
+) -> str | None:
     """A line for calibrated margins made with another view of the humans than the run's (``sensor_range`` m;
     None: every human seen), None otherwise. A calibration records the sensor its robots were behind
     (``calibrate --sensor-range``; none for a real one or one made before the option), and a run plans with
@@ -232,17 +236,18 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
     with every person in view, its margins cover less behind a sensor, where a person just come into view is
     predicted from a track of one or two positions (measured at 3 m: docs/replayed_crowds.md); made behind
     a sensor, they are wider than a robot that sees everyone needs, and behind another range their coverage
-    is not measured. Not refused: the safe configuration
+    is not measured, nor behind a tracker that reports track lengths where the calibration's did not, or
+    the other way (``sensor_tracks``). Not refused: the safe configuration
     kept its collision rate behind a 3 m sensor among ORCA's humans (docs/extending.md)."""
     from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
 
-    margins, name = spec.margins.behind(sensor_range), spec.predictor_name
-    block = _planned_block(spec.behind(sensor_range))
+    margins, name = spec.margins.behind(sensor_range, sensor_tracks), spec.predictor_name
+    block = _planned_block(spec.behind(sensor_range, sensor_tracks))
     if block is None or name is None:
         return None
     made = block.sensor_range
-    if made == sensor_range:
+    if (made, block.sensor_tracks) == (sensor_range, sensor_tracks) or (made, sensor_range) == (None, None):
         return None
     alpha = alpha_text(margins.alpha)
     command = ""
@@ -250,7 +255,7 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
         own = "with every person in view" if sensor_range is None else "behind this run's sensor"
         options = _block_options(block, sensor=False)
         if sensor_range is not None:
-            options += f" --sensor-range {sensor_range:g}"
+            options += f" --sensor-range {sensor_range:g}" + ("" if sensor_tracks else " --no-sensor-tracks")
         command = (
             f"; {recalibrate_command(name, margins.source, margins.alpha)}{options} calibrates {own}, "
             "stored beside that block"
@@ -260,6 +265,14 @@ def sensor_margins_note(spec: ControllerSpec, sensor_range: float | None) -> str
             f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated behind a sensor of "
             f"{made:g} m, this run's robots see every human: made for people just come into view, they are "
             f'wider than it needs (docs/replayed_crowds.md, "Behind a sensor"){command}'
+        )
+    if made == sensor_range:  # the same range, the track lengths the other way
+        given = ("without", "with") if sensor_tracks else ("with", "without")
+        return (
+            f"note: the closed-loop margins of {name!r} at alpha={alpha} were calibrated behind a sensor of "
+            f"{made:g} m {given[0]} the tracker's track lengths, this run's controller plans {given[1]} "
+            f"them: it classes the people who just came into view otherwise, and the coverage here is not "
+            f"measured{command}"
         )
     if made is not None:  # behind another range: more or fewer people come into view, by how much unmeasured
         return (
@@ -294,6 +307,7 @@ def _planned_block(spec: ControllerSpec) -> Any:
             margins.alpha,
             sha256=checkpoint_sha256(name),
             sensor_range=margins.sensor_range,
+            sensor_tracks=margins.sensor_tracks,
         )
     except PredictorError:
         return None
@@ -312,6 +326,8 @@ def _block_options(block: Any, sensor: bool = True) -> str:
     if isinstance(details.get("humans"), list):
         options.append("--humans " + ",".join(str(h) for h in details["humans"]))
     options.append(f"--near {'inf' if near is None else f'{near:g}'}")  # null: everyone scored
-    if sensor and isinstance(details.get("sensor_range"), int | float):  # its robots behind a sensor
-        options.append(f"--sensor-range {details['sensor_range']:g}")
+    if sensor and block.sensor_range is not None:  # its robots behind a sensor
+        options.append(f"--sensor-range {block.sensor_range:g}")
+        if not block.sensor_tracks:
+            options.append("--no-sensor-tracks")
     return " " + " ".join(options)

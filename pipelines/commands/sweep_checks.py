@@ -117,7 +117,8 @@ def check_margins(experiment: Experiment) -> None:
     for label, spec in experiment.methods:
         name = spec.predictor_name
         horizon, sha256 = mpc_config(spec).horizon, checkpoint_sha256(name)
-        margins = spec.margins.behind(experiment.method_worlds.get(label, experiment.world).sensor_range)
+        world = experiment.method_worlds.get(label, experiment.world)
+        margins = spec.margins.behind(world.sensor_range, world.sensor_tracks)
         try:
             margins.resolve(name, horizon, sha256)
             margins.resolve_classes(name, horizon, sha256)
@@ -151,8 +152,9 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
                 cell.world.visibility,
                 cell.world.crowd,
                 cell.world.sensor_range,
+                cell.world.sensor_tracks,
             ),
-            sensor_margins_note(cell.spec, cell.world.sensor_range),
+            sensor_margins_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
         ):
             if note is not None:
                 methods.setdefault(note, []).append(cell.method)

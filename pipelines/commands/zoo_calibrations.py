@@ -47,8 +47,7 @@ def calibration_table(user_dir: Path | None, predictor: str | None = None) -> li
 def _row(block: Calibration, user_dir: Path | None) -> list[str]:
     from predictors.conformal import alpha_text
 
-    made = block.sensor_range
-    view = "recorded" if block.source == "real" else "every human" if made is None else f"{made:g} m sensor"
+    view = "recorded" if block.source == "real" else _view(block)
     per_class = [name for name, table in (("motion", block.classes), ("shortfall", block.shortfall)) if table]
     return [
         block.predictor,
@@ -61,6 +60,14 @@ def _row(block: Calibration, user_dir: Path | None) -> list[str]:
         _weights(block, user_dir),
         block.created[:16].replace("T", " "),
     ]
+
+
+def _view(block: Calibration) -> str:
+    """How a closed-loop block's robots saw the humans: "every human", "3 m sensor", "3 m untracked"."""
+    made = block.sensor_range
+    if made is None:
+        return "every human"
+    return f"{made:g} m sensor" if block.sensor_tracks else f"{made:g} m untracked"
 
 
 def _weights(block: Calibration, user_dir: Path | None) -> str:
@@ -112,7 +119,7 @@ def plot_margins(blocks: list[Calibration], title: str) -> Any:
         for block in ours:
             steps = range(1, block.horizon + 1)
             made = block.sensor_range
-            view = "" if made is None else f", {made:g} m sensor"
+            view = "" if made is None else f", {_view(block)}"
             ax.plot(
                 steps,
                 block.quantiles,

@@ -136,6 +136,9 @@ class ClosedLoopPlan:
     # margins then cover the people who come into view, predicted from short tracks, as such a robot meets
     # them (docs/replayed_crowds.md, "Behind a sensor"); recorded in a block's details only when set.
     sensor_range: float | None = None
+    # With sensor_range: whether its tracker reports track lengths (False: the controller classes the people
+    # it sees from their padded tracks, as one behind `--no-sensor-tracks` does); recorded only when False.
+    sensor_tracks: bool = True
     # What the controller plans with while the errors are measured: none for a calibration (the paper's
     # method); a held-out check may plan with the calibrated margins, to see whether the coverage survives
     # the change they make to how the robots, and so the humans, move.
@@ -161,6 +164,8 @@ class ClosedLoopPlan:
             raise PipelineError(
                 f"--sensor-range must be a finite number of metres > 0, got {self.sensor_range!r}"
             )
+        if self.sensor_tracks is not True and (self.sensor_tracks is not False or self.sensor_range is None):
+            raise PipelineError("--no-sensor-tracks is a sensor's: give --sensor-range M too")
 
     def schedule(self) -> list[tuple[str, int, int]]:
         """``(scenario, n_humans, seed)`` of every episode: scenarios alternate, crowd sizes cycle."""
@@ -222,9 +227,12 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
     from pipelines.loop.episode import behind_sensor, run_episode
 
     env_config = make_env_config(plan.profile, plan.visibility)
-    controller = make_controller(_controller_spec(plan).behind(plan.sensor_range), env_config)
+    spec = _controller_spec(plan).behind(plan.sensor_range, plan.sensor_tracks)
+    controller = make_controller(spec, env_config)
     # behind the sensor, the NLP of every crowd size in view built before the first episode
-    controller = behind_sensor(controller, plan.sensor_range, True, PAPER_ROBOTS, max(plan.humans))
+    controller = behind_sensor(
+        controller, plan.sensor_range, plan.sensor_tracks, PAPER_ROBOTS, max(plan.humans)
+    )
     observer = PredictionErrors(plan.near)
     successes = 0
     try:
@@ -249,6 +257,8 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool = True) -> ClosedLoo
     }
     if plan.sensor_range is None:  # the blocks of every robot seeing everyone, as made before the option
         del details["sensor_range"]
+    if plan.sensor_tracks:  # a tracked sensor's blocks, as made before the option
+        del details["sensor_tracks"]
     return ClosedLoopErrors(observer.errors, observer.classes, observer.shortfall, details)
 
 

@@ -104,7 +104,7 @@ def planned_margins(cell: Cell) -> dict[str, Any]:
     from pipelines.loop.mpc_setup import mpc_config
     from predictors.registry import checkpoint_sha256
 
-    spec = cell.spec.behind(cell.world.sensor_range)  # as the worker builds its controller
+    spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as the worker builds it
     name, sha256 = spec.predictor_name, checkpoint_sha256(spec.predictor_name)
     horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
     classes = spec.margins.resolve_classes(name, horizon, sha256)

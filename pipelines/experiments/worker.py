@@ -238,7 +238,9 @@ class EpisodeWorker:
 
         cell, world = task.cell, task.cell.world
         env_config = world.env_config()
-        controller = make_controller(cell.spec.behind(world.sensor_range), env_config, jit=self.jit)
+        controller = make_controller(
+            cell.spec.behind(world.sensor_range, world.sensor_tracks), env_config, jit=self.jit
+        )
         controller = behind_sensor(
             controller, world.sensor_range, world.sensor_tracks, cell.n_robots, cell.n_humans, world.crowd
         )

@@ -217,7 +217,7 @@ def run_episodes(
             f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
             "sensor_range too (metres)"
         )
-    controller = make_controller(spec.behind(sensor_range), env_config)
+    controller = make_controller(spec.behind(sensor_range, sensor_tracks), env_config)
     controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans, env_config.crowd)
     run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into

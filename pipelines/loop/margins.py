@@ -113,6 +113,7 @@ class MarginSpec:
     # part of the margins' text or label (the world's sensing is): the loop sets it (``behind``), and the
     # block made behind that sensor is planned with where one is stored (find_calibration)
     sensor_range: float | None = None
+    sensor_tracks: bool = True  # with sensor_range: whether its tracker reports track lengths
 
     def __post_init__(self):
         if self.mode not in MARGIN_MODES:
@@ -141,6 +142,8 @@ class MarginSpec:
                 "margins' sensor_range must be a finite number of metres > 0 (or None: every human seen), "
                 f"got {self.sensor_range!r}"
             )
+        if not isinstance(self.sensor_tracks, bool):
+            raise PipelineError(f"margins' sensor_tracks must be True or False, got {self.sensor_tracks!r}")
         if (self.mode == "fixed") != bool(values):
             raise PipelineError(
                 "fixed margins need values (e.g. fixed:0.05,0.1,0.15,0.2); other modes take none"
@@ -148,13 +151,14 @@ class MarginSpec:
         object.__setattr__(self, "values", tuple(float(v) for v in values))
         object.__setattr__(self, "alpha", float(alpha))
 
-    def behind(self, sensor_range: float | None) -> MarginSpec:
-        """These margins for robots behind a sensor of ``sensor_range`` m (None: seeing every human): a
-        calibrated mode plans with the block made behind that sensor where one is stored; the others are
-        returned as they are."""
-        if self.mode not in CALIBRATED_MODES or sensor_range == self.sensor_range:
+    def behind(self, sensor_range: float | None, sensor_tracks: bool = True) -> MarginSpec:
+        """These margins for robots behind a sensor of ``sensor_range`` m (None: seeing every human) whose
+        tracker reports its track lengths or not (``sensor_tracks``): a calibrated mode plans with the block
+        made behind that sensor where one is stored; the others are returned as they are."""
+        view = (None if sensor_range is None else float(sensor_range), sensor_tracks)
+        if self.mode not in CALIBRATED_MODES or view == (self.sensor_range, self.sensor_tracks):
             return self
-        return replace(self, sensor_range=None if sensor_range is None else float(sensor_range))
+        return replace(self, sensor_range=view[0], sensor_tracks=view[1])
 
     @property
     def label(self) -> str:
@@ -194,7 +198,7 @@ class MarginSpec:
             from predictors.conformal import alpha_text
 
             assert predictor is not None  # _block refused None
-            command = recalibrate_command(predictor, self.source, self.alpha, block.sensor_range)
+            command = recalibrate_command(predictor, self.source, self.alpha, *block.key()[3:])
             raise PipelineError(
                 f"the {self.source} calibration of {predictor!r} at alpha={alpha_text(self.alpha)} has no "
                 f"{self.mode} margins per motion class (made before they existed, or too few samples in a "
@@ -217,7 +221,12 @@ class MarginSpec:
             )
 
         block = find_calibration(
-            predictor, self.source, self.alpha, sha256=sha256, sensor_range=self.sensor_range
+            predictor,
+            self.source,
+            self.alpha,
+            sha256=sha256,
+            sensor_range=self.sensor_range,
+            sensor_tracks=self.sensor_tracks,
         )
         if len(block.quantiles) < horizon:
             raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon))

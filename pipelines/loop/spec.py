@@ -96,10 +96,11 @@ class ControllerSpec:
     def kind(self) -> ControllerKind:
         return controller_kind(self.controller)
 
-    def behind(self, sensor_range: float | None) -> ControllerSpec:
-        """This spec for robots behind a sensor of ``sensor_range`` m (None: seeing every human): calibrated
-        margins plan with the block made behind that sensor where one is stored (``MarginSpec.behind``)."""
-        margins = self.margins.behind(sensor_range)
+    def behind(self, sensor_range: float | None, sensor_tracks: bool = True) -> ControllerSpec:
+        """This spec for robots behind a sensor of ``sensor_range`` m (None: seeing every human), its tracker
+        reporting track lengths or not: calibrated margins plan with the block made behind that sensor where
+        one is stored (``MarginSpec.behind``)."""
+        margins = self.margins.behind(sensor_range, sensor_tracks)
         return self if margins is self.margins else replace(self, margins=margins)
 
     @property

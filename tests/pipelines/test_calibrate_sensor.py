@@ -113,3 +113,24 @@ def test_a_sensor_block_without_class_margins_is_not_stored_where_runs_behind_it
     err = capsys.readouterr().err
     assert "not stored: constant_velocity's closed-loop calibration at alpha 0.1 (in force: " in err
     assert not any(b.sensor_range for b in read_calibrations())  # nothing stored: the shipped blocks alone
+
+
+def test_no_sensor_tracks_calibrates_behind_a_tracker_that_reports_none_and_needs_a_range(tmp_path, capsys):
+    """The controller is given no track lengths (its classes read the padded tracks as a long stay), the
+    block records it, and its key stands beside the tracked one's; refused without a range or for real
+    scenes, naming the option."""
+    argv = [*CALIBRATE, "--alpha", "0.45", "--episodes", "2", "--humans", "4", "--sensor-range", "2.5"]
+    assert main(argv) == 0
+    assert main([*argv, "--no-sensor-tracks"]) == 0
+    blocks = {b.key()[3:]: b for b in read_calibrations(tmp_path / "zoo")}
+    assert set(blocks) == {(2.5, False), (2.5, True)}
+    assert (
+        blocks[2.5, False].details["sensor_tracks"] is False
+        and "sensor_tracks" not in blocks[2.5, True].details
+    )
+    capsys.readouterr()
+    assert main([*CALIBRATE, "--no-sensor-tracks", "--dry-run"]) == 2
+    assert "--no-sensor-tracks is a sensor's: give --sensor-range M too" in capsys.readouterr().err
+    real = ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--no-sensor-tracks"]
+    assert main(real) == 2
+    assert "--no-sensor-tracks is for --source closed-loop" in capsys.readouterr().err

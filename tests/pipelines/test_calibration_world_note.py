@@ -128,11 +128,16 @@ def test_behind_a_sensor_calibrated_margins_are_noted_with_what_was_measured_the
     ]
     assert main(sweep) == 0
     notes = [line for line in capsys.readouterr().err.splitlines() if "with every person in view" in line]
-    assert [note.split(":")[1] for note in notes] == [
+    assert [note.split(":")[1] for note in notes] == [  # the untracked column's command says so
         " method '4 m'",
-        " methods '3 m', '3 m untracked'",
+        " method '3 m'",
         " method '2 m'",
+        " method '3 m untracked'",
     ]
+    command = (
+        "--sensor-range 3 --no-sensor-tracks calibrates behind this run's sensor, stored beside that block"
+    )
+    assert notes[-1].endswith(command)
 
 
 def test_margins_calibrated_behind_a_sensor_are_noted_where_the_run_sees_otherwise():
@@ -175,3 +180,26 @@ def test_a_block_made_behind_the_runs_sensor_stands_beside_the_one_of_every_huma
     v1 = calibration_world_note(spec, "v1", "visible", sensor_range=3.0) or ""
     assert "--sensor-range 3 --profile v1" in v1
     assert "--sensor-range" not in (calibration_world_note(spec, "v1", "visible") or "-")
+
+
+def test_a_tracker_reporting_track_lengths_the_other_way_is_noted_with_the_command_for_its_own():
+    shipped = find_calibration("social_lstm_eth", "closed-loop", 0.1)
+    behind = {**shipped.details, "sensor_range": 3.0}
+    save_calibration(dataclasses.replace(shipped, alpha=0.15, details=behind))
+    spec = _spec("conformal-motion:0.15")
+    assert sensor_margins_note(spec, 3.0, True) is None
+    note = sensor_margins_note(spec, 3.0, False) or ""
+    assert note.startswith(
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.15 were calibrated behind a sensor of "
+        "3 m with the tracker's track lengths, this run's controller plans without them: it classes the "
+        "people who just came into view otherwise, and the coverage here is not measured; crowdmpc calibrate"
+    )
+    assert note.endswith(
+        "--near 3 --sensor-range 3 --no-sensor-tracks calibrates behind this run's sensor, stored beside "
+        "that block"
+    )
+    untracked = {**behind, "sensor_tracks": False}
+    save_calibration(dataclasses.replace(shipped, alpha=0.15, details=untracked))
+    assert sensor_margins_note(spec, 3.0, False) is None
+    world = calibration_world_note(spec, "v1", "visible", sensor_range=3.0, sensor_tracks=False) or ""
+    assert "--sensor-range 3 --no-sensor-tracks --profile v1 --visibility visible measures it" in world

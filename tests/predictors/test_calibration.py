@@ -123,7 +123,7 @@ def test_every_shipped_predictor_has_the_blocks_the_checkpoints_readme_lists():
     for name, sha in weights.items():
         for source in ("closed-loop", "real") if name != "orca_oracle" else ("closed-loop",):
             for alpha in SHIPPED_ALPHAS:
-                block = blocks.get((name, source, alpha, None))  # the shipped: every human seen
+                block = blocks.get((name, source, alpha, None, True))  # the shipped: every human seen
                 assert block is not None, f"no shipped {source} block of {name} at alpha {alpha}"
                 assert block.predictor_sha256 == sha, f"{name}'s {source} block is of other weights"
 
@@ -607,3 +607,30 @@ def test_a_repeated_key_is_found_among_other_predictors_and_sources(tmp_path):
         )
     )
     assert read_calibrations(tmp_path) == blocks[:4]
+
+
+def test_a_block_made_without_track_lengths_stands_beside_the_tracked_one_and_is_taken_by_its_view(tmp_path):
+    """`calibrate --sensor-range 3 --no-sensor-tracks`: keyed apart from the tracked 3 m block; a run behind
+    a tracker that reports no track lengths takes it, and without it the tracked block of its range, before
+    the full view's."""
+    untracked = behind(3.0, quantiles=(0.9, 0.9, 0.9, 0.9))
+    untracked = dataclasses.replace(untracked, details={**untracked.details, "sensor_tracks": False})
+    assert untracked.key()[3:] == (3.0, False) and behind(3.0).key()[3:] == (3.0, True)
+    for made in (behind(None), behind(3.0), untracked):
+        save_calibration(made, tmp_path)
+    assert len(read_calibrations(tmp_path)) == 3
+
+    def planned(wanted: float | None, tracks: bool, directory=tmp_path) -> tuple[float | None, bool]:
+        found = find_calibration("social_lstm_eth", "closed-loop", 0.1, directory, SHA_A, wanted, tracks)
+        return found.key()[3:]
+
+    assert planned(3.0, False) == (3.0, False) and planned(3.0, True) == (3.0, True)
+    assert planned(4.0, False) == (None, True)  # another range: the full view, as before
+    tracked_only = tmp_path / "tracked"
+    for made in (behind(None), behind(3.0)):
+        save_calibration(made, tracked_only)
+    assert planned(3.0, False, tracked_only) == (3.0, True)  # its range, the track lengths the other way
+    with pytest.raises(PredictorError, match="'details.sensor_tracks' must be true or false"):
+        dataclasses.replace(untracked, details={**untracked.details, "sensor_tracks": "no"})
+    with pytest.raises(PredictorError, match="and false only beside a sensor_range"):
+        block(source="closed-loop", details={"sensor_tracks": False})
