@@ -164,7 +164,9 @@ class ClosedLoopPlan:
             raise PipelineError(
                 f"--sensor-range must be a finite number of metres > 0, got {self.sensor_range!r}"
             )
-        if self.sensor_tracks is not True and (self.sensor_tracks is not False or self.sensor_range is None):
+        if not isinstance(self.sensor_tracks, bool):  # a truthy "no" would report them
+            raise PipelineError(f"sensor_tracks must be True or False, got {self.sensor_tracks!r}")
+        if not self.sensor_tracks and self.sensor_range is None:
             raise PipelineError("--no-sensor-tracks is a sensor's: give --sensor-range M too")
 
     def schedule(self) -> list[tuple[str, int, int]]:
