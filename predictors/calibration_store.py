@@ -165,8 +165,8 @@ def _file_order(block: Calibration) -> tuple[str, str, float, float, bool]:
 
 
 def _behind(sensor_range: float | None, tracks: bool = True) -> str:
-    """`` behind a 3 m sensor`` (``untracked``: its tracker reporting no track lengths) for a block made
-    behind one, nothing for one with every human in view."""
+    """`` behind a 3 m sensor`` (`` without track lengths`` after it where ``tracks`` is False: its tracker
+    reported none) for a block made behind one, nothing for one with every human in view."""
     if sensor_range is None:
         return ""
     return f" behind a {sensor_range:g} m sensor" + ("" if tracks else " without track lengths")
