@@ -226,9 +226,9 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         action="append",
         metavar="mpc.KEY=V1,V2",
         help="a column per value of an [mpc] setting (or controller.margins=M1,M2) beside each method that "
-        "plans, on the same crowds, or of scenario.robots=M1,M2 or a simulator setting (env.KEY=V1,V2, "
-        "env.orca.KEY=V1,V2) beside every method (Table I's value is a plain sweep's cell); again: every "
-        "combination",
+        "plans, on the same crowds, or of scenario.robots=M1,M2, a simulator setting (env.KEY=V1,V2, "
+        "env.orca.KEY=V1,V2) or simulate.sensor_range=R1,R2 beside every method (Table I's value is a plain "
+        "sweep's cell); again: every combination",
     )
     p.add_argument(
         "--sensor-range",

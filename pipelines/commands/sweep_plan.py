@@ -90,7 +90,7 @@ def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
     for vary in pending:
         experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), where)
     for vary in settings:  # last: every column the others made, at each simulator value, number of robots
-        if vary.section in ("env", "env.orca", "scenario"):
+        if vary.section in ("env", "env.orca", "simulate", "scenario"):
             experiment = with_values(experiment, vary, None, where)
     return experiment
 

@@ -1,15 +1,15 @@
 """``sweep --vary mpc.KEY=V1,V2,..``, ``--vary controller.margins=M1,M2,..``, ``--vary
-scenario.robots=M1,M2,..`` or ``--vary env[.orca].KEY=V1,V2,..`` ([sweep] vary): a column per value of one
-[mpc] setting, or per margins, beside each method that plans with a predictor, on the same crowds, or per
-number of robots beside every method, on the same seeds (the humans are placed clear of each team), or per
-value of a simulator setting (the humans' ORCA, the time limit, ...: ``World.env_settings``) beside every
-method, in one table.
+scenario.robots=M1,M2,..``, ``--vary env[.orca].KEY=V1,V2,..`` or ``--vary simulate.sensor_range=R1,R2,..``
+([sweep] vary): a column per value of one [mpc] setting, or per margins, beside each method that plans with a
+predictor, on the same crowds, or per number of robots beside every method, on the same seeds (the humans are
+placed clear of each team), or per value of a simulator setting (the humans' ORCA, the time limit, ...:
+``World.env_settings``) or per sensor range (``World.sensing``) beside every method, in one table.
 
-Each column is the cell ``--set mpc.KEY=V`` (``--margins M``, ``--robots M``, ``--set env.KEY=V``) makes
-(its key, its episodes): a value that is Table I's (margins none, the paper's 3 robots, the profile's own
-simulator value) adds nothing to the cell, whose episodes are those of the sweep without ``--vary``, so a
-study can extend a sweep already run. Every value is checked as ``--set`` (``--margins``, ``--robots``)
-checks it, with the run's other settings.
+Each column is the cell ``--set mpc.KEY=V`` (``--margins M``, ``--robots M``, ``--set env.KEY=V``,
+``--sensor-range R``) makes (its key, its episodes): a value that is Table I's (margins none, the paper's 3
+robots, the profile's own simulator value) adds nothing to the cell, whose episodes are those of the sweep
+without ``--vary``, so a study can extend a sweep already run. Every value is checked as ``--set``
+(``--margins``, ``--robots``) checks it, with the run's other settings.
 """
 
 from __future__ import annotations
@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight"})
 MAX_VALUES: Final[int] = 12  # each value (each combination) is a whole column of cells per method and size
 ENV_SECTIONS: Final[tuple[str, str]] = ("env", "env.orca")  # their keys in ENV_SETTINGS vary every method
+SENSOR_RANGE: Final[str] = (
+    "simulate.sensor_range"  # varies every method's view of the humans, as --sensor-range
+)
 
 
 def reads_setting(spec: ControllerSpec, key: str) -> bool:
@@ -99,7 +102,7 @@ def _one_setting(cfg: RunConfig, where: str, text: str) -> Varied:
                 f"{where} and {cfg.label('scenario', 'robots')} both set the robots: give them once"
             )
         items = [item.strip() for item in raw.split(",")]
-    elif section in ENV_SECTIONS and env_name(section, key) in ENV_SETTINGS:
+    elif section in ENV_SECTIONS and env_name(section, key) in ENV_SETTINGS or name.strip() == SENSOR_RANGE:
         if cfg.chosen(section, key):
             raise ConfigError(
                 f"{where} and {cfg.label(section, key)} both set {section}.{key}: give its values once"
@@ -108,9 +111,9 @@ def _one_setting(cfg: RunConfig, where: str, text: str) -> Varied:
     else:
         raise ConfigError(
             f"{where} {text!r}: only an [mpc] setting (mpc.KEY=V1,V2,...), the margins (controller.margins="
-            "M1,M2,...), the robots (scenario.robots=M1,M2,...) or a simulator setting (env.KEY or "
-            f"env.orca.KEY, one of {', '.join(ENV_SETTINGS)}) vary; the predictors, controllers and sensor "
-            "ranges have experiments of their own (predictors, controllers, sensing)"
+            "M1,M2,...), the robots (scenario.robots=M1,M2,...), a simulator setting (env.KEY or "
+            f"env.orca.KEY, one of {', '.join(ENV_SETTINGS)}) or the sensor range ({SENSOR_RANGE}=R1,R2,...) "
+            "vary; the predictors and controllers have experiments of their own (predictors, controllers)"
         )
     if len(items) < 2 or not all(items):
         raise ConfigError(f"{where} {text!r}: expected {section}.{key}=V1,V2,... with at least two values")
@@ -209,6 +212,7 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
     key, name = vary.key, experiment.name
     _check_applies(experiment, vary, where)
     simulator = vary.section in ENV_SECTIONS
+    sensed = f"{vary.section}.{vary.key}" == SENSOR_RANGE
     if simulator:
         key = env_name(vary.section, key)
     methods: list[tuple[str, ControllerSpec]] = []
@@ -223,7 +227,7 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
                 "another setting"
             )
         columns = [(label, spec)]
-        if vary.section == "scenario" or simulator or reads_setting(spec, key):
+        if vary.section in ("scenario", "simulate") or simulator or reads_setting(spec, key):
             columns = [
                 (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]
@@ -231,6 +235,7 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
         for k, (column, column_spec) in enumerate(columns):
             methods.append((column, column_spec))
             world = _with_simulator(base, key, vary.values[k]) if simulator else base
+            world = world.sensing(vary.values[k]) if sensed else world
             if label in experiment.method_worlds or world != base:
                 worlds[column] = world
             if vary.section == "scenario":
@@ -261,7 +266,7 @@ def _with_simulator(world: World, key: str, value: Any) -> World:
 def _with_value(spec: ControllerSpec, vary: Varied, value: Any, table_i: Any) -> ControllerSpec:
     """``spec`` with the varied setting at ``value``: Table I's adds no override to the cell, and the
     number of robots and the simulator's settings are the cell's, not the controller's."""
-    if vary.section == "scenario" or vary.section in ENV_SECTIONS:
+    if vary.section in ("scenario", "simulate") or vary.section in ENV_SECTIONS:
         return spec
     if vary.section == "controller":
         return dataclasses.replace(spec, margins=value)
@@ -273,7 +278,15 @@ def _check_applies(experiment: Experiment, vary: Varied, where: str) -> None:
     """Refuse a variation no method would run, or one that undoes what the experiment compares."""
     key, name = vary.key, experiment.name
     labels = ", ".join(repr(label) for label, _ in experiment.methods)
-    if vary.section == "scenario" or vary.section in ENV_SECTIONS:  # every controller drives robots
+    if f"{vary.section}.{key}" == SENSOR_RANGE and any(
+        own.sensor_range != experiment.world.sensor_range for own in experiment.method_worlds.values()
+    ):
+        raise ConfigError(
+            f"{where}: experiment {name!r} compares sensor ranges across its methods; they do not vary"
+        )
+    if (
+        vary.section in ("scenario", "simulate") or vary.section in ENV_SECTIONS
+    ):  # every controller drives robots
         return
     if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
         raise ConfigError(

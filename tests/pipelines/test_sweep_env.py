@@ -116,3 +116,30 @@ def test_a_simulator_variation_that_cannot_run_is_refused_in_one_line(options, m
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_vary_the_sensor_range_gives_every_method_a_column_per_range(tmp_path, capsys):
+    """Each column the cell `--sensor-range R` makes; the sensing experiment, which compares ranges itself,
+    and a run that sets one range refuse it."""
+    sweep = ["sweep", "--humans", "7", "--dry-run", "--out", str(tmp_path / "sw"), "--experiment"]
+    assert main([*sweep, "table2", "--vary", "simulate.sensor_range=2,3"]) == 0
+    plain = "social_lstm_eth-F-ibr-m=none-paper-visible"
+    assert _keys(capsys) == {
+        "CMPC sensor_range=2.0": f"cmpc-{plain}-sensed2m-h7-r3",
+        "CMPC sensor_range=3.0": f"cmpc-{plain}-sensed3m-h7-r3",
+        "DMPC sensor_range=2.0": f"dmpc-{plain}-sensed2m-h7-r3",
+        "DMPC sensor_range=3.0": f"dmpc-{plain}-sensed3m-h7-r3",
+    }
+    assert main([*sweep, "table2", "--sensor-range", "3"]) == 0
+    assert set(_keys(capsys).values()) == {f"cmpc-{plain}-sensed3m-h7-r3", f"dmpc-{plain}-sensed3m-h7-r3"}
+    for options, message in (
+        (["sensing", "--vary", "simulate.sensor_range=2,3"], "experiment 'sensing' compares sensor ranges"),
+        (
+            ["table2", "--sensor-range", "3", "--vary", "simulate.sensor_range=2,3"],
+            "both set simulate.sensor",
+        ),
+        (["table2", "--vary", "simulate.sensor_range=2,0"], "must be a finite number of metres > 0, got 0.0"),
+    ):
+        assert main([*sweep, *options]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1

@@ -69,7 +69,7 @@ def test_robots_vary_last_in_a_grid_and_keep_the_paper_beside_three():
         (["--vary", "scenario.robots=3"], "expected scenario.robots=V1,V2,... with at least two values"),
         (
             ["--vary", "scenario.humans=3,4"],
-            "the robots (scenario.robots=M1,M2,...) or a simulator setting (env.KEY or env.orca.KEY",
+            "the robots (scenario.robots=M1,M2,...), a simulator setting (env.KEY or env.orca.KEY",
         ),
     ],
 )
