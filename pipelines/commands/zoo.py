@@ -187,11 +187,10 @@ def format_list(located_entries) -> str:
                 located.source,
             ]
         )
+    from predictors.text_table import aligned_lines
+
     rows = [[str(c) for c in r] for r in rows]
-    widths = [max(len(r[k]) for r in [header, *rows]) for k in range(len(header))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in [header, *rows]]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    return "\n".join(aligned_lines(header, rows, numbers_right=False))
 
 
 def run(args: argparse.Namespace) -> int:

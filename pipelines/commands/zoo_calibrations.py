@@ -30,18 +30,24 @@ HEADER = [
 ]
 
 
-def calibration_table(user_dir: Path | None, predictor: str | None = None) -> list[list[str]]:
-    """The header and a row per block in force (of ``predictor`` alone where given), the user zoo's first;
-    each row ends with the zoo it comes from."""
+def blocks_of(user_dir: Path | None, predictor: str | None = None) -> list[tuple[str, Calibration]]:
+    """``(zoo, block)`` for every block in force (of ``predictor`` alone where given), user zoo first."""
     from predictors.calibration_store import blocks_in_force, zoo_calibration_files
 
     files = zoo_calibration_files(user_dir)
     zoo_of = {path: zoo for zoo, path in files}
-    rows = [[*HEADER, "zoo"]]
-    for path, block in blocks_in_force([path for _, path in files]):
-        if predictor is None or block.predictor == predictor:
-            rows.append([*_row(block, user_dir), zoo_of[path]])
-    return rows
+    found = blocks_in_force([path for _, path in files])
+    return [(zoo_of[path], block) for path, block in found if predictor in (None, block.predictor)]
+
+
+def calibration_table(user_dir: Path | None, predictor: str | None = None) -> list[list[str]]:
+    """The header and a row per block of ``blocks_of``, each row ending with the zoo it comes from."""
+    return table_rows(blocks_of(user_dir, predictor), user_dir)
+
+
+def table_rows(found: list[tuple[str, Calibration]], user_dir: Path | None) -> list[list[str]]:
+    """The header and a row per ``(zoo, block)`` of ``found``."""
+    return [[*HEADER, "zoo"], *([*_row(block, user_dir), zoo] for zoo, block in found)]
 
 
 def _row(block: Calibration, user_dir: Path | None) -> list[str]:
@@ -92,10 +98,9 @@ def _weights(block: Calibration, user_dir: Path | None) -> str:
 
 def format_table(rows: list[list[str]]) -> str:
     """``rows`` (the header first) as aligned columns under a rule."""
-    widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    from predictors.text_table import aligned_lines
+
+    return "\n".join(aligned_lines(rows[0], rows[1:], numbers_right=False))
 
 
 def plot_margins(blocks: list[Calibration], title: str) -> Any:
@@ -151,8 +156,8 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
         if predictor is None:
             raise PipelineError("--plot draws one predictor's blocks: add --predictor NAME")
         check_writable(plot, "--plot", room=0)
-    rows = calibration_table(user_dir, predictor)
-    if len(rows) == 1:
+    found = blocks_of(user_dir, predictor)  # read once: the table and the plot
+    if not found:
         where = " or ".join(str(path) for _, path in zoo_calibration_files(user_dir))
         if predictor is None:
             print(f"no calibrations in {where}")
@@ -169,12 +174,9 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
             f"{predictor} --source closed-loop|real --alpha 0.1"
         )
         return 0
-    print(format_table(rows))
+    print(format_table(table_rows(found, user_dir)))
     if plot is not None:
-        from predictors.calibration_store import blocks_in_force
-
-        files = [path for _, path in zoo_calibration_files(user_dir)]
-        blocks = [block for _, block in blocks_in_force(files) if block.predictor == predictor]
+        blocks = [block for _, block in found]
         figure = plot_margins(blocks, f"Conformal margins of {predictor} (crowdmpc zoo calibrations)")
         figure.savefig(plot, dpi=120)
         print(f"wrote {plot}")

@@ -143,11 +143,9 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 def _table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
-    cells = [list(header)] + [[_fmt(v) for v in row] for row in rows]
-    widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() for row in cells]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    from predictors.text_table import aligned_lines
+
+    return "\n".join(aligned_lines(header, [[_fmt(v) for v in row] for row in rows], numbers_right=False))
 
 
 _RUN_COLUMNS: Final = ("success", "collision", "timeout", "travel_time", "min_distance")
