@@ -242,8 +242,9 @@ def sensor_margins_note(
     from predictors.calibration_store import recalibrate_command
     from predictors.conformal import alpha_text
 
-    margins, name = spec.margins.behind(sensor_range, sensor_tracks), spec.predictor_name
-    block = _planned_block(spec.behind(sensor_range, sensor_tracks))
+    planned = spec.behind(sensor_range, sensor_tracks)
+    margins, name = planned.margins, spec.predictor_name
+    block = _planned_block(planned)
     if block is None or name is None:
         return None
     made = block.sensor_range

@@ -73,7 +73,7 @@ def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
     the overrides of a cell stay in the [mpc] table's order, so that a varied value's cell is the one
     ``--set`` makes (the same key, the same episodes); varied margins first, as they have no place there,
     and varied robots last, as they are no controller's."""
-    from pipelines.commands.sweep_vary import varied, with_values
+    from pipelines.commands.sweep_vary import CELL_SECTIONS, varied, with_values
 
     where = cfg.label("sweep", "vary")
     settings = varied(cfg)
@@ -90,7 +90,7 @@ def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:
     for vary in pending:
         experiment = with_values(experiment, vary, cfg.default("mpc", vary.key), where)
     for vary in settings:  # last: every column the others made, at each simulator value, number of robots
-        if vary.section in ("env", "env.orca", "simulate", "scenario"):
+        if vary.section in CELL_SECTIONS:
             experiment = with_values(experiment, vary, None, where)
     return experiment
 

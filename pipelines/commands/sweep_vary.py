@@ -35,9 +35,10 @@ if TYPE_CHECKING:
 FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight"})
 MAX_VALUES: Final[int] = 12  # each value (each combination) is a whole column of cells per method and size
 ENV_SECTIONS: Final[tuple[str, str]] = ("env", "env.orca")  # their keys in ENV_SETTINGS vary every method
-SENSOR_RANGE: Final[str] = (
-    "simulate.sensor_range"  # varies every method's view of the humans, as --sensor-range
-)
+SENSOR_RANGE: Final[str] = "simulate.sensor_range"  # every method's view of the humans, as --sensor-range
+# The sections whose varied values are the cell's (its robots, humans, simulator, sensor), not a controller's:
+# every method gets a column per value, and they are applied last, to every column the others made
+CELL_SECTIONS: Final[tuple[str, ...]] = ("scenario", "simulate", *ENV_SECTIONS)
 
 
 def reads_setting(spec: ControllerSpec, key: str) -> bool:
@@ -227,7 +228,7 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
                 "another setting"
             )
         columns = [(label, spec)]
-        if vary.section in ("scenario", "simulate") or simulator or reads_setting(spec, key):
+        if vary.section in CELL_SECTIONS or reads_setting(spec, key):
             columns = [
                 (f"{label} {key}={shown(v)}", _with_value(spec, vary, v, table_i)) for v in vary.values
             ]
@@ -266,7 +267,7 @@ def _with_simulator(world: World, key: str, value: Any) -> World:
 def _with_value(spec: ControllerSpec, vary: Varied, value: Any, table_i: Any) -> ControllerSpec:
     """``spec`` with the varied setting at ``value``: Table I's adds no override to the cell, and the
     number of robots and the simulator's settings are the cell's, not the controller's."""
-    if vary.section in ("scenario", "simulate") or vary.section in ENV_SECTIONS:
+    if vary.section in CELL_SECTIONS:
         return spec
     if vary.section == "controller":
         return dataclasses.replace(spec, margins=value)
@@ -284,9 +285,7 @@ def _check_applies(experiment: Experiment, vary: Varied, where: str) -> None:
         raise ConfigError(
             f"{where}: experiment {name!r} compares sensor ranges across its methods; they do not vary"
         )
-    if (
-        vary.section in ("scenario", "simulate") or vary.section in ENV_SECTIONS
-    ):  # every controller drives robots
+    if vary.section in CELL_SECTIONS:  # every controller drives robots among the humans
         return
     if not any(spec.kind.uses_predictor for _, spec in experiment.methods):
         raise ConfigError(
