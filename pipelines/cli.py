@@ -20,6 +20,7 @@ COMMANDS = (
     "calibrate",
     "simulate",
     "sweep",
+    "compare",
     "review",
     "cache",
     "config",

@@ -121,6 +121,25 @@ def test_review_json_of_several_set_ups_has_totals_per_group_only(tmp_path):
     assert "`totals` only when the folder holds one set-up" in " ".join(DOC.read_text().split())
 
 
+def test_every_compare_field_is_documented(outputs, tmp_path):
+    """`crowdmpc compare --json` of the sweep against a copy with one setting changed in its records."""
+    other = tmp_path / "other"
+    other.mkdir()
+    lines = (outputs / "sw/episodes.jsonl").read_text().splitlines()
+    changed = [_strict(line) for line in lines]
+    for record in changed:
+        record["config"]["env"]["time_limit"] = 1.0
+    (other / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in changed))
+    assert main(["compare", str(outputs / "sw"), str(other), "--json", str(tmp_path / "c.json")]) == 0
+    report = _strict((tmp_path / "c.json").read_text())
+    group = report["groups"][0]
+    versus = group["versus_first"]["other"]
+    names = [*report, *report["runs"][0], *group, *group["runs"]["sw"], *versus, *versus["travel_difference"]]
+    names += [*versus["success"], *report["settings_differ"]["other"][0]]
+    assert report["settings_differ"]["other"][0]["setting"] == "env.time_limit"
+    assert _undocumented(names, _documented()) == []
+
+
 def test_every_channel_schema_and_metadata_key_of_a_recording_is_documented(outputs):
     doc = _documented()
     with open(outputs / "runs/d/perpendicular_seed000000.mcap", "rb") as f:

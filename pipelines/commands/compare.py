@@ -1,0 +1,254 @@
+"""``crowdmpc compare``: sweeps side by side on the crowds they share, each against the first, episode by
+episode (pipelines.experiments.compare)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Final
+
+from pipelines.commands import check_writable, write_output
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
+from pipelines.errors import PipelineError
+from pipelines.plain_json import plain
+
+EPILOG = """examples:
+  crowdmpc compare runs/table2 runs/table2-cp
+  crowdmpc compare paper=runs/table2 cp0.1=runs/table2-cp safe=runs/t2-safe --json compare.json
+  crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
+
+Each RUN is a `crowdmpc sweep --out` folder, named by LABEL= or by its folder's name. Episodes pair where two
+runs faced the same crowd: the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or
+the same recording, the same placement rules and formation), and the same method (case ignored). Only
+episodes every run holds are compared. First each run's folder, episodes and code (the commits its
+sweep.json names); then, for each method and crowd size, every run's success, collision and contact rates (%)
+and mean travel time over its successes (s), and for each run after the first, against it: +k / −j, the
+episodes where the run has the outcome and the first run not, and the reverse, with the exact McNemar p; the
+mean travel-time difference over the episodes both completed, ± a normal 95 % half-width, their number in
+brackets; and how many episodes have every metric equal. Last, the settings the runs' episodes ran with where
+they differ from the first run's. --expect-identical exits 1 unless every episode of every run is in every
+other with every metric equal: a change that must not move a result (`--jit on` against off, a refactoring).
+"""
+MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
+VALUE_WIDTH: Final = 60  # characters of a setting's values shown
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "compare",
+        help="sweeps side by side on the crowds they share, paired episode by episode",
+        description="Compare sweeps' episodes on the crowds they share: rates per method and crowd size, "
+        "paired changes against the first run (exact McNemar), and the settings that differ.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("runs", nargs="+", metavar="[LABEL=]RUN", help="two or more sweep folders")
+    parser.add_argument(
+        "--json",
+        type=json_path,
+        metavar="FILE",
+        help="also write the comparison as JSON (-: standard output)",
+    )
+    parser.add_argument(
+        "--expect-identical",
+        action="store_true",
+        help="exit 1 unless the runs hold the same episodes with every metric equal",
+    )
+    parser.set_defaults(func=run)
+
+
+def labelled(items: list[str]) -> list[tuple[str, Path]]:
+    """``(label, folder)`` of each ``[LABEL=]RUN``: an existing folder is taken whole (its name may hold "="),
+    else LABEL=RUN names it; the label defaults to the folder's name. A label given twice is refused."""
+    runs: list[tuple[str, Path]] = []
+    for item in items:
+        label, sep, folder = item.partition("=")
+        if sep and not Path(item).is_dir():
+            if not (label and folder):
+                raise PipelineError(f"expected [LABEL=]RUN, a sweep folder, got {item!r}")
+        elif item:
+            label, folder = Path(item).resolve().name or item, item
+        else:
+            raise PipelineError("expected [LABEL=]RUN, a sweep folder, got ''")
+        if any(label == seen for seen, _ in runs):
+            raise PipelineError(f"label {label!r} is given twice; name each run once (LABEL=RUN)")
+        runs.append((label, Path(folder)))
+    if len(runs) < 2:
+        raise PipelineError("give at least two sweep folders to compare")
+    return runs
+
+
+def run(args: argparse.Namespace) -> int:
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        return _compare(args)
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from pipelines.experiments.compare import load_run, shared_identities
+
+    named = labelled(args.runs)
+    from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
+
+    inputs = [path / name for _, path in named for name in (EPISODES_FILE, SWEEP_FILE)]
+    check_writable(args.json, "--json", inputs=inputs, json_only=True)
+    runs = [load_run(label, path) for label, path in named]
+    shared = shared_identities(runs)
+    if not shared:
+        raise PipelineError(
+            "the runs share no episode (the same method, humans, robots, scenario, seed and crowd: another "
+            "profile, team or formation draws other crowds from the same seeds)"
+        )
+    report = _report(runs, shared)
+    print(_text(report))
+    if args.json:
+        write_output(args.json, json.dumps(plain(report), indent=2, allow_nan=False) + "\n", "--json")
+        if not is_stdout(args.json):
+            print(f"json: {shown(args.json)}")
+    if args.expect_identical:
+        return _identical(report)
+    return 0
+
+
+def _report(runs: list[Any], shared: list[Any]) -> dict[str, Any]:
+    from pipelines.experiments.compare import groups_of, settings_differ, side, versus
+
+    base = runs[0]
+    groups = []
+    grouped = groups_of(shared)
+    order = {method: i for i, method in enumerate(dict.fromkeys(g[0] for g in grouped))}  # the plan's methods
+    for group in sorted(grouped, key=lambda g: (order[g[0]], g[2], g[1])):
+        identities = grouped[group]
+        sides = {run.label: side([run.outcomes[k] for k in identities]) for run in runs}
+        against = {
+            run.label: versus([base.outcomes[k] for k in identities], [run.outcomes[k] for k in identities])
+            for run in runs[1:]
+        }
+        groups.append(
+            {
+                "method": base.methods[group],
+                "humans": group[1],
+                "robots": group[2],
+                "episodes": len(identities),
+                "runs": {label: {"rates": s.rates, "travel_time": s.travel} for label, s in sides.items()},
+                "versus_first": {label: _versus_json(v) for label, v in against.items()},
+            }
+        )
+    held = set(shared)
+    return {
+        "shared_episodes": len(shared),
+        "runs": [
+            {
+                "label": run.label,
+                "path": str(run.path),
+                "episodes": len(run.outcomes),
+                "code": run.commits,
+                "unshared": sorted(o.key for k, o in run.outcomes.items() if k not in held)[:20],
+            }
+            for run in runs
+        ],
+        "groups": groups,
+        "settings_differ": {
+            run.label: [{"setting": k, "first": a, "this": b} for k, a, b in settings_differ(base, run)]
+            for run in runs[1:]
+        },
+    }
+
+
+def _versus_json(v: Any) -> dict[str, Any]:
+    return {
+        **{name: {"gained": p.gained, "lost": p.lost, "p": p.p} for name, p in v.flags.items()},
+        "travel_difference": {
+            "mean": v.travel_difference,
+            "half_width_95": v.travel_half_width,
+            "n": v.travel_n,
+        },
+        "same_metrics": v.same,
+        "text": {**{name: p.text() for name, p in v.flags.items()}, "travel": v.travel_text()},
+    }
+
+
+def _text(report: dict[str, Any]) -> str:
+    first = report["runs"][0]["label"]
+    lines = [f"Compared on the {report['shared_episodes']} episodes every run holds:"]
+    for r in report["runs"]:
+        code = ", ".join(r["code"]) or "not recorded"
+        lines.append(f"  {r['label']}: {r['path']}, {r['episodes']} episodes, code {code}")
+    lines += [
+        "",
+        f"success / collision / contact %, travel s (mean over successes); against {first}: +k / −j episodes "
+        "with the outcome only in this run / only in the first (exact McNemar p), travel difference over the "
+        "episodes both completed (mean ± 95 %, their number), episodes with every metric equal",
+        "",
+        "| method | humans | robots | run | episodes | success % | collision % | contact % | travel s | "
+        "success | collision | contact | travel Δ s | same |",
+        "|---" * 14 + "|",
+    ]
+    for g in report["groups"]:
+        for label, s in g["runs"].items():
+            rates = [f"{s['rates'][name]:.1f}" for name in ("success", "collision", "contact")]
+            travel = "n/a" if s["travel_time"] is None else f"{s['travel_time']:.1f}"
+            v = g["versus_first"].get(label)
+            paired = (
+                ["", "", "", "", ""]
+                if v is None
+                else [
+                    v["text"]["success"],
+                    v["text"]["collision"],
+                    v["text"]["contact"],
+                    v["text"]["travel"],
+                    f"{v['same_metrics']} of {g['episodes']}",
+                ]
+            )
+            cells = [
+                g["method"],
+                str(g["humans"]),
+                str(g["robots"]),
+                label,
+                str(g["episodes"]),
+                *rates,
+                travel,
+            ]
+            lines.append("| " + " | ".join(cells + paired) + " |")
+    lines += _settings_lines(report, first)
+    return "\n".join(lines)
+
+
+def _settings_lines(report: dict[str, Any], first: str) -> list[str]:
+    lines = []
+    for label, rows in report["settings_differ"].items():
+        if not rows:
+            lines.append(f"\n{label} ran with the settings of {first}.")
+            continue
+        lines.append(f"\nSettings {label}'s episodes ran with where they differ from {first}'s:")
+        for row in rows[:MAX_SETTINGS_SHOWN]:
+            lines.append(f"  {row['setting']}: {_short(row['first'])} -> {_short(row['this'])}")
+        if len(rows) > MAX_SETTINGS_SHOWN:
+            lines.append(f"  and {len(rows) - MAX_SETTINGS_SHOWN} more (--json lists them all)")
+    return lines
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= VALUE_WIDTH else text[: VALUE_WIDTH - 3] + "..."
+
+
+def _identical(report: dict[str, Any]) -> int:
+    """0 when every run holds the shared episodes alone and each has every metric of the first's, else 1
+    with a line saying what differs."""
+    problems = []
+    for r in report["runs"]:
+        if r["episodes"] != report["shared_episodes"]:
+            extra = r["episodes"] - report["shared_episodes"]
+            problems.append(f"{r['label']} holds {extra} episodes not in every run (e.g. {r['unshared'][0]})")
+    for label in [r["label"] for r in report["runs"][1:]]:
+        differ = sum(g["episodes"] - g["versus_first"][label]["same_metrics"] for g in report["groups"])
+        if differ:
+            problems.append(
+                f"{differ} of {report['shared_episodes']} episodes of {label} differ from the first run's"
+            )
+    if problems:
+        print(f"crowdmpc compare: not identical: {'; '.join(problems)}", file=sys.stderr)
+        return 1
+    print(f"identical: {report['shared_episodes']} episodes, every metric equal")
+    return 0

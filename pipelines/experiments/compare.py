@@ -1,0 +1,265 @@
+"""Sweeps compared on the crowds they share: each run's success, collision, contact and travel time per method
+and crowd size, and each run against the first, episode by episode (``crowdmpc compare``).
+
+Which episodes pair. Two runs face the same crowd when they ran the same scenario from the same seed with the
+same number of humans and robots, and the crowd was made alike: ORCA's humans or the same replayed recording
+(``env.crowd``), placed under the same rules (``env.crossing``, ``env.spawn_separation``) around the same
+robot formation (``env.formation``; the placement keeps clear of the robots' starts, crowdsim.scenarios).
+Another profile or team draws other humans from the same seed, so its episodes pair with none. A record made
+before sweeps kept their config ran its profile's placement. Within that crowd an episode is its method's
+(case ignored: Table II writes "CMPC", the controllers experiment "cmpc"), so a method's column of one sweep
+pairs with the same method's of another whatever else the two changed (margins, weights, code): the
+comparison is what the runs differ in, listed beside it (``settings_differ``). Only episodes every run holds
+are compared.
+
+The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.tables): episodes where
+the run has the outcome and the first run not, and the reverse. Travel time is compared on the episodes both
+runs completed, as the mean of the differences with a normal 95 % half-width (1.96 sample standard deviations
+over the root of their number), a description of the runs, not a test corrected for the groups compared.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import statistics
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+from crowdsim.metrics import ADDED_FIELDS
+from pipelines.errors import PipelineError
+from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, read_sweep_file
+from pipelines.experiments.tables import mcnemar_exact
+
+# The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
+CROWD_SETTINGS: Final[tuple[str, ...]] = ("crowd", "crossing", "spawn_separation", "formation")
+FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
+Z95: Final[float] = 1.96
+# Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
+RUN_FIELDS: Final[tuple[str, ...]] = ("predictor_sha256", "sensor_range", "sensor_tracks")
+
+Group = tuple[str, int, int]  # method (case folded), humans, robots
+Identity = tuple[Any, ...]  # Group + scenario, seed and the crowd's settings
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one episode of a run is compared by. ``digest`` stands for every metric it recorded, ``core`` for
+    those every record has (not crowdsim.metrics' ``ADDED_FIELDS``, which ``added`` names where present)."""
+
+    success: bool
+    collision: bool
+    contact: bool
+    travel_time: float | None
+    key: str
+    digest: bytes
+    core: bytes
+    added: frozenset[str]
+
+    def same_metrics(self, other: Outcome) -> bool:
+        """Every metric equal; where one record predates some of ``ADDED_FIELDS``, every metric but those."""
+        return self.digest == other.digest if self.added == other.added else self.core == other.core
+
+
+@dataclass
+class Run:
+    """One sweep directory as the comparison reads it."""
+
+    label: str
+    path: Path
+    outcomes: dict[Identity, Outcome] = field(default_factory=dict)
+    methods: dict[Group, str] = field(default_factory=dict)  # each group's method as this run spells it
+    settings: dict[str, set[str]] = field(default_factory=dict)  # dotted setting -> the values it ran with
+    commits: list[str] = field(default_factory=list)
+
+
+def crowd_identity(record: Mapping[str, Any]) -> Identity:
+    """The episode's identity across runs (module docstring). A record older than a setting ran with the
+    value every run had before it (``UNRECORDED``), one older than the recorded config with its profile's."""
+    group: Group = (str(record["method"]).casefold(), int(record["n_humans"]), int(record["n_robots"]))
+    config = record.get("config")
+    env = config.get("env") if isinstance(config, dict) else None
+    if not isinstance(env, dict):
+        env = _profile_env(str(record.get("profile") or "paper"))
+    crowd = tuple(json.dumps(env.get(name, UNRECORDED.get(name)), sort_keys=True) for name in CROWD_SETTINGS)
+    return (*group, str(record["scenario"]), int(record["seed"]), *crowd)
+
+
+# The crowd settings added after sweeps began to record their config, as every episode before ran them.
+UNRECORDED: Final[dict[str, str]] = {"crowd": "orca", "formation": "auto"}
+
+
+def _profile_env(profile: str) -> dict[str, Any]:
+    from crowdsim.profiles import PROFILES, make_env_config
+
+    if profile not in PROFILES:
+        return {"profile": profile}  # pairs with nothing but its own kind
+    env = make_env_config(profile, "visible")
+    return {"crossing": env.crossing, "spawn_separation": env.spawn_separation}
+
+
+def _flat(values: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
+    for key, value in values.items():
+        if isinstance(value, Mapping) and value:
+            yield from _flat(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+def load_run(label: str, path: Path) -> Run:
+    """The episodes of the sweep directory ``path``, read as its report reads them (each line checked) and
+    left as they are (a sweep still writing it may hold a torn last line, which is passed over)."""
+    if not path.is_dir():
+        raise PipelineError(f"{label}: {path} is not a folder (a `crowdmpc sweep --out` folder is expected)")
+    if not (path / EPISODES_FILE).is_file():
+        raise PipelineError(
+            f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one)"
+        )
+    run = Run(label, path, commits=_commits(path))
+    kinds: dict[frozenset[str], frozenset[str]] = {}  # one ``added`` set per kind of record, not per episode
+    for _, _, record in episode_log(path).scan(repair=False):
+        identity = crowd_identity(record)
+        if identity in run.outcomes:
+            raise PipelineError(
+                f"{label}: {path} holds two episodes of method {record['method']!r} on one crowd "
+                f"({run.outcomes[identity].key} and {record['key']}): its cells are not told apart by method"
+            )
+        run.outcomes[identity] = _outcome(record, kinds)
+        run.methods.setdefault(identity[:3], str(record["method"]))
+        ran = {"config": record.get("config") or {}, **{name: record.get(name) for name in RUN_FIELDS}}
+        for key, value in _flat(ran):
+            run.settings.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
+    if not run.outcomes:
+        raise PipelineError(f"{label}: {path / EPISODES_FILE} holds no episode yet")
+    return run
+
+
+def _outcome(record: Mapping[str, Any], kinds: dict[frozenset[str], frozenset[str]]) -> Outcome:
+    metrics = record["metrics"]
+    success, collision, contact = (bool(metrics.get(name)) for name in FLAGS)
+    core = {k: v for k, v in metrics.items() if k not in ADDED_FIELDS}
+    added = frozenset(metrics.keys() & ADDED_FIELDS)
+    added = kinds.setdefault(added, added)
+    travel = metrics.get("travel_time")
+    return Outcome(success, collision, contact, travel, record["key"], _digest(metrics), _digest(core), added)
+
+
+def _digest(values: Mapping[str, Any]) -> bytes:
+    return hashlib.blake2b(json.dumps(values, sort_keys=True).encode(), digest_size=16).digest()
+
+
+def _commits(path: Path) -> list[str]:
+    """The code each run line of ``path``'s sweep.json ran ("abc123def456+dirty"), oldest first; none where
+    the file is missing or unreadable (the episodes are still compared)."""
+    try:
+        meta = read_sweep_file(path / SWEEP_FILE)
+    except (PipelineError, OSError):
+        return []
+    found: list[str] = []
+    for line in meta.get("runs", []):
+        code = line.get("code") if isinstance(line, dict) else None
+        commit = code.get("commit") if isinstance(code, dict) else None
+        if isinstance(code, dict) and commit:
+            text = str(commit)[:12] + ("+dirty" if code.get("dirty") else "")
+            if text not in found:
+                found.append(text)
+    return found
+
+
+@dataclass(frozen=True)
+class Paired:
+    """One flag, one run against the first, on the shared episodes: ``gained`` where only the run has it."""
+
+    gained: int
+    lost: int
+
+    @property
+    def p(self) -> float:
+        return mcnemar_exact(self.gained, self.lost)
+
+    def text(self) -> str:
+        return f"+{self.gained} / −{self.lost} (p = {self.p:.2g})"
+
+
+@dataclass(frozen=True)
+class Side:
+    """One run's figures in one group: rates in %, mean travel time over its successes."""
+
+    n: int
+    rates: dict[str, float]
+    travel: float | None
+
+
+@dataclass(frozen=True)
+class Versus:
+    """One run against the first in one group."""
+
+    flags: dict[str, Paired]
+    travel_difference: float | None  # mean of (run - first) over the episodes both completed, s
+    travel_half_width: float | None
+    travel_n: int
+    same: int  # episodes whose every metric equals the first run's
+
+    def travel_text(self) -> str:
+        if self.travel_difference is None:
+            return "n/a"
+        spread = "" if self.travel_half_width is None else f" ± {self.travel_half_width:.2f}"
+        return f"{self.travel_difference:+.2f}{spread} ({self.travel_n})"
+
+
+def side(outcomes: list[Outcome]) -> Side:
+    travel = [o.travel_time for o in outcomes if o.success and o.travel_time is not None]
+    rates = {name: 100.0 * sum(getattr(o, name) for o in outcomes) / len(outcomes) for name in FLAGS}
+    return Side(len(outcomes), rates, sum(travel) / len(travel) if travel else None)
+
+
+def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
+    """``other`` against ``base``, the same episodes in the same order."""
+    pairs = list(zip(base, other, strict=True))
+    flags = {
+        name: Paired(
+            sum(getattr(o, name) and not getattr(b, name) for b, o in pairs),
+            sum(getattr(b, name) and not getattr(o, name) for b, o in pairs),
+        )
+        for name in FLAGS
+    }
+    differences = [
+        o.travel_time - b.travel_time
+        for b, o in pairs
+        if b.success and o.success and b.travel_time is not None and o.travel_time is not None
+    ]
+    mean = statistics.fmean(differences) if differences else None
+    half = Z95 * statistics.stdev(differences) / math.sqrt(len(differences)) if len(differences) > 1 else None
+    same = sum(b.same_metrics(o) for b, o in pairs)
+    return Versus(flags, mean, half, len(differences), same)
+
+
+def shared_identities(runs: list[Run]) -> list[Identity]:
+    """The episodes every run holds, in the first run's order (its plan's: cells as its table lists them)."""
+    others = [run.outcomes.keys() for run in runs[1:]]
+    return [k for k in runs[0].outcomes if all(k in keys for keys in others)]
+
+
+def groups_of(identities: list[Identity]) -> dict[Group, list[Identity]]:
+    grouped: dict[Group, list[Identity]] = {}
+    for identity in identities:
+        grouped.setdefault(identity[:3], []).append(identity)
+    return grouped
+
+
+def settings_differ(base: Run, other: Run) -> list[tuple[str, str, str]]:
+    """(setting, the values the first run's episodes ran with, the other's) where the two differ, each side
+    its values joined with " | ", sorted; a setting one run does not record shows "(not recorded)"."""
+    rows = []
+    for key in sorted(base.settings.keys() | other.settings.keys()):
+        a, b = base.settings.get(key), other.settings.get(key)
+        if a != b:
+            rows.append((key, _values(a), _values(b)))
+    return rows
+
+
+def _values(values: set[str] | None) -> str:
+    return "(not recorded)" if values is None else " | ".join(sorted(values))

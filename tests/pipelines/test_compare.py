@@ -1,0 +1,242 @@
+"""``crowdmpc compare``: sweeps paired on the crowds they share, against numbers worked by hand."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands.compare import labelled
+from pipelines.errors import PipelineError
+from pipelines.experiments.compare import Outcome, versus
+from pipelines.experiments.tables import mcnemar_exact
+
+ENV = {"crowd": "orca", "crossing": "paper", "spawn_separation": 0.5, "formation": "auto", "time_limit": 40.0}
+
+
+def _record(i: int, success: bool, collision: bool, travel: float, *, method="CMPC", humans=7, **changes):
+    """Episode ``i`` of a cell (circle when even, seed i // 2) with the outcomes given; ``changes`` replace
+    parts of it: ``env``, ``mpc`` (the config's), ``contact``, ``min_distance``."""
+    metrics = {
+        "success": success,
+        "travel_time": travel if success else None,
+        "collision": collision,
+        "contact": changes.get("contact", False),
+        "discomfort": False,
+        "timeout": not success,
+        "min_distance": changes.get("min_distance", 1.0),
+        "min_distance_robots": 1.0,
+        "min_distance_humans": 1.0,
+        "path_length": [10.0, 10.0, 10.0],
+        "reach_times": [travel] * 3,
+        "discomfort_steps": 0,
+        "n_steps": 50,
+    }
+    cell = f"{method.lower()}-constant_velocity-F-ibr-m=none-paper-visible-h{humans}-r3"
+    scenario = ("circle", "perpendicular")[i % 2]
+    return {
+        "seed": i // 2,
+        "scenario": scenario,
+        "n_humans": humans,
+        "n_robots": 3,
+        "controller": method.lower(),
+        "predictor": "constant_velocity",
+        "metrics": metrics,
+        "solver": {
+            "steps": 50,
+            "total_ms": 100.0,
+            "median_ms": 2.0,
+            "p95_ms": 3.0,
+            "max_ms": 4.0,
+            "mean_iterations": 2.0,
+            "max_iterations": 2,
+            "fallback_steps": 0,
+        },
+        "key": f"{cell}/{scenario}/{i}",
+        "cell": cell,
+        "method": method,
+        "index": i,
+        "wall_s": 1.0,
+        "profile": "paper",
+        "config": {"env": changes.get("env", ENV), "mpc": changes.get("mpc", {"w_coll": 1e7})},
+    }
+
+
+def _sweep(path: Path, records: list[dict], commit: str | None = "0123456789abcdef") -> Path:
+    path.mkdir(parents=True)
+    (path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    if commit:
+        code = {"commit": commit, "dirty": False}
+        (path / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": [{"code": code}]}))
+    return path
+
+
+# base and new on four crowds: success 1,0,1,1 vs 1,1,0,1; collision 0,1,1,0 vs 0,0,0,0; travel on the two
+# both completed (episodes 0 and 3): 10 -> 11 and 9 -> 12
+BASE = [(True, False, 10.0), (False, True, 0.0), (True, True, 12.0), (True, False, 9.0)]
+NEW = [(True, False, 11.0), (True, False, 13.0), (False, False, 0.0), (True, False, 12.0)]
+
+
+def test_two_runs_by_hand(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(NEW)])
+    assert main(["compare", f"base={a}", f"new={b}", "--json", str(tmp_path / "c.json")]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| CMPC")]
+    # base: 3 of 4 succeed, 2 of 4 collide, travel (10 + 12 + 9) / 3 = 10.33
+    assert rows[0] == "| CMPC | 7 | 3 | base | 4 | 75.0 | 50.0 | 0.0 | 10.3 |  |  |  |  |  |"
+    # new: 3 of 4, 0 of 4, (11 + 13 + 12) / 3 = 12; success +1 (episode 1) / -1 (episode 2), McNemar p = 1;
+    # collision +0 / -2, p = 2 / 4 = 0.5; travel differences 1 and 3: mean 2, sd sqrt(2), half 1.96
+    assert rows[1] == (
+        "| CMPC | 7 | 3 | new | 4 | 75.0 | 0.0 | 0.0 | 12.0 | +1 / −1 (p = 1) | +0 / −2 (p = 0.5) "
+        "| +0 / −0 (p = 1) | +2.00 ± 1.96 (2) | 0 of 4 |"
+    )
+    report = json.loads((tmp_path / "c.json").read_text())
+    against = report["groups"][0]["versus_first"]["new"]
+    assert against["collision"] == {"gained": 0, "lost": 2, "p": 0.5}
+    assert against["travel_difference"] == {"mean": 2.0, "half_width_95": pytest.approx(1.96), "n": 2}
+    assert report["runs"][0]["code"] == ["0123456789ab"] and report["shared_episodes"] == 4
+
+
+def test_mcnemar_and_the_travel_spread_by_hand():
+    # 1 vs 3 discordant: 2 (C(4,0) + C(4,1)) / 2^4 = 10 / 16
+    assert mcnemar_exact(1, 3) == pytest.approx(0.625)
+
+    def o(success, travel):
+        return Outcome(success, False, False, travel, "k", b"", b"", frozenset())
+
+    v = versus(
+        [o(True, 10.0), o(True, 10.0), o(True, 10.0), o(False, None)], [o(True, 11.0), o(True, 12.0)] * 2
+    )
+    # differences 1, 2, 1 (base's 4th failed): mean 4/3, sd sqrt(1/3), half 1.96 sqrt(1/3) / sqrt(3)
+    assert v.travel_difference == pytest.approx(4 / 3)
+    assert v.travel_half_width == pytest.approx(1.96 / 3)
+    assert v.flags["success"].gained == 1 and v.flags["success"].lost == 0
+
+
+def test_a_method_pairs_whatever_its_case_and_only_on_the_same_crowd(tmp_path, capsys):
+    """Table II writes "CMPC", the controllers experiment "cmpc": the same episodes. Another formation (or
+    crowd, or profile) places other humans from the same seed: those pair with nothing."""
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o, method="cmpc") for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(b), "--expect-identical"]) == 0
+    assert "identical: 4 episodes, every metric equal" in capsys.readouterr().out
+    wedge = {**ENV, "formation": "wedge"}
+    c = _sweep(tmp_path / "c", [_record(i, *o, env=wedge) for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(c)]) == 2
+    assert "the runs share no episode" in capsys.readouterr().err
+
+
+def test_expect_identical_names_what_differs(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    changed = [_record(i, *o, min_distance=0.9 if i == 2 else 1.0) for i, o in enumerate(BASE)]
+    b = _sweep(tmp_path / "b", [*changed, _record(4, True, False, 8.0)])  # one more crowd, one metric moved
+    assert main(["compare", str(a), str(b), "--expect-identical"]) == 1
+    out, err = capsys.readouterr()
+    assert "| 3 of 4 |" in out  # success, collision, contact and travel all equal: the minimum distance moved
+    assert "not identical: b holds 1 episodes not in every run (e.g. cmpc-" in err
+    assert "1 of 4 episodes of b differ from the first run's" in err
+
+
+def test_the_settings_that_differ_are_listed(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o, mpc={"w_coll": 1e6}) for i, o in enumerate(BASE)], commit=None)
+    assert main(["compare", str(a), str(b)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "Settings b's episodes ran with where they differ from a's:\n  mpc.w_coll: 10000000.0 -> 1000000.0"
+        in out
+    )
+    assert "b: " + str(b) + ", 4 episodes, code not recorded" in out
+
+
+def test_json_on_standard_output_is_the_document_alone(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(NEW)])
+    assert main(["compare", str(a), str(b), "--json", "-"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["groups"][0]["versus_first"]["b"]["success"] == {"gained": 1, "lost": 1, "p": 1.0}
+    assert "| CMPC | 7 | 3 | a |" in err
+
+
+@pytest.mark.parametrize(
+    ("items", "message"),
+    [
+        (["a"], "give at least two sweep folders"),
+        (["x=a", "x=b"], "label 'x' is given twice"),
+        (["=a", "b"], "expected [LABEL=]RUN"),
+        (["", "b"], "expected [LABEL=]RUN"),
+    ],
+)
+def test_labels_are_checked(items, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(PipelineError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        labelled(items)
+
+
+def test_a_folder_whose_name_holds_an_equals_sign_is_taken_whole(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "w=1e6").mkdir()
+    assert labelled(["w=1e6", "base=b"]) == [("w=1e6", Path("w=1e6")), ("base", Path("b"))]
+
+
+def test_bad_runs_are_one_line_errors(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    (tmp_path / "empty").mkdir()
+    damaged = _sweep(tmp_path / "damaged", [_record(0, *BASE[0])])
+    with (damaged / "episodes.jsonl").open("a") as f:
+        f.write('{"key": "x", "metrics": []}\n')
+    twice = _sweep(tmp_path / "twice", [_record(0, *BASE[0]), {**_record(0, *BASE[0]), "key": "other"}])
+    for other, message in [
+        (tmp_path / "missing", "is not a folder (a `crowdmpc sweep --out` folder is expected)"),
+        (tmp_path / "empty", "holds no episodes.jsonl"),
+        (damaged, "damaged/episodes.jsonl:2: not an episode record"),
+        (twice, "holds two episodes of method 'CMPC' on one crowd"),
+    ]:
+        assert main(["compare", str(a), str(other)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_json_output_may_not_replace_a_runs_file(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(NEW)])
+    before = (a / "episodes.jsonl").read_bytes()
+    assert main(["compare", str(a), str(b), "--json", str(a / "episodes.jsonl")]) == 2
+    assert "--json" in capsys.readouterr().err
+    assert (a / "episodes.jsonl").read_bytes() == before
+
+
+def test_a_record_older_than_the_recorded_config_pairs_by_its_profile(tmp_path, capsys):
+    """Sweeps recorded no config at first: such an episode ran its profile's placement, the ORCA crowd and
+    the automatic formation, and pairs with a new record of those; a v1 record pairs with neither."""
+
+    def old(i, outcome, profile):
+        record = _record(i, *outcome)
+        del record["config"]
+        return record | {"profile": profile}
+
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [old(i, o, "paper") for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(b), "--expect-identical"]) == 0
+    capsys.readouterr()
+    v1 = _sweep(tmp_path / "v1", [old(i, o, "v1") for i, o in enumerate(BASE)])
+    for first in (a, b):
+        assert main(["compare", str(first), str(v1)]) == 2
+        assert "share no episode" in capsys.readouterr().err
+
+
+def test_a_record_older_than_a_metric_is_compared_on_the_metrics_it_has(tmp_path, capsys):
+    """robot_contact came after the first sweeps: a record without it equals one with it where every metric
+    both have is equal, and not where one of those differs."""
+
+    def newer(i, outcome, **changes):
+        record = _record(i, *outcome, **changes)
+        record["metrics"] |= {"robot_contact": False, "robot_contact_steps": 0}
+        return record
+
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [newer(i, o) for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(b), "--expect-identical"]) == 0
+    c = _sweep(tmp_path / "c", [newer(i, o, min_distance=0.7 if i else 1.0) for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(c), "--expect-identical"]) == 1
+    assert "| 1 of 4 |" in capsys.readouterr().out
