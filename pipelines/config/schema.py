@@ -39,9 +39,8 @@ from pipelines.config.settings import (
     ControllerSettings,
     ScenarioSettings,
     SimulateSettings,
-    SweepSettings,
-    available_cpus,
 )
+from pipelines.config.sweep_keys import build_sweep, sweep_keys
 from pipelines.errors import PipelineError
 
 # ---- [world] ---------------------------------------------------------------------------------------------
@@ -250,85 +249,6 @@ def _build_simulate(values: dict[str, Any], built: Mapping[str, Any]) -> Simulat
     return SimulateSettings(**values)
 
 
-def _sweep_keys() -> tuple[Key, ...]:
-    from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
-    from pipelines.experiments.methods import SHIPPED_CONTROLLERS
-
-    return (
-        Key(
-            "experiment",
-            "str",
-            None,
-            f"{' | '.join(sorted(EXPERIMENTS))} (--experiment; sweep needs one)",
-            "table2",
-        ),
-        Key(
-            "out",
-            "str",
-            None,
-            "the sweep directory, created and resumed (--out; sweep needs one; a leading ~ is the home "
-            "directory)",
-            "runs/x",
-        ),
-        Key(
-            "episodes_per_cell",
-            "int",
-            PAPER_EPISODES_PER_CELL,
-            "episodes per cell, half of each scenario (the paper's 1000; --episodes-per-cell)",
-        ),
-        Key("humans", "ints", None, "crowd sizes (--humans); unset: the experiment's own", [5, 6, 7, 8, 9]),
-        Key("seed", "int", 0, "base scenario seed: episode i is seed + i // 2 (--seed)"),
-        Key(
-            "workers",
-            "int",
-            None,
-            "parallel workers (--workers); unset: the CPUs this process may use",
-            available_cpus(),
-        ),
-        Key(
-            "backend",
-            "str",
-            "auto",
-            "auto (Ray when installed, else processes) | ray | process | inline (--backend)",
-        ),
-        Key("ray_address", "str", None, "run on this Ray cluster (--ray-address)", "ray://head:10001"),
-        Key("record", "str", "none", "keep MCAP logs: none | failures | all (--record)"),
-        Key(
-            "jit",
-            "str",
-            "auto",
-            "compile the MPC NLPs (once per machine, cached): auto (when it pays back) | on | off (--jit)",
-        ),
-        Key(
-            "predictors",
-            "strs",
-            None,
-            "the predictors experiment's columns (--predictors); unset: the shipped swap table",
-            ["constant_velocity", "social_lstm_eth"],
-        ),
-        Key(
-            "controllers",
-            "strs",
-            None,
-            f"the controllers experiment's columns (--controllers); unset: {', '.join(SHIPPED_CONTROLLERS)}",
-            ["cmpc", "orca"],
-        ),
-        Key(
-            "vary",
-            "str",
-            None,
-            "a column per value of one [mpc] setting, or controller.margins, beside each method that plans, "
-            "or of scenario.robots beside every method (--vary); several separated by ';': a column per "
-            "combination; unset: none",
-            "mpc.d_min=0.8,0.9,1.0",
-        ),
-    )
-
-
-def _build_sweep(values: dict[str, Any], built: Mapping[str, Any]) -> SweepSettings:
-    return SweepSettings(**values)
-
-
 _WORLD_REASON = "set it in [world], the one source of the simulator's and the MPC's shared facts"
 SECTIONS: Final[tuple[Section, ...]] = (
     Section(
@@ -381,7 +301,7 @@ SECTIONS: Final[tuple[Section, ...]] = (
         },
     ),
     Section("simulate", "crowdmpc simulate's run.", SIMULATE_KEYS, _build_simulate),
-    Section("sweep", "crowdmpc sweep's run (pipelines/experiments).", _sweep_keys(), _build_sweep),
+    Section("sweep", "crowdmpc sweep's run (pipelines/experiments).", sweep_keys(), build_sweep),
 )
 SECTION_BY_NAME: Final[Mapping[str, Section]] = {s.name: s for s in SECTIONS}
 # The order in which sections are written: a nested table follows its parent.

@@ -15,6 +15,7 @@ from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 from pipelines.experiments.backends import BACKENDS
 from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
+from pipelines.experiments.deadline import check_timeout
 from pipelines.experiments.sweep_config import MAX_EPISODES_PER_CELL, MAX_WORKERS
 from pipelines.experiments.worker import RECORD_POLICIES
 from pipelines.loop.spec import COUPLINGS, ControllerSpec
@@ -177,6 +178,7 @@ class SweepSettings:
     ray_address: str | None = None
     record: str = "none"
     jit: str = "auto"
+    episode_timeout_s: float | None = None  # s of wall clock an episode may take (experiments/deadline.py)
     predictors: tuple[str, ...] | None = None  # the predictors experiment's list; None: the shipped one
     controllers: tuple[str, ...] | None = None  # the controllers experiment's list; None: the shipped one
     # "mpc.KEY=V1,V2,..": a column per value, ";" between settings: a grid (pipelines/commands/sweep_vary.py)
@@ -206,6 +208,7 @@ class SweepSettings:
             raise PipelineError(f"record must be one of {list(RECORD_POLICIES)}, got {self.record!r}")
         if self.jit not in JIT_CHOICES:
             raise PipelineError(f"jit must be one of {list(JIT_CHOICES)}, got {self.jit!r}")
+        check_timeout(self.episode_timeout_s)
         self._check_workers()
         self._check_predictors()
         self._check_controllers()

@@ -55,9 +55,11 @@ class InlineBackend:
 
     name = "inline"
 
-    def __init__(self, record: str, jit: bool = False, scratch_root: str | None = None):
+    def __init__(
+        self, record: str, jit: bool = False, scratch_root: str | None = None, timeout_s: float | None = None
+    ):
         # The driver stays where it is: the compile cache writes jit's C sources into its own folder.
-        self.worker = EpisodeWorker(record, jit, worker_scratch(scratch_root))
+        self.worker = EpisodeWorker(record, jit, worker_scratch(scratch_root), timeout_s)
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         for task in tasks:
@@ -71,11 +73,17 @@ class _RayEpisodeWorker(EpisodeWorker):
     """An EpisodeWorker in a Ray actor: its own process, so it may move to a scratch directory for jit (the
     driver's scratch root when the actor runs on the driver's machine, else one of its own)."""
 
-    def __init__(self, record: str = "none", jit: bool = False, scratch_root: str | None = None):
+    def __init__(
+        self,
+        record: str = "none",
+        jit: bool = False,
+        scratch_root: str | None = None,
+        timeout_s: float | None = None,
+    ):
         scratch = worker_scratch(scratch_root)
         if jit:
             os.chdir(scratch)
-        super().__init__(record, jit, scratch)
+        super().__init__(record, jit, scratch, timeout_s)
 
 
 class RayBackend:
@@ -92,6 +100,7 @@ class RayBackend:
         address: str | None,
         jit: bool = False,
         scratch_root: str | None = None,
+        timeout_s: float | None = None,
     ):
         try:
             import ray
@@ -107,7 +116,7 @@ class RayBackend:
             else:
                 _join_cluster(ray, address, env)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
-        self._actor_args = (record, jit, scratch_root)
+        self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
@@ -197,12 +206,14 @@ def make_backend(
     ray_address: str | None,
     jit: bool = False,
     scratch_root: str | None = None,
+    timeout_s: float | None = None,
 ) -> Backend:
     """``scratch_root``: the driver's folder for the workers' scratch (pipelines.experiments.worker), which
-    the driver removes; None: each worker makes its own in the temp directory."""
+    the driver removes; None: each worker makes its own in the temp directory. ``timeout_s``: each
+    episode's wall-clock limit (pipelines.experiments.deadline)."""
     check_backend(kind, workers, ray_address)
     if kind == "inline":
-        return InlineBackend(record, jit, scratch_root)
+        return InlineBackend(record, jit, scratch_root, timeout_s)
     if kind == "ray" or (kind == "auto" and (ray_available() or ray_address is not None)):
-        return RayBackend(workers, record, ray_address, jit, scratch_root)
-    return ProcessBackend(workers, record, jit, scratch_root)
+        return RayBackend(workers, record, ray_address, jit, scratch_root, timeout_s)
+    return ProcessBackend(workers, record, jit, scratch_root, timeout_s)

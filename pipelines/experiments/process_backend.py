@@ -57,7 +57,7 @@ def _exit_with_parent() -> None:
     threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
 
 
-def _init_pool_worker(record: str, jit: bool, scratch_root: str | None) -> None:
+def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_s: float | None) -> None:
     import signal
 
     global _WORKER
@@ -69,7 +69,7 @@ def _init_pool_worker(record: str, jit: bool, scratch_root: str | None) -> None:
         os.chdir(
             scratch
         )  # CasADi's jit writes its C sources into the current directory (no option for another)
-    _WORKER = EpisodeWorker(record, jit, scratch)
+    _WORKER = EpisodeWorker(record, jit, scratch, timeout_s)
 
 
 def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
@@ -178,7 +178,14 @@ class ProcessBackend:
 
     name = "process"
 
-    def __init__(self, workers: int, record: str, jit: bool = False, scratch_root: str | None = None):
+    def __init__(
+        self,
+        workers: int,
+        record: str,
+        jit: bool = False,
+        scratch_root: str | None = None,
+        timeout_s: float | None = None,
+    ):
         """``scratch_root``: the folder the workers' scratch folders go in (a sweep's); without one the
         backend makes its own and removes it on ``close``: a worker's folder of its own would be left behind,
         since ``close`` terminates the workers (no atexit runs)."""
@@ -186,7 +193,8 @@ class ProcessBackend:
         _check_main_is_a_file()
         self._environment = _worker_environment()  # refuses a plugin the workers cannot import
         self._own_root = None if scratch_root is not None else make_scratch_root()
-        self._initargs = (record, jit, scratch_root if self._own_root is None else str(self._own_root))
+        root = scratch_root if self._own_root is None else str(self._own_root)
+        self._initargs = (record, jit, root, timeout_s)
         _start_resource_tracker()
         try:
             self._start_pool()

@@ -338,7 +338,13 @@ def _read_back(log: EpisodeLog, line: bytes, key: str) -> dict[str, Any]:
 
 def _default_backend(config: SweepConfig, scratch: str) -> Backend:
     return make_backend(
-        config.backend, config.workers, config.record, config.ray_address, config.jit, scratch
+        config.backend,
+        config.workers,
+        config.record,
+        config.ray_address,
+        config.jit,
+        scratch,
+        config.episode_timeout_s,
     )
 
 

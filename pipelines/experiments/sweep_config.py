@@ -20,6 +20,7 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments.backends import BACKENDS
 from pipelines.experiments.cells import Experiment
+from pipelines.experiments.deadline import check_timeout
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES
 
@@ -44,6 +45,8 @@ class SweepConfig:
     record: str = "none"  # RECORD_POLICIES
     progress: bool = True
     jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
+    # s of wall-clock time after which a worker stops an episode (pipelines.experiments.deadline); None: none
+    episode_timeout_s: float | None = None
     # The run's effective config (pipelines/config: every section, and the file it came from), for sweep.json.
     run_config: Mapping[str, Any] | None = field(default=None, compare=False)
 
@@ -66,6 +69,7 @@ class SweepConfig:
             raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
         if self.humans is not None and max(self.humans) > MAX_HUMANS:
             raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
+        check_timeout(self.episode_timeout_s, "--episode-timeout")
 
     def tasks(self) -> list[EpisodeTask]:
         return self.experiment.tasks(

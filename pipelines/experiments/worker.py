@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
 from pipelines.loop.controllers import Controller, make_controller
@@ -218,13 +219,21 @@ class EpisodeOutcome:
 class EpisodeWorker:
     """Runs episode tasks; builds each cell's controller once and reuses it across that cell's episodes."""
 
-    def __init__(self, record: str = "none", jit: bool = False, scratch: str | Path | None = None):
-        """``scratch``: the folder of this worker's temporary files (default: the temp directory)."""
+    def __init__(
+        self,
+        record: str = "none",
+        jit: bool = False,
+        scratch: str | Path | None = None,
+        timeout_s: float | None = None,
+    ):
+        """``scratch``: the folder of this worker's temporary files (default: the temp directory);
+        ``timeout_s``: each episode's wall-clock limit (pipelines.experiments.deadline; None: none)."""
         if record not in RECORD_POLICIES:
             raise PipelineError(f"unknown --record {record!r}; choose from {list(RECORD_POLICIES)}")
         self.record = record
         self.jit = jit
         self.scratch = scratch
+        self.timeout_s = check_timeout(timeout_s)
         self._controllers: OrderedDict[str, Controller] = OrderedDict()
         self._configs: dict[str, dict[str, Any]] = {}  # cell key -> cell_config, built with its controller
         self.builds = 0  # controllers built so far (a test checks the reuse)
@@ -254,7 +263,14 @@ class EpisodeWorker:
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
-            return self._run(task)
+            with deadline(self.timeout_s):
+                return self._run(task)
+        except EpisodeTimeout:
+            # stopped anywhere, mid-step too: its state is not to be trusted with another episode
+            self._controllers.pop(task.cell.key, None)
+            self._configs.pop(task.cell.key, None)
+            assert self.timeout_s is not None  # only a limit raises it
+            return EpisodeOutcome(task.key, error=timeout_error(self.timeout_s, traceback.format_exc()))
         except Exception as exc:  # a bug or a solver crash in one episode must not end a sweep of thousands
             interrupt = interrupt_behind(exc)
             if interrupt is not None:  # Ctrl-C in CasADi (inline sweeps): the sweep's, not the episode's

@@ -1,12 +1,14 @@
 """Controller plugins that fail as a sweep's episodes may: ``Dies`` ends its own worker process (as a
 segfault in a library or the kernel's OOM killer would), ``RaisesOnCircles`` raises on the circle crossings
 (every other episode of a cell, on every run), ``SetInDescribe`` describes itself with a set (no JSON);
-``RaisesIn...`` raise in one method each, ``InterruptedInAct`` is Ctrl-C in act."""
+``RaisesIn...`` raise in one method each, ``InterruptedInAct`` is Ctrl-C in act, ``HangsOnCircles`` never
+returns from act on the circle crossings."""
 
 from __future__ import annotations
 
 import os
 import signal
+import time
 from typing import Any
 
 import numpy as np
@@ -90,3 +92,21 @@ class NaNInThirdEpisode(StraightLine):
         if self.episodes == 3 and obs.step == 4:
             out.accelerations[0, 0] = np.nan
         return out
+
+
+class HangsOnCircles(StraightLine):
+    """Never returns from ``act`` on a circle crossing, catching every Exception on the way (a plugin waiting
+    on something that never comes); other crowds it crosses as StraightLine does."""
+
+    name = "hangs_on_circles"
+
+    def reset(self, obs: Observation) -> None:
+        self.circle = bool(np.allclose(obs.human_goals, -obs.human_positions, rtol=0, atol=1e-9))
+
+    def act(self, obs: Observation) -> Any:
+        while self.circle:
+            try:
+                time.sleep(0.02)
+            except Exception:  # noqa: S112 (the point: a catch-all that a time limit must get past)
+                continue
+        return super().act(obs)

@@ -1,0 +1,70 @@
+"""A wall-clock limit on each episode of a sweep (``[sweep] episode_timeout_s``, ``--episode-timeout S``).
+
+Why. A sweep runs thousands of episodes unattended, some with its users' own controllers (plugins). One that
+never returned (a plugin waiting on a lock or looping in ``act``) held its worker for good: the other workers
+finished their share, and the sweep then waited forever with nothing in errors.jsonl to say why. With a
+limit, the worker stops the episode when its time runs out, hands the driver an error naming the limit and
+where the episode was (errors.jsonl; a rerun tries the episode again), and goes on with the next.
+
+How. A real-time interval timer (``setitimer``) raises ``EpisodeTimeout`` in the worker's main thread, where
+every backend runs its episodes (the pool's processes, Ray's actors, the inline driver). It derives from
+BaseException, as KeyboardInterrupt does, so that a controller's ``except Exception`` does not swallow it.
+Python acts on the timer between bytecodes: an episode inside one long C call (a CasADi solve, itself bounded
+by ``mpc.time_limit_s``; a plugin's C extension) is stopped when that call returns.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+from pipelines.errors import PipelineError
+
+
+class EpisodeTimeout(BaseException):
+    """An episode ran past its wall-clock limit (s, the argument)."""
+
+
+def check_timeout(seconds: Any, name: str = "episode_timeout_s") -> float | None:
+    """``seconds`` as a limit: None (none) or a finite number > 0; else a PipelineError naming ``name``."""
+    if seconds is None:
+        return None
+    number = isinstance(seconds, int | float) and not isinstance(seconds, bool)
+    if not (number and math.isfinite(seconds) and seconds > 0):
+        raise PipelineError(f"{name} must be a number of seconds > 0, or unset for no limit; got {seconds!r}")
+    return float(seconds)
+
+
+@contextlib.contextmanager
+def deadline(seconds: float | None) -> Iterator[None]:
+    """Raise ``EpisodeTimeout`` in the block once ``seconds`` of wall-clock time have passed (None: never).
+    The timer is cleared on the way out; one that fires in that instant raises from here."""
+    if seconds is None:
+        yield
+        return
+    if threading.current_thread() is not threading.main_thread():  # signals reach the main thread alone
+        raise PipelineError("an episode time limit needs the episodes run on their process's main thread")
+
+    def expire(signum: int, frame: Any) -> None:
+        raise EpisodeTimeout(seconds)
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def timeout_error(seconds: float, trace: str) -> str:
+    """The error a timed-out episode leaves in errors.jsonl: the limit, then where the episode was."""
+    return (
+        f"the episode ran past the sweep's episode_timeout_s = {seconds:g} s of wall-clock time and was "
+        "stopped; its controller was dropped (the cell's next episode builds it again) and a rerun tries the "
+        f"episode again. Where it was:\n{trace}"
+    )

@@ -1,0 +1,122 @@
+"""A sweep's episode time limit (pipelines/experiments/deadline.py): a controller that never returns is
+stopped as an episode error, its worker goes on, and the limit is checked where it is given."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import threading
+import time
+
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline
+from tests.cli_calls import one_line, parser_error
+from tests.cli_calls import run_cli as run
+
+HANGS = "tests.plugins.failing_controllers:HangsOnCircles"
+
+
+def test_the_deadline_stops_a_loop_that_catches_every_exception_and_leaves_no_timer():
+    before = signal.getsignal(signal.SIGALRM)
+    started = time.perf_counter()
+    with pytest.raises(EpisodeTimeout), deadline(0.2):
+        while True:
+            try:
+                time.sleep(0.01)
+            except Exception:  # noqa: S112 (what a plugin may do: the limit is no Exception)
+                continue
+    assert 0.2 <= time.perf_counter() - started < 2.0
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    assert signal.getsignal(signal.SIGALRM) is before
+    with deadline(5.0):  # a block that ends in time: nothing raised, the timer cleared
+        pass
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_the_deadline_needs_the_main_thread():
+    raised: list[BaseException] = []
+
+    def in_thread() -> None:
+        try:
+            with deadline(1.0):
+                pass
+        except PipelineError as exc:
+            raised.append(exc)
+
+    thread = threading.Thread(target=in_thread)
+    thread.start()
+    thread.join()
+    assert raised and "main thread" in str(raised[0])
+    with deadline(None):  # no limit: no timer, any thread
+        pass
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, math.nan, math.inf, True, "10"])
+def test_a_limit_is_a_positive_finite_number(bad):
+    with pytest.raises(PipelineError, match="episode_timeout_s must be a number of seconds > 0"):
+        check_timeout(bad)
+    assert check_timeout(None) is None and check_timeout(3) == 3.0
+
+
+def _sweep(capsys, out, backend: str, *extra: str) -> tuple[int, str, str]:
+    argv = ["--plugin", HANGS, "sweep", "--experiment", "controllers", "--controllers", f"straight,{HANGS}"]
+    argv += ["--humans", "2", "--episodes-per-cell", "4", "--workers", "1", "--backend", backend]
+    return run(capsys, *argv, "--jit", "off", "--no-progress", "--out", str(out), *extra)
+
+
+@pytest.mark.parametrize("backend", ["inline", "process"])
+def test_a_hanging_controller_is_an_episode_error_and_its_worker_goes_on(backend, tmp_path, capsys):
+    """HangsOnCircles never returns on the circle crossings (seeds 0 and 1 of its cell): each is stopped
+    after the limit into errors.jsonl, naming the limit and the line it hung on, and the same worker runs the
+    rest, the plugin's perpendicular crossings with a controller built again."""
+    out = tmp_path / "sweep"
+    started = time.perf_counter()
+    code, _, err = _sweep(capsys, out, backend, "--episode-timeout", "1")
+    assert time.perf_counter() - started < 60
+    assert code == 1, err  # some episodes raised
+    errors = [json.loads(line) for line in (out / "errors.jsonl").read_text().splitlines()]
+    assert sorted(e["key"].rsplit("/", 2)[1:] for e in errors) == [["circle", "0"], ["circle", "1"]]
+    assert all(e["key"].startswith(HANGS) for e in errors), errors
+    message = errors[0]["error"]
+    assert message.startswith("the episode ran past the sweep's episode_timeout_s = 1 s of wall-clock time")
+    assert "failing_controllers.py" in message and "time.sleep(0.02)" in message
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert sorted((r["controller"], r["scenario"]) for r in records) == [
+        ("hangs_on_circles", "perpendicular"),
+        ("hangs_on_circles", "perpendicular"),
+        *[("straight", s) for s in ("circle", "circle", "perpendicular", "perpendicular")],
+    ]
+    assert len({r["worker"] for r in records}) == 1  # one worker throughout: not killed, not replaced
+    run_line = json.loads((out / "sweep.json").read_text())["runs"][0]
+    assert run_line["config"]["sweep"]["episode_timeout_s"] == 1.0
+
+
+def test_the_worker_builds_a_timed_out_cells_controller_again(tmp_path):
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.worker import EpisodeWorker
+    from pipelines.plugins import register_plugins
+
+    register_plugins([HANGS])
+    tasks = get_experiment("controllers").with_controllers((HANGS,)).tasks(2, humans=(2,))
+    worker = EpisodeWorker(timeout_s=0.5)
+    circle, perpendicular = tasks
+    assert circle.scenario == "circle" and "episode_timeout_s = 0.5 s" in (worker.run(circle).error or "")
+    assert worker.run(perpendicular).record is not None
+    assert worker.builds == 2  # the cell's controller, stopped mid-act, was not used again
+
+
+def test_a_bad_limit_is_one_line(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    for given, label in (
+        (["--episode-timeout", "0"], "--episode-timeout"),
+        (["--episode-timeout", "nan"], "--episode-timeout"),
+        (["--set", "sweep.episode_timeout_s=-5"], "--set sweep.episode_timeout_s:"),
+    ):
+        argv = ["sweep", "--experiment", "baselines", "--episodes-per-cell", "1", "--out", str(out)]
+        code, _, err = run(capsys, *argv, *given)
+        assert code == 2 and f"{label} must be a number of seconds > 0" in one_line(err), err
+    assert not out.exists()
+    assert "invalid float value" in parser_error(capsys, "sweep", "--episode-timeout", "soon")
