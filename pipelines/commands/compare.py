@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from pipelines.commands import check_writable, write_output
+from pipelines.commands.output_paths import output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
@@ -17,6 +18,7 @@ from pipelines.plain_json import plain
 EPILOG = """examples:
   crowdmpc compare runs/table2 runs/table2-cp
   crowdmpc compare paper=runs/table2 cp0.1=runs/table2-cp safe=runs/t2-safe --json compare.json
+  crowdmpc compare paper=runs/table2 safe=runs/t2-safe --plot safe_vs_paper.png
   crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
 
 Each RUN is a `crowdmpc sweep --out` folder, named by LABEL= or by its folder's name. Episodes pair where two
@@ -26,10 +28,12 @@ episodes every run holds are compared. First each run's folder, episodes and cod
 sweep.json names); then, for each method and crowd size, every run's success, collision and contact rates (%)
 and mean travel time over its successes (s), and for each run after the first, against it: +k / −j, the
 episodes where the run has the outcome and the first run not, and the reverse, with the exact McNemar p; the
-mean travel-time difference over the episodes both completed, ± a normal 95 % half-width, their number in
-brackets; and how many episodes have every metric equal. Last, the settings the runs' episodes ran with where
-they differ from the first run's. --expect-identical exits 1 unless every episode of every run is in every
-other with every metric equal: a change that must not move a result (`--jit on` against off, a refactoring).
+mean travel-time difference over the episodes both completed, ± Student's t 95 % half-width, their number
+in brackets; and how many episodes have every metric equal. Last, the settings the runs' episodes ran with
+where they differ from the first run's. --plot draws each change with its 95 % interval (the rates' by
+Newcombe's square-and-add for paired proportions; --json holds them too). --expect-identical exits 1 unless
+every episode of every run is in every other with every metric equal: a change that must not move a result
+(`--jit on` against off, a refactoring).
 """
 MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
 VALUE_WIDTH: Final = 60  # characters of a setting's values shown
@@ -50,6 +54,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=json_path,
         metavar="FILE",
         help="also write the comparison as JSON (-: standard output)",
+    )
+    parser.add_argument(
+        "--plot",
+        type=output_arg,
+        metavar="PNG",
+        help="each run's change against the first per method and crowd size, with 95 %% intervals",
     )
     parser.add_argument(
         "--expect-identical",
@@ -93,6 +103,13 @@ def _compare(args: argparse.Namespace) -> int:
 
     inputs = [path / name for _, path in named for name in (EPISODES_FILE, SWEEP_FILE)]
     check_writable(args.json, "--json", inputs=inputs, json_only=True)
+    if args.plot is not None:
+        from crowdsim.plotting import check_figure_path
+
+        check_figure_path(args.plot, "--plot")
+        check_writable(args.plot, "--plot", inputs=inputs, room=0)
+        if not is_stdout(args.json) and args.json is not None and args.json.resolve() == args.plot.resolve():
+            raise PipelineError(f"--json and --plot name the same file {args.plot}; give each its own")
     runs = [load_run(label, path) for label, path in named]
     shared = shared_identities(runs)
     if not shared:
@@ -102,6 +119,12 @@ def _compare(args: argparse.Namespace) -> int:
         )
     report = _report(runs, shared)
     print(_text(report))
+    if args.plot is not None:
+        from pipelines.experiments.compare_plot import compare_figure
+
+        args.plot.parent.mkdir(parents=True, exist_ok=True)
+        compare_figure(report).savefig(args.plot, dpi=120)
+        print(f"plot: {args.plot}")
     if args.json:
         write_output(args.json, json.dumps(plain(report), indent=2, allow_nan=False) + "\n", "--json")
         if not is_stdout(args.json):
@@ -158,7 +181,7 @@ def _report(runs: list[Any], shared: list[Any]) -> dict[str, Any]:
 
 def _versus_json(v: Any) -> dict[str, Any]:
     return {
-        **{name: {"gained": p.gained, "lost": p.lost, "p": p.p} for name, p in v.flags.items()},
+        **{name: _flag_json(p) for name, p in v.flags.items()},
         "travel_difference": {
             "mean": v.travel_difference,
             "half_width_95": v.travel_half_width,
@@ -166,6 +189,18 @@ def _versus_json(v: Any) -> dict[str, Any]:
         },
         "same_metrics": v.same,
         "text": {**{name: p.text() for name, p in v.flags.items()}, "travel": v.travel_text()},
+    }
+
+
+def _flag_json(p: Any) -> dict[str, Any]:
+    low, high = p.interval
+    pp = 100.0 * p.difference
+    return {
+        "gained": p.gained,
+        "lost": p.lost,
+        "p": p.p,
+        "difference_pp": pp,
+        "interval_pp": [100 * low, 100 * high],
     }
 
 

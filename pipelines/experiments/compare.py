@@ -13,9 +13,11 @@ comparison is what the runs differ in, listed beside it (``settings_differ``). O
 are compared.
 
 The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.tables): episodes where
-the run has the outcome and the first run not, and the reverse. Travel time is compared on the episodes both
-runs completed, as the mean of the differences with a normal 95 % half-width (1.96 sample standard deviations
-over the root of their number), a description of the runs, not a test corrected for the groups compared.
+the run has the outcome and the first run not, and the reverse. The difference of the two rates has Newcombe's
+square-and-add 95 % interval for paired proportions (``paired_interval``), which unlike the normal
+approximation stays inside [-100, 100] % and is not of zero width at 0 of n. Travel time is compared on the
+episodes both runs completed, as the mean of the differences with Student's t 95 % half-width, as cells.csv
+gives a mean's. Each describes one group; none is corrected for the number of groups compared.
 """
 
 from __future__ import annotations
@@ -32,12 +34,12 @@ from typing import Any, Final
 from crowdsim.metrics import ADDED_FIELDS
 from pipelines.errors import PipelineError
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, read_sweep_file
+from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
 CROWD_SETTINGS: Final[tuple[str, ...]] = ("crowd", "crossing", "spawn_separation", "formation")
 FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
-Z95: Final[float] = 1.96
 # Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
 RUN_FIELDS: Final[tuple[str, ...]] = ("predictor_sha256", "sensor_range", "sensor_tracks")
 
@@ -171,17 +173,52 @@ def _commits(path: Path) -> list[str]:
 
 @dataclass(frozen=True)
 class Paired:
-    """One flag, one run against the first, on the shared episodes: ``gained`` where only the run has it."""
+    """One flag, one run against the first, on the shared episodes: ``gained`` where only the run has it,
+    ``lost`` where only the first has it, ``both`` and ``neither``."""
 
     gained: int
     lost: int
+    both: int = 0
+    neither: int = 0
 
     @property
     def p(self) -> float:
         return mcnemar_exact(self.gained, self.lost)
 
+    @property
+    def difference(self) -> float:
+        """The run's rate minus the first's, as a fraction."""
+        n = self.gained + self.lost + self.both + self.neither
+        return (self.gained - self.lost) / n if n else math.nan
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        return paired_interval(self.both, self.gained, self.lost, self.neither)
+
     def text(self) -> str:
         return f"+{self.gained} / −{self.lost} (p = {self.p:.2g})"
+
+
+def paired_interval(both: int, gained: int, lost: int, neither: int) -> tuple[float, float]:
+    """The 95 % interval, as fractions, of a run's rate minus the first run's on paired episodes (``both``
+    with the outcome, ``gained`` in the run alone, ``lost`` in the first alone, ``neither``): Newcombe's
+    square-and-add of the two Wilson intervals, with the correlation of the pairs (continuity-corrected
+    phi; R. G. Newcombe, Statistics in Medicine 17, 2635-2650, 1998, method 10). (nan, nan) for no pair."""
+    n = both + gained + lost + neither
+    if n == 0:
+        return math.nan, math.nan
+    p1, p2 = (both + gained) / n, (both + lost) / n
+    (l1, u1), (l2, u2) = wilson_interval(both + gained, n), wilson_interval(both + lost, n)
+    product = (both + gained) * (lost + neither) * (both + lost) * (gained + neither)
+    cross = both * neither - gained * lost
+    phi = 0.0
+    if product and cross > n / 2:
+        phi = (cross - n / 2) / math.sqrt(product)
+    elif product and cross < 0:
+        phi = cross / math.sqrt(product)
+    below = math.sqrt(max(0.0, (p1 - l1) ** 2 + (u2 - p2) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2)))
+    above = math.sqrt(max(0.0, (u1 - p1) ** 2 + (p2 - l2) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2)))
+    return max(-1.0, p1 - p2 - below), min(1.0, p1 - p2 + above)
 
 
 @dataclass(frozen=True)
@@ -223,6 +260,8 @@ def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
         name: Paired(
             sum(getattr(o, name) and not getattr(b, name) for b, o in pairs),
             sum(getattr(b, name) and not getattr(o, name) for b, o in pairs),
+            sum(getattr(b, name) and getattr(o, name) for b, o in pairs),
+            sum(not getattr(b, name) and not getattr(o, name) for b, o in pairs),
         )
         for name in FLAGS
     }
@@ -232,7 +271,8 @@ def versus(base: list[Outcome], other: list[Outcome]) -> Versus:
         if b.success and o.success and b.travel_time is not None and o.travel_time is not None
     ]
     mean = statistics.fmean(differences) if differences else None
-    half = Z95 * statistics.stdev(differences) / math.sqrt(len(differences)) if len(differences) > 1 else None
+    n = len(differences)
+    half = t95(n - 1) * statistics.stdev(differences) / math.sqrt(n) if n > 1 else None
     same = sum(b.same_metrics(o) for b, o in pairs)
     return Versus(flags, mean, half, len(differences), same)
 

@@ -1,6 +1,7 @@
 """``crowdmpc compare``: sweeps paired on the crowds they share, against numbers worked by hand."""
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -8,7 +9,7 @@ import pytest
 from pipelines.cli import main
 from pipelines.commands.compare import labelled
 from pipelines.errors import PipelineError
-from pipelines.experiments.compare import Outcome, versus
+from pipelines.experiments.compare import Outcome, paired_interval, versus
 from pipelines.experiments.tables import mcnemar_exact
 
 ENV = {"crowd": "orca", "crossing": "paper", "spawn_separation": 0.5, "formation": "auto", "time_limit": 40.0}
@@ -85,15 +86,20 @@ def test_two_runs_by_hand(tmp_path, capsys):
     # base: 3 of 4 succeed, 2 of 4 collide, travel (10 + 12 + 9) / 3 = 10.33
     assert rows[0] == "| CMPC | 7 | 3 | base | 4 | 75.0 | 50.0 | 0.0 | 10.3 |  |  |  |  |  |"
     # new: 3 of 4, 0 of 4, (11 + 13 + 12) / 3 = 12; success +1 (episode 1) / -1 (episode 2), McNemar p = 1;
-    # collision +0 / -2, p = 2 / 4 = 0.5; travel differences 1 and 3: mean 2, sd sqrt(2), half 1.96
+    # collision +0 / -2, p = 2 / 4 = 0.5; travel differences 1 and 3: mean 2, sd sqrt(2), half t95(1) = 12.71
     assert rows[1] == (
         "| CMPC | 7 | 3 | new | 4 | 75.0 | 0.0 | 0.0 | 12.0 | +1 / −1 (p = 1) | +0 / −2 (p = 0.5) "
-        "| +0 / −0 (p = 1) | +2.00 ± 1.96 (2) | 0 of 4 |"
+        "| +0 / −0 (p = 1) | +2.00 ± 12.71 (2) | 0 of 4 |"
     )
     report = json.loads((tmp_path / "c.json").read_text())
     against = report["groups"][0]["versus_first"]["new"]
-    assert against["collision"] == {"gained": 0, "lost": 2, "p": 0.5}
-    assert against["travel_difference"] == {"mean": 2.0, "half_width_95": pytest.approx(1.96), "n": 2}
+    assert {k: against["collision"][k] for k in ("gained", "lost", "p", "difference_pp")} == {
+        "gained": 0,
+        "lost": 2,
+        "p": 0.5,
+        "difference_pp": -50.0,
+    }
+    assert against["travel_difference"] == {"mean": 2.0, "half_width_95": pytest.approx(12.7062), "n": 2}
     assert report["runs"][0]["code"] == ["0123456789ab"] and report["shared_episodes"] == 4
 
 
@@ -107,9 +113,9 @@ def test_mcnemar_and_the_travel_spread_by_hand():
     v = versus(
         [o(True, 10.0), o(True, 10.0), o(True, 10.0), o(False, None)], [o(True, 11.0), o(True, 12.0)] * 2
     )
-    # differences 1, 2, 1 (base's 4th failed): mean 4/3, sd sqrt(1/3), half 1.96 sqrt(1/3) / sqrt(3)
+    # differences 1, 2, 1 (base's 4th failed): mean 4/3, sd sqrt(1/3), half t95(2) sqrt(1/3) / sqrt(3)
     assert v.travel_difference == pytest.approx(4 / 3)
-    assert v.travel_half_width == pytest.approx(1.96 / 3)
+    assert v.travel_half_width == pytest.approx(4.302653 / 3)
     assert v.flags["success"].gained == 1 and v.flags["success"].lost == 0
 
 
@@ -154,7 +160,10 @@ def test_json_on_standard_output_is_the_document_alone(tmp_path, capsys):
     b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(NEW)])
     assert main(["compare", str(a), str(b), "--json", "-"]) == 0
     out, err = capsys.readouterr()
-    assert json.loads(out)["groups"][0]["versus_first"]["b"]["success"] == {"gained": 1, "lost": 1, "p": 1.0}
+    success = json.loads(out)["groups"][0]["versus_first"]["b"]["success"]
+    assert (success["gained"], success["lost"], success["p"], success["difference_pp"]) == (1, 1, 1.0, 0.0)
+    low, high = success["interval_pp"]  # 3 of 4 both: an interval symmetric about no change
+    assert low == pytest.approx(-high) and 0 < high < 100
     assert "| CMPC | 7 | 3 | a |" in err
 
 
@@ -240,3 +249,33 @@ def test_a_record_older_than_a_metric_is_compared_on_the_metrics_it_has(tmp_path
     c = _sweep(tmp_path / "c", [newer(i, o, min_distance=0.7 if i else 1.0) for i, o in enumerate(BASE)])
     assert main(["compare", str(a), str(c), "--expect-identical"]) == 1
     assert "| 1 of 4 |" in capsys.readouterr().out
+
+
+def test_the_paired_interval_matches_a_published_example():
+    """Cavo et al. (2012) as Fagerland, Lydersen and Laake's "Statistical Analysis of Contingency Tables"
+    (2017, chapter 8) gives it: 59 pairs with the outcome in both, 6 in the first alone, 16 in the second
+    alone, 80 in neither; Newcombe's square-and-add: -0.0621 (95 % CI -0.1186 to -0.0046)."""
+    low, high = paired_interval(both=59, gained=6, lost=16, neither=80)
+    assert (round(low, 4), round(high, 4)) == (-0.1186, -0.0046)
+    # 0 of n in both runs: an interval of width, not the normal approximation's single point
+    low, high = paired_interval(0, 0, 0, 50)
+    assert low < 0 < high and high == pytest.approx(-low) and high < 0.08
+    assert all(math.isnan(x) for x in paired_interval(0, 0, 0, 0))  # no pair
+
+
+def test_the_plot_is_drawn_and_its_path_checked_first(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(NEW)])
+    assert main(["compare", str(a), str(b), "--plot", str(tmp_path / "p.png")]) == 0
+    assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
+    assert main(["compare", str(a), str(b), "--plot", str(tmp_path / "p.xyz")]) == 2
+    assert "--plot" in one_line_err(capsys)
+    both = str(tmp_path / "same.png")
+    assert main(["compare", str(a), str(b), "--plot", both, "--json", both]) == 2
+    assert "name the same file" in one_line_err(capsys)
+
+
+def one_line_err(capsys) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    return err
