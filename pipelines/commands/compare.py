@@ -21,9 +21,10 @@ EPILOG = """examples:
   crowdmpc compare paper=runs/table2 safe=runs/t2-safe --plot safe_vs_paper.png
   crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
 
-Each RUN is a `crowdmpc sweep --out` folder, named by LABEL= or by its folder's name. Episodes pair where two
-runs faced the same crowd: the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or
-the same recording, the same placement rules and formation), and the same method (case ignored). Only
+Each RUN is a `crowdmpc sweep --out` folder or a `crowdmpc simulate --json` file (its episodes the method
+named by their controller), named by LABEL= or by its name. Episodes pair where two runs faced the same
+crowd: the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or the same
+recording, the same placement rules and formation), and the same method (case ignored). Only
 episodes every run holds are compared. First each run's folder, episodes and code (the commits its
 sweep.json names); then, for each method and crowd size, every run's success, collision and contact rates (%)
 and mean travel time over its successes (s), and for each run after the first, against it: +k / −j, the
@@ -48,7 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("runs", nargs="+", metavar="[LABEL=]RUN", help="two or more sweep folders")
+    parser.add_argument(
+        "runs", nargs="+", metavar="[LABEL=]RUN", help="two or more sweep folders or simulate --json files"
+    )
     parser.add_argument(
         "--json",
         type=json_path,
@@ -70,18 +73,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def labelled(items: list[str]) -> list[tuple[str, Path]]:
-    """``(label, folder)`` of each ``[LABEL=]RUN``: an existing folder is taken whole (its name may hold "="),
-    else LABEL=RUN names it; the label defaults to the folder's name. A label given twice is refused."""
+    """``(label, path)`` of each ``[LABEL=]RUN``: an existing path is taken whole (its name may hold "="),
+    else LABEL=RUN names it; the label defaults to the folder's name (a file's, less its suffix). A label
+    given twice is refused."""
     runs: list[tuple[str, Path]] = []
     for item in items:
         label, sep, folder = item.partition("=")
-        if sep and not Path(item).is_dir():
+        if sep and not Path(item).exists():
             if not (label and folder):
-                raise PipelineError(f"expected [LABEL=]RUN, a sweep folder, got {item!r}")
+                raise PipelineError(
+                    f"expected [LABEL=]RUN, a sweep folder or simulate --json file, got {item!r}"
+                )
         elif item:
-            label, folder = Path(item).resolve().name or item, item
+            whole = Path(item).resolve()
+            label, folder = (whole.stem if whole.is_file() else whole.name) or item, item
         else:
-            raise PipelineError("expected [LABEL=]RUN, a sweep folder, got ''")
+            raise PipelineError("expected [LABEL=]RUN, a sweep folder or simulate --json file, got ''")
         if any(label == seen for seen, _ in runs):
             raise PipelineError(f"label {label!r} is given twice; name each run once (LABEL=RUN)")
         runs.append((label, Path(folder)))
@@ -101,7 +108,7 @@ def _compare(args: argparse.Namespace) -> int:
     named = labelled(args.runs)
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
-    inputs = [path / name for _, path in named for name in (EPISODES_FILE, SWEEP_FILE)]
+    inputs = [p for _, path in named for p in (path, path / EPISODES_FILE, path / SWEEP_FILE)]
     check_writable(args.json, "--json", inputs=inputs, json_only=True)
     if args.plot is not None:
         from crowdsim.plotting import check_figure_path

@@ -113,16 +113,22 @@ def _flat(values: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, An
 
 def load_run(label: str, path: Path) -> Run:
     """The episodes of the sweep directory ``path``, read as its report reads them (each line checked) and
-    left as they are (a sweep still writing it may hold a torn last line, which is passed over)."""
-    if not path.is_dir():
-        raise PipelineError(f"{label}: {path} is not a folder (a `crowdmpc sweep --out` folder is expected)")
-    if not (path / EPISODES_FILE).is_file():
+    left as they are (a sweep still writing it may hold a torn last line, which is passed over); or of the
+    ``crowdmpc simulate --json`` file ``path``, each episode its controller's (``simulate_records``)."""
+    records: Iterable[dict[str, Any]]
+    if path.is_file():
+        records, commits = simulate_records(path)
+    elif not path.is_dir():
+        raise PipelineError(f"{label}: {path} does not exist (a sweep folder or a simulate --json file)")
+    elif not (path / EPISODES_FILE).is_file():
         raise PipelineError(
             f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one)"
         )
-    run = Run(label, path, commits=_commits(path))
+    else:
+        records, commits = (r for _, _, r in episode_log(path).scan(repair=False)), _commits(path)
+    run = Run(label, path, commits=commits)
     kinds: dict[frozenset[str], frozenset[str]] = {}  # one ``added`` set per kind of record, not per episode
-    for _, _, record in episode_log(path).scan(repair=False):
+    for record in records:
         identity = crowd_identity(record)
         if identity in run.outcomes:
             raise PipelineError(
@@ -153,6 +159,34 @@ def _digest(values: Mapping[str, Any]) -> bytes:
     return hashlib.blake2b(json.dumps(values, sort_keys=True).encode(), digest_size=16).digest()
 
 
+def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
+    """The episodes of a ``crowdmpc simulate --json`` file as a sweep's records, each its controller's
+    method (a sweep's "CMPC" column pairs with simulate's "cmpc"), and the code that ran them."""
+    from pipelines.experiments.log import check_record
+
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise PipelineError(
+            f"{path}: not a simulate --json file ({type(exc).__name__}: {str(exc)[:120]})"
+        ) from None
+    episodes = document.get("episodes") if isinstance(document, dict) else None
+    if not (isinstance(episodes, list) and isinstance(document.get("summary"), dict)):
+        raise PipelineError(f"{path}: not a `crowdmpc simulate --json` file (no summary and episodes)")
+    records = []
+    for i, episode in enumerate(episodes):
+        where = f"{path}: episode {i}"
+        if not isinstance(episode, dict) or episode.get("seed") is None:
+            raise PipelineError(f"{where} has no seed: an unseeded run's crowds pair with none")
+        controller = str(episode.get("controller"))
+        key = f"{controller}/{episode.get('scenario')}/{episode['seed']}"
+        record = {**episode, "key": key, "cell": controller, "method": controller, "index": i, "wall_s": 0.0}
+        check_record(record, where)
+        records.append(record)
+    commit = _commit_text(document.get("code"))
+    return records, [] if commit is None else [commit]
+
+
 def _commits(path: Path) -> list[str]:
     """The code each run line of ``path``'s sweep.json ran ("abc123def456+dirty"), oldest first; none where
     the file is missing or unreadable (the episodes are still compared)."""
@@ -162,13 +196,18 @@ def _commits(path: Path) -> list[str]:
         return []
     found: list[str] = []
     for line in meta.get("runs", []):
-        code = line.get("code") if isinstance(line, dict) else None
-        commit = code.get("commit") if isinstance(code, dict) else None
-        if isinstance(code, dict) and commit:
-            text = str(commit)[:12] + ("+dirty" if code.get("dirty") else "")
-            if text not in found:
-                found.append(text)
+        text = _commit_text(line.get("code") if isinstance(line, dict) else None)
+        if text is not None and text not in found:
+            found.append(text)
     return found
+
+
+def _commit_text(code: Any) -> str | None:
+    """A run's recorded code as "abc123def456+dirty"; None where it names no commit."""
+    commit = code.get("commit") if isinstance(code, dict) else None
+    if not commit:
+        return None
+    return str(commit)[:12] + ("+dirty" if code.get("dirty") else "")
 
 
 @dataclass(frozen=True)

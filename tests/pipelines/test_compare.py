@@ -196,7 +196,7 @@ def test_bad_runs_are_one_line_errors(tmp_path, capsys):
         f.write('{"key": "x", "metrics": []}\n')
     twice = _sweep(tmp_path / "twice", [_record(0, *BASE[0]), {**_record(0, *BASE[0]), "key": "other"}])
     for other, message in [
-        (tmp_path / "missing", "is not a folder (a `crowdmpc sweep --out` folder is expected)"),
+        (tmp_path / "missing", "does not exist (a sweep folder or a simulate --json file)"),
         (tmp_path / "empty", "holds no episodes.jsonl"),
         (damaged, "damaged/episodes.jsonl:2: not an episode record"),
         (twice, "holds two episodes of method 'CMPC' on one crowd"),
@@ -279,3 +279,38 @@ def one_line_err(capsys) -> str:
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     return err
+
+
+def _simulate_json(path: Path, records: list[dict], commit: str = "fedcba9876543210") -> Path:
+    """A `crowdmpc simulate --json` document of ``records`` (their closed-loop fields, not the sweep's)."""
+    sweep_only = ("key", "cell", "method", "index", "wall_s", "profile")
+    episodes = [{k: v for k, v in r.items() if k not in sweep_only} for r in records]
+    document = {"run": {}, "code": {"commit": commit, "dirty": True}, "summary": {}, "episodes": episodes}
+    path.write_text(json.dumps(document))
+    return path
+
+
+def test_a_simulate_json_pairs_with_a_sweep_by_its_controller(tmp_path, capsys):
+    """simulate's episodes are its controller's ("cmpc"), a sweep's column "CMPC": the same crowds pair."""
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    sim = _simulate_json(tmp_path / "run.json", [_record(i, *o) for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(sim), "--expect-identical"]) == 0
+    out = capsys.readouterr().out
+    assert f"run: {sim}, 4 episodes, code fedcba987654+dirty" in out
+    assert "| CMPC | 7 | 3 | run | 4 | 75.0 | 50.0 |" in out
+
+
+def test_a_simulate_json_that_cannot_pair_is_one_line(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    unseeded = _simulate_json(tmp_path / "unseeded.json", [{**_record(0, *BASE[0]), "seed": None}])
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"groups": []}))
+    broken = tmp_path / "broken.json"
+    broken.write_text("{")
+    for path, message in [
+        (unseeded, "episode 0 has no seed: an unseeded run's crowds pair with none"),
+        (other, "not a `crowdmpc simulate --json` file (no summary and episodes)"),
+        (broken, "not a simulate --json file (JSONDecodeError"),
+    ]:
+        assert main(["compare", str(a), str(path)]) == 2
+        assert message in one_line_err(capsys)
