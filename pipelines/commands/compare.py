@@ -22,19 +22,18 @@ EPILOG = """examples:
   crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
 
 Each RUN is a `crowdmpc sweep --out` folder or a `crowdmpc simulate --json` file (its episodes the method
-named by their controller), named by LABEL= or by its name. Episodes pair where two runs faced the same
-crowd: the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or the same
-recording, the same placement rules and formation), and the same method (case ignored). Only
-episodes every run holds are compared. First each run's folder, episodes and code (the commits its
-sweep.json names); then, for each method and crowd size, every run's success, collision and contact rates (%)
-and mean travel time over its successes (s), and for each run after the first, against it: +k / −j, the
-episodes where the run has the outcome and the first run not, and the reverse, with the exact McNemar p; the
-mean travel-time difference over the episodes both completed, ± Student's t 95 % half-width, their number
-in brackets; and how many episodes have every metric equal. Last, the settings the runs' episodes ran with
-where they differ from the first run's. --plot draws each change with its 95 % interval (the rates' by
-Newcombe's square-and-add for paired proportions; --json holds them too). --expect-identical exits 1 unless
-every episode of every run is in every other with every metric equal: a change that must not move a result
-(`--jit on` against off, a refactoring).
+named by their controller), named by LABEL= or by its name. Episodes pair where two runs faced the same crowd:
+the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or the same recording, the
+same placement rules and formation), and the same method (case ignored). Only episodes every run holds are
+compared. First each run's folder, episodes and code (the commits its sweep.json names); then, for each method
+and crowd size, every run's success, collision and contact rates (%) and mean travel time over its successes
+(s), and for each run after the first, against it: +k / −j, the episodes where the run has the outcome and the
+first run not, and the reverse, with the exact McNemar p; the mean travel-time difference over the episodes
+both completed, ± Student's t 95 % half-width, their number in brackets; and how many episodes have every
+metric equal. Last, the settings the compared groups' episodes ran with where they differ from the first
+run's. --plot draws each change with its 95 % interval (the rates' by Newcombe's square-and-add for paired
+proportions; --json holds them too). --expect-identical exits 1 unless every episode of every run is in every
+other with every metric equal: a change that must not move a result (`--jit on` against off, a refactoring).
 """
 MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
 VALUE_WIDTH: Final = 60  # characters of a setting's values shown
@@ -180,7 +179,9 @@ def _report(runs: list[Any], shared: list[Any]) -> dict[str, Any]:
         ],
         "groups": groups,
         "settings_differ": {
-            run.label: [{"setting": k, "first": a, "this": b} for k, a, b in settings_differ(base, run)]
+            run.label: [
+                {"setting": k, "first": a, "this": b} for k, a, b in settings_differ(base, run, grouped)
+            ]
             for run in runs[1:]
         },
     }

@@ -74,7 +74,8 @@ class Run:
     path: Path
     outcomes: dict[Identity, Outcome] = field(default_factory=dict)
     methods: dict[Group, str] = field(default_factory=dict)  # each group's method as this run spells it
-    settings: dict[str, set[str]] = field(default_factory=dict)  # dotted setting -> the values it ran with
+    # per group, each dotted setting -> the values its episodes ran with
+    settings: dict[Group, dict[str, set[str]]] = field(default_factory=dict)
     commits: list[str] = field(default_factory=list)
 
 
@@ -139,7 +140,8 @@ def load_run(label: str, path: Path) -> Run:
         run.methods.setdefault(identity[:3], str(record["method"]))
         ran = {"config": record.get("config") or {}, **{name: record.get(name) for name in RUN_FIELDS}}
         for key, value in _flat(ran):
-            run.settings.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
+            ran_with = run.settings.setdefault(identity[:3], {})
+            ran_with.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
         raise PipelineError(f"{label}: {path / EPISODES_FILE} holds no episode yet")
     return run
@@ -329,15 +331,25 @@ def groups_of(identities: list[Identity]) -> dict[Group, list[Identity]]:
     return grouped
 
 
-def settings_differ(base: Run, other: Run) -> list[tuple[str, str, str]]:
-    """(setting, the values the first run's episodes ran with, the other's) where the two differ, each side
-    its values joined with " | ", sorted; a setting one run does not record shows "(not recorded)"."""
+def settings_differ(base: Run, other: Run, groups: Iterable[Group]) -> list[tuple[str, str, str]]:
+    """(setting, the values the first run's episodes of ``groups`` ran with, the other's) where the two
+    differ, each side its values joined with " | ", sorted; a setting one run does not record shows
+    "(not recorded)". Only the groups compared: a method the other run lacks says nothing of it."""
+    a_values, b_values = _settings(base, groups), _settings(other, groups)
     rows = []
-    for key in sorted(base.settings.keys() | other.settings.keys()):
-        a, b = base.settings.get(key), other.settings.get(key)
+    for key in sorted(a_values.keys() | b_values.keys()):
+        a, b = a_values.get(key), b_values.get(key)
         if a != b:
             rows.append((key, _values(a), _values(b)))
     return rows
+
+
+def _settings(run: Run, groups: Iterable[Group]) -> dict[str, set[str]]:
+    merged: dict[str, set[str]] = {}
+    for group in groups:
+        for key, values in run.settings.get(group, {}).items():
+            merged.setdefault(key, set()).update(values)
+    return merged
 
 
 def _values(values: set[str] | None) -> str:
