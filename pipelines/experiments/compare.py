@@ -334,10 +334,12 @@ def groups_of(identities: list[Identity]) -> dict[Group, list[Identity]]:
 def settings_differ(base: Run, other: Run, groups: Iterable[Group]) -> list[tuple[str, str, str]]:
     """(setting, the values the first run's episodes of ``groups`` ran with, the other's) where the two
     differ, each side its values joined with " | ", sorted; a setting one run does not record shows
-    "(not recorded)". Only the groups compared: a method the other run lacks says nothing of it."""
+    "(not recorded)". Only the groups compared: a method the other run lacks says nothing of it. The
+    settings a user sets come first ("mpc.guidance"), the details under them after
+    ("margins.calibration.created")."""
     a_values, b_values = _settings(base, groups), _settings(other, groups)
     rows = []
-    for key in sorted(a_values.keys() | b_values.keys()):
+    for key in sorted(a_values.keys() | b_values.keys(), key=lambda k: (k.count("."), k)):
         a, b = a_values.get(key), b_values.get(key)
         if a != b:
             rows.append((key, _values(a), _values(b)))
