@@ -145,13 +145,14 @@ def test_expect_identical_names_what_differs(tmp_path, capsys):
 
 def test_the_settings_that_differ_are_listed(tmp_path, capsys):
     a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
-    b = _sweep(tmp_path / "b", [_record(i, *o, mpc={"w_coll": 1e6}) for i, o in enumerate(BASE)], commit=None)
+    changed = {"w_coll": 1e6, "a_detail": {"made": "today"}}  # a detail sorts after the setting it is under
+    b = _sweep(tmp_path / "b", [_record(i, *o, mpc=changed) for i, o in enumerate(BASE)], commit=None)
     assert main(["compare", str(a), str(b)]) == 0
     out = capsys.readouterr().out
     assert (
-        "Settings b's episodes ran with where they differ from a's:\n  mpc.w_coll: 10000000.0 -> 1000000.0"
-        in out
-    )
+        "Settings b's episodes ran with where they differ from a's:\n  mpc.w_coll: 10000000.0 -> 1000000.0\n"
+        '  mpc.a_detail.made: (not recorded) -> "today"'
+    ) in out
     assert "b: " + str(b) + ", 4 episodes, code not recorded" in out
 
 
