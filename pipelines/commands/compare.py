@@ -63,6 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="PNG",
         help="each run's change against the first per method and crowd size, with 95 %% intervals",
     )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar while reading the runs")
     parser.add_argument(
         "--expect-identical",
         action="store_true",
@@ -116,7 +117,7 @@ def _compare(args: argparse.Namespace) -> int:
         check_writable(args.plot, "--plot", inputs=inputs, room=0)
         if not is_stdout(args.json) and args.json is not None and args.json.resolve() == args.plot.resolve():
             raise PipelineError(f"--json and --plot name the same file {args.plot}; give each its own")
-    runs = [load_run(label, path) for label, path in named]
+    runs = [load_run(label, path, progress=False if args.no_progress else None) for label, path in named]
     shared = shared_identities(runs)
     if not shared:
         raise PipelineError(

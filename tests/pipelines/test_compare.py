@@ -159,7 +159,7 @@ def test_the_settings_that_differ_are_listed(tmp_path, capsys):
 def test_json_on_standard_output_is_the_document_alone(tmp_path, capsys):
     a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
     b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(NEW)])
-    assert main(["compare", str(a), str(b), "--json", "-"]) == 0
+    assert main(["compare", str(a), str(b), "--json", "-", "--no-progress"]) == 0
     out, err = capsys.readouterr()
     success = json.loads(out)["groups"][0]["versus_first"]["b"]["success"]
     assert (success["gained"], success["lost"], success["p"], success["difference_pp"]) == (1, 1, 1.0, 0.0)
