@@ -131,6 +131,7 @@ class CrowdEnv:
                 radius=cfg.radius,
                 past=cfg.history_len - 1,
                 formation=cfg.formation,
+                spacing=cfg.robot_spacing,
             )
             return self._start_replay(episode)
         layout = make_layout(
@@ -143,6 +144,7 @@ class CrowdEnv:
             crossing=cfg.crossing,
             spawn_separation=cfg.spawn_separation,
             formation=cfg.formation,
+            spacing=cfg.robot_spacing,
         )
         return self._start(layout)
 

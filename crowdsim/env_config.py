@@ -26,7 +26,7 @@ from crowdsim.conventions import (
 from crowdsim.errors import SimulationError, real_number, whole_number
 from crowdsim.orca import OrcaParams
 from crowdsim.replay import CROWDS, RECORDED_DT
-from crowdsim.scenarios import FORMATIONS, Formation
+from crowdsim.scenarios import FORMATIONS, Formation, check_spacing
 from crowdsim.slots import GOAL_ASSIGNMENTS, GoalAssignment
 from crowdsim.world import (
     A_MAX,
@@ -81,6 +81,9 @@ class EnvConfig:
     # the robots' starts and goals (crowdsim.scenarios): "auto" is the paper's row up to 3 robots, a wedge
     # from 4; "row", "wedge", "two_rows" choose one for every team size
     formation: Formation = "auto"
+    # m between neighbouring robots (and their goals); None: the formation's own, 1 m in the row, d_ij in
+    # the others. Wider where the MPC's d_min leaves robots no room to stand on goals 1 m apart.
+    robot_spacing: float | None = None
     # who the humans are: "orca" (the paper's simulated crowd) or a replayed BIWI sequence, "eth" or "hotel",
     # or its test split alone, "eth_test" or "hotel_test" (crowdsim.replay: real tracks played back, not
     # reacting to anyone), or one yielding to the robots, "eth_test_reactive", ... (crowdsim.reaction)
@@ -129,6 +132,9 @@ class EnvConfig:
             raise SimulationError(
                 f"EnvConfig.formation must be one of {list(FORMATIONS)}, got {self.formation!r}"
             )
+        check_spacing(self.robot_spacing, "EnvConfig.robot_spacing")
+        if self.robot_spacing is not None:
+            self._store("robot_spacing", float(self.robot_spacing))
         if self.crowd not in CROWDS:
             raise SimulationError(f"EnvConfig.crowd must be one of {list(CROWDS)}, got {self.crowd!r}")
         if self.crowd != "orca" and not math.isclose(self.dt, RECORDED_DT, rel_tol=1e-9):

@@ -172,11 +172,12 @@ def replay_episode(
     radius: float,
     past: int = 0,
     formation: Formation = "auto",
+    spacing: float | None = None,
 ) -> ReplayEpisode:
     """A window of ``steps + 1`` rows of ``recording``, after ``past`` rows of history, with ``n_humans``
     pedestrians near the robots' path (module docstring); SimulationError when ``WINDOW_TRIES`` draws find
     none."""
-    robot_starts, robot_goals = robot_layout(n_robots, formation)
+    robot_starts, robot_goals = robot_layout(n_robots, formation, spacing=spacing)
     turned = recording.turned(scenario)
     starts = recording.window_starts(past + steps)
     if len(starts) == 0:

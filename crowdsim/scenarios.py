@@ -20,6 +20,9 @@ Formations (``FORMATIONS``; ``formation="auto"`` picks by the number of robots M
   1 + 2 + 1; 6: 1 + 2 + 3; 12: 1 + 2 + 3 + 4 + 2). ``auto`` for M >= 4.
 * ``"two_rows"``: ceil(M / 2) robots in front, floor(M / 2) behind.
 
+``EnvConfig.robot_spacing`` (``[env] robot_spacing``) puts neighbours that far apart in any of them, for an
+MPC whose ``d_min`` leaves its robots no room on goals 1 m apart (docs/extending.md).
+
 The wedge and the two rows are cut from a hexagonal lattice of spacing ``d_ij``: ranks ``d_ij sqrt(3) / 2``
 apart, each shifted half a spacing from the one ahead, each on the lattice slots nearest the middle (ties to
 the right). Every robot then stands at least ``d_ij`` from every other and exactly ``d_ij`` from its
@@ -96,7 +99,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final, Literal, get_args
+from typing import Any, Final, Literal, get_args
 
 import numpy as np
 
@@ -109,6 +112,9 @@ SCENARIOS: Final[tuple[str, ...]] = ("circle", "perpendicular")
 Formation = Literal["auto", "row", "wedge", "two_rows"]  # module docstring
 FORMATIONS: Final[tuple[Formation, ...]] = get_args(Formation)
 ROBOT_SPACING: Final[float] = 1.0  # m between neighbouring robots of the "row" (the first simulator's)
+# m: the widest robot spacing taken; 12 robots in a row at 2.5 m span 27.5 m, past the humans' 10 m circle and
+# within the gymnasium observation's bounds (crowdsim.gym_observation.scene_bound, 20 m from the origin)
+MAX_ROBOT_SPACING: Final[float] = 2.5
 ROBOT_START_Y: Final[float] = -5.0  # m, centre of the start formation (module docstring)
 ROBOT_TRAVEL: Final[float] = -2.0 * ROBOT_START_Y  # m, every goal is its start moved this far along +y
 ROW_MAX_ROBOTS: Final[int] = 3  # "auto" keeps the row up to this many robots (the paper's 3, unchanged)
@@ -239,27 +245,39 @@ def _hexagonal(sizes: list[int], spacing: float) -> np.ndarray:
 
 
 def robot_layout(
-    n_robots: int, formation: Formation = "auto", *, spacing: float = D_FLOCK
+    n_robots: int, formation: Formation = "auto", *, spacing: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Starts ``(M, 2)`` and goals ``(M, 2)`` of M robots in ``formation`` (see the module docstring).
 
-    ``spacing`` (m): between neighbours of the wedge and the two rows; the default is the MPC's flocking
-    distance ``d_ij`` (``crowdsim.world.D_FLOCK``), and it may not be below its ``d_min`` (``D_MIN``).
+    ``spacing`` (m): between neighbouring robots, and so between their goals (``EnvConfig.robot_spacing``);
+    None, the formation's own: 1 m in the row (``ROBOT_SPACING``), the MPC's flocking distance ``d_ij``
+    (``crowdsim.world.D_FLOCK``) in the wedge and the two rows. It may not be below ``d_min`` (``D_MIN``).
     """
     if isinstance(n_robots, bool) or not isinstance(n_robots, int | np.integer) or n_robots < 0:
         raise SimulationError(f"n_robots must be an int >= 0, got {n_robots!r}")
     if formation not in FORMATIONS:
         raise SimulationError(f"unknown formation {formation!r}; choose from {list(FORMATIONS)}")
-    if not (isinstance(spacing, int | float) and math.isfinite(spacing) and spacing >= D_MIN):
-        raise SimulationError(f"spacing must be a number >= d_min = {D_MIN} m, got {spacing!r}")
+    check_spacing(spacing, "spacing")
     chosen = choose_formation(int(n_robots)) if formation == "auto" else formation
     if chosen == "row":
-        x = (np.arange(n_robots) - (n_robots - 1) / 2.0) * ROBOT_SPACING
+        x = (np.arange(n_robots) - (n_robots - 1) / 2.0) * (ROBOT_SPACING if spacing is None else spacing)
         offsets = np.stack([x, np.zeros(n_robots)], axis=1)
     else:
-        offsets = _hexagonal(rank_sizes(chosen, int(n_robots)), spacing)
+        offsets = _hexagonal(rank_sizes(chosen, int(n_robots)), D_FLOCK if spacing is None else spacing)
     starts = offsets + [0.0, ROBOT_START_Y]
     return starts, starts + [0.0, ROBOT_TRAVEL]
+
+
+def check_spacing(spacing: Any, name: str) -> None:
+    """Refuse a robot spacing (m) that is not None or a number in [d_min, ``MAX_ROBOT_SPACING``]."""
+    if spacing is None:
+        return
+    number = isinstance(spacing, int | float | np.floating) and not isinstance(spacing, bool)
+    if not (number and math.isfinite(spacing) and D_MIN <= spacing <= MAX_ROBOT_SPACING):
+        raise SimulationError(
+            f"{name} must be a number of metres in [d_min = {D_MIN:g}, {MAX_ROBOT_SPACING:g}], or unset "
+            f"for the formation's own; got {spacing!r}"
+        )
 
 
 def geometry_scale(n_humans: int) -> float:
@@ -293,6 +311,7 @@ def make_layout(
     crossing: str = "paper",
     spawn_separation: float | None = None,
     formation: Formation = "auto",
+    spacing: float | None = None,
 ) -> Layout:
     """Robots in ``formation`` plus ``n_humans`` humans sampled from ``rng`` under the ``crossing`` rules.
 
@@ -312,7 +331,7 @@ def make_layout(
         "a finite number >= 0 m",
         lambda s: math.isfinite(s) and s >= 0,
     )
-    robot_starts, robot_goals = robot_layout(n_robots, formation)
+    robot_starts, robot_goals = robot_layout(n_robots, formation, spacing=spacing)
     _check_robot_spacing(robot_starts, radius, formation, n_robots)
     # Every placed agent has the same radius, so the separation is one number.
     starts, goals = PLACERS[crossing](

@@ -266,7 +266,7 @@ def _simulate(resolved: SimulateRun) -> int:
     visibility = "visible" if cfg.env.robots_visible else "invisible"
     notes = (
         checks.flock_note(spec, scenario.robots),
-        checks.goal_room_note(spec, scenario.robots, cfg.env.formation, formation_settable=True),
+        checks.goal_room_note(spec, scenario.robots, cfg.env.formation, cfg.env.robot_spacing),
         checks.horizon_note(spec),
         checks.calibration_world_note(
             spec, cfg.env.profile, visibility, cfg.env.crowd, sim.sensor_range, sim.sensor_tracks

@@ -6,9 +6,10 @@ training."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any, Final
 
-from crowdsim.world import D_FLOCK, PAPER_ROBOTS
+from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
 
@@ -102,35 +103,40 @@ def check_recording(config: RunConfig) -> None:
 # How close to the closest two robots' goals d_min may come before the note: no measured rule holds for
 # every formation (docs/extending.md, robot_reached), and the row of 4 failed already at 0.98 of 1.0 m.
 GOAL_ROOM_MARGIN: Final[float] = 0.05  # m
+# m above d_min at which goal_room_note's suggested robot spacing gave the robots room: CMPC, row of 3, 7
+# humans, d_min 1.0 m: 0 of 6 episodes reached their goals 1.0 m apart, 9 of 10 at 1.2 m, 10 of 10 at 1.3 m
+ROOM_SPACING: Final[float] = 0.3
 
 
 def goal_room_note(
-    spec: ControllerSpec, n_robots: int, formation: str, *, formation_settable: bool
+    spec: ControllerSpec, n_robots: int, formation: str, spacing: float | None = None
 ) -> str | None:
     """A line for an MPC whose d_min is within ``GOAL_ROOM_MARGIN`` of, or above, the distance between two
-    robots' goals, None otherwise: the MPC keeps every pair of robots d_min apart (Eq. 12), which can keep
-    them from standing on their goals at once, and the episodes then time out for a reason no metric names.
-    Where it starts depends on the formation, the number of robots and the controller (measured, no humans,
-    2 episodes each: CMPC in the row of 3, goals 1.0 m apart, arrived at 0.98 and never from 1.0; in the row
-    of 4 never from 0.98; the wedge of 3, goals 1.2 m apart, arrived up to 1.5, the wedge of 6 failed at
-    1.3), so the line says "can", and docs/extending.md has the table."""
+    robots' goals (``formation`` of ``n_robots`` at ``spacing``, ``EnvConfig.robot_spacing``), None
+    otherwise: the MPC keeps every pair of robots d_min apart (Eq. 12), which can keep them from standing on
+    their goals at once, and the episodes then time out for a reason no metric names. Where it starts
+    depends on the formation, the number of robots and the controller (measured, no humans, 2 episodes each:
+    CMPC in the row of 3, goals 1.0 m apart, arrived at 0.98 and never from 1.0; in the row of 4 never from
+    0.98; the wedge of 3, goals 1.2 m apart, arrived up to 1.5, the wedge of 6 failed at 1.3), so the line
+    says "can", and docs/extending.md has the table. It names the spacing that gave room: ``ROOM_SPACING``
+    above d_min."""
     import numpy as np
 
-    from crowdsim.scenarios import choose_formation, robot_layout
+    from crowdsim.scenarios import MAX_ROBOT_SPACING, choose_formation, robot_layout
     from pipelines.loop.mpc_setup import mpc_config
 
     if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
         return None
     shape = choose_formation(n_robots) if formation == "auto" else formation
-    goals = robot_layout(n_robots, shape)[1]  # type: ignore[arg-type]  # EnvConfig checked the name
+    goals = robot_layout(n_robots, shape, spacing=spacing)[1]  # type: ignore[arg-type]  # EnvConfig checked it
     gaps = np.linalg.norm(goals[:, None] - goals[None], axis=-1)[np.triu_indices(n_robots, k=1)]
     d_min, gap = mpc_config(spec).d_min, float(gaps.min())
     if d_min < gap - GOAL_ROOM_MARGIN - 1e-9:
         return None
-    wedge = D_FLOCK  # the wedge's goals are d_flock apart: a way out only below its own note
+    wider = math.ceil((d_min + ROOM_SPACING) * 20 - 1e-9) / 20  # to 5 cm, up
     hint = (
-        f"; [env] formation wedge spaces them {wedge:g} m apart"
-        if formation_settable and shape == "row" and d_min < wedge - GOAL_ROOM_MARGIN - 1e-9
+        f"; [env] robot_spacing = {wider:g} (--set env.robot_spacing={wider:g}) spaces them {wider:g} m apart"
+        if wider <= MAX_ROBOT_SPACING
         else ""
     )
     return (

@@ -37,6 +37,8 @@ def table_header(
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
     goals += "" if env_config.formation == "auto" else f"formation {env_config.formation} | "
+    spacing = env_config.robot_spacing
+    goals += "" if spacing is None else f"robot spacing {spacing:g} m | "
     reactive = reacts(env_config.crowd)
     if env_config.crowd != "orca":
         goals += f"crowd {env_config.crowd} ({'replayed, yielding' if reactive else 'replayed'}) | "

@@ -141,9 +141,9 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
         if cell.method in seen:
             continue
         seen.add(cell.method)
-        formation = cell.world.env_config().formation
+        env = cell.world.env_config()
         for note in (
-            goal_room_note(cell.spec, cell.n_robots, formation, formation_settable=False),
+            goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             horizon_note(cell.spec),
             flock_note(cell.spec, cell.n_robots),
             calibration_world_note(

@@ -87,7 +87,10 @@ def render(config: RunConfig) -> str:
         for key in section.keys:
             value = config.values[name][key.name]
             if value is None:  # unset: commented out, with what it stands for
-                example = getattr(config.env, key.name) if name == "env" else key.example
+                # an [env] key the profile fills shows the profile's value; one unset in the simulator too
+                # (robot_spacing: the formation's own) its example
+                example = getattr(config.env, key.name) if name == "env" else None
+                example = key.example if example is None else example
                 texts.append(f"# {key.name} = {toml_value(example)}")
             else:
                 texts.append(f"{key.name} = {toml_value(value)}")

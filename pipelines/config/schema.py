@@ -96,6 +96,14 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
         "(crowdsim/scenarios.py)",
     ),
     Key(
+        "robot_spacing",
+        "float",
+        None,
+        "m between neighbouring robots and between their goals; unset: the formation's own (the row 1 m, the "
+        "others d_ij = 1.2 m); wider where the MPC's d_min keeps robots from standing on goals that close",
+        1.2,
+    ),
+    Key(
         "crowd",
         "str",
         "orca",
@@ -123,7 +131,8 @@ def _build_env(values: dict[str, Any], built: Mapping[str, Any]) -> EnvConfig:
         f.name: getattr(base, f.name) for f in fields(EnvConfig) if f.name not in (*ENV_FROM_WORLD, "orca")
     }
     settings |= {name: values[name] for name in ENV_PROFILE_KEYS if values[name] is not None}
-    settings |= {name: values[name] for name in ("robots_visible", "goal_assignment", "formation", "crowd")}
+    chosen = ("robots_visible", "goal_assignment", "formation", "robot_spacing", "crowd")
+    settings |= {name: values[name] for name in chosen}
     env = EnvConfig.from_world(built["world"], orca=built["env.orca"], **settings)
     if env.max_steps > MAX_EPISODE_STEPS:
         raise PipelineError(

@@ -4,7 +4,8 @@ and crowd size, and each run against the first, episode by episode (``crowdmpc c
 Which episodes pair. Two runs face the same crowd when they ran the same scenario from the same seed with the
 same number of humans and robots, and the crowd was made alike: ORCA's humans or the same replayed recording
 (``env.crowd``), placed under the same rules (``env.crossing``, ``env.spawn_separation``) around the same
-robot formation (``env.formation``; the placement keeps clear of the robots' starts, crowdsim.scenarios).
+robot formation (``env.formation``, ``env.robot_spacing``; the placement keeps clear of the robots' starts,
+crowdsim.scenarios).
 Another profile or team draws other humans from the same seed, so its episodes pair with none. A record made
 before sweeps kept their config ran its profile's placement. Within that crowd an episode is its method's
 (case ignored: Table II writes "CMPC", the controllers experiment "cmpc"), so a method's column of one sweep
@@ -40,7 +41,13 @@ from pipelines.experiments.tables import mcnemar_exact
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
-CROWD_SETTINGS: Final[tuple[str, ...]] = ("crowd", "crossing", "spawn_separation", "formation")
+CROWD_SETTINGS: Final[tuple[str, ...]] = (
+    "crowd",
+    "crossing",
+    "spawn_separation",
+    "formation",
+    "robot_spacing",
+)
 FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
 # Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
 RUN_FIELDS: Final[tuple[str, ...]] = ("predictor_sha256", "sensor_range", "sensor_tracks")
@@ -94,7 +101,7 @@ def crowd_identity(record: Mapping[str, Any]) -> Identity:
 
 
 # The crowd settings added after sweeps began to record their config, as every episode before ran them.
-UNRECORDED: Final[dict[str, str]] = {"crowd": "orca", "formation": "auto"}
+UNRECORDED: Final[dict[str, str | None]] = {"crowd": "orca", "formation": "auto", "robot_spacing": None}
 
 
 def _profile_env(profile: str) -> dict[str, Any]:

@@ -37,6 +37,7 @@ ENV_SETTINGS: Final[tuple[str, ...]] = (
     "orca.neighbor_dist",
     "orca.time_horizon",
     "orca_radius_margin",
+    "robot_spacing",
     "spawn_separation",
     "success_rule",
     "time_limit",

@@ -25,6 +25,7 @@ RUN_IDENTITY: Final[tuple[str, ...]] = ("controller", "predictor", "n_robots", "
 # seen. Left out, a --sensor-range run silently replaced the full observation's recordings in their folder.
 UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {
     "env.formation": "auto",
+    "env.robot_spacing": None,
     "env.crowd": "orca",
     "sensing.radius_m": None,
     "sensing.report_tracks": None,

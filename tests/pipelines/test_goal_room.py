@@ -25,25 +25,26 @@ def _spec(controller: str = "cmpc", d_min: float | None = None) -> ControllerSpe
     ],
 )
 def test_no_note_where_the_goals_leave_room(spec, robots, formation):
-    assert goal_room_note(spec, robots, formation, formation_settable=True) is None
+    assert goal_room_note(spec, robots, formation) is None
 
 
-def test_the_note_names_the_distance_the_formation_and_where_to_widen_it():
+def test_the_note_names_the_distance_the_formation_and_the_spacing_that_gives_room():
     # the row of 4 reached its goals in no episode at 0.98 m (within 0.05 m of its 1.0 m)
-    note = goal_room_note(_spec(d_min=0.98), 4, "row", formation_settable=True)
+    note = goal_room_note(_spec(d_min=0.98), 4, "row")
     assert note is not None and note.startswith(
         "note: the MPC's d_min 0.98 m is not well below the 1 m between two robots' goals (row of 4)"
     )
+    # d_min + 0.3 m, up to 5 cm: 1.28 -> 1.3
     assert note.endswith(
-        "(measured thresholds: docs/extending.md); [env] formation wedge spaces them 1.2 m apart"
+        "(measured thresholds: docs/extending.md); [env] robot_spacing = 1.3 (--set env.robot_spacing=1.3) "
+        "spaces them 1.3 m apart"
     )
-    # a sweep cannot change the formation; the wedge gets the note itself from 1.15 m, so no hint from there
-    assert goal_room_note(_spec("dmpc", 1.0), 3, "row", formation_settable=False).endswith(
-        "docs/extending.md)"
-    )
-    assert goal_room_note(_spec(d_min=1.15), 3, "row", formation_settable=True).endswith("docs/extending.md)")
-    wedge = goal_room_note(_spec(d_min=1.2), 4, "auto", formation_settable=True)
+    wedge = goal_room_note(_spec("dmpc", 1.2), 4, "auto")
     assert wedge is not None and "1.2 m between two robots' goals (wedge of 4)" in wedge
+    assert wedge.endswith("robot_spacing = 1.5 (--set env.robot_spacing=1.5) spaces them 1.5 m apart")
+    # spaced so, no note; beyond the widest spacing taken (2.5 m), no hint
+    assert goal_room_note(_spec(d_min=1.0), 3, "row", 1.3) is None
+    assert goal_room_note(_spec(d_min=2.3), 3, "row").endswith("docs/extending.md)")
 
 
 def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
@@ -52,6 +53,8 @@ def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
     assert "note: the MPC's d_min" not in capsys.readouterr().err
     assert main([*args, "--set", "mpc.d_min=1.0"]) == 0
     assert capsys.readouterr().err.count("note: the MPC's d_min 1 m is not well below") == 1
+    assert main([*args, "--set", "mpc.d_min=1.0", "--set", "env.robot_spacing=1.3"]) == 0
+    assert "note: the MPC's d_min" not in capsys.readouterr().err
     sweep = ["sweep", "--experiment", "table2", "--humans", "5,6", "--episodes-per-cell", "2", "--dry-run"]
     assert main([*sweep, "--vary", "mpc.d_min=0.8,1.0", "--out", str(tmp_path / "sw")]) == 0
     err = capsys.readouterr().err

@@ -17,8 +17,8 @@ EPISODE = {"controller": "cmpc", "predictor": "constant_velocity", "n_robots": "
 
 def test_run_identity_hand_value():
     """The episode's four values (its scenario and seed name the file, so they are no part of it), the
-    config flattened to dotted keys (an empty table kept as a value), the formation and the crowd of
-    recordings that predate them, and the speed-only settings left out; a config key named like an episode
+    config flattened to dotted keys (an empty table kept as a value), the formation, robot spacing and crowd
+    of recordings that predate them, and the speed-only settings left out; a config key named like an episode
     value does not override the episode's."""
     episode = EPISODE | {"scenario": "circle", "seed": "4"}
     config = {
@@ -36,6 +36,7 @@ def test_run_identity_hand_value():
         "margins": {},
         "mpc.horizon": 4,
         "env.formation": "auto",
+        "env.robot_spacing": None,
         "env.crowd": "orca",
         "sensing.radius_m": None,
         "sensing.report_tracks": None,
