@@ -7,13 +7,16 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, write_output
 from pipelines.commands.output_paths import output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from pipelines.experiments.compare import Identity, Paired, Run, Versus
 
 EPILOG = """examples:
   crowdmpc compare runs/table2 runs/table2-cp
@@ -93,7 +96,7 @@ def labelled(items: list[str]) -> list[tuple[str, Path]]:
             raise PipelineError(f"label {label!r} is given twice; name each run once (LABEL=RUN)")
         runs.append((label, Path(folder)))
     if len(runs) < 2:
-        raise PipelineError("give at least two sweep folders to compare")
+        raise PipelineError("give at least two runs to compare (sweep folders or simulate --json files)")
     return runs
 
 
@@ -104,10 +107,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     from pipelines.experiments.compare import load_run, shared_identities
-
-    named = labelled(args.runs)
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
+    named = labelled(args.runs)
     inputs = [p for _, path in named for p in (path, path / EPISODES_FILE, path / SWEEP_FILE)]
     check_writable(args.json, "--json", inputs=inputs, json_only=True)
     if args.plot is not None:
@@ -141,7 +143,7 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
-def _report(runs: list[Any], shared: list[Any]) -> dict[str, Any]:
+def _report(runs: list[Run], shared: list[Identity]) -> dict[str, Any]:
     from pipelines.experiments.compare import groups_of, settings_differ, side, versus
 
     base = runs[0]
@@ -188,7 +190,7 @@ def _report(runs: list[Any], shared: list[Any]) -> dict[str, Any]:
     }
 
 
-def _versus_json(v: Any) -> dict[str, Any]:
+def _versus_json(v: Versus) -> dict[str, Any]:
     return {
         **{name: _flag_json(p) for name, p in v.flags.items()},
         "travel_difference": {
@@ -201,7 +203,7 @@ def _versus_json(v: Any) -> dict[str, Any]:
     }
 
 
-def _flag_json(p: Any) -> dict[str, Any]:
+def _flag_json(p: Paired) -> dict[str, Any]:
     low, high = p.interval
     pp = 100.0 * p.difference
     return {

@@ -28,7 +28,7 @@ import json
 import math
 import statistics
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -161,7 +161,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
         for key, value in _flat(ran):
             ran_with.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
-        raise PipelineError(f"{label}: {path / EPISODES_FILE} holds no episode yet")
+        raise PipelineError(f"{label}: {path if path.is_file() else path / EPISODES_FILE} holds no episode")
     return run
 
 
@@ -349,7 +349,7 @@ def groups_of(identities: list[Identity]) -> dict[Group, list[Identity]]:
     return grouped
 
 
-def settings_differ(base: Run, other: Run, groups: Iterable[Group]) -> list[tuple[str, str, str]]:
+def settings_differ(base: Run, other: Run, groups: Collection[Group]) -> list[tuple[str, str, str]]:
     """(setting, the values the first run's episodes of ``groups`` ran with, the other's) where the two
     differ, each side its values joined with " | ", sorted; a setting one run does not record shows
     "(not recorded)". Only the groups compared: a method the other run lacks says nothing of it. The
@@ -364,7 +364,7 @@ def settings_differ(base: Run, other: Run, groups: Iterable[Group]) -> list[tupl
     return rows
 
 
-def _settings(run: Run, groups: Iterable[Group]) -> dict[str, set[str]]:
+def _settings(run: Run, groups: Collection[Group]) -> dict[str, set[str]]:
     merged: dict[str, set[str]] = {}
     for group in groups:
         for key, values in run.settings.get(group, {}).items():

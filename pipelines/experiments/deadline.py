@@ -6,6 +6,9 @@ finished their share, and the sweep then waited forever with nothing in errors.j
 limit, the worker stops the episode when its time runs out, hands the driver an error naming the limit and
 where the episode was (errors.jsonl; a rerun tries the episode again), and goes on with the next.
 
+What it counts: the episode, from its reset to its record, not the build of its cell's controller (a first
+episode's gcc compile or solver build, seconds, is no hang).
+
 How. A real-time interval timer (``setitimer``) raises ``EpisodeTimeout`` in the worker's main thread, where
 every backend runs its episodes (the pool's processes, Ray's actors, the inline driver). It derives from
 BaseException, as KeyboardInterrupt does, so that a controller's ``except Exception`` does not swallow it.

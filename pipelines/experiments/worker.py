@@ -263,8 +263,11 @@ class EpisodeWorker:
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
+            # built outside the limit: a first episode's gcc compile (2-8 s) or solver build is no hang, and a
+            # compile stopped half-way would leave its files to the cache's clean-up
+            controller = self.controller(task)
             with deadline(self.timeout_s):
-                return self._run(task)
+                return self._run(task, controller)
         except EpisodeTimeout:
             # stopped anywhere, mid-step too: its state is not to be trusted with another episode
             self._controllers.pop(task.cell.key, None)
@@ -277,10 +280,9 @@ class EpisodeWorker:
                 raise interrupt from None
             return EpisodeOutcome(task.key, error=traceback.format_exc())
 
-    def _run(self, task: EpisodeTask) -> EpisodeOutcome:
+    def _run(self, task: EpisodeTask, controller: Controller) -> EpisodeOutcome:
         from pipelines.loop.episode import run_episode
 
-        controller = self.controller(task)
         recorder = None
         if self.record != "none":
             from pipelines.logs.recording import McapEpisodeRecorder

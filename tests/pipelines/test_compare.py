@@ -171,7 +171,7 @@ def test_json_on_standard_output_is_the_document_alone(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("items", "message"),
     [
-        (["a"], "give at least two sweep folders"),
+        (["a"], "give at least two runs to compare"),
         (["x=a", "x=b"], "label 'x' is given twice"),
         (["=a", "b"], "expected [LABEL=]RUN"),
         (["", "b"], "expected [LABEL=]RUN"),
