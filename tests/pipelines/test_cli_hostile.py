@@ -1022,9 +1022,10 @@ def test_ctrl_c_inside_casadi_outside_a_solve_ends_the_command_as_interrupted(mo
     as a failed episode and went on."""
     from pipelines.experiments.worker import EpisodeWorker
 
-    def interrupted(self, task):
+    def interrupted(self, task, controller):
         raise _wrapped_interrupt()
 
+    monkeypatch.setattr(EpisodeWorker, "controller", lambda self, task: None)
     monkeypatch.setattr(EpisodeWorker, "_run", interrupted)
     with pytest.raises(KeyboardInterrupt):
         EpisodeWorker("none").run(None)  # type: ignore[arg-type]
