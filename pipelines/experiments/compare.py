@@ -152,7 +152,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
             )
         run.outcomes[identity] = _outcome(record, kinds)
         run.methods.setdefault(identity[:3], str(record["method"]))
-        ran = {"config": record.get("config") or {}, **{name: record.get(name) for name in RUN_FIELDS}}
+        ran = {"config": _with_unrecorded(record.get("config")), **{k: record.get(k) for k in RUN_FIELDS}}
         text = json.dumps(ran, sort_keys=True)
         if (identity[:3], text) in configs:  # a cell's episodes share their settings: flattened once
             continue
@@ -163,6 +163,17 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
     if not run.outcomes:
         raise PipelineError(f"{label}: {path if path.is_file() else path / EPISODES_FILE} holds no episode")
     return run
+
+
+def _with_unrecorded(config: Any) -> dict[str, Any]:
+    """A record's config with the crowd settings it predates at the value it ran with (``UNRECORDED``): a
+    sweep recorded before ``robot_spacing`` existed ran with none, which is no difference from a new one's."""
+    if not isinstance(config, dict):
+        return {}
+    env = config.get("env")
+    if not isinstance(env, dict):
+        return config
+    return {**config, "env": {**UNRECORDED, **env}}
 
 
 def _outcome(record: Mapping[str, Any], kinds: dict[frozenset[str], frozenset[str]]) -> Outcome:

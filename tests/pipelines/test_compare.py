@@ -315,3 +315,20 @@ def test_a_simulate_json_that_cannot_pair_is_one_line(tmp_path, capsys):
     ]:
         assert main(["compare", str(a), str(path)]) == 2
         assert message in one_line_err(capsys)
+
+
+def test_a_setting_a_record_predates_is_no_difference_at_the_value_it_ran_with(tmp_path, capsys):
+    """A sweep recorded before `env.robot_spacing` existed ran with none (the formation's own): against a new
+    record of none the settings agree; against one spaced 1.3 m, the crowds differ and nothing pairs."""
+    old = {k: v for k, v in ENV.items() if k != "robot_spacing"}
+    a = _sweep(tmp_path / "a", [_record(i, *o, env=old) for i, o in enumerate(BASE)])
+    b = _sweep(
+        tmp_path / "b", [_record(i, *o, env={**ENV, "robot_spacing": None}) for i, o in enumerate(BASE)]
+    )
+    assert main(["compare", str(a), str(b), "--no-progress"]) == 0
+    assert "b ran with the settings of a." in capsys.readouterr().out
+    c = _sweep(
+        tmp_path / "c", [_record(i, *o, env={**ENV, "robot_spacing": 1.3}) for i, o in enumerate(BASE)]
+    )
+    assert main(["compare", str(a), str(c), "--no-progress"]) == 2
+    assert "share no episode" in capsys.readouterr().err
