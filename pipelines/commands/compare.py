@@ -79,6 +79,8 @@ def labelled(items: list[str]) -> list[tuple[str, Path]]:
     """``(label, path)`` of each ``[LABEL=]RUN``: an existing path is taken whole (its name may hold "="),
     else LABEL=RUN names it; the label defaults to the folder's name (a file's, less its suffix). A label
     given twice is refused."""
+    from pipelines.experiments.log import EPISODES_FILE
+
     runs: list[tuple[str, Path]] = []
     for item in items:
         label, sep, folder = item.partition("=")
@@ -89,6 +91,8 @@ def labelled(items: list[str]) -> list[tuple[str, Path]]:
                 )
         elif item:
             whole = Path(item).resolve()
+            if whole.name == EPISODES_FILE and whole.is_file():  # a sweep's log: named by its folder
+                whole = whole.parent
             label, folder = (whole.stem if whole.is_file() else whole.name) or item, item
         else:
             raise PipelineError("expected [LABEL=]RUN, a sweep folder or simulate --json file, got ''")

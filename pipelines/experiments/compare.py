@@ -127,6 +127,8 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
     ``crowdmpc simulate --json`` file ``path``, each episode its controller's (``simulate_records``).
     ``progress``: a bar of the episodes read (None: on a terminal only; a run of 100 000 takes about 17 s)."""
     records: Iterable[dict[str, Any]]
+    if path.name == EPISODES_FILE and path.is_file():  # the sweep's log named instead of its folder
+        path = path.parent
     if path.is_file():
         records, commits = simulate_records(path)
     elif not path.is_dir():

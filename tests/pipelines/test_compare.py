@@ -332,3 +332,13 @@ def test_a_setting_a_record_predates_is_no_difference_at_the_value_it_ran_with(t
     )
     assert main(["compare", str(a), str(c), "--no-progress"]) == 2
     assert "share no episode" in capsys.readouterr().err
+
+
+def test_a_sweeps_log_named_for_its_folder_is_its_folder(tmp_path, capsys):
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(BASE)])
+    assert (
+        main(["compare", f"a={a}", f"b={b / 'episodes.jsonl'}", "--expect-identical", "--no-progress"]) == 0
+    )
+    assert f"b: {b}, 4 episodes" in capsys.readouterr().out
+    assert labelled([str(b / "episodes.jsonl"), str(a)])[0][0] == "b"  # unlabelled: its folder's name
