@@ -38,6 +38,7 @@ from pipelines.errors import PipelineError
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, read_sweep_file
 from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
+from pipelines.logs.identity import UNRECORDED_DEFAULTS, dotted_settings
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
@@ -100,8 +101,11 @@ def crowd_identity(record: Mapping[str, Any]) -> Identity:
     return (*group, str(record["scenario"]), int(record["seed"]), *crowd)
 
 
-# The crowd settings added after sweeps began to record their config, as every episode before ran them.
-UNRECORDED: Final[dict[str, str | None]] = {"crowd": "orca", "formation": "auto", "robot_spacing": None}
+# The crowd settings added after sweeps began to record their config, as every episode before ran them: the
+# recordings' own list (pipelines.logs.identity), whose "env." keys are a record's config's "env" keys.
+UNRECORDED: Final[dict[str, Any]] = {
+    k.removeprefix("env."): v for k, v in UNRECORDED_DEFAULTS.items() if k.startswith("env.")
+}
 
 
 def _profile_env(profile: str) -> dict[str, Any]:
@@ -111,14 +115,6 @@ def _profile_env(profile: str) -> dict[str, Any]:
         return {"profile": profile}  # pairs with nothing but its own kind
     env = make_env_config(profile, "visible")
     return {"crossing": env.crossing, "spawn_separation": env.spawn_separation}
-
-
-def _flat(values: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
-    for key, value in values.items():
-        if isinstance(value, Mapping) and value:
-            yield from _flat(value, f"{prefix}{key}.")
-        else:
-            yield f"{prefix}{key}", value
 
 
 def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
@@ -160,7 +156,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
             continue
         configs.add((identity[:3], text))
         ran_with = run.settings.setdefault(identity[:3], {})
-        for key, value in _flat(ran):
+        for key, value in dotted_settings(ran).items():
             ran_with.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
         raise PipelineError(f"{label}: {path if path.is_file() else path / EPISODES_FILE} holds no episode")

@@ -37,12 +37,12 @@ MAX_DIFFERENCES_NAMED: Final = 8  # in the refusal; the rest counted
 MISSING: Final = "(not set)"  # a setting the held recording has and this run has not
 
 
-def _flat(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+def dotted_settings(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     """Nested settings as dotted keys: {"env": {"formation": "row"}} -> {"env.formation": "row"}."""
     out: dict[str, Any] = {}
     for key, value in values.items():
         if isinstance(value, Mapping) and value:
-            out.update(_flat(value, f"{prefix}{key}."))
+            out.update(dotted_settings(value, f"{prefix}{key}."))
         else:
             out[f"{prefix}{key}"] = value
     return out
@@ -54,7 +54,7 @@ def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[
     ``pipelines.logs.reader.decode_metadata`` reads it) flattened to dotted keys, where a setting a recording
     predates takes its ``UNRECORDED_DEFAULTS`` value."""
     identity: dict[str, Any] = {k: episode[k] for k in RUN_IDENTITY if k in episode}
-    flat = _flat(config)
+    flat = dotted_settings(config)
     for key, value in UNRECORDED_DEFAULTS.items():
         flat.setdefault(key, value)
     return identity | {k: v for k, v in flat.items() if k not in identity and k not in SPEED_ONLY}
