@@ -1,4 +1,4 @@
-"""``crowdmpc compare``: sweeps side by side on the crowds they share, each against the first, episode by
+"""``crowdmpc compare``: runs side by side on the crowds they share, each against the first, episode by
 episode (pipelines.experiments.compare)."""
 
 from __future__ import annotations
@@ -23,20 +23,24 @@ EPILOG = """examples:
   crowdmpc compare paper=runs/table2 cp0.1=runs/table2-cp safe=runs/t2-safe --json compare.json
   crowdmpc compare paper=runs/table2 safe=runs/t2-safe --plot safe_vs_paper.png
   crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
+  crowdmpc compare runs/demo runs/demo-h5                 # two folders of `simulate --record` recordings
 
-Each RUN is a `crowdmpc sweep --out` folder or a `crowdmpc simulate --json` file (its episodes the method
-named by their controller), named by LABEL= or by its name. Episodes pair where two runs faced the same crowd:
-the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or the same recording, the
-same placement rules and formation), and the same method (case ignored). Only episodes every run holds are
-compared. First each run's folder, episodes and code (the commits its sweep.json names); then, for each method
-and crowd size, every run's success, collision and contact rates (%) and mean travel time over its successes
-(s), and for each run after the first, against it: +k / −j, the episodes where the run has the outcome and the
-first run not, and the reverse, with the exact McNemar p; the mean travel-time difference over the episodes
-both completed, ± Student's t 95 % half-width, their number in brackets; and how many episodes have every
-metric equal. Last, the settings the compared groups' episodes ran with where they differ from the first
-run's. --plot draws each change with its 95 % interval (the rates' by Newcombe's square-and-add for paired
-proportions; --json holds them too). --expect-identical exits 1 unless every episode of every run is in every
-other with every metric equal: a change that must not move a result (`--jit on` against off, a refactoring).
+Each RUN is a `crowdmpc sweep --out` folder, a `crowdmpc simulate --json` file, or recordings: an .mcap file
+or a folder of them as `crowdmpc review` finds them (`simulate --record DIR`, `make demo`'s runs/demo; a file
+that cannot be read or whose episode did not finish is left out with a warning); the episodes of the last two
+are the method named by their controller. Each is named by LABEL= or by its name. Episodes pair where two runs
+faced the same crowd: the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or the
+same recording, the same placement rules and formation), and the same method (case ignored). Only episodes
+every run holds are compared. First each run's folder, episodes and code (the commits it names); then, for
+each method and crowd size, every run's success, collision and contact rates (%) and mean travel time over its
+successes (s), and for each run after the first, against it: +k / −j, the episodes where the run has the
+outcome and the first run not, and the reverse, with the exact McNemar p; the mean travel-time difference over
+the episodes both completed, ± Student's t 95 % half-width, their number in brackets; and how many episodes
+have every metric equal. Last, the settings the compared groups' episodes ran with where they differ from the
+first run's. --plot draws each change with its 95 % interval (the rates' by Newcombe's square-and-add for
+paired proportions; --json holds them too). --expect-identical exits 1 unless every episode of every run is in
+every other with every metric equal: a change that must not move a result (`--jit on` against off, a
+refactoring).
 """
 MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
 VALUE_WIDTH: Final = 60  # characters of a setting's values shown
@@ -45,14 +49,17 @@ VALUE_WIDTH: Final = 60  # characters of a setting's values shown
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "compare",
-        help="sweeps side by side on the crowds they share, paired episode by episode",
-        description="Compare sweeps' episodes on the crowds they share: rates per method and crowd size, "
+        help="runs side by side on the crowds they share, paired episode by episode",
+        description="Compare runs' episodes on the crowds they share: rates per method and crowd size, "
         "paired changes against the first run (exact McNemar), and the settings that differ.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
-        "runs", nargs="+", metavar="[LABEL=]RUN", help="two or more sweep folders or simulate --json files"
+        "runs",
+        nargs="+",
+        metavar="[LABEL=]RUN",
+        help="two or more sweep folders, simulate --json files or recordings (.mcap files or folders)",
     )
     parser.add_argument(
         "--json",
@@ -79,6 +86,7 @@ def labelled(items: list[str]) -> list[tuple[str, Path]]:
     """``(label, path)`` of each ``[LABEL=]RUN``: an existing path is taken whole (its name may hold "="),
     else LABEL=RUN names it; the label defaults to the folder's name (a file's, less its suffix). A label
     given twice is refused."""
+    from pipelines.experiments.compare import SOURCES
     from pipelines.experiments.log import EPISODES_FILE
 
     runs: list[tuple[str, Path]] = []
@@ -86,21 +94,19 @@ def labelled(items: list[str]) -> list[tuple[str, Path]]:
         label, sep, folder = item.partition("=")
         if sep and not Path(item).exists():
             if not (label and folder):
-                raise PipelineError(
-                    f"expected [LABEL=]RUN, a sweep folder or simulate --json file, got {item!r}"
-                )
+                raise PipelineError(f"expected [LABEL=]RUN, {SOURCES}, got {item!r}")
         elif item:
             whole = Path(item).resolve()
             if whole.name == EPISODES_FILE and whole.is_file():  # a sweep's log: named by its folder
                 whole = whole.parent
             label, folder = (whole.stem if whole.is_file() else whole.name) or item, item
         else:
-            raise PipelineError("expected [LABEL=]RUN, a sweep folder or simulate --json file, got ''")
+            raise PipelineError(f"expected [LABEL=]RUN, {SOURCES}, got ''")
         if any(label == seen for seen, _ in runs):
             raise PipelineError(f"label {label!r} is given twice; name each run once (LABEL=RUN)")
         runs.append((label, Path(folder)))
     if len(runs) < 2:
-        raise PipelineError("give at least two runs to compare (sweep folders or simulate --json files)")
+        raise PipelineError(f"give at least two runs to compare, each {SOURCES}")
     return runs
 
 
@@ -220,11 +226,13 @@ def _flag_json(p: Paired) -> dict[str, Any]:
 
 
 def _text(report: dict[str, Any]) -> str:
+    from pipelines.logs.review import count
+
     first = report["runs"][0]["label"]
-    lines = [f"Compared on the {report['shared_episodes']} episodes every run holds:"]
+    lines = [f"Compared on the {count(report['shared_episodes'], 'episode')} every run holds:"]
     for r in report["runs"]:
         code = ", ".join(r["code"]) or "not recorded"
-        lines.append(f"  {r['label']}: {r['path']}, {r['episodes']} episodes, code {code}")
+        lines.append(f"  {r['label']}: {r['path']}, {count(r['episodes'], 'episode')}, code {code}")
     lines += [
         "",
         f"success / collision / contact %, travel s (mean over successes); against {first}: +k / −j episodes "
@@ -286,11 +294,15 @@ def _short(text: str) -> str:
 def _identical(report: dict[str, Any]) -> int:
     """0 when every run holds the shared episodes alone and each has every metric of the first's, else 1
     with a line saying what differs."""
+    from pipelines.logs.review import count
+
     problems = []
     for r in report["runs"]:
         if r["episodes"] != report["shared_episodes"]:
             extra = r["episodes"] - report["shared_episodes"]
-            problems.append(f"{r['label']} holds {extra} episodes not in every run (e.g. {r['unshared'][0]})")
+            problems.append(
+                f"{r['label']} holds {count(extra, 'episode')} not in every run (e.g. {r['unshared'][0]})"
+            )
     for label in [r["label"] for r in report["runs"][1:]]:
         differ = sum(g["episodes"] - g["versus_first"][label]["same_metrics"] for g in report["groups"])
         if differ:

@@ -1,5 +1,6 @@
-"""Sweeps compared on the crowds they share: each run's success, collision, contact and travel time per method
-and crowd size, and each run against the first, episode by episode (``crowdmpc compare``).
+"""Runs (sweeps, simulate --json files, MCAP recordings) compared on the crowds they share: each run's
+success, collision, contact and travel time per method and crowd size, and each run against the first,
+episode by episode (``crowdmpc compare``).
 
 Which episodes pair. Two runs face the same crowd when they ran the same scenario from the same seed with the
 same number of humans and robots, and the crowd was made alike: ORCA's humans or the same replayed recording
@@ -35,10 +36,12 @@ from typing import Any, Final
 
 from crowdsim.metrics import ADDED_FIELDS
 from pipelines.errors import PipelineError
+from pipelines.experiments.compare_sources import commit_text, recording_records, simulate_records
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, read_sweep_file
 from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 from pipelines.logs.identity import UNRECORDED_DEFAULTS, dotted_settings
+from pipelines.logs.reader import find_recordings
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
@@ -53,6 +56,7 @@ FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
 # Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
 RUN_FIELDS: Final[tuple[str, ...]] = ("predictor_sha256", "sensor_range", "sensor_tracks")
 
+SOURCES: Final = "a sweep folder, a simulate --json file, or recordings: an .mcap file or a folder of them"
 Group = tuple[str, int, int]  # method (case folded), humans, robots
 Identity = tuple[Any, ...]  # Group + scenario, seed and the crowd's settings
 
@@ -120,21 +124,12 @@ def _profile_env(profile: str) -> dict[str, Any]:
 def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
     """The episodes of the sweep directory ``path``, read as its report reads them (each line checked) and
     left as they are (a sweep still writing it may hold a torn last line, which is passed over); or of the
-    ``crowdmpc simulate --json`` file ``path``, each episode its controller's (``simulate_records``).
-    ``progress``: a bar of the episodes read (None: on a terminal only; a run of 100 000 takes about 17 s)."""
-    records: Iterable[dict[str, Any]]
+    ``crowdmpc simulate --json`` file ``path``, or of the recordings ``path`` (an .mcap file, or a folder of
+    them), each episode its controller's (pipelines.experiments.compare_sources). ``progress``: a bar of the
+    episodes or files read (None: on a terminal only; a run of 100 000 takes about 17 s)."""
     if path.name == EPISODES_FILE and path.is_file():  # the sweep's log named instead of its folder
         path = path.parent
-    if path.is_file():
-        records, commits = simulate_records(path)
-    elif not path.is_dir():
-        raise PipelineError(f"{label}: {path} does not exist (a sweep folder or a simulate --json file)")
-    elif not (path / EPISODES_FILE).is_file():
-        raise PipelineError(
-            f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one)"
-        )
-    else:
-        records, commits = (r for _, _, r in episode_log(path).scan(repair=False)), _commits(path)
+    records, commits, twice = _source(label, path, progress)
     run = Run(label, path, commits=commits)
     kinds: dict[frozenset[str], frozenset[str]] = {}  # one ``added`` set per kind of record, not per episode
     configs: set[tuple[Group, str]] = set()
@@ -146,7 +141,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
         if identity in run.outcomes:
             raise PipelineError(
                 f"{label}: {path} holds two episodes of method {record['method']!r} on one crowd "
-                f"({run.outcomes[identity].key} and {record['key']}): its cells are not told apart by method"
+                f"({run.outcomes[identity].key} and {record['key']}): {twice}"
             )
         run.outcomes[identity] = _outcome(record, kinds)
         run.methods.setdefault(identity[:3], str(record["method"]))
@@ -159,8 +154,35 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
         for key, value in dotted_settings(ran).items():
             ran_with.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
-        raise PipelineError(f"{label}: {path if path.is_file() else path / EPISODES_FILE} holds no episode")
+        log = path / EPISODES_FILE
+        raise PipelineError(f"{label}: {log if log.is_file() else path} holds no episode")
     return run
+
+
+def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dict[str, Any]], list[str], str]:
+    """``path``'s records, the commits that made them, and what to do when two share a crowd."""
+    if path.is_file() and path.suffix != ".mcap":
+        records, commits = simulate_records(path)
+        return records, commits, "its episodes repeat a crowd"
+    if not path.exists():
+        raise PipelineError(f"{label}: {path} does not exist ({SOURCES})")
+    if path.is_dir() and (path / EPISODES_FILE).is_file():
+        scanned = (r for _, _, r in episode_log(path).scan(repair=False))
+        return scanned, _commits(path), "its cells are not told apart by method"
+    if path.is_dir() and not _holds_recordings(path):
+        raise PipelineError(
+            f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one) and no "
+            ".mcap recordings"
+        )
+    records, commits = recording_records(path, label, progress)
+    return records, commits, "compare each folder as a run of its own"
+
+
+def _holds_recordings(folder: Path) -> bool:
+    try:
+        return bool(any(find_recordings(folder)))
+    except PipelineError:
+        return False
 
 
 def _with_unrecorded(config: Any) -> dict[str, Any]:
@@ -188,34 +210,6 @@ def _digest(values: Mapping[str, Any]) -> bytes:
     return hashlib.blake2b(json.dumps(values, sort_keys=True).encode(), digest_size=16).digest()
 
 
-def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
-    """The episodes of a ``crowdmpc simulate --json`` file as a sweep's records, each its controller's
-    method (a sweep's "CMPC" column pairs with simulate's "cmpc"), and the code that ran them."""
-    from pipelines.experiments.log import check_record
-
-    try:
-        document = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise PipelineError(
-            f"{path}: not a simulate --json file ({type(exc).__name__}: {str(exc)[:120]})"
-        ) from None
-    episodes = document.get("episodes") if isinstance(document, dict) else None
-    if not (isinstance(episodes, list) and isinstance(document.get("summary"), dict)):
-        raise PipelineError(f"{path}: not a `crowdmpc simulate --json` file (no summary and episodes)")
-    records = []
-    for i, episode in enumerate(episodes):
-        where = f"{path}: episode {i}"
-        if not isinstance(episode, dict) or episode.get("seed") is None:
-            raise PipelineError(f"{where} has no seed: an unseeded run's crowds pair with none")
-        controller = str(episode.get("controller"))
-        key = f"{controller}/{episode.get('scenario')}/{episode['seed']}"
-        record = {**episode, "key": key, "cell": controller, "method": controller, "index": i, "wall_s": 0.0}
-        check_record(record, where)
-        records.append(record)
-    commit = _commit_text(document.get("code"))
-    return records, [] if commit is None else [commit]
-
-
 def _commits(path: Path) -> list[str]:
     """The code each run line of ``path``'s sweep.json ran ("abc123def456+dirty"), oldest first; none where
     the file is missing or unreadable (the episodes are still compared)."""
@@ -225,18 +219,10 @@ def _commits(path: Path) -> list[str]:
         return []
     found: list[str] = []
     for line in meta.get("runs", []):
-        text = _commit_text(line.get("code") if isinstance(line, dict) else None)
+        text = commit_text(line.get("code") if isinstance(line, dict) else None)
         if text is not None and text not in found:
             found.append(text)
     return found
-
-
-def _commit_text(code: Any) -> str | None:
-    """A run's recorded code as "abc123def456+dirty"; None where it names no commit."""
-    commit = code.get("commit") if isinstance(code, dict) else None
-    if not commit:
-        return None
-    return str(commit)[:12] + ("+dirty" if code.get("dirty") else "")
 
 
 @dataclass(frozen=True)

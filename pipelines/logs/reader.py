@@ -22,7 +22,7 @@ from __future__ import annotations
 import io
 import json
 import struct
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -196,11 +196,12 @@ def _seconds(ns: int) -> str:
 
 class _Walk:
     """The records of one file in order, into channels, messages, metadata and problems; ``metadata_only``:
-    into its metadata alone, its chunks left compressed."""
+    into its metadata alone, its chunks left compressed; ``topics``: only these topics' messages decoded."""
 
-    def __init__(self, path: Path, *, metadata_only: bool = False):
+    def __init__(self, path: Path, *, metadata_only: bool = False, topics: frozenset[str] | None = None):
         self.path = path
         self.metadata_only = metadata_only
+        self.topics = topics
         self.metadata: dict[str, dict[str, str]] = {}
         self.channels: dict[str, Channel] = {}
         self.messages: dict[str, list[LoggedMessage]] = {}
@@ -232,7 +233,7 @@ class _Walk:
             channel = self._channels.get(record.channel_id)
             if channel is None:
                 self._orphans.setdefault(record.channel_id, []).append(record)
-            else:
+            elif self.topics is None or channel.topic in self.topics:
                 self._messages_of(channel).append(self._decoded(channel.topic, record))
         elif isinstance(record, Metadata):
             self.metadata[record.name] = dict(record.metadata)
@@ -248,6 +249,8 @@ class _Walk:
                     f"{_seconds(orphans[0].log_time - start)} to {_seconds(orphans[-1].log_time - start)}), "
                     "which no channel record describes: left out"
                 )
+                continue
+            if self.topics is not None and channel.topic not in self.topics:
                 continue
             topic_messages = self._messages_of(channel)
             topic_messages[:0] = [self._decoded(channel.topic, m) for m in orphans]
@@ -294,14 +297,17 @@ def _records(buffer: io.BytesIO, size: int, *, first: bool) -> Iterator[McapReco
     return iter(reader.records)
 
 
-def read_recording(path: str | Path) -> Recording:
+def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Recording:
     """Read every message and metadata record of ``path``; a truncated file reads up to its last chunk.
+    ``topics``: only the messages of these (``crowdmpc compare`` reads "/episode/metrics" alone), the other
+    topics absent from ``messages`` and ``channels``: every chunk is still decompressed and checked, but
+    the hundreds of state messages are not parsed.
 
     Raises PipelineError only when ``path`` is no recording at all: missing, a folder, empty, not MCAP, or
     cut inside its header.
     """
     path = Path(path)
-    walk = _Walk(path)
+    walk = _Walk(path, topics=None if topics is None else frozenset(topics))
     complete, stopped_at = _walk_file(path, walk)
     walk.finish()
     return Recording(

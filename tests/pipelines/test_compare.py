@@ -139,7 +139,7 @@ def test_expect_identical_names_what_differs(tmp_path, capsys):
     assert main(["compare", str(a), str(b), "--expect-identical"]) == 1
     out, err = capsys.readouterr()
     assert "| 3 of 4 |" in out  # success, collision, contact and travel all equal: the minimum distance moved
-    assert "not identical: b holds 1 episodes not in every run (e.g. cmpc-" in err
+    assert "not identical: b holds 1 episode not in every run (e.g. cmpc-" in err
     assert "1 of 4 episodes of b differ from the first run's" in err
 
 
@@ -197,7 +197,7 @@ def test_bad_runs_are_one_line_errors(tmp_path, capsys):
         f.write('{"key": "x", "metrics": []}\n')
     twice = _sweep(tmp_path / "twice", [_record(0, *BASE[0]), {**_record(0, *BASE[0]), "key": "other"}])
     for other, message in [
-        (tmp_path / "missing", "does not exist (a sweep folder or a simulate --json file)"),
+        (tmp_path / "missing", "does not exist (a sweep folder, a simulate --json file, or recordings"),
         (tmp_path / "empty", "holds no episodes.jsonl"),
         (damaged, "damaged/episodes.jsonl:2: not an episode record"),
         (twice, "holds two episodes of method 'CMPC' on one crowd"),

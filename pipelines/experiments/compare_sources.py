@@ -1,0 +1,140 @@
+"""Where ``crowdmpc compare`` reads a run's episodes besides a sweep's log: a ``crowdmpc simulate --json``
+file and MCAP recordings (``crowdmpc simulate --record DIR``, ``make demo``'s runs/demo/), each episode made
+into the record a sweep writes, its method the controller (a sweep's "CMPC" column pairs with simulate's
+"cmpc").
+
+A recording holds what simulate's JSON holds of its episode: the "/episode/metrics" message is the same
+``EpisodeRecord`` and the "config" metadata the same effective config, so a folder of recordings compares
+with the ``--json`` file of its run episode for episode, every metric equal. Only those two are read of each
+file (``read_recording``'s ``topics``), not its hundreds of state messages."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any, Final
+
+from pipelines.errors import PipelineError
+from predictors.progress import progress_bar
+
+METRICS_TOPIC: Final = "/episode/metrics"
+
+
+def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
+    """The episodes of a ``crowdmpc simulate --json`` file as a sweep's records and the code that ran them."""
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise PipelineError(
+            f"{path}: not a simulate --json file ({type(exc).__name__}: {str(exc)[:120]})"
+        ) from None
+    episodes = document.get("episodes") if isinstance(document, dict) else None
+    if not (isinstance(episodes, list) and isinstance(document.get("summary"), dict)):
+        raise PipelineError(f"{path}: not a `crowdmpc simulate --json` file (no summary and episodes)")
+    records = [_record(episode, i, f"{path}: episode {i}") for i, episode in enumerate(episodes)]
+    commit = commit_text(document.get("code"))
+    return records, [] if commit is None else [commit]
+
+
+def _record(episode: Any, index: int, where: str, key: str | None = None) -> dict[str, Any]:
+    """One simulated episode (simulate's JSON entry, or a recording's metrics with its config) as a sweep's
+    record, checked as a sweep's log line is."""
+    from pipelines.experiments.log import check_record
+
+    if not isinstance(episode, dict) or episode.get("seed") is None:
+        raise PipelineError(f"{where} has no seed: an unseeded run's crowds pair with none")
+    controller = str(episode.get("controller"))
+    key = key or f"{controller}/{episode.get('scenario')}/{episode['seed']}"
+    record = {**episode, "key": key, "cell": controller, "method": controller, "index": index, "wall_s": 0.0}
+    check_record(record, where)
+    return record
+
+
+def recording_records(
+    path: Path, label: str, progress: bool | None = False
+) -> tuple[list[dict[str, Any]], list[str]]:
+    """The episodes recorded in ``path``, an .mcap file or a folder of them (as ``crowdmpc review`` finds
+    them), as a sweep's records, and the code that recorded them (each commit once, in file order). A file
+    that cannot be read, or whose episode did not finish (no metrics: its run was killed), is left out with
+    a warning line, as are unfinished ``.mcap.part`` files: their episodes pair with none. A sweep's
+    recordings are refused: it may have kept some episodes only (``--record failures``); its folder has
+    them all."""
+    from pipelines.logs.reader import find_recordings
+
+    _refuse_sweep_recordings(path, label)
+    if path.is_dir():
+        files, unfinished = find_recordings(path)
+        for part in unfinished:
+            _warn(label, f"{part} is unfinished (still being written, or its run was killed): left out")
+    else:
+        files = [path]
+    records: list[dict[str, Any]] = []
+    commits: dict[str, None] = {}
+    bar = progress_bar(
+        files, show=progress, desc=f"reading {label}", unit="file", file=sys.stderr, leave=False
+    )
+    for file in bar:
+        found = _read_episode(file, label, single=not path.is_dir())
+        if found is None:
+            continue
+        episode, commit = found
+        key = file.relative_to(path).as_posix() if path.is_dir() else file.name
+        records.append(_record(episode, len(records), str(file), key))
+        if commit is not None:
+            commits.setdefault(commit)
+    return records, list(commits)
+
+
+def _read_episode(file: Path, label: str, single: bool) -> tuple[dict[str, Any], str | None] | None:
+    """The recording's episode (its metrics message with the config it ran) and its commit; None, warned,
+    where a folder's file has none (``single``: the one file named is refused instead)."""
+    from pipelines.logs.reader import read_recording
+
+    try:
+        rec = read_recording(file, topics=[METRICS_TOPIC])
+    except PipelineError as exc:
+        if single:
+            raise PipelineError(f"{label}: {exc}") from None
+        _warn(label, f"{exc}; left out")
+        return None
+    messages = rec.data(METRICS_TOPIC)
+    if not messages or not isinstance(messages[-1], dict):
+        why = f"{file} holds no {METRICS_TOPIC} message " + (
+            "(its episode did not finish: the run was killed)"
+            if rec.truncated or not (rec.problems or rec.message_problems())
+            else f"that reads ({(rec.problems + rec.message_problems())[0].removesuffix('; left out')}; "
+            "`crowdmpc review --check` lists every problem)"
+        )
+        if single:
+            raise PipelineError(f"{label}: {why}")
+        _warn(label, f"{why}; left out")
+        return None
+    meta = rec.metadata.get("crowdmpc", {})
+    commit = commit_text({"commit": meta.get("commit"), "dirty": meta.get("dirty") == "true"})
+    return {**messages[-1], "config": rec.config()}, commit
+
+
+def _refuse_sweep_recordings(path: Path, label: str) -> None:
+    """A sweep's DIR/mcap, DIR/mcap/CELL or a file in one: refused, naming the sweep's folder."""
+    from pipelines.experiments.log import EPISODES_FILE, MCAP_DIR
+
+    here = path.resolve()
+    for up in [here, *here.parents][:3]:
+        if up.name == MCAP_DIR and (up.parent / EPISODES_FILE).is_file():
+            raise PipelineError(
+                f"{label}: {path} is a sweep's recordings, which may be some of its episodes only (sweep "
+                f"--record failures); compare the sweep's folder {up.parent}, whose {EPISODES_FILE} has all"
+            )
+
+
+def _warn(label: str, text: str) -> None:
+    print(f"crowdmpc compare: warning: {label}: {text}", file=sys.stderr)
+
+
+def commit_text(code: Any) -> str | None:
+    """A run's recorded code as "abc123def456+dirty"; None where it names no commit."""
+    commit = code.get("commit") if isinstance(code, dict) else None
+    if not commit or commit == "null":
+        return None
+    return str(commit)[:12] + ("+dirty" if code.get("dirty") else "")
