@@ -87,7 +87,16 @@ def _remove(files: list[os.DirEntry], removed: int, freed: int) -> tuple[int, in
     for entry in files:
         with contextlib.suppress(FileNotFoundError):  # another process removed it first
             size = entry.stat(follow_symlinks=False).st_size
-            os.unlink(entry.path)
+            try:
+                os.unlink(entry.path)
+            except FileNotFoundError:
+                raise
+            except OSError as exc:  # a folder the user may not write: say which file, and what went already
+                raise CompileCacheError(
+                    f"cannot remove {entry.path} ({exc.strerror or exc}); {removed} file"
+                    + ("" if removed == 1 else "s")
+                    + " removed before it"
+                ) from None
             removed += 1
             freed += size
     return removed, freed

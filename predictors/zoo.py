@@ -124,6 +124,19 @@ def writable_zoo_dir(directory: str | Path | None = None) -> Path:
     return root
 
 
+def readable_zoo_dir(directory: str | Path | None = None) -> Path:
+    """The user zoo ``zoo list``, ``show``, ``verify`` and ``calibrations`` read; PredictorError when it is a
+    file (passed over, the shipped zoo was listed alone) or when ``directory`` names one that does not exist
+    (more likely a typo than the empty zoo a missing ``$CROWDMPC_ZOO`` is before the first ``zoo add``)."""
+    root = user_zoo_dir(directory)
+    if root.exists() and not root.is_dir():
+        where = "--dir: " if directory is not None else f"${ZOO_ENV}: " if os.environ.get(ZOO_ENV) else ""
+        raise PredictorError(f"{where}the user zoo {root} is a file, not a directory")
+    if directory is not None and not root.exists():
+        raise PredictorError(f"--dir {root}: no such user zoo (`crowdmpc zoo --dir DIR add` makes one)")
+    return root
+
+
 def read_manifest(directory: str | Path | None = None) -> dict[str, ZooEntry]:
     """Entries by name of the zoo at ``directory`` (``manifest.read_manifest_at``); ``None``: the shipped
     zoo's and then the user zoo's (a user entry under a shipped name is left out: the shipped one is what

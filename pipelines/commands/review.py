@@ -213,6 +213,15 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     return runs, n_unreadable
 
 
+def _recordings_or_none(folder: Path) -> list[Path]:
+    from pipelines.logs.reader import find_recordings
+
+    try:
+        return find_recordings(folder)[0]
+    except PipelineError:
+        return []
+
+
 def _warn_failures_only(folder: Path) -> None:
     """Warn when ``folder`` is a sweep's recordings (its DIR, DIR/mcap or DIR/mcap/CELL) and some run of the
     sweep kept only its failed episodes (``--record failures``): rates over those runs are over a selection
@@ -324,7 +333,9 @@ def _review(args: argparse.Namespace) -> int:
             f"--{name}" for name in ("plot", "times", "animate", "compare") if getattr(args, name)
         ]
         if single_file_only:
-            files = sorted(args.path.glob("*.mcap"))
+            files = [
+                p for p in _recordings_or_none(args.path) if p.is_file()
+            ]  # a folder named *.mcap is none
             example = f"; give one of its files, e.g. {files[0]}" if files else ""
             verb = "needs" if len(single_file_only) == 1 else "need"
             raise PipelineError(

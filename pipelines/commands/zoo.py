@@ -197,6 +197,8 @@ def run(args: argparse.Namespace) -> int:
     from predictors import zoo, zoo_edit
     from predictors.errors import PredictorError
 
+    if args.zoo_command in ("list", "show", "verify", "calibrations"):
+        zoo.readable_zoo_dir(args.dir)
     if args.zoo_command == "list":
         entries = zoo.zoo_entries(args.dir)
         if not entries:

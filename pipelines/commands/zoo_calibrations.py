@@ -151,10 +151,12 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
     from predictors.calibration_store import zoo_calibration_files
 
     if plot is not None:
+        from crowdsim.plotting import check_figure_path
         from pipelines.commands import check_writable
 
         if predictor is None:
             raise PipelineError("--plot draws one predictor's blocks: add --predictor NAME")
+        check_figure_path(plot, "--plot")  # savefig chose a format of its own for a name without a suffix
         check_writable(plot, "--plot", room=0)
     found = blocks_of(user_dir, predictor)  # read once: the table and the plot
     if not found:
@@ -169,15 +171,18 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
         names = sorted({*PREDICTORS, *(located.entry.name for located in zoo.zoo_entries(user_dir))})
         if predictor not in names:  # a typo, rather than a model never calibrated
             raise UnknownPredictor(predictor, names)
-        print(
-            f"no calibrations of {predictor!r} in {where}; make them with crowdmpc calibrate --predictor "
-            f"{predictor} --source closed-loop|real --alpha 0.1"
+        how = (
+            f"make them with crowdmpc calibrate --predictor {predictor} --source closed-loop|real --alpha 0.1"
         )
+        if plot is not None:  # the file asked for is not written: not a success
+            raise PipelineError(f"--plot {plot}: no calibrations of {predictor!r} to draw in {where}; {how}")
+        print(f"no calibrations of {predictor!r} in {where}; {how}")
         return 0
     print(format_table(table_rows(found, user_dir)))
     if plot is not None:
         blocks = [block for _, block in found]
         figure = plot_margins(blocks, f"Conformal margins of {predictor} (crowdmpc zoo calibrations)")
+        plot.parent.mkdir(parents=True, exist_ok=True)
         figure.savefig(plot, dpi=120)
         print(f"wrote {plot}")
     print(

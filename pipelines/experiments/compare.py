@@ -41,7 +41,7 @@ from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, re
 from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 from pipelines.logs.identity import UNRECORDED_DEFAULTS, dotted_settings
-from pipelines.logs.reader import find_recordings
+from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
@@ -161,7 +161,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
 
 def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dict[str, Any]], list[str], str]:
     """``path``'s records, the commits that made them, and what to do when two share a crowd."""
-    if path.is_file() and path.suffix != ".mcap":
+    if path.is_file() and not path.name.endswith((".mcap", ".mcap" + UNFINISHED_SUFFIX)):
         records, commits = simulate_records(path)
         return records, commits, "its episodes repeat a crowd"
     if not path.exists():

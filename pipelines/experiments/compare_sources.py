@@ -54,12 +54,12 @@ def _record(episode: Any, index: int, where: str, key: str | None = None) -> dic
 def recording_records(
     path: Path, label: str, progress: bool | None = False
 ) -> tuple[list[dict[str, Any]], list[str]]:
-    """The episodes recorded in ``path``, an .mcap file or a folder of them (as ``crowdmpc review`` finds
-    them), as a sweep's records, and the code that recorded them (each commit once, in file order). A file
-    that cannot be read, or whose episode did not finish (no metrics: its run was killed), is left out with
-    a warning line, as are unfinished ``.mcap.part`` files: their episodes pair with none. A sweep's
-    recordings are refused: it may have kept some episodes only (``--record failures``); its folder has
-    them all."""
+    """The episodes recorded in ``path``, an .mcap file (or an unfinished .mcap.part, named) or a folder
+    of them (as ``crowdmpc review`` finds them), as a sweep's records, and the code that recorded them
+    (each commit once, in file order). A file that cannot be read, or whose episode did not finish (no
+    metrics: its run was killed), is left out with a warning line, as are unfinished ``.mcap.part`` files:
+    their episodes pair with none. A sweep's recordings are refused: it may have kept some episodes only
+    (``--record failures``); its folder has them all."""
     from pipelines.logs.reader import find_recordings
 
     _refuse_sweep_recordings(path, label)

@@ -244,6 +244,7 @@ class EpisodeWorker:
             self._controllers.move_to_end(key)
             return self._controllers[key]
         from pipelines.loop.episode import behind_sensor
+        from pipelines.loop.mpc import MPCController
 
         cell, world = task.cell, task.cell.world
         env_config = world.env_config()
@@ -253,6 +254,9 @@ class EpisodeWorker:
         controller = behind_sensor(
             controller, world.sensor_range, world.sensor_tracks, cell.n_robots, cell.n_humans, world.crowd
         )
+        if self.timeout_s is not None and isinstance(controller, MPCController):
+            # its NLP too, not only at the episode's reset, inside the limit (behind_sensor built every size)
+            controller.prepare(cell.n_robots, [cell.n_humans])
         self.builds += 1
         self._controllers[key] = controller
         self._configs[key] = cell_config(controller, env_config)

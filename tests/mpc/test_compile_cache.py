@@ -307,6 +307,28 @@ def test_clear_refuses_a_cache_directory_that_is_a_symlink(tmp_path):
     assert (target / f"{'ab' * 32}.casadi").exists()
 
 
+def test_clear_names_a_file_it_may_not_remove(tmp_path, monkeypatch):
+    """A cache folder the user may not write gave "[Errno 13] Permission denied: '<path>.so'" (root ignores
+    the folder's mode, so the refusal is the one unlink gives a user)."""
+    key = "ab" * 32
+    for name in (f"{key}.casadi", f"{key}.record", f"{key}.lock"):
+        (tmp_path / name).write_bytes(b"x" * 10)
+    real_unlink = os.unlink
+
+    def unlink(path, *args, **kwargs):
+        if str(path).endswith(".record"):
+            raise PermissionError(13, "Permission denied", str(path))
+        real_unlink(path, *args, **kwargs)
+
+    monkeypatch.setattr(cache_admin.os, "unlink", unlink)
+    with pytest.raises(compile_cache.CompileCacheError) as raised:
+        cache_admin.clear(tmp_path)
+    assert (
+        str(raised.value)
+        == f"cannot remove {tmp_path / (key + '.record')} (Permission denied); 1 file removed before it"
+    )
+
+
 def test_the_cache_lives_under_crowdmpc_cache(monkeypatch, tmp_path):
     from predictors.data.locate import cache_root
 

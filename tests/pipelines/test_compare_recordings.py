@@ -71,8 +71,14 @@ def test_a_folders_unreadable_recordings_are_left_out_with_a_warning(recorded, t
     assert "empty.mcap is empty (0 bytes)" in captured.err
     assert main(["compare", str(recorded / "run.json"), str(damaged), "--expect-identical"]) == 1
     assert "run holds 1 episode not in every run" in capsys.readouterr().err
+    part = tmp_path / "ended.mcap.part"  # a run killed after its metrics: read when named, as review does
+    shutil.copy(recorded / "rec" / "circle_seed000004.mcap", part)
+    assert main(["compare", str(recorded / "run.json"), str(part), "--no-progress"]) == 0
+    assert f"ended.mcap: {part}, 1 episode" in capsys.readouterr().out
+    (damaged / "next.mcap.part").write_bytes(cut.read_bytes())
     for alone, message in [
         (cut, "holds no /episode/metrics message (its episode did not finish"),
+        (damaged / "next.mcap.part", "holds no /episode/metrics message (its episode did not finish"),
         (damaged / "empty.mcap", "is empty (0 bytes)"),
         (tmp_path / "missing.mcap", "does not exist (a sweep folder, a simulate --json file, or recordings"),
     ]:

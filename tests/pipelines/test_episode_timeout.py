@@ -36,6 +36,57 @@ def test_the_deadline_stops_a_loop_that_catches_every_exception_and_leaves_no_ti
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
+def test_a_limit_whose_raise_c_code_swallowed_is_raised_when_the_block_ends():
+    """CasADi's SWIG layer clears the errors of the conversions it tries: the limit fired inside one while an
+    NLP was built, and its episode finished far past a 1 ms limit (1 to 2 of 4 episodes)."""
+    started = time.perf_counter()
+    with pytest.raises(EpisodeTimeout), deadline(0.05):
+        try:
+            time.sleep(0.5)
+        except EpisodeTimeout:  # what the C layer did with it
+            pass
+        finished = time.perf_counter()
+    assert finished - started < 0.4  # the sleep was cut, and the block ended without the raise
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_a_limited_sweep_builds_its_nlp_outside_the_limit_and_runs_the_same_episodes(monkeypatch):
+    """The limit counts the episode, not the build of its cell's NLP, which the first episode's reset did
+    inside the limit (a limit of 1 ms stopped it there, a first episode's jit compile counted)."""
+    import contextlib
+
+    import mpc.cmpc
+    import pipelines.experiments.worker as worker_module
+    from pipelines.experiments.cells import get_experiment
+    from pipelines.experiments.worker import EpisodeWorker
+
+    task = get_experiment("table2").with_predictor("constant_velocity").tasks(1, humans=(3,))[0]
+    assert task.cell.spec.controller == "cmpc"
+    free = EpisodeWorker().run(task).record
+    inside: list[bool] = []
+    builds: list[bool] = []
+    timed = worker_module.deadline
+
+    @contextlib.contextmanager
+    def watched(seconds):
+        inside.append(True)
+        with timed(seconds):
+            yield
+        inside.clear()
+
+    built = mpc.cmpc.CMPC.__init__
+
+    def build(self, *args, **kwargs):
+        builds.append(bool(inside))
+        built(self, *args, **kwargs)
+
+    monkeypatch.setattr(worker_module, "deadline", watched)
+    monkeypatch.setattr(mpc.cmpc.CMPC, "__init__", build)
+    limited = EpisodeWorker(timeout_s=60.0).run(task).record
+    assert builds == [False]  # built once, before the limit started
+    assert free is not None and limited is not None and limited["metrics"] == free["metrics"]
+
+
 def test_the_deadline_needs_the_main_thread():
     raised: list[BaseException] = []
 

@@ -145,6 +145,11 @@ def test_folder_gives_one_row_per_run_and_the_rates(runs, capsys, tmp_path):
     err = capsys.readouterr().err
     assert "--plot needs one .mcap file" in err
     assert f"give one of its files, e.g. {runs[0].path.parent / 'circle_seed000001.mcap'}" in err
+    folder = tmp_path / "with_a_folder"  # its example named a folder "a.mcap", which --plot refuses
+    (folder / "a.mcap").mkdir(parents=True)
+    shutil.copy(runs[0].path, folder / "b.mcap")
+    assert main(["review", str(folder), "--animate", str(tmp_path / "a.gif")]) == 2
+    assert f"give one of its files, e.g. {folder / 'b.mcap'}\n" in capsys.readouterr().err
 
 
 def test_plot_animation_and_comparison(runs, tmp_path, capsys):

@@ -80,3 +80,31 @@ def test_the_plot_draws_each_block_of_the_predictor_by_alpha_and_view(tmp_path, 
     assert out.read_bytes().startswith(b"\x89PNG") and f"wrote {out}" in capsys.readouterr().out
     assert main(["zoo", "calibrations", "--plot", str(out)]) == 2
     assert "--plot draws one predictor's blocks: add --predictor NAME" in capsys.readouterr().err
+
+
+def test_a_plot_that_cannot_be_written_is_refused_before_the_table(tmp_path, capsys, monkeypatch):
+    """A name matplotlib cannot write (or that has no suffix, for which savefig chose PNG and another name)
+    is one line before anything is read; a missing folder is made; a predictor with no block to draw is an
+    error, not a success without the file."""
+    for name, message in [
+        ("x.txt", "--plot " + str(tmp_path / "x.txt") + ": cannot write a figure of type 'txt'"),
+        ("plain", "cannot write a figure of type '(no suffix)'"),
+    ]:
+        assert (
+            main(["zoo", "calibrations", "--predictor", "constant_velocity", "--plot", str(tmp_path / name)])
+            == 2
+        )
+        captured = capsys.readouterr()
+        assert message in captured.err and captured.err.count("\n") == 1 and captured.out == ""
+    nested = tmp_path / "new" / "folder" / "m.png"
+    assert main(["zoo", "calibrations", "--predictor", "constant_velocity", "--plot", str(nested)]) == 0
+    assert nested.read_bytes().startswith(b"\x89PNG")
+    monkeypatch.setattr("pipelines.commands.zoo_calibrations.blocks_of", lambda *_: [])
+    capsys.readouterr()
+    empty = tmp_path / "none.png"
+    assert main(["zoo", "calibrations", "--predictor", "constant_velocity", "--plot", str(empty)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"--plot {empty}: no calibrations of 'constant_velocity' to draw in" in err and err.count("\n") == 1
+    )
+    assert not empty.exists()

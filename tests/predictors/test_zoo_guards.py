@@ -509,3 +509,24 @@ def test_a_manifest_of_a_version_this_code_does_not_know_is_refused(user, pair, 
     for command in (["list"], ["add", str(pair), "--name", "other"], ["remove", "mine"]):
         assert cli(["zoo", *command], capsys)[::2] == (2, message)
     assert snapshot(user) == before
+
+
+@pytest.mark.parametrize("action", [["list"], ["show", NAME], ["verify"], ["calibrations"]])
+def test_a_user_zoo_that_is_a_file_or_a_missing_dir_is_named_not_passed_over(
+    tmp_path, monkeypatch, capsys, action
+):
+    """Each listed the shipped zoo alone, exit 0, as if the user's were empty."""
+    file = tmp_path / "zoo.json"
+    file.write_text("{}")
+    for argv, message in [
+        (["--dir", str(file)], f"--dir: the user zoo {file} is a file, not a directory"),
+        (["--dir", str(tmp_path / "typo")], f"--dir {tmp_path / 'typo'}: no such user zoo"),
+    ]:
+        assert main(["zoo", *argv, *action]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    monkeypatch.setenv("CROWDMPC_ZOO", str(file))
+    assert main(["zoo", *action]) == 2
+    assert f"$CROWDMPC_ZOO: the user zoo {file} is a file" in capsys.readouterr().err
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "not_yet"))  # before the first add: empty, not an error
+    assert main(["zoo", *action]) == 0
