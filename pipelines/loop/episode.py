@@ -36,6 +36,7 @@ from pipelines.loop.contract import (
 )
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.interrupt import interrupts_between_steps
+from pipelines.loop.progress import StepShown
 from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
 from pipelines.loop.spec import CONTROLLER_METHODS
 from predictors.errors import PredictorError, short_repr
@@ -223,9 +224,12 @@ def run_episodes(
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
     successes = sum(r.metrics.success for r in results)  # counted as they come: a sum per episode was O(N^2)
+    stepper = StepShown(bar)
     try:
         for i in bar:
             observers = tuple(observers_factory()) if observers_factory is not None else ()
+            if not bar.disable:
+                observers = (*observers, stepper)
             try:
                 result = run_episode(
                     controller,
@@ -245,8 +249,8 @@ def run_episodes(
                 raise
             results.append(result)
             successes += result.metrics.success
-            rate = 100.0 * successes / len(results)
-            bar.set_postfix(success=f"{rate:.0f}%", refresh=False)
+            stepper.success = f"success={100.0 * successes / len(results):.0f}%"
+            bar.set_postfix_str(stepper.success, refresh=False)
     finally:
         called(controller, "close")  # e.g. DMPC's solver threads
     return results

@@ -268,3 +268,24 @@ def test_a_spec_where_a_controller_goes_and_the_other_way_round_are_named():
             run_episodes(ControllerSpec("orca"), episodes=episodes, progress=False, **kwargs)
     assert run_episodes(ControllerSpec("orca"), episodes=0, progress=False, **kwargs) == []
     assert len(run_episodes(ControllerSpec("orca"), episodes=np.int64(1), progress=False, **kwargs)) == 1
+
+
+def test_the_progress_bar_shows_the_running_episodes_step(monkeypatch, capsys):
+    """A bar of episodes sat at 0 of 1 through an episode of minutes (a long horizon) as if hung."""
+    import predictors.progress
+    from pipelines.loop import episode
+
+    monkeypatch.setattr(
+        episode, "progress_bar", lambda *a, **k: predictors.progress.progress_bar(*a, **k, mininterval=0)
+    )
+    results = episode.run_episodes(
+        ControllerSpec("straight"), episodes=2, seed=0, scenario="circle", n_humans=2, progress=True
+    )
+    err = capsys.readouterr().err
+    steps = results[0].metrics.n_steps
+    assert "0/2 [" in err and f"step={steps}]" in err  # the first episode's last step, before it counts
+    assert f"success={100 * results[0].metrics.success:.0f}%, step=1]" in err  # then the second's first
+    quiet = episode.run_episodes(
+        ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2, progress=False
+    )
+    assert capsys.readouterr().err == "" and quiet[0].metrics == results[0].metrics
