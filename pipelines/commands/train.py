@@ -29,6 +29,8 @@ from pipelines.commands.train_net import (
     trains_point_head,
 )
 from pipelines.commands.train_resume import (
+    LOCK_FILE,
+    SETTINGS_FILE,
     check_last_checkpoint,
     check_more_epochs,
     check_resumed_settings,
@@ -73,7 +75,8 @@ a data option is typed; --out names the run), one typed must be the run's, and o
 upwards (the count already trained only finishes a run that stopped before writing its metrics). --val and
 --test files are read as the evaluation reads them before training starts: a TrajNet++ test/ file without
 ground truth is refused then, not after training.
-A second train into an --out where one is running is refused (its lock: OUT/.train.lock).
+A second train into an --out where one is running is refused (its lock: OUT/.train.lock), and so is an
+--out folder holding files but no training run (no train_settings.json): choose an empty or new one.
 """
 
 
@@ -253,19 +256,7 @@ def run(args: argparse.Namespace) -> int:
     # `--out .` in a clone: Lightning's checkpoints/ is the shipped zoo's folder
     check_outside_the_zoos(ckpt_dir, f"--out {out}: its folder", "the training run")
     check_writable(out, "--out", directory=True)
-    for folder in ("checkpoints", "csv", "tensorboard"):  # Lightning writes into them (train_fit._trainer)
-        if (out / folder).is_symlink():
-            raise PipelineError(
-                f"--out {out}: its {folder} is a symbolic link; crowdmpc does not write through one "
-                "(remove it)"
-            )
-        if (out / folder).exists() and not (out / folder).is_dir():  # Lightning's makedirs: a traceback
-            raise PipelineError(f"--out {out}: its {folder} is not a directory (remove it)")
-    last = ckpt_dir / "last.ckpt"
-    if args.resume and not last.is_file():
-        raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
-    if not args.resume and last.is_file():
-        raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
+    _check_run_folder(out, args.resume)
     files, root = resolve_files(args)
     evaluated = check_data(files, progress=False if args.no_progress else None)
 
@@ -276,6 +267,50 @@ def run(args: argparse.Namespace) -> int:
         name = _check_out(args, out, settings, net_config, loss_typed, recorded)
         say_taken(out, args, taken, net_taken, data_taken)
         return run_training(args, net_config, name, out, (files, root), settings, evaluated)
+
+
+def _check_run_folder(out: Path, resume: bool) -> None:
+    """PipelineError unless --out is a folder a run may write into: missing, empty, or a training run's
+    (what ``--resume`` continues, or a new run replaces while it has no last.ckpt); Lightning's folders in
+    it must be folders, none a symbolic link."""
+    for folder in ("checkpoints", "csv", "tensorboard"):  # Lightning writes into them (train_fit._trainer)
+        if (out / folder).is_symlink():
+            raise PipelineError(
+                f"--out {out}: its {folder} is a symbolic link; crowdmpc does not write through one "
+                "(remove it)"
+            )
+        if (out / folder).exists() and not (out / folder).is_dir():  # Lightning's makedirs: a traceback
+            raise PipelineError(f"--out {out}: its {folder} is not a directory (remove it)")
+    last = out / "checkpoints" / "last.ckpt"
+    # a resume said "does not exist", and a new run saved its last checkpoint inside the folder
+    if last.exists() and not last.is_file():
+        what = "a folder" if last.is_dir() else "a special file"
+        if resume:
+            raise PipelineError(f"--resume: {last} is {what}, not a checkpoint (nothing to resume in {out})")
+        raise PipelineError(f"--out {out}: its checkpoints/last.ckpt is {what}, not a checkpoint (remove it)")
+    if resume and not last.is_file():
+        raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
+    if not resume and last.is_file():
+        raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
+    if not resume and not _holds_a_run_or_nothing(out):
+        # the run's checkpoints, logs and NAME.pt would be mixed with the user's files (sweep and data
+        # prepare refuse such a folder too)
+        raise PipelineError(
+            f"--out {out} holds files but no training run ({SETTINGS_FILE} or checkpoints/last.ckpt of "
+            "`crowdmpc train`); a run would write among them: choose an empty or new folder"
+        )
+
+
+def _holds_a_run_or_nothing(out: Path) -> bool:
+    """Whether ``out`` is missing, empty or a training run's folder, which holds its settings from before
+    its first epoch (a run from before they were kept holds a last.ckpt, refused before this without
+    --resume). The lock alone is a run's too: it is left in a folder the run did not make when the run
+    fails before writing anything, as is the settings' temporary when a kill stops their write."""
+    if not out.is_dir():
+        return True
+    names = {entry.name for entry in out.iterdir()}
+    leftovers = {n for n in names if n.startswith(f".{SETTINGS_FILE}.") and n.endswith(".part")}
+    return SETTINGS_FILE in names or not names - leftovers - {LOCK_FILE}
 
 
 def _check_out(

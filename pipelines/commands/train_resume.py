@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -238,9 +239,9 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
     try:
         checkpoint = torch.load(last, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises RuntimeError, UnpicklingError, EOFError ... for a bad file
-        first = (str(exc).strip().splitlines() or [""])[0][:160]
         raise PipelineError(
-            f"--resume: {last} is not a readable Lightning checkpoint ({type(exc).__name__}: {first})"
+            f"--resume: {last} is not a readable Lightning checkpoint (damaged, or not written by `crowdmpc "
+            f"train`; {_first_sentence(exc)})"
         ) from None
     hyper = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
     if not isinstance(hyper, dict) or "state_dict" not in checkpoint:
@@ -261,6 +262,15 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
     done = epoch + 1 if isinstance(epoch, int) and not isinstance(epoch, bool) and epoch >= 0 else None
     check_kept_checkpoints(checkpoint, last, done)
     return done
+
+
+def _first_sentence(exc: Exception) -> str:
+    """``exc``'s class and the first sentence of its message: torch's run on for lines (how to load an
+    untrusted file, what a miniz error may mean), which cut at a length ended mid-sentence. A first
+    sentence too long to show is left out rather than cut."""
+    line = (str(exc).strip().splitlines() or [""])[0]
+    sentence = re.split(r"(?<=[.!?])\s", line, maxsplit=1)[0].strip()
+    return f"{type(exc).__name__}: {sentence}" if sentence and len(sentence) <= 160 else type(exc).__name__
 
 
 def check_kept_checkpoints(checkpoint: dict[str, Any], last: Path, done: int | None) -> None:

@@ -1,0 +1,150 @@
+"""``crowdmpc train`` refusing what a user can hand it by mistake, in one line: a damaged last.ckpt or a
+folder in its place on --resume, and an --out folder of other files."""
+
+from __future__ import annotations
+
+import random
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pipelines.cli import main
+from tests.predictors.samples import write_walk_file
+
+UNREADABLE = "is not a readable Lightning checkpoint (damaged, or not written by `crowdmpc train`; "
+
+
+@pytest.fixture(autouse=True)
+def _private_dirs(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+    monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path_factory.mktemp("shipped")))
+
+
+def _args(data: Path, out: Path, epochs: int = 1) -> list[str]:
+    return [
+        "train",
+        "--model",
+        "vanilla_lstm",
+        "--train",
+        str(data),
+        "--val",
+        str(data),
+        "--epochs",
+        str(epochs),
+        "--limit-batches",
+        "1",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
+
+
+@pytest.fixture(scope="module")
+def one_run(tmp_path_factory) -> tuple[Path, Path]:
+    """The walk data and a run of one epoch on it, trained once for the module (each test copies it)."""
+    folder = tmp_path_factory.mktemp("trained")
+    data = write_walk_file(folder / "walk.ndjson")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+        patch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path_factory.mktemp("shipped")))
+        assert main(_args(data, folder / "run")) == 0
+    return data, folder / "run"
+
+
+@pytest.fixture
+def run_copy(one_run, tmp_path) -> tuple[Path, Path]:
+    data, run = one_run
+    shutil.copytree(run, tmp_path / "run")
+    return data, tmp_path / "run"
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err.rstrip("\n")
+
+
+@pytest.mark.parametrize(
+    ("damage", "why"),
+    [
+        ("random bytes", "UnpicklingError: Weights only load failed.)"),
+        (
+            "half a checkpoint",
+            "RuntimeError: PytorchStreamReader failed reading zip archive: failed finding central "
+            "directory.)",
+        ),
+    ],
+)
+def test_a_damaged_last_checkpoint_is_named_with_the_first_sentence_of_why(run_copy, capsys, damage, why):
+    """torch's message ran on for lines (how to load untrusted files, what a miniz error may mean) and was
+    cut at 160 characters, mid-sentence: "... Re-running `torch.)"."""
+    data, out = run_copy
+    last = out / "checkpoints" / "last.ckpt"
+    whole = last.read_bytes()
+    broken = random.Random(0).randbytes(5000) if damage == "random bytes" else whole[: len(whole) // 2]
+    last.write_bytes(broken)
+    capsys.readouterr()
+    assert main([*_args(data, out, epochs=2), "--resume"]) == 2
+    assert _one_line(capsys) == f"crowdmpc train: error: --resume: {last} {UNREADABLE}{why}"
+
+
+def test_a_folder_in_place_of_the_last_checkpoint_is_named_a_folder(run_copy, capsys):
+    """A resume said "last.ckpt does not exist", which it does, as a folder; a new run trained and saved its
+    last checkpoint inside that folder, where no --resume reads it."""
+    data, out = run_copy
+    last = out / "checkpoints" / "last.ckpt"
+    last.unlink()
+    last.mkdir()
+    capsys.readouterr()
+    assert main([*_args(data, out, epochs=2), "--resume"]) == 2
+    assert _one_line(capsys) == (
+        f"crowdmpc train: error: --resume: {last} is a folder, not a checkpoint (nothing to resume in {out})"
+    )
+    assert main(_args(data, out)) == 2
+    assert _one_line(capsys) == (
+        f"crowdmpc train: error: --out {out}: its checkpoints/last.ckpt is a folder, not a checkpoint "
+        "(remove it)"
+    )
+
+
+def test_an_out_folder_of_other_files_is_refused_and_left_alone(tmp_path, capsys):
+    """`train --out` into a folder of the user's trained there, mixing the run's files with theirs, where
+    `sweep --out` and `data prepare --out` refuse such a folder."""
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "foreign"
+    out.mkdir()
+    (out / "notes.txt").write_text("hi\n")
+    assert main(_args(data, out)) == 2
+    assert _one_line(capsys) == (
+        f"crowdmpc train: error: --out {out} holds files but no training run (train_settings.json or "
+        "checkpoints/last.ckpt of `crowdmpc train`); a run would write among them: choose an empty or new "
+        "folder"
+    )
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]  # not even the run's lock
+
+
+def test_an_empty_out_and_a_run_stopped_before_its_first_checkpoint_are_trained_into(run_copy, tmp_path):
+    """What stays accepted: an empty folder, and a run's folder with no last.ckpt yet (its settings, logs
+    and a file the user put there), which a new run replaces, then resumes."""
+    data, out = run_copy
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(_args(data, empty)) == 0
+    shutil.rmtree(out / "checkpoints")
+    for written in out.glob("vanilla_lstm_custom.*"):
+        written.unlink()
+    (out / "notes.txt").write_text("the user's\n")
+    assert main(_args(data, out)) == 0
+    assert main([*_args(data, out, epochs=2), "--resume"]) == 0
+    assert (out / "notes.txt").read_text() == "the user's\n"
+
+
+def test_only_the_first_sentence_of_a_long_error_is_shown_and_never_a_cut_one():
+    from pipelines.commands.train_resume import _first_sentence
+
+    assert _first_sentence(EOFError()) == "EOFError"
+    assert _first_sentence(EOFError("Ran out of input")) == "EOFError: Ran out of input"
+    long = RuntimeError("Bad header in v2.6 file. See `torch.load` for more.\nDetails follow.")
+    assert _first_sentence(long) == "RuntimeError: Bad header in v2.6 file."
+    assert _first_sentence(ValueError("x" * 300 + ". more")) == "ValueError"
