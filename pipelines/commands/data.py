@@ -12,7 +12,7 @@ from typing import Final
 from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
-from pipelines.commands.evaluate import counted
+from pipelines.commands.evaluate import counted, seed_arg
 from pipelines.commands.output_paths import output_arg
 from pipelines.errors import PipelineError, writes_named
 
@@ -80,7 +80,7 @@ def _register_prepare(actions) -> None:
     )
     prepare.add_argument(
         "--seed",
-        type=int,
+        type=seed_arg,
         default=None,  # None: not typed, so --no-tags can refuse only a seed the user gave
         help="seed of the TrajNet++ categorisation: the draws of its Kalman fits, which may change a scene's "
         "type, and of the static-scene acceptance (default 42; not with --no-tags, which draws nothing)",
@@ -123,9 +123,10 @@ def _register_synth(actions) -> None:
         "--humans", required=True, type=counted(1, MAX_HUMANS), help=f"humans per episode (1..{MAX_HUMANS})"
     )
     synth.add_argument(
-        "--seed", required=True, type=counted(0), help="seed of episode 0 (episode i uses seed + i)"
+        "--seed", required=True, type=seed_arg, help="seed of episode 0 (episode i uses seed + i)"
     )
     synth.add_argument("--scenario", choices=("circle", "perpendicular"), default="circle")
+    synth.add_argument("--no-progress", action="store_true", help="no progress bar of the episodes")
     synth.add_argument(
         "--with-robots",
         action="store_true",
@@ -293,6 +294,7 @@ def run_synth(args: argparse.Namespace) -> int:
                 scenario=args.scenario,
                 with_robots=args.with_robots,
                 env_config=make_env_config(args.profile),
+                progress=False if args.no_progress else None,
             )
             if "path" in summary:
                 summary["path"] = str(args.out)

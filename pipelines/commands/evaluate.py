@@ -6,11 +6,15 @@ import argparse
 import json
 import sys
 from collections.abc import Callable
-from typing import Final
+from pathlib import Path
+from typing import TYPE_CHECKING, Final
 
 from pipelines.commands import check_data_files, check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from predictors.evaluate import EvalConfig, EvalScene
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
@@ -53,6 +57,19 @@ def counted(least: int, most: int | None = None) -> Callable[[str], int]:
         return value
 
     return parse
+
+
+def seed_arg(text: str) -> int:
+    """An argparse type: a seed in every command's range, 0..``pipelines.config.settings.MAX_SEED`` (TOML's
+    largest integer, where a run's config records it): `data prepare` took -1 and `data synth` 10^22, seeds
+    that no other command takes."""
+    from pipelines.config.settings import MAX_SEED
+
+    value = counted(0)(text)
+    if value > MAX_SEED:
+        given = text if len(text) <= 40 else f"{text[:37]}..."
+        raise argparse.ArgumentTypeError(f"must be at most 2**63 - 1 (TOML's largest integer), got {given}")
+    return value
 
 
 def register(subparsers) -> None:
@@ -99,7 +116,7 @@ def register(subparsers) -> None:
         metavar="K",
         help=f"top-K ADE/FDE for sampling models (1..{MAX_TOP_K})",
     )
-    parser.add_argument("--seed", type=counted(0), default=0, help="seed for sampling models (default 0)")
+    parser.add_argument("--seed", type=seed_arg, default=0, help="seed for sampling models (default 0)")
     parser.add_argument(
         "--json",
         type=json_path,
@@ -119,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from pipelines.version import code_identity
     from predictors.data.locate import prepared_dir, protocol_files
-    from predictors.evaluate import EvalConfig, evaluate, format_table
+    from predictors.evaluate import EvalConfig, check_dataset_predictor, evaluate_scenes, format_table
     from predictors.registry import PREDICTORS, checkpoint_sha256, load_predictor
     from predictors.zoo import locate
 
@@ -132,7 +149,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     else:
         files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
         root = prepared_dir(args.data_dir)
-    result = evaluate(predictor, files[args.split], config, progress=not args.no_progress, root=root)
+    check_dataset_predictor(predictor)  # before the files are read
+    loaded = _scenes(args, files[args.split], config, root)
+    result = evaluate_scenes(predictor, loaded, config, progress=not args.no_progress, root=root)
     result.update(
         protocol=args.protocol,
         dataset=args.dataset,
@@ -188,3 +207,24 @@ def _choose_files(args: argparse.Namespace) -> None:
         )
     check_data_files("--test", args.test)  # a file named twice was scored twice in "overall"
     args.protocol, args.dataset, args.split = "custom", None, "test"
+
+
+def _scenes(
+    args: argparse.Namespace, files: list[Path], config: EvalConfig, root: Path | None
+) -> dict[Path, list[EvalScene]]:
+    """The scenes of each file scored, by its path; PipelineError naming a file that holds none, before any
+    is scored: its row read "0 scenes -" and the command passed, as if something had been evaluated (an
+    empty --test file, or a prepared split its raw data was too short to give a scene)."""
+    from predictors.evaluate import load_eval_scenes
+
+    loaded = {Path(path): load_eval_scenes(path, config) for path in files}
+    empty = next((path for path, scenes in loaded.items() if not scenes), None)
+    if empty is None:
+        return loaded
+    if root is None:
+        raise PipelineError(f"--test {empty}: holds no scenes; the evaluation needs at least one")
+    name = empty.relative_to(root) if empty.is_relative_to(root) else empty
+    raise PipelineError(
+        f"the {args.split} split {name} of {root} holds no scenes; evaluate another --dataset or --split, or "
+        "prepare data with more frames"
+    )

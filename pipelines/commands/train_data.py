@@ -89,16 +89,15 @@ def protocol_options(args: argparse.Namespace, explicit: bool) -> None:
 
 
 def check_data(files: dict[str, list[Path]], progress: bool | None = False) -> dict[Path, list[Any]]:
-    """Every data file is read as the run will read it, and the training and validation splits hold scenes,
-    before Lightning starts (its banner would come before the one-line error, and a half-made run folder
-    after it). The training and validation files are loaded as the training data module loads them
-    (``load_file_arrays``: scenes of exactly 21 steps), which keeps them for it. The validation and test
-    files are also read as the evaluation of the trained net reads them (scene length, frame rate, spacing):
-    a file it refuses, such as a TrajNet++ test/ file without ground truth, was found only after training,
-    with no metrics written. Returns those scenes by path, for that evaluation: each file is parsed once
-    (the validation file was parsed three times, the test file twice). ``progress``: a bar while a file's
-    scenes are built (None: on a terminal only), the first read of a large file being a minute of silence
-    otherwise."""
+    """Every data file is read as the run will read it, and each split given holds scenes, before Lightning
+    starts (its banner would come before the one-line error, and a half-made run folder after it). The
+    training and validation files are loaded as the training data module loads them (``load_file_arrays``:
+    scenes of exactly 21 steps), which keeps them for it. The validation and test files are also read as the
+    evaluation of the trained net reads them (scene length, frame rate, spacing): a file it refuses, such as
+    a TrajNet++ test/ file without ground truth, was found only after training, with no metrics written.
+    Returns those scenes by path, for that evaluation: each file is parsed once (the validation file was
+    parsed three times, the test file twice). ``progress``: a bar while a file's scenes are built (None: on
+    a terminal only), the first read of a large file being a minute of silence otherwise."""
     from predictors.data.validate import parse_ndjson
     from predictors.data.windows import load_file_arrays
     from predictors.evaluate import eval_scenes_of
@@ -116,7 +115,8 @@ def check_data(files: dict[str, list[Path]], progress: bool | None = False) -> d
                 held.append(len(evaluated[path]))
             if split != "test":
                 held.append(len(load_file_arrays(path, progress=progress, content=content)))
-        if split in ("train", "val") and not any(held):
+        # an empty --test too: the run passed with its test metrics silently missing
+        if paths and not any(held):
             names = ", ".join(str(p) for p in paths)
             raise PipelineError(f"--{split} {names}: holds no scenes; {split} needs at least one")
     return evaluated

@@ -329,7 +329,16 @@ def test_evaluate_a_scene_file_without_ground_truth(prepared, capsys):
 def test_synth_forwards_its_options(monkeypatch, tmp_path, capsys):
     calls = []
 
-    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False, env_config=None):
+    def synthesize(
+        out_path,
+        episodes,
+        n_humans,
+        seed,
+        scenario="circle",
+        with_robots=False,
+        env_config=None,
+        progress=None,
+    ):
         calls.append((out_path, episodes, n_humans, seed, scenario, with_robots))
         out_path.write_text("scenes\n")
         return {"scenes": 12, "out": str(out_path)}
@@ -389,7 +398,16 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
     without provenance (the rerun said "exists; add --replace"), or with --replace, the new data beside the
     old provenance (another seed and sha256)."""
 
-    def synthesize(out_path, episodes, n_humans, seed, scenario="circle", with_robots=False, env_config=None):
+    def synthesize(
+        out_path,
+        episodes,
+        n_humans,
+        seed,
+        scenario="circle",
+        with_robots=False,
+        env_config=None,
+        progress=None,
+    ):
         out_path.write_text(f"scenes of seed {seed}\n")
         return {"scenes": 1}
 

@@ -77,3 +77,15 @@ def test_one_human_without_robots_is_refused_before_any_episode(tmp_path, monkey
     assert not ran and not (tmp_path / "x.ndjson").exists()
     one = synthesize(tmp_path / "y.ndjson", episodes=1, n_humans=1, seed=0, with_robots=True)
     assert one["scenes"] > 0  # with the robots a human is a primary beside them
+
+
+def test_synth_shows_a_bar_of_its_episodes_and_writes_the_same_file_without(tmp_path, capsys):
+    """Up to 100 000 episodes ran with nothing on the terminal."""
+    from pipelines.cli import main
+
+    argv = ["data", "synth", "--episodes", "3", "--humans", "4", "--seed", "0"]
+    synthesize(tmp_path / "a.ndjson", 3, 4, 0, progress=True)
+    assert "synth circle: 100%|██████████| 3/3 [" in capsys.readouterr().err
+    assert main([*argv, "--out", str(tmp_path / "b.ndjson"), "--no-progress"]) == 0
+    assert "synth circle" not in capsys.readouterr().err
+    assert (tmp_path / "a.ndjson").read_bytes() == (tmp_path / "b.ndjson").read_bytes()
