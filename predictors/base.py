@@ -38,7 +38,7 @@ import casadi as ca
 import numpy as np
 
 from crowdsim import world
-from predictors.errors import short_repr
+from predictors.errors import PredictorError, short_repr
 
 if TYPE_CHECKING:
     from crowdsim.env import EnvConfig, Observation
@@ -92,7 +92,8 @@ def robot_indices(n_agents: int, humans: np.ndarray) -> np.ndarray:
 
 
 def check_humans(humans: np.ndarray, n_agents: int) -> np.ndarray:
-    """``humans`` as a 1-D integer array of distinct indices into ``n_agents`` agents; ValueError otherwise.
+    """``humans`` as a 1-D integer array of distinct indices into ``n_agents`` agents; PredictorError (a
+    ValueError) otherwise.
 
     Each check stops a silent misreading: a repeated index makes that human a neighbour of its own copy (the
     pooling moves its forecast by centimetres), and a boolean mask ``[True, False, True]`` would be taken for
@@ -100,49 +101,64 @@ def check_humans(humans: np.ndarray, n_agents: int) -> np.ndarray:
     """
     humans = np.asarray(humans)
     if humans.ndim != 1:
-        raise ValueError(f"humans must be a 1-D array of agent indices, got shape {humans.shape}")
+        raise PredictorError(f"humans must be a 1-D array of agent indices, got shape {humans.shape}")
     if humans.size == 0:
         return humans.astype(int)
     if not np.issubdtype(humans.dtype, np.integer):  # bool is not an integer dtype in numpy
         hint = " (a boolean mask? pass np.flatnonzero(mask))" if humans.dtype == bool else ""
-        raise ValueError(f"humans must be integer agent indices, got dtype {humans.dtype}{hint}")
+        raise PredictorError(f"humans must be integer agent indices, got dtype {humans.dtype}{hint}")
     if humans.min() < 0 or humans.max() >= n_agents:
-        raise ValueError(
+        raise PredictorError(
             f"humans must be indices into {n_agents} agents (0..{n_agents - 1}), "
             f"got {short_repr(humans.tolist())}"
         )
     values, counts = np.unique(humans, return_counts=True)
     if (counts > 1).any():
-        raise ValueError(
+        raise PredictorError(
             f"humans must be distinct agent indices; {short_repr(values[counts > 1].tolist())} repeated"
         )
     return humans
 
 
 def check_horizon(horizon: int, what: str) -> int:
-    """``horizon`` if it is at least one step (``to_casadi``'s bound); ValueError naming ``what`` otherwise.
+    """``horizon`` if it is a whole number of steps, at least one (``to_casadi``'s bound); PredictorError
+    naming ``what`` otherwise.
 
     A recursion of zero or fewer steps predicts nothing: the learned predictors used to return one step
-    anyway, constant velocity an empty array."""
+    anyway, constant velocity an empty array. 3.5 steps were 3 and True one."""
+    if isinstance(horizon, bool | np.bool_) or not isinstance(horizon, int | np.integer):
+        raise PredictorError(f"{what} must be a whole number of steps, got {short_repr(horizon)}")
     if horizon < 1:
-        raise ValueError(f"{what} must be at least 1 step, got {horizon}")
+        raise PredictorError(f"{what} must be at least 1 step, got {horizon}")
     return int(horizon)
 
 
+def check_sizes(n_humans: int, n_robots: int, horizon: int | None = None) -> None:
+    """PredictorError unless the counts of a CasADi twin are whole numbers >= 0 and ``horizon`` is one
+    >= 1: CasADi's own refusals named none of them, and constant velocity's context of "2" humans was
+    "2222"."""
+    for name, count in (("n_humans", n_humans), ("n_robots", n_robots)):
+        if isinstance(count, bool | np.bool_) or not isinstance(count, int | np.integer) or count < 0:
+            raise PredictorError(f"{name} must be a whole number >= 0, got {short_repr(count)}")
+    if horizon is not None:
+        check_horizon(horizon, "horizon")
+
+
 def check_history(history: np.ndarray, mask: np.ndarray) -> None:
-    """ValueError unless ``history`` is ``(L, N, 2)``, ``mask`` ``(L, N)`` and each observed position finite.
+    """PredictorError unless ``history`` is ``(L, N, 2)``, ``mask`` ``(L, N)`` and each observed position
+    finite.
 
     An unobserved entry may hold anything (TrajNet++ marks absence with NaN). An observed NaN is absence left
     out of ``mask``: the learned predictors' pooling spread it to every agent's forecast, while their CasADi
     twin turned it into finite numbers, and constant velocity returned NaN for that agent."""
     if history.ndim != 3 or history.shape[2] != 2:
-        raise ValueError(f"history must have shape (L, N, 2), got {history.shape}")
+        raise PredictorError(f"history must have shape (L, N, 2), got {history.shape}")
     if mask.shape != history.shape[:2]:
-        raise ValueError(f"mask must have shape {history.shape[:2]}, got {mask.shape}")
+        raise PredictorError(f"mask must have shape {history.shape[:2]}, got {mask.shape}")
     bad = np.argwhere(mask.astype(bool) & ~np.isfinite(history).all(axis=-1))
     if bad.size:
         step, agent = bad[0]
-        raise ValueError(
+        raise PredictorError(
             f"history[{step}, {agent}] is {history[step, agent].tolist()}, not a finite position, where mask "
             f"marks agent {agent} observed ({len(bad)} such entries); mark absent entries False in mask"
         )
@@ -162,12 +178,13 @@ def check_rollout_inputs(
     n_robots = n_agents - len(check_humans(humans, n_agents))
     if robots_future is None:
         if horizon is None:
-            raise ValueError("horizon is required when robots_future is None")
+            raise PredictorError("horizon is required when robots_future is None")
         return check_horizon(horizon, "horizon")
     if robots_future.ndim != 3 or robots_future.shape[1:] != (n_robots, 2):
-        raise ValueError(f"robots_future must have shape (H, {n_robots}, 2), got {robots_future.shape}")
+        raise PredictorError(f"robots_future must have shape (H, {n_robots}, 2), got {robots_future.shape}")
     if not np.isfinite(robots_future).all():
-        raise ValueError("robots_future holds a non-finite position; a robot plan is finite positions")
+        raise PredictorError("robots_future holds a non-finite position; a robot plan is finite positions")
     if horizon is not None and horizon != robots_future.shape[0]:
-        raise ValueError(f"horizon {horizon} disagrees with robots_future of length {robots_future.shape[0]}")
+        length = robots_future.shape[0]
+        raise PredictorError(f"horizon {horizon} disagrees with robots_future of length {length}")
     return check_horizon(robots_future.shape[0], "robots_future's length H")

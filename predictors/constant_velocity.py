@@ -5,7 +5,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from predictors.base import DT, check_history, check_humans, check_rollout_inputs
+from predictors.base import DT, check_history, check_humans, check_rollout_inputs, check_sizes
+from predictors.errors import PredictorError
 
 
 def last_state(history: np.ndarray, mask: np.ndarray, agents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -23,7 +24,7 @@ def last_state(history: np.ndarray, mask: np.ndarray, agents: np.ndarray) -> tup
     for k, a in enumerate(agents):
         seen = np.flatnonzero(mask[:, a])
         if seen.size == 0:
-            raise ValueError(f"agent {a} is never observed in the history; it cannot be predicted")
+            raise PredictorError(f"agent {a} is never observed in the history; it cannot be predicted")
         last = seen[-1]
         pos[k] = history[last, a]
         if last >= 1 and mask[last - 1, a]:
@@ -38,25 +39,30 @@ class ConstantVelocity:
 
     def __init__(self, obs_len: int = 2):
         if obs_len < 1:
-            raise ValueError(f"obs_len must be >= 1, got {obs_len}")
+            raise PredictorError(f"obs_len must be >= 1, got {obs_len}")
         self.obs_len = obs_len
 
     def rollout(self, history, mask, robots_future, humans, horizon=None):
-        horizon = check_rollout_inputs(history, mask, robots_future, humans, horizon)
+        history, mask = np.asarray(history, dtype=float), np.asarray(mask, dtype=bool)  # lists too, as nets'
+        future = None if robots_future is None else np.asarray(robots_future, dtype=float)
+        horizon = check_rollout_inputs(history, mask, future, humans, horizon)
         pos, vel = last_state(history, mask, humans)
         steps = np.arange(1, horizon + 1, dtype=float)[:, None, None]
         return pos[None] + steps * DT * vel[None]
 
     def encode(self, history, mask, humans):
-        check_history(np.asarray(history), np.asarray(mask))  # as rollout
+        history, mask = np.asarray(history, dtype=float), np.asarray(mask, dtype=bool)
+        check_history(history, mask)  # as rollout
         humans = check_humans(humans, np.shape(history)[1])  # as rollout: a repeat or a mask is refused
         pos, vel = last_state(history, mask, humans)
         return np.concatenate([pos.ravel(), vel.ravel()]).astype(np.float64)
 
     def context_size(self, n_humans: int, n_robots: int) -> int:
+        check_sizes(n_humans, n_robots)
         return 4 * n_humans
 
     def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
+        check_sizes(n_humans, n_robots, horizon)
         context = ca.MX.sym("context", self.context_size(n_humans, n_robots))
         robots_future = ca.MX.sym("robots_future", horizon * n_robots * 2)
         pos = context[: 2 * n_humans]

@@ -36,6 +36,7 @@ import casadi as ca
 import numpy as np
 import torch
 
+from predictors import base
 from predictors.base import OBS_LEN, check_history, check_humans, check_rollout_inputs, robot_indices
 from predictors.errors import PredictorError
 from predictors.export import TensorSpec, export_function, output_shapes
@@ -93,7 +94,7 @@ class LearnedPredictor:
         history = np.asarray(history, dtype=np.float64)
         mask = np.asarray(mask, dtype=bool)
         if history.ndim != 3 or history.shape[2] != 2 or mask.shape != history.shape[:2]:
-            raise ValueError(
+            raise PredictorError(
                 f"history (L, N, 2) and mask (L, N) expected, got {history.shape} and {mask.shape}"
             )
         humans = np.asarray(humans, dtype=int)
@@ -105,7 +106,7 @@ class LearnedPredictor:
         seen = mask[-self.obs_len :, order].copy()
         never = np.flatnonzero(~seen.any(axis=0))
         if never.size:
-            raise ValueError(
+            raise PredictorError(
                 f"agents {order[never].tolist()} are never observed in the last {self.obs_len} steps of the "
                 f"history (the steps {self.name!r} reads); they cannot be predicted"
             )
@@ -204,6 +205,8 @@ class LearnedPredictor:
     def rollout(self, history, mask, robots_future, humans, horizon=None):
         future = None if robots_future is None else np.asarray(robots_future, dtype=np.float64)
         horizon = check_rollout_inputs(np.asarray(history), np.asarray(mask), future, humans, horizon)
+        if np.size(humans) == 0:  # no one to predict (the net's reshape of zero agents raised)
+            return np.zeros((horizon, 0, 2))
         pos, seen, n_humans, encoded = self._encoded(history, mask, humans, keep_robots=future is not None)
         with torch.no_grad(), single_threaded():
             return self._decode(
@@ -290,18 +293,15 @@ class LearnedPredictor:
         return tuple(math.prod(d) for d in dims), out_width
 
     def context_size(self, n_humans: int, n_robots: int) -> int:
+        base.check_sizes(n_humans, n_robots)
         n_agents = n_humans + n_robots
         return n_agents * (sum(self._widths()[0]) + 2 + 1) + 2 * n_humans
 
     # ------------------------------------------------------------------------------------ symbolic side
     def to_casadi(self, n_humans: int, n_robots: int, horizon: int) -> ca.Function:
         """``f(context, robots_future) -> humans_future`` (see ``predictors.base``); built once per size."""
-        if n_humans < 0 or n_robots < 0 or horizon < 1:
-            raise PredictorError(
-                "to_casadi needs n_humans, n_robots >= 0 and horizon >= 1, "
-                f"got {n_humans}, {n_robots}, {horizon}"
-            )
-        key = (n_humans, n_robots, horizon)
+        base.check_sizes(n_humans, n_robots, horizon)
+        key = (int(n_humans), int(n_robots), int(horizon))
         if self._export_failure is not None:
             raise self._export_failure  # every size is built the same way: it would fail the same
         if key not in self._functions:

@@ -22,7 +22,7 @@ import torch
 
 from predictors.base import OBS_LEN, Predictor
 from predictors.checkpoint import load_checkpoint, save_checkpoint
-from predictors.errors import CheckpointMismatch
+from predictors.errors import CheckpointMismatch, PredictorError
 from predictors.learned import LearnedPredictor
 from predictors.models import load_plugin, model_kind, model_kinds
 from predictors.oracle import ORACLE_PREDICTOR
@@ -221,6 +221,33 @@ def test_rollout_refuses_a_horizon_below_one(predictor):
             predictor.rollout(history, mask, None, np.arange(6), horizon=horizon)
     with pytest.raises(ValueError, match="^robots_future's length H must be at least 1 step, got 0$"):
         predictor.rollout(history, mask, robots_future[:0], humans)
+
+
+def test_sizes_that_are_no_whole_numbers_are_refused_naming_them(predictor):
+    """3.5 steps were 3 and True one; CasADi's refusals of a size named none ("Assertion nrow>=0"), and
+    constant velocity's context of "2" humans was "2222"."""
+    history, mask, humans, robots_future = crossing_scene()
+    for horizon in (3.5, True, "3"):
+        with pytest.raises(PredictorError, match="^horizon must be a whole number of steps, got "):
+            predictor.rollout(history, mask, None, np.arange(6), horizon=horizon)
+    for sizes, name in [((2.5, 2, 3), "n_humans"), ((2, "2", 3), "n_robots"), ((-1, 2, 3), "n_humans")]:
+        with pytest.raises(PredictorError, match=f"^{name} must be a whole number >= 0, got "):
+            predictor.to_casadi(*sizes)
+    with pytest.raises(PredictorError, match="^horizon must be at least 1 step, got 0$"):
+        predictor.to_casadi(2, 2, 0)
+    with pytest.raises(PredictorError, match="^n_humans must be a whole number >= 0, got '2'$"):
+        predictor.context_size("2", 2)
+
+
+def test_lists_and_a_scene_of_no_one_are_taken_as_arrays(predictor):
+    """Constant velocity raised AttributeError on lists where the nets took them; a net raised torch's
+    reshape error on a scene of no agents at all, where constant velocity returned no forecast."""
+    history, mask, humans, robots_future = crossing_scene()
+    as_arrays = predictor.rollout(history, mask, robots_future, humans)
+    as_lists = predictor.rollout(history.tolist(), mask.tolist(), robots_future.tolist(), humans.tolist())
+    np.testing.assert_array_equal(as_lists, as_arrays)
+    nobody = predictor.rollout(np.zeros((9, 0, 2)), np.zeros((9, 0), bool), None, np.array([], int), 3)
+    assert nobody.shape == (3, 0, 2)
 
 
 def test_casadi_function_save_load_round_trip(predictor, tmp_path):
