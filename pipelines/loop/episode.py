@@ -117,9 +117,7 @@ def run_episode(
     """
     check_controller(controller)
     check_built_for(controller, env_config, "run_episode")
-    check_sizes(scenario, n_humans, n_robots)
-    if n_robots < 1:  # the simulator runs crowds alone; an episode's metrics are its robots'
-        raise SimulationError(f"run_episode: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
+    _check_team(scenario, n_humans, n_robots, "run_episode")
     env = CrowdEnv(env_config, replayed_recording(env_config))
     controller = behind_tracks(controller, env_config)
     obs = env.reset(seed, scenario, n_humans, n_robots)
@@ -213,6 +211,13 @@ def run_episodes(
     # numpy integers too, as seeds and sizes are taken (a notebook's counts often come from numpy)
     if isinstance(episodes, bool) or not isinstance(episodes, int | np.integer) or episodes < 0:
         raise PipelineError(f"run_episodes: episodes must be an int >= 0, got {short_repr(episodes)}")
+    # before the controller is built, and with no episode to run too (seed "0" failed at seed + i, None
+    # likewise, and True ran seed 1)
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise PipelineError(f"run_episodes: seed must be an int >= 0, got {short_repr(seed)}")
+    if not isinstance(env_config, EnvConfig):
+        raise PipelineError(f"run_episodes: env_config must be an EnvConfig, got {short_repr(env_config)}")
+    _check_team(scenario, n_humans, n_robots, "run_episodes")
     if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
         raise PipelineError(
             f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
@@ -368,6 +373,15 @@ def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
     out["fallback_steps"] = int(sum(f is not None for r in results for f in r.fallbacks))
     out["statuses"] = dict(Counter(s for r in results for s in r.statuses))
     return out
+
+
+def _check_team(scenario: str, n_humans: int, n_robots: int, where: str) -> None:
+    """``check_sizes`` with at least one robot: the simulator runs crowds alone, an episode's metrics are
+    its robots' (13 robots were refused as out of [0, 12] and 0 as out of [1, 12])."""
+    whole = isinstance(n_robots, int | np.integer) and not isinstance(n_robots, bool)
+    if whole and not 1 <= n_robots <= MAX_ROBOTS:
+        raise SimulationError(f"{where}: n_robots must be in [1, {MAX_ROBOTS}], got {n_robots}")
+    check_sizes(scenario, n_humans, n_robots)
 
 
 def _close_quietly(observers: Iterable[EpisodeObserver]) -> None:

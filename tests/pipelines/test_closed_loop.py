@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from crowdsim.env_config import EnvConfig
+from crowdsim.errors import SimulationError
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, ControlOutput, make_controller
 from pipelines.loop.episode import run_episode, run_episodes, summarize
@@ -237,6 +238,31 @@ def test_an_episode_without_robots_is_refused_before_it_starts(controller):
         run_episode(make_controller(ControllerSpec(controller)), seed=0, scenario="circle", n_humans=3,
                     n_robots=0, observers=[spy])  # fmt: skip
     assert spy.calls == []
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"seed": "0"}, "run_episodes: seed must be an int >= 0, got '0'"),
+        ({"seed": None}, "run_episodes: seed must be an int >= 0, got None"),
+        ({"seed": True}, "run_episodes: seed must be an int >= 0, got True"),  # it ran seed 1
+        ({"env_config": {"dt": 0.4}}, "run_episodes: env_config must be an EnvConfig, got {'dt': 0.4}"),
+        ({"n_robots": 13}, "run_episodes: n_robots must be in [1, 12], got 13"),  # it said [0, 12]
+        ({"scenario": "square", "episodes": 0}, "unknown scenario 'square'"),  # checked with none to run too
+    ],
+)
+def test_run_episodes_names_a_bad_argument_before_building_anything(changes, message, monkeypatch):
+    """From a notebook: seed "0" or None failed at ``seed + i`` with Python's TypeError, an env_config dict
+    with "'dict' object has no attribute 'world'", both after the controller was built."""
+    import pipelines.loop.episode as episode
+
+    monkeypatch.setattr(episode, "make_controller", lambda *a, **k: pytest.fail("built before the check"))
+    arguments = {"episodes": 1, "seed": 0, "scenario": "circle", "n_humans": 2, "progress": False}
+    with pytest.raises((PipelineError, SimulationError)) as raised:
+        run_episodes(ControllerSpec("straight"), **{**arguments, **changes})
+    assert str(raised.value) == message or str(raised.value).startswith(message)
+    monkeypatch.undo()
+    assert run_episodes(ControllerSpec("straight"), **{**arguments, "seed": np.int64(3), "episodes": 0}) == []
 
 
 def test_an_episode_result_shows_itself_in_one_line():
