@@ -30,6 +30,8 @@ import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Final, Literal, get_args
 
+import numpy as np
+
 from crowdsim import world
 from crowdsim.world import PAPER_ROBOTS as PAPER_ROBOTS  # Table I's weights were set for it; named here too
 from crowdsim.world import WorldFacts
@@ -228,6 +230,7 @@ class MPCConfig:
     stall_release_s: float = 0.0
 
     def __post_init__(self):
+        self._plain_scalars()
         self._check_numbers()
         for name in ("warm_start", "multi_start", "jit", "dmpc_pairs"):
             if not isinstance(getattr(self, name), bool):
@@ -303,6 +306,18 @@ class MPCConfig:
         for name, (least, unit) in MPC_LEAST.items():
             if getattr(self, name) < least:
                 raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(self, name)!r}")
+
+    def _plain_scalars(self) -> None:
+        """numpy's scalars stored as Python's, as EnvConfig stores them: values from numpy (a sweep over
+        ``np.linspace``) were refused as if wrong ("horizon must be an integer >= 1, got np.int64(4)"), and
+        a run's JSON record takes Python's alone."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.generic):
+                object.__setattr__(self, f.name, value.item())
+            elif f.name == "human_margins" and isinstance(value, tuple | list):
+                plain = [m.item() if isinstance(m, np.generic) else m for m in value]
+                object.__setattr__(self, f.name, type(value)(plain))
 
     def _check_margins(self) -> None:
         margins = self.human_margins

@@ -88,6 +88,18 @@ def test_replace_validates_and_rejects_unknown_fields():
         MPCConfig().replace(horizn=6)
 
 
+def test_numpy_scalars_are_stored_as_pythons():
+    """As EnvConfig: np.int64(4) was refused as "horizon must be an integer >= 1", np.True_ as no bool."""
+    config = MPCConfig(
+        horizon=np.int64(4), d_min=np.float32(0.5), warm_start=np.True_, human_margins=[np.float64(0.1)] * 4
+    )
+    assert config == MPCConfig(d_min=float(np.float32(0.5)), human_margins=(0.1,) * 4)
+    assert [type(v) for v in (config.horizon, config.d_min, config.warm_start)] == [int, float, bool]
+    assert all(type(m) is float for m in config.human_margins)
+    with pytest.raises(MPCConfigError, match=r"^horizon must be an integer >= 1, got 4.5$"):
+        MPCConfig(horizon=np.float64(4.5))
+
+
 def test_human_margins_are_validated_and_kept_as_a_tuple():
     assert MPCConfig().human_margins == () and MPCConfig().human_margin(3) == 0.0
     cfg = MPCConfig(human_margins=[0.05, 0.1, 0.15, 0.2])  # a JSON round trip gives a list
