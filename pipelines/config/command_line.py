@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from pipelines.config.entries import ConfigError, Entry, Source, parse_set, read_file
 from pipelines.config.resolve import RunConfig, resolve
+from predictors.errors import short_repr
 
 
 @dataclass(frozen=True)
@@ -59,6 +61,11 @@ def config_arguments(args: Any) -> tuple[str | None, list[str]]:
 
 def load(path: str | None = None, sets: Sequence[str] = (), cli: Sequence[Entry] = ()) -> RunConfig:
     """Defaults < the file at ``path`` < ``sets`` < ``cli``, validated."""
+    if path is not None and not isinstance(path, str | os.PathLike):
+        raise ConfigError(f"the config file must be a path, got {short_repr(path)}")
+    # a string is a sequence too: "mpc.horizon=3" was read letter by letter ("--set 'm': expected ...")
+    if isinstance(sets, str) or not isinstance(sets, Sequence) or not all(isinstance(t, str) for t in sets):
+        raise ConfigError(f"sets must be a list of 'SECTION.KEY=VALUE' strings, got {short_repr(sets)}")
     entries = read_file(path) if path is not None else []
     entries += [parse_set(text) for text in sets]
     entries += list(cli)

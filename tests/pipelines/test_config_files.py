@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shlex
 import tomllib
 from pathlib import Path
@@ -813,3 +814,20 @@ def test_a_sweep_applies_a_files_profile_convention_to_every_cell_and_takes_conf
     assert main(["--config", str(shown), *argv]) == 0
     keys = [line.split()[-1] for line in capsys.readouterr().out.splitlines() if " humans " in line]
     assert len(keys) == 8 and not any("time_limit" in key for key in keys)
+
+
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        ((123,), "the config file must be a path, got 123"),
+        ((None, "mpc.horizon=3"), "sets must be a list of 'SECTION.KEY=VALUE' strings, got 'mpc.horizon=3'"),
+        ((None, None), "sets must be a list of 'SECTION.KEY=VALUE' strings, got None"),
+        ((None, [3]), "sets must be a list of 'SECTION.KEY=VALUE' strings, got [3]"),
+    ],
+)
+def test_load_from_python_names_arguments_of_the_wrong_kind(arguments, message):
+    """A string of sets was read letter by letter ("--set 'm': expected SECTION.KEY=VALUE"); the others
+    failed in pathlib or iteration with Python's TypeError."""
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        load(*arguments)
+    assert load(None, ["mpc.horizon=3"]).mpc.horizon == 3
