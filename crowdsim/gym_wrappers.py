@@ -48,6 +48,11 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
             raise SimulationError(f"VelocityControl wraps a CrowdNavEnv, got {type(base).__name__}")
+        inner: Any = env
+        while isinstance(inner, gym.Wrapper):  # twice, velocities were taken for velocities twice over
+            if isinstance(inner, VelocityControl):
+                raise SimulationError("VelocityControl wraps an environment that has one already")
+            inner = inner.env
         cfg = base.config
         gain = 1.0 / cfg.dt if gain is None else gain
         if isinstance(gain, bool) or not isinstance(gain, int | float) or not 0 < gain <= 1.0 / cfg.dt:
@@ -106,6 +111,7 @@ class SensorRange(
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
             raise SimulationError(f"SensorRange wraps a CrowdNavEnv, got {type(base).__name__}")
+        radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
         if not is_sensor_range(radius):
             raise SimulationError(f"radius must be a finite number of metres > 0, got {radius!r}")
         self.radius = float(radius)

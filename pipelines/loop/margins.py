@@ -265,6 +265,8 @@ def _margin_text(value: float) -> str:
 
 def parse_margins(text: str) -> MarginSpec:
     """``none`` | ``conformal[:ALPHA[:SOURCE]]`` | ``fixed:M1,M2,..`` (module docstring)."""
+    if not isinstance(text, str):  # None failed on .strip()
+        raise PipelineError(f"margins must be text such as 'none' or 'conformal:0.1', got {text!r}")
     mode, _, rest = text.strip().partition(":")
     if mode == "none" and not rest:
         return MarginSpec()

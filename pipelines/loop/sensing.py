@@ -60,6 +60,7 @@ class RangeLimited:
     """``inner`` fed the humans within ``radius`` metres of some robot (module docstring)."""
 
     def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
+        radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
         if not (is_sensor_range(radius) or radius == math.inf):  # inf: the tracked humans of a replay
             raise PipelineError(f"sensor radius must be a finite number of metres > 0, got {radius!r}")
         if not isinstance(report_tracks, bool):  # a truthy "no" would report them

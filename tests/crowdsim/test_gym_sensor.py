@@ -69,3 +69,14 @@ def test_a_range_that_is_no_distance_is_refused(radius):
 def test_it_wraps_the_crowd_environment_only():
     with pytest.raises(SimulationError, match="SensorRange wraps a CrowdNavEnv"):
         SensorRange(gym.make("CartPole-v1"), radius=3.0)
+
+
+def test_a_numpy_range_is_a_range_and_velocity_control_is_not_stacked():
+    """np.int64(3) was refused as "a finite number of metres > 0"; a second VelocityControl took the
+    velocities the first made of the user's for velocities again."""
+    assert SensorRange(CrowdNavEnv(), radius=np.int64(3)).radius == 3.0
+    once = VelocityControl(SensorRange(CrowdNavEnv(), radius=np.float32(2.5)))
+    with pytest.raises(SimulationError, match="^VelocityControl wraps an environment that has one already$"):
+        VelocityControl(once)
+    with pytest.raises(SimulationError, match="has one already"):
+        VelocityControl(SensorRange(once, radius=3.0))

@@ -778,3 +778,10 @@ def test_an_unreadable_journal_of_a_killed_calibrate_is_one_line_naming_it(tmp_p
     assert err.startswith(f"crowdmpc calibrate: error: {journal}: a killed calibrate's record")
     assert "\n" not in err
     assert not (tmp_path / "calibrations.json").exists()
+
+
+@pytest.mark.parametrize("given", [None, 3, ["none"]])
+def test_margins_that_are_no_text_are_named(given):
+    """None failed with "'NoneType' object has no attribute 'strip'"."""
+    with pytest.raises(PipelineError, match=r"^margins must be text such as 'none' or 'conformal:0.1', got "):
+        parse_margins(given)

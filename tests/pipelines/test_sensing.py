@@ -216,3 +216,11 @@ def test_calibrations_scorer_classes_people_behind_a_sensor_as_the_controller_di
     )
     assert observer.classes.tolist() == [2, 0]
     np.testing.assert_allclose(observer.errors, np.zeros((2, 2)))  # it predicts them to stay: they do
+
+
+def test_a_numpy_range_is_a_range():
+    """np.int64(3) was refused as "a finite number of metres > 0"."""
+    sensed = RangeLimited(make_controller(ControllerSpec("straight")), np.int64(3))
+    assert sensed.radius == 3.0 and type(sensed.radius) is float
+    with pytest.raises(PipelineError, match="sensor radius must be a finite number of metres > 0, got True"):
+        RangeLimited(make_controller(ControllerSpec("straight")), np.True_)
