@@ -12,8 +12,11 @@ if TYPE_CHECKING:
 
 
 class StepShown:
-    """The running episode's step beside a bar of episodes (drawn at most every ``mininterval``): a long
-    horizon's episode takes minutes, and the bar sat at 0 of 1 as if hung."""
+    """The running episode's step beside a bar of episodes: a long horizon's episode takes minutes, and the
+    bar sat at 0 of 1 as if hung. Drawn at most every ``every`` seconds (and the bar's ``mininterval``): a
+    bar written to a log file (simulate draws one there too) grows by a line's worth each time."""
+
+    every = 0.5
 
     def __init__(self, bar: Any) -> None:
         self.bar, self.drawn = bar, 0.0
@@ -25,7 +28,7 @@ class StepShown:
         shown = [] if self.success is None else [self.success]
         self.bar.set_postfix_str(", ".join([*shown, f"step={next_obs.step}"]), refresh=False)
         now = time.monotonic()
-        if now - self.drawn >= self.bar.mininterval:  # tqdm's update(0) stops drawing once miniters > 0
+        if now - self.drawn >= max(self.every, self.bar.mininterval):  # update(0) stops once miniters > 0
             self.bar.refresh()
             self.drawn = now
 

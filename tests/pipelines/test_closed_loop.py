@@ -304,6 +304,7 @@ def test_the_progress_bar_shows_the_running_episodes_step(monkeypatch, capsys):
     monkeypatch.setattr(
         episode, "progress_bar", lambda *a, **k: predictors.progress.progress_bar(*a, **k, mininterval=0)
     )
+    monkeypatch.setattr(episode.StepShown, "every", 0.0)
     results = episode.run_episodes(
         ControllerSpec("straight"), episodes=2, seed=0, scenario="circle", n_humans=2, progress=True
     )
