@@ -13,7 +13,10 @@ How. A real-time interval timer (``setitimer``) raises ``EpisodeTimeout`` in the
 every backend runs its episodes (the pool's processes, Ray's actors, the inline driver). It derives from
 BaseException, as KeyboardInterrupt does, so that a controller's ``except Exception`` does not swallow it.
 Python acts on the timer between bytecodes: an episode inside one long C call (a CasADi solve, itself bounded
-by ``mpc.time_limit_s``; a plugin's C extension) is stopped when that call returns.
+by ``mpc.time_limit_s``; a plugin's C extension) is stopped when that call returns. While the episode's steps
+run it is raised where the step in progress ends, as a Ctrl-C is (``pipelines.loop.interrupt``): raised inside
+a solve, CasADi printed its interrupt lines and IPOPT took it for a user's stop, the raise lost. A step that
+outlasts the limit once more is a hang (a plugin looping in ``act``): the timer's next firing raises at once.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from pipelines.errors import PipelineError
+from pipelines.loop.interrupt import defer_to_step_end
 
 
 class EpisodeTimeout(BaseException):
@@ -57,6 +61,12 @@ def deadline(seconds: float | None) -> Iterator[None]:
 
     def expire(signum: int, frame: Any) -> None:
         nonlocal fired
+        if not fired and defer_to_step_end(EpisodeTimeout(seconds)):
+            # raised where the step ends, not inside a CasADi solve; a step that outlasts the limit once
+            # more is a hang, and the next firing raises at once
+            fired = True
+            signal.setitimer(signal.ITIMER_REAL, seconds)
+            return
         fired = True
         raise EpisodeTimeout(seconds)
 

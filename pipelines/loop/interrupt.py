@@ -26,10 +26,12 @@ from typing import Any
 
 
 class StepInterrupt:
-    """The Ctrl-C noted during a step: ``check()`` raises it."""
+    """The Ctrl-C noted during a step: ``check()`` raises it; or another exception deferred to the step's
+    end (``defer_to_step_end``: a sweep's episode time limit)."""
 
     def __init__(self) -> None:
         self.pending = False
+        self.deferred: BaseException | None = None
 
     def note(self, signum: int, frame: FrameType | None) -> None:
         if self.pending:
@@ -40,6 +42,19 @@ class StepInterrupt:
         if self.pending:
             self.pending = False
             raise KeyboardInterrupt
+        if self.deferred is not None:
+            deferred, self.deferred = self.deferred, None
+            raise deferred
+
+
+def defer_to_step_end(exc: BaseException) -> bool:
+    """Have ``exc`` raised where the control step in progress ends, as a Ctrl-C is, if an episode's steps
+    are running in this (the main) thread; False otherwise (then raise it yourself). Raised inside a solve,
+    CasADi printed its own interrupt lines and IPOPT took it for a user's stop, the raise lost."""
+    if _stepping is None or threading.current_thread() is not threading.main_thread():
+        return False
+    _stepping.deferred = exc
+    return True
 
 
 _stepping: StepInterrupt | None = None  # the episode's, in the main thread, while its steps run

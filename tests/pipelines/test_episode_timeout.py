@@ -50,6 +50,28 @@ def test_a_limit_whose_raise_c_code_swallowed_is_raised_when_the_block_ends():
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
+def test_a_limit_met_during_a_step_is_raised_where_the_step_ends_unless_the_step_hangs():
+    """Raised inside a CasADi solve, the limit made CasADi print its interrupt lines and IPOPT take it for a
+    user's stop (the raise lost, the episode run to its end). A step that outlasts the limit once more is a
+    hang, stopped inside it."""
+    from pipelines.loop.interrupt import interrupts_between_steps
+
+    ended = []
+    with pytest.raises(EpisodeTimeout), deadline(0.2):
+        with interrupts_between_steps() as step:
+            time.sleep(0.3)  # the step, past the limit: nothing raised inside it
+            ended.append(True)
+            step.check()  # where the loop ends each step
+    assert ended == [True]
+    started = time.perf_counter()
+    with pytest.raises(EpisodeTimeout), deadline(0.2):
+        with interrupts_between_steps():
+            while True:
+                time.sleep(0.01)
+    assert 0.4 <= time.perf_counter() - started < 2.0
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
 def test_a_limited_sweep_builds_its_nlp_outside_the_limit_and_runs_the_same_episodes(monkeypatch):
     """The limit counts the episode, not the build of its cell's NLP, which the first episode's reset did
     inside the limit (a limit of 1 ms stopped it there, a first episode's jit compile counted)."""
