@@ -226,15 +226,10 @@ def _warn_failures_only(folder: Path) -> None:
     """Warn when ``folder`` is a sweep's recordings (its DIR, DIR/mcap or DIR/mcap/CELL) and some run of the
     sweep kept only its failed episodes (``--record failures``): rates over those runs are over a selection
     (a sweep with 19 collisions in 20 episodes reviewed as "collision 100.0 % (19/19)"), not the sweep's."""
-    from pipelines.experiments.log import MCAP_DIR, SWEEP_FILE, read_sweep_file
+    from pipelines.experiments.log import SWEEP_FILE, read_sweep_file, sweep_of_recordings
 
     here = folder.resolve()
-    candidates = [here] + [
-        up
-        for up, name in ((here.parent, here.name), (here.parent.parent, here.parent.name))
-        if name == MCAP_DIR
-    ]
-    sweep = next((c for c in candidates if (c / SWEEP_FILE).is_file()), None)
+    sweep = here if (here / SWEEP_FILE).is_file() else sweep_of_recordings(here, SWEEP_FILE)
     if sweep is None:
         return
     try:

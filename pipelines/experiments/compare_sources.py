@@ -117,15 +117,14 @@ def _read_episode(file: Path, label: str, single: bool) -> tuple[dict[str, Any],
 
 def _refuse_sweep_recordings(path: Path, label: str) -> None:
     """A sweep's DIR/mcap, DIR/mcap/CELL or a file in one: refused, naming the sweep's folder."""
-    from pipelines.experiments.log import EPISODES_FILE, MCAP_DIR
+    from pipelines.experiments.log import EPISODES_FILE, sweep_of_recordings
 
-    here = path.resolve()
-    for up in [here, *here.parents][:3]:
-        if up.name == MCAP_DIR and (up.parent / EPISODES_FILE).is_file():
-            raise PipelineError(
-                f"{label}: {path} is a sweep's recordings, which may be some of its episodes only (sweep "
-                f"--record failures); compare the sweep's folder {up.parent}, whose {EPISODES_FILE} has all"
-            )
+    sweep = sweep_of_recordings(path)
+    if sweep is not None:
+        raise PipelineError(
+            f"{label}: {path} is a sweep's recordings, which may be some of its episodes only (sweep "
+            f"--record failures); compare the sweep's folder {sweep}, whose {EPISODES_FILE} has all"
+        )
 
 
 def _warn(label: str, text: str) -> None:

@@ -233,6 +233,16 @@ def _check_kinds(values: dict[str, Any], kinds: dict[str, str], part: str, where
             )
 
 
+def sweep_of_recordings(path: Path, marker: str = EPISODES_FILE) -> Path | None:
+    """The sweep folder DIR whose recordings ``path`` is among (DIR/mcap, DIR/mcap/CELL, or a file in one),
+    DIR holding the file ``marker``; None for a path outside every sweep's recordings."""
+    here = path.resolve()
+    for up in [here, *here.parents][:3]:
+        if up.name == MCAP_DIR and (up.parent / marker).is_file():
+            return up.parent
+    return None
+
+
 def read_sweep_file(path: Path) -> dict[str, Any]:
     """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it."""
     try:
