@@ -63,6 +63,19 @@ def check_data_files(option: str, paths: Sequence[Path]) -> None:
             raise PipelineError(f"{option} names {path} more than once{same}; give each file once")
 
 
+def comma_items(text: str) -> list[str]:
+    """A comma list's items, stripped; an empty item (``5,,7``, ``2,``) may stand for a value left out, so it
+    is refused (argparse's one line), where the list types had dropped it silently."""
+    items = [item.strip() for item in text.split(",")]
+    if items == [""]:
+        raise argparse.ArgumentTypeError("expected values separated by commas, got ''")
+    if not all(items):
+        raise argparse.ArgumentTypeError(
+            f"an empty item in {text[:64]!r}; separate the values by single commas"
+        )
+    return items
+
+
 def first_repeat(values: Sequence[T]) -> T | None:
     """The first value of ``values`` that an earlier one equals, or None (for options naming each once)."""
     return next((v for i, v in enumerate(values) if v in values[:i]), None)
@@ -72,7 +85,7 @@ def humans_list(text: str) -> tuple[int, ...]:
     """An argparse type: ``5,6,7`` -> (5, 6, 7), positive integers, each once (``--humans`` of sweep and
     calibrate: a repeat would be a second column of the same cells)."""
     try:
-        values = tuple(int(v) for v in text.split(",") if v.strip())
+        values = tuple(int(v) for v in comma_items(text))
     except ValueError:
         raise argparse.ArgumentTypeError(f"--humans takes integers like 5,6,7, got {text!r}") from None
     if not values or min(values) < 1:

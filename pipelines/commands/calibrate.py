@@ -7,7 +7,7 @@ import dataclasses
 import json
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.commands import check_writable, humans_list, path_arg, write_output
+from pipelines.commands import check_writable, comma_items, humans_list, path_arg, write_output
 from pipelines.commands.calibrate_store import plans_with_new_blocks, storing, take_back_killed
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
@@ -57,7 +57,7 @@ CLOSED_LOOP_OPTIONS: Final[tuple[str, ...]] = (
 
 def _alphas(text: str) -> tuple[float, ...]:
     try:
-        values = tuple(float(v) for v in text.split(",") if v.strip())
+        values = tuple(float(v) for v in comma_items(text))
     except ValueError:
         raise argparse.ArgumentTypeError(f"--alpha takes numbers like 0.1,0.05, got {text!r}") from None
     if not values or not all(0.0 < a < 1.0 for a in values):

@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.commands import check_writable, path_arg, write_output
+from pipelines.commands import check_writable, comma_items, path_arg, write_output
 from pipelines.commands.output_paths import output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
@@ -104,7 +104,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _times(text: str) -> list[float]:
     try:
-        times = [float(t) for t in text.split(",") if t.strip()]
+        times = [float(t) for t in comma_items(text)]
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected seconds separated by commas, e.g. 0,4,8; got {text!r}"

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipelines.commands import check_writable, humans_list
+from pipelines.commands import check_writable, comma_items, humans_list
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.sweep_checks import check_plan, method_notes
 from pipelines.commands.sweep_help import EPILOG
@@ -104,7 +104,7 @@ def controller_list(text: str) -> tuple[str, ...]:
     experiment (``Experiment.with_controllers``)."""
     from pipelines.config.settings import MAX_SWAP_PREDICTORS
 
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    names = tuple(comma_items(text))
     if not names or len(names) > MAX_SWAP_PREDICTORS:
         raise argparse.ArgumentTypeError(
             f"expected 1 to {MAX_SWAP_PREDICTORS} names like cmpc,orca, got {text[:64]!r}"
@@ -117,7 +117,7 @@ def predictor_list(text: str) -> tuple[str, ...]:
     from pipelines.config.settings import MAX_SWAP_PREDICTORS
     from predictors.checkpoint import NAME_PATTERN
 
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    names = tuple(comma_items(text))
     if not names:
         raise argparse.ArgumentTypeError(
             f"expected names like constant_velocity,social_lstm_eth, got {text!r}"
