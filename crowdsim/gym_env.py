@@ -73,8 +73,10 @@ and ``robot_contact`` at the new state, ``min_distance_robots_between_steps`` an
 ``robot_contact_between_steps`` over the step; ``surface_distance`` ``(max_robots,)`` (the ``d_i``
 above), ``robot_rewards`` ``(max_robots,)``, ``reached`` ``(max_robots,)``, ``success`` and ``timeout``.
 The last step adds ``episode_metrics``, the ``EpisodeMetrics`` of the whole episode (what ``crowdmpc
-simulate`` reports); an episode that a contact ended has ``contact_between_steps`` True there (and
-``timeout`` True: it did not succeed), while its step-sampled ``contact`` may be False.
+simulate`` reports; an episode that an outer ``TimeLimit`` ended has them from
+``env.unwrapped.episode_metrics()``, since the environment cannot know that step is the last); an episode that
+a contact ended has ``contact_between_steps`` True there (and ``timeout`` True: it did not succeed), while its
+step-sampled ``contact`` may be False.
 
 Per-robot info arrays have ``max_robots`` rows, as the action and the observation, so that
 ``gymnasium.vector`` can stack environments whose episodes have different ``n_robots``: rows past
@@ -92,6 +94,7 @@ are checked in crowdsim.gym_options.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any, Final
 
@@ -116,12 +119,14 @@ from crowdsim.gym_observation import (
 from crowdsim.gym_options import episode_options
 from crowdsim.gym_reward import (
     RewardConfig,
+    as_reward_config,
     robot_pair_info,
     state_info,
     step_closest,
     surface_distances,
 )
 from crowdsim.metrics import COLLISION_DISTANCE, EpisodeMetrics, episode_metrics
+from crowdsim.profiles import as_env_config
 from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, check_sizes
 from crowdsim.world import DT, PAPER_ROBOTS
@@ -170,8 +175,9 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
     :param max_humans: rows of humans in the observation (default ``n_humans``).
     :param max_robots: rows of robots in the observation and the action (default ``n_robots``).
     :param config: the simulator's settings (default ``EnvConfig()``, the paper's profile;
-        ``crowdsim.profiles.make_env_config`` names the others).
-    :param reward: the reward's numbers.
+        ``crowdsim.profiles.make_env_config`` names the others), or plain data: a mapping of its fields with
+        ``profile`` and ``visibility`` (``crowdsim.profiles.as_env_config``).
+    :param reward: the reward's numbers, a ``RewardConfig`` or a mapping of its fields.
     :param end_on_collision: end the episode (``terminated``) at a robot-human contact during a step
         (``info["contact_between_steps"]``), as upstream CrowdNav; its success is then not paid.
     :param render_mode: None or "rgb_array".
@@ -188,19 +194,15 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         n_robots: int = PAPER_ROBOTS,
         max_humans: int | None = None,
         max_robots: int | None = None,
-        config: EnvConfig | None = None,
-        reward: RewardConfig | None = None,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+        reward: RewardConfig | Mapping[str, Any] | None = None,
         end_on_collision: bool = False,
         render_mode: str | None = None,
         recording: Recording | None = None,
     ):
-        config = EnvConfig() if config is None else config
-        if not isinstance(config, EnvConfig):
-            raise SimulationError(f"config must be an EnvConfig, got {type(config).__name__}")
+        config = as_env_config(config)  # a mapping too: plain data, as a YAML file of gym.make's keywords
         self._sim = CrowdEnv(config, recording)  # refuses a recording that is not the crowd's
-        reward = RewardConfig() if reward is None else reward
-        if not isinstance(reward, RewardConfig):
-            raise SimulationError(f"reward must be a RewardConfig, got {type(reward).__name__}")
+        reward = as_reward_config(reward)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise SimulationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if not isinstance(end_on_collision, bool):
@@ -229,7 +231,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
 
         self._obs: Observation | None = None
         self._episode: dict[str, Any] = {}
-        self._done = False
+        self._done = self._contact_ended = False
         self._figure: Any = None
 
     # ---- gymnasium API -----------------------------------------------------------------------------------
@@ -262,7 +264,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             obs = self._sim.reset(drawn, chosen["scenario"], chosen["n_humans"], chosen["n_robots"])
         self._obs = obs
         self._episode = {"seed": episode_seed, **chosen}
-        self._done = False
+        self._done = self._contact_ended = False
         return self._array(obs), {"observation": ComparableObservation.of(obs), **self._episode}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -290,6 +292,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         contact_in_step = gaps < 0
         timeout = bool(native.get("timeout", False))
         contact_ends = self.end_on_collision and bool(contact_in_step.any())
+        self._contact_ended = contact_ends
         # A contact that ends the episode comes first (upstream CrowdNav's Collision): a step that also brings
         # the robots to their goals is no success, in the rewards, the info and the episode's metrics alike.
         success = bool(native.get("success", False)) and not contact_ends
@@ -323,7 +326,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             "timeout": timeout,
         }
         if self._done:
-            info["episode_metrics"] = self._episode_metrics(contact_ends)
+            info["episode_metrics"] = self.episode_metrics()
         return self._array(obs), reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
@@ -343,7 +346,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
     def close(self) -> None:
         """Nothing is held between calls (each frame is drawn on a figure of its own)."""
 
-    # ---- the native simulator ----------------------------------------------------------------------------
+    # ---- the native simulator and the episode -------------------------------------------------------------
 
     @property
     def observation(self) -> Observation:
@@ -362,16 +365,22 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         """This episode's seed, scenario, n_humans and n_robots (empty before the first reset)."""
         return dict(self._episode)
 
-    # ---- internals ---------------------------------------------------------------------------------------
+    def episode_metrics(self) -> EpisodeMetrics:
+        """The ``EpisodeMetrics`` of the episode so far, as its last step's ``info["episode_metrics"]``: for
+        an episode that an outer wrapper ended (gymnasium's ``TimeLimit``, from ``max_episode_steps``), whose
+        last step's info the environment could not know to be the last.
 
-    def _episode_metrics(self, contact_ended: bool) -> EpisodeMetrics:
-        """The episode's ``crowdsim.metrics`` metrics with the outcome this environment gave it: those read
-        success off the trajectory alone, which does not show that a contact ended the episode on the step
-        the robots reached their goals. Such an episode did not succeed: timeout True, no travel time."""
+        The ``crowdsim.metrics`` metrics with the outcome this environment gave it: those read success off the
+        trajectory alone, which does not show that a contact ended the episode on the step the robots reached
+        their goals. Such an episode did not succeed: timeout True, no travel time."""
+        if self._obs is None:
+            raise SimulationError("no episode before reset()")
         metrics = episode_metrics(self._sim.trajectory())
-        if contact_ended and metrics.success:
+        if self._contact_ended and metrics.success:
             return replace(metrics, success=False, timeout=True, travel_time=math.nan)
         return metrics
+
+    # ---- internals ---------------------------------------------------------------------------------------
 
     def _rows(self, values: np.ndarray, fill: float | bool) -> np.ndarray:
         """``values`` (one row per robot of the episode) padded to ``max_robots`` rows with ``fill``."""

@@ -5,7 +5,9 @@ segment, as CrowdNav's ``point_to_segment_dist`` takes it."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -56,6 +58,20 @@ class RewardConfig:
         if surface_distance < self.discomfort_dist:
             return float((surface_distance - self.discomfort_dist) * self.discomfort_factor * dt)
         return 0.0
+
+
+def as_reward_config(values: RewardConfig | Mapping[str, Any] | None) -> RewardConfig:
+    """``values`` as a RewardConfig: itself, the default (None), or one from plain data (a YAML or JSON
+    file's ``gym.make`` keywords), unknown keys named."""
+    if values is None or isinstance(values, RewardConfig):
+        return RewardConfig() if values is None else values
+    if not isinstance(values, Mapping):
+        raise SimulationError(f"reward must be a RewardConfig or a mapping of its fields, got {values!r:.80}")
+    names = [f.name for f in fields(RewardConfig)]
+    unknown = sorted(str(key) for key in values if key not in names)
+    if unknown:
+        raise SimulationError(f"reward has no field {unknown[0]!r}; expected {', '.join(names)}")
+    return RewardConfig(**values)
 
 
 def step_closest(before: Observation, after: Observation) -> np.ndarray:

@@ -38,7 +38,8 @@ from crowdsim.world import is_sensor_range
 class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):
     """Velocity commands in, accelerations out (module docstring).
 
-    :param env: a ``crowdmpc/CrowdNav-v0`` environment, possibly wrapped.
+    :param env: a ``crowdmpc/CrowdNav-v0`` environment, possibly wrapped, but by no action wrapper: those
+        (``RescaleAction``) go outside, or the accelerations computed here would be read as other numbers.
     :param gain: k in 1/s, in ``(0, 1/dt]``; default ``1/dt``.
     """
 
@@ -48,11 +49,10 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
             raise SimulationError(f"VelocityControl wraps a CrowdNavEnv, got {type(base).__name__}")
-        inner: Any = env
-        while isinstance(inner, gym.Wrapper):  # twice, velocities were taken for velocities twice over
+        for inner in _wrappers(env):  # twice, velocities were taken for velocities twice over
             if isinstance(inner, VelocityControl):
                 raise SimulationError("VelocityControl wraps an environment that has one already")
-            inner = inner.env
+        _check_takes_accelerations(env, base)
         cfg = base.config
         gain = 1.0 / cfg.dt if gain is None else gain
         if isinstance(gain, bool) or not isinstance(gain, int | float) or not 0 < gain <= 1.0 / cfg.dt:
@@ -101,7 +101,9 @@ class SensorRange(
 ):
     """The humans beyond ``radius`` m of every robot as padding rows (module docstring).
 
-    :param env: a ``crowdmpc/CrowdNav-v0`` environment, possibly wrapped.
+    :param env: a ``crowdmpc/CrowdNav-v0`` environment, possibly wrapped, but by no observation wrapper
+        other than a ``SensorRange``: those (``FlattenObservation``) go outside, as the rows zeroed here are
+        the environment's own.
     :param radius: the sensor's range in m, finite and > 0.
     """
 
@@ -111,6 +113,7 @@ class SensorRange(
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
             raise SimulationError(f"SensorRange wraps a CrowdNavEnv, got {type(base).__name__}")
+        _check_gives_rows(env, base)
         radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
         if not is_sensor_range(radius):
             raise SimulationError(f"radius must be a finite number of metres > 0, got {radius!r}")
@@ -126,3 +129,46 @@ class SensorRange(
         rows = self._base.max_robots
         out[rows : rows + obs.n_humans][~seen] = 0.0
         return out
+
+
+def _wrappers(env: gym.Env[Any, Any]) -> list[gym.Wrapper[Any, Any, Any, Any]]:
+    """The wrappers of ``env`` from the outermost in (``env`` itself first when it is one)."""
+    found = []
+    while isinstance(env, gym.Wrapper):
+        found.append(env)
+        env = env.env
+    return found
+
+
+def _changer(env: gym.Env[Any, Any], base: CrowdNavEnv, space: str, kind: type, own: type) -> str | None:
+    """The innermost wrapper below ``env`` (``env`` included) that is a ``kind`` (an ``ObservationWrapper``
+    or ``ActionWrapper``) other than ``own``, or that makes the ``space`` attribute other than the base's."""
+    for wrapper in reversed(_wrappers(env)):
+        if isinstance(wrapper, kind) and not isinstance(wrapper, own):
+            return type(wrapper).__name__
+        if getattr(wrapper, space) != getattr(base, space):
+            return type(wrapper).__name__
+    return None
+
+
+def _check_takes_accelerations(env: gym.Env[Any, Any], base: CrowdNavEnv) -> None:
+    """VelocityControl computes the environment's own accelerations (m/s^2, ``base.config.a_max``): an
+    action wrapper below it (``RescaleAction``) turned them into other numbers, 0.2 m/s reached 0.4."""
+    changer = _changer(env, base, "action_space", gym.ActionWrapper, VelocityControl)
+    if changer is not None:
+        raise SimulationError(
+            f"VelocityControl must wrap the environment's own accelerations, but {changer} lies between; "
+            "put action wrappers (RescaleAction, ClipAction, ...) outside VelocityControl"
+        )
+
+
+def _check_gives_rows(env: gym.Env[Any, Any], base: CrowdNavEnv) -> None:
+    """SensorRange zeroes rows of the environment's own ``(rows, 7)`` array: below a wrapper that flattens,
+    stacks or rescales it (``FlattenObservation``), it zeroed other numbers and left the humans in view."""
+    changer = _changer(env, base, "observation_space", gym.ObservationWrapper, SensorRange)
+    if changer is not None:
+        raise SimulationError(
+            f"SensorRange must wrap the environment's own {base.observation_space.shape} observation, but "
+            f"{changer} lies between; put observation wrappers (FlattenObservation, FrameStackObservation, "
+            "NormalizeObservation, ...) outside SensorRange"
+        )

@@ -21,11 +21,13 @@ visible ones.
 from __future__ import annotations
 
 import dataclasses
-from typing import Final
+from collections.abc import Mapping
+from typing import Any, Final
 
 from crowdsim.conventions import V1_SPAWN_SEPARATION, V1_TIME_LIMIT, V1_TIMEOUT_MARGIN
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
+from crowdsim.orca import OrcaParams
 
 PROFILES: Final[dict[str, EnvConfig]] = {
     "paper": EnvConfig(),  # EnvConfig's defaults are the paper profile with visible robots
@@ -48,3 +50,33 @@ def make_env_config(profile: str = "paper", visibility: str = "visible") -> EnvC
     if visibility not in VISIBILITY:
         raise SimulationError(f"unknown visibility {visibility!r}; choose from {list(VISIBILITY)}")
     return dataclasses.replace(PROFILES[profile], robots_visible=visibility == "visible")
+
+
+def as_env_config(values: EnvConfig | Mapping[str, Any] | None) -> EnvConfig:
+    """``values`` as an EnvConfig: itself, the default (None), or one from plain data, as a YAML or JSON file
+    gives ``gym.make``'s keywords (RL Zoo's ``env_kwargs``): ``profile`` and ``visibility`` choose the
+    conventions as ``make_env_config`` does (an EnvConfig's own ``profile`` is only its label), ``orca`` is a
+    mapping of ``OrcaParams``' fields, and every other key an EnvConfig field replacing the profile's."""
+    if values is None or isinstance(values, EnvConfig):
+        return EnvConfig() if values is None else values
+    if not isinstance(values, Mapping) or not all(isinstance(key, str) for key in values):
+        raise SimulationError(f"config must be an EnvConfig or a mapping of its fields, got {values!r:.80}")
+    rest = dict(values)
+    if "visibility" in rest and "robots_visible" in rest:
+        raise SimulationError("config gives both visibility and robots_visible: give one")
+    base = make_env_config(rest.pop("profile", "paper"), rest.pop("visibility", "visible"))
+    known = [f.name for f in dataclasses.fields(EnvConfig) if f.name != "profile"]
+    unknown = sorted(set(rest) - set(known))
+    if unknown:
+        raise SimulationError(
+            f"config has no field {unknown[0]!r}; expected profile, visibility or one of {', '.join(known)}"
+        )
+    if isinstance(rest.get("orca"), Mapping):
+        orca = dict(rest["orca"])
+        names = [f.name for f in dataclasses.fields(OrcaParams)]
+        if set(orca) - set(names):
+            raise SimulationError(
+                f"config orca has no field {sorted(set(orca) - set(names))[0]!r}; expected {', '.join(names)}"
+            )
+        rest["orca"] = OrcaParams(**orca)
+    return dataclasses.replace(base, **rest)

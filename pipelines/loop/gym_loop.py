@@ -30,9 +30,10 @@ from crowdsim import ENV_ID
 from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
+from crowdsim.errors import SimulationError
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_wrappers import VelocityControl
-from crowdsim.metrics import episode_metrics
+from crowdsim.profiles import as_env_config
 from pipelines.errors import PipelineError
 from pipelines.loop.contract import (
     called,
@@ -72,13 +73,16 @@ def _action_changer(env: gym.Env[Any, Any], base: CrowdNavEnv) -> str | None:
     return type(env).__name__
 
 
-def make_env(config: EnvConfig | None = None, **kwargs: Any) -> gym.Env[np.ndarray, np.ndarray]:
+def make_env(
+    config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: Any
+) -> gym.Env[np.ndarray, np.ndarray]:
     """``gym.make(crowdsim.ENV_ID, config=config, **kwargs)`` with, for a replayed ``config.crowd``, the
     ``Recording`` it plays, read from the BIWI data (``$CROWDMPC_DATA``; pipelines.loop.replay_data): the
     environment among real people in one call, ``make_env(EnvConfig(crowd="eth_test"), n_humans=10)``."""
-    config = EnvConfig() if config is None else config
-    if not isinstance(config, EnvConfig):  # before reading anything: the environment says it too
-        raise PipelineError(f"make_env: config must be an EnvConfig, got {type(config).__name__}")
+    try:  # before reading anything: the environment says it too
+        config = as_env_config(config)  # or plain data (crowdsim.profiles.as_env_config)
+    except SimulationError as exc:
+        raise PipelineError(f"make_env: {exc}") from None
     if "recording" in kwargs:
         raise PipelineError("make_env reads the recording of config.crowd itself; give no recording=")
     return gym.make(ENV_ID, config=config, recording=replayed_recording(config), **kwargs)
@@ -111,7 +115,7 @@ class _Steps:
         traj = base.simulator.trajectory()
         episode = base.episode
         # An outer wrapper (gymnasium's TimeLimit from max_episode_steps) may end the episode before the
-        # environment does; the metrics of the trajectory so far are then what the environment would report.
+        # environment does, on a step whose info has no metrics: the episode's so far are then the ones.
         metrics = info.get("episode_metrics")
         return EpisodeResult(
             seed=episode["seed"],
@@ -121,7 +125,7 @@ class _Steps:
             controller=str(meta["controller"]),
             predictor=meta["predictor"],
             predictor_sha256=meta["predictor_sha256"],
-            metrics=episode_metrics(traj) if metrics is None else metrics,
+            metrics=base.episode_metrics() if metrics is None else metrics,
             robot_positions=traj.robot_positions,
             human_positions=traj.human_positions,
             robot_goals=traj.robot_goals,

@@ -29,6 +29,8 @@ from crowdsim.gym_env import (
 )
 from crowdsim.gym_wrappers import VelocityControl
 from crowdsim.metrics import episode_metrics
+from crowdsim.orca import OrcaParams
+from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import Layout
 from tests.same_metrics import same_metrics
 
@@ -177,7 +179,16 @@ def test_bad_reset_options_are_one_line(options, message):
         ({"render_mode": "human"}, "render_mode must be None or 'rgb_array', got 'human'"),
         ({"n_robots": 0}, "n_robots must be an int in [1, 12], got 0"),
         ({"n_humans": 5, "max_humans": 4}, "max_humans must be an int in [5, 50], got 4"),
-        ({"config": "paper"}, "config must be an EnvConfig, got str"),
+        ({"config": "paper"}, "config must be an EnvConfig or a mapping of its fields, got 'paper'"),
+        (
+            {"config": {"profile": "v1", "horizon": 2}},
+            "config has no field 'horizon'; expected profile, visi",
+        ),
+        ({"config": {"orca": {"horizon": 2}}}, "config orca has no field 'horizon'; expected neighbor_dist,"),
+        ({"config": {"visibility": "visible", "robots_visible": True}}, "config gives both visibility and"),
+        ({"config": {"profile": "v2"}}, "unknown profile 'v2'; choose from ['paper', 'v1']"),
+        ({"reward": {"sucess": 2}}, "reward has no field 'sucess'; expected success, collision, discomfort_"),
+        ({"reward": 1.0}, "reward must be a RewardConfig or a mapping of its fields, got 1.0"),
         ({"reward": RewardConfig(), "end_on_collision": 1}, "end_on_collision must be a bool, got 1"),
     ],
 )
@@ -525,3 +536,38 @@ def test_a_non_finite_action_is_refused_as_the_action(bad):
     with pytest.raises(SimulationError, match=r"^action must be finite for the episode's 1 robots, got 1 "):
         env.step(np.array([[bad, 0.0], [0.0, 0.0]]))
     env.step(np.array([[0.5, 0.0], [bad, bad]]))
+
+
+def test_an_outer_time_limit_leaves_the_metrics_to_episode_metrics():
+    """gym.make(..., max_episode_steps=K) truncates on a step whose info the environment could not know to
+    be the last, so it has no "episode_metrics"; env.unwrapped.episode_metrics() gives them, as the
+    environment's own last step does."""
+    env = gym.make(crowdsim.ENV_ID, max_episode_steps=3)
+    with pytest.raises(SimulationError, match="no episode before reset"):
+        env.unwrapped.episode_metrics()
+    env.reset(seed=0)
+    for _ in range(3):
+        *_, truncated, info = env.step(np.zeros(env.action_space.shape))
+    assert truncated and "episode_metrics" not in info
+    metrics = env.unwrapped.episode_metrics()
+    assert not metrics.success and metrics.timeout
+    own = CrowdNavEnv(config=EnvConfig(time_limit=1.2, timeout_margin=0.0))  # three steps of 0.4 s
+    own.reset(seed=0)
+    for _ in range(3):
+        *_, truncated, info = own.step(np.zeros(own.action_space.shape))
+    assert truncated and same_metrics(info["episode_metrics"], metrics)
+    assert same_metrics(own.episode_metrics(), metrics)
+
+
+def test_plain_data_is_the_config_the_profile_names_with_its_fields_replaced():
+    """gym.make's keywords from a YAML or JSON file (RL Zoo's env_kwargs) are plain data: a mapping is the
+    profile's EnvConfig (its conventions, not only its label) with the other keys replaced."""
+    env = gym.make(
+        crowdsim.ENV_ID, config={"profile": "v1", "visibility": "invisible", "orca": {"time_horizon": 2.0}}
+    )
+    expected = dataclasses.replace(
+        make_env_config("v1", "invisible"), orca=dataclasses.replace(OrcaParams(), time_horizon=2.0)
+    )
+    assert env.unwrapped.config == expected and env.unwrapped.config.max_steps == 75
+    assert CrowdNavEnv(config={"time_limit": 8.0}).config == EnvConfig(time_limit=8.0)
+    assert CrowdNavEnv(reward={"success": 2.0}).reward_config == RewardConfig(success=2.0)

@@ -80,3 +80,62 @@ def test_a_numpy_range_is_a_range_and_velocity_control_is_not_stacked():
         VelocityControl(once)
     with pytest.raises(SimulationError, match="has one already"):
         VelocityControl(SensorRange(once, radius=3.0))
+
+
+@pytest.mark.parametrize(
+    "inner, name",
+    [
+        (gym.wrappers.FlattenObservation, "FlattenObservation"),
+        (lambda env: gym.wrappers.FrameStackObservation(env, 2), "FrameStackObservation"),
+        (gym.wrappers.NormalizeObservation, "NormalizeObservation"),  # keeps the shape, not the numbers
+        (lambda env: gym.wrappers.RecordEpisodeStatistics(gym.wrappers.FlattenObservation(env)), "Flatten"),
+    ],
+)
+def test_the_range_refuses_an_observation_wrapper_below_it(inner, name):
+    """Over FlattenObservation it zeroed scalars 3-7 of the flat vector (robot 0's goal) and left every
+    human in view: the (rows, 7) array is the environment's own, so such wrappers go outside."""
+    with pytest.raises(SimulationError, match=f"but {name}.* lies between; put observation wrappers"):
+        SensorRange(inner(CrowdNavEnv()), radius=1.0)
+
+
+def test_outside_the_range_a_flattened_view_is_the_ranged_view_flattened():
+    ranged = SensorRange(CrowdNavEnv(n_humans=5), radius=1.0)
+    flat = gym.wrappers.FlattenObservation(SensorRange(CrowdNavEnv(n_humans=5), radius=1.0))
+    (rows, _), (vector, _) = ranged.reset(seed=0), flat.reset(seed=0)
+    assert vector.shape == (rows.size,) and np.array_equal(vector, rows.ravel())
+    assert rows[3:, PRESENT].sum() < 5  # some human is out of view, so the zeroing acted
+
+
+@pytest.mark.parametrize(
+    "inner, name",
+    [
+        (lambda env: gym.wrappers.RescaleAction(env, -1.0, 1.0), "RescaleAction"),
+        (gym.wrappers.ClipAction, "ClipAction"),
+    ],
+)
+def test_velocity_control_refuses_an_action_wrapper_below_it(inner, name):
+    """Over RescaleAction(-1, 1) a command of 0.2 m/s became 0.4 m/s: its accelerations were read as
+    [-1, 1] and rescaled to +-a_max once more."""
+    with pytest.raises(SimulationError, match=f"but {name} lies between; put action wrappers"):
+        VelocityControl(inner(CrowdNavEnv()))
+
+
+def test_an_action_wrapper_outside_velocity_control_takes_its_velocities():
+    env = gym.wrappers.RescaleAction(VelocityControl(CrowdNavEnv()), -1.0, 1.0)
+    env.reset(seed=0)
+    env.step(np.full(env.action_space.shape, 0.2))  # 0.2 of v_max = 1 m/s: 0.2 m/s
+    base = env.unwrapped
+    assert np.allclose(base.observation.robot_velocities, 0.2)
+
+
+def test_the_readmes_chain_for_an_rl_library_passes_check_env():
+    """README.md, "With an RL library": the project's wrappers inside, gymnasium's outside, plain data in.
+    gymnasium warns of the float64 bounds cast to float32 when the wrapper is made and in check_env."""
+    env = gym.make(crowdsim.ENV_ID, config={"profile": "paper"}, max_episode_steps=50)
+    env = SensorRange(VelocityControl(env), radius=3.0)
+    env = gym.wrappers.RescaleAction(env, -1.0, 1.0)
+    with pytest.warns(UserWarning, match="precision lowered by casting to float32"):  # gymnasium's, on bounds
+        env = gym.wrappers.DtypeObservation(gym.wrappers.FlattenObservation(env), np.float32)
+    checked(env, expected=(WRAPPED, "precision lowered by casting to float32"))
+    obs, _ = env.reset(seed=0)
+    assert obs.dtype == np.float32 and obs.shape == (8 * 7,)

@@ -63,8 +63,11 @@ def test_a_policys_replayed_episode_keeps_who_was_tracked_and_is_never_clipped(d
 def test_make_env_names_what_it_cannot_do(data, monkeypatch):  # noqa: F811
     with pytest.raises(PipelineError, match="make_env reads the recording of config.crowd itself"):
         make_env(EnvConfig(crowd="eth"), recording=None)
-    with pytest.raises(PipelineError, match="make_env: config must be an EnvConfig, got dict"):
-        make_env({"crowd": "eth"})
+    with pytest.raises(PipelineError, match="make_env: config must be an EnvConfig or a mapping of its fiel"):
+        make_env("eth")
+    with pytest.raises(PipelineError, match="make_env: config has no field 'crwd'; expected profile, vis"):
+        make_env({"crwd": "eth"})
+    assert make_env({"crowd": "hotel_test"}).unwrapped.simulator.recording is not None  # plain data: YAML's
     assert make_env().unwrapped.simulator.recording is None  # ORCA's crowd reads nothing
     monkeypatch.delenv("CROWDMPC_DATA")
     with pytest.raises(PipelineError, match="crowd 'hotel_test' replays the raw BIWI tracks: set CROWDMPC"):
