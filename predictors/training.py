@@ -92,7 +92,10 @@ class _PredictorModule(L.LightningModule):
         checkpoint["crowdmpc_torch_rng"] = torch.get_rng_state()
 
     def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
-        if "crowdmpc_torch_rng" in checkpoint:  # checkpoints written before it was kept have none
+        # Only for a fit that resumes: load_from_checkpoint (no trainer) or a validate/test run restoring
+        # weights replaced the caller's seeded random stream. Checkpoints from before it was kept have none.
+        trainer = self._trainer
+        if trainer is not None and trainer.state.fn == "fit" and "crowdmpc_torch_rng" in checkpoint:
             torch.set_rng_state(checkpoint["crowdmpc_torch_rng"])
 
     def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:

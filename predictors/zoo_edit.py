@@ -243,7 +243,7 @@ def _shipped_refusal(name: str) -> str | None:
     spelled = "" if shipped_name == name else f" (as {shipped_name!r}: names are compared ignoring case)"
     return (
         f"zoo name {name!r} is taken by a model of the shipped zoo {checkpoints_dir()}{spelled}; "
-        "pick another name"
+        "pick another name (--name)"
     )
 
 

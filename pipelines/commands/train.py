@@ -22,6 +22,7 @@ from pipelines.commands.train_data import (
     resolve_files,
     take_run_data,
 )
+from pipelines.commands.train_epochs import DEFAULT_EPOCHS, check_more_epochs, record_epochs, take_run_epochs
 from pipelines.commands.train_net import (
     net_config_of,
     resumed_net_config,
@@ -32,7 +33,6 @@ from pipelines.commands.train_resume import (
     LOCK_FILE,
     SETTINGS_FILE,
     check_last_checkpoint,
-    check_more_epochs,
     check_resumed_settings,
     checkpoint_record,
     note_other_code,
@@ -146,7 +146,12 @@ def _net_options(parser: argparse.ArgumentParser) -> None:
 
 def _optimisation_options(parser: argparse.ArgumentParser) -> None:
     """How long and how fast: epochs, batches, learning rate and its decay, the loss."""
-    parser.add_argument("--epochs", type=int, default=25, help="training epochs (default 25)")
+    parser.add_argument(
+        "--epochs",
+        type=int,
+        default=None,
+        help=f"training epochs in all (default {DEFAULT_EPOCHS}; with --resume, the run's last --epochs)",
+    )
     parser.add_argument(
         "--batch-size", type=int, default=None, help="scenes per batch (default 8, as TrajNet++)" + RESUMED
     )
@@ -237,14 +242,19 @@ def run(args: argparse.Namespace) -> int:
     pooling, net_config = net_config_of(args)
     explicit = args.train is not None or args.val is not None
     protocol_options(args, explicit)
-    name = args.name or default_name(args.model, pooling, args.dataset or DEFAULT_DATASET, explicit)
+    # `--name ''` (an unset shell variable) is refused by check_name, not taken for no name
+    name = (
+        args.name
+        if args.name is not None
+        else default_name(args.model, pooling, args.dataset or DEFAULT_DATASET, explicit)
+    )
     check_name(name, "--name")  # NAME becomes file names (OUT/NAME.pt) and the zoo name
     out = args.out or Path("runs") / "train" / name
     # A resume goes on with the run's settings wherever the command line leaves one out (read once: a run's
     # settings never change once it exists); the checks below refuse one typed otherwise.
     recorded = read_run_settings(out) if args.resume else None
     started = checkpoint_record(out) if args.resume and recorded is None else recorded
-    taken = take_run_options(args, started)
+    taken = take_run_options(args, started) + take_run_epochs(args, out, started)
     data_taken = take_run_data(args, recorded)
     pooling, net_config, net_taken = resumed_net_config(args, started, pooling, net_config)
     _check_numbers(args)
@@ -266,6 +276,8 @@ def run(args: argparse.Namespace) -> int:
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
         name = _check_out(args, out, settings, net_config, loss_typed, recorded)
         say_taken(out, args, taken, net_taken, data_taken)
+        if args.resume and recorded is not None:
+            record_epochs(out, recorded, args.epochs)
         return run_training(args, net_config, name, out, (files, root), settings, evaluated)
 
 
@@ -310,7 +322,9 @@ def _holds_a_run_or_nothing(out: Path) -> bool:
         return True
     names = {entry.name for entry in out.iterdir()}
     leftovers = {n for n in names if n.startswith(f".{SETTINGS_FILE}.") and n.endswith(".part")}
-    return SETTINGS_FILE in names or not names - leftovers - {LOCK_FILE}
+    # a folder made ready for runs holds a .gitkeep or the like, which the run's files leave alone
+    hidden = {n for n in names if n.startswith(".") and (out / n).is_file() and not (out / n).is_symlink()}
+    return SETTINGS_FILE in names or not names - leftovers - hidden - {LOCK_FILE}
 
 
 def _check_out(

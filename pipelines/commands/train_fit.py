@@ -61,6 +61,9 @@ def _prepare_process(seed: int) -> None:
     torch.set_num_threads(1)
     warnings.filterwarnings("ignore", message=".*does not have many workers.*")
     warnings.filterwarnings("ignore", message=".*Checkpoint directory.*exists and is not empty.*")
+    # fewer batches an epoch than log_every_n_steps (--limit-batches, a small file): the module logs each
+    # epoch's mean train loss too (train_loss_epoch), and the CLI has no such option to act on the advice
+    warnings.filterwarnings("ignore", message=".*smaller than the logging interval.*")
     # Lightning 2.6's own use of a torch pytree API that torch 2.13 deprecates: nothing a user can act on.
     warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)", category=FutureWarning)
     for logger in ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero"):
@@ -274,11 +277,15 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
     """Lightning's trainer, the callback that keeps the best checkpoint by validation ADE, the one that
     stops a diverged fit, and the run's clock."""
     import lightning as L
+    from lightning.pytorch.callbacks import LearningRateMonitor
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
     from pipelines.commands.train_checkpoint import RunCheckpoint, StopOnDivergence, TrainingClock
     from pipelines.commands.train_resume import BEST_FILENAME
 
+    # Absolute, as the rest of the command takes them: Lightning expands a leading "~" (and reads "s3://"
+    # through fsspec), so `--out '~/x'` wrote its logs and checkpoints to $HOME/x, its settings to ./~/x.
+    out, ckpt_dir = out.absolute(), ckpt_dir.absolute()
     best = RunCheckpoint(
         dirpath=ckpt_dir,
         filename=BEST_FILENAME,
@@ -298,7 +305,13 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
             CSVLogger(out, name="csv"),
             TensorBoardLogger(out, name="tensorboard", default_hp_metric=False),
         ],
-        callbacks=[best, divergence := StopOnDivergence(), clock := TrainingClock()],
+        # the step schedule's rate each epoch (lr-Adam in metrics.csv and TensorBoard), as Lightning logs it
+        callbacks=[
+            best,
+            divergence := StopOnDivergence(),
+            clock := TrainingClock(),
+            LearningRateMonitor(logging_interval="epoch"),
+        ],
         deterministic=True,
         enable_progress_bar=not args.no_progress,
         enable_model_summary=False,

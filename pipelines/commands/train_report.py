@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import os
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -96,11 +97,14 @@ def _plugin_option(model: str) -> str:
     """``--plugin MODEL `` when ``model`` is a plugin's kind (later commands must register it too)."""
     from predictors.models import model_kind
 
-    return f"--plugin {model} " if model_kind(model).source == "plugin" else ""
+    return f"--plugin {shlex.quote(model)} " if model_kind(model).source == "plugin" else ""
 
 
 def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int | None) -> None:
-    print(f"{summary['name']}: best checkpoint {best}; weights {weights} (+ .json)")
+    limit = summary["training"].get("limit_batches")
+    # its val_ade is over the batches validated each epoch, the val line below over every scene
+    over = "" if limit is None else f" (val_ade over {limit} validation batch{'es' * (limit != 1)})"
+    print(f"{summary['name']}: best checkpoint {best}{over}; weights {weights} (+ .json)")
     for split, m in summary["metrics"].items():
         line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
         if "topk_ade" in m:
@@ -108,7 +112,8 @@ def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int 
         print(line)
     print(
         f"  median epoch time {summary['training']['median_epoch_time_s']} s; add to the zoo with "
-        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {weights}{_name_option(weights.stem)}`"
+        f"`crowdmpc {_plugin_option(summary['model'])}zoo add {shlex.quote(str(weights))}"
+        f"{_name_option(weights.stem)}`"
     )
 
 

@@ -28,8 +28,9 @@ _LOSSES = ("gaussian", "l2")  # predictors.training.LOSSES, without importing Li
 LOCK_FILE = ".train.lock"
 # What a resume names by a noun alone (say_taken), rather than as an option and its value
 _NOUNS: Final[tuple[str, ...]] = ("net config", "data files")
-# Recorded but not compared on a resume: the files a data directory gives are (train_data.data_settings)
-_NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir",)
+# Recorded but not compared on a resume: the files a data directory gives are (train_data.data_settings),
+# and the epochs in all, which a resume may change (train_epochs)
+_NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir", "epochs")
 # The options a resume takes from its run when they are not typed, and their defaults for a new run: the
 # parser's defaults are None, so that an option typed can be told from one left out (--batch-size 8 typed on
 # the resume of a run at 2 is refused; left out, the run's 2 goes on). Types as the run records them.
@@ -99,6 +100,7 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
         "batch_size": args.batch_size,
         "batching": args.batching,
         "limit_batches": args.limit_batches,
+        "epochs": args.epochs,  # the one setting a resume may change (train_epochs)
         "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
     }
 
@@ -319,18 +321,6 @@ def relocated(state: dict[str, Any], dirpath: str) -> dict[str, Any]:
     if isinstance(state.get("best_k_models"), dict):
         moved["best_k_models"] = {here(path): score for path, score in state["best_k_models"].items()}
     return {**state, **moved, "dirpath": dirpath}
-
-
-def check_more_epochs(out: Path, epochs: int, done: int | None, finished: bool) -> None:
-    """PipelineError when a resume would train no epoch: Lightning stops at once, and the run's NAME.pt,
-    NAME.json and metrics were written again, recording --epochs where more had trained. The same count
-    as the run's passes while the run is not ``finished`` (no metrics yet: it stopped after training, and
-    this writes what it left out)."""
-    if done is not None and (epochs < done or (epochs == done and finished)):
-        raise PipelineError(
-            f"--resume: {out} has trained {done} epoch{'s' if done != 1 else ''} already; --epochs {epochs} "
-            f"would train none (give more than {done} to continue it)"
-        )
 
 
 def checkpoint_settings(hyper: dict[str, Any], data: Any) -> dict[str, Any]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import sys
 from pathlib import Path
 
 from pipelines.commands import examples, path_arg
@@ -173,7 +174,7 @@ def format_list(located_entries) -> str:
             topk = f"{_metric(m, 'test', 'topk_ade')}/{_metric(m, 'test', 'topk_fde')}"
         rows.append(
             [
-                entry.name,
+                entry.name + (" *" if quick_check(entry.training) is not None else ""),
                 entry.cls,
                 entry.model,
                 _pooling(located),
@@ -207,6 +208,8 @@ def run(args: argparse.Namespace) -> int:
             return 0
         print(format_list(entries))
         print("ADE/FDE in metres, TrajNet++ metrics of the primary pedestrian (9 -> 12 steps)")
+        if any(quick_check(located.entry.training) is not None for located in entries):
+            print("* a quick check (train --limit-batches: a few batches an epoch), not a trained model")
         return 0
     if args.zoo_command == "show":
         located = zoo.locate(args.name, args.dir)
@@ -322,7 +325,18 @@ def _add(args: argparse.Namespace) -> int:
         replace=args.replace,
     )
     print(_added_line(entry, previous, args, root))
+    limit = quick_check(entry.training)
+    if limit is not None:  # docs/extending.md: such a model is never mistaken for a trained one
+        batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
+        note = f"note: {entry.name} trained on {batches}: a quick check, not a trained model (zoo list: *)"
+        print(note, file=sys.stderr)
     return 0
+
+
+def quick_check(training: dict) -> int | None:
+    """The batches an epoch an entry trained on when ``train --limit-batches`` cut its epochs, else None."""
+    limit = training.get("limit_batches")
+    return limit if isinstance(limit, int) and not isinstance(limit, bool) else None
 
 
 def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:

@@ -182,9 +182,12 @@ class SceneSample:
     rotation: np.ndarray  # (2, 2) float32, scene = (world - origin) @ rotation.T
 
 
-@dataclass(frozen=True)
+@dataclass
 class SceneBatch:
-    """A padded batch of scenes; agent 0 of every scene is its primary pedestrian."""
+    """A padded batch of scenes; agent 0 of every scene is its primary pedestrian.
+
+    Not frozen: Lightning's precision plugins (``Trainer(precision="64-true")``) and device moves rebuild a
+    batch field by field with ``apply_to_collection``, which refuses a frozen dataclass."""
 
     positions: torch.Tensor  # (B, T, Nmax, 2) float32 metres, scene frame, 0 where mask is False
     mask: torch.Tensor  # (B, T, Nmax) bool, True where the agent is present (False also for padding)

@@ -163,8 +163,9 @@ def sparse_grid_pool(
     row = ((b * n_agents + i) * n_cells)[:, None] + cells  # (P, K) rows of the (B·N·C, F) output
     pair = torch.arange(len(b), device=values.device)[:, None].expand_as(cells)
     row, pair, weights = row[inside], pair[inside], weights[inside]
-    shares = weights[:, None] * values[b[pair], j[pair]]
     grid = values.new_zeros(batch * n_agents * n_cells, width)
+    # in values' dtype: under autocast (bf16-mixed) they are bfloat16 and the weights float32; a no-op else
+    shares = (weights[:, None] * values[b[pair], j[pair]]).to(grid.dtype)
     return grid.index_put((row,), shares, accumulate=True).reshape(batch, n_agents, n_cells, width)
 
 

@@ -254,7 +254,10 @@ def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
     )
     assert line.startswith("crowdmpc sweep: error: argument --predictors: ")
     assert line.endswith(
-        ("is not a predictor name; see 'crowdmpc sweep --help'", "got ','; see 'crowdmpc sweep --help'")
+        (
+            "is not a predictor name; see 'crowdmpc sweep --help'",
+            "an empty item in ','; separate the values by single commas; see 'crowdmpc sweep --help'",
+        )
     )
 
 

@@ -124,6 +124,24 @@ def test_an_out_folder_of_other_files_is_refused_and_left_alone(tmp_path, capsys
     assert [p.name for p in out.iterdir()] == ["notes.txt"]  # not even the run's lock
 
 
+def test_a_folder_holding_only_a_gitkeep_is_trained_into_and_keeps_it(tmp_path, capsys):
+    """A folder made ready for runs (runs/.gitkeep) was refused as holding "files but no training run"."""
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "ready"
+    out.mkdir()
+    (out / ".gitkeep").write_text("")
+    assert main(_args(data, out)) == 0
+    assert (out / ".gitkeep").read_text() == "" and (out / "train_settings.json").is_file()
+
+
+def test_an_empty_name_is_refused_not_taken_for_none(tmp_path, capsys):
+    """`--name ''` (an unset shell variable) trained under the default name."""
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    assert main([*_args(data, tmp_path / "run"), "--name", ""]) == 2
+    assert "--name '' is not allowed" in _one_line(capsys)
+    assert not (tmp_path / "run").exists()
+
+
 def test_an_empty_out_and_a_run_stopped_before_its_first_checkpoint_are_trained_into(run_copy, tmp_path):
     """What stays accepted: an empty folder, and a run's folder with no last.ckpt yet (its settings, logs
     and a file the user put there), which a new run replaces, then resumes."""

@@ -255,3 +255,38 @@ def test_gan_losses_are_the_social_gan_definitions_by_hand():
     d_loss = module.discriminator_loss(batch, out["fake"].detach())
     expected = F.softplus(-real_x).mean() + F.softplus(fake_x.detach()).mean()
     assert d_loss.item() == pytest.approx(expected.item(), rel=1e-6)
+
+
+@pytest.mark.parametrize("precision", ["64-true", "bf16-mixed"])
+def test_a_plain_trainer_trains_at_lightnings_precisions(tiny_data, precision):
+    """Trainer(precision="64-true") refused the frozen SceneBatch (apply_to_collection rebuilds it), and
+    bf16-mixed met a float32 share added into a bfloat16 pooling grid."""
+    module = make_module("social_lstm", SocialLSTMConfig(hidden_dim=8, embedding_dim=8), OptimConfig())
+    trainer = L.Trainer(
+        fast_dev_run=True,
+        accelerator="cpu",
+        precision=precision,
+        logger=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        enable_checkpointing=False,
+    )
+    trainer.fit(module, datamodule=tiny_data)
+    assert torch.isfinite(trainer.callback_metrics["train_loss"])
+
+
+def test_loading_a_checkpoint_leaves_the_callers_random_stream(tiny_data, tmp_path):
+    """on_load_checkpoint restores the run's torch RNG for a fit that resumes, and only there: a notebook's
+    load_from_checkpoint set the caller's stream to the run's (its next draws were the run's)."""
+    path, _ = _old_checkpoint(tiny_data, tmp_path, SocialLSTMConfig())
+    checkpoint = torch.load(path, weights_only=True)
+    torch.manual_seed(999)
+    checkpoint["crowdmpc_torch_rng"] = torch.get_rng_state()  # as a run's checkpoint holds it
+    runs = torch.rand(3)
+    torch.save(checkpoint, path)
+    torch.manual_seed(123)
+    PredictorModule.load_from_checkpoint(path, map_location="cpu")  # building the net draws its init
+    after_load = torch.rand(3)
+    torch.manual_seed(123)
+    make_module("social_lstm", SocialLSTMConfig(), OptimConfig())
+    assert not torch.equal(after_load, runs) and torch.equal(after_load, torch.rand(3))

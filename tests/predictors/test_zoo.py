@@ -149,7 +149,7 @@ def test_a_user_model_may_not_take_a_shipped_name(shipped, user, pair, capsys):
     code, _, err = cli(["zoo", "add", str(pair)], capsys)  # its own name, social_lstm_eth, is shipped
     assert code == 2 and one_line(err) == (
         f"crowdmpc zoo: error: zoo name {NAME!r} is taken by a model of the shipped zoo {shipped}; "
-        "pick another name"
+        "pick another name (--name)"
     )
     assert not user.exists() and snapshot(shipped) == before
 
@@ -455,7 +455,7 @@ def test_names_that_differ_only_in_case_are_taken(shipped, user, pair, capsys):
     code, _, err = cli(["zoo", "add", str(pair), "--name", NAME.upper()], capsys)
     assert code == 2 and one_line(err) == (
         f"crowdmpc zoo: error: zoo name {NAME.upper()!r} is taken by a model of the shipped zoo {shipped} "
-        f"(as {NAME!r}: names are compared ignoring case); pick another name"
+        f"(as {NAME!r}: names are compared ignoring case); pick another name (--name)"
     )
     assert snapshot(user) == before and set(read_manifest(user)) == {"mine"}
     for built_in in ("constant_velocity", "ORCA_Oracle"):  # the name loads the built-in: never the entry
@@ -542,3 +542,21 @@ def test_loading_a_model_leaves_torchs_random_numbers_alone(name):
     torch.manual_seed(0)
     load_predictor(name)
     assert torch.equal(torch.rand(3), expected)
+
+
+def test_a_quick_check_is_added_with_a_note_and_listed_with_a_mark(shipped, user, pair, capsys):
+    """docs/extending.md: a model trained with --limit-batches "is never mistaken for a trained one"; only
+    `zoo show` had said so."""
+    metrics = pair.with_suffix(".metrics.json")
+    metrics.write_text(json.dumps({"metrics": {"test": {"ade": 0.5}}, "training": {"limit_batches": 10}}))
+    code, out, err = cli(["zoo", "add", str(pair), "--name", "quick"], capsys)
+    assert code == 0 and out.startswith("added quick")
+    assert err == (
+        "note: quick trained on 10 batches an epoch (train --limit-batches 10): a quick check, not a trained "
+        "model (zoo list: *)\n"
+    )
+    code, out, _ = cli(["zoo", "list"], capsys)
+    lines = out.splitlines()
+    assert any(line.startswith("quick *") for line in lines)
+    assert not any(line.startswith(f"{NAME} *") for line in lines)  # the shipped one trained on every batch
+    assert lines[-1].startswith("* a quick check (train --limit-batches")
