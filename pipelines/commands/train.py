@@ -75,6 +75,8 @@ a data option is typed; --out names the run), one typed must be the run's, and o
 upwards (the count already trained only finishes a run that stopped before writing its metrics). --val and
 --test files are read as the evaluation reads them before training starts: a TrajNet++ test/ file without
 ground truth is refused then, not after training.
+It trains on the CPU in one thread (deterministic: a seed gives the same weights); another accelerator,
+precision or your own callbacks and loggers take a lightning.Trainer of your own (docs/extending.md).
 A second train into an --out where one is running is refused (its lock: OUT/.train.lock), and so is an
 --out folder holding files but no training run (no train_settings.json): choose an empty or new one.
 """
