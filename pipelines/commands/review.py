@@ -12,6 +12,16 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, comma_items, path_arg, write_output
 from pipelines.commands.output_paths import output_arg
+from pipelines.commands.review_notes import (
+    deeper_note,
+    subfolders_note,
+    unread_below,
+    warn,
+    warn_different_crowds,
+    warn_failures_only,
+    warn_mixed_code,
+    warn_repeats,
+)
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
@@ -29,17 +39,20 @@ EPILOG = """examples:
 
 The folders are those `make demo`, `crowdmpc simulate --record DIR` and `crowdmpc sweep --record` write; a
 folder means the .mcap files directly in it or, when it holds none, those one and two levels below it (a
-folder of runs' folders, a sweep's DIR or DIR/mcap). Runs of different set-ups (controller, predictor,
+folder of runs' folders, a sweep's DIR or DIR/mcap; a warning counts the subfolders' recordings that a
+folder's own files leave unread). Runs of different set-ups (controller, predictor,
 numbers of robots and humans, or any simulator or controller setting the recordings' "config" metadata holds:
 profile, visibility, formation, MPC settings, margins...) get one table and aggregate each, named by what
 differs, their files by their paths below the folder, then a row each side by side. --json writes "groups",
-one per set-up with its "totals" (and "totals" at the top too when the folder holds one set-up). A sweep
-recorded with --record failures kept its failed episodes only: a warning says that its rates here are over
-those, and its table.md has the sweep's.
+one per set-up with its "totals" (and "totals" at the top too when the folder holds one set-up). Copies of
+one episode (same set-up, scenario, seed and code) count once, with a warning. A sweep recorded with --record
+failures kept its failed episodes only: a warning says that its rates here are over those, and its table.md
+has the sweep's.
 
 A file whose run was killed reads up to its last complete chunk, with a warning. A bad chunk (its CRC or
 compression fails) or a message that is not what the review reads is left out, with a warning; --check lists
-every one, with the schema violations.
+every one, with the schema violations, a truncated file and the file's own problems on lines apart from its
+messages' count, and checks --compare's file too.
 
 In a folder, every readable file is reviewed; each unreadable one (empty, not MCAP, cut inside its header, a
 folder named *.mcap) gets one line on stderr, and each unfinished NAME.mcap.part (a recording still being
@@ -47,7 +60,8 @@ written, or whose run was killed: review it by name to read what it holds) a war
 
 Exit code: 0 when the review ran, even with files left out of a folder (a sweep killed half-way must still
 review what it finished); 2 when nothing could be read (one file, or a folder without one readable recording);
-with --check, 1 when any file has a bad chunk, a bad message, a schema violation or is unreadable.
+with --check, 1 when any file is truncated or unreadable, or has a bad chunk, a corrupt record, a bad message
+or a schema violation.
 """
 
 MAX_ERRORS_SHOWN = 20
@@ -115,19 +129,39 @@ def _times(text: str) -> list[float]:
 
 
 def _check(runs: list[RunDigest], report: dict[str, Any]) -> int:
+    """Each file's check: a line for a truncated file and one for the file's own problems (a bad chunk, a
+    corrupt record), apart from its messages' count, then the messages' errors; how many files failed."""
+    from pipelines.logs.review import count
+
     failed = 0
     for run in runs:
         assert run.check is not None  # digested with check=True
         checked, errors = run.check
-        report.setdefault("check", {})[run.file] = {"messages": checked, "errors": errors}
-        verdict = "ok" if not errors else f"{len(errors)} invalid"
-        print(f"check {run.file}: {checked} messages, {verdict}")
-        for line in errors[:MAX_ERRORS_SHOWN]:
-            print(f"  {line}")
-        if len(errors) > MAX_ERRORS_SHOWN:
-            print(f"  ... and {len(errors) - MAX_ERRORS_SHOWN} more")
-        failed += bool(errors)
+        truncated = bool(run.summary["truncated"])
+        report.setdefault("check", {})[run.file] = {
+            "messages": checked,
+            "errors": errors,
+            "file_problems": run.file_problems,
+            "truncated": truncated,
+        }
+        if truncated:
+            read = sum(run.summary["messages"].values())
+            why = run.stopped_at or "no closing magic"
+            print(f"check {run.file}: {read} messages read, truncated: {why}; the rest of the file is lost")
+        if run.file_problems:
+            print(f"check {run.file}: the file itself: {count(len(run.file_problems), 'problem')}")
+            _listed(run.file_problems)
+        print(f"check {run.file}: {checked} messages, {f'{len(errors)} invalid' if errors else 'ok'}")
+        _listed(errors)
+        failed += bool(errors or run.file_problems or truncated)
     return failed
+
+
+def _listed(lines: list[str]) -> None:
+    for line in lines[:MAX_ERRORS_SHOWN]:
+        print(f"  {line}")
+    if len(lines) > MAX_ERRORS_SHOWN:
+        print(f"  ... and {len(lines) - MAX_ERRORS_SHOWN} more")
 
 
 def _with_units(summary: dict[str, Any]) -> dict[str, Any]:
@@ -147,7 +181,12 @@ def _read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[lis
     from pipelines.logs.digest import digest
     from pipelines.logs.reader import find_recordings, read_recording
 
-    paths, unfinished = find_recordings(folder)
+    try:
+        paths, unfinished = find_recordings(folder)
+    except PipelineError as exc:  # nothing within two levels: say what lies deeper (a folder of sweeps)
+        raise PipelineError(f"{exc}{deeper_note(folder)}") from None
+    # its own files read: those of its subfolders are not (never mixed), which must not pass unsaid
+    unread = unread_below(folder) if any(p.parent == folder for p in paths + unfinished) else 0
     for path in unfinished:
         print(
             f"crowdmpc review: warning: skipping {path}: unfinished (its run was killed or is still "
@@ -163,10 +202,14 @@ def _read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[lis
             unreadable[str(path)] = str(exc)
             tqdm.write(f"crowdmpc review: unreadable: {exc}", file=sys.stderr)
     report.update(unreadable=unreadable, unfinished=[str(p) for p in unfinished])
+    note = subfolders_note(folder, unread) if unread else ""
     if not runs:
         raise PipelineError(
             f"no readable recording in {folder} ({len(unreadable)} unreadable, {len(unfinished)} unfinished)"
+            + (f"; {note}" if note else "")
         )
+    if note:
+        warn(f"{folder}: {note}")
     return runs, len(unreadable)
 
 
@@ -175,12 +218,13 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     names them when there are several), into ``report``; the runs and the number of unreadable files."""
     from pipelines.logs.identity import RUN_IDENTITY
     from pipelines.logs.review import aggregate_table, count, setups_table
-    from pipelines.logs.setups import group_parts, groups, named_settings, short_names
+    from pipelines.logs.setups import drop_repeats, group_parts, groups, named_settings, short_names
 
     runs, n_unreadable = _read_folder(folder, report, check)
-    _warn_failures_only(folder)
+    warn_failures_only(folder, runs)
     report["runs"] = [run.summary for run in runs]
     setups = groups(runs)
+    repeats = [drop_repeats(setup) for setup in setups]
     named = named_settings(setups)
     parts = [group_parts(setup, named) for setup in setups]
     names = [", ".join(p) for p in parts]
@@ -191,9 +235,10 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
             file=sys.stderr,
         )
     report["groups"] = []
-    for setup, name in zip(setups, names, strict=True):
+    for setup, name, repeated in zip(setups, names, repeats, strict=True):
         members = [run.summary for run in setup.members]
-        _warn_mixed_code(folder, name, members)
+        warn_repeats(folder, name, repeated)
+        warn_mixed_code(folder, name, members)
         table, totals = aggregate_table(members, [run.solve_times_s for run in setup.members], root=folder)
         if len(setups) > 1:
             print(f"== {name}: {count(len(setup.members), 'run')} ==")
@@ -203,7 +248,7 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
             {"name": name}
             | {k: members[0][k] for k in RUN_IDENTITY}
             | {"settings": {k: identity.get(k) for k in named}}
-            | {"files": [run.file for run in setup.members], "totals": totals}
+            | {"files": [run.file for run in setup.members], "repeats": repeated, "totals": totals}
         )
     if len(setups) == 1:  # as before the folder held several: the one set-up's totals at the top
         report["totals"] = report["groups"][0]["totals"]
@@ -220,54 +265,6 @@ def _recordings_or_none(folder: Path) -> list[Path]:
         return find_recordings(folder)[0]
     except PipelineError:
         return []
-
-
-def _warn_failures_only(folder: Path) -> None:
-    """Warn when ``folder`` is a sweep's recordings (its DIR, DIR/mcap or DIR/mcap/CELL) and some run of the
-    sweep kept only its failed episodes (``--record failures``): rates over those runs are over a selection
-    (a sweep with 19 collisions in 20 episodes reviewed as "collision 100.0 % (19/19)"), not the sweep's."""
-    from pipelines.experiments.log import SWEEP_FILE, read_sweep_file, sweep_of_recordings
-
-    here = folder.resolve()
-    sweep = here if (here / SWEEP_FILE).is_file() else sweep_of_recordings(here, SWEEP_FILE)
-    if sweep is None:
-        return
-    try:
-        runs = read_sweep_file(sweep / SWEEP_FILE).get("runs", [])
-    except PipelineError:  # not ours to judge here: the review reads the recordings, not the sweep
-        return
-    if "failures" in {_record_policy(run) for run in runs}:
-        print(
-            f"crowdmpc review: warning: {sweep} kept the recordings of its failed episodes only (sweep "
-            "--record failures: not every robot arrived, or a robot came within 0.8 m of a human), so the "
-            "rates below are over those, not the sweep's: its table.md and cells.csv give those",
-            file=sys.stderr,
-        )
-
-
-def _record_policy(run: object) -> object:
-    """What one run of sweep.json recorded (its config's ``sweep.record``); None where it does not say."""
-    for key in ("config", "sweep", "record"):
-        run = run.get(key) if isinstance(run, dict) else None
-    return run
-
-
-def _warn_mixed_code(folder: Path, name: str, members: list[dict[str, Any]]) -> None:
-    """Warn when one set-up's runs were recorded by different commits (or some by code that recorded none,
-    before 4a16d16): its aggregate pools two codebases' results, as a sweep resumed by other code says."""
-    commits = {_commit_shown(m.get("crowdmpc_commit")): None for m in members}
-    if len(commits) > 1:
-        print(
-            f"crowdmpc review: warning: {folder} holds runs recorded by different code "
-            f"({', '.join(commits)}) pooled in the aggregate of {name}; record them again with one version "
-            "to compare like with like",
-            file=sys.stderr,
-        )
-
-
-def _commit_shown(commit: object) -> str:
-    """A recording's commit as the warning names it; none for one made outside git or before it was kept."""
-    return f"commit {str(commit)[:12]}" if commit not in (None, "", "null") else "commit not recorded"
 
 
 def _check_distinct_outputs(args: argparse.Namespace) -> None:
@@ -289,6 +286,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise PipelineError("--times chooses the plans drawn by --plot; add --plot FILE.png")
     if args.times and args.compare:  # the overlay draws both runs' paths, no plan: the times went unused
         raise PipelineError("--times chooses the plans drawn by --plot, and --compare's overlay draws none")
+    if args.animate and args.compare:  # it animated A alone, unsaid
+        raise PipelineError("--animate animates one run, not --compare's two; animate each on its own")
     if args.plot:
         from crowdsim.plotting import check_figure_path
 
@@ -316,13 +315,15 @@ def run(args: argparse.Namespace) -> int:
 
 def _review(args: argparse.Namespace) -> int:
     from pipelines.logs.digest import digest
+    from pipelines.logs.identity import differing_settings
     from pipelines.logs.plots import animate_recording, plot_compare, plot_recording
     from pipelines.logs.reader import read_recording
-    from pipelines.logs.review import compare_table, format_summary, summarize
+    from pipelines.logs.review import compare_table, format_summary
 
     _check_outputs(args)
     report: dict[str, Any] = {}
     n_unreadable = 0
+    other_run = None
     if args.path.is_dir():
         single_file_only = [
             f"--{name}" for name in ("plot", "times", "animate", "compare") if getattr(args, name)
@@ -344,26 +345,30 @@ def _review(args: argparse.Namespace) -> int:
         runs = [digest(rec, args.check)]
         print(format_summary(_with_units(runs[0].summary)))
         report["summary"] = runs[0].summary
+        other_run = digest(other, args.check) if other is not None else None
     for run in runs:
         if run.warning:
             print(f"crowdmpc review: warning: {run.warning}", file=sys.stderr)
         if run.problems_warning and not args.check:  # --check lists them all
             print(f"crowdmpc review: warning: {run.problems_warning}", file=sys.stderr)
 
-    failed = _check(runs, report) + n_unreadable if args.check else 0
+    checked = runs if args.path.is_dir() or other_run is None else [*runs, other_run]  # --compare's too
+    failed = _check(checked, report) + n_unreadable if args.check else 0
 
     for out in (args.plot, args.animate, args.json):
         # checked writable above, as other commands' outputs: its folder made here
         if out is not None and not is_stdout(out):
             out.parent.mkdir(parents=True, exist_ok=True)
     if not args.path.is_dir():
-        if other is not None:
+        if other is not None and other_run is not None:
             print()
             print(compare_table(rec, other))
-            report["compare"] = summarize(other)
-            for warning in (other.warning, other.problems_warning):
+            differ = [{"setting": k, "a": va, "b": vb} for k, va, vb in differing_settings(rec, other)]
+            report["compare"] = other_run.summary | {"differing_settings": differ}
+            warn_different_crowds(runs[0].summary, other_run.summary)
+            for warning in (other.warning, None if args.check else other.problems_warning):
                 if warning:
-                    print(f"crowdmpc review: warning: {warning}", file=sys.stderr)
+                    warn(warning)
         if args.plot:
             if other is not None:
                 plot_compare(rec, other, args.plot)

@@ -292,7 +292,9 @@ class EpisodeWorker:
             from pipelines.logs.recording import McapEpisodeRecorder
 
             # A scratch folder per episode; a kept log goes to the driver as bytes (it may run elsewhere).
-            run_meta = {"experiment": task.experiment, "cell": task.cell.key}
+            # "record": which episodes the sweep kept, so that a review of the files alone (no sweep.json
+            # beside them) can say that --record failures' rates are over the failures only.
+            run_meta = {"experiment": task.experiment, "cell": task.cell.key, "record": self.record}
             scratch = tempfile.mkdtemp(prefix="crowdmpc-episode-", dir=self.scratch)
             recorder = McapEpisodeRecorder(scratch, run_meta=run_meta)
         meta = {

@@ -29,7 +29,13 @@ class RunDigest:
     solve_times_s: np.ndarray  # every control step's /mpc/solver solve_time_s
     warning: str | None  # Recording.warning (truncated)
     problems_warning: str | None  # Recording.problems_warning
-    check: tuple[int, list[str]] | None  # check_recording's (checked, errors); None when not asked
+    # --check: (messages checked, their errors: schema violations, messages left out); None when not asked.
+    # The file's own problems are apart (``file_problems``, ``stopped_at``): a corrupt summary record is
+    # no "invalid message", and a cut file whose messages all pass still fails the check.
+    check: tuple[int, list[str]] | None
+    file_problems: list[str]  # Recording.problems: bad chunks, corrupt records, bad metadata
+    stopped_at: str | None  # truncated: what ended reading (Recording.stopped_at; None: no closing magic)
+    record_policy: str | None  # a sweep's --record ("all", "failures"), from the "run" metadata; else None
 
     @property
     def file(self) -> str:
@@ -46,5 +52,22 @@ def digest(rec: Recording, check: bool = False) -> RunDigest:
         solve_times_s=np.array([m["solve_time_s"] for m in rec.data("/mpc/solver")], dtype=float),
         warning=rec.warning,
         problems_warning=rec.problems_warning,
-        check=check_recording(rec) if check else None,
+        check=_message_check(rec) if check else None,
+        file_problems=list(rec.problems),
+        stopped_at=rec.stopped_at,
+        record_policy=_record_policy(rec),
     )
+
+
+def _message_check(rec: Recording) -> tuple[int, list[str]]:
+    """``check_recording`` of the messages alone: its errors begin with ``rec.problems``, the file's own."""
+    checked, errors = check_recording(rec)
+    assert errors[: len(rec.problems)] == rec.problems
+    return checked, errors[len(rec.problems) :]
+
+
+def _record_policy(rec: Recording) -> str | None:
+    """Which episodes the sweep that recorded ``rec`` kept (``crowdmpc sweep --record``); None for a
+    recording of anything else, or one made before sweeps wrote it."""
+    policy = rec.run_meta().get("record")
+    return policy if isinstance(policy, str) else None

@@ -57,6 +57,10 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "crowdmpc_version": rec.metadata.get("crowdmpc", {}).get("version"),
         # the commit that recorded it ("null" for a copy without git history; absent in older recordings)
         "crowdmpc_commit": rec.metadata.get("crowdmpc", {}).get("commit"),
+        # recorded from a tree with uncommitted changes: the commit alone does not name its code
+        "crowdmpc_dirty": {"true": True, "false": False}.get(
+            rec.metadata.get("crowdmpc", {}).get("dirty", "")
+        ),
         "states": len(robots),
         "sim_time_s": robots[-1]["time"] if robots else 0.0,
         "started": _wall_clock(rec.start_time_ns),
@@ -95,11 +99,19 @@ def count(n: Any, noun: str) -> str:
     return f"{_fmt(n)} {noun}" + ("" if str(n) == "1" else "s")
 
 
+def commit_shown(summary: dict[str, Any]) -> str | None:
+    """The recording's commit as ``crowdmpc compare`` names code ("c28989d46c28+dirty": recorded from a tree
+    with uncommitted changes, which the commit alone does not name); None where it names none."""
+    commit = summary.get("crowdmpc_commit")
+    if commit in (None, "", "null"):
+        return None
+    return str(commit)[:12] + ("+dirty" if summary.get("crowdmpc_dirty") else "")
+
+
 def _code(summary: dict[str, Any]) -> str:
     """The version, and the commit when the recording names one."""
-    commit = summary.get("crowdmpc_commit")
-    named = commit if commit not in (None, "", "null") else None
-    return f"{_fmt(summary['crowdmpc_version'])}" + (f" (commit {named[:12]})" if named else "")
+    named = commit_shown(summary)
+    return f"{_fmt(summary['crowdmpc_version'])}" + (f" (commit {named})" if named else "")
 
 
 def format_summary(summary: dict[str, Any]) -> str:

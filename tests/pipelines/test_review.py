@@ -50,9 +50,11 @@ def test_summary_of_a_finished_run(runs, capsys):
     assert summary["solver"]["statuses"] == {"Solve_Succeeded": 3, "ok": 5}
     from pipelines.version import code_identity
 
-    commit = code_identity()["commit"]  # the recording's code, when this tree is a git checkout
+    code = code_identity()
+    commit = code["commit"]  # the recording's code, when this tree is a git checkout
     (crowdmpc,) = [line for line in out.splitlines() if line.startswith("crowdmpc ")]
-    assert crowdmpc.endswith(f"(commit {commit[:12]})" if commit else code_identity()["version"])
+    dirty = "+dirty" if code["dirty"] else ""  # recorded from a tree with uncommitted changes
+    assert crowdmpc.endswith(f"(commit {commit[:12]}{dirty})" if commit else code["version"])
 
 
 @pytest.mark.parametrize("cut", [1, 0.5])
@@ -81,9 +83,10 @@ def test_a_truncated_file_reads_up_to_its_last_chunk_with_a_warning(tmp_path, cu
         episode_view(complete).robot_positions[: len(episode_view(rec).times)],
     )
 
-    assert main(["review", str(cut_path), "--check"]) == 0
+    assert main(["review", str(cut_path), "--check"]) == 1  # its messages pass; the file is cut
     out, err = capsys.readouterr()
     assert "warning" in err and "truncated" in err
+    assert f"check {cut_path}: {sum(len(m) for m in rec.messages.values())} messages read, truncated: " in out
     assert "ok" in out.splitlines()[-1]
     if cut != 1:
         assert "metrics           missing" in out
@@ -237,22 +240,22 @@ def test_a_folder_of_run_folders_is_reviewed_one_and_two_levels_down(runs, tmp_p
     (empty / "a" / "b" / "c" / "deep.mcap").write_bytes(runs[0].path.read_bytes())  # three levels: not read
     assert main(["review", str(empty)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"no .mcap files in {empty}, nor in the two levels of folders below it")
+    assert f"no .mcap files in {empty}, nor in the two levels of folders below it; " in err
     above = tmp_path / "above"
-    for cell in ("mcap/cell_a", "mcap/cell_b"):  # a sweep's layout: the same file name in two cells
-        (above / cell).mkdir(parents=True)
-        shutil.copy(runs[0].path, above / cell / runs[0].path.name)
+    for cell, humans in (("mcap/cell_a", 4), ("mcap/cell_b", 5)):  # a sweep's layout: one file name, 2 cells
+        record_episode(above / cell, seed=1, steps=8, n_humans=humans)
     assert main(["review", str(above), "--json", str(tmp_path / "r.json")]) == 0
     out = capsys.readouterr().out
     name = runs[0].path.name
-    assert f"mcap/cell_a/{name}" in out and f"mcap/cell_b/{name}" in out and "2 runs" in out
+    assert f"mcap/cell_a/{name}" in out and f"mcap/cell_b/{name}" in out
     report = json.loads((tmp_path / "r.json").read_text())
-    assert report["totals"]["runs"] == 2 and len(report["runs"]) == 2
+    assert [g["totals"]["runs"] for g in report["groups"]] == [1, 1] and len(report["runs"]) == 2
     assert main(["review", str(above / "mcap")]) == 0
     assert f"cell_a/{name}" in capsys.readouterr().out
     shutil.copy(runs[1].path, above / runs[1].path.name)  # now the folder has one of its own
     assert main(["review", str(above), "--json", str(tmp_path / "r.json")]) == 0
     assert json.loads((tmp_path / "r.json").read_text())["totals"]["runs"] == 1
+    assert "its subfolders hold 2 recordings, not read" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is not None, reason="ffmpeg is installed: an mp4 would be written")
@@ -338,7 +341,9 @@ def test_compare_names_the_code_that_recorded_each_run(tmp_path, capsys, monkeyp
     from pipelines.version import code_identity
 
     a = record_episode(tmp_path / "a", seed=1, steps=4)
-    monkeypatch.setattr(recording, "code_identity", lambda: {**code_identity(), "commit": "0123456789abcdef"})
+    monkeypatch.setattr(
+        recording, "code_identity", lambda: {**code_identity(), "commit": "0123456789abcdef", "dirty": False}
+    )
     b = record_episode(tmp_path / "b", seed=1, steps=4)
     monkeypatch.undo()
     assert main(["review", str(a.path), "--compare", str(b.path)]) == 0
