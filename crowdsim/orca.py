@@ -62,7 +62,7 @@ class OrcaParams:
         dist = real_number(
             "OrcaParams.neighbor_dist",
             self.neighbor_dist,
-            f"> 0 and at most {MAX_NEIGHBOR_DIST:g} m, or inf (every agent)",
+            f"a number > 0 and at most {MAX_NEIGHBOR_DIST:g} m, or inf (every agent)",
             lambda d: d > 0 and (d <= MAX_NEIGHBOR_DIST or d == math.inf),
         )
         object.__setattr__(self, "neighbor_dist", dist)
@@ -71,7 +71,7 @@ class OrcaParams:
         horizon = real_number(
             "OrcaParams.time_horizon",
             self.time_horizon,
-            f"at least {MIN_TIME_HORIZON:g} s",
+            f"a number of at least {MIN_TIME_HORIZON:g} s",
             lambda t: t >= MIN_TIME_HORIZON,
         )
         object.__setattr__(self, "time_horizon", horizon)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from pipelines.commands import examples
 from pipelines.errors import PipelineError
@@ -94,7 +95,7 @@ def _show_recorded(args: argparse.Namespace) -> int:
     make it another run, so they are refused (edit the printed file instead)."""
     from pipelines.config import render
     from pipelines.config.command_line import config_arguments
-    from pipelines.config.recorded import machine_note, provenance, recorded_config, recorded_runs
+    from pipelines.config.recorded import machine_note, provenance, recorded_config, recorded_runs, zoo_note
 
     path, sets = config_arguments(args)
     if path is not None or sets:
@@ -105,5 +106,9 @@ def _show_recorded(args: argparse.Namespace) -> int:
         raise PipelineError(f"--run {args.run}: {sweep_file} records runs 1..{len(runs)}")
     run_line = runs[index - 1]
     config = recorded_config(sweep_file, run_line, index)
-    print(provenance(sweep_file, run_line, index, len(runs)) + machine_note(config) + render(config), end="")
+    changed = zoo_note(args.from_sweep)
+    if changed:  # on stderr too: a file piped into a rerun shows its comments to no one
+        print(f"note: {' '.join(line[2:] for line in changed.splitlines())}", file=sys.stderr)
+    notes = machine_note(config) + changed
+    print(provenance(sweep_file, run_line, index, len(runs)) + notes + render(config), end="")
     return 0

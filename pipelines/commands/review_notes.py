@@ -142,12 +142,24 @@ def deeper_note(folder: Path) -> str:
                     found[top] = found.get(top, 0) + 1
         level = below
     if not found:
-        return ""
+        return _unrecorded_sweep(folder)
     names = [str(folder / top) for top in sorted(found)]
     shown = ", ".join(names[:MAX_FOLDERS_NAMED]) + (", ..." if len(names) > MAX_FOLDERS_NAMED else "")
     n = sum(found.values())
     return (
         f"; deeper folders hold {n} recording{'s' * (n != 1)} (under {shown}): review each of those folders"
+    )
+
+
+def _unrecorded_sweep(folder: Path) -> str:
+    """A sweep's folder without recordings: a sweep writes them only when asked (``--record``)."""
+    from pipelines.experiments.log import SWEEP_FILE
+
+    if not (folder / SWEEP_FILE).is_file():
+        return ""
+    return (
+        "; it is a sweep's, which records episodes only with `sweep --record all|failures` (its table.md and "
+        "cells.csv hold its results)"
     )
 
 

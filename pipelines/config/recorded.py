@@ -140,6 +140,44 @@ def machine_note(config: RunConfig) -> str:
     return "".join(f"# {line}\n" for line in textwrap.wrap(text, 106))
 
 
+def zoo_note(directory: str | Path) -> str:
+    """Comment lines when the zoo no longer holds what the sweep's episodes ran with: other weights under a
+    predictor's name (`zoo add --replace`), or a calibration replaced since (`calibrate` again under the same
+    alpha and source). A rerun of the printed file then gives other episodes, and said nothing (README
+    promises "same episodes, metric for metric"); the records name both (predictor_sha256, and each margins'
+    calibration by its creation time and data)."""
+    from pipelines.experiments.log import episode_log
+    from predictors.calibration_store import stored_calibrations
+    from predictors.registry import checkpoint_sha256
+
+    weights: dict[str, Any] = {}  # predictor -> sha256 its episodes ran with
+    # (created, data sha256, alpha): a block; one calibrate run makes its blocks of every alpha at one time
+    calibrations: dict[tuple[str, str, float], str] = {}  # -> the predictor it calibrated
+    try:
+        for _, _, record in episode_log(Path(directory)).scan(repair=False):
+            name = record.get("predictor")
+            if not isinstance(name, str):
+                continue
+            weights.setdefault(name, record.get("predictor_sha256"))
+            margins = (record.get("config") or {}).get("margins") or {}
+            made = margins.get("calibration")
+            if isinstance(made, dict) and isinstance(margins.get("alpha"), float):
+                block = (str(made.get("created")), str(made.get("data_sha256")), round(margins["alpha"], 9))
+                calibrations.setdefault(block, name)
+        now = {(b.created, b.data_sha256, round(b.alpha, 9)) for _, b in stored_calibrations()}
+        changed = [f"{name}'s weights" for name, sha in weights.items() if checkpoint_sha256(name) != sha]
+    except Exception:  # a damaged log or zoo: the rerun's own checks say what is wrong with them
+        return ""
+    changed += sorted({f"{name}'s calibration" for block, name in calibrations.items() if block not in now})
+    if not changed:
+        return ""
+    text = (
+        f"The zoo no longer holds what this sweep ran with ({', '.join(changed)} changed since), so a rerun "
+        "gives other episodes; `crowdmpc compare OLD NEW` names what differs."
+    )
+    return "".join(f"# {line}\n" for line in textwrap.wrap(text, 106))
+
+
 def _plain(value: Any) -> str:
     """A recorded value inside a comment: one short line (a line break in it would end the comment, and what
     follows would be read as TOML)."""

@@ -83,13 +83,35 @@ class ResumeChecks:
             if key not in current:
                 current[key] = planned_margins(self.tasks[i].cell)
             if stored != current[key]:
-                was, now = stored["margins_m"], current[key]["margins_m"]
-                per_class = " (per motion class)" if was == now else ""
                 raise PipelineError(
-                    f"{log} holds episodes of {key} planned with margins {was} m, but the cell's "
-                    f"margins are now {now} m{per_class}: they changed since "
-                    "the records were made (recalibrated?); use another --out for the new margins"
+                    f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
+                    "they changed since the records were made (recalibrated?); use another --out for the new "
+                    "margins"
                 )
+
+
+def _margins_change(was: dict[str, Any], now: dict[str, Any]) -> str:
+    """What changed between two ``planned_margins``: the margins themselves, else the first motion class
+    whose margins differ (per-class modes plan with those alone, and their common margins are [] on both
+    sides: the refusal had read "margins [] m, but ... now [] m")."""
+    if was["margins_m"] != now["margins_m"]:
+        return f"margins {was['margins_m']} m, but the cell's margins are now {now['margins_m']} m"
+    old, new = (c if isinstance(c, dict) else {} for c in (was["classes"], now["classes"]))
+    names, a_rows, b_rows = old.get("names"), old.get("quantiles"), new.get("quantiles")
+    # a damaged record's rows: compare what both hold
+    differ = [(n, a, b) for n, a, b in zip(names or [], a_rows or [], b_rows or [], strict=False) if a != b]
+    if not differ:  # the classes themselves changed (their speeds, or none on one side)
+        return "other motion classes than the cell's now"
+    name, a, b = differ[0]
+    more = f" (and {len(differ) - 1} more class{'es' * (len(differ) > 2)})" if len(differ) > 1 else ""
+    return f"margins per motion class, {name} {_rounded(a)} m, but the cell's are now {_rounded(b)} m{more}"
+
+
+def _rounded(values: Any) -> str:
+    """A class's margins to the millimetre (a calibration's quantiles have 17 digits)."""
+    if isinstance(values, list) and all(isinstance(v, int | float) for v in values):
+        return "[" + ", ".join(f"{v:.3f}" for v in values) + "]"
+    return str(values)
 
 
 def _keep_first(firsts: dict[Any, tuple[Any, ...]], key: Any, value: tuple[Any, ...]) -> None:

@@ -100,6 +100,15 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     observed = human_observed(obs)
     if observed is not None:  # a tracker's late arrivals: their padded rows become their tracks extended back
         history = backfill(history, np.concatenate([np.full(obs.n_robots, obs_len), observed]))
+    lost = np.argwhere(~np.isfinite(history).all(axis=-1))
+    if lost.size:  # a tracker's NaN rows before a track: the predictor's refusal spoke of a mask never given
+        step, i = lost[0]
+        who, _ = _agent(obs, int(i))
+        raise PipelineError(
+            f"obs.history[{step - obs_len}] holds a position that is not finite for {who} ({len(lost)} such "
+            "entries in the rows the predictor reads): give obs.human_observed, each human's track length "
+            "(the rows before a track may then hold anything), or fill those rows with finite positions"
+        )
     return history, np.ones(history.shape[:2], dtype=bool)
 
 
@@ -119,19 +128,30 @@ def check_history(obs: Observation) -> None:
             "human_positions"
         )
     now = np.concatenate([obs.robot_positions, obs.human_positions]).astype(float)
+    lost = ~np.isfinite(now).all(axis=1)
+    if lost.any():  # said as such, not as a history that differs from the positions (NaN differs)
+        i = int(np.flatnonzero(lost)[0])
+        who, field = _agent(obs, i)
+        raise PipelineError(
+            f"{field} holds a position that is not finite ({who} at {now[i].tolist()}); a controller plans "
+            "from every agent's current position (hand it only the people tracked now)"
+        )
     differs = ~np.all(np.abs(history[-1] - now) <= 1e-9, axis=1)  # NaN differs
     if differs.any():
         i = int(np.flatnonzero(differs)[0])
-        who, field = (
-            (f"robot {i}", "robot_positions")
-            if i < obs.n_robots
-            else (f"human {i - obs.n_robots}", "human_positions")
-        )
+        who, field = _agent(obs, i)
         raise PipelineError(
             f"obs.history[-1] (now) is not the agents' positions: {who} is at {history[-1, i].tolist()} "
             f"there but at {now[i].tolist()} in {field} ({int(differs.sum())} agent(s) differ); row -1 of "
             "the history must be the current positions, robots first"
         )
+
+
+def _agent(obs: Observation, i: int) -> tuple[str, str]:
+    """Agent ``i`` of the history's columns (robots, then humans) and the field that holds its position."""
+    if i < obs.n_robots:
+        return f"robot {i}", "obs.robot_positions"
+    return f"human {i - obs.n_robots}", "obs.human_positions"
 
 
 def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None:

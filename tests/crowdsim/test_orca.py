@@ -38,10 +38,13 @@ def test_params_validation_names_the_value():
     ("settings", "message"),
     [
         # squared: 1e300 passed and ended the first step in OverflowError
-        ({"neighbor_dist": 1e300}, "neighbor_dist must be > 0 and at most 1e+06 m, or inf (every agent)"),
-        ({"neighbor_dist": math.nan}, "neighbor_dist must be > 0"),
+        (
+            {"neighbor_dist": 1e300},
+            "neighbor_dist must be a number > 0 and at most 1e+06 m, or inf (every agent)",
+        ),
+        ({"neighbor_dist": math.nan}, "neighbor_dist must be a number > 0"),
         # 1 / time_horizon scales positions: 1e-305 overflowed the velocity obstacles
-        ({"time_horizon": 1e-305}, "time_horizon must be at least 1e-06 s, got 1e-305"),
+        ({"time_horizon": 1e-305}, "time_horizon must be a number of at least 1e-06 s, got 1e-305"),
     ],
 )
 def test_lengths_and_times_whose_squares_or_quotients_overflow_are_refused(settings, message):

@@ -234,8 +234,8 @@ def test_mpc_overrides_are_the_values_that_differ_from_table_i(tmp_path):
         ),
         (
             '[env.orca]\nneighbor_dist = "far"\n',
-            "run.toml: env.orca.neighbor_dist: must be > 0 and at most 1e+06 m, or inf (every agent), "
-            "got 'far'",
+            "run.toml: env.orca.neighbor_dist: must be a number > 0 and at most 1e+06 m, or inf (every "
+            "agent), got 'far'",
         ),
         ("[scenario]\nhumans = 100\n", "run.toml: scenario.humans: n_humans must be in [0, 50], got 100"),
         ("[scenario]\nrobots = 0\n", "run.toml: scenario.robots: must be in 1..12, got 0"),
@@ -426,7 +426,8 @@ def test_errors_from_the_python_api_are_config_errors(tmp_path):
         (["--set", "mpc.rho=1e300"], "--set mpc.rho: must be at most 1000 s^2, got 1e+300"),
         (
             ["--set", "env.orca.neighbor_dist=1e300"],  # squared: OverflowError in the first ORCA step
-            "--set env.orca.neighbor_dist: must be > 0 and at most 1e+06 m, or inf (every agent), got 1e+300",
+            "--set env.orca.neighbor_dist: must be a number > 0 and at most 1e+06 m, or inf (every agent), "
+            "got 1e+300",
         ),
         (
             ["--set", "env.orca.max_neighbors=100000"],

@@ -160,3 +160,32 @@ def test_a_record_of_more_workers_than_this_machine_takes_reads_back(tmp_path, c
     assert not again.exists()
     argv = ["--config", str(rerun), "sweep", "--workers", "2", "--dry-run", "--out", str(again)]
     assert main(argv) == 0  # --workers reruns it here
+
+
+def test_a_changed_calibration_or_model_is_said_before_a_rerun(tmp_path, capsys):
+    """A rerun from the printed file gave other episodes, silently, once the calibration the sweep planned
+    with was made again (or a model replaced): the file says so in a comment, and a note on stderr."""
+    import dataclasses
+
+    import numpy as np
+
+    from predictors.calibration_store import save_calibration
+    from tests.calibration_blocks import constant_velocity_block
+    from tests.pipelines.test_sweep_hostile import MARGINS_ARGV
+
+    def calibrate(scale: float, created: str) -> None:
+        block = constant_velocity_block(np.outer(np.arange(1, 20) / 100.0 * scale, [1.0, 2.0, 3.0, 4.0]))
+        save_calibration(dataclasses.replace(block, created=created))
+
+    out = tmp_path / "sweep"
+    calibrate(1.0, "2026-01-01T00:00:00+00:00")
+    assert main([*MARGINS_ARGV, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(out)]) == 0
+    assert "no longer holds" not in "".join(capsys.readouterr())  # the zoo holds what it ran with
+    calibrate(2.0, "2026-01-02T00:00:00+00:00")  # the same key: it replaces the block the sweep used
+    assert main(["config", "show", "--from-sweep", str(out)]) == 0
+    printed, err = capsys.readouterr()
+    said = "The zoo no longer holds what this sweep ran with (constant_velocity's calibration changed since)"
+    assert said in " ".join(line.lstrip("# ") for line in printed.splitlines())
+    assert err.startswith(f"note: {said}") and err.count("\n") == 1

@@ -361,7 +361,7 @@ def test_close_stops_the_dmpc_solver_threads():
         ),
         (
             lambda o: {"human_positions": np.where(np.arange(4)[:, None] == 1, np.nan, o.human_positions)},
-            r"obs\.history\[-1\].*human 1.*\[nan, nan\]",
+            r"obs\.human_positions holds a position that is not finite \(human 1 at \[nan, nan\]\)",
         ),
     ],
 )

@@ -102,6 +102,17 @@ def test_recordings_deeper_than_two_levels_are_named_in_the_error(runs, tmp_path
     assert main(["review", str(tmp_path / "a")]) == 0  # each one reviews
 
 
+def test_a_sweep_without_recordings_is_said_to_record_none(tmp_path, capsys):
+    """`review SWEEP` of a sweep run without --record said only "no .mcap files"."""
+    (tmp_path / "sweep.json").write_text("{}")
+    assert main(["review", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.count("\n") == 1 and "nor in the two levels of folders below it; it is a sweep's, which " in err
+    )
+    assert "records episodes only with `sweep --record all|failures`" in err
+
+
 def test_a_sweep_records_which_episodes_it_kept_in_each_file(tmp_path):
     argv = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1"]
     out = tmp_path / "o"

@@ -32,7 +32,7 @@ def test_settings_reach_the_simulator_and_the_key_and_none_keep_the_old_key():
     ("settings", "message"),
     [
         ({"dt": 0.2}, r"unknown simulator settings \['dt'\]; a sweep sets \["),
-        ({"orca.time_horizon": 0.0}, "OrcaParams.time_horizon must be at least"),
+        ({"orca.time_horizon": 0.0}, "OrcaParams.time_horizon must be a number of at least"),
         ({"crossing": "diagonal"}, "EnvConfig.crossing must be one of"),
     ],
 )
@@ -107,7 +107,10 @@ def test_vary_a_simulator_setting_gives_every_method_a_column_per_value(tmp_path
             "--vary and --set env.orca.time_horizon both set env.orca.time_horizon: give its values once",
         ),
         (["--vary", "env.profile=paper,v1"], "only an [mpc] setting (mpc.KEY=V1,V2,...), the margins"),
-        (["--vary", "env.orca.time_horizon=2,0"], "--vary value 0 must be at least 1e-06 s, got 0.0"),
+        (
+            ["--vary", "env.orca.time_horizon=2,0"],
+            "--vary value 0 must be a number of at least 1e-06 s, got 0.0",
+        ),
         (["--vary", "env.crossing=paper,diagonal"], "--vary value diagonal must be one of"),
     ],
 )

@@ -35,3 +35,36 @@ def test_a_social_lstm_predicts_the_late_arrival_walking_at_its_tracked_speed():
 def test_a_count_below_one_is_refused_naming_the_human():
     with pytest.raises(PipelineError, match=r"human_observed must be >= 1 .* got 0 for human 0"):
         predictor_history(_late_human(50, np.array([0])), 9)
+
+
+def _with_nan_past(observed=None):
+    """The late human's rows before its track as NaN, as many trackers give them."""
+    obs = _late_human(50, observed)
+    obs.history[:-2, 3] = np.nan
+    return obs
+
+
+def test_nan_rows_before_a_track_are_read_with_its_length_and_named_without_it():
+    """Without human_observed the refusal came from the predictor, about a `mask` an Observation has not."""
+    history, _ = predictor_history(_with_nan_past(np.array([2])), 9)
+    assert np.isfinite(history).all()  # backfilled: the track extended back
+    with pytest.raises(PipelineError) as refused:
+        predictor_history(_with_nan_past(), 9)
+    assert str(refused.value) == (
+        "obs.history[-9] holds a position that is not finite for human 0 (7 such entries in the rows the "
+        "predictor reads): give obs.human_observed, each human's track length (the rows before a track may "
+        "then hold anything), or fill those rows with finite positions"
+    )
+    assert np.isfinite(predictor_history(_with_nan_past(), 2)[0]).all()  # a predictor reading 2 rows: fine
+
+
+def test_a_current_position_that_is_not_finite_is_said_so():
+    from pipelines.loop.mpc_setup import check_history
+
+    obs = _late_human(50)
+    obs.human_positions[0] = np.nan
+    obs.history[-1, 3] = np.nan
+    with pytest.raises(
+        PipelineError, match=r"^obs.human_positions holds a position that is not finite \(human 0"
+    ):
+        check_history(obs)
