@@ -115,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(
                 "nothing to measure: --no-ibr leaves --coupled and --dmpc-parallel (which runs at 7 humans)"
             )
+        if args.dmpc_parallel and 7 not in args.humans:  # it measured nothing, and said nothing
+            parser.error("--dmpc-parallel runs at 7 humans: add 7 to --humans")
 
         report: dict[str, Any] = {"load_before": os.getloadavg()}
         rows: list[tuple[str, dict[str, Any]]] = []

@@ -35,15 +35,6 @@ from predictors.registry import load_predictor  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import count_in, figure, predicted_humans, run_main  # noqa: E402
 
-DEFAULT_MODELS = (
-    "social_lstm_eth",
-    "social_lstm_soft_eth",
-    "vanilla_lstm_eth",
-    "social_gan_eth",
-    "social_gru_eth",
-    "social_attention_eth",
-)
-
 
 def handwritten(predictor: LearnedPredictor):
     """The hand-written twin's prediction builder for a Social-LSTM-family net, or None for other nets."""
@@ -130,7 +121,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--models", default=",".join(DEFAULT_MODELS))
+    parser.add_argument(
+        "--models", help="zoo names, comma-separated (default: every model of the shipped and the user zoo)"
+    )
     parser.add_argument(
         "--humans", type=predicted_humans, default=7, help="at least 1: the twin predicts the humans"
     )
@@ -145,7 +138,8 @@ def main() -> None:
     columns = ("export s", "value err", "jac err", "IBR ms", "NLP ms")
     widths = (9, 10, 10, 8, 8)
     print(f"{'model':22} {'twin':13} " + " ".join(f"{c:>{w}}" for c, w in zip(columns, widths, strict=True)))
-    for name in args.models.split(","):
+    # every model the zoos hold by default: a fixed list of six left social_lstm_synth and users' models out
+    for name in args.models.split(",") if args.models else list(dict.fromkeys(zoo_names())):
         if name not in available:
             print(f"{name:22} (not in the zoo)")
             continue

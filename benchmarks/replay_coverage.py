@@ -186,7 +186,8 @@ def print_report(report: dict[str, Any], horizon: int) -> None:
     for crowd, measured in report["crowds"].items():
         print(
             f"{crowd}: {measured['episodes']} episodes, {measured['success']} successes, "
-            f"{measured['collision']} with a collision; {measured['scored_at_k1']} humans scored at k = 1"
+            f"{measured['collision']} with a collision; {measured['scored_at_k1']} scores at k = 1 (a human "
+            "at a step)"
         )
         for margins, shares in measured["coverage"].items():
             print(f"  {margins:28s}" + " ".join(f"{share:6.3f}" for share in shares))
