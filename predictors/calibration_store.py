@@ -206,9 +206,52 @@ def recalibrate_command(
 ) -> str:
     """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``, behind
     a sensor of ``sensor_range`` m (reporting no track lengths unless ``sensor_tracks``) where given."""
-    sensor = "" if sensor_range is None else f" --sensor-range {sensor_range:g}"
-    sensor += "" if sensor_range is None or sensor_tracks else " --no-sensor-tracks"
+    sensor = _sensor_options(sensor_range, sensor_tracks)
     return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}{sensor}"
+
+
+def _sensor_options(sensor_range: float | None, sensor_tracks: bool) -> str:
+    """`` --sensor-range 3`` (and `` --no-sensor-tracks``) for a block made behind a sensor, else nothing."""
+    if sensor_range is None:
+        return ""
+    return f" --sensor-range {sensor_range:g}" + ("" if sensor_tracks else " --no-sensor-tracks")
+
+
+# the closed-loop settings a block's details record, as calibrate's options: the episodes a block was made
+# on, and so the humans its margins cover (pipelines/experiments/calibrate.py, ClosedLoopPlan)
+MADE_WITH: Final[tuple[str, ...]] = (
+    "episodes",
+    "seed",
+    "humans",
+    "controller",
+    "profile",
+    "visibility",
+    "near",
+)
+
+
+def made_with(block: Calibration) -> dict[str, str]:
+    """``MADE_WITH``'s settings ``block``'s details record, each as calibrate's option takes it (``humans``
+    ``5,6``, ``near`` ``inf`` for everyone scored); none for a real block, whose scenes were recorded."""
+    details = block.details if block.source == "closed-loop" else {}
+    found = {key: details[key] for key in MADE_WITH if key in details}
+    if isinstance(found.get("humans"), list | tuple):
+        found["humans"] = ",".join(str(h) for h in found["humans"])
+    if "near" in found and not isinstance(found["near"], str):
+        found["near"] = "inf" if found["near"] is None else f"{found['near']:g}"  # null: everyone scored
+    return {key: str(value) for key, value in found.items()}
+
+
+def calibrate_command(block: Calibration, alphas: Sequence[float] = (), **changed: object) -> str:
+    """The ``crowdmpc calibrate`` command line that makes ``block`` again, at ``alphas`` (default its own)
+    with the settings it records (``made_with``) but those ``changed`` (``episodes=400``)."""
+    alpha = ",".join(alpha_text(a) for a in alphas or (block.alpha,))
+    settings = made_with(block) | {key: str(value) for key, value in changed.items()}
+    return (
+        f"crowdmpc calibrate --predictor {block.predictor} --source {block.source} --alpha {alpha}"
+        + "".join(f" --{key} {value}" for key, value in settings.items())
+        + _sensor_options(block.sensor_range, block.sensor_tracks)
+    )
 
 
 def find_calibration(

@@ -5,10 +5,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, comma_items, humans_list, path_arg, write_output
-from pipelines.commands.calibrate_store import plans_with_new_blocks, storing, take_back_killed
+from pipelines.commands.calibrate_store import (
+    evaluation_seeds_note,
+    plans_with_new_blocks,
+    storing,
+    take_back_killed,
+)
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
@@ -39,6 +45,9 @@ data the calibration did not see: the test scenes
 (real) or as many further episodes (closed-loop; per motion class too). The blocks are stored after those
 episodes; when they plan with a block this run makes (--holdout-margins conformal:ALPHA with ALPHA one of
 --alpha), it is stored before them and taken back if the run stops, by the next calibrate after a kill -9.
+A note says when the episodes' seeds are ones simulate and sweep evaluate on, and when a block replaces one
+made otherwise (another --controller, other seeds or episodes); a run planning with a block made with another
+controller says so too. `crowdmpc zoo calibrations` lists each block's controller and episodes.
 """
 
 
@@ -293,6 +302,9 @@ def _check_first(args: argparse.Namespace) -> str | None:
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "closed-loop":
         _check_closed_loop(args, holdout_margins, sha256)
+        note = evaluation_seeds_note(args.seed, args.episodes)
+        if note is not None:
+            print(note, file=sys.stderr)
     return sha256
 
 
@@ -377,4 +389,6 @@ def _calibrate(args: argparse.Namespace) -> int:
         write_output(args.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
         if not is_stdout(args.json):
             print(f"wrote {shown(args.json)}")
+    if args.dry_run:  # measured only: the blocks in force are as they were
+        print("--dry-run: nothing stored; the calibrations in force are unchanged")
     return 0

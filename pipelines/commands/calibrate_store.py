@@ -1,7 +1,9 @@
 """Storing ``crowdmpc calibrate``'s blocks in the user zoo's calibrations file: after the held-out run, so
 that an interrupted or failed command leaves the user's calibrations as they were, or before it when its
 episodes plan with them, the earlier blocks put back if the run stops (by the next calibrate when a kill left
-no chance: ``take_back_killed``); never a block without margins per motion class over one that has them."""
+no chance: ``take_back_killed``); never a block without margins per motion class over one that has them.
+The notes on what the blocks stored will be: fitted on evaluation seeds, made otherwise than those they
+replace."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import json
 import os
 import re
 import secrets
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -22,6 +25,7 @@ from predictors.locking import pid_alive, unless_held
 
 if TYPE_CHECKING:
     from pipelines.loop.margins import MarginSpec
+    from predictors.calibration import Calibration
 
 # what a calibrate storing blocks before its held-out run would take back, beside the calibrations file:
 # .calibrate-holdout.PID-RANDOM.json (.PID.json before the RANDOM). The pid alone was no run's own name: two
@@ -46,6 +50,32 @@ def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec)
         and holdout_margins.source == "closed-loop"
         and any(same_alpha(holdout_margins.alpha, a) for a in args.alpha)
     )
+
+
+def evaluation_seeds_note(seed: int, episodes: int) -> str | None:
+    """A line for calibration episodes on seeds that simulate and sweep evaluate on from their default --seed
+    (simulate's episode i: seed + i, at most MAX_SIMULATE_EPISODES; a sweep cell's: seed + i // 2), None
+    otherwise: the blocks stored would cover those very episodes, where the default, CALIBRATION_SEED on,
+    keeps the two apart. Not refused: it may be meant."""
+    from pipelines.config.settings import MAX_SIMULATE_EPISODES, SimulateSettings, SweepSettings
+    from pipelines.experiments.calibrate import CALIBRATION_SEED
+    from pipelines.experiments.sweep_config import MAX_EPISODES_PER_CELL
+
+    first = min(SimulateSettings.seed, SweepSettings.seed)
+    last = first + max(MAX_SIMULATE_EPISODES, (MAX_EPISODES_PER_CELL + 1) // 2) - 1
+    shared = (max(seed, first), min(seed + episodes - 1, last))
+    if shared[0] > shared[1]:
+        return None
+    return (
+        f"note: calibration seeds {_seeds(seed, seed + episodes - 1)} overlap the evaluation seeds "
+        f"{_seeds(first, last)} (simulate and sweep from their default --seed {first}) at {_seeds(*shared)}: "
+        "the margins would be fitted on episodes they are later evaluated on (the default --seed "
+        f"{CALIBRATION_SEED} keeps them apart)"
+    )
+
+
+def _seeds(first: int, last: int) -> str:
+    return str(first) if first == last else f"{first}..{last}"
 
 
 @contextlib.contextmanager
@@ -174,11 +204,44 @@ def _store(blocks: list, args: argparse.Namespace) -> None:
     """Store ``blocks``, each refused (``_check_keeps_class_margins``) under the lock it is written under: a
     calibrate running meanwhile (another job on the same user zoo) may have stored a block with margins per
     motion class since this one checked, before its held-out run, and a short trial replaced it."""
-    from predictors.calibration_store import save_calibration
+    from predictors.calibration_store import save_calibration, stored_calibrations
 
+    in_force = stored_calibrations()
     for block in blocks:
+        note = _replaced_note(block, in_force)
         path = save_calibration(block, check=lambda: _check_keeps_class_margins(blocks, args))
+        if note is not None:  # once it is stored: a block refused replaces nothing
+            print(note, file=sys.stderr)
     print(f"wrote {len(blocks)} block(s) to {path}")
+
+
+def _replaced_note(block: Calibration, in_force: list[tuple[Path, Calibration]]) -> str | None:
+    """A line for a block that takes the place of one made with other settings (another controller, other
+    seeds or episodes: ``made_with``), None otherwise: runs planning with that alpha then plan with margins
+    of other episodes, and one calibration silently replaced another (a trial with --controller dmpc the
+    CMPC block that --margins conformal:ALPHA meant). Settings the old block does not record are passed
+    over."""
+    from predictors.calibration_store import made_with
+    from predictors.conformal import alpha_text
+
+    replaced = [(path, old) for path, old in in_force if old.same_key(block)]
+    if not replaced:
+        return None
+    path, old = replaced[0]
+    before, now = made_with(old), made_with(block)
+    differ = [key for key in before if before[key] != now.get(key)]
+    if not differ:
+        return None
+    view = f"alpha {alpha_text(block.alpha)}"
+    view += "" if block.sensor_range is None else f" behind a {block.sensor_range:g} m sensor"
+    view += "" if block.sensor_tracks else " without track lengths"
+    return (
+        f"note: this replaces the {block.source} block of {block.predictor} at {view} in force from {path}, "
+        "made with "
+        + " ".join(f"--{key} {before[key]}" for key in differ)
+        + "; this one is made with "
+        + " ".join(f"--{key} {now.get(key, '(not recorded)')}" for key in differ)
+    )
 
 
 def _put_back(blocks: list, before: list | None, who: str = "the held-out run") -> None:
@@ -202,10 +265,10 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
     conformal-shortfall, which docs/examples/safe_crossing.toml plans with, refuse that predictor."""
     from pipelines.loop.margins import class_tables
     from predictors.calibration_store import stored_calibrations, view_distance
-    from predictors.conformal import alpha_text
 
     in_force = stored_calibrations()
-    losing = []
+    losing: list[Calibration] = []
+    having: set[Path] = set()  # the files of the blocks in force that have them
     for block in blocks:
         new = class_tables(block)
         planned = [
@@ -215,10 +278,29 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
             continue
         path, old = min(planned, key=lambda found: view_distance(found[1].key()[3:], block.key()[3:]))
         if any(new[mode] is None and had is not None for mode, had in class_tables(old).items()):
-            losing.append(f"alpha {alpha_text(block.alpha)} (in force: {path})")
+            losing.append(block)
+            having.add(path)
     if losing:
-        raise PipelineError(
-            f"not stored: {args.predictor}'s {args.source} calibration at {', '.join(losing)} has margins "
-            "per motion class and these blocks have none (too few samples in a class); run more --episodes "
-            "(default 200), or measure without storing with --dry-run"
-        )
+        raise PipelineError(_losing_class_margins(losing, sorted(having), args))
+
+
+def _losing_class_margins(losing: list[Calibration], having: list[Path], args: argparse.Namespace) -> str:
+    """Why ``losing`` (blocks without margins per motion class where runs plan with blocks of ``having``'s
+    files that have them) are not stored, and the command that makes them: the same with more episodes."""
+    from pipelines.experiments.calibrate import ClosedLoopPlan
+    from predictors.calibration_store import calibrate_command
+    from predictors.conformal import alpha_text
+
+    alphas = [b.alpha for b in losing]
+    one = len(losing) == 1
+    had = losing[0].details.get("episodes")
+    more = max(ClosedLoopPlan.episodes, 2 * had) if isinstance(had, int) else ClosedLoopPlan.episodes
+    in_episodes = f" in {had} episodes" if isinstance(had, int) else ""
+    return (
+        f"not stored: the new {args.source} block{'' if one else 's'} of {args.predictor} at alpha "
+        f"{', '.join(alpha_text(a) for a in alphas)} {'has' if one else 'have'} no margins per motion class "
+        f"(a class had too few samples{in_episodes}), and runs plan now with "
+        f"{'a block that has' if one else 'blocks that have'} them (in {', '.join(map(str, having))}); make "
+        f"{'it' if one else 'them'} with more episodes: {calibrate_command(losing[0], alphas, episodes=more)}"
+        ", or measure without storing with --dry-run"
+    )

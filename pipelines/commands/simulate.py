@@ -272,10 +272,10 @@ def _simulate(resolved: SimulateRun) -> int:
             spec, cfg.env.profile, visibility, cfg.env.crowd, sim.sensor_range, sim.sensor_tracks
         ),
         checks.sensor_margins_note(spec, sim.sensor_range, sim.sensor_tracks),
+        checks.calibration_controller_note(spec, sim.sensor_range, sim.sensor_tracks),
     )
-    for note in notes:
-        if note is not None:
-            print(note, file=sys.stderr)
+    for note in filter(None, notes):
+        print(note, file=sys.stderr)
     env_config = cfg.env
     run_meta = _run_meta(resolved)
     recorder = None

@@ -224,6 +224,17 @@ def calibration_world_note(
     )
 
 
+def calibration_controller_note(
+    spec: ControllerSpec, sensor_range: float | None = None, sensor_tracks: bool = True
+) -> str | None:
+    """A line for closed-loop margins calibrated with another controller than the run's (``calibrate
+    --controller dmpc`` for a CMPC run), None otherwise (``pipelines.loop.margins.controller_note``)."""
+    from pipelines.loop.margins import controller_note
+
+    block = _planned_block(spec.behind(sensor_range, sensor_tracks))
+    return None if block is None else controller_note(block, spec.controller)
+
+
 # What docs/replayed_crowds.md measured behind a 3 m sensor, by calibration source (social_lstm_eth and
 # constant velocity, alpha 0.1; benchmarks/replay_coverage.py --sensor-range 3)
 _MEASURED_BEHIND = {

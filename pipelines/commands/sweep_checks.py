@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from pipelines.commands.simulate_checks import (
+    calibration_controller_note,
     calibration_world_note,
     flock_note,
     goal_room_note,
@@ -130,9 +131,9 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals),
     ``horizon_note`` lines (a plan longer than the learned predictor's training), ``flock_note`` lines
     (a team larger than the paper's under its per-pair flocking weight), ``calibration_world_note`` lines
-    (margins calibrated under other conventions) and ``sensor_margins_note`` lines (calibrated margins
-    behind a sensor), each once, naming the methods it
-    applies to: a grid of --vary columns printed the same line for each of eight methods."""
+    (margins calibrated under other conventions), ``sensor_margins_note`` lines (calibrated margins
+    behind a sensor) and ``calibration_controller_note`` lines (with another controller), each once, naming
+    the methods it applies to: a grid of --vary columns printed the same line for each of eight methods."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
     for cell in cells:
@@ -155,6 +156,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
                 cell.world.sensor_tracks,
             ),
             sensor_margins_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
+            calibration_controller_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
         ):
             if note is not None:
                 methods.setdefault(note, []).append(cell.method)

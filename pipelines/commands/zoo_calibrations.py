@@ -26,6 +26,8 @@ HEADER = [
     "samples",
     "per class",
     "weights",
+    "controller",
+    "episodes (seeds)",
     "made",
 ]
 
@@ -64,8 +66,26 @@ def _row(block: Calibration, user_dir: Path | None) -> list[str]:
         str(min(block.n)),
         ", ".join(per_class) or "-",
         _weights(block, user_dir),
+        str(block.details.get("controller", "-")) if block.source == "closed-loop" else "-",
+        _episodes(block),
         block.created[:16].replace("T", " "),
     ]
+
+
+def _episodes(block: Calibration) -> str:
+    """The closed-loop episodes a block was made on: "200 (1000000..1000199)", "-" where not recorded (a
+    real block's scenes were recorded): blocks of one alpha made on other episodes give other margins."""
+    from predictors.calibration_store import made_with
+
+    made = made_with(block)
+    if "episodes" not in made:
+        return "-"
+    seeds = block.details.get("seeds")
+    if not isinstance(seeds, list) and "seed" in made:  # a block made before its seed range was recorded
+        seeds = [int(made["seed"]), int(made["seed"]) + int(made["episodes"]) - 1]
+    if not isinstance(seeds, list) or not seeds:
+        return made["episodes"]
+    return f"{made['episodes']} ({seeds[0]}..{seeds[-1]})"
 
 
 def _view(block: Calibration) -> str:
@@ -188,6 +208,7 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
     print(
         "margins: the (1 - alpha) quantile of the displacement error at horizon steps 1..H, those of "
         "--margins conformal:ALPHA[:SOURCE]; per class: the block also holds those of conformal-motion and "
-        "conformal-shortfall; weights other: made for other weights, refused until recalibrated"
+        "conformal-shortfall; weights other: made for other weights, refused until recalibrated; controller, "
+        "episodes (seeds): the closed-loop episodes the block was made on"
     )
     return 0

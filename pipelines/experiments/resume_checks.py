@@ -100,7 +100,11 @@ def _margins_change(was: dict[str, Any], now: dict[str, Any]) -> str:
     names, a_rows, b_rows = old.get("names"), old.get("quantiles"), new.get("quantiles")
     # a damaged record's rows: compare what both hold
     differ = [(n, a, b) for n, a, b in zip(names or [], a_rows or [], b_rows or [], strict=False) if a != b]
-    if not differ:  # the classes themselves changed (their speeds, or none on one side)
+    if not a_rows or not b_rows:
+        if a_rows:
+            return "margins per motion class, where the cell now plans with none"
+        return "no margins per motion class, where the cell now plans with them"
+    if not differ:  # the classes themselves changed (their speeds)
         return "other motion classes than the cell's now"
     name, a, b = differ[0]
     more = f" (and {len(differ) - 1} more class{'es' * (len(differ) > 2)})" if len(differ) > 1 else ""

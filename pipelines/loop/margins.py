@@ -255,6 +255,26 @@ class MarginSpec:
         return out
 
 
+def controller_note(block: Calibration, controller: str) -> str | None:
+    """A line for a run of MPC ``controller`` planning with the margins of ``block``, a closed-loop block
+    calibrated with another controller (``calibrate --controller``, recorded in its details), None otherwise,
+    as ``simulate_checks.calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
+    otherwise, and so do the humans who answer them, but one block is stored per alpha (a recalibration
+    replaces it) and a run planned with the other controller's silently. Not refused: an experiment may hold
+    the margins fixed across controllers."""
+    from predictors.calibration_store import calibrate_command
+    from predictors.conformal import alpha_text
+
+    made = block.details.get("controller") if block.source == "closed-loop" else None
+    if made is None or made == controller:
+        return None
+    return (
+        f"note: the closed-loop margins of {block.predictor!r} at alpha={alpha_text(block.alpha)} were "
+        f"calibrated with controller {made}, this run's is {controller}: their coverage here is not measured "
+        f"({calibrate_command(block, controller=controller)} measures it, replacing that block)"
+    )
+
+
 def _margin_text(value: float) -> str:
     """``value`` exactly and short: ``:g`` where it names the value (``0``, ``5``, ``0.05``: the labels, and
     so the cell keys, that sweeps wrote before), else the shortest repr (``0.1234561``, which ``:g`` would

@@ -111,7 +111,7 @@ def test_a_sensor_block_without_class_margins_is_not_stored_where_runs_behind_it
     assert find_calibration("constant_velocity", "closed-loop", 0.1, sensor_range=2.5).classes is not None
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert "not stored: constant_velocity's closed-loop calibration at alpha 0.1 (in force: " in err
+    assert "not stored: the new closed-loop block of constant_velocity at alpha 0.1 has no margins" in err
     assert not any(b.sensor_range for b in read_calibrations())  # nothing stored: the shipped blocks alone
 
 

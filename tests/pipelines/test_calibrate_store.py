@@ -118,7 +118,7 @@ def test_a_block_without_class_margins_is_refused_before_anything_is_stored(tmp_
     few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
     ran = []
     for held in ("none", "conformal:0.1"):  # stored after the run, and before it
-        with pytest.raises(PipelineError, match="has margins per motion class"), storing([few], _args(held)):
+        with pytest.raises(PipelineError, match="has no margins per motion"), storing([few], _args(held)):
             ran.append(held)
     assert ran == [] and not calibrations_path().exists() and _journals(tmp_path) == []
 
@@ -144,7 +144,7 @@ def test_a_block_with_class_margins_stored_meanwhile_stays(tmp_path, monkeypatch
 
     monkeypatch.setattr(calibrate_store, "_write_journal", full_stored_first)
     ran = []
-    with pytest.raises(PipelineError, match="has margins per motion class"), storing([few], _args(held)):
+    with pytest.raises(PipelineError, match="has no margins per motion class"), storing([few], _args(held)):
         ran.append(held)
         if held == "none":
             save_calibration(full)  # another calibrate, during this one's held-out run

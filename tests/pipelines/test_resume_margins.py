@@ -30,10 +30,10 @@ def test_per_class_margins_name_the_first_class_that_changed_and_count_the_other
 
 def test_classes_that_changed_otherwise_are_said_so():
     quantiles = [[0.1], [0.0], [0.2], [0.3]]
-    assert (
-        _margins_change(_planned([], quantiles), _planned([], None))
-        == "other motion classes than the cell's now"
+    assert _margins_change(_planned([], quantiles), _planned([], None)) == (
+        "margins per motion class, where the cell now plans with none"
     )
+    assert _margins_change(_planned([], None), _planned([], quantiles)).startswith("no margins per motion")
     changed = _planned([], quantiles)
     changed["classes"]["standing_speed"] = 0.2
     assert _margins_change(_planned([], quantiles), changed) == "other motion classes than the cell's now"

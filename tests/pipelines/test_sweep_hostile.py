@@ -580,7 +580,8 @@ def test_changed_margins_per_motion_class_are_refused_too(good, tmp_path):
     _damage(good, tmp_path, lambda r: r["config"].update(margins={"margins_m": [], "classes": classes}))
     (tmp_path / SWEEP_FILE).write_bytes((good / SWEEP_FILE).read_bytes())
     with pytest.raises(
-        PipelineError, match=r"margins \[\] m, but the cell's margins are now \[\] m \(per motion"
+        PipelineError,
+        match=r"planned with margins per motion class, where the cell now plans with none: they",
     ):
         run_sweep(_config(tmp_path))
 

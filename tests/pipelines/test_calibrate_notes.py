@@ -1,0 +1,203 @@
+"""What calibrate says about the blocks it makes, as a new user found it: seeds among the evaluation seeds,
+a block made otherwise than the one it replaces, a dry run that stored nothing, and blocks lacking margins
+per motion class; and what the runs and `zoo calibrations` say about the controller a block was made with."""
+
+import dataclasses
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.commands.calibrate_store import _check_keeps_class_margins, evaluation_seeds_note
+from pipelines.commands.zoo_calibrations import calibration_table
+from pipelines.errors import PipelineError
+from pipelines.loop.margins import controller_note
+from predictors.calibration_store import calibrations_path, find_calibration, read_calibrations
+from predictors.zoo import checkpoints_dir
+from tests.calibration_blocks import class_errors, constant_velocity_block
+
+CALIBRATE = ["calibrate", "--predictor", "constant_velocity", "--source", "closed-loop", "--no-progress"]
+SHIPPED = checkpoints_dir() / "calibrations.json"
+
+
+@pytest.fixture(autouse=True)
+def _private_zoo(tmp_path, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
+
+
+@pytest.fixture
+def episodes(monkeypatch):
+    """calibrate's closed-loop episodes replaced by ``class_errors(4)`` (19 per motion class, enough for
+    alpha 0.1) with the details the real ones record of their plan."""
+    from pipelines.experiments import calibrate as experiment
+
+    def measured(plan, progress=True):
+        scores, motion = class_errors(4)
+        recorded = ("episodes", "seed", "humans", "controller", "profile", "visibility", "near")
+        details = {key: getattr(plan, key) for key in recorded}
+        details |= {"seeds": [plan.seed, plan.seed + plan.episodes - 1]}
+        return experiment.ClosedLoopErrors(scores, motion, scores, details)
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", measured)
+
+
+# ---------------------------------------------------------------------------------- 1: evaluation seeds
+def test_calibration_seeds_among_the_evaluation_seeds_are_named_with_the_overlap():
+    assert evaluation_seeds_note(0, 4) == (
+        "note: calibration seeds 0..3 overlap the evaluation seeds 0..99999 (simulate and sweep from their "
+        "default --seed 0) at 0..3: the margins would be fitted on episodes they are later evaluated on (the "
+        "default --seed 1000000 keeps them apart)"
+    )
+    assert "seeds 99998..100002 overlap the evaluation seeds 0..99999 " in (
+        evaluation_seeds_note(99_998, 5) or ""
+    )
+    assert " at 99998..99999: " in (evaluation_seeds_note(99_998, 5) or "")
+    assert evaluation_seeds_note(100_000, 5) is None  # past the last evaluation seed
+    assert evaluation_seeds_note(1_000_000, 200) is None  # calibrate's default
+
+
+def test_calibrate_on_evaluation_seeds_says_so_in_one_line_and_runs(episodes, capsys):
+    """`calibrate --seed 0` ran without a word, though its help says its seeds are disjoint from every
+    evaluation seed. Said, not refused: it may be meant."""
+    assert main([*CALIBRATE, "--alpha", "0.3", "--episodes", "4", "--seed", "0", "--dry-run"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("note: calibration seeds 0..3 overlap the evaluation seeds") and err.count("\n") == 1
+    )
+    assert main([*CALIBRATE, "--alpha", "0.3", "--episodes", "4", "--dry-run"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+# ----------------------------------------------------------------------------------------- 3: dry run
+def test_a_dry_run_ends_saying_nothing_was_stored(episodes, capsys, tmp_path):
+    assert main([*CALIBRATE, "--alpha", "0.3", "--episodes", "4", "--dry-run"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == "--dry-run: nothing stored; the calibrations in force are unchanged"
+    assert not calibrations_path().exists()
+    assert main([*CALIBRATE, "--alpha", "0.3", "--episodes", "4"]) == 0
+    assert "--dry-run" not in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------ 2a: the block a calibrate replaces
+def test_replacing_a_block_made_with_another_controller_says_what_differs(episodes, capsys):
+    """A trial with --controller dmpc replaced the CMPC block of its alpha without a word."""
+    argv = [*CALIBRATE, "--alpha", "0.3", "--episodes", "4", "--humans", "5"]
+    assert main(argv) == 0
+    assert capsys.readouterr().err == ""  # nothing replaced
+    assert main(argv) == 0
+    assert capsys.readouterr().err == ""  # replaced by the same calibration made again
+    assert main([*argv, "--controller", "dmpc", "--seed", "7"]) == 0
+    assert capsys.readouterr().err == (
+        f"{evaluation_seeds_note(7, 4)}\n"
+        "note: this replaces the closed-loop block of constant_velocity at alpha 0.3 in force from "
+        f"{calibrations_path()}, made with --seed 1000000 --controller cmpc; this one is made with --seed 7 "
+        "--controller dmpc\n"
+    )
+    assert [b.details["controller"] for b in read_calibrations() if b.alpha == 0.3] == ["dmpc"]
+
+
+def test_hiding_the_shipped_block_made_on_other_episodes_names_them(episodes, capsys):
+    assert main([*CALIBRATE, "--alpha", "0.1", "--episodes", "4", "--humans", "5"]) == 0
+    assert capsys.readouterr().err == (
+        "note: this replaces the closed-loop block of constant_velocity at alpha 0.1 in force from "
+        f"{SHIPPED}, made with --episodes 100 --humans 5,6,7,8,9; this one is made with --episodes 4 "
+        "--humans 5\n"
+    )
+
+
+# ------------------------------------------------------------------- 2b: a run planning with another's block
+def test_a_run_planning_with_a_block_made_with_another_controller_gets_a_note():
+    shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
+    assert shipped.details["controller"] == "cmpc" and controller_note(shipped, "cmpc") is None
+    assert controller_note(shipped, "dmpc") == (
+        "note: the closed-loop margins of 'constant_velocity' at alpha=0.1 were calibrated with controller "
+        "cmpc, this run's is dmpc: their coverage here is not measured (crowdmpc calibrate --predictor "
+        "constant_velocity --source closed-loop --alpha 0.1 --episodes 100 --seed 1000000 --humans 5,6,7,8,9 "
+        "--controller dmpc --profile paper --visibility visible --near 3 measures it, replacing that block)"
+    )
+    behind = dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0})
+    assert (controller_note(behind, "dmpc") or "").endswith(
+        " --sensor-range 3 measures it, replacing that block)"
+    )
+    unrecorded = dataclasses.replace(shipped, details={})  # made before the controller was recorded
+    assert controller_note(unrecorded, "dmpc") is None
+    assert controller_note(find_calibration("constant_velocity", "real", 0.1), "dmpc") is None
+
+
+# -------------------------------------------------------------------- 2c: zoo calibrations, the episodes
+def test_zoo_calibrations_shows_each_blocks_controller_and_episodes():
+    header, *rows = calibration_table(None, "constant_velocity")
+    columns = header.index("controller"), header.index("episodes (seeds)")
+    made = {(r[1], r[2]): [r[i] for i in columns] for r in rows}
+    assert made["closed-loop", "0.1"] == ["cmpc", "100 (1000000..1000099)"]
+    assert made["real", "0.1"] == ["-", "-"]  # recorded scenes
+    shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
+    older = {k: v for k, v in shipped.details.items() if k != "seeds"} | {"controller": "dmpc", "seed": 5}
+    from predictors.calibration_store import save_calibration
+
+    save_calibration(dataclasses.replace(shipped, details=older))  # made before the seed range was recorded
+    header, *rows = calibration_table(None, "constant_velocity")
+    assert [r[i] for r in rows if r[1:3] == ["closed-loop", "0.1"] for i in columns] == [
+        "dmpc",
+        "100 (5..104)",
+    ]
+
+
+# ----------------------------------------------------------------- 4: blocks lacking margins per class
+def test_blocks_lacking_margins_per_class_are_named_with_the_command_that_makes_them(monkeypatch):
+    """It read "calibration at alpha 0.1 (in force: ...), alpha 0.05 (in force: ...) has margins per motion
+    class and these blocks have none"."""
+    from types import SimpleNamespace
+
+    errors, motion = class_errors(4)
+    made = {"episodes": 4, "seed": 1_000_000, "humans": [5], "controller": "cmpc", "near": 3.0}
+    few = [
+        dataclasses.replace(
+            constant_velocity_block(errors[motion != 0], classes=motion[motion != 0]),
+            alpha=alpha,
+            details=made,
+        )
+        for alpha in (0.1, 0.05)
+    ]
+    args = SimpleNamespace(predictor="constant_velocity", source="closed-loop")
+    with pytest.raises(PipelineError) as refused:
+        _check_keeps_class_margins(few, args)
+    assert str(refused.value) == (
+        "not stored: the new closed-loop blocks of constant_velocity at alpha 0.1, 0.05 have no margins per "
+        "motion class (a class had too few samples in 4 episodes), and runs plan now with blocks that have "
+        f"them (in {SHIPPED}); make them with more episodes: crowdmpc calibrate --predictor "
+        "constant_velocity --source closed-loop --alpha 0.1,0.05 --episodes 200 --seed 1000000 --humans 5 "
+        "--controller cmpc --near 3, or measure without storing with --dry-run"
+    )
+    with pytest.raises(
+        PipelineError, match=r"new closed-loop block of .* at alpha 0\.05 has no margins .* a "
+    ):
+        _check_keeps_class_margins(few[1:], args)
+
+
+def test_simulate_and_sweep_say_when_a_run_plans_with_another_controllers_block(capsys, tmp_path):
+    """The note was written but no command printed it: a DMPC run planned with the shipped CMPC-made block
+    silently. A sweep says it once, of the DMPC method alone."""
+    argv = [
+        "sweep",
+        "--experiment",
+        "table2",
+        "--predictor",
+        "constant_velocity",
+        "--margins",
+        "conformal:0.1",
+    ]
+    argv += ["--humans", "1", "--episodes-per-cell", "1", "--dry-run", "--out", str(tmp_path / "s")]
+    assert main(argv) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "calibrated with controller" in line]
+    assert len(notes) == 1 and notes[0].startswith(
+        "note: method 'DMPC': the closed-loop margins of 'constant_velocity' at alpha=0.1 were calibrated "
+        "with controller cmpc, this run's is dmpc"
+    )
+    from pipelines.commands.simulate_checks import calibration_controller_note
+    from pipelines.loop.margins import parse_margins
+    from pipelines.loop.spec import ControllerSpec
+
+    margins = parse_margins("conformal:0.1")
+    assert calibration_controller_note(ControllerSpec("cmpc", "constant_velocity", margins=margins)) is None
+    note = calibration_controller_note(ControllerSpec("dmpc", "constant_velocity", margins=margins))
+    assert note is not None and note.startswith("note: the closed-loop margins of 'constant_velocity'")
