@@ -175,7 +175,8 @@ def read_file(path: str | Path) -> list[Entry]:
 
 _NO_DATE: Final[str] = "must not be a TOML date or time, got"
 _QUOTE_IT: Final[str] = '(no setting takes one; quote it, "...", for a string)'
-BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@-]+")
+# "=" and ";" too: a sweep's vary is KEY=V1,V2 (";" between grids), `--set sweep.vary=mpc.d_min=0.8,0.9`
+BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@=;-]+")
 CONTROL: Final[re.Pattern[str]] = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # all but the tab
 
 

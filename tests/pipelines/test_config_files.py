@@ -832,3 +832,15 @@ def test_load_from_python_names_arguments_of_the_wrong_kind(arguments, message):
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
         load(*arguments)
     assert load(None, ["mpc.horizon=3"]).mpc.horizon == 3
+
+
+def test_a_sweeps_vary_is_taken_bare_by_set_as_by_vary(capsys):
+    """`--set sweep.vary=mpc.d_min=0.8,0.9` was "not a TOML value" where `--vary mpc.d_min=0.8,0.9` and
+    `--set controller.margins=fixed:0.1,0.1` are taken bare: "=" and ";" are a vary's own characters."""
+    from pipelines.config.entries import parse_set
+
+    assert parse_set("sweep.vary=mpc.d_min=0.8,0.9").value == "mpc.d_min=0.8,0.9"
+    assert parse_set("sweep.vary=mpc.d_min=0.8,0.9;mpc.w_coll=1e6,1e7").value == (
+        "mpc.d_min=0.8,0.9;mpc.w_coll=1e6,1e7"
+    )
+    assert parse_set('sweep.vary="mpc.d_min=0.8,0.9"').value == "mpc.d_min=0.8,0.9"  # quoted, as before
