@@ -95,7 +95,14 @@ def _show_recorded(args: argparse.Namespace) -> int:
     make it another run, so they are refused (edit the printed file instead)."""
     from pipelines.config import render
     from pipelines.config.command_line import config_arguments
-    from pipelines.config.recorded import machine_note, provenance, recorded_config, recorded_runs, zoo_note
+    from pipelines.config.recorded import (
+        comment,
+        machine_note,
+        provenance,
+        recorded_config,
+        recorded_runs,
+        zoo_note,
+    )
 
     path, sets = config_arguments(args)
     if path is not None or sets:
@@ -108,7 +115,7 @@ def _show_recorded(args: argparse.Namespace) -> int:
     config = recorded_config(sweep_file, run_line, index)
     changed = zoo_note(args.from_sweep)
     if changed:  # on stderr too: a file piped into a rerun shows its comments to no one
-        print(f"note: {' '.join(line[2:] for line in changed.splitlines())}", file=sys.stderr)
-    notes = machine_note(config) + changed
+        print(f"note: {changed}", file=sys.stderr)
+    notes = machine_note(config) + comment(changed)
     print(provenance(sweep_file, run_line, index, len(runs)) + notes + render(config), end="")
     return 0

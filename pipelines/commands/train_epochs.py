@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from pipelines.commands import replace_file
+from pipelines.commands.train_resume import SETTINGS_FILE
 from pipelines.errors import PipelineError
 
 DEFAULT_EPOCHS: Final[int] = 25
@@ -38,8 +39,6 @@ def take_run_epochs(args: argparse.Namespace, out: Path, recorded: dict[str, Any
 def record_epochs(out: Path, recorded: dict[str, Any], epochs: int) -> None:
     """Write ``epochs`` into the run's settings file (``recorded``, as read) when a resume changed it, so that
     the next resume without --epochs goes on to this count (its other settings were checked equal)."""
-    from pipelines.commands.train_resume import SETTINGS_FILE
-
     if recorded.get("epochs") == epochs:
         return
     text = json.dumps({**recorded, "epochs": epochs}, indent=2) + "\n"

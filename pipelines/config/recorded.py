@@ -137,15 +137,20 @@ def machine_note(config: RunConfig) -> str:
         f"most {local_workers_limit()}: {LOCAL_WORKERS_PER_CPU} per CPU this process may use, "
         f"{available_cpus()}); give --workers N, or edit it, to rerun here."
     )
+    return comment(text)
+
+
+def comment(text: str) -> str:
+    """``text`` as TOML comment lines of the printed file's width ("" for none)."""
     return "".join(f"# {line}\n" for line in textwrap.wrap(text, 106))
 
 
 def zoo_note(directory: str | Path) -> str:
-    """Comment lines when the zoo no longer holds what the sweep's episodes ran with: other weights under a
-    predictor's name (`zoo add --replace`), or a calibration replaced since (`calibrate` again under the same
-    alpha and source). A rerun of the printed file then gives other episodes, and said nothing (README
-    promises "same episodes, metric for metric"); the records name both (predictor_sha256, and each margins'
-    calibration by its creation time and data)."""
+    """A line of plain text ("" for none) when the zoo no longer holds what the sweep's episodes ran with:
+    other weights under a predictor's name (`zoo add --replace`), or a calibration replaced since
+    (`calibrate` again under the same alpha and source). A rerun of the printed file then gives other
+    episodes, and said nothing (README promises "same episodes, metric for metric"); the records name both
+    (predictor_sha256, and each margins' calibration by its creation time and data)."""
     from pipelines.experiments.log import episode_log
     from predictors.calibration_store import stored_calibrations
     from predictors.registry import checkpoint_sha256
@@ -175,7 +180,7 @@ def zoo_note(directory: str | Path) -> str:
         f"The zoo no longer holds what this sweep ran with ({', '.join(changed)} changed since), so a rerun "
         "gives other episodes; `crowdmpc compare OLD NEW` names what differs."
     )
-    return "".join(f"# {line}\n" for line in textwrap.wrap(text, 106))
+    return text
 
 
 def _plain(value: Any) -> str:

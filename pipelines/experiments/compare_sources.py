@@ -10,7 +10,6 @@ file (``read_recording``'s ``topics``), not its hundreds of state messages."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any, Final
@@ -23,12 +22,9 @@ METRICS_TOPIC: Final = "/episode/metrics"
 
 def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
     """The episodes of a ``crowdmpc simulate --json`` file as a sweep's records and the code that ran them."""
-    try:
-        document = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise PipelineError(
-            f"{path}: not a simulate --json file ({type(exc).__name__}: {str(exc)[:120]})"
-        ) from None
+    from pipelines.experiments.log import read_json_file
+
+    document = read_json_file(path, "a simulate --json file")
     episodes = document.get("episodes") if isinstance(document, dict) else None
     if not (isinstance(episodes, list) and isinstance(document.get("summary"), dict)):
         raise PipelineError(f"{path}: not a `crowdmpc simulate --json` file (no summary and episodes)")

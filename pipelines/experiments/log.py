@@ -243,14 +243,18 @@ def sweep_of_recordings(path: Path, marker: str = EPISODES_FILE) -> Path | None:
     return None
 
 
+def read_json_file(path: Path, what: str, advice: str = "") -> Any:
+    """``path``'s JSON document, or a PipelineError "PATH: not WHAT (the reason)ADVICE" for one that cannot
+    be read, is not text or not JSON, or nests too deeply."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise PipelineError(f"{path}: not {what} ({type(exc).__name__}: {str(exc)[:120]}){advice}") from None
+
+
 def read_sweep_file(path: Path) -> dict[str, Any]:
     """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it."""
-    try:
-        meta = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise PipelineError(
-            f"{path}: not a sweep file ({type(exc).__name__}: {str(exc)[:120]}); move it away to start afresh"
-        ) from None
+    meta = read_json_file(path, "a sweep file", "; move it away to start afresh")
     if not (isinstance(meta, dict) and isinstance(meta.get("runs", []), list)):
         raise PipelineError(f"{path}: not a sweep file (expected an object with a list of runs)")
     return meta

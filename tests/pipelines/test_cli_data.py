@@ -398,16 +398,7 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
     without provenance (the rerun said "exists; add --replace"), or with --replace, the new data beside the
     old provenance (another seed and sha256)."""
 
-    def synthesize(
-        out_path,
-        episodes,
-        n_humans,
-        seed,
-        scenario="circle",
-        with_robots=False,
-        env_config=None,
-        progress=None,
-    ):
+    def synthesize(out_path, episodes, n_humans, seed, **_options):  # the options: the test above
         out_path.write_text(f"scenes of seed {seed}\n")
         return {"scenes": 1}
 

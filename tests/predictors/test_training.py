@@ -35,10 +35,11 @@ def tiny_data(tmp_path):
     return TrajnetDataModule([path], [path], [path], batch_size=2, seed=0)
 
 
-def fast_dev_trainer() -> L.Trainer:
+def fast_dev_trainer(precision: str | None = None) -> L.Trainer:
     return L.Trainer(
         fast_dev_run=True,
         accelerator="cpu",
+        precision=precision,
         logger=False,
         enable_progress_bar=False,
         enable_model_summary=False,
@@ -262,15 +263,7 @@ def test_a_plain_trainer_trains_at_lightnings_precisions(tiny_data, precision):
     """Trainer(precision="64-true") refused the frozen SceneBatch (apply_to_collection rebuilds it), and
     bf16-mixed met a float32 share added into a bfloat16 pooling grid."""
     module = make_module("social_lstm", SocialLSTMConfig(hidden_dim=8, embedding_dim=8), OptimConfig())
-    trainer = L.Trainer(
-        fast_dev_run=True,
-        accelerator="cpu",
-        precision=precision,
-        logger=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        enable_checkpointing=False,
-    )
+    trainer = fast_dev_trainer(precision)
     trainer.fit(module, datamodule=tiny_data)
     assert torch.isfinite(trainer.callback_metrics["train_loss"])
 
