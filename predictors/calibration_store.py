@@ -274,6 +274,20 @@ def find_calibration(
     have now (None for a weightless predictor); the default ``...`` reads it from the zoo manifest in
     ``directory``. A block made for other weights is refused.
     """
+    return locate_calibration(predictor, source, alpha, directory, sha256, sensor_range, sensor_tracks)[1]
+
+
+def locate_calibration(
+    predictor: str,
+    source: str,
+    alpha: float,
+    directory: str | Path | None = None,
+    sha256: str | None | EllipsisType = ...,
+    sensor_range: float | None = None,
+    sensor_tracks: bool = True,
+) -> tuple[Path, Calibration]:
+    """``(file, block)``: the block ``find_calibration`` gives and the calibrations file holding it, which
+    tells a user's block from a shipped one (``calibration_zoo``)."""
     check_alpha(alpha)
     if source not in SOURCES:
         raise PredictorError(f"unknown calibration source {source!r}; choose from {list(SOURCES)}")
@@ -298,7 +312,13 @@ def find_calibration(
             f"predictor {predictor!r} was made for weights sha256 {block.predictor_sha256}, but the weights "
             f"now have sha256 {expected}; the weights changed since calibration, recalibrate: {command}"
         )
-    return block
+    return path, block
+
+
+def calibration_zoo(path: Path) -> str:
+    """``SHIPPED`` for a calibrations file of the shipped zoo, else ``USER`` (the user zoo's, or a directory
+    a caller named)."""
+    return SHIPPED if is_shipped(path.parent) else USER
 
 
 def view_distance(

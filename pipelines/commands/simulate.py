@@ -350,7 +350,7 @@ def _report(
     summary = summarize(results)
     finished = len(results) if interrupted or failure is not None else None
     stopped = "interrupted" if interrupted else "stopped by an error"
-    header = table_header(cfg, spec, run_meta, finished, stopped)
+    header = table_header(cfg, spec, run_meta, finished, stopped, configs[0] if configs else None)
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
     if resolved.json is not None:
         from pipelines.version import code_identity

@@ -4,6 +4,7 @@ title of its --plot."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
@@ -30,9 +31,15 @@ def table_header(
     run_meta: dict[str, Any],
     finished: int | None = None,
     stopped: str = "interrupted",
+    episode_config: Mapping[str, Any] | None = None,
 ) -> str:
     """The line above the table: controller, predictor, margins, conventions, task and the seeds run;
-    ``finished``: the episodes that ended before the run was ``stopped`` (None: it was not)."""
+    ``finished``: the episodes that ended before the run was ``stopped`` (None: it was not);
+    ``episode_config``: the first episode's effective config (``EpisodeConfigs``), whose record of the
+    calibration the margins came from is said beside them (a user's block and a shipped one share the
+    label)."""
+    from pipelines.loop.margins import calibration_text
+
     scenario, sim, env_config = cfg.scenario, cfg.simulate, cfg.env
     # The paper's task needs no mention; goals as slots is another task and must show in every summary.
     goals = "" if env_config.goal_assignment == "fixed" else f"goals {env_config.goal_assignment} | "
@@ -51,9 +58,11 @@ def table_header(
     # beside the paper's method (Algorithms 1 and 2 with flocking) another method: it must show
     method = "" if spec.coupling == "ibr" else f"coupling {spec.coupling} | "
     method += "" if spec.flocking or spec.predictor_name is None else "no flocking | "
+    calibration = (episode_config or {}).get("margins", {}).get("calibration")
+    made = "" if calibration is None else f" ({calibration_text(calibration)})"
     return (
         f"controller {spec.controller} | predictor {spec.predictor_name or '-'} | {method}"
-        f"margins {spec.margins.label} | {conventions} | {goals}scenario {scenario.name} | "
+        f"margins {spec.margins.label}{made} | {conventions} | {goals}scenario {scenario.name} | "
         f"humans {scenario.humans} | robots {scenario.robots} | episodes {sim.episodes} | seeds {sim.seed}.."
         f"{sim.seed + sim.episodes - 1}"
         + (f" | {stopped}: {finished} episodes finished" if finished is not None else "")

@@ -121,6 +121,7 @@ class CellColumns:
         self.solver = {name: Column(kind) for name, kind in SOLVER_COLUMNS.items()}
         self.offsets: array[int] = array("q")
         self.crcs: array[int] = array("L")
+        self.calibrations: set[str] = set()  # where the cell's calibrated margins came from (a few at most)
 
     def add(self, record: Mapping[str, Any], offset: int | None = None, crc: int = 0) -> None:
         """``record``'s fields (a field it lacks is null, as the summary's ``get`` reads it); ``offset`` and
@@ -135,6 +136,7 @@ class CellColumns:
             values = record[part]
             for name, column in columns.items():
                 column.append(values.get(name))
+        self.calibrations.update(calibration_texts([record]))
         if offset is not None:
             self.offsets.append(offset)
             self.crcs.append(crc)
@@ -167,6 +169,16 @@ class CellColumns:
         """(offset, CRC-32) of each episode's line in the log, in the plan's order."""
         for i in self.plan_order():
             yield self.offsets[i], self.crcs[i]
+
+
+def calibration_texts(records: Iterable[Mapping[str, Any]]) -> set[str]:
+    """Where the calibrated margins of ``records`` came from (``pipelines.loop.margins.calibration_text`` of
+    each record's ``config.margins.calibration``): none for margins without a calibration, or records
+    without their config."""
+    from pipelines.loop.margins import calibration_text
+
+    made = (((r.get("config") or {}).get("margins") or {}).get("calibration") for r in records)
+    return {calibration_text(c) for c in made if c}
 
 
 def columns_by_cell(records: Iterable[Mapping[str, Any]]) -> dict[str, CellColumns]:

@@ -40,7 +40,7 @@ from pipelines.experiments.compare_sources import commit_text, recording_records
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, read_sweep_file
 from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
-from pipelines.logs.identity import UNRECORDED_DEFAULTS, dotted_settings
+from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
 from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
 from predictors.progress import progress_bar
 
@@ -152,7 +152,9 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
         configs.add((identity[:3], text))
         ran_with = run.settings.setdefault(identity[:3], {})
         for key, value in dotted_settings(ran).items():
-            ran_with.setdefault(key.removeprefix("config."), set()).add(json.dumps(value, sort_keys=True))
+            setting = key.removeprefix("config.")
+            if setting not in NOT_SETTINGS:  # where a calibration is stored, not what it is
+                ran_with.setdefault(setting, set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
         log = path / EPISODES_FILE
         raise PipelineError(f"{label}: {log if log.is_file() else path} holds no episode")

@@ -22,7 +22,7 @@ import numpy as np
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 from pipelines.experiments import safety_report as safety
-from pipelines.experiments.cell_columns import CellColumns
+from pipelines.experiments.cell_columns import CellColumns, calibration_texts
 from pipelines.experiments.cells import Experiment, PaperFigures
 from pipelines.experiments.tasks import SCENARIOS, Cell
 
@@ -97,6 +97,7 @@ class CellSummary:
     iterations_mean: float  # IBR iterations per control step: all iterations / all steps
     fallback_step_rate: float  # % of control steps that fell back
     runs_solver: bool  # some control step iterated (IBR iterations > 0); the baselines report 0 throughout
+    calibrations: tuple[str, ...]  # where calibrated margins came from (cell_columns.calibration_texts)
     paper: PaperFigures | None
 
     @property
@@ -154,7 +155,14 @@ def _t_central(t: float, dof: int) -> float:
     return 2.0 / math.pi * (theta + sin * total)
 
 
-def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFigures | None) -> CellSummary:
+def summarize_cell(
+    cell: Cell,
+    records: Sequence[dict[str, Any]],
+    paper: PaperFigures | None,
+    calibrations: Iterable[str] | None = None,
+) -> CellSummary:
+    """``calibrations``: where the records' calibrated margins came from (``cell_columns.calibration_texts``;
+    None: read from ``records``)."""
     # in the plan's order (seed, scenario), not the order the workers finished: a resumed sweep's cells.csv
     # differed from an uninterrupted one's in the last digits of its means
     records = sorted(records, key=lambda r: (r["seed"], str(r["scenario"])))
@@ -198,6 +206,7 @@ def summarize_cell(cell: Cell, records: Sequence[dict[str, Any]], paper: PaperFi
         # a controller without a solver has nothing to fall back from (unless it says it did)
         fallback_step_rate=100.0 * fallbacks / steps if steps and (runs_solver or fallbacks) else math.nan,
         runs_solver=runs_solver,
+        calibrations=tuple(sorted(calibration_texts(records) if calibrations is None else calibrations)),
         paper=paper,
     )
 
@@ -223,7 +232,12 @@ def summarize_columns(
     """``summarize`` of records held as columns, by cell key (pipelines.experiments.cell_columns): a cell's
     episodes are made records one cell at a time, and only of the fields the summary reads."""
     return [
-        summarize_cell(cell, columns[cell.key].episodes(), paper_figures(experiment, cell))
+        summarize_cell(
+            cell,
+            columns[cell.key].episodes(),
+            paper_figures(experiment, cell),
+            columns[cell.key].calibrations,
+        )
         for cell in cells
         if cell.key in columns and len(columns[cell.key])
     ]

@@ -100,6 +100,13 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
         ),
         world_line,
     ]
+    calibrations: dict[tuple[str, str], set[str]] = {}  # (predictor, margins) -> where they came from
+    for s in columns:
+        key = (s.cell.spec.predictor_name or "none", s.cell.spec.margins.label)
+        calibrations.setdefault(key, set()).update(s.calibrations)
+    made = [f"{p} {label}: {' and '.join(sorted(t))}" for (p, label), t in sorted(calibrations.items()) if t]
+    if made:  # a user's block and a shipped one share a label
+        notes.append(f"Calibrated margins from: {'; '.join(made)}.")
     robots = sorted({s.cell.n_robots for s in columns})
     if robots != [PAPER_ROBOTS]:
         teams = ", ".join(map(str, robots))

@@ -33,6 +33,9 @@ UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {
 # Settings that change how fast a run goes, not its episodes (jit compiles the same NLP; DMPC's threads give
 # the serial result, tests/mpc): a rerun with another value replaces its recordings, as the same command's.
 SPEED_ONLY: Final[tuple[str, ...]] = ("mpc.jit", "mpc.dmpc_parallel")
+# Where the calibration block the margins came from is stored (the shipped zoo or the user's), for a reader:
+# its "created" and "data_sha256" beside it tell the block, and recordings made before it was kept lack it.
+NOT_SETTINGS: Final[tuple[str, ...]] = ("margins.calibration.zoo",)
 MAX_DIFFERENCES_NAMED: Final = 8  # in the refusal; the rest counted
 MISSING: Final = "(not set)"  # a setting the held recording has and this run has not
 
@@ -57,7 +60,8 @@ def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[
     flat = dotted_settings(config)
     for key, value in UNRECORDED_DEFAULTS.items():
         flat.setdefault(key, value)
-    return identity | {k: v for k, v in flat.items() if k not in identity and k not in SPEED_ONLY}
+    left_out = {*identity, *SPEED_ONLY, *NOT_SETTINGS}
+    return identity | {k: v for k, v in flat.items() if k not in left_out}
 
 
 def differing_settings(a: Recording, b: Recording) -> list[tuple[str, Any, Any]]:

@@ -35,6 +35,8 @@ from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     import numpy as np
 
     from crowdsim.env import Observation
@@ -207,9 +209,13 @@ class MarginSpec:
         return table
 
     def _block(self, predictor: str | None, horizon: int, sha256: str | None) -> Calibration:
+        return self._located(predictor, horizon, sha256)[1]
+
+    def _located(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[Path, Calibration]:
+        """The calibrations file holding the block planned with, and the block."""
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
-        from predictors.calibration_store import find_calibration
+        from predictors.calibration_store import locate_calibration
         from predictors.oracle import ORACLE_PREDICTOR
 
         if self.source == "real" and predictor == ORACLE_PREDICTOR:  # `calibrate --source real` refuses it
@@ -220,7 +226,7 @@ class MarginSpec:
                 f"with its closed-loop one (margins conformal:{alpha_text(self.alpha)}) or leave it out"
             )
 
-        block = find_calibration(
+        path, block = locate_calibration(
             predictor,
             self.source,
             self.alpha,
@@ -230,22 +236,24 @@ class MarginSpec:
         )
         if len(block.quantiles) < horizon:
             raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon))
-        return block
+        return path, block
 
     def calibration(self, predictor: str | None, sha256: str | None) -> dict[str, Any] | None:
         """Which stored calibration the margins come from, for the records: when it was made, its data's
-        sha256 and, closed-loop, the conventions its episodes ran under (one block is kept per predictor,
+        sha256, the zoo whose file holds it ("shipped" or "user": a user's block of a key hides the shipped
+        one) and, closed-loop, the conventions its episodes ran under (one block is kept per predictor,
         alpha and sensor range: a recalibration replaces it), with the sensor range its robots were behind
         where they were.
         None for margins that need none."""
         if self.mode not in CALIBRATED_MODES:
             return None
-        block = self._block(predictor, 0, sha256)
+        from predictors.calibration_store import calibration_zoo
+
+        path, block = self._located(predictor, 0, sha256)
         closed_loop = block.source == "closed-loop"
         keys = ("profile", "visibility", "controller", "sensor_range") if closed_loop else ()
-        return {"created": block.created, "data_sha256": block.data_sha256} | {
-            k: block.details[k] for k in keys if k in block.details
-        }
+        made = {"created": block.created, "data_sha256": block.data_sha256, "zoo": calibration_zoo(path)}
+        return made | {k: block.details[k] for k in keys if k in block.details}
 
     def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
         """What metadata and records state about the margins actually planned with."""
@@ -253,6 +261,23 @@ class MarginSpec:
         if self.mode in CALIBRATED_MODES:
             out |= {"alpha": self.alpha, "source": self.source}
         return out
+
+
+def calibration_text(calibration: Mapping[str, Any]) -> str:
+    """Where a record's calibrated margins came from (``MarginSpec.calibration``), for a summary: "shipped
+    calibration of 2026-11-30 20:08 UTC" or "your calibration of ..." (the user zoo's), "calibration of ..."
+    in a record from before the zoo was recorded."""
+    from datetime import UTC, datetime
+
+    whose = {"shipped": "shipped ", "user": "your "}.get(str(calibration.get("zoo")), "")
+    created = str(calibration.get("created"))
+    try:
+        made = datetime.fromisoformat(created)
+    except ValueError:  # a record written by hand: said as it is
+        return f"{whose}calibration of {created}"
+    zone = "" if made.tzinfo is None else " UTC"
+    made = made if made.tzinfo is None else made.astimezone(UTC)
+    return f"{whose}calibration of {made:%Y-%m-%d %H:%M}{zone}"
 
 
 def controller_note(block: Calibration, controller: str) -> str | None:

@@ -315,12 +315,13 @@ def test_a_record_names_the_calibration_its_margins_came_from():
     assert controller.describe()["config"]["margins"]["calibration"] == {
         "created": block.created,
         "data_sha256": block.data_sha256,
+        "zoo": "shipped",
         "profile": "paper",
         "visibility": "visible",
         "controller": "cmpc",
     }
     real = MarginSpec("conformal", alpha=0.1, source="real").calibration("constant_velocity", None)
-    assert real is not None and set(real) == {"created", "data_sha256"}  # real scenes: no conventions
+    assert real is not None and set(real) == {"created", "data_sha256", "zoo"}  # real scenes: no conventions
     assert MarginSpec().calibration("social_lstm_eth", None) is None
     fixed = make_controller(ControllerSpec("cmpc", margins=parse_margins("fixed:0.1,0.1,0.1,0.1")))
     assert "calibration" not in fixed.describe()["config"]["margins"]
