@@ -71,8 +71,9 @@ def cell_rows(summaries: Sequence[CellSummary]) -> list[dict[str, Any]]:
             "n_robots": s.cell.n_robots,
             "controller": s.cell.spec.controller,
             "predictor": s.cell.spec.predictor_name,  # none for orca, straight: as the records and the key
-            "flocking": s.cell.spec.flocking,
-            "coupling": s.cell.spec.coupling,
+            # orca and straight predict nothing: no flocking term, no coupling (their keys keep the defaults)
+            "flocking": s.cell.spec.flocking if s.cell.spec.kind.uses_predictor else None,
+            "coupling": s.cell.spec.coupling if s.cell.spec.kind.uses_predictor else None,
             **safety.world_columns(s.cell),
             **settings[s.cell.key],
             "cell": s.cell.key,

@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Callable, Collection
 from dataclasses import asdict, dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Final
 
@@ -131,7 +132,7 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
     _note_other_code(out, meta.get("runs") or [])
     meta.setdefault("runs", []).append(
         {
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "started": _local_time(),
             "version": crowdmpc_version(),
             "code": code_identity(),
             "episodes_per_cell": config.episodes_per_cell,
@@ -348,10 +349,14 @@ def _default_backend(config: SweepConfig, scratch: str) -> Backend:
     )
 
 
+def _local_time() -> str:
+    """Now, local time in ISO 8601's extended form ("2026-12-05T23:41:16+00:00"): strftime's %z gave a basic
+    offset, "+0000", which strict ISO readers refuse beside the extended date."""
+    return datetime.now().astimezone().isoformat(timespec="seconds")
+
+
 def _append_error(out: Path, task: EpisodeTask, error: str) -> None:
-    EpisodeLog(out / ERRORS_FILE).append(
-        {"key": task.key, "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "error": error}
-    )
+    EpisodeLog(out / ERRORS_FILE).append({"key": task.key, "time": _local_time(), "error": error})
 
 
 def _progress_bar(config: SweepConfig, outcome: SweepOutcome) -> Any:

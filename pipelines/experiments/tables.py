@@ -14,7 +14,7 @@ from typing import Final
 
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.experiments import safety_report as safety
-from pipelines.experiments.cells import Experiment
+from pipelines.experiments.cells import EXPERIMENTS, Experiment
 from pipelines.experiments.summary import CellSummary, Rate
 from pipelines.experiments.tasks import SCENARIOS
 
@@ -115,6 +115,11 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
             notes[-1] += " Bold among the columns of one team: another team is another task."
     if any(s.paper for s in columns):
         notes.append(f"Paper ('paper' rows): 1000 episodes per cell (500 + 500), {experiment.paper_source}.")
+        if _beside_other_settings(experiment, columns):
+            notes[-1] += (
+                " They are of the paper's settings (Table I, margins none), not of the columns above them, "
+                "which ran with others (as said above)."
+            )
     elif experiment.paper and robots != [PAPER_ROBOTS]:
         notes.append(
             f"The paper's figures ({experiment.paper_source}) are for {PAPER_ROBOTS} robots: not shown "
@@ -125,6 +130,17 @@ def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_l
     else:
         notes.append("The paper has no such table.")
     return "\n".join(notes)
+
+
+def _beside_other_settings(experiment: Experiment, columns: Sequence[CellSummary]) -> bool:
+    """Whether a column beside the paper's figures ran with other settings than the shipped experiment's
+    methods (``--set mpc.d_min=0.9``, ``--margins``, ``--profile``, ``[env]``): a ``--vary`` column of another
+    value gets no paper figures, but these apply to every column."""
+    shipped = EXPERIMENTS.get(experiment.name)
+    if shipped is None:
+        return False
+    own = {(spec, shipped.method_worlds.get(label, shipped.world)) for label, spec in shipped.methods}
+    return any(s.paper and (s.cell.spec, s.cell.world) not in own for s in columns)
 
 
 def _crowds(s: CellSummary) -> tuple[int, str]:
@@ -202,7 +218,8 @@ def _metric_rows(groups: dict[int, list[CellSummary]], columns: list[CellSummary
             texts = [
                 f"{_fmt(s.travel_time_mean)} ± {_fmt(s.travel_time_ci)}"
                 if s.travel_time_ci == s.travel_time_ci
-                else _fmt(s.travel_time_mean)
+                # one success has no interval: said, where the header promises one
+                else _fmt(s.travel_time_mean) + (" (1 success)" if s.success.count == 1 else "")
                 for s in columns
             ]
         else:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import signal
 import threading
 import time
@@ -154,6 +155,7 @@ def test_a_hanging_controller_is_an_episode_error_and_its_worker_goes_on(backend
     assert sorted(e["key"].rsplit("/", 2)[1:] for e in errors) == [["circle", "0"], ["circle", "1"]]
     assert all(e["key"].startswith(HANGS) for e in errors), errors
     message = errors[0]["error"]
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d\d:\d\d", errors[0]["time"])  # ISO 8601
     assert message.startswith("the episode ran past the sweep's episode_timeout_s = 1 s of wall-clock time")
     assert "failing_controllers.py" in message and "time.sleep(0.02)" in message
     records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]

@@ -172,6 +172,14 @@ def test_cells_csv_names_the_predictor_a_cell_plans_with():
     named = {row["method"]: row["predictor"] for row in rows}
     assert named == {"cmpc": "social_lstm_eth", "dmpc": "social_lstm_eth", "orca": None, "straight": None}
     assert all(("-none-" in row["cell"]) == (row["predictor"] is None) for row in rows)
+    # nor a flocking term or a coupling: a reader grouping by flocking counted ORCA among the flocking
+    settings = {row["method"]: (row["flocking"], row["coupling"]) for row in rows}
+    assert settings == {
+        "cmpc": (True, "ibr"),
+        "dmpc": (True, "ibr"),
+        "orca": (None, None),
+        "straight": (None, None),
+    }
 
 
 def test_the_bold_mark_compares_the_printed_values():
@@ -197,3 +205,19 @@ def test_a_cells_figures_do_not_depend_on_the_order_its_records_finished():
     ]
     forward, backward = (cell_rows([summarize_cell(cell, r, None)]) for r in (records, records[::-1]))
     assert forward == backward
+
+
+def test_a_travel_time_of_one_success_says_why_it_has_no_interval():
+    """The header promises "± the 95% interval of its mean": a lone "25.6" read as a figure without one."""
+    from pipelines.experiments.summary import summarize
+    from pipelines.experiments.tables import markdown_table
+
+    experiment = get_experiment("table2")
+    cmpc, dmpc = experiment.cells((5,))
+    one = [_record(0, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0, time_s=25.6)]
+    one.append(_record(1, success=False, min_distance=1.0, median=1.0, p95=1.0, total=10.0))
+    two = [_record(i, success=True, min_distance=1.0, median=1.0, p95=1.0, total=10.0) for i in range(2)]
+    records = [r | {"cell": cmpc.key} for r in one] + [r | {"cell": dmpc.key} for r in two]
+    table = markdown_table(experiment, summarize(experiment, [cmpc, dmpc], records))
+    (row,) = [line for line in table.splitlines() if line.startswith("| Average travel time (s) |")]
+    assert row.split(" | ")[1:3] == ["25.6 (1 success)", "**20.0 ± 0.0** |"]  # bold: the shorter
