@@ -37,6 +37,20 @@ def _refuse(shown: list[str], controller: str, plans_with: str, keys: str) -> No
         )
 
 
+def _refuse_unread(config: RunConfig, spec: ControllerSpec) -> None:
+    """Refuse an [mpc] value given on the command line (``--set``) that ``spec``'s MPC does not read (DMPC's
+    update rule for CMPC, the coupled NLP's mode under IBR, a flocking weight with --no-flocking): a value in
+    a file passes, as a file may serve both controllers (docs/examples/many_robots.toml)."""
+    from pipelines.commands.sweep_vary import unread_because
+
+    for key, value in config.values["mpc"].items():
+        source = config.source("mpc", key)
+        why = unread_because(spec, key)
+        if source is not None and source.kind != "file" and why is not None:
+            shown = _shown(config, "mpc", key, value)
+            raise PipelineError(f"{shown} changes nothing here, where the runs {why}; leave it out")
+
+
 def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     """Refuse what ``spec``'s controller would ignore: a predictor, margins or coupling for one that plans
     with no predictor, and flocking, record_iterations or an [mpc] value for ORCA and the straight line,
@@ -72,6 +86,8 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
             "MPC",
             "flocking, record_iterations and [mpc]",
         )
+    if is_shipped(spec.controller) and spec.controller in MPC_CONTROLLERS:
+        _refuse_unread(config, spec)
     if not config.simulate.sensor_tracks and config.simulate.sensor_range is None:
         raise PipelineError(
             f"{_shown(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "

@@ -188,7 +188,7 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
     a method sets that key itself; a key of the flocking term only in the methods that flock."""
     import dataclasses
 
-    from pipelines.commands.sweep_vary import reads_setting
+    from pipelines.commands.sweep_vary import reads_setting, unread_because
 
     if key == "jit":
         raise cfg.error(
@@ -204,12 +204,13 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
         )
     applies = _planning(cfg, experiment, "mpc", key)
     applies = tuple((label, spec) for label, spec in applies if reads_setting(spec, key))
-    if not applies:  # they all plan (_planning refuses otherwise), none of them flocks
+    source = cfg.source("mpc", key)
+    if not applies and source is not None and source.kind == "file":
+        return experiment  # a file may serve other experiments too (safe_crossing.toml's DMPC settings)
+    if not applies:  # they all plan (_planning refuses otherwise), none reads the key
+        why = dict.fromkeys(unread_because(spec, key) for _, spec in experiment.methods)
         raise cfg.error(
-            "mpc",
-            key,
-            f"the methods of experiment {experiment.name!r} plan without the flocking term (NF), which "
-            f"{key} shapes",
+            "mpc", key, f"the methods of experiment {experiment.name!r} {' or '.join(map(str, why))}"
         )
     methods = []
     for label, spec in experiment.methods:
