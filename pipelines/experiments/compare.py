@@ -54,7 +54,13 @@ CROWD_SETTINGS: Final[tuple[str, ...]] = (
 )
 FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
 # Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
-RUN_FIELDS: Final[tuple[str, ...]] = ("predictor", "predictor_sha256", "sensor_range", "sensor_tracks")
+RUN_FIELDS: Final[tuple[str, ...]] = (
+    "predictor",
+    "predictor_sha256",
+    "crowd_sha256",
+    "sensor_range",
+    "sensor_tracks",
+)
 
 SOURCES: Final = "a sweep folder, a simulate --json file, or recordings: an .mcap file or a folder of them"
 Group = tuple[str, int, int]  # method (case folded), humans, robots

@@ -1,6 +1,7 @@
 """What a resumed sweep must match in the records it extends: the predictor weights and the margins each cell
-plans with now, against those its records state (pipelines.experiments.sweep checks both before any episode
-runs, so a table never silently mixes two predictors or two margin sets).
+plans with now, and the recording a replayed crowd plays, against those its records state
+(pipelines.experiments.sweep checks them before any episode runs, so a table never silently mixes two
+predictors, two margin sets or two crowds).
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ class ResumeChecks:
         self._predictors: dict[str, tuple[int, Any, Any]] = {}
         # (cell key, its margins as JSON) -> (first plan index, margins)
         self._margins: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
+        # (replayed crowd, its file's sha256) -> first plan index
+        self._crowds: dict[tuple[str, str], int] = {}
 
     def add(self, record: dict[str, Any]) -> None:
         i = self._index.get(record["key"])
@@ -40,6 +43,9 @@ class ResumeChecks:
         self.done[i] = 1
         name, sha256 = record.get("predictor"), record.get("predictor_sha256")
         _keep_first(self._predictors, json.dumps([name, sha256], sort_keys=True), (i, name, sha256))
+        crowd, sha256 = self.tasks[i].cell.world.crowd, record.get("crowd_sha256")
+        if crowd != "orca" and isinstance(sha256, str):  # a record from before it was kept says nothing
+            self._crowds.setdefault((crowd, sha256), i)
         stored = _stored_margins(record)
         if stored is not None:
             key = (self.tasks[i].cell.key, json.dumps(stored, sort_keys=True))
@@ -53,6 +59,7 @@ class ResumeChecks:
         self._index.clear()  # not held while the workers run
         self._check_predictors()
         self._check_margins()
+        self._check_crowds()
 
     def _check_predictors(self) -> None:
         """Refuse to extend a cell whose records came from other weights than the zoo holds now (a retrained
@@ -87,6 +94,22 @@ class ResumeChecks:
                     f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
                     "they changed since the records were made (recalibrated?); use another --out for the new "
                     "margins"
+                )
+
+    def _check_crowds(self) -> None:
+        """Refuse to extend a cell whose records replayed people from another file than the data directory
+        holds now (another $CROWDMPC_DATA, an edited recording): its table would silently mix two crowds."""
+        from pipelines.loop.replay_data import recording_path, recording_sha256
+
+        log = self.out / EPISODES_FILE
+        for (crowd, sha256), i in sorted(self._crowds.items(), key=lambda item: item[1]):
+            now = recording_sha256(crowd)
+            if sha256 != now:
+                key = self.tasks[i].cell.key
+                raise PipelineError(
+                    f"{log} holds episodes of {key} replaying people from a file of sha256 {sha256}, but "
+                    f"{recording_path(crowd)} is now {now}; use another --out for the new data (or set "
+                    "CROWDMPC_DATA back)"
                 )
 
 

@@ -181,6 +181,10 @@ def episode_record(
         "cpu_s": cpu_s,
         "worker": f"{socket.gethostname()}:{os.getpid()}",
     }
+    if world.crowd != "orca":  # the file its people came from: a resume checks it (resume_checks)
+        from pipelines.loop.replay_data import recording_sha256
+
+        sweep["crowd_sha256"] = recording_sha256(world.crowd)
     if config is not None:
         sweep["config"] = config
     return {**result.record().to_dict(), **plain(sweep)}

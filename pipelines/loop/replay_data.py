@@ -41,6 +41,28 @@ def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
     """The ``Recording`` of ``crowd`` (a key of ``SEQUENCES``, or its reactive replay: "eth_test_reactive"
     plays "eth_test") from ``data_dir`` (default: ``$CROWDMPC_DATA``); PipelineError naming what is missing,
     DatasetFormatError for a broken file."""
+    path = recording_path(crowd, data_dir)
+    return _read(crowd.removesuffix(REACTIVE_SUFFIX), path, os.stat(path).st_mtime_ns)
+
+
+def recording_sha256(crowd: str, data_dir: str | Path | None = None) -> str:
+    """The sha256 of the file ``crowd`` replays, for the records: a sweep resumed with another data
+    directory (or an edited file) would have mixed two crowds under one cell key."""
+    path = recording_path(crowd, data_dir)
+    stat = os.stat(path)
+    return _sha256(path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=4)
+def _sha256(path: Path, mtime_ns: int, size: int) -> str:
+    import hashlib
+
+    with open(path, "rb") as file:
+        return hashlib.file_digest(file, "sha256").hexdigest()
+
+
+def recording_path(crowd: str, data_dir: str | Path | None = None) -> Path:
+    """The raw annotation file ``crowd`` replays (see ``recording``)."""
     from predictors.data.locate import DATA_ENV, raw_ewap_dir, resolve_data_dir
 
     replayed = [*SEQUENCES, *REACTIVE]
@@ -60,8 +82,7 @@ def recording(crowd: str, data_dir: str | Path | None = None) -> Recording:
             f"raw_ewap/{sequence}/obsmat.txt (a prepared directory keeps only 8 s scenes); set "
             "CROWDMPC_DATA to the folder holding raw_ewap/ (data/README.md)"
         )
-    path = raw / sequence / "obsmat.txt"
-    return _read(crowd.removesuffix(REACTIVE_SUFFIX), path, os.stat(path).st_mtime_ns)
+    return raw / sequence / "obsmat.txt"
 
 
 @functools.lru_cache(maxsize=4)
