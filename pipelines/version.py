@@ -32,12 +32,15 @@ def crowdmpc_version() -> str:
 
 @functools.cache
 def code_identity() -> dict[str, str | bool | None]:
-    """``{"version", "commit", "dirty", "python", "casadi", "torch", "numpy"}``, looked up once a process."""
+    """``{"version", "commit", "dirty", "diff_sha256", "python", "casadi", "torch", "numpy"}``, looked up once
+    a process; ``diff_sha256``: of ``git diff HEAD`` (tracked files) when dirty, else None."""
     commit, dirty = _git_state(SOURCE_ROOT)
     identity: dict[str, str | bool | None] = {
         "version": crowdmpc_version(),
         "commit": commit,
         "dirty": dirty,
+        # which uncommitted changes: two runs of one dirty commit were told apart by nothing
+        "diff_sha256": _diff_sha256(SOURCE_ROOT) if dirty else None,
         "python": sys.version.split()[0],
     }
     for name in RESULT_LIBRARIES:
@@ -52,8 +55,8 @@ def code_changes(earlier: Iterable[Any]) -> str:
     """What differs between this process's code and the ``code_identity()``s earlier runs recorded, as the
     resume notes name it: "commit 0123456789ab -> 89abcdef0123, torch ..." (each key as the first earlier
     identity that differs had it), led by "code not recorded -> commit ..." when one is no identity (a run
-    from before the code was recorded); "" when every one is this code. "dirty" is not compared: uncommitted
-    changes are recorded but cannot be told apart."""
+    from before the code was recorded); "" when every one is this code. Uncommitted changes are compared by
+    their diff's sha256 ("dirty" alone says nothing of which), where the earlier identity recorded one."""
     now = code_identity()
     changed: dict[str, Any] = {}
     unrecorded = False
@@ -62,12 +65,38 @@ def code_changes(earlier: Iterable[Any]) -> str:
             unrecorded = True
             continue
         for k in now:
-            if k != "dirty" and before.get(k) != now[k]:
+            if k == "dirty" or (k == "diff_sha256" and k not in before):
+                continue
+            if before.get(k) != now[k]:
                 changed.setdefault(k, before.get(k))
     shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
     if unrecorded:
         shown = f"code not recorded -> commit {str(now['commit'])[:12]}" + (f", {shown}" if shown else "")
     return shown
+
+
+def dirty_text(dirty: Any, diff_sha256: Any) -> str:
+    """How a commit's name goes on for a tree with uncommitted changes: "+dirty:0123abcd" (their diff's
+    sha256, where recorded), "+dirty" (where not), "" for a clean tree."""
+    if not dirty:
+        return ""
+    return "+dirty" + (f":{diff_sha256[:8]}" if isinstance(diff_sha256, str) and diff_sha256 else "")
+
+
+def _diff_sha256(root: Path) -> str | None:
+    """The sha256 of ``git diff HEAD`` in ``root`` (tracked files; untracked ones are no part of the code a
+    clone has), None where git cannot say."""
+    import hashlib
+
+    try:
+        diff = subprocess.run(
+            ["git", "-C", str(root), "diff", "HEAD", "--binary", "--no-ext-diff", "--no-color"],
+            capture_output=True,
+            timeout=30,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return hashlib.sha256(diff.stdout).hexdigest() if diff.returncode == 0 else None
 
 
 def _git_state(root: Path) -> tuple[str | None, bool | None]:

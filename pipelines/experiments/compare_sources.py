@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
+from pipelines.version import dirty_text
 from predictors.progress import progress_bar
 
 METRICS_TOPIC: Final = "/episode/metrics"
@@ -128,8 +129,9 @@ def _warn(label: str, text: str) -> None:
 
 
 def commit_text(code: Any) -> str | None:
-    """A run's recorded code as "abc123def456+dirty"; None where it names no commit."""
+    """A run's recorded code as "abc123def456+dirty" ("+dirty:0123abcd": its uncommitted changes' sha256,
+    where recorded); None where it names no commit."""
     commit = code.get("commit") if isinstance(code, dict) else None
     if not commit or commit == "null":
         return None
-    return str(commit)[:12] + ("+dirty" if code.get("dirty") else "")
+    return str(commit)[:12] + dirty_text(code.get("dirty"), code.get("diff_sha256"))

@@ -21,6 +21,7 @@ import numpy as np
 from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
 from pipelines.loop.episode import step_time_stats
+from pipelines.version import dirty_text
 
 
 def _solver_stats(rec: Recording) -> dict[str, Any]:
@@ -61,6 +62,8 @@ def summarize(rec: Recording) -> dict[str, Any]:
         "crowdmpc_dirty": {"true": True, "false": False}.get(
             rec.metadata.get("crowdmpc", {}).get("dirty", "")
         ),
+        # which uncommitted changes (the sha256 of their diff; "null" when clean, absent in older recordings)
+        "crowdmpc_diff_sha256": _null_none(rec.metadata.get("crowdmpc", {}).get("diff_sha256")),
         "states": len(robots),
         "sim_time_s": robots[-1]["time"] if robots else 0.0,
         "started": _wall_clock(rec.start_time_ns),
@@ -107,13 +110,17 @@ def count(n: Any, noun: str) -> str:
     return f"{_fmt(n)} {noun}" + ("" if str(n) == "1" else "s")
 
 
+def _null_none(value: str | None) -> str | None:
+    return None if value in (None, "", "null") else value
+
+
 def commit_shown(summary: dict[str, Any]) -> str | None:
     """The recording's commit as ``crowdmpc compare`` names code ("c28989d46c28+dirty": recorded from a tree
     with uncommitted changes, which the commit alone does not name); None where it names none."""
     commit = summary.get("crowdmpc_commit")
     if commit in (None, "", "null"):
         return None
-    return str(commit)[:12] + ("+dirty" if summary.get("crowdmpc_dirty") else "")
+    return str(commit)[:12] + dirty_text(summary.get("crowdmpc_dirty"), summary.get("crowdmpc_diff_sha256"))
 
 
 def _code(summary: dict[str, Any]) -> str:

@@ -178,8 +178,11 @@ def test_metadata_present(recording):
     if (REPO / ".git").exists():
         commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True)
         assert code.pop("commit") == commit.stdout.strip() and code.pop("dirty") in ("true", "false")
+        # which uncommitted changes: their diff's sha256, null for a clean tree
+        diff = code.pop("diff_sha256")
+        assert diff == "null" if meta["crowdmpc"]["dirty"] == "false" else len(diff) == 64
     else:  # a copy of the tree without its history: nothing to name
-        assert (code.pop("commit"), code.pop("dirty")) == ("null", "null")
+        assert (code.pop("commit"), code.pop("dirty"), code.pop("diff_sha256")) == ("null", "null", "null")
     assert code == {name: version(name) for name in ("casadi", "torch", "numpy")} | {
         "python": platform.python_version()
     }

@@ -190,20 +190,23 @@ def test_a_recording_of_uncommitted_code_says_dirty(tmp_path, capsys, monkeypatc
 
     now = code_identity()
     for seed, dirty in ((1, False), (2, True)):
+        diff = "ab" * 32 if dirty else None
         monkeypatch.setattr(
-            recording, "code_identity", lambda d=dirty: {**now, "commit": "c28989d46c28abcd", "dirty": d}
+            recording,
+            "code_identity",
+            lambda d=dirty, s=diff: {**now, "commit": "c28989d46c28abcd", "dirty": d, "diff_sha256": s},
         )
         record_episode(tmp_path, seed=seed, steps=4)
     monkeypatch.undo()
     assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
     (warning,) = _warnings(capsys.readouterr().err)
-    assert "recorded by different code (commit c28989d46c28, commit c28989d46c28+dirty)" in warning
+    assert "recorded by different code (commit c28989d46c28, commit c28989d46c28+dirty:abababab)" in warning
     report = json.loads((tmp_path / "r.json").read_text())
     assert [r["crowdmpc_dirty"] for r in report["runs"]] == [False, True]
     (dirty,) = tmp_path.glob("*seed000002.mcap")
     assert main(["review", str(dirty)]) == 0
     (line,) = [line for line in capsys.readouterr().out.splitlines() if line.startswith("crowdmpc ")]
-    assert line.endswith("(commit c28989d46c28+dirty)")
+    assert line.endswith("(commit c28989d46c28+dirty:abababab)")
 
 
 def test_compare_lists_the_settings_that_differ_and_warns_of_another_crowd(tmp_path, capsys):
