@@ -120,10 +120,13 @@ def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
     return meta
 
 
-def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int) -> int:
+def _add_run(
+    out: Path, meta: dict[str, Any], config: SweepConfig, planned: int, backend: str | None = None
+) -> int:
     """Write sweep.json: ``meta`` with what the directory holds and a line for this run; return the run's
     number, counted from 1 as ``config show --from-sweep DIR --run N`` counts them (``runs[N - 1]``), which
-    each record of the run keeps as its ``run``."""
+    each record of the run keeps as its ``run``. ``backend``: the one that started (``--backend auto``
+    names none), with Ray's version where it was Ray; None for a run with nothing to run."""
     from pipelines.version import code_identity, crowdmpc_version
 
     path = out / SWEEP_FILE
@@ -141,6 +144,8 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
             "n_robots": config.n_robots,
             "jit": config.jit,
             "planned": planned,
+            **({} if backend is None else {"backend": backend}),
+            **({"ray": _ray_version()} if backend == "ray" else {}),
             **({"config": config.run_config} if config.run_config is not None else {}),
             "cells": [
                 {
@@ -163,6 +168,15 @@ def _add_run(out: Path, meta: dict[str, Any], config: SweepConfig, planned: int)
         finally:  # stopped before the replace: the half-written file is nobody's
             tmp.unlink(missing_ok=True)
     return len(meta["runs"])
+
+
+def _ray_version() -> str | None:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ray")
+    except PackageNotFoundError:
+        return None
 
 
 def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
@@ -274,15 +288,15 @@ def _run_tasks(
     backend_factory: Callable[[SweepConfig, str], Backend],
     scratch: str,
     retried: Collection[str] = (),
-    started: Callable[[], int] = lambda: 1,
+    started: Callable[[str], int] = lambda backend: 1,
     records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
 ) -> None:
-    """Start the backend, call ``started`` (the run's line in sweep.json: a backend that could not start ran
-    nothing; it returns the run's number), write every outcome as it comes back, each record with that
-    number as its ``run``, and end the backend. Stop (SweepStopped)
-    when no episode has run and FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run)
-    have raised: a broken method or setting, also when it extends a sweep; old failures raising again tell
-    nothing new, and run after the new episodes."""
+    """Start the backend, call ``started`` with its name (the run's line in sweep.json: a backend that could
+    not start ran nothing; it returns the run's number), write every outcome as it comes back, each record
+    with that number as its ``run``, and end the backend. Stop (SweepStopped) when no episode has run and
+    FAIL_FAST_ERRORS episodes not ``retried`` (keys that raised in an earlier run) have raised: a broken
+    method or setting, also when it extends a sweep; old failures raising again tell nothing new, and run
+    after the new episodes."""
     out = Path(config.out)
     by_key = {t.key: t for t in todo}
     start = time.perf_counter()
@@ -291,7 +305,7 @@ def _run_tasks(
     outcome.startup_s = time.perf_counter() - start
     bar: Any = None
     try:
-        run = started()
+        run = started(backend.name)
         bar = _progress_bar(config, outcome)
         for result in backend.run(todo):
             task = by_key[result.key]
