@@ -15,6 +15,7 @@ says which; the paper's figures are open squares (dashed lines across crowd size
 from __future__ import annotations
 
 import math
+import re
 import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -73,6 +74,7 @@ OUTCOMES: Final[tuple[Outcome, ...]] = (
         "Control step (ms)",
         "median of the episodes' median steps",
         bars="bars up to the p95 of the episodes' p95 steps; the period is 400 ms",
+        missing="not recorded",
     ),
 )
 
@@ -94,15 +96,39 @@ MAX_LEGEND_INSIDE: Final[int] = 8  # legend entries that a plot of FIGSIZE holds
 BAR_WIDTH_IN: Final[float] = 0.36
 
 
+# Colours past matplotlib's ten (C0..C9): tab20b's, then tab20c's, darkest shades first, so that each of up
+# to 50 methods has its own (the safety experiment's 16 repeated six of C0..C9, told apart by marker alone).
+_MORE_COLORS: Final[tuple[str, ...]] = (
+    *("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#6b6ecf", "#b5cf6b", "#e7ba52"),
+    *("#d6616b", "#ce6dbd", "#5254a3", "#8ca252", "#bd9e39", "#ad494a", "#a55194", "#9c9ede"),
+    *("#cedb9c", "#e7cb94", "#e7969c", "#de9ed6", "#3182bd", "#e6550d", "#31a354", "#756bb1"),
+    *("#636363", "#9ecae1", "#fdae6b", "#a1d99b", "#bcbddc", "#bdbdbd", "#6baed6", "#fd8d3c"),
+    *("#74c476", "#9e9ac8", "#969696", "#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#d9d9d9"),
+)
+
+
 def method_style(k: int) -> dict[str, str]:
-    """The ``k``-th method's colour, line style and marker: matplotlib's ten colours, then dashed lines and
-    triangles for the next ten, dotted and diamonds after (the safety experiment's 16 methods drew 6 pairs
-    of lines and points in one colour, told apart by nothing). Squares are the paper's."""
+    """The ``k``-th method's colour, line style and marker: matplotlib's ten colours, then ``_MORE_COLORS``
+    (no two methods of up to 50 share one), with dashed lines and triangles for the next ten, dotted and
+    diamonds after, so that a legend tells them apart in grey too. Squares are the paper's."""
+    palette = [f"C{j}" for j in range(10)] + list(_MORE_COLORS)
     return {
-        "color": f"C{k % 10}",
+        "color": palette[k % len(palette)],
         "ls": ("-", "--", ":")[k // 10 % 3],
         "marker": ("o", "^", "D")[k // 10 % 3],
     }
+
+
+# "d_min = 0.8, 1.0" of a --vary title: one item, never broken after its comma (the title read "d_min =
+# 0.8,", then "1.0" on a line of its own). Possessive: a value ends where the next "KEY =" starts.
+_VALUE_LIST = re.compile(r"[^\s,;]+ = [^\s,;]++(?:, [^\s,;=]++(?! =))*")
+_GLUE: Final[str] = "\u00a0"  # no-break space: textwrap breaks at ASCII whitespace only
+
+
+def wrap_title(title: str, width: int) -> str:
+    """``title`` wrapped at ``width`` characters between words, but never inside a value list."""
+    glued = _VALUE_LIST.sub(lambda m: m.group(0).replace(" ", _GLUE), title)
+    return textwrap.fill(glued, width, break_long_words=False).replace(_GLUE, " ")
 
 
 PLOT_AXES: Final[tuple[str, ...]] = ("humans", "robots", "method")  # what a report's plots are drawn against
@@ -155,23 +181,59 @@ def _paper(cells: Sequence[CellSummary], name: str) -> list[float | None]:
 def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary], outcome: Outcome) -> bool:
     """The bars; whether any has an error bar (a travel time of fewer than two successes has none). A method
     without a value has its slot say why (``outcome.missing``) rather than stand empty like a rate of 0."""
+    from matplotlib.patches import Patch
+
     name = outcome.name
     cells = [next(s for s in summaries if s.cell.method == m) for m in methods]
     y, err = _values(cells, name)
     x = np.arange(len(methods))
-    colors = [f"C{k}" for k in range(len(methods))]
+    colors = [method_style(k)["color"] for k in range(len(methods))]
     drawn = not np.isnan(err).all()
-    ax.bar(x, y, yerr=err if drawn else None, color=colors, capsize=4, label="ours (95% interval)")
-    if name == ROBOT_CONTACT_FLAG:
-        for k in np.flatnonzero(np.isnan(y)):
-            ax.text(x[k], 0.0, outcome.missing, rotation=90, ha="center", va="bottom", fontsize="x-small")
+    ax.bar(x, y, yerr=err if drawn else None, color=colors, capsize=4)
+    _mark_gaps(ax, x, y, err, cells, outcome)
     paper = [(k, v) for k, v in enumerate(_paper(cells, name)) if v is not None]
     if paper:
         px, py = zip(*paper, strict=True)
-        ax.plot(px, py, ls="none", marker="s", ms=8, mfc="none", mec="k", label="paper")
-        ax.legend(fontsize="small")
+        (mark,) = ax.plot(px, py, ls="none", marker="s", ms=8, mfc="none", mec="k", label="paper")
+        # The bars' colours are the methods' (named on the x axis): the legend's bar is neutral, not C0.
+        what = "ours (a bar per method, 95% interval)" if drawn else "ours (a bar per method)"
+        ours = Patch(facecolor="0.8", edgecolor="0.3", label=what)
+        ax.legend(handles=[ours, mark], fontsize="small")
     ax.set_xticks(x, methods, rotation=30, ha="right")
     return drawn
+
+
+def _mark_gaps(
+    ax: Any, x: np.ndarray, y: np.ndarray, err: np.ndarray, cells: Sequence[Any], o: Outcome
+) -> None:
+    """Write into each slot without a bar why (``o.missing``: an empty slot read as 0 s), and above a bar
+    whose value has no error bar the one episode it stands on (the title promises intervals)."""
+    bottom = ax.get_xaxis_transform()  # x in data, y in axes fraction: at the foot whatever the y limits
+    for k in np.flatnonzero(np.isnan(y)):
+        ax.text(
+            x[k], 0.02, o.missing, transform=bottom, rotation=90, ha="center", va="bottom", fontsize="small"
+        )
+    _mark_lone(ax, x, y, err, cells, o, "k")
+
+
+def _mark_lone(
+    ax: Any, x: np.ndarray, y: np.ndarray, err: np.ndarray, cells: Sequence[Any], o: Outcome, color: str
+) -> None:
+    """Above a travel time without an error bar, the one success it stands on: the title promises each
+    value its interval, and a bare point read as an exact one."""
+    if o.name != "travel_time":
+        return
+    for k in np.flatnonzero(~np.isnan(y) & np.isnan(err).any(axis=0)):
+        text = f"n = {cells[int(k)].success.count}"
+        ax.annotate(
+            text,
+            (x[k], y[k]),
+            xytext=(0, 4),
+            textcoords="offset points",
+            ha="center",
+            color=color,
+            fontsize="small",
+        )
 
 
 def _dodges(methods: list[str], sizes: list[int]) -> dict[str, float]:
@@ -192,12 +254,13 @@ def _draw_vs(
 ) -> bool:
     """A line per method (``lines``: its cells) against ``size`` of their cells; whether any point has an
     error bar. A method with no value at all (no success, for the travel time) is named so in the legend,
-    as the safety trade-off names it."""
+    as the safety trade-off names it; each point without a value is marked where it would stand."""
     name = outcome.name
     drawn = False
     sizes = sorted({size(s) for cells in lines.values() for s in cells})
     methods = list(lines)
     dodge = _dodges(methods, sizes)
+    gaps: dict[int, list[tuple[str, dict[str, str]]]] = {}
     for k, method in enumerate(methods):
         cells = sorted(lines[method], key=size)
         x = np.array([size(s) for s in cells], dtype=float) + dodge[method]
@@ -207,6 +270,9 @@ def _draw_vs(
         color = style["color"]
         label = f"{method} (ours)" if not np.isnan(y).all() else f"{method} (ours, {outcome.missing})"
         ax.errorbar(x, y, yerr=err, capsize=3, label=label, **style)
+        for s in (s for s, v in zip(cells, y, strict=True) if np.isnan(v)):
+            gaps.setdefault(size(s), []).append((method, style))
+        _mark_lone(ax, x, y, err, cells, outcome, color)
         paper = [
             (size(s) + dodge[method], v)
             for s, v in zip(cells, _paper(cells, name), strict=True)
@@ -215,10 +281,42 @@ def _draw_vs(
         if paper:
             px, py = zip(*paper, strict=True)
             ax.plot(px, py, ls="--", marker="s", mfc="none", color=color, label=f"{method} (paper)")
+    _mark_missing(ax, gaps, dodge, outcome.missing)
     ax.set_xticks(sizes)
     ax.set_xlabel(f"number of {axis}")
     _legend(ax)
     return drawn
+
+
+def _mark_missing(
+    ax: Any, gaps: dict[int, list[tuple[str, dict[str, str]]]], dodge: dict[str, float], missing: str
+) -> None:
+    """An open marker at the foot of the axes for each point without a value (a line simply broke there, as
+    if the cell had not run), and above them which methods and why (``missing``: "not recorded" for a cell
+    whose records predate robot_contact, "no success" for a travel time)."""
+    foot = ax.get_xaxis_transform()  # x in data, y in axes fraction
+    for at, methods in gaps.items():
+        for method, style in methods:
+            x = at + dodge[method]
+            ax.plot(
+                x, 0.03, transform=foot, ls="none", marker=style["marker"], mfc="none", mec=style["color"]
+            )
+        names = ", ".join(m for m, _ in methods)
+        color = methods[0][1]["color"] if len(methods) == 1 else "k"
+        box = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8}
+        text = f"{names}: {missing}"
+        ax.text(
+            at,
+            0.07,
+            text,
+            transform=foot,
+            rotation=90,
+            ha="center",
+            va="bottom",
+            color=color,
+            fontsize="small",
+            bbox=box,
+        )
 
 
 def _lines(
@@ -274,7 +372,7 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     ax.set_ylabel(outcome.ylabel)
     bars = f"error bars: our 95% {outcome.interval}" if drawn else f"no error bars: {outcome.no_bars}"
     bars = outcome.bars or bars
-    ax.set_title(f"{textwrap.fill(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
+    ax.set_title(f"{wrap_title(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
     ax.grid(alpha=0.3)
     return fig
 

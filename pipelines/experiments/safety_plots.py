@@ -1,22 +1,23 @@
 """The safety report's plots (pipelines.experiments.safety_report): the histogram of each episode's minimum
-robot-human distance, and the success / collision trade-off, one panel per number of humans.
+robot-human distance, and the success / collision trade-off, one panel per number of humans, in rows of at
+most three (five crowd sizes made a histogram 22.8 in wide) on shared axes.
 
-The safety experiment compares 16 methods at one crowd size; its legends stand beside the panels (inside,
-they overflowed the panel and covered the title), and where more than ``MAX_ANNOTATED`` methods share a
-panel the trade-off names them in such a legend rather than beside each point (16 labels piled up on the
-few points where methods agree).
+Each panel's legend stands under it, off the data (inside, it covered points and error bars; beside, it
+widened the figure). Where more than ``MAX_ANNOTATED`` methods share a trade-off panel the legend names
+them (16 labels piled up on the few points where methods agree); fewer are labelled beside their points,
+each placed where it overlaps no other label and stays inside the panel, and the legend's title counts the
+methods that share a point (only the last one drawn shows there).
 """
 
 from __future__ import annotations
 
 import math
-import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
-from pipelines.experiments.report_plots import method_style
+from pipelines.experiments.report_plots import method_style, wrap_title
 from pipelines.experiments.safety_report import (
     COLLISION_TARGET,
     CONTACT_DISTANCE,
@@ -31,15 +32,26 @@ from pipelines.experiments.safety_report import (
 if TYPE_CHECKING:
     from pipelines.experiments.cells import Experiment
 
-# Methods a trade-off panel labels beside their points: one per corner of a point (_LABEL_CORNERS).
+# Methods a trade-off panel labels beside their points; more are named in its legend.
 MAX_ANNOTATED: Final[int] = 4
-LEGEND_WIDTH: Final[float] = 2.6  # in, added to a panel whose legend stands beside it
-_LABEL_CORNERS: Final[tuple[tuple[int, int], ...]] = ((5, 5), (5, -5), (-5, 5), (-5, -5))  # points
+# A panel's width (in) in a row of 1, 2, 3: a figure stays within 11.5 in, so that scaled to a 7 in text width
+# its small text (8 pt) still reads at 5 pt; five crowd sizes made a histogram 22.8 in wide.
+PANEL_WIDTHS: Final[tuple[float, float, float]] = (6.4, 5.2, 3.8)
+PANEL_HEIGHT: Final[float] = 2.9  # in, of a panel's axes and their tick labels
+LEGEND_GAP: Final[float] = (
+    0.5  # in below a panel's axes, past its tick labels and x label, where its legend starts
+)
+LEGEND_LINE: Final[float] = 0.2  # in, a line of a "small" legend
+# Where a label may stand from its point (points): the four corners, then above, below, further out.
+_OFFSETS: Final[tuple[tuple[int, int], ...]] = tuple(
+    (sx * r, sy * r) for r in (5, 14, 26) for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1))
+) + ((0, 12), (0, -12), (0, 30), (0, -30))
 
 
-def _panels(count: int, size: tuple[float, float], title: str, **kwargs):
-    """A figure with ``count`` panels in rows of at most three, the unused ones hidden, and ``title`` wrapped
-    to the figure's width (experiment titles are longer than one panel is wide).
+def _panels(count: int, height: float, title: str, **kwargs: Any) -> tuple[Any, list[Any]]:
+    """A figure of ``count`` panels in rows of at most three, each ``height`` in tall (axes and legend), the
+    unused ones hidden, and each line of ``title`` wrapped to the figure's width between items
+    (report_plots.wrap_title).
 
     A ``matplotlib.figure.Figure``, not pyplot's: a report written from a notebook neither switches its
     backend (this module called ``matplotlib.use("Agg")``) nor adds to its open figures."""
@@ -47,22 +59,45 @@ def _panels(count: int, size: tuple[float, float], title: str, **kwargs):
 
     ncols = min(3, count)
     nrows = math.ceil(count / ncols)
-    fig = Figure(figsize=(size[0] * ncols, size[1] * nrows), layout="constrained")
+    width = PANEL_WIDTHS[ncols - 1] * ncols
+    fig = Figure(figsize=(width, height * nrows + 0.5), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False, **kwargs)
     for ax in axes.flat[count:]:
         ax.set_visible(False)
-    fig.suptitle(textwrap.fill(title, width=int(12 * size[0] * ncols)), fontsize="medium")
+    for ax in axes.flat[:count]:
+        # Shared axes keep their tick labels: each panel has its legend under it, and a panel above a hidden
+        # one had none at all.
+        ax.tick_params(labelbottom=True, labelleft=True)
+    lines = (wrap_title(line, int(13 * width)) for line in title.split("\n"))
+    fig.suptitle("\n".join(lines), fontsize="medium")
     return fig, list(axes.flat[:count])
 
 
-def _beside(ax: Any, **kwargs: Any) -> None:
-    """The panel's legend at its right, outside it: nothing drawn or written is covered."""
-    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="x-small", **kwargs)
+def _below(ax: Any, **kwargs: Any) -> None:
+    """The panel's legend under it, clear of its tick labels and x label: nothing drawn is covered."""
+    from matplotlib.transforms import ScaledTranslation
+
+    entries = len(ax.get_legend_handles_labels()[1])
+    ax.legend(
+        loc="upper center",
+        bbox_to_anchor=(0.5, 0.0),
+        bbox_transform=ax.transAxes + ScaledTranslation(0.0, -LEGEND_GAP, ax.figure.dpi_scale_trans),
+        borderaxespad=0.0,
+        fontsize="small",
+        title_fontsize="small",
+        ncols=_legend_columns(entries),
+        **kwargs,
+    )
 
 
-def _height(size: float, entries: int) -> float:
-    """A panel's height (in): ``size``, or more when its legend of ``entries`` lines needs it."""
-    return max(size, 0.8 + 0.16 * entries)
+def _legend_columns(entries: int) -> int:
+    return 1 if entries <= 6 else 2
+
+
+def _height(entries: int, title_lines: int) -> float:
+    """A panel's height (in): its axes, then its legend of ``entries`` in ``_legend_columns``."""
+    rows = math.ceil(entries / _legend_columns(entries)) + title_lines
+    return PANEL_HEIGHT + LEGEND_GAP + 0.15 + LEGEND_LINE * rows
 
 
 def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dict[int, list[SafetyColumn]]:
@@ -79,6 +114,10 @@ def _method_styles(experiment: Experiment) -> dict[str, dict[str, str]]:
     return {label: method_style(k) for k, label in enumerate(experiment.method_labels)}
 
 
+# The histogram's outlines, by method: one on another hid it wholly where their counts agree.
+_HIST_STYLES: Final[tuple[Any, ...]] = ("-", "--", "-.", (0, (1, 1)))
+
+
 def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> Any:
     """Step histograms of each episode's minimum robot-human distance, one per method, overlaid on shared
     bins; one panel per number of humans, since a larger crowd shifts the whole distribution."""
@@ -86,26 +125,28 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
 
     groups = _by_humans(experiment, summaries)
     styles = _method_styles(experiment)
-    entries = max(len(cells) for cells in groups.values()) + 3  # + the two thresholds and the title
-    size = (5.0 + LEGEND_WIDTH, _height(3.6, entries))
-    fig, axes = _panels(len(groups), size, experiment.title, sharex=True, sharey=True)
+    order = {label: k for k, label in enumerate(experiment.method_labels)}
+    entries = max(len(cells) for cells in groups.values()) + 2  # + the two thresholds
+    fig, axes = _panels(len(groups), _height(entries, 1), experiment.title, sharex=True, sharey=True)
     for ax, (n, cells) in zip(axes, groups.items(), strict=True):
         for s in cells:
             counts = min_distance_counts(s.min_distances)
             beyond = f", {counts[-1]} beyond {HIST_MAX:g} m" if counts[-1] else ""
             label = f"{s.cell.method} ({s.episodes}{beyond})"
-            style = styles.get(s.cell.method, {})
-            ax.stairs(
-                counts[:-1], HIST_EDGES, color=style.get("color"), ls=style.get("ls"), lw=1.3, label=label
-            )
+            k = order.get(s.cell.method, 0)
+            color = styles.get(s.cell.method, {}).get("color")
+            ls = _HIST_STYLES[k % len(_HIST_STYLES)]
+            ax.stairs(counts[:-1], HIST_EDGES, color=color, ls=ls, lw=1.6, alpha=0.85, label=label)
         ax.axvline(CONTACT_DISTANCE, color="k", ls=":", lw=1, label=f"contact ({CONTACT_DISTANCE:g} m)")
-        ax.axvline(COLLISION_DISTANCE, color="k", ls="--", lw=1, label=f"d_min ({COLLISION_DISTANCE:g} m)")
+        # The metric's threshold (crowdsim.metrics, Table I), not the planning d_min a column may vary.
+        threshold = f"collision threshold ({COLLISION_DISTANCE:g} m)"
+        ax.axvline(COLLISION_DISTANCE, color="k", ls="--", lw=1, label=threshold)
         ax.set_xlim(0.0, HIST_MAX)
         ax.set_title(f"{n} humans", fontsize="medium")
+        ax.set_xlabel("episode's minimum robot-human distance (m)", fontsize="small")
+        ax.set_ylabel("episodes", fontsize="small")
         ax.grid(alpha=0.3)
-        _beside(ax, title="method (episodes)", title_fontsize="x-small")
-    fig.supxlabel("episode's minimum robot-human distance (m)")
-    fig.supylabel("episodes")
+        _below(ax, title="method (episodes)")
     # Counts: whole ticks (two episodes a cell were read against ticks of 0.25 episodes). Shared y axes: one
     # locator serves every panel.
     axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))
@@ -123,12 +164,15 @@ def _annotation(s: SafetyColumn) -> str:
     return f"{s.cell.method}, {time:.1f} s" if time == time else f"{s.cell.method}, no success"
 
 
-def _draw_point(ax: Any, s: SafetyColumn, style: dict[str, str], corner: int | None) -> None:
-    """One method's point with its 95% Wilson intervals; its name and travel time at ``corner`` of it
-    (_LABEL_CORNERS), or in the legend when None."""
-    x, y = s.collision.percent, s.success.percent
+def _point(s: SafetyColumn) -> tuple[float, float]:
+    return s.collision.percent, s.success.percent
+
+
+def _draw_point(ax: Any, s: SafetyColumn, style: dict[str, str], named: bool) -> None:
+    """One method's point with its 95% Wilson intervals; its name and travel time in the legend when
+    ``named``, else beside it (``_place_labels``)."""
+    x, y = _point(s)
     (x_lo, x_hi), (y_lo, y_hi) = s.collision.interval, s.success.interval
-    color = style.get("color")
     ax.errorbar(
         x,
         y,
@@ -136,61 +180,114 @@ def _draw_point(ax: Any, s: SafetyColumn, style: dict[str, str], corner: int | N
         xerr=[[max(0.0, x - x_lo)], [max(0.0, x_hi - x)]],
         yerr=[[max(0.0, y - y_lo)], [max(0.0, y_hi - y)]],
         fmt=style.get("marker", "o"),
-        color=color,
+        color=style.get("color"),
         capsize=3,
-        label=_annotation(s) if corner is None else None,
+        label=_annotation(s) if named else None,
     )
-    if corner is None:
-        return
-    # Neighbouring methods (e.g. close alphas) often sit close together: their labels take turns at the
-    # four corners of the point, on a translucent box so that crossings stay legible.
-    dx, dy = _LABEL_CORNERS[corner]
-    ax.annotate(
-        _annotation(s),
-        (x, y),
-        xytext=(dx, dy),
-        textcoords="offset points",
-        ha="left" if dx > 0 else "right",
-        va="bottom" if dy > 0 else "top",
-        fontsize="x-small",
-        color=color,
-        bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
-        zorder=10,  # above every method's error bars, drawn later
-    )
+
+
+def _coinciding(cells: Sequence[SafetyColumn]) -> str:
+    """Lines saying where several methods share one point (only the last one drawn shows there)."""
+    at: dict[tuple[float, float], int] = {}
+    for s in cells:
+        x, y = _point(s)
+        at[round(x, 6), round(y, 6)] = at.get((round(x, 6), round(y, 6)), 0) + 1
+    return "\n".join(f"{k} methods at ({x:.3g} %, {y:.3g} %)" for (x, y), k in at.items() if k > 1)
+
+
+def _place_labels(fig: Any, labels: Sequence[tuple[Any, SafetyColumn, str]]) -> None:
+    """Each (panel, method, colour) label beside its point at the first of ``_OFFSETS`` where it stays
+    inside the panel and clear of the points and the labels placed before it; failing that, where it
+    overlaps least. Measured on the laid-out figure: labels at fixed corners ran into one another ("CMPC
+    d_min=0.DMPC d_min=0.8, 18.0 s") and over the y label."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    renderer = fig.canvas.get_renderer()
+    taken: dict[Any, list[Any]] = {}
+    for ax, s, color in labels:
+        frame = ax.get_window_extent(renderer).padded(-2)
+        dots = [_dot(ax, other) for other_ax, other, _ in labels if other_ax is ax]
+        best: tuple[float, Any] | None = None
+        for dx, dy in _OFFSETS:
+            text = ax.annotate(
+                _annotation(s),
+                _point(s),
+                xytext=(dx, dy),
+                textcoords="offset points",
+                ha="left" if dx > 0 else "right" if dx < 0 else "center",
+                va="bottom" if dy > 0 else "top",
+                fontsize="small",
+                color=color,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
+                zorder=10,  # above every method's error bars, drawn later
+                in_layout=False,  # placed inside the panel: the layout measured stays the one drawn
+            )
+            box = text.get_window_extent(renderer)
+            outside = not (
+                frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+            )
+            clash = sum(_overlap(box, other) for other in taken.get(ax, []) + dots) + 1e9 * outside
+            if best is None or clash < best[0]:
+                if best is not None:
+                    best[1].remove()
+                best = (clash, text)
+            else:
+                text.remove()
+            if clash == 0:
+                break
+        assert best is not None
+        taken.setdefault(ax, []).append(best[1].get_window_extent(renderer))
+
+
+def _dot(ax: Any, s: SafetyColumn) -> Any:
+    """A point's marker, in display coordinates."""
+    from matplotlib.transforms import Bbox
+
+    x, y = ax.transData.transform(_point(s))
+    return Bbox.from_extents(x - 4, y - 4, x + 4, y + 4)
+
+
+def _overlap(a: Any, b: Any) -> float:
+    return max(0.0, min(a.x1, b.x1) - max(a.x0, b.x0)) * max(0.0, min(a.y1, b.y1) - max(a.y0, b.y0))
 
 
 def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> Any | None:
     """Success against collision rate per method, both with their 95% Wilson intervals, one panel per
-    number of humans that has at least two methods to trade off; None when none has."""
+    number of humans that has at least two methods to trade off, on shared axes; None when none has."""
     groups = {n: cells for n, cells in _by_humans(experiment, summaries).items() if len(cells) >= 2}
     if not groups:
         return None
     styles = _method_styles(experiment)
     most = max(len(cells) for cells in groups.values())
-    annotated = most <= MAX_ANNOTATED
-    size = (5.6, 4.2) if annotated else (5.6 + LEGEND_WIDTH, _height(4.2, most + 1))
-    fig, axes = _panels(len(groups), size, experiment.title)
+    named = most > MAX_ANNOTATED
+    notes = max(len(_coinciding(cells).splitlines()) for cells in groups.values())
+    height = _height(1 + (most if named else 0), notes)
+    where = "in the legend" if named else "beside each method"
+    title = (
+        f"{experiment.title}\nsuccess against collision rate, the cross-bars their 95 % Wilson intervals; "
+        f"mean travel time of the successful episodes {where}"
+    )
+    fig, axes = _panels(len(groups), height, title, sharex=True, sharey=True)
     for ax, (n, cells) in zip(axes, groups.items(), strict=True):
-        for k, s in enumerate(cells):
-            corner = k % len(_LABEL_CORNERS) if annotated else None
-            _draw_point(ax, s, styles.get(s.cell.method, {}), corner)
-        ax.axvline(
-            COLLISION_TARGET,
-            color="grey",
-            ls="--",
-            lw=1,
-            label=f"{COLLISION_TARGET:g} % collisions: the paper's Table II stays below",
-        )
-        ax.set_xlim(left=min(-0.5, ax.get_xlim()[0]))
-        ax.set_xlabel(f"collision rate (%), < {COLLISION_DISTANCE:g} m")
-        ax.set_ylabel("success rate (%)")
-        where = "beside each method" if annotated else "in the legend"
-        ax.set_title(f"{n} humans: mean travel time of successful episodes {where}", fontsize="small")
+        for s in cells:
+            _draw_point(ax, s, styles.get(s.cell.method, {}), named)
+        target = f"{COLLISION_TARGET:g} % collisions: the paper's Table II stays below"
+        ax.axvline(COLLISION_TARGET, color="grey", ls="--", lw=1, label=target)
+        ax.set_xlabel(f"collision rate (%), < {COLLISION_DISTANCE:g} m", fontsize="small")
+        ax.set_ylabel("success rate (%)", fontsize="small")
+        ax.set_title(f"{n} humans", fontsize="medium")
         ax.grid(alpha=0.3)
-        if annotated:
-            ax.legend(fontsize="x-small", loc="lower right")
-        else:
-            _beside(ax, title="method, mean travel time", title_fontsize="x-small")
+        _below(ax, title=_coinciding(cells) or None)
+    # Shared by every panel: a point at 0 % collisions stood on the left edge, half cut off.
+    axes[0].set_xlim(left=min(-1.0, axes[0].get_xlim()[0]))
+    if not named:
+        labels = [
+            (ax, s, styles.get(s.cell.method, {}).get("color", "k"))
+            for ax, (_, cells) in zip(axes, groups.items(), strict=True)
+            for s in cells
+        ]
+        _place_labels(fig, labels)
     return fig
 
 

@@ -79,6 +79,7 @@ def test_every_record_field_and_sweep_file_is_documented(outputs):
     assert _undocumented([*sweep, *sweep["runs"][0], *sweep["runs"][0]["code"]], doc) == []
     # ISO 8601's extended form throughout (strftime's %z wrote "+0000", which strict readers refuse)
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d\d:\d\d", sweep["runs"][0]["started"])
+    assert sweep["runs"][0]["backend"] == "inline"  # the one that ran, as asked here
     files = [p.name for p in (outputs / "sw").iterdir() if not p.name.endswith(".png")]
     assert _undocumented(files, doc) == []
 
