@@ -343,7 +343,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from pipelines.experiments.calibrate import class_coverage_report, format_coverage, missing_class_margins
+    from pipelines.experiments.calibrate import (
+        class_coverage_report,
+        coverage_notes,
+        format_coverage,
+        missing_class_margins,
+    )
     from pipelines.plain_json import plain
     from predictors.conformal import coverage
     from predictors.registry import load_predictor
@@ -371,6 +376,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     elif args.holdout:
         print(f"held-out: {holdout.shape[0]} samples of the prepared test scenes")
     print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))
+    print(coverage_notes([b.alpha for b in blocks], holdout, cover), end="", file=sys.stderr)
     class_cover = class_coverage_report(blocks, holdout, holdout_classes)
     shortfall_cover = class_coverage_report(blocks, holdout_shortfall, holdout_classes, shortfall=True)
     if args.source == "closed-loop":  # a real calibration computes no margins per motion class

@@ -91,13 +91,13 @@ def _register_prepare(actions) -> None:
 def _register_stats(actions) -> None:
     stats = actions.add_parser(
         "stats",
-        help="scenes, tracks, pedestrians and agents per scene of every ndjson file in a directory",
-        description="Print a table of scenes, tracks, pedestrians and agents per scene (min/mean/max), "
-        "one row per file.",
+        help="scenes, tracks, pedestrians and agents per scene of an ndjson file or every one in a directory",
+        description="Print a table of scenes, tracks, pedestrians, agents per scene (min/mean/max), scene "
+        "types and frame rates, one row per file.",
         epilog="example:\n  crowdmpc data stats data/prepared\n",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    stats.add_argument("directory", type=path_arg, help="directory searched recursively for *.ndjson")
+    stats.add_argument("directory", type=path_arg, help="an ndjson file, or a folder searched for them")
     stats.set_defaults(func=run_stats)
 
 
@@ -155,7 +155,9 @@ def run_prepare(args: argparse.Namespace) -> int:
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
     if raw is None:
         raise PipelineError(
-            f"--raw {args.raw}: expected a BIWI EWAP directory holding seq_eth/obsmat.txt and "
+            f"--raw {args.raw} is a file; give the folder holding seq_eth/ and seq_hotel/"
+            if args.raw.is_file()
+            else f"--raw {args.raw}: expected a BIWI EWAP directory holding seq_eth/obsmat.txt and "
             "seq_hotel/obsmat.txt; other data (e.g. 'frame ped x y' text) has no converter here: write it "
             "as TrajNet++ ndjson and give it to train --train/--val or evaluate --test (data/README.md, "
             "'Your own data')"
@@ -234,12 +236,12 @@ def _check_prepare_target(out: Path) -> None:
 
 
 def run_stats(args: argparse.Namespace) -> int:
-    from predictors.data.stats import file_stats, format_table, ndjson_files
+    from predictors.data.stats import stats_report
 
     _check_prepared_files(args.directory)
-    files = ndjson_files(args.directory)
-    # a bar on a terminal only (None), so that a piped table stays clean
-    print(format_table([file_stats(f, progress=None) for f in files], root=args.directory))
+    table, notes = stats_report(args.directory)
+    print(table)
+    print(*notes, sep="\n", end="\n" if notes else "", file=sys.stderr)
     return 0
 
 

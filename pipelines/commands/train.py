@@ -16,8 +16,10 @@ from pipelines.commands.train_data import (
     DATASET_SUFFIX,
     DEFAULT_DATASET,
     check_data,
+    check_resumed_data,
     data_options,
     data_settings,
+    note_shared_data,
     protocol_options,
     resolve_files,
     take_run_data,
@@ -72,9 +74,12 @@ NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net'
 into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise):
 an option left out takes the run's setting (its data files, protocol, dataset and data directory too, unless
 a data option is typed; --out names the run), one typed must be the run's, and only --epochs may change,
-upwards (the count already trained only finishes a run that stopped before writing its metrics). --val and
---test files are read as the evaluation reads them before training starts: a TrajNet++ test/ file without
-ground truth is refused then, not after training.
+upwards (the count already trained only finishes a run that stopped before writing its metrics); a data
+file whose content changed since the run started is refused. --test files are read as `crowdmpc evaluate`
+reads them (the last 21 steps of a longer scene); --val files too, and also as training reads them, for
+the validation of each epoch that picks the best one: their scenes must have exactly 21 steps (cut longer
+ones first). Both are read before training starts: a TrajNet++ test/ file without ground truth is refused
+then, not after training. A --test file with the content of a --train or --val file is noted.
 It trains on the CPU in one thread (deterministic: a seed gives the same weights); another accelerator,
 precision or your own callbacks and loggers take a lightning.Trainer of your own (docs/extending.md).
 A second train into an --out where one is running is refused (its lock: OUT/.train.lock), and so is an
@@ -272,7 +277,8 @@ def run(args: argparse.Namespace) -> int:
     files, root = resolve_files(args)
     evaluated = check_data(files, progress=False if args.no_progress else None)
 
-    settings = {**run_settings(args, net_config, name, files), **data_settings(args)}
+    settings = {**run_settings(args, net_config, name, files), **data_settings(args, files)}
+    note_shared_data(files, settings["data_sha256"])
     from pipelines.commands.train_fit import run_training
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
@@ -351,6 +357,7 @@ def _check_out(
     if not loss_typed or (loss == "gaussian" and trains_point_head(args, net_config)):
         settings["loss"] = args.loss = loss or args.loss
     name = check_resumed_settings(out, recorded, settings, name_given=args.name is not None)
+    check_resumed_data(out, recorded, settings["data_sha256"])
     done = check_last_checkpoint(last, settings)
     check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
     note_other_code(out, recorded)

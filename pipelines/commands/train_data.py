@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 from typing import Any, Final
 
@@ -122,19 +123,66 @@ def check_data(files: dict[str, list[Path]], progress: bool | None = False) -> d
     return evaluated
 
 
-def data_settings(args: argparse.Namespace) -> dict[str, Any]:
+def data_settings(args: argparse.Namespace, files: dict[str, list[Path]]) -> dict[str, Any]:
     """What the run records of its data choice besides its files (``train_resume.run_settings``):
     ``{"explicit": True}`` for --train/--val files, else the protocol and dataset, and the resolved data
     directory (``data_dir``, which a resume takes but does not compare: the same prepared files can come
-    from two copies of the raw data, and the files are compared)."""
+    from two copies of the raw data, and the files are compared); and each file's content
+    (``data_sha256``, by resolved path), which a resume must find unchanged (``check_resumed_data``)."""
+    hashes = {"data_sha256": data_hashes(files)}
     if args.train is not None or args.val is not None:
-        return {"data": {"explicit": True}}
+        return {"data": {"explicit": True}, **hashes}
     from predictors.data.locate import resolve_data_dir
 
     return {
         "data": {"protocol": args.protocol, "dataset": args.dataset},
         "data_dir": str(resolve_data_dir(args.data_dir).resolve()),
+        **hashes,
     }
+
+
+def data_hashes(files: dict[str, list[Path]]) -> dict[str, str]:
+    """Each data file's sha256 by its resolved path (a file in two splits once)."""
+    from predictors.hashing import sha256_file
+
+    return {str(p.resolve()): sha256_file(p) for paths in files.values() for p in paths}
+
+
+def note_shared_data(files: dict[str, list[Path]], hashes: dict[str, str]) -> None:
+    """A note when a --test file holds the same bytes as a --train or --val file, by name or as a copy: its
+    "test" ADE, which metrics.json and the zoo record as held out, is then on data the net trained on or
+    chose its epoch by. A --val file that is the training file is not noted: small checks do it on purpose,
+    and its metrics are no test's."""
+    seen = {hashes[str(p.resolve())]: (split, p) for split in ("val", "train") for p in files[split]}
+    for path in files["test"]:
+        sha = hashes[str(path.resolve())]
+        if sha not in seen or not path.stat().st_size:  # two empty files are no shared data
+            continue
+        split, first = seen[sha]
+        other = f"--{split}" if first.resolve() == path.resolve() else f"--{split} {first}"
+        print(
+            f"note: --test {path} holds the same data as {other} (sha256 {sha[:12]}…): its test metrics are "
+            "not on held-out data",
+            file=sys.stderr,
+        )
+
+
+def check_resumed_data(out: Path, recorded: dict[str, Any] | None, hashes: dict[str, str]) -> None:
+    """PipelineError when a data file of the run in ``out`` (same path, ``recorded``: its settings) holds
+    other content than when the run started: the resume trained on the new content without a word, and the
+    run's metrics and zoo entry recorded only the new hash, for weights trained on both. A run from before
+    the hashes were recorded has none to compare."""
+    held = recorded.get("data_sha256") if recorded is not None else None
+    if not isinstance(held, dict):
+        return
+    for path, sha in hashes.items():
+        before = held.get(path)
+        if isinstance(before, str) and before != sha:
+            raise PipelineError(
+                f"--resume: data file {path} has changed since the run in {out} started (sha256 "
+                f"{before} then, {sha} now); restore that file, or start a new run with another "
+                "--out"
+            )
 
 
 def take_run_data(args: argparse.Namespace, recorded: dict[str, Any] | None) -> list[str]:

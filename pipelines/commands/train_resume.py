@@ -29,8 +29,9 @@ LOCK_FILE = ".train.lock"
 # What a resume names by a noun alone (say_taken), rather than as an option and its value
 _NOUNS: Final[tuple[str, ...]] = ("net config", "data files")
 # Recorded but not compared on a resume: the files a data directory gives are (train_data.data_settings),
-# and the epochs in all, which a resume may change (train_epochs)
-_NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir", "epochs")
+# the epochs in all, which a resume may change (train_epochs), and the files' hashes, which
+# train_data.check_resumed_data compares with a message of their own
+_NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir", "epochs", "data_sha256")
 # The options a resume takes from its run when they are not typed, and their defaults for a new run: the
 # parser's defaults are None, so that an option typed can be told from one left out (--batch-size 8 typed on
 # the resume of a run at 2 is refused; left out, the run's 2 goes on). Types as the run records them.

@@ -315,6 +315,26 @@ def format_coverage(
     return "\n".join(lines)
 
 
+def coverage_notes(alphas: Sequence[float], holdout: Any, coverage: Any) -> str:
+    """A note line for each alpha whose held-out coverage at a step falls below ``1 - alpha`` by more than a
+    binomial 95 % margin over its samples: the block is stored all the same, but may not hold on this data."""
+    if holdout is None or coverage is None:
+        return ""
+    counts, notes = np.sum(~np.isnan(np.asarray(holdout, dtype=float)), axis=0), ""
+    for alpha, steps in zip(alphas, coverage, strict=True):
+        floor = [1 - alpha - 1.96 * math.sqrt((1 - alpha) * alpha / n) if n else -1.0 for n in counts]
+        low = [k for k, c in enumerate(steps) if math.isfinite(c) and c < floor[k]]
+        if low:
+            k = min(low, key=lambda k: steps[k] - floor[k])
+            notes += (
+                f"note: alpha {alpha_text(alpha)}: held-out coverage {steps[k]:.1%} at step {k + 1} is below "
+                f"the target {coverage_target(alpha)} beyond chance (95 % margin {floor[k]:.1%} over "
+                f"{counts[k]} samples; {len(low)} step{'s' * (len(low) != 1)} so): its margins may not hold "
+                "on this data\n"
+            )
+    return notes
+
+
 def coverage_target(alpha: float) -> str:
     """``1 - alpha`` in percent, exactly as the alpha is written (0.025: 97.5%, 1e-05: 99.999%): a rounded
     target (98%, 100%) would misstate the coverage each margin was made for."""

@@ -41,8 +41,9 @@ _NUMBER: Final = re.compile(
 _COLUMNS: Final[tuple[str, ...]] = ("frame", "id", "pos_x", "pos_z", "pos_y", "v_x", "v_z", "v_y")
 
 
-def read_obsmat(path: str | Path) -> np.ndarray:
-    """BIWI EWAP ``obsmat.txt`` as ``(R, 4)`` rows ``frame - 1, pedestrian, x, y`` (metres), in file order.
+def read_obsmat(path: str | Path, *, velocities: bool = False) -> np.ndarray:
+    """BIWI EWAP ``obsmat.txt`` as ``(R, 4)`` rows ``frame - 1, pedestrian, x, y`` (metres), in file order;
+    with ``velocities``, ``(R, 6)`` rows with the file's ``v_x, v_y`` (m/s) after them.
 
     Each line holds 8 numbers ``frame id pos_x pos_z pos_y v_x v_z v_y`` (z unused), all finite, with an
     integer frame in 1..``MAX_FRAME``, an integer id in 0..``MAX_ID`` and ``|x|, |y| < MAX_COORDINATE``
@@ -50,7 +51,7 @@ def read_obsmat(path: str | Path) -> np.ndarray:
     at least. Anything else raises ``DatasetFormatError`` naming the file and the line.
     """
     path = require_file(path, " (expected a BIWI EWAP obsmat.txt)")
-    rows: list[tuple[float, float, float, float]] = []
+    rows: list[tuple[float, ...]] = []
     seen: dict[tuple[int, int], int] = {}
     for lineno, raw in bounded_lines(path):
         row = _obsmat_row(path, lineno, raw)
@@ -62,18 +63,20 @@ def read_obsmat(path: str | Path) -> np.ndarray:
                 path, lineno, f"pedestrian {key[1]} at frame {key[0]} repeats line {seen[key]}"
             )
         seen[key] = lineno
-        rows.append((row[0] - 1.0, row[1], row[2], row[3]))  # the converter's 1- to 0-based frames
+        rows.append((row[0] - 1.0, *row[1:]))  # the converter's 1- to 0-based frames
     if not rows:
         raise DatasetFormatError(path, None, "no annotation rows")
     if len({frame for frame, _ in seen}) < 2:
         raise DatasetFormatError(
             path, None, "annotations at a single frame; a sequence needs at least two distinct frames"
         )
-    return np.asarray(rows, dtype=np.float64)
+    table = np.asarray(rows, dtype=np.float64)
+    return table if velocities else table[:, :4]
 
 
-def _obsmat_row(path: Path, lineno: int, raw: bytes) -> tuple[float, float, float, float] | None:
-    """``(frame, id, x, y)`` of one obsmat line as read (1-based frame), or None for a blank line."""
+def _obsmat_row(path: Path, lineno: int, raw: bytes) -> tuple[float, ...] | None:
+    """``(frame, id, x, y, v_x, v_y)`` of one obsmat line as read (1-based frame), or None for a blank
+    line."""
     fields = raw.split()
     if not fields:
         return None
@@ -106,7 +109,7 @@ def _obsmat_row(path: Path, lineno: int, raw: bytes) -> tuple[float, float, floa
                 lineno,
                 f"{name} {value:g} m outside the supported range |{name}| < {MAX_COORDINATE:.0e} m",
             )
-    return frame, ped, x, y
+    return frame, ped, x, y, values[5], values[7]
 
 
 def infer_frame_step(frames: np.ndarray) -> int:

@@ -11,7 +11,9 @@ import errno
 import json
 import os
 import shutil
+import sys
 import tempfile
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Final
@@ -26,6 +28,7 @@ from predictors.data.ewap import (
     read_obsmat,
     split_frames,
 )
+from predictors.data.ewap_checks import check_step_seconds, fast_steps_note
 from predictors.data.selfcheck import Reference, compare_with_reference, describe_check
 from predictors.data.trajnet_scenes import (
     CHUNK_SIZE,
@@ -60,13 +63,16 @@ def prepare_ewap(
     progress: bool = False,
     log=print,
     log_dir: str | Path | None = None,
+    note: Callable[[str], None] | None = None,
 ) -> dict:
     """Convert ``raw_dir/seq_eth`` and ``raw_dir/seq_hotel`` into ``out_dir/{train,val,test}/<name>.ndjson``
     and write ``out_dir/manifest.json``; with ``references`` ({name: a TrajNet++ conversion of the whole
     sequence}) also run the self-check (``compare_with_reference``). Without ``categorize_scenes`` scenes
     are untagged and none is dropped (much faster; see ``build_scenes``). The log names each file in
-    ``log_dir`` (default ``out_dir``): a caller that moves ``out_dir`` into place names that place. Returns
-    the manifest."""
+    ``log_dir`` (default ``out_dir``): a caller that moves ``out_dir`` into place names that place. ``note``
+    takes the "note: ..." lines (default: stderr): steps no walker makes, splits without scenes. A sequence
+    whose velocities imply another rate than 2.5 fps, or a conversion with no scene at all, raises
+    ``PredictorError`` and leaves ``out_dir`` as it was. Returns the manifest."""
     raw_dir, out_dir = Path(raw_dir), Path(out_dir)
     log_dir = Path(log_dir) if log_dir is not None else out_dir
     sources = {name: raw_dir / seq / "obsmat.txt" for name, seq in EWAP_SEQUENCES.items()}
@@ -85,7 +91,7 @@ def prepare_ewap(
     try:
         staging.mkdir(parents=True)
         manifest = _prepare_into(staging, raw_dir, sources, acceptance, categorize_scenes, seed, fractions,
-                                 references, progress, log, log_dir)  # fmt: skip
+                                 references, progress, log, log_dir, note or _to_stderr)  # fmt: skip
         _install(staging, out_dir, manifest)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -104,12 +110,19 @@ def _prepare_into(
     progress: bool,
     log,
     log_dir: Path,
+    note: Callable[[str], None],
 ) -> dict:
     manifest = _new_manifest(raw_dir, acceptance, categorize_scenes, seed, fractions)
     options = dict(categorize_scenes=categorize_scenes, acceptance=acceptance, seed=seed, progress=progress)
     for name, source in sources.items():
-        tracks = read_obsmat(source)
+        with_velocities = read_obsmat(source, velocities=True)
+        tracks = np.ascontiguousarray(with_velocities[:, :4])
         frame_step = infer_frame_step(tracks[:, 0])
+        # before any file is written: a 10 Hz file was labelled 2.5 fps and scored 4x too slow
+        check_step_seconds(source, with_velocities, frame_step)
+        fast = fast_steps_note(source, with_velocities, frame_step)
+        if fast is not None:
+            note(fast)
         parts = split_frames(tracks[:, 0], fractions)
         manifest["sources"][name] = {
             "path": str(source.resolve()),
@@ -123,8 +136,27 @@ def _prepare_into(
         if reference is not None and Path(reference.path).is_file():
             check = _self_check(name, tracks, reference, frame_step, progress, log, out_dir)
             manifest["self_check"][name] = check
+    _check_scenes_made(manifest, raw_dir, log_dir, note)
     (out_dir / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
     return manifest
+
+
+def _to_stderr(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _check_scenes_made(manifest: dict, raw_dir: Path, log_dir: Path, note: Callable[[str], None]) -> None:
+    """``PredictorError`` when no file holds a scene (too few frames: a prepare that wrote only empty files
+    passed, and training then failed far from the cause); a note for each empty file, whose split a protocol
+    may still read (an empty val part left the selection of the best epoch to the other sequence's few)."""
+    empty = [name for name, entry in manifest["files"].items() if not entry["scenes"]]
+    if len(empty) == len(manifest["files"]):
+        raise PredictorError(
+            f"--raw {raw_dir}: no scene in any split; a scene needs a pedestrian annotated at 21 "
+            "consecutive steps within one part of the 70/10/20 % split of a sequence's frames"
+        )
+    for name in empty:
+        note(f"note: {log_dir / name} holds no scenes (too few frames of its sequence in that split)")
 
 
 def _install(staging: Path, out_dir: Path, manifest: dict) -> None:

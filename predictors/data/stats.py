@@ -17,12 +17,14 @@ from predictors.text_table import aligned_lines
 class FileStats:
     path: Path
     scenes: int
-    tracks: int  # track records
+    tracks: int  # distinct track rows (pedestrian and frame): an identical repeated row is one position
+    repeated: int  # track records that repeat an earlier one (the Reader keeps one)
     pedestrians: int  # distinct pedestrian ids
     agents_min: int  # agents per scene, as Reader.paths_to_xy returns them (primary included)
     agents_mean: float
     agents_max: int
     types: tuple[int, int, int, int]  # scenes of TrajNet++ type I, II, III, IV (untagged scenes not counted)
+    fps: tuple[float | None, ...] = ()  # the scenes' distinct frame rates, None for scenes without one
 
 
 def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
@@ -38,15 +40,18 @@ def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
         if kind is not None:
             types[kind - 1] += 1
     agents = np.asarray(sizes or [0])
+    distinct = len({(row.frame, row.pedestrian) for row in content.tracks})
     return FileStats(
         path=Path(path),
         scenes=len(sizes),
-        tracks=summary.n_tracks,
+        tracks=distinct,
+        repeated=summary.n_tracks - distinct,
         pedestrians=len(summary.pedestrians),
         agents_min=int(agents.min()),
         agents_mean=float(agents.mean()) if sizes else 0.0,
         agents_max=int(agents.max()),
         types=(types[0], types[1], types[2], types[3]),
+        fps=tuple(sorted({row.fps for row in content.scenes}, key=lambda fps: (fps is None, fps or 0))),
     )
 
 
@@ -63,19 +68,57 @@ def scene_type(tag: object) -> int | None:
 
 
 def ndjson_files(directory: str | Path) -> list[Path]:
-    """Every ``*.ndjson`` under ``directory`` (recursively), sorted."""
+    """Every ``*.ndjson`` under ``directory`` (recursively), sorted; a file alone, as train and evaluate
+    take them."""
     directory = Path(directory)
+    if directory.is_file():
+        return [directory]
     if not directory.is_dir():
-        raise PredictorError(f"{directory} is not a directory")
+        raise PredictorError(f"{directory} is neither an ndjson file nor a directory")
     files = sorted(p for p in directory.rglob("*.ndjson") if p.is_file())
     if not files:
         raise PredictorError(f"no .ndjson files under {directory}")
     return files
 
 
+def stats_report(path: str | Path) -> tuple[str, list[str]]:
+    """``data stats`` of an ndjson file or of every one under a folder: the table, and its notes (stderr).
+    A bar over each file's scenes on a terminal only, so that a piped table stays clean."""
+    stats = [file_stats(f, progress=None) for f in ndjson_files(path)]
+    return format_table(stats, root=path), repeated_notes(stats)
+
+
+def repeated_notes(stats: list[FileStats]) -> list[str]:
+    """A note for each file with repeated track rows, which the tracks column counts once."""
+    return [
+        f"note: {s.path}: {s.repeated} track row{'s' * (s.repeated != 1)} repeat an earlier one (same "
+        "pedestrian and frame); counted once"
+        for s in stats
+        if s.repeated
+    ]
+
+
+def _shown_fps(fps: tuple[float | None, ...]) -> str:
+    """The frame rates of a file's scenes ("2.5", "2.5,10", "none"): a file at another rate than 2.5 fps
+    is refused by train and evaluate, and one without a rate is read as 2.5 fps."""
+    return ",".join("none" if f is None else f"{f:g}" for f in fps) or "-"
+
+
 def format_table(stats: list[FileStats], root: str | Path | None = None) -> str:
-    """A plain-text table, one row per file plus the totals."""
-    header = ("file", "scenes", "tracks", "peds", "agents/scene min", "mean", "max", "types I/II/III/IV")
+    """A plain-text table, one row per file plus the totals; ``root``: the folder (or the one file) the
+    names are relative to."""
+    header = (
+        "file",
+        "scenes",
+        "tracks",
+        "peds",
+        "agents/scene min",
+        "mean",
+        "max",
+        "types I/II/III/IV",
+        "fps",
+    )
+    root = Path(root).parent if root is not None and Path(root).is_file() else root
     rows = []
     for s in stats:
         name = str(s.path.relative_to(root)) if root is not None else str(s.path)
@@ -89,6 +132,7 @@ def format_table(stats: list[FileStats], root: str | Path | None = None) -> str:
                 f"{s.agents_mean:.1f}",
                 str(s.agents_max),
                 "/".join(map(str, s.types)),
+                _shown_fps(s.fps),
             )
         )
     if len(stats) > 1:
@@ -107,6 +151,9 @@ def format_table(stats: list[FileStats], root: str | Path | None = None) -> str:
                 f"{mean:.1f}",
                 str(max(s.agents_max for s in stats)),
                 "/".join(map(str, types)),
+                _shown_fps(
+                    tuple(sorted({f for s in stats for f in s.fps}, key=lambda f: (f is None, f or 0)))
+                ),
             )
         )
     return "\n".join(aligned_lines(header, rows))

@@ -48,6 +48,7 @@ MAX_COORDINATE: Final[float] = 1e5  # metres, exclusive
 MAX_FPS: Final[float] = 1e4  # no annotation runs at more than 10 kHz
 # A TrajNet++ record is under 200 bytes; the cap bounds memory and parse time for a hostile line.
 MAX_LINE_BYTES: Final[int] = 1 << 20
+UTF8_BOM: Final[bytes] = b"\xef\xbb\xbf"
 
 TRACK_KEYS: Final[tuple[str, ...]] = ("f", "p", "x", "y")
 # fields of a TrajNet++ prediction file's tracks, optional: the Reader keeps them on its rows, nothing more
@@ -199,6 +200,11 @@ def bounded_lines(path: Path) -> Iterator[tuple[int, bytes]]:
         with path.open("rb") as handle:
             while raw := handle.readline(MAX_LINE_BYTES + 1):
                 lineno += 1
+                if lineno == 1 and raw.startswith(UTF8_BOM):
+                    # TrajNet++'s tools read neither format with one (json.loads and float() refuse it)
+                    raise DatasetFormatError(
+                        path, 1, "starts with a UTF-8 byte-order mark; save the file without one"
+                    )
                 if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
                     raise DatasetFormatError(path, lineno, f"line longer than {MAX_LINE_BYTES} bytes")
                 yield lineno, raw

@@ -106,7 +106,7 @@ def test_stats_counts_only_integer_scene_types(tmp_path, capsys):
         write_lines(tmp_path / f"t{k}.ndjson", records)
     code, out, err = run(capsys, "data", "stats", str(tmp_path))
     assert code == 0, err
-    assert out.splitlines()[-1].split()[0] == "total" and out.splitlines()[-1].endswith(" 0/0/1/2")
+    assert out.splitlines()[-1].split()[0] == "total" and out.splitlines()[-1].split()[-2] == "0/0/1/2"
 
 
 BAD_LINES = {

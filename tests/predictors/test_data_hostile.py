@@ -129,7 +129,11 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         N + 1,
         "track frame 300 lies outside every scene's [s, e] frame range",
     ),
-    "UTF-8 byte-order mark": (["\ufeff" + json.dumps(VALID[0])] + VALID[1:], 1, "invalid JSON"),
+    "UTF-8 byte-order mark": (
+        ["\ufeff" + json.dumps(VALID[0])] + VALID[1:],
+        1,
+        "starts with a UTF-8 byte-order mark; save the file without one",
+    ),
     "carriage returns only": (["\r".join(json.dumps(r) for r in VALID)], 1, "invalid JSON (Extra data"),
     # line 2 is pedestrian 1 at frame 0, (0, 0): the reader kept one of the two and dropped the other
     "a second position for a pedestrian and frame": (
