@@ -135,8 +135,8 @@ def format_table(
 
 
 def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list[tuple[str, str]]:
-    """The rows shown only when some steps were cut short: by the MPC's wall-time budget, by a NaN
-    prediction."""
+    """The rows shown only when some steps were cut short: by the MPC's wall-time budget, by solves that
+    mostly failed, by a NaN prediction."""
     found: list[tuple[str, str]] = []
     # The budget is far above a step's time at Table I's horizon; a long horizon or a slow predictor reaches
     # it, and then what those steps planned depends on the machine's speed and load.
@@ -154,6 +154,19 @@ def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list
     # it ends the step's iterations, and the metrics above read as the predictor's without this row. Not every
     # such step fell back: one whose NaN came after a solved iteration keeps that iteration's plan (its status
     # is still nan_prediction), so the row names the prediction and leaves the count of fallbacks to its row.
+    # Most steps falling back is no result of the method: the robots brake or hold a stale plan, and a world
+    # far from Table I's (a shorter dt, say) can leave every solve short of its iterations.
+    fell, steps = int(summary.get("fallback_steps") or 0), int(summary.get("control_steps") or 0)
+    if steps and fell > steps / 2:
+        failed = {k: v for k, v in summary.get("statuses", {}).items() if k != "ok"}
+        most = max(failed, key=lambda k: failed[k]) if failed else "failed"
+        found.append(
+            (
+                "mostly fallbacks",
+                f"{fell} of {steps} steps fell back (most: {most}): the MPC rarely solved, so these metrics "
+                "are of its fallback; mpc.solver_max_iter or mpc.cost_scale may let it solve",
+            )
+        )
     nan_steps = int(summary.get("statuses", {}).get(NAN_PREDICTION, 0))
     if nan_steps:
         found.append(

@@ -275,3 +275,21 @@ def test_the_robot_contact_row_reads_n_a_for_older_records():
     summary |= {f"robot_contact_between_steps_{k}": float("nan") for k in ("rate", "count")}
     (row,) = [line for line in format_table(summary, "h").splitlines() if "robot-robot" in line]
     assert row.split()[2:10] == ["n/a,", "n/a", "of", "states,", "between", "steps", "n/a:", "two"]
+
+
+def test_a_run_that_mostly_fell_back_says_so():
+    """[world] dt = 0.2 left every CMPC solve at its 100 iterations: 195 of 195 steps fell back, the robots
+    braked all episode, and the table read "success 0.0 %" as the method's with nothing said; under half of
+    the steps falling back, no such row."""
+    from pipelines.commands.simulate_table import format_table
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.episode import run_episodes, summarize
+
+    summary = summarize(run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle",
+                                     n_humans=2, progress=False))  # fmt: skip
+    summary["statuses"], summary["control_steps"] = {"ok": 5, "Maximum_Iterations_Exceeded": 190}, 195
+    summary["fallback_steps"] = 97
+    assert "mostly fallbacks" not in format_table(summary, "h")
+    summary["fallback_steps"] = 190
+    (row,) = [line for line in format_table(summary, "h").splitlines() if "mostly fallbacks" in line]
+    assert "190 of 195 steps fell back (most: Maximum_Iterations_Exceeded)" in row and "solver_max_iter" in row
