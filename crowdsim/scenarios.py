@@ -366,6 +366,6 @@ def _check_robot_spacing(starts: np.ndarray, radius: float, formation: Formation
         chosen = choose_formation(n_robots) if formation == "auto" else formation
         raise SimulationError(
             f"radius {radius:g} m: the {chosen} formation of {n_robots} robots puts neighbours {closest:g} m "
-            f"apart, in contact from the start (2 x radius = {2.0 * radius:g} m); use [world] radius <= "
-            f"{closest / 2.0:g} m, or another [env] formation"
+            f"apart, in contact from the start (2 x radius = {2.0 * radius:g} m); space them out ([env] "
+            f"robot_spacing, m between neighbours) or use [world] radius <= {closest / 2.0:g} m"
         )

@@ -85,6 +85,8 @@ def test_the_overlap_refusal_is_one_line_naming_the_setting(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         "crowdmpc simulate: error: radius 0.55 m: the row formation of 3 robots puts neighbours 1 m apart, "
-        "in contact from the start (2 x radius = 1.1 m); use [world] radius <= 0.5 m, or another [env] "
-        "formation"
+        "in contact from the start (2 x radius = 1.1 m); space them out ([env] robot_spacing, m between "
+        "neighbours) or use [world] radius <= 0.5 m"
     ]
+    # the way out it names works (another formation did not: the wedge's neighbours are 1.2 m apart)
+    assert main([*argv, "--set", "env.robot_spacing=1.2", "--episodes", "1"]) == 0
