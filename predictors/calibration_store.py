@@ -270,7 +270,7 @@ def find_calibration(
     Of the blocks made behind different sensors, the one made behind ``sensor_range`` is taken (with the
     track lengths as the run has them, else without), else the one made with every human in view, else the
     one behind the nearest range (the notes of
-    ``pipelines.commands.simulate_checks`` say when the view differs). ``sha256`` is the sha256 the weights
+    ``pipelines.commands.calibration_notes`` say when the view differs). ``sha256`` is the sha256 the weights
     have now (None for a weightless predictor); the default ``...`` reads it from the zoo manifest in
     ``directory``. A block made for other weights is refused.
     """

@@ -262,17 +262,13 @@ def _simulate(resolved: SimulateRun) -> int:
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
     from pipelines.commands import simulate_checks as checks
+    from pipelines.commands.calibration_notes import calibration_notes
 
-    visibility = "visible" if cfg.env.robots_visible else "invisible"
     notes = (
         checks.flock_note(spec, scenario.robots),
         checks.goal_room_note(spec, scenario.robots, cfg.env.formation, cfg.env.robot_spacing),
         checks.horizon_note(spec),
-        checks.calibration_world_note(
-            spec, cfg.env.profile, visibility, cfg.env.crowd, sim.sensor_range, sim.sensor_tracks
-        ),
-        checks.sensor_margins_note(spec, sim.sensor_range, sim.sensor_tracks),
-        checks.calibration_controller_note(spec, sim.sensor_range, sim.sensor_tracks),
+        *calibration_notes(spec, cfg),
     )
     for note in filter(None, notes):
         print(note, file=sys.stderr)

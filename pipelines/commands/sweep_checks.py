@@ -6,14 +6,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from pipelines.commands.simulate_checks import (
+from pipelines.commands.calibration_notes import (
+    CROWD_SETTINGS,
     calibration_controller_note,
+    calibration_physics_note,
     calibration_world_note,
-    flock_note,
-    goal_room_note,
-    horizon_note,
     sensor_margins_note,
 )
+from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -132,7 +132,8 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     ``horizon_note`` lines (a plan longer than the learned predictor's training), ``flock_note`` lines
     (a team larger than the paper's under its per-pair flocking weight), ``calibration_world_note`` lines
     (margins calibrated under other conventions), ``sensor_margins_note`` lines (calibrated margins
-    behind a sensor) and ``calibration_controller_note`` lines (with another controller), each once, naming
+    behind a sensor), ``calibration_controller_note`` lines (with another controller) and
+    ``calibration_physics_note`` lines (in another crowd's motion, [env] / [env.orca]), each once, naming
     the methods it applies to: a grid of --vary columns printed the same line for each of eight methods."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
@@ -157,6 +158,12 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             ),
             sensor_margins_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
             calibration_controller_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
+            calibration_physics_note(
+                cell.spec,
+                [f"{k} {v}" for k, v in cell.world.env_settings if k in CROWD_SETTINGS],
+                cell.world.sensor_range,
+                cell.world.sensor_tracks,
+            ),
         ):
             if note is not None:
                 methods.setdefault(note, []).append(cell.method)

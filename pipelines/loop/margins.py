@@ -283,7 +283,7 @@ def calibration_text(calibration: Mapping[str, Any]) -> str:
 def controller_note(block: Calibration, controller: str) -> str | None:
     """A line for a run of MPC ``controller`` planning with the margins of ``block``, a closed-loop block
     calibrated with another controller (``calibrate --controller``, recorded in its details), None otherwise,
-    as ``simulate_checks.calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
+    as ``calibration_notes.calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
     otherwise, and so do the humans who answer them, but one block is stored per alpha (a recalibration
     replaces it) and a run planned with the other controller's silently. Not refused: an experiment may hold
     the margins fixed across controllers."""

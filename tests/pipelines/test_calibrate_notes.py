@@ -193,7 +193,7 @@ def test_simulate_and_sweep_say_when_a_run_plans_with_another_controllers_block(
         "note: method 'DMPC': the closed-loop margins of 'constant_velocity' at alpha=0.1 were calibrated "
         "with controller cmpc, this run's is dmpc"
     )
-    from pipelines.commands.simulate_checks import calibration_controller_note
+    from pipelines.commands.calibration_notes import calibration_controller_note
     from pipelines.loop.margins import parse_margins
     from pipelines.loop.spec import ControllerSpec
 

@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands.simulate_checks import calibration_world_note, sensor_margins_note
+from pipelines.commands.calibration_notes import calibration_world_note, sensor_margins_note
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import parse_margins
 from predictors.calibration_store import find_calibration, save_calibration
@@ -203,3 +203,22 @@ def test_a_tracker_reporting_track_lengths_the_other_way_is_noted_with_the_comma
     assert sensor_margins_note(spec, 3.0, False) is None
     world = calibration_world_note(spec, "v1", "visible", sensor_range=3.0, sensor_tracks=False) or ""
     assert "--sensor-range 3 --no-sensor-tracks --profile v1 --visibility visible measures it" in world
+
+
+def test_margins_planned_with_in_another_world_or_crowd_motion_say_so():
+    """calibrate reads no config: its blocks are of Table I's world and the profile's ORCA humans, and a
+    run of slower people (world.v_pref 0.5), larger robots or a shorter ORCA horizon planned with them silently."""
+    from pipelines.commands.calibration_notes import calibration_physics_note, changed_physics
+    from pipelines.config import load
+
+    cfg = load(sets=["world.v_pref=0.5", "env.time_limit=60", "env.orca.time_horizon=2", "world.radius=0.3"])
+    # the time limit moves no one; a value set to its default (radius 0.3) changes nothing
+    assert changed_physics(cfg) == ["world.v_pref 0.5", "env.orca.time_horizon 2.0"]
+    note = calibration_physics_note(_spec("conformal:0.1"), ["world.v_pref 0.5"]) or ""
+    assert note.startswith(
+        "note: the closed-loop margins of 'social_lstm_eth' at alpha=0.1 were calibrated in "
+    )
+    assert note.endswith("this run sets world.v_pref 0.5: their coverage here is not measured")
+    assert calibration_physics_note(_spec("conformal:0.1"), []) is None  # Table I's world
+    assert calibration_physics_note(_spec("conformal:0.1:real"), ["world.v_pref 0.5"]) is None  # real people
+    assert calibration_physics_note(_spec("none"), ["world.v_pref 0.5"]) is None

@@ -138,7 +138,7 @@ def test_a_replayed_sweeps_table_says_who_the_humans_are_and_that_the_oracle_is_
 
 
 def test_closed_loop_margins_among_a_replayed_crowd_are_noted_as_covering_less_there():
-    from pipelines.commands.simulate_checks import calibration_world_note
+    from pipelines.commands.calibration_notes import calibration_world_note
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.margins import parse_margins
 
