@@ -207,7 +207,8 @@ def test_a_tracker_reporting_track_lengths_the_other_way_is_noted_with_the_comma
 
 def test_margins_planned_with_in_another_world_or_crowd_motion_say_so():
     """calibrate reads no config: its blocks are of Table I's world and the profile's ORCA humans, and a
-    run of slower people (world.v_pref 0.5), larger robots or a shorter ORCA horizon planned with them silently."""
+    run of slower people (world.v_pref 0.5), larger robots or a shorter ORCA horizon planned with them
+    silently."""
     from pipelines.commands.calibration_notes import calibration_physics_note, changed_physics
     from pipelines.config import load
 
