@@ -237,6 +237,7 @@ def check_world(cfg: RunConfig) -> None:
     from pipelines.commands.simulate_checks import check_recording
 
     _check_scenario(cfg)
+    _check_simulate(cfg)
     check_recording(cfg)
     why = (
         "a sweep's cells share Table I's world facts (time step, history, radius, bounds), which the "
@@ -291,6 +292,27 @@ SWEEP_SCENARIO: dict[str, str] = {
     "humans": "a sweep's crowd sizes are --humans ([sweep] humans)",
     "name": "a sweep's episodes alternate the circle (even episodes) and perpendicular (odd) scenarios",
 }
+
+
+# [simulate] keys a sweep has its own of (sensor_range and sensor_tracks it takes: every method behind them)
+SWEEP_OWN: dict[str, str] = {
+    "episodes": "a sweep's are --episodes-per-cell ([sweep] episodes_per_cell)",
+    "seed": "a sweep's are --seed ([sweep] seed)",
+    "record": "a sweep's are --record none|failures|all ([sweep] record), into --out",
+    "json": "a sweep writes its records and table into --out",
+    "plot": "a sweep draws its plots into --out",
+    "progress": "a sweep's is --no-progress",
+}
+
+
+def _check_simulate(cfg: RunConfig) -> None:
+    """Refuse a [simulate] value given with --set that a sweep does not read (``--set simulate.seed=7`` ran
+    seed 0 without a word); a config file's pass, as a file may serve simulate too."""
+    for key, why in SWEEP_OWN.items():
+        source = cfg.source("simulate", key)
+        if source is not None and source.kind != "file":
+            value = cfg.values["simulate"][key]
+            raise cfg.error("simulate", key, f"{value!r}: [simulate] {key} applies to simulate only; {why}")
 
 
 def _check_scenario(cfg: RunConfig) -> None:

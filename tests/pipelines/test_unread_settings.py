@@ -87,3 +87,31 @@ def test_a_config_file_shared_by_both_controllers_still_serves_cmpc(capsys):
         ["--config", str(MANY_ROBOTS), "simulate", "--controller", "cmpc", "--episodes", "1"]
     )
     assert resolve_run(args).config.mpc.dmpc_update == "gauss_seidel"
+
+
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        (
+            "simulate.seed=7",
+            "--set simulate.seed: 7: [simulate] seed applies to simulate only; a sweep's are --seed",
+        ),
+        (
+            "simulate.episodes=5",
+            "[simulate] episodes applies to simulate only; a sweep's are --episodes-per-cell",
+        ),
+    ],
+)
+def test_a_sweep_refuses_a_simulate_setting_it_has_its_own_of(tmp_path, capsys, item, message):
+    """`sweep --set simulate.seed=7` ran seed 0 and `--set simulate.episodes=5` a thousand a cell, without a
+    word; [simulate] sensor_range still puts every method behind a sensor."""
+    out = str(tmp_path / "s")
+    assert main(["sweep", "--experiment", "table2", "--set", item, "--out", out, "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert (
+        main(
+            ["sweep", "--experiment", "table2", "--set", "simulate.sensor_range=3", "--out", out, "--dry-run"]
+        )
+        == 0
+    )
