@@ -313,6 +313,7 @@ def _add(args: argparse.Namespace) -> int:
     if args.protocol:
         training_data["protocol"] = args.protocol
     training["size_kb"] = round(args.weights.stat().st_size / 1024, 1)
+    training |= {"code": summary["code"]} if isinstance(summary.get("code"), dict) else {}  # that trained it
     entry, previous = zoo_edit.add_entry(
         args.weights,
         name=name,

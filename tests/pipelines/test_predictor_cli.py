@@ -873,7 +873,10 @@ def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, cap
     listing = capsys.readouterr().out
     assert "walker" in listing and "social_lstm" in listing
     assert main(["zoo", "show", "walker"]) == 0
-    assert json.loads(capsys.readouterr().out)["training_data"]["sha256"]
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["training_data"]["sha256"]
+    # the code that trained it, as its metrics file recorded it (the entry kept the seed, not the commit)
+    assert shown["training"]["code"] == json.loads((out / "walker.metrics.json").read_text())["code"]
     assert main(["zoo", "verify"]) == 0
     assert "walker (user): ok\n1 of 1 entries ok" in capsys.readouterr().out
 
