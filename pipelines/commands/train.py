@@ -278,7 +278,8 @@ def run(args: argparse.Namespace) -> int:
     evaluated = check_data(files, progress=False if args.no_progress else None)
 
     settings = {**run_settings(args, net_config, name, files), **data_settings(args, files)}
-    note_shared_data(files, settings["data_sha256"])
+    if not args.resume:  # said when the run started
+        note_shared_data(files, settings["data_sha256"])
     from pipelines.commands.train_fit import run_training
 
     with one_run_at_a_time(out):  # under the lock: a train into --out may have started or ended since
