@@ -292,4 +292,6 @@ def test_a_run_that_mostly_fell_back_says_so():
     assert "mostly fallbacks" not in format_table(summary, "h")
     summary["fallback_steps"] = 190
     (row,) = [line for line in format_table(summary, "h").splitlines() if "mostly fallbacks" in line]
-    assert "190 of 195 steps fell back (most: Maximum_Iterations_Exceeded)" in row and "solver_max_iter" in row
+    assert (
+        "190 of 195 steps fell back (most: Maximum_Iterations_Exceeded)" in row and "solver_max_iter" in row
+    )
