@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import fcntl
 import json
 import os
@@ -205,13 +204,10 @@ def _store(blocks: list, args: argparse.Namespace) -> None:
     """Store ``blocks``, each refused (``_check_keeps_class_margins``) under the lock it is written under: a
     calibrate running meanwhile (another job on the same user zoo) may have stored a block with margins per
     motion class since this one checked, before its held-out run, and a short trial replaced it."""
-    from pipelines.version import code_identity
     from predictors.calibration_store import save_calibration, stored_calibrations
 
     in_force = stored_calibrations()
     for block in blocks:
-        # the code that measured it: closed-loop margins are the MPC's episodes, a real block the predictor's
-        block = dataclasses.replace(block, details={**block.details, "code": code_identity()})
         note = _replaced_note(block, in_force)
         path = save_calibration(block, check=lambda: _check_keeps_class_margins(blocks, args))
         if note is not None:  # once it is stored: a block refused replaces nothing

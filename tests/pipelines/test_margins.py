@@ -786,17 +786,3 @@ def test_margins_that_are_no_text_are_named(given):
     """None failed with "'NoneType' object has no attribute 'strip'"."""
     with pytest.raises(PipelineError, match=r"^margins must be text such as 'none' or 'conformal:0.1', got "):
         parse_margins(given)
-
-
-def test_a_stored_block_records_the_code_that_measured_it(monkeypatch, capsys):
-    """Closed-loop margins are the MPC's episodes, and a block said nothing of the code that ran them, where
-    every other output records it."""
-    from pipelines.cli import main
-    from pipelines.version import code_identity
-    from predictors.calibration_store import find_calibration
-
-    _episodes(monkeypatch)
-    assert main([*CALIBRATE, "--alpha", "0.1"]) == 0
-    capsys.readouterr()
-    block = find_calibration("constant_velocity", "closed-loop", 0.1)
-    assert block.details["code"] == code_identity()
