@@ -44,11 +44,16 @@ def code_identity() -> dict[str, str | bool | None]:
         "python": sys.version.split()[0],
     }
     for name in RESULT_LIBRARIES:
-        try:
-            identity[name] = version(name)
-        except PackageNotFoundError:
-            identity[name] = None
+        identity[name] = library_version(name)
     return identity
+
+
+def library_version(name: str) -> str | None:
+    """The installed version of distribution ``name``, None where it is not installed."""
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return None
 
 
 def code_changes(earlier: Iterable[Any]) -> str:

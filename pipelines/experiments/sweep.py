@@ -127,7 +127,7 @@ def _add_run(
     number, counted from 1 as ``config show --from-sweep DIR --run N`` counts them (``runs[N - 1]``), which
     each record of the run keeps as its ``run``. ``backend``: the one that started (``--backend auto``
     names none), with Ray's version where it was Ray; None for a run with nothing to run."""
-    from pipelines.version import code_identity, crowdmpc_version
+    from pipelines.version import code_identity, crowdmpc_version, library_version
 
     path = out / SWEEP_FILE
     meta["experiment"] = config.experiment.name
@@ -145,7 +145,7 @@ def _add_run(
             "jit": config.jit,
             "planned": planned,
             **({} if backend is None else {"backend": backend}),
-            **({"ray": _ray_version()} if backend == "ray" else {}),
+            **({"ray": library_version("ray")} if backend == "ray" else {}),
             **({"config": config.run_config} if config.run_config is not None else {}),
             "cells": [
                 {
@@ -168,15 +168,6 @@ def _add_run(
         finally:  # stopped before the replace: the half-written file is nobody's
             tmp.unlink(missing_ok=True)
     return len(meta["runs"])
-
-
-def _ray_version() -> str | None:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("ray")
-    except PackageNotFoundError:
-        return None
 
 
 def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
