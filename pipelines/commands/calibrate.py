@@ -365,7 +365,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     else:
         blocks, holdout = _closed_loop(args, sha256), None
     holdout_classes = holdout_shortfall = None
-    with storing(blocks, args):
+    with storing(blocks, args) as blocks:
         if args.holdout and args.source == "closed-loop":
             holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args)
     cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None

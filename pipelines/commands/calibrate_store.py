@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import fcntl
 import json
 import os
@@ -79,20 +80,25 @@ def _seeds(first: int, last: int) -> str:
 
 
 @contextlib.contextmanager
-def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
+def storing(blocks: list, args: argparse.Namespace) -> Iterator[list]:
     """Store ``blocks`` (not with --dry-run) once the held-out run inside has finished: an interrupted or
     failed command leaves the user's calibrations as they were. When the held-out episodes plan with these
     blocks they are stored first, and the earlier blocks of their keys are put back if the run stops (blocks
-    another calibrate stored meanwhile stay)."""
+    another calibrate stored meanwhile stay). Yields the blocks as they are stored: with the code that
+    measured them (``details["code"]``), as every other output records it."""
     from pipelines.loop.margins import parse_margins
+    from pipelines.version import code_identity
     from predictors.calibration_store import calibrations_path, read_calibration_file
 
+    # here, before any journal: a take-back finds the blocks as they were stored (closed-loop margins are the
+    # MPC's episodes, a real block the predictor's errors; both change with the code)
+    blocks = [dataclasses.replace(b, details={**b.details, "code": code_identity()}) for b in blocks]
     if args.dry_run:
-        yield
+        yield blocks
         return
     _check_keeps_class_margins(blocks, args)  # now, not after the held-out run; and again as they are stored
     if not plans_with_new_blocks(args, parse_margins(args.holdout_margins)):
-        yield
+        yield blocks
         _store(blocks, args)
         return
     from pipelines.loop.interrupt import terminate_as_interrupt
@@ -107,14 +113,14 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[None]:
 
 def _stored_for_the_run(
     blocks: list, args: argparse.Namespace, path: Path, before: list | None
-) -> Iterator[None]:
+) -> Iterator[list]:
     """``storing``'s case of a held-out run that plans with ``blocks``: stored before it, journalled, and
     the earlier blocks ``before`` put back if it stops."""
     journal, held = _write_journal(path, blocks, before)
     try:
         try:
             _store(blocks, args)
-            yield
+            yield blocks
         except BaseException:  # Ctrl-C too, and a refusal of a block (another calibrate stored one since)
             _put_back(blocks, before)
             raise

@@ -49,8 +49,7 @@ def test_a_held_out_run_planning_with_the_blocks_stores_them_first_and_leaves_no
 ):
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     path = calibrations_path()
-    blocks = _blocks()
-    with storing(blocks, _args()):
+    with storing(_blocks(), _args()) as blocks:
         assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
         assert [_JOURNAL.fullmatch(name)["pid"] for name in _journals(tmp_path)] == [str(os.getpid())]
     assert [b.to_json() for b in read_calibration_file(path)] == [b.to_json() for b in blocks]
@@ -63,11 +62,27 @@ def test_a_held_out_run_planning_with_the_blocks_makes_a_user_zoo_not_made_yet(t
     zoo before storing the blocks made it."""
     zoo = tmp_path / "zoo"
     monkeypatch.setenv("CROWDMPC_ZOO", str(zoo))
-    blocks = _blocks()
-    with storing(blocks, _args()):
+    with storing(_blocks(), _args()) as blocks:
         assert [_JOURNAL.fullmatch(name)["pid"] for name in _journals(zoo)] == [str(os.getpid())]
     assert [b.to_json() for b in read_calibration_file(calibrations_path())] == [b.to_json() for b in blocks]
     assert _journals(zoo) == []
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_the_blocks_record_the_code_that_measured_them(tmp_path, monkeypatch, dry_run):
+    """Closed-loop margins are the MPC's episodes and a real block the predictor's errors, and a block said
+    nothing of the code that made them, where every other output records it: the blocks stored, and those
+    --json writes with --dry-run, carry ``details["code"]``, the rest of their details as they were."""
+    from pipelines.version import code_identity
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    made = _blocks()
+    args = SimpleNamespace(**{**vars(_args()), "holdout": False, "dry_run": dry_run})
+    with storing(made, args) as blocks:
+        pass
+    assert [b.details for b in blocks] == [{**b.details, "code": code_identity()} for b in made]
+    stored = [] if dry_run else [b.details for b in read_calibration_file(calibrations_path())]
+    assert stored == ([] if dry_run else [b.details for b in blocks])
 
 
 def test_a_stopped_held_out_run_with_no_earlier_file_leaves_no_file_and_no_journal(tmp_path, monkeypatch):
