@@ -7,6 +7,7 @@
   --controller module:Class``) and lists it in ``CROWDMPC_CONTROLLERS``.
 
 Either variable is read by the processes a command starts (sweep workers), so they load the same plugins.
+Every output records their code beside crowdmpc's: ``code_with_plugins``.
 A plugin that does not load is a ``PluginError``: one line, which the command line prints as a parser error;
 ``load_environment_plugins`` loads those the variables name up front, so that such an error says which
 variable named the plugin.
@@ -15,10 +16,13 @@ variable named the plugin.
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from typing import Final, Literal
+from pathlib import Path
+from typing import Any, Final, Literal
 
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import PLUGINS_ENV as CONTROLLERS_ENV
@@ -150,3 +154,35 @@ def _check_importable_elsewhere(spec: str) -> None:
         f"worker processes cannot import (each is a new interpreter); put it in a module file and register "
         f"'module:{name}', or run the sweep with backend 'inline'"
     )
+
+
+def code_with_plugins() -> dict[str, Any]:
+    """The code a run ran: ``pipelines.version.code_identity()`` and, with plugins registered, ``"plugins"``
+    (``plugin_code()``): a changed plugin gave the same records as the old one, and a sweep resumed with it
+    said nothing."""
+    from pipelines.version import code_identity
+
+    identity: dict[str, Any] = dict(code_identity())
+    files = plugin_code()
+    if files:
+        identity["plugins"] = files
+    return identity
+
+
+def plugin_code() -> dict[str, str | None]:
+    """``module:Class`` -> the sha256 of the file its module was imported from, for each plugin registered
+    in this process (predictor nets, then controllers; entry points, installed packages with a version of
+    their own, are not among them). The module's own file only: code it imports from other files is not
+    covered. None for a module with no file (a notebook's ``__main__``)."""
+    specs = [*models.registered_plugins(), *registered_controller_plugins()]
+    return {spec: _module_sha256(spec.partition(":")[0]) for spec in specs}
+
+
+@functools.cache
+def _module_sha256(module: str) -> str | None:
+    """Once a process: the code that runs is the code imported, however its file changes afterwards."""
+    path = getattr(sys.modules.get(module), "__file__", None)
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest() if path else None
+    except OSError:
+        return None

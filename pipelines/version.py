@@ -33,7 +33,8 @@ def crowdmpc_version() -> str:
 @functools.cache
 def code_identity() -> dict[str, str | bool | None]:
     """``{"version", "commit", "dirty", "diff_sha256", "python", "casadi", "torch", "numpy"}``, looked up once
-    a process; ``diff_sha256``: of ``git diff HEAD`` (tracked files) when dirty, else None."""
+    a process; ``diff_sha256``: of ``git diff HEAD`` (tracked files) when dirty, else None. Outputs record
+    ``pipelines.plugins.code_with_plugins()``: this and the plugins' files."""
     commit, dirty = _git_state(SOURCE_ROOT)
     identity: dict[str, str | bool | None] = {
         "version": crowdmpc_version(),
@@ -56,13 +57,14 @@ def library_version(name: str) -> str | None:
         return None
 
 
-def code_changes(earlier: Iterable[Any]) -> str:
-    """What differs between this process's code and the ``code_identity()``s earlier runs recorded, as the
-    resume notes name it: "commit 0123456789ab -> 89abcdef0123, torch ..." (each key as the first earlier
-    identity that differs had it), led by "code not recorded -> commit ..." when one is no identity (a run
-    from before the code was recorded); "" when every one is this code. Uncommitted changes are compared by
-    their diff's sha256 ("dirty" alone says nothing of which), where the earlier identity recorded one."""
-    now = code_identity()
+def code_changes(earlier: Iterable[Any], now: dict[str, Any]) -> str:
+    """What differs between ``now`` (this process's code: ``pipelines.plugins.code_with_plugins()``) and the
+    identities earlier runs recorded, as the resume notes name it: "commit 0123456789ab -> 89abcdef0123,
+    torch ..." (each key as the first earlier identity that differs had it; "plugin module:Class" for each
+    plugin's file that differs, "(none)" on the side without it), led by "code not recorded -> commit ..."
+    when one is no identity (a run from before the code was recorded); "" when every one is this code.
+    Uncommitted changes are compared by their diff's sha256 ("dirty" alone says nothing of which), where the
+    earlier identity recorded one."""
     changed: dict[str, Any] = {}
     unrecorded = False
     for before in earlier:
@@ -70,14 +72,27 @@ def code_changes(earlier: Iterable[Any]) -> str:
             unrecorded = True
             continue
         for k in now:
-            if k == "dirty" or (k == "diff_sha256" and k not in before):
+            if k in ("dirty", "plugins") or (k == "diff_sha256" and k not in before):
                 continue
             if before.get(k) != now[k]:
                 changed.setdefault(k, before.get(k))
-    shown = ", ".join(f"{k} {str(was)[:12]} -> {str(now[k])[:12]}" for k, was in changed.items())
+        # each plugin's file on its own, one added or dropped too ("(none)" on the side that lacks it)
+        was = _plugin_items(before)
+        for key in sorted({key for key, _ in was.items() ^ _plugin_items(now).items()}):
+            changed.setdefault(key, was.get(key, "(none)"))
+    current = now | _plugin_items(now)
+    shown = ", ".join(
+        f"{k} {str(was)[:12]} -> {str(current.get(k, '(none)'))[:12]}" for k, was in changed.items()
+    )
     if unrecorded:
         shown = f"code not recorded -> commit {str(now['commit'])[:12]}" + (f", {shown}" if shown else "")
     return shown
+
+
+def _plugin_items(identity: dict[str, Any]) -> dict[str, Any]:
+    """An identity's plugins as "plugin module:Class" -> its file's sha256 (none recorded: none)."""
+    plugins = identity.get("plugins")
+    return {f"plugin {spec}": sha for spec, sha in plugins.items()} if isinstance(plugins, dict) else {}
 
 
 def dirty_text(dirty: Any, diff_sha256: Any) -> str:

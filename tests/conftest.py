@@ -1,3 +1,5 @@
+import os
+
 import pytest
 
 from pipelines.loop.spec import PLUGINS_ENV as CONTROLLER_PLUGINS_ENV
@@ -25,6 +27,11 @@ def _private_user_zoo(tmp_path_factory, monkeypatch):
     monkeypatch.setenv(ZOO_ENV, str(tmp_path_factory.mktemp("user_zoo")))
     monkeypatch.delenv(PLUGINS_ENV, raising=False)
     monkeypatch.delenv(CONTROLLER_PLUGINS_ENV, raising=False)
+    yield
+    # monkeypatch restores only what it changed: a variable absent before the test, and set by its --plugin,
+    # stayed, and a later test's monkeypatch.undo() put it back mid-test (a plugin of a gone tmp_path)
+    for variable in (PLUGINS_ENV, CONTROLLER_PLUGINS_ENV):
+        os.environ.pop(variable, None)
 
 
 @pytest.fixture

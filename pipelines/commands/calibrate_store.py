@@ -87,12 +87,12 @@ def storing(blocks: list, args: argparse.Namespace) -> Iterator[list]:
     another calibrate stored meanwhile stay). Yields the blocks as they are stored: with the code that
     measured them (``details["code"]``), as every other output records it."""
     from pipelines.loop.margins import parse_margins
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
     from predictors.calibration_store import calibrations_path, read_calibration_file
 
     # here, before any journal: a take-back finds the blocks as they were stored (closed-loop margins are the
     # MPC's episodes, a real block the predictor's errors; both change with the code)
-    blocks = [dataclasses.replace(b, details={**b.details, "code": code_identity()}) for b in blocks]
+    blocks = [dataclasses.replace(b, details={**b.details, "code": code_with_plugins()}) for b in blocks]
     if args.dry_run:
         yield blocks
         return

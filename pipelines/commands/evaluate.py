@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.evaluate import EvalConfig, check_dataset_predictor, evaluate_scenes, format_table
     from predictors.registry import PREDICTORS, checkpoint_sha256, load_predictor
@@ -161,7 +161,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         # what the numbers depend on beyond the data: the weights, the samples' seed, the code
         predictor_sha256=checkpoint_sha256(args.predictor),
         seed=args.seed,
-        code=code_identity(),
+        code=code_with_plugins(),
     )
     # the entry the name loads: none for a built-in (constant velocity, the oracle), loaded by name first
     located = None if args.predictor in PREDICTORS else locate(args.predictor)

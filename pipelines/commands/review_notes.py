@@ -77,11 +77,16 @@ def _record_policy(run: object) -> object:
 
 def warn_mixed_code(folder: Path, name: str, members: list[dict[str, Any]]) -> None:
     """Warn when one set-up's runs were recorded by different code: other commits, a commit with and
-    without uncommitted changes ("+dirty"), or some by code that recorded none (before 4a16d16): its
+    without uncommitted changes ("+dirty"), other plugin files, or some by code that recorded none (before
+    4a16d16): its
     aggregate pools two codebases' results, as a sweep resumed by other code says."""
-    from pipelines.logs.review import commit_shown
+    from pipelines.logs.review import commit_shown, plugins_shown
 
-    commits = {_commit_named(commit_shown(m)): None for m in members}
+    commits = {
+        _commit_named(commit_shown(m))
+        + (f" with plugins {plugins_shown(m)}" if plugins_shown(m) else ""): None
+        for m in members
+    }
     if len(commits) > 1:
         warn(
             f"{folder} holds runs recorded by different code ({', '.join(commits)}) pooled in the aggregate "

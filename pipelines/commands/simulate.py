@@ -349,11 +349,11 @@ def _report(
     header = table_header(cfg, spec, run_meta, finished, stopped, configs[0] if configs else None)
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
     if resolved.json is not None:
-        from pipelines.version import code_identity
+        from pipelines.plugins import code_with_plugins
 
         payload = {
             "run": run_meta,
-            "code": code_identity(),
+            "code": code_with_plugins(),
             **({"interrupted": True, "episodes_finished": len(results)} if interrupted else {}),
             **({"failed": _failed(failure), "episodes_finished": len(results)} if failure else {}),
             "summary": summary,

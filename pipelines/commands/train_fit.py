@@ -104,10 +104,10 @@ def _fit(
         from pipelines.commands.train_resume import SETTINGS_FILE
 
         out.mkdir(parents=True, exist_ok=True)
-        from pipelines.version import code_identity
+        from pipelines.plugins import code_with_plugins
 
         # the code too, which a resume compares with its own (train_resume.note_other_code)
-        text = json.dumps({**settings, "name": name, "code": code_identity()}, indent=2) + "\n"
+        text = json.dumps({**settings, "name": name, "code": code_with_plugins()}, indent=2) + "\n"
         # in one rename: a symbolic link planted in --out is replaced, never written through
         replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
     started = time.perf_counter()
@@ -239,7 +239,7 @@ def _summary(
         evaluate_splits,
         median_epoch_time,
     )
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
     from predictors.checkpoint import load_checkpoint
     from predictors.hashing import sha256_file
 
@@ -255,7 +255,7 @@ def _summary(
         "model": args.model,
         # what ties these metrics to their weights: `zoo add` refuses them beside other ones
         "weights_sha256": sha256_file(weights),
-        "code": code_identity(),
+        "code": code_with_plugins(),
         "protocol": protocol,
         "training_data": data_record(files, root, protocol),
         "metrics": metrics,

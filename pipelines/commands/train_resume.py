@@ -218,11 +218,12 @@ def note_other_code(out: Path, recorded: dict[str, Any] | None) -> None:
     none: the epochs so far were trained by it, the next by this code, and NAME.metrics.json names this code
     only. Not refused, as a sweep's resume is not: a change that leaves training alone (documentation, a
     benchmark) is common. No settings (a run from before they were kept): no note."""
+    from pipelines.plugins import code_with_plugins
     from pipelines.version import code_changes
 
     if recorded is None:
         return
-    shown = code_changes([recorded.get("code")])
+    shown = code_changes([recorded.get("code")], code_with_plugins())
     if shown:
         print(
             f"note: --resume: {out} was started by other code ({shown}); its epochs so far were trained by "

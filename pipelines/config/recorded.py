@@ -1,6 +1,6 @@
 """A sweep's recorded config, back as a ``RunConfig``: ``crowdmpc config show --from-sweep DIR`` prints the
 TOML that reruns what a sweep directory holds (each run line of ``sweep.json`` keeps the effective config it
-ran with, ``RunConfig.effective``, and the code it ran: ``pipelines.version.code_identity``).
+ran with, ``RunConfig.effective``, and the code it ran: ``pipelines.plugins.code_with_plugins``).
 
 The recorded values go through the same resolver as a config file's (unknown sections and keys, types and
 bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Two values are not

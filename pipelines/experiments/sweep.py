@@ -127,7 +127,8 @@ def _add_run(
     number, counted from 1 as ``config show --from-sweep DIR --run N`` counts them (``runs[N - 1]``), which
     each record of the run keeps as its ``run``. ``backend``: the one that started (``--backend auto``
     names none), with Ray's version where it was Ray; None for a run with nothing to run."""
-    from pipelines.version import code_identity, crowdmpc_version, library_version
+    from pipelines.plugins import code_with_plugins
+    from pipelines.version import crowdmpc_version, library_version
 
     path = out / SWEEP_FILE
     meta["experiment"] = config.experiment.name
@@ -137,7 +138,7 @@ def _add_run(
         {
             "started": _local_time(),
             "version": crowdmpc_version(),
-            "code": code_identity(),
+            "code": code_with_plugins(),
             "episodes_per_cell": config.episodes_per_cell,
             "humans": list(config.humans or config.experiment.humans),
             "seed": config.seed,
@@ -175,11 +176,14 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     its episodes are kept, and a table over both mixes two codebases. Not refused: a resume after a change
     that leaves results alone (documentation, a benchmark) is the common case. Uncommitted changes are
     recorded ("dirty") but cannot be compared, so they alone say nothing."""
+    from pipelines.plugins import code_with_plugins
     from pipelines.version import code_changes
 
     # a run from before the code was recorded (4a16d16) has none: code unknown, and results changed through
     # many commits since, so it is no same code
-    shown = code_changes(run.get("code") if isinstance(run, dict) else None for run in runs)
+    shown = code_changes(
+        (run.get("code") if isinstance(run, dict) else None for run in runs), code_with_plugins()
+    )
     if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
         print(
             f"note: {out} holds episodes made by other code ({shown}); they are kept and counted with this "

@@ -43,7 +43,7 @@ from pipelines.logs.schemas import (
     SOLVER,
 )
 from pipelines.plain_json import plain
-from pipelines.version import code_identity
+from pipelines.plugins import code_with_plugins
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -158,7 +158,7 @@ class McapEpisodeRecorder:
         metadata = {
             # strings as they are (the version reads "0.1.0", not "\"0.1.0\""), the rest in JSON
             "crowdmpc": {
-                **{k: v if isinstance(v, str) else json.dumps(v) for k, v in code_identity().items()},
+                **{k: v if isinstance(v, str) else json.dumps(v) for k, v in code_with_plugins().items()},
                 "format": FORMAT,
             },
             "episode": episode,

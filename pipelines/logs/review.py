@@ -8,6 +8,7 @@ runs are crowdsim's own aggregate, over the runs whose episode ended. The schema
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections import Counter
@@ -64,6 +65,8 @@ def summarize(rec: Recording) -> dict[str, Any]:
         ),
         # which uncommitted changes (the sha256 of their diff; "null" when clean, absent in older recordings)
         "crowdmpc_diff_sha256": _null_none(rec.metadata.get("crowdmpc", {}).get("diff_sha256")),
+        # the plugins' code (module:Class -> its file's sha256); None without plugins and in older recordings
+        "crowdmpc_plugins": _plugins(rec.metadata.get("crowdmpc", {}).get("plugins")),
         "states": len(robots),
         "sim_time_s": robots[-1]["time"] if robots else 0.0,
         "started": _wall_clock(rec.start_time_ns),
@@ -114,6 +117,15 @@ def _null_none(value: str | None) -> str | None:
     return None if value in (None, "", "null") else value
 
 
+def _plugins(value: str | None) -> dict[str, Any] | None:
+    """The recorded plugins' code (JSON in the metadata), None where absent or not a JSON object."""
+    try:
+        plugins = json.loads(value) if value else None
+    except ValueError:  # a hand-edited file: no code named
+        return None
+    return plugins if isinstance(plugins, dict) else None
+
+
 def commit_shown(summary: dict[str, Any]) -> str | None:
     """The recording's commit as ``crowdmpc compare`` names code ("c28989d46c28+dirty": recorded from a tree
     with uncommitted changes, which the commit alone does not name); None where it names none."""
@@ -123,10 +135,18 @@ def commit_shown(summary: dict[str, Any]) -> str | None:
     return str(commit)[:12] + dirty_text(summary.get("crowdmpc_dirty"), summary.get("crowdmpc_diff_sha256"))
 
 
+def plugins_shown(summary: dict[str, Any]) -> str:
+    """The recorded plugins' code: "module:Class 0123456789ab, ..." (their files' sha256), "" for none."""
+    return ", ".join(
+        f"{spec} {str(sha)[:12]}" for spec, sha in (summary.get("crowdmpc_plugins") or {}).items()
+    )
+
+
 def _code(summary: dict[str, Any]) -> str:
-    """The version, and the commit when the recording names one."""
-    named = commit_shown(summary)
-    return f"{_fmt(summary['crowdmpc_version'])}" + (f" (commit {named})" if named else "")
+    """The version, the commit when the recording names one, and the plugins' files."""
+    named, plugins = commit_shown(summary), plugins_shown(summary)
+    shown = f"{_fmt(summary['crowdmpc_version'])}" + (f" (commit {named})" if named else "")
+    return shown + (f", plugins {plugins}" if plugins else "")
 
 
 def format_summary(summary: dict[str, Any]) -> str:

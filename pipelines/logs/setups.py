@@ -62,7 +62,8 @@ def groups(runs: list[RunDigest]) -> list[SetUp]:
 
 def drop_repeats(setup: SetUp) -> dict[str, str]:
     """Leave each episode once among ``setup``'s members, and return each file left out -> the file kept in
-    its place. An episode is its scenario and seed recorded by one code ("commit+dirty", or none recorded):
+    its place. An episode is its scenario and seed recorded by one code ("commit+dirty" and the plugins'
+    files, or none recorded):
     a folder holding two copies of a run's files (a/ and a backup b/) pooled both, "collision 38.5 % (5/13)"
     where the ten episodes had 3. A run whose scenario or seed is unknown (cut before its metadata) is never a
     repeat. The copy kept is the first complete one whose episode ended, else the first whose episode ended,
@@ -76,7 +77,8 @@ def drop_repeats(setup: SetUp) -> dict[str, str]:
 
     for run in sorted(setup.members, key=worse):  # stable: in the folder's order among equals
         s = run.summary
-        key = (s["scenario"], s["seed"], commit_shown(s))
+        plugins = s.get("crowdmpc_plugins") or {}
+        key = (s["scenario"], s["seed"], commit_shown(s), tuple(sorted(plugins.items(), key=str)))
         if s["scenario"] is None or s["seed"] is None or key not in kept:
             kept.setdefault(key, run)
             members.append(run)

@@ -73,14 +73,14 @@ def test_the_blocks_record_the_code_that_measured_them(tmp_path, monkeypatch, dr
     """Closed-loop margins are the MPC's episodes and a real block the predictor's errors, and a block said
     nothing of the code that made them, where every other output records it: the blocks stored, and those
     --json writes with --dry-run, carry ``details["code"]``, the rest of their details as they were."""
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     made = _blocks()
     args = SimpleNamespace(**{**vars(_args()), "holdout": False, "dry_run": dry_run})
     with storing(made, args) as blocks:
         pass
-    assert [b.details for b in blocks] == [{**b.details, "code": code_identity()} for b in made]
+    assert [b.details for b in blocks] == [{**b.details, "code": code_with_plugins()} for b in made]
     stored = [] if dry_run else [b.details for b in read_calibration_file(calibrations_path())]
     assert stored == ([] if dry_run else [b.details for b in blocks])
 

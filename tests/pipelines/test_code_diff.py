@@ -51,10 +51,10 @@ def test_a_dirty_commit_is_shown_with_its_diff():
     assert commit_shown(summary) == "0123456789ab+dirty:fefefefe"
 
 
-def test_a_resume_after_the_uncommitted_changes_changed_says_so(monkeypatch):
+def test_a_resume_after_the_uncommitted_changes_changed_says_so():
     now = {"version": "0.1.0", "commit": "c" * 40, "dirty": True, "diff_sha256": "b" * 64, "python": "3.11"}
-    monkeypatch.setattr(version, "code_identity", lambda: now)
-    assert version.code_changes([now]) == ""
-    assert version.code_changes([now | {"diff_sha256": "a" * 64}]) == f"diff_sha256 {'a' * 12} -> {'b' * 12}"
+    assert version.code_changes([now], now) == ""
+    changed = version.code_changes([now | {"diff_sha256": "a" * 64}], now)
+    assert changed == f"diff_sha256 {'a' * 12} -> {'b' * 12}"
     older = {k: v for k, v in now.items() if k != "diff_sha256"}  # recorded before the diff was: unknown
-    assert version.code_changes([older]) == ""
+    assert version.code_changes([older], now) == ""

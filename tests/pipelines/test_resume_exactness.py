@@ -306,11 +306,11 @@ def test_records_whose_margins_state_no_values_say_nothing_about_them(tmp_path):
 
 def test_uncommitted_changes_alone_are_no_other_code(tmp_path, capsys):
     """The "dirty" flag cannot be compared (two dirty trees may differ or not): alone it is no other code."""
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
 
     run_sweep(_config(tmp_path, 1))
     meta = json.loads((tmp_path / "sweep.json").read_text())
-    meta["runs"][-1]["code"] = {**code_identity(), "dirty": not code_identity()["dirty"]}
+    meta["runs"][-1]["code"] = {**code_with_plugins(), "dirty": not code_with_plugins()["dirty"]}
     (tmp_path / "sweep.json").write_text(json.dumps(meta))
     capsys.readouterr()
     run_sweep(_config(tmp_path, 1))

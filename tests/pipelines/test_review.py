@@ -48,12 +48,13 @@ def test_summary_of_a_finished_run(runs, capsys):
     summary = summarize(read_recording(runs[0].path))
     assert summary["metrics"] == runs[0].result.metrics.as_dict()
     assert summary["solver"]["statuses"] == {"Solve_Succeeded": 3, "ok": 5}
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
+    from pipelines.version import dirty_text
 
-    code = code_identity()
+    code = code_with_plugins()
     commit = code["commit"]  # the recording's code, when this tree is a git checkout
     (crowdmpc,) = [line for line in out.splitlines() if line.startswith("crowdmpc ")]
-    dirty = "+dirty" if code["dirty"] else ""  # recorded from a tree with uncommitted changes
+    dirty = dirty_text(code["dirty"], code["diff_sha256"])  # from a tree with uncommitted changes
     assert crowdmpc.endswith(f"(commit {commit[:12]}{dirty})" if commit else code["version"])
 
 
@@ -338,11 +339,13 @@ def test_compare_names_the_code_that_recorded_each_run(tmp_path, capsys, monkeyp
     """`review A --compare B` of a run recorded before an upgrade and one after it set their metrics side by
     side without saying which code made either (A's summary above names A's alone, B's nowhere)."""
     import pipelines.logs.recording as recording
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
 
     a = record_episode(tmp_path / "a", seed=1, steps=4)
     monkeypatch.setattr(
-        recording, "code_identity", lambda: {**code_identity(), "commit": "0123456789abcdef", "dirty": False}
+        recording,
+        "code_with_plugins",
+        lambda: {**code_with_plugins(), "commit": "0123456789abcdef", "dirty": False},
     )
     b = record_episode(tmp_path / "b", seed=1, steps=4)
     monkeypatch.undo()
@@ -385,11 +388,11 @@ def test_a_folder_of_runs_recorded_by_different_code_says_so(tmp_path, capsys, m
     one aggregate without a word (a 4a16d16^ recording, which names no commit, beside a f01a943 one), where a
     resumed sweep says its episodes are mixed; a warning names the commits of the set-up's runs."""
     import pipelines.logs.recording as recording
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
 
     record_episode(tmp_path, seed=1, steps=4)
-    now = code_identity()
-    monkeypatch.setattr(recording, "code_identity", lambda: {**now, "commit": "0123456789abcdef"})
+    now = code_with_plugins()
+    monkeypatch.setattr(recording, "code_with_plugins", lambda: {**now, "commit": "0123456789abcdef"})
     record_episode(tmp_path, seed=2, steps=4)
     assert main(["review", str(tmp_path)]) == 0
     err = capsys.readouterr().err

@@ -186,14 +186,14 @@ def test_a_recording_of_uncommitted_code_says_dirty(tmp_path, capsys, monkeypatc
     """crowdmpc.dirty = "true" showed as "commit c28989d46c28" like a clean one, and the mixed-code warning
     took clean and dirty recordings of one commit for the same code."""
     import pipelines.logs.recording as recording
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
 
-    now = code_identity()
+    now = code_with_plugins()
     for seed, dirty in ((1, False), (2, True)):
         diff = "ab" * 32 if dirty else None
         monkeypatch.setattr(
             recording,
-            "code_identity",
+            "code_with_plugins",
             lambda d=dirty, s=diff: {**now, "commit": "c28989d46c28abcd", "dirty": d, "diff_sha256": s},
         )
         record_episode(tmp_path, seed=seed, steps=4)

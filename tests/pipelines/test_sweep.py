@@ -1250,19 +1250,19 @@ def test_a_tables_title_follows_the_predictors_it_runs():
 def test_each_run_records_its_code_and_a_resume_by_other_code_says_so(tmp_path, capsys):
     """The version stays 0.1.0 while results change from commit to commit: each run line of sweep.json keeps
     the commit and the libraries' versions, and a resume by other code says its episodes are mixed in."""
-    from pipelines.version import code_identity
+    from pipelines.plugins import code_with_plugins
 
     run_sweep(_config(tmp_path, 1))
     meta = json.loads((tmp_path / "sweep.json").read_text())
-    assert meta["runs"][0]["code"] == code_identity() and set(code_identity()) >= {"commit", "casadi"}
+    assert meta["runs"][0]["code"] == code_with_plugins() and set(code_with_plugins()) >= {"commit", "casadi"}
     run_sweep(_config(tmp_path, 1))
     assert "note:" not in capsys.readouterr().err  # the same code: nothing to say
-    meta["runs"][-1]["code"] = {**code_identity(), "commit": "0123456789abcdef", "casadi": "3.6.0"}
+    meta["runs"][-1]["code"] = {**code_with_plugins(), "commit": "0123456789abcdef", "casadi": "3.6.0"}
     (tmp_path / "sweep.json").write_text(json.dumps(meta))
     run_sweep(_config(tmp_path, 2))
     err = capsys.readouterr().err
     assert f"note: {tmp_path} holds episodes made by other code (commit 0123456789ab -> " in err
-    assert f"casadi 3.6.0 -> {code_identity()['casadi']}" in err
+    assert f"casadi 3.6.0 -> {code_with_plugins()['casadi']}" in err
     run_sweep(_config(tmp_path, 2))  # the mix stays in the directory: every later resume says so
     assert "note: " in capsys.readouterr().err
 
