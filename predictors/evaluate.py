@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from predictors.base import DT, OBS_LEN, PRED_LEN, ObservingPredictor, Predictor
-from predictors.data.trajnet_io import scenes_of
+from predictors.data.trajnet_io import last_steps, scenes_of
 from predictors.data.validate import NdjsonContent, parse_ndjson
-from predictors.errors import DatasetFormatError, PredictorError
+from predictors.errors import PredictorError
 from predictors.metrics import SceneScore, score_scene, summarize
 from predictors.progress import progress_bar
 from predictors.text_table import aligned_lines
@@ -101,22 +101,14 @@ def eval_scenes_of(content: NdjsonContent, config: EvalConfig = EvalConfig()) ->
     module's arrays from the same parse."""
     path = content.summary.path
     length = config.obs_len + config.pred_len
+    needs = (
+        f"the evaluation needs {length} ({config.obs_len} observed + {config.pred_len} predicted); is this a "
+        "test/ file without ground truth?"
+    )
     scenes = []
     for scene in scenes_of(content, require_fps=1 / DT):
-        if len(scene.frames) < length:
-            raise DatasetFormatError(
-                path,
-                scene.line,
-                f"scene {scene.id} has {len(scene.frames)} steps, the evaluation needs {length} "
-                f"({config.obs_len} observed + {config.pred_len} predicted); is this a test/ file without "
-                "ground truth?",
-            )
-        frames = scene.frames[len(scene.frames) - length :]
-        if np.unique(np.diff(frames)).size != 1:
-            raise DatasetFormatError(
-                path, scene.line, f"scene {scene.id} has unevenly spaced frames {frames.tolist()}"
-            )
-        scenes.append(EvalScene(scene.xy[len(scene.frames) - length :], frames))
+        cut = last_steps(scene, length, path, needs)
+        scenes.append(EvalScene(cut.xy, cut.frames))
     return scenes
 
 

@@ -75,11 +75,11 @@ into the user zoo. --resume continues the run as if it had not stopped (same ord
 an option left out takes the run's setting (its data files, protocol, dataset and data directory too, unless
 a data option is typed; --out names the run), one typed must be the run's, and only --epochs may change,
 upwards (the count already trained only finishes a run that stopped before writing its metrics); a data
-file whose content changed since the run started is refused. --test files are read as `crowdmpc evaluate`
-reads them (the last 21 steps of a longer scene); --val files too, and also as training reads them, for
-the validation of each epoch that picks the best one: their scenes must have exactly 21 steps (cut longer
-ones first). Both are read before training starts: a TrajNet++ test/ file without ground truth is refused
-then, not after training. A --test file with the content of a --train or --val file is noted.
+file whose content changed since the run started is refused. --val and --test files are read as `crowdmpc
+evaluate` reads them (the last 21 steps of a longer scene), the validation of each epoch that picks the
+best one too; --train files' scenes must have exactly 21 steps (training windows). All are read before
+training starts: a TrajNet++ test/ file without ground truth is refused then, not after training. A --test
+file with the content of a --train or --val file is noted.
 It trains on the CPU in one thread (deterministic: a seed gives the same weights); another accelerator,
 precision or your own callbacks and loggers take a lightning.Trainer of your own (docs/extending.md).
 A second train into an --out where one is running is refused (its lock: OUT/.train.lock), and so is an

@@ -93,14 +93,15 @@ def check_data(files: dict[str, list[Path]], progress: bool | None = False) -> d
     """Every data file is read as the run will read it, and each split given holds scenes, before Lightning
     starts (its banner would come before the one-line error, and a half-made run folder after it). The
     training and validation files are loaded as the training data module loads them (``load_file_arrays``:
-    scenes of exactly 21 steps), which keeps them for it. The validation and test files are also read as the
-    evaluation of the trained net reads them (scene length, frame rate, spacing): a file it refuses, such as
-    a TrajNet++ test/ file without ground truth, was found only after training, with no metrics written.
-    Returns those scenes by path, for that evaluation: each file is parsed once (the validation file was
-    parsed three times, the test file twice). ``progress``: a bar while a file's scenes are built (None: on
-    a terminal only), the first read of a large file being a minute of silence otherwise."""
+    training's scenes of exactly 21 steps, validation's last 21), which keeps them for it. The validation and
+    test files are also read as the evaluation of the trained net reads them (scene length, frame rate,
+    spacing): a file it refuses, such as a TrajNet++ test/ file without ground truth, was found only after
+    training, with no metrics written. Returns those scenes by path, for that evaluation: each file is
+    parsed once (the validation file was parsed three times, the test file twice). ``progress``: a bar while
+    a file's scenes are built (None: on a terminal only), the first read of a large file being a minute of
+    silence otherwise."""
     from predictors.data.validate import parse_ndjson
-    from predictors.data.windows import load_file_arrays
+    from predictors.data.windows import Window, load_file_arrays
     from predictors.evaluate import eval_scenes_of
 
     evaluated: dict[Path, list[Any]] = {}
@@ -115,7 +116,8 @@ def check_data(files: dict[str, list[Path]], progress: bool | None = False) -> d
             if split != "train":
                 held.append(len(evaluated[path]))
             if split != "test":
-                held.append(len(load_file_arrays(path, progress=progress, content=content)))
+                window: Window = "whole" if split == "train" else "last"  # as the data module reads them
+                held.append(len(load_file_arrays(path, window=window, progress=progress, content=content)))
         # an empty --test too: the run passed with its test metrics silently missing
         if paths and not any(held):
             names = ", ".join(str(p) for p in paths)

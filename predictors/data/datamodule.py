@@ -74,6 +74,9 @@ class TrajnetDataModule(L.LightningDataModule):
                 pred_len=self.pred_len,
                 augment=self.augment and split == "train",
                 seed=self.seed,
+                # validation picks the epoch that evaluation would score best: read as evaluation reads
+                # (each scene's end); training takes whole scenes of exactly its length
+                window="whole" if split == "train" else "last",
             )
             if split in ("train", "val") and len(dataset) == 0:
                 # An empty split is a valid file, but nothing to train on or to select the best epoch by

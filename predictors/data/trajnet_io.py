@@ -11,6 +11,7 @@ defines them; duplicate rows resolve as the Reader resolves them (the later row 
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from collections import defaultdict
 from collections.abc import Iterator
@@ -37,6 +38,7 @@ __all__ = [
     "TRACK_KEYS",
     "NdjsonSummary",
     "Scene",
+    "last_steps",
     "read_scenes",
     "scenes_of",
     "shown_scenes",
@@ -161,6 +163,20 @@ def scenes_of(
                 line=line,
             )
         )
+
+
+def last_steps(scene: Scene, length: int, path: Path, needs: str) -> Scene:
+    """``scene`` cut to its last ``length`` primary frames, what the evaluation scores (a prediction is a
+    scene's end; earlier frames may be any); DatasetFormatError when it has fewer (``needs``: what for, after
+    "scene S has N steps, ") or they are unevenly spaced."""
+    if len(scene.frames) < length:
+        raise DatasetFormatError(path, scene.line, f"scene {scene.id} has {len(scene.frames)} steps, {needs}")
+    frames = scene.frames[len(scene.frames) - length :]
+    if np.unique(np.diff(frames)).size > 1:
+        raise DatasetFormatError(
+            path, scene.line, f"scene {scene.id} has unevenly spaced frames {frames.tolist()}"
+        )
+    return dataclasses.replace(scene, frames=frames, xy=scene.xy[len(scene.frames) - length :])
 
 
 def _check_length(

@@ -23,7 +23,7 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Final, Literal, get_args
 
 import numpy as np
 import torch
@@ -31,7 +31,7 @@ from torch.utils.data import Dataset, Sampler
 
 from predictors.base import DT, OBS_LEN, PRED_LEN, SCENE_LENGTH
 from predictors.data.locate import cache_root
-from predictors.data.trajnet_io import shown_scenes
+from predictors.data.trajnet_io import last_steps, shown_scenes
 from predictors.data.validate import NdjsonContent, parse_ndjson, read_error, require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
@@ -57,13 +57,18 @@ class FileArrays:
         return self.xy[:, self.offsets[s] : self.offsets[s + 1]]
 
 
-_MEMORY: dict[tuple[str, int, int, int], FileArrays] = {}
+# How a file's scenes become windows (load_file_arrays): training's exact scenes, or each scene's end.
+Window = Literal["whole", "last"]
+WINDOWS: Final[tuple[str, ...]] = get_args(Window)
+
+_MEMORY: dict[tuple[str, int, int, int, str], FileArrays] = {}
 
 
-def _remember(key: tuple[str, int, int, int], arrays: FileArrays) -> FileArrays:
+def _remember(key: tuple[str, int, int, int, str], arrays: FileArrays) -> FileArrays:
     """``arrays`` kept for ``key``, in place of any earlier version of the same file at the same scene
-    length: a long-lived process that rewrites its data (a notebook) would otherwise hold every version."""
-    for old in [k for k in _MEMORY if (k[0], k[3]) == (key[0], key[3])]:
+    length and window: a long-lived process that rewrites its data (a notebook) would otherwise hold every
+    version."""
+    for old in [k for k in _MEMORY if (k[0], k[3], k[4]) == (key[0], key[3], key[4])]:
         del _MEMORY[old]
     _MEMORY[key] = arrays
     return arrays
@@ -73,19 +78,25 @@ def load_file_arrays(
     path: str | Path,
     *,
     scene_length: int = SCENE_LENGTH,
+    window: Window = "whole",
     disk_cache: bool = True,
     progress: bool | None = False,
     content: NdjsonContent | None = None,
 ) -> FileArrays:
-    """The scenes of ``path`` as arrays; every primary must span ``scene_length`` evenly spaced frames.
-    ``progress``: a bar over the scenes while they are built (None: on a terminal only); a cached file has
-    none to show. Building costs time in scenes x agents: a file of dense crowds takes a minute.
-    ``content``: ``path`` as ``parse_ndjson`` read it, when the caller has parsed it already (``crowdmpc
-    train`` evaluates its validation files too): built from, not parsed again."""
+    """The scenes of ``path`` as arrays of ``scene_length`` steps. ``window`` "whole": every primary must
+    span exactly that many evenly spaced frames (training's windows); "last": each scene's last
+    ``scene_length`` frames, evenly spaced, of a scene at least that long, as the evaluation reads it
+    (``predictors.evaluate``; validation and test). ``progress``: a bar over the scenes while they are
+    built (None: on a terminal only); a cached file has none to show. Building costs time in scenes x
+    agents: a file of dense crowds takes a minute. ``content``: ``path`` as ``parse_ndjson`` read it, when
+    the caller has parsed it already (``crowdmpc train`` evaluates its validation files too): built from,
+    not parsed again."""
+    if window not in WINDOWS:
+        raise PredictorError(f"window must be one of {list(WINDOWS)}, got {window!r}")
     path = require_file(path)
     try:
         stat = path.stat()
-        key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, scene_length)
+        key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, scene_length, window)
         if key in _MEMORY:
             return _MEMORY[key]
         digest = sha256_file(path) if disk_cache else None
@@ -93,14 +104,19 @@ def load_file_arrays(
         raise read_error(path, None, exc) from None
     disk = None
     if disk_cache:
-        disk = cache_root() / "scenes" / f"{digest}-{scene_length}-{CACHE_VERSION}.npz"
+        mode = "" if window == "whole" else f"{window}-"  # the whole scenes' entries keep their names
+        disk = cache_root() / "scenes" / f"{digest}-{scene_length}-{mode}{CACHE_VERSION}.npz"
         arrays = _load_entry(disk, scene_length)
         if arrays is not None:
             return _remember(key, arrays)
     # a scene at a time, kept as float32: the float64 scenes of a large file are several times its arrays
     xys, ids = [np.empty((scene_length, 0, 2), dtype=np.float32)], []
     content = parse_ndjson(path) if content is None else content
-    for scene in shown_scenes(content, progress, require_length=scene_length, require_fps=1 / DT):
+    whole = {"require_length": scene_length} if window == "whole" else {}
+    needs = f"validation and test read the last {scene_length}, as the evaluation does"
+    for scene in shown_scenes(content, progress, require_fps=1 / DT, **whole):
+        if window == "last":
+            scene = last_steps(scene, scene_length, path, needs)
         xys.append(scene.xy.astype(np.float32))
         ids.append(scene.id)
     sizes = np.asarray([xy.shape[1] for xy in xys[1:]], dtype=np.int64)
@@ -256,7 +272,7 @@ class TrajnetSceneDataset(Dataset):
     item ``dataset[index, epoch]`` (what ``EpochShuffle`` hands a loader) or ``dataset[index]`` (epoch 0). So
     the angles are the same in worker processes and in a run resumed at that epoch, and new in every epoch.
     (They used to come from one generator drawn item after item, which a resumed run restarted: its first
-    epoch repeated epoch 0's angles.)
+    epoch repeated epoch 0's angles.) ``window``: how the files' scenes are read (``load_file_arrays``).
     """
 
     def __init__(
@@ -268,6 +284,7 @@ class TrajnetSceneDataset(Dataset):
         augment: bool = False,
         seed: int = 0,
         scene_length: int = SCENE_LENGTH,
+        window: Window = "whole",
     ):
         if obs_len < 2 or pred_len < 1 or obs_len + pred_len > scene_length:
             raise PredictorError(
@@ -280,7 +297,7 @@ class TrajnetSceneDataset(Dataset):
         self.obs_len = obs_len
         self.pred_len = pred_len
         self.augment = augment
-        self.arrays = [load_file_arrays(f, scene_length=scene_length) for f in self.files]
+        self.arrays = [load_file_arrays(f, scene_length=scene_length, window=window) for f in self.files]
         sizes = np.asarray([len(a) for a in self.arrays], dtype=np.int64)
         self._starts = np.concatenate([[0], np.cumsum(sizes)])
         self.seed = seed

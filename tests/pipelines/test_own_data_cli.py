@@ -96,9 +96,9 @@ def test_held_out_coverage_far_below_its_target_is_noted():
     assert coverage_notes([0.1], None, None) == ""
 
 
-def test_train_help_says_val_files_need_exact_scenes_and_test_files_are_cut():
+def test_train_help_says_training_files_need_exact_scenes_and_val_and_test_files_are_cut():
     from pipelines.commands.train import EPILOG
 
     text = " ".join(EPILOG.split())
-    assert "--test files are read as `crowdmpc evaluate` reads them (the last 21 steps" in text
-    assert "their scenes must have exactly 21 steps" in text
+    assert "--val and --test files are read as `crowdmpc evaluate` reads them (the last 21 steps" in text
+    assert "--train files' scenes must have exactly 21 steps" in text

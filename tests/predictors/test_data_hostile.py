@@ -507,22 +507,52 @@ def steps_scene(steps: int) -> list[dict]:
     return [scene(0, 1, 0, (steps - 1) * STEP), *tracks]
 
 
-@pytest.mark.parametrize(("split", "steps", "reason"), [("--train", 19, "has 19"), ("--val", 25, "has 25")])
+@pytest.mark.parametrize(
+    ("split", "steps", "reason"),
+    [
+        ("--train", 19, "scene 0: primary pedestrian 1 has 19 frames, need 21"),
+        ("--train", 25, "scene 0: primary pedestrian 1 has 25 frames, need 21"),
+        ("--val", 19, "scene 0 has 19 steps, the evaluation needs 21"),
+    ],
+)
 def test_cli_train_reads_the_training_files_as_the_data_module_before_training(
     split, steps, reason, tmp_path, capsys
 ):
-    """The data module takes scenes of exactly 21 steps, the pre-check did not (a training file only had to
-    parse, a validation file to hold 21 steps or more): such a file was refused after Lightning's banner and
-    left a run folder of logs and settings. Both are now loaded as the data module loads them, first."""
+    """The data module takes training scenes of exactly 21 steps, the pre-check did not (a training file
+    only had to parse): such a file was refused after Lightning's banner and left a run folder of logs and
+    settings. Every file is now loaded as the data module loads it, first; a validation scene needs 21
+    steps or more, as the evaluation does."""
     odd = write_lines(tmp_path / "odd.ndjson", steps_scene(steps))
     walk = str(write_walk_file(tmp_path / "walk.ndjson"))
     files = {"--train": walk, "--val": walk, split: str(odd)}
     argv = ["train", "--model", "vanilla_lstm", *[a for kv in files.items() for a in kv]]
     out = tmp_path / "run"
     code, _, err = run_cli(capsys, *argv, "--epochs", "1", "--no-progress", "--out", str(out))
-    assert_cli_error(code, err, f"{odd}:1: scene 0: primary pedestrian 1 {reason} frames, need 21")
+    assert_cli_error(code, err, f"{odd}:1: {reason}")
     assert len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_validation_reads_a_longer_scene_as_the_evaluation_does(tmp_path, capsys):
+    """A --val scene of 25 steps was refused ("has 25 frames, need 21") where --test and evaluate score its
+    last 21: the epoch picked was not chosen on what the evaluation reads. Each epoch's validation now reads
+    the same last 21 steps, and such a file trains."""
+    long = write_lines(tmp_path / "long.ndjson", steps_scene(25))
+    [scene_21] = load_eval_scenes(long)
+    walk = str(write_walk_file(tmp_path / "walk.ndjson"))
+    module = TrajnetDataModule([walk], [long], [long], batch_size=1)
+    module.setup("fit")
+    arrays = module.datasets["val"].arrays[0]
+    np.testing.assert_array_equal(arrays.xy, scene_21.xy.astype(np.float32))
+    assert arrays.xy.shape[0] == 21 and np.isnan(arrays.xy).sum() == 0
+    with pytest.raises(DatasetFormatError, match="has 25 frames, need 21"):
+        load_file_arrays(long)  # training's windows stay whole scenes
+    out = tmp_path / "run"
+    argv = ["train", "--model", "vanilla_lstm", "--train", walk, "--val", str(long), "--epochs", "1"]
+    code, _, err = run_cli(capsys, *argv, "--no-progress", "--out", str(out))
+    assert code == 0, err
+    metrics = json.loads(next(out.glob("*.metrics.json")).read_text())
+    assert metrics["metrics"]["val"]["scenes"] == 1
 
 
 def test_a_scenes_tag_reaches_the_reader(tmp_path):
