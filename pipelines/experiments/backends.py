@@ -85,6 +85,19 @@ class _RayEpisodeWorker(EpisodeWorker):
             os.chdir(scratch)
         super().__init__(record, jit, scratch, timeout_s)
 
+    def code(self) -> tuple[str, dict[str, Any] | str]:
+        """(this node's name, the code it runs as the driver records its own: ``code_with_plugins``), the
+        plugins the driver named loaded first; in place of the code, why one of them does not load here."""
+        import platform
+
+        from pipelines.plugins import code_with_plugins, load_environment_plugins
+
+        try:
+            load_environment_plugins()
+        except PipelineError as exc:
+            return platform.node(), str(exc)
+        return platform.node(), code_with_plugins()
+
 
 class RayBackend:
     """K Ray actors, on a local Ray (K CPUs) or on a cluster (--ray-address); the cluster's nodes need
@@ -118,6 +131,33 @@ class RayBackend:
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
+        try:
+            self._check_code(self._actors)
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_code(self, actors: list[Any]) -> None:
+        """PipelineError unless every actor runs the driver's code (commit and uncommitted diff, libraries,
+        plugins: ``code_changes``): a cluster node with another checkout or other libraries mixed two
+        codebases' episodes in one table, which sweep.json names by the driver's code alone. An actor
+        that died before answering is no refusal: its episodes fail as a dead actor's do."""
+        from pipelines.plugins import code_with_plugins
+        from pipelines.version import code_changes
+
+        driver = code_with_plugins()
+        for ref in [actor.code.remote() for actor in actors]:
+            try:
+                node, code = self._ray.get(ref)
+            except self._ray.exceptions.RayActorError:
+                continue
+            differ = code if isinstance(code, str) else code_changes([driver], code)
+            if differ:
+                raise PipelineError(
+                    f"a Ray worker on {node} does not run this driver's code ({differ}; the driver's -> "
+                    "the worker's): its episodes would be counted beside the driver's as one codebase's; "
+                    "install the same crowdmpc commit, libraries and plugins on every node"
+                )
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         """Each actor holds two episodes. An actor that dies (a segfault, the OOM killer, a node lost)
@@ -145,6 +185,7 @@ class RayBackend:
                 if self._actors[slot] is actor:  # the first of its episodes to fail: replace it once
                     deaths += 1
                     self._actors[slot] = self._actor_class.remote(*self._actor_args)
+                    self._check_code([self._actors[slot]])  # it may start on another node
                 reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 error = f"Ray actor died while this episode was on it ({reason}); a rerun tries it again"
                 outcome = EpisodeOutcome(task.key, error=error)

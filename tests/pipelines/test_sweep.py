@@ -472,12 +472,16 @@ class _FakeActorDied(Exception):
     pass
 
 
-def _fake_ray(monkeypatch, dies: set[str]) -> list[int]:
+def _fake_ray(monkeypatch, dies: set[str], code: dict | None = None) -> list[int]:
     """A Ray whose actors run an episode at once, each dying on a task whose key is in ``dies`` (and failing
-    every task it held); returns the list of actor ids made, in order."""
+    every task it held), and running ``code`` (default: the driver's); returns the list of actor ids made, in
+    order."""
     import types
 
+    from pipelines.plugins import code_with_plugins
+
     made: list[int] = []
+    killed: list[int] = []
 
     class Ref:
         def __init__(self, actor, task):
@@ -488,8 +492,11 @@ def _fake_ray(monkeypatch, dies: set[str]) -> list[int]:
             self.id, self.dead = len(made), False
             made.append(self.id)
             self.run = types.SimpleNamespace(remote=lambda task: Ref(self, task))
+            self.code = types.SimpleNamespace(remote=lambda: Ref(self, None))
 
     def get(ref):
+        if ref.task is None:  # the actor's code
+            return "node-7", code_with_plugins() if code is None else code
         if ref.actor.dead or ref.task.key in dies:
             ref.actor.dead = True
             raise _FakeActorDied("The actor died unexpectedly before finishing this task.\n\tpid: 1")
@@ -501,6 +508,8 @@ def _fake_ray(monkeypatch, dies: set[str]) -> list[int]:
     fake.wait = lambda refs, num_returns: (refs[:1], refs[1:])  # type: ignore[attr-defined]
     fake.get = get  # type: ignore[attr-defined]
     fake.exceptions = types.SimpleNamespace(RayActorError=_FakeActorDied)  # type: ignore[attr-defined]
+    fake.kill = lambda actor: killed.append(actor.id)  # type: ignore[attr-defined]
+    fake.killed = killed  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
     return made
 
@@ -526,6 +535,33 @@ def test_a_dead_ray_actor_fails_its_episodes_and_a_new_one_takes_its_place(monke
     _fake_ray(monkeypatch, dies=set("abcdef"))
     with pytest.raises(SweepStopped, match="the Ray actors died 3 times in a row"):
         list(RayBackend(1, "none", address=None).run(tasks))
+
+
+def test_a_ray_worker_running_other_code_is_refused(monkeypatch):
+    """A cluster node with another checkout, other libraries or another plugin file ran its episodes into the
+    driver's table, which sweep.json names by the driver's code alone: the backend now asks every actor for
+    its code as it starts (a replacement too) and refuses, naming the node and what differs."""
+    import types
+
+    from pipelines.experiments.backends import RayBackend
+    from pipelines.plugins import code_with_plugins
+
+    other = {**code_with_plugins(), "commit": "0123456789abcdef", "numpy": "1.0.0"}
+    made = _fake_ray(monkeypatch, dies=set(), code=other)
+    with pytest.raises(
+        PipelineError, match=r"^a Ray worker on node-7 does not run this driver's code \(commit "
+    ):
+        RayBackend(2, "none", address=None)
+    assert sys.modules["ray"].killed == made == [0, 1]  # type: ignore[attr-defined]
+    with pytest.raises(PipelineError) as refused:
+        RayBackend(1, "none", address=None)
+    assert "numpy " in str(refused.value) and "-> 1.0.0" in str(refused.value)
+    assert str(refused.value).endswith(
+        "install the same crowdmpc commit, libraries and plugins on every node"
+    )
+    _fake_ray(monkeypatch, dies={"b"})  # the driver's code: runs, and the replacement is asked too
+    tasks = [types.SimpleNamespace(key=k) for k in "abc"]
+    assert sorted(o.key for o in RayBackend(1, "none", address=None).run(tasks)) == list("abc")
 
 
 def test_a_sweep_whose_every_episode_kills_its_worker_stops(tmp_path, plugins, capsys, monkeypatch):
@@ -1180,12 +1216,16 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
     import types
 
     from pipelines.experiments.backends import RayBackend, worker_environment
+    from pipelines.plugins import code_with_plugins
 
     calls: list[dict] = []
     fake = types.ModuleType("ray")
     fake.is_initialized = lambda: False  # type: ignore[attr-defined]
     fake.init = lambda **kwargs: calls.append(kwargs)  # type: ignore[attr-defined]
-    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: None)  # type: ignore[attr-defined]
+    actor = types.SimpleNamespace(code=types.SimpleNamespace(remote=lambda: "ref"))
+    fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: actor)  # type: ignore[attr-defined]
+    fake.get = lambda ref: ("node", code_with_plugins())  # type: ignore[attr-defined]
+    fake.exceptions = types.SimpleNamespace(RayActorError=RuntimeError)  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
     monkeypatch.setenv("CROWDMPC_CONTROLLERS", "my_pkg.ctl:MyController")
     # the plugins earlier tests registered in this process travel too (plugin_environment): none here
