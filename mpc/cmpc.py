@@ -89,9 +89,17 @@ def joint_result(
 
 
 def finite_prediction(prediction: np.ndarray, shape: tuple[int, ...]) -> np.ndarray | None:
-    """``prediction`` as float64 when it has ``shape`` and is finite everywhere, else None."""
+    """``prediction`` as float64 when it is finite everywhere, None where it is not (the step reports
+    ``nan_prediction`` and falls back); a ValueError when it is not of ``shape`` ``(H, N_h, 2)``: a predict
+    function of one's own returning ``(N_h, H, 2)`` was reported as a NaN prediction, and its every step
+    fell back without a word of shapes."""
     prediction = np.asarray(prediction, dtype=float)
-    if prediction.shape != shape or not np.all(np.isfinite(prediction)):
+    if prediction.shape != shape:
+        raise ValueError(
+            f"the predict function returned shape {prediction.shape}, expected {shape}: (H, N_h, 2), the "
+            "horizon's steps, then the humans, in metres"
+        )
+    if not np.all(np.isfinite(prediction)):
         return None
     return prediction
 

@@ -27,6 +27,41 @@ class StepData:
     # (M,) m added to delta in Eq. 7's weight (costs.Track.goal_slack, mpc/parked.py); None: 0 (the paper)
     goal_slack: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        """Arrays of the shapes above, taken as float or bool arrays (lists too), else a ValueError naming the
+        field: a one-robot ``arrived`` for three robots was stretched to all three by numpy's broadcasting
+        (each treated as arrived), and a wrong shape failed deep in the NLP's parameters."""
+        states = np.asarray(self.states, dtype=float)
+        if states.ndim != 2 or states.shape[1:] != (4,) or not np.all(np.isfinite(states)):
+            raise ValueError(
+                f"states must be finite rows [s_x, s_y, v_x, v_y] of shape (M, 4), got shape {states.shape}"
+            )
+        object.__setattr__(self, "states", states)
+        m = len(states)
+        for name, what in (
+            ("last_actions", "finite accelerations"),
+            ("goals", "finite positions"),
+            ("targets", "finite positions"),
+            ("active", "booleans"),
+            ("arrived", "booleans"),
+            ("flocking", "booleans"),
+        ):
+            self._check(name, what, (m, 2) if what.startswith("finite") else (m,))
+
+    def _check(self, name: str, what: str, shape: tuple[int, ...]) -> None:
+        """``name`` as an array of ``what`` (finite floats, or booleans) and ``shape``; an optional field
+        (default None) may stay None."""
+        value = getattr(self, name)
+        if value is None and name in ("arrived", "targets", "flocking"):
+            return
+        finite = what.startswith("finite")
+        array = np.asarray(value, dtype=float if finite else bool)
+        if array.shape != shape or (finite and not np.all(np.isfinite(array))):
+            raise ValueError(
+                f"{name} must be {what} of shape {shape}, one per robot of states, got shape {array.shape}"
+            )
+        object.__setattr__(self, name, array)
+
     @property
     def n_robots(self) -> int:
         return len(self.states)

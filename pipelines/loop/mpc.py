@@ -247,10 +247,7 @@ class MPCController:
             self._observer.observe(obs, self.env_config)
 
     def reset(self, obs: Observation) -> None:
-        if abs(obs.dt - self.cfg.dt) > 1e-12:  # an episode of another simulator than the one built for
-            raise PipelineError(
-                f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
-            )
+        self._check_dt(obs)
         check_history(obs)
         history, _ = predictor_history(obs, self.model.obs_len)
         self._observe(obs)
@@ -260,8 +257,15 @@ class MPCController:
         if self.stall is not None:
             self.stall.reset()
 
+    def _check_dt(self, obs: Observation) -> None:
+        if abs(obs.dt - self.cfg.dt) > 1e-12:  # an episode of another simulator than the one built for
+            raise PipelineError(
+                f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
+            )
+
     def act(self, obs: Observation) -> ControlOutput:
         t0 = time.perf_counter()
+        self._check_dt(obs)  # at every step, not at reset alone: an observation built by hand
         check_history(obs)
         self._observe(obs)
         cfg = self.cfg

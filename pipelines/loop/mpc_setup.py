@@ -118,7 +118,9 @@ def check_history(obs: Observation) -> None:
 
     The predictor reads the history and the MPC the positions: an observation built outside the simulator (a
     tracker's, on a real robot) whose history keeps a human who left, misses one who came, or lags a step
-    was otherwise planned with silently, or failed deep in the predictor. The simulator's agree exactly."""
+    was otherwise planned with silently, or failed deep in the predictor. The simulator's agree exactly (a
+    float32 history, a tracker's, within a micrometre). Its robots' and humans' fields are checked first."""
+    _check_fields(obs)
     history = np.asarray(obs.history)
     agents = obs.n_robots + obs.n_humans
     if history.ndim != 3 or history.shape[1:] != (agents, 2):
@@ -136,7 +138,7 @@ def check_history(obs: Observation) -> None:
             f"{field} holds a position that is not finite ({who} at {now[i].tolist()}); a controller plans "
             "from every agent's current position (hand it only the people tracked now)"
         )
-    differs = ~np.all(np.abs(history[-1] - now) <= 1e-9, axis=1)  # NaN differs
+    differs = ~np.all(np.abs(history[-1] - now) <= 1e-6, axis=1)  # NaN differs; float32 rounds 1e-7 m off
     if differs.any():
         i = int(np.flatnonzero(differs)[0])
         who, field = _agent(obs, i)
@@ -145,6 +147,26 @@ def check_history(obs: Observation) -> None:
             f"there but at {now[i].tolist()} in {field} ({int(differs.sum())} agent(s) differ); row -1 of "
             "the history must be the current positions, robots first"
         )
+
+
+def _check_fields(obs: Observation) -> None:
+    """PipelineError naming the first of the robots' and humans' fields that is not one row per agent: a
+    one-robot ``robot_reached`` for three robots was stretched to all three (each taken as arrived), other
+    shapes failed in numpy's words."""
+    m, n = obs.n_robots, obs.n_humans
+    for name, shape in (
+        ("robot_positions", (m, 2)),
+        ("robot_velocities", (m, 2)),
+        ("robot_goals", (m, 2)),
+        ("robot_last_actions", (m, 2)),
+        ("robot_reached", (m,)),
+        ("human_positions", (n, 2)),
+        ("human_velocities", (n, 2)),
+    ):
+        got = np.shape(getattr(obs, name))
+        if got != shape:
+            agents = "robot of obs.robot_positions" if name.startswith("robot") else "human"
+            raise PipelineError(f"obs.{name} has shape {got}, expected {shape}: one row per {agents}")
 
 
 def _agent(obs: Observation, i: int) -> tuple[str, str]:

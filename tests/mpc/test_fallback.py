@@ -1,5 +1,7 @@
 """A failing step never ends an episode: shifted previous plan, else braking; the status is recorded."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -39,6 +41,48 @@ def test_nan_prediction_is_a_failure_not_a_crash():
     for solver in (CMPC(cfg, 2, 1), DMPC(cfg, 2, 1)):
         result = solver.solve(data, humans(cfg, np.nan), start)
         assert not result.solved and result.status == "nan_prediction" and result.solves == 0
+
+
+def test_a_prediction_of_another_shape_is_named_not_taken_for_nan():
+    """A predict function of one's own returning (N_h, H, 2), or too few humans, was reported as
+    "nan_prediction" and every step fell back: the shape is a programming error, named."""
+    cfg = MPCConfig()
+    data = moving_data()
+    start = PlanMemory(cfg).start(data)
+    for solver in (CMPC(cfg, 2, 1), DMPC(cfg, 2, 1)):
+        for wrong in ((1, cfg.horizon, 2), (cfg.horizon, 2, 2)):
+            expected = rf"returned shape {re.escape(str(wrong))}, expected \(4, 1, 2\): \(H, N_h, 2\)"
+            with pytest.raises(ValueError, match=expected):
+                solver.solve(data, lambda robots_future, wrong=wrong: np.zeros(wrong), start)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        (
+            "arrived",
+            np.array([True]),
+            r"arrived must be booleans of shape \(2,\), one per robot of states, got ",
+        ),
+        ("active", np.ones(3, dtype=bool), r"active must be booleans of shape \(2,\)"),
+        ("goals", np.full((2, 2), np.nan), r"goals must be finite positions of shape \(2, 2\)"),
+        ("last_actions", np.zeros(2), r"last_actions must be finite accelerations of shape \(2, 2\)"),
+        ("states", np.zeros((2, 2)), r"states must be finite rows \[s_x, s_y, v_x, v_y\] of shape \(M, 4\)"),
+        ("states", np.full((2, 4), np.nan), r"states must be finite rows"),
+    ],
+)
+def test_step_data_of_the_wrong_shape_is_refused_naming_the_field(field, value, message):
+    """A one-robot ``arrived`` for two robots was stretched to both by numpy's broadcasting (both taken as
+    arrived, the plan changed, status ok); other shapes failed deep in the NLP with numpy's words."""
+    import dataclasses
+
+    with pytest.raises(ValueError, match=message):
+        dataclasses.replace(moving_data(), **{field: value})
+
+
+def test_step_data_takes_lists():
+    data = StepData([[0.0, 0.0, 0.5, 0.5]], [[0.0, 0.0]], [[0.0, 5.0]], [True], arrived=[False])
+    assert data.states.dtype == float and data.active.dtype == bool and data.arrived.shape == (1,)
 
 
 def test_timeout_is_a_failure():

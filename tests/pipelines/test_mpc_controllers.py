@@ -1,6 +1,7 @@
 """CMPC/DMPC as closed-loop controllers, driven through crowdsim's CrowdEnv."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -287,6 +288,28 @@ def test_an_episode_of_another_time_step_is_refused():
     obs = CrowdEnv(EnvConfig(dt=0.2)).reset(0, "circle", 2)
     with pytest.raises(PipelineError, match=r"the simulator steps 0.2 s but the MPC plans with tau = 0.4 s"):
         controller.reset(obs)
+
+
+def test_a_hand_built_observation_is_checked_at_every_step():
+    """Observations built outside the simulator (a tracker's) reach ``act`` without a ``reset`` in between:
+    another time step was planned with at tau = 0.4 s, a one-robot ``robot_reached`` for two robots taken as
+    both arrived (numpy's broadcasting), a velocity of the wrong shape failed in numpy's words, and a
+    float32 history (9e-8 m of rounding) was refused as a history that is not the positions."""
+    controller = make_controller(ControllerSpec("cmpc", predictor="constant_velocity"))
+    obs = CrowdEnv().reset(0, "circle", 3, n_robots=2)
+    controller.reset(obs)
+    with pytest.raises(PipelineError, match=r"the simulator steps 0.1 s but the MPC plans with tau = 0.4 s"):
+        controller.act(dataclasses.replace(obs, dt=0.1))
+    wrong = {
+        "robot_reached": np.array([True]),
+        "robot_velocities": np.zeros(2),
+        "human_positions": np.zeros(3),
+    }
+    for field, value in wrong.items():
+        with pytest.raises(PipelineError, match=rf"^obs.{field} has shape {re.escape(str(value.shape))}, "):
+            controller.act(dataclasses.replace(obs, **{field: value}))
+    float32 = dataclasses.replace(obs, history=obs.history.astype(np.float32))
+    assert controller.act(float32).status == "ok"
 
 
 def test_an_episode_does_not_depend_on_the_episodes_run_before():
