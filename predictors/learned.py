@@ -17,9 +17,8 @@ row-major: the net's state after the observed past, the agents' current position
 positions at ``t+1`` (these depend on the past only) and 1/0 for agents observed at the current step (only
 those are neighbours).
 
-An agent missing at the current step is extrapolated from its last observed step (constant velocity when its
-last two steps were seen, else held), takes part in the recursion, but is never pooled; an agent never
-observed cannot be predicted (``ValueError``).
+An agent missing now is extrapolated from its last observed step (constant velocity when its last two steps
+were seen, else held), takes part in the recursion, but is never pooled; one never observed is refused.
 
 The classes of the ``SocialLSTM`` net, ``SocialLSTMPredictor`` and the generator's ``SocialGANPredictor``
 (with ``sample``), are predictors.social_lstm_predictors.
@@ -87,15 +86,15 @@ class LearnedPredictor:
     # ------------------------------------------------------------------------------------- numeric side
     def _prepare(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray, keep_robots: bool = True):
         """Agents reordered (humans, robots), the last ``obs_len`` steps, gaps zeroed, absent agents imputed.
-
         ``keep_robots=False`` (a rollout without a robot plan) drops robots never observed: nothing is known
-        of them, and dataset evaluation passes agents that appear only later as such "robots".
-        """
+        of them, and dataset evaluation passes agents that appear only later as such "robots"."""
         history = np.asarray(history, dtype=np.float64)
         mask = np.asarray(mask, dtype=bool)
-        if history.ndim != 3 or history.shape[2] != 2 or mask.shape != history.shape[:2]:
+        shaped = history.ndim == 3 and history.shape[2] == 2 and mask.shape == history.shape[:2]
+        if not shaped or len(history) < self.obs_len:  # a short one ran on the steps it had: 0.7-0.9 m off
             raise PredictorError(
-                f"history (L, N, 2) and mask (L, N) expected, got {history.shape} and {mask.shape}"
+                f"history (L, N, 2) and mask (L, N) with L >= {self.obs_len} (the steps {self.name!r} reads; "
+                f"pad a short track, its padding False in mask) expected, got {history.shape}, {mask.shape}"
             )
         humans = np.asarray(humans, dtype=int)
         robots = robot_indices(history.shape[1], humans)

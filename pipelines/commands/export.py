@@ -147,7 +147,12 @@ def run(args: argparse.Namespace) -> int:
 
         print(
             f"  parity with torch (float64): values {parity.value_error:.1e}, Jacobians with respect to the "
-            f"robots' plan {parity.jacobian_error:.1e} (tolerance {PARITY_TOLERANCE:g})"
+            f"robots' plan {parity.jacobian_error:.1e} (tolerance {PARITY_TOLERANCE:g}; "
+            + (
+                f"largest entry {parity.coupling:.1e})"
+                if parity.coupling > 0
+                else "all 0: no prediction depends on the plan, the net pools no neighbours)"
+            )
         )
     print(f"  input  context        ({size}, 1)  from {args.name}.encode(history, mask, humans)")
     print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")

@@ -51,6 +51,9 @@ class Parity:
     jacobian_error: float  # max |dCasADi/dplan - dtorch/dplan|
     # which of torch's and the export's values and Jacobians hold NaN or inf (then an error above is NaN)
     nonfinite: tuple[str, ...] = ()
+    # max |dtorch/dplan|: 0 when no prediction depends on the robots' plan, so that the Jacobians compared
+    # were zeros on both sides (a net without social pooling, as vanilla_lstm)
+    coupling: float = 0.0
 
     @property
     def worst(self) -> float:
@@ -65,13 +68,19 @@ def crossing_scene(
     n_humans: int, n_robots: int, horizon: int, obs_len: int, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A plausible scene: agents within 3 m of each other (so pooling and attention see neighbours) walking
-    at ~1 m/s; ``(history (L, N, 2), mask, humans, robots_future (H, M, 2))``, robots last."""
+    at ~1 m/s, robot ``j`` ending its past within 1 m of human ``j mod N_h``, so that the prediction
+    depends on the plan (robots 2.4-5.2 m from every human compared two zero Jacobians); ``(history (L, N,
+    2), mask, humans, robots_future (H, M, 2))``, robots last."""
     rng = np.random.default_rng(seed)
     n = n_humans + n_robots
     start = rng.uniform(-3.0, 3.0, (n, 2))
     velocity = rng.normal(0.0, 1.0, (n, 2))
     steps = np.arange(obs_len)[:, None, None] * DT
     history = start[None] + steps * velocity[None] + rng.normal(0.0, 0.02, (obs_len, n, 2))
+    if n_humans:
+        near = np.random.default_rng([seed, 1]).uniform(-0.7, 0.7, (n_robots, 2))
+        beside = history[-1, np.arange(n_robots) % n_humans] + near
+        history[:, n_humans:] += (beside - history[-1, n_humans:])[None]
     future = (
         history[-1, n_humans:][None]
         + (np.arange(1, horizon + 1)[:, None, None] * DT) * velocity[None, n_humans:]
@@ -112,16 +121,18 @@ def check_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: int
         _errors(predictor, function, scene(n_humans, n_robots, horizon, predictor.obs_len, seed))
         for scene in (crossing_scene, scattered_scene)
     ]
-    value_error, jacobian_error = (float(np.max(e)) for e in zip(*(e[:2] for e in errors), strict=True))
+    value_error, jacobian_error, coupling = (
+        float(np.max(e)) for e in zip(*((e[0], e[1], e[3]) for e in errors), strict=True)
+    )
     nonfinite = tuple(name for name in NONFINITE_ORDER if any(name in e[2] for e in errors))
-    return Parity(value_error=value_error, jacobian_error=jacobian_error, nonfinite=nonfinite)
+    return Parity(value_error, jacobian_error, nonfinite, coupling)
 
 
 def _errors(
     predictor: Exported, function: Any, scene: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-) -> tuple[float, float, tuple[str, ...]]:
-    """The largest differences of ``function``'s prediction and its Jacobian from torch's on ``scene``, and
-    which of the four (``NONFINITE_ORDER``) hold NaN or inf."""
+) -> tuple[float, float, tuple[str, ...], float]:
+    """The largest differences of ``function``'s prediction and its Jacobian from torch's on ``scene``,
+    which of the four (``NONFINITE_ORDER``) hold NaN or inf, and torch's largest Jacobian entry."""
     history, mask, humans, future = scene
     context = predictor.encode(history, mask, humans)
     plan = ca.MX.sym("plan", future.size)
@@ -145,6 +156,7 @@ def _errors(
         float(np.abs(value.ravel() - torch_value).max(initial=0.0)),
         float(np.abs(jac.reshape(torch_jac.shape) - torch_jac).max(initial=0.0)),
         tuple(name for name, array in arrays.items() if not np.isfinite(array).all()),
+        float(np.abs(torch_jac).max(initial=0.0)),
     )
 
 

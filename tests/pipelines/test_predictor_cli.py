@@ -900,8 +900,8 @@ def test_zoo_add_list_show_verify_export_and_hash_refusal(trained, tmp_path, cap
     )
     function = ca.Function.load(str(casadi_file))
     predictor = load_predictor("walker")
-    history = np.stack([np.array([[0.4 * t, 0.0], [0.4 * t, 0.6], [1.0, 0.3 * t]]) for t in range(8)])
-    mask = np.ones((8, 3), dtype=bool)
+    history = np.stack([np.array([[0.4 * t, 0.0], [0.4 * t, 0.6], [1.0, 0.3 * t]]) for t in range(9)])
+    mask = np.ones((9, 3), dtype=bool)  # the 9 steps walker reads (obs_len)
     plan = np.array([[[1.0, 2.4]], [[1.0, 2.7]], [[1.0, 3.0]]])
     np.testing.assert_allclose(
         np.asarray(function(predictor.encode(history, mask, np.array([0, 1])), plan.ravel())).reshape(

@@ -86,12 +86,12 @@ def learned(request) -> LearnedPredictor:
 
 
 def crossing_scene(robots_first: bool = True):
-    """8 observed steps of 2 robots and 4 humans walking through each other within ~2 m (pooling range).
+    """obs_len (9) observed steps of 2 robots and 4 humans walking through each other within ~2 m (pooling).
 
     Returns history (L, 6, 2), mask, humans, robots_future (H, 2, 2). With ``robots_first`` the layout is
     the simulator's (robots 0, 1); otherwise robots sit at indices 1 and 4 and humans come unsorted.
     """
-    L = 8
+    L = 9
     t = np.arange(L)[:, None] * 0.4
     start = np.array([[-1.5, 0.3], [1.5, -0.2], [-1.0, -1.0], [0.8, 1.2], [0.0, -1.6], [1.2, 0.6]])
     velocity = np.array([[0.9, 0.0], [-0.9, 0.1], [0.5, 0.6], [-0.3, -0.8], [0.1, 0.9], [-0.7, -0.2]])

@@ -649,18 +649,35 @@ def test_the_parity_check_measures_values_and_jacobians_apart():
 
 
 def test_the_parity_scene_is_a_crowd_with_robots_moving_on():
-    """The check is only as good as its scene: agents that start within the +-3 m square (pooling's reach
-    sees neighbours), robots last, and a plan that starts one step after the last observed position (at
-    t + 1, as every plan the solver hands the predictor)."""
+    """The check is only as good as its scene: humans that start within the +-3 m square (pooling's reach
+    sees neighbours), robots last, each ending its past within 1 m of a human (so that the prediction
+    depends on the plan: robots 2.4-5.2 m away compared zero Jacobians), and a plan that starts one step
+    after the last observed position (at t + 1, as every plan the solver hands the predictor)."""
     from predictors.export.parity import crossing_scene
 
     history, mask, humans, future = crossing_scene(3, 2, 4, obs_len=5, seed=1)
     assert history.shape == (5, 5, 2) and future.shape == (4, 2, 2) and mask.all()
     assert humans.tolist() == [0, 1, 2]
-    assert np.abs(history[0]).max() < 3.0 + 0.1  # the start, plus 0.02 m noise
+    assert np.abs(history[0, :3]).max() < 3.0 + 0.1  # the start, plus 0.02 m noise
+    assert np.linalg.norm(history[-1, 3:] - history[-1, [0, 1]], axis=1).max() < 1.0
     step = future[1] - future[0]  # one step of each robot's constant velocity
     np.testing.assert_allclose(future[0] - history[-1, 3:], step, atol=1e-12)
     assert np.abs(step).min() > 0  # they move
+
+
+def test_the_export_says_whether_its_jacobians_compared_anything(tmp_path, capsys):
+    """One human and one robot: the parity check printed "Jacobians ... 0.0e+00" as passed where the robot
+    stood out of pooling's reach and both sides' Jacobians were zero. The robot now stands beside a human,
+    and the line says the largest entry, or that the net pools no neighbours (vanilla_lstm)."""
+    from pipelines.cli import main
+
+    for name, said in (
+        ("social_lstm_eth", r"largest entry [1-9]\.[0-9]e-0[1-5]\)"),
+        ("vanilla_lstm_eth", r"all 0: no prediction depends on the plan, the net pools no neighbours\)"),
+    ):
+        argv = ["export", name, "--out", str(tmp_path / f"{name}.casadi"), "--humans", "1", "--robots", "1"]
+        assert main(argv) == 0
+        assert re.search(said, capsys.readouterr().out)
 
 
 def test_the_second_parity_scene_is_scattered_with_gaps_in_the_history():

@@ -170,6 +170,10 @@ def test_casadi_encoder_gives_the_torch_context(name, length):
         mask[1, 5] = mask[0, 3] = False
     if length == 1:
         mask[:] = True  # a single step: everyone must be seen now
+    # the steps before them padded, marked unobserved: a predictor reads obs_len steps (fewer are refused)
+    pad = predictor.obs_len - length
+    history = np.concatenate([np.zeros((pad, *history.shape[1:])), history])
+    mask = np.concatenate([np.zeros((pad, mask.shape[1]), dtype=bool), mask])
     context = predictor.encode(history, mask, humans)
     reference = torch_context(predictor, history, mask, humans)
     n_agents, hidden = history.shape[1], predictor.config.hidden_dim
@@ -180,6 +184,17 @@ def test_casadi_encoder_gives_the_torch_context(name, length):
         # the gaps are not a no-op: the same past fully observed gives another state
         full = predictor.encode(history, np.ones_like(mask), humans)
         assert np.abs(full[: 2 * n_agents * hidden] - context[: 2 * n_agents * hidden]).max() > 1e-3
+
+
+@pytest.mark.parametrize("method", ["rollout", "encode"])
+def test_a_history_shorter_than_the_steps_read_is_refused(method):
+    """3 rows given to a net that reads 9 ran on the 3 it had: a forecast 0.7-0.9 m from the one its 9
+    steps give, without a word (docs/extending.md: L at least obs_len)."""
+    predictor = load_predictor("social_lstm_eth")
+    history, mask, humans = gappy_scene()
+    args = (None, humans, 4) if method == "rollout" else (humans,)
+    with pytest.raises(PredictorError, match=r"with L >= 9 \(the steps 'social_lstm_eth' reads; pad a short"):
+        getattr(predictor, method)(history[-3:], mask[-3:], *args)
 
 
 def test_encode_runs_without_torch_and_reuses_a_copy_of_the_context(monkeypatch):
