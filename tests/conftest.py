@@ -34,6 +34,17 @@ def _private_user_zoo(tmp_path_factory, monkeypatch):
         os.environ.pop(variable, None)
 
 
+@pytest.fixture(autouse=True)
+def _plugins_of_this_test_only(monkeypatch):
+    """The plugin registries as they were before the test, after it: a plugin one test registered stayed
+    registered for every later test, whose outputs then named its code (``code_with_plugins``)."""
+    from pipelines.loop import spec
+    from predictors import models
+
+    monkeypatch.setattr(spec, "_PLUGINS", dict(spec._PLUGINS))
+    monkeypatch.setattr(models, "_PLUGINS", dict(models._PLUGINS))
+
+
 @pytest.fixture
 def sigint_as_at_a_terminal():
     """SIGINT delivered to this process, and to the programs it starts, as a terminal's Ctrl-C is: a test
