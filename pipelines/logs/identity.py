@@ -55,8 +55,12 @@ def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[
     """What defines a run's episodes besides scenario and seed: the ``RUN_IDENTITY`` values of its "episode"
     metadata (strings; those it lacks left out) and its "config" metadata (decoded, as
     ``pipelines.logs.reader.decode_metadata`` reads it) flattened to dotted keys, where a setting a recording
-    predates takes its ``UNRECORDED_DEFAULTS`` value."""
+    predates takes its ``UNRECORDED_DEFAULTS`` value; and the predictor's weights (``predictor_sha256``,
+    where it has weights): a zoo name replaced by other weights (``zoo add --replace``) named two predictors,
+    whose runs `review` pooled and whose recordings replaced each other."""
     identity: dict[str, Any] = {k: episode[k] for k in RUN_IDENTITY if k in episode}
+    if episode.get("predictor_sha256"):  # "" for a predictor without weights, absent in the oldest
+        identity["predictor_sha256"] = episode["predictor_sha256"]
     flat = dotted_settings(config)
     for key, value in UNRECORDED_DEFAULTS.items():
         flat.setdefault(key, value)

@@ -116,7 +116,8 @@ def named_settings(setups: list[SetUp]) -> list[str]:
 
 
 def setting(key: str, value: Any) -> str:
-    """A setting in a set-up's name: "crowd eth", "formation row", "robots invisible", "mpc.horizon 8"."""
+    """A setting in a set-up's name: "crowd eth", "formation row", "robots invisible", "mpc.horizon 8",
+    "weights 0123456789ab"."""
     if value is MISSING:
         return f"{'margins' if key == 'margins.label' else key.removeprefix('env.')} not recorded"
     if key == "env.robots_visible" and isinstance(value, bool):
@@ -125,6 +126,8 @@ def setting(key: str, value: Any) -> str:
         return f"{key.removeprefix('env.')} {shown(value)}"
     if key == "margins.label":
         return f"margins {shown(value)}"
+    if key == "predictor_sha256" and isinstance(value, str):  # a name's two weights: the digits tell them
+        return f"weights {value[:12]}"
     return f"{key} {shown(value)}"
 
 

@@ -62,9 +62,10 @@ def record_episode(
     with_plan: bool = True,
     end: bool = True,
     config: dict | None = None,
+    predictor_sha256: str = "ab" * 32,
 ) -> RecordedEpisode:
     """Run ``steps`` steps (or to the end of the episode) through a McapEpisodeRecorder (``config``: more
-    settings of its "config" metadata)."""
+    settings of its "config" metadata; ``predictor_sha256``: the weights it names)."""
     env = CrowdEnv(EnvConfig(time_limit=steps * 0.4, timeout_margin=0.0))
     obs = env.reset(seed, scenario, n_humans, n_robots)
     meta = {
@@ -74,7 +75,7 @@ def record_episode(
         "n_robots": n_robots,
         "controller": "handmade",
         "predictor": "constant_velocity",
-        "predictor_sha256": "ab" * 32,
+        "predictor_sha256": predictor_sha256,
         "config": {"env": {"dt": 0.4, "radius": 0.3}, "horizon": HORIZON, **(config or {})},
     }
     recorder = McapEpisodeRecorder(out_dir, record_iterations=record_iterations, run_meta={"argv": ["test"]})
