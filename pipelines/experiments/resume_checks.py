@@ -35,10 +35,14 @@ class ResumeChecks:
         self._margins: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
         # (replayed crowd, its file's sha256) -> first plan index
         self._crowds: dict[tuple[str, str], int] = {}
+        self.outside = 0  # records of episodes this run does not plan (another run's options)
+        self._outside_key: str | None = None  # the first of them
 
     def add(self, record: dict[str, Any]) -> None:
         i = self._index.get(record["key"])
-        if i is None:  # not of the plan: neither run nor checked
+        if i is None:  # not of the plan: neither run nor checked, but counted (outside_note)
+            self.outside += 1
+            self._outside_key = self._outside_key or str(record["key"])
             return
         self.done[i] = 1
         name, sha256 = record.get("predictor"), record.get("predictor_sha256")
@@ -53,6 +57,18 @@ class ResumeChecks:
 
     def recorded(self, i: int) -> bool:
         return bool(self.done[i])
+
+    def outside_note(self) -> str | None:
+        """A line for a log holding episodes this run does not plan (a resume with fewer episodes per cell,
+        other crowd sizes or settings), None otherwise: the report is of the plan's episodes, and those
+        dropped out of table.md and cells.csv without a word."""
+        if not self.outside:
+            return None
+        return (
+            f"note: {self.out / EPISODES_FILE} holds {self.outside} episode(s) this run does not plan (e.g. "
+            f"{self._outside_key}): table.md, cells.csv and episodes.csv report this run's plan only; "
+            f"`crowdmpc config show --from-sweep {self.out} --run N` prints what earlier run N planned"
+        )
 
     def check(self) -> None:
         """The predictors, then the margins: each planned episode's record, in the plan's order."""

@@ -225,6 +225,9 @@ def run_sweep(
             if records is not None:
                 records(offset, line, record)
         recorded.check()
+        note = recorded.outside_note()
+        if note is not None:
+            print(note, file=sys.stderr)
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
         # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
         add_run = functools.partial(_add_run, out, meta, config, len(tasks))

@@ -307,6 +307,21 @@ def _config(out: Path, episodes: int, **kw) -> SweepConfig:
     return SweepConfig(get_experiment("baselines"), out, episodes, **kw)
 
 
+def test_a_rerun_planning_fewer_episodes_says_its_report_leaves_some_out(tmp_path, capsys):
+    """A rerun with fewer episodes per cell, or other crowd sizes, reports its own plan: the episodes of the
+    earlier plan dropped out of table.md and cells.csv without a word. It says so now, once per run."""
+    run_sweep(_config(tmp_path, 3))
+    capsys.readouterr()
+    run_sweep(_config(tmp_path, 3))
+    assert "this run does not plan" not in capsys.readouterr().err  # the same plan: nothing left out
+    run_sweep(_config(tmp_path, 2))
+    err = capsys.readouterr().err
+    assert f"note: {tmp_path / EPISODES_FILE} holds 2 episode(s) this run does not plan (e.g. " in err
+    assert "table.md, cells.csv and episodes.csv report this run's plan only" in err
+    run_sweep(_config(tmp_path, 1, humans=(3,)))
+    assert "holds 6 episode(s) this run does not plan" in capsys.readouterr().err
+
+
 def test_a_rerun_runs_only_what_is_missing_and_extends(tmp_path):
     first = run_sweep(_config(tmp_path, 2))
     assert (first.planned, first.already_done, first.ran, first.errors) == (4, 0, 4, [])
