@@ -201,7 +201,8 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
 
     summaries = summarize_columns(config.experiment, cells, log.columns)
     rows = episode_rows(config.out / EPISODES_FILE, cells, log)
-    report = write_report_of(config.out, config.experiment, summaries, rows)
+    note = not_counted_note(cells, tasks, {s.cell.key: s.episodes for s in summaries})
+    report = write_report_of(config.out, config.experiment, summaries, rows, note)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
     cpu = [log.cpu[i] for i in range(len(log.cpu))]
@@ -216,6 +217,32 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
             f"{duration(total)} of CPU: {duration(total / k)} for {workers}",
             file=sys.stderr,
         )
+
+
+NOT_COUNTED_NAMED = 8  # cells named in table.md's note of episodes not recorded; the rest counted
+
+
+def not_counted_note(cells: tuple[Cell, ...], tasks: list[EpisodeTask], recorded: dict[str, int]) -> str:
+    """table.md's line for the tabulated cells with planned episodes not recorded ("" when none): an episode
+    that raised or ran past --episode-timeout (errors.jsonl) is in no rate, so a cell whose slow episodes
+    timed out had its rates of the quick ones, or no column at all, under "N episodes per cell"."""
+    planned: dict[str, int] = {}
+    for task in tasks:
+        planned[task.cell.key] = planned.get(task.cell.key, 0) + 1
+    short = [
+        f"{c.method} at {c.n_humans} humans {planned[c.key] - recorded.get(c.key, 0)} of {planned[c.key]}"
+        for c in cells
+        if recorded.get(c.key, 0) < planned.get(c.key, 0)
+    ]
+    if not short:
+        return ""
+    if len(short) > NOT_COUNTED_NAMED:  # a sweep stopped early: every cell short
+        short = [*short[:NOT_COUNTED_NAMED], f"{len(short) - NOT_COUNTED_NAMED} more cells"]
+    return (
+        f"Not counted, planned episodes not recorded: {'; '.join(short)} (each raised or ran past "
+        "--episode-timeout, in errors.jsonl, or has not run yet; a rerun runs them): the rates are of the "
+        "recorded episodes, and a cell with none has no column."
+    )
 
 
 def duration(seconds: float) -> str:

@@ -202,15 +202,19 @@ def write_report(
 
 
 def write_report_of(
-    out: Path, experiment: Experiment, summaries: Sequence[CellSummary], rows: Iterable[dict[str, Any]]
+    out: Path,
+    experiment: Experiment,
+    summaries: Sequence[CellSummary],
+    rows: Iterable[dict[str, Any]],
+    note: str = "",
 ) -> Report:
     """``write_report`` of the cells' ``summaries`` and episodes.csv's ``rows`` (``episode_row``'s, in the
     plan's order): a report that reads a sweep's log once more for the rows rather than holding its records
-    (pipelines.commands.sweep_report)."""
+    (pipelines.commands.sweep_report). ``note``: a paragraph after table.md's table."""
     from pipelines.experiments.worker import remove_stale_scratch
 
     out = Path(out)
-    markdown = markdown_table(experiment, summaries)
+    markdown = markdown_table(experiment, summaries) + (f"\n{note}\n" if note else "")
     # a killed report's: not one another process writes now, here or on another machine
     remove_stale_scratch(out, STAGING_PREFIX, older_than_s=STALE_STAGING_S)
     staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))

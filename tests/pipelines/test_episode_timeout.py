@@ -167,6 +167,11 @@ def test_a_hanging_controller_is_an_episode_error_and_its_worker_goes_on(backend
     assert len({r["worker"] for r in records}) == 1  # one worker throughout: not killed, not replaced
     run_line = json.loads((out / "sweep.json").read_text())["runs"][0]
     assert run_line["config"]["sweep"]["episode_timeout_s"] == 1.0
+    # the table's rates are of the episodes that finished: said under it (they had vanished without a word)
+    table = (out / "table.md").read_text()
+    assert (
+        f"Not counted, planned episodes not recorded: {HANGS} at 2 humans 2 of 4 (each raised or ran" in table
+    )
 
 
 def test_the_worker_builds_a_timed_out_cells_controller_again(tmp_path):

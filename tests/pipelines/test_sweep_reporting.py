@@ -333,3 +333,23 @@ def test_bars_of_many_methods_keep_their_labels_apart():
         ax = fig.axes[0]
         per_bar = ax.get_position().width * fig.get_size_inches()[0] / len(experiment.method_labels)
         assert per_bar >= 0.34 if width is None else fig.get_size_inches()[0] == width
+
+
+def test_the_note_of_episodes_not_counted_names_at_most_eight_cells():
+    """A sweep stopped early has every cell short: the note names eight and counts the rest; a cell fully
+    recorded is not named, and a plan fully recorded has no note."""
+    import types
+
+    from pipelines.commands.sweep_report import not_counted_note
+
+    cells = tuple(types.SimpleNamespace(key=f"c{i}", method=f"M{i}", n_humans=5) for i in range(11))
+    tasks = [types.SimpleNamespace(cell=c) for c in cells for _ in range(4)]
+    recorded = {"c0": 4, "c1": 3}
+    note = not_counted_note(cells, tasks, recorded)
+    assert note.startswith(
+        "Not counted, planned episodes not recorded: M1 at 5 humans 1 of 4; M2 at 5 humans"
+    )
+    assert (
+        "M0 " not in note and "M8 at" in note and "M9" not in note and "; 2 more cells (each raised" in note
+    )
+    assert not_counted_note(cells, tasks, {c.key: 4 for c in cells}) == ""
