@@ -264,6 +264,8 @@ def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
 
     status = 0
     outcome = run_sweep(config, records=None if log is None else log.add)
+    if log is not None:  # the log's own count: a SIGTERM between an append and its count lost one
+        outcome.ran = log.planned - outcome.already_done
     done = outcome.already_done + outcome.ran
     rate = (
         f", {outcome.episodes_per_minute:.1f} episodes/min; "
