@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from pipelines.commands import examples
 from pipelines.errors import PipelineError
@@ -86,8 +87,23 @@ def run(args: argparse.Namespace) -> int:
         return _show_recorded(args)
     if args.run is not None:
         raise PipelineError("--run goes with --from-sweep DIR")
-    print(render(command_config(args)), end="")
+    config = command_config(args)
+    print(render(config), end="")
+    _note_refused(config)
     return 0
+
+
+def _note_refused(config: Any) -> None:
+    """A note for a configuration that simulate and sweep refuse before running: its values each pass their
+    own checks here, but an MPC d_min below the contact distance is a fact of two sections together, which
+    `config show` printed without a word and simulate then refused."""
+    from pipelines.loop.mpc_setup import check_contact_distance
+
+    if config.controller.controller in (None, "cmpc", "dmpc"):  # a sweep's experiment runs the MPCs
+        try:
+            check_contact_distance(config.world, config.mpc)
+        except PipelineError as exc:
+            print(f"note: simulate and sweep refuse this configuration: {exc}", file=sys.stderr)
 
 
 def _show_recorded(args: argparse.Namespace) -> int:

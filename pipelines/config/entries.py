@@ -98,7 +98,14 @@ def check_key(prefix: str, section: Section, key: str) -> None:
     if key in section.elsewhere:
         raise ConfigError(f"{prefix}: not a [{section.name}] key: {section.elsewhere[key]}")
     close = difflib.get_close_matches(key, section.names, n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    owners = _owners(key)  # `episodes` under [scenario]: a key of [simulate] and [sweep]'s episodes_per_cell
+    hint = (
+        f" (did you mean {close[0]!r}?)"
+        if close
+        else f" (a key of {' and '.join(f'[{s}]' for s in owners)})"
+        if owners
+        else ""
+    )
     raise ConfigError(f"{prefix}: unknown key{hint}; valid keys: {', '.join(section.names)}")
 
 

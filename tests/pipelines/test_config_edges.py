@@ -217,3 +217,32 @@ def test_an_earlier_section_that_breaks_this_one_is_named(bystander):
     set beside it (it broke [env] 'alone', over that world), not --set world.dt."""
     with pytest.raises(ConfigError, match=r"^--set world\.dt: \[env\]: EnvConfig\.dt must be at least"):
         load(None, ["world.dt=1e-9", bystander])
+
+
+def test_config_show_notes_a_configuration_the_runs_refuse(tmp_path, capsys):
+    """`config show` printed `[mpc] d_min = 0.5` and exited 0 where simulate then refused it (below the
+    contact distance, a fact of [mpc] and [world] together): it still prints the file, with a note."""
+    from pipelines.cli import main
+
+    path = tmp_path / "close.toml"
+    path.write_text("[mpc]\nd_min = 0.5\n")
+    assert main(["config", "show", "--config", str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert "d_min = 0.5" in out
+    assert err.startswith(
+        "note: simulate and sweep refuse this configuration: the MPC's d_min 0.5 m is below"
+    )
+    path.write_text("[mpc]\nd_min = 0.6\n")
+    assert main(["config", "show", "--config", str(path)]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_a_key_in_the_wrong_section_names_the_section_that_has_it(tmp_path):
+    """`episodes` under [scenario] (a hand-edited demo file) listed [scenario]'s keys only; a near miss said
+    "did you mean", a key of another section nothing."""
+    path = tmp_path / "demo.toml"
+    path.write_text("[scenario]\nepisodes = 4\n")
+    with pytest.raises(
+        ConfigError, match=r"scenario.episodes: unknown key \(a key of \[simulate\]\); valid keys"
+    ):
+        load(path)
