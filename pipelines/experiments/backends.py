@@ -151,7 +151,7 @@ class RayBackend:
                 node, code = self._ray.get(ref)
             except self._ray.exceptions.RayActorError:
                 continue
-            differ = code if isinstance(code, str) else code_changes([driver], code)
+            differ = code if isinstance(code, str) else code_changes([driver], _plugins_of(code, driver))
             if differ:
                 raise PipelineError(
                     f"a Ray worker on {node} does not run this driver's code ({differ}; the driver's -> "
@@ -203,6 +203,17 @@ class RayBackend:
             self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
+
+
+def _plugins_of(code: dict[str, Any], driver: dict[str, Any]) -> dict[str, Any]:
+    """An actor's ``code`` with only the plugins ``driver``'s code names: an actor loads every plugin its
+    variables list, a Python driver only those it registered or ran (one listed and never run is no code of
+    the run)."""
+    wanted = driver.get("plugins") or {}
+    plugins = {spec: sha for spec, sha in (code.get("plugins") or {}).items() if spec in wanted}
+    return {key: value for key, value in code.items() if key != "plugins"} | (
+        {"plugins": plugins} if plugins else {}
+    )
 
 
 def check_backend(kind: str, workers: int, ray_address: str | None) -> None:

@@ -574,6 +574,18 @@ def test_a_ray_worker_running_other_code_is_refused(monkeypatch):
     assert str(refused.value).endswith(
         "install the same crowdmpc commit, libraries and plugins on every node"
     )
+    # a plugin only the actor loaded (its variables list it; the driver never ran it) is no code of the run,
+    # one the driver registered and the actor lacks is
+    _fake_ray(monkeypatch, dies=set(), code={**code_with_plugins(), "plugins": {"x:Y": "a" * 64}})
+    RayBackend(1, "none", address=None)
+    from pipelines.plugins import register
+
+    register("tests.plugins.toy_controller:StraightLine")
+    _fake_ray(monkeypatch, dies=set(), code={k: v for k, v in code_with_plugins().items() if k != "plugins"})
+    with pytest.raises(
+        PipelineError, match=r"\(plugin tests.plugins.toy_controller:StraightLine [0-9a-f]{12} -> "
+    ):
+        RayBackend(1, "none", address=None)
     _fake_ray(monkeypatch, dies={"b"})  # the driver's code: runs, and the replacement is asked too
     tasks = [types.SimpleNamespace(key=k) for k in "abc"]
     assert sorted(o.key for o in RayBackend(1, "none", address=None).run(tasks)) == list("abc")
