@@ -36,6 +36,14 @@ TOY = "tests.plugins.toy_predictor:ToyNet"
 
 load_plugin(TOY)  # registered before the kinds are listed: the contract covers plugins
 
+
+@pytest.fixture(autouse=True)
+def _toy_registered():
+    """Registered for each test too: the session drops the plugins its modules registered as they were
+    imported (tests/conftest.py), and the test's own registration goes with the test."""
+    load_plugin(TOY)
+
+
 # Every kind with its own config, and the variants the MPC relies on (soft pooling: the coupled NLP).
 UNTRAINED = [(name, {}) for name in sorted(model_kinds())] + [("social_lstm", {"pooling": "soft"})]
 
