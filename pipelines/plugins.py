@@ -175,12 +175,18 @@ def plugin_code() -> dict[str, str | None]:
     their own, are not among them). The module's own file only: code it imports from other files is not
     covered. None for a module with no file (a notebook's ``__main__``)."""
     specs = [*models.registered_plugins(), *registered_controller_plugins()]
-    return {spec: _module_sha256(spec.partition(":")[0]) for spec in specs}
+    out = {}
+    for spec in specs:
+        module, _, name = spec.partition(":")
+        out[spec] = _module_sha256(module, getattr(sys.modules.get(module), name, None))
+    return out
 
 
 @functools.cache
-def _module_sha256(module: str) -> str | None:
-    """Once a process: the code that runs is the code imported, however its file changes afterwards."""
+def _module_sha256(module: str, plugin_class: object) -> str | None:
+    """Once per class object (held by the cache, so that its id is never another's): the code that runs is
+    the code imported, however its file changes afterwards; a module reloaded (``importlib.reload``, a
+    notebook) makes a new class, whose file is read again."""
     path = getattr(sys.modules.get(module), "__file__", None)
     try:
         return hashlib.sha256(Path(path).read_bytes()).hexdigest() if path else None

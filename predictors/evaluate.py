@@ -152,6 +152,12 @@ def evaluate_scenes(
 ) -> dict:
     """``evaluate`` of files already read (``load_eval_scenes`` with the same ``config``), by their paths."""
     check_dataset_predictor(predictor)
+    if predictor.obs_len > config.obs_len:  # refused by the predictor at the first scene, in its API's words
+        raise PredictorError(
+            f"predictor {predictor.name!r} reads {predictor.obs_len} observed steps, the evaluation gives "
+            f"{config.obs_len} of each scene ({config.obs_len} observed + {config.pred_len} predicted: "
+            "TrajNet++'s protocol)"
+        )
     per_file: dict[str, dict] = {}
     all_scores: list[SceneScore] = []
     # disable=None: a bar on a terminal only, so logs and pipes stay clean

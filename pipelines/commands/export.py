@@ -151,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
             + (
                 f"largest entry {parity.coupling:.1e})"
                 if parity.coupling > 0
+                else "none: no robots or no humans)"
+                if args.robots == 0 or args.humans == 0
                 else "all 0: no prediction depends on the plan, the net pools no neighbours)"
             )
         )

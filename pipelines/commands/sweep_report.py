@@ -257,6 +257,14 @@ def duration(seconds: float) -> str:
     return f"{seconds / 86400:.1f} days"
 
 
+def _recorded(config: SweepConfig) -> int:
+    """The plan's episodes --out's log holds, read again."""
+    from pipelines.experiments.log import episode_log
+
+    planned = {t.key for t in config.tasks()}
+    return sum(record["key"] in planned for _, _, record in episode_log(config.out).scan(repair=False))
+
+
 def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
     """Runs the episodes not yet recorded and says how it went; returns the exit status (1: some episodes
     raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run appends."""
@@ -264,8 +272,8 @@ def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
 
     status = 0
     outcome = run_sweep(config, records=None if log is None else log.add)
-    if log is not None:  # the log's own count: a SIGTERM between an append and its count lost one
-        outcome.ran = log.planned - outcome.already_done
+    if outcome.interrupted:  # the log's own count: a SIGTERM between a record's append and its count
+        outcome.ran = _recorded(config) - outcome.already_done
     done = outcome.already_done + outcome.ran
     rate = (
         f", {outcome.episodes_per_minute:.1f} episodes/min; "

@@ -69,7 +69,19 @@ def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_
         os.chdir(
             scratch
         )  # CasADi's jit writes its C sources into the current directory (no option for another)
+    _load_plugins()
     _WORKER = EpisodeWorker(record, jit, scratch, timeout_s)
+
+
+def _load_plugins() -> None:
+    """The plugins the driver's variables name, loaded as the driver loaded them: a net plugin loaded
+    lazily, at the worker's first episode of it, left the recordings made before it naming no plugin, beside
+    the later ones (``review``: "recorded by different code"). One that does not load here raises in the
+    episodes that use it, with its message, not in the pool's start."""
+    from pipelines.plugins import PluginError, load_environment_plugins
+
+    with contextlib.suppress(PluginError):
+        load_environment_plugins()
 
 
 def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:

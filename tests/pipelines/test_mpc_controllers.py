@@ -13,7 +13,7 @@ from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.mpc import MPCController
-from pipelines.loop.mpc_setup import mpc_config, predictor_history
+from pipelines.loop.mpc_setup import check_history, mpc_config, predictor_history
 
 
 class Collect:
@@ -310,6 +310,11 @@ def test_a_hand_built_observation_is_checked_at_every_step():
             controller.act(dataclasses.replace(obs, **{field: value}))
     float32 = dataclasses.replace(obs, history=obs.history.astype(np.float32))
     assert controller.act(float32).status == "ok"
+    # a tracker's map frame, a kilometre out: float32 rounds its positions by up to 6e-5 m there
+    far = {f: getattr(obs, f) + 1234.5 for f in ("robot_positions", "human_positions")}
+    check_history(dataclasses.replace(obs, **far, history=(obs.history + 1234.5).astype(np.float32)))
+    with pytest.raises(PipelineError, match=r"obs.history\[-1\] \(now\) is not the agents' positions"):
+        check_history(dataclasses.replace(obs, **far, history=(obs.history + 1234.6).astype(np.float32)))
 
 
 def test_an_episode_does_not_depend_on_the_episodes_run_before():

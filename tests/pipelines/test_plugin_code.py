@@ -89,7 +89,6 @@ def test_a_sweep_resumed_with_a_changed_plugin_says_so(tmp_path, capsys, monkeyp
     first = _sha256(path)
     _mine(tmp_path, 0.7, monkeypatch)  # the user edits the plugin; a new process imports the new file
     sys.modules.pop(MINE.partition(":")[0])
-    plugins._module_sha256.cache_clear()
     code, _, err = run(capsys, *argv, "--episodes-per-cell", "2")
     assert code == 0, err
     assert f"holds episodes made by other code (plugin {MINE} {first[:12]} -> {_sha256(path)[:12]})" in err
@@ -107,7 +106,6 @@ def test_review_keeps_runs_of_one_seed_by_two_versions_of_a_plugin(tmp_path, cap
         code, _, err = run(capsys, *argv, "--no-progress", "--record", str(recorded / f"v{len(shas)}"))
         assert code == 0, err
         sys.modules.pop(MINE.partition(":")[0])
-        plugins._module_sha256.cache_clear()
     code, out, err = run(capsys, "review", str(recorded), "--json", str(tmp_path / "review.json"))
     assert code == 0, err
     review = json.loads((tmp_path / "review.json").read_text())
@@ -116,3 +114,32 @@ def test_review_keeps_runs_of_one_seed_by_two_versions_of_a_plugin(tmp_path, cap
         g["repeats"] for g in review["groups"]
     )
     assert "recorded by different code" in err and f"with plugins {MINE} {shas[0][:12]}" in err
+
+
+def test_a_reloaded_plugin_is_named_by_its_new_file(tmp_path, monkeypatch):
+    """A notebook edits its plugin and reloads it (importlib.reload keeps the module object): the new class
+    runs, and the outputs named the old file's hash, kept once per module."""
+    import importlib
+
+    path = _mine(tmp_path, 0.8, monkeypatch)
+    plugins.register_plugins([MINE])
+    before = plugins.code_with_plugins()["plugins"][MINE]
+    assert before == _sha256(path)
+    _mine(tmp_path, 0.8, monkeypatch, "# edited\n")
+    assert plugins.code_with_plugins()["plugins"][MINE] == before  # the class imported still runs
+    importlib.reload(sys.modules[MINE.partition(":")[0]])
+    plugins.register_plugins([MINE])
+    assert plugins.code_with_plugins()["plugins"][MINE] == _sha256(path) != before
+
+
+def test_a_pool_worker_loads_the_plugins_its_variables_name(monkeypatch):
+    """A net plugin loaded lazily, at a worker's first episode of it, left that worker's earlier recordings
+    naming no plugin beside its later ones: the worker loads them as it starts, as the driver does."""
+    from pipelines.experiments.process_backend import _load_plugins
+
+    monkeypatch.setenv(models.PLUGINS_ENV, NET)
+    assert "plugins" not in plugins.code_with_plugins()
+    _load_plugins()
+    assert list(plugins.code_with_plugins()["plugins"]) == [NET]
+    monkeypatch.setenv(models.PLUGINS_ENV, "tests.plugins.never_imported:Net")
+    _load_plugins()  # one that does not load raises in the episodes that use it, not in the pool's start

@@ -72,3 +72,13 @@ def test_top_k_for_predictors_that_sample(tmp_path):
     assert evaluate(ConstantVelocity(), [path], EvalConfig(top_k=3), progress=False)["top_k"] is None
     with pytest.raises(PredictorError, match="top-k"):
         EvalConfig(top_k=0)
+
+
+def test_a_predictor_reading_more_steps_than_the_protocol_gives_is_refused_first(tmp_path):
+    """A zoo net trained to read 10 steps (obs_len up to 100 is allowed) failed inside the first scene with
+    the predictor API's words ("pad a short track ..."), which a command-line user cannot act on."""
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    with pytest.raises(
+        PredictorError, match=r"reads 10 observed steps, the evaluation gives 9 of each scene"
+    ):
+        evaluate(ConstantVelocity(obs_len=10), [path])

@@ -678,6 +678,9 @@ def test_the_export_says_whether_its_jacobians_compared_anything(tmp_path, capsy
         argv = ["export", name, "--out", str(tmp_path / f"{name}.casadi"), "--humans", "1", "--robots", "1"]
         assert main(argv) == 0
         assert re.search(said, capsys.readouterr().out)
+    argv = ["export", "social_lstm_eth", "--out", str(tmp_path / "alone.casadi"), "--humans", "2", "--robots"]
+    assert main([*argv, "0"]) == 0  # no plan to differentiate by: said so, not "pools no neighbours"
+    assert "(tolerance 1e-06; none: no robots or no humans)" in capsys.readouterr().out
 
 
 def test_the_second_parity_scene_is_scattered_with_gaps_in_the_history():
