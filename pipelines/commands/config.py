@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 from pipelines.commands import examples
 from pipelines.errors import PipelineError
+
+if TYPE_CHECKING:
+    from pipelines.config import RunConfig
 
 EPILOG = """examples:
   crowdmpc config show > run.toml            # every setting with its default and what it means
@@ -93,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _note_refused(config: Any) -> None:
+def _note_refused(config: RunConfig) -> None:
     """A note for a configuration that simulate and sweep refuse before running: its values each pass their
     own checks here, but an MPC d_min below the contact distance is a fact of two sections together, which
     `config show` printed without a word and simulate then refused."""

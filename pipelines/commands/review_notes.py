@@ -78,8 +78,7 @@ def _record_policy(run: object) -> object:
 def warn_mixed_code(folder: Path, name: str, members: list[dict[str, Any]]) -> None:
     """Warn when one set-up's runs were recorded by different code: other commits, a commit with and
     without uncommitted changes ("+dirty"), other plugin files, or some by code that recorded none (before
-    4a16d16): its
-    aggregate pools two codebases' results, as a sweep resumed by other code says."""
+    4a16d16): its aggregate pools two codebases' results, as a sweep resumed by other code says."""
     from pipelines.logs.review import commit_shown, plugins_shown
 
     commits = {

@@ -63,11 +63,10 @@ def groups(runs: list[RunDigest]) -> list[SetUp]:
 def drop_repeats(setup: SetUp) -> dict[str, str]:
     """Leave each episode once among ``setup``'s members, and return each file left out -> the file kept in
     its place. An episode is its scenario and seed recorded by one code ("commit+dirty" and the plugins'
-    files, or none recorded):
-    a folder holding two copies of a run's files (a/ and a backup b/) pooled both, "collision 38.5 % (5/13)"
-    where the ten episodes had 3. A run whose scenario or seed is unknown (cut before its metadata) is never a
-    repeat. The copy kept is the first complete one whose episode ended, else the first whose episode ended,
-    else the first (a killed run's file beside its rerun's)."""
+    files, or none recorded): a folder holding two copies of a run's files (a/ and a backup b/) pooled both,
+    "collision 38.5 % (5/13)" where the ten episodes had 3. A run whose scenario or seed is unknown (cut
+    before its metadata) is never a repeat. The copy kept is the first complete one whose episode ended,
+    else the first whose episode ended, else the first (a killed run's file beside its rerun's)."""
     kept: dict[tuple[Any, ...], RunDigest] = {}
     repeats: dict[str, str] = {}
     members = []
