@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import sys
 from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
@@ -151,7 +152,7 @@ class RayBackend:
                 node, code = self._ray.get(ref)
             except self._ray.exceptions.RayActorError:
                 continue
-            differ = code if isinstance(code, str) else code_changes([driver], _plugins_of(code, driver))
+            differ = code if isinstance(code, str) else code_changes(*_comparable(driver, code, node))
             if differ:
                 raise PipelineError(
                     f"a Ray worker on {node} does not run this driver's code ({differ}; the driver's -> "
@@ -203,6 +204,30 @@ class RayBackend:
             self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
+
+
+_UNNAMED_NOTED: set[str] = set()  # the nodes whose code was compared without a commit, said once
+
+
+def _comparable(
+    driver: dict[str, Any], code: dict[str, Any], node: str
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """``code_changes``' arguments for an actor's ``code`` beside the ``driver``'s: the actor's plugins
+    those the driver ran (``_plugins_of``), and, where either side names no commit (an installed package has
+    no git checkout), the commit and its diff left out, with a note: a node installed from the wheel was
+    refused beside a driver in a clone, with nothing known to differ."""
+    code = _plugins_of(code, driver)
+    if driver.get("commit") is None or code.get("commit") is None:
+        if node not in _UNNAMED_NOTED:  # once a node, not once an actor
+            _UNNAMED_NOTED.add(node)
+            print(
+                f"note: the Ray worker on {node} or the driver names no commit (an installed package): their "
+                "code is compared by version, Python, libraries and plugins only",
+                file=sys.stderr,
+            )
+        unnamed = ("commit", "dirty", "diff_sha256")
+        driver, code = ({k: v for k, v in c.items() if k not in unnamed} for c in (driver, code))
+    return [driver], code
 
 
 def _plugins_of(code: dict[str, Any], driver: dict[str, Any]) -> dict[str, Any]:

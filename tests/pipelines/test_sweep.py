@@ -552,7 +552,7 @@ def test_a_dead_ray_actor_fails_its_episodes_and_a_new_one_takes_its_place(monke
         list(RayBackend(1, "none", address=None).run(tasks))
 
 
-def test_a_ray_worker_running_other_code_is_refused(monkeypatch):
+def test_a_ray_worker_running_other_code_is_refused(monkeypatch, capsys):
     """A cluster node with another checkout, other libraries or another plugin file ran its episodes into the
     driver's table, which sweep.json names by the driver's code alone: the backend now asks every actor for
     its code as it starts (a replacement too) and refuses, naming the node and what differs."""
@@ -585,6 +585,18 @@ def test_a_ray_worker_running_other_code_is_refused(monkeypatch):
     with pytest.raises(
         PipelineError, match=r"\(plugin tests.plugins.toy_controller:StraightLine [0-9a-f]{12} -> "
     ):
+        RayBackend(1, "none", address=None)
+    # a node installed from the wheel names no commit: compared by the rest, said once a node
+    import pipelines.experiments.backends as backends
+
+    monkeypatch.setattr(backends, "_UNNAMED_NOTED", set())
+    wheel = {**code_with_plugins(), "commit": None, "dirty": None, "diff_sha256": None}
+    _fake_ray(monkeypatch, dies=set(), code=wheel)
+    capsys.readouterr()
+    RayBackend(2, "none", address=None)
+    assert capsys.readouterr().err.count("note: the Ray worker on node-7 or the driver names no commit") == 1
+    _fake_ray(monkeypatch, dies=set(), code={**wheel, "numpy": "1.0.0"})
+    with pytest.raises(PipelineError, match=r"\(numpy .* -> 1.0.0; the driver's -> the worker's\)"):
         RayBackend(1, "none", address=None)
     _fake_ray(monkeypatch, dies={"b"})  # the driver's code: runs, and the replacement is asked too
     tasks = [types.SimpleNamespace(key=k) for k in "abc"]
