@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,14 +12,14 @@ from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.replay import CROWDS
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.commands import check_writable, write_output
+from pipelines.commands import check_writable
 from pipelines.commands.output_paths import without_missing_parents
+from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_title, table_header
-from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
-from pipelines.errors import EpisodeFailed, PipelineError
+from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
+from pipelines.errors import PipelineError
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
-from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig
@@ -310,10 +309,12 @@ def _simulate(resolved: SimulateRun) -> int:
         if not results:
             if recorder is not None and recorder.paths:  # no report follows: the cut file would go unsaid
                 print(recorder.written_line(finished=0))
+            write_json(resolved.json, run_meta, [], configs.configs, True, None)
             raise
         interrupted = True  # the finished episodes are reported and written, then the interrupt goes on
     except PipelineError as exc:  # a plugin's, in an episode (EpisodeFailed) or in close() after the last
         if not results:
+            write_json(resolved.json, run_meta, [], configs.configs, False, exc)
             raise
         failure = exc  # as an interrupt: the finished episodes are reported, then the error's line
     finally:
@@ -348,34 +349,11 @@ def _report(
     stopped = "interrupted" if interrupted else "stopped by an error"
     header = table_header(cfg, spec, run_meta, finished, stopped, configs[0] if configs else None)
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
-    if resolved.json is not None:
-        from pipelines.plugins import code_with_plugins
-
-        payload = {
-            "run": run_meta,
-            "code": code_with_plugins(),
-            **({"interrupted": True, "episodes_finished": len(results)} if interrupted else {}),
-            **({"failed": _failed(failure), "episodes_finished": len(results)} if failure else {}),
-            "summary": summary,
-            # an episode that started and did not finish (Ctrl-C, a plugin's error) has a config, no result
-            "episodes": [
-                r.record().to_dict() | {"config": c}
-                for r, c in zip(results, configs[: len(results)], strict=True)
-            ],
-        }
-        write_output(resolved.json, json.dumps(plain(payload), indent=1) + "\n", "--json")
-        if not is_stdout(resolved.json):
-            print(f"wrote {shown(resolved.json)}")
+    write_json(resolved.json, run_meta, results, configs, interrupted, failure, summary)
     if resolved.plot is not None:
         _plot(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:
         print(recorder.written_line(finished=len(results)))
-
-
-def _failed(failure: PipelineError) -> dict[str, Any]:
-    """The JSON's record of the error that stopped a run: the failing episode's seed (None: it came after
-    the last episode, from the controller's close()) and the error's line."""
-    return {"seed": failure.seed if isinstance(failure, EpisodeFailed) else None, "error": str(failure)}
 
 
 def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:

@@ -3,13 +3,15 @@ when a run starts)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import sys
 import time
 from typing import Any
 
 import torch
-from lightning.pytorch.callbacks import Callback, ModelCheckpoint
+from lightning.pytorch.callbacks import Callback, ModelCheckpoint, TQDMProgressBar
 
 from pipelines.commands.train_resume import relocated
 
@@ -115,3 +117,29 @@ class TrainingClock(Callback):
     def this_part(self) -> float:
         """The seconds since this fit started (0 before it has)."""
         return 0.0 if self._started is None else time.perf_counter() - self._started
+
+
+class StderrProgressBar(TQDMProgressBar):
+    """Lightning's bars on stderr, where every command's progress goes: Lightning draws them on stdout
+    (``file=sys.stdout``, looked up as each bar is made), so a script reading train's results from stdout
+    got the bars' carriage returns and cursor-up escapes among them."""
+
+    def init_sanity_tqdm(self) -> Any:
+        with contextlib.redirect_stdout(sys.stderr):
+            return super().init_sanity_tqdm()
+
+    def init_train_tqdm(self) -> Any:
+        with contextlib.redirect_stdout(sys.stderr):
+            return super().init_train_tqdm()
+
+    def init_validation_tqdm(self) -> Any:
+        with contextlib.redirect_stdout(sys.stderr):
+            return super().init_validation_tqdm()
+
+    def init_test_tqdm(self) -> Any:
+        with contextlib.redirect_stdout(sys.stderr):
+            return super().init_test_tqdm()
+
+    def init_predict_tqdm(self) -> Any:
+        with contextlib.redirect_stdout(sys.stderr):
+            return super().init_predict_tqdm()

@@ -280,7 +280,12 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
     from lightning.pytorch.callbacks import LearningRateMonitor
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-    from pipelines.commands.train_checkpoint import RunCheckpoint, StopOnDivergence, TrainingClock
+    from pipelines.commands.train_checkpoint import (
+        RunCheckpoint,
+        StderrProgressBar,
+        StopOnDivergence,
+        TrainingClock,
+    )
     from pipelines.commands.train_resume import BEST_FILENAME
 
     # Absolute, as the rest of the command takes them: Lightning expands a leading "~" (and reads "s3://"
@@ -311,6 +316,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
             divergence := StopOnDivergence(),
             clock := TrainingClock(),
             LearningRateMonitor(logging_interval="epoch"),
+            *([] if args.no_progress else [StderrProgressBar()]),
         ],
         deterministic=True,
         enable_progress_bar=not args.no_progress,

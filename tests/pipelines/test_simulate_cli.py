@@ -295,3 +295,20 @@ def test_a_run_that_mostly_fell_back_says_so():
     assert (
         "190 of 195 steps fell back (most: Maximum_Iterations_Exceeded)" in row and "solver_max_iter" in row
     )
+
+
+@pytest.mark.parametrize("json_arg", ["file", "-"])
+def test_a_run_stopped_before_its_first_episode_finished_still_writes_its_json(tmp_path, capsys, json_arg):
+    """A plugin's error in episode 0 left an earlier run's --json file in place (a script then read the old
+    results as this run's), and `--json -` gave an empty stdout: the document is written, summary null."""
+    plugin = "tests.plugins.failing_controllers:RaisesInAct"
+    path = tmp_path / "run.json"
+    path.write_text('{"old": 1}\n')
+    target = str(path) if json_arg == "file" else "-"
+    argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "2"]
+    code = main([*argv, "--no-progress", "--json", target])
+    out = capsys.readouterr().out
+    payload = json.loads(path.read_text() if json_arg == "file" else out)
+    assert code != 0 and payload["episodes_finished"] == 0 and payload["summary"] is None
+    assert payload["episodes"] == [] and "boom in act" in payload["failed"]["error"]
+    assert payload["failed"]["seed"] == 0
