@@ -151,7 +151,15 @@ def _check(runs: list[RunDigest], report: dict[str, Any]) -> int:
         if run.file_problems:
             print(f"check {run.file}: the file itself: {count(len(run.file_problems), 'problem')}")
             _listed(run.file_problems)
-        print(f"check {run.file}: {checked} messages, {f'{len(errors)} invalid' if errors else 'ok'}")
+        # the verdict, last: "ok" only for a file that passes (a truncated one read "ok" after its cut line)
+        fails = [
+            why for why, bad in (("truncated", truncated), ("its own problems", run.file_problems)) if bad
+        ]
+        verdict = f"{len(errors)} invalid" if errors else "each valid" if fails else "ok"
+        print(
+            f"check {run.file}: {checked} messages, {verdict}"
+            + (f"; fails: {', '.join(fails)}" if fails else "")
+        )
         _listed(errors)
         failed += bool(errors or run.file_problems or truncated)
     return failed

@@ -109,7 +109,8 @@ def test_cut_at_many_offsets_reads_a_prefix_or_is_reported(episode, tmp_path, ca
     assert all(not read_recording(path).data("/episode/metrics") for path in rows)
     rc, out, _ = review(capsys, folder, "--check")
     assert rc == 1  # the unreadable cuts fail the check, and so do the truncated ones (a lost footer)
-    assert out.count(" ok\n") == len(truncated) + 1  # every message each file holds is valid
+    assert out.count(" each valid; fails: truncated\n") == len(truncated)  # every message each holds is valid
+    assert out.count(" ok\n") == 1  # the whole file alone
     assert out.count(" messages read, truncated: ") == len(truncated)
 
 
@@ -148,7 +149,7 @@ def test_a_flipped_byte_in_a_chunk_loses_that_chunk_only(tmp_path, capsys, compr
         rc, out, _ = review(capsys, flipped, "--check")
         assert rc == 1
         assert f"check {flipped}: the file itself: 1 problem\n  bad chunk at byte" in out
-        assert f"check {flipped}: {60 - len(lost)} messages, ok\n" in out  # what it holds is valid
+        assert f"check {flipped}: {60 - len(lost)} messages, each valid; fails: its own problems\n" in out
 
 
 def test_the_data_section_crc_is_checked_where_the_file_has_one(tmp_path, capsys):

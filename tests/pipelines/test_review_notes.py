@@ -179,7 +179,7 @@ def test_check_fails_a_cut_file_and_counts_the_files_problems_apart(runs, tmp_pa
     checked = sum(len(m) for m in read_recording(corrupt).messages.values())
     assert lines[0] == f"check {corrupt}: the file itself: 1 problem"
     assert lines[1].startswith("  corrupt record at byte ")
-    assert lines[2] == f"check {corrupt}: {checked} messages, ok"
+    assert lines[2] == f"check {corrupt}: {checked} messages, each valid; fails: its own problems"
 
 
 def test_a_recording_of_uncommitted_code_says_dirty(tmp_path, capsys, monkeypatch):
