@@ -182,8 +182,9 @@ def _main(argv: list[str] | None) -> int:
         return 2
     parser = build_parser()
     args = parser.parse_args(argv)
-    if getattr(args, "func", None) is None:
-        parser.print_help()
+    if getattr(args, "func", None) is None:  # usage, as a missing argument is: on stderr, not stdout
+        parser.print_help(sys.stderr)
+        print("crowdmpc: error: give a COMMAND (above)", file=sys.stderr)
         return 2
     if (args.config_file or args.config_set) and args.command not in ("simulate", "sweep", "config"):
         parser.error(f"--config and --set apply to simulate, sweep and config, not {args.command}")

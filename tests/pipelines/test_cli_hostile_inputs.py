@@ -288,3 +288,13 @@ def test_evaluate_on_raw_data_refuses_an_unusable_cache_before_preparing(tmp_pat
         f"{tmp_path / 'file'} is not a directory; set $CROWDMPC_CACHE to a writable directory"
     )
     assert os.path.isfile(tmp_path / "file")
+
+
+def test_no_command_is_usage_on_stderr(capsys):
+    """`crowdmpc` alone printed its whole help on stdout (exit 2), where every subcommand missing its action
+    says so on stderr: a script piping stdout got 60 lines of help as output."""
+    from pipelines.cli import main
+
+    assert main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: crowdmpc") and err.endswith("error: give a COMMAND (above)\n")
