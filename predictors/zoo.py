@@ -169,6 +169,9 @@ def zoo_roots(user_dir: str | Path | None = None) -> list[tuple[str, Path]]:
     shipped = checkpoints_dir()
     roots = [(SHIPPED, shipped)]
     user = user_zoo_dir(user_dir)
+    if user_dir is None and user.is_file():  # a mistyped $CROWDMPC_ZOO: its calibrations silently not read
+        where = f"${ZOO_ENV}: " if os.environ.get(ZOO_ENV) else ""
+        raise PredictorError(f"{where}the user zoo {user} is a file, not a directory")
     if _resolved(user) != _resolved(shipped):
         roots.append((USER, user))
     return roots

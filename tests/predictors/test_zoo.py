@@ -560,3 +560,17 @@ def test_a_quick_check_is_added_with_a_note_and_listed_with_a_mark(shipped, user
     assert any(line.startswith("quick *") for line in lines)
     assert not any(line.startswith(f"{NAME} *") for line in lines)  # the shipped one trained on every batch
     assert lines[-1].startswith("* a quick check (train --limit-batches")
+
+
+def test_a_user_zoo_that_is_a_file_is_refused_where_the_zoos_are_read(tmp_path, monkeypatch):
+    """`zoo list` refused $CROWDMPC_ZOO naming a file, while simulate with a shipped predictor ran and
+    silently read none of the user's calibrations from it."""
+    from predictors.zoo import locate
+
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"x")
+    monkeypatch.setenv("CROWDMPC_ZOO", str(junk))
+    with pytest.raises(
+        PredictorError, match=r"^\$CROWDMPC_ZOO: the user zoo .*junk.mcap is a file, not a dir"
+    ):
+        locate("social_lstm_eth")
