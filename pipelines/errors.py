@@ -17,6 +17,11 @@ class PipelineError(ValueError):
     """Base class of the user-facing errors raised by `pipelines`."""
 
 
+class RecordingRefused(PipelineError):
+    """``--record`` cannot write an episode's file (another run's episode there, a link, no lock): a refusal
+    of the folder the user named, not a failure of the episode."""
+
+
 class SweepStopped(PipelineError):
     """A sweep that stopped itself part way (its first episodes all raised, its workers kept dying): what it
     recorded stands, and gets its report."""

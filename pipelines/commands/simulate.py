@@ -17,7 +17,7 @@ from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_title, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, RecordingRefused
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
 
@@ -314,7 +314,8 @@ def _simulate(resolved: SimulateRun) -> int:
         interrupted = True  # the finished episodes are reported and written, then the interrupt goes on
     except PipelineError as exc:  # a plugin's, in an episode (EpisodeFailed) or in close() after the last
         if not results:
-            write_json(resolved.json, run_meta, [], configs.configs, False, exc)
+            if not isinstance(exc.__cause__, RecordingRefused):  # a refusal of --record writes nothing
+                write_json(resolved.json, run_meta, [], configs.configs, False, exc)
             raise
         failure = exc  # as an interrupt: the finished episodes are reported, then the error's line
     finally:

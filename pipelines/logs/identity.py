@@ -12,7 +12,7 @@ from typing import Any, Final
 
 from mcap.reader import make_reader
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, RecordingRefused
 from pipelines.logs.reader import Recording, decode_metadata, read_metadata
 
 # What tells two runs' recordings of one (scenario, seed) apart (its file name is the same for both), and
@@ -107,7 +107,7 @@ def check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
         more = f", and {len(differ) - len(named)} more" if len(differ) > len(named) else ""
         was = ", ".join(f"{k} {shown(held[k])}" for k in named)
         now = ", ".join(f"{k} {shown(identity.get(k, MISSING))}" for k in named)
-        raise PipelineError(
+        raise RecordingRefused(
             f"cannot record to {path}: it holds another run's episode ({was}{more}; this run: {now}); record "
             "into another folder, or remove it"
         )

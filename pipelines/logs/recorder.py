@@ -23,7 +23,7 @@ from typing import IO, Any, Final
 
 from mcap.writer import CompressionType, Writer
 
-from pipelines.errors import PipelineError
+from pipelines.errors import PipelineError, RecordingRefused
 from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, MessageSchema
 
 DEFAULT_CHUNK_SIZE: Final[int] = 64 * 1024  # bytes, uncompressed
@@ -72,8 +72,8 @@ def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None
         raise
     except OSError as exc:
         if path.is_symlink():
-            raise PipelineError(f"cannot record to {path}: it is a symbolic link; remove it") from None
-        raise PipelineError(f"cannot record to {path}: {exc.strerror}") from None
+            raise RecordingRefused(f"cannot record to {path}: it is a symbolic link; remove it") from None
+        raise RecordingRefused(f"cannot record to {path}: {exc.strerror}") from None
     if not new:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -85,13 +85,13 @@ def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None
                 if any(not r.closed and r.part_path.absolute() == path.absolute() for r in _OPEN)
                 else ""
             )
-            raise PipelineError(
+            raise RecordingRefused(
                 f"cannot record to {path}: another run is recording that episode into this folder now{here}; "
                 "record into another folder"
             ) from None
         except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP: not a bug of ours
             os.close(fd)
-            raise PipelineError(
+            raise RecordingRefused(
                 f"cannot record to {path}: {exc.strerror} (its file system does not lock files; an NFS mount "
                 "without its lock daemon?); record into a folder on one that does"
             ) from None
@@ -141,7 +141,7 @@ class McapRecorder:
             raise PipelineError(f"compression must be an mcap CompressionType, got {compression!r}")
         self.path = Path(path)
         if not self.path.parent.is_dir():
-            raise PipelineError(f"cannot record to {self.path}: folder {self.path.parent} does not exist")
+            raise RecordingRefused(f"cannot record to {self.path}: folder {self.path.parent} does not exist")
         # Written to <name>.part, renamed to <name> by close(), rather than created at <name> once the first
         # chunk is ready: a file under its final name is then always a finished recording (a folder review, a
         # sweep's resume, Foxglove never meet a half-written one, nor a 0-byte one from a run killed in its
