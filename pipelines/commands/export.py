@@ -145,16 +145,15 @@ def run(args: argparse.Namespace) -> int:
     if parity is not None:
         from predictors.export.parity import PARITY_TOLERANCE
 
+        if parity.coupling > 0:
+            compared = f"largest entry {parity.coupling:.1e}"
+        elif args.robots == 0 or args.humans == 0:
+            compared = "none: no robots or no humans"
+        else:
+            compared = "all 0: no prediction depends on the plan, the net pools no neighbours"
         print(
             f"  parity with torch (float64): values {parity.value_error:.1e}, Jacobians with respect to the "
-            f"robots' plan {parity.jacobian_error:.1e} (tolerance {PARITY_TOLERANCE:g}; "
-            + (
-                f"largest entry {parity.coupling:.1e})"
-                if parity.coupling > 0
-                else "none: no robots or no humans)"
-                if args.robots == 0 or args.humans == 0
-                else "all 0: no prediction depends on the plan, the net pools no neighbours)"
-            )
+            f"robots' plan {parity.jacobian_error:.1e} (tolerance {PARITY_TOLERANCE:g}; {compared})"
         )
     print(f"  input  context        ({size}, 1)  from {args.name}.encode(history, mask, humans)")
     print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")

@@ -14,6 +14,7 @@ import dataclasses
 import json
 import sys
 import zlib
+from collections import Counter
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -226,9 +227,7 @@ def not_counted_note(cells: tuple[Cell, ...], tasks: list[EpisodeTask], recorded
     """table.md's line for the tabulated cells with planned episodes not recorded ("" when none): an episode
     that raised or ran past --episode-timeout (errors.jsonl) is in no rate, so a cell whose slow episodes
     timed out had its rates of the quick ones, or no column at all, under "N episodes per cell"."""
-    planned: dict[str, int] = {}
-    for task in tasks:
-        planned[task.cell.key] = planned.get(task.cell.key, 0) + 1
+    planned = Counter(task.cell.key for task in tasks)
     short = [
         f"{c.method} at {c.n_humans} humans {planned[c.key] - recorded.get(c.key, 0)} of {planned[c.key]}"
         for c in cells

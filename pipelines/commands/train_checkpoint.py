@@ -125,21 +125,22 @@ class StderrProgressBar(TQDMProgressBar):
     got the bars' carriage returns and cursor-up escapes among them."""
 
     def init_sanity_tqdm(self) -> Any:
-        with contextlib.redirect_stdout(sys.stderr):
-            return super().init_sanity_tqdm()
+        return _on_stderr(super().init_sanity_tqdm)
 
     def init_train_tqdm(self) -> Any:
-        with contextlib.redirect_stdout(sys.stderr):
-            return super().init_train_tqdm()
+        return _on_stderr(super().init_train_tqdm)
 
     def init_validation_tqdm(self) -> Any:
-        with contextlib.redirect_stdout(sys.stderr):
-            return super().init_validation_tqdm()
+        return _on_stderr(super().init_validation_tqdm)
 
     def init_test_tqdm(self) -> Any:
-        with contextlib.redirect_stdout(sys.stderr):
-            return super().init_test_tqdm()
+        return _on_stderr(super().init_test_tqdm)
 
     def init_predict_tqdm(self) -> Any:
-        with contextlib.redirect_stdout(sys.stderr):
-            return super().init_predict_tqdm()
+        return _on_stderr(super().init_predict_tqdm)
+
+
+def _on_stderr(make: Any) -> Any:
+    """``make()``'s bar, made while ``sys.stdout`` is stderr (Lightning names its file then)."""
+    with contextlib.redirect_stdout(sys.stderr):
+        return make()

@@ -132,6 +132,7 @@ class RayBackend:
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
+        self._uncommitted_nodes: set[str] = set()  # compared without a commit: said once a node
         try:
             self._check_code(self._actors)
         except BaseException:
@@ -152,7 +153,18 @@ class RayBackend:
                 node, code = self._ray.get(ref)
             except self._ray.exceptions.RayActorError:
                 continue
-            differ = code if isinstance(code, str) else code_changes(*_comparable(driver, code, node))
+            if isinstance(code, str):  # a plugin that does not load there
+                differ = code
+            else:
+                earlier, now, commits = _comparable(driver, code)
+                if not commits and node not in self._uncommitted_nodes:
+                    self._uncommitted_nodes.add(node)
+                    print(
+                        f"note: the Ray worker on {node} or the driver names no commit (an installed "
+                        "package): their code is compared by version, Python, libraries and plugins only",
+                        file=sys.stderr,
+                    )
+                differ = code_changes(earlier, now)
             if differ:
                 raise PipelineError(
                     f"a Ray worker on {node} does not run this driver's code ({differ}; the driver's -> "
@@ -206,28 +218,19 @@ class RayBackend:
             self._ray.shutdown()
 
 
-_UNNAMED_NOTED: set[str] = set()  # the nodes whose code was compared without a commit, said once
-
-
 def _comparable(
-    driver: dict[str, Any], code: dict[str, Any], node: str
-) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """``code_changes``' arguments for an actor's ``code`` beside the ``driver``'s: the actor's plugins
-    those the driver ran (``_plugins_of``), and, where either side names no commit (an installed package has
-    no git checkout), the commit and its diff left out, with a note: a node installed from the wheel was
-    refused beside a driver in a clone, with nothing known to differ."""
+    driver: dict[str, Any], code: dict[str, Any]
+) -> tuple[list[dict[str, Any]], dict[str, Any], bool]:
+    """``code_changes``' arguments for an actor's ``code`` beside the ``driver``'s, and whether both name a
+    commit: the actor's plugins those the driver ran (``_plugins_of``), and, where either side names no
+    commit (an installed package has no git checkout), the commit and its diff left out: a node installed
+    from the wheel was refused beside a driver in a clone, with nothing known to differ."""
     code = _plugins_of(code, driver)
-    if driver.get("commit") is None or code.get("commit") is None:
-        if node not in _UNNAMED_NOTED:  # once a node, not once an actor
-            _UNNAMED_NOTED.add(node)
-            print(
-                f"note: the Ray worker on {node} or the driver names no commit (an installed package): their "
-                "code is compared by version, Python, libraries and plugins only",
-                file=sys.stderr,
-            )
+    commits = driver.get("commit") is not None and code.get("commit") is not None
+    if not commits:
         unnamed = ("commit", "dirty", "diff_sha256")
         driver, code = ({k: v for k, v in c.items() if k not in unnamed} for c in (driver, code))
-    return [driver], code
+    return [driver], code, commits
 
 
 def _plugins_of(code: dict[str, Any], driver: dict[str, Any]) -> dict[str, Any]:

@@ -587,9 +587,6 @@ def test_a_ray_worker_running_other_code_is_refused(monkeypatch, capsys):
     ):
         RayBackend(1, "none", address=None)
     # a node installed from the wheel names no commit: compared by the rest, said once a node
-    import pipelines.experiments.backends as backends
-
-    monkeypatch.setattr(backends, "_UNNAMED_NOTED", set())
     wheel = {**code_with_plugins(), "commit": None, "dirty": None, "diff_sha256": None}
     _fake_ray(monkeypatch, dies=set(), code=wheel)
     capsys.readouterr()
