@@ -8,7 +8,13 @@ import importlib.util
 import sys
 from typing import NoReturn
 
-from pipelines.errors import PipelineError, interrupt_behind, storage_refusal
+from pipelines.errors import (
+    EPISODES_RAISED,
+    EpisodeFailed,
+    PipelineError,
+    interrupt_behind,
+    storage_refusal,
+)
 
 # The order in which subcommands are listed by --help.
 COMMANDS = (
@@ -196,6 +202,9 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt:  # first: the clause below may import its errors' packages
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except EpisodeFailed as exc:  # before the user errors it is one of
+        print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
+        return EPISODES_RAISED
     except user_errors() as exc:
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -12,6 +12,11 @@ from collections.abc import Iterator
 # and runs the command again, so the CLI says so in one line rather than in a traceback.
 STORAGE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
 
+# The exit status of a run an episode's error stopped (simulate, calibrate: the episode named by its seed,
+# what finished reported) and of a sweep some of whose episodes raised (each in its errors.jsonl): what ran
+# is kept, where a refused input (2) ran nothing, and a script tells the two apart.
+EPISODES_RAISED = 1
+
 
 class PipelineError(ValueError):
     """Base class of the user-facing errors raised by `pipelines`."""

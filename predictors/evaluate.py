@@ -133,7 +133,7 @@ def evaluate(
     files: list[Path],
     config: EvalConfig = EvalConfig(),
     *,
-    progress: bool = True,
+    progress: bool | None = None,
     root: Path | None = None,
 ) -> dict:
     """Per-file and overall (scenes pooled) metrics, as a JSON-ready dict."""
@@ -147,10 +147,11 @@ def evaluate_scenes(
     loaded: dict[Path, list[EvalScene]],
     config: EvalConfig = EvalConfig(),
     *,
-    progress: bool = True,
+    progress: bool | None = None,
     root: Path | None = None,
 ) -> dict:
-    """``evaluate`` of files already read (``load_eval_scenes`` with the same ``config``), by their paths."""
+    """``evaluate`` of files already read (``load_eval_scenes`` with the same ``config``), by their paths;
+    ``progress``: a bar of the scenes (None: on a terminal only, so logs and pipes stay clean)."""
     check_dataset_predictor(predictor)
     if predictor.obs_len > config.obs_len:  # refused by the predictor at the first scene, in its API's words
         raise PredictorError(
@@ -160,13 +161,12 @@ def evaluate_scenes(
         )
     per_file: dict[str, dict] = {}
     all_scores: list[SceneScore] = []
-    # disable=None: a bar on a terminal only, so logs and pipes stay clean
     with progress_bar(
         total=sum(len(s) for s in loaded.values()),
         desc=f"evaluating {predictor.name}",
         unit="scene",
         leave=False,
-        show=None if progress else False,
+        show=progress,
     ) as bar:
         for path, scenes in loaded.items():
             scores = score_scenes(predictor, scenes, config, bar)

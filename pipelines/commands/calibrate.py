@@ -160,11 +160,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="closed-loop held-out episodes plan with these margins (e.g. conformal:0.1, once stored); "
         "default none, the calibration's own conditions",
     )
-    p.add_argument(
-        "--json", type=json_path, metavar="FILE", help="write the blocks and coverage as JSON (-: stdout)"
-    )
+    p.add_argument("--json", type=json_path, metavar="FILE", help="blocks, coverage as JSON (-: stdout)")
     p.add_argument("--dry-run", action="store_true", help="measure and print; store nothing")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    # args.progress None: a bar on a terminal only (predictors.progress)
+    p.add_argument("--no-progress", dest="progress", action="store_const", const=False, help="no bar")
     p.set_defaults(func=run)
 
 
@@ -188,7 +187,7 @@ def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple
     from predictors.real_data import real_errors
 
     _check_real_horizon(args, predictor)
-    files = protocol_files(args.data_dir, "paper", progress=not args.no_progress)
+    files = protocol_files(args.data_dir, "paper", progress=args.progress)
     blocks, _ = calibrate_real(
         predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256
     )
@@ -217,7 +216,7 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
     from pipelines.experiments.calibrate import closed_loop_errors, errors_sha256
     from predictors.calibration import calibrations_from_errors
 
-    errors, classes, shortfall, details = closed_loop_errors(_plan(args), progress=not args.no_progress)
+    errors, classes, shortfall, details = closed_loop_errors(_plan(args), progress=args.progress)
     if errors.shape[0] == 0:
         raise PipelineError(
             f"no human came within --near {args.near:g} m of a robot in {args.episodes} episode(s), so there "
@@ -247,7 +246,7 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
     after = dataclasses.replace(
         plan, seed=plan.seed + plan.episodes, margins=parse_margins(args.holdout_margins)
     )
-    measured = closed_loop_errors(after, progress=not args.no_progress)
+    measured = closed_loop_errors(after, progress=args.progress)
     return measured.errors, measured.classes, measured.shortfall
 
 

@@ -124,7 +124,9 @@ def register(subparsers) -> None:
         metavar="FILE",
         help="also write the results as JSON (-: standard output)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (drawn on a terminal only)"
+    )
     parser.set_defaults(func=run)
 
 
@@ -147,11 +149,15 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.test is not None:
         files, root = {"test": list(args.test)}, None
     else:
-        files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
+        files = protocol_files(
+            args.data_dir, args.protocol, args.dataset, progress=False if args.no_progress else None
+        )
         root = prepared_dir(args.data_dir)
     check_dataset_predictor(predictor)  # before the files are read
     loaded = _scenes(args, files[args.split], config, root)
-    result = evaluate_scenes(predictor, loaded, config, progress=not args.no_progress, root=root)
+    result = evaluate_scenes(
+        predictor, loaded, config, progress=False if args.no_progress else None, root=root
+    )
     result.update(
         protocol=args.protocol,
         dataset=args.dataset,

@@ -151,7 +151,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --sensor-range: the tracker reports no track lengths (a late arrival's padded past reads "
         "as its own)",
     )
-    parser.add_argument("--no-progress", action="store_true", default=None, help="no progress bar")
+    parser.add_argument(
+        "--no-progress", action="store_true", default=None, help="no progress bar (drawn on a terminal only)"
+    )
     add_config_options(parser)
     parser.set_defaults(func=run, parser_error=parser.error)
 
@@ -299,7 +301,7 @@ def _simulate(resolved: SimulateRun) -> int:
             n_humans=scenario.humans,
             n_robots=scenario.robots,
             observers_factory=lambda: observers,
-            progress=sim.progress,
+            progress=None if sim.progress else False,  # a bar on a terminal only: logs stay clean
             env_config=env_config,
             into=results,
             sensor_range=sim.sensor_range,

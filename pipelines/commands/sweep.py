@@ -219,7 +219,7 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
         "is the one DIR's last run recorded, --experiment too)",
     )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (drawn on a terminal only)")
     p.add_argument(
         "--episode-timeout",
         type=float,
@@ -284,10 +284,22 @@ def run(args: argparse.Namespace) -> int:
         if status == INTERRUPTED:  # a record appended as the interrupt came may not have reached ``log``
             log = None
     elif not (out / EPISODES_FILE).exists():
-        raise PipelineError(f"{out / EPISODES_FILE} does not exist: nothing to report")
+        raise PipelineError(_nothing_recorded(out))
     if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
         report(config, cells, tasks, report_only=args.report_only, log=log)
     return status
+
+
+def _nothing_recorded(out: Path) -> str:
+    """Why --report-only has nothing to report in ``out``: no episode recorded, and whether some raised."""
+    from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE
+
+    if (out / ERRORS_FILE).is_file():
+        return (
+            f"{out} holds no recorded episode, only episodes that raised (see {out / ERRORS_FILE}): "
+            "nothing to report; rerun the sweep without --report-only to retry them"
+        )
+    return f"{out / EPISODES_FILE} does not exist: nothing to report"
 
 
 def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
@@ -295,13 +307,16 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     anything is written or started."""
     from pipelines.config import command_config
     from pipelines.config.recorded import report_config
-    from pipelines.experiments.log import check_sweep_directory
+    from pipelines.experiments.log import SWEEP_FILE, check_sweep_directory
 
     # a report of the sweep in --out: its recorded config beneath what is typed
     cfg = report_config(args, _options()) if args.report_only else command_config(args, _options())
     settings = cfg.sweep
-    for key in ("experiment", "out"):
+    # a report reads its experiment in --out's sweep.json: a folder without one is named before the option
+    for key in ("out", "experiment") if args.report_only else ("experiment", "out"):
         if getattr(settings, key) is None:
+            if key == "experiment" and not (Path(settings.out or "") / SWEEP_FILE).is_file():
+                raise PipelineError(f"{settings.out} holds no sweep ({SWEEP_FILE}): nothing to report")
             args.parser_error(f"the following arguments are required: --{key} (or [sweep] {key})")
     out = without_missing_parents(Path(settings.out or ""))
     if not args.dry_run:
@@ -340,7 +355,7 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
         backend=settings.backend,
         ray_address=settings.ray_address,
         record=settings.record,
-        progress=not args.no_progress,
+        progress=False if args.no_progress else None,  # a bar on a terminal only: logs stay clean
         episode_timeout_s=settings.episode_timeout_s,
         # nothing to compile (baselines only), or nothing run (--report-only): gcc is not needed
         jit=not args.report_only

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pipelines.errors import PipelineError
+from pipelines.errors import EPISODES_RAISED, PipelineError
 from pipelines.experiments.cell_columns import FLOATS, CellColumns, Column
 
 if TYPE_CHECKING:
@@ -265,8 +265,9 @@ def _recorded(config: SweepConfig) -> int:
 
 
 def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
-    """Runs the episodes not yet recorded and says how it went; returns the exit status (1: some episodes
-    raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run appends."""
+    """Runs the episodes not yet recorded and says how it went; returns the exit status (EPISODES_RAISED: some
+    episodes raised, INTERRUPTED). ``log``: given every record of the log, those held and those this run
+    appends."""
     from pipelines.experiments.sweep import run_sweep
 
     status = 0
@@ -288,7 +289,7 @@ def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
     if outcome.errors:
         raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
         print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
-        status = 1
+        status = EPISODES_RAISED
     if outcome.interrupted:
         print("interrupted: rerun the same command to resume", file=sys.stderr)
         status = INTERRUPTED

@@ -121,7 +121,11 @@ def register(subparsers) -> None:
         default=None,
         help="seed of weights, shuffling, augmentation (default 0)" + RESUMED,
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar (on a terminal) nor line an epoch (elsewhere)",
+    )
     parser.set_defaults(func=run)
 
 

@@ -144,3 +144,38 @@ def _on_stderr(make: Any) -> Any:
     """``make()``'s bar, made while ``sys.stdout`` is stderr (Lightning names its file then)."""
     with contextlib.redirect_stdout(sys.stderr):
         return make()
+
+
+class EpochLines(Callback):
+    """One line on stderr per epoch, where no terminal shows Lightning's bars (a batch job's log, ``nohup``,
+    a pipe): a bar there writes a carriage-return update per refresh, hundreds of kilobytes of them an hour,
+    and no line a log reader can follow."""
+
+    def __init__(self) -> None:
+        self._started = time.perf_counter()
+
+    def on_train_epoch_start(self, trainer: Any, pl_module: Any) -> None:
+        self._started = time.perf_counter()
+
+    def on_train_epoch_end(self, trainer: Any, pl_module: Any) -> None:
+        # Lightning validates before this hook within an epoch, so the epoch's val_ade is here
+        metrics = trainer.callback_metrics
+        shown = [
+            f"{label} {float(metrics[key]):.4g}{unit}"
+            for key, label, unit in (("train_loss_epoch", "train loss", ""), ("val_ade", "val ADE", " m"))
+            if key in metrics
+        ]
+        seconds = time.perf_counter() - self._started
+        print(
+            f"epoch {trainer.current_epoch + 1}/{trainer.max_epochs}: {', '.join(shown) or 'no metric yet'} "
+            f"({seconds:.1f} s)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+def progress_callbacks(no_progress: bool) -> list[Callback]:
+    """Lightning's bars on a terminal (on stderr), one line an epoch elsewhere, nothing with --no-progress."""
+    if no_progress:
+        return []
+    return [StderrProgressBar()] if sys.stderr is not None and sys.stderr.isatty() else [EpochLines()]

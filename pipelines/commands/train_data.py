@@ -63,7 +63,9 @@ def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:
         return files, None
     from predictors.data.locate import prepared_dir, protocol_files
 
-    files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=not args.no_progress)
+    files = protocol_files(
+        args.data_dir, args.protocol, args.dataset, progress=False if args.no_progress else None
+    )
     return files, prepared_dir(args.data_dir)
 
 

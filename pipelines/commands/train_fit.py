@@ -285,6 +285,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
         StderrProgressBar,
         StopOnDivergence,
         TrainingClock,
+        progress_callbacks,
     )
     from pipelines.commands.train_resume import BEST_FILENAME
 
@@ -316,10 +317,10 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
             divergence := StopOnDivergence(),
             clock := TrainingClock(),
             LearningRateMonitor(logging_interval="epoch"),
-            *([] if args.no_progress else [StderrProgressBar()]),
+            *(shown := progress_callbacks(args.no_progress)),
         ],
         deterministic=True,
-        enable_progress_bar=not args.no_progress,
+        enable_progress_bar=any(isinstance(c, StderrProgressBar) for c in shown),
         enable_model_summary=False,
         log_every_n_steps=5,
     )

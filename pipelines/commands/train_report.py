@@ -85,7 +85,7 @@ def evaluate_splits(
                 # list`) is then what `crowdmpc evaluate --top-k K` prints, and nets trained with different
                 # seeds are scored on the same noise
                 EvalConfig(top_k=top_k),
-                progress=not args.no_progress,
+                progress=False if args.no_progress else None,
                 root=root,
             )
             if result["overall"].get("scenes"):  # an empty --test file has nothing to report

@@ -234,7 +234,7 @@ SIMULATE_KEYS: Final = (
         "one MCAP file per episode in this folder (--record; ~ as for json)",
         "runs/mcap",
     ),
-    Key("progress", "bool", True, "show a progress bar (--no-progress)"),
+    Key("progress", "bool", True, "a progress bar on a terminal (--no-progress: none)"),
     Key(
         "sensor_range",
         "float",

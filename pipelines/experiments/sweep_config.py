@@ -43,7 +43,7 @@ class SweepConfig:
     backend: str = "auto"  # "auto": Ray when installed, else a process pool
     ray_address: str | None = None
     record: str = "none"  # RECORD_POLICIES
-    progress: bool = True
+    progress: bool | None = True  # a bar of the episodes; None: on a terminal only
     jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
     # s of wall-clock time after which a worker stops an episode (pipelines.experiments.deadline); None: none
     episode_timeout_s: float | None = None

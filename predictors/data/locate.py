@@ -165,7 +165,7 @@ def raw_ewap_dir(directory: Path) -> Path | None:
     return None
 
 
-def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool = True) -> Path:
+def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None = True) -> Path:
     """The prepared directory for ``data_dir`` (module doc); raw data is prepared into the cache once."""
     directory = resolve_data_dir(data_dir)
     if read_manifest(directory) is not None:
@@ -295,7 +295,12 @@ def vita_train_dir(data_dir: Path, prepared: Path) -> Path | None:
 
 
 def protocol_files(
-    data_dir: str | Path | None, protocol: str, dataset: str = "biwi_eth", *, log=None, progress: bool = True
+    data_dir: str | Path | None,
+    protocol: str,
+    dataset: str = "biwi_eth",
+    *,
+    log=None,
+    progress: bool | None = True,
 ) -> dict[str, list[Path]]:
     """``{"train": [...], "val": [...], "test": [...]}``: the ndjson files of ``protocol`` for ``dataset``."""
     if protocol not in PROTOCOLS:

@@ -60,7 +60,7 @@ def prepare_ewap(
     seed: int = DEFAULT_SEED,
     fractions: tuple[float, float] = SPLIT_FRACTIONS,
     references: dict[str, Reference] | None = None,
-    progress: bool = False,
+    progress: bool | None = False,
     log=print,
     log_dir: str | Path | None = None,
     note: Callable[[str], None] | None = None,
@@ -107,7 +107,7 @@ def _prepare_into(
     seed: int,
     fractions: tuple[float, float],
     references: dict[str, Reference] | None,
-    progress: bool,
+    progress: bool | None,
     log,
     log_dir: Path,
     note: Callable[[str], None],
@@ -286,7 +286,13 @@ def _write_parts(
 
 
 def _self_check(
-    name: str, tracks: np.ndarray, reference: Reference, frame_step: int, progress: bool, log, staging: Path
+    name: str,
+    tracks: np.ndarray,
+    reference: Reference,
+    frame_step: int,
+    progress: bool | None,
+    log,
+    staging: Path,
 ) -> dict:
     """``compare_with_reference`` in a scratch directory, reported through ``log``; the manifest's entry.
     The scratch is inside ``staging``: a preparation killed meanwhile (``kill``, a timeout) left one in the

@@ -45,7 +45,7 @@ def compare_with_reference(
     frame_step: int,
     workdir: Path,
     tolerance: float = 1e-6,
-    progress: bool = False,
+    progress: bool | None = False,
 ) -> SelfCheck:
     """Convert the whole sequence (no split, nothing dropped by acceptance) and look up each reference scene.
 

@@ -231,7 +231,7 @@ def build_scenes(
     categorize_scenes: bool = True,
     acceptance: tuple[float, float, float, float] | None = TRAJNETPP_ACCEPTANCE,
     seed: int = DEFAULT_SEED,
-    progress: bool = False,
+    progress: bool | None = False,
 ) -> list[SceneSpec]:
     """TrajNet++ scenes of ``tracks`` (``(R, 4)`` rows ``frame, ped_id, x, y``), as the converter builds them.
 
@@ -260,9 +260,9 @@ def build_scenes(
     if categorize_scenes and candidates:
         union_frames = np.unique(np.concatenate([frames[w] for _, w in candidates]))
         iterator: Iterable = enumerate(candidates)
-        if progress:
+        if progress is not False:  # None: on a terminal only
             iterator = progress_bar(
-                iterator, total=len(candidates), desc="categorising", unit="scene", leave=False, show=True
+                iterator, total=len(candidates), desc="categorising", unit="scene", leave=False, show=progress
             )
         for k, (primary, window) in iterator:
             start, end = int(frames[window[0]]), int(frames[window[-1]])

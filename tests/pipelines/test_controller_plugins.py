@@ -222,7 +222,7 @@ def test_a_plugin_whose_act_returns_no_control_output_is_one_line(capsys):
     )
     argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
     code, stdout, err = run(capsys, *argv, "--no-progress")
-    assert code == 2 and stdout == ""
+    assert code == 1 and stdout == ""
     assert err == f"crowdmpc simulate: error: episode seed 0 (circle): {message}\n"
     with pytest.raises(PipelineError) as caught:
         run_episode(make_controller(ControllerSpec(bad)), seed=0, scenario="circle", n_humans=2)
@@ -259,7 +259,7 @@ def test_a_plugin_raising_in_a_method_is_one_line_naming_it_and_the_method(name,
         assert (code, err) == (2, f"crowdmpc simulate: error: {message}\n") and "success" in stdout
     else:
         first = f"crowdmpc simulate: error: episode seed 0 (circle): {message}\n"
-        assert (code, stdout, err) == (2, "", first)
+        assert (code, stdout, err) == (1, "", first)
     if name != "RaisesInClose":  # the loops never close the controller they are given
         with pytest.raises(PipelineError) as caught:
             run_gym_episode(controller, gym.make(crowdsim.ENV_ID, n_humans=2), seed=0)
@@ -390,7 +390,7 @@ def test_a_refused_describe_under_record_leaves_no_folder(tmp_path, capsys):
     bad = f"{BROKEN}:DescribeNone"
     argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
     code, _, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
-    assert code == 2 and "describe() must return a dict" in err
+    assert code == 1 and "describe() must return a dict" in err
     assert not (tmp_path / "rec").exists()
 
 
@@ -398,7 +398,7 @@ def test_a_wrong_plan_under_record_is_one_line(tmp_path, capsys):
     bad = f"{BROKEN}:FlatPlan"
     argv = ["--plugin", bad, "simulate", "--controller", bad, "--humans", "2", "--episodes", "1"]
     code, stdout, err = run(capsys, *argv, "--no-progress", "--record", str(tmp_path / "rec"))
-    assert code == 2 and stdout == ""
+    assert code == 1 and stdout == ""
     problem = f"controller 'flat_plan' (FlatPlan): {BROKEN_CONTRACTS[0][1]}"
     assert err == f"crowdmpc simulate: error: episode seed 0 (circle): {problem}\n"
 
@@ -681,7 +681,10 @@ def _recorded_positions(path: Path) -> list[tuple[int, list]]:
 def test_a_plugin_failing_in_a_later_episode_keeps_the_finished_ones_and_names_the_seed(tmp_path, capsys):
     """A plugin failing in episode 3 of 4 ended simulate with its one line, which named no episode, and
     without the summary or --json of the two episodes that had finished: a long run was lost, and its
-    failure could not be rerun alone. It now reports those (as after Ctrl-C) and names the failing seed."""
+    failure could not be rerun alone. It now reports those (as after Ctrl-C) and names the failing seed, and
+    exits 1 as a sweep whose episodes raised does (it exited 2, a refused input's status, though two ran)."""
+    from pipelines.errors import EPISODES_RAISED
+
     plugin = f"{FAILING}:NaNInThirdEpisode"
     report = tmp_path / "run.json"
     argv = ["--plugin", plugin, "simulate", "--controller", plugin, "--humans", "2", "--episodes", "4"]
@@ -690,7 +693,7 @@ def test_a_plugin_failing_in_a_later_episode_keeps_the_finished_ones_and_names_t
         "episode seed 12 (circle): controller 'nan_in_third_episode' (NaNInThirdEpisode): act() must return "
         "accelerations of finite numbers, got nan"
     )
-    assert (code, err) == (2, f"crowdmpc simulate: error: {problem}\n")
+    assert (code, err) == (EPISODES_RAISED, f"crowdmpc simulate: error: {problem}\n")
     assert "| stopped by an error: 2 episodes finished" in out
     payload = json.loads(report.read_text())
     assert payload["failed"] == {"seed": 12, "error": problem} and payload["episodes_finished"] == 2
@@ -716,7 +719,7 @@ def test_a_plugin_nets_error_in_a_later_episode_keeps_the_finished_ones_and_name
     monkeypatch.setattr(episode, "run_episode", second_fails)
     argv = ["simulate", "--controller", "straight", "--humans", "2", "--episodes", "3", "--no-progress"]
     code, out, err = run(capsys, *argv)
-    assert code == 2 and "| stopped by an error: 1 episodes finished" in out
+    assert code == 1 and "| stopped by an error: 1 episodes finished" in out
     assert err == (
         "crowdmpc simulate: error: episode seed 1 (circle): predictor 'mine' (model 'my:Net'): encode raised "
         "ValueError: no\n"

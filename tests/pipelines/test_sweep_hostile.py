@@ -300,6 +300,26 @@ def test_a_new_sweep_whose_few_episodes_all_raised_says_so_without_a_missing_log
     assert f"2 episodes raised; see {out / ERRORS_FILE}" in err
     assert "error:" not in err and not (out / EPISODES_FILE).exists()
     assert (out / TABLE_MD).is_file()
+    # a report of it afterwards said "episodes.jsonl does not exist", as of a folder that never held a sweep
+    assert main(["sweep", "--report-only", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc sweep: error: {out} holds no recorded episode, only episodes that raised (see "
+        f"{out / ERRORS_FILE}): nothing to report; rerun the sweep without --report-only to retry them\n"
+    )
+
+
+@pytest.mark.parametrize("made", [False, True])
+def test_a_report_of_a_folder_without_a_sweep_names_the_folder_not_the_experiment(tmp_path, capsys, made):
+    """--report-only reads the experiment from --out's sweep.json; of a folder without one (missing, empty)
+    it asked for --experiment, and given one, said episodes.jsonl does not exist."""
+    out = tmp_path / "sweep"
+    if made:
+        out.mkdir()
+    assert main(["sweep", "--report-only", "--out", str(out)]) == 2
+    assert (
+        capsys.readouterr().err
+        == f"crowdmpc sweep: error: {out} holds no sweep (sweep.json): nothing to report\n"
+    )
 
 
 def test_report_only_needs_no_gcc_whatever_jit_says(tmp_path, capsys, monkeypatch):

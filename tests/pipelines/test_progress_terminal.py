@@ -1,0 +1,66 @@
+"""Progress is drawn on a terminal only: simulate, sweep and evaluate drew their bars into a log that was no
+terminal (a batch job's, ``2> run.log``) unless told ``--no-progress``, as review, compare and data synth
+already did not; ``train`` writes one line an epoch there instead of Lightning's bars."""
+
+from __future__ import annotations
+
+import re
+import sys
+
+import pytest
+
+from pipelines.cli import main
+from tests.predictors.samples import write_crowds
+
+
+def _argv(command: str, tmp_path) -> list[str]:
+    if command == "simulate":
+        return ["simulate", "--controller", "straight", "--humans", "2", "--episodes", "2"]
+    if command == "sweep":
+        return ["sweep", "--experiment", "controllers", "--controllers", "straight", "--humans", "1",
+                "--episodes-per-cell", "2", "--backend", "inline", "--out", str(tmp_path / "s")]  # fmt: skip
+    data = str(write_crowds(tmp_path / "crowds.ndjson"))
+    return ["evaluate", "--predictor", "constant_velocity", "--test", data]
+
+
+@pytest.mark.parametrize("command", ["simulate", "sweep", "evaluate"])
+@pytest.mark.parametrize("terminal", [False, True])
+def test_a_bar_is_drawn_on_a_terminal_only(command, terminal, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal)  # tqdm asks its file, stderr
+    assert main(_argv(command, tmp_path)) == 0
+    err = capsys.readouterr().err
+    rate = re.compile(r"[\d?](scene|ep)/s")  # tqdm's "12.3ep/s" ("?ep/s" before the first)
+    assert (rate.search(err) is not None) is terminal and ("\r" in err) is terminal, err
+
+
+def test_no_progress_draws_no_bar_on_a_terminal(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main([*_argv("simulate", tmp_path), "--no-progress"]) == 0
+    assert "\r" not in capsys.readouterr().err
+
+
+def _train(tmp_path, *extra: str) -> str:
+    data = str(write_crowds(tmp_path / "crowds.ndjson"))
+    files = ["--train", data, "--val", data, "--test", data]
+    argv = ["train", "--model", "vanilla_lstm", *files, "--batch-size", "2", "--epochs", "2"]
+    return [*argv, "--seed", "3", "--out", str(tmp_path / "run"), *extra]
+
+
+def test_train_writes_a_line_an_epoch_where_stderr_is_no_terminal(tmp_path, capsys):
+    import json
+
+    assert main(_train(tmp_path)) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("epoch ")]
+    assert [line.split(":")[0] for line in lines] == ["epoch 1/2", "epoch 2/2"] and "\r" not in err, err
+    # the figures of the run's own log, as Lightning's CSV logger wrote them
+    rows = [line.split(",") for line in (tmp_path / "run" / "csv" / "version_0" / "metrics.csv").open()]
+    column = rows[0].index("val_ade")
+    ades = [float(row[column]) for row in rows[1:] if row[column]]
+    assert [f"val ADE {ade:.4g} m" in line for ade, line in zip(ades, lines, strict=True)] == [True, True]
+    assert json.loads((tmp_path / "run" / "train_settings.json").read_text())  # a run like any other
+
+
+def test_train_with_no_progress_writes_no_epoch_line(tmp_path, capsys):
+    assert main(_train(tmp_path, "--no-progress")) == 0
+    assert not [line for line in capsys.readouterr().err.splitlines() if line.startswith("epoch ")]
