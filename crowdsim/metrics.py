@@ -67,7 +67,9 @@ from crowdsim.distances import (
 from crowdsim.errors import SimulationError
 from crowdsim.world import D_MIN
 
-COLLISION_DISTANCE: Final[float] = D_MIN  # m, d_min of Table I: personal-space violation (Section VI)
+# m, d_min of Table I: personal-space violation (Section VI). The metric's, fixed: a run that plans with
+# another d_min (MPCConfig.d_min) is still scored against Table I's, so its rates compare with the paper's.
+COLLISION_DISTANCE: Final[float] = D_MIN
 DISCOMFORT_HORIZON: Final[float] = 1.2  # s, "the proportional factor is chosen as 1.2 s" (Section VI)
 # Fields added after records were first written: EpisodeMetrics.from_dict leaves them None when absent.
 ADDED_COUNTS: Final[tuple[str, ...]] = ("collision_steps", "contact_steps")

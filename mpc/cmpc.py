@@ -144,6 +144,8 @@ class CMPC:
             solves += n_solves
             solver_iterations += n_iterations
             if not sol.success:
+                # Algorithm 1 says nothing of it: a failure after the first solve keeps u^(j-1), a solve's
+                # plan against the previous prediction (no fallback), the step's status naming the failure
                 status = sol.status
                 break
             accels, lam_x, lam_g, potential = sol.accels, sol.lam_x, sol.lam_g, sol.cost

@@ -109,7 +109,9 @@ class MPCConfig:
     # v_max, m/s, bound on each velocity component, Eq. 6; reference speed in Eq. 8
     v_max: float = world.V_MAX
     a_max: float = world.A_MAX  # a_max, m/s^2, bound on each acceleration component, Eq. 6
-    rho: float = 0.5  # rho, s^2, speed-dependent growth of the robot-human safety distance, Eq. 11
+    # rho, s^2 (Table I prints s; rho |v|^2 is added to d_min^2, an area), speed-dependent growth of the
+    # robot-human safety distance, Eq. 11
+    rho: float = 0.5
     d_min: float = world.D_MIN  # d_min, m, minimum allowed distance, Eqs. 11 and 12
     mu: float = 30.0  # mu, 1/m^2, sharpness of smax(z) = log(exp(mu z) + 1) / mu, the penalty of Eqs. 11-12
     j_max: int = 10  # j_max, maximum IBR iterations, Algorithms 1 and 2

@@ -357,7 +357,8 @@ class DMPC:
         prediction: np.ndarray,
     ) -> bool:
         """Lines 12-16: no robot's new plan is worse, by more than epsilon, than its old one against the
-        others' new plans."""
+        others' new plans. It can hold after the first iteration (every robot's start already near its best
+        response), and the step then ends with one round of solves, as Algorithm 2 reads."""
         new_params = list(step.rows(moving, new_positions, prediction))
         checks = self.local.costs(
             [new_accels[i] for i in moving] + [accels[i] for i in moving], new_params + new_params

@@ -1,5 +1,5 @@
-"""The callbacks of ``crowdmpc train``: its checkpoints, and its stop on divergence (imported with Lightning,
-when a run starts)."""
+"""The callbacks of ``crowdmpc train``: its checkpoints, its stop on divergence, its clock and its progress
+(imported with Lightning, when a run starts)."""
 
 from __future__ import annotations
 
