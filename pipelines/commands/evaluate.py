@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Final
 from pipelines.commands import check_data_files, check_writable, path_arg, write_output
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
+from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
     from predictors.evaluate import EvalConfig, EvalScene
@@ -188,7 +189,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.top_k is not None and result["top_k"] is None:
         print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)
     if args.json is not None:
-        write_output(args.json, json.dumps(result, indent=2) + "\n", "--json")
+        # strict JSON, as every record's (a non-finite figure null, never a bare NaN a strict reader refuses)
+        write_output(args.json, json.dumps(plain(result), indent=2, allow_nan=False) + "\n", "--json")
         if not is_stdout(args.json):
             print(f"wrote {shown(args.json)}")
     return 0

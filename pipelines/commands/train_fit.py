@@ -18,6 +18,7 @@ from typing import Any
 
 from pipelines.commands import replace_file
 from pipelines.errors import PipelineError, writes_named
+from pipelines.plain_json import plain
 
 
 def run_training(
@@ -45,7 +46,8 @@ def run_training(
     weights, extra = _save_best(args, module, name, out, best_path, optim)
     top_k = 20 if model_kind(args.model).adversarial else None
     summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k, evaluated)
-    replace_file(metrics, lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=2) + "\n"))
+    text = json.dumps(plain(summary), indent=2, allow_nan=False) + "\n"  # strict JSON, as every record's
+    replace_file(metrics, lambda tmp: Path(tmp).write_text(text))
     print_summary(summary, Path(best_path).name, weights, top_k)
     return 0
 

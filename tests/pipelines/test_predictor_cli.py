@@ -1103,3 +1103,19 @@ def test_help_examples_name_the_plugin_model_train_writes(command, capsys):
     assert named <= {name}, f"{command} --help names {sorted(named)}; train writes {name!r}"
     if command == "zoo":
         assert f"runs/train/{name}/{name}.pt" in text
+
+
+def test_evaluate_json_is_strict_with_a_figure_that_is_not_finite(tmp_path, monkeypatch):
+    """evaluate --json was written with json.dumps as it stood: a non-finite figure (a predictor's inf) came
+    out as a bare Infinity, which strict readers (jq, JavaScript, Go) refuse. It is null, as in every record."""
+    import predictors.evaluate
+
+    summarize = predictors.evaluate.summarize
+    monkeypatch.setattr(predictors.evaluate, "summarize", lambda scores: summarize(scores) | {"ade": np.inf})
+    walk, out = write_walk_file(tmp_path / "walk.ndjson"), tmp_path / "scores.json"
+    assert (
+        main(["evaluate", "--predictor", "constant_velocity", "--test", str(walk), "--json", str(out)]) == 0
+    )
+    refuse = lambda token: pytest.fail(f"not strict JSON: {token}")  # noqa: E731
+    scores = json.loads(out.read_text(), parse_constant=refuse)
+    assert scores["overall"]["ade"] is None and scores["overall"]["fde"] == 0.0  # a straight walk
