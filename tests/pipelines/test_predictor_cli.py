@@ -1107,7 +1107,8 @@ def test_help_examples_name_the_plugin_model_train_writes(command, capsys):
 
 def test_evaluate_json_is_strict_with_a_figure_that_is_not_finite(tmp_path, monkeypatch):
     """evaluate --json was written with json.dumps as it stood: a non-finite figure (a predictor's inf) came
-    out as a bare Infinity, which strict readers (jq, JavaScript, Go) refuse. It is null, as in every record."""
+    out as a bare Infinity, which strict readers (jq, JavaScript, Go) refuse. It is null, as in every
+    record."""
     import predictors.evaluate
 
     summarize = predictors.evaluate.summarize
