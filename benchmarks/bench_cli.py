@@ -139,7 +139,7 @@ def write_text(path: str | Path, text: str) -> None:
         return
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")
 
 
 def write_json(path: str | Path, payload: Any, indent: int = 2) -> None:

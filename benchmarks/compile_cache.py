@@ -73,7 +73,11 @@ def run_sweep(out: Path, jit: str, episodes: int, predictors: str, env: dict[str
     wall = time.perf_counter() - t0
     if done.returncode != 0:
         raise SystemExit(f"sweep failed ({done.returncode}): {' '.join(cmd)}\n{done.stderr[-3000:]}")
-    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines() if line.strip()]
+    records = [
+        json.loads(line)
+        for line in (out / "episodes.jsonl").read_text(encoding="utf-8").splitlines()
+        if line.strip()
+    ]
     return {
         "jit": jit,
         "wall_s": wall,

@@ -194,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     check_not_input(parser, "--out", args.out, args.runs)
     try:
-        reports = [(str(path), json.loads(path.read_text())) for path in args.runs]
+        reports = [(str(path), json.loads(path.read_text(encoding="utf-8"))) for path in args.runs]
         pts = points(reports)
     except (OSError, ValueError) as exc:  # json.JSONDecodeError is a ValueError
         raise PipelineError(str(exc)) from None

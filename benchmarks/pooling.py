@@ -43,7 +43,7 @@ MODES = ("dense", "sparse")
 def _memory_kb(key: str) -> int | None:
     """``key`` (VmRSS, VmHWM) of /proc/self/status in KB, or None without /proc."""
     try:
-        with open("/proc/self/status") as status:
+        with open("/proc/self/status", encoding="utf-8") as status:
             return next(int(line.split()[1]) for line in status if line.startswith(f"{key}:"))
     except (OSError, StopIteration):
         return None

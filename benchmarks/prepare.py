@@ -38,7 +38,7 @@ from bench_cli import (  # noqa: E402
 def resident_mb() -> float | None:
     """This process's resident memory now (``VmRSS``), MB; None without /proc (macOS)."""
     try:
-        with open("/proc/self/status") as status:
+        with open("/proc/self/status", encoding="utf-8") as status:
             for line in status:
                 if line.startswith("VmRSS:"):
                     return int(line.split()[1]) / 1024

@@ -36,7 +36,7 @@ def records(out: Path) -> list[str]:
     path = out / "episodes.jsonl"
     if not path.exists():
         return []
-    return [line for line in path.read_text().split("\n") if line.strip()]
+    return [line for line in path.read_text(encoding="utf-8").split("\n") if line.strip()]
 
 
 def scratch() -> set[str]:
@@ -93,7 +93,7 @@ def main() -> int:
                 keys.append(json.loads(line)["key"])
             except (ValueError, KeyError, TypeError):
                 torn += 1
-        sweep = json.loads((out / "sweep.json").read_text())
+        sweep = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
         planned = sweep["runs"][-1]["planned"]
         print(
             f"final run exit {done.returncode}; planned {planned}, recorded {len(lines)}, distinct "

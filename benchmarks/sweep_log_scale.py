@@ -75,20 +75,20 @@ def multiply(seed: Path, out: Path, per_cell: int) -> int:
     """``out`` as a sweep directory of ``per_cell`` episodes in each of ``seed``'s cells, every record a copy
     of one of ``seed``'s under the key the plan gives episode i; returns the log's size in bytes."""
     out.mkdir(parents=True, exist_ok=True)
-    meta = json.loads((seed / SWEEP_FILE).read_text())
+    meta = json.loads((seed / SWEEP_FILE).read_text(encoding="utf-8"))
     run = meta["runs"][-1]
     run["episodes_per_cell"] = per_cell
     run["planned"] = per_cell * len(run["cells"])
-    (out / SWEEP_FILE).write_text(json.dumps(meta, indent=1) + "\n")
+    (out / SWEEP_FILE).write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
     templates: dict[str, list[dict[str, Any]]] = {}
-    with open(seed / EPISODES_FILE) as f:
+    with open(seed / EPISODES_FILE, encoding="utf-8") as f:
         for line in f:
             record = json.loads(line)
             templates.setdefault(record["cell"], []).append(record)
     for records in templates.values():
         records.sort(key=lambda r: r["index"])
     schedule = scenario_schedule(per_cell, run["seed"])
-    with open(out / EPISODES_FILE, "w") as f:
+    with open(out / EPISODES_FILE, "w", encoding="utf-8") as f:
         for i, (scenario, seed_number) in enumerate(schedule):
             for cell, records in templates.items():
                 record = records[i % len(records)]  # the same scenario: index i % 2 is its own

@@ -184,7 +184,7 @@ def _recorded_library(manifest: Path, record: object) -> Path | None:
 def _readentry_record(manifest: Path) -> object:
     """The record stored beside ``manifest`` (<key>.record), or None when there is none or it is no JSON."""
     try:
-        return json.loads(manifest.with_suffix(".record").read_text())
+        return json.loads(manifest.with_suffix(".record").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
 

@@ -339,7 +339,7 @@ def _compile_nlpsol(
                 raise RuntimeError(str(exc).replace(command, shlex.quote(cc.path))) from None
         solver.save(str(tmp))
         del solver
-        record.write_text(entry_record(tmp, folder / f"{library}.so"))
+        record.write_text(entry_record(tmp, folder / f"{library}.so"), encoding="utf-8")
         # The record before the manifest: a reader that finds the manifest finds its record. Losing the race
         # to another compile (no flock) leaves our record beside its manifest: unloadable, compiled again.
         os.replace(record, folder / f"{key}.record")

@@ -163,6 +163,10 @@ def main(argv: list[str] | None = None) -> int:
     from pipelines.commands.standard_output import hold_standard_descriptors
 
     hold_standard_descriptors()
+    if sys.stdout is not None and hasattr(sys.stdout, "reconfigure"):
+        # under a locale without "—" or "±" (ASCII, Latin-1) a table printed them as escapes, where it had
+        # raised a UnicodeEncodeError once the work was done (stderr does so by Python's default)
+        sys.stdout.reconfigure(errors="backslashreplace")
     try:
         try:
             return _main(argv)

@@ -183,7 +183,7 @@ def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     text = json.dumps(document, indent=2, allow_nan=False) + "\n"
     try:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding="utf-8")
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)  # a full disk (or a Ctrl-C) leaves no half-written temporary in the zoo

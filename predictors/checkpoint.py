@@ -121,7 +121,7 @@ def save_checkpoint(
         "net": net_config,
         **(extra or {}),
     }
-    config.write_text(json.dumps(document, indent=2) + "\n")
+    config.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     return weights, config
 
 

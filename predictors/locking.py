@@ -108,7 +108,7 @@ def _zombie(pid: int) -> bool:
     writes nothing more. A preparer killed holding the cache entry's lock is one at the very moment the
     waiter takes that lock, and its staging was then kept for good. False where there is no /proc."""
     try:
-        with open(f"/proc/{pid}/stat") as f:
+        with open(f"/proc/{pid}/stat", encoding="utf-8") as f:
             stat = f.read()
     except OSError:
         return False

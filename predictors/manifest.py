@@ -203,7 +203,7 @@ def write_manifest(entries: dict[str, ZooEntry], directory: str | Path) -> Path:
     }
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(json.dumps(document, indent=2) + "\n")
+        tmp.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
         tmp.replace(path)
     except OSError as exc:
         if exc.filename is not None:  # a name is given already (the temporary's, at its open or rename)

@@ -348,14 +348,14 @@ def write_output(path: Path, text: str, option: str) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.exists() and not path.is_file():  # /dev/null, a pipe: written in place, never replaced
-            path.write_text(text)
+            path.write_text(text, encoding="utf-8")
             return
         try:
-            replace_file(path, lambda name: Path(name).write_text(text))
+            replace_file(path, lambda name: Path(name).write_text(text, encoding="utf-8"))
         except PermissionError:  # a folder without new files but a writable file: in place, as before
             if not path.is_file():
                 raise
-            path.write_text(text)
+            path.write_text(text, encoding="utf-8")
     except OSError as exc:
         raise PipelineError(f"{option} {path}: could not write it ({exc.strerror or exc})") from None
 

@@ -159,7 +159,7 @@ def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:
         journal.unlink(missing_ok=True)
         return
     try:
-        document = json.loads(journal.read_text())
+        document = json.loads(journal.read_text(encoding="utf-8"))
         stored = [Calibration.from_json(b, journal) for b in document["stored"]]
         earlier = document["earlier"]
         if earlier is not None:
@@ -195,7 +195,7 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path,
                 "files; an NFS mount without its lock daemon?); set $CROWDMPC_ZOO to a folder on one that "
                 "does"
             ) from None
-        with open(fd, "w", closefd=False) as f:
+        with open(fd, "w", encoding="utf-8", closefd=False) as f:
             f.write(json.dumps(document, allow_nan=False))
             f.flush()
             os.fsync(fd)

@@ -331,7 +331,7 @@ def _provenance(path: Path) -> dict | None:
     import json
 
     try:
-        document = json.loads(path.read_text())
+        document = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         return None
     return document if isinstance(document, dict) else None
@@ -394,7 +394,7 @@ def _write_provenance(args: argparse.Namespace, summary: dict, path: Path, data:
     }
     tmp = path.with_name(f".{path.name}{PART_SUFFIX}")
     try:
-        tmp.write_text(json.dumps(plain(document), indent=2) + "\n")
+        tmp.write_text(json.dumps(plain(document), indent=2) + "\n", encoding="utf-8")
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

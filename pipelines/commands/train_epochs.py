@@ -42,7 +42,7 @@ def record_epochs(out: Path, recorded: dict[str, Any], epochs: int) -> None:
     if recorded.get("epochs") == epochs:
         return
     text = json.dumps({**recorded, "epochs": epochs}, indent=2) + "\n"
-    replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
+    replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
 def check_more_epochs(out: Path, epochs: int, done: int | None, finished: bool) -> None:

@@ -47,7 +47,7 @@ def run_training(
     top_k = 20 if model_kind(args.model).adversarial else None
     summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k, evaluated)
     text = json.dumps(plain(summary), indent=2, allow_nan=False) + "\n"  # strict JSON, as every record's
-    replace_file(metrics, lambda tmp: Path(tmp).write_text(text))
+    replace_file(metrics, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
     print_summary(summary, Path(best_path).name, weights, top_k)
     return 0
 
@@ -111,7 +111,7 @@ def _fit(
         # the code too, which a resume compares with its own (train_resume.note_other_code)
         text = json.dumps({**settings, "name": name, "code": code_with_plugins()}, indent=2) + "\n"
         # in one rename: a symbolic link planted in --out is replaced, never written through
-        replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text))
+        replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
     started = time.perf_counter()
     try:
         # a full disk fails TensorBoard's event write, whose error names no file

@@ -148,7 +148,7 @@ def epoch_times_from_csv(log_dir: str | Path) -> list[float]:
     path = Path(log_dir) / "metrics.csv"
     if not path.is_file():
         return []
-    with open(path) as f:
+    with open(path, encoding="utf-8") as f:
         return [float(row["epoch_time_s"]) for row in csv.DictReader(f) if row.get("epoch_time_s")]
 
 

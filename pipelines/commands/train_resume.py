@@ -115,7 +115,7 @@ def read_run_settings(out: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        recorded = json.loads(path.read_text())
+        recorded = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError, RecursionError) as exc:
         raise PipelineError(f"--resume: {path} is not readable JSON ({exc})") from None
     if not isinstance(recorded, dict):

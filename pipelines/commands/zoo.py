@@ -296,7 +296,7 @@ def _add(args: argparse.Namespace) -> int:
             f"{metrics_path}: more than the {checkpoint.MAX_DOCUMENT_BYTES} bytes a metrics file may have"
         )
     try:
-        summary = json.loads(metrics_path.read_text())
+        summary = json.loads(metrics_path.read_text(encoding="utf-8"))
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, not UTF-8, nested too deeply
         raise PipelineError(f"{metrics_path}: not valid JSON ({exc})") from None
     if not isinstance(summary, dict):

@@ -247,7 +247,7 @@ def read_json_file(path: Path, what: str, advice: str = "") -> Any:
     """``path``'s JSON document, or a PipelineError "PATH: not WHAT (the reason)ADVICE" for one that cannot
     be read, is not text or not JSON, or nests too deeply."""
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
         raise PipelineError(f"{path}: not {what} ({type(exc).__name__}: {str(exc)[:120]}){advice}") from None
 
@@ -305,7 +305,7 @@ def sweep_lock(out: Path) -> Iterator[None]:
     """Refuse a second sweep writing the same directory (its records would interleave)."""
     import fcntl
 
-    with open(out / LOCK_FILE, "w") as f:
+    with open(out / LOCK_FILE, "w", encoding="utf-8") as f:
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -168,7 +168,7 @@ def episode_row(r: dict[str, Any], method: str) -> dict[str, Any]:
 def write_csv(path: Path, rows: Iterable[dict[str, Any]]) -> None:
     """``rows`` as CSV, the first row's keys the header (an empty file for no rows); None and NaN empty."""
     rows = iter(rows)
-    with open(path, "w", newline="") as f:
+    with open(path, "w", encoding="utf-8", newline="") as f:
         first = next(rows, None)
         if first is None:
             return
@@ -242,7 +242,7 @@ def _write_staged(
     """Every file of the report into ``staging``; their names."""
     write_csv(staging / CELLS_CSV, cell_rows(summaries))
     write_csv(staging / EPISODES_CSV, rows)
-    (staging / TABLE_MD).write_text(markdown)
+    (staging / TABLE_MD).write_text(markdown, encoding="utf-8")
     write_csv(staging / safety.MIN_DISTANCE_HIST_CSV, safety.min_distance_hist_rows(summaries))
     written = [CELLS_CSV, EPISODES_CSV, TABLE_MD, safety.MIN_DISTANCE_HIST_CSV]
     if summaries:

@@ -164,7 +164,7 @@ def _add_run(
     tmp = path.with_suffix(path.suffix + PART_SUFFIX)
     with writes_named(path):  # a full disk's error names sweep.json, which stays as it was
         try:
-            tmp.write_text(json.dumps(plain(meta), indent=1) + "\n")
+            tmp.write_text(json.dumps(plain(meta), indent=1) + "\n", encoding="utf-8")
             os.replace(tmp, path)
         finally:  # stopped before the replace: the half-written file is nobody's
             tmp.unlink(missing_ok=True)

@@ -137,7 +137,7 @@ def _prepare_into(
             check = _self_check(name, tracks, reference, frame_step, progress, log, out_dir)
             manifest["self_check"][name] = check
     _check_scenes_made(manifest, raw_dir, log_dir, note)
-    (out_dir / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+    (out_dir / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     return manifest
 
 

@@ -320,7 +320,9 @@ def write_ndjson(
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        with tmp.open("w") as out:  # a line at a time: a synthetic set of 10^7 rows is GBs as one string
+        with tmp.open(
+            "w", encoding="utf-8"
+        ) as out:  # a line at a time: a synthetic set of 10^7 rows is GBs as one string
             for s in scenes:
                 scene = SceneRow(s.id, s.primary, s.start_frame, s.end_frame, fps, s.json_tag())
                 out.write(trajnet(scene) + "\n")

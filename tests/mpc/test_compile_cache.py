@@ -549,7 +549,11 @@ def _fma_flags() -> list[str] | None:
     if machine in ("aarch64", "arm64"):
         return []
     cpu = Path("/proc/cpuinfo")
-    if machine == "x86_64" and cpu.is_file() and " fma " in f" {cpu.read_text()} ".replace("\n", " "):
+    if (
+        machine == "x86_64"
+        and cpu.is_file()
+        and " fma " in f" {cpu.read_text(encoding='utf-8')} ".replace("\n", " ")
+    ):
         return ["-mfma"]
     return None
 

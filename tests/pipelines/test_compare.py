@@ -287,7 +287,7 @@ def _simulate_json(path: Path, records: list[dict], commit: str = "fedcba9876543
     sweep_only = ("key", "cell", "method", "index", "wall_s", "profile")
     episodes = [{k: v for k, v in r.items() if k not in sweep_only} for r in records]
     document = {"run": {}, "code": {"commit": commit, "dirty": True}, "summary": {}, "episodes": episodes}
-    path.write_text(json.dumps(document))
+    path.write_text(json.dumps(document), encoding="utf-8")
     return path
 
 

@@ -124,7 +124,7 @@ ONE_LINE_RUNS = pytest.mark.parametrize(
 
 @ONE_LINE_RUNS
 def test_a_failed_write_on_stdout_is_one_line(argv, prefix, tmp_path):
-    with open("/dev/full", "w") as full:
+    with open("/dev/full", "w", encoding="utf-8") as full:
         done = _run([*argv, "--json", "-"], tmp_path, stdout=full, stderr=subprocess.PIPE)
     assert done.returncode == 2
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr

@@ -86,7 +86,7 @@ def test_every_record_field_and_sweep_file_is_documented(outputs):
 
 @pytest.mark.parametrize("name", ["cells.csv", "episodes.csv", "min_distance_hist.csv"])
 def test_every_csv_column_is_documented(outputs, name):
-    with open(outputs / "sw" / name, newline="") as f:
+    with open(outputs / "sw" / name, encoding="utf-8", newline="") as f:
         header = next(csv.reader(f))
     assert _undocumented(header, _documented()) == []
 

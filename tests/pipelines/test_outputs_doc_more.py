@@ -62,4 +62,4 @@ def test_every_calibrate_field_is_documented(tmp_path):
     written = _strict(report.read_text())
     (block,) = written["blocks"]
     assert _undocumented([*written, *block, *block["details"]], _documented()) == []
-    assert json.loads(Path(report).read_text())["holdout_margins"] == "none"
+    assert json.loads(Path(report).read_text(encoding="utf-8"))["holdout_margins"] == "none"

@@ -22,7 +22,7 @@ def test_the_own_experiment_example_sweeps_and_extends_its_table(tmp_path, capsy
     first = capsys.readouterr().out
     assert first.startswith("8 episodes run, 0 already there, 0 errors\n")
     assert "| Metrics \\ Methods | full | 3 m | 3 m + 0.1 m | ORCA |" in first
-    with open(out / "cells.csv") as f:
+    with open(out / "cells.csv", encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
     assert [(r["method"], r["sensing"], r["margins"]) for r in rows] == [
         ("full", "every human", "none"),

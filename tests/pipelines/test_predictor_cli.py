@@ -125,7 +125,9 @@ def test_a_second_train_into_an_out_a_run_holds_is_refused(tmp_path, capsys):
     out.mkdir()
     args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data)]
     args += ["--epochs", "1", "--out", str(out), "--name", "walker", "--no-progress"]
-    with open(out / ".train.lock", "w") as held:  # as the running train holds it (another open file)
+    with open(
+        out / ".train.lock", "w", encoding="utf-8"
+    ) as held:  # as the running train holds it (another open file)
         fcntl.flock(held, fcntl.LOCK_EX)
         assert main(args) == 2
     assert capsys.readouterr().err == (

@@ -119,14 +119,14 @@ def test_step_frequency_needs_every_count():
 def test_cells_and_episodes_csv_carry_the_new_columns(tmp_path):
     safety, cells, records = _safety_records()
     write_report(tmp_path, safety, cells, records)
-    with open(tmp_path / CELLS_CSV) as f:
+    with open(tmp_path / CELLS_CSV, encoding="utf-8") as f:
         first = next(csv.DictReader(f))
     assert (first["margins"], first["profile"], first["visibility"]) == ("none", "paper", "visible")
     assert float(first["collision_step_freq"]) == pytest.approx(10.0)
     assert float(first["contact_step_freq"]) == pytest.approx(5.0)
     assert float(first["discomfort_step_freq"]) == pytest.approx(20.0)
     assert float(first["min_distance_median"]) == pytest.approx(0.7)
-    with open(tmp_path / EPISODES_CSV) as f:
+    with open(tmp_path / EPISODES_CSV, encoding="utf-8") as f:
         episodes = list(csv.DictReader(f))
     assert [(e["collision_steps"], e["contact_steps"]) for e in episodes[:3]] == [
         ("3", "1"),
@@ -143,9 +143,9 @@ def test_old_records_without_the_new_keys_still_report(tmp_path):
     assert math.isnan(none.collision_step_freq) and math.isnan(none.discomfort_step_freq)
     assert none.min_distance_median == pytest.approx(0.7)  # min_distance has always been recorded
     assert "| Collision per step (%) | — | — |" in report.markdown.splitlines()
-    with open(tmp_path / CELLS_CSV) as f:
+    with open(tmp_path / CELLS_CSV, encoding="utf-8") as f:
         assert next(csv.DictReader(f))["collision_step_freq"] == ""
-    with open(tmp_path / EPISODES_CSV) as f:
+    with open(tmp_path / EPISODES_CSV, encoding="utf-8") as f:
         first = next(csv.DictReader(f))
     assert (first["collision_steps"], first["margins"], first["visibility"]) == ("", "", "")
 
@@ -160,7 +160,7 @@ def test_histogram_counts_every_episode_once(tmp_path):
     safety, cells, records = _safety_records()
     records.append(_record(cells[1], 4, None, 20))  # null minimum (no human): the overflow bin
     write_report(tmp_path, safety, cells, records)
-    with open(tmp_path / MIN_DISTANCE_HIST_CSV) as f:
+    with open(tmp_path / MIN_DISTANCE_HIST_CSV, encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
     per_cell: dict[str, int] = {}
     for row in rows:
@@ -281,9 +281,9 @@ def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
     assert [line for line in report.markdown.splitlines() if not line.startswith(row)] == [
         line for line in old.markdown.splitlines() if not line.startswith(row)
     ]
-    with open(tmp_path / CELLS_CSV) as f:
+    with open(tmp_path / CELLS_CSV, encoding="utf-8") as f:
         none, half = list(csv.DictReader(f))
-    with open(tmp_path / "before" / CELLS_CSV) as f:
+    with open(tmp_path / "before" / CELLS_CSV, encoding="utf-8") as f:
         none_before, half_before = list(csv.DictReader(f))
     assert none_before["collision_between_steps_rate"] == ""  # records without the field
     for now, then in ((none, none_before), (half, half_before)):  # every other column unchanged
@@ -296,7 +296,7 @@ def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
     assert float(half["collision_between_steps_rate"]) == 25.0
     lo, hi = float(half["collision_between_steps_ci_lo"]), float(half["collision_between_steps_ci_hi"])
     assert lo < 25.0 < hi  # the Wilson interval, as the other rates'
-    with open(tmp_path / EPISODES_CSV) as f:
+    with open(tmp_path / EPISODES_CSV, encoding="utf-8") as f:
         episodes = list(csv.DictReader(f))
     assert [e["collision_between_steps"] for e in episodes[:4]] == ["True", "False", "True", "True"]
     assert [e["contact_between_steps"] for e in episodes[:4]] == ["True", "False", "False", "False"]
@@ -414,9 +414,9 @@ def test_robot_robot_contact_in_cells_csv_episodes_csv_and_the_table(tmp_path):
     (tmp_path / "before").mkdir()
     old = write_report(tmp_path / "before", safety, cells, before)
     report = write_report(tmp_path, safety, cells, records)
-    with open(tmp_path / CELLS_CSV) as f:
+    with open(tmp_path / CELLS_CSV, encoding="utf-8") as f:
         none, half = list(csv.DictReader(f))
-    with open(tmp_path / "before" / CELLS_CSV) as f:
+    with open(tmp_path / "before" / CELLS_CSV, encoding="utf-8") as f:
         none_before, half_before = list(csv.DictReader(f))
     assert (none["robot_contact_count"], half["robot_contact_count"]) == ("2", "0")
     assert (
@@ -437,7 +437,7 @@ def test_robot_robot_contact_in_cells_csv_episodes_csv_and_the_table(tmp_path):
         assert {k: v for k, v in now.items() if "robot_contact" not in k} == {
             k: v for k, v in then.items() if "robot_contact" not in k
         }
-    with open(tmp_path / EPISODES_CSV) as f:
+    with open(tmp_path / EPISODES_CSV, encoding="utf-8") as f:
         episodes = list(csv.DictReader(f))
     assert [(e["robot_contact"], e["robot_contact_steps"]) for e in episodes[:3]] == [
         ("True", "2"),

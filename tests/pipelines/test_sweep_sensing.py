@@ -144,9 +144,9 @@ def test_sweep_sensor_range_runs_every_method_behind_the_sensor_and_reports_it(t
     assert len(lines) == 4
     assert {(r["sensor_range"], r["sensor_tracks"]) for r in lines} == {(2.0, False)}
     assert all(r["cell"].endswith("-paper-visible-sensed2m-notracks-h3-r3") for r in lines)
-    with open(out / "cells.csv") as f:
+    with open(out / "cells.csv", encoding="utf-8") as f:
         assert {row["sensing"] for row in csv.DictReader(f)} == {"2 m untracked"}
-    with open(out / "episodes.csv") as f:
+    with open(out / "episodes.csv", encoding="utf-8") as f:
         assert {(row["sensor_range"], row["sensor_tracks"]) for row in csv.DictReader(f)} == {
             ("2.0", "False")
         }

@@ -22,7 +22,9 @@ def track(frame: int, ped: int, x: float, y: float) -> dict:
 def write_lines(path: Path, records: list[dict | str]) -> Path:
     """One line per record; strings are written verbatim (for malformed lines)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("".join((r if isinstance(r, str) else json.dumps(r)) + "\n" for r in records))
+    path.write_text(
+        "".join((r if isinstance(r, str) else json.dumps(r)) + "\n" for r in records), encoding="utf-8"
+    )
     return path
 
 

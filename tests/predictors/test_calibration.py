@@ -291,7 +291,7 @@ def test_a_failed_storage_write_leaves_the_file_and_no_temporary(tmp_path, monke
     before = (tmp_path / CALIBRATIONS_NAME).read_bytes()
 
     def disk_full(self, text):
-        with open(self, "w") as f:
+        with open(self, "w", encoding="utf-8") as f:
             f.write(text[:100])
         raise OSError(errno.ENOSPC, "No space left on device")
 

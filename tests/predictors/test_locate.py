@@ -239,7 +239,7 @@ def test_a_killed_lock_holders_staging_is_removed_by_the_waiter(raw_root, monkey
     holder = subprocess.Popen([sys.executable, "-c", "pass"])  # ended, not yet reaped: a zombie
     stat = Path(f"/proc/{holder.pid}/stat")
     deadline = time.monotonic() + 30
-    while " Z " not in stat.read_text() and time.monotonic() < deadline:
+    while " Z " not in stat.read_text(encoding="utf-8") and time.monotonic() < deadline:
         time.sleep(0.01)
     left = entry.parent / f".{entry.name}.{holder.pid}.tmp.prepare-{holder.pid}.tmp"
     left.mkdir()

@@ -1,0 +1,46 @@
+"""crowdmpc under a locale whose encoding lacks the characters its tables use (ASCII with Python's UTF-8
+mode and locale coercion off, as some clusters' job environments start it; Latin-1 lacks "—" and "−"): a
+sweep ended in a UnicodeEncodeError as it wrote table.md, its report unwritten, and a printed table could
+raise the same."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+ASCII = {"LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+
+
+def _crowdmpc(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    env = os.environ | ASCII | {"PYTHONPATH": str(ROOT), "CROWDMPC_CACHE": str(cwd / "cache")}
+    return subprocess.run(
+        [sys.executable, "-m", "pipelines.cli", *args], cwd=cwd, env=env, capture_output=True, timeout=300
+    )
+
+
+def test_a_sweep_writes_its_report_as_utf8_under_an_ascii_locale(tmp_path):
+    check = _crowdmpc([], tmp_path)  # usage only: the locale really is ASCII in the child
+    assert check.returncode == 2
+    probe = subprocess.run(
+        [sys.executable, "-c", "import locale; print(locale.getpreferredencoding())"],
+        env=os.environ | ASCII,
+        capture_output=True,
+        text=True,
+    )
+    assert probe.stdout.strip() in ("ANSI_X3.4-1968", "ascii", "US-ASCII")
+    argv = ["sweep", "--experiment", "controllers", "--controllers", "straight", "--humans", "1"]
+    done = _crowdmpc([*argv, "--episodes-per-cell", "1", "--backend", "inline", "--out", "s"], tmp_path)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")[-2000:]
+    table = (tmp_path / "s" / "table.md").read_text(encoding="utf-8")
+    assert "±" in table  # the interval of a travel time, written as itself
+
+
+def test_a_printed_table_shows_what_the_locale_cannot_as_escapes(tmp_path):
+    argv = ["sweep", "--experiment", "controllers", "--controllers", "straight", "--humans", "1"]
+    for out in ("a", "b"):
+        done = _crowdmpc([*argv, "--episodes-per-cell", "1", "--backend", "inline", "--out", out], tmp_path)
+        assert done.returncode == 0
+    compared = _crowdmpc(["compare", "a=a", "b=b", "--no-progress"], tmp_path)  # its table prints "−", "Δ"
+    assert compared.returncode == 0, compared.stderr.decode(errors="replace")[-2000:]
+    assert "+0 / \\u22120 (p = 1)" in compared.stdout.decode("ascii")  # nothing raw the locale cannot show
