@@ -97,7 +97,7 @@ def locked(path: Path) -> Iterator[None]:
     if fcntl is None:  # pragma: no cover
         yield
         return
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    fd = _lock_descriptor(path)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)
@@ -108,17 +108,34 @@ def locked(path: Path) -> Iterator[None]:
         os.close(fd)  # releases the lock
 
 
+def _lock_descriptor(path: Path, create: bool = True) -> int:
+    """``path`` opened to be locked, created if missing with the permissions the umask leaves (as every file
+    of the cache is: a cache a group shares under umask 002 is the group's). One another user made that this
+    one may not write is opened to read, which flock takes on a local disk: a second user's compile failed
+    with "Permission denied" on the first one's lock instead of waiting for it. ``create`` False: an existing
+    lock, never followed through a symbolic link."""
+    flags = os.O_CREAT if create else os.O_NOFOLLOW
+    try:
+        return os.open(path, os.O_RDWR | flags, 0o666)
+    except PermissionError:
+        return os.open(path, os.O_RDONLY | flags)
+
+
 @contextlib.contextmanager
 def unless_locked(path: Path) -> Iterator[bool]:
     """Hold ``path``, an existing lock file, if nobody holds it now (True), else hold nothing (False): what
     ``cache_admin.clear`` asks of an entry before removing its files, which a compile under way needs.
     A lock file that is gone, or another file (a symbolic link), is held by nobody; on a file system that
-    does not lock files nobody can tell, and the entry counts as held."""
+    does not lock files nobody can tell, and the entry counts as held, as it does when the lock is another
+    user's that this one may not even read."""
     if fcntl is None:  # pragma: no cover
         yield True
         return
     try:
-        fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW)
+        fd = _lock_descriptor(path, create=False)
+    except PermissionError:
+        yield False
+        return
     except OSError:
         yield True
         return

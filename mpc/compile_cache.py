@@ -102,9 +102,15 @@ class CacheLocationError(CompileCacheError, MPCConfigError):
 
 
 def cache_dir() -> Path:
-    """``$CROWDMPC_CACHE/compiled``, default ``~/.cache/crowdmpc/compiled`` (not created here)."""
-    root = os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "crowdmpc"
-    return Path(root).expanduser() / SUBDIR
+    """``$CROWDMPC_CACHE/compiled``, else ``$XDG_CACHE_HOME/crowdmpc/compiled`` (an absolute one only, as
+    the XDG spec says), else ``~/.cache/crowdmpc/compiled`` (not created here); the prepared data's root is
+    the same folder (``predictors.data.locate.cache_root``)."""
+    root = os.environ.get(CACHE_ENV)
+    if root:
+        return Path(root).expanduser() / SUBDIR
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "crowdmpc" / SUBDIR
 
 
 def _nearest_existing(path: Path) -> Path:

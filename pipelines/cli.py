@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import os
 import sys
 from typing import NoReturn
 
@@ -163,6 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     from pipelines.commands.standard_output import hold_standard_descriptors
 
     hold_standard_descriptors()
+    if (gone := _no_working_directory()) is not None:
+        print(f"crowdmpc: error: {gone}", file=sys.stderr)
+        return 2
     if sys.stdout is not None and hasattr(sys.stdout, "reconfigure"):
         # under a locale without "—" or "±" (ASCII, Latin-1) a table printed them as escapes, where it had
         # raised a UnicodeEncodeError once the work was done (stderr does so by Python's default)
@@ -180,6 +184,17 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C before a command runs (importing the commands takes a second or two)
         print("crowdmpc: interrupted", file=sys.stderr)
         return 130
+
+
+def _no_working_directory() -> str | None:
+    """Why the command cannot run where it was started: a current directory removed while a shell sat in it
+    (``rmdir`` from another terminal, a job's scratch folder cleaned). torch then failed to load with Intel
+    oneMKL's "FATAL ERROR: Cannot load libtorch_cpu.so" and exit 2, and a relative path names nothing."""
+    try:
+        os.getcwd()
+    except FileNotFoundError:
+        return "the current directory no longer exists (removed since the shell entered it); cd to another"
+    return None
 
 
 def _main(argv: list[str] | None) -> int:

@@ -24,7 +24,8 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
     link planted there must not make us create a file elsewhere (O_NOFOLLOW), nor a FIFO block the open for
     ever (O_NONBLOCK, then anything but a regular file refused)."""
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+        # 0o666: the umask decides, as for every file open() makes (a group's shared folder under umask 002)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o666)
     except OSError as exc:
         if os.path.islink(path):
             raise PredictorError(f"{path}: cannot {purpose} (it is a symbolic link)") from None

@@ -16,12 +16,13 @@ EPILOG = """examples:
   crowdmpc cache clear
 
 With jit (`crowdmpc sweep --jit auto|on`), each NLP is compiled with gcc once per machine and stored in
-$CROWDMPC_CACHE/compiled (default ~/.cache/crowdmpc/compiled): a serialized solver (<key>.casadi) and its
-library (<key>.<tag>.so). Every later build, in any worker of any run, loads it in milliseconds. The key
-hashes the NLP's expression graph, the solver and its options, the CasADi version and the compiler with its
-flags, so an entry is never used for anything else; a CasADi or gcc upgrade starts new entries (clear the
-old ones). `clear` removes the cache's own files only, never a symlink or what it points to; a run that
-already loaded an entry keeps using it, and an entry another process is compiling now is left to it.
+$CROWDMPC_CACHE/compiled (else $XDG_CACHE_HOME/crowdmpc/compiled, by default ~/.cache/crowdmpc/compiled): a
+serialized solver (<key>.casadi) and its library (<key>.<tag>.so). Every later build, in any worker of any
+run, loads it in milliseconds. The key hashes the NLP's expression graph, the solver and its options, the
+CasADi version and the compiler with its flags, so an entry is never used for anything else; a CasADi or gcc
+upgrade starts new entries (clear the old ones). `clear` removes the cache's own files only, never a symlink
+or what it points to; a run that already loaded an entry keeps using it, and an entry another process is
+compiling now is left to it.
 """
 
 

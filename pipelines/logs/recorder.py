@@ -67,7 +67,7 @@ def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None
     is still taken over, once ``may_replace`` (if given) has let it: what it raises goes up, the file kept."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_EXCL if new else 0)
     try:
-        fd = os.open(path, flags, 0o644)
+        fd = os.open(path, flags, 0o666)  # the umask decides, as for the run's other outputs
     except FileExistsError:  # only with new (O_EXCL): the caller chooses another name
         raise
     except OSError as exc:

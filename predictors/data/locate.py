@@ -78,8 +78,14 @@ def _not_a_directory(path: Path) -> str:
 
 
 def cache_root() -> Path:
-    """``$CROWDMPC_CACHE``, else ``~/.cache/crowdmpc`` (not created here: reading needs no directory)."""
-    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "crowdmpc").expanduser()
+    """``$CROWDMPC_CACHE``, else ``$XDG_CACHE_HOME/crowdmpc`` (an absolute ``XDG_CACHE_HOME`` only, as the
+    XDG spec says), else ``~/.cache/crowdmpc`` (not created here: reading needs no directory). The compile
+    cache's root is the same folder (``mpc.compile_cache.cache_dir``: mpc imports nothing of predictors)."""
+    root = os.environ.get(CACHE_ENV)
+    if root:
+        return Path(root).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return Path(xdg) / "crowdmpc" if xdg and Path(xdg).is_absolute() else Path.home() / ".cache" / "crowdmpc"
 
 
 def writable_cache_dir(*parts: str) -> Path:

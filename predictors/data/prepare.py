@@ -169,7 +169,7 @@ def _install(staging: Path, out_dir: Path, manifest: dict) -> None:
     _check_out_dir(out_dir)  # again: a link put down while the files were made
     marker = out_dir / INCOMPLETE_MARKER
     # O_NOFOLLOW: a link put down since the check is refused (ELOOP), never followed to create its target
-    os.close(os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o644))
+    os.close(os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o666))  # the umask decides
     (out_dir / MANIFEST).unlink(missing_ok=True)
     for name in manifest["files"]:
         _move(staging / name, out_dir / name)

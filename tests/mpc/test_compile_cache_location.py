@@ -108,3 +108,26 @@ def test_a_path_the_shell_takes_as_it_is_is_accepted(tmp_path, name):
     """shlex.quote's ASCII-only safe set refused /home/josé, where the default cache lives, and disabled
     every jit build; only what the shell splits on or interprets is refused."""
     assert compile_cache.writable_dir(tmp_path / name) == tmp_path / name
+
+
+@pytest.mark.parametrize(
+    "cache, xdg, expected",
+    [
+        ("{tmp}/mine", "{tmp}/xdg", "{tmp}/mine"),  # $CROWDMPC_CACHE first
+        (None, "{tmp}/xdg", "{tmp}/xdg/crowdmpc"),  # then the XDG spec's cache home (it was ignored)
+        (None, "relative/xdg", "{home}/.cache/crowdmpc"),  # a relative one is invalid, the spec says
+        (None, None, "{home}/.cache/crowdmpc"),
+    ],
+)
+def test_the_compile_cache_and_the_prepared_data_share_one_root(tmp_path, monkeypatch, cache, xdg, expected):
+    """Two functions find it (mpc imports nothing of predictors): they must agree, whatever is set."""
+    from predictors.data.locate import cache_root
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    for variable, value in ((compile_cache.CACHE_ENV, cache), ("XDG_CACHE_HOME", xdg)):
+        if value is None:
+            monkeypatch.delenv(variable, raising=False)
+        else:
+            monkeypatch.setenv(variable, value.format(tmp=tmp_path))
+    root = expected.format(tmp=tmp_path, home=tmp_path / "home")
+    assert str(cache_root()) == root and compile_cache.cache_dir() == cache_root() / compile_cache.SUBDIR

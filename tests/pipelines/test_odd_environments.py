@@ -1,7 +1,8 @@
-"""crowdmpc under a locale whose encoding lacks the characters its tables use (ASCII with Python's UTF-8
-mode and locale coercion off, as some clusters' job environments start it; Latin-1 lacks "—" and "−"): a
-sweep ended in a UnicodeEncodeError as it wrote table.md, its report unwritten, and a printed table could
-raise the same."""
+"""crowdmpc started where it cannot run as it would elsewhere. Under a locale whose encoding lacks the
+characters its tables use (ASCII with Python's UTF-8 mode and locale coercion off, as some clusters' job
+environments start it; Latin-1 lacks "—" and "−") a sweep ended in a UnicodeEncodeError as it wrote
+table.md, its report unwritten, and a printed table could raise the same; in a removed folder, torch failed
+to load."""
 
 import os
 import subprocess
@@ -44,3 +45,24 @@ def test_a_printed_table_shows_what_the_locale_cannot_as_escapes(tmp_path):
     compared = _crowdmpc(["compare", "a=a", "b=b", "--no-progress"], tmp_path)  # its table prints "−", "Δ"
     assert compared.returncode == 0, compared.stderr.decode(errors="replace")[-2000:]
     assert "+0 / \\u22120 (p = 1)" in compared.stdout.decode("ascii")  # nothing raw the locale cannot show
+
+
+def test_a_removed_current_directory_is_one_line(tmp_path):
+    """Started in a folder removed meanwhile (rmdir from another terminal), simulate stopped with oneMKL's
+    "FATAL ERROR: Cannot load libtorch_cpu.so" as torch loaded."""
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    done = subprocess.run(
+        [sys.executable, "-m", "pipelines.cli", "simulate", "--controller", "straight"],
+        cwd=gone,
+        preexec_fn=lambda: os.rmdir(gone),  # in the child, once it is inside the folder
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert (done.returncode, done.stdout) == (2, "")
+    assert done.stderr == (
+        "crowdmpc: error: the current directory no longer exists (removed since the shell entered it); cd to "
+        "another\n"
+    )
