@@ -130,9 +130,11 @@ def main() -> None:
     parser.add_argument("--calls", type=count_in("calls", 1), default=300)
     parser.add_argument("--no-closed-loop", action="store_true", help="skip the coupled-NLP episodes")
     args = parser.parse_args()
-    from predictors.zoo import zoo_names
+    from predictors.models import model_names
+    from predictors.zoo import read_manifest, zoo_names
 
     available = set(zoo_names())
+    entries, kinds = read_manifest(), set(model_names())
     load = os.getloadavg()[0]
     print(f"load average {load:.2f} on {os.cpu_count()} cores; {args.humans} humans, 3 robots, H=4")
     columns = ("export s", "value err", "jac err", "IBR ms", "NLP ms")
@@ -142,6 +144,10 @@ def main() -> None:
     for name in args.models.split(",") if args.models else list(dict.fromkeys(zoo_names())):
         if name not in available:
             print(f"{name:22} (not in the zoo)")
+            continue
+        model = entries[name].model
+        if model not in kinds:  # a user's plugin net: it loads once its plugin is registered
+            print(f"{name:22} (a plugin's model: CROWDMPC_PLUGINS={model} measures it)")
             continue
         rows = measure(name, args.humans, args.calls, not args.no_closed_loop)
         for row in rows:

@@ -13,6 +13,7 @@ from pipelines.errors import (
     EPISODES_RAISED,
     EpisodeFailed,
     PipelineError,
+    RecordingRefused,
     interrupt_behind,
     storage_refusal,
 )
@@ -223,7 +224,8 @@ def _main(argv: list[str] | None) -> int:
         return 130
     except EpisodeFailed as exc:  # before the user errors it is one of
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
-        return EPISODES_RAISED
+        # a refusal of the --record folder, met at an episode's first write, is one of the user's input
+        return 2 if isinstance(exc.__cause__, RecordingRefused) else EPISODES_RAISED
     except user_errors() as exc:
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
         return 2

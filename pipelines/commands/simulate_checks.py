@@ -120,7 +120,7 @@ def check_recording(config: RunConfig) -> None:
 # every formation (docs/extending.md, robot_reached), and the row of 4 failed already at 0.98 of 1.0 m.
 GOAL_ROOM_MARGIN: Final[float] = 0.05  # m
 # m above d_min at which goal_room_note's suggested robot spacing gave the robots room: CMPC, row of 3, 7
-# humans, d_min 1.0 m: 0 of 6 episodes reached their goals 1.0 m apart, 9 of 10 at 1.2 m, 10 of 10 at 1.3 m
+# humans, d_min 1.0 m: 0 of 10 episodes reached their goals 1.0 m apart, 9 of 10 at 1.2 m, 10 of 10 at 1.3 m
 ROOM_SPACING: Final[float] = 0.3
 
 

@@ -315,7 +315,8 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     # a report reads its experiment in --out's sweep.json: a folder without one is named before the option
     for key in ("out", "experiment") if args.report_only else ("experiment", "out"):
         if getattr(settings, key) is None:
-            if key == "experiment" and not (Path(settings.out or "") / SWEEP_FILE).is_file():
+            no_sweep = not (Path(settings.out or "") / SWEEP_FILE).is_file()
+            if key == "experiment" and args.report_only and no_sweep:
                 raise PipelineError(f"{settings.out} holds no sweep ({SWEEP_FILE}): nothing to report")
             args.parser_error(f"the following arguments are required: --{key} (or [sweep] {key})")
     out = without_missing_parents(Path(settings.out or ""))

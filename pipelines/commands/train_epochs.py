@@ -26,6 +26,9 @@ def take_run_epochs(args: argparse.Namespace, out: Path, recorded: dict[str, Any
     if not args.resume:
         args.epochs = DEFAULT_EPOCHS
         return []
+    last = out / "checkpoints" / "last.ckpt"
+    if recorded is None and not last.exists():  # no run there: said so, as with --epochs typed
+        raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
     epochs = (recorded or {}).get("epochs")
     if isinstance(epochs, bool) or not isinstance(epochs, int) or not 1 <= epochs:
         raise PipelineError(

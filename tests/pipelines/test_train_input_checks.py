@@ -166,3 +166,14 @@ def test_only_the_first_sentence_of_a_long_error_is_shown_and_never_a_cut_one():
     long = RuntimeError("Bad header in v2.6 file. See `torch.load` for more.\nDetails follow.")
     assert _first_sentence(long) == "RuntimeError: Bad header in v2.6 file."
     assert _first_sentence(ValueError("x" * 300 + ". more")) == "ValueError"
+
+
+def test_a_resume_of_a_run_that_never_started_says_there_is_nothing_to_resume(tmp_path, capsys):
+    """Without --epochs, a resume of an --out holding nothing (a run killed before it wrote) said the folder
+    "does not record how many epochs it trains in all (a run started before the count was kept)"."""
+    out = tmp_path / "never"
+    assert main(["train", "--model", "vanilla_lstm", "--resume", "--out", str(out)]) == 2
+    last = out / "checkpoints" / "last.ckpt"
+    assert _one_line(capsys) == (
+        f"crowdmpc train: error: --resume: {last} does not exist (nothing to resume in {out})"
+    )

@@ -290,7 +290,7 @@ def test_a_failed_storage_write_leaves_the_file_and_no_temporary(tmp_path, monke
     save_calibration(block(), tmp_path)
     before = (tmp_path / CALIBRATIONS_NAME).read_bytes()
 
-    def disk_full(self, text):
+    def disk_full(self, text, encoding=None):
         with open(self, "w", encoding="utf-8") as f:
             f.write(text[:100])
         raise OSError(errno.ENOSPC, "No space left on device")
