@@ -203,6 +203,7 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
     summaries = summarize_columns(config.experiment, cells, log.columns)
     rows = episode_rows(config.out / EPISODES_FILE, cells, log)
     note = not_counted_note(cells, tasks, {s.cell.key: s.episodes for s in summaries})
+    note = "\n\n".join(line for line in (note, code_note(config.out)) if line)
     report = write_report_of(config.out, config.experiment, summaries, rows, note)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
@@ -219,6 +220,46 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
             file=sys.stderr,
         )
 
+
+def code_note(out: Path) -> str:
+    """table.md's line naming the code behind its episodes, as sweep.json's runs recorded it: "Code: commit
+    0123456789ab, crowdmpc 0.1.0, Python 3.11.7, CasADi 3.8.2, torch 2.13.0+cpu, numpy 2.4.6." (each
+    version of the code once, in the order the runs met them); "" without a sweep.json. The table alone had
+    said nothing of it, and a copy of it in a paper's supplement could not be traced to its code."""
+    from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
+
+    if not (out / SWEEP_FILE).is_file():
+        return ""
+    runs = read_sweep_file(out / SWEEP_FILE).get("runs", [])
+    shown = list(
+        dict.fromkeys(_code_text(run.get("code") if isinstance(run, dict) else None) for run in runs)
+    )
+    if len(shown) <= 1:
+        return f"Code: {shown[0]}." if shown else ""
+    return f"Code: {len(shown)} versions, in the order the sweep's runs used them: " + "; ".join(shown) + "."
+
+
+def _code_text(code: Any) -> str:
+    """A run's recorded code (``pipelines.version.code_identity``, with its plugins) in one line."""
+    from pipelines.version import dirty_text
+
+    if not isinstance(code, dict):
+        return "not recorded (a run from before the code was)"
+    parts = [f"commit {str(code.get('commit'))[:12]}{dirty_text(code.get('dirty'), code.get('diff_sha256'))}"]
+    parts += [f"{label} {code[key]}" for key, label in _LIBRARIES if code.get(key)]
+    plugins = code.get("plugins")
+    if isinstance(plugins, dict):
+        parts += [f"plugin {spec} {str(sha)[:12]}" for spec, sha in sorted(plugins.items())]
+    return ", ".join(parts)
+
+
+_LIBRARIES = (
+    ("version", "crowdmpc"),
+    ("python", "Python"),
+    ("casadi", "CasADi"),
+    ("torch", "torch"),
+    ("numpy", "numpy"),
+)
 
 NOT_COUNTED_NAMED = 8  # cells named in table.md's note of episodes not recorded; the rest counted
 
