@@ -185,6 +185,8 @@ def _evaluate(args: argparse.Namespace) -> int:
             f"chooses the files scored, so these are not {args.protocol!r} results for this model",
             file=sys.stderr,
         )
+    for note in seen_notes(args.predictor, None if located is None else located.entry, files[args.split]):
+        print(note, file=sys.stderr)
     print(format_table(result))
     if args.top_k is not None and result["top_k"] is None:
         print(f"note: {args.predictor} has no sample(); --top-k ignored", file=sys.stderr)
@@ -236,3 +238,30 @@ def _scenes(
         f"the {args.split} split {name} of {root} holds no scenes; evaluate another --dataset or --split, or "
         "prepare data with more frames"
     )
+
+
+def seen_notes(predictor: str, entry: object, paths: list[Path]) -> list[str]:
+    """A note for each file scored that the model saw in training (its entry's training or validation files,
+    by sha256): `evaluate --test` on one's own training file printed its ADE as any other, where `train` notes
+    a --test file equal to its --train."""
+    from predictors.hashing import sha256_file
+
+    recorded = getattr(entry, "training_data", {}).get("files")
+    if not isinstance(recorded, dict):
+        return []
+    seen = {
+        sha: (split, name)
+        for split in ("val", "train")  # a file in both was trained on, which says more
+        if isinstance(recorded.get(split), dict)
+        for name, sha in recorded[split].items()
+    }
+    notes = []
+    for path in paths:
+        split, name = seen.get(sha256_file(path), (None, None))
+        if split is not None:
+            role = "trained" if split == "train" else "validated (its best epoch chosen)"
+            notes.append(
+                f"note: {path} holds the data {predictor} was {role} on ({split} file {name}): these scores "
+                "are not on held-out data"
+            )
+    return notes

@@ -74,7 +74,7 @@ NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net'
 into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise):
 an option left out takes the run's setting (its data files, protocol, dataset and data directory too, unless
 a data option is typed; --out names the run), one typed must be the run's, and only --epochs may change,
-upwards (the count already trained only finishes a run that stopped before writing its metrics); a data
+to no fewer than the epochs trained (that count only finishes a run that stopped before its metrics); a data
 file whose content changed since the run started is refused. --val and --test files are read as `crowdmpc
 evaluate` reads them (the last 21 steps of a longer scene), the validation of each epoch that picks the
 best one too; --train files' scenes must have exactly 21 steps (training windows). All are read before

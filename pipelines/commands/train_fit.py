@@ -257,6 +257,8 @@ def _summary(
         "model": args.model,
         # what ties these metrics to their weights: `zoo add` refuses them beside other ones
         "weights_sha256": sha256_file(weights),
+        # and to their config (NAME.json): an edited one with the same weights is another model
+        "config_sha256": sha256_file(weights.with_suffix(".json")),
         "code": code_with_plugins(),
         "protocol": protocol,
         "training_data": data_record(files, root, protocol),

@@ -287,6 +287,11 @@ def _add(args: argparse.Namespace) -> int:
         raise PipelineError(
             f"{args.weights} is not a file; give the weights `crowdmpc train` wrote (NAME.pt)"
         )
+    if args.weights.suffix == ".ckpt":  # it asked for a last.metrics.json, which no run writes
+        raise PipelineError(
+            f"{args.weights} is a Lightning training checkpoint, not a zoo one; add the NAME.pt `crowdmpc "
+            "train` wrote in the run's folder (its best epoch's weights)"
+        )
     metrics_path = args.metrics or args.weights.with_suffix(".metrics.json")
     if not metrics_path.is_file():  # a folder or /dev/zero exists, and is no metrics file either
         why = "is not a file" if metrics_path.exists() else "does not exist"
@@ -304,9 +309,12 @@ def _add(args: argparse.Namespace) -> int:
     for key in ("training", "training_data", "metrics"):
         if not isinstance(summary.get(key, {}), dict):
             raise PipelineError(f'{metrics_path}: "{key}" must be a JSON object')
+    from pipelines.commands.zoo_metrics import check_metrics_describe, check_protocol_label
+
     # the zoo name is the user's or the checkpoint's: a metrics file may be shared by mistake
     name = args.name if args.name is not None else args.weights.stem
-    _check_metrics_describe(args.weights, metrics_path, summary)
+    check_metrics_describe(args.weights, metrics_path, summary)
+    check_protocol_label(args.protocol, summary, metrics_path)
     # add_to_zoo checks the name before it writes anything
     training = dict(summary.get("training", {}))
     training_data = dict(summary.get("training_data", {}))
@@ -356,45 +364,3 @@ def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:
         f"replaced {entry.name} (was sha256 {previous.sha256[:12]}…, model {previous.model}) with "
         f"{entry.file} ({sha}, model {entry.model}) in the {which} zoo {root}"
     )
-
-
-def _check_metrics_describe(weights: Path, metrics_path: Path, summary: dict) -> None:
-    """Refuse a metrics file that `crowdmpc train` wrote for other weights: the zoo entry would list metrics
-    of other weights. Train records the weights' sha256 (since this check), and the checkpoint's name, model
-    kind and epochs, which its config holds too (the config's errors are left to the loading that follows).
-    The epochs tell apart a resumed run's new weights from the metrics of its earlier, shorter run."""
-    from predictors import checkpoint
-    from predictors.errors import PredictorError
-    from predictors.hashing import sha256_file
-
-    for key in ("name", "model", "weights_sha256"):
-        if key in summary and not isinstance(summary[key], str):
-            raise PipelineError(f'{metrics_path}: "{key}" must be a string (the checkpoint\'s {key})')
-    recorded = summary.get("weights_sha256")
-    if recorded is not None and weights.is_file() and recorded != sha256_file(weights):
-        raise PipelineError(
-            f"{metrics_path} holds the metrics of weights with sha256 {recorded[:12]}…, not of {weights} "
-            f"({sha256_file(weights)[:12]}…); pass the NAME.metrics.json `crowdmpc train` wrote beside these "
-            "weights (a run stopped before writing it: finish it with `crowdmpc train --resume`)"
-        )
-    config = weights.with_suffix(".json")
-    if not ({"name", "model", "training"} & summary.keys()) or not config.is_file():
-        return
-    try:
-        document = checkpoint.read_document(config, checkpoint.CONFIG_FORMAT, "crowdmpc predictor config")
-    except PredictorError:
-        return  # add_to_zoo refuses it with the whole story
-    trained = document.get("training")
-    own = {
-        "name": document.get("name", weights.stem),
-        "model": document.get("model"),
-        "epochs": trained.get("epochs") if isinstance(trained, dict) else None,
-    }
-    claimed = {**summary, "epochs": summary.get("training", {}).get("epochs")}
-    for key, value in own.items():
-        if claimed.get(key) is not None and value is not None and claimed[key] != value:
-            raise PipelineError(
-                f"{metrics_path} holds the metrics of {key} {claimed[key]!r}, not of {weights} ({key} "
-                f"{value!r} in {config.name}); pass the NAME.metrics.json "
-                "`crowdmpc train` wrote beside these weights"
-            )

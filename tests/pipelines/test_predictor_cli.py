@@ -307,7 +307,8 @@ def test_zoo_add_refuses_the_metrics_of_other_weights(trained, tmp_path, monkeyp
     metrics.write_text(json.dumps(first))
     assert main(["zoo", "add", str(out / "walker.pt")]) == 2
     assert "holds the metrics of weights with sha256" in capsys.readouterr().err
-    metrics.write_text(json.dumps({k: v for k, v in first.items() if k != "weights_sha256"}))
+    old = ("weights_sha256", "config_sha256")  # a metrics file from before either was recorded
+    metrics.write_text(json.dumps({k: v for k, v in first.items() if k not in old}))
     assert main(["zoo", "add", str(out / "walker.pt")]) == 2
     assert "holds the metrics of epochs 1, not of" in capsys.readouterr().err
 
@@ -1122,3 +1123,51 @@ def test_evaluate_json_is_strict_with_a_figure_that_is_not_finite(tmp_path, monk
     refuse = lambda token: pytest.fail(f"not strict JSON: {token}")  # noqa: E731
     scores = json.loads(out.read_text(), parse_constant=refuse)
     assert scores["overall"]["ade"] is None and scores["overall"]["fde"] == 0.0  # a straight walk
+
+
+def test_zoo_add_refuses_metrics_beside_an_edited_config(trained, capsys):
+    """zoo add checked the weights against the metrics, not the config: NAME.json edited to another input
+    scale (the same tensors) was added with the trained model's test ADE, its own off by a factor of five."""
+    out, _ = trained
+    config = out / "walker.json"
+    document = json.loads(config.read_text())
+    document["net"]["input_scale"] = 2 * document["net"].get("input_scale", 1.0)
+    before = config.read_text()
+    config.write_text(json.dumps(document, indent=2) + "\n")
+    capsys.readouterr()
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {config} is not the config {out / 'walker.metrics.json'} was measured with" in err
+    config.write_text(before)  # as train wrote it: added
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 0
+
+
+@pytest.mark.parametrize("label, refused", [("paper", True), ("loo", True), ("synth", False)])
+def test_zoo_add_protocol_cannot_call_a_run_of_ones_own_files_trajnets(trained, capsys, label, refused):
+    out, _ = trained  # a run of its own --train/--val files: protocol custom
+    assert main(["zoo", "add", str(out / "walker.pt"), "--protocol", label]) == (2 if refused else 0)
+    if refused:
+        assert "records a run of protocol 'custom'" in capsys.readouterr().err
+
+
+def test_zoo_add_of_a_lightning_checkpoint_names_what_to_add(trained, capsys):
+    out, _ = trained
+    last = out / "checkpoints" / "last.ckpt"
+    assert main(["zoo", "add", str(last)]) == 2
+    assert f"{last} is a Lightning training checkpoint, not a zoo one" in capsys.readouterr().err
+
+
+def test_evaluate_notes_a_file_the_model_was_trained_on(trained, tmp_path, capsys):
+    out, args = trained
+    assert main(["zoo", "add", str(out / "walker.pt")]) == 0
+    from tests.predictors.samples import write_crowds
+
+    data = args[args.index("--train") + 1]  # its --train, --val and --test file
+    capsys.readouterr()
+    assert main(["evaluate", "--predictor", "walker", "--test", data, "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: {data} holds the data walker was trained on (train file " in err
+    assert "these scores are not on held-out data" in err
+    other = write_crowds(tmp_path / "crowds.ndjson")  # data it never saw: no note
+    assert main(["evaluate", "--predictor", "walker", "--test", str(other), "--no-progress"]) == 0
+    assert "note:" not in capsys.readouterr().err
