@@ -185,7 +185,13 @@ def _evaluate(args: argparse.Namespace) -> int:
             f"chooses the files scored, so these are not {args.protocol!r} results for this model",
             file=sys.stderr,
         )
-    for note in seen_notes(args.predictor, None if located is None else located.entry, files[args.split]):
+    from pipelines.commands.simulate_checks import plugin_code_note
+
+    notes = [
+        plugin_code_note(args.predictor),
+        *seen_notes(args.predictor, getattr(located, "entry", None), files[args.split]),
+    ]
+    for note in filter(None, notes):
         print(note, file=sys.stderr)
     print(format_table(result))
     if args.top_k is not None and result["top_k"] is None:

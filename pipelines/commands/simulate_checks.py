@@ -182,6 +182,30 @@ def horizon_note(spec: ControllerSpec) -> str | None:
     )
 
 
+def plugin_code_note(predictor: str | None) -> str | None:
+    """A line for a zoo model of a plugin's net whose module file is not the one it was trained with (the
+    sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from
+    the figures `zoo list` shows, where the model loaded without a word. None otherwise (no record, no
+    plugin, the same file)."""
+    from pipelines.plugins import plugin_code
+    from predictors.zoo import locate
+
+    located = None if not predictor else locate(predictor)
+    code = located.entry.training.get("code") if located is not None else None
+    trained = code.get("plugins") if isinstance(code, dict) else None
+    if located is None or not isinstance(trained, dict) or located.entry.model not in trained:
+        return None
+    model = located.entry.model
+    now = plugin_code().get(model)
+    if now is None or now == trained[model]:
+        return None
+    return (
+        f"note: {predictor!r} was trained with plugin {model} of sha256 {str(trained[model])[:12]}, its file "
+        f"is now {now[:12]}: if the net's code changed, so may its predictions (zoo list's figures are the "
+        "trained code's)"
+    )
+
+
 def flock_note(spec: ControllerSpec, n_robots: int) -> str | None:
     """A line for a flock larger than the paper's 3 under Table I's per-pair flocking weight, which was set
     for 3 robots and pulls a 12-robot flock 5.5x harder against its goals (mpc/config.py, flocking_weight;

@@ -13,7 +13,7 @@ from pipelines.commands.calibration_notes import (
     calibration_world_note,
     sensor_margins_note,
 )
-from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note
+from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note, plugin_code_note
 from pipelines.errors import PipelineError
 
 if TYPE_CHECKING:
@@ -147,6 +147,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
         for note in (
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             horizon_note(cell.spec),
+            plugin_code_note(cell.spec.predictor_name),
             flock_note(cell.spec, cell.n_robots),
             calibration_world_note(
                 cell.spec,

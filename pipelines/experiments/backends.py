@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import itertools
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
@@ -125,10 +127,19 @@ class RayBackend:
         self._owns_ray = not ray.is_initialized()
         if self._owns_ray:
             env = {"env_vars": worker_environment()}
-            if address is None:
-                ray.init(num_cpus=workers, include_dashboard=False, runtime_env=env, log_to_driver=False)
-            else:
-                _join_cluster(ray, address, env)
+            # Ray's driver installs its own SIGTERM handler, which aborted a sweep (exit 134, no report)
+            # where the other backends stop as at Ctrl-C (pipelines.loop.interrupt): put ours back after
+            terminate = signal.getsignal(signal.SIGTERM)
+            try:
+                if address is None:  # "local": its own Ray, as without a cluster, even beside a `ray start`
+                    # one or under $RAY_ADDRESS, which made ray.init refuse num_cpus in a traceback
+                    init = {"num_cpus": workers, "include_dashboard": False, "log_to_driver": False}
+                    ray.init(address="local", runtime_env=env, **init)
+                else:
+                    _join_cluster(ray, address, env)
+            finally:
+                if terminate is not None and threading.current_thread() is threading.main_thread():
+                    signal.signal(signal.SIGTERM, terminate)
         self._actor_class: Any = ray.remote(num_cpus=1)(_RayEpisodeWorker)
         self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
