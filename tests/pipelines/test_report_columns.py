@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from pipelines.commands.sweep_report import read_log, report
+from pipelines.commands.sweep_report import code_note, read_log, report
 from pipelines.errors import PipelineError
 from pipelines.experiments import log as log_module
 from pipelines.experiments.cell_columns import COUNTS, FLAGS, FLOATS, Column
@@ -138,11 +138,15 @@ def test_the_report_of_a_log_is_that_of_its_records_held_whole(tmp_path, shuffle
     whole.mkdir()
     records = list(EpisodeLog(config.out / EPISODES_FILE).load().values())
     held = write_report(whole, config.experiment, cells, records)
-    assert printed.strip() == held.markdown.strip()
+    # the sweep's report ends with its code, from sweep.json, which a report of records alone has not
+    code = code_note(config.out)
+    assert code.startswith("Code: commit ")
+    assert printed.strip() == (held.markdown + f"\n{code}\n").strip()
     names = [p.name for p in held.files]
     assert set(REPORT_FILES) <= set(names) and any(n.endswith(".png") for n in names)
     for name in names:
-        assert (config.out / name).read_bytes() == (whole / name).read_bytes(), name
+        expected = (whole / name).read_bytes() + (f"\n{code}\n".encode() if name == "table.md" else b"")
+        assert (config.out / name).read_bytes() == expected, name
 
 
 def test_a_log_replaced_while_the_report_reads_it_is_refused(tmp_path):
