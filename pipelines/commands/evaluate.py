@@ -16,6 +16,7 @@ from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
     from predictors.evaluate import EvalConfig, EvalScene
+    from predictors.manifest import ZooEntry
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
@@ -147,18 +148,15 @@ def _evaluate(args: argparse.Namespace) -> int:
     _choose_files(args)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
     predictor = load_predictor(args.predictor)
+    progress = False if args.no_progress else None  # None: a bar on a terminal only
     if args.test is not None:
         files, root = {"test": list(args.test)}, None
     else:
-        files = protocol_files(
-            args.data_dir, args.protocol, args.dataset, progress=False if args.no_progress else None
-        )
+        files = protocol_files(args.data_dir, args.protocol, args.dataset, progress=progress)
         root = prepared_dir(args.data_dir)
     check_dataset_predictor(predictor)  # before the files are read
     loaded = _scenes(args, files[args.split], config, root)
-    result = evaluate_scenes(
-        predictor, loaded, config, progress=False if args.no_progress else None, root=root
-    )
+    result = evaluate_scenes(predictor, loaded, config, progress=progress, root=root)
     result.update(
         protocol=args.protocol,
         dataset=args.dataset,
@@ -172,7 +170,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     )
     # the entry the name loads: none for a built-in (constant velocity, the oracle), loaded by name first
     located = None if args.predictor in PREDICTORS else locate(args.predictor)
-    trained = None if located is None else located.entry.protocol
+    entry = None if located is None else located.entry
+    trained = None if entry is None else entry.protocol
     result["trained_protocol"] = trained  # None: no zoo entry (constant velocity, the oracle)
     if root is None:
         print(f"files given with --test ({len(files['test'])})")
@@ -185,12 +184,9 @@ def _evaluate(args: argparse.Namespace) -> int:
             f"chooses the files scored, so these are not {args.protocol!r} results for this model",
             file=sys.stderr,
         )
-    from pipelines.commands.simulate_checks import plugin_code_note
+    from pipelines.commands.simulate_checks import plugin_entry_note
 
-    notes = [
-        plugin_code_note(args.predictor),
-        *seen_notes(args.predictor, getattr(located, "entry", None), files[args.split]),
-    ]
+    notes = [plugin_entry_note(args.predictor, entry), *seen_notes(args.predictor, entry, files[args.split])]
     for note in filter(None, notes):
         print(note, file=sys.stderr)
     print(format_table(result))
@@ -246,13 +242,13 @@ def _scenes(
     )
 
 
-def seen_notes(predictor: str, entry: object, paths: list[Path]) -> list[str]:
+def seen_notes(predictor: str, entry: ZooEntry | None, paths: list[Path]) -> list[str]:
     """A note for each file scored that the model saw in training (its entry's training or validation files,
     by sha256): `evaluate --test` on one's own training file printed its ADE as any other, where `train` notes
     a --test file equal to its --train."""
     from predictors.hashing import sha256_file
 
-    recorded = getattr(entry, "training_data", {}).get("files")
+    recorded = None if entry is None else entry.training_data.get("files")
     if not isinstance(recorded, dict):
         return []
     seen = {

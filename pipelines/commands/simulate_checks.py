@@ -16,6 +16,7 @@ from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
+    from predictors.manifest import ZooEntry
 
 
 def _shown(config: RunConfig, section: str, key: str, value: Any) -> str:
@@ -187,15 +188,23 @@ def plugin_code_note(predictor: str | None) -> str | None:
     sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from
     the figures `zoo list` shows, where the model loaded without a word. None otherwise (no record, no
     plugin, the same file)."""
-    from pipelines.plugins import plugin_code
     from predictors.zoo import locate
 
-    located = None if not predictor else locate(predictor)
-    code = located.entry.training.get("code") if located is not None else None
-    trained = code.get("plugins") if isinstance(code, dict) else None
-    if located is None or not isinstance(trained, dict) or located.entry.model not in trained:
+    if not predictor:
         return None
-    model = located.entry.model
+    located = locate(predictor)
+    return None if located is None else plugin_entry_note(predictor, located.entry)
+
+
+def plugin_entry_note(predictor: str, entry: ZooEntry | None) -> str | None:
+    """``plugin_code_note`` of the zoo entry ``predictor`` loads, already located (None: none)."""
+    from pipelines.plugins import plugin_code
+
+    code = None if entry is None else entry.training.get("code")
+    trained = code.get("plugins") if isinstance(code, dict) else None
+    if entry is None or not isinstance(trained, dict) or entry.model not in trained:
+        return None
+    model = entry.model
     now = plugin_code().get(model)
     if now is None or now == trained[model]:
         return None
