@@ -154,10 +154,25 @@ def _shell_unsafe(path: Path) -> str | None:
     except (OSError, RuntimeError):  # a symbolic link loop: _unwritable names it
         return None
     if not _utf8(resolved):  # undecodable bytes: CasADi receives "" for the path
+        if _utf8_bytes(resolved):  # UTF-8 on disk, but the locale's encoding (ASCII) could not read it
+            encoding = sys.getfilesystemencoding()
+            return (
+                f"its path {resolved!r} is not text in this locale's encoding ({encoding}), which CasADi "
+                "cannot pass to gcc: run under a UTF-8 locale (LANG=C.UTF-8) or name an ASCII path"
+            )
         return f"its path {resolved!r} is not UTF-8, which CasADi cannot pass to gcc"
     if SHELL_SPECIAL.search(resolved) is None:
         return None
     return f"its path {resolved!r} holds a space or shell character, which CasADi passes to gcc unquoted"
+
+
+def _utf8_bytes(text: str) -> bool:
+    """Whether the bytes behind ``text`` (a path as Python decoded it) are valid UTF-8."""
+    try:
+        os.fsencode(text).decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
 
 
 def _utf8(text: str) -> bool:

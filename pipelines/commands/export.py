@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -60,6 +61,31 @@ def _parity(predictor, args: argparse.Namespace):
     if not isinstance(predictor, LearnedPredictor):
         return None
     return require_parity(predictor, args.humans, args.robots, args.horizon)
+
+
+def _notes(predictor, args: argparse.Namespace) -> list[str]:
+    """What the saved function is that its printout would not say: a horizon past what the net was trained
+    to predict (its later steps extrapolate, as ``simulate`` notes for the MPC), a generator's zero noise
+    (the function is one deterministic future of many), a plugin net whose module changed since training."""
+    from pipelines.commands.simulate_checks import plugin_code_note
+    from predictors.base import DT
+    from predictors.registry import trained_prediction_length
+    from predictors.social_lstm_predictors import SocialGANPredictor
+
+    notes = []
+    trained = trained_prediction_length(args.name)
+    if trained is not None and args.horizon > trained:
+        notes.append(
+            f"note: --horizon {args.horizon} is past the {trained} steps ({trained * DT:g} s) {args.name!r} "
+            f"was trained to predict: the function's steps {trained + 1}..{args.horizon} are extrapolated"
+        )
+    if isinstance(predictor, SocialGANPredictor):
+        notes.append(
+            f"note: {args.name!r} is a generator: the function is its zero-noise future, as the MPC plans on "
+            "it; its sampled futures (SocialGANPredictor.sample) stay in torch"
+        )
+    plugin = plugin_code_note(args.name)
+    return notes + ([plugin] if plugin else [])
 
 
 def _check_replaces_an_export(out: Path) -> None:
@@ -158,4 +184,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  input  context        ({size}, 1)  from {args.name}.encode(history, mask, humans)")
     print(f"  input  robots_future  ({args.horizon * args.robots * 2}, 1)  (H, M, 2) row-major")
     print(f"  output humans_future  ({args.horizon * args.humans * 2}, 1)  (H, N_h, 2) row-major")
+    for note in _notes(predictor, args):
+        print(note, file=sys.stderr)
     return 0

@@ -81,7 +81,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="parallel workers (default: the CPUs this process may use)",
     )
     p.add_argument(
-        "--ray-address", metavar="ADDR", help="run on this Ray cluster (needs the [cluster] extra)"
+        "--ray-address",
+        metavar="ADDR",
+        help="run on this Ray cluster: the address `ray start --head` printed (HOST:6379) or "
+        "ray://HOST:10001 (needs the [cluster] extra); --workers actors, at most one per free CPU there",
     )
     p.add_argument(
         "--backend",

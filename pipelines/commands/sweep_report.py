@@ -331,7 +331,9 @@ def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
         raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
         print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
         status = EPISODES_RAISED
-    if outcome.interrupted:
-        print("interrupted: rerun the same command to resume", file=sys.stderr)
+    if outcome.interrupted:  # no backend: stopped while it started (joining a cluster), before any episode
+        again = "resume" if outcome.backend or outcome.already_done else "start it"
+        why = "" if outcome.backend else " (stopped while its workers started: no episode ran this run)"
+        print(f"interrupted: rerun the same command to {again}{why}", file=sys.stderr)
         status = INTERRUPTED
     return status

@@ -90,7 +90,10 @@ def register(subparsers) -> None:
     add.add_argument("weights", type=path_arg, help="NAME.pt written by `crowdmpc train` (beside NAME.json)")
     add.add_argument("--name", default=None, help="zoo name (default: the checkpoint's own name)")
     add.add_argument(
-        "--protocol", default=None, help="protocol label (default: the training run's: paper, loo or custom)"
+        "--protocol",
+        default=None,
+        help="protocol label (default: the training run's: paper, loo or custom); paper and loo only for "
+        "a run of that protocol, any other label for a run of one's own files",
     )
     add.add_argument(
         "--metrics",

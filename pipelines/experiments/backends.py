@@ -1,8 +1,9 @@
 """Where a sweep's episodes run: the same EpisodeWorker inline, in a process pool, or in Ray actors.
 
 Execution. Ray when it is installed (``pip install -e .[cluster]``): ``ray.init`` starts a local Ray with K
-CPUs, or joins a cluster with ``--ray-address``; K actors each run episodes. Without Ray, K processes of a
-``concurrent.futures`` pool (spawn start method: no state forked from the driver). Both backends run the same
+CPUs, or joins a cluster with ``--ray-address`` (pipelines.experiments.ray_join); K actors each run episodes.
+Without Ray, K processes of a ``concurrent.futures`` pool (spawn start method: no state forked from the
+driver). Both backends run the same
 ``EpisodeWorker`` (pipelines.experiments.worker) and hand its outcomes back to the driver in completion order;
 library thread pools inside each worker are held to one thread, since the workers are the parallelism. The
 inline backend runs one episode at a time in the driver's own process, for debugging and profiling.
@@ -24,6 +25,7 @@ from typing import Any, Final, Protocol
 
 from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.process_backend import MAX_BREAKS_IN_A_ROW, ProcessBackend
+from pipelines.experiments.ray_join import join_cluster, workers_that_fit
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
 
@@ -136,7 +138,8 @@ class RayBackend:
                     init = {"num_cpus": workers, "include_dashboard": False, "log_to_driver": False}
                     ray.init(address="local", runtime_env=env, **init)
                 else:
-                    _join_cluster(ray, address, env)
+                    join_cluster(ray, address, env)
+                    workers = workers_that_fit(ray, address, workers)
             finally:
                 if terminate is not None and threading.current_thread() is threading.main_thread():
                     signal.signal(signal.SIGTERM, terminate)
@@ -266,18 +269,6 @@ def check_backend(kind: str, workers: int, ray_address: str | None) -> None:
         raise PipelineError(f"--ray-address needs the Ray backend, not --backend {kind}")
     if (kind == "ray" or ray_address is not None) and not ray_available():
         raise PipelineError(RAY_MISSING)
-
-
-def _join_cluster(ray: Any, address: str, env: dict[str, Any]) -> None:
-    """``ray.init`` on a cluster's address; its failures (no cluster there, an address Ray cannot parse) are
-    one line naming the address: they are the user's input, not a bug."""
-    try:
-        ray.init(address=address, runtime_env=env, log_to_driver=False)
-    except (ConnectionError, ValueError) as exc:
-        raise PipelineError(
-            f"cannot join a Ray cluster at --ray-address {address!r} ({exc}); give the address that "
-            "`ray start --head` printed, or leave --ray-address out for a local Ray"
-        ) from None
 
 
 def _take(it: Iterator[EpisodeTask], n: int) -> list[EpisodeTask]:

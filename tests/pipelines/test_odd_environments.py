@@ -66,3 +66,18 @@ def test_a_removed_current_directory_is_one_line(tmp_path):
         "crowdmpc: error: the current directory no longer exists (removed since the shell entered it); cd to "
         "another\n"
     )
+
+
+def test_a_utf8_cache_path_under_an_ascii_locale_names_the_locale(tmp_path):
+    """The path "café" is UTF-8 on disk, but an ASCII locale decodes it to surrogates, which CasADi cannot
+    pass on: it was refused as "not UTF-8", sending the user to rename a folder whose name was fine."""
+    code = "from mpc import compile_cache as c\ntry:\n c.writable_dir()\nexcept Exception as e:\n print(e)"
+    cache = os.fsencode(tmp_path) + "/café".encode()
+    env = os.environb | {k.encode(): v.encode() for k, v in ASCII.items()}
+    env |= {b"PYTHONPATH": os.fsencode(ROOT), b"CROWDMPC_CACHE": cache}
+    said = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=60)
+    assert (
+        b"is not text in this locale's encoding (ascii), which CasADi cannot pass to gcc: run under a "
+        in (said.stdout)
+    ), said.stdout + said.stderr
+    assert b"UTF-8 locale (LANG=C.UTF-8) or name an ASCII path" in said.stdout

@@ -1249,6 +1249,7 @@ def test_ray_workers_get_the_drivers_crowdmpc_environment(monkeypatch):
 
 
 def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
+    import socket
     import types
 
     from pipelines.experiments.backends import RayBackend, worker_environment
@@ -1262,6 +1263,7 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
     fake.remote = lambda **_: lambda cls: types.SimpleNamespace(remote=lambda *a: actor)  # type: ignore[attr-defined]
     fake.get = lambda ref: ("node", code_with_plugins())  # type: ignore[attr-defined]
     fake.exceptions = types.SimpleNamespace(RayActorError=RuntimeError)  # type: ignore[attr-defined]
+    fake.available_resources = lambda: {"CPU": 2.0}  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
     monkeypatch.setenv("CROWDMPC_CONTROLLERS", "my_pkg.ctl:MyController")
     # the plugins earlier tests registered in this process travel too (plugin_environment): none here
@@ -1269,10 +1271,12 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
 
     kept = {name: p for name, p in controllers._PLUGINS.items() if p.source != "plugin"}
     monkeypatch.setattr(controllers, "_PLUGINS", kept)
-    RayBackend(2, "none", address="ray://head:10001")
+    with socket.create_server(("127.0.0.1", 0)) as head:  # the join tries the address's port first
+        address = f"ray://127.0.0.1:{head.getsockname()[1]}"
+        RayBackend(2, "none", address=address)
     assert calls == [
         {
-            "address": "ray://head:10001",
+            "address": address,
             "runtime_env": {"env_vars": worker_environment()},
             "log_to_driver": False,
         }
@@ -1289,7 +1293,8 @@ def test_the_ray_backend_starts_ray_with_that_environment(monkeypatch):
 )
 def test_a_ray_address_with_no_cluster_is_one_line_naming_it(monkeypatch, failure, shown):
     """What Ray 2.60 raises for an address with no cluster behind it, and for one it cannot parse (both met
-    with the real Ray): the user's input, so a PipelineError naming it rather than Ray's traceback."""
+    with the real Ray): the user's input, so a PipelineError naming it rather than Ray's traceback. (A port
+    nothing listens at is refused before Ray: tests/pipelines/test_ray_join.py.)"""
     import types
 
     from pipelines.experiments.backends import RayBackend
@@ -1301,8 +1306,8 @@ def test_a_ray_address_with_no_cluster_is_one_line_naming_it(monkeypatch, failur
     fake.is_initialized = lambda: False  # type: ignore[attr-defined]
     fake.init = init  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", fake)
-    with pytest.raises(PipelineError, match=f"--ray-address 'head:1' .*{shown}.*ray start --head"):
-        RayBackend(2, "none", address="head:1")
+    with pytest.raises(PipelineError, match=f"--ray-address 'head' .*{shown}.*ray start --head"):
+        RayBackend(2, "none", address="head")  # no port: left to Ray
 
 
 def test_a_tables_title_follows_the_predictors_it_runs():

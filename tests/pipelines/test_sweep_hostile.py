@@ -363,9 +363,15 @@ def test_a_sweep_interrupted_before_its_backend_started_resumes(tmp_path, capsys
     with monkeypatch.context() as patched:
         patched.setattr("pipelines.experiments.sweep._default_backend", interrupted)
         assert main([*ARGV, "--out", str(out)]) == 130
-    assert "interrupted: rerun the same command to resume" in capsys.readouterr().err
+    said = "interrupted: rerun the same command to start it (stopped while its workers started: no episode "
+    assert said in capsys.readouterr().err  # it had said "to resume" of a sweep that never started
     assert main([*ARGV, "--out", str(out)]) == 0
     assert len(json.loads((out / SWEEP_FILE).read_text())["runs"]) == 1
+    with monkeypatch.context() as patched:  # the same stop over recorded episodes: a resume, said so
+        patched.setattr("pipelines.experiments.sweep._default_backend", interrupted)
+        assert main([*ARGV, "--out", str(out), "--episodes-per-cell", "2"]) == 130
+    said = "interrupted: rerun the same command to resume (stopped while its workers started: no episode "
+    assert said in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------------------------------------

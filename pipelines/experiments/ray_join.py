@@ -1,0 +1,128 @@
+"""Joining a Ray cluster (``sweep --ray-address``): what goes wrong there is the user's set-up, not a bug, so
+each failure is one line naming the address (nothing listening at it, a dashboard's URL, a cluster that wants
+an authentication token, Ray's own refusals), a join that takes long says so, and on a cluster with fewer
+free CPUs than workers the sweep runs as many workers as fit. pipelines.experiments.backends' RayBackend
+calls it."""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from typing import Any, Final
+
+from pipelines.errors import PipelineError
+
+_GIVE_ADDRESS: Final[str] = (
+    "give the address that `ray start --head` printed, or leave --ray-address out for a local Ray"
+)
+JOIN_PROBE_S: Final[float] = 10.0  # a cluster's head answers a connection at once; a firewall drops it
+JOIN_NOTE_S: Final[float] = 30.0
+
+
+def join_cluster(ray: Any, address: str, env: dict[str, Any]) -> None:
+    """``ray.init`` on a cluster's address; its failures (no cluster there, an address Ray cannot parse) are
+    one line naming the address: they are the user's input, not a bug. Ray's client retries a silent port
+    for ever, so a host:port is tried first (``_check_answers``), and a join still going after
+    ``JOIN_NOTE_S`` says so rather than wait without a word."""
+    _check_address_kind(address)
+    _check_answers(address)
+    waiting = threading.Timer(JOIN_NOTE_S, _still_joining, (address,))
+    waiting.daemon = True
+    waiting.start()
+    # Ray's own errors at a join are the set-up's: a missing authentication token (AuthenticationError)
+    refused: tuple[type[BaseException], ...] = (ConnectionError, ValueError, RuntimeError)
+    ray_error = getattr(getattr(ray, "exceptions", None), "RayError", None)
+    if isinstance(ray_error, type) and issubclass(ray_error, BaseException):
+        refused += (ray_error,)
+    try:
+        ray.init(address=address, runtime_env=env, log_to_driver=False)
+    except refused as exc:
+        raise PipelineError(
+            f"cannot join a Ray cluster at --ray-address {address!r} ({_first_line(exc)}){_auth_hint(exc)}; "
+            f"{_GIVE_ADDRESS}"
+        ) from None
+    finally:
+        waiting.cancel()
+
+
+def _check_address_kind(address: str) -> None:
+    """A dashboard's URL (Ray Jobs' ``http://head:8265``) is no address a driver joins: Ray's refusal of it
+    ran to a paragraph."""
+    scheme = address.split("://", 1)[0].lower() if "://" in address else None
+    if scheme in ("http", "https"):
+        raise PipelineError(
+            f"--ray-address {address!r} is a URL of Ray's dashboard (for `ray job submit`), not a cluster a "
+            "sweep joins: give the head's address that `ray start --head` printed (host:6379), or "
+            "ray://host:10001 through Ray Client"
+        )
+
+
+def _check_answers(address: str) -> None:
+    """PipelineError unless ``address``'s host takes a TCP connection at its port within ``JOIN_PROBE_S``
+    (``auto`` and an address without a port are left to Ray): with nothing listening there, ``ray.init``
+    retried without end, and a Ctrl-C then read as a sweep to resume."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if address.lower() in ("auto", "local"):
+        return
+    try:
+        parts = urlsplit(address if "://" in address else f"//{address}")
+        host, port = parts.hostname, parts.port
+    except ValueError:  # a port that is no number: Ray's own words name it
+        return
+    if not host or port is None:
+        return
+    try:
+        socket.create_connection((host, port), timeout=JOIN_PROBE_S).close()
+    except OSError as exc:
+        reason = f"no answer in {JOIN_PROBE_S:g} s" if isinstance(exc, TimeoutError) else exc.strerror or exc
+        raise PipelineError(
+            f"cannot join a Ray cluster at --ray-address {address!r}: nothing answers at {host}:{port} "
+            f"({reason}); is the cluster running (`ray status` on its head)? {_GIVE_ADDRESS}"
+        ) from None
+
+
+def _still_joining(address: str) -> None:
+    print(
+        f"note: still joining the Ray cluster at {address!r} after {JOIN_NOTE_S:g} s (Ray retries while the "
+        "cluster does not answer); Ctrl-C stops, and nothing has run",
+        file=sys.stderr,
+    )
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _auth_hint(exc: BaseException) -> str:
+    """A cluster started with token authentication refuses a driver without it by a ConnectionError that
+    names no authentication (Ray 2.60: "Failed to connect to Ray cluster at ...", the reason only in a log
+    line above it)."""
+    if isinstance(exc, ConnectionError) and not os.environ.get("RAY_AUTH_MODE"):
+        return (
+            "; a cluster started with token authentication refuses so too: then set RAY_AUTH_MODE=token "
+            "where the sweep runs, with the cluster's token (~/.ray/auth_token or $RAY_AUTH_TOKEN)"
+        )
+    return ""
+
+
+def workers_that_fit(ray: Any, address: str, workers: int) -> int:
+    """How many of --workers actors to start on the joined cluster: as many as it has free CPUs (each actor
+    takes one), at least one, said in a note when fewer than asked. Each actor holds its CPU to the end, so
+    one that found none waited for ever (the sweep hung in its code check, without a word); a cluster that
+    autoscales adds nodes only while actors wait, so its nodes are best started first (said too)."""
+    cpus = int(ray.available_resources().get("CPU", 0))  # what other jobs on the cluster leave
+    if workers <= cpus:
+        return workers
+    fit = max(cpus, 1)
+    wait = "; that one waits for a CPU another job frees" if cpus == 0 else ""
+    print(
+        f"note: the Ray cluster at {address!r} has {cpus} CPU{'' if cpus == 1 else 's'} free for --workers "
+        f"{workers}: the sweep runs {fit} worker{'' if fit == 1 else 's'}{wait} (an autoscaling cluster "
+        "adds nodes only for work that waits: start its nodes before the sweep)",
+        file=sys.stderr,
+    )
+    return fit

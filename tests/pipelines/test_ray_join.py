@@ -1,0 +1,135 @@
+"""Joining a Ray cluster (pipelines.experiments.ray_join), without Ray installed: a stand-in ``ray`` module
+records the calls. What the real Ray 2.60 does at each of these was met by hand (the docstrings say what)."""
+
+from __future__ import annotations
+
+import socket
+import time
+import types
+
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.experiments import ray_join
+from pipelines.experiments.ray_join import join_cluster, workers_that_fit
+
+
+@pytest.fixture
+def listening():
+    """A host:port that takes connections (as a cluster's head does)."""
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        yield f"127.0.0.1:{server.getsockname()[1]}"
+
+
+def _closed_port() -> int:
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        return server.getsockname()[1]
+
+
+def _ray(init=None, cpus: float = 8.0) -> types.ModuleType:
+    fake = types.ModuleType("ray")
+    fake.calls = []  # type: ignore[attr-defined]
+    fake.init = init or (lambda **kwargs: fake.calls.append(kwargs))  # type: ignore[attr-defined]
+    fake.available_resources = lambda: {"CPU": cpus, "memory": 1e9}  # type: ignore[attr-defined]
+    return fake
+
+
+def test_an_address_where_nothing_listens_is_refused_at_once_without_ray():
+    """Ray 2.60's client retried 127.0.0.1:6390 (nothing there) without end, printing "Failed to connect to
+    GCS ... within 5 seconds" now and then; Ctrl-C then called it a sweep to resume."""
+    port = _closed_port()
+    fake = _ray()
+    start = time.perf_counter()
+    with pytest.raises(PipelineError) as refused:
+        join_cluster(fake, f"127.0.0.1:{port}", {})
+    assert time.perf_counter() - start < 5 and fake.calls == []  # type: ignore[attr-defined]
+    said = str(refused.value)
+    assert said.startswith(f"cannot join a Ray cluster at --ray-address '127.0.0.1:{port}': nothing answers")
+    assert "Connection refused" in said and "ray status" in said and "\n" not in said
+    with pytest.raises(PipelineError, match=f"nothing answers at 127.0.0.1:{port}"):
+        join_cluster(fake, f"ray://127.0.0.1:{port}", {})  # Ray Client's port alike
+
+
+def test_auto_and_an_address_without_a_port_are_left_to_ray(monkeypatch):
+    def no_probe(*_args, **_kwargs):
+        raise AssertionError("probed")
+
+    monkeypatch.setattr(socket, "create_connection", no_probe)
+    fake = _ray()
+    for address in ("auto", "head", "head:port"):
+        join_cluster(fake, address, {})
+    assert [c["address"] for c in fake.calls] == ["auto", "head", "head:port"]  # type: ignore[attr-defined]
+
+
+def test_a_dashboard_url_is_refused_in_one_line(listening):
+    """Ray's refusal of http://head:8265 was a paragraph about RAY_ADDRESS, which the user had not set."""
+    fake = _ray()
+    with pytest.raises(PipelineError, match=r"is a URL of Ray's dashboard .*host:6379.*ray://host:10001"):
+        join_cluster(fake, f"http://{listening}", {})
+    assert fake.calls == []  # type: ignore[attr-defined]
+
+
+def test_a_refused_join_hints_at_token_authentication_unless_it_is_set(listening, monkeypatch):
+    """A cluster started with RAY_AUTH_MODE=token refused a driver without it by Ray 2.60's
+    ConnectionError("Failed to connect to Ray cluster at ..."), which names no authentication."""
+
+    def init(**_):
+        raise ConnectionError("Failed to connect to Ray cluster at 192.0.2.2:6391")
+
+    monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+    with pytest.raises(PipelineError) as refused:
+        join_cluster(_ray(init), listening, {})
+    said = str(refused.value)
+    assert f"--ray-address '{listening}' (Failed to connect to Ray cluster at 192.0.2.2:6391)" in said
+    assert "set RAY_AUTH_MODE=token" in said and said.endswith("for a local Ray")
+    monkeypatch.setenv("RAY_AUTH_MODE", "token")
+    with pytest.raises(PipelineError) as refused:
+        join_cluster(_ray(init), listening, {})
+    assert "RAY_AUTH_MODE" not in str(refused.value)
+
+
+def test_rays_own_errors_at_a_join_are_one_line(listening):
+    """With RAY_AUTH_MODE=token and no token, Ray 2.60 raised ray.exceptions.AuthenticationError (a RayError,
+    no ConnectionError) in a traceback."""
+
+    class RayError(Exception):
+        pass
+
+    class AuthenticationError(RayError):
+        pass
+
+    def init(**_):
+        raise AuthenticationError("Token authentication is enabled but no authentication token was found")
+
+    fake = _ray(init)
+    fake.exceptions = types.SimpleNamespace(RayError=RayError)  # type: ignore[attr-defined]
+    with pytest.raises(PipelineError, match=r"\(Token authentication is enabled but no .* was found\); give"):
+        join_cluster(fake, listening, {})
+
+
+def test_a_slow_join_says_so(listening, monkeypatch, capsys):
+    monkeypatch.setattr(ray_join, "JOIN_NOTE_S", 0.05)
+    join_cluster(_ray(lambda **_: time.sleep(0.5)), listening, {})
+    err = capsys.readouterr().err
+    assert f"note: still joining the Ray cluster at '{listening}' after 0.05 s" in err
+    assert "Ctrl-C stops, and nothing has run" in err
+    join_cluster(_ray(), listening, {})  # a quick one: no word
+    time.sleep(0.2)
+    assert capsys.readouterr().err == ""
+
+
+def test_a_cluster_with_fewer_free_cpus_than_workers_runs_as_many_as_fit(capsys):
+    """Each actor holds a CPU to the end: on a 2-CPU cluster the third of --workers 3 was never placed, and
+    the sweep hung in its code check without a word (met with Ray 2.60 on a `ray start --num-cpus 2`)."""
+    assert workers_that_fit(_ray(cpus=2.0), "head:6379", 3) == 2
+    assert capsys.readouterr().err == (
+        "note: the Ray cluster at 'head:6379' has 2 CPUs free for --workers 3: the sweep runs 2 workers (an "
+        "autoscaling cluster adds nodes only for work that waits: start its nodes before the sweep)\n"
+    )
+    assert workers_that_fit(_ray(cpus=3.0), "head:6379", 3) == 3
+    assert capsys.readouterr().err == ""
+    # a fraction left by another job's tasks places no actor: one, which waits for that job
+    assert workers_that_fit(_ray(cpus=0.5), "head:6379", 2) == 1
+    assert "has 0 CPUs free for --workers 2: the sweep runs 1 worker; that one waits for a CPU" in (
+        capsys.readouterr().err
+    )
