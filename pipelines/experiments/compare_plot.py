@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, Final
 
-from pipelines.experiments.report_plots import method_style
+from pipelines.experiments.plot_style import method_style
 
 PANELS: Final[tuple[tuple[str, str], ...]] = (
     ("success", "success (pp)"),
@@ -60,9 +60,12 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
             xs, ys, below, above = [], [], [], []
             for g, versus in points:
                 y, low, high = _change(versus, panel)
+                x = list(ticks).index(g["humans"] if by_humans else g["method"]) + offset
+                if panel == "travel" and (y is None or low is None):  # a bare point read as exact
+                    _mark(ax, x, y, versus, look["color"])
                 if y is None:
                     continue
-                xs.append(list(ticks).index(g["humans"] if by_humans else g["method"]) + offset)
+                xs.append(x)
                 ys.append(y)
                 below.append(0.0 if low is None else y - low)
                 above.append(0.0 if high is None else high - y)
@@ -95,8 +98,26 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
         fontsize=9,
         title="95 % intervals",
     )
-    figure.suptitle(f"Paired on {report['shared_episodes']} shared episodes (crowdmpc compare)", fontsize=11)
+    shared = report["shared_episodes"]
+    figure.suptitle(
+        f"Paired on {shared} shared episode{'' if shared == 1 else 's'} (crowdmpc compare)", fontsize=11
+    )
     return figure
+
+
+def _mark(ax: Any, x: float, y: float | None, versus: Mapping[str, Any], color: str) -> None:
+    """Where a change has no interval, why: no episode both runs completed (a travel time; the method had
+    simply vanished from its panel), or one pair only (its point alone, under a legend promising 95 %
+    intervals)."""
+    if y is None:
+        foot = ax.get_xaxis_transform()  # x in data, y in axes fraction
+        ax.text(x, 0.03, "none completed by both", transform=foot, rotation=90, ha="center", va="bottom",
+                color=color, fontsize="small")  # fmt: skip
+        return
+    n = versus["travel_difference"]["n"]
+    # beside the point, not above it: a point at the top of its panel put the words over the panel's title
+    ax.annotate(f"n = {n}", (x, y), xytext=(6, 0), textcoords="offset points", ha="left", va="center",
+                color=color, fontsize="small")  # fmt: skip
 
 
 def _ticks(groups: list[Mapping[str, Any]], by_humans: bool) -> dict[Any, str]:

@@ -15,8 +15,6 @@ says which; the paper's figures are open squares (dashed lines across crowd size
 from __future__ import annotations
 
 import math
-import re
-import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +24,7 @@ import numpy as np
 
 from crowdsim.metrics import ADDED_FLAGS, COLLISION_DISTANCE
 from pipelines.experiments.cells import Experiment
+from pipelines.experiments.plot_style import method_style, settings_line, wrap_title
 from pipelines.experiments.summary import CellSummary, Rate
 
 ROBOT_CONTACT_FLAG: Final[str] = "robot_contact"  # crowdsim.metrics' flag: two robots touched in the episode
@@ -90,45 +89,11 @@ def plotted_outcomes(summaries: Sequence[CellSummary]) -> tuple[Outcome, ...]:
 
 
 FIGSIZE: Final[tuple[float, float]] = (6.4, 4.4)  # in
-MAX_LEGEND_INSIDE: Final[int] = 8  # legend entries that a plot of FIGSIZE holds inside its axes
+MAX_LEGEND_INSIDE: Final[int] = 8  # legend entries that stand under a plot's axes; more stand beside them
+LEGEND_ROW_IN: Final[float] = 0.22  # in, a row of a "small" legend
 # in of width per bar: labels slanted at 30 degrees lie half the spacing apart, and a line of text is about
 # 0.17 in; FIGSIZE's axes give 14 bars that much, --vary's 24 (12 values x CMPC, DMPC) wrote over each other
 BAR_WIDTH_IN: Final[float] = 0.36
-
-
-# Colours past matplotlib's ten (C0..C9): tab20b's, then tab20c's, darkest shades first, so that each of up
-# to 50 methods has its own (the safety experiment's 16 repeated six of C0..C9, told apart by marker alone).
-_MORE_COLORS: Final[tuple[str, ...]] = (
-    *("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#6b6ecf", "#b5cf6b", "#e7ba52"),
-    *("#d6616b", "#ce6dbd", "#5254a3", "#8ca252", "#bd9e39", "#ad494a", "#a55194", "#9c9ede"),
-    *("#cedb9c", "#e7cb94", "#e7969c", "#de9ed6", "#3182bd", "#e6550d", "#31a354", "#756bb1"),
-    *("#636363", "#9ecae1", "#fdae6b", "#a1d99b", "#bcbddc", "#bdbdbd", "#6baed6", "#fd8d3c"),
-    *("#74c476", "#9e9ac8", "#969696", "#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#d9d9d9"),
-)
-
-
-def method_style(k: int) -> dict[str, str]:
-    """The ``k``-th method's colour, line style and marker: matplotlib's ten colours, then ``_MORE_COLORS``
-    (no two methods of up to 50 share one), with dashed lines and triangles for the next ten, dotted and
-    diamonds after, so that a legend tells them apart in grey too. Squares are the paper's."""
-    palette = [f"C{j}" for j in range(10)] + list(_MORE_COLORS)
-    return {
-        "color": palette[k % len(palette)],
-        "ls": ("-", "--", ":")[k // 10 % 3],
-        "marker": ("o", "^", "D")[k // 10 % 3],
-    }
-
-
-# "d_min = 0.8, 1.0" of a --vary title: one item, never broken after its comma (the title read "d_min =
-# 0.8,", then "1.0" on a line of its own). Possessive: a value ends where the next "KEY =" starts.
-_VALUE_LIST = re.compile(r"[^\s,;]+ = [^\s,;]++(?:, [^\s,;=]++(?! =))*")
-_GLUE: Final[str] = "\u00a0"  # no-break space: textwrap breaks at ASCII whitespace only
-
-
-def wrap_title(title: str, width: int) -> str:
-    """``title`` wrapped at ``width`` characters between words, but never inside a value list."""
-    glued = _VALUE_LIST.sub(lambda m: m.group(0).replace(" ", _GLUE), title)
-    return textwrap.fill(glued, width, break_long_words=False).replace(_GLUE, " ")
 
 
 PLOT_AXES: Final[tuple[str, ...]] = ("humans", "robots", "method")  # what a report's plots are drawn against
@@ -200,6 +165,7 @@ def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary
         ours = Patch(facecolor="0.8", edgecolor="0.3", label=what)
         ax.legend(handles=[ours, mark], fontsize="small")
     ax.set_xticks(x, methods, rotation=30, ha="right")
+    ax.set_xlim(-0.6, len(methods) - 0.4)  # with no bar at all the slots had shrunk onto the frame's edges
     return drawn
 
 
@@ -301,10 +267,11 @@ def _mark_missing(
             ax.plot(
                 x, 0.03, transform=foot, ls="none", marker=style["marker"], mfc="none", mec=style["color"]
             )
-        names = ", ".join(m for m, _ in methods)
+        # one method's name and why; several share the reason, their markers in their colours tell them
+        # apart (their names rose past the axes into the title)
         color = methods[0][1]["color"] if len(methods) == 1 else "k"
         box = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8}
-        text = f"{names}: {missing}"
+        text = f"{methods[0][0]}: {missing}" if len(methods) == 1 else missing
         ax.text(
             at,
             0.07,
@@ -334,14 +301,17 @@ def _lines(
 
 
 def _legend(ax: Any) -> None:
-    """The legend where matplotlib finds room for it in the axes, or, past ``MAX_LEGEND_INSIDE`` entries,
-    beside them on a figure widened for it: the safety experiment's 16 methods across crowd sizes made a
-    legend that covered the middle of the plot, lines and all."""
-    entries = len(ax.get_legend_handles_labels()[1])
-    if entries <= MAX_LEGEND_INSIDE:
-        ax.legend(fontsize="small")
+    """The legend under the axes, two entries a row, on a figure made taller for it, or, past
+    ``MAX_LEGEND_INSIDE`` entries, beside them on a figure widened for it: inside, where matplotlib found
+    the least data, it still covered the points of rates at 0 % and the foot of their error bars, and the
+    safety experiment's 16 methods made a legend over the middle of the plot."""
+    handles, labels = ax.get_legend_handles_labels()
+    if len(labels) <= MAX_LEGEND_INSIDE:
+        rows = math.ceil(len(labels) / 2)
+        ax.figure.set_size_inches(FIGSIZE[0], FIGSIZE[1] + LEGEND_ROW_IN * rows)
+        ax.figure.legend(handles, labels, loc="outside lower center", ncols=2, fontsize="small")
         return
-    ax.figure.set_size_inches(FIGSIZE[0] + 2.8, max(FIGSIZE[1], 1.2 + 0.2 * entries))
+    ax.figure.set_size_inches(FIGSIZE[0] + 2.8, max(FIGSIZE[1], 1.2 + 0.2 * len(labels)))
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
 
 
@@ -366,15 +336,33 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
         drawn = _draw_vs(ax, lines, outcome, size, axis)
         if axis == "robots":
             ax.set_xlabel(f"number of robots ({summaries[0].cell.n_humans} humans)")
-    # Rates from 0; a travel time above 0 too: a Student's t interval of few successes reaches below it
-    # (14.4 +- 15.2 s over 2), and the axis showed travel times of -20 s.
-    ax.set_ylim(bottom=0.0 if outcome.name != "travel_time" else max(0.0, ax.get_ylim()[0]))
+    cut = _from_zero(ax, outcome)
     ax.set_ylabel(outcome.ylabel)
-    bars = f"error bars: our 95% {outcome.interval}" if drawn else f"no error bars: {outcome.no_bars}"
+    bars = f"error bars: our 95% {outcome.interval}{cut}" if drawn else f"no error bars: {outcome.no_bars}"
     bars = outcome.bars or bars
-    ax.set_title(f"{wrap_title(experiment.title, 70)}\n{outcome.meaning}\n{bars}", fontsize="medium")
+    shared = settings_line([s.cell for s in summaries])
+    title = "\n".join(t for t in (wrap_title(experiment.title, 70), shared, outcome.meaning, bars) if t)
+    ax.set_title(title, fontsize="medium")
     ax.grid(alpha=0.3)
     return fig
+
+
+def _from_zero(ax: Any, outcome: Outcome) -> str:
+    """Every axis from 0, a little below it so that a point at 0 shows whole (one on the frame was half cut
+    off, its line lost in the spine); the title's words for intervals cut there (", cut at 0 s"): a
+    Student's t interval of few successes reaches below 0 s (14.4 +- 15.2 s over 2), which no travel time
+    is, and the axis showed travel times of -20 s. With nothing drawn (no success anywhere) no scale."""
+    data = [line.get_ydata() for line in ax.get_lines() if line.get_transform() == ax.transData]
+    data += [[bar.get_y() + bar.get_height()] for bar in ax.patches]  # a bar's value; caps are lines
+    values = np.concatenate([np.asarray(d, dtype=float).ravel() for d in data]) if data else np.empty(0)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        ax.set_ylim(0.0, 1.0)
+        ax.set_yticks([])
+        return ""
+    top = max(ax.get_ylim()[1], 1e-9)
+    ax.set_ylim(-0.015 * top, top)
+    return ", cut at 0 s" if outcome.name == "travel_time" and values.min() < 0 else ""
 
 
 def plot_outcomes(experiment: Experiment, summaries: Sequence[CellSummary], out: Path) -> list[Path]:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
-from pipelines.experiments.report_plots import method_style, wrap_title
+from pipelines.experiments.plot_style import method_style, settings_line, wrap_title
 from pipelines.experiments.safety_report import (
     COLLISION_TARGET,
     CONTACT_DISTANCE,
@@ -51,7 +51,7 @@ _OFFSETS: Final[tuple[tuple[int, int], ...]] = tuple(
 def _panels(count: int, height: float, title: str, **kwargs: Any) -> tuple[Any, list[Any]]:
     """A figure of ``count`` panels in rows of at most three, each ``height`` in tall (axes and legend), the
     unused ones hidden, and each line of ``title`` wrapped to the figure's width between items
-    (report_plots.wrap_title).
+    (plot_style.wrap_title).
 
     A ``matplotlib.figure.Figure``, not pyplot's: a report written from a notebook neither switches its
     backend (this module called ``matplotlib.use("Agg")``) nor adds to its open figures."""
@@ -110,7 +110,7 @@ def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dic
 
 
 def _method_styles(experiment: Experiment) -> dict[str, dict[str, str]]:
-    """One style per method, the same in every panel and plot (report_plots.method_style)."""
+    """One style per method, the same in every panel and plot (plot_style.method_style)."""
     return {label: method_style(k) for k, label in enumerate(experiment.method_labels)}
 
 
@@ -127,7 +127,8 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
     styles = _method_styles(experiment)
     order = {label: k for k, label in enumerate(experiment.method_labels)}
     entries = max(len(cells) for cells in groups.values()) + 2  # + the two thresholds
-    fig, axes = _panels(len(groups), _height(entries, 1), experiment.title, sharex=True, sharey=True)
+    title = _title(experiment, summaries)
+    fig, axes = _panels(len(groups), _height(entries, 1), title, sharex=True, sharey=True)
     for ax, (n, cells) in zip(axes, groups.items(), strict=True):
         for s in cells:
             counts = min_distance_counts(s.min_distances)
@@ -195,8 +196,8 @@ def _coinciding(cells: Sequence[SafetyColumn]) -> str:
     return "\n".join(f"{k} methods at ({x:.3g} %, {y:.3g} %)" for (x, y), k in at.items() if k > 1)
 
 
-def _place_labels(fig: Any, labels: Sequence[tuple[Any, SafetyColumn, str]]) -> None:
-    """Each (panel, method, colour) label beside its point at the first of ``_OFFSETS`` where it stays
+def _place_labels(fig: Any, labels: Sequence[tuple[Any, SafetyColumn, str, str]]) -> None:
+    """Each (panel, method, colour, text) label beside its point at the first of ``_OFFSETS`` where it stays
     inside the panel and clear of the points and the labels placed before it; failing that, where it
     overlaps least. Measured on the laid-out figure: labels at fixed corners ran into one another ("CMPC
     d_min=0.DMPC d_min=0.8, 18.0 s") and over the y label."""
@@ -205,13 +206,13 @@ def _place_labels(fig: Any, labels: Sequence[tuple[Any, SafetyColumn, str]]) -> 
     FigureCanvasAgg(fig).draw()
     renderer = fig.canvas.get_renderer()
     taken: dict[Any, list[Any]] = {}
-    for ax, s, color in labels:
+    for ax, s, color, label in labels:
         frame = ax.get_window_extent(renderer).padded(-2)
-        dots = [_dot(ax, other) for other_ax, other, _ in labels if other_ax is ax]
+        dots = [_dot(ax, other) for other_ax, other, _, _ in labels if other_ax is ax]
         best: tuple[float, Any] | None = None
         for dx, dy in _OFFSETS:
             text = ax.annotate(
-                _annotation(s),
+                label,
                 _point(s),
                 xytext=(dx, dy),
                 textcoords="offset points",
@@ -265,8 +266,8 @@ def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyCol
     height = _height(1 + (most if named else 0), notes)
     where = "in the legend" if named else "beside each method"
     title = (
-        f"{experiment.title}\nsuccess against collision rate, the cross-bars their 95 % Wilson intervals; "
-        f"mean travel time of the successful episodes {where}"
+        f"{_title(experiment, summaries)}\nsuccess against collision rate, the cross-bars their 95 % Wilson "
+        f"intervals; mean travel time of the successful episodes {where}"
     )
     fig, axes = _panels(len(groups), height, title, sharex=True, sharey=True)
     for ax, (n, cells) in zip(axes, groups.items(), strict=True):
@@ -279,16 +280,42 @@ def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyCol
         ax.set_title(f"{n} humans", fontsize="medium")
         ax.grid(alpha=0.3)
         _below(ax, title=_coinciding(cells) or None)
-    # Shared by every panel: a point at 0 % collisions stood on the left edge, half cut off.
+    # Shared by every panel: a point at 0 % collisions stood on the left edge, half cut off; success on its
+    # whole scale, 0 to 100 %, where the axis had started at 27 % unmarked
     axes[0].set_xlim(left=min(-1.0, axes[0].get_xlim()[0]))
+    axes[0].set_ylim(-3.0, 103.0)
     if not named:
         labels = [
-            (ax, s, styles.get(s.cell.method, {}).get("color", "k"))
+            label
             for ax, (_, cells) in zip(axes, groups.items(), strict=True)
-            for s in cells
+            for label in _labels(ax, cells, styles)
         ]
         _place_labels(fig, labels)
     return fig
+
+
+def _title(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> str:
+    """The experiment's title and, on a line of its own, the settings its cells share (plot_style)."""
+    shared = settings_line([s.cell for s in summaries])
+    return f"{experiment.title}\n{shared}" if shared else experiment.title
+
+
+def _labels(
+    ax: Any, cells: Sequence[SafetyColumn], styles: dict[str, dict[str, str]]
+) -> list[tuple[Any, SafetyColumn, str, str]]:
+    """A panel's (panel, method, colour, text) labels: one for the methods that share a point, a line each
+    in black, since labels of one point placed apart still covered each other (four methods at (0 %, 100 %),
+    one of them hidden whole)."""
+    at: dict[tuple[float, float], list[SafetyColumn]] = {}
+    for s in cells:
+        x, y = _point(s)
+        at.setdefault((round(x, 6), round(y, 6)), []).append(s)
+    return [
+        (ax, group[0], styles.get(group[0].cell.method, {}).get("color", "k"), _annotation(group[0]))
+        if len(group) == 1
+        else (ax, group[0], "k", "\n".join(_annotation(s) for s in group))
+        for group in at.values()
+    ]
 
 
 def plot_safety_tradeoff(

@@ -185,7 +185,9 @@ def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
     shared = set.intersection(*(set(c.spec.mpc_overrides) for c in cells)) if cells else set()
     if shared:
         line += " MPC settings: " + ", ".join(f"{k}={v}" for k, v in sorted(shared)) + "."
-    simulator = sorted({pair for c in cells for pair in c.world.env_settings})  # a sweep's [env], [env.orca]
+    # a sweep's [env], [env.orca] (every column's); a --vary env.KEY column's value is in its label: listed
+    # here, time_limit=3.0 of one column read as every column's beside one of 40
+    simulator = sorted(set.intersection(*(set(c.world.env_settings) for c in cells))) if cells else []
     if simulator:
         line += " Simulator settings over the profile's: " + ", ".join(f"{k}={v}" for k, v in simulator) + "."
     return line, per_column

@@ -57,11 +57,16 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
 
     Returns what was drawn and when, as the figure's title ends: "plans and predictions at t = 0, 1.2 s"
     (the nearest recorded states with a plan or prediction, if any has), or "agents at t = ..." for a run
-    that records neither.
+    that records neither; and the times asked for past the episode's end.
     """
     fig, _ = recording_figure(rec, times)
     fig.savefig(out, dpi=120, bbox_inches="tight")
-    return str(fig.axes[0].get_title()).splitlines()[-1]
+    said = str(fig.axes[0].get_title()).splitlines()[-1]
+    end = float(episode_view(rec).times[-1])
+    late = [t for t in times or () if t > end]  # drawn at the last state: the title alone showed it moved
+    if late:
+        said += f"; --times {', '.join(f'{t:g}' for t in late)} past the episode's end at {end:g} s"
+    return said
 
 
 def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tuple[Any, list[float]]:

@@ -120,7 +120,9 @@ class EpisodeConfigs:
         self.configs: list[dict[str, Any]] = []
 
     def on_reset(self, obs: Any, meta: Mapping[str, Any]) -> None:
-        self.configs.append(plain(meta["config"]))
+        config = plain(meta["config"])
+        # the same config as the last episode's is held once: a run's episodes mostly share one
+        self.configs.append(self.configs[-1] if self.configs and self.configs[-1] == config else config)
 
     def on_step(self, obs: Any, out: Any, next_obs: Any) -> None:
         pass

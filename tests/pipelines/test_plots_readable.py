@@ -12,7 +12,8 @@ import pytest
 
 from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.compare_plot import compare_figure
-from pipelines.experiments.report_plots import OUTCOMES, method_style, outcome_figure, wrap_title
+from pipelines.experiments.plot_style import method_style, wrap_title
+from pipelines.experiments.report_plots import OUTCOMES, outcome_figure
 from pipelines.experiments.safety_plots import min_distance_hist_figure, safety_tradeoff_figure
 from pipelines.experiments.summary import summarize
 from tests.pipelines.test_safety_report import _record
@@ -51,7 +52,9 @@ def test_a_title_wraps_between_items_never_inside_a_value_list():
 def test_few_methods_trade_off_labels_stay_apart_inside_their_panel():
     """`--vary mpc.d_min=0.8,1.0` at 7 humans: four methods, two sharing a point at (0 %, 100 %) and one at
     (0 %, 50 %). Labels at fixed corners wrote "CMPC d_min=0.DMPC d_min=0.8, 18.0 s" and ran over the y
-    label; now no two overlap, each stays in the panel, and the legend stands below it."""
+    label; now no two overlap, each stays in the panel, and the legend stands below it. The two methods of
+    one point share one label, a line each (placed apart, four methods' labels of one point had hidden one
+    whole)."""
     experiment = _varied_d_min()
     cells = experiment.cells((7,))
     # (successes, collisions) of four episodes: two methods at (0 %, 100 %), one at (0, 50), one at (50, 100)
@@ -65,7 +68,8 @@ def test_few_methods_trade_off_labels_stay_apart_inside_their_panel():
     renderer = _drawn(fig)
     (ax,) = fig.axes
     boxes = [t.get_window_extent(renderer) for t in ax.texts]
-    assert len(boxes) == len(cells)
+    lines = [line for t in ax.texts for line in t.get_text().split("\n")]
+    assert len(boxes) == 3 and sorted(line.split(",")[0] for line in lines) == sorted(c.method for c in cells)
     frame = ax.get_window_extent(renderer)
     for box in boxes:
         assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1

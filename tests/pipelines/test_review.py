@@ -307,9 +307,13 @@ def test_a_time_past_the_episode_draws_its_last_state(runs, t):
 def test_a_time_past_the_episode_draws_its_last_plan(runs, tmp_path, t, capsys):
     """review --plot uses planned_row_at, which took t unclipped: --times 1e17 drew the plans at t = 0 s
     (on a 13.2 s episode, at 8.4 s) while 1e3 drew the last plan. 8 steps of 0.4 s: the last plan is at
-    2.8 s."""
+    2.8 s. A time past the episode's end is said so (the title alone showed the time had moved); one within
+    it is not."""
     assert main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", t]) == 0
-    assert "(plans and predictions at t = 2.8 s)" in capsys.readouterr().out
+    late = f"; --times {float(t):g} past the episode's end at 3.2 s"
+    assert f"(plans and predictions at t = 2.8 s{late})" in capsys.readouterr().out
+    assert main(["review", str(runs[0].path), "--plot", str(tmp_path / "p.png"), "--times", "0,3.2"]) == 0
+    assert "(plans and predictions at t = 0, 2.8 s)" in capsys.readouterr().out
 
 
 def test_a_run_summary_names_the_units_of_its_metrics(runs, capsys):
@@ -582,10 +586,12 @@ def test_plot_times_fall_on_states_with_a_plan(runs, tmp_path, tmp_path_factory,
     recording without plans keeps the nearest state of all."""
     png = tmp_path / "p.png"
     assert main(["review", str(runs[0].path), "--plot", str(png), "--times", "100,3.2,0.5"]) == 0
-    assert "(plans and predictions at t = 0.4, 2.8 s)" in capsys.readouterr().out
+    said = "(plans and predictions at t = 0.4, 2.8 s; --times 100 past the episode's end at 3.2 s)"
+    assert said in capsys.readouterr().out
     plain = record_episode(tmp_path_factory.mktemp("plain"), seed=1, steps=8, with_plan=False)
     assert main(["review", str(plain.path), "--plot", str(png), "--times", "100"]) == 0
-    assert "(agents at t = 3.2 s)" in capsys.readouterr().out  # it records no plan: said "plans"
+    # it records no plan: it had said "plans"
+    assert "(agents at t = 3.2 s; --times 100 past the episode's end at 3.2 s)" in capsys.readouterr().out
 
 
 def test_a_compare_file_that_cannot_be_read_is_the_one_line_alone(runs, tmp_path, capsys):

@@ -1102,7 +1102,7 @@ def test_a_travel_time_plot_says_when_a_method_has_no_success_or_no_error_bar():
         summaries = summarize(table2, table2.cells(), _records(table2, outcomes))
         fig = outcome_figure(table2, summaries, travel)
         ax = fig.axes[0]
-        return [t.get_text() for t in ax.get_legend().get_texts()], ax.get_title()
+        return [t.get_text() for t in fig.legends[0].get_texts()], ax.get_title()
 
     failed = {(m, h): [(False, 0.0, False, False)] * 2 for m in ("CMPC", "DMPC") for h in (5, 6)}
     labels, title = figure(failed)

@@ -146,3 +146,19 @@ def test_vary_the_sensor_range_gives_every_method_a_column_per_range(tmp_path, c
         assert main([*sweep, *options]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1
+
+
+def test_table_notes_name_only_the_simulator_settings_every_column_shares():
+    """`--vary env.time_limit=3,40`: the notes said "Simulator settings over the profile's: time_limit=3.0"
+    of the whole table (40 is the profile's own, a column without settings); each column's label says it."""
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+    from pipelines.experiments.safety_report import world_note
+
+    def note(*sets: str) -> str:
+        experiment = configured_experiment(load(sets=["sweep.experiment=baselines", *sets]))
+        return world_note(list(experiment.cells((3,))))[0]
+
+    assert "Simulator settings" not in note('sweep.vary="env.time_limit=3,40"')
+    shared = note('sweep.vary="env.orca.time_horizon=2,5"', "env.time_limit=50")
+    assert shared.endswith("Simulator settings over the profile's: time_limit=50.0.")

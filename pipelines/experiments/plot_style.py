@@ -1,0 +1,70 @@
+"""What the report's plots share beside their data: each method's colour, line style and marker, titles
+wrapped between items, and the line naming the settings every plotted cell shares (pipelines.experiments
+.report_plots, .safety_plots, .compare_plot)."""
+
+from __future__ import annotations
+
+import re
+import textwrap
+from collections.abc import Sequence
+from typing import Final
+
+from pipelines.experiments.tasks import Cell
+
+# Colours past matplotlib's ten (C0..C9): tab20b's, then tab20c's, darkest shades first, so that each of up
+# to 50 methods has its own (the safety experiment's 16 repeated six of C0..C9, told apart by marker alone).
+_MORE_COLORS: Final[tuple[str, ...]] = (
+    *("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#6b6ecf", "#b5cf6b", "#e7ba52"),
+    *("#d6616b", "#ce6dbd", "#5254a3", "#8ca252", "#bd9e39", "#ad494a", "#a55194", "#9c9ede"),
+    *("#cedb9c", "#e7cb94", "#e7969c", "#de9ed6", "#3182bd", "#e6550d", "#31a354", "#756bb1"),
+    *("#636363", "#9ecae1", "#fdae6b", "#a1d99b", "#bcbddc", "#bdbdbd", "#6baed6", "#fd8d3c"),
+    *("#74c476", "#9e9ac8", "#969696", "#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#d9d9d9"),
+)
+
+
+def method_style(k: int) -> dict[str, str]:
+    """The ``k``-th method's colour, line style and marker: matplotlib's ten colours, then ``_MORE_COLORS``
+    (no two methods of up to 50 share one), with dashed lines and triangles for the next ten, dotted and
+    diamonds after, so that a legend tells them apart in grey too. Squares are the paper's."""
+    palette = [f"C{j}" for j in range(10)] + list(_MORE_COLORS)
+    return {
+        "color": palette[k % len(palette)],
+        "ls": ("-", "--", ":")[k // 10 % 3],
+        "marker": ("o", "^", "D")[k // 10 % 3],
+    }
+
+
+# "d_min = 0.8, 1.0" of a --vary title: one item, never broken after its comma (the title read "d_min =
+# 0.8,", then "1.0" on a line of its own). Possessive: a value ends where the next "KEY =" starts.
+_VALUE_LIST = re.compile(r"[^\s,;]+ = [^\s,;]++(?:, [^\s,;=]++(?! =))*")
+_GLUE: Final[str] = "\u00a0"  # no-break space: textwrap breaks at ASCII whitespace only
+
+
+def wrap_title(title: str, width: int) -> str:
+    """``title`` wrapped at ``width`` characters between words, but never inside a value list."""
+    glued = _VALUE_LIST.sub(lambda m: m.group(0).replace(" ", _GLUE), title)
+    return textwrap.fill(glued, width, break_long_words=False).replace(_GLUE, " ")
+
+
+def settings_line(cells: Sequence[Cell]) -> str:
+    """What every plotted cell shares that changes its figures and neither the methods' labels nor the
+    experiment's title say (table.md's notes do): the predictor, the margins, a profile or visibility other
+    than the paper's, Table I's values replaced (``--set mpc.KEY``). A Table II plot of constant velocity at
+    d_min 1.0 was titled as the paper's Table II. Empty where there is nothing to say."""
+    predicting = [c for c in cells if c.spec.kind.uses_predictor]
+    parts = []
+    for what, values in (
+        ("predictor", {c.spec.predictor_name for c in predicting}),
+        ("margins", {c.spec.margins.label for c in predicting}),
+    ):
+        if len(values) == 1:
+            parts.append(f"{what} {values.pop()}")
+    for name, paper in (("profile", "paper"), ("visibility", "visible")):
+        worlds = {getattr(c.world, name) for c in cells}
+        if len(worlds) == 1 and (value := worlds.pop()) != paper:
+            parts.append(f"{name} {value}")
+    shared = set.intersection(*(set(c.spec.mpc_overrides) for c in predicting)) if predicting else set()
+    shown = sorted((key, value) for key, value in shared if key != "jit")  # jit changes no figure
+    if shown:
+        parts.append("MPC " + ", ".join(f"{key}={value}" for key, value in shown))
+    return "; ".join(parts)
