@@ -37,8 +37,17 @@ class ResumeChecks:
         self._crowds: dict[tuple[str, str], int] = {}
         self.outside = 0  # records of episodes this run does not plan (another run's options)
         self._outside_key: str | None = None  # the first of them
+        # the runs (sweep.json's numbers) that recorded an episode; None once a record names none (written
+        # before records kept their run): then every run may have
+        self.runs_recorded: set[int] | None = set()
 
     def add(self, record: dict[str, Any]) -> None:
+        run = record.get("run")
+        if self.runs_recorded is not None:
+            if isinstance(run, int) and not isinstance(run, bool):
+                self.runs_recorded.add(run)
+            else:
+                self.runs_recorded = None
         i = self._index.get(record["key"])
         if i is None:  # not of the plan: neither run nor checked, but counted (outside_note)
             self.outside += 1

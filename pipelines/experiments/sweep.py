@@ -121,7 +121,12 @@ def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
 
 
 def _add_run(
-    out: Path, meta: dict[str, Any], config: SweepConfig, planned: int, backend: str | None = None
+    out: Path,
+    meta: dict[str, Any],
+    config: SweepConfig,
+    planned: int,
+    runs_recorded: set[int] | None,
+    backend: str | None = None,
 ) -> int:
     """Write sweep.json: ``meta`` with what the directory holds and a line for this run; return the run's
     number, counted from 1 as ``config show --from-sweep DIR --run N`` counts them (``runs[N - 1]``), which
@@ -133,7 +138,9 @@ def _add_run(
     path = out / SWEEP_FILE
     meta["experiment"] = config.experiment.name
     meta["title"] = config.experiment.title
-    _note_other_code(out, meta.get("runs") or [])
+    runs = meta.get("runs") or []
+    # a run that recorded no episode (stopped as its workers started) leaves no other code in the folder
+    _note_other_code(out, [r for k, r in enumerate(runs, 1) if runs_recorded is None or k in runs_recorded])
     meta.setdefault("runs", []).append(
         {
             "started": _local_time(),
@@ -230,7 +237,7 @@ def run_sweep(
             print(note, file=sys.stderr)
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
         # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
-        add_run = functools.partial(_add_run, out, meta, config, len(tasks))
+        add_run = functools.partial(_add_run, out, meta, config, len(tasks), recorded.runs_recorded)
         # Episodes that raised before (errors.jsonl) last: a rerun that extends the sweep runs the new ones
         # first, rather than stopping on the same failures again.
         retried = error_keys(out)

@@ -1338,7 +1338,13 @@ def test_each_run_records_its_code_and_a_resume_by_other_code_says_so(tmp_path, 
     assert meta["runs"][0]["code"] == code_with_plugins() and set(code_with_plugins()) >= {"commit", "casadi"}
     run_sweep(_config(tmp_path, 1))
     assert "note:" not in capsys.readouterr().err  # the same code: nothing to say
-    meta["runs"][-1]["code"] = {**code_with_plugins(), "commit": "0123456789abcdef", "casadi": "3.6.0"}
+    other = {**code_with_plugins(), "commit": "0123456789abcdef", "casadi": "3.6.0"}
+    meta = json.loads((tmp_path / "sweep.json").read_text())
+    meta["runs"][1]["code"] = other  # the second run recorded no episode: no other code in the folder
+    (tmp_path / "sweep.json").write_text(json.dumps(meta))
+    run_sweep(_config(tmp_path, 1))
+    assert "note:" not in capsys.readouterr().err
+    meta["runs"][0]["code"] = other  # the run that made the episodes
     (tmp_path / "sweep.json").write_text(json.dumps(meta))
     run_sweep(_config(tmp_path, 2))
     err = capsys.readouterr().err
