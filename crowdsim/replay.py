@@ -205,11 +205,17 @@ def replay_episode(
             rows = turned[first - past : first + steps + 1, people]
             return _episode(rows, robot_starts, robot_goals, past, first, people, recording.dt)
         blocked += 1
+    # which of the two conditions failed, first: "the most found: 50" after "has 50 pedestrians" read as
+    # a contradiction where every draw with 50 had someone on a robot's start
+    why = f"the most in one window: {most}"
+    if blocked:
+        clear = 2.0 * radius + START_CLEARANCE
+        draws = f"{blocked} draw{'' if blocked == 1 else 's'}"
+        why = f"{draws} with enough had someone within {clear:g} m of a robot's start; {why}"
     raise SimulationError(
         f"recording {recording.name!r}: no window in {WINDOW_TRIES} draws has {n_humans} pedestrians in "
-        f"its first {(chosen_rows - 1) * recording.dt:g} s and the robots' starts clear (the most found: "
-        f"{most}; {blocked} draws with enough had someone within {2.0 * radius + START_CLEARANCE:g} m of a "
-        "start); use fewer humans"
+        f"its first {(chosen_rows - 1) * recording.dt:g} s and the robots' starts clear ({why}); use fewer "
+        "humans"
     )
 
 

@@ -79,8 +79,9 @@ with name, predictor, reset, act, describe and close: docs/extending.md, section
 "module:Class" (simulate --controller module:Class). The module is imported from the installed packages or
 the current directory. $CROWDMPC_PLUGINS and $CROWDMPC_CONTROLLERS (comma-separated) do the same; installed
 packages may declare entry points in the groups "crowdmpc.predictors" (nets) and "crowdmpc.controllers"
-(controllers). Trained models go to the user zoo, $CROWDMPC_ZOO (default
-$XDG_DATA_HOME/crowdmpc/zoo or ~/.local/share/crowdmpc/zoo); the shipped zoo (checkpoints/) is read-only.
+(controllers). `crowdmpc train` writes a run into its --out; `crowdmpc zoo add` puts the model into the user
+zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo or ~/.local/share/crowdmpc/zoo); the shipped zoo
+(checkpoints/) is read-only.
 """
 
 

@@ -12,7 +12,7 @@ from pipelines.errors import PipelineError
 EPILOG = """examples:
   crowdmpc cache info
   crowdmpc cache info --json
-  crowdmpc cache info --json cache.json
+  crowdmpc cache info --json runs/cache.json
   crowdmpc cache clear
 
 With jit (`crowdmpc sweep --jit auto|on`), each NLP is compiled with gcc once per machine and stored in

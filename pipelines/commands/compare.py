@@ -20,10 +20,10 @@ if TYPE_CHECKING:
 
 EPILOG = """examples:
   crowdmpc compare runs/table2 runs/table2-cp
-  crowdmpc compare paper=runs/table2 cp0.1=runs/table2-cp safe=runs/t2-safe --json compare.json
-  crowdmpc compare paper=runs/table2 safe=runs/t2-safe --plot safe_vs_paper.png
+  crowdmpc compare paper=runs/table2 cp0.1=runs/table2-cp safe=runs/t2-safe --json runs/compare.json
+  crowdmpc compare paper=runs/table2 safe=runs/t2-safe --plot runs/safe_vs_paper.png
   crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
-  crowdmpc compare runs/demo runs/demo-h5                 # two folders of `simulate --record` recordings
+  crowdmpc compare cv=runs/cmpc-cv lstm=runs/cmpc-lstm    # `simulate --record` folders of the same seeds
 
 Each RUN is a `crowdmpc sweep --out` folder, a `crowdmpc simulate --json` file, or recordings: an .mcap file
 or a folder of them as `crowdmpc review` finds them (`simulate --record DIR`, `make demo`'s runs/demo; a file

@@ -20,7 +20,8 @@ if TYPE_CHECKING:
 
 EPILOG = """examples:
   crowdmpc evaluate --predictor constant_velocity --dataset biwi_eth --split test
-  crowdmpc evaluate --predictor constant_velocity --data-dir data/prepared --protocol loo --json cv_loo.json
+  crowdmpc evaluate --predictor constant_velocity --data-dir data/prepared --protocol loo \\
+      --json runs/cv_loo.json
   crowdmpc evaluate --predictor social_lstm_eth --test my_data/test_a.ndjson my_data/test_b.ndjson
 
 protocols (data/README.md):

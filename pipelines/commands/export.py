@@ -16,8 +16,9 @@ from pipelines.errors import PipelineError
 MAX_HORIZON = 100
 
 EPILOG = """examples:
-  crowdmpc export social_lstm_soft_eth --out social_lstm_soft_eth.casadi --humans 7 --robots 3 --horizon 4
-  python -c "import casadi; f = casadi.Function.load('social_lstm_soft_eth.casadi'); print(f)"
+  crowdmpc export social_lstm_soft_eth --out runs/social_lstm_soft_eth.casadi --humans 7 --robots 3 \\
+      --horizon 4
+  python -c "import casadi; f = casadi.Function.load('runs/social_lstm_soft_eth.casadi'); print(f)"
 
 The function is built for fixed sizes and does recursive coupled prediction over the horizon:
   input  0 "context"        (context_size, 1)  predictor.encode(history, mask, humans): the observed past

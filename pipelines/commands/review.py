@@ -31,9 +31,10 @@ if TYPE_CHECKING:
 
 EPILOG = """examples:
   crowdmpc review runs/demo/                              # one row per episode, then rates over them
-  crowdmpc review runs/demo/circle_seed000000.mcap --plot p.png --times 0,4,8 --animate a.gif
-  crowdmpc review runs/a.mcap --compare other/a.mcap --plot overlay.png
-  crowdmpc review runs/demo/ --check --json review.json   # validate every message against its schema
+  crowdmpc review runs/demo/circle_seed000000.mcap --plot runs/p.png --times 0,4,8 \\
+      --animate runs/a.gif
+  crowdmpc review runs/a.mcap --compare other/a.mcap --plot runs/overlay.png
+  crowdmpc review runs/demo/ --check --json runs/review.json   # validate every message against its schema
   crowdmpc review runs/                                   # runs/cmpc/ and runs/dmpc/: a table each
   crowdmpc review SWEEP/                                  # a sweep's recordings (SWEEP/mcap/CELL/)
 

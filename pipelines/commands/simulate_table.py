@@ -140,14 +140,24 @@ def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list
     found: list[tuple[str, str]] = []
     # The budget is far above a step's time at Table I's horizon; a long horizon or a slow predictor reaches
     # it, and then what those steps planned depends on the machine's speed and load.
-    cut = sum(int(summary.get("statuses", {}).get(status, 0)) for status in BUDGET_STATUSES)
+    statuses = summary.get("statuses", {})
+    cut = sum(int(statuses.get(status, 0)) for status in BUDGET_STATUSES)
     if cut:
         limit = "" if time_limit_s is None else f" = {time_limit_s:g} s"
+        longest = summary.get("solve_time_max_ms")
+        took = "" if longest is None else f", the longest step {longest / 1e3:.3g} s"
+        # IBR stops at the budget between solves, but a Fatrop solve cannot be stopped inside: at horizon 100
+        # each ran 20 s past a 1 s budget, and the row said the steps were "cut short at" it
+        fatrop = (
+            "; a Fatrop solve runs to its end, and one past the budget brakes"
+            if statuses.get("Maximum_WallTime_Exceeded")
+            else ""
+        )
         found.append(
             (
                 "wall-time budget",
-                f"{cut} of {summary['control_steps']} steps cut short at mpc.time_limit_s{limit}: their "
-                "plans depend on this machine's speed",
+                f"{cut} of {summary['control_steps']} steps reached mpc.time_limit_s{limit}{took}{fatrop}: "
+                "their plans depend on this machine's speed",
             )
         )
     # A predictor returning NaN or inf (mpc/cmpc.py, dmpc.py, coupled.py) is a bug in it, not its quality:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, comma_items, humans_list
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.sweep_checks import check_plan, method_notes
+from pipelines.commands.sweep_checks import check_plan, check_replays, method_notes
 from pipelines.commands.sweep_help import EPILOG
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_world, configured_experiment
@@ -182,8 +182,9 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         metavar="mpc.KEY=V1,V2",
         help="a column per value of an [mpc] setting (or controller.margins=M1,M2) beside each method that "
         "plans, on the same crowds, or of scenario.robots=M1,M2, a simulator setting (env.KEY=V1,V2, "
-        "env.orca.KEY=V1,V2) or simulate.sensor_range=R1,R2 beside every method (Table I's value is a plain "
-        "sweep's cell); again: every combination",
+        "env.orca.KEY=V1,V2; not the profile, visibility or crowd, which --profile, --visibility and --crowd "
+        "set for the whole sweep) or simulate.sensor_range=R1,R2 beside every method (Table I's value is a "
+        "plain sweep's cell); again: every combination",
     )
     p.add_argument(
         "--sensor-range",
@@ -264,6 +265,7 @@ def run(args: argparse.Namespace) -> int:
             print(note, file=sys.stderr)
     if args.dry_run:
         check_plan(experiment)  # a plan whose every episode would fail is not fine
+        check_replays(tasks)
         print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
         width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
         for cell in cells:
@@ -274,6 +276,7 @@ def run(args: argparse.Namespace) -> int:
     log: LogRead | None = None  # None: the report reads the log
     if not args.report_only:
         check_plan(experiment)
+        check_replays(tasks)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
         # what the report takes of the log, filled as the sweep reads its records and appends new ones: the

@@ -4,7 +4,7 @@ the MPC's d_min."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pipelines.commands.calibration_notes import (
     CROWD_SETTINGS,
@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable
 
     from pipelines.experiments.cells import Experiment
-    from pipelines.experiments.tasks import Cell
+    from pipelines.experiments.tasks import Cell, EpisodeTask
     from predictors.base import Predictor
 
 
@@ -174,3 +174,27 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
         )
         for note, named in methods.items()
     ]
+
+
+def check_replays(tasks: Iterable[EpisodeTask]) -> None:
+    """PipelineError naming the cell when a replayed crowd cannot give its first episode (too many humans for
+    the recording, say): every episode of it raised in the workers, each after its NLPs were built (42 s
+    for the four cells of Table II at 50 humans), with a traceback in errors.jsonl for the reason. The first
+    episode's window of each crowd, size and team is drawn here, as its episode draws it."""
+    from crowdsim.env import CrowdEnv
+    from crowdsim.errors import SimulationError
+    from pipelines.loop.episode import replayed_recording
+
+    drawn: set[tuple[Any, ...]] = set()
+    for task in tasks:
+        cell = task.cell
+        config = cell.world.env_config()
+        if config.crowd == "orca" or (key := (config, cell.n_humans, cell.n_robots)) in drawn:
+            continue
+        drawn.add(key)
+        try:
+            env = CrowdEnv(config, replayed_recording(config))
+            env.reset(task.seed, task.scenario, cell.n_humans, cell.n_robots)
+        except SimulationError as exc:
+            where = f"cell {cell.method!r} at {cell.n_humans} humans, crowd {config.crowd}"
+            raise PipelineError(f"{where}: {exc}") from None

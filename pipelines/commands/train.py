@@ -55,7 +55,7 @@ MAX_LR = 10.0
 EPILOG = """examples:
   crowdmpc train --model social_lstm --data-dir ../shared/data --epochs 25
   crowdmpc train --model social_lstm --pooling soft --data-dir ../shared/data --out runs/train/sl_soft
-  crowdmpc train --model social_lstm --data-dir ../shared/data --out runs/train/sl --resume
+  crowdmpc train --model social_lstm --data-dir ../shared/data --out runs/train/sl_soft --resume
   crowdmpc train --model social_lstm --data-dir ../shared/data --batching by_size   # less padding
   crowdmpc train --model social_lstm --train data/synth/train.ndjson --val data/synth/val.ndjson \\
       --test data/synth/test.ndjson --name my_lstm_synth    # files from `crowdmpc data synth --out ...`
@@ -142,9 +142,10 @@ def _net_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--pooling",
         default=None,
-        help="social pooling: grid (hard, TrajNet++) or soft (bilinear, differentiable); "
-        "default grid for social_lstm, soft for social_gan and social_gru; not for vanilla_lstm, and only "
-        "for kinds whose config has a pooling; with --resume, the run's",
+        help="social pooling: grid (hard, TrajNet++) or soft (bilinear, differentiable), or none where the "
+        "kind allows it (social_gru: a plain GRU); default grid for social_lstm, soft for social_gan and "
+        "social_gru; not for vanilla_lstm, and only for kinds whose config has a pooling; a pooling other "
+        "than the kind's default is in the default --name (social_lstm_soft_eth); with --resume, the run's",
     )
     parser.add_argument(
         "--net-config",
@@ -216,10 +217,13 @@ def model_name(text: str) -> str:
 
 
 def default_name(model: str, pooling: str | None, dataset: str, explicit_files: bool) -> str:
-    """``social_lstm_soft_eth`` and the like; a plugin's ``module:MyNet`` gives ``my_net_eth``."""
+    """``social_lstm_soft_eth`` and the like: a pooling other than the kind's own is named (a plain GRU,
+    ``--pooling none``, was called social_gru_eth); a plugin's ``module:MyNet`` gives ``my_net_eth``."""
+    from predictors.models import model_kind
+
     suffix = "custom" if explicit_files else DATASET_SUFFIX[dataset]
-    variant = "_soft" if model == "social_lstm" and pooling == "soft" else ""
-    variant = "_grid" if model == "social_gan" and pooling == "grid" else variant
+    own = None if pooling is None else getattr(model_kind(model).config(), "pooling", None)
+    variant = f"_{pooling}" if own is not None and pooling != own else ""
     stem = model.rpartition(":")[2]
     if stem != model:  # a class name: MyNet -> my_net
         stem = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", stem).lower()

@@ -46,7 +46,11 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
-        "--dir", type=path_arg, default=None, help="the user zoo directory (default $CROWDMPC_ZOO, see below)"
+        "--dir",
+        type=path_arg,
+        default=None,
+        help="the user zoo directory (default $CROWDMPC_ZOO, see below); list, show, verify and calibrations "
+        "refuse one that does not exist (more likely a typo than an empty zoo), add makes it",
     )
     actions = parser.add_subparsers(dest="zoo_command", metavar="ACTION", required=True)
     actions.add_parser(
@@ -68,7 +72,7 @@ def register(subparsers) -> None:
         help="one line per conformal calibration block in force (crowdmpc calibrate), of both zoos",
         **examples(
             "crowdmpc zoo calibrations",
-            "crowdmpc zoo calibrations --predictor social_lstm_eth --plot margins.png",
+            "crowdmpc zoo calibrations --predictor social_lstm_eth --plot runs/margins.png",
         ),
     )
     calibrations.add_argument("--predictor", default=None, help="only this predictor's blocks")

@@ -86,8 +86,8 @@ def sweep_keys() -> tuple[Key, ...]:
             "str",
             None,
             "a column per value of one [mpc] setting, or controller.margins, beside each method that plans, "
-            "or of scenario.robots beside every method (--vary); several separated by ';': a column per "
-            "combination; unset: none",
+            "or of scenario.robots, a simulator setting (env.KEY, env.orca.KEY) or simulate.sensor_range "
+            "beside every method (--vary); several separated by ';': a column per combination; unset: none",
             "mpc.d_min=0.8,0.9,1.0",
         ),
     )

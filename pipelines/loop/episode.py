@@ -223,6 +223,9 @@ def run_episodes(
             f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
             "sensor_range too (metres)"
         )
+    if env_config.crowd != "orca" and episodes:  # its first window drawn before the NLPs are built: 12
+        # robots' took 2.5 minutes before "no window has 50 pedestrians" (SimulationError)
+        CrowdEnv(env_config, replayed_recording(env_config)).reset(seed, scenario, n_humans, n_robots)
     controller = make_controller(spec.behind(sensor_range, sensor_tracks), env_config)
     controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans, env_config.crowd)
     run_meta = dict(meta or {})

@@ -79,7 +79,7 @@ def test_the_circle_scenario_turns_the_flow_along_the_robots_path_and_more_peopl
 
 def test_an_episode_nobody_can_make_is_refused_with_the_most_found():
     with pytest.raises(
-        SimulationError, match=r"has 5 pedestrians in its first 4 s .*the most found: 4; 0 draws with enough"
+        SimulationError, match=r"has 5 pedestrians in its first 4 s .*clear \(the most in one window: 4\);"
     ):
         replay_episode(four_people(), "circle", 5, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
     with pytest.raises(SimulationError, match="no 14 consecutive steps"):
@@ -91,7 +91,8 @@ def test_an_episode_nobody_can_make_is_refused_with_the_most_found():
     rec = Recording.from_rows("eth", np.array(rows), frame_step=6)
     with pytest.raises(
         SimulationError,
-        match=r"and the robots. starts clear .*200 draws with enough had someone within 0.8 m",
+        match=r"and the robots. starts clear \(200 draws with enough had someone within 0.8 m of a robot.s "
+        r"start; the most in one window: 4\)",
     ):
         replay_episode(rec, "perpendicular", 1, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
 

@@ -1171,3 +1171,33 @@ def test_evaluate_notes_a_file_the_model_was_trained_on(trained, tmp_path, capsy
     other = write_crowds(tmp_path / "crowds.ndjson")  # data it never saw: no note
     assert main(["evaluate", "--predictor", "walker", "--test", str(other), "--no-progress"]) == 0
     assert "note:" not in capsys.readouterr().err
+
+
+def test_the_default_name_says_a_pooling_other_than_the_kinds_own():
+    """`train --model social_gru --pooling none` trained a plain GRU named social_gru_eth, the name of the
+    shipped pooled one; social_lstm_soft and social_gan_grid were named so already."""
+    from pipelines.commands.train import default_name
+
+    names = {
+        (kind, pooling): default_name(kind, pooling, "biwi_eth", explicit_files=False)
+        for kind, pooling in [
+            ("social_gru", "none"),
+            ("social_gru", "grid"),
+            ("social_gru", "soft"),
+            ("social_lstm", "soft"),
+            ("social_lstm", "grid"),
+            ("social_gan", "grid"),
+            ("vanilla_lstm", "none"),
+            ("social_attention", None),
+        ]  # fmt: skip
+    }
+    assert names == {
+        ("social_gru", "none"): "social_gru_none_eth",
+        ("social_gru", "grid"): "social_gru_grid_eth",
+        ("social_gru", "soft"): "social_gru_eth",
+        ("social_lstm", "soft"): "social_lstm_soft_eth",
+        ("social_lstm", "grid"): "social_lstm_eth",
+        ("social_gan", "grid"): "social_gan_grid_eth",
+        ("vanilla_lstm", "none"): "vanilla_lstm_eth",
+        ("social_attention", None): "social_attention_eth",
+    }

@@ -222,3 +222,32 @@ def test_an_mpc_handed_people_who_are_not_there_says_how_the_loop_hands_them(dat
     wrapped = RangeLimited(controller, math.inf)
     wrapped.reset(obs)
     assert wrapped.act(obs).accelerations.shape == (3, 2)
+
+
+def test_a_crowd_the_recording_cannot_give_is_refused_before_any_nlp_is_built(
+    data, monkeypatch, tmp_path, capsys
+):
+    """50 pedestrians of ETH at once around 12 robots: simulate built the 12 robots' NLPs (2.5 minutes)
+    before the first episode's window said none exists, and a sweep raised it in every episode, each after
+    its cell's NLPs, with a traceback in errors.jsonl. Both now draw the first window first."""
+    from crowdsim.errors import SimulationError
+    from pipelines.loop import episode
+    from pipelines.loop.controllers import ControllerSpec
+
+    def built(*_args, **_kwargs):
+        raise AssertionError("the controller was built")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(episode, "make_controller", built)
+        with pytest.raises(SimulationError, match="no window in 200 draws has 50 pedestrians"):
+            episode.run_episodes(ControllerSpec("cmpc", "constant_velocity"), episodes=1, seed=0,
+                                 scenario="circle", n_humans=50, n_robots=3, progress=False,
+                                 env_config=EnvConfig(crowd="eth"))  # fmt: skip
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "table2", "--crowd", "eth_reactive", "--humans", "50", "--out", str(out)]
+    for dry in ([], ["--dry-run"]):
+        code, _, err = run_cli(capsys, *argv, *dry, "--episodes-per-cell", "1", "--backend", "inline")
+        assert code == 2 and one_line(err).startswith(
+            "crowdmpc sweep: error: cell 'CMPC' at 50 humans, crowd eth_reactive: recording 'eth': no window"
+        )
+        assert not out.exists()
