@@ -134,7 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
         "MODULE:CLASS) of your own (repeatable; before COMMAND)",
     )
     # Config files (pipelines/config): also accepted after simulate, sweep and config show.
-    # Appended, not stored: a second --config is refused (pipelines/config.config_arguments), not dropped.
+    # Appended, not stored: a second --config is refused, not dropped
+    # (pipelines.config.command_line.config_arguments).
     parser.add_argument(
         "--config",
         dest="config_file",

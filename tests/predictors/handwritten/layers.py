@@ -5,8 +5,9 @@ Every function takes the layer's weights as float64 numpy arrays (as torch store
 **columns**: a layer maps a ``(features, N)`` matrix to ``(out, N)``, so one dense ``mtimes`` serves every
 agent at once and an MX graph stays a few hundred nodes per step instead of one node per scalar.
 
-This module imports neither torch nor anything of the project, so ``mpc`` can use it directly. The torch side
-of every piece lives in ``predictors.nets``; ``tests/predictors/test_casadi_layers.py`` checks each pair.
+This module imports neither torch nor anything of the project: written apart from the exporter
+(``predictors.export``), it checks it. The torch side of every piece lives in ``predictors.nets``;
+``tests/predictors/test_casadi_layers.py`` checks each pair.
 """
 
 from __future__ import annotations

@@ -1,9 +1,11 @@
-"""The CasADi twin of a ``nets.SocialLSTM``'s two halves, built from ``predictors.casadi_layers`` with the
-model's own weights (agents as columns, one MX graph each, one step function ``_step``).
+"""A hand-written CasADi twin of a ``nets.SocialLSTM``'s two halves, built from
+``tests.predictors.handwritten.layers`` with the model's own weights (agents as columns, one MX graph each,
+one step function ``_step``). The project exports its nets with ``predictors.export`` (no hand-written
+twin); this one, written layer by layer, stays in the tests as an independent check of that export
+(tests/predictors/test_export.py).
 
-The encoder's twin (``encoder``) is evaluated numerically by ``LearnedPredictor.encode``, because torch's
-per-operation overhead on these tiny tensors cost milliseconds per control step; only the prediction horizon
-(``prediction``, behind ``to_casadi``) is symbolic, so the MPC differentiates through the decoder alone.
+The encoder's twin (``encoder``) is meant to be evaluated numerically, as ``LearnedPredictor.encode`` is;
+only the prediction horizon (``prediction``) is symbolic, as ``to_casadi``'s is.
 
 Context layout (``encode``), agents ordered humans (as given) then robots (increasing index), ``D`` hidden:
 ``h (N, D) | c (N, D) | now (N, 2) | first (N_h, 2) | present (N)``, each block row-major: the decoder's
