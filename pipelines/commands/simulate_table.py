@@ -146,10 +146,10 @@ def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list
         limit = "" if time_limit_s is None else f" = {time_limit_s:g} s"
         longest = summary.get("solve_time_max_ms")
         took = "" if longest is None else f", the longest step {longest / 1e3:.3g} s"
-        # IBR stops at the budget between solves, but a Fatrop solve cannot be stopped inside: at horizon 100
-        # each ran 20 s past a 1 s budget, and the row said the steps were "cut short at" it
+        # IBR stops at the budget between solves and IPOPT inside one, but Fatrop cannot be stopped inside a
+        # solve: at horizon 100 each ran 20 s past a 1 s budget, and the row said the steps were "cut short"
         fatrop = (
-            "; a Fatrop solve runs to its end, and one past the budget brakes"
+            "; a step whose solve reached it brakes (a Fatrop solve only once it has run to its end)"
             if statuses.get("Maximum_WallTime_Exceeded")
             else ""
         )

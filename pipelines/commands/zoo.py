@@ -7,6 +7,7 @@ import json
 import shlex
 import sys
 from pathlib import Path
+from typing import Any
 
 from pipelines.commands import examples, path_arg
 from pipelines.errors import PipelineError
@@ -83,6 +84,12 @@ def register(subparsers) -> None:
         metavar="FILE.png",
         help="also draw the predictor's margins against the horizon step (needs --predictor)",
     )
+    _add_and_remove(actions)
+    parser.set_defaults(func=run)
+
+
+def _add_and_remove(actions: Any) -> None:
+    """The actions that change a zoo: ``add`` and ``remove``."""
     add = actions.add_parser(
         "add",
         help="copy a trained checkpoint pair into the user zoo",
@@ -127,7 +134,6 @@ def register(subparsers) -> None:
         help="remove only the hidden files an add or remove of NAME stopped on the way left (`verify` names "
         "them); its entry, if it has one, stays",
     )
-    parser.set_defaults(func=run)
 
 
 def _metric(metrics: dict, split: str, key: str) -> str:

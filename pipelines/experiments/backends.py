@@ -139,7 +139,11 @@ class RayBackend:
                     ray.init(address="local", runtime_env=env, **init)
                 else:
                     join_cluster(ray, address, env)
-                    workers = workers_that_fit(ray, address, workers)
+                    try:
+                        workers = workers_that_fit(ray, address, workers)
+                    except BaseException:  # joined: leave the cluster as a refused join leaves it
+                        ray.shutdown()
+                        raise
             finally:
                 if terminate is not None and threading.current_thread() is threading.main_thread():
                     signal.signal(signal.SIGTERM, terminate)

@@ -21,7 +21,7 @@ import numpy as np
 
 from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
-from pipelines.loop.episode import step_time_stats
+from pipelines.loop.record import step_time_stats
 from pipelines.version import dirty_text
 
 

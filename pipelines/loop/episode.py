@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, Protocol
@@ -22,7 +21,7 @@ from crowdsim.control import ControlOutput
 from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
-from crowdsim.metrics import EpisodeMetrics, aggregate, episode_metrics
+from crowdsim.metrics import EpisodeMetrics, episode_metrics
 from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
@@ -37,7 +36,8 @@ from pipelines.loop.contract import (
 from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.progress import StepShown
-from pipelines.loop.record import EpisodeRecord, SolverStats, step_time_stats
+from pipelines.loop.record import EpisodeRecord, SolverStats
+from pipelines.loop.record import summarize as summarize  # its callers import it from here
 from pipelines.loop.spec import CONTROLLER_METHODS
 from predictors.errors import PredictorError, short_repr
 from predictors.progress import progress_bar
@@ -203,26 +203,8 @@ def run_episodes(
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
-    if not isinstance(spec, ControllerSpec):
-        raise PipelineError(
-            f"run_episodes takes a ControllerSpec (e.g. ControllerSpec('cmpc')) and builds the controller, "
-            f"got {short_repr(spec)}"
-        )
-    # numpy integers too, as seeds and sizes are taken (a notebook's counts often come from numpy)
-    if isinstance(episodes, bool) or not isinstance(episodes, int | np.integer) or episodes < 0:
-        raise PipelineError(f"run_episodes: episodes must be an int >= 0, got {short_repr(episodes)}")
-    # before the controller is built, and with no episode to run too (seed "0" failed at seed + i, None
-    # likewise, and True ran seed 1)
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise PipelineError(f"run_episodes: seed must be an int >= 0, got {short_repr(seed)}")
-    if not isinstance(env_config, EnvConfig):
-        raise PipelineError(f"run_episodes: env_config must be an EnvConfig, got {short_repr(env_config)}")
+    _check_run(spec, episodes, seed, env_config, sensor_range, sensor_tracks)
     _check_team(scenario, n_humans, n_robots, "run_episodes")
-    if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
-        raise PipelineError(
-            f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
-            "sensor_range too (metres)"
-        )
     if env_config.crowd != "orca" and episodes:  # its first window drawn before the NLPs are built: 12
         # robots' took 2.5 minutes before "no window has 50 pedestrians" (SimulationError)
         CrowdEnv(env_config, replayed_recording(env_config)).reset(seed, scenario, n_humans, n_robots)
@@ -262,6 +244,29 @@ def run_episodes(
     finally:
         called(controller, "close")  # e.g. DMPC's solver threads
     return results
+
+
+def _check_run(
+    spec: Any, episodes: Any, seed: Any, env_config: Any, sensor_range: Any, sensor_tracks: Any
+) -> None:
+    """``run_episodes``' arguments, before the controller is built, and with no episode to run too (seed "0"
+    failed at seed + i, None likewise, and True ran seed 1); numpy integers are taken, as a notebook's counts
+    often come from numpy."""
+    if not isinstance(spec, ControllerSpec):
+        raise PipelineError(
+            f"run_episodes takes a ControllerSpec (e.g. ControllerSpec('cmpc')) and builds the controller, "
+            f"got {short_repr(spec)}"
+        )
+    for name, value in (("episodes", episodes), ("seed", seed)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+            raise PipelineError(f"run_episodes: {name} must be an int >= 0, got {short_repr(value)}")
+    if not isinstance(env_config, EnvConfig):
+        raise PipelineError(f"run_episodes: env_config must be an EnvConfig, got {short_repr(env_config)}")
+    if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
+        raise PipelineError(
+            f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
+            "sensor_range too (metres)"
+        )
 
 
 def behind_sensor(
@@ -357,25 +362,6 @@ def check_built_for(controller: object, env_config: EnvConfig, where: str) -> No
 
 def controller_label(controller: object) -> str:
     return repr(getattr(controller, "name", type(controller).__name__))
-
-
-def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
-    """Episode metrics (``crowdsim.metrics.aggregate``: the rates sampled at the steps, and the collision and
-    contact rates between steps) and control-step costs over all steps of all episodes.
-
-    Solve times in ms per control step: median, p95, max; IBR iterations: mean and max; fallback steps.
-    """
-    out: dict[str, Any] = dict(aggregate([r.metrics for r in results]))
-    times = np.concatenate([r.solve_times_s for r in results])
-    its = np.concatenate([r.iterations for r in results])
-    has = times.size > 0
-    out["control_steps"] = int(times.size)
-    out.update({f"solve_time_{k}": v for k, v in step_time_stats(times).items()})
-    out["iterations_mean"] = float(its.mean()) if has else math.nan
-    out["iterations_max"] = int(its.max()) if has else 0
-    out["fallback_steps"] = int(sum(f is not None for r in results for f in r.fallbacks))
-    out["statuses"] = dict(Counter(s for r in results for s in r.statuses))
-    return out
 
 
 def _check_team(scenario: str, n_humans: int, n_robots: int, where: str) -> None:

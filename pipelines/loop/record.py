@@ -7,16 +7,20 @@ every report states them with.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from crowdsim.metrics import EpisodeMetrics
+from crowdsim.metrics import EpisodeMetrics, aggregate
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from pipelines.loop.episode import EpisodeResult
 
 
 def step_time_stats(seconds: Sequence[float] | np.ndarray) -> dict[str, float | None]:
@@ -129,3 +133,22 @@ class EpisodeConfigs:
 
     def on_end(self, result: Any) -> None:
         pass
+
+
+def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+    """Episode metrics (``crowdsim.metrics.aggregate``: the rates sampled at the steps, and the collision and
+    contact rates between steps) and control-step costs over all steps of all episodes.
+
+    Solve times in ms per control step: median, p95, max; IBR iterations: mean and max; fallback steps.
+    """
+    out: dict[str, Any] = dict(aggregate([r.metrics for r in results]))
+    times = np.concatenate([r.solve_times_s for r in results])
+    its = np.concatenate([r.iterations for r in results])
+    has = times.size > 0
+    out["control_steps"] = int(times.size)
+    out.update({f"solve_time_{k}": v for k, v in step_time_stats(times).items()})
+    out["iterations_mean"] = float(its.mean()) if has else math.nan
+    out["iterations_max"] = int(its.max()) if has else 0
+    out["fallback_steps"] = int(sum(f is not None for r in results for f in r.fallbacks))
+    out["statuses"] = dict(Counter(s for r in results for s in r.statuses))
+    return out

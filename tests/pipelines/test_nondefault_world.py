@@ -70,7 +70,8 @@ def test_steps_the_wall_time_budget_cut_short_are_printed(tmp_path, capsys):
     steps, longest = summary["control_steps"], summary["solve_time_max_ms"] / 1e3
     expected = (
         f"wall-time budget         {steps} of {steps} steps reached mpc.time_limit_s = 1e-06 s, the longest "
-        f"step {longest:.3g} s; a Fatrop solve runs to its end, and one past the budget brakes: their plans"
+        f"step {longest:.3g} s; a step whose solve reached it brakes (a Fatrop solve only once it has run to "
+        "its end): their plans"
     )
     assert expected in capsys.readouterr().out  # the step's length said: the budget did not bound it
     assert main(argv) == 0
