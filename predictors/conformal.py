@@ -110,8 +110,16 @@ def step_quantiles(errors: np.ndarray, alpha: float) -> tuple[float, ...]:
     return tuple(conformal_quantile(col[~np.isnan(col)], alpha) for col in errors.T)
 
 
+# Errors within a nanometre of a margin count as covered: constant velocity's errors on people walking
+# straight are 0 up to rounding (1e-16 m), and its margins at alpha 0.5 too (2.5e-16 m), which an exact
+# comparison ranked as misses or hits by rounding alone (a step's held-out coverage 35.5 %, where 41.3 % of
+# the errors are within 1e-9 m of it).
+COVERAGE_TOLERANCE: Final[float] = 1e-9  # m
+
+
 def coverage(errors: np.ndarray, quantiles: tuple[float, ...] | list[float]) -> tuple[float, ...]:
-    """Share (0..1) of each column's non-NaN entries with error <= its quantile; NaN for an empty column."""
+    """Share (0..1) of each column's non-NaN entries with error <= its quantile (within
+    ``COVERAGE_TOLERANCE``); NaN for an empty column."""
     errors = _check_errors(errors)
     quantiles = tuple(float(q) for q in quantiles)
     if len(quantiles) != errors.shape[1]:
@@ -119,7 +127,7 @@ def coverage(errors: np.ndarray, quantiles: tuple[float, ...] | list[float]) -> 
     shares = []
     for col, q in zip(errors.T, quantiles, strict=True):
         known = col[~np.isnan(col)]
-        shares.append(float(np.mean(known <= q)) if known.size else math.nan)
+        shares.append(float(np.mean(known <= q + COVERAGE_TOLERANCE)) if known.size else math.nan)
     return tuple(shares)
 
 

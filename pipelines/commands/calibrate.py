@@ -8,8 +8,9 @@ import json
 import sys
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.commands import check_writable, comma_items, humans_list, path_arg, write_output
+from pipelines.commands import check_writable, humans_list, path_arg, write_output
 from pipelines.commands.calibrate_store import (
+    alphas_arg,
     evaluation_seeds_note,
     plans_with_new_blocks,
     storing,
@@ -64,27 +65,6 @@ CLOSED_LOOP_OPTIONS: Final[tuple[str, ...]] = (
 )
 
 
-def _alphas(text: str) -> tuple[float, ...]:
-    try:
-        values = tuple(float(v) for v in comma_items(text))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--alpha takes numbers like 0.1,0.05, got {text!r}") from None
-    if not values or not all(0.0 < a < 1.0 for a in values):
-        raise argparse.ArgumentTypeError(f"--alpha needs numbers in (0, 1), got {text!r}")
-    from predictors.calibration import same_alpha
-    from predictors.conformal import MIN_ALPHA
-
-    if min(values) < MIN_ALPHA:  # its margin would need more than 10^12 samples (predictors.conformal)
-        raise argparse.ArgumentTypeError(f"--alpha needs numbers of at least {MIN_ALPHA:g}, got {text!r}")
-    # one block per alpha: a repeat (within the calibration key's tolerance) would be stored once
-    for i, a in enumerate(values):
-        same = [b for b in values[:i] if same_alpha(a, b)]
-        if same:
-            twice = f"{a!r} twice" if same[0] == a else f"{same[0]!r} and {a!r}, one calibration,"
-            raise argparse.ArgumentTypeError(f"--alpha names {twice} in {text!r}; give each alpha once")
-    return values
-
-
 def _option(name: str) -> str:
     """The option that sets ``name``: ``--sensor-range``, and ``--no-sensor-tracks`` for sensor_tracks."""
     return "--no-sensor-tracks" if name == "sensor_tracks" else f"--{name.replace('_', '-')}"
@@ -112,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--predictor", required=True, help="a registered predictor, a zoo entry or orca_oracle")
     p.add_argument("--source", required=True, choices=("real", "closed-loop"))
-    p.add_argument("--alpha", type=_alphas, default=(0.1,), metavar="A[,A..]", help="default 0.1")
+    p.add_argument("--alpha", type=alphas_arg, default=(0.1,), metavar="A[,A..]", help="default 0.1")
     p.add_argument(
         "--horizon",
         type=int,
@@ -367,11 +347,13 @@ def _calibrate(args: argparse.Namespace) -> int:
     with storing(blocks, args) as blocks:
         if args.holdout and args.source == "closed-loop":
             holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args)
-    cover = [coverage(holdout, b.quantiles) for b in blocks] if holdout is not None else None
+    held = holdout is not None and len(holdout) > 0  # none near a robot: no coverage, not an error
+    cover = [coverage(holdout, b.quantiles) for b in blocks] if held else None
     n = ", ".join(str(c) for c in blocks[0].n)
     print(f"{args.predictor}: {args.source} calibration, samples per step {n}")
     if args.holdout and args.source == "closed-loop":
-        print(f"held-out: {holdout.shape[0]} samples, planning with margins {args.holdout_margins}")
+        none = "" if held else " (no human came within --near of a robot: no coverage)"
+        print(f"held-out: {holdout.shape[0]} samples{none}, planning with margins {args.holdout_margins}")
     elif args.holdout:
         print(f"held-out: {holdout.shape[0]} samples of the prepared test scenes")
     print(format_coverage([b.alpha for b in blocks], [b.quantiles for b in blocks], cover))

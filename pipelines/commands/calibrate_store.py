@@ -20,6 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
+from pipelines.commands import comma_items
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
 from predictors.locking import pid_alive, unless_held
@@ -37,20 +38,49 @@ _JOURNAL: Final = re.compile(
 )
 
 
+def alphas_arg(text: str) -> tuple[float, ...]:
+    """``--alpha``'s argparse type: distinct alphas in (0, 1), each at least ``MIN_ALPHA``: one block each."""
+    try:
+        values = tuple(float(v) for v in comma_items(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--alpha takes numbers like 0.1,0.05, got {text!r}") from None
+    if not values or not all(0.0 < a < 1.0 for a in values):
+        raise argparse.ArgumentTypeError(f"--alpha needs numbers in (0, 1), got {text!r}")
+    from predictors.calibration import same_alpha
+    from predictors.conformal import MIN_ALPHA
+
+    if min(values) < MIN_ALPHA:  # its margin would need more than 10^12 samples (predictors.conformal)
+        raise argparse.ArgumentTypeError(f"--alpha needs numbers of at least {MIN_ALPHA:g}, got {text!r}")
+    # one block per alpha: a repeat (within the calibration key's tolerance) would be stored once
+    for i, a in enumerate(values):
+        same = [b for b in values[:i] if same_alpha(a, b)]
+        if same:
+            twice = f"{a!r} twice" if same[0] == a else f"{same[0]!r} and {a!r}, one calibration,"
+            raise argparse.ArgumentTypeError(f"--alpha names {twice} in {text!r}; give each alpha once")
+    return values
+
+
 def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec) -> bool:
     """Whether the held-out episodes plan with margins of a block this run stores (--holdout-margins
-    conformal:A with A one of --alpha), which must then be stored before them."""
+    conformal:A with A one of --alpha), which must then be stored before them; PipelineError when --dry-run
+    stores nothing."""
     from pipelines.loop.margins import CALIBRATED_MODES
     from predictors.calibration import same_alpha
 
-    return (
-        not args.dry_run
-        and args.holdout
+    names = (
+        args.holdout
         and args.source == "closed-loop"
         and holdout_margins.mode in CALIBRATED_MODES
         and holdout_margins.source == "closed-loop"
         and any(same_alpha(holdout_margins.alpha, a) for a in args.alpha)
     )
+    if names and args.dry_run:  # they planned with the block stored before, its coverage printed as the new's
+        raise PipelineError(
+            f"--holdout-margins {args.holdout_margins} plans the held-out episodes with this run's block, "
+            "which --dry-run does not store: they would plan with the block stored before (or find none); "
+            "drop --dry-run, or hold out with --holdout-margins none or fixed:M1,...,MH"
+        )
+    return bool(names)
 
 
 def evaluation_seeds_note(seed: int, episodes: int) -> str | None:

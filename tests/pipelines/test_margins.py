@@ -494,13 +494,16 @@ def test_a_short_calibration_says_what_gives_the_horizon(tmp_path, monkeypatch):
 
 def test_held_out_margins_are_resolved_before_the_episodes(tmp_path, monkeypatch, capsys):
     """--holdout-margins conformal:0.3 with --dry-run (nothing stored), or an alpha this run does not
-    calibrate and no block has, failed after the calibration episodes. One this run stores is taken."""
+    calibrate and no block has, failed after the calibration episodes. One this run stores is taken. With
+    --dry-run, one of this run's alphas is refused whether a block of it is stored or not: the held-out
+    episodes planned with the stored block, its coverage printed as the new block's."""
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     plans = _episodes(monkeypatch)
     held = [*CALIBRATE, "--holdout", "--holdout-margins", "conformal:0.3"]
-    for extra in (["--alpha", "0.3", "--dry-run"], ["--alpha", "0.5"]):
-        err = _refused(capsys, [*held, *extra])
-        assert "--holdout-margins conformal:0.3: no closed-loop calibration at alpha=0.3" in err
+    err = _refused(capsys, [*held, "--alpha", "0.5"])
+    assert "--holdout-margins conformal:0.3: no closed-loop calibration at alpha=0.3" in err
+    err = _refused(capsys, [*held, "--alpha", "0.3", "--dry-run"])
+    assert "plans the held-out episodes with this run's block, which --dry-run does not store" in err
     assert plans == []
     from pipelines.cli import main
 
@@ -786,3 +789,30 @@ def test_margins_that_are_no_text_are_named(given):
     """None failed with "'NoneType' object has no attribute 'strip'"."""
     with pytest.raises(PipelineError, match=r"^margins must be text such as 'none' or 'conformal:0.1', got "):
         parse_margins(given)
+
+
+def test_held_out_episodes_that_met_no_human_report_no_coverage_and_keep_the_block(
+    tmp_path, monkeypatch, capsys
+):
+    """No human came within --near of a robot in the held-out episodes: the block was stored, then the
+    command failed on "errors must have shape (n, H) with H >= 1, got (0, 0)", its --json unwritten."""
+    import json
+
+    from pipelines.cli import main
+    from pipelines.experiments import calibrate as experiment
+    from tests.calibration_blocks import synthetic_closed_loop
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    runs = iter([None, np.zeros((0, 0))])  # the calibration's errors, then the held-out run's: none
+
+    def measured(plan, progress=True):
+        return synthetic_closed_loop(plan, next(runs))
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", measured)
+    out = tmp_path / "calibrate.json"
+    assert main([*CALIBRATE, "--holdout", "--json", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "held-out: 0 samples (no human came within --near of a robot: no coverage)" in said
+    written = json.loads(out.read_text())
+    assert written["holdout_coverage"] is None and written["holdout_rows"] == 0
+    assert (tmp_path / "calibrations.json").is_file()

@@ -177,6 +177,10 @@ def test_coverage_by_hand():
         coverage(errors, (1.0,))
     with pytest.raises(PredictorError, match="3 quantiles for errors of 2 horizon steps"):
         coverage(errors, (1.0, 1.0, 1.0))
+    # rounding is no miss: constant velocity's zero errors come out as 1e-16 m, its margin at alpha 0.5 as
+    # 2.5e-16 m; an error a micrometre past a margin is one
+    rounded = np.array([[0.0], [1.1e-16], [3.3e-16], [6.6e-16], [1e-6]])
+    assert coverage(rounded, (2.5e-16,)) == (0.8,)
 
 
 def test_held_out_coverage_on_exchangeable_data():
