@@ -1,11 +1,13 @@
 """The notes on calibrated margins planned with where they were not measured (simulate's and sweep's, each a
 "note: ..." line or None): under other conventions or among a replayed crowd (``calibration_world_note``),
 in another world or crowd motion (``calibration_physics_note``), with another controller
-(``calibration_controller_note``) or another view of the humans (``sensor_margins_note``). Not refusals: an
-experiment may hold the margins fixed across any of these."""
+(``calibration_controller_note``), team or crowd size (``calibration_team_note``) or another view of the
+humans (``sensor_margins_note``). Not refusals: an experiment may hold the margins fixed across any of
+these."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.loop.spec import MPC_CONTROLLERS
@@ -23,6 +25,9 @@ def calibration_notes(spec: ControllerSpec, config: RunConfig) -> list[str]:
         calibration_world_note(spec, env.profile, visibility, env.crowd, sim.sensor_range, sim.sensor_tracks),
         sensor_margins_note(spec, sim.sensor_range, sim.sensor_tracks),
         calibration_controller_note(spec, sim.sensor_range, sim.sensor_tracks),
+        calibration_team_note(
+            spec, [config.scenario.humans], config.scenario.robots, sim.sensor_range, sim.sensor_tracks
+        ),
         calibration_physics_note(spec, changed_physics(config), sim.sensor_range, sim.sensor_tracks),
     )
     return [note for note in found if note is not None]
@@ -112,6 +117,38 @@ def changed_physics(config: RunConfig) -> list[str]:
     return [
         f"{s}.{k} {config.values[s][k]}" for s, k in chosen if config.values[s][k] != config.default(s, k)
     ]
+
+
+def calibration_team_note(
+    spec: ControllerSpec,
+    humans: Sequence[int],
+    n_robots: int,
+    sensor_range: float | None = None,
+    sensor_tracks: bool = True,
+) -> str | None:
+    """A line for closed-loop margins planned with by another team than calibrate's (its episodes run
+    ``PAPER_ROBOTS`` robots) or among crowds of ``humans`` outside the block's sizes, None otherwise: more
+    robots or people move otherwise near each other than the margins measured, and the run planned with
+    them without a word."""
+    from crowdsim.world import PAPER_ROBOTS
+    from predictors.conformal import alpha_text
+
+    block = _planned_block(spec.behind(sensor_range, sensor_tracks))
+    made = block.details.get("humans") if block is not None else None
+    if block is None or block.source != "closed-loop" or not isinstance(made, list) or not made:
+        return None
+    outside = sorted({n for n in humans if not min(made) <= n <= max(made)})
+    differ = ([f"{n_robots} robots"] if n_robots != PAPER_ROBOTS else []) + (
+        [f"{', '.join(map(str, outside))} humans"] if outside else []
+    )
+    if not differ:
+        return None
+    return (
+        f"note: the closed-loop margins of {spec.predictor_name!r} at alpha={alpha_text(spec.margins.alpha)} "
+        f"were calibrated with {PAPER_ROBOTS} robots among {min(made)}-{max(made)} humans (calibrate's "
+        f"episodes; --humans sets their crowds), this run has {' and '.join(differ)}: their coverage here "
+        "is not measured"
+    )
 
 
 def calibration_controller_note(

@@ -10,6 +10,7 @@ from pipelines.commands.calibration_notes import (
     CROWD_SETTINGS,
     calibration_controller_note,
     calibration_physics_note,
+    calibration_team_note,
     calibration_world_note,
     sensor_margins_note,
 )
@@ -135,11 +136,16 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     ``horizon_note`` lines (a plan longer than the learned predictor's training), ``flock_note`` lines
     (a team larger than the paper's under its per-pair flocking weight), ``calibration_world_note`` lines
     (margins calibrated under other conventions), ``sensor_margins_note`` lines (calibrated margins
-    behind a sensor), ``calibration_controller_note`` lines (with another controller) and
+    behind a sensor), ``calibration_controller_note`` lines (with another controller),
+    ``calibration_team_note`` lines (another team or crowd size than calibrated) and
     ``calibration_physics_note`` lines (in another crowd's motion, [env] / [env.orca]), each once, naming
     the methods it applies to: a grid of --vary columns printed the same line for each of eight methods."""
     methods: dict[str, list[str]] = {}  # a note's text -> the methods it applies to, in table order
     seen: set[str] = set()
+    cells = list(cells)
+    sizes: dict[str, list[int]] = {}  # a method's crowd sizes, which the team note reads
+    for cell in cells:
+        sizes.setdefault(cell.method, []).append(cell.n_humans)
     for cell in cells:
         # a method's cells differ only in their crowd size, which no note reads: each looked at once (the
         # calibration note reads the calibrations file)
@@ -162,6 +168,13 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             ),
             sensor_margins_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
             calibration_controller_note(cell.spec, cell.world.sensor_range, cell.world.sensor_tracks),
+            calibration_team_note(
+                cell.spec,
+                sizes[cell.method],
+                cell.n_robots,
+                cell.world.sensor_range,
+                cell.world.sensor_tracks,
+            ),
             calibration_physics_note(
                 cell.spec,
                 [f"{k} {v}" for k, v in cell.world.env_settings if k in CROWD_SETTINGS],

@@ -223,3 +223,24 @@ def test_margins_planned_with_in_another_world_or_crowd_motion_say_so():
     assert calibration_physics_note(_spec("conformal:0.1"), []) is None  # Table I's world
     assert calibration_physics_note(_spec("conformal:0.1:real"), ["world.v_pref 0.5"]) is None  # real people
     assert calibration_physics_note(_spec("none"), ["world.v_pref 0.5"]) is None
+
+
+def test_another_team_or_crowd_size_than_calibrated_is_noted():
+    """The shipped block was measured with 3 robots among 5-9 humans; a run of 5 robots among 15 planned
+    with it without a word (the conventions, controller and world were noted, not the team)."""
+    from pipelines.commands.calibration_notes import calibration_team_note
+    from pipelines.commands.sweep_checks import method_notes
+    from pipelines.experiments.cells import get_experiment
+
+    spec = _spec("conformal:0.1")
+    assert calibration_team_note(spec, [5, 7, 9], 3) is None  # the calibration's own team and sizes
+    assert calibration_team_note(_spec("none"), [15], 5) is None  # no calibrated margins
+    assert calibration_team_note(_spec("conformal:0.1:real"), [15], 5) is None  # real people: no team
+    note = calibration_team_note(spec, [4, 7, 15], 5)
+    assert note is not None and note.endswith(
+        "were calibrated with 3 robots among 5-9 humans (calibrate's episodes; --humans sets their crowds), "
+        "this run has 5 robots and 4, 15 humans: their coverage here is not measured"
+    )
+    table2 = get_experiment("table2").with_margins(parse_margins("conformal:0.1"))
+    notes = [n for n in method_notes(table2.cells((5, 10))) if "calibrated with 3 robots" in n]
+    assert notes == [f"note: methods 'CMPC', 'DMPC': {calibration_team_note(spec, [10], 3)[6:]}"]
