@@ -253,10 +253,10 @@ def _store(blocks: list, args: argparse.Namespace) -> None:
 
 def _replaced_note(block: Calibration, in_force: list[tuple[Path, Calibration]]) -> str | None:
     """A line for a block that takes the place of one made with other settings (another controller, other
-    seeds or episodes: ``made_with``), None otherwise: runs planning with that alpha then plan with margins
-    of other episodes, and one calibration silently replaced another (a trial with --controller dmpc the
-    CMPC block that --margins conformal:ALPHA meant). Settings the old block does not record are passed
-    over."""
+    seeds or episodes: ``made_with``; another horizon), None otherwise: runs planning with that alpha then
+    plan with margins of other episodes, and one calibration silently replaced another (a trial with
+    --controller dmpc the CMPC block that --margins conformal:ALPHA meant). Settings the old block does not
+    record are passed over."""
     from predictors.calibration_store import made_with
     from predictors.conformal import alpha_text
 
@@ -264,7 +264,10 @@ def _replaced_note(block: Calibration, in_force: list[tuple[Path, Calibration]])
     if not replaced:
         return None
     path, old = replaced[0]
-    before, now = made_with(old), made_with(block)
+    # the horizon too: a real block at --horizon 3 replaced the one at 4 in silence, and every run at
+    # Table I's horizon was then refused
+    before = made_with(old) | {"horizon": str(len(old.quantiles))}
+    now = made_with(block) | {"horizon": str(len(block.quantiles))}
     differ = [key for key in before if before[key] != now.get(key)]
     if not differ:
         return None

@@ -104,6 +104,20 @@ def test_hiding_the_shipped_block_made_on_other_episodes_names_them(episodes, ca
     )
 
 
+def test_replacing_a_real_block_of_another_horizon_says_so():
+    """`calibrate --source real --horizon 3` replaced the block at Table I's 4 steps without a word, and
+    every run at that horizon was then refused ("covers 3 steps")."""
+    from pathlib import Path
+
+    from pipelines.commands.calibrate_store import _replaced_note
+
+    old = find_calibration("constant_velocity", "real", 0.1)
+    new = dataclasses.replace(old, quantiles=old.quantiles[:3], n=old.n[:3])
+    note = _replaced_note(new, [(Path("calibrations.json"), old)])
+    assert note is not None and note.endswith("made with --horizon 4; this one is made with --horizon 3")
+    assert _replaced_note(old, [(Path("calibrations.json"), old)]) is None  # the same again: nothing to say
+
+
 # ------------------------------------------------------------------- 2b: a run planning with another's block
 def test_a_run_planning_with_a_block_made_with_another_controller_gets_a_note():
     shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
