@@ -104,6 +104,7 @@ def scores(
 def coverage(observer: Any, margins: str, predictor: str, horizon: int) -> list[float]:
     """The share of ``observer``'s scores within ``margins`` at each horizon step (NaN: nothing scored)."""
     from pipelines.loop.margins import parse_margins
+    from predictors.conformal import COVERAGE_TOLERANCE
     from predictors.registry import checkpoint_sha256
 
     spec = parse_margins(margins)
@@ -115,7 +116,7 @@ def coverage(observer: Any, margins: str, predictor: str, horizon: int) -> list[
     else:
         bound = np.asarray(table.quantiles)[observer.classes][:, :horizon]
     known = ~np.isnan(score)
-    within = (score <= bound) & known
+    within = (score <= bound + COVERAGE_TOLERANCE) & known  # as calibrate counts (predictors.conformal)
     counts = known.sum(axis=0)
     return [float(w / c) if c else math.nan for w, c in zip(within.sum(axis=0), counts, strict=True)]
 
