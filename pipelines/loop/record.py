@@ -11,16 +11,13 @@ import math
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from crowdsim.metrics import EpisodeMetrics, aggregate
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
-
-if TYPE_CHECKING:
-    from pipelines.loop.episode import EpisodeResult
 
 
 def step_time_stats(seconds: Sequence[float] | np.ndarray) -> dict[str, float | None]:
@@ -135,7 +132,23 @@ class EpisodeConfigs:
         pass
 
 
-def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+class SteppedEpisode(Protocol):
+    """What ``summarize`` reads of an episode (``pipelines.loop.episode.EpisodeResult``, which imports this
+    module)."""
+
+    @property
+    def metrics(self) -> EpisodeMetrics: ...
+    @property
+    def solve_times_s(self) -> np.ndarray: ...
+    @property
+    def iterations(self) -> np.ndarray: ...
+    @property
+    def statuses(self) -> tuple[str, ...]: ...
+    @property
+    def fallbacks(self) -> tuple[str | None, ...]: ...
+
+
+def summarize(results: Sequence[SteppedEpisode]) -> dict[str, Any]:
     """Episode metrics (``crowdsim.metrics.aggregate``: the rates sampled at the steps, and the collision and
     contact rates between steps) and control-step costs over all steps of all episodes.
 
