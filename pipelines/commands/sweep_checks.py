@@ -205,11 +205,14 @@ def check_replays(tasks: Iterable[EpisodeTask]) -> None:
 
     # (crowd's config, humans, robots) -> its first cell's label and its episodes' (seed, scenario), in order
     firsts: dict[tuple[Any, ...], tuple[str, dict[tuple[int, str], None]]] = {}
+    keys: dict[Cell, tuple[Any, ...]] = {}  # each cell's, its config built once, not once a task
     for task in tasks:
-        config = task.cell.world.env_config()
-        if config.crowd != "orca":
-            key = (config, task.cell.n_humans, task.cell.n_robots)
-            firsts.setdefault(key, (task.cell.method, {}))[1][task.seed, task.scenario] = None
+        cell = task.cell
+        if cell.world.crowd == "orca":
+            continue
+        if cell not in keys:
+            keys[cell] = (cell.world.env_config(), cell.n_humans, cell.n_robots)
+        firsts.setdefault(keys[cell], (cell.method, {}))[1][task.seed, task.scenario] = None
     for (config, n_humans, n_robots), (method, episodes) in firsts.items():
         env = CrowdEnv(config, replayed_recording(config))
         failed: SimulationError | None = None

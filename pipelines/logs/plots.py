@@ -59,10 +59,11 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
     (the nearest recorded states with a plan or prediction, if any has), or "agents at t = ..." for a run
     that records neither; and the times asked for past the episode's end.
     """
-    fig, _ = recording_figure(rec, times)
+    view = episode_view(rec)  # once: the figure and the episode's end read it
+    fig, _ = _recording_figure(rec, view, times)
     fig.savefig(out, dpi=120, bbox_inches="tight")
     said = str(fig.axes[0].get_title()).splitlines()[-1]
-    end = float(episode_view(rec).times[-1])
+    end = float(view.times[-1])
     late = [t for t in times or () if t > end]  # drawn at the last state: the title alone showed it moved
     if late:
         said += f"; --times {', '.join(f'{t:g}' for t in late)} past the episode's end at {end:g} s"
@@ -71,9 +72,14 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
 
 def recording_figure(rec: Recording, times: Sequence[float] | None = None) -> tuple[Any, list[float]]:
     """``plot_recording``'s figure and the times drawn."""
+    return _recording_figure(rec, episode_view(rec), times)
+
+
+def _recording_figure(
+    rec: Recording, view: EpisodeView, times: Sequence[float] | None
+) -> tuple[Any, list[float]]:
     from crowdsim.plotting import default_snapshots, plot_episode
 
-    view = episode_view(rec)
     if times or view.plans or _has_predictions(view):
         rows = sorted({view.planned_row_at(t) for t in (times if times else default_times(view))})
     else:  # nothing planned to show: the agents as simulate --plot draws them, the last state included
