@@ -21,13 +21,12 @@ EPILOG = """examples:
 Experiments: table2 (CMPC vs DMPC), table3 (CMPC with/without flocking), both x 5-9 humans with the paper's
 figures beside ours; predictors (CMPC at 7 humans with each predictor and an ORCA-ground-truth oracle; by
 default the shipped models, --predictors for any list of registered and zoo names, a user zoo's included);
-coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); safety
-(CMPC without margins and with conformal margins at alpha 0.5 .. 0.01: pooled, per motion class and per
-motion class of the distance shortfall, 7 humans); conventions (simulation profile x robot visibility x
-margins, 7 humans); baselines (straight and ORCA robots, a quick check);
-controllers (each controller at 7 humans, by default cmpc, dmpc, orca and straight; --controllers for any
-list, controller plugins included); sensing (CMPC given every human vs behind a sensor of 4, 3 and 2 m
-with track lengths, and 3 m without, 7 humans).
+coupling (CMPC by iterated best response vs the coupled NLP, exact and first-order, 7 humans); safety (CMPC
+without margins and with conformal margins at alpha 0.5 .. 0.01: pooled, per motion class and per motion class
+of the distance shortfall, 7 humans); conventions (simulation profile x robot visibility x margins, 7 humans);
+baselines (straight and ORCA robots, a quick check); controllers (each controller at 7 humans, by default
+cmpc, dmpc, orca and straight; --controllers for any list, controller plugins included); sensing (CMPC given
+every human vs behind a sensor of 4, 3 and 2 m with track lengths, and 3 m without, 7 humans).
 --margins applies to every method that plans with a predictor (of controllers: cmpc and dmpc; orca and
 straight plan with none, and run without margins); baselines, conventions and safety fix their methods'
 margins and refuse it. --profile and --visibility apply to every method; conventions fixes them and refuses

@@ -69,21 +69,21 @@ sets hyper-parameters of the kind's config (a JSON object; unknown keys and bad 
 
 Writes into --out: checkpoints/ (Lightning: best on val ADE, and last.ckpt for --resume), csv/ and
 tensorboard/ logs, train_settings.json, and at the end NAME.pt + NAME.json (state_dict + config) with
-NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net's top-20 drawn as
-`crowdmpc evaluate --top-k 20` draws it, whatever --seed). `crowdmpc zoo add OUT/NAME.pt` puts the pair
-into the user zoo. --resume continues the run as if it had not stopped (same order, rotations and noise):
-an option left out takes the run's setting (its data files, protocol, dataset and data directory too, unless
-a data option is typed; --out names the run), one typed must be the run's, and only --epochs may change,
-to no fewer than the epochs trained (that count only finishes a run that stopped before its metrics); a data
-file whose content changed since the run started is refused. --val and --test files are read as `crowdmpc
-evaluate` reads them (the last 21 steps of a longer scene), the validation of each epoch that picks the
-best one too; --train files' scenes must have exactly 21 steps (training windows). All are read before
-training starts: a TrajNet++ test/ file without ground truth is refused then, not after training. A --test
-file with the content of a --train or --val file is noted.
-It trains on the CPU in one thread (deterministic: a seed gives the same weights); another accelerator,
-precision or your own callbacks and loggers take a lightning.Trainer of your own (docs/extending.md).
-A second train into an --out where one is running is refused (its lock: OUT/.train.lock), and so is an
---out folder holding files but no training run (no train_settings.json): choose an empty or new one.
+NAME.metrics.json (TrajNet++ val/test metrics of the best epoch; a sampling net's top-20 drawn as `crowdmpc
+evaluate --top-k 20` draws it, whatever --seed). `crowdmpc zoo add OUT/NAME.pt` puts the pair into the user
+zoo. --resume continues the run as if it had not stopped (same order, rotations and noise): an option left out
+takes the run's setting (its data files, protocol, dataset and data directory too, unless a data option is
+typed; --out names the run), one typed must be the run's, and only --epochs may change, to no fewer than the
+epochs trained (that count only finishes a run that stopped before its metrics); a data file whose content
+changed since the run started is refused. --val and --test files are read as `crowdmpc evaluate` reads them
+(the last 21 steps of a longer scene), the validation of each epoch that picks the best one too; --train
+files' scenes must have exactly 21 steps (training windows). All are read before training starts: a TrajNet++
+test/ file without ground truth is refused then, not after training. A --test file with the content of a
+--train or --val file is noted. It trains on the CPU in one thread (deterministic: a seed gives the same
+weights); another accelerator, precision or your own callbacks and loggers take a lightning.Trainer of your
+own (docs/extending.md). A second train into an --out where one is running is refused (its lock:
+OUT/.train.lock), and so is an --out folder holding files but no training run (no train_settings.json): choose
+an empty or new one.
 """
 
 
