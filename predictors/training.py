@@ -108,6 +108,20 @@ class _PredictorModule(L.LightningModule):
     def test_step(self, batch: SceneBatch, batch_idx: int) -> None:
         self._log_eval(self.model_step(batch, "test"), "test", len(batch))
 
+    def predict_step(self, batch: SceneBatch, batch_idx: int) -> torch.Tensor:
+        """``Trainer.predict``'s output: every agent's predicted positions (B, pred_len, Nmax, 2) in world
+        coordinates (the scenes' own metres), NaN for an agent absent at the last observed step (padding
+        included), whose prediction means nothing. As ``crowdmpc evaluate`` scores them: no teacher
+        forcing, a GAN's generator at zero noise."""
+        predicted = batch.to_world(self.predicted_positions(batch))
+        present = batch.mask[:, batch.obs_len - 1]  # (B, Nmax)
+        return predicted.masked_fill(~present[:, None, :, None], float("nan"))
+
+    def predicted_positions(self, batch: SceneBatch) -> torch.Tensor:
+        """Every agent's predicted positions (B, pred_len, Nmax, 2) in the scene frame; each subclass
+        defines it."""
+        raise NotImplementedError
+
     def _log_eval(self, out: dict, stage: str, batch_size: int) -> None:
         for key, value in out.items():
             self.log(f"{stage}_{key}", value, prog_bar=key == "ade", batch_size=batch_size)
@@ -179,6 +193,9 @@ class PredictorModule(_PredictorModule):
         return teacher_forced_rollout(
             self.net, positions, mask, self.obs_len, self.pred_len, teacher_forcing=teacher_forcing
         )
+
+    def predicted_positions(self, batch: SceneBatch) -> torch.Tensor:
+        return self.rollout(batch.positions, batch.mask, teacher_forcing=False)[1]
 
     def model_step(self, batch: SceneBatch, stage: str) -> dict[str, torch.Tensor]:
         positions = batch.positions
@@ -258,6 +275,13 @@ class GANModule(_PredictorModule):
             noise=noise,
         )
         return predicted[:, :, 0].reshape(k, batch_size, self.pred_len, 2)
+
+    def predicted_positions(self, batch: SceneBatch) -> torch.Tensor:
+        noise = batch.positions.new_zeros(len(batch), batch.positions.shape[2], self.net.config.noise_dim)
+        _, predicted = self.net(
+            batch.positions, batch.mask, self.obs_len, self.pred_len, teacher_forcing=False, noise=noise
+        )
+        return predicted
 
     def _trajectory(self, batch: SceneBatch, future: torch.Tensor) -> torch.Tensor:
         return torch.cat([batch.positions[:, : self.obs_len, 0], future], dim=1)

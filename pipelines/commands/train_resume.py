@@ -331,7 +331,9 @@ def checkpoint_settings(hyper: dict[str, Any], data: Any) -> dict[str, Any]:
     held = hyper.get("optim_config")
     optim: dict[str, Any] = held if isinstance(held, dict) else {}
     data = data if isinstance(data, dict) else {}
-    files = data.get("files")
+    files = data.get("files")  # before the data module saved its constructor's names
+    if files is None and "train_files" in data:
+        files = {split: data.get(f"{split}_files") for split in ("train", "val", "test")}
     return {
         "model": hyper.get("model", "social_gan" if "discriminator_config" in hyper else None),
         "net_config": hyper.get("net_config"),

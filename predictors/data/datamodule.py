@@ -52,12 +52,15 @@ class TrajnetDataModule(L.LightningDataModule):
         self.pred_len = pred_len
         self.batching = check_batching(batching)
         self.datasets: dict[str, TrajnetSceneDataset] = {}
+        # under the constructor's own names, as strings (a checkpoint loads with weights_only=True), so that
+        # ``TrajnetDataModule.load_from_checkpoint`` rebuilds this module
         self.save_hyperparameters(
             {
-                "files": {k: [str(p) for p in v] for k, v in self.files.items()},
+                **{f"{k}_files": [str(p) for p in v] for k, v in self.files.items()},
                 "batch_size": batch_size,
                 "augment": augment,
                 "seed": seed,
+                "num_workers": num_workers,
                 "obs_len": obs_len,
                 "pred_len": pred_len,
                 "batching": batching,
@@ -128,4 +131,8 @@ class TrajnetDataModule(L.LightningDataModule):
         return self._loader("val", shuffle=False)
 
     def test_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+    def predict_dataloader(self) -> DataLoader:
+        """The test scenes in order, for ``Trainer.predict`` (``_PredictorModule.predict_step``'s output)."""
         return self._loader("test", shuffle=False)
