@@ -11,6 +11,7 @@ from typing import NoReturn
 
 from pipelines.errors import (
     EPISODES_RAISED,
+    CloseFailed,
     EpisodeFailed,
     PipelineError,
     RecordingRefused,
@@ -224,7 +225,7 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt:  # first: the clause below may import its errors' packages
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
         return 130
-    except EpisodeFailed as exc:  # before the user errors it is one of
+    except (EpisodeFailed, CloseFailed) as exc:  # before the user errors they are among
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
         # a refusal of the --record folder, met at an episode's first write, is one of the user's input
         return 2 if isinstance(exc.__cause__, RecordingRefused) else EPISODES_RAISED

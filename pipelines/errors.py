@@ -89,3 +89,17 @@ def writes_named(path: object) -> Iterator[None]:
         if exc.filename is not None or exc.errno is None:
             raise
         raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
+class CloseFailed(PipelineError):
+    """A controller plugin's ``close()`` raised after every episode of ``run_episodes`` had finished: the
+    episodes stand (a report gives them whole), and the run ends as one whose plugin raised."""
+
+    def __init__(self, error: Exception | str, episodes: int):
+        after = "its one episode" if episodes == 1 else f"all {episodes} of its episodes"
+        super().__init__(f"{error} (after {after} had finished)")
+        self.error = str(error)
+        self.episodes = episodes
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (self.error, self.episodes)

@@ -17,7 +17,7 @@ from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_title, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
-from pipelines.errors import PipelineError, RecordingRefused
+from pipelines.errors import CloseFailed, PipelineError, RecordingRefused
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
 
@@ -349,7 +349,9 @@ def _report(
     cfg, spec = resolved.config, resolved.spec
     env_config = cfg.env
     summary = summarize(results)
-    finished = len(results) if interrupted or failure is not None else None
+    # a plugin's close() failing after the last episode stopped nothing: the header counts no stop
+    stopped_early = failure is not None and not isinstance(failure, CloseFailed)
+    finished = len(results) if interrupted or stopped_early else None
     stopped = "interrupted" if interrupted else "stopped by an error"
     header = table_header(cfg, spec, run_meta, finished, stopped, configs[0] if configs else None)
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))

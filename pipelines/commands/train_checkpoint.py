@@ -8,12 +8,14 @@ import math
 import os
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint, TQDMProgressBar
 
 from pipelines.commands.train_resume import relocated
+from pipelines.errors import PipelineError
 
 
 class RunCheckpoint(ModelCheckpoint):
@@ -179,3 +181,29 @@ def progress_callbacks(no_progress: bool) -> list[Callback]:
     if no_progress:
         return []
     return [StderrProgressBar()] if sys.stderr is not None and sys.stderr.isatty() else [EpochLines()]
+
+
+def check_weights_fit(last: Path, module: torch.nn.Module) -> None:
+    """PipelineError unless ``last``'s weights are the ones ``module`` holds, name for name and shape for
+    shape: a plugin net changed since the run started (a layer added) or a hand-edited file otherwise ends
+    the resume inside Lightning with a traceback."""
+    held = torch.load(last, map_location="cpu", weights_only=True)["state_dict"]
+    wanted = module.state_dict()
+    problems = [f"{key} missing" for key in wanted if key not in held]
+    problems += [f"{key} not in the net" for key in held if key not in wanted]
+    problems += [
+        f"{key} {_shape(held[key])} in the file, {_shape(value)} in the net"
+        for key, value in wanted.items()
+        if key in held and getattr(held[key], "shape", None) != value.shape
+    ]
+    if problems:
+        shown = "; ".join(problems[:3]) + (f"; {len(problems) - 3} more" if len(problems) > 3 else "")
+        raise PipelineError(
+            f"--resume: {last}'s weights do not fit the net this run builds ({shown}): its code changed since "
+            "the run started, or the file was edited; train it anew with another --out"
+        )
+
+
+def _shape(value: Any) -> str:
+    shape = getattr(value, "shape", None)
+    return "x".join(map(str, shape)) if shape is not None else type(value).__name__

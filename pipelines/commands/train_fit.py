@@ -101,6 +101,10 @@ def _fit(
         train, val, test, batch_size=args.batch_size, seed=args.seed, batching=args.batching
     )
     module = make_module(args.model, net_config, optim)
+    if args.resume:
+        from pipelines.commands.train_checkpoint import check_weights_fit
+
+        check_weights_fit(last, module)
     trainer, best, divergence, clock = _trainer(args, out, ckpt_dir)
     if not args.resume:
         from pipelines.commands.train_resume import SETTINGS_FILE

@@ -25,7 +25,7 @@ from crowdsim.metrics import EpisodeMetrics, episode_metrics
 from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.errors import EpisodeFailed, PipelineError
+from pipelines.errors import CloseFailed, EpisodeFailed, PipelineError
 from pipelines.loop.contract import (
     called,
     checked_description,
@@ -241,8 +241,14 @@ def run_episodes(
             successes += result.metrics.success
             stepper.success = f"success={100.0 * successes / len(results):.0f}%"
             bar.set_postfix_str(stepper.success, refresh=False)
-    finally:
+    except BaseException:
+        with contextlib.suppress(PipelineError):  # a plugin's close() failing too: the run's error is told
+            called(controller, "close")
+        raise
+    try:
         called(controller, "close")  # e.g. DMPC's solver threads
+    except PipelineError as exc:
+        raise CloseFailed(exc, len(results)) from exc
     return results
 
 

@@ -177,3 +177,29 @@ def test_a_resume_of_a_run_that_never_started_says_there_is_nothing_to_resume(tm
     assert _one_line(capsys) == (
         f"crowdmpc train: error: --resume: {last} does not exist (nothing to resume in {out})"
     )
+
+
+def test_weights_that_do_not_fit_the_net_are_named_before_lightning_loads_them(run_copy, capsys):
+    """A hand-edited last.ckpt (or a plugin net given a layer since the run started) ended the resume in
+    Lightning's traceback of load_state_dict."""
+    import torch
+
+    data, out = run_copy
+    last = out / "checkpoints" / "last.ckpt"
+    checkpoint = torch.load(last, map_location="cpu", weights_only=True)
+    first = next(iter(checkpoint["state_dict"]))
+    shape = "x".join(map(str, checkpoint["state_dict"][first].shape))
+    checkpoint["state_dict"][first] = torch.zeros(3, 3)
+    checkpoint["state_dict"]["net.extra.weight"] = torch.zeros(2)
+    torch.save(checkpoint, last)
+    capsys.readouterr()
+    assert main([*_args(data, out, epochs=2), "--resume"]) == 2
+    assert _one_line(capsys) == (
+        f"crowdmpc train: error: --resume: {last}'s weights do not fit the net this run builds (net.extra.weight "
+        f"not in the net; {first} 3x3 in the file, {shape} in the net): its code changed since the run started, "
+        "or the file was edited; train it anew with another --out"
+    )
+    del checkpoint["state_dict"][first], checkpoint["state_dict"]["net.extra.weight"]
+    torch.save(checkpoint, last)
+    assert main([*_args(data, out, epochs=2), "--resume"]) == 2
+    assert f"({first} missing)" in _one_line(capsys)
