@@ -349,8 +349,7 @@ def _report(
     cfg, spec = resolved.config, resolved.spec
     env_config = cfg.env
     summary = summarize(results)
-    # a plugin's close() failing after the last episode stopped nothing: the header counts no stop
-    stopped_early = failure is not None and not isinstance(failure, CloseFailed)
+    stopped_early = failure is not None and not isinstance(failure, CloseFailed)  # not after the last
     finished = len(results) if interrupted or stopped_early else None
     stopped = "interrupted" if interrupted else "stopped by an error"
     header = table_header(cfg, spec, run_meta, finished, stopped, configs[0] if configs else None)

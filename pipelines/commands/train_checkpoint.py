@@ -199,8 +199,8 @@ def check_weights_fit(last: Path, module: torch.nn.Module) -> None:
     if problems:
         shown = "; ".join(problems[:3]) + (f"; {len(problems) - 3} more" if len(problems) > 3 else "")
         raise PipelineError(
-            f"--resume: {last}'s weights do not fit the net this run builds ({shown}): its code changed since "
-            "the run started, or the file was edited; train it anew with another --out"
+            f"--resume: {last}'s weights do not fit the net this run builds ({shown}): its code changed "
+            "since the run started, or the file was edited; train it anew with another --out"
         )
 
 

@@ -195,9 +195,9 @@ def test_weights_that_do_not_fit_the_net_are_named_before_lightning_loads_them(r
     capsys.readouterr()
     assert main([*_args(data, out, epochs=2), "--resume"]) == 2
     assert _one_line(capsys) == (
-        f"crowdmpc train: error: --resume: {last}'s weights do not fit the net this run builds (net.extra.weight "
-        f"not in the net; {first} 3x3 in the file, {shape} in the net): its code changed since the run started, "
-        "or the file was edited; train it anew with another --out"
+        f"crowdmpc train: error: --resume: {last}'s weights do not fit the net this run builds "
+        f"(net.extra.weight not in the net; {first} 3x3 in the file, {shape} in the net): its code changed "
+        "since the run started, or the file was edited; train it anew with another --out"
     )
     del checkpoint["state_dict"][first], checkpoint["state_dict"]["net.extra.weight"]
     torch.save(checkpoint, last)
