@@ -17,6 +17,7 @@ from pipelines.errors import (
     RecordingRefused,
     interrupt_behind,
     storage_refusal,
+    warnings_as_notes,
 )
 
 # The order in which subcommands are listed by --help.
@@ -203,6 +204,8 @@ def _no_working_directory() -> str | None:
 
 def _main(argv: list[str] | None) -> int:
     from pipelines.plugins import PluginError, load_environment_plugins
+
+    warnings_as_notes()
 
     try:  # before parsing: an option that names a plugin would otherwise report a broken one as its own
         load_environment_plugins()

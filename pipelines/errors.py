@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import sys
+import warnings
 from collections.abc import Iterator
+from typing import Any, TextIO
 
 # The errno of a write that the storage refused: a full disk (ENOSPC), a quota (EDQUOT), a file size limit
 # (EFBIG, `ulimit -f`), a file system remounted read-only (EROFS). None is a bug of ours: the user frees space
@@ -103,3 +106,36 @@ class CloseFailed(PipelineError):
 
     def __reduce__(self) -> tuple[type, tuple[object, ...]]:
         return type(self), (self.error, self.episodes)
+
+
+class NoTwinWarning(RuntimeWarning):
+    """A predictor whose CasADi twin could not be exported, run in torch instead (pipelines.loop.mpc):
+    slower, and said once for each size of the NLP."""
+
+
+def warnings_as_notes() -> None:
+    """Show crowdmpc's own warnings (agents laid out in contact, a predictor run without its twin) as the
+    commands' other notes, "note: ..." on one line, not as Python's file, line and source line; any other
+    warning as Python shows it. For the CLI and its worker processes; a library user keeps Python's."""
+    from crowdsim.errors import LayoutWarning
+
+    shown = warnings.showwarning
+    if getattr(shown, "crowdmpc_notes", False):
+        return
+
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: TextIO | None = None,
+        line: str | None = None,
+    ) -> None:
+        if not issubclass(category, LayoutWarning | NoTwinWarning):
+            shown(message, category, filename, lineno, file, line)
+        elif (out := file or sys.stderr) is not None:
+            print(f"note: {message}", file=out)
+
+    show_any: Any = show
+    show_any.crowdmpc_notes = True
+    warnings.showwarning = show

@@ -15,7 +15,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import PipelineError, SweepStopped
+from pipelines.errors import PipelineError, SweepStopped, warnings_as_notes
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import (
     SINGLE_THREAD_ENV,
@@ -64,6 +64,7 @@ def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_
     # Ctrl-C goes to the whole process group; the driver alone handles it (and ends the workers).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent()
+    warnings_as_notes()  # as the driver shows them
     scratch = worker_scratch(scratch_root)
     if jit:
         os.chdir(

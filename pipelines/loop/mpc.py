@@ -42,7 +42,7 @@ from mpc.guidance import guidance_targets, lookahead
 from mpc.nlp import StepData
 from mpc.parked import yield_slack
 from mpc.stall import StallWatch
-from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.errors import NoTwinWarning, PipelineError, interrupt_behind
 from pipelines.loop.margins import observed_classes
 from pipelines.loop.mpc_setup import (
     check_coupling,
@@ -206,7 +206,7 @@ class MPCController:
                 warnings.warn(
                     f"predictor {self.model.name!r}: no CasADi twin ({exc}); the iterative best response "
                     "predicts with torch instead (slower)",
-                    RuntimeWarning,
+                    NoTwinWarning,
                     stacklevel=2,
                 )
                 self._twins[key] = None

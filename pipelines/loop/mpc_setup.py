@@ -22,6 +22,7 @@ from pipelines.loop.spec import ControllerSpec
 from predictors.backfill import backfill
 from predictors.base import DT as PREDICTOR_DT
 from predictors.base import ObservingPredictor, Predictor
+from predictors.errors import PredictorError
 from predictors.oracle import ORACLE_PREDICTOR
 
 if TYPE_CHECKING:
@@ -70,6 +71,14 @@ def check_coupling(spec: ControllerSpec, distributed: bool, model: Predictor | N
             f"the {model.name} predictor works with coupling 'ibr' only: it has no CasADi twin "
             "to put inside the joint NLP"
         )
+    if spec.coupling == "nlp":  # a plugin net the exporter cannot take failed in the first episode's step
+        try:
+            model.to_casadi(1, 1, mpc_config(spec).horizon)
+        except PredictorError as exc:
+            raise PipelineError(
+                f"coupling 'nlp' puts the predictor inside the joint NLP, and {model.name!r} has no CasADi "
+                f"twin ({exc}): use coupling 'ibr', which runs it in torch"
+            ) from None
 
 
 def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.ndarray]:

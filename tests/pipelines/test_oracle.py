@@ -123,6 +123,32 @@ def test_a_twin_that_fails_its_check_is_named_and_torch_predicts(monkeypatch):
         controller.reset(obs)
     out = controller.act(obs)
     assert out.status == "ok" and np.isfinite(out.accelerations).all()
+    # the coupled NLP cannot run it in torch: refused as the controller is built, not in the first step
+    with pytest.raises(PipelineError) as refused:
+        make_controller(ControllerSpec("cmpc", predictor="social_lstm_eth", coupling="nlp"))
+    assert str(refused.value) == (
+        "coupling 'nlp' puts the predictor inside the joint NLP, and 'social_lstm_eth' has no CasADi twin "
+        "(cannot export: the exported prediction differs from torch by 1.00e-01 (in module "
+        "'social_lstm_eth')): use coupling 'ibr', which runs it in torch"
+    )
+
+
+def test_the_commands_show_a_missing_twin_as_a_note_and_other_warnings_as_python_does(capsys):
+    """The CLI printed the warning with its file, line number and source line, unlike its other notes."""
+    import warnings
+
+    from pipelines.errors import NoTwinWarning, warnings_as_notes
+
+    others = []
+    with warnings.catch_warnings():  # it restores the showwarning in force
+        warnings.simplefilter("always")
+        warnings.showwarning = lambda message, category, *rest: others.append((str(message), category))
+        warnings_as_notes()
+        warnings_as_notes()  # once only: a second call does not wrap the first
+        warnings.warn("predictor 'p': no CasADi twin (x)", NoTwinWarning, stacklevel=1)
+        warnings.warn("something else", UserWarning, stacklevel=1)
+    assert capsys.readouterr().err == "note: predictor 'p': no CasADi twin (x)\n"
+    assert others == [("something else", UserWarning)]
 
 
 @pytest.mark.parametrize("controller", ["cmpc", "dmpc"])
