@@ -29,6 +29,12 @@ def import_class(spec: str, what: str = "plugin") -> object:
             f"{what} {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
         ) from None
     if not hasattr(module, class_name):
+        if (yours := _shadowed_file(module_name, module, Path(cwd))) is not None:
+            where = getattr(module, "__file__", None) or "built in"
+            raise PredictorError(
+                f"{what} {spec!r}: module {module_name!r} is {where}, not your {yours}: an installed module "
+                "(or crowdmpc's own) of that name comes first; rename your file"
+            )
         # A notebook that wrote the class after a first try: import_module hands back the module as it
         # was first imported, and the refusal repeated itself with nothing saying why.
         reload = (
@@ -39,6 +45,18 @@ def import_class(spec: str, what: str = "plugin") -> object:
         )
         raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}{reload}")
     return getattr(module, class_name)
+
+
+def _shadowed_file(module_name: str, module: object, cwd: Path) -> Path | None:
+    """The user's file or folder in ``cwd`` that ``module_name`` was meant to import, when the module
+    imported is another one (an installed package's, or crowdmpc's own ``mpc``): None otherwise."""
+    top = module_name.partition(".")[0]
+    candidates = [cwd / f"{top}.py", cwd / top]
+    yours = next((p for p in candidates if p.is_file() or (p / "__init__.py").is_file()), None)
+    if yours is None:
+        return None
+    where = getattr(module, "__file__", None)
+    return None if where is not None and Path(where).resolve().is_relative_to(cwd.resolve()) else yours
 
 
 def reloaded_class(spec: str, registered: object) -> object | None:

@@ -208,12 +208,19 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
 
 def model_name(text: str) -> str:
     """An argparse type: a registered model kind (plugins given before the command are registered by then)."""
+    from pipelines.loop.spec import registered_controller_plugins
     from predictors.models import model_kind
 
     try:
         return model_kind(text).name
     except PredictorError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+        message = str(exc)
+        if text in registered_controller_plugins():  # --plugin took its class for a controller
+            message = (
+                f"model {text!r} is registered as a controller (a class with reset and act), not a predictor "
+                "net (an nn.Module with encode and decode_step, docs/extending.md): train takes a net"
+            )
+        raise argparse.ArgumentTypeError(message) from None
 
 
 def default_name(model: str, pooling: str | None, dataset: str, explicit_files: bool) -> str:

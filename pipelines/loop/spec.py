@@ -140,6 +140,15 @@ class UnknownController(PipelineError):
     def __init__(self, name: object, choices: list[str]):
         self.name = name
         self.choices = choices
+        from predictors.models import registered_plugins
+
+        if is_plugin_spec(name) and name in registered_plugins():  # --plugin took its class for a net
+            super().__init__(
+                f"controller {name!r} is registered as a predictor net (an nn.Module), not a controller (a "
+                "class with reset, act, describe and close, docs/extending.md); a net drives cmpc or dmpc: "
+                f"--controller cmpc --predictor NAME, once trained and in the zoo"
+            )
+            return
         if is_plugin_spec(name):
             super().__init__(
                 f"controller {name!r} is a plugin that is not registered; register it with "

@@ -139,6 +139,20 @@ def test_a_bad_plugin_is_a_one_line_error(spec, message, capsys):
     assert PLUGINS_ENV not in os.environ
 
 
+def test_a_plugin_file_named_as_crowdmpcs_own_package_is_told_to_be_renamed(tmp_path, monkeypatch, capsys):
+    """It said "module 'mpc' has no 'MyNet'; ... importlib.reload(mpc) first", of crowdmpc's mpc package."""
+    import mpc
+
+    (tmp_path / "mpc.py").write_text("class MyNet:\n    pass\n", encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    line = parser_error(capsys, "--plugin", "mpc:MyNet", "zoo", "list")
+    assert line == (
+        f"crowdmpc: error: argument --plugin: plugin 'mpc:MyNet': module 'mpc' is {mpc.__file__}, not your "
+        f"{tmp_path / 'mpc.py'}: an installed module (or crowdmpc's own) of that name comes first; rename "
+        "your file; see 'crowdmpc --help'"
+    )
+
+
 def test_an_unregistered_plugin_kind_is_refused_by_train_and_never_imported(capsys):
     line = parser_error(capsys, "train", "--model", NEVER)
     assert line == (
@@ -149,6 +163,32 @@ def test_an_unregistered_plugin_kind_is_refused_by_train_and_never_imported(caps
     assert "tests.plugins.never_imported" not in sys.modules
     line = parser_error(capsys, "train", "--model", "gpt")
     assert line.startswith("crowdmpc train: error: argument --model: unknown model 'gpt'; choose from [")
+
+
+def test_a_plugin_of_one_kind_named_where_the_other_is_wanted_is_told_its_kind(monkeypatch, capsys):
+    """Each said "is a plugin that is not registered; register it with --plugin ...", the plugin the user had
+    just registered."""
+    from pipelines.loop import spec
+    from pipelines.loop.spec import PLUGINS_ENV as CONTROLLERS_ENV
+
+    monkeypatch.setattr(models, "_PLUGINS", {})
+    monkeypatch.setattr(spec, "_PLUGINS", {})
+    for variable in (PLUGINS_ENV, CONTROLLERS_ENV):
+        monkeypatch.setenv(variable, "")
+    net, controller = TOY, "tests.plugins.toy_controller:StraightLine"
+    line = parser_error(capsys, "--plugin", net, "simulate", "--controller", net)
+    assert line == (
+        f"crowdmpc simulate: error: argument --controller: controller {net!r} is registered as a predictor "
+        "net (an nn.Module), not a controller (a class with reset, act, describe and close, "
+        "docs/extending.md); a net drives cmpc or dmpc: --controller cmpc --predictor NAME, once trained and "
+        "in the zoo; see 'crowdmpc simulate --help'"
+    )
+    line = parser_error(capsys, "--plugin", controller, "train", "--model", controller)
+    assert line == (
+        f"crowdmpc train: error: argument --model: model {controller!r} is registered as a controller (a "
+        "class with reset and act), not a predictor net (an nn.Module with encode and decode_step, "
+        "docs/extending.md): train takes a net; see 'crowdmpc train --help'"
+    )
 
 
 def test_the_sweep_refuses_a_plugin_model_whose_plugin_is_not_registered(tmp_path, monkeypatch, capsys):
