@@ -265,10 +265,38 @@ def verify_entries(user_dir: str | Path | None = None) -> list[tuple[Located, st
             continue
         try:
             load_located(located)
-            results.append((located, None))
+            results.append((located, disagreement(located)))
         except PredictorError as exc:
             results.append((located, str(exc)))
     return results
+
+
+def disagreement(located: Located) -> str | None:
+    """Where ``located``'s manifest entry says other than its config (whose sha256 the entry holds, so the
+    config is the pair's truth): its model kind or a value of its training record (epochs,
+    limit_batches, seed ...). ``zoo list`` shows the entry's, loading takes the config's; a manifest edited
+    by hand would show one model and run another. None when they agree."""
+    from predictors.checkpoint import CONFIG_FORMAT, read_document
+
+    entry = located.entry
+    _, config = entry.paths(located.root, located.manifest)
+    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
+    trained = document.get("training")
+    # not the class: an entry records the predictor class that loads it, a config the one that saved it
+    pairs = [("model", entry.model, document.get("model"))]
+    pairs += [  # of what both record: an entry added from a metrics file without them says nothing of them
+        (f"training.{key}", entry.training[key], value)
+        for key, value in (trained.items() if isinstance(trained, dict) else ())
+        if key in entry.training
+    ]
+    for key, said, value in pairs:
+        if value is not None and said != value:
+            return (
+                f"{located.manifest}: entry {entry.name!r} says {key} {said!r}, its config {config.name} "
+                f"{value!r} (the manifest edited by hand?); add the model again with `crowdmpc zoo add "
+                "--replace`, or restore the manifest"
+            )
+    return None
 
 
 def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
@@ -280,7 +308,7 @@ def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
     for name in zoo_names(root):
         try:
             load_zoo(name, root)
-            results.append((name, None))
+            results.append((name, disagreement(Located(USER, root, find_entry(name, root)))))
         except PredictorError as exc:
             results.append((name, str(exc)))
     return results

@@ -324,6 +324,33 @@ def test_verify_loads_each_entry_of_a_zoo_directory(shipped, user):
     assert located.entry.name == NAME and problem is not None and "the manifest expects" in problem
 
 
+@pytest.mark.parametrize(
+    "key, value, problem",
+    [
+        ("model", "vanilla_lstm", "says model 'vanilla_lstm', its config social_lstm_eth.json 'social_lstm'"),
+        ("training", {"epochs": 50}, "says training.epochs 50, its config social_lstm_eth.json 25"),
+        ("training", {"limit_batches": 3}, None),  # of which the shipped config says nothing
+    ],
+)
+def test_verify_names_a_manifest_entry_that_says_other_than_its_config(shipped, key, value, problem):
+    """A manifest edited by hand ("model": another kind, epochs or limit_batches changed to hide a quick
+    check) listed one model and ran another, and verify said ok: the config, whose sha256 the entry holds, is
+    the pair's truth."""
+    entry = real_entry()
+    entry[key] = {**entry[key], **value} if key == "training" else value
+    write_manifest(shipped, entry)
+    said = (
+        None
+        if problem is None
+        else (
+            f"{shipped / zoo.MANIFEST_NAME}: entry {NAME!r} {problem} (the manifest edited by hand?); add the "
+            "model again with `crowdmpc zoo add --replace`, or restore the manifest"
+        )
+    )
+    assert zoo.verify(shipped) == [(NAME, said)]
+    assert [problem for _, problem in zoo.verify_entries()] == [said]
+
+
 def test_a_saved_pair_reads_back_as_saved(tmp_path):
     """float32 weights whatever the net's dtype (the zoo's files are float32), the observed steps asked for
     (not the default 9), and the name a caller gives over the file's own."""
