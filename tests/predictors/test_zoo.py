@@ -343,8 +343,8 @@ def test_verify_names_a_manifest_entry_that_says_other_than_its_config(shipped, 
         None
         if problem is None
         else (
-            f"{shipped / zoo.MANIFEST_NAME}: entry {NAME!r} {problem} (the manifest edited by hand?); add the "
-            "model again with `crowdmpc zoo add --replace`, or restore the manifest"
+            f"{shipped / zoo.MANIFEST_NAME}: entry {NAME!r} {problem} (the manifest edited by hand?); add "
+            "the model again with `crowdmpc zoo add --replace`, or restore the manifest"
         )
     )
     assert zoo.verify(shipped) == [(NAME, said)]
