@@ -207,7 +207,24 @@ def recalibrate_command(
     """The ``crowdmpc calibrate`` command line that makes the block of ``(predictor, source, alpha)``, behind
     a sensor of ``sensor_range`` m (reporting no track lengths unless ``sensor_tracks``) where given."""
     sensor = _sensor_options(sensor_range, sensor_tracks)
-    return f"crowdmpc calibrate --predictor {predictor} --source {source} --alpha {alpha_text(alpha)}{sensor}"
+    return (
+        f"{_crowdmpc(predictor)} calibrate --predictor {predictor} --source {source} "
+        f"--alpha {alpha_text(alpha)}{sensor}"
+    )
+
+
+def _crowdmpc(predictor: str) -> str:
+    """``crowdmpc``, with the ``--plugin`` a zoo model of a plugin net needs to load (the command said to run
+    failed with "a plugin that is not registered" without it)."""
+    from predictors.models import PLUGIN_PATTERN
+    from predictors.zoo import locate
+
+    try:
+        located = locate(predictor)
+    except PredictorError:
+        return "crowdmpc"
+    model = located.entry.model if located is not None else ""
+    return f"crowdmpc --plugin {model}" if PLUGIN_PATTERN.fullmatch(model) else "crowdmpc"
 
 
 def _sensor_options(sensor_range: float | None, sensor_tracks: bool) -> str:
@@ -248,7 +265,8 @@ def calibrate_command(block: Calibration, alphas: Sequence[float] = (), **change
     alpha = ",".join(alpha_text(a) for a in alphas or (block.alpha,))
     settings = made_with(block) | {key: str(value) for key, value in changed.items()}
     return (
-        f"crowdmpc calibrate --predictor {block.predictor} --source {block.source} --alpha {alpha}"
+        f"{_crowdmpc(block.predictor)} calibrate --predictor {block.predictor} --source {block.source} "
+        f"--alpha {alpha}"
         + "".join(f" --{key} {value}" for key, value in settings.items())
         + _sensor_options(block.sensor_range, block.sensor_tracks)
     )

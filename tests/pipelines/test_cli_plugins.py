@@ -208,6 +208,21 @@ def test_the_sweep_refuses_a_plugin_model_whose_plugin_is_not_registered(tmp_pat
 
 
 # ------------------------------------------------------------------------------------------- --predictors
+def test_a_calibrate_command_offered_for_a_plugin_model_registers_its_plugin(tmp_path, capsys):
+    """The note's command, run as printed, failed with "a plugin that is not registered"."""
+    from predictors.calibration_store import recalibrate_command
+
+    weights = _toy_checkpoint(tmp_path)
+    assert main(["--plugin", TOY, "zoo", "add", str(weights), "--name", "toy_walk"]) == 0
+    assert recalibrate_command("toy_walk", "closed-loop", 0.1) == (
+        f"crowdmpc --plugin {TOY} calibrate --predictor toy_walk --source closed-loop --alpha 0.1"
+    )
+    assert recalibrate_command("social_lstm_eth", "real", 0.05, 3.0, False) == (
+        "crowdmpc calibrate --predictor social_lstm_eth --source real --alpha 0.05 --sensor-range 3 "
+        "--no-sensor-tracks"
+    )
+
+
 def test_the_default_swap_table_takes_the_later_models_once_a_zoo_has_them():
     assert "social_gru_eth" in SWAP_PREDICTORS
     assert swap_predictors(()) == (
