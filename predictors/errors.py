@@ -56,7 +56,8 @@ class CheckpointMismatch(PredictorError):
         self.found = found
         super().__init__(
             f"checkpoint {self.path} has sha256 {found}, but the manifest expects {expected}; "
-            "the file is corrupt or was replaced — restore it or re-run `crowdmpc zoo verify`"
+            "the file is corrupt or was replaced: restore it, or add the model again (`crowdmpc zoo add ... "
+            "--replace`); `crowdmpc zoo verify` lists every entry whose files differ"
         )
 
     def __reduce__(self) -> tuple[type, tuple[object, ...]]:

@@ -41,8 +41,15 @@ def net_config_of(args: argparse.Namespace, base: dict[str, Any] | None = None) 
     try:
         config = kind.config({**(base or {}), **overrides})
     except PredictorError as exc:
-        source = "--net-config" if args.net_config is not None else "the options"
-        raise PipelineError(f"{source}: {args.model}: {exc}") from None
+        named = str(exc) if str(exc).startswith(args.model) else f"{args.model}: {exc}"
+        if args.net_config is None and not overrides and not base:  # its config class's own defaults
+            raise PipelineError(
+                f"{named}; give the values its config has no default for with --net-config '{{\"key\": ...}}'"
+            ) from None
+        options = (("--pooling", args.pooling), ("--hidden-dim", args.hidden_dim))
+        given = [option for option, value in options if value is not None]
+        source = "--net-config" if args.net_config is not None else " and ".join(given) or "the run's config"
+        raise PipelineError(f"{source}: {named}") from None
     pooling = getattr(config, "pooling", None)
     return (pooling if isinstance(pooling, str) else None), config
 

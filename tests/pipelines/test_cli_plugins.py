@@ -335,7 +335,7 @@ def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
         ),
         (
             ["--model", "social_lstm", "--pooling", "max"],
-            "the options: social_lstm: pooling 'max' is not one of",
+            "--pooling: social_lstm: pooling 'max' is not one of",
         ),
         (["--model", "social_lstm", "--net-config", "[1]"], "--net-config must be a JSON object"),
         (["--model", "social_lstm", "--net-config", "{"], "--net-config: not valid JSON"),
@@ -354,14 +354,21 @@ def test_predictor_names_are_checked_by_the_parser(tmp_path, capsys, value):
         ),
         (
             ["--model", TOY, "--net-config", '{"radius": -1}'],
-            f"--net-config: {TOY}: {TOY} config: ValueError",
+            f"--net-config: {TOY} config: ValueError",
+        ),
+        (  # a config class with a field of no default: the values come from --net-config
+            ["--model", "tests.plugins.broken_nets:NoDefaults"],
+            "tests.plugins.broken_nets:NoDefaults config: TypeError: NoDefaultsConfig.__init__() missing 1 "
+            "required positional argument: 'width'; give the values its config has no default for with "
+            "--net-config '{\"key\": ...}'",
         ),
         (["--model", "social_lstm", "--name", "../x"], "--name '../x' is not allowed"),
     ],
 )
 def test_train_options_are_checked_in_one_line(tmp_path, capsys, options, message):
     data = write_walk_file(tmp_path / "walk.ndjson")
-    argv = ["--plugin", TOY, "train", *options, "--train", str(data), "--val", str(data)]
+    plugins = ["--plugin", TOY, "--plugin", "tests.plugins.broken_nets:NoDefaults"]
+    argv = [*plugins, "train", *options, "--train", str(data), "--val", str(data)]
     code, _, err = run(capsys, *argv, "--out", str(tmp_path / "run"), "--no-progress")
     line = one_line(err)
     assert code == 2 and line.startswith(f"crowdmpc train: error: {message}"), line

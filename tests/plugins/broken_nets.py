@@ -4,6 +4,8 @@ loading from a zoo and the closed loop refuse each in one line."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 from torch import nn
 
@@ -165,3 +167,18 @@ class RaisesOnCrowds(ToyNet):
         if cur.shape[1] > 5:
             raise ValueError(f"my pooling grid holds at most 5 agents, got {cur.shape[1]}")
         return super().decode_step(h, prev, cur, neighbours)
+
+
+@dataclass(frozen=True)
+class NoDefaultsConfig:
+    """A config whose field has no default: the kind's defaults cannot build one."""
+
+    width: int
+    hidden_dim: int = 8
+    radius: float = 2.0
+
+
+class NoDefaults(ToyNet):
+    """``ToyNet`` under a config that ``train`` cannot build without ``--net-config``."""
+
+    config_class = NoDefaultsConfig
