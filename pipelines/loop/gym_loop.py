@@ -243,11 +243,13 @@ class ObserveEpisodes(
         self._obs: Observation | None = None
         self._meta: dict[str, Any] = {}
         self._steps = _Steps()
+        self._open = False  # an episode reset and not yet ended
         self._handed_out = 0.0
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        self._end_cut_episode()
         obs, info = self.env.reset(seed=seed, options=options)
         # the observers' own copy: the policy may change info["observation"] in place (handed_out)
         self._obs = handed_out(info["observation"])
@@ -258,8 +260,31 @@ class ObserveEpisodes(
         self._steps = _Steps()
         for observer in self.observers:
             observer.on_reset(self._obs, self._meta)
+        self._open = True
         self._handed_out = time.perf_counter()
         return obs, info
+
+    def close(self) -> None:
+        self._end_cut_episode()
+        super().close()
+
+    def _end_cut_episode(self) -> None:
+        """End, as its last step would have, an episode a wrapper outside this one cut short (gymnasium's
+        ``TimeLimit`` put around it: its truncation never reaches this wrapper): before the next reset or
+        the close, while the environment still holds it. Its recording had no metrics and the episode no
+        result. One reset again before any step stays without either."""
+        if self._open and self._steps.solve_times:
+            self._end({})
+        self._open = False
+
+    def _end(self, info: Mapping[str, Any]) -> None:
+        result = self._steps.result(self._base, self._meta, info)
+        self.results.append(result)
+        if self.buffer_length is not None and len(self.results) > self.buffer_length:
+            del self.results[: len(self.results) - self.buffer_length]
+        for observer in self.observers:
+            observer.on_end(result)
+        self._open = False
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
         elapsed = time.perf_counter() - self._handed_out
@@ -275,12 +300,7 @@ class ObserveEpisodes(
         for observer in self.observers:
             observer.on_step(before, out, self._obs)
         if terminated or truncated:
-            result = self._steps.result(self._base, self._meta, info)
-            self.results.append(result)
-            if self.buffer_length is not None and len(self.results) > self.buffer_length:
-                del self.results[: len(self.results) - self.buffer_length]
-            for observer in self.observers:
-                observer.on_end(result)
+            self._end(info)
         self._handed_out = time.perf_counter()
         return obs, reward, terminated, truncated, info
 

@@ -238,6 +238,40 @@ def test_an_episode_ended_by_gymnasiums_time_limit_is_recorded_whole(tmp_path):
     assert isinstance(rebuilt.env, ObserveEpisodes) and rebuilt.env.controller == "p"
 
 
+def test_an_episode_a_time_limit_outside_the_wrapper_cut_is_ended_at_the_next_reset_or_close(tmp_path):
+    """TimeLimit put around ObserveEpisodes truncates where the wrapper cannot see: each recording lacked its
+    metrics and last state (`crowdmpc review`: "whose episode did not end") and results stayed empty. They
+    are now those of TimeLimit put inside, as gym.make(..., max_episode_steps=5) puts it."""
+
+    def recorded(folder: Path, outside: bool) -> tuple[list[Any], list[dict[str, int]]]:
+        with McapEpisodeRecorder(folder) as recorder:
+            if outside:
+                env: Any = gym.make(crowdsim.ENV_ID, n_humans=3, n_robots=2)
+                env = gym.wrappers.TimeLimit(ObserveEpisodes(env, [recorder]), 5)
+            else:
+                env = ObserveEpisodes(
+                    gym.make(crowdsim.ENV_ID, n_humans=3, n_robots=2, max_episode_steps=5), [recorder]
+                )
+            for seed in (0, 1):
+                env.reset(seed=seed)
+                assert [env.step(np.zeros((2, 2)))[3] for _ in range(5)][-1]  # truncated
+            env.close()
+            results = env.get_wrapper_attr("results")
+        counts = [
+            {topic: len(read_recording(p).data(topic)) for topic in ("/robots", "/episode/metrics")}
+            for p in recorder.paths
+        ]
+        return results, counts
+
+    inside, inside_counts = recorded(tmp_path / "inside", outside=False)
+    outside, outside_counts = recorded(tmp_path / "outside", outside=True)
+    assert outside_counts == inside_counts == [{"/robots": 6, "/episode/metrics": 1}] * 2
+    assert [r.seed for r in outside] == [0, 1]
+    for a, b in zip(inside, outside, strict=True):
+        assert same_metrics(a.metrics, b.metrics)
+        assert np.array_equal(a.robot_positions, b.robot_positions)
+
+
 def test_a_controller_whose_act_returns_no_control_output_is_named_through_gym_too():
     from tests.plugins.broken_controllers import ArrayAct
 
