@@ -279,7 +279,11 @@ def run(args: argparse.Namespace) -> int:
     taken = take_run_options(args, started) + take_run_epochs(args, out, started)
     data_taken = take_run_data(args, recorded)
     pooling, net_config, net_taken = resumed_net_config(args, started, pooling, net_config)
-    _check_numbers(args)
+    try:
+        _check_numbers(args)
+    except PipelineError as exc:  # "--seed must be ...": of a value the command line never typed
+        source = out / SETTINGS_FILE if recorded is not None else out / "checkpoints" / "last.ckpt"
+        raise PipelineError(f"--resume: {exc}, taken from {source}; the file is damaged") from None
     # before the data: a --loss the net does not train on is refused before files are read or prepared
     loss_typed = args.loss is not None
     args.loss = training_loss(args, net_config)

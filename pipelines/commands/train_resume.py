@@ -16,6 +16,8 @@ from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
+from predictors.checkpoint import check_name
+from predictors.errors import PredictorError
 
 # What fixes a training run: --resume continues it with these, and only --epochs may change.
 SETTINGS_FILE = "train_settings.json"
@@ -202,6 +204,10 @@ def check_resumed_settings(
         return str(settings["name"])
     if not name_given:  # the default name follows the options, which are checked below
         settings = {**settings, "name": recorded.get("name", settings["name"])}
+        try:  # it names files in --out: '../x' wrote beside it
+            check_name(settings["name"], "its name")
+        except PredictorError as exc:
+            raise PipelineError(f"--resume: {out / SETTINGS_FILE}: {exc}; the file is damaged") from None
     differ = [k for k in settings if k in recorded and k not in _NOT_COMPARED and recorded[k] != settings[k]]
     if differ:
         shown = "; ".join(f"{k}: {_compared('run', recorded[k], settings[k])}" for k in differ)

@@ -203,3 +203,34 @@ def test_weights_that_do_not_fit_the_net_are_named_before_lightning_loads_them(r
     torch.save(checkpoint, last)
     assert main([*_args(data, out, epochs=2), "--resume"]) == 2
     assert f"({first} missing)" in _one_line(capsys)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("name", "../../escaped", "its name '../../escaped' is not allowed: use 1 to 64 letters"),
+        ("seed", -1, "--seed must be in 0..4294967295, got -1, taken from"),
+    ],
+)
+def test_a_damaged_settings_file_is_named_before_training_and_nothing_is_written_outside(
+    run_copy, capsys, key, value, message
+):
+    """Its "name" was taken unchecked: the run trained to its end, then made a folder two levels above --out
+    ('r6/../../escaped.part'); a "seed" of -1 was refused as "--seed must be ...", an option never typed."""
+    import json
+
+    data, out = run_copy
+    settings = out / "train_settings.json"
+    document = json.loads(settings.read_text(encoding="utf-8"))
+    settings.write_text(json.dumps({**document, key: value}), encoding="utf-8")
+    around = sorted(p.name for p in out.parent.parent.iterdir())
+    before = sorted(p.name for p in (out / "checkpoints").iterdir())
+    capsys.readouterr()
+    assert main([*_args(data, out, epochs=2), "--resume"]) == 2
+    line = _one_line(capsys)
+    assert line.startswith("crowdmpc train: error: --resume: ") and message in line, line
+    assert line.endswith(f"{settings}; the file is damaged") or line.startswith(
+        f"crowdmpc train: error: --resume: {settings}: "
+    ), line
+    assert sorted(p.name for p in out.parent.parent.iterdir()) == around
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == before  # no epoch trained
