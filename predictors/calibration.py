@@ -106,6 +106,12 @@ class Calibration:
                 f"calibration 'quantiles' must be a list of finite non-negative metres, "
                 f"got {self.quantiles!r}"
             )
+        need = min_samples(self.alpha)  # fewer give no finite quantile: calibrate stores no such block
+        if min(self.n) < need:
+            raise PredictorError(
+                f"calibration 'n' {list(self.n)}: a finite quantile at alpha={alpha_text(self.alpha)} takes "
+                f"at least {need} samples a step"
+            )
         if len(self.quantiles) != len(self.n):
             raise PredictorError(
                 f"calibration has {len(self.quantiles)} quantiles but {len(self.n)} sample counts; "

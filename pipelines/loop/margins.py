@@ -236,7 +236,24 @@ class MarginSpec:
         )
         if len(block.quantiles) < horizon:
             raise PipelineError(_short_horizon(self, predictor, len(block.quantiles), horizon))
+        self._check_width(block, path, predictor, horizon)
         return path, block
+
+    def _check_width(self, block: Calibration, path: Path, predictor: str, horizon: int) -> None:
+        """PipelineError when a margin this mode plans with (its first ``horizon`` steps) is past
+        ``MAX_MARGIN``, which fixed margins may not pass either: every step would fall back."""
+        table = class_tables(block).get(self.mode)
+        rows = [block.quantiles] if self.mode == "conformal" else list(table.quantiles if table else ())
+        widest = max((q for row in rows for q in row[:horizon]), default=0.0)  # horizon 0: the records'
+        if widest > MAX_MARGIN:
+            from predictors.conformal import alpha_text
+
+            raise PipelineError(
+                f"the {self.source} calibration of {predictor!r} at alpha={alpha_text(self.alpha)} in "
+                f"{path} has a margin of {widest:.4g} m, past the {MAX_MARGIN:g} m any plan in the paper's "
+                "scene can keep (a damaged file, or a predictor that far off); recalibrate it or plan with a "
+                "larger alpha"
+            )
 
     def calibration(self, predictor: str | None, sha256: str | None) -> dict[str, Any] | None:
         """Which stored calibration the margins come from, for the records: when it was made, its data's

@@ -279,17 +279,22 @@ def test_a_calibration_one_step_short_of_the_horizon_is_refused(tmp_path, monkey
 
 def test_shortfall_margins_come_from_the_shortfall_table(tmp_path, monkeypatch):
     """conformal-shortfall plans with the distance-shortfall quantiles, conformal-motion with the
-    displacement ones: with shortfalls twice the errors, class c's step-k margin is 0.36 (c + 1) k, not
+    displacement ones: with shortfalls 1.5 times the errors, class c's step-k margin is 0.27 (c + 1) k, not
     0.18 (c + 1) k (tests/calibration_blocks.class_errors: the 18th smallest of 19 samples)."""
     from tests.calibration_blocks import class_errors
 
     monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
     errors, motion = class_errors(4)
-    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=2 * errors))
+    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=1.5 * errors))
     moving = MarginSpec("conformal-motion").resolve_classes("constant_velocity", 4, None)
     short = MarginSpec("conformal-shortfall").resolve_classes("constant_velocity", 4, None)
     assert moving.quantiles[0][3] == pytest.approx(0.18 * 4)
-    assert short.quantiles[0][3] == pytest.approx(0.36 * 4)
+    assert short.quantiles[0][3] == pytest.approx(0.27 * 4)
+    # past the 5 m a fixed margin may have (0.36 * 4 * 4 = 5.76 m for class 3 at step 4): refused, naming it
+    save_calibration(constant_velocity_block(errors, classes=motion, shortfall=2 * errors))
+    with pytest.raises(PipelineError, match="has a margin of 5.76 m, past the 5 m any plan"):
+        MarginSpec("conformal-shortfall").resolve_classes("constant_velocity", 4, None)
+    assert MarginSpec("conformal-motion").resolve_classes("constant_velocity", 4, None) == moving
 
 
 def test_describe_states_alpha_and_source_of_calibrated_margins():

@@ -229,7 +229,11 @@ def test_block_json_round_trip():
         ({"predictor_sha256": "abc"}, "'predictor_sha256' must be 64 lowercase hex"),
         ({"source": "sim"}, r"'source' must be one of \['real', 'closed-loop'\], got 'sim'"),
         ({"alpha": 0.0}, "'alpha' must be a number with 0 < alpha < 1"),
-        ({"n": (1, 2)}, "4 quantiles but 2 sample counts"),
+        ({"n": (100, 98)}, "4 quantiles but 2 sample counts"),
+        (  # no finite quantile at alpha 0.1 comes of fewer than 9 (a block claiming none was planned with)
+            {"n": (100, 98, 8, 90)},
+            r"'n' \[100, 98, 8, 90\]: a finite quantile at alpha=0.1 takes at least 9 samples a step",
+        ),
         ({"n": (1, -2, 3, 4)}, "'n' must be a non-empty list of sample counts"),
         ({"quantiles": (0.1, math.inf, 0.3, 0.4)}, "'quantiles' must be a list of finite non-negative"),
         ({"data_sha256": "x"}, "'data_sha256' must be 64 lowercase hex"),
@@ -574,7 +578,8 @@ def test_parallel_calibrations_keep_every_block(tmp_path):
 
     context = multiprocessing.get_context("spawn")
     start = context.Event()
-    shares = [[round(0.001 * (40 * k + i + 1), 3) for i in range(40)] for k in range(4)]
+    # alphas from 0.02: block()'s 90 samples give no finite quantile below 1/91
+    shares = [[round(0.02 + 0.001 * (40 * k + i), 3) for i in range(40)] for k in range(4)]
     workers = [context.Process(target=_save_alphas, args=(str(tmp_path), a, start)) for a in shares]
     for w in workers:
         w.start()
