@@ -134,7 +134,8 @@ def warnings_as_notes() -> None:
         if not issubclass(category, LayoutWarning | NoTwinWarning):
             shown(message, category, filename, lineno, file, line)
         elif (out := file or sys.stderr) is not None:
-            print(f"note: {message}", file=out)
+            with contextlib.suppress(OSError):  # as Python's own: a note lost to a closed pipe raises nothing
+                print(f"note: {message}", file=out)
 
     show_any: Any = show
     show_any.crowdmpc_notes = True

@@ -5,6 +5,7 @@ controller plugins (``pipelines.loop.spec``), whose registries keep what it impo
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -56,7 +57,12 @@ def _shadowed_file(module_name: str, module: object, cwd: Path) -> Path | None:
     if yours is None:
         return None
     where = getattr(module, "__file__", None)
-    return None if where is not None and Path(where).resolve().is_relative_to(cwd.resolve()) else yours
+    mine = yours if yours.is_file() else yours / "__init__.py"
+    try:  # the same file, not one under cwd: a link in cwd to a file elsewhere is the user's all the same
+        same = where is not None and os.path.samefile(where, mine)
+    except OSError:
+        same = False
+    return None if same else yours
 
 
 def reloaded_class(spec: str, registered: object) -> object | None:

@@ -265,8 +265,10 @@ class ObserveEpisodes(
         return obs, info
 
     def close(self) -> None:
-        self._end_cut_episode()
-        super().close()
+        try:
+            self._end_cut_episode()
+        finally:  # an observer that cannot take it (a recorder closed before the env) leaves the env's close
+            super().close()
 
     def _end_cut_episode(self) -> None:
         """End, as its last step would have, an episode a wrapper outside this one cut short (gymnasium's
@@ -278,13 +280,13 @@ class ObserveEpisodes(
         self._open = False
 
     def _end(self, info: Mapping[str, Any]) -> None:
+        self._open = False  # first: an observer raising in on_end must not have the episode ended twice
         result = self._steps.result(self._base, self._meta, info)
         self.results.append(result)
         if self.buffer_length is not None and len(self.results) > self.buffer_length:
             del self.results[: len(self.results) - self.buffer_length]
         for observer in self.observers:
             observer.on_end(result)
-        self._open = False
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
         elapsed = time.perf_counter() - self._handed_out

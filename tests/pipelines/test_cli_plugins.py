@@ -153,6 +153,21 @@ def test_a_plugin_file_named_as_crowdmpcs_own_package_is_told_to_be_renamed(tmp_
     )
 
 
+def test_a_plugin_file_linked_from_elsewhere_is_the_users_own(tmp_path, monkeypatch, capsys):
+    """A link in the working folder to one's own file elsewhere was taken for another module of that name."""
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "shared" / "linked_nets_q.py").write_text("class Other:\n    pass\n", encoding="utf-8")
+    (tmp_path / "work").mkdir()
+    (tmp_path / "work" / "linked_nets_q.py").symlink_to(tmp_path / "shared" / "linked_nets_q.py")
+    monkeypatch.chdir(tmp_path / "work")
+    monkeypatch.syspath_prepend(str(tmp_path / "work"))
+    line = parser_error(capsys, "--plugin", "linked_nets_q:MyNet", "zoo", "list")
+    assert line.startswith(
+        "crowdmpc: error: argument --plugin: plugin 'linked_nets_q:MyNet': module 'linked_nets_q' has no "
+        "'MyNet'"
+    ), line
+
+
 def test_an_unregistered_plugin_kind_is_refused_by_train_and_never_imported(capsys):
     line = parser_error(capsys, "train", "--model", NEVER)
     assert line == (

@@ -272,6 +272,42 @@ def test_an_episode_a_time_limit_outside_the_wrapper_cut_is_ended_at_the_next_re
         assert np.array_equal(a.robot_positions, b.robot_positions)
 
 
+def test_a_cut_episode_whose_observer_fails_to_take_it_is_ended_once_and_the_env_still_closes():
+    """An observer raising in on_end (a full disk, a recorder closed before the env) had the next reset end
+    the same episode again, and close() left the environments beneath it open."""
+
+    class FailsOnce:
+        ends: list[int] = []
+
+        def on_reset(self, obs: Any, meta: Any) -> None:
+            pass
+
+        def on_step(self, before: Any, out: Any, after: Any) -> None:
+            pass
+
+        def on_end(self, result: Any) -> None:
+            FailsOnce.ends.append(result.seed)
+            if len(FailsOnce.ends) == 1:
+                raise OSError(28, "No space left on device")
+
+    observed = ObserveEpisodes(gym.make(crowdsim.ENV_ID, n_humans=2, n_robots=2), [FailsOnce()])
+    env = gym.wrappers.TimeLimit(observed, 3)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros((2, 2)))
+    with pytest.raises(OSError, match="No space left"):
+        env.reset(seed=1)
+    env.reset(seed=1)
+    assert [r.seed for r in observed.results] == [0] and FailsOnce.ends == [0]
+    closed = []
+    observed.env.close = lambda: closed.append(True)  # type: ignore[method-assign]
+    env.step(np.zeros((2, 2)))
+    FailsOnce.ends.clear()  # the next on_end raises again
+    with pytest.raises(OSError):
+        env.close()
+    assert closed == [True] and [r.seed for r in observed.results] == [0, 1]
+
+
 def test_a_controller_whose_act_returns_no_control_output_is_named_through_gym_too():
     from tests.plugins.broken_controllers import ArrayAct
 

@@ -150,6 +150,15 @@ def test_the_commands_show_a_missing_twin_as_a_note_and_other_warnings_as_python
     assert capsys.readouterr().err == "note: predictor 'p': no CasADi twin (x)\n"
     assert others == [("something else", UserWarning)]
 
+    class ClosedPipe:
+        def write(self, text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+    with warnings.catch_warnings():  # a note lost to a closed pipe raises nothing, as Python's own warnings
+        warnings.simplefilter("always")
+        warnings_as_notes()
+        warnings.showwarning("lost", NoTwinWarning, "f.py", 1, ClosedPipe())  # type: ignore[arg-type]
+
 
 @pytest.mark.parametrize("controller", ["cmpc", "dmpc"])
 def test_reset_builds_everything_the_first_step_needs(controller, monkeypatch):
