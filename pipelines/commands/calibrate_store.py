@@ -16,7 +16,7 @@ import os
 import re
 import secrets
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
@@ -179,6 +179,16 @@ def take_back_killed() -> None:
         with unless_held(journal, gone=False) as free:
             if free:
                 _take_back(journal, match, path)
+
+
+def take_back_before_planning(margins: Iterable[MarginSpec]) -> None:
+    """``take_back_killed`` before a run plans with any of ``margins`` that a calibration gives: a calibrate
+    killed while its held-out episodes planned with its new blocks left them in force, and simulate and
+    sweep planned with them, unsaid, until the next calibrate took them back."""
+    from pipelines.loop.margins import CALIBRATED_MODES
+
+    if any(spec.mode in CALIBRATED_MODES for spec in margins):
+        take_back_killed()
 
 
 def _take_back(journal: Path, match: re.Match[str], path: Path) -> None:

@@ -13,16 +13,16 @@ from crowdsim.replay import CROWDS
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable
+from pipelines.commands.calibrate_store import take_back_before_planning
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_json import write_json
-from pipelines.commands.simulate_table import format_table, plot_title, table_header
+from pipelines.commands.simulate_table import format_table, plot_first_episode, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import CloseFailed, PipelineError, RecordingRefused
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
 
 if TYPE_CHECKING:
-    from crowdsim.env_config import EnvConfig
     from pipelines.config import Option, RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import EpisodeResult
@@ -253,6 +253,7 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     resolved = resolve_run(args)
+    take_back_before_planning([resolved.spec.margins])  # a calibrate killed mid-run left blocks it stored
     with json_on_stdout(resolved.json):  # --json -: the JSON alone on stdout, the rest on stderr
         return _simulate(resolved)
 
@@ -356,7 +357,7 @@ def _report(
     print(format_table(summary, header, env_config.radius, cfg.mpc.time_limit_s))
     write_json(resolved.json, run_meta, results, configs, interrupted, failure, summary)
     if resolved.plot is not None:
-        _plot(resolved.plot, spec.controller, results[0], env_config)
+        plot_first_episode(resolved.plot, spec.controller, results[0], env_config)
     if recorder is not None:
         print(recorder.written_line(finished=len(results)))
 
@@ -380,21 +381,3 @@ class _FirstWhole(list["EpisodeResult"]):
                 human_present=None,
             )
         super().append(result)
-
-
-def _plot(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:
-    from crowdsim.plotting import plot_episode
-
-    title = plot_title(controller, first)
-    fig = plot_episode(
-        first.robot_positions,
-        first.human_positions,
-        first.robot_goals,
-        title=title,
-        radius=env_config.radius,
-        dt=env_config.dt,
-        human_present=first.human_present,
-    )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    print(f"wrote {path}")

@@ -1,5 +1,5 @@
-"""``crowdmpc simulate``'s printed summary: the header line naming the run and the metrics table; and the
-title of its --plot."""
+"""``crowdmpc simulate``'s printed summary: the header line naming the run and the metrics table; and its
+--plot with its title."""
 
 from __future__ import annotations
 
@@ -20,6 +20,9 @@ BUDGET_STATUSES: Final[tuple[str, ...]] = ("timeout", "Maximum_WallTime_Exceeded
 NAN_PREDICTION: Final[str] = "nan_prediction"
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
+    from crowdsim.env_config import EnvConfig
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import EpisodeResult
@@ -215,3 +218,22 @@ def plot_title(controller: str, episode: EpisodeResult) -> str:
         swept = m.min_distance_robots_between_steps
         closest += f"; robots touched ({m.min_distance_robots if swept is None else swept:.2f} m apart)"
     return f"{who}, {crowd}\n{outcome}, {closest}"
+
+
+def plot_first_episode(path: Path, controller: str, first: EpisodeResult, env_config: EnvConfig) -> None:
+    """simulate's --plot: the first episode's paths, titled by ``plot_title``."""
+    from crowdsim.plotting import plot_episode
+
+    title = plot_title(controller, first)
+    fig = plot_episode(
+        first.robot_positions,
+        first.human_positions,
+        first.robot_goals,
+        title=title,
+        radius=env_config.radius,
+        dt=env_config.dt,
+        human_present=first.human_present,
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    print(f"wrote {path}")

@@ -263,6 +263,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.report_only:
         for note in method_notes(cells):
             print(note, file=sys.stderr)
+        from pipelines.commands.calibrate_store import take_back_before_planning
+
+        take_back_before_planning(cell.spec.margins for cell in cells)  # a killed calibrate's blocks out
     if args.dry_run:
         check_plan(experiment)  # a plan whose every episode would fail is not fine
         check_replays(tasks)

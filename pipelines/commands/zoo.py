@@ -242,7 +242,11 @@ def run(args: argparse.Namespace) -> int:
         _report_leftovers(zoo.user_zoo_dir(args.dir), args.dir)
         return 1 if bad else 0
     if args.zoo_command == "calibrations":
+        from pipelines.commands.calibrate_store import take_back_killed
         from pipelines.commands.zoo_calibrations import run_calibrations
+
+        if args.dir is None:  # the blocks runs plan with: not those of a calibrate killed mid-run
+            take_back_killed()
 
         return run_calibrations(args.dir, args.predictor, args.plot)
     if args.zoo_command == "add":

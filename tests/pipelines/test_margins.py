@@ -772,6 +772,37 @@ def test_a_killed_calibrates_journal_under_this_runs_own_pid_is_taken_back(tmp_p
     assert not journal.exists()
 
 
+def test_runs_planning_with_calibrated_margins_take_a_killed_calibrates_blocks_back_first(
+    tmp_path, monkeypatch, capsys
+):
+    """simulate and sweep planned with the blocks a calibrate killed during its held-out run had stored, and
+    `zoo calibrations` listed them in force, until the next calibrate took them back."""
+    from pipelines.cli import main
+    from pipelines.commands.calibrate_store import take_back_before_planning
+    from predictors.calibration_store import read_calibration_file
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    path = tmp_path / "calibrations.json"
+    _episodes(monkeypatch)
+    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0  # the killed run's block, over no earlier file
+    (block,) = read_calibration_file(path)
+    journal = tmp_path / f".calibrate-holdout.{os.getpid()}.json"
+    journal.write_text(json.dumps({"stored": [block.to_json()], "earlier": None}))
+    take_back_before_planning([parse_margins("none"), parse_margins("fixed:0.1,0.1,0.1,0.1")])
+    assert journal.exists() and read_calibration_file(path) == [block]  # no calibrated margins: untouched
+    take_back_before_planning([parse_margins("none"), parse_margins("conformal-motion:0.3")])
+    assert not journal.exists() and not path.exists()
+    journal.write_text(json.dumps({"stored": [block.to_json()], "earlier": None}))
+    path.write_text(
+        json.dumps({"format": "crowdmpc-calibrations", "version": 1, "calibrations": [block.to_json()]})
+    )
+    capsys.readouterr()
+    assert main(["zoo", "calibrations", "--predictor", "constant_velocity"]) == 0
+    out = capsys.readouterr().out
+    assert f"(pid {os.getpid()}) did not finish" in out and "user" not in out.split("did not finish")[1]
+    assert not journal.exists()
+
+
 def test_an_unreadable_journal_of_a_killed_calibrate_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
     from pipelines.cli import main
 
