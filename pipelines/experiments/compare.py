@@ -220,10 +220,13 @@ def _digest(values: Mapping[str, Any]) -> bytes:
 
 def _commits(path: Path) -> list[str]:
     """The code each run line of ``path``'s sweep.json ran ("abc123def456+dirty"), oldest first; none where
-    the file is missing or unreadable (the episodes are still compared)."""
+    the file is missing or unreadable (the episodes are still compared; a damaged file said so)."""
+    if not (path / SWEEP_FILE).exists():
+        return []
     try:
-        meta = read_sweep_file(path / SWEEP_FILE)
-    except (PipelineError, OSError):
+        meta = read_sweep_file(path / SWEEP_FILE, hint="")
+    except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
+        print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
         return []
     found: list[str] = []
     for line in meta.get("runs", []):

@@ -252,9 +252,10 @@ def read_json_file(path: Path, what: str, advice: str = "") -> Any:
         raise PipelineError(f"{path}: not {what} ({type(exc).__name__}: {str(exc)[:120]}){advice}") from None
 
 
-def read_sweep_file(path: Path) -> dict[str, Any]:
-    """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it."""
-    meta = read_json_file(path, "a sweep file", "; move it away to start afresh")
+def read_sweep_file(path: Path, hint: str = "; move it away to start afresh") -> dict[str, Any]:
+    """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it (and
+    ending with ``hint``)."""
+    meta = read_json_file(path, "a sweep file", hint)
     if not (isinstance(meta, dict) and isinstance(meta.get("runs", []), list)):
         raise PipelineError(f"{path}: not a sweep file (expected an object with a list of runs)")
     return meta

@@ -252,6 +252,22 @@ def test_a_record_older_than_a_metric_is_compared_on_the_metrics_it_has(tmp_path
     assert "| 1 of 4 |" in capsys.readouterr().out
 
 
+def test_a_damaged_sweep_file_is_noted_and_its_episodes_still_compared(tmp_path, capsys):
+    """`sweep --report-only` refuses a sweep.json that does not read; compare passed it by unsaid, showing
+    "code not recorded" as of a run from before code was kept."""
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    b = _sweep(tmp_path / "b", [_record(i, *o) for i, o in enumerate(BASE)], commit=None)
+    capsys.readouterr()
+    assert main(["compare", str(a), str(b), "--expect-identical"]) == 0
+    assert "note:" not in capsys.readouterr().err  # a run without the file: nothing to say
+    (b / "sweep.json").write_text("{bad")
+    assert main(["compare", str(a), str(b), "--expect-identical"]) == 0
+    assert capsys.readouterr().err.startswith(
+        f"note: {b / 'sweep.json'}: not a sweep file (JSONDecodeError: Expecting property name enclosed in "
+        "double quotes: line 1 column 2 (char 1)); its episodes are compared without the code they ran\n"
+    )
+
+
 def test_the_paired_interval_matches_a_published_example():
     """Cavo et al. (2012) as Fagerland, Lydersen and Laake's "Statistical Analysis of Contingency Tables"
     (2017, chapter 8) gives it: 59 pairs with the outcome in both, 6 in the first alone, 16 in the second
