@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import re
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -224,7 +225,9 @@ def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) ->
             f"{weights}: {size} bytes, more than the {limit} a state_dict of the net of {config} can take"
         )
     try:
-        state = torch.load(weights, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # torch's advice on a pickle's protocol: the refusal says it all
+            warnings.simplefilter("ignore", UserWarning)
+            state = torch.load(weights, map_location="cpu", weights_only=True)
     except Exception:  # whatever a corrupt or hostile file makes torch raise, the file is at fault
         # torch's own message suggests weights_only=False, which a checkpoint must never need
         raise PredictorError(

@@ -650,3 +650,19 @@ def test_adding_the_same_pair_again_rewrites_a_damaged_copy(pair, tmp_path, monk
     )
     assert (root / f"{NAME}.pt").read_bytes() == weights.read_bytes()
     assert main(["zoo", "verify"]) == 0
+
+
+def test_a_plain_pickle_in_place_of_the_weights_is_refused_without_torchs_advice(tmp_path):
+    """torch's UserWarning on the pickle's protocol ("please file an issue ...") was printed with its source
+    line before the one-line refusal."""
+    import pickle
+    import warnings
+
+    weights = tmp_path / f"{NAME}.pt"
+    weights.write_bytes(pickle.dumps(os.getcwd, protocol=4))  # a function, by reference: never loaded
+    shutil.copyfile(REAL_ZOO / f"{NAME}.json", tmp_path / f"{NAME}.json")
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        with pytest.raises(PredictorError, match="not a state_dict of tensors"):
+            checkpoint.load_checkpoint(weights)
+    assert [str(w.message) for w in shown] == []
