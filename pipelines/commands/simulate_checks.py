@@ -188,9 +188,10 @@ def plugin_code_note(predictor: str | None) -> str | None:
     sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from
     the figures `zoo list` shows, where the model loaded without a word. None otherwise (no record, no
     plugin, the same file)."""
+    from predictors.registry import PREDICTORS
     from predictors.zoo import locate
 
-    if not predictor:
+    if not predictor or predictor in PREDICTORS:  # a registered one is no zoo's: its manifest is not read
         return None
     located = locate(predictor)
     return None if located is None else plugin_entry_note(predictor, located.entry)

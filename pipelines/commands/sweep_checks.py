@@ -36,11 +36,14 @@ def check_predictors(experiment: Experiment) -> None:
     from predictors import zoo
     from predictors.errors import PredictorError
     from predictors.models import model_kind
-    from predictors.registry import available
+    from predictors.registry import PREDICTORS, available
 
-    known = set(available())
-    # only the predictors some method plans with: an orca or straight column loads none
+    # only the predictors some method plans with: an orca or straight column loads none, and registered ones
+    # need no zoo (a damaged user manifest stopped a sweep of constant velocity and ORCA)
     wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
+    if wanted <= set(PREDICTORS):
+        return
+    known = set(available())
     missing = sorted(wanted - known)
     if missing:
         hint = "--predictors" if experiment.predictor_list else "--predictor"

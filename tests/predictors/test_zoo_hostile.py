@@ -666,3 +666,19 @@ def test_a_plain_pickle_in_place_of_the_weights_is_refused_without_torchs_advice
         with pytest.raises(PredictorError, match="not a state_dict of tensors"):
             checkpoint.load_checkpoint(weights)
     assert [str(w.message) for w in shown] == []
+
+
+def test_a_damaged_user_manifest_stops_no_run_that_loads_no_zoo_model(tmp_path, monkeypatch, capsys):
+    """A sweep of constant velocity and ORCA, and simulate with constant velocity, failed on the user zoo's
+    manifest.json, which they never need; a run of a zoo model still names it."""
+    user = tmp_path / "zoo"
+    user.mkdir()
+    (user / "manifest.json").write_text("{")
+    monkeypatch.setenv(zoo.ZOO_ENV, str(user))
+    sweep = ["sweep", "--experiment", "baselines", "--humans", "2", "--dry-run", "--out", str(tmp_path / "s")]
+    assert main(sweep) == 0
+    simulate = ["simulate", "--controller", "cmpc", "--humans", "2", "--no-progress"]
+    assert main([*simulate, "--predictor", "constant_velocity"]) == 0
+    capsys.readouterr()
+    assert main([*simulate, "--predictor", "my_model"]) == 2  # looked for in the user zoo
+    assert f"{user / 'manifest.json'}: not valid JSON" in capsys.readouterr().err
