@@ -56,6 +56,10 @@ def _points(rows: list[Any], n: int) -> np.ndarray:
     return np.asarray(rows, dtype=float).reshape(n, 2)
 
 
+# m: no scene is larger (the gymnasium environment's bounds are tens of metres); past it a file is damaged
+MAX_COORD = 1e6
+
+
 def episode_view(rec: Recording) -> EpisodeView:
     """The arrays; PipelineError when the recorded states do not make one episode (sizes that change)."""
     try:
@@ -90,10 +94,12 @@ def _episode_view(rec: Recording) -> EpisodeView:
         present = by_step[s].get("present")
         if isinstance(present, list) and len(present) == n:
             human_positions[row, ~np.asarray(present, dtype=bool)] = np.nan
+    robot_positions = np.array([_points(r["positions"], m) for r in robots])
+    _check_positions(rec, robot_positions, human_positions)
     return EpisodeView(
         times=times,
         steps=np.array(steps, dtype=int),
-        robot_positions=np.array([_points(r["positions"], m) for r in robots]),
+        robot_positions=robot_positions,
         human_positions=human_positions,
         robot_goals=_points(robots[0]["goals"], m),
         human_goals=_points(humans[0]["goals"], n),
@@ -104,4 +110,17 @@ def _episode_view(rec: Recording) -> EpisodeView:
         },
         dt=dt,
         radius=float(ep.get("radius", RADIUS)),
+    )
+
+
+def _check_positions(rec: Recording, robots: np.ndarray, humans: np.ndarray) -> None:
+    """PipelineError for positions no episode has: a robot's not finite, or anyone's beyond ``MAX_COORD``
+    (a human's NaN is one not there, in a replayed crowd). A damaged file drew nothing of use, with numpy's
+    overflow warnings and their source lines."""
+    if np.isfinite(robots).all() and np.all(np.abs(robots) <= MAX_COORD):
+        if not np.any(np.abs(np.nan_to_num(humans, nan=0.0)) > MAX_COORD):  # inf is beyond too
+            return
+    raise PipelineError(
+        f"{rec.path}: its /robots or /humans positions hold values no episode has (inf, NaN or beyond "
+        f"{MAX_COORD:g} m): a damaged recording; --check names the messages"
     )

@@ -119,6 +119,31 @@ def test_check_catches_a_bad_message(tmp_path, capsys):
     assert len(report["check"][str(path)]["errors"]) == 2
 
 
+@pytest.mark.parametrize("bad", [1e308, -2e6])  # the recorder writes no NaN or inf (strict JSON)
+def test_positions_no_episode_has_are_refused_for_pictures_naming_the_check(tmp_path, capsys, bad):
+    """A robot at 1e308 m was drawn with numpy's overflow warnings and their source lines, exit 0."""
+    from pipelines.logs.schemas import HUMANS
+
+    path = tmp_path / "bad.mcap"
+    robots = {"time": 0.0, "step": 0, "positions": [[0.0, 0.0]], "velocities": [[0.0, 0.0]]}
+    robots |= {"goals": [[1.0, 1.0]], "actions": None, "commanded": None, "reached": [False]}
+    humans = {"time": 0.0, "step": 0, "positions": [[2.0, 0.0]], "velocities": [[0.0, 0.0]]}
+    humans |= {"goals": [[3.0, 0.0]]}
+    with McapRecorder(path) as rec:
+        for step in (0, 1):
+            at = {"time": 0.4 * step, "step": step}
+            moved = [[bad, 0.0]] if step else [[0.0, 0.0]]
+            rec.write("/robots", robots | at | {"positions": moved}, step * 400_000_000, schema=ROBOTS)
+            rec.write("/humans", humans | at, step * 400_000_000, schema=HUMANS)
+    capsys.readouterr()
+    assert main(["review", str(path), "--plot", str(tmp_path / "p.png")]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc review: error: {path}: its /robots or /humans positions hold values no episode has (inf, "
+        "NaN or beyond 1e+06 m): a damaged recording; --check names the messages\n"
+    )
+    assert not (tmp_path / "p.png").exists()
+
+
 def test_recorded_episodes_pass_the_check(runs, capsys):
     assert main(["review", str(runs[0].path.parent), "--check"]) == 0
     assert capsys.readouterr().out.count(" ok\n") == 2
