@@ -131,9 +131,13 @@ def _save(function, out: Path) -> None:
         ) from None
 
 
+# agents x horizon steps from which a net's export takes tens of seconds (62 x 5: 9 s with social_lstm_eth)
+LONG_EXPORT = 300
+
+
 def run(args: argparse.Namespace) -> int:
     from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
-    from predictors.registry import load_predictor
+    from predictors.registry import PREDICTORS, load_predictor
 
     # Checked before anything is loaded or built; the agent counts are the simulator's (crowdsim.scenarios).
     if not (
@@ -159,6 +163,13 @@ def run(args: argparse.Namespace) -> int:
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
     predictor = load_predictor(args.name)
+    if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:
+        print(  # one CasADi call builds and checks it: Ctrl-C and kill -TERM wait for it to return
+            f"note: a net's twin for {args.humans + args.robots} agents over {args.horizon} steps takes long "
+            "to build and check (here 9 s at 62 agents over 5 steps, 78 s over 20, 8 minutes over 100); an "
+            "interrupt waits for CasADi to return",
+            file=sys.stderr,
+        )
     start = time.perf_counter()
     function = predictor.to_casadi(args.humans, args.robots, args.horizon)
     seconds = time.perf_counter() - start

@@ -183,6 +183,24 @@ def horizon_note(spec: ControllerSpec) -> str | None:
     )
 
 
+def size_note(spec: ControllerSpec, n_humans: int, n_robots: int) -> str | None:
+    """A line for an MPC whose NLPs take seconds to build and a step past the 0.4 s control period to solve
+    (a long horizon, or many robots among many humans), None otherwise: one CasADi call builds each, and an
+    interrupt waits for it to return (measured on a 2-core machine with constant velocity)."""
+    from pipelines.loop.mpc_setup import mpc_config
+
+    if spec.controller not in MPC_CONTROLLERS:
+        return None
+    horizon = mpc_config(spec).horizon
+    if horizon <= 12 and horizon * n_humans * n_robots < 4000:
+        return None
+    return (
+        f"note: an NLP of {n_robots} robots among {n_humans} humans over {horizon} steps is large (here 11 s "
+        "to build and 0.6 s a first step for 12 robots, 50 humans, 8 steps; 2.5 s and 0.9 s for 3, 7 and "
+        "30): steps may pass mpc.time_limit_s, and an interrupt waits for CasADi to return"
+    )
+
+
 def plugin_code_note(predictor: str | None) -> str | None:
     """A line for a zoo model of a plugin's net whose module file is not the one it was trained with (the
     sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from

@@ -24,3 +24,21 @@ def test_export_notes_a_horizon_past_training_and_a_generators_zero_noise(tmp_pa
         out = tmp_path / f"{name}.casadi"
         assert main(["export", name, "--out", str(out), *small, "--horizon", horizon]) == 0
         assert "note:" not in capsys.readouterr().err
+
+
+def test_a_large_export_of_a_net_is_said_to_take_long_before_it_starts(tmp_path, capsys, monkeypatch):
+    """50 humans and 12 robots over 100 steps ran for 8 minutes in one CasADi call, deaf to Ctrl-C, unsaid."""
+    from pipelines.commands import export
+
+    monkeypatch.setattr(export, "LONG_EXPORT", 4)  # 3 agents x 2 steps: the note without the long wait
+    small = ["--humans", "2", "--robots", "1", "--horizon", "2"]
+    assert main(["export", "social_lstm_eth", "--out", str(tmp_path / "a.casadi"), *small]) == 0
+    assert capsys.readouterr().err.startswith(
+        "note: a net's twin for 3 agents over 2 steps takes long to build and check (here 9 s at 62 agents "
+        "over 5 steps, 78 s over 20, 8 minutes over 100); an interrupt waits for CasADi to return\n"
+    )
+    assert main(["export", "constant_velocity", "--out", str(tmp_path / "b.casadi"), *small]) == 0
+    assert "note:" not in capsys.readouterr().err  # a rule's twin builds in a moment at any size
+    monkeypatch.setattr(export, "LONG_EXPORT", 7)
+    assert main(["export", "social_lstm_eth", "--out", str(tmp_path / "c.casadi"), *small]) == 0
+    assert "note:" not in capsys.readouterr().err

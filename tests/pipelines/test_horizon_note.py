@@ -69,3 +69,19 @@ def test_a_sweep_says_it_once_naming_the_methods(tmp_path, capsys):
         "note: methods 'CMPC', 'DMPC': the MPC plans 14 steps ahead and 'social_lstm_eth' was trained to "
         "predict 12 (4.8 s): its steps 13..14 are extrapolated"
     ]
+
+
+def test_an_nlp_that_takes_long_to_build_and_solve_is_said_so():
+    """A horizon of 100 among 50 humans ran minutes in one CasADi call, deaf to Ctrl-C, without a word."""
+    from pipelines.commands.simulate_checks import size_note
+
+    assert size_note(_spec("cmpc", "constant_velocity", None), 7, 3) is None  # Table I
+    assert size_note(_spec("cmpc", "constant_velocity", None), 50, 12) is None  # 4 x 50 x 12 = 2400
+    assert size_note(_spec("dmpc", "constant_velocity", 12), 7, 3) is None
+    assert size_note(_spec("orca", "constant_velocity", 30), 50, 12) is None  # no NLP
+    assert size_note(_spec("cmpc", "constant_velocity", 13), 7, 3) == (
+        "note: an NLP of 3 robots among 7 humans over 13 steps is large (here 11 s to build and 0.6 s a "
+        "first step for 12 robots, 50 humans, 8 steps; 2.5 s and 0.9 s for 3, 7 and 30): steps may pass "
+        "mpc.time_limit_s, and an interrupt waits for CasADi to return"
+    )
+    assert size_note(_spec("dmpc", "constant_velocity", 8), 50, 12) is not None  # 4800
