@@ -125,7 +125,8 @@ def check_writable(
     if path is None or is_stdout(path):
         return
     path = Path(path)
-    label = f"{option} {path}"
+    shown = str(path)  # a path of 800 kB from a file is no 800 kB error line
+    label = f"{option} {shown if len(shown) <= 1024 else shown[:800] + '...' + shown[-200:]}"
     try:
         os.lstat(path)
     except (FileNotFoundError, NotADirectoryError):

@@ -26,7 +26,8 @@ def _shown(config: RunConfig, section: str, key: str, value: Any) -> str:
     source = config.source(section, key)
     if isinstance(value, bool):
         return label if source is not None and source.kind == "cli" else f"{label} {str(value).lower()}"
-    return f"{label} {value}"
+    text = str(value)  # a 900 kB string in a file is no 900 kB error line
+    return f"{label} {text if len(text) <= 80 else text[:77] + '...'}"
 
 
 def _refuse(shown: list[str], controller: str, plans_with: str, keys: str) -> None:

@@ -239,6 +239,13 @@ def check_world(cfg: RunConfig) -> None:
     _check_scenario(cfg)
     _check_simulate(cfg)
     check_recording(cfg)
+    if cfg.controller.record_iterations and cfg.sweep.record == "none":  # as simulate refuses it
+        raise cfg.error(
+            "controller",
+            "record_iterations",
+            "the iterations are written to the MCAP recordings; give --record failures or all too (or "
+            "[sweep] record)",
+        )
     why = (
         "a sweep's cells share Table I's world facts (time step, history, radius, bounds), which the "
         "controllers and predictors are built for; [world] values apply to simulate only"

@@ -48,11 +48,21 @@ def _given(value: Any) -> list[Any]:
     return [] if value is None else [value]
 
 
+def _same(path: str) -> str:
+    """What a config path names, for telling two spellings of one file apart from two files."""
+    try:
+        return os.path.realpath(path)
+    except (OSError, ValueError):  # a NUL byte: refused as it is read
+        return path
+
+
 def config_arguments(args: Any) -> tuple[str | None, list[str]]:
     """The config file and ``--set`` items of a command line: before the command (``crowdmpc --config F``)
     or after it (``crowdmpc simulate --config F``); one file at most (the same one twice is one)."""
     given = [*_given(getattr(args, "config_file", None)), *_given(getattr(args, "sub_config_file", None))]
     files = list(dict.fromkeys(str(f) for f in given))
+    if len(files) > 1 and len({_same(f) for f in files}) == 1:  # a.toml and ./a.toml: one file
+        files = files[:1]
     if len(files) > 1:
         raise ConfigError(f"--config given twice ({files[0]}, {files[1]}); one config file per run")
     sets = [*(getattr(args, "config_set", None) or []), *(getattr(args, "sub_config_set", None) or [])]

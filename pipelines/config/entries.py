@@ -65,7 +65,9 @@ class Entry:
 
 def _unknown_section(where: str, name: str) -> ConfigError:
     valid = ", ".join(f"[{s}]" for s in WRITE_ORDER)
-    close = difflib.get_close_matches(name, list(WRITE_ORDER), n=1)
+    # [controller.mpc]: its last part is the section meant ([mpc]), else the closest whole name
+    last = name.rpartition(".")[2]
+    close = [last] if last in WRITE_ORDER else difflib.get_close_matches(name, list(WRITE_ORDER), n=1)
     hint = f" (did you mean [{close[0]}]?)" if close and "." in name else ""
     return ConfigError(f"{where}: [{name}]: unknown section{hint}; valid sections: {valid}")
 
@@ -135,8 +137,8 @@ def read_file(path: str | Path) -> list[Entry]:
         raise ConfigError(f"--config {where}: not a file")
     if p.stat().st_size > MAX_CONFIG_BYTES:
         raise ConfigError(f"--config {where}: {p.stat().st_size} bytes; a config file is at most 1 MiB")
-    try:
-        text = p.read_bytes().decode("utf-8")
+    try:  # utf-8-sig: a byte-order mark, which Windows editors write and TOML does not allow, is dropped
+        text = p.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ConfigError(f"{where}: not UTF-8 text (a TOML file)") from None
     except OSError as exc:

@@ -155,6 +155,8 @@ class _Resolver:
         if key.kind == "strs" and isinstance(key.example, list):
             text += ", like [" + ", ".join(f'"{name}"' for name in key.example) + "]"
         message = f"{key.name} must be {text}, got {_short(raw)}"
+        if key.kind == "bool":  # TOML's spelling, whatever the dataclass says ("True or False", "a bool")
+            return ConfigError(self.sources[(section.name, key.name)].label(section.name, key.name, message))
         try:
             section.build({**defaults, key.name: raw}, self.built)
         except VALUE_ERRORS as exc:  # its own wording, when it is about this key and shows the value

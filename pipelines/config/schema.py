@@ -309,7 +309,13 @@ SECTIONS: Final[tuple[Section, ...]] = (
             "human_margins": 'set margins in [controller] margins (e.g. "fixed:0.05,0.1,0.15,0.2")',
         },
     ),
-    Section("simulate", "crowdmpc simulate's run.", SIMULATE_KEYS, _build_simulate),
+    Section(
+        "simulate",
+        "crowdmpc simulate's run. A sweep reads sensor_range and sensor_tracks here and passes the others "
+        "over in a file (one file may serve both; --set refuses them for a sweep): its own are in [sweep].",
+        SIMULATE_KEYS,
+        _build_simulate,
+    ),
     Section("sweep", "crowdmpc sweep's run (pipelines/experiments).", sweep_keys(), build_sweep),
 )
 SECTION_BY_NAME: Final[Mapping[str, Section]] = {s.name: s for s in SECTIONS}

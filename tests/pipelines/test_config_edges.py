@@ -246,3 +246,70 @@ def test_a_key_in_the_wrong_section_names_the_section_that_has_it(tmp_path):
         ConfigError, match=r"scenario.episodes: unknown key \(a key of \[simulate\]\); valid keys"
     ):
         load(path)
+
+
+def test_a_file_with_a_byte_order_mark_reads_as_without_one(tmp_path: Path):
+    """Windows editors write one; tomllib refused it as "Invalid statement (at line 1, column 1)"."""
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf[scenario]\nhumans = 3\n")
+    assert load(path).scenario.humans == 3
+
+
+def test_one_file_given_twice_by_two_spellings_is_one_file(tmp_path: Path, monkeypatch, capsys):
+    """`--config a.toml simulate --config ./a.toml` was "--config given twice"; two files still are."""
+    from pipelines.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a.toml").write_text("[scenario]\nhumans = 3\n", encoding="utf-8")
+    (tmp_path / "b.toml").write_text("[scenario]\nhumans = 4\n", encoding="utf-8")
+    assert main(["--config", "a.toml", "config", "show", "--config", "./a.toml"]) == 0
+    assert "\nhumans = 3 " in capsys.readouterr().out
+    assert main(["--config", "a.toml", "config", "show", "--config", "b.toml"]) == 2
+    assert "--config given twice (a.toml, b.toml)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [  # each said it as its dataclass does: "True or False", "a bool"
+        ('[mpc]\nwarm_start = "yes"\n', "x.toml: mpc.warm_start: must be true or false, got 'yes'"),
+        (
+            '[env]\nrobots_visible = "false"\n',
+            "x.toml: env.robots_visible: must be true or false, got 'false'",
+        ),
+        (
+            '[controller]\nflocking = "false"\n',
+            "x.toml: controller.flocking: must be true or false, got 'false'",
+        ),
+        (  # the section meant is the last part, not the closest whole name ([controller])
+            "[controller.mpc]\nhorizon = 3\n",
+            "x.toml: [controller.mpc]: unknown section (did you mean [mpc]?); valid sections: [world], "
+            "[env], [env.orca], [scenario], [controller], [mpc], [simulate], [sweep]",
+        ),
+    ],
+)
+def test_a_boolean_of_the_wrong_type_and_a_nested_section_are_named_in_tomls_words(text, message, tmp_path):
+    path = tmp_path / "x.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError) as refused:
+        load(path)
+    assert str(refused.value) == message.replace("x.toml", str(path))
+
+
+def test_a_sweep_refuses_recorded_iterations_it_would_not_record_and_cuts_long_values(tmp_path, capsys):
+    """A sweep ran `record_iterations` without `--record` in silence, where simulate refuses it; a 900 kB
+    predictor name for ORCA was a 900 kB error line."""
+    from pipelines.cli import main
+
+    sweep = ["sweep", "--experiment", "table2", "--humans", "3", "--dry-run", "--out", str(tmp_path / "s")]
+    assert main(["--set", "controller.record_iterations=true", *sweep]) == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc sweep: error: --set controller.record_iterations: the iterations are written to the MCAP "
+        "recordings; give --record failures or all too (or [sweep] record)\n"
+    )
+    assert main(["--set", "controller.record_iterations=true", *sweep, "--record", "failures"]) == 0
+    path = tmp_path / "long.toml"
+    path.write_text(f'[controller]\npredictor = "{"a" * 900_000}"\n', encoding="utf-8")
+    capsys.readouterr()
+    assert main(["--config", str(path), "simulate", "--controller", "orca", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert len(err) < 400 and f"{path}: controller.predictor {'a' * 77}...: controller 'orca'" in err

@@ -227,7 +227,7 @@ def test_mpc_overrides_are_the_values_that_differ_from_table_i(tmp_path):
             '[env]\nprofile = "v2"\n',
             "run.toml: env.profile: unknown profile 'v2'; choose from ['paper', 'v1']",
         ),
-        ("[env]\nrobots_visible = 1\n", "run.toml: env.robots_visible: must be a bool, got 1"),
+        ("[env]\nrobots_visible = 1\n", "run.toml: env.robots_visible: must be true or false, got 1"),
         (
             '[env]\ngoal_assignment = "swap"\n',
             "run.toml: env.goal_assignment: must be one of ['fixed', 'slots'], got 'swap'",
