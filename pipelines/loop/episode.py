@@ -10,6 +10,7 @@ PipelineError naming it (``pipelines.loop.contract``).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -28,7 +29,9 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import CloseFailed, EpisodeFailed, PipelineError
 from pipelines.loop.contract import (
     called,
+    check_run,
     checked_description,
+    checked_observers,
     checked_output,
     episode_meta,
     handed_out,
@@ -80,6 +83,14 @@ class EpisodeResult:
     # (T+1, N) bool, a replayed crowd's tracked humans at each row (crowdsim.replay); None: all, always
     human_present: np.ndarray | None = field(default=None, repr=False)
 
+    def __eq__(self, other: object) -> bool:
+        """Field by field, arrays by their values and NaN equal to NaN (the generated ``==`` asked numpy for
+        one truth value of an array: a ValueError). Two runs of one seed differ in ``solve_times_s``, wall
+        times: ``metrics`` and the trajectories are what a seed repeats."""
+        if not isinstance(other, EpisodeResult):
+            return NotImplemented
+        return all(_same(getattr(self, f.name), getattr(other, f.name)) for f in dataclasses.fields(self))
+
     def record(self) -> EpisodeRecord:
         """The episode without its trajectories: what every report and log serialises."""
         return EpisodeRecord(
@@ -93,6 +104,21 @@ class EpisodeResult:
             metrics=self.metrics,
             solver=SolverStats.of_steps(self.solve_times_s, self.iterations, self.statuses, self.fallbacks),
         )
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and bool(np.all((a == b) | (_nan(a) & _nan(b))))
+    if dataclasses.is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return bool(a == b)
+
+
+def _nan(values: np.ndarray) -> np.ndarray:  # NaN where the values are floats (ints have none)
+    return np.isnan(values) if values.dtype.kind in "fc" else np.zeros(values.shape, dtype=bool)
 
 
 def run_episode(
@@ -116,6 +142,7 @@ def run_episode(
     PipelineError.
     """
     check_controller(controller)
+    observers = checked_observers(observers, env_config, "run_episode")
     check_built_for(controller, env_config, "run_episode")
     _check_team(scenario, n_humans, n_robots, "run_episode")
     env = CrowdEnv(env_config, replayed_recording(env_config))
@@ -203,7 +230,7 @@ def run_episodes(
     ``into``: the list each finished episode is appended to (and returned), so that a caller interrupted
     half-way (Ctrl-C) still holds the episodes that finished.
     """
-    _check_run(spec, episodes, seed, env_config, sensor_range, sensor_tracks)
+    seed = check_run(spec, episodes, seed, env_config, sensor_range, sensor_tracks, into, observers_factory)
     _check_team(scenario, n_humans, n_robots, "run_episodes")
     if env_config.crowd != "orca" and episodes:  # its first window drawn before the NLPs are built: 12
         # robots' took 2.5 minutes before "no window has 50 pedestrians" (SimulationError)
@@ -250,29 +277,6 @@ def run_episodes(
     except PipelineError as exc:
         raise CloseFailed(exc, len(results)) from exc
     return results
-
-
-def _check_run(
-    spec: Any, episodes: Any, seed: Any, env_config: Any, sensor_range: Any, sensor_tracks: Any
-) -> None:
-    """``run_episodes``' arguments, before the controller is built, and with no episode to run too (seed "0"
-    failed at seed + i, None likewise, and True ran seed 1); numpy integers are taken, as a notebook's counts
-    often come from numpy."""
-    if not isinstance(spec, ControllerSpec):
-        raise PipelineError(
-            f"run_episodes takes a ControllerSpec (e.g. ControllerSpec('cmpc')) and builds the controller, "
-            f"got {short_repr(spec)}"
-        )
-    for name, value in (("episodes", episodes), ("seed", seed)):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-            raise PipelineError(f"run_episodes: {name} must be an int >= 0, got {short_repr(value)}")
-    if not isinstance(env_config, EnvConfig):
-        raise PipelineError(f"run_episodes: env_config must be an EnvConfig, got {short_repr(env_config)}")
-    if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
-        raise PipelineError(
-            f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
-            "sensor_range too (metres)"
-        )
 
 
 def behind_sensor(

@@ -1,0 +1,64 @@
+"""The closed loop's functions as a notebook calls them: results that compare, numpy counts, and arguments of
+the wrong kind named in one line before any episode runs (each failed deep inside, or after an episode)."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.episode import run_episode, run_episodes
+
+ORCA = ControllerSpec("orca")
+
+
+def test_episodes_compare_by_value_and_a_numpy_seed_is_a_python_int():
+    """`a == b` raised numpy's "truth value of an array ... is ambiguous"; a numpy seed stayed numpy's (and
+    np.uint64's largest wrapped round to seed 0 for the next episode)."""
+    first, second = run_episodes(
+        ORCA, episodes=2, seed=np.int64(3), scenario="circle", n_humans=2, progress=False
+    )
+    again = run_episodes(ORCA, episodes=1, seed=3, scenario="circle", n_humans=2, progress=False)[0]
+    assert type(first.seed) is int and (first.seed, second.seed) == (3, 4)
+    assert first == copy.deepcopy(first) and first != second
+    # a seed repeats everything but the wall times of its steps
+    assert first != again and dataclasses.replace(first, solve_times_s=again.solve_times_s) == again
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"env_config": None}, "run_episode: env_config must be an EnvConfig, got None"),
+        ({"observers": None}, "run_episode: observers must be a sequence of EpisodeObservers, got None"),
+        ({"observers": [object()]}, "run_episode: observer <object object at "),
+    ],
+)
+def test_run_episode_names_an_argument_of_the_wrong_kind(arguments, message):
+    controller = make_controller(ORCA)
+    with pytest.raises(PipelineError, match="^" + message.replace("(", r"\(")):
+        run_episode(controller, seed=0, scenario="circle", n_humans=1, **arguments)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"into": ()}, "run_episodes: into must be a list the results are appended to, got ()"),
+        (
+            {"observers_factory": []},
+            "run_episodes: observers_factory must be a function returning each episode's observers (e.g. "
+            "lambda: [recorder]), got []",
+        ),
+    ],
+)
+def test_run_episodes_names_into_and_the_observers_factory_before_any_episode(
+    arguments, message, monkeypatch
+):
+    """A tuple as `into` failed after the first episode, its result lost; a list as the factory at it."""
+    monkeypatch.setattr("pipelines.loop.episode.make_controller", None)  # nothing may be built first
+    with pytest.raises(PipelineError) as refused:
+        run_episodes(ORCA, episodes=1, seed=0, scenario="circle", n_humans=1, progress=False, **arguments)
+    assert str(refused.value) == message
