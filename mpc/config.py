@@ -94,6 +94,9 @@ MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2")}
 # The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
 # built), 2**32 wrapped to 0 and every solve failed at once.
 MAX_SOLVER_ITER: Final[int] = 2**31 - 1
+# steps: one CasADi call builds the NLP, and 100 among 50 humans took minutes; a config file, export and
+# Python all stop here (pipelines.config.keys.MOST, pipelines.commands.export)
+MAX_HORIZON: Final[int] = 100
 
 
 @dataclass(frozen=True)
@@ -287,6 +290,8 @@ class MPCConfig:
             minimum = 0 if name == "solver_max_iter" else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
                 raise MPCConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        if self.horizon > MAX_HORIZON:
+            raise MPCConfigError(f"horizon must be at most {MAX_HORIZON} steps, got {self.horizon!r}")
         if self.solver_max_iter > MAX_SOLVER_ITER:
             raise MPCConfigError(
                 f"solver_max_iter must be at most {MAX_SOLVER_ITER} (the solvers' int), "

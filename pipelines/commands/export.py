@@ -7,13 +7,10 @@ import sys
 import time
 from pathlib import Path
 
+from mpc.config import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
 from pipelines.commands.output_paths import output_arg
 from pipelines.errors import PipelineError
-
-# The MPC predicts over 4 steps (Table I); the CasADi function grows with H (its graph unrolls H recursive
-# steps, and 100000 ran without bound), so H is capped well above any horizon the controller can solve over.
-MAX_HORIZON = 100
 
 EPILOG = """examples:
   crowdmpc export social_lstm_soft_eth --out runs/social_lstm_soft_eth.casadi --humans 7 --robots 3 \\

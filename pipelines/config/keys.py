@@ -8,6 +8,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final, Literal
 
+from mpc.config import MAX_HORIZON
+
 Kind = Literal["int", "float", "bool", "str", "ints", "strs"]
 
 
@@ -59,7 +61,7 @@ MOST: Final[Mapping[str, float]] = {
     "world.obs_len": 1000,
     "env.time_limit": 3600.0,  # s: an hour-long episode
     "env.orca.max_neighbors": 1000,
-    "mpc.horizon": 100,
+    "mpc.horizon": MAX_HORIZON,
     "mpc.j_max": 1000,
     "mpc.solver_max_iter": 100_000,
     "mpc.time_limit_s": 3600.0,

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from crowdsim.scenarios import MAX_HUMANS
 from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
@@ -261,8 +262,10 @@ def prepare_sizes(n_robots: int, n_humans: Iterable[int]) -> list[tuple[int, int
         )
     sizes = []
     for n in n_humans:
-        if not _is_count(n) or n < 0:
-            raise PipelineError(f"each number of humans must be an int >= 0, got {n!r} in n_humans")
+        if not _is_count(n) or not 0 <= n <= MAX_HUMANS:  # 100000 took gigabytes without a word
+            raise PipelineError(
+                f"each number of humans must be an int in 0..{MAX_HUMANS}, got {n!r} in n_humans"
+            )
         sizes.append((int(n_robots), int(n)))
     return sizes
 

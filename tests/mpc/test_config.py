@@ -42,6 +42,7 @@ def test_defaults_are_table_one():
         ("horizon", 0),
         ("horizon", 2.5),
         ("horizon", True),
+        ("horizon", 101),  # from Python as from a config file: a build of minutes, deaf to Ctrl-C
         ("j_max", 0),
         ("solver_max_iter", -1),
         ("dt", 0.0),
