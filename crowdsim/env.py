@@ -213,7 +213,12 @@ class CrowdEnv:
             raise SimulationError("step() called after the episode ended; call reset()")
         cfg = self.config
         m = len(self._rp)
-        a = np.asarray(robot_accelerations, dtype=float)
+        given = np.asarray(robot_accelerations)
+        if given.dtype.kind not in "iuf":  # strings were read as numbers, booleans as 0/1, complex cut
+            raise SimulationError(
+                f"robot_accelerations must be a ({m}, 2) array of real numbers, got one of {given.dtype}"
+            )
+        a = given.astype(float)
         if a.shape != (m, 2) or not np.isfinite(a).all():
             raise SimulationError(
                 f"robot_accelerations must be a finite ({m}, 2) array, got shape {a.shape} "

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import struct
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -36,6 +37,7 @@ from pipelines.errors import PipelineError
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
 from pipelines.logs.schemas import EPISODE_FORMAT
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
+from predictors.errors import short_repr
 
 MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 START_TIME_KEY: Final[str] = "start_time_ns"  # in the "episode" metadata record (pipelines.logs.recording)
@@ -306,6 +308,10 @@ def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Rec
     Raises PipelineError only when ``path`` is no recording at all: missing, a folder, empty, not MCAP, or
     cut inside its header.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise PipelineError(f"read_recording takes a path to an MCAP file, got {short_repr(path)}")
+    if isinstance(topics, str | bytes):  # iterated, "/episode/metrics" was its characters: nothing read
+        raise PipelineError(f"topics must be a list of topics, e.g. [{topics!r:.60}], got the string itself")
     path = Path(path)
     walk = _Walk(path, topics=None if topics is None else frozenset(topics))
     complete, stopped_at = _walk_file(path, walk)

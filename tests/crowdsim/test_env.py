@@ -103,6 +103,18 @@ def test_bad_actions_and_call_order_raise():
         env.step(np.zeros(3))
     with pytest.raises(SimulationError, match="non-finite"):
         env.step(np.array([[np.nan, 0.0]]))
+    # each was taken: "1" as 1.0, True as 1.0, 1+1j as 1.0 with only numpy's ComplexWarning
+    for given, dtype in (
+        (np.array([["1", "0"]]), "<U1"),
+        (np.ones((1, 2), bool), "bool"),
+        ([[1 + 1j, 0]], "complex128"),
+    ):
+        with pytest.raises(
+            SimulationError,
+            match=rf"^robot_accelerations must be a \(1, 2\) array of real numbers, got one of {dtype}$",
+        ):
+            env.step(given)
+    env.step([[1, 0]])  # integers are numbers
 
 
 def test_invalid_scenario_and_sizes_name_the_value():

@@ -62,3 +62,17 @@ def test_run_episodes_names_into_and_the_observers_factory_before_any_episode(
     with pytest.raises(PipelineError) as refused:
         run_episodes(ORCA, episodes=1, seed=0, scenario="circle", n_humans=1, progress=False, **arguments)
     assert str(refused.value) == message
+
+
+def test_read_recording_names_a_path_and_topics_of_the_wrong_kind(tmp_path):
+    """`topics="/episode/metrics"` was iterated into its characters and read nothing, silently; None as the
+    path was pathlib's TypeError."""
+    from pipelines.logs.reader import read_recording
+
+    with pytest.raises(PipelineError, match=r"^read_recording takes a path to an MCAP file, got None$"):
+        read_recording(None)  # type: ignore[arg-type]
+    with pytest.raises(PipelineError) as refused:
+        read_recording(tmp_path / "x.mcap", topics="/episode/metrics")
+    assert str(refused.value) == (
+        "topics must be a list of topics, e.g. ['/episode/metrics'], got the string itself"
+    )
