@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Protocol
 
+from pipelines.loop.observed import check_state
+
 if TYPE_CHECKING:
     from crowdsim.control import ControlOutput
     from crowdsim.env import Observation
@@ -36,9 +38,11 @@ class BaselineController:
         self.env_config = env_config  # the simulator it was built for (the loops refuse another world)
 
     def reset(self, obs: Observation) -> None:
+        check_state(obs)
         self.inner.reset(obs)
 
     def act(self, obs: Observation) -> ControlOutput:
+        check_state(obs)
         return self.inner.act(obs)
 
     def describe(self) -> dict[str, Any]:

@@ -19,6 +19,7 @@ from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.margins import CALIBRATED_MODES, human_observed
+from pipelines.loop.observed import agent, check_fields, check_positions
 from pipelines.loop.spec import ControllerSpec
 from predictors.backfill import backfill
 from predictors.base import DT as PREDICTOR_DT
@@ -113,7 +114,7 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
     lost = np.argwhere(~np.isfinite(history).all(axis=-1))
     if lost.size:  # a tracker's NaN rows before a track: the predictor's refusal spoke of a mask never given
         step, i = lost[0]
-        who, _ = _agent(obs, int(i))
+        who, _ = agent(obs, int(i))
         raise PipelineError(
             f"obs.history[{step - obs_len}] holds a position that is not finite for {who} ({len(lost)} such "
             "entries in the rows the predictor reads): give obs.human_observed, each human's track length "
@@ -130,7 +131,7 @@ def check_history(obs: Observation) -> None:
     tracker's, on a real robot) whose history keeps a human who left, misses one who came, or lags a step
     was otherwise planned with silently, or failed deep in the predictor. The simulator's agree exactly (a
     float32 history, a tracker's, within its rounding). Its robots' and humans' fields are checked first."""
-    _check_fields(obs)
+    check_fields(obs)
     history = np.asarray(obs.history)
     agents = obs.n_robots + obs.n_humans
     if history.ndim != 3 or history.shape[1:] != (agents, 2):
@@ -139,53 +140,19 @@ def check_history(obs: Observation) -> None:
             f"{obs.n_robots} robots then the {obs.n_humans} humans, in the order of robot_positions and "
             "human_positions"
         )
+    check_positions(obs)  # said as such, not as a history that differs from the positions (NaN differs)
     now = np.concatenate([obs.robot_positions, obs.human_positions]).astype(float)
-    lost = ~np.isfinite(now).all(axis=1)
-    if lost.any():  # said as such, not as a history that differs from the positions (NaN differs)
-        i = int(np.flatnonzero(lost)[0])
-        who, field = _agent(obs, i)
-        raise PipelineError(
-            f"{field} holds a position that is not finite ({who} at {now[i].tolist()}); a controller plans "
-            "from every agent's current position (hand it only the people tracked now)"
-        )
     # NaN differs; a float32 history (a tracker's) is its positions rounded: 9e-8 m at 3 m, 6e-5 m at 1 km
     eps = np.finfo(history.dtype).eps if np.issubdtype(history.dtype, np.floating) else 0.0
     differs = ~np.all(np.abs(history[-1] - now) <= 1e-9 + 2 * eps * np.abs(now), axis=1)
     if differs.any():
         i = int(np.flatnonzero(differs)[0])
-        who, field = _agent(obs, i)
+        who, field = agent(obs, i)
         raise PipelineError(
             f"obs.history[-1] (now) is not the agents' positions: {who} is at {history[-1, i].tolist()} "
             f"there but at {now[i].tolist()} in {field} ({int(differs.sum())} agent(s) differ); row -1 of "
             "the history must be the current positions, robots first"
         )
-
-
-def _check_fields(obs: Observation) -> None:
-    """PipelineError naming the first of the robots' and humans' fields that is not one row per agent: a
-    one-robot ``robot_reached`` for three robots was stretched to all three (each taken as arrived), other
-    shapes failed in numpy's words."""
-    m, n = obs.n_robots, obs.n_humans
-    for name, shape in (
-        ("robot_positions", (m, 2)),
-        ("robot_velocities", (m, 2)),
-        ("robot_goals", (m, 2)),
-        ("robot_last_actions", (m, 2)),
-        ("robot_reached", (m,)),
-        ("human_positions", (n, 2)),
-        ("human_velocities", (n, 2)),
-    ):
-        got = np.shape(getattr(obs, name))
-        if got != shape:
-            agents = "robot of obs.robot_positions" if name.startswith("robot") else "human"
-            raise PipelineError(f"obs.{name} has shape {got}, expected {shape}: one row per {agents}")
-
-
-def _agent(obs: Observation, i: int) -> tuple[str, str]:
-    """Agent ``i`` of the history's columns (robots, then humans) and the field that holds its position."""
-    if i < obs.n_robots:
-        return f"robot {i}", "obs.robot_positions"
-    return f"human {i - obs.n_robots}", "obs.human_positions"
 
 
 def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None:

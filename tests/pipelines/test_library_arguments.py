@@ -76,3 +76,30 @@ def test_read_recording_names_a_path_and_topics_of_the_wrong_kind(tmp_path):
     assert str(refused.value) == (
         "topics must be a list of topics, e.g. ['/episode/metrics'], got the string itself"
     )
+
+
+@pytest.mark.parametrize("controller", ["orca", "straight", "cmpc"])
+@pytest.mark.parametrize(
+    ("field", "message"),
+    [
+        (
+            "human_positions",
+            "obs.human_positions holds a position that is not finite (human 1 at [nan, nan])",
+        ),
+        ("robot_velocities", "obs.robot_velocities holds a value that is not finite (row 1: [nan, nan])"),
+        ("robot_goals", "obs.robot_goals holds a value that is not finite (row 1: [nan, nan])"),
+    ],
+)
+def test_every_shipped_controller_refuses_a_state_that_is_not_finite(controller, field, message):
+    """ORCA and the straight line returned NaN accelerations (or planned around NaN humans as if absent);
+    the MPC's NaN velocities failed as "states must be finite rows ... of shape (M, 4), got shape (3, 4)"."""
+    from crowdsim.env import CrowdEnv
+
+    obs = CrowdEnv().reset(0, "circle", 3)
+    built = make_controller(ControllerSpec(controller))
+    built.reset(obs)
+    values = np.array(getattr(obs, field), dtype=float)
+    values[1] = np.nan
+    with pytest.raises(PipelineError) as refused:
+        built.act(dataclasses.replace(obs, **{field: values}))
+    assert str(refused.value).startswith(message)

@@ -1,0 +1,66 @@
+"""What a controller is handed, checked before it plans: one finite row per agent in each of an
+observation's current fields (``check_fields``; the MPC checks its history too, pipelines.loop.mpc_setup)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdsim.env import Observation
+from pipelines.errors import PipelineError
+
+
+def check_fields(obs: Observation) -> None:
+    """PipelineError naming the first of the robots' and humans' fields that is not one row per agent: a
+    one-robot ``robot_reached`` for three robots was stretched to all three (each taken as arrived), other
+    shapes failed in numpy's words."""
+    m, n = obs.n_robots, obs.n_humans
+    for name, shape in (
+        ("robot_positions", (m, 2)),
+        ("robot_velocities", (m, 2)),
+        ("robot_goals", (m, 2)),
+        ("robot_last_actions", (m, 2)),
+        ("robot_reached", (m,)),
+        ("human_positions", (n, 2)),
+        ("human_velocities", (n, 2)),
+    ):
+        got = np.shape(getattr(obs, name))
+        if got != shape:
+            agents = "robot of obs.robot_positions" if name.startswith("robot") else "human"
+            raise PipelineError(f"obs.{name} has shape {got}, expected {shape}: one row per {agents}")
+        if name in ("robot_reached", "robot_positions", "human_positions"):  # positions: check_positions
+            continue
+        finite = np.isfinite(np.asarray(getattr(obs, name), dtype=float)).all(axis=1)
+        if not finite.all():  # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
+            row = int(np.flatnonzero(~finite)[0])
+            raise PipelineError(
+                f"obs.{name} holds a value that is not finite (row {row}: "
+                f"{np.asarray(getattr(obs, name))[row].tolist()}); a controller plans from the current state"
+            )
+
+
+def check_positions(obs: Observation) -> None:
+    """PipelineError naming the first agent whose current position is not finite."""
+    now = np.concatenate([obs.robot_positions, obs.human_positions]).astype(float)
+    lost = ~np.isfinite(now).all(axis=1)
+    if lost.any():
+        i = int(np.flatnonzero(lost)[0])
+        who, field = agent(obs, i)
+        raise PipelineError(
+            f"{field} holds a position that is not finite ({who} at {now[i].tolist()}); a controller plans "
+            "from every agent's current position (hand it only the people tracked now)"
+        )
+
+
+def agent(obs: Observation, i: int) -> tuple[str, str]:
+    """Agent ``i`` of the history's columns (robots, then humans) and the field that holds its position."""
+    if i < obs.n_robots:
+        return f"robot {i}", "obs.robot_positions"
+    return f"human {i - obs.n_robots}", "obs.human_positions"
+
+
+def check_state(obs: Observation) -> None:
+    """``check_fields`` and ``check_positions`` of an observation a controller without a history acts on
+    (ORCA, the straight line): NaN positions handed to them gave NaN accelerations, or humans planned around
+    as if absent, where the MPC refused them."""
+    check_fields(obs)
+    check_positions(obs)
