@@ -57,6 +57,8 @@ def trained_prediction_length(name: str | None) -> int | None:
 
 
 def load_predictor(name: str) -> Predictor:
+    if not isinstance(name, str):  # a list was "unhashable type: 'list'"
+        raise UnknownPredictor(name, available())
     if name in PREDICTORS:
         return PREDICTORS[name]()
     located = zoo.locate(name)

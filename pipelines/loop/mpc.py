@@ -45,6 +45,7 @@ from mpc.stall import StallWatch
 from pipelines.errors import NoTwinWarning, PipelineError, interrupt_behind
 from pipelines.loop.margins import observed_classes
 from pipelines.loop.mpc_setup import (
+    SolversHeld,
     check_coupling,
     check_history,
     check_margins_world,
@@ -70,7 +71,7 @@ if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig
 
 
-class MPCController:
+class MPCController(SolversHeld):
     """Algorithm 1 (``distributed=False``), Algorithm 2 (``True``) or the coupled NLP (``coupling="nlp"``)."""
 
     def __init__(

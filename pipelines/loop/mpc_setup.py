@@ -10,7 +10,7 @@ the predictor reads (``predictor_history``).
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
@@ -44,6 +44,17 @@ def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORL
     cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
     cfg = cfg.replace(jit=spec.coupling != "nlp" and (jit or cfg.jit))
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
+
+
+class SolversHeld:
+    """A controller holding built CasADi solvers (SWIG objects): ``copy.deepcopy`` and ``pickle`` failed
+    with "cannot pickle 'SwigPyObject'"; the refusal says what to do instead."""
+
+    def __reduce__(self) -> NoReturn:
+        raise PipelineError(
+            f"{type(self).__name__} holds built CasADi solvers, which cannot be copied or pickled: build "
+            "another with make_controller(spec, env_config), or pickle its ControllerSpec"
+        )
 
 
 def check_coupling(spec: ControllerSpec, distributed: bool, model: Predictor | None = None) -> None:

@@ -103,3 +103,26 @@ def test_every_shipped_controller_refuses_a_state_that_is_not_finite(controller,
     with pytest.raises(PipelineError) as refused:
         built.act(dataclasses.replace(obs, **{field: values}))
     assert str(refused.value).startswith(message)
+
+
+def test_small_things_a_notebook_does_with_the_mpc_and_the_registry():
+    """A controller copied or pickled failed with "cannot pickle 'SwigPyObject'"; margins as a numpy array
+    were refused as "must be a sequence of 4 numbers, got array([...])"; a list of predictors was
+    "unhashable type: 'list'"."""
+    import copy
+    import pickle
+
+    from mpc.config import MPCConfig
+    from predictors.errors import UnknownPredictor
+    from predictors.registry import load_predictor
+
+    controller = make_controller(ControllerSpec("dmpc"))
+    for copied in (copy.deepcopy, pickle.dumps):
+        with pytest.raises(
+            PipelineError, match=r"^MPCController holds built CasADi solvers, which cannot be"
+        ):
+            copied(controller)
+    assert pickle.loads(pickle.dumps(ControllerSpec("dmpc"))) == ControllerSpec("dmpc")
+    assert MPCConfig(human_margins=np.array([0.1, 0.2, 0.3, 0.4])).human_margins == (0.1, 0.2, 0.3, 0.4)
+    with pytest.raises(UnknownPredictor, match=r"^unknown predictor \['social_lstm_eth'\]; choose from"):
+        load_predictor(["social_lstm_eth"])  # type: ignore[arg-type]
