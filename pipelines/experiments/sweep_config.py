@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+import numpy as np
+
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
@@ -23,6 +25,7 @@ from pipelines.experiments.cells import Experiment
 from pipelines.experiments.deadline import check_timeout
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import RECORD_POLICIES
+from predictors.errors import short_repr
 
 # Upper bounds checked before any worker starts (a typo must not become thousands of failing episodes): the
 # paper runs 1000 episodes per cell (cells.PAPER_EPISODES_PER_CELL); workers are Ray actors at most (a local
@@ -51,6 +54,17 @@ class SweepConfig:
     run_config: Mapping[str, Any] | None = field(default=None, compare=False)
 
     def __post_init__(self):
+        if not isinstance(self.experiment, Experiment):
+            raise PipelineError(
+                f"SweepConfig's experiment must be an Experiment, got {short_repr(self.experiment)}"
+            )
+        for name in ("episodes_per_cell", "seed", "n_robots", "workers"):  # a float failed deep in range()
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise PipelineError(f"SweepConfig's {name} must be an int, got {short_repr(value)}")
+            object.__setattr__(self, name, int(value))
+        if self.seed < 0:
+            raise PipelineError(f"--seed must be at least 0, got {self.seed}")
         if self.episodes_per_cell < 1:
             raise PipelineError(f"--episodes-per-cell must be at least 1, got {self.episodes_per_cell}")
         if self.episodes_per_cell > MAX_EPISODES_PER_CELL:

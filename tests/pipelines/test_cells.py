@@ -93,7 +93,7 @@ def test_an_experiment_needs_distinct_labels_and_some_humans():
     spec = ControllerSpec("orca")
     with pytest.raises(PipelineError, match=r"needs distinct method labels, got \['A', 'A'\]"):
         Experiment("x", "X", methods=(("A", spec), ("A", spec)), humans=(5,))
-    with pytest.raises(PipelineError, match="has no numbers of humans"):
+    with pytest.raises(PipelineError, match=r"humans must be numbers of humans in 1\.\.50, got \(\)"):
         Experiment("x", "X", methods=(("A", spec),), humans=())
 
 

@@ -126,3 +126,39 @@ def test_small_things_a_notebook_does_with_the_mpc_and_the_registry():
     assert MPCConfig(human_margins=np.array([0.1, 0.2, 0.3, 0.4])).human_margins == (0.1, 0.2, 0.3, 0.4)
     with pytest.raises(UnknownPredictor, match=r"^unknown predictor \['social_lstm_eth'\]; choose from"):
         load_predictor(["social_lstm_eth"])  # type: ignore[arg-type]
+
+
+def test_an_experiment_and_a_sweep_config_built_by_hand_are_checked_before_any_work(tmp_path):
+    """Each failed deep inside (a str as a spec, an int as humans, a float as a count), or ran with every
+    episode in errors.jsonl (99 humans, seed 1.5), leaving a sweep folder behind."""
+    from pathlib import Path
+
+    from pipelines.experiments.cells import Experiment
+    from pipelines.experiments.sweep_config import SweepConfig
+
+    def experiment(**changes):
+        values = {"name": "mine", "title": "t", "methods": (("ORCA", ORCA),), "humans": (2,)} | changes
+        return Experiment(**values)
+
+    for changes, message in (
+        ({"methods": (("ORCA", "orca"),)}, "methods must be (label, ControllerSpec) pairs"),
+        ({"methods": {"ORCA": ORCA}}, "methods must be (label, ControllerSpec) pairs"),
+        ({"humans": 2}, "humans must be numbers of humans in 1..50, got 2"),
+        ({"humans": (99,)}, "humans must be numbers of humans in 1..50, got (99,)"),
+        ({"method_robots": {"nope": 2}}, "method_robots names no method: ['nope']"),
+    ):
+        with pytest.raises(PipelineError) as refused:
+            experiment(**changes)
+        assert str(refused.value).startswith(f"experiment 'mine': {message}")
+    for arguments, message in (
+        ({"episodes_per_cell": 1.5}, "SweepConfig's episodes_per_cell must be an int, got 1.5"),
+        ({"seed": 1.5}, "SweepConfig's seed must be an int, got 1.5"),
+        ({"n_robots": 2.0}, "SweepConfig's n_robots must be an int, got 2.0"),
+    ):
+        with pytest.raises(PipelineError) as refused:
+            SweepConfig(
+                **({"experiment": experiment(), "out": Path(tmp_path), "episodes_per_cell": 1} | arguments)
+            )
+        assert str(refused.value) == message
+    assert SweepConfig(experiment(), tmp_path, np.int64(2)).episodes_per_cell == 2
+    assert list(tmp_path.iterdir()) == []
