@@ -325,7 +325,11 @@ class MPCConfig:
             value = getattr(self, f.name)
             if isinstance(value, np.generic):
                 object.__setattr__(self, f.name, value.item())
-            elif f.name == "human_margins" and isinstance(value, tuple | list | np.ndarray):
+            elif (
+                f.name == "human_margins"
+                and isinstance(value, tuple | list | np.ndarray)
+                and np.ndim(value) == 1
+            ):
                 # an array too: "must be a sequence of 4 numbers, got array([0.1, 0.1, 0.1, 0.1])" refused one
                 plain = [m.item() if isinstance(m, np.generic) else m for m in value]
                 object.__setattr__(self, f.name, list(plain) if isinstance(value, list) else tuple(plain))

@@ -12,7 +12,7 @@ from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.sweep_checks import check_plan, check_replays, method_notes
 from pipelines.commands.sweep_help import EPILOG
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
-from pipelines.commands.sweep_plan import check_world, configured_experiment
+from pipelines.commands.sweep_plan import check_iterations_recorded, check_world, configured_experiment
 from pipelines.errors import PipelineError, SweepStopped
 
 if TYPE_CHECKING:
@@ -334,6 +334,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
         check_sweep_directory(out, cfg.label("sweep", "out"))
     check_world(cfg)
     if not args.report_only:  # a report starts no worker
+        check_iterations_recorded(cfg)
         _check_this_machine(cfg)
     return cfg, out
 

@@ -239,13 +239,6 @@ def check_world(cfg: RunConfig) -> None:
     _check_scenario(cfg)
     _check_simulate(cfg)
     check_recording(cfg)
-    if cfg.controller.record_iterations and cfg.sweep.record == "none":  # as simulate refuses it
-        raise cfg.error(
-            "controller",
-            "record_iterations",
-            "the iterations are written to the MCAP recordings; give --record failures or all too (or "
-            "[sweep] record)",
-        )
     why = (
         "a sweep's cells share Table I's world facts (time step, history, radius, bounds), which the "
         "controllers and predictors are built for; [world] values apply to simulate only"
@@ -253,6 +246,18 @@ def check_world(cfg: RunConfig) -> None:
     for key in cfg.values["world"]:
         if _asked(cfg, "world", key, cfg.default("world", key)):
             raise cfg.error("world", key, f"{cfg.values['world'][key]!r}: {why}")
+
+
+def check_iterations_recorded(cfg: RunConfig) -> None:
+    """Refuse ``record_iterations`` with nothing recorded, as simulate does: of a sweep about to run, not of
+    one reported (``--report-only``), whose recorded config the older code ran as it was."""
+    if cfg.controller.record_iterations and cfg.sweep.record == "none":  # as simulate refuses it
+        raise cfg.error(
+            "controller",
+            "record_iterations",
+            "the iterations are written to the MCAP recordings; give --record failures or all too (or "
+            "[sweep] record)",
+        )
 
 
 def env_settings(cfg: RunConfig) -> dict[str, Any]:

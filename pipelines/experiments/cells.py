@@ -15,7 +15,6 @@ from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 from typing import Any, Final
 
-from crowdsim.scenarios import MAX_HUMANS
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import PipelineError
 
@@ -40,10 +39,9 @@ from pipelines.experiments.paper import (
     PAPER_TABLE_III,
     PaperFigures,
 )
-from pipelines.experiments.tasks import Cell, EpisodeTask, World, scenario_schedule
+from pipelines.experiments.tasks import Cell, EpisodeTask, World, checked_experiment, scenario_schedule
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.margins import MarginSpec
-from predictors.errors import short_repr
 from predictors.oracle import ORACLE_PREDICTOR
 
 PAPER_EPISODES_PER_CELL: Final[int] = 1000  # Section VI: 500 circle + 500 perpendicular crossing per cell
@@ -84,28 +82,8 @@ class Experiment:
     controller_list: bool = False
 
     def __post_init__(self):
-        pairs = self.methods
-        if not isinstance(pairs, tuple | list) or not all(
-            isinstance(m, tuple) and len(m) == 2 and isinstance(m[1], ControllerSpec) for m in pairs
-        ):
-            raise PipelineError(
-                f"experiment {self.name!r}: methods must be (label, ControllerSpec) pairs, got "
-                f"{short_repr(self.methods)}"
-            )
-        labels = [label for label, _ in self.methods]
-        if not labels or len(set(labels)) != len(labels):
-            raise PipelineError(f"experiment {self.name!r} needs distinct method labels, got {labels}")
-        humans = self.humans if isinstance(self.humans, tuple | list) else None
-        if not humans or not all(
-            isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_HUMANS for n in humans
-        ):
-            raise PipelineError(
-                f"experiment {self.name!r}: humans must be numbers of humans in 1..{MAX_HUMANS}, got "
-                f"{short_repr(self.humans)}"
-            )
-        unknown = sorted(set(self.method_robots) - set(labels))
-        if unknown:
-            raise PipelineError(f"experiment {self.name!r}: method_robots names no method: {unknown}")
+        humans = checked_experiment(self.name, self.methods, self.humans, self.method_robots)
+        object.__setattr__(self, "humans", humans)  # np.arange's counts too, as ints
 
     def __reduce__(self) -> tuple[Any, ...]:
         # A read-only mapping cannot be pickled nor deep-copied: a SweepConfig sent to a background process

@@ -79,6 +79,12 @@ class SweepConfig:
             raise PipelineError(f"unknown --record {self.record!r}; choose from {list(RECORD_POLICIES)}")
         if self.backend not in BACKENDS:
             raise PipelineError(f"unknown backend {self.backend!r}; choose from {list(BACKENDS)}")
+        if self.humans is not None:  # (5.5,) failed deep inside
+            if isinstance(self.humans, str | bytes) or not all(
+                isinstance(n, int | np.integer) and not isinstance(n, bool) for n in self.humans
+            ):
+                raise PipelineError(f"--humans must list numbers of humans, got {short_repr(self.humans)}")
+            object.__setattr__(self, "humans", tuple(int(n) for n in self.humans))
         if self.humans is not None and (not self.humans or min(self.humans) < 1):
             raise PipelineError(f"--humans must list positive numbers, got {self.humans}")
         if self.humans is not None and max(self.humans) > MAX_HUMANS:

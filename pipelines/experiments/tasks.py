@@ -13,15 +13,18 @@ The experiments these make up, and the registry of those the project ships, are 
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.profiles import PROFILES, VISIBILITY, make_env_config
 from crowdsim.replay import CROWDS
+from crowdsim.scenarios import MAX_HUMANS
 from crowdsim.world import PAPER_ROBOTS, is_sensor_range
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec
+from predictors.errors import short_repr
 
 if TYPE_CHECKING:
     from crowdsim.env_config import EnvConfig
@@ -179,3 +182,31 @@ def scenario_schedule(episodes: int, seed: int = 0) -> list[tuple[str, int]]:
     if seed < 0:
         raise PipelineError(f"the base seed must be non-negative, got {seed}")
     return [(SCENARIOS[i % 2], seed + i // 2) for i in range(episodes)]
+
+
+def checked_experiment(name: str, methods: Any, humans: Any, method_robots: Any) -> tuple[int, ...]:
+    """An ``Experiment``'s humans as ints, once its methods are (label, ControllerSpec) pairs of distinct
+    labels, its humans numbers in 1..MAX_HUMANS (numpy's too) and its ``method_robots`` of its methods;
+    PipelineError naming the field otherwise (a str spec, an int for humans failed deep inside; 99 humans ran
+    every episode into errors.jsonl)."""
+    if not isinstance(methods, tuple | list) or not all(
+        isinstance(m, tuple) and len(m) == 2 and isinstance(m[1], ControllerSpec) for m in methods
+    ):
+        raise PipelineError(
+            f"experiment {name!r}: methods must be (label, ControllerSpec) pairs, got {short_repr(methods)}"
+        )
+    labels = [label for label, _ in methods]
+    if not labels or len(set(labels)) != len(labels):
+        raise PipelineError(f"experiment {name!r} needs distinct method labels, got {labels}")
+    counts = humans if isinstance(humans, tuple | list) else ()
+    if not counts or not all(
+        isinstance(n, numbers.Integral) and not isinstance(n, bool) and 1 <= n <= MAX_HUMANS for n in counts
+    ):
+        raise PipelineError(
+            f"experiment {name!r}: humans must be numbers of humans in 1..{MAX_HUMANS}, got "
+            f"{short_repr(humans)}"
+        )
+    unknown = sorted(set(method_robots) - set(labels))
+    if unknown:
+        raise PipelineError(f"experiment {name!r}: method_robots names no method: {unknown}")
+    return tuple(int(n) for n in counts)

@@ -76,7 +76,7 @@ class EpisodeResult:
     human_positions: np.ndarray = field(repr=False)  # (T+1, N, 2) m
     robot_goals: np.ndarray = field(repr=False)  # (M, 2) m
     human_goals: np.ndarray = field(repr=False)  # (N, 2) m
-    solve_times_s: np.ndarray = field(repr=False)  # (T,) s, wall time of each control step
+    solve_times_s: np.ndarray = field(repr=False, compare=False)  # (T,) s, wall time of each control step
     statuses: tuple[str, ...] = field(repr=False)  # (T,) solver status per control step
     fallbacks: tuple[str | None, ...] = field(repr=False)  # (T,) None or the fallback used
     iterations: np.ndarray = field(repr=False)  # (T,) int, IBR iterations per control step
@@ -85,11 +85,12 @@ class EpisodeResult:
 
     def __eq__(self, other: object) -> bool:
         """Field by field, arrays by their values and NaN equal to NaN (the generated ``==`` asked numpy for
-        one truth value of an array: a ValueError). Two runs of one seed differ in ``solve_times_s``, wall
-        times: ``metrics`` and the trajectories are what a seed repeats."""
+        one truth value of an array: a ValueError); the wall times of the steps (``solve_times_s``) are not
+        compared, so two runs of one seed are equal."""
         if not isinstance(other, EpisodeResult):
             return NotImplemented
-        return all(_same(getattr(self, f.name), getattr(other, f.name)) for f in dataclasses.fields(self))
+        compared = (f.name for f in dataclasses.fields(self) if f.compare)
+        return all(_same(getattr(self, name), getattr(other, name)) for name in compared)
 
     def record(self) -> EpisodeRecord:
         """The episode without its trajectories: what every report and log serialises."""
@@ -112,6 +113,8 @@ def _same(a: Any, b: Any) -> bool:
         return a.shape == b.shape and bool(np.all((a == b) | (_nan(a) & _nan(b))))
     if dataclasses.is_dataclass(a) and type(a) is type(b):
         return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, tuple | list) and type(a) is type(b):  # reach_times: NaN for a robot that never arrived
+        return len(a) == len(b) and all(map(_same, a, b))
     if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
         return True
     return bool(a == b)

@@ -27,7 +27,8 @@ def check_fields(obs: Observation) -> None:
         if got != shape:
             agents = "robot of obs.robot_positions" if name.startswith("robot") else "human"
             raise PipelineError(f"obs.{name} has shape {got}, expected {shape}: one row per {agents}")
-        if name in ("robot_reached", "robot_positions", "human_positions"):  # positions: check_positions
+        # positions: check_positions; the humans' velocities only ORCA (and its oracle) read: check_state
+        if name in ("robot_reached", "robot_positions", "human_positions", "human_velocities"):
             continue
         finite = np.isfinite(np.asarray(getattr(obs, name), dtype=float)).all(axis=1)
         if not finite.all():  # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
@@ -64,3 +65,10 @@ def check_state(obs: Observation) -> None:
     as if absent, where the MPC refused them."""
     check_fields(obs)
     check_positions(obs)
+    finite = np.isfinite(np.asarray(obs.human_velocities, dtype=float)).all(axis=1)
+    if not finite.all():  # ORCA avoids the humans by their velocities
+        row = int(np.flatnonzero(~finite)[0])
+        raise PipelineError(
+            f"obs.human_velocities holds a value that is not finite (row {row}: "
+            f"{np.asarray(obs.human_velocities)[row].tolist()}); ORCA plans with the humans' velocities"
+        )

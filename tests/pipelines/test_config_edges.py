@@ -307,6 +307,14 @@ def test_a_sweep_refuses_recorded_iterations_it_would_not_record_and_cuts_long_v
         "recordings; give --record failures or all too (or [sweep] record)\n"
     )
     assert main(["--set", "controller.record_iterations=true", *sweep, "--record", "failures"]) == 0
+    # a sweep reported (--report-only) is of its recorded config, which older code ran as it was
+    from pipelines.commands.sweep_plan import check_iterations_recorded, check_world
+    from pipelines.config import load
+
+    recorded = load(sets=["controller.record_iterations=true", "sweep.experiment=table2"])
+    check_world(recorded)
+    with pytest.raises(ConfigError, match="the iterations are written to the MCAP recordings"):
+        check_iterations_recorded(recorded)
     path = tmp_path / "long.toml"
     path.write_text(f'[controller]\npredictor = "{"a" * 900_000}"\n', encoding="utf-8")
     capsys.readouterr()
