@@ -200,7 +200,8 @@ def checked_experiment(name: str, methods: Any, humans: Any, method_robots: Any)
         raise PipelineError(f"experiment {name!r} needs distinct method labels, got {labels}")
     counts = humans if isinstance(humans, tuple | list) else ()
     if not counts or not all(
-        isinstance(n, numbers.Integral) and not isinstance(n, bool) and 1 <= n <= MAX_HUMANS for n in counts
+        isinstance(n, numbers.Integral) and not isinstance(n, bool) and 1 <= int(n) <= MAX_HUMANS
+        for n in counts
     ):
         raise PipelineError(
             f"experiment {name!r}: humans must be numbers of humans in 1..{MAX_HUMANS}, got "
