@@ -752,19 +752,30 @@ def test_the_blocks_of_a_calibrate_killed_in_its_held_out_run_are_taken_back_by_
     assert not list(tmp_path.glob(".calibrate-holdout.*"))
 
 
-def test_a_killed_calibrates_journal_under_this_runs_own_pid_is_taken_back(tmp_path, monkeypatch, capsys):
-    """In a container every run is PID 1: the journal a killed calibrate left had the next one's PID, which
-    is alive (it is that very run), so its block stayed in force and the new run's journal replaced it."""
+def _killed_runs_journal(tmp_path, monkeypatch):
+    """A user zoo in ``tmp_path`` whose calibrations file holds the block of a calibrate killed during its
+    held-out run, over no earlier file, and the journal it left under this process's PID: (file, journal,
+    block)."""
     from pipelines.cli import main
     from predictors.calibration_store import read_calibration_file
 
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
     path = tmp_path / "calibrations.json"
     _episodes(monkeypatch)
-    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0  # the killed run's block, over no earlier file
+    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0
     (block,) = read_calibration_file(path)
     journal = tmp_path / f".calibrate-holdout.{os.getpid()}.json"
     journal.write_text(json.dumps({"stored": [block.to_json()], "earlier": None}))
+    return path, journal, block
+
+
+def test_a_killed_calibrates_journal_under_this_runs_own_pid_is_taken_back(tmp_path, monkeypatch, capsys):
+    """In a container every run is PID 1: the journal a killed calibrate left had the next one's PID, which
+    is alive (it is that very run), so its block stayed in force and the new run's journal replaced it."""
+    from pipelines.cli import main
+    from predictors.calibration_store import read_calibration_file
+
+    path, journal, _ = _killed_runs_journal(tmp_path, monkeypatch)
     capsys.readouterr()
     assert main([*CALIBRATE, "--alpha", "0.2"]) == 0
     assert f"(pid {os.getpid()}) did not finish" in capsys.readouterr().out
@@ -781,13 +792,7 @@ def test_runs_planning_with_calibrated_margins_take_a_killed_calibrates_blocks_b
     from pipelines.commands.calibrate_store import take_back_before_planning
     from predictors.calibration_store import read_calibration_file
 
-    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
-    path = tmp_path / "calibrations.json"
-    _episodes(monkeypatch)
-    assert main([*CALIBRATE, "--alpha", "0.3"]) == 0  # the killed run's block, over no earlier file
-    (block,) = read_calibration_file(path)
-    journal = tmp_path / f".calibrate-holdout.{os.getpid()}.json"
-    journal.write_text(json.dumps({"stored": [block.to_json()], "earlier": None}))
+    path, journal, block = _killed_runs_journal(tmp_path, monkeypatch)
     take_back_before_planning([parse_margins("none"), parse_margins("fixed:0.1,0.1,0.1,0.1")])
     assert journal.exists() and read_calibration_file(path) == [block]  # no calibrated margins: untouched
     take_back_before_planning([parse_margins("none"), parse_margins("conformal-motion:0.3")])
