@@ -96,11 +96,43 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
             "--sensor-range M too (or [simulate] sensor_range)"
         )
     check_recording(config)
+    _check_where_chosen(config, spec)
     if spec.record_iterations and config.simulate.record is None:
         raise PipelineError(
             f"{config.label('controller', 'record_iterations')}: the iterations are written to the MCAP "
             "recordings; give --record DIR too (or [simulate] record)"
         )
+
+
+def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
+    """The run's own checks of its predictor's name, fixed margins' length and d_min, made now for a value a
+    file or ``--set`` chose, so that the refusal names where it came from ("run.toml: controller.predictor:
+    unknown predictor 'nope'"); those checks, as the controller is built, named the key at most."""
+    from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
+    from predictors.errors import UnknownPredictor
+    from predictors.registry import PREDICTORS, available
+
+    def chosen(section: str, key: str) -> bool:
+        source = config.source(section, key)
+        return source is not None and source.kind != "cli"
+
+    name = spec.predictor_name
+    if chosen("controller", "predictor") and name is not None and name not in PREDICTORS:
+        known = available()
+        if name not in known:
+            raise config.error("controller", "predictor", str(UnknownPredictor(name, known)))
+    if spec.controller not in MPC_CONTROLLERS:
+        return
+    mpc = mpc_config(spec, world=config.world)
+    values = spec.margins.values
+    if chosen("controller", "margins") and spec.margins.mode == "fixed" and len(values) != mpc.horizon:
+        message = f"fixed margins need one value per horizon step ({mpc.horizon}), got {len(values)}"
+        raise config.error("controller", "margins", message)
+    if chosen("mpc", "d_min"):
+        try:
+            check_contact_distance(config.world, mpc)
+        except PipelineError as exc:
+            raise config.error("mpc", "d_min", str(exc)) from None
 
 
 def check_recording(config: RunConfig) -> None:

@@ -321,3 +321,31 @@ def test_a_sweep_refuses_recorded_iterations_it_would_not_record_and_cuts_long_v
     assert main(["--config", str(path), "simulate", "--controller", "orca", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert len(err) < 400 and f"{path}: controller.predictor {'a' * 77}...: controller 'orca'" in err
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            'predictor = "nope"\n',
+            "controller.predictor: unknown predictor 'nope'; choose from ['constant_velocity'",
+        ),
+        (
+            'margins = "fixed:0.1,0.2"\n',
+            "controller.margins: fixed margins need one value per horizon step (4), got 2",
+        ),
+        (
+            "[mpc]\nd_min = 0.5\n",
+            "mpc.d_min: the MPC's d_min 0.5 m is below the contact distance 2 x [world] radius",
+        ),
+    ],
+)
+def test_a_value_the_run_refuses_names_the_file_it_came_from(text, message, tmp_path, capsys):
+    """These were refused as the controller was built, naming the key at most ("unknown predictor 'nope'")."""
+    from pipelines.cli import main
+
+    path = tmp_path / "x.toml"
+    path.write_text('[controller]\ncontroller = "cmpc"\n' + text, encoding="utf-8")
+    capsys.readouterr()
+    assert main(["--config", str(path), "simulate", "--humans", "2", "--no-progress"]) == 2
+    assert capsys.readouterr().err.startswith(f"crowdmpc simulate: error: {path}: {message}")
