@@ -30,13 +30,19 @@ def check_fields(obs: Observation) -> None:
         # positions: check_positions; the humans' velocities only ORCA (and its oracle) read: check_state
         if name in ("robot_reached", "robot_positions", "human_positions", "human_velocities"):
             continue
-        finite = np.isfinite(np.asarray(getattr(obs, name), dtype=float)).all(axis=1)
-        if not finite.all():  # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
-            row = int(np.flatnonzero(~finite)[0])
-            raise PipelineError(
-                f"obs.{name} holds a value that is not finite (row {row}: "
-                f"{np.asarray(getattr(obs, name))[row].tolist()}); a controller plans from the current state"
-            )
+        # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
+        _check_finite(obs, name, "a controller plans from the current state")
+
+
+def _check_finite(obs: Observation, name: str, why: str) -> None:
+    """PipelineError naming the first row of field ``name`` that is not finite, and ``why`` it matters."""
+    values = np.asarray(getattr(obs, name))
+    finite = np.isfinite(values.astype(float)).all(axis=1)
+    if not finite.all():
+        row = int(np.flatnonzero(~finite)[0])
+        raise PipelineError(
+            f"obs.{name} holds a value that is not finite (row {row}: {values[row].tolist()}); {why}"
+        )
 
 
 def check_positions(obs: Observation) -> None:
@@ -65,10 +71,4 @@ def check_state(obs: Observation) -> None:
     as if absent, where the MPC refused them."""
     check_fields(obs)
     check_positions(obs)
-    finite = np.isfinite(np.asarray(obs.human_velocities, dtype=float)).all(axis=1)
-    if not finite.all():  # ORCA avoids the humans by their velocities
-        row = int(np.flatnonzero(~finite)[0])
-        raise PipelineError(
-            f"obs.human_velocities holds a value that is not finite (row {row}: "
-            f"{np.asarray(obs.human_velocities)[row].tolist()}); ORCA plans with the humans' velocities"
-        )
+    _check_finite(obs, "human_velocities", "ORCA plans with the humans' velocities")
