@@ -128,11 +128,24 @@ def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
     if chosen("controller", "margins") and spec.margins.mode == "fixed" and len(values) != mpc.horizon:
         message = f"fixed margins need one value per horizon step ({mpc.horizon}), got {len(values)}"
         raise config.error("controller", "margins", message)
-    if chosen("mpc", "d_min"):
+    if chosen("mpc", "d_min") or chosen("world", "radius"):
+        section, key = ("mpc", "d_min") if chosen("mpc", "d_min") else ("world", "radius")
         try:
             check_contact_distance(config.world, mpc)
         except PipelineError as exc:
-            raise config.error("mpc", "d_min", str(exc)) from None
+            raise config.error(section, key, str(exc)) from None
+    if name is not None and (chosen("world", "dt") or chosen("world", "obs_len")):
+        from pipelines.loop.mpc_setup import check_world
+        from predictors.base import DT as PREDICTOR_DT
+        from predictors.registry import load_predictor
+
+        predictor = load_predictor(name)  # its history and sampling time, which the world must give
+        try:
+            check_world(config.world, mpc, predictor)
+        except PipelineError as exc:
+            # check_world's order: the predictor's sampling time, then its history
+            key = "dt" if predictor.obs_len > 1 and abs(config.world.dt - PREDICTOR_DT) > 1e-12 else "obs_len"
+            raise config.error("world", key, str(exc)) from None
 
 
 def check_recording(config: RunConfig) -> None:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, comma_items, humans_list
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.sweep_checks import check_plan, check_replays, method_notes
+from pipelines.commands.sweep_checks import check_first_episodes, check_plan, method_notes
 from pipelines.commands.sweep_help import EPILOG
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
 from pipelines.commands.sweep_plan import check_iterations_recorded, check_world, configured_experiment
@@ -267,8 +267,8 @@ def run(args: argparse.Namespace) -> int:
 
         take_back_before_planning(cell.spec.margins for cell in cells)  # a killed calibrate's blocks out
     if args.dry_run:
-        check_plan(experiment)  # a plan whose every episode would fail is not fine
-        check_replays(tasks)
+        check_plan(experiment, cfg)  # a plan whose every episode would fail is not fine
+        check_first_episodes(tasks)
         print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
         width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
         for cell in cells:
@@ -278,8 +278,8 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     log: LogRead | None = None  # None: the report reads the log
     if not args.report_only:
-        check_plan(experiment)
-        check_replays(tasks)
+        check_plan(experiment, cfg)
+        check_first_episodes(tasks)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
         # what the report takes of the log, filled as the sweep reads its records and appends new ones: the

@@ -17,27 +17,30 @@ from pipelines.commands.calibration_notes import (
 from pipelines.commands.simulate_checks import flock_note, goal_room_note, horizon_note, plugin_code_note
 from pipelines.errors import PipelineError
 
-# The first episodes of a replayed crowd, size and team drawn before a sweep runs (check_replays)
-REPLAY_TRIES: Final[int] = 8
+# The first episodes of a crowd, size, team and scenario drawn before a sweep runs (check_first_episodes)
+FIRST_TRIES: Final[int] = 8
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    from collections.abc import Iterable, Mapping
 
+    from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
     from pipelines.experiments.tasks import Cell, EpisodeTask
     from predictors.base import Predictor
 
 
-def check_predictors(experiment: Experiment) -> None:
+def check_predictors(experiment: Experiment, chosen_by: Mapping[str, str] | None = None) -> None:
     """Fail before starting workers, not once per episode in errors.jsonl: every predictor is registered or
     in a zoo, a zoo model's kind is registered (a plugin's, with --plugin, which the workers inherit), and it
     loads as simulate loads it (its files' sha256 as its manifest records them, its net's contract), each
-    refusal simulate's one line."""
+    refusal simulate's one line. ``chosen_by``: a predictor's name -> where the run chose it ("run.toml:
+    controller.predictor", "--predictors"), which its refusal names first."""
     from predictors import zoo
     from predictors.errors import PredictorError
     from predictors.models import model_kind
     from predictors.registry import PREDICTORS, available
 
+    chosen_by = chosen_by or {}
     # only the predictors some method plans with: an orca or straight column loads none, and registered ones
     # need no zoo (a damaged user manifest stopped a sweep of constant velocity and ORCA)
     wanted = {name for _, spec in experiment.methods if (name := spec.predictor_name) is not None}
@@ -46,34 +49,84 @@ def check_predictors(experiment: Experiment) -> None:
     known = set(available())
     missing = sorted(wanted - known)
     if missing:
-        hint = "--predictors" if experiment.predictor_list else "--predictor"
+        where = next((chosen_by[name] for name in missing if name in chosen_by), None)
+        option = "--predictors" if experiment.predictor_list else "--predictor"
+        hint = f"check the names {option} gives, or " if where is None else ""
         raise PipelineError(
-            f"experiment {experiment.name!r} needs predictors {missing} that are not available; "
-            f"available: {sorted(known)} (check the names {hint} gives, or train or fetch the zoo models)"
+            f"{'' if where is None else f'{where}: '}experiment {experiment.name!r} needs predictors "
+            f"{missing} that are not available; available: {sorted(known)} ({hint}train or fetch the zoo "
+            "models)"
         )
     for name in sorted(wanted):
         located = zoo.locate(name)
         if located is not None:
+            where = f"{chosen_by[name]}: " if name in chosen_by else ""
             try:
                 model_kind(located.entry.model)
             except PredictorError as exc:
-                raise PipelineError(f"predictor {name!r} of the {located.source} zoo: {exc}") from None
-            zoo.load_located(located)  # what every worker would do first, and fail at
+                raise PipelineError(f"{where}predictor {name!r} of the {located.source} zoo: {exc}") from None
+            try:
+                zoo.load_located(located)  # what every worker would do first, and fail at
+            except (PipelineError, PredictorError) as exc:
+                if not where:
+                    raise
+                raise PipelineError(f"{where}{exc}") from None
 
 
-def check_plan(experiment: Experiment) -> None:
+def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
     """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
     with them (``check_couplings``), the margins they plan with (``check_margins``) and the MPC's d_min
-    against the agents' contact distance (``check_contact_distances``)."""
+    against the agents' contact distance (``check_contact_distances``). With the run's ``cfg``, a refusal of
+    a value the run chose names where it chose it first ("run.toml: mpc.d_min: method 'CMPC' of ..."), as
+    simulate's do: they named the method alone, and a file's value looked like one of the experiment's."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
-    check_predictors(experiment)
-    check_couplings(experiment)
-    check_margins(experiment)
-    check_contact_distances(experiment)
+    check_predictors(experiment, {} if cfg is None else _predictors_chosen(cfg))
+    for check, keys in (
+        (check_couplings, (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors"))),
+        (check_margins, (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS)),
+        (check_contact_distances, (("mpc", "d_min"),)),
+    ):
+        try:
+            check(experiment)
+        except PipelineError as exc:
+            where = None if cfg is None else _chosen_where(cfg, keys)
+            if where is None:
+                raise
+            raise PipelineError(f"{where}: {exc}") from None
+
+
+# what the margins a method plans with read beside their own setting and its horizon
+SENSING_KEYS: Final = (("simulate", "sensor_range"), ("simulate", "sensor_tracks"))
+
+
+def _predictors_chosen(cfg: RunConfig) -> dict[str, str]:
+    """The predictors a file or ``--set`` names -> where (``check_predictors``' ``chosen_by``); the refusal of
+    one an option names says "check the names --predictor gives", as simulate's does."""
+    chosen: dict[str, str] = {}
+    for section, key, names in (
+        ("sweep", "predictors", cfg.sweep.predictors or ()),
+        ("controller", "predictor", (cfg.controller.predictor,) if cfg.controller.predictor else ()),
+    ):
+        source = cfg.source(section, key)
+        if source is not None and source.kind != "cli" and cfg.chosen(section, key):
+            chosen.update(dict.fromkeys(names, source.prefix(section, key)))
+    return chosen
+
+
+def _chosen_where(cfg: RunConfig, keys: tuple[tuple[str, str], ...]) -> str | None:
+    """Where the run chose what a check refused: [sweep] vary's label where it varies one of ``keys`` (the
+    refused method is one of its columns: --margins conformal:0.1 with --vary mpc.horizon=4,6 is refused
+    at 6), else the first of them the run sets; None where it sets none of them."""
+    from pipelines.commands.sweep_vary import varied
+
+    varies = {(vary.section, vary.key) for vary in varied(cfg)}
+    if varies.intersection(keys):
+        return cfg.label("sweep", "vary")
+    return next((cfg.label(section, key) for section, key in keys if cfg.chosen(section, key)), None)
 
 
 def check_couplings(experiment: Experiment) -> None:
@@ -195,38 +248,48 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
     ]
 
 
-def check_replays(tasks: Iterable[EpisodeTask]) -> None:
-    """PipelineError naming the cell when a replayed crowd cannot give any of its first ``REPLAY_TRIES``
-    episodes (too many humans for the recording, say): every episode of it raised in the workers, each after
-    its NLPs were built (42 s for the four cells of Table II at 50 humans), with a traceback in errors.jsonl
-    for the reason. Each crowd, size and team's first episodes draw their windows here, as they would; one
-    that some of them can draw is left to run (the draw depends on the seed: at 46 of ETH's people about
-    half the seeds find a window), its failures recorded as before."""
+def check_first_episodes(tasks: Iterable[EpisodeTask]) -> None:
+    """PipelineError naming the cell when a crowd cannot give any of the first ``FIRST_TRIES`` episodes of a
+    scenario: a replayed crowd's recording no window (too many humans for it, say), ORCA's humans no
+    placement (a spawn separation too wide for the arena). Every such episode raised in the workers, each
+    after its NLPs were built (42 s for the four cells of Table II at 50 humans), with a traceback in
+    errors.jsonl for the reason; ``--vary env.spawn_separation=0.1,30`` recorded the circle's episodes at 30
+    m that way and tabled its perpendicular ones alone. Each crowd, size, team and scenario's first episodes
+    are drawn here, as they would be; one that some of them can draw is left to run (the draw depends on the
+    seed: at 46 of ETH's people about half the seeds find a window), its failures recorded as before."""
     from crowdsim.env import CrowdEnv
     from crowdsim.errors import SimulationError
     from pipelines.loop.episode import replayed_recording
 
-    # (crowd's config, humans, robots) -> its first cell's label and its episodes' (seed, scenario), in order
-    firsts: dict[tuple[Any, ...], tuple[str, dict[tuple[int, str], None]]] = {}
-    keys: dict[Cell, tuple[Any, ...]] = {}  # each cell's, its config built once, not once a task
+    # (crowd's config, humans, robots, scenario) -> its first cell's label and its episodes' seeds, in order
+    firsts: dict[tuple[Any, ...], tuple[str, dict[int, None]]] = {}
+    configs: dict[Cell, Any] = {}  # each cell's, built once, not once a task
     for task in tasks:
         cell = task.cell
-        if cell.world.crowd == "orca":
-            continue
-        if cell not in keys:
-            keys[cell] = (cell.world.env_config(), cell.n_humans, cell.n_robots)
-        firsts.setdefault(keys[cell], (cell.method, {}))[1][task.seed, task.scenario] = None
-    for (config, n_humans, n_robots), (method, episodes) in firsts.items():
-        env = CrowdEnv(config, replayed_recording(config))
+        if cell not in configs:
+            configs[cell] = cell.world.env_config()
+        key = (configs[cell], cell.n_humans, cell.n_robots, task.scenario)
+        firsts.setdefault(key, (cell.method, {}))[1][task.seed] = None
+    envs: dict[Any, CrowdEnv] = {}
+    for (config, n_humans, n_robots, scenario), (method, seeds) in firsts.items():
+        if config not in envs:
+            envs[config] = CrowdEnv(config, replayed_recording(config))
         failed: SimulationError | None = None
-        for seed, scenario in list(episodes)[:REPLAY_TRIES]:
+        for seed in list(seeds)[:FIRST_TRIES]:
             try:
-                env.reset(seed, scenario, n_humans, n_robots)
+                envs[config].reset(seed, scenario, n_humans, n_robots)
                 break
             except SimulationError as exc:
                 failed = exc
         else:
-            tried = min(len(episodes), REPLAY_TRIES)
-            which = "its first episode" if tried == 1 else f"any of its first {tried} episodes"
+            tried = min(len(seeds), FIRST_TRIES)
+            which = (
+                f"its first {scenario} episode"
+                if tried == 1
+                else f"any of its first {tried} {scenario} episodes"
+            )
             where = f"cell {method!r} at {n_humans} humans, crowd {config.crowd}"
-            raise PipelineError(f"{where}: the recording gives no window for {which}: {failed}")
+            gives = (
+                "the recording gives no window" if config.crowd != "orca" else "the humans cannot be placed"
+            )
+            raise PipelineError(f"{where}: {gives} for {which}: {failed}")

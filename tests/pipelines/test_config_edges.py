@@ -338,6 +338,17 @@ def test_a_sweep_refuses_recorded_iterations_it_would_not_record_and_cuts_long_v
             "[mpc]\nd_min = 0.5\n",
             "mpc.d_min: the MPC's d_min 0.5 m is below the contact distance 2 x [world] radius",
         ),
+        # the d_min is Table I's; the radius the file's is what leaves it inside a contact
+        ("[world]\nradius = 1.0\n", "world.radius: the MPC's d_min 0.8 m is below the contact distance"),
+        (
+            'predictor = "social_lstm_eth"\n[world]\nobs_len = 3\n',
+            "world.obs_len: the predictor social_lstm_eth reads 9 observed steps but the simulator keeps 3",
+        ),
+        # both wrong: the first the controller's check refuses is the one named
+        (
+            'predictor = "social_lstm_eth"\n[world]\nobs_len = 3\ndt = 0.2\n',
+            "world.dt: the predictor social_lstm_eth reads positions sampled every 0.4 s",
+        ),
     ],
 )
 def test_a_value_the_run_refuses_names_the_file_it_came_from(text, message, tmp_path, capsys):
@@ -349,3 +360,55 @@ def test_a_value_the_run_refuses_names_the_file_it_came_from(text, message, tmp_
     capsys.readouterr()
     assert main(["--config", str(path), "simulate", "--humans", "2", "--no-progress"]) == 2
     assert capsys.readouterr().err.startswith(f"crowdmpc simulate: error: {path}: {message}")
+
+
+@pytest.mark.parametrize(
+    ("text", "options", "message"),
+    [
+        (
+            '[controller]\npredictor = "nope"\n',
+            [],
+            "{path}: controller.predictor: experiment 'table2' needs predictors ['nope'] that are not",
+        ),
+        (
+            '[controller]\nmargins = "fixed:0.1,0.2"\n',
+            [],
+            "{path}: controller.margins: method 'CMPC' of experiment 'table2': fixed margins need one value",
+        ),
+        (
+            "[mpc]\nd_min = 0.5\n",
+            [],
+            "{path}: mpc.d_min: method 'CMPC' of experiment 'table2': the MPC's d_min 0.5 m is below",
+        ),
+        (
+            '[sweep]\nvary = "mpc.d_min=0.5,1.0"\n',
+            [],
+            "{path}: sweep.vary: method 'CMPC d_min=0.5' of experiment 'table2': the MPC's d_min 0.5 m",
+        ),
+        ("", ["--margins", "fixed:0.1"], "--margins: method 'CMPC' of experiment 'table2': fixed margins"),
+        (
+            '[sweep]\npredictors = ["constant_velocity", "nope"]\n',
+            ["--experiment", "predictors"],
+            "{path}: sweep.predictors: experiment 'predictors' needs predictors ['nope'] that are not",
+        ),
+        # the column the vary adds is the one refused, not the margins every column shares
+        (
+            "",
+            ["--margins", "conformal:0.1", "--vary", "mpc.horizon=4,6"],
+            "--vary: method 'CMPC horizon=6' of experiment 'table2': the closed-loop calibration of",
+        ),
+    ],
+)
+def test_a_value_a_sweep_refuses_names_where_the_run_chose_it(text, options, message, tmp_path, capsys):
+    """A sweep's plan checks named the method alone ("method 'CMPC' of experiment 'table2': fixed margins
+    need ..."): a value a file chose looked like one of the experiment's own."""
+    from pipelines.cli import main
+
+    path = tmp_path / "x.toml"
+    path.write_text(text, encoding="utf-8")
+    sweep = ["sweep", "--experiment", "table2", "--humans", "3", "--dry-run", "--out", str(tmp_path / "s")]
+    capsys.readouterr()
+    assert main(["--config", str(path), *sweep, *options]) == 2
+    last = capsys.readouterr().err.splitlines()[-1]  # after the notes on the columns that would run
+    assert last.startswith(f"crowdmpc sweep: error: {message.format(path=path)}")
+    assert main(sweep) == 0  # the experiment's own values pass

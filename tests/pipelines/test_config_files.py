@@ -362,8 +362,8 @@ def test_a_history_shorter_than_the_predictor_reads_names_world_obs_len(capsys):
     argv = ["simulate", "--controller", "cmpc", "--humans", "1", "--no-progress", "--set", "world.obs_len=1"]
     assert main(argv) == 2
     assert _one_error_line(capsys, "simulate") == (
-        "the predictor constant_velocity reads 2 observed steps but the simulator keeps 1 ([world] obs_len): "
-        "set [world] obs_len >= 2 (e.g. --set world.obs_len=2)"
+        "--set world.obs_len: the predictor constant_velocity reads 2 observed steps but the simulator keeps "
+        "1 ([world] obs_len): set [world] obs_len >= 2 (e.g. --set world.obs_len=2)"
     )
     assert main(["config", "show"]) == 0
     (line,) = [line for line in capsys.readouterr().out.splitlines() if line.startswith("obs_len =")]

@@ -335,3 +335,23 @@ def test_report_only_names_the_columns_it_has_no_episode_of(tmp_path, capsys):
     )
     assert main([*run, "--report-only"]) == 0
     assert "no episode of" not in capsys.readouterr().err
+
+
+def test_a_column_whose_humans_cannot_be_placed_is_refused_before_any_episode(tmp_path, capsys):
+    """At a 30 m spawn separation no circle of 7 humans fits the arena: the sweep recorded each such episode's
+    traceback in errors.jsonl and tabled the perpendicular ones alone, as if the column had run."""
+    out = tmp_path / "sw"
+    sweep = ["sweep", "--experiment", "controllers", "--controllers", "straight", "--humans", "7",
+             "--episodes-per-cell", "4", "--backend", "inline", "--no-progress",
+             "--out", str(out)]  # fmt: skip
+    for dry in (["--dry-run"], []):
+        assert main([*sweep, *dry, "--vary", "env.spawn_separation=0.1,30"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(
+            "crowdmpc sweep: error: cell 'straight spawn_separation=30.0' at 7 humans, crowd orca: the "
+            "humans cannot be placed for any of its first 2 circle episodes: could not place human 1 of "
+            "n_humans=7"
+        )
+        assert not out.exists()
+    assert main([*sweep, "--vary", "env.spawn_separation=0.1,0.5"]) == 0
+    assert not (out / "errors.jsonl").exists()
