@@ -27,6 +27,7 @@ HEADER = [
     "per class",
     "weights",
     "controller",
+    "crowd (humans, profile, robots)",
     "episodes (seeds)",
     "made",
 ]
@@ -67,9 +68,25 @@ def _row(block: Calibration, user_dir: Path | None) -> list[str]:
         ", ".join(per_class) or "-",
         _weights(block, user_dir),
         str(block.details.get("controller", "-")) if block.source == "closed-loop" else "-",
+        _crowd(block),
         _episodes(block),
         block.created[:16].replace("T", " "),
     ]
+
+
+def _crowd(block: Calibration) -> str:
+    """The closed-loop crowds a block was made among: "5..9, paper, visible" (its crowd sizes, the humans'
+    profile, whether they saw the robots), "-" where not recorded; a run among others gets a note
+    (pipelines.commands.calibration_notes), and the list said nothing of them."""
+    from predictors.calibration_store import made_with
+
+    made = made_with(block)
+    if not made.get("humans"):
+        return "-"
+    sizes = [int(h) for h in made["humans"].split(",")]
+    run = len(sizes) > 2 and sizes == list(range(sizes[0], sizes[-1] + 1))
+    humans = f"{sizes[0]}..{sizes[-1]}" if run else ",".join(map(str, sizes))
+    return ", ".join([humans, *(made[key] for key in ("profile", "visibility") if key in made)])
 
 
 def _episodes(block: Calibration) -> str:
@@ -209,6 +226,7 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
         "margins: the (1 - alpha) quantile of the displacement error at horizon steps 1..H, those of "
         "--margins conformal:ALPHA[:SOURCE]; per class: the block also holds those of conformal-motion and "
         "conformal-shortfall; weights other: made for other weights, refused until recalibrated; controller, "
-        "episodes (seeds): the closed-loop episodes the block was made on"
+        "crowd, episodes (seeds): the closed-loop episodes the block was made on (crowd sizes, the humans' "
+        "profile, robots visible to them or not)"
     )
     return 0

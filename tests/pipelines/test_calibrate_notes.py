@@ -140,18 +140,22 @@ def test_a_run_planning_with_a_block_made_with_another_controller_gets_a_note():
 # -------------------------------------------------------------------- 2c: zoo calibrations, the episodes
 def test_zoo_calibrations_shows_each_blocks_controller_and_episodes():
     header, *rows = calibration_table(None, "constant_velocity")
-    columns = header.index("controller"), header.index("episodes (seeds)")
+    columns = [
+        header.index(name) for name in ("controller", "crowd (humans, profile, robots)", "episodes (seeds)")
+    ]
     made = {(r[1], r[2]): [r[i] for i in columns] for r in rows}
-    assert made["closed-loop", "0.1"] == ["cmpc", "100 (1000000..1000099)"]
-    assert made["real", "0.1"] == ["-", "-"]  # recorded scenes
+    assert made["closed-loop", "0.1"] == ["cmpc", "5..9, paper, visible", "100 (1000000..1000099)"]
+    assert made["real", "0.1"] == ["-", "-", "-"]  # recorded scenes
     shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
     older = {k: v for k, v in shipped.details.items() if k != "seeds"} | {"controller": "dmpc", "seed": 5}
+    older |= {"humans": [5, 7], "profile": "v1", "visibility": "invisible"}
     from predictors.calibration_store import save_calibration
 
     save_calibration(dataclasses.replace(shipped, details=older))  # made before the seed range was recorded
     header, *rows = calibration_table(None, "constant_velocity")
     assert [r[i] for r in rows if r[1:3] == ["closed-loop", "0.1"] for i in columns] == [
         "dmpc",
+        "5,7, v1, invisible",
         "100 (5..104)",
     ]
 
