@@ -259,8 +259,8 @@ class MarginSpec:
         """Which stored calibration the margins come from, for the records: when it was made, its data's
         sha256, the zoo whose file holds it ("shipped" or "user": a user's block of a key hides the shipped
         one) and, closed-loop, the conventions its episodes ran under (one block is kept per predictor,
-        alpha and sensor range: a recalibration replaces it), with the sensor range its robots were behind
-        where they were.
+        alpha and sensor range: a recalibration replaces it) and its crowd sizes, with the sensor range its
+        robots were behind where they were and whether its tracker reported track lengths.
         None for margins that need none."""
         if self.mode not in CALIBRATED_MODES:
             return None
@@ -268,9 +268,10 @@ class MarginSpec:
 
         path, block = self._located(predictor, 0, sha256)
         closed_loop = block.source == "closed-loop"
-        keys = ("profile", "visibility", "controller", "sensor_range") if closed_loop else ()
+        keys = ("profile", "visibility", "controller", "humans", "sensor_range") if closed_loop else ()
         made = {"created": block.created, "data_sha256": block.data_sha256, "zoo": calibration_zoo(path)}
-        return made | {k: block.details[k] for k in keys if k in block.details}
+        made |= {k: block.details[k] for k in keys if k in block.details}
+        return made | ({"sensor_tracks": block.sensor_tracks} if "sensor_range" in made else {})
 
     def describe(self, resolved: tuple[float, ...]) -> dict[str, Any]:
         """What metadata and records state about the margins actually planned with."""

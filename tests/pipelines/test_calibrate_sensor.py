@@ -96,9 +96,10 @@ def test_a_run_behind_the_sensor_plans_with_its_block_and_one_seeing_everyone_wi
         assert main([*argv, "--margins", "conformal:0.1", *sensor, "--no-progress", "--json", str(out)]) == 0
         (episode,) = json.loads(out.read_text())["episodes"]
         margins = episode["config"]["margins"]
-        planned[bool(sensor)] = (margins["margins_m"], margins["calibration"].get("sensor_range"))
-    assert planned[False] == (list(shipped.quantiles), None)
-    assert planned[True] == (list(wider), 3.0)
+        made = margins["calibration"]
+        planned[bool(sensor)] = (margins["margins_m"], made.get("sensor_range"), made.get("sensor_tracks"))
+    assert planned[False] == (list(shipped.quantiles), None, None)
+    assert planned[True] == (list(wider), 3.0, True)
 
 
 def test_a_sensor_block_without_class_margins_is_not_stored_where_runs_behind_it_plan_with_them(capsys):

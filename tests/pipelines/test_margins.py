@@ -324,6 +324,7 @@ def test_a_record_names_the_calibration_its_margins_came_from():
         "profile": "paper",
         "visibility": "visible",
         "controller": "cmpc",
+        "humans": [5, 6, 7, 8, 9],
     }
     real = MarginSpec("conformal", alpha=0.1, source="real").calibration("constant_velocity", None)
     assert real is not None and set(real) == {"created", "data_sha256", "zoo"}  # real scenes: no conventions
@@ -857,3 +858,21 @@ def test_held_out_episodes_that_met_no_human_report_no_coverage_and_keep_the_blo
     written = json.loads(out.read_text())
     assert written["holdout_coverage"] is None and written["holdout_rows"] == 0
     assert (tmp_path / "calibrations.json").is_file()
+
+
+def test_a_record_of_margins_made_behind_a_sensor_says_whether_its_tracker_gave_track_lengths():
+    """Blocks made behind one range with and without track lengths stand side by side (Calibration.key):
+    the record named the range alone, which both share."""
+    from predictors.calibration_store import find_calibration, save_calibration
+
+    shipped = find_calibration("constant_velocity", "closed-loop", 0.1)
+    untracked = {**shipped.details, "sensor_range": 3.0, "sensor_tracks": False}
+    save_calibration(dataclasses.replace(shipped, details=untracked))
+    spec = MarginSpec("conformal", alpha=0.1, source="closed-loop")
+    made = spec.behind(3.0, sensor_tracks=False).calibration("constant_velocity", None)
+    assert made is not None and (made["sensor_range"], made["sensor_tracks"], made["zoo"]) == (
+        3.0,
+        False,
+        "user",
+    )
+    assert "sensor_tracks" not in (spec.calibration("constant_velocity", None) or {})  # every human in view
