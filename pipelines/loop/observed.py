@@ -32,6 +32,23 @@ def check_fields(obs: Observation) -> None:
             continue
         # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
         _check_finite(obs, name, "a controller plans from the current state")
+    _check_present(obs)
+
+
+def _check_present(obs: Observation) -> None:
+    """PipelineError where ``obs.human_present`` is given and is not one boolean per human: two Trues for
+    four humans passed as every human tracked, and 0.5 as tracked."""
+    if obs.human_present is None:
+        return
+    present = np.asarray(obs.human_present)
+    flags = present.dtype == bool or (present.dtype.kind in "iuf" and np.isin(present, (0, 1)).all())
+    if present.shape != (obs.n_humans,) or not flags:
+        raise PipelineError(
+            f"obs.human_present must be {obs.n_humans} boolean{'' if obs.n_humans == 1 else 's'}, one per "
+            "human (tracked now or not), got "
+            f"{present.dtype} of shape {present.shape}"
+            + ("" if present.shape != (obs.n_humans,) else f": {present.tolist()}")
+        )
 
 
 def _check_finite(obs: Observation, name: str, why: str) -> None:

@@ -68,3 +68,31 @@ def test_a_current_position_that_is_not_finite_is_said_so():
         PipelineError, match=r"^obs.human_positions holds a position that is not finite \(human 0"
     ):
         check_history(obs)
+
+
+@pytest.mark.parametrize(
+    ("present", "got"),
+    [
+        (np.ones(2, dtype=bool), "got bool of shape (2,)"),
+        (np.ones((1, 2), dtype=bool), "got bool of shape (1, 2)"),
+        (np.array([1.0]), None),
+        (np.array([0.5]), "got float64 of shape (1,): [0.5]"),
+    ],
+)
+def test_human_present_is_one_boolean_per_human(present, got):
+    """Two Trues for one human passed as every human tracked (np.all), and 0.5 as tracked."""
+    import dataclasses
+
+    from pipelines.loop.mpc_setup import check_history
+    from pipelines.loop.observed import check_state
+
+    obs = dataclasses.replace(_late_human(50), human_present=present)
+    for check in (check_history, check_state):
+        if got is None:
+            check(obs)
+            continue
+        with pytest.raises(PipelineError) as refused:
+            check(obs)
+        assert str(refused.value) == (
+            f"obs.human_present must be 1 boolean, one per human (tracked now or not), {got}"
+        )
