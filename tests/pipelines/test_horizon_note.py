@@ -85,3 +85,18 @@ def test_an_nlp_that_takes_long_to_build_and_solve_is_said_so():
         "mpc.time_limit_s, and an interrupt waits for CasADi to return"
     )
     assert size_note(_spec("dmpc", "constant_velocity", 8), 50, 12) is not None  # 4800
+
+
+def test_a_sweep_says_it_of_each_methods_largest_crowd(tmp_path, capsys):
+    """simulate said it; a sweep of the same NLPs said nothing."""
+    argv = ["sweep", "--experiment", "table2", "--humans", "7,50", "--robots", "12", "--set", "mpc.horizon=8",
+            "--dry-run", "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "is large" in line]
+    assert notes == [
+        "note: methods 'CMPC', 'DMPC': an NLP of 12 robots among 50 humans over 8 steps is large (here 11 s "
+        "to build and 0.6 s a first step for 12 robots, 50 humans, 8 steps; 2.5 s and 0.9 s for 3, 7 and "
+        "30): steps may pass mpc.time_limit_s, and an interrupt waits for CasADi to return"
+    ]
+    assert main([*argv[:7], "--dry-run", "--out", str(tmp_path)]) == 0  # horizon 4: 4 x 50 x 12 = 2400
+    assert "is large" not in capsys.readouterr().err
