@@ -268,7 +268,7 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
         base = experiment.method_worlds.get(label, experiment.world)
         for k, (column, column_spec) in enumerate(columns):
             methods.append((column, column_spec))
-            world = _with_simulator(base, key, vary.values[k]) if simulator else base
+            world = base.with_env({key: vary.values[k]}) if simulator else base
             world = world.sensing(vary.values[k]) if sensed else world
             if label in experiment.method_worlds or world != base:
                 worlds[column] = world
@@ -287,14 +287,6 @@ def with_values(experiment: Experiment, vary: Varied, table_i: Any, where: str) 
         method_robots=MappingProxyType(robots),
         paper=MappingProxyType(paper),
     )
-
-
-def _with_simulator(world: World, key: str, value: Any) -> World:
-    """``world`` simulated with the setting ``key`` (``World.env_settings``' name) at ``value``: the value it
-    has already (its profile's, or the run's ``--set``) adds nothing to the cell."""
-    env = world.env_config()
-    current = getattr(env.orca, key.removeprefix("orca.")) if key.startswith("orca.") else getattr(env, key)
-    return world if current == value else world.with_env({key: value})
 
 
 def _with_value(spec: ControllerSpec, vary: Varied, value: Any, table_i: Any) -> ControllerSpec:

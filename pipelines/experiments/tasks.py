@@ -125,8 +125,20 @@ class World:
         return replace(config, crowd=self.crowd, orca=replace(config.orca, **orca), **env)
 
     def with_env(self, settings: dict[str, Any]) -> World:
-        """This world with the simulator ``settings`` (``env_settings``' keys) over its own."""
-        return replace(self, env_settings=tuple(sorted({**dict(self.env_settings), **settings}.items())))
+        """This world with the simulator ``settings`` (``env_settings``' keys) over its own; a value its
+        profile has already adds nothing to the cell (``--set env.orca.time_horizon=5``, the paper's, made
+        other cells than Table II's, whose episodes it reran, where ``--vary``'s 5 was Table II's cell)."""
+        merged = {**dict(self.env_settings), **settings}
+        plain = replace(self, env_settings=()).env_config()
+        own = {k: v for k, v in merged.items() if _setting(plain, k) != v}
+        return replace(self, env_settings=tuple(sorted(own.items())))
+
+
+def _setting(config: EnvConfig, key: str) -> Any:
+    """The value of ``World.env_settings``' ``key`` ("time_limit", "orca.time_horizon") in ``config``."""
+    if key.startswith("orca."):
+        return getattr(config.orca, key.removeprefix("orca."))
+    return getattr(config, key)
 
 
 @dataclass(frozen=True)

@@ -355,3 +355,16 @@ def test_a_column_whose_humans_cannot_be_placed_is_refused_before_any_episode(tm
         assert not out.exists()
     assert main([*sweep, "--vary", "env.spawn_separation=0.1,0.5"]) == 0
     assert not (out / "errors.jsonl").exists()
+
+
+def test_a_simulator_value_the_profile_has_already_is_the_plain_cell_set_or_varied(tmp_path, capsys):
+    """--set env.orca.time_horizon=5 (the paper's) made cells of their own, whose episodes a sweep into a
+    Table II folder ran again, where --vary's 5 was Table II's cell."""
+    out = ["--out", str(tmp_path / "sw")]
+    plain = _plan(capsys, "--experiment", "table2", *out)
+    assert _plan(capsys, "--experiment", "table2", "--set", "env.orca.time_horizon=5", *out) == plain
+    assert _plan(capsys, "--experiment", "table2", "--set", "env.time_limit=40", *out) == plain
+    varied = _plan(capsys, "--experiment", "table2", "--vary", "env.orca.time_horizon=2,5", *out)
+    assert varied["CMPC orca.time_horizon=5.0"] == plain["CMPC"]
+    other = _plan(capsys, "--experiment", "table2", "--set", "env.orca.time_horizon=2", *out)
+    assert other["CMPC"] == varied["CMPC orca.time_horizon=2.0"] != plain["CMPC"]
