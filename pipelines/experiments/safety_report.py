@@ -185,12 +185,29 @@ def world_note(cells: Sequence[Cell]) -> tuple[str, list[str] | None]:
     shared = set.intersection(*(set(c.spec.mpc_overrides) for c in cells)) if cells else set()
     if shared:
         line += " MPC settings: " + ", ".join(f"{k}={v}" for k, v in sorted(shared)) + "."
+    for controller, own in _controller_settings(cells, shared).items():
+        line += f" {controller}'s: " + ", ".join(f"{k}={v}" for k, v in own) + "."
     # a sweep's [env], [env.orca] (every column's); a --vary env.KEY column's value is in its label: listed
     # here, time_limit=3.0 of one column read as every column's beside one of 40
     simulator = sorted(set.intersection(*(set(c.world.env_settings) for c in cells))) if cells else []
     if simulator:
         line += " Simulator settings over the profile's: " + ", ".join(f"{k}={v}" for k, v in simulator) + "."
     return line, per_column
+
+
+def _controller_settings(cells: Sequence[Cell], shared: set[tuple[str, Any]]) -> dict[str, list[Any]]:
+    """The settings beside ``shared`` that every column of one controller shares, by controller ("DMPC"):
+    safe_crossing.toml's Gauss-Seidel update is DMPC's alone, and Table II's table read as the paper's Jacobi.
+    A setting some of a controller's columns lack (a --vary column's, in its label) is not one of them."""
+    by_controller: dict[str, list[set[tuple[str, Any]]]] = {}
+    for cell in cells:
+        by_controller.setdefault(cell.spec.controller, []).append(set(cell.spec.mpc_overrides) - shared)
+    named = {"cmpc": "CMPC", "dmpc": "DMPC"}
+    return {
+        named.get(controller, controller): sorted(common)
+        for controller, settings in by_controller.items()
+        if (common := set.intersection(*settings))
+    }
 
 
 def min_distance_counts(distances: Sequence[float]) -> np.ndarray:

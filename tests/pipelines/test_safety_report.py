@@ -481,3 +481,27 @@ def test_between_step_rows_of_the_table():
     assert f"| Robot-robot contact between steps (%) | {' | '.join(none_half['robot'])} |" in table
     assert "| Collision between steps (%) (not in the paper) | — | — |" in old
     assert "| Robot-robot contact between steps (%) | — | — |" in old
+
+
+def test_world_note_names_the_settings_every_column_of_one_controller_shares():
+    """safe_crossing.toml's DMPC update and stop rules are DMPC's alone: the table said nothing of them, and
+    its DMPC column read as the paper's Jacobi."""
+    import dataclasses
+
+    def with_settings(cell, *settings):
+        spec = dataclasses.replace(cell.spec, mpc_overrides=(*cell.spec.mpc_overrides, *settings))
+        return dataclasses.replace(cell, spec=spec)
+
+    shared = (("guidance", "standing"),)
+    dmpc = (("dmpc_stop", "no_improvement"), ("dmpc_update", "gauss_seidel"))
+    cells = [
+        with_settings(c, *shared, *(dmpc if c.spec.controller == "dmpc" else ()))
+        for c in get_experiment("table2").cells()
+    ]
+    assert world_note(cells)[0] == (
+        "Margins: none; profile paper, robots visible to the humans. MPC settings: guidance=standing. "
+        "DMPC's: dmpc_stop=no_improvement, dmpc_update=gauss_seidel."
+    )
+    # one DMPC column without them (a --vary column's value is in its label): not every DMPC column's
+    cells[1] = dataclasses.replace(cells[1], spec=get_experiment("table2").cells()[1].spec)
+    assert cells[1].spec.controller == "dmpc" and "DMPC's" not in world_note(cells)[0]
