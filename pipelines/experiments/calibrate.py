@@ -221,7 +221,7 @@ class ClosedLoopErrors(NamedTuple):
     details: dict[str, Any]  # what identifies the episodes
 
 
-def closed_loop_errors(plan: ClosedLoopPlan, progress: bool | None = True) -> ClosedLoopErrors:
+def closed_loop_errors(plan: ClosedLoopPlan, progress: bool | None = None) -> ClosedLoopErrors:
     """Run ``plan``'s episodes and return what they measured."""
     from crowdsim.profiles import make_env_config
     from crowdsim.world import PAPER_ROBOTS

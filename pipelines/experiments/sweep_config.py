@@ -46,7 +46,7 @@ class SweepConfig:
     backend: str = "auto"  # "auto": Ray when installed, else a process pool
     ray_address: str | None = None
     record: str = "none"  # RECORD_POLICIES
-    progress: bool | None = True  # a bar of the episodes; None: on a terminal only
+    progress: bool | None = None  # a bar of the episodes; None: on a terminal only, as the commands draw it
     jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
     # s of wall-clock time after which a worker stops an episode (pipelines.experiments.deadline); None: none
     episode_timeout_s: float | None = None

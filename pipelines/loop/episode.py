@@ -212,7 +212,7 @@ def run_episodes(
     n_humans: int,
     n_robots: int = PAPER_ROBOTS,
     observers_factory: Callable[[], Iterable[EpisodeObserver]] | None = None,
-    progress: bool | None = True,
+    progress: bool | None = None,
     env_config: EnvConfig = DEFAULT_ENV,
     meta: Mapping[str, Any] | None = None,
     into: list[EpisodeResult] | None = None,

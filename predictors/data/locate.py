@@ -171,7 +171,7 @@ def raw_ewap_dir(directory: Path) -> Path | None:
     return None
 
 
-def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None = True) -> Path:
+def prepared_dir(data_dir: str | Path | None, *, log=None, progress: bool | None = None) -> Path:
     """The prepared directory for ``data_dir`` (module doc); raw data is prepared into the cache once."""
     directory = resolve_data_dir(data_dir)
     if read_manifest(directory) is not None:
@@ -306,7 +306,7 @@ def protocol_files(
     dataset: str = "biwi_eth",
     *,
     log=None,
-    progress: bool | None = True,
+    progress: bool | None = None,
 ) -> dict[str, list[Path]]:
     """``{"train": [...], "val": [...], "test": [...]}``: the ndjson files of ``protocol`` for ``dataset``."""
     if protocol not in PROTOCOLS:

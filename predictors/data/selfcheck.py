@@ -115,8 +115,13 @@ def _scene_difference(ref, mine, tolerance: float) -> str | None:
 def default_references(raw_dir: str | Path) -> dict[str, Reference]:
     """Reference conversions found beside a raw EWAP directory laid out like the team's shared data:
     the official TrajNet++ hotel file, and pedro-mgb's (unofficial) whole-ETH conversion."""
+    return {name: ref for name, ref in expected_references(raw_dir).items() if ref.path.is_file()}
+
+
+def expected_references(raw_dir: str | Path) -> dict[str, Reference]:
+    """Where ``default_references`` looks for each reference conversion, found there or not."""
     root = Path(raw_dir).resolve().parent
-    found = {
+    return {
         "biwi_hotel": Reference(
             root / "trajnetpp_vita" / "train" / "real_data" / "biwi_hotel.ndjson", "official TrajNet++", True
         ),
@@ -127,7 +132,6 @@ def default_references(raw_dir: str | Path) -> dict[str, Reference]:
             False,
         ),
     }
-    return {name: ref for name, ref in found.items() if ref.path.is_file()}
 
 
 def describe_check(name: str, check: SelfCheck) -> list[str]:

@@ -242,6 +242,14 @@ def test_prepare_and_evaluate(tmp_path, capsys):
     code, stdout, _ = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags")
     assert code == 0
     assert "biwi_eth    test" in stdout and (out / "manifest.json").is_file()
+    # no reference conversion beside the raw folder: each check not made is said (ETH's was not)
+    skipped = [line for line in stdout.splitlines() if line.startswith("self-check skipped")]
+    assert skipped == [
+        f"self-check skipped: no official TrajNet++ biwi_hotel.ndjson found at {raw.resolve().parent}"
+        "/trajnetpp_vita/train/real_data",
+        "self-check skipped: no unofficial (pedro-mgb, TrajNet++ converter) biwi_eth.ndjson found at "
+        f"{raw.resolve().parent}/trajnetpp_pedro-mgb/test_private/real_data",
+    ]
     report = tmp_path / "r.json"
     code, stdout, _ = run(
         capsys, "evaluate", "--predictor", "constant_velocity", "--data-dir", str(out), "--json", str(report)

@@ -70,7 +70,7 @@ print("episodes", len(results))
 
 def test_the_library_draws_no_bar_where_python_has_no_stderr(tmp_path):
     # a program importing crowdmpc (pythonw, a service) holds no descriptor for it: run_episodes'
-    # progress bar, on by default, failed at its first write (AttributeError on None), status 1
+    # progress bar, then on by default, failed at its first write (AttributeError on None), status 1
     done = _run(["-c", LIBRARY_RUN], tmp_path, closed=2)
     assert done.returncode == 0 and "episodes 2" in done.stdout
 
@@ -82,3 +82,19 @@ def test_a_progress_bar_without_stderr_is_off(show, monkeypatch):
     monkeypatch.setattr(sys, "stderr", None)
     bar = progress_bar(range(3), show=show, desc="x")
     assert list(bar) == [0, 1, 2] and bar.disable
+
+
+def test_the_library_draws_its_bar_on_a_terminal_only(tmp_path):
+    """The README says bars are drawn on a terminal only; run_episodes' default drew one into a pipe (a
+    notebook's or a job's log), frame after frame."""
+    env = os.environ | {"PYTHONPATH": str(ROOT), "CROWDMPC_CACHE": str(tmp_path / "cache")}
+    done = subprocess.run(
+        [sys.executable, "-c", LIBRARY_RUN],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0 and "episodes 2" in done.stdout
+    assert "orca circle" not in done.stderr and "ep/s" not in done.stderr
