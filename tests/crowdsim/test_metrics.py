@@ -186,6 +186,18 @@ def test_aggregate_step_frequencies_and_median():
     assert out["min_distance_median"] == pytest.approx((0.55 + 0.7) / 2)
     c = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, [[[0.0, 0.9]], [[0.0, 3.0]]]))
     assert aggregate([a, b, c])["min_distance_median"] == pytest.approx(0.7)
+    # an episode without a robot-human pair (a replayed crowd's, nobody tracked as the robots cross) is left
+    # out, as a sweep's report leaves it: its inf made the mean inf and moved the median to (0.7 + 0.9) / 2
+    alone = episode_metrics(make_traj([[[0.0, 0.0]]] * 2, np.zeros((2, 0, 2))))
+    assert alone.min_distance == math.inf
+    out = aggregate([a, b, c, alone])
+    assert (out["min_distance_mean"], out["min_distance_median"], out["min_distance_min"]) == pytest.approx(
+        ((0.55 + 0.7 + 0.9) / 3, 0.7, 0.55)
+    )
+    nobody = aggregate([alone, alone])
+    assert (
+        nobody["min_distance_mean"] == nobody["min_distance_median"] == nobody["min_distance_min"] == math.inf
+    )
 
 
 def test_from_dict_round_trip_and_old_records():
