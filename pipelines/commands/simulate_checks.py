@@ -43,7 +43,7 @@ def _refuse_unread(config: RunConfig, spec: ControllerSpec) -> None:
     """Refuse an [mpc] value given on the command line (``--set``) that ``spec``'s MPC does not read (DMPC's
     update rule for CMPC, the coupled NLP's mode under IBR, a flocking weight with --no-flocking): a value in
     a file passes, as a file may serve both controllers (docs/examples/many_robots.toml)."""
-    from pipelines.commands.sweep_vary import unread_because
+    from pipelines.loop.unread import unread_because
 
     for key, value in config.values["mpc"].items():
         source = config.source("mpc", key)

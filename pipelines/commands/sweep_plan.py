@@ -188,7 +188,7 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
     a method sets that key itself; a key of the flocking term only in the methods that flock."""
     import dataclasses
 
-    from pipelines.commands.sweep_vary import reads_setting, unread_because
+    from pipelines.loop.unread import reads_setting, unread_because
 
     if key == "jit":
         raise cfg.error(

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, Final
 from pipelines.config.entries import ConfigError, Entry, Source, check_key, parse_set
 from pipelines.config.schema import SECTION_BY_NAME
 from pipelines.experiments.tasks import ENV_SETTINGS
+from pipelines.loop.unread import reads_setting, unread_because
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -30,55 +31,12 @@ if TYPE_CHECKING:
     from pipelines.experiments.tasks import World
     from pipelines.loop.controllers import ControllerSpec
 
-# The [mpc] keys of the flocking term (Eq. 15) alone: a method without it (table3's NF) keeps one column, not
-# a column per value that would run the same episodes again.
-FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight"})
-# The [mpc] keys one controller reads and the other does not (mpc/dmpc*.py, mpc/cmpc.py, mpc/coupled.py): a
-# CMPC column per value of DMPC's update rule ran the same episodes again under new cell keys.
-DMPC_KEYS: Final[frozenset[str]] = frozenset(
-    {
-        "epsilon",
-        "dmpc_parallel",
-        "dmpc_update",
-        "dmpc_relaxation",
-        "dmpc_stop",
-        "dmpc_start",
-        "dmpc_order",
-        "dmpc_pairs",
-    }
-)
-CMPC_KEYS: Final[frozenset[str]] = frozenset({"xi"})  # Algorithm 1's threshold; DMPC stops by epsilon
-COUPLED_KEYS: Final[frozenset[str]] = frozenset({"coupled_mode"})  # the coupled NLP's (coupling nlp)
 MAX_VALUES: Final[int] = 12  # each value (each combination) is a whole column of cells per method and size
 ENV_SECTIONS: Final[tuple[str, str]] = ("env", "env.orca")  # their keys in ENV_SETTINGS vary every method
 SENSOR_RANGE: Final[str] = "simulate.sensor_range"  # every method's view of the humans, as --sensor-range
 # The sections whose varied values are the cell's (its robots, humans, simulator, sensor), not a controller's:
 # every method gets a column per value, and they are applied last, to every column the others made
 CELL_SECTIONS: Final[tuple[str, ...]] = ("scenario", "simulate", *ENV_SECTIONS)
-
-
-def reads_setting(spec: ControllerSpec, key: str) -> bool:
-    """Whether ``spec``'s controller plans with the ``[mpc]`` ``key`` (or the margins): ``unread_because``."""
-    return unread_because(spec, key) is None
-
-
-def unread_because(spec: ControllerSpec, key: str) -> str | None:
-    """Why ``spec``'s controller does not read the ``[mpc]`` ``key``, as said of methods ("plan with no MPC"),
-    None where it does: ORCA and the straight line have no MPC, a method without flocking (table3's NF,
-    w_floc = 0) no flocking term to weigh, CMPC none of DMPC's settings nor DMPC CMPC's, and IBR none of the
-    coupled NLP's, so a value of theirs would only run the same episodes again under a new cell key. A
-    plugin reads what it likes."""
-    if not spec.kind.uses_predictor:
-        return "plan with no MPC"
-    if key in FLOCKING_KEYS and not spec.flocking:
-        return f"plan without the flocking term (NF), which {key} shapes"
-    if key in DMPC_KEYS and spec.controller == "cmpc":
-        return f"are centralized (CMPC), and {key} is DMPC's"
-    if key in CMPC_KEYS and spec.controller == "dmpc":
-        return f"are distributed (DMPC), and {key} is CMPC's"
-    if key in COUPLED_KEYS and spec.coupling != "nlp":
-        return f"couple by {spec.coupling}, and {key} is the coupled NLP's (coupling nlp)"
-    return None
 
 
 @dataclasses.dataclass(frozen=True)

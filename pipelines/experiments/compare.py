@@ -42,6 +42,7 @@ from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
 from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
+from pipelines.loop.unread import unread_keys
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
@@ -157,14 +158,27 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
             continue
         configs.add((identity[:3], text))
         ran_with = run.settings.setdefault(identity[:3], {})
+        unread = _unread(record)
         for key, value in dotted_settings(ran).items():
             setting = key.removeprefix("config.")
-            if setting not in NOT_SETTINGS:  # where a calibration is stored, not what it is
+            # where a calibration is stored, not what it is; an [mpc] key the controller does not read
+            if setting not in NOT_SETTINGS and setting.removeprefix("mpc.") not in unread:
                 ran_with.setdefault(setting, set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
         log = path / EPISODES_FILE
         raise PipelineError(f"{label}: {log if log.is_file() else path} holds no episode")
     return run
+
+
+def _unread(record: dict[str, Any]) -> frozenset[str]:
+    """The [mpc] keys the record's controller does not read (pipelines.loop.unread): a CMPC's recorded under
+    safe_crossing.toml by simulate, which applies every [mpc] value, and at Table I's by a sweep, which
+    applies a method's own alone, made two runs of the same episodes differ in DMPC's update rule."""
+    config = record.get("config")
+    if not isinstance(config, dict):
+        config = {}
+    coupling, flocking = config.get("coupling", "ibr"), config.get("flocking", True)
+    return unread_keys(str(record.get("controller")), str(coupling), flocking is not False)
 
 
 def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dict[str, Any]], list[str], str]:

@@ -169,3 +169,18 @@ def test_a_metrics_message_the_review_cannot_use_is_named(recorded, tmp_path, ca
         in err
     )
     assert "expected an object; `crowdmpc review --check` lists every problem); left out\n" in err
+
+
+def test_settings_the_controller_does_not_read_are_no_difference(recorded, tmp_path, capsys):
+    """simulate applies every [mpc] value of a file, a sweep's CMPC cells their own alone: a CMPC run under
+    safe_crossing.toml and the sweep's same episodes differed in DMPC's update rule, which CMPC never reads.
+    A key it reads still differs."""
+    config = tmp_path / "run.toml"
+    config.write_text('[mpc]\ndmpc_update = "gauss_seidel"\ndmpc_stop = "no_improvement"\n', encoding="utf-8")
+    assert main(["--config", str(config), *RUN, "--json", str(tmp_path / "dmpc_keys.json")]) == 0
+    capsys.readouterr()
+    run = str(recorded / "run.json")
+    assert main(["compare", run, str(tmp_path / "dmpc_keys.json"), "--expect-identical"]) == 0
+    assert "dmpc_keys ran with the settings of run." in capsys.readouterr().out
+    assert main(["compare", run, str(recorded / "other"), "--no-progress"]) == 0
+    assert "mpc.w_goal: 10.0 -> 5.0" in capsys.readouterr().out
