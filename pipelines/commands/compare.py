@@ -132,10 +132,7 @@ def _compare(args: argparse.Namespace) -> int:
     runs = [load_run(label, path, progress=False if args.no_progress else None) for label, path in named]
     shared = shared_identities(runs)
     if not shared:
-        raise PipelineError(
-            "the runs share no episode (the same method, humans, robots, scenario, seed and crowd: another "
-            "profile, team or formation draws other crowds from the same seeds)"
-        )
+        raise PipelineError(_nothing_shared(runs))
     report = _report(runs, shared)
     print(_text(report))
     if args.plot is not None:
@@ -151,6 +148,23 @@ def _compare(args: argparse.Namespace) -> int:
     if args.expect_identical:
         return _identical(report)
     return 0
+
+
+def _nothing_shared(runs: list[Run]) -> str:
+    """Why ``runs`` share no episode: their methods' labels where the crowds are shared (a --vary column is
+    labelled with its value, "CMPC orca.time_horizon=5.0", and was said to draw other crowds), else the
+    crowds."""
+    crowds = [{identity[1:] for identity in run.outcomes} for run in runs]
+    if set.intersection(*crowds):
+        methods = "; ".join(f"{run.label}: {', '.join(sorted(set(run.methods.values())))}" for run in runs)
+        return (
+            f"the runs share no method on the same crowds (episodes pair by their method's label, humans and "
+            f"robots; a --vary column's label names its value): {methods}"
+        )
+    return (
+        "the runs share no episode (the same method, humans, robots, scenario, seed and crowd: another "
+        "profile, team or formation draws other crowds from the same seeds)"
+    )
 
 
 def _report(runs: list[Run], shared: list[Identity]) -> dict[str, Any]:

@@ -130,6 +130,13 @@ def test_a_method_pairs_whatever_its_case_and_only_on_the_same_crowd(tmp_path, c
     c = _sweep(tmp_path / "c", [_record(i, *o, env=wedge) for i, o in enumerate(BASE)])
     assert main(["compare", str(a), str(c)]) == 2
     assert "the runs share no episode" in capsys.readouterr().err
+    # the same crowds under another label (a --vary column's): said so, where it blamed the crowds
+    d = _sweep(tmp_path / "d", [_record(i, *o, method="CMPC w_goal=10") for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(d)]) == 2
+    assert one_line_err(capsys).endswith(
+        "the runs share no method on the same crowds (episodes pair by their method's label, humans and "
+        "robots; a --vary column's label names its value): a: CMPC; d: CMPC w_goal=10\n"
+    )
 
 
 def test_expect_identical_names_what_differs(tmp_path, capsys):
