@@ -78,8 +78,8 @@ def plans_with_new_blocks(args: argparse.Namespace, holdout_margins: MarginSpec)
         raise PipelineError(
             f"--holdout-margins {args.holdout_margins} plans the held-out episodes with this run's block, "
             "which --dry-run does not store: they would plan with the block stored before (or find none); "
-            "drop --dry-run (with CROWDMPC_ZOO=DIR, a scratch user zoo, to keep yours as it is), or hold out "
-            "with --holdout-margins none or fixed:M1,...,MH"
+            "drop --dry-run (with CROWDMPC_ZOO=DIR, a scratch copy of your user zoo, to keep yours as it "
+            "is), or hold out with --holdout-margins none or fixed:M1,...,MH"
         )
     return bool(names)
 

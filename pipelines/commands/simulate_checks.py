@@ -129,7 +129,9 @@ def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
         message = f"fixed margins need one value per horizon step ({mpc.horizon}), got {len(values)}"
         raise config.error("controller", "margins", message)
     if chosen("mpc", "d_min") or chosen("world", "radius"):
-        section, key = ("mpc", "d_min") if chosen("mpc", "d_min") else ("world", "radius")
+        # the d_min a file states at Table I's (`config show` writes every default) is not the one changed
+        d_min = config.chosen("mpc", "d_min") or not chosen("world", "radius")
+        section, key = ("mpc", "d_min") if d_min else ("world", "radius")
         try:
             check_contact_distance(config.world, mpc)
         except PipelineError as exc:

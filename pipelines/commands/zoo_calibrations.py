@@ -83,9 +83,10 @@ def _crowd(block: Calibration) -> str:
     made = made_with(block)
     if not made.get("humans"):
         return "-"
-    sizes = [int(h) for h in made["humans"].split(",")]
-    run = len(sizes) > 2 and sizes == list(range(sizes[0], sizes[-1] + 1))
-    humans = f"{sizes[0]}..{sizes[-1]}" if run else ",".join(map(str, sizes))
+    texts = made["humans"].split(",")
+    sizes = [int(h) for h in texts if h.strip().isdigit()]
+    run = len(sizes) == len(texts) > 2 and sizes == list(range(sizes[0], sizes[-1] + 1))
+    humans = f"{sizes[0]}..{sizes[-1]}" if run else made["humans"]  # a hand-edited block's as it stands
     return ", ".join([humans, *(made[key] for key in ("profile", "visibility") if key in made)])
 
 

@@ -97,6 +97,8 @@ class Run:
     methods: dict[Group, str] = field(default_factory=dict)  # each group's method as this run spells it
     # per group, each dotted setting -> the values its episodes ran with
     settings: dict[Group, dict[str, set[str]]] = field(default_factory=dict)
+    # per group, the [mpc] keys some of its episodes' controller does not read (pipelines.loop.unread)
+    unread: dict[Group, set[str]] = field(default_factory=dict)
     commits: list[str] = field(default_factory=list)
 
 
@@ -158,11 +160,10 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
             continue
         configs.add((identity[:3], text))
         ran_with = run.settings.setdefault(identity[:3], {})
-        unread = _unread(record)
+        run.unread.setdefault(identity[:3], set()).update(f"mpc.{key}" for key in _unread(record))
         for key, value in dotted_settings(ran).items():
             setting = key.removeprefix("config.")
-            # where a calibration is stored, not what it is; an [mpc] key the controller does not read
-            if setting not in NOT_SETTINGS and setting.removeprefix("mpc.") not in unread:
+            if setting not in NOT_SETTINGS:  # where a calibration is stored, not what it is
                 ran_with.setdefault(setting, set()).add(json.dumps(value, sort_keys=True))
     if not run.outcomes:
         log = path / EPISODES_FILE
@@ -171,9 +172,8 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
 
 
 def _unread(record: dict[str, Any]) -> frozenset[str]:
-    """The [mpc] keys the record's controller does not read (pipelines.loop.unread): a CMPC's recorded under
-    safe_crossing.toml by simulate, which applies every [mpc] value, and at Table I's by a sweep, which
-    applies a method's own alone, made two runs of the same episodes differ in DMPC's update rule."""
+    """The [mpc] keys the record's controller does not read (pipelines.loop.unread; ``settings_differ``): a
+    CMPC's DMPC settings, recorded by simulate from a file, at Table I's by a sweep of the same episodes."""
     config = record.get("config")
     if not isinstance(config, dict):
         config = {}
@@ -374,12 +374,15 @@ def settings_differ(base: Run, other: Run, groups: Collection[Group]) -> list[tu
     differ, each side its values joined with " | ", sorted; a setting one run does not record shows
     "(not recorded)". Only the groups compared: a method the other run lacks says nothing of it. The
     settings a user sets come first ("mpc.guidance"), the details under them after
-    ("margins.calibration.created")."""
+    ("margins.calibration.created"). An [mpc] key that one side's controller does not read is none
+    (``Run.unread``): it made no difference to that side's episodes, whatever value it records (a CMPC's
+    DMPC update rule, the flocking weight of a run without flocking, whose ``flocking`` row says so)."""
     a_values, b_values = _settings(base, groups), _settings(other, groups)
+    unread = set().union(*(run.unread.get(group, ()) for run in (base, other) for group in groups))
     rows = []
     for key in sorted(a_values.keys() | b_values.keys(), key=lambda k: (k.count("."), k)):
         a, b = a_values.get(key), b_values.get(key)
-        if a != b:
+        if a != b and key not in unread:
             rows.append((key, _values(a), _values(b)))
     return rows
 

@@ -158,6 +158,10 @@ def test_zoo_calibrations_shows_each_blocks_controller_and_episodes():
         "5,7, v1, invisible",
         "100 (5..104)",
     ]
+    # a hand-edited block's sizes as they stand: int() of them ended the whole listing in a traceback
+    save_calibration(dataclasses.replace(shipped, details=older | {"humans": [5.0, 7.0]}))
+    header, *rows = calibration_table(None, "constant_velocity")
+    assert [r[columns[1]] for r in rows if r[1:3] == ["closed-loop", "0.1"]] == ["5.0,7.0, v1, invisible"]
 
 
 # ----------------------------------------------------------------- 4: blocks lacking margins per class

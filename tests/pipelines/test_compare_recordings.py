@@ -184,3 +184,10 @@ def test_settings_the_controller_does_not_read_are_no_difference(recorded, tmp_p
     assert "dmpc_keys ran with the settings of run." in capsys.readouterr().out
     assert main(["compare", run, str(recorded / "other"), "--no-progress"]) == 0
     assert "mpc.w_goal: 10.0 -> 5.0" in capsys.readouterr().out
+    # without flocking the flocking weights are read by neither side: the flocking row says it all (they were
+    # shown "(not recorded)" on the side that did not read them)
+    assert main([*RUN, "--no-flocking", "--json", str(tmp_path / "nf.json")]) == 0
+    capsys.readouterr()
+    assert main(["compare", run, str(tmp_path / "nf.json"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "  flocking: true -> false" in out and "w_floc" not in out and "not recorded" not in out

@@ -340,6 +340,11 @@ def test_a_sweep_refuses_recorded_iterations_it_would_not_record_and_cuts_long_v
         ),
         # the d_min is Table I's; the radius the file's is what leaves it inside a contact
         ("[world]\nradius = 1.0\n", "world.radius: the MPC's d_min 0.8 m is below the contact distance"),
+        # a file `config show` wrote states Table I's d_min: the radius is still the value changed
+        (
+            "[mpc]\nd_min = 0.8\n[world]\nradius = 1.0\n",
+            "world.radius: the MPC's d_min 0.8 m is below the contact distance",
+        ),
         (
             'predictor = "social_lstm_eth"\n[world]\nobs_len = 3\n',
             "world.obs_len: the predictor social_lstm_eth reads 9 observed steps but the simulator keeps 3",

@@ -510,7 +510,10 @@ def test_held_out_margins_are_resolved_before_the_episodes(tmp_path, monkeypatch
     assert "--holdout-margins conformal:0.3: no closed-loop calibration at alpha=0.3" in err
     err = _refused(capsys, [*held, "--alpha", "0.3", "--dry-run"])
     assert "plans the held-out episodes with this run's block, which --dry-run does not store" in err
-    assert "drop --dry-run (with CROWDMPC_ZOO=DIR, a scratch user zoo, to keep yours as it is)" in err
+    assert (
+        "drop --dry-run (with CROWDMPC_ZOO=DIR, a scratch copy of your user zoo, to keep yours as it is)"
+        in err
+    )
     assert plans == []
     from pipelines.cli import main
 
