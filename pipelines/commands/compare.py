@@ -23,6 +23,7 @@ EPILOG = """examples:
   crowdmpc compare paper=runs/table2 cp0.1=runs/table2-cp safe=runs/t2-safe --json runs/compare.json
   crowdmpc compare paper=runs/table2 safe=runs/t2-safe --plot runs/safe_vs_paper.png
   crowdmpc compare before=runs/t2-main after=runs/t2-branch --expect-identical
+  crowdmpc compare runs/table2 runs/t2-dmin --by-cell --expect-identical   # --vary mpc.d_min=0.8,1.0's 0.8
   crowdmpc compare cv=runs/cmpc-cv lstm=runs/cmpc-lstm    # `simulate --record` folders of the same seeds
 
 Each RUN is a `crowdmpc sweep --out` folder, a `crowdmpc simulate --json` file, or recordings: an .mcap file
@@ -30,17 +31,18 @@ or a folder of them as `crowdmpc review` finds them (`simulate --record DIR`, `m
 that cannot be read or whose episode did not finish is left out with a warning); the episodes of the last two
 are the method named by their controller. Each is named by LABEL= or by its name. Episodes pair where two runs
 faced the same crowd: the same scenario, seed, humans and robots, the crowd made alike (ORCA's humans or the
-same recording, the same placement rules and formation), and the same method (case ignored). Only episodes
-every run holds are compared. First each run's folder, episodes and code (the commits it names); then, for
-each method and crowd size, every run's success, collision and contact rates (%) and mean travel time over its
-successes (s), and for each run after the first, against it: +k / −j, the episodes where the run has the
-outcome and the first run not, and the reverse, with the exact McNemar p; the mean travel-time difference over
-the episodes both completed, ± Student's t 95 % half-width, their number in brackets; and how many episodes
-have every metric equal. Last, the settings the compared groups' episodes ran with where they differ from the
-first run's. --plot draws each change with its 95 % interval (the rates' by Newcombe's square-and-add for
-paired proportions; --json holds them too). --expect-identical exits 1 unless every episode of every run is in
-every other with every metric equal: a change that must not move a result (`--jit on` against off, a
-refactoring).
+same recording, the same placement rules and formation), and the same method (case ignored; with --by-cell,
+sweeps' episodes the same cell, whatever their columns' labels: `--vary mpc.d_min=0.8,1.0`'s 0.8 column is
+Table II's cell). Only episodes every run holds are compared. First each run's folder, episodes and code (the
+commits it names); then, for each method and crowd size, every run's success, collision and contact rates (%)
+and mean travel time over its successes (s), and for each run after the first, against it: +k / −j, the
+episodes where the run has the outcome and the first run not, and the reverse, with the exact McNemar p; the
+mean travel-time difference over the episodes both completed, ± Student's t 95 % half-width, their number in
+brackets; and how many episodes have every metric equal. Last, the settings the compared groups' episodes ran
+with where they differ from the first run's. --plot draws each change with its 95 % interval (the rates' by
+Newcombe's square-and-add for paired proportions; --json holds them too). --expect-identical exits 1 unless
+every episode of every run is in every other with every metric equal: a change that must not move a result
+(`--jit on` against off, a refactoring).
 """
 MAX_SETTINGS_SHOWN: Final = 12  # per run; the rest counted (--json has them all)
 VALUE_WIDTH: Final = 60  # characters of a setting's values shown
@@ -72,6 +74,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=output_arg,
         metavar="PNG",
         help="each run's change against the first per method and crowd size, with 95 %% intervals",
+    )
+    parser.add_argument(
+        "--by-cell",
+        action="store_true",
+        help="pair sweeps' episodes by their cell (its key) rather than their method's label: a --vary "
+        "column with the plain sweep's column of that cell, one experiment's column with another's",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar while reading the runs")
     parser.add_argument(
@@ -129,7 +137,8 @@ def _compare(args: argparse.Namespace) -> int:
         check_writable(args.plot, "--plot", inputs=inputs, room=0)
         if not is_stdout(args.json) and args.json is not None and args.json.resolve() == args.plot.resolve():
             raise PipelineError(f"--json and --plot name the same file {args.plot}; give each its own")
-    runs = [load_run(label, path, progress=False if args.no_progress else None) for label, path in named]
+    show = False if args.no_progress else None
+    runs = [load_run(label, path, progress=show, by_cell=args.by_cell) for label, path in named]
     shared = shared_identities(runs)
     if not shared:
         raise PipelineError(_nothing_shared(runs))
@@ -159,7 +168,7 @@ def _nothing_shared(runs: list[Run]) -> str:
         methods = "; ".join(f"{run.label}: {', '.join(sorted(set(run.methods.values())))}" for run in runs)
         return (
             f"the runs share no method on the same crowds (episodes pair by their method's label, humans and "
-            f"robots; a --vary column's label names its value): {methods}"
+            f"robots; a --vary column's label names its value, and --by-cell pairs sweeps by cell): {methods}"
         )
     return (
         "the runs share no episode (the same method, humans, robots, scenario, seed and crowd: another "

@@ -11,8 +11,8 @@ Another profile or team draws other humans from the same seed, so its episodes p
 before sweeps kept their config ran its profile's placement. Within that crowd an episode is its method's
 (case ignored: Table II writes "CMPC", the controllers experiment "cmpc"), so a method's column of one sweep
 pairs with the same method's of another whatever else the two changed (margins, weights, code): the
-comparison is what the runs differ in, listed beside it (``settings_differ``). Only episodes every run holds
-are compared.
+comparison is what the runs differ in, listed beside it (``settings_differ``); or, for sweeps by cell
+(``--by-cell``), its cell's, whatever the column's label. Only episodes every run holds are compared.
 
 The paired counts are the exact McNemar test's discordant pairs (pipelines.experiments.tables): episodes where
 the run has the outcome and the first run not, and the reverse. The difference of the two rates has Newcombe's
@@ -42,7 +42,7 @@ from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
 from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
-from pipelines.loop.unread import unread_keys
+from pipelines.loop.unread import record_unread
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
@@ -102,10 +102,13 @@ class Run:
     commits: list[str] = field(default_factory=list)
 
 
-def crowd_identity(record: Mapping[str, Any]) -> Identity:
+def crowd_identity(record: Mapping[str, Any], by_cell: bool = False) -> Identity:
     """The episode's identity across runs (module docstring). A record older than a setting ran with the
-    value every run had before it (``UNRECORDED``), one older than the recorded config with its profile's."""
-    group: Group = (str(record["method"]).casefold(), int(record["n_humans"]), int(record["n_robots"]))
+    value every run had before it (``UNRECORDED``), one older than the recorded config with its profile's.
+    ``by_cell``: a sweep's episode is its cell's (``cell``, the key that names everything that makes its
+    episodes), not its method label's: a --vary column pairs with the plain sweep's column of that cell."""
+    name = record["cell"] if by_cell else record["method"]
+    group: Group = (str(name).casefold(), int(record["n_humans"]), int(record["n_robots"]))
     config = record.get("config")
     env = config.get("env") if isinstance(config, dict) else None
     if not isinstance(env, dict):
@@ -130,14 +133,17 @@ def _profile_env(profile: str) -> dict[str, Any]:
     return {"crossing": env.crossing, "spawn_separation": env.spawn_separation}
 
 
-def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
+def load_run(label: str, path: Path, progress: bool | None = False, by_cell: bool = False) -> Run:
     """The episodes of the sweep directory ``path``, read as its report reads them (each line checked) and
     left as they are (a sweep still writing it may hold a torn last line, which is passed over); or of the
     ``crowdmpc simulate --json`` file ``path``, or of the recordings ``path`` (an .mcap file, or a folder of
     them), each episode its controller's (pipelines.experiments.compare_sources). ``progress``: a bar of the
-    episodes or files read (None: on a terminal only; a run of 100 000 takes about 17 s)."""
+    episodes or files read (None: on a terminal only; a run of 100 000 takes about 17 s). ``by_cell``:
+    ``crowd_identity``'s, for sweeps alone."""
     if path.name == EPISODES_FILE and path.is_file():  # the sweep's log named instead of its folder
         path = path.parent
+    if by_cell and not (path / EPISODES_FILE).is_file():
+        raise PipelineError(f"{label}: {path} is no sweep folder: --by-cell pairs sweeps' episodes by cell")
     records, commits, twice = _source(label, path, progress)
     run = Run(label, path, commits=commits)
     kinds: dict[frozenset[str], frozenset[str]] = {}  # one ``added`` set per kind of record, not per episode
@@ -146,7 +152,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
         records, show=progress, desc=f"reading {label}", unit="ep", file=sys.stderr, leave=False
     )
     for record in bar:
-        identity = crowd_identity(record)
+        identity = crowd_identity(record, by_cell)
         if identity in run.outcomes:
             raise PipelineError(
                 f"{label}: {path} holds two episodes of method {record['method']!r} on one crowd "
@@ -160,7 +166,7 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
             continue
         configs.add((identity[:3], text))
         ran_with = run.settings.setdefault(identity[:3], {})
-        run.unread.setdefault(identity[:3], set()).update(f"mpc.{key}" for key in _unread(record))
+        run.unread.setdefault(identity[:3], set()).update(f"mpc.{key}" for key in record_unread(record))
         for key, value in dotted_settings(ran).items():
             setting = key.removeprefix("config.")
             if setting not in NOT_SETTINGS:  # where a calibration is stored, not what it is
@@ -169,16 +175,6 @@ def load_run(label: str, path: Path, progress: bool | None = False) -> Run:
         log = path / EPISODES_FILE
         raise PipelineError(f"{label}: {log if log.is_file() else path} holds no episode")
     return run
-
-
-def _unread(record: dict[str, Any]) -> frozenset[str]:
-    """The [mpc] keys the record's controller does not read (pipelines.loop.unread; ``settings_differ``): a
-    CMPC's DMPC settings, recorded by simulate from a file, at Table I's by a sweep of the same episodes."""
-    config = record.get("config")
-    if not isinstance(config, dict):
-        config = {}
-    coupling, flocking = config.get("coupling", "ibr"), config.get("flocking", True)
-    return unread_keys(str(record.get("controller")), str(coupling), flocking is not False)
 
 
 def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dict[str, Any]], list[str], str]:

@@ -5,7 +5,7 @@ episodes ran with (``unread_keys``)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 if TYPE_CHECKING:
     from pipelines.loop.controllers import ControllerSpec
@@ -65,3 +65,13 @@ def unread_keys(controller: str, coupling: str, flocking: bool) -> frozenset[str
     if coupling != "nlp":
         unread |= COUPLED_KEYS
     return unread if flocking else unread | FLOCKING_KEYS
+
+
+def record_unread(record: dict[str, Any]) -> frozenset[str]:
+    """``unread_keys`` of an episode record's controller, coupling and flocking (``crowdmpc compare``: a
+    CMPC's DMPC settings, recorded by simulate from a file, at Table I's by a sweep of the same episodes)."""
+    config = record.get("config")
+    if not isinstance(config, dict):
+        config = {}
+    coupling, flocking = config.get("coupling", "ibr"), config.get("flocking", True)
+    return unread_keys(str(record.get("controller")), str(coupling), flocking is not False)

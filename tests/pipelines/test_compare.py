@@ -135,7 +135,29 @@ def test_a_method_pairs_whatever_its_case_and_only_on_the_same_crowd(tmp_path, c
     assert main(["compare", str(a), str(d)]) == 2
     assert one_line_err(capsys).endswith(
         "the runs share no method on the same crowds (episodes pair by their method's label, humans and "
-        "robots; a --vary column's label names its value): a: CMPC; d: CMPC w_goal=10\n"
+        "robots; a --vary column's label names its value, and --by-cell pairs sweeps by cell): a: CMPC; d: "
+        "CMPC w_goal=10\n"
+    )
+
+
+def test_by_cell_pairs_sweeps_columns_of_one_cell_whatever_their_labels(tmp_path, capsys):
+    """A --vary column of Table I's value is the plain sweep's cell ("CMPC orca.time_horizon=5.0" and
+    "CMPC"): by label the two shared nothing, so the README's claim could not be checked with
+    --expect-identical. By cell they pair, shown under the first run's label; another cell pairs with none."""
+    a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
+    varied = [{**_record(i, *o), "method": "CMPC orca.time_horizon=5.0"} for i, o in enumerate(BASE)]
+    b = _sweep(tmp_path / "b", varied)
+    assert main(["compare", str(a), str(b), "--by-cell", "--expect-identical"]) == 0
+    out = capsys.readouterr().out
+    assert "identical: 4 episodes, every metric equal" in out and "| CMPC | 7 | 3 | b | 4 |" in out
+    other = [{**r, "cell": r["cell"] + "-orca.time_horizon=2.0"} for r in varied]
+    c = _sweep(tmp_path / "c", other)
+    assert main(["compare", str(a), str(c), "--by-cell"]) == 2
+    assert "the runs share no" in one_line_err(capsys)
+    sim = _simulate_json(tmp_path / "run.json", [_record(i, *o) for i, o in enumerate(BASE)])
+    assert main(["compare", str(a), str(sim), "--by-cell"]) == 2
+    assert one_line_err(capsys).endswith(
+        f"run: {sim} is no sweep folder: --by-cell pairs sweeps' episodes by cell\n"
     )
 
 
