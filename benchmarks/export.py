@@ -134,17 +134,20 @@ def main() -> None:
     from predictors.zoo import read_manifest, zoo_names
 
     available = set(zoo_names())
+    # every model the zoos hold by default: a fixed list of six left social_lstm_synth and users' models out
+    wanted = [name for name in args.models.split(",") if name] if args.models else sorted(available)
+    unknown = [name for name in wanted if name not in available]
+    if unknown:  # a typo ran nothing, printed "(not in the zoo)" and exited 0
+        parser.error(
+            f"--models: {', '.join(unknown)} not in the zoo; choose from {', '.join(sorted(available))}"
+        )
     entries, kinds = read_manifest(), set(model_names())
     load = os.getloadavg()[0]
     print(f"load average {load:.2f} on {os.cpu_count()} cores; {args.humans} humans, 3 robots, H=4")
     columns = ("export s", "value err", "jac err", "IBR ms", "NLP ms")
     widths = (9, 10, 10, 8, 8)
     print(f"{'model':22} {'twin':13} " + " ".join(f"{c:>{w}}" for c, w in zip(columns, widths, strict=True)))
-    # every model the zoos hold by default: a fixed list of six left social_lstm_synth and users' models out
-    for name in args.models.split(",") if args.models else list(dict.fromkeys(zoo_names())):
-        if name not in available:
-            print(f"{name:22} (not in the zoo)")
-            continue
+    for name in wanted:
         model = entries[name].model
         if model not in kinds:  # a user's plugin net: it loads once its plugin is registered
             print(f"{name:22} (a plugin's model: CROWDMPC_PLUGINS={model} measures it)")

@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
     episode_count,
     human_count,
+    json_on_stdout,
     output_file,
     predictor_name,
     run_main,
@@ -104,6 +105,11 @@ def main() -> None:
     )
     parser.add_argument("--json", type=output_file, default=None, metavar="FILE")
     args = parser.parse_args()
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        _measure(args)
+
+
+def _measure(args: argparse.Namespace) -> None:
     runs = {mode: run_mode(mode, args) for mode in MODES}
     default_paths = [r.robot_positions[1] for r in runs["default"]]
     report: dict[str, Any] = {"predictor": args.predictor, "episodes": args.episodes, "modes": {}}

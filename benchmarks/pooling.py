@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, figure, json_on_stdout, output_file, run_main, write_json  # noqa: E402
+from bench_cli import check_distinct, count_in, figure, json_on_stdout, output_file, run_main, write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 21  # obs 9 + pred 12, TrajNet++'s window
@@ -130,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=count_in("threads", 1), default=1)
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
+    check_distinct(parser, "--agents", args.agents)
     with json_on_stdout(args.json):
         batch = args.batch if args.phase == "train" else 1
         print(

@@ -112,8 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     predictor = load_predictor(args.model)
-    if not isinstance(predictor, LearnedPredictor):
-        raise SystemExit(f"{args.model} is not a learned predictor: it has no CasADi encoder or twin")
+    if not isinstance(predictor, LearnedPredictor):  # a user error: one line and exit 2, as crowdmpc's
+        parser.error(f"--model {args.model} is not a learned predictor: it has no CasADi encoder or twin")
     print(
         f"{args.model}, {args.humans} humans + {args.robots} robots, H = {args.horizon}, "
         f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"

@@ -41,6 +41,7 @@ from bench_cli import (  # noqa: E402
     count_in,
     episode_bar,
     episode_count,
+    json_on_stdout,
     output_file,
     predictor_name,
     run_main,
@@ -143,14 +144,19 @@ def main() -> None:
     parser.add_argument("--json", type=output_file, default=None, metavar="FILE")
     args = parser.parse_args()
     from crowdsim.world import is_sensor_range
+    from pipelines.loop.margins import parse_margins
 
     if args.sensor_range is not None and not is_sensor_range(args.sensor_range):
         parser.error(f"--sensor-range must be a finite number of metres > 0, got {args.sensor_range}")
-    from mpc.config import MPCConfig
-    from pipelines.loop.margins import parse_margins
-
     for text in (*args.margins, args.plan_with):
         parse_margins(text)  # a typo is one line now, not after the episodes
+    with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
+        _measure(args)
+
+
+def _measure(args: argparse.Namespace) -> None:
+    from mpc.config import MPCConfig
+
     horizon = MPCConfig().horizon
     report: dict[str, Any] = {
         "predictor": args.predictor,

@@ -26,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
+    check_distinct,
     episode_bar,
     episode_count,
     human_count,
@@ -108,6 +109,7 @@ def main() -> None:
     parser.add_argument("--seed", type=seed_number, default=0, help="episode i uses seed + i // 2")
     parser.add_argument("--json", type=output_file, help="write the rows to this file ('-': stdout)")
     args = parser.parse_args()
+    check_distinct(parser, "--radii", args.radii)
     with json_on_stdout(args.json):
         try:  # the config files' parser and checks
             run = load(args.config)
