@@ -7,8 +7,9 @@ those both sides failed to avoid. Among a reactive crowd it also says how far th
 their tracks (against the plain replay's same episodes, whose people are the recording's).
 
 For the closest robot-human pair of each episode with contact (< 0.6 m, among tracked people), at the state
-where it is closest: the person's speed and the robot's over the step before, and the robot's distance from
-its start and its goal.
+where it is closest: the person's speed and the robot's over the step before (the person's only where they
+were tracked then: someone whose track begins there has none), and the robot's distance from its start and
+its goal.
 
     nice -n 10 .venv/bin/python benchmarks/replay_contacts.py --crowd hotel_test --humans 10 --episodes 20
 """
@@ -16,6 +17,7 @@ its start and its goal.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -47,7 +49,10 @@ def contact_at(result: EpisodeResult) -> tuple[float, float, float, float, float
     k, i, j = np.unravel_index(np.argmin(d), d.shape)
     before = max(int(k) - 1, 0)
     dt = 0.4
-    human = float(np.linalg.norm(result.human_positions[k, j] - result.human_positions[before, j])) / dt
+    # NaN where they were not tracked the step before (their track begins at k): the row there is padding,
+    # which read as someone standing (0 m/s)
+    moved = float(np.linalg.norm(result.human_positions[k, j] - result.human_positions[before, j])) / dt
+    human = moved if k > 0 and present[before, j] else math.nan
     robot = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_positions[before, i])) / dt
     start = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_positions[0, i]))
     goal = float(np.linalg.norm(result.robot_positions[k, i] - result.robot_goals[i]))
@@ -103,9 +108,12 @@ def main() -> None:
         rows = np.array([c for c in map(contact_at, results) if c is not None]).reshape(-1, 5)
         line = f"{scenario:13s} contact in {len(rows)} of {len(results)} episodes"
         if len(rows):
-            human, robot, start, goal, _ = np.median(rows, axis=0)
+            _, robot, start, goal, _ = np.median(rows, axis=0)
+            speeds = rows[np.isfinite(rows[:, 0]), 0]  # those tracked the step before
+            human = f"{np.median(speeds):.2f} m/s" if len(speeds) else "-"
             line += (
-                f"; medians: person {human:.2f} m/s, robot {robot:.2f} m/s, {start:.1f} m from its start and "
+                f"; medians: person {human} (of the {len(speeds)} tracked the step before), robot "
+                f"{robot:.2f} m/s, {start:.1f} m from its start and "
                 f"{goal:.1f} m from its goal; person standing in {int((rows[:, 0] < STANDING).sum())}, robot "
                 f"within 1 m of its goal in {int((rows[:, 3] < 1.0).sum())}; the person appearing in contact "
                 f"in {int(rows[:, 4].sum())}"

@@ -257,6 +257,9 @@ def test_run_main_ends_a_users_error_in_one_line_and_keeps_a_bugs_traceback(caps
         ),
         ("cost_scale", ["--robots", "1", "1", "--episodes", "1"], "--robots names 1 more than once"),
         ("orca_step", ["--humans", "0", "0", "--episodes", "1"], "--humans names 0 more than once"),
+        ("pooling", ["--agents", "2", "2", "--repeats", "1"], "--agents names 2 more than once"),
+        # a user error, as crowdmpc's: exit 2 (it was 1)
+        ("predictor_floor", ["--model", "constant_velocity"], "not a learned predictor"),
     ],
 )
 def test_a_bad_command_line_stops_before_any_episode(script, argv, message, capsys, tmp_path, monkeypatch):

@@ -165,6 +165,12 @@ def test_cache_info_json_on_a_closed_stdout_is_one_line(json_args, monkeypatch, 
         ["review_memory.py", "--files", "1", "--episodes", "1", "--humans", "0"],
         ["sweep_log_scale.py", "--experiment", "baselines", "--humans", "3", "--episodes", "2"],
         ["run_all.py", "--quick", "--sections", "simulator"],
+        # these two printed their table on stdout before the JSON
+        ["first_step.py", "--predictor", "constant_velocity", "--episodes", "1", "--humans", "1"],
+        [
+            "replay_coverage.py",
+            *("--predictor", "constant_velocity", "--crowds", "orca", "--episodes", "1", "--humans", "1"),
+        ],
     ],
     ids=lambda argv: argv[0],
 )
