@@ -1,6 +1,7 @@
 """benchmarks/replay_contacts.py: each contact's speeds and place among a replayed crowd, counting only the
 people tracked then."""
 
+import math
 import sys
 from types import SimpleNamespace
 
@@ -36,7 +37,11 @@ def test_the_contact_is_the_closest_tracked_approach_with_its_speeds_and_place()
     # the person standing on the start is not there: untracked, no contact with it
     assert replay_contacts.contact_at(episode(np.array([[False, False]] * 3))) is None
     human, robot, _, _, _ = replay_contacts.contact_at(episode(np.array([[False, True]] * 3)))
-    assert (human, robot) == (0.0, 0.0)  # tracked, it is the contact: at row 0, standing
+    assert math.isnan(human) and robot == 0.0  # tracked, it is the contact: at row 0, with no step before
+    # a track that begins at the contact has no speed: its row before is padding (it read 0 m/s, standing)
+    late = np.array([[False, False], [True, False], [True, False]])
+    human, robot, _, _, appeared = replay_contacts.contact_at(episode(late))
+    assert math.isnan(human) and robot == pytest.approx(1.0) and appeared == 1.0
 
 
 def test_a_contact_with_someone_whose_track_begins_within_contact_is_told_apart():
