@@ -54,7 +54,10 @@ def table_rows(found: list[tuple[str, Calibration]], user_dir: Path | None) -> l
 
 
 def _row(block: Calibration, user_dir: Path | None) -> list[str]:
+    from predictors.calibration_store import made_with
     from predictors.conformal import alpha_text
+
+    made = made_with(block)  # the settings the crowd and episodes columns read
 
     view = "recorded" if block.source == "real" else _view(block)
     per_class = [name for name, table in (("motion", block.classes), ("shortfall", block.shortfall)) if table]
@@ -68,19 +71,17 @@ def _row(block: Calibration, user_dir: Path | None) -> list[str]:
         ", ".join(per_class) or "-",
         _weights(block, user_dir),
         str(block.details.get("controller", "-")) if block.source == "closed-loop" else "-",
-        _crowd(block),
-        _episodes(block),
+        _crowd(made),
+        _episodes(block, made),
         block.created[:16].replace("T", " "),
     ]
 
 
-def _crowd(block: Calibration) -> str:
+def _crowd(made: dict[str, str]) -> str:
     """The closed-loop crowds a block was made among: "5..9, paper, visible" (its crowd sizes, the humans'
     profile, whether they saw the robots), "-" where not recorded; a run among others gets a note
-    (pipelines.commands.calibration_notes), and the list said nothing of them."""
-    from predictors.calibration_store import made_with
-
-    made = made_with(block)
+    (pipelines.commands.calibration_notes), and the list said nothing of them. ``made``: the block's
+    ``made_with``."""
     if not made.get("humans"):
         return "-"
     texts = made["humans"].split(",")
@@ -90,12 +91,10 @@ def _crowd(block: Calibration) -> str:
     return ", ".join([humans, *(made[key] for key in ("profile", "visibility") if key in made)])
 
 
-def _episodes(block: Calibration) -> str:
+def _episodes(block: Calibration, made: dict[str, str]) -> str:
     """The closed-loop episodes a block was made on: "200 (1000000..1000199)", "-" where not recorded (a
-    real block's scenes were recorded): blocks of one alpha made on other episodes give other margins."""
-    from predictors.calibration_store import made_with
-
-    made = made_with(block)
+    real block's scenes were recorded): blocks of one alpha made on other episodes give other margins.
+    ``made``: the block's ``made_with``."""
     if "episodes" not in made:
         return "-"
     seeds = block.details.get("seeds")
