@@ -1,7 +1,7 @@
 """The [mpc] keys a controller does not read (``unread_because``): a CMPC column per value of DMPC's update
 rule ran the same episodes again under new cell keys (a sweep refuses or skips them, simulate refuses them
 given on the command line), and a comparison of two runs that differ only in them differs in nothing their
-episodes ran with (``unread_keys``)."""
+episodes ran with (``record_unread``)."""
 
 from __future__ import annotations
 
@@ -44,34 +44,33 @@ def unread_because(spec: ControllerSpec, key: str) -> str | None:
     plugin reads what it likes."""
     if not spec.kind.uses_predictor:
         return "plan with no MPC"
-    if key in FLOCKING_KEYS and not spec.flocking:
+    return _unread(spec.controller, spec.coupling, spec.flocking, key)
+
+
+def _unread(controller: str, coupling: str, flocking: bool, key: str) -> str | None:
+    """``unread_because``'s rule for a controller that plans with an MPC."""
+    if key in FLOCKING_KEYS and not flocking:
         return f"plan without the flocking term (NF), which {key} shapes"
-    if key in DMPC_KEYS and spec.controller == "cmpc":
+    if key in DMPC_KEYS and controller == "cmpc":
         return f"are centralized (CMPC), and {key} is DMPC's"
-    if key in CMPC_KEYS and spec.controller == "dmpc":
+    if key in CMPC_KEYS and controller == "dmpc":
         return f"are distributed (DMPC), and {key} is CMPC's"
-    if key in COUPLED_KEYS and spec.coupling != "nlp":
-        return f"couple by {spec.coupling}, and {key} is the coupled NLP's (coupling nlp)"
+    if key in COUPLED_KEYS and coupling != "nlp":
+        return f"couple by {coupling}, and {key} is the coupled NLP's (coupling nlp)"
     return None
 
 
-def unread_keys(controller: str, coupling: str, flocking: bool) -> frozenset[str]:
-    """The [mpc] keys a shipped MPC controller (``cmpc``, ``dmpc``) with this coupling and flocking does not
-    read, as a record names them (``unread_because``'s rule; none for another controller, which reads what
-    it likes or has no MPC)."""
+def record_unread(record: dict[str, Any]) -> frozenset[str]:
+    """The [mpc] keys an episode record's controller does not read, by ``unread_because``'s rule, for a
+    shipped MPC controller (cmpc, dmpc; none for another, which reads what it likes or has no MPC):
+    ``crowdmpc compare``'s, where a CMPC's DMPC settings were recorded by simulate from a file and at
+    Table I's by a sweep of the same episodes."""
+    controller = str(record.get("controller"))
     if controller not in ("cmpc", "dmpc"):
         return frozenset()
-    unread = DMPC_KEYS if controller == "cmpc" else CMPC_KEYS
-    if coupling != "nlp":
-        unread |= COUPLED_KEYS
-    return unread if flocking else unread | FLOCKING_KEYS
-
-
-def record_unread(record: dict[str, Any]) -> frozenset[str]:
-    """``unread_keys`` of an episode record's controller, coupling and flocking (``crowdmpc compare``: a
-    CMPC's DMPC settings, recorded by simulate from a file, at Table I's by a sweep of the same episodes)."""
     config = record.get("config")
     if not isinstance(config, dict):
         config = {}
-    coupling, flocking = config.get("coupling", "ibr"), config.get("flocking", True)
-    return unread_keys(str(record.get("controller")), str(coupling), flocking is not False)
+    coupling, flocking = str(config.get("coupling", "ibr")), config.get("flocking", True) is not False
+    keys = FLOCKING_KEYS | DMPC_KEYS | CMPC_KEYS | COUPLED_KEYS
+    return frozenset(key for key in keys if _unread(controller, coupling, flocking, key) is not None)
