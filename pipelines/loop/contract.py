@@ -333,8 +333,7 @@ def check_run(
     for name, value in (("episodes", episodes), ("seed", seed)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise PipelineError(f"run_episodes: {name} must be an int >= 0, got {short_repr(value)}")
-    if not isinstance(env_config, EnvConfig):
-        raise PipelineError(f"run_episodes: env_config must be an EnvConfig, got {short_repr(env_config)}")
+    _check_env_config(env_config, "run_episodes")
     if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
         raise PipelineError(
             f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "
@@ -355,8 +354,7 @@ def check_run(
 def checked_observers(observers: Any, env_config: Any, where: str) -> tuple[Any, ...]:
     """``observers`` as a tuple of objects with ``on_reset``, ``on_step`` and ``on_end``, and ``env_config``
     an EnvConfig; PipelineError naming the argument otherwise (an AttributeError came from inside)."""
-    if not isinstance(env_config, EnvConfig):
-        raise PipelineError(f"{where}: env_config must be an EnvConfig, got {short_repr(env_config)}")
+    _check_env_config(env_config, where)
     if (
         observers is None
         or isinstance(observers, str | bytes | Mapping)
@@ -373,3 +371,8 @@ def checked_observers(observers: Any, env_config: Any, where: str) -> tuple[Any,
                 "EpisodeObserver, pipelines.loop.episode)"
             )
     return observers
+
+
+def _check_env_config(env_config: Any, where: str) -> None:
+    if not isinstance(env_config, EnvConfig):
+        raise PipelineError(f"{where}: env_config must be an EnvConfig, got {short_repr(env_config)}")
