@@ -123,6 +123,7 @@ class McapEpisodeRecorder:
         self.run_meta = dict(run_meta or {})
         self.paths: list[Path] = []  # every file started, in order
         self._recorder: McapRecorder | None = None
+        self._cut: Path | None = None  # the file close() finished while its episode was still running
         self._scene: SceneBuilder | None = None
         self._last: Observation | None = None  # the newest state seen
         self._last_written_step = -1
@@ -134,6 +135,7 @@ class McapEpisodeRecorder:
     # -- EpisodeObserver -------------------------------------------------------------------------------------
     def on_reset(self, obs: Observation, meta: Mapping[str, Any]) -> None:
         self.close()  # an episode that ended without on_end (an exception in the loop) is finished as it is
+        self._cut = None
         # made for the first episode, not before: a run refused first (a plugin's describe()) leaves no folder
         self.out_dir.mkdir(parents=True, exist_ok=True)
         missing = [key for key in ("seed", "scenario") if key not in meta]
@@ -250,6 +252,11 @@ class McapEpisodeRecorder:
         self._last = next_obs
 
     def on_end(self, result: EpisodeResult) -> None:
+        if self._recorder is None and self._cut is not None:
+            # closed mid-episode (``with`` ended before the env's close ended a cut episode): the file stands
+            # as one cut short, which review names; raising here stopped the env's close
+            self._cut = None
+            return
         rec = self._require_open()
         builder, last = self._require_episode()
         t_ns = self._start_ns + seconds_to_ns(last.time)
@@ -267,12 +274,14 @@ class McapEpisodeRecorder:
             rec.write_json("/scene", scene, t_ns, schema=SCENE_UPDATE)
         rec.write("/episode/metrics", episode_summary(result), t_ns, schema=EPISODE_METRICS)
         self.close()
+        self._cut = None
 
     # -- lifetime --------------------------------------------------------------------------------------------
     def close(self) -> None:
         """Finish the open file, if any (also what ``with McapEpisodeRecorder(...)`` does on the way out)."""
         if self._recorder is not None:
             recorder, self._recorder = self._recorder, None
+            self._cut = recorder.path
             recorder.close()
 
     def __enter__(self) -> McapEpisodeRecorder:
@@ -292,6 +301,8 @@ class McapEpisodeRecorder:
 
     # -- helpers ---------------------------------------------------------------------------------------------
     def _require_open(self) -> McapRecorder:
+        if self._recorder is None and self._cut is not None:
+            raise PipelineError(f"McapEpisodeRecorder: on_step after close(), which finished {self._cut}")
         if self._recorder is None:
             raise PipelineError("McapEpisodeRecorder: on_step/on_end called before on_reset")
         return self._recorder

@@ -308,6 +308,28 @@ def test_a_cut_episode_whose_observer_fails_to_take_it_is_ended_once_and_the_env
     assert closed == [True] and [r.seed for r in observed.results] == [0, 1]
 
 
+def test_a_recorder_closed_before_the_env_leaves_the_cut_episode_cut_short_and_the_close_quiet(tmp_path):
+    """`with McapEpisodeRecorder(...)` ending before env.close() had the close raise the recorder's "called
+    before on_reset" for the episode a TimeLimit outside had cut: its file is finished, without metrics."""
+    with McapEpisodeRecorder(tmp_path) as recorder:
+        observed = ObserveEpisodes(gym.make(crowdsim.ENV_ID, n_humans=2, n_robots=2), [recorder])
+        env = gym.wrappers.TimeLimit(observed, 3)
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(np.zeros((2, 2)))
+    env.close()
+    assert [r.seed for r in observed.results] == [0]
+    rec = read_recording(recorder.paths[0])
+    assert len(rec.data("/robots")) == 3 and not rec.data("/episode/metrics")
+    # a step into the file closed is refused, naming the close
+    with McapEpisodeRecorder(tmp_path / "stepped") as recorder:
+        env = ObserveEpisodes(gym.make(crowdsim.ENV_ID, n_humans=2, n_robots=2), [recorder])
+        env.reset(seed=0)
+        env.step(np.zeros((2, 2)))
+    with pytest.raises(PipelineError, match=r"on_step after close\(\), which finished .*seed000000"):
+        env.step(np.zeros((2, 2)))
+
+
 def test_a_controller_whose_act_returns_no_control_output_is_named_through_gym_too():
     from tests.plugins.broken_controllers import ArrayAct
 
