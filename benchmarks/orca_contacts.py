@@ -76,6 +76,9 @@ def main() -> None:
           f"{args.seed}..{args.seed + n - 1}")  # fmt: skip
     for name, values in minima.items():
         v = np.array(values)
+        if not np.isfinite(v).any():  # one robot: no robot-robot pair (it printed "inf m")
+            print(f"  {name:<12} no pair of this kind")
+            continue
         print(f"  {name:<12} contact (< {CONTACT} m) in {int((v < CONTACT).sum()):>3} / {n} episodes;"
               f" smallest distance {v.min():.3f} m")  # fmt: skip
     print(f"  episodes where some human needed the 3-D linear program: {lp3_episodes} / {n}")

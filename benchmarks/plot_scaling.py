@@ -127,6 +127,7 @@ def figure(pts: list[Point]) -> Any:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex="col")
     colours = {"cmpc": "tab:blue", "dmpc": "tab:orange"}
@@ -150,6 +151,7 @@ def figure(pts: list[Point]) -> Any:
         axes[1, col].text(axes[1, col].get_xlim()[0], CONTROL_PERIOD_MS * 1.08, " control period 0.4 s")
         axes[1, col].set_ylabel("control step ms (median, p99 dashed)")
         axes[1, col].set_xlabel("robots M" if along == "robots" else "humans N")
+        axes[1, col].xaxis.set_major_locator(MaxNLocator(integer=True))  # counts: no 3.5 robots
         if lines:
             axes[0, col].legend(fontsize=8)
         for ax in axes[:, col]:

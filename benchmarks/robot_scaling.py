@@ -226,7 +226,7 @@ def print_table(rows: list[dict[str, Any]]) -> None:
             f"{r['controller']:<5} {r['robots']:>3} {r['formation']:<9} {r['goals']:<5} "
             f"{r['success_rate']:6.1f} {r['collision_rate']:6.1f} {r['timeout_rate']:6.1f} "
             f"{figure(r['travel_time_mean'], '8.2f')} "
-            f"{r['min_distance_robots']:8.2f} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
+            f"{figure(r['min_distance_robots'], '8.2f')} {r['reached_pct']:6.1f} {r['median_ms']:7.1f} "
             f"{r['p95_ms']:7.1f} {r['p99_ms']:7.1f} {r['steps']:6d} {r['j_max_steps']:5d} "
             f"{r['fallback_steps']:5d} {figure(r['halfway_s_success'], '7.1f')} / "
             f"{figure(r['halfway_s_failed'], '6.1f')}  "

@@ -1,4 +1,5 @@
-"""benchmarks/orca_contacts.py: its summary names the time limit it ran; one agent (no pair) is refused."""
+"""benchmarks/orca_contacts.py: its summary names the time limit it ran; one agent (no pair) is refused, and
+one robot has no robot-robot line."""
 
 import sys
 
@@ -17,7 +18,10 @@ def test_the_summary_names_the_time_limit_the_episodes_ran(monkeypatch, capsys):
     argv = ["orca_contacts.py", "--humans", "2", "--robots", "1", "--episodes", "1"]
     monkeypatch.setattr(sys, "argv", argv)
     orca_contacts.main()
-    assert f"episodes that hit the {EnvConfig().time_limit:g} s time limit: " in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"episodes that hit the {EnvConfig().time_limit:g} s time limit: " in out
+    # one robot: no robot-robot pair, said so (it printed "smallest distance inf m")
+    assert "robot-robot  no pair of this kind" in out and "inf" not in out
     monkeypatch.setattr(orca_contacts, "CrowdEnv", lambda: CrowdEnv(EnvConfig(time_limit=25.0)))
     orca_contacts.main()
     assert "episodes that hit the 25 s time limit: " in capsys.readouterr().out

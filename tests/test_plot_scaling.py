@@ -94,6 +94,15 @@ def test_main_writes_the_figure(tmp_path):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_the_robot_and_human_axes_tick_whole_numbers():
+    """The robots axis had ticks at 3.5, 4.5, ... robots (matplotlib's default locator)."""
+    few = _report(7, [("cmpc", "fixed", 3, 100.0), ("cmpc", "fixed", 5, 98.0), ("cmpc", "fixed", 6, 96.0)])
+    fig = plot_scaling.figure(plot_scaling.points([("m.json", few), ("n5", N_RUNS[0]), ("n50", N_RUNS[1])]))
+    for ax in fig.axes:
+        ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+        assert ticks and all(float(t).is_integer() for t in ticks)
+
+
 def test_the_path_printed_is_the_path_written(tmp_path, capsys):
     """--out X wrote X.png (matplotlib's default format) and printed "wrote X"."""
     run = tmp_path / "m.json"

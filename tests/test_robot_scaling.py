@@ -103,3 +103,22 @@ def test_the_episodes_are_resets_and_run_the_perpendicular_overlaps_without_a_wa
         warnings.simplefilter("error")
         row = robot_scaling.run_row("cmpc", "constant_velocity", 1, 16, 1, 1, ("perpendicular",), "auto")
     assert row["episodes"] == 1 and row["steps"] > 0
+
+
+def test_one_robot_prints_no_robot_distance(capsys):
+    """One robot has no robot-robot pair: its row printed "inf" as the smallest robot-robot distance."""
+    row = {
+        "controller": "cmpc",
+        "robots": 1,
+        "formation": "row",
+        "goals": "fixed",
+        "failures": dict.fromkeys(robot_scaling.FAILURES, 0),
+        **dict.fromkeys(("success_rate", "collision_rate", "timeout_rate", "reached_pct"), 100.0),
+        **dict.fromkeys(("travel_time_mean", "median_ms", "p95_ms", "p99_ms"), 1.0),
+        **dict.fromkeys(("halfway_s_success", "halfway_s_failed"), 2.0),
+        **dict.fromkeys(("steps", "j_max_steps", "fallback_steps"), 0),
+        "min_distance_robots": float("inf"),
+    }
+    robot_scaling.print_table([row])
+    line = capsys.readouterr().out.splitlines()[1]
+    assert "inf" not in line and line.split()[8] == "-"
