@@ -8,6 +8,7 @@ A/B comparison): the check reads the channels' schemas and encodings, which noth
 from __future__ import annotations
 
 import json
+import math
 
 from pipelines.logs.jsonschema import unsupported_keywords, validate
 from pipelines.logs.reader import Channel, LoggedMessage, Recording
@@ -72,7 +73,25 @@ def _check_topic(
             f"{message.where(topic, start_time_ns)} ({channel.schema_name}): {problem}"
             for problem in validate(message.data, schema)
         ]
+        if not violations:  # where its schema lets it pass: bare NaN and Infinity are no JSON (outputs.md)
+            violations = [
+                f"{message.where(topic, start_time_ns)}: {where} is {value}, which JSON cannot hold"
+                for where, value in _non_finite(message.data, "$")
+            ]
         if not violations and message.problem:
             violations.append(f"{message.where(topic, start_time_ns)}: {message.problem}")
         errors += violations
     return checked, errors
+
+
+def _non_finite(value: object, where: str) -> list[tuple[str, float]]:
+    """Every NaN or infinite number in decoded JSON, by its path: Python's json reads bare NaN, Infinity and
+    1e999, and a schema says nothing of them where it leaves a value open (``Solver.extra``); Foxglove's
+    parser drops the whole message."""
+    if isinstance(value, float):
+        return [] if math.isfinite(value) else [(where, value)]
+    if isinstance(value, dict):
+        return [found for key, item in value.items() for found in _non_finite(item, f"{where}.{key}")]
+    if isinstance(value, list):
+        return [found for i, item in enumerate(value) for found in _non_finite(item, f"{where}[{i}]")]
+    return []

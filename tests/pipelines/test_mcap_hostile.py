@@ -301,6 +301,28 @@ def test_states_of_changing_sizes_cannot_be_drawn(tmp_path, capsys):
     assert rc == 2 and "do not make one episode" in err and str(path) in err
 
 
+def test_check_names_a_bare_nan_where_the_schema_leaves_the_value_open(tmp_path, capsys):
+    """Python's json reads bare NaN, so `review --check` passed `"extra": {"r": [1, NaN]}` (Solver.extra is
+    open): no JSON reader takes it, and Foxglove drops the message. The review still reads it."""
+    errors = {}
+    for name, value in (("nan", b"NaN"), ("big", b"1e999"), ("finite", b"0.5")):
+        path = tmp_path / f"{name}.mcap"
+        with McapRecorder(path) as rec:
+            rec.write("/robots", robot(0, 1), 0, schema=ROBOTS)
+            solver = b'{"time": 0.0, "step": 0, "status": "ok", "solve_time_s": 0.001, "iterations": 1, '
+            solver += b'"potential": null, "fallback": null, "extra": {"r": [1, ' + value + b"]}}"
+            rec.write_json("/mpc/solver", solver, 0, schema=SOLVER)
+        review(capsys, path, "--check", "--json", tmp_path / f"{name}.json")
+        report = json.loads((tmp_path / f"{name}.json").read_text())
+        errors[name] = [e for e in report["check"][str(path)]["errors"] if "/mpc/solver" in e]
+        assert len(read_recording(path).data("/mpc/solver")) == 1
+    assert errors == {
+        "nan": ["/mpc/solver @ 0.000 s: $.extra.r[1] is nan, which JSON cannot hold"],
+        "big": ["/mpc/solver @ 0.000 s: $.extra.r[1] is inf, which JSON cannot hold"],
+        "finite": [],
+    }
+
+
 @pytest.mark.parametrize(
     ("dt", "duration_ms", "pace"),
     [

@@ -15,7 +15,7 @@ from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.recording import McapEpisodeRecorder
-from pipelines.logs.review import summarize
+from pipelines.logs.review import setups_table, summarize
 from pipelines.logs.schemas import ROBOTS
 from pipelines.logs.view import episode_view
 from tests.pipelines.mcap_episode import control_output, record_episode
@@ -592,6 +592,14 @@ def test_set_ups_side_by_side_name_each_by_what_differs(tmp_path, capsys):
         assert cells[9:11] == [f"{t['robot_contact_rate']:.1f}", f"({t['robot_contact_count']}/1)"]
         # printed to 3 significant digits
         assert float(cells[-2]) == pytest.approx(t["solve_time_median_ms"], rel=5e-3)
+
+
+def test_set_ups_side_by_side_print_a_fast_controllers_steps_to_three_digits():
+    """The times were rounded to 0.1 ms before the table's 3 significant digits: ORCA's 0.156 ms median
+    printed as 0.200 (28 % off)."""
+    totals = {"runs": 2, "control_steps": 80, "solve_time_median_ms": 0.156, "solve_time_p95_ms": 0.2534}
+    row = setups_table(["orca"], [totals]).splitlines()[-1].split()
+    assert row[0] == "orca" and row[-2:] == ["0.156", "0.253"]
 
 
 def test_times_with_compare_is_refused_before_reading(runs, tmp_path, capsys):
