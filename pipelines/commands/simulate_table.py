@@ -173,11 +173,17 @@ def _cut_short_rows(summary: dict[str, Any], time_limit_s: float | None) -> list
     if steps and fell > steps / 2:
         failed = {k: v for k, v in summary.get("statuses", {}).items() if k != "ok"}
         most = max(failed, key=lambda k: failed[k]) if failed else "failed"
+        # a budget cut: more iterations cannot help (they named solver_max_iter at every wall-time stop)
+        remedy = (
+            "a longer mpc.time_limit_s"
+            if most in BUDGET_STATUSES
+            else "mpc.solver_max_iter or mpc.cost_scale"
+        )
         found.append(
             (
                 "mostly fallbacks",
                 f"{fell} of {steps} steps fell back (most: {most}): the MPC rarely solved, so these metrics "
-                "are of its fallback; mpc.solver_max_iter or mpc.cost_scale may let it solve",
+                f"are of its fallback; {remedy} may let it solve",
             )
         )
     nan_steps = int(summary.get("statuses", {}).get(NAN_PREDICTION, 0))

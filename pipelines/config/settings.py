@@ -68,6 +68,16 @@ def _check_seed(seed: object) -> None:
         raise PipelineError(f"seed must be at most 2**63 - 1 (TOML's largest integer), got {seed!r}")
 
 
+def check_last_seed(seed: int, offset: int, episodes: str, name: str = "seed") -> None:
+    """The last episode's seed, ``seed + offset``, in range too: one past 2**63 - 1 ran and was recorded under
+    a seed no command takes back (`--seed` refuses it), so the episode could not be rerun alone."""
+    if seed + offset > MAX_SEED:
+        raise PipelineError(
+            f"{name} must be at most {MAX_SEED - offset} with {episodes} (its last episode's seed, seed + "
+            f"{offset}, must stay within 2**63 - 1, TOML's largest integer), got {seed!r}"
+        )
+
+
 def _check_once(name: str, what: str, names: tuple[str, ...]) -> None:
     """Refuse a list that names one twice, as ``humans`` is: each name is a column (the experiment refused it
     later, as "--predictors names [...] more than once" under ``--set sweep.predictors``)."""
@@ -152,6 +162,7 @@ class SimulateSettings:
                 f"episodes must be at most {MAX_SIMULATE_EPISODES} (use crowdmpc sweep), got {self.episodes}"
             )
         _check_seed(self.seed)
+        check_last_seed(self.seed, self.episodes - 1, f"{self.episodes} episodes")
         for name in ("json", "plot", "record"):
             value = getattr(self, name)
             if value is not None and not (isinstance(value, str) and value):
@@ -199,7 +210,8 @@ class SweepSettings:
         if n > MAX_EPISODES_PER_CELL:
             raise PipelineError(f"episodes_per_cell must be at most {MAX_EPISODES_PER_CELL}, got {n}")
         self._check_humans()
-        _check_seed(self.seed)
+        _check_seed(self.seed)  # a cell's episode i runs seed + i // 2 (experiments/tasks.py)
+        check_last_seed(self.seed, (n - 1) // 2, f"{n} episodes a cell")
         if self.backend not in BACKENDS:
             raise PipelineError(f"backend must be one of {list(BACKENDS)}, got {self.backend!r}")
         if self.ray_address is not None and not (isinstance(self.ray_address, str) and self.ray_address):

@@ -83,9 +83,13 @@ def test_a_sweep_runs_the_papers_episodes_per_cell_by_default():
 
 
 def test_a_sweep_seed_must_fit_the_toml_config_it_is_written_into():
-    assert SweepSettings(seed=2**63 - 1).seed == 2**63 - 1
+    assert SweepSettings(seed=2**63 - 1, episodes_per_cell=2).seed == 2**63 - 1  # seeds: seed + i // 2
     with pytest.raises(PipelineError, match=r"seed must be at most 2\*\*63 - 1 \(TOML's largest integer\)"):
         SweepSettings(seed=2**63)
+    # and so must its last episode's: 1000 a cell reach seed + 499
+    assert SweepSettings(seed=2**63 - 500).seed == 2**63 - 500
+    with pytest.raises(PipelineError, match=rf"seed must be at most {2**63 - 500} with 1000 episodes a cell"):
+        SweepSettings(seed=2**63 - 499)
 
 
 def test_an_experiment_needs_distinct_labels_and_some_humans():

@@ -418,6 +418,11 @@ def test_errors_from_the_python_api_are_config_errors(tmp_path):
         (["--seed", "-2"], "--seed must be >= 0, got -2"),
         # written into the run's TOML config, whose integers other readers take as 64-bit signed
         (["--seed", str(2**63)], f"--seed must be at most 2**63 - 1 (TOML's largest integer), got {2**63}"),
+        (  # its last episode ran at 2**63 and was recorded under a seed --seed then refused
+            ["--seed", str(2**63 - 1), "--episodes", "2"],
+            f"--seed must be at most {2**63 - 2} with 2 episodes (its last episode's seed, seed + 1, "
+            f"must stay within 2**63 - 1, TOML's largest integer), got {2**63 - 1}",
+        ),
         (["--set", "scenario.humans=100"], "--set scenario.humans: n_humans must be in [0, 50], got 100"),
         (["--set", "mpc.horizon=100000"], "--set mpc.horizon: must be at most 100, got 100000"),
         (["--set", "mpc.j_max=1e9"], "--set mpc.j_max: must be an integer >= 1, got 1000000000.0"),

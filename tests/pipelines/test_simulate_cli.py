@@ -295,6 +295,10 @@ def test_a_run_that_mostly_fell_back_says_so():
     assert (
         "190 of 195 steps fell back (most: Maximum_Iterations_Exceeded)" in row and "solver_max_iter" in row
     )
+    # cut by the wall-time budget, where more iterations cannot help: the budget is named
+    summary["statuses"] = {"ok": 5, "Maximum_WallTime_Exceeded": 190}
+    (row,) = [line for line in format_table(summary, "h").splitlines() if "mostly fallbacks" in line]
+    assert "a longer mpc.time_limit_s may let it solve" in row and "solver_max_iter" not in row
 
 
 @pytest.mark.parametrize("json_arg", ["file", "-"])
