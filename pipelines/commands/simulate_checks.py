@@ -171,6 +171,11 @@ GOAL_ROOM_MARGIN: Final[float] = 0.05  # m
 # m above d_min at which goal_room_note's suggested robot spacing gave the robots room: CMPC, row of 3, 7
 # humans, d_min 1.0 m: 0 of 10 episodes reached their goals 1.0 m apart, 9 of 10 at 1.2 m, 10 of 10 at 1.3 m
 ROOM_SPACING: Final[float] = 0.3
+# m by which the closest goals may lie beyond d_flock before the note: Eq. 15's all-pairs pull held the outer
+# robots of a row of 3 off their goals with no humans about at 1.5 m spacing (0.39 m short), not at 1.25,
+# 1.3 or 1.4 m (CMPC, d_flock 1.2, 2 episodes each; DMPC arrived at 1.3, not at 2.0); d_flock = 1.5 let them
+# arrive. With d_min 1.5, spacing and d_flock 1.8 arrived; with d_min 2, spacing and d_flock 2.3 did not.
+FLOCK_SLACK: Final[float] = 0.25
 
 
 def goal_room_note(
@@ -184,7 +189,9 @@ def goal_room_note(
     CMPC in the row of 3, goals 1.0 m apart, arrived at 0.98 and never from 1.0; in the row of 4 never from
     0.98; the wedge of 3, goals 1.2 m apart, arrived up to 1.5, the wedge of 6 failed at 1.3), so the line
     says "can", and docs/extending.md has the table. It names the spacing that gave room: ``ROOM_SPACING``
-    above d_min."""
+    above d_min, with a d_flock to match where that spacing passes d_flock. Goals with room but further
+    apart than d_flock by more than ``FLOCK_SLACK`` get the flocking line instead (Eq. 15 pulls the pair
+    together)."""
     import numpy as np
 
     from crowdsim.scenarios import MAX_ROBOT_SPACING, choose_formation, robot_layout
@@ -195,12 +202,23 @@ def goal_room_note(
     shape = choose_formation(n_robots) if formation == "auto" else formation
     goals = robot_layout(n_robots, shape, spacing=spacing)[1]  # type: ignore[arg-type]  # EnvConfig checked it
     gaps = np.linalg.norm(goals[:, None] - goals[None], axis=-1)[np.triu_indices(n_robots, k=1)]
-    d_min, gap = mpc_config(spec).d_min, float(gaps.min())
+    cfg = mpc_config(spec)
+    d_min, gap = cfg.d_min, float(gaps.min())
+    flocking = cfg.w_floc > 0  # off with --no-flocking (Table III's "NF")
     if d_min < gap - GOAL_ROOM_MARGIN - 1e-9:
+        if flocking and gap > cfg.d_flock + FLOCK_SLACK + 1e-9:
+            return (
+                f"note: the robots' closest goals are {gap:g} m apart ({shape} of {n_robots}), beyond the "
+                f"MPC's flocking distance d_flock {cfg.d_flock:g} m: Eq. 15 pulls every pair towards it, "
+                "which can hold robots off their goals while nobody is in the way (row of 3, no humans: 0 "
+                f"of 2 arrived 1.5 m apart, 2 of 2 with --set mpc.d_flock=1.5); --set mpc.d_flock={gap:g}"
+            )
         return None
     wider = math.ceil((d_min + ROOM_SPACING) * 20 - 1e-9) / 20  # to 5 cm, up
+    flock = f" and --set mpc.d_flock={wider:g}" if flocking and wider > cfg.d_flock + FLOCK_SLACK else ""
     hint = (
-        f"; [env] robot_spacing = {wider:g} (--set env.robot_spacing={wider:g}) spaces them {wider:g} m apart"
+        f"; [env] robot_spacing = {wider:g} (--set env.robot_spacing={wider:g}{flock}) spaces them "
+        f"{wider:g} m apart"
         if wider <= MAX_ROBOT_SPACING
         else ""
     )

@@ -41,10 +41,28 @@ def test_the_note_names_the_distance_the_formation_and_the_spacing_that_gives_ro
     )
     wedge = goal_room_note(_spec("dmpc", 1.2), 4, "auto")
     assert wedge is not None and "1.2 m between two robots' goals (wedge of 4)" in wedge
-    assert wedge.endswith("robot_spacing = 1.5 (--set env.robot_spacing=1.5) spaces them 1.5 m apart")
+    # past d_flock 1.2 by more than 0.25 m, with the d_flock that let a row of 3 at 1.5 m arrive
+    assert wedge.endswith(
+        "robot_spacing = 1.5 (--set env.robot_spacing=1.5 and --set mpc.d_flock=1.5) spaces them 1.5 m apart"
+    )
     # spaced so, no note; beyond the widest spacing taken (2.5 m), no hint
     assert goal_room_note(_spec(d_min=1.0), 3, "row", 1.3) is None
     assert goal_room_note(_spec(d_min=2.3), 3, "row").endswith("docs/extending.md)")
+
+
+def test_goals_further_apart_than_the_flocking_distance_are_named_with_a_d_flock_to_match():
+    """A row spaced 1.5 m timed out in every episode with no humans about (its outer robots parked 0.39 m
+    short: Eq. 15 pulls every pair towards d_flock 1.2 m), and nothing said why."""
+    note = goal_room_note(_spec(), 3, "row", 1.5)
+    assert note is not None and note.startswith(
+        "note: the robots' closest goals are 1.5 m apart (row of 3), beyond the MPC's flocking distance "
+        "d_flock 1.2 m"
+    )
+    assert note.endswith("; --set mpc.d_flock=1.5")
+    assert goal_room_note(_spec(), 3, "row", 1.4) is None  # arrived: within FLOCK_SLACK
+    matched = ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("d_flock", 1.5),))
+    assert goal_room_note(matched, 3, "row", 1.5) is None
+    assert goal_room_note(ControllerSpec("cmpc", flocking=False), 3, "row", 1.5) is None  # no Eq. 15
 
 
 def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
