@@ -113,9 +113,13 @@ def robot_collision_cost(positions_i: Symbolic, positions_j: Symbolic, cfg: MPCC
     return ca.sum2(smax(g, cfg.mu))
 
 
-def flocking_cost(positions_i: Symbolic, positions_j: Symbolic, cfg: MPCConfig) -> Symbolic:
-    """Eq. 15: ``sum_k (||s_i,k+1 - s_j,k+1|| - d_ij)^2`` with the smoothed norm. Unweighted."""
-    return ca.sum2((smooth_norm(positions_i - positions_j, cfg.delta) - cfg.d_flock) ** 2)
+def flocking_cost(
+    positions_i: Symbolic, positions_j: Symbolic, cfg: MPCConfig, d_ij: Symbolic | float | None = None
+) -> Symbolic:
+    """Eq. 15: ``sum_k (||s_i,k+1 - s_j,k+1|| - d_ij)^2`` with the smoothed norm. Unweighted. ``d_ij``: the
+    pair's distance (``MPCConfig.flock_distance``; a parameter in the NLPs), None: ``cfg.d_flock``."""
+    d = cfg.d_flock if d_ij is None else d_ij
+    return ca.sum2((smooth_norm(positions_i - positions_j, cfg.delta) - d) ** 2)
 
 
 @dataclass(frozen=True)
@@ -166,14 +170,20 @@ def individual_cost(
     )
 
 
-def shared_cost(positions_i: Symbolic, positions_j: Symbolic, w_floc: Symbolic, cfg: MPCConfig) -> Symbolic:
+def shared_cost(
+    positions_i: Symbolic,
+    positions_j: Symbolic,
+    w_floc: Symbolic,
+    cfg: MPCConfig,
+    d_ij: Symbolic | float | None = None,
+) -> Symbolic:
     """Eq. 14: ``J_ij = w_coll J_coll_ij + w_floc_ij J_floc_ij``; symmetric in ``i, j`` (Lemma 1).
 
     ``w_floc`` is per pair (a parameter in the NLPs) so that a robot on its goal stops pulling the others
-    while the weights stay symmetric.
+    while the weights stay symmetric; so is ``d_ij`` (``flocking_cost``), symmetric too.
     """
     return cfg.w_coll * robot_collision_cost(positions_i, positions_j, cfg) + w_floc * flocking_cost(
-        positions_i, positions_j, cfg
+        positions_i, positions_j, cfg, d_ij
     )
 
 
@@ -191,12 +201,14 @@ def robot_cost(
     n_humans: int,
     cfg: MPCConfig,
     margins: Symbolic | None = None,
+    other_distances: Sequence[Symbolic] | None = None,
 ) -> Symbolic:
     """``C_i = J_i + sum_{j != i} J_ij`` (Definition 1, the objective of Eq. 5), others' positions given;
-    ``margins``: see :func:`human_collision_cost`."""
+    ``margins``: see :func:`human_collision_cost`; ``other_distances``: each pair's d_ij (None: d_flock)."""
     total = individual_cost(track, humans, n_humans, cfg, margins)
-    for positions_j, w in zip(other_positions, other_floc_weights, strict=True):
-        total = total + shared_cost(track.positions, positions_j, w, cfg)
+    distances = [None] * len(other_positions) if other_distances is None else other_distances
+    for positions_j, w, d in zip(other_positions, other_floc_weights, distances, strict=True):
+        total = total + shared_cost(track.positions, positions_j, w, cfg, d)
     return total
 
 
@@ -207,18 +219,21 @@ def potential(
     n_humans: int,
     cfg: MPCConfig,
     margins: Symbolic | None = None,
+    distances: Symbolic | None = None,
 ) -> Symbolic:
     """Eq. 16 with each unordered pair once (module docstring): ``F = sum_i J_i + sum_{i<j} J_ij``.
 
-    ``floc_weights`` holds one weight per unordered pair in :func:`pair_index` order.
+    ``floc_weights`` holds one weight per unordered pair in :func:`pair_index` order, ``distances`` (None:
+    d_flock for every pair) one d_ij.
     """
     n_robots = len(tracks)
     total = 0
     for i, track in enumerate(tracks):
         total = total + individual_cost(track, humans, n_humans, cfg, margins)
         for j in range(i + 1, n_robots):
-            w = floc_weights[pair_index(i, j, n_robots)]
-            total = total + shared_cost(track.positions, tracks[j].positions, w, cfg)
+            k = pair_index(i, j, n_robots)
+            d = None if distances is None else distances[k]
+            total = total + shared_cost(track.positions, tracks[j].positions, floc_weights[k], cfg, d)
     return total
 
 

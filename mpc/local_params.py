@@ -25,7 +25,9 @@ class LocalParams:
     """Every robot's local parameters at one step, for any plans of the others and any predictions."""
 
     data: StepData
-    head: np.ndarray  # (M, 11 + M-1): state, last action, goal, target, slack, flocking weights
+    head: (
+        np.ndarray
+    )  # (M, 11 + M-1 [+ M-1]): state, last action, goal, target, slack, flocking weights [, d_ij]
     others: np.ndarray  # (M, M-1) int: robot i's others in index order
     margins: np.ndarray  # (H * N_h,) every human's margin at every step, row-major
 
@@ -45,6 +47,7 @@ class LocalParams:
                 data.reference_targets(),
                 data.goal_slacks()[:, None],
                 data.floc_weights(cfg.pair_floc_weight(data.n_robots))[pairs],
+                *(d[pairs] for d in flock_distances(data, cfg)),  # with flock_distance "goals" only
             ],
             axis=1,
         )
@@ -72,3 +75,8 @@ class LocalParams:
     def row(self, i: int, positions: np.ndarray, humans: np.ndarray) -> np.ndarray:
         """Robot ``i``'s parameters (``rows`` of one robot)."""
         return self.rows([i], positions, humans)[0]
+
+
+def flock_distances(data: StepData, cfg: MPCConfig) -> list[np.ndarray]:
+    """The NLPs' d_ij parameters, per unordered pair: none unless ``cfg.flock_distance`` is "goals"."""
+    return [data.flock_distances(cfg.d_flock)] if cfg.flock_distance == "goals" else []

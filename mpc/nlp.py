@@ -28,7 +28,7 @@ from mpc import costs
 from mpc.config import MPCConfig
 from mpc.dynamics import braking
 from mpc.fastcall import BufferedFunction
-from mpc.local_params import LocalParams
+from mpc.local_params import LocalParams, flock_distances
 from mpc.solvers import SOLVED, Solution, _Solver, better
 from mpc.step_data import StepData
 
@@ -93,9 +93,11 @@ class JointNLP:
         p_target = sym.sym("targets", 2 * m)
         p_slack = sym.sym("goal_slack", m)
         p_floc = sym.sym("floc_weights", self.n_pairs)
+        # d_ij per pair only where they differ (flock_distance "goals"): the paper's NLP stays as it was
+        p_dist = [sym.sym("flock_distances", self.n_pairs)] if cfg.flock_distance == "goals" else []
         p_margins = sym.sym("human_margins", h * n_humans)
         p_extra = sym.sym("humans_model", model.n_params)
-        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_slack, p_floc, p_margins, p_extra)
+        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_slack, p_floc, *p_dist, p_margins, p_extra)
         states = ca.reshape(p_state, 4, m)
         lasts = ca.reshape(p_last, 2, m)
         goals = ca.reshape(p_goal, 2, m)
@@ -109,7 +111,7 @@ class JointNLP:
         humans_flat = model.humans(p_extra, robots_future)
         humans = ca.reshape(humans_flat, 2, h * n_humans)
         margins = ca.reshape(p_margins, 1, h * n_humans)
-        F = costs.potential(tracks, p_floc, humans, n_humans, cfg, margins)
+        F = costs.potential(tracks, p_floc, humans, n_humans, cfg, margins, *p_dist)
         penalty = costs.collision_penalty(tracks, humans, n_humans, cfg, margins)
         g = ca.vertcat(*[ca.vec(t.velocities) for t in tracks])
         self.penalty_fn = ca.Function("penalty", [u, p], [penalty], ["u", "p"], ["penalty"])
@@ -146,6 +148,7 @@ class JointNLP:
                 data.reference_targets().ravel(),
                 data.goal_slacks(),
                 data.floc_weights(self.cfg.pair_floc_weight(data.n_robots)),
+                *flock_distances(data, self.cfg),
                 data.margins(self.cfg, self.n_humans),
                 np.asarray(extra, dtype=float).ravel(),
             ]
@@ -248,16 +251,20 @@ class LocalNLP:
         p_target = ca.SX.sym("target", 2)
         p_slack = ca.SX.sym("goal_slack", 1)
         p_floc = ca.SX.sym("floc_weights", n_others)
+        p_dist = [ca.SX.sym("flock_distances", n_others)] if cfg.flock_distance == "goals" else []
         p_others = ca.SX.sym("others", 2 * h * n_others)
         p_margins = ca.SX.sym("human_margins", h * n_humans)
         p_humans = ca.SX.sym("humans", 2 * h * n_humans)
-        p = ca.vertcat(p_state, p_last, p_goal, p_target, p_slack, p_floc, p_others, p_margins, p_humans)
+        p = ca.vertcat(
+            p_state, p_last, p_goal, p_target, p_slack, p_floc, *p_dist, p_others, p_margins, p_humans
+        )
         track = costs.make_track(p_state, ca.reshape(u, 2, h), p_last, p_goal, cfg.dt, p_target, p_slack)
         others = _blocks(p_others, n_others, h)
         humans = ca.reshape(p_humans, 2, h * n_humans)
         weights = [p_floc[k] for k in range(n_others)]
         margins = ca.reshape(p_margins, 1, h * n_humans)
-        C = costs.robot_cost(track, others, weights, humans, n_humans, cfg, margins)
+        distances = [p_dist[0][k] for k in range(n_others)] if p_dist else None
+        C = costs.robot_cost(track, others, weights, humans, n_humans, cfg, margins, distances)
         penalty = cfg.w_coll * costs.human_collision_cost(
             track.positions, track.velocities, humans, n_humans, cfg, margins
         )

@@ -66,6 +66,13 @@ class StepData:
     def n_robots(self) -> int:
         return len(self.states)
 
+    def flock_distances(self, d_flock: float) -> np.ndarray:
+        """Eq. 15's d_ij per unordered pair (costs.pair_index order) under ``flock_distance = "goals"``:
+        ``max(d_flock, ||g_i - g_j||)``, so that the flock's shape at its goals costs nothing."""
+        goals = np.asarray(self.goals, dtype=float)
+        i, j = np.triu_indices(self.n_robots, k=1)  # row-major: pair_index's order
+        return np.maximum(d_flock, np.linalg.norm(goals[i] - goals[j], axis=1))
+
     def floc_weights(self, w_floc: float) -> np.ndarray:
         """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
         has arrived, is pinned (a parked robot must not pull the flock, nor be pulled) or does not flock

@@ -174,7 +174,8 @@ ROOM_SPACING: Final[float] = 0.3
 # m by which the closest goals may lie beyond d_flock before the note: Eq. 15's all-pairs pull held the outer
 # robots of a row of 3 off their goals with no humans about at 1.5 m spacing (0.39 m short), not at 1.25,
 # 1.3 or 1.4 m (CMPC, d_flock 1.2, 2 episodes each; DMPC arrived at 1.3, not at 2.0); d_flock = 1.5 let them
-# arrive. With d_min 1.5, spacing and d_flock 1.8 arrived; with d_min 2, spacing and d_flock 2.3 did not.
+# arrive, and so did flock_distance "goals" at 1.5 and 2.0 m, and at d_min 1.5 / 2.0 with 1.8 / 2.3 m
+# spacing (CMPC and DMPC, 2 of 2 each), where d_flock 2.3 with d_min 2.0 did not.
 FLOCK_SLACK: Final[float] = 0.25
 
 
@@ -189,7 +190,7 @@ def goal_room_note(
     CMPC in the row of 3, goals 1.0 m apart, arrived at 0.98 and never from 1.0; in the row of 4 never from
     0.98; the wedge of 3, goals 1.2 m apart, arrived up to 1.5, the wedge of 6 failed at 1.3), so the line
     says "can", and docs/extending.md has the table. It names the spacing that gave room: ``ROOM_SPACING``
-    above d_min, with a d_flock to match where that spacing passes d_flock. Goals with room but further
+    above d_min, with flock_distance "goals" where that spacing passes d_flock. Goals with room but further
     apart than d_flock by more than ``FLOCK_SLACK`` get the flocking line instead (Eq. 15 pulls the pair
     together)."""
     import numpy as np
@@ -204,18 +205,20 @@ def goal_room_note(
     gaps = np.linalg.norm(goals[:, None] - goals[None], axis=-1)[np.triu_indices(n_robots, k=1)]
     cfg = mpc_config(spec)
     d_min, gap = cfg.d_min, float(gaps.min())
-    flocking = cfg.w_floc > 0  # off with --no-flocking (Table III's "NF")
+    # off with --no-flocking (Table III's "NF"); under flock_distance "goals" the goals' shape costs nothing
+    flocking = cfg.w_floc > 0 and cfg.flock_distance == "uniform"
     if d_min < gap - GOAL_ROOM_MARGIN - 1e-9:
         if flocking and gap > cfg.d_flock + FLOCK_SLACK + 1e-9:
             return (
                 f"note: the robots' closest goals are {gap:g} m apart ({shape} of {n_robots}), beyond the "
                 f"MPC's flocking distance d_flock {cfg.d_flock:g} m: Eq. 15 pulls every pair towards it, "
                 "which can hold robots off their goals while nobody is in the way (row of 3, no humans: 0 "
-                f"of 2 arrived 1.5 m apart, 2 of 2 with --set mpc.d_flock=1.5); --set mpc.d_flock={gap:g}"
+                "of 2 arrived 1.5 m apart, 2 of 2 with --set mpc.flock_distance=goals, which gives each pair "
+                "its goals' distance)"
             )
         return None
     wider = math.ceil((d_min + ROOM_SPACING) * 20 - 1e-9) / 20  # to 5 cm, up
-    flock = f" and --set mpc.d_flock={wider:g}" if flocking and wider > cfg.d_flock + FLOCK_SLACK else ""
+    flock = " --set mpc.flock_distance=goals" if flocking and wider > cfg.d_flock + FLOCK_SLACK else ""
     hint = (
         f"; [env] robot_spacing = {wider:g} (--set env.robot_spacing={wider:g}{flock}) spaces them "
         f"{wider:g} m apart"

@@ -72,6 +72,8 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "dmpc_start": "DMPC's u^(0): shifted (previous plan, else braking) | heading (not braking if F lower)",
     "guidance": "none (the paper: Eq. 8 heads for the goal) | standing: around rows of humans standing still",
     "flocking_weight": "per_pair (the paper: w_floc on every pair) | per_robot: w_floc * 2 / (M - 1)",
+    "flock_distance": "uniform (the paper's runs: d_flock for every pair) | goals: max(d_flock, the pair's "
+    "goals' distance)",
     "guidance_clearance": "margin (d_min + margin) | penalty (where Eq. 11's penalty falls to w_goal)",
     "stall_release_s": "s without 0.25 m of progress before a robot stops flocking (mpc/stall.py); 0: never",
     "coupled_mode": "coupling nlp: auto | exact (the predictor inside the NLP) | first_order",

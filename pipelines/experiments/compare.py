@@ -119,9 +119,10 @@ def crowd_identity(record: Mapping[str, Any], by_cell: bool = False) -> Identity
 
 # The crowd settings added after sweeps began to record their config, as every episode before ran them: the
 # recordings' own list (pipelines.logs.identity), whose "env." keys are a record's config's "env" keys.
-UNRECORDED: Final[dict[str, Any]] = {
-    k.removeprefix("env."): v for k, v in UNRECORDED_DEFAULTS.items() if k.startswith("env.")
-}
+UNRECORDED, UNRECORDED_MPC = (
+    {k.removeprefix(p): v for k, v in UNRECORDED_DEFAULTS.items() if k.startswith(p)}
+    for p in ("env.", "mpc.")
+)
 
 
 def _profile_env(profile: str) -> dict[str, Any]:
@@ -186,7 +187,7 @@ def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dic
         raise PipelineError(f"{label}: {path} does not exist ({SOURCES})")
     if path.is_dir() and (path / EPISODES_FILE).is_file():
         scanned = (r for _, _, r in episode_log(path).scan(repair=False))
-        return scanned, _commits(path), "its cells are not told apart by method"
+        return scanned, _commits(path), "its cells are not told apart by method (use --by-cell)"
     if path.is_dir() and not _holds_recordings(path):
         raise PipelineError(
             f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one) and no "
@@ -208,7 +209,9 @@ def _with_unrecorded(config: Any) -> dict[str, Any]:
     sweep recorded before ``robot_spacing`` existed ran with none, which is no difference from a new one's."""
     if not isinstance(config, dict):
         return {}
-    env = config.get("env")
+    env, mpc = config.get("env"), config.get("mpc")
+    if isinstance(mpc, dict):  # likewise an [mpc] option added later at the value every run before had
+        config = {**config, "mpc": {**UNRECORDED_MPC, **mpc}}
     if not isinstance(env, dict):
         return config
     return {**config, "env": {**UNRECORDED, **env}}

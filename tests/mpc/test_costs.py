@@ -170,14 +170,20 @@ def test_potential_counts_each_pair_once():
     assert c1 + c2 - F == pytest.approx(j12)
 
 
-@pytest.mark.parametrize(("seed", "arrived"), [(0, None), (1, None), (2, None), (3, [False, True, False])])
-def test_lemma_1_local_gradient_equals_potential_gradient(seed, arrived):
+GOALS = MPCConfig(flock_distance="goals")
+
+
+@pytest.mark.parametrize(
+    ("seed", "arrived", "cfg"),
+    [(0, None, CFG), (1, None, CFG), (2, None, CFG), (3, [False, True, False], CFG), (4, None, GOALS)],
+)
+def test_lemma_1_local_gradient_equals_potential_gradient(seed, arrived, cfg):
     """dC_i/du_i = dF/du_i (Lemma 1) for random states, plans, goals and predictions, 3 robots, 4 humans.
     With robot 1 arrived the pairs' flocking weights differ ((0,1) and (1,2) 0, (0,2) w_floc): each pair's
-    own weight must reach both F and every C_i."""
-    m, n, h = 3, 4, CFG.horizon
+    own weight must reach both F and every C_i; with flock_distance "goals", each pair's own d_ij."""
+    m, n, h = 3, 4, cfg.horizon
     rng = np.random.default_rng(seed)
-    joint, local = JointNLP(CFG, m, n), LocalNLP(CFG, m, n)
+    joint, local = JointNLP(cfg, m, n), LocalNLP(cfg, m, n)
     states = np.concatenate([rng.uniform(-1.5, 1.5, (m, 2)), rng.uniform(-1, 1, (m, 2))], axis=1)
     # Some robot-robot and robot-human distances inside the penalty zone, so every term contributes.
     data = StepData(
@@ -188,7 +194,7 @@ def test_lemma_1_local_gradient_equals_potential_gradient(seed, arrived):
     u = ca.SX.sym("u", 2 * h * m)
     grad_F = ca.Function("dF", [u], [ca.gradient(joint.potential_fn(u, joint.params(data, humans)), u)])
     dF = grad_F(accels.ravel()).full().reshape(m, h, 2)
-    positions = rollout_numpy(states, accels, CFG.dt)[0]
+    positions = rollout_numpy(states, accels, cfg.dt)[0]
     for i in range(m):
         ui = ca.SX.sym("ui", 2 * h)
         params = local.params(i, data, positions, humans)
@@ -197,6 +203,23 @@ def test_lemma_1_local_gradient_equals_potential_gradient(seed, arrived):
         scale = max(1.0, float(np.abs(dF[i]).max()))
         np.testing.assert_allclose(dC, dF[i], rtol=1e-9, atol=1e-9 * scale)
         assert np.abs(dF[i]).max() > 0
+
+
+def test_flock_distances_are_the_goals_distances_above_d_flock_by_hand():
+    """flock_distance "goals": d_ij = max(d_flock, ||g_i - g_j||), pairs (0,1), (0,2), (1,2); F then differs
+    from the uniform d_flock by w_floc * sum_k [(n_k - d_ij)^2 - (n_k - 1.2)^2] on each pair."""
+    states = np.array([[0.0, 0.0, 0, 0], [1.0, 0.0, 0, 0], [3.0, 0.0, 0, 0]])
+    goals = np.array([[0.0, 5.0], [1.0, 5.0], [3.0, 5.0]])
+    data = StepData(states, np.zeros((3, 2)), goals, np.ones(3, bool))
+    np.testing.assert_allclose(data.flock_distances(1.2), [1.2, 3.0, 2.0])
+    accels, humans = np.zeros((3, GOALS.horizon, 2)), np.zeros((GOALS.horizon, 0, 2))
+    uniform = JointNLP(CFG, 3, 0).potential(accels, data, humans)
+    by_goals = JointNLP(GOALS, 3, 0).potential(accels, data, humans)
+    norms = np.sqrt(np.array([1.0, 9.0, 4.0]) + CFG.delta)  # the robots stand still: the same every step
+    gap = ((norms - [1.2, 3.0, 2.0]) ** 2 - (norms - 1.2) ** 2).sum() * GOALS.horizon
+    assert by_goals - uniform == pytest.approx(CFG.w_floc * gap, rel=1e-9)
+    with pytest.raises(ValueError, match="flock_distance must be one of"):
+        MPCConfig(flock_distance="shape")  # type: ignore[arg-type]
 
 
 def test_human_margins_grow_the_distance_per_step_by_hand():

@@ -229,7 +229,8 @@ def test_bad_runs_are_one_line_errors(tmp_path, capsys):
         (tmp_path / "missing", "does not exist (a sweep folder, a simulate --json file, or recordings"),
         (tmp_path / "empty", "holds no episodes.jsonl"),
         (damaged, "damaged/episodes.jsonl:2: not an episode record"),
-        (twice, "holds two episodes of method 'CMPC' on one crowd"),
+        (twice, "holds two episodes of method 'CMPC' on one crowd"),  # and names the way out, by cell
+        (twice, "its cells are not told apart by method (use --by-cell)"),
     ]:
         assert main(["compare", str(a), str(other)]) == 2
         err = capsys.readouterr().err
@@ -262,6 +263,20 @@ def test_a_record_older_than_the_recorded_config_pairs_by_its_profile(tmp_path, 
     for first in (a, b):
         assert main(["compare", str(first), str(v1)]) == 2
         assert "share no episode" in capsys.readouterr().err
+
+
+def test_an_mpc_option_a_record_predates_reads_as_the_value_it_ran_with(tmp_path, capsys):
+    """mpc.flock_distance came after: a record without it ran the one d_flock ("uniform"), so compare named
+    "mpc.flock_distance: (not recorded) -> "uniform"" as a difference between two identical runs."""
+    old = _sweep(tmp_path / "old", [_record(i, *o, mpc={"w_floc": 10.0}) for i, o in enumerate(BASE)])
+    mpc = {"w_floc": 10.0, "flock_distance": "uniform"}
+    new = _sweep(tmp_path / "new", [_record(i, *o, mpc=mpc) for i, o in enumerate(BASE)])
+    assert main(["compare", str(old), str(new), "--expect-identical"]) == 0
+    assert "flock_distance" not in capsys.readouterr().out
+    goals = {**mpc, "flock_distance": "goals"}
+    other = _sweep(tmp_path / "goals", [_record(i, *o, mpc=goals) for i, o in enumerate(BASE)])
+    assert main(["compare", str(old), str(other)]) == 0
+    assert 'mpc.flock_distance: "uniform" -> "goals"' in capsys.readouterr().out
 
 
 def test_a_record_older_than_a_metric_is_compared_on_the_metrics_it_has(tmp_path, capsys):

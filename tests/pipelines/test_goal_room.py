@@ -41,16 +41,16 @@ def test_the_note_names_the_distance_the_formation_and_the_spacing_that_gives_ro
     )
     wedge = goal_room_note(_spec("dmpc", 1.2), 4, "auto")
     assert wedge is not None and "1.2 m between two robots' goals (wedge of 4)" in wedge
-    # past d_flock 1.2 by more than 0.25 m, with the d_flock that let a row of 3 at 1.5 m arrive
+    # past d_flock 1.2 by more than 0.25 m, with the flocking distances that let a row of 3 at 1.5 m arrive
     assert wedge.endswith(
-        "robot_spacing = 1.5 (--set env.robot_spacing=1.5 and --set mpc.d_flock=1.5) spaces them 1.5 m apart"
+        "(--set env.robot_spacing=1.5 --set mpc.flock_distance=goals) spaces them 1.5 m apart"
     )
     # spaced so, no note; beyond the widest spacing taken (2.5 m), no hint
     assert goal_room_note(_spec(d_min=1.0), 3, "row", 1.3) is None
     assert goal_room_note(_spec(d_min=2.3), 3, "row").endswith("docs/extending.md)")
 
 
-def test_goals_further_apart_than_the_flocking_distance_are_named_with_a_d_flock_to_match():
+def test_goals_further_apart_than_the_flocking_distance_are_named_with_the_way_out():
     """A row spaced 1.5 m timed out in every episode with no humans about (its outer robots parked 0.39 m
     short: Eq. 15 pulls every pair towards d_flock 1.2 m), and nothing said why."""
     note = goal_room_note(_spec(), 3, "row", 1.5)
@@ -58,11 +58,15 @@ def test_goals_further_apart_than_the_flocking_distance_are_named_with_a_d_flock
         "note: the robots' closest goals are 1.5 m apart (row of 3), beyond the MPC's flocking distance "
         "d_flock 1.2 m"
     )
-    assert note.endswith("; --set mpc.d_flock=1.5")
+    assert note.endswith(
+        "2 of 2 with --set mpc.flock_distance=goals, which gives each pair its goals' distance)"
+    )
     assert goal_room_note(_spec(), 3, "row", 1.4) is None  # arrived: within FLOCK_SLACK
     matched = ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("d_flock", 1.5),))
     assert goal_room_note(matched, 3, "row", 1.5) is None
     assert goal_room_note(ControllerSpec("cmpc", flocking=False), 3, "row", 1.5) is None  # no Eq. 15
+    goals = ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("flock_distance", "goals"),))
+    assert goal_room_note(goals, 3, "row", 1.5) is None
 
 
 def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
