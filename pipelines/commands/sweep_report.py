@@ -144,6 +144,7 @@ class LogRead:
     )  # each planned record's cpu_s that is set
     planned_keys: Collection[str] = ()  # the plan's episodes' keys
     tabulated: Collection[str] = ()  # the keys of the cells the report tabulates
+    runs: set[int | None] = dataclasses.field(default_factory=set)  # the runs that made the tabulated ones
 
     @classmethod
     def of_plan(cls, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
@@ -161,6 +162,7 @@ class LogRead:
             self.cpu.append(record["cpu_s"])
         if record["cell"] in self.tabulated:
             self.columns.setdefault(record["cell"], CellColumns()).add(record, offset, zlib.crc32(line))
+            self.runs.add(record.get("run"))
 
 
 def read_log(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
@@ -203,7 +205,7 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
     summaries = summarize_columns(config.experiment, cells, log.columns)
     rows = episode_rows(config.out / EPISODES_FILE, cells, log)
     note = not_counted_note(cells, tasks, {s.cell.key: s.episodes for s in summaries})
-    note = "\n\n".join(line for line in (note, code_note(config.out)) if line)
+    note = "\n\n".join(line for line in (note, code_note(config.out, log.runs)) if line)
     report = write_report_of(config.out, config.experiment, summaries, rows, note)
     print(report.markdown)
     print("wrote " + ", ".join(str(p) for p in report.files), file=sys.stderr)
@@ -221,28 +223,38 @@ def _write(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask
         )
 
 
-def code_note(out: Path) -> str:
+def code_note(out: Path, used: Collection[int | None] | None = None) -> str:
     """table.md's line naming the code behind its episodes, as sweep.json's runs recorded it: "Code: commit
     0123456789ab, crowdmpc 0.1.0, Python 3.11.7, CasADi 3.8.2, torch 2.13.0+cpu, numpy 2.4.6." (each
     version of the code once, in the order the runs met them); "" without a sweep.json. The table alone had
-    said nothing of it, and a copy of it in a paper's supplement could not be traced to its code."""
+    said nothing of it, and a copy of it in a paper's supplement could not be traced to its code. ``used``:
+    the runs (their records' ``run``) that made the tabulated episodes, whose code alone it names (every
+    run's had named code that made none of them); None, or a record older than its run number: every run."""
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
 
     if not (out / SWEEP_FILE).is_file():
         return ""
     runs = read_sweep_file(out / SWEEP_FILE).get("runs", [])
+    if used is not None and None not in used:
+        runs = [run for k, run in enumerate(runs, 1) if k in used]
     shown = list(
-        dict.fromkeys(_code_text(run.get("code") if isinstance(run, dict) else None) for run in runs)
+        dict.fromkeys(
+            _code_text(run.get("code"), "lost" in run) if isinstance(run, dict) else _code_text(None)
+            for run in runs
+        )
     )
     if len(shown) <= 1:
         return f"Code: {shown[0]}." if shown else ""
     return f"Code: {len(shown)} versions, in the order the sweep's runs used them: " + "; ".join(shown) + "."
 
 
-def _code_text(code: Any) -> str:
-    """A run's recorded code (``pipelines.version.code_identity``, with its plugins) in one line."""
+def _code_text(code: Any, lost: bool = False) -> str:
+    """A run's recorded code (``pipelines.version.code_identity``, with its plugins) in one line; ``lost``: a
+    run sweep.json no longer listed (``log.lost_runs``)."""
     from pipelines.version import dirty_text
 
+    if lost:
+        return "unknown (a run sweep.json no longer listed)"
     if not isinstance(code, dict):
         return "not recorded (a run from before the code was)"
     parts = [f"commit {str(code.get('commit'))[:12]}{dirty_text(code.get('dirty'), code.get('diff_sha256'))}"]

@@ -16,7 +16,8 @@ import itertools
 import json
 import math
 import os
-from collections.abc import Callable, Iterator
+import sys
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any, Final
 
@@ -252,7 +253,11 @@ def read_json_file(path: Path, what: str, advice: str = "") -> Any:
         raise PipelineError(f"{path}: not {what} ({type(exc).__name__}: {str(exc)[:120]}){advice}") from None
 
 
-def read_sweep_file(path: Path, hint: str = "; move it away to start afresh") -> dict[str, Any]:
+def read_sweep_file(
+    path: Path,
+    hint: str = "; restore it, or move it away (the episodes it listed are then kept as runs of unknown "
+    "code; a new --out starts afresh)",
+) -> dict[str, Any]:
     """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it (and
     ending with ``hint``)."""
     meta = read_json_file(path, "a sweep file", hint)
@@ -323,3 +328,18 @@ def sweep_lock(out: Path) -> Iterator[None]:
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def lost_runs(out: Path, listed: int, recorded: Iterable[int] | None) -> list[dict[str, str]]:
+    """A line for each run the records name (``recorded``: their ``run`` numbers) past the ``listed`` lines
+    of sweep.json, said on stderr: with sweep.json moved away, the next run took number 1, and the old
+    records' ``"run": 1`` credited its code with their episodes."""
+    lost = max((k for k in recorded or () if isinstance(k, int)), default=0) - listed
+    if lost <= 0:
+        return []
+    print(
+        f"note: {out / EPISODES_FILE} holds episodes of {lost} run(s) {SWEEP_FILE} does not list; they are "
+        "kept as runs of unknown code (a new --out starts afresh)",
+        file=sys.stderr,
+    )
+    return [{"lost": f"not listed in {SWEEP_FILE} when run {listed + lost + 1} began"}] * lost

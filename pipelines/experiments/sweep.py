@@ -41,6 +41,7 @@ from pipelines.experiments.log import (
     check_sweep_directory,
     episode_log,
     error_keys,
+    lost_runs,
     read_sweep_file,
     sweep_lock,
 )
@@ -138,10 +139,11 @@ def _add_run(
     path = out / SWEEP_FILE
     meta["experiment"] = config.experiment.name
     meta["title"] = config.experiment.title
-    runs = meta.get("runs") or []
+    runs = meta.setdefault("runs", [])
+    runs.extend(lost_runs(out, len(runs), runs_recorded))  # before this run's number is taken
     # a run that recorded no episode (stopped as its workers started) leaves no other code in the folder
     _note_other_code(out, [r for k, r in enumerate(runs, 1) if runs_recorded is None or k in runs_recorded])
-    meta.setdefault("runs", []).append(
+    runs.append(
         {
             "started": _local_time(),
             "version": crowdmpc_version(),
@@ -193,8 +195,9 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     )
     if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
         print(
-            f"note: {out} holds episodes made by other code ({shown}); they are kept and counted with this "
-            "run's (a new --out keeps one codebase per table)",
+            f"note: {out} holds episodes made by other code ({shown}); they are kept, and a table of cells "
+            "holding both mixes them (table.md's Code line names what it tabulates; a new --out keeps one "
+            "codebase per table)",
             file=sys.stderr,
         )
 

@@ -1382,6 +1382,24 @@ def test_a_resume_of_a_sweep_whose_code_went_unrecorded_says_so(tmp_path, capsys
     assert f"note: {tmp_path} holds episodes made by other code (code not recorded -> commit " in err
 
 
+def test_a_sweep_json_moved_away_leaves_its_runs_unknown_not_credited_to_the_next(tmp_path, capsys):
+    """The damaged-sweep.json refusal said "move it away to start afresh": a rerun then kept every episode
+    and numbered itself run 1, so the old records' "run": 1 named its code (table.md's Code line too)."""
+    run_sweep(_config(tmp_path, 1))
+    (tmp_path / "sweep.json").rename(tmp_path / "sweep.json.bad")
+    capsys.readouterr()
+    run_sweep(_config(tmp_path, 2))
+    err = capsys.readouterr().err
+    assert f"note: {tmp_path / EPISODES_FILE} holds episodes of 1 run(s) sweep.json does not list" in err
+    runs = json.loads((tmp_path / "sweep.json").read_text())["runs"]
+    assert runs[0] == {"lost": "not listed in sweep.json when run 2 began"} and "code" in runs[1]
+    made_by = sorted((r["scenario"], r["run"]) for r in EpisodeLog(tmp_path / EPISODES_FILE).load().values())
+    assert made_by == [("circle", 1)] * 2 + [("perpendicular", 2)] * 2
+    run_sweep(_config(tmp_path, 2))  # listed now: nothing more to pad
+    assert "does not list" not in capsys.readouterr().err
+    assert len(json.loads((tmp_path / "sweep.json").read_text())["runs"]) == 3
+
+
 def test_the_note_says_one_episode_per_cell_in_the_singular():
     """A sweep of --episodes-per-cell 1 said "Ours: 1 episodes per cell"."""
     table2 = get_experiment("table2")

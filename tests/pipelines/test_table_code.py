@@ -17,16 +17,33 @@ def test_the_table_names_the_code_of_its_runs(tmp_path, capsys):
     code = code_identity()
     line = (out / "table.md").read_text(encoding="utf-8").rstrip().splitlines()[-1]
     assert line.startswith(f"Code: commit {str(code['commit'])[:12]}") and f"CasADi {code['casadi']}" in line
-    # a resume by other code (its run line as another commit would have written it, plugins and all)
+    # its episodes as another commit would have recorded them (plugins and all), resumed by this code
     meta = json.loads((out / "sweep.json").read_text())
     plugins = {"m:Net": "ab" * 32}
-    other = dict(
-        meta["runs"][-1], code={**code, "commit": "0123456789abcdef", "dirty": False, "plugins": plugins}
-    )
-    meta["runs"].append(other)
+    meta["runs"][0]["code"] = {**code, "commit": "0123456789abcdef", "dirty": False, "plugins": plugins}
+    (out / "sweep.json").write_text(json.dumps(meta))
+    capsys.readouterr()
+    assert main([*ARGV, "--episodes-per-cell", "2", "--out", str(out)]) == 0
+    line = (out / "table.md").read_text(encoding="utf-8").rstrip().splitlines()[-1]
+    assert line.startswith("Code: 2 versions, in the order the sweep's runs used them: commit 0123456789ab, ")
+    assert ", plugin m:Net abababababab; commit " in line
+
+
+def test_the_table_names_only_the_code_of_the_runs_it_tabulates(tmp_path, capsys):
+    """A run that made none of the tabulated episodes (a resume with nothing left to run, or one whose cells
+    another --set made new) was named all the same: "2 versions" behind a table of one run's episodes."""
+    from pipelines.commands.sweep_report import code_note
+
+    out = tmp_path / "s"
+    assert main([*ARGV, "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    meta = json.loads((out / "sweep.json").read_text())
+    other = {**code_identity(), "commit": "0123456789abcdef", "dirty": False}
+    meta["runs"] += [dict(meta["runs"][-1], code=other), {"lost": "not listed in sweep.json"}]
     (out / "sweep.json").write_text(json.dumps(meta))
     capsys.readouterr()
     assert main([*ARGV, "--episodes-per-cell", "1", "--out", str(out), "--report-only"]) == 0
     line = (out / "table.md").read_text(encoding="utf-8").rstrip().splitlines()[-1]
-    assert line.startswith("Code: 2 versions, in the order the sweep's runs used them: commit ")
-    assert "; commit 0123456789ab, crowdmpc " in line and line.endswith(", plugin m:Net abababababab.")
+    assert line.startswith("Code: commit ") and "0123456789ab" not in line  # run 2 made no episode
+    assert "0123456789ab" in code_note(out, {2}) and "0123456789ab" in code_note(out)  # every run's
+    assert code_note(out, {1, None}).startswith("Code: 3 versions")  # a record without its run: all of them
+    assert code_note(out, {3}) == "Code: unknown (a run sweep.json no longer listed)."
