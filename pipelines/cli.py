@@ -189,6 +189,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C before a command runs (importing the commands takes a second or two)
         print("crowdmpc: interrupted", file=sys.stderr)
         return 130
+    except ImportError as exc:  # that Ctrl-C inside an extension's import (scipy: "initialization failed")
+        if interrupt_behind(exc) is None:
+            raise
+        print("crowdmpc: interrupted", file=sys.stderr)
+        return 130
 
 
 def _no_working_directory() -> str | None:
@@ -220,14 +225,14 @@ def _main(argv: list[str] | None) -> int:
         return 2
     if (args.config_file or args.config_set) and args.command not in ("simulate", "sweep", "config"):
         parser.error(f"--config and --set apply to simulate, sweep and config, not {args.command}")
-    from pipelines.loop.interrupt import terminate_as_interrupt
+    from pipelines.loop.interrupt import stop_status, terminate_as_interrupt
 
     try:
         with terminate_as_interrupt():  # `kill`, `timeout`: what Ctrl-C keeps is kept (finished episodes)
             return int(args.func(args) or 0)
     except KeyboardInterrupt:  # first: the clause below may import its errors' packages
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return stop_status()
     except (EpisodeFailed, CloseFailed) as exc:  # before the user errors they are among
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
         # a refusal of the --record folder, met at an episode's first write, is one of the user's input
@@ -245,7 +250,7 @@ def _main(argv: list[str] | None) -> int:
             raise
         # Ctrl-C inside a CasADi call outside any solve, handed back as a SystemError caused by it
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return stop_status()
 
 
 if __name__ == "__main__":

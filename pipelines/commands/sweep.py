@@ -252,6 +252,7 @@ def run(args: argparse.Namespace) -> int:
         run_cells,
     )
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
+    from pipelines.loop.interrupt import stop_status
 
     cfg, out = _checked_config(args)
     config = _sweep_config(args, cfg, out)
@@ -296,7 +297,7 @@ def run(args: argparse.Namespace) -> int:
         raise PipelineError(_nothing_recorded(out))
     if args.report_only or (out / SWEEP_FILE).exists():  # none: stopped before it started, nothing to tell
         report(config, cells, tasks, report_only=args.report_only, log=log)
-    return status
+    return stop_status() if status == INTERRUPTED else status  # 143 for SIGTERM (pipelines.loop.interrupt)
 
 
 def _nothing_recorded(out: Path) -> str:

@@ -29,7 +29,9 @@ if TYPE_CHECKING:
     from pipelines.experiments.tasks import Cell, EpisodeTask
 
 
-INTERRUPTED = 130  # the exit status of a sweep stopped by Ctrl-C or SIGTERM, as the CLI's (pipelines.cli)
+INTERRUPTED = (
+    130  # a sweep stopped by Ctrl-C or SIGTERM; its exit status is stop_status()'s (143 for SIGTERM)
+)
 
 
 def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
@@ -343,7 +345,10 @@ def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
         raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
         print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
         status = EPISODES_RAISED
-    if outcome.interrupted:  # no backend: stopped while it started (joining a cluster), before any episode
+    if outcome.interrupted and done >= outcome.planned:  # after the last episode: nothing is left to resume
+        print("interrupted after every planned episode was recorded: the report follows", file=sys.stderr)
+        status = INTERRUPTED
+    elif outcome.interrupted:  # no backend: stopped while it started (joining a cluster), before any episode
         again = "resume" if outcome.backend or outcome.already_done else "start it"
         why = "" if outcome.backend else " (stopped while its workers started: no episode ran this run)"
         print(f"interrupted: rerun the same command to {again}{why}", file=sys.stderr)

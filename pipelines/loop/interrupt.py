@@ -84,6 +84,16 @@ def interrupts_between_steps() -> Iterator[StepInterrupt]:
     step.check()  # noted after the last step's check, the block ending normally
 
 
+_signalled: int | None = None  # the SIGTERM or SIGHUP terminate_as_interrupt took, in this process
+
+
+def stop_status() -> int:
+    """The exit status of a command that stopped at an interrupt: 128 + the signal's number, as a shell
+    reports a process the signal ended, 130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP: a batch script
+    tells a scheduler's stop from a user's Ctrl-C (every one gave 130)."""
+    return 128 + int(_signalled or signal.SIGINT)
+
+
 @contextlib.contextmanager
 def terminate_as_interrupt() -> Iterator[None]:
     """SIGTERM and SIGHUP end the block like Ctrl-C: a sweep stops its workers, removes its scratch and
@@ -95,7 +105,12 @@ def terminate_as_interrupt() -> Iterator[None]:
         yield
         return
 
+    global _signalled
+    _signalled = None
+
     def interrupt(signum: int, frame: Any) -> None:
+        global _signalled
+        _signalled = signum
         # the episode's step in progress, even where SIGINT is not the loop's (ignored by a background job's
         # shell): raised in CasADi's solve, it printed CasADi's own "KeyboardInterrupt" above the CLI's line
         if _stepping is not None:

@@ -19,7 +19,7 @@ import crowdsim
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.gym_loop import run_gym_episode
-from pipelines.loop.interrupt import terminate_as_interrupt
+from pipelines.loop.interrupt import stop_status, terminate_as_interrupt
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -175,6 +175,19 @@ def test_a_terminate_outside_an_episode_is_raised_at_once(default_terminate):
         time.sleep(5)  # the handler runs in the main thread before the sleep's end
 
 
+@pytest.mark.parametrize(
+    ("sig", "status"), [(signal.SIGTERM, 143), (signal.SIGHUP, 129)], ids=["TERM", "HUP"]
+)
+def test_the_exit_status_names_the_signal_as_a_shell_does(default_terminate, sig, status):
+    """Every stop gave 130, Ctrl-C's: a batch script could not tell a scheduler's SIGTERM from a user."""
+    with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt):
+        os.kill(os.getpid(), sig)
+        time.sleep(5)
+    assert stop_status() == status
+    with terminate_as_interrupt():  # the next command's own: a Ctrl-C is 130 again
+        assert stop_status() == 130
+
+
 @pytest.mark.slow
 def test_a_terminated_simulate_keeps_the_episodes_that_finished(tmp_path):
     """`kill` or `timeout` ended simulate at once: no line, the episodes it had finished lost (no --json
@@ -193,7 +206,7 @@ def test_a_terminated_simulate_keeps_the_episodes_that_finished(tmp_path):
         out, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
-    assert proc.returncode == 130 and err.endswith("crowdmpc simulate: interrupted\n"), err
+    assert proc.returncode == 143 and err.endswith("crowdmpc simulate: interrupted\n"), err
     payload = json.loads(report.read_text())
     assert payload["interrupted"] and payload["episodes_finished"] >= 1
     assert payload["episodes_finished"] == len(payload["episodes"]) and "| interrupted: " in out
