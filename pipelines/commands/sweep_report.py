@@ -311,6 +311,20 @@ def duration(seconds: float) -> str:
     return f"{seconds / 86400:.1f} days"
 
 
+def _note_retried(config: SweepConfig) -> None:
+    """Say that the plan's episodes errors.jsonl lists have been recorded since: a folder complete after its
+    retries kept their entries with nothing marking them retried, as if they still failed."""
+    from pipelines.experiments.log import ERRORS_FILE, error_keys
+
+    retried = error_keys(config.out) & {t.key for t in config.tasks()}
+    if retried:
+        print(
+            f"note: {config.out / ERRORS_FILE} lists {len(retried)} episode(s) of this plan that raised in "
+            "an earlier run; each is recorded since (the file keeps their tracebacks)",
+            file=sys.stderr,
+        )
+
+
 def _recorded(config: SweepConfig) -> int:
     """The plan's episodes --out's log holds, read again."""
     from pipelines.experiments.log import episode_log
@@ -345,6 +359,8 @@ def run_cells(config: SweepConfig, log: LogRead | None = None) -> int:
         raised = f"{len(outcome.errors)} episode{'' if len(outcome.errors) == 1 else 's'} raised"
         print(f"{raised}; see {config.out / 'errors.jsonl'} (a rerun retries)", file=sys.stderr)
         status = EPISODES_RAISED
+    elif outcome.complete:
+        _note_retried(config)
     if outcome.interrupted and done >= outcome.planned:  # after the last episode: nothing is left to resume
         print("interrupted after every planned episode was recorded: the report follows", file=sys.stderr)
         status = INTERRUPTED

@@ -44,7 +44,7 @@ def _record(episode: Any, index: int, where: str, key: str | None = None) -> dic
     controller = str(episode.get("controller"))
     key = key or f"{controller}/{episode.get('scenario')}/{episode['seed']}"
     record = {**episode, "key": key, "cell": controller, "method": controller, "index": index, "wall_s": 0.0}
-    check_record(record, where)
+    check_record(record, where, "the file is damaged")  # no sweep's log: no episode runs again
     return record
 
 

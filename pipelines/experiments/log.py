@@ -28,6 +28,8 @@ from pipelines.plain_json import plain
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
+# what a refusal of a damaged log says to do: a line left out is an episode the next sweep runs again
+DAMAGED: Final[str] = "the file is damaged: edit out that line (a copy kept) and its episode runs again"
 SWEEP_FILE: Final[str] = "sweep.json"
 LOCK_FILE: Final[str] = ".sweep.lock"
 MCAP_DIR: Final[str] = "mcap"
@@ -68,7 +70,7 @@ class EpisodeLog:
                     break  # only what a newline ends was fully written
                 if bad is not None:
                     raise PipelineError(
-                        f"{self.path}:{bad[0]}: not a JSON record ({bad[1]}); the file is damaged"
+                        f"{self.path}:{bad[0]}: not a JSON record ({bad[1]}); {DAMAGED}"
                     ) from None
                 try:
                     record = json.loads(line) if line.strip() else None
@@ -79,13 +81,11 @@ class EpisodeLog:
                 if record is not None:
                     key = record.get("key") if isinstance(record, dict) else None
                     if not isinstance(key, str):
-                        raise PipelineError(f"{self.path}:{number}: record has no 'key'; the file is damaged")
+                        raise PipelineError(f"{self.path}:{number}: record has no 'key'; {DAMAGED}")
                     if self.check is not None:
                         self.check(record, f"{self.path}:{number}")
                     if hash(key) in seen and self._key_before(key, number):
-                        raise PipelineError(
-                            f"{self.path}:{number}: a second record for {key!r}; the file is damaged"
-                        )
+                        raise PipelineError(f"{self.path}:{number}: a second record for {key!r}; {DAMAGED}")
                     seen.add(hash(key))
                     yield offset, line, record
                 good_end += len(line)
@@ -198,19 +198,19 @@ SOLVER_KINDS: Final[dict[str, str]] = {
 }
 
 
-def check_record(record: dict[str, Any], where: str) -> None:
+def check_record(record: dict[str, Any], where: str, damaged: str = DAMAGED) -> None:
     """A line the report can read: the closed loop's episode record, the types of its metrics and solver
     figures, and the sweep's cell fields. The seed and scenario are checked here, not by from_dict, which
     takes a null seed (simulate's unseeded episode) and casts both: the report sorts and groups by them."""
     try:
         EpisodeRecord.from_dict(record)
     except (PipelineError, SimulationError) as exc:
-        raise PipelineError(f"{where}: {exc}; the file is damaged") from None
+        raise PipelineError(f"{where}: {exc}; {damaged}") from None
     except AttributeError as exc:  # metrics or solver a list or a string: from_dict expects mappings
-        raise PipelineError(f"{where}: not an episode record ({exc}); the file is damaged") from None
-    _check_kinds(record["metrics"], METRIC_KINDS, "metrics", where)
-    _check_kinds(record["solver"], SOLVER_KINDS, "solver", where)
-    _check_kinds(record, {"wall_s": "number", "cpu_s": "number?"}, "", where)
+        raise PipelineError(f"{where}: not an episode record ({exc}); {damaged}") from None
+    _check_kinds(record["metrics"], METRIC_KINDS, "metrics", where, damaged)
+    _check_kinds(record["solver"], SOLVER_KINDS, "solver", where, damaged)
+    _check_kinds(record, {"wall_s": "number", "cpu_s": "number?"}, "", where, damaged)
     for name, kind, what in (
         ("cell", str, "a string"),
         ("method", str, "a string"),
@@ -220,17 +220,17 @@ def check_record(record: dict[str, Any], where: str) -> None:
     ):
         value = record.get(name)
         if not isinstance(value, kind) or isinstance(value, bool):
-            raise PipelineError(f"{where}: record's {name!r} is not {what}; the file is damaged")
+            raise PipelineError(f"{where}: record's {name!r} is not {what}; {damaged}")
 
 
-def _check_kinds(values: dict[str, Any], kinds: dict[str, str], part: str, where: str) -> None:
+def _check_kinds(values: dict[str, Any], kinds: dict[str, str], part: str, where: str, damaged: str) -> None:
     """Each of ``kinds``' fields of ``values`` (of the record's ``part``) is of its kind (``_KINDS``)."""
     for name, kind in kinds.items():
         is_kind, what = _KINDS[kind]
         if not is_kind(values.get(name)):
             field = f"{part} {name!r}" if part else repr(name)
             raise PipelineError(
-                f"{where}: record's {field} is not {what} (got {values.get(name)!r:.40}); the file is damaged"
+                f"{where}: record's {field} is not {what} (got {values.get(name)!r:.40}); {damaged}"
             )
 
 

@@ -155,7 +155,7 @@ def test_the_report_refuses_a_tampered_metric_in_one_line(good, tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         f"crowdmpc sweep: error: {out / EPISODES_FILE}:1: record's metrics 'success' is not a boolean (got "
-        "'yes'); the file is damaged"
+        "'yes'); the file is damaged: edit out that line (a copy kept) and its episode runs again"
     ]
     assert not (out / TABLE_MD).exists() or (out / TABLE_MD).read_bytes() == (good / TABLE_MD).read_bytes()
 
@@ -183,7 +183,7 @@ def test_a_deeply_nested_record_is_named_by_file_and_line(good, tmp_path, capsys
     assert main([*ARGV, "--report-only", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{out / EPISODES_FILE}:2: not a JSON record (" in err[0]
-    assert err[0].endswith("; the file is damaged")
+    assert err[0].endswith("the file is damaged: edit out that line (a copy kept) and its episode runs again")
 
 
 def test_a_deeply_nested_error_entry_is_passed_over(good, tmp_path, capsys):
