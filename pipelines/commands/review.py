@@ -223,8 +223,9 @@ def _read_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[lis
 
 
 def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[list[RunDigest], int]:
-    """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a warning
-    names them when there are several), into ``report``; the runs and the number of unreadable files."""
+    """``review DIR``: every readable recording's summary, then a table and aggregate per set-up (a note, not
+    a warning, names several: a sweep's cells are so by design), into ``report``; the runs and the number of
+    unreadable files."""
     from pipelines.logs.identity import RUN_IDENTITY
     from pipelines.logs.review import aggregate_table, count, setups_table
     from pipelines.logs.setups import drop_repeats, group_parts, groups, named_settings, short_names
@@ -239,7 +240,7 @@ def _review_folder(folder: Path, report: dict[str, Any], check: bool) -> tuple[l
     names = [", ".join(p) for p in parts]
     if len(setups) > 1:
         print(
-            f"crowdmpc review: warning: {folder} holds runs of {len(setups)} different set-ups "
+            f"crowdmpc review: note: {folder} holds runs of {len(setups)} different set-ups "
             f"({'; '.join(names)}): one aggregate for each, none over all",
             file=sys.stderr,
         )

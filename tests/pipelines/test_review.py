@@ -445,6 +445,7 @@ def test_a_folder_of_different_set_ups_gets_an_aggregate_for_each(tmp_path, caps
         "handmade, predictor constant_velocity, 3 robots, 5 humans",
     )
     assert f"holds runs of 2 different set-ups ({four}; {five})" in err
+    assert "review: note: " in err and "warning" not in err  # a sweep's cells are so by design: no warning
     assert f"== {four}: 1 run ==" in out and f"== {five}: 2 runs ==" in out
     assert "\n1 run\n" in out and "\n2 runs\n" in out  # "1 run" (was "1 runs")
     report = json.loads((tmp_path / "r.json").read_text())
