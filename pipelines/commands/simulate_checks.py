@@ -218,9 +218,12 @@ def goal_room_note(
             )
         return None
     wider = math.ceil((d_min + ROOM_SPACING) * 20 - 1e-9) / 20  # to 5 cm, up
-    flock = " --set mpc.flock_distance=goals" if flocking and wider > cfg.d_flock + FLOCK_SLACK else ""
+    flock = flocking and wider > cfg.d_flock + FLOCK_SLACK  # then the flocking line's way out too
+    toml, option = (
+        ('with [mpc] flock_distance = "goals" ', " --set mpc.flock_distance=goals") if flock else ("", "")
+    )
     hint = (
-        f"; [env] robot_spacing = {wider:g} (--set env.robot_spacing={wider:g}{flock}) spaces them "
+        f"; [env] robot_spacing = {wider:g} {toml}(--set env.robot_spacing={wider:g}{option}) spaces them "
         f"{wider:g} m apart"
         if wider <= MAX_ROBOT_SPACING
         else ""

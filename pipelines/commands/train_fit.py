@@ -123,7 +123,7 @@ def _fit(
             trainer.fit(module, datamodule=data, ckpt_path=str(last) if args.resume else None)
     except SystemExit as stop:
         # Lightning ends an interrupted fit with sys.exit: 1 for Ctrl-C, 0 for SIGTERM (its SIGTERMException),
-        # which told a script that a killed run had trained. Both are the interrupt the CLI reports (130).
+        # which told a script that a killed run had trained. Both are the CLI's interrupt (130, or 143).
         raise KeyboardInterrupt from stop
     # with the run's earlier parts, for a resume (their seconds came back from last.ckpt)
     elapsed = clock.before + time.perf_counter() - started

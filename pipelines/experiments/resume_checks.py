@@ -40,11 +40,15 @@ class ResumeChecks:
         # the runs (sweep.json's numbers) that recorded an episode; None once a record names none (written
         # before records kept their run): then every run may have
         self.runs_recorded: set[int] | None = set()
+        self.last_run = 0  # the highest run a record names, whatever others lack (log.lost_runs)
 
     def add(self, record: dict[str, Any]) -> None:
         run = record.get("run")
+        run = run if isinstance(run, int) and not isinstance(run, bool) else None
+        if run is not None:
+            self.last_run = max(self.last_run, run)
         if self.runs_recorded is not None:
-            if isinstance(run, int) and not isinstance(run, bool):
+            if run is not None:
                 self.runs_recorded.add(run)
             else:
                 self.runs_recorded = None

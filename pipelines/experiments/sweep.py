@@ -43,6 +43,7 @@ from pipelines.experiments.log import (
     error_keys,
     lost_runs,
     read_sweep_file,
+    split_lost,
     sweep_lock,
 )
 from pipelines.experiments.resume_checks import ResumeChecks
@@ -128,6 +129,8 @@ def _add_run(
     planned: int,
     runs_recorded: set[int] | None,
     backend: str | None = None,
+    *,
+    last_run: int = 0,
 ) -> int:
     """Write sweep.json: ``meta`` with what the directory holds and a line for this run; return the run's
     number, counted from 1 as ``config show --from-sweep DIR --run N`` counts them (``runs[N - 1]``), which
@@ -140,7 +143,7 @@ def _add_run(
     meta["experiment"] = config.experiment.name
     meta["title"] = config.experiment.title
     runs = meta.setdefault("runs", [])
-    runs.extend(lost_runs(out, len(runs), runs_recorded))  # before this run's number is taken
+    runs.extend(lost_runs(out, len(runs), last_run))  # before this run's number is taken
     # a run that recorded no episode (stopped as its workers started) leaves no other code in the folder
     _note_other_code(out, [r for k, r in enumerate(runs, 1) if runs_recorded is None or k in runs_recorded])
     runs.append(
@@ -188,11 +191,12 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     from pipelines.plugins import code_with_plugins
     from pipelines.version import code_changes
 
-    # a run from before the code was recorded (4a16d16) has none: code unknown, and results changed through
-    # many commits since, so it is no same code
+    # a run from before the code was recorded (4a16d16) has none: unknown, and results changed since
+    kept, lost = split_lost(runs)  # a lost run's code is unknown, not old: said apart
     shown = code_changes(
-        (run.get("code") if isinstance(run, dict) else None for run in runs), code_with_plugins()
+        (run.get("code") if isinstance(run, dict) else None for run in kept), code_with_plugins()
     )
+    shown = "; ".join(filter(None, [shown, f"{lost} run(s) {SWEEP_FILE} lost, code unknown" if lost else ""]))
     if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
         print(
             f"note: {out} holds episodes made by other code ({shown}); they are kept, and a table of cells "
@@ -240,7 +244,9 @@ def run_sweep(
             print(note, file=sys.stderr)
         # A refused resume is no run, nor a backend that could not start: the run's line is added once the
         # backend has started (an interrupted run is recorded), or at once when there is nothing to run.
-        add_run = functools.partial(_add_run, out, meta, config, len(tasks), recorded.runs_recorded)
+        add_run = functools.partial(
+            _add_run, out, meta, config, len(tasks), recorded.runs_recorded, last_run=recorded.last_run
+        )
         # Episodes that raised before (errors.jsonl) last: a rerun that extends the sweep runs the new ones
         # first, rather than stopping on the same failures again.
         retried = error_keys(out)

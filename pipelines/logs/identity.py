@@ -64,7 +64,8 @@ def run_identity(episode: Mapping[str, str], config: Mapping[str, Any]) -> dict[
         identity["predictor_sha256"] = episode["predictor_sha256"]
     flat = dotted_settings(config)
     for key, value in UNRECORDED_DEFAULTS.items():
-        flat.setdefault(key, value)
+        if key.partition(".")[0] in config or not key.startswith("mpc."):  # ORCA's records have no [mpc]
+            flat.setdefault(key, value)
     left_out = {*identity, *SPEED_ONLY, *NOT_SETTINGS}
     return identity | {k: v for k, v in flat.items() if k not in left_out}
 

@@ -87,11 +87,15 @@ def _check_topic(
 def _non_finite(value: object, where: str) -> list[tuple[str, float]]:
     """Every NaN or infinite number in decoded JSON, by its path: Python's json reads bare NaN, Infinity and
     1e999, and a schema says nothing of them where it leaves a value open (``Solver.extra``); Foxglove's
-    parser drops the whole message."""
-    if isinstance(value, float):
-        return [] if math.isfinite(value) else [(where, value)]
-    if isinstance(value, dict):
-        return [found for key, item in value.items() for found in _non_finite(item, f"{where}.{key}")]
-    if isinstance(value, list):
-        return [found for i, item in enumerate(value) for found in _non_finite(item, f"{where}[{i}]")]
-    return []
+    parser drops the whole message. A walk with its own stack: json.loads reads nesting deeper than
+    Python's recursion limit allows a recursive walk (it was reported as the schema's fault)."""
+    found, stack = [], [(value, where)]
+    while stack:
+        item, path = stack.pop()
+        if isinstance(item, float) and not math.isfinite(item):
+            found.append((path, item))
+        elif isinstance(item, dict):
+            stack.extend((v, f"{path}.{k}") for k, v in reversed(item.items()))
+        elif isinstance(item, list):
+            stack.extend((v, f"{path}[{i}]") for i, v in reversed(list(enumerate(item))))
+    return found

@@ -101,12 +101,11 @@ def terminate_as_interrupt() -> Iterator[None]:
     episode's step the signal is noted as a Ctrl-C is (``interrupts_between_steps``), so that CasADi prints
     nothing of its own. A signal the caller ignores (SIGHUP under ``nohup``) stays ignored. Only the main
     thread may set signal handlers; elsewhere the default actions stay."""
+    global _signalled
+    _signalled = None  # each command's own (a thread's too, which sets no handler): one before is no cause
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    global _signalled
-    _signalled = None
 
     def interrupt(signum: int, frame: Any) -> None:
         global _signalled

@@ -43,7 +43,8 @@ def test_the_note_names_the_distance_the_formation_and_the_spacing_that_gives_ro
     assert wedge is not None and "1.2 m between two robots' goals (wedge of 4)" in wedge
     # past d_flock 1.2 by more than 0.25 m, with the flocking distances that let a row of 3 at 1.5 m arrive
     assert wedge.endswith(
-        "(--set env.robot_spacing=1.5 --set mpc.flock_distance=goals) spaces them 1.5 m apart"
+        'robot_spacing = 1.5 with [mpc] flock_distance = "goals" (--set env.robot_spacing=1.5 --set '
+        "mpc.flock_distance=goals) spaces them 1.5 m apart"
     )
     # spaced so, no note; beyond the widest spacing taken (2.5 m), no hint
     assert goal_room_note(_spec(d_min=1.0), 3, "row", 1.3) is None

@@ -493,3 +493,15 @@ def test_messages_written_before_their_channel_keep_their_place(tmp_path):
     assert got.problems == [
         "2 message(s) on channel id 7 (times 1.000 s to 1.500 s), which no channel record describes: left out"
     ]
+
+
+def test_the_check_walks_nesting_deeper_than_the_recursion_limit():
+    """A recursive walk raised RecursionError at 600 levels of `extra` that json.loads reads, reported as
+    the topic's schema being malformed, and the NaN in the next message went unnamed."""
+    from pipelines.logs.schema_check import _non_finite
+
+    deep: list = [float("nan")]
+    for _ in range(5000):
+        deep = [deep]
+    found = _non_finite({"extra": deep, "ok": [1.0, float("inf")]}, "$")
+    assert found[0][0] == "$.extra" + "[0]" * 5001 and found[1][0] == "$.ok[1]"

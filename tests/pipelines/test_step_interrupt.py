@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -186,6 +187,19 @@ def test_the_exit_status_names_the_signal_as_a_shell_does(default_terminate, sig
     assert stop_status() == status
     with terminate_as_interrupt():  # the next command's own: a Ctrl-C is 130 again
         assert stop_status() == 130
+    with terminate_as_interrupt(), pytest.raises(KeyboardInterrupt):
+        os.kill(os.getpid(), sig)
+        time.sleep(5)
+    seen = []
+
+    def command() -> None:  # a command run in a thread (a notebook's): none of the signal before is its
+        with terminate_as_interrupt():
+            seen.append(stop_status())
+
+    worker = threading.Thread(target=command)
+    worker.start()
+    worker.join()
+    assert seen == [130]
 
 
 @pytest.mark.slow

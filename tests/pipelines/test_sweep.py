@@ -1395,9 +1395,34 @@ def test_a_sweep_json_moved_away_leaves_its_runs_unknown_not_credited_to_the_nex
     assert runs[0] == {"lost": "not listed in sweep.json when run 2 began"} and "code" in runs[1]
     made_by = sorted((r["scenario"], r["run"]) for r in EpisodeLog(tmp_path / EPISODES_FILE).load().values())
     assert made_by == [("circle", 1)] * 2 + [("perpendicular", 2)] * 2
-    run_sweep(_config(tmp_path, 2))  # listed now: nothing more to pad
-    assert "does not list" not in capsys.readouterr().err
+    run_sweep(_config(tmp_path, 2))  # listed now: nothing more to pad, and the lost run named as such
+    err = capsys.readouterr().err
+    assert "does not list" not in err and "1 run(s) sweep.json lost, code unknown" in err
+    assert "code not recorded" not in err  # that is a run from before the code was kept
     assert len(json.loads((tmp_path / "sweep.json").read_text())["runs"]) == 3
+    assert main(["config", "show", "--from-sweep", str(tmp_path), "--run", "1"]) == 2
+    assert (
+        "(run 1) was lost from the file (not listed in sweep.json when run 2 began)"
+        in capsys.readouterr().err
+    )
+
+
+def test_lost_runs_are_found_past_records_without_a_run_and_bounded(tmp_path, capsys):
+    """A record older than its run number turned the search off (the next run took number 1 again), and a
+    damaged record's run of 200000 padded sweep.json with as many lines."""
+    from pipelines.experiments.log import lost_runs
+    from pipelines.experiments.resume_checks import ResumeChecks
+
+    checks = ResumeChecks(tmp_path, [])
+    for run in (None, 3, 2):
+        checks.add({"key": "k", "run": run} if run else {"key": "k"})
+    assert checks.runs_recorded is None and checks.last_run == 3
+    assert (
+        lost_runs(tmp_path, 1, checks.last_run) == [{"lost": "not listed in sweep.json when run 4 began"}] * 2
+    )
+    assert lost_runs(tmp_path, 3, 3) == []
+    with pytest.raises(PipelineError, match="a record names run 200000, 199999 past the 1 sweep.json lists"):
+        lost_runs(tmp_path, 1, 200_000)
 
 
 def test_the_note_says_one_episode_per_cell_in_the_singular():

@@ -47,3 +47,4 @@ def test_the_table_names_only_the_code_of_the_runs_it_tabulates(tmp_path, capsys
     assert "0123456789ab" in code_note(out, {2}) and "0123456789ab" in code_note(out)  # every run's
     assert code_note(out, {1, None}).startswith("Code: 3 versions")  # a record without its run: all of them
     assert code_note(out, {3}) == "Code: unknown (a run sweep.json no longer listed)."
+    assert code_note(out, {1, 9}).endswith("; unknown (a run sweep.json no longer listed).")  # past its lines
