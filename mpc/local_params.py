@@ -25,9 +25,8 @@ class LocalParams:
     """Every robot's local parameters at one step, for any plans of the others and any predictions."""
 
     data: StepData
-    head: (
-        np.ndarray
-    )  # (M, 11 + M-1 [+ M-1]): state, last action, goal, target, slack, flocking weights [, d_ij]
+    # (M, 11 + M-1 [+ M-1]): state, last action, goal, target, slack, flocking weights [, d_ij]
+    head: np.ndarray
     others: np.ndarray  # (M, M-1) int: robot i's others in index order
     margins: np.ndarray  # (H * N_h,) every human's margin at every step, row-major
 

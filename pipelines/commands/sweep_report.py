@@ -29,9 +29,8 @@ if TYPE_CHECKING:
     from pipelines.experiments.tasks import Cell, EpisodeTask
 
 
-INTERRUPTED = (
-    130  # a sweep stopped by Ctrl-C or SIGTERM; its exit status is stop_status()'s (143 for SIGTERM)
-)
+# a sweep stopped by Ctrl-C or SIGTERM; it exits with stop_status() (143 for SIGTERM: loop.interrupt)
+INTERRUPTED = 130
 
 
 def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:

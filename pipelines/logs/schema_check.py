@@ -89,6 +89,11 @@ def _non_finite(value: object, where: str) -> list[tuple[str, float]]:
     1e999, and a schema says nothing of them where it leaves a value open (``Solver.extra``); Foxglove's
     parser drops the whole message. A walk with its own stack: json.loads reads nesting deeper than
     Python's recursion limit allows a recursive walk (it was reported as the schema's fault)."""
+    try:  # C's speed for the common message, which holds none (a /scene message holds hundreds of numbers)
+        json.dumps(value, allow_nan=False)
+        return []
+    except (ValueError, RecursionError):
+        pass
     found, stack = [], [(value, where)]
     while stack:
         item, path = stack.pop()
