@@ -175,8 +175,11 @@ def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple
 
 
 def _plan(args: argparse.Namespace) -> Any:
+    from pipelines.config.settings import check_last_seed
     from pipelines.experiments.calibrate import ClosedLoopPlan
 
+    n = args.episodes * (2 if args.holdout else 1)  # --holdout's as many more on the seeds after
+    check_last_seed(args.seed, n - 1, f"{n} episodes{' with --holdout' if args.holdout else ''}", "--seed")
     return ClosedLoopPlan(
         predictor=args.predictor,
         episodes=args.episodes,

@@ -14,6 +14,7 @@ from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
 from pipelines.commands.evaluate import counted, seed_arg
 from pipelines.commands.output_paths import output_arg
+from pipelines.config.settings import check_last_seed
 from pipelines.errors import PipelineError, writes_named
 
 PART_SUFFIX: Final[str] = ".part"  # a file's name until it is complete
@@ -264,6 +265,7 @@ def provenance_path(out: Path) -> Path:
 
 
 def run_synth(args: argparse.Namespace) -> int:
+    check_last_seed(args.seed, args.episodes - 1, f"{args.episodes} episodes", "--seed")
     check_writable(args.out, "--out", room=SYNTH_NAME_ROOM)
     provenance = provenance_path(args.out)
     check_writable(provenance, "--out's provenance file")
@@ -278,8 +280,7 @@ def run_synth(args: argparse.Namespace) -> int:
         if exc.name != "pipelines.experiments.synth":
             raise
         raise PipelineError(
-            "synthetic data needs pipelines/experiments/synth.py (the crowd simulator), "
-            "which is not installed"
+            "synthetic data needs pipelines/experiments/synth.py (the crowd simulator): not installed"
         ) from None
     # The data is made under a temporary name (no data glob takes it) and renamed into place after its
     # provenance is: data at --out always has its provenance beside it, and the provenance is its own.

@@ -104,6 +104,27 @@ def test_a_seed_out_of_range_is_refused_as_by_every_command(command, seed, messa
     assert not (tmp_path / "out").exists() and not (tmp_path / "s.ndjson").exists()
 
 
+@pytest.mark.parametrize(
+    ("command", "episodes", "said"),
+    [
+        (["data", "synth", "--humans", "3"], "3", "3 episodes"),
+        (["calibrate", "--holdout"], "2", "4 episodes with --holdout"),
+    ],
+)
+def test_a_run_whose_last_episode_passes_the_largest_seed_is_refused(
+    command, episodes, said, tmp_path, capsys
+):
+    """synth and calibrate run episode i at seed + i: the last passed 2**63 - 1 and was recorded under a seed
+    no command takes (calibrate's --holdout runs as many more on the seeds after)."""
+    out = tmp_path / "s.ndjson"
+    options = ["--out", str(out)] if command[0] == "data" else ["--predictor", "constant_velocity"]
+    options += ["--source", "closed-loop", "--alpha", "0.1", "--dry-run"] if command[0] == "calibrate" else []
+    line, _ = refused(capsys, *command, *options, "--episodes", episodes, "--seed", str(2**63 - 2))
+    n = int(said.split()[0])
+    assert f"--seed must be at most {2**63 - n} with {said} (its last episode's seed, seed + {n - 1}" in line
+    assert not out.exists()
+
+
 def test_the_largest_seed_is_taken(tmp_path, capsys):
     walk = str(write_walk_file(tmp_path / "walk.ndjson"))
     assert (
