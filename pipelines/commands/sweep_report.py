@@ -238,24 +238,21 @@ def code_note(out: Path, used: Collection[int | None] | None = None) -> str:
     runs = read_sweep_file(out / SWEEP_FILE).get("runs", [])
     if used is not None and None not in used:  # a number past the file's lines: a run it lost (log.lost_runs)
         runs = [runs[k - 1] if k <= len(runs) else {"lost": ""} for k in sorted(k for k in used if k)]
-    shown = list(
-        dict.fromkeys(
-            _code_text(run.get("code"), "lost" in run) if isinstance(run, dict) else _code_text(None)
-            for run in runs
-        )
-    )
+    shown = list(dict.fromkeys(_code_text(run) for run in runs))
     if len(shown) <= 1:
         return f"Code: {shown[0]}." if shown else ""
     return f"Code: {len(shown)} versions, in the order the sweep's runs used them: " + "; ".join(shown) + "."
 
 
-def _code_text(code: Any, lost: bool = False) -> str:
-    """A run's recorded code (``pipelines.version.code_identity``, with its plugins) in one line; ``lost``: a
-    run sweep.json no longer listed (``log.lost_runs``)."""
+def _code_text(run: Any) -> str:
+    """A run line's recorded code (``pipelines.version.code_identity``, with its plugins) in one line; that
+    of a run sweep.json no longer listed (``log.lost_runs``) is unknown."""
+    from pipelines.experiments.log import is_lost
     from pipelines.version import dirty_text
 
-    if lost:
+    if is_lost(run):
         return "unknown (a run sweep.json no longer listed)"
+    code = run.get("code") if isinstance(run, dict) else None
     if not isinstance(code, dict):
         return "not recorded (a run from before the code was)"
     parts = [f"commit {str(code.get('commit'))[:12]}{dirty_text(code.get('dirty'), code.get('diff_sha256'))}"]

@@ -75,9 +75,11 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
 
 def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]:
     """The entries of the config run ``index`` of ``path`` recorded (``recorded_config``)."""
+    from pipelines.experiments.log import is_lost
+
     where = f"{path} (run {index})"
     values = run.get("config")
-    if "lost" in run:  # log.lost_runs: the run's line was gone when a later run began
+    if is_lost(run):  # log.lost_runs: the run's line was gone when a later run began
         raise ConfigError(f"{where} was lost from the file ({run['lost']}): its config is unknown")
     if not isinstance(values, dict):
         raise ConfigError(

@@ -331,9 +331,14 @@ def sweep_lock(out: Path) -> Iterator[None]:
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
+def is_lost(run: Any) -> bool:
+    """A run line ``lost_runs`` added: the run's own line was gone, its code and config unknown."""
+    return isinstance(run, dict) and "lost" in run
+
+
 def split_lost(runs: list[Any]) -> tuple[list[Any], int]:
     """sweep.json's run lines but those ``lost_runs`` added, and how many it added."""
-    kept = [run for run in runs if not (isinstance(run, dict) and "lost" in run)]
+    kept = [run for run in runs if not is_lost(run)]
     return kept, len(runs) - len(kept)
 
 
@@ -355,4 +360,4 @@ def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:
         "kept as runs of unknown code (a new --out starts afresh)",
         file=sys.stderr,
     )
-    return [{"lost": f"not listed in {SWEEP_FILE} when run {listed + lost + 1} began"}] * lost
+    return [{"lost": f"not listed in {SWEEP_FILE} when run {listed + lost + 1} began"} for _ in range(lost)]
