@@ -65,6 +65,20 @@ GuidanceClearance = Literal["margin", "penalty"]
 GUIDANCE_CLEARANCES: Final[tuple[GuidanceClearance, ...]] = get_args(GuidanceClearance)
 COUPLED_MODES: Final[tuple[CoupledMode, ...]] = get_args(CoupledMode)
 ON_GOAL_MODES: Final[tuple[OnGoal, ...]] = get_args(OnGoal)
+_CHOICES: Final[dict[str, tuple[str, ...]]] = {  # each option of MPCConfig that names one of a few choices
+    "solver": SOLVERS,
+    "dmpc_parallel": PARALLEL_MODES,
+    "dmpc_update": DMPC_UPDATES,
+    "dmpc_stop": DMPC_STOPS,
+    "dmpc_order": DMPC_ORDERS,
+    "dmpc_start": DMPC_STARTS,
+    "flocking_weight": FLOCKING_WEIGHTS,
+    "flock_distance": FLOCK_DISTANCES,
+    "on_goal": ON_GOAL_MODES,
+    "guidance": GUIDANCE_MODES,
+    "guidance_clearance": GUIDANCE_CLEARANCES,
+    "coupled_mode": COUPLED_MODES,
+}
 
 # Upper bounds of the numbers that enter the NLP: far above any sensible value, low enough that its cost,
 # gradient and exact Hessian stay finite with all of them at their bounds together (rho = 1e300 made the
@@ -79,6 +93,7 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
     "mu": (1e4, " 1/m^2"),  # Table I: 30; at 1e4 smax is max(z, 0) to within 7e-5 m^2
     "d_min": (1e3, " m"),  # Table I: 0.8; the scenarios are 10 m across
     "d_flock": (1e3, " m"),  # 1.2
+    "flock_range": (1e3, " m"),  # 0: every pair flocks
     "delta": (1e3, ""),  # 1e-3 (m in Eq. 7, m^2 in Eq. 15)
     "cost_scale": (1e3, ""),  # 1; docs/examples/many_robots.toml scales F down, by 0.01
     # 1e-6; it never enters the NLP, but a loose one passes any iterate: at 100 and 1e300 every step was
@@ -138,6 +153,12 @@ class MPCConfig:
     # and with nobody about the outer robots parked 0.39 m short of their goals every episode. Among 7 humans
     # the wider flock collided more (docs/extending.md), so "uniform" stays the default.
     flock_distance: FlockDistance = "uniform"
+    # Which pairs flock. Eq. 15 holds every pair near d_ij, which suits a team bound for one place (the
+    # paper's row of 3 with goals 1 m apart) and holds robots bound for separate places together: two robots
+    # swapping places passed each other and then stood 1.42 m apart until the time limit (docs/extending.md).
+    # > 0: a pair flocks only while its goals lie within flock_range m of each other (w_floc_ij = 0 beyond,
+    # symmetric, so Lemma 1 holds); 0: every pair (the paper).
+    flock_range: float = 0.0
     # --- robots on their goals (the paper does not say what one that has arrived does meanwhile) ---------
     # "track": a robot that has reached its goal stays in the optimisation with its goal term (the reference
     # is then the goal itself, weighted omega_goal / (||s - goal|| + delta) = 1e4 on the goal), so it holds
@@ -251,16 +272,9 @@ class MPCConfig:
         for name in ("warm_start", "multi_start", "jit", "dmpc_pairs"):
             if not isinstance(getattr(self, name), bool):
                 raise MPCConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        if self.solver not in SOLVERS:
-            raise MPCConfigError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
-        if self.dmpc_parallel not in PARALLEL_MODES:
-            raise MPCConfigError(f"dmpc_parallel must be one of {PARALLEL_MODES}, got {self.dmpc_parallel!r}")
-        if self.dmpc_update not in DMPC_UPDATES:
-            raise MPCConfigError(f"dmpc_update must be one of {DMPC_UPDATES}, got {self.dmpc_update!r}")
-        if self.dmpc_stop not in DMPC_STOPS:
-            raise MPCConfigError(f"dmpc_stop must be one of {DMPC_STOPS}, got {self.dmpc_stop!r}")
-        if self.dmpc_order not in DMPC_ORDERS:
-            raise MPCConfigError(f"dmpc_order must be one of {DMPC_ORDERS}, got {self.dmpc_order!r}")
+        for name, choices in _CHOICES.items():
+            if getattr(self, name) not in choices:
+                raise MPCConfigError(f"{name} must be one of {choices}, got {getattr(self, name)!r}")
         if self.dmpc_order != "index" and self.dmpc_update != "gauss_seidel":
             raise MPCConfigError(
                 f"dmpc_order {self.dmpc_order!r} orders gauss_seidel's rounds; dmpc_update is "
@@ -271,28 +285,8 @@ class MPCConfig:
                 "dmpc_pairs moves stalled robots, and stall_release_s = 0 marks none stalled: set "
                 "stall_release_s > 0"
             )
-        if self.flocking_weight not in FLOCKING_WEIGHTS:
-            raise MPCConfigError(
-                f"flocking_weight must be one of {FLOCKING_WEIGHTS}, got {self.flocking_weight!r}"
-            )
-        if self.flock_distance not in FLOCK_DISTANCES:
-            raise MPCConfigError(
-                f"flock_distance must be one of {FLOCK_DISTANCES}, got {self.flock_distance!r}"
-            )
-        if self.dmpc_start not in DMPC_STARTS:
-            raise MPCConfigError(f"dmpc_start must be one of {DMPC_STARTS}, got {self.dmpc_start!r}")
         if not 0 < self.dmpc_relaxation <= 1:
             raise MPCConfigError(f"dmpc_relaxation must be in (0, 1], got {self.dmpc_relaxation!r}")
-        if self.on_goal not in ON_GOAL_MODES:
-            raise MPCConfigError(f"on_goal must be one of {ON_GOAL_MODES}, got {self.on_goal!r}")
-        if self.guidance not in GUIDANCE_MODES:
-            raise MPCConfigError(f"guidance must be one of {GUIDANCE_MODES}, got {self.guidance!r}")
-        if self.guidance_clearance not in GUIDANCE_CLEARANCES:
-            raise MPCConfigError(
-                f"guidance_clearance must be one of {GUIDANCE_CLEARANCES}, got {self.guidance_clearance!r}"
-            )
-        if self.coupled_mode not in COUPLED_MODES:
-            raise MPCConfigError(f"coupled_mode must be one of {COUPLED_MODES}, got {self.coupled_mode!r}")
         self._check_margins()
 
     def _check_numbers(self) -> None:
@@ -312,7 +306,8 @@ class MPCConfig:
         positive: tuple[str, ...] = ("dt", "w_goal", "w_coll", "v_max", "a_max", "d_min", "mu", "xi")
         positive += ("epsilon", "delta")
         positive += ("d_flock", "cost_scale", "solver_tol", "time_limit_s", "dmpc_relaxation")
-        non_negative = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty", "stall_release_s")
+        non_negative: tuple[str, ...] = ("w_acce", "w_jerk", "w_floc", "rho", "restart_penalty")
+        non_negative += ("stall_release_s", "flock_range")
         for name in positive + non_negative:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):

@@ -45,7 +45,7 @@ class LocalParams:
                 np.asarray(data.goals, dtype=float),
                 data.reference_targets(),
                 data.goal_slacks()[:, None],
-                data.floc_weights(cfg.pair_floc_weight(data.n_robots))[pairs],
+                data.floc_weights(cfg.pair_floc_weight(data.n_robots), cfg.flock_range)[pairs],
                 *(d[pairs] for d in flock_distances(data, cfg)),  # with flock_distance "goals" only
             ],
             axis=1,

@@ -147,7 +147,7 @@ class JointNLP:
                 data.goals.ravel(),
                 data.reference_targets().ravel(),
                 data.goal_slacks(),
-                data.floc_weights(self.cfg.pair_floc_weight(data.n_robots)),
+                data.floc_weights(self.cfg.pair_floc_weight(data.n_robots), self.cfg.flock_range),
                 *flock_distances(data, self.cfg),
                 data.margins(self.cfg, self.n_humans),
                 np.asarray(extra, dtype=float).ravel(),

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpc.config import MPCConfig
+from mpc.head_on import keep_right
 
 
 @dataclass(frozen=True)
@@ -73,17 +74,22 @@ class StepData:
         i, j = np.triu_indices(self.n_robots, k=1)  # row-major: pair_index's order
         return np.maximum(d_flock, np.linalg.norm(goals[i] - goals[j], axis=1))
 
-    def floc_weights(self, w_floc: float) -> np.ndarray:
+    def floc_weights(self, w_floc: float, flock_range: float = 0.0) -> np.ndarray:
         """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
         has arrived, is pinned (a parked robot must not pull the flock, nor be pulled) or does not flock
-        (``flocking``)."""
-        m = self.n_robots
+        (``flocking``), or, with ``flock_range`` > 0, the pair's goals lie more than ``flock_range`` m apart
+        (``MPCConfig.flock_range``: robots bound for separate places)."""
         free = np.asarray(self.active, dtype=bool)
         if self.arrived is not None:
             free = free & ~np.asarray(self.arrived, dtype=bool)
         if self.flocking is not None:
             free = free & np.asarray(self.flocking, dtype=bool)
-        return np.array([w_floc * (free[i] and free[j]) for i in range(m) for j in range(i + 1, m)])
+        i, j = np.triu_indices(self.n_robots, k=1)  # row-major: pair_index's order
+        pairs = free[i] & free[j]
+        if flock_range > 0:
+            goals = np.asarray(self.goals, dtype=float)
+            pairs &= np.linalg.norm(goals[i] - goals[j], axis=1) <= flock_range
+        return w_floc * pairs.astype(float)
 
     def goal_slacks(self) -> np.ndarray:
         """``goal_slack`` as the NLPs' ``(M,)`` parameter, zeros without it."""
@@ -95,14 +101,15 @@ class StepData:
         return slack
 
     def reference_targets(self) -> np.ndarray:
-        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals."""
+        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals; a robot meeting a teammate exactly
+        head-on keeps right (mpc/head_on.py: a tie of floating point that held both at a standstill)."""
         targets = self.goals if self.targets is None else self.targets
         targets = np.asarray(targets, dtype=float)
         if targets.shape != (self.n_robots, 2) or not np.all(np.isfinite(targets)):
             raise ValueError(
                 f"targets must be finite positions of shape {(self.n_robots, 2)}, got {targets.shape}"
             )
-        return targets
+        return keep_right(self.states[:, 0:2], targets)
 
     def margins(self, cfg: MPCConfig, n_humans: int) -> np.ndarray:
         """The NLPs' margin parameters: ``human_margins`` row-major, else ``cfg.human_margin(k)`` for every

@@ -205,8 +205,9 @@ def goal_room_note(
     gaps = np.linalg.norm(goals[:, None] - goals[None], axis=-1)[np.triu_indices(n_robots, k=1)]
     cfg = mpc_config(spec)
     d_min, gap = cfg.d_min, float(gaps.min())
-    # off with --no-flocking (Table III's "NF"); under flock_distance "goals" the goals' shape costs nothing
-    flocking = cfg.w_floc > 0 and cfg.flock_distance == "uniform"
+    # off with --no-flocking (Table III's "NF"); under flock_distance "goals" the goals' shape costs nothing;
+    # a flock_range short of the closest goals' distance leaves that pair out of Eq. 15
+    flocking = cfg.w_floc > 0 and cfg.flock_distance == "uniform" and not 0 < cfg.flock_range < gap
     if d_min < gap - GOAL_ROOM_MARGIN - 1e-9:
         if flocking and gap > cfg.d_flock + FLOCK_SLACK + 1e-9:
             return (

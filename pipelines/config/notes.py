@@ -74,6 +74,8 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "flocking_weight": "per_pair (the paper: w_floc on every pair) | per_robot: w_floc * 2 / (M - 1)",
     "flock_distance": "uniform (the paper's runs: d_flock for every pair) | goals: max(d_flock, the pair's "
     "goals' distance)",
+    "flock_range": "m; > 0: a pair flocks only if its goals lie within it (robots bound apart); 0: every "
+    "pair (the paper)",
     "guidance_clearance": "margin (d_min + margin) | penalty (where Eq. 11's penalty falls to w_goal)",
     "stall_release_s": "s without 0.25 m of progress before a robot stops flocking (mpc/stall.py); 0: never",
     "coupled_mode": "coupling nlp: auto | exact (the predictor inside the NLP) | first_order",

@@ -12,7 +12,9 @@ if TYPE_CHECKING:
 
 # The [mpc] keys of the flocking term (Eq. 15) alone: a method without it (table3's NF) keeps one column, not
 # a column per value that would run the same episodes again.
-FLOCKING_KEYS: Final[frozenset[str]] = frozenset({"w_floc", "d_flock", "flocking_weight", "flock_distance"})
+FLOCKING_KEYS: Final[frozenset[str]] = frozenset(
+    {"w_floc", "d_flock", "flocking_weight", "flock_distance", "flock_range"}
+)
 # The [mpc] keys one controller reads and the other does not (mpc/dmpc*.py, mpc/cmpc.py, mpc/coupled.py): a
 # CMPC column per value of DMPC's update rule ran the same episodes again under new cell keys.
 DMPC_KEYS: Final[frozenset[str]] = frozenset(

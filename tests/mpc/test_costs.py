@@ -1,5 +1,6 @@
 """Each cost term of Section IV against a value computed by hand, and Lemma 1 numerically."""
 
+import dataclasses
 import math
 
 import casadi as ca
@@ -171,11 +172,20 @@ def test_potential_counts_each_pair_once():
 
 
 GOALS = MPCConfig(flock_distance="goals")
+RANGE = MPCConfig(flock_range=2.5)  # seeds 5 and 9 below draw goals with pairs within it and beyond
 
 
 @pytest.mark.parametrize(
     ("seed", "arrived", "cfg"),
-    [(0, None, CFG), (1, None, CFG), (2, None, CFG), (3, [False, True, False], CFG), (4, None, GOALS)],
+    [
+        (0, None, CFG),
+        (1, None, CFG),
+        (2, None, CFG),
+        (3, [False, True, False], CFG),
+        (4, None, GOALS),
+        (5, None, RANGE),
+        (9, None, RANGE),
+    ],
 )
 def test_lemma_1_local_gradient_equals_potential_gradient(seed, arrived, cfg):
     """dC_i/du_i = dF/du_i (Lemma 1) for random states, plans, goals and predictions, 3 robots, 4 humans.
@@ -220,6 +230,27 @@ def test_flock_distances_are_the_goals_distances_above_d_flock_by_hand():
     assert by_goals - uniform == pytest.approx(CFG.w_floc * gap, rel=1e-9)
     with pytest.raises(ValueError, match="flock_distance must be one of"):
         MPCConfig(flock_distance="shape")  # type: ignore[arg-type]
+
+
+def test_flock_range_leaves_out_the_pairs_whose_goals_lie_beyond_it_by_hand():
+    """Goals at x = 0, 1, 3: pairs (0,1), (0,2), (1,2) lie 1, 3 and 2 m apart. flock_range 2 keeps (0,1) and
+    (1,2) at w_floc and gives (0,2) 0; F then lacks exactly that pair's Eq. 15 term; robot 1 arrived drops
+    the other two as before; 0 (the default) keeps every pair, the paper's Eq. 15."""
+    states = np.array([[0.0, 0.0, 0, 0], [1.0, 0.0, 0, 0], [3.0, 0.0, 0, 0]])
+    goals = np.array([[0.0, 5.0], [1.0, 5.0], [3.0, 5.0]])
+    data = StepData(states, np.zeros((3, 2)), goals, np.ones(3, bool))
+    np.testing.assert_array_equal(data.floc_weights(10.0), [10.0, 10.0, 10.0])
+    np.testing.assert_array_equal(data.floc_weights(10.0, 2.0), [10.0, 0.0, 10.0])
+    arrived = dataclasses.replace(data, arrived=np.array([False, True, False]))
+    np.testing.assert_array_equal(arrived.floc_weights(10.0, 2.0), [0.0, 0.0, 0.0])
+    accels, humans = np.zeros((3, CFG.horizon, 2)), np.zeros((CFG.horizon, 0, 2))
+    every = JointNLP(CFG, 3, 0).potential(accels, data, humans)
+    near = JointNLP(CFG.replace(flock_range=2.0), 3, 0).potential(accels, data, humans)
+    outer = (np.sqrt(9.0 + CFG.delta) - CFG.d_flock) ** 2 * CFG.horizon  # robots 0 and 2 stand 3 m apart
+    assert every - near == pytest.approx(CFG.w_floc * outer, rel=1e-9)
+    for bad in (-1.0, math.inf, 1e4):
+        with pytest.raises(ValueError, match="flock_range must be"):
+            MPCConfig(flock_range=bad)
 
 
 def test_human_margins_grow_the_distance_per_step_by_hand():

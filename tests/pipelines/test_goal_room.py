@@ -68,6 +68,11 @@ def test_goals_further_apart_than_the_flocking_distance_are_named_with_the_way_o
     assert goal_room_note(ControllerSpec("cmpc", flocking=False), 3, "row", 1.5) is None  # no Eq. 15
     goals = ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("flock_distance", "goals"),))
     assert goal_room_note(goals, 3, "row", 1.5) is None
+    # flock_range: the closest goals (1.5 m) beyond it flock with nobody; within it, they still do
+    apart = ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("flock_range", 1.4),))
+    assert goal_room_note(apart, 3, "row", 1.5) is None
+    near = ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("flock_range", 2.0),))
+    assert goal_room_note(near, 3, "row", 1.5) == note
 
 
 def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
