@@ -1,0 +1,162 @@
+"""Robots trading places with nobody about: M robots on a circle, each bound for the point opposite its start.
+
+The antipodal circle is the multi-robot test a newcomer writes first (two robots swapping places is M = 2):
+every robot's straight line runs through the centre, so the team must share it, and with exact coordinates
+each robot meets the one opposite it exactly head-on. Each row runs one controller on one team size; with
+``--jitter`` every start and goal moves by up to that many metres (episode i draws from seed + i), so rows
+show both the exact layout and the ones a real team would see. It prints success, travel time, the closest
+two robots came (centres; 2 x radius is contact) and the time-outs.
+
+    nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 3 4 6 --controllers cmpc dmpc orca
+    nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 4 --jitter 0.05 --episodes 10 \\
+        --mpc flock_range=2
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import crowdsim
+from crowdsim.env_config import EnvConfig
+from crowdsim.scenarios import Layout
+from pipelines.config import ConfigError, load
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.gym_loop import run_gym_episode
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_cli import (  # noqa: E402
+    check_distinct,
+    count_in,
+    episode_bar,
+    episode_count,
+    json_on_stdout,
+    mpc_sets,
+    output_file,
+    run_main,
+    seed_number,
+    write_json,
+)
+
+CONTROLLERS = ("cmpc", "dmpc", "orca")
+MAX_JITTER = 0.5  # m: more would let two starts of a small circle overlap
+
+
+def antipodal(n_robots: int, radius: float, jitter: float, rng: np.random.Generator) -> Layout:
+    """Robot i starts at angle ``-pi/2 + 2 pi i / M`` on the circle and heads for the opposite point; each
+    start and goal then moves by a uniform draw in ``[-jitter, jitter]`` per coordinate."""
+    angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / n_robots
+    starts = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: keep the exact layout exact
+    goals = -starts
+    if jitter > 0:
+        starts = starts + rng.uniform(-jitter, jitter, starts.shape)
+        goals = goals + rng.uniform(-jitter, jitter, goals.shape)
+    return Layout(starts, goals, np.zeros((0, 2)), np.zeros((0, 2)))
+
+
+def run_row(
+    controller: str, n_robots: int, args: argparse.Namespace, overrides: tuple[tuple[str, Any], ...]
+) -> dict[str, Any]:
+    """``args.episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
+    config = EnvConfig()
+    env = gym.make(crowdsim.ENV_ID, n_humans=0, n_robots=n_robots, config=config)
+    mpc = overrides if controller != "orca" else ()
+    policy = make_controller(ControllerSpec(controller, mpc_overrides=mpc), config)
+    outcomes = []
+    try:
+        for i in episode_bar(args.episodes, f"{controller} M={n_robots}"):
+            layout = antipodal(n_robots, args.radius, args.jitter, np.random.default_rng(args.seed + i))
+            m = run_gym_episode(policy, env, seed=args.seed + i, options={"layout": layout}).metrics
+            outcomes.append((m.success, m.travel_time, m.min_distance_robots, m.timeout))
+    finally:
+        policy.close()
+        env.close()
+    success, travel, closest, timeout = (
+        np.array(column, dtype=float) for column in zip(*outcomes, strict=True)
+    )
+    return {
+        "controller": controller,
+        "robots": n_robots,
+        "episodes": args.episodes,
+        "success_rate": float(success.mean()),
+        "travel_time_mean": float(travel[success > 0].mean()) if success.any() else math.nan,
+        "min_robot_distance": float(closest.min()),
+        "contact_rate": float((closest < 2 * config.radius).mean()),
+        "timeout_rate": float(timeout.mean()),
+    }
+
+
+def print_rows(rows: list[dict[str, Any]], radius: float) -> None:
+    print(
+        f"{'controller':10s} {'M':>3s} {'eps':>4s} {'success':>8s} {'travel s':>9s} {'closest m':>10s} "
+        f"{'contact':>8s} {'timeout':>8s}"
+    )
+    for r in rows:
+        travel = "n/a" if math.isnan(r["travel_time_mean"]) else f"{r['travel_time_mean']:.1f}"
+        print(
+            f"{r['controller']:10s} {r['robots']:3d} {r['episodes']:4d} {100 * r['success_rate']:7.0f}% "
+            f"{travel:>9s} {r['min_robot_distance']:10.2f} {100 * r['contact_rate']:7.0f}% "
+            f"{100 * r['timeout_rate']:7.0f}%"
+        )
+    print(f"(closest: the smallest centre distance of two robots in the row; contact below {2 * radius:g} m)")
+
+
+def jitter_metres(text: str) -> float:
+    value = float(text)
+    if not 0 <= value <= MAX_JITTER:
+        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_JITTER}] m, got {text}")
+    return value
+
+
+def circle_radius(text: str) -> float:
+    value = float(text)
+    if not 1.0 <= value <= 10.0:
+        raise argparse.ArgumentTypeError(f"must be in [1, 10] m (the paper's arena is 5 m), got {text}")
+    return value
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--robots", type=count_in("--robots", 2, 12), nargs="+", default=[2, 3, 4, 6])
+    parser.add_argument("--controllers", nargs="+", choices=CONTROLLERS, default=list(CONTROLLERS))
+    parser.add_argument("--radius", type=circle_radius, default=4.0, help="m, the circle's (default 4)")
+    parser.add_argument(
+        "--jitter", type=jitter_metres, default=0.0, help="m per coordinate (default 0: exact)"
+    )
+    parser.add_argument("--episodes", type=episode_count, default=1, help="episodes per row (default 1)")
+    parser.add_argument(
+        "--seed", type=seed_number, default=0, help="episode i draws its jitter from seed + i"
+    )
+    parser.add_argument(
+        "--mpc",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an [mpc] value, as `crowdmpc --set mpc.KEY=VALUE` takes it, for cmpc and dmpc (repeatable)",
+    )
+    parser.add_argument("--json", type=output_file, help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    with json_on_stdout(args.json):
+        check_distinct(parser, "--robots", args.robots)
+        try:
+            overrides = load(None, sets=mpc_sets(args.mpc)).mpc_overrides()
+        except (ConfigError, PipelineError) as exc:
+            parser.error(f"--mpc: {exc}")
+        rows = [run_row(c, m, args, overrides) for c in args.controllers for m in args.robots]
+        print_rows(rows, EnvConfig().radius)
+        if args.json is not None:
+            write_json(args.json, {"args": vars(args), "rows": rows})
+
+
+if __name__ == "__main__":
+    sys.exit(run_main(main))

@@ -1,0 +1,59 @@
+"""benchmarks/robot_swaps.py: the antipodal circle by hand, its jitter within bounds and seeded, one row
+end to end, and its options checked when parsed."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.benchmark_modules import load_benchmark
+
+robot_swaps = load_benchmark("robot_swaps")
+
+
+def test_the_antipodal_circle_by_hand():
+    """Four robots on a 4 m circle from the bottom, anticlockwise, each bound for the opposite point; the
+    exact layout stays exact (cos(pi / 2) is 6e-17, set to 0), so robots 0 and 2 meet exactly head-on."""
+    layout = robot_swaps.antipodal(4, 4.0, 0.0, np.random.default_rng(0))
+    starts = [[0.0, -4.0], [4.0, 0.0], [0.0, 4.0], [-4.0, 0.0]]
+    np.testing.assert_allclose(layout.robot_starts, starts, atol=1e-15)
+    np.testing.assert_array_equal(layout.robot_starts[[0, 2], 0], [0.0, 0.0])
+    np.testing.assert_array_equal(layout.robot_goals, -layout.robot_starts)
+    assert layout.human_starts.shape == (0, 2) and layout.human_goals.shape == (0, 2)
+
+
+def test_the_jitter_moves_every_coordinate_within_its_bound_and_follows_the_seed():
+    exact = robot_swaps.antipodal(6, 4.0, 0.0, np.random.default_rng(3))
+    moved = robot_swaps.antipodal(6, 4.0, 0.05, np.random.default_rng(3))
+    again = robot_swaps.antipodal(6, 4.0, 0.05, np.random.default_rng(3))
+    for name in ("robot_starts", "robot_goals"):
+        shift = getattr(moved, name) - getattr(exact, name)
+        assert np.all(np.abs(shift) <= 0.05) and np.all(shift != 0)
+        np.testing.assert_array_equal(getattr(moved, name), getattr(again, name))
+
+
+def test_one_row_end_to_end(tmp_path, capsys):
+    """Two robots swapping places without flocking pass (the head-on tie broken), d_min apart."""
+    out = tmp_path / "rows.json"
+    robot_swaps.main(["--robots", "2", "--controllers", "cmpc", "--mpc", "w_floc=0", "--json", str(out)])
+    printed = capsys.readouterr().out
+    assert "cmpc         2    1     100%" in printed
+    (row,) = json.loads(out.read_text(encoding="utf-8"))["rows"]
+    assert row["success_rate"] == 1.0 and row["min_robot_distance"] > 0.8 and row["contact_rate"] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--jitter", "0.6"], "--jitter: must be in [0, 0.5] m"),
+        (["--radius", "0.5"], "--radius: must be in [1, 10] m"),
+        (["--robots", "1"], "--robots"),
+        (["--robots", "2", "2"], "--robots names 2 more than once"),
+        (["--mpc", "flock_range=-1"], "--mpc: "),
+    ],
+)
+def test_bad_options_are_refused_when_parsed(argv, message, capsys):
+    with pytest.raises(SystemExit) as stop:
+        robot_swaps.main(argv)
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
