@@ -3,8 +3,8 @@
 Why. When two robots' straight lines to their goals run along one line towards each other (a swap of places
 typed as exact coordinates, ``[-4, 0] -> [4, 0]`` and ``[4, 0] -> [-4, 0]``), every term of the NLPs is
 symmetric under the reflection across that line, so the solvers' iterates never leave it: the paper's
-penalty has no sideways gradient there. Measured with nobody else about (docs/extending.md, "Robots that
-swap places"): CMPC stopped the two robots facing each other 1.08 m apart until the time limit, and DMPC's
+penalty has no sideways gradient there. Measured with nobody else about (docs/extending.md, "Two robots
+exactly head-on"): CMPC stopped the two robots facing each other 1.07 m apart until the time limit, and DMPC's
 best responses carried them through each other (0.39 m between centres, bodies overlapping) and counted it
 a success. Offsetting one robot's start by 1e-8 m was enough for both to pass on a side, so the tie is one
 of floating point, not of the method.

@@ -113,6 +113,11 @@ class NoTwinWarning(RuntimeWarning):
     slower, and said once for each size of the NLP."""
 
 
+class FlockWarning(UserWarning):
+    """Robots bound for separate places whom Eq. 15, every pair flocking, may hold together (pipelines.loop
+    .mpc_setup.warn_separate_goals; MPCConfig.flock_range)."""
+
+
 def warnings_as_notes() -> None:
     """Show crowdmpc's own warnings (agents laid out in contact, a predictor run without its twin) as the
     commands' other notes, "note: ..." on one line, not as Python's file, line and source line; any other
@@ -131,7 +136,7 @@ def warnings_as_notes() -> None:
         file: TextIO | None = None,
         line: str | None = None,
     ) -> None:
-        if not issubclass(category, LayoutWarning | NoTwinWarning):
+        if not issubclass(category, LayoutWarning | NoTwinWarning | FlockWarning):
             shown(message, category, filename, lineno, file, line)
         elif (out := file or sys.stderr) is not None:
             with contextlib.suppress(OSError):  # as Python's own: a note lost to a closed pipe raises nothing

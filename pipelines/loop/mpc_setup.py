@@ -9,6 +9,7 @@ the predictor reads (``predictor_history``).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, NoReturn
 
@@ -17,7 +18,7 @@ import numpy as np
 from crowdsim.scenarios import MAX_HUMANS
 from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
-from pipelines.errors import PipelineError
+from pipelines.errors import FlockWarning, PipelineError
 from pipelines.loop.margins import CALIBRATED_MODES, human_observed
 from pipelines.loop.observed import agent, check_fields, check_positions
 from pipelines.loop.spec import ControllerSpec
@@ -44,6 +45,31 @@ def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORL
     cfg = MPCConfig.from_world(world).replace(**dict(spec.mpc_overrides))
     cfg = cfg.replace(jit=spec.coupling != "nlp" and (jit or cfg.jit))
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
+
+
+def warn_separate_goals(cfg: MPCConfig, positions: np.ndarray, goals: np.ndarray) -> None:
+    """A ``FlockWarning`` when every pair of robots flocks (``flock_range`` 0, ``w_floc`` > 0) and some pair
+    is bound for goals more than ``2 d_flock`` apart whose offset differs from the starts' by as much: robots
+    trading places or parting ways, not a team keeping its shape. Eq. 15 then pulls them together all the
+    way (two robots swapping places stood 1.42 m apart until the time limit; docs/extending.md)."""
+    if cfg.flock_range > 0 or cfg.w_floc == 0 or len(goals) < 2:
+        return
+    positions, goals = np.asarray(positions, dtype=float), np.asarray(goals, dtype=float)
+    i, j = np.triu_indices(len(goals), k=1)
+    apart = np.linalg.norm(goals[i] - goals[j], axis=1)
+    reshaped = np.linalg.norm((goals[i] - goals[j]) - (positions[i] - positions[j]), axis=1)
+    parting = (apart > 2 * cfg.d_flock) & (reshaped > 2 * cfg.d_flock)
+    if parting.any():
+        k = int(np.flatnonzero(parting)[0])
+        warnings.warn(
+            f"robots {i[k]} and {j[k]} are bound for goals {apart[k]:.1f} m apart by separate ways, and "
+            f"Eq. 15 pulls every pair of robots towards d_flock {cfg.d_flock:g} m, which can hold them "
+            'together until the time limit: mpc_overrides=(("flock_range", 2.0),) ([mpc] flock_range) '
+            'flocks only the pairs whose goals lie within 2 m (docs/extending.md, "Robots bound for separate '
+            'places")',
+            FlockWarning,
+            stacklevel=3,
+        )
 
 
 class SolversHeld:

@@ -5,14 +5,20 @@ passed, and Eq. 15 then held them 1.42 m apart, each facing away, until the time
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import crowdsim
 from crowdsim.env_config import EnvConfig
 from crowdsim.scenarios import Layout
+from mpc.config import MPCConfig
+from pipelines.errors import FlockWarning
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.gym_loop import run_gym_episode
+from pipelines.loop.mpc_setup import warn_separate_goals
 
 SWAP = Layout([[-4.0, 0.0], [4.0, 0.0]], [[4.0, 0.0], [-4.0, 0.0]], [], [])
 OFFSET = Layout([[-4.0, 0.0], [4.0, 0.05]], [[4.0, 0.0], [-4.0, 0.05]], [], [])
@@ -42,10 +48,38 @@ def test_an_exact_swap_passes_right_shoulder_to_right_shoulder(controller):
 def test_robots_bound_for_separate_places_pass_when_only_near_goals_flock(controller):
     """Eq. 15 with every pair flocking holds the robots 1.42 m apart once they have passed; flock_range 2 m
     (their goals lie 8 m apart) leaves the pair out of it, and they arrive."""
-    held = swap(ControllerSpec(controller), OFFSET)
+    with pytest.warns(FlockWarning, match="flock_range"):  # the reset says so (the last test)
+        held = swap(ControllerSpec(controller), OFFSET)
     assert not held.success and held.timeout
     m = swap(ControllerSpec(controller, mpc_overrides=(("flock_range", 2.0),)), OFFSET)
     assert m.success and m.travel_time < 10.0
     assert m.min_distance_robots > 0.8
     exact = swap(ControllerSpec(controller, mpc_overrides=(("flock_range", 2.0),)), SWAP)
     assert exact.success and exact.min_distance_robots > 0.8
+
+
+def test_a_warning_names_robots_parting_ways_while_every_pair_flocks():
+    """The controller's reset says why such an episode may time out, and what to set; a team keeping its
+    shape (the paper's row, and a row of 12 robots 11 m wide) and a controller with flock_range or without
+    flocking say nothing."""
+    config = EnvConfig()
+    with pytest.warns(
+        FlockWarning, match=r"robots 0 and 1 are bound for goals 8\.0 m apart by separate ways"
+    ):
+        warn_separate_goals(MPCConfig(), SWAP.robot_starts, SWAP.robot_goals)
+    row = np.array([[x, -5.0] for x in np.arange(12.0)])
+    quiet = [
+        (MPCConfig(), row, row + [0.0, 10.0]),
+        (MPCConfig(flock_range=2.0), SWAP.robot_starts, SWAP.robot_goals),
+        (MPCConfig(w_floc=0.0), SWAP.robot_starts, SWAP.robot_goals),
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FlockWarning)
+        for cfg, starts, goals in quiet:
+            warn_separate_goals(cfg, np.asarray(starts), np.asarray(goals))
+        env = gym.make(crowdsim.ENV_ID, n_humans=3, n_robots=3, config=config)
+        controller = make_controller(ControllerSpec("cmpc"), config)
+        run_gym_episode(controller, env, seed=0)  # the paper's circle crossing
+        controller.close()
+    with pytest.warns(FlockWarning):
+        swap(ControllerSpec("dmpc"), SWAP)
