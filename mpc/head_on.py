@@ -22,7 +22,7 @@ from typing import Final
 
 import numpy as np
 
-NUDGE: Final[float] = 1e-3  # m to the right: far below any distance that matters, far above rounding
+NUDGE: Final[float] = 0.1  # m to the right: an eighth of d_min; 1 mm left DMPC's crossing 3.6 s slower
 # |cross| / (|a| |b|) below which two directions count as one line: the exact ties above give 0 or ~1e-16
 COLLINEAR: Final[float] = 1e-9
 
@@ -47,10 +47,42 @@ def head_on(positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
     return tie.any(axis=1)
 
 
-def keep_right(positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """``targets`` with each robot in an exact head-on tie (``head_on``) given a target ``NUDGE`` m to the
-    right of its line; the same array, untouched, when no robot is."""
+def mirrored(positions: np.ndarray, targets: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+    """``(M,)`` True for each robot that is a teammate's mirror image on crossing paths: the reflection across
+    the perpendicular bisector of their positions takes its target and velocity exactly to the teammate's,
+    and its line to its target crosses that bisector. Two robots crossing at right angles from the same
+    distance are such a pair: DMPC's Jacobi update gives the two the same best response, mirrored, at every
+    iteration (both dodge, both wait, both go), and in the closed loop they went through each other (0.19 m
+    between centres; CMPC's joint solve crossed in 9.2 s)."""
+    positions, targets = np.asarray(positions, dtype=float), np.asarray(targets, dtype=float)
+    velocities = np.asarray(velocities, dtype=float)
+    tied = np.zeros(len(positions), dtype=bool)
+    for i, j in zip(*np.triu_indices(len(positions), k=1), strict=True):
+        axis = positions[j] - positions[i]
+        length = float(np.linalg.norm(axis))
+        if length == 0:
+            continue
+        n = axis / length
+        middle = 0.5 * (positions[i] + positions[j])
+        reach = float(np.linalg.norm(targets[i] - positions[i]))
+        crosses = float(np.dot(targets[i] - middle, n)) > 0  # robot i starts on the bisector's -n side
+        target = targets[i] - 2 * np.dot(targets[i] - middle, n) * n
+        velocity = velocities[i] - 2 * np.dot(velocities[i], n) * n
+        speeds = float(np.linalg.norm(velocities[i]) + np.linalg.norm(velocities[j]))
+        same = np.linalg.norm(target - targets[j]) <= COLLINEAR * (length + reach)
+        if crosses and same and np.linalg.norm(velocity - velocities[j]) <= COLLINEAR * (1.0 + speeds):
+            tied[[i, j]] = True
+    return tied
+
+
+def keep_right(
+    positions: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+) -> np.ndarray:
+    """``targets`` with each robot in an exact tie (``head_on``, or ``mirrored`` given ``velocities``) given
+    a target ``NUDGE`` m to the right of its line; the same array, untouched, when no robot is."""
     tied = head_on(positions, targets)
+    if velocities is not None:
+        tied |= mirrored(positions, targets, velocities)
     if not tied.any():
         return targets
     out = np.array(targets, dtype=float)

@@ -109,7 +109,7 @@ class StepData:
             raise ValueError(
                 f"targets must be finite positions of shape {(self.n_robots, 2)}, got {targets.shape}"
             )
-        return keep_right(self.states[:, 0:2], targets)
+        return keep_right(self.states[:, 0:2], targets, self.states[:, 2:4])
 
     def margins(self, cfg: MPCConfig, n_humans: int) -> np.ndarray:
         """The NLPs' margin parameters: ``human_margins`` row-major, else ``cfg.human_margin(k)`` for every

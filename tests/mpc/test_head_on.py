@@ -4,7 +4,7 @@ robots swapping places pass each other in the closed loop under both controllers
 import numpy as np
 import pytest
 
-from mpc.head_on import NUDGE, head_on, keep_right
+from mpc.head_on import NUDGE, head_on, keep_right, mirrored
 from mpc.step_data import StepData
 
 SWAP = np.array([[-4.0, 0.0], [4.0, 0.0]])
@@ -49,3 +49,23 @@ def test_step_data_hands_the_nlps_the_nudged_targets():
         states + np.pad(lanes, ((0, 0), (0, 2))), np.zeros((2, 2)), SWAP[::-1] + lanes, np.ones(2, bool)
     )
     np.testing.assert_array_equal(apart.reference_targets(), SWAP[::-1] + lanes)
+
+
+def test_mirror_images_on_crossing_paths_are_a_tie_and_parallel_ones_are_not():
+    """Two robots crossing at right angles from the same distance mirror each other across y = x (DMPC's
+    Jacobi update then moved them alike until they went through each other); the paper's row, whose outer
+    robots mirror each other across x = 0 on parallel paths, is no tie; nor are moving mirror images whose
+    velocities do not mirror. Each robot of the crossing pair keeps right: robot 0 heads +x (right is -y),
+    robot 1 heads +y (right is +x)."""
+    still = np.zeros((2, 2))
+    crossing, goals = np.array([[-4.0, 0.0], [0.0, -4.0]]), np.array([[4.0, 0.0], [0.0, 4.0]])
+    np.testing.assert_array_equal(mirrored(crossing, goals, still), [True, True])
+    np.testing.assert_array_equal(head_on(crossing, goals), [False, False])
+    np.testing.assert_allclose(
+        keep_right(crossing, goals, still), [[4.0, -NUDGE], [NUDGE, 4.0]], rtol=0, atol=1e-15
+    )
+    row = np.array([[-1.0, -5.0], [0.0, -5.0], [1.0, -5.0]])
+    np.testing.assert_array_equal(mirrored(row, row + [0.0, 10.0], np.zeros((3, 2))), [False] * 3)
+    moving = np.array([[1.0, 0.0], [0.0, 0.5]])  # robot 0 at 1 m/s along its path, robot 1 at 0.5 m/s
+    np.testing.assert_array_equal(mirrored(crossing, goals, moving), [False, False])
+    np.testing.assert_array_equal(mirrored(crossing, goals, np.array([[1.0, 0.0], [0.0, 1.0]])), [True, True])
