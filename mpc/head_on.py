@@ -10,10 +10,12 @@ a success. Offsetting one robot's start by 1e-8 m was enough for both to pass on
 of floating point, not of the method.
 
 What. A robot is in such a tie when a teammate stands exactly on its line to its target, ahead of it, and
-heads exactly back along that line (the cross products below are 0 up to rounding). Its Eq. 8 target then
-moves ``NUDGE`` to its right, as two people meeting in a corridor keep right: the reflection symmetry is
-gone and the robots pass right shoulder to right shoulder. Anything less than exact leaves the target alone,
-so every scene the simulator draws (its starts and humans are random) is solved exactly as the paper's.
+heads exactly back along that line (the cross products below are 0 up to rounding), or when it is a
+teammate's exact mirror image on a crossing path (``mirrored``: DMPC's Jacobi update keeps such a pair
+mirrored). Its Eq. 8 target then moves ``NUDGE`` to its right for the step, as two people meeting in a
+corridor keep right: the reflection symmetry is gone and the robots pass right shoulder to right shoulder.
+Anything less than exact leaves the target alone, so every scene the simulator draws (its teams travel side
+by side among random humans) is solved exactly as the paper's.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Final
 
 import numpy as np
 
-NUDGE: Final[float] = 0.1  # m to the right: an eighth of d_min; 1 mm left DMPC's crossing 3.6 s slower
+NUDGE: Final[float] = 0.03  # m to the right (1 mm: DMPC crossed 3.6 s slower; 0.1 m: 8 robots touched)
 # |cross| / (|a| |b|) below which two directions count as one line: the exact ties above give 0 or ~1e-16
 COLLINEAR: Final[float] = 1e-9
 
