@@ -12,4 +12,9 @@ from gymnasium.envs.registration import register, registry
 ENV_ID: Final[str] = "crowdmpc/CrowdNav-v0"
 
 if ENV_ID not in registry:
-    register(id=ENV_ID, entry_point="crowdsim.gym_env:CrowdNavEnv")
+    # Without gymnasium's passive checker (gym.make's default wraps every env in it): in gymnasium 1.4 a first
+    # reset that raises (a layout with a typo) left it holding None, and every later step on that env raised
+    # "TypeError: cannot unpack non-iterable NoneType object" however right the next layout was. The tests run
+    # gymnasium's full check_env on the environment instead; gym.make(..., disable_env_checker=False) asks
+    # for the checker all the same.
+    register(id=ENV_ID, entry_point="crowdsim.gym_env:CrowdNavEnv", disable_env_checker=True)

@@ -173,6 +173,21 @@ def test_bad_reset_options_are_one_line(options, message):
     assert str(exc.value).startswith(message) and "\n" not in str(exc.value)
 
 
+def test_a_bad_first_layout_leaves_the_env_usable():
+    """gym.make's env after a first reset that raised: gymnasium's passive checker (gymnasium 1.4) then held
+    None and every later step raised "cannot unpack non-iterable NoneType object", whatever the next layout;
+    the environment is registered without it (crowdsim/__init__.py), and asking for it still works."""
+    good = one_robot((3.0, 0.0))
+    bad = dataclasses.replace(good, robot_starts=[[0.0, 0.0, 0.0]])
+    env = gym.make(crowdsim.ENV_ID, n_humans=1, n_robots=1)
+    with pytest.raises(SimulationError, match="layout.robot_starts"):
+        env.reset(seed=0, options={"layout": bad})
+    env.reset(seed=0, options={"layout": good})
+    env.step(np.zeros(env.action_space.shape))
+    checked = gym.make(crowdsim.ENV_ID, n_humans=1, n_robots=1, disable_env_checker=False)
+    assert "PassiveEnvChecker" in str(checked)
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [
