@@ -275,22 +275,24 @@ class MPCController(SolversHeld):
         n_robots, n_humans = obs.n_robots, obs.n_humans
         states = np.concatenate([obs.robot_positions, obs.robot_velocities], axis=1).astype(float)
         reached = np.asarray(obs.robot_reached, dtype=bool)
+        # Guidance and the stall watch go by where a robot is now: one that arrived and was pushed off its
+        # goal (a pair of people herded one 4.8 m back) must be led back, not left as "has arrived"
+        on_goal = np.linalg.norm(states[:, :2] - obs.robot_goals, axis=1) < obs.radius
         data = StepData(
             states=states,
             last_actions=np.asarray(obs.robot_last_actions, dtype=float),
             goals=np.asarray(obs.robot_goals, dtype=float),
             active=~reached if cfg.on_goal == "brake" else np.ones(n_robots, dtype=bool),
             arrived=reached,
-            flocking=self._flocking(states, obs.robot_goals, reached),
+            flocking=self._flocking(states, obs.robot_goals, on_goal),
             goal_slack=yield_slack(states[:, :2], obs.robot_goals, reached, obs.radius)
             if cfg.on_goal == "yield"
             else None,
-            **self._crowd_allowances(obs, states, reached),
+            **self._crowd_allowances(obs, states, on_goal),
         )
         # Nothing to optimise when every robot is pinned (on_goal "brake": all have arrived) or stands on
         # its goal now. "Has arrived once" is not enough: under the simultaneous success rule a robot pushed
         # off its goal after the last one arrived must get back; braking everyone froze it there.
-        on_goal = np.linalg.norm(states[:, :2] - obs.robot_goals, axis=1) < obs.radius
         if (reached if cfg.on_goal == "brake" else on_goal).all():
             plan = braking(states, cfg.horizon, cfg.dt, cfg.a_max)
             self.memory.commit(plan, solved=False, kind="brake")
@@ -322,11 +324,11 @@ class MPCController(SolversHeld):
             return self._exception_output(exc, start, data, t0)
         return self._output(result, start.kind, data, t0)
 
-    def _flocking(self, states: np.ndarray, goals: np.ndarray, reached: np.ndarray) -> np.ndarray | None:
+    def _flocking(self, states: np.ndarray, goals: np.ndarray, on_goal: np.ndarray) -> np.ndarray | None:
         """StepData's ``flocking``: every robot but the stalled ones (mpc/stall.py); None without release."""
-        return None if self.stall is None else ~self.stall.update(states[:, :2], goals, reached)
+        return None if self.stall is None else ~self.stall.update(states[:, :2], goals, on_goal)
 
-    def _crowd_allowances(self, obs: Observation, states: np.ndarray, reached: np.ndarray) -> dict[str, Any]:
+    def _crowd_allowances(self, obs: Observation, states: np.ndarray, on_goal: np.ndarray) -> dict[str, Any]:
         """StepData's ``human_margins`` (per-class margins: each human's, ``(H, N_h)``) and
         ``targets`` (guidance "standing": around the humans standing still); absent: the configured
         margins for every human, the goals."""
@@ -348,7 +350,7 @@ class MPCController(SolversHeld):
                 obs.robot_goals,
                 obs.human_positions[standing],
                 cfg.standing_clearance(float(margin)),
-                ~reached,
+                ~on_goal,
                 lookahead(cfg.v_max, cfg.horizon, cfg.dt),
             )
         return out
