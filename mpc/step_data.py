@@ -101,15 +101,22 @@ class StepData:
         return slack
 
     def reference_targets(self) -> np.ndarray:
-        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals; a robot meeting a teammate exactly
-        head-on keeps right (mpc/head_on.py: a tie of floating point that held both at a standstill)."""
+        """Eq. 8's targets ``(M, 2)``: ``targets``, else the goals; a robot in an exact tie with a teammate
+        keeps right (mpc/head_on.py: head-on, or mirror images, which held robots at a standstill or took
+        them through each other). Read-only, worked out once: DMPC's local NLPs ask for it at every solve."""
+        cached = self.__dict__.get("_reference_targets")
+        if cached is not None:
+            return cached
         targets = self.goals if self.targets is None else self.targets
         targets = np.asarray(targets, dtype=float)
         if targets.shape != (self.n_robots, 2) or not np.all(np.isfinite(targets)):
             raise ValueError(
                 f"targets must be finite positions of shape {(self.n_robots, 2)}, got {targets.shape}"
             )
-        return keep_right(self.states[:, 0:2], targets, self.states[:, 2:4])
+        cached = np.array(keep_right(self.states[:, 0:2], targets, self.states[:, 2:4]))
+        cached.flags.writeable = False
+        object.__setattr__(self, "_reference_targets", cached)
+        return cached
 
     def margins(self, cfg: MPCConfig, n_humans: int) -> np.ndarray:
         """The NLPs' margin parameters: ``human_margins`` row-major, else ``cfg.human_margin(k)`` for every
