@@ -1,14 +1,18 @@
-"""Robots trading places with nobody about: M robots on a circle, each bound for the point opposite its start.
+"""Robots trading places: M robots on a circle, each bound for the point opposite its start, among N people.
 
 The antipodal circle is the multi-robot test a newcomer writes first (two robots swapping places is M = 2):
 every robot's straight line runs through the centre, so the team must share it, and with exact coordinates
 each robot meets the one opposite it exactly head-on. Each row runs one controller on one team size; with
 ``--jitter`` every start and goal moves by up to that many metres (episode i draws from seed + i), so rows
-show both the exact layout and the ones a real team would see. It prints success, travel time, the closest
-two robots came (centres; 2 x radius is contact) and the time-outs.
+show both the exact layout and the ones a real team would see. ``--humans N`` adds people by the paper's
+crossing rules (``--scenario``: circle or perpendicular, each placed clear of the robots' starts and goals,
+drawn from the episode's seed). It prints success, travel time, the closest two robots came (centres; 2 x
+radius is contact), robot-human collisions (< 0.8 m, Table I's) and the time-outs.
 
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 3 4 6 --controllers cmpc dmpc orca
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 4 --jitter 0.05 --episodes 10 \\
+        --mpc flock_range=2
+    nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 3 4 --humans 5 --episodes 20 \\
         --mpc flock_range=2
 """
 
@@ -24,8 +28,9 @@ import gymnasium as gym
 import numpy as np
 
 import crowdsim
+from crowdsim.crossings import place_humans_paper
 from crowdsim.env_config import EnvConfig
-from crowdsim.scenarios import Layout
+from crowdsim.scenarios import MAX_TRIES, SCENARIOS, Layout, geometry_scale
 from pipelines.config import ConfigError, load
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
@@ -37,6 +42,7 @@ from bench_cli import (  # noqa: E402
     count_in,
     episode_bar,
     episode_count,
+    human_count,
     json_on_stdout,
     mpc_sets,
     output_file,
@@ -49,9 +55,17 @@ CONTROLLERS = ("cmpc", "dmpc", "orca")
 MAX_JITTER = 0.5  # m: more would let two starts of a small circle overlap
 
 
-def antipodal(n_robots: int, radius: float, jitter: float, rng: np.random.Generator) -> Layout:
+def antipodal(
+    n_robots: int,
+    radius: float,
+    jitter: float,
+    rng: np.random.Generator,
+    n_humans: int = 0,
+    scenario: str = "circle",
+) -> Layout:
     """Robot i starts at angle ``-pi/2 + 2 pi i / M`` on the circle and heads for the opposite point; each
-    start and goal then moves by a uniform draw in ``[-jitter, jitter]`` per coordinate."""
+    start and goal then moves by a uniform draw in ``[-jitter, jitter]`` per coordinate; ``n_humans`` people
+    are placed after them by the paper's crossing rules (``EnvConfig()``'s radius and separation)."""
     angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / n_robots
     starts = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: keep the exact layout exact
@@ -59,7 +73,20 @@ def antipodal(n_robots: int, radius: float, jitter: float, rng: np.random.Genera
     if jitter > 0:
         starts = starts + rng.uniform(-jitter, jitter, starts.shape)
         goals = goals + rng.uniform(-jitter, jitter, goals.shape)
-    return Layout(starts, goals, np.zeros((0, 2)), np.zeros((0, 2)))
+    config = EnvConfig()
+    people = place_humans_paper(
+        scenario,
+        n_humans,
+        starts,
+        goals,
+        rng,
+        min_dist=2 * config.radius + config.spawn_separation,
+        v_pref=config.v_pref,
+        scale=geometry_scale(n_humans),
+        max_tries=MAX_TRIES,
+    )
+    human_starts, human_goals = (np.asarray(p, dtype=float).reshape(n_humans, 2) for p in people)
+    return Layout(starts, goals, human_starts, human_goals)
 
 
 def run_row(
@@ -67,21 +94,21 @@ def run_row(
 ) -> dict[str, Any]:
     """``args.episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
     config = EnvConfig()
-    env = gym.make(crowdsim.ENV_ID, n_humans=0, n_robots=n_robots, config=config)
+    env = gym.make(crowdsim.ENV_ID, n_humans=args.humans, n_robots=n_robots, config=config)
     mpc = overrides if controller != "orca" else ()
     policy = make_controller(ControllerSpec(controller, mpc_overrides=mpc), config)
     outcomes = []
     try:
         for i in episode_bar(args.episodes, f"{controller} M={n_robots}"):
-            layout = antipodal(n_robots, args.radius, args.jitter, np.random.default_rng(args.seed + i))
+            rng = np.random.default_rng(args.seed + i)
+            layout = antipodal(n_robots, args.radius, args.jitter, rng, args.humans, args.scenario)
             m = run_gym_episode(policy, env, seed=args.seed + i, options={"layout": layout}).metrics
-            outcomes.append((m.success, m.travel_time, m.min_distance_robots, m.timeout))
+            outcomes.append((m.success, m.travel_time, m.min_distance_robots, m.collision, m.timeout))
     finally:
         policy.close()
         env.close()
-    success, travel, closest, timeout = (
-        np.array(column, dtype=float) for column in zip(*outcomes, strict=True)
-    )
+    columns = (np.array(column, dtype=float) for column in zip(*outcomes, strict=True))
+    success, travel, closest, collision, timeout = columns
     return {
         "controller": controller,
         "robots": n_robots,
@@ -90,6 +117,8 @@ def run_row(
         "travel_time_mean": float(travel[success > 0].mean()) if success.any() else math.nan,
         "min_robot_distance": float(closest.min()),
         "contact_rate": float((closest < 2 * config.radius).mean()),
+        "humans": args.humans,
+        "collision_rate": float(collision.mean()),
         "timeout_rate": float(timeout.mean()),
     }
 
@@ -97,16 +126,19 @@ def run_row(
 def print_rows(rows: list[dict[str, Any]], radius: float) -> None:
     print(
         f"{'controller':10s} {'M':>3s} {'eps':>4s} {'success':>8s} {'travel s':>9s} {'closest m':>10s} "
-        f"{'contact':>8s} {'timeout':>8s}"
+        f"{'contact':>8s} {'N':>3s} {'collision':>9s} {'timeout':>8s}"
     )
     for r in rows:
         travel = "n/a" if math.isnan(r["travel_time_mean"]) else f"{r['travel_time_mean']:.1f}"
         print(
             f"{r['controller']:10s} {r['robots']:3d} {r['episodes']:4d} {100 * r['success_rate']:7.0f}% "
-            f"{travel:>9s} {r['min_robot_distance']:10.2f} {100 * r['contact_rate']:7.0f}% "
-            f"{100 * r['timeout_rate']:7.0f}%"
+            f"{travel:>9s} {r['min_robot_distance']:10.2f} {100 * r['contact_rate']:7.0f}% {r['humans']:3d} "
+            f"{100 * r['collision_rate']:8.0f}% {100 * r['timeout_rate']:7.0f}%"
         )
-    print(f"(closest: the smallest centre distance of two robots in the row; contact below {2 * radius:g} m)")
+    print(
+        f"(closest: the smallest centre distance of two robots in the row; contact below {2 * radius:g} m; "
+        "collision: a robot within 0.8 m of a person)"
+    )
 
 
 def jitter_metres(text: str) -> float:
@@ -133,6 +165,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--jitter", type=jitter_metres, default=0.0, help="m per coordinate (default 0: exact)"
     )
+    parser.add_argument("--humans", type=human_count, default=0, help="people crossing too (default 0)")
+    parser.add_argument("--scenario", choices=SCENARIOS, default="circle", help="the people's crossing")
     parser.add_argument("--episodes", type=episode_count, default=1, help="episodes per row (default 1)")
     parser.add_argument(
         "--seed", type=seed_number, default=0, help="episode i draws its jitter from seed + i"
@@ -148,6 +182,14 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     with json_on_stdout(args.json):
         check_distinct(parser, "--robots", args.robots)
+        body = 2 * EnvConfig().radius
+        for m in args.robots:
+            gap = 2 * args.radius * math.sin(math.pi / m)
+            if gap < body:
+                parser.error(
+                    f"--radius {args.radius:g} puts {m} robots {gap:.2f} m apart, closer than two robots' "
+                    f"bodies ({body:g} m): a radius of at least {body / 2 / math.sin(math.pi / m):.2f} m"
+                )
         try:
             overrides = load(None, sets=mpc_sets(args.mpc)).mpc_overrides()
         except (ConfigError, PipelineError) as exc:

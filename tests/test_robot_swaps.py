@@ -32,6 +32,19 @@ def test_the_jitter_moves_every_coordinate_within_its_bound_and_follows_the_seed
         np.testing.assert_array_equal(getattr(moved, name), getattr(again, name))
 
 
+def test_people_are_placed_clear_of_the_robots_by_the_papers_rules_and_follow_the_seed():
+    """Five people of the circle crossing, each start at least 2 radius + the spawn separation (1.1 m) from
+    every robot's start and every other person's; the same seed, the same people."""
+    one = robot_swaps.antipodal(4, 4.0, 0.05, np.random.default_rng(7), 5, "circle")
+    two = robot_swaps.antipodal(4, 4.0, 0.05, np.random.default_rng(7), 5, "circle")
+    np.testing.assert_array_equal(one.human_starts, two.human_starts)
+    assert one.human_starts.shape == one.human_goals.shape == (5, 2)
+    starts = np.concatenate([one.robot_starts, one.human_starts])
+    gaps = np.linalg.norm(one.human_starts[:, None] - starts[None], axis=-1)
+    gaps[:, 4:][np.diag_indices(5)] = np.inf  # a person and itself
+    assert gaps.min() >= 1.1 - 1e-12
+
+
 def test_one_row_end_to_end(tmp_path, capsys):
     """Two robots swapping places without flocking pass (the head-on tie broken), d_min apart."""
     out = tmp_path / "rows.json"
@@ -50,6 +63,11 @@ def test_one_row_end_to_end(tmp_path, capsys):
         (["--robots", "1"], "--robots"),
         (["--robots", "2", "2"], "--robots names 2 more than once"),
         (["--mpc", "flock_range=-1"], "--mpc: "),
+        (
+            ["--robots", "12", "--radius", "1"],
+            "--radius 1 puts 12 robots 0.52 m apart, closer than two robots'",
+        ),
+        (["--humans", "51"], "--humans"),
     ],
 )
 def test_bad_options_are_refused_when_parsed(argv, message, capsys):
