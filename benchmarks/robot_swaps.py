@@ -52,7 +52,7 @@ from bench_cli import (  # noqa: E402
 )
 
 CONTROLLERS = ("cmpc", "dmpc", "orca")
-MAX_JITTER = 0.5  # m: more would let two starts of a small circle overlap
+MAX_JITTER = 0.5  # m per coordinate; main() refuses a circle too small for its robots so moved
 
 
 def antipodal(
@@ -182,13 +182,16 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     with json_on_stdout(args.json):
         check_distinct(parser, "--robots", args.robots)
-        body = 2 * EnvConfig().radius
+        # neighbours' starts (and goals) a chord apart, less what the jitter may take off each (its
+        # diagonal), must leave room for two bodies
+        body = 2 * EnvConfig().radius + 2 * math.sqrt(2) * args.jitter
         for m in args.robots:
             gap = 2 * args.radius * math.sin(math.pi / m)
             if gap < body:
                 parser.error(
-                    f"--radius {args.radius:g} puts {m} robots {gap:.2f} m apart, closer than two robots' "
-                    f"bodies ({body:g} m): a radius of at least {body / 2 / math.sin(math.pi / m):.2f} m"
+                    f"--radius {args.radius:g} puts {m} robots {gap:.2f} m apart, too close for two robots' "
+                    f"bodies moved by --jitter {args.jitter:g} ({body:.2f} m): a radius of at least "
+                    f"{body / 2 / math.sin(math.pi / m):.2f} m"
                 )
         try:
             overrides = load(None, sets=mpc_sets(args.mpc)).mpc_overrides()

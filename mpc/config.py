@@ -157,7 +157,8 @@ class MPCConfig:
     # paper's row of 3 with goals 1 m apart) and holds robots bound for separate places together: two robots
     # swapping places passed each other and then stood 1.42 m apart until the time limit (docs/extending.md).
     # > 0: a pair flocks only while its goals lie within flock_range m of each other (w_floc_ij = 0 beyond,
-    # symmetric, so Lemma 1 holds); 0: every pair (the paper).
+    # symmetric, so Lemma 1 holds); 0: every pair (the paper). flocking_weight "per_robot" still divides by
+    # M - 1 teammates, so a robot with fewer flocking partners feels less of Eq. 15's pull.
     flock_range: float = 0.0
     # --- robots on their goals (the paper does not say what one that has arrived does meanwhile) ---------
     # "track": a robot that has reached its goal stays in the optimisation with its goal term (the reference

@@ -33,16 +33,17 @@ Point = tuple[float, float]
 
 
 def _head_on(p: Point, t: Point, q: Point, u: Point) -> bool:
-    """Robots at ``p`` and ``q`` bound for ``t`` and ``u`` meet head-on along one line (each heads through the
-    other, towards it). Scalar arithmetic with early exits: a few microseconds a pair, where numpy's calls on
-    (M, M) arrays cost a tenth of a millisecond at every team size."""
+    """Robots at ``p`` and ``q`` bound for ``t`` and ``u`` meet head-on along one line: each heads along it
+    towards the other, and their ways overlap (the two targets do not stop them short of each other).
+    Scalar arithmetic with early exits: a few microseconds a pair, where numpy's calls on (M, M) arrays cost
+    a tenth of a millisecond at every team size."""
     rx, ry = q[0] - p[0], q[1] - p[1]
     hx, hy = t[0] - p[0], t[1] - p[1]
     gx, gy = u[0] - q[0], u[1] - q[1]
-    r = math.hypot(rx, ry)
-    if abs(hx * ry - hy * rx) > COLLINEAR * math.hypot(hx, hy) * r or hx * rx + hy * ry <= 0:
+    r, h, g = math.hypot(rx, ry), math.hypot(hx, hy), math.hypot(gx, gy)
+    if abs(hx * ry - hy * rx) > COLLINEAR * h * r or hx * rx + hy * ry <= 0 or r > h + g:
         return False
-    return abs(gx * ry - gy * rx) <= COLLINEAR * math.hypot(gx, gy) * r and gx * rx + gy * ry < 0 < r
+    return abs(gx * ry - gy * rx) <= COLLINEAR * g * r and gx * rx + gy * ry < 0 < r
 
 
 def _mirrored(p: Point, t: Point, v: Point, q: Point, u: Point, w: Point) -> bool:
@@ -70,7 +71,7 @@ def _points(array: np.ndarray) -> list[Point]:
 
 def head_on(positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """``(M,)`` True for each robot whose line to its target runs exactly through a teammate ahead of it that
-    heads exactly back along it. ``positions`` and ``targets`` are ``(M, 2)`` m."""
+    heads exactly back along it, their ways overlapping. ``positions`` and ``targets`` are ``(M, 2)`` m."""
     p, t = _points(positions), _points(targets)
     tied = np.zeros(len(p), dtype=bool)
     for i in range(len(p)):
@@ -108,6 +109,6 @@ def keep_right(
         return targets
     out = np.array(targets, dtype=float)
     heading = out[tied] - np.asarray(positions, dtype=float)[tied]
-    unit = heading / np.linalg.norm(heading, axis=1, keepdims=True)
+    unit = heading / np.hypot(heading[:, :1], heading[:, 1:])  # hypot: no overflow of x^2 at 1e154 m
     out[tied] += NUDGE * np.stack([unit[:, 1], -unit[:, 0]], axis=1)  # (x, y) turned clockwise: right
     return out

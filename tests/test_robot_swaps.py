@@ -65,8 +65,9 @@ def test_one_row_end_to_end(tmp_path, capsys):
         (["--mpc", "flock_range=-1"], "--mpc: "),
         (
             ["--robots", "12", "--radius", "1"],
-            "--radius 1 puts 12 robots 0.52 m apart, closer than two robots'",
+            "--radius 1 puts 12 robots 0.52 m apart, too close for two",
         ),
+        (["--robots", "4", "--radius", "1", "--jitter", "0.5"], "bodies moved by --jitter 0.5 (2.01 m)"),
         (["--humans", "51"], "--humans"),
     ],
 )

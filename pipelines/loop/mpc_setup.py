@@ -9,6 +9,7 @@ the predictor reads (``predictor_history``).
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, NoReturn
@@ -59,17 +60,25 @@ def warn_separate_goals(cfg: MPCConfig, positions: np.ndarray, goals: np.ndarray
     apart = np.linalg.norm(goals[i] - goals[j], axis=1)
     reshaped = np.linalg.norm((goals[i] - goals[j]) - (positions[i] - positions[j]), axis=1)
     parting = (apart > 2 * cfg.d_flock) & (reshaped > 2 * cfg.d_flock)
-    if parting.any():
-        k = int(np.flatnonzero(parting)[0])
-        warnings.warn(
-            f"robots {i[k]} and {j[k]} are bound for goals {apart[k]:.1f} m apart by separate ways, and "
-            f"Eq. 15 pulls every pair of robots towards d_flock {cfg.d_flock:g} m, which can hold them "
-            'together until the time limit: mpc_overrides=(("flock_range", 2.0),) ([mpc] flock_range) '
-            'flocks only the pairs whose goals lie within 2 m (docs/extending.md, "Robots bound for separate '
-            'places")',
-            FlockWarning,
-            stacklevel=3,
+    if not parting.any():
+        return
+    k = int(np.flatnonzero(parting)[0])
+    team, low = float(apart[~parting].max(initial=cfg.d_flock)), float(apart[parting].min())
+    if team < low:  # a range between the team's own goal distances and the parting pairs' keeps the team
+        fit = math.ceil(10 * min(team + 0.5, (team + low) / 2)) / 10
+        way = f'mpc_overrides=(("flock_range", {fit:.1f}),) ([mpc] flock_range) flocks only the pairs '
+        way += f"whose goals lie within {fit:.1f} m"
+    else:
+        way = (
+            f"no flock_range parts them from pairs whose goals lie {team:.1f} m apart; w_floc = 0 flocks none"
         )
+    warnings.warn(
+        f"robots {i[k]} and {j[k]} are bound for goals {apart[k]:.1f} m apart by separate ways, and Eq. 15 "
+        f"pulls every pair of robots towards d_flock {cfg.d_flock:g} m, which can hold them together until "
+        f'the time limit: {way} (docs/extending.md, "Robots bound for separate places")',
+        FlockWarning,
+        stacklevel=3,
+    )
 
 
 class SolversHeld:

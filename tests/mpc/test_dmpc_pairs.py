@@ -54,7 +54,10 @@ def test_two_robots_swapping_places_sidestep_together():
     leaves by keeping right (mpc/head_on.py). Before that tie-break their Gauss-Seidel best responses backed
     away from each other (F = 60.6: passing alone ran into the other's plan) and only the pair solved
     together swerved (F = 33.5); now the best responses swerve to their right (F = 32.07, against targets
-    3 cm to the right) and the pair's joint solve, one more solve, keeps to the same sides at F = 32.03."""
+    3 cm to the right) and the pair's joint solve, one more solve, keeps to the same sides at F = 32.03. No
+    layout of two robots off such a tie that was tried (five: a parked teammate in the way, swaps 1 mm to
+    10 cm off the line) left the best responses backing off; what pair moves are worth is measured at 12
+    robots (docs/results.md, "DMPC pair moves")."""
     data = held(at_rest([[0.0, 0.0], [1.0, 0.1]], [[1.0, 0.1], [0.0, 0.0]]), 0)
     alone = solve(CFG, data)
     paired = solve(CFG.replace(dmpc_pairs=True), data)

@@ -11,8 +11,8 @@ SWAP = np.array([[-4.0, 0.0], [4.0, 0.0]])
 
 
 def test_a_swap_along_a_line_is_a_tie_and_each_robot_keeps_right_by_hand():
-    """Robot 0 heads +x (its right is -y), robot 1 heads -x (its right is +y): the targets move 1 mm
-    apart, so the robots pass right shoulder to right shoulder."""
+    """Robot 0 heads +x (its right is -y), robot 1 heads -x (its right is +y): each target moves NUDGE (3
+    cm) to its robot's right, so the robots pass right shoulder to right shoulder."""
     targets = SWAP[::-1].copy()
     np.testing.assert_array_equal(head_on(SWAP, targets), [True, True])
     np.testing.assert_allclose(keep_right(SWAP, targets), [[4.0, -NUDGE], [-4.0, NUDGE]], rtol=0, atol=1e-15)
@@ -28,6 +28,9 @@ def test_a_swap_along_a_line_is_a_tie_and_each_robot_keeps_right_by_hand():
         ([[-4.0, 0.0], [-2.0, 0.0]], [[4.0, 0.0], [6.0, 0.0]], [False, False]),  # one behind the other
         ([[-4.0, 0.0], [4.0, 0.0]], [[4.0, 0.0], [4.0, 0.0]], [False, False]),  # robot 1 on its target
         ([[-4.0, 0.0], [4.0, 0.0]], [[-6.0, 0.0], [6.0, 0.0]], [False, False]),  # back to back
+        ([[0.0, 0.0], [5.0, 0.0]], [[1.0, 0.0], [4.0, 0.0]], [False, False]),  # towards, stopping 3 m apart
+        # the paper's row after an overshoot: its outer robots head back inwards to goals 2 m apart
+        ([[-1.01, 5.0], [0.0, 5.0], [1.01, 5.0]], [[-1.0, 5.0], [0.0, 5.0], [1.0, 5.0]], [False] * 3),
         # robots 0 and 2 meet on y = 0; robot 1 crosses their line at right angles
         ([[-4.0, 0.0], [0.0, -4.0], [4.0, 0.0]], [[4.0, 0.0], [0.0, 4.0], [-4.0, 0.0]], [True, False, True]),
     ],

@@ -1,7 +1,8 @@
 """Two robots swapping places with nobody about, the multi-robot test a newcomer writes first. Measured before
-the fixes (docs/extending.md, "Robots that swap places"): typed as exact coordinates, CMPC held both at a
-standstill 1.08 m apart and DMPC drove them through each other (0.39 m between centres); offset by 5 cm they
-passed, and Eq. 15 then held them 1.42 m apart, each facing away, until the time limit."""
+the fixes (docs/extending.md, "Robots bound for separate places" and "Two robots exactly head-on"): typed
+as exact coordinates, CMPC held both at a standstill 1.08 m apart and DMPC drove them through each other
+(0.39 m between centres); offset by 5 cm they passed, and Eq. 15 then held them 1.42 m apart, each facing
+away, until the time limit."""
 
 from __future__ import annotations
 
@@ -70,14 +71,20 @@ def test_robots_bound_for_separate_places_pass_when_only_near_goals_flock(contro
 
 
 def test_a_warning_names_robots_parting_ways_while_every_pair_flocks():
-    """The controller's reset says why such an episode may time out, and what to set; a team keeping its
-    shape (the paper's row, and a row of 12 robots 11 m wide) and a controller with flock_range or without
-    flocking say nothing."""
+    """The controller's reset says why such an episode may time out, and what to set: a range above the
+    team's own goal distances (d_flock when there is no team: 1.2 + 0.5 m; the pair 2.5 m apart: 3.0 m),
+    below the parting pairs' (8 m), else no range parts them. A team keeping its shape (the paper's row, and
+    a row of 12 robots 11 m wide) and a controller with flock_range or without flocking say nothing."""
     config = EnvConfig()
-    with pytest.warns(
-        FlockWarning, match=r"robots 0 and 1 are bound for goals 8\.0 m apart by separate ways"
-    ):
+    alone = r"robots 0 and 1 are bound for goals 8\.0 m apart by separate ways.*\(\"flock_range\", 1\.7\)"
+    with pytest.warns(FlockWarning, match=alone):
         warn_separate_goals(MPCConfig(), SWAP.robot_starts, SWAP.robot_goals)
+    team = np.array([[-4.0, 0.0], [-4.0, 2.5], [4.0, 0.0]])  # robots 0 and 1 side by side, 2 swapping ends
+    with pytest.warns(FlockWarning, match=r"robots 0 and 2 .*\(\"flock_range\", 3\.0\)"):
+        warn_separate_goals(MPCConfig(), team, team[[2, 2, 0]] + [[0.0, 0.0], [0.0, 2.5], [0.0, 0.0]])
+    wide = np.array([[-4.0, 0.0], [-4.0, 9.0], [4.0, 0.0]])  # the side-by-side pair's goals 9 m apart
+    with pytest.warns(FlockWarning, match="no flock_range parts them from pairs whose goals lie 9.0 m apart"):
+        warn_separate_goals(MPCConfig(), wide, wide[[2, 2, 0]] + [[0.0, 0.0], [0.0, 9.0], [0.0, 0.0]])
     row = np.array([[x, -5.0] for x in np.arange(12.0)])
     quiet = [
         (MPCConfig(), row, row + [0.0, 10.0]),
