@@ -13,7 +13,7 @@ radius is contact), robot-human collisions (< 0.8 m, Table I's) and the time-out
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 4 --jitter 0.05 --episodes 10 \\
         --mpc flock_range=2
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 3 4 --humans 5 --episodes 20 \\
-        --mpc flock_range=2
+        --mpc flock_range=2 [--config docs/examples/safe_crossing.toml]
 """
 
 from __future__ import annotations
@@ -35,10 +35,12 @@ from pipelines.config import ConfigError, load
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.gym_loop import run_gym_episode
+from pipelines.loop.margins import MarginSpec, parse_margins
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_cli import (  # noqa: E402
     check_distinct,
+    check_not_input,
     count_in,
     episode_bar,
     episode_count,
@@ -90,13 +92,17 @@ def antipodal(
 
 
 def run_row(
-    controller: str, n_robots: int, args: argparse.Namespace, overrides: tuple[tuple[str, Any], ...]
+    controller: str,
+    n_robots: int,
+    args: argparse.Namespace,
+    overrides: tuple[tuple[str, Any], ...],
+    margins: MarginSpec,
 ) -> dict[str, Any]:
     """``args.episodes`` episodes of one controller with ``n_robots`` robots: the row's figures."""
     config = EnvConfig()
     env = gym.make(crowdsim.ENV_ID, n_humans=args.humans, n_robots=n_robots, config=config)
-    mpc = overrides if controller != "orca" else ()
-    policy = make_controller(ControllerSpec(controller, mpc_overrides=mpc), config)
+    spec = ControllerSpec(controller, mpc_overrides=overrides, margins=margins)
+    policy = make_controller(spec if controller != "orca" else ControllerSpec(controller), config)
     outcomes = []
     try:
         for i in episode_bar(args.episodes, f"{controller} M={n_robots}"):
@@ -178,9 +184,13 @@ def main(argv: list[str] | None = None) -> None:
         metavar="KEY=VALUE",
         help="an [mpc] value, as `crowdmpc --set mpc.KEY=VALUE` takes it, for cmpc and dmpc (repeatable)",
     )
+    parser.add_argument(
+        "--config", help="a crowdmpc config file: its [mpc] table and [controller] margins, for cmpc and dmpc"
+    )
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
     with json_on_stdout(args.json):
+        check_not_input(parser, "--json", args.json, [args.config])  # a typo must not overwrite the config
         check_distinct(parser, "--robots", args.robots)
         # neighbours' starts (and goals) a chord apart, less what the jitter may take off each (its
         # diagonal), must leave room for two bodies
@@ -194,10 +204,11 @@ def main(argv: list[str] | None = None) -> None:
                     f"{body / 2 / math.sin(math.pi / m):.2f} m"
                 )
         try:
-            overrides = load(None, sets=mpc_sets(args.mpc)).mpc_overrides()
+            run = load(args.config, sets=mpc_sets(args.mpc))
+            overrides, margins = run.mpc_overrides(), parse_margins(run.controller.margins or "none")
         except (ConfigError, PipelineError) as exc:
-            parser.error(f"--mpc: {exc}")
-        rows = [run_row(c, m, args, overrides) for c in args.controllers for m in args.robots]
+            parser.error(f"--config/--mpc: {exc}")
+        rows = [run_row(c, m, args, overrides, margins) for c in args.controllers for m in args.robots]
         print_rows(rows, EnvConfig().radius)
         if args.json is not None:
             write_json(args.json, {"args": vars(args), "rows": rows})

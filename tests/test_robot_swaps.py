@@ -45,6 +45,37 @@ def test_people_are_placed_clear_of_the_robots_by_the_papers_rules_and_follow_th
     assert gaps.min() >= 1.1 - 1e-12
 
 
+def test_a_config_file_gives_its_mpc_table_and_margins(tmp_path, monkeypatch):
+    """--config: the [mpc] table (here d_min), the --mpc values over it, and the [controller] margins reach
+    the MPC controllers; ORCA gets neither."""
+    config = tmp_path / "c.toml"
+    config.write_text('[controller]\nmargins = "fixed:0.1"\n[mpc]\nd_min = 0.9\n', encoding="utf-8")
+    built = []
+
+    def spy(spec, env_config):
+        built.append(spec)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(robot_swaps, "make_controller", spy)
+    for controller in ("dmpc", "orca"):
+        argv = [
+            "--robots",
+            "2",
+            "--controllers",
+            controller,
+            "--config",
+            str(config),
+            "--mpc",
+            "flock_range=2",
+        ]
+        with pytest.raises(SystemExit):
+            robot_swaps.main(argv)
+    dmpc, orca = built
+    assert dict(dmpc.mpc_overrides) == {"d_min": 0.9, "flock_range": 2.0}
+    assert dmpc.margins.mode == "fixed" and list(dmpc.margins.values) == [0.1]
+    assert orca.mpc_overrides == () and orca.margins.mode == "none"
+
+
 def test_one_row_end_to_end(tmp_path, capsys):
     """Two robots swapping places without flocking pass (the head-on tie broken), d_min apart."""
     out = tmp_path / "rows.json"
@@ -62,7 +93,7 @@ def test_one_row_end_to_end(tmp_path, capsys):
         (["--radius", "0.5"], "--radius: must be in [1, 10] m"),
         (["--robots", "1"], "--robots"),
         (["--robots", "2", "2"], "--robots names 2 more than once"),
-        (["--mpc", "flock_range=-1"], "--mpc: "),
+        (["--mpc", "flock_range=-1"], "--config/--mpc: "),
         (
             ["--robots", "12", "--radius", "1"],
             "--radius 1 puts 12 robots 0.52 m apart, too close for two",
