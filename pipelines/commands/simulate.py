@@ -269,6 +269,7 @@ def _simulate(resolved: SimulateRun) -> int:
     notes = (
         checks.flock_note(spec, scenario.robots),
         checks.goal_room_note(spec, scenario.robots, cfg.env.formation, cfg.env.robot_spacing),
+        checks.radius_note(spec, scenario.robots, cfg.env.radius, cfg.env.formation, cfg.env.robot_spacing),
         checks.horizon_note(spec),
         checks.size_note(spec, scenario.humans, scenario.robots),
         checks.plugin_code_note(spec.predictor_name),

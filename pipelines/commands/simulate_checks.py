@@ -193,18 +193,14 @@ def goal_room_note(
     above d_min, with flock_distance "goals" where that spacing passes d_flock. Goals with room but further
     apart than d_flock by more than ``FLOCK_SLACK`` get the flocking line instead (Eq. 15 pulls the pair
     together)."""
-    import numpy as np
-
-    from crowdsim.scenarios import MAX_ROBOT_SPACING, choose_formation, robot_layout
+    from crowdsim.scenarios import MAX_ROBOT_SPACING
     from pipelines.loop.mpc_setup import mpc_config
 
     if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
         return None
-    shape = choose_formation(n_robots) if formation == "auto" else formation
-    goals = robot_layout(n_robots, shape, spacing=spacing)[1]  # type: ignore[arg-type]  # EnvConfig checked it
-    gaps = np.linalg.norm(goals[:, None] - goals[None], axis=-1)[np.triu_indices(n_robots, k=1)]
+    shape, gap = _closest_goals(n_robots, formation, spacing)
     cfg = mpc_config(spec)
-    d_min, gap = cfg.d_min, float(gaps.min())
+    d_min = cfg.d_min
     # off with --no-flocking (Table III's "NF"); under flock_distance "goals" the goals' shape costs nothing;
     # a flock_range short of the closest goals' distance leaves that pair out of Eq. 15
     flocking = cfg.w_floc > 0 and cfg.flock_distance == "uniform" and not 0 < cfg.flock_range < gap
@@ -233,6 +229,57 @@ def goal_room_note(
         f"note: the MPC's d_min {d_min:g} m is not well below the {gap:g} m between two robots' goals "
         f"({shape} of {n_robots}), and it keeps them d_min apart, which can keep them from standing on their "
         f"goals at once: the episodes then time out (measured thresholds: docs/extending.md){hint}"
+    )
+
+
+def _closest_goals(n_robots: int, formation: str, spacing: float | None) -> tuple[str, float]:
+    """The formation ``formation`` stands for (``auto``: by the team's size) and the distance, m, between
+    its two closest goals at ``spacing`` (None: the formation's own)."""
+    import numpy as np
+
+    from crowdsim.scenarios import choose_formation, robot_layout
+
+    shape = choose_formation(n_robots) if formation == "auto" else formation
+    goals = robot_layout(n_robots, shape, spacing=spacing)[1]  # type: ignore[arg-type]  # EnvConfig checked it
+    gaps = np.linalg.norm(goals[:, None] - goals[None], axis=-1)[np.triu_indices(n_robots, k=1)]
+    return shape, float(gaps.min())
+
+
+# m of robot radius below which robots may not count as arrived (the arrival test is the radius): 3 robots
+# in a row, no humans, radius 0.01 m, CMPC parked the outer ones 4, 1, 9 and 19 cm off their goals at 1.0,
+# 1.1, 1.2 and 1.3 m spacing (Eq. 12's tail at 1.0 m, Eq. 15's pull of the outer pair beyond) and timed out
+# at all but 1.1 m; with flock_distance "goals" 0.1 mm off from 1.2 m on (`crowdmpc simulate --controller
+# cmpc --humans 0 --set world.radius=0.01 --set env.robot_spacing=S [--set mpc.flock_distance=goals]`).
+SMALL_RADIUS: Final[float] = 0.2
+# m between goals from which Eq. 12's tail no longer holds robots off them (the 1.2 m above)
+TAIL_FREE: Final[float] = 1.2
+# Robots up to which the formations with goals TAIL_FREE apart arrived at 0.01 m under the one d_flock: the
+# wedge and two rows of 3 and 4 did, of 5, 6 and 12 did not (and did with flock_distance "goals" at 6)
+SMALL_TEAM: Final[int] = 4
+
+
+def radius_note(
+    spec: ControllerSpec, n_robots: int, radius: float, formation: str, spacing: float | None
+) -> str | None:
+    """A line for an MPC team whose robots are smaller than ``SMALL_RADIUS`` (``[world] radius``): a robot
+    has arrived once within its radius of its goal, and the MPC's own terms (Eq. 12's tail, Eq. 15's one
+    d_flock) can hold it centimetres off, so the episodes time out with nobody in the way. None when the
+    goals lie ``TAIL_FREE`` apart or more and flocking leaves their shape alone (flock_distance "goals", no
+    flocking) or the team is small (``SMALL_TEAM``)."""
+    from pipelines.loop.mpc_setup import mpc_config
+
+    if spec.controller not in MPC_CONTROLLERS or n_robots < 2 or radius >= SMALL_RADIUS:
+        return None
+    cfg = mpc_config(spec)
+    shape, gap = _closest_goals(n_robots, formation, spacing)
+    harmless = cfg.w_floc == 0 or cfg.flock_distance == "goals" or n_robots <= SMALL_TEAM
+    if harmless and gap >= TAIL_FREE - 1e-9:
+        return None
+    return (
+        f"note: robots arrive within [world] radius {radius:g} m of their goals, and the MPC can hold them a "
+        f"few centimetres off ({shape} of {n_robots}, goals {gap:g} m apart; a row of 3 with no humans at "
+        "radius 0.01 m parked 1-19 cm off at 1.0-1.3 m spacing): the episodes can time out; --set "
+        f"env.robot_spacing={max(gap, TAIL_FREE):g} --set mpc.flock_distance=goals arrived within 0.1 mm"
     )
 
 

@@ -5,7 +5,7 @@ in every episode for a reason no metric names."""
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands.simulate_checks import goal_room_note
+from pipelines.commands.simulate_checks import goal_room_note, radius_note
 from pipelines.loop.controllers import ControllerSpec
 
 
@@ -89,3 +89,34 @@ def test_simulate_and_sweep_say_it_once(tmp_path, capsys):
     # one line naming both methods it applies to
     assert err.count("note: methods 'CMPC d_min=1.0', 'DMPC d_min=1.0': the MPC's d_min 1 m") == 1
     assert err.count("the MPC's d_min") == 1 and "d_min=0.8'" not in err
+
+
+def test_a_robot_smaller_than_the_mpcs_parking_gets_a_note_naming_the_way_out():
+    """[world] radius 0.01 m: the row of 3 timed out in every episode with nobody about (its outer robots
+    parked 4 cm off goals they must reach within 1 cm), and nothing said why. The note names the spacing and
+    flocking distance that arrived; none for Table I's radius, flocking that leaves the goals' shape alone at
+    1.2 m or more, ORCA or one robot."""
+    note = radius_note(_spec(), 3, 0.01, "auto", None)
+    assert note is not None and note.startswith(
+        "note: robots arrive within [world] radius 0.01 m of their goals, and the MPC can hold them a few "
+        "centimetres off (row of 3, goals 1 m apart;"
+    )
+    assert note.endswith("--set env.robot_spacing=1.2 --set mpc.flock_distance=goals arrived within 0.1 mm")
+    goals = ControllerSpec("cmpc", mpc_overrides=(("flock_distance", "goals"),))
+    assert radius_note(goals, 3, 0.01, "row", 1.2) is None
+    assert radius_note(goals, 3, 0.01, "row", 1.1) is not None  # Eq. 12's tail at 1.1 m
+    assert radius_note(ControllerSpec("cmpc", flocking=False), 3, 0.01, "wedge", None) is None  # 1.2 m apart
+    assert radius_note(_spec(), 4, 0.01, "wedge", None) is None  # arrived under the one d_flock
+    assert radius_note(_spec(), 5, 0.01, "two_rows", None) is not None  # did not
+    assert radius_note(_spec(), 3, 0.3, "auto", None) is None
+    assert radius_note(_spec("orca"), 3, 0.01, "auto", None) is None
+    assert radius_note(_spec(), 1, 0.01, "auto", None) is None
+
+
+def test_simulate_says_it_once_for_a_small_robot(capsys):
+    args = ["simulate", "--controller", "cmpc", "--humans", "0", "--episodes", "1", "--no-progress"]
+    assert main([*args, "--set", "world.radius=0.01"]) == 0
+    assert capsys.readouterr().err.count("note: robots arrive within [world] radius 0.01 m") == 1
+    assert main([*args, "--set", "world.radius=0.01", "--set", "env.robot_spacing=1.2", "--set",
+                 "mpc.flock_distance=goals"]) == 0  # fmt: skip
+    assert "[world] radius" not in capsys.readouterr().err
