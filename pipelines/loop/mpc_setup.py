@@ -9,7 +9,6 @@ the predictor reads (``predictor_history``).
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, NoReturn
@@ -65,9 +64,9 @@ def warn_separate_goals(cfg: MPCConfig, positions: np.ndarray, goals: np.ndarray
     k = int(np.flatnonzero(parting)[0])
     team, low = float(apart[~parting].max(initial=cfg.d_flock)), float(apart[parting].min())
     if team < low:  # a range between the team's own goal distances and the parting pairs' keeps the team
-        fit = math.ceil(10 * min(team + 0.5, (team + low) / 2)) / 10
-        way = f'mpc_overrides=(("flock_range", {fit:.1f}),) ([mpc] flock_range) flocks only the pairs '
-        way += f"whose goals lie within {fit:.1f} m"
+        fit = min(team + 0.5, (team + low) / 2)
+        way = f'mpc_overrides=(("flock_range", {fit:.2f}),) ([mpc] flock_range) flocks only the pairs '
+        way += f"whose goals lie within {fit:.2f} m"
     else:
         way = (
             f"no flock_range parts them from pairs whose goals lie {team:.1f} m apart; w_floc = 0 flocks none"

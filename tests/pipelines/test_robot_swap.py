@@ -71,16 +71,17 @@ def test_robots_bound_for_separate_places_pass_when_only_near_goals_flock(contro
 
 
 def test_a_warning_names_robots_parting_ways_while_every_pair_flocks():
-    """The controller's reset says why such an episode may time out, and what to set: a range above the
-    team's own goal distances (d_flock when there is no team: 1.2 + 0.5 m; the pair 2.5 m apart: 3.0 m),
-    below the parting pairs' (8 m), else no range parts them. A team keeping its shape (the paper's row, and
-    a row of 12 robots 11 m wide) and a controller with flock_range or without flocking say nothing."""
+    """The controller's reset says why such an episode may time out, and what to set: a range 0.5 m above
+    the team's own goal distances (d_flock when there is no team: 1.7 m; the pair 2.5 m apart: 3.0 m), or
+    halfway to the parting pairs' (8 m) when nearer, else no range parts them. A team keeping its shape (the
+    paper's row, and a row of 12 robots 11 m wide) and a controller with flock_range or without flocking
+    say nothing."""
     config = EnvConfig()
-    alone = r"robots 0 and 1 are bound for goals 8\.0 m apart by separate ways.*\(\"flock_range\", 1\.7\)"
+    alone = r"robots 0 and 1 are bound for goals 8\.0 m apart by separate ways.*\(\"flock_range\", 1\.70\)"
     with pytest.warns(FlockWarning, match=alone):
         warn_separate_goals(MPCConfig(), SWAP.robot_starts, SWAP.robot_goals)
     team = np.array([[-4.0, 0.0], [-4.0, 2.5], [4.0, 0.0]])  # robots 0 and 1 side by side, 2 swapping ends
-    with pytest.warns(FlockWarning, match=r"robots 0 and 2 .*\(\"flock_range\", 3\.0\)"):
+    with pytest.warns(FlockWarning, match=r"robots 0 and 2 .*\(\"flock_range\", 3\.00\)"):
         warn_separate_goals(MPCConfig(), team, team[[2, 2, 0]] + [[0.0, 0.0], [0.0, 2.5], [0.0, 0.0]])
     wide = np.array([[-4.0, 0.0], [-4.0, 9.0], [4.0, 0.0]])  # the side-by-side pair's goals 9 m apart
     with pytest.warns(FlockWarning, match="no flock_range parts them from pairs whose goals lie 9.0 m apart"):
