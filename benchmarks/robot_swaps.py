@@ -13,7 +13,7 @@ radius is contact), robot-human collisions (< 0.8 m, Table I's) and the time-out
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 2 4 --jitter 0.05 --episodes 10 \\
         --mpc flock_range=2
     nice -n 5 .venv/bin/python benchmarks/robot_swaps.py --robots 3 4 --humans 5 --episodes 20 \\
-        --mpc flock_range=2 [--config docs/examples/safe_crossing.toml]
+        --mpc flock_range=2 --config docs/examples/safe_crossing.toml
 """
 
 from __future__ import annotations
