@@ -79,7 +79,7 @@ class EnvConfig:
     robots_visible: bool = True  # the humans' ORCA sees the robots
     goal_assignment: GoalAssignment = "fixed"  # "fixed": robot i to goal i (paper); "slots": crowdsim.slots
     # the robots' starts and goals (crowdsim.scenarios): "auto" is the paper's row up to 3 robots, a wedge
-    # from 4; "row", "wedge", "two_rows" choose one for every team size
+    # from 4; "row", "wedge", "two_rows" choose one for every team size; "antipodal": robots trading places
     formation: Formation = "auto"
     # m between neighbouring robots (and their goals); None: the formation's own, 1 m in the row, d_ij in
     # the others. Wider where the MPC's d_min leaves robots no room to stand on goals 1 m apart.
@@ -133,6 +133,17 @@ class EnvConfig:
                 f"EnvConfig.formation must be one of {list(FORMATIONS)}, got {self.formation!r}"
             )
         check_spacing(self.robot_spacing, "EnvConfig.robot_spacing")
+        if self.formation == "antipodal" and self.goal_assignment == "slots":
+            raise SimulationError(
+                "EnvConfig.formation 'antipodal' sends each robot to the point opposite its start, and an "
+                "even team's goals are its starts: goal_assignment 'slots' would leave every robot where it "
+                "stands"
+            )
+        if self.formation == "antipodal" and self.robot_spacing is not None:
+            raise SimulationError(
+                "EnvConfig.robot_spacing does not apply to formation 'antipodal' (its robots stand on a 5 m "
+                "circle, 10 sin(pi / M) m apart)"
+            )
         if self.robot_spacing is not None:
             self._store("robot_spacing", float(self.robot_spacing))
         if self.crowd not in CROWDS:

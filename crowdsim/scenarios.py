@@ -19,6 +19,11 @@ Formations (``FORMATIONS``; ``formation="auto"`` picks by the number of robots M
 * ``"wedge"``: ranks of 1, 2, 3, ... robots from the front, the last rank taking what remains (M = 4:
   1 + 2 + 1; 6: 1 + 2 + 3; 12: 1 + 2 + 3 + 4 + 2). ``auto`` for M >= 4.
 * ``"two_rows"``: ceil(M / 2) robots in front, floor(M / 2) behind.
+* ``"antipodal"``: not a team but robots trading places, the classic multi-robot test: on a 5 m circle from
+  ``(0, -5)`` anticlockwise, each bound for the opposite point, so every path crosses the centre. Eq. 15
+  then holds the robots together unless the MPC flocks only near goals (``flock_range``, docs/extending.md,
+  "Robots bound for separate places"); ``robot_spacing`` does not apply, and goals as slots are refused
+  (an even team's goals are its starts).
 
 ``EnvConfig.robot_spacing`` (``[env] robot_spacing``) puts neighbours that far apart in any of them, for an
 MPC whose ``d_min`` leaves its robots no room on goals 1 m apart (docs/extending.md).
@@ -109,7 +114,7 @@ from crowdsim.errors import SimulationError, real_number
 from crowdsim.world import D_FLOCK, D_MIN, RADIUS, V_PREF, finite_positive
 
 SCENARIOS: Final[tuple[str, ...]] = ("circle", "perpendicular")
-Formation = Literal["auto", "row", "wedge", "two_rows"]  # module docstring
+Formation = Literal["auto", "row", "wedge", "two_rows", "antipodal"]  # module docstring
 FORMATIONS: Final[tuple[Formation, ...]] = get_args(Formation)
 ROBOT_SPACING: Final[float] = 1.0  # m between neighbouring robots of the "row" (the first simulator's)
 # m: the widest robot spacing taken; 12 robots in a row at 2.5 m span 27.5 m, past the humans' 10 m circle and
@@ -252,6 +257,7 @@ def robot_layout(
     ``spacing`` (m): between neighbouring robots, and so between their goals (``EnvConfig.robot_spacing``);
     None, the formation's own: 1 m in the row (``ROBOT_SPACING``), the MPC's flocking distance ``d_ij``
     (``crowdsim.world.D_FLOCK``) in the wedge and the two rows. It may not be below ``d_min`` (``D_MIN``).
+    The antipodal circle ignores it (its neighbours are 10 sin(pi / M) m apart).
     """
     if isinstance(n_robots, bool) or not isinstance(n_robots, int | np.integer) or n_robots < 0:
         raise SimulationError(f"n_robots must be an int >= 0, got {n_robots!r}")
@@ -259,6 +265,11 @@ def robot_layout(
         raise SimulationError(f"unknown formation {formation!r}; choose from {list(FORMATIONS)}")
     check_spacing(spacing, "spacing")
     chosen = choose_formation(int(n_robots)) if formation == "auto" else formation
+    if chosen == "antipodal":
+        angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / max(int(n_robots), 1)
+        starts = -ROBOT_START_Y * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: opposite robots exactly head-on
+        return starts, 0.0 - starts
     if chosen == "row":
         x = (np.arange(n_robots) - (n_robots - 1) / 2.0) * (ROBOT_SPACING if spacing is None else spacing)
         offsets = np.stack([x, np.zeros(n_robots)], axis=1)

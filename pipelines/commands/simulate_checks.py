@@ -199,6 +199,8 @@ def goal_room_note(
     if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
         return None
     shape, gap = _closest_goals(n_robots, formation, spacing)
+    if shape == "antipodal":  # robots trading places: the controller's FlockWarning names flock_range
+        return None
     cfg = mpc_config(spec)
     d_min = cfg.d_min
     # off with --no-flocking (Table III's "NF"); under flock_distance "goals" the goals' shape costs nothing;

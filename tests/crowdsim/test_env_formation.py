@@ -49,8 +49,9 @@ def test_the_formation_comes_from_the_command_line(tmp_path, capsys):
     assert '"formation": "two_rows"' in report.read_text()
     assert "| paper/visible | formation two_rows | scenario circle |" in capsys.readouterr().out
     assert main(["--set", "env.formation=hexagon", "simulate", "--controller", "straight"]) == 2
-    assert "env.formation: must be one of ['auto', 'row', 'wedge', 'two_rows'], got 'hexagon'" in (
-        capsys.readouterr().err
+    assert (
+        "env.formation: must be one of ['auto', 'row', 'wedge', 'two_rows', 'antipodal'], got 'hexagon'"
+        in (capsys.readouterr().err)
     )
 
 
@@ -90,3 +91,31 @@ def test_the_overlap_refusal_is_one_line_naming_the_setting(capsys):
     ]
     # the way out it names works (another formation did not: the wedge's neighbours are 1.2 m apart)
     assert main([*argv, "--set", "env.robot_spacing=1.2", "--episodes", "1"]) == 0
+
+
+def test_the_antipodal_circle_takes_neither_slots_nor_a_spacing():
+    """An even team's goals are its own starts: slots would hand every robot its start, and the episode would
+    succeed at once; the circle's spacing is its own."""
+    with pytest.raises(SimulationError, match="goal_assignment 'slots' would leave every robot where it"):
+        EnvConfig(formation="antipodal", goal_assignment="slots")
+    with pytest.raises(SimulationError, match="robot_spacing does not apply to formation 'antipodal'"):
+        EnvConfig(formation="antipodal", robot_spacing=1.3)
+    obs = CrowdEnv(EnvConfig(formation="antipodal")).reset(0, "circle", 5, 4)
+    np.testing.assert_array_equal(obs.robot_goals, 0.0 - obs.robot_positions)
+
+
+def test_simulate_runs_robots_trading_places_and_says_what_to_set(capsys):
+    """Four robots crossing the circle among nobody: every pair flocking, the controller's note names
+    flock_range (and the formation's goal-room note stays silent: its advice is for a team); with it they
+    arrive, no two closer than d_min."""
+    args = ["simulate", "--controller", "cmpc", "--humans", "0", "--robots", "4", "--no-progress"]
+    args += ["--set", "env.formation=antipodal", "--json", "-"]
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    assert "note: robots 0 and 1 are bound for goals 7.1 m apart by separate ways" in captured.err
+    assert "closest goals" not in captured.err
+    assert main([*args, "--set", "mpc.flock_range=2"]) == 0
+    import json
+
+    (episode,) = json.loads(capsys.readouterr().out)["episodes"]
+    assert episode["metrics"]["success"] and episode["metrics"]["min_distance_robots"] > 0.8

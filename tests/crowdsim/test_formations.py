@@ -131,7 +131,8 @@ def test_the_row_can_still_be_chosen_for_any_number():
     np.testing.assert_array_equal(goals[:, 1], 5.0)
 
 
-FORMED = [(m, f) for m in range(1, MAX_ROBOTS + 1) for f in FORMATIONS]
+# the formations of a team travelling together; "antipodal" (robots trading places) has its own tests below
+FORMED = [(m, f) for m in range(1, MAX_ROBOTS + 1) for f in FORMATIONS if f != "antipodal"]
 
 
 @pytest.mark.parametrize("m, formation", FORMED)
@@ -225,3 +226,19 @@ def test_humans_are_placed_around_every_formation(crossing, scenario, m):
             np.testing.assert_array_equal(layout.robot_starts, robot_layout(m)[0])
             assert layout.human_starts.shape == layout.human_goals.shape == (n_humans, 2)
             _humans_clear(layout, crossing, scenario)
+
+
+def test_the_antipodal_circle_by_hand():
+    """Robots trading places: on a 5 m circle from (0, -5) anticlockwise, each bound for the opposite point;
+    exact zeros where cos and sin should give them (opposite robots then meet exactly head-on, mpc/head_on.py
+    breaks the tie); neighbours 10 sin(pi / M) m apart."""
+    starts, goals = robot_layout(3, "antipodal")
+    h = 5 * math.sqrt(3) / 2
+    np.testing.assert_allclose(starts, [[0.0, -5.0], [h, 2.5], [-h, 2.5]], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(goals, 0.0 - starts)
+    starts, goals = robot_layout(4, "antipodal")
+    np.testing.assert_array_equal(starts, [[0.0, -5.0], [5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]])
+    for m in (2, 5, 12):
+        d = _pair_distances(robot_layout(m, "antipodal")[0])
+        assert math.isclose(d.min(), 10 * math.sin(math.pi / m), rel_tol=1e-12)
+    assert robot_layout(3, "antipodal", spacing=2.0)[0].tolist() == robot_layout(3, "antipodal")[0].tolist()
