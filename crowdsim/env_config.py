@@ -135,14 +135,13 @@ class EnvConfig:
         check_spacing(self.robot_spacing, "EnvConfig.robot_spacing")
         if self.formation == "antipodal" and self.goal_assignment == "slots":
             raise SimulationError(
-                "EnvConfig.formation 'antipodal' sends each robot to the point opposite its start, and an "
-                "even team's goals are its starts: goal_assignment 'slots' would leave every robot where it "
-                "stands"
+                "EnvConfig.formation 'antipodal' sends each robot to the point opposite its start: "
+                "goal_assignment 'slots' would deal the goals anew (an even team its own starts)"
             )
         if self.formation == "antipodal" and self.robot_spacing is not None:
             raise SimulationError(
-                "EnvConfig.robot_spacing does not apply to formation 'antipodal' (its robots stand on a 5 m "
-                "circle, 10 sin(pi / M) m apart)"
+                "EnvConfig.robot_spacing does not apply to formation 'antipodal' (its robots stand on a 3.5 "
+                "m circle, 7 sin(pi / M) m apart)"
             )
         if self.robot_spacing is not None:
             self._store("robot_spacing", float(self.robot_spacing))

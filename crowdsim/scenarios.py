@@ -19,11 +19,11 @@ Formations (``FORMATIONS``; ``formation="auto"`` picks by the number of robots M
 * ``"wedge"``: ranks of 1, 2, 3, ... robots from the front, the last rank taking what remains (M = 4:
   1 + 2 + 1; 6: 1 + 2 + 3; 12: 1 + 2 + 3 + 4 + 2). ``auto`` for M >= 4.
 * ``"two_rows"``: ceil(M / 2) robots in front, floor(M / 2) behind.
-* ``"antipodal"``: not a team but robots trading places, the classic multi-robot test: on a 5 m circle from
-  ``(0, -5)`` anticlockwise, each bound for the opposite point, so every path crosses the centre. Eq. 15
-  then holds the robots together unless the MPC flocks only near goals (``flock_range``, docs/extending.md,
-  "Robots bound for separate places"); ``robot_spacing`` does not apply, and goals as slots are refused
-  (an even team's goals are its starts).
+* ``"antipodal"``: not a team but robots trading places, the classic multi-robot test: on a circle of
+  ``ANTIPODAL_RADIUS`` from ``(0, -3.5)`` anticlockwise, each bound for the opposite point, so every path
+  crosses the centre. Eq. 15 then holds the robots together unless the MPC flocks only near goals
+  (``flock_range``, docs/extending.md, "Robots bound for separate places"); ``robot_spacing`` does not
+  apply, and goals as slots are refused (they would be dealt anew, an even team its own starts).
 
 ``EnvConfig.robot_spacing`` (``[env] robot_spacing``) puts neighbours that far apart in any of them, for an
 MPC whose ``d_min`` leaves its robots no room on goals 1 m apart (docs/extending.md).
@@ -95,9 +95,9 @@ Across numbers of robots, not in the circle: a human drawn near a robot is redra
 shifts. Seed 5 with 7 humans: with 3 or 6 robots only humans 4-6 start where they do with 1 robot (the
 1-robot crowd's first human, next to where the 3-robot row stands, is redrawn, humans 1-3 move up one place
 and a new draw takes place 3); of seeds 0-99 only 53 (3 robots), 55 (6) and 26 (12) give the 1-robot crowd
-(v1: 20, 25, 5). The perpendicular crowds start over 3 m from every formation and are the same for every
-number of robots. A robot-scaling comparison "on the same seeds" thus faces other circle crowds at each
-number of robots.
+(v1: 20, 25, 5). The perpendicular crowds start over 1.5 m from every formation (over 3 m from the teams)
+and are the same for every number of robots. A robot-scaling comparison "on the same seeds" thus faces
+other circle crowds at each number of robots.
 """
 
 from __future__ import annotations
@@ -121,6 +121,11 @@ ROBOT_SPACING: Final[float] = 1.0  # m between neighbouring robots of the "row" 
 # within the gymnasium observation's bounds (crowdsim.gym_observation.scene_bound, 20 m from the origin)
 MAX_ROBOT_SPACING: Final[float] = 2.5
 ROBOT_START_Y: Final[float] = -5.0  # m, centre of the start formation (module docstring)
+# m, the antipodal circle's: inside the circle crossing's 5 m start circle and the perpendicular crossing's
+# start strips (|x| from 5 m) by 1.5 m, more than the 1.1 m the samplers keep, so no person is drawn near a
+# robot (on a 5 m circle the perpendicular sampler, which keeps its last draw after 100, started people on
+# robots in 13 of 100 crowds of 16, and 12 robots left 16 people of the circle no room)
+ANTIPODAL_RADIUS: Final[float] = 3.5
 ROBOT_TRAVEL: Final[float] = -2.0 * ROBOT_START_Y  # m, every goal is its start moved this far along +y
 ROW_MAX_ROBOTS: Final[int] = 3  # "auto" keeps the row up to this many robots (the paper's 3, unchanged)
 MAX_HUMANS: Final[int] = 50
@@ -257,7 +262,7 @@ def robot_layout(
     ``spacing`` (m): between neighbouring robots, and so between their goals (``EnvConfig.robot_spacing``);
     None, the formation's own: 1 m in the row (``ROBOT_SPACING``), the MPC's flocking distance ``d_ij``
     (``crowdsim.world.D_FLOCK``) in the wedge and the two rows. It may not be below ``d_min`` (``D_MIN``).
-    The antipodal circle ignores it (its neighbours are 10 sin(pi / M) m apart).
+    The antipodal circle ignores it (its neighbours are 7 sin(pi / M) m apart).
     """
     if isinstance(n_robots, bool) or not isinstance(n_robots, int | np.integer) or n_robots < 0:
         raise SimulationError(f"n_robots must be an int >= 0, got {n_robots!r}")
@@ -267,7 +272,7 @@ def robot_layout(
     chosen = choose_formation(int(n_robots)) if formation == "auto" else formation
     if chosen == "antipodal":
         angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / max(int(n_robots), 1)
-        starts = -ROBOT_START_Y * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        starts = ANTIPODAL_RADIUS * np.stack([np.cos(angles), np.sin(angles)], axis=1)
         starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: opposite robots exactly head-on
         return starts, 0.0 - starts
     if chosen == "row":
@@ -375,8 +380,11 @@ def _check_robot_spacing(starts: np.ndarray, radius: float, formation: Formation
     closest = float(gaps[np.triu_indices(len(starts), k=1)].min())
     if closest < 2.0 * radius - 1e-9:  # the lattice's sqrt(3) / 2 puts "1.2 m" neighbours 1e-16 closer
         chosen = choose_formation(n_robots) if formation == "auto" else formation
+        spaced = (
+            "" if chosen == "antipodal" else "space them out ([env] robot_spacing, m between neighbours) or "
+        )
         raise SimulationError(
             f"radius {radius:g} m: the {chosen} formation of {n_robots} robots puts neighbours {closest:g} m "
-            f"apart, in contact from the start (2 x radius = {2.0 * radius:g} m); space them out ([env] "
-            f"robot_spacing, m between neighbours) or use [world] radius <= {closest / 2.0:g} m"
+            f"apart, in contact from the start (2 x radius = {2.0 * radius:g} m); {spaced}use [world] radius "
+            f"<= {closest / 2.0:g} m"
         )

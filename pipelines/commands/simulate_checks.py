@@ -274,6 +274,8 @@ def radius_note(
         return None
     cfg = mpc_config(spec)
     shape, gap = _closest_goals(n_robots, formation, spacing)
+    if shape == "antipodal":  # goals metres apart: the tail never holds them; flocking is FlockWarning's
+        return None
     harmless = cfg.w_floc == 0 or cfg.flock_distance == "goals" or n_robots <= SMALL_TEAM
     if harmless and gap >= TAIL_FREE - 1e-9:
         return None

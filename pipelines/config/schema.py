@@ -93,7 +93,7 @@ ENV_KEYS: Final[tuple[Key, ...]] = (
         "str",
         "auto",
         "the robots' starts and goals: auto (a row up to 3 robots, a wedge from 4) | row | wedge | two_rows "
-        "| antipodal (robots trading places across a 5 m circle; crowdsim/scenarios.py)",
+        "| antipodal (robots trading places across a 3.5 m circle; crowdsim/scenarios.py)",
     ),
     Key(
         "robot_spacing",

@@ -96,12 +96,14 @@ def test_the_overlap_refusal_is_one_line_naming_the_setting(capsys):
 def test_the_antipodal_circle_takes_neither_slots_nor_a_spacing():
     """An even team's goals are its own starts: slots would hand every robot its start, and the episode would
     succeed at once; the circle's spacing is its own."""
-    with pytest.raises(SimulationError, match="goal_assignment 'slots' would leave every robot where it"):
+    with pytest.raises(SimulationError, match="goal_assignment 'slots' would deal the goals anew"):
         EnvConfig(formation="antipodal", goal_assignment="slots")
     with pytest.raises(SimulationError, match="robot_spacing does not apply to formation 'antipodal'"):
         EnvConfig(formation="antipodal", robot_spacing=1.3)
     obs = CrowdEnv(EnvConfig(formation="antipodal")).reset(0, "circle", 5, 4)
-    np.testing.assert_array_equal(obs.robot_goals, 0.0 - obs.robot_positions)
+    np.testing.assert_array_equal(obs.robot_goals, [[0.0, 3.5], [-3.5, 0.0], [0.0, -3.5], [3.5, 0.0]])
+    with pytest.raises(SimulationError, match=r"antipodal formation of 12 robots .* use \[world\] radius <="):
+        CrowdEnv(EnvConfig(formation="antipodal", radius=1.0)).reset(0, "circle", 0, 12)
 
 
 def test_simulate_runs_robots_trading_places_and_says_what_to_set(capsys):
@@ -112,7 +114,7 @@ def test_simulate_runs_robots_trading_places_and_says_what_to_set(capsys):
     args += ["--set", "env.formation=antipodal", "--json", "-"]
     assert main(args) == 0
     captured = capsys.readouterr()
-    assert "note: robots 0 and 1 are bound for goals 7.1 m apart by separate ways" in captured.err
+    assert "note: robots 0 and 1 are bound for goals 4.9 m apart by separate ways" in captured.err
     assert "closest goals" not in captured.err
     assert main([*args, "--set", "mpc.flock_range=2"]) == 0
     import json

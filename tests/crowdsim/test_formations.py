@@ -229,16 +229,32 @@ def test_humans_are_placed_around_every_formation(crossing, scenario, m):
 
 
 def test_the_antipodal_circle_by_hand():
-    """Robots trading places: on a 5 m circle from (0, -5) anticlockwise, each bound for the opposite point;
-    exact zeros where cos and sin should give them (opposite robots then meet exactly head-on, mpc/head_on.py
-    breaks the tie); neighbours 10 sin(pi / M) m apart."""
+    """Robots trading places: on a 3.5 m circle from (0, -3.5) anticlockwise, each bound for the opposite
+    point; exact zeros, never -0.0, where cos and sin should give them (opposite robots then meet exactly
+    head-on, which mpc/head_on.py breaks); neighbours 7 sin(pi / M) m apart; the spacing does not apply."""
     starts, goals = robot_layout(3, "antipodal")
-    h = 5 * math.sqrt(3) / 2
-    np.testing.assert_allclose(starts, [[0.0, -5.0], [h, 2.5], [-h, 2.5]], rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(goals, 0.0 - starts)
+    h = 3.5 * math.sqrt(3) / 2
+    np.testing.assert_allclose(starts, [[0.0, -3.5], [h, 1.75], [-h, 1.75]], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(goals, [[0.0, 3.5], [-h, -1.75], [h, -1.75]], rtol=0, atol=1e-12)
     starts, goals = robot_layout(4, "antipodal")
-    np.testing.assert_array_equal(starts, [[0.0, -5.0], [5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]])
-    for m in (2, 5, 12):
-        d = _pair_distances(robot_layout(m, "antipodal")[0])
-        assert math.isclose(d.min(), 10 * math.sin(math.pi / m), rel_tol=1e-12)
+    np.testing.assert_array_equal(starts, [[0.0, -3.5], [3.5, 0.0], [0.0, 3.5], [-3.5, 0.0]])
+    np.testing.assert_array_equal(goals, [[0.0, 3.5], [-3.5, 0.0], [0.0, -3.5], [3.5, 0.0]])
+    for m in range(1, MAX_ROBOTS + 1):
+        starts, goals = robot_layout(m, "antipodal")
+        assert not np.signbit(starts[starts == 0]).any() and not np.signbit(goals[goals == 0]).any()
+        if m > 1:
+            assert math.isclose(_pair_distances(starts).min(), 7 * math.sin(math.pi / m), rel_tol=1e-12)
     assert robot_layout(3, "antipodal", spacing=2.0)[0].tolist() == robot_layout(3, "antipodal")[0].tolist()
+
+
+@pytest.mark.parametrize("scenario", ["circle", "perpendicular"])
+@pytest.mark.parametrize("m", [2, 4, 12])
+def test_people_are_placed_clear_of_robots_trading_places(scenario, m):
+    """On a 5 m circle the robots stood where the crossings start people: the perpendicular sampler, which
+    keeps its last draw after 100, started people on robots (13 of 100 crowds of 16), and 12 robots left 16
+    people of the circle no room. At 3.5 m every start keeps the samplers' 1.1 m from every robot."""
+    for n_humans in (5, 12, 16, 20, 50):
+        for seed in range(4):
+            layout = make_layout(scenario, n_humans, m, np.random.default_rng(seed), formation="antipodal")
+            gaps = np.linalg.norm(layout.human_starts[:, None] - layout.robot_starts[None], axis=-1)
+            assert gaps.min() >= 1.1, (n_humans, seed)

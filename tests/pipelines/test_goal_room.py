@@ -111,6 +111,7 @@ def test_a_robot_smaller_than_the_mpcs_parking_gets_a_note_naming_the_way_out():
     assert radius_note(_spec(), 3, 0.3, "auto", None) is None
     assert radius_note(_spec("orca"), 3, 0.01, "auto", None) is None
     assert radius_note(_spec(), 1, 0.01, "auto", None) is None
+    assert radius_note(_spec(), 6, 0.01, "antipodal", None) is None  # goals metres apart: no spacing to give
 
 
 def test_simulate_says_it_once_for_a_small_robot(capsys):
