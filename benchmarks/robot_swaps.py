@@ -30,7 +30,7 @@ import numpy as np
 import crowdsim
 from crowdsim.crossings import place_humans_paper
 from crowdsim.env_config import EnvConfig
-from crowdsim.scenarios import MAX_TRIES, SCENARIOS, Layout, geometry_scale
+from crowdsim.scenarios import MAX_TRIES, SCENARIOS, Layout, antipodal_circle, geometry_scale
 from pipelines.config import ConfigError, load
 from pipelines.errors import PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
@@ -68,10 +68,7 @@ def antipodal(
     """Robot i starts at angle ``-pi/2 + 2 pi i / M`` on the circle and heads for the opposite point; each
     start and goal then moves by a uniform draw in ``[-jitter, jitter]`` per coordinate; ``n_humans`` people
     are placed after them by the paper's crossing rules (``EnvConfig()``'s radius and separation)."""
-    angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / n_robots
-    starts = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: keep the exact layout exact
-    goals = -starts
+    starts, goals = antipodal_circle(n_robots, radius)
     if jitter > 0:
         starts = starts + rng.uniform(-jitter, jitter, starts.shape)
         goals = goals + rng.uniform(-jitter, jitter, goals.shape)

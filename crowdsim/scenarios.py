@@ -271,10 +271,7 @@ def robot_layout(
     check_spacing(spacing, "spacing")
     chosen = choose_formation(int(n_robots)) if formation == "auto" else formation
     if chosen == "antipodal":
-        angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / max(int(n_robots), 1)
-        starts = ANTIPODAL_RADIUS * np.stack([np.cos(angles), np.sin(angles)], axis=1)
-        starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: opposite robots exactly head-on
-        return starts, 0.0 - starts
+        return antipodal_circle(int(n_robots))
     if chosen == "row":
         x = (np.arange(n_robots) - (n_robots - 1) / 2.0) * (ROBOT_SPACING if spacing is None else spacing)
         offsets = np.stack([x, np.zeros(n_robots)], axis=1)
@@ -282,6 +279,15 @@ def robot_layout(
         offsets = _hexagonal(rank_sizes(chosen, int(n_robots)), D_FLOCK if spacing is None else spacing)
     starts = offsets + [0.0, ROBOT_START_Y]
     return starts, starts + [0.0, ROBOT_TRAVEL]
+
+
+def antipodal_circle(n_robots: int, radius: float = ANTIPODAL_RADIUS) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and goals of the antipodal formation on a circle of ``radius`` m: robot i at angle
+    ``-pi/2 + 2 pi i / M``, bound for the opposite point (benchmarks/robot_swaps.py takes other radii)."""
+    angles = -math.pi / 2 + 2 * math.pi * np.arange(n_robots) / max(n_robots, 1)
+    starts = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    starts[np.abs(starts) < 1e-12] = 0.0  # cos(pi / 2) is 6e-17: opposite robots exactly head-on
+    return starts, 0.0 - starts  # 0.0 - x: no -0.0 among the goals
 
 
 def check_spacing(spacing: Any, name: str) -> None:

@@ -70,9 +70,13 @@ class StepData:
     def flock_distances(self, d_flock: float) -> np.ndarray:
         """Eq. 15's d_ij per unordered pair (costs.pair_index order) under ``flock_distance = "goals"``:
         ``max(d_flock, ||g_i - g_j||)``, so that the flock's shape at its goals costs nothing."""
+        return np.maximum(d_flock, self._goal_gaps())
+
+    def _goal_gaps(self) -> np.ndarray:
+        """``||g_i - g_j||`` per unordered pair, m, in costs.pair_index's (row-major) order."""
         goals = np.asarray(self.goals, dtype=float)
-        i, j = np.triu_indices(self.n_robots, k=1)  # row-major: pair_index's order
-        return np.maximum(d_flock, np.linalg.norm(goals[i] - goals[j], axis=1))
+        i, j = np.triu_indices(self.n_robots, k=1)
+        return np.linalg.norm(goals[i] - goals[j], axis=1)
 
     def floc_weights(self, w_floc: float, flock_range: float = 0.0) -> np.ndarray:
         """One flocking weight per unordered pair (costs.pair_index order): w_floc unless a robot of the pair
@@ -87,8 +91,7 @@ class StepData:
         i, j = np.triu_indices(self.n_robots, k=1)  # row-major: pair_index's order
         pairs = free[i] & free[j]
         if flock_range > 0:
-            goals = np.asarray(self.goals, dtype=float)
-            pairs &= np.linalg.norm(goals[i] - goals[j], axis=1) <= flock_range
+            pairs &= self._goal_gaps() <= flock_range
         return w_floc * pairs.astype(float)
 
     def goal_slacks(self) -> np.ndarray:
