@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from crowdsim.crossings import place_humans_paper
 from crowdsim.env_config import EnvConfig
 from crowdsim.scenarios import MAX_TRIES, SCENARIOS, Layout, antipodal_circle, geometry_scale
 from pipelines.config import ConfigError, load
-from pipelines.errors import PipelineError
+from pipelines.errors import FlockWarning, PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.gym_loop import run_gym_episode
 from pipelines.loop.margins import MarginSpec, parse_margins
@@ -186,6 +187,8 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--json", type=output_file, help="also write the rows to this file")
     args = parser.parse_args(argv)
+    # the rows where every pair flocks are the point: the controller's note on them, once an episode, is not
+    warnings.simplefilter("ignore", FlockWarning)
     with json_on_stdout(args.json):
         check_not_input(parser, "--json", args.json, [args.config])  # a typo must not overwrite the config
         check_distinct(parser, "--robots", args.robots)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,7 +19,7 @@ from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_first_episode, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
-from pipelines.errors import CloseFailed, PipelineError, RecordingRefused
+from pipelines.errors import CloseFailed, FlockWarning, PipelineError, RecordingRefused
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
 
@@ -264,12 +265,15 @@ def _simulate(resolved: SimulateRun) -> int:
     cfg, spec = resolved.config, resolved.spec
     scenario, sim = cfg.scenario, cfg.simulate
     from pipelines.commands import simulate_checks as checks
+    from pipelines.commands import team_notes
     from pipelines.commands.calibration_notes import calibration_notes
 
+    formation, spacing = cfg.env.formation, cfg.env.robot_spacing
     notes = (
-        checks.flock_note(spec, scenario.robots),
-        checks.goal_room_note(spec, scenario.robots, cfg.env.formation, cfg.env.robot_spacing),
-        checks.radius_note(spec, scenario.robots, cfg.env.radius, cfg.env.formation, cfg.env.robot_spacing),
+        team_notes.separate_goals_note(spec, scenario.robots, formation, spacing),
+        team_notes.flock_note(spec, scenario.robots, formation, spacing),
+        team_notes.goal_room_note(spec, scenario.robots, formation, spacing),
+        team_notes.radius_note(spec, scenario.robots, cfg.env.radius, formation, spacing),
         checks.horizon_note(spec),
         checks.size_note(spec, scenario.humans, scenario.robots),
         checks.plugin_code_note(spec.predictor_name),
@@ -297,20 +301,22 @@ def _simulate(resolved: SimulateRun) -> int:
     interrupted = False
     failure: PipelineError | None = None
     try:
-        run_episodes(
-            spec,
-            episodes=sim.episodes,
-            seed=sim.seed,
-            scenario=scenario.name,
-            n_humans=scenario.humans,
-            n_robots=scenario.robots,
-            observers_factory=lambda: observers,
-            progress=None if sim.progress else False,  # a bar on a terminal only: logs stay clean
-            env_config=env_config,
-            into=results,
-            sensor_range=sim.sensor_range,
-            sensor_tracks=sim.sensor_tracks,
-        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FlockWarning)  # the controller's: said above, in the CLI's words
+            run_episodes(
+                spec,
+                episodes=sim.episodes,
+                seed=sim.seed,
+                scenario=scenario.name,
+                n_humans=scenario.humans,
+                n_robots=scenario.robots,
+                observers_factory=lambda: observers,
+                progress=None if sim.progress else False,  # a bar on a terminal only: logs stay clean
+                env_config=env_config,
+                into=results,
+                sensor_range=sim.sensor_range,
+                sensor_tracks=sim.sensor_tracks,
+            )
     except KeyboardInterrupt:
         if not results:
             if recorder is not None and recorder.paths:  # no report follows: the cut file would go unsaid

@@ -14,13 +14,8 @@ from pipelines.commands.calibration_notes import (
     calibration_world_note,
     sensor_margins_note,
 )
-from pipelines.commands.simulate_checks import (
-    flock_note,
-    goal_room_note,
-    horizon_note,
-    plugin_code_note,
-    size_note,
-)
+from pipelines.commands.simulate_checks import horizon_note, plugin_code_note, size_note
+from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.errors import PipelineError
 
 # The first episodes of a crowd, size, team and scenario drawn before a sweep runs (check_first_episodes)
@@ -194,10 +189,11 @@ def check_margins(experiment: Experiment) -> None:
 
 
 def method_notes(cells: Iterable[Cell]) -> list[str]:
-    """simulate's ``goal_room_note`` lines (a d_min that leaves two robots no room at their goals),
-    ``horizon_note`` lines (a plan longer than the learned predictor's training), ``size_note`` lines (an
-    NLP of the method's largest crowd that takes seconds to build and may pass the time limit a step; a
-    sweep said nothing of it), ``flock_note`` lines
+    """simulate's ``separate_goals_note`` lines (robots trading places whom every pair flocking holds
+    together: each worker's controller said it, and leaves it out now), ``goal_room_note`` lines (a d_min
+    that leaves two robots no room at their goals), ``horizon_note`` lines (a plan longer than the learned
+    predictor's training), ``size_note`` lines (an NLP of the method's largest crowd that takes seconds to
+    build and may pass the time limit a step; a sweep said nothing of it), ``flock_note`` lines
     (a team larger than the paper's under its per-pair flocking weight), ``calibration_world_note`` lines
     (margins calibrated under other conventions), ``sensor_margins_note`` lines (calibrated margins
     behind a sensor), ``calibration_controller_note`` lines (with another controller),
@@ -218,11 +214,12 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
         seen.add(cell.method)
         env = cell.world.env_config()
         for note in (
+            separate_goals_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             horizon_note(cell.spec),
             size_note(cell.spec, max(sizes[cell.method]), cell.n_robots),  # its largest crowd's NLP
             plugin_code_note(cell.spec.predictor_name),
-            flock_note(cell.spec, cell.n_robots),
+            flock_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             calibration_world_note(
                 cell.spec,
                 cell.world.profile,

@@ -24,13 +24,14 @@ import socket
 import tempfile
 import time
 import traceback
+import warnings
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import PipelineError, interrupt_behind
+from pipelines.errors import FlockWarning, PipelineError, interrupt_behind
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
@@ -271,11 +272,14 @@ class EpisodeWorker:
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
-            # built outside the limit: a first episode's gcc compile (2-8 s) or solver build is no hang, and a
-            # compile stopped half-way would leave its files to the cache's clean-up
-            controller = self.controller(task)
-            with deadline(self.timeout_s):
-                return self._run(task, controller)
+            with warnings.catch_warnings():
+                # the sweep says it once (sweep_checks.method_notes); each worker's controller said it again
+                warnings.simplefilter("ignore", FlockWarning)
+                # built outside the limit: a first episode's gcc compile (2-8 s) or solver build is no hang,
+                # and a compile stopped half-way would leave its files to the cache's clean-up
+                controller = self.controller(task)
+                with deadline(self.timeout_s):
+                    return self._run(task, controller)
         except EpisodeTimeout:
             # stopped anywhere, mid-step too: its state is not to be trusted with another episode
             self._controllers.pop(task.cell.key, None)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, NamedTuple, NoReturn
 
 import numpy as np
 
@@ -47,37 +47,62 @@ def mpc_config(spec: ControllerSpec, jit: bool = False, world: WorldFacts = WORL
     return cfg if spec.flocking else cfg.replace(w_floc=0.0)
 
 
-def warn_separate_goals(cfg: MPCConfig, positions: np.ndarray, goals: np.ndarray) -> None:
-    """A ``FlockWarning`` when every pair of robots flocks (``flock_range`` 0, ``w_floc`` > 0) and some pair
-    is bound for goals more than ``2 d_flock`` apart whose offset differs from the starts' by as much: robots
-    trading places or parting ways, not a team keeping its shape. Eq. 15 then pulls them together all the
-    way (two robots swapping places stood 1.42 m apart until the time limit; docs/extending.md)."""
+class Parting(NamedTuple):
+    """Two robots bound for goals ``apart`` m apart by separate ways (``separate_goals``), and the
+    ``flock_range`` that would flock the rest of the team but not them (None where none does: the team's own
+    goals lie ``team`` m apart, as far as theirs)."""
+
+    i: int
+    j: int
+    apart: float
+    team: float
+    fit: float | None
+
+
+def separate_goals(cfg: MPCConfig, positions: np.ndarray, goals: np.ndarray) -> Parting | None:
+    """The first pair of robots that every pair flocking (``flock_range`` 0, ``w_floc`` > 0) would hold
+    together: bound for goals more than ``2 d_flock`` apart whose offset differs from the starts' by as much,
+    robots trading places or parting ways, not a team keeping its shape. Eq. 15 then pulls them together all
+    the way (two robots swapping places stood 1.42 m apart until the time limit; docs/extending.md)."""
     if cfg.flock_range > 0 or cfg.w_floc == 0 or len(goals) < 2:
-        return
+        return None
     positions, goals = np.asarray(positions, dtype=float), np.asarray(goals, dtype=float)
     i, j = np.triu_indices(len(goals), k=1)
     apart = np.linalg.norm(goals[i] - goals[j], axis=1)
     reshaped = np.linalg.norm((goals[i] - goals[j]) - (positions[i] - positions[j]), axis=1)
     parting = (apart > 2 * cfg.d_flock) & (reshaped > 2 * cfg.d_flock)
     if not parting.any():
-        return
+        return None
     k = int(np.flatnonzero(parting)[0])
     team, low = float(apart[~parting].max(initial=cfg.d_flock)), float(apart[parting].min())
-    if team < low:  # a range between the team's own goal distances and the parting pairs' keeps the team
-        fit = min(team + 0.5, (team + low) / 2)
-        way = f'mpc_overrides=(("flock_range", {fit:.2f}),) ([mpc] flock_range) flocks only the pairs '
-        way += f"whose goals lie within {fit:.2f} m"
+    # a range between the team's own goal distances and the parting pairs' keeps the team
+    fit = min(team + 0.5, (team + low) / 2) if team < low else None
+    return Parting(int(i[k]), int(j[k]), float(apart[k]), team, fit)
+
+
+def parting_message(cfg: MPCConfig, parting: Parting, setting: str) -> str:
+    """Why ``parting``'s episodes may time out and what to set; ``setting`` formats the range as its reader
+    sets it (``{:.2f}`` for the number): ``mpc_overrides=(("flock_range", {:.2f}),)`` in the API,
+    ``--set mpc.flock_range={:.2f}`` on the command line."""
+    if parting.fit is not None:
+        way = f"{setting.format(parting.fit)} ([mpc] flock_range) flocks only the pairs "
+        way += f"whose goals lie within {parting.fit:.2f} m"
     else:
-        way = (
-            f"no flock_range parts them from pairs whose goals lie {team:.1f} m apart; w_floc = 0 flocks none"
-        )
-    warnings.warn(
-        f"robots {i[k]} and {j[k]} are bound for goals {apart[k]:.1f} m apart by separate ways, and Eq. 15 "
-        f"pulls every pair of robots towards d_flock {cfg.d_flock:g} m, which can hold them together until "
-        f'the time limit: {way} (docs/extending.md, "Robots bound for separate places")',
-        FlockWarning,
-        stacklevel=3,
+        way = f"no flock_range parts them from pairs whose goals lie {parting.team:.1f} m apart; w_floc = 0 "
+        way += "flocks none"
+    return (
+        f"robots {parting.i} and {parting.j} are bound for goals {parting.apart:.1f} m apart by separate "
+        f"ways, and Eq. 15 pulls every pair of robots towards d_flock {cfg.d_flock:g} m, which can hold them "
+        f'together until the time limit: {way} (docs/extending.md, "Robots bound for separate places")'
     )
+
+
+def warn_separate_goals(cfg: MPCConfig, positions: np.ndarray, goals: np.ndarray) -> None:
+    """A ``FlockWarning`` where ``separate_goals`` finds a pair (the controller's reset)."""
+    parting = separate_goals(cfg, positions, goals)
+    if parting is not None:
+        message = parting_message(cfg, parting, 'mpc_overrides=(("flock_range", {:.2f}),)')
+        warnings.warn(message, FlockWarning, stacklevel=3)
 
 
 class SolversHeld:

@@ -3,7 +3,7 @@
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands.simulate_checks import flock_note
+from pipelines.commands.team_notes import flock_note
 from pipelines.loop.spec import ControllerSpec
 
 PER_ROBOT = (("flocking_weight", "per_robot"),)

@@ -5,7 +5,7 @@ in every episode for a reason no metric names."""
 import pytest
 
 from pipelines.cli import main
-from pipelines.commands.simulate_checks import goal_room_note, radius_note
+from pipelines.commands.team_notes import goal_room_note, radius_note
 from pipelines.loop.controllers import ControllerSpec
 
 
