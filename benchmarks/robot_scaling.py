@@ -51,6 +51,7 @@ from typing import Any, cast
 import numpy as np
 
 from crowdsim.env import CrowdEnv
+from crowdsim.errors import SimulationError
 from crowdsim.metrics import EpisodeMetrics, Trajectory, aggregate, episode_metrics
 from crowdsim.profiles import make_env_config
 from crowdsim.scenarios import FORMATIONS, SCENARIOS, Formation, choose_formation
@@ -281,6 +282,10 @@ def main(argv: list[str] | None = None) -> int:
             formation = args.formation or run.env.formation
         except (ConfigError, PipelineError) as exc:
             parser.error(f"--config/--mpc: {exc}")
+        try:  # a pair refused together (the antipodal formation's goals as slots), named as typed here
+            dataclasses.replace(make_env_config("paper"), goal_assignment=goals, formation=formation)
+        except SimulationError as exc:
+            parser.error(f"--formation {formation} with --goals {goals} (or the --config's [env]): {exc}")
 
         report: dict[str, Any] = {"load_before": os.getloadavg(), "args": vars(args)}
         rows = []

@@ -159,8 +159,9 @@ def checked_layout(layout: Layout) -> Layout:
         rows = "M" if name.startswith("robot") else "N"
         try:
             raw = np.asarray(getattr(layout, name))
-        except (TypeError, ValueError) as exc:  # ragged rows
-            raise SimulationError(f"layout.{name} must be a ({rows}, 2) array of numbers: {exc}") from None
+        except (TypeError, ValueError) as exc:  # ragged rows: numpy's long text names no row
+            why = str(exc) if isinstance(exc, TypeError) else "its rows are of unequal lengths, or one nests"
+            raise SimulationError(f"layout.{name} must be a ({rows}, 2) array of numbers: {why}") from None
         if raw.dtype.kind == "c" or (
             raw.dtype == object and any(isinstance(x, complex | np.complexfloating) for x in raw.flat)
         ):  # numpy's float conversion would only warn (ComplexWarning) and drop the imaginary parts

@@ -3,6 +3,7 @@
 import warnings
 
 import numpy as np
+import pytest
 
 from crowdsim.metrics import Trajectory, episode_metrics
 from crowdsim.scenarios import make_layout, start_overlaps
@@ -122,3 +123,19 @@ def test_one_robot_prints_no_robot_distance(capsys):
     robot_scaling.print_table([row])
     line = capsys.readouterr().out.splitlines()[1]
     assert "inf" not in line and line.split()[8] == "-"
+
+
+def test_antipodal_goals_as_slots_are_refused_naming_this_scripts_options(capsys):
+    """The simulator refuses the pair together in its own words (EnvConfig.formation, goal_assignment); the
+    script's refusal names the options that chose them, before any row."""
+    robot_scaling = load_benchmark("robot_scaling")
+    with pytest.raises(SystemExit) as info:
+        robot_scaling.main(
+            ["--formation", "antipodal", "--goals", "slots", "--robots", "3", "--episodes", "1"]
+        )
+    assert info.value.code == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert err.split(": ", 1)[1].startswith(
+        "error: --formation antipodal with --goals slots (or the --config"
+    )
+    assert "would deal the goals anew" in err

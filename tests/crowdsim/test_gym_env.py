@@ -136,6 +136,13 @@ def test_a_layout_episode_has_no_seed_and_keeps_the_generators_sequence():
     assert seeded["seed"] is None  # seed 8 seeded the generator, not this layout
 
 
+# numpy's ragged-array text ("setting an array element with a sequence. The requested array has an
+# inhomogeneous shape after 1 dimensions...") named no row and ran on for two sentences
+UNEQUAL = (
+    "layout.human_starts must be a (N, 2) array of numbers: its rows are of unequal lengths, or one nests"
+)
+
+
 @pytest.mark.parametrize(
     "options, message",
     [
@@ -155,7 +162,11 @@ def test_a_layout_episode_has_no_seed_and_keeps_the_generators_sequence():
         # read as out of bounds
         (
             {"layout": dataclasses.replace(one_robot((3.0, 0.0)), human_starts=[[3.0, 0.0], [1.0]])},
-            "layout.human_starts must be a (N, 2) array of numbers: setting an array element with a sequence",
+            UNEQUAL,
+        ),
+        (
+            {"layout": dataclasses.replace(one_robot((3.0, 0.0)), human_starts=[[3.0, [0.0, 1.0]]])},
+            UNEQUAL,
         ),
         (
             {"layout": dataclasses.replace(one_robot((3.0, 0.0)), human_starts=[["a", "b"]])},
