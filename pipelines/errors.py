@@ -118,6 +118,20 @@ class FlockWarning(UserWarning):
     .mpc_setup.warn_separate_goals; MPCConfig.flock_range)."""
 
 
+class GoalRoomWarning(UserWarning):
+    """Two robots' goals closer than the MPC lets robots stand (pipelines.loop.mpc_setup.warn_goal_room;
+    Eq. 12 keeps every pair d_min apart)."""
+
+
+def quiet_team_warnings() -> None:
+    """Leave out the controller's warnings on the robots' layout (``FlockWarning``, ``GoalRoomWarning``),
+    which ``simulate`` and ``sweep`` say once, before the first episode, in their own words
+    (pipelines.commands.team_notes); a sweep's workers each said them again. Inside
+    ``warnings.catch_warnings()``."""
+    for category in (FlockWarning, GoalRoomWarning):
+        warnings.simplefilter("ignore", category)
+
+
 def warnings_as_notes() -> None:
     """Show crowdmpc's own warnings (agents laid out in contact, a predictor run without its twin) as the
     commands' other notes, "note: ..." on one line, not as Python's file, line and source line; any other
@@ -136,7 +150,7 @@ def warnings_as_notes() -> None:
         file: TextIO | None = None,
         line: str | None = None,
     ) -> None:
-        if not issubclass(category, LayoutWarning | NoTwinWarning | FlockWarning):
+        if not issubclass(category, LayoutWarning | NoTwinWarning | FlockWarning | GoalRoomWarning):
             shown(message, category, filename, lineno, file, line)
         elif (out := file or sys.stderr) is not None:
             with contextlib.suppress(OSError):  # as Python's own: a note lost to a closed pipe raises nothing

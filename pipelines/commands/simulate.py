@@ -19,7 +19,7 @@ from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_first_episode, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
-from pipelines.errors import CloseFailed, FlockWarning, PipelineError, RecordingRefused
+from pipelines.errors import CloseFailed, PipelineError, RecordingRefused, quiet_team_warnings
 from pipelines.loop.controllers import COUPLINGS, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
 
@@ -302,7 +302,7 @@ def _simulate(resolved: SimulateRun) -> int:
     failure: PipelineError | None = None
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FlockWarning)  # the controller's: said above, in the CLI's words
+            quiet_team_warnings()  # the controller's notes on the layout: said above, in the CLI's words
             run_episodes(
                 spec,
                 episodes=sim.episodes,

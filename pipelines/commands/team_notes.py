@@ -13,18 +13,13 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from crowdsim.world import PAPER_ROBOTS
+from pipelines.loop.mpc_setup import GOAL_ROOM_MARGIN, ROOM_SPACING
 from pipelines.loop.spec import MPC_CONTROLLERS
 
 if TYPE_CHECKING:
     from pipelines.loop.controllers import ControllerSpec
 
 
-# How close to the closest two robots' goals d_min may come before the note: no measured rule holds for
-# every formation (docs/extending.md, robot_reached), and the row of 4 failed already at 0.98 of 1.0 m.
-GOAL_ROOM_MARGIN: Final[float] = 0.05  # m
-# m above d_min at which goal_room_note's suggested robot spacing gave the robots room: CMPC, row of 3, 7
-# humans, d_min 1.0 m: 0 of 10 episodes reached their goals 1.0 m apart, 9 of 10 at 1.2 m, 10 of 10 at 1.3 m
-ROOM_SPACING: Final[float] = 0.3
 # m by which the closest goals may lie beyond d_flock before the note: Eq. 15's all-pairs pull held the outer
 # robots of a row of 3 off their goals with no humans about at 1.5 m spacing (0.39 m short), not at 1.25,
 # 1.3 or 1.4 m (CMPC, d_flock 1.2, 2 episodes each; DMPC arrived at 1.3, not at 2.0); d_flock = 1.5 let them

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import FlockWarning, PipelineError, interrupt_behind
+from pipelines.errors import PipelineError, interrupt_behind, quiet_team_warnings
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
@@ -273,8 +273,7 @@ class EpisodeWorker:
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
             with warnings.catch_warnings():
-                # the sweep says it once (sweep_checks.method_notes); each worker's controller said it again
-                warnings.simplefilter("ignore", FlockWarning)
+                quiet_team_warnings()  # the sweep says them once (sweep_checks.method_notes)
                 # built outside the limit: a first episode's gcc compile (2-8 s) or solver build is no hang,
                 # and a compile stopped half-way would leave its files to the cache's clean-up
                 controller = self.controller(task)

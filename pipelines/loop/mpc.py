@@ -54,7 +54,7 @@ from pipelines.loop.mpc_setup import (
     predictor_history,
     prepare_sizes,
     standing_history,
-    warn_separate_goals,
+    warn_team_layout,
 )
 from pipelines.loop.spec import ControllerSpec
 from pipelines.loop.step_record import allowances_record
@@ -255,7 +255,7 @@ class MPCController(SolversHeld):
         self._observe(obs)
         # Build now, not inside the first timed step; the first step encodes the same past.
         self._build(obs.n_robots, obs.n_humans, history)
-        warn_separate_goals(self.cfg, np.asarray(obs.robot_positions), np.asarray(obs.robot_goals))
+        warn_team_layout(self.cfg, np.asarray(obs.robot_positions), np.asarray(obs.robot_goals))
         self.memory.reset()
         if self.stall is not None:
             self.stall.reset()

@@ -2,11 +2,20 @@
 pair d_min apart, and the row of 3 puts their goals 1.0 m apart, so a d_min study's 1.0 m column timed out
 in every episode for a reason no metric names."""
 
+import warnings
+
+import numpy as np
 import pytest
 
+from crowdsim.env import CrowdEnv
+from crowdsim.env_config import EnvConfig
+from crowdsim.scenarios import Layout
+from mpc.config import MPCConfig
 from pipelines.cli import main
 from pipelines.commands.team_notes import goal_room_note, radius_note
-from pipelines.loop.controllers import ControllerSpec
+from pipelines.errors import GoalRoomWarning
+from pipelines.loop.controllers import ControllerSpec, make_controller
+from pipelines.loop.mpc_setup import warn_goal_room
 
 
 def _spec(controller: str = "cmpc", d_min: float | None = None) -> ControllerSpec:
@@ -121,3 +130,36 @@ def test_simulate_says_it_once_for_a_small_robot(capsys):
     assert main([*args, "--set", "world.radius=0.01", "--set", "env.robot_spacing=1.2", "--set",
                  "mpc.flock_distance=goals"]) == 0  # fmt: skip
     assert "[world] radius" not in capsys.readouterr().err
+
+
+def test_a_python_users_own_goals_get_the_same_warning():
+    """A layout of one's own has no formation for the note to read: the controller's reset warns with the
+    note's rule, d_min within 0.05 m of the closest goals' distance or above (Table I's 0.8 m: goals 0.85 m
+    apart warn, 0.86 m do not), naming the pair and d_min + 0.3 m. Measured: a row of 3 goals 0.8 m apart
+    with nobody about, DMPC timed out; 0.6 m apart, both MPCs (standing 1.0 m apart)."""
+    goals = np.array([[-0.85, 4.0], [0.0, 4.0], [0.86, 4.0]])
+    message = (
+        r"^robots 0 and 1's goals lie 0\.85 m apart, and the MPC keeps every pair of robots d_min 0\.8 m "
+        r"apart \(Eq\. 12\), which can keep them from standing on their goals at once: the episode then "
+        r"times out; goals 1\.1 m apart or more gave room"
+    )
+    with pytest.warns(GoalRoomWarning, match=message):
+        warn_goal_room(MPCConfig(), goals)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GoalRoomWarning)
+        warn_goal_room(MPCConfig(), goals[1:])  # 0.86 m: 0.8 < 0.86 - 0.05
+        warn_goal_room(MPCConfig(), goals[:1])  # one robot
+        warn_goal_room(MPCConfig(d_min=0.6), goals)
+    with pytest.warns(GoalRoomWarning, match="robots 0 and 1's goals lie 0.80 m apart"):
+        controller = make_controller(ControllerSpec("dmpc"), EnvConfig())
+        starts = np.array([[-1.0, -4.0], [0.0, -4.0], [1.0, -4.0]])
+        layout = Layout(starts, starts * [0.8, -1.0], np.zeros((0, 2)), np.zeros((0, 2)))
+        controller.reset(CrowdEnv(EnvConfig()).reset_layout(layout))
+        controller.close()
+
+
+def test_the_command_line_says_it_once_in_its_own_words(capsys):
+    args = ["simulate", "--controller", "dmpc", "--humans", "0", "--episodes", "2", "--no-progress"]
+    assert main([*args, "--set", "mpc.d_min=1.0", "--set", "env.time_limit=2"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note: the MPC's d_min 1 m is not well below") == 1 and "goals lie" not in err
