@@ -298,7 +298,7 @@ def shipped() -> dict[str, ModelKind]:
 def load_plugin(spec: str) -> ModelKind:
     """Register ``module:NetClass`` (importing the module) and return its kind, named ``spec``.
 
-    The module is looked up on ``sys.path``, plus the current directory, as ``python -m`` would: a user's
+    The module is looked up among the installed ones, then in the current directory: a user's
     one-file plugin next to where they work needs no install."""
     if not isinstance(spec, str) or len(spec) > MAX_PLUGIN_SPEC or PLUGIN_PATTERN.fullmatch(spec) is None:
         raise PredictorError(f"plugin {short_repr(spec)} is not of the form module:NetClass")

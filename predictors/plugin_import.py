@@ -5,6 +5,8 @@ controller plugins (``pipelines.loop.spec``), whose registries keep what it impo
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.machinery
 import os
 import sys
 from pathlib import Path
@@ -19,8 +21,7 @@ def import_class(spec: str, what: str = "plugin") -> object:
     plugin next to where they work needs no install, and never shadows an installed module. PredictorError
     in one line, naming ``what`` and ``spec``, when it cannot. Shared by net and controller plugins."""
     cwd = str(Path.cwd())
-    if cwd not in sys.path:
-        sys.path.append(cwd)
+    _search_after_installed(cwd)
     module_name, _, class_name = spec.partition(":")
     imported_before = module_name in sys.modules
     try:
@@ -46,6 +47,27 @@ def import_class(spec: str, what: str = "plugin") -> object:
         )
         raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}{reload}")
     return getattr(module, class_name)
+
+
+class _AfterInstalled(importlib.abc.MetaPathFinder):
+    """Finds top-level modules in ``folder`` once every other finder has had its turn. Appending the folder
+    to ``sys.path`` was not enough: an editable install (the README's ``pip install -e``) is found by a
+    finder that Python asks after every ``sys.path`` entry, so a stray ``mpc.py`` beside the plugin became
+    crowdmpc's ``mpc`` in a sweep's fresh workers ("No module named 'mpc.cmpc'; 'mpc' is not a package")."""
+
+    def __init__(self, folder: str):
+        self.folder = folder
+
+    def find_spec(self, fullname: str, path: Any = None, target: Any = None) -> Any:
+        if path is not None:  # a submodule: its package's own __path__ finds it
+            return None
+        return importlib.machinery.PathFinder.find_spec(fullname, [self.folder])
+
+
+def _search_after_installed(folder: str) -> None:
+    """Put an ``_AfterInstalled`` finder for ``folder`` last on ``sys.meta_path`` (once)."""
+    if not any(isinstance(f, _AfterInstalled) and f.folder == folder for f in sys.meta_path):
+        sys.meta_path.append(_AfterInstalled(folder))
 
 
 def _shadowed_file(module_name: str, module: object, cwd: Path) -> Path | None:

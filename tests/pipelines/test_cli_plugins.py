@@ -388,3 +388,30 @@ def test_train_options_are_checked_in_one_line(tmp_path, capsys, options, messag
     line = one_line(err)
     assert code == 2 and line.startswith(f"crowdmpc train: error: {message}"), line
     assert not (tmp_path / "run").exists()
+
+
+def test_a_stray_file_named_as_crowdmpcs_own_package_beside_a_plugin_shadows_nothing(tmp_path):
+    """In a fresh interpreter (a sweep's worker), importing a plugin from the working folder put that folder
+    on sys.path before crowdmpc's packages had been imported, and an editable install is found after every
+    sys.path entry: a notes file mpc.py beside the plugin became crowdmpc's ``mpc`` ("No module named
+    'mpc.cmpc'; 'mpc' is not a package"), and every episode of the sweep raised."""
+    (tmp_path / "mpc.py").write_text("# notes\n", encoding="utf-8")
+    (tmp_path / "pipelines.py").write_text("# notes\n", encoding="utf-8")
+    (tmp_path / "my_plugin_q.py").write_text("class Thing:\n    pass\n", encoding="utf-8")
+    code = (
+        "from predictors.plugin_import import import_class\n"
+        "print(import_class('my_plugin_q:Thing').__module__)\n"
+        "import mpc.cmpc, pipelines.cli\n"
+        "print(mpc.__file__ != 'mpc.py' and mpc.__path__ is not None, pipelines.cli.__name__)\n"
+    )
+    # -P: the working folder is not put first on sys.path, as for the `crowdmpc` script and its workers
+    done = subprocess.run(
+        [sys.executable, "-P", "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["my_plugin_q", "True", "pipelines.cli"]
