@@ -15,6 +15,7 @@ pipelines.experiments.process_backend.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import signal
@@ -24,7 +25,7 @@ from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
 from pipelines.errors import PipelineError, SweepStopped
-from pipelines.experiments.process_backend import MAX_BREAKS_IN_A_ROW, ProcessBackend
+from pipelines.experiments.process_backend import CLOSE_GRACE_S, MAX_BREAKS_IN_A_ROW, ProcessBackend
 from pipelines.experiments.ray_join import join_cluster, workers_that_fit
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
@@ -71,7 +72,7 @@ class InlineBackend:
             yield self.worker.run(task)
 
     def close(self) -> None:
-        pass
+        self.worker.close()
 
 
 class _RayEpisodeWorker(EpisodeWorker):
@@ -151,6 +152,7 @@ class RayBackend:
         self._actor_args = (record, jit, scratch_root, timeout_s)
         self._actors: list[Any] = [self._actor_class.remote(*self._actor_args) for _ in range(workers)]
         self._uncommitted_nodes: set[str] = set()  # compared without a commit: said once a node
+        self._drained = False
         try:
             self._check_code(self._actors)
         except BaseException:
@@ -228,8 +230,12 @@ class RayBackend:
                 )
             submit(slot, 2 - sum(1 for s, _, _ in owner.values() if s == slot))
             yield outcome
+        self._drained = True  # every episode came back: close may let the actors close their controllers
 
     def close(self) -> None:
+        if self._drained:
+            with contextlib.suppress(Exception):  # a hung or dead actor: killed below all the same
+                self._ray.get([actor.close.remote() for actor in self._actors], timeout=CLOSE_GRACE_S)
         for actor in self._actors:
             self._ray.kill(actor)
         if self._owns_ray:

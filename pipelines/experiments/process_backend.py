@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import time
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, Final
 
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
 MAX_BREAKS_IN_A_ROW: Final[int] = 3
 BROKEN_POOL_WAIT_S: Final[float] = 30.0  # for the futures of a broken pool to fail (they do at once)
 STARTING_EXIT_S: Final[float] = 5.0  # for workers that died starting to finish exiting (they do at once)
+CLOSE_GRACE_S: Final[float] = 10.0  # for idle workers to close their controllers and exit at a sweep's end
 
 
 _WORKER: EpisodeWorker | None = None  # one per pool process
@@ -58,6 +60,7 @@ def _exit_with_parent() -> None:
 
 
 def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_s: float | None) -> None:
+    import multiprocessing.util
     import signal
 
     global _WORKER
@@ -72,6 +75,8 @@ def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_
         )  # CasADi's jit writes its C sources into the current directory (no option for another)
     _load_plugins()
     _WORKER = EpisodeWorker(record, jit, scratch, timeout_s)
+    # its controllers closed when the worker exits after the pool's last task (ProcessBackend.close lets it)
+    multiprocessing.util.Finalize(None, _WORKER.close, exitpriority=10)
 
 
 def _load_plugins() -> None:
@@ -244,6 +249,7 @@ class ProcessBackend:
             self._end_pool()  # every process joined: their exit codes are known
             raise SweepStopped(self._died_starting()) from None
         self._pool_ended = False
+        self._drained = False
 
     def _died_starting(self) -> str:
         """Why no worker started. Each spawned worker imports the driver's main script before anything else:
@@ -273,6 +279,7 @@ class ProcessBackend:
         while True:
             broken = self._submit(in_flight, unsent, pending)
             if not in_flight and not broken:
+                self._drained = True  # every episode came back: close may let the workers exit of themselves
                 return
             if not broken:
                 done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
@@ -369,15 +376,20 @@ class ProcessBackend:
         return ", ".join(sorted(ends)) or "ended abruptly"
 
     def close(self) -> None:
-        self._end_pool()
+        self._end_pool(grace_s=CLOSE_GRACE_S if self._drained else 0.0)
         if self._own_root is not None:
             release_scratch_root(self._own_root)
 
-    def _end_pool(self) -> None:
+    def _end_pool(self, grace_s: float = 0.0) -> None:
         # Cancel what has not started and end the running episodes now: their records were never written, so a
-        # rerun runs them again. (ProcessPoolExecutor has no public way to stop a running call.)
+        # rerun runs them again. (ProcessPoolExecutor has no public way to stop a running call.) With nothing
+        # running (``grace_s``), the workers first get that long to exit of themselves, closing their
+        # controllers (_init_pool_worker).
         self._note_processes()
         self._pool.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + grace_s
+        for process in self._processes:
+            process.join(timeout=max(0.0, deadline - time.monotonic()))
         for process in self._processes:
             if process.is_alive():
                 process.terminate()

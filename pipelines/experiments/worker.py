@@ -21,6 +21,7 @@ import re
 import resource
 import shutil
 import socket
+import sys
 import tempfile
 import time
 import traceback
@@ -266,9 +267,26 @@ class EpisodeWorker:
         self._controllers[key] = controller
         self._configs[key] = cell_config(controller, env_config)
         while len(self._controllers) > CONTROLLER_CACHE:
-            dropped, _ = self._controllers.popitem(last=False)
-            self._configs.pop(dropped, None)
+            self._drop(next(iter(self._controllers)))
         return controller
+
+    def _drop(self, key: str) -> None:
+        """Forget cell ``key``'s controller, closed: a controller's ``close`` releases its threads and
+        solvers (a plugin's, its hardware), and a sweep called it for none of them."""
+        self._configs.pop(key, None)
+        controller = self._controllers.pop(key, None)
+        if controller is None:
+            return
+        try:
+            controller.close()
+        except Exception as exc:  # an episode's record is written already: say it, do not end the sweep
+            name = getattr(controller, "name", type(controller).__name__)
+            print(f"note: controller {name!r}'s close() raised {type(exc).__name__}: {exc}", file=sys.stderr)
+
+    def close(self) -> None:
+        """Close every controller built (the sweep's end; the process backend's workers at their exit)."""
+        for key in list(self._controllers):
+            self._drop(key)
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
@@ -281,8 +299,7 @@ class EpisodeWorker:
                     return self._run(task, controller)
         except EpisodeTimeout:
             # stopped anywhere, mid-step too: its state is not to be trusted with another episode
-            self._controllers.pop(task.cell.key, None)
-            self._configs.pop(task.cell.key, None)
+            self._drop(task.cell.key)
             assert self.timeout_s is not None  # only a limit raises it
             return EpisodeOutcome(task.key, error=timeout_error(self.timeout_s, traceback.format_exc()))
         except Exception as exc:  # a bug or a solver crash in one episode must not end a sweep of thousands

@@ -801,3 +801,33 @@ def test_the_top_level_help_names_both_entry_point_groups_and_the_whole_protocol
     assert f'"{models.ENTRY_POINT_GROUP}"' in text
     assert f'"{registry.ENTRY_POINT_GROUP}"' in text
     assert "name, predictor, reset, act, describe and close" in text
+
+
+@pytest.mark.parametrize("backend", ["process", "inline"])
+def test_a_sweep_closes_the_controllers_it_built(backend, tmp_path, monkeypatch, capsys):
+    """Section 6 of docs/extending.md: ``close`` runs after the run (threads, solvers, a robot's hardware).
+    A sweep closed none: each worker's cached controllers were dropped with the process."""
+    log = tmp_path / "close.log"
+    monkeypatch.setenv("CROWDMPC_TEST_CLOSE_LOG", str(log))
+    logged = f"{TOYS}:Logged"
+    code, stdout, _ = run(
+        capsys, "--plugin", logged, "sweep", "--experiment", "controllers", "--controllers", logged,
+        "--humans", "2,3", "--episodes-per-cell", "2", "--workers", "2", "--backend", backend,
+        "--no-progress", "--out", str(tmp_path / "sweep"),
+    )  # fmt: skip
+    assert code == 0, stdout
+    lines = log.read_text().split("\n")[:-1]
+    built = sorted(line.split()[1] for line in lines if line.startswith("init"))
+    closed = sorted(line.split()[1] for line in lines if line.startswith("close"))
+    assert built and closed == built  # one close per controller built, in the process that built it
+
+
+def test_a_controller_whose_close_raises_is_said_once_and_the_sweep_stands(tmp_path, capfd):
+    raises = f"{TOYS}:CloseRaises"
+    code = main(
+        ["--plugin", raises, "sweep", "--experiment", "controllers", "--controllers", raises, "--humans", "2",
+         "--episodes-per-cell", "2", "--backend", "inline", "--no-progress", "--out", str(tmp_path / "sw")]
+    )  # fmt: skip
+    assert code == 0
+    err = capfd.readouterr().err
+    assert err.count("note: controller 'straight_line''s close() raised OSError: the serial port is gone") == 1

@@ -137,3 +137,23 @@ class SwapGoals(StraightLine):
 
     def act(self, obs: Observation) -> ControlOutput:
         return super().act(dataclasses.replace(obs, robot_goals=obs.robot_goals[::-1]))
+
+
+class Logged(StraightLine):
+    """Writes "init PID" when built and "close PID" when closed to the file $CROWDMPC_TEST_CLOSE_LOG names."""
+
+    def __init__(self, spec: Any, env_config: EnvConfig | None, *, jit: bool = False):
+        super().__init__(spec, env_config, jit=jit)
+        self._write("init")
+
+    def _write(self, what: str) -> None:
+        with open(os.environ["CROWDMPC_TEST_CLOSE_LOG"], "a", encoding="utf-8") as log:
+            log.write(f"{what} {os.getpid()}\n")
+
+    def close(self) -> None:
+        self._write("close")
+
+
+class CloseRaises(StraightLine):
+    def close(self) -> None:
+        raise OSError("the serial port is gone")
