@@ -52,7 +52,18 @@ class OrcaOracle:
 
     def observe(self, obs: Observation, env_config: EnvConfig) -> None:
         """The state the next rollouts start from (velocities and goals are not in the history) and the
-        simulator's settings the humans move by (ORCA parameters, whether they see the robots)."""
+        simulator's settings the humans move by (ORCA parameters, whether they see the robots). The humans'
+        goals and velocities must be finite: a NaN goal (an unknown one, on a real robot) made every
+        prediction NaN, and every step fell back to the shifted plan without a word."""
+        for name in ("human_goals", "human_velocities"):
+            values = np.asarray(getattr(obs, name), dtype=float)
+            bad = np.flatnonzero(~np.isfinite(values).all(axis=-1)) if values.ndim == 2 else []
+            if len(bad):
+                raise PredictorError(
+                    f"obs.{name} of human {bad[0]} is not finite ({values[bad[0]].tolist()}): the ORCA oracle "
+                    "moves the humans by the simulator's rules, from their goals and velocities; without "
+                    "them, predict with a model (--predictor constant_velocity, say)"
+                )
         self._obs = obs
         self.env_config = env_config
 

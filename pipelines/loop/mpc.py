@@ -253,8 +253,9 @@ class MPCController(SolversHeld):
         check_history(obs)
         history, _ = predictor_history(obs, self.model.obs_len)
         self._observe(obs)
-        # Build now, not inside the first timed step; the first step encodes the same past.
-        self._build(obs.n_robots, obs.n_humans, history)
+        # Build now, not inside the first timed step (which encodes the same past); no robots: act brakes none
+        if obs.n_robots:  # without a solver, and DMPC's NLP has no size 0 (CasADi's assertion)
+            self._build(obs.n_robots, obs.n_humans, history)
         warn_team_layout(self.cfg, np.asarray(obs.robot_positions), np.asarray(obs.robot_goals))
         self.memory.reset()
         if self.stall is not None:

@@ -14,6 +14,10 @@ def check_fields(obs: Observation) -> None:
     one-robot ``robot_reached`` for three robots was stretched to all three (each taken as arrived), other
     shapes failed in numpy's words."""
     m, n = obs.n_robots, obs.n_humans
+    radius = obs.radius
+    if isinstance(radius, bool) or not isinstance(radius, int | float | np.number) or not 0 < radius < np.inf:
+        # NaN passed, and every robot counted as off its goal (guidance, the stall watch) for good
+        raise PipelineError(f"obs.radius must be a number of metres > 0 (a robot's arrival), got {radius!r}")
     for name, shape in (
         ("robot_positions", (m, 2)),
         ("robot_velocities", (m, 2)),

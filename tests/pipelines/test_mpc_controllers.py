@@ -407,3 +407,16 @@ def test_a_hand_built_observation_whose_history_disagrees_with_it_is_refused(cha
         controller.reset(bad)
     with pytest.raises(PipelineError, match=match):
         controller.act(bad)
+
+
+@pytest.mark.parametrize("controller", ["cmpc", "dmpc"])
+def test_a_team_of_no_robots_is_braked_without_a_solver(controller):
+    """CMPC took an observation of no robots (act returns no rows); DMPC's reset built a local NLP of size 0
+    and raised CasADi's assertion "Dimensions must be non-negative, got -1-by-1"."""
+    obs = CrowdEnv().reset(0, "circle", 3, 0)
+    policy = make_controller(ControllerSpec(controller))
+    try:
+        policy.reset(obs)
+        assert policy.act(obs).accelerations.shape == (0, 2)
+    finally:
+        policy.close()
