@@ -57,12 +57,12 @@ class OrcaOracle:
         prediction NaN, and every step fell back to the shifted plan without a word."""
         for name in ("human_goals", "human_velocities"):
             values = np.asarray(getattr(obs, name), dtype=float)
-            bad = np.flatnonzero(~np.isfinite(values).all(axis=-1)) if values.ndim == 2 else []
+            bad = np.flatnonzero(~np.isfinite(values).all(axis=-1)) if values.ndim == 2 else np.zeros(0, int)
             if len(bad):
                 raise PredictorError(
-                    f"obs.{name} of human {bad[0]} is not finite ({values[bad[0]].tolist()}): the ORCA oracle "
-                    "moves the humans by the simulator's rules, from their goals and velocities; without "
-                    "them, predict with a model (--predictor constant_velocity, say)"
+                    f"obs.{name} of human {bad[0]} is not finite ({values[bad[0]].tolist()}): the ORCA "
+                    "oracle moves the humans by the simulator's rules, from their goals and velocities; "
+                    "without them, predict with a model (--predictor constant_velocity, say)"
                 )
         self._obs = obs
         self.env_config = env_config
