@@ -58,8 +58,10 @@ def episode_options(
             f"{max_humans}; make it with max_humans={chosen['n_humans']}"
         )
     if not 1 <= chosen["n_robots"] <= max_robots:
+        source = "the layout's robots" if "layout" in chosen else "n_robots"
+        more = f"; make it with max_robots={chosen['n_robots']}" if chosen["n_robots"] > max_robots else ""
         raise SimulationError(
-            f"options: n_robots must be in [1, max_robots={max_robots}], got {chosen['n_robots']}"
+            f"options: {source} must be in [1, max_robots={max_robots}], got {chosen['n_robots']}{more}"
         )
     chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
     return chosen

@@ -120,7 +120,10 @@ def _check_array(
         )
     got = "ragged rows" if array is None else f"shape {array.shape}"
     if array is not None and array.dtype.kind not in "iuf":
-        got += f" of {array.dtype} values"
+        fits = array.ndim == len(shape) and all(
+            w is None or w == g for w, g in zip(shape, array.shape, strict=True)
+        )
+        got = f"{array.dtype} values, not numbers" if fits else f"{got} of {array.dtype} values"
     raise PipelineError(f"{_named(controller)}: act() must return {field} {expected}, got {got}")
 
 

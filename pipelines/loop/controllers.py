@@ -165,6 +165,11 @@ def _build_plugin(
             f"controller {plugin.name!r}: a {plugin.cls.__name__} needs a non-empty str name and a predictor "
             f"(str or None), got name={name!r:.60}, predictor={predictor!r:.60}"
         )
+    if is_shipped(name):  # recorded as "cmpc", its episodes read as CMPC's in compare and review
+        raise PipelineError(
+            f"controller {plugin.name!r}: its name {name!r} is a shipped controller's, under which its "
+            "records would read as that one's: give the class a name of its own"
+        )
     if plugin.kind.uses_predictor and predictor != spec.predictor:
         raise PipelineError(
             f"controller {plugin.name!r}: a {plugin.cls.__name__} has uses_predictor = True: its predictor "

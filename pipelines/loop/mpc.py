@@ -264,7 +264,7 @@ class MPCController(SolversHeld):
     def _check_dt(self, obs: Observation) -> None:
         if abs(obs.dt - self.cfg.dt) > 1e-12:  # an episode of another simulator than the one built for
             raise PipelineError(
-                f"the simulator steps {obs.dt} s but the MPC plans with tau = {self.cfg.dt} s"
+                f"obs.dt is {obs.dt} s (the simulator's step) but the MPC plans with tau = {self.cfg.dt} s"
             )
 
     def act(self, obs: Observation) -> ControlOutput:

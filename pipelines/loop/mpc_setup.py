@@ -229,16 +229,28 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
             "RangeLimited(controller, math.inf))"
         )
     observed = human_observed(obs)
-    if observed is not None:  # a tracker's late arrivals: their padded rows become their tracks extended back
-        history = backfill(history, np.concatenate([np.full(obs.n_robots, obs_len), observed]))
+    tracks = None if observed is None else np.concatenate([np.full(obs.n_robots, obs_len), observed])
+    if tracks is not None:  # a tracker's late arrivals: their padded rows become their tracks extended back
+        history = backfill(history, tracks)
     lost = np.argwhere(~np.isfinite(history).all(axis=-1))
+    if lost.size and tracks is not None:  # a NaN inside a track made its backfill NaN too: name the cause
+        inside = lost[lost[:, 0] >= obs_len - tracks[lost[:, 1]]]
+        lost = inside if inside.size else lost
     if lost.size:  # a tracker's NaN rows before a track: the predictor's refusal spoke of a mask never given
         step, i = lost[0]
         who, _ = agent(obs, int(i))
+        if i < obs.n_robots:  # no track length covers a robot: it knows where it was
+            fix = "a robot's rows must hold its positions"
+        elif observed is not None:
+            track = int(observed[i - obs.n_robots])
+            fix = f"that row is within its track of {track} (obs.human_observed): fill it, or give a "
+            fix += "shorter track"
+        else:
+            fix = "give obs.human_observed, each human's track length (the rows before a track may then hold "
+            fix += "anything), or fill those rows with finite positions"
         raise PipelineError(
             f"obs.history[{step - obs_len}] holds a position that is not finite for {who} ({len(lost)} such "
-            "entries in the rows the predictor reads): give obs.human_observed, each human's track length "
-            "(the rows before a track may then hold anything), or fill those rows with finite positions"
+            f"entr{'y' if len(lost) == 1 else 'ies'} in the rows the predictor reads): {fix}"
         )
     return history, np.ones(history.shape[:2], dtype=bool)
 

@@ -151,6 +151,11 @@ UNEQUAL = (
             "options: n_humans=6 exceeds this environment's max_humans=5; make it with max_humans=6",
         ),
         ({"n_robots": 0}, "options: n_robots must be in [1, max_robots=3], got 0"),
+        ({"n_robots": 4}, "options: n_robots must be in [1, max_robots=3], got 4; make it with max_robots=4"),
+        (
+            {"layout": Layout(np.zeros((4, 2)), np.ones((4, 2)), np.zeros((0, 2)), np.zeros((0, 2)))},
+            "options: the layout's robots must be in [1, max_robots=3], got 4; make it with max_robots=4",
+        ),
         ({"humans": 3}, "unknown reset options ['humans']; choose from"),
         ({"scenario": "square"}, "unknown scenario 'square'"),
         (

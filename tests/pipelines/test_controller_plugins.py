@@ -212,6 +212,12 @@ def test_a_plugin_that_fails_to_build_is_one_line(capsys):
     register_controller_plugins([nameless])
     with pytest.raises(PipelineError, match="needs a non-empty str name and a predictor"):
         make_controller(ControllerSpec(nameless))
+    named = f"{TOYS}:NamedCmpc"
+    register_controller_plugins([named])
+    with pytest.raises(
+        PipelineError, match=r"its name 'cmpc' is a shipped controller's, under which its rec"
+    ):
+        make_controller(ControllerSpec(named))
 
 
 def test_a_plugin_whose_act_returns_no_control_output_is_one_line(capsys):
@@ -306,7 +312,7 @@ BROKEN_CONTRACTS = [
     ("PotentialText", "act() must return potential as a number or None, got 'x'"),
     (
         "BoolAccelerations",
-        "act() must return accelerations of shape (3, 2), a row per robot, got shape (3, 2) of bool values",
+        "act() must return accelerations of shape (3, 2), a row per robot, got bool values, not numbers",
     ),
     ("NaNAccelerations", "act() must return accelerations of finite numbers, got nan"),
     ("InfPlan", "act() must return plan of finite numbers, got inf"),

@@ -286,7 +286,9 @@ def test_an_episode_of_another_time_step_is_refused():
 
     controller = make_controller(ControllerSpec("cmpc"))
     obs = CrowdEnv(EnvConfig(dt=0.2)).reset(0, "circle", 2)
-    with pytest.raises(PipelineError, match=r"the simulator steps 0.2 s but the MPC plans with tau = 0.4 s"):
+    with pytest.raises(
+        PipelineError, match=r"obs.dt is 0.2 s \(the simulator.s step\) but the MPC plans with tau = 0.4 s"
+    ):
         controller.reset(obs)
 
 
@@ -298,7 +300,9 @@ def test_a_hand_built_observation_is_checked_at_every_step():
     controller = make_controller(ControllerSpec("cmpc", predictor="constant_velocity"))
     obs = CrowdEnv().reset(0, "circle", 3, n_robots=2)
     controller.reset(obs)
-    with pytest.raises(PipelineError, match=r"the simulator steps 0.1 s but the MPC plans with tau = 0.4 s"):
+    with pytest.raises(
+        PipelineError, match=r"obs.dt is 0.1 s \(the simulator.s step\) but the MPC plans with tau = 0.4 s"
+    ):
         controller.act(dataclasses.replace(obs, dt=0.1))
     wrong = {
         "robot_reached": np.array([True]),

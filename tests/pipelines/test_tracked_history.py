@@ -58,6 +58,25 @@ def test_nan_rows_before_a_track_are_read_with_its_length_and_named_without_it()
     assert np.isfinite(predictor_history(_with_nan_past(), 2)[0]).all()  # a predictor reading 2 rows: fine
 
 
+def test_nan_rows_inside_a_track_or_of_a_robot_are_named_as_such():
+    """Both were told to give obs.human_observed: a robot has no track length, and one was given already."""
+    with pytest.raises(PipelineError) as refused:
+        predictor_history(_with_nan_past(np.array([4])), 9)  # rows -9..-3 NaN, the track rows -4..-1
+    assert str(refused.value) == (
+        "obs.history[-4] holds a position that is not finite for human 0 (2 such entries in the rows the "
+        "predictor reads): that row is within its track of 4 (obs.human_observed): fill it, or give a "
+        "shorter track"
+    )
+    obs = _late_human(50)
+    obs.history[-5, 0] = np.nan
+    with pytest.raises(PipelineError) as refused:
+        predictor_history(obs, 9)
+    assert str(refused.value) == (
+        "obs.history[-5] holds a position that is not finite for robot 0 (1 such entry in the rows the "
+        "predictor reads): a robot's rows must hold its positions"
+    )
+
+
 def test_a_current_position_that_is_not_finite_is_said_so():
     from pipelines.loop.mpc_setup import check_history
 

@@ -90,6 +90,12 @@ class Nameless(StraightLine):
     name = ""
 
 
+class NamedCmpc(StraightLine):
+    """Builds an object named as the shipped CMPC: make_controller refuses it."""
+
+    name = "cmpc"
+
+
 class Predicting(StraightLine):
     """Plans with the run's predictor (``uses_predictor``), as the guide says: names ``spec.predictor``."""
 
