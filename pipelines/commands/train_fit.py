@@ -38,12 +38,12 @@ def run_training(
 
     optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
     _prepare_process(args.seed)
-    module, best_path, elapsed = _fit(args, net_config, name, out, data_files[0], settings, optim)
+    module, best_path, elapsed, limited = _fit(args, net_config, name, out, data_files[0], settings, optim)
     metrics = out / f"{name}.metrics.json"
     # gone before the weights change: a run stopped before its new metrics are written is visibly unfinished
     # (--resume then finishes it), never new weights beside the metrics of the old ones
     metrics.unlink(missing_ok=True)
-    weights, extra = _save_best(args, module, name, out, best_path, optim)
+    weights, extra = _save_best(args, module, name, out, best_path, optim, limited)
     top_k = 20 if model_kind(args.model).adversarial else None
     summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k, evaluated)
     text = json.dumps(plain(summary), indent=2, allow_nan=False) + "\n"  # strict JSON, as every record's
@@ -84,9 +84,9 @@ def _fit(
     files: dict,
     settings: dict[str, Any],
     optim: Any,
-) -> tuple[Any, str, float]:
+) -> tuple[Any, str, float, int | None]:
     """Fits (or resumes) the run; returns the module holding the best epoch's weights, that checkpoint's
-    path and the fit's wall time."""
+    path, the fit's wall time and the batch limit that cut its epochs (``_limited``)."""
     import torch
 
     from predictors.data.datamodule import TrajnetDataModule
@@ -133,7 +133,18 @@ def _fit(
     best_path = best.best_model_path or str(last)
     state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
-    return module, best_path, elapsed
+    return module, best_path, elapsed, _limited(args.limit_batches, trainer)
+
+
+def _limited(limit: int | None, trainer: Any) -> int | None:
+    """``--limit-batches`` where it cut an epoch's training or validation batches, else None: at or above
+    both counts the weights are the unlimited run's to the bit, and were recorded (and added to the zoo) as
+    a quick check, their val_ade "over 100000 validation batches" of 18."""
+    if limit is None:
+        return None
+    val = trainer.val_dataloaders
+    loaders = [trainer.train_dataloader, *(val if isinstance(val, list | tuple) else [val])]
+    return limit if any(loader is None or limit < len(loader) for loader in loaders) else None
 
 
 @contextlib.contextmanager
@@ -177,7 +188,13 @@ def _check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> N
 
 
 def _save_best(
-    args: argparse.Namespace, module: Any, name: str, out: Path, best_path: str, optim: Any
+    args: argparse.Namespace,
+    module: Any,
+    name: str,
+    out: Path,
+    best_path: str,
+    optim: Any,
+    limited: int | None,
 ) -> tuple[Path, dict[str, Any]]:
     """Writes OUT/NAME.pt + NAME.json, each in one rename (written in a temporary folder in OUT first: an
     interrupted save leaves no half file); returns the weights' path and the training record they carry."""
@@ -197,7 +214,7 @@ def _save_best(
             "batching": args.batching,  # how the scenes were cut into batches (predictors.data.batching)
             "pred_len": module.pred_len,  # steps it learned to predict: a longer MPC horizon extrapolates
             # only when set: a checkpoint trained on every batch reads as before
-            **({} if args.limit_batches is None else {"limit_batches": args.limit_batches}),
+            **({} if limited is None else {"limit_batches": limited}),
             "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
         }
     }

@@ -49,6 +49,9 @@ GAUSSIAN_WIDTH: Final[int] = 5  # mean (2), sigmas (2), correlation: what losses
 # The checks' synthetic batch: B and N differ, so a state laid out (N, B, ...) cannot pass as (B, N, ...).
 CHECK_BATCH: Final[int] = 2
 CHECK_AGENTS: Final[int] = 3
+# The step contract is checked again with this many agents: a net that fits only N = 3 (an nn.Linear across
+# the agents) passed, and failed in training's first real batch in a 75-line traceback.
+OTHER_AGENTS: Final[int] = 5
 TRAINING_FORWARD: Final[str] = (
     "forward(positions, mask, obs_len, pred_len, *, teacher_forcing) -> (outputs, predicted)"
 )
@@ -69,7 +72,11 @@ class StepNet(Protocol):
 
 
 def synthetic_scene(
-    length: int, *, dtype: torch.dtype = torch.float32, device: torch.device | None = None
+    length: int,
+    *,
+    agents: int = CHECK_AGENTS,
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``(positions (B, length, N, 2), mask (B, length, N))``: agents walking straight lines within a couple
     of metres of each other (pooling range), all observed. Deterministic: checking a net draws no random
@@ -78,8 +85,10 @@ def synthetic_scene(
     # their count of changes, which inference tensors do not keep (a RuntimeError on loading a zoo model).
     with torch.inference_mode(False):
         steps = torch.arange(length, dtype=dtype, device=device)[None, :, None, None] * DT
-        start = torch.tensor([[-1.5, 0.3], [1.5, -0.2], [0.2, -1.6]], dtype=dtype, device=device)
-        velocity = torch.tensor([[0.9, 0.0], [-0.9, 0.1], [0.1, 0.8]], dtype=dtype, device=device)
+        starts = [[-1.5, 0.3], [1.5, -0.2], [0.2, -1.6], [-0.4, 1.7], [2.0, 1.1]][:agents]
+        velocities = [[0.9, 0.0], [-0.9, 0.1], [0.1, 0.8], [0.2, -0.9], [-0.7, -0.5]][:agents]
+        start = torch.tensor(starts, dtype=dtype, device=device)
+        velocity = torch.tensor(velocities, dtype=dtype, device=device)
         shift = torch.arange(CHECK_BATCH, dtype=dtype, device=device)[:, None, None, None] * 0.1
         positions = start + steps * velocity + shift
         return positions, torch.ones(positions.shape[:3], dtype=torch.bool, device=device)
@@ -101,7 +110,7 @@ def _probing(net: torch.nn.Module) -> Iterator[None]:
             module.training = training
 
 
-def _call(where: str, what: str, function: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+def _call(where: str, what: str, agents: int, function: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     """``function(*args, **kwargs)``; a net that fails on a well-formed batch is the net's fault: one line."""
     try:
         return function(*args, **kwargs)
@@ -110,7 +119,7 @@ def _call(where: str, what: str, function: Callable[..., Any], *args: Any, **kwa
     except Exception as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise PredictorError(
-            f"{where}: {what} failed on a synthetic batch (B={CHECK_BATCH}, N={CHECK_AGENTS}): "
+            f"{where}: {what} failed on a synthetic batch (B={CHECK_BATCH}, N={agents}): "
             f"{type(exc).__name__}: {first[:200]} {SEE}"
         ) from None
 
@@ -129,6 +138,7 @@ def head_type_of(net: object, where: str) -> object:
 def _unchanged(
     where: str,
     what: str,
+    agents: int,
     arguments: dict[str, torch.Tensor],
     function: Callable[..., Any],
     *args: Any,
@@ -139,7 +149,7 @@ def _unchanged(
     centre`` in ``encode`` changed the caller's tensor, in training the batch itself, so that a net trained
     and was validated on moved scenes without a word."""
     before = {name: tensor._version for name, tensor in arguments.items()}
-    result = _call(where, what, function, *args, **kwargs)
+    result = _call(where, what, agents, function, *args, **kwargs)
     changed = [name for name, tensor in arguments.items() if tensor._version != before[name]]
     if changed:
         raise PredictorError(
@@ -186,7 +196,7 @@ def _shape(value: Any) -> str:
     return str(tuple(value.shape)) if isinstance(value, torch.Tensor) else type(value).__name__
 
 
-def _split(result: Any, where: str, method: str) -> tuple[list[torch.Tensor], Any]:
+def _split(result: Any, where: str, method: str, agents: int) -> tuple[list[torch.Tensor], Any]:
     """``(*state, out)`` of what ``method`` returned, each state tensor ``(B, N, ...)``."""
     if not (isinstance(result, tuple | list) and len(result) >= 2):
         got = f"{len(result)} values" if isinstance(result, tuple | list) else type(result).__name__
@@ -196,10 +206,10 @@ def _split(result: Any, where: str, method: str) -> tuple[list[torch.Tensor], An
         )
     *state, out = result
     for i, tensor in enumerate(state):
-        if not isinstance(tensor, torch.Tensor) or tuple(tensor.shape[:2]) != (CHECK_BATCH, CHECK_AGENTS):
+        if not isinstance(tensor, torch.Tensor) or tuple(tensor.shape[:2]) != (CHECK_BATCH, agents):
             raise PredictorError(
                 f"{where}: {method}'s state tensor {i} must be of shape (B, N, ...), got {_shape(tensor)} "
-                f"for B={CHECK_BATCH}, N={CHECK_AGENTS} {SEE}"
+                f"for B={CHECK_BATCH}, N={agents} {SEE}"
             )
     return state, out
 
@@ -218,21 +228,27 @@ def check_step_contract(net: torch.nn.Module, where: str, *, obs_len: int) -> No
     state tensor ``(B, N, ...)``, ``decode_step`` handing back the state it was given in the same shapes and
     dtypes, ``out`` ``(B, N, K)`` in the positions' dtype with K the head's width."""
     head = _head_type(net, where)
+    for agents in (CHECK_AGENTS, OTHER_AGENTS):
+        _check_steps(net, where, obs_len, head, agents)
+
+
+def _check_steps(net: torch.nn.Module, where: str, obs_len: int, head: str, agents: int) -> None:
+    """``check_step_contract`` on a synthetic batch of ``agents`` agents."""
     dtype, device = _dtype_and_device(net)
-    positions, mask = synthetic_scene(obs_len, dtype=dtype, device=device)
-    lead = (CHECK_BATCH, CHECK_AGENTS)
+    positions, mask = synthetic_scene(obs_len, agents=agents, dtype=dtype, device=device)
+    lead = (CHECK_BATCH, agents)
     step_net: Any = net  # its encode and decode_step are no nn.Module methods mypy knows
     with _probing(net):
         arguments = {"positions": positions, "mask": mask}
-        encoded = _unchanged(where, "encode", arguments, step_net.encode, positions, mask)
-        state, out = _split(encoded, where, "encode")
+        encoded = _unchanged(where, "encode", agents, arguments, step_net.encode, positions, mask)
+        state, out = _split(encoded, where, "encode", agents)
         _check_head(out, lead, head, dtype, where, "encode's out")
         # copies, not views of positions: a view shares its base's count of changes, and would be named too
         inputs = (positions[:, -2].clone(), positions[:, -1].clone(), mask[:, -1].clone())
         arguments = {f"state tensor {i}": t for i, t in enumerate(state)}
         arguments.update(zip(("prev", "cur", "neighbours"), inputs, strict=True))
-        stepped = _unchanged(where, "decode_step", arguments, step_net.decode_step, *state, *inputs)
-        new_state, new_out = _split(stepped, where, "decode_step")
+        stepped = _unchanged(where, "decode_step", agents, arguments, step_net.decode_step, *state, *inputs)
+        new_state, new_out = _split(stepped, where, "decode_step", agents)
         _check_head(new_out, lead, head, dtype, where, "decode_step's out")
     before = [(tuple(t.shape), t.dtype) for t in state]
     after = [(tuple(t.shape), t.dtype) for t in new_state]
@@ -284,7 +300,7 @@ def check_training_forward(net: torch.nn.Module, where: str, *, obs_len: int, pr
         ) from None
     with _probing(net):
         arguments = {"positions": positions, "mask": mask}
-        result = _unchanged(where, "forward", arguments, net, *args, teacher_forcing=True)
+        result = _unchanged(where, "forward", CHECK_AGENTS, arguments, net, *args, teacher_forcing=True)
     if not (isinstance(result, tuple | list) and len(result) == 2):
         raise PredictorError(
             f"{where}: forward must return (outputs, predicted), got {type(result).__name__} {SEE}"

@@ -847,12 +847,15 @@ def test_limit_batches_trains_on_the_first_batches_and_is_recorded(tmp_path, cap
         return torch.load(tmp_path / out / "checkpoints" / "last.ckpt", weights_only=False)["global_step"]
 
     assert (steps("all"), steps("limited", "--limit-batches", "1")) == (4, 2)
+    assert steps("unlimited", "--limit-batches", "2") == 4  # the file's two batches an epoch: nothing cut
 
     def training(out: str) -> dict:
         (weights,) = (tmp_path / out).glob("*.pt")
         return json.loads(weights.with_suffix(".json").read_text())["training"]
 
     assert training("limited")["limit_batches"] == 1 and "limit_batches" not in training("all")
+    # as the whole run to the bit, not a quick check (zoo add said "trained on 100000 batches an epoch")
+    assert "limit_batches" not in training("unlimited")
     assert training("all")["pred_len"] == 12  # what the MPC's horizon note compares with
     capsys.readouterr()
     resumed = [*args, "--epochs", "3", "--out", str(tmp_path / "limited"), "--no-progress", "--resume"]

@@ -182,3 +182,15 @@ class NoDefaults(ToyNet):
     """``ToyNet`` under a config that ``train`` cannot build without ``--net-config``."""
 
     config_class = NoDefaultsConfig
+
+
+class ThreeAgentsOnly(ToyNet):
+    """Mixes the agents with an ``nn.Linear(3, 3)``: it fits a batch of 3 agents and no other."""
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        self.mix = nn.Linear(3, 3)
+
+    def decode_step(self, h, prev, cur, neighbours):
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, self.mix(out.transpose(1, 2)).transpose(1, 2)

@@ -77,6 +77,11 @@ BAD_STEPS = [
         "encode's out must be of shape (B, N, 5) (mean step, sigmas, correlation) for a 'gaussian' head, "
         "got (2, 3, 2) for B=2, N=3",
     ),
+    (  # passed the check of 3 agents and failed in training's first batch, in a 75-line traceback
+        "ThreeAgentsOnly",
+        "encode failed on a synthetic batch (B=2, N=5): RuntimeError: mat1 and mat2 shapes cannot be "
+        "multiplied (4x5 and 3x3)",
+    ),
 ]
 
 
