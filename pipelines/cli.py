@@ -110,11 +110,25 @@ class OneLineParser(argparse.ArgumentParser):
     usage block (which for a long option list is many lines before the one that matters). Subparsers are of
     the class of their parent (argparse's ``add_subparsers`` default), so every level errs the same way."""
 
+    given: list[str] = []  # the command line being parsed (main's argv), for the hint below
+
     def error(self, message: str) -> NoReturn:
-        if message.startswith("unrecognized arguments:") and "--plugin" in message.split():
-            # `crowdmpc evaluate --plugin m:C ...`: an option of crowdmpc itself, given after the command
+        after = _plugin_after_command(self.prog, OneLineParser.given)
+        if (message.startswith("unrecognized arguments:") and "--plugin" in message.split()) or (
+            after and "is a plugin that is not registered" in message
+        ):
+            # `crowdmpc evaluate --plugin m:C ...`: an option of crowdmpc itself, given after the command (a
+            # --model naming the plugin was refused first, as not registered, without the hint)
             message += " (--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)"
         self.exit(2, f"{self.prog}: error: {message}; see '{self.prog} --help'\n")
+
+
+def _plugin_after_command(prog: str, given: list[str]) -> bool:
+    """Whether ``--plugin`` comes after the command of subparser ``prog`` ("crowdmpc train") in ``given``."""
+    command = prog.split()[-1]
+    if command not in given or "--plugin" not in given:
+        return False
+    return given.index("--plugin") > given.index(command)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -218,6 +232,7 @@ def _main(argv: list[str] | None) -> int:
         print(f"crowdmpc: error: {exc}", file=sys.stderr)
         return 2
     parser = build_parser()
+    OneLineParser.given = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:  # usage, as a missing argument is: on stderr, not stdout
         parser.print_help(sys.stderr)

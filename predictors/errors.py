@@ -41,10 +41,21 @@ class UnknownPredictor(PredictorError):
     def __init__(self, name: str, choices: list[str]):
         self.name = name
         self.choices = choices
-        super().__init__(f"unknown predictor {short_repr(name)}; choose from {choices}")
+        super().__init__(f"unknown predictor {short_repr(name)}; choose from {choices}{_unknown_hint(name)}")
 
     def __reduce__(self) -> tuple[type, tuple[object, ...]]:
         return type(self), (self.name, self.choices)  # see DatasetFormatError.__reduce__
+
+
+def _unknown_hint(name: object) -> str:
+    """What a name of the wrong kind needs: a weights file, or a net class, is no predictor's name yet."""
+    if not isinstance(name, str):
+        return ""
+    if name.endswith(".pt") or "/" in name:
+        return " (a weights file joins the zoo first: `crowdmpc zoo add FILE.pt`, then its name)"
+    if ":" in name:
+        return " (module:Class names a net to train, not a trained model: train it, zoo add it, use its name)"
+    return ""
 
 
 class CheckpointMismatch(PredictorError):

@@ -148,6 +148,11 @@ def _evaluate(args: argparse.Namespace) -> int:
     check_writable(args.json, "--json", json_only=True)
     _choose_files(args)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
+    from pipelines.commands.simulate_checks import plugin_code_note, quick_check_note
+
+    # before the load: an edited plugin whose weights no longer fit said why only in simulate
+    for note in filter(None, (plugin_code_note(args.predictor), quick_check_note(args.predictor))):
+        print(note, file=sys.stderr)
     predictor = load_predictor(args.predictor)
     progress = False if args.no_progress else None  # None: a bar on a terminal only
     if args.test is not None:
@@ -185,10 +190,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             f"chooses the files scored, so these are not {args.protocol!r} results for this model",
             file=sys.stderr,
         )
-    from pipelines.commands.simulate_checks import plugin_entry_note
-
-    notes = [plugin_entry_note(args.predictor, entry), *seen_notes(args.predictor, entry, files[args.split])]
-    for note in filter(None, notes):
+    for note in filter(None, seen_notes(args.predictor, entry, files[args.split])):
         print(note, file=sys.stderr)
     print(format_table(result))
     if args.top_k is not None and result["top_k"] is None:

@@ -64,8 +64,8 @@ def _parity(predictor, args: argparse.Namespace):
 def _notes(predictor, args: argparse.Namespace) -> list[str]:
     """What the saved function is that its printout would not say: a horizon past what the net was trained
     to predict (its later steps extrapolate, as ``simulate`` notes for the MPC), a generator's zero noise
-    (the function is one deterministic future of many), a plugin net whose module changed since training."""
-    from pipelines.commands.simulate_checks import plugin_code_note
+    (the function is one deterministic future of many); a plugin net whose module changed since training is
+    said before the load (``run``)."""
     from predictors.base import DT
     from predictors.registry import trained_prediction_length
     from predictors.social_lstm_predictors import SocialGANPredictor
@@ -82,8 +82,7 @@ def _notes(predictor, args: argparse.Namespace) -> list[str]:
             f"note: {args.name!r} is a generator: the function is its zero-noise future, as the MPC plans on "
             "it; its sampled futures (SocialGANPredictor.sample) stay in torch"
         )
-    plugin = plugin_code_note(args.name)
-    return notes + ([plugin] if plugin else [])
+    return notes
 
 
 def _check_replaces_an_export(out: Path) -> None:
@@ -159,6 +158,11 @@ def run(args: argparse.Namespace) -> int:
     check_outside_the_zoos(args.out, "--out", "the export")
     check_writable(args.out, "--out")  # before the export, not when CasADi fails to open it afterwards
     _check_replaces_an_export(args.out)
+    from pipelines.commands.simulate_checks import plugin_code_note, quick_check_note
+
+    # before the load: an edited plugin whose weights no longer fit said why only in simulate
+    for note in filter(None, (plugin_code_note(args.name), quick_check_note(args.name))):
+        print(note, file=sys.stderr)
     predictor = load_predictor(args.name)
     if (args.humans + args.robots) * args.horizon >= LONG_EXPORT and args.name not in PREDICTORS:
         print(  # one CasADi call builds and checks it: Ctrl-C and kill -TERM wait for it to return

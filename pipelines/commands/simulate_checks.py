@@ -215,6 +215,24 @@ def plugin_code_note(predictor: str | None) -> str | None:
     return None if located is None else plugin_entry_note(predictor, located.entry)
 
 
+def quick_check_note(predictor: str | None) -> str | None:
+    """A line for a zoo model trained with ``train --limit-batches`` cutting its epochs (``zoo.quick_check``):
+    ``zoo add`` and ``zoo list`` said so, and simulate, sweep and evaluate ran it beside trained models
+    without a word. None otherwise."""
+    from pipelines.commands.zoo import quick_check
+    from predictors.registry import PREDICTORS
+    from predictors.zoo import locate
+
+    if not predictor or predictor in PREDICTORS:
+        return None
+    located = locate(predictor)
+    limit = None if located is None else quick_check(located.entry.training)
+    if limit is None:
+        return None
+    batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
+    return f"note: {predictor!r} trained on {batches}: a quick check, not a trained model (zoo list: *)"
+
+
 def plugin_entry_note(predictor: str, entry: ZooEntry | None) -> str | None:
     """``plugin_code_note`` of the zoo entry ``predictor`` loads, already located (None: none)."""
     from pipelines.plugins import plugin_code

@@ -27,6 +27,17 @@ def check_protocol_label(label: str | None, summary: dict, metrics_path: Path) -
         )
 
 
+def _reads_as_weights(weights: Path) -> bool:
+    """Whether ``weights`` loads as a torch file of tensors (``weights_only``, as every load here)."""
+    import torch
+
+    try:
+        torch.load(weights, map_location="cpu", weights_only=True)
+    except Exception:  # whatever a damaged file makes torch raise
+        return False
+    return True
+
+
 def check_metrics_describe(weights: Path, metrics_path: Path, summary: dict) -> None:
     """Refuse a metrics file that `crowdmpc train` wrote for other weights: the zoo entry would list metrics
     of other weights. Train records the weights' sha256 (since this check), and the checkpoint's name, model
@@ -41,6 +52,12 @@ def check_metrics_describe(weights: Path, metrics_path: Path, summary: dict) -> 
             raise PipelineError(f'{metrics_path}: "{key}" must be a string (the checkpoint\'s {key})')
     recorded = summary.get("weights_sha256")
     if recorded is not None and weights.is_file() and recorded != sha256_file(weights):
+        if not _reads_as_weights(weights):  # a truncated file was told to finish its run with --resume
+            raise PipelineError(
+                f"{weights} is not the file `crowdmpc train` wrote ({metrics_path} records sha256 "
+                f"{recorded[:12]}…) and does not read as weights (truncated, or not a torch file): add the "
+                "file train wrote, or train again"
+            )
         raise PipelineError(
             f"{metrics_path} holds the metrics of weights with sha256 {recorded[:12]}…, not of {weights} "
             f"({sha256_file(weights)[:12]}…); pass the NAME.metrics.json `crowdmpc train` wrote beside these "

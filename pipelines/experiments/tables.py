@@ -79,7 +79,8 @@ def _best(values: Sequence[float], higher_is_better: bool) -> set[int]:
 
 def _table_notes(experiment: Experiment, columns: Sequence[CellSummary], world_line: str) -> str:
     """The paragraph above the table: how many episodes, which predictors and conventions, how to read it."""
-    predictors = sorted({s.cell.spec.predictor_name or "none" for s in columns})
+    # in the columns' order (--predictors'), each once: sorted, the words and the columns read differently
+    predictors = list(dict.fromkeys(s.cell.spec.predictor_name or "none" for s in columns))
     counts = sorted({s.episodes for s in columns})
     per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
     notes = [

@@ -106,6 +106,14 @@ def test_plugin_after_the_command_says_where_it_goes(capsys):
         "crowdmpc: error: unrecognized arguments: --plugin mymod:MyNet (--plugin goes before COMMAND: "
         "crowdmpc --plugin MODULE:CLASS COMMAND ...); see 'crowdmpc --help'\n"
     )
+    # `train --plugin X --model X`: --model refused X as not registered first, without the hint
+    toy = "tests.plugins.toy_predictor:ToyNet"
+    with pytest.raises(SystemExit) as done:
+        main(["train", "--plugin", toy, "--model", toy, "--epochs", "1"])
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"crowdmpc train: error: argument --model: model {toy!r} is a plugin that is not")
+    assert "(--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)" in err
 
 
 # ----------------------------------------------------------------------------------------------------------

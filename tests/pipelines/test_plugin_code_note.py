@@ -29,3 +29,33 @@ def test_the_same_file_or_no_record_says_nothing(monkeypatch):
     _model(monkeypatch, "a" * 64, None)  # not registered here: loading it is refused elsewhere
     assert simulate_checks.plugin_code_note("my_net_eth") is None
     assert simulate_checks.plugin_code_note(None) is None
+
+
+def test_a_quick_check_is_noted_where_it_runs(monkeypatch):
+    """`zoo add` and `zoo list` said so; simulate, sweep, evaluate and export ran it beside trained models."""
+    entry = SimpleNamespace(model="mine:Net", training={"limit_batches": 20})
+    monkeypatch.setattr("predictors.zoo.locate", lambda name: SimpleNamespace(entry=entry))
+    assert simulate_checks.quick_check_note("my_net_eth") == (
+        "note: 'my_net_eth' trained on 20 batches an epoch (train --limit-batches 20): a quick check, not a "
+        "trained model (zoo list: *)"
+    )
+    entry.training = {}
+    assert simulate_checks.quick_check_note("my_net_eth") is None
+    assert simulate_checks.quick_check_note("constant_velocity") is None  # registered: no zoo entry read
+
+
+def test_export_says_a_changed_plugin_before_a_load_that_fails(monkeypatch, tmp_path, capsys):
+    """An edited plugin whose weights no longer fit was refused ("weights do not fit the net") with the
+    note that explains it printed only after a successful load."""
+    from pipelines.cli import main
+    from pipelines.errors import PipelineError
+
+    monkeypatch.setattr(simulate_checks, "plugin_code_note", lambda name: "note: its file is now bbbb")
+
+    def refuse(name):
+        raise PipelineError("weights do not fit the net")
+
+    monkeypatch.setattr("predictors.registry.load_predictor", refuse)
+    assert main(["export", "my_net_eth", "--out", str(tmp_path / "x.casadi")]) == 2
+    err = capsys.readouterr().err
+    assert err.index("note: its file is now bbbb") < err.index("weights do not fit the net"), err

@@ -311,6 +311,14 @@ def test_zoo_add_refuses_the_metrics_of_other_weights(trained, tmp_path, monkeyp
     metrics.write_text(json.dumps({k: v for k, v in first.items() if k not in old}))
     assert main(["zoo", "add", str(out / "walker.pt")]) == 2
     assert "holds the metrics of epochs 1, not of" in capsys.readouterr().err
+    # a truncated weights file was told to finish its run with train --resume
+    metrics.write_text(json.dumps(first))
+    weights = out / "walker.pt"
+    weights.write_bytes(weights.read_bytes()[:1500])
+    assert main(["zoo", "add", str(weights)]) == 2
+    err = capsys.readouterr().err
+    assert f"{weights} is not the file `crowdmpc train` wrote" in err and "does not read as weights" in err
+    assert "--resume" not in err
 
 
 def test_the_data_record_names_every_file(tmp_path):

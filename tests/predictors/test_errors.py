@@ -36,3 +36,16 @@ def test_an_error_survives_a_trip_through_pickle(error):
     assert type(back) is type(error)
     assert str(back) == str(error)
     assert vars(back) == vars(error)
+
+
+def test_an_unknown_predictor_of_the_wrong_kind_says_what_it_needs():
+    """A weights file or a net class given as --predictor was only "unknown", as a typo is."""
+    assert str(UnknownPredictor("runs/x/net.pt", ["constant_velocity"])).endswith(
+        "(a weights file joins the zoo first: `crowdmpc zoo add FILE.pt`, then its name)"
+    )
+    assert str(UnknownPredictor("mine:Net", ["constant_velocity"])).endswith(
+        "(module:Class names a net to train, not a trained model: train it, zoo add it, use its name)"
+    )
+    assert str(UnknownPredictor("socal_lstm_eth", ["social_lstm_eth"])) == (
+        "unknown predictor 'socal_lstm_eth'; choose from ['social_lstm_eth']"
+    )
