@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from mpc.config import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
 from pipelines.commands.output_paths import output_arg
@@ -42,8 +43,12 @@ def register(subparsers) -> None:
     )
     parser.add_argument("name", help="registered predictor or model-zoo name")
     parser.add_argument("--out", required=True, type=output_arg, help="output file (.casadi)")
-    parser.add_argument("--humans", type=int, default=7, help="number of humans N_h (default 7)")
-    parser.add_argument("--robots", type=int, default=3, help="number of robots M (default 3)")
+    parser.add_argument(
+        "--humans", type=int, default=7, help=f"number of humans N_h, 1..{MAX_HUMANS} (default 7)"
+    )
+    parser.add_argument(
+        "--robots", type=int, default=3, help=f"number of robots M, 0..{MAX_ROBOTS} (default 3)"
+    )
     parser.add_argument(
         "--horizon", type=int, default=4, help="prediction horizon H, 1..100 (default 4, Table I)"
     )
@@ -132,7 +137,6 @@ LONG_EXPORT = 300
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
     from predictors.registry import PREDICTORS, load_predictor
 
     # Checked before anything is loaded or built; the agent counts are the simulator's (crowdsim.scenarios).
