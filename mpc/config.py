@@ -240,6 +240,10 @@ class MPCConfig:
     # the joint NLP over their two plans, the others' fixed, kept when F drops by epsilon (mpc/dmpc_pairs.py:
     # a late robot in front of a parked teammate is an equilibrium no single best response leaves).
     dmpc_pairs: bool = False
+    # DMPC: after the loop (and the pair moves), each pair of robots whose plans come within d_min of each
+    # other solves the same joint NLP over its two plans, closest first, kept when F drops by epsilon: among
+    # people, two robots can stop at an equilibrium that plans them into each other (mpc/dmpc_pairs.py).
+    dmpc_conflicts: bool = False
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand
     # into the NLP's scalar graph, first-order for a network (mpc/coupled.py has the measurements).
@@ -270,7 +274,7 @@ class MPCConfig:
     def __post_init__(self):
         self._plain_scalars()
         self._check_numbers()
-        for name in ("warm_start", "multi_start", "jit", "dmpc_pairs"):
+        for name in ("warm_start", "multi_start", "jit", "dmpc_pairs", "dmpc_conflicts"):
             if not isinstance(getattr(self, name), bool):
                 raise MPCConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
         for name, choices in _CHOICES.items():

@@ -70,7 +70,8 @@ solve the joint NLP over their two plans, kept when F falls by epsilon; the equi
 front of a parked teammate, which no best response leaves, falls to it. 12 robots 44 -> 56 % (fixed goals),
 82 -> 88 % (slots); 3, 5, 6 robots 566 -> 568 successes of 600 (50 episodes a row), with per-pair
 flocking. With per-robot flocking they add nothing (12 robots 92 % either way on fixed goals, 94 % without
-against 90 % with on slots, at 1.7x the p99 step), so many_robots.toml leaves them off.
+against 90 % with on slots, at 1.7x the p99 step), so many_robots.toml leaves them off. With
+``dmpc_conflicts`` two robots whose final plans run into each other move the same way (mpc/dmpc_pairs.py).
 
 Parallelism (``dmpc_parallel="threads"``): ``mpc/parallel.py`` has the mechanism and its measurements. The
 local parameters of a step are built once (mpc/local_params.py), the C_i checks in one call (LocalNLP.costs).
@@ -120,7 +121,7 @@ class DMPC:
         self._keeper = PlanKeeper(cfg, self.local, n_robots)
         # F_t of the final plan (the common currency of CMPC and DMPC) and the heading start's test; solved
         # only by the pair moves, so its solver is built only for them.
-        self.joint = JointNLP(cfg, n_robots, n_humans, solver=cfg.dmpc_pairs)
+        self.joint = JointNLP(cfg, n_robots, n_humans, solver=cfg.dmpc_pairs or cfg.dmpc_conflicts)
         self._pool: ThreadPoolExecutor | None = None  # made on first use with dmpc_parallel="threads"
         # Threads besides the caller's for the local solves: one per further core, at most one per robot.
         self._helpers = max(1, min(n_robots, cores()) - 1)
@@ -128,7 +129,7 @@ class DMPC:
     def build_all(self) -> None:
         """Build every solver instance a solve may call, not only those the first step needs."""
         self.local.build_all()
-        if self.cfg.dmpc_pairs:
+        if self.cfg.dmpc_pairs or self.cfg.dmpc_conflicts:
             self.joint.build_all()
 
     def close(self) -> None:
@@ -255,7 +256,7 @@ class DMPC:
             lam_g=lam_g,
             solver_iterations=solver_iterations,
         )
-        return pair_moves(self.joint, data, result) if cfg.dmpc_pairs else result
+        return pair_moves(self.joint, data, result) if cfg.dmpc_pairs or cfg.dmpc_conflicts else result
 
     def _update(
         self,

@@ -1,5 +1,6 @@
-"""A stalled robot and the teammate in its way move together (``MPCConfig.dmpc_pairs``): DMPC's way out of the
-equilibria that no single robot can leave.
+"""A stalled robot and the teammate in its way move together (``MPCConfig.dmpc_pairs``), and so do two robots
+whose plans run into each other (``MPCConfig.dmpc_conflicts``): DMPC's way out of the equilibria that no
+single robot can leave.
 
 Why. With twelve robots and fixed goals (docs/examples/many_robots.toml), most failed DMPC episodes are lost
 at the arrival, not in the crossing: the flock is half-way at 16.2 s in them against 14.0 s in the successes
@@ -18,18 +19,28 @@ single-robot steps Algorithm 2 takes; the paper's DMPC (``dmpc_pairs = False``, 
 
 Measured with the paper's per-pair flocking weight: 12 robots 44 -> 56 % (fixed goals), 82 -> 88 % (slots).
 With ``flocking_weight="per_robot"`` it adds nothing measurable at 5, 6 or 12 robots (mpc/dmpc.py).
+
+Conflicts. The loop can end on plans that bring two robots within d_min of each other: under the paper's
+Jacobi update each plan answers plans replaced meanwhile, and among people an epsilon-Nash point can plan a
+squeezed pair into each other. After the stalled pairs, each pair whose plans come within d_min, closest
+first, solves the same joint NLP from the plans and from the pair braking (from colliding plans the first
+solve stayed where it was), the better kept when F falls by epsilon. Robots trading places (4 and 8, Jacobi):
+contact in 1 of 10 episodes each -> none, the closest 0.33 / 0.53 -> 1.03 / 0.91 m; Table II's conditions:
+3 of 100 episodes differ (docs/results.md, "DMPC conflict moves").
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
 from mpc.cmpc import IBRResult
 from mpc.dmpc_keep import accept
-from mpc.dynamics import rollout_numpy
+from mpc.dynamics import braking, rollout_numpy
 from mpc.nlp import JointNLP
+from mpc.solvers import better
 from mpc.step_data import StepData
 
 
@@ -60,25 +71,95 @@ def blocker(data: StepData, i: int) -> int | None:
     return None if not np.isfinite(distances[j]) else j
 
 
+def conflicts(data: StepData, positions: np.ndarray, d_min: float) -> list[tuple[int, int]]:
+    """Pairs ``(i, j)``, ``i < j``, of active robots whose planned positions ``(M, H, 2)`` come closer than
+    ``d_min`` at some step of the horizon, the closest first (ties in index order)."""
+    active = np.asarray(data.active, dtype=bool)
+    i, j = np.triu_indices(data.n_robots, k=1)
+    gaps = np.linalg.norm(positions[i] - positions[j], axis=-1).min(axis=1)
+    near = np.flatnonzero((gaps < d_min) & active[i] & active[j])
+    near = near[np.argsort(gaps[near], kind="stable")]
+    return [(int(i[k]), int(j[k])) for k in near]
+
+
+class _Moves(NamedTuple):
+    """The plans as the pair moves leave them, and what the moves took."""
+
+    accels: np.ndarray
+    potential: float
+    lam_x: np.ndarray | None
+    lam_g: np.ndarray | None
+    solves: int
+    iterations: int
+    kept: bool
+
+
 def pair_moves(joint: JointNLP, data: StepData, result: IBRResult) -> IBRResult:
-    """``result`` after the pair moves of its stalled robots (module docstring); unchanged when nothing was
-    solved, nobody is stalled or no pair lowers F by epsilon."""
+    """``result`` after the pair moves (module docstring): of its stalled robots (``dmpc_pairs``), then of
+    the pairs whose plans, as those moves leave them, conflict (``dmpc_conflicts``); unchanged when nothing
+    was solved, no pair asks for a move or none lowers F by epsilon."""
     cfg = joint.cfg
-    held = stalled(data)
     # prediction is None exactly when nothing was solved (IBRResult.solved)
-    if result.prediction is None or held.size == 0 or not np.isfinite(result.potential):
+    if result.prediction is None or not np.isfinite(result.potential):
         return result
-    accels, potential = result.accels, result.potential
-    lam_x, lam_g = result.lam_x, result.lam_g
-    solves, iterations, kept = result.solves, result.solver_iterations, False
-    for i in held:
-        j = blocker(data, int(i))
-        if j is None:
-            continue
+    moves = _Moves(
+        result.accels,
+        result.potential,
+        result.lam_x,
+        result.lam_g,
+        result.solves,
+        result.solver_iterations,
+        False,
+    )
+    if cfg.dmpc_pairs:
+        held = [(int(i), j) for i in stalled(data) if (j := blocker(data, int(i))) is not None]
+        moves = _move(joint, data, result.prediction, held, moves, restart=False)
+    if cfg.dmpc_conflicts:
+        planned = rollout_numpy(data.states, moves.accels, cfg.dt)[0]
+        moves = _move(
+            joint, data, result.prediction, conflicts(data, planned, cfg.d_min), moves, restart=True
+        )
+    if not moves.kept:
+        return dataclasses.replace(result, solves=moves.solves, solver_iterations=moves.iterations)
+    return dataclasses.replace(
+        result,
+        accels=moves.accels,
+        positions=rollout_numpy(data.states, moves.accels, cfg.dt)[0],
+        potential=moves.potential,
+        potentials=(*result.potentials, moves.potential),
+        solves=moves.solves,
+        solver_iterations=moves.iterations,
+        lam_x=moves.lam_x,
+        lam_g=moves.lam_g,
+    )
+
+
+def _move(
+    joint: JointNLP,
+    data: StepData,
+    prediction: np.ndarray,
+    pairs: list[tuple[int, int]],
+    moves: _Moves,
+    *,
+    restart: bool,
+) -> _Moves:
+    """Each pair in turn solves the joint NLP over its two plans, the others' fixed, from the plans the moves
+    before it left (and, with ``restart``, again from the pair braking, the better kept: from the plans
+    that collide the solve stayed in their local minimum); kept when F drops by epsilon."""
+    cfg = joint.cfg
+    accels, potential, lam_x, lam_g, solves, iterations, kept = moves
+    brake = braking(data.states, cfg.horizon, cfg.dt, cfg.a_max) if restart and pairs else None
+    for i, j in pairs:
         free = np.zeros(data.n_robots, dtype=bool)
         free[[i, j]] = True
-        sol = joint.solve_group(data, result.prediction, accels, free)
+        sol = joint.solve_group(data, prediction, accels, free)
         solves, iterations = solves + 1, iterations + sol.iterations
+        if brake is not None:
+            start = accels.copy()
+            start[free] = brake[free]
+            other = joint.solve_group(data, prediction, start, free)
+            solves, iterations = solves + 1, iterations + other.iterations
+            sol = better(sol, other)
         # The joint NLP's objective is F itself (as CMPC reads it): sol.cost is F of the pair's new plans.
         if sol.success and accept(sol.cost, potential, cfg.epsilon):
             accels, potential, kept = sol.accels, sol.cost, True
@@ -86,16 +167,4 @@ def pair_moves(joint: JointNLP, data: StepData, result: IBRResult) -> IBRResult:
                 lam_x, lam_g = lam_x.copy(), lam_g.copy()
                 lam_x[free] = sol.lam_x.reshape(lam_x.shape)[free]
                 lam_g[free] = sol.lam_g.reshape(lam_g.shape)[free]
-    if not kept:
-        return dataclasses.replace(result, solves=solves, solver_iterations=iterations)
-    return dataclasses.replace(
-        result,
-        accels=accels,
-        positions=rollout_numpy(data.states, accels, cfg.dt)[0],
-        potential=potential,
-        potentials=(*result.potentials, potential),
-        solves=solves,
-        solver_iterations=iterations,
-        lam_x=lam_x,
-        lam_g=lam_g,
-    )
+    return _Moves(accels, potential, lam_x, lam_g, solves, iterations, kept)

@@ -31,6 +31,7 @@ UNRECORDED_DEFAULTS: Final[Mapping[str, Any]] = {
     "sensing.report_tracks": None,
     "mpc.flock_distance": "uniform",  # the paper's one d_flock, which every run before the option ran
     "mpc.flock_range": 0.0,  # every pair flocks (the paper), as every run before the option did
+    "mpc.dmpc_conflicts": False,  # no conflict pair moves (the paper), as every run before the option
 }
 # Settings that change how fast a run goes, not its episodes (jit compiles the same NLP; DMPC's threads give
 # the serial result, tests/mpc): a rerun with another value replaces its recordings, as the same command's.

@@ -27,6 +27,7 @@ DMPC_KEYS: Final[frozenset[str]] = frozenset(
         "dmpc_start",
         "dmpc_order",
         "dmpc_pairs",
+        "dmpc_conflicts",
     }
 )
 CMPC_KEYS: Final[frozenset[str]] = frozenset({"xi"})  # Algorithm 1's threshold; DMPC stops by epsilon

@@ -42,6 +42,7 @@ def test_run_identity_hand_value():
         "sensing.report_tracks": None,
         "mpc.flock_distance": "uniform",  # its [mpc] predates the option: the one d_flock it ran
         "mpc.flock_range": 0.0,  # and every pair flocking
+        "mpc.dmpc_conflicts": False,  # and no conflict moves
     }
     # no [mpc] section (ORCA's recordings): no MPC option is added to tell it from an MPC's
     assert "mpc.flock_distance" not in run_identity(episode, {"env": {"dt": 0.4}})
