@@ -125,6 +125,15 @@ def _fit(
         # Lightning ends an interrupted fit with sys.exit: 1 for Ctrl-C, 0 for SIGTERM (its SIGTERMException),
         # which told a script that a killed run had trained. Both are the CLI's interrupt (130, or 143).
         raise KeyboardInterrupt from stop
+    except Exception as exc:
+        failed = _in_plugin(args.model, exc)
+        if failed is None:
+            raise
+        raise PipelineError(
+            f"model {args.model!r}: training failed in the net's code ({failed}): {type(exc).__name__}: "
+            f"{str(exc).strip().splitlines()[0][:200] if str(exc).strip() else ''} (the contract check's "
+            "synthetic batches passed; a real batch pads scenes to their largest, its absent agents masked)"
+        ) from None
     # with the run's earlier parts, for a resume (their seconds came back from last.ckpt)
     elapsed = clock.before + time.perf_counter() - started
     _check_divergence(args, divergence, best)
@@ -134,6 +143,23 @@ def _fit(
     state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
     return module, best_path, elapsed, _limited(args.limit_batches, trainer)
+
+
+def _in_plugin(model: str, exc: BaseException) -> str | None:
+    """``file:line in function`` of the last frame of ``exc``'s traceback in a plugin net's module (model
+    ``module:Class``), None for a shipped model or an error raised elsewhere: a net that passed the contract
+    check and failed on a real batch ended train in Lightning's 75-line traceback."""
+    import traceback
+
+    from predictors.models import model_kind
+
+    kind = model_kind(model)
+    module = sys.modules.get(model.partition(":")[0]) if kind.source == "plugin" else None
+    path = getattr(module, "__file__", None)
+    if path is None:
+        return None
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if Path(f.filename) == Path(path)]
+    return None if not frames else f"{Path(path).name}:{frames[-1].lineno} in {frames[-1].name}"
 
 
 def _limited(limit: int | None, trainer: Any) -> int | None:

@@ -194,3 +194,13 @@ class ThreeAgentsOnly(ToyNet):
     def decode_step(self, h, prev, cur, neighbours):
         h, out = super().decode_step(h, prev, cur, neighbours)
         return h, self.mix(out.transpose(1, 2)).transpose(1, 2)
+
+
+class NoPadding(ToyNet):
+    """Takes every agent as present: the contract check's batches pass (all observed), a real batch padded to
+    its largest scene (absent agents masked) fails."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        if not bool(neighbours.all()):
+            raise ValueError("an absent agent in the batch")
+        return super().decode_step(h, prev, cur, neighbours)

@@ -272,3 +272,20 @@ def test_a_model_loads_and_an_in_place_change_is_still_refused_under_inference_m
         model = _registered("CentresInPlace")
         with pytest.raises(PredictorError, match="encode changed its argument positions in place"):
             check_step_contract(model_kind(model).build_net({}), f"model {model!r}", obs_len=OBS_LEN)
+
+
+def test_a_net_failing_on_a_real_batch_ends_train_in_one_line(tmp_path, capsys):
+    """It passed the contract check and ended train in Lightning's 75-line traceback."""
+    from tests.predictors.samples import write_crowds
+
+    model = f"{BROKEN}:NoPadding"
+    data = str(write_crowds(tmp_path / "crowds.ndjson"))  # scenes of 1 to 4 agents, padded in a batch of 5
+    argv = ["--plugin", model, "train", "--model", model, "--train", data, "--val", data, "--batch-size", "5"]
+    capsys.readouterr()
+    code = main([*argv, "--epochs", "1", "--out", str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(
+        f"crowdmpc train: error: model {model!r}: training failed in the net's code (broken_nets.py:"
+    )
+    assert "in decode_step): ValueError: an absent agent in the batch (the contract check's" in err
