@@ -198,6 +198,7 @@ class RayBackend:
         its place, and the sweep stops when actors keep dying with no episode finishing in between, as the
         process backend does."""
         ray = self._ray
+        self._drained = False  # until this run's episodes have all come back
         pending = iter(tasks)
         owner: dict[Any, tuple[int, Any, EpisodeTask]] = {}  # object ref -> (slot, actor, task)
 

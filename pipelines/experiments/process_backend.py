@@ -272,6 +272,7 @@ class ProcessBackend:
         from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
+        self._drained = False  # until this run's episodes have all come back
         pending = iter(tasks)
         unsent: list[EpisodeTask] = []  # taken from ``pending`` but refused by a pool that broke meanwhile
         in_flight: dict[Future[EpisodeOutcome], EpisodeTask] = {}
