@@ -75,8 +75,9 @@ above), ``robot_rewards`` ``(max_robots,)``, ``reached`` ``(max_robots,)``, ``su
 The last step adds ``episode_metrics``, the ``EpisodeMetrics`` of the whole episode (what ``crowdmpc
 simulate`` reports; an episode that an outer ``TimeLimit`` ended has them from
 ``env.unwrapped.episode_metrics()``, since the environment cannot know that step is the last); an episode that
-a contact ended has ``contact_between_steps`` True there (and ``timeout`` True: it did not succeed), while its
-step-sampled ``contact`` may be False.
+a contact ended has ``contact_between_steps`` True there (and the metrics' ``timeout`` True: it did not
+succeed; the step's ``info["timeout"]`` is the time limit alone, False there), while its step-sampled
+``contact`` may be False.
 
 Per-robot info arrays have ``max_robots`` rows, as the action and the observation, so that
 ``gymnasium.vector`` can stack environments whose episodes have different ``n_robots``: rows past
@@ -116,7 +117,8 @@ from crowdsim.gym_observation import (
     observation_array,
     observation_bounds,
 )
-from crowdsim.gym_options import episode_options
+from crowdsim.gym_options import count as _count
+from crowdsim.gym_options import episode_options, numbers
 from crowdsim.gym_reward import (
     RewardConfig,
     as_reward_config,
@@ -147,23 +149,6 @@ __all__ = [
 
 RENDER_SIZE: Final[tuple[float, float]] = (8.0, 6.0)  # inches at RENDER_DPI: 640 x 480 pixels
 RENDER_DPI: Final[int] = 80
-
-
-def numbers(action: object, what: str) -> np.ndarray:
-    """``action`` as a float array; SimulationError naming ``what`` when it holds no numbers (numpy's own
-    "could not convert string to float" named nothing)."""
-    try:
-        return np.asarray(action, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise SimulationError(
-            f"{what} must be an array of numbers, got {type(action).__name__} ({exc})"
-        ) from None
-
-
-def _count(value: object, name: str, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not low <= value <= high:
-        raise SimulationError(f"{name} must be an int in [{low}, {high}], got {value!r}")
-    return int(value)
 
 
 class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -246,7 +231,20 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         ``crowdsim.scenarios.Layout`` of starts and goals to start from instead (a hand-built scene; its
         scenario reads "layout", its seed None: no seed draws it), alone. Every reset takes one draw from
         the generator when ``seed`` is None, a layout's too, so that the episodes after it are the same
-        whichever layouts came between."""
+        whichever layouts came between. A reset that raises changes nothing of the generator, and leaves no
+        episode to step on (the last one carried on)."""
+        generator, seeded = self._np_random, self._np_random_seed
+        state = None if generator is None else generator.bit_generator.state
+        self._obs = None
+        try:
+            return self._reset(seed, options)
+        except BaseException:
+            self._np_random, self._np_random_seed = generator, seeded
+            if generator is not None and state is not None:
+                generator.bit_generator.state = state
+            raise
+
+    def _reset(self, seed: int | None, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         defaults = {"scenario": self.scenario, "n_humans": self.n_humans, "n_robots": self.n_robots}
         chosen = episode_options(options, defaults, self.scene_limit, self.max_humans, self.max_robots)
@@ -269,7 +267,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._obs is None:
-            raise SimulationError("step() called before reset()")
+            raise SimulationError("step() called before reset() (or after a reset that raised)")
         if self._done:
             raise SimulationError("step() called after the episode ended; call reset()")
         a = numbers(action, "action")

@@ -1,5 +1,6 @@
 """The reset options of ``crowdmpc/CrowdNav-v0`` (crowdsim.gym_env, whose ``reset`` documents them): the
-episode's scenario and sizes, or a hand-built ``Layout``, checked against the environment's spaces.
+episode's scenario and sizes, or a hand-built ``Layout``, checked against the environment's spaces; and the
+checks of the numbers its constructor and ``step`` take (``count``, ``numbers``).
 """
 
 from __future__ import annotations
@@ -65,3 +66,21 @@ def episode_options(
         )
     chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
     return chosen
+
+
+def numbers(action: object, what: str) -> np.ndarray:
+    """``action`` as a float array; SimulationError naming ``what`` when it holds no numbers (numpy's own
+    "could not convert string to float" named nothing)."""
+    try:
+        return np.asarray(action, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise SimulationError(
+            f"{what} must be an array of numbers, got {type(action).__name__} ({exc})"
+        ) from None
+
+
+def count(value: object, name: str, low: int, high: int) -> int:
+    """``value`` as an int in ``[low, high]``; SimulationError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not low <= value <= high:
+        raise SimulationError(f"{name} must be an int in [{low}, {high}], got {value!r}")
+    return int(value)

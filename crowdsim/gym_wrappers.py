@@ -55,6 +55,7 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         _check_takes_accelerations(env, base)
         cfg = base.config
         gain = 1.0 / cfg.dt if gain is None else gain
+        gain = gain.item() if isinstance(gain, np.generic) else gain  # np.float32 from a sweep's numbers
         if isinstance(gain, bool) or not isinstance(gain, int | float) or not 0 < gain <= 1.0 / cfg.dt:
             raise SimulationError(f"gain must be a number in (0, 1/dt = {1.0 / cfg.dt:g}] 1/s, got {gain!r}")
         self.gain = float(gain)

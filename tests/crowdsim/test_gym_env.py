@@ -602,3 +602,27 @@ def test_plain_data_is_the_config_the_profile_names_with_its_fields_replaced():
     assert env.unwrapped.config == expected and env.unwrapped.config.max_steps == 75
     assert CrowdNavEnv(config={"time_limit": 8.0}).config == EnvConfig(time_limit=8.0)
     assert CrowdNavEnv(reward={"success": 2.0}).reward_config == RewardConfig(success=2.0)
+
+
+def test_a_reset_that_raises_leaves_no_episode_and_the_generator_as_it_was():
+    """The last episode carried on after a reset that raised (its step accepted), and the failed reset had
+    used a draw of the generator (or reseeded it), so the resets after it drew other episodes than an
+    environment that never tried it."""
+    make = lambda: gym.make(crowdsim.ENV_ID, n_humans=8, max_humans=16, config={"spawn_separation": 1.5})  # noqa: E731
+    env = make()
+    env.reset(seed=0)
+    with pytest.raises(SimulationError, match="could not place human"):  # no room for 16
+        env.reset(seed=1, options={"n_humans": 16})
+    with pytest.raises(SimulationError, match=r"^step\(\) called before reset\(\) \(or after a reset that"):
+        env.step(np.zeros((3, 2)))
+    for failed in ({}, {"seed": 7}):
+        tried, untried = make(), make()
+        tried.reset(seed=3)
+        untried.reset(seed=3)
+        with pytest.raises(SimulationError):
+            tried.reset(options={"n_humans": 16}, **failed)
+        assert tried.reset()[1]["seed"] == untried.reset()[1]["seed"]
+
+
+def test_the_velocity_gain_takes_numpy_numbers():
+    assert VelocityControl(gym.make(crowdsim.ENV_ID), gain=np.float32(1.0)).gain == 1.0
