@@ -268,14 +268,16 @@ def _episode(
     people: np.ndarray,
     dt: float,
 ) -> ReplayEpisode:
-    """The chosen pedestrians' rows held outside their tracks, their velocities, presence and track
-    lengths."""
+    """The chosen pedestrians' rows held outside their tracks (and through a gap in one: the last row seen),
+    their velocities, presence and track lengths."""
     present = np.isfinite(window[..., 0])
     observed = track_lengths(present)
     rows = np.arange(len(window))[:, None]
     first_row = present.argmax(axis=0)
-    last_row = len(window) - 1 - present[::-1].argmax(axis=0)
-    held = np.clip(rows, first_row, last_row)  # (T+1, N): the tracked row each row shows
+    # (T+1, N): the tracked row each row shows, the last one seen at or before it, else the first. Clipped
+    # to the track alone, a person unseen for rows inside it stood at NaN, which no recording may hold.
+    seen = np.maximum.accumulate(np.where(present, rows, -1), axis=0)
+    held = np.where(seen >= 0, seen, first_row)
     positions = window[held, np.arange(window.shape[1])]
     velocities = np.zeros_like(positions)
     moving = present[1:] & present[:-1]

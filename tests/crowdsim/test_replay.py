@@ -67,6 +67,22 @@ def test_an_episode_takes_the_people_closest_to_the_robots_path_held_outside_the
     np.testing.assert_allclose(ep.goals, [[0.8, 1.0], [-0.8, -1.0]])
 
 
+def test_a_person_unseen_inside_their_track_stands_where_last_seen():
+    """A (id 1) unseen on rows 6 and 7 of its track 3..10 (BIWI's files have no such gap; one's own may):
+    those rows stood at NaN, and every recorded episode failed ("not plain JSON")."""
+    rows = walk(1, [3, 4, 5, 8, 9, 10], -2.0, 0.4, 1.0) + walk(2, range(3, 11), 2.0, -0.4, -1.0)
+    rows += walk(3, range(13), -2.4, 0.4, 8.0) + walk(4, range(13), 2.4, -0.4, -8.0)
+    recording = Recording.from_rows("eth", np.array(rows), frame_step=6)
+    ep = replay_episode(recording, "perpendicular", 2, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
+    np.testing.assert_array_equal(ep.people, [0, 1])
+    assert np.isfinite(ep.positions).all()
+    seen = [False] * 3 + [True] * 3 + [False] * 2 + [True] * 3 + [False] * 2
+    np.testing.assert_array_equal(ep.present[:, 0], seen)
+    # rows 5..7 at row 5's -2.0 + 2 x 0.4 = -1.2 m; row 8 at -2.0 + 5 x 0.4 = 0.0 (walk counts from row 3)
+    np.testing.assert_allclose(ep.positions[5:9, 0, 0], [-1.2, -1.2, -1.2, 0.0], atol=1e-12)
+    np.testing.assert_allclose(ep.velocities[5:9, 0, 0], [1.0, 0.0, 0.0, 0.0], atol=1e-12)
+
+
 def test_the_circle_scenario_turns_the_flow_along_the_robots_path_and_more_people_come_in_order():
     ep = replay_episode(four_people(), "circle", 3, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
     # turned by +90 degrees, (x, y) -> (-y, x): A walks up the robots' path at x = -1; C, 8 m aside, is the
