@@ -89,9 +89,13 @@ def recording_path(crowd: str, data_dir: str | Path | None = None) -> Path:
 def _read(crowd: str, path: Path, mtime_ns: int) -> Recording:
     """One file's recording, kept while the file is unchanged (``mtime_ns`` is part of the key)."""
     from predictors.data.ewap import infer_frame_step, read_obsmat, split_frames
+    from predictors.data.ewap_checks import check_step_seconds
 
-    rows = read_obsmat(path)
+    with_velocities = read_obsmat(path, velocities=True)
+    rows = np.ascontiguousarray(with_velocities[:, :4])
     step = infer_frame_step(rows[:, 0])  # of the whole sequence: the test split's gaps must not change it
+    # as `data prepare` refuses it: a 10 Hz file replayed its walkers at a quarter of their speed
+    check_step_seconds(path, with_velocities, step)
     if crowd.endswith("_test"):
         rows = rows[np.isin(rows[:, 0].astype(np.int64), split_frames(rows[:, 0])["test"])]
     return Recording.from_rows(crowd, rows, step)

@@ -66,6 +66,25 @@ def test_the_recording_is_read_once_and_a_data_folder_without_raw_tracks_is_name
         recording("zara")
 
 
+def test_a_recording_annotated_faster_than_biwi_is_refused_as_data_prepare_refuses_it(tmp_path):
+    """Four walkers at 0.8 m/s annotated every 0.1 s (frame step 4, the velocity columns say so) were
+    replayed at 0.1 m a 0.4 s step, a quarter of their speed, without a word."""
+    from predictors.errors import DatasetFormatError
+
+    rows = [
+        (1 + 4 * k, p, -12.0 + 0.08 * k, float(p), 0.0, 0.8, 0.0, 0.0)
+        for p in range(1, 5)
+        for k in range(150)
+    ]
+    lines = ("".join(f"{v:16.7e}" for v in row) + "\n" for row in sorted(rows))
+    text = "".join(lines)
+    for sequence in ("seq_eth", "seq_hotel"):  # a raw folder holds both
+        (tmp_path / "raw_ewap" / sequence).mkdir(parents=True)
+        (tmp_path / "raw_ewap" / sequence / "obsmat.txt").write_text(text, encoding="utf-8")
+    with pytest.raises(DatasetFormatError, match=r"its velocity columns imply 0\.100 s per annotated step"):
+        recording("eth", tmp_path)
+
+
 class Counting(Keep):
     """Keep, counting the humans handed over at each call."""
 
