@@ -172,7 +172,7 @@ def _nothing_shared(runs: list[Run]) -> str:
         )
     return (
         "the runs share no episode (the same method, humans, robots, scenario, seed and crowd: another "
-        "profile, team or formation draws other crowds from the same seeds)"
+        "crowd, profile, team or formation draws other people from the same seeds)"
     )
 
 

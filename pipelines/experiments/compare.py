@@ -4,9 +4,10 @@ episode by episode (``crowdmpc compare``).
 
 Which episodes pair. Two runs face the same crowd when they ran the same scenario from the same seed with the
 same number of humans and robots, and the crowd was made alike: ORCA's humans or the same replayed recording
-(``env.crowd``), placed under the same rules (``env.crossing``, ``env.spawn_separation``) around the same
-robot formation (``env.formation``, ``env.robot_spacing``; the placement keeps clear of the robots' starts,
-crowdsim.scenarios).
+(``env.crowd``; a replay's reactive replay draws the same people, who then yield to the robots), placed
+under the same rules (``env.crossing``, ``env.spawn_separation``) around the same robot formation
+(``env.formation``, ``env.robot_spacing``; the placement keeps clear of the robots' starts: crowdsim
+.scenarios).
 Another profile or team draws other humans from the same seed, so its episodes pair with none. A record made
 before sweeps kept their config ran its profile's placement. Within that crowd an episode is its method's
 (case ignored: Table II writes "CMPC", the controllers experiment "cmpc"), so a method's column of one sweep
@@ -42,17 +43,12 @@ from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
 from pipelines.logs.reader import UNFINISHED_SUFFIX, find_recordings
+from pipelines.loop.replay_data import REACTIVE_SUFFIX
 from pipelines.loop.unread import record_unread
 from predictors.progress import progress_bar
 
 # The simulator settings besides scenario, seed and team that decide an episode's crowd (module docstring).
-CROWD_SETTINGS: Final[tuple[str, ...]] = (
-    "crowd",
-    "crossing",
-    "spawn_separation",
-    "formation",
-    "robot_spacing",
-)
+CROWD_SETTINGS: Final = ("crowd", "crossing", "spawn_separation", "formation", "robot_spacing")
 FLAGS: Final[tuple[str, ...]] = ("success", "collision", "contact")
 # Record fields beyond its config that tell what ran (wall time, worker and key differ in any two runs).
 RUN_FIELDS: Final[tuple[str, ...]] = (
@@ -113,7 +109,10 @@ def crowd_identity(record: Mapping[str, Any], by_cell: bool = False) -> Identity
     env = config.get("env") if isinstance(config, dict) else None
     if not isinstance(env, dict):
         env = _profile_env(str(record.get("profile") or "paper"))
-    crowd = tuple(json.dumps(env.get(name, UNRECORDED.get(name)), sort_keys=True) for name in CROWD_SETTINGS)
+    values = {name: env.get(name, UNRECORDED.get(name)) for name in CROWD_SETTINGS}
+    if isinstance(values["crowd"], str):  # a replay and its reactive replay draw the same people from a seed
+        values["crowd"] = values["crowd"].removesuffix(REACTIVE_SUFFIX)
+    crowd = tuple(json.dumps(values[name], sort_keys=True) for name in CROWD_SETTINGS)
     return (*group, str(record["scenario"]), int(record["seed"]), *crowd)
 
 

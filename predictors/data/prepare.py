@@ -156,7 +156,10 @@ def _check_scenes_made(manifest: dict, raw_dir: Path, log_dir: Path, note: Calla
             "consecutive steps within one part of the 70/10/20 % split of a sequence's frames"
         )
     for name in empty:
-        note(f"note: {log_dir / name} holds no scenes (too few frames of its sequence in that split)")
+        note(
+            f"note: {log_dir / name} holds no scenes (too few frames of its sequence in that split, or no "
+            "pedestrian there whom TrajNet++'s scene rules keep)"
+        )
 
 
 def _install(staging: Path, out_dir: Path, manifest: dict) -> None:

@@ -91,7 +91,8 @@ def stats_report(path: str | Path) -> tuple[str, list[str]]:
 def repeated_notes(stats: list[FileStats]) -> list[str]:
     """A note for each file with repeated track rows, which the tracks column counts once."""
     return [
-        f"note: {s.path}: {s.repeated} track row{'s' * (s.repeated != 1)} repeat an earlier one (same "
+        f"note: {s.path}: {s.repeated} track row{'s' * (s.repeated != 1)} "
+        f"repeat{'s' * (s.repeated == 1)} an earlier one (same "
         "pedestrian and frame); counted once"
         for s in stats
         if s.repeated

@@ -402,3 +402,16 @@ def test_a_sweeps_log_named_for_its_folder_is_its_folder(tmp_path, capsys):
     )
     assert f"b: {b}, 4 episodes" in capsys.readouterr().out
     assert labelled([str(b / "episodes.jsonl"), str(a)])[0][0] == "b"  # unlabelled: its folder's name
+
+
+def test_a_replay_pairs_with_its_reactive_replay_and_no_other_crowd():
+    """A replay and its reactive replay draw the same people from a seed (they differ in whether those
+    yield): docs/replayed_crowds.md pairs them, and compare refused ("the runs share no episode"); another
+    recording, or ORCA's crowd, draws other people."""
+    from pipelines.experiments.compare import crowd_identity
+
+    def identity(crowd: str):
+        return crowd_identity(_record(0, True, False, 15.0, env={**ENV, "crowd": crowd}))
+
+    assert identity("eth_test") == identity("eth_test_reactive") != identity("hotel_test")
+    assert identity("hotel_test_reactive") == identity("hotel_test") != identity("orca")

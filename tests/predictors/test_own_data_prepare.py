@@ -76,7 +76,8 @@ def test_no_scene_in_any_split_is_refused_and_an_empty_split_noted(tmp_path):
     manifest = _prepare(_raw(tmp_path, ewap_rows(300, 6), ewap_rows(30, 10)), tmp_path / "out", notes)
     empty = [name for name, entry in manifest["files"].items() if not entry["scenes"]]
     assert empty and sorted(notes) == sorted(
-        f"note: {tmp_path / 'out' / name} holds no scenes (too few frames of its sequence in that split)"
+        f"note: {tmp_path / 'out' / name} holds no scenes (too few frames of its sequence in that split, "
+        "or no pedestrian there whom TrajNet++'s scene rules keep)"
         for name in empty
     )
 
