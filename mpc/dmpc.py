@@ -256,7 +256,9 @@ class DMPC:
             lam_g=lam_g,
             solver_iterations=solver_iterations,
         )
-        return pair_moves(self.joint, data, result) if cfg.dmpc_pairs or cfg.dmpc_conflicts else result
+        if cfg.dmpc_pairs or cfg.dmpc_conflicts:  # within the step's time limit, as the loop above
+            return pair_moves(self.joint, data, result, until=t0 + cfg.time_limit_s)
+        return result
 
     def _update(
         self,

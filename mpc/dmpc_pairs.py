@@ -32,6 +32,8 @@ contact in 1 of 10 episodes each -> none, the closest 0.33 / 0.53 -> 1.03 / 0.91
 from __future__ import annotations
 
 import dataclasses
+import math
+import time
 from typing import NamedTuple
 
 import numpy as np
@@ -94,10 +96,11 @@ class _Moves(NamedTuple):
     kept: bool
 
 
-def pair_moves(joint: JointNLP, data: StepData, result: IBRResult) -> IBRResult:
+def pair_moves(joint: JointNLP, data: StepData, result: IBRResult, until: float = math.inf) -> IBRResult:
     """``result`` after the pair moves (module docstring): of its stalled robots (``dmpc_pairs``), then of
     the pairs whose plans, as those moves leave them, conflict (``dmpc_conflicts``); unchanged when nothing
-    was solved, no pair asks for a move or none lowers F by epsilon."""
+    was solved, no pair asks for a move or none lowers F by epsilon. No pair starts after ``until``
+    (``time.perf_counter()``: the step's time limit, as the IBR loop's)."""
     cfg = joint.cfg
     # prediction is None exactly when nothing was solved (IBRResult.solved)
     if result.prediction is None or not np.isfinite(result.potential):
@@ -113,12 +116,11 @@ def pair_moves(joint: JointNLP, data: StepData, result: IBRResult) -> IBRResult:
     )
     if cfg.dmpc_pairs:
         held = [(int(i), j) for i in stalled(data) if (j := blocker(data, int(i))) is not None]
-        moves = _move(joint, data, result.prediction, held, moves, restart=False)
+        moves = _move(joint, data, result.prediction, held, moves, until, restart=False)
     if cfg.dmpc_conflicts:
         planned = rollout_numpy(data.states, moves.accels, cfg.dt)[0]
-        moves = _move(
-            joint, data, result.prediction, conflicts(data, planned, cfg.d_min), moves, restart=True
-        )
+        pairs = conflicts(data, planned, cfg.d_min)
+        moves = _move(joint, data, result.prediction, pairs, moves, until, restart=True)
     if not moves.kept:
         return dataclasses.replace(result, solves=moves.solves, solver_iterations=moves.iterations)
     return dataclasses.replace(
@@ -140,16 +142,24 @@ def _move(
     prediction: np.ndarray,
     pairs: list[tuple[int, int]],
     moves: _Moves,
+    until: float,
     *,
     restart: bool,
 ) -> _Moves:
     """Each pair in turn solves the joint NLP over its two plans, the others' fixed, from the plans the moves
     before it left (and, with ``restart``, again from the pair braking, the better kept: from the plans
-    that collide the solve stayed in their local minimum); kept when F drops by epsilon."""
+    that collide the solve stayed in their local minimum); kept when F drops by epsilon. With ``restart``
+    (the conflicts) a pair an earlier move set apart is passed over."""
     cfg = joint.cfg
     accels, potential, lam_x, lam_g, solves, iterations, kept = moves
     brake = braking(data.states, cfg.horizon, cfg.dt, cfg.a_max) if restart and pairs else None
     for i, j in pairs:
+        if time.perf_counter() > until:
+            break
+        if brake is not None and kept:
+            planned = rollout_numpy(data.states[[i, j]], accels[[i, j]], cfg.dt)[0]
+            if np.linalg.norm(planned[0] - planned[1], axis=-1).min() >= cfg.d_min:
+                continue
         free = np.zeros(data.n_robots, dtype=bool)
         free[[i, j]] = True
         sol = joint.solve_group(data, prediction, accels, free)

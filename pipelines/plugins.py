@@ -126,7 +126,12 @@ def plugin_environment() -> dict[str, str]:
         models.PLUGINS_ENV: models.registered_plugins(),
         CONTROLLERS_ENV: registered_controller_plugins(),
     }
+    from predictors.plugin_import import FOLDERS_ENV, plugin_folders
+
     environment = {}
+    listed_folders = [f for f in os.environ.get(FOLDERS_ENV, "").split(os.pathsep) if f]
+    if folders := list(dict.fromkeys([*listed_folders, *plugin_folders()])):
+        environment[FOLDERS_ENV] = os.pathsep.join(folders)
     for variable, specs in registered.items():
         for spec in specs:
             _check_importable_elsewhere(spec)

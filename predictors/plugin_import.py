@@ -10,9 +10,12 @@ import importlib.machinery
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from predictors.errors import PredictorError
+
+# The folders the plugins were imported from, for the processes this one starts (pipelines.plugins)
+FOLDERS_ENV: Final[str] = "CROWDMPC_PLUGIN_FOLDERS"
 
 
 def import_class(spec: str, what: str = "plugin") -> object:
@@ -66,8 +69,22 @@ class _AfterInstalled(importlib.abc.MetaPathFinder):
 
 def _search_after_installed(folder: str) -> None:
     """Put an ``_AfterInstalled`` finder for ``folder`` last on ``sys.meta_path`` (once)."""
-    if not any(isinstance(f, _AfterInstalled) and f.folder == folder for f in sys.meta_path):
+    if folder not in plugin_folders():
         sys.meta_path.append(_AfterInstalled(folder))
+
+
+def plugin_folders() -> list[str]:
+    """The folders this process imports plugins from (``import_class``'s working folders), in order."""
+    return [f.folder for f in sys.meta_path if isinstance(f, _AfterInstalled)]
+
+
+def search_listed_folders() -> None:
+    """Search the folders ``FOLDERS_ENV`` lists as ``import_class`` searches its own: a sweep's worker,
+    before it moves to its scratch folder (jit), where its plugins are not (every episode raised "No module
+    named ..." once the folder was no longer on sys.path, the cmpc column's too)."""
+    for folder in os.environ.get(FOLDERS_ENV, "").split(os.pathsep):
+        if folder:
+            _search_after_installed(folder)
 
 
 def _shadowed_file(module_name: str, module: object, cwd: Path) -> Path | None:

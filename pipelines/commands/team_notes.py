@@ -48,13 +48,14 @@ def goal_room_note(
     if spec.controller not in MPC_CONTROLLERS or n_robots < 2:
         return None
     shape, gap = _closest_goals(n_robots, formation, spacing)
-    if shape == "antipodal":  # robots trading places: separate_goals_note names flock_range
-        return None
     cfg = mpc_config(spec)
     d_min = cfg.d_min
     # off with --no-flocking (Table III's "NF"); under flock_distance "goals" the goals' shape costs nothing;
-    # a flock_range short of the closest goals' distance leaves that pair out of Eq. 15
-    flocking = cfg.w_floc > 0 and cfg.flock_distance == "uniform" and not 0 < cfg.flock_range < gap
+    # a flock_range short of the closest goals' distance leaves that pair out of Eq. 15; robots trading
+    # places have separate_goals_note's, which names flock_range
+    trading = shape == "antipodal"
+    flocking = not trading and cfg.w_floc > 0 and cfg.flock_distance == "uniform"
+    flocking = flocking and not 0 < cfg.flock_range < gap
     if d_min < gap - GOAL_ROOM_MARGIN - 1e-9:
         if flocking and gap > cfg.d_flock + FLOCK_SLACK + 1e-9:
             return (
@@ -73,7 +74,7 @@ def goal_room_note(
     hint = (
         f"; [env] robot_spacing = {wider:g} {toml}(--set env.robot_spacing={wider:g}{option}) spaces them "
         f"{wider:g} m apart"
-        if wider <= MAX_ROBOT_SPACING
+        if wider <= MAX_ROBOT_SPACING and not trading  # the antipodal circle takes no robot_spacing
         else ""
     )
     return (

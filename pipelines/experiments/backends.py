@@ -21,14 +21,16 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from collections.abc import Iterable, Iterator
 from typing import Any, Final, Protocol
 
-from pipelines.errors import PipelineError, SweepStopped
+from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings
 from pipelines.experiments.process_backend import CLOSE_GRACE_S, MAX_BREAKS_IN_A_ROW, ProcessBackend
 from pipelines.experiments.ray_join import join_cluster, workers_that_fit
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import SINGLE_THREAD_ENV, EpisodeOutcome, EpisodeWorker, worker_scratch
+from predictors.plugin_import import search_listed_folders
 
 BACKENDS: Final[tuple[str, ...]] = ("auto", "ray", "process", "inline")
 RAY_MISSING: Final[str] = "the Ray backend needs the cluster extra: pip install -e '.[cluster]'"
@@ -68,8 +70,10 @@ class InlineBackend:
         self.worker = EpisodeWorker(record, jit, worker_scratch(scratch_root), timeout_s)
 
     def run(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
-        for task in tasks:
-            yield self.worker.run(task)
+        with warnings.catch_warnings():  # once for the run: a filter set per episode repeated other warnings
+            quiet_team_warnings()  # the sweep says them once (sweep_checks.method_notes)
+            for task in tasks:
+                yield self.worker.run(task)
 
     def close(self) -> None:
         self.worker.close()
@@ -86,6 +90,8 @@ class _RayEpisodeWorker(EpisodeWorker):
         scratch_root: str | None = None,
         timeout_s: float | None = None,
     ):
+        search_listed_folders()  # the driver's plugin folders, before the move below
+        quiet_team_warnings()  # for the actor's life: the sweep says them once (sweep_checks.method_notes)
         scratch = worker_scratch(scratch_root)
         if jit:
             os.chdir(scratch)
@@ -234,11 +240,13 @@ class RayBackend:
         self._drained = True  # every episode came back: close may let the actors close their controllers
 
     def close(self) -> None:
-        if self._drained:
-            with contextlib.suppress(Exception):  # a hung or dead actor: killed below all the same
-                self._ray.get([actor.close.remote() for actor in self._actors], timeout=CLOSE_GRACE_S)
-        for actor in self._actors:
-            self._ray.kill(actor)
+        try:
+            if self._drained:
+                with contextlib.suppress(Exception):  # a hung or dead actor: killed below all the same
+                    self._ray.get([actor.close.remote() for actor in self._actors], timeout=CLOSE_GRACE_S)
+        finally:  # a Ctrl-C in the wait above still ends the actors
+            for actor in self._actors:
+                self._ray.kill(actor)
         if self._owns_ray:
             self._ray.shutdown()
 

@@ -1,11 +1,10 @@
 """The process pool's backend: K spawned processes of a ``concurrent.futures`` pool run the sweep's episodes
 (pipelines.experiments.backends picks it when Ray is not installed, or for ``--backend process``).
 
-What it holds: the pool's worker processes (each with one EpisodeWorker, ignoring Ctrl-C from its start,
-exiting with a killed driver), the environment they start with, the resource tracker started quiet, and the
-break handling: a worker process that dies breaks the whole pool, each episode in flight becomes an episode
-error, a new pool runs the rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing
-finishing."""
+What it holds: the pool's workers (one EpisodeWorker each, ignoring Ctrl-C, exiting with a killed driver), the
+environment they start with, the resource tracker started quiet, and the break handling: a worker process that
+dies breaks the whole pool, each episode in flight becomes an episode error, a new pool runs the rest, and the
+sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing."""
 
 from __future__ import annotations
 
@@ -16,7 +15,7 @@ import time
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import PipelineError, SweepStopped, warnings_as_notes
+from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings, warnings_as_notes
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import (
     SINGLE_THREAD_ENV,
@@ -26,6 +25,7 @@ from pipelines.experiments.worker import (
     release_scratch_root,
     worker_scratch,
 )
+from predictors.plugin_import import search_listed_folders
 
 if TYPE_CHECKING:
     from concurrent.futures import Future
@@ -68,11 +68,11 @@ def _init_pool_worker(record: str, jit: bool, scratch_root: str | None, timeout_
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent()
     warnings_as_notes()  # as the driver shows them
+    quiet_team_warnings()  # for the worker's life: the sweep says them once (sweep_checks.method_notes)
+    search_listed_folders()  # the driver's plugin folders, before the move below
     scratch = worker_scratch(scratch_root)
-    if jit:
-        os.chdir(
-            scratch
-        )  # CasADi's jit writes its C sources into the current directory (no option for another)
+    if jit:  # CasADi's jit writes its C sources into the current directory (no option for another)
+        os.chdir(scratch)
     _load_plugins()
     _WORKER = EpisodeWorker(record, jit, scratch, timeout_s)
     # its controllers closed when the worker exits after the pool's last task (ProcessBackend.close lets it)
@@ -377,22 +377,24 @@ class ProcessBackend:
         return ", ".join(sorted(ends)) or "ended abruptly"
 
     def close(self) -> None:
-        self._end_pool(grace_s=CLOSE_GRACE_S if self._drained else 0.0)
-        if self._own_root is not None:
-            release_scratch_root(self._own_root)
+        try:
+            self._end_pool(grace_s=CLOSE_GRACE_S if self._drained else 0.0)
+        finally:  # a Ctrl-C in the grace below still ends the workers and releases the folder
+            if self._own_root is not None:
+                release_scratch_root(self._own_root)
 
     def _end_pool(self, grace_s: float = 0.0) -> None:
-        # Cancel what has not started and end the running episodes now: their records were never written, so a
-        # rerun runs them again. (ProcessPoolExecutor has no public way to stop a running call.) With nothing
-        # running (``grace_s``), the workers first get that long to exit of themselves, closing their
-        # controllers (_init_pool_worker).
+        # Cancel what has not started, end the running episodes (never written: a rerun runs them) now; idle,
+        # the workers get ``grace_s`` to exit of themselves, closing their controllers (_init_pool_worker).
         self._note_processes()
         self._pool.shutdown(wait=False, cancel_futures=True)
-        deadline = time.monotonic() + grace_s
-        for process in self._processes:
-            process.join(timeout=max(0.0, deadline - time.monotonic()))
-        for process in self._processes:
-            if process.is_alive():
-                process.terminate()
+        try:
+            deadline = time.monotonic() + grace_s
+            for process in self._processes:
+                process.join(timeout=max(0.0, deadline - time.monotonic()))
+        finally:
+            for process in self._processes:
+                if process.is_alive():
+                    process.terminate()
         for process in self._processes:
             process.join(timeout=5)

@@ -25,14 +25,13 @@ import sys
 import tempfile
 import time
 import traceback
-import warnings
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from pipelines.errors import PipelineError, interrupt_behind, quiet_team_warnings
+from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline, timeout_error
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.loop.contract import checked_description, episode_config
@@ -270,17 +269,23 @@ class EpisodeWorker:
             self._drop(next(iter(self._controllers)))
         return controller
 
-    def _drop(self, key: str) -> None:
-        """Forget cell ``key``'s controller, closed: a controller's ``close`` releases its threads and
-        solvers (a plugin's, its hardware), and a sweep called it for none of them."""
+    def _drop(self, key: str, close: bool = True) -> None:
+        """Forget cell ``key``'s controller, closed (``close``): a controller's ``close`` releases its threads
+        and solvers (a plugin's, its hardware), and a sweep called it for none of them. Within the episode
+        limit, if the sweep has one: a close that hangs must not hold the worker for good."""
         self._configs.pop(key, None)
         controller = self._controllers.pop(key, None)
-        if controller is None:
+        if controller is None or not close:
             return
+        name = getattr(controller, "name", type(controller).__name__)
         try:
-            controller.close()
+            with deadline(self.timeout_s):
+                controller.close()
+        except EpisodeTimeout:
+            print(
+                f"note: controller {name!r}'s close() did not return in {self.timeout_s:g} s", file=sys.stderr
+            )
         except Exception as exc:  # an episode's record is written already: say it, do not end the sweep
-            name = getattr(controller, "name", type(controller).__name__)
             print(f"note: controller {name!r}'s close() raised {type(exc).__name__}: {exc}", file=sys.stderr)
 
     def close(self) -> None:
@@ -290,16 +295,15 @@ class EpisodeWorker:
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         try:
-            with warnings.catch_warnings():
-                quiet_team_warnings()  # the sweep says them once (sweep_checks.method_notes)
-                # built outside the limit: a first episode's gcc compile (2-8 s) or solver build is no hang,
-                # and a compile stopped half-way would leave its files to the cache's clean-up
-                controller = self.controller(task)
-                with deadline(self.timeout_s):
-                    return self._run(task, controller)
+            # built outside the limit: a first episode's gcc compile (2-8 s) or solver build is no hang, and a
+            # compile stopped half-way would leave its files to the cache's clean-up
+            controller = self.controller(task)
+            with deadline(self.timeout_s):
+                return self._run(task, controller)
         except EpisodeTimeout:
-            # stopped anywhere, mid-step too: its state is not to be trusted with another episode
-            self._drop(task.cell.key)
+            # stopped anywhere, mid-step too: its state is not to be trusted with another episode, nor its
+            # close() (a plugin's may wait on the device its act hung on), so it is dropped unclosed
+            self._drop(task.cell.key, close=False)
             assert self.timeout_s is not None  # only a limit raises it
             return EpisodeOutcome(task.key, error=timeout_error(self.timeout_s, traceback.format_exc()))
         except Exception as exc:  # a bug or a solver crash in one episode must not end a sweep of thousands

@@ -3,6 +3,8 @@ observation's current fields (``check_fields``; the MPC checks its history too, 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from crowdsim.env import Observation
@@ -15,8 +17,11 @@ def check_fields(obs: Observation) -> None:
     shapes failed in numpy's words."""
     m, n = obs.n_robots, obs.n_humans
     radius = obs.radius
-    if isinstance(radius, bool) or not isinstance(radius, int | float | np.number) or not 0 < radius < np.inf:
-        # NaN passed, and every robot counted as off its goal (guidance, the stall watch) for good
+    try:
+        value = math.nan if isinstance(radius, bool | str | bytes) else float(radius)  # a 0-d array too
+    except (TypeError, ValueError):
+        value = math.nan
+    if not 0 < value < math.inf:  # NaN passed, and every robot counted as off its goal for good
         raise PipelineError(f"obs.radius must be a number of metres > 0 (a robot's arrival), got {radius!r}")
     for name, shape in (
         ("robot_positions", (m, 2)),

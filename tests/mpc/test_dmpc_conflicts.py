@@ -55,3 +55,13 @@ def test_a_jacobi_cycle_ending_on_colliding_plans_is_moved_apart():
     again = solve(MPCConfig(j_max=10, dmpc_conflicts=True), data)
     np.testing.assert_array_equal(again.accels, safe.accels)
     assert again.solves == safe.solves
+
+
+def test_no_conflict_move_starts_past_the_steps_time_limit():
+    """The IBR loop stops at time_limit_s; the moves after it ran two joint solves a pair whatever the time
+    (132 at most at 12 robots)."""
+    data = row_crossing(3)
+    late = solve(MPCConfig(j_max=9, dmpc_conflicts=True, time_limit_s=1e-6), data)
+    plain = solve(MPCConfig(j_max=9, time_limit_s=1e-6), data)
+    assert late.status == plain.status == "timeout" and late.solves == plain.solves
+    np.testing.assert_array_equal(late.accels, plain.accels)

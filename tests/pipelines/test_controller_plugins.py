@@ -838,3 +838,28 @@ def test_a_controller_whose_close_raises_is_said_once_and_the_sweep_stands(tmp_p
     err = capfd.readouterr().err
     line = "note: controller 'straight_line''s close() raised OSError: the serial port is gone"
     assert err.count(line) == 1
+
+
+def test_a_plugin_of_the_working_folder_reaches_workers_that_move_to_their_scratch(tmp_path):
+    """With jit a sweep's workers move to their scratch folders before they import the plugins: once the
+    plugin's folder was searched by a finder of the driver's (not on sys.path, which spawned workers copy),
+    every episode raised "No module named 'mine_q'"; it imports a module of its folder too. Run as a user
+    runs it, the `crowdmpc` script in the plugin's folder (pytest's own sys.path hid it)."""
+    (tmp_path / "helper_q.py").write_text("SPEED = 0.7\n", encoding="utf-8")
+    source = (REPO / "tests" / "plugins" / "toy_controller.py").read_text(encoding="utf-8")
+    extra = "\nfrom helper_q import SPEED  # noqa: E402\n"
+    extra += "\n\nclass Compiling(StraightLine):\n    compiles = True\n"
+    (tmp_path / "mine_q.py").write_text(source + extra, encoding="utf-8")
+    mine = "mine_q:Compiling"  # its kind compiles: --jit on moves the workers to their scratch folders
+    argv = ["--plugin", mine, "sweep", "--experiment", "controllers", "--controllers", f"orca,{mine}"]
+    argv += ["--humans", "2", "--episodes-per-cell", "1", "--workers", "2", "--jit", "on", "--no-progress"]
+    done = subprocess.run(
+        [str(Path(sys.executable).with_name("crowdmpc")), *argv, "--out", str(tmp_path / "sweep")],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert len((tmp_path / "sweep" / "episodes.jsonl").read_text().splitlines()) == 2

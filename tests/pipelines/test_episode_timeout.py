@@ -12,6 +12,7 @@ import time
 
 import pytest
 
+from pipelines.cli import main
 from pipelines.errors import PipelineError
 from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline
 from tests.cli_calls import one_line, parser_error
@@ -200,3 +201,28 @@ def test_a_bad_limit_is_one_line(tmp_path, capsys):
         assert code == 2 and f"{label} must be a number of seconds > 0" in one_line(err), err
     assert not out.exists()
     assert "invalid float value" in parser_error(capsys, "sweep", "--episode-timeout", "soon")
+
+
+@pytest.mark.parametrize("backend", ["inline", "process"])
+def test_a_close_that_hangs_neither_holds_the_worker_nor_follows_a_timeout(backend, tmp_path, capfd):
+    """The controller a limit stopped is dropped unclosed (its close may wait on what its act hung on: the
+    sweep hung there); the one built again is closed at the end within the limit, and said so."""
+    hangs = "tests.plugins.failing_controllers:HangsInCloseToo"
+    argv = [
+        "--plugin",
+        hangs,
+        "sweep",
+        "--experiment",
+        "controllers",
+        "--controllers",
+        hangs,
+        "--humans",
+        "2",
+    ]
+    argv += ["--episodes-per-cell", "4", "--workers", "1", "--backend", backend, "--jit", "off"]
+    started = time.perf_counter()
+    code = main([*argv, "--no-progress", "--episode-timeout", "1", "--out", str(tmp_path / "sweep")])
+    assert time.perf_counter() - started < 60
+    assert code == 1  # the circles' episodes raised
+    err = capfd.readouterr().err
+    assert err.count("note: controller 'hangs_in_close_too''s close() did not return in 1 s") == 1, err

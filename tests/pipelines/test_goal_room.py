@@ -163,3 +163,13 @@ def test_the_command_line_says_it_once_in_its_own_words(capsys):
     assert main([*args, "--set", "mpc.d_min=1.0", "--set", "env.time_limit=2"]) == 0
     err = capsys.readouterr().err
     assert err.count("note: the MPC's d_min 1 m is not well below") == 1 and "goals lie" not in err
+
+
+def test_the_antipodal_circle_gets_the_note_too_without_a_spacing_it_refuses():
+    """The controller's GoalRoomWarning, which simulate and sweep leave out for this note, fired for 12
+    robots on the circle (neighbouring goals 7 sin(pi / 12) = 1.81 m apart) at d_min 1.8, and the note said
+    nothing there."""
+    note = goal_room_note(_spec(d_min=1.8), 12, "antipodal")
+    assert note is not None and note.startswith("note: the MPC's d_min 1.8 m is not well below the 1.81")
+    assert "(antipodal of 12)" in note and "robot_spacing" not in note
+    assert goal_room_note(_spec(), 12, "antipodal") is None  # Table I's 0.8 m

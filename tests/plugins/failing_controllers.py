@@ -110,3 +110,16 @@ class HangsOnCircles(StraightLine):
             except Exception:  # noqa: S112 (the point: a catch-all that a time limit must get past)
                 continue
         return super().act(obs)
+
+
+class HangsInCloseToo(HangsOnCircles):
+    """HangsOnCircles whose ``close`` waits for good too (a driver waiting on the device its act hung on)."""
+
+    name = "hangs_in_close_too"
+
+    def close(self) -> None:
+        while True:
+            try:
+                time.sleep(0.02)
+            except Exception:  # noqa: S112 (the point: a catch-all that a time limit must get past)
+                continue
