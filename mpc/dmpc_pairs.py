@@ -25,7 +25,7 @@ Jacobi update each plan answers plans replaced meanwhile, and among people an ep
 squeezed pair into each other. After the stalled pairs, each pair whose plans come within d_min, closest
 first, solves the same joint NLP from the plans and from the pair braking (from colliding plans the first
 solve stayed where it was), the better kept when F falls by epsilon. Robots trading places (4 and 8, Jacobi):
-contact in 1 of 10 episodes each -> none, the closest 0.33 / 0.53 -> 1.03 / 0.91 m; Table II's conditions:
+contact in 1 of 10 episodes each -> none, the closest 0.33 / 0.53 -> 1.03 / 0.93 m; Table II's conditions:
 3 of 100 episodes differ (docs/results.md, "DMPC conflict moves").
 """
 
