@@ -240,9 +240,9 @@ class MPCConfig:
     # the joint NLP over their two plans, the others' fixed, kept when F drops by epsilon (mpc/dmpc_pairs.py:
     # a late robot in front of a parked teammate is an equilibrium no single best response leaves).
     dmpc_pairs: bool = False
-    # DMPC: after the loop (and the pair moves), each pair of robots whose plans come within d_min of each
-    # other solves the same joint NLP over its two plans, closest first, kept when F drops by epsilon: among
-    # people, two robots can stop at an equilibrium that plans them into each other (mpc/dmpc_pairs.py).
+    # DMPC: after the loop (and the pair moves), robots whose plans come within d_min of each other (joined
+    # where they share a robot) solve the same joint NLP over their plans, kept when F drops by epsilon: the
+    # loop can stop on plans that run robots into each other (mpc/dmpc_pairs.py).
     dmpc_conflicts: bool = False
     # coupling="nlp": "exact" (the predictor inside the NLP), "first_order" (its value and Jacobian at the
     # current plan, re-linearised until F settles) or "auto": exact for a predictor small enough to expand

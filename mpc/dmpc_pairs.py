@@ -1,4 +1,4 @@
-"""A stalled robot and the teammate in its way move together (``MPCConfig.dmpc_pairs``), and so do two robots
+"""A stalled robot and the teammate in its way move together (``MPCConfig.dmpc_pairs``), and so do robots
 whose plans run into each other (``MPCConfig.dmpc_conflicts``): DMPC's way out of the equilibria that no
 single robot can leave.
 
@@ -22,11 +22,13 @@ With ``flocking_weight="per_robot"`` it adds nothing measurable at 5, 6 or 12 ro
 
 Conflicts. The loop can end on plans that bring two robots within d_min of each other: under the paper's
 Jacobi update each plan answers plans replaced meanwhile, and among people an epsilon-Nash point can plan a
-squeezed pair into each other. After the stalled pairs, each pair whose plans come within d_min, closest
-first, solves the same joint NLP from the plans and from the pair braking (from colliding plans the first
-solve stayed where it was), the better kept when F falls by epsilon. Robots trading places (4 and 8, Jacobi):
-contact in 1 of 10 episodes each -> none, the closest 0.33 / 0.53 -> 1.03 / 0.93 m; Table II's conditions:
-3 of 100 episodes differ (docs/results.md, "DMPC conflict moves").
+squeezed pair into each other. After the stalled pairs, the robots of each such pair, joined where pairs
+share a robot (four robots meeting in the middle of their circle: pair by pair each move ran into a third),
+solve the same joint NLP from the plans and from braking (from colliding plans the first solve stayed where
+it was), the better kept when F falls by epsilon, the group of the closest pair first. Robots trading places
+(4 and 8, Jacobi): contact in 1 of 10 episodes each -> none, the closest 0.33 / 0.53 -> 1.10 / 0.91 m;
+among people with the safe configuration, 4 and 6 robots, 100 episodes each: touches 4 -> 0 of 200
+(docs/results.md, "DMPC conflict moves").
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -84,6 +87,29 @@ def conflicts(data: StepData, positions: np.ndarray, d_min: float) -> list[tuple
     return [(int(i[k]), int(j[k])) for k in near]
 
 
+def conflict_groups(data: StepData, positions: np.ndarray, d_min: float) -> list[tuple[int, ...]]:
+    """The robots of ``conflicts``' pairs joined where they share a robot (three robots meeting in the middle
+    of a circle are one group: pair by pair, each move ran into the third), each group sorted, the group of
+    the closest pair first."""
+    group = list(range(data.n_robots))  # union-find: each robot's representative
+
+    def root(k: int) -> int:
+        while group[k] != k:
+            k = group[k]
+        return k
+
+    pairs = conflicts(data, positions, d_min)
+    for i, j in pairs:
+        group[root(j)] = root(i)
+    groups: dict[int, list[int]] = {}
+    for i, _ in pairs:  # closest first: the groups in the order of their closest pair
+        groups.setdefault(root(i), [])
+    for k in range(data.n_robots):
+        if root(k) in groups and any(k in pair for pair in pairs):
+            groups[root(k)].append(k)
+    return [tuple(members) for members in groups.values()]
+
+
 class _Moves(NamedTuple):
     """The plans as the pair moves leave them, and what the moves took."""
 
@@ -98,8 +124,8 @@ class _Moves(NamedTuple):
 
 def pair_moves(joint: JointNLP, data: StepData, result: IBRResult, until: float = math.inf) -> IBRResult:
     """``result`` after the pair moves (module docstring): of its stalled robots (``dmpc_pairs``), then of
-    the pairs whose plans, as those moves leave them, conflict (``dmpc_conflicts``); unchanged when nothing
-    was solved, no pair asks for a move or none lowers F by epsilon. No pair starts after ``until``
+    the groups whose plans, as those moves leave them, conflict (``dmpc_conflicts``); unchanged when nothing
+    was solved, no group asks for a move or none lowers F by epsilon. No move starts after ``until``
     (``time.perf_counter()``: the step's time limit, as the IBR loop's)."""
     cfg = joint.cfg
     # prediction is None exactly when nothing was solved (IBRResult.solved)
@@ -119,8 +145,8 @@ def pair_moves(joint: JointNLP, data: StepData, result: IBRResult, until: float 
         moves = _move(joint, data, result.prediction, held, moves, until, restart=False)
     if cfg.dmpc_conflicts:
         planned = rollout_numpy(data.states, moves.accels, cfg.dt)[0]
-        pairs = conflicts(data, planned, cfg.d_min)
-        moves = _move(joint, data, result.prediction, pairs, moves, until, restart=True)
+        groups = conflict_groups(data, planned, cfg.d_min)
+        moves = _move(joint, data, result.prediction, groups, moves, until, restart=True)
     if not moves.kept:
         return dataclasses.replace(result, solves=moves.solves, solver_iterations=moves.iterations)
     return dataclasses.replace(
@@ -140,28 +166,30 @@ def _move(
     joint: JointNLP,
     data: StepData,
     prediction: np.ndarray,
-    pairs: list[tuple[int, int]],
+    pairs: Sequence[tuple[int, ...]],
     moves: _Moves,
     until: float,
     *,
     restart: bool,
 ) -> _Moves:
-    """Each pair in turn solves the joint NLP over its two plans, the others' fixed, from the plans the moves
-    before it left (and, with ``restart``, again from the pair braking, the better kept: from the plans
-    that collide the solve stayed in their local minimum); kept when F drops by epsilon. With ``restart``
-    (the conflicts) a pair an earlier move set apart is passed over."""
+    """Each group (a pair, or more) in turn solves the joint NLP over its plans, the others' fixed, from the
+    plans the moves before it left (and, with ``restart``, again from the group braking, the better kept:
+    from the plans that collide the solve stayed in their local minimum); kept when F drops by epsilon. With
+    ``restart`` (the conflicts) a group an earlier move set apart is passed over."""
     cfg = joint.cfg
     accels, potential, lam_x, lam_g, solves, iterations, kept = moves
     brake = braking(data.states, cfg.horizon, cfg.dt, cfg.a_max) if restart and pairs else None
-    for i, j in pairs:
+    for members in pairs:
         if time.perf_counter() > until:
             break
-        if brake is not None and kept:
-            planned = rollout_numpy(data.states[[i, j]], accels[[i, j]], cfg.dt)[0]
-            if np.linalg.norm(planned[0] - planned[1], axis=-1).min() >= cfg.d_min:
+        chosen = list(members)
+        if brake is not None and kept:  # still in conflict, after the moves before it?
+            planned = rollout_numpy(data.states[chosen], accels[chosen], cfg.dt)[0]
+            i, j = np.triu_indices(len(chosen), k=1)
+            if np.linalg.norm(planned[i] - planned[j], axis=-1).min() >= cfg.d_min:
                 continue
         free = np.zeros(data.n_robots, dtype=bool)
-        free[[i, j]] = True
+        free[chosen] = True
         sol = joint.solve_group(data, prediction, accels, free)
         solves, iterations = solves + 1, iterations + sol.iterations
         if brake is not None:

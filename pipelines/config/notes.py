@@ -69,7 +69,7 @@ MPC_NOTES: Final[Mapping[str, str]] = {
     "dmpc_stop": "regret (Algorithm 2, lines 12-16) | no_improvement: when DMPC's iterations end",
     "dmpc_order": "index | nearest_first (to its target): the order of gauss_seidel's best responses",
     "dmpc_pairs": "a stalled robot re-plans with the teammate in its way (needs stall_release_s)",
-    "dmpc_conflicts": "two robots whose plans come within d_min of each other re-plan together",
+    "dmpc_conflicts": "robots whose plans come within d_min of each other re-plan together",
     "dmpc_start": "DMPC's u^(0): shifted (previous plan, else braking) | heading (not braking if F lower)",
     "guidance": "none (the paper: Eq. 8 heads for the goal) | standing: around rows of humans standing still",
     "flocking_weight": "per_pair (the paper: w_floc on every pair) | per_robot: w_floc * 2 / (M - 1)",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mpc.config import MPCConfig
-from mpc.dmpc_pairs import conflicts
+from mpc.dmpc_pairs import conflict_groups, conflicts
 from mpc.errors import MPCConfigError
 from mpc.nlp import StepData
 from tests.mpc.test_dmpc_convergence import row_crossing, solve
@@ -65,3 +65,14 @@ def test_no_conflict_move_starts_past_the_steps_time_limit():
     plain = solve(MPCConfig(j_max=9, time_limit_s=1e-6), data)
     assert late.status == plain.status == "timeout" and late.solves == plain.solves
     np.testing.assert_array_equal(late.accels, plain.accels)
+
+
+def test_robots_sharing_a_conflict_move_as_one_group_by_hand():
+    """Robots 0, 1 and 2 in a line 0.5 and 0.6 m apart (0 and 2 1.1 m), 3 and 4 0.7 m apart, 5 m off: two
+    groups, the one of the closest pair first. Four robots trading places met in the middle of their circle,
+    and pair by pair each move ran into a third robot (two robots 0.33 m apart in 1 of 100 episodes)."""
+    planned = np.array([[[0.0, 0.0]], [[0.5, 0.0]], [[1.1, 0.0]], [[5.0, 0.0]], [[5.7, 0.0]]])
+    data = StepData(np.zeros((5, 4)), np.zeros((5, 2)), np.zeros((5, 2)), np.ones(5, dtype=bool))
+    assert conflicts(data, planned, 0.8) == [(0, 1), (1, 2), (3, 4)]
+    assert conflict_groups(data, planned, 0.8) == [(0, 1, 2), (3, 4)]
+    assert conflict_groups(data, planned, 0.55) == [(0, 1)]
