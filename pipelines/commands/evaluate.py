@@ -148,10 +148,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     check_writable(args.json, "--json", json_only=True)
     _choose_files(args)
     config = EvalConfig(top_k=args.top_k, seed=args.seed)
-    from pipelines.commands.simulate_checks import plugin_code_note, quick_check_note
+    from pipelines.commands.simulate_checks import zoo_notes
 
     # before the load: an edited plugin whose weights no longer fit said why only in simulate
-    for note in filter(None, (plugin_code_note(args.predictor), quick_check_note(args.predictor))):
+    for note in zoo_notes(args.predictor):
         print(note, file=sys.stderr)
     predictor = load_predictor(args.predictor)
     progress = False if args.no_progress else None  # None: a bar on a terminal only

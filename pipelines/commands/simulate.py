@@ -276,8 +276,7 @@ def _simulate(resolved: SimulateRun) -> int:
         team_notes.radius_note(spec, scenario.robots, cfg.env.radius, formation, spacing),
         checks.horizon_note(spec),
         checks.size_note(spec, scenario.humans, scenario.robots),
-        checks.plugin_code_note(spec.predictor_name),
-        checks.quick_check_note(spec.predictor_name),
+        *checks.zoo_notes(spec.predictor_name),
         *calibration_notes(spec, cfg),
     )
     for note in filter(None, notes):

@@ -201,36 +201,46 @@ def size_note(spec: ControllerSpec, n_humans: int, n_robots: int) -> str | None:
     )
 
 
-def plugin_code_note(predictor: str | None) -> str | None:
-    """A line for a zoo model of a plugin's net whose module file is not the one it was trained with (the
-    sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from
-    the figures `zoo list` shows, where the model loaded without a word. None otherwise (no record, no
-    plugin, the same file)."""
-    from predictors.registry import PREDICTORS
-    from predictors.zoo import locate
-
-    if not predictor or predictor in PREDICTORS:  # a registered one is no zoo's: its manifest is not read
-        return None
-    located = locate(predictor)
-    return None if located is None else plugin_entry_note(predictor, located.entry)
-
-
-def quick_check_note(predictor: str | None) -> str | None:
-    """A line for a zoo model trained with ``train --limit-batches`` cutting its epochs (``zoo.quick_check``):
-    ``zoo add`` and ``zoo list`` said so, and simulate, sweep and evaluate ran it beside trained models
-    without a word. None otherwise."""
-    from pipelines.commands.zoo import quick_check
+def _zoo_entry(predictor: str | None) -> ZooEntry | None:
+    """The zoo entry ``predictor`` loads; None for a registered predictor (no zoo's: its manifest is not
+    read) or a name no zoo holds."""
     from predictors.registry import PREDICTORS
     from predictors.zoo import locate
 
     if not predictor or predictor in PREDICTORS:
         return None
     located = locate(predictor)
-    limit = None if located is None else quick_check(located.entry.training)
-    if limit is None:
-        return None
-    batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
-    return f"note: {predictor!r} trained on {batches}: a quick check, not a trained model (zoo list: *)"
+    return None if located is None else located.entry
+
+
+def zoo_notes(predictor: str | None) -> list[str]:
+    """``plugin_code_note``'s and ``quick_check_note``'s lines, the entry located once."""
+    from pipelines.commands.zoo import quick_check_line
+
+    entry = _zoo_entry(predictor)
+    if predictor is None or entry is None:
+        return []
+    notes = (plugin_entry_note(predictor, entry), quick_check_line(repr(predictor), entry.training))
+    return [note for note in notes if note is not None]
+
+
+def plugin_code_note(predictor: str | None) -> str | None:
+    """A line for a zoo model of a plugin's net whose module file is not the one it was trained with (the
+    sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from
+    the figures `zoo list` shows, where the model loaded without a word. None otherwise (no record, no
+    plugin, the same file)."""
+    entry = _zoo_entry(predictor)
+    return None if predictor is None or entry is None else plugin_entry_note(predictor, entry)
+
+
+def quick_check_note(predictor: str | None) -> str | None:
+    """A line for a zoo model trained with ``train --limit-batches`` cutting its epochs (``zoo.quick_check``):
+    ``zoo add`` and ``zoo list`` said so, and simulate, sweep and evaluate ran it beside trained models
+    without a word. None otherwise."""
+    from pipelines.commands.zoo import quick_check_line
+
+    entry = _zoo_entry(predictor)
+    return None if entry is None else quick_check_line(repr(predictor), entry.training)
 
 
 def plugin_entry_note(predictor: str, entry: ZooEntry | None) -> str | None:

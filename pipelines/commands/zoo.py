@@ -351,10 +351,8 @@ def _add(args: argparse.Namespace) -> int:
         replace=args.replace,
     )
     print(_added_line(entry, previous, args, root))
-    limit = quick_check(entry.training)
-    if limit is not None:  # docs/extending.md: such a model is never mistaken for a trained one
-        batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
-        note = f"note: {entry.name} trained on {batches}: a quick check, not a trained model (zoo list: *)"
+    note = quick_check_line(entry.name, entry.training)
+    if note is not None:  # docs/extending.md: such a model is never mistaken for a trained one
         print(note, file=sys.stderr)
     return 0
 
@@ -363,6 +361,15 @@ def quick_check(training: dict) -> int | None:
     """The batches an epoch an entry trained on when ``train --limit-batches`` cut its epochs, else None."""
     limit = training.get("limit_batches")
     return limit if isinstance(limit, int) and not isinstance(limit, bool) else None
+
+
+def quick_check_line(shown: str, training: dict) -> str | None:
+    """The note on an entry (named ``shown``) that ``quick_check`` finds, else None."""
+    limit = quick_check(training)
+    if limit is None:
+        return None
+    batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
+    return f"note: {shown} trained on {batches}: a quick check, not a trained model (zoo list: *)"
 
 
 def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:

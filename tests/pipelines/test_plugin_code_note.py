@@ -47,10 +47,11 @@ def test_a_quick_check_is_noted_where_it_runs(monkeypatch):
 def test_export_says_a_changed_plugin_before_a_load_that_fails(monkeypatch, tmp_path, capsys):
     """An edited plugin whose weights no longer fit was refused ("weights do not fit the net") with the
     note that explains it printed only after a successful load."""
+    import pipelines.commands.sweep_checks  # noqa: F401 (imported before the patch: it binds zoo_notes)
     from pipelines.cli import main
     from pipelines.errors import PipelineError
 
-    monkeypatch.setattr(simulate_checks, "plugin_code_note", lambda name: "note: its file is now bbbb")
+    monkeypatch.setattr(simulate_checks, "zoo_notes", lambda name: ["note: its file is now bbbb"])
 
     def refuse(name):
         raise PipelineError("weights do not fit the net")
