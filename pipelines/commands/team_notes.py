@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from crowdsim.world import PAPER_ROBOTS
-from pipelines.loop.mpc_setup import GOAL_ROOM_MARGIN, ROOM_SPACING
+from pipelines.loop.mpc_setup import ROOM_SPACING, short_of_room
 from pipelines.loop.spec import MPC_CONTROLLERS
 
 if TYPE_CHECKING:
@@ -56,7 +56,7 @@ def goal_room_note(
     trading = shape == "antipodal"
     flocking = not trading and cfg.w_floc > 0 and cfg.flock_distance == "uniform"
     flocking = flocking and not 0 < cfg.flock_range < gap
-    if d_min < gap - GOAL_ROOM_MARGIN - 1e-9:
+    if not short_of_room(d_min, gap):
         if flocking and gap > cfg.d_flock + FLOCK_SLACK + 1e-9:
             return (
                 f"note: the robots' closest goals are {gap:g} m apart ({shape} of {n_robots}), beyond the "

@@ -122,6 +122,12 @@ GOAL_ROOM_MARGIN: Final[float] = 0.05  # m
 ROOM_SPACING: Final[float] = 0.3
 
 
+def short_of_room(d_min: float, gap: float) -> bool:
+    """Whether ``d_min`` is within ``GOAL_ROOM_MARGIN`` of two goals ``gap`` m apart, or above: the rule of
+    ``warn_goal_room`` and of the command line's note (pipelines.commands.team_notes.goal_room_note)."""
+    return d_min >= gap - GOAL_ROOM_MARGIN - 1e-9
+
+
 def goal_room(cfg: MPCConfig, goals: np.ndarray) -> tuple[int, int, float] | None:
     """The closest two robots' goals, ``(i, j, distance)``, when ``d_min`` is within ``GOAL_ROOM_MARGIN``
     of their distance or above; None otherwise."""
@@ -131,7 +137,7 @@ def goal_room(cfg: MPCConfig, goals: np.ndarray) -> tuple[int, int, float] | Non
     i, j = np.triu_indices(len(goals), k=1)
     gaps = np.linalg.norm(goals[i] - goals[j], axis=1)
     k = int(np.argmin(gaps))
-    if cfg.d_min < gaps[k] - GOAL_ROOM_MARGIN - 1e-9:
+    if not short_of_room(cfg.d_min, float(gaps[k])):
         return None
     return int(i[k]), int(j[k]), float(gaps[k])
 
