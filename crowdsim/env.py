@@ -132,6 +132,7 @@ class CrowdEnv:
                 past=cfg.history_len - 1,
                 formation=cfg.formation,
                 spacing=cfg.robot_spacing,
+                crowd=cfg.crowd,
             )
             return self._start_replay(episode)
         layout = make_layout(

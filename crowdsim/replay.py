@@ -173,16 +173,21 @@ def replay_episode(
     past: int = 0,
     formation: Formation = "auto",
     spacing: float | None = None,
+    crowd: str | None = None,
 ) -> ReplayEpisode:
     """A window of ``steps + 1`` rows of ``recording``, after ``past`` rows of history, with ``n_humans``
     pedestrians near the robots' path (module docstring); SimulationError when ``WINDOW_TRIES`` draws find
-    none."""
+    none. ``crowd``, the crowd the user chose ("hotel_reactive"), is named in that error beside the recording.
+    """
+    named = f"recording {recording.name!r}"
+    if crowd is not None and crowd != recording.name:
+        named = f"crowd {crowd!r} (recording {recording.name!r})"
     robot_starts, robot_goals = robot_layout(n_robots, formation, spacing=spacing)
     turned = recording.turned(scenario)
     starts = recording.window_starts(past + steps)
     if len(starts) == 0:
         raise SimulationError(
-            f"recording {recording.name!r} has no {past + steps + 1} consecutive steps (an episode of "
+            f"{named} has no {past + steps + 1} consecutive steps (an episode of "
             f"{steps * recording.dt:g} s after {past} of observed history): shorten [env] time_limit"
         )
     corridor = np.concatenate([robot_starts, robot_goals]) if n_robots else np.zeros((1, 2))
@@ -213,7 +218,7 @@ def replay_episode(
         draws = f"{blocked} draw{'' if blocked == 1 else 's'}"
         why = f"{draws} with enough had someone within {clear:g} m of a robot's start; {why}"
     raise SimulationError(
-        f"recording {recording.name!r}: no window in {WINDOW_TRIES} draws has {n_humans} pedestrians in "
+        f"{named}: no window in {WINDOW_TRIES} draws has {n_humans} pedestrians in "
         f"its first {(chosen_rows - 1) * recording.dt:g} s and the robots' starts clear ({why}); use fewer "
         "humans"
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +26,9 @@ class FileStats:
     agents_max: int
     types: tuple[int, int, int, int]  # scenes of TrajNet++ type I, II, III, IV (untagged scenes not counted)
     fps: tuple[float | None, ...] = ()  # the scenes' distinct frame rates, None for scenes without one
+    untagged: int = 0  # scenes without a tag (tag 0: uncategorised, as `data prepare --no-tags` writes them)
+    odd_tags: int = 0  # scenes whose tag is no TrajNet++ type: [2.0, []], [5, []], "III" (the Reader's any)
+    odd_example: str = ""  # the first of those tags, as the file holds it
 
 
 def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
@@ -34,11 +38,16 @@ def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
     summary = content.summary
     sizes: list[int] = []  # a scene at a time: a large file's scenes are GBs as arrays
     types = [0, 0, 0, 0]
+    untagged, odd = 0, []
     for scene in shown_scenes(content, progress):
         sizes.append(scene.xy.shape[1])
         kind = scene_type(scene.tag)
         if kind is not None:
             types[kind - 1] += 1
+        elif scene.tag == 0 and not isinstance(scene.tag, bool):
+            untagged += 1
+        else:
+            odd.append(scene.tag)
     agents = np.asarray(sizes or [0])
     distinct = len({(row.frame, row.pedestrian) for row in content.tracks})
     return FileStats(
@@ -52,6 +61,9 @@ def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
         agents_max=int(agents.max()),
         types=(types[0], types[1], types[2], types[3]),
         fps=tuple(sorted({row.fps for row in content.scenes}, key=lambda fps: (fps is None, fps or 0))),
+        untagged=untagged,
+        odd_tags=len(odd),
+        odd_example=json.dumps(odd[0]) if odd else "",
     )
 
 
@@ -85,7 +97,7 @@ def stats_report(path: str | Path) -> tuple[str, list[str]]:
     """``data stats`` of an ndjson file or of every one under a folder: the table, and its notes (stderr).
     A bar over each file's scenes on a terminal only, so that a piped table stays clean."""
     stats = [file_stats(f, progress=None) for f in ndjson_files(path)]
-    return format_table(stats, root=path), repeated_notes(stats)
+    return format_table(stats, root=path), repeated_notes(stats) + tag_notes(stats)
 
 
 def repeated_notes(stats: list[FileStats]) -> list[str]:
@@ -97,6 +109,26 @@ def repeated_notes(stats: list[FileStats]) -> list[str]:
         for s in stats
         if s.repeated
     ]
+
+
+def tag_notes(stats: list[FileStats]) -> list[str]:
+    """What the types column leaves out: a note for each file with tags that are no TrajNet++ type (a
+    hand-made or foreign file; they were counted nowhere, unsaid), and one for the untagged scenes of all."""
+    notes = [
+        f"note: {s.path}: {s.odd_tags} scene{'s' * (s.odd_tags != 1)} tagged with no TrajNet++ type "
+        f"(an integer 1-4), e.g. {s.odd_example}: left out of the types column"
+        for s in stats
+        if s.odd_tags
+    ]
+    untagged = [s for s in stats if s.untagged]
+    if untagged:
+        n = sum(s.untagged for s in untagged)
+        where = str(untagged[0].path) if len(untagged) == 1 else f"{len(untagged)} files"
+        notes.append(
+            f"note: {n} scene{'s' * (n != 1)} in {where} {'are' if n != 1 else 'is'} untagged (`data prepare "
+            "--no-tags` writes them so): left out of the types column"
+        )
+    return notes
 
 
 def _shown_fps(fps: tuple[float | None, ...]) -> str:

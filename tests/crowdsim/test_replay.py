@@ -100,6 +100,11 @@ def test_an_episode_nobody_can_make_is_refused_with_the_most_found():
         replay_episode(four_people(), "circle", 5, 3, 10, np.random.default_rng(0), radius=0.3, past=2)
     with pytest.raises(SimulationError, match="no 14 consecutive steps"):
         replay_episode(four_people(), "circle", 2, 3, 11, np.random.default_rng(0), radius=0.3, past=2)
+    # the crowd the user chose is named beside the recording it replays ("hotel_reactive" said 'hotel' alone)
+    name = four_people().name
+    with pytest.raises(SimulationError, match=rf"^crowd '{name}_reactive' \(recording '{name}'\) has no 14"):
+        replay_episode(four_people(), "circle", 2, 3, 11, np.random.default_rng(0), radius=0.3, past=2,
+                       crowd=f"{name}_reactive")  # fmt: skip
     # someone standing on the middle robot's start at the first step (5 at (0, -5), 7 at (0, 5), 6 and 8
     # walking along x through the centre): the only window cannot leave the start clear
     rows = walk(5, range(13), 0.0, 0.0, -5.0) + walk(7, range(13), 0.0, 0.0, 5.0)

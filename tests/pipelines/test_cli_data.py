@@ -107,6 +107,17 @@ def test_stats_counts_only_integer_scene_types(tmp_path, capsys):
     code, out, err = run(capsys, "data", "stats", str(tmp_path))
     assert code == 0, err
     assert out.splitlines()[-1].split()[0] == "total" and out.splitlines()[-1].split()[-2] == "0/0/1/2"
+    # and the four scenes counted in no column are named, each with its tag, not passed over in silence
+    odd = [line for line in err.splitlines() if "tagged with no TrajNet++ type" in line]
+    assert [line.split(": ")[1] for line in odd] == [str(tmp_path / f"t{k}.ndjson") for k in (0, 1, 3, 4)]
+    assert odd[0].endswith("1 scene tagged with no TrajNet++ type (an integer 1-4), e.g. [2.0, []]: left out "
+                           "of the types column") and 'e.g. "III"' in odd[3]  # fmt: skip
+    assert "untagged" not in err
+    records = walk_scene_records()
+    records[0]["scene"].pop("tag", None)
+    write_lines(tmp_path / "t9.ndjson", records)
+    code, _, err = run(capsys, "data", "stats", str(tmp_path / "t9.ndjson"))
+    assert code == 0 and f"note: 1 scene in {tmp_path / 't9.ndjson'} is untagged" in err
 
 
 BAD_LINES = {

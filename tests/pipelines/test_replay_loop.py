@@ -268,7 +268,7 @@ def test_a_crowd_the_recording_cannot_give_is_refused_before_any_nlp_is_built(
         code, _, err = run_cli(capsys, *argv, *dry, "--episodes-per-cell", "1", "--backend", "inline")
         assert code == 2 and one_line(err).startswith(
             "crowdmpc sweep: error: cell 'CMPC' at 50 humans, crowd eth_reactive: the recording gives no "
-            "window for its first circle episode: recording 'eth': no window"
+            "window for its first circle episode: crowd 'eth_reactive' (recording 'eth'): no window"
         )
         assert not out.exists()
     # the draw depends on the seed: at 46 of ETH's people seed 3's circle finds no window and seed 0's does;
