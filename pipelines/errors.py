@@ -127,9 +127,11 @@ def quiet_team_warnings() -> None:
     """Leave out the controller's warnings on the robots' layout (``FlockWarning``, ``GoalRoomWarning``),
     which ``simulate`` and ``sweep`` say once, before the first episode, in their own words
     (pipelines.commands.team_notes); a sweep's workers each said them again. Inside
-    ``warnings.catch_warnings()``."""
+    ``warnings.catch_warnings()``. Only those of a controller crowdmpc's loops reset (the warning names
+    the caller of the MPC's ``reset``): a plugin around ``MPCController`` resets it from its own module,
+    gets no note, and keeps the warning as its only word on the layout."""
     for category in (FlockWarning, GoalRoomWarning):
-        warnings.simplefilter("ignore", category)
+        warnings.filterwarnings("ignore", category=category, module=r"pipelines\.")
 
 
 def warnings_as_notes() -> None:

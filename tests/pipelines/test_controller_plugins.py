@@ -78,6 +78,17 @@ def test_a_sweep_compares_a_plugin_controller_with_shipped_ones_in_worker_proces
     assert TOY in table and " orca " in table
 
 
+def test_a_plugin_around_the_mpc_keeps_its_warning_on_the_layout(capsys):
+    """simulate leaves out the MPC's layout warnings for its own notes, which are for cmpc and dmpc: a
+    plugin wrapping MPCController had the warning hidden and no note in its place."""
+    wrapped = f"{TOYS}:WrappedMPC"
+    argv = ["simulate", "--humans", "0", "--episodes", "2", "--no-progress", "--set", "env.time_limit=2"]
+    code, _, err = run(capsys, "--plugin", wrapped, *argv, "--controller", wrapped)
+    assert code == 0 and err.count("robots 0 and 1's goals lie 1.00 m apart, and the MPC keeps") == 1, err
+    code, _, err = run(capsys, *argv, "--controller", "cmpc", "--set", "mpc.d_min=1.0")
+    assert code == 0 and "goals lie" not in err and "note: the MPC's d_min 1 m is not well below" in err
+
+
 def test_controllers_is_refused_outside_the_controllers_experiment(tmp_path, capsys):
     argv = ["sweep", "--experiment", "table2", "--controllers", "cmpc", "--dry-run", "--out", str(tmp_path)]
     code, _, err = run(capsys, *argv)
