@@ -118,7 +118,7 @@ from crowdsim.gym_observation import (
     observation_bounds,
 )
 from crowdsim.gym_options import count as _count
-from crowdsim.gym_options import episode_options, numbers
+from crowdsim.gym_options import episode_options, numbers, warn_formation
 from crowdsim.gym_reward import (
     RewardConfig,
     as_reward_config,
@@ -194,6 +194,7 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             raise SimulationError(f"end_on_collision must be a bool, got {end_on_collision!r}")
         check_sizes(scenario, n_humans, n_robots)
         self.n_robots = _count(n_robots, "n_robots", 1, MAX_ROBOTS)
+        warn_formation(config, self.n_robots)
         self.n_humans = int(n_humans)
         self.max_robots = _count(
             n_robots if max_robots is None else max_robots, "max_robots", n_robots, MAX_ROBOTS

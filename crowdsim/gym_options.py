@@ -5,13 +5,17 @@ checks of the numbers its constructor and ``step`` take (``count``, ``numbers``)
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import fields
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from crowdsim.errors import SimulationError
-from crowdsim.scenarios import Layout, check_sizes, checked_layout
+from crowdsim.errors import LayoutWarning, SimulationError
+from crowdsim.scenarios import Layout, check_robot_spacing, check_sizes, checked_layout, robot_layout
+
+if TYPE_CHECKING:
+    from crowdsim.env_config import EnvConfig
 
 RESET_OPTIONS: Final[tuple[str, ...]] = ("scenario", "n_humans", "n_robots", "layout")
 LAYOUT_SCENARIO: Final[str] = "layout"  # the scenario an episode from options["layout"] reports
@@ -66,6 +70,17 @@ def episode_options(
         )
     chosen["n_humans"], chosen["n_robots"] = int(chosen["n_humans"]), int(chosen["n_robots"])
     return chosen
+
+
+def warn_formation(config: EnvConfig, n_robots: int) -> None:
+    """A LayoutWarning from the constructor where ``config``'s formation of its ``n_robots`` puts neighbours
+    in contact at its radius: every reset without ``options["layout"]`` is then refused, and said so only
+    at the first. A warning, not a refusal: a user of hand-built layouts alone may want that radius."""
+    starts, _ = robot_layout(n_robots, config.formation, spacing=config.robot_spacing)
+    try:
+        check_robot_spacing(starts, config.radius, config.formation, n_robots)
+    except SimulationError as exc:
+        warnings.warn(f"{exc}: a reset without options['layout'] is refused", LayoutWarning, stacklevel=3)
 
 
 def numbers(action: object, what: str) -> np.ndarray:

@@ -355,7 +355,7 @@ def make_layout(
         lambda s: math.isfinite(s) and s >= 0,
     )
     robot_starts, robot_goals = robot_layout(n_robots, formation, spacing=spacing)
-    _check_robot_spacing(robot_starts, radius, formation, n_robots)
+    check_robot_spacing(robot_starts, radius, formation, n_robots)
     # Every placed agent has the same radius, so the separation is one number.
     starts, goals = PLACERS[crossing](
         scenario,
@@ -376,7 +376,7 @@ def make_layout(
     )
 
 
-def _check_robot_spacing(starts: np.ndarray, radius: float, formation: Formation, n_robots: int) -> None:
+def check_robot_spacing(starts: np.ndarray, radius: float, formation: Formation, n_robots: int) -> None:
     """Refuse a radius at which the formation's neighbours overlap: its spacing (1 m in the row, d_ij in the
     others) does not follow [world] radius, the simulator has no robot-robot contact, and the metrics count
     robot-human contact only, so robots 1 m apart at radius 0.55 m drove the whole episode inside each other

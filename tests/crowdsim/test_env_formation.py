@@ -93,6 +93,31 @@ def test_the_overlap_refusal_is_one_line_naming_the_setting(capsys):
     assert main([*argv, "--set", "env.robot_spacing=1.2", "--episodes", "1"]) == 0
 
 
+def test_the_gymnasium_constructor_warns_of_a_formation_its_resets_refuse():
+    """gym.make took a radius at which every reset of its formation was then refused, the first word of it
+    at the first reset; it warns now, naming the way out. A warning, not a refusal: hand-built layouts
+    (``options["layout"]``) do not use the formation."""
+    import warnings
+
+    import gymnasium as gym
+
+    from crowdsim import ENV_ID
+    from crowdsim.errors import LayoutWarning
+
+    with pytest.warns(LayoutWarning, match=r"neighbours 1 m apart, in contact .*: a reset without options"):
+        env = gym.make(ENV_ID, config=EnvConfig(radius=0.6), n_humans=0)
+    with pytest.raises(SimulationError, match="in contact from the start"):
+        env.reset(seed=0)
+    starts = np.array([[-1.5, -4.0], [1.5, -4.0]])
+    layout = make_layout("circle", 0, 2, np.random.default_rng(0))
+    layout = type(layout)(starts, starts * [1.0, -1.0], layout.human_starts, layout.human_goals)
+    env.reset(seed=0, options={"layout": layout})  # the radius the user wanted, for layouts of their own
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LayoutWarning)
+        gym.make(ENV_ID, config=EnvConfig(radius=0.6, robot_spacing=1.3)).reset(seed=0)
+        gym.make(ENV_ID, config=EnvConfig(radius=0.6), n_robots=1).reset(seed=0)
+
+
 def test_the_antipodal_circle_takes_neither_slots_nor_a_spacing():
     """An even team's goals are its own starts: slots would hand every robot its start, and the episode would
     succeed at once; the circle's spacing is its own."""
