@@ -70,7 +70,8 @@ def calibration_world_note(
         f"note: the closed-loop margins of {name!r} at alpha={alpha_text(margins.alpha)} were calibrated "
         f"under profile {measured[0]} with robots {measured[1]}, this run is {profile} with robots "
         f"{visibility}: their coverage here is not measured ({command} --profile {profile} --visibility "
-        f"{visibility} measures it, replacing that block)"
+        f"{visibility} measures it, replacing that block for every run; CROWDMPC_ZOO=DIR keeps it "
+        "apart)"
     )
 
 

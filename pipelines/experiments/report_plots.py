@@ -163,7 +163,10 @@ def _draw_by_method(ax: Any, methods: list[str], summaries: Sequence[CellSummary
         # The bars' colours are the methods' (named on the x axis): the legend's bar is neutral, not C0.
         what = "ours (a bar per method, 95% interval)" if drawn else "ours (a bar per method)"
         ours = Patch(facecolor="0.8", edgecolor="0.3", label=what)
-        ax.legend(handles=[ours, mark], fontsize="small")
+        # under the axes, as _legend's: inside, matplotlib's least-data corner still covered a bar's foot
+        fig = ax.figure
+        fig.set_size_inches(fig.get_size_inches()[0], FIGSIZE[1] + LEGEND_ROW_IN)
+        fig.legend(handles=[ours, mark], loc="outside lower center", ncols=2, fontsize="small")
     ax.set_xticks(x, methods, rotation=30, ha="right")
     ax.set_xlim(-0.6, len(methods) - 0.4)  # with no bar at all the slots had shrunk onto the frame's edges
     return drawn
@@ -340,7 +343,8 @@ def outcome_figure(experiment: Experiment, summaries: Sequence[CellSummary], out
     ax.set_ylabel(outcome.ylabel)
     bars = f"error bars: our 95% {outcome.interval}{cut}" if drawn else f"no error bars: {outcome.no_bars}"
     bars = outcome.bars or bars
-    shared = settings_line([s.cell for s in summaries])
+    # the settings line wrapped too: the safe configuration's ran past both edges, losing the predictor
+    shared = wrap_title(settings_line([s.cell for s in summaries]), 70)
     title = "\n".join(t for t in (wrap_title(experiment.title, 70), shared, outcome.meaning, bars) if t)
     ax.set_title(title, fontsize="medium")
     ax.grid(alpha=0.3)

@@ -143,6 +143,25 @@ def test_a_histogram_of_five_crowd_sizes_fits_a_page_and_names_its_threshold():
         assert len({str(p.get_linestyle()) for p in steps}) == 2  # one outline does not hide the other
 
 
+@pytest.mark.parametrize("sizes", [(5, 6), (5,)])
+def test_the_safe_configurations_settings_line_stays_inside_the_figure(sizes):
+    """The settings line under the title (predictor, margins, five [mpc] values) ran past both edges of the
+    safe configuration's plots, against the humans and by method: "onstant_velocity; ... s"."""
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+
+    sets = ["sweep.experiment=table2", "controller.predictor=constant_velocity"]
+    experiment = configured_experiment(load("docs/examples/safe_crossing.toml", sets=sets))
+    cells = experiment.cells(sizes)
+    summaries = summarize(experiment, cells, [_record(c, i, 1.0, 20) for c in cells for i in range(2)])
+    fig = outcome_figure(experiment, summaries, _outcome("success"))
+    renderer = _drawn(fig)
+    title = fig.axes[0].title
+    assert "predictor constant_velocity" in title.get_text() and "stall_release_s=4" in title.get_text()
+    box, page = title.get_window_extent(renderer), fig.bbox
+    assert page.x0 <= box.x0 and box.x1 <= page.x1 and box.y1 <= page.y1
+
+
 def test_a_bar_without_a_travel_time_says_why_and_one_success_says_n_1():
     """`--vary mpc.d_min=0.8,1.0`: CMPC d_min=1.0 never succeeded (an empty slot, read as 0 s) and DMPC
     d_min=1.0 once (no error bar under a title promising them); the legend's one blue bar stood for bars of
@@ -158,8 +177,11 @@ def test_a_bar_without_a_travel_time_says_why_and_one_success_says_n_1():
     texts = {t.get_text(): t for t in ax.texts}
     assert texts["no success"].get_position()[0] == 1  # CMPC d_min=1.0's slot
     assert texts["n = 1"].xy == (3, pytest.approx(15.0))  # above DMPC d_min=1.0's bar
-    handles = ax.get_legend().legend_handles
-    (ours,) = [h for h in handles if isinstance(h, Patch)]
+    (legend,) = ax.figure.legends  # under the axes (inside, it covered a bar's foot)
+    assert ax.get_legend() is None
+    renderer = _drawn(ax.figure)
+    assert not legend.get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
+    (ours,) = [h for h in legend.legend_handles if isinstance(h, Patch)]
     assert to_hex(ours.get_facecolor()) not in {to_hex(f"C{k}") for k in range(10)}
     assert "a bar per method" in ours.get_label()
 
