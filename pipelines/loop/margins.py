@@ -314,8 +314,8 @@ def controller_note(block: Calibration, controller: str) -> str | None:
     return (
         f"note: the closed-loop margins of {block.predictor!r} at alpha={alpha_text(block.alpha)} were "
         f"calibrated with controller {made}, this run's is {controller}: their coverage here is not measured "
-        f"({calibrate_command(block, controller=controller)} measures it, replacing that block for every run; "
-        "CROWDMPC_ZOO=DIR keeps it apart)"
+        f"({calibrate_command(block, controller=controller)} measures it, replacing that block for every "
+        "run; CROWDMPC_ZOO=DIR keeps it apart)"
     )
 
 

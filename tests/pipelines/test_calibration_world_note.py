@@ -51,7 +51,8 @@ def test_the_note_names_both_conventions_and_the_command_that_measures_the_runs(
         "with robots visible, this run is v1 with robots invisible: their coverage here is not measured "
         "(crowdmpc calibrate --predictor social_lstm_eth --source closed-loop --alpha 0.1 --horizon 4 "
         "--episodes 200 --seed 1000000 --controller cmpc --humans 5,6,7,8,9 --near 3 --profile v1 "
-        "--visibility invisible measures it, replacing that block for every run; CROWDMPC_ZOO=DIR keeps it apart)"
+        "--visibility invisible measures it, replacing that block for every run; CROWDMPC_ZOO=DIR keeps it "
+        "apart)"
     )
 
 
