@@ -126,8 +126,8 @@ def test_a_run_planning_with_a_block_made_with_another_controller_gets_a_note():
         "note: the closed-loop margins of 'constant_velocity' at alpha=0.1 were calibrated with controller "
         "cmpc, this run's is dmpc: their coverage here is not measured (crowdmpc calibrate --predictor "
         "constant_velocity --source closed-loop --alpha 0.1 --episodes 100 --seed 1000000 --humans 5,6,7,8,9 "
-        "--controller dmpc --profile paper --visibility visible --near 3 measures it, replacing that block for "
-        "every run; CROWDMPC_ZOO=DIR keeps it apart)"
+        "--controller dmpc --profile paper --visibility visible --near 3 measures it, replacing that block "
+        "for every run; CROWDMPC_ZOO=DIR keeps it apart)"
     )
     behind = dataclasses.replace(shipped, details={**shipped.details, "sensor_range": 3.0})
     assert (controller_note(behind, "dmpc") or "").endswith(
