@@ -63,8 +63,13 @@ def file_stats(path: str | Path, *, progress: bool | None = False) -> FileStats:
         fps=tuple(sorted({row.fps for row in content.scenes}, key=lambda fps: (fps is None, fps or 0))),
         untagged=untagged,
         odd_tags=len(odd),
-        odd_example=json.dumps(odd[0]) if odd else "",
+        odd_example=_shortened(json.dumps(odd[0])) if odd else "",
     )
+
+
+def _shortened(text: str, limit: int = 60) -> str:
+    """``text`` cut to ``limit`` characters with "...": a tag may be any JSON, a whole scene's worth."""
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
 
 
 def scene_type(tag: object) -> int | None:
