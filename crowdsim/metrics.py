@@ -23,7 +23,9 @@ accelerating within a step follow a parabola, which the segment approximates).
 * contact: that minimum is below the sum of the radii (0.6 m): physical contact.
 * per-step counts: ``collision_steps``, ``contact_steps`` and ``discomfort_steps`` count the recorded
   states (rows 0..T) at which the condition holds; ``aggregate`` turns them into frequencies per evaluated
-  state, CrowdNav's per-step convention.
+  state (over T + 1 states, each distance at the state). Not CrowdNav's per-step count, which tests the
+  closest approach within each of the T steps (higher where agents pass close between states); the
+  between-steps rates below make that within-step test, per episode.
 * discomfort: at some step a robot's projected path intersects a human's projected path; a projected path is
   the closed segment from the agent's position to ``position + velocity * 1.2 s`` (length speed x 1.2 s). An
   agent standing still projects a point; touching segments count as intersecting.
