@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 
 from pipelines.errors import PipelineError, RecordingRefused
 from pipelines.logs.reader import Recording, decode_metadata, read_metadata
+from pipelines.logs.recorder import UNFINISHED_SUFFIX
 
 # What tells two runs' recordings of one (scenario, seed) apart (its file name is the same for both), and
 # two set-ups in `crowdmpc review DIR`: these values of the "episode" metadata, then every setting of the
@@ -98,12 +99,27 @@ def check_replaceable(path: Path, identity: Mapping[str, Any]) -> None:
     same folder silently replaced the first's. A setting the held recording does not name (recorded before
     it existed, and not in ``UNRECORDED_DEFAULTS``) tells nothing apart. The metadata are read as ``crowdmpc
     review`` reads them, so that a cut file (a killed run's ``.part``, a copy that stopped) still names its
-    run; a file that is no recording is left to the recorder, which replaces it."""
+    run. A ``.part`` that is no recording (a killed run's, cut inside its header) is left to the recorder,
+    which takes it over; at the episode's own name, where only a finished recording is renamed to, anything
+    else is the user's (a file of theirs named so was replaced without a word), refused, and so are a
+    symbolic link and a folder there (a folder was found only after the episode had run)."""
+    if path.is_symlink():
+        raise RecordingRefused(f"cannot record to {path}: it is a symbolic link; remove it")
     if not path.is_file():
+        if path.exists():
+            raise RecordingRefused(
+                f"cannot record to {path}: a folder (or another thing than a file) has that name; remove it, "
+                "or record into another folder"
+            )
         return
     records = _held_metadata(path)
     if records is None or "episode" not in records:  # not an MCAP file, or cut inside its header
-        return
+        if path.name.endswith(UNFINISHED_SUFFIX):
+            return
+        raise RecordingRefused(
+            f"cannot record to {path}: it holds no crowdmpc recording (a file of your own?); remove it, or "
+            "record into another folder"
+        )
     held = run_identity(records["episode"], decode_metadata(records.get("config", {})))
     differ = [k for k in held if held[k] != identity.get(k, MISSING)]
     if differ:

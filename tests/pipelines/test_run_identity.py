@@ -83,10 +83,33 @@ def test_an_empty_setting_is_shown_as_a_dash(tmp_path):
     assert (shown(""), shown("row"), shown(4), shown(None)) == ("-", "row", "4", "null")
 
 
-def test_a_recording_without_episode_metadata_is_left_to_the_recorder(tmp_path):
-    """No episode, no run to keep apart: the recorder replaces it."""
-    path = _recording(tmp_path / "circle_1.mcap", None, {"mpc": {"horizon": 9}})
-    check_replaceable(path, run_identity(EPISODE, {"mpc": {"horizon": 4}}))
+def test_a_file_that_is_no_recording_is_taken_over_only_as_an_unfinished_part(tmp_path):
+    """A killed run's ``.part`` cut inside its header names no run: the recorder takes it over. At the
+    episode's own name, where only a finished recording is renamed to, a file that is none is the user's: a
+    note of theirs named circle_seed000000.mcap was replaced without a word. A symbolic link or a folder
+    there is refused too, before the episode runs (a folder was found after it, as an unwritable .part)."""
+    identity = run_identity(EPISODE, {"mpc": {"horizon": 4}})
+    for made in (
+        lambda p: _recording(p, None, {"mpc": {"horizon": 9}}),  # an MCAP file, no episode
+        lambda p: p.write_text("my notes"),
+        lambda p: p.write_bytes(b""),
+    ):
+        part = tmp_path / "circle_seed000000.mcap.part"
+        made(part)
+        check_replaceable(part, identity)
+        final = tmp_path / "circle_seed000000.mcap"
+        made(final)
+        with pytest.raises(PipelineError, match="it holds no crowdmpc recording .a file of your own.."):
+            check_replaceable(final, identity)
+        part.unlink()
+        final.unlink()
+    (tmp_path / "elsewhere.mcap").write_text("x")
+    (tmp_path / "circle_seed000000.mcap").symlink_to(tmp_path / "elsewhere.mcap")
+    with pytest.raises(PipelineError, match="it is a symbolic link; remove it"):
+        check_replaceable(tmp_path / "circle_seed000000.mcap", identity)
+    (tmp_path / "circle_seed000001.mcap").mkdir()
+    with pytest.raises(PipelineError, match="a folder .or another thing than a file. has that name"):
+        check_replaceable(tmp_path / "circle_seed000001.mcap", identity)
 
 
 def test_a_sensed_run_does_not_replace_the_full_observations_recording(tmp_path):
