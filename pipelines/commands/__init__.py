@@ -115,8 +115,9 @@ def check_writable(
     recording by its summary), and with ``json_only`` (a ``--json`` report) it replaces only a JSON document:
     a mistyped name must not overwrite a data file, a recording or weights. A file output that is a symbolic
     link is refused: one planted in a folder would send the output wherever it points. Nor is an output a
-    zoo's own file (its manifest, calibrations, lock; ``_check_not_zoo_file``), existing or not, unless
-    ``zoo_own``: the command keeps that very file (calibrate's calibrations.json). ``room``: how many bytes
+    zoo's own file (its manifest, calibrations, lock; ``_check_not_zoo_file``), existing or not, nor
+    anywhere in a zoo (``check_outside_the_zoos``), unless ``zoo_own``: the command keeps that very file
+    (calibrate's calibrations.json). ``room``: how many bytes
     longer than the output's name the temporary name it is first made under beside it is, which its name
     must leave room for (default: ``REPLACE_FILE_ROOM`` for a file, made by ``replace_file``; 0 for a
     directory, written into; 0 for a file written in place, such as a figure). Standard output (``--json
@@ -143,6 +144,8 @@ def check_writable(
         )
     if not zoo_own:
         _check_not_zoo_file(path, label)
+        # nor anywhere in a zoo: a --record, --json or sweep folder there wrote among the weights
+        check_outside_the_zoos(path, option, "it")
     if not directory and path.is_symlink():
         # a link planted in a folder would make the output land wherever it points (even where nothing is)
         raise PipelineError(

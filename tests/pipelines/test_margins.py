@@ -855,13 +855,14 @@ def test_held_out_episodes_that_met_no_human_report_no_coverage_and_keep_the_blo
         return synthetic_closed_loop(plan, next(runs))
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))  # the report beside it: none is written in it
     out = tmp_path / "calibrate.json"
     assert main([*CALIBRATE, "--holdout", "--json", str(out)]) == 0
     said = capsys.readouterr().out
     assert "held-out: 0 samples (no human came within --near of a robot: no coverage)" in said
     written = json.loads(out.read_text())
     assert written["holdout_coverage"] is None and written["holdout_rows"] == 0
-    assert (tmp_path / "calibrations.json").is_file()
+    assert (tmp_path / "zoo" / "calibrations.json").is_file()
 
 
 def test_a_record_of_margins_made_behind_a_sensor_says_whether_its_tracker_gave_track_lengths():

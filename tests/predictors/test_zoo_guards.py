@@ -457,6 +457,37 @@ def test_training_never_writes_into_a_zoo(tmp_path, shipped, user, capsys, where
     assert snapshot(tmp_path) == before and all(problem is None for _, problem in zoo.verify_entries())
 
 
+SIMULATE = ["simulate", "--controller", "straight", "--humans", "1", "--robots", "1", "--no-progress"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "option", "where"),
+    [
+        (SIMULATE, "--record", "checkpoints"),
+        (SIMULATE, "--json", "user/report.json"),
+        (SIMULATE, "--plot", "link/run.png"),
+        (["sweep", "--experiment", "controllers", "--controllers", "straight", "--humans", "1",
+          "--episodes-per-cell", "2", "--backend", "inline"], "--out", "checkpoints/sweep"),  # fmt: skip
+        (["evaluate", "--predictor", "constant_velocity"], "--json", "user/eval.json"),
+    ],
+)
+def test_no_command_writes_its_outputs_into_a_zoo(tmp_path, shipped, user, capsys, argv, option, where):
+    """train and export refused a zoo folder, the other outputs did not: `simulate --record checkpoints`
+    wrote a recording among the shipped weights, `--json` a report into the user zoo."""
+    (tmp_path / "link").symlink_to(user)
+    out = tmp_path / where
+    which = "shipped" if where.startswith("checkpoints") else "user"
+    root = (shipped if which == "shipped" else user).resolve()
+    before = snapshot(tmp_path)
+    code, _, err = cli([*argv, option, str(out)], capsys)
+    assert (code, err) == (
+        2,
+        f"crowdmpc {argv[0]}: error: {option} {out} lies in the {which} zoo {root}, whose files only "
+        "`crowdmpc zoo add` writes; write it elsewhere",
+    )
+    assert snapshot(tmp_path) == before
+
+
 def test_training_beside_the_shipped_zoo_never_puts_its_checkpoints_into_it(tmp_path, shipped, capsys):
     """`train --out .` at a clone's top wrote Lightning's last.ckpt and best-*.ckpt into OUT/checkpoints/,
     which is the shipped zoo's folder."""
