@@ -458,6 +458,10 @@ def test_training_never_writes_into_a_zoo(tmp_path, shipped, user, capsys, where
 
 
 SIMULATE = ["simulate", "--controller", "straight", "--humans", "1", "--robots", "1", "--no-progress"]
+SWEEP = (
+    "sweep --experiment controllers --controllers straight --humans 1 --episodes-per-cell 2 --backend inline"
+)
+SWEEP = SWEEP.split()
 
 
 @pytest.mark.parametrize(
@@ -466,8 +470,7 @@ SIMULATE = ["simulate", "--controller", "straight", "--humans", "1", "--robots",
         (SIMULATE, "--record", "checkpoints"),
         (SIMULATE, "--json", "user/report.json"),
         (SIMULATE, "--plot", "link/run.png"),
-        (["sweep", "--experiment", "controllers", "--controllers", "straight", "--humans", "1",
-          "--episodes-per-cell", "2", "--backend", "inline"], "--out", "checkpoints/sweep"),  # fmt: skip
+        (SWEEP, "--out", "checkpoints/sweep"),
         (["evaluate", "--predictor", "constant_velocity"], "--json", "user/eval.json"),
     ],
 )
