@@ -186,8 +186,10 @@ def progress_callbacks(no_progress: bool) -> list[Callback]:
 def check_weights_fit(last: Path, module: torch.nn.Module) -> None:
     """PipelineError unless ``last``'s weights are the ones ``module`` holds, name for name and shape for
     shape: a plugin net changed since the run started (a layer added) or a hand-edited file otherwise ends
-    the resume inside Lightning with a traceback."""
-    held = torch.load(last, map_location="cpu", weights_only=True)["state_dict"]
+    the resume inside Lightning with a traceback; and unless the rest a resume restores is whole
+    (``_check_training_state``)."""
+    checkpoint = torch.load(last, map_location="cpu", weights_only=True)
+    held = checkpoint["state_dict"]
     wanted = module.state_dict()
     problems = [f"{key} missing" for key in wanted if key not in held]
     problems += [f"{key} not in the net" for key in held if key not in wanted]
@@ -202,6 +204,45 @@ def check_weights_fit(last: Path, module: torch.nn.Module) -> None:
             f"--resume: {last}'s weights do not fit the net this run builds ({shown}): its code changed "
             "since the run started, or the file was edited; train it anew with another --out"
         )
+    problem = _check_training_state(checkpoint, module)
+    if problem is not None:
+        raise PipelineError(
+            f"--resume: {last} is damaged ({problem}); train anew with another --out, or resume from a "
+            "copy of the run"
+        )
+
+
+def _check_training_state(checkpoint: dict[str, Any], module: Any) -> str | None:
+    """What of ``checkpoint``'s training state a resume cannot restore, None when nothing: the optimizers'
+    and schedulers' states loaded into fresh ones of ``module`` (as Lightning will load them), the random
+    state and the epoch. A file edited by hand (an optimizer state dropped, a random state of floats) ended
+    the resume in a 30-50 line traceback from Lightning or torch."""
+    epoch = checkpoint.get("epoch")
+    if isinstance(epoch, bool) or not isinstance(epoch, int) or epoch < 0:
+        return f"epoch {epoch!r}, not a count from 0"
+    rng = checkpoint.get("crowdmpc_torch_rng")  # absent in runs from before it was kept
+    expected = torch.get_rng_state()
+    if rng is not None and not (
+        isinstance(rng, torch.Tensor) and rng.dtype == expected.dtype and rng.shape == expected.shape
+    ):
+        return "crowdmpc_torch_rng is not torch's random state"
+    optimizers, schedulers = module.configure_optimizers()
+    # the keys without which a state restores nothing (a scheduler's load takes any dict as it is; a newer
+    # torch adds keys of its own, which an older run's file lacks and which are not asked for here)
+    needed = {"optimizer_states": {"state", "param_groups"}, "lr_schedulers": {"last_epoch", "base_lrs"}}
+    for key, fresh in (("optimizer_states", optimizers), ("lr_schedulers", schedulers)):
+        held = checkpoint.get(key)
+        if not isinstance(held, list) or len(held) != len(fresh):
+            holds = len(held) if isinstance(held, list) else "none" if held is None else type(held).__name__
+            return f"{key}: {len(fresh)} expected, the file holds {holds}"
+        for state, made in zip(held, fresh, strict=True):
+            if not isinstance(state, dict) or not needed[key] <= set(state):
+                return f"{key}: a state without the keys {sorted(needed[key])}"
+            try:
+                made.load_state_dict(state)
+            except Exception as exc:  # noqa: BLE001 (torch's ValueError, KeyError, TypeError ...)
+                return f"{key}: {type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}"
+    return None
 
 
 def _shape(value: Any) -> str:
