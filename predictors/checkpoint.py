@@ -225,9 +225,7 @@ def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) ->
             f"{weights}: {size} bytes, more than the {limit} a state_dict of the net of {config} can take"
         )
     try:
-        with warnings.catch_warnings():  # torch's advice on a pickle's protocol: the refusal says it all
-            warnings.simplefilter("ignore", UserWarning)
-            state = torch.load(weights, map_location="cpu", weights_only=True)
+        state = load_tensors(weights)
     except Exception:  # whatever a corrupt or hostile file makes torch raise, the file is at fault
         # torch's own message suggests weights_only=False, which a checkpoint must never need
         raise PredictorError(
@@ -240,6 +238,17 @@ def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) ->
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:  # not expected after the checks above
         raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from None
     return net
+
+
+def load_tensors(path: Path) -> Any:
+    """``torch.load(path, weights_only=True)`` onto the CPU, never a pickled object, and without torch's
+    advice on a pickle's protocol, a warning of two lines that came before the caller's one-line refusal of
+    such a file (`zoo add`, `train --resume`)."""
+    import torch
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return torch.load(path, map_location="cpu", weights_only=True)
 
 
 def check_state_dict(state: object, expected: dict[str, Any], weights: Path, config: Path) -> None:

@@ -16,6 +16,7 @@ from lightning.pytorch.callbacks import Callback, ModelCheckpoint, TQDMProgressB
 
 from pipelines.commands.train_resume import relocated
 from pipelines.errors import PipelineError
+from predictors.checkpoint import load_tensors
 
 
 class RunCheckpoint(ModelCheckpoint):
@@ -188,7 +189,7 @@ def check_weights_fit(last: Path, module: torch.nn.Module) -> None:
     shape: a plugin net changed since the run started (a layer added) or a hand-edited file otherwise ends
     the resume inside Lightning with a traceback; and unless the rest a resume restores is whole
     (``_check_training_state``)."""
-    checkpoint = torch.load(last, map_location="cpu", weights_only=True)
+    checkpoint = load_tensors(last)
     held = checkpoint["state_dict"]
     wanted = module.state_dict()
     problems = [f"{key} missing" for key in wanted if key not in held]

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
-from predictors.checkpoint import check_name
+from predictors.checkpoint import check_name, load_tensors
 from predictors.errors import PredictorError
 
 # What fixes a training run: --resume continues it with these, and only --epochs may change.
@@ -129,10 +129,8 @@ def checkpoint_record(out: Path) -> dict[str, Any] | None:
     """What the last.ckpt of the run in ``out`` says it was trained with (``checkpoint_settings``, the values
     it holds): the settings a resume goes on with for a run from before its settings file was kept; None
     where it cannot be read (``check_last_checkpoint`` then says why)."""
-    import torch
-
     try:
-        checkpoint = torch.load(out / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True)
+        checkpoint = load_tensors(out / "checkpoints" / "last.ckpt")
         hyper, data = checkpoint["hyper_parameters"], checkpoint.get("datamodule_hyper_parameters")
         held = checkpoint_settings(hyper, data)
     except Exception:
@@ -183,10 +181,8 @@ def recorded_loss(recorded: dict[str, Any] | None, last: Path) -> str | None:
     loss = recorded.get("loss") if recorded is not None else None
     if loss in _LOSSES:
         return str(loss)
-    import torch
-
     try:
-        hyper = torch.load(last, map_location="cpu", weights_only=True).get("hyper_parameters")
+        hyper = load_tensors(last).get("hyper_parameters")
         loss = hyper["optim_config"]["loss"]
     except Exception:  # refused, with why, by check_last_checkpoint
         return None
@@ -244,10 +240,8 @@ def check_last_checkpoint(last: Path, settings: dict[str, Any]) -> int | None:
     (``checkpoint_settings``): a cut, foreign or other-model file otherwise fails inside Lightning with a
     traceback, and other settings would be recorded for weights they never trained. The checkpoint is the
     authority even when the run's settings file is gone or damaged."""
-    import torch
-
     try:
-        checkpoint = torch.load(last, map_location="cpu", weights_only=True)
+        checkpoint = load_tensors(last)
     except Exception as exc:  # torch raises RuntimeError, UnpicklingError, EOFError ... for a bad file
         raise PipelineError(
             f"--resume: {last} is not a readable Lightning checkpoint (damaged, or not written by `crowdmpc "

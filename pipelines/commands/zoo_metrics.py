@@ -29,10 +29,10 @@ def check_protocol_label(label: str | None, summary: dict, metrics_path: Path) -
 
 def _reads_as_weights(weights: Path) -> bool:
     """Whether ``weights`` loads as a torch file of tensors (``weights_only``, as every load here)."""
-    import torch
+    from predictors.checkpoint import load_tensors
 
     try:
-        torch.load(weights, map_location="cpu", weights_only=True)
+        load_tensors(weights)
     except Exception:  # whatever a damaged file makes torch raise
         return False
     return True

@@ -564,3 +564,25 @@ def test_a_user_zoo_that_is_a_file_or_a_missing_dir_is_named_not_passed_over(
     assert f"$CROWDMPC_ZOO: the user zoo {file} is a file" in capsys.readouterr().err
     monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "not_yet"))  # before the first add: empty, not an error
     assert main(["zoo", *action]) == 0
+
+
+class _Payload:
+    def __reduce__(self):  # what a hostile pickle runs on loading; weights_only never calls it
+        return (Path.touch, (Path(os.environ["CROWDMPC_TEST_PAYLOAD"]),))
+
+
+def test_a_pickle_with_code_is_refused_in_one_line_and_never_run(
+    tmp_path, pair, monkeypatch, capsys, user, recwarn
+):
+    """A pickle of protocol 4 in the weights' place: refused as weights_only refuses it, its code never run;
+    torch's advice on the protocol came as two lines of warning before the one-line refusal."""
+    import pickle
+
+    ran = tmp_path / "payload_ran"
+    monkeypatch.setenv("CROWDMPC_TEST_PAYLOAD", str(ran))
+    with open(pair, "wb") as f:
+        pickle.dump({"w": _Payload()}, f, protocol=4)
+    code, _, err = cli(["zoo", "add", str(pair), "--name", "mine2"], capsys)  # cli: one line of stderr
+    assert code == 2 and "a pickled object, which is never loaded" in err, err
+    assert not ran.exists()
+    assert not [w for w in recwarn if "pickle protocol" in str(w.message)]  # shown before the line
