@@ -118,6 +118,11 @@ class FlockWarning(UserWarning):
     .mpc_setup.warn_separate_goals; MPCConfig.flock_range)."""
 
 
+class DroppedLineWarning(UserWarning):
+    """A sweep's episodes.jsonl ended in a whole line that is no JSON record, cut off and kept beside it
+    (pipelines.experiments.log.EpisodeLog.scan)."""
+
+
 class GoalRoomWarning(UserWarning):
     """Two robots' goals closer than the MPC lets robots stand (pipelines.loop.mpc_setup.warn_goal_room;
     Eq. 12 keeps every pair d_min apart)."""
@@ -152,7 +157,8 @@ def warnings_as_notes() -> None:
         file: TextIO | None = None,
         line: str | None = None,
     ) -> None:
-        if not issubclass(category, LayoutWarning | NoTwinWarning | FlockWarning | GoalRoomWarning):
+        ours = LayoutWarning | NoTwinWarning | FlockWarning | GoalRoomWarning | DroppedLineWarning
+        if not issubclass(category, ours):
             shown(message, category, filename, lineno, file, line)
         elif (out := file or sys.stderr) is not None:
             with contextlib.suppress(OSError):  # as Python's own: a note lost to a closed pipe raises nothing

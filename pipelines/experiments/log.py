@@ -17,12 +17,13 @@ import json
 import math
 import os
 import sys
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Final
 
 from crowdsim.errors import SimulationError
-from pipelines.errors import PipelineError
+from pipelines.errors import DroppedLineWarning, PipelineError
 from pipelines.loop.record import EpisodeRecord
 from pipelines.plain_json import plain
 
@@ -91,10 +92,29 @@ class EpisodeLog:
                     yield offset, line, record
                 good_end += len(line)
         if repair and good_end < size:
+            if bad is not None:
+                self._keep_cut(good_end, bad)
             with open(self.path, "r+b") as f:
                 f.truncate(good_end)
                 f.flush()
                 os.fsync(f.fileno())
+
+    def _keep_cut(self, start: int, bad: tuple[int, Exception]) -> None:
+        """Keep a whole last line that is no record, about to be cut off, in ``<log>.cut``, and say so: a
+        crash can leave one (its blocks written out of order), but so does an edit, which was lost without
+        a word (a torn line without its newline, what a kill leaves, is cut silently)."""
+        kept = self.path.with_name(self.path.name + ".cut")
+        with open(self.path, "rb") as source, open(kept, "ab") as f:
+            source.seek(start)
+            f.write(source.read())
+            f.flush()
+            os.fsync(f.fileno())
+        warnings.warn(
+            f"{self.path}:{bad[0]}: the last line is no JSON record ({bad[1]}), as a crash while writing can "
+            f"leave; cut off (an episode it held runs again) and kept in {kept}",
+            DroppedLineWarning,
+            stacklevel=3,
+        )
 
     def _key_before(self, key: str, number: int) -> bool:
         """Whether a line before line ``number`` is a record of ``key``: two keys' hashes may be equal."""
