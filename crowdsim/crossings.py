@@ -10,9 +10,10 @@ v1 (this project's first simulator)
 
     * circle: a uniform angle on the circle plus uniform noise in ``[-v_pref/2, v_pref/2)`` on each
       coordinate (CrowdNav's ``generate_circle_crossing_human``); the goal is the opposite point ``-start``.
-    * perpendicular: a fair coin picks the side; the start is ``(±(5 + e), y)`` with ``e`` uniform in
-      ``[-1, 1)`` m and ``y`` uniform in ``[-5, 5)`` m; the goal is ``(∓(5 + e'), y + n)``, ``e'`` uniform in
-      ``[-1, 1)`` m and ``n`` uniform in ``[-v_pref/2, v_pref/2)``.
+    * perpendicular: a fair coin picks the side; ``y`` is uniform in ``[-5, 5)`` m; the start is
+      ``(±(5 + e), y)`` with ``e`` uniform in ``[-1, 1)`` m, the goal ``(∓(5 + e'), y + n)``, ``e'`` uniform
+      in ``[-1, 1)`` m and ``n`` uniform in ``[-v_pref/2, v_pref/2)`` (drawn in that order: side, y, e, e',
+      n).
 
 paper (the authors' CrowdNav fork, ``crowd_sim/envs/crowd_sim.py``)
     * circle (``generate_circle_crossing_human``): the same candidate as v1, but the start is checked only

@@ -18,7 +18,7 @@ class Observation:
     robot_velocities: np.ndarray  # (M, 2) m/s
     robot_goals: np.ndarray  # (M, 2) m
     robot_last_actions: np.ndarray  # (M, 2) m/s^2, last applied (clipped) acceleration, zeros at start
-    robot_reached: np.ndarray  # (M,) bool, robot has reached its goal (within its radius)
+    robot_reached: np.ndarray  # (M,) bool, robot has been within its radius of its goal at some step
     human_positions: np.ndarray  # (N, 2) m
     human_velocities: np.ndarray  # (N, 2) m/s
     human_goals: np.ndarray  # (N, 2) m

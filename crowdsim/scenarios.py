@@ -95,9 +95,9 @@ Across numbers of robots, not in the circle: a human drawn near a robot is redra
 shifts. Seed 5 with 7 humans: with 3 or 6 robots only humans 4-6 start where they do with 1 robot (the
 1-robot crowd's first human, next to where the 3-robot row stands, is redrawn, humans 1-3 move up one place
 and a new draw takes place 3); of seeds 0-99 only 53 (3 robots), 55 (6) and 26 (12) give the 1-robot crowd
-(v1: 20, 25, 5). The perpendicular crowds start over 1.5 m from every formation (over 3 m from the teams)
-and are the same for every number of robots. A robot-scaling comparison "on the same seeds" thus faces
-other circle crowds at each number of robots.
+(v1: 20, 25, 5). The perpendicular crowds start over 1.5 m from the auto, wedge and two-row formations
+(over 3 m from the teams; a long row's ends come nearer) and are the same for every number of robots. A
+robot-scaling comparison "on the same seeds" thus faces other circle crowds at each number of robots.
 """
 
 from __future__ import annotations

@@ -38,12 +38,17 @@ class IBRResult:
     prediction: np.ndarray | None  # (H, N_h, 2) the prediction the plan was optimised against
     potential: float  # F_t (Eq. 16) of the plan under ``prediction`` (nan when nothing was solved)
     iterations: int  # IBR iterations j used
-    solves: int  # NLP solves run (CMPC: <= iterations; DMPC: up to M per iteration, then its pair moves)
+    solves: int  # NLP solves run (CMPC: one per iteration, two when it restarts from braking; DMPC: up to
+    # M per iteration, then its pair and conflict moves)
     solved: bool  # at least one solve produced the plan (False: ``accels`` is the fallback Start.accels)
     converged: bool  # the stopping test of the algorithm held before j_max
-    status: str  # "ok", or the first failure: a solver status (mpc/solvers.py), "nan_prediction", "timeout"
+    # "ok", or the first failure: a solver status (mpc/solvers.py), "nan_prediction", "timeout"; DMPC reports
+    # "ok" where any robot's solve gave the plan, its first failure only when none did
+    status: str
     predictions: tuple[np.ndarray, ...]  # (H, N_h, 2) of every iteration
-    potentials: tuple[float, ...]  # F^(j) of every iteration that produced a plan (then DMPC's pair moves')
+    # F^(j) of every iteration after the first plan (one whose prediction repeated, or whose DMPC solves all
+    # failed, repeats the last), then DMPC's pair moves'
+    potentials: tuple[float, ...]
     lam_x: np.ndarray | None  # (M, H, 2) multipliers of the final plan, for the next warm start
     lam_g: np.ndarray | None
     solver_iterations: int  # solver iterations summed over the solves

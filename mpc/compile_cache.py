@@ -74,10 +74,10 @@ SUBDIR: Final[str] = "compiled"
 FORMAT: Final[int] = 1
 # What compiling costs and saves, per NLP, for `crowdmpc sweep --jit auto`, measured by
 # benchmarks/compile_cache.py (3 robots, 7 humans, the shared 2-core machine): a cold compile of CMPC's joint
-# NLP takes 8.2 s of CPU, gcc included (wall 5.1 / 6.7 / 7.8 s at 5 / 7 / 9 humans with the machine at load
-# 1.4, twice that at load 4), of DMPC's local NLP 2.3 s; a warm load 15-95 ms, as long as a build without
-# jit. The jit then saves 0.10-0.11 s of CPU per CMPC episode (0.26 -> 0.15 s; 0.11 s with social_lstm_eth)
-# and 0.19-0.22 s per DMPC episode (0.51 -> 0.30 s).
+# NLP takes 8.2 s of CPU (COMPILE_S rounds it to 8.0), gcc included (wall 5.1 / 6.7 / 7.8 s at 5 / 7 / 9
+# humans with the machine at load 1.4, twice that at load 4), of DMPC's local NLP 2.3 s; a warm load 15-95 ms,
+# as long as a build without jit. The jit then saves 0.10-0.11 s of CPU per CMPC episode (0.26 -> 0.15 s; 0.11
+# s with social_lstm_eth) and 0.19-0.22 s per DMPC episode (0.51 -> 0.30 s).
 COMPILE_S: Final[Mapping[str, float]] = {"joint": 8.0, "local": 2.3}
 SAVING_PER_EPISODE_S: Final[Mapping[str, float]] = {"joint": 0.10, "local": 0.19}
 # Free space a compile may need: its C source, object, library and entry; the largest entry measured (CMPC,

@@ -1,7 +1,8 @@
 """The local NLPs' parameter vectors of one control step (mpc/nlp.py ``LocalNLP``), built once per step.
 
 Robot ``i``'s parameters are ``[state, last action, goal, Eq. 8 target, goal slack, flocking weights of its
-M-1 pairs, the others' planned positions, every human's margins, the predictions]``. Only the others' plans
+M-1 pairs, (with flock_distance "goals") their d_ij, the others' planned positions, every human's margins,
+the predictions]``. Only the others' plans
 and the predictions change between the iterations of a step; the rest is the step's, so it is assembled
 once here (it went through StepData's checks and a Python loop over the pairs in every one of the ~6 builds
 per robot and iteration of DMPC). The vectors are the same numbers in the same order as one
