@@ -120,7 +120,22 @@ class OneLineParser(argparse.ArgumentParser):
             # `crowdmpc evaluate --plugin m:C ...`: an option of crowdmpc itself, given after the command (a
             # --model naming the plugin was refused first, as not registered, without the hint)
             message += " (--plugin goes before COMMAND: crowdmpc --plugin MODULE:CLASS COMMAND ...)"
-        self.exit(2, f"{self.prog}: error: {message}; see '{self.prog} --help'\n")
+        prog = self.prog
+        if message.startswith("unrecognized arguments:") and "--plugin goes" not in message:
+            # argparse's top level says it for every command, and --plugin's hint points at the top's help
+            prog = " ".join([prog, *_command(self, OneLineParser.given)])
+        self.exit(2, f"{prog}: error: {message}; see '{prog} --help'\n")
+
+
+def _command(parser: argparse.ArgumentParser, given: list[str]) -> list[str]:
+    """The command of ``given`` that ``parser``'s subcommands know, and its own ("zoo", "list"): `crowdmpc
+    calibrate --robots 1` was refused as "crowdmpc: error", pointing at the top level's help."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for k, arg in enumerate(given):
+                if arg in action.choices:
+                    return [arg, *_command(action.choices[arg], given[k + 1 :])]
+    return []
 
 
 def _plugin_after_command(prog: str, given: list[str]) -> bool:

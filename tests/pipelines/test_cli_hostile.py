@@ -60,7 +60,7 @@ def _one_error_line(capsys, command: str) -> str:
         (["data"], "data", "ACTION"),
         (["data", "prepare", "--raw"], "data prepare", "--raw"),
         (["bogus"], "", "COMMAND"),
-        (["simulate", "--controller", "orca", "--frobnicate"], "", "--frobnicate"),
+        (["simulate", "--controller", "orca", "--frobnicate"], "simulate", "--frobnicate"),
         # an empty path (an unset shell variable) read or wrote the current directory: Path("") is "."
         (["data", "prepare", "--raw", "r", "--out", ""], "data prepare", "--out: must be a path, got ''"),
         (["train", "--model", "vanilla_lstm", "--out", ""], "train", "--out: must be a path"),
@@ -95,6 +95,26 @@ def test_a_parser_error_exits_2_from_the_command_line():
         "crowdmpc simulate: error: argument --controller: invalid choice: 'bogus' "
         "(choose from 'cmpc', 'dmpc', 'orca', 'straight'); see 'crowdmpc simulate --help'\n"
     )
+
+
+@pytest.mark.parametrize(
+    ("argv", "prog"),
+    [
+        (
+            ["calibrate", "--predictor", "constant_velocity", "--source", "real", "--robots", "1"],
+            "crowdmpc calibrate",
+        ),
+        (["zoo", "list", "--robots", "1"], "crowdmpc zoo list"),
+    ],
+)
+def test_an_unknown_option_names_its_command_and_that_commands_help(capsys, argv, prog):
+    """argparse's top level refuses what no parser took: "crowdmpc: error: ... see 'crowdmpc --help'", the
+    help without the command's options."""
+    with pytest.raises(SystemExit) as done:
+        main(argv)
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert err == f"{prog}: error: unrecognized arguments: --robots 1; see '{prog} --help'\n"
 
 
 def test_plugin_after_the_command_says_where_it_goes(capsys):
