@@ -466,6 +466,18 @@ def test_review_refuses_to_write_over_the_recording_it_reads(tmp_path, capsys):
     assert run.path.read_bytes() == before
 
 
+@pytest.mark.parametrize("option", ["--json", "--plot"])
+def test_simulate_refuses_to_write_over_its_config_file(tmp_path, capsys, option):
+    """An empty config file is valid TOML, and --json takes an empty file: `--config c.toml simulate --json
+    c.toml` replaced the config by the report."""
+    config = tmp_path / ("c.toml" if option == "--json" else "c.png")
+    config.write_text("")
+    argv = ["--config", str(config), "simulate", "--controller", "straight", "--humans", "1", "--no-progress"]
+    assert main([*argv, option, str(config)]) == 2
+    assert "that is one of the command's inputs" in capsys.readouterr().err
+    assert config.read_text() == ""
+
+
 @pytest.mark.parametrize(
     ("first", "second", "name"), [("--plot", "--json", "same.png"), ("--plot", "--animate", "same.gif")]
 )
