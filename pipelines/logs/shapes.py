@@ -16,6 +16,7 @@ from typing import Any, Final
 import numpy as np
 
 from crowdsim.env_config import ENV_BOUNDS
+from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 
 # -- values ------------------------------------------------------------------------------------------------
 
@@ -86,6 +87,27 @@ def _tracks(x: Any) -> str | None:  # (A, H, 2) or (H, N, 2)
     return _array_problem(x, 3)
 
 
+_FLAGS: Final = ("success", "collision", "contact", "discomfort", "timeout")
+_NUMBERS: Final = ("travel_time", "min_distance")
+
+
+def _metrics(x: Any) -> str | None:
+    """The episode's metrics as the review adds them up: its flags booleans, its travel time and distance
+    numbers or null, a success with its travel time. A hand-made "success": "yes" counted as a success and
+    passed --check, a NaN travel time made the folder's mean unknown, where compare refused both."""
+    if not isinstance(x, dict):
+        return _object(x)
+    for name in _FLAGS:
+        if name in x and not isinstance(x[name], bool):
+            return f"{name!r} is {x[name]!r}, expected true or false"
+    for name in _NUMBERS:
+        if name in x and (problem := _real_or_null(x[name])):
+            return f"{name!r} {problem}"
+    if x.get("success") is True and "travel_time" in x and x["travel_time"] is None:
+        return "a success without its travel time"
+    return None
+
+
 _Checks = dict[str, Callable[[Any], str | None]]
 _STATE: Final[_Checks] = {"time": _real, "step": _int, "positions": _points, "goals": _points}
 _TRACK: Final[_Checks] = {"time": _real, "step": _int, "positions": _tracks}
@@ -103,7 +125,7 @@ _REQUIRED: Final[dict[str, _Checks]] = {
         "potential": _real_or_null,
         "fallback": _text_or_null,
     },
-    "/episode/metrics": {"metrics": _object},
+    "/episode/metrics": {"metrics": _metrics},
 }
 
 
@@ -116,6 +138,8 @@ def message_problem(topic: str, message: Any) -> str | None:
 # -- metadata ----------------------------------------------------------------------------------------------
 
 _EPISODE_INTS: Final = ("seed", "n_robots", "n_humans")
+# the simulator's own bounds on the agents (crowdsim.scenarios): "1000000000 robots" was shown as read
+_EPISODE_COUNTS: Final[Mapping[str, int]] = {"n_robots": MAX_ROBOTS, "n_humans": MAX_HUMANS}
 _EPISODE_REALS: Final = ("dt", "radius")
 # The simulator's own bound on the radius (crowdsim.env_config): a hand-edited radius of 1e300 passed as a
 # positive number and kept `review --plot` drawing for over a minute.
@@ -129,9 +153,12 @@ def episode_metadata_problems(episode: Mapping[str, str]) -> dict[str, str]:
     for key in _EPISODE_INTS:
         if key in episode:
             try:
-                int(episode[key])
+                value = int(episode[key])
             except ValueError:
                 problems[key] = f"{key} = {episode[key]!r} is not an integer"
+            else:
+                if key in _EPISODE_COUNTS and not 0 <= value <= _EPISODE_COUNTS[key]:
+                    problems[key] = f"{key} = {value} is outside the simulator's 0..{_EPISODE_COUNTS[key]}"
     for key in _EPISODE_REALS:
         if key in episode:
             try:

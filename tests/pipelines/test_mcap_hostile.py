@@ -9,6 +9,7 @@ shape the review reads, bad metadata, empty files, a folder named x.mcap, unfini
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
 import shutil
@@ -367,6 +368,45 @@ def test_a_radius_beyond_the_simulators_is_reported_and_ignored(tmp_path, capsys
     assert read_recording(path).problems == [problem]
     rc, out, err = review(capsys, path, "--plot", tmp_path / "p.png")
     assert rc == 0 and f"plot: {tmp_path / 'p.png'}" in out and err.strip().endswith(problem)
+
+
+@pytest.mark.parametrize(
+    ("metrics", "problem"),
+    [
+        ({"success": "yes"}, "'success' is 'yes', expected true or false"),
+        (
+            {"success": True, "travel_time": math.nan},
+            "'travel_time' is nan, expected a finite number or null",
+        ),
+        ({"success": True, "travel_time": None}, "a success without its travel time"),
+    ],
+)
+def test_metrics_the_review_cannot_add_up_are_left_out_and_checked(
+    episode, tmp_path, capsys, metrics, problem
+):
+    """A hand-made "success": "yes" counted as a success (and passed --check), a NaN travel time made a
+    folder's mean travel time unknown for every run: compare refused both files, review took them."""
+    whole = read_recording(episode.path).data("/episode/metrics")[0]
+    path = tmp_path / "edited.mcap"
+    with open(path, "wb") as f:  # by hand: the recorder writes no NaN
+        writer = Writer(f)
+        writer.start()
+        writer.add_metadata("episode", {"scenario": "circle", "n_robots": "1000000000"})
+        channel = writer.register_channel(
+            "/episode/metrics", "json", writer.register_schema(*_schema(EPISODE_METRICS))
+        )
+        data = json.dumps({**whole, "metrics": {**whole["metrics"], **metrics}}).encode()
+        writer.add_message(channel, log_time=S, data=data, publish_time=S)
+        writer.finish()
+    read = read_recording(path)
+    assert read.data("/episode/metrics") == []
+    assert read.message_problems() == [f"/episode/metrics @ 1.000 s: 'metrics' {problem}; left out"]
+    assert read.problems == [
+        "metadata 'episode': n_robots = 1000000000 is outside the simulator's 0..12; the review ignores "
+        "n_robots"
+    ]
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 1 and "/episode/metrics @ 1.000 s" in out  # the review's words, or the schema's for NaN
 
 
 def test_a_folder_reviews_its_readable_files_and_lists_the_rest(episode, tmp_path, capsys):
