@@ -153,12 +153,12 @@ def episode_metadata_problems(episode: Mapping[str, str]) -> dict[str, str]:
     for key in _EPISODE_INTS:
         if key in episode:
             try:
-                value = int(episode[key])
+                count = int(episode[key])
             except ValueError:
                 problems[key] = f"{key} = {episode[key]!r} is not an integer"
             else:
-                if key in _EPISODE_COUNTS and not 0 <= value <= _EPISODE_COUNTS[key]:
-                    problems[key] = f"{key} = {value} is outside the simulator's 0..{_EPISODE_COUNTS[key]}"
+                if key in _EPISODE_COUNTS and not 0 <= count <= _EPISODE_COUNTS[key]:
+                    problems[key] = f"{key} = {count} is outside the simulator's 0..{_EPISODE_COUNTS[key]}"
     for key in _EPISODE_REALS:
         if key in episode:
             try:
