@@ -170,7 +170,19 @@ def error_keys(out: Path) -> set[str]:
 
 def episode_log(out: Path) -> EpisodeLog:
     """A sweep directory's episodes.jsonl, every line checked to be a record the report can read."""
-    return EpisodeLog(out / EPISODES_FILE, check=check_record)
+    return EpisodeLog(out / EPISODES_FILE, check=_check_sweep_record)
+
+
+def _check_sweep_record(record: dict[str, Any], where: str) -> None:
+    """``check_record``, and a sweep's key is its cell, scenario and seed (``EpisodeTask.key``): a record
+    whose seed was edited kept its key, counted as recorded, and paired with another crowd's episode."""
+    check_record(record, where)
+    expected = f"{record.get('cell')}/{record['scenario']}/{record['seed']}"
+    if record["key"] != expected:
+        raise PipelineError(
+            f"{where}: record's key {record['key']!r:.120} is not its cell, scenario and seed "
+            f"({expected!r:.120}); {DAMAGED}"
+        )
 
 
 def _number(value: Any) -> bool:

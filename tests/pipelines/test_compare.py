@@ -53,7 +53,7 @@ def _record(i: int, success: bool, collision: bool, travel: float, *, method="CM
             "max_iterations": 2,
             "fallback_steps": 0,
         },
-        "key": f"{cell}/{scenario}/{i}",
+        "key": f"{cell}/{scenario}/{i // 2}",
         "cell": cell,
         "method": method,
         "index": i,
@@ -150,7 +150,14 @@ def test_by_cell_pairs_sweeps_columns_of_one_cell_whatever_their_labels(tmp_path
     assert main(["compare", str(a), str(b), "--by-cell", "--expect-identical"]) == 0
     out = capsys.readouterr().out
     assert "identical: 4 episodes, every metric equal" in out and "| CMPC | 7 | 3 | b | 4 |" in out
-    other = [{**r, "cell": r["cell"] + "-orca.time_horizon=2.0"} for r in varied]
+    other = [
+        {
+            **r,
+            "cell": f"{r['cell']}-orca.time_horizon=2.0",
+            "key": r["key"].replace(r["cell"], f"{r['cell']}-orca.time_horizon=2.0"),
+        }
+        for r in varied
+    ]
     c = _sweep(tmp_path / "c", other)
     assert main(["compare", str(a), str(c), "--by-cell"]) == 2
     assert "the runs share no" in one_line_err(capsys)
@@ -224,7 +231,13 @@ def test_bad_runs_are_one_line_errors(tmp_path, capsys):
     damaged = _sweep(tmp_path / "damaged", [_record(0, *BASE[0])])
     with (damaged / "episodes.jsonl").open("a") as f:
         f.write('{"key": "x", "metrics": []}\n')
-    twice = _sweep(tmp_path / "twice", [_record(0, *BASE[0]), {**_record(0, *BASE[0]), "key": "other"}])
+    first = _record(0, *BASE[0])  # and the same crowd in another cell of one label
+    second = {
+        **first,
+        "cell": f"{first['cell']}-x",
+        "key": first["key"].replace(first["cell"], f"{first['cell']}-x"),
+    }
+    twice = _sweep(tmp_path / "twice", [first, second])
     for other, message in [
         (tmp_path / "missing", "does not exist (a sweep folder, a simulate --json file, or recordings"),
         (tmp_path / "empty", "holds no episodes.jsonl"),

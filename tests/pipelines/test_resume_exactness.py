@@ -115,6 +115,16 @@ def test_every_typed_field_of_a_record_is_checked(one_record, tmp_path, part, na
         episode_log(tmp_path).load()
 
 
+@pytest.mark.parametrize(("name", "value"), [("seed", -1), ("seed", 7), ("scenario", "perpendicular")])
+def test_a_record_whose_key_is_not_its_cell_scenario_and_seed_is_refused(one_record, tmp_path, name, value):
+    """A seed edited to -1 kept its key: the sweep counted the episode as recorded, and compare paired it
+    with another crowd's episode."""
+    record = {**json.loads(json.dumps(one_record)), name: value}
+    (tmp_path / EPISODES_FILE).write_text(json.dumps(record) + "\n")
+    with pytest.raises(PipelineError, match=":1: record's key .* is not its cell, scenario and seed"):
+        episode_log(tmp_path).load()
+
+
 # ----------------------------------------------------------------------------------------------------------
 # Solver figures of a record
 # ----------------------------------------------------------------------------------------------------------
