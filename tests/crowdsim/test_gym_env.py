@@ -512,6 +512,9 @@ def test_an_action_of_no_numbers_is_one_line_naming_it():
     velocity.reset(seed=0)
     with pytest.raises(SimulationError, match=r"^velocity action must be an array of numbers, got dict"):
         velocity.step({"vx": 1.0})
+    # complex numbers: numpy kept the real part, with a ComplexWarning only
+    with pytest.raises(SimulationError, match=r"^action must be an array of real numbers, got complex ones"):
+        env.step(np.array([[1j, 1j]]))
 
 
 def test_render_draws_an_rgb_frame():
