@@ -5,7 +5,9 @@ stderr ("KeyboardInterrupt" from the solver call, or IPOPT's 'WARNING("KeyboardI
 before the interrupt reaches Python, so that an interrupted ``crowdmpc simulate`` printed it above the
 CLI's one line. While an episode runs, a SIGINT is therefore noted rather than raised, and raised where the
 step in progress ends: at most one control step later, whose solves are bounded by their wall budget. A
-second Ctrl-C before then is raised at once, for a user who will not wait.
+second Ctrl-C before then is raised at once, for a user who will not wait, and so is the first once the step
+has held it ``STEP_GRACE_S``: a plugin's step that hangs kept one SIGTERM (``timeout``, a scheduler's stop,
+which sends no second) from ever stopping the run.
 
 Only in the main thread (the only one that may set a handler) and only while SIGINT has Python's default
 handler: a program, a sweep worker or a test that set its own keeps it, and gets the interrupt as before.
@@ -22,7 +24,11 @@ import signal
 import threading
 from collections.abc import Iterator
 from types import FrameType
-from typing import Any
+from typing import Any, Final
+
+# Seconds a step may hold a noted interrupt before it is raised inside the step: a control step's solves are
+# bounded by their wall budget (below 1 s; the NLPs are built at reset, not in a step)
+STEP_GRACE_S: Final[float] = 5.0
 
 
 class StepInterrupt:
@@ -32,15 +38,32 @@ class StepInterrupt:
     def __init__(self) -> None:
         self.pending = False
         self.deferred: BaseException | None = None
+        self._timer: threading.Timer | None = None
 
     def note(self, signum: int, frame: FrameType | None) -> None:
         if self.pending:
             raise KeyboardInterrupt
         self.pending = True
+        self._arm(signum)
+
+    def _arm(self, signum: int) -> None:
+        """The same signal again, to the main thread, after ``STEP_GRACE_S``: the second, raised at once."""
+        main = threading.main_thread().ident
+        if main is None or not hasattr(signal, "pthread_kill"):
+            return
+        self._timer = threading.Timer(STEP_GRACE_S, signal.pthread_kill, (main, signum))
+        self._timer.daemon = True
+        self._timer.start()
+
+    def disarm(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
 
     def check(self) -> None:
         if self.pending:
             self.pending = False
+            self.disarm()
             raise KeyboardInterrupt
         if self.deferred is not None:
             deferred, self.deferred = self.deferred, None
@@ -81,6 +104,7 @@ def interrupts_between_steps() -> Iterator[StepInterrupt]:
         _stepping = outer
         if takes_ctrl_c:
             signal.signal(signal.SIGINT, signal.default_int_handler)
+        step.disarm()  # the block is left: nothing is held any more (what is pending, check raises)
     step.check()  # noted after the last step's check, the block ending normally
 
 
@@ -112,8 +136,8 @@ def terminate_as_interrupt() -> Iterator[None]:
         _signalled = signum
         # the episode's step in progress, even where SIGINT is not the loop's (ignored by a background job's
         # shell): raised in CasADi's solve, it printed CasADi's own "KeyboardInterrupt" above the CLI's line
-        if _stepping is not None:
-            _stepping.note(signal.SIGINT, frame)
+        if _stepping is not None:  # its own signal: SIGINT, which the grace would send, may be ignored here
+            _stepping.note(signum, frame)
             return
         raise KeyboardInterrupt(signal.Signals(signum).name)
 

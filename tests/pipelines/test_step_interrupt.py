@@ -20,7 +20,7 @@ import crowdsim
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.gym_loop import run_gym_episode
-from pipelines.loop.interrupt import stop_status, terminate_as_interrupt
+from pipelines.loop.interrupt import STEP_GRACE_S, stop_status, terminate_as_interrupt
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -225,6 +225,34 @@ def test_a_terminated_simulate_keeps_the_episodes_that_finished(tmp_path):
     assert payload["interrupted"] and payload["episodes_finished"] >= 1
     assert payload["episodes_finished"] == len(payload["episodes"]) and "| interrupted: " in out
     assert not list(record.glob("*.part"))
+
+
+def test_one_terminate_stops_a_step_that_hangs(tmp_path):
+    """The interrupt waits for the step in progress to end: a plugin's step that never returned kept one
+    SIGTERM (what `timeout` and schedulers send) from stopping simulate, which ran on for minutes. After
+    STEP_GRACE_S the step is interrupted where it hangs."""
+    marker = tmp_path / "stepping"
+    toy = "tests.plugins.toy_controller:Hang"
+    command = [sys.executable, "-m", "pipelines.cli", "--plugin", toy, "simulate", "--controller", toy]
+    command += ["--humans", "1", "--robots", "1", "--no-progress"]
+    env = {**os.environ, "CROWDMPC_TEST_HANG": str(marker)}
+    proc = subprocess.Popen(
+        command, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not marker.exists():
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, "no step began"
+            time.sleep(0.02)
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+        waited = time.monotonic() - sent
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and err.endswith("crowdmpc simulate: interrupted\n"), err
+    assert STEP_GRACE_S - 0.5 < waited < STEP_GRACE_S + 20  # held for the grace, then stopped
 
 
 class _SignalledStart(_Steps):

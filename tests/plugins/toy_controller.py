@@ -189,3 +189,16 @@ class WrappedMPC(StraightLine):
 
     def close(self) -> None:
         self.inner.close()
+
+
+class Hang(StraightLine):
+    """A step that never returns (a plugin's deadlock): writes the file $CROWDMPC_TEST_HANG names, then
+    sleeps."""
+
+    name = "hang"
+
+    def act(self, obs: Observation) -> ControlOutput:
+        with open(os.environ["CROWDMPC_TEST_HANG"], "w", encoding="utf-8") as marker:
+            marker.write("stepping")
+        time.sleep(1000)
+        return super().act(obs)
