@@ -86,14 +86,15 @@ def warn_formation(config: EnvConfig, n_robots: int) -> None:
 def numbers(action: object, what: str) -> np.ndarray:
     """``action`` as a float array; SimulationError naming ``what`` when it holds no numbers (numpy's own
     "could not convert string to float" named nothing)."""
-    if np.iscomplexobj(action):  # numpy drops the imaginary part with a ComplexWarning only
-        raise SimulationError(f"{what} must be an array of real numbers, got complex ones")
     try:
-        return np.asarray(action, dtype=float)
+        raw = np.asarray(action)
+        if not np.iscomplexobj(raw):  # numpy drops an imaginary part with a ComplexWarning only
+            return raw.astype(float)
     except (TypeError, ValueError) as exc:
         raise SimulationError(
             f"{what} must be an array of numbers, got {type(action).__name__} ({exc})"
         ) from None
+    raise SimulationError(f"{what} must be an array of real numbers, got complex ones")
 
 
 def count(value: object, name: str, low: int, high: int) -> int:
