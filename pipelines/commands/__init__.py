@@ -14,6 +14,8 @@ from pathlib import Path
 from typing import Final, TypeVar
 
 from pipelines.commands.standard_output import is_stdout, write_document
+from pipelines.commands.zoo_outputs import check_not_in_a_zoo, check_not_zoo_file
+from pipelines.commands.zoo_outputs import check_outside_the_zoos as check_outside_the_zoos
 from pipelines.errors import PipelineError
 
 T = TypeVar("T")
@@ -115,9 +117,9 @@ def check_writable(
     recording by its summary), and with ``json_only`` (a ``--json`` report) it replaces only a JSON document:
     a mistyped name must not overwrite a data file, a recording or weights. A file output that is a symbolic
     link is refused: one planted in a folder would send the output wherever it points. Nor is an output a
-    zoo's own file (its manifest, calibrations, lock; ``_check_not_zoo_file``), existing or not, nor
-    anywhere in a zoo (``check_outside_the_zoos``), unless ``zoo_own``: the command keeps that very file
-    (calibrate's calibrations.json). ``room``: how many bytes
+    zoo's own file (its manifest, calibrations, lock; ``check_not_zoo_file``), existing or not, nor in the
+    shipped zoo, nor a user zoo entry's weights or config (``check_not_in_a_zoo``), unless ``zoo_own``: the
+    command keeps that very file (calibrate's calibrations.json). ``room``: how many bytes
     longer than the output's name the temporary name it is first made under beside it is, which its name
     must leave room for (default: ``REPLACE_FILE_ROOM`` for a file, made by ``replace_file``; 0 for a
     directory, written into; 0 for a file written in place, such as a figure). Standard output (``--json
@@ -143,9 +145,8 @@ def check_writable(
             "under a longer temporary name first)"
         )
     if not zoo_own:
-        _check_not_zoo_file(path, label)
-        # nor anywhere in a zoo: a --record, --json or sweep folder there wrote among the weights
-        check_outside_the_zoos(path, option, "it")
+        check_not_zoo_file(path, label)
+        check_not_in_a_zoo(path, option, label)
     if not directory and path.is_symlink():
         # a link planted in a folder would make the output land wherever it points (even where nothing is)
         raise PipelineError(
@@ -179,65 +180,6 @@ def check_writable(
         _probe(ancestor)
     except OSError as exc:
         raise PipelineError(f"{label}: cannot create it in {ancestor} ({exc.strerror or exc})") from None
-
-
-def check_outside_the_zoos(path: Path, option: str, what: str) -> None:
-    """Refuse an output ``path`` in the shipped or the user zoo (symbolic links followed): their files are
-    what their manifests' sha256 record, and only `crowdmpc zoo add` writes them; an export over NAME.pt, or
-    a training run writing its NAME.pt there, left an entry that never loads again. ``what`` is the output
-    the message asks to put elsewhere."""
-    from predictors import zoo
-    from predictors.errors import PredictorError
-
-    try:
-        target = path.resolve()
-    except (OSError, RuntimeError):  # a symbolic link loop, in no zoo: check_writable refuses it
-        return
-    for which, locate in (("shipped", zoo.checkpoints_dir), ("user", zoo.user_zoo_dir)):
-        try:
-            root = locate().resolve()
-        except (PredictorError, OSError, RuntimeError):  # no such zoo here, so the path cannot be in it
-            continue
-        if target.is_relative_to(root):
-            raise PipelineError(
-                f"{option} {path} lies in the {which} zoo {root}, whose files only `crowdmpc zoo add` "
-                f"writes; write {what} elsewhere"
-            )
-
-
-def _check_not_zoo_file(path: Path, label: str) -> None:
-    """Refuse ``path`` when it is the user zoo's or the shipped zoo's own file, whether it exists yet or not:
-    a report written there before the zoo made the file (``calibrate --json ZOO/calibrations.json`` on a new
-    zoo) took its place, and every later command that reads the zoo failed on it."""
-    from predictors.errors import PredictorError
-    from predictors.manifest import ZOO_FILES, zoo_file
-    from predictors.zoo import checkpoints_dir, user_zoo_dir
-
-    own = zoo_file(path.name)
-    if own is None:
-        return
-    for zoo_dir in (user_zoo_dir, checkpoints_dir):
-        try:
-            root = zoo_dir()
-        except PredictorError:  # no home directory, no shipped zoo: no such file to protect
-            continue
-        if _same_directory(path.parent, root):
-            raise PipelineError(
-                f"{label}: that is a file of the zoo {root}, its {ZOO_FILES[own]}; name another file"
-            )
-
-
-def _same_directory(a: Path, b: Path) -> bool:
-    """Whether ``a`` and ``b`` name one directory: the same file where both exist (a case-insensitive file
-    system, links), else the same path once resolved (a zoo not made yet)."""
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        pass
-    try:
-        return a.resolve() == b.resolve()
-    except (OSError, RuntimeError):  # a symbolic link loop: not a zoo
-        return False
 
 
 def _check_not_input(path: Path, label: str, inputs: Iterable[Path]) -> None:

@@ -87,8 +87,7 @@ def _fit(
 ) -> tuple[Any, str, float, int | None]:
     """Fits (or resumes) the run; returns the module holding the best epoch's weights, that checkpoint's
     path, the fit's wall time and the batch limit that cut its epochs (``_limited``)."""
-    import torch
-
+    from predictors.checkpoint import load_tensors
     from predictors.data.datamodule import TrajnetDataModule
     from predictors.training import make_module
 
@@ -140,7 +139,7 @@ def _fit(
 
     # a file in --out: the best checkpoint saved or kept (RunCheckpoint: restored only where it is), else last
     best_path = best.best_model_path or str(last)
-    state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
+    state = load_tensors(Path(best_path))["state_dict"]
     module.load_state_dict(state)
     return module, best_path, elapsed, _limited(args.limit_batches, trainer)
 

@@ -101,14 +101,17 @@ class EpisodeLog:
 
     def _keep_cut(self, start: int, bad: tuple[int, Exception]) -> None:
         """Keep a whole last line that is no record, about to be cut off, in ``<log>.cut``, and say so: a
-        crash can leave one (its blocks written out of order), but so does an edit, which was lost without
-        a word (a torn line without its newline, what a kill leaves, is cut silently)."""
-        kept = self.path.with_name(self.path.name + ".cut")
-        with open(self.path, "rb") as source, open(kept, "ab") as f:
-            source.seek(start)
-            f.write(source.read())
-            f.flush()
-            os.fsync(f.fileno())
+        crash can leave one, but so can an edit, lost without a word (a torn line without newline is not)."""
+        kept = self.path.with_name(self.path.name + CUT_SUFFIX)
+        try:  # never through a link planted there (check_sweep_directory refuses one first)
+            fd = os.open(kept, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o666)
+            with os.fdopen(fd, "ab") as f, open(self.path, "rb") as source:
+                source.seek(start)
+                f.write(source.read())
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise PipelineError(f"{kept}: cannot write there ({exc.strerror}); remove it") from None
         warnings.warn(
             f"{self.path}:{bad[0]}: the last line is no JSON record ({bad[1]}), as a crash while writing can "
             f"leave; cut off (an episode it held runs again) and kept in {kept}",
@@ -299,9 +302,10 @@ def read_sweep_file(
     return meta
 
 
-# What a sweep writes at the top of its directory besides the names above: the report (tables, CSVs, plots:
-# pipelines.experiments.report) and the temporary files replaced into place (".part").
+# What a sweep writes at the top of its directory besides the names above: the report (tables, CSVs, plots),
+# the temporary files replaced into place (".part"), a cut line kept (".cut")
 PART_SUFFIX: Final[str] = ".part"
+CUT_SUFFIX: Final[str] = ".cut"  # episodes.jsonl.cut: a last line a resume cut off (EpisodeLog._keep_cut)
 OWN_SUFFIXES: Final[tuple[str, ...]] = (".csv", ".md", ".png", PART_SUFFIX)
 
 
@@ -319,7 +323,7 @@ def check_sweep_directory(out: Path, option: str = "--out") -> None:
             f"{option} {out} holds files but no sweep ({SWEEP_FILE}, {EPISODES_FILE}); a sweep would "
             "overwrite them: choose an empty or new folder"
         )
-    own = (EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, LOCK_FILE, MCAP_DIR)
+    own = (EPISODES_FILE, ERRORS_FILE, SWEEP_FILE, LOCK_FILE, MCAP_DIR, EPISODES_FILE + CUT_SUFFIX)
     for name, entry in sorted(entries.items()):
         if name in own or name.endswith(OWN_SUFFIXES):
             _refuse_link(entry)

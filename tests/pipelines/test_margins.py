@@ -855,7 +855,7 @@ def test_held_out_episodes_that_met_no_human_report_no_coverage_and_keep_the_blo
         return synthetic_closed_loop(plan, next(runs))
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
-    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))  # the report beside it: none is written in it
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path / "zoo"))
     out = tmp_path / "calibrate.json"
     assert main([*CALIBRATE, "--holdout", "--json", str(out)]) == 0
     said = capsys.readouterr().out

@@ -269,6 +269,28 @@ def test_a_garbled_last_line_counts_as_torn_but_one_in_the_middle_is_refused(tmp
     assert path.with_name(f"{EPISODES_FILE}.cut").read_bytes().endswith(b'not json\n{"key": "b"')
 
 
+def test_the_kept_cut_line_is_never_written_through_a_link_or_into_a_folder(tmp_path):
+    """episodes.jsonl.cut is the sweep's own file: a link planted there had the cut line appended to its
+    target, and a folder of that name stopped every resume with the OS's "Is a directory"."""
+    from pipelines.experiments.log import check_sweep_directory
+
+    path = tmp_path / EPISODES_FILE
+    path.write_bytes(b'{"key": "a"}\n')
+    (tmp_path / "target").write_text("precious\n")
+    cut = tmp_path / f"{EPISODES_FILE}.cut"
+    cut.symlink_to(tmp_path / "target")
+    with pytest.raises(PipelineError, match="is a symbolic link"):
+        check_sweep_directory(tmp_path)
+    path.write_bytes(b'{"key": "a"}\nnot json\n')
+    with pytest.raises(PipelineError, match=r"episodes.jsonl.cut: cannot write there \(.*\); remove it"):
+        EpisodeLog(path).load()  # the library's own guard, for a caller that skipped the folder's check
+    assert (tmp_path / "target").read_text() == "precious\n"
+    cut.unlink()
+    cut.mkdir()
+    with pytest.raises(PipelineError, match="is a directory where the sweep keeps a file; remove it"):
+        check_sweep_directory(tmp_path)
+
+
 def test_load_keeps_what_keep_makes_of_each_checked_record(tmp_path):
     """The report holds each record without its effective config (half a record's memory)."""
     seen = []

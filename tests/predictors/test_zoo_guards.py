@@ -468,27 +468,45 @@ SWEEP = SWEEP.split()
     ("argv", "option", "where"),
     [
         (SIMULATE, "--record", "checkpoints"),
-        (SIMULATE, "--json", "user/report.json"),
-        (SIMULATE, "--plot", "link/run.png"),
+        (SIMULATE, "--plot", "checkpoints/run.png"),
         (SWEEP, "--out", "checkpoints/sweep"),
-        (["evaluate", "--predictor", "constant_velocity"], "--json", "user/eval.json"),
+        (["evaluate", "--predictor", "constant_velocity"], "--json", "checkpoints/eval.json"),
     ],
 )
-def test_no_command_writes_its_outputs_into_a_zoo(tmp_path, shipped, user, capsys, argv, option, where):
+def test_no_command_writes_its_outputs_into_the_shipped_zoo(
+    tmp_path, shipped, user, capsys, argv, option, where
+):
     """train and export refused a zoo folder, the other outputs did not: `simulate --record checkpoints`
-    wrote a recording among the shipped weights, `--json` a report into the user zoo."""
-    (tmp_path / "link").symlink_to(user)
+    wrote a recording among the shipped weights (tracked in git, verified by sha256)."""
     out = tmp_path / where
-    which = "shipped" if where.startswith("checkpoints") else "user"
-    root = (shipped if which == "shipped" else user).resolve()
     before = snapshot(tmp_path)
     code, _, err = cli([*argv, option, str(out)], capsys)
     assert (code, err) == (
         2,
-        f"crowdmpc {argv[0]}: error: {option} {out} lies in the {which} zoo {root}, whose files only "
-        "`crowdmpc zoo add` writes; write it elsewhere",
+        f"crowdmpc {argv[0]}: error: {option} {out} lies in the shipped zoo {shipped.resolve()}, whose files "
+        "only `crowdmpc zoo add` writes; write it elsewhere",
     )
     assert snapshot(tmp_path) == before
+
+
+def test_outputs_beside_the_user_zoos_entries_are_written_but_never_over_them(
+    tmp_path, shipped, user, capsys
+):
+    """The user zoo is the folder a user names with CROWDMPC_ZOO=DIR, where their reports may go (refusing
+    every output there refused a calibrate --json beside it); an entry's own files are kept."""
+    (tmp_path / "link").symlink_to(user)
+    argv = [*SIMULATE, "--json"]
+    for what, name in (("config", "mine.json"), ("weights", "mine.pt")):
+        before = snapshot(tmp_path)
+        code, _, err = cli([*argv, str(tmp_path / "link" / name)], capsys)
+        assert (code, err) == (
+            2,
+            f"crowdmpc simulate: error: --json {tmp_path / 'link' / name}: that is the {what} of the user "
+            "zoo's entry 'mine'; name another file",
+        )
+        assert snapshot(tmp_path) == before
+    assert cli([*argv, str(user / "report.json")], capsys)[0] == 0
+    assert (user / "report.json").is_file() and all(problem is None for _, problem in zoo.verify_entries())
 
 
 def test_training_beside_the_shipped_zoo_never_puts_its_checkpoints_into_it(tmp_path, shipped, capsys):
