@@ -31,7 +31,11 @@ def test_stats_of_one_file_counts_repeated_rows_once_and_shows_its_rate(tmp_path
     assert header.split()[-1] == "fps" and row.split()[:3] == ["walk.ndjson", "2", "45"]
     assert row.split()[-1] == "2.5"
     shown = "5 track rows repeat an earlier one (same pedestrian and frame); counted once"
-    assert err == f"note: {walk}: {shown}\n"
+    assert err.splitlines() == [
+        f"note: {walk}: {shown}",
+        f"note: 2 scenes in {walk} are untagged (`data prepare --no-tags` writes them so): left out of the "
+        "types column",
+    ]
 
 
 def test_stats_shows_scenes_without_a_rate(tmp_path, capsys):
