@@ -42,6 +42,7 @@ class StepInterrupt:
 
     def note(self, signum: int, frame: FrameType | None) -> None:
         if self.pending:
+            self.disarm()
             raise KeyboardInterrupt
         self.pending = True
         self._arm(signum)
