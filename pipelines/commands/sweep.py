@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipelines.commands import check_writable, comma_items, humans_list, path_arg
+from pipelines.commands import check_writable, comma_items, humans_list
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.sweep_checks import check_first_episodes, check_plan, method_notes
 from pipelines.commands.sweep_help import EPILOG
@@ -222,13 +222,6 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
         help="write the table and plots from DIR; run nothing (without --config, every setting not typed "
         "is the one DIR's last run recorded, --experiment too)",
     )
-    p.add_argument(
-        "--reuse",
-        type=path_arg,
-        metavar="DIR",
-        help="seed a new --out with the episodes sweep DIR ran of this plan's cells (Table III's F cells are "
-        "Table II's CMPC cells), with their runs' code; the sweep runs the rest",
-    )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (drawn on a terminal only)")
     p.add_argument(
@@ -259,13 +252,10 @@ def run(args: argparse.Namespace) -> int:
         run_cells,
     )
     from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
-    from pipelines.experiments.reuse import reusable, reuse_records
     from pipelines.loop.interrupt import stop_status
 
     cfg, out = _checked_config(args)
     config = _sweep_config(args, cfg, out)
-    if args.reuse is not None and args.report_only:
-        raise PipelineError("--reuse seeds a sweep that runs; --report-only runs nothing")
     if args.report_only:
         config = recorded_plan(cfg, config)  # the sweep that is there, not another plan
     experiment = config.experiment
@@ -284,8 +274,6 @@ def run(args: argparse.Namespace) -> int:
         width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
         for cell in cells:
             print(f"  {cell.method:>{width}}  {cell.n_humans} humans  {cell.key}")
-        if args.reuse is not None:
-            print(f"--reuse: {len(reusable(args.reuse, out, tasks)[0])} of them recorded in {args.reuse}")
         return 0
 
     status = 0
@@ -293,8 +281,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.report_only:
         check_plan(experiment, cfg)
         check_first_episodes(tasks)
-        if args.reuse is not None:
-            print(reuse_records(args.reuse, out, experiment, tasks), file=sys.stderr)
         if config.jit:
             check_compile_cache(cfg.label("sweep", "jit"), cfg.sweep.jit)
         # what the report takes of the log, filled as the sweep reads its records and appends new ones: the
