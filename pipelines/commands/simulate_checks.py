@@ -214,7 +214,10 @@ def _zoo_entry(predictor: str | None) -> ZooEntry | None:
 
 
 def zoo_notes(predictor: str | None) -> list[str]:
-    """``plugin_code_note``'s and ``quick_check_note``'s lines, the entry located once."""
+    """The lines on the zoo model ``predictor`` loads (none for a registered predictor), the entry located
+    once: a plugin net whose module file changed since training (``plugin_entry_note``: its outputs may
+    differ from the figures `zoo list` shows), and a quick check trained with ``train --limit-batches``
+    (``zoo.quick_check_line``: simulate, sweep and evaluate ran it beside trained models without a word)."""
     from pipelines.commands.zoo import quick_check_line
 
     entry = _zoo_entry(predictor)
@@ -224,27 +227,9 @@ def zoo_notes(predictor: str | None) -> list[str]:
     return [note for note in notes if note is not None]
 
 
-def plugin_code_note(predictor: str | None) -> str | None:
-    """A line for a zoo model of a plugin's net whose module file is not the one it was trained with (the
-    sha256 its training recorded, ``code.plugins``): the net's code, and so its outputs, may differ from
-    the figures `zoo list` shows, where the model loaded without a word. None otherwise (no record, no
-    plugin, the same file)."""
-    entry = _zoo_entry(predictor)
-    return None if predictor is None or entry is None else plugin_entry_note(predictor, entry)
-
-
-def quick_check_note(predictor: str | None) -> str | None:
-    """A line for a zoo model trained with ``train --limit-batches`` cutting its epochs (``zoo.quick_check``):
-    ``zoo add`` and ``zoo list`` said so, and simulate, sweep and evaluate ran it beside trained models
-    without a word. None otherwise."""
-    from pipelines.commands.zoo import quick_check_line
-
-    entry = _zoo_entry(predictor)
-    return None if entry is None else quick_check_line(repr(predictor), entry.training)
-
-
 def plugin_entry_note(predictor: str, entry: ZooEntry | None) -> str | None:
-    """``plugin_code_note`` of the zoo entry ``predictor`` loads, already located (None: none)."""
+    """The line on a plugin net's changed module file (``zoo_notes``) of the zoo entry ``predictor`` loads,
+    already located (None: none)."""
     from pipelines.plugins import plugin_code
 
     code = None if entry is None else entry.training.get("code")

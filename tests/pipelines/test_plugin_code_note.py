@@ -16,32 +16,32 @@ def _model(monkeypatch, trained: str, now: str | None) -> None:
 
 def test_a_changed_plugin_file_is_noted(monkeypatch):
     _model(monkeypatch, "a" * 64, "b" * 64)
-    assert simulate_checks.plugin_code_note("my_net_eth") == (
+    assert simulate_checks.zoo_notes("my_net_eth") == [
         "note: 'my_net_eth' was trained with plugin mine:Net of sha256 aaaaaaaaaaaa, its file is now "
         "bbbbbbbbbbbb: if the net's code changed, so may its predictions (zoo list's figures are the "
         "trained code's)"
-    )
+    ]
 
 
 def test_the_same_file_or_no_record_says_nothing(monkeypatch):
     _model(monkeypatch, "a" * 64, "a" * 64)
-    assert simulate_checks.plugin_code_note("my_net_eth") is None
+    assert simulate_checks.zoo_notes("my_net_eth") == []
     _model(monkeypatch, "a" * 64, None)  # not registered here: loading it is refused elsewhere
-    assert simulate_checks.plugin_code_note("my_net_eth") is None
-    assert simulate_checks.plugin_code_note(None) is None
+    assert simulate_checks.zoo_notes("my_net_eth") == []
+    assert simulate_checks.zoo_notes(None) == []
 
 
 def test_a_quick_check_is_noted_where_it_runs(monkeypatch):
     """`zoo add` and `zoo list` said so; simulate, sweep, evaluate and export ran it beside trained models."""
     entry = SimpleNamespace(model="mine:Net", training={"limit_batches": 20})
     monkeypatch.setattr("predictors.zoo.locate", lambda name: SimpleNamespace(entry=entry))
-    assert simulate_checks.quick_check_note("my_net_eth") == (
+    assert simulate_checks.zoo_notes("my_net_eth") == [
         "note: 'my_net_eth' trained on 20 batches an epoch (train --limit-batches 20): a quick check, not a "
         "trained model (zoo list: *)"
-    )
+    ]
     entry.training = {}
-    assert simulate_checks.quick_check_note("my_net_eth") is None
-    assert simulate_checks.quick_check_note("constant_velocity") is None  # registered: no zoo entry read
+    assert simulate_checks.zoo_notes("my_net_eth") == []
+    assert simulate_checks.zoo_notes("constant_velocity") == []  # registered: no zoo entry read
 
 
 def test_export_says_a_changed_plugin_before_a_load_that_fails(monkeypatch, tmp_path, capsys):
