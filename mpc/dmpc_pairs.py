@@ -80,11 +80,16 @@ def conflicts(data: StepData, positions: np.ndarray, d_min: float) -> list[tuple
     """Pairs ``(i, j)``, ``i < j``, of active robots whose planned positions ``(M, H, 2)`` come closer than
     ``d_min`` at some step of the horizon, the closest first (ties in index order)."""
     active = np.asarray(data.active, dtype=bool)
-    i, j = np.triu_indices(data.n_robots, k=1)
-    gaps = np.linalg.norm(positions[i] - positions[j], axis=-1).min(axis=1)
+    i, j, gaps = _closest(positions)
     near = np.flatnonzero((gaps < d_min) & active[i] & active[j])
     near = near[np.argsort(gaps[near], kind="stable")]
     return [(int(i[k]), int(j[k])) for k in near]
+
+
+def _closest(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair ``i < j`` of the planned positions ``(K, H, 2)`` and how close it comes over the horizon."""
+    i, j = np.triu_indices(len(positions), k=1)
+    return i, j, np.linalg.norm(positions[i] - positions[j], axis=-1).min(axis=1)
 
 
 def conflict_groups(data: StepData, positions: np.ndarray, d_min: float) -> list[tuple[int, ...]]:
@@ -185,8 +190,7 @@ def _move(
         chosen = list(members)
         if brake is not None and kept:  # still in conflict, after the moves before it?
             planned = rollout_numpy(data.states[chosen], accels[chosen], cfg.dt)[0]
-            i, j = np.triu_indices(len(chosen), k=1)
-            if np.linalg.norm(planned[i] - planned[j], axis=-1).min() >= cfg.d_min:
+            if _closest(planned)[2].min() >= cfg.d_min:
                 continue
         free = np.zeros(data.n_robots, dtype=bool)
         free[chosen] = True
