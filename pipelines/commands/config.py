@@ -116,6 +116,7 @@ def _show_recorded(args: argparse.Namespace) -> int:
     from pipelines.config.command_line import config_arguments
     from pipelines.config.recorded import (
         comment,
+        last_own_run,
         machine_note,
         provenance,
         recorded_config,
@@ -127,7 +128,7 @@ def _show_recorded(args: argparse.Namespace) -> int:
     if path is not None or sets:
         raise PipelineError("--from-sweep prints what the sweep ran: no --config or --set beside it")
     sweep_file, runs = recorded_runs(args.from_sweep)
-    index = len(runs) if args.run is None else args.run
+    index = last_own_run(runs) if args.run is None else args.run  # not a run --reuse took episodes of
     if not 1 <= index <= len(runs):
         raise PipelineError(f"--run {args.run}: {sweep_file} records runs 1..{len(runs)}")
     run_line = runs[index - 1]

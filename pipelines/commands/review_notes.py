@@ -50,6 +50,7 @@ def _sweep_kept_failures(folder: Path) -> bool:
     """Whether the sweep whose recordings ``folder`` is kept only the failed episodes of some run, warned."""
     from pipelines.errors import PipelineError
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file, sweep_of_recordings
+    from pipelines.experiments.reuse import is_reused
 
     here = folder.resolve()
     sweep = here if (here / SWEEP_FILE).is_file() else sweep_of_recordings(here, SWEEP_FILE)
@@ -59,7 +60,8 @@ def _sweep_kept_failures(folder: Path) -> bool:
         runs = read_sweep_file(sweep / SWEEP_FILE).get("runs", [])
     except PipelineError:  # not ours to judge here: the review reads the recordings, not the sweep
         return False
-    if "failures" not in {_record_policy(run) for run in runs}:
+    # a run --reuse took episodes of kept its recordings in its own folder (pipelines.experiments.reuse)
+    if "failures" not in {_record_policy(run) for run in runs if not is_reused(run)}:
         return False
     warn(
         f"{sweep} kept the recordings of its failed episodes only {_FAILURES_ONLY}: its table.md and "

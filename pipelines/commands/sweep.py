@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipelines.commands import check_writable, comma_items, humans_list
+from pipelines.commands import check_writable, comma_items, humans_list, path_arg
 from pipelines.commands.output_paths import without_missing_parents
 from pipelines.commands.sweep_checks import check_first_episodes, check_plan, method_notes
 from pipelines.commands.sweep_help import EPILOG
@@ -222,6 +222,13 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
         help="write the table and plots from DIR; run nothing (without --config, every setting not typed "
         "is the one DIR's last run recorded, --experiment too)",
     )
+    p.add_argument(
+        "--reuse",
+        type=path_arg,
+        metavar="DIR",
+        help="take the episodes sweep DIR ran of this plan's cells first, with their runs' code (Table "
+        "III's F cells are Table II's CMPC cells), then run the rest",
+    )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (drawn on a terminal only)")
     p.add_argument(
@@ -256,6 +263,8 @@ def run(args: argparse.Namespace) -> int:
 
     cfg, out = _checked_config(args)
     config = _sweep_config(args, cfg, out)
+    if args.reuse is not None and args.report_only:
+        raise PipelineError("--reuse takes episodes for a sweep that runs; --report-only runs nothing")
     if args.report_only:
         config = recorded_plan(cfg, config)  # the sweep that is there, not another plan
     experiment = config.experiment
@@ -274,6 +283,10 @@ def run(args: argparse.Namespace) -> int:
         width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
         for cell in cells:
             print(f"  {cell.method:>{width}}  {cell.n_humans} humans  {cell.key}")
+        if args.reuse is not None:
+            from pipelines.experiments.reuse import reusable
+
+            print(f"--reuse: {len(reusable(args.reuse, out, tasks)[0])} of them to take from {args.reuse}")
         return 0
 
     status = 0
@@ -381,4 +394,5 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
             settings.episodes_per_cell,
         ),
         run_config={"config_file": cfg.path, **cfg.effective()},
+        reuse=args.reuse,
     )

@@ -12,6 +12,7 @@ EPILOG = """examples:
   crowdmpc --plugin my_controller:MyCtl sweep --experiment controllers \\
       --controllers cmpc,orca,my_controller:MyCtl --episodes-per-cell 20 --out runs/controllers
   crowdmpc sweep --experiment table2 --margins conformal:0.1 --profile paper --out runs/table2-cp
+  crowdmpc sweep --experiment table3 --reuse runs/table2 --episodes-per-cell 100 --out runs/table3
   crowdmpc sweep --experiment table3 --workers 64 --ray-address ray://head:10001 --out /shared/runs/table3
   crowdmpc --config run.toml --set mpc.w_coll=1e6 sweep --experiment table2 --out runs/table2-wcoll
   crowdmpc sweep --experiment sensing --episodes-per-cell 100 --out runs/sensing
@@ -43,11 +44,14 @@ experiment compares across its methods is refused, as are [world] values (the wo
 and predictors are built for) and [scenario] humans and name (simulate-only).
 
 Rerunning the same command resumes: episodes already in DIR/episodes.jsonl are not run again (a larger
---episodes-per-cell extends the sweep). Outputs in DIR: episodes.jsonl, errors.jsonl (episodes that raised;
-retried on rerun), cells.csv, episodes.csv, table.md, a plot per outcome (success, travel_time, collision,
-contact, discomfort, control_step, and robot_contact where robots can touch: not in the paper) named
-OUTCOME_vs_humans.png, at one crowd size OUTCOME_vs_robots.png (--vary scenario.robots) or
-OUTCOME_by_method.png, min_distance_hist.csv/.png, safety_tradeoff.png, sweep.json, and with --record the
-MCAP logs in DIR/mcap/<cell>/. Every file's fields: docs/outputs.md. --episode-timeout S stops an episode
-that runs past S s of wall-clock time (a controller that hangs) as an episode error, and the sweep goes on.
+--episodes-per-cell extends the sweep). --reuse OTHER takes first the episodes sweep OTHER recorded of this
+plan's cells (a cell's key is everything that defines its episodes: Table III's F cells are Table II's CMPC
+cells), with the code of the runs that made them, and runs the rest. Outputs in DIR: episodes.jsonl,
+errors.jsonl (episodes that raised; retried on rerun), cells.csv, episodes.csv, table.md, a plot per outcome
+(success, travel_time, collision, contact, discomfort, control_step, and robot_contact where robots can touch:
+not in the paper) named OUTCOME_vs_humans.png, at one crowd size OUTCOME_vs_robots.png (--vary
+scenario.robots) or OUTCOME_by_method.png, min_distance_hist.csv/.png, safety_tradeoff.png, sweep.json, and
+with --record the MCAP logs in DIR/mcap/<cell>/. Every file's fields: docs/outputs.md. --episode-timeout S
+stops an episode that runs past S s of wall-clock time (a controller that hangs) as an episode error, and the
+sweep goes on.
 """

@@ -39,6 +39,7 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
     --set) taken from the sweep's last run line in sweep.json. A directory without sweep.json keeps
     ``config`` as it is."""
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
+    from pipelines.experiments.reuse import is_reused
 
     path = config.out / SWEEP_FILE
     if not path.is_file():
@@ -51,7 +52,8 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
             f"{config.experiment.name!r} (its records would be tabulated as that experiment's methods); "
             f"give --experiment {recorded}"
         )
-    runs = [run for run in meta.get("runs", []) if isinstance(run, dict)]
+    # the sweep's own runs: a line --reuse copied is another experiment's (pipelines.experiments.reuse)
+    runs = [run for run in meta.get("runs", []) if isinstance(run, dict) and not is_reused(run)]
     if not runs:
         return config
     last = runs[-1]
@@ -248,10 +250,11 @@ def _code_text(run: Any) -> str:
     """A run line's recorded code (``pipelines.version.code_identity``, with its plugins) in one line; that
     of a run sweep.json no longer listed (``log.lost_runs``) is unknown."""
     from pipelines.experiments.log import is_lost
+    from pipelines.experiments.reuse import is_reused
     from pipelines.version import dirty_text
 
-    if is_lost(run):
-        return "unknown (a run sweep.json no longer listed)"
+    if is_lost(run):  # a line --reuse took says which sweep's file lacks it
+        return f"unknown ({run['lost']})" if is_reused(run) else "unknown (a run sweep.json no longer listed)"
     code = run.get("code") if isinstance(run, dict) else None
     if not isinstance(code, dict):
         return "not recorded (a run from before the code was)"

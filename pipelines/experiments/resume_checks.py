@@ -24,8 +24,11 @@ class ResumeChecks:
     while the log is read, the plan's index by key: a resume of 100,000 recorded episodes with nothing left
     to run (benchmarks/sweep_log_scale.py's) peaked at 256 MB, now 154 MB."""
 
-    def __init__(self, out: Path, tasks: list[EpisodeTask]):
+    def __init__(self, out: Path, tasks: list[EpisodeTask], *, reused: bool = False):
+        """``reused``: ``out`` is another sweep's folder whose records ``sweep --reuse`` would take
+        (pipelines.experiments.reuse), not the folder this sweep extends."""
         self.out = out
+        self.reused = reused
         self.tasks = tasks
         self._index = {t.key: i for i, t in enumerate(tasks)}
         self.done = bytearray(len(tasks))  # 1 where the log holds the planned episode
@@ -104,7 +107,7 @@ class ResumeChecks:
                 raise PipelineError(
                     f"{log} holds episodes of {self.tasks[i].cell.key} run with predictor {name!r} of "
                     f"sha256 {sha256}, but the zoo's {name!r} is now {current[name]}; "
-                    "use another --out for the new weights"
+                    f"{self._remedy('the new weights')}"
                 )
 
     def _check_margins(self) -> None:
@@ -121,8 +124,8 @@ class ResumeChecks:
             if stored != current[key]:
                 raise PipelineError(
                     f"{log} holds episodes of {key} planned with {_margins_change(stored, current[key])}: "
-                    "they changed since the records were made (recalibrated?); use another --out for the new "
-                    "margins"
+                    "they changed since the records were made (recalibrated?); "
+                    f"{self._remedy('the new margins')}"
                 )
 
     def _check_crowds(self) -> None:
@@ -137,9 +140,16 @@ class ResumeChecks:
                 key = self.tasks[i].cell.key
                 raise PipelineError(
                     f"{log} holds episodes of {key} replaying people from a file of sha256 {sha256}, but "
-                    f"{recording_path(crowd)} is now {now}; use another --out for the new data (or set "
-                    "CROWDMPC_DATA back)"
+                    f"{recording_path(crowd)} is now {now}; "
+                    f"{self._remedy('the new data (or set CROWDMPC_DATA back)')}"
                 )
+
+    def _remedy(self, what: str) -> str:
+        """What to do about a refused record: a new folder for what changed, or, for records ``sweep --reuse``
+        would take, no taking (they are not the episodes the cells plan now)."""
+        if self.reused:
+            return "they are not episodes of this plan now: run the sweep without --reuse"
+        return f"use another --out for {what}"
 
 
 def _margins_change(was: dict[str, Any], now: dict[str, Any]) -> str:

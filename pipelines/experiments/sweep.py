@@ -47,6 +47,7 @@ from pipelines.experiments.log import (
     sweep_lock,
 )
 from pipelines.experiments.resume_checks import ResumeChecks
+from pipelines.experiments.reuse import seed_from
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import make_scratch_root, release_scratch_root
@@ -109,9 +110,9 @@ def _write_atomic(path: Path, data: bytes) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
-    """sweep.json's document (empty for a new sweep); PipelineError when it holds another experiment (a
-    directory belongs to one)."""
+def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask]) -> dict[str, Any]:
+    """sweep.json's document (empty for a new sweep), with --reuse's run lines (``seed_from``, which writes
+    them and their records); PipelineError when it holds another experiment (a directory belongs to one)."""
     path = out / SWEEP_FILE
     meta: dict[str, Any] = read_sweep_file(path) if path.exists() else {}
     if meta and meta.get("experiment") != config.experiment.name:
@@ -119,7 +120,7 @@ def _sweep_meta(out: Path, config: SweepConfig) -> dict[str, Any]:
             f"{out} holds a sweep of experiment {meta.get('experiment')!r}, not {config.experiment.name!r}; "
             "choose another --out"
         )
-    return meta
+    return meta if config.reuse is None else seed_from(config.reuse, out, config.experiment, tasks, meta)
 
 
 def _add_run(
@@ -231,7 +232,7 @@ def run_sweep(
     if len(set(keys)) != len(keys):
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
     with sweep_lock(out):
-        meta = _sweep_meta(out, config)
+        meta = _sweep_meta(out, config, tasks)
         log = episode_log(out)
         recorded = ResumeChecks(out, tasks)
         for offset, line, record in log.scan():  # a record at a time: not held
@@ -378,8 +379,7 @@ def _default_backend(config: SweepConfig, scratch: str) -> Backend:
 
 
 def _local_time() -> str:
-    """Now, local time in ISO 8601's extended form ("2026-12-05T23:41:16+00:00"): strftime's %z gave a basic
-    offset, "+0000", which strict ISO readers refuse beside the extended date."""
+    """Now, local time, in ISO 8601's extended form (strict readers refuse strftime's "+0000" beside it)."""
     return datetime.now().astimezone().isoformat(timespec="seconds")
 
 

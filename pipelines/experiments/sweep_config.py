@@ -10,6 +10,7 @@ files check their values against the same bounds (pipelines.config.settings) wit
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +51,8 @@ class SweepConfig:
     jit: bool = False  # compile the MPC controllers' NLPs in every worker (make_controller's jit)
     # s of wall-clock time after which a worker stops an episode (pipelines.experiments.deadline); None: none
     episode_timeout_s: float | None = None
+    # another sweep's folder, whose episodes of this plan the sweep takes first (pipelines.experiments.reuse)
+    reuse: Path | None = None
     # The run's effective config (pipelines/config: every section, and the file it came from), for sweep.json.
     run_config: Mapping[str, Any] | None = field(default=None, compare=False)
 
@@ -90,6 +93,12 @@ class SweepConfig:
         if self.humans is not None and max(self.humans) > MAX_HUMANS:
             raise PipelineError(f"--humans must be in 1..{MAX_HUMANS}, got {max(self.humans)}")
         check_timeout(self.episode_timeout_s, "--episode-timeout")
+        if self.reuse is not None and not isinstance(self.reuse, str | os.PathLike):
+            raise PipelineError(
+                f"SweepConfig's reuse must be a sweep folder's path, got {short_repr(self.reuse)}"
+            )
+        if self.reuse is not None:
+            object.__setattr__(self, "reuse", Path(self.reuse))
 
     def tasks(self) -> list[EpisodeTask]:
         return self.experiment.tasks(

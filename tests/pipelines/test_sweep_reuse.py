@@ -1,0 +1,179 @@
+"""`crowdmpc sweep --reuse DIR`: Table III's F cells are Table II's CMPC cells (the same settings, the same
+crowds), and a paper-scale Table III ran those 5000 episodes again, or was seeded by hand with Table II's
+lines, whose code its table.md then called "unknown". The episodes taken are those a run of their own gives,
+under this experiment's labels, with their runs' code; what the seeded folder does next (resume, report,
+config show, review) reads the sweep's own runs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from pipelines.cli import main
+from pipelines.experiments import reuse
+from tests.cli_calls import one_line, run_cli
+
+SMALL = ["--humans", "5", "--episodes-per-cell", "2", "--backend", "inline", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def table2(tmp_path_factory):
+    out = tmp_path_factory.mktemp("t2") / "sweep"
+    assert main(["sweep", "--experiment", "table2", *SMALL, "--out", str(out)]) == 0
+    return out
+
+
+def _records(out) -> list[dict]:
+    return [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+
+
+def _runs(out) -> list[dict]:
+    return json.loads((out / "sweep.json").read_text())["runs"]
+
+
+def _table3(capsys, out, *extra: str) -> tuple[int, str, str]:
+    return run_cli(capsys, "sweep", "--experiment", "table3", *SMALL, "--out", str(out), *extra)
+
+
+def test_table_iii_takes_table_iis_cmpc_episodes_and_runs_the_rest(table2, tmp_path, capsys):
+    reused, fresh = tmp_path / "reused", tmp_path / "fresh"
+    code, _, err = _table3(capsys, reused, "--reuse", str(table2))
+    assert code == 0 and f"reused 2 episode(s) of 1 cell(s) from {table2} (1 of its runs)" in err
+    assert main(["sweep", "--experiment", "table3", *SMALL, "--out", str(fresh)]) == 0
+    capsys.readouterr()
+    # the same episodes as a run of its own, metric for metric, under Table III's labels
+    assert main(["compare", f"reused={reused}", f"fresh={fresh}", "--expect-identical", "--no-progress"]) == 0
+    assert "identical: 4 episodes, every metric equal" in capsys.readouterr().out
+    taken = [r for r in _records(reused) if r["run"] == 1]
+    cmpc = {r["key"]: r for r in _records(table2) if r["method"] == "CMPC"}
+    assert {r["key"] for r in taken} == set(cmpc) and {r["method"] for r in taken} == {"F"}
+    assert all({**r, "method": "CMPC", "experiment": "table2"} == cmpc[r["key"]] for r in taken)
+    runs, source = _runs(reused), _runs(table2)[0]
+    assert runs[0] == {**source, "reused_from": str(table2.resolve()), "run_there": 1}  # its code with it
+    assert len(runs) == 2 and "reused_from" not in runs[1]
+    # its table names the code of both runs' episodes, one commit here
+    assert "Code: commit" in (reused / "table.md").read_text()
+
+
+def test_the_same_command_again_resumes_and_takes_nothing_twice(table2, tmp_path, capsys):
+    out = tmp_path / "t3"
+    assert _table3(capsys, out, "--reuse", str(table2))[0] == 0
+    code, _, err = _table3(capsys, out, "--reuse", str(table2))
+    assert code == 0 and "none of its episodes is one of this plan's left to run" in err
+    assert len(_records(out)) == 4 and [("reused_from" in r) for r in _runs(out)] == [True, False, False]
+
+
+def test_a_stop_between_the_run_lines_and_the_records_is_taken_up_again(
+    table2, tmp_path, capsys, monkeypatch
+):
+    out = tmp_path / "t3"
+
+    def stopped(path, records):
+        raise KeyboardInterrupt  # after sweep.json, before a record
+
+    monkeypatch.setattr(reuse, "_append", stopped)
+    code, _, err = _table3(capsys, out, "--reuse", str(table2))
+    assert code == 130 and "interrupted" in err
+    assert len(_runs(out)) == 1 and not (out / "episodes.jsonl").exists()  # the provenance first
+    monkeypatch.undo()
+    code, _, err = _table3(capsys, out, "--reuse", str(table2))
+    assert code == 0 and "reused 2 episode(s)" in err
+    assert [("reused_from" in r) for r in _runs(out)] == [True, False]  # its line once, its number kept
+    assert sorted(r["run"] for r in _records(out)) == [1, 1, 2, 2]
+
+
+def test_a_dry_run_counts_them_and_writes_nothing(table2, tmp_path, capsys):
+    out = tmp_path / "t3"
+    code, stdout, _ = _table3(capsys, out, "--reuse", str(table2), "--dry-run")
+    assert code == 0 and stdout.splitlines()[-1] == f"--reuse: 2 of them to take from {table2}"
+    assert not out.exists()
+
+
+def test_records_of_other_weights_are_refused_before_anything_is_written(table2, tmp_path, capsys):
+    source, out = tmp_path / "t2", tmp_path / "t3"
+    shutil.copytree(table2, source)
+    lines = (source / "episodes.jsonl").read_text().splitlines()
+    edited = [json.loads(line) for line in lines]
+    for r in edited:
+        r["predictor_sha256"] = "0" * 64 if r["method"] == "CMPC" else r["predictor_sha256"]
+    (source / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in edited))
+    code, _, err = _table3(capsys, out, "--reuse", str(source))
+    line = one_line(err)
+    assert code == 2 and str(source / "episodes.jsonl") in line and "sha256 " + "0" * 64 in line
+    assert line.endswith("they are not episodes of this plan now: run the sweep without --reuse")
+    assert not (out / "sweep.json").exists() and not (out / "episodes.jsonl").exists()
+
+
+def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
+    def refused(out, *extra: str) -> str:
+        code, _, err = _table3(capsys, out, *extra)
+        assert code == 2
+        return one_line(err)
+
+    assert f"not a sweep folder ({tmp_path / 'sweep.json'} does not exist)" in refused(
+        tmp_path / "a", "--reuse", str(tmp_path)
+    )
+    code, _, err = run_cli(capsys, "sweep", "--experiment", "table2", *SMALL, "--out", str(table2), "--reuse",
+                           str(table2))  # fmt: skip
+    assert code == 2 and "that is --out itself" in one_line(err)
+    assert "--report-only runs nothing" in refused(tmp_path / "b", "--reuse", str(table2), "--report-only")
+
+
+def test_a_sweep_of_other_cells_gives_nothing_and_the_sweep_runs_all_of_its_own(table2, tmp_path, capsys):
+    code, _, err = run_cli(
+        capsys, "sweep", "--experiment", "table3", "--humans", "6", *SMALL[2:],
+        "--reuse", str(table2), "--out", str(tmp_path / "c"),
+    )  # fmt: skip
+    assert code == 0 and "none of its episodes is one of this plan's left to run" in err
+    assert len(_runs(tmp_path / "c")) == 1
+
+
+def test_config_show_and_report_only_read_the_sweeps_own_runs(table2, tmp_path, capsys):
+    out = tmp_path / "t3"
+    assert _table3(capsys, out, "--reuse", str(table2))[0] == 0
+    code, stdout, _ = run_cli(capsys, "config", "show", "--from-sweep", str(out))
+    assert code == 0 and "run 2 of 2" in stdout and 'experiment = "table3"' in stdout
+    code, _, err = run_cli(capsys, "config", "show", "--from-sweep", str(out), "--run", "1")
+    assert code == 2 and f"is run 1 of {table2.resolve()}, whose episodes this sweep took" in one_line(err)
+    assert f"--from-sweep {table2.resolve()} --run 1" in err
+    # a report asked with no --experiment reads table3's last run, not Table II's copied line
+    code, _, _ = run_cli(capsys, "sweep", "--report-only", "--out", str(out), "--no-progress")
+    assert code == 0 and "| F |" in (out / "table.md").read_text().replace("  ", " ")
+
+
+def test_records_without_a_run_take_the_sources_only_run_else_an_unknown_one(table2, tmp_path, capsys):
+    for extra_run in (False, True):
+        source, out = tmp_path / f"s{extra_run}", tmp_path / f"o{extra_run}"
+        shutil.copytree(table2, source)
+        records = _records(source)
+        for r in records:
+            del r["run"]
+        (source / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+        if extra_run:
+            meta = json.loads((source / "sweep.json").read_text())
+            meta["runs"].append(meta["runs"][0])
+            (source / "sweep.json").write_text(json.dumps(meta))
+        assert _table3(capsys, out, "--reuse", str(source))[0] == 0
+        first = _runs(out)[0]
+        if extra_run:  # which of two runs made them is unknown: its code too
+            assert first == {"lost": first["lost"], "reused_from": str(source.resolve()), "run_there": None}
+            assert (
+                f"unknown (no line of {source / 'sweep.json'} names the run of its episodes)"
+                in (out / "table.md").read_text()
+            )
+        else:
+            assert first["run_there"] == 1 and first["code"] == _runs(table2)[0]["code"]
+
+
+def test_review_reads_the_recording_policy_of_the_sweeps_own_runs(tmp_path, recwarn):
+    from pipelines.commands.review_notes import _sweep_kept_failures
+
+    failures = {"config": {"sweep": {"record": "failures"}}}
+    (tmp_path / "sweep.json").write_text(
+        json.dumps({"runs": [{**failures, "reused_from": "/x", "run_there": 1}]})
+    )
+    assert not _sweep_kept_failures(tmp_path) and not recwarn.list
+    (tmp_path / "sweep.json").write_text(json.dumps({"runs": [failures]}))
+    assert _sweep_kept_failures(tmp_path)
