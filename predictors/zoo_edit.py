@@ -86,12 +86,14 @@ def add_entry(
     # checked before the lock, which creates the zoo directory: a refused add writes nothing
     if _unchanged(entries.get(name), entry, root, which, replace):
         return entry, entry
+    _check_no_stray_file(entry, entries.get(name), root, which)
     with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
         entries = read_manifest(root)
         _check_case_clash(name, entries, root, which)
         previous = entries.get(name)
         if _unchanged(previous, entry, root, which, replace):
             return entry, entry
+        _check_no_stray_file(entry, previous, root, which)
         _write_pair(weights, config_bytes, entry, root, entries)
     return entries[name], previous
 
@@ -136,6 +138,22 @@ def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: st
     raise PredictorError(_taken(entry.name, root, which, previous, entry))
 
 
+def _check_no_stray_file(entry: ZooEntry, previous: ZooEntry | None, root: Path, which: str) -> None:
+    """Refuse a NAME.pt or NAME.json linked to outside the zoo, or one there that is no file of its entry
+    NAME (``previous``): the user's own (a training run's, in a folder given as the zoo), lost if replaced."""
+    manifest = root / MANIFEST_NAME
+    paths = entry.paths(root, manifest)
+    owned = () if previous is None else previous.paths(root, manifest)
+    if previous is not None and _TEMPORARY.fullmatch(previous.file):
+        owned = paths  # an add of NAME stopped between its manifest's writes: NAME.pt, NAME.json are its own
+    for file_name, path in zip((entry.file, entry.config), paths, strict=True):
+        if os.path.lexists(root / file_name) and path not in owned:
+            raise PredictorError(
+                f"{root / file_name} is in the {which} zoo but is no file of its entry {entry.name!r}; "
+                "adding would replace it: move that file away, or add under another --name"
+            )
+
+
 def _write_pair(
     weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path, entries: dict[str, ZooEntry]
 ) -> None:
@@ -148,7 +166,6 @@ def _write_pair(
     NAME.pt and NAME.json are replaced by links to them (each in one rename); the manifest then names
     NAME.pt and NAME.json; and the temporary names go. Until the first manifest switch, the old entry and its
     files are as they were; after it, the entry's files are never the ones being replaced."""
-    entry.paths(root, root / MANIFEST_NAME)  # refuse a NAME.pt or NAME.json linked to outside the zoo
     staged = [root / f".{file_name}.{os.getpid()}.new" for file_name in (entry.file, entry.config)]
     try:
         _copy_synced(weights, staged[0])

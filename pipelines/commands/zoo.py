@@ -27,13 +27,13 @@ training data and metrics: the shipped zoo, checkpoints/ (or $CROWDMPC_CHECKPOIN
 zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo, else ~/.local/share/crowdmpc/zoo, or --dir), where
 `add` writes and `remove` deletes. A user model may not take a shipped model's name. `add` under a name the
 zoo has already is refused (adding the very same model again changes nothing) unless --replace says to replace
-that entry; so is a name whose files would be the zoo's own (manifest, calibrations). Parallel adds and
-removes take turns. The metrics file must be the one `crowdmpc train` wrote for these weights. A file whose
-sha256 differs from its manifest is refused when loaded; `verify` checks every entry of both zoos and names
-the hidden files an add or remove stopped on the way left in the user zoo (`remove --leftovers NAME` removes
-them, keeping the entry; `remove NAME` removes them with it). A model of a plugin's kind loads once the
-plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the shipped zoo holds only the kinds the
-project ships.
+that entry; so is a name whose files would be the zoo's own (manifest, calibrations), or files there that are
+no entry's of that name (your own NAME.pt: move it away first). Parallel adds and removes take turns. The
+metrics file must be the one `crowdmpc train` wrote for these weights. A file whose sha256 differs from its
+manifest is refused when loaded; `verify` checks every entry of both zoos and names the hidden files an add or
+remove stopped on the way left in the user zoo (`remove --leftovers NAME` removes them, keeping the entry;
+`remove NAME` removes them with it). A model of a plugin's kind loads once the plugin is registered
+(crowdmpc --plugin module:NetClass zoo ...); the shipped zoo holds only the kinds the project ships.
 """
 
 

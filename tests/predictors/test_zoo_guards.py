@@ -231,6 +231,10 @@ def test_a_replace_interrupted_at_any_later_step_leaves_a_consistent_entry(tmp_p
         zoo_edit.add_to_zoo(new, name="mine", protocol="p", training_data={}, metrics={}, replace=True)
     problem, recorded = entry_state(user, "mine")
     assert problem is None and recorded in (old.sha256, new_sha)
+    # the same command again finishes the replace: mine.pt and mine.json are the stopped add's, no stray files
+    zoo_edit.add_to_zoo(new, name="mine", protocol="p", training_data={}, metrics={}, replace=True)
+    assert entry_state(user, "mine") == (None, new_sha)
+    assert not [p.name for p in user.iterdir() if p.name.startswith(".mine")]
 
 
 def test_a_remove_interrupted_after_its_manifest_write_is_finished_by_remove(user, monkeypatch, capsys):
@@ -330,6 +334,33 @@ def test_remove_never_takes_a_model_no_entry_names(user, tmp_path, capsys):
     code, _, line = cli(["zoo", "--dir", str(run), "remove", "mine"], capsys)
     assert code == 2 and "has no entry 'mine'" in line
     assert (run / "mine.pt").read_bytes() == b"trained weights" and (run / "mine.json").is_file()
+
+
+@pytest.mark.parametrize("suffix", [".pt", ".json"])
+@pytest.mark.parametrize("replace", [[], ["--replace"]])
+def test_add_never_replaces_a_file_no_entry_of_that_name_owns(user, pair, capsys, suffix, replace):
+    """A file of the user's named like the new entry's weights or config (theirs.pt, theirs.json) was
+    replaced without a word; the add is refused, --replace or not (there is no entry to replace)."""
+    (user / f"theirs{suffix}").write_bytes(b"the user's own file")
+    before = snapshot(user)
+    code, _, err = cli(["zoo", "add", str(pair), "--name", "theirs", *replace], capsys)
+    assert (code, err) == (
+        2,
+        f"crowdmpc zoo: error: {user / f'theirs{suffix}'} is in the user zoo but is no file of its entry "
+        "'theirs'; adding would replace it: move that file away, or add under another --name",
+    )
+    assert snapshot(user) == before and zoo.zoo_names(user) == ["mine"]
+
+
+def test_add_into_a_training_runs_folder_keeps_its_weights(tmp_path, pair, capsys):
+    """`zoo --dir RUN add` under the name of the run's own NAME.pt, which no manifest names."""
+    run = tmp_path / "a_training_run"
+    run.mkdir()
+    (run / "mine.pt").write_bytes(b"trained weights")
+    code, _, err = cli(["zoo", "--dir", str(run), "add", str(pair), "--name", "mine"], capsys)
+    assert code == 2 and err.startswith(f"crowdmpc zoo: error: {run / 'mine.pt'} is in the user zoo but")
+    assert sorted(p.name for p in run.iterdir()) == ["mine.pt"]
+    assert (run / "mine.pt").read_bytes() == b"trained weights"
 
 
 # ---------------------------------------------------------------------------------- parallel adds, removes
