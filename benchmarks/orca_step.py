@@ -49,6 +49,7 @@ def measure(n_humans: int, n_robots: int, episodes: int, scenario: str, repeats:
     lp3_steps = 0
     for seed in range(episodes):
         obs = env.reset(seed, scenario, n_humans, n_robots)
+        controller.reset(obs)  # the controllers' protocol (a no-op for ORCA): MPCController warns without it
         done = False
         while not done:
             action = controller.act(obs).accelerations

@@ -128,6 +128,21 @@ class GoalRoomWarning(UserWarning):
     Eq. 12 keeps every pair d_min apart)."""
 
 
+class ActBeforeResetWarning(UserWarning):
+    """A controller's ``act`` before any ``reset`` (pipelines.loop.mpc), said once per controller: the checks
+    of the robots' layout that reset makes were skipped. Not a refusal: a benchmark may time ``act`` alone.
+    Not a ``LayoutWarning`` either: it is about the calls, and ignoring layouts must not hide it."""
+
+
+def act_before_reset(controller: str) -> ActBeforeResetWarning:
+    """The warning of ``controller``'s first ``act`` before any ``reset``: what it skips, and the way out."""
+    return ActBeforeResetWarning(
+        f"{controller}.act called before reset: the checks reset makes on the robots' layout (FlockWarning, "
+        "GoalRoomWarning) are skipped, and a size prepare() did not build is built inside this step; call "
+        "reset(obs) at the start of each episode (said once per controller)"
+    )
+
+
 def quiet_team_warnings() -> None:
     """Leave out the controller's warnings on the robots' layout (``FlockWarning``, ``GoalRoomWarning``),
     which ``simulate`` and ``sweep`` say once, before the first episode, in their own words
@@ -157,7 +172,14 @@ def warnings_as_notes() -> None:
         file: TextIO | None = None,
         line: str | None = None,
     ) -> None:
-        ours = LayoutWarning | NoTwinWarning | FlockWarning | GoalRoomWarning | DroppedLineWarning
+        ours = (
+            LayoutWarning
+            | NoTwinWarning
+            | FlockWarning
+            | GoalRoomWarning
+            | DroppedLineWarning
+            | ActBeforeResetWarning
+        )
         if not issubclass(category, ours):
             shown(message, category, filename, lineno, file, line)
         elif (out := file or sys.stderr) is not None:

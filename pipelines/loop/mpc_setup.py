@@ -3,8 +3,8 @@
 simulator agree on the world (``check_world``) and that its d_min keeps agents apart
 (``check_contact_distance``), that calibrated margins were measured at its tau
 (``check_margins_world``), the coupling the controller can build (``check_coupling``),
-that an observation's history is the one of its agents (``check_history``), and the rows of that history
-the predictor reads (``predictor_history``).
+that an observation's step is its tau (``check_dt``) and its history the one of its agents
+(``check_history``), and the rows of that history the predictor reads (``predictor_history``).
 """
 
 from __future__ import annotations
@@ -259,6 +259,15 @@ def predictor_history(obs: Observation, obs_len: int) -> tuple[np.ndarray, np.nd
             f"entr{'y' if len(lost) == 1 else 'ies'} in the rows the predictor reads): {fix}"
         )
     return history, np.ones(history.shape[:2], dtype=bool)
+
+
+def check_dt(obs: Observation, dt: float) -> None:
+    """``obs.dt`` is the MPC's tau ``dt``, else a PipelineError: an episode of another simulator than the
+    one the controller was built for."""
+    if abs(obs.dt - dt) > 1e-12:
+        raise PipelineError(
+            f"obs.dt is {obs.dt} s (the simulator's step) but the MPC plans with tau = {dt} s"
+        )
 
 
 def check_history(obs: Observation) -> None:

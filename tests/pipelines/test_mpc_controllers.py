@@ -9,7 +9,7 @@ import pytest
 from crowdsim.env import CrowdEnv
 from mpc.dynamics import braking
 from mpc.errors import MPCConfigError
-from pipelines.errors import PipelineError
+from pipelines.errors import ActBeforeResetWarning, PipelineError
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 from pipelines.loop.mpc import MPCController
@@ -290,6 +290,36 @@ def test_an_episode_of_another_time_step_is_refused():
         PipelineError, match=r"obs.dt is 0.2 s \(the simulator.s step\) but the MPC plans with tau = 0.4 s"
     ):
         controller.reset(obs)
+
+
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+def test_act_before_reset_warns_once_per_controller_what_it_skips(name):
+    """``act`` before any ``reset`` ran silently, and the layout warnings reset gives never came; a
+    benchmark may time ``act`` alone, so it is said (once per controller), not refused."""
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller = make_controller(ControllerSpec(name))
+    with pytest.warns(ActBeforeResetWarning) as record:
+        controller.act(obs)
+        controller.act(obs)
+    said = [w for w in record if issubclass(w.category, ActBeforeResetWarning)]
+    assert len(said) == 1 and said[0].filename == __file__  # the caller's line, not the controller's
+    assert str(said[0].message) == (
+        "MPCController.act called before reset: the checks reset makes on the robots' layout (FlockWarning, "
+        "GoalRoomWarning) are skipped, and a size prepare() did not build is built inside this step; call "
+        "reset(obs) at the start of each episode (said once per controller)"
+    )
+    with pytest.warns(ActBeforeResetWarning):  # another controller says it again
+        make_controller(ControllerSpec(name)).act(obs)
+
+
+def test_reset_then_act_says_nothing_of_a_missing_reset(recwarn):
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller = make_controller(ControllerSpec("cmpc"))
+    controller.reset(obs)
+    controller.act(obs)
+    controller.reset(CrowdEnv().reset(1, "circle", 2))
+    controller.act(obs)
+    assert not [w for w in recwarn if issubclass(w.category, ActBeforeResetWarning)]
 
 
 def test_a_hand_built_observation_is_checked_at_every_step():
