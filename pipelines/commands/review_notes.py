@@ -50,7 +50,7 @@ def _sweep_kept_failures(folder: Path) -> bool:
     """Whether the sweep whose recordings ``folder`` is kept only the failed episodes of some run, warned."""
     from pipelines.errors import PipelineError
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file, sweep_of_recordings
-    from pipelines.experiments.reuse import is_reused
+    from pipelines.experiments.run_lines import is_reused
 
     here = folder.resolve()
     sweep = here if (here / SWEEP_FILE).is_file() else sweep_of_recordings(here, SWEEP_FILE)

@@ -39,7 +39,7 @@ def recorded_plan(cfg: RunConfig, config: SweepConfig) -> SweepConfig:
     --set) taken from the sweep's last run line in sweep.json. A directory without sweep.json keeps
     ``config`` as it is."""
     from pipelines.experiments.log import SWEEP_FILE, read_sweep_file
-    from pipelines.experiments.reuse import is_reused
+    from pipelines.experiments.run_lines import is_reused
 
     path = config.out / SWEEP_FILE
     if not path.is_file():
@@ -238,7 +238,9 @@ def code_note(out: Path, used: Collection[int | None] | None = None) -> str:
     if not (out / SWEEP_FILE).is_file():
         return ""
     runs = read_sweep_file(out / SWEEP_FILE).get("runs", [])
-    if used is not None and None not in used:  # a number past the file's lines: a run it lost (log.lost_runs)
+    if (
+        used is not None and None not in used
+    ):  # a number past the file's lines: a run it lost (run_lines.lost_runs)
         runs = [runs[k - 1] if k <= len(runs) else {"lost": ""} for k in sorted(k for k in used if k)]
     shown = list(dict.fromkeys(_code_text(run) for run in runs))
     if len(shown) <= 1:
@@ -248,9 +250,8 @@ def code_note(out: Path, used: Collection[int | None] | None = None) -> str:
 
 def _code_text(run: Any) -> str:
     """A run line's recorded code (``pipelines.version.code_identity``, with its plugins) in one line; that
-    of a run sweep.json no longer listed (``log.lost_runs``) is unknown."""
-    from pipelines.experiments.log import is_lost
-    from pipelines.experiments.reuse import is_reused
+    of a run sweep.json no longer listed (``run_lines.lost_runs``) is unknown."""
+    from pipelines.experiments.run_lines import is_lost, is_reused
     from pipelines.version import dirty_text
 
     if is_lost(run):  # a line --reuse took says which sweep's file lacks it

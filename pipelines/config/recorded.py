@@ -66,7 +66,7 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
         sweep_file, runs = recorded_runs(held.parent)
     except ConfigError:  # no run line yet (a sweep stopped before its first): the typed plan, as before
         return typed
-    from pipelines.experiments.reuse import is_reused
+    from pipelines.experiments.run_lines import is_reused
 
     last = last_own_run(runs)
     if not isinstance(runs[last - 1].get("config"), dict) or is_reused(runs[last - 1]):
@@ -79,15 +79,14 @@ def report_config(args: Any, options: Sequence[Option]) -> RunConfig:
 def last_own_run(runs: list[dict[str, Any]]) -> int:
     """The number (from 1) of the last run line that is a run of the sweep itself, not the code of episodes
     ``sweep --reuse`` took (pipelines.experiments.reuse); the last line when none is."""
-    from pipelines.experiments.reuse import own_runs
+    from pipelines.experiments.run_lines import own_runs
 
     return (own_runs(runs) or [len(runs)])[-1]
 
 
 def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]:
     """The entries of the config run ``index`` of ``path`` recorded (``recorded_config``)."""
-    from pipelines.experiments.log import is_lost
-    from pipelines.experiments.reuse import REUSED, is_reused
+    from pipelines.experiments.run_lines import REUSED, is_lost, is_reused
 
     where = f"{path} (run {index})"
     values = run.get("config")
@@ -97,7 +96,7 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
             f"--reuse: `crowdmpc config show --from-sweep {run[REUSED]} --run {run.get('run_there')}` prints "
             "what it ran"
         )
-    if is_lost(run):  # log.lost_runs: the run's line was gone when a later run began
+    if is_lost(run):  # run_lines.lost_runs: the run's line was gone when a later run began
         raise ConfigError(f"{where} was lost from the file ({run['lost']}): its config is unknown")
     if not isinstance(values, dict):
         raise ConfigError(

@@ -16,7 +16,6 @@ import itertools
 import json
 import math
 import os
-import sys
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -29,7 +28,6 @@ from pipelines.plain_json import plain
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
-MAX_LOST_RUNS: Final[int] = 1000  # runs a log's records may name past sweep.json's (lost_runs)
 # what a refusal of a damaged log says to do: a line left out is an episode the next sweep runs again
 DAMAGED: Final[str] = "the file is damaged: edit out that line (a copy kept) and its episode runs again"
 SWEEP_FILE: Final[str] = "sweep.json"
@@ -365,35 +363,3 @@ def sweep_lock(out: Path) -> Iterator[None]:
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
-
-
-def is_lost(run: Any) -> bool:
-    """A run line ``lost_runs`` added: the run's own line was gone, its code and config unknown."""
-    return isinstance(run, dict) and "lost" in run
-
-
-def split_lost(runs: list[Any]) -> tuple[list[Any], int]:
-    """sweep.json's run lines but those ``lost_runs`` added, and how many it added."""
-    kept = [run for run in runs if not is_lost(run)]
-    return kept, len(runs) - len(kept)
-
-
-def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:
-    """A line for each run the records name (``last``: the highest ``run`` of any) past the ``listed`` lines
-    of sweep.json, said on stderr: with sweep.json moved away, the next run took number 1, and the old
-    records' ``"run": 1`` credited its code with their episodes. A number past ``MAX_LOST_RUNS`` of them is
-    the log's damage, not runs (a line each would fill sweep.json)."""
-    lost = last - listed
-    if lost <= 0:
-        return []
-    if lost > MAX_LOST_RUNS:
-        raise PipelineError(
-            f"{out / EPISODES_FILE}: a record names run {last}, {lost} past the {listed} {SWEEP_FILE} lists; "
-            f"{DAMAGED}"
-        )
-    print(
-        f"note: {out / EPISODES_FILE} holds episodes of {lost} run(s) {SWEEP_FILE} does not list; they are "
-        "kept as runs of unknown code (a new --out starts afresh)",
-        file=sys.stderr,
-    )
-    return [{"lost": f"not listed in {SWEEP_FILE} when run {listed + lost + 1} began"} for _ in range(lost)]

@@ -43,7 +43,7 @@ class ResumeChecks:
         # the runs (sweep.json's numbers) that recorded an episode; None once a record names none (written
         # before records kept their run): then every run may have
         self.runs_recorded: set[int] | None = set()
-        self.last_run = 0  # the highest run a record names, whatever others lack (log.lost_runs)
+        self.last_run = 0  # the highest run a record names, whatever others lack (run_lines.lost_runs)
 
     def add(self, record: dict[str, Any]) -> None:
         run = record.get("run")

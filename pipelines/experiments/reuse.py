@@ -9,7 +9,7 @@ II's lines, whose code its table.md then called "unknown". Each record taken kee
 this experiment's name, method label and index, and its run's line of the source's sweep.json (code,
 settings, cells) comes with it, marked ``reused_from`` and ``run_there``; the sweep then runs the rest as a
 resume does. The reused lines are the code of those episodes, not runs of this sweep: ``config show
---from-sweep``, ``--report-only`` and ``review`` read this sweep's own runs (``own_runs``).
+--from-sweep``, ``--report-only`` and ``review`` read this sweep's own runs (``run_lines.own_runs``).
 
 Taking is a resume of its own: the records are checked first as a resume checks its own (the weights,
 margins and crowd the cells plan with now), the run lines are written before the records that name them, and
@@ -24,34 +24,21 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
 from pipelines.errors import PipelineError, writes_named
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
     EPISODES_FILE,
     MCAP_DIR,
-    PART_SUFFIX,
     SWEEP_FILE,
     check_sweep_directory,
     episode_log,
-    lost_runs,
     read_sweep_file,
 )
+from pipelines.experiments.run_lines import REUSED, is_reused, lost_runs, write_sweep_file
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.plain_json import plain
-
-REUSED: Final[str] = "reused_from"  # a run line's mark: the folder whose run it is (``run_there``: which)
-
-
-def is_reused(run: Any) -> bool:
-    """A run line ``seed_from`` copied from another sweep: the code of episodes it took, not a run here."""
-    return isinstance(run, dict) and REUSED in run
-
-
-def own_runs(runs: Sequence[Any]) -> list[int]:
-    """The numbers (from 1) of sweep.json's run lines that are runs of this sweep, not ``is_reused``."""
-    return [k for k, run in enumerate(runs, start=1) if not is_reused(run)]
 
 
 def reusable(
@@ -92,7 +79,7 @@ def reusable(
 
 def _run_there(record: dict[str, Any], listed: int) -> int | None:
     """The run that made ``record``: its ``run`` (one past the lines sweep.json lists: a lost run,
-    log.lost_runs), or the only run of a sweep.json of ``listed`` = 1 line (a record from before records
+    run_lines.lost_runs), or the only run of a sweep.json of ``listed`` = 1 line (a record from before records
     kept it); None when unknown."""
     run = record.get("run")
     if isinstance(run, int) and not isinstance(run, bool) and run >= 1:
@@ -119,13 +106,13 @@ def seed_from(
         there = record["run"]
         if (where, there) not in numbers:
             line = source_runs[there - 1] if there is not None and there <= len(source_runs) else None
-            if not isinstance(line, dict):  # its code is unknown, as a lost run's is (log.is_lost)
+            if not isinstance(line, dict):  # its code is unknown, as a lost run's is (run_lines.is_lost)
                 line = {"lost": f"no line of {source / SWEEP_FILE} names the run of its episodes"}
             runs.append({**line, REUSED: where, "run_there": there})
             numbers[(where, there)] = len(runs)
         record["run"] = numbers[(where, there)]
     meta["experiment"], meta["title"] = experiment.name, experiment.title
-    _replace(out / SWEEP_FILE, json.dumps(plain(meta), indent=1) + "\n")
+    write_sweep_file(out / SWEEP_FILE, meta)
     _append(out / EPISODES_FILE, records)
     cells = len({r["cell"] for r in records})
     kept = f"; their recordings stay in {source / MCAP_DIR}" if (source / MCAP_DIR).is_dir() else ""
@@ -135,20 +122,6 @@ def seed_from(
         file=sys.stderr,
     )
     return meta
-
-
-def _replace(path: Path, text: str) -> None:
-    """``text`` into ``path`` in one rename, synced: a stop halfway leaves the file as it was."""
-    tmp = path.with_name(path.name + PART_SUFFIX)
-    with writes_named(path):
-        try:
-            with open(tmp, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
 
 
 def _append(path: Path, records: list[dict[str, Any]]) -> None:

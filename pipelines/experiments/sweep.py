@@ -30,7 +30,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Final
 
-from pipelines.errors import PipelineError, SweepStopped, writes_named
+from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import Backend, check_backend, make_backend
 from pipelines.experiments.log import (
     ERRORS_FILE,
@@ -41,18 +41,16 @@ from pipelines.experiments.log import (
     check_sweep_directory,
     episode_log,
     error_keys,
-    lost_runs,
     read_sweep_file,
-    split_lost,
     sweep_lock,
 )
 from pipelines.experiments.resume_checks import ResumeChecks
 from pipelines.experiments.reuse import seed_from
+from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import make_scratch_root, release_scratch_root
 from pipelines.loop.interrupt import terminate_as_interrupt
-from pipelines.plain_json import plain
 from predictors.progress import progress_bar
 
 # A sweep whose first episodes all raise is misconfigured (a missing model, a broken build): stop it rather
@@ -174,13 +172,7 @@ def _add_run(
             ],
         }
     )
-    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
-    with writes_named(path):  # a full disk's error names sweep.json, which stays as it was
-        try:
-            tmp.write_text(json.dumps(plain(meta), indent=1) + "\n", encoding="utf-8")
-            os.replace(tmp, path)
-        finally:  # stopped before the replace: the half-written file is nobody's
-            tmp.unlink(missing_ok=True)
+    write_sweep_file(path, meta)
     return len(meta["runs"])
 
 

@@ -1438,8 +1438,8 @@ def test_a_sweep_json_moved_away_leaves_its_runs_unknown_not_credited_to_the_nex
 def test_lost_runs_are_found_past_records_without_a_run_and_bounded(tmp_path, capsys):
     """A record older than its run number turned the search off (the next run took number 1 again), and a
     damaged record's run of 200000 padded sweep.json with as many lines."""
-    from pipelines.experiments.log import lost_runs
     from pipelines.experiments.resume_checks import ResumeChecks
+    from pipelines.experiments.run_lines import lost_runs
 
     checks = ResumeChecks(tmp_path, [])
     for run in (None, 3, 2):

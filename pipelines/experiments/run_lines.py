@@ -1,0 +1,78 @@
+"""sweep.json's run lines: a line per run of the sweep (``pipelines.experiments.sweep._add_run``: its code,
+settings and cells), which each record names by number (its ``run``), and the two kinds of line that are no
+run of the sweep's own: a run the records name that sweep.json no longer listed (``lost_runs``: code unknown),
+and a run of another sweep whose episodes ``sweep --reuse`` took (pipelines.experiments.reuse: the code of
+those episodes, not a run here). Written whole, in one rename (``write_sweep_file``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Final
+
+from pipelines.errors import PipelineError, writes_named
+from pipelines.experiments.log import DAMAGED, EPISODES_FILE, PART_SUFFIX, SWEEP_FILE
+from pipelines.plain_json import plain
+
+MAX_LOST_RUNS: Final[int] = 1000  # runs a log's records may name past sweep.json's (lost_runs)
+REUSED: Final[str] = "reused_from"  # a reused line's mark: the folder whose run it is (``run_there``: which)
+
+
+def is_reused(run: Any) -> bool:
+    """A line ``sweep --reuse`` copied from another sweep: the code of episodes it took, not a run here."""
+    return isinstance(run, dict) and REUSED in run
+
+
+def own_runs(runs: Sequence[Any]) -> list[int]:
+    """The numbers (from 1) of sweep.json's run lines that are runs of this sweep, not ``is_reused``."""
+    return [k for k, run in enumerate(runs, start=1) if not is_reused(run)]
+
+
+def is_lost(run: Any) -> bool:
+    """A run line ``lost_runs`` added: the run's own line was gone, its code and config unknown."""
+    return isinstance(run, dict) and "lost" in run
+
+
+def split_lost(runs: list[Any]) -> tuple[list[Any], int]:
+    """sweep.json's run lines but those ``lost_runs`` added, and how many it added."""
+    kept = [run for run in runs if not is_lost(run)]
+    return kept, len(runs) - len(kept)
+
+
+def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:
+    """A line for each run the records name (``last``: the highest ``run`` of any) past the ``listed`` lines
+    of sweep.json, said on stderr: with sweep.json moved away, the next run took number 1, and the old
+    records' ``"run": 1`` credited its code with their episodes. A number past ``MAX_LOST_RUNS`` of them is
+    the log's damage, not runs (a line each would fill sweep.json)."""
+    lost = last - listed
+    if lost <= 0:
+        return []
+    if lost > MAX_LOST_RUNS:
+        raise PipelineError(
+            f"{out / EPISODES_FILE}: a record names run {last}, {lost} past the {listed} {SWEEP_FILE} lists; "
+            f"{DAMAGED}"
+        )
+    print(
+        f"note: {out / EPISODES_FILE} holds episodes of {lost} run(s) {SWEEP_FILE} does not list; they are "
+        "kept as runs of unknown code (a new --out starts afresh)",
+        file=sys.stderr,
+    )
+    return [{"lost": f"not listed in {SWEEP_FILE} when run {listed + lost + 1} began"} for _ in range(lost)]
+
+
+def write_sweep_file(path: Path, meta: dict[str, Any]) -> None:
+    """sweep.json's document into ``path`` in one rename, synced: a stop or a full disk halfway leaves the
+    file as it was (a full disk's error names it)."""
+    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
+    with writes_named(path):
+        try:
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.write(json.dumps(plain(meta), indent=1) + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        finally:  # stopped before the replace: the half-written file is nobody's
+            tmp.unlink(missing_ok=True)
