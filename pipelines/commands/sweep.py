@@ -225,8 +225,8 @@ def _add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--reuse",
         type=path_arg,
-        metavar="DIR",
-        help="take the episodes sweep DIR ran of this plan's cells first, with their runs' code (Table "
+        metavar="OTHER",
+        help="take the episodes sweep OTHER ran of this plan's cells first, with their runs' code (Table "
         "III's F cells are Table II's CMPC cells), then run the rest",
     )
     p.add_argument("--dry-run", action="store_true", help="print the cells and episode count; run nothing")
@@ -284,9 +284,11 @@ def run(args: argparse.Namespace) -> int:
         for cell in cells:
             print(f"  {cell.method:>{width}}  {cell.n_humans} humans  {cell.key}")
         if args.reuse is not None:
-            from pipelines.experiments.reuse import reusable
+            from pipelines.experiments.reuse import taken
 
-            print(f"--reuse: {len(reusable(args.reuse, out, tasks)[0])} of them to take from {args.reuse}")
+            print(
+                f"--reuse: {len(taken(args.reuse, out, tasks).runs_there)} of them to take from {args.reuse}"
+            )
         return 0
 
     status = 0

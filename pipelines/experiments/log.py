@@ -19,12 +19,15 @@ import os
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.errors import SimulationError
 from pipelines.errors import DroppedLineWarning, PipelineError
 from pipelines.loop.record import EpisodeRecord
 from pipelines.plain_json import plain
+
+if TYPE_CHECKING:
+    from pipelines.experiments.tasks import EpisodeTask
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
@@ -167,6 +170,11 @@ def error_keys(out: Path) -> set[str]:
             if isinstance(entry, dict) and isinstance(entry.get("key"), str):
                 keys.add(entry["key"])
     return keys
+
+
+def mcap_path(out: Path, task: EpisodeTask) -> Path:
+    """Where sweep ``out`` keeps the MCAP recording of ``task``'s episode (``--record``)."""
+    return out / MCAP_DIR / task.cell.key / f"{task.scenario}_seed{task.seed:06d}.mcap"
 
 
 def episode_log(out: Path) -> EpisodeLog:

@@ -23,6 +23,7 @@ import json
 import os
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,8 +33,8 @@ from pipelines.experiments.log import (
     EPISODES_FILE,
     MCAP_DIR,
     SWEEP_FILE,
-    check_sweep_directory,
     episode_log,
+    mcap_path,
     read_sweep_file,
 )
 from pipelines.experiments.run_lines import REUSED, is_reused, lost_runs, write_sweep_file
@@ -41,47 +42,68 @@ from pipelines.experiments.tasks import EpisodeTask
 from pipelines.plain_json import plain
 
 
-def reusable(
-    source: Path, out: Path, tasks: Sequence[EpisodeTask], *, repair: bool = False
-) -> tuple[list[dict[str, Any]], list[Any], int]:
-    """The records of ``source`` (another sweep's folder) that are episodes of ``tasks`` not recorded in
-    ``out``, relabelled for them and checked as a resume checks its own; the source's run lines; the highest
-    run a record of ``out`` names. A PipelineError naming ``source`` for a folder that is no sweep, is
-    ``out``, or whose episodes were made with other weights, margins or crowds than the cells plan with now.
-    ``repair``: cut a torn last line off ``out``'s log (only the sweep holding its lock may), which the
-    records taken would otherwise follow."""
-    from pipelines.experiments.resume_checks import ResumeChecks
-
+def check_source(source: Path, out: Path) -> None:
+    """Before ``out`` is made: ``source`` holds a sweep's log and run lines, neither a link (the files of the
+    folder named are read, not others), its sweep.json readable, and is not ``out``."""
     option = f"--reuse {source}"
     for name in (SWEEP_FILE, EPISODES_FILE):
+        if (source / name).is_symlink():
+            raise PipelineError(
+                f"{option}: {source / name} is a symbolic link; --reuse reads a sweep's own files"
+            )
         if not (source / name).is_file():
             raise PipelineError(f"{option}: not a sweep folder ({source / name} does not exist)")
     if out.is_dir() and os.path.samefile(out, source):
         raise PipelineError(f"{option}: that is --out itself; a sweep resumes from its own folder unasked")
-    check_sweep_directory(source, "--reuse")
-    runs = read_sweep_file(source / SWEEP_FILE).get("runs", [])
-    have, last_run = set(), 0
+    _source_runs(source)  # and read again after its log (``taken``)
+
+
+def _source_runs(source: Path) -> list[Any]:
+    """The run lines of ``source``'s sweep.json; a PipelineError naming it as --reuse's."""
+    hint = f" (the file of the sweep --reuse {source} names)"
+    return read_sweep_file(source / SWEEP_FILE, hint).get("runs", [])
+
+
+@dataclass(frozen=True)
+class Taken:
+    """What ``taken`` found: the key of each episode to take, with the run of ``source`` that made it (None:
+    unknown), that source's run lines, and the highest run a record of ``out`` names."""
+
+    runs_there: dict[str, int | None]
+    source_runs: list[Any]
+    last_run: int
+
+
+def taken(source: Path, out: Path, tasks: Sequence[EpisodeTask], *, repair: bool = False) -> Taken:
+    """The episodes of ``tasks`` that ``source`` (another sweep's folder) recorded and ``out`` has not. Both
+    folders' records are checked as a resume checks its own (the weights, margins and crowd the cells plan
+    with now), ``out``'s first, so that a refusal writes nothing; a PipelineError names the file. Held: a key
+    and a run number an episode, not the records (those of a 20,000-episode source took 18 KB each).
+    ``repair``: cut a torn last line off ``out``'s log (only the sweep holding its lock may), which the
+    records taken would otherwise follow."""
+    from pipelines.experiments.resume_checks import ResumeChecks
+
+    check_source(source, out)
+    own = ResumeChecks(out, list(tasks))
     for _, _, record in episode_log(out).scan(repair=repair):
-        have.add(record["key"])
-        last_run = max(last_run, _run_there(record, 0) or 0)
-    planned = {task.key: task for task in tasks if task.key not in have}
+        own.add(record)
+    own.check()
+    left = {t.key for i, t in enumerate(tasks) if not own.recorded(i)}
     checks = ResumeChecks(source, list(tasks), reused=True)
-    records = []
+    there: dict[str, Any] = {}
     for _, _, record in episode_log(source).scan(repair=False):  # the source is read, never cut
-        task = planned.pop(record["key"], None)  # a key once: the source's scan refuses a second
-        if task is not None:
+        if record["key"] in left:  # a key once: the source's scan refuses a second
             checks.add(record)
-            label = {"experiment": task.experiment, "method": task.cell.method, "index": task.index}
-            records.append({**record, **label, "run": _run_there(record, len(runs))})
+            there[record["key"]] = record.get("run")
     checks.check()
-    return records, runs, last_run
+    runs = _source_runs(source)  # read after its log: the line of a run the source began meanwhile is there
+    return Taken({key: _run_there(run, len(runs)) for key, run in there.items()}, runs, own.last_run)
 
 
-def _run_there(record: dict[str, Any], listed: int) -> int | None:
-    """The run that made ``record``: its ``run`` (one past the lines sweep.json lists: a lost run,
-    run_lines.lost_runs), or the only run of a sweep.json of ``listed`` = 1 line (a record from before records
-    kept it); None when unknown."""
-    run = record.get("run")
+def _run_there(run: Any, listed: int) -> int | None:
+    """The source's run that made a record whose ``run`` is ``run``: that number (one past the lines its
+    sweep.json lists: a lost run, run_lines.lost_runs), or the only run of a sweep.json of ``listed`` = 1
+    line (a record from before records kept it); None when unknown."""
     if isinstance(run, int) and not isinstance(run, bool) and run >= 1:
         return run
     return 1 if listed == 1 else None
@@ -91,44 +113,58 @@ def seed_from(
     source: Path, out: Path, experiment: Experiment, tasks: Sequence[EpisodeTask], meta: dict[str, Any]
 ) -> dict[str, Any]:
     """Give ``out`` (a sweep folder whose lock the caller holds; ``meta``: its sweep.json, checked to be
-    ``experiment``'s) the episodes ``reusable`` takes from ``source``: their runs' lines first, in
-    sweep.json, then the records naming them in episodes.jsonl. Returns sweep.json as written; says on
-    stderr what it took."""
-    records, source_runs, last_run = reusable(source, out, tasks, repair=True)
-    if not records:
+    ``experiment``'s) the episodes ``taken`` finds in ``source``: their runs' lines first, in sweep.json,
+    then their records, relabelled, in episodes.jsonl. Returns sweep.json as written; says on stderr what it
+    took."""
+    found = taken(source, out, tasks, repair=True)
+    if not found.runs_there:
         print(f"--reuse {source}: none of its episodes is one of this plan's left to run", file=sys.stderr)
         return meta
     runs = meta.setdefault("runs", [])
-    runs.extend(lost_runs(out, len(runs), last_run))  # before new numbers are taken
+    runs.extend(lost_runs(out, len(runs), found.last_run))  # before new numbers are taken
     where = str(source.resolve())
     numbers = {(r.get(REUSED), r.get("run_there")): k for k, r in enumerate(runs, start=1) if is_reused(r)}
-    for record in records:
-        there = record["run"]
+    for there in sorted(set(found.runs_there.values()), key=str):
         if (where, there) not in numbers:
-            line = source_runs[there - 1] if there is not None and there <= len(source_runs) else None
+            line = (
+                found.source_runs[there - 1]
+                if there is not None and there <= len(found.source_runs)
+                else None
+            )
             if not isinstance(line, dict):  # its code is unknown, as a lost run's is (run_lines.is_lost)
                 line = {"lost": f"no line of {source / SWEEP_FILE} names the run of its episodes"}
             runs.append({**line, REUSED: where, "run_there": there})
             numbers[(where, there)] = len(runs)
-        record["run"] = numbers[(where, there)]
     meta["experiment"], meta["title"] = experiment.name, experiment.title
     write_sweep_file(out / SWEEP_FILE, meta)
-    _append(out / EPISODES_FILE, records)
-    cells = len({r["cell"] for r in records})
-    kept = f"; their recordings stay in {source / MCAP_DIR}" if (source / MCAP_DIR).is_dir() else ""
+    by_key = {task.key: task for task in tasks if task.key in found.runs_there}
+    run_of = {key: numbers[(where, there)] for key, there in found.runs_there.items()}
+    _append(out / EPISODES_FILE, source, by_key, run_of)
+    kept = sum(mcap_path(source, task).is_file() for task in by_key.values())
+    cells = len({task.cell.key for task in by_key.values()})
+    recordings = f"; {kept} of their recordings stay in {source / MCAP_DIR}" if kept else ""
     print(
-        f"reused {len(records)} episode(s) of {cells} cell(s) from {source} "
-        f"({len({r['run'] for r in records})} of its runs){kept}",
+        f"reused {len(by_key)} episode(s) of {cells} cell(s) from {source} ({len(set(run_of.values()))} of "
+        f"its runs){recordings}",
         file=sys.stderr,
     )
     return meta
 
 
-def _append(path: Path, records: list[dict[str, Any]]) -> None:
-    """The records as the log's last lines, synced once (a record at a time, as a sweep appends them, took a
-    disk sync each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts."""
-    lines = "".join(json.dumps(plain(r), allow_nan=False, separators=(",", ":")) + "\n" for r in records)
+def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dict[str, int]) -> None:
+    """The records of ``source`` of ``tasks``' keys, under their labels and with ``run_of``'s numbers, as the
+    log's last lines, read and written a record at a time and synced once (a sweep's appends take a disk sync
+    each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts."""
     with writes_named(path), open(path, "ab") as f:
-        f.write(lines.encode())
+        for _, _, record in episode_log(source).scan(repair=False):
+            task = tasks.get(record["key"])
+            if task is not None:
+                label = {"experiment": task.experiment, "method": task.cell.method, "index": task.index}
+                line = json.dumps(
+                    plain({**record, **label, "run": run_of[task.key]}),
+                    allow_nan=False,
+                    separators=(",", ":"),
+                )
+                f.write(line.encode() + b"\n")
         f.flush()
         os.fsync(f.fileno())

@@ -36,10 +36,18 @@ def is_lost(run: Any) -> bool:
     return isinstance(run, dict) and "lost" in run
 
 
-def split_lost(runs: list[Any]) -> tuple[list[Any], int]:
-    """sweep.json's run lines but those ``lost_runs`` added, and how many it added."""
+def split_lost(runs: list[Any]) -> tuple[list[Any], str]:
+    """sweep.json's run lines of known code, and what the others are ("" for none): lines ``lost_runs`` added
+    (the run's line was gone), and lines --reuse took of another sweep that lacked them."""
     kept = [run for run in runs if not is_lost(run)]
-    return kept, len(runs) - len(kept)
+    reused = sum(map(is_reused, (run for run in runs if is_lost(run))))
+    lost = len(runs) - len(kept) - reused
+    parts = [
+        f"{lost} run(s) {SWEEP_FILE} lost" if lost else "",
+        f"{reused} reused run(s) their sweep's {SWEEP_FILE} lacked" if reused else "",
+    ]
+    text = ", ".join(filter(None, parts))
+    return kept, f"{text}, code unknown" if text else ""
 
 
 def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:

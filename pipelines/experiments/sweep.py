@@ -34,18 +34,18 @@ from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import Backend, check_backend, make_backend
 from pipelines.experiments.log import (
     ERRORS_FILE,
-    MCAP_DIR,
     PART_SUFFIX,
     SWEEP_FILE,
     EpisodeLog,
     check_sweep_directory,
     episode_log,
     error_keys,
+    mcap_path,
     read_sweep_file,
     sweep_lock,
 )
 from pipelines.experiments.resume_checks import ResumeChecks
-from pipelines.experiments.reuse import seed_from
+from pipelines.experiments.reuse import check_source, seed_from
 from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
 from pipelines.experiments.tasks import EpisodeTask
@@ -84,10 +84,6 @@ class SweepOutcome:
         """Once the workers are up: the rate a long sweep approaches."""
         running = self.wall_s - self.startup_s
         return 60.0 * self.ran / running if running > 0 else 0.0
-
-
-def mcap_path(out: Path, task: EpisodeTask) -> Path:
-    return out / MCAP_DIR / task.cell.key / f"{task.scenario}_seed{task.seed:06d}.mcap"
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
@@ -185,11 +181,11 @@ def _note_other_code(out: Path, runs: list[dict[str, Any]]) -> None:
     from pipelines.version import code_changes
 
     # a run from before the code was recorded (4a16d16) has none: unknown, and results changed since
-    kept, lost = split_lost(runs)  # a lost run's code is unknown, not old: said apart
+    kept, unknown = split_lost(runs)  # a lost run's code is unknown, not old: said apart
     shown = code_changes(
         (run.get("code") if isinstance(run, dict) else None for run in kept), code_with_plugins()
     )
-    shown = "; ".join(filter(None, [shown, f"{lost} run(s) {SWEEP_FILE} lost, code unknown" if lost else ""]))
+    shown = "; ".join(filter(None, [shown, unknown]))
     if shown:  # every resume says it, not only the first after the change: the mix stays in the directory
         print(
             f"note: {out} holds episodes made by other code ({shown}); they are kept, and a table of cells "
@@ -218,6 +214,8 @@ def run_sweep(
     if backend_factory is None:  # a choice refused here leaves no folder, nor a line in sweep.json
         check_backend(config.backend, config.workers, config.ray_address)
     check_sweep_directory(out)
+    if config.reuse is not None:  # a source that is no sweep leaves no --out made
+        check_source(config.reuse, out)
     out.mkdir(parents=True, exist_ok=True)
     tasks = config.tasks()
     keys = [t.key for t in tasks]
@@ -371,7 +369,8 @@ def _default_backend(config: SweepConfig, scratch: str) -> Backend:
 
 
 def _local_time() -> str:
-    """Now, local time, in ISO 8601's extended form (strict readers refuse strftime's "+0000" beside it)."""
+    """Now, local time in ISO 8601's extended form ("2026-12-05T23:41:16+00:00"): strftime's %z gave a basic
+    offset, "+0000", which strict ISO readers refuse beside the extended date."""
     return datetime.now().astimezone().isoformat(timespec="seconds")
 
 

@@ -70,7 +70,7 @@ def test_a_stop_between_the_run_lines_and_the_records_is_taken_up_again(
 ):
     out = tmp_path / "t3"
 
-    def stopped(path, records):
+    def stopped(*args):
         raise KeyboardInterrupt  # after sweep.json, before a record
 
     monkeypatch.setattr(reuse, "_append", stopped)
@@ -119,6 +119,32 @@ def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
                            str(table2))  # fmt: skip
     assert code == 2 and "that is --out itself" in one_line(err)
     assert "--report-only runs nothing" in refused(tmp_path / "b", "--reuse", str(table2), "--report-only")
+    # a source of damaged or linked files is named as --reuse's, and no --out is made for it
+    bad = tmp_path / "bad"
+    shutil.copytree(table2, bad)
+    (bad / "sweep.json").write_text("{")
+    line = refused(tmp_path / "c", "--reuse", str(bad))
+    assert line.endswith(f"(the file of the sweep --reuse {bad} names)") and not (tmp_path / "c").exists()
+    (bad / "sweep.json").unlink()
+    (bad / "sweep.json").symlink_to(table2 / "sweep.json")
+    assert refused(tmp_path / "c", "--reuse", str(bad)).endswith(
+        f"--reuse {bad}: {bad / 'sweep.json'} is a symbolic link; --reuse reads a sweep's own files"
+    )
+    assert not (tmp_path / "c").exists()
+
+
+def test_outs_own_records_are_checked_before_anything_is_taken(table2, tmp_path, capsys):
+    out = tmp_path / "t3"
+    assert main(["sweep", "--experiment", "table3", *SMALL[:2], "--episodes-per-cell", "1", *SMALL[4:],
+                 "--out", str(out)]) == 0  # fmt: skip
+    records = _records(out)
+    for r in records:
+        r["predictor_sha256"] = "0" * 64
+    (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    before = {name: (out / name).read_bytes() for name in ("episodes.jsonl", "sweep.json")}
+    code, _, err = _table3(capsys, out, "--reuse", str(table2))
+    assert code == 2 and one_line(err).endswith("use another --out for the new weights")
+    assert {name: (out / name).read_bytes() for name in before} == before  # nothing taken
 
 
 def test_a_sweep_of_other_cells_gives_nothing_and_the_sweep_runs_all_of_its_own(table2, tmp_path, capsys):
@@ -155,9 +181,11 @@ def test_records_without_a_run_take_the_sources_only_run_else_an_unknown_one(tab
             meta = json.loads((source / "sweep.json").read_text())
             meta["runs"].append(meta["runs"][0])
             (source / "sweep.json").write_text(json.dumps(meta))
-        assert _table3(capsys, out, "--reuse", str(source))[0] == 0
+        code, _, err = _table3(capsys, out, "--reuse", str(source))
+        assert code == 0
         first = _runs(out)[0]
-        if extra_run:  # which of two runs made them is unknown: its code too
+        if extra_run:  # which of two runs made them is unknown: its code too, said as the source's gap
+            assert "(1 reused run(s) their sweep's sweep.json lacked, code unknown)" in err
             assert first == {"lost": first["lost"], "reused_from": str(source.resolve()), "run_there": None}
             assert (
                 f"unknown (no line of {source / 'sweep.json'} names the run of its episodes)"
@@ -177,3 +205,11 @@ def test_review_reads_the_recording_policy_of_the_sweeps_own_runs(tmp_path, recw
     assert not _sweep_kept_failures(tmp_path) and not recwarn.list
     (tmp_path / "sweep.json").write_text(json.dumps({"runs": [failures]}))
     assert _sweep_kept_failures(tmp_path)
+
+
+def test_the_recordings_taken_are_counted_where_they_stay(tmp_path, capsys):
+    source = tmp_path / "t2"
+    argv = ["sweep", "--experiment", "table2", *SMALL, "--record", "all", "--out", str(source)]
+    assert main(argv) == 0
+    code, _, err = _table3(capsys, tmp_path / "t3", "--reuse", str(source))
+    assert code == 0 and f"(1 of its runs); 2 of their recordings stay in {source / 'mcap'}" in err
