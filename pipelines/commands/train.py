@@ -185,6 +185,14 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
         + RESUMED,
     )
     parser.add_argument(
+        "--patience",
+        type=int,
+        default=None,
+        metavar="N",
+        help="stop once validation ADE has not improved for N epochs (Lightning's EarlyStopping; the best "
+        "epoch's weights are saved, as always; default: every epoch of --epochs)" + RESUMED,
+    )
+    parser.add_argument(
         "--lr",
         type=float,
         default=None,
@@ -250,6 +258,7 @@ def _check_numbers(args: argparse.Namespace) -> None:
         ("--step-size", args.step_size, 100_000),
         ("--hidden-dim", args.hidden_dim, 4096),
         ("--limit-batches", args.limit_batches, 1_000_000),
+        ("--patience", args.patience, 100_000),
     ):
         if value is not None and not 1 <= value <= high:
             raise PipelineError(f"{option} must be in 1..{high}, got {value}")
@@ -379,6 +388,6 @@ def _check_out(
     name = check_resumed_settings(out, recorded, settings, name_given=args.name is not None)
     check_resumed_data(out, recorded, settings["data_sha256"])
     done = check_last_checkpoint(last, settings)
-    check_more_epochs(out, args.epochs, done, finished=(out / f"{name}.metrics.json").is_file())
+    check_more_epochs(out, args.epochs, done, out / f"{name}.metrics.json")
     note_other_code(out, recorded)
     return name

@@ -48,11 +48,31 @@ def record_epochs(out: Path, recorded: dict[str, Any], epochs: int) -> None:
     replace_file(out / SETTINGS_FILE, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
-def check_more_epochs(out: Path, epochs: int, done: int | None, finished: bool) -> None:
+def _check_not_stopped_early(out: Path, metrics: Path) -> None:
+    """PipelineError when the finished run in ``out`` (``metrics``: its NAME.metrics.json) was ended by its
+    --patience: a resume would restore the stop's count and end the fit again after an epoch or go on past
+    the stop, either way other weights than the run's under its settings."""
+    try:
+        training = json.loads(metrics.read_text(encoding="utf-8")).get("training", {})
+    except (OSError, ValueError, AttributeError):  # the run's other checks say what is wrong with it
+        return
+    stopped = training.get("stopped_early_after") if isinstance(training, dict) else None
+    if stopped is not None:
+        raise PipelineError(
+            f"--resume: {out} stopped early after {stopped} epochs (validation ADE had not improved in the "
+            f"last {training.get('patience')}, its --patience): it is finished; start a new run with another "
+            "--out"
+        )
+
+
+def check_more_epochs(out: Path, epochs: int, done: int | None, metrics: Path) -> None:
     """PipelineError when a resume would train no epoch: Lightning stops at once, and the run's NAME.pt,
     NAME.json and metrics were written again, recording --epochs where more had trained. The same count
-    as the run's passes while the run is not ``finished`` (no metrics yet: it stopped after training, and
-    this writes what it left out)."""
+    as the run's passes while the run is not finished (no ``metrics``, its NAME.metrics.json, yet: it stopped
+    after training, and this writes what it left out). A finished run its --patience ended is refused too."""
+    finished = metrics.is_file()
+    if finished:
+        _check_not_stopped_early(out, metrics)
     if done is not None and (epochs < done or (epochs == done and finished)):
         raise PipelineError(
             f"--resume: {out} has trained {done} epoch{'s' if done != 1 else ''} already; --epochs {epochs} "

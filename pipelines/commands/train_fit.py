@@ -38,12 +38,12 @@ def run_training(
 
     optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
     _prepare_process(args.seed)
-    module, best_path, elapsed, limited = _fit(args, net_config, name, out, data_files[0], settings, optim)
+    module, best_path, elapsed, ended = _fit(args, net_config, name, out, data_files[0], settings, optim)
     metrics = out / f"{name}.metrics.json"
     # gone before the weights change: a run stopped before its new metrics are written is visibly unfinished
     # (--resume then finishes it), never new weights beside the metrics of the old ones
     metrics.unlink(missing_ok=True)
-    weights, extra = _save_best(args, module, name, out, best_path, optim, limited)
+    weights, extra = _save_best(args, module, name, out, best_path, optim, ended)
     top_k = 20 if model_kind(args.model).adversarial else None
     summary = _summary(args, name, out, data_files, weights, extra, elapsed, top_k, evaluated)
     text = json.dumps(plain(summary), indent=2, allow_nan=False) + "\n"  # strict JSON, as every record's
@@ -84,9 +84,9 @@ def _fit(
     files: dict,
     settings: dict[str, Any],
     optim: Any,
-) -> tuple[Any, str, float, int | None]:
+) -> tuple[Any, str, float, dict[str, Any]]:
     """Fits (or resumes) the run; returns the module holding the best epoch's weights, that checkpoint's
-    path, the fit's wall time and the batch limit that cut its epochs (``_limited``)."""
+    path, the fit's wall time and how the fit ran (``_ended``: the batch limit, the early stop)."""
     from predictors.checkpoint import load_tensors
     from predictors.data.datamodule import TrajnetDataModule
     from predictors.training import make_module
@@ -141,7 +141,7 @@ def _fit(
     best_path = best.best_model_path or str(last)
     state = load_tensors(Path(best_path))["state_dict"]
     module.load_state_dict(state)
-    return module, best_path, elapsed, _limited(args.limit_batches, trainer)
+    return module, best_path, elapsed, _ended(args, trainer)
 
 
 def _in_plugin(model: str, exc: BaseException) -> str | None:
@@ -159,6 +159,21 @@ def _in_plugin(model: str, exc: BaseException) -> str | None:
         return None
     frames = [f for f in traceback.extract_tb(exc.__traceback__) if Path(f.filename) == Path(path)]
     return None if not frames else f"{Path(path).name}:{frames[-1].lineno} in {frames[-1].name}"
+
+
+def _ended(args: argparse.Namespace, trainer: Any) -> dict[str, Any]:
+    """What the training record adds of how the fit ran: the batch limit that cut its epochs (``_limited``),
+    and with --patience that patience and, where validation ADE's stop ended the fit, the epochs trained."""
+    from lightning.pytorch.callbacks import EarlyStopping
+
+    limited = _limited(args.limit_batches, trainer)
+    ended: dict[str, Any] = {} if limited is None else {"limit_batches": limited}
+    if args.patience is not None:
+        ended["patience"] = args.patience
+        stop = next(c for c in trainer.callbacks if isinstance(c, EarlyStopping))
+        if stop.stopped_epoch:  # the index of the epoch it stopped after; 0: it did not stop the fit
+            ended["stopped_early_after"] = stop.stopped_epoch + 1
+    return ended
 
 
 def _limited(limit: int | None, trainer: Any) -> int | None:
@@ -219,7 +234,7 @@ def _save_best(
     out: Path,
     best_path: str,
     optim: Any,
-    limited: int | None,
+    ended: dict[str, Any],
 ) -> tuple[Path, dict[str, Any]]:
     """Writes OUT/NAME.pt + NAME.json, each in one rename (written in a temporary folder in OUT first: an
     interrupted save leaves no half file); returns the weights' path and the training record they carry."""
@@ -238,8 +253,8 @@ def _save_best(
             "batch_size": args.batch_size,
             "batching": args.batching,  # how the scenes were cut into batches (predictors.data.batching)
             "pred_len": module.pred_len,  # steps it learned to predict: a longer MPC horizon extrapolates
-            # only when set: a checkpoint trained on every batch reads as before
-            **({} if limited is None else {"limit_batches": limited}),
+            # only when set: a checkpoint trained on every batch, every epoch, reads as before
+            **ended,
             "optim": {**optim.__dict__, "loss": trained_loss(module, optim.loss)},
         }
     }
@@ -327,7 +342,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
     """Lightning's trainer, the callback that keeps the best checkpoint by validation ADE, the one that
     stops a diverged fit, and the run's clock."""
     import lightning as L
-    from lightning.pytorch.callbacks import LearningRateMonitor
+    from lightning.pytorch.callbacks import EarlyStopping, LearningRateMonitor
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
     from pipelines.commands.train_checkpoint import (
@@ -351,6 +366,12 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
         save_top_k=1,
         enable_version_counter=False,  # the run's folder is its own (RunCheckpoint)
     )
+    # validation ADE's stop (--patience): Lightning keeps its count in last.ckpt, so a resume goes on counting
+    stop = (
+        None
+        if args.patience is None
+        else EarlyStopping(monitor="val_ade", mode="min", patience=args.patience)
+    )
     trainer = L.Trainer(
         max_epochs=args.epochs,
         limit_train_batches=args.limit_batches,
@@ -367,6 +388,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
             divergence := StopOnDivergence(),
             clock := TrainingClock(),
             LearningRateMonitor(logging_interval="epoch"),
+            *([] if stop is None else [stop]),
             *(shown := progress_callbacks(args.no_progress)),
         ],
         deterministic=True,

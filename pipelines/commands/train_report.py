@@ -105,6 +105,13 @@ def print_summary(summary: dict[str, Any], best: str, weights: Path, top_k: int 
     # its val_ade is over the batches validated each epoch, the val line below over every scene
     over = "" if limit is None else f" (val_ade over {limit} validation batch{'es' * (limit != 1)})"
     print(f"{summary['name']}: best checkpoint {best}{over}; weights {weights} (+ .json)")
+    training = summary["training"]
+    if "stopped_early_after" in training:
+        patience = training["patience"]
+        print(
+            f"  stopped early after {training['stopped_early_after']} of {training['epochs']} epochs: "
+            f"validation ADE had not improved in the last {patience} (--patience {patience})"
+        )
     for split, m in summary["metrics"].items():
         line = f"  {split}: ADE {m['ade']:.3f} m  FDE {m['fde']:.3f} m  ({m['scenes']} scenes)"
         if "topk_ade" in m:

@@ -43,6 +43,7 @@ RUN_OPTIONS: Final[dict[str, Any]] = {
     "batch_size": 8,
     "batching": "shuffled",
     "seed": 0,
+    "patience": None,  # train every epoch (no early stop)
 }
 _RECORDED_TYPES: Final[dict[str, tuple[type, ...]]] = {
     "lr": (float, int),
@@ -51,6 +52,7 @@ _RECORDED_TYPES: Final[dict[str, tuple[type, ...]]] = {
     "batching": (str,),
     "seed": (int,),
     "limit_batches": (int,),
+    "patience": (int,),
 }
 
 
@@ -103,6 +105,7 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
         "batch_size": args.batch_size,
         "batching": args.batching,
         "limit_batches": args.limit_batches,
+        "patience": args.patience,
         "epochs": args.epochs,  # the one setting a resume may change (train_epochs)
         "files": {split: [str(p.resolve()) for p in paths] for split, paths in files.items()},
     }
