@@ -1,5 +1,5 @@
 """Writing a model zoo: ``add_to_zoo`` / ``add_entry`` copy a checkpoint pair into the user zoo (or, for the
-maintainers, the shipped one) and record it in its manifest; ``remove_from_zoo`` takes a user entry out.
+maintainers, the shipped one) and record it in its manifest; ``predictors.zoo_remove`` takes a user entry out.
 Every change of a manifest holds the zoo's lock (``predictors.manifest.zoo_lock``) from its read to its write.
 Reading the zoos (``predictors.zoo``) needs none of this.
 """
@@ -16,21 +16,20 @@ from dataclasses import replace as replace_fields
 from pathlib import Path
 from typing import Any
 
-from predictors.checkpoint import CONFIG_FORMAT, check_name, load_checkpoint, read_document
+from predictors.checkpoint import CONFIG_FORMAT, load_checkpoint, read_document
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.manifest import (
     MANIFEST_NAME,
     ZooEntry,
     check_model_name,
-    is_zoo_file,
     write_manifest,
     zoo_lock,
 )
 from predictors.zoo import SHIPPED, USER, checkpoints_dir, read_manifest, writable_zoo_dir
 
 # the hidden names an add (_write_pair, _replace_with_link) or a remove gives a model's files on the way
-_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?:pt|json)\.\d+\.(?:new|link|removed)")
+TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?:pt|json)\.\d+\.(?:new|link|removed)")
 
 
 def add_to_zoo(weights: str | Path, **options: Any) -> ZooEntry:
@@ -86,14 +85,14 @@ def add_entry(
     # checked before the lock, which creates the zoo directory: a refused add writes nothing
     if _unchanged(entries.get(name), entry, root, which, replace):
         return entry, entry
-    _check_no_stray_file(entry, entries.get(name), root, which)
+    _check_no_stray_file(entry, entries.get(name), root, which, (weights, config))
     with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
         entries = read_manifest(root)
         _check_case_clash(name, entries, root, which)
         previous = entries.get(name)
         if _unchanged(previous, entry, root, which, replace):
             return entry, entry
-        _check_no_stray_file(entry, previous, root, which)
+        _check_no_stray_file(entry, previous, root, which, (weights, config))
         _write_pair(weights, config_bytes, entry, root, entries)
     return entries[name], previous
 
@@ -138,20 +137,32 @@ def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: st
     raise PredictorError(_taken(entry.name, root, which, previous, entry))
 
 
-def _check_no_stray_file(entry: ZooEntry, previous: ZooEntry | None, root: Path, which: str) -> None:
+def _check_no_stray_file(
+    entry: ZooEntry, previous: ZooEntry | None, root: Path, which: str, sources: tuple[Path, Path]
+) -> None:
     """Refuse a NAME.pt or NAME.json linked to outside the zoo, or one there that is no file of its entry
-    NAME (``previous``): the user's own (a training run's, in a folder given as the zoo), lost if replaced."""
+    NAME (``previous``): the user's own (a training run's, in a folder given as the zoo), lost if replaced.
+    One that is the file being added (``sources``: the weights and their config; ``zoo --dir RUN add
+    RUN/NAME.pt``) is written with what it holds."""
     manifest = root / MANIFEST_NAME
     paths = entry.paths(root, manifest)
     owned = () if previous is None else previous.paths(root, manifest)
-    if previous is not None and _TEMPORARY.fullmatch(previous.file):
+    if previous is not None and TEMPORARY.fullmatch(previous.file):
         owned = paths  # an add of NAME stopped between its manifest's writes: NAME.pt, NAME.json are its own
-    for file_name, path in zip((entry.file, entry.config), paths, strict=True):
-        if os.path.lexists(root / file_name) and path not in owned:
+    for file_name, path, source in zip((entry.file, entry.config), paths, sources, strict=True):
+        if os.path.lexists(root / file_name) and path not in owned and not _same_file(path, source):
+            whose = "is no file of its entry" if previous is not None else "no entry names it; none is"
             raise PredictorError(
-                f"{root / file_name} is in the {which} zoo but is no file of its entry {entry.name!r}; "
-                "adding would replace it: move that file away, or add under another --name"
+                f"{root / file_name} is in the {which} zoo but {whose} {entry.name!r}; adding would replace "
+                "it: move that file away, or add under another --name"
             )
+
+
+def _same_file(path: Path, other: Path) -> bool:
+    try:
+        return os.path.samefile(path, other)
+    except OSError:  # one of them is gone, or a dangling link
+        return False
 
 
 def _write_pair(
@@ -306,95 +317,3 @@ def _check_shipped_kind(config: Path) -> None:
             f"{config}: model {model!r} is not a kind this project ships ({', '.join(kinds)}), so the "
             "shipped zoo cannot hold it; add it to your user zoo without --shipped"
         )
-
-
-def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
-    """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its files (those no
-    other entry names, and never one of the zoo's own: an entry added under a name reserved since may name
-    one) are first renamed to hidden temporaries (.NAME.pt.PID.removed), then the manifest entry goes, then
-    the temporaries, and those an earlier add or remove of ``name`` left. A remove stopped on the way leaves
-    either the entry (its files gone: `zoo remove NAME` again finishes it) or hidden temporaries of ours
-    (``remove_leftovers``), never files that look like a model no entry names. Returns the entry and the zoo
-    directory."""
-    check_name(name)  # not check_model_name: such an entry must stay removable
-    root = writable_zoo_dir(directory)
-    _entry_to_remove(name, root, read_manifest(root), directory)  # before the lock creates the directory
-    with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
-        entries = read_manifest(root)
-        entry = _entry_to_remove(name, root, entries, directory)
-        del entries[name]
-        manifest = root / MANIFEST_NAME
-        files = set(entry.paths(root, manifest))  # inside the zoo: checked when the manifest was read
-        still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
-        doomed = [path for path in files - still_used if not is_zoo_file(root, path)]
-        parked = [path.with_name(f".{path.name}.{os.getpid()}.removed") for path in doomed]
-        for path, hidden in zip(doomed, parked, strict=True):
-            if path.exists() or path.is_symlink():
-                os.replace(path, hidden)
-        try:
-            write_manifest(entries, root)
-        except OSError:  # a full disk, a quota: the manifest as it was, so the entry's files go back
-            _put_back(doomed, parked)
-            raise
-        for hidden in parked:
-            hidden.unlink(missing_ok=True)
-        for model, path in leftover_files(root):  # an earlier add or remove of it stopped on the way
-            if model == name:
-                path.unlink(missing_ok=True)
-    return entry, root
-
-
-def _put_back(doomed: list[Path], parked: list[Path]) -> None:
-    """The files of an entry a remove had parked, back under their names: the manifest that would have
-    dropped the entry could not be written, and an entry whose files are gone loads nowhere."""
-    for path, hidden in zip(doomed, parked, strict=True):
-        if os.path.lexists(hidden):
-            os.replace(hidden, path)
-
-
-def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:
-    """Remove the hidden temporaries of model ``name`` that no entry of the user zoo (``directory``, else
-    ``user_zoo_dir()``) names (``leftover_files``). Never NAME.pt or NAME.json: a folder given as the zoo may
-    hold a training run's output, which no entry names either. Returns the files removed (none: nothing to
-    do) and the zoo directory."""
-    check_name(name)
-    root = writable_zoo_dir(directory)
-    if not root.is_dir():
-        return [], root  # the lock would create it
-    with zoo_lock(root):  # an add in progress holds it: its temporary files are not leftovers
-        removed = [path for model, path in leftover_files(root) if model == name]
-        for path in removed:
-            path.unlink()
-    return removed, root
-
-
-def leftover_files(root: Path) -> list[tuple[str, Path]]:
-    """``(model name, path)`` of each hidden temporary in the zoo ``root`` that no entry of its manifest
-    names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add (.NAME.pt.PID.new, .link)
-    stopped on the way, or of one running now unless the caller holds ``zoo_lock``."""
-    if not root.is_dir():
-        return []
-    manifest = root / MANIFEST_NAME
-    owned = {path for entry in read_manifest(root).values() for path in entry.paths(root, manifest)}
-    found = []
-    for path in sorted(root.iterdir()):
-        match = _TEMPORARY.fullmatch(path.name)
-        if match is None or not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
-            continue
-        if path.resolve() in owned or path in owned:
-            continue
-        found.append((match["name"], path))
-    return found
-
-
-def _entry_to_remove(
-    name: str, root: Path, entries: dict[str, ZooEntry], directory: str | Path | None
-) -> ZooEntry:
-    """Entry ``name`` of the user zoo ``root``, or PredictorError saying where it is not."""
-    if name in entries:
-        return entries[name]
-    if directory is None and name in read_manifest(checkpoints_dir()):
-        raise PredictorError(
-            f"{name!r} is a model of the shipped zoo {checkpoints_dir()}, which is read-only"
-        )
-    raise PredictorError(f"the user zoo {root} has no entry {name!r}; it has {sorted(entries)}")

@@ -1,8 +1,10 @@
-"""The callbacks of ``crowdmpc train``: its checkpoints, its stop on divergence, its clock and its progress
-(imported with Lightning, when a run starts)."""
+"""The callbacks of ``crowdmpc train``: its checkpoints, its stop on divergence (and what it says of one),
+its clock and its progress, and the epochs a resumed fit goes to (imported with Lightning, when a run
+starts)."""
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
 import os
@@ -14,7 +16,7 @@ from typing import Any
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint, TQDMProgressBar
 
-from pipelines.commands.train_resume import relocated
+from pipelines.commands.train_resume import early_stopping_state, relocated
 from pipelines.errors import PipelineError
 from predictors.checkpoint import load_tensors
 
@@ -249,3 +251,36 @@ def _check_training_state(checkpoint: dict[str, Any], module: Any) -> str | None
 def _shape(value: Any) -> str:
     shape = getattr(value, "shape", None)
     return "x".join(map(str, shape)) if shape is not None else type(value).__name__
+
+
+def epochs_to_fit(epochs: int, last: Path | None) -> int:
+    """The epochs a fit goes to: ``epochs``, but for a resume (``last``: the run's last.ckpt) of a run its
+    --patience had stopped (no gain in validation ADE for that many epochs) before its outputs were written,
+    the epochs it trained: Lightning checks the stop at an epoch's end, so it trained one epoch past it, or
+    on to ``epochs`` when that one happened to gain."""
+    if last is None:
+        return epochs
+    checkpoint = load_tensors(last)
+    stop = early_stopping_state(checkpoint)
+    wait, patience = (None, None) if stop is None else (stop.get("wait_count"), stop.get("patience"))
+    if isinstance(wait, int) and isinstance(patience, int) and wait >= patience:
+        return min(epochs, int(checkpoint["epoch"]) + 1)
+    return epochs
+
+
+def check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> None:
+    """PipelineError when the fit stopped on a non-finite loss (``StopOnDivergence``) before any epoch
+    validated to a finite ADE: its weights are NaN, and were written, then refused on reading back as "tensor
+    ... holds NaN", which named neither the cause nor the epoch. With a finite best epoch before it, that
+    epoch's weights are saved as usual, and a line says why the run stopped early."""
+    if divergence.epoch is None:
+        return
+    what = f"the training loss was {divergence.loss} in epoch {divergence.epoch}"
+    score = best.best_model_score
+    if score is None or not math.isfinite(float(score)):
+        raise PipelineError(
+            f"model {args.model!r}: training diverged: {what}, and no epoch before it validated; no weights "
+            f"written. A net whose steps are NaN (a division, log or sqrt at 0, such as an agent's distance "
+            f"to itself) or a learning rate too high (--lr {args.lr:g}) does this"
+        )
+    print(f"training stopped: {what}; the best epoch before it is kept", file=sys.stderr)

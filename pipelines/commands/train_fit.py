@@ -8,7 +8,6 @@ import argparse
 import contextlib
 import json
 import logging
-import math
 import sys
 import threading
 import time
@@ -87,6 +86,7 @@ def _fit(
 ) -> tuple[Any, str, float, dict[str, Any]]:
     """Fits (or resumes) the run; returns the module holding the best epoch's weights, that checkpoint's
     path, the fit's wall time and how the fit ran (``_ended``: the batch limit, the early stop)."""
+    from pipelines.commands.train_checkpoint import check_divergence
     from predictors.checkpoint import load_tensors
     from predictors.data.datamodule import TrajnetDataModule
     from predictors.training import make_module
@@ -104,7 +104,7 @@ def _fit(
         from pipelines.commands.train_checkpoint import check_weights_fit
 
         check_weights_fit(last, module)
-    trainer, best, divergence, clock = _trainer(args, out, ckpt_dir)
+    trainer, best, divergence, clock = _trainer(args, out, ckpt_dir, last if args.resume else None)
     if not args.resume:
         from pipelines.commands.train_resume import SETTINGS_FILE
 
@@ -135,7 +135,7 @@ def _fit(
         ) from None
     # with the run's earlier parts, for a resume (their seconds came back from last.ckpt)
     elapsed = clock.before + time.perf_counter() - started
-    _check_divergence(args, divergence, best)
+    check_divergence(args, divergence, best)
 
     # a file in --out: the best checkpoint saved or kept (RunCheckpoint: restored only where it is), else last
     best_path = best.best_model_path or str(last)
@@ -166,13 +166,17 @@ def _ended(args: argparse.Namespace, trainer: Any) -> dict[str, Any]:
     and with --patience that patience and, where validation ADE's stop ended the fit, the epochs trained."""
     from lightning.pytorch.callbacks import EarlyStopping
 
+    from pipelines.commands.train_checkpoint import StopOnDivergence
+
     limited = _limited(args.limit_batches, trainer)
     ended: dict[str, Any] = {} if limited is None else {"limit_batches": limited}
     if args.patience is not None:
         ended["patience"] = args.patience
         stop = next(c for c in trainer.callbacks if isinstance(c, EarlyStopping))
-        if stop.stopped_epoch:  # the index of the epoch it stopped after; 0: it did not stop the fit
-            ended["stopped_early_after"] = stop.stopped_epoch + 1
+        diverged = next(c for c in trainer.callbacks if isinstance(c, StopOnDivergence)).epoch is not None
+        # the count, not its stopped_epoch: a resume restores that of a stop it then trains past
+        if stop.wait_count >= stop.patience and trainer.current_epoch < args.epochs and not diverged:
+            ended["stopped_early_after"] = trainer.current_epoch  # the epochs trained
     return ended
 
 
@@ -207,24 +211,6 @@ def _writer_thread_errors_left_to_the_fit() -> Iterator[None]:
         yield
     finally:
         threading.excepthook = printed
-
-
-def _check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> None:
-    """PipelineError when the fit stopped on a non-finite loss (``StopOnDivergence``) before any epoch
-    validated to a finite ADE: its weights are NaN, and were written, then refused on reading back as "tensor
-    ... holds NaN", which named neither the cause nor the epoch. With a finite best epoch before it, that
-    epoch's weights are saved as usual, and a line says why the run stopped early."""
-    if divergence.epoch is None:
-        return
-    what = f"the training loss was {divergence.loss} in epoch {divergence.epoch}"
-    score = best.best_model_score
-    if score is None or not math.isfinite(float(score)):
-        raise PipelineError(
-            f"model {args.model!r}: training diverged: {what}, and no epoch before it validated; no weights "
-            f"written. A net whose steps are NaN (a division, log or sqrt at 0, such as an agent's distance "
-            f"to itself) or a learning rate too high (--lr {args.lr:g}) does this"
-        )
-    print(f"training stopped: {what}; the best epoch before it is kept", file=sys.stderr)
 
 
 def _save_best(
@@ -338,9 +324,9 @@ def _no_advertising(record: logging.LogRecord) -> bool:
     return not str(record.msg).startswith("💡 Tip")
 
 
-def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, Any, Any, Any]:
+def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | None) -> tuple[Any, ...]:
     """Lightning's trainer, the callback that keeps the best checkpoint by validation ADE, the one that
-    stops a diverged fit, and the run's clock."""
+    stops a diverged fit, and the run's clock; ``last``: the checkpoint a resume starts from."""
     import lightning as L
     from lightning.pytorch.callbacks import EarlyStopping, LearningRateMonitor
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
@@ -350,6 +336,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
         StderrProgressBar,
         StopOnDivergence,
         TrainingClock,
+        epochs_to_fit,
         progress_callbacks,
     )
     from pipelines.commands.train_resume import BEST_FILENAME
@@ -366,14 +353,12 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path) -> tuple[Any, 
         save_top_k=1,
         enable_version_counter=False,  # the run's folder is its own (RunCheckpoint)
     )
-    # validation ADE's stop (--patience): Lightning keeps its count in last.ckpt, so a resume goes on counting
-    stop = (
-        None
-        if args.patience is None
-        else EarlyStopping(monitor="val_ade", mode="min", patience=args.patience)
-    )
+    # validation ADE's stop (--patience): Lightning keeps its count in last.ckpt, which a resume goes on
+    # counting; a NaN is StopOnDivergence's to stop and say, not a loss of patience
+    patience = args.patience
+    stop = None if patience is None else EarlyStopping("val_ade", patience=patience, check_finite=False)
     trainer = L.Trainer(
-        max_epochs=args.epochs,
+        max_epochs=epochs_to_fit(args.epochs, last),
         limit_train_batches=args.limit_batches,
         limit_val_batches=args.limit_batches,
         accelerator="cpu",

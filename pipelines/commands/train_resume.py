@@ -34,6 +34,8 @@ _NOUNS: Final[tuple[str, ...]] = ("net config", "data files")
 # the epochs in all, which a resume may change (train_epochs), and the files' hashes, which
 # train_data.check_resumed_data compares with a message of their own
 _NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir", "epochs", "data_sha256")
+# settings a run's file holds since they were added, as a run that predates them ran: without early stop
+_ADDED_LATER: Final[dict[str, Any]] = {"patience": None}
 # The options a resume takes from its run when they are not typed, and their defaults for a new run: the
 # parser's defaults are None, so that an option typed can be told from one left out (--batch-size 8 typed on
 # the resume of a run at 2 is refused; left out, the run's 2 goes on). Types as the run records them.
@@ -136,6 +138,8 @@ def checkpoint_record(out: Path) -> dict[str, Any] | None:
         checkpoint = load_tensors(out / "checkpoints" / "last.ckpt")
         hyper, data = checkpoint["hyper_parameters"], checkpoint.get("datamodule_hyper_parameters")
         held = checkpoint_settings(hyper, data)
+        stop = early_stopping_state(checkpoint)
+        held["patience"] = None if stop is None else stop.get("patience")
     except Exception:
         return None
     return {key: value for key, value in held.items() if value is not None}
@@ -207,6 +211,7 @@ def check_resumed_settings(
             check_name(settings["name"], "its name")
         except PredictorError as exc:
             raise PipelineError(f"--resume: {out / SETTINGS_FILE}: {exc}; the file is damaged") from None
+    recorded = {**_ADDED_LATER, **recorded}  # a run from before an option was kept ran without it
     differ = [k for k in settings if k in recorded and k not in _NOT_COMPARED and recorded[k] != settings[k]]
     if differ:
         shown = "; ".join(f"{k}: {_compared('run', recorded[k], settings[k])}" for k in differ)
@@ -326,6 +331,16 @@ def relocated(state: dict[str, Any], dirpath: str) -> dict[str, Any]:
     if isinstance(state.get("best_k_models"), dict):
         moved["best_k_models"] = {here(path): score for path, score in state["best_k_models"].items()}
     return {**state, **moved, "dirpath": dirpath}
+
+
+def early_stopping_state(checkpoint: dict[str, Any]) -> dict[str, Any] | None:
+    """The state a Lightning ``checkpoint`` keeps of ``--patience``'s EarlyStopping (``wait_count``,
+    ``patience``, ``best_score``, ``stopped_epoch``); None for a run without it."""
+    states = checkpoint.get("callbacks")
+    for key, state in states.items() if isinstance(states, dict) else ():
+        if str(key).startswith("EarlyStopping") and isinstance(state, dict):
+            return state
+    return None
 
 
 def checkpoint_settings(hyper: dict[str, Any], data: Any) -> dict[str, Any]:

@@ -208,7 +208,7 @@ def format_list(located_entries) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from predictors import zoo, zoo_edit
+    from predictors import zoo, zoo_remove
     from predictors.errors import PredictorError
 
     if args.zoo_command in ("list", "show", "verify", "calibrations"):
@@ -252,16 +252,16 @@ def run(args: argparse.Namespace) -> int:
     if args.zoo_command == "add":
         return _add(args)
     if args.zoo_command == "remove" and args.leftovers:
-        leftovers, root = zoo_edit.remove_leftovers(args.name, args.dir)
+        leftovers, root = zoo_remove.remove_leftovers(args.name, args.dir)
         names = ", ".join(path.name for path in leftovers) or "none"
         print(f"removed the leftover files of {args.name} from the user zoo {root}: {names}")
         return 0
     if args.zoo_command == "remove":
         try:
-            entry, root = zoo_edit.remove_from_zoo(args.name, args.dir)
+            entry, root = zoo_remove.remove_from_zoo(args.name, args.dir)
         except PredictorError:
             # no entry: an add or remove stopped on the way may have left its hidden temporaries
-            leftovers, root = zoo_edit.remove_leftovers(args.name, args.dir)
+            leftovers, root = zoo_remove.remove_leftovers(args.name, args.dir)
             if not leftovers:
                 raise
             names = ", ".join(path.name for path in leftovers)
@@ -275,12 +275,12 @@ def run(args: argparse.Namespace) -> int:
 def _report_leftovers(root: Path, directory: Path | None) -> None:
     """Name the hidden files an add or remove stopped on the way left in the user zoo ``root``: no entry
     names them, so no line above does, and each may be as large as a model."""
-    from predictors import zoo, zoo_edit
+    from predictors import zoo, zoo_remove
 
     if zoo.is_shipped(root) or not root.is_dir():
         return
     option = "" if directory is None else f" --dir {shlex.quote(str(directory))}"
-    for name, path in zoo_edit.leftover_files(root):
+    for name, path in zoo_remove.leftover_files(root):
         print(
             f"{path}: left by an add or remove of {name} that stopped on the way (or is running now); "
             f"`crowdmpc zoo{option} remove --leftovers {shlex.quote(name)}` removes it"

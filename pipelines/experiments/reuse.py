@@ -19,10 +19,11 @@ twice, nor an episode the folder holds). The source is only read; its recordings
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -60,8 +61,25 @@ def check_source(source: Path, out: Path) -> None:
 
 def _source_runs(source: Path) -> list[Any]:
     """The run lines of ``source``'s sweep.json; a PipelineError naming it as --reuse's."""
-    hint = f" (the file of the sweep --reuse {source} names)"
-    return read_sweep_file(source / SWEEP_FILE, hint).get("runs", [])
+    with _named(source):
+        return read_sweep_file(source / SWEEP_FILE, hint="").get("runs", [])
+
+
+def _source_records(source: Path) -> Iterator[dict[str, Any]]:
+    """The records of ``source``'s log, read and never cut; a damaged one a PipelineError naming it as
+    --reuse's."""
+    with _named(source):
+        yield from (record for _, _, record in episode_log(source).scan(repair=False))
+
+
+@contextlib.contextmanager
+def _named(source: Path) -> Iterator[None]:
+    """A PipelineError of reading ``source`` raised again as --reuse's (its advice is for a sweep's own
+    files: a source's are another sweep's)."""
+    try:
+        yield
+    except PipelineError as exc:
+        raise PipelineError(f"--reuse {source}: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -91,7 +109,7 @@ def taken(source: Path, out: Path, tasks: Sequence[EpisodeTask], *, repair: bool
     left = {t.key for i, t in enumerate(tasks) if not own.recorded(i)}
     checks = ResumeChecks(source, list(tasks), reused=True)
     there: dict[str, Any] = {}
-    for _, _, record in episode_log(source).scan(repair=False):  # the source is read, never cut
+    for record in _source_records(source):
         if record["key"] in left:  # a key once: the source's scan refuses a second
             checks.add(record)
             there[record["key"]] = record.get("run")
@@ -124,7 +142,7 @@ def seed_from(
     runs.extend(lost_runs(out, len(runs), found.last_run))  # before new numbers are taken
     where = str(source.resolve())
     numbers = {(r.get(REUSED), r.get("run_there")): k for k, r in enumerate(runs, start=1) if is_reused(r)}
-    for there in sorted(set(found.runs_there.values()), key=str):
+    for there in sorted(set(found.runs_there.values()), key=lambda run: (run is None, run or 0)):
         if (where, there) not in numbers:
             line = (
                 found.source_runs[there - 1]
@@ -154,11 +172,14 @@ def seed_from(
 def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dict[str, int]) -> None:
     """The records of ``source`` of ``tasks``' keys, under their labels and with ``run_of``'s numbers, as the
     log's last lines, read and written a record at a time and synced once (a sweep's appends take a disk sync
-    each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts."""
+    each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts. The source
+    changed between its two reads (records the first did not check) is refused."""
+    written = set()
     with writes_named(path), open(path, "ab") as f:
-        for _, _, record in episode_log(source).scan(repair=False):
+        for record in _source_records(source):
             task = tasks.get(record["key"])
-            if task is not None:
+            if task is not None and task.key not in written:
+                written.add(task.key)
                 label = {"experiment": task.experiment, "method": task.cell.method, "index": task.index}
                 line = json.dumps(
                     plain({**record, **label, "run": run_of[task.key]}),
@@ -168,3 +189,7 @@ def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dic
                 f.write(line.encode() + b"\n")
         f.flush()
         os.fsync(f.fileno())
+    if len(written) != len(tasks):  # a log is only appended to: some were edited out meanwhile
+        raise PipelineError(
+            f"--reuse {source}: its episodes changed while they were read; run the sweep again"
+        )

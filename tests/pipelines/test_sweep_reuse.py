@@ -122,15 +122,28 @@ def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
     # a source of damaged or linked files is named as --reuse's, and no --out is made for it
     bad = tmp_path / "bad"
     shutil.copytree(table2, bad)
-    (bad / "sweep.json").write_text("{")
-    line = refused(tmp_path / "c", "--reuse", str(bad))
-    assert line.endswith(f"(the file of the sweep --reuse {bad} names)") and not (tmp_path / "c").exists()
+    for damaged in ("{", "[]"):
+        (bad / "sweep.json").write_text(damaged)
+        line = refused(tmp_path / "c", "--reuse", str(bad))
+        assert line.startswith(
+            f"crowdmpc sweep: error: --reuse {bad}: {bad / 'sweep.json'}: not a sweep file"
+        )
+        assert not (tmp_path / "c").exists()
     (bad / "sweep.json").unlink()
     (bad / "sweep.json").symlink_to(table2 / "sweep.json")
     assert refused(tmp_path / "c", "--reuse", str(bad)).endswith(
         f"--reuse {bad}: {bad / 'sweep.json'} is a symbolic link; --reuse reads a sweep's own files"
     )
     assert not (tmp_path / "c").exists()
+    # a damaged line in its log, named as the source's
+    (bad / "sweep.json").unlink()
+    shutil.copy(table2 / "sweep.json", bad / "sweep.json")
+    lines = (bad / "episodes.jsonl").read_text().splitlines(keepends=True)
+    (bad / "episodes.jsonl").write_text("".join([lines[0], "not json\n", *lines[1:]]))
+    line = refused(tmp_path / "d", "--reuse", str(bad))
+    assert line.startswith(
+        f"crowdmpc sweep: error: --reuse {bad}: {bad / 'episodes.jsonl'}:2: not a JSON record"
+    )
 
 
 def test_outs_own_records_are_checked_before_anything_is_taken(table2, tmp_path, capsys):

@@ -78,3 +78,41 @@ def test_the_patience_is_the_runs_on_a_resume(tmp_path, capsys):
 def test_a_patience_out_of_bounds_is_refused(tmp_path, capsys, value):
     code, _, err = run_cli(capsys, *_train(tmp_path, "--patience", value))
     assert code == 2 and f"--patience must be in 1..100000, got {value}" in one_line(err)
+
+
+def test_a_stopped_run_cut_before_its_outputs_is_finished_by_its_resume_not_trained_on(tmp_path, capsys):
+    """As a Ctrl-C during the final evaluation leaves it (no metrics file, or a damaged one): Lightning checks
+    the stop at an epoch's end, and trained one epoch past it, recorded as the run's."""
+    assert main(_train(tmp_path, "--epochs", "6", "--patience", "2", *FROZEN)) == 0
+    metrics = tmp_path / "run" / "vanilla_lstm_custom.metrics.json"
+    for cut in (None, "[]"):
+        metrics.unlink() if cut is None else metrics.write_text(cut)
+        code, out, _ = run_cli(capsys, *_train(tmp_path, "--resume"))
+        assert code == 0 and "stopped early after 3 of 6 epochs" in out and _epochs_done(tmp_path) == 3
+        assert _training(tmp_path)["stopped_early_after"] == 3
+
+
+def test_a_stop_at_the_last_epoch_is_no_early_stop(tmp_path, capsys):
+    code, out, _ = run_cli(capsys, *_train(tmp_path, "--epochs", "3", "--patience", "2", *FROZEN))
+    assert code == 0 and "stopped early" not in out and "stopped_early_after" not in _training(tmp_path)
+
+
+def test_a_run_from_before_patience_was_kept_ran_without_one(tmp_path, capsys):
+    assert main(_train(tmp_path, "--epochs", "1")) == 0
+    settings = tmp_path / "run" / "train_settings.json"
+    settings.write_text(
+        json.dumps({k: v for k, v in json.loads(settings.read_text()).items() if k != "patience"})
+    )
+    code, _, err = run_cli(capsys, *_train(tmp_path, "--resume", "--epochs", "2", "--patience", "1"))
+    assert code == 2 and "patience: run null, now 1" in one_line(err)
+
+
+def test_a_diverged_fit_is_said_as_such_not_as_a_loss_of_patience(tmp_path, capsys):
+    model = "tests.plugins.broken_nets:NaNFromItsThirdStep"
+    argv = ["--plugin", model, *_train(tmp_path, "--epochs", "5", "--patience", "3")]
+    argv[argv.index("vanilla_lstm")] = model
+    code, out, err = run_cli(capsys, *argv)
+    assert code == 0 and "training stopped: the training loss was nan in epoch 2" in err
+    assert "stopped early" not in out
+    training = json.loads((tmp_path / "run" / "na_nfrom_its_third_step_custom.json").read_text())["training"]
+    assert training["patience"] == 3 and "stopped_early_after" not in training

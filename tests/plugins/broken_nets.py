@@ -204,3 +204,20 @@ class NoPadding(ToyNet):
         if not bool(neighbours.all()):
             raise ValueError("an absent agent in the batch")
         return super().decode_step(h, prev, cur, neighbours)
+
+
+class NaNFromItsThirdStep(ToyNet):
+    """A net that trains, then diverges: its third training step on (the walk file's one batch an epoch: the
+    third epoch) and every later one are NaN, as a learning rate that overshoots late does."""
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        self.steps = 0  # training steps taken, per net (the contract check builds its own)
+
+    def encode(self, positions, mask):
+        h, out = super().encode(positions, mask)
+        if self.training and torch.is_grad_enabled():
+            self.steps += 1
+            if self.steps >= 3:
+                out = out * float("nan")
+        return h, out

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from pipelines.cli import main
-from predictors import manifest, zoo, zoo_edit
+from predictors import manifest, zoo, zoo_edit, zoo_remove
 from predictors.calibration_store import CALIBRATIONS_NAME
 from predictors.errors import PredictorError
 from tests.predictors.test_zoo import retrained  # its metrics are the pair's: here an empty file
@@ -246,7 +246,7 @@ def test_a_remove_interrupted_after_its_manifest_write_is_finished_by_remove(use
 
     with monkeypatch.context() as patched, pytest.raises(Interrupted):
         patched.setattr(Path, "unlink", interrupted)  # after the manifest's rename, before the files go
-        zoo_edit.remove_from_zoo("mine", user)
+        zoo_remove.remove_from_zoo("mine", user)
     assert "mine" not in zoo.read_manifest(user) and not (user / "mine.pt").exists()
     (user / ".mine.pt.123.new").write_bytes(b"an add's temporary copy")
     code, out, _ = cli(["zoo", "remove", "mine"], capsys)
@@ -294,7 +294,7 @@ def test_verify_names_the_leftovers_of_a_stopped_remove(user, monkeypatch, capsy
 
     with monkeypatch.context() as patched, pytest.raises(Interrupted):
         patched.setattr(Path, "unlink", interrupted)
-        zoo_edit.remove_from_zoo("mine", user)
+        zoo_remove.remove_from_zoo("mine", user)
     (user / ".other.json.77.link").write_text("{}")
     (user / ".not_ours.pt.new").write_text("no pid: nobody's temporary")
     code, out, _ = cli(["zoo", "verify"], capsys)
@@ -346,7 +346,7 @@ def test_add_never_replaces_a_file_no_entry_of_that_name_owns(user, pair, capsys
     code, _, err = cli(["zoo", "add", str(pair), "--name", "theirs", *replace], capsys)
     assert (code, err) == (
         2,
-        f"crowdmpc zoo: error: {user / f'theirs{suffix}'} is in the user zoo but is no file of its entry "
+        f"crowdmpc zoo: error: {user / f'theirs{suffix}'} is in the user zoo but no entry names it; none is "
         "'theirs'; adding would replace it: move that file away, or add under another --name",
     )
     assert snapshot(user) == before and zoo.zoo_names(user) == ["mine"]
@@ -361,6 +361,39 @@ def test_add_into_a_training_runs_folder_keeps_its_weights(tmp_path, pair, capsy
     assert code == 2 and err.startswith(f"crowdmpc zoo: error: {run / 'mine.pt'} is in the user zoo but")
     assert sorted(p.name for p in run.iterdir()) == ["mine.pt"]
     assert (run / "mine.pt").read_bytes() == b"trained weights"
+
+
+def test_a_training_runs_folder_given_as_the_zoo_takes_the_run_itself(tmp_path, capsys):
+    """`zoo --dir RUN add RUN/NAME.pt`: the files in place are the ones added, not another's to keep."""
+    weights = copy_pair(tmp_path / "run", "trained")
+    before = weights.read_bytes()
+    code, out, err = cli(["zoo", "--dir", str(weights.parent), "add", str(weights)], capsys)
+    assert code == 0 and not err and zoo.zoo_names(weights.parent) == ["trained"]
+    assert weights.read_bytes() == before and zoo.verify(weights.parent)[-1] == ("trained", None)
+
+
+def test_removing_the_entry_of_a_stopped_add_takes_the_files_it_was_putting_in_place(
+    tmp_path, user, monkeypatch, capsys
+):
+    """An add of a new name stopped between its manifest's writes (the entry naming its staged copies,
+    fresh.pt already in place): `zoo remove fresh` left fresh.pt, no entry's, and the add of fresh again was
+    refused as a stray file's."""
+    real_replace, calls = os.replace, []
+
+    def replace(source, target, *args, **kwargs):
+        calls.append(target)  # the manifest's write, fresh.pt's rename into place, fresh.json's
+        if len(calls) == 3:
+            raise Interrupted
+        return real_replace(source, target, *args, **kwargs)
+
+    new = copy_pair(tmp_path / "run2", "fresh")
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(os, "replace", replace)
+        zoo_edit.add_to_zoo(new, name="fresh", protocol="p", training_data={}, metrics={})
+    assert (user / "fresh.pt").exists() and zoo.read_manifest(user)["fresh"].file.startswith(".fresh.pt.")
+    assert cli(["zoo", "remove", "fresh"], capsys)[0] == 0
+    assert not [p.name for p in user.iterdir() if "fresh" in p.name]
+    assert cli(["zoo", "add", str(new)], capsys)[0] == 0 and zoo.verify(user)[0] == ("fresh", None)
 
 
 # ---------------------------------------------------------------------------------- parallel adds, removes

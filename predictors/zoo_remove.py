@@ -1,0 +1,117 @@
+"""Taking a model out of the user zoo: ``remove_from_zoo`` removes an entry and its files,
+``remove_leftovers`` the hidden temporaries a stopped add or remove left, which ``leftover_files`` finds.
+Every change of the manifest holds the zoo's lock (``predictors.manifest.zoo_lock``), as an add's does
+(``predictors.zoo_edit``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from predictors.checkpoint import check_name
+from predictors.errors import PredictorError
+from predictors.manifest import MANIFEST_NAME, ZooEntry, is_zoo_file, write_manifest, zoo_lock
+from predictors.zoo import checkpoints_dir, read_manifest, writable_zoo_dir
+from predictors.zoo_edit import TEMPORARY
+
+
+def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
+    """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its files (those no
+    other entry names, and never one of the zoo's own: an entry added under a name reserved since may name
+    one) are first renamed to hidden temporaries (.NAME.pt.PID.removed), then the manifest entry goes, then
+    the temporaries, and those an earlier add or remove of ``name`` left. A remove stopped on the way leaves
+    either the entry (its files gone: `zoo remove NAME` again finishes it) or hidden temporaries of ours
+    (``remove_leftovers``), never files that look like a model no entry names. Returns the entry and the zoo
+    directory."""
+    check_name(name)  # not check_model_name: such an entry must stay removable
+    root = writable_zoo_dir(directory)
+    _entry_to_remove(name, root, read_manifest(root), directory)  # before the lock creates the directory
+    with zoo_lock(root):  # another add or remove may have written the manifest since: read it again
+        entries = read_manifest(root)
+        entry = _entry_to_remove(name, root, entries, directory)
+        del entries[name]
+        manifest = root / MANIFEST_NAME
+        files = set(entry.paths(root, manifest)) | _being_added(entry, root)  # inside the zoo (the manifest)
+        still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
+        doomed = [path for path in files - still_used if not is_zoo_file(root, path)]
+        parked = [path.with_name(f".{path.name}.{os.getpid()}.removed") for path in doomed]
+        for path, hidden in zip(doomed, parked, strict=True):
+            if path.exists() or path.is_symlink():
+                os.replace(path, hidden)
+        try:
+            write_manifest(entries, root)
+        except OSError:  # a full disk, a quota: the manifest as it was, so the entry's files go back
+            _put_back(doomed, parked)
+            raise
+        for hidden in parked:
+            hidden.unlink(missing_ok=True)
+        for model, path in leftover_files(root):  # an earlier add or remove of it stopped on the way
+            if model == name:
+                path.unlink(missing_ok=True)
+    return entry, root
+
+
+def _being_added(entry: ZooEntry, root: Path) -> set[Path]:
+    """NAME.pt and NAME.json of an entry that names its add's staged files (``.NAME.pt.PID.new``: the add
+    stopped between its manifest's writes), which that add was putting in place: its own, gone with it, or
+    left as files no entry names, which a new add of NAME refuses."""
+    if not (TEMPORARY.fullmatch(entry.file) and TEMPORARY.fullmatch(entry.config)):
+        return set()
+    return {root / staged[1:].rsplit(".", 2)[0] for staged in (entry.file, entry.config)}
+
+
+def _put_back(doomed: list[Path], parked: list[Path]) -> None:
+    """The files of an entry a remove had parked, back under their names: the manifest that would have
+    dropped the entry could not be written, and an entry whose files are gone loads nowhere."""
+    for path, hidden in zip(doomed, parked, strict=True):
+        if os.path.lexists(hidden):
+            os.replace(hidden, path)
+
+
+def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[list[Path], Path]:
+    """Remove the hidden temporaries of model ``name`` that no entry of the user zoo (``directory``, else
+    ``user_zoo_dir()``) names (``leftover_files``). Never NAME.pt or NAME.json: a folder given as the zoo may
+    hold a training run's output, which no entry names either. Returns the files removed (none: nothing to
+    do) and the zoo directory."""
+    check_name(name)
+    root = writable_zoo_dir(directory)
+    if not root.is_dir():
+        return [], root  # the lock would create it
+    with zoo_lock(root):  # an add in progress holds it: its temporary files are not leftovers
+        removed = [path for model, path in leftover_files(root) if model == name]
+        for path in removed:
+            path.unlink()
+    return removed, root
+
+
+def leftover_files(root: Path) -> list[tuple[str, Path]]:
+    """``(model name, path)`` of each hidden temporary in the zoo ``root`` that no entry of its manifest
+    names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add (.NAME.pt.PID.new, .link)
+    stopped on the way, or of one running now unless the caller holds ``zoo_lock``."""
+    if not root.is_dir():
+        return []
+    manifest = root / MANIFEST_NAME
+    owned = {path for entry in read_manifest(root).values() for path in entry.paths(root, manifest)}
+    found = []
+    for path in sorted(root.iterdir()):
+        match = TEMPORARY.fullmatch(path.name)
+        if match is None or not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
+            continue
+        if path.resolve() in owned or path in owned:
+            continue
+        found.append((match["name"], path))
+    return found
+
+
+def _entry_to_remove(
+    name: str, root: Path, entries: dict[str, ZooEntry], directory: str | Path | None
+) -> ZooEntry:
+    """Entry ``name`` of the user zoo ``root``, or PredictorError saying where it is not."""
+    if name in entries:
+        return entries[name]
+    if directory is None and name in read_manifest(checkpoints_dir()):
+        raise PredictorError(
+            f"{name!r} is a model of the shipped zoo {checkpoints_dir()}, which is read-only"
+        )
+    raise PredictorError(f"the user zoo {root} has no entry {name!r}; it has {sorted(entries)}")
