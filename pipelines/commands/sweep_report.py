@@ -238,9 +238,8 @@ def code_note(out: Path, used: Collection[int | None] | None = None) -> str:
     if not (out / SWEEP_FILE).is_file():
         return ""
     runs = read_sweep_file(out / SWEEP_FILE).get("runs", [])
-    if (
-        used is not None and None not in used
-    ):  # a number past the file's lines: a run it lost (run_lines.lost_runs)
+    # a number past the file's lines: a run it lost (run_lines.lost_runs)
+    if used is not None and None not in used:
         runs = [runs[k - 1] if k <= len(runs) else {"lost": ""} for k in sorted(k for k in used if k)]
     shown = list(dict.fromkeys(_code_text(run) for run in runs))
     if len(shown) <= 1:
