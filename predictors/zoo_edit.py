@@ -151,7 +151,7 @@ def _check_no_stray_file(
         owned = paths  # an add of NAME stopped between its manifest's writes: NAME.pt, NAME.json are its own
     for file_name, path, source in zip((entry.file, entry.config), paths, sources, strict=True):
         if os.path.lexists(root / file_name) and path not in owned and not _same_file(path, source):
-            whose = "is no file of its entry" if previous is not None else "no entry names it; none is"
+            whose = "is no file of its entry" if previous is not None else "the zoo has no entry"
             raise PredictorError(
                 f"{root / file_name} is in the {which} zoo but {whose} {entry.name!r}; adding would replace "
                 "it: move that file away, or add under another --name"

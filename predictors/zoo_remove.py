@@ -32,7 +32,8 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
         entry = _entry_to_remove(name, root, entries, directory)
         del entries[name]
         manifest = root / MANIFEST_NAME
-        files = set(entry.paths(root, manifest)) | _being_added(entry, root)  # inside the zoo (the manifest)
+        # inside the zoo: checked when the manifest was read
+        files = set(entry.paths(root, manifest)) | _being_added(entry, root)
         still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
         doomed = [path for path in files - still_used if not is_zoo_file(root, path)]
         parked = [path.with_name(f".{path.name}.{os.getpid()}.removed") for path in doomed]

@@ -16,7 +16,8 @@ from typing import Any
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint, TQDMProgressBar
 
-from pipelines.commands.train_resume import early_stopping_state, relocated
+from pipelines.commands.train_epochs import stopped_after
+from pipelines.commands.train_resume import relocated
 from pipelines.errors import PipelineError
 from predictors.checkpoint import load_tensors
 
@@ -254,18 +255,12 @@ def _shape(value: Any) -> str:
 
 
 def epochs_to_fit(epochs: int, last: Path | None) -> int:
-    """The epochs a fit goes to: ``epochs``, but for a resume (``last``: the run's last.ckpt) of a run its
+    """The epochs a fit goes to: ``epochs``, or for a resume (``last``: the run's last.ckpt) of a run its
     --patience had stopped (no gain in validation ADE for that many epochs) before its outputs were written,
-    the epochs it trained: Lightning checks the stop at an epoch's end, so it trained one epoch past it, or
-    on to ``epochs`` when that one happened to gain."""
-    if last is None:
-        return epochs
-    checkpoint = load_tensors(last)
-    stop = early_stopping_state(checkpoint)
-    wait, patience = (None, None) if stop is None else (stop.get("wait_count"), stop.get("patience"))
-    if isinstance(wait, int) and isinstance(patience, int) and wait >= patience:
-        return min(epochs, int(checkpoint["epoch"]) + 1)
-    return epochs
+    the epochs it trained: Lightning checks the stop at an epoch's end, and would train an epoch past it (on
+    to ``epochs`` if that one gained)."""
+    stopped = None if last is None else stopped_after(load_tensors(last))
+    return epochs if stopped is None else min(epochs, stopped)
 
 
 def check_divergence(args: argparse.Namespace, divergence: Any, best: Any) -> None:

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any, Final
 
 from pipelines.commands import replace_file
-from pipelines.commands.train_resume import SETTINGS_FILE
+from pipelines.commands.train_resume import SETTINGS_FILE, early_stopping_state
 from pipelines.errors import PipelineError
+from predictors.checkpoint import load_tensors
 
 DEFAULT_EPOCHS: Final[int] = 25
 
@@ -65,6 +67,30 @@ def _check_not_stopped_early(out: Path, metrics: Path) -> None:
         )
 
 
+def _stopped_by_patience(out: Path, epochs: int) -> int | None:
+    """The epochs the run in ``out`` trained when its --patience ran out (a run cut before its outputs were
+    written, or whose count ran out at its last epoch: this resume trains none and writes them,
+    ``train_checkpoint.epochs_to_fit``), said on stderr; None for a run it had not stopped. PipelineError
+    for ``epochs`` below them (no count it may take: its stop is its end)."""
+    last = out / "checkpoints" / "last.ckpt"
+    try:
+        stopped = stopped_after(load_tensors(last))
+    except Exception:  # read and checked before (train_resume.check_last_checkpoint): nothing more to say
+        return None
+    if stopped is not None and epochs < stopped:
+        raise PipelineError(
+            f"--resume: {out} stopped early after {stopped} epochs (its --patience); --epochs {epochs} is "
+            "fewer: resume it without --epochs to write what its stop left out"
+        )
+    if stopped is not None:
+        print(
+            f"note: --resume: {out} stopped after {stopped} epochs, its --patience run out; this resume "
+            "trains no epoch and writes its outputs",
+            file=sys.stderr,
+        )
+    return stopped
+
+
 def check_more_epochs(out: Path, epochs: int, done: int | None, metrics: Path) -> None:
     """PipelineError when a resume would train no epoch: Lightning stops at once, and the run's NAME.pt,
     NAME.json and metrics were written again, recording --epochs where more had trained. The same count
@@ -73,8 +99,21 @@ def check_more_epochs(out: Path, epochs: int, done: int | None, metrics: Path) -
     finished = metrics.is_file()
     if finished:
         _check_not_stopped_early(out, metrics)
+    # a finished run asked for no more epochs is refused below, stopped or not
+    if (not finished or done is None or epochs > done) and _stopped_by_patience(out, epochs) is not None:
+        return
     if done is not None and (epochs < done or (epochs == done and finished)):
         raise PipelineError(
             f"--resume: {out} has trained {done} epoch{'s' if done != 1 else ''} already; --epochs {epochs} "
             f"would train none (give more than {done} to continue it)"
         )
+
+
+def stopped_after(checkpoint: dict[str, Any]) -> int | None:
+    """The epochs a run trained when its --patience ran out (``checkpoint``: its last.ckpt, whose
+    EarlyStopping state counts the epochs without a gain); None while it had not."""
+    stop = early_stopping_state(checkpoint)
+    wait, patience = (None, None) if stop is None else (stop.get("wait_count"), stop.get("patience"))
+    if isinstance(wait, int) and isinstance(patience, int) and wait >= patience:
+        return int(checkpoint["epoch"]) + 1
+    return None

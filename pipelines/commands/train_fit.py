@@ -174,7 +174,7 @@ def _ended(args: argparse.Namespace, trainer: Any) -> dict[str, Any]:
         ended["patience"] = args.patience
         stop = next(c for c in trainer.callbacks if isinstance(c, EarlyStopping))
         diverged = next(c for c in trainer.callbacks if isinstance(c, StopOnDivergence)).epoch is not None
-        # the count, not its stopped_epoch: a resume restores that of a stop it then trains past
+        # the count (restored by a resume), not stopped_epoch, which a run only sets on the fit that stops
         if stop.wait_count >= stop.patience and trainer.current_epoch < args.epochs and not diverged:
             ended["stopped_early_after"] = trainer.current_epoch  # the epochs trained
     return ended

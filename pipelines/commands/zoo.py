@@ -124,7 +124,8 @@ def _add_and_remove(actions: Any) -> None:
     )
     remove = actions.add_parser(
         "remove",
-        help="remove a model (and its files) from the user zoo",
+        help="remove a model and its files from the user zoo (a training run's folder given as --dir loses "
+        "the NAME.pt and NAME.json that were added from it)",
         **examples("crowdmpc zoo remove my_social_lstm"),
     )
     remove.add_argument("name")

@@ -31,6 +31,7 @@ from typing import Any
 from pipelines.errors import PipelineError, writes_named
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
+    DAMAGED,
     EPISODES_FILE,
     MCAP_DIR,
     SWEEP_FILE,
@@ -78,8 +79,9 @@ def _named(source: Path) -> Iterator[None]:
     files: a source's are another sweep's)."""
     try:
         yield
-    except PipelineError as exc:
-        raise PipelineError(f"--reuse {source}: {exc}") from None
+    except PipelineError as exc:  # a damaged log's advice ends in DAMAGED: editing another sweep's is its own
+        message = str(exc).replace(f"; {DAMAGED}", "; that sweep's own rerun refuses it too")
+        raise PipelineError(f"--reuse {source}: {message}") from None
 
 
 @dataclass(frozen=True)
@@ -172,8 +174,8 @@ def seed_from(
 def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dict[str, int]) -> None:
     """The records of ``source`` of ``tasks``' keys, under their labels and with ``run_of``'s numbers, as the
     log's last lines, read and written a record at a time and synced once (a sweep's appends take a disk sync
-    each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts. The source
-    changed between its two reads (records the first did not check) is refused."""
+    each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts. A source whose
+    records taken went missing between its two reads (edited: a log is only appended to) is refused."""
     written = set()
     with writes_named(path), open(path, "ab") as f:
         for record in _source_records(source):

@@ -144,6 +144,7 @@ def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
     assert line.startswith(
         f"crowdmpc sweep: error: --reuse {bad}: {bad / 'episodes.jsonl'}:2: not a JSON record"
     )
+    assert line.endswith("; that sweep's own rerun refuses it too")
 
 
 def test_outs_own_records_are_checked_before_anything_is_taken(table2, tmp_path, capsys):

@@ -87,14 +87,29 @@ def test_a_stopped_run_cut_before_its_outputs_is_finished_by_its_resume_not_trai
     metrics = tmp_path / "run" / "vanilla_lstm_custom.metrics.json"
     for cut in (None, "[]"):
         metrics.unlink() if cut is None else metrics.write_text(cut)
-        code, out, _ = run_cli(capsys, *_train(tmp_path, "--resume"))
+        code, out, err = run_cli(capsys, *_train(tmp_path, "--resume"))
         assert code == 0 and "stopped early after 3 of 6 epochs" in out and _epochs_done(tmp_path) == 3
+        assert "stopped after 3 epochs, its --patience run out; this resume trains no epoch and writes its " \
+            "outputs" in err  # fmt: skip
         assert _training(tmp_path)["stopped_early_after"] == 3
+    metrics.unlink()
+    code, _, err = run_cli(capsys, *_train(tmp_path, "--resume", "--epochs", "2"))
+    assert code == 2 and one_line(err).endswith(
+        "stopped early after 3 epochs (its --patience); --epochs 2 is fewer: resume it without --epochs to "
+        "write what its stop left out"
+    )
 
 
 def test_a_stop_at_the_last_epoch_is_no_early_stop(tmp_path, capsys):
     code, out, _ = run_cli(capsys, *_train(tmp_path, "--epochs", "3", "--patience", "2", *FROZEN))
     assert code == 0 and "stopped early" not in out and "stopped_early_after" not in _training(tmp_path)
+    # finished: the same count again trains none, as for any run
+    code, _, err = run_cli(capsys, *_train(tmp_path, "--resume", "--epochs", "3"))
+    assert code == 2 and "has trained 3 epochs already" in one_line(err)
+    # more epochs: its count had run out, so it ends where a run of 6 ends, training none
+    code, out, err = run_cli(capsys, *_train(tmp_path, "--resume", "--epochs", "6"))
+    assert code == 0 and "its --patience run out; this resume trains no epoch" in err
+    assert "stopped early after 3 of 6 epochs" in out and _epochs_done(tmp_path) == 3
 
 
 def test_a_run_from_before_patience_was_kept_ran_without_one(tmp_path, capsys):

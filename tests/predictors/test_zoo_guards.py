@@ -346,7 +346,7 @@ def test_add_never_replaces_a_file_no_entry_of_that_name_owns(user, pair, capsys
     code, _, err = cli(["zoo", "add", str(pair), "--name", "theirs", *replace], capsys)
     assert (code, err) == (
         2,
-        f"crowdmpc zoo: error: {user / f'theirs{suffix}'} is in the user zoo but no entry names it; none is "
+        f"crowdmpc zoo: error: {user / f'theirs{suffix}'} is in the user zoo but the zoo has no entry "
         "'theirs'; adding would replace it: move that file away, or add under another --name",
     )
     assert snapshot(user) == before and zoo.zoo_names(user) == ["mine"]
