@@ -94,7 +94,8 @@ def add_entry(
             return entry, entry
         _check_no_stray_file(entry, previous, root, which, (weights, config))
         _write_pair(weights, config_bytes, entry, root, entries)
-    return entries[name], previous
+        _drop_leftovers(name, root)
+    return entries[name], None if _stopped_add(previous, entry) else previous  # finished: no entry replaced
 
 
 def _new_entry(weights: Path, *, name: str, **recorded: Any) -> tuple[ZooEntry, bytes]:
@@ -126,6 +127,8 @@ def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: st
     PredictorError when it is another one and ``replace`` was not asked for."""
     if previous is None or replace:
         return False
+    if _stopped_add(previous, entry):
+        return False  # written again, to finish it
     if previous == entry:
         # adding the same thing twice changes nothing, unless the zoo's copy was damaged since: rewrite it
         return all(
@@ -196,6 +199,24 @@ def _write_pair(
     write_manifest(entries, root)
     for path in staged:
         path.unlink(missing_ok=True)
+
+
+def _stopped_add(previous: ZooEntry | None, entry: ZooEntry) -> bool:
+    """Whether ``previous`` is ``entry``'s own add, stopped between its manifest's writes (``_write_pair``:
+    the entry names its staged copies), which the same add finishes."""
+    if previous is None or not TEMPORARY.fullmatch(previous.file):
+        return False
+    return replace_fields(previous, file=entry.file, config=entry.config) == entry
+
+
+def _drop_leftovers(name: str, root: Path) -> None:
+    """The hidden copies an add or remove of ``name`` stopped on the way left (no entry names them, and the
+    caller holds the lock: no add is writing them now), gone once an add of ``name`` has finished."""
+    from predictors.zoo_remove import leftover_files  # it reads the names this module gives them
+
+    for model, path in leftover_files(root):
+        if model == name:
+            path.unlink(missing_ok=True)
 
 
 def _replace_with_link(source: Path, target: Path) -> None:

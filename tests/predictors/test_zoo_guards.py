@@ -396,6 +396,32 @@ def test_removing_the_entry_of_a_stopped_add_takes_the_files_it_was_putting_in_p
     assert cli(["zoo", "add", str(new)], capsys)[0] == 0 and zoo.verify(user)[0] == ("fresh", None)
 
 
+@pytest.mark.parametrize("call", [2, 3])
+def test_an_add_stopped_between_its_manifests_writes_is_finished_by_the_same_command(
+    tmp_path, user, monkeypatch, capsys, call
+):
+    """The entry naming the add's staged copies: the same `zoo add` again was refused as a name the zoo has
+    ("the same weights, with other metrics or settings; add it with --replace"), and --replace left the
+    staged copies behind."""
+    real_replace, calls = os.replace, []
+
+    def replace(source, target, *args, **kwargs):
+        calls.append(target)
+        if len(calls) == call:
+            raise Interrupted
+        return real_replace(source, target, *args, **kwargs)
+
+    new = copy_pair(tmp_path / "run2", "fresh")
+    with monkeypatch.context() as patched, pytest.raises(Interrupted):
+        patched.setattr(os, "replace", replace)
+        main(["zoo", "add", str(new)])
+    code, out, err = cli(["zoo", "add", str(new)], capsys)
+    assert code == 0 and not err, err
+    assert zoo.verify(user)[0] == ("fresh", None) and zoo.read_manifest(user)["fresh"].file == "fresh.pt"
+    assert not [p.name for p in user.iterdir() if p.name.startswith(".fresh")]
+    assert out.startswith("added fresh")  # finished, not "replaced": no model was there before
+
+
 # ---------------------------------------------------------------------------------- parallel adds, removes
 CHILD = """
 import sys, time
