@@ -23,6 +23,7 @@ from predictors.manifest import (
     MANIFEST_NAME,
     ZooEntry,
     check_model_name,
+    is_zoo_file,
     write_manifest,
     zoo_lock,
 )
@@ -212,8 +213,6 @@ def _stopped_add(previous: ZooEntry | None, entry: ZooEntry) -> bool:
 def _drop_leftovers(name: str, root: Path) -> None:
     """The hidden copies an add or remove of ``name`` stopped on the way left (no entry names them, and the
     caller holds the lock: no add is writing them now), gone once an add of ``name`` has finished."""
-    from predictors.zoo_remove import leftover_files  # it reads the names this module gives them
-
     for model, path in leftover_files(root):
         if model == name:
             path.unlink(missing_ok=True)
@@ -338,3 +337,22 @@ def _check_shipped_kind(config: Path) -> None:
             f"{config}: model {model!r} is not a kind this project ships ({', '.join(kinds)}), so the "
             "shipped zoo cannot hold it; add it to your user zoo without --shipped"
         )
+
+
+def leftover_files(root: Path) -> list[tuple[str, Path]]:
+    """``(model name, path)`` of each hidden temporary in the zoo ``root`` that no entry of its manifest
+    names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add (.NAME.pt.PID.new, .link)
+    stopped on the way, or of one running now unless the caller holds ``zoo_lock``."""
+    if not root.is_dir():
+        return []
+    manifest = root / MANIFEST_NAME
+    owned = {path for entry in read_manifest(root).values() for path in entry.paths(root, manifest)}
+    found = []
+    for path in sorted(root.iterdir()):
+        match = TEMPORARY.fullmatch(path.name)
+        if match is None or not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
+            continue
+        if path.resolve() in owned or path in owned:
+            continue
+        found.append((match["name"], path))
+    return found

@@ -1,5 +1,5 @@
 """Taking a model out of the user zoo: ``remove_from_zoo`` removes an entry and its files,
-``remove_leftovers`` the hidden temporaries a stopped add or remove left, which ``leftover_files`` finds.
+``remove_leftovers`` the hidden temporaries a stopped add or remove left (``zoo_edit.leftover_files``).
 Every change of the manifest holds the zoo's lock (``predictors.manifest.zoo_lock``), as an add's does
 (``predictors.zoo_edit``).
 """
@@ -13,7 +13,7 @@ from predictors.checkpoint import check_name
 from predictors.errors import PredictorError
 from predictors.manifest import MANIFEST_NAME, ZooEntry, is_zoo_file, write_manifest, zoo_lock
 from predictors.zoo import checkpoints_dir, read_manifest, writable_zoo_dir
-from predictors.zoo_edit import TEMPORARY
+from predictors.zoo_edit import TEMPORARY, leftover_files
 
 
 def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
@@ -84,25 +84,6 @@ def remove_leftovers(name: str, directory: str | Path | None = None) -> tuple[li
         for path in removed:
             path.unlink()
     return removed, root
-
-
-def leftover_files(root: Path) -> list[tuple[str, Path]]:
-    """``(model name, path)`` of each hidden temporary in the zoo ``root`` that no entry of its manifest
-    names: those of a ``remove_from_zoo`` (.NAME.pt.PID.removed) or an add (.NAME.pt.PID.new, .link)
-    stopped on the way, or of one running now unless the caller holds ``zoo_lock``."""
-    if not root.is_dir():
-        return []
-    manifest = root / MANIFEST_NAME
-    owned = {path for entry in read_manifest(root).values() for path in entry.paths(root, manifest)}
-    found = []
-    for path in sorted(root.iterdir()):
-        match = TEMPORARY.fullmatch(path.name)
-        if match is None or not (path.is_file() or path.is_symlink()) or is_zoo_file(root, path.resolve()):
-            continue
-        if path.resolve() in owned or path in owned:
-            continue
-        found.append((match["name"], path))
-    return found
 
 
 def _entry_to_remove(

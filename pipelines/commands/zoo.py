@@ -276,12 +276,12 @@ def run(args: argparse.Namespace) -> int:
 def _report_leftovers(root: Path, directory: Path | None) -> None:
     """Name the hidden files an add or remove stopped on the way left in the user zoo ``root``: no entry
     names them, so no line above does, and each may be as large as a model."""
-    from predictors import zoo, zoo_remove
+    from predictors import zoo, zoo_edit
 
     if zoo.is_shipped(root) or not root.is_dir():
         return
     option = "" if directory is None else f" --dir {shlex.quote(str(directory))}"
-    for name, path in zoo_remove.leftover_files(root):
+    for name, path in zoo_edit.leftover_files(root):
         print(
             f"{path}: left by an add or remove of {name} that stopped on the way (or is running now); "
             f"`crowdmpc zoo{option} remove --leftovers {shlex.quote(name)}` removes it"
