@@ -37,8 +37,8 @@ from typing import Any, Final
 
 from crowdsim.metrics import ADDED_FIELDS
 from pipelines.errors import PipelineError
-from pipelines.experiments.compare_sources import commit_text, recording_records, simulate_records
-from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, episode_log, read_sweep_file
+from pipelines.experiments.compare_sources import recording_records, simulate_records, sweep_records
+from pipelines.experiments.log import EPISODES_FILE
 from pipelines.experiments.summary import t95, wilson_interval
 from pipelines.experiments.tables import mcnemar_exact
 from pipelines.logs.identity import NOT_SETTINGS, UNRECORDED_DEFAULTS, dotted_settings
@@ -185,8 +185,8 @@ def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dic
     if not path.exists():
         raise PipelineError(f"{label}: {path} does not exist ({SOURCES})")
     if path.is_dir() and (path / EPISODES_FILE).is_file():
-        scanned = (r for _, _, r in episode_log(path).scan(repair=False))
-        return scanned, _commits(path), "its cells are not told apart by method (use --by-cell)"
+        scanned, commits = sweep_records(path)  # its commits once every record is read
+        return scanned, commits, "its cells are not told apart by method (use --by-cell)"
     if path.is_dir() and not _holds_recordings(path):
         raise PipelineError(
             f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one) and no "
@@ -228,24 +228,6 @@ def _outcome(record: Mapping[str, Any], kinds: dict[frozenset[str], frozenset[st
 
 def _digest(values: Mapping[str, Any]) -> bytes:
     return hashlib.blake2b(json.dumps(values, sort_keys=True).encode(), digest_size=16).digest()
-
-
-def _commits(path: Path) -> list[str]:
-    """The code each run line of ``path``'s sweep.json ran ("abc123def456+dirty"), oldest first; none where
-    the file is missing or unreadable (the episodes are still compared; a damaged file said so)."""
-    if not (path / SWEEP_FILE).exists():
-        return []
-    try:
-        meta = read_sweep_file(path / SWEEP_FILE, hint="")
-    except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
-        print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
-        return []
-    found: list[str] = []
-    for line in meta.get("runs", []):
-        text = commit_text(line.get("code") if isinstance(line, dict) else None)
-        if text is not None and text not in found:
-            found.append(text)
-    return found
 
 
 @dataclass(frozen=True)

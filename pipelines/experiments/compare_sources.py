@@ -1,24 +1,63 @@
-"""Where ``crowdmpc compare`` reads a run's episodes besides a sweep's log: a ``crowdmpc simulate --json``
-file and MCAP recordings (``crowdmpc simulate --record DIR``, ``make demo``'s runs/demo/), each episode made
-into the record a sweep writes, its method the controller (a sweep's "CMPC" column pairs with simulate's
-"cmpc").
+"""Where ``crowdmpc compare`` reads a run's episodes, and the code that made them: a sweep's log and
+sweep.json, a ``crowdmpc simulate --json`` file, and MCAP recordings (``crowdmpc simulate --record DIR``,
+``make demo``'s runs/demo/), each episode made into the record a sweep writes, its method the controller (a
+sweep's "CMPC" column pairs with simulate's "cmpc").
 
 A recording holds what simulate's JSON holds of its episode: the "/episode/metrics" message is the same
-``EpisodeRecord`` and the "config" metadata the same effective config, so a folder of recordings compares
-with the ``--json`` file of its run episode for episode, every metric equal. Only those two are read of each
-file (``read_recording``'s ``topics``), not its hundreds of state messages."""
+``EpisodeRecord`` and the "config" metadata the same effective config, so a folder of recordings compares with
+the ``--json`` file of its run episode for episode, every metric equal. Only those two are read of each file
+(``read_recording``'s ``topics``), not its hundreds of state messages."""
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
+from pipelines.experiments.log import SWEEP_FILE, episode_log, read_sweep_file
 from pipelines.version import dirty_text
 from predictors.progress import progress_bar
 
 METRICS_TOPIC: Final = "/episode/metrics"
+
+
+def sweep_records(path: Path) -> tuple[Iterator[dict[str, Any]], list[str]]:
+    """The records of the sweep folder ``path``, read as its report reads them and left as they are (a sweep
+    still writing it may hold a torn last line, passed over), and the code of the runs they name, oldest
+    first: filled once every record was read, since a run line no record names (a run stopped before its
+    first episode, a copied ``--reuse`` line whose records a kill cut off) made none of them."""
+    commits: list[str] = []
+
+    def records() -> Iterator[dict[str, Any]]:
+        named: set[Any] = set()
+        for _, _, record in episode_log(path).scan(repair=False):
+            named.add(record.get("run"))
+            yield record
+        commits.extend(_sweep_commits(path, named))
+
+    return records(), commits
+
+
+def _sweep_commits(path: Path, named: set[Any]) -> list[str]:
+    """The code each run line of ``path``'s sweep.json that a record ``named`` ran ("abc123def456+dirty"),
+    each once; every line's where a record names no run (older sweeps); none where the file is missing or
+    unreadable (the episodes are still compared; a damaged file said so)."""
+    if not (path / SWEEP_FILE).exists():
+        return []
+    try:
+        runs = read_sweep_file(path / SWEEP_FILE, hint="").get("runs", [])
+    except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
+        print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
+        return []
+    every = any(not isinstance(run, int) or isinstance(run, bool) for run in named)
+    found: list[str] = []
+    for k, line in enumerate(runs, start=1):
+        text = commit_text(line.get("code") if isinstance(line, dict) else None)
+        if (every or k in named) and text is not None and text not in found:
+            found.append(text)
+    return found
 
 
 def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:

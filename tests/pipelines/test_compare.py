@@ -103,6 +103,21 @@ def test_two_runs_by_hand(tmp_path, capsys):
     assert report["runs"][0]["code"] == ["0123456789ab"] and report["shared_episodes"] == 4
 
 
+def test_the_code_named_is_that_of_the_runs_the_episodes_name(tmp_path, capsys):
+    """A run line no record names (a run stopped before its first episode, a copied `--reuse` line whose
+    records a kill cut off) made none of the episodes: its code was listed beside theirs."""
+    lines = [{"code": {"commit": commit, "dirty": False}} for commit in ("aaaaaaaaaaaa", "bbbbbbbbbbbb")]
+    folders = []
+    for name, run in (("named", {"run": 2}), ("unnamed", {})):  # records from before they kept their run
+        path = _sweep(tmp_path / name, [{**_record(i, *o), **run} for i, o in enumerate(BASE)])
+        (path / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": lines}))
+        folders.append(path)
+    out = tmp_path / "c.json"
+    assert main(["compare", f"a={folders[0]}", f"b={folders[1]}", "--json", str(out), "--no-progress"]) == 0
+    codes = [run["code"] for run in json.loads(out.read_text())["runs"]]
+    assert codes == [["bbbbbbbbbbbb"], ["aaaaaaaaaaaa", "bbbbbbbbbbbb"]]
+
+
 def test_mcnemar_and_the_travel_spread_by_hand():
     # 1 vs 3 discordant: 2 (C(4,0) + C(4,1)) / 2^4 = 10 / 16
     assert mcnemar_exact(1, 3) == pytest.approx(0.625)
