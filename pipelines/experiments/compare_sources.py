@@ -31,16 +31,17 @@ def sweep_records(path: Path) -> tuple[Iterator[dict[str, Any]], list[str]]:
     commits: list[str] = []
 
     def records() -> Iterator[dict[str, Any]]:
-        named: set[Any] = set()
+        named: set[int | None] = set()
         for _, _, record in episode_log(path).scan(repair=False):
-            named.add(record.get("run"))
+            run = record.get("run")  # None: a record that names none (or no number: said as unknown)
+            named.add(run if isinstance(run, int) and not isinstance(run, bool) else None)
             yield record
         commits.extend(_sweep_commits(path, named))
 
     return records(), commits
 
 
-def _sweep_commits(path: Path, named: set[Any]) -> list[str]:
+def _sweep_commits(path: Path, named: set[int | None]) -> list[str]:
     """The code each run line of ``path``'s sweep.json that a record ``named`` ran ("abc123def456+dirty"),
     each once; every line's where a record names no run (older sweeps); none where the file is missing or
     unreadable (the episodes are still compared; a damaged file said so)."""
@@ -51,7 +52,7 @@ def _sweep_commits(path: Path, named: set[Any]) -> list[str]:
     except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
         print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
         return []
-    every = any(not isinstance(run, int) or isinstance(run, bool) for run in named)
+    every = None in named
     found: list[str] = []
     for k, line in enumerate(runs, start=1):
         text = commit_text(line.get("code") if isinstance(line, dict) else None)

@@ -108,14 +108,16 @@ def test_the_code_named_is_that_of_the_runs_the_episodes_name(tmp_path, capsys):
     records a kill cut off) made none of the episodes: its code was listed beside theirs."""
     lines = [{"code": {"commit": commit, "dirty": False}} for commit in ("aaaaaaaaaaaa", "bbbbbbbbbbbb")]
     folders = []
-    for name, run in (("named", {"run": 2}), ("unnamed", {})):  # records from before they kept their run
+    # records from before they kept their run, or a damaged one's: every line may have made them
+    for name, run in (("named", {"run": 2}), ("unnamed", {}), ("damaged", {"run": [2]})):
         path = _sweep(tmp_path / name, [{**_record(i, *o), **run} for i, o in enumerate(BASE)])
         (path / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": lines}))
         folders.append(path)
     out = tmp_path / "c.json"
-    assert main(["compare", f"a={folders[0]}", f"b={folders[1]}", "--json", str(out), "--no-progress"]) == 0
+    labels = [f"{name}={path}" for name, path in zip("abc", folders, strict=True)]
+    assert main(["compare", *labels, "--json", str(out), "--no-progress"]) == 0
     codes = [run["code"] for run in json.loads(out.read_text())["runs"]]
-    assert codes == [["bbbbbbbbbbbb"], ["aaaaaaaaaaaa", "bbbbbbbbbbbb"]]
+    assert codes == [["bbbbbbbbbbbb"], *[["aaaaaaaaaaaa", "bbbbbbbbbbbb"]] * 2]
 
 
 def test_mcnemar_and_the_travel_spread_by_hand():
