@@ -350,8 +350,10 @@ def _refuse_link(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def sweep_lock(out: Path) -> Iterator[None]:
-    """Refuse a second sweep writing the same directory (its records would interleave)."""
+def sweep_lock(out: Path, made: bool = False) -> Iterator[None]:
+    """Refuse a second sweep writing the same directory (its records would interleave). ``made``: the caller
+    made ``out`` for this sweep, which is removed again when the sweep is refused or stopped before writing
+    anything there but the lock (a --reuse refused for its source's log had left the empty folder)."""
     import fcntl
 
     with open(out / LOCK_FILE, "w", encoding="utf-8") as f:
@@ -369,5 +371,10 @@ def sweep_lock(out: Path) -> Iterator[None]:
             ) from None
         try:
             yield
+        except BaseException:
+            if made and [entry.name for entry in out.iterdir()] == [LOCK_FILE]:
+                (out / LOCK_FILE).unlink()  # while held: a sweep that opened it meanwhile is refused
+                out.rmdir()
+            raise
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)

@@ -216,12 +216,13 @@ def run_sweep(
     check_sweep_directory(out)
     if config.reuse is not None:  # a source that is no sweep leaves no --out made
         check_source(config.reuse, out)
+    made = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     tasks = config.tasks()
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
         raise PipelineError("the sweep plans the same episode twice (repeated --humans?)")
-    with sweep_lock(out):
+    with sweep_lock(out, made):
         meta = _sweep_meta(out, config, tasks)
         log = episode_log(out)
         recorded = ResumeChecks(out, tasks)

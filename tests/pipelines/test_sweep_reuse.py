@@ -103,7 +103,7 @@ def test_records_of_other_weights_are_refused_before_anything_is_written(table2,
     line = one_line(err)
     assert code == 2 and str(source / "episodes.jsonl") in line and "sha256 " + "0" * 64 in line
     assert line.endswith("they are not episodes of this plan now: run the sweep without --reuse")
-    assert not (out / "sweep.json").exists() and not (out / "episodes.jsonl").exists()
+    assert not out.exists()  # nor the folder made for it
 
 
 def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
@@ -144,7 +144,7 @@ def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
     assert line.startswith(
         f"crowdmpc sweep: error: --reuse {bad}: {bad / 'episodes.jsonl'}:2: not a JSON record"
     )
-    assert line.endswith("; that sweep's own rerun refuses it too")
+    assert line.endswith("; that sweep's own rerun refuses it too") and not (tmp_path / "d").exists()
 
 
 def test_outs_own_records_are_checked_before_anything_is_taken(table2, tmp_path, capsys):
