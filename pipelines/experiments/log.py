@@ -372,9 +372,11 @@ def sweep_lock(out: Path, made: bool = False) -> Iterator[None]:
         try:
             yield
         except BaseException:
-            if made and [entry.name for entry in out.iterdir()] == [LOCK_FILE]:
-                (out / LOCK_FILE).unlink()  # while held: a sweep that opened it meanwhile is refused
-                out.rmdir()
+            # its own error is the one to say: a folder that cannot go is left as it is
+            with contextlib.suppress(OSError):
+                if made and [entry.name for entry in out.iterdir()] == [LOCK_FILE]:
+                    (out / LOCK_FILE).unlink()  # while held: a sweep that opened it meanwhile is refused
+                    out.rmdir()
             raise
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
