@@ -151,7 +151,7 @@ def _check_no_stray_file(
     manifest = root / MANIFEST_NAME
     paths = entry.paths(root, manifest)
     owned = () if previous is None else previous.paths(root, manifest)
-    if previous is not None and TEMPORARY.fullmatch(previous.file):
+    if previous is not None and staged_names(previous) is not None:
         owned = paths  # an add of NAME stopped between its manifest's writes: NAME.pt, NAME.json are its own
     for file_name, path, source in zip((entry.file, entry.config), paths, sources, strict=True):
         if os.path.lexists(root / file_name) and path not in owned and not _same_file(path, source):
@@ -202,10 +202,18 @@ def _write_pair(
         path.unlink(missing_ok=True)
 
 
+def staged_names(entry: ZooEntry) -> tuple[str, str] | None:
+    """NAME.pt and NAME.json of an entry that names its add's staged copies (``.NAME.pt.PID.new``: the add
+    stopped between its manifest's writes, ``_write_pair``); None for an entry naming its own files."""
+    if not (TEMPORARY.fullmatch(entry.file) and TEMPORARY.fullmatch(entry.config)):
+        return None
+    return entry.file[1:].rsplit(".", 2)[0], entry.config[1:].rsplit(".", 2)[0]
+
+
 def _stopped_add(previous: ZooEntry | None, entry: ZooEntry) -> bool:
     """Whether ``previous`` is ``entry``'s own add, stopped between its manifest's writes (``_write_pair``:
     the entry names its staged copies), which the same add finishes."""
-    if previous is None or not TEMPORARY.fullmatch(previous.file):
+    if previous is None or staged_names(previous) is None:
         return False
     return replace_fields(previous, file=entry.file, config=entry.config) == entry
 

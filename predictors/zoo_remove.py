@@ -13,7 +13,7 @@ from predictors.checkpoint import check_name
 from predictors.errors import PredictorError
 from predictors.manifest import MANIFEST_NAME, ZooEntry, is_zoo_file, write_manifest, zoo_lock
 from predictors.zoo import checkpoints_dir, read_manifest, writable_zoo_dir
-from predictors.zoo_edit import TEMPORARY, leftover_files
+from predictors.zoo_edit import leftover_files, staged_names
 
 
 def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
@@ -57,9 +57,8 @@ def _being_added(entry: ZooEntry, root: Path) -> set[Path]:
     """NAME.pt and NAME.json of an entry that names its add's staged files (``.NAME.pt.PID.new``: the add
     stopped between its manifest's writes), which that add was putting in place: its own, gone with it, or
     left as files no entry names, which a new add of NAME refuses."""
-    if not (TEMPORARY.fullmatch(entry.file) and TEMPORARY.fullmatch(entry.config)):
-        return set()
-    return {root / staged[1:].rsplit(".", 2)[0] for staged in (entry.file, entry.config)}
+    names = staged_names(entry)
+    return set() if names is None else {root / name for name in names}
 
 
 def _put_back(doomed: list[Path], parked: list[Path]) -> None:

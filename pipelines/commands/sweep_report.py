@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from pipelines.errors import EPISODES_RAISED, PipelineError
 from pipelines.experiments.cell_columns import FLOATS, CellColumns, Column
+from pipelines.experiments.run_lines import run_number, runs_named
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -165,7 +166,7 @@ class LogRead:
             self.cpu.append(record["cpu_s"])
         if record["cell"] in self.tabulated:
             self.columns.setdefault(record["cell"], CellColumns()).add(record, offset, zlib.crc32(line))
-            self.runs.add(record.get("run"))
+            self.runs.add(run_number(record))
 
 
 def read_log(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTask]) -> LogRead:
@@ -238,9 +239,7 @@ def code_note(out: Path, used: Collection[int | None] | None = None) -> str:
     if not (out / SWEEP_FILE).is_file():
         return ""
     runs = read_sweep_file(out / SWEEP_FILE).get("runs", [])
-    # a number past the file's lines: a run it lost (run_lines.lost_runs)
-    if used is not None and None not in used:
-        runs = [runs[k - 1] if k <= len(runs) else {"lost": ""} for k in sorted(k for k in used if k)]
+    runs = runs if used is None else runs_named(runs, used)
     shown = list(dict.fromkeys(_code_text(run) for run in runs))
     if len(shown) <= 1:
         return f"Code: {shown[0]}." if shown else ""

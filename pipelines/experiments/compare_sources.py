@@ -17,6 +17,7 @@ from typing import Any, Final
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.log import SWEEP_FILE, episode_log, read_sweep_file
+from pipelines.experiments.run_lines import run_number, runs_named
 from pipelines.version import dirty_text
 from predictors.progress import progress_bar
 
@@ -33,8 +34,7 @@ def sweep_records(path: Path) -> tuple[Iterator[dict[str, Any]], list[str]]:
     def records() -> Iterator[dict[str, Any]]:
         named: set[int | None] = set()
         for _, _, record in episode_log(path).scan(repair=False):
-            run = record.get("run")  # None: a record that names none (or no number: said as unknown)
-            named.add(run if isinstance(run, int) and not isinstance(run, bool) else None)
+            named.add(run_number(record))
             yield record
         commits.extend(_sweep_commits(path, named))
 
@@ -52,11 +52,10 @@ def _sweep_commits(path: Path, named: set[int | None]) -> list[str]:
     except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
         print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
         return []
-    every = None in named
     found: list[str] = []
-    for k, line in enumerate(runs, start=1):
+    for line in runs_named(runs, named):
         text = commit_text(line.get("code") if isinstance(line, dict) else None)
-        if (every or k in named) and text is not None and text not in found:
+        if text is not None and text not in found:
             found.append(text)
     return found
 
@@ -77,7 +76,7 @@ def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
 def _record(episode: Any, index: int, where: str, key: str | None = None) -> dict[str, Any]:
     """One simulated episode (simulate's JSON entry, or a recording's metrics with its config) as a sweep's
     record, checked as a sweep's log line is."""
-    from pipelines.experiments.log import check_record
+    from pipelines.experiments.record_checks import check_record
 
     if not isinstance(episode, dict) or episode.get("seed") is None:
         raise PipelineError(f"{where} has no seed: an unseeded run's crowds pair with none")

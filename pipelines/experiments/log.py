@@ -12,18 +12,17 @@ The names of the directory's other files are here too, so that every module name
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import json
-import math
 import os
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from crowdsim.errors import SimulationError
 from pipelines.errors import DroppedLineWarning, PipelineError
-from pipelines.loop.record import EpisodeRecord
+from pipelines.experiments.record_checks import DAMAGED, check_sweep_record
 from pipelines.plain_json import plain
 
 if TYPE_CHECKING:
@@ -31,8 +30,6 @@ if TYPE_CHECKING:
 
 EPISODES_FILE: Final[str] = "episodes.jsonl"
 ERRORS_FILE: Final[str] = "errors.jsonl"
-# what a refusal of a damaged log says to do: a line left out is an episode the next sweep runs again
-DAMAGED: Final[str] = "the file is damaged: edit out that line (a copy kept) and its episode runs again"
 SWEEP_FILE: Final[str] = "sweep.json"
 LOCK_FILE: Final[str] = ".sweep.lock"
 MCAP_DIR: Final[str] = "mcap"
@@ -41,10 +38,14 @@ MCAP_DIR: Final[str] = "mcap"
 class EpisodeLog:
     """Append-only JSON-lines file of episode records, one per key."""
 
-    def __init__(self, path: Path, check: Callable[[dict[str, Any], str], None] | None = None):
-        """``check(record, "file:line")`` raises for a record of the wrong shape (``episode_log``'s does)."""
+    def __init__(
+        self, path: Path, check: Callable[[dict[str, Any], str], None] | None = None, damaged: str = DAMAGED
+    ):
+        """``check(record, "file:line")`` raises for a record of the wrong shape (``episode_log``'s does);
+        ``damaged``: what a refusal of a damaged line says to do (another sweep's log is not ours to edit)."""
         self.path = Path(path)
         self.check = check
+        self.damaged = damaged
 
     def load(
         self, repair: bool = True, keep: Callable[[dict[str, Any]], dict[str, Any]] | None = None
@@ -73,7 +74,7 @@ class EpisodeLog:
                     break  # only what a newline ends was fully written
                 if bad is not None:
                     raise PipelineError(
-                        f"{self.path}:{bad[0]}: not a JSON record ({bad[1]}); {DAMAGED}"
+                        f"{self.path}:{bad[0]}: not a JSON record ({bad[1]}); {self.damaged}"
                     ) from None
                 try:
                     record = json.loads(line) if line.strip() else None
@@ -84,11 +85,13 @@ class EpisodeLog:
                 if record is not None:
                     key = record.get("key") if isinstance(record, dict) else None
                     if not isinstance(key, str):
-                        raise PipelineError(f"{self.path}:{number}: record has no 'key'; {DAMAGED}")
+                        raise PipelineError(f"{self.path}:{number}: record has no 'key'; {self.damaged}")
                     if self.check is not None:
                         self.check(record, f"{self.path}:{number}")
                     if hash(key) in seen and self._key_before(key, number):
-                        raise PipelineError(f"{self.path}:{number}: a second record for {key!r}; {DAMAGED}")
+                        raise PipelineError(
+                            f"{self.path}:{number}: a second record for {key!r}; {self.damaged}"
+                        )
                     seen.add(hash(key))
                     yield offset, line, record
                 good_end += len(line)
@@ -132,12 +135,7 @@ class EpisodeLog:
     def append(self, record: dict[str, Any]) -> tuple[int, bytes]:
         """Writes ``record`` as the log's last line; returns that line and its offset, as ``scan`` gives
         them."""
-        try:
-            line = json.dumps(plain(record), allow_nan=False, separators=(",", ":")) + "\n"
-        except (TypeError, ValueError) as exc:  # the workers check their records (worker.check_json)
-            key = record.get("key") if isinstance(record, dict) else None
-            raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
-        data = line.encode()
+        data = self._line(record)
         try:
             with open(self.path, "ab") as f:
                 offset = os.fstat(f.fileno()).st_size  # one writer: the sweep holding the lock
@@ -145,12 +143,33 @@ class EpisodeLog:
                 f.flush()
                 os.fsync(f.fileno())
         except OSError as exc:  # a full disk, a quota, `ulimit -f`: a torn last line, which a resume cuts
-            key = record.get("key")
-            raise PipelineError(
-                f"{self.path}: could not append the record of {key!r} ({exc.strerror or exc}); the episodes "
-                "recorded before it are kept: free space and run the same sweep again to resume"
-            ) from None
+            raise self._not_appended(f"the record of {record.get('key')!r}", exc, "it") from None
         return offset, data
+
+    def extend(self, records: Iterable[dict[str, Any]]) -> None:
+        """Writes ``records`` as the log's last lines, synced once (``append`` syncs each line): a stop
+        halfway leaves whole lines and at most a torn last one, which a resume cuts."""
+        try:
+            with open(self.path, "ab") as f:
+                for record in records:
+                    f.write(self._line(record))
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise self._not_appended("records", exc, "them") from None
+
+    def _not_appended(self, what: str, exc: OSError, it: str) -> PipelineError:
+        return PipelineError(
+            f"{self.path}: could not append {what} ({exc.strerror or exc}); the episodes recorded before "
+            f"{it} are kept: free space and run the same sweep again to resume"
+        )
+
+    def _line(self, record: dict[str, Any]) -> bytes:
+        try:
+            return (json.dumps(plain(record), allow_nan=False, separators=(",", ":")) + "\n").encode()
+        except (TypeError, ValueError) as exc:  # the workers check their records (worker.check_json)
+            key = record.get("key") if isinstance(record, dict) else None
+            raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
 
 
 def error_keys(out: Path) -> set[str]:
@@ -177,103 +196,10 @@ def mcap_path(out: Path, task: EpisodeTask) -> Path:
     return out / MCAP_DIR / task.cell.key / f"{task.scenario}_seed{task.seed:06d}.mcap"
 
 
-def episode_log(out: Path) -> EpisodeLog:
+def episode_log(out: Path, damaged: str = DAMAGED) -> EpisodeLog:
     """A sweep directory's episodes.jsonl, every line checked to be a record the report can read."""
-    return EpisodeLog(out / EPISODES_FILE, check=_check_sweep_record)
-
-
-def _check_sweep_record(record: dict[str, Any], where: str) -> None:
-    """``check_record``, and a sweep's key is its cell, scenario and seed (``EpisodeTask.key``): a record
-    whose seed was edited kept its key, counted as recorded, and paired with another crowd's episode."""
-    check_record(record, where)
-    expected = f"{record.get('cell')}/{record['scenario']}/{record['seed']}"
-    if record["key"] != expected:
-        raise PipelineError(
-            f"{where}: record's key {record['key']!r:.120} is not its cell, scenario and seed "
-            f"({expected!r:.120}); {DAMAGED}"
-        )
-
-
-def _number(value: Any) -> bool:
-    """A finite number: the writer writes NaN and inf as null, and a NaN read back fell in no bin of the
-    minimum-distance histogram and made a cell's mean NaN."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _count(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
-
-
-# What the report computes with, as the writer writes it (EpisodeMetrics.as_dict, SolverStats through plain):
-# NaN and inf become null. A value of another type would be counted wrongly ("yes" as a success) or stop the
-# report with a traceback, so a line holding one is refused like any damaged line.
-_KINDS: Final[dict[str, tuple[Callable[[Any], bool], str]]] = {
-    "bool": (lambda v: isinstance(v, bool), "a boolean"),
-    "bool?": (lambda v: v is None or isinstance(v, bool), "a boolean or null"),
-    "count": (_count, "a non-negative integer"),
-    "count?": (lambda v: v is None or _count(v), "a non-negative integer or null"),
-    "number": (_number, "a finite number"),
-    "number?": (lambda v: v is None or _number(v), "a finite number or null"),
-    "numbers": (
-        lambda v: isinstance(v, list) and all(x is None or _number(x) for x in v),
-        "a list of finite numbers (or nulls)",
-    ),
-}
-METRIC_KINDS: Final[dict[str, str]] = {
-    **dict.fromkeys(("success", "collision", "contact", "discomfort", "timeout"), "bool"),
-    **dict.fromkeys(("travel_time", "min_distance", "min_distance_robots", "min_distance_humans"), "number?"),
-    **dict.fromkeys(("path_length", "reach_times"), "numbers"),
-    **dict.fromkeys(("discomfort_steps", "n_steps"), "count"),
-    **dict.fromkeys(("collision_steps", "contact_steps"), "count?"),  # absent from records before them
-    "min_distance_between_steps": "number?",  # these three too
-    **dict.fromkeys(("collision_between_steps", "contact_between_steps"), "bool?"),
-    "robot_contact": "bool?",  # robot-robot contact (not in the paper): absent from records before it
-    "robot_contact_steps": "count?",
-    "min_distance_robots_between_steps": "number?",  # and its between-step figures, before them
-    "robot_contact_between_steps": "bool?",
-}
-SOLVER_KINDS: Final[dict[str, str]] = {
-    **dict.fromkeys(("steps", "fallback_steps"), "count"),
-    "total_ms": "number",
-    **dict.fromkeys(("median_ms", "p95_ms", "max_ms", "mean_iterations"), "number?"),
-    "max_iterations": "count?",
-}
-
-
-def check_record(record: dict[str, Any], where: str, damaged: str = DAMAGED) -> None:
-    """A line the report can read: the closed loop's episode record, the types of its metrics and solver
-    figures, and the sweep's cell fields. The seed and scenario are checked here, not by from_dict, which
-    takes a null seed (simulate's unseeded episode) and casts both: the report sorts and groups by them."""
-    try:
-        EpisodeRecord.from_dict(record)
-    except (PipelineError, SimulationError) as exc:
-        raise PipelineError(f"{where}: {exc}; {damaged}") from None
-    except AttributeError as exc:  # metrics or solver a list or a string: from_dict expects mappings
-        raise PipelineError(f"{where}: not an episode record ({exc}); {damaged}") from None
-    _check_kinds(record["metrics"], METRIC_KINDS, "metrics", where, damaged)
-    _check_kinds(record["solver"], SOLVER_KINDS, "solver", where, damaged)
-    _check_kinds(record, {"wall_s": "number", "cpu_s": "number?"}, "", where, damaged)
-    for name, kind, what in (
-        ("cell", str, "a string"),
-        ("method", str, "a string"),
-        ("index", int, "an integer"),
-        ("seed", int, "an integer"),
-        ("scenario", str, "a string"),
-    ):
-        value = record.get(name)
-        if not isinstance(value, kind) or isinstance(value, bool):
-            raise PipelineError(f"{where}: record's {name!r} is not {what}; {damaged}")
-
-
-def _check_kinds(values: dict[str, Any], kinds: dict[str, str], part: str, where: str, damaged: str) -> None:
-    """Each of ``kinds``' fields of ``values`` (of the record's ``part``) is of its kind (``_KINDS``)."""
-    for name, kind in kinds.items():
-        is_kind, what = _KINDS[kind]
-        if not is_kind(values.get(name)):
-            field = f"{part} {name!r}" if part else repr(name)
-            raise PipelineError(
-                f"{where}: record's {field} is not {what} (got {values.get(name)!r:.40}); {damaged}"
-            )
+    check = functools.partial(check_sweep_record, damaged=damaged)
+    return EpisodeLog(out / EPISODES_FILE, check=check, damaged=damaged)
 
 
 def sweep_of_recordings(path: Path, marker: str = EPISODES_FILE) -> Path | None:

@@ -12,6 +12,7 @@ from typing import Any
 
 from pipelines.errors import PipelineError
 from pipelines.experiments.log import EPISODES_FILE
+from pipelines.experiments.run_lines import run_number
 from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
 
@@ -46,8 +47,7 @@ class ResumeChecks:
         self.last_run = 0  # the highest run a record names, whatever others lack (run_lines.lost_runs)
 
     def add(self, record: dict[str, Any]) -> None:
-        run = record.get("run")
-        run = run if isinstance(run, int) and not isinstance(run, bool) else None
+        run = run_number(record)
         if run is not None:
             self.last_run = max(self.last_run, run)
         if self.runs_recorded is not None:

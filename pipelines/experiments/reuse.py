@@ -20,7 +20,6 @@ twice, nor an episode the folder holds). The source is only read; its recordings
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import sys
 from collections.abc import Iterator, Sequence
@@ -28,20 +27,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipelines.errors import PipelineError, writes_named
+from pipelines.errors import PipelineError
 from pipelines.experiments.cells import Experiment
 from pipelines.experiments.log import (
-    DAMAGED,
     EPISODES_FILE,
     MCAP_DIR,
     SWEEP_FILE,
+    EpisodeLog,
     episode_log,
     mcap_path,
     read_sweep_file,
 )
-from pipelines.experiments.run_lines import REUSED, is_reused, lost_runs, write_sweep_file
+from pipelines.experiments.run_lines import REUSED, is_reused, lost_runs, run_number, write_sweep_file
 from pipelines.experiments.tasks import EpisodeTask
-from pipelines.plain_json import plain
 
 
 def check_source(source: Path, out: Path) -> None:
@@ -68,20 +66,19 @@ def _source_runs(source: Path) -> list[Any]:
 
 def _source_records(source: Path) -> Iterator[dict[str, Any]]:
     """The records of ``source``'s log, read and never cut; a damaged one a PipelineError naming it as
-    --reuse's."""
+    --reuse's (editing another sweep's log is not this sweep's to advise)."""
     with _named(source):
-        yield from (record for _, _, record in episode_log(source).scan(repair=False))
+        log = episode_log(source, damaged="that sweep's own rerun refuses it too")
+        yield from (record for _, _, record in log.scan(repair=False))
 
 
 @contextlib.contextmanager
 def _named(source: Path) -> Iterator[None]:
-    """A PipelineError of reading ``source`` raised again as --reuse's (its advice is for a sweep's own
-    files: a source's are another sweep's)."""
+    """A PipelineError of reading ``source`` raised again as --reuse's."""
     try:
         yield
-    except PipelineError as exc:  # a damaged log's advice ends in DAMAGED: editing another sweep's is its own
-        message = str(exc).replace(f"; {DAMAGED}", "; that sweep's own rerun refuses it too")
-        raise PipelineError(f"--reuse {source}: {message}") from None
+    except PipelineError as exc:
+        raise PipelineError(f"--reuse {source}: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -114,17 +111,17 @@ def taken(source: Path, out: Path, tasks: Sequence[EpisodeTask], *, repair: bool
     for record in _source_records(source):
         if record["key"] in left:  # a key once: the source's scan refuses a second
             checks.add(record)
-            there[record["key"]] = record.get("run")
+            there[record["key"]] = run_number(record)
     checks.check()
     runs = _source_runs(source)  # read after its log: the line of a run the source began meanwhile is there
     return Taken({key: _run_there(run, len(runs)) for key, run in there.items()}, runs, own.last_run)
 
 
-def _run_there(run: Any, listed: int) -> int | None:
-    """The source's run that made a record whose ``run`` is ``run``: that number (one past the lines its
-    sweep.json lists: a lost run, run_lines.lost_runs), or the only run of a sweep.json of ``listed`` = 1
+def _run_there(run: int | None, listed: int) -> int | None:
+    """The source's run that made a record naming ``run`` (``run_number``): that number (one past the lines
+    its sweep.json lists: a lost run, run_lines.lost_runs), or the only run of a sweep.json of ``listed`` = 1
     line (a record from before records kept it); None when unknown."""
-    if isinstance(run, int) and not isinstance(run, bool) and run >= 1:
+    if run is not None and run >= 1:
         return run
     return 1 if listed == 1 else None
 
@@ -173,25 +170,20 @@ def seed_from(
 
 def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dict[str, int]) -> None:
     """The records of ``source`` of ``tasks``' keys, under their labels and with ``run_of``'s numbers, as the
-    log's last lines, read and written a record at a time and synced once (a sweep's appends take a disk sync
-    each): a stop halfway leaves whole lines and at most a torn last one, which a resume cuts. A source whose
-    records taken went missing between its two reads (edited: a log is only appended to) is refused."""
-    written = set()
-    with writes_named(path), open(path, "ab") as f:
+    log's last lines, read and written a record at a time (``EpisodeLog.extend``). A source whose records
+    taken went missing between its two reads (edited: a log is only appended to) is refused."""
+    written: set[str] = set()
+
+    def relabelled() -> Iterator[dict[str, Any]]:
         for record in _source_records(source):
             task = tasks.get(record["key"])
             if task is not None and task.key not in written:
                 written.add(task.key)
                 label = {"experiment": task.experiment, "method": task.cell.method, "index": task.index}
-                line = json.dumps(
-                    plain({**record, **label, "run": run_of[task.key]}),
-                    allow_nan=False,
-                    separators=(",", ":"),
-                )
-                f.write(line.encode() + b"\n")
-        f.flush()
-        os.fsync(f.fileno())
-    if len(written) != len(tasks):  # a log is only appended to: some were edited out meanwhile
+                yield {**record, **label, "run": run_of[task.key]}
+
+    EpisodeLog(path).extend(relabelled())
+    if len(written) != len(tasks):
         raise PipelineError(
             f"--reuse {source}: its episodes changed while they were read; run the sweep again"
         )

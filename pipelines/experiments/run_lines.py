@@ -9,12 +9,13 @@ from __future__ import annotations
 import json
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError, writes_named
-from pipelines.experiments.log import DAMAGED, EPISODES_FILE, PART_SUFFIX, SWEEP_FILE
+from pipelines.experiments.log import EPISODES_FILE, PART_SUFFIX, SWEEP_FILE
+from pipelines.experiments.record_checks import DAMAGED
 from pipelines.plain_json import plain
 
 MAX_LOST_RUNS: Final[int] = 1000  # runs a log's records may name past sweep.json's (lost_runs)
@@ -29,6 +30,21 @@ def is_reused(run: Any) -> bool:
 def own_runs(runs: Sequence[Any]) -> list[int]:
     """The numbers (from 1) of sweep.json's run lines that are runs of this sweep, not ``is_reused``."""
     return [k for k, run in enumerate(runs, start=1) if not is_reused(run)]
+
+
+def run_number(record: Mapping[str, Any]) -> int | None:
+    """The line of sweep.json a record names (its ``run``, from 1); None where it names none, or no number
+    (a record from before records kept it, or a damaged one: any run may have made it)."""
+    run = record.get("run")
+    return run if isinstance(run, int) and not isinstance(run, bool) else None
+
+
+def runs_named(runs: Sequence[Any], used: Collection[int | None]) -> list[Any]:
+    """The lines of ``runs`` that the records' ``used`` numbers (``run_number``) name, in number order; every
+    line where a record names none; a number past the lines, a run the file lost (``{"lost": ""}``)."""
+    if None in used:
+        return list(runs)
+    return [runs[k - 1] if 1 <= k <= len(runs) else {"lost": ""} for k in sorted(k for k in used if k)]
 
 
 def is_lost(run: Any) -> bool:

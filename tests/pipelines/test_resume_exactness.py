@@ -77,7 +77,7 @@ def test_a_line_that_is_not_utf8_is_torn_at_the_end_and_damage_elsewhere(tmp_pat
         EpisodeLog(path).load()
 
 
-# Every typed field of a record, written out by hand (not taken from log.METRIC_KINDS, so that a field
+# Every typed field of a record, written out by hand (not from record_checks.METRIC_KINDS, so that a field
 # dropped from the check is noticed): the string "1", which the record's own reading would take for 1 (or
 # True), where each expects a number, count or boolean is refused.
 TYPED_FIELDS = [
