@@ -1,5 +1,6 @@
 """What a controller is handed, checked before it plans: one finite row per agent in each of an
-observation's current fields (``check_fields``; the MPC checks its history too, pipelines.loop.mpc_setup)."""
+observation's current fields, and its clock (``check_fields``; the MPC checks its history too,
+pipelines.loop.mpc_setup)."""
 
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ def check_fields(obs: Observation) -> None:
         value = math.nan
     if not 0 < value < math.inf:  # NaN passed, and every robot counted as off its goal for good
         raise PipelineError(f"obs.radius must be a number of metres > 0 (a robot's arrival), got {radius!r}")
+    _check_clock(obs)
     for name, shape in (
         ("robot_positions", (m, 2)),
         ("robot_velocities", (m, 2)),
@@ -42,6 +44,27 @@ def check_fields(obs: Observation) -> None:
         # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
         _check_finite(obs, name, "a controller plans from the current state")
     _check_present(obs)
+
+
+def _check_clock(obs: Observation) -> None:
+    """PipelineError where ``obs.step`` is not an int >= 0 or ``obs.time`` not a finite number of seconds
+    >= 0. The step is read: with ``human_observed`` None every human counts as seen ``step + 1`` times (the
+    per-class margins' "new"), a sensor counts its tracks from it, and a recording stamps it: -1 or 2.5 were
+    taken as they came (a track of 0 or 3.5 positions), NaN failed later in the recorder's ``int``."""
+    step, time = obs.step, obs.time
+    if isinstance(step, bool) or not isinstance(step, int | np.integer) or step < 0:
+        raise PipelineError(
+            f"obs.step must be an int >= 0 (control periods since the episode began; with obs.human_observed "
+            f"None every human counts as seen step + 1 times), got {step!r}"
+        )
+    if isinstance(time, bool) or not isinstance(time, int | float | np.integer | np.floating):
+        value = math.nan
+    else:
+        value = float(time)
+    if not 0 <= value < math.inf:
+        raise PipelineError(
+            f"obs.time must be a finite number of seconds >= 0 since the episode began, got {time!r}"
+        )
 
 
 def _check_present(obs: Observation) -> None:

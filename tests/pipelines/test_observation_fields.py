@@ -42,3 +42,21 @@ def test_a_radius_that_is_no_length_is_refused(radius, controller):
         PipelineError, match=r"^obs\.radius must be a number of metres > 0 \(a robot's arrival\)"
     ):
         _act(ControllerSpec(controller), radius=radius)
+
+
+@pytest.mark.parametrize("step", [-1, 2.5, float("nan"), True, "3", None])
+@pytest.mark.parametrize("controller", ["cmpc", "orca"])
+def test_a_step_that_is_no_count_of_periods_is_refused(step, controller):
+    # with human_observed None every human counts as seen step + 1 times (the per-class margins read it)
+    with pytest.raises(PipelineError, match=r"^obs\.step must be an int >= 0 \(control periods since"):
+        _act(ControllerSpec(controller), step=step)
+
+
+@pytest.mark.parametrize("time", [-0.4, float("nan"), float("inf"), True, "0.4", None])
+def test_a_time_that_is_no_number_of_seconds_is_refused(time):
+    with pytest.raises(PipelineError, match=r"^obs\.time must be a finite number of seconds >= 0"):
+        _act(ControllerSpec("cmpc"), time=time)
+
+
+def test_numpy_scalars_of_a_clock_are_taken():
+    _act(ControllerSpec("orca"), step=np.int64(3), time=np.float32(1.2))
