@@ -8,13 +8,16 @@ Table II's CMPC cells: a paper-scale Table III ran those 5000 episodes again, or
 II's lines, whose code its table.md then called "unknown". Each record taken keeps its episode as it is, under
 this experiment's name, method label and index, and its run's line of the source's sweep.json (code,
 settings, cells) comes with it, marked ``reused_from`` and ``run_there``; the sweep then runs the rest as a
-resume does. The reused lines are the code of those episodes, not runs of this sweep: ``config show
---from-sweep``, ``--report-only`` and ``review`` read this sweep's own runs (``run_lines.own_runs``).
+resume does. A line the source itself took with --reuse keeps where it points (the sweep that ran those
+episodes: their code, config and recordings), so a chain of reuses names their origin in one step. The
+reused lines are the code of those episodes, not runs of this sweep: ``config show --from-sweep``,
+``--report-only`` and ``review`` read this sweep's own runs (``run_lines.own_runs``).
 
 Taking is a resume of its own: the records are checked first as a resume checks its own (the weights,
 margins and crowd the cells plan with now), the run lines are written before the records that name them, and
 a sweep stopped halfway takes the rest when the same command runs again (a line already taken is not taken
-twice, nor an episode the folder holds). The source is only read; its recordings stay in its mcap folder.
+twice, nor an episode the folder holds). The source is only read; the recordings stay in the mcap folder of
+the sweep that made them.
 """
 
 from __future__ import annotations
@@ -139,33 +142,59 @@ def seed_from(
         return meta
     runs = meta.setdefault("runs", [])
     runs.extend(lost_runs(out, len(runs), found.last_run))  # before new numbers are taken
-    where = str(source.resolve())
     numbers = {(r.get(REUSED), r.get("run_there")): k for k, r in enumerate(runs, start=1) if is_reused(r)}
+    number_of: dict[int | None, int] = {}
     for there in sorted(set(found.runs_there.values()), key=lambda run: (run is None, run or 0)):
-        if (where, there) not in numbers:
-            line = (
-                found.source_runs[there - 1]
-                if there is not None and there <= len(found.source_runs)
-                else None
-            )
-            if not isinstance(line, dict):  # its code is unknown, as a lost run's is (run_lines.is_lost)
-                line = {"lost": f"no line of {source / SWEEP_FILE} names the run of its episodes"}
-            runs.append({**line, REUSED: where, "run_there": there})
-            numbers[(where, there)] = len(runs)
+        line = found.source_runs[there - 1] if there is not None and there <= len(found.source_runs) else None
+        if not isinstance(line, dict):  # its code is unknown, as a lost run's is (run_lines.is_lost)
+            line = {"lost": f"no line of {source / SWEEP_FILE} names the run of its episodes"}
+        origin = _origin(source, there, line)
+        if origin not in numbers:
+            runs.append({**line, REUSED: origin[0], "run_there": origin[1]})
+            numbers[origin] = len(runs)
+        number_of[there] = numbers[origin]
     meta["experiment"], meta["title"] = experiment.name, experiment.title
     write_sweep_file(out / SWEEP_FILE, meta)
     by_key = {task.key: task for task in tasks if task.key in found.runs_there}
-    run_of = {key: numbers[(where, there)] for key, there in found.runs_there.items()}
+    run_of = {key: number_of[there] for key, there in found.runs_there.items()}
     _append(out / EPISODES_FILE, source, by_key, run_of)
-    kept = sum(mcap_path(source, task).is_file() for task in by_key.values())
+    folders = {key: _folder(source, runs[number - 1][REUSED]) for key, number in run_of.items()}
     cells = len({task.cell.key for task in by_key.values()})
-    recordings = f"; {kept} of their recordings stay in {source / MCAP_DIR}" if kept else ""
     print(
         f"reused {len(by_key)} episode(s) of {cells} cell(s) from {source} ({len(set(run_of.values()))} of "
-        f"its runs){recordings}",
+        f"its runs){_recordings(by_key, folders)}",
         file=sys.stderr,
     )
     return meta
+
+
+def _origin(source: Path, there: int | None, line: dict[str, Any]) -> tuple[str, int | None]:
+    """The sweep folder and run that made the episodes of run ``there`` of ``source`` (its ``line``): that
+    run, or where a line ``source`` itself took with --reuse points, so that a chain of reuses names the
+    sweep that ran them (its config, its recordings) in one step."""
+    if is_reused(line):
+        return line[REUSED], line.get("run_there")
+    return str(source.resolve()), there
+
+
+def _folder(source: Path, where: str) -> Path:
+    """``where`` (a reused line's absolute folder) as the user named it when it is ``source``."""
+    return source if where == str(source.resolve()) else Path(where)
+
+
+def _recordings(tasks: dict[str, EpisodeTask], folders: dict[str, Path]) -> str:
+    """ "; N of their recordings stay in DIR/mcap[, M in OTHER/mcap]" for the episodes ``tasks`` taken, each
+    kept in ``folders``' sweep (the one that ran it), or nothing when none was recorded."""
+    kept: dict[Path, int] = {}
+    for key, task in tasks.items():
+        if mcap_path(folders[key], task).is_file():
+            kept[folders[key]] = kept.get(folders[key], 0) + 1
+    if not kept:
+        return ""
+    (folder, count), *more = kept.items()
+    return f"; {count} of their recordings stay in {folder / MCAP_DIR}" + "".join(
+        f", {n} in {f / MCAP_DIR}" for f, n in more
+    )
 
 
 def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dict[str, int]) -> None:

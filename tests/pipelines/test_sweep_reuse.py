@@ -221,9 +221,20 @@ def test_review_reads_the_recording_policy_of_the_sweeps_own_runs(tmp_path, recw
     assert _sweep_kept_failures(tmp_path)
 
 
-def test_the_recordings_taken_are_counted_where_they_stay(tmp_path, capsys):
+def test_the_recordings_taken_are_counted_where_they_stay_and_a_chain_names_its_origin(tmp_path, capsys):
     source = tmp_path / "t2"
     argv = ["sweep", "--experiment", "table2", *SMALL, "--record", "all", "--out", str(source)]
     assert main(argv) == 0
-    code, _, err = _table3(capsys, tmp_path / "t3", "--reuse", str(source))
+    t3 = tmp_path / "t3"
+    code, _, err = _table3(capsys, t3, "--reuse", str(source), "--record", "all")
     assert code == 0 and f"(1 of its runs); 2 of their recordings stay in {source / 'mcap'}" in err
+    # a chain: what t3 took from source points at source, where their code and recordings are, in one step
+    code, _, err = _table3(capsys, tmp_path / "again", "--reuse", str(t3))
+    own = len(_records(t3)) - 2
+    assert code == 0 and f"reused {own + 2} episode(s) of 2 cell(s) from {t3} (2 of its runs)" in err
+    assert f"; 2 of their recordings stay in {source.resolve() / 'mcap'}, {own} in {t3 / 'mcap'}" in err
+    runs = _runs(tmp_path / "again")
+    assert runs[0] == {**_runs(source)[0], "reused_from": str(source.resolve()), "run_there": 1}
+    assert runs[1] == {**_runs(t3)[1], "reused_from": str(t3.resolve()), "run_there": 2}
+    code, _, err = run_cli(capsys, "config", "show", "--from-sweep", str(tmp_path / "again"), "--run", "1")
+    assert code == 2 and f"--from-sweep {source.resolve()} --run 1" in err
