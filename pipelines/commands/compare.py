@@ -93,7 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def labelled(items: list[str]) -> list[tuple[str, Path]]:
     """``(label, path)`` of each ``[LABEL=]RUN``: an existing path is taken whole (its name may hold "="),
     else LABEL=RUN names it; the label defaults to the folder's name (a file's, less its suffix). A label
-    given twice is refused."""
+    given twice, or one the table cannot show (a newline, a "|"), is refused."""
     from pipelines.experiments.compare import SOURCES
     from pipelines.experiments.log import EPISODES_FILE
 
@@ -110,6 +110,11 @@ def labelled(items: list[str]) -> list[tuple[str, Path]]:
             label, folder = (whole.stem if whole.is_file() else whole.name) or item, item
         else:
             raise PipelineError(f"expected [LABEL=]RUN, {SOURCES}, got ''")
+        if not label.isprintable() or "|" in label:  # a newline or "|" broke the table's rows
+            raise PipelineError(
+                f"label {label!r} must be printable text without '|' (it names the run in the table's rows); "
+                "name the run LABEL=RUN"
+            )
         if any(label == seen for seen, _ in runs):
             raise PipelineError(f"label {label!r} is given twice; name each run once (LABEL=RUN)")
         runs.append((label, Path(folder)))

@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -228,11 +229,15 @@ def test_json_on_standard_output_is_the_document_alone(tmp_path, capsys):
         (["x=a", "x=b"], "label 'x' is given twice"),
         (["=a", "b"], "expected [LABEL=]RUN"),
         (["", "b"], "expected [LABEL=]RUN"),
+        # a newline or "|" broke the table's rows (a folder so named needs a label of its own)
+        (["a\nb=a", "b"], "label 'a\\nb' must be printable text without '|'"),
+        (["a|b=a", "b"], "label 'a|b' must be printable text without '|'"),
+        (["a|b", "b"], "label 'a|b' must be printable text without '|' (it names the run in the table's"),
     ],
 )
 def test_labels_are_checked(items, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(PipelineError, match=message.replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(PipelineError, match=re.escape(message)):
         labelled(items)
 
 
