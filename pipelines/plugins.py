@@ -36,6 +36,7 @@ from pipelines.loop.spec import (
 )
 from predictors import models
 from predictors.errors import PredictorError, short_repr
+from predictors.plugin_import import lone_spec
 
 PluginKind = Literal["model", "controller"]
 
@@ -77,6 +78,8 @@ def register(spec: str) -> PluginKind:
 
 def register_plugins(specs: Sequence[str]) -> list[PluginKind]:
     """``register`` each of ``specs``, in order (what ``crowdmpc --plugin`` calls)."""
+    if (refusal := lone_spec(specs, "module:Class")) is not None:
+        raise PluginError(refusal)
     return [register(spec) for spec in specs]
 
 

@@ -26,7 +26,7 @@ from importlib import metadata
 from typing import TYPE_CHECKING, Any, Final, cast
 
 from predictors.errors import PredictorError, short_repr
-from predictors.plugin_import import import_class, reloaded_class, shadowing
+from predictors.plugin_import import import_class, lone_spec, reloaded_class, shadowing
 
 if TYPE_CHECKING:
     import torch
@@ -316,6 +316,8 @@ def load_plugin(spec: str) -> ModelKind:
 def register_plugins(specs: list[str] | tuple[str, ...]) -> list[ModelKind]:
     """Load each plugin and record it in ``CROWDMPC_PLUGINS`` so that child processes (sweep workers) load it
     as well."""
+    if (refusal := lone_spec(specs, "module:NetClass")) is not None:
+        raise PredictorError(refusal)
     kinds = [load_plugin(spec) for spec in specs]
     listed = [s for s in os.environ.get(PLUGINS_ENV, "").split(",") if s]
     os.environ[PLUGINS_ENV] = ",".join(dict.fromkeys([*listed, *specs]))

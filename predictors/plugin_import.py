@@ -18,6 +18,14 @@ from predictors.errors import PredictorError
 FOLDERS_ENV: Final[str] = "CROWDMPC_PLUGIN_FOLDERS"
 
 
+def lone_spec(specs: object, form: str) -> str | None:
+    """The one-line refusal of one ``module:Class`` given where a list of them is due, else None: a str is
+    iterable, and its letters were taken for plugins ("plugin 'w' is not of the form module:NetClass")."""
+    if isinstance(specs, str):
+        return f"plugins are a list of {form!r} strings, got the str {specs!r}: write [{specs!r}]"
+    return None
+
+
 def import_class(spec: str, what: str = "plugin") -> object:
     """What ``module:Class`` names (the form is the caller's to check), importing the module from the
     installed packages or, after them, the current directory, as ``python -m`` would: a user's one-file

@@ -237,6 +237,10 @@ def load_controller_plugin(spec: str) -> ControllerPlugin:
 
 def register_controller_plugins(specs: Sequence[str]) -> list[ControllerPlugin]:
     """Load each plugin and list it in ``CROWDMPC_CONTROLLERS`` for the processes started after."""
+    from predictors.plugin_import import lone_spec
+
+    if (refusal := lone_spec(specs, "module:Class")) is not None:
+        raise PipelineError(refusal)
     plugins = [load_controller_plugin(spec) for spec in specs]
     listed = [s for s in os.environ.get(PLUGINS_ENV, "").split(",") if s]
     os.environ[PLUGINS_ENV] = ",".join(dict.fromkeys([*listed, *specs]))

@@ -113,6 +113,13 @@ def test_a_net_plugin_is_still_a_model_kind():
     assert os.environ[NETS_ENV] == NET and os.environ[registry.PLUGINS_ENV] == TOY
 
 
+@pytest.mark.parametrize("register", [register_controller_plugins, plugins.register_plugins])
+def test_one_plugin_given_alone_is_refused_naming_it(register):
+    # a str is iterable: its letters were taken for plugins ("plugin 't' is not of the form module:Class")
+    with pytest.raises(PipelineError, match=r"a list of 'module:Class' strings, got the str 'tests\.plugins"):
+        register(TOY)
+
+
 def test_a_new_process_sees_the_registered_controllers(tmp_path):
     register_controller_plugins([TOY])
     script = "from pipelines.loop.controllers import controller_names; print(controller_names())"

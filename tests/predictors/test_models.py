@@ -182,6 +182,12 @@ def test_register_plugins_records_them_for_child_processes(no_plugins, monkeypat
     assert os.environ[PLUGINS_ENV] == f"some.module:Other,{TOY}"  # kept, and each listed once
 
 
+def test_one_plugin_given_alone_is_refused_naming_it(no_plugins):
+    # register_plugins("m:C") iterated the str: "plugin 'w' is not of the form module:NetClass"
+    with pytest.raises(PredictorError, match=r"list of 'module:NetClass' strings, got the str 'tests\."):
+        register_plugins(TOY)
+
+
 def test_plugins_from_the_environment(no_plugins, monkeypatch):
     monkeypatch.setenv(PLUGINS_ENV, f" {TOY} ,")
     assert TOY in model_names()
