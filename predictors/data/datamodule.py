@@ -39,11 +39,16 @@ class TrajnetDataModule(L.LightningDataModule):
         batching: str = "shuffled",
     ):
         super().__init__()
+        for what, count in (("batch_size", batch_size), ("num_workers", num_workers)):
+            # "8" from a YAML file met a bare TypeError in the comparison below
+            if not isinstance(count, int) or isinstance(count, bool):
+                raise PredictorError(f"{what} must be an int, got {type(count).__name__} {count!r}")
         if batch_size < 1:
             raise PredictorError(f"batch_size must be >= 1, got {batch_size}")
         if num_workers < 0:
             raise PredictorError(f"num_workers must be >= 0, got {num_workers}")
-        self.files = {"train": list(train_files), "val": list(val_files), "test": list(test_files)}
+        self.files = {"train": _paths(train_files, "train"), "val": _paths(val_files, "val")}
+        self.files["test"] = _paths(test_files, "test")
         self.batch_size = batch_size
         self.augment = augment
         self.seed = seed
@@ -136,3 +141,13 @@ class TrajnetDataModule(L.LightningDataModule):
     def predict_dataloader(self) -> DataLoader:
         """The test scenes in order, for ``Trainer.predict`` (``_PredictorModule.predict_step``'s output)."""
         return self._loader("test", shuffle=False)
+
+
+def _paths(files: Sequence[str | Path], split: str) -> list[str | Path]:
+    """``files`` as a list; one path given alone is refused in one line, since a str is a sequence of its
+    letters, which were read as files ("/: is a directory, not a data file")."""
+    if isinstance(files, (str, Path)):
+        raise PredictorError(
+            f"{split}_files is a list of paths, got the single path {str(files)!r}: write [path]"
+        )
+    return list(files)

@@ -1,10 +1,15 @@
 """CPU smoke test: the DataModule feeds a Lightning fit on a tiny dataset the test writes itself."""
 
+import re
+from pathlib import Path
+
 import lightning as L
+import pytest
 import torch
 
 from predictors.data.datamodule import TrajnetDataModule
 from predictors.data.windows import SceneBatch
+from predictors.errors import PredictorError
 from tests.predictors.samples import write_walk_file
 
 
@@ -53,6 +58,23 @@ def test_fast_dev_run_on_a_tiny_dataset(tmp_path):
     assert len(model.seen) == 3  # one train, one val and one test batch
     assert model.seen[0].positions.shape == (2, 21, 3, 2)
     assert model.scale.item() != 0.0  # the optimiser stepped
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"val_files": "val.ndjson"}, "val_files is a list of paths, got the single path 'val.ndjson'"),
+        ({"train_files": Path("a.ndjson")}, "train_files is a list of paths, got the single path 'a.ndjson'"),
+        ({"batch_size": "8"}, "batch_size must be an int, got str '8'"),
+        ({"num_workers": 1.0}, "num_workers must be an int, got float 1.0"),
+    ],
+)
+def test_a_lone_path_or_a_count_of_another_type_is_one_line(tmp_path, change, message):
+    # a str path was read letter by letter ("/: is a directory"), a str batch_size met a bare TypeError
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    given = {"train_files": [path], "val_files": [path], "test_files": [path], "batch_size": 2} | change
+    with pytest.raises(PredictorError, match=re.escape(message)):
+        TrajnetDataModule(**given)
 
 
 def test_training_batches_are_shuffled_and_rotated_reproducibly(tmp_path):
