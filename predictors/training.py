@@ -15,6 +15,7 @@ trajectories.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
@@ -59,6 +60,14 @@ class OptimConfig:
     top_k: int = 20  # GAN: samples for the validation top-k ADE/FDE
 
     def __post_init__(self):
+        for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below
+            whole = key in ("step_size", "variety_k", "top_k")
+            if key != "loss" and (
+                isinstance(value, bool) or not isinstance(value, int if whole else (int, float))
+            ):
+                raise PredictorError(f"{key} must be {'an int' if whole else 'a number'}, got {value!r}")
+            if key != "loss" and not math.isfinite(value):
+                raise PredictorError(f"{key} must be finite, got {value!r}")
         if self.loss not in LOSSES:
             raise PredictorError(f"loss {self.loss!r} is not one of {list(LOSSES)}")
         if self.lr <= 0 or self.weight_decay < 0 or self.step_size < 1 or not 0 < self.gamma <= 1:

@@ -98,6 +98,13 @@ def test_model_step_shares_one_path_for_val_and_test(tiny_data):
 def test_bad_options_are_refused():
     with pytest.raises(PredictorError, match="loss 'l1' is not one of"):
         OptimConfig(loss="l1")
+    # a YAML file's 1e-3 is the str "1e-3": it met a bare TypeError ("'<=' not supported ..."); NaN passed
+    with pytest.raises(PredictorError, match="^lr must be a number, got '1e-3'$"):
+        OptimConfig(lr="1e-3")  # type: ignore[arg-type]
+    with pytest.raises(PredictorError, match="^step_size must be an int, got 10.0$"):
+        OptimConfig(step_size=10.0)  # type: ignore[arg-type]
+    with pytest.raises(PredictorError, match="^lr must be finite, got nan$"):
+        OptimConfig(lr=float("nan"))
     with pytest.raises(PredictorError, match="unknown model 'transformer'"):
         make_module("transformer", SocialLSTMConfig(), OptimConfig())
     with pytest.raises(PredictorError, match="needs noise_dim >= 1"):
