@@ -29,6 +29,7 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import CloseFailed, EpisodeFailed, PipelineError
 from pipelines.loop.contract import (
     called,
+    check_controller,
     check_run,
     checked_description,
     checked_observers,
@@ -41,8 +42,7 @@ from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.progress import StepShown
 from pipelines.loop.record import EpisodeRecord, SolverStats
 from pipelines.loop.record import summarize as summarize  # its callers import it from here
-from pipelines.loop.spec import CONTROLLER_METHODS
-from predictors.errors import PredictorError, short_repr
+from predictors.errors import PredictorError
 from predictors.progress import progress_bar
 
 
@@ -322,23 +322,6 @@ def behind_tracks(controller: Controller, env_config: EnvConfig) -> Controller:
     if env_config.crowd == "orca" or isinstance(controller, RangeLimited):
         return controller
     return RangeLimited(controller, math.inf)
-
-
-def check_controller(controller: object, where: str = "run_episode") -> None:
-    """PipelineError unless ``controller`` has the protocol's methods (a spec or a name given in its place,
-    in a notebook, failed on an attribute deep inside); ``where``: the function it was given to (run_episode,
-    run_gym_episode)."""
-    if isinstance(controller, ControllerSpec):
-        takes_spec = " (run_episodes takes the spec)" if where == "run_episode" else ""
-        raise PipelineError(
-            f"{where} takes a controller built by make_controller(spec), not the ControllerSpec{takes_spec}"
-        )
-    missing = [m for m in (*CONTROLLER_METHODS, "name", "predictor") if not hasattr(controller, m)]
-    if missing:
-        raise PipelineError(
-            f"{where}: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
-            "(build one with make_controller(ControllerSpec(...)))"
-        )
 
 
 WORLD_UNITS: Final[dict[str, str]] = {

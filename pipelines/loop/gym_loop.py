@@ -37,6 +37,7 @@ from crowdsim.profiles import as_env_config
 from pipelines.errors import PipelineError
 from pipelines.loop.contract import (
     called,
+    check_controller,
     checked_description,
     checked_meta,
     checked_output,
@@ -49,7 +50,6 @@ from pipelines.loop.episode import (
     EpisodeResult,
     behind_tracks,
     check_built_for,
-    check_controller,
     replayed_recording,
 )
 from pipelines.loop.interrupt import interrupts_between_steps

@@ -40,7 +40,7 @@ import numpy as np
 
 from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
-from pipelines.loop.contract import called, checked_description, checked_output
+from pipelines.loop.contract import called, check_controller, checked_description, checked_output
 
 if TYPE_CHECKING:
     from crowdsim.control import ControlOutput
@@ -60,6 +60,7 @@ class RangeLimited:
     """``inner`` fed the humans within ``radius`` metres of some robot (module docstring)."""
 
     def __init__(self, inner: Controller, radius: float, report_tracks: bool = True):
+        check_controller(inner, "RangeLimited")  # a spec or a name in its place failed on inner.name
         radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
         if not (is_sensor_range(radius) or radius == math.inf):  # inf: the tracked humans of a replay
             raise PipelineError(f"sensor radius must be a finite number of metres > 0, got {radius!r}")

@@ -1,5 +1,7 @@
 """RangeLimited: a controller fed the humans within a radius of some robot, with a tracker's tracks."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -113,6 +115,19 @@ def test_without_reported_tracks_the_padding_reads_as_the_past_and_the_descripti
 def test_a_radius_that_is_no_distance_is_refused(radius):
     with pytest.raises(PipelineError, match="sensor radius must be a finite number of metres > 0"):
         RangeLimited(Keep(), radius)
+
+
+@pytest.mark.parametrize(
+    "inner, message",
+    [
+        (ControllerSpec("cmpc"), "RangeLimited takes a controller built by make_controller(spec), not the"),
+        ("cmpc", "RangeLimited: 'cmpc' is no controller: it has no reset, act, describe, close, name"),
+    ],
+)
+def test_a_spec_or_a_name_in_place_of_a_controller_is_one_line(inner, message):
+    # each failed on inner.name: AttributeError: 'ControllerSpec' object has no attribute 'name'
+    with pytest.raises(PipelineError, match=re.escape(message)):
+        RangeLimited(inner, 3.0)
 
 
 def test_report_tracks_must_be_a_bool():
