@@ -130,6 +130,18 @@ def make_controller(
     """The controller of ``spec`` for episodes simulated under ``env_config`` (a predictor that observes the
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
     compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
+    from crowdsim.env_config import EnvConfig
+    from predictors.errors import short_repr
+
+    # a name or a dict given in their place failed on an attribute deep inside (no attribute 'controller')
+    if not isinstance(spec, ControllerSpec):
+        raise PipelineError(
+            f"make_controller takes a ControllerSpec (ControllerSpec('cmpc')), got {short_repr(spec)}"
+        )
+    if not (env_config is None or isinstance(env_config, EnvConfig)):
+        raise PipelineError(
+            f"make_controller: env_config must be an EnvConfig or None, got {short_repr(env_config)}"
+        )
     if is_shipped(spec.controller):
         controller_names()  # PipelineError when an installed entry point takes its name
         return CONTROLLERS[spec.controller](spec, env_config, jit)

@@ -1,5 +1,7 @@
 """The closed loop: episode bookkeeping, observer hooks, seeds, summaries, errors that must surface."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -316,3 +318,16 @@ def test_the_progress_bar_shows_the_running_episodes_step(monkeypatch, capsys):
         ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2, progress=False
     )
     assert capsys.readouterr().err == "" and quiet[0].metrics == results[0].metrics
+
+
+@pytest.mark.parametrize(
+    "spec, env_config, message",
+    [
+        ("cmpc", None, "make_controller takes a ControllerSpec (ControllerSpec('cmpc')), got 'cmpc'"),
+        (ControllerSpec("orca"), {"a_max": 1.0}, "env_config must be an EnvConfig or None,"),
+    ],
+)
+def test_make_controller_names_a_name_or_a_dict_given_in_place_of_its_arguments(spec, env_config, message):
+    # each failed on an attribute deep inside: AttributeError: 'str' object has no attribute 'controller'
+    with pytest.raises(PipelineError, match=re.escape(message)):
+        make_controller(spec, env_config)
