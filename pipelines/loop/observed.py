@@ -10,13 +10,14 @@ import numpy as np
 
 from crowdsim.env import Observation
 from pipelines.errors import PipelineError
+from predictors.errors import short_repr
 
 
 def check_fields(obs: Observation) -> None:
     """PipelineError naming the first of the robots' and humans' fields that is not one row per agent: a
     one-robot ``robot_reached`` for three robots was stretched to all three (each taken as arrived), other
     shapes failed in numpy's words."""
-    m, n = obs.n_robots, obs.n_humans
+    m, n = (_agents(obs, name) for name in ("robot_positions", "human_positions"))
     radius = obs.radius
     try:
         value = math.nan if isinstance(radius, bool | str | bytes) else float(radius)  # a 0-d array too
@@ -44,6 +45,23 @@ def check_fields(obs: Observation) -> None:
         # NaN velocities failed in the MPC as "states must be finite ... (M, 4)"
         _check_finite(obs, name, "a controller plans from the current state")
     _check_present(obs)
+
+
+def _agents(obs: Observation, name: str) -> int:
+    """The rows of positions field ``name``, else a PipelineError: ``n_robots`` and ``n_humans`` are its
+    ``len``, and None given for "no humans" failed in it as a TypeError."""
+    value = getattr(obs, name)
+    try:
+        shape = np.shape(value)
+    except ValueError:  # rows of different lengths
+        shape = (-1,)
+    if len(shape) != 2 or shape[1] != 2:
+        got = "rows of different lengths" if shape == (-1,) else f"shape {shape}: {short_repr(value)}"
+        raise PipelineError(
+            f"obs.{name} must be an (n, 2) array of positions in metres (np.zeros((0, 2)) for none), "
+            f"got {got}"
+        )
+    return shape[0]
 
 
 def _check_clock(obs: Observation) -> None:

@@ -5,6 +5,7 @@ shifted plan, saying only its status), a NaN or zero ``radius`` (every robot off
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -60,3 +61,30 @@ def test_a_time_that_is_no_number_of_seconds_is_refused(time):
 
 def test_numpy_scalars_of_a_clock_are_taken():
     _act(ControllerSpec("orca"), step=np.int64(3), time=np.float32(1.2))
+
+
+@pytest.mark.parametrize(
+    ("value", "got"),
+    [
+        (None, "shape (): None"),
+        ([[0.0, 1.0], [2.0]], "rows of different lengths"),
+        (np.zeros(4), "shape (4,)"),
+    ],
+)
+@pytest.mark.parametrize("field", ["human_positions", "robot_positions"])
+def test_positions_that_are_no_rows_of_points_are_refused(field, value, got):
+    # None for "no humans" failed in len() as a TypeError before any check
+    with pytest.raises(
+        PipelineError, match=rf"^obs\.{field} must be an \(n, 2\) array .* got {re.escape(got)}"
+    ):
+        _act(ControllerSpec("cmpc"), **{field: value})
+
+
+def test_no_humans_is_an_empty_array():
+    _act(
+        ControllerSpec("orca"),
+        human_positions=np.zeros((0, 2)),
+        human_velocities=np.zeros((0, 2)),
+        human_goals=np.zeros((0, 2)),
+        history=CrowdEnv().reset(0, "circle", 3, 3).history[:, :3],
+    )
