@@ -40,6 +40,7 @@ from pipelines.loop.contract import (
     check_controller,
     checked_description,
     checked_meta,
+    checked_observers,
     checked_output,
     episode_meta,
     handed_out,
@@ -165,6 +166,7 @@ def run_gym_episode(
             "the actions"
         )
     check_built_for(controller, base.config, "run_gym_episode")
+    observers = checked_observers(observers, base.config, "run_gym_episode")
     controller = behind_tracks(controller, base.config)  # among a replayed crowd, the people tracked now
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)
@@ -234,7 +236,7 @@ class ObserveEpisodes(
                 f"ObserveEpisodes records the environment's accelerations: wrap {changer} around it, "
                 f"{changer}(ObserveEpisodes(env, ...)), not inside it"
             )
-        self.observers = tuple(observers)
+        self.observers = checked_observers(observers, self._base.config, "ObserveEpisodes")
         self.controller = controller
         self.meta = checked_meta(meta, "ObserveEpisodes")
         # a list, trimmed, not a deque(maxlen=...): users slice it (results[-10:]) and compare it with lists

@@ -445,3 +445,16 @@ def test_the_own_layout_example_runs_two_controllers_that_review_compares(tmp_pa
         "cmpc, predictor constant_velocity",
         "orca, predictor none",
     ]
+
+
+def test_observers_that_are_none_one_recorder_or_no_observer_are_one_line(tmp_path):
+    """run_episode names bad observers; through gym they ended in "TypeError: 'McapEpisodeRecorder' object is
+    not iterable" (one recorder, not a list of it) or an AttributeError for on_reset after the reset."""
+    recorder = McapEpisodeRecorder(tmp_path)
+    straight = make_controller(ControllerSpec("straight"))
+    for bad, shown in ((None, "None"), (recorder, "McapEpisodeRecorder"), ([object()], "object")):
+        with pytest.raises(PipelineError, match=rf"^ObserveEpisodes: observer.*{shown}"):
+            ObserveEpisodes(CrowdNavEnv(n_humans=2), bad)  # type: ignore[arg-type]
+        with pytest.raises(PipelineError, match=rf"^run_gym_episode: observer.*{shown}"):
+            run_gym_episode(straight, CrowdNavEnv(n_humans=2), seed=0, observers=bad)  # type: ignore[arg-type]
+    assert not list(tmp_path.iterdir())
