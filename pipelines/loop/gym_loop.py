@@ -295,10 +295,11 @@ class ObserveEpisodes(
         if self._obs is None:
             raise PipelineError("step() called before reset()")
         before = self._obs
+        # the environment checks the action first: numpy's "could not convert string to float" named nothing
+        obs, reward, terminated, truncated, info = self.env.step(action)
         out = ControlOutput(
             accelerations=np.array(action, dtype=float)[: before.n_robots], solve_time_s=elapsed
         )
-        obs, reward, terminated, truncated, info = self.env.step(action)
         self._obs = handed_out(info["observation"])
         self._steps.add(out)
         for observer in self.observers:

@@ -14,6 +14,7 @@ import pytest
 
 import crowdsim
 from crowdsim.env_config import EnvConfig
+from crowdsim.errors import SimulationError
 from crowdsim.gym_env import CrowdNavEnv
 from crowdsim.gym_wrappers import VelocityControl
 from pipelines.errors import PipelineError
@@ -458,3 +459,15 @@ def test_observers_that_are_none_one_recorder_or_no_observer_are_one_line(tmp_pa
         with pytest.raises(PipelineError, match=rf"^run_gym_episode: observer.*{shown}"):
             run_gym_episode(straight, CrowdNavEnv(n_humans=2), seed=0, observers=bad)  # type: ignore[arg-type]
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("bad", ["a", None, object()])
+def test_an_action_of_no_numbers_through_observe_episodes_is_the_environments_one_line(bad):
+    """It was numpy's own "ValueError: could not convert string to float: 'a'" (or an IndexError for None),
+    raised by the wrapper's record of the action before the environment could name it."""
+    env = ObserveEpisodes(CrowdNavEnv(n_humans=2), [])
+    env.reset(seed=0)
+    with pytest.raises(SimulationError, match=r"^action must be"):
+        env.step(bad)
+    env.step(np.zeros((3, 2)))  # nothing of the refused step was recorded
+    assert len(env._steps.solve_times) == 1
