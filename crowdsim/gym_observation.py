@@ -6,7 +6,7 @@ the array, and the native observation its info carries (``ComparableObservation`
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
@@ -38,7 +38,14 @@ class ComparableObservation(Observation):
 
     @classmethod
     def of(cls, obs: Observation) -> ComparableObservation:
-        return cls(**{f.name: getattr(obs, f.name) for f in fields(Observation)})
+        """``obs`` with copies of its arrays: the environment computes the next step's reward and distances
+        from its own ``obs``, which a policy taking the humans relative to a robot in place
+        (``human_positions -= robot``) on the info's shared arrays had moved."""
+        values: dict[str, Any] = {f.name: getattr(obs, f.name) for f in fields(Observation)}
+        copied: dict[str, Any] = {
+            k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in values.items()
+        }
+        return cls(**copied)
 
 
 def observation_bounds(

@@ -629,3 +629,22 @@ def test_a_reset_that_raises_leaves_no_episode_and_the_generator_as_it_was():
 
 def test_the_velocity_gain_takes_numpy_numbers():
     assert VelocityControl(gym.make(crowdsim.ENV_ID), gain=np.float32(1.0)).gain == 1.0
+
+
+def test_a_policy_changing_the_infos_observation_in_place_changes_no_reward():
+    """The info's native observation shared its arrays with the state the next step's reward and distances are
+    computed from: a policy taking the humans relative to a robot in place changed the rewards, silently."""
+
+    def rewards(relative: bool) -> list[tuple[float, float]]:
+        env = CrowdNavEnv(n_humans=4)
+        _, info = env.reset(seed=1)
+        paid = []
+        for _ in range(10):
+            obs = info["observation"]
+            if relative:  # in place: the humans relative to the first robot, as a policy's input
+                obs.human_positions[:] -= obs.robot_positions[0]
+            _, reward, _, _, info = env.step(np.ones((3, 2)))
+            paid.append((reward, info["min_distance_between_steps"]))
+        return paid
+
+    assert rewards(relative=True) == rewards(relative=False)
