@@ -62,18 +62,20 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         self._period = cfg.dt if gain == 1.0 / cfg.dt else 1.0 / self.gain  # divide as the baselines do
         self.a_max = cfg.a_max
         self.action_space = spaces.Box(-cfg.v_max, cfg.v_max, (base.max_robots, 2), dtype=np.float64)
+        # the velocities tracked are the environment's own: the info's copy is the policy's to change in place
+        self._base = base
         self._native: Observation | None = None
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        self._native = info["observation"]
+        self._native = self._base.observation
         return obs, info
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
         result = super().step(action)
-        self._native = result[4]["observation"]
+        self._native = self._base.observation
         return result
 
     def action(self, action: np.ndarray) -> np.ndarray:

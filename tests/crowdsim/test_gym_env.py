@@ -648,3 +648,21 @@ def test_a_policy_changing_the_infos_observation_in_place_changes_no_reward():
         return paid
 
     assert rewards(relative=True) == rewards(relative=False)
+
+
+def test_the_velocity_tracker_reads_the_environments_velocities_not_the_infos():
+    """VelocityControl tracked the velocities of the info's observation, the very object the policy was
+    handed: a policy zeroing them in place (a noisy reading dropped) had every command tracked from rest."""
+
+    def positions(zeroed: bool) -> np.ndarray:
+        env = VelocityControl(CrowdNavEnv(n_humans=2))
+        _, info = env.reset(seed=1)
+        seen = []
+        for _ in range(6):
+            if zeroed:
+                info["observation"].robot_velocities[:] = 0.0
+            obs, _, _, _, info = env.step(np.full((3, 2), 0.5))
+            seen.append(obs)
+        return np.array(seen)
+
+    assert np.array_equal(positions(zeroed=True), positions(zeroed=False))
