@@ -271,7 +271,10 @@ def _check_json(controller: Controller, value: object, what: str) -> None:
 
 def checked_meta(meta: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
     """``meta`` as a dict, unless it sets one of the episode's own fields (``OWN_FIELDS``): PipelineError
-    naming ``where`` it was given."""
+    naming ``where`` it was given. A string or a list (``meta="demo"``) failed in ``dict()``, naming
+    nothing."""
+    if meta is not None and not isinstance(meta, Mapping):
+        raise PipelineError(f"{where}: meta must be a dict of fields to add, got {short_repr(meta)}")
     meta = dict(meta or {})
     clash = [key for key in OWN_FIELDS if key in meta]
     if clash:

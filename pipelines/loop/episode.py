@@ -32,6 +32,7 @@ from pipelines.loop.contract import (
     check_controller,
     check_run,
     checked_description,
+    checked_meta,
     checked_observers,
     checked_output,
     episode_meta,
@@ -235,12 +236,12 @@ def run_episodes(
     """
     seed = check_run(spec, episodes, seed, env_config, sensor_range, sensor_tracks, into, observers_factory)
     _check_team(scenario, n_humans, n_robots, "run_episodes")
+    run_meta = checked_meta(meta, "run_episodes")  # before the controller is built: an MPC's NLPs take long
     if env_config.crowd != "orca" and episodes:  # its first window drawn before the NLPs are built: 12
         # robots' took 2.5 minutes before "no window has 50 pedestrians" (SimulationError)
         CrowdEnv(env_config, replayed_recording(env_config)).reset(seed, scenario, n_humans, n_robots)
     controller = make_controller(spec.behind(sensor_range, sensor_tracks), env_config)
     controller = behind_sensor(controller, sensor_range, sensor_tracks, n_robots, n_humans, env_config.crowd)
-    run_meta = dict(meta or {})
     results: list[EpisodeResult] = [] if into is None else into
     bar = progress_bar(range(episodes), desc=f"{spec.controller} {scenario}", unit="ep", show=progress)
     successes = sum(r.metrics.success for r in results)  # counted as they come: a sum per episode was O(N^2)

@@ -23,7 +23,7 @@ from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.schema_check import check_recording
 from pipelines.logs.view import episode_view
 from pipelines.loop.controllers import ControllerSpec, make_controller
-from pipelines.loop.episode import run_episode
+from pipelines.loop.episode import run_episode, run_episodes
 from pipelines.loop.gym_loop import ObserveEpisodes, run_gym_episode
 from tests.same_metrics import same_metrics
 
@@ -471,3 +471,19 @@ def test_an_action_of_no_numbers_through_observe_episodes_is_the_environments_on
         env.step(bad)
     env.step(np.zeros((3, 2)))  # nothing of the refused step was recorded
     assert len(env._steps.solve_times) == 1
+
+
+@pytest.mark.parametrize("meta", ["demo", ["experiment", "demo"], 5])
+def test_meta_that_is_no_mapping_is_one_line_naming_it(meta):
+    """meta="demo" for meta={"experiment": "demo"} ended in dict()'s "ValueError: dictionary update sequence
+    element #0 has length 1; 2 is required" (a TypeError for 5), naming neither meta nor the call."""
+    with pytest.raises(PipelineError, match=r"^ObserveEpisodes: meta must be a dict of fields to add, got"):
+        ObserveEpisodes(CrowdNavEnv(n_humans=2), [], meta=meta)
+    with pytest.raises(PipelineError, match=r"^run_gym_episode: meta must be a dict"):
+        run_gym_episode(make_controller(ControllerSpec("straight")), CrowdNavEnv(), seed=0, meta=meta)
+    with pytest.raises(PipelineError, match=r"^run_episode: meta must be a dict"):
+        run_episode(
+            make_controller(ControllerSpec("straight")), seed=0, scenario="circle", n_humans=2, meta=meta
+        )
+    with pytest.raises(PipelineError, match=r"^run_episodes: meta must be a dict"):
+        run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2, meta=meta)
