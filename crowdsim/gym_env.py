@@ -190,8 +190,9 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
         reward = as_reward_config(reward)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise SimulationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if not isinstance(end_on_collision, bool):
+        if not isinstance(end_on_collision, bool | np.bool_):  # numpy's from a sweep's values, as EnvConfig's
             raise SimulationError(f"end_on_collision must be a bool, got {end_on_collision!r}")
+        end_on_collision = bool(end_on_collision)
         check_sizes(scenario, n_humans, n_robots)
         self.n_robots = _count(n_robots, "n_robots", 1, MAX_ROBOTS)
         warn_formation(config, self.n_robots)

@@ -666,3 +666,10 @@ def test_the_velocity_tracker_reads_the_environments_velocities_not_the_infos():
         return np.array(seen)
 
     assert np.array_equal(positions(zeroed=True), positions(zeroed=False))
+
+
+def test_end_on_collision_takes_numpys_bool_as_envconfigs_flags_do():
+    """for end in np.array([False, True]) was refused, "must be a bool, got np.True_", where EnvConfig's
+    robots_visible, the velocity gain and the sensor radius take numpy's scalars."""
+    env = CrowdNavEnv(n_humans=1, end_on_collision=np.bool_(True))
+    assert env.end_on_collision is True
