@@ -54,6 +54,7 @@ from pipelines.loop.episode import (
     replayed_recording,
 )
 from pipelines.loop.interrupt import interrupts_between_steps
+from predictors.errors import short_repr
 
 
 def _action_changer(env: gym.Env[Any, Any], base: CrowdNavEnv) -> str | None:
@@ -224,6 +225,11 @@ class ObserveEpisodes(
         buffer_length: int | None = 100,
     ):
         buffer_length = _checked_length(buffer_length)
+        if not isinstance(controller, str) or not controller.strip():  # a policy was recorded by its repr
+            raise PipelineError(
+                f"ObserveEpisodes: controller is the name the records give the policy, a non-empty str; got "
+                f"{short_repr(controller)}"
+            )
         # env.spec can then rebuild the wrapper (gym.make(env.spec)), and check_env accepts it
         gym.utils.RecordConstructorArgs.__init__(
             self, observers=observers, controller=controller, meta=meta, buffer_length=buffer_length

@@ -487,3 +487,11 @@ def test_meta_that_is_no_mapping_is_one_line_naming_it(meta):
         )
     with pytest.raises(PipelineError, match=r"^run_episodes: meta must be a dict"):
         run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2, meta=meta)
+
+
+@pytest.mark.parametrize("name", [lambda obs: np.zeros((3, 2)), None, ""])
+def test_observe_episodes_names_a_policy_given_for_its_name(name):
+    """controller=policy (the function, for its name) was recorded as "<function <lambda> at 0x...>", another
+    name each run, so the same episodes recorded again were refused as another run's."""
+    with pytest.raises(PipelineError, match=r"^ObserveEpisodes: controller is the name the records give"):
+        ObserveEpisodes(CrowdNavEnv(n_humans=2), [], controller=name)
