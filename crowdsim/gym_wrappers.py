@@ -44,7 +44,9 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.ndarray], *, gain: float | None = None):
-        gym.utils.RecordConstructorArgs.__init__(self, gain=gain)  # env.spec can rebuild the wrapper
+        gain = gain.item() if isinstance(gain, np.generic) else gain  # np.float32 from a sweep's numbers
+        # env.spec can rebuild the wrapper, and write it as JSON (numpy's scalars are not JSON)
+        gym.utils.RecordConstructorArgs.__init__(self, gain=gain)
         gym.ActionWrapper.__init__(self, env)
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
@@ -55,7 +57,6 @@ class VelocityControl(gym.ActionWrapper[np.ndarray, np.ndarray, np.ndarray], gym
         _check_takes_accelerations(env, base)
         cfg = base.config
         gain = 1.0 / cfg.dt if gain is None else gain
-        gain = gain.item() if isinstance(gain, np.generic) else gain  # np.float32 from a sweep's numbers
         if isinstance(gain, bool) or not isinstance(gain, int | float) or not 0 < gain <= 1.0 / cfg.dt:
             raise SimulationError(f"gain must be a number in (0, 1/dt = {1.0 / cfg.dt:g}] 1/s, got {gain!r}")
         self.gain = float(gain)
@@ -111,13 +112,13 @@ class SensorRange(
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.ndarray], *, radius: float):
-        gym.utils.RecordConstructorArgs.__init__(self, radius=radius)
+        radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
+        gym.utils.RecordConstructorArgs.__init__(self, radius=radius)  # Python's numbers: JSON, as gain
         gym.ObservationWrapper.__init__(self, env)
         base = env.unwrapped
         if not isinstance(base, CrowdNavEnv):
             raise SimulationError(f"SensorRange wraps a CrowdNavEnv, got {type(base).__name__}")
         _check_gives_rows(env, base)
-        radius = radius.item() if isinstance(radius, np.generic) else radius  # np.int64(3) read as no range
         if not is_sensor_range(radius):
             raise SimulationError(f"radius must be a finite number of metres > 0, got {radius!r}")
         self.radius = float(radius)

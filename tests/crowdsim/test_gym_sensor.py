@@ -4,6 +4,7 @@ by the rule ``crowdmpc simulate --sensor-range`` sees them (``pipelines.loop.sen
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.envs.registration import EnvSpec
 
 import crowdsim
 from crowdsim.errors import SimulationError
@@ -139,3 +140,13 @@ def test_the_readmes_chain_for_an_rl_library_passes_check_env():
     checked(env, expected=(WRAPPED, "precision lowered by casting to float32"))
     obs, _ = env.reset(seed=0)
     assert obs.dtype == np.float32 and obs.shape == (8 * 7,)
+
+
+def test_the_wrappers_spec_of_numpys_numbers_is_written_as_json():
+    """gain=np.float32(2.0) and radius=np.int64(3) were recorded in env.spec as given: spec.to_json() raised
+    "TypeError: Object of type float32 is not JSON serializable"."""
+    env = SensorRange(
+        VelocityControl(gym.make(crowdsim.ENV_ID, n_humans=2), gain=np.float32(2.0)), radius=np.int64(3)
+    )
+    rebuilt = gym.make(EnvSpec.from_json(env.spec.to_json()))
+    assert (rebuilt.radius, rebuilt.env.gain) == (3.0, 2.0)
