@@ -22,7 +22,7 @@ from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.controllers import Controller
-from pipelines.loop.spec import CONTROLLER_METHODS, ControllerSpec
+from pipelines.loop.spec import ControllerSpec
 from pipelines.plain_json import plain
 from predictors.errors import short_repr
 
@@ -382,20 +382,3 @@ def checked_observers(observers: Any, env_config: Any, where: str) -> tuple[Any,
 def _check_env_config(env_config: Any, where: str) -> None:
     if not isinstance(env_config, EnvConfig):
         raise PipelineError(f"{where}: env_config must be an EnvConfig, got {short_repr(env_config)}")
-
-
-def check_controller(controller: object, where: str = "run_episode") -> None:
-    """PipelineError unless ``controller`` has the protocol's methods (a spec or a name given in its place,
-    in a notebook, failed on an attribute deep inside); ``where``: the function it was given to (run_episode,
-    run_gym_episode)."""
-    if isinstance(controller, ControllerSpec):
-        takes_spec = " (run_episodes takes the spec)" if where == "run_episode" else ""
-        raise PipelineError(
-            f"{where} takes a controller built by make_controller(spec), not the ControllerSpec{takes_spec}"
-        )
-    missing = [m for m in (*CONTROLLER_METHODS, "name", "predictor") if not hasattr(controller, m)]
-    if missing:
-        raise PipelineError(
-            f"{where}: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
-            "(build one with make_controller(ControllerSpec(...)))"
-        )

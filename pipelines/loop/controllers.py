@@ -25,6 +25,7 @@ from crowdsim.control import ControlOutput
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import (
     CONTROLLER_KINDS,
+    CONTROLLER_METHODS,
     COUPLINGS,
     ControllerKind,
     ControllerName,
@@ -39,6 +40,7 @@ from pipelines.loop.spec import (
     load_controller_plugin,
     register_controller_plugins,
 )
+from predictors.errors import short_repr
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
@@ -131,7 +133,6 @@ def make_controller(
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
     compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
     from crowdsim.env_config import EnvConfig
-    from predictors.errors import short_repr
 
     # a name or a dict given in their place failed on an attribute deep inside (no attribute 'controller')
     if not isinstance(spec, ControllerSpec):
@@ -208,3 +209,20 @@ def controller_name(value: str) -> str:
         raise argparse.ArgumentTypeError(str(UnknownController(value, [])))
     choices = ", ".join(repr(name) for name in names)
     raise argparse.ArgumentTypeError(f"invalid choice: {value!r:.60} (choose from {choices})")
+
+
+def check_controller(controller: object, where: str = "run_episode") -> None:
+    """PipelineError unless ``controller`` has the protocol's methods (a spec or a name given in its place,
+    in a notebook, failed on an attribute deep inside); ``where``: the function it was given to (run_episode,
+    run_gym_episode)."""
+    if isinstance(controller, ControllerSpec):
+        takes_spec = " (run_episodes takes the spec)" if where == "run_episode" else ""
+        raise PipelineError(
+            f"{where} takes a controller built by make_controller(spec), not the ControllerSpec{takes_spec}"
+        )
+    missing = [m for m in (*CONTROLLER_METHODS, "name", "predictor") if not hasattr(controller, m)]
+    if missing:
+        raise PipelineError(
+            f"{where}: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
+            "(build one with make_controller(ControllerSpec(...)))"
+        )

@@ -29,7 +29,6 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.errors import CloseFailed, EpisodeFailed, PipelineError
 from pipelines.loop.contract import (
     called,
-    check_controller,
     check_run,
     checked_description,
     checked_meta,
@@ -38,7 +37,7 @@ from pipelines.loop.contract import (
     episode_meta,
     handed_out,
 )
-from pipelines.loop.controllers import Controller, ControllerSpec, make_controller
+from pipelines.loop.controllers import Controller, ControllerSpec, check_controller, make_controller
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.progress import StepShown
 from pipelines.loop.record import EpisodeRecord, SolverStats

@@ -37,7 +37,6 @@ from crowdsim.profiles import as_env_config
 from pipelines.errors import PipelineError
 from pipelines.loop.contract import (
     called,
-    check_controller,
     checked_description,
     checked_meta,
     checked_observers,
@@ -45,7 +44,7 @@ from pipelines.loop.contract import (
     episode_meta,
     handed_out,
 )
-from pipelines.loop.controllers import Controller
+from pipelines.loop.controllers import Controller, check_controller
 from pipelines.loop.episode import (
     EpisodeObserver,
     EpisodeResult,

@@ -40,7 +40,8 @@ import numpy as np
 
 from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError
-from pipelines.loop.contract import called, check_controller, checked_description, checked_output
+from pipelines.loop.contract import called, checked_description, checked_output
+from pipelines.loop.controllers import check_controller
 
 if TYPE_CHECKING:
     from crowdsim.control import ControlOutput

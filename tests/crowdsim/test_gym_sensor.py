@@ -41,12 +41,11 @@ def test_the_humans_out_of_range_are_padding_and_the_reward_is_the_full_ones():
 
 def test_the_view_is_the_closed_loops_sensor():
     """Over a seeded episode, the rows shown are those of the humans RangeLimited hands its controller."""
-    from types import SimpleNamespace
-
+    from pipelines.loop.controllers import ControllerSpec, make_controller
     from pipelines.loop.sensing import RangeLimited
 
     env = SensorRange(CrowdNavEnv(n_humans=7), radius=3.0)
-    rule = RangeLimited(SimpleNamespace(name="none", predictor=None), 3.0)
+    rule = RangeLimited(make_controller(ControllerSpec("orca")), 3.0)
     obs, info = env.reset(seed=5)
     robots = env.unwrapped.max_robots
     both = set()
