@@ -71,9 +71,14 @@ def as_env_config(values: EnvConfig | Mapping[str, Any] | None) -> EnvConfig:
         raise SimulationError(
             f"config has no field {unknown[0]!r}; expected profile, visibility or one of {', '.join(known)}"
         )
+    names = [f.name for f in dataclasses.fields(OrcaParams)]
+    if "orca" in rest and not isinstance(rest["orca"], Mapping | OrcaParams):  # EnvConfig's refusal named
+        raise SimulationError(  # OrcaParams only, which plain data cannot give
+            f"config orca must be a mapping of OrcaParams' fields ({', '.join(names)}), "
+            f"got {rest['orca']!r:.80}"
+        )
     if isinstance(rest.get("orca"), Mapping):
         orca = dict(rest["orca"])
-        names = [f.name for f in dataclasses.fields(OrcaParams)]
         if set(orca) - set(names):
             raise SimulationError(
                 f"config orca has no field {sorted(set(orca) - set(names))[0]!r}; expected {', '.join(names)}"

@@ -34,9 +34,10 @@ def policy(obs: np.ndarray, n_robots: int) -> np.ndarray:
 def main(
     episodes: int = 3, out_dir: str = "runs/gym_velocity_policy", crowd: str = "orca", n_humans: int = 7
 ) -> None:
+    # gym.make("crowdmpc/CrowdNav-v0", ...) once crowdsim is imported; make_env reads a replay's recording,
+    # before the recorder makes OUT_DIR (a mistyped crowd left it empty)
+    base = make_env(EnvConfig(crowd=crowd), n_humans=n_humans)
     with McapEpisodeRecorder(out_dir) as recorder:
-        # gym.make("crowdmpc/CrowdNav-v0", ...) once crowdsim is imported; make_env reads a replay's recording
-        base = make_env(EnvConfig(crowd=crowd), n_humans=n_humans)
         env = VelocityControl(ObserveEpisodes(base, [recorder], controller="velocity_policy"))
         for seed in range(episodes):
             obs, _ = env.reset(seed=seed)

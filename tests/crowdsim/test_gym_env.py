@@ -216,6 +216,8 @@ def test_a_bad_first_layout_leaves_the_env_usable():
             "config has no field 'horizon'; expected profile, visi",
         ),
         ({"config": {"orca": {"horizon": 2}}}, "config orca has no field 'horizon'; expected neighbor_dist,"),
+        # plain data gives no OrcaParams: the refusal names the mapping it can give
+        ({"config": {"orca": 2.0}}, "config orca must be a mapping of OrcaParams' fields (neighbor_dist, "),
         ({"config": {"visibility": "visible", "robots_visible": True}}, "config gives both visibility and"),
         ({"config": {"profile": "v2"}}, "unknown profile 'v2'; choose from ['paper', 'v1']"),
         ({"reward": {"sucess": 2}}, "reward has no field 'sucess'; expected success, collision, discomfort_"),
