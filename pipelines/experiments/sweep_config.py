@@ -11,7 +11,7 @@ files check their values against the same bounds (pipelines.config.settings) wit
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -61,6 +61,8 @@ class SweepConfig:
             raise PipelineError(
                 f"SweepConfig's experiment must be an Experiment, got {short_repr(self.experiment)}"
             )
+        if not isinstance(self.out, str | os.PathLike):  # None failed in run_sweep's Path(out)
+            raise PipelineError(f"SweepConfig's out must be a folder's path, got {short_repr(self.out)}")
         for name in ("episodes_per_cell", "seed", "n_robots", "workers"):  # a float failed deep in range()
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer):
@@ -82,9 +84,11 @@ class SweepConfig:
             raise PipelineError(f"unknown --record {self.record!r}; choose from {list(RECORD_POLICIES)}")
         if self.backend not in BACKENDS:
             raise PipelineError(f"unknown backend {self.backend!r}; choose from {list(BACKENDS)}")
-        if self.humans is not None:  # (5.5,) failed deep inside
-            if isinstance(self.humans, str | bytes) or not all(
-                isinstance(n, int | np.integer) and not isinstance(n, bool) for n in self.humans
+        if self.humans is not None:  # (5.5,) failed deep inside, 5 in a bare TypeError
+            if (
+                isinstance(self.humans, str | bytes)
+                or not isinstance(self.humans, Iterable)
+                or not all(isinstance(n, int | np.integer) and not isinstance(n, bool) for n in self.humans)
             ):
                 raise PipelineError(f"--humans must list numbers of humans, got {short_repr(self.humans)}")
             object.__setattr__(self, "humans", tuple(int(n) for n in self.humans))

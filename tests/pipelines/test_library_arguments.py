@@ -190,4 +190,9 @@ def test_an_experiment_and_a_sweep_config_built_by_hand_are_checked_before_any_w
     assert experiment(humans=tuple(np.arange(5, 7))).humans == (5, 6)  # numpy's counts, kept as ints
     with pytest.raises(PipelineError, match=r"^--humans must list numbers of humans, got \(5.5,\)$"):
         SweepConfig(experiment(), tmp_path, 1, humans=(5.5,))  # type: ignore[arg-type]
+    with pytest.raises(PipelineError, match=r"^--humans must list numbers of humans, got 5$"):
+        SweepConfig(experiment(), tmp_path, 1, humans=5)  # type: ignore[arg-type]
+    with pytest.raises(PipelineError, match=r"^SweepConfig's out must be a folder's path, got None$"):
+        SweepConfig(experiment(), None, 1)  # type: ignore[arg-type]
+    assert SweepConfig(experiment(), tmp_path, 1, humans=np.arange(5, 7)).humans == (5, 6)  # type: ignore[arg-type]
     assert list(tmp_path.iterdir()) == []
