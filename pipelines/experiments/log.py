@@ -134,11 +134,15 @@ class EpisodeLog:
 
     def append(self, record: dict[str, Any]) -> tuple[int, bytes]:
         """Writes ``record`` as the log's last line; returns that line and its offset, as ``scan`` gives
-        them."""
+        them. A torn last line no scan cut off (errors.jsonl is never cut) is ended first: appended to, it
+        took this record into a line that reads as neither."""
         data = self._line(record)
         try:
-            with open(self.path, "ab") as f:
+            with open(self.path, "a+b") as f:
                 offset = os.fstat(f.fileno()).st_size  # one writer: the sweep holding the lock
+                if offset and os.pread(f.fileno(), 1, offset - 1) != b"\n":
+                    f.write(b"\n")
+                    offset += 1
                 f.write(data)
                 f.flush()
                 os.fsync(f.fileno())

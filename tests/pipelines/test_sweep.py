@@ -26,7 +26,7 @@ from pipelines.experiments.cells import (
     PaperFigures,
     get_experiment,
 )
-from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, sweep_lock
+from pipelines.experiments.log import EPISODES_FILE, ERRORS_FILE, EpisodeLog, error_keys, sweep_lock
 from pipelines.experiments.report import CELLS_CSV, write_report
 from pipelines.experiments.summary import _half_width, summarize, t95, wilson_interval
 from pipelines.experiments.sweep import mcap_path, run_sweep
@@ -412,6 +412,26 @@ def test_episodes_that_raise_go_to_errors_and_a_broken_setup_stops_early(tmp_pat
     errors = (tmp_path / ERRORS_FILE).read_text().splitlines()
     assert len(errors) == 4 and "no solver here" in json.loads(errors[0])["error"]
     assert EpisodeLog(tmp_path / EPISODES_FILE).load() == {}
+
+
+def test_an_error_after_a_torn_entry_of_errors_jsonl_is_an_entry_of_its_own(tmp_path, monkeypatch):
+    """errors.jsonl is appended to and never cut: an entry torn by a kill or a full disk took the next
+    entry into its line, whose traceback could not be read again, nor its key, which a rerun retries last."""
+
+    def broken(spec, env_config=None, *, jit=False):
+        raise RuntimeError("no solver here")
+
+    monkeypatch.setattr("pipelines.experiments.worker.make_controller", broken)
+    with pytest.raises(PipelineError, match="first 4 episodes all raised"):
+        run_sweep(_config(tmp_path, 5))
+    errors = (tmp_path / ERRORS_FILE).read_bytes()
+    (tmp_path / ERRORS_FILE).write_bytes(errors[:-20])  # the last entry torn
+    with pytest.raises(PipelineError, match="first 4 episodes all raised"):
+        run_sweep(_config(tmp_path, 5))
+    lines = (tmp_path / ERRORS_FILE).read_bytes().splitlines()
+    assert len(lines) == 8 and lines[3] == errors.splitlines()[3][:-19]
+    assert all("no solver here" in json.loads(line)["error"] for line in lines[:3] + lines[4:])
+    assert len(error_keys(tmp_path)) == 7  # the torn entry's key alone is lost
 
 
 def test_an_out_whose_file_system_does_not_lock_is_one_line(tmp_path, monkeypatch, capsys):
