@@ -47,12 +47,9 @@ class EpisodeLog:
         self.check = check
         self.damaged = damaged
 
-    def load(
-        self, repair: bool = True, keep: Callable[[dict[str, Any]], dict[str, Any]] | None = None
-    ) -> dict[str, dict[str, Any]]:
-        """Every complete record by key (``keep(record)``: what to hold of each, after its check), as ``scan``
-        reads them."""
-        return {record["key"]: record if keep is None else keep(record) for _, _, record in self.scan(repair)}
+    def load(self, repair: bool = True) -> dict[str, dict[str, Any]]:
+        """Every complete record by key, as ``scan`` reads them."""
+        return {record["key"]: record for _, _, record in self.scan(repair)}
 
     def scan(self, repair: bool = True) -> Iterator[tuple[int, bytes, dict[str, Any]]]:
         """Every complete record, checked, in the file's order, with its line and the line's offset: what

@@ -291,17 +291,14 @@ def test_the_kept_cut_line_is_never_written_through_a_link_or_into_a_folder(tmp_
         check_sweep_directory(tmp_path)
 
 
-def test_load_keeps_what_keep_makes_of_each_checked_record(tmp_path):
-    """The report holds each record without its effective config (half a record's memory)."""
+def test_load_checks_each_record_naming_its_line(tmp_path):
     seen = []
     log = EpisodeLog(tmp_path / EPISODES_FILE, check=lambda record, where: seen.append((dict(record), where)))
     log.append({"key": "a", "config": {"mpc": {"horizon": 4}}, "x": 1})
     log.append({"key": "b", "config": {}, "x": 2})
-    kept = log.load(keep=lambda r: {k: v for k, v in r.items() if k != "config"})
-    assert kept == {"a": {"key": "a", "x": 1}, "b": {"key": "b", "x": 2}}
+    assert log.load()["a"] == {"key": "a", "config": {"mpc": {"horizon": 4}}, "x": 1}
     assert [where.rsplit(":", 1)[1] for _, where in seen] == ["1", "2"]
-    assert seen[0][0]["config"] == {"mpc": {"horizon": 4}}  # checked whole, before keep
-    assert log.load()["a"]["config"] == {"mpc": {"horizon": 4}}  # the file itself keeps everything
+    assert seen[0][0]["config"] == {"mpc": {"horizon": 4}}
 
 
 def test_the_report_holds_no_record_but_columns_of_what_it_reads(tmp_path):
