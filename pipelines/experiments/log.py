@@ -173,6 +173,20 @@ class EpisodeLog:
             raise PipelineError(f"{self.path}: cannot write the record of {key!r} as JSON ({exc})") from None
 
 
+def write_whole(path: Path, data: bytes) -> None:
+    """``data`` into ``path`` in one rename, synced: a stop or a full disk halfway leaves the file as it was,
+    and no ``.part`` (sweep.json, a kept recording)."""
+    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:  # stopped before the replace: the half-written file is nobody's
+        tmp.unlink(missing_ok=True)
+
+
 def error_keys(out: Path) -> set[str]:
     """The keys of the episodes ``<out>/errors.jsonl`` holds (episodes that raised, each entry a line; a
     rerun that retries one appends again). A line that is no entry (a torn tail) is passed over: the keys only

@@ -7,14 +7,13 @@ those episodes, not a run here). Written whole, in one rename (``write_sweep_fil
 from __future__ import annotations
 
 import json
-import os
 import sys
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
 from pipelines.errors import PipelineError, writes_named
-from pipelines.experiments.log import EPISODES_FILE, PART_SUFFIX, SWEEP_FILE
+from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE, write_whole
 from pipelines.experiments.record_checks import DAMAGED
 from pipelines.plain_json import plain
 
@@ -90,13 +89,5 @@ def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:
 def write_sweep_file(path: Path, meta: dict[str, Any]) -> None:
     """sweep.json's document into ``path`` in one rename, synced: a stop or a full disk halfway leaves the
     file as it was (a full disk's error names it)."""
-    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
     with writes_named(path):
-        try:
-            with open(tmp, "w", encoding="utf-8") as f:
-                f.write(json.dumps(plain(meta), indent=1) + "\n")
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        finally:  # stopped before the replace: the half-written file is nobody's
-            tmp.unlink(missing_ok=True)
+        write_whole(path, (json.dumps(plain(meta), indent=1) + "\n").encode())

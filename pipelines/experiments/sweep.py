@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import sys
 import time
 from collections.abc import Callable, Collection
@@ -34,7 +33,6 @@ from pipelines.errors import PipelineError, SweepStopped
 from pipelines.experiments.backends import Backend, check_backend, make_backend
 from pipelines.experiments.log import (
     ERRORS_FILE,
-    PART_SUFFIX,
     SWEEP_FILE,
     EpisodeLog,
     check_sweep_directory,
@@ -43,6 +41,7 @@ from pipelines.experiments.log import (
     mcap_path,
     read_sweep_file,
     sweep_lock,
+    write_whole,
 )
 from pipelines.experiments.resume_checks import ResumeChecks
 from pipelines.experiments.reuse import check_source, seed_from
@@ -88,20 +87,13 @@ class SweepOutcome:
 
 def _write_atomic(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + PART_SUFFIX)
     try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        write_whole(path, data)
     except OSError as exc:  # a full disk, a quota, `ulimit -f`: a write's OSError names no file
         raise PipelineError(
             f"{path}: could not write the episode's recording ({exc.strerror or exc}); the episodes recorded "
             "before it are kept: free space and run the same sweep again to resume"
         ) from None
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask]) -> dict[str, Any]:
