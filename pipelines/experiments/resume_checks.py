@@ -87,7 +87,8 @@ class ResumeChecks:
         )
 
     def check(self) -> None:
-        """The predictors, then the margins: each planned episode's record, in the plan's order."""
+        """The predictors, then the margins, then the replayed crowds: each planned episode's record, in the
+        plan's order."""
         self._index.clear()  # not held while the workers run
         self._check_predictors()
         self._check_margins()

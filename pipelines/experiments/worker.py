@@ -161,8 +161,10 @@ def episode_record(
     cell, the worker). ``cpu_s`` is the worker's CPU time for the episode (``process_cpu_s``: gcc compiling a
     solver included), which unlike ``wall_s`` does not
     depend on how busy the machine was. ``config``: the effective config the episode ran with
-    (``cell_config``: the simulator's and the controller's, as in the MCAP metadata), under "config"; records
-    written before it existed have none, and nothing that reads records needs it."""
+    (``cell_config``: the simulator's and the controller's, as in the MCAP metadata), under "config": a
+    resume checks its margins (resume_checks), table.md names their calibration (cell_columns), compare pairs
+    crowds by its "env". Records written before it existed have none: no margins to check, no calibration
+    to name, their profile's crowd."""
     spec, world = task.cell.spec, task.cell.world
     sweep = {
         "key": task.key,
