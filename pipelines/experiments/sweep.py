@@ -285,9 +285,9 @@ def _run_tasks(
     outcome: SweepOutcome,
     backend_factory: Callable[[SweepConfig, str], Backend],
     scratch: str,
-    retried: Collection[str] = (),
-    started: Callable[[str], int] = lambda backend: 1,
-    records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
+    retried: Collection[str],
+    started: Callable[[str], int],
+    records: Callable[[int, bytes, dict[str, Any]], None] | None,
 ) -> None:
     """Start the backend, call ``started`` with its name (the run's line in sweep.json: a backend that could
     not start ran nothing; it returns the run's number), write every outcome as it comes back, each record
