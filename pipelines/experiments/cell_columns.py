@@ -179,11 +179,3 @@ def calibration_texts(records: Iterable[Mapping[str, Any]]) -> set[str]:
 
     made = (((r.get("config") or {}).get("margins") or {}).get("calibration") for r in records)
     return {calibration_text(c) for c in made if c}
-
-
-def columns_by_cell(records: Iterable[Mapping[str, Any]]) -> dict[str, CellColumns]:
-    """``records`` (dicts) by their cell, as columns."""
-    by_cell: dict[str, CellColumns] = {}
-    for record in records:
-        by_cell.setdefault(record["cell"], CellColumns()).add(record)
-    return by_cell

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from pipelines.cli import main
-from pipelines.experiments.cell_columns import columns_by_cell
+from pipelines.experiments.cell_columns import CellColumns
 from pipelines.experiments.cells import get_experiment
 from pipelines.experiments.summary import summarize, summarize_columns
 from pipelines.experiments.tables import markdown_table
@@ -68,7 +68,10 @@ def test_a_sweeps_table_says_where_its_margins_came_from():
     line = "Calibrated margins from: social_lstm_eth cp0.1: shipped calibration of 2026-11-30 20:08 UTC."
     assert line in table.splitlines()
     # the report of a large sweep reads its records as columns: the same table
-    assert markdown_table(experiment, summarize_columns(experiment, cells, columns_by_cell(records))) == table
+    columns: dict[str, CellColumns] = {}
+    for record in records:
+        columns.setdefault(record["cell"], CellColumns()).add(record)
+    assert markdown_table(experiment, summarize_columns(experiment, cells, columns)) == table
     mine = _cell_records(cells, SHIPPED | {"zoo": "user", "created": "2026-12-05T10:00:00+00:00"})
     table = markdown_table(experiment, summarize(experiment, cells, mine))
     assert (
