@@ -7,9 +7,9 @@ frequencies as ``100 sum(x_steps) / sum(n_steps + 1)`` over a cell's episodes. R
 step counts existed still report, with NaN (printed "—") for what they lack.
 
 Those rates sample distances at the steps (every 0.4 s), as the paper's table is compared; CrowdNav takes the
-closest approach within each step. ``between_steps_rate`` gives the % of a cell's episodes whose closest
-approach with linear motion between steps is below d_min (crowdsim.metrics ``collision_between_steps``),
-cells.csv's ``collision_between_steps_*`` columns; NaN when some record predates the field. The same goes
+closest approach within each step. ``added_flag_count`` counts a cell's episodes whose closest approach
+with linear motion between steps is below d_min (crowdsim.metrics ``collision_between_steps``), cells.csv's
+``collision_between_steps_*`` columns; empty when some record predates the field. The same goes
 for robots touching each other (``robot_contact``, not a metric of the paper): cells.csv's
 ``robot_contact_*`` columns and ``robot_contact_step_freq``.
 
@@ -102,17 +102,14 @@ def step_frequency(metrics: Sequence[Mapping[str, Any]], name: str) -> float:
     return 100.0 * sum(cast("list[float]", counts)) / sum(n + 1 for n in cast("list[float]", steps))
 
 
-def between_steps_rate(
-    metrics: Sequence[Mapping[str, Any]], name: str = "collision_between_steps"
-) -> tuple[int | None, float]:
-    """(episodes, % of episodes) in which ``name`` (a crowdsim.metrics flag added after the first records:
-    a ``*_between_steps`` flag, ``robot_contact``) held; (None, NaN) when some episode lacks it (an older
-    record) or there are no episodes."""
+def added_flag_count(metrics: Sequence[Mapping[str, Any]], name: str) -> int | None:
+    """The episodes in which ``name`` (a crowdsim.metrics flag added after the first records: a
+    ``*_between_steps`` flag, ``robot_contact``) held; None when some episode lacks it (an older record) or
+    there are no episodes."""
     flags = [m.get(name) for m in metrics]
     if not flags or any(f is None for f in flags):
-        return None, math.nan
-    count = sum(bool(f) for f in flags)
-    return count, 100.0 * count / len(flags)
+        return None
+    return sum(bool(f) for f in flags)
 
 
 def min_distances(metrics: Sequence[Mapping[str, Any]]) -> tuple[float, ...]:
@@ -128,7 +125,7 @@ def safety_figures(metrics: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "min_distance_median": float(np.median(finite)) if finite else math.nan,
         "min_distances": distances,
         # the flags added after the first records, counted per cell like the paper's rates
-        "added_flag_counts": {name: between_steps_rate(metrics, name)[0] for name in ADDED_FLAGS},
+        "added_flag_counts": {name: added_flag_count(metrics, name) for name in ADDED_FLAGS},
     }
 
 

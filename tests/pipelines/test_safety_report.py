@@ -14,7 +14,7 @@ from pipelines.experiments.safety_report import (
     MIN_DISTANCE_HIST_CSV,
     MIN_DISTANCE_HIST_PNG,
     SAFETY_TRADEOFF_PNG,
-    between_steps_rate,
+    added_flag_count,
     min_distance_counts,
     step_frequency,
     world_note,
@@ -305,14 +305,11 @@ def test_cells_csv_gives_the_collision_rate_between_steps(tmp_path):
     assert (episodes[3]["min_distance"], episodes[3]["min_distance_between_steps"]) == ("0.82", "0.78")
 
 
-def test_between_steps_rate_needs_every_record():
-    assert between_steps_rate([{"collision_between_steps": True}, {"collision_between_steps": False}]) == (
-        1,
-        50.0,
-    )
-    count, percent = between_steps_rate([{"collision_between_steps": True}, {}])  # one older record
-    assert count is None and math.isnan(percent)
-    assert math.isnan(between_steps_rate([])[1])
+def test_added_flag_count_needs_every_record():
+    name = "collision_between_steps"
+    assert added_flag_count([{name: True}, {name: False}], name) == 1
+    assert added_flag_count([{name: True}, {}], name) is None  # one older record
+    assert added_flag_count([], name) is None
 
 
 def test_the_plots_panels_follow_the_crowd_sizes_and_each_the_methods_order():
