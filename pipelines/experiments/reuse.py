@@ -141,8 +141,12 @@ def seed_from(
         print(f"--reuse {source}: none of its episodes is one of this plan's left to run", file=sys.stderr)
         return meta
     runs = meta.setdefault("runs", [])
-    runs.extend(lost_runs(out, len(runs), found.last_run))  # before new numbers are taken
     numbers = {(r.get(REUSED), r.get("run_there")): k for k, r in enumerate(runs, start=1) if is_reused(r)}
+    listed, lost = (
+        len(runs),
+        max(0, found.last_run - len(runs)),
+    )  # lost runs' numbers first: records name them
+    added: list[dict[str, Any]] = []
     number_of: dict[int | None, int] = {}
     for there in sorted(set(found.runs_there.values()), key=lambda run: (run is None, run or 0)):
         line = found.source_runs[there - 1] if there is not None and there <= len(found.source_runs) else None
@@ -150,9 +154,12 @@ def seed_from(
             line = {"lost": f"no line of {source / SWEEP_FILE} names the run of its episodes"}
         origin = _origin(source, there, line)
         if origin not in numbers:
-            runs.append({**line, REUSED: origin[0], "run_there": origin[1]})
-            numbers[origin] = len(runs)
+            added.append({**line, REUSED: origin[0], "run_there": origin[1]})
+            numbers[origin] = listed + lost + len(added)
         number_of[there] = numbers[origin]
+    # the run that began is the sweep's own, after the lines taken (they named run listed + lost + 1)
+    runs.extend(lost_runs(out, listed, found.last_run, began=listed + lost + len(added) + 1))
+    runs.extend(added)
     meta["experiment"], meta["title"] = experiment.name, experiment.title
     write_sweep_file(out / SWEEP_FILE, meta)
     by_key = {task.key: task for task in tasks if task.key in found.runs_there}

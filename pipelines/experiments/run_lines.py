@@ -65,11 +65,12 @@ def split_lost(runs: list[Any]) -> tuple[list[Any], str]:
     return kept, f"{text}, code unknown" if text else ""
 
 
-def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:
+def lost_runs(out: Path, listed: int, last: int, began: int | None = None) -> list[dict[str, str]]:
     """A line for each run the records name (``last``: the highest ``run`` of any) past the ``listed`` lines
     of sweep.json, said on stderr: with sweep.json moved away, the next run took number 1, and the old
     records' ``"run": 1`` credited its code with their episodes. A number past ``MAX_LOST_RUNS`` of them is
-    the log's damage, not runs (a line each would fill sweep.json)."""
+    the log's damage, not runs (a line each would fill sweep.json). ``began``: the number of the run that
+    found them (None: the next, ``last + 1``; --reuse's lines taken come between)."""
     lost = last - listed
     if lost <= 0:
         return []
@@ -83,7 +84,8 @@ def lost_runs(out: Path, listed: int, last: int) -> list[dict[str, str]]:
         "kept as runs of unknown code (a new --out starts afresh)",
         file=sys.stderr,
     )
-    return [{"lost": f"not listed in {SWEEP_FILE} when run {listed + lost + 1} began"} for _ in range(lost)]
+    began = last + 1 if began is None else began
+    return [{"lost": f"not listed in {SWEEP_FILE} when run {began} began"} for _ in range(lost)]
 
 
 def write_sweep_file(path: Path, meta: dict[str, Any]) -> None:

@@ -84,6 +84,34 @@ def test_a_stop_between_the_run_lines_and_the_records_is_taken_up_again(
     assert sorted(r["run"] for r in _records(out)) == [1, 1, 2, 2]
 
 
+def test_a_run_sweep_json_lost_is_named_with_the_run_that_found_it(table2, tmp_path, capsys):
+    out = tmp_path / "t3"
+    assert (
+        main(
+            [
+                "sweep",
+                "--experiment",
+                "table3",
+                *SMALL[:2],
+                "--episodes-per-cell",
+                "1",
+                *SMALL[4:],
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    meta = json.loads((out / "sweep.json").read_text())
+    (out / "sweep.json").write_text(json.dumps({**meta, "runs": []}))  # its one line lost
+    code, _, err = _table3(capsys, out, "--reuse", str(table2))
+    assert code == 0 and "reused 1 episode(s)" in err
+    runs = _runs(out)  # the lost run 1, the line taken (2), then the run that found the loss (3)
+    assert runs[0] == {"lost": "not listed in sweep.json when run 3 began"}
+    assert "reused_from" in runs[1] and len(runs) == 3 and "reused_from" not in runs[2]
+    assert sorted(r["run"] for r in _records(out)) == [1, 1, 2, 3]
+
+
 def test_a_dry_run_counts_them_and_writes_nothing(table2, tmp_path, capsys):
     out = tmp_path / "t3"
     code, stdout, _ = _table3(capsys, out, "--reuse", str(table2), "--dry-run")
