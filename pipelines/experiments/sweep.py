@@ -306,7 +306,11 @@ def _run_tasks(
         run = started(backend.name)
         bar = _progress_bar(config, outcome)
         for result in backend.run(todo):
-            task = by_key[result.key]
+            task = by_key.get(result.key)
+            if task is None:  # a backend of one's own (backend_factory) answering for another episode
+                raise PipelineError(
+                    f"{backend.name} backend returned episode {result.key!r}, which it was not given"
+                )
             if result.error is not None:
                 outcome.errors.append(result.key)
                 _append_error(out, task, result.error)

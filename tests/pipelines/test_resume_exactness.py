@@ -264,6 +264,22 @@ def test_errors_after_a_recorded_episode_do_not_stop_the_sweep(tmp_path):
     assert len((tmp_path / "errors.jsonl").read_text().splitlines()) == 7
 
 
+def test_a_backend_answering_for_an_episode_it_was_not_given_is_one_line(tmp_path):
+    class Stray:  # a backend of one's own (run_sweep's backend_factory) with a bug: it was a bare KeyError
+        name = "stray"
+
+        def run(self, tasks):
+            yield EpisodeOutcome("not-planned", error="boom")
+
+        def close(self):
+            pass
+
+    with pytest.raises(
+        PipelineError, match="^stray backend returned episode 'not-planned', which it was not"
+    ):
+        run_sweep(_config(tmp_path, 1), backend_factory=lambda config, scratch: Stray())
+
+
 class _NoEpisodes:
     """A backend that runs nothing: what sweep.json states is written before any episode."""
 
