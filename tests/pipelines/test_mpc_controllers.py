@@ -335,12 +335,12 @@ def test_a_hand_built_observation_is_checked_at_every_step():
     ):
         controller.act(dataclasses.replace(obs, dt=0.1))
     wrong = {
-        "robot_reached": np.array([True]),
-        "robot_velocities": np.zeros(2),
-        "human_positions": np.zeros(3),
+        "robot_reached": (np.array([True]), "has shape (1,), expected (2,)"),
+        "robot_velocities": (np.zeros(2), "has shape (2,), expected (2, 2)"),
+        "human_positions": (np.zeros(3), "must be an (n, 2) array of positions in metres (np.zeros((0, 2)) "),
     }
-    for field, value in wrong.items():
-        with pytest.raises(PipelineError, match=rf"^obs.{field} has shape {re.escape(str(value.shape))}, "):
+    for field, (value, message) in wrong.items():
+        with pytest.raises(PipelineError, match=rf"^obs.{field} {re.escape(message)}"):
             controller.act(dataclasses.replace(obs, **{field: value}))
     float32 = dataclasses.replace(obs, history=obs.history.astype(np.float32))
     assert controller.act(float32).status == "ok"
