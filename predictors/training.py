@@ -16,6 +16,7 @@ trajectories.
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
@@ -63,7 +64,8 @@ class OptimConfig:
         for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below
             whole = key in ("step_size", "variety_k", "top_k")
             if key != "loss" and (
-                isinstance(value, bool) or not isinstance(value, int if whole else (int, float))
+                # numpy's scalars (a sweep's np.arange steps) as the nets' configs take them
+                isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real)
             ):
                 raise PredictorError(f"{key} must be {'an int' if whole else 'a number'}, got {value!r}")
             if key != "loss" and not math.isfinite(value):

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import lightning as L
+import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
@@ -105,6 +106,8 @@ def test_bad_options_are_refused():
         OptimConfig(step_size=10.0)  # type: ignore[arg-type]
     with pytest.raises(PredictorError, match="^lr must be finite, got nan$"):
         OptimConfig(lr=float("nan"))
+    # numpy's scalars were taken before the type check, as SocialLSTMConfig's sizes and rates are
+    assert OptimConfig(lr=np.float32(1e-3), step_size=np.int64(5), top_k=np.int64(3)).step_size == 5
     with pytest.raises(PredictorError, match="unknown model 'transformer'"):
         make_module("transformer", SocialLSTMConfig(), OptimConfig())
     with pytest.raises(PredictorError, match="needs noise_dim >= 1"):
