@@ -167,6 +167,7 @@ def run_gym_episode(
         )
     check_built_for(controller, base.config, "run_gym_episode")
     observers = checked_observers(observers, base.config, "run_gym_episode")
+    checked_meta(meta, "run_gym_episode")  # before the reset: a recorder inside env opened its file there
     controller = behind_tracks(controller, base.config)  # among a replayed crowd, the people tracked now
     shape = (base.max_robots, 2)
     _, info = env.reset(seed=seed, options=options)

@@ -489,6 +489,15 @@ def test_meta_that_is_no_mapping_is_one_line_naming_it(meta):
         run_episodes(ControllerSpec("straight"), episodes=1, seed=0, scenario="circle", n_humans=2, meta=meta)
 
 
+def test_meta_refused_by_run_gym_episode_leaves_the_env_unreset(tmp_path):
+    """It was checked after env.reset: a recorder inside the env (ObserveEpisodes) had opened its file."""
+    env = ObserveEpisodes(CrowdNavEnv(n_humans=2), [McapEpisodeRecorder(tmp_path)])
+    for meta in ("demo", {"seed": 3}):
+        with pytest.raises(PipelineError, match=r"^run_gym_episode: meta"):
+            run_gym_episode(make_controller(ControllerSpec("straight")), env, seed=0, meta=meta)
+    assert env.unwrapped.episode == {} and not list(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize("name", [lambda obs: np.zeros((3, 2)), None, ""])
 def test_observe_episodes_names_a_policy_given_for_its_name(name):
     """controller=policy (the function, for its name) was recorded as "<function <lambda> at 0x...>", another
