@@ -146,6 +146,7 @@ def run_episode(
     """
     check_controller(controller)
     observers = checked_observers(observers, env_config, "run_episode")
+    checked_meta(meta, "run_episode")  # before the controller's reset, which may build its NLPs
     check_built_for(controller, env_config, "run_episode")
     _check_team(scenario, n_humans, n_robots, "run_episode")
     env = CrowdEnv(env_config, replayed_recording(env_config))

@@ -504,3 +504,13 @@ def test_observe_episodes_names_a_policy_given_for_its_name(name):
     name each run, so the same episodes recorded again were refused as another run's."""
     with pytest.raises(PipelineError, match=r"^ObserveEpisodes: controller is the name the records give"):
         ObserveEpisodes(CrowdNavEnv(n_humans=2), [], controller=name)
+
+
+def test_meta_refused_by_run_episode_is_refused_before_the_controllers_reset():
+    """It was checked after the reset, where an MPC builds its NLPs (minutes at twelve robots)."""
+    controller = make_controller(ControllerSpec("straight"))
+    resets = []
+    controller.reset = resets.append  # type: ignore[method-assign]
+    with pytest.raises(PipelineError, match=r"^run_episode: meta"):
+        run_episode(controller, seed=0, scenario="circle", n_humans=2, meta={"seed": 3})
+    assert resets == []
