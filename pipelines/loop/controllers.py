@@ -213,8 +213,8 @@ def controller_name(value: str) -> str:
 
 def check_controller(controller: object, where: str = "run_episode") -> None:
     """PipelineError unless ``controller`` has the protocol's methods (a spec or a name given in its place,
-    in a notebook, failed on an attribute deep inside); ``where``: the function it was given to (run_episode,
-    run_gym_episode)."""
+    in a notebook, failed on an attribute deep inside), its ``name`` a non-empty str and its ``predictor`` a
+    str or None; ``where``: the function it was given to (run_episode, run_gym_episode, RangeLimited)."""
     if isinstance(controller, ControllerSpec):
         takes_spec = " (run_episodes takes the spec)" if where == "run_episode" else ""
         raise PipelineError(
@@ -225,4 +225,12 @@ def check_controller(controller: object, where: str = "run_episode") -> None:
         raise PipelineError(
             f"{where}: {short_repr(controller)} is no controller: it has no {', '.join(missing)} "
             "(build one with make_controller(ControllerSpec(...)))"
+        )
+    # what the records and recordings write as "controller" and "predictor" (strings by their schemas): a
+    # hand-built controller's name=5 wrote an /episode/metrics message that review --check refused
+    name, predictor = controller.name, controller.predictor  # type: ignore[attr-defined]
+    if not (isinstance(name, str) and name) or not (predictor is None or isinstance(predictor, str)):
+        raise PipelineError(
+            f"{where}: a controller needs a non-empty str name and a predictor (str or None), got "
+            f"name={short_repr(name)}, predictor={short_repr(predictor)}"
         )

@@ -331,3 +331,16 @@ def test_make_controller_names_a_name_or_a_dict_given_in_place_of_its_arguments(
     # each failed on an attribute deep inside: AttributeError: 'str' object has no attribute 'controller'
     with pytest.raises(PipelineError, match=re.escape(message)):
         make_controller(spec, env_config)
+
+
+@pytest.mark.parametrize("name, predictor", [(5, None), ("", None), ("mine", 3)])
+def test_a_hand_built_controller_names_itself_with_strings(name, predictor):
+    """The records and recordings write a controller's ``name`` and ``predictor`` as strings (their schemas):
+    a hand-built controller with ``name = 5`` ran, and its recording's /episode/metrics message was refused
+    by ``review --check`` ("$.controller: expected string, got int 5"). It is refused before the reset."""
+    from pipelines.loop.baselines import orca
+
+    controller = orca()
+    controller.name, controller.predictor = name, predictor  # type: ignore[misc]
+    with pytest.raises(PipelineError, match=r"^run_episode: a controller needs a non-empty str name and a "):
+        run_episode(controller, seed=0, scenario="circle", n_humans=1, n_robots=1)
