@@ -22,7 +22,7 @@ from crowdsim.control import ControlOutput
 from crowdsim.env import CrowdEnv, Observation
 from crowdsim.env_config import EnvConfig
 from crowdsim.errors import SimulationError
-from crowdsim.metrics import EpisodeMetrics, episode_metrics
+from crowdsim.metrics import EpisodeMetrics, Trajectory, episode_metrics
 from crowdsim.replay import Recording
 from crowdsim.scenarios import MAX_ROBOTS, check_sizes
 from crowdsim.world import PAPER_ROBOTS
@@ -124,6 +124,48 @@ def _nan(values: np.ndarray) -> np.ndarray:  # NaN where the values are floats (
     return np.isnan(values) if values.dtype.kind in "fc" else np.zeros(values.shape, dtype=bool)
 
 
+class EpisodeSteps:
+    """One episode's control steps as each closed loop takes them (``run_episode``, the gym loops), and the
+    ``EpisodeResult`` they end in."""
+
+    def __init__(self) -> None:
+        self.solve_times: list[float] = []
+        self.statuses: list[str] = []
+        self.fallbacks: list[str | None] = []
+        self.iterations: list[int] = []
+
+    def add(self, out: ControlOutput) -> None:
+        self.solve_times.append(float(out.solve_time_s))
+        self.statuses.append(str(out.status))
+        self.fallbacks.append(out.fallback)
+        self.iterations.append(int(out.iterations))
+
+    def result(
+        self, episode: Mapping[str, Any], meta: Mapping[str, Any], traj: Trajectory, metrics: EpisodeMetrics
+    ) -> EpisodeResult:
+        """The result of the episode ``episode`` (seed, scenario, n_humans, n_robots) whose meta (who drove:
+        controller, predictor, predictor_sha256) is ``meta``, its states ``traj``."""
+        return EpisodeResult(
+            seed=episode["seed"],
+            scenario=episode["scenario"],
+            n_humans=episode["n_humans"],
+            n_robots=episode["n_robots"],
+            controller=meta["controller"],
+            predictor=meta["predictor"],
+            predictor_sha256=meta["predictor_sha256"],
+            metrics=metrics,
+            robot_positions=traj.robot_positions,
+            human_positions=traj.human_positions,
+            robot_goals=traj.robot_goals,
+            human_goals=traj.human_goals,
+            solve_times_s=np.asarray(self.solve_times, dtype=float),
+            statuses=tuple(self.statuses),
+            fallbacks=tuple(self.fallbacks),
+            iterations=np.asarray(self.iterations, dtype=int),
+            human_present=traj.human_present,
+        )
+
+
 def run_episode(
     controller: Controller,
     *,
@@ -158,10 +200,7 @@ def run_episode(
     full_meta = episode_meta(
         episode, env_config, controller.name, controller.predictor, described, meta, "run_episode"
     )
-    solve_times: list[float] = []
-    statuses: list[str] = []
-    fallbacks: list[str | None] = []
-    iterations: list[int] = []
+    steps = EpisodeSteps()
     done = False
     with interrupts_between_steps() as interrupt:  # CasADi's own Ctrl-C lines: see pipelines.loop.interrupt
         # the observers' starts too: a recorder opening its .part, interrupted there, left it behind
@@ -170,35 +209,14 @@ def run_episode(
         while not done:
             out = checked_output(controller, called(controller, "act", handed_out(obs)), obs)
             next_obs, done, _ = env.step(out.accelerations)
-            solve_times.append(float(out.solve_time_s))
-            statuses.append(str(out.status))
-            fallbacks.append(out.fallback)
-            iterations.append(int(out.iterations))
+            steps.add(out)
             for observer in observers:
                 observer.on_step(obs, out, next_obs)
             obs = next_obs
             interrupt.check()
 
     traj = env.trajectory()
-    result = EpisodeResult(
-        seed=seed,
-        scenario=scenario,
-        n_humans=n_humans,
-        n_robots=n_robots,
-        controller=controller.name,
-        predictor=full_meta["predictor"],
-        predictor_sha256=full_meta["predictor_sha256"],
-        metrics=episode_metrics(traj),
-        robot_positions=traj.robot_positions,
-        human_positions=traj.human_positions,
-        robot_goals=traj.robot_goals,
-        human_goals=traj.human_goals,
-        solve_times_s=np.asarray(solve_times, dtype=float),
-        statuses=tuple(statuses),
-        fallbacks=tuple(fallbacks),
-        iterations=np.asarray(iterations, dtype=int),
-        human_present=traj.human_present,
-    )
+    result = steps.result(episode, full_meta, traj, episode_metrics(traj))
     for observer in observers:
         observer.on_end(result)
     return result

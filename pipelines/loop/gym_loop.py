@@ -48,6 +48,7 @@ from pipelines.loop.controllers import Controller, check_controller
 from pipelines.loop.episode import (
     EpisodeObserver,
     EpisodeResult,
+    EpisodeSteps,
     behind_tracks,
     check_built_for,
     replayed_recording,
@@ -97,46 +98,15 @@ def crowdnav_env(env: gym.Env[Any, Any]) -> CrowdNavEnv:
     return base
 
 
-class _Steps:
-    """One episode's control steps, and the ``EpisodeResult`` they end in."""
-
-    def __init__(self) -> None:
-        self.solve_times: list[float] = []
-        self.statuses: list[str] = []
-        self.fallbacks: list[str | None] = []
-        self.iterations: list[int] = []
-
-    def add(self, out: ControlOutput) -> None:
-        self.solve_times.append(float(out.solve_time_s))
-        self.statuses.append(str(out.status))
-        self.fallbacks.append(out.fallback)
-        self.iterations.append(int(out.iterations))
-
-    def result(self, base: CrowdNavEnv, meta: Mapping[str, Any], info: Mapping[str, Any]) -> EpisodeResult:
-        traj = base.simulator.trajectory()
-        episode = base.episode
-        # An outer wrapper (gymnasium's TimeLimit from max_episode_steps) may end the episode before the
-        # environment does, on a step whose info has no metrics: the episode's so far are then the ones.
-        metrics = info.get("episode_metrics")
-        return EpisodeResult(
-            seed=episode["seed"],
-            scenario=episode["scenario"],
-            n_humans=episode["n_humans"],
-            n_robots=episode["n_robots"],
-            controller=str(meta["controller"]),
-            predictor=meta["predictor"],
-            predictor_sha256=meta["predictor_sha256"],
-            metrics=base.episode_metrics() if metrics is None else metrics,
-            robot_positions=traj.robot_positions,
-            human_positions=traj.human_positions,
-            robot_goals=traj.robot_goals,
-            human_goals=traj.human_goals,
-            solve_times_s=np.asarray(self.solve_times, dtype=float),
-            statuses=tuple(self.statuses),
-            fallbacks=tuple(self.fallbacks),
-            iterations=np.asarray(self.iterations, dtype=int),
-            human_present=traj.human_present,
-        )
+def _result(
+    steps: EpisodeSteps, base: CrowdNavEnv, meta: Mapping[str, Any], info: Mapping[str, Any]
+) -> EpisodeResult:
+    """The ``EpisodeResult`` of the episode ``base`` holds, whose last step's info is ``info``."""
+    # An outer wrapper (gymnasium's TimeLimit from max_episode_steps) may end the episode before the
+    # environment does, on a step whose info has no metrics: the episode's so far are then the ones.
+    metrics = info.get("episode_metrics")
+    metrics = base.episode_metrics() if metrics is None else metrics
+    return steps.result(base.episode, meta, base.simulator.trajectory(), metrics)
 
 
 def _padded(accelerations: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -177,7 +147,7 @@ def run_gym_episode(
     full_meta = episode_meta(
         base.episode, base.config, controller.name, controller.predictor, described, meta, "run_gym_episode"
     )
-    steps = _Steps()
+    steps = EpisodeSteps()
     done = False
     with interrupts_between_steps() as interrupt:  # as run_episode's loop, the observers' starts too
         for observer in observers:
@@ -191,7 +161,7 @@ def run_gym_episode(
             obs = info["observation"]
             done = terminated or truncated
             interrupt.check()
-    result = steps.result(base, full_meta, info)
+    result = _result(steps, base, full_meta, info)
     for observer in observers:
         observer.on_end(result)
     return result
@@ -250,7 +220,7 @@ class ObserveEpisodes(
         self.buffer_length = buffer_length
         self._obs: Observation | None = None
         self._meta: dict[str, Any] = {}
-        self._steps = _Steps()
+        self._steps = EpisodeSteps()
         self._open = False  # an episode reset and not yet ended
         self._handed_out = 0.0
 
@@ -265,7 +235,7 @@ class ObserveEpisodes(
         self._meta = episode_meta(
             base.episode, base.config, self.controller, None, None, self.meta, "ObserveEpisodes"
         )
-        self._steps = _Steps()
+        self._steps = EpisodeSteps()
         for observer in self.observers:
             observer.on_reset(self._obs, self._meta)
         self._open = True
@@ -289,7 +259,7 @@ class ObserveEpisodes(
 
     def _end(self, info: Mapping[str, Any]) -> None:
         self._open = False  # first: an observer raising in on_end must not have the episode ended twice
-        result = self._steps.result(self._base, self._meta, info)
+        result = _result(self._steps, self._base, self._meta, info)
         self.results.append(result)
         if self.buffer_length is not None and len(self.results) > self.buffer_length:
             del self.results[: len(self.results) - self.buffer_length]
