@@ -105,6 +105,13 @@ def _create(path: Path, *, new: bool = False, may_replace: Callable[[Path], None
     return os.fdopen(fd, "wb")
 
 
+def _check_metadata(name: str, data: Mapping[str, str]) -> None:
+    """PipelineError unless ``data`` maps strings to strings, as MCAP metadata holds them."""
+    bad = {k: v for k, v in data.items() if not isinstance(k, str) or not isinstance(v, str)}
+    if bad:
+        raise PipelineError(f"metadata {name!r} needs str keys and values; got {bad!r}")
+
+
 class McapRecorder:
     """Write JSON messages with JSON schemas to one MCAP file.
 
@@ -150,6 +157,8 @@ class McapRecorder:
         # file late would still leave a truncated .mcap for any kill after the first chunk.
         self.part_path = self.path.with_name(self.path.name + UNFINISHED_SUFFIX)
         self._may_replace = may_replace
+        for name, data in (metadata or {}).items():  # before the file: a refusal left a .part of a header
+            _check_metadata(name, data)
         self._stream: IO[bytes] = _create(self.part_path, new=new, may_replace=may_replace)
         if new and (self.path.exists() or self.path.is_symlink()):
             self._stream.close()
@@ -230,9 +239,7 @@ class McapRecorder:
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """A named MCAP metadata record; keys and values must be strings (encode anything else first)."""
         self._check_open()
-        bad = {k: v for k, v in data.items() if not isinstance(k, str) or not isinstance(v, str)}
-        if bad:
-            raise PipelineError(f"metadata {name!r} needs str keys and values; got {bad!r}")
+        _check_metadata(name, data)
         try:
             self._writer.add_metadata(name, dict(data))
         except OSError as exc:

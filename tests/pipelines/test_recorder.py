@@ -210,6 +210,18 @@ def test_a_negative_log_time_or_a_key_that_is_not_text_is_refused(tmp_path):
             rec.add_metadata("episode", {3: "seed"})
 
 
+def test_metadata_refused_at_the_start_leaves_no_file_behind(tmp_path):
+    """``McapRecorder(path, metadata=...)`` with a value that is no str was refused after the header was
+    written: the ``.part`` stayed in the folder, open and locked until collected, an unfinished recording of
+    nothing (a killed run's ``.part`` there emptied). Metadata is checked before the file is opened now."""
+    with pytest.raises(PipelineError, match="needs str keys and values"):
+        McapRecorder(tmp_path / "a.mcap", metadata={"episode": {"seed": 3}})
+    assert list(tmp_path.iterdir()) == []
+    with McapRecorder(tmp_path / "a.mcap", metadata={"episode": {"seed": "3"}}):
+        pass
+    assert [p.name for p in tmp_path.iterdir()] == ["a.mcap"]
+
+
 def test_a_longer_left_over_part_file_is_overwritten_not_kept_behind(tmp_path):
     """A killed run's NAME.mcap.part, longer than the new recording: its tail must not stay after the new
     file's end (the finished file would then not end with MCAP's magic and read as truncated)."""
