@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from crowdsim.control import ControlOutput
+from crowdsim.env_config import EnvConfig
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import (
     CONTROLLER_KINDS,
@@ -44,7 +45,6 @@ from predictors.errors import short_repr
 
 if TYPE_CHECKING:
     from crowdsim.env import Observation
-    from crowdsim.env_config import EnvConfig
 
 # The spec and the controllers' facts live in pipelines.loop.spec (the MPC adapter needs them, and the
 # registry needs the adapter); they are re-exported here, the registry's public face.
@@ -132,7 +132,6 @@ def make_controller(
     """The controller of ``spec`` for episodes simulated under ``env_config`` (a predictor that observes the
     simulator, the ORCA oracle, simulates the humans with it; None: the default conventions). ``jit``
     compiles the NLPs of a controller whose kind ``compiles`` and is ignored by the others."""
-    from crowdsim.env_config import EnvConfig
 
     # a name or a dict given in their place failed on an attribute deep inside (no attribute 'controller')
     if not isinstance(spec, ControllerSpec):
@@ -234,3 +233,39 @@ def check_controller(controller: object, where: str = "run_episode") -> None:
             f"{where}: a controller needs a non-empty str name and a predictor (str or None), got "
             f"name={short_repr(name)}, predictor={short_repr(predictor)}"
         )
+
+
+WORLD_UNITS: Final[dict[str, str]] = {
+    "dt": "s",
+    "obs_len": "steps",
+    "radius": "m",
+    "v_pref": "m/s",
+    "v_max": "m/s",
+    "a_max": "m/s^2",
+}
+
+
+def check_built_for(controller: object, env_config: EnvConfig, where: str) -> None:
+    """PipelineError when ``controller`` was built for a simulator of other world facts than ``env_config``
+    (the shipped controllers keep theirs as ``env_config``; a plugin without one is not checked). Built by
+    ``make_controller(spec)`` for the default world and run in a slower or larger-bodied one, an MPC planned
+    at the default speed (the simulator clipping every plan) and with a d_min checked against the default
+    radius, silently; only another tau was refused, at reset."""
+    built = getattr(controller, "env_config", None)
+    if not isinstance(built, EnvConfig):
+        return
+    there, here = built.world(), env_config.world()
+    differ = [
+        f"{name} {getattr(there, name):g} {unit} there, {getattr(here, name):g} here"
+        for name, unit in WORLD_UNITS.items()
+        if getattr(there, name) != getattr(here, name)
+    ]
+    if differ:
+        raise PipelineError(
+            f"{where}: the controller {controller_label(controller)} was built for another world "
+            f"({'; '.join(differ)}): build it with make_controller(spec, env_config) for this simulator"
+        )
+
+
+def controller_label(controller: object) -> str:
+    return repr(getattr(controller, "name", type(controller).__name__))

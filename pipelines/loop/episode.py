@@ -37,7 +37,13 @@ from pipelines.loop.contract import (
     episode_meta,
     handed_out,
 )
-from pipelines.loop.controllers import Controller, ControllerSpec, check_controller, make_controller
+from pipelines.loop.controllers import (
+    Controller,
+    ControllerSpec,
+    check_built_for,
+    check_controller,
+    make_controller,
+)
 from pipelines.loop.interrupt import interrupts_between_steps
 from pipelines.loop.progress import StepShown
 from pipelines.loop.record import EpisodeRecord, SolverStats
@@ -341,42 +347,6 @@ def behind_tracks(controller: Controller, env_config: EnvConfig) -> Controller:
     if env_config.crowd == "orca" or isinstance(controller, RangeLimited):
         return controller
     return RangeLimited(controller, math.inf)
-
-
-WORLD_UNITS: Final[dict[str, str]] = {
-    "dt": "s",
-    "obs_len": "steps",
-    "radius": "m",
-    "v_pref": "m/s",
-    "v_max": "m/s",
-    "a_max": "m/s^2",
-}
-
-
-def check_built_for(controller: object, env_config: EnvConfig, where: str) -> None:
-    """PipelineError when ``controller`` was built for a simulator of other world facts than ``env_config``
-    (the shipped controllers keep theirs as ``env_config``; a plugin without one is not checked). Built by
-    ``make_controller(spec)`` for the default world and run in a slower or larger-bodied one, an MPC planned
-    at the default speed (the simulator clipping every plan) and with a d_min checked against the default
-    radius, silently; only another tau was refused, at reset."""
-    built = getattr(controller, "env_config", None)
-    if not isinstance(built, EnvConfig):
-        return
-    there, here = built.world(), env_config.world()
-    differ = [
-        f"{name} {getattr(there, name):g} {unit} there, {getattr(here, name):g} here"
-        for name, unit in WORLD_UNITS.items()
-        if getattr(there, name) != getattr(here, name)
-    ]
-    if differ:
-        raise PipelineError(
-            f"{where}: the controller {controller_label(controller)} was built for another world "
-            f"({'; '.join(differ)}): build it with make_controller(spec, env_config) for this simulator"
-        )
-
-
-def controller_label(controller: object) -> str:
-    return repr(getattr(controller, "name", type(controller).__name__))
 
 
 def _check_team(scenario: str, n_humans: int, n_robots: int, where: str) -> None:

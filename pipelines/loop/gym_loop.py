@@ -44,13 +44,12 @@ from pipelines.loop.contract import (
     episode_meta,
     handed_out,
 )
-from pipelines.loop.controllers import Controller, check_controller
+from pipelines.loop.controllers import Controller, check_built_for, check_controller
 from pipelines.loop.episode import (
     EpisodeObserver,
     EpisodeResult,
     EpisodeSteps,
     behind_tracks,
-    check_built_for,
     replayed_recording,
 )
 from pipelines.loop.interrupt import interrupts_between_steps

@@ -69,7 +69,7 @@ class RangeLimited:
             raise PipelineError(f"report_tracks must be True or False, got {report_tracks!r}")
         self.inner, self.radius, self.report_tracks = inner, float(radius), report_tracks
         self.name, self.predictor = inner.name, inner.predictor
-        # the simulator it was built for, which the loops check (pipelines.loop.episode.check_built_for)
+        # the simulator it was built for, which the loops check (pipelines.loop.controllers.check_built_for)
         self.env_config = getattr(inner, "env_config", None)
         self._in_view: np.ndarray = np.zeros(0, dtype=bool)  # per human, at the last step sensed
         self._track_start: np.ndarray = np.zeros(0, dtype=int)  # per human in view: the step its track began
