@@ -25,6 +25,7 @@ from predictors.base import DT, Predictor
 from predictors.conformal import alpha_text, check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError
+from predictors.hashing import is_sha256
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
 
 SOURCES: Final[tuple[str, ...]] = ("real", "closed-loop")
@@ -38,10 +39,6 @@ def same_alpha(a: float, b: float) -> bool:
 
 def now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
-
-
-def _is_sha256(value: object) -> bool:
-    return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value)
 
 
 def _is_count(value: object) -> bool:
@@ -77,7 +74,7 @@ class Calibration:
     def __post_init__(self):
         if not isinstance(self.predictor, str) or not self.predictor:
             raise PredictorError(f"calibration 'predictor' must be a non-empty name, got {self.predictor!r}")
-        if self.predictor_sha256 is not None and not _is_sha256(self.predictor_sha256):
+        if self.predictor_sha256 is not None and not is_sha256(self.predictor_sha256):
             raise PredictorError(
                 f"calibration 'predictor_sha256' must be 64 lowercase hex digits or null, "
                 f"got {self.predictor_sha256!r}"
@@ -86,7 +83,7 @@ class Calibration:
             raise PredictorError(f"calibration 'source' must be one of {list(SOURCES)}, got {self.source!r}")
         check_alpha(self.alpha, "calibration 'alpha'")
         self._check_steps()
-        if not _is_sha256(self.data_sha256):
+        if not is_sha256(self.data_sha256):
             raise PredictorError(
                 f"calibration 'data_sha256' must be 64 lowercase hex digits, got {self.data_sha256!r}"
             )

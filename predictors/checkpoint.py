@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from predictors.base import OBS_LEN
 from predictors.errors import CheckpointMismatch, PredictorError, short_repr
-from predictors.hashing import sha256_file
+from predictors.hashing import is_sha256, sha256_file
 
 if TYPE_CHECKING:
     import torch
@@ -36,7 +36,6 @@ CONFIG_FORMAT: Final[str] = "crowdmpc-predictor"
 # A zoo name becomes a file name (NAME.pt, NAME.json) and a CasADi function name: letters, digits, "_", "."
 # and "-", starting with a letter or digit, so that no name is a path ("../x", "/tmp/x"), hidden, "." or "..".
 NAME_PATTERN: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
-SHA256_PATTERN: Final[re.Pattern[str]] = re.compile(r"[0-9a-f]{64}")
 # Observed steps a checkpoint may ask for: TrajNet++ observes 9 (3.6 s at 2.5 Hz); 100 steps are 40 s of
 # history, beyond any scene's, and the encoder (torch and CasADi) unrolls once per step.
 MAX_OBS_LEN: Final[int] = 100
@@ -60,7 +59,7 @@ def check_sha256(value: object, what: str) -> str:
     """``value`` if it is a sha256 as the zoo records it (64 lowercase hex digits), else PredictorError.
 
     A missing hash is never "skip the check": every zoo file is verified before it is loaded."""
-    if not isinstance(value, str) or SHA256_PATTERN.fullmatch(value) is None:
+    if not is_sha256(value):
         raise PredictorError(f"{what} must be a sha256 (64 lowercase hex digits), got {short_repr(value)}")
     return value
 
