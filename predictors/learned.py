@@ -87,7 +87,8 @@ class LearnedPredictor:
     def _prepare(self, history: np.ndarray, mask: np.ndarray, humans: np.ndarray, keep_robots: bool = True):
         """Agents reordered (humans, robots), the last ``obs_len`` steps, gaps zeroed, absent agents imputed.
         ``keep_robots=False`` (a rollout without a robot plan) drops robots never observed: nothing is known
-        of them, and dataset evaluation passes agents that appear only later as such "robots"."""
+        of them, and nothing of theirs is returned (dataset evaluation hands over only observed agents, all
+        as humans: ``predictors.evaluate.observed_history``)."""
         history = np.asarray(history, dtype=np.float64)
         mask = np.asarray(mask, dtype=bool)
         shaped = history.ndim == 3 and history.shape[2] == 2 and mask.shape == history.shape[:2]
