@@ -84,11 +84,3 @@ class BySizeBatches(Sampler[list[tuple[int, int]]]):
             batches += [part[i : i + self.batch_size] for i in range(0, len(part), self.batch_size)]
         for b in rng.permutation(len(batches)):
             yield [(int(i), epoch) for i in batches[b]]
-
-
-def padding_fraction(batches: list[list[int]], sizes: np.ndarray) -> float:
-    """Padded agent slots over real ones: each batch holds ``len(batch) * max size`` slots
-    (``collate_scenes`` pads to the largest scene), of which ``sum(sizes)`` are scenes' agents."""
-    slots = sum(len(batch) * int(np.max(sizes[batch])) for batch in batches)
-    real = sum(int(np.sum(sizes[batch])) for batch in batches)
-    return (slots - real) / real

@@ -8,11 +8,19 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from predictors.data.batching import BATCHINGS, BySizeBatches, padding_fraction
+from predictors.data.batching import BATCHINGS, BySizeBatches
 from predictors.data.datamodule import TrajnetDataModule
 from predictors.data.windows import EpochShuffle, TrajnetSceneDataset, collate_scenes
 from predictors.errors import PredictorError
 from tests.predictors.samples import write_crowds, write_walk_file
+
+
+def padding_fraction(batches: list[list[int]], sizes: np.ndarray) -> float:
+    """Padded agent slots over real ones: each batch holds ``len(batch) * max size`` slots
+    (``collate_scenes`` pads to the largest scene), of which ``sum(sizes)`` are scenes' agents."""
+    slots = sum(len(batch) * int(np.max(sizes[batch])) for batch in batches)
+    real = sum(int(np.sum(sizes[batch])) for batch in batches)
+    return (slots - real) / real
 
 
 class Items:
