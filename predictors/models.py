@@ -243,6 +243,7 @@ def check_net_class(cls: object, name: str) -> None:
 
 def _shipped() -> dict[str, ModelKind]:
     from predictors.nets.social_attention import SocialAttention
+    from predictors.nets.social_gan import GENERATOR_DEFAULTS
     from predictors.nets.social_gru import SocialGRU
     from predictors.nets.social_lstm import SocialLSTM
 
@@ -269,7 +270,7 @@ def _shipped() -> dict[str, ModelKind]:
         ModelKind(
             "social_gan",
             SocialLSTM,
-            {"pooling": "soft", "noise_dim": 8, "head": "point"},
+            dict(GENERATOR_DEFAULTS),
             adversarial=True,
             refused={
                 "noise_dim": (

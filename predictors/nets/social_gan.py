@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import asdict, dataclass
+from typing import Any, Final
 
 import torch
 from torch import nn
@@ -18,11 +19,17 @@ from torch import nn
 from predictors.errors import PredictorError, short_repr
 from predictors.nets.social_lstm import SocialLSTMConfig
 
+# The generator's settings beside SocialLSTMConfig's defaults: the social_gan model kind's defaults
+# (predictors.models) and generator_config's.
+GENERATOR_DEFAULTS: Final[dict[str, Any]] = {"pooling": "soft", "noise_dim": 8, "head": "point"}
 
-def generator_config(pooling: str = "soft", noise_dim: int = 8, **overrides) -> SocialLSTMConfig:
-    if noise_dim < 1:
-        raise PredictorError(f"a generator needs noise_dim >= 1, got {noise_dim}")
-    return SocialLSTMConfig(pooling=pooling, noise_dim=noise_dim, head="point", **overrides)
+
+def generator_config(**overrides: Any) -> SocialLSTMConfig:
+    """The generator's ``SocialLSTMConfig``: ``GENERATOR_DEFAULTS`` with ``overrides``."""
+    config = {**GENERATOR_DEFAULTS, **overrides}
+    if config["noise_dim"] < 1:
+        raise PredictorError(f"a generator needs noise_dim >= 1, got {config['noise_dim']}")
+    return SocialLSTMConfig(**config)
 
 
 @dataclass(frozen=True)
