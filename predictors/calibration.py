@@ -22,14 +22,15 @@ import numpy as np
 
 from crowdsim.world import is_sensor_range
 from predictors.base import DT, Predictor
-from predictors.conformal import alpha_text, check_alpha, min_samples, step_counts, step_quantiles
+from predictors.conformal import MIN_ALPHA, alpha_text, check_alpha, min_samples, step_counts, step_quantiles
 from predictors.conformal_classes import ClassMargins, class_margins
 from predictors.errors import PredictorError
 from predictors.hashing import is_sha256
 from predictors.real_data import HORIZON, combined_sha256, file_hashes, real_errors
 
 SOURCES: Final[tuple[str, ...]] = ("real", "closed-loop")
-ALPHA_TOLERANCE: Final[float] = 1e-12  # alphas closer than this are the same calibration key
+# alphas closer than this are one calibration key: the smallest alpha accepted (conformal.MIN_ALPHA says why)
+ALPHA_TOLERANCE: Final[float] = MIN_ALPHA
 
 
 def same_alpha(a: float, b: float) -> bool:
