@@ -90,7 +90,9 @@ def register(subparsers) -> None:
         help="registered predictor or model-zoo name (shipped or user zoo; a plugin's model needs "
         "crowdmpc --plugin module:NetClass evaluate ...)",
     )
-    parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
+    parser.add_argument(
+        "--data-dir", type=path_arg, default=None, help="data directory (default: $CROWDMPC_DATA)"
+    )
     # defaults filled in by _choose_files: None tells an option typed from its default, which --test refuses
     parser.add_argument(
         "--dataset", default=None, choices=("biwi_eth", "biwi_hotel"), help="test sequence (default biwi_eth)"

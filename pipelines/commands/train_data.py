@@ -23,7 +23,9 @@ _OPTIONS: Final[tuple[str, ...]] = ("data_dir", "protocol", "dataset", "train", 
 def data_options(parser: argparse.ArgumentParser) -> None:
     """Which scenes: prepared files by protocol and dataset, or explicit files."""
     # None by default, here and below: given with explicit --train/--val files, they are refused
-    parser.add_argument("--data-dir", default=None, help="data directory (default: $CROWDMPC_DATA)")
+    parser.add_argument(
+        "--data-dir", type=path_arg, default=None, help="data directory (default: $CROWDMPC_DATA)"
+    )
     parser.add_argument(
         "--protocol",
         default=None,

@@ -67,6 +67,9 @@ def _one_error_line(capsys, command: str) -> str:
         (["review", ""], "review", "path: must be a path"),
         (["export", "cv", "--out", ""], "export", "--out: must be a path"),
         (["evaluate", "--predictor", "cv", "--json", ""], "evaluate", "--json: must be a path"),
+        # --data-dir '' fell back to $CROWDMPC_DATA without a word (calibrate's refused it)
+        (["evaluate", "--predictor", "cv", "--data-dir", ""], "evaluate", "--data-dir: must be a path"),
+        (["train", "--model", "vanilla_lstm", "--data-dir", ""], "train", "--data-dir: must be a path"),
     ],
 )
 def test_parser_errors_are_one_line_and_point_to_help(argv, command, named, capsys):
