@@ -50,7 +50,7 @@ def register(subparsers) -> None:
         "--robots", type=int, default=3, help=f"number of robots M, 0..{MAX_ROBOTS} (default 3)"
     )
     parser.add_argument(
-        "--horizon", type=int, default=4, help="prediction horizon H, 1..100 (default 4, Table I)"
+        "--horizon", type=int, default=4, help=f"prediction horizon H, 1..{MAX_HORIZON} (default 4, Table I)"
     )
     parser.set_defaults(func=run)
 
