@@ -52,6 +52,7 @@ def _options() -> tuple[Option, ...]:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from crowdsim.world import PAPER_ROBOTS
     from pipelines.commands.config import add_config_options
     from pipelines.experiments.backends import BACKENDS
     from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
@@ -75,10 +76,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"episodes per cell, half of each scenario (default {PAPER_EPISODES_PER_CELL}, the paper's)",
     )
     p.add_argument(
-        "--workers",
-        type=int,
-        metavar="K",
-        help="parallel workers (default: the CPUs this process may use)",
+        "--workers", type=int, metavar="K", help="parallel workers (default: the CPUs this process may use)"
     )
     p.add_argument(
         "--ray-address",
@@ -94,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--humans", type=humans_list, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
     )
-    p.add_argument("--robots", type=int, help="robots per episode (default 3)")
+    p.add_argument("--robots", type=int, help=f"robots per episode (default {PAPER_ROBOTS})")
     p.add_argument("--seed", type=int, help="base scenario seed (default 0)")
     _add_method_options(p)
     _add_execution_options(p)
@@ -137,6 +135,7 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
     """What replaces the experiment's own choices for every method."""
     from crowdsim.profiles import PROFILES, VISIBILITY
     from crowdsim.replay import CROWDS
+    from pipelines.experiments.methods import SHIPPED_CONTROLLERS
     from pipelines.loop.replay_data import CROWD_HELP
 
     p.add_argument(
@@ -155,8 +154,8 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         "--controllers",
         type=controller_list,
         metavar="A,B,C",
-        help="the controllers experiment's list, one column each (default: cmpc,dmpc,orca,straight; a "
-        "plugin's module:Class after `crowdmpc --plugin module:Class`)",
+        help="the controllers experiment's list, one column each (default: "
+        f"{','.join(SHIPPED_CONTROLLERS)}; a plugin's module:Class after `crowdmpc --plugin module:Class`)",
     )
     p.add_argument(
         "--margins",
