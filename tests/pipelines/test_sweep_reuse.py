@@ -86,22 +86,8 @@ def test_a_stop_between_the_run_lines_and_the_records_is_taken_up_again(
 
 def test_a_run_sweep_json_lost_is_named_with_the_run_that_found_it(table2, tmp_path, capsys):
     out = tmp_path / "t3"
-    assert (
-        main(
-            [
-                "sweep",
-                "--experiment",
-                "table3",
-                *SMALL[:2],
-                "--episodes-per-cell",
-                "1",
-                *SMALL[4:],
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    one_a_cell = [*SMALL[:2], "--episodes-per-cell", "1", *SMALL[4:]]
+    assert main(["sweep", "--experiment", "table3", *one_a_cell, "--out", str(out)]) == 0
     meta = json.loads((out / "sweep.json").read_text())
     (out / "sweep.json").write_text(json.dumps({**meta, "runs": []}))  # its one line lost
     code, _, err = _table3(capsys, out, "--reuse", str(table2))
