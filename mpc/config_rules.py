@@ -32,12 +32,6 @@ def check_combinations(cfg: Any) -> None:
             f'{cfg.dmpc_update!r}, which does not read it (set dmpc_update = "relaxed", or leave it out)'
         )
 
-    if _changed(cfg, "restart_penalty") and not cfg.multi_start:
-        raise MPCConfigError(
-            f"restart_penalty = {cfg.restart_penalty!r} is the penalty above which multi_start solves again; "
-            "multi_start is false, so nothing reads it (set multi_start = true, or leave it out)"
-        )
-
 
 def _changed(cfg: Any, name: str) -> bool:
     """Whether ``cfg``'s field ``name`` differs from its default (MPCConfig's own)."""

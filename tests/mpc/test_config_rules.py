@@ -47,15 +47,3 @@ def test_a_file_names_itself(tmp_path, capsys):
     path.write_text("[mpc]\ndmpc_relaxation = 0.25\n")
     assert main(["--config", str(path), "config", "show"]) == 2
     assert f"{path}: mpc.dmpc_relaxation: dmpc_relaxation = 0.25" in capsys.readouterr().err
-
-
-def test_a_restart_penalty_without_multi_start_is_refused(capsys):
-    """--vary mpc.restart_penalty=1,2 --set mpc.multi_start=false ran each method's episodes twice."""
-    with pytest.raises(MPCConfigError, match=r"restart_penalty = 2.0 .*multi_start is false"):
-        MPCConfig(multi_start=False, restart_penalty=2.0)
-    assert MPCConfig(multi_start=False).restart_penalty == 1.0  # its default passes
-    sets = ["--set", "mpc.multi_start=false", "--set", "mpc.restart_penalty=2"]
-    assert main(["simulate", "--controller", "cmpc", *sets]) == 2
-    err = capsys.readouterr().err
-    assert "--set mpc.restart_penalty: restart_penalty = 2.0 is the penalty above which" in err
-    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
