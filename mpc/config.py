@@ -35,7 +35,6 @@ import numpy as np
 from crowdsim import world
 from crowdsim.world import PAPER_ROBOTS as PAPER_ROBOTS  # Table I's weights were set for it; named here too
 from crowdsim.world import WorldFacts
-from mpc.config_rules import check_combinations
 from mpc.errors import MPCConfigError
 
 # Option types as Literals (values stay plain strings in JSON and MCAP metadata); the tuples are their values.
@@ -281,10 +280,19 @@ class MPCConfig:
         for name, choices in _CHOICES.items():
             if getattr(self, name) not in choices:
                 raise MPCConfigError(f"{name} must be one of {choices}, got {getattr(self, name)!r}")
+        if self.dmpc_order != "index" and self.dmpc_update != "gauss_seidel":
+            raise MPCConfigError(
+                f"dmpc_order {self.dmpc_order!r} orders gauss_seidel's rounds; dmpc_update is "
+                f"{self.dmpc_update!r}"
+            )
+        if self.dmpc_pairs and not self.stall_release_s:
+            raise MPCConfigError(
+                "dmpc_pairs moves stalled robots, and stall_release_s = 0 marks none stalled: set "
+                "stall_release_s > 0"
+            )
         if not 0 < self.dmpc_relaxation <= 1:
             raise MPCConfigError(f"dmpc_relaxation must be in (0, 1], got {self.dmpc_relaxation!r}")
         self._check_margins()
-        check_combinations(self)  # mpc/config_rules.py: a field that another's value leaves unread
 
     def _check_numbers(self) -> None:
         """The counts, weights, lengths and tolerances: finite, of the right sign, within ``MPC_BOUNDS``."""
