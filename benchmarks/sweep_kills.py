@@ -7,7 +7,9 @@ worker scratch left behind?
 Each round starts ``crowdmpc sweep`` (process pool, 2 workers) on the same directory and sends SIGKILL to the
 driver's whole process group at a random moment (seeded) between 0.5 s and 4 s after the start; a last run
 finishes the sweep. Prints per round how many records there were, then planned vs recorded, duplicate keys,
-torn lines, and the crowdmpc scratch folders left in the temp directory.
+torn lines, and the crowdmpc scratch folders left in the temp directory. The sweeps get a temp directory of
+their own (``TMPDIR``), so that another crowdmpc run on a shared machine, whose scratch comes and goes in
+the system's, is not counted as theirs.
 """
 
 from __future__ import annotations
@@ -39,8 +41,7 @@ def records(out: Path) -> list[str]:
     return [line for line in path.read_text(encoding="utf-8").split("\n") if line.strip()]
 
 
-def scratch() -> set[str]:
-    tmp = Path(tempfile.gettempdir())
+def scratch(tmp: Path) -> set[str]:
     return {p.name for p in tmp.glob("crowdmpc-*") if p.is_dir()}
 
 
@@ -64,23 +65,27 @@ def main() -> int:
     elif args.predictor is None:
         args.predictor = "constant_velocity"
     rng = random.Random(args.seed)
-    before = scratch()
     with tempfile.TemporaryDirectory(prefix="sweep-kills-") as tmp:
         out = Path(tmp) / "sweep"
+        # The sweeps' own temp directory: in the system's, any other crowdmpc sweep running meanwhile (a
+        # test suite beside this) made scratch folders that were counted as left behind, and exit 1.
+        temp = Path(tmp) / "temp"
+        temp.mkdir()
+        env = {**os.environ, "TMPDIR": str(temp)}
         cmd = [sys.executable, "-m", "pipelines.cli", "sweep", "--experiment", args.experiment,
                "--episodes-per-cell", str(args.episodes_per_cell), "--workers", "2", "--backend", "process",
                "--jit", "off", "--no-progress", "--out", str(out)]  # fmt: skip
         if args.predictor:
             cmd += ["--predictor", args.predictor]
         for k in range(args.kills):
-            proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+            proc = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
                                     stderr=subprocess.DEVNULL)  # fmt: skip
             delay = rng.uniform(0.5, 4.0)
             time.sleep(delay)
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
             print(f"kill {k + 1:2d} after {delay:.2f} s: {len(records(out))} records")
-        done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+        done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
         if done.returncode != 0:  # the sweep's own words: what a "no sweep.json" below would have hidden
             said = "\n".join(done.stderr.strip().splitlines()[-20:])
             print(f"the final sweep exited {done.returncode}:\n{said}", file=sys.stderr)
@@ -99,8 +104,8 @@ def main() -> int:
             f"final run exit {done.returncode}; planned {planned}, recorded {len(lines)}, distinct "
             f"{len(set(keys))}, duplicates {len(keys) - len(set(keys))}, torn lines {torn}"
         )
-    left = scratch() - before
-    print(f"crowdmpc scratch folders left in {tempfile.gettempdir()}: {len(left)} {sorted(left)[:5]}")
+        left = scratch(temp)
+        print(f"crowdmpc scratch folders left in the sweeps' temp directory: {len(left)} {sorted(left)[:5]}")
     return 0 if planned == len(lines) == len(set(keys)) and not torn and not left else 1
 
 

@@ -350,6 +350,39 @@ def test_sweep_kills_reports_the_sweeps_own_error(capsys, monkeypatch):
     assert "error: the sweep failed (exit 2) before it planned a run" in err
 
 
+def test_sweep_kills_counts_only_its_own_sweeps_scratch(capsys, monkeypatch, tmp_path):
+    """Another crowdmpc sweep running meanwhile (a test suite beside it) made a scratch folder in the system's
+    temp directory, which was counted as left behind by the killed sweeps: exit 1 on a sweep that was fine.
+    The sweeps now run with a temp directory of their own, and a folder left there still counts."""
+    import subprocess
+    import tempfile
+    from pathlib import Path
+
+    sweep_kills = load_benchmark("sweep_kills")
+    system_temp = tmp_path / "system"
+    system_temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_temp))
+
+    def finished(cmd, leave: bool, **kwargs):
+        (system_temp / "crowdmpc-sweep-1-another").mkdir()  # someone else's sweep, still running
+        if leave:
+            (Path(kwargs["env"]["TMPDIR"]) / "crowdmpc-sweep-2-ours").mkdir()
+        out = Path(cmd[cmd.index("--out") + 1])
+        out.mkdir()
+        (out / "sweep.json").write_text(json.dumps({"runs": [{"planned": 1}]}), encoding="utf-8")
+        (out / "episodes.jsonl").write_text(json.dumps({"key": "a"}) + "\n", encoding="utf-8")
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(sys, "argv", ["sweep_kills.py", "--kills", "0"])
+    monkeypatch.setattr(sweep_kills.subprocess, "run", lambda cmd, **kw: finished(cmd, False, **kw))
+    assert bench_cli.run_main(sweep_kills.main) == 0
+    assert "scratch folders left in the sweeps' temp directory: 0 []" in capsys.readouterr().out
+    (system_temp / "crowdmpc-sweep-1-another").rmdir()
+    monkeypatch.setattr(sweep_kills.subprocess, "run", lambda cmd, **kw: finished(cmd, True, **kw))
+    assert bench_cli.run_main(sweep_kills.main) == 1
+    assert "temp directory: 1 ['crowdmpc-sweep-2-ours']" in capsys.readouterr().out
+
+
 def test_run_all_scaling_rows_say_how_many_steps_they_timed():
     """The humans' rows time whole episodes and the robots' their first --steps steps from rest: without the
     count, 46.8 ms over 2 steps stood beside 3.8 ms over 38 as one measurement."""
