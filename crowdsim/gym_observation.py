@@ -6,12 +6,13 @@ the array, and the native observation its info carries (``ComparableObservation`
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any, Final
+from typing import Final
 
 import numpy as np
 
 from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
+from crowdsim.observation import array_copies
 from crowdsim.reaction import CATCH_UP, MIN_SPEED, reacts
 from crowdsim.replay import Recording
 from crowdsim.scenarios import geometry_scale
@@ -41,11 +42,7 @@ class ComparableObservation(Observation):
         """``obs`` with copies of its arrays: the environment computes the next step's reward and distances
         from its own ``obs``, which a policy taking the humans relative to a robot in place
         (``human_positions -= robot``) on the info's shared arrays had moved."""
-        values: dict[str, Any] = {f.name: getattr(obs, f.name) for f in fields(Observation)}
-        copied: dict[str, Any] = {
-            k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in values.items()
-        }
-        return cls(**copied)
+        return cls(**{**{f.name: getattr(obs, f.name) for f in fields(Observation)}, **array_copies(obs)})
 
 
 def observation_bounds(

@@ -3,7 +3,8 @@ too: plugins import it from there)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -48,3 +49,9 @@ class Observation:
         distance = np.linalg.norm(self.human_positions[:, None] - self.robot_positions[None], axis=-1)
         near = (distance <= radius).any(axis=1)
         return near if self.human_present is None else near & np.asarray(self.human_present, dtype=bool)
+
+
+def array_copies(obs: Observation) -> dict[str, Any]:
+    """Copies of ``obs``'s array fields, by name: an observation handed to someone who may change its arrays
+    in place (a policy, a controller) without moving what its giver computes from (rewards, recordings)."""
+    return {f.name: np.array(v) for f in fields(obs) if isinstance(v := getattr(obs, f.name), np.ndarray)}

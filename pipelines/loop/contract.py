@@ -20,6 +20,7 @@ import numpy as np
 from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
+from crowdsim.observation import array_copies
 from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.controllers import Controller
 from pipelines.loop.spec import ControllerSpec
@@ -71,12 +72,7 @@ def handed_out(obs: Observation) -> Observation:
     hand the observation itself to their observers after ``act``, and a controller that changed its arrays in
     place (the scene centred on a robot, ``obs.human_positions -= centre``) moved the positions the recorder
     then wrote, while the metrics, from the simulator, stayed right."""
-    arrays: dict[str, Any] = {
-        field.name: np.array(value)
-        for field in dataclasses.fields(obs)
-        if isinstance(value := getattr(obs, field.name), np.ndarray)
-    }
-    return dataclasses.replace(obs, **arrays)
+    return dataclasses.replace(obs, **array_copies(obs))
 
 
 def _check_array(
