@@ -172,7 +172,7 @@ def _build_plugin(
             f"controller {plugin.name!r}: building it failed: {type(exc).__name__}: {exc}"
         ) from None
     name, predictor = getattr(controller, "name", None), getattr(controller, "predictor", ())
-    if not (isinstance(name, str) and name) or not (predictor is None or isinstance(predictor, str)):
+    if not _names_itself(name, predictor):
         raise PipelineError(
             f"controller {plugin.name!r}: a {plugin.cls.__name__} needs a non-empty str name and a predictor "
             f"(str or None), got name={name!r:.60}, predictor={predictor!r:.60}"
@@ -228,11 +228,17 @@ def check_controller(controller: object, where: str = "run_episode") -> None:
     # what the records and recordings write as "controller" and "predictor" (strings by their schemas): a
     # hand-built controller's name=5 wrote an /episode/metrics message that review --check refused
     name, predictor = controller.name, controller.predictor  # type: ignore[attr-defined]
-    if not (isinstance(name, str) and name) or not (predictor is None or isinstance(predictor, str)):
+    if not _names_itself(name, predictor):
         raise PipelineError(
             f"{where}: a controller needs a non-empty str name and a predictor (str or None), got "
             f"name={short_repr(name)}, predictor={short_repr(predictor)}"
         )
+
+
+def _names_itself(name: object, predictor: object) -> bool:
+    """Whether a controller's ``name`` is a non-empty str and its ``predictor`` a str or None: what records
+    and recordings store as "controller" and "predictor"."""
+    return isinstance(name, str) and bool(name) and (predictor is None or isinstance(predictor, str))
 
 
 WORLD_UNITS: Final[dict[str, str]] = {
