@@ -62,13 +62,13 @@ class OptimConfig:
 
     def __post_init__(self):
         for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below
+            if key == "loss":
+                continue
             whole = key in ("step_size", "variety_k", "top_k")
-            if key != "loss" and (
-                # numpy's scalars (a sweep's np.arange steps) as the nets' configs take them
-                isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real)
-            ):
+            # numpy's scalars (a sweep's np.arange steps) as the nets' configs take them
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real):
                 raise PredictorError(f"{key} must be {'an int' if whole else 'a number'}, got {value!r}")
-            if key != "loss" and not math.isfinite(value):
+            if not math.isfinite(value):
                 raise PredictorError(f"{key} must be finite, got {value!r}")
         if self.loss not in LOSSES:
             raise PredictorError(f"loss {self.loss!r} is not one of {list(LOSSES)}")

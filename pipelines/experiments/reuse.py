@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -142,10 +143,8 @@ def seed_from(
         return meta
     runs = meta.setdefault("runs", [])
     numbers = {(r.get(REUSED), r.get("run_there")): k for k, r in enumerate(runs, start=1) if is_reused(r)}
-    listed, lost = (
-        len(runs),
-        max(0, found.last_run - len(runs)),
-    )  # lost runs' numbers first: records name them
+    listed = len(runs)
+    lost = max(0, found.last_run - listed)  # the lost runs' numbers come first: records name them
     added: list[dict[str, Any]] = []
     number_of: dict[int | None, int] = {}
     for there in sorted(set(found.runs_there.values()), key=lambda run: (run is None, run or 0)):
@@ -192,10 +191,7 @@ def _folder(source: Path, where: str) -> Path:
 def _recordings(tasks: dict[str, EpisodeTask], folders: dict[str, Path]) -> str:
     """ "; N of their recordings stay in DIR/mcap[, M in OTHER/mcap]" for the episodes ``tasks`` taken, each
     kept in ``folders``' sweep (the one that ran it), or nothing when none was recorded."""
-    kept: dict[Path, int] = {}
-    for key, task in tasks.items():
-        if mcap_path(folders[key], task).is_file():
-            kept[folders[key]] = kept.get(folders[key], 0) + 1
+    kept = Counter(folders[key] for key, task in tasks.items() if mcap_path(folders[key], task).is_file())
     if not kept:
         return ""
     (folder, count), *more = kept.items()
