@@ -203,9 +203,11 @@ def _with_mpc_override(cfg: RunConfig, experiment: Experiment, key: str, value: 
             "its methods",
         )
     applies = _planning(cfg, experiment, "mpc", key)
-    applies = tuple((label, spec) for label, spec in applies if reads_setting(spec, key))
     source = cfg.source("mpc", key)
-    if not applies and source is not None and source.kind == "file":
+    # a file's value is judged by the controller alone: the cells of a folder swept with it keep their keys
+    given = source is None or source.kind != "file"
+    applies = tuple((label, spec) for label, spec in applies if reads_setting(spec, key, by_values=given))
+    if not applies and not given:
         return experiment  # a file may serve other experiments too (safe_crossing.toml's DMPC settings)
     if not applies:  # they all plan (_planning refuses otherwise), none reads the key
         why = dict.fromkeys(unread_because(spec, key) for _, spec in experiment.methods)

@@ -1,11 +1,18 @@
-"""The [mpc] keys a controller does not read (``unread_because``): a CMPC column per value of DMPC's update
+"""The [mpc] keys a controller does not read (``unread_because``), or reads only under another key's value
+(``READ_UNDER``: dmpc_relaxation under the relaxed update): a CMPC column per value of DMPC's update
 rule ran the same episodes again under new cell keys (a sweep refuses or skips them, simulate refuses them
 given on the command line), and a comparison of two runs that differ only in them differs in nothing their
 episodes ran with (``record_unread``)."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Final
+
+from mpc.config import MPCConfig
 
 if TYPE_CHECKING:
     from pipelines.loop.controllers import ControllerSpec
@@ -32,22 +39,59 @@ DMPC_KEYS: Final[frozenset[str]] = frozenset(
 )
 CMPC_KEYS: Final[frozenset[str]] = frozenset({"xi"})  # Algorithm 1's threshold; DMPC stops by epsilon
 COUPLED_KEYS: Final[frozenset[str]] = frozenset({"coupled_mode"})  # the coupled NLP's (coupling nlp)
+# The [mpc] keys an MPC reads only under another key's value: (that key, the value). The relaxed step of
+# mpc/dmpc_keep.py, Gauss-Seidel's order (mpc/dmpc.py), the restart from braking past restart_penalty
+# (mpc/nlp.py, mpc/dmpc.py) and the discs of guidance "standing" (pipelines/loop/mpc.py): a --vary over
+# dmpc_relaxation under Jacobi ran the same episodes once a value under new cell keys.
+READ_UNDER: Final[Mapping[str, tuple[str, Any]]] = MappingProxyType(
+    {
+        "dmpc_relaxation": ("dmpc_update", "relaxed"),
+        "dmpc_order": ("dmpc_update", "gauss_seidel"),
+        "restart_penalty": ("multi_start", True),
+        "guidance_clearance": ("guidance", "standing"),
+    }
+)
+_TABLE_I: Final[Mapping[str, Any]] = MappingProxyType(
+    {
+        field.name: field.default
+        for field in dataclasses.fields(MPCConfig)
+        if field.name in dict(READ_UNDER.values())
+    }
+)
 
 
-def reads_setting(spec: ControllerSpec, key: str) -> bool:
+def reads_setting(spec: ControllerSpec, key: str, *, by_values: bool = True) -> bool:
     """Whether ``spec``'s controller plans with the ``[mpc]`` ``key`` (or the margins): ``unread_because``."""
-    return unread_because(spec, key) is None
+    return unread_because(spec, key, by_values=by_values) is None
 
 
-def unread_because(spec: ControllerSpec, key: str) -> str | None:
+def unread_because(spec: ControllerSpec, key: str, *, by_values: bool = True) -> str | None:
     """Why ``spec``'s controller does not read the ``[mpc]`` ``key``, as said of methods ("plan with no MPC"),
     None where it does: ORCA and the straight line have no MPC, a method without flocking (table3's NF,
     w_floc = 0) no flocking term to weigh, CMPC none of DMPC's settings nor DMPC CMPC's, and IBR none of the
     coupled NLP's, so a value of theirs would only run the same episodes again under a new cell key. A
-    plugin reads what it likes."""
+    plugin reads what it likes. ``by_values``: a shipped MPC's ``READ_UNDER`` keys too, under the values of
+    ``spec.mpc_overrides`` (Table I's where absent); without, the controller alone decides, as it did the
+    cell keys of a file's values before (a folder swept with such a file keeps its cells)."""
     if not spec.kind.uses_predictor:
         return "plan with no MPC"
-    return _unread(spec.controller, spec.coupling, spec.flocking, key)
+    why = _unread(spec.controller, spec.coupling, spec.flocking, key)
+    if why is None and by_values and spec.controller in ("cmpc", "dmpc"):
+        return unread_under(dict(spec.mpc_overrides), key)
+    return why
+
+
+def unread_under(values: Mapping[str, Any], key: str) -> str | None:
+    """Why an MPC planning with the ``[mpc]`` ``values`` (Table I's where absent) does not read ``key``
+    (``READ_UNDER``), None where it does."""
+    if key not in READ_UNDER:
+        return None
+    other, needed = READ_UNDER[key]
+    value = values.get(other, _TABLE_I[other])
+    if value == needed:
+        return None
+    shown, read = json.dumps(value), json.dumps(needed)
+    return f"plan with {other} = {shown}, and {key} is read under {other} = {read} only"
 
 
 def _unread(controller: str, coupling: str, flocking: bool, key: str) -> str | None:
@@ -75,5 +119,11 @@ def record_unread(record: dict[str, Any]) -> frozenset[str]:
     if not isinstance(config, dict):
         config = {}
     coupling, flocking = str(config.get("coupling", "ibr")), config.get("flocking", True) is not False
-    keys = FLOCKING_KEYS | DMPC_KEYS | CMPC_KEYS | COUPLED_KEYS
-    return frozenset(key for key in keys if _unread(controller, coupling, flocking, key) is not None)
+    values = config.get("mpc")
+    values = values if isinstance(values, dict) else {}
+    keys = FLOCKING_KEYS | DMPC_KEYS | CMPC_KEYS | COUPLED_KEYS | READ_UNDER.keys()
+    return frozenset(
+        key
+        for key in keys
+        if _unread(controller, coupling, flocking, key) is not None or unread_under(values, key) is not None
+    )

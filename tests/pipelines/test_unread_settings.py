@@ -70,6 +70,18 @@ def test_a_sweep_setting_no_method_reads_is_one_line(tmp_path, capsys, options, 
             ["--controller", "cmpc", "--no-flocking", "--set", "mpc.d_flock=1.5"],
             "where the runs plan without the flocking term (NF), which d_flock shapes",
         ),
+        (
+            ["--controller", "dmpc", "--set", "mpc.dmpc_relaxation=0.3"],
+            'dmpc_update = "jacobi", and dmpc_relaxation is read under dmpc_update = "relaxed" only',
+        ),
+        (
+            ["--controller", "cmpc", "--set", "mpc.multi_start=false", "--set", "mpc.restart_penalty=3"],
+            "plan with multi_start = false, and restart_penalty is read under multi_start = true only",
+        ),
+        (
+            ["--controller", "cmpc", "--set", "mpc.guidance_clearance=penalty"],
+            'guidance = "none", and guidance_clearance is read under guidance = "standing" only',
+        ),
     ],
 )
 def test_simulate_refuses_a_typed_setting_its_controller_does_not_read(capsys, options, message):
@@ -115,3 +127,42 @@ def test_a_sweep_refuses_a_simulate_setting_it_has_its_own_of(tmp_path, capsys, 
         )
         == 0
     )
+
+
+def test_a_setting_read_under_another_value_varies_only_where_it_is_read():
+    """dmpc_relaxation is the relaxed update's alone: `--vary mpc.dmpc_relaxation=0.3,0.7` under Jacobi ran
+    DMPC's episodes twice under two cell keys, and a --set of it gave the Jacobi column a key of its own."""
+    cfg = load(sets=["sweep.experiment=table2", 'sweep.vary="mpc.dmpc_relaxation=0.3,0.7"'])
+    with pytest.raises(Exception, match='dmpc_relaxation is read under dmpc_update = "relaxed" only'):
+        configured_experiment(cfg)
+    sets = ["sweep.experiment=table2", "mpc.dmpc_update=relaxed", 'sweep.vary="mpc.dmpc_relaxation=0.3,0.7"']
+    labels = [label for label, _ in configured_experiment(load(sets=sets)).methods]
+    assert labels == ["CMPC", "DMPC dmpc_relaxation=0.3", "DMPC dmpc_relaxation=0.7"]
+    sets = ["sweep.experiment=table2", "mpc.dmpc_relaxation=0.3"]
+    sets.append('sweep.vary="mpc.dmpc_update=jacobi,relaxed"')
+    methods = dict(configured_experiment(load(sets=sets)).methods)
+    assert methods["DMPC dmpc_update=jacobi"] == dict(get_experiment("table2").methods)["DMPC"]
+    assert dict(methods["DMPC dmpc_update=relaxed"].mpc_overrides)["dmpc_relaxation"] == 0.3
+
+
+def test_a_files_value_read_under_another_value_keeps_its_cell_keys(tmp_path):
+    """A file may set dmpc_relaxation under Jacobi (it serves other runs too): taken, and judged by the
+    controller alone, so a folder swept with that file before keeps its cells."""
+    path = tmp_path / "run.toml"
+    path.write_text("[mpc]\ndmpc_relaxation = 0.3\n", encoding="utf-8")
+    experiment = configured_experiment(load(str(path), sets=["sweep.experiment=table2"]))
+    assert dict(dict(experiment.methods)["DMPC"].mpc_overrides) == {"dmpc_relaxation": 0.3}
+
+
+def test_compare_reads_past_a_setting_read_under_another_value():
+    from pipelines.loop.unread import record_unread
+
+    def record(update: str) -> dict:
+        return {"controller": "dmpc", "config": {"coupling": "ibr", "mpc": {"dmpc_update": update}}}
+
+    assert {"dmpc_relaxation", "restart_penalty", "guidance_clearance"} <= record_unread(
+        {"controller": "dmpc", "config": {"mpc": {"multi_start": False}}}
+    ) | record_unread(record("jacobi"))
+    assert "dmpc_relaxation" not in record_unread(record("relaxed"))
+    assert "dmpc_order" not in record_unread(record("gauss_seidel"))
+    assert "restart_penalty" not in record_unread(record("relaxed"))  # Table I's multi_start = true
