@@ -45,7 +45,7 @@ VISIBILITY: Final[tuple[str, str]] = ("visible", "invisible")
 
 def make_env_config(profile: str = "paper", visibility: str = "visible") -> EnvConfig:
     """The named profile's EnvConfig with the robots visible to the humans' ORCA or not."""
-    if profile not in PROFILES:
+    if not isinstance(profile, str) or profile not in PROFILES:  # a list from plain data is unhashable
         raise SimulationError(f"unknown profile {profile!r}; choose from {sorted(PROFILES)}")
     if visibility not in VISIBILITY:
         raise SimulationError(f"unknown visibility {visibility!r}; choose from {list(VISIBILITY)}")

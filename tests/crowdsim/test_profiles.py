@@ -38,6 +38,9 @@ def test_make_env_config_names_the_bad_value_and_the_choices():
         make_env_config("crowdnav")
     with pytest.raises(SimulationError, match=r"'hidden'.*\['visible', 'invisible'\]"):
         make_env_config("paper", "hidden")
+    # a YAML list or mapping (gym.make's config) is no name: refused as one, not TypeError "unhashable"
+    with pytest.raises(SimulationError, match=r"unknown profile \['paper'\]; choose from"):
+        make_env_config(["paper"])  # type: ignore[arg-type]
 
 
 def _head_on(config):
