@@ -89,8 +89,10 @@ class Recording:
         """Rows ``k`` whose next ``steps`` rows follow each other on the frame grid (one grid, no jump)."""
         if len(self.frames) <= steps:
             return np.zeros(0, dtype=int)
-        span = self.frames[steps:] - self.frames[:-steps]
-        return np.flatnonzero(span == steps * self.frame_step)
+        # jumps off the grid counted up to each row: the span alone let two jumps that add up to whole steps
+        # (ids shifted by 3 frames and back, 6 -> 9 -> 18) pass for consecutive rows
+        jumps = np.concatenate([[0], np.cumsum(np.diff(self.frames) != self.frame_step)])
+        return np.flatnonzero(jumps[steps:] == jumps[: len(jumps) - steps])
 
     def flow(self) -> tuple[np.ndarray, np.ndarray]:
         """The crowd's centre and main direction (``_flow``), computed once: a whole sequence's take 15 ms,

@@ -42,6 +42,16 @@ def test_a_recording_holds_each_track_on_the_frame_grid_and_knows_its_gaps():
         Recording.from_rows("hotel", np.array(rows), frame_step=0)
 
 
+def test_no_window_spans_jumps_off_the_grid_that_add_up_to_whole_steps():
+    # ids shifted by 3 frames (6 -> 9) and back (9 -> 18): frames 6, 9, 18 span 12 = 2 steps, but are no two
+    # steps of 0.4 s, and their replay would walk 0.2 s and 0.6 s of motion as 0.4 s each
+    rows = [(frame, 1, 0.1 * frame, 0.0) for frame in (0, 6, 9, 18, 24)]
+    rec = Recording.from_rows("eth", np.array(rows), frame_step=6)
+    np.testing.assert_array_equal(rec.frames, [0, 6, 9, 18, 24])
+    np.testing.assert_array_equal(rec.window_starts(1), [0, 3])
+    assert len(rec.window_starts(2)) == len(rec.window_starts(3)) == 0
+
+
 def test_the_flow_is_the_median_position_and_the_main_direction_of_the_steps():
     centre, direction = four_people().flow()
     np.testing.assert_array_equal(centre, [0.0, 0.0])
