@@ -163,6 +163,9 @@ def test_a_replayed_crowd_needs_its_recording_the_recorded_step_and_no_layout():
         CrowdEnv(EnvConfig(crowd="hotel"), four_people("eth"))
     with pytest.raises(SimulationError, match="not 'orca'"):
         CrowdEnv(EnvConfig(), four_people())
+    ten_hertz = Recording("eth", np.arange(4), 1, np.zeros((4, 1, 2)), dt=0.1)
+    with pytest.raises(SimulationError, match="recording 'eth' has steps of 0.1 s, but dt is 0.4 s"):
+        CrowdEnv(EnvConfig(crowd="eth"), ten_hertz)
     env = CrowdEnv(EnvConfig(crowd="eth", time_limit=4.0, timeout_margin=0.0, history_len=3), four_people())
     layout = Layout(np.zeros((1, 2)), np.ones((1, 2)), np.zeros((0, 2)), np.zeros((0, 2)))
     with pytest.raises(SimulationError, match="is replayed: use reset"):
