@@ -17,6 +17,7 @@ from pipelines.commands.standard_output import is_stdout, write_document
 from pipelines.commands.zoo_outputs import check_not_in_a_zoo, check_not_zoo_file
 from pipelines.commands.zoo_outputs import check_outside_the_zoos as check_outside_the_zoos
 from pipelines.errors import PipelineError
+from pipelines.whole_files import new_file_mode
 
 T = TypeVar("T")
 
@@ -122,7 +123,8 @@ def check_writable(
     command keeps that very file (calibrate's calibrations.json). ``room``: how many bytes
     longer than the output's name the temporary name it is first made under beside it is, which its name
     must leave room for (default: ``REPLACE_FILE_ROOM`` for a file, made by ``replace_file``; 0 for a
-    directory, written into; 0 for a file written in place, such as a figure). Standard output (``--json
+    directory, written into; 0 for a figure, whose temporary's name does not grow with the output's:
+    ``whole_files.save_figure``). Standard output (``--json
     -``, ``standard_output.STDOUT``) is no file and needs no check.
     """
     if path is None or is_stdout(path):
@@ -236,13 +238,7 @@ def replace_file(path: Path, write: Callable[[str], object]) -> None:
             fcntl.flock(fd, fcntl.LOCK_EX)
         except OSError:  # a file system that cannot lock (ENOLCK): its temporaries are never removed
             pass
-        if path.is_file():
-            mode = stat.S_IMODE(path.stat().st_mode)
-        else:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(name, mode)
+        os.chmod(name, new_file_mode(path))
         write(name)
         os.replace(name, path)
     finally:

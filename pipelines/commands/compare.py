@@ -14,6 +14,7 @@ from pipelines.commands.output_paths import output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
+from pipelines.whole_files import save_figure
 
 if TYPE_CHECKING:
     from pipelines.experiments.compare import Identity, Paired, Run, Versus
@@ -153,7 +154,8 @@ def _compare(args: argparse.Namespace) -> int:
         from pipelines.experiments.compare_plot import compare_figure
 
         args.plot.parent.mkdir(parents=True, exist_ok=True)
-        compare_figure(report).savefig(args.plot, dpi=120)
+        figure = compare_figure(report)
+        save_figure(args.plot, lambda name: figure.savefig(name, dpi=120))
         print(f"plot: {args.plot}")
     if args.json:
         write_output(args.json, json.dumps(plain(report), indent=2, allow_nan=False) + "\n", "--json")

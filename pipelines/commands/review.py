@@ -311,7 +311,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         below = [pattern + "*" for level in FOLDER_LEVELS for pattern in level]
         inputs += [p for pattern in below for p in args.path.glob(pattern)]
     inputs += [args.compare] if args.compare else []
-    # matplotlib writes the figures under their own names, not staged beside them
+    # the figures' temporaries (whole_files.save_figure) have names of their own length: no room
     check_writable(args.plot, "--plot", inputs=inputs, room=0)
     check_writable(args.animate, "--animate", inputs=inputs, room=0)
     check_writable(args.json, "--json", inputs=inputs, json_only=True)

@@ -207,7 +207,7 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
     # Before the episodes, not after them: a path that cannot be written would waste the whole run.
     inputs = [] if config.path is None else [Path(config.path)]  # an empty config file took a report
     check_writable(run.json, config.label("simulate", "json"), json_only=True, inputs=inputs)
-    check_writable(run.plot, config.label("simulate", "plot"), room=0, inputs=inputs)  # savefig writes it
+    check_writable(run.plot, config.label("simulate", "plot"), room=0, inputs=inputs)  # save_figure: no room
     check_writable(run.record, config.label("simulate", "record"), directory=True)
     json_file = None if is_stdout(run.json) else run.json
     if json_file is not None and run.plot is not None and json_file.resolve() == run.plot.resolve():

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, Final
 from crowdsim.metrics import COLLISION_DISTANCE
 from crowdsim.reaction import reacts
 from crowdsim.world import RADIUS
+from pipelines.whole_files import save_figure
 
 # The statuses of control steps that the MPC's wall-time budget (mpc.time_limit_s) cut short: the IBR loop
 # stopped at it ("timeout", mpc/cmpc.py, dmpc.py, coupled.py) or a solve ran past it (IPOPT's status, which
@@ -241,5 +242,5 @@ def plot_first_episode(path: Path, controller: str, first: EpisodeResult, env_co
         human_present=first.human_present,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    save_figure(path, lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
     print(f"wrote {path}")

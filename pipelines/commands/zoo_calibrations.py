@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pipelines.errors import PipelineError
+from pipelines.whole_files import save_figure
 
 if TYPE_CHECKING:
     from predictors.calibration import Calibration
@@ -220,7 +221,7 @@ def run_calibrations(user_dir: Path | None, predictor: str | None, plot: Path | 
         blocks = [block for _, block in found]
         figure = plot_margins(blocks, f"Conformal margins of {predictor} (crowdmpc zoo calibrations)")
         plot.parent.mkdir(parents=True, exist_ok=True)
-        figure.savefig(plot, dpi=120)
+        save_figure(plot, lambda name: figure.savefig(name, dpi=120))
         print(f"wrote {plot}")
     print(
         "margins: the (1 - alpha) quantile of the displacement error at horizon steps 1..H, those of "

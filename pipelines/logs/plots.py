@@ -18,6 +18,7 @@ from pipelines.errors import PipelineError
 from pipelines.logs.identity import differing_settings, shown
 from pipelines.logs.reader import Recording
 from pipelines.logs.view import EpisodeView, episode_view
+from pipelines.whole_files import save_figure
 
 
 def _robot_color(i: int) -> str:
@@ -61,7 +62,7 @@ def plot_recording(rec: Recording, out: str | Path, times: Sequence[float] | Non
     """
     view = episode_view(rec)  # once: the figure and the episode's end read it
     fig, _ = _recording_figure(rec, view, times)
-    fig.savefig(out, dpi=120, bbox_inches="tight")
+    save_figure(Path(out), lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
     said = str(fig.axes[0].get_title()).splitlines()[-1]
     end = float(view.times[-1])
     late = [t for t in times or () if t > end]  # drawn at the last state: the title alone showed it moved
@@ -186,7 +187,7 @@ def plot_compare(a: Recording, b: Recording, out: str | Path) -> None:
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.set_title("A solid, B dashed")
     _dedupe_legend(ax, below=True)
-    fig.savefig(out, dpi=120, bbox_inches="tight")
+    save_figure(Path(out), lambda name: fig.savefig(name, dpi=120, bbox_inches="tight"))
 
 
 def _compare_labels(a: Recording, b: Recording) -> dict[str, str]:
@@ -371,5 +372,5 @@ def animate_recording(rec: Recording, out: str | Path, *, speed: float = 1.0) ->
         if gif
         else FFMpegWriter(fps=fps)  # type: ignore[arg-type]
     )
-    animation.save(out, writer=writer, dpi=80)
+    save_figure(out, lambda name: animation.save(name, writer=writer, dpi=80))
     return AnimationFacts(len(rows), every, frame_s, asked_s, least_s)

@@ -315,8 +315,9 @@ def test_data_synth_leaves_room_for_the_temporary_of_its_staged_data(tmp_path, c
 
 
 def test_a_figure_with_a_long_name_is_written_as_matplotlib_saves_it_under_that_name(tmp_path, capsys):
-    """--plot and --animate are saved by matplotlib under their own names, no temporary beside them: a
-    240-byte name was refused as "crowdmpc writes it under a longer temporary name first"; it does not."""
+    """--plot and --animate are saved under a temporary whose name does not grow with theirs
+    (whole_files.save_figure): a 240-byte name was refused as "crowdmpc writes it under a longer temporary
+    name first"; it does not."""
     record = tmp_path / "rec"
     plot = tmp_path / ("p" * 236 + ".png")
     argv = ["simulate", "--controller", "straight", "--humans", "1", "--no-progress", "--record", str(record)]
