@@ -155,20 +155,31 @@ def check_writable(
             f"{label}: is a symbolic link; crowdmpc does not write through one (name its target)"
         )
     if path.exists():
-        if directory != path.is_dir():
-            raise PipelineError(f"{label}: " + ("not a directory" if directory else "is a directory"))
-        if not directory:
-            _check_not_input(path, label, inputs)
-            if json_only:
-                _check_json_document(path, label)
-        try:
-            if directory:
-                _probe(path)
-            else:
-                open(path, "ab").close()  # neither its contents nor its modification time change
-        except OSError as exc:
-            raise PipelineError(f"{label}: cannot write there ({exc.strerror or exc})") from None
-        return
+        _check_existing(path, label, directory, inputs, json_only)
+    else:
+        _check_creatable(path, label)
+
+
+def _check_existing(path: Path, label: str, directory: bool, inputs: Iterable[Path], json_only: bool) -> None:
+    """``check_writable`` of an output that exists: of the kind asked for, and writable as it is."""
+    if directory != path.is_dir():
+        raise PipelineError(f"{label}: " + ("not a directory" if directory else "is a directory"))
+    if not directory:
+        _check_not_input(path, label, inputs)
+        if json_only:
+            _check_json_document(path, label)
+    try:
+        if directory:
+            _probe(path)
+        else:
+            open(path, "ab").close()  # neither its contents nor its modification time change
+    except OSError as exc:
+        raise PipelineError(f"{label}: cannot write there ({exc.strerror or exc})") from None
+
+
+def _check_creatable(path: Path, label: str) -> None:
+    """``check_writable`` of an output that does not exist yet: its nearest existing ancestor is a directory
+    the command may create entries in."""
     ancestor = path
     while not ancestor.exists() and ancestor != ancestor.parent:
         if ancestor.is_symlink():  # dangling or a loop: nothing can be made through it (mkdir: File exists)

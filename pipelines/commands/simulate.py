@@ -16,6 +16,7 @@ from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable
 from pipelines.commands.calibrate_store import take_back_before_planning
 from pipelines.commands.output_paths import without_missing_parents
+from pipelines.commands.simulate_help import EPILOG
 from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_first_episode, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
@@ -27,22 +28,6 @@ if TYPE_CHECKING:
     from pipelines.config import Option, RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import EpisodeResult
-
-EPILOG = """examples:
-  crowdmpc simulate --controller orca --scenario circle --humans 7 --episodes 20 --seed 0
-  crowdmpc simulate --controller cmpc --predictor constant_velocity --scenario perpendicular --humans 5 \\
-      --episodes 10 --json runs/cmpc.json --plot runs/cmpc.png --record runs/cmpc
-  crowdmpc simulate --controller dmpc --no-flocking --coupling ibr --humans 9 --episodes 50
-  crowdmpc --plugin my_predictor:MyNet simulate --controller cmpc --predictor my_net_eth --humans 7
-
-  crowdmpc --config docs/examples/demo.toml simulate --humans 5 --record runs/demo-h5 \\
-      --plot runs/demo-h5/episode.png    # the file's settings, 5 humans, recorded apart from the demo's
-
-Episode i uses seed S + i. --plot draws the first episode; --record writes one MCAP file per episode.
-Every option can also come from a TOML config file (--config FILE, before or after `simulate`; `crowdmpc
-config show` prints one with every default) and --set SECTION.KEY=VALUE items (e.g. --set mpc.w_coll=1e6):
-defaults < the file < --set < the options given here.
-"""
 
 
 # The options that set a config key when given (their defaults are the config's: pipelines/config).
@@ -85,6 +70,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     # Defaults are None: an option given overrides the config (file, --set), whose defaults are these.
+    _add_run_options(parser)
+    _add_output_options(parser)
+    _add_sensing_options(parser)
+    parser.add_argument(
+        "--no-progress", action="store_true", default=None, help="no progress bar (drawn on a terminal only)"
+    )
+    add_config_options(parser)
+    parser.set_defaults(func=run, parser_error=parser.error)
+
+
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    """What runs: the controller, the scenario, its team and its crowd, the episodes."""
     parser.add_argument(
         "--controller",
         type=controller_name,
@@ -125,6 +122,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
     )
     parser.add_argument("--crowd", choices=CROWDS, help=CROWD_HELP)
+
+
+def _add_output_options(parser: argparse.ArgumentParser) -> None:
+    """The files a run writes: its report, the first episode's plot, the recordings."""
     parser.add_argument(
         "--json",
         metavar="FILE",
@@ -138,6 +139,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="record every IBR iteration's prediction in the --record files (cmpc, dmpc)",
     )
+
+
+def _add_sensing_options(parser: argparse.ArgumentParser) -> None:
+    """What the controller sees of the crowd."""
     parser.add_argument(
         "--sensor-range",
         type=float,
@@ -152,11 +157,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --sensor-range: the tracker reports no track lengths (a late arrival's padded past reads "
         "as its own)",
     )
-    parser.add_argument(
-        "--no-progress", action="store_true", default=None, help="no progress bar (drawn on a terminal only)"
-    )
-    add_config_options(parser)
-    parser.set_defaults(func=run, parser_error=parser.error)
 
 
 @dataclass(frozen=True)

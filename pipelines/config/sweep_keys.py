@@ -11,8 +11,13 @@ from pipelines.config.settings import SweepSettings, available_cpus
 
 
 def sweep_keys() -> tuple[Key, ...]:
+    """The [sweep] keys, in the order ``crowdmpc config show`` writes them."""
+    return (*_experiment_keys(), *_running_keys(), *_column_keys())
+
+
+def _experiment_keys() -> tuple[Key, ...]:
+    """Which experiment, where it goes and its size."""
     from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
-    from pipelines.experiments.methods import SHIPPED_CONTROLLERS
 
     return (
         Key(
@@ -38,6 +43,12 @@ def sweep_keys() -> tuple[Key, ...]:
         ),
         Key("humans", "ints", None, "crowd sizes (--humans); unset: the experiment's own", [5, 6, 7, 8, 9]),
         Key("seed", "int", 0, "base scenario seed: episode i is seed + i // 2 (--seed)"),
+    )
+
+
+def _running_keys() -> tuple[Key, ...]:
+    """How and where its episodes run."""
+    return (
         Key(
             "workers",
             "int",
@@ -67,6 +78,14 @@ def sweep_keys() -> tuple[Key, ...]:
             "records it in errors.jsonl (--episode-timeout); unset: no limit",
             600.0,
         ),
+    )
+
+
+def _column_keys() -> tuple[Key, ...]:
+    """The columns of the experiments whose columns a user chooses."""
+    from pipelines.experiments.methods import SHIPPED_CONTROLLERS
+
+    return (
         Key(
             "predictors",
             "strs",

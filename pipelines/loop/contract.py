@@ -137,6 +137,20 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
             f"{_named(controller)}: act() must return a crowdsim.control.ControlOutput, got "
             f"{type(out).__module__}.{type(out).__qualname__}"
         )
+    _check_arrays(controller, out, obs)
+    _check_solver_fields(controller, out)
+    # the loop and the recorder work on float arrays (a list of rows had no .tolist() for the recorder)
+    return dataclasses.replace(
+        out,
+        accelerations=np.asarray(out.accelerations, dtype=float),
+        plan=None if out.plan is None else np.asarray(out.plan, dtype=float),
+        prediction=None if out.prediction is None else np.asarray(out.prediction, dtype=float),
+        iteration_predictions=tuple(np.asarray(p, dtype=float) for p in out.iteration_predictions),
+    )
+
+
+def _check_arrays(controller: Controller, out: ControlOutput, obs: Observation) -> None:
+    """``checked_output``'s arrays: their shapes for ``obs`` and their values."""
     m, n = obs.n_robots, obs.n_humans
     _check_array(
         controller, "accelerations", out.accelerations, (m, 2), f"of shape ({m}, 2), a row per robot"
@@ -161,6 +175,11 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
         _check_array(
             controller, "iteration_predictions", each, (None, n, 2), f"of (H, {n}, 2) arrays", humans_axis=1
         )
+
+
+def _check_solver_fields(controller: Controller, out: ControlOutput) -> None:
+    """``checked_output``'s fields of the step's report: ``iterations``, ``status``, ``fallback``, ``extra``,
+    ``solve_time_s`` and ``potential``."""
     if isinstance(out.iterations, bool) or not isinstance(out.iterations, int | np.integer):
         raise PipelineError(
             f"{_named(controller)}: act() must return iterations as an int, got {out.iterations!r}"
@@ -195,14 +214,6 @@ def checked_output(controller: Controller, out: object, obs: Observation) -> Con
             raise PipelineError(
                 f"{_named(controller)}: act() must return {name} as {expected}, got {value!r:.40}"
             )
-    # the loop and the recorder work on float arrays (a list of rows had no .tolist() for the recorder)
-    return dataclasses.replace(
-        out,
-        accelerations=np.asarray(out.accelerations, dtype=float),
-        plan=None if out.plan is None else np.asarray(out.plan, dtype=float),
-        prediction=None if out.prediction is None else np.asarray(out.prediction, dtype=float),
-        iteration_predictions=tuple(np.asarray(p, dtype=float) for p in out.iteration_predictions),
-    )
 
 
 def _check_extra(controller: Controller, extra: object) -> None:

@@ -275,23 +275,9 @@ def run_episodes(
             observers = tuple(observers_factory()) if observers_factory is not None else ()
             if not bar.disable:
                 observers = (*observers, stepper)
-            try:
-                result = run_episode(
-                    controller,
-                    seed=seed + i,
-                    scenario=scenario,
-                    n_humans=n_humans,
-                    n_robots=n_robots,
-                    env_config=env_config,
-                    observers=observers,
-                    meta=run_meta,
-                )
-            except (PipelineError, PredictorError) as exc:  # a plugin's: the episode, to rerun it alone
-                _close_quietly(observers)
-                raise EpisodeFailed(seed + i, scenario, exc) from exc
-            except BaseException:
-                _close_quietly(observers)
-                raise
+            result = _observed_episode(
+                controller, observers, seed + i, scenario, n_humans, n_robots, env_config, run_meta
+            )
             results.append(result)
             successes += result.metrics.success
             stepper.success = f"success={100.0 * successes / len(results):.0f}%"
@@ -305,6 +291,37 @@ def run_episodes(
     except PipelineError as exc:
         raise CloseFailed(exc, len(results)) from exc
     return results
+
+
+def _observed_episode(
+    controller: Controller,
+    observers: tuple[EpisodeObserver, ...],
+    seed: int,
+    scenario: str,
+    n_humans: int,
+    n_robots: int,
+    env_config: EnvConfig,
+    meta: Mapping[str, Any],
+) -> EpisodeResult:
+    """One episode of ``run_episodes``: when it raises, its ``observers`` are closed before the exception goes
+    on, a plugin's error as an ``EpisodeFailed`` naming the episode's seed."""
+    try:
+        return run_episode(
+            controller,
+            seed=seed,
+            scenario=scenario,
+            n_humans=n_humans,
+            n_robots=n_robots,
+            env_config=env_config,
+            observers=observers,
+            meta=meta,
+        )
+    except (PipelineError, PredictorError) as exc:  # a plugin's: the episode, to rerun it alone
+        _close_quietly(observers)
+        raise EpisodeFailed(seed, scenario, exc) from exc
+    except BaseException:
+        _close_quietly(observers)
+        raise
 
 
 def behind_sensor(
