@@ -6,13 +6,13 @@ import argparse
 import sys
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from crowdsim.profiles import PROFILES, VISIBILITY
 from crowdsim.replay import CROWDS
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
-from crowdsim.world import PAPER_ROBOTS
 from pipelines.commands import check_writable
 from pipelines.commands.calibrate_store import take_back_before_planning
 from pipelines.commands.output_paths import without_missing_parents
@@ -82,6 +82,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _add_run_options(parser: argparse.ArgumentParser) -> None:
     """What runs: the controller, the scenario, its team and its crowd, the episodes."""
+    from pipelines.config.schema import key_default
+
     parser.add_argument(
         "--controller",
         type=controller_name,
@@ -94,11 +96,13 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         help="predictor of cmpc/dmpc: a registered name or a model of the shipped or user zoo "
         "(default: constant_velocity)",
     )
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS), help="default: circle")
-    parser.add_argument("--humans", type=int, help=f"0..{MAX_HUMANS} (default: 7)")
-    parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: {PAPER_ROBOTS})")
-    parser.add_argument("--episodes", type=int, help="default: 1")
-    parser.add_argument("--seed", type=int, help="first episode's seed (default: 0)")
+    # the config's defaults, read from its schema: literals here could drift from them
+    scenario, simulate = partial(key_default, "scenario"), partial(key_default, "simulate")
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS), help=f"default: {scenario('name')}")
+    parser.add_argument("--humans", type=int, help=f"0..{MAX_HUMANS} (default: {scenario('humans')})")
+    parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: {scenario('robots')})")
+    parser.add_argument("--episodes", type=int, help=f"default: {simulate('episodes')}")
+    parser.add_argument("--seed", type=int, help=f"first episode's seed (default: {simulate('seed')})")
     parser.add_argument(
         "--no-flocking", action="store_true", default=None, help="omega_floc = 0 (Table III, NF)"
     )

@@ -319,6 +319,17 @@ SECTIONS: Final[tuple[Section, ...]] = (
     Section("sweep", "crowdmpc sweep's run (pipelines/experiments).", sweep_keys(), build_sweep),
 )
 SECTION_BY_NAME: Final[Mapping[str, Section]] = {s.name: s for s in SECTIONS}
+
+
+def key_default(section: str, key: str) -> Any:
+    """``section.key``'s default as the schema holds it, for a help text that states it: read here, the text
+    cannot drift from the value (a literal in the help could). KeyError for a key the schema has not."""
+    found = SECTION_BY_NAME[section].key(key)
+    if found is None:
+        raise KeyError(f"{section}.{key}")
+    return found.default
+
+
 # The order in which sections are written: a nested table follows its parent.
 WRITE_ORDER: Final[tuple[str, ...]] = (
     "world",

@@ -343,3 +343,33 @@ def test_simulate_holds_one_trajectory_and_reports_as_if_it_held_all(tmp_path, c
     assert main([*argv, "--json", str(out_json), "--no-progress"]) == 0
     episodes = json.loads(out_json.read_text())["episodes"]
     assert [e["metrics"]["travel_time"] for e in episodes] == [r.metrics.travel_time for r in whole]
+
+
+def test_the_help_states_the_defaults_its_config_schema_holds(monkeypatch):
+    """--scenario, --humans, --robots, --episodes and --seed stated the config's defaults as literals, which a
+    change of the schema's default would have left saying the old value: they read it from the schema."""
+    import argparse
+    import dataclasses
+
+    from pipelines.cli import build_parser
+    from pipelines.config import schema
+
+    changed = {
+        ("scenario", "name"): "perpendicular",
+        ("scenario", "humans"): 5,
+        ("scenario", "robots"): 4,
+        ("simulate", "episodes"): 3,
+        ("simulate", "seed"): 11,
+    }
+    for name in ("scenario", "simulate"):
+        section = schema.SECTION_BY_NAME[name]
+        keys = tuple(
+            dataclasses.replace(k, default=changed.get((name, k.name), k.default)) for k in section.keys
+        )
+        monkeypatch.setitem(schema.SECTION_BY_NAME, name, dataclasses.replace(section, keys=keys))
+    (commands,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    helps = {action.dest: action.help for action in commands.choices["simulate"]._actions}
+    assert helps["scenario"] == "default: perpendicular"
+    assert helps["humans"].endswith("(default: 5)") and helps["robots"].endswith("(default: 4)")
+    assert helps["episodes"] == "default: 3"
+    assert helps["seed"] == "first episode's seed (default: 11)"
