@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib.resources
 import os
+import pwd
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -91,11 +92,24 @@ def user_zoo_dir(directory: str | Path | None = None) -> Path:
     data = os.environ.get("XDG_DATA_HOME")
     if data and Path(data).is_absolute():
         return Path(data) / "crowdmpc" / "zoo"
+    return _home() / ".local" / "share" / "crowdmpc" / "zoo"
+
+
+def _home() -> Path:
+    """``$HOME`` when it is an absolute path, else the user's home in the password database, as for no
+    ``$HOME``. Not ``Path.home()``: it takes an empty ``$HOME`` (``env HOME= crowdmpc``) for "/", and so
+    made the user zoo /.local/share/crowdmpc/zoo, and a relative one for a folder of the current
+    directory, a user zoo that changed with it."""
+    home = os.environ.get("HOME")
+    if home and Path(home).is_absolute():
+        return Path(home)
     try:
-        home = Path.home()
-    except (RuntimeError, KeyError):  # no $HOME and no password entry
-        raise PredictorError(f"cannot find the home directory for the user zoo; set {ZOO_ENV}") from None
-    return home / ".local" / "share" / "crowdmpc" / "zoo"
+        entry = pwd.getpwuid(os.getuid()).pw_dir
+    except KeyError:
+        entry = ""
+    if not Path(entry).is_absolute():  # no password entry, or one without a home
+        raise PredictorError(f"cannot find the home directory for the user zoo; set {ZOO_ENV}")
+    return Path(entry)
 
 
 def _resolved(path: Path) -> Path:

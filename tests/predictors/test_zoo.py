@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import pwd
 import shutil
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -112,6 +114,22 @@ def test_the_user_zoo_defaults_to_the_users_data_directory(tmp_path, monkeypatch
     assert user_zoo_dir() == tmp_path / "home" / ".local" / "share" / "crowdmpc" / "zoo"
     monkeypatch.setenv(ZOO_ENV, str(tmp_path / "mine"))
     assert user_zoo_dir() == tmp_path / "mine" and user_zoo_dir(tmp_path / "x") == tmp_path / "x"
+
+
+@pytest.mark.parametrize("home", ["", "relative/home"])
+def test_a_home_that_is_no_absolute_path_is_passed_over_as_none(tmp_path, monkeypatch, home):
+    """An empty $HOME made the user zoo /.local/share/crowdmpc/zoo, a relative one a folder of the current
+    directory: the password database's home is taken, as when $HOME is unset."""
+    monkeypatch.delenv(ZOO_ENV)
+    monkeypatch.delenv("XDG_DATA_HOME", raising=False)
+    monkeypatch.setenv("HOME", home)
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=str(tmp_path / "pw")))
+    assert user_zoo_dir() == tmp_path / "pw" / ".local" / "share" / "crowdmpc" / "zoo"
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=""))
+    with pytest.raises(
+        PredictorError, match=f"cannot find the home directory for the user zoo; set {ZOO_ENV}"
+    ):
+        user_zoo_dir()
 
 
 # ---------------------------------------------------------------------------------------- add, see, remove
