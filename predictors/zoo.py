@@ -50,11 +50,12 @@ USER: Final[str] = "user"
 
 
 def checkpoints_dir(directory: str | Path | None = None) -> Path:
-    """The shipped zoo: ``directory``, else ``$CROWDMPC_CHECKPOINTS``, else ``shipped_checkpoints_dir()``."""
+    """The shipped zoo: ``directory``, else ``$CROWDMPC_CHECKPOINTS`` (``~`` expanded), else
+    ``shipped_checkpoints_dir()``."""
     if directory is not None:
         return Path(directory)
     env = os.environ.get(CHECKPOINTS_ENV)
-    return Path(env) if env else shipped_checkpoints_dir()
+    return _expanded(env, CHECKPOINTS_ENV) if env else shipped_checkpoints_dir()
 
 
 def shipped_checkpoints_dir() -> Path:
@@ -82,17 +83,33 @@ def shipped_checkpoints_dir() -> Path:
 
 
 def user_zoo_dir(directory: str | Path | None = None) -> Path:
-    """The user zoo: ``directory``, else ``$CROWDMPC_ZOO``, else ``$XDG_DATA_HOME/crowdmpc/zoo`` (an absolute
-    ``XDG_DATA_HOME`` only, as the XDG spec says), else ``~/.local/share/crowdmpc/zoo``."""
+    """The user zoo: ``directory``, else ``$CROWDMPC_ZOO`` (``~`` expanded), else
+    ``$XDG_DATA_HOME/crowdmpc/zoo`` (an absolute ``XDG_DATA_HOME`` only, as the XDG spec says), else
+    ``~/.local/share/crowdmpc/zoo``."""
     if directory is not None:
         return Path(directory)
     env = os.environ.get(ZOO_ENV)
     if env:
-        return Path(env)
+        return _expanded(env, ZOO_ENV)
     data = os.environ.get("XDG_DATA_HOME")
     if data and Path(data).is_absolute():
         return Path(data) / "crowdmpc" / "zoo"
     return _home() / ".local" / "share" / "crowdmpc" / "zoo"
+
+
+def _expanded(value: str, variable: str) -> Path:
+    """A zoo variable's path with a leading ``~`` expanded, as ``$CROWDMPC_DATA``'s and ``$CROWDMPC_CACHE``'s
+    are: a quoted ``CROWDMPC_ZOO="~/zoo"`` (an env file, docker -e) made a folder named "~" in the current
+    directory."""
+    if value == "~" or value.startswith("~/"):
+        return _home() / value[2:]
+    try:
+        return Path(value).expanduser()  # ~user/...
+    except RuntimeError:
+        tilde = value.split("/")[0]
+        raise PredictorError(
+            f"${variable} {value}: no user {tilde[1:]!r} here, so {tilde} names no home"
+        ) from None
 
 
 def _home() -> Path:

@@ -132,6 +132,22 @@ def test_a_home_that_is_no_absolute_path_is_passed_over_as_none(tmp_path, monkey
         user_zoo_dir()
 
 
+def test_a_zoo_variable_starting_with_a_tilde_names_the_home(tmp_path, monkeypatch):
+    """As $CROWDMPC_DATA and $CROWDMPC_CACHE do: a quoted CROWDMPC_ZOO="~/zoo" made a folder "~" here."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv(ZOO_ENV, "~/zoo")
+    monkeypatch.setenv(zoo.CHECKPOINTS_ENV, "~")
+    assert user_zoo_dir() == tmp_path / "home" / "zoo"
+    assert zoo.checkpoints_dir() == tmp_path / "home"
+    monkeypatch.setenv(ZOO_ENV, "~no-such-user-here/zoo")
+    with pytest.raises(PredictorError) as refused:
+        user_zoo_dir()
+    assert str(refused.value) == (
+        f"${ZOO_ENV} ~no-such-user-here/zoo: no user 'no-such-user-here' here, "
+        "so ~no-such-user-here names no home"
+    )
+
+
 # ---------------------------------------------------------------------------------------- add, see, remove
 def test_add_writes_the_user_zoo_and_every_command_sees_both(shipped, user, pair, capsys):
     before = snapshot(shipped)
