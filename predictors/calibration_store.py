@@ -15,7 +15,6 @@ directory's file only.
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import EllipsisType
@@ -25,7 +24,11 @@ from predictors.calibration import SOURCES, Calibration
 from predictors.checkpoint import read_document
 from predictors.conformal import alpha_text, check_alpha
 from predictors.errors import PredictorError, UnknownPredictor
-from predictors.manifest import CALIBRATIONS_NAME, zoo_lock  # the zoo's own files (ZOO_FILES), its lock
+from predictors.manifest import (  # the zoo's own files (ZOO_FILES), its lock, how they are written
+    CALIBRATIONS_NAME,
+    replace_durably,
+    zoo_lock,
+)
 from predictors.zoo import (
     SHIPPED,
     USER,
@@ -179,14 +182,7 @@ def _write_blocks(path: Path, blocks: list[Calibration]) -> None:
         "version": CALIBRATIONS_VERSION,
         "calibrations": [b.to_json() for b in sorted(blocks, key=_file_order)],
     }
-    # the pid keeps two concurrent writers from sharing a temp file; the rename makes each write whole
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    text = json.dumps(document, indent=2, allow_nan=False) + "\n"
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)  # a full disk (or a Ctrl-C) leaves no half-written temporary in the zoo
+    replace_durably(path, json.dumps(document, indent=2, allow_nan=False) + "\n")
 
 
 def current_sha256(predictor: str, directory: str | Path | None = None) -> str | None:

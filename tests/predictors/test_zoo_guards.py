@@ -283,6 +283,31 @@ def test_a_manifest_the_disk_refuses_is_named(user, capsys):
     assert code == 2 and f"could not write {user / manifest.MANIFEST_NAME} (File too large)" in line
 
 
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="names a descriptor's file through /proc")
+def test_the_manifest_and_calibrations_reach_the_disk_before_they_replace_the_old(tmp_path, monkeypatch):
+    """Written and renamed unsynced, a power loss could leave the rename on disk without its data: an empty
+    manifest, the user zoo's every model lost (as the calibrations). Each is synced before its rename, and
+    its directory after."""
+    from predictors.calibration_store import save_calibration
+    from tests.calibration_blocks import class_errors, constant_velocity_block
+
+    synced: list[str] = []
+    fsync = os.fsync
+
+    def recorded(fd: int) -> None:
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", recorded)
+    manifest.write_manifest({}, tmp_path)
+    save_calibration(constant_velocity_block(class_errors(4)[0]), tmp_path)
+    temporaries = [
+        str(tmp_path / f".{name}.{os.getpid()}.tmp") for name in (manifest.MANIFEST_NAME, CALIBRATIONS_NAME)
+    ]
+    assert synced == [temporaries[0], str(tmp_path), temporaries[1], str(tmp_path)]
+    assert zoo.read_manifest(tmp_path) == {} and (tmp_path / CALIBRATIONS_NAME).is_file()
+
+
 def test_verify_names_the_leftovers_of_a_stopped_remove(user, monkeypatch, capsys):
     """`zoo verify` listed the entries only: the hidden copies a stopped remove left (as large as the model)
     were named by no line, and a user learnt of them only by a second `zoo remove mine`."""
