@@ -165,7 +165,13 @@ def take_back_killed() -> None:
     """Take back the blocks of each calibrate killed during a held-out run that planned with them (kill -9,
     a crash: no chance to put them back itself), as its Ctrl-C would have: from the journal it left."""
     from predictors.calibration_store import calibrations_path
+    from predictors.zoo import is_shipped, user_zoo_dir
 
+    # $CROWDMPC_ZOO at the shipped zoo, which is read as the one zoo: no calibrate wrote a journal there, and
+    # calibrations_path() refuses it as a zoo to write, which failed `zoo calibrations` and every run planning
+    # with calibrated margins
+    if is_shipped(user_zoo_dir()):
+        return
     path = calibrations_path()
     if not path.parent.is_dir():
         return

@@ -108,3 +108,17 @@ def test_a_plot_that_cannot_be_written_is_refused_before_the_table(tmp_path, cap
         f"--plot {empty}: no calibrations of 'constant_velocity' to draw in" in err and err.count("\n") == 1
     )
     assert not empty.exists()
+
+
+def test_a_user_zoo_set_to_the_shipped_one_lists_its_blocks(monkeypatch, capsys):
+    """$CROWDMPC_ZOO at the shipped zoo is read as the one zoo (`zoo list` does), yet `zoo calibrations`,
+    and every run planning with calibrated margins, failed: looking for a killed calibrate's blocks to take
+    back, they asked for the user zoo to write, which the shipped one is not."""
+    from predictors import zoo
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(zoo.checkpoints_dir()))
+    before = sorted(p.name for p in zoo.checkpoints_dir().iterdir())
+    assert main(["zoo", "calibrations", "--predictor", "constant_velocity"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == 2 + 10 + 1 and all(line.endswith(" shipped") for line in out[2:-1])
+    assert sorted(p.name for p in zoo.checkpoints_dir().iterdir()) == before
