@@ -11,7 +11,7 @@ from typing import Final
 
 from crowdsim.profiles import PROFILES, make_env_config
 from crowdsim.scenarios import MAX_HUMANS
-from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
+from pipelines.commands import PREPARE_ROOM, check_writable, path_arg, replace_file
 from pipelines.commands.evaluate import counted, seed_arg
 from pipelines.commands.output_paths import output_arg
 from pipelines.config.settings import check_last_seed
@@ -392,9 +392,7 @@ def _write_provenance(args: argparse.Namespace, summary: dict, path: Path, data:
         "summary": summary,
         "code": code_identity(),
     }
-    tmp = path.with_name(f".{path.name}{PART_SUFFIX}")
-    try:
-        tmp.write_text(json.dumps(plain(document), indent=2) + "\n", encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    # a temporary name of its own (replace_file): a fixed one was shared by two synths into the same --out,
+    # each removing or renaming the other's, and one a killed run left there (a link) was written through
+    text = json.dumps(plain(document), indent=2) + "\n"
+    replace_file(path, lambda name: Path(name).write_text(text, encoding="utf-8"))

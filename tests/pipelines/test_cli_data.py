@@ -478,6 +478,43 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
         assert out.read_text() == f"scenes of seed {seed}\n"
 
 
+def test_synth_writes_its_provenance_under_a_temporary_name_of_its_own(monkeypatch, tmp_path, capsys):
+    """The provenance was written as a fixed ``.NAME.synth.json.part``: two synths into the same --out shared
+    it (each removing or renaming the other's), one a killed run left as a folder failed every later synth,
+    and one left as a link had the provenance written through it, over the file it points to."""
+    monkeypatch.setitem(
+        sys.modules,
+        "pipelines.experiments.synth",
+        types.SimpleNamespace(synthesize=lambda out_path, *_, **__: out_path.write_text("s\n") and {}),
+    )
+    out, provenance = tmp_path / "s.ndjson", tmp_path / "s.synth.json"
+    precious = tmp_path / "precious.txt"
+    precious.write_text("mine\n")
+    fixed = tmp_path / ".s.synth.json.part"
+    renamed: list[Path] = []
+    real_replace = os.replace
+
+    def replace(src, dst):
+        if Path(dst) == provenance:
+            renamed.append(Path(src))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    argv = ["data", "synth", "--out", str(out), "--episodes", "1", "--humans", "2", "--seed", "0"]
+    for leftover in (fixed.mkdir, lambda: fixed.symlink_to(precious)):
+        leftover()
+        code, _, err = run(capsys, *argv, "--replace")
+        assert code == 0, err
+        assert precious.read_text() == "mine\n" and not provenance.is_symlink()
+        assert json.loads(provenance.read_text())["data"] == "s.ndjson"
+        if fixed.is_symlink():
+            fixed.unlink()
+        else:
+            fixed.rmdir()
+    # each run its own temporary, beside the provenance
+    assert len(renamed) == len(set(renamed)) == 2 and all(p.parent == tmp_path for p in renamed)
+
+
 def test_synth_never_takes_another_data_files_provenance(tmp_path, capsys):
     """``--out x.json`` beside ``x.ndjson`` shares its provenance name, x.synth.json: the same options read
     as a rerun of this command, so x.ndjson's provenance was replaced by x.json's, silently (and with
