@@ -183,7 +183,8 @@ def _parse_line(path: Path, lineno: int, raw: bytes) -> Any:
     if not text.strip():
         return _BLANK
     try:
-        return json.loads(text)
+        # without its line end: an error at the end of a cut line was placed at column 1 of the next line
+        return json.loads(text.rstrip("\r\n"))
     except json.JSONDecodeError as exc:
         raise DatasetFormatError(path, lineno, f"invalid JSON ({exc.msg} at column {exc.colno})") from None
     except RecursionError:

@@ -134,6 +134,12 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         1,
         "starts with a UTF-8 byte-order mark; save the file without one",
     ),
+    # a line cut short (a writer killed mid-line), its end column named: it was "column 1", of the next line
+    "a line cut short": (
+        VALID + ['{"track": {"f": 0, "p": 2, "x": 1'],
+        N + 1,
+        "invalid JSON (Expecting ',' delimiter at column 34)",
+    ),
     "carriage returns only": (["\r".join(json.dumps(r) for r in VALID)], 1, "invalid JSON (Extra data"),
     # line 2 is pedestrian 1 at frame 0, (0, 0): the reader kept one of the two and dropped the other
     "a second position for a pedestrian and frame": (
