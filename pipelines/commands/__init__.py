@@ -108,6 +108,7 @@ def check_writable(
     json_only: bool = False,
     zoo_own: bool = False,
     room: int | None = None,
+    renamed: bool = False,
 ) -> None:
     """Refuse an output ``path`` that cannot be written, before any work (``None``: the option was not given).
 
@@ -124,8 +125,10 @@ def check_writable(
     longer than the output's name the temporary name it is first made under beside it is, which its name
     must leave room for (default: ``REPLACE_FILE_ROOM`` for a file, made by ``replace_file``; 0 for a
     directory, written into; 0 for a figure, whose temporary's name does not grow with the output's:
-    ``whole_files.save_figure``). Standard output (``--json
-    -``, ``standard_output.STDOUT``) is no file and needs no check.
+    ``whole_files.save_figure``). ``renamed``: the file is made under that temporary name and renamed into
+    place, so a device or a pipe there is refused: the rename replaced the node itself (``data synth --out
+    /dev/null``, run as root, left a regular file there). Standard output (``--json -``,
+    ``standard_output.STDOUT``) is no file and needs no check.
     """
     if path is None or is_stdout(path):
         return
@@ -155,15 +158,19 @@ def check_writable(
             f"{label}: is a symbolic link; crowdmpc does not write through one (name its target)"
         )
     if path.exists():
-        _check_existing(path, label, directory, inputs, json_only)
+        _check_existing(path, label, directory, inputs, json_only, renamed)
     else:
         _check_creatable(path, label)
 
 
-def _check_existing(path: Path, label: str, directory: bool, inputs: Iterable[Path], json_only: bool) -> None:
+def _check_existing(
+    path: Path, label: str, directory: bool, inputs: Iterable[Path], json_only: bool, renamed: bool
+) -> None:
     """``check_writable`` of an output that exists: of the kind asked for, and writable as it is."""
     if directory != path.is_dir():
         raise PipelineError(f"{label}: " + ("not a directory" if directory else "is a directory"))
+    if renamed and not path.is_file():  # before the open below, which waits for a pipe's reader
+        raise PipelineError(f"{label}: is not a regular file (a device or a pipe); name a file")
     if not directory:
         _check_not_input(path, label, inputs)
         if json_only:

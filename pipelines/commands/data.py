@@ -266,9 +266,9 @@ def provenance_path(out: Path) -> Path:
 
 def run_synth(args: argparse.Namespace) -> int:
     check_last_seed(args.seed, args.episodes - 1, f"{args.episodes} episodes", "--seed")
-    check_writable(args.out, "--out", room=SYNTH_NAME_ROOM)
+    check_writable(args.out, "--out", room=SYNTH_NAME_ROOM, renamed=True)
     provenance = provenance_path(args.out)
-    check_writable(provenance, "--out's provenance file")
+    check_writable(provenance, "--out's provenance file", renamed=True)
     _check_provenance_is_outs(args, provenance)
     for path in (args.out, provenance):
         if path.exists() and path.stat().st_size > 0 and not args.replace and not _rerun_of(args, path):

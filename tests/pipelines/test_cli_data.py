@@ -515,6 +515,30 @@ def test_synth_writes_its_provenance_under_a_temporary_name_of_its_own(monkeypat
     assert len(renamed) == len(set(renamed)) == 2 and all(p.parent == tmp_path for p in renamed)
 
 
+@pytest.mark.parametrize("name", ["s.ndjson", "s.synth.json"])
+def test_synth_refuses_a_pipe_or_device_as_its_output(name, monkeypatch, tmp_path, capsys):
+    """The data and its provenance are renamed into place, which replaced the node itself: `data synth --out
+    /dev/null` run as root left a regular file at /dev/null. A pipe (with a reader, which the check's open
+    of it waits for) shows it without touching /dev."""
+    import stat
+
+    monkeypatch.setitem(
+        sys.modules,
+        "pipelines.experiments.synth",
+        types.SimpleNamespace(synthesize=lambda out_path, *_, **__: out_path.write_text("s\n") and {}),
+    )
+    pipe = tmp_path / name
+    os.mkfifo(pipe)
+    reader = os.open(pipe, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        argv = ["--episodes", "1", "--humans", "2", "--seed", "0", "--replace"]
+        code, _, err = run(capsys, "data", "synth", "--out", str(tmp_path / "s.ndjson"), *argv)
+    finally:
+        os.close(reader)
+    assert_one_line_error(code, err, f"{pipe}: is not a regular file (a device or a pipe)")
+    assert stat.S_ISFIFO(os.lstat(pipe).st_mode) and os.listdir(tmp_path) == [name]
+
+
 def test_synth_never_takes_another_data_files_provenance(tmp_path, capsys):
     """``--out x.json`` beside ``x.ndjson`` shares its provenance name, x.synth.json: the same options read
     as a rerun of this command, so x.ndjson's provenance was replaced by x.json's, silently (and with
