@@ -264,9 +264,12 @@ def _main(argv: list[str] | None) -> int:
         print(f"crowdmpc {args.command}: interrupted", file=sys.stderr)
         return stop_status()
     except (EpisodeFailed, CloseFailed) as exc:  # before the user errors they are among
-        print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
-        # a refusal of the --record folder, met at an episode's first write, is one of the user's input
-        return 2 if isinstance(exc.__cause__, RecordingRefused) else EPISODES_RAISED
+        # a refusal of the --record folder is one of the user's input, told alone: the file it names is the
+        # episode refused, where the seed of the episode that met it is the first's (which checks every
+        # planned file) and no episode to rerun
+        refused = isinstance(exc.__cause__, RecordingRefused)
+        print(f"crowdmpc {args.command}: error: {exc.__cause__ if refused else exc}", file=sys.stderr)
+        return 2 if refused else EPISODES_RAISED
     except user_errors() as exc:
         print(f"crowdmpc {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -1040,6 +1040,8 @@ def test_another_runs_episode_at_a_later_seed_is_refused_before_the_first_episod
     assert main([*base, "--controller", "straight", "--episodes", "3", "--json", str(report)]) == 2
     out, err = capsys.readouterr()
     assert "circle_seed000002.mcap: it holds another run's episode (controller orca" in err
+    # the file names the episode it refuses; seed 0, whose start checked the planned files, does not clash
+    assert err.startswith("crowdmpc simulate: error: cannot record to ") and "seed 0" not in err
     assert sorted(p.name for p in folder.iterdir()) == ["circle_seed000002.mcap"]  # seeds 0 and 1 never ran
     assert (folder / "circle_seed000002.mcap").read_bytes() == held and not report.exists() and out == ""
 
