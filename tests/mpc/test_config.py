@@ -139,17 +139,25 @@ def test_numbers_that_enter_the_nlp_have_a_least_value(field):
         MPCConfig(**{field: 1e-300})
 
 
+def test_delta_has_a_least_value():
+    """Eq. 7 weighs a robot on its goal by w_goal / delta: delta = 1e-300 passed "> 0", and with w_goal = 1e12
+    the weight overflowed, the gradient was NaN and a Fatrop solve never returned."""
+    with pytest.raises(MPCConfigError, match=r"^delta must be at least 1e-12, got 1e-300$"):
+        MPCConfig(delta=1e-300, w_goal=1e12)
+
+
 @pytest.mark.parametrize("least", [False, True], ids=["most", "least_and_most"])
 def test_at_every_bound_together_the_nlp_stays_finite(least):
     """The potential, its gradient and exact Hessian in the accelerations (what Fatrop and IPOPT evaluate),
     with every bounded number at its bound, at points beyond the bounds an interior-point iterate may reach
-    (2 robots, 1 human)."""
+    (2 robots, 1 human; robot 0 starts on its goal, where Eq. 7 weighs by w_goal / delta: delta = 1e-300
+    with w_goal = 1e12 made the gradient NaN there, and the Fatrop solve never returned)."""
     bounds = {name: most for name, (most, _) in MPC_BOUNDS.items()}
     cfg = MPCConfig(**(bounds | ({k: v for k, (v, _) in MPC_LEAST.items()} if least else {})))
     h = cfg.horizon
     u = ca.SX.sym("u", 2, 2 * h)
     starts, humans = ca.SX.sym("x", 4, 2), ca.SX.sym("h", 2, h)
-    goals = starts[0:2, :] + ca.repmat(ca.DM([0.0, 6.0]), 1, 2)
+    goals = starts[0:2, :] + ca.horzcat(ca.DM([0.0, 0.0]), ca.DM([0.0, 6.0]))
     no_action = ca.DM.zeros(2, 1)
     tracks = [
         make_track(starts[:, i], u[:, i * h : (i + 1) * h], no_action, goals[:, i], cfg.dt) for i in (0, 1)
