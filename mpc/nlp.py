@@ -56,6 +56,16 @@ def _solution(out: dict, stats: dict, cost_scale: float, shape: tuple[int, ...])
     )
 
 
+def _same_team(data: StepData, n_robots: int) -> None:
+    """ValueError unless ``data`` is of the team the NLP was built for: a team of another size reached numpy
+    as a parameter vector of the wrong length ("operands could not be broadcast together")."""
+    if data.n_robots != n_robots:
+        raise ValueError(
+            f"StepData holds {data.n_robots} robots, but this NLP was built for {n_robots}: build the "
+            "solver for the team's size"
+        )
+
+
 class FixedPredictions:
     """The humans' predicted positions are parameters: Eq. 17 as Algorithm 1 solves it."""
 
@@ -140,6 +150,7 @@ class JointNLP:
     def params(self, data: StepData, extra: np.ndarray) -> np.ndarray:
         """The parameter vector for ``data``; ``extra``: the humans model's parameters (by default the
         predictions ``(H, N_h, 2)``)."""
+        _same_team(data, self.n_robots)
         return np.concatenate(
             [
                 data.states.ravel(),
@@ -156,6 +167,7 @@ class JointNLP:
 
     def bounds(self, data: StepData) -> tuple[np.ndarray, np.ndarray]:
         """Acceleration bounds (Eq. 6); a parked robot's controls are pinned to braking."""
+        _same_team(data, self.n_robots)
         cfg = self.cfg
         lbx = np.full((self.n_robots, cfg.horizon, 2), -cfg.a_max)
         ubx = np.full((self.n_robots, cfg.horizon, 2), cfg.a_max)
@@ -293,6 +305,7 @@ class LocalNLP:
 
     def step_params(self, data: StepData) -> LocalParams:
         """The step's parameters of every robot, for any plans of the others (mpc/local_params.py)."""
+        _same_team(data, self.n_robots)
         return LocalParams.build(data, self.cfg, self.n_humans)
 
     def params(self, i: int, data: StepData, positions: np.ndarray, humans: np.ndarray) -> np.ndarray:

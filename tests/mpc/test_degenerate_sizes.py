@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from mpc import costs
+from mpc.cmpc import CMPC
 from mpc.config import MPCConfig
-from mpc.nlp import JointNLP, LocalNLP
+from mpc.dmpc import DMPC
+from mpc.fallback import PlanMemory
+from mpc.nlp import JointNLP, LocalNLP, StepData
 from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode
 
@@ -54,3 +57,14 @@ def test_one_robot_without_humans_reaches_its_goal(spec, scenario):
 def test_no_robots_still_builds():
     """No tracks at all: the penalty is a plain 0.0, as before."""
     assert _penalty_anywhere(JointNLP(MPCConfig(), n_robots=0, n_humans=0).penalty_fn) == 0.0
+
+
+@pytest.mark.parametrize("solver", [CMPC, DMPC])
+def test_a_step_of_another_team_size_is_refused_by_name(solver):
+    """A StepData of 2 robots handed to solvers built for 3 failed in numpy ("operands could not be broadcast
+    together with shapes (16,) (24,) (24,)"), naming neither the robots nor the sizes."""
+    cfg = MPCConfig()
+    states = np.array([[0.0, 0.0, 0.0, 0.0], [1.2, 0.0, 0.0, 0.0]])
+    data = StepData(states, np.zeros((2, 2)), states[:, :2] + [0.0, 5.0], np.ones(2, dtype=bool))
+    with pytest.raises(ValueError, match=r"^StepData holds 2 robots, but this NLP was built for 3"):
+        solver(cfg, 3, 1).solve(data, lambda _: np.zeros((cfg.horizon, 1, 2)), PlanMemory(cfg).start(data))
