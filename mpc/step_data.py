@@ -35,7 +35,7 @@ class StepData:
         states = np.asarray(self.states, dtype=float)
         if states.ndim != 2 or states.shape[1:] != (4,) or not np.all(np.isfinite(states)):
             raise ValueError(
-                f"states must be finite rows [s_x, s_y, v_x, v_y] of shape (M, 4), got shape {states.shape}"
+                f"states must be finite rows [s_x, s_y, v_x, v_y] of shape (M, 4), got {_what(states)}"
             )
         object.__setattr__(self, "states", states)
         m = len(states)
@@ -59,7 +59,7 @@ class StepData:
         array = np.asarray(value, dtype=float if finite else bool)
         if array.shape != shape or (finite and not np.all(np.isfinite(array))):
             raise ValueError(
-                f"{name} must be {what} of shape {shape}, one per robot of states, got shape {array.shape}"
+                f"{name} must be {what} of shape {shape}, one per robot of states, got {_what(array)}"
             )
         object.__setattr__(self, name, array)
 
@@ -134,3 +134,10 @@ class StepData:
                 f"{margins.shape}"
             )
         return margins.ravel()
+
+
+def _what(array: np.ndarray) -> str:
+    """An array refused by StepData: its shape, and how many of its values are not finite (a NaN velocity
+    of the right shape read as a wrong shape: "got shape (3, 4)")."""
+    bad = int(np.sum(~np.isfinite(array))) if array.dtype.kind == "f" else 0
+    return f"shape {array.shape}" + (f" with {bad} non-finite entries" if bad else "")

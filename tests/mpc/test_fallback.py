@@ -65,15 +65,24 @@ def test_a_prediction_of_another_shape_is_named_not_taken_for_nan():
             r"arrived must be booleans of shape \(2,\), one per robot of states, got ",
         ),
         ("active", np.ones(3, dtype=bool), r"active must be booleans of shape \(2,\)"),
-        ("goals", np.full((2, 2), np.nan), r"goals must be finite positions of shape \(2, 2\)"),
+        (
+            "goals",
+            np.full((2, 2), np.nan),
+            r"goals must be finite positions of shape \(2, 2\), .*, got shape \(2, 2\) with 4 non-finite",
+        ),
         ("last_actions", np.zeros(2), r"last_actions must be finite accelerations of shape \(2, 2\)"),
         ("states", np.zeros((2, 2)), r"states must be finite rows \[s_x, s_y, v_x, v_y\] of shape \(M, 4\)"),
-        ("states", np.full((2, 4), np.nan), r"states must be finite rows"),
+        (
+            "states",
+            np.full((2, 4), np.inf),
+            r"states must be finite rows.*got shape \(2, 4\) with 8 non-finite",
+        ),
     ],
 )
 def test_step_data_of_the_wrong_shape_is_refused_naming_the_field(field, value, message):
     """A one-robot ``arrived`` for two robots was stretched to both by numpy's broadcasting (both taken as
-    arrived, the plan changed, status ok); other shapes failed deep in the NLP with numpy's words."""
+    arrived, the plan changed, status ok); other shapes failed deep in the NLP with numpy's words. Values
+    that are not finite are counted: "got shape (2, 4)" alone read as if the shape were wrong."""
     import dataclasses
 
     with pytest.raises(ValueError, match=message):
