@@ -17,7 +17,7 @@ from pipelines.commands.standard_output import is_stdout, write_document
 from pipelines.commands.zoo_outputs import check_not_in_a_zoo, check_not_zoo_file
 from pipelines.commands.zoo_outputs import check_outside_the_zoos as check_outside_the_zoos
 from pipelines.errors import PipelineError
-from pipelines.whole_files import new_file_mode
+from pipelines.whole_files import lock_temporary, new_file_mode, remove_killed_temporaries
 
 T = TypeVar("T")
 
@@ -246,16 +246,12 @@ def replace_file(path: Path, write: Callable[[str], object]) -> None:
     file gets the mode of the file it replaces (else the umask's). ``OSError`` on failure, the temporary
     file removed; ``path`` must not be a device or a pipe (the rename would replace the node itself). The
     temporary is locked while it is written, and those a killed writer left beside ``path`` are removed."""
-    import fcntl
+    import re
 
-    _remove_killed_temporaries(path)
+    remove_killed_temporaries(path.parent, re.compile(rf"\.{re.escape(path.name)}\.[a-z0-9_]{{8}}\.part"))
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
     try:
-        # held until the rename: what tells this writer's temporary from one a kill left (no finally ran)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)
-        except OSError:  # a file system that cannot lock (ENOLCK): its temporaries are never removed
-            pass
+        lock_temporary(fd)
         os.chmod(name, new_file_mode(path))
         write(name)
         os.replace(name, path)
@@ -263,39 +259,6 @@ def replace_file(path: Path, write: Callable[[str], object]) -> None:
         if os.path.lexists(name):
             os.unlink(name)
         os.close(fd)
-
-
-# Older than this and unlocked, a temporary of replace_file is a killed writer's: a live one locks its file
-# within microseconds of creating it.
-_TEMPORARY_MIN_AGE_S: Final[float] = 60.0
-
-
-def _remove_killed_temporaries(path: Path) -> None:
-    """Remove the ``.NAME.XXXXXXXX.part`` files that writers of ``path`` killed before their rename (kill -9,
-    or a SIGTERM, which runs no finally) left beside it: each is as large as the output (an export's CasADi
-    file), and every killed run added one for good. Only regular files nobody holds locked, written over a
-    minute ago; a file system that cannot lock keeps them all (``unless_held``)."""
-    import contextlib
-    import re
-    import time
-
-    from predictors.locking import unless_held
-
-    temporary = re.compile(rf"\.{re.escape(path.name)}\.[a-z0-9_]{{8}}\.part")
-    try:
-        entries = [entry for entry in os.scandir(path.parent) if temporary.fullmatch(entry.name)]
-    except OSError:  # the folder unreadable or missing: the write that follows says why
-        return
-    for entry in entries:
-        try:
-            info = entry.stat(follow_symlinks=False)
-        except OSError:
-            continue
-        if not stat.S_ISREG(info.st_mode) or time.time() - info.st_mtime < _TEMPORARY_MIN_AGE_S:
-            continue
-        with unless_held(Path(entry.path), gone=False) as free, contextlib.suppress(OSError):
-            if free:
-                Path(entry.path).unlink(missing_ok=True)
 
 
 def write_output(path: Path, text: str, option: str) -> None:

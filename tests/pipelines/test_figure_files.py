@@ -5,8 +5,10 @@ emptied the earlier figure."""
 from __future__ import annotations
 
 import errno
+import fcntl
 import os
 import stat
+import time
 from pathlib import Path
 
 import pytest
@@ -15,6 +17,7 @@ from matplotlib.figure import Figure
 
 from pipelines.cli import main
 from pipelines.whole_files import save_figure
+from predictors.locking import unless_held
 from tests.pipelines.test_compare import BASE, NEW, _record, _sweep
 
 EARLIER = b"the earlier figure"
@@ -95,3 +98,37 @@ def test_a_saved_figure_replaces_the_earlier_one_keeping_its_mode(tmp_path):
     assert target.read_bytes().startswith(b"%PDF")
     assert stat.S_IMODE(target.stat().st_mode) == 0o640
     assert [p.name for p in tmp_path.iterdir()] == ["f.pdf"]
+
+
+def test_the_temporaries_of_killed_saves_are_removed_by_the_next_save(tmp_path):
+    """A figure saved by a run killed before its rename (kill -9, SIGTERM: no finally runs) left its
+    ".crowdmpc-figure-XXXXXXXX.png" in the folder for good, one more per kill (an animation's as large as
+    the animation). The next save into that folder removes them, whichever figure they were for; never a
+    temporary a live save holds locked, nor one just made (its save may not have locked it yet), nor a
+    folder or a file of another name."""
+    old = time.time() - 3600
+    killed = [tmp_path / ".crowdmpc-figure-k1ll3d_0.png", tmp_path / ".crowdmpc-figure-k1ll3d_1.gif"]
+    live = tmp_path / ".crowdmpc-figure-l1ve0000.png"
+    kept = [live, tmp_path / ".crowdmpc-figure-fresh000.png", tmp_path / ".crowdmpc-figure-short.png"]
+    folder = tmp_path / ".crowdmpc-figure-folder00.png"
+    folder.mkdir()
+    for path in [*killed, *kept]:
+        path.write_bytes(b"half")
+        if path.name != ".crowdmpc-figure-fresh000.png":
+            os.utime(path, (old, old))
+    os.utime(folder, (old, old))
+    figure = Figure()
+    figure.add_subplot().plot([0, 1], [1, 0])
+    locked_while_saved = []
+
+    def save(name: str) -> None:
+        with unless_held(Path(name), gone=True) as free:  # as the next save's look sees this one's
+            locked_while_saved.append(not free)
+        figure.savefig(name)
+
+    with open(live, "rb+") as held:  # another process's save, still writing
+        fcntl.flock(held, fcntl.LOCK_EX)
+        save_figure(tmp_path / "f.png", save)
+    assert locked_while_saved == [True]
+    left = {p.name for p in tmp_path.iterdir()}
+    assert left == {"f.png", folder.name, *(p.name for p in kept)}
