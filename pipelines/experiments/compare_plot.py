@@ -16,6 +16,12 @@ PANELS: Final[tuple[tuple[str, str], ...]] = (
     ("travel", "travel time (s), both completed"),
 )
 SPREAD: Final[float] = 0.5  # of the distance between neighbouring x positions, taken by the lines' offsets
+# Up to this many x positions, a column of the travel panel (about 4 in wide) is wider than "n = 1" (0.35 in
+# at 8.3 pt): the note reads across; past it, it stands upright.
+MAX_LEVEL_NOTES: Final[int] = 8
+# The room added above the travel panel's points for "n = 1", as a fraction of their range (level, upright):
+# a line of the small font, or the words upright, in a panel about 2.4 in high.
+HEAD_ROOM: Final[tuple[float, float]] = (0.12, 0.3)
 
 
 def _change(versus: Mapping[str, Any], panel: str) -> tuple[float | None, float | None, float | None]:
@@ -53,6 +59,7 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
     ticks = _ticks(groups, by_humans)
     figure = Figure(figsize=(9.6, 7.0), layout="constrained")
     axes = list(figure.subplots(2, 2, sharex=True).flat)
+    notes: dict[int, list[tuple[float, int | None, dict[str, str]]]] = {}  # per x position (_mark_travel)
     for k, (name, points) in enumerate(series.items()):
         offset = SPREAD * ((k + 0.5) / len(series) - 0.5)
         look = method_style(k)  # past ten series, other colours and markers rather than C0 again
@@ -60,9 +67,11 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
             xs, ys, below, above = [], [], [], []
             for g, versus in points:
                 y, low, high = _change(versus, panel)
-                x = list(ticks).index(g["humans"] if by_humans else g["method"]) + offset
+                at = list(ticks).index(g["humans"] if by_humans else g["method"])
+                x = at + offset
                 if panel == "travel" and (y is None or low is None):  # a bare point read as exact
-                    _mark(ax, x, y, versus, look["color"])
+                    pairs = None if y is None else versus["travel_difference"]["n"]
+                    notes.setdefault(at, []).append((x, pairs, look))
                 if y is None:
                     continue
                 xs.append(x)
@@ -89,6 +98,7 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
         ax.set_xlim(-0.5, len(ticks) - 0.5)  # the outermost points off the panel's edges
         ax.set_xlabel("humans" if by_humans else "method")
         ax.set_ylabel(f"change against {first}", fontsize=9)
+    _mark_travel(axes[-1], notes, len(ticks))
     handles, labels = axes[0].get_legend_handles_labels()  # every panel has each series: one entry each
     figure.legend(
         handles,
@@ -105,19 +115,41 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
     return figure
 
 
-def _mark(ax: Any, x: float, y: float | None, versus: Mapping[str, Any], color: str) -> None:
-    """Where a change has no interval, why: no episode both runs completed (a travel time; the method had
-    simply vanished from its panel), or one pair only (its point alone, under a legend promising 95 %
-    intervals)."""
-    if y is None:
-        foot = ax.get_xaxis_transform()  # x in data, y in axes fraction
-        ax.text(x, 0.03, "none completed by both", transform=foot, rotation=90, ha="center", va="bottom",
-                color=color, fontsize="small")  # fmt: skip
-        return
-    n = versus["travel_difference"]["n"]
-    # beside the point, not above it: a point at the top of its panel put the words over the panel's title
-    ax.annotate(f"n = {n}", (x, y), xytext=(6, 0), textcoords="offset points", ha="left", va="center",
-                color=color, fontsize="small")  # fmt: skip
+def _mark_travel(
+    ax: Any, notes: dict[int, list[tuple[float, int | None, dict[str, str]]]], columns: int
+) -> None:
+    """Where a travel time has no interval, why, in one note per x position (``notes``: each series' x there,
+    its number of pairs, None for none, and its look) whatever the number of series: a note beside each
+    point ran into the next series' ("n =n = 1") and past the panel's right edge.
+
+    "n = 1" (one pair: its point alone, under a legend promising 95 % intervals) at the head of the column,
+    in room added above the points; "none completed by both" (the series had simply vanished from its
+    panel) up from its foot where the point would stand, above an open marker for each such series. In the
+    series' colour where it is alone, else in black: the bare points and the markers tell the series apart.
+    """
+    column = ax.get_xaxis_transform()  # x in data, y in axes fraction
+    upright = columns > MAX_LEVEL_NOTES
+    if any(pairs is not None for marks in notes.values() for _, pairs, _ in marks):
+        low, high = ax.get_ylim()  # after the points and the zero line: fixed from here on
+        ax.set_ylim(low, high + (HEAD_ROOM[upright] * (high - low)))
+    for at, marks in notes.items():
+        lone = [(pairs, look) for _, pairs, look in marks if pairs is not None]
+        gone = [(x, look) for x, pairs, look in marks if pairs is None]
+        if lone:
+            counts = ", ".join(str(n) for n in sorted({pairs for pairs, _ in lone}))
+            ax.text(at, 0.97, f"n = {counts}", transform=column, rotation=90 if upright else 0, ha="center",
+                    va="top", color=_colour(lone), fontsize="small")  # fmt: skip
+        for x, look in gone:
+            ax.plot(x, 0.03, transform=column, ls="none", marker=look["marker"], mfc="none",
+                    mec=look["color"])  # fmt: skip
+        if gone:  # where the first of them would stand: no point of the column there
+            ax.text(gone[0][0], 0.07, "none completed by both", transform=column, rotation=90, ha="center",
+                    va="bottom", color=_colour(gone), fontsize="small")  # fmt: skip
+
+
+def _colour(marks: list[tuple[Any, dict[str, str]]]) -> str:
+    """A note's colour: its one series', else black."""
+    return marks[0][1]["color"] if len(marks) == 1 else "k"
 
 
 def _ticks(groups: list[Mapping[str, Any]], by_humans: bool) -> dict[Any, str]:

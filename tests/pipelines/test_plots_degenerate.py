@@ -4,6 +4,8 @@ builds the matplotlib Figure and reads its texts and limits (tests/pipelines/tes
 
 from __future__ import annotations
 
+import pytest
+
 from pipelines.commands.sweep_plan import configured_experiment
 from pipelines.config import load
 from pipelines.experiments.compare_plot import compare_figure
@@ -96,3 +98,35 @@ def test_compare_says_where_no_pair_completed_and_where_one_did():
     assert sorted(t.get_text() for t in travel.texts) == ["n = 1", "none completed by both"]
     assert all(not ax.texts for ax in fig.axes[:3])
     assert fig.get_suptitle() == "Paired on 1 shared episode (crowdmpc compare)"
+
+
+def _lone(mean: float) -> dict:
+    return _versus(1.0) | {"travel_difference": {"mean": mean, "half_width_95": None, "n": 1}}
+
+
+@pytest.mark.parametrize("sizes", [(5,), (5, 6, 7, 8, 9, 10), tuple(range(3, 15))])
+def test_compare_notes_of_methods_at_one_crowd_size_neither_collide_nor_leave_the_panel(sizes):
+    """An "n = 1" beside each point ran into the next method's at the same crowd size ("n =n = 1") and the
+    last past the panel's right edge; a "none completed by both" at each point's place ran into the next."""
+    looks = {"CMPC": _lone(0.5), "DMPC": _lone(1.5), "ORCA": _versus(1.0)}
+    none = _versus(1.0) | {"travel_difference": {"mean": None, "half_width_95": None, "n": 0}}
+    groups = [
+        {"method": m, "humans": h, "robots": 3, "versus_first": {"b": none if (h + k) % 3 == 0 else v}}
+        for h in sizes
+        for k, (m, v) in enumerate(looks.items())
+    ]
+    fig = compare_figure({"shared_episodes": 1, "runs": [{"label": "a"}, {"label": "b"}], "groups": groups})
+    renderer = _drawn(fig)
+    travel = fig.axes[3]
+    texts = [t.get_text() for t in travel.texts]
+    boxes = [t.get_window_extent(renderer) for t in travel.texts]
+    panel = travel.get_window_extent(renderer)
+    for k, box in enumerate(boxes):
+        assert panel.x0 <= box.x0 and box.x1 <= panel.x1 and panel.y0 <= box.y0 and box.y1 <= panel.y1
+        assert fig.bbox.contains(box.x0, box.y0) and fig.bbox.contains(box.x1, box.y1)
+        assert not any(box.overlaps(other) for other in boxes[k + 1 :])
+    points = travel.transData.transform([(x, y) for line in travel.get_lines() for x, y in line.get_xydata()
+                                         if line.get_transform() == travel.transData])  # fmt: skip
+    assert texts.count("n = 1") == len(sizes) and "none completed by both" in texts
+    heads = [box for box, t in zip(boxes, texts, strict=True) if t == "n = 1"]
+    assert all(box.y0 > points[:, 1].max() for box in heads)  # above every point, in room of their own
