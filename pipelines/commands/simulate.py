@@ -16,17 +16,16 @@ from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS, SCENARIOS
 from pipelines.commands import check_writable
 from pipelines.commands.calibrate_store import take_back_before_planning
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.simulate_help import EPILOG
+from pipelines.commands.simulate_help import EPILOG, coupling_help, margins_help
 from pipelines.commands.simulate_json import write_json
 from pipelines.commands.simulate_table import format_table, plot_first_episode, table_header
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path
 from pipelines.errors import CloseFailed, PipelineError, RecordingRefused, quiet_team_warnings
-from pipelines.loop.controllers import COUPLINGS, controller_name
+from pipelines.loop.controllers import COUPLINGS, ControllerSpec, controller_name
 from pipelines.loop.replay_data import CROWD_HELP
 
 if TYPE_CHECKING:
     from pipelines.config import Option, RunConfig
-    from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.episode import EpisodeResult
 
 
@@ -94,10 +93,11 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--predictor",
         help="predictor of cmpc/dmpc: a registered name or a model of the shipped or user zoo "
-        "(default: constant_velocity)",
+        f"(default: {ControllerSpec.predictor})",  # what an unset one runs (run): the schema has none
     )
     # the config's defaults, read from its schema: literals here could drift from them
     scenario, simulate = partial(key_default, "scenario"), partial(key_default, "simulate")
+    controller, env = partial(key_default, "controller"), partial(key_default, "env")
     parser.add_argument("--scenario", choices=sorted(SCENARIOS), help=f"default: {scenario('name')}")
     parser.add_argument("--humans", type=int, help=f"0..{MAX_HUMANS} (default: {scenario('humans')})")
     parser.add_argument("--robots", type=int, help=f"1..{MAX_ROBOTS} (default: {scenario('robots')})")
@@ -106,24 +106,14 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-flocking", action="store_true", default=None, help="omega_floc = 0 (Table III, NF)"
     )
+    parser.add_argument("--coupling", choices=COUPLINGS, help=coupling_help(controller("coupling")))
+    # what unset margins plan with (run): the schema has none, a sweep's experiment its own
+    parser.add_argument("--margins", metavar="SPEC", help=margins_help(ControllerSpec.margins.mode))
+    conventions = f"simulation conventions (default: {env('profile')})"
+    parser.add_argument("--profile", choices=sorted(PROFILES), help=conventions)
+    visible = VISIBILITY[0] if env("robots_visible") else VISIBILITY[1]
     parser.add_argument(
-        "--coupling",
-        choices=COUPLINGS,
-        help="ibr (default): iterative best response to the humans' predictions, Algorithms 1 and 2; nlp: "
-        "the predictor inside CMPC's joint NLP, coupled prediction and planning (cmpc only); none: predict, "
-        "then plan, the predictor blind to the robots (the ablation of the coupling)",
-    )
-    parser.add_argument(
-        "--margins",
-        metavar="SPEC",
-        help="allowance for prediction error in the robot-human distance: none (the paper, default), "
-        "conformal[:ALPHA[:closed-loop|real]] (a calibration: the shipped predictors' at alpha 0.5, 0.2, "
-        "0.1, 0.05, 0.01 come with crowdmpc, others from `crowdmpc calibrate`), conformal-motion[:ALPHA] or "
-        "conformal-shortfall[:ALPHA] (a margin per human from its motion class), fixed:M1,..,MH (metres)",
-    )
-    parser.add_argument("--profile", choices=sorted(PROFILES), help="simulation conventions (default: paper)")
-    parser.add_argument(
-        "--visibility", choices=VISIBILITY, help="robots seen by the humans' ORCA (default: visible)"
+        "--visibility", choices=VISIBILITY, help=f"robots seen by the humans' ORCA (default: {visible})"
     )
     parser.add_argument("--crowd", choices=CROWDS, help=CROWD_HELP)
 
@@ -182,7 +172,6 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
     """The run's effective config, with every number and output path checked before any work starts."""
     from pipelines.commands.simulate_checks import check_choices_apply
     from pipelines.config import command_config
-    from pipelines.loop.controllers import ControllerSpec
     from pipelines.loop.margins import parse_margins
 
     config = command_config(args, _options())
@@ -192,12 +181,12 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         raise SystemExit(2)  # parser_error exits
     spec = ControllerSpec(
         controller=chosen.controller,
-        predictor=chosen.predictor or "constant_velocity",
+        predictor=chosen.predictor or ControllerSpec.predictor,
         flocking=chosen.flocking,
         coupling=chosen.coupling,  # type: ignore[arg-type]  # one of COUPLINGS (settings check it)
         record_iterations=chosen.record_iterations,
         mpc_overrides=config.mpc_overrides(),
-        margins=parse_margins(chosen.margins or "none"),
+        margins=parse_margins(chosen.margins) if chosen.margins else ControllerSpec.margins,
     )
     check_choices_apply(config, spec)
     paths = {name: getattr(config.simulate, name) for name in ("plot", "record")}

@@ -54,6 +54,7 @@ def _options() -> tuple[Option, ...]:
 def register(subparsers: argparse._SubParsersAction) -> None:
     from crowdsim.world import PAPER_ROBOTS
     from pipelines.commands.config import add_config_options
+    from pipelines.config.schema import key_default
     from pipelines.experiments.backends import BACKENDS
     from pipelines.experiments.cells import EXPERIMENTS, PAPER_EPISODES_PER_CELL
 
@@ -93,7 +94,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--humans", type=humans_list, metavar="5,6,7", help="numbers of humans (default: the experiment's)"
     )
     p.add_argument("--robots", type=int, help=f"robots per episode (default {PAPER_ROBOTS})")
-    p.add_argument("--seed", type=int, help="base scenario seed (default 0)")
+    p.add_argument("--seed", type=int, help=f"base scenario seed (default {key_default('sweep', 'seed')})")
     _add_method_options(p)
     _add_execution_options(p)
     add_config_options(p)

@@ -373,3 +373,51 @@ def test_the_help_states_the_defaults_its_config_schema_holds(monkeypatch):
     assert helps["humans"].endswith("(default: 5)") and helps["robots"].endswith("(default: 4)")
     assert helps["episodes"] == "default: 3"
     assert helps["seed"] == "first episode's seed (default: 11)"
+
+
+def test_the_help_states_the_defaults_of_coupling_margins_conventions_and_the_sweeps_seed(monkeypatch):
+    """simulate's --predictor, --coupling, --margins, --profile and --visibility, and sweep's --seed, still
+    stated their defaults as literals, which a change of the config's default (or of what simulate runs
+    when no predictor or margins are chosen) would have left saying the old value."""
+    import argparse
+    import dataclasses
+
+    from pipelines.cli import build_parser
+    from pipelines.config import schema
+    from pipelines.loop.controllers import ControllerSpec
+    from pipelines.loop.margins import MarginSpec
+
+    def helps(command: str) -> dict[str, str]:
+        (commands,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+        return {action.dest: action.help for action in commands.choices[command]._actions}
+
+    paper = helps("simulate")
+    changed = {
+        ("controller", "coupling"): "nlp",
+        ("env", "profile"): "v1",
+        ("env", "robots_visible"): False,
+        ("sweep", "seed"): 11,
+    }
+    for name in ("controller", "env", "sweep"):
+        section = schema.SECTION_BY_NAME[name]
+        keys = tuple(
+            dataclasses.replace(k, default=changed.get((name, k.name), k.default)) for k in section.keys
+        )
+        monkeypatch.setitem(schema.SECTION_BY_NAME, name, dataclasses.replace(section, keys=keys))
+    monkeypatch.setattr(ControllerSpec, "predictor", "social_lstm_eth")
+    monkeypatch.setattr(ControllerSpec, "margins", MarginSpec(mode="conformal"))
+    simulate = helps("simulate")
+    assert simulate["predictor"].endswith("(default: social_lstm_eth)")
+    assert simulate["coupling"].startswith("ibr: iterative best response")
+    assert "; nlp (default): the predictor inside CMPC's joint NLP" in simulate["coupling"]
+    assert "none (the paper), conformal[" in simulate["margins"]
+    assert simulate["margins"].endswith("fixed:M1,..,MH (metres) (default: conformal)")
+    assert simulate["profile"] == "simulation conventions (default: v1)"
+    assert simulate["visibility"] == "robots seen by the humans' ORCA (default: invisible)"
+    assert helps("sweep")["seed"] == "base scenario seed (default 11)"
+    # at the shipped defaults, the words as they were
+    assert paper["coupling"].startswith("ibr (default): iterative best response to the humans' predictions")
+    assert "robot-human distance: none (the paper, default), conformal[" in paper["margins"]
+    assert paper["margins"].endswith("fixed:M1,..,MH (metres)")
+    assert paper["profile"] == "simulation conventions (default: paper)"
+    assert paper["visibility"] == "robots seen by the humans' ORCA (default: visible)"
