@@ -4,7 +4,7 @@ A file is read whole into memory and walked front to back, record by record (mca
 ``emit_chunks``), so that a truncated file (its writer was killed) yields everything up to its last complete
 chunk; a file is truncated when it does not end with MCAP's magic. CRCs are verified where the file carries
 them: each chunk's (``breakup_chunk(validate_crc=True)``, one chunk at a time, so that a bad chunk loses only
-its own messages) and the data section's (``validate_crcs``; crowdmpc's writer leaves it 0, i.e. absent).
+its own messages), the data section's and the summary section's (``pipelines.logs.mcap_file``, the walk).
 
 Log times are wall clock since the Unix epoch: the episode's start (metadata "episode" ``start_time_ns``) +
 its simulation time (``pipelines.logs.recording``); files recorded before that, without ``start_time_ns``,
@@ -19,27 +19,24 @@ reads (``pipelines.logs.shapes``), a bad metadata value or a corrupt record beco
 
 from __future__ import annotations
 
-import io
 import json
 import os
-import struct
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
-from mcap.exceptions import EndOfFile
 from mcap.records import Channel as McapChannel
-from mcap.records import Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+from mcap.records import Chunk, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
 
 from pipelines.errors import PipelineError
+from pipelines.logs.mcap_file import reason, walk_file
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
 from pipelines.logs.schemas import EPISODE_FORMAT
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
 from predictors.errors import short_repr
 
-MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 START_TIME_KEY: Final[str] = "start_time_ns"  # in the "episode" metadata record (pipelines.logs.recording)
 
 
@@ -186,12 +183,6 @@ def decode_metadata(record: Mapping[str, str]) -> dict[str, Any]:
 # ------------------------------------------------------------------------------------------------------------
 
 
-def _reason(exc: BaseException) -> str:
-    if isinstance(exc, EndOfFile | struct.error):
-        return "the file ends inside a record"
-    return f"{type(exc).__name__}: {exc}".rstrip(": ")
-
-
 def _seconds(ns: int) -> str:
     return f"{ns / 1e9:.3f} s"
 
@@ -222,7 +213,7 @@ class _Walk:
                 start = start_time_ns(self.metadata)  # metadata precede the chunks
                 self.problems.append(
                     f"bad chunk at byte {offset} (times {_seconds(record.message_start_time - start)} to "
-                    f"{_seconds(record.message_end_time - start)}): {_reason(exc)}; its messages are left out"
+                    f"{_seconds(record.message_end_time - start)}): {reason(exc)}; its messages are left out"
                 )
                 return
             for r in inner:
@@ -291,14 +282,6 @@ class _Walk:
         return LoggedMessage(message.log_time, data, message_problem(topic, data))
 
 
-def _records(buffer: io.BytesIO, size: int, *, first: bool) -> Iterator[McapRecord]:
-    # record_size_limit: no record is longer than the file, whatever a corrupt length field says
-    reader = StreamReader(
-        buffer, skip_magic=not first, emit_chunks=True, validate_crcs=True, record_size_limit=size
-    )
-    return iter(reader.records)
-
-
 def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Recording:
     """Read every message and metadata record of ``path``; a truncated file reads up to its last chunk.
     ``topics``: only the messages of these (``crowdmpc compare`` reads "/episode/metrics" alone), the other
@@ -314,7 +297,7 @@ def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Rec
         raise PipelineError(f"topics must be a list of topics, e.g. [{topics!r:.60}], got the string itself")
     path = Path(path)
     walk = _Walk(path, topics=None if topics is None else frozenset(topics))
-    complete, stopped_at = _walk_file(path, walk)
+    complete, stopped_at = walk_file(path, walk.take, walk.problems)
     walk.finish()
     return Recording(
         path, walk.metadata, walk.channels, walk.messages, not complete, stopped_at, walk.problems
@@ -325,61 +308,8 @@ def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
     """The metadata records of ``path`` as ``read_recording`` reads them (a truncated file's too), without
     decompressing its chunks; the same PipelineError for a file that is no recording at all."""
     walk = _Walk(Path(path), metadata_only=True)
-    _walk_file(walk.path, walk)
+    walk_file(walk.path, walk.take, walk.problems)
     return walk.metadata
-
-
-def _walk_file(path: Path, walk: _Walk) -> tuple[bool, str | None]:
-    """Hand every record of ``path`` after its header to ``walk``; whether the file is complete (ends with
-    the closing magic) and what stopped reading early, if anything did."""
-    if path.is_dir():
-        raise PipelineError(f"{path} is a folder, not a recording")
-    if not path.is_file():  # /dev/zero or a pipe exists: "no such recording" sent the user looking for it
-        why = "is not a regular file (a device or a pipe)" if path.exists() else "no such recording"
-        raise PipelineError(f"{path}: {why}")
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise PipelineError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-    if not data:
-        raise PipelineError(f"{path} is empty (0 bytes): its run was killed before writing anything")
-    if not data.startswith(MAGIC):
-        raise PipelineError(f"{path} is not an MCAP file (it does not start with MCAP's magic bytes)")
-    complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
-    buffer = io.BytesIO(data)
-    records = _records(buffer, len(data), first=True)
-    try:
-        header = next(records)
-    except Exception as exc:  # noqa: BLE001 (whatever the bytes after the magic are, this is no recording)
-        raise PipelineError(
-            f"{path} has no complete MCAP header ({len(data)} bytes; {_reason(exc)}): not a recording"
-        ) from None
-    if not isinstance(header, Header):
-        raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
-
-    stopped_at = None
-    while True:
-        offset = buffer.tell()
-        try:
-            record = next(records)
-        except StopIteration:
-            break
-        except Exception as exc:  # noqa: BLE001 (any parse error: a cut, or corrupt bytes)
-            if isinstance(exc, CRCValidationError) and isinstance(exc.record, DataEnd):
-                walk.problems.append(
-                    f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
-                )
-                records = _records(buffer, len(data), first=False)  # the summary section still reads
-                continue
-            if complete:
-                walk.problems.append(
-                    f"corrupt record at byte {offset} ({_reason(exc)}); the rest of the file is not read"
-                )
-            else:
-                stopped_at = _reason(exc)
-            break
-        walk.take(record, offset)
-    return complete, stopped_at
 
 
 # Where a folder's recordings are looked for: in it, else one and two levels below it (find_recordings).

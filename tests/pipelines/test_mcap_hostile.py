@@ -14,12 +14,14 @@ import os
 import random
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from PIL import Image
@@ -172,6 +174,35 @@ def test_the_data_section_crc_is_checked_where_the_file_has_one(tmp_path, capsys
     assert rec.episode()["scenario"] == "Circle" and len(rec.data("/robots")) == 1  # the rest still reads
     rc, out, _ = review(capsys, path, "--check")
     assert rc == 1 and "data section CRC mismatch" in out
+
+
+def test_the_summary_section_crc_is_checked(episode, tmp_path, capsys):
+    """No mcap reader checks the footer's summary CRC: a changed chunk index made mcap's indexed reader (as
+    Foxglove reads a file) fail, while every message still read front to back and --check said "ok"."""
+    data = episode.path.read_bytes()
+    footer = len(data) - 8 - 29  # the footer: opcode, length, summary start, summary offset start, CRC
+    offsets_start = struct.unpack_from("<Q", data, footer + 17)[0]
+    groups = {}  # each summary offset record: opcode, length, group opcode, group start, group length
+    for at in range(offsets_start, footer, 1 + 8 + 17):
+        group_opcode, group_start, _ = struct.unpack_from("<BQQ", data, at + 9)
+        groups[group_opcode] = group_start
+    bad = bytearray(data)
+    bad[groups[Opcode.CHUNK_INDEX] + 1 + 8 + 8 + 8] ^= 1  # the first chunk index's chunk start offset
+    path = tmp_path / "index.mcap"
+    path.write_bytes(bytes(bad))
+    with open(path, "rb") as f, pytest.raises(Exception):  # noqa: B017 (mcap raises what the bytes make)
+        list(make_reader(f, validate_crcs=True).iter_messages())
+    rec = read_recording(path)
+    (problem,) = rec.problems
+    assert problem.startswith("summary section CRC mismatch (recorded ")
+    assert {t: len(m) for t, m in rec.messages.items()} == {
+        t: len(m) for t, m in read_recording(episode.path).messages.items()
+    }
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 1
+    assert f"check {path}: the file itself: 1 problem\n  summary section CRC mismatch" in out
+    assert out.endswith("each valid; fails: its own problems\n")
+    assert read_recording(episode.path).problems == []  # the file as written matches its CRC
 
 
 ROBOTS_JSON = b'{"time":0.0,"step":0,"positions":[[0,0]],"velocities":[[0,0]],"goals":[[1,1]],"actions":null,\

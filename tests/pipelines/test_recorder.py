@@ -9,7 +9,8 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType
 
 from pipelines.errors import PipelineError
-from pipelines.logs.reader import MAGIC, read_recording
+from pipelines.logs.mcap_file import MAGIC
+from pipelines.logs.reader import read_recording
 from pipelines.logs.recorder import DEFAULT_COMPRESSION, McapRecorder
 from pipelines.logs.schemas import HUMANS, PREDICTION, ROBOTS, MessageSchema
 from pipelines.logs.view import episode_view

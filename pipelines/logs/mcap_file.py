@@ -1,0 +1,114 @@
+"""An MCAP file's records front to back, its damage noted: how ``pipelines.logs.reader`` walks a recording.
+
+The file is read whole and parsed by mcap's ``StreamReader`` (``emit_chunks``: each chunk is handed on whole,
+its CRC checked by the reader, one chunk at a time). The CRCs that mcap's readers leave unchecked are checked
+here: the data section's (``validate_crcs``; crowdmpc's writer leaves it 0, i.e. absent) and the summary
+section's (the footer's ``summary_crc``, which no mcap reader verifies): a changed byte among the chunk
+indexes made mcap's indexed reader, as Foxglove reads a file, fail on a file whose messages all read here.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+import zlib
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Final
+
+from mcap.exceptions import EndOfFile
+from mcap.records import DataEnd, Footer, Header, McapRecord
+from mcap.stream_reader import CRCValidationError, StreamReader
+
+from pipelines.errors import PipelineError
+
+MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
+# the footer's bytes that its summary CRC covers: opcode, record length, summary start, summary offset start
+_FOOTER_CRC_SPAN: Final[int] = 1 + 8 + 8 + 8
+
+
+def reason(exc: BaseException) -> str:
+    if isinstance(exc, EndOfFile | struct.error):
+        return "the file ends inside a record"
+    return f"{type(exc).__name__}: {exc}".rstrip(": ")
+
+
+def _records(buffer: io.BytesIO, size: int, *, first: bool) -> Iterator[McapRecord]:
+    # record_size_limit: no record is longer than the file, whatever a corrupt length field says
+    reader = StreamReader(
+        buffer, skip_magic=not first, emit_chunks=True, validate_crcs=True, record_size_limit=size
+    )
+    return iter(reader.records)
+
+
+def summary_crc_problem(data: bytes, footer_offset: int, footer: Footer) -> str | None:
+    """Why the summary section of ``data`` does not match its footer's CRC (MCAP: the CRC-32 of every byte
+    from the summary's start through the footer's summary offset start; 0: none recorded), or None."""
+    if footer.summary_crc == 0:
+        return None
+    start = footer.summary_start or footer_offset  # no summary: the CRC covers the footer's fields alone
+    crc = zlib.crc32(data[start : footer_offset + _FOOTER_CRC_SPAN])
+    if crc == footer.summary_crc:
+        return None
+    return (
+        f"summary section CRC mismatch (recorded {footer.summary_crc:#010x}, computed {crc:#010x}): its "
+        "index records changed after writing, which readers that seek by them (Foxglove, mcap's) may fail on"
+    )
+
+
+def walk_file(
+    path: Path, take: Callable[[McapRecord, int], None], problems: list[str]
+) -> tuple[bool, str | None]:
+    """Hand every record of ``path`` after its header to ``take`` (with its offset), and the damage found
+    to ``problems``; whether the file is complete (ends with the closing magic) and what stopped reading
+    early, if anything did. PipelineError when ``path`` is no recording at all."""
+    if path.is_dir():
+        raise PipelineError(f"{path} is a folder, not a recording")
+    if not path.is_file():  # /dev/zero or a pipe exists: "no such recording" sent the user looking for it
+        why = "is not a regular file (a device or a pipe)" if path.exists() else "no such recording"
+        raise PipelineError(f"{path}: {why}")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise PipelineError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if not data:
+        raise PipelineError(f"{path} is empty (0 bytes): its run was killed before writing anything")
+    if not data.startswith(MAGIC):
+        raise PipelineError(f"{path} is not an MCAP file (it does not start with MCAP's magic bytes)")
+    complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
+    buffer = io.BytesIO(data)
+    records = _records(buffer, len(data), first=True)
+    try:
+        header = next(records)
+    except Exception as exc:  # noqa: BLE001 (whatever the bytes after the magic are, this is no recording)
+        raise PipelineError(
+            f"{path} has no complete MCAP header ({len(data)} bytes; {reason(exc)}): not a recording"
+        ) from None
+    if not isinstance(header, Header):
+        raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
+
+    stopped_at = None
+    while True:
+        offset = buffer.tell()
+        try:
+            record = next(records)
+        except StopIteration:
+            break
+        except Exception as exc:  # noqa: BLE001 (any parse error: a cut, or corrupt bytes)
+            if isinstance(exc, CRCValidationError) and isinstance(exc.record, DataEnd):
+                problems.append(
+                    f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
+                )
+                records = _records(buffer, len(data), first=False)  # the summary section still reads
+                continue
+            if complete:
+                problems.append(
+                    f"corrupt record at byte {offset} ({reason(exc)}); the rest of the file is not read"
+                )
+            else:
+                stopped_at = reason(exc)
+            break
+        if isinstance(record, Footer) and (problem := summary_crc_problem(data, offset, record)):
+            problems.append(problem)
+        take(record, offset)
+    return complete, stopped_at
