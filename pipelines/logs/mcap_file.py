@@ -5,6 +5,7 @@ its CRC checked by the reader, one chunk at a time). The CRCs that mcap's reader
 here: the data section's (``validate_crcs``; crowdmpc's writer leaves it 0, i.e. absent) and the summary
 section's (the footer's ``summary_crc``, which no mcap reader verifies): a changed byte among the chunk
 indexes made mcap's indexed reader, as Foxglove reads a file, fail on a file whose messages all read here.
+A record that does not parse is stepped over by its length where that lies within the file.
 """
 
 from __future__ import annotations
@@ -39,6 +40,16 @@ def _records(buffer: io.BytesIO, size: int, *, first: bool) -> Iterator[McapReco
         buffer, skip_magic=not first, emit_chunks=True, validate_crcs=True, record_size_limit=size
     )
     return iter(reader.records)
+
+
+def _record_end(data: bytes, offset: int, limit: int) -> int | None:
+    """Where the record at ``offset`` ends by its length field, when that lies within ``data[:limit]``: a
+    record whose content does not parse (a flipped byte in a metadata string) is stepped over there, where
+    it lost every message after it, though its neighbours' bytes are intact."""
+    if offset + 9 > limit:
+        return None
+    end = offset + 9 + struct.unpack_from("<Q", data, offset + 1)[0]
+    return end if end <= limit else None
 
 
 def summary_crc_problem(data: bytes, footer_offset: int, footer: Footer) -> str | None:
@@ -100,6 +111,12 @@ def walk_file(
                     f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
                 )
                 records = _records(buffer, len(data), first=False)  # the summary section still reads
+                continue
+            end = _record_end(data, offset, len(data) - len(MAGIC) if complete else len(data))
+            if end is not None:  # its content is bad, not its length: the records after it still read
+                problems.append(f"corrupt record at byte {offset} ({reason(exc)}); left out")
+                buffer.seek(end)
+                records = _records(buffer, len(data), first=False)
                 continue
             if complete:
                 problems.append(

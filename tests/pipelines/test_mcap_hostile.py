@@ -205,6 +205,33 @@ def test_the_summary_section_crc_is_checked(episode, tmp_path, capsys):
     assert read_recording(episode.path).problems == []  # the file as written matches its CRC
 
 
+def test_a_record_that_does_not_parse_loses_itself_only(episode, tmp_path, capsys):
+    """A flipped byte in a metadata record's text (the bytes before the first chunk) ended the walk there:
+    the review read no message of the episode, where mcap's own reader read them all."""
+    data = episode.path.read_bytes()
+    # the "crowdmpc" metadata record (the header's library is the first "crowdmpc"): its name, then its
+    # map's byte length and its first key's length, then that key's first character
+    start = data.index(b"\x08\x00\x00\x00crowdmpc", HEADER_END) - 9  # its opcode and record length
+    bad = bytearray(data)
+    bad[start + 9 + 4 + 8 + 4 + 4] = 0xFF  # no UTF-8
+    path = tmp_path / "meta.mcap"
+    path.write_bytes(bytes(bad))
+    with open(path, "rb") as f:
+        assert sum(1 for _ in make_reader(f, validate_crcs=True).iter_messages()) > 0
+    rec, whole = read_recording(path), read_recording(episode.path)
+    (problem,) = rec.problems
+    assert problem.startswith(f"corrupt record at byte {start} (UnicodeDecodeError") and "left out" in problem
+    assert {t: [m.data for m in ms] for t, ms in rec.messages.items()} == {
+        t: [m.data for m in ms] for t, ms in whole.messages.items()
+    }
+    assert "crowdmpc" not in rec.metadata and rec.episode() == whole.episode()
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 1
+    assert f"check {path}: the file itself: 1 problem\n  corrupt record at byte {start} " in out
+    n = sum(len(m) for m in whole.messages.values())
+    assert out.endswith(f"check {path}: {n} messages, each valid; fails: its own problems\n")
+
+
 ROBOTS_JSON = b'{"time":0.0,"step":0,"positions":[[0,0]],"velocities":[[0,0]],"goals":[[1,1]],"actions":null,\
 "commanded":null,"reached":[false]}'
 
