@@ -1,9 +1,9 @@
 """An MCAP file's records front to back, its damage noted: how ``pipelines.logs.reader`` walks a recording.
 
 The file is read whole and parsed by mcap's ``StreamReader`` (``emit_chunks``: each chunk is handed on whole,
-its CRC checked by the reader, one chunk at a time). The CRCs that mcap's readers leave unchecked are checked
-here: the data section's (``validate_crcs``; crowdmpc's writer leaves it 0, i.e. absent) and the summary
-section's (the footer's ``summary_crc``, which no mcap reader verifies): a changed byte among the chunk
+its CRC checked by the reader, one chunk at a time). The data section's CRC is checked as the walk meets it
+(``validate_crcs``; 0, i.e. absent, in recordings made before crowdmpc wrote it), and the summary section's
+(the footer's ``summary_crc``), which no mcap reader verifies, at the footer: a changed byte among the chunk
 indexes made mcap's indexed reader, as Foxglove reads a file, fail on a file whose messages all read here.
 A record that does not parse is stepped over by its length where that lies within the file.
 """
@@ -107,9 +107,10 @@ def walk_file(
             break
         except Exception as exc:  # noqa: BLE001 (any parse error: a cut, or corrupt bytes)
             if isinstance(exc, CRCValidationError) and isinstance(exc.record, DataEnd):
-                problems.append(
-                    f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
-                )
+                if not problems:  # else a bad chunk or record found before it is what changed: no 2nd line
+                    problems.append(
+                        f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
+                    )
                 records = _records(buffer, len(data), first=False)  # the summary section still reads
                 continue
             end = _record_end(data, offset, len(data) - len(MAGIC) if complete else len(data))

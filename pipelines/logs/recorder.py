@@ -165,7 +165,11 @@ class McapRecorder:
             self.part_path.unlink()
             raise FileExistsError(f"{self.path} exists")
         try:
-            self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
+            # the data section's CRC too (mcap leaves it out by default): the chunks carry CRCs of their own,
+            # but a flipped bit in the metadata records before them (seed 0 read as seed 1) passed --check
+            self._writer = Writer(
+                self._stream, chunk_size=chunk_size, compression=compression, enable_data_crcs=True
+            )
             self._writer.start(profile="", library="crowdmpc")
         except OSError as exc:
             self._stream.close()

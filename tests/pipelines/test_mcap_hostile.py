@@ -176,6 +176,23 @@ def test_the_data_section_crc_is_checked_where_the_file_has_one(tmp_path, capsys
     assert rc == 1 and "data section CRC mismatch" in out
 
 
+def test_a_recording_carries_its_data_section_crc(episode, tmp_path, capsys):
+    """The recorder wrote no data section CRC (mcap's default): a flipped bit in the "episode" metadata,
+    outside every chunk, made seed 7 read as seed 6 (another episode) and --check said "ok"."""
+    data = episode.path.read_bytes()
+    at = data.index(b"\x04\x00\x00\x00seed\x01\x00\x00\x007") + 4 + 4 + 4  # the key, the value's length
+    bad = bytearray(data)
+    bad[at] ^= 1  # "7" -> "6"
+    path = tmp_path / "seed.mcap"
+    path.write_bytes(bytes(bad))
+    rec = read_recording(path)
+    assert rec.episode()["seed"] == "6"
+    (problem,) = rec.problems
+    assert problem.startswith("data section CRC mismatch")
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 1 and f"check {path}: the file itself: 1 problem\n  data section CRC mismatch" in out
+
+
 def test_the_summary_section_crc_is_checked(episode, tmp_path, capsys):
     """No mcap reader checks the footer's summary CRC: a changed chunk index made mcap's indexed reader (as
     Foxglove reads a file) fail, while every message still read front to back and --check said "ok"."""
