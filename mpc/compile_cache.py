@@ -42,6 +42,7 @@ import hashlib
 import json
 import os
 import platform
+import pwd
 import re
 import secrets
 import shlex
@@ -106,11 +107,35 @@ def cache_dir() -> Path:
     the XDG spec says), else ``~/.cache/crowdmpc/compiled`` (not created here); the prepared data's root is
     the same folder (``predictors.data.locate.cache_root``)."""
     root = os.environ.get(CACHE_ENV)
+    if root and (root == "~" or root.startswith("~/")):  # lstrip: home / "/x" of "~//x" is /x
+        return _home(f"${CACHE_ENV} {root}", " to an absolute path") / root[2:].lstrip("/") / SUBDIR
     if root:
-        return Path(root).expanduser() / SUBDIR
+        try:
+            return Path(root).expanduser() / SUBDIR  # ~user/...: the password database, never $HOME
+        except RuntimeError:  # ~user of no user: Python's error names no variable
+            raise CacheLocationError(f"${CACHE_ENV} {root}: no such user, so no home") from None
     xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else _home("the compile cache") / ".cache"
     return base / "crowdmpc" / SUBDIR
+
+
+def _home(what: str, wanted: str = "") -> Path:
+    """An absolute ``$HOME``, else the password database's home (``Path.home()`` took ``HOME=`` for "/"):
+    predictors.home.home_dir repeated, as CACHE_ENV is, for mpc and predictors import nothing of each other
+    and share only crowdsim.world, which holds the world's facts."""
+    home = os.environ.get("HOME")
+    if home and Path(home).is_absolute():
+        return Path(home)
+    try:
+        entry = pwd.getpwuid(os.getuid()).pw_dir
+    except KeyError:
+        entry = ""
+    if not Path(entry).is_absolute():  # no password entry, or one without a home
+        raise CacheLocationError(
+            f"cannot find the home directory for {what} (no absolute $HOME, and none in the password "
+            f"database); set ${CACHE_ENV}{wanted}"
+        )
+    return Path(entry)
 
 
 def _nearest_existing(path: Path) -> Path:

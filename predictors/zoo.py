@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import importlib.resources
 import os
-import pwd
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -32,6 +31,7 @@ from predictors.checkpoint import (
     load_checkpoint,
 )
 from predictors.errors import PredictorError
+from predictors.home import expand_home, home_dir
 from predictors.manifest import (
     MANIFEST_NAME,
     ZooEntry,
@@ -55,7 +55,7 @@ def checkpoints_dir(directory: str | Path | None = None) -> Path:
     if directory is not None:
         return Path(directory)
     env = os.environ.get(CHECKPOINTS_ENV)
-    return _expanded(env, CHECKPOINTS_ENV) if env else shipped_checkpoints_dir()
+    return expand_home(env, f"${CHECKPOINTS_ENV}") if env else shipped_checkpoints_dir()
 
 
 def shipped_checkpoints_dir() -> Path:
@@ -90,43 +90,11 @@ def user_zoo_dir(directory: str | Path | None = None) -> Path:
         return Path(directory)
     env = os.environ.get(ZOO_ENV)
     if env:
-        return _expanded(env, ZOO_ENV)
+        return expand_home(env, f"${ZOO_ENV}")
     data = os.environ.get("XDG_DATA_HOME")
     if data and Path(data).is_absolute():
         return Path(data) / "crowdmpc" / "zoo"
-    return _home() / ".local" / "share" / "crowdmpc" / "zoo"
-
-
-def _expanded(value: str, variable: str) -> Path:
-    """A zoo variable's path with a leading ``~`` expanded, as ``$CROWDMPC_DATA``'s and ``$CROWDMPC_CACHE``'s
-    are: a quoted ``CROWDMPC_ZOO="~/zoo"`` (an env file, docker -e) made a folder named "~" in the current
-    directory."""
-    if value == "~" or value.startswith("~/"):
-        return _home() / value[2:]
-    try:
-        return Path(value).expanduser()  # ~user/...
-    except RuntimeError:
-        tilde = value.split("/")[0]
-        raise PredictorError(
-            f"${variable} {value}: no user {tilde[1:]!r} here, so {tilde} names no home"
-        ) from None
-
-
-def _home() -> Path:
-    """``$HOME`` when it is an absolute path, else the user's home in the password database, as for no
-    ``$HOME``. Not ``Path.home()``: it takes an empty ``$HOME`` (``env HOME= crowdmpc``) for "/", and so
-    made the user zoo /.local/share/crowdmpc/zoo, and a relative one for a folder of the current
-    directory, a user zoo that changed with it."""
-    home = os.environ.get("HOME")
-    if home and Path(home).is_absolute():
-        return Path(home)
-    try:
-        entry = pwd.getpwuid(os.getuid()).pw_dir
-    except KeyError:
-        entry = ""
-    if not Path(entry).is_absolute():  # no password entry, or one without a home
-        raise PredictorError(f"cannot find the home directory for the user zoo; set {ZOO_ENV}")
-    return Path(entry)
+    return home_dir("the user zoo", f"set ${ZOO_ENV}") / ".local" / "share" / "crowdmpc" / "zoo"
 
 
 def _resolved(path: Path) -> Path:

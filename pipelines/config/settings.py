@@ -19,6 +19,7 @@ from pipelines.experiments.deadline import check_timeout
 from pipelines.experiments.sweep_config import MAX_EPISODES_PER_CELL, MAX_WORKERS
 from pipelines.experiments.worker import RECORD_POLICIES
 from pipelines.loop.spec import COUPLINGS, ControllerSpec
+from predictors.home import expand_home
 
 MAX_SIMULATE_EPISODES: Final[int] = (
     100_000  # a sweep's cell holds at most as many; beyond, use `crowdmpc sweep`
@@ -89,10 +90,11 @@ def _check_once(name: str, what: str, names: tuple[str, ...]) -> None:
 def _home(settings: object, name: str) -> None:
     """A path setting with a leading ``~`` made the home directory's, as a shell does: ``record = "~/runs"``
     (no shell reads a config file, nor a quoted --set) wrote a folder named ``~`` here. Set in place: the
-    dataclass is frozen, and this is its own validation."""
+    dataclass is frozen, and this is its own validation. Not ``expanduser``: it made an empty ``$HOME``'s
+    ``~/runs`` /runs."""
     value = getattr(settings, name)
     if isinstance(value, str) and value.startswith("~"):
-        object.__setattr__(settings, name, os.path.expanduser(value))
+        object.__setattr__(settings, name, str(expand_home(value, name)))
 
 
 @dataclass(frozen=True)

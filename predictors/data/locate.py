@@ -37,6 +37,7 @@ from predictors.data.prepare import CONVERTER_VERSION, STAGING_INFIX, prepare_ew
 from predictors.data.selfcheck import default_references
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
+from predictors.home import expand_home, home_dir
 from predictors.locking import locked, pid_alive
 
 DATA_ENV: Final[str] = "CROWDMPC_DATA"
@@ -51,14 +52,15 @@ SPLIT_FILE: Final[re.Pattern[str]] = re.compile(rf"({'|'.join(SPLITS)})/[^/\\\0.
 
 def resolve_data_dir(data_dir: str | Path | None) -> Path:
     """``data_dir`` if given, else ``$CROWDMPC_DATA``; it must exist."""
+    named = "--data-dir"
     if data_dir is None or str(data_dir) == "":
-        data_dir = os.environ.get(DATA_ENV) or None
+        data_dir, named = os.environ.get(DATA_ENV) or None, f"${DATA_ENV}"
         if data_dir is None:
             raise PredictorError(
                 f"no data directory: pass --data-dir DIR or set {DATA_ENV} (a prepared directory from "
                 "`crowdmpc data prepare`, or a directory holding raw_ewap/; see data/README.md)"
             )
-    path = Path(data_dir).expanduser()
+    path = expand_home(str(data_dir), named)
     if not path.is_dir():
         raise PredictorError(f"data directory {path} {_not_a_directory(path)}")
     return path
@@ -83,9 +85,11 @@ def cache_root() -> Path:
     cache's root is the same folder (``mpc.compile_cache.cache_dir``: mpc imports nothing of predictors)."""
     root = os.environ.get(CACHE_ENV)
     if root:
-        return Path(root).expanduser()
+        return expand_home(root, f"${CACHE_ENV}")
     xdg = os.environ.get("XDG_CACHE_HOME")
-    return Path(xdg) / "crowdmpc" if xdg and Path(xdg).is_absolute() else Path.home() / ".cache" / "crowdmpc"
+    if xdg and Path(xdg).is_absolute():
+        return Path(xdg) / "crowdmpc"
+    return home_dir("the cache", f"set ${CACHE_ENV}") / ".cache" / "crowdmpc"
 
 
 def writable_cache_dir(*parts: str) -> Path:

@@ -5,6 +5,8 @@ error about a temporary file."""
 from __future__ import annotations
 
 import os
+import pwd
+from types import SimpleNamespace
 
 import pytest
 
@@ -131,3 +133,55 @@ def test_the_compile_cache_and_the_prepared_data_share_one_root(tmp_path, monkey
             monkeypatch.setenv(variable, value.format(tmp=tmp_path))
     root = expected.format(tmp=tmp_path, home=tmp_path / "home")
     assert str(cache_root()) == root and compile_cache.cache_dir() == cache_root() / compile_cache.SUBDIR
+
+
+@pytest.mark.parametrize("home", ["", "relative/home"])
+@pytest.mark.parametrize("cache, under", [(None, ".cache/crowdmpc"), ("~/mine", "mine"), ("~//mine", "mine")])
+def test_a_home_that_is_no_absolute_path_is_passed_over_for_the_cache(
+    tmp_path, monkeypatch, home, cache, under
+):
+    """Path.home() and expanduser take an empty $HOME for "/", so `env HOME= crowdmpc` run as root put the
+    cache in /.cache/crowdmpc (or $CROWDMPC_CACHE="~/mine" in /mine), and a relative one in a folder of the
+    current directory: both roots take the password database's home, as for no $HOME."""
+    from predictors.data.locate import cache_root
+
+    monkeypatch.setenv("HOME", home)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    if cache is None:
+        monkeypatch.delenv(compile_cache.CACHE_ENV, raising=False)
+    else:
+        monkeypatch.setenv(compile_cache.CACHE_ENV, cache)
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=str(tmp_path / "pw")))
+    assert cache_root() == tmp_path / "pw" / under
+    assert compile_cache.cache_dir() == tmp_path / "pw" / under / compile_cache.SUBDIR
+
+
+def test_no_home_at_all_is_one_line_naming_the_cache_variable(monkeypatch):
+    from predictors.data.locate import cache_root
+    from predictors.errors import PredictorError
+
+    monkeypatch.setenv("HOME", "")
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.delenv(compile_cache.CACHE_ENV, raising=False)
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=""))
+    why = "(no absolute $HOME, and none in the password database); set $CROWDMPC_CACHE"
+    with pytest.raises(PredictorError) as data:
+        cache_root()
+    with pytest.raises(compile_cache.CacheLocationError) as compiled:
+        compile_cache.cache_dir()
+    assert str(data.value) == f"cannot find the home directory for the cache {why}"
+    assert str(compiled.value) == f"cannot find the home directory for the compile cache {why}"
+    assert isinstance(compiled.value, MPCConfigError)  # the command line prints it as one line
+    monkeypatch.setenv(compile_cache.CACHE_ENV, "~/mine")
+    with pytest.raises(PredictorError) as data:
+        cache_root()
+    with pytest.raises(compile_cache.CacheLocationError) as compiled:
+        compile_cache.cache_dir()
+    assert (
+        str(data.value)
+        == str(compiled.value)
+        == (f"cannot find the home directory for $CROWDMPC_CACHE ~/mine {why} to an absolute path")
+    )
+    monkeypatch.setenv(compile_cache.CACHE_ENV, "~no-such-user-here/mine")
+    with pytest.raises(compile_cache.CacheLocationError, match="^[^\n]*no such user"):
+        compile_cache.cache_dir()

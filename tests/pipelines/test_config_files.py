@@ -145,6 +145,30 @@ def test_a_leading_tilde_in_a_path_setting_is_the_home_directory(tmp_path, capsy
     assert list(work.iterdir()) == [] and len(list((home / "runs").glob("*.mcap"))) == 1
 
 
+@pytest.mark.parametrize("home", ["", "relative/home"])
+def test_a_leading_tilde_under_a_home_that_is_no_absolute_path(tmp_path, monkeypatch, home):
+    """expanduser takes an empty $HOME for "/": `env HOME= crowdmpc` made `record = "~/runs"` /runs, which a
+    run as root wrote into; a relative one made it a folder of the current directory. The password
+    database's home is taken, as for no $HOME; without one, the setting is refused naming itself."""
+    import pwd
+    from types import SimpleNamespace
+
+    monkeypatch.setenv("HOME", home)
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=str(tmp_path / "pw")))
+    cfg = load(sets=["simulate.record=~/runs", "sweep.out=~//sw"])
+    assert (cfg.simulate.record, cfg.sweep.out) == (
+        str(tmp_path / "pw" / "runs"),
+        str(tmp_path / "pw" / "sw"),
+    )
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=""))
+    with pytest.raises(ConfigError) as refused:
+        load(sets=["simulate.record=~/runs"])
+    assert str(refused.value) == (
+        "--set simulate.record: cannot find the home directory for record ~/runs (no absolute $HOME, and "
+        "none in the password database); set record to an absolute path"
+    )
+
+
 def test_precedence_defaults_file_set_options(tmp_path):
     from pipelines.config.entries import Entry, Source
 

@@ -1,5 +1,7 @@
+import pwd
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -38,6 +40,23 @@ def test_data_dir_from_argument_or_environment(tmp_path, monkeypatch):
     assert resolve_data_dir(tmp_path / ".") == tmp_path / "."
     with pytest.raises(PredictorError, match="does not exist"):
         resolve_data_dir(tmp_path / "absent")
+
+
+def test_a_data_dir_starting_with_a_tilde_under_an_empty_home(tmp_path, monkeypatch):
+    """expanduser made "~/data" /data under `env HOME= crowdmpc`: the password database's home is taken, as
+    for no $HOME, and without one the refusal names where the path came from."""
+    (tmp_path / "pw" / "data").mkdir(parents=True)
+    monkeypatch.setenv("HOME", "")
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=str(tmp_path / "pw")))
+    monkeypatch.setenv("CROWDMPC_DATA", "~/data")
+    assert resolve_data_dir(None) == resolve_data_dir("~/data") == tmp_path / "pw" / "data"
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: SimpleNamespace(pw_dir=""))
+    with pytest.raises(
+        PredictorError, match=r"^cannot find .* for \$CROWDMPC_DATA ~/data .*; set \$CROWDMPC_DATA to"
+    ):
+        resolve_data_dir(None)
+    with pytest.raises(PredictorError, match=r"^cannot find .* for --data-dir ~/data .*; set --data-dir to"):
+        resolve_data_dir("~/data")
 
 
 def test_paper_protocol_files(prepared):
