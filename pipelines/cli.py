@@ -180,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="SECTION.KEY=VALUE",
-        help="override one config value, e.g. mpc.w_coll=1e6 (repeatable)",
+        help="override one config value, e.g. mpc.w_coll=1e6; =null unsets it (repeatable)",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:

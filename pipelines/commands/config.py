@@ -24,7 +24,9 @@ EPILOG = """examples:
 Sections: [world] (tau, L, radius, speeds: shared by the simulator and the MPC), [env] and [env.orca] (the
 simulator), [scenario], [controller], [mpc] (Table I and the solver), [simulate], [sweep]. Precedence, lowest
 first: defaults < the --config file < --set SECTION.KEY=VALUE (in order; VALUE is a TOML value, a bare word a
-string) < a command's explicit options. The output of `config show` is itself a config file.
+string) < a command's explicit options. TOML has no null: --set SECTION.KEY=null unsets a key, back to its
+default (--set simulate.plot=null draws no figure whatever the file says). The output of `config show` is
+itself a config file.
 """
 
 
@@ -43,7 +45,8 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="SECTION.KEY=VALUE",
-        help="override one config value, e.g. mpc.w_coll=1e6 (repeatable; over the file, under options)",
+        help="override one config value, e.g. mpc.w_coll=1e6; =null unsets it, e.g. a file's simulate.plot "
+        "(repeatable; over the file, under options)",
     )
 
 

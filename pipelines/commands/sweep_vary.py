@@ -167,6 +167,8 @@ def _checked(cfg: RunConfig, where: str, name: str, item: str) -> Any:
         entry = parse_set(f"{name}={item}")
     except ConfigError as exc:
         raise ConfigError(str(exc).replace(f"--set {name}", f"{where} value {item}")) from None
+    if entry.value is None:  # --set's null, which unsets: a column needs a value of its own
+        raise ConfigError(f"{where} value {item}: a column needs a value; null unsets only in --set")
     own = [
         Entry(section, key, _as_written(cfg.values[section][key]), source)
         for (section, key), source in cfg.sources.items()

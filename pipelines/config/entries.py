@@ -59,7 +59,7 @@ def reason(message: str, key: str) -> str:
 class Entry:
     section: str
     key: str
-    value: Any
+    value: Any  # None: unset (--set KEY=null)
     source: Source
 
 
@@ -187,11 +187,15 @@ _QUOTE_IT: Final[str] = '(no setting takes one; quote it, "...", for a string)'
 # "=" and ";" too: a sweep's vary is KEY=V1,V2 (";" between grids), `--set sweep.vary=mpc.d_min=0.8,0.9`
 BARE_VALUE: Final[re.Pattern[str]] = re.compile(r"[A-Za-z0-9_./~:,+@=;-]+")
 CONTROL: Final[re.Pattern[str]] = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # all but the tab
+UNSET: Final[str] = "null"  # --set KEY=null: the key's default, as if no file or --set before had set it
 
 
 def parse_set(text: str) -> Entry:
     """``--set SECTION.KEY=VALUE``: VALUE is a TOML value (``1e6``, ``true``, ``"circle"``, ``[5, 6]``); a
-    bare word that is no TOML value (``circle``, ``conformal:0.05``, ``runs/x``) is taken as a string."""
+    bare word that is no TOML value (``circle``, ``conformal:0.05``, ``runs/x``) is taken as a string, but
+    ``null``, which unsets the key (an entry of value None): TOML has no null, so a file's ``plot = "..."``
+    could not be switched off from the command line (``none`` was a file name). ``null`` is what a record
+    holds for an unset key, as Helm's ``--set`` and Hydra's overrides spell it; ``"null"`` is the string."""
     name, sep, raw = text.partition("=")
     name, raw = name.strip(), raw.strip()
     if not sep or "." not in name:
@@ -210,9 +214,12 @@ def parse_set(text: str) -> Entry:
     except RecursionError:  # tomllib parses nested arrays recursively
         raise ConfigError(f"--set {name}: the value's arrays or tables are nested too deeply") from None
     except tomllib.TOMLDecodeError:
+        if raw == UNSET:
+            return Entry(section.name, key, None, Source("set", "--set"))
         if BARE_VALUE.fullmatch(raw) is None:
             raise ConfigError(
-                f'--set {name}: {raw[:80]!r} is not a TOML value (e.g. 1e6, true, "circle", [5, 6])'
+                f'--set {name}: {raw[:80]!r} is not a TOML value (e.g. 1e6, true, "circle", [5, 6]; '
+                f"{UNSET} unsets the key)"
             ) from None
         value = raw
     except ValueError:  # not a TOMLDecodeError: a decimal integer past Python's digit limit

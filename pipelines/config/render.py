@@ -22,7 +22,8 @@ HEADER = """\
 #   crowdmpc --config run.toml sweep --experiment table2 --out runs/table2
 #   crowdmpc config show --config run.toml --set mpc.w_coll=1e6    (the effective config)
 # Precedence, lowest first: these defaults < this file < --set SECTION.KEY=VALUE (in order) < the command's
-# explicit options (--humans 5). A commented-out key is unset: it has no single default (see its comment).
+# explicit options (--humans 5). A commented-out key is unset: it has no single default (see its comment);
+# --set SECTION.KEY=null unsets a key this file sets (--set simulate.plot=null: no figure).
 # Values marked "Table I" are the paper's (Le et al., Multi-robot cooperative navigation in crowds).
 """
 

@@ -1,9 +1,10 @@
 """A config file's entries, ``--set`` overrides and the command line's options (``pipelines.config.entries``)
 validated into one ``RunConfig``.
 
-Precedence, lowest first: the dataclasses' defaults, the TOML file, ``--set SECTION.KEY=VALUE`` (in order),
-the command's explicit options (``--humans 5``). Every value is checked by the dataclass it belongs to; an
-error is one line naming where the value came from, the key and what is expected:
+Precedence, lowest first: the dataclasses' defaults, the TOML file, ``--set SECTION.KEY=VALUE`` (in order;
+``--set SECTION.KEY=null`` unsets the key), the command's explicit options (``--humans 5``). Every value is
+checked by the dataclass it belongs to; an error is one line naming where the value came from, the key and
+what is expected:
 
     run.toml: mpc.horizon: must be an integer >= 1, got 'four'
     --set mpc.horizon: must be an integer >= 1, got 0
@@ -307,6 +308,10 @@ def resolve(entries: Iterable[Entry], path: str | None = None) -> RunConfig:
     chosen: dict[str, dict[str, Any]] = {}
     sources: dict[tuple[str, str], Source] = {}
     for entry in entries:
+        if entry.value is None:  # --set KEY=null: unset, as if no entry before had set it
+            chosen.get(entry.section, {}).pop(entry.key, None)
+            sources.pop((entry.section, entry.key), None)
+            continue
         chosen.setdefault(entry.section, {})[entry.key] = entry.value
         sources[(entry.section, entry.key)] = entry.source
     resolver = _Resolver(chosen, sources)

@@ -97,6 +97,22 @@ def _home(settings: object, name: str) -> None:
         object.__setattr__(settings, name, str(expand_home(value, name)))
 
 
+def _check_optional_path(name: str, value: object) -> None:
+    """A [simulate] path or None; the error says how to switch one off. "none" (or "null") is refused, not
+    taken for a file name: it was meant as off, as [sweep] record reads it, and a config file's plot could
+    not be switched off (TOML has no null), so `--set simulate.plot=none` was a figure of no type."""
+    if value is None:
+        return
+    word = isinstance(value, str) and value.lower() in ("none", "null")
+    if isinstance(value, str) and value and not word:
+        return
+    named = f"; ./{value} is the path of that name" if word else ""
+    raise PipelineError(
+        f"{name} must be a path, got {value!r}; to switch it off, leave it out or unset it "
+        f"(--set simulate.{name}=null){named}"
+    )
+
+
 @dataclass(frozen=True)
 class ScenarioSettings:
     """What ``simulate`` runs: one scenario, a crowd size, a robot count (a sweep reads ``robots`` only)."""
@@ -166,9 +182,7 @@ class SimulateSettings:
         _check_seed(self.seed)
         check_last_seed(self.seed, self.episodes - 1, f"{self.episodes} episodes")
         for name in ("json", "plot", "record"):
-            value = getattr(self, name)
-            if value is not None and not (isinstance(value, str) and value):
-                raise PipelineError(f"{name} must be a path, got {value!r}")
+            _check_optional_path(name, getattr(self, name))
             _home(self, name)
         sensed = self.sensor_range
         if sensed is not None and not is_sensor_range(sensed):

@@ -204,7 +204,7 @@ def test_an_empty_path_option_is_refused_by_name(argv, expected, tmp_path, capsy
     _no_work(monkeypatch)
     monkeypatch.chdir(tmp_path)
     line = error_line(capsys, *argv)
-    assert line.startswith(expected) and line.endswith(", got ''"), line
+    assert line.startswith(expected) and ", got ''" in line, line
     assert list(tmp_path.iterdir()) == []
 
 

@@ -169,6 +169,63 @@ def test_a_leading_tilde_under_a_home_that_is_no_absolute_path(tmp_path, monkeyp
     )
 
 
+def test_set_null_unsets_a_key_a_file_sets(tmp_path, capsys, monkeypatch):
+    """TOML has no null: `--set simulate.plot=` was no TOML value and `=none` a figure of no type, so a config
+    file's plot could not be switched off. `--set KEY=null` unsets the key (in order with the other --set
+    items); a quoted "null" is the string."""
+    path = _write(tmp_path, '[controller]\ncontroller = "straight"\n[simulate]\nplot = "ep.png"\n')
+    cfg = load(str(path), sets=["simulate.plot=null", "mpc.horizon=9", "mpc.horizon=null"])
+    assert cfg.simulate.plot is None and cfg.source("simulate", "plot") is None
+    assert cfg.mpc.horizon == MPCConfig().horizon and not cfg.chosen("mpc", "horizon")
+    assert load(str(path), sets=["simulate.plot=null", "simulate.plot=b.png"]).simulate.plot == "b.png"
+    assert main(["--config", str(path), "--set", "simulate.plot=null", "config", "show"]) == 0
+    assert '\n# plot = "runs/episode.png"' in capsys.readouterr().out
+    with pytest.raises(ConfigError) as refused:
+        load(str(path), sets=['simulate.plot="null"'])
+    assert str(refused.value).startswith("--set simulate.plot: must be a path, got 'null'; to switch it off")
+    monkeypatch.chdir(tmp_path)
+    argv = [
+        "--config",
+        str(path),
+        "--set",
+        "simulate.plot=null",
+        "simulate",
+        "--humans",
+        "0",
+        "--no-progress",
+    ]
+    assert main(argv) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.toml"]  # no ep.png
+
+
+@pytest.mark.parametrize("name", ["json", "plot", "record"])
+@pytest.mark.parametrize("word", ["none", "None", "null"])
+def test_none_for_a_path_says_how_to_switch_it_off(tmp_path, name, word):
+    """`--set simulate.record=none` recorded into a folder named none (as [sweep] record reads it, it meant
+    off), `plot = "none"` was a figure of no type: each is refused saying how to switch the path off;
+    ./none is the path of that name, and an empty path says so too."""
+    path = _write(tmp_path, f'[simulate]\n{name} = "{word}"\n')
+    with pytest.raises(ConfigError) as refused:
+        load(str(path))
+    assert str(refused.value) == (
+        f"{path}: simulate.{name}: must be a path, got {word!r}; to switch it off, leave it out or unset it "
+        f"(--set simulate.{name}=null); ./{word} is the path of that name"
+    )
+    assert getattr(load(sets=[f"simulate.{name}=./{word}"]).simulate, name) == f"./{word}"
+    with pytest.raises(ConfigError) as refused:
+        load(sets=[f'simulate.{name}=""'])
+    assert str(refused.value) == (
+        f"--set simulate.{name}: must be a path, got ''; to switch it off, leave it out or unset it "
+        f"(--set simulate.{name}=null)"
+    )
+    with pytest.raises(ConfigError) as refused:
+        load(sets=[f"simulate.{name}="])
+    assert str(refused.value) == (
+        f"--set simulate.{name}: '' is not a TOML value (e.g. 1e6, true, \"circle\", [5, 6]; null unsets "
+        "the key)"
+    )
+
+
 def test_precedence_defaults_file_set_options(tmp_path):
     from pipelines.config.entries import Entry, Source
 

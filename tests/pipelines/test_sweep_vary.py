@@ -93,6 +93,10 @@ def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays
             "--vary and --set mpc.d_min both set mpc.d_min",
         ),
         (["--vary", "nothing"], "--vary must read mpc.KEY=V1,V2,..., got 'nothing'"),
+        (  # --set's null unsets a key: no column's value
+            ["--vary", "simulate.sensor_range=null,3"],
+            "--vary value null: a column needs a value; null unsets only in --set",
+        ),
         (
             ["--vary", "mpc.d_min=0.5,1.0"],
             "method 'CMPC d_min=0.5' of experiment 'table2': the MPC's d_min 0.5 m",
