@@ -5,7 +5,9 @@ its CRC checked by the reader, one chunk at a time). The data section's CRC is c
 (``validate_crcs``; 0, i.e. absent, in recordings made before crowdmpc wrote it), and the summary section's
 (the footer's ``summary_crc``), which no mcap reader verifies, at the footer: a changed byte among the chunk
 indexes made mcap's indexed reader, as Foxglove reads a file, fail on a file whose messages all read here.
-A record that does not parse is stepped over by its length where that lies within the file.
+A record that does not parse is stepped over by its length where that lies within the file. The messages
+read are counted against the summary's Statistics record (``statistics_problem``): where a file has no data
+section CRC, a chunk whose opcode byte changed is skipped by mcap's reader as a record it does not know.
 """
 
 from __future__ import annotations
@@ -13,12 +15,12 @@ from __future__ import annotations
 import io
 import struct
 import zlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Final
 
 from mcap.exceptions import EndOfFile
-from mcap.records import DataEnd, Footer, Header, McapRecord
+from mcap.records import DataEnd, Footer, Header, McapRecord, Statistics
 from mcap.stream_reader import CRCValidationError, StreamReader
 
 from pipelines.errors import PipelineError
@@ -64,6 +66,27 @@ def summary_crc_problem(data: bytes, footer_offset: int, footer: Footer) -> str 
     return (
         f"summary section CRC mismatch (recorded {footer.summary_crc:#010x}, computed {crc:#010x}): its "
         "index records changed after writing, which readers that seek by them (Foxglove, mcap's) may fail on"
+    )
+
+
+def statistics_problem(
+    statistics: Statistics, read: Mapping[int, int], topics: Mapping[int, str]
+) -> str | None:
+    """Why the messages read (channel id -> how many) do not match what ``statistics`` counts: per channel
+    where it has counts per channel, and in all; None when they match. ``topics``: channel id -> topic."""
+    counted = statistics.channel_message_counts  # {} where its writer left them out: the total alone
+    n, m = sum(read.values()), statistics.message_count
+    channels = sorted(counted.keys() | read.keys()) if counted else []
+    differ = [c for c in channels if read.get(c, 0) != counted.get(c, 0)]
+    if n == m and not differ:
+        return None
+    each = ", ".join(
+        f"{topics.get(c, f'channel id {c}')} {read.get(c, 0)} of {counted.get(c, 0)}" for c in differ
+    )
+    return (
+        f"{n} messages read, the statistics record counts {m}{f' ({each})' if each else ''}: a record "
+        "mcap's reader does not know was skipped (a chunk whose opcode byte changed), or the counts changed "
+        "after writing"
     )
 
 

@@ -4,7 +4,8 @@ A file is read whole into memory and walked front to back, record by record (mca
 ``emit_chunks``), so that a truncated file (its writer was killed) yields everything up to its last complete
 chunk; a file is truncated when it does not end with MCAP's magic. CRCs are verified where the file carries
 them: each chunk's (``breakup_chunk(validate_crc=True)``, one chunk at a time, so that a bad chunk loses only
-its own messages), the data section's and the summary section's (``pipelines.logs.mcap_file``, the walk).
+its own messages), the data section's and the summary section's (``pipelines.logs.mcap_file``, the walk);
+the messages read are counted against the file's Statistics record, where it has one.
 
 Log times are wall clock since the Unix epoch: the episode's start (metadata "episode" ``start_time_ns``) +
 its simulation time (``pipelines.logs.recording``); files recorded before that, without ``start_time_ns``,
@@ -21,17 +22,18 @@ from __future__ import annotations
 
 import json
 import os
+from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
 from mcap.records import Channel as McapChannel
-from mcap.records import Chunk, McapRecord, Message, Metadata, Schema
+from mcap.records import Chunk, McapRecord, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import breakup_chunk
 
 from pipelines.errors import PipelineError
-from pipelines.logs.mcap_file import reason, walk_file
+from pipelines.logs.mcap_file import reason, statistics_problem, walk_file
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
 from pipelines.logs.schemas import EPISODE_FORMAT
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
@@ -202,6 +204,8 @@ class _Walk:
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, McapChannel] = {}
         self._orphans: dict[int, list[Message]] = {}  # channel id -> messages read before its channel
+        self._read: Counter[int] = Counter()  # channel id -> messages read, whatever their topic
+        self._statistics: Statistics | None = None
 
     def take(self, record: McapRecord, offset: int) -> None:
         if self.metadata_only and not isinstance(record, Metadata):
@@ -223,6 +227,7 @@ class _Walk:
         elif isinstance(record, McapChannel):
             self._channels.setdefault(record.id, record)
         elif isinstance(record, Message):
+            self._read[record.channel_id] += 1
             channel = self._channels.get(record.channel_id)
             if channel is None:
                 self._orphans.setdefault(record.channel_id, []).append(record)
@@ -230,9 +235,16 @@ class _Walk:
                 self._messages_of(channel).append(self._decoded(channel.topic, record))
         elif isinstance(record, Metadata):
             self.metadata[record.name] = dict(record.metadata)
+        elif isinstance(record, Statistics) and self._statistics is None:
+            self._statistics = record
 
     def finish(self) -> None:
-        """Messages whose channel came later (the summary repeats the channels) join their topic first."""
+        """The messages read against the Statistics record's counts; messages whose channel came later (the
+        summary repeats the channels) join their topic first."""
+        if self._statistics is not None and not self.problems:  # else a bad chunk or record lost them: 1 line
+            topics = {i: c.topic for i, c in self._channels.items()}
+            if problem := statistics_problem(self._statistics, self._read, topics):
+                self.problems.append(problem)
         start = start_time_ns(self.metadata)
         for channel_id, orphans in self._orphans.items():
             channel = self._channels.get(channel_id)

@@ -23,11 +23,14 @@ from pathlib import Path
 import pytest
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
+from mcap.records import DataEnd, Statistics
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from PIL import Image
 
 from pipelines.cli import main
 from pipelines.errors import PipelineError
+from pipelines.logs.mcap_file import statistics_problem
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recorder import McapRecorder
 from pipelines.logs.recording import episode_filename
@@ -191,6 +194,85 @@ def test_a_recording_carries_its_data_section_crc(episode, tmp_path, capsys):
     assert problem.startswith("data section CRC mismatch")
     rc, out, _ = review(capsys, path, "--check")
     assert rc == 1 and f"check {path}: the file itself: 1 problem\n  data section CRC mismatch" in out
+
+
+def _recorded(path: Path, monkeypatch, *, data_crc: bool, **writer) -> Path:
+    """60 robot states in 6 chunks as McapRecorder writes them, or as it did before it wrote the data
+    section's CRC (``data_crc=False``: DataEnd's CRC is 0, "not computed"); ``writer``: more Writer kwargs."""
+    with monkeypatch.context() as m:
+        m.setattr(
+            "pipelines.logs.recorder.Writer",
+            lambda *a, enable_data_crcs, **k: Writer(*a, **k, **writer, enable_data_crcs=data_crc),
+        )
+        with McapRecorder(path, chunk_size=2048) as rec:
+            for k in range(60):
+                rec.write("/robots", robot(k), k * S // 2, schema=ROBOTS)
+    with open(path, "rb") as f:
+        (end,) = [r for r in StreamReader(f).records if isinstance(r, DataEnd)]
+    assert (end.data_section_crc != 0) == data_crc
+    return path
+
+
+def test_a_chunk_skipped_as_an_unknown_record_is_counted_missing(tmp_path, capsys, monkeypatch):
+    """A recording made before the data section CRC was written: a chunk whose opcode byte flipped is a
+    record mcap's reader does not know and skips, so its messages vanished and --check said "ok"."""
+    path = _recorded(tmp_path / "old.mcap", monkeypatch, data_crc=False)
+    assert read_recording(path).problems == []
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 0 and out.endswith(f"check {path}: 60 messages, ok\n")
+    with open(path, "rb") as f:
+        chunk = make_reader(f).get_summary().chunk_indexes[2]
+    lost = [k for k in range(60) if chunk.message_start_time <= k * S // 2 <= chunk.message_end_time]
+    assert 0 < len(lost) < 60
+    bad = bytearray(path.read_bytes())
+    assert bad[chunk.chunk_start_offset] == Opcode.CHUNK
+    bad[chunk.chunk_start_offset] ^= 0x80  # 0x86: no record MCAP defines
+    flipped = tmp_path / "flipped.mcap"
+    flipped.write_bytes(bytes(bad))
+
+    rec = read_recording(flipped)
+    assert [r["step"] for r in rec.data("/robots")] == [k for k in range(60) if k not in lost]
+    n = 60 - len(lost)
+    (problem,) = rec.problems
+    assert problem.startswith(f"{n} messages read, the statistics record counts 60 (/robots {n} of 60): ")
+    rc, out, _ = review(capsys, flipped, "--check")
+    assert rc == 1
+    assert f"check {flipped}: the file itself: 1 problem\n  {n} messages read, the statistics" in out
+    assert out.endswith(f"check {flipped}: {n} messages, each valid; fails: its own problems\n")
+
+    # where the file has a data section CRC, its mismatch is the one line: the count is not a second
+    new = _recorded(tmp_path / "new.mcap", monkeypatch, data_crc=True)
+    bad = bytearray(new.read_bytes())
+    assert bad[chunk.chunk_start_offset] == Opcode.CHUNK  # the same chunks: only DataEnd's CRC differs
+    bad[chunk.chunk_start_offset] ^= 0x80
+    new.write_bytes(bytes(bad))
+    (problem,) = read_recording(new).problems
+    assert problem.startswith("data section CRC mismatch")
+
+
+def test_without_counts_per_channel_the_total_is_compared():
+    """A writer may leave the Statistics record's counts per channel out: its total is still a count."""
+    stats = Statistics(
+        attachment_count=0, channel_count=2, channel_message_counts={}, chunk_count=1, message_count=5,
+        message_end_time=0, message_start_time=0, metadata_count=0, schema_count=1,
+    )  # fmt: skip
+    assert statistics_problem(stats, {1: 3, 2: 2}, {1: "/robots"}) is None
+    problem = statistics_problem(stats, {1: 3, 2: 1}, {1: "/robots"})
+    assert problem is not None and problem.startswith("4 messages read, the statistics record counts 5: ")
+    stats.channel_message_counts = {1: 3, 2: 2}
+    problem = statistics_problem(stats, {1: 3, 2: 1}, {1: "/robots"})
+    assert problem is not None and problem.startswith("4 messages read, the statistics record counts 5 "
+                                                      "(channel id 2 1 of 2): ")  # fmt: skip
+
+
+def test_a_summary_without_statistics_is_no_problem(tmp_path, capsys, monkeypatch):
+    """MCAP leaves the Statistics record optional: a file without one has nothing to count against."""
+    path = _recorded(tmp_path / "bare.mcap", monkeypatch, data_crc=False, use_statistics=False)
+    with open(path, "rb") as f:
+        assert make_reader(f).get_summary().statistics is None
+    assert read_recording(path).problems == []
+    rc, out, _ = review(capsys, path, "--check")
+    assert rc == 0 and out.endswith(f"check {path}: 60 messages, ok\n")
 
 
 def test_the_summary_section_crc_is_checked(episode, tmp_path, capsys):
