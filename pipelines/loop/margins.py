@@ -331,13 +331,14 @@ def parse_margins(text: str) -> MarginSpec:
     """``none`` | ``conformal[:ALPHA[:SOURCE]]`` | ``fixed:M1,M2,..`` (module docstring)."""
     if not isinstance(text, str):  # None failed on .strip()
         raise PipelineError(f"margins must be text such as 'none' or 'conformal:0.1', got {text!r}")
-    mode, _, rest = text.strip().partition(":")
-    if mode == "none" and not rest:
+    mode, has_alpha, rest = text.strip().partition(":")
+    if mode == "none" and not has_alpha:
         return MarginSpec()
     if mode in CALIBRATED_MODES:
-        alpha_text, _, source = rest.partition(":")
-        alpha = _number(alpha_text, text) if alpha_text else DEFAULT_ALPHA
-        return MarginSpec(mode, alpha=alpha, source=source or "closed-loop")  # type: ignore[arg-type]
+        alpha_text, has_source, source = rest.partition(":")  # `conformal:$UNSET` is no default alpha
+        alpha = _number(alpha_text, text) if has_alpha else DEFAULT_ALPHA
+        source = source if has_source else "closed-loop"
+        return MarginSpec(mode, alpha=alpha, source=source)  # type: ignore[arg-type]
     if mode == "fixed" and rest:
         return MarginSpec("fixed", values=tuple(_number(v, text) for v in rest.split(",")))
     raise PipelineError(

@@ -46,6 +46,16 @@ def test_parse_margins():
             parse_margins(bad)
 
 
+@pytest.mark.parametrize(
+    "bad", ["conformal:", "conformal: ", "conformal::real", "conformal:0.1:", "conformal-shortfall:", "none:"]
+)
+def test_an_empty_field_after_a_colon_is_refused(bad):
+    """`--margins conformal:$ALPHA` with ALPHA unset planned at the default alpha 0.1, and `conformal:0.1:`
+    with the default source, as if the colon and what should follow it were not there."""
+    with pytest.raises(PipelineError, match=r"bad margins|calibration source ''"):
+        parse_margins(bad)
+
+
 def test_resolution_reads_the_calibration_and_checks_the_horizon(tmp_path, monkeypatch):
     monkeypatch.setenv("CROWDMPC_CHECKPOINTS", str(tmp_path))
     assert MarginSpec().resolve("constant_velocity", 4, None) == ()
