@@ -120,6 +120,27 @@ class ZooEntry:
                     f'{where} "{key}" must be a JSON object, got {short_repr(getattr(self, key))}'
                 )
 
+    def seen_in_training(self, paths: list[Path]) -> list[tuple[Path, str, str]]:
+        """``(path, split, name)`` for each of ``paths`` whose content is a file this model records it was
+        trained (split "train") or validated ("val") on, by sha256, under the name it records there."""
+        from predictors.hashing import sha256_file
+
+        recorded = self.training_data.get("files")
+        if not isinstance(recorded, dict):
+            return []
+        seen = {
+            sha: (split, name)
+            for split in ("val", "train")  # a file in both was trained on, which says more
+            if isinstance(recorded.get(split), dict)
+            for name, sha in recorded[split].items()
+        }
+        found = []
+        for path in paths:
+            sha = sha256_file(path)
+            if sha in seen:
+                found.append((path, *seen[sha]))
+        return found
+
     def to_json(self) -> dict:
         out = asdict(self)
         return {"name": out.pop("name"), "class": out.pop("cls"), **out}

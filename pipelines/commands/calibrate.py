@@ -15,6 +15,7 @@ from pipelines.commands.calibrate_store import (
     plans_with_new_blocks,
     storing,
     take_back_killed,
+    trained_on_notes,
 )
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
@@ -45,8 +46,9 @@ the calibration did not see: the test scenes (real) or as many further episodes 
 too). The blocks are stored after those episodes; when they plan with a block this run makes
 (--holdout-margins conformal:ALPHA with ALPHA one of --alpha), it is stored before them and taken back if the
 run stops, by the next calibrate after a kill -9. A note says when the episodes' seeds are ones simulate and
-sweep evaluate on, and when a block replaces one made otherwise (another --controller, other seeds or
-episodes); a run planning with a block made with another controller says so too. `crowdmpc zoo calibrations`
+sweep evaluate on, or the real scenes ones the model was trained on, and when a block replaces one made
+otherwise (another --controller, other seeds or episodes); a run planning with a block made with another
+controller says so too. `crowdmpc zoo calibrations`
 lists each block's controller and episodes.
 """
 
@@ -167,6 +169,8 @@ def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple
 
     _check_real_horizon(args, predictor)
     files = protocol_files(args.data_dir, "paper", progress=args.progress)
+    for note in trained_on_notes(args.predictor, files["val"], files["test"] if args.holdout else []):
+        print(note, file=sys.stderr)
     blocks, _ = calibrate_real(
         predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256
     )

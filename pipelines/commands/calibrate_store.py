@@ -106,6 +106,31 @@ def evaluation_seeds_note(seed: int, episodes: int) -> str | None:
     )
 
 
+def trained_on_notes(predictor: str, calibrated: list[Path], held_out: list[Path]) -> list[str]:
+    """A line for each real scene file, of those ``calibrated`` on and those ``held_out`` for coverage, that
+    ``predictor`` was trained on (its zoo entry's training files, by sha256): a model's errors on the data it
+    was fitted to are smaller than elsewhere, so margins calibrated there cover less than 1 - alpha on other
+    people, and coverage measured there is more than they have. Not refused: it may be meant. The validation
+    files, which chose the best epoch (the shipped models': the calibration's), are not trained on."""
+    from predictors.registry import PREDICTORS
+    from predictors.zoo import locate
+
+    located = None if predictor in PREDICTORS else locate(predictor)
+    if located is None:  # constant velocity: nothing learned
+        return []
+    calibrated_on = "the margins are calibrated", "they cover less than 1 - alpha of people it has not seen"
+    measured_on = "held-out coverage is measured", "it overstates what they cover of people it has not seen"
+    notes = []
+    for paths, (what, so) in ((calibrated, calibrated_on), (held_out, measured_on)):
+        for path, split, name in located.entry.seen_in_training(paths):
+            if split == "train":
+                notes.append(
+                    f"note: {what} on {path}, which holds data {predictor} was trained on (its training "
+                    f"file {name}): {so}"
+                )
+    return notes
+
+
 def _seeds(first: int, last: int) -> str:
     return str(first) if first == last else f"{first}..{last}"
 

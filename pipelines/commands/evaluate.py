@@ -251,24 +251,11 @@ def seen_notes(predictor: str, entry: ZooEntry | None, paths: list[Path]) -> lis
     """A note for each file scored that the model saw in training (its entry's training or validation files,
     by sha256): `evaluate --test` on one's own training file printed its ADE as any other, where `train` notes
     a --test file equal to its --train."""
-    from predictors.hashing import sha256_file
-
-    recorded = None if entry is None else entry.training_data.get("files")
-    if not isinstance(recorded, dict):
-        return []
-    seen = {
-        sha: (split, name)
-        for split in ("val", "train")  # a file in both was trained on, which says more
-        if isinstance(recorded.get(split), dict)
-        for name, sha in recorded[split].items()
-    }
     notes = []
-    for path in paths:
-        split, name = seen.get(sha256_file(path), (None, None))
-        if split is not None:
-            role = "trained" if split == "train" else "validated (its best epoch chosen)"
-            notes.append(
-                f"note: {path} holds the data {predictor} was {role} on ({split} file {name}): these scores "
-                "are not on held-out data"
-            )
+    for path, split, name in [] if entry is None else entry.seen_in_training(paths):
+        role = "trained" if split == "train" else "validated (its best epoch chosen)"
+        notes.append(
+            f"note: {path} holds the data {predictor} was {role} on ({split} file {name}): these scores "
+            "are not on held-out data"
+        )
     return notes

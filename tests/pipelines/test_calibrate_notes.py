@@ -224,3 +224,38 @@ def test_simulate_and_sweep_say_when_a_run_plans_with_another_controllers_block(
     assert calibration_controller_note(ControllerSpec("cmpc", "constant_velocity", margins=margins)) is None
     note = calibration_controller_note(ControllerSpec("dmpc", "constant_velocity", margins=margins))
     assert note is not None and note.startswith("note: the closed-loop margins of 'constant_velocity'")
+
+
+# --------------------------------------------------------------- 5: real scenes the model was trained on
+def test_real_calibration_on_the_models_own_training_files_says_so(tmp_path, monkeypatch, capsys):
+    """`calibrate --source real` of a model trained on the validation scenes it calibrates on (a run of
+    one's own --train files) stored margins fitted to its training data without a word, where `evaluate`
+    notes such a file: they cover less than 1 - alpha of people the model has not seen."""
+    from predictors.data import locate
+    from predictors.hashing import sha256_file
+    from predictors.zoo_edit import add_to_zoo
+    from tests.predictors.samples import write_crowds
+
+    seen, unseen = write_crowds(tmp_path / "seen.ndjson"), write_crowds(tmp_path / "unseen.ndjson")
+    unseen.write_text(unseen.read_text() + "\n")  # other bytes, the same scenes
+    files = {"train": {"train/seen.ndjson": sha256_file(seen)}, "val": {}, "test": {}}
+    add_to_zoo(
+        checkpoints_dir() / "vanilla_lstm_eth.pt",
+        name="lstm_of_seen",
+        protocol="paper",
+        training_data={"protocol": "paper", "files": files},
+        metrics={},
+    )
+    split = {"train": [seen], "val": [seen], "test": [unseen]}
+    monkeypatch.setattr(locate, "protocol_files", lambda *args, **kwargs: split)
+    monkeypatch.setattr(locate, "prepared_dir", lambda *args, **kwargs: tmp_path)
+    real = ["calibrate", "--predictor", "lstm_of_seen", "--source", "real", "--alpha", "0.5", "--dry-run"]
+    assert main([*real, "--holdout", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: the margins are calibrated on {seen}, which holds data lstm_of_seen was trained on" in err
+    assert "held-out coverage is measured" not in err  # the test file it never saw
+    split["val"], split["test"] = [unseen], [seen]
+    assert main([*real, "--holdout", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "the margins are calibrated on" not in err
+    assert f"note: held-out coverage is measured on {seen}, which holds data lstm_of_seen" in err
