@@ -14,6 +14,7 @@ from pipelines.commands.calibrate_store import (
     evaluation_seeds_note,
     plans_with_new_blocks,
     storing,
+    take_back_before_planning,
     take_back_killed,
     trained_on_notes,
 )
@@ -284,6 +285,8 @@ def _check_first(args: argparse.Namespace) -> str | None:
         check_writable(calibrations_path(), "calibrations file", zoo_own=True)
         take_back_killed()  # before anything reads the blocks in force
         stored_calibrations()  # read as storing will: a file calibrate cannot extend fails now
+    else:  # stores nothing, but its held-out episodes may plan with the blocks in force: not a killed run's
+        take_back_before_planning([holdout_margins])
     sha256 = checkpoint_sha256(args.predictor)
     if args.source == "closed-loop":
         _check_closed_loop(args, holdout_margins, sha256)

@@ -823,6 +823,23 @@ def test_runs_planning_with_calibrated_margins_take_a_killed_calibrates_blocks_b
     assert not journal.exists()
 
 
+def test_a_dry_run_holding_out_with_calibrated_margins_takes_a_killed_calibrates_blocks_back_first(
+    tmp_path, monkeypatch, capsys
+):
+    """calibrate --dry-run took nothing back (it stores nothing), so its held-out episodes planned with the
+    block a calibrate killed during its held-out run had left in force, and printed their coverage."""
+    from pipelines.cli import main
+
+    path, journal, _ = _killed_runs_journal(tmp_path, monkeypatch)
+    capsys.readouterr()
+    argv = [*CALIBRATE, "--alpha", "0.2", "--holdout", "--holdout-margins", "conformal:0.3", "--dry-run"]
+    assert main(argv) == 2  # the killed run's block at 0.3 taken back, none is left to plan with
+    captured = capsys.readouterr()
+    assert f"(pid {os.getpid()}) did not finish" in captured.out
+    assert "no closed-loop calibration at alpha=0.3" in captured.err
+    assert not journal.exists() and not path.exists()
+
+
 def test_an_unreadable_journal_of_a_killed_calibrate_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
     from pipelines.cli import main
 
