@@ -352,8 +352,13 @@ def _check_keeps_class_margins(blocks: list, args: argparse.Namespace) -> None:
     having: set[Path] = set()  # the files of the blocks in force that have them
     for block in blocks:
         new = class_tables(block)
+        # a block of other weights than the new one's is refused by every run (find_calibration): no run
+        # plans with its margins per class, and a retrained model could not replace it without them
         planned = [
-            (path, old) for path, old in in_force if old.matches(block.predictor, block.source, block.alpha)
+            (path, old)
+            for path, old in in_force
+            if old.matches(block.predictor, block.source, block.alpha)
+            and old.predictor_sha256 == block.predictor_sha256
         ]
         if not planned:
             continue

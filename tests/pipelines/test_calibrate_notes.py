@@ -197,6 +197,20 @@ def test_blocks_lacking_margins_per_class_are_named_with_the_command_that_makes_
         _check_keeps_class_margins(few[1:], args)
 
 
+def test_a_block_of_other_weights_does_not_keep_a_retrained_models_block_out():
+    """A model retrained under its name could not store a block without margins per motion class over its
+    old weights' block, "runs plan now with a block that has them": every run refuses that block."""
+    from types import SimpleNamespace
+
+    errors, motion = class_errors(4)
+    few = constant_velocity_block(errors[motion != 0], classes=motion[motion != 0])
+    retrained = dataclasses.replace(few, predictor_sha256="a" * 64)
+    args = SimpleNamespace(predictor="constant_velocity", source="closed-loop")
+    with pytest.raises(PipelineError, match="runs plan now with a block that has them"):
+        _check_keeps_class_margins([few], args)  # the shipped block is of these (no) weights
+    _check_keeps_class_margins([retrained], args)  # it is of other weights than these
+
+
 def test_simulate_and_sweep_say_when_a_run_plans_with_another_controllers_block(capsys, tmp_path):
     """The note was written but no command printed it: a DMPC run planned with the shipped CMPC-made block
     silently. A sweep says it once, of the DMPC method alone."""
