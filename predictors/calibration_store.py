@@ -122,16 +122,27 @@ def read_calibrations(directory: str | Path | None = None) -> list[Calibration]:
 def save_calibration(
     block: Calibration, directory: str | Path | None = None, check: Callable[[], None] | None = None
 ) -> Path:
-    """Store ``block`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
-    replacing that file's block with the same key (``Calibration.key``); written atomically. ``check()``
-    runs under the lock, on the file as this write finds it, and what it raises stops the write."""
+    """Store ``block`` in ``calibrations_path(directory)``: ``save_calibrations`` of it alone."""
+    return save_calibrations([block], directory, check)
+
+
+def save_calibrations(
+    blocks: Sequence[Calibration],
+    directory: str | Path | None = None,
+    check: Callable[[], None] | None = None,
+) -> Path:
+    """Store ``blocks`` in ``calibrations_path(directory)`` (the user zoo by default, never the shipped zoo),
+    each replacing that file's block with the same key (``Calibration.key``); written atomically, all in one
+    write (one at a time, a Ctrl-C or refusal between two left some of a run's blocks stored, mixed with
+    other runs'). ``check()`` runs under the lock, on the file as this write finds it, and what it raises
+    stops the write."""
     path = calibrations_path(directory)
     # under the zoo's lock: two calibrations that both read the old file would each write back only their own
     with zoo_lock(path.parent):
         if check is not None:
             check()
-        kept = [b for b in read_calibration_file(path) if not b.same_key(block)]
-        _write_blocks(path, [*kept, block])
+        kept = [b for b in read_calibration_file(path) if not any(b.same_key(new) for new in blocks)]
+        _write_blocks(path, [*kept, *blocks])
     return path
 
 

@@ -279,17 +279,17 @@ def _write_journal(path: Path, blocks: list, before: list | None) -> tuple[Path,
 
 
 def _store(blocks: list, args: argparse.Namespace) -> None:
-    """Store ``blocks``, each refused (``_check_keeps_class_margins``) under the lock it is written under: a
-    calibrate running meanwhile (another job on the same user zoo) may have stored a block with margins per
-    motion class since this one checked, before its held-out run, and a short trial replaced it."""
-    from predictors.calibration_store import save_calibration, stored_calibrations
+    """Store ``blocks``, all in one write, refused (``_check_keeps_class_margins``) under the lock it is
+    written under: a calibrate running meanwhile (another job on the same user zoo) may have stored a block
+    with margins per motion class since this one checked, before its held-out run, and a short trial
+    replaced it."""
+    from predictors.calibration_store import save_calibrations, stored_calibrations
 
     in_force = stored_calibrations()
-    for block in blocks:
-        note = _replaced_note(block, in_force)
-        path = save_calibration(block, check=lambda: _check_keeps_class_margins(blocks, args))
-        if note is not None:  # once it is stored: a block refused replaces nothing
-            print(note, file=sys.stderr)
+    notes = [_replaced_note(block, in_force) for block in blocks]
+    path = save_calibrations(blocks, check=lambda: _check_keeps_class_margins(blocks, args))
+    for note in filter(None, notes):  # once they are stored: blocks refused replace nothing
+        print(note, file=sys.stderr)
     print(f"wrote {len(blocks)} block(s) to {path}")
 
 

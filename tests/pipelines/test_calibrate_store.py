@@ -256,3 +256,32 @@ def test_held_out_margins_from_real_data_do_not_plan_with_the_closed_loop_blocks
     assert not plans_with_new_blocks(
         SimpleNamespace(**{**vars(args), "holdout": False}), parse_margins("conformal:0.1")
     )
+
+
+def test_a_run_of_several_alphas_stores_all_its_blocks_or_none(tmp_path, monkeypatch):
+    """Each alpha's block was written on its own: a Ctrl-C, a full disk or a refusal between two writes left
+    the first alphas' new blocks in force beside the last alphas' blocks of an earlier run."""
+    import dataclasses
+
+    from predictors import calibration_store
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    (block,) = _blocks()
+    blocks = [dataclasses.replace(block, alpha=alpha) for alpha in (0.3, 0.2)]
+    write = calibration_store.replace_durably
+    writes = []
+
+    def full_at_the_second(path, text):
+        writes.append(path)
+        if len(writes) == 2:
+            raise OSError(28, "No space left on device")
+        write(path, text)
+
+    monkeypatch.setattr(calibration_store, "replace_durably", full_at_the_second)
+    try:
+        with storing(blocks, _args("none")):
+            pass
+    except OSError:
+        pass
+    stored = [b.alpha for b in read_calibration_file(calibrations_path())]
+    assert sorted(stored) in ([], [0.2, 0.3])
