@@ -18,6 +18,7 @@ from pipelines.commands.calibrate_store import (
     take_back_killed,
     trained_on_notes,
 )
+from pipelines.commands.calibration_notes import wide_margins_notes
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from predictors.errors import PredictorError
@@ -47,9 +48,9 @@ the calibration did not see: the test scenes (real) or as many further episodes 
 too). The blocks are stored after those episodes; when they plan with a block this run makes
 (--holdout-margins conformal:ALPHA with ALPHA one of --alpha), it is stored before them and taken back if the
 run stops, by the next calibrate after a kill -9. A note says when the episodes' seeds are ones simulate and
-sweep evaluate on, or the real scenes ones the model was trained on, and when a block replaces one made
-otherwise (another --controller, other seeds or episodes); a run planning with a block made with another
-controller says so too. `crowdmpc zoo calibrations`
+sweep evaluate on, or the real scenes ones the model was trained on, when margins pass the 5 m a plan can
+keep, and when a block replaces one made otherwise (another --controller, other seeds or episodes); a run
+planning with a block made with another controller says so too. `crowdmpc zoo calibrations`
 lists each block's controller and episodes.
 """
 
@@ -372,6 +373,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     if args.source == "closed-loop":  # a real calibration computes no margins per motion class
         for line in missing_class_margins(blocks):
             print(line)
+    for note in wide_margins_notes(blocks):
+        print(note, file=sys.stderr)
     if args.json is not None:
         payload = {
             "blocks": [b.to_json() for b in blocks],

@@ -15,6 +15,7 @@ from pipelines.loop.spec import MPC_CONTROLLERS
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
+    from predictors.calibration import Calibration
 
 
 def calibration_notes(spec: ControllerSpec, config: RunConfig) -> list[str]:
@@ -231,6 +232,30 @@ def sensor_margins_note(
         'short track, and they cover less than calibrated (docs/replayed_crowds.md, "Behind a sensor": at '
         f"3 m, {_MEASURED_BEHIND[margins.source]}){command}"
     )
+
+
+def wide_margins_notes(blocks: Sequence[Calibration]) -> list[str]:
+    """calibrate's line for each block with margins past ``MAX_MARGIN`` (of ``conformal``, or of a class of
+    ``conformal-motion`` or ``conformal-shortfall``), naming the first horizon step that passes it: a run
+    planning with those margins at a horizon reaching that step refuses the block
+    (``MarginSpec._check_width``), which calibrate stored without a word, in the place of its key's block."""
+    from pipelines.loop.margins import MAX_MARGIN, class_tables
+    from predictors.conformal import alpha_text
+
+    notes = []
+    for block in blocks:
+        tables = {"conformal": [block.quantiles]}
+        tables |= {mode: list(table.quantiles) for mode, table in class_tables(block).items() if table}
+        for mode, rows in tables.items():
+            past = [k + 1 for k in range(block.horizon) if any(row[k] > MAX_MARGIN for row in rows)]
+            if past:
+                notes.append(
+                    f"note: alpha {alpha_text(block.alpha)}: the {mode} margins pass the {MAX_MARGIN:g} m "
+                    f"any plan in the paper's scene can keep from horizon step {past[0]} on "
+                    f"({max(max(row) for row in rows):.4g} m at the widest): runs planning with them at a "
+                    f"horizon of {past[0]} or more refuse this block"
+                )
+    return notes
 
 
 def _planned_block(spec: ControllerSpec) -> Any:

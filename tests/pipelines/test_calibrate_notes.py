@@ -273,3 +273,23 @@ def test_real_calibration_on_the_models_own_training_files_says_so(tmp_path, mon
     err = capsys.readouterr().err
     assert "the margins are calibrated on" not in err
     assert f"note: held-out coverage is measured on {seen}, which holds data lstm_of_seen" in err
+
+
+# ---------------------------------------------------------------------- 6: margins no plan can keep
+def test_calibrate_says_which_margins_no_plan_can_keep(monkeypatch, capsys):
+    """A block with margins past the 5 m any plan in the paper's scene can keep was stored without a word,
+    in the place of its key's block; the first run planning with it at that horizon was refused."""
+    from pipelines.experiments import calibrate as experiment
+
+    def measured(plan, progress=True):
+        scores, motion = class_errors(4)  # walking's 0.9 margins 0.72 k m: 1.44 k m when doubled
+        return experiment.ClosedLoopErrors(2 * scores, motion, scores, {"humans": list(plan.humans)})
+
+    monkeypatch.setattr(experiment, "closed_loop_errors", measured)
+    assert main([*CALIBRATE, "--alpha", "0.1", "--episodes", "4", "--dry-run"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "5 m any plan" in line]
+    assert notes == [
+        "note: alpha 0.1: the conformal-motion margins pass the 5 m any plan in the paper's scene can keep "
+        "from horizon step 4 on (5.76 m at the widest): runs planning with them at a horizon of 4 or more "
+        "refuse this block"
+    ]
