@@ -24,6 +24,7 @@ from mpc.config import MPCConfig
 from mpc.dynamics import rollout_numpy
 from mpc.fallback import Start
 from mpc.nlp import JointNLP, StepData
+from mpc.step_data import MAX_MAGNITUDE
 
 # predict(robots_future (H, M, 2)) -> humans' predicted positions (H, N_h, 2)
 PredictFn = Callable[[np.ndarray], np.ndarray]
@@ -94,17 +95,18 @@ def joint_result(
 
 
 def finite_prediction(prediction: np.ndarray, shape: tuple[int, ...]) -> np.ndarray | None:
-    """``prediction`` as float64 when it is finite everywhere, None where it is not (the step reports
-    ``nan_prediction`` and falls back); a ValueError when it is not of ``shape`` ``(H, N_h, 2)``: a predict
-    function of one's own returning ``(N_h, H, 2)`` was reported as a NaN prediction, and its every step
-    fell back without a word of shapes."""
+    """``prediction`` as float64 when it is finite and within ``MAX_MAGNITUDE`` everywhere, None where it is
+    not (the step reports ``nan_prediction`` and falls back: a human predicted at -1e308 made the NLP's
+    gradient NaN, and a Fatrop solve never returned); a ValueError when it is not of ``shape``
+    ``(H, N_h, 2)``: a predict function of one's own returning ``(N_h, H, 2)`` was reported as a NaN
+    prediction, and its every step fell back without a word of shapes."""
     prediction = np.asarray(prediction, dtype=float)
     if prediction.shape != shape:
         raise ValueError(
             f"the predict function returned shape {prediction.shape}, expected {shape}: (H, N_h, 2), the "
             "horizon's steps, then the humans, in metres"
         )
-    if not np.all(np.isfinite(prediction)):
+    if not np.all(np.abs(prediction) <= MAX_MAGNITUDE):  # NaN too
         return None
     return prediction
 

@@ -3,11 +3,31 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 
 from mpc.config import MPCConfig
 from mpc.head_on import keep_right
+
+# The most a position (m), velocity (m/s) or acceleration (m/s^2) of StepData, or a predicted position
+# (cmpc.finite_prediction), may be in magnitude. The NLPs square positions and velocities (Eqs. 7, 11, 12,
+# 15): a velocity of 1e155 m/s (its square inf, and inf - inf = NaN in Eq. 11), a position of 1e300 or a
+# predicted one at -1e308 made the gradient NaN at the start point, and a Fatrop solve, which has no
+# wall-time limit, never returned. At 1e9 what the horizon reaches, 1e9 (1 + H dt) m, stays within what
+# MPCConfig's own bounds reach, a_max (H dt)^2 / 2 (dt a day, a_max 1000 m/s^2): with every bound together
+# the cost is at most 2e57, its gradient 7e52 and Hessian 3e48 (horizon 4; 2e62, 4e57 and 4e52 at 100),
+# about what inputs of 1e6 give, and far from float64's 1.8e308 for the solvers' squares of them
+# (tests/mpc/test_step_data.py). 1e9 m is a million km: the simulator's robots cover at most 8.6e6 m (a day
+# at 100 m/s), the replayed crowds tens of metres, a UTM northing less than 1e7 m.
+MAX_MAGNITUDE: Final[float] = 1e9
+# StepData's fields of numbers: each column's quantity and unit, for the message that refuses one
+_QUANTITIES: Final[dict[str, tuple[tuple[str, str], ...]]] = {
+    "states": (("position", "m"),) * 2 + (("velocity", "m/s"),) * 2,
+    "last_actions": (("last action", "m/s^2"),) * 2,
+    "goals": (("goal", "m"),) * 2,
+    "targets": (("target", "m"),) * 2,
+}
 
 
 @dataclass(frozen=True)
@@ -37,6 +57,7 @@ class StepData:
             raise ValueError(
                 f"states must be finite rows [s_x, s_y, v_x, v_y] of shape (M, 4), got {_what(states)}"
             )
+        _check_magnitude("states", states)
         object.__setattr__(self, "states", states)
         m = len(states)
         for name, what in (
@@ -61,6 +82,8 @@ class StepData:
             raise ValueError(
                 f"{name} must be {what} of shape {shape}, one per robot of states, got {_what(array)}"
             )
+        if finite:
+            _check_magnitude(name, array)
         object.__setattr__(self, name, array)
 
     @property
@@ -141,3 +164,17 @@ def _what(array: np.ndarray) -> str:
     of the right shape read as a wrong shape: "got shape (3, 4)")."""
     bad = int(np.sum(~np.isfinite(array))) if array.dtype.kind == "f" else 0
     return f"shape {array.shape}" + (f" with {bad} non-finite entries" if bad else "")
+
+
+def _check_magnitude(name: str, array: np.ndarray) -> None:
+    """ValueError naming the first robot of field ``name`` (finite, of its shape) with a number beyond
+    ``MAX_MAGNITUDE``, and what that number is."""
+    beyond = np.abs(array) > MAX_MAGNITUDE
+    if beyond.any():
+        robot, column = (int(k) for k in np.argwhere(beyond)[0])
+        quantity, unit = _QUANTITIES[name][column]
+        raise ValueError(
+            f"{name}: robot {robot}'s {quantity} {array[robot, column]:g} {unit} exceeds "
+            f"{MAX_MAGNITUDE:g} in magnitude, the most the MPC takes (mpc.step_data.MAX_MAGNITUDE; far "
+            "larger values overflow the NLP's squares)"
+        )

@@ -20,7 +20,7 @@ from crowdsim.world import WORLD, WorldFacts
 from mpc.config import MPCConfig
 from pipelines.errors import FlockWarning, GoalRoomWarning, PipelineError
 from pipelines.loop.margins import CALIBRATED_MODES, human_observed
-from pipelines.loop.observed import agent, check_fields, check_positions
+from pipelines.loop.observed import agent, check_fields, check_magnitudes, check_positions
 from pipelines.loop.spec import ControllerSpec
 from predictors.backfill import backfill
 from predictors.base import DT as PREDICTOR_DT
@@ -277,7 +277,8 @@ def check_history(obs: Observation) -> None:
     The predictor reads the history and the MPC the positions: an observation built outside the simulator (a
     tracker's, on a real robot) whose history keeps a human who left, misses one who came, or lags a step
     was otherwise planned with silently, or failed deep in the predictor. The simulator's agree exactly (a
-    float32 history, a tracker's, within its rounding). Its robots' and humans' fields are checked first."""
+    float32 history, a tracker's, within its rounding). Its robots' and humans' fields are checked first,
+    and then how large their numbers are (``check_magnitudes``)."""
     check_fields(obs)
     history = np.asarray(obs.history)
     agents = obs.n_robots + obs.n_humans
@@ -288,6 +289,7 @@ def check_history(obs: Observation) -> None:
             "human_positions"
         )
     check_positions(obs)  # said as such, not as a history that differs from the positions (NaN differs)
+    check_magnitudes(obs)
     now = np.concatenate([obs.robot_positions, obs.human_positions]).astype(float)
     # NaN differs; a float32 history (a tracker's) is its positions rounded: 9e-8 m at 3 m, 6e-5 m at 1 km
     eps = np.finfo(history.dtype).eps if np.issubdtype(history.dtype, np.floating) else 0.0

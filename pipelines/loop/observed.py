@@ -1,6 +1,6 @@
 """What a controller is handed, checked before it plans: one finite row per agent in each of an
 observation's current fields, and its clock (``check_fields``; the MPC checks its history too,
-pipelines.loop.mpc_setup)."""
+pipelines.loop.mpc_setup, and how large the numbers are, ``check_magnitudes``)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from crowdsim.env import Observation
+from mpc.step_data import MAX_MAGNITUDE
 from pipelines.errors import PipelineError
 from predictors.errors import short_repr
 
@@ -123,6 +124,28 @@ def check_positions(obs: Observation) -> None:
             f"{field} holds a position that is not finite ({who} at {now[i].tolist()}); a controller plans "
             "from every agent's current position (hand it only the people tracked now)"
         )
+
+
+def check_magnitudes(obs: Observation) -> None:
+    """PipelineError naming the first of the current fields the MPC plans from that holds a number beyond
+    ``mpc.step_data.MAX_MAGNITUDE``: a robot velocity of 1e200, finite, made the NLP's gradient NaN and the
+    first Fatrop solve never returned (or the MPC refused it in StepData's words, not the observation's)."""
+    for name, unit in (
+        ("robot_positions", "m"),
+        ("robot_velocities", "m/s"),
+        ("robot_goals", "m"),
+        ("robot_last_actions", "m/s^2"),
+        ("human_positions", "m"),
+    ):
+        values = np.asarray(getattr(obs, name), dtype=float)
+        beyond = ~np.all(np.abs(values) <= MAX_MAGNITUDE, axis=1)
+        if beyond.any():
+            row = int(np.flatnonzero(beyond)[0])
+            raise PipelineError(
+                f"obs.{name} holds a number beyond {MAX_MAGNITUDE:g} {unit} in magnitude (row {row}: "
+                f"{values[row].tolist()}), the most the MPC plans with; far larger ones overflow its "
+                "arithmetic"
+            )
 
 
 def agent(obs: Observation, i: int) -> tuple[str, str]:

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +17,7 @@ from pipelines.loop.controllers import ControllerSpec, make_controller
 from pipelines.loop.episode import run_episode, run_episodes
 
 ORCA = ControllerSpec("orca")
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_episodes_compare_by_value_and_a_numpy_seed_is_a_python_int():
@@ -125,6 +129,52 @@ def test_every_shipped_controller_refuses_a_state_that_is_not_finite(controller,
     with pytest.raises(PipelineError) as refused:
         built.act(dataclasses.replace(obs, **{field: values}))
     assert str(refused.value).startswith(message)
+
+
+HUGE = """
+import dataclasses, sys
+sys.path.insert(0, {root!r})
+import numpy as np
+from crowdsim.env import CrowdEnv
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+obs = CrowdEnv().reset(0, "circle", 3)
+velocities = np.array(obs.robot_velocities, dtype=float)
+velocities[1, 0] = 1e200
+humans = np.array(obs.human_positions, dtype=float)
+humans[2] = -1e308
+history = np.array(obs.history, dtype=float)
+history[-1, obs.n_robots + 2] = -1e308
+for name in ("cmpc", "dmpc"):
+    controller = make_controller(ControllerSpec(name))
+    controller.reset(obs)
+    for bad in (
+        dataclasses.replace(obs, robot_velocities=velocities),
+        dataclasses.replace(obs, human_positions=humans, history=history),
+    ):
+        try:
+            controller.act(bad)
+        except PipelineError as exc:
+            print(exc)
+"""
+
+
+def test_the_mpc_refuses_finite_but_absurd_numbers_in_one_line():
+    """A hand-built observation with a robot velocity of 1e200 (or a human at -1e308) made the NLP's
+    gradient NaN, and the step's first Fatrop solve never returned; in a process of its own, under a time
+    limit, for that reason."""
+    done = subprocess.run(
+        [sys.executable, "-c", HUGE.format(root=str(ROOT))], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    tail = "the most the MPC plans with; far larger ones overflow its arithmetic"
+    velocity = (
+        f"obs.robot_velocities holds a number beyond 1e+09 m/s in magnitude (row 1: [1e+200, 0.0]), {tail}"
+    )
+    human = (
+        f"obs.human_positions holds a number beyond 1e+09 m in magnitude (row 2: [-1e+308, -1e+308]), {tail}"
+    )
+    assert done.stdout.splitlines() == [velocity, human] * 2
 
 
 def test_small_things_a_notebook_does_with_the_mpc_and_the_registry():
