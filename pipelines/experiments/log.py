@@ -60,6 +60,10 @@ class EpisodeLog:
         refused. Read a line at a time."""
         if not self.path.exists():
             return
+        if not self.path.is_file():  # a pipe's open waits for a writer; /dev/zero is one endless line
+            raise PipelineError(
+                f"{self.path}: is not a regular file (a device or a pipe); a sweep keeps its records in one"
+            )
         seen: set[int] = set()  # each key's hash: the keys themselves were ~100 B a record
         good_end = size = 0
         bad: tuple[int, Exception] | None = None  # a line that is not JSON: fine only as the last one
