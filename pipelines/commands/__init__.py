@@ -4,6 +4,7 @@ so that ``crowdmpc --help`` stays fast."""
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
 import stat
@@ -178,6 +179,9 @@ def _check_existing(
     try:
         if directory:
             _probe(path)
+        elif path.is_fifo():  # opened and closed, it ends the output its reader waits for: asked instead
+            if not os.access(path, os.W_OK):
+                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES))
         else:
             open(path, "ab").close()  # neither its contents nor its modification time change
     except OSError as exc:
