@@ -108,8 +108,10 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
     for name, section in values.items():
         if name == "config_file":  # where the values came from, not a value
             continue
-        if name not in SECTION_BY_NAME or not isinstance(section, dict):
+        if name not in SECTION_BY_NAME:
             raise ConfigError(f"{where}: unknown config section {name!r}; the file is damaged")
+        if not isinstance(section, dict):  # a known section: "unknown" sent the reader to look for a typo
+            raise ConfigError(f"{where}: config section {name!r} is not a table of keys; the file is damaged")
         for key, value in section.items():
             check_key(source.prefix(name, key), SECTION_BY_NAME[name], key)
             # null: unset, as a file leaves it out. The profile's own value: unset too (a record holds every

@@ -54,19 +54,21 @@ def test_a_sweep_reruns_from_what_its_directory_records(tmp_path, capsys):
         (["--from-sweep", "{sweep}", "--set", "mpc.horizon=5"], "no --config or --set beside it"),
         (["--from-sweep", "{old}"], "records no config (a sweep from before configs were kept)"),
         (["--from-sweep", "{damaged}"], "unknown config section 'mcp'; the file is damaged"),
+        (["--from-sweep", "{flat}"], "config section 'mpc' is not a table of keys; the file is damaged"),
     ],
 )
 def test_what_it_refuses(tmp_path, capsys, args, message):
-    sweep, old, damaged = tmp_path / "sweep", tmp_path / "old", tmp_path / "damaged"
+    sweep, old, damaged, flat = (tmp_path / name for name in ("sweep", "old", "damaged", "flat"))
     run = {"started": "2026-12-01T00:00:00+0000", "version": "0.1.0"}
     for folder, line in (
         (sweep, {**run, "config": {}}),
         (old, run),
         (damaged, {**run, "config": {"mcp": {}}}),
+        (flat, {**run, "config": {"mpc": 4}}),
     ):
         folder.mkdir()
         (folder / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [line]}))
-    names = {"tmp": tmp_path, "sweep": sweep, "old": old, "damaged": damaged}
+    names = {"tmp": tmp_path, "sweep": sweep, "old": old, "damaged": damaged, "flat": flat}
     assert main(["config", "show", *(a.format(**names) for a in args)]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
