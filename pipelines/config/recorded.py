@@ -33,6 +33,14 @@ def recorded_runs(directory: str | Path) -> tuple[Path, list[dict[str, Any]]]:
     if str(directory) == "":  # Path("") is ".": the current directory, which was not given
         raise ConfigError("--from-sweep must be a sweep directory, got ''")
     path = Path(directory) / SWEEP_FILE
+    if Path(directory).name == SWEEP_FILE and Path(directory).is_file():  # the file named for its folder
+        raise ConfigError(
+            f"--from-sweep {directory}: that is a sweep's file; give its folder, {path.parent.parent}"
+        )
+    if path.exists() and not path.is_file():  # a folder or a pipe of that name is no missing file
+        raise ConfigError(
+            f"--from-sweep {directory}: {path} is not a regular file (a folder, a device or a pipe)"
+        )
     if not path.is_file():
         raise ConfigError(f"--from-sweep {directory}: no {SWEEP_FILE} (not a sweep directory)")
     runs = [r for r in read_sweep_file(path).get("runs", []) if isinstance(r, dict)]

@@ -55,6 +55,11 @@ def test_a_sweep_reruns_from_what_its_directory_records(tmp_path, capsys):
         (["--from-sweep", "{old}"], "records no config (a sweep from before configs were kept)"),
         (["--from-sweep", "{damaged}"], "unknown config section 'mcp'; the file is damaged"),
         (["--from-sweep", "{flat}"], "config section 'mpc' is not a table of keys; the file is damaged"),
+        (["--from-sweep", "{sweep}/sweep.json"], "sweep.json: that is a sweep's file; give its folder, "),
+        (
+            ["--from-sweep", "{tmp}/odd"],
+            "odd/sweep.json is not a regular file (a folder, a device or a pipe)",
+        ),
     ],
 )
 def test_what_it_refuses(tmp_path, capsys, args, message):
@@ -68,6 +73,7 @@ def test_what_it_refuses(tmp_path, capsys, args, message):
     ):
         folder.mkdir()
         (folder / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [line]}))
+    (tmp_path / "odd" / SWEEP_FILE).mkdir(parents=True)
     names = {"tmp": tmp_path, "sweep": sweep, "old": old, "damaged": damaged, "flat": flat}
     assert main(["config", "show", *(a.format(**names) for a in args)]) == 2
     err = capsys.readouterr().err
