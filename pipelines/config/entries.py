@@ -208,6 +208,12 @@ def parse_set(text: str) -> Entry:
     section = SECTION_BY_NAME.get(section_name)
     if section is None:
         raise _unknown_section(f"--set {name}", section_name)
+    whole = SECTION_BY_NAME.get(name)  # env.orca=...: [env] has no key orca, a list that names none of this
+    if whole is not None:
+        raise ConfigError(
+            f"--set {name}: [{name}] is a section; set one of its keys at a time, --set {name}.KEY=VALUE "
+            f"(keys: {', '.join(whole.names)})"
+        )
     check_key(f"--set {name}", section, key)
     try:
         value = tomllib.loads(f"v = {raw}")["v"]

@@ -425,6 +425,11 @@ def test_a_bad_key_section_or_syntax_is_one_line(text, message, tmp_path, capsys
         ("mpc.w_coll", "--set 'mpc.w_coll': expected SECTION.KEY=VALUE, e.g. mpc.w_coll=1e6"),
         ("horizon=4", "--set 'horizon=4': expected SECTION.KEY=VALUE"),
         ("mpc.horizn=4", "--set mpc.horizn: unknown key (did you mean 'horizon'?)"),
+        (  # a section set whole: its keys are listed, not [env]'s, which name no orca
+            "env.orca={max_neighbors=5}",
+            "--set env.orca: [env.orca] is a section; set one of its keys at a time, --set "
+            "env.orca.KEY=VALUE (keys: neighbor_dist, max_neighbors, time_horizon)",
+        ),
         ("controller.margins=bogus", "--set controller.margins: bad margins 'bogus'"),
         (
             "controller.coupling=mpc",
