@@ -88,5 +88,6 @@ def run(args: argparse.Namespace) -> int:
         if busy
         else ""
     )
-    print(f"removed {removed} files ({_size(freed)}) from {compile_cache.cache_dir()}{left}")
+    files = "file" if removed == 1 else "files"
+    print(f"removed {removed} {files} ({_size(freed)}) from {compile_cache.cache_dir()}{left}")
     return 0

@@ -51,6 +51,9 @@ def test_clear_says_it_left_an_entry_being_compiled(folder, capsys):
         "(clear again once it is done)\n"
     )
     assert (folder / f"{key}.77_0123abcd.o").exists()
+    (folder / f"{key}.lock").unlink()
+    assert main(["cache", "clear"]) == 0  # its one file, once the compile is done
+    assert capsys.readouterr().out == f"removed 1 file (100 B) from {folder}\n"  # not "1 files"
 
 
 def test_info_json_takes_a_file_as_every_other_json_option(folder, tmp_path, capsys):
