@@ -108,7 +108,9 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # zero makes every pair's penalty w_coll log(2) / mu wherever the agents are (mu = 1e-300 overflowed the cost
 # to inf and every solve failed); at 1e-3 it is 693 w_coll per pair, finite at every weight's bound. Eq. 7
 # weighs a robot on its goal by w_goal / delta: delta = 1e-300 overflowed it (a NaN gradient; Fatrop hung).
-MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2"), "delta": (1e-12, "")}
+# At 1e-40 the NLP stays far from overflow (mpc/step_data.py); 1e-12 also refused the configs of sweep
+# folders that had run well at 1e-13 (--report-only, config show --from-sweep).
+MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, "")}
 # The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
 # built), 2**32 wrapped to 0 and every solve failed at once.
 MAX_SOLVER_ITER: Final[int] = 2**31 - 1

@@ -16,8 +16,8 @@ from mpc.head_on import keep_right
 # predicted one at -1e308 made the gradient NaN at the start point, and a Fatrop solve, which has no
 # wall-time limit, never returned. At 1e9 what the horizon reaches, 1e9 (1 + H dt) m, stays within what
 # MPCConfig's own bounds reach, a_max (H dt)^2 / 2 (dt a day, a_max 1000 m/s^2): with every bound together
-# the cost is at most 2e57, its gradient 7e52 and Hessian 3e48 (horizon 4; 2e62, 4e57 and 4e52 at 100),
-# about what inputs of 1e6 give, and far from float64's 1.8e308 for the solvers' squares of them
+# (delta at its least, 1e-40) the cost is at most 2e85, its gradient 7e80 and Hessian 2e76 (horizon 4; 3e90,
+# 4e85 and 4e80 at 100), far from float64's 1.8e308 for the solvers' squares of them
 # (tests/mpc/test_step_data.py). 1e9 m is a million km: the simulator's robots cover at most 8.6e6 m (a day
 # at 100 m/s), the replayed crowds tens of metres, a UTM northing less than 1e7 m.
 MAX_MAGNITUDE: Final[float] = 1e9

@@ -232,3 +232,17 @@ def test_an_episode_log_that_is_a_pipe_is_not_waited_on(tmp_path, capsys):
         f"crowdmpc sweep: error: {sweep / EPISODES_FILE}: is not a regular file (a device or a pipe); a "
         "sweep keeps its records in one\n"
     )
+
+
+def test_a_sweep_run_at_a_small_delta_still_reads_back(tmp_path, capsys):
+    """MPCConfig's least delta also refuses what sweep folders recorded: at 1e-12 a sweep that had run well at
+    delta = 1e-13 (no fallback step) could no longer be shown or reported; only values near the NLP's
+    overflow are refused."""
+    run = {
+        "started": "2026-12-01T00:00:00+0000",
+        "version": "0.1.0",
+        "config": {"sweep": {"experiment": "baselines"}, "mpc": {"delta": 1e-13}},
+    }
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
+    assert "delta = 1e-13" in capsys.readouterr().out
