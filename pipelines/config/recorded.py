@@ -3,9 +3,10 @@ TOML that reruns what a sweep directory holds (each run line of ``sweep.json`` k
 ran with, ``RunConfig.effective``, and the code it ran: ``pipelines.plugins.code_with_plugins``).
 
 The recorded values go through the same resolver as a config file's (unknown sections and keys, types and
-bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Two values are not
+bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Three values are not
 written as recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
-default out (another ``--profile`` then takes its own), and ``[sweep] out`` is the directory read, absolute.
+default out (another ``--profile`` then takes its own), ``[sweep] out`` is the directory read, absolute, and
+a margins spec with an empty alpha or source (``conformal:``, refused where typed) is written as it ran.
 This machine's limit on local workers is not applied (the sweep that runs the file applies it): a comment
 says when the recorded workers exceed it.
 """
@@ -126,10 +127,41 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
             # [env] value, RunConfig.effective), or the file would hold the paper profile's time limit,
             # crossing ... under --profile v1, and a sweep of it would be refused them.
             if value is not None and not (name == "env" and key in own and own[key] == value):
-                entries.append(Entry(name, key, value, source))
+                entries.append(Entry(name, key, _as_ran(name, key, value), source))
     # The recorded out may be relative to wherever that sweep started; this directory is where it resumes.
     entries.append(Entry("sweep", "out", str(Path(path).parent.resolve()), source))
     return entries
+
+
+def _as_ran(section: str, key: str, value: Any) -> Any:
+    """A recorded margins spec (``[controller] margins``, or in ``[sweep] vary``) written as the code that
+    ran it read it: an empty alpha or source (``conformal:``, ``conformal::real``, ``none:``) ran at the
+    default, and is refused now where it is typed, so a sweep run with one could not be reported."""
+    if (section, key) == ("controller", "margins") and isinstance(value, str):
+        return _margins_as_ran(value)
+    if (section, key) == ("sweep", "vary") and isinstance(value, str):
+        parts = []
+        for part in value.split(";"):
+            name, equals, items = part.partition("=")
+            if equals and name.strip() == "controller.margins":  # a fixed margin's bare numbers: kept
+                part = name + equals + ",".join(_margins_as_ran(item) for item in items.split(","))
+            parts.append(part)
+        return ";".join(parts)
+    return value
+
+
+def _margins_as_ran(text: str) -> str:
+    from pipelines.loop.margins import CALIBRATED_MODES, DEFAULT_ALPHA
+
+    mode, colon, rest = text.strip().partition(":")
+    if not colon:
+        return text
+    if mode == "none" and not rest:
+        return "none"
+    alpha, _, source = rest.partition(":")
+    if mode not in CALIBRATED_MODES or (alpha and source):
+        return text
+    return ":".join([mode, alpha or repr(DEFAULT_ALPHA), *([source] if source else [])])
 
 
 def _profile_values(values: dict[str, Any]) -> dict[str, Any]:

@@ -246,3 +246,27 @@ def test_a_sweep_run_at_a_small_delta_still_reads_back(tmp_path, capsys):
     (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
     assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
     assert "delta = 1e-13" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("margins", "vary", "shown"),
+    [
+        ("conformal:", None, 'margins = "conformal:0.1"'),
+        ("conformal::real", None, 'margins = "conformal:0.1:real"'),
+        ("none:", None, 'margins = "none"'),
+        (None, "controller.margins=conformal-motion:,fixed:0.1,0.2", 'vary = "controller.margins='),
+    ],
+)
+def test_a_margins_spec_with_an_empty_part_reads_back_as_it_ran(tmp_path, capsys, margins, vary, shown):
+    """An empty alpha or source ran at the default before it was refused where typed; the sweeps recorded
+    with one (`--margins conformal:$ALPHA`, $ALPHA unset) could no longer be shown or reported."""
+    from pipelines.loop.margins import parse_margins
+
+    config = {"sweep": {"experiment": "baselines", "vary": vary}, "controller": {"margins": margins}}
+    run = {"started": "2026-12-01T00:00:00+0000", "version": "0.1.0", "config": config}
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith(shown))
+    if vary is not None:  # each value as it ran, the fixed margins' numbers kept
+        assert line.startswith('vary = "controller.margins=conformal-motion:0.1,fixed:0.1,0.2"')
+        assert parse_margins("conformal-motion:0.1") == parse_margins("conformal-motion")
