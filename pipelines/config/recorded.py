@@ -6,7 +6,8 @@ The recorded values go through the same resolver as a config file's (unknown sec
 bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Three values are not
 written as recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
 default out (another ``--profile`` then takes its own), ``[sweep] out`` is the directory read, absolute, and
-a margins spec with an empty alpha or source (``conformal:``, refused where typed) is written as it ran.
+a value refused now where typed (a margins spec ``conformal:``, a [simulate] path "none") is written as it
+ran.
 This machine's limit on local workers is not applied (the sweep that runs the file applies it): a comment
 says when the recorded workers exceed it.
 """
@@ -134,11 +135,14 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
 
 
 def _as_ran(section: str, key: str, value: Any) -> Any:
-    """A recorded margins spec (``[controller] margins``, or in ``[sweep] vary``) written as the code that
-    ran it read it: an empty alpha or source (``conformal:``, ``conformal::real``, ``none:``) ran at the
-    default, and is refused now where it is typed, so a sweep run with one could not be reported."""
+    """A recorded value that is refused now where it is typed, written as the code that ran it read it, so
+    that a sweep run with one can still be reported: a margins spec (``[controller] margins``, or in ``[sweep]
+    vary``) with an empty alpha or source (``conformal:``, ``conformal::real``, ``none:``) ran at the
+    default; a [simulate] path "none" or "null" (a config file's, which a sweep records too) was a file."""
     if (section, key) == ("controller", "margins") and isinstance(value, str):
         return _margins_as_ran(value)
+    if section == "simulate" and key in ("json", "plot", "record") and str(value).lower() in ("none", "null"):
+        return f"./{value}"  # the file it wrote (the word is refused now: meant as off)
     if (section, key) == ("sweep", "vary") and isinstance(value, str):
         parts = []
         for part in value.split(";"):

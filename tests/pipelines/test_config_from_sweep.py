@@ -270,3 +270,14 @@ def test_a_margins_spec_with_an_empty_part_reads_back_as_it_ran(tmp_path, capsys
     if vary is not None:  # each value as it ran, the fixed margins' numbers kept
         assert line.startswith('vary = "controller.margins=conformal-motion:0.1,fixed:0.1,0.2"')
         assert parse_margins("conformal-motion:0.1") == parse_margins("conformal-motion")
+
+
+def test_a_simulate_path_named_none_reads_back_as_the_file_it_was(tmp_path, capsys):
+    """A config file's [simulate] record = "none" (off, as [sweep] record reads it) was a folder named none,
+    and a sweep run with that file records it; refusing the word where typed refused the sweep's report."""
+    config = {"sweep": {"experiment": "baselines"}, "simulate": {"record": "none", "json": "NULL"}}
+    run = {"started": "2026-12-01T00:00:00+0000", "version": "0.1.0", "config": config}
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert 'record = "./none"' in printed and 'json = "./NULL"' in printed
