@@ -137,6 +137,12 @@ def save_calibrations(
     other runs'). ``check()`` runs under the lock, on the file as this write finds it, and what it raises
     stops the write."""
     path = calibrations_path(directory)
+    for i, block in enumerate(blocks):  # both written, the file is refused by every read that follows
+        if any(other.same_key(block) for other in blocks[:i]):
+            raise PredictorError(
+                f"blocks[{i}] repeats predictor {block.predictor!r}, source {block.source!r}, "
+                f"alpha={alpha_text(block.alpha)}{_behind(*block.key()[3:])}: store one block per key"
+            )
     # under the zoo's lock: two calibrations that both read the old file would each write back only their own
     with zoo_lock(path.parent):
         if check is not None:

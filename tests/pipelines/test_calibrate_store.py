@@ -285,3 +285,19 @@ def test_a_run_of_several_alphas_stores_all_its_blocks_or_none(tmp_path, monkeyp
         pass
     stored = [b.alpha for b in read_calibration_file(calibrations_path())]
     assert sorted(stored) in ([], [0.2, 0.3])
+
+
+def test_two_blocks_of_one_key_are_refused_before_the_write(tmp_path, monkeypatch):
+    """save_calibrations wrote both, and every read of the file after it refused it (a block repeated):
+    `zoo calibrations` and every run planning with calibrated margins failed until it was edited by hand."""
+    import dataclasses
+
+    from predictors.calibration_store import save_calibrations
+    from predictors.errors import PredictorError
+
+    monkeypatch.setenv("CROWDMPC_ZOO", str(tmp_path))
+    (block,) = _blocks()
+    save_calibration(block)
+    with pytest.raises(PredictorError, match=r"^blocks\[1\] repeats predictor 'constant_velocity'"):
+        save_calibrations([block, dataclasses.replace(block, alpha=0.1 + 5e-13)])
+    assert read_calibration_file(calibrations_path()) == [block]
