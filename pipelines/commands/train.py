@@ -31,6 +31,7 @@ from pipelines.commands.train_net import (
     training_loss,
     trains_point_head,
 )
+from pipelines.commands.train_report import finished_outputs
 from pipelines.commands.train_resume import (
     LOCK_FILE,
     SETTINGS_FILE,
@@ -320,8 +321,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_run_folder(out: Path, resume: bool) -> None:
     """PipelineError unless --out is a folder a run may write into: missing, empty, or a training run's
-    (what ``--resume`` continues, or a new run replaces while it has no last.ckpt); Lightning's folders in
-    it must be folders, none a symbolic link."""
+    (what ``--resume`` continues, or a new run replaces while it has no last.ckpt nor NAME.pt or metrics);
+    Lightning's folders in it must be folders, none a symbolic link."""
     for folder in ("checkpoints", "csv", "tensorboard"):  # Lightning writes into them (train_fit._trainer)
         if (out / folder).is_symlink():
             raise PipelineError(
@@ -341,6 +342,11 @@ def _check_run_folder(out: Path, resume: bool) -> None:
         raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
     if not resume and last.is_file():
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
+    if not resume and (finished := finished_outputs(out)):  # its checkpoints/ removed (to save space)
+        raise PipelineError(
+            f"{out} holds a finished run's {', '.join(finished)} but no checkpoints/last.ckpt to resume; a "
+            "new run would replace them: choose another --out, or remove them"
+        )
     if not resume and not _holds_a_run_or_nothing(out):
         # the run's checkpoints, logs and NAME.pt would be mixed with the user's files (sweep and data
         # prepare refuse such a folder too)

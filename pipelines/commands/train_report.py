@@ -52,6 +52,14 @@ def file_labels(paths: list[Path], root: Path | None) -> list[str]:
     ]
 
 
+def finished_outputs(out: Path) -> list[str]:
+    """The weights and metrics a finished run wrote into ``out`` (NAME.pt, NAME.metrics.json), by name."""
+    if not out.is_dir():
+        return []
+    names = [p.name for p in out.iterdir() if p.is_file() and not p.name.startswith(".")]
+    return sorted(n for n in names if n.endswith((".pt", ".metrics.json")))
+
+
 def trained_loss(module: Any, asked: str) -> str:
     """The loss the module trained on: the Gaussian NLL needs a Gaussian head (PredictorModule.model_step
     falls back to L2 on the mean steps), and the GAN has its own."""

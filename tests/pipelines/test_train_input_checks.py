@@ -234,3 +234,18 @@ def test_a_damaged_settings_file_is_named_before_training_and_nothing_is_written
     ), line
     assert sorted(p.name for p in out.parent.parent.iterdir()) == around
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == before  # no epoch trained
+
+
+def test_a_finished_run_without_its_checkpoints_is_not_trained_over(run_copy, capsys):
+    """A finished run whose checkpoints/ was removed (to save space) passed as a run stopped before its first
+    checkpoint: a second train into it replaced its NAME.pt, NAME.json and metrics without a word."""
+    data, out = run_copy
+    shutil.rmtree(out / "checkpoints")
+    written = {p.name: p.read_bytes() for p in out.glob("vanilla_lstm_custom.*")}
+    assert main([*_args(data, out), "--seed", "7"]) == 2
+    assert _one_line(capsys) == (
+        f"crowdmpc train: error: {out} holds a finished run's vanilla_lstm_custom.metrics.json, "
+        "vanilla_lstm_custom.pt but no checkpoints/last.ckpt to resume; a new run would replace them: choose "
+        "another --out, or remove them"
+    )
+    assert {p.name: p.read_bytes() for p in out.glob("vanilla_lstm_custom.*")} == written
