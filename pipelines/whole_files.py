@@ -57,10 +57,17 @@ def save_figure(path: Path, save: Callable[[str], object]) -> None:
             raise
         save(str(path))
         return
+    fill_and_rename(fd, name, path, save)
+
+
+def fill_and_rename(fd: int, name: str, path: Path, write: Callable[[str], object]) -> None:
+    """``write(name)`` fills the temporary ``name`` (open at ``fd``, locked meanwhile, given ``path``'s
+    mode), which then replaces ``path`` in one rename; the temporary is removed and ``fd`` closed whatever
+    happens (``save_figure``'s and ``replace_file``'s)."""
     try:
         lock_temporary(fd)
         os.chmod(name, new_file_mode(path))
-        save(name)
+        write(name)
         os.replace(name, path)
     finally:
         if os.path.lexists(name):

@@ -18,7 +18,7 @@ from pipelines.commands.standard_output import is_stdout, write_document
 from pipelines.commands.zoo_outputs import check_not_in_a_zoo, check_not_zoo_file
 from pipelines.commands.zoo_outputs import check_outside_the_zoos as check_outside_the_zoos
 from pipelines.errors import PipelineError
-from pipelines.whole_files import lock_temporary, new_file_mode, remove_killed_temporaries
+from pipelines.whole_files import fill_and_rename, remove_killed_temporaries
 
 T = TypeVar("T")
 
@@ -254,15 +254,7 @@ def replace_file(path: Path, write: Callable[[str], object]) -> None:
 
     remove_killed_temporaries(path.parent, re.compile(rf"\.{re.escape(path.name)}\.[a-z0-9_]{{8}}\.part"))
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    try:
-        lock_temporary(fd)
-        os.chmod(name, new_file_mode(path))
-        write(name)
-        os.replace(name, path)
-    finally:
-        if os.path.lexists(name):
-            os.unlink(name)
-        os.close(fd)
+    fill_and_rename(fd, name, path, write)
 
 
 def write_output(path: Path, text: str, option: str) -> None:
