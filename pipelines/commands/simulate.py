@@ -270,6 +270,7 @@ def _simulate(resolved: SimulateRun) -> int:
         team_notes.radius_note(spec, scenario.robots, cfg.env.radius, formation, spacing),
         checks.horizon_note(spec),
         checks.size_note(spec, scenario.humans, scenario.robots),
+        checks.tolerance_note(spec),
         *checks.zoo_notes(spec.predictor_name),
         *calibration_notes(spec, cfg),
     )

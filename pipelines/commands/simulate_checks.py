@@ -201,6 +201,25 @@ def size_note(spec: ControllerSpec, n_humans: int, n_robots: int) -> str | None:
     )
 
 
+def tolerance_note(spec: ControllerSpec) -> str | None:
+    """A line for an MPC whose cost_scale lies below its solver_tol, None otherwise: the solvers stop at an
+    error of solver_tol in cost_scale * F, so with the default tolerance cost_scale = 1e-9 reported every
+    step "ok" while the robots stood still (1e-8 barely moved them). A note, not a refusal: a rule between
+    two settings refuses configs recorded in sweep folders, and solver_tol = 1 with cost_scale = 0.01 ran
+    well."""
+    from pipelines.loop.mpc_setup import mpc_config
+
+    if spec.controller not in MPC_CONTROLLERS:
+        return None
+    cfg = mpc_config(spec)
+    if cfg.cost_scale >= cfg.solver_tol:
+        return None
+    return (
+        f"note: mpc.cost_scale {cfg.cost_scale:g} is below mpc.solver_tol {cfg.solver_tol:g}: the solvers "
+        "stop at an error of solver_tol in cost_scale * F, and may return plans that hardly move"
+    )
+
+
 def _zoo_entry(predictor: str | None) -> ZooEntry | None:
     """The zoo entry ``predictor`` loads; None for a registered predictor (no zoo's: its manifest is not
     read) or a name no zoo holds."""

@@ -14,7 +14,7 @@ from pipelines.commands.calibration_notes import (
     calibration_world_note,
     sensor_margins_note,
 )
-from pipelines.commands.simulate_checks import horizon_note, size_note, zoo_notes
+from pipelines.commands.simulate_checks import horizon_note, size_note, tolerance_note, zoo_notes
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
 from pipelines.errors import PipelineError
 
@@ -218,6 +218,7 @@ def method_notes(cells: Iterable[Cell]) -> list[str]:
             goal_room_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             horizon_note(cell.spec),
             size_note(cell.spec, max(sizes[cell.method]), cell.n_robots),  # its largest crowd's NLP
+            tolerance_note(cell.spec),
             *zoo_notes(cell.spec.predictor_name),
             flock_note(cell.spec, cell.n_robots, env.formation, env.robot_spacing),
             calibration_world_note(

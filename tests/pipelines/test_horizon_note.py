@@ -100,3 +100,22 @@ def test_a_sweep_says_it_of_each_methods_largest_crowd(tmp_path, capsys):
     ]
     assert main([*argv[:7], "--dry-run", "--out", str(tmp_path)]) == 0  # horizon 4: 4 x 50 x 12 = 2400
     assert "is large" not in capsys.readouterr().err
+
+
+def test_a_cost_scale_below_the_solver_tolerance_is_said_so(tmp_path, capsys):
+    """The solvers stop at an error of solver_tol in cost_scale * F: cost_scale = 1e-9 with the default
+    tolerance reported every step "ok" while the robots stood still. A note, not a refusal (a rule between the
+    two would refuse recorded configs, and solver_tol = 1 with cost_scale = 0.01 ran well)."""
+    from pipelines.commands.simulate_checks import tolerance_note
+
+    said = tolerance_note(ControllerSpec("cmpc", "constant_velocity", mpc_overrides=(("cost_scale", 1e-9),)))
+    assert said == (
+        "note: mpc.cost_scale 1e-09 is below mpc.solver_tol 1e-06: the solvers stop at an error of "
+        "solver_tol in cost_scale * F, and may return plans that hardly move"
+    )
+    for overrides in ((), (("cost_scale", 0.01),), (("cost_scale", 1e-9), ("solver_tol", 1e-9))):
+        assert tolerance_note(ControllerSpec("dmpc", "constant_velocity", mpc_overrides=overrides)) is None
+    assert tolerance_note(ControllerSpec("orca")) is None
+    argv = ["sweep", "--experiment", "table2", "--set", "mpc.cost_scale=1e-9", "--dry-run"]
+    assert main([*argv, "--out", str(tmp_path / "s")]) == 0
+    assert "note: methods 'CMPC', 'DMPC': mpc.cost_scale 1e-09 is below" in capsys.readouterr().err
