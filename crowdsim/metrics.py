@@ -181,8 +181,9 @@ class EpisodeMetrics:
         """Rebuild from ``as_dict``'s output (e.g. read back from JSON).
 
         null becomes inf for the minimum distances (no pair of agents) and NaN elsewhere (travel time, reach
-        times); lists become tuples. The fields in ``ADDED_FIELDS`` may be absent (records written before
-        them) and are then None; any other missing key raises SimulationError naming it.
+        times), but a null flag or count (``_NEVER_NULL``) raises SimulationError; lists become tuples. The
+        fields in ``ADDED_FIELDS`` may be absent (records written before them) and are then None; any other
+        missing key raises SimulationError naming it.
         """
         names = [f.name for f in fields(cls)]
         missing = [n for n in names if n not in record and n not in ADDED_FIELDS]
@@ -197,10 +198,20 @@ class EpisodeMetrics:
                 value = math.inf if value is None else float(value)
             elif isinstance(value, list | tuple):
                 value = tuple(math.nan if v is None else v for v in value)
+            elif value is None and name in _NEVER_NULL:  # NaN reads as true: a failure counted a success
+                raise SimulationError(f"episode metrics record's {name} is null, not {_NEVER_NULL[name]}")
             elif value is None and name not in ADDED_FIELDS:
                 value = math.nan
             values[name] = value
         return cls(**values)
+
+
+# The flags and counts every record holds (not those added later, which may be null): a null one is no value
+_NEVER_NULL: Final[dict[str, str]] = {
+    f.name: {"bool": "true or false", "int": "a whole number"}[str(f.type)]
+    for f in fields(EpisodeMetrics)
+    if f.type in ("bool", "int") and f.name not in ADDED_FIELDS
+}
 
 
 def first_reach_steps(robot_positions: np.ndarray, robot_goals: np.ndarray, radius: float) -> np.ndarray:

@@ -217,6 +217,17 @@ def test_from_dict_round_trip_and_old_records():
         EpisodeMetrics.from_dict({k: v for k, v in old.items() if k != "min_distance"})
 
 
+def test_a_null_flag_or_count_is_refused_not_read_as_nan():
+    """A record's null success was NaN, which reads as true: a failed episode counted a success (only a hand
+    edit or another writer makes one; a float's null stays NaN, a later field's None)."""
+    m = episode_metrics(make_traj([[[0.0, 0.0]]] * 3, [[[0.0, 2.0]]] * 3, robot_goals=[[0.0, 9.0]]))
+    for name, said in (("success", "true or false"), ("collision", "true or false"), ("n_steps", "a whole")):
+        with pytest.raises(SimulationError, match=f"record's {name} is null, not {said}"):
+            EpisodeMetrics.from_dict({**m.as_dict(), name: None})
+    assert math.isnan(EpisodeMetrics.from_dict({**m.as_dict(), "travel_time": None}).travel_time)
+    assert EpisodeMetrics.from_dict({**m.as_dict(), "robot_contact": None}).robot_contact is None
+
+
 def test_a_robot_exactly_its_radius_from_its_goal_has_not_arrived():
     # Goal (0, 0), radius 0.3: the robot at (0.3, 0) is 0.3 m off, not strictly closer -> not inside under
     # either rule; one step on at (0.29, 0) it is (row 2, 0.8 s).
