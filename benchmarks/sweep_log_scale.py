@@ -79,6 +79,10 @@ def multiply(seed: Path, out: Path, per_cell: int) -> int:
     run = meta["runs"][-1]
     run["episodes_per_cell"] = per_cell
     run["planned"] = per_cell * len(run["cells"])
+    if isinstance(run.get("config"), dict):  # run_sweep's own line without one: the CLI records it
+        # --report-only plans from the run's recorded config, not the line's count: left at the seed's 2,
+        # the report tabulated 2 episodes a cell of the whole log
+        run["config"]["sweep"]["episodes_per_cell"] = per_cell
     (out / SWEEP_FILE).write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
     templates: dict[str, list[dict[str, Any]]] = {}
     with open(seed / EPISODES_FILE, encoding="utf-8") as f:

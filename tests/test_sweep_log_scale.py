@@ -25,6 +25,21 @@ def test_a_multiplied_log_holds_every_planned_episode_and_passes_the_checks(tmp_
     assert run_sweep(config).ran == 0  # the resume finds the plan done
 
 
+def test_the_report_of_a_multiplied_log_tabulates_every_episode_of_it(tmp_path, capsys):
+    """--report-only plans from the run's recorded config: the benchmark's report had tabulated the seed
+    sweep's 2 episodes a cell, whatever the log held."""
+    from pipelines.cli import main
+
+    seed = tmp_path / "seed"
+    argv = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "2"]
+    assert main([*argv, "--backend", "inline", "--no-progress", "--jit", "off", "--out", str(seed)]) == 0
+    out = tmp_path / "big"
+    sweep_log_scale.multiply(seed, out, 7)
+    assert main(["sweep", "--experiment", "baselines", "--out", str(out), "--report-only"]) == 0
+    rows = (out / "episodes.csv").read_text().splitlines()[1:]
+    assert len(rows) == 7 * len(get_experiment("baselines").cells((3,)))
+
+
 def test_a_small_run_prints_and_writes_its_figures(tmp_path, capsys):
     out = tmp_path / "scale.json"
     argv = ["--experiment", "baselines", "--humans", "3", "--episodes", "4", "--json", str(out)]
