@@ -174,7 +174,7 @@ def read_log(config: SweepConfig, cells: tuple[Cell, ...], tasks: list[EpisodeTa
     from pipelines.experiments.log import episode_log
 
     log = LogRead.of_plan(cells, tasks)
-    for offset, line, record in episode_log(config.out).scan(repair=False):
+    for offset, line, record in episode_log(config.out).scan_shown(config.progress, repair=False):
         log.add(offset, line, record)
     return log
 

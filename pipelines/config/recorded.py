@@ -226,7 +226,7 @@ def zoo_note(directory: str | Path) -> str:
     # (created, data sha256, alpha): a block; one calibrate run makes its blocks of every alpha at one time
     calibrations: dict[tuple[str, str, float], str] = {}  # -> the predictor it calibrated
     try:
-        for _, _, record in episode_log(Path(directory)).scan(repair=False):
+        for _, _, record in episode_log(Path(directory)).scan_shown(None, repair=False):
             name = record.get("predictor")
             if not isinstance(name, str):
                 continue

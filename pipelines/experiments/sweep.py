@@ -218,7 +218,7 @@ def run_sweep(
         meta = _sweep_meta(out, config, tasks)
         log = episode_log(out)
         recorded = ResumeChecks(out, tasks)
-        for offset, line, record in log.scan():  # a record at a time: not held
+        for offset, line, record in log.scan_shown(config.progress):  # a record at a time: not held
             recorded.add(record)
             if records is not None:
                 records(offset, line, record)

@@ -64,3 +64,25 @@ def test_train_writes_a_line_an_epoch_where_stderr_is_no_terminal(tmp_path, caps
 def test_train_with_no_progress_writes_no_epoch_line(tmp_path, capsys):
     assert main(_train(tmp_path, "--no-progress")) == 0
     assert not [line for line in capsys.readouterr().err.splitlines() if line.startswith("epoch ")]
+
+
+@pytest.mark.parametrize("after", [["sweep", "--report-only"], ["sweep"], ["config", "show", "--from-sweep"]])
+@pytest.mark.parametrize("terminal", [False, True])
+def test_reading_a_sweeps_log_draws_a_bar_on_a_terminal_only(after, terminal, tmp_path, capsys, monkeypatch):
+    """A resume, a report and ``config show --from-sweep`` read the whole log first (~10,000 records a
+    second), a million records in silence for minutes before."""
+    argv = _argv("sweep", tmp_path)
+    assert main([*argv, "--no-progress"]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal)
+    out = str(tmp_path / "s")
+    assert main([*argv, *after[1:]] if after[0] == "sweep" else [*after, out]) == 0
+    assert ("reading episodes.jsonl" in capsys.readouterr().err) is terminal
+
+
+def test_no_progress_draws_no_bar_of_the_log_on_a_terminal(tmp_path, capsys, monkeypatch):
+    argv = _argv("sweep", tmp_path)
+    assert main([*argv, "--no-progress"]) == 0
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main([*argv, "--report-only", "--no-progress"]) == 0
+    assert "reading episodes.jsonl" not in capsys.readouterr().err
