@@ -4,6 +4,7 @@ wrapped between items, and the line naming the settings every plotted cell share
 
 from __future__ import annotations
 
+import math
 import re
 import textwrap
 from collections.abc import Sequence
@@ -68,3 +69,32 @@ def settings_line(cells: Sequence[Cell]) -> str:
     if shown:
         parts.append("MPC " + ", ".join(f"{key}={value}" for key, value in shown))
     return "; ".join(parts)
+
+
+# A "small" legend's width past its texts, in its font size (em): each column's handle and the gap to its text
+# (2.0 + 0.8), the gap between two columns (2.0), the border and frame (1.0); one column measured 0.43 in
+# past its widest 8.33 pt text
+LEGEND_HANDLE_EM: Final[float] = 2.8
+LEGEND_COLUMN_GAP_EM: Final[float] = 2.0
+LEGEND_BORDER_EM: Final[float] = 1.0
+
+
+def legend_width(labels: Sequence[str], title: str, columns: int) -> float:
+    """The width (in) of a "small" legend of ``labels`` in ``columns`` (filled down, as matplotlib fills
+    them) under ``title`` (lines apart), measured on the font before any figure is drawn."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextToPath
+
+    prop = FontProperties(size="small")
+    measure = TextToPath().get_text_width_height_descent
+
+    def width(text: str) -> float:
+        return max(
+            (measure(line, prop, ismath=False)[0] / 72 for line in text.split("\n") if line), default=0
+        )
+
+    em = prop.get_size_in_points() / 72
+    rows = max(1, math.ceil(len(labels) / columns))
+    texts = sum(max(map(width, labels[k : k + rows])) for k in range(0, len(labels), rows))
+    entries = texts + columns * LEGEND_HANDLE_EM * em + (columns - 1) * LEGEND_COLUMN_GAP_EM * em
+    return max(entries, width(title)) + LEGEND_BORDER_EM * em

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from crowdsim.metrics import COLLISION_DISTANCE
-from pipelines.experiments.plot_style import method_style, settings_line, wrap_title
+from pipelines.experiments.plot_style import legend_width, method_style, settings_line, wrap_title
 from pipelines.experiments.safety_report import (
     COLLISION_TARGET,
     CONTACT_DISTANCE,
@@ -42,22 +42,22 @@ LEGEND_GAP: Final[float] = (
     0.5  # in below a panel's axes, past its tick labels and x label, where its legend starts
 )
 LEGEND_LINE: Final[float] = 0.2  # in, a line of a "small" legend
+LEGEND_MARGIN: Final[float] = 0.2  # in between the legends of two panels side by side
 # Where a label may stand from its point (points): the four corners, then above, below, further out.
 _OFFSETS: Final[tuple[tuple[int, int], ...]] = tuple(
     (sx * r, sy * r) for r in (5, 14, 26) for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1))
 ) + ((0, 12), (0, -12), (0, 30), (0, -30))
 
 
-def _panels(count: int, height: float, title: str, **kwargs: Any) -> tuple[Any, list[Any]]:
-    """A figure of ``count`` panels in rows of at most three, each ``height`` in tall (axes and legend), the
-    unused ones hidden, and each line of ``title`` wrapped to the figure's width between items
+def _panels(count: int, ncols: int, height: float, title: str, **kwargs: Any) -> tuple[Any, list[Any]]:
+    """A figure of ``count`` panels in rows of ``ncols`` (at most three), each ``height`` in tall (axes and
+    legend), the unused ones hidden, and each line of ``title`` wrapped to the figure's width between items
     (plot_style.wrap_title).
 
     A ``matplotlib.figure.Figure``, not pyplot's: a report written from a notebook neither switches its
     backend (this module called ``matplotlib.use("Agg")``) nor adds to its open figures."""
     from matplotlib.figure import Figure
 
-    ncols = min(3, count)
     nrows = math.ceil(count / ncols)
     width = PANEL_WIDTHS[ncols - 1] * ncols
     fig = Figure(figsize=(width, height * nrows + 0.5), layout="constrained")
@@ -73,11 +73,11 @@ def _panels(count: int, height: float, title: str, **kwargs: Any) -> tuple[Any, 
     return fig, list(axes.flat[:count])
 
 
-def _below(ax: Any, **kwargs: Any) -> None:
-    """The panel's legend under it, clear of its tick labels and x label: nothing drawn is covered."""
+def _below(ax: Any, columns: int, **kwargs: Any) -> None:
+    """The panel's legend under it in ``columns``, clear of its tick labels and x label: nothing drawn is
+    covered."""
     from matplotlib.transforms import ScaledTranslation
 
-    entries = len(ax.get_legend_handles_labels()[1])
     ax.legend(
         loc="upper center",
         bbox_to_anchor=(0.5, 0.0),
@@ -85,19 +85,28 @@ def _below(ax: Any, **kwargs: Any) -> None:
         borderaxespad=0.0,
         fontsize="small",
         title_fontsize="small",
-        ncols=_legend_columns(entries),
+        ncols=columns,
         **kwargs,
     )
 
 
-def _legend_columns(entries: int) -> int:
-    return 1 if entries <= 6 else 2
+def _layout(legends: Sequence[tuple[Sequence[str], str]]) -> tuple[int, list[int], float]:
+    """For panels with legends of (labels, title): the panels a row (at most three, fewer where a legend is
+    wider than its panel), each legend's columns (two for more than six entries where two fit under its
+    panel) and a panel's height (in: its axes, then the tallest legend). Two columns of --vary's labels ran
+    into the next panel's legend and past the figure's edges (three d_min values at five crowd sizes)."""
 
+    def fits(labels: Sequence[str], title: str, columns: int, ncols: int) -> bool:
+        return legend_width(labels, title, columns) <= PANEL_WIDTHS[ncols - 1] - LEGEND_MARGIN
 
-def _height(entries: int, title_lines: int) -> float:
-    """A panel's height (in): its axes, then its legend of ``entries`` in ``_legend_columns``."""
-    rows = math.ceil(entries / _legend_columns(entries)) + title_lines
-    return PANEL_HEIGHT + LEGEND_GAP + 0.15 + LEGEND_LINE * rows
+    most = min(3, len(legends))
+    ncols = next((n for n in range(most, 1, -1) if all(fits(*legend, 1, n) for legend in legends)), 1)
+    columns = [2 if len(labels) > 6 and fits(labels, title, 2, ncols) else 1 for labels, title in legends]
+    rows = max(
+        math.ceil(len(labels) / k) + len(title.splitlines())
+        for (labels, title), k in zip(legends, columns, strict=True)
+    )
+    return ncols, columns, PANEL_HEIGHT + LEGEND_GAP + 0.15 + LEGEND_LINE * rows
 
 
 def _by_humans(experiment: Experiment, summaries: Sequence[SafetyColumn]) -> dict[int, list[SafetyColumn]]:
@@ -126,32 +135,38 @@ def min_distance_hist_figure(experiment: Experiment, summaries: Sequence[SafetyC
     groups = _by_humans(experiment, summaries)
     styles = _method_styles(experiment)
     order = {label: k for k, label in enumerate(experiment.method_labels)}
-    entries = max(len(cells) for cells in groups.values()) + 2  # + the two thresholds
+    contact = f"contact ({CONTACT_DISTANCE:g} m)"
+    # The metric's threshold (crowdsim.metrics, Table I), not the planning d_min a column may vary.
+    threshold = f"collision threshold ({COLLISION_DISTANCE:g} m)"
+    legend_title = "method (episodes)"
+    labels = {n: [_hist_label(s) for s in cells] + [contact, threshold] for n, cells in groups.items()}
+    ncols, columns, height = _layout([(texts, legend_title) for texts in labels.values()])
     title = _title(experiment, summaries)
-    fig, axes = _panels(len(groups), _height(entries, 1), title, sharex=True, sharey=True)
-    for ax, (n, cells) in zip(axes, groups.items(), strict=True):
-        for s in cells:
+    fig, axes = _panels(len(groups), ncols, height, title, sharex=True, sharey=True)
+    for ax, (n, cells), k_columns in zip(axes, groups.items(), columns, strict=True):
+        for s, label in zip(cells, labels[n], strict=False):
             counts = min_distance_counts(s.min_distances)
-            beyond = f", {counts[-1]} beyond {HIST_MAX:g} m" if counts[-1] else ""
-            label = f"{s.cell.method} ({s.episodes}{beyond})"
             k = order.get(s.cell.method, 0)
             color = styles.get(s.cell.method, {}).get("color")
             ls = _HIST_STYLES[k % len(_HIST_STYLES)]
             ax.stairs(counts[:-1], HIST_EDGES, color=color, ls=ls, lw=1.6, alpha=0.85, label=label)
-        ax.axvline(CONTACT_DISTANCE, color="k", ls=":", lw=1, label=f"contact ({CONTACT_DISTANCE:g} m)")
-        # The metric's threshold (crowdsim.metrics, Table I), not the planning d_min a column may vary.
-        threshold = f"collision threshold ({COLLISION_DISTANCE:g} m)"
+        ax.axvline(CONTACT_DISTANCE, color="k", ls=":", lw=1, label=contact)
         ax.axvline(COLLISION_DISTANCE, color="k", ls="--", lw=1, label=threshold)
         ax.set_xlim(0.0, HIST_MAX)
         ax.set_title(f"{n} humans", fontsize="medium")
         ax.set_xlabel("episode's minimum robot-human distance (m)", fontsize="small")
         ax.set_ylabel("episodes", fontsize="small")
         ax.grid(alpha=0.3)
-        _below(ax, title="method (episodes)")
+        _below(ax, k_columns, title=legend_title)
     # Counts: whole ticks (two episodes a cell were read against ticks of 0.25 episodes). Shared y axes: one
     # locator serves every panel.
     axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))
     return fig
+
+
+def _hist_label(s: SafetyColumn) -> str:
+    beyond = min_distance_counts(s.min_distances)[-1]
+    return f"{s.cell.method} ({s.episodes}{f', {beyond} beyond {HIST_MAX:g} m' if beyond else ''})"
 
 
 def plot_min_distance_hist(experiment: Experiment, summaries: Sequence[SafetyColumn], path: Path) -> Path:
@@ -260,26 +275,29 @@ def safety_tradeoff_figure(experiment: Experiment, summaries: Sequence[SafetyCol
     if not groups:
         return None
     styles = _method_styles(experiment)
-    most = max(len(cells) for cells in groups.values())
-    named = most > MAX_ANNOTATED
-    notes = max(len(_coinciding(cells).splitlines()) for cells in groups.values())
-    height = _height(1 + (most if named else 0), notes)
+    named = max(len(cells) for cells in groups.values()) > MAX_ANNOTATED
+    target = f"{COLLISION_TARGET:g} % collisions: the paper's Table II stays below"
+    legends = [
+        # a legend lists lines (the target) before the methods' error bars
+        ([target, *([_annotation(s) for s in cells] if named else [])], _coinciding(cells))
+        for cells in groups.values()
+    ]
+    ncols, columns, height = _layout(legends)
     where = "in the legend" if named else "beside each method"
     title = (
         f"{_title(experiment, summaries)}\nsuccess against collision rate, the cross-bars their 95 % Wilson "
         f"intervals; mean travel time of the successful episodes {where}"
     )
-    fig, axes = _panels(len(groups), height, title, sharex=True, sharey=True)
-    for ax, (n, cells) in zip(axes, groups.items(), strict=True):
+    fig, axes = _panels(len(groups), ncols, height, title, sharex=True, sharey=True)
+    for ax, (n, cells), k_columns in zip(axes, groups.items(), columns, strict=True):
         for s in cells:
             _draw_point(ax, s, styles.get(s.cell.method, {}), named)
-        target = f"{COLLISION_TARGET:g} % collisions: the paper's Table II stays below"
         ax.axvline(COLLISION_TARGET, color="grey", ls="--", lw=1, label=target)
         ax.set_xlabel(f"collision rate (%), < {COLLISION_DISTANCE:g} m", fontsize="small")
         ax.set_ylabel("success rate (%)", fontsize="small")
         ax.set_title(f"{n} humans", fontsize="medium")
         ax.grid(alpha=0.3)
-        _below(ax, title=_coinciding(cells) or None)
+        _below(ax, k_columns, title=_coinciding(cells) or None)
     # Shared by every panel: a point at 0 % collisions stood on the left edge, half cut off; success on its
     # whole scale, 0 to 100 %, where the axis had started at 27 % unmarked
     axes[0].set_xlim(left=min(-1.0, axes[0].get_xlim()[0]))

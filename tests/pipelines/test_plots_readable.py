@@ -143,6 +143,30 @@ def test_a_histogram_of_five_crowd_sizes_fits_a_page_and_names_its_threshold():
         assert len({str(p.get_linestyle()) for p in steps}) == 2  # one outline does not hide the other
 
 
+@pytest.mark.parametrize("figure", [min_distance_hist_figure, safety_tradeoff_figure])
+def test_legends_of_many_methods_stay_apart_and_inside_the_figure(figure):
+    """`--vary mpc.d_min=0.6,0.65,0.7` at five crowd sizes: six methods a panel. Legends of two columns,
+    wider than a panel of a row of three, ran into the next panel's and past the figure's edges."""
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+
+    sets = ["sweep.experiment=table2", 'sweep.vary="mpc.d_min=0.6,0.65,0.7"']
+    experiment = configured_experiment(load(sets=sets))
+    cells = experiment.cells((5, 6, 7, 8, 9))
+    records = [
+        _record(c, i, 0.5 + k / 10, 20, collision=i < k % 3) for k, c in enumerate(cells) for i in range(4)
+    ]
+    fig = figure(experiment, summarize(experiment, cells, records))
+    renderer = _drawn(fig)
+    assert fig.get_size_inches()[0] <= MAX_WIDTH_IN
+    legends = [ax.get_legend().get_window_extent(renderer) for ax in fig.axes if ax.get_visible()]
+    assert len(legends) == 5
+    for box in legends:
+        assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1 and fig.bbox.y0 <= box.y0, box
+    for a, b in itertools.combinations(legends, 2):
+        assert not a.overlaps(b)
+
+
 @pytest.mark.parametrize("sizes", [(5, 6), (5,)])
 def test_the_safe_configurations_settings_line_stays_inside_the_figure(sizes):
     """The settings line under the title (predictor, margins, five [mpc] values) ran past both edges of the
