@@ -86,3 +86,18 @@ def test_no_progress_draws_no_bar_of_the_log_on_a_terminal(tmp_path, capsys, mon
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     assert main([*argv, "--report-only", "--no-progress"]) == 0
     assert "reading episodes.jsonl" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("terminal", [False, True])
+def test_writing_a_reports_episodes_csv_draws_a_bar_on_a_terminal_only(
+    terminal, tmp_path, capsys, monkeypatch
+):
+    """Each row is read again from the log: 40 s at a million episodes, after the log's own bar."""
+    argv = _argv("sweep", tmp_path)
+    assert main([*argv, "--no-progress"]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal)
+    assert main([*argv, "--report-only"]) == 0
+    err = capsys.readouterr().err
+    assert ("writing episodes.csv" in err) is terminal
+    assert (re.search(r"writing episodes.csv: +0%\|.*\| 0/2 \[", err) is not None) is terminal  # 2 rows
