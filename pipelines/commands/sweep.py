@@ -286,9 +286,8 @@ def run(args: argparse.Namespace) -> int:
         if args.reuse is not None:
             from pipelines.experiments.reuse import taken
 
-            print(
-                f"--reuse: {len(taken(args.reuse, out, tasks).runs_there)} of them to take from {args.reuse}"
-            )
+            found = taken(args.reuse, out, tasks, progress=config.progress)
+            print(f"--reuse: {len(found.runs_there)} of them to take from {args.reuse}")
         return 0
 
     status = 0

@@ -106,18 +106,18 @@ class EpisodeLog:
                 os.fsync(f.fileno())
 
     def scan_shown(
-        self, progress: bool | None, repair: bool = True
+        self, progress: bool | None, repair: bool = True, name: str | None = None
     ) -> Iterator[tuple[int, bytes, dict[str, Any]]]:
-        """``scan``, with a bar of the log's bytes read when ``progress`` (None: on a terminal only): a
-        resume, a report or ``config show --from-sweep`` read ~10,000 records a second, and spent a minute and
-        more on a large log before their first word."""
+        """``scan``, with a bar of the log's bytes read when ``progress`` (None: on a terminal only), named
+        "reading ``name``" (the file's name by default): a resume, a report or ``config show --from-sweep``
+        read ~10,000 records a second, and spent a minute and more on a large log before their first word."""
         from predictors.progress import progress_bar
 
         total = self.path.stat().st_size if self.path.is_file() else 0
         bar = progress_bar(
             total=total,
             show=progress,
-            desc=f"reading {self.path.name}",
+            desc=f"reading {name or self.path.name}",
             unit="B",
             unit_scale=True,
             file=sys.stderr,

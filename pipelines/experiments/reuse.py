@@ -68,12 +68,13 @@ def _source_runs(source: Path) -> list[Any]:
         return read_sweep_file(source / SWEEP_FILE, hint="").get("runs", [])
 
 
-def _source_records(source: Path) -> Iterator[dict[str, Any]]:
-    """The records of ``source``'s log, read and never cut; a damaged one a PipelineError naming it as
-    --reuse's (editing another sweep's log is not this sweep's to advise)."""
+def _source_records(source: Path, progress: bool | None = False) -> Iterator[dict[str, Any]]:
+    """The records of ``source``'s log, read and never cut, with a bar when ``progress``; a damaged one a
+    PipelineError naming it as --reuse's (editing another sweep's log is not this sweep's to advise)."""
     with _named(source):
         log = episode_log(source, damaged="that sweep's own rerun refuses it too")
-        yield from (record for _, _, record in log.scan(repair=False))
+        scanned = log.scan_shown(progress, repair=False, name=str(source / EPISODES_FILE))
+        yield from (record for _, _, record in scanned)
 
 
 @contextlib.contextmanager
@@ -95,24 +96,32 @@ class Taken:
     last_run: int
 
 
-def taken(source: Path, out: Path, tasks: Sequence[EpisodeTask], *, repair: bool = False) -> Taken:
+def taken(
+    source: Path,
+    out: Path,
+    tasks: Sequence[EpisodeTask],
+    *,
+    repair: bool = False,
+    progress: bool | None = False,
+) -> Taken:
     """The episodes of ``tasks`` that ``source`` (another sweep's folder) recorded and ``out`` has not. Both
     folders' records are checked as a resume checks its own (the weights, margins and crowd the cells plan
     with now), ``out``'s first, so that a refusal writes nothing; a PipelineError names the file. Held: a key
     and a run number an episode, not the records (those of a 20,000-episode source took 18 KB each).
     ``repair``: cut a torn last line off ``out``'s log (only the sweep holding its lock may), which the
-    records taken would otherwise follow."""
+    records taken would otherwise follow. ``progress``: a bar of each log read (None: on a terminal only), of
+    100,000 records ~10 s each."""
     from pipelines.experiments.resume_checks import ResumeChecks
 
     check_source(source, out)
     own = ResumeChecks(out, list(tasks))
-    for _, _, record in episode_log(out).scan(repair=repair):
+    for _, _, record in episode_log(out).scan_shown(progress, repair=repair):
         own.add(record)
     own.check()
     left = {t.key for i, t in enumerate(tasks) if not own.recorded(i)}
     checks = ResumeChecks(source, list(tasks), reused=True)
     there: dict[str, Any] = {}
-    for record in _source_records(source):
+    for record in _source_records(source, progress):
         if record["key"] in left:  # a key once: the source's scan refuses a second
             checks.add(record)
             there[record["key"]] = run_number(record)
@@ -131,13 +140,18 @@ def _run_there(run: int | None, listed: int) -> int | None:
 
 
 def seed_from(
-    source: Path, out: Path, experiment: Experiment, tasks: Sequence[EpisodeTask], meta: dict[str, Any]
+    source: Path,
+    out: Path,
+    experiment: Experiment,
+    tasks: Sequence[EpisodeTask],
+    meta: dict[str, Any],
+    progress: bool | None = False,
 ) -> dict[str, Any]:
     """Give ``out`` (a sweep folder whose lock the caller holds; ``meta``: its sweep.json, checked to be
     ``experiment``'s) the episodes ``taken`` finds in ``source``: their runs' lines first, in sweep.json,
     then their records, relabelled, in episodes.jsonl. Returns sweep.json as written; says on stderr what it
-    took."""
-    found = taken(source, out, tasks, repair=True)
+    took. ``progress``: a bar of each log read (``taken``'s)."""
+    found = taken(source, out, tasks, repair=True, progress=progress)
     if not found.runs_there:
         print(f"--reuse {source}: none of its episodes is one of this plan's left to run", file=sys.stderr)
         return meta
@@ -163,7 +177,7 @@ def seed_from(
     write_sweep_file(out / SWEEP_FILE, meta)
     by_key = {task.key: task for task in tasks if task.key in found.runs_there}
     run_of = {key: number_of[there] for key, there in found.runs_there.items()}
-    _append(out / EPISODES_FILE, source, by_key, run_of)
+    _append(out / EPISODES_FILE, source, by_key, run_of, progress)
     folders = {key: _folder(source, runs[number - 1][REUSED]) for key, number in run_of.items()}
     cells = len({task.cell.key for task in by_key.values()})
     print(
@@ -200,14 +214,20 @@ def _recordings(tasks: dict[str, EpisodeTask], folders: dict[str, Path]) -> str:
     )
 
 
-def _append(path: Path, source: Path, tasks: dict[str, EpisodeTask], run_of: dict[str, int]) -> None:
+def _append(
+    path: Path,
+    source: Path,
+    tasks: dict[str, EpisodeTask],
+    run_of: dict[str, int],
+    progress: bool | None = False,
+) -> None:
     """The records of ``source`` of ``tasks``' keys, under their labels and with ``run_of``'s numbers, as the
     log's last lines, read and written a record at a time (``EpisodeLog.extend``). A source whose records
     taken went missing between its two reads (edited: a log is only appended to) is refused."""
     written: set[str] = set()
 
     def relabelled() -> Iterator[dict[str, Any]]:
-        for record in _source_records(source):
+        for record in _source_records(source, progress):
             task = tasks.get(record["key"])
             if task is not None and task.key not in written:
                 written.add(task.key)

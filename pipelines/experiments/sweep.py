@@ -106,7 +106,11 @@ def _sweep_meta(out: Path, config: SweepConfig, tasks: list[EpisodeTask]) -> dic
             f"{out} holds a sweep of experiment {meta.get('experiment')!r}, not {config.experiment.name!r}; "
             "choose another --out"
         )
-    return meta if config.reuse is None else seed_from(config.reuse, out, config.experiment, tasks, meta)
+    return (
+        meta
+        if config.reuse is None
+        else seed_from(config.reuse, out, config.experiment, tasks, meta, config.progress)
+    )
 
 
 def _add_run(

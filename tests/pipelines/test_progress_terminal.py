@@ -101,3 +101,18 @@ def test_writing_a_reports_episodes_csv_draws_a_bar_on_a_terminal_only(
     err = capsys.readouterr().err
     assert ("writing episodes.csv" in err) is terminal
     assert (re.search(r"writing episodes.csv: +0%\|.*\| 0/2 \[", err) is not None) is terminal  # 2 rows
+
+
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]])
+@pytest.mark.parametrize("terminal", [False, True])
+def test_reuse_draws_a_bar_of_the_source_log_on_a_terminal_only(
+    dry_run, terminal, tmp_path, capsys, monkeypatch
+):
+    """--reuse reads its source's log twice before the sweep starts: 10 s a read at 100,000 records."""
+    argv = _argv("sweep", tmp_path)
+    assert main([*argv, "--no-progress"]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal)
+    source = tmp_path / "s"
+    assert main([*argv[:-1], str(tmp_path / "t"), "--reuse", str(source), *dry_run]) == 0
+    assert (f"reading {source / 'episodes.jsonl'}" in capsys.readouterr().err) is terminal
