@@ -342,17 +342,18 @@ def _check_run_folder(out: Path, resume: bool) -> None:
         raise PipelineError(f"--resume: {last} does not exist (nothing to resume in {out})")
     if not resume and last.is_file():
         raise PipelineError(f"{out} already holds a training run; pass --resume to continue it or pick --out")
-    if not resume and (finished := finished_outputs(out)):  # its checkpoints/ removed (to save space)
-        raise PipelineError(
-            f"{out} holds a finished run's {', '.join(finished)} but no checkpoints/last.ckpt to resume; a "
-            "new run would replace them: choose another --out, or remove them"
-        )
     if not resume and not _holds_a_run_or_nothing(out):
         # the run's checkpoints, logs and NAME.pt would be mixed with the user's files (sweep and data
         # prepare refuse such a folder too)
         raise PipelineError(
             f"--out {out} holds files but no training run ({SETTINGS_FILE} or checkpoints/last.ckpt of "
             "`crowdmpc train`); a run would write among them: choose an empty or new folder"
+        )
+    # its checkpoints/ removed (to save space); after the check above: one's own folder with a .pt is no run
+    if not resume and (finished := finished_outputs(out)):
+        raise PipelineError(
+            f"{out} holds a finished run's {', '.join(finished)} but no checkpoints/last.ckpt to resume; a "
+            "new run would replace them: choose another --out, or remove them"
         )
 
 

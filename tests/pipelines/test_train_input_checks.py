@@ -249,3 +249,23 @@ def test_a_finished_run_without_its_checkpoints_is_not_trained_over(run_copy, ca
         "another --out, or remove them"
     )
     assert {p.name: p.read_bytes() for p in out.glob("vanilla_lstm_custom.*")} == written
+
+
+def test_a_folder_of_ones_own_weights_is_no_finished_run(tmp_path, run_copy, capsys):
+    """A folder of the user's own files with a .pt among them was refused as "a finished run's" weights, to
+    be removed; and a finished run from before runs kept their settings, its checkpoints/ removed, was told to
+    remove its NAME.pt and metrics, after which it was still refused as no training run."""
+    data, run = run_copy
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "weights.pt").write_bytes(b"mine")
+    shutil.rmtree(run / "checkpoints")
+    (run / "train_settings.json").unlink()
+    for out in (mine, run):
+        assert main([*_args(data, out), "--seed", "7"]) == 2
+        assert _one_line(capsys) == (
+            f"crowdmpc train: error: --out {out} holds files but no training run (train_settings.json or "
+            "checkpoints/last.ckpt of `crowdmpc train`); a run would write among them: choose an empty or "
+            "new folder"
+        )
+    assert [p.name for p in mine.iterdir()] == ["weights.pt"]
