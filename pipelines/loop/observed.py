@@ -129,7 +129,8 @@ def check_positions(obs: Observation) -> None:
 def check_magnitudes(obs: Observation) -> None:
     """PipelineError naming the first of the current fields the MPC plans from that holds a number beyond
     ``mpc.step_data.MAX_MAGNITUDE``: a robot velocity of 1e200, finite, made the NLP's gradient NaN and the
-    first Fatrop solve never returned (or the MPC refused it in StepData's words, not the observation's)."""
+    first Fatrop solve never returned (or the MPC refused it in StepData's words, not the observation's);
+    then the history (``obs.history``, of its shape), which the predictor reads."""
     for name, unit in (
         ("robot_positions", "m"),
         ("robot_velocities", "m/s"),
@@ -146,6 +147,17 @@ def check_magnitudes(obs: Observation) -> None:
                 f"{values[row].tolist()}), the most the MPC plans with; far larger ones overflow its "
                 "arithmetic"
             )
+    history = np.asarray(obs.history, dtype=float)
+    # a human at 1e307 a step ago: the coupled NLP's predictor (coupling nlp) ran the humans to 1e308, its
+    # gradient was NaN and the Fatrop solve never returned (a NaN, a step not observed, is no number beyond)
+    beyond = np.abs(history) > MAX_MAGNITUDE
+    if beyond.any():
+        step, i = (int(k) for k in np.argwhere(beyond)[0][:2])
+        raise PipelineError(
+            f"obs.history holds a number beyond {MAX_MAGNITUDE:g} m in magnitude ({agent(obs, i)[0]} at row "
+            f"{step - len(history)}: {history[step, i].tolist()}), the most the MPC plans with; far larger "
+            "ones overflow its arithmetic"
+        )
 
 
 def agent(obs: Observation, i: int) -> tuple[str, str]:

@@ -177,6 +177,39 @@ def test_the_mpc_refuses_finite_but_absurd_numbers_in_one_line():
     assert done.stdout.splitlines() == [velocity, human] * 2
 
 
+PAST = """
+import dataclasses, sys
+sys.path.insert(0, {root!r})
+import numpy as np
+from crowdsim.env import CrowdEnv
+from pipelines.errors import PipelineError
+from pipelines.loop.controllers import ControllerSpec, make_controller
+obs = CrowdEnv().reset(0, "circle", 3)
+history = np.array(obs.history, dtype=float)
+history[-2, obs.n_robots + 1] = 1e307
+controller = make_controller(ControllerSpec("cmpc", predictor="constant_velocity", coupling="nlp"))
+controller.reset(obs)
+try:
+    controller.act(dataclasses.replace(obs, history=history))
+except PipelineError as exc:
+    print(exc)
+"""
+
+
+def test_the_mpc_refuses_an_absurd_number_in_the_history_in_one_line():
+    """A human at 1e307 a step before the current one, which only the history holds: the coupled NLP's
+    constant-velocity prediction ran that human to 1e308, and its Fatrop solve never returned (in a process
+    of its own, under a time limit, for that reason)."""
+    done = subprocess.run(
+        [sys.executable, "-c", PAST.format(root=str(ROOT))], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        "obs.history holds a number beyond 1e+09 m in magnitude (human 1 at row -2: [1e+307, 1e+307]), the "
+        "most the MPC plans with; far larger ones overflow its arithmetic"
+    ]
+
+
 def test_small_things_a_notebook_does_with_the_mpc_and_the_registry():
     """A controller copied or pickled failed with "cannot pickle 'SwigPyObject'"; margins as a numpy array
     were refused as "must be a sequence of 4 numbers, got array([...])"; a list of predictors was
