@@ -18,12 +18,12 @@ from predictors.zoo_edit import leftover_files, staged_names
 
 def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[ZooEntry, Path]:
     """Remove entry ``name`` from the user zoo (``directory``, else ``user_zoo_dir()``): its files (those no
-    other entry names, and never one of the zoo's own: an entry added under a name reserved since may name
-    one) are first renamed to hidden temporaries (.NAME.pt.PID.removed), then the manifest entry goes, then
-    the temporaries, and those an earlier add or remove of ``name`` left. A remove stopped on the way leaves
-    either the entry (its files gone: `zoo remove NAME` again finishes it) or hidden temporaries of ours
-    (``remove_leftovers``), never files that look like a model no entry names. Returns the entry and the zoo
-    directory."""
+    other entry names, a symbolic link itself and never the file it points to, and never one of the zoo's
+    own: an entry added under a name reserved since may name one) are first renamed to hidden temporaries
+    (.NAME.pt.PID.removed), then the manifest entry goes, then the temporaries, and those an earlier add or
+    remove of ``name`` left. A remove stopped on the way leaves either the entry (its files gone: `zoo remove
+    NAME` again finishes it) or hidden temporaries of ours (``remove_leftovers``), never files that look like
+    a model no entry names. Returns the entry and the zoo directory."""
     check_name(name)  # not check_model_name: such an entry must stay removable
     root = writable_zoo_dir(directory)
     _entry_to_remove(name, root, read_manifest(root), directory)  # before the lock creates the directory
@@ -33,8 +33,12 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
         del entries[name]
         manifest = root / MANIFEST_NAME
         # inside the zoo: checked when the manifest was read
-        files = set(entry.paths(root, manifest)) | _being_added(entry, root)
-        still_used = {path for other in entries.values() for path in other.paths(root, manifest)}
+        files = _named_files(entry, root, manifest) | _being_added(entry, root)
+        still_used = {
+            path
+            for other in entries.values()
+            for path in (*other.paths(root, manifest), *_named_files(other, root, manifest))
+        }
         doomed = [path for path in files - still_used if not is_zoo_file(root, path)]
         parked = [path.with_name(f".{path.name}.{os.getpid()}.removed") for path in doomed]
         for path, hidden in zip(doomed, parked, strict=True):
@@ -51,6 +55,20 @@ def remove_from_zoo(name: str, directory: str | Path | None = None) -> tuple[Zoo
             if model == name:
                 path.unlink(missing_ok=True)
     return entry, root
+
+
+def _named_files(entry: ZooEntry, root: Path, manifest: Path) -> set[Path]:
+    """``entry``'s files as its manifest names them: a symbolic link in the zoo is itself the file, never
+    the one it points to (the user's own, or another entry's), which removing it would take and leave the
+    link dangling, refused by a later add of the name as a file no entry owns."""
+    files = set()
+    base = root.resolve()
+    for relative, resolved in zip((entry.file, entry.config), entry.paths(root, manifest), strict=True):
+        named = root / relative
+        link = named.parent.resolve() / named.name
+        inside = link.parent.is_relative_to(base)  # "../x/NAME.pt" may be a link back into the zoo
+        files.add(link if inside and link.is_symlink() else resolved)
+    return files
 
 
 def _being_added(entry: ZooEntry, root: Path) -> set[Path]:

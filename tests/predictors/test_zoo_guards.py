@@ -362,6 +362,28 @@ def test_remove_never_takes_a_model_no_entry_names(user, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("suffix", [".pt", ".json"])
+@pytest.mark.parametrize("target", ["kept", "other"])
+def test_remove_takes_a_symbolic_link_never_the_file_it_points_to(user, pair, capsys, suffix, target):
+    """mine.pt a link to another file of the zoo: remove deleted that file (the user's own "kept", or
+    entry "other"'s was kept and the link with it) and a later `zoo add --name mine` was refused."""
+    if target == "other":
+        zoo_edit.add_to_zoo(pair, name="other", protocol="p", training_data={}, metrics={})
+    else:
+        os.replace(user / f"mine{suffix}", user / f"kept{suffix}")
+    (user / f"mine{suffix}").unlink(missing_ok=True)
+    (user / f"mine{suffix}").symlink_to(f"{target}{suffix}")
+    before = (user / f"{target}{suffix}").read_bytes()
+    if target == "kept":  # other.json names "other", so mine's recorded sha256 is not its
+        assert cli(["zoo", "verify"], capsys)[0] == 0  # the entry loads through the link
+    assert cli(["zoo", "remove", "mine"], capsys)[0] == 0
+    assert not os.path.lexists(user / f"mine{suffix}") and not os.path.lexists(user / "mine.pt")
+    assert (user / f"{target}{suffix}").read_bytes() == before
+    code, _, err = cli(["zoo", "add", str(pair), "--name", "mine"], capsys)
+    assert (code, err) == (0, "") and "mine" in zoo.read_manifest(user)
+    assert not (user / f"mine{suffix}").is_symlink()
+
+
+@pytest.mark.parametrize("suffix", [".pt", ".json"])
 @pytest.mark.parametrize("replace", [[], ["--replace"]])
 def test_add_never_replaces_a_file_no_entry_of_that_name_owns(user, pair, capsys, suffix, replace):
     """A file of the user's named like the new entry's weights or config (theirs.pt, theirs.json) was
