@@ -189,7 +189,9 @@ def _report(runs: list[Run], shared: list[Identity]) -> dict[str, Any]:
     base = runs[0]
     groups = []
     grouped = groups_of(shared)
-    order = {method: i for i, method in enumerate(dict.fromkeys(g[0] for g in grouped))}  # the plan's methods
+    # a sweep's plan first, then the order its episodes came in: a method it did not plan after those it did
+    seen = dict.fromkeys(g[0] for g in grouped)
+    order = {method: (base.plan.get(method, len(base.plan)), i) for i, method in enumerate(seen)}
     for group in sorted(grouped, key=lambda g: (order[g[0]], g[2], g[1])):
         identities = grouped[group]
         sides = {run.label: side([run.outcomes[k] for k in identities]) for run in runs}

@@ -96,6 +96,9 @@ class Run:
     # per group, the [mpc] keys some of its episodes' controller does not read (pipelines.loop.unread)
     unread: dict[Group, set[str]] = field(default_factory=dict)
     commits: list[str] = field(default_factory=list)
+    # a sweep's groups (case folded method, or cell with --by-cell) in its sweep.json plan's order, whatever
+    # order its parallel workers finished them in; empty for other runs, whose order is their episodes'
+    plan: dict[str, int] = field(default_factory=dict)
 
 
 def crowd_identity(record: Mapping[str, Any], by_cell: bool = False) -> Identity:
@@ -144,7 +147,7 @@ def load_run(label: str, path: Path, progress: bool | None = False, by_cell: boo
         path = path.parent
     if by_cell and not (path / EPISODES_FILE).is_file():
         raise PipelineError(f"{label}: {path} is no sweep folder: --by-cell pairs sweeps' episodes by cell")
-    records, commits, twice = _source(label, path, progress)
+    records, commits, cells, twice = _source(label, path, progress)
     run = Run(label, path, commits=commits)
     kinds: dict[frozenset[str], frozenset[str]] = {}  # one ``added`` set per kind of record, not per episode
     configs: set[tuple[Group, str]] = set()
@@ -174,26 +177,33 @@ def load_run(label: str, path: Path, progress: bool | None = False, by_cell: boo
     if not run.outcomes:
         log = path / EPISODES_FILE
         raise PipelineError(f"{label}: {log if log.is_file() else path} holds no episode")
+    for cell in cells:  # read with the records
+        name = cell.get("key" if by_cell else "method")
+        if isinstance(name, str):
+            run.plan.setdefault(name.casefold(), len(run.plan))
     return run
 
 
-def _source(label: str, path: Path, progress: bool | None) -> tuple[Iterable[dict[str, Any]], list[str], str]:
-    """``path``'s records, the commits that made them, and what to do when two share a crowd."""
+def _source(
+    label: str, path: Path, progress: bool | None
+) -> tuple[Iterable[dict[str, Any]], list[str], list[dict[str, Any]], str]:
+    """``path``'s records, the commits that made them, the cells a sweep planned, and what to do when two
+    share a crowd."""
     if path.is_file() and not path.name.endswith((".mcap", ".mcap" + UNFINISHED_SUFFIX)):
         records, commits = simulate_records(path)
-        return records, commits, "its episodes repeat a crowd"
+        return records, commits, [], "its episodes repeat a crowd"
     if not path.exists():
         raise PipelineError(f"{label}: {path} does not exist ({SOURCES})")
     if path.is_dir() and (path / EPISODES_FILE).is_file():
-        scanned, commits = sweep_records(path)  # its commits once every record is read
-        return scanned, commits, "its cells are not told apart by method (use --by-cell)"
+        scanned, commits, cells = sweep_records(path)  # its commits and cells once every record is read
+        return scanned, commits, cells, "its cells are not told apart by method (use --by-cell)"
     if path.is_dir() and not _holds_recordings(path):
         raise PipelineError(
             f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one) and no "
             ".mcap recordings"
         )
     records, commits = recording_records(path, label, progress)
-    return records, commits, "compare each folder as a run of its own"
+    return records, commits, [], "compare each folder as a run of its own"
 
 
 def _holds_recordings(folder: Path) -> bool:

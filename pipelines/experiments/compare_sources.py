@@ -24,27 +24,38 @@ from predictors.progress import progress_bar
 METRICS_TOPIC: Final = "/episode/metrics"
 
 
-def sweep_records(path: Path) -> tuple[Iterator[dict[str, Any]], list[str]]:
+def sweep_records(path: Path) -> tuple[Iterator[dict[str, Any]], list[str], list[dict[str, Any]]]:
     """The records of the sweep folder ``path``, read as its report reads them and left as they are (a sweep
-    still writing it may hold a torn last line, passed over), and the code of the runs they name, oldest
-    first: filled once every record was read, since a run line no record names (a run stopped before its
-    first episode, a copied ``--reuse`` line whose records a kill cut off) made none of them."""
+    still writing it may hold a torn last line, passed over), the code of the runs they name, oldest first,
+    and the cells those runs planned, in their plan's order (the newest run's first, as the sweep's report
+    goes by its last run): both filled once every record was read, since a run line no record names (a run
+    stopped before its first episode, a copied ``--reuse`` line whose records a kill cut off) made none of
+    them."""
     commits: list[str] = []
+    cells: list[dict[str, Any]] = []
 
     def records() -> Iterator[dict[str, Any]]:
         named: set[int | None] = set()
         for _, _, record in episode_log(path).scan(repair=False):
             named.add(run_number(record))
             yield record
-        commits.extend(_sweep_commits(path, named))
+        lines = [line for line in _run_lines(path, named) if isinstance(line, dict)]
+        for line in lines:
+            text = commit_text(line.get("code"))
+            if text is not None and text not in commits:
+                commits.append(text)
+        for line in reversed(lines):  # workers append episodes as they finish, out of the plan's order
+            planned = line.get("cells")
+            if isinstance(planned, list):
+                cells.extend(cell for cell in planned if isinstance(cell, dict))
 
-    return records(), commits
+    return records(), commits, cells
 
 
-def _sweep_commits(path: Path, named: set[int | None]) -> list[str]:
-    """The code each run line of ``path``'s sweep.json that a record ``named`` ran ("abc123def456+dirty"),
-    each once; every line's where a record names no run (older sweeps); none where the file is missing or
-    unreadable (the episodes are still compared; a damaged file said so)."""
+def _run_lines(path: Path, named: set[int | None]) -> list[Any]:
+    """The run lines of ``path``'s sweep.json that a record ``named`` ran; every line where a record names
+    no run (older sweeps); none where the file is missing or unreadable (the episodes are still compared; a
+    damaged file said so)."""
     if not (path / SWEEP_FILE).exists():
         return []
     try:
@@ -52,12 +63,7 @@ def _sweep_commits(path: Path, named: set[int | None]) -> list[str]:
     except (PipelineError, OSError) as exc:  # `sweep --report-only` refuses it: compare goes on, saying so
         print(f"note: {exc}; its episodes are compared without the code they ran", file=sys.stderr)
         return []
-    found: list[str] = []
-    for line in runs_named(runs, named):
-        text = commit_text(line.get("code") if isinstance(line, dict) else None)
-        if text is not None and text not in found:
-            found.append(text)
-    return found
+    return runs_named(runs, named)
 
 
 def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:

@@ -186,6 +186,32 @@ def test_by_cell_pairs_sweeps_columns_of_one_cell_whatever_their_labels(tmp_path
     )
 
 
+@pytest.mark.parametrize("by_cell", [[], ["--by-cell"]])
+def test_a_sweeps_methods_are_listed_in_its_plans_order(tmp_path, capsys, by_cell):
+    """`--vary mpc.d_min=0.6,0.65,0.7` run by parallel workers logs 0.65's episodes first: the table and the
+    plot listed the methods as their episodes came. A sweep lists them as sweep.json plans its cells; a
+    sweep.json without them (older sweeps) keeps the order the episodes came in."""
+    values = ["0.6", "0.65", "0.7"]
+    records = []
+    for i, o in enumerate(BASE):
+        for value in ("0.65", "0.7", "0.6"):  # as the workers finished them
+            record = _record(i, *o, method=f"CMPC mpc.d_min={value}")
+            cell = f"{record['cell']}-mpc.d_min={value}"
+            records.append({**record, "cell": cell, "key": record["key"].replace(record["cell"], cell)})
+    cells = {r["cell"]: {"key": r["cell"], "method": r["method"], "n_humans": 7} for r in records}
+    planned = sorted(cells.values(), key=lambda c: values.index(c["method"].rsplit("=")[-1]))
+    code = {"commit": "0123456789abcdef", "dirty": False}
+    for name, line in (("planned", {"code": code, "cells": planned}), ("unplanned", {"code": code})):
+        path = _sweep(tmp_path / name, records)
+        (path / "sweep.json").write_text(json.dumps({"experiment": "table2", "runs": [line]}))
+        out = tmp_path / f"{name}.json"
+        assert main(["compare", f"a={path}", f"b={path}", "--json", str(out), *by_cell]) == 0
+        methods = [g["method"].rsplit("=")[-1] for g in json.loads(out.read_text())["groups"]]
+        assert methods == (values if name == "planned" else ["0.65", "0.7", "0.6"])
+        rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| CMPC")]
+        assert [row.split(" | ")[0].rsplit("=")[-1] for row in rows[::2]] == methods
+
+
 def test_expect_identical_names_what_differs(tmp_path, capsys):
     a = _sweep(tmp_path / "a", [_record(i, *o) for i, o in enumerate(BASE)])
     changed = [_record(i, *o, min_distance=0.9 if i == 2 else 1.0) for i, o in enumerate(BASE)]
