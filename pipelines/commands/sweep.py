@@ -279,15 +279,9 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         check_plan(experiment, cfg)  # a plan whose every episode would fail is not fine
         check_first_episodes(tasks)
-        print(f"{experiment.title}: {len(cells)} cells x {config.episodes_per_cell} episodes = {len(tasks)}")
-        width = max(22, *(len(cell.method) for cell in cells))  # --vary's labels are longer
-        for cell in cells:
-            print(f"  {cell.method:>{width}}  {cell.n_humans} humans  {cell.key}")
-        if args.reuse is not None:
-            from pipelines.experiments.reuse import taken
+        from pipelines.commands.sweep_dry_run import print_plan
 
-            found = taken(args.reuse, out, tasks, progress=config.progress)
-            print(f"--reuse: {len(found.runs_there)} of them to take from {args.reuse}")
+        print_plan(config, cells, tasks, args.reuse)
         return 0
 
     status = 0

@@ -7,14 +7,36 @@ predictors, two margin sets or two crowds).
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from pipelines.errors import PipelineError
-from pipelines.experiments.log import EPISODES_FILE
+from pipelines.experiments.log import EPISODES_FILE, episode_log
 from pipelines.experiments.run_lines import run_number
 from pipelines.experiments.tasks import Cell, EpisodeTask
 from pipelines.plain_json import plain
+
+
+def read_recorded(
+    out: Path,
+    tasks: list[EpisodeTask],
+    progress: bool | None,
+    *,
+    repair: bool = False,
+    records: Callable[[int, bytes, dict[str, Any]], None] | None = None,
+) -> ResumeChecks:
+    """Which of ``tasks`` the log of ``out`` holds, as a resume reads it (a record at a time, a bar when
+    ``progress``) and checked (``ResumeChecks.check``): what a resume runs is the rest. ``repair``: cut a torn
+    last line off the log (only the sweep holding its lock may); ``records``: called with each record as
+    ``EpisodeLog.scan`` gives it."""
+    recorded = ResumeChecks(out, tasks)
+    for offset, line, record in episode_log(out).scan_shown(progress, repair=repair):
+        recorded.add(record)
+        if records is not None:
+            records(offset, line, record)
+    recorded.check()
+    return recorded
 
 
 class ResumeChecks:

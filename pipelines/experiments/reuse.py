@@ -111,13 +111,10 @@ def taken(
     ``repair``: cut a torn last line off ``out``'s log (only the sweep holding its lock may), which the
     records taken would otherwise follow. ``progress``: a bar of each log read (None: on a terminal only), of
     100,000 records ~10 s each."""
-    from pipelines.experiments.resume_checks import ResumeChecks
+    from pipelines.experiments.resume_checks import ResumeChecks, read_recorded
 
     check_source(source, out)
-    own = ResumeChecks(out, list(tasks))
-    for _, _, record in episode_log(out).scan_shown(progress, repair=repair):
-        own.add(record)
-    own.check()
+    own = read_recorded(out, list(tasks), progress, repair=repair)
     left = {t.key for i, t in enumerate(tasks) if not own.recorded(i)}
     checks = ResumeChecks(source, list(tasks), reused=True)
     there: dict[str, Any] = {}

@@ -43,7 +43,7 @@ from pipelines.experiments.log import (
     sweep_lock,
     write_whole,
 )
-from pipelines.experiments.resume_checks import ResumeChecks
+from pipelines.experiments.resume_checks import read_recorded
 from pipelines.experiments.reuse import check_source, seed_from
 from pipelines.experiments.run_lines import lost_runs, split_lost, write_sweep_file
 from pipelines.experiments.sweep_config import SweepConfig
@@ -221,12 +221,7 @@ def run_sweep(
     with sweep_lock(out, made):
         meta = _sweep_meta(out, config, tasks)
         log = episode_log(out)
-        recorded = ResumeChecks(out, tasks)
-        for offset, line, record in log.scan_shown(config.progress):  # a record at a time: not held
-            recorded.add(record)
-            if records is not None:
-                records(offset, line, record)
-        recorded.check()
+        recorded = read_recorded(out, tasks, config.progress, repair=True, records=records)
         note = recorded.outside_note()
         if note is not None:
             print(note, file=sys.stderr)

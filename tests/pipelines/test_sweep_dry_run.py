@@ -1,0 +1,48 @@
+"""``crowdmpc sweep --dry-run`` over a sweep folder, a resume's preview: it listed the planned cells but not
+how many of their episodes the folder's log records, nor how many a resume would run."""
+
+from __future__ import annotations
+
+from pipelines.cli import main
+from pipelines.experiments.log import EPISODES_FILE
+from tests.cli_calls import run_cli
+
+ARGV = ["sweep", "--experiment", "baselines", "--backend", "inline", "--no-progress"]
+
+
+def test_a_dry_run_over_a_sweep_says_what_is_recorded_and_what_a_resume_runs(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    assert main([*ARGV, "--humans", "3", "--episodes-per-cell", "1", "--out", str(out)]) == 0
+    log = (out / EPISODES_FILE).read_bytes()
+    # a torn last line is what a resume cuts off and runs again: not recorded, and the dry run leaves it
+    (out / EPISODES_FILE).write_bytes(log + b'{"key": "torn')
+    code, stdout, _ = run_cli(
+        capsys, *ARGV, "--episodes-per-cell", "3", "--humans", "3,4", "--dry-run", "--out", str(out)
+    )
+    assert code == 0 and (out / EPISODES_FILE).read_bytes() == log + b'{"key": "torn'
+    cells = [line.split() for line in stdout.splitlines() if " humans " in line]
+    assert [(words[1], words[3], words[-1][-5:]) for words in cells] == [
+        ("3", "1/3", "h3-r3"),
+        ("3", "1/3", "h3-r3"),
+        ("4", "0/3", "h4-r3"),
+        ("4", "0/3", "h4-r3"),
+    ]
+    assert stdout.splitlines()[-1] == (
+        f"2 of 12 planned episodes recorded in {out / EPISODES_FILE}; a resume runs 10"
+    )
+
+
+def test_a_dry_run_into_a_new_folder_lists_the_cells_alone(tmp_path, capsys):
+    code, stdout, _ = run_cli(
+        capsys,
+        *ARGV,
+        "--humans",
+        "3",
+        "--episodes-per-cell",
+        "2",
+        "--dry-run",
+        "--out",
+        str(tmp_path / "new"),
+    )
+    assert code == 0 and "recorded" not in stdout
+    assert [len(line.split()) for line in stdout.splitlines()[1:]] == [4, 4]  # label, crowd size, key
