@@ -330,6 +330,10 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
     # a report of the sweep in --out: its recorded config beneath what is typed
     cfg = report_config(args, _options()) if args.report_only else command_config(args, _options())
     settings = cfg.sweep
+    given = Path(settings.out or "")
+    if given.name == SWEEP_FILE and given.is_file():  # as `config show --from-sweep` says it
+        where = f"{cfg.label('sweep', 'out')} {given}"
+        raise PipelineError(f"{where}: that is a sweep's file; give its folder, {given.parent}")
     # a report reads its experiment in --out's sweep.json: a folder without one is named before the option
     for key in ("out", "experiment") if args.report_only else ("experiment", "out"):
         if getattr(settings, key) is None:

@@ -322,6 +322,20 @@ def test_a_report_of_a_folder_without_a_sweep_names_the_folder_not_the_experimen
     )
 
 
+@pytest.mark.parametrize(
+    "mode",
+    [["--report-only"], ["--report-only", *ARGV[1:3]], ARGV[1:3] + ["--dry-run"]],
+    ids=["report", "report-of-experiment", "dry-run"],
+)
+def test_a_sweeps_file_given_for_its_folder_is_named_as_config_show_names_it(good, capsys, mode):
+    """--report-only --out DIR/sweep.json said the file "holds no sweep (sweep.json)", and a dry run listed
+    the plan as of a new folder, where `config show --from-sweep` says to give its folder."""
+    assert main(["sweep", *mode, "--out", str(good / SWEEP_FILE)]) == 2
+    assert capsys.readouterr().err == (
+        f"crowdmpc sweep: error: --out {good / SWEEP_FILE}: that is a sweep's file; give its folder, {good}\n"
+    )
+
+
 def test_report_only_needs_no_gcc_whatever_jit_says(tmp_path, capsys, monkeypatch):
     """--report-only runs nothing, yet --jit on (as a sweep's recorded config states it) was refused without
     gcc: "--jit on needs gcc on the PATH", on the machine the report was to be written on."""
