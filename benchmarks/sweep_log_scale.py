@@ -7,8 +7,9 @@ writes a sweep directory holding that many records, each a copy of a real one un
 (cell, scenario, seed as the schedule gives them), so that every line passes the log's checks, and sweep.json
 with the plan's episodes per cell. In that directory, each in a fresh process: (a) ``crowdmpc sweep
 --report-only`` (pipelines/experiments/log.py, summary, report, tables, the plots: the tables and plots of
-every cell) and (b) a resume of the whole plan (``run_sweep``: loads the log, checks the finished episodes'
-predictors and margins, finds nothing to run). Prints each one's wall time and peak resident memory (the
+every cell), (b) a resume of the whole plan (``run_sweep``: loads the log, checks the finished episodes'
+predictors and margins, finds nothing to run) and (c) ``crowdmpc compare a=DIR b=DIR`` (both runs held at
+once, every episode paired). Prints each one's wall time and peak resident memory (the
 child's own, as benchmarks/review_memory.py reads it) and the log's size. The machine is shared: the memory
 figures do not depend on its load, the times do. A million records take ~2.6 GB of disk for table2. A child
 that fails prints its own error.
@@ -115,6 +116,18 @@ def report_code(experiment: str) -> str:
     )
 
 
+# (c) compare of the folder with itself: two runs of every record held at once, as compare holds them
+COMPARE = (
+    "import contextlib, io, sys\n"
+    "from pipelines.cli import main\n"
+    "argv = ['compare', 'a=' + sys.argv[1], 'b=' + sys.argv[1], '--no-progress']\n"
+    "with contextlib.redirect_stdout(io.StringIO()):\n"
+    "    status = main(argv)\n"
+    "if status:\n"
+    "    sys.exit(status)\n"
+)
+
+
 def measured(code: str, *args: str) -> tuple[float, float, str]:
     """review_memory's ``peak``; a child that fails shows its own error, not only its exit status."""
     try:
@@ -151,8 +164,9 @@ def main(argv: list[str] | None = None) -> int:
             seed = Path(tmp) / "seed"
             seed_sweep(seed, args.experiment, humans)
             print(f"{args.experiment}, {cells} cells at {humans} humans; records copied from a real sweep")
-            head = ("episodes", "log MB", "report s", "report MB", "resume s", "resume MB")
-            widths = (9, 8, 9, 10, 9, 10)
+            head = ("episodes", "log MB", "report s", "report MB", "resume s", "resume MB", "compare s")
+            head += ("compare MB",)
+            widths = (9, 8, 9, 10, 9, 10, 10, 11)
             print(" ".join(f"{h:>{w}}" for h, w in zip(head, widths, strict=True)))
             read_from = ""
             for episodes in sorted(set(args.episodes)):
@@ -161,6 +175,7 @@ def main(argv: list[str] | None = None) -> int:
                 size = multiply(seed, folder, per_cell)
                 report_mb, report_s, read_from = measured(report_code(args.experiment), str(folder))
                 resume_mb, resume_s, _ = measured(RESUME, args.experiment, str(folder), str(per_cell), humans)
+                compare_mb, compare_s, _ = measured(COMPARE, str(folder))
                 row = {
                     "episodes": per_cell * cells,
                     "log_mb": size / 1e6,
@@ -168,11 +183,13 @@ def main(argv: list[str] | None = None) -> int:
                     "report_peak_mb": report_mb,
                     "resume_s": resume_s,
                     "resume_peak_mb": resume_mb,
+                    "compare_s": compare_s,
+                    "compare_peak_mb": compare_mb,
                 }
                 rows.append(row)
                 print(
                     f"{row['episodes']:9d} {row['log_mb']:8.1f} {report_s:9.1f} {report_mb:10.0f} "
-                    f"{resume_s:9.1f} {resume_mb:10.0f}"
+                    f"{resume_s:9.1f} {resume_mb:10.0f} {compare_s:10.1f} {compare_mb:11.0f}"
                 )
                 shutil.rmtree(folder)  # the next, larger log is not written beside this one
             print(f"peak memory: {PEAK_SOURCES[read_from]}")

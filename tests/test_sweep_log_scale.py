@@ -46,7 +46,8 @@ def test_a_small_run_prints_and_writes_its_figures(tmp_path, capsys):
     assert sweep_log_scale.main(argv) == 0
     (row,) = json.loads(out.read_text())["rows"]
     assert row["episodes"] == 4 and row["report_peak_mb"] > 0 and row["resume_peak_mb"] > 0
-    assert "report MB" in capsys.readouterr().out
+    assert row["compare_peak_mb"] > 0 and row["compare_s"] > 0
+    assert "compare MB" in capsys.readouterr().out
 
 
 def test_more_episodes_a_cell_than_a_sweep_takes_are_refused_before_any_run(capsys):

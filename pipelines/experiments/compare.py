@@ -64,7 +64,7 @@ Group = tuple[str, int, int]  # method (case folded), humans, robots
 Identity = tuple[Any, ...]  # Group + scenario, seed and the crowd's settings
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # one per episode: a million a run at 1000x Table II
 class Outcome:
     """What one episode of a run is compared by. ``digest`` stands for every metric it recorded, ``core`` for
     those every record has (not crowdsim.metrics' ``ADDED_FIELDS``, which ``added`` names where present)."""
@@ -107,7 +107,7 @@ def crowd_identity(record: Mapping[str, Any], by_cell: bool = False) -> Identity
     ``by_cell``: a sweep's episode is its cell's (``cell``, the key that names everything that makes its
     episodes), not its method label's: a --vary column pairs with the plain sweep's column of that cell."""
     name = record["cell"] if by_cell else record["method"]
-    group: Group = (str(name).casefold(), int(record["n_humans"]), int(record["n_robots"]))
+    group: Group = (sys.intern(str(name).casefold()), int(record["n_humans"]), int(record["n_robots"]))
     config = record.get("config")
     env = config.get("env") if isinstance(config, dict) else None
     if not isinstance(env, dict):
@@ -115,8 +115,9 @@ def crowd_identity(record: Mapping[str, Any], by_cell: bool = False) -> Identity
     values = {name: env.get(name, UNRECORDED.get(name)) for name in CROWD_SETTINGS}
     if isinstance(values["crowd"], str):  # a replay and its reactive replay draw the same people from a seed
         values["crowd"] = values["crowd"].removesuffix(REACTIVE_SUFFIX)
-    crowd = tuple(json.dumps(values[name], sort_keys=True) for name in CROWD_SETTINGS)
-    return (*group, str(record["scenario"]), int(record["seed"]), *crowd)
+    # interned: the same few strings in every identity, not a copy each (a million records a run)
+    crowd = tuple(sys.intern(json.dumps(values[name], sort_keys=True)) for name in CROWD_SETTINGS)
+    return (*group, sys.intern(str(record["scenario"])), int(record["seed"]), *crowd)
 
 
 # The crowd settings added after sweeps began to record their config, as every episode before ran them: the

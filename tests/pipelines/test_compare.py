@@ -476,3 +476,16 @@ def test_a_replay_pairs_with_its_reactive_replay_and_no_other_crowd():
 
     assert identity("eth_test") == identity("eth_test_reactive") != identity("hotel_test")
     assert identity("hotel_test_reactive") == identity("hotel_test") != identity("orca")
+
+
+def test_episodes_of_one_cell_share_their_identitys_strings():
+    """A run holds every episode's identity (a million at 1000x Table II): its strings are one object per
+    value, not a copy per record as each line's JSON decodes them (908 -> 530 bytes a record)."""
+    from pipelines.experiments.compare import crowd_identity
+
+    first, second = (json.loads(json.dumps(_record(i, True, False, 15.0))) for i in (0, 2))  # fresh strings
+    one, two = crowd_identity(first), crowd_identity(second)
+    assert one[4] != two[4]  # the seeds
+    shared = [i for i, part in enumerate(one) if isinstance(part, str)]
+    assert len(shared) >= 7 and all(one[i] is two[i] for i in shared)
+    assert not hasattr(Outcome(True, False, False, 1.0, "k", b"", b"", frozenset()), "__dict__")
