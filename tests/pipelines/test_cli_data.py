@@ -470,11 +470,13 @@ def test_an_interrupted_synth_never_leaves_data_beside_another_provenance(monkey
         code, _, err = run(capsys, *argv(seed, *extra))
         monkeypatch.setattr(os, "replace", real_replace)
         assert code != 0 and err.strip().splitlines()[-1] == "crowdmpc data: interrupted"
-        assert sorted(p.name for p in tmp_path.iterdir()) == ["s.synth.json"]  # no old data, no temporary
+        left = sorted(p.name for p in tmp_path.iterdir())
+        assert left == [".s.ndjson.synth.lock", "s.synth.json"]  # no old data, no temporary
         assert json.loads(provenance.read_text())["options"]["seed"] == int(seed)
         code, _, err = run(capsys, *argv(seed, *extra))  # the same command again
         assert code == 0, err
-        assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ndjson", "s.synth.json"] and matches()
+        left = sorted(p.name for p in tmp_path.iterdir())
+        assert left == [".s.ndjson.synth.lock", "s.ndjson", "s.synth.json"] and matches()
         assert out.read_text() == f"scenes of seed {seed}\n"
 
 
@@ -513,6 +515,43 @@ def test_synth_writes_its_provenance_under_a_temporary_name_of_its_own(monkeypat
             fixed.rmdir()
     # each run its own temporary, beside the provenance
     assert len(renamed) == len(set(renamed)) == 2 and all(p.parent == tmp_path for p in renamed)
+
+
+def test_a_second_synth_into_the_same_out_is_refused_while_the_first_runs(monkeypatch, tmp_path, capsys):
+    """Two synths into one --out finishing together could rename one's data over the other's after the other
+    had written its provenance: seed 1's scenes beside seed 2's provenance (another sha256). The second,
+    started here just before the first renames its data into place, is refused in one line; the first's data
+    and provenance match."""
+
+    def synthesize(out_path, episodes, n_humans, seed, **_options):
+        out_path.write_text(f"scenes of seed {seed}\n")
+        return {"scenes": 1}
+
+    monkeypatch.setitem(
+        sys.modules, "pipelines.experiments.synth", types.SimpleNamespace(synthesize=synthesize)
+    )
+    out, provenance = tmp_path / "s.ndjson", tmp_path / "s.synth.json"
+    argv = ["data", "synth", "--out", str(out), "--episodes", "1", "--humans", "2", "--replace", "--seed"]
+    real_replace = os.replace
+    started: list[bool] = []
+    second: list[tuple[int, str, str]] = []
+
+    def replace(src, dst):
+        if Path(dst) == out and not started:  # the first's provenance is written, its data not yet renamed
+            started.append(True)
+            with monkeypatch.context() as other:  # another process: its temporaries named by its own pid
+                other.setattr(os, "getpid", os.getppid)
+                second.append(run(capsys, *argv, "2"))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    assert main([*argv, "1"]) == 0
+    ((code, _, err),) = second
+    assert_one_line_error(code, err, f"another crowdmpc data synth is writing --out {out}")
+    assert out.read_text() == "scenes of seed 1\n"
+    document = json.loads(provenance.read_text())
+    assert document["options"]["seed"] == 1
+    assert document["sha256"] == hashlib.sha256(out.read_bytes()).hexdigest()
 
 
 @pytest.mark.parametrize("name", ["s.ndjson", "s.synth.json"])
