@@ -272,7 +272,18 @@ def read_sweep_file(
     "code; a new --out starts afresh)",
 ) -> dict[str, Any]:
     """sweep.json as written by ``run_sweep`` (an object with a list of runs), or an error naming it (and
-    ending with ``hint``)."""
+    ending with ``hint``). One larger than a zoo's documents may be is refused unread: a run line is a few
+    kB, and a file of gigabytes (not a sweep's) took the memory."""
+    from predictors.checkpoint import MAX_DOCUMENT_BYTES
+
+    try:
+        size = path.stat().st_size
+    except OSError:  # a missing or unreachable file: read_json_file says so
+        size = 0
+    if size > MAX_DOCUMENT_BYTES:
+        raise PipelineError(
+            f"{path}: {size} bytes, more than the {MAX_DOCUMENT_BYTES} a sweep file may have{hint}"
+        )
     meta = read_json_file(path, "a sweep file", hint)
     if not (isinstance(meta, dict) and isinstance(meta.get("runs", []), list)):
         raise PipelineError(f"{path}: not a sweep file (expected an object with a list of runs)")

@@ -62,6 +62,28 @@ def test_a_garbage_sweep_file_is_named_and_left_alone(tmp_path, capsys, content)
     assert (tmp_path / SWEEP_FILE).read_bytes() == content
 
 
+@pytest.mark.parametrize("argv", [[*ARGV, "--out", "{out}"], ["config", "show", "--from-sweep", "{out}"]])
+def test_an_oversized_sweep_file_is_refused_before_it_is_read(tmp_path, capsys, monkeypatch, argv):
+    """sweep.json was read whole, whatever its size, where a config, a manifest or a metrics file is
+    refused past its cap: a sweep file of gigabytes took the memory. The cap (64 MiB) is lowered here."""
+    from predictors import checkpoint
+
+    monkeypatch.setattr(checkpoint, "MAX_DOCUMENT_BYTES", 1 << 16)
+    document = '{"experiment": "baselines", "runs": [], "pad": ""}'
+    content = document.replace('""', '"' + "x" * ((1 << 16) + 1 - len(document)) + '"').encode()
+    assert len(content) == (1 << 16) + 1
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / SWEEP_FILE).write_bytes(content)
+    code = main([a.format(out=out) for a in argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert (
+        f"{out / SWEEP_FILE}: {len(content)} bytes, more than the {1 << 16} a sweep file may have" in err[0]
+    )
+    assert (out / SWEEP_FILE).read_bytes() == content
+
+
 @pytest.mark.parametrize("name", [SWEEP_FILE, EPISODES_FILE, CELLS_CSV, f"{SWEEP_FILE}.part"])
 def test_a_sweep_file_that_is_a_folder_is_named(tmp_path, name):
     """Named before anything is read or run (the OS's "Is a directory" named no option, and for cells.csv
