@@ -79,6 +79,7 @@ class Recording:
             raise SimulationError(f"recording {name!r}: rows must be a finite (R, 4) array with R >= 1")
         if isinstance(frame_step, bool) or not isinstance(frame_step, int) or frame_step < 1:
             raise SimulationError(f"recording {name!r}: frame_step must be an int >= 1, got {frame_step!r}")
+        _check_keys(name, rows[:, :2])
         frames = _grid(np.unique(rows[:, 0].astype(np.int64)), frame_step)
         people, person_of = np.unique(rows[:, 1].astype(np.int64), return_inverse=True)
         positions = np.full((len(frames), len(people), 2), np.nan)
@@ -244,6 +245,31 @@ def track_lengths(present: np.ndarray) -> np.ndarray:
     for k in range(1, len(present)):
         lengths[k] = np.where(present[k], lengths[k - 1] + 1, 0)
     return lengths
+
+
+def _check_keys(name: str, keys: np.ndarray) -> None:
+    """SimulationError for ``(frame, pedestrian)`` columns that are not whole numbers, or name one person
+    twice at one frame: the grid truncated 7.5 to 7 (two people's tracks merged into one) and kept the last
+    of two rows of a person at a frame. ``read_obsmat`` refuses both naming the file's line; this is for
+    every other caller (the TrajNet++ scene builder's ``_check_tracks`` says the same of its tracks)."""
+    bad = np.flatnonzero((keys != np.round(keys)).any(axis=1))
+    if bad.size:
+        raise SimulationError(
+            f"recording {name!r}: frame and pedestrian ids in rows must be integers: rows[{bad[0]}] has "
+            f"frame {float(keys[bad[0], 0])!r}, pedestrian {float(keys[bad[0], 1])!r} ({bad.size} of "
+            f"{len(keys)} rows)"
+        )
+    whole = keys.astype(np.int64)
+    _, first, inverse = np.unique(whole, axis=0, return_index=True, return_inverse=True)
+    first_of_key = first[inverse.ravel()]  # (R,) the first row with each row's (frame, pedestrian)
+    repeats = np.flatnonzero(first_of_key != np.arange(len(whole)))
+    if repeats.size:
+        row = repeats[0]
+        frame, person = whole[row].tolist()
+        raise SimulationError(
+            f"recording {name!r}: rows hold {repeats.size} duplicate (frame, pedestrian) rows; the first is "
+            f"rows[{row}]: frame {frame}, pedestrian {person}, already at rows[{first_of_key[row]}]"
+        )
 
 
 def _grid(frames: np.ndarray, step: int) -> np.ndarray:

@@ -42,6 +42,36 @@ def test_a_recording_holds_each_track_on_the_frame_grid_and_knows_its_gaps():
         Recording.from_rows("hotel", np.array(rows), frame_step=0)
 
 
+@pytest.mark.parametrize(
+    ("spoilt", "message"),
+    [
+        (
+            (6, 7, 9.0, 9.0),
+            "recording 'hotel': rows hold 1 duplicate (frame, pedestrian) rows; the first is rows[2]: "
+            "frame 6, pedestrian 7, already at rows[1]",
+        ),
+        (
+            (12, 7.5, 9.0, 9.0),
+            "recording 'hotel': frame and pedestrian ids in rows must be integers: rows[2] has frame 12.0, "
+            "pedestrian 7.5 (1 of 3 rows)",
+        ),
+        (
+            (12.5, 9, 9.0, 9.0),
+            "recording 'hotel': frame and pedestrian ids in rows must be integers: rows[2] has frame 12.5, "
+            "pedestrian 9.0 (1 of 3 rows)",
+        ),
+    ],
+    ids=["duplicate", "fractional-id", "fractional-frame"],
+)
+def test_rows_that_name_one_person_twice_at_a_frame_or_no_whole_frame_or_id_are_refused(spoilt, message):
+    """read_obsmat refuses these (naming the file's line), but from_rows kept the last of two rows of one
+    person at one frame, and truncated 7.5 to 7, merging two people's tracks into one."""
+    rows = np.array([(0, 7, 1.0, 2.0), (6, 7, 1.5, 2.0), spoilt])
+    with pytest.raises(SimulationError) as info:
+        Recording.from_rows("hotel", rows, frame_step=6)
+    assert str(info.value) == message
+
+
 def test_no_window_spans_jumps_off_the_grid_that_add_up_to_whole_steps():
     # ids shifted by 3 frames (6 -> 9) and back (9 -> 18): frames 6, 9, 18 span 12 = 2 steps, but are no two
     # steps of 0.4 s, and their replay would walk 0.2 s and 0.6 s of motion as 0.4 s each
