@@ -247,6 +247,8 @@ class CrowdNavEnv(gym.Env[np.ndarray, np.ndarray]):
             raise
 
     def _reset(self, seed: int | None, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
+        if isinstance(seed, bool):  # gymnasium seeds with it as an int (True ran seed 1); CrowdEnv refuses it
+            raise SimulationError(f"seed must be an int >= 0 or None, got {seed!r}")
         super().reset(seed=seed)
         defaults = {"scenario": self.scenario, "n_humans": self.n_humans, "n_robots": self.n_robots}
         chosen = episode_options(options, defaults, self.scene_limit, self.max_humans, self.max_robots)

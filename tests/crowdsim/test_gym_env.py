@@ -629,6 +629,21 @@ def test_a_reset_that_raises_leaves_no_episode_and_the_generator_as_it_was():
         assert tried.reset()[1]["seed"] == untried.reset()[1]["seed"]
 
 
+@pytest.mark.parametrize("seed", [True, False])
+def test_a_bool_seed_is_refused_as_crowdenv_refuses_it(seed):
+    """gymnasium takes a bool for an int, so reset(seed=True) ran seed 1 where CrowdEnv.reset(True, ...)
+    is refused; both refuse it, through the wrappers too, and the refused reset draws nothing."""
+    with pytest.raises(SimulationError, match=rf"^seed must be an int >= 0, got {seed}$"):
+        CrowdEnv().reset(seed, "circle", 5)
+    for env in (CrowdNavEnv(), gym.make(crowdsim.ENV_ID), VelocityControl(gym.make(crowdsim.ENV_ID))):
+        untried = CrowdNavEnv()
+        env.reset(seed=3)
+        untried.reset(seed=3)
+        with pytest.raises(SimulationError, match=rf"^seed must be an int >= 0 or None, got {seed}$"):
+            env.reset(seed=seed)
+        assert env.reset()[1]["seed"] == untried.reset()[1]["seed"]
+
+
 def test_the_velocity_gain_takes_numpy_numbers():
     assert VelocityControl(gym.make(crowdsim.ENV_ID), gain=np.float32(1.0)).gain == 1.0
 
