@@ -16,6 +16,7 @@ import functools
 import itertools
 import json
 import os
+import stat
 import sys
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -277,9 +278,14 @@ def read_sweep_file(
     from predictors.checkpoint import MAX_DOCUMENT_BYTES
 
     try:
-        size = path.stat().st_size
+        status = path.stat()
     except OSError:  # a missing or unreachable file: read_json_file says so
-        size = 0
+        status = None
+    if status is not None and not stat.S_ISREG(status.st_mode):  # a pipe's read waits for good
+        raise PipelineError(
+            f"{path}: not a sweep file (not a regular file: a folder, a device or a pipe){hint}"
+        )
+    size = 0 if status is None else status.st_size
     if size > MAX_DOCUMENT_BYTES:
         raise PipelineError(
             f"{path}: {size} bytes, more than the {MAX_DOCUMENT_BYTES} a sweep file may have{hint}"
@@ -317,6 +323,11 @@ def check_sweep_directory(out: Path, option: str = "--out") -> None:
             _refuse_link(entry)
             if name != MCAP_DIR and entry.is_dir():  # the OS's "Is a directory" named no option
                 raise PipelineError(f"{entry} is a directory where the sweep keeps a file; remove it")
+            if name != MCAP_DIR and not entry.is_file():  # a pipe's read or write waits for good
+                raise PipelineError(
+                    f"{entry} is not a regular file (a device or a pipe) where the sweep keeps a file; "
+                    "remove it"
+                )
     if (out / MCAP_DIR).is_dir():
         for root, dirs, files in os.walk(out / MCAP_DIR):  # a link is listed, never followed
             for name in sorted(dirs + files):

@@ -95,6 +95,27 @@ def test_a_sweep_file_that_is_a_folder_is_named(tmp_path, name):
         run_sweep(_config(tmp_path))
 
 
+@pytest.mark.parametrize("name", [SWEEP_FILE, EPISODES_FILE, f"{SWEEP_FILE}.part"])
+def test_a_sweep_file_that_is_a_pipe_is_named_not_waited_on(tmp_path, name):
+    """A sweep with a pipe for sweep.json waited for good on its read; its folder check now names it."""
+    if name != SWEEP_FILE:
+        (tmp_path / SWEEP_FILE).write_text('{"experiment": "baselines", "runs": []}')
+    os.mkfifo(tmp_path / name)
+    with pytest.raises(PipelineError, match=f"{tmp_path / name} is not a regular file .a device or a pipe."):
+        run_sweep(_config(tmp_path))
+
+
+def test_a_pipe_for_sweep_json_is_read_by_no_reader(tmp_path, capsys):
+    """read_sweep_file, which compare and --reuse read it with, names it rather than wait (compare goes on
+    without the code the episodes ran, as for a damaged one)."""
+    out = tmp_path / "sweep"
+    out.mkdir()
+    os.mkfifo(out / SWEEP_FILE)
+    (out / EPISODES_FILE).write_text("")
+    main(["compare", f"a={out}", f"b={out}"])
+    assert "sweep.json: not a sweep file (not a regular file" in capsys.readouterr().err
+
+
 def _damage(good: Path, tmp_path: Path, edit) -> Path:
     lines = (good / EPISODES_FILE).read_text().splitlines()
     records = [json.loads(line) for line in lines]
