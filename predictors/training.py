@@ -37,7 +37,7 @@ from predictors.nets.contract import (
     check_trainable,
     check_training_forward,
 )
-from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
+from predictors.nets.losses import VARIETY_ERRORS, gaussian_nll, l2_loss, variety_loss
 from predictors.nets.rollout import teacher_forced_rollout
 from predictors.nets.social_gan import Discriminator, DiscriminatorConfig
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
@@ -59,10 +59,13 @@ class OptimConfig:
     variety_k: int = 6  # GAN: samples per scene for the best-of-k loss [Social GAN: 20]
     adversarial_weight: float = 0.1  # GAN: weight of the generator's adversarial loss
     top_k: int = 20  # GAN: samples for the validation top-k ADE/FDE
+    # GAN: what the best-of-k loss picks and penalises per scene (nets.losses.variety_loss): "distance", the
+    # sample's mean Euclidean error (every shipped GAN), or "squared", its mean squared error [Social GAN]
+    variety_error: str = "distance"
 
     def __post_init__(self):
         for key, value in asdict(self).items():  # "1e-3" from a YAML file met a bare TypeError below
-            if key == "loss":
+            if key in ("loss", "variety_error"):
                 continue
             whole = key in ("step_size", "variety_k", "top_k")
             # numpy's scalars (a sweep's np.arange steps) as the nets' configs take them
@@ -72,6 +75,8 @@ class OptimConfig:
                 raise PredictorError(f"{key} must be finite, got {value!r}")
         if self.loss not in LOSSES:
             raise PredictorError(f"loss {self.loss!r} is not one of {list(LOSSES)}")
+        if self.variety_error not in VARIETY_ERRORS:
+            raise PredictorError(f"variety_error {self.variety_error!r} is not one of {list(VARIETY_ERRORS)}")
         if self.lr <= 0 or self.weight_decay < 0 or self.step_size < 1 or not 0 < self.gamma <= 1:
             raise PredictorError(
                 f"need lr > 0, weight_decay >= 0, step_size >= 1 and 0 < gamma <= 1, got {asdict(self)}"
@@ -301,7 +306,7 @@ class GANModule(_PredictorModule):
         truth, valid = primary_targets(batch)
         if stage == "train":
             samples = self._generate(batch, self.optim.variety_k, teacher_forcing=True)
-            variety = variety_loss(samples, truth, valid)
+            variety = variety_loss(samples, truth, valid, self.optim.variety_error)
             fake_logits = self.discriminator(self._trajectory(batch, samples[0]))
             adversarial = F.binary_cross_entropy_with_logits(fake_logits, torch.ones_like(fake_logits))
             return {

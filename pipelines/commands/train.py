@@ -26,6 +26,9 @@ from pipelines.commands.train_data import (
 )
 from pipelines.commands.train_epochs import DEFAULT_EPOCHS, check_more_epochs, record_epochs, take_run_epochs
 from pipelines.commands.train_net import (
+    check_variety_error,
+    check_variety_error_applies,
+    loss_options,
     net_config_of,
     resumed_net_config,
     training_loss,
@@ -158,7 +161,7 @@ def _net_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _optimisation_options(parser: argparse.ArgumentParser) -> None:
-    """How long and how fast: epochs, batches, learning rate and its decay, the loss."""
+    """How long and how fast: epochs, batches, learning rate and its decay, the loss (``train_net``)."""
     parser.add_argument(
         "--epochs",
         type=int,
@@ -205,14 +208,7 @@ def _optimisation_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="epochs per 10x learning-rate decay (default 10)" + RESUMED,
     )
-    parser.add_argument(
-        "--loss",
-        choices=("gaussian", "l2"),
-        default=None,
-        help="training loss of a net with a Gaussian head: gaussian (its negative log-likelihood) or l2 (on "
-        "its mean); a point head trains on l2 only, social_gan on its variety + adversarial loss (default: "
-        "gaussian for Gaussian heads, l2 for point heads; with --resume, the run's)",
-    )
+    loss_options(parser, RESUMED)
 
 
 def model_name(text: str) -> str:
@@ -248,7 +244,8 @@ def default_name(model: str, pooling: str | None, dataset: str, explicit_files: 
 
 
 def _check_numbers(args: argparse.Namespace) -> None:
-    """Every number of the command line, before Lightning is imported (it prints a banner) or a file read."""
+    """Every number of the command line (and --variety-error, which a resume may take from a damaged file),
+    before Lightning is imported (it prints a banner) or a file read."""
     if args.lr is not None and not (math.isfinite(args.lr) and 0 < args.lr <= MAX_LR):
         raise PipelineError(f"--lr must be a finite number in (0, {MAX_LR:g}], got {args.lr}")
     # Upper bounds far above any sensible run, so that a typo cannot ask for days or for all the memory:
@@ -265,6 +262,7 @@ def _check_numbers(args: argparse.Namespace) -> None:
             raise PipelineError(f"{option} must be in 1..{high}, got {value}")
     if args.seed is not None and not 0 <= args.seed < 2**32:  # Lightning makes one outside numpy's range 0
         raise PipelineError(f"--seed must be in 0..{2**32 - 1}, got {args.seed}")
+    check_variety_error(args)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -272,6 +270,7 @@ def run(args: argparse.Namespace) -> int:
 
     _check_numbers(args)  # those typed; the ones a resume takes from its run are checked again below
     pooling, net_config = net_config_of(args)
+    check_variety_error_applies(args)  # as typed: a resume takes the run's (below), recorded for every kind
     explicit = args.train is not None or args.val is not None
     protocol_options(args, explicit)
     # `--name ''` (an unset shell variable) is refused by check_name, not taken for no name

@@ -35,7 +35,9 @@ def run_training(
     from predictors.models import model_kind
     from predictors.training import OptimConfig
 
-    optim = OptimConfig(lr=args.lr, step_size=args.step_size, loss=args.loss)
+    optim = OptimConfig(
+        lr=args.lr, step_size=args.step_size, loss=args.loss, variety_error=args.variety_error
+    )
     _prepare_process(args.seed)
     module, best_path, elapsed, ended = _fit(args, net_config, name, out, data_files[0], settings, optim)
     metrics = out / f"{name}.metrics.json"

@@ -1,6 +1,6 @@
 """``crowdmpc train``'s network: the net config the command line asks for (--model, --net-config,
---pooling, --hidden-dim) and the loss it trains on (--loss), checked before Lightning is imported or a data
-file read."""
+--pooling, --hidden-dim) and the loss it trains on (--loss, --variety-error), checked before Lightning is
+imported or a data file read."""
 
 from __future__ import annotations
 
@@ -13,6 +13,48 @@ from predictors.errors import PredictorError
 
 # --net-config is a JSON object of a few hyper-parameters; a longer text is no config anyone types.
 MAX_NET_CONFIG_CHARS = 65_536
+VARIETY_ERRORS = ("distance", "squared")  # predictors.nets.losses.VARIETY_ERRORS, without importing torch
+
+
+def loss_options(parser: argparse.ArgumentParser, resumed: str) -> None:
+    """--loss and --variety-error, with no parser default (``resumed``: train's note that a resume left
+    without one takes the run's)."""
+    parser.add_argument(
+        "--loss",
+        choices=("gaussian", "l2"),
+        default=None,
+        help="training loss of a net with a Gaussian head: gaussian (its negative log-likelihood) or l2 (on "
+        "its mean); a point head trains on l2 only, social_gan on its variety + adversarial loss (default: "
+        "gaussian for Gaussian heads, l2 for point heads; with --resume, the run's)",
+    )
+    parser.add_argument(
+        "--variety-error",
+        choices=VARIETY_ERRORS,
+        default=None,
+        help="social_gan's best-of-k variety loss per scene: the sample of least mean distance to the truth, "
+        "penalised by that distance (distance), or of least mean squared distance, penalised by it "
+        "(squared, Social GAN's own) (default distance)" + resumed,
+    )
+
+
+def check_variety_error(args: argparse.Namespace) -> None:
+    """PipelineError unless --variety-error is unset or one of ``VARIETY_ERRORS``: argparse's choices check
+    it typed, not as a resume takes it from its run's (damaged) file."""
+    if args.variety_error not in (None, *VARIETY_ERRORS):
+        raise PipelineError(
+            f"--variety-error must be one of {', '.join(VARIETY_ERRORS)}, got {args.variety_error!r}"
+        )
+
+
+def check_variety_error_applies(args: argparse.Namespace) -> None:
+    """PipelineError when --variety-error is typed for a net that trains no best-of-k loss (only a GAN's
+    ``GANModule`` reads it; any other would train as without it)."""
+    from predictors.models import model_kind
+
+    if args.variety_error is not None and not model_kind(args.model).adversarial:
+        raise PipelineError(
+            f"--variety-error does not apply to {args.model} (only a GAN trains on a best-of-k variety loss)"
+        )
 
 
 def net_config_of(args: argparse.Namespace, base: dict[str, Any] | None = None) -> tuple[str | None, Any]:

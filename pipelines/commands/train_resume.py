@@ -34,8 +34,9 @@ _NOUNS: Final[tuple[str, ...]] = ("net config", "data files")
 # the epochs in all, which a resume may change (train_epochs), and the files' hashes, which
 # train_data.check_resumed_data compares with a message of their own
 _NOT_COMPARED: Final[tuple[str, ...]] = ("data_dir", "epochs", "data_sha256")
-# settings a run's file holds since they were added, as a run that predates them ran: without early stop
-_ADDED_LATER: Final[dict[str, Any]] = {"patience": None}
+# settings a run's file holds since they were added, as a run that predates them ran: without early stop,
+# a GAN on the distance variety loss
+_ADDED_LATER: Final[dict[str, Any]] = {"patience": None, "variety_error": "distance"}
 # The options a resume takes from its run when they are not typed, and their defaults for a new run: the
 # parser's defaults are None, so that an option typed can be told from one left out (--batch-size 8 typed on
 # the resume of a run at 2 is refused; left out, the run's 2 goes on). Types as the run records them.
@@ -46,6 +47,7 @@ RUN_OPTIONS: Final[dict[str, Any]] = {
     "batching": "shuffled",
     "seed": 0,
     "patience": None,  # train every epoch (no early stop)
+    "variety_error": "distance",
 }
 _RECORDED_TYPES: Final[dict[str, tuple[type, ...]]] = {
     "lr": (float, int),
@@ -55,6 +57,7 @@ _RECORDED_TYPES: Final[dict[str, tuple[type, ...]]] = {
     "seed": (int,),
     "limit_batches": (int,),
     "patience": (int,),
+    "variety_error": (str,),
 }
 
 
@@ -103,6 +106,7 @@ def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: di
         "lr": args.lr,
         "step_size": args.step_size,
         "loss": args.loss,
+        "variety_error": args.variety_error,
         "seed": args.seed,
         "batch_size": args.batch_size,
         "batching": args.batching,
@@ -356,6 +360,7 @@ def checkpoint_settings(hyper: dict[str, Any], data: Any) -> dict[str, Any]:
         "model": hyper.get("model", "social_gan" if "discriminator_config" in hyper else None),
         "net_config": hyper.get("net_config"),
         **{k: optim.get(k) for k in ("lr", "step_size", "loss")},
+        "variety_error": optim.get("variety_error", "distance") if optim else None,  # as _ADDED_LATER
         "seed": data.get("seed"),
         "batch_size": data.get("batch_size"),
         # a data module from before --batching batched as "shuffled" does

@@ -12,6 +12,12 @@ import math
 
 import torch
 
+from predictors.errors import PredictorError
+
+# What one step's miss costs in the variety loss: its Euclidean distance, or that distance squared (Social
+# GAN's ``l2_loss(..., mode="raw")``)
+VARIETY_ERRORS = ("distance", "squared")
+
 
 def gaussian_nll(params: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     """Mean negative log-likelihood of ``target`` (..., 2) under the bivariate normals ``params`` (..., 5).
@@ -34,13 +40,24 @@ def l2_loss(mean: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> t
     return _weighted_mean(torch.linalg.vector_norm(mean - target, dim=-1), weight)
 
 
-def variety_loss(samples: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+def variety_loss(
+    samples: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, error: str = "distance"
+) -> torch.Tensor:
     """Best-of-k (Gupta et al. 2018): ``samples`` (k, B, T, 2), ``target`` (B, T, 2), ``weight`` (B, T).
 
-    For each scene only the sample closest to the truth (mean displacement error) is penalised.
+    For each scene only the sample closest to the truth is penalised, by its error over the weighted steps
+    summed and divided by the weights' sum (Social GAN's loss mask). ``error`` "distance" takes each step's
+    Euclidean distance (the sample of least displacement error, ADE); "squared" its square summed over x
+    and y, Social GAN's ``l2_loss(..., mode="raw")``, under which one large miss costs more than several
+    small ones of the same total distance. Social GAN's code applies it to the displacements and sums its
+    scenes; here both errors are of positions and averaged over the scenes, so that the batch size leaves
+    the balance with the (averaged) adversarial loss alone.
     """
-    error = torch.linalg.vector_norm(samples - target[None], dim=-1) * weight[None]
-    per_scene = error.sum(dim=-1) / weight.sum(dim=-1).clamp(min=1)[None]  # (k, B)
+    if error not in VARIETY_ERRORS:
+        raise PredictorError(f"variety error {error!r} is not one of {list(VARIETY_ERRORS)}")
+    miss = samples - target[None]
+    step = torch.linalg.vector_norm(miss, dim=-1) if error == "distance" else miss.square().sum(dim=-1)
+    per_scene = (step * weight[None]).sum(dim=-1) / weight.sum(dim=-1).clamp(min=1)[None]  # (k, B)
     return per_scene.min(dim=0).values.mean()
 
 

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from predictors.errors import PredictorError
-from predictors.nets.losses import gaussian_nll, l2_loss, variety_loss
+from predictors.nets.losses import VARIETY_ERRORS, gaussian_nll, l2_loss, variety_loss
 from predictors.nets.pooling import cell_weights
 from predictors.nets.social_gan import Discriminator, generator_config
 from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig, gaussian_head
@@ -154,6 +154,45 @@ def test_l2_and_variety_loss_hand_computed():
     samples = torch.stack([torch.full((1, 2, 2), 3.0), torch.tensor([[[0.3, 0.4], [0.0, 0.0]]])])
     # sample 0: mean distance 3 sqrt 2; sample 1: (0.5 + 0) / 2 = 0.25 -> the best counts
     assert variety_loss(samples, target, weight).item() == pytest.approx(0.25)
+
+
+def _variety_scenes() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Two scenes of five steps at the origin, two samples each, ``(samples, target, valid)``.
+
+    Scene 0, steps 0-3 valid: sample 0 misses by 2 m once (distance 2 / 4 = 0.5, squared 4 / 4 = 1), sample
+    1 by 0.6 m at each step (distance 2.4 / 4 = 0.6, squared 4 * 0.36 / 4 = 0.36) and by 100 m at the
+    masked step 4. Scene 1, steps 0-1 valid: sample 0 misses by 0.5 m once (0.25, squared 0.125), sample 1
+    by 1 m once (0.5, squared 0.5); both miss by 50 m at the masked steps."""
+    samples = torch.zeros(2, 2, 5, 2, dtype=torch.float64)
+    samples[0, 0, 0] = torch.tensor([1.2, 1.6], dtype=torch.float64)
+    samples[1, 0, :4] = torch.tensor([0.36, 0.48], dtype=torch.float64)
+    samples[1, 0, 4] = torch.tensor([60.0, 80.0], dtype=torch.float64)
+    samples[0, 1, 1] = torch.tensor([0.3, 0.4], dtype=torch.float64)
+    samples[1, 1, 0] = torch.tensor([0.6, 0.8], dtype=torch.float64)
+    samples[:, 1, 2:] = torch.tensor([30.0, 40.0], dtype=torch.float64)
+    valid = torch.tensor([[True] * 4 + [False], [True] * 2 + [False] * 3])
+    return samples, torch.zeros(2, 5, 2, dtype=torch.float64), valid
+
+
+def test_the_variety_errors_pick_different_samples_by_hand():
+    """Scene 0's one large miss is the nearest sample by mean distance (0.5 < 0.6) and the farthest by mean
+    squared error (1 > 0.36); scene 1 picks sample 0 either way. Each error over the valid steps only,
+    divided by their count, the two scenes averaged: (0.5 + 0.25) / 2 and (0.36 + 0.125) / 2."""
+    samples, target, valid = _variety_scenes()
+    assert variety_loss(samples, target, valid, "distance").item() == pytest.approx(0.375, abs=1e-12)
+    assert variety_loss(samples, target, valid, "squared").item() == pytest.approx(0.2425, abs=1e-12)
+    # float weights weigh the steps as the mask does
+    assert variety_loss(samples, target, valid.double(), "squared").item() == pytest.approx(0.2425, abs=1e-12)
+
+
+def test_the_variety_loss_defaults_to_the_distance_every_shipped_gan_trained_on():
+    samples, target, valid = _variety_scenes()
+    assert variety_loss(samples, target, valid).item() == pytest.approx(0.375, abs=1e-12)
+    assert VARIETY_ERRORS == ("distance", "squared")
+    with pytest.raises(
+        PredictorError, match=r"^variety error 'mse' is not one of \['distance', 'squared'\]$"
+    ):
+        variety_loss(samples, target, valid, "mse")
 
 
 def test_config_validation_names_the_bad_value():

@@ -15,6 +15,7 @@ from predictors.data.datamodule import TrajnetDataModule
 from predictors.data.windows import SceneBatch
 from predictors.errors import PredictorError
 from predictors.models import load_plugin
+from predictors.nets.losses import variety_loss
 from predictors.nets.social_attention import SocialAttention
 from predictors.nets.social_gan import generator_config
 from predictors.nets.social_gru import SocialGRU, SocialGRUConfig
@@ -26,6 +27,7 @@ from predictors.training import (
     SocialLSTMModule,
     defines_forward,
     make_module,
+    primary_targets,
 )
 from tests.predictors.samples import write_walk_file
 
@@ -293,3 +295,40 @@ def test_loading_a_checkpoint_leaves_the_callers_random_stream(tiny_data, tmp_pa
     torch.manual_seed(123)
     make_module("social_lstm", SocialLSTMConfig(), OptimConfig())
     assert not torch.equal(after_load, runs) and torch.equal(after_load, torch.rand(3))
+
+
+def test_the_variety_error_is_checked_and_defaults_to_the_distance():
+    assert OptimConfig().variety_error == "distance"
+    with pytest.raises(
+        PredictorError, match=r"^variety_error 'mse' is not one of \['distance', 'squared'\]$"
+    ):
+        OptimConfig(variety_error="mse")
+    # hyper-parameters saved before the option (every shipped GAN's) train on the distance, as they did
+    before = {k: v for k, v in OptimConfig().__dict__.items() if k != "variety_error"}
+    module = GANModule(generator_config().to_dict(), before)
+    assert module.optim.variety_error == "distance"
+
+
+@pytest.mark.parametrize("error", ["distance", "squared"])
+def test_the_gan_trains_on_the_variety_error_of_its_config(error):
+    """The generator's variety term is variety_loss of the error asked for, over the samples it drew."""
+    config = (
+        OptimConfig(variety_k=3) if error == "distance" else OptimConfig(variety_k=3, variety_error=error)
+    )
+    module = make_module("social_gan", generator_config(), config)
+    assert isinstance(module, GANModule)
+    module.discriminator = FinalX()
+    steps = torch.arange(21, dtype=torch.float32)[None, :, None, None]
+    positions = torch.cat([0.4 * steps, 0.1 * steps**1.5], dim=-1)
+    batch = SceneBatch(
+        positions, torch.ones(1, 21, 1, dtype=torch.bool), torch.zeros(1, 2), torch.eye(2)[None], obs_len=9
+    )
+    torch.manual_seed(0)
+    out = module.model_step(batch, "train")
+    torch.manual_seed(0)
+    samples = module._generate(batch, 3, teacher_forcing=True)
+    truth, valid = primary_targets(batch)
+    expected = variety_loss(samples, truth, valid, error)
+    assert out["variety"].item() == pytest.approx(expected.item(), rel=1e-6)
+    other = variety_loss(samples, truth, valid, "squared" if error == "distance" else "distance")
+    assert out["variety"].item() != pytest.approx(other.item(), rel=1e-3)
