@@ -108,8 +108,8 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # zero makes every pair's penalty w_coll log(2) / mu wherever the agents are (mu = 1e-300 overflowed the cost
 # to inf and every solve failed); at 1e-3 it is 693 w_coll per pair, finite at every weight's bound. Eq. 7
 # weighs a robot on its goal by w_goal / delta: delta = 1e-300 overflowed it (a NaN gradient; Fatrop hung).
-# At 1e-40 the NLP stays far from overflow (mpc/step_data.py); 1e-12 also refused the configs of sweep
-# folders that had run well at 1e-13 (--report-only, config show --from-sweep).
+# At 1e-40 the NLP stays far from overflow (mpc/step_data.py). They guard the solver, so an NLP checks them as
+# it is built (mpc.nlp.check_solvable), and a run as it starts: not every MPCConfig (see there).
 MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, "")}
 # The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
 # built), 2**32 wrapped to 0 and every solve failed at once.
@@ -328,9 +328,6 @@ class MPCConfig:
             value = getattr(self, name)
             if value > most:
                 raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {value!r}")
-        for name, (least, unit) in MPC_LEAST.items():
-            if getattr(self, name) < least:
-                raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(self, name)!r}")
 
     def _plain_scalars(self) -> None:
         """numpy's scalars stored as Python's, as EnvConfig stores them: values from numpy (a sweep over

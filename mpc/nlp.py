@@ -25,8 +25,9 @@ import casadi as ca
 import numpy as np
 
 from mpc import costs
-from mpc.config import MPCConfig
+from mpc.config import MPC_LEAST, MPCConfig
 from mpc.dynamics import braking
+from mpc.errors import MPCConfigError
 from mpc.fastcall import BufferedFunction
 from mpc.local_params import LocalParams, flock_distances
 from mpc.solvers import SOLVED, Solution, _Solver, better
@@ -66,6 +67,17 @@ def _same_team(data: StepData, n_robots: int) -> None:
         )
 
 
+def check_solvable(cfg: MPCConfig) -> None:
+    """``cfg``'s least values (``MPC_LEAST``; delta = 1e-300 overflowed Eq. 7's goal weight and a Fatrop solve
+    never returned), MPCConfigError naming the first one below. Checked here and as a run starts
+    (pipelines.commands.simulate_checks), not by MPCConfig: a config read back from a sweep folder that ran
+    well below a least value added since (delta = 1e-200 with Table I's weights) runs nothing, and its
+    --report-only and config show --from-sweep refused it."""
+    for name, (least, unit) in MPC_LEAST.items():
+        if getattr(cfg, name) < least:
+            raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(cfg, name)!r}")
+
+
 class FixedPredictions:
     """The humans' predicted positions are parameters: Eq. 17 as Algorithm 1 solves it."""
 
@@ -90,6 +102,7 @@ class JointNLP:
         """``solver=False`` builds only the cost functions (``potential``, ``penalty``): the solver, which
         takes most of the build (4 of 4.4 s at 12 robots, and a gcc compile with ``jit``), is then built by
         the first ``solve``. DMPC evaluates F with this NLP and solves it only for its pair moves."""
+        check_solvable(cfg)
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         h, m = cfg.horizon, n_robots
         self.n_pairs = m * (m - 1) // 2
@@ -254,6 +267,7 @@ class LocalNLP:
     """
 
     def __init__(self, cfg: MPCConfig, n_robots: int, n_humans: int):
+        check_solvable(cfg)
         self.cfg, self.n_robots, self.n_humans = cfg, n_robots, n_humans
         h, n_others = cfg.horizon, n_robots - 1
         u = ca.SX.sym("u", 2 * h)

@@ -87,6 +87,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipelines.commands.simulate_checks import check_mpc_least
     from pipelines.config import command_config, render
 
     if args.from_sweep is not None:
@@ -94,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if args.run is not None:
         raise PipelineError("--run goes with --from-sweep DIR")
     config = command_config(args)
+    check_mpc_least(config)  # what it shows is a run's config: refused as simulate and sweep refuse it
     print(render(config), end="")
     _note_refused(config)
     return 0

@@ -57,6 +57,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     which plan with no MPC. Only values the user chose count (``RunConfig.chosen``: a config file shared
     with cmpc may state the defaults); a plugin reads the spec as it sees fit, so only its predictor facts
     are checked. Then ``record_iterations`` without ``record``: nothing would write it."""
+    check_mpc_least(config)
     if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
         chosen = config.controller
         _refuse(
@@ -100,6 +101,20 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
             f"{config.label('controller', 'record_iterations')}: the iterations are written to the MCAP "
             "recordings; give --record DIR too (or [simulate] record)"
         )
+
+
+def check_mpc_least(config: RunConfig) -> None:
+    """The least values the MPC's NLP is built with (``mpc.nlp.check_solvable``), refused as a run starts and
+    named where they were chosen; a config read back from a sweep folder is not held to them."""
+    from mpc.errors import MPCConfigError
+    from mpc.nlp import check_solvable as check_nlp
+    from pipelines.config.entries import reason
+
+    try:
+        check_nlp(config.mpc)
+    except MPCConfigError as exc:
+        key = str(exc).partition(" ")[0]  # its message starts with the field it refuses
+        raise config.error("mpc", key, reason(str(exc), key)) from None
 
 
 def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Final
 
+from mpc.config import MPC_LEAST
 from pipelines.commands.calibration_notes import (
     CROWD_SETTINGS,
     calibration_controller_note,
@@ -78,10 +79,11 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
     """The checks a plan passes before any worker starts, in the dry run as in the run: the installed
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
-    with them (``check_couplings``), the margins they plan with (``check_margins``) and the MPC's d_min
-    against the agents' contact distance (``check_contact_distances``). With the run's ``cfg``, a refusal of
-    a value the run chose names where it chose it first ("run.toml: mpc.d_min: method 'CMPC' of ..."), as
-    simulate's do: they named the method alone, and a file's value looked like one of the experiment's."""
+    with them (``check_couplings``), the margins they plan with (``check_margins``), the MPC's d_min against
+    the agents' contact distance (``check_contact_distances``) and its least values (``check_least_values``).
+    With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
+    mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
+    looked like one of the experiment's."""
     from pipelines.loop.spec import controller_names
 
     controller_names()
@@ -90,6 +92,7 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
         (check_couplings, (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors"))),
         (check_margins, (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS)),
         (check_contact_distances, (("mpc", "d_min"),)),
+        (check_least_values, tuple(("mpc", key) for key in MPC_LEAST)),
     ):
         try:
             check(experiment)
@@ -165,6 +168,23 @@ def check_contact_distances(experiment: Experiment) -> None:
         try:
             check_contact_distance(WORLD, mpc_config(spec), radius_settable=False)  # check_world: no [world]
         except PipelineError as exc:
+            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+
+
+def check_least_values(experiment: Experiment) -> None:
+    """Every CMPC and DMPC method's MPC takes the least values its NLP is built with (``MPC_LEAST``), as the
+    NLP checks them, refused here with the method named (a column of --vary mpc.delta too), not once per
+    episode in errors.jsonl; a --report-only of a folder that ran below them runs no such check."""
+    from mpc.errors import MPCConfigError
+    from mpc.nlp import check_solvable
+    from pipelines.loop.mpc_setup import mpc_config
+
+    for label, spec in experiment.methods:
+        if spec.controller not in ("cmpc", "dmpc"):
+            continue
+        try:
+            check_solvable(mpc_config(spec))
+        except MPCConfigError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 

@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from mpc.config import MPC_LEAST
 from pipelines.cli import main
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
@@ -281,3 +282,35 @@ def test_a_simulate_path_named_none_reads_back_as_the_file_it_was(tmp_path, caps
     assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert 'record = "./none"' in printed and 'json = "./NULL"' in printed
+
+
+def test_a_sweep_run_below_a_least_value_added_since_reads_back_and_does_not_rerun(
+    tmp_path, capsys, monkeypatch
+):
+    """A sweep folder recorded before MPC_LEAST held delta to 1e-40 (delta = 1e-200 ran well with Table I's
+    weights) was refused by --report-only and config show --from-sweep, which run nothing, since MPCConfig
+    checked the least values; only a run is refused now, as its NLP would be."""
+    out = tmp_path / "sweep"
+    options = ["--experiment", "controllers", "--controllers", "cmpc", "--humans", "1", "--robots", "1"]
+    options += ["--episodes-per-cell", "1", "--set", "env.time_limit=2", "--backend", "inline"]
+    options += ["--no-progress"]
+    with monkeypatch.context() as before:  # the code before delta had a least value
+        before.setitem(MPC_LEAST, "delta", (0.0, ""))
+        assert main(["sweep", *options, "--set", "mpc.delta=1e-200", "--out", str(out)]) == 0
+    (out / "table.md").unlink()
+    capsys.readouterr()
+    assert main(["sweep", "--report-only", "--out", str(out)]) == 0
+    assert "cmpc" in (out / "table.md").read_text()  # the report written again
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "\ndelta = 1e-200 " in printed
+    rerun = tmp_path / "rerun.toml"
+    rerun.write_text(printed)
+    assert main(["--config", str(rerun), "sweep", "--out", str(tmp_path / "again"), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"crowdmpc sweep: error: {rerun}: mpc.delta: must be at least 1e-40, got 1e-200\n"
+    for command in (["config", "show"], ["simulate", "--controller", "cmpc"]):  # typed: refused as before
+        assert main([*command, "--set", "mpc.delta=1e-300"]) == 2
+        err = capsys.readouterr().err
+        assert err.endswith(" error: --set mpc.delta: must be at least 1e-40, got 1e-300\n")
