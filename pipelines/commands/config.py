@@ -87,7 +87,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.simulate_checks import check_mpc_least
+    from pipelines.commands.simulate_checks import check_mpc_least, check_predictors_known
     from pipelines.config import command_config, render
 
     if args.from_sweep is not None:
@@ -95,7 +95,10 @@ def run(args: argparse.Namespace) -> int:
     if args.run is not None:
         raise PipelineError("--run goes with --from-sweep DIR")
     config = command_config(args)
-    check_mpc_least(config)  # what it shows is a run's config: refused as simulate and sweep refuse it
+    # what it shows is a run's config: refused as simulate and sweep refuse it (not a sweep's record, which
+    # shows what ran: a predictor a plugin registered then, or a zoo held, is named by a rerun's refusal)
+    check_mpc_least(config)
+    check_predictors_known(config, ("controller", "predictor"), ("sweep", "predictors"))
     print(render(config), end="")
     _note_refused(config)
     return 0

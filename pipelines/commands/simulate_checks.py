@@ -117,23 +117,37 @@ def check_mpc_least(config: RunConfig) -> None:
         raise config.error("mpc", key, reason(str(exc), key)) from None
 
 
+def check_predictors_known(config: RunConfig, *keys: tuple[str, str]) -> None:
+    """The predictors' names a file or ``--set`` gave the ``keys`` ((section, key): [controller] predictor,
+    [sweep] predictors), refused in ``UnknownPredictor``'s words naming where, when neither the registry (a
+    plugin's too) nor a zoo knows one; a name an option gives is refused as its predictor loads."""
+    from predictors.errors import UnknownPredictor
+    from predictors.registry import PREDICTORS, available
+
+    for section, key in keys:
+        source, value = config.source(section, key), config.values[section][key]
+        names = [value] if isinstance(value, str) else list(value or ())
+        if source is None or source.kind == "cli" or set(names) <= set(PREDICTORS):
+            continue
+        known = available()
+        for name in names:
+            if name not in known:
+                raise config.error(section, key, str(UnknownPredictor(name, known)))
+
+
 def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
     """The run's own checks of its predictor's name, fixed margins' length and d_min, made now for a value a
     file or ``--set`` chose, so that the refusal names where it came from ("run.toml: controller.predictor:
     unknown predictor 'nope'"); those checks, as the controller is built, named the key at most."""
     from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
-    from predictors.errors import UnknownPredictor
-    from predictors.registry import PREDICTORS, available
 
     def chosen(section: str, key: str) -> bool:
         source = config.source(section, key)
         return source is not None and source.kind != "cli"
 
     name = spec.predictor_name
-    if chosen("controller", "predictor") and name is not None and name not in PREDICTORS:
-        known = available()
-        if name not in known:
-            raise config.error("controller", "predictor", str(UnknownPredictor(name, known)))
+    if name is not None:
+        check_predictors_known(config, ("controller", "predictor"))
     if spec.controller not in MPC_CONTROLLERS:
         return
     mpc = mpc_config(spec, world=config.world)

@@ -314,3 +314,30 @@ def test_a_sweep_run_below_a_least_value_added_since_reads_back_and_does_not_rer
         assert main([*command, "--set", "mpc.delta=1e-300"]) == 2
         err = capsys.readouterr().err
         assert err.endswith(" error: --set mpc.delta: must be at least 1e-40, got 1e-300\n")
+
+
+def test_an_unknown_predictor_is_refused_as_simulate_refuses_it_but_a_recorded_one_is_shown(tmp_path, capsys):
+    """`config show --set controller.predictor=nosuch` printed the config without a word, where simulate and
+    sweep refuse the name. What a sweep recorded is shown as it ran: a predictor that a plugin registered
+    then (not loaded now), or a zoo held, is named by a rerun's own refusal."""
+    typed = tmp_path / "typed.toml"
+    typed.write_text('[controller]\npredictor = "nosuch"\n')
+    for given in (["--set", "controller.predictor=nosuch"], ["--config", str(typed)]):
+        assert main(["simulate", "--controller", "cmpc", *given]) == 2
+        refused = capsys.readouterr().err
+        assert main(["config", "show", *given]) == 2
+        out, err = capsys.readouterr()
+        assert (out, err) == ("", refused.replace("crowdmpc simulate:", "crowdmpc config:", 1))
+        assert err.count("\n") == 1 and "predictor: unknown predictor 'nosuch'; choose from [" in err
+    assert main(["config", "show", "--set", 'sweep.predictors=["constant_velocity", "nosuch"]']) == 2
+    assert "--set sweep.predictors: unknown predictor 'nosuch'; choose from [" in capsys.readouterr().err
+    assert main(["config", "show", "--set", "controller.predictor=social_lstm_eth"]) == 0
+    run = {
+        "started": "2026-12-01T00:00:00+0000",
+        "version": "0.1.0",
+        "config": {"sweep": {"experiment": "table2"}, "controller": {"predictor": "my_plugin_net"}},
+    }
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "table2", "runs": [run]}))
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
+    assert '\npredictor = "my_plugin_net" ' in capsys.readouterr().out
