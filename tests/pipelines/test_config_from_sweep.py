@@ -230,8 +230,8 @@ def test_an_episode_log_that_is_a_pipe_is_not_waited_on(tmp_path, capsys):
         signal.alarm(0)
         signal.signal(signal.SIGALRM, before)
     assert capsys.readouterr().err == (
-        f"crowdmpc sweep: error: {sweep / EPISODES_FILE}: is not a regular file (a device or a pipe); a "
-        "sweep keeps its records in one\n"
+        f"crowdmpc sweep: error: {sweep / EPISODES_FILE} is not a regular file (a device or a pipe) where "
+        "the sweep keeps a file; remove it\n"
     )
 
 
