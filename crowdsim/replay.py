@@ -56,6 +56,10 @@ START_CLEARANCE: Final[float] = 0.2  # m beyond 2 radius between a robot's start
 # so that they are about while the robots cross (an episode of the paper's 40 s limit ends in 14-21 s)
 SELECT_S: Final[float] = 20.0
 WINDOW_TRIES: Final[int] = 200  # windows drawn before an episode is declared impossible
+# Grid rows times pedestrians a recording may hold (positions: 16 bytes each, 800 MB): BIWI's ETH is about
+# 2,000 x 360; two frames a billion ids apart on a step of 1 filled a grid of a billion rows
+MAX_GRID_CELLS: Final[int] = 50_000_000
+MAX_KEY: Final[float] = 1e15  # frame and pedestrian ids: whole in float64, far below int64's end
 
 
 @dataclass(frozen=True)
@@ -79,9 +83,22 @@ class Recording:
             raise SimulationError(f"recording {name!r}: rows must be a finite (R, 4) array with R >= 1")
         if isinstance(frame_step, bool) or not isinstance(frame_step, int) or frame_step < 1:
             raise SimulationError(f"recording {name!r}: frame_step must be an int >= 1, got {frame_step!r}")
+        if (np.abs(rows[:, :2]) > MAX_KEY).any():  # 1e300 wrapped to an arbitrary int64 frame
+            raise SimulationError(
+                f"recording {name!r}: frame and pedestrian ids must be within +-{MAX_KEY:.0e}"
+            )
         _check_keys(name, rows[:, :2])
-        frames = _grid(np.unique(rows[:, 0].astype(np.int64)), frame_step)
+        distinct = np.unique(rows[:, 0].astype(np.int64))
         people, person_of = np.unique(rows[:, 1].astype(np.int64), return_inverse=True)
+        gaps = np.diff(distinct)
+        size = 1 + int(np.where(gaps % frame_step == 0, gaps // frame_step, 1).sum())  # _grid's rows
+        if size * len(people) > MAX_GRID_CELLS:
+            raise SimulationError(
+                f"recording {name!r}: frames {distinct[0]}..{distinct[-1]} on a step of {frame_step} make "
+                f"{size} rows for {len(people)} pedestrians, more than the {MAX_GRID_CELLS} cells a "
+                "recording may hold (frames far apart on one grid)"
+            )
+        frames = _grid(distinct, frame_step)
         positions = np.full((len(frames), len(people), 2), np.nan)
         positions[np.searchsorted(frames, rows[:, 0].astype(np.int64)), person_of] = rows[:, 2:4]
         return cls(name, frames, frame_step, positions, float(dt))

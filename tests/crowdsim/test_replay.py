@@ -72,6 +72,24 @@ def test_rows_that_name_one_person_twice_at_a_frame_or_no_whole_frame_or_id_are_
     assert str(info.value) == message
 
 
+def test_frames_too_far_apart_or_too_large_are_refused_before_any_grid_is_filled():
+    """Two frames a billion ids apart on a step of 1 filled a grid of a billion rows (16 GB a pedestrian),
+    and a frame of 1e300 became an arbitrary int64."""
+    from crowdsim.replay import MAX_GRID_CELLS
+
+    far = np.array([(0, 7, 1.0, 2.0), (1, 7, 1.5, 2.0), (10**9, 8, 0.0, 0.0)])
+    with pytest.raises(SimulationError) as info:
+        Recording.from_rows("eth", far, frame_step=1)
+    assert str(info.value) == (
+        f"recording 'eth': frames 0..{10**9} on a step of 1 make {10**9 + 1} rows for 2 pedestrians, more "
+        f"than the {MAX_GRID_CELLS} cells a recording may hold (frames far apart on one grid)"
+    )
+    assert (10**9 - 1) % 6  # on a step of 6 the far frame is off the grid: a jump, no row filled
+    assert len(Recording.from_rows("eth", far, frame_step=6).frames) == 3
+    with pytest.raises(SimulationError, match="frame and pedestrian ids must be within"):
+        Recording.from_rows("eth", np.array([(0, 7, 1.0, 2.0), (1e300, 7, 1.5, 2.0)]), frame_step=1)
+
+
 def test_no_window_spans_jumps_off_the_grid_that_add_up_to_whole_steps():
     # ids shifted by 3 frames (6 -> 9) and back (9 -> 18): frames 6, 9, 18 span 12 = 2 steps, but are no two
     # steps of 0.4 s, and their replay would walk 0.2 s and 0.6 s of motion as 0.4 s each
