@@ -26,11 +26,12 @@ import numpy as np
 from crowdsim.env import EnvConfig
 from crowdsim.reaction import reacts
 from crowdsim.replay import REACTIVE, REPLAYED, recorded
+from crowdsim.scenarios import MAX_HUMANS
 from pipelines.loop.controllers import ControllerSpec
 from pipelines.loop.episode import EpisodeResult, run_episodes
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import episode_count, human_count, predictor_name, run_main, seed_number  # noqa: E402
+from bench_cli import count_in, episode_count, predictor_name, run_main, seed_number  # noqa: E402
 
 CONTACT: float = 0.6  # m, the sum of the radii
 STANDING: float = 0.2  # m/s: a person slower than this over the step stands
@@ -78,7 +79,10 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--crowd", default="eth_test", choices=(*REPLAYED, *REACTIVE))
-    parser.add_argument("--humans", type=human_count, default=10)
+    # at least one: an empty crowd has no closest approach to look at
+    parser.add_argument(
+        "--humans", type=count_in("humans", 1, MAX_HUMANS), default=10, help="people who come by (at least 1)"
+    )
     parser.add_argument("--episodes", type=episode_count, default=20, help="per scenario")
     parser.add_argument("--seed", type=seed_number, default=0)
     parser.add_argument("--predictor", type=predictor_name, default="constant_velocity")

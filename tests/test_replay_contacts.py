@@ -92,3 +92,14 @@ def test_among_a_reactive_crowd_it_says_how_far_people_were_pushed(monkeypatch, 
     out = run_main(monkeypatch, capsys, "eth_test_reactive")
     assert [line.split()[0] for line in out[1:]] == ["circle", "circle", "perpendicular", "perpendicular"]
     assert "people pushed off their tracks: by more than 0.1 m in " in out[1]
+
+
+def test_no_people_is_refused_in_one_line_before_any_episode(monkeypatch, capsys):
+    # an empty crowd has no closest approach: the script ended in numpy's traceback after its episodes
+    monkeypatch.setattr(sys, "argv", ["replay_contacts.py", "--humans", "0", "--episodes", "1"])
+    with pytest.raises(SystemExit) as exit_:
+        replay_contacts.main()
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        "replay_contacts.py: error: argument --humans: humans must be an integer in 1..50, got '0'"
+    )
