@@ -37,7 +37,10 @@ def _step_rows(report: dict[str, Any]) -> list[str]:
     for key, stats in report.get("simulator_step", {}).items():
         lines.append(_row(f"simulator step {key}", stats))
     for key, stats in report.get("control_step", {}).items():
-        lines.append(_row(f"control step {key} (7 humans)", stats))
+        # the baselines' and the oracle's rows time the first --steps steps of each episode from rest, the
+        # others whole episodes: as in the scaling rows, the count tells the two measurements apart
+        steps = f", {stats['steps']} steps" if stats and "steps" in stats else ""
+        lines.append(_row(f"control step {key} (7 humans{steps})", stats))
     for key, stats in report.get("scaling", {}).items():
         # the humans' rows time whole episodes, the robots' their first --steps steps from rest: the count
         # tells two rows measured differently apart (46.8 ms over 2 steps beside 3.8 ms over 38)
