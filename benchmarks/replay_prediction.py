@@ -45,6 +45,20 @@ SPEEDS = {"< 0.5": (0.0, 0.5), "0.5..1": (0.5, 1.0), "1..1.5": (1.0, 1.5), ">= 1
 SHIPPED = ("constant_velocity", "vanilla_lstm_eth", "social_lstm_eth", "social_gan_eth", "social_lstm_synth")
 
 
+def recording_predictor(text: str) -> str:
+    """An argparse ``type``: a predictor ``crowdmpc`` knows that predicts from positions alone; the ORCA
+    oracle reads the simulator's state, which a recording has none of."""
+    from predictors.oracle import ORACLE_PREDICTOR
+
+    name = predictor_name(text)
+    if name == ORACLE_PREDICTOR:
+        raise argparse.ArgumentTypeError(
+            f"{name} predicts the simulator's humans from its ORCA state, not a recording's people: "
+            "name a predictor that reads positions"
+        )
+    return name
+
+
 def cases(
     rec: Recording, obs_len: int, horizon: int, every: int
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -106,7 +120,7 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--crowd", default="eth_test", choices=REPLAYED)
-    parser.add_argument("--predictors", nargs="+", type=predictor_name, default=list(SHIPPED))
+    parser.add_argument("--predictors", nargs="+", type=recording_predictor, default=list(SHIPPED))
     parser.add_argument("--horizon", type=count_in("horizon", 1, 12), default=HORIZON)
     parser.add_argument("--every", type=count_in("every", 1), default=1, help="evaluate every k-th row")
     parser.add_argument("--by", choices=("track", "speed"), default="track", help="group by (docstring)")

@@ -87,3 +87,18 @@ def test_it_prints_every_group_for_each_predictor(monkeypatch, capsys):
     out = capsys.readouterr().out.splitlines()
     assert out[1].split() == ["predictor", "<", "0.5", "0.5..1", "1..1.5", ">=", "1.5"]
     assert out[3].startswith("people scored: < 0.5 ")
+
+
+def test_the_orca_oracle_is_refused_in_one_line_before_the_recording_is_read(monkeypatch, capsys):
+    # it reads the simulator's state: the table's header came first, then its API's "call observe(obs)"
+    argv = ["replay_prediction.py", "--predictors", "constant_velocity", "orca_oracle"]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as exit_:
+        replay_prediction.main()
+    assert exit_.value.code == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.splitlines()[-1] == (
+        "replay_prediction.py: error: argument --predictors: orca_oracle predicts the simulator's humans "
+        "from its ORCA state, not a recording's people: name a predictor that reads positions"
+    )
