@@ -21,6 +21,7 @@ from crowdsim.control import ControlOutput
 from crowdsim.env import Observation
 from crowdsim.env_config import EnvConfig
 from crowdsim.observation import array_copies
+from crowdsim.world import is_sensor_range
 from pipelines.errors import PipelineError, interrupt_behind
 from pipelines.loop.controllers import Controller
 from pipelines.loop.spec import ControllerSpec
@@ -347,6 +348,13 @@ def check_run(
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise PipelineError(f"run_episodes: {name} must be an int >= 0, got {short_repr(value)}")
     _check_env_config(env_config, "run_episodes")
+    # named here, before the build: a bad one was refused after it, as the margins' or RangeLimited's radius
+    sensed = sensor_range.item() if isinstance(sensor_range, np.generic) else sensor_range
+    if sensed is not None and not is_sensor_range(sensed):
+        raise PipelineError(
+            "run_episodes: sensor_range must be a finite number of metres > 0 (None: every human seen), got "
+            f"{short_repr(sensor_range)}"
+        )
     if sensor_range is None and sensor_tracks is not True:  # simulate refuses --no-sensor-tracks alone too
         raise PipelineError(
             f"run_episodes: sensor_tracks={short_repr(sensor_tracks)} is a sensor's setting; give "

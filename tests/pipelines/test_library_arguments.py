@@ -73,6 +73,34 @@ def test_run_episodes_names_into_and_the_observers_factory_before_any_episode(
     assert str(refused.value) == message
 
 
+@pytest.mark.parametrize("margins", ["none", "conformal"])
+@pytest.mark.parametrize("sensor_range", [-1.0, 0, float("inf"), float("nan"), "2", True])
+def test_run_episodes_names_a_sensor_range_that_is_no_distance_before_the_build(
+    sensor_range, margins, monkeypatch
+):
+    """It was refused after the controller was built, as RangeLimited's "sensor radius", or with calibrated
+    margins as the "margins' sensor_range" before that; inf ran without margins and was refused with them."""
+    from pipelines.loop.margins import parse_margins
+
+    monkeypatch.setattr("pipelines.loop.episode.make_controller", None)  # nothing may be built first
+    spec = ControllerSpec("cmpc", margins=parse_margins(margins))
+    with pytest.raises(PipelineError) as refused:
+        run_episodes(
+            spec, episodes=1, seed=0, scenario="circle", n_humans=1, progress=False, sensor_range=sensor_range
+        )
+    assert str(refused.value) == (
+        "run_episodes: sensor_range must be a finite number of metres > 0 (None: every human seen), got "
+        f"{sensor_range!r}"
+    )
+
+
+def test_run_episodes_takes_a_numpy_sensor_range():
+    results = run_episodes(
+        ORCA, episodes=1, seed=0, scenario="circle", n_humans=1, progress=False, sensor_range=np.int64(3)
+    )
+    assert len(results) == 1
+
+
 def test_read_recording_names_a_path_and_topics_of_the_wrong_kind(tmp_path):
     """`topics="/episode/metrics"` was iterated into its characters and read nothing, silently; None as the
     path was pathlib's TypeError."""
