@@ -307,7 +307,7 @@ def check_history(obs: Observation) -> None:
 def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None:
     """The MPC and the predictor agree with the simulator's world facts (crowdsim/world.py): the control
     period is the simulation step and the predictor's sampling time, the MPC's robot bounds are the
-    simulator's, and the history holds what the predictor reads."""
+    simulator's, and the history holds what the predictor and guidance "standing" read."""
     for name in ("dt", "v_max", "a_max"):
         ours, theirs = getattr(cfg, name), getattr(world, name)
         if abs(ours - theirs) > 1e-12:
@@ -319,10 +319,13 @@ def check_world(world: WorldFacts, cfg: MPCConfig, predictor: Predictor) -> None
             f"simulator's tau is {world.dt} s ([world] dt): set --set world.dt={PREDICTOR_DT}, or plan "
             f"with {ORACLE_PREDICTOR}"
         )
-    if predictor.obs_len > world.obs_len:
+    # guidance "standing" tells who stands still by how far each human moved over the history: 2 rows at least
+    rows = max(predictor.obs_len, 2 if cfg.guidance == "standing" else 1)
+    if rows > world.obs_len:
+        reader = f"the predictor {predictor.name}" if predictor.obs_len == rows else "guidance 'standing'"
         raise PipelineError(
-            f"the predictor {predictor.name} reads {predictor.obs_len} observed steps but the simulator "
-            f"keeps {world.obs_len} ([world] obs_len): {_keep_more(predictor.obs_len)}"
+            f"{reader} reads {rows} observed steps but the simulator keeps {world.obs_len} ([world] "
+            f"obs_len): {_keep_more(rows)}"
         )
 
 

@@ -88,3 +88,23 @@ def test_a_guided_target_lies_beyond_the_horizons_reach(horizon, v_max, start):
     expected = max(2.0, v_max * (horizon + 1) * 0.4)
     assert ahead == pytest.approx(expected, abs=1e-3)
     assert ahead > v_max * horizon * 0.4
+
+
+def test_guidance_standing_without_two_rows_of_history_is_refused_naming_the_history_kept():
+    """Guidance tells who stands still from the humans' motion over the history. The ORCA oracle reads one
+    row, so [world] obs_len = 1 passed every check, and every episode failed at its first step in the
+    classifier's words ("history must have shape (L >= 2, N, 2), got (1, 7, 2)"), naming neither guidance nor
+    obs_len."""
+    from crowdsim.env_config import EnvConfig
+    from pipelines.errors import PipelineError
+
+    overrides = (("guidance", "standing"),)
+    spec = ControllerSpec("cmpc", predictor="orca_oracle", mpc_overrides=overrides)
+    with pytest.raises(PipelineError) as refused:
+        make_controller(spec, EnvConfig(history_len=1))
+    assert str(refused.value) == (
+        "guidance 'standing' reads 2 observed steps but the simulator keeps 1 ([world] obs_len): set [world] "
+        "obs_len >= 2 (e.g. --set world.obs_len=2)"
+    )
+    make_controller(spec, EnvConfig(history_len=2))  # two rows tell a motion
+    make_controller(ControllerSpec("cmpc", predictor="orca_oracle"), EnvConfig(history_len=1))  # no guidance
