@@ -6,8 +6,8 @@ predictions come from the predictor on the last ``predictor.obs_len`` rows of ``
 then humans) with the robots' planned positions as ``robots_future``: its CasADi twin evaluated numerically
 on ``predictor.encode`` of that history (``rollout`` for a predictor without a twin, the ORCA oracle), or,
 for ``coupling="nlp"``, the same twin inside the NLP. ``coupling="none"`` shows the predictor the humans'
-rows alone: predictions that do not answer the robots' plans (predict, then plan; the IBR loop then stops
-at its second solve).
+rows alone: predictions that do not answer the robots' plans (predict, then plan: CMPC's IBR loop ends at its
+second iteration without a second solve; DMPC's robots still answer each other's plans, up to j_max).
 
 A robot that has reached its goal (``obs.robot_reached``) holds position and stops flocking: by default
 (``on_goal="track"``) it stays in the optimisation anchored by its goal term, so it keeps still unless a

@@ -37,7 +37,7 @@ def test_the_prediction_is_the_humans_past_alone_whatever_the_robots_plan(contro
     np.testing.assert_allclose(out.prediction, alone, atol=1e-6)  # the twin, within its contract
     assert out.status == "ok"
     if controller == "cmpc":
-        assert out.iterations == 2  # the second solve meets the same prediction: converged
+        assert out.iterations == 2  # the second prediction is the first: converged, not solved again
     # the paper's coupling predicts these humans answering the robots, who stand among them
     _, coupled = act(ControllerSpec(controller, "social_lstm_eth"), obs)
     assert np.abs(coupled.prediction - alone).max() > 1e-3
