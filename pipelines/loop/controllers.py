@@ -252,8 +252,9 @@ WORLD_UNITS: Final[dict[str, str]] = {
 
 
 def check_built_for(controller: object, env_config: EnvConfig, where: str) -> None:
-    """PipelineError when ``controller`` was built for a simulator of other world facts than ``env_config``
-    (the shipped controllers keep theirs as ``env_config``; a plugin without one is not checked). Built by
+    """PipelineError when ``controller`` was built for a simulator of other world facts than ``env_config``,
+    or, moving by ORCA, of other ORCA settings (``ORCA_SETTINGS``) (the shipped controllers keep theirs as
+    ``env_config``; a plugin without one is not checked). Built by
     ``make_controller(spec)`` for the default world and run in a slower or larger-bodied one, an MPC planned
     at the default speed (the simulator clipping every plan) and with a d_min checked against the default
     radius, silently; only another tau was refused, at reset."""
@@ -270,6 +271,35 @@ def check_built_for(controller: object, env_config: EnvConfig, where: str) -> No
         raise PipelineError(
             f"{where}: the controller {controller_label(controller)} was built for another world "
             f"({'; '.join(differ)}): build it with make_controller(spec, env_config) for this simulator"
+        )
+    _check_orca_built_for(controller, built, env_config, where)
+
+
+# What a shipped controller moves by ORCA with, as the simulator it was built for sets it: the ORCA oracle its
+# predicted humans (predictors.oracle: seeing the robots or not), the ORCA baseline its robots. Built for the
+# default simulator and run among humans blind to the robots, the oracle predicted them dodging (0.12 m off
+# a step ahead, where it is exact), silently. (The oracle by its name: predictors.oracle imports CasADi.)
+ORCA_SETTINGS: Final[dict[str, tuple[str, ...]]] = {
+    "orca_oracle": ("robots_visible", "orca", "orca_radius_margin"),
+    "orca": ("orca", "orca_radius_margin"),
+}
+
+
+def _check_orca_built_for(controller: object, built: EnvConfig, env_config: EnvConfig, where: str) -> None:
+    """``check_built_for``'s ORCA settings (``ORCA_SETTINGS``) of a controller planning with the oracle or
+    driving by ORCA."""
+    predictor, name = getattr(controller, "predictor", None), getattr(controller, "name", None)
+    read = ORCA_SETTINGS.get(predictor if predictor == "orca_oracle" else str(name), ())
+    differ = [
+        f"{key} {getattr(built, key)} there, {getattr(env_config, key)} here"
+        for key in read
+        if getattr(built, key) != getattr(env_config, key)
+    ]
+    if differ:
+        raise PipelineError(
+            f"{where}: the controller {controller_label(controller)} moves by the ORCA settings of the "
+            f"simulator it was built for ({'; '.join(differ)}): build it with make_controller(spec, "
+            "env_config) for this simulator"
         )
 
 

@@ -183,3 +183,42 @@ def test_a_controller_built_for_another_world_is_refused_by_the_loops():
     controller = make_controller(ControllerSpec("straight"))
     longer = EnvConfig(time_limit=60.0)
     assert run_episode(controller, seed=0, scenario="circle", n_humans=2, env_config=longer).metrics.success
+
+
+def test_a_controller_moving_by_orca_built_for_other_orca_settings_is_refused_by_the_loops():
+    """The ORCA oracle predicts the humans by the simulator it was built for (whether they see the robots,
+    their ORCA parameters), the ORCA baseline drives its robots by its ORCA parameters: built by
+    make_controller(spec) for the default simulator and run among humans blind to the robots, the oracle
+    predicted them dodging (0.12 m off one step ahead, where it is exact), silently. An MPC predicting with a
+    model reads none of them and still runs."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import crowdsim
+    from crowdsim.env_config import EnvConfig
+    from pipelines.errors import PipelineError
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+    from pipelines.loop.episode import run_episode
+    from pipelines.loop.gym_loop import run_gym_episode
+    from predictors.oracle import ORACLE_PREDICTOR
+
+    blind = EnvConfig(robots_visible=False)
+    oracle = make_controller(ControllerSpec("cmpc", ORACLE_PREDICTOR))
+    message = (
+        r"moves by the ORCA settings of the simulator it was built for \(robots_visible True there, False"
+    )
+    with pytest.raises(PipelineError, match="run_episode: the controller 'cmpc' " + message):
+        run_episode(oracle, seed=0, scenario="circle", n_humans=2, env_config=blind)
+    with pytest.raises(PipelineError, match="run_gym_episode: .*" + message):
+        run_gym_episode(oracle, gym.make(crowdsim.ENV_ID, n_humans=2, config=blind), seed=0)
+    tighter = EnvConfig(orca=dataclasses.replace(EnvConfig().orca, time_horizon=2.0))
+    with pytest.raises(PipelineError, match=r"run_episode: the controller 'orca' .*\(orca OrcaParams\("):
+        run_episode(
+            make_controller(ControllerSpec("orca")), seed=0, scenario="circle", n_humans=2, env_config=tighter
+        )
+    for name in ("cmpc", "orca"):  # built for it: runs
+        built = make_controller(ControllerSpec(name, ORACLE_PREDICTOR), blind)
+        assert run_episode(built, seed=0, scenario="circle", n_humans=2, env_config=blind).metrics.n_steps
+    model = make_controller(ControllerSpec("cmpc", "constant_velocity"))
+    assert run_episode(model, seed=0, scenario="circle", n_humans=2, env_config=blind).metrics.n_steps
