@@ -89,7 +89,7 @@ class MPCController(SolversHeld):
         ``predictor``: a predictor object in place of the one ``spec.predictor`` names (tests)."""
         from crowdsim.env_config import EnvConfig
 
-        if distributed:  # refused before a predictor is loaded for it
+        if distributed and spec.coupling == "nlp":  # refused before a predictor is loaded for it
             check_coupling(spec, distributed)
         self.spec = spec
         self.name = "dmpc" if distributed else "cmpc"

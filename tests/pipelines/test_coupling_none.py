@@ -59,6 +59,26 @@ def test_the_orca_oracle_cannot_predict_blind_to_the_robots(capsys):
     )
 
 
+@pytest.mark.parametrize("controller", ["cmpc", "dmpc"])
+def test_the_mpc_loads_its_predictor_once(controller, monkeypatch):
+    """DMPC's early refusal of a coupled NLP loaded the predictor for coupling "none" too, then the
+    controller loaded it again (a checkpoint read twice per build), and refused the oracle only then."""
+    from pipelines.loop import mpc
+    from pipelines.loop.mpc import MPCController
+    from predictors import registry
+
+    loads, load = [], registry.load_predictor
+
+    def counted(name):
+        loads.append(name)
+        return load(name)
+
+    monkeypatch.setattr(mpc, "load_predictor", counted)
+    monkeypatch.setattr(registry, "load_predictor", counted)  # check_coupling imports it from there
+    MPCController(ControllerSpec(controller, "social_lstm_eth", coupling="none"), controller == "dmpc")
+    assert loads == ["social_lstm_eth"]
+
+
 def test_predicting_then_planning_compiles_its_nlps_as_the_paper_s_coupling_does():
     import dataclasses
 
