@@ -102,7 +102,7 @@ class MPCController(SolversHeld):
         world = self.env_config.world()
         check_margins_world(spec, world)  # before the calibration is looked up: the cause, not a symptom
         cfg = mpc_config(spec, jit, world)
-        sha256 = checkpoint_sha256(self.model.name)
+        self.predictor_sha256 = sha256 = checkpoint_sha256(self.model.name)
         margins = spec.margins.resolve(self.model.name, cfg.horizon, sha256)
         self.cfg = cfg.replace(human_margins=margins)
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
@@ -133,7 +133,7 @@ class MPCController(SolversHeld):
     def describe(self) -> dict[str, Any]:
         """What the episode metadata records about this controller (the closed loop merges it)."""
         return {
-            "predictor_sha256": checkpoint_sha256(self.model.name),
+            "predictor_sha256": self.predictor_sha256,  # the weights loaded, whatever the zoo holds now
             "config": {
                 "mpc": self.cfg.to_dict(),
                 "coupling": self.spec.coupling,

@@ -396,6 +396,21 @@ def test_describe_names_the_weights_of_a_trained_predictor():
     assert sha256 == checkpoint_sha256("social_lstm_eth") and len(sha256) == 64
 
 
+def test_the_records_name_the_weights_loaded_when_the_zoo_entry_is_replaced_meanwhile(monkeypatch):
+    """describe() looked the name up in the zoo at every episode: after `crowdmpc zoo add ... --replace` of
+    the name during a run, the controller still planned with the weights it had loaded, and its episodes were
+    recorded under the new weights' sha256 (their runs mixed, which the sha256 is there to prevent)."""
+    import pipelines.loop.mpc
+    from predictors.registry import checkpoint_sha256
+
+    controller = make_controller(ControllerSpec("cmpc", "social_lstm_eth"))
+    loaded = checkpoint_sha256("social_lstm_eth")
+    monkeypatch.setattr(pipelines.loop.mpc, "checkpoint_sha256", lambda name: "f" * 64)  # replaced
+    assert controller.describe()["predictor_sha256"] == loaded
+    result = run_episode(controller, seed=0, scenario="circle", n_humans=1)
+    assert result.predictor_sha256 == loaded
+
+
 def test_close_stops_the_dmpc_solver_threads():
     """run_episodes closes its controller; DMPC's worker threads must end with it (a sweep worker builds a
     controller per cell and would otherwise keep every cell's threads alive)."""
