@@ -85,7 +85,9 @@ _CHOICES: Final[dict[str, tuple[str, ...]]] = {  # each option of MPCConfig that
 # Hessian Inf, and a Fatrop solve, which has no wall-time limit, ran on for minutes). Measured there (3
 # robots, 2 humans, accelerations up to 10 a_max, positions up to 100 m): |F| up to 2e45, the Hessian 5e36;
 # a short closed loop of CMPC and DMPC took at most 0.1 s a solve. The thresholds that never enter the NLP
-# (xi, epsilon, restart_penalty, stall_release_s) are only compared with: any finite value does.
+# (xi, epsilon, restart_penalty, stall_release_s) are only compared with: any finite value does. They guard
+# the solver, so an NLP checks them as it is built (mpc.nlp.check_solvable), and a run as it starts: not
+# every MPCConfig, so that a sweep folder that ran beyond a bound added since (rho = 2000) reads back.
 MAX_WEIGHT: Final[float] = 1e12  # Table I's largest weight is w_coll = 1e7
 MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
     **{name: (MAX_WEIGHT, "") for name in ("w_goal", "w_acce", "w_jerk", "w_coll", "w_floc")},
@@ -108,8 +110,8 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # zero makes every pair's penalty w_coll log(2) / mu wherever the agents are (mu = 1e-300 overflowed the cost
 # to inf and every solve failed); at 1e-3 it is 693 w_coll per pair, finite at every weight's bound. Eq. 7
 # weighs a robot on its goal by w_goal / delta: delta = 1e-300 overflowed it (a NaN gradient; Fatrop hung).
-# At 1e-40 the NLP stays far from overflow (mpc/step_data.py). They guard the solver, so an NLP checks them as
-# it is built (mpc.nlp.check_solvable), and a run as it starts: not every MPCConfig (see there).
+# At 1e-40 the NLP stays far from overflow (mpc/step_data.py). They guard the solver too: checked with
+# MPC_BOUNDS (see there).
 MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, "")}
 # The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
 # built), 2**32 wrapped to 0 and every solve failed at once.
@@ -298,7 +300,8 @@ class MPCConfig:
         self._check_margins()
 
     def _check_numbers(self) -> None:
-        """The counts, weights, lengths and tolerances: finite, of the right sign, within ``MPC_BOUNDS``."""
+        """The counts, weights, lengths and tolerances: finite, of the right sign (their ``MPC_BOUNDS`` and
+        ``MPC_LEAST`` guard the solver: mpc.nlp.check_solvable)."""
         for name in ("horizon", "j_max", "solver_max_iter"):
             value = getattr(self, name)
             minimum = 0 if name == "solver_max_iter" else 1
@@ -324,10 +327,6 @@ class MPCConfig:
                 raise MPCConfigError(f"{name} must be > 0, got {value!r}")
             if name in non_negative and value < 0:
                 raise MPCConfigError(f"{name} must be >= 0, got {value!r}")
-        for name, (most, unit) in MPC_BOUNDS.items():
-            value = getattr(self, name)
-            if value > most:
-                raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {value!r}")
 
     def _plain_scalars(self) -> None:
         """numpy's scalars stored as Python's, as EnvConfig stores them: values from numpy (a sweep over

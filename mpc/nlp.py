@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from mpc import costs
-from mpc.config import MPC_LEAST, MPCConfig
+from mpc.config import MPC_BOUNDS, MPC_LEAST, MPCConfig
 from mpc.dynamics import braking
 from mpc.errors import MPCConfigError
 from mpc.fastcall import BufferedFunction
@@ -68,11 +68,15 @@ def _same_team(data: StepData, n_robots: int) -> None:
 
 
 def check_solvable(cfg: MPCConfig) -> None:
-    """``cfg``'s least values (``MPC_LEAST``; delta = 1e-300 overflowed Eq. 7's goal weight and a Fatrop solve
-    never returned), MPCConfigError naming the first one below. Checked here and as a run starts
+    """``cfg``'s numbers within the bounds its NLP is built with (``MPC_BOUNDS``: rho = 1e300 made the exact
+    Hessian Inf; ``MPC_LEAST``: delta = 1e-300 overflowed Eq. 7's goal weight; either way a Fatrop solve
+    never returned), MPCConfigError naming the first one beyond. Checked here and as a run starts
     (pipelines.commands.simulate_checks), not by MPCConfig: a config read back from a sweep folder that ran
-    well below a least value added since (delta = 1e-200 with Table I's weights) runs nothing, and its
-    --report-only and config show --from-sweep refused it."""
+    well beyond a bound added since (rho = 2000, delta = 1e-200 with Table I's weights) runs nothing, and
+    its --report-only and config show --from-sweep refused it."""
+    for name, (most, unit) in MPC_BOUNDS.items():
+        if getattr(cfg, name) > most:
+            raise MPCConfigError(f"{name} must be at most {most:g}{unit}, got {getattr(cfg, name)!r}")
     for name, (least, unit) in MPC_LEAST.items():
         if getattr(cfg, name) < least:
             raise MPCConfigError(f"{name} must be at least {least:g}{unit}, got {getattr(cfg, name)!r}")

@@ -15,7 +15,7 @@ from mpc.head_on import keep_right
 # 15): a velocity of 1e155 m/s (its square inf, and inf - inf = NaN in Eq. 11), a position of 1e300 or a
 # predicted one at -1e308 made the gradient NaN at the start point, and a Fatrop solve, which has no
 # wall-time limit, never returned. At 1e9 what the horizon reaches, 1e9 (1 + H dt) m, stays within what
-# MPCConfig's own bounds reach, a_max (H dt)^2 / 2 (dt a day, a_max 1000 m/s^2): with every bound together
+# MPC_BOUNDS reach, a_max (H dt)^2 / 2 (dt a day, a_max 1000 m/s^2): with every bound together
 # (delta at its least, 1e-40) the cost is at most 2e85, its gradient 7e80 and Hessian 2e76 (horizon 4; 3e90,
 # 4e85 and 4e80 at 100), far from float64's 1.8e308 for the solvers' squares of them
 # (tests/mpc/test_step_data.py). 1e9 m is a million km: the simulator's robots cover at most 8.6e6 m (a day

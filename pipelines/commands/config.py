@@ -87,7 +87,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipelines.commands.simulate_checks import check_mpc_least, check_predictors_known
+    from pipelines.commands.simulate_checks import check_mpc_solvable, check_predictors_known
     from pipelines.config import command_config, render
 
     if args.from_sweep is not None:
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     config = command_config(args)
     # what it shows is a run's config: refused as simulate and sweep refuse it (not a sweep's record, which
     # shows what ran: a predictor a plugin registered then, or a zoo held, is named by a rerun's refusal)
-    check_mpc_least(config)
+    check_mpc_solvable(config)
     check_predictors_known(config, ("controller", "predictor"), ("sweep", "predictors"))
     print(render(config), end="")
     _note_refused(config)

@@ -57,7 +57,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     which plan with no MPC. Only values the user chose count (``RunConfig.chosen``: a config file shared
     with cmpc may state the defaults); a plugin reads the spec as it sees fit, so only its predictor facts
     are checked. Then ``record_iterations`` without ``record``: nothing would write it."""
-    check_mpc_least(config)
+    check_mpc_solvable(config)
     if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
         chosen = config.controller
         _refuse(
@@ -103,9 +103,10 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         )
 
 
-def check_mpc_least(config: RunConfig) -> None:
-    """The least values the MPC's NLP is built with (``mpc.nlp.check_solvable``), refused as a run starts and
-    named where they were chosen; a config read back from a sweep folder is not held to them."""
+def check_mpc_solvable(config: RunConfig) -> None:
+    """The bounds and least values the MPC's NLP is built with (``mpc.nlp.check_solvable``), refused as a
+    run starts and named where they were chosen; a config read back from a sweep folder is not held to
+    them."""
     from mpc.errors import MPCConfigError
     from mpc.nlp import check_solvable as check_nlp
     from pipelines.config.entries import reason

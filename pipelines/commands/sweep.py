@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from pipelines.commands import check_writable, comma_items, humans_list, path_arg
 from pipelines.commands.output_paths import without_missing_parents
-from pipelines.commands.simulate_checks import check_mpc_least
+from pipelines.commands.simulate_checks import check_mpc_solvable
 from pipelines.commands.sweep_checks import check_first_episodes, check_plan, method_notes
 from pipelines.commands.sweep_help import EPILOG
 from pipelines.commands.sweep_jit import check_compile_cache, choose_jit
@@ -348,7 +348,7 @@ def _checked_config(args: argparse.Namespace) -> tuple[RunConfig, Path]:
         check_sweep_directory(out, cfg.label("sweep", "out"))
     check_world(cfg)
     if not args.report_only:  # a report starts no worker
-        check_mpc_least(cfg)  # not of a report: a folder that ran below a least value added since reads back
+        check_mpc_solvable(cfg)  # not of a report: a folder that ran beyond a bound added since reads back
         check_iterations_recorded(cfg)
         _check_this_machine(cfg)
     return cfg, out

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Final
 
-from mpc.config import MPC_LEAST
+from mpc.config import MPC_BOUNDS, MPC_LEAST
 from pipelines.commands.calibration_notes import (
     CROWD_SETTINGS,
     calibration_controller_note,
@@ -17,6 +17,7 @@ from pipelines.commands.calibration_notes import (
 )
 from pipelines.commands.simulate_checks import horizon_note, size_note, tolerance_note, zoo_notes
 from pipelines.commands.team_notes import flock_note, goal_room_note, separate_goals_note
+from pipelines.config.schema import MPC_FROM_WORLD
 from pipelines.errors import PipelineError
 
 # The first episodes of a crowd, size, team and scenario drawn before a sweep runs (check_first_episodes)
@@ -80,7 +81,7 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
     controllers (an entry point that would shadow a shipped one is refused here, as ``simulate`` refuses it,
     not in every episode's worker), its predictors (``check_predictors``), the couplings their methods build
     with them (``check_couplings``), the margins they plan with (``check_margins``), the MPC's d_min against
-    the agents' contact distance (``check_contact_distances``) and its least values (``check_least_values``).
+    the agents' contact distance (``check_contact_distances``) and its bounds (``check_solvable_values``).
     With the run's ``cfg``, a refusal of a value the run chose names where it chose it first ("run.toml:
     mpc.d_min: method 'CMPC' of ..."), as simulate's do: they named the method alone, and a file's value
     looked like one of the experiment's."""
@@ -92,7 +93,7 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
         (check_couplings, (("controller", "coupling"), ("controller", "predictor"), ("sweep", "predictors"))),
         (check_margins, (("controller", "margins"), ("mpc", "horizon"), *SENSING_KEYS)),
         (check_contact_distances, (("mpc", "d_min"),)),
-        (check_least_values, tuple(("mpc", key) for key in MPC_LEAST)),
+        (check_solvable_values, SOLVABLE_KEYS),
     ):
         try:
             check(experiment)
@@ -105,6 +106,8 @@ def check_plan(experiment: Experiment, cfg: RunConfig | None = None) -> None:
 
 # what the margins a method plans with read beside their own setting and its horizon
 SENSING_KEYS: Final = (("simulate", "sensor_range"), ("simulate", "sensor_tracks"))
+# the [mpc] values its NLP is built within (dt, v_max and a_max are [world]'s, which the simulator bounds)
+SOLVABLE_KEYS: Final = tuple(("mpc", key) for key in {**MPC_BOUNDS, **MPC_LEAST} if key not in MPC_FROM_WORLD)
 
 
 def _predictors_chosen(cfg: RunConfig) -> dict[str, str]:
@@ -171,10 +174,11 @@ def check_contact_distances(experiment: Experiment) -> None:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
-def check_least_values(experiment: Experiment) -> None:
-    """Every CMPC and DMPC method's MPC takes the least values its NLP is built with (``MPC_LEAST``), as the
-    NLP checks them, refused here with the method named (a column of --vary mpc.delta too), not once per
-    episode in errors.jsonl; a --report-only of a folder that ran below them runs no such check."""
+def check_solvable_values(experiment: Experiment) -> None:
+    """Every CMPC and DMPC method's MPC takes the bounds and least values its NLP is built with
+    (``MPC_BOUNDS``, ``MPC_LEAST``), as the NLP checks them, refused here with the method named (a column of
+    --vary mpc.rho too), not once per episode in errors.jsonl; a --report-only of a folder that ran beyond
+    them runs no such check."""
     from mpc.errors import MPCConfigError
     from mpc.nlp import check_solvable
     from pipelines.loop.mpc_setup import mpc_config

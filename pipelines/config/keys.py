@@ -55,8 +55,8 @@ def kind_of(value: Any) -> Kind:
 # Numbers that size the work (NLP size, iterations, history rows, ORCA neighbours, episode length) are
 # bounded before anything runs; the dataclasses only require them positive. Far above any sensible value.
 # (Numbers whose huge or tiny values overflow the arithmetic are bounded by their dataclass, for every
-# caller: mpc.config.MPC_BOUNDS, crowdsim.env_config.ENV_BOUNDS, OrcaParams' neighbor_dist and
-# time_horizon; MPC_LEAST by the NLP as it is built, mpc.nlp.check_solvable.)
+# caller: crowdsim.env_config.ENV_BOUNDS, OrcaParams' neighbor_dist and time_horizon; mpc.config's
+# MPC_BOUNDS and MPC_LEAST by the NLP as it is built, mpc.nlp.check_solvable.)
 MOST: Final[Mapping[str, float]] = {
     "world.obs_len": 1000,
     "env.time_limit": 3600.0,  # s: an hour-long episode

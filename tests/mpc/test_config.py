@@ -10,6 +10,7 @@ import pytest
 from mpc.cmpc import CMPC
 from mpc.config import MPC_BOUNDS, MPC_LEAST, MPCConfig
 from mpc.costs import make_track, potential
+from mpc.dmpc import DMPC
 from mpc.errors import MPCConfigError
 from mpc.nlp import JointNLP, LocalNLP, check_solvable
 
@@ -121,13 +122,18 @@ def test_human_margins_are_validated_and_kept_as_a_tuple():
 
 
 @pytest.mark.parametrize("field", sorted(MPC_BOUNDS))
-def test_numbers_that_enter_the_nlp_are_bounded(field):
-    """rho = 1e300 passed, made the exact Hessian Inf, and a Fatrop solve (no wall-time limit) ran on."""
+@pytest.mark.parametrize("nlp", [JointNLP, LocalNLP])
+def test_numbers_that_enter_the_nlp_are_bounded(field, nlp):
+    """rho = 1e300 passed, made the exact Hessian Inf, and a Fatrop solve (no wall-time limit) ran on: an
+    NLP is not built with it. MPCConfig holds it (a config a sweep folder recorded reads back;
+    tests/pipelines)."""
     most, _ = MPC_BOUNDS[field]
-    assert getattr(MPCConfig(**{field: most}), field) == most
+    check_solvable(MPCConfig(**{field: most}))
+    beyond = MPCConfig(**{field: 1e300})
+    assert getattr(beyond, field) == 1e300
     shown = re.escape(f"{most:g}")
     with pytest.raises(MPCConfigError, match=rf"^{field} must be at most {shown}.*, got 1e\+300$"):
-        MPCConfig(**{field: 1e300})
+        nlp(beyond, 2, 1)
 
 
 @pytest.mark.parametrize("field", sorted(MPC_LEAST))
@@ -143,6 +149,13 @@ def test_numbers_that_enter_the_nlp_have_a_least_value(field, nlp):
         MPCConfigError, match=rf"^{field} must be at least {re.escape(f'{least:g}')}.*, got 1e-300$"
     ):
         nlp(below, 2, 1)
+
+
+@pytest.mark.parametrize("solver", [CMPC, DMPC])
+def test_a_solver_is_not_built_beyond_a_bound(solver):
+    """What a Python caller builds with an MPCConfig beyond a bound is refused before any solve."""
+    with pytest.raises(MPCConfigError, match=r"^rho must be at most 1000 s\^2, got 2000.0$"):
+        solver(MPCConfig(rho=2000.0), 3, 2)
 
 
 def test_delta_has_a_least_value():

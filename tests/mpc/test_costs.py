@@ -248,9 +248,11 @@ def test_flock_range_leaves_out_the_pairs_whose_goals_lie_beyond_it_by_hand():
     near = JointNLP(CFG.replace(flock_range=2.0), 3, 0).potential(accels, data, humans)
     outer = (np.sqrt(9.0 + CFG.delta) - CFG.d_flock) ** 2 * CFG.horizon  # robots 0 and 2 stand 3 m apart
     assert every - near == pytest.approx(CFG.w_floc * outer, rel=1e-9)
-    for bad in (-1.0, math.inf, 1e4):
+    for bad in (-1.0, math.inf):
         with pytest.raises(ValueError, match="flock_range must be"):
             MPCConfig(flock_range=bad)
+    with pytest.raises(ValueError, match="flock_range must be at most"):  # its bound guards the NLP
+        JointNLP(CFG.replace(flock_range=1e4), 3, 0)
 
 
 def test_human_margins_grow_the_distance_per_step_by_hand():

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
-from mpc.config import MPC_LEAST
+from mpc.config import MPC_BOUNDS, MPC_LEAST
 from pipelines.cli import main
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
 
@@ -284,19 +285,28 @@ def test_a_simulate_path_named_none_reads_back_as_the_file_it_was(tmp_path, caps
     assert 'record = "./none"' in printed and 'json = "./NULL"' in printed
 
 
-def test_a_sweep_run_below_a_least_value_added_since_reads_back_and_does_not_rerun(
-    tmp_path, capsys, monkeypatch
+@pytest.mark.parametrize(
+    "bounds, key, lifted, ran, shown, limit, typed",
+    [
+        (MPC_LEAST, "delta", 0.0, "1e-200", "1e-200", "at least 1e-40", "1e-300"),
+        (MPC_BOUNDS, "rho", math.inf, "2000", "2000.0", "at most 1000 s^2", "1e+300"),
+    ],
+    ids=["least", "most"],
+)
+def test_a_sweep_run_beyond_a_bound_added_since_reads_back_and_does_not_rerun(
+    tmp_path, capsys, monkeypatch, bounds, key, lifted, ran, shown, limit, typed
 ):
     """A sweep folder recorded before MPC_LEAST held delta to 1e-40 (delta = 1e-200 ran well with Table I's
-    weights) was refused by --report-only and config show --from-sweep, which run nothing, since MPCConfig
-    checked the least values; only a run is refused now, as its NLP would be."""
+    weights), or before MPC_BOUNDS held rho to 1000 s^2 (rho = 2000 ran), was refused by --report-only and
+    config show --from-sweep, which run nothing, since MPCConfig checked the bounds; only a run is refused
+    now, as its NLP would be."""
     out = tmp_path / "sweep"
     options = ["--experiment", "controllers", "--controllers", "cmpc", "--humans", "1", "--robots", "1"]
     options += ["--episodes-per-cell", "1", "--set", "env.time_limit=2", "--backend", "inline"]
     options += ["--no-progress"]
-    with monkeypatch.context() as before:  # the code before delta had a least value
-        before.setitem(MPC_LEAST, "delta", (0.0, ""))
-        assert main(["sweep", *options, "--set", "mpc.delta=1e-200", "--out", str(out)]) == 0
+    with monkeypatch.context() as before:  # the code before the bound
+        before.setitem(bounds, key, (lifted, bounds[key][1]))
+        assert main(["sweep", *options, "--set", f"mpc.{key}={ran}", "--out", str(out)]) == 0
     (out / "table.md").unlink()
     capsys.readouterr()
     assert main(["sweep", "--report-only", "--out", str(out)]) == 0
@@ -304,16 +314,16 @@ def test_a_sweep_run_below_a_least_value_added_since_reads_back_and_does_not_rer
     capsys.readouterr()
     assert main(["config", "show", "--from-sweep", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "\ndelta = 1e-200 " in printed
+    assert f"\n{key} = {shown} " in printed
     rerun = tmp_path / "rerun.toml"
     rerun.write_text(printed)
     assert main(["--config", str(rerun), "sweep", "--out", str(tmp_path / "again"), "--dry-run"]) == 2
     err = capsys.readouterr().err
-    assert err == f"crowdmpc sweep: error: {rerun}: mpc.delta: must be at least 1e-40, got 1e-200\n"
+    assert err == f"crowdmpc sweep: error: {rerun}: mpc.{key}: must be {limit}, got {shown}\n"
     for command in (["config", "show"], ["simulate", "--controller", "cmpc"]):  # typed: refused as before
-        assert main([*command, "--set", "mpc.delta=1e-300"]) == 2
+        assert main([*command, "--set", f"mpc.{key}={typed}"]) == 2
         err = capsys.readouterr().err
-        assert err.endswith(" error: --set mpc.delta: must be at least 1e-40, got 1e-300\n")
+        assert err.endswith(f" error: --set mpc.{key}: must be {limit}, got {typed}\n")
 
 
 def test_an_unknown_predictor_is_refused_as_simulate_refuses_it_but_a_recorded_one_is_shown(tmp_path, capsys):

@@ -69,6 +69,25 @@ def test_spec_options_reach_the_config():
         MPCController(ControllerSpec("cmpc", mpc_overrides=(("horizon", 0),)), distributed=False)
 
 
+@pytest.mark.parametrize("name", ["cmpc", "dmpc"])
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        (("rho", 2000.0), r"^rho must be at most 1000 s\^2, got 2000.0$"),
+        (("delta", 1e-300), r"^delta must be at least 1e-40, got 1e-300$"),
+    ],
+)
+def test_an_mpc_its_nlp_cannot_solve_is_refused_before_any_solve(name, override, message):
+    """MPCConfig holds a value beyond the NLP's bounds (a config a sweep folder recorded reads back): the
+    controller builds its NLP as it resets, which refuses it, and so does a step without a reset."""
+    obs = CrowdEnv().reset(0, "circle", 2)
+    controller = MPCController(ControllerSpec(name, mpc_overrides=(override,)), distributed=name == "dmpc")
+    with pytest.raises(MPCConfigError, match=message):
+        controller.reset(obs)
+    with pytest.raises(MPCConfigError, match=message), pytest.warns(ActBeforeResetWarning):
+        MPCController(ControllerSpec(name, mpc_overrides=(override,)), distributed=name == "dmpc").act(obs)
+
+
 def test_jit_compiles_the_ibr_nlps_only():
     assert mpc_config(ControllerSpec("cmpc"), jit=True).jit
     assert not mpc_config(ControllerSpec("cmpc"), jit=False).jit

@@ -101,6 +101,11 @@ def test_methods_that_plan_with_no_predictor_keep_one_column_and_the_paper_stays
             ["--vary", "mpc.d_min=0.5,1.0"],
             "method 'CMPC d_min=0.5' of experiment 'table2': the MPC's d_min 0.5 m",
         ),
+        (  # the NLP's bounds, as the NLP checks them (a sweep folder recorded beyond them reads back)
+            ["--vary", "mpc.rho=0.5,2000"],
+            "--vary: method 'CMPC rho=2000.0' of experiment 'table2': rho must be at most 1000 s^2, got "
+            "2000.0",
+        ),
         (
             ["--margins", "conformal:0.1", "--vary", "mpc.horizon=4,6"],
             "method 'CMPC horizon=6' of experiment 'table2': the closed-loop calibration of",
