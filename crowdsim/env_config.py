@@ -213,13 +213,19 @@ class EnvConfig:
 
     @property
     def max_steps(self) -> int:
-        """Steps before the timeout: those starting at ``t = k dt < time_limit - timeout_margin``.
+        """Steps before the timeout: those starting at ``t = k dt < time_limit - timeout_margin`` and ending
+        by ``time_limit``.
 
         The fork checks ``global_time >= time_limit - 1`` before each step, so with 40 s and 0.4 s steps start
         at t = 0, 0.4, ..., 38.8 and t = 39.2 is a timeout: 98 steps. With no margin (v1) it is
         ``time_limit / dt``: 75 steps of 0.4 s in 30 s. The 1e-9 absorbs rounding such as 30 / 0.4 =
-        75.00000000000001. At least 1: t = 0 is always before ``time_limit - timeout_margin`` (the margin is
-        less than the limit), and ``CrowdEnv`` runs that first step whatever the count; the 1e-9 alone made it
-        0 for a margin within 1e-9 steps of the limit.
+        75.00000000000001. A step may start before ``time_limit - timeout_margin`` and end after the limit
+        (no margin, 10.1 s of 0.4 s steps: the 26th from 10.0 s to 10.4 s); it is not run, since a success on
+        it would report a travel time past the time limit. At least 1: t = 0 is always before ``time_limit -
+        timeout_margin`` (the margin is less than the limit), that step ends by the limit (``dt <=
+        time_limit``), and ``CrowdEnv`` runs it whatever the count; the 1e-9 alone made it 0 for a margin
+        within 1e-9 steps of the limit.
         """
-        return max(1, math.ceil((self.time_limit - self.timeout_margin) / self.dt - 1e-9))
+        started = math.ceil((self.time_limit - self.timeout_margin) / self.dt - 1e-9)
+        ended = math.floor(self.time_limit / self.dt + 1e-9)
+        return max(1, min(started, ended))

@@ -27,8 +27,8 @@ velocities within ``±max(v_max, v_pref)`` (robots per component, humans' ORCA s
 within ``±position_limit = scene_limit + max(v_max, v_pref) T``, where ``scene_limit = max(2 L, L + v_pref /
 2)``, ``L = max(circle radius, square width) x geometry_scale(max_humans)``, bounds every start and goal (the
 samplers' noise of up to ``v_pref / 2`` per coordinate is not scaled; 20 m, so 60 m with the paper's
-defaults) and ``T = max(time_limit, max_steps dt)`` (the steps outlast the time limit with no margin and a
-time limit that is no whole number of steps). Values are clipped into the box, which absorbs rounding only.
+defaults) and ``T = time_limit`` (no step ends after it: ``EnvConfig.max_steps``). Values are clipped into
+the box, which absorbs rounding only.
 
 Action: ``Box(-a_max, a_max, (max_robots, 2))``, float64: each robot's acceleration [m/s^2], the native
 action. ``CrowdEnv`` clips it per component to the acceleration and velocity bounds of Eq. (6); rows past

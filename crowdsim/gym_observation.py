@@ -51,8 +51,8 @@ def observation_bounds(
     """``(scene_limit, position_limit, low, high)``: the limits (m) and the box's bounds, one row per agent
     (``max_robots + max_humans`` rows, ``COLUMNS``); a replayed crowd's ``recording`` bounds its humans'
     positions and velocities instead (``human_limits``), the other limits stay the ones returned."""
-    # Bounds (gym_env's docstring): the scene, plus the farthest anyone travels per axis. An episode runs
-    # max_steps steps, which may outlast time_limit (no margin, time_limit / dt not whole).
+    # Bounds (gym_env's docstring): the scene, plus the farthest anyone travels per axis. An episode's
+    # max_steps steps end by time_limit, to within the rounding max_steps allows for.
     speed = max(config.v_max, config.v_pref)
     scene_limit = scene_bound(config.v_pref, max_humans)
     duration = max(config.time_limit, config.max_steps * config.dt)

@@ -59,6 +59,26 @@ def test_max_steps_per_profile():
     assert done and info["timeout"] and obs.step == short.max_steps
 
 
+def test_no_step_ends_after_the_time_limit():
+    """No margin and 10.1 s, not a whole number of 0.4 s steps: the 26th step would start at 10.0 s and end at
+    10.4 s, where a lone robot 9.9 m from its goal arrives; it was run, and the episode was a success with a
+    travel time of 10.4 s, past its 10.1 s time limit. Now the episode stops after 25 steps, at 10.0 s."""
+    config = EnvConfig(time_limit=10.1, timeout_margin=0.0)
+    assert config.max_steps == 25 and EnvConfig(time_limit=10.4, timeout_margin=0.0).max_steps == 26
+    assert EnvConfig(dt=0.9, time_limit=1.0, timeout_margin=0.0).max_steps == 1
+    env = CrowdEnv(config)
+    obs, done, controller = env.reset(0, "circle", 0, 1), False, StraightController()
+    while not done:
+        obs, done, info = env.step(controller.act(obs).accelerations)
+    m = episode_metrics(env.trajectory())
+    assert obs.time <= config.time_limit and info["timeout"] and not m.success and np.isnan(m.travel_time)
+    longer = CrowdEnv(EnvConfig(time_limit=10.4, timeout_margin=0.0))
+    obs, done = longer.reset(0, "circle", 0, 1), False
+    while not done:
+        obs, done, info = longer.step(controller.act(obs).accelerations)
+    assert info["success"] and episode_metrics(longer.trajectory()).travel_time == pytest.approx(10.4)
+
+
 def test_paper_episode_times_out_after_98_steps_at_39_2_s():
     env = CrowdEnv()
     env.reset_layout(one_robot())
