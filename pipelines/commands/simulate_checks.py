@@ -53,10 +53,11 @@ def _refuse_unread(config: RunConfig, spec: ControllerSpec) -> None:
 
 def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     """Refuse what ``spec``'s controller would ignore: a predictor, margins or coupling for one that plans
-    with no predictor, and flocking, record_iterations or an [mpc] value for ORCA and the straight line,
-    which plan with no MPC. Only values the user chose count (``RunConfig.chosen``: a config file shared
-    with cmpc may state the defaults); a plugin reads the spec as it sees fit, so only its predictor facts
-    are checked. Then ``record_iterations`` without ``record``: nothing would write it."""
+    with no predictor, and flocking, record_iterations, an [mpc] value or --no-sensor-tracks for ORCA and
+    the straight line, which plan with no MPC and read no pasts. Only values the user chose count
+    (``RunConfig.chosen``: a config file shared with cmpc may state the defaults); a plugin reads the spec as
+    it sees fit, so only its predictor facts are checked. Then ``record_iterations`` without ``record``:
+    nothing would write it."""
     check_mpc_solvable(config)
     if spec.predictor_name is None:  # ORCA, the straight line, a plugin that predicts nothing
         chosen = config.controller
@@ -94,6 +95,8 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
             f"{_shown(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
             "--sensor-range M too (or [simulate] sensor_range)"
         )
+    if is_shipped(spec.controller) and spec.controller not in MPC_CONTROLLERS:
+        _refuse_untracked(config, spec.controller)
     check_recording(config)
     _check_where_chosen(config, spec)
     if spec.record_iterations and config.simulate.record is None:
@@ -134,6 +137,18 @@ def check_predictors_known(config: RunConfig, *keys: tuple[str, str]) -> None:
         for name in names:
             if name not in known:
                 raise config.error(section, key, str(UnknownPredictor(name, known)))
+
+
+def _refuse_untracked(config: RunConfig, controller: str) -> None:
+    """ORCA and the straight line act on the humans' current positions and velocities, never on their pasts,
+    so a tracker that reports no track lengths drives them as one that does: the switch changed only the
+    record's ``sensing``."""
+    if config.chosen("simulate", "sensor_tracks") and not config.simulate.sensor_tracks:
+        raise PipelineError(
+            f"{_shown(config, 'simulate', 'sensor_tracks', False)}: controller {controller!r} acts on the "
+            "humans' current positions and velocities, not their pasts, so track lengths change nothing for "
+            "it; leave it out"
+        )
 
 
 def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:

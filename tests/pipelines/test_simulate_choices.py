@@ -82,6 +82,22 @@ def test_a_config_file_is_refused_only_for_what_it_changes(tmp_path, capsys, mon
     )
 
 
+@pytest.mark.parametrize("controller", ["orca", "straight"])
+def test_no_sensor_tracks_is_refused_for_a_controller_that_reads_no_pasts(controller, capsys, monkeypatch):
+    """ORCA and the straight line act on the humans' current positions and velocities: behind a tracker that
+    reports no track lengths they drove as behind one that does, while the record's sensing said otherwise."""
+    _no_episodes(monkeypatch)
+    argv = ["simulate", "--controller", controller, *RUN, "--sensor-range", "2"]
+    assert main([*argv, "--no-sensor-tracks"]) == 2
+    assert _error_line(capsys) == (
+        f"crowdmpc simulate: error: --no-sensor-tracks: controller {controller!r} acts on the humans' "
+        "current positions and velocities, not their pasts, so track lengths change nothing for it; leave it "
+        "out"
+    )
+    assert main([*argv, "--set", "simulate.sensor_tracks=false"]) == 2
+    assert _error_line(capsys).startswith("crowdmpc simulate: error: --set simulate.sensor_tracks false: ")
+
+
 def test_record_iterations_needs_a_recording(capsys, monkeypatch):
     """--record-iterations without --record was accepted and wrote nothing."""
     _no_episodes(monkeypatch)
