@@ -97,6 +97,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         )
     if is_shipped(spec.controller) and spec.controller not in MPC_CONTROLLERS:
         _refuse_untracked(config, spec.controller)
+    _refuse_unseen_visibility(config)
     check_recording(config)
     _check_where_chosen(config, spec)
     if spec.record_iterations and config.simulate.record is None:
@@ -206,6 +207,28 @@ def check_recording(config: RunConfig) -> None:
         recording(config.env.crowd)
     except (PipelineError, PredictorError) as exc:
         raise PipelineError(f"{config.label('env', 'crowd')} {config.env.crowd}: {exc}") from None
+
+
+def _refuse_unseen_visibility(config: RunConfig) -> None:
+    """A plain replayed crowd walks its recorded tracks, seeing no robot whether the robots are visible or
+    not: the visibility chosen was run as if not given, while the record stated it."""
+    from crowdsim.reaction import reacts
+
+    crowd = config.env.crowd
+    if crowd == "orca" or reacts(crowd) or not config.chosen("env", "robots_visible"):
+        return
+    visibility = "visible" if config.env.robots_visible else "invisible"
+    source = config.source("env", "robots_visible")
+    shown = config.label("env", "robots_visible")
+    shown += (
+        f" {visibility}"
+        if source is not None and source.kind == "cli"
+        else f" {visibility == 'visible'}".lower()
+    )
+    raise PipelineError(
+        f"{shown}: crowd {crowd!r} replays people who see no robot whatever the visibility (crowd "
+        f"{crowd}_reactive yields to visible robots); leave it out"
+    )
 
 
 def horizon_note(spec: ControllerSpec) -> str | None:

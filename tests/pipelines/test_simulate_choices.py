@@ -98,6 +98,29 @@ def test_no_sensor_tracks_is_refused_for_a_controller_that_reads_no_pasts(contro
     assert _error_line(capsys).startswith("crowdmpc simulate: error: --set simulate.sensor_tracks false: ")
 
 
+@pytest.mark.parametrize(
+    "options, shown",
+    [
+        (["--crowd", "eth", "--visibility", "invisible"], "--visibility invisible: crowd 'eth'"),
+        (["--crowd", "hotel_test", "--visibility", "visible"], "--visibility visible: crowd 'hotel_test'"),
+        (
+            ["--set", "env.crowd=eth", "--set", "env.robots_visible=false"],
+            "--set env.robots_visible false: crowd 'eth'",
+        ),
+    ],
+)
+def test_a_visibility_is_refused_for_a_crowd_that_sees_no_robot(options, shown, capsys, monkeypatch):
+    """A plain replay walks its recorded tracks whether the robots are visible or not: the choice was run as
+    if not given (the summary's conventions dropped it), while the record stated it."""
+    _no_episodes(monkeypatch)
+    assert main(["simulate", "--controller", "straight", *RUN, *options]) == 2
+    crowd = shown.split("'")[1]
+    assert _error_line(capsys) == (
+        f"crowdmpc simulate: error: {shown} replays people who see no robot whatever the visibility (crowd "
+        f"{crowd}_reactive yields to visible robots); leave it out"
+    )
+
+
 def test_record_iterations_needs_a_recording(capsys, monkeypatch):
     """--record-iterations without --record was accepted and wrote nothing."""
     _no_episodes(monkeypatch)
