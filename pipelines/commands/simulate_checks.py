@@ -98,6 +98,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     if is_shipped(spec.controller) and spec.controller not in MPC_CONTROLLERS:
         _refuse_untracked(config, spec.controller)
     _refuse_unseen_visibility(config)
+    _refuse_unsampled(config)
     check_recording(config)
     _check_where_chosen(config, spec)
     if spec.record_iterations and config.simulate.record is None:
@@ -229,6 +230,21 @@ def _refuse_unseen_visibility(config: RunConfig) -> None:
         f"{shown}: crowd {crowd!r} replays people who see no robot whatever the visibility (crowd "
         f"{crowd}_reactive yields to visible robots); leave it out"
     )
+
+
+def _refuse_unsampled(config: RunConfig) -> None:
+    """A replayed crowd's people stand where their tracks put them: the rules by which ORCA's humans are
+    sampled (``crowdsim.crossings``) place nobody, and a value chosen for them was run as if not given."""
+    crowd = config.env.crowd
+    if crowd == "orca":
+        return
+    for key in ("crossing", "spawn_separation"):
+        if config.chosen("env", key):
+            raise PipelineError(
+                f"{_shown(config, 'env', key, config.values['env'][key])}: crowd {crowd!r} replays recorded "
+                "people, placed by their tracks; crossing and spawn_separation sample the humans of crowd "
+                "orca; leave it out"
+            )
 
 
 def horizon_note(spec: ControllerSpec) -> str | None:

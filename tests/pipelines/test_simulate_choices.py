@@ -121,6 +121,22 @@ def test_a_visibility_is_refused_for_a_crowd_that_sees_no_robot(options, shown, 
     )
 
 
+@pytest.mark.parametrize(
+    "crowd, option",
+    [("eth", "env.spawn_separation=3"), ("hotel_test_reactive", "env.crossing=v1")],
+)
+def test_the_sampling_rules_are_refused_for_a_replayed_crowd(crowd, option, capsys, monkeypatch):
+    """A replay's people stand where their tracks put them: the episodes were those of the default rules."""
+    _no_episodes(monkeypatch)
+    assert main(["simulate", "--controller", "straight", *RUN, "--crowd", crowd, "--set", option]) == 2
+    key, value = option.split("=")
+    assert _error_line(capsys) == (
+        f"crowdmpc simulate: error: --set {key} {float(value) if value[0].isdigit() else value}: crowd "
+        f"{crowd!r} replays recorded people, placed by their tracks; crossing and spawn_separation sample "
+        "the humans of crowd orca; leave it out"
+    )
+
+
 def test_record_iterations_needs_a_recording(capsys, monkeypatch):
     """--record-iterations without --record was accepted and wrote nothing."""
     _no_episodes(monkeypatch)
