@@ -6,10 +6,11 @@ NLP that takes seconds to build, a plugin's changed code (the notes on the robot
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
+from pipelines.loop.unread import FLOCKING_KEYS
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
@@ -90,6 +91,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         )
     if is_shipped(spec.controller) and spec.controller in MPC_CONTROLLERS:
         _refuse_unread(config, spec)
+    _refuse_teamless(config, is_shipped(spec.controller) and spec.controller in MPC_CONTROLLERS)
     if not config.simulate.sensor_tracks and config.simulate.sensor_range is None:
         raise PipelineError(
             f"{_shown(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
@@ -139,6 +141,34 @@ def check_predictors_known(config: RunConfig, *keys: tuple[str, str]) -> None:
         for name in names:
             if name not in known:
                 raise config.error(section, key, str(UnknownPredictor(name, known)))
+
+
+# What a team has and a lone robot has not: Eq. 15's pairs and what tunes them (mpc.stall drops a stalled
+# robot's pairs), DMPC's joint re-plans of two robots and its order among several, and the team's layout.
+TEAM_MPC_KEYS: Final[tuple[tuple[str, str], ...]] = (
+    ("controller", "flocking"),
+    *(("mpc", key) for key in sorted(FLOCKING_KEYS)),
+    *(("mpc", key) for key in ("stall_release_s", "dmpc_pairs", "dmpc_conflicts", "dmpc_order")),
+)
+
+
+def _refuse_teamless(config: RunConfig, mpc: bool) -> None:
+    """A lone robot flocks with nobody, has no teammate to re-plan with and no formation to keep: a value
+    given on the command line for a team (its layout, any formation but antipodal, and for a shipped
+    ``mpc``, ``TEAM_MPC_KEYS``) ran the episodes of its default. A value in a file passes, as a file may
+    serve every team size."""
+    if config.scenario.robots != 1:
+        return
+    team = [("env", "goal_assignment"), ("env", "robot_spacing"), *(TEAM_MPC_KEYS if mpc else ())]
+    team += [("env", "formation")] if config.env.formation != "antipodal" else []
+    for section, key in team:
+        source = config.source(section, key)
+        if source is not None and source.kind != "file":
+            shown = _shown(config, section, key, config.values[section][key])
+            raise PipelineError(
+                f"{shown} changes nothing here, where {config.label('scenario', 'robots')} 1 leaves the "
+                "robot no teammate to flock, re-plan or stand in formation with; leave it out"
+            )
 
 
 def _refuse_untracked(config: RunConfig, controller: str) -> None:

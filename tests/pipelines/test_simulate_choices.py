@@ -137,6 +137,39 @@ def test_the_sampling_rules_are_refused_for_a_replayed_crowd(crowd, option, caps
     )
 
 
+LONE = (
+    "changes nothing here, where --robots 1 leaves the robot no teammate to flock, re-plan or stand in "
+    "formation with"
+)
+
+
+@pytest.mark.parametrize(
+    "controller, options, shown",
+    [
+        ("cmpc", ["--no-flocking"], "--no-flocking"),
+        ("dmpc", ["--set", "mpc.w_floc=1"], "--set mpc.w_floc 1.0"),
+        ("dmpc", ["--set", "mpc.stall_release_s=2"], "--set mpc.stall_release_s 2.0"),
+        ("cmpc", ["--set", "env.goal_assignment=slots"], "--set env.goal_assignment slots"),
+        ("orca", ["--set", "env.formation=wedge"], "--set env.formation wedge"),
+        ("straight", ["--set", "env.robot_spacing=2"], "--set env.robot_spacing 2.0"),
+    ],
+)
+def test_a_team_setting_is_refused_for_a_lone_robot(controller, options, shown, capsys, monkeypatch):
+    """One robot has no pair for Eq. 15 and no formation to keep: these ran their defaults' episodes."""
+    _no_episodes(monkeypatch)
+    assert main(["simulate", "--controller", controller, *RUN, "--robots", "1", *options]) == 2
+    assert _error_line(capsys) == f"crowdmpc simulate: error: {shown} {LONE}; leave it out"
+
+
+def test_a_lone_robot_keeps_the_antipodal_formation_and_a_files_team_settings(tmp_path, capsys):
+    """Antipodal moves even one robot (across a 3.5 m circle); a file may serve every team size."""
+    out = tmp_path / "run.json"
+    argv = ["simulate", "--controller", "straight", *RUN, "--robots", "1", "--json", str(out)]
+    assert main([*argv, "--set", "env.formation=antipodal"]) == 0
+    (tmp_path / "team.toml").write_text('[env]\nformation = "wedge"\n')
+    assert main([*argv, "--config", str(tmp_path / "team.toml")]) == 0
+
+
 def test_record_iterations_needs_a_recording(capsys, monkeypatch):
     """--record-iterations without --record was accepted and wrote nothing."""
     _no_episodes(monkeypatch)
