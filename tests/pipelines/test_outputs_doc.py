@@ -180,3 +180,19 @@ def test_the_mcap_example_runs_as_printed(outputs, monkeypatch):
     assert (controller, horizon) == ("dmpc", "4") and commit
     assert re.search(r"^\d+ states; robot 0 starts at \[.*\] m$", printed.getvalue().splitlines()[1])
     assert re.search(r"^success (True|False) min distance \d", printed.getvalue().splitlines()[2])
+
+
+def test_an_unseen_humans_prediction_is_a_pair_of_nulls_as_documented(tmp_path):
+    """outputs.md said `/mpc/prediction`'s `positions` held null for a human the controller did not see, but
+    the recording writes `[null, null]` at each step (the schema's point of two numbers or nulls): a reader
+    testing `p is None` found every human predicted."""
+    argv = ["simulate", "--controller", "cmpc", "--predictor", "constant_velocity", "--humans", "3"]
+    argv += ["--robots", "2", "--sensor-range", "1", "--set", "env.time_limit=2", "--no-progress"]
+    assert main([*argv, "--record", str(tmp_path)]) == 0
+    with open(next(tmp_path.glob("*.mcap")), "rb") as f:
+        _, _, message = next(make_reader(f).iter_messages(topics=["/mpc/prediction"]))
+    first = _strict(message.data)
+    unseen = {tuple(point) for step in first["positions"] for point in step}
+    assert unseen == {(None, None)}  # no human within 1 m of a robot at the start
+    row = next(line for line in DOC.read_text().splitlines() if line.startswith("| `/mpc/prediction`"))
+    assert "`[null, null]` at every step for a human the controller did not see" in row
