@@ -196,3 +196,19 @@ def test_an_unseen_humans_prediction_is_a_pair_of_nulls_as_documented(tmp_path):
     assert unseen == {(None, None)}  # no human within 1 m of a robot at the start
     row = next(line for line in DOC.read_text().splitlines() if line.startswith("| `/mpc/prediction`"))
     assert "`[null, null]` at every step for a human the controller did not see" in row
+
+
+def test_the_documented_cell_key_is_the_one_a_sweep_makes(tmp_path, capsys):
+    """outputs.md's cell key left out the `[mpc]` values a cell sets (`-w_goal=20.0`, after the coupling) and
+    did not say that the simulator settings come before the humans and robots: a reader who built a key by it
+    (to find a cell's records or its mcap/ folder) built one that no sweep writes."""
+    said = re.search(
+        r"`--set mpc.w_goal=20 --set env.time_limit=50` makes .*? `([^`]+)`",
+        " ".join(DOC.read_text().split()),
+    )
+    assert said is not None, "outputs.md gives no cell key of a sweep with --set"
+    argv = ["sweep", "--experiment", "table2", "--humans", "5", "--episodes-per-cell", "2", "--dry-run"]
+    argv += ["--set", "mpc.w_goal=20", "--set", "env.time_limit=50", "--out", str(tmp_path / "sw")]
+    assert main(argv) == 0
+    printed = capsys.readouterr()
+    assert said.group(1) in (printed.out + printed.err).split()
