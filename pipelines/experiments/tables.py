@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Sequence
-from typing import Final
+from typing import Any, Final
 
+from crowdsim.replay import recorded
 from crowdsim.world import PAPER_ROBOTS
 from pipelines.experiments import safety_report as safety
 from pipelines.experiments.cells import EXPERIMENTS, Experiment
@@ -43,6 +44,9 @@ def paired_success(reference: CellSummary, other: CellSummary) -> tuple[int, int
     return gained, lost, mcnemar_exact(gained, lost)
 
 
+# The simulator settings that place the humans around the robots (crowdsim.scenarios), as `crowdmpc compare`
+# pairs crowds by them (pipelines.experiments.compare.CROWD_SETTINGS)
+PLACEMENT: Final[tuple[str, ...]] = ("crossing", "spawn_separation", "formation", "robot_spacing")
 # The episodes' own medians and p95s, summarised over the cell's episodes (summary.CellSummary): not the
 # statistic `simulate` and `review` print, pooled over all control steps, which records cannot give.
 STEP_TIME_LABEL: Final[str] = "Control step (ms): median of the episodes' medians / p95 of their p95s"
@@ -144,11 +148,16 @@ def _beside_other_settings(experiment: Experiment, columns: Sequence[CellSummary
     return any(s.paper and (s.cell.spec, s.cell.world) not in own for s in columns)
 
 
-def _crowds(s: CellSummary) -> tuple[int, str]:
+def _crowds(s: CellSummary) -> tuple[Any, ...]:
     """What decides a column's crowds beside the seed, the scenario and the number of humans
-    (crowdsim.scenarios): its number of robots (a human drawn near a robot is redrawn) and its profile (the
-    spawn separation and crossing band it draws with). Visibility, sensing and margins do not."""
-    return s.cell.n_robots, s.cell.world.profile
+    (crowdsim.scenarios): its number of robots (a human drawn near a robot is redrawn), its profile and the
+    simulator settings that place the humans (``PLACEMENT``: ``--vary env.spawn_separation=0.1,1`` paired
+    columns of other crowds), and the recording a replayed crowd plays. Visibility, sensing and margins do
+    not, nor the humans' ORCA or the time limit (the same people, who then move otherwise)."""
+    world = s.cell.world
+    env = world.env_config()
+    placement = tuple(getattr(env, name) for name in PLACEMENT)
+    return s.cell.n_robots, world.profile, recorded(world.crowd), placement
 
 
 def _crowds_note(columns: Sequence[CellSummary]) -> str:
@@ -156,7 +165,7 @@ def _crowds_note(columns: Sequence[CellSummary]) -> str:
     nothing where they do."""
     if len({_crowds(s) for s in columns}) == 1:
         return ""
-    return " on the same crowds (as many robots, the same profile)"
+    return " on the same crowds (as many robots, the same profile and placement)"
 
 
 def markdown_table(experiment: Experiment, summaries: Sequence[CellSummary]) -> str:

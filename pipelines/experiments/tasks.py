@@ -5,8 +5,9 @@ Seeding. Episode ``i`` of every cell of an experiment is the same crowd: scenari
 any prefix of a cell is half circle and half perpendicular crossing, as the paper's 500 + 500) with seed
 ``seed + i // 2``. The circle episodes of a cell are therefore exactly those of
 ``crowdmpc simulate --scenario circle --seed S --episodes N/2``, and cells differ only in the controller.
-Only where the cells share their number of robots and profile, though: another team or profile draws other
-humans from the same seed (crowdsim.scenarios), and table.md pairs successes only within those.
+Only where the cells share their number of robots, profile and the [env] settings that place the humans,
+though: another team, profile or placement draws other humans from the same seed (crowdsim.scenarios), and
+table.md pairs successes only within those.
 
 The experiments these make up, and the registry of those the project ships, are pipelines.experiments.cells.
 """

@@ -162,3 +162,47 @@ def test_table_notes_name_only_the_simulator_settings_every_column_shares():
     assert "Simulator settings" not in note('sweep.vary="env.time_limit=3,40"')
     shared = note('sweep.vary="env.orca.time_horizon=2,5"', "env.time_limit=50")
     assert shared.endswith("Simulator settings over the profile's: time_limit=50.0.")
+
+
+def test_success_is_paired_only_with_a_column_of_the_same_placement():
+    """The spawn separation places other humans from a seed (seed 1, 7 humans, circle), so `--vary
+    env.spawn_separation=0.1,1` gives each value its own reference, and DMPC is paired with CMPC of its value;
+    the humans' ORCA horizon (the same people, who then move otherwise) keeps one reference. Hand-made
+    outcomes, 4 crowds each: CMPC at 0.1 succeeds on all, the others fail crowds 0 and 1. Paired with CMPC
+    at 0.1, CMPC at 1 read "+0 / −2 (p = 0.5)", losses on crowds it never faced."""
+    import numpy as np
+
+    from crowdsim.scenarios import make_layout
+    from pipelines.commands.sweep_plan import configured_experiment
+    from pipelines.config import load
+    from pipelines.experiments.summary import summarize
+    from pipelines.experiments.tables import markdown_table
+    from tests.pipelines.test_small_fixes import _records
+
+    near, far = (
+        make_layout("circle", 7, 3, np.random.default_rng(1), spawn_separation=s).human_starts
+        for s in (0.1, 1)
+    )
+    assert not np.allclose(near, far)
+    won, lost = (True, False, False, False), (False, False, False, False)
+
+    def paired(vary: str) -> list[str]:
+        sets = ["sweep.experiment=table2", "sweep.humans=[7]", f'sweep.vary="{vary}"']
+        experiment = configured_experiment(load(sets=sets))
+        outcomes = {(label, 7): [lost, lost, won, won] for label in experiment.method_labels}
+        outcomes[experiment.method_labels[0], 7] = [won] * 4
+        table = markdown_table(
+            experiment, summarize(experiment, experiment.cells(), _records(experiment, outcomes))
+        )
+        line = next(line for line in table.splitlines() if line.startswith("| Success, paired"))
+        return line.removesuffix(" |").split(" | ")[1:]
+
+    assert paired("env.spawn_separation=0.1,1") == [
+        "reference",
+        "reference",
+        "+0 / −2 (p = 0.5)",
+        "+0 / −0 (p = 1)",
+    ]
+    assert (
+        paired("env.orca.time_horizon=2,5") == ["reference", "+0 / −2 (p = 0.5)"] + ["+0 / −2 (p = 0.5)"] * 2
+    )

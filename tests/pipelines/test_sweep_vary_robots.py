@@ -211,7 +211,10 @@ def test_success_is_paired_only_with_a_column_of_as_many_robots():
         "| Success, paired with the group's first method | reference | reference | +0 / −2 (p = 0.5) "
         "| +1 / −0 (p = 1) |"
     ) in table
-    assert "and the first one on the same crowds (as many robots, the same profile) failed / the" in table
+    assert (
+        "and the first one on the same crowds (as many robots, the same profile and placement) failed / the"
+        in table
+    )
 
 
 def test_the_table_bolds_and_pairs_a_column_only_against_its_own_team():
