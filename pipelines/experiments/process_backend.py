@@ -38,7 +38,6 @@ BROKEN_POOL_WAIT_S: Final[float] = 30.0  # for the futures of a broken pool to f
 STARTING_EXIT_S: Final[float] = 5.0  # for workers that died starting to finish exiting (they do at once)
 CLOSE_GRACE_S: Final[float] = 10.0  # for idle workers to close their controllers and exit at a sweep's end
 
-
 _WORKER: EpisodeWorker | None = None  # one per pool process
 
 
@@ -204,9 +203,8 @@ class ProcessBackend:
         scratch_root: str | None = None,
         timeout_s: float | None = None,
     ):
-        """``scratch_root``: the folder the workers' scratch folders go in (a sweep's); without one the
-        backend makes its own and removes it on ``close``: a worker's folder of its own would be left behind,
-        since ``close`` terminates the workers (no atexit runs)."""
+        """``scratch_root``: where the workers' scratch folders go (a sweep's); else the backend's own,
+        removed on ``close`` or a failed start (a worker's own would stay: ``close`` ends it, no atexit)."""
         self.workers = workers
         _check_main_is_a_file()
         self._environment = _worker_environment()  # refuses a plugin the workers cannot import
@@ -216,7 +214,9 @@ class ProcessBackend:
         _start_resource_tracker()
         try:
             self._start_pool()
-        except SweepStopped:
+        except BaseException:  # a Ctrl-C while the workers start too: they end now, not when collected
+            if getattr(self, "_pool", None) is not None:  # ended already after SweepStopped: a no-op
+                self._end_pool()
             if self._own_root is not None:
                 release_scratch_root(self._own_root)
             raise

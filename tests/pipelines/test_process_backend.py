@@ -119,3 +119,24 @@ def test_a_main_script_piped_in_is_refused_before_any_worker_starts(tmp_path, mo
     fake_main("<stdin>", spec=types.SimpleNamespace(name="study"))
     process_backend.ProcessBackend(1, "none", scratch_root=str(tmp_path))
     assert len(started) == 2
+
+
+def test_a_ctrl_c_while_the_workers_start_ends_them_and_removes_the_pools_folder(tmp_path, monkeypatch):
+    """A KeyboardInterrupt while the pool waited for its workers to start left them running (until the
+    pool was collected) and, without a sweep's root, the backend's own scratch root behind: only a
+    worker that died starting (SweepStopped) was cleaned up."""
+    import concurrent.futures
+    import tempfile
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the spawned workers' temp directory
+    monkeypatch.setattr(tempfile, "tempdir", None)  # and the driver's (cached once asked)
+    before = set(multiprocessing.active_children())
+
+    def interrupted(self, timeout=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(concurrent.futures.Future, "result", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        process_backend.ProcessBackend(2, "none")
+    assert [p for p in multiprocessing.active_children() if p not in before] == []
+    assert list(tmp_path.iterdir()) == []
