@@ -53,7 +53,9 @@ def compare_figure(report: Mapping[str, Any]) -> Any:
         for label, versus in g["versus_first"].items():
             team = f", {g['robots']} robots" if teams else ""
             name = f"{g['method']}{team}: {label} − {first}"
-            series.setdefault(name if by_humans else f"{label} − {first}", []).append((g, versus))
+            if not by_humans:  # the x axis names the method: its teams' points had shared one x, one series
+                name = f"{g['robots']} robots: {label} − {first}" if teams else f"{label} − {first}"
+            series.setdefault(name, []).append((g, versus))
     # One x position per crowd size run (or per method), evenly spaced: a line across 5 and 7 humans read
     # as if 6 had run, and the axis had ticks at 5.5 humans.
     ticks = _ticks(groups, by_humans)

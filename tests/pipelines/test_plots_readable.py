@@ -271,3 +271,17 @@ def test_compare_of_one_group_names_it_in_full_off_the_panel_edges():
         low, high = ax.get_xlim()
         xs = np.concatenate([line.get_xdata() for line in ax.get_lines() if line.get_marker() == "o"])
         assert low < xs.min() - 0.2 and xs.max() + 0.2 < high
+
+
+def test_compare_at_one_crowd_size_draws_each_team_apart():
+    """A sweep folder resumed with --robots 6 after --robots 3 holds two groups of one method at one crowd
+    size: both teams' points stood at the method's one x in one series, one hiding the other and the legend
+    naming neither team. A series per team now, each beside the other and named."""
+    report = _report([("cmpc", 5), ("cmpc", 5)])
+    report["groups"][1] |= {"robots": 6, "versus_first": {"b": _versus(-20.0)}}
+    fig = compare_figure(report)
+    for ax in fig.axes:
+        points = [line for line in ax.get_lines() if line.get_marker() not in (None, "None", "")]
+        xs = {float(x) for line in points for x in line.get_xdata()}
+        assert len(xs) == 2
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["3 robots: b − a", "6 robots: b − a"]
