@@ -53,8 +53,8 @@ from pipelines.loop.interrupt import terminate_as_interrupt
 from predictors.progress import progress_bar
 
 # A sweep whose first episodes all raise is misconfigured (a missing model, a broken build): stop it rather
-# than fill errors.jsonl with thousands of copies of one traceback. Only while the directory holds no record:
-# once an episode succeeded the setup works, and the episodes that raise are those episodes' own failures.
+# than fill errors.jsonl with thousands of copies of one traceback. Only while this run has recorded none (a
+# run extending a sweep too): once an episode succeeded the setup works, and those that raise fail alone.
 FAIL_FAST_ERRORS: Final[int] = 4
 
 
