@@ -6,27 +6,26 @@ NLP that takes seconds to build, a plugin's changed code (the notes on the robot
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING
 
+from pipelines.commands.idle_choices import (
+    SAMPLING_KEYS,
+    shown_choice,
+    team_keys,
+    teamless_refusal,
+    typed,
+    unsampled_because,
+    unseen_because,
+    untracked_because,
+    visibility_shown,
+)
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
-from pipelines.loop.unread import FLOCKING_KEYS
 
 if TYPE_CHECKING:
     from pipelines.config import RunConfig
     from pipelines.loop.controllers import ControllerSpec
     from predictors.manifest import ZooEntry
-
-
-def _shown(config: RunConfig, section: str, key: str, value: Any) -> str:
-    """A chosen value as an error names it: "--no-flocking", "--set mpc.horizon 10", "run.toml: mpc.horizon
-    10" (a switch given as an option says its value by its name)."""
-    label = config.label(section, key)
-    source = config.source(section, key)
-    if isinstance(value, bool):
-        return label if source is not None and source.kind == "cli" else f"{label} {str(value).lower()}"
-    text = str(value)  # a 900 kB string in a file is no 900 kB error line
-    return f"{label} {text if len(text) <= 80 else text[:77] + '...'}"
 
 
 def _refuse(shown: list[str], controller: str, plans_with: str, keys: str) -> None:
@@ -48,7 +47,7 @@ def _refuse_unread(config: RunConfig, spec: ControllerSpec) -> None:
         source = config.source("mpc", key)
         why = unread_because(spec, key)
         if source is not None and source.kind != "file" and why is not None:
-            shown = _shown(config, "mpc", key, value)
+            shown = shown_choice(config, "mpc", key, value)
             raise PipelineError(f"{shown} changes nothing here, where the runs {why}; leave it out")
 
 
@@ -64,7 +63,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         chosen = config.controller
         _refuse(
             [
-                _shown(config, "controller", key, value)
+                shown_choice(config, "controller", key, value)
                 for key, value, given in (
                     ("predictor", chosen.predictor, config.chosen("controller", "predictor")),
                     ("margins", chosen.margins, spec.margins.mode != "none"),
@@ -81,7 +80,7 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
         mpc += [("mpc", key) for key in config.values["mpc"]]
         _refuse(
             [
-                _shown(config, section, key, config.values[section][key])
+                shown_choice(config, section, key, config.values[section][key])
                 for section, key in mpc
                 if config.chosen(section, key)
             ],
@@ -94,11 +93,10 @@ def check_choices_apply(config: RunConfig, spec: ControllerSpec) -> None:
     _refuse_teamless(config, is_shipped(spec.controller) and spec.controller in MPC_CONTROLLERS)
     if not config.simulate.sensor_tracks and config.simulate.sensor_range is None:
         raise PipelineError(
-            f"{_shown(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
+            f"{shown_choice(config, 'simulate', 'sensor_tracks', False)}: track lengths are a sensor's; give "
             "--sensor-range M too (or [simulate] sensor_range)"
         )
-    if is_shipped(spec.controller) and spec.controller not in MPC_CONTROLLERS:
-        _refuse_untracked(config, spec.controller)
+    _refuse_untracked(config, spec.controller)
     _refuse_unseen_visibility(config)
     _refuse_unsampled(config)
     check_recording(config)
@@ -143,43 +141,25 @@ def check_predictors_known(config: RunConfig, *keys: tuple[str, str]) -> None:
                 raise config.error(section, key, str(UnknownPredictor(name, known)))
 
 
-# What a team has and a lone robot has not: Eq. 15's pairs and what tunes them (mpc.stall drops a stalled
-# robot's pairs), DMPC's joint re-plans of two robots and its order among several, and the team's layout.
-TEAM_MPC_KEYS: Final[tuple[tuple[str, str], ...]] = (
-    ("controller", "flocking"),
-    *(("mpc", key) for key in sorted(FLOCKING_KEYS)),
-    *(("mpc", key) for key in ("stall_release_s", "dmpc_pairs", "dmpc_conflicts", "dmpc_order")),
-)
-
-
 def _refuse_teamless(config: RunConfig, mpc: bool) -> None:
     """A lone robot flocks with nobody, has no teammate to re-plan with and no formation to keep: a value
-    given on the command line for a team (its layout, any formation but antipodal, and for a shipped
-    ``mpc``, ``TEAM_MPC_KEYS``) ran the episodes of its default. A value in a file passes, as a file may
-    serve every team size."""
+    given on the command line for a team (``team_keys``: its layout, any formation but antipodal, and for a
+    shipped ``mpc`` Eq. 15's and DMPC's pairs) ran the episodes of its default. A value in a file passes, as
+    a file may serve every team size."""
     if config.scenario.robots != 1:
         return
-    team = [("env", "goal_assignment"), ("env", "robot_spacing"), *(TEAM_MPC_KEYS if mpc else ())]
-    team += [("env", "formation")] if config.env.formation != "antipodal" else []
-    for section, key in team:
-        source = config.source(section, key)
-        if source is not None and source.kind != "file":
-            shown = _shown(config, section, key, config.values[section][key])
-            raise PipelineError(
-                f"{shown} changes nothing here, where {config.label('scenario', 'robots')} 1 leaves the "
-                "robot no teammate to flock, re-plan or stand in formation with; leave it out"
-            )
+    for section, key in team_keys(config, mpc):
+        if typed(config, section, key):
+            raise teamless_refusal(config, shown_choice(config, section, key, config.values[section][key]))
 
 
 def _refuse_untracked(config: RunConfig, controller: str) -> None:
-    """ORCA and the straight line act on the humans' current positions and velocities, never on their pasts,
-    so a tracker that reports no track lengths drives them as one that does: the switch changed only the
-    record's ``sensing``."""
-    if config.chosen("simulate", "sensor_tracks") and not config.simulate.sensor_tracks:
+    """--no-sensor-tracks for a controller that reads no pasts (``untracked_because``: ORCA, the straight
+    line): the switch changed only the record's ``sensing``."""
+    why = untracked_because([controller])
+    if config.chosen("simulate", "sensor_tracks") and not config.simulate.sensor_tracks and why is not None:
         raise PipelineError(
-            f"{_shown(config, 'simulate', 'sensor_tracks', False)}: controller {controller!r} acts on the "
-            "humans' current positions and velocities, not their pasts, so track lengths change nothing for "
-            "it; leave it out"
+            f"{shown_choice(config, 'simulate', 'sensor_tracks', False)}: {why}; leave it out"
         )
 
 
@@ -243,37 +223,19 @@ def check_recording(config: RunConfig) -> None:
 def _refuse_unseen_visibility(config: RunConfig) -> None:
     """A plain replayed crowd walks its recorded tracks, seeing no robot whether the robots are visible or
     not: the visibility chosen was run as if not given, while the record stated it."""
-    from crowdsim.reaction import reacts
-
-    crowd = config.env.crowd
-    if crowd == "orca" or reacts(crowd) or not config.chosen("env", "robots_visible"):
-        return
-    visibility = "visible" if config.env.robots_visible else "invisible"
-    source = config.source("env", "robots_visible")
-    shown = config.label("env", "robots_visible")
-    shown += (
-        f" {visibility}"
-        if source is not None and source.kind == "cli"
-        else f" {visibility == 'visible'}".lower()
-    )
-    raise PipelineError(
-        f"{shown}: crowd {crowd!r} replays people who see no robot whatever the visibility (crowd "
-        f"{crowd}_reactive yields to visible robots); leave it out"
-    )
+    why = unseen_because(config.env.crowd)
+    if why is not None and config.chosen("env", "robots_visible"):
+        raise PipelineError(f"{visibility_shown(config)}: {why}; leave it out")
 
 
 def _refuse_unsampled(config: RunConfig) -> None:
     """A replayed crowd's people stand where their tracks put them: the rules by which ORCA's humans are
     sampled (``crowdsim.crossings``) place nobody, and a value chosen for them was run as if not given."""
-    crowd = config.env.crowd
-    if crowd == "orca":
-        return
-    for key in ("crossing", "spawn_separation"):
-        if config.chosen("env", key):
+    why = unsampled_because(config.env.crowd)
+    for key in SAMPLING_KEYS:
+        if why is not None and config.chosen("env", key):
             raise PipelineError(
-                f"{_shown(config, 'env', key, config.values['env'][key])}: crowd {crowd!r} replays recorded "
-                "people, placed by their tracks; crossing and spawn_separation sample the humans of crowd "
-                "orca; leave it out"
+                f"{shown_choice(config, 'env', key, config.values['env'][key])}: {why}; leave it out"
             )
 
 

@@ -369,7 +369,7 @@ def _sweep_config(args: argparse.Namespace, cfg: RunConfig, out: Path) -> SweepC
     from pipelines.experiments.sweep_config import SweepConfig
 
     settings = cfg.sweep
-    experiment = configured_experiment(cfg)
+    experiment = configured_experiment(cfg, run=not args.report_only)  # a report reads what ran
     return SweepConfig(
         experiment=experiment,
         out=out,

@@ -19,11 +19,12 @@ if TYPE_CHECKING:
     from pipelines.loop.spec import ControllerSpec
 
 
-def configured_experiment(cfg: RunConfig) -> Experiment:
+def configured_experiment(cfg: RunConfig, *, run: bool = False) -> Experiment:
     """The experiment of ``cfg`` with its choices applied to every method: the predictors, predictor and
     margins (--predictors, --predictor, --margins or the config), the profile and visibility, and the
     [controller] and [mpc] values that differ from their defaults (a value the experiment compares across
-    its methods is refused)."""
+    its methods is refused). For a sweep to ``run`` (its dry run too, not a report), the choices the command
+    line made that no cell would read are refused too (``idle_choices.check_sweep_choices``)."""
     from pipelines.experiments.cells import get_experiment
     from pipelines.experiments.tasks import World
     from pipelines.loop.margins import parse_margins
@@ -65,7 +66,12 @@ def configured_experiment(cfg: RunConfig) -> Experiment:
     for key in ("controller", "coupling", "flocking", "record_iterations"):
         if cfg.chosen("controller", key):
             experiment = _with_spec_field(cfg, experiment, key, getattr(cfg.controller, key))
-    return _with_mpc_settings(cfg, experiment)
+    experiment = _with_mpc_settings(cfg, experiment)
+    if run:
+        from pipelines.commands.idle_choices import check_sweep_choices
+
+        check_sweep_choices(cfg, experiment)
+    return experiment
 
 
 def _with_mpc_settings(cfg: RunConfig, experiment: Experiment) -> Experiment:

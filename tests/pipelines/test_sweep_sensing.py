@@ -137,8 +137,11 @@ def test_a_sensed_sweep_episode_is_simulates_metric_for_metric_and_its_record_sa
 
 def test_sweep_sensor_range_runs_every_method_behind_the_sensor_and_reports_it(tmp_path, capsys):
     out = tmp_path / "sw"
-    args = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "2"]
-    args += ["--backend", "inline", "--no-progress", "--sensor-range", "2", "--no-sensor-tracks"]
+    # a file's switch: typed, it is refused for ORCA and the straight line, which read no pasts
+    # (test_sweep_idle_choices), while a file may serve the controllers that do
+    (tmp_path / "run.toml").write_text("[simulate]\nsensor_tracks = false\n")
+    args = ["--config", str(tmp_path / "run.toml"), "sweep", "--experiment", "baselines", "--humans", "3"]
+    args += ["--episodes-per-cell", "2", "--backend", "inline", "--no-progress", "--sensor-range", "2"]
     assert main([*args, "--out", str(out)]) == 0
     lines = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
     assert len(lines) == 4
