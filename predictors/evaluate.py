@@ -65,12 +65,30 @@ def predict_scene(predictor: Predictor, xy: np.ndarray, config: EvalConfig, rng:
         raise PredictorError(
             f"predictor {predictor.name!r} returned shape {prediction.shape}, expected {expected}"
         )
+    check_finite(predictor, prediction, "prediction")
     samples = None
     if config.top_k is not None and hasattr(predictor, "sample"):
         samples = np.asarray(
             predictor.sample(history, mask, None, humans, config.pred_len, config.top_k, rng)
         )
+        check_finite(predictor, samples, "samples")
     return prediction, agents, samples
+
+
+def check_finite(predictor: Predictor, positions: np.ndarray, what: str) -> None:
+    """PredictorError naming the first non-finite position a predictor returned: the scores would otherwise
+    fail inside trajnetplusplustools with a bare AssertionError (a NaN primary), or count a NaN neighbour as
+    absent where TrajNet++'s evaluator reads a present one that collides with nothing."""
+    bad = np.argwhere(~np.isfinite(positions).all(axis=-1))
+    if len(bad):
+        *sample, step, agent = bad[0].tolist()
+        where = f"sample {sample[0]}, " if sample else ""
+        value = positions[tuple(bad[0])].tolist()
+        raise PredictorError(
+            f"predictor {predictor.name!r} returned a non-finite position {value} "
+            f"in its {what} ({where}predicted step {step + 1}, agent {agent}); "
+            "a predictor must return finite positions"
+        )
 
 
 def observed_history(xy: np.ndarray, obs_len: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

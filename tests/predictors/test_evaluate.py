@@ -82,3 +82,41 @@ def test_a_predictor_reading_more_steps_than_the_protocol_gives_is_refused_first
         PredictorError, match=r"reads 10 observed steps, the evaluation gives 9 of each scene"
     ):
         evaluate(ConstantVelocity(obs_len=10), [path])
+
+
+class Diverging(Sampler):
+    """Constant velocity whose primary's forecast (or one neighbour's sample) turns NaN at step 3."""
+
+    name = "diverging"
+
+    def __init__(self, agent: int = 0, in_samples: bool = False):
+        super().__init__()
+        self.agent, self.in_samples = agent, in_samples
+
+    def rollout(self, history, mask, robots_future, humans, horizon=None):
+        future = super().rollout(history, mask, robots_future, humans, horizon)
+        if not self.in_samples:
+            future[2, self.agent] = np.nan
+        return future
+
+    def sample(self, history, mask, robots_future, humans, horizon, k, rng):
+        samples = super().sample(history, mask, robots_future, humans, horizon, k, rng)
+        samples[1, 2, self.agent, 0] = np.inf
+        return samples
+
+
+def test_a_non_finite_prediction_is_refused_naming_where(tmp_path):
+    """A NaN primary ended in trajnetplusplustools' bare AssertionError; a NaN neighbour was scored as absent
+    (its segments joined across the gap), where TrajNet++'s evaluator reads a present row colliding with
+    nothing. Either is the predictor's fault, said in one line."""
+    path = write_walk_file(tmp_path / "walk.ndjson")
+    with pytest.raises(
+        PredictorError,
+        match=r"^predictor 'diverging' returned a non-finite position \[nan, nan\] in its prediction "
+        r"\(predicted step 3, agent 0\); a predictor must return finite positions$",
+    ):
+        evaluate(Diverging(), [path], progress=False)
+    with pytest.raises(PredictorError, match=r"\[nan, nan\] in its prediction \(predicted step 3, agent 1\)"):
+        evaluate(Diverging(agent=1), [path], progress=False)
+    with pytest.raises(PredictorError, match=r"\[inf, 1.0\] in its samples \(sample 1, predicted step 3"):
+        evaluate(Diverging(in_samples=True), [path], EvalConfig(top_k=3), progress=False)
