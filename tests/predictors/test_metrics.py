@@ -1,9 +1,12 @@
+import json
+
 import numpy as np
 import pytest
 import torch
+from trajnetplusplustools import TrackRow, writers
 from trajnetplusplustools import metrics as tt_metrics
 
-from predictors.metrics import SceneScore, ade, collides, fde, score_scene, summarize, track_rows
+from predictors.metrics import SceneScore, ade, collides, fde, round_cm, score_scene, summarize, track_rows
 
 
 def test_ade_fde_hand_computed_numpy_and_torch():
@@ -185,3 +188,18 @@ def test_two_pedestrians_exactly_two_radii_apart_collide():
     beside = np.tile([0.6, 0.2], (12, 1))
     assert tt_metrics.collision(track_rows(primary, FRAMES), track_rows(beside, FRAMES, 1), n_predictions=12)
     assert collides(primary, beside, FRAMES)
+
+
+def test_predictions_are_rounded_as_the_trajnet_writer_rounds_them():
+    """TrajNet++'s evaluator scores the predictions its writer wrote, Python's ``round(v, 2)`` of each
+    coordinate. ``np.round`` parts from it at half centimetres: 0.015 (0.01499...) went to 0.02 and 0.005
+    (0.00500...01) to 0.0, so a primary standing at the origin predicted at (0.015, 0.005) scored 0.02 m,
+    where TrajNet++ scores |(0.01, 0.01)|."""
+    truth = np.zeros((21, 1, 2))
+    prediction = np.tile([0.015, 0.005], (12, 1, 1))
+    score = score_scene(prediction, [0], truth, np.arange(0, 210, 10), obs_len=9, samples=prediction[None])
+    assert score.ade == pytest.approx(0.01 * np.sqrt(2)) and score.fde == pytest.approx(0.01 * np.sqrt(2))
+    assert score.topk_ade == pytest.approx(0.01 * np.sqrt(2))
+    values = np.concatenate([np.arange(-2000, 2000) * 0.01 + 0.005, [0.125, -0.125, 1.2345678, np.nan]])
+    written = [json.loads(writers.trajnet(TrackRow(0, 1, float(v), 0.0)))["track"]["x"] for v in values]
+    np.testing.assert_array_equal(round_cm(values), np.array(written, dtype=float))
