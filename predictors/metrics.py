@@ -7,13 +7,19 @@
   that appear only after the observation). Percent of those scenes; the TrajNet++ evaluator instead reports
   Col-I as -1 for the whole file when any scene's neighbours differ (every scene of the ETH test split
   matches, so the two agree there).
-* Col-II (ground-truth collision): the primary's prediction collides with a neighbour's *true* path. Percent
-  of scenes.
+* Col-II (ground-truth collision): the primary's prediction collides with a neighbour's *true* path, of the
+  neighbours seen at some observed step (TrajNet++ drops later arrivals here too). Percent of scenes.
 * A collision is ``trajnetplusplustools.metrics.collision``: over the common frames, consecutive steps are
   joined by segments sampled at their ends and midpoints, and two pedestrians of radius 0.1 m touch at
-  some sample (``collides`` hands the library only the pairs that come that close).
+  some sample (``collides`` hands the library only the pairs that come that close). A neighbour's NaN row
+  is a frame it is absent from, as in ``Reader.paths_to_xy`` (the scenes are read so), and its path is
+  joined across it; TrajNet++'s evaluator, reading paths, keeps the row as a common frame whose segments
+  never collide (a comparison with NaN is false), so on a file with NaN rows its Col-II can be lower. The
+  TrajNet++ files here have none.
 * Top-k ADE/FDE (k samples): ADE of the sample with the lowest ADE, and that sample's FDE
-  (``trajnetplusplustools.metrics.topk``).
+  (``trajnetplusplustools.metrics.topk``). TrajNet++'s evaluator ranks prediction numbers 0-2 (its table's
+  "Top3"), prediction 0 among them, which its ADE and collisions score; here the k samples are drawn apart
+  from the scored prediction (a GAN's zero-noise one).
 
 Predictions are rounded to centimetres before scoring, as the TrajNet++ evaluator's writer does (Python's
 ``round``: ``round_cm``). ``ade``/``fde`` are plain vectorised versions (numpy or torch) for training losses

@@ -203,3 +203,20 @@ def test_predictions_are_rounded_as_the_trajnet_writer_rounds_them():
     values = np.concatenate([np.arange(-2000, 2000) * 0.01 + 0.005, [0.125, -0.125, 1.2345678, np.nan]])
     written = [json.loads(writers.trajnet(TrackRow(0, 1, float(v), 0.0)))["track"]["x"] for v in values]
     np.testing.assert_array_equal(round_cm(values), np.array(written, dtype=float))
+
+
+def test_a_nan_row_of_a_neighbour_is_a_frame_it_is_absent_from():
+    """The difference from TrajNet++'s evaluator that predictors/metrics.py states: a neighbour crossing the
+    primary's prediction at predicted step 6, its row there NaN, collides here (its path joined from step 5
+    to 7 meets the primary's midpoint), as it does with no row at all; TrajNet++'s ``collision`` on the rows
+    as read, the NaN one kept, finds no collision."""
+    primary = line([0.0, 0.0], [0.5, 0.0])  # x = 0.5 .. 6.0, at x = 3.0 on step 6
+    crossing = np.stack([np.full(12, 3.0), 0.5 * (np.arange(1, 13) - 6.0)], axis=1)
+    crossing[5] = np.nan
+    assert collides(primary, crossing, FRAMES)
+    with_nan_row = [*track_rows(crossing, FRAMES, 1)]
+    with_nan_row.insert(5, TrackRow(int(FRAMES[5]), 1, float("nan"), float("nan")))
+    assert not tt_metrics.collision(track_rows(primary, FRAMES), with_nan_row, n_predictions=12)
+    assert tt_metrics.collision(
+        track_rows(primary, FRAMES), track_rows(crossing, FRAMES, 1), n_predictions=12
+    )
