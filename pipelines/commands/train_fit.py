@@ -71,6 +71,7 @@ def _prepare_process(seed: int) -> None:
     warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)", category=FutureWarning)
     for logger in ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero"):
         logging.getLogger(logger).addFilter(_no_advertising)
+        logging.getLogger(logger).addFilter(_no_interrupt_notice)
     # its SIGTERM handler's "[rank: 0] Received SIGTERM: 15", printed above the CLI's one line: a `kill` ends
     # the run as Ctrl-C does (pipelines.loop.interrupt), and Ctrl-C prints no such line
     logging.getLogger("lightning.pytorch.trainer.connectors.signal_connector").setLevel(logging.WARNING)
@@ -324,6 +325,12 @@ def _summary(
 def _no_advertising(record: logging.LogRecord) -> bool:
     """Drop Lightning's "Tip: try installing litlogger / litmodels" lines (cloud services, not training)."""
     return not str(record.msg).startswith("💡 Tip")
+
+
+def _no_interrupt_notice(record: logging.LogRecord) -> bool:
+    """Drop Lightning's blank line and "Detected KeyboardInterrupt, attempting graceful shutdown ..." on
+    Ctrl-C or `kill` during a fit: the CLI's one line says it ("crowdmpc train: interrupted")."""
+    return not str(record.msg).lstrip().startswith("Detected KeyboardInterrupt")
 
 
 def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | None) -> tuple[Any, ...]:

@@ -1073,30 +1073,35 @@ def test_a_save_stopped_by_a_kill_leaves_no_staging_folder_past_the_next_run(tra
     assert not killed.exists() and other.is_dir()
 
 
-def test_a_terminated_training_prints_the_interrupt_alone(tmp_path, monkeypatch, capfd):
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGINT"])
+def test_an_interrupted_training_prints_the_interrupt_alone(name, tmp_path, monkeypatch, capfd):
     """`kill` during a fit: Lightning's own SIGTERM handler logged "[rank: 0] Received SIGTERM: 15" above the
-    CLI's line, which a Ctrl-C at the same moment does not print (README: as Ctrl-C does)."""
+    CLI's line; and Ctrl-C or `kill` alike, its interrupt clause logged a blank line and "Detected
+    KeyboardInterrupt, attempting graceful shutdown ..." there (README: the command's one line)."""
     import os
     import signal
 
     from predictors.data.datamodule import TrajnetDataModule
 
+    sig = getattr(signal, name)
     loader = TrajnetDataModule.train_dataloader
 
     def killed(self):
-        os.kill(os.getpid(), signal.SIGTERM)  # under Lightning's handler, which calls the CLI's after its own
+        os.kill(os.getpid(), sig)  # SIGTERM under Lightning's handler, which calls the CLI's after its own
         return loader(self)
 
     monkeypatch.setattr(TrajnetDataModule, "train_dataloader", killed)
-    saved = signal.signal(signal.SIGTERM, signal.SIG_DFL)  # as a shell starts it (not ignored)
+    # as a shell starts it: SIGTERM's default action, Python's own Ctrl-C handler (neither ignored)
+    saved = signal.signal(sig, signal.SIG_DFL if sig == signal.SIGTERM else signal.default_int_handler)
     try:
         data = str(write_walk_file(tmp_path / "walk.ndjson"))
         args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--epochs", "1"]
-        assert main([*args, "--out", str(tmp_path / "run"), "--no-progress"]) == 143  # 128 + SIGTERM
+        assert main([*args, "--out", str(tmp_path / "run"), "--no-progress"]) == 128 + sig
     finally:
-        signal.signal(signal.SIGTERM, saved)
+        signal.signal(sig, saved)
     err = capfd.readouterr().err
     assert "Received SIGTERM" not in err and err.endswith("crowdmpc train: interrupted\n"), err
+    assert "KeyboardInterrupt" not in err and "\n\n" not in err, err
 
 
 @pytest.mark.parametrize("command", ["zoo", "simulate", "sweep"])
