@@ -205,24 +205,29 @@ def main(argv: list[str] | None = None) -> int:
         # under a locale without "—" or "±" (ASCII, Latin-1) a table printed them as escapes, where it had
         # raised a UnicodeEncodeError once the work was done (stderr does so by Python's default)
         sys.stdout.reconfigure(errors="backslashreplace")
+    from pipelines.loop.interrupt import stop_status, terminate_as_interrupt
+
     try:
-        try:
-            return _main(argv)
-        finally:
-            if sys.stdout is not None:  # None: started with standard output closed (`>&-`)
-                sys.stdout.flush()
+        # from the start: a `kill` while the commands are imported ended the process silently, by the default
+        # action, where Ctrl-C printed the line below
+        with terminate_as_interrupt():
+            try:
+                return _main(argv)
+            finally:
+                if sys.stdout is not None:  # None: started with standard output closed (`>&-`)
+                    sys.stdout.flush()
     except BrokenPipeError:
         if not stdout_reader_left():  # another pipe (a worker's): a real error
             raise
         return quit_closed_stdout()
-    except KeyboardInterrupt:  # Ctrl-C before a command runs (importing the commands takes a second or two)
+    except KeyboardInterrupt:  # Ctrl-C or kill before a command runs (importing the commands takes a second)
         print("crowdmpc: interrupted", file=sys.stderr)
-        return 130
+        return stop_status()
     except ImportError as exc:  # that Ctrl-C inside an extension's import (scipy: "initialization failed")
         if interrupt_behind(exc) is None:
             raise
         print("crowdmpc: interrupted", file=sys.stderr)
-        return 130
+        return stop_status()
 
 
 def _no_working_directory() -> str | None:

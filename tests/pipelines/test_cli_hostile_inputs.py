@@ -18,6 +18,8 @@ from tests.predictors.samples import write_tiny_ewap
 EXITS = "tests.plugins.exits_on_import:Net"  # sys.exit(3) while imported
 RAISES = "tests.plugins.raises_on_import:Net"  # ValueError("boom") while imported
 INTERRUPTS = "tests.plugins.interrupts_on_import:Net"  # KeyboardInterrupt while imported
+SIGNALLED = "tests.plugins.signalled_on_import:Net"  # SIGTERM or SIGHUP to itself while imported
+REPO = Path(__file__).resolve().parents[2]
 
 
 def error_line(capsys, *argv: str) -> str:
@@ -256,6 +258,25 @@ def test_ctrl_c_while_a_plugin_is_imported_is_not_swallowed(capsys):
     before a command runs)."""
     assert main(["--plugin", INTERRUPTS, "zoo", "list"]) == 130
     assert capsys.readouterr().err == "crowdmpc: interrupted\n"
+
+
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGHUP"])
+def test_kill_before_a_command_runs_stops_as_ctrl_c_does(name):
+    """`kill` (`timeout`, a closed terminal) in the first second or two, while the commands and plugins are
+    imported, ended the process by the signal's default action: no line, where a Ctrl-C then prints
+    "crowdmpc: interrupted"; it is taken as Ctrl-C from the start, with 128 + the signal."""
+    import signal
+    import subprocess
+
+    done = subprocess.run(
+        [sys.executable, "-m", "pipelines.cli", "--plugin", SIGNALLED, "zoo", "list"],
+        cwd=REPO,
+        env=os.environ | {"CROWDMPC_TEST_SIGNAL": name},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert (done.returncode, done.stderr) == (128 + getattr(signal, name), "crowdmpc: interrupted\n")
 
 
 # ---- 8. a cache directory that cannot be one -----------------------------------------------------------
