@@ -192,9 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The ``crowdmpc`` command. Its output flushed here, so that a reader that left (``crowdmpc review ... |
-    head``) ends the command quietly, with the status of a SIGPIPE, instead of a BrokenPipeError traceback."""
-    from pipelines.commands import quit_closed_stdout, stdout_reader_left
+    """The ``crowdmpc`` command: its status, whatever stopped it."""
     from pipelines.commands.standard_output import hold_standard_descriptors
 
     hold_standard_descriptors()
@@ -205,6 +203,19 @@ def main(argv: list[str] | None = None) -> int:
         # under a locale without "—" or "±" (ASCII, Latin-1) a table printed them as escapes, where it had
         # raised a UnicodeEncodeError once the work was done (stderr does so by Python's default)
         sys.stdout.reconfigure(errors="backslashreplace")
+    from pipelines.loop.interrupt import forget_handled_interrupts
+
+    try:
+        return _stopped_in_order(argv)
+    finally:
+        forget_handled_interrupts()  # the status returned is the process's, 128 + a signal included
+
+
+def _stopped_in_order(argv: list[str] | None) -> int:
+    """``main``'s command, an interrupt ended in one line and its status. Its output flushed here, so that a
+    reader that left (``crowdmpc review ... | head``) ends the command quietly, with the status of a SIGPIPE,
+    instead of a BrokenPipeError traceback."""
+    from pipelines.commands import quit_closed_stdout, stdout_reader_left
     from pipelines.loop.interrupt import stop_status, terminate_as_interrupt
 
     try:

@@ -119,6 +119,16 @@ def stop_status() -> int:
     return 128 + int(_signalled or signal.SIGINT)
 
 
+def forget_handled_interrupts() -> None:
+    """CPython notes a KeyboardInterrupt that ends code run from a string (``exec`` of source, as dataclasses
+    and namedtuples generate their methods while torch or CasADi is imported) and, once the interpreter has
+    finished, ends the process by SIGINT whatever status it exits with: a `kill` there, taken as Ctrl-C and
+    reported as 143, ended the process as Ctrl-C does (130 in a shell, -2 to a Python parent). Running any
+    code from a string clears that note (pythonrun.c, run_eval_code_obj); for a program that has handled
+    every interrupt, as the CLI's ``main`` has once it returns."""
+    exec("", {})
+
+
 @contextlib.contextmanager
 def terminate_as_interrupt() -> Iterator[None]:
     """SIGTERM and SIGHUP end the block like Ctrl-C: a sweep stops its workers, removes its scratch and
