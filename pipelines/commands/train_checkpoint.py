@@ -8,17 +8,21 @@ import argparse
 import contextlib
 import math
 import os
+import re
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint, TQDMProgressBar
+from lightning.pytorch.plugins import TorchCheckpointIO
 
+from pipelines.commands import replace_file
 from pipelines.commands.train_epochs import stopped_after
 from pipelines.commands.train_resume import relocated
 from pipelines.errors import PipelineError
+from pipelines.whole_files import remove_killed_temporaries
 from predictors.checkpoint import load_tensors
 
 
@@ -79,6 +83,26 @@ class RunCheckpoint(ModelCheckpoint):
         # skipped too when this step is saved already: a new best writes last.ckpt with it
         if not self._should_skip_saving_checkpoint(trainer):
             self._save_last_checkpoint(trainer, self._monitor_candidates(trainer))
+
+
+# replace_file's temporary of a checkpoint: .NAME.ckpt.XXXXXXXX.part
+CHECKPOINT_TEMPORARY: Final[re.Pattern[str]] = re.compile(r"\..+\.ckpt\.[a-z0-9_]{8}\.part")
+
+
+class WholeCheckpointIO(TorchCheckpointIO):
+    """Lightning's checkpoint writer, each checkpoint written beside its name and renamed (``replace_file``):
+    Lightning's own wrote it to a temporary of the temp directory and moved it in, so a kill -9 in between
+    left a copy of the weights and optimiser state in $TMPDIR for good (80 MB for a hidden size of 1024),
+    and where $TMPDIR is another file system the move copied, which a kill cut under the checkpoint's name.
+    What a killed save leaves beside it, the next save into the folder removes."""
+
+    def save_checkpoint(self, checkpoint: dict[str, Any], path: Any, storage_options: Any = None) -> None:
+        if storage_options is not None:  # as Lightning's: none of its savers passes one
+            raise TypeError(f"storage_options is not supported by {type(self).__name__}")
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        # every killed save's: a best checkpoint's name holds its val_ade, which the next run may never reach
+        remove_killed_temporaries(Path(path).parent, CHECKPOINT_TEMPORARY)
+        replace_file(Path(path), lambda name: torch.save(checkpoint, name))
 
 
 class StopOnDivergence(Callback):

@@ -345,6 +345,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | N
         StderrProgressBar,
         StopOnDivergence,
         TrainingClock,
+        WholeCheckpointIO,
         epochs_to_fit,
         progress_callbacks,
     )
@@ -385,6 +386,7 @@ def _trainer(args: argparse.Namespace, out: Path, ckpt_dir: Path, last: Path | N
             *([] if stop is None else [stop]),
             *(shown := progress_callbacks(args.no_progress)),
         ],
+        plugins=[WholeCheckpointIO()],
         deterministic=True,
         enable_progress_bar=any(isinstance(c, StderrProgressBar) for c in shown),
         enable_model_summary=False,

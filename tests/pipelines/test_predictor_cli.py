@@ -1217,3 +1217,66 @@ def test_the_default_name_says_a_pooling_other_than_the_kinds_own():
         ("vanilla_lstm", "none"): "vanilla_lstm_eth",
         ("social_attention", None): "social_attention_eth",
     }
+
+
+# a train whose third checkpoint save (epoch 1's best, after epoch 0's best and last) is killed (kill -9: no
+# finally runs) after the checkpoint was written and before it took its name
+_KILLED_CHECKPOINT_SAVE = """
+import os, shutil, sys
+from pipelines.cli import main
+saves, replace, move = [], os.replace, shutil.move
+def named(src, dst, *args, **kwargs):
+    if str(dst).endswith(".ckpt"):
+        saves.append(dst)
+        if len(saves) == 3:
+            os._exit(137)
+    return (move if named.move else replace)(src, dst, *args, **kwargs)
+def moved(src, dst, *args, **kwargs):
+    named.move = True
+    try:
+        return named(src, dst, *args, **kwargs)
+    finally:
+        named.move = False
+named.move = False
+os.replace, shutil.move = named, moved
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_checkpoint_save_stopped_by_a_kill_leaves_no_copy_past_the_next_run(tmp_path):
+    """Lightning wrote each checkpoint to a temporary of the temp directory (tempfile.mkstemp), then moved it
+    into --out: a kill -9 in between left a copy of the weights and the optimiser's state in $TMPDIR that no
+    later run removed (80 MB a kill for a net of hidden size 1024), and where $TMPDIR is another file system
+    the move was a copy, which a kill left half written under the checkpoint's own name. A checkpoint is now
+    written beside its name and renamed, and the next run into --out removes what a killed save left."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    data = str(write_walk_file(tmp_path / "walk.ndjson"))
+    out, tmp = tmp_path / "run", tmp_path / "tmp"
+    tmp.mkdir()
+    args = ["train", "--model", "vanilla_lstm", "--train", data, "--val", data, "--epochs", "2"]
+    args += ["--out", str(out), "--name", "walker", "--no-progress"]
+    killed = subprocess.run(
+        [sys.executable, "-c", _KILLED_CHECKPOINT_SAVE, *args],
+        cwd=Path(__file__).resolve().parents[2],
+        env=os.environ | {"TMPDIR": str(tmp)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert killed.returncode == 137, killed.stderr[-2000:]
+    assert [p.name for p in tmp.iterdir() if p.is_file()] == []  # (torch's torchinductor_root folder aside)
+    left = [p for p in (out / "checkpoints").iterdir() if not p.name.endswith(".ckpt")]
+    assert left  # the killed save's, beside the checkpoint it was to become
+    # and one of a best checkpoint whose val_ade the resumed run will not reach again
+    left.append(out / "checkpoints" / ".best-epoch=007-val_ade=9.8765.ckpt.k1ll3d_0.part")
+    left[-1].write_bytes(b"a killed save's checkpoint")
+    old = time.time() - 3600  # a killed writer's: unlocked, and older than a live one's could be
+    for path in left:
+        os.utime(path, (old, old))
+    assert main([*args, "--resume"]) == 0
+    assert [p.name for p in (out / "checkpoints").iterdir() if not p.name.endswith(".ckpt")] == []
+    assert (out / "walker.metrics.json").is_file()
