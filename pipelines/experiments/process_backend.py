@@ -2,9 +2,9 @@
 (pipelines.experiments.backends picks it when Ray is not installed, or for ``--backend process``).
 
 What it holds: the pool's workers (one EpisodeWorker each, ignoring Ctrl-C, exiting with a killed driver), the
-environment they start with, the resource tracker started quiet, and the break handling: a worker process that
-dies breaks the whole pool, each episode in flight becomes an episode error, a new pool runs the rest, and the
-sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing."""
+environment they start with, the resource tracker started (pool_tracker), and the break handling: a worker
+process that dies breaks the whole pool, each episode in flight becomes an episode error, a new pool runs the
+rest, and the sweep stops (SweepStopped) when the pool keeps breaking with nothing finishing."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.errors import PipelineError, SweepStopped, quiet_team_warnings, warnings_as_notes
+from pipelines.experiments.pool_tracker import start_resource_tracker
 from pipelines.experiments.tasks import EpisodeTask
 from pipelines.experiments.worker import (
     SINGLE_THREAD_ENV,
@@ -92,31 +93,6 @@ def _load_plugins() -> None:
 def _run_in_pool(task: EpisodeTask) -> EpisodeOutcome:
     assert _WORKER is not None, "pool worker used before its initializer ran"
     return _WORKER.run(task)
-
-
-def _start_resource_tracker() -> None:
-    """Start multiprocessing's resource tracker (unless it runs already) so that it does not warn about the
-    pool's semaphores when the driver is killed.
-
-    The pool's queues hold named POSIX semaphores (5; spawn needs names the workers can open), which the
-    driver registers with the tracker, a process of its own, and unregisters when it exits. A driver killed by
-    SIGKILL cannot; the tracker then unlinks them, which is what it is for, and warns "There appear to be 5
-    leaked semaphore objects to clean up at shutdown" on the terminal after the driver is gone. Nothing is
-    left behind, so that warning is noise: the tracker starts with it filtered out (its warning filters come
-    from the environment it starts in). SIGTERM and SIGHUP end a sweep in an orderly way (run_sweep), with no
-    warning either."""
-    from multiprocessing import resource_tracker
-
-    quiet = "ignore:resource_tracker:UserWarning"
-    saved = os.environ.get("PYTHONWARNINGS")
-    os.environ["PYTHONWARNINGS"] = f"{saved},{quiet}" if saved else quiet
-    try:
-        resource_tracker.ensure_running()
-    finally:
-        if saved is None:
-            os.environ.pop("PYTHONWARNINGS", None)
-        else:
-            os.environ["PYTHONWARNINGS"] = saved
 
 
 def _check_main_is_a_file() -> None:
@@ -211,7 +187,7 @@ class ProcessBackend:
         self._own_root = None if scratch_root is not None else make_scratch_root()
         root = scratch_root if self._own_root is None else str(self._own_root)
         self._initargs = (record, jit, root, timeout_s)
-        _start_resource_tracker()
+        start_resource_tracker()
         try:
             self._start_pool()
         except BaseException:  # a Ctrl-C while the workers start too: they end now, not when collected

@@ -850,10 +850,13 @@ def _worker_folders(root: Path) -> list[Path]:
     return [p for p in root.iterdir() if p.is_dir()]
 
 
-def _start_and_signal(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, str, list[Path]]:
+def _start_and_signal(
+    tmp_path: Path, sig: int, group: bool = False
+) -> tuple[subprocess.Popen, str, list[Path]]:
     """A process-pool sweep with its temp directory in ``tmp_path/tmp``, sent ``sig`` once it has recorded
-    a few episodes; its stderr (read to the end: until the resource tracker, which shares it, is gone too)
-    and the scratch roots its driver left."""
+    a few episodes (``group``: its every process, as a closed terminal sends SIGHUP); its stderr (read to
+    the end: until the resource tracker, which shares it, is gone too) and the scratch roots its driver
+    left."""
     tmp = tmp_path / "tmp"
     tmp.mkdir(exist_ok=True)
     out = tmp_path / "killed"
@@ -883,7 +886,7 @@ def _start_and_signal(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, str, 
             time.sleep(0.02)
         roots = list(tmp.glob(SCRATCH_PREFIX + f"{proc.pid}-*"))
         assert len(roots) == 1 and len(_worker_folders(roots[0])) == 2  # a folder per worker, and the lock
-        os.kill(proc.pid, sig)
+        (os.killpg if group else os.kill)(proc.pid, sig)
         _, err = proc.communicate(timeout=30)
         return proc, err, roots
     finally:
@@ -919,6 +922,19 @@ def test_a_terminated_sweep_stops_in_order(tmp_path):
     assert list((tmp_path / "tmp").iterdir()) == []
     records = [json.loads(line) for line in (tmp_path / "killed" / EPISODES_FILE).read_text().splitlines()]
     assert len(records) >= 5
+
+
+@pytest.mark.slow
+def test_a_closed_terminal_stops_a_sweep_in_order(tmp_path):
+    """A closed terminal sends SIGHUP to every process of its job: multiprocessing's resource tracker, which
+    ignores SIGINT and SIGTERM only, died of it, and the driver's orderly stop warned "resource_tracker:
+    process died unexpectedly, relaunching. Some resources might leak." and the tracker it relaunched printed
+    a KeyError traceback for each semaphore the pool released."""
+    proc, err, roots = _start_and_signal(tmp_path, signal.SIGHUP, group=True)
+    assert proc.returncode == 129, err  # 128 + 1
+    assert "interrupted: rerun the same command to resume" in err
+    assert "resource_tracker" not in err and "Traceback" not in err, err
+    assert list((tmp_path / "tmp").iterdir()) == []
 
 
 @pytest.mark.parametrize("name", ["cmpc", "dmpc"])
