@@ -5,9 +5,9 @@ ran with, ``RunConfig.effective``, and the code it ran: ``pipelines.plugins.code
 The recorded values go through the same resolver as a config file's (unknown sections and keys, types and
 bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Three values are not
 written as recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
-default out (another ``--profile`` then takes its own), ``[sweep] out`` is the directory read, absolute, and
-a value refused now where typed (a margins spec ``conformal:``, a [simulate] path "none") is written as it
-ran.
+default out (another ``--profile`` then takes its own), unless a cell of another profile ran with them,
+``[sweep] out`` is the directory read, absolute, and a value refused now where typed (a margins spec
+``conformal:``, a [simulate] path "none") is written as it ran.
 This machine's limit on local workers is not applied (the sweep that runs the file applies it): a comment
 says when the recorded workers exceed it.
 """
@@ -113,7 +113,7 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
             f"{where} records no config (a sweep from before configs were kept); rerun it from its options"
         )
     source = Source("file", where)
-    own = _profile_values(values)
+    own = _profile_values(values, run)
     entries: list[Entry] = []
     for name, section in values.items():
         if name == "config_file":  # where the values came from, not a value
@@ -126,7 +126,8 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
             check_key(source.prefix(name, key), SECTION_BY_NAME[name], key)
             # null: unset, as a file leaves it out. The profile's own value: unset too (a record holds every
             # [env] value, RunConfig.effective), or the file would hold the paper profile's time limit,
-            # crossing ... under --profile v1, and a sweep of it would be refused them.
+            # crossing ... under --profile v1, and a sweep of it would be refused them; unless a cell ran
+            # with it (_profile_values).
             if value is not None and not (name == "env" and key in own and own[key] == value):
                 entries.append(Entry(name, key, _as_ran(name, key, value), source))
     # The recorded out may be relative to wherever that sweep started; this directory is where it resumes.
@@ -168,16 +169,32 @@ def _margins_as_ran(text: str) -> str:
     return ":".join([mode, alpha or repr(DEFAULT_ALPHA), *([source] if source else [])])
 
 
-def _profile_values(values: dict[str, Any]) -> dict[str, Any]:
+def _profile_values(values: dict[str, Any], run: dict[str, Any]) -> dict[str, Any]:
     """The recorded profile's own values of the [env] keys it sets (none when that profile is unknown: the
-    resolver refuses it, naming the file)."""
+    resolver refuses it, naming the file), but those the sweep asked for: a value some recorded cell ran
+    with over its own profile's (``World.env_settings``), not by ``[sweep] vary``. `--set
+    env.time_limit=40.0`, the paper's, gave the conventions experiment's v1 cells 40 s; left unset, a
+    rerun and ``--report-only`` planned v1 cells of 30 s, whose episodes the folder does not hold."""
     from crowdsim.profiles import PROFILES
 
     env = values.get("env")
     default = next(k.default for k in SECTION_BY_NAME["env"].keys if k.name == "profile")  # none recorded
     name = env.get("profile", default) if isinstance(env, dict) else default
     profile = PROFILES.get(name) if isinstance(name, str) else None
-    return {} if profile is None else {key: getattr(profile, key) for key in ENV_PROFILE_KEYS}
+    if profile is None:
+        return {}
+    sweep = values.get("sweep")
+    vary = sweep.get("vary") if isinstance(sweep, dict) else None
+    varied = {part.partition("=")[0].strip() for part in vary.split(";")} if isinstance(vary, str) else set()
+    cells = run.get("cells")
+    ran = [
+        tuple(pair)
+        for cell in (cells if isinstance(cells, list) else [])
+        for pair in (cell.get("env_settings") or [] if isinstance(cell, dict) else [])
+        if isinstance(pair, list) and len(pair) == 2 and f"env.{pair[0]}" not in varied
+    ]
+    own = {key: getattr(profile, key) for key in ENV_PROFILE_KEYS}
+    return {key: value for key, value in own.items() if (key, value) not in ran}
 
 
 def provenance(path: Path, run: dict[str, Any], index: int, total: int) -> str:

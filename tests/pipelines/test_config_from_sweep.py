@@ -351,3 +351,25 @@ def test_an_unknown_predictor_is_refused_as_simulate_refuses_it_but_a_recorded_o
     capsys.readouterr()
     assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
     assert '\npredictor = "my_plugin_net" ' in capsys.readouterr().out
+
+
+def test_a_profile_value_the_sweep_asked_for_reads_back_for_the_cells_of_another_profile(tmp_path, capsys):
+    """`--set env.time_limit=40.0` is the paper's limit, so the record could not tell it from the unset value
+    and left it unset: the conventions experiment's v1 cells had run at 40 s, and `--report-only` and the
+    printed file planned v1 cells of 30 s, which the folder does not hold (the report lost their columns)."""
+    out = tmp_path / "sweep"
+    options = ["--experiment", "conventions", "--predictor", "constant_velocity", "--humans", "1"]
+    options += ["--robots", "1", "--episodes-per-cell", "1", "--backend", "inline", "--no-progress"]
+    assert main(["sweep", *options, "--set", "env.time_limit=40.0", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["sweep", "--report-only", "--out", str(out)]) == 0
+    assert "not recorded" not in (out / "table.md").read_text()
+    assert "v1/visible/none" in (out / "table.md").read_text()
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "\ntime_limit = 40.0 " in printed and "\n# timeout_margin = 1.0 " in printed
+    rerun = tmp_path / "rerun.toml"
+    rerun.write_text(printed)
+    assert main(["--config", str(rerun), "sweep", "--dry-run"]) == 0
+    assert "8 of 8 planned episodes recorded" in capsys.readouterr().out
