@@ -26,10 +26,15 @@ import math
 import signal
 import threading
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, Final
 
 from pipelines.errors import PipelineError
 from pipelines.loop.interrupt import defer_to_step_end
+
+# The longest limit a timer is armed for: setitimer refuses one past about 9.2e9 s (2**63 ns), raising
+# OverflowError in every episode of a sweep that asked for one (--episode-timeout 1e10). A limit beyond it is
+# none in practice (31 years), and refusing it would refuse the sweep folders that recorded one.
+MOST_TIMER_S: Final[float] = 1e9
 
 
 class EpisodeTimeout(BaseException):
@@ -48,10 +53,11 @@ def check_timeout(seconds: Any, name: str = "episode_timeout_s") -> float | None
 
 @contextlib.contextmanager
 def deadline(seconds: float | None) -> Iterator[None]:
-    """Raise ``EpisodeTimeout`` in the block once ``seconds`` of wall-clock time have passed (None: never).
+    """Raise ``EpisodeTimeout`` in the block once ``seconds`` of wall-clock time have passed (None, or past
+    ``MOST_TIMER_S``: never).
     The timer is cleared on the way out; one that fires in that instant raises from here, as does one whose
     raise C code swallowed."""
-    if seconds is None:
+    if seconds is None or seconds > MOST_TIMER_S:
         yield
         return
     if threading.current_thread() is not threading.main_thread():  # signals reach the main thread alone

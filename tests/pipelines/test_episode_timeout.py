@@ -14,7 +14,7 @@ import pytest
 
 from pipelines.cli import main
 from pipelines.errors import PipelineError
-from pipelines.experiments.deadline import EpisodeTimeout, check_timeout, deadline
+from pipelines.experiments.deadline import MOST_TIMER_S, EpisodeTimeout, check_timeout, deadline
 from tests.cli_calls import one_line, parser_error
 from tests.cli_calls import run_cli as run
 
@@ -134,6 +134,22 @@ def test_a_limit_is_a_positive_finite_number(bad):
     with pytest.raises(PipelineError, match="episode_timeout_s must be a number of seconds > 0"):
         check_timeout(bad)
     assert check_timeout(None) is None and check_timeout(3) == 3.0
+
+
+def test_a_limit_longer_than_a_timer_takes_is_no_timer(tmp_path, capsys):
+    """setitimer refuses more than about 9.2e9 s: `--episode-timeout 1e10` passed the checks and every
+    episode failed with OverflowError into errors.jsonl; it now runs its episodes, as no limit does."""
+    with deadline(MOST_TIMER_S):
+        assert signal.getitimer(signal.ITIMER_REAL)[0] > 0
+    with deadline(1e10):
+        assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--experiment", "baselines", "--humans", "1", "--episodes-per-cell", "1"]
+    argv += ["--backend", "inline", "--no-progress", "--episode-timeout", "1e10", "--out", str(out)]
+    code, _, err = run(capsys, *argv)
+    assert code == 0, err
+    assert not (out / "errors.jsonl").exists()
+    assert len((out / "episodes.jsonl").read_text().splitlines()) == 2
 
 
 def _sweep(capsys, out, backend: str, *extra: str) -> tuple[int, str, str]:
