@@ -106,15 +106,26 @@ def run(args: argparse.Namespace) -> int:
 
 def _note_refused(config: RunConfig) -> None:
     """A note for a configuration that simulate and sweep refuse before running: its values each pass their
-    own checks here, but an MPC d_min below the contact distance is a fact of two sections together, which
-    `config show` printed without a word and simulate then refused."""
+    own checks here, but an MPC d_min below the contact distance, or fixed margins of another length than
+    the horizon, is a fact of two sections together, which `config show` printed without a word and
+    simulate then refused."""
+    from pipelines.loop.margins import parse_margins
     from pipelines.loop.mpc_setup import check_contact_distance
 
-    if config.controller.controller in (None, "cmpc", "dmpc"):  # a sweep's experiment runs the MPCs
-        try:
-            check_contact_distance(config.world, config.mpc)
-        except PipelineError as exc:
-            print(f"note: simulate and sweep refuse this configuration: {exc}", file=sys.stderr)
+    if config.controller.controller not in (None, "cmpc", "dmpc"):  # a sweep's experiment runs the MPCs
+        return
+    refused = "note: simulate and sweep refuse this configuration:"
+    try:
+        check_contact_distance(config.world, config.mpc)
+    except PipelineError as exc:
+        print(f"{refused} {exc}", file=sys.stderr)
+    margins = parse_margins(config.controller.margins or "none")
+    if margins.mode == "fixed" and len(margins.values) != config.mpc.horizon:
+        print(
+            f"{refused} fixed margins need one value per horizon step ({config.mpc.horizon}), got "
+            f"{len(margins.values)}",
+            file=sys.stderr,
+        )
 
 
 def _show_recorded(args: argparse.Namespace) -> int:

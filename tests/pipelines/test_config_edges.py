@@ -237,6 +237,24 @@ def test_config_show_notes_a_configuration_the_runs_refuse(tmp_path, capsys):
     assert capsys.readouterr().err == ""
 
 
+def test_config_show_notes_fixed_margins_the_horizon_refuses(capsys):
+    """`config show --set controller.margins=fixed:0.1` printed the file without a word, where simulate with
+    cmpc and every sweep of a planning method refuse margins of another length than the horizon."""
+    from pipelines.cli import main
+
+    assert main(["config", "show", "--set", "controller.margins=fixed:0.1"]) == 0
+    out, err = capsys.readouterr()
+    assert 'margins = "fixed:0.1"' in out
+    assert err == (
+        "note: simulate and sweep refuse this configuration: fixed margins need one value per horizon step "
+        "(4), got 1\n"
+    )
+    assert (
+        main(["config", "show", "--set", "controller.margins=fixed:0.1,0.2", "--set", "mpc.horizon=2"]) == 0
+    )
+    assert capsys.readouterr().err == ""
+
+
 def test_a_key_in_the_wrong_section_names_the_section_that_has_it(tmp_path):
     """`episodes` under [scenario] (a hand-edited demo file) listed [scenario]'s keys only; a near miss said
     "did you mean", a key of another section nothing."""
