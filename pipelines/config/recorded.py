@@ -3,8 +3,9 @@ TOML that reruns what a sweep directory holds (each run line of ``sweep.json`` k
 ran with, ``RunConfig.effective``, and the code it ran: ``pipelines.plugins.code_with_plugins``).
 
 The recorded values go through the same resolver as a config file's (unknown sections and keys, types and
-bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. Three values are not
-written as recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
+bounds refused, naming ``sweep.json``), so what comes out loads back to the same run. A null of a key that
+takes inf (``INFINITE_KEYS``) is inf, which the JSON record cannot hold. Three values are not written as
+recorded: the [env] values that are the recorded profile's own stay unset, as a file leaves a
 default out (another ``--profile`` then takes its own), unless a cell of another profile ran with them,
 ``[sweep] out`` is the directory read, absolute, and a value refused now where typed (a margins spec
 ``conformal:``, a [simulate] path "none") is written as it ran.
@@ -14,10 +15,11 @@ says when the recorded workers exceed it.
 
 from __future__ import annotations
 
+import math
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.config.entries import ConfigError, Entry, Source, check_key, parse_set
 from pipelines.config.resolve import RunConfig, resolve
@@ -26,6 +28,15 @@ from pipelines.config.settings import LOCAL_WORKERS_PER_CPU, available_cpus, loc
 
 if TYPE_CHECKING:
     from pipelines.config.command_line import Option
+
+# The keys that take inf (OrcaParams: every agent a neighbour, velocity obstacles never truncated), which a
+# record writes as null, JSON having no inf: read as unset, a sweep run with one was shown and reported as
+# one of the default 10 m or 5 s, whose cells the folder does not hold. Their default is a number, so a
+# recorded null is no unset value.
+INFINITE_KEYS: Final[tuple[tuple[str, str], ...]] = (
+    ("env.orca", "neighbor_dist"),
+    ("env.orca", "time_horizon"),
+)
 
 
 def recorded_runs(directory: str | Path) -> tuple[Path, list[dict[str, Any]]]:
@@ -124,6 +135,8 @@ def recorded_entries(path: Path, run: dict[str, Any], index: int) -> list[Entry]
             raise ConfigError(f"{where}: config section {name!r} is not a table of keys; the file is damaged")
         for key, value in section.items():
             check_key(source.prefix(name, key), SECTION_BY_NAME[name], key)
+            if value is None and (name, key) in INFINITE_KEYS:  # a record writes inf as null (plain_json)
+                value = math.inf
             # null: unset, as a file leaves it out. The profile's own value: unset too (a record holds every
             # [env] value, RunConfig.effective), or the file would hold the paper profile's time limit,
             # crossing ... under --profile v1, and a sweep of it would be refused them; unless a cell ran

@@ -373,3 +373,39 @@ def test_a_profile_value_the_sweep_asked_for_reads_back_for_the_cells_of_another
     rerun.write_text(printed)
     assert main(["--config", str(rerun), "sweep", "--dry-run"]) == 0
     assert "8 of 8 planned episodes recorded" in capsys.readouterr().out
+
+
+def test_an_infinite_orca_setting_reads_back_as_it_ran(tmp_path, capsys):
+    """OrcaParams takes inf, which sweep.json writes as null (JSON has none): read back as unset, the report
+    planned cells of the default 5 s horizon and refused ("none of them of the cells planned here")."""
+    out = tmp_path / "sweep"
+    options = ["--experiment", "baselines", "--humans", "1", "--episodes-per-cell", "1"]
+    options += ["--backend", "inline", "--no-progress", "--out", str(out)]
+    infinite = ["--set", "env.orca.time_horizon=inf", "--set", "env.orca.neighbor_dist=inf"]
+    assert main(["sweep", *options, *infinite]) == 0
+    assert "orca.time_horizon=inf" in (out / EPISODES_FILE).read_text()
+    capsys.readouterr()
+    assert main(["sweep", "--report-only", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["config", "show", "--from-sweep", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "\nneighbor_dist = inf " in printed and "\ntime_horizon = inf " in printed
+
+
+def test_the_keys_read_back_as_inf_are_those_that_take_it():
+    """A recorded null is inf for these keys alone: one more that takes inf is recorded as null too."""
+    from pipelines.config import ConfigError, load
+    from pipelines.config.recorded import INFINITE_KEYS
+    from pipelines.config.schema import SECTIONS
+
+    def takes_inf(section: str, key: str) -> bool:
+        try:
+            load(sets=[f"{section}.{key}=inf"])
+        except ConfigError:
+            return False
+        return True
+
+    numbers = [
+        (s.name, k.name) for s in SECTIONS for k in s.keys if k.kind == "float" and k.default is not None
+    ]
+    assert [pair for pair in numbers if takes_inf(*pair)] == list(INFINITE_KEYS)
