@@ -192,7 +192,8 @@ UNSET: Final[str] = "null"  # --set KEY=null: the key's default, as if no file o
 
 def parse_set(text: str) -> Entry:
     """``--set SECTION.KEY=VALUE``: VALUE is a TOML value (``1e6``, ``true``, ``"circle"``, ``[5, 6]``); a
-    bare word that is no TOML value (``circle``, ``conformal:0.05``, ``runs/x``) is taken as a string, but
+    bare word that is no TOML value (``circle``, ``conformal:0.05``, ``runs/x``), or a number or date given
+    bare to a text setting (``sweep.out=2026``), is taken as a string, but
     ``null``, which unsets the key (an entry of value None): TOML has no null, so a file's ``plot = "..."``
     could not be switched off from the command line (``none`` was a file name). ``null`` is what a record
     holds for an unset key, as Helm's ``--set`` and Hydra's overrides spell it; ``"null"`` is the string."""
@@ -235,7 +236,17 @@ def parse_set(text: str) -> Entry:
         value = raw  # no setting takes a date: --set simulate.json=2026-12-02 names a file, like other words
     elif date is not None:
         raise ConfigError(f"--set {name}: {_NO_DATE} {date.isoformat()} {_QUOTE_IT}")
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if number and BARE_VALUE.fullmatch(raw) and _kind(section, key) == "str":
+        # a text setting takes no number: --set sweep.out=2026 names the folder --out 2026 names (it was
+        # "must be a path, got 2026", and 1e3 "got 1000.0"), as a date is the word typed
+        value = raw
     return Entry(section.name, key, value, Source("set", "--set"))
+
+
+def _kind(section: Section, key: str) -> str | None:
+    found = section.key(key)
+    return None if found is None else found.kind
 
 
 def _date_in(value: Any) -> datetime.date | datetime.time | None:

@@ -97,6 +97,16 @@ def test_a_set_value_that_tomllib_reads_as_a_date_is_the_word_given():
     assert load(sets=["simulate.json=2026-12-02"]).simulate.json == "2026-12-02"
 
 
+def test_a_bare_number_for_a_text_setting_is_the_word_given():
+    """``--set sweep.out=2026`` was "must be a path, got 2026" (and ``1e3`` "got 1000.0"), where ``--out
+    2026`` names that folder; a number setting still reads the number, and a boolean stays refused."""
+    config = load(sets=["sweep.out=2026", "simulate.json=1e3", "simulate.plot=1_000"])
+    assert (config.sweep.out, config.simulate.json, config.simulate.plot) == ("2026", "1e3", "1_000")
+    assert load(sets=["mpc.w_coll=1e3"]).mpc.w_coll == 1000.0
+    with pytest.raises(ConfigError, match="^--set simulate.json: must be a path, got True;"):
+        load(sets=["simulate.json=true"])
+
+
 @pytest.mark.parametrize("where", ["file", "set"])
 def test_a_date_inside_an_inline_table_or_a_set_array_is_named_in_toml(where, tmp_path: Path):
     """An inline table's date was shown as ``{'a': datetime.date(1979, 5, 27)}``, in a file and in --set."""
