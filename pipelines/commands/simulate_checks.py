@@ -166,7 +166,8 @@ def _refuse_untracked(config: RunConfig, controller: str) -> None:
 def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
     """The run's own checks of its predictor's name, fixed margins' length and d_min, made now for a value a
     file or ``--set`` chose, so that the refusal names where it came from ("run.toml: controller.predictor:
-    unknown predictor 'nope'"); those checks, as the controller is built, named the key at most."""
+    unknown predictor 'nope'"); those checks, as the controller is built, named the key at most. Margins
+    given by ``--margins`` too: their refusal there named nothing."""
     from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
 
     def chosen(section: str, key: str) -> bool:
@@ -180,7 +181,7 @@ def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
         return
     mpc = mpc_config(spec, world=config.world)
     values = spec.margins.values
-    if chosen("controller", "margins") and spec.margins.mode == "fixed" and len(values) != mpc.horizon:
+    if spec.margins.mode == "fixed" and len(values) != mpc.horizon:
         message = f"fixed margins need one value per horizon step ({mpc.horizon}), got {len(values)}"
         raise config.error("controller", "margins", message)
     if chosen("mpc", "d_min") or chosen("world", "radius"):

@@ -395,6 +395,18 @@ def test_a_value_the_run_refuses_names_the_file_it_came_from(text, message, tmp_
     assert capsys.readouterr().err.startswith(f"crowdmpc simulate: error: {path}: {message}")
 
 
+def test_fixed_margins_the_horizon_refuses_name_the_option_that_gave_them(capsys):
+    """`simulate --margins fixed:0.1` was refused as "fixed margins need one value per horizon step (4), got
+    1", naming no input (a file's or --set's margins were named)."""
+    from pipelines.cli import main
+
+    argv = ["simulate", "--controller", "cmpc", "--humans", "1", "--no-progress", "--margins", "fixed:0.1"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        "crowdmpc simulate: error: --margins: fixed margins need one value per horizon step (4), got 1\n"
+    )
+
+
 @pytest.mark.parametrize(
     ("text", "options", "message"),
     [
