@@ -56,7 +56,9 @@ def check_source(source: Path, out: Path) -> None:
                 f"{option}: {source / name} is a symbolic link; --reuse reads a sweep's own files"
             )
         if not (source / name).is_file():
-            raise PipelineError(f"{option}: not a sweep folder ({source / name} does not exist)")
+            # a folder or a pipe there exists: "does not exist" sent the user looking for a missing file
+            what = "is not a regular file" if (source / name).exists() else "does not exist"
+            raise PipelineError(f"{option}: not a sweep folder ({source / name} {what})")
     if out.is_dir() and os.path.samefile(out, source):
         raise PipelineError(f"{option}: that is --out itself; a sweep resumes from its own folder unasked")
     _source_runs(source)  # and read again after its log (``taken``)

@@ -7,6 +7,7 @@ config show, review) reads the sweep's own runs."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 
 import pytest
@@ -149,6 +150,16 @@ def test_what_cannot_be_reused_is_one_line(table2, tmp_path, capsys):
         f"--reuse {bad}: {bad / 'sweep.json'} is a symbolic link; --reuse reads a sweep's own files"
     )
     assert not (tmp_path / "c").exists()
+    # a log or a sweep file that is there but is no file (a pipe: read, it waits for good) is named so
+    for name in ("sweep.json", "episodes.jsonl"):
+        piped = tmp_path / f"piped_{name}"
+        shutil.copytree(table2, piped)
+        (piped / name).unlink()
+        os.mkfifo(piped / name)
+        assert refused(tmp_path / "c", "--reuse", str(piped)).endswith(
+            f"--reuse {piped}: not a sweep folder ({piped / name} is not a regular file)"
+        )
+        assert not (tmp_path / "c").exists()
     # a damaged line in its log, named as the source's
     (bad / "sweep.json").unlink()
     shutil.copy(table2 / "sweep.json", bad / "sweep.json")
