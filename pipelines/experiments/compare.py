@@ -198,6 +198,8 @@ def _source(
     if path.is_dir() and (path / EPISODES_FILE).is_file():
         scanned, commits, cells = sweep_records(path)  # its commits and cells once every record is read
         return scanned, commits, cells, "its cells are not told apart by method (use --by-cell)"
+    if path.is_dir() and (path / EPISODES_FILE).exists():  # a pipe or a folder: "holds no" misled
+        raise PipelineError(f"{label}: {path / EPISODES_FILE} is not a regular file (a folder or a pipe)")
     if path.is_dir() and not _holds_recordings(path):
         raise PipelineError(
             f"{label}: {path} holds no {EPISODES_FILE} (a `crowdmpc sweep --out` folder has one) and no "

@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 import re
 from pathlib import Path
 
@@ -286,7 +287,11 @@ def test_bad_runs_are_one_line_errors(tmp_path, capsys):
         "key": first["key"].replace(first["cell"], f"{first['cell']}-x"),
     }
     twice = _sweep(tmp_path / "twice", [first, second])
+    piped = tmp_path / "piped"  # its log a pipe: read, it waits for good
+    piped.mkdir()
+    os.mkfifo(piped / "episodes.jsonl")
     for other, message in [
+        (piped, f"{piped / 'episodes.jsonl'} is not a regular file (a folder or a pipe)"),
         (tmp_path / "missing", "does not exist (a sweep folder, a simulate --json file, or recordings"),
         (tmp_path / "empty", "holds no episodes.jsonl"),
         (damaged, "damaged/episodes.jsonl:2: not an episode record"),
