@@ -91,6 +91,20 @@ def _planted(path: Path) -> bool:
         return False
 
 
+def remove_made_folders(lock: Path, made: list[Path]) -> None:
+    """For a run that failed holding ``lock``, which made the folders ``made`` (innermost first, the lock's
+    own among them): remove them where the lock is all they hold, the lock first while still held (a run
+    that opened it meanwhile and tries it now is refused), so that a failed run leaves nothing it made."""
+    if not made or [p.name for p in lock.parent.iterdir()] != [lock.name]:
+        return
+    lock.unlink()
+    for folder in made:
+        try:
+            folder.rmdir()
+        except OSError:  # something else was put there meanwhile: not ours to remove
+            break
+
+
 def pid_alive(pid: int) -> bool:
     """Whether process ``pid`` runs: what a staging folder, a journal or a scratch folder named by its
     writer's pid is judged by (kept while its writer runs, removed once it is gone). Another user's process

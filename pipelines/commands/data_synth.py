@@ -98,7 +98,7 @@ def _one_synth_at_a_time(out: Path) -> Iterator[None]:
     renamed its data into place after writing its provenance), and one waiting for the other would find
     its data there and replace it, or be refused, after a wait of up to an hour. A run that fails before
     writing leaves no folder it made: only its lock would be in them."""
-    from predictors.locking import locked
+    from predictors.locking import locked, remove_made_folders
 
     def refuse() -> None:
         raise PipelineError(
@@ -112,13 +112,7 @@ def _one_synth_at_a_time(out: Path) -> Iterator[None]:
         try:
             yield
         except BaseException:
-            if made and [p.name for p in lock.parent.iterdir()] == [lock.name]:
-                lock.unlink()  # while held: a synth that opened it meanwhile is refused
-                for folder in made:
-                    try:
-                        folder.rmdir()
-                    except OSError:  # something else was put there meanwhile: not ours to remove
-                        break
+            remove_made_folders(lock, made)
             raise
 
 

@@ -68,7 +68,7 @@ def one_run_at_a_time(out: Path) -> Iterator[None]:
     started meanwhile train into the same folder, which ended with one run's settings beside the other's
     last.ckpt. A run that fails before writing anything (a broken net, refused when its module is built)
     leaves no folder it made (--out and the parents it needed): only its lock would be in them."""
-    from predictors.locking import locked
+    from predictors.locking import locked, remove_made_folders
 
     def refuse() -> None:
         raise PipelineError(
@@ -85,14 +85,7 @@ def one_run_at_a_time(out: Path) -> Iterator[None]:
         try:
             yield
         except BaseException:
-            # Removed while still held: a train that opened the lock meanwhile and tries it now is refused.
-            if made and [p.name for p in out.iterdir()] == [LOCK_FILE]:
-                lock.unlink()
-                for folder in made:
-                    try:
-                        folder.rmdir()
-                    except OSError:  # something else was put there meanwhile: not ours to remove
-                        break
+            remove_made_folders(lock, made)
             raise
 
 
