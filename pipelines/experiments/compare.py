@@ -164,7 +164,7 @@ def load_run(label: str, path: Path, progress: bool | None = False, by_cell: boo
             )
         run.outcomes[identity] = _outcome(record, kinds)
         run.methods.setdefault(identity[:3], str(record["method"]))
-        ran = {"config": _with_unrecorded(record.get("config")), **{k: record.get(k) for k in RUN_FIELDS}}
+        ran = {"config": _with_unrecorded(record.get("config")), **_run_fields(record)}
         text = json.dumps(ran, sort_keys=True)
         if (identity[:3], text) in configs:  # a cell's episodes share their settings: flattened once
             continue
@@ -183,6 +183,12 @@ def load_run(label: str, path: Path, progress: bool | None = False, by_cell: boo
         if isinstance(name, str):
             run.plan.setdefault(name.casefold(), len(run.plan))
     return run
+
+
+def _run_fields(record: Mapping[str, Any]) -> dict[str, Any]:
+    """``RUN_FIELDS`` of ``record``; ``crowd_sha256`` only where it is recorded (a sweep's record of a
+    replayed crowd): simulate's JSON, recordings and older sweeps do not name the file, which is not null."""
+    return {k: record.get(k) for k in RUN_FIELDS if k != "crowd_sha256" or k in record}
 
 
 def _source(

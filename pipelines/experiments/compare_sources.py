@@ -89,8 +89,20 @@ def _record(episode: Any, index: int, where: str, key: str | None = None) -> dic
     controller = str(episode.get("controller"))
     key = key or f"{controller}/{episode.get('scenario')}/{episode['seed']}"
     record = {**episode, "key": key, "cell": controller, "method": controller, "index": index, "wall_s": 0.0}
+    record = {**_sensor_fields(episode.get("config")), **record}
     check_record(record, where, "the file is damaged")  # no sweep's log: no episode runs again
     return record
+
+
+def _sensor_fields(config: Any) -> dict[str, Any]:
+    """The sweep record's ``sensor_range`` and ``sensor_tracks`` (pipelines/experiments/worker.py) of an
+    episode whose config names its sensor: simulate's JSON and a recording hold it there alone, and without
+    them a run behind the same sensor as a sweep's read as run with none."""
+    sensing = config.get("sensing") if isinstance(config, dict) else None
+    if not isinstance(sensing, dict):  # every human seen: null, as the sweep's records
+        return {}
+    radius = sensing.get("radius_m")
+    return {"sensor_range": radius, "sensor_tracks": None if radius is None else sensing.get("report_tracks")}
 
 
 def recording_records(

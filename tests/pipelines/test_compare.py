@@ -494,3 +494,23 @@ def test_episodes_of_one_cell_share_their_identitys_strings():
     shared = [i for i, part in enumerate(one) if isinstance(part, str)]
     assert len(shared) >= 7 and all(one[i] is two[i] for i in shared)
     assert not hasattr(Outcome(True, False, False, 1.0, "k", b"", b"", frozenset()), "__dict__")
+
+
+def test_a_simulate_json_of_a_sweeps_set_up_reads_as_run_with_its_settings(tmp_path, capsys):
+    """simulate's JSON names its sensor in the config alone, and not the replayed file: against a sweep's
+    episodes of the same set-up it read as run with no sensor, and the file as null (none)."""
+    env = {**ENV, "crowd": "eth_test"}
+    records = []
+    for i, o in enumerate(BASE):
+        record = {**_record(i, *o, env=env), "sensor_range": 3.0, "sensor_tracks": True}
+        record["config"]["sensing"] = {"radius_m": 3.0, "report_tracks": True}
+        records.append({**record, "crowd_sha256": "ab" * 32})
+    a = _sweep(tmp_path / "a", records)
+    sweep_only = ("sensor_range", "sensor_tracks", "crowd_sha256")
+    sim = _simulate_json(
+        tmp_path / "run.json", [{k: v for k, v in r.items() if k not in sweep_only} for r in records]
+    )
+    assert main(["compare", f"a={a}", f"b={sim}", "--expect-identical", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "sensor_range" not in out and "sensor_tracks" not in out, out
+    assert re.search(r"crowd_sha256: \S+ -> \(not recorded\)", out), out
