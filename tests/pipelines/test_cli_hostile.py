@@ -865,6 +865,9 @@ def _start_and_signal(
         cwd=REPO,
         env=os.environ | {"TMPDIR": str(tmp)},
         start_new_session=True,
+        # as a shell starts it: a test run in the background (nohup, `make test &`) has SIGHUP ignored, which
+        # the sweep keeps ignoring (it is meant to outlive its terminal there)
+        preexec_fn=None if sig == signal.SIGKILL else lambda: signal.signal(sig, signal.SIG_DFL),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
