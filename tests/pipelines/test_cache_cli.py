@@ -9,6 +9,7 @@ import pytest
 from mpc import compile_cache
 from mpc.cache_entries import locked
 from pipelines.cli import main
+from tests.waits import within
 
 
 @pytest.fixture
@@ -169,15 +170,10 @@ def test_a_cache_without_room_for_a_compile_is_refused_by_on_and_turns_auto_off(
     assert not out.exists()
 
 
-class _Hung(BaseException):
-    """Raised by the alarm below, past every ``except Exception`` on the way."""
-
-
 def test_info_json_into_a_named_pipe_reaches_its_reader(folder, tmp_path, capsys):
     """The check that --json FILE can be written opened and closed it: a pipe's reader (`cat fifo`) took
     that for the end of an empty output, and the write of the document then waited for another for good."""
     import os
-    import signal
     import threading
 
     fifo = tmp_path / "info.fifo"
@@ -186,16 +182,10 @@ def test_info_json_into_a_named_pipe_reaches_its_reader(folder, tmp_path, capsys
     reader = threading.Thread(target=lambda: read.append(fifo.read_bytes()), daemon=True)
     reader.start()
 
-    def hung(signum, frame):
-        raise _Hung("cache info --json waited for a reader of the pipe")
-
-    before = signal.signal(signal.SIGALRM, hung)
-    signal.alarm(20)
     try:
-        assert main(["cache", "info", "--json", str(fifo)]) == 0
+        with within(20, "cache info --json waited for a reader of the pipe"):
+            assert main(["cache", "info", "--json", str(fifo)]) == 0
     finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, before)
         # let the reader's open return, if the command never opened the pipe; ENXIO: no reader holds it open
         # (the reader read the document and closed it, its thread not yet ended)
         if reader.is_alive():

@@ -10,6 +10,7 @@ import pytest
 from mpc.config import MPC_BOUNDS, MPC_LEAST
 from pipelines.cli import main
 from pipelines.experiments.log import EPISODES_FILE, SWEEP_FILE
+from tests.waits import within
 
 
 def _metrics(out) -> dict:
@@ -201,15 +202,10 @@ def test_a_changed_calibration_or_model_is_said_before_a_rerun(tmp_path, capsys)
     assert err.startswith(f"note: {said}") and err.count("\n") == 1
 
 
-class _Hung(BaseException):
-    """Raised by the alarm below: no ``except Exception`` on the way takes it for a damaged file."""
-
-
 def test_an_episode_log_that_is_a_pipe_is_not_waited_on(tmp_path, capsys):
     """The zoo note read episodes.jsonl whatever it was: a pipe there (nobody writing it) hung the command
     for good, and a link to /dev/zero read one endless line until the memory ran out."""
     import os
-    import signal
 
     sweep = tmp_path / "sweep"
     sweep.mkdir()
@@ -217,19 +213,11 @@ def test_an_episode_log_that_is_a_pipe_is_not_waited_on(tmp_path, capsys):
     (sweep / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
     os.mkfifo(sweep / EPISODES_FILE)
 
-    def hung(signum, frame):
-        raise _Hung("config show --from-sweep waited on the pipe")
-
-    before = signal.signal(signal.SIGALRM, hung)
-    signal.alarm(20)
-    try:
+    with within(20, "config show --from-sweep waited on the pipe"):
         assert main(["config", "show", "--from-sweep", str(sweep)]) == 0
         assert capsys.readouterr().out.startswith(f"# From {sweep / SWEEP_FILE}, run 1 of 1")
         argv = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1"]
         assert main([*argv, "--backend", "inline", "--no-progress", "--out", str(sweep)]) == 2
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, before)
     assert capsys.readouterr().err == (
         f"crowdmpc sweep: error: {sweep / EPISODES_FILE} is not a regular file (a device or a pipe) where "
         "the sweep keeps a file; remove it\n"

@@ -1,14 +1,12 @@
 """A sweep directory that was damaged or edited by hand stops the sweep with one line naming the file (and
 the line), never a traceback, and nothing of it is overwritten."""
 
-import contextlib
 import dataclasses
 import errno
 import json
 import math
 import os
 import shutil
-import signal
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +33,7 @@ from predictors.zoo import checkpoints_dir, user_zoo_dir
 from predictors.zoo_edit import add_to_zoo
 from tests.calibration_blocks import constant_velocity_block
 from tests.read_only import file_size_limit
+from tests.waits import within
 
 ARGV = ["sweep", "--experiment", "baselines", "--humans", "3", "--episodes-per-cell", "1", "--backend",
         "inline", "--no-progress", "--jit", "off"]  # fmt: skip
@@ -103,7 +102,10 @@ def test_a_sweep_file_that_is_a_pipe_is_named_not_waited_on(tmp_path, name):
     if name != SWEEP_FILE:
         (tmp_path / SWEEP_FILE).write_text('{"experiment": "baselines", "runs": []}')
     os.mkfifo(tmp_path / name)
-    with _within(20), pytest.raises(PipelineError, match=f"{tmp_path / name} is not a regular file .a dev"):
+    with (
+        within(20, "a sweep waited on the pipe"),
+        pytest.raises(PipelineError, match=f"{tmp_path / name} is not a regular file .a dev"),
+    ):
         run_sweep(_config(tmp_path))
 
 
@@ -114,29 +116,9 @@ def test_a_pipe_for_sweep_json_is_read_by_no_reader(tmp_path, capsys):
     out.mkdir()
     os.mkfifo(out / SWEEP_FILE)
     (out / EPISODES_FILE).write_text("")
-    with _within(20):
+    with within(20, "compare waited on the pipe"):
         main(["compare", f"a={out}", f"b={out}"])
     assert "sweep.json: not a sweep file (not a regular file" in capsys.readouterr().err
-
-
-class _Waited(BaseException):  # not an Exception: no handler under test may take it for its own error
-    pass
-
-
-@contextlib.contextmanager
-def _within(seconds: int):
-    """Fail, rather than hang the suite, where the code waits on a pipe."""
-
-    def waited(signum, frame):
-        raise _Waited(f"waited {seconds} s on a pipe")
-
-    before = signal.signal(signal.SIGALRM, waited)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, before)
 
 
 def _damage(good: Path, tmp_path: Path, edit) -> Path:
