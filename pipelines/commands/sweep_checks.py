@@ -24,8 +24,9 @@ from pipelines.errors import PipelineError
 FIRST_TRIES: Final[int] = 8
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable, Mapping
+    from collections.abc import Callable, Iterable, Mapping
 
+    from mpc.config import MPCConfig
     from pipelines.config import RunConfig
     from pipelines.experiments.cells import Experiment
     from pipelines.experiments.tasks import Cell, EpisodeTask
@@ -163,15 +164,12 @@ def check_contact_distances(experiment: Experiment) -> None:
     (``mpc_setup.check_contact_distance``); refused here with the method named, not once per episode in
     errors.jsonl."""
     from crowdsim.world import WORLD
-    from pipelines.loop.mpc_setup import check_contact_distance, mpc_config
+    from pipelines.loop.mpc_setup import check_contact_distance
 
-    for label, spec in experiment.methods:
-        if spec.controller not in ("cmpc", "dmpc"):
-            continue
-        try:
-            check_contact_distance(WORLD, mpc_config(spec), radius_settable=False)  # check_world: no [world]
-        except PipelineError as exc:
-            raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
+    # check_world: no [world]
+    _each_mpc(
+        experiment, lambda mpc: check_contact_distance(WORLD, mpc, radius_settable=False), PipelineError
+    )
 
 
 def check_solvable_values(experiment: Experiment) -> None:
@@ -181,14 +179,20 @@ def check_solvable_values(experiment: Experiment) -> None:
     them runs no such check."""
     from mpc.errors import MPCConfigError
     from mpc.nlp import check_solvable
+
+    _each_mpc(experiment, check_solvable, MPCConfigError)
+
+
+def _each_mpc(experiment: Experiment, check: Callable[[MPCConfig], None], refusal: type[Exception]) -> None:
+    """``check`` of every CMPC and DMPC method's MPCConfig, its ``refusal`` naming the method."""
     from pipelines.loop.mpc_setup import mpc_config
 
     for label, spec in experiment.methods:
         if spec.controller not in ("cmpc", "dmpc"):
             continue
         try:
-            check_solvable(mpc_config(spec))
-        except MPCConfigError as exc:
+            check(mpc_config(spec))
+        except refusal as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 
 
