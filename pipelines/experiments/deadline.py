@@ -17,6 +17,8 @@ by ``mpc.time_limit_s``; a plugin's C extension) is stopped when that call retur
 run it is raised where the step in progress ends, as a Ctrl-C is (``pipelines.loop.interrupt``): raised inside
 a solve, CasADi printed its interrupt lines and IPOPT took it for a user's stop, the raise lost. A step that
 outlasts the limit once more is a hang (a plugin looping in ``act``): the timer's next firing raises at once.
+A raise outside the steps that C code cleared (a predictor's CasADi encoder in an MPC's reset) is raised again
+where the next step ends: the episode ran every step past the limit, to be stopped where it ended.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from collections.abc import Iterator
 from typing import Any, Final
 
 from pipelines.errors import PipelineError
-from pipelines.loop.interrupt import defer_to_step_end
+from pipelines.loop.interrupt import defer_to_step_end, overdue_at_step_ends
 
 # The longest limit a timer is armed for: setitimer refuses one past about 9.2e9 s (2**63 ns), raising
 # OverflowError in every episode of a sweep that asked for one (--episode-timeout 1e10). A limit beyond it is
@@ -74,6 +76,7 @@ def deadline(seconds: float | None) -> Iterator[None]:
             signal.setitimer(signal.ITIMER_REAL, seconds)
             return
         fired = True
+        overdue_at_step_ends(EpisodeTimeout(seconds))  # in case C code clears this raise
         raise EpisodeTimeout(seconds)
 
     previous = signal.signal(signal.SIGALRM, expire)
@@ -83,6 +86,7 @@ def deadline(seconds: float | None) -> Iterator[None]:
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+        overdue_at_step_ends(None)
     if fired:
         # The raise was lost: C code the handler ran inside cleared it (CasADi's SWIG layer tries conversions
         # and clears their errors: one that fired while an NLP was built let its episode finish past a 1 ms

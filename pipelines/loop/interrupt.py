@@ -33,7 +33,7 @@ STEP_GRACE_S: Final[float] = 5.0
 
 class StepInterrupt:
     """The Ctrl-C noted during a step: ``check()`` raises it; or another exception deferred to the step's
-    end (``defer_to_step_end``: a sweep's episode time limit)."""
+    end (``defer_to_step_end``: a sweep's episode time limit), or one overdue (``overdue_at_step_ends``)."""
 
     def __init__(self) -> None:
         self.pending = False
@@ -69,6 +69,8 @@ class StepInterrupt:
         if self.deferred is not None:
             deferred, self.deferred = self.deferred, None
             raise deferred
+        if _overdue is not None and threading.current_thread() is threading.main_thread():
+            raise _overdue
 
 
 def defer_to_step_end(exc: BaseException) -> bool:
@@ -81,7 +83,16 @@ def defer_to_step_end(exc: BaseException) -> bool:
     return True
 
 
+def overdue_at_step_ends(exc: BaseException | None) -> None:
+    """Have ``exc``, raised at once outside a step, raised again where each control step in this (the main)
+    thread ends, until None clears it: C code may clear a raise (CasADi's SWIG conversions, as a predictor's
+    exported encoder ran in an MPC's reset), and a sweep's limit met there let the episode run every step."""
+    global _overdue
+    _overdue = exc
+
+
 _stepping: StepInterrupt | None = None  # the episode's, in the main thread, while its steps run
+_overdue: BaseException | None = None  # overdue_at_step_ends'
 
 
 @contextlib.contextmanager

@@ -17,6 +17,7 @@ from pipelines.errors import PipelineError
 from pipelines.experiments.deadline import MOST_TIMER_S, EpisodeTimeout, check_timeout, deadline
 from tests.cli_calls import one_line, parser_error
 from tests.cli_calls import run_cli as run
+from tests.plugins.toy_controller import StraightLine
 
 HANGS = "tests.plugins.failing_controllers:HangsOnCircles"
 
@@ -72,6 +73,45 @@ def test_a_limit_met_during_a_step_is_raised_where_the_step_ends_unless_the_step
                 time.sleep(0.01)
     assert 0.4 <= time.perf_counter() - started < 2.0
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+class _SwallowsTheLimitInReset(StraightLine):
+    """A reset in a long C call that clears the limit's raise, as CasADi's SWIG conversions did while a
+    predictor's exported encoder ran in MPCController.reset (table2's CMPC at 5 humans, a 1 ms limit: 2 of
+    6 episodes ran to their end, 20 times the stopped ones' time)."""
+
+    name = "swallows_the_limit_in_reset"
+
+    def __init__(self) -> None:
+        super().__init__(None, None)
+        self.acts = 0
+
+    def reset(self, obs):
+        ends = time.perf_counter() + 0.3
+        while time.perf_counter() < ends:
+            try:
+                time.sleep(0.01)
+            except EpisodeTimeout:  # what the C layer did with it
+                pass
+
+    def act(self, obs):
+        self.acts += 1
+        return super().act(obs)
+
+
+def test_a_limit_whose_raise_c_code_swallowed_before_the_steps_ends_the_episode_at_the_first_step():
+    """The swallowed raise was raised again only where the episode ended, every step run past the limit."""
+    from pipelines.loop.episode import run_episode
+
+    controller = _SwallowsTheLimitInReset()
+    with pytest.raises(EpisodeTimeout) as raised, deadline(0.05):
+        run_episode(controller, seed=0, scenario="circle", n_humans=2)
+    assert controller.acts == 1
+    assert raised.traceback[-1].name == "check"  # the step's end, not the limit's block
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    controller.acts = 0
+    run_episode(controller, seed=0, scenario="circle", n_humans=2)  # the next, limited no more: nothing due
+    assert controller.acts > 10
 
 
 def test_a_limited_sweep_builds_its_nlp_outside_the_limit_and_runs_the_same_episodes(monkeypatch):
