@@ -116,11 +116,10 @@ class MPCController(SolversHeld):
             )
         check_world(world, self.cfg, self.model)
         self.memory = PlanMemory(self.cfg)
-        release = self.cfg.stall_release_s
-        self.stall = StallWatch(release, self.cfg.dt) if release else None
+        self.stall = StallWatch(self.cfg.stall_release_s, self.cfg.dt) if self.cfg.stall_release_s else None
         self._solvers: dict[tuple[int, int], CMPC | DMPC | CoupledCMPC] = {}
         self._twins: dict[tuple[int, int], BufferedFunction | None] = {}
-        self.solve_exceptions = 0  # control steps whose solve raised (each fell back), since construction
+        self.solve_exceptions = 0  # control steps whose solve raised (each fell back), in this episode
         self._predictor_error: BaseException | None = None  # raised by the predictor in this step's solve
         self._never_reset = True  # until the first reset, or act's one warning that there was none
 
@@ -260,6 +259,7 @@ class MPCController(SolversHeld):
             self._build(obs.n_robots, obs.n_humans, history)
         warn_team_layout(self.cfg, np.asarray(obs.robot_positions), np.asarray(obs.robot_goals))
         self._never_reset = False
+        self.solve_exceptions = 0  # the steps' count is of their episode, which its recording holds
         self.memory.reset()
         if self.stall is not None:
             self.stall.reset()

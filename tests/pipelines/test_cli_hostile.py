@@ -773,6 +773,21 @@ def test_the_step_says_what_the_solve_raised(monkeypatch):
     np.testing.assert_allclose(out.accelerations, 0.0)  # braking from rest
 
 
+def test_the_steps_count_the_solves_that_raised_in_their_own_episode(monkeypatch):
+    """Each step's extra["solve_exceptions"] (an episode's recording, /mpc/solver) counted since the
+    controller was built: the second episode of a reused controller reported the first's too."""
+    from crowdsim.env import CrowdEnv
+
+    monkeypatch.setattr("mpc.solvers._Solver.solve", _raising_solve())
+    controller = make_controller(ControllerSpec("cmpc"))
+    env = CrowdEnv()
+    for _ in range(2):
+        obs = env.reset(0, "circle", 2)
+        controller.reset(obs)
+        counts = [controller.act(obs).extra["solve_exceptions"] for _ in range(2)]
+        assert counts == [1, 2]
+
+
 def test_a_predictor_that_raises_is_not_taken_for_the_solver(monkeypatch):
     from crowdsim.env import CrowdEnv
 
