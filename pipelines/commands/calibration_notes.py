@@ -157,11 +157,30 @@ def calibration_controller_note(
     spec: ControllerSpec, sensor_range: float | None = None, sensor_tracks: bool = True
 ) -> str | None:
     """A line for closed-loop margins calibrated with another controller than the run's (``calibrate
-    --controller dmpc`` for a CMPC run), None otherwise (``pipelines.loop.margins.controller_note``)."""
-    from pipelines.loop.margins import controller_note
-
+    --controller dmpc`` for a CMPC run), None otherwise (``controller_note``)."""
     block = _planned_block(spec.behind(sensor_range, sensor_tracks))
     return None if block is None else controller_note(block, spec.controller)
+
+
+def controller_note(block: Calibration, controller: str) -> str | None:
+    """A line for a run of MPC ``controller`` planning with the margins of ``block``, a closed-loop block
+    calibrated with another controller (``calibrate --controller``, recorded in its details), None otherwise,
+    as ``calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
+    otherwise, and so do the humans who answer them, but one block is stored per alpha (a recalibration
+    replaces it) and a run planned with the other controller's silently. Not refused: an experiment may hold
+    the margins fixed across controllers."""
+    from predictors.calibration_store import calibrate_command
+    from predictors.conformal import alpha_text
+
+    made = block.details.get("controller") if block.source == "closed-loop" else None
+    if made is None or made == controller:
+        return None
+    return (
+        f"note: the closed-loop margins of {block.predictor!r} at alpha={alpha_text(block.alpha)} were "
+        f"calibrated with controller {made}, this run's is {controller}: their coverage here is not measured "
+        f"({calibrate_command(block, controller=controller)} measures it, replacing that block for every "
+        "run; CROWDMPC_ZOO=DIR keeps it apart)"
+    )
 
 
 # What docs/replayed_crowds.md measured behind a 3 m sensor, by calibration source (social_lstm_eth and

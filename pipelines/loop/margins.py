@@ -43,6 +43,8 @@ if TYPE_CHECKING:
     from predictors.calibration import Calibration
     from predictors.conformal_classes import ClassMargins
 
+    Located = tuple[Path, Calibration]  # a calibrations file and the block of it planned with
+
 MarginMode = Literal["none", "conformal", "conformal-motion", "conformal-shortfall", "fixed"]
 CalibrationSource = Literal["closed-loop", "real"]
 MARGIN_MODES: Final[tuple[str, ...]] = (
@@ -175,9 +177,18 @@ class MarginSpec:
         source = "" if self.source == "closed-loop" else f"-{self.source}"  # per-class modes: closed-loop
         return f"{LABEL_PREFIXES[self.mode]}{alpha_text(self.alpha)}{source}"
 
-    def resolve(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[float, ...]:
+    def located(self, predictor: str | None, horizon: int, sha256: str | None) -> Located | None:
+        """The calibrations file and block these margins plan with (None: a mode that needs none), read once
+        for ``resolve``, ``resolve_classes`` and ``calibration``: read by each, a controller planned with a
+        block a calibrate run replaced between the reads, and its records named the new one."""
+        return self._located(predictor, horizon, sha256) if self.mode in CALIBRATED_MODES else None
+
+    def resolve(
+        self, predictor: str | None, horizon: int, sha256: str | None, at: Located | None = None
+    ) -> tuple[float, ...]:
         """``MPCConfig.human_margins`` for ``predictor`` (its weights' ``sha256``) and ``horizon``: the same
-        margins for every human (none for ``conformal-motion``, whose margins ``resolve_classes`` gives)."""
+        margins for every human (none for ``conformal-motion``, whose margins ``resolve_classes`` gives);
+        ``at``: the block ``located`` gave (None: read here)."""
         if self.mode == "none" or self.mode in PER_HUMAN_MODES:
             return ()
         if self.mode == "fixed":
@@ -186,14 +197,16 @@ class MarginSpec:
                     f"fixed margins need one value per horizon step ({horizon}), got {len(self.values)}"
                 )
             return self.values
-        return tuple(self._block(predictor, horizon, sha256).quantiles[:horizon])
+        return tuple((at or self._located(predictor, horizon, sha256))[1].quantiles[:horizon])
 
-    def resolve_classes(self, predictor: str | None, horizon: int, sha256: str | None) -> ClassMargins | None:
+    def resolve_classes(
+        self, predictor: str | None, horizon: int, sha256: str | None, at: Located | None = None
+    ) -> ClassMargins | None:
         """The margins per motion class of ``conformal-motion`` (displacement) and ``conformal-shortfall``
-        (distance shortfall); None for every other mode."""
+        (distance shortfall); None for every other mode. ``at``: as ``resolve``'s."""
         if self.mode not in PER_HUMAN_MODES:
             return None
-        block = self._block(predictor, horizon, sha256)
+        block = (at or self._located(predictor, horizon, sha256))[1]
         table = class_tables(block)[self.mode]
         if table is None:
             from predictors.calibration_store import recalibrate_command
@@ -208,10 +221,7 @@ class MarginSpec:
             )
         return table
 
-    def _block(self, predictor: str | None, horizon: int, sha256: str | None) -> Calibration:
-        return self._located(predictor, horizon, sha256)[1]
-
-    def _located(self, predictor: str | None, horizon: int, sha256: str | None) -> tuple[Path, Calibration]:
+    def _located(self, predictor: str | None, horizon: int, sha256: str | None) -> Located:
         """The calibrations file holding the block planned with, and the block."""
         if predictor is None:
             raise PipelineError("conformal margins need a predictor; this controller uses none")
@@ -255,18 +265,20 @@ class MarginSpec:
                 "larger alpha"
             )
 
-    def calibration(self, predictor: str | None, sha256: str | None) -> dict[str, Any] | None:
+    def calibration(
+        self, predictor: str | None, sha256: str | None, at: Located | None = None
+    ) -> dict[str, Any] | None:
         """Which stored calibration the margins come from, for the records: when it was made, its data's
         sha256, the zoo whose file holds it ("shipped" or "user": a user's block of a key hides the shipped
         one) and, closed-loop, the conventions its episodes ran under (one block is kept per predictor,
         alpha and sensor range: a recalibration replaces it) and its crowd sizes, with the sensor range its
         robots were behind where they were and whether its tracker reported track lengths.
-        None for margins that need none."""
+        None for margins that need none. ``at``: as ``resolve``'s."""
         if self.mode not in CALIBRATED_MODES:
             return None
         from predictors.calibration_store import calibration_zoo
 
-        path, block = self._located(predictor, 0, sha256)
+        path, block = at or self._located(predictor, 0, sha256)
         closed_loop = block.source == "closed-loop"
         keys = ("profile", "visibility", "controller", "humans", "sensor_range") if closed_loop else ()
         made = {"created": block.created, "data_sha256": block.data_sha256, "zoo": calibration_zoo(path)}
@@ -296,27 +308,6 @@ def calibration_text(calibration: Mapping[str, Any]) -> str:
     zone = "" if made.tzinfo is None else " UTC"
     made = made if made.tzinfo is None else made.astimezone(UTC)
     return f"{whose}calibration of {made:%Y-%m-%d %H:%M}{zone}"
-
-
-def controller_note(block: Calibration, controller: str) -> str | None:
-    """A line for a run of MPC ``controller`` planning with the margins of ``block``, a closed-loop block
-    calibrated with another controller (``calibrate --controller``, recorded in its details), None otherwise,
-    as ``calibration_notes.calibration_world_note`` says it of another profile: CMPC's and DMPC's robots move
-    otherwise, and so do the humans who answer them, but one block is stored per alpha (a recalibration
-    replaces it) and a run planned with the other controller's silently. Not refused: an experiment may hold
-    the margins fixed across controllers."""
-    from predictors.calibration_store import calibrate_command
-    from predictors.conformal import alpha_text
-
-    made = block.details.get("controller") if block.source == "closed-loop" else None
-    if made is None or made == controller:
-        return None
-    return (
-        f"note: the closed-loop margins of {block.predictor!r} at alpha={alpha_text(block.alpha)} were "
-        f"calibrated with controller {made}, this run's is {controller}: their coverage here is not measured "
-        f"({calibrate_command(block, controller=controller)} measures it, replacing that block for every "
-        "run; CROWDMPC_ZOO=DIR keeps it apart)"
-    )
 
 
 def _margin_text(value: float) -> str:

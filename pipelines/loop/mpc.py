@@ -103,11 +103,11 @@ class MPCController(SolversHeld):
         check_margins_world(spec, world)  # before the calibration is looked up: the cause, not a symptom
         cfg = mpc_config(spec, jit, world)
         self.predictor_sha256 = sha256 = checkpoint_sha256(self.model.name)
-        margins = spec.margins.resolve(self.model.name, cfg.horizon, sha256)
-        self.cfg = cfg.replace(human_margins=margins)
+        at = spec.margins.located(self.model.name, cfg.horizon, sha256)  # the calibrations read once
+        self.cfg = cfg.replace(human_margins=spec.margins.resolve(self.model.name, cfg.horizon, sha256, at))
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step
-        self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256)
-        self.calibration = spec.margins.calibration(self.model.name, sha256)
+        self.class_margins = spec.margins.resolve_classes(self.model.name, cfg.horizon, sha256, at)
+        self.calibration = spec.margins.calibration(self.model.name, sha256, at)
         if self.class_margins is not None and world.obs_len < CLASS_WINDOW:
             raise PipelineError(
                 f"{spec.margins.mode} margins are calibrated for motion classes read from a human's last "

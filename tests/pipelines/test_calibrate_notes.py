@@ -8,9 +8,9 @@ import pytest
 
 from pipelines.cli import main
 from pipelines.commands.calibrate_store import _check_keeps_class_margins, evaluation_seeds_note
+from pipelines.commands.calibration_notes import controller_note
 from pipelines.commands.zoo_calibrations import calibration_table
 from pipelines.errors import PipelineError
-from pipelines.loop.margins import controller_note
 from predictors.calibration_store import calibrations_path, find_calibration, read_calibrations
 from predictors.zoo import checkpoints_dir
 from tests.calibration_blocks import class_errors, constant_velocity_block

@@ -111,3 +111,43 @@ def test_compare_lists_no_difference_in_where_a_block_is_stored(tmp_path, capsys
     c = _sweep(tmp_path / "c", with_calibration(SHIPPED | {"created": "2026-12-05T10:00:00+00:00"}))
     assert main(["compare", str(a), str(c), "--no-progress"]) == 0
     assert "margins.calibration.created" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("margins", ["conformal", "conformal-motion"])
+def test_a_controller_plans_with_the_block_its_records_name(margins, monkeypatch):
+    """Its margins, their classes and the record of their block each read the calibrations files as the
+    controller was built: a calibrate run that replaced the block between those reads had the controller
+    plan with one block while every record named the other."""
+    import dataclasses
+
+    import predictors.calibration_store as store
+    from pipelines.loop.controllers import ControllerSpec, make_controller
+
+    errors, motion = class_errors(4)
+    planned = constant_velocity_block(errors, classes=motion, shortfall=errors)
+    save_calibration(planned)
+    later = dataclasses.replace(
+        constant_velocity_block(2 * errors, classes=motion, shortfall=2 * errors), data_sha256="1" * 64
+    )
+    real = store.read_calibration_file
+    read: list[object] = []  # the files the controller's build read
+    saving = []  # while the calibrate run reads the file it writes: not the build's
+
+    def read_then_recalibrate(path):
+        blocks = real(path)
+        if not saving:
+            read.append(path)
+        if len(read) == 2 and not saving:  # the user zoo's file and the shipped: the block is replaced
+            saving.append(True)
+            save_calibration(later)
+            saving.clear()
+        return blocks
+
+    monkeypatch.setattr(store, "read_calibration_file", read_then_recalibrate)
+    controller = make_controller(ControllerSpec("cmpc", margins=parse_margins(margins)))
+    assert len(read) == len(set(read)) == 2  # the user zoo's file, then the shipped one
+    assert controller.calibration is not None and controller.calibration["data_sha256"] == "0" * 64
+    if margins == "conformal":
+        assert controller.cfg.human_margins == tuple(planned.quantiles[:4])
+    else:
+        assert controller.class_margins == planned.classes
