@@ -110,9 +110,9 @@ MPC_BOUNDS: Final[dict[str, tuple[float, str]]] = {
 # zero makes every pair's penalty w_coll log(2) / mu wherever the agents are (mu = 1e-300 overflowed the cost
 # to inf and every solve failed); at 1e-3 it is 693 w_coll per pair, finite at every weight's bound. Eq. 7
 # weighs a robot on its goal by w_goal / delta: delta = 1e-300 overflowed it (a NaN gradient; Fatrop hung).
-# At 1e-40 the NLP stays far from overflow (mpc/step_data.py). They guard the solver too: checked with
-# MPC_BOUNDS (see there).
-MPC_LEAST: Final[dict[str, tuple[float, str]]] = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, "")}
+# At 1e-40 the NLP stays far from overflow (mpc/step_data.py); so does guidance's penalty disc, which divides
+# by mu w_goal (w_goal = 5e-324 with mu = 1e-3 made it zero). Checked as MPC_BOUNDS are (see there).
+MPC_LEAST: Final = {"mu": (1e-3, " 1/m^2"), "delta": (1e-40, ""), "w_goal": (1e-40, "")}
 # The solvers take max_iter as a C int: 2**31 made IPOPT refuse its options (a RuntimeError when the NLP was
 # built), 2**32 wrapped to 0 and every solve failed at once.
 MAX_SOLVER_ITER: Final[int] = 2**31 - 1

@@ -108,3 +108,20 @@ def test_guidance_standing_without_two_rows_of_history_is_refused_naming_the_his
     )
     make_controller(spec, EnvConfig(history_len=2))  # two rows tell a motion
     make_controller(ControllerSpec("cmpc", predictor="orca_oracle"), EnvConfig(history_len=1))  # no guidance
+
+
+def test_a_goal_weight_below_its_least_value_is_refused_where_it_is_given(capsys):
+    """Guidance's penalty disc divides by mu w_goal: w_goal = 5e-324 (a float > 0, which the schema took)
+    with mu at its least value made that zero, and simulate's first guided step raised ZeroDivisionError.
+    With every number at its least value or bound together the disc is finite."""
+    from mpc.config import MAX_WEIGHT, MPC_LEAST
+    from tests.cli_calls import one_line
+    from tests.cli_calls import run_cli as run
+
+    least = {name: value for name, (value, _) in MPC_LEAST.items()}
+    widest = MPCConfig(guidance_clearance="penalty", w_coll=MAX_WEIGHT, **least)
+    assert math.isfinite(widest.standing_clearance(0.0))
+    argv = ["simulate", "--controller", "cmpc", "--episodes", "1", "--humans", "2", "--set", "mpc.mu=1e-3"]
+    argv += ["--set", "mpc.guidance=standing", "--set", "mpc.guidance_clearance=penalty"]
+    code, _, err = run(capsys, *argv, "--set", "mpc.w_goal=5e-324")
+    assert code == 2 and one_line(err).endswith("--set mpc.w_goal: must be at least 1e-40, got 5e-324")
