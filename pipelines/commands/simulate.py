@@ -222,6 +222,8 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
 def _run_meta(run: SimulateRun) -> dict[str, Any]:
     """The run's choices, for the JSON output and every MCAP file's "run" metadata: the main ones at the top,
     and the whole effective config (with the config file it came from) under "config"."""
+    from pipelines.loop.replay_data import crowd_sha256
+
     cfg, spec = run.config, run.spec
     return {
         "command": "simulate",
@@ -236,6 +238,7 @@ def _run_meta(run: SimulateRun) -> dict[str, Any]:
         "goals": cfg.env.goal_assignment,
         "formation": cfg.env.formation,
         "crowd": cfg.env.crowd,
+        "crowd_sha256": crowd_sha256(cfg.env.crowd),  # as a sweep's records: compare pairs files by it
         "scenario": cfg.scenario.name,
         "humans": cfg.scenario.humans,
         "robots": cfg.scenario.robots,

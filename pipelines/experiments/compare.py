@@ -186,8 +186,9 @@ def load_run(label: str, path: Path, progress: bool | None = False, by_cell: boo
 
 
 def _run_fields(record: Mapping[str, Any]) -> dict[str, Any]:
-    """``RUN_FIELDS`` of ``record``; ``crowd_sha256`` only where it is recorded (a sweep's record of a
-    replayed crowd): simulate's JSON, recordings and older sweeps do not name the file, which is not null."""
+    """``RUN_FIELDS`` of ``record``; ``crowd_sha256`` only where it is recorded (a replayed crowd's record,
+    or its simulate run's): ORCA's crowd, and files written before it was recorded, name no file, which is
+    not null."""
     return {k: record.get(k) for k in RUN_FIELDS if k != "crowd_sha256" or k in record}
 
 

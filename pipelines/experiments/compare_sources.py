@@ -74,14 +74,17 @@ def simulate_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
     episodes = document.get("episodes") if isinstance(document, dict) else None
     if not (isinstance(episodes, list) and isinstance(document.get("summary"), dict)):
         raise PipelineError(f"{path}: not a `crowdmpc simulate --json` file (no summary and episodes)")
-    records = [_record(episode, i, f"{path}: episode {i}") for i, episode in enumerate(episodes)]
+    crowd = _crowd_field(document.get("run"))
+    records = [_record(episode, i, f"{path}: episode {i}", crowd=crowd) for i, episode in enumerate(episodes)]
     commit = commit_text(document.get("code"))
     return records, [] if commit is None else [commit]
 
 
-def _record(episode: Any, index: int, where: str, key: str | None = None) -> dict[str, Any]:
+def _record(
+    episode: Any, index: int, where: str, key: str | None = None, crowd: dict[str, str] | None = None
+) -> dict[str, Any]:
     """One simulated episode (simulate's JSON entry, or a recording's metrics with its config) as a sweep's
-    record, checked as a sweep's log line is."""
+    record, checked as a sweep's log line is; ``crowd``: its run's ``_crowd_field``."""
     from pipelines.experiments.record_checks import check_record
 
     if not isinstance(episode, dict) or episode.get("seed") is None:
@@ -89,7 +92,7 @@ def _record(episode: Any, index: int, where: str, key: str | None = None) -> dic
     controller = str(episode.get("controller"))
     key = key or f"{controller}/{episode.get('scenario')}/{episode['seed']}"
     record = {**episode, "key": key, "cell": controller, "method": controller, "index": index, "wall_s": 0.0}
-    record = {**_sensor_fields(episode.get("config")), **record}
+    record = {**_sensor_fields(episode.get("config")), **(crowd or {}), **record}
     check_record(record, where, "the file is damaged")  # no sweep's log: no episode runs again
     return record
 
@@ -103,6 +106,14 @@ def _sensor_fields(config: Any) -> dict[str, Any]:
         return {}
     radius = sensing.get("radius_m")
     return {"sensor_range": radius, "sensor_tracks": None if radius is None else sensing.get("report_tracks")}
+
+
+def _crowd_field(run: Any) -> dict[str, str]:
+    """The sweep record's ``crowd_sha256`` from a run's ``run`` (simulate's JSON, a recording's "run"
+    metadata): the replayed file's sha256, which a sweep's record holds for a replayed crowd alone; none for
+    ORCA's crowd (null) and for a run written before it was recorded, which is "(not recorded)", not null."""
+    sha256 = run.get("crowd_sha256") if isinstance(run, dict) else None
+    return {"crowd_sha256": sha256} if isinstance(sha256, str) else {}
 
 
 def recording_records(
@@ -132,17 +143,20 @@ def recording_records(
         found = _read_episode(file, label, single=not path.is_dir())
         if found is None:
             continue
-        episode, commit = found
+        episode, crowd, commit = found
         key = file.relative_to(path).as_posix() if path.is_dir() else file.name
-        records.append(_record(episode, len(records), str(file), key))
+        records.append(_record(episode, len(records), str(file), key, crowd))
         if commit is not None:
             commits.setdefault(commit)
     return records, list(commits)
 
 
-def _read_episode(file: Path, label: str, single: bool) -> tuple[dict[str, Any], str | None] | None:
-    """The recording's episode (its metrics message with the config it ran) and its commit; None, warned,
-    where a folder's file has none (``single``: the one file named is refused instead)."""
+def _read_episode(
+    file: Path, label: str, single: bool
+) -> tuple[dict[str, Any], dict[str, str], str | None] | None:
+    """The recording's episode (its metrics message with the config it ran), its ``_crowd_field`` and its
+    commit; None, warned, where a folder's file has none (``single``: the one file named is refused
+    instead)."""
     from pipelines.logs.reader import read_recording
 
     try:
@@ -166,7 +180,7 @@ def _read_episode(file: Path, label: str, single: bool) -> tuple[dict[str, Any],
         return None
     meta = rec.metadata.get("crowdmpc", {})
     commit = commit_text({"commit": meta.get("commit"), "dirty": meta.get("dirty") == "true"})
-    return {**messages[-1], "config": rec.config()}, commit
+    return {**messages[-1], "config": rec.config()}, _crowd_field(rec.run_meta()), commit
 
 
 def _refuse_sweep_recordings(path: Path, label: str) -> None:

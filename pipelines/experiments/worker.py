@@ -325,6 +325,11 @@ class EpisodeWorker:
             # "record": which episodes the sweep kept, so that a review of the files alone (no sweep.json
             # beside them) can say that --record failures' rates are over the failures only.
             run_meta = {"experiment": task.experiment, "cell": task.cell.key, "record": self.record}
+            crowd = task.cell.world.crowd
+            if crowd != "orca":  # the file its people came from, as the episode's record names it
+                from pipelines.loop.replay_data import recording_sha256
+
+                run_meta["crowd_sha256"] = recording_sha256(crowd)
             scratch = tempfile.mkdtemp(prefix="crowdmpc-episode-", dir=self.scratch)
             recorder = McapEpisodeRecorder(scratch, run_meta=run_meta)
         meta = {

@@ -53,6 +53,12 @@ def recording_sha256(crowd: str, data_dir: str | Path | None = None) -> str:
     return _sha256(path, stat.st_mtime_ns, stat.st_size)
 
 
+def crowd_sha256(crowd: str) -> str | None:
+    """``recording_sha256`` of a replayed crowd, None for ORCA's (it replays no file): what a run records
+    beside ``crowd``, so that ``crowdmpc compare`` tells two files' crowds apart."""
+    return None if crowd == "orca" else recording_sha256(crowd)
+
+
 @functools.lru_cache(maxsize=4)
 def _sha256(path: Path, mtime_ns: int, size: int) -> str:
     import hashlib
