@@ -12,7 +12,7 @@ from typing import Any
 
 from pipelines.cli import main
 from tests.pipelines.test_outputs_doc import DOC, _strict
-from tests.predictors.samples import write_crowds
+from tests.predictors.samples import write_crowds, write_tiny_ewap
 
 REPO = Path(__file__).resolve().parents[2]
 SCALARS: dict[str, tuple[type, ...]] = {
@@ -27,7 +27,8 @@ SCALARS: dict[str, tuple[type, ...]] = {
 
 def doc_table(heading: str, index: int = 0) -> dict[str, dict[str, str]]:
     """The ``index``-th table of outputs.md's section ``heading`` (its ``## `` line, without the marks):
-    each name its first column gives (`a`, `b`: two names) -> the row's cells by column name."""
+    each name its first column gives (`a`, `b`: two names) -> the row's cells by column name, a type
+    column of as many types as names ("integer, string") giving each name its own."""
     text = DOC.read_text(encoding="utf-8")
     start = text.index(f"\n## {heading}\n")
     section = text[start + 1 :].split("\n## ", 1)[0]
@@ -37,24 +38,33 @@ def doc_table(heading: str, index: int = 0) -> dict[str, dict[str, str]]:
     table: dict[str, dict[str, str]] = {}
     for row in rows:
         cells = [cell.strip() for cell in re.split(r"(?<!\\)\|", row.strip().strip("|"))]
-        for name in re.findall(r"`([^`]+)`", cells[0]):
-            table[name] = dict(zip(columns, cells, strict=True))
+        names = re.findall(r"`([^`]+)`", cells[0])
+        row = dict(zip(columns, cells, strict=True))
+        types = row.get("type", "").split(", ")
+        for i, name in enumerate(names):  # `a`, `b` | integer, string: a's type, then b's
+            table[name] = row | ({"type": types[i]} if len(types) == len(names) else {})
     return table
 
 
 def of_type(value: Any, spec: str) -> bool:
-    """Whether ``value`` is of the doc's type ``spec`` ("string or null", "list of lists of numbers")."""
-    for kind in spec.split(" or "):
-        if kind.startswith("list of "):
-            plural, _, rest = kind.removeprefix("list of ").partition(" ")
-            item = " ".join(filter(None, (plural.removesuffix("s"), rest)))
-            if isinstance(value, list) and all(of_type(v, item) for v in value):
-                return True
-        elif isinstance(value, SCALARS[kind]) and (
+    """Whether ``value`` is of the doc's type ``spec`` ("string or null", "null or list of numbers"); a list's
+    item types run to the end ("list of integers or nulls": each item an integer or null)."""
+    scalars, _, items = spec.partition("list of ")
+    for kind in filter(None, scalars.split(" or ")):
+        if isinstance(value, SCALARS[kind]) and (
             kind in ("boolean", "object") or not isinstance(value, bool)
         ):
             return True
-    return False
+    if not items or not isinstance(value, list):
+        return False
+    item = " or ".join(_singular(kind) for kind in items.split(" or "))
+    return all(of_type(v, item) for v in value)
+
+
+def _singular(kind: str) -> str:
+    """ "integers" -> "integer", "lists of numbers" -> "list of numbers"."""
+    first, _, rest = kind.partition(" ")
+    return " ".join(filter(None, (first.removesuffix("s"), rest)))
 
 
 def check_documented(table: Mapping[str, Mapping[str, str]], objects: Iterable[Mapping[str, Any]]) -> None:
@@ -80,6 +90,8 @@ def test_the_type_names_read_as_the_doc_means_them():
         [[1, "a"]], "list of lists of numbers"
     )
     assert of_type([], "list of objects") and not of_type({}, "list of objects")
+    assert of_type([1, None], "list of integers or nulls") and not of_type(None, "list of integers or nulls")
+    assert of_type(None, "null or list of numbers") and of_type([0.1], "null or list of numbers")
 
 
 def test_the_zoo_manifest_is_as_documented(tmp_path, monkeypatch):
@@ -111,3 +123,37 @@ def test_calibrations_json_is_as_documented(tmp_path):
     blocks = [block for file in files for block in file["calibrations"]]
     assert {block["source"] for block in blocks} == {"real", "closed-loop"}
     check_documented(doc_table(heading, 2), blocks)
+
+
+def test_prepared_datas_manifest_is_as_documented(tmp_path):
+    """data prepare's manifest.json, which every reader of the prepared data checks, was named as "sources
+    (sha256), parameters, per-file scene counts and sha256, self-check results" and no further."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    argv = ["data", "prepare", "--raw", str(raw)]
+    assert main([*argv, "--out", str(tmp_path / "first"), "--no-tags"]) == 0
+    reference = tmp_path / "data" / "trajnetpp_vita" / "train" / "real_data" / "biwi_hotel.ndjson"
+    reference.parent.mkdir(parents=True)
+    reference.write_bytes((tmp_path / "first" / "train" / "biwi_hotel.ndjson").read_bytes())
+    assert main([*argv, "--out", str(tmp_path / "checked")]) == 0  # tagged, and checked against the reference
+    manifests = [_strict((tmp_path / out / "manifest.json").read_text()) for out in ("first", "checked")]
+    heading = "`crowdmpc data prepare --out DIR`"
+    check_documented(doc_table(heading, 0), manifests)
+    check_documented(doc_table(heading, 1), [m["parameters"] for m in manifests])
+    check_documented(doc_table(heading, 2), [s for m in manifests for s in m["sources"].values()])
+    check_documented(doc_table(heading, 3), [f for m in manifests for f in m["files"].values()])
+    checks = [c for m in manifests for c in m["self_check"].values()]
+    assert len(checks) == 1
+    check_documented(doc_table(heading, 4), checks)
+
+
+def test_a_synthetic_files_provenance_is_as_documented(tmp_path):
+    """NAME.synth.json, from which a synthetic set is made again, was named as "options, sha256, code"."""
+    argv = ["data", "synth", "--episodes", "1", "--humans", "3", "--seed", "0", "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "a.ndjson")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "b.ndjson"), "--with-robots", "--profile", "v1"]) == 0
+    documents = [_strict((tmp_path / f"{name}.synth.json").read_text()) for name in "ab"]
+    heading = "`crowdmpc data synth --out FILE`"
+    check_documented(doc_table(heading, 0), documents)
+    check_documented(doc_table(heading, 1), [d["options"] for d in documents])
+    check_documented(doc_table(heading, 2), [d["summary"] for d in documents])
+    assert documents[1]["options"]["profile"] == "v1" and "profile" not in documents[0]["options"]
