@@ -27,7 +27,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cli import count_in, json_on_stdout, output_file, predictor_name, run_main, write_json  # noqa: E402
+from bench_cli import (  # noqa: E402
+    check_distinct,
+    count_in,
+    json_on_stdout,
+    output_file,
+    predictor_name,
+    run_main,
+    write_json,
+)
 
 FILLS = ("standing", "backfill", "mask")
 
@@ -67,6 +75,28 @@ def whole_primaries(predictor, splits: list[str], horizon: int) -> list[np.ndarr
     return [xy for xy in scenes if not np.isnan(xy[:, 0]).any()]
 
 
+def checked_tracked(parser: argparse.ArgumentParser, name: str, predictor, values: list[int]) -> list[int]:
+    """``--tracked``'s values, sorted and once each, for a predictor that reads dataset scenes, else the
+    parser's one-line error. The ORCA oracle predicts from the simulator's goals and velocities, which a
+    dataset scene lacks (its one observed position left no k to try, and that was all it was told); a k of
+    ``obs_len`` or more is no partial track, and leaving it out printed a table without the row asked for."""
+    from predictors.errors import PredictorError
+    from predictors.evaluate import check_dataset_predictor
+
+    try:
+        check_dataset_predictor(predictor)
+    except PredictorError as exc:
+        parser.error(f"--predictor {name}: {exc}")
+    check_distinct(parser, "--tracked", values)
+    length = predictor.obs_len
+    for k in values:
+        if k >= length:
+            parser.error(
+                f"--tracked {k}: {name} reads {length} positions, so a partial track is 1..{length - 1}"
+            )
+    return sorted(values)
+
+
 def main() -> None:
     from predictors.registry import load_predictor
 
@@ -82,9 +112,7 @@ def main() -> None:
     parser.add_argument("--json", type=output_file, help="write the figures to this file ('-': stdout)")
     args = parser.parse_args()
     predictor = load_predictor(args.predictor)
-    tracked = sorted({k for k in args.tracked if k < predictor.obs_len})
-    if not tracked:
-        parser.error(f"{args.predictor} reads {predictor.obs_len} positions: --tracked needs a k below that")
+    tracked = checked_tracked(parser, args.predictor, predictor, args.tracked)
     with json_on_stdout(args.json):
         from tqdm import tqdm
 
