@@ -14,8 +14,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -154,6 +157,29 @@ def episode_bar(episodes: int, desc: str) -> Iterator[int]:
     from tqdm import tqdm
 
     return iter(tqdm(range(episodes), desc=desc, unit="ep", file=sys.stderr, leave=False))
+
+
+@contextmanager
+def private_cache(prefix: str) -> Iterator[Path]:
+    """``$CROWDMPC_CACHE`` set to a new, empty folder for the run, removed after and the variable restored.
+
+    A benchmark that compiles (jit) must neither fill the user's compile cache with the sizes it tries nor
+    time loads of entries an earlier run left there: each run compiles from cold, as a fresh machine does,
+    and the figures do not depend on what the cache held. The variable also roots the prepared datasets
+    (``predictors.data.locate.cache_root``), which a run under this would prepare again: only the benchmarks
+    that compile use it."""
+    from mpc.compile_cache import CACHE_ENV
+
+    before = os.environ.get(CACHE_ENV)
+    with tempfile.TemporaryDirectory(prefix=prefix) as folder:
+        os.environ[CACHE_ENV] = folder
+        try:
+            yield Path(folder)
+        finally:
+            if before is None:
+                del os.environ[CACHE_ENV]
+            else:
+                os.environ[CACHE_ENV] = before
 
 
 def run_main(main: Callable[[], int | None]) -> int:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -29,6 +28,7 @@ from bench_cli import (  # noqa: E402
     json_on_stdout,
     output_file,
     predictor_name,
+    private_cache,
     robot_count,
     run_main,
     write_json,
@@ -93,10 +93,7 @@ def main() -> None:
         if not args.jit:
             runs["no_jit"] = prepare_once(args.controller, args.predictor, args.robots, humans, False)
         else:
-            from mpc.compile_cache import CACHE_ENV
-
-            with tempfile.TemporaryDirectory(prefix="crowdmpc-prepare-") as cache:
-                os.environ[CACHE_ENV] = cache  # empty: the first controller compiles every size
+            with private_cache("crowdmpc-prepare-"):  # empty: the first controller compiles every size
                 for label in ("cold_cache", "warm_cache"):
                     runs[label] = prepare_once(args.controller, args.predictor, args.robots, humans, True)
         for label, run in runs.items():

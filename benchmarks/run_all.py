@@ -34,6 +34,10 @@ Sections
               floor), the later IBR solves, the predictor and the rest (benchmarks/ibr_solves.py; quick: 1
               episode)
 
+What is compiled (the episodes' sections, ibr's jit on) goes to a private compile cache, empty at the start,
+removed at the end and shared by the sections: the user's cache is neither filled nor read, so a cell's
+first episodes pay the compile on every run, as on a fresh machine.
+
 Rows measured here rather than by control_step.py (the baselines, the oracle, robots != 3) time the first
 ``--steps`` control steps of episodes of both scenarios (export, robots and dmpc_updates time whole episodes).
 Medians and 95th percentiles in milliseconds. The machine is shared: figures vary with the load, which is
@@ -55,7 +59,16 @@ import numpy as np
 # and this script's parts (run_all_parts/) are imported by name, however this is run.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_cli import count_in, is_stdout, json_on_stdout, json_text, output_file, run_main, write_text  # noqa: E402
+from bench_cli import (  # noqa: E402
+    count_in,
+    is_stdout,
+    json_on_stdout,
+    json_text,
+    output_file,
+    private_cache,
+    run_main,
+    write_text,
+)
 from run_all_parts.sections import SECTION_RUNS, Run  # noqa: E402
 from run_all_table import table  # noqa: E402
 
@@ -115,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {list(SECTIONS)}")
     with json_on_stdout(args.json):  # --json -: the JSON alone on stdout, the rest on stderr
-        report = run(args)
+        with private_cache("crowdmpc-run-all-cache-"):  # one for every section: each reuses what one compiled
+            report = run(args)
         print(table(report))  # run_all_table.py
         text = json_text(report, indent=1)
         if not is_stdout(args.json):  # printed once, on stdout, by write_text

@@ -17,13 +17,9 @@ printed separately (the jit build dominates them): the jit builds compile in a p
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import sys
-import tempfile
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +37,7 @@ from bench_cli import (  # noqa: E402
     json_on_stdout,
     output_file,
     predictor_name,
+    private_cache,
     run_main,
     write_json,
 )
@@ -128,23 +125,6 @@ def replay(nlp: dict, cfg: MPCConfig, problems: list[dict[str, Any]]) -> dict[st
     }
 
 
-@contextmanager
-def private_cache() -> Iterator[None]:
-    """``$CROWDMPC_CACHE`` set to an empty folder for the run, removed and restored after."""
-    from mpc.compile_cache import CACHE_ENV
-
-    before = os.environ.get(CACHE_ENV)
-    with tempfile.TemporaryDirectory(prefix="solvers-bench-") as tmp:
-        os.environ[CACHE_ENV] = tmp
-        try:
-            yield
-        finally:
-            if before is None:
-                del os.environ[CACHE_ENV]
-            else:
-                os.environ[CACHE_ENV] = before
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -159,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--json", type=output_file, help="also write the figures here")
     args = parser.parse_args(argv)
-    with json_on_stdout(args.json), private_cache():  # --json -: the JSON alone on stdout, the rest on stderr
+    # --json -: the JSON alone on stdout, the rest on stderr
+    with json_on_stdout(args.json), private_cache("solvers-bench-"):
         print(
             f"recording {args.episodes} DMPC + {args.episodes} CMPC episodes, {args.humans} humans",
             file=sys.stderr,
