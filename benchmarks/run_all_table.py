@@ -72,8 +72,10 @@ def _formation_rows(report: dict[str, Any]) -> list[str]:
         for mode, stats in cell["rows"].items():
             lines.append(_row(f"dmpc {key} {mode}", stats))
         if "speedup_median" in cell:
+            # dmpc_scaling.same_before_limit compared these episodes only up to a step past the time limit
+            cut = f", {cell['cut']} episodes up to a step past the time limit" if cell.get("cut") else ""
             lines.append(
-                f"| dmpc {key} threads speed-up (median; same trajectories: {cell['same']}) | "
+                f"| dmpc {key} threads speed-up (median; same trajectories: {cell['same']}{cut}) | "
                 f"x{cell['speedup_median']:.2f} | | |"
             )
     for key, row in report.get("ibr", {}).items():

@@ -73,3 +73,45 @@ def test_the_threads_speed_up_is_labelled_serial_over_threads(capsys):
     line = capsys.readouterr().out.splitlines()[-1]
     assert "speed-up (serial / threads): step median x0.82, phase x1.50, same trajectories: True" in line
     assert "threads/serial" not in line
+
+
+def _run(times_s, positions):
+    """An episode's result as closed_loop reads it: step times and the robots' path (one robot, x only)."""
+    from types import SimpleNamespace
+
+    metrics = SimpleNamespace(success=True, collision=False, timeout=False)
+    path = np.zeros((len(positions), 1, 2))
+    path[:, 0, 0] = positions
+    return SimpleNamespace(
+        solve_times_s=np.asarray(times_s),
+        iterations=[1] * len(times_s),
+        metrics=metrics,
+        robot_positions=path,
+    )
+
+
+def test_runs_are_compared_up_to_a_step_past_the_time_limit_and_no_further():
+    within = _run([0.1, 0.1, 0.1], [0.0, 1.0, 2.0, 3.0])
+    # step 1 ran past 1 s: positions 0..1 follow from step 0 alone; position 2 is step 1's, cut by the clock
+    late = _run([0.1, 1.5, 0.1], [0.0, 1.0, 2.5, 3.5])
+    assert dmpc_scaling.same_before_limit([within, late], 1.0) == (True, True)
+    early = _run(
+        [0.1, 1.5, 0.1], [0.0, 1.1, 2.5, 3.5]
+    )  # parted at step 0, within the limit: a real difference
+    assert dmpc_scaling.same_before_limit([within, early], 1.0) == (False, True)
+    assert dmpc_scaling.same_before_limit([within, _run([0.1] * 3, [0.0, 1.0, 2.0, 3.1])], 1.0) == (
+        False,
+        False,
+    )
+    assert dmpc_scaling.same_before_limit([within, within], 1.0) == (True, False)
+
+
+def test_a_serial_step_cut_by_the_time_limit_is_no_difference_and_is_said(monkeypatch):
+    """At 6 robots on a loaded machine a serial step stopped at the 1 s limit, the threads' did not, and the
+    check printed "same trajectories: False" for a difference the load made."""
+    runs = iter([_run([0.1, 1.2], [0.0, 1.0, 2.5]), _run([0.1, 0.3], [0.0, 1.0, 2.0])])
+    monkeypatch.setattr(dmpc_scaling, "run_episode", lambda *args, **kwargs: next(runs))
+    # no phase was timed by these runs: the speed-ups' arithmetic is tested above, the check alone here
+    monkeypatch.setattr(dmpc_scaling, "cell_report", lambda rows, same, cut=0: {"same": same, "cut": cut})
+    cell = dmpc_scaling.closed_loop(2, 1, "jacobi:regret", ["serial", "threads"], 1)
+    assert (cell["same"], cell["cut"]) == (True, 1)
