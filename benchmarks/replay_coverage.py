@@ -41,6 +41,7 @@ from bench_cli import (  # noqa: E402
     count_in,
     episode_bar,
     episode_count,
+    figure,
     json_on_stdout,
     output_file,
     predictor_name,
@@ -112,6 +113,8 @@ def coverage(observer: Any, margins: str, predictor: str, horizon: int) -> list[
     sha256 = checkpoint_sha256(predictor)
     table = spec.resolve_classes(predictor, horizon, sha256)
     score = observer.shortfall if spec.mode == "conformal-shortfall" else observer.errors
+    if not len(score):  # no human came within --near of a robot: PredictionErrors' empty (0, 0), no steps
+        return [math.nan] * horizon
     if table is None:
         bound = np.broadcast_to(np.asarray(spec.resolve(predictor, horizon, sha256)), score.shape)
     else:
@@ -197,7 +200,7 @@ def print_report(report: dict[str, Any], horizon: int) -> None:
             "at a step)"
         )
         for margins, shares in measured["coverage"].items():
-            print(f"  {margins:28s}" + " ".join(f"{share:6.3f}" for share in shares))
+            print(f"  {margins:28s}" + " ".join(figure(share, "6.3f") for share in shares))
 
 
 if __name__ == "__main__":

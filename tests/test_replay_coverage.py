@@ -84,3 +84,22 @@ def test_the_script_scores_behind_a_sensor(tmp_path):
             [*run, "--sensor-range", bad], capture_output=True, text=True, timeout=120, cwd=ROOT
         )
         assert refused.returncode == 2 and "--sensor-range must be" in refused.stderr
+
+
+def test_a_crowd_that_never_came_near_has_no_coverage_and_is_printed_so(capsys):
+    """1 person of eth who never came within --near of a robot left PredictionErrors' empty (0, 0) arrays,
+    and broadcasting a margin to them ended the script in a ValueError traceback."""
+    empty = SimpleNamespace(errors=np.zeros((0, 0)), shortfall=np.zeros((0, 0)), classes=np.zeros(0, int))
+    for margins in ("conformal:0.1", "conformal-shortfall:0.05"):
+        shares = replay_coverage.coverage(empty, margins, "constant_velocity", 4)
+        assert len(shares) == 4 and all(math.isnan(share) for share in shares)
+    eth = {
+        "episodes": 1,
+        "success": 1,
+        "collision": 0,
+        "scored_at_k1": 0,
+        "coverage": {"conformal:0.1": shares},
+    }
+    report = {"predictor": "constant_velocity", "plan_with": "none", "crowds": {"eth": eth}}
+    replay_coverage.print_report(report, 4)
+    assert capsys.readouterr().out.splitlines()[-1].split() == ["conformal:0.1", "-", "-", "-", "-"]
