@@ -58,7 +58,8 @@ def measure(controller_name: str, predictor: str, episodes: int, humans: int) ->
     loop = total - recorder.spent_s
     return {
         "controller": controller_name,
-        "predictor": predictor,
+        # as the episodes record it: None for a baseline, which predicts nothing whatever --predictor says
+        "predictor": results[0].predictor,
         "episodes": episodes,
         "steps": steps,
         "loop_s": loop,
@@ -79,7 +80,8 @@ def main() -> None:
     args = parser.parse_args()
     row = measure(args.controller, args.predictor, args.episodes, args.humans)
     print(
-        f"{row['controller']} ({row['predictor']}), {row['episodes']} episodes, {row['steps']} steps: "
+        f"{row['controller']} ({row['predictor'] or 'no predictor'}), {row['episodes']} episodes, "
+        f"{row['steps']} steps: "
         f"loop {row['loop_s']:.2f} s, recording {row['recording_s']:.3f} s "
         f"({row['recording_ms_per_step']:.2f} ms/step) = {row['overhead_percent']:.1f} % of the loop"
     )
