@@ -7,7 +7,8 @@ its CRC checked by the reader, one chunk at a time). The data section's CRC is c
 indexes made mcap's indexed reader, as Foxglove reads a file, fail on a file whose messages all read here.
 A record that does not parse is stepped over by its length where that lies within the file. The messages
 read are counted against the summary's Statistics record (``statistics_problem``): where a file has no data
-section CRC, a chunk whose opcode byte changed is skipped by mcap's reader as a record it does not know.
+section CRC, a chunk whose opcode byte changed is skipped by mcap's reader as a record it does not know. A
+footer reached without a DataEnd record before it is a problem too: that record holds the data section's CRC.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import Final
 
 from mcap.exceptions import EndOfFile
+from mcap.opcode import Opcode
 from mcap.records import DataEnd, Footer, Header, McapRecord, Statistics
 from mcap.stream_reader import CRCValidationError, StreamReader
 
@@ -28,6 +30,7 @@ from pipelines.errors import PipelineError
 MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 # the footer's bytes that its summary CRC covers: opcode, record length, summary start, summary offset start
 _FOOTER_CRC_SPAN: Final[int] = 1 + 8 + 8 + 8
+_OPCODES: Final[frozenset[int]] = frozenset(Opcode)
 
 
 def reason(exc: BaseException) -> str:
@@ -90,6 +93,18 @@ def statistics_problem(
     )
 
 
+def _data_end_problem(unknown: list[tuple[int, int]]) -> str:
+    """Why a file whose footer was read but no DataEnd record before it is damaged; ``unknown``: the records
+    of an opcode MCAP does not define, (offset, opcode), which mcap's reader skipped."""
+    instead = "".join(
+        f"; a record of unknown opcode {opcode:#04x} at byte {at} was skipped" for at, opcode in unknown
+    )
+    return (
+        f"no Data End record closes the data section{instead}: its CRC went unchecked, so bytes outside the "
+        "chunks may have changed unseen"
+    )
+
+
 def walk_file(
     path: Path, take: Callable[[McapRecord, int], None], problems: list[str]
 ) -> tuple[bool, str | None]:
@@ -122,14 +137,20 @@ def walk_file(
         raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
 
     stopped_at = None
+    # every MCAP file ends its data section with a DataEnd record; a changed opcode byte made mcap's reader
+    # skip it as a record it does not know, and with it the data section's CRC
+    data_ended, unknown = False, []
     while True:
         offset = buffer.tell()
+        if offset < len(data) and data[offset] not in _OPCODES:
+            unknown.append((offset, data[offset]))
         try:
             record = next(records)
         except StopIteration:
             break
         except Exception as exc:  # noqa: BLE001 (any parse error: a cut, or corrupt bytes)
             if isinstance(exc, CRCValidationError) and isinstance(exc.record, DataEnd):
+                data_ended = True
                 if not problems:  # else a bad chunk or record found before it is what changed: no 2nd line
                     problems.append(
                         f"data section CRC mismatch ({exc}): bytes outside the chunks changed after writing"
@@ -149,7 +170,11 @@ def walk_file(
             else:
                 stopped_at = reason(exc)
             break
-        if isinstance(record, Footer) and (problem := summary_crc_problem(data, offset, record)):
-            problems.append(problem)
+        data_ended = data_ended or isinstance(record, DataEnd)
+        if isinstance(record, Footer):
+            if problem := summary_crc_problem(data, offset, record):
+                problems.append(problem)
+            if not data_ended:
+                problems.append(_data_end_problem(unknown))
         take(record, offset)
     return complete, stopped_at

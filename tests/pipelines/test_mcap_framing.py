@@ -1,0 +1,60 @@
+"""The records that frame a recording, damaged one byte at a time: its Data End record, its header and its
+closing magic. Each is one line of the file's problems under ``review --check``, never an "ok", and never
+costs the messages that still read."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from mcap.opcode import Opcode
+from mcap.records import DataEnd
+from mcap.stream_reader import StreamReader
+
+from pipelines.cli import main
+from pipelines.logs.reader import read_recording
+from tests.pipelines.mcap_episode import record_episode
+
+
+@pytest.fixture(scope="module")
+def episode(tmp_path_factory) -> Path:
+    return record_episode(tmp_path_factory.mktemp("episode"), steps=20, n_humans=5).path
+
+
+def review_check(capsys, path: Path) -> tuple[int, str]:
+    rc = main(["review", str(path), "--check"])
+    out, _ = capsys.readouterr()
+    return rc, out
+
+
+def test_a_lost_data_end_record_fails_the_check(episode, tmp_path, capsys):
+    """A changed opcode byte of the Data End record made mcap's reader skip it as a record it does not know,
+    and with it the data section's CRC: --check said "ok" of a file changed outside its chunks."""
+    data = episode.read_bytes()
+    at = _footer_summary_start(data) - (1 + 8 + 4)  # Data End (opcode, length, CRC) is right before it
+    assert data[at] == Opcode.DATA_END
+    bad = bytearray(data)
+    bad[at] ^= 0x80
+    path = tmp_path / "data_end.mcap"
+    path.write_bytes(bytes(bad))
+    with open(path, "rb") as f:  # mcap reads it front to back without a word
+        assert not any(isinstance(r, DataEnd) for r in StreamReader(f, validate_crcs=True).records)
+
+    rec = read_recording(path)
+    (problem,) = rec.problems
+    assert problem.startswith(
+        "no Data End record closes the data section; "
+        f"a record of unknown opcode 0x8f at byte {at} was skipped"
+    )
+    whole = read_recording(episode)
+    assert {t: len(m) for t, m in rec.messages.items()} == {t: len(m) for t, m in whole.messages.items()}
+    rc, out = review_check(capsys, path)
+    assert rc == 1
+    assert f"check {path}: the file itself: 1 problem\n  no Data End record closes the data section" in out
+    assert read_recording(episode).problems == []  # the file as written has one
+
+
+def _footer_summary_start(data: bytes) -> int:
+    footer = len(data) - 8 - (1 + 8 + 8 + 8 + 4)  # before the closing magic: opcode, length, 2 offsets, CRC
+    assert data[footer] == Opcode.FOOTER
+    return int.from_bytes(data[footer + 9 : footer + 17], "little")
