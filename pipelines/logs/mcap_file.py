@@ -105,12 +105,8 @@ def _data_end_problem(unknown: list[tuple[int, int]]) -> str:
     )
 
 
-def walk_file(
-    path: Path, take: Callable[[McapRecord, int], None], problems: list[str]
-) -> tuple[bool, str | None]:
-    """Hand every record of ``path`` after its header to ``take`` (with its offset), and the damage found
-    to ``problems``; whether the file is complete (ends with the closing magic) and what stopped reading
-    early, if anything did. PipelineError when ``path`` is no recording at all."""
+def _file_bytes(path: Path) -> bytes:
+    """The bytes of ``path``, an MCAP file by its opening magic; PipelineError for anything else."""
     if path.is_dir():
         raise PipelineError(f"{path} is a folder, not a recording")
     if not path.is_file():  # /dev/zero or a pipe exists: "no such recording" sent the user looking for it
@@ -124,17 +120,45 @@ def walk_file(
         raise PipelineError(f"{path} is empty (0 bytes): its run was killed before writing anything")
     if not data.startswith(MAGIC):
         raise PipelineError(f"{path} is not an MCAP file (it does not start with MCAP's magic bytes)")
-    complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
-    buffer = io.BytesIO(data)
+    return data
+
+
+def _after_header(
+    path: Path, data: bytes, buffer: io.BytesIO, limit: int, problems: list[str]
+) -> Iterator[McapRecord]:
+    """The records after the header of ``data`` (read through ``buffer``), the last ending by ``limit``. A
+    header record whose content does not parse but whose length lies within the file is stepped over, a
+    problem: a changed byte in its library's name lost the file whole, where mcap's reader read every
+    message. PipelineError where no header record stands after the magic."""
     records = _records(buffer, len(data), first=True)
     try:
         header = next(records)
-    except Exception as exc:  # noqa: BLE001 (whatever the bytes after the magic are, this is no recording)
-        raise PipelineError(
-            f"{path} has no complete MCAP header ({len(data)} bytes; {reason(exc)}): not a recording"
-        ) from None
+    except Exception as exc:  # noqa: BLE001 (whatever the bytes after the magic are)
+        start = len(MAGIC)
+        end = _record_end(data, start, limit) if data[start : start + 1] == bytes([Opcode.HEADER]) else None
+        if end is None:
+            raise PipelineError(
+                f"{path} has no complete MCAP header ({len(data)} bytes; {reason(exc)}): not a recording"
+            ) from None
+        problems.append(f"corrupt header record at byte {start} ({reason(exc)}); left out")
+        buffer.seek(end)
+        return _records(buffer, len(data), first=False)
     if not isinstance(header, Header):
         raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
+    return records
+
+
+def walk_file(
+    path: Path, take: Callable[[McapRecord, int], None], problems: list[str]
+) -> tuple[bool, str | None]:
+    """Hand every record of ``path`` after its header to ``take`` (with its offset), and the damage found
+    to ``problems``; whether the file is complete (ends with the closing magic) and what stopped reading
+    early, if anything did. PipelineError when ``path`` is no recording at all."""
+    data = _file_bytes(path)
+    complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
+    limit = len(data) - len(MAGIC) if complete else len(data)  # where the last record must end
+    buffer = io.BytesIO(data)
+    records = _after_header(path, data, buffer, limit, problems)
 
     stopped_at = None
     # every MCAP file ends its data section with a DataEnd record; a changed opcode byte made mcap's reader
@@ -157,7 +181,7 @@ def walk_file(
                     )
                 records = _records(buffer, len(data), first=False)  # the summary section still reads
                 continue
-            end = _record_end(data, offset, len(data) - len(MAGIC) if complete else len(data))
+            end = _record_end(data, offset, limit)
             if end is not None:  # its content is bad, not its length: the records after it still read
                 problems.append(f"corrupt record at byte {offset} ({reason(exc)}); left out")
                 buffer.seek(end)

@@ -8,10 +8,12 @@ from pathlib import Path
 
 import pytest
 from mcap.opcode import Opcode
+from mcap.reader import make_reader
 from mcap.records import DataEnd
 from mcap.stream_reader import StreamReader
 
 from pipelines.cli import main
+from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
 from tests.pipelines.mcap_episode import record_episode
 
@@ -58,3 +60,36 @@ def _footer_summary_start(data: bytes) -> int:
     footer = len(data) - 8 - (1 + 8 + 8 + 8 + 4)  # before the closing magic: opcode, length, 2 offsets, CRC
     assert data[footer] == Opcode.FOOTER
     return int.from_bytes(data[footer + 9 : footer + 17], "little")
+
+
+def test_a_header_that_does_not_parse_loses_itself_only(episode, tmp_path, capsys):
+    """A changed byte in the header's library name ("crowdmpc", no longer UTF-8) refused the recording whole
+    as one with "no complete MCAP header", where mcap's reader read every message of it."""
+    data = episode.read_bytes()
+    library = data.index(b"crowdmpc")  # the header's: magic, opcode, length, profile "", library's length
+    assert library == 8 + 1 + 8 + 4 + 4
+    bad = bytearray(data)
+    bad[library + 1] = 0xFF
+    path = tmp_path / "header.mcap"
+    path.write_bytes(bytes(bad))
+    with open(path, "rb") as f:
+        assert sum(1 for _ in make_reader(f, validate_crcs=True).iter_messages()) > 0
+
+    rec, whole = read_recording(path), read_recording(episode)
+    (problem,) = rec.problems
+    assert problem.startswith("corrupt header record at byte 8 (UnicodeDecodeError") and "left out" in problem
+    assert {t: [m.data for m in ms] for t, ms in rec.messages.items()} == {
+        t: [m.data for m in ms] for t, ms in whole.messages.items()
+    }
+    assert rec.metadata == whole.metadata and not rec.truncated
+    rc, out = review_check(capsys, path)
+    assert rc == 1
+    assert f"check {path}: the file itself: 1 problem\n  corrupt header record at byte 8 " in out
+    n = sum(len(m) for m in whole.messages.values())
+    assert out.endswith(f"check {path}: {n} messages, each valid; fails: its own problems\n")
+
+    # a header cut short is still no recording: its length runs past the file's end
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(bytes(bad[: library + 4]))
+    with pytest.raises(PipelineError, match=r"has no complete MCAP header \(29 bytes; "):
+        read_recording(cut)
