@@ -152,8 +152,9 @@ def walk_file(
     path: Path, take: Callable[[McapRecord, int], None], problems: list[str]
 ) -> tuple[bool, str | None]:
     """Hand every record of ``path`` after its header to ``take`` (with its offset), and the damage found
-    to ``problems``; whether the file is complete (ends with the closing magic) and what stopped reading
-    early, if anything did. PipelineError when ``path`` is no recording at all."""
+    to ``problems``; whether the file is complete (it ends with the closing magic, or with its footer and 8
+    bytes a change kept from being it: a problem) and what stopped reading early, if anything did.
+    PipelineError when ``path`` is no recording at all."""
     data = _file_bytes(path)
     complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
     limit = len(data) - len(MAGIC) if complete else len(data)  # where the last record must end
@@ -201,4 +202,12 @@ def walk_file(
             if not data_ended:
                 problems.append(_data_end_problem(unknown))
         take(record, offset)
+        if isinstance(record, Footer) and not complete and len(data) - buffer.tell() == len(MAGIC):
+            # the file ends where its footer does, but for the magic: a byte changed, nothing was cut off
+            problems.append(
+                f"closing magic bytes changed after writing ({data[-len(MAGIC) :].hex(' ')}, where MCAP's "
+                f"are {MAGIC.hex(' ')}): readers that check them refuse the file"
+            )
+            complete = True
+            break
     return complete, stopped_at

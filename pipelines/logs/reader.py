@@ -2,10 +2,10 @@
 
 A file is read whole into memory and walked front to back, record by record (mcap's ``StreamReader`` with
 ``emit_chunks``), so that a truncated file (its writer was killed) yields everything up to its last complete
-chunk; a file is truncated when it does not end with MCAP's magic. CRCs are verified where the file carries
-them: each chunk's (``breakup_chunk(validate_crc=True)``, one chunk at a time, so that a bad chunk loses only
-its own messages), the data section's and the summary section's (``pipelines.logs.mcap_file``, the walk);
-the messages read are counted against the file's Statistics record, where it has one.
+chunk; a file is truncated when it stops short of MCAP's closing magic. CRCs are verified where the file
+carries them: each chunk's (``breakup_chunk(validate_crc=True)``, one chunk at a time, so that a bad chunk
+loses only its own messages), the data section's and the summary section's (``pipelines.logs.mcap_file``,
+the walk); the messages read are counted against the file's Statistics record, where it has one.
 
 Log times are wall clock since the Unix epoch: the episode's start (metadata "episode" ``start_time_ns``) +
 its simulation time (``pipelines.logs.recording``); files recorded before that, without ``start_time_ns``,
@@ -70,7 +70,7 @@ class Recording:
     metadata: dict[str, dict[str, str]]  # name -> record (the last one when a name repeats)
     channels: dict[str, Channel]  # topic -> channel
     messages: dict[str, list[LoggedMessage]]  # topic -> messages in file order
-    truncated: bool  # the file does not end with MCAP's closing magic
+    truncated: bool  # the file stops short of MCAP's closing magic (a changed one is a problem)
     stopped_at: str | None = None  # what ended reading early (truncated files)
     problems: list[str] = field(default_factory=list)  # bad chunks, bad metadata, corruption (not messages)
 

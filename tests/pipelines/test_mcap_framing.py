@@ -4,6 +4,7 @@ costs the messages that still read."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -93,3 +94,28 @@ def test_a_header_that_does_not_parse_loses_itself_only(episode, tmp_path, capsy
     cut.write_bytes(bytes(bad[: library + 4]))
     with pytest.raises(PipelineError, match=r"has no complete MCAP header \(29 bytes; "):
         read_recording(cut)
+
+
+def test_a_changed_closing_magic_is_no_cut(episode, tmp_path, capsys):
+    """A changed byte of the closing magic was read as a killed run's file: "truncated (the run was killed
+    or is still writing) ... the rest is lost", of a file that had lost nothing."""
+    bad = bytearray(episode.read_bytes())
+    bad[-3] ^= 0x80
+    path = tmp_path / "magic.mcap"
+    path.write_bytes(bytes(bad))
+    rec, whole = read_recording(path), read_recording(episode)
+    assert not rec.truncated and rec.warning is None
+    (problem,) = rec.problems
+    assert problem.startswith("closing magic bytes changed after writing (89 4d 43 41 50 b0 0d 0a, where ")
+    assert {t: len(m) for t, m in rec.messages.items()} == {t: len(m) for t, m in whole.messages.items()}
+    rc, out = review_check(capsys, path)
+    assert rc == 1 and re.search(r"^truncated +no$", out, re.MULTILINE) and "truncated:" not in out
+    assert f"check {path}: the file itself: 1 problem\n  closing magic bytes changed after writing" in out
+    n = sum(len(m) for m in whole.messages.values())
+    assert out.endswith(f"check {path}: {n} messages, each valid; fails: its own problems\n")
+
+    # the same bytes cut anywhere before them are a killed run's file, as before
+    for cut in (len(bad) - 1, len(bad) - 8, len(bad) - 9):
+        path.write_bytes(bytes(bad[:cut]))
+        rec = read_recording(path)
+        assert rec.truncated and rec.problems == [], cut
