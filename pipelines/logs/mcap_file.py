@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Final
 
-from mcap.exceptions import EndOfFile
+from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
 from mcap.opcode import Opcode
 from mcap.records import DataEnd, Footer, Header, McapRecord, Statistics
 from mcap.stream_reader import CRCValidationError, StreamReader
@@ -33,9 +33,12 @@ _FOOTER_CRC_SPAN: Final[int] = 1 + 8 + 8 + 8
 _OPCODES: Final[frozenset[int]] = frozenset(Opcode)
 
 
+CUT: Final[str] = "the file ends inside a record"
+
+
 def reason(exc: BaseException) -> str:
     if isinstance(exc, EndOfFile | struct.error):
-        return "the file ends inside a record"
+        return CUT
     return f"{type(exc).__name__}: {exc}".rstrip(": ")
 
 
@@ -192,8 +195,8 @@ def walk_file(
                 problems.append(
                     f"corrupt record at byte {offset} ({reason(exc)}); the rest of the file is not read"
                 )
-            else:
-                stopped_at = reason(exc)
+            else:  # a record longer than the whole file, in a file cut short: the cut, as any other
+                stopped_at = CUT if isinstance(exc, RecordLengthLimitExceeded) else reason(exc)
             break
         data_ended = data_ended or isinstance(record, DataEnd)
         if isinstance(record, Footer):

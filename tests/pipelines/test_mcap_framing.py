@@ -119,3 +119,18 @@ def test_a_changed_closing_magic_is_no_cut(episode, tmp_path, capsys):
         path.write_bytes(bytes(bad[:cut]))
         rec = read_recording(path)
         assert rec.truncated and rec.problems == [], cut
+
+
+def test_a_cut_is_named_alike_wherever_it_falls(episode, tmp_path):
+    """A file cut inside a record longer than the bytes it kept was said to have lost the rest to
+    "RecordLengthLimitExceeded: METADATA record has length 243 that exceeds limit 50" (the limit: the file's
+    size), where a cut inside a shorter record said "the file ends inside a record"."""
+    data = episode.read_bytes()
+    first = 8 + 9 + int.from_bytes(data[9:17], "little")  # the record after the header: the metadata
+    length = int.from_bytes(data[first + 1 : first + 9], "little")
+    for cut in (first + 9 + 1, first + 9 + length - 1):  # its length runs past the file's end, or not
+        path = tmp_path / f"cut{cut}.mcap"
+        path.write_bytes(data[:cut])
+        rec = read_recording(path)
+        assert rec.truncated and rec.stopped_at == "the file ends inside a record", cut
+        assert rec.warning is not None and rec.warning.endswith("(the file ends inside a record)")
