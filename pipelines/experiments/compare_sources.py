@@ -178,6 +178,9 @@ def _read_episode(
             raise PipelineError(f"{label}: {why}")
         _warn(label, f"{why}; left out")
         return None
+    if rec.problems:  # the settings compared are its metadata, outside the chunks: a mismatch may be theirs
+        more = f" (1 of {len(rec.problems)} problems)" if len(rec.problems) > 1 else ""
+        _warn(label, f"{file}: {rec.problems[0]}{more}; `crowdmpc review --check` lists every problem")
     meta = rec.metadata.get("crowdmpc", {})
     commit = commit_text({"commit": meta.get("commit"), "dirty": meta.get("dirty") == "true"})
     return {**messages[-1], "config": rec.config()}, _crowd_field(rec.run_meta()), commit

@@ -191,3 +191,22 @@ def test_settings_the_controller_does_not_read_are_no_difference(recorded, tmp_p
     assert main(["compare", run, str(tmp_path / "nf.json"), "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "  flocking: true -> false" in out and "w_floc" not in out and "not recorded" not in out
+
+
+def test_a_recording_changed_after_writing_is_named(recorded, tmp_path, capsys):
+    """A byte of a recording's "config" metadata changed after writing (w_goal 10.0 -> 11.0): compare said
+    the run's episodes ran with w_goal 11.0, without a word of the file's data section CRC mismatch, which
+    review reports."""
+    folder = tmp_path / "changed"
+    shutil.copytree(recorded / "rec", folder)
+    path = folder / "circle_seed000004.mcap"
+    data = bytearray(path.read_bytes())
+    data[data.index(b'"w_goal": 10.0') + len('"w_goal": 1')] ^= 0x01
+    path.write_bytes(bytes(data))
+    capsys.readouterr()
+    assert main(["compare", str(recorded / "run.json"), str(folder), "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert "mpc.w_goal: 10.0 -> 10.0 | 11.0" in out  # what the file says, now under a warning
+    (line,) = err.splitlines()
+    assert line.startswith(f"crowdmpc compare: warning: changed: {path}: data section CRC mismatch (")
+    assert line.endswith("; `crowdmpc review --check` lists every problem")
