@@ -92,10 +92,15 @@ class Recording:
             return None
         n = sum(len(v) for v in self.messages.values())
         ends = [m[-1].log_time_ns for m in self.messages.values() if m]
-        last = self.sim_seconds(max(ends)) if ends else 0.0
+        # no message read has no time to name: "up to t = 0.0 s, the last complete chunk" told of a chunk
+        read = (
+            f"read {n} messages up to t = {self.sim_seconds(max(ends)):.1f} s, the last complete chunk"
+            if ends
+            else "read no message, no chunk was complete"
+        )
         return (
-            f"{self.path} is truncated (the run was killed or is still writing): read {n} messages up to "
-            f"t = {last:.1f} s, the last complete chunk; the rest is lost ({self.stopped_at or 'no footer'})"
+            f"{self.path} is truncated (the run was killed or is still writing): {read}; the rest is lost "
+            f"({self.stopped_at or 'no footer'})"
         )
 
     @property

@@ -134,3 +134,18 @@ def test_a_cut_is_named_alike_wherever_it_falls(episode, tmp_path):
         rec = read_recording(path)
         assert rec.truncated and rec.stopped_at == "the file ends inside a record", cut
         assert rec.warning is not None and rec.warning.endswith("(the file ends inside a record)")
+
+
+def test_a_cut_before_the_first_chunk_names_no_time(episode, tmp_path):
+    """A file cut before its first chunk ended was said to have been "read 0 messages up to t = 0.0 s, the
+    last complete chunk": a time and a chunk it never held."""
+    data = episode.read_bytes()
+    with open(episode, "rb") as f:
+        first_chunk = min(c.chunk_start_offset for c in make_reader(f).get_summary().chunk_indexes)
+    path = tmp_path / "early.mcap"
+    path.write_bytes(data[: first_chunk + 20])
+    rec = read_recording(path)
+    assert rec.warning == (
+        f"{path} is truncated (the run was killed or is still writing): read no message, no chunk was "
+        "complete; the rest is lost (the file ends inside a record)"
+    )
