@@ -173,9 +173,22 @@ def warn_different_crowds(a: Mapping[str, Any], b: Mapping[str, Any]) -> None:
     """Warn when ``review A --compare B`` sets two episodes of different crowds side by side (another
     scenario, seed or number of humans): their metrics differ by the crowd, not only by the controller."""
     named = {"scenario": "scenario", "seed": "seed", "n_humans": "humans"}
-    differ = [f"{word} {a[key]} vs {b[key]}" for key, word in named.items() if a[key] != b[key]]
+    known = {key: word for key, word in named.items() if a[key] is not None and b[key] is not None}
+    differ = [f"{word} {a[key]} vs {b[key]}" for key, word in known.items() if a[key] != b[key]]
     if differ:
         warn(
             f"{a['file']} and {b['file']} are episodes of different crowds ({', '.join(differ)}): their "
             "metrics differ by the crowd too; compare recordings of one scenario and seed"
+        )
+        return
+    # a value a file does not record (its metadata lost or cut off) was shown as None, the crowds as different
+    lacking = [
+        f"{run['file']} records no {', '.join(words[:-1])}{' or ' * (len(words) > 1)}{words[-1]}"
+        for run in (a, b)
+        if (words := [word for key, word in named.items() if run[key] is None])
+    ]
+    if lacking:
+        warn(
+            f"{a['file']} and {b['file']} may be episodes of different crowds ({'; '.join(lacking)}): their "
+            "metrics may differ by the crowd too"
         )

@@ -223,6 +223,21 @@ def test_compare_lists_the_settings_that_differ_and_warns_of_another_crowd(tmp_p
     assert "different crowds" not in capsys.readouterr().err  # one crowd, another controller setting
 
 
+def test_compare_with_a_recording_that_names_no_crowd_says_so(tmp_path, capsys):
+    """A recording killed before its metadata was written was said to hold another crowd, "scenario None vs
+    circle, seed None vs 1, humans None vs 4"."""
+    a = record_episode(tmp_path / "a", seed=1, steps=4)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(a.path.read_bytes()[:40])  # its header, and 7 bytes of its first metadata record
+    assert main(["review", str(a.path), "--compare", str(cut)]) == 0
+    err = capsys.readouterr().err
+    assert "None" not in err
+    assert (
+        f"{a.path} and {cut} may be episodes of different crowds ({cut} records no scenario, seed or humans)"
+        in err
+    )
+
+
 def test_compare_with_animate_is_refused_before_reading(runs, tmp_path, capsys):
     argv = ["review", str(runs[0].path), "--compare", str(runs[1].path), "--animate", str(tmp_path / "a.gif")]
     assert main(argv) == 2
