@@ -65,14 +65,17 @@ def drop_repeats(setup: SetUp) -> dict[str, str]:
     its place. An episode is its scenario and seed recorded by one code ("commit+dirty" and the plugins'
     files, or none recorded): a folder holding two copies of a run's files (a/ and a backup b/) pooled both,
     "collision 38.5 % (5/13)" where the ten episodes had 3. A run whose scenario or seed is unknown (cut
-    before its metadata) is never a repeat. The copy kept is the first complete one whose episode ended,
-    else the first whose episode ended, else the first (a killed run's file beside its rerun's)."""
+    before its metadata) is never a repeat. The copy kept is the first complete and undamaged one whose
+    episode ended, else the first complete one, else the first whose episode ended, else the first (a killed
+    run's file beside its rerun's; a copy with a bad chunk, whose lost solver steps the table's times left
+    out, beside an intact one)."""
     kept: dict[tuple[Any, ...], RunDigest] = {}
     repeats: dict[str, str] = {}
     members = []
 
-    def worse(run: RunDigest) -> tuple[bool, bool]:
-        return run.summary["metrics"] is None, bool(run.summary["truncated"])
+    def worse(run: RunDigest) -> tuple[bool, bool, bool]:
+        damaged = run.problems_warning is not None  # the file's own problems or messages left out
+        return run.summary["metrics"] is None, bool(run.summary["truncated"]), damaged
 
     for run in sorted(setup.members, key=worse):  # stable: in the folder's order among equals
         s = run.summary

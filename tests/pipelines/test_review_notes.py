@@ -9,6 +9,7 @@ import shutil
 import struct
 
 import pytest
+from mcap.reader import make_reader
 
 from pipelines.cli import main
 from pipelines.logs.reader import read_recording
@@ -64,6 +65,29 @@ def test_a_copy_whose_episode_ended_is_the_one_kept(runs, tmp_path, capsys):
     out, err = capsys.readouterr()
     assert f"{tmp_path}/a/{runs[0].path.name} repeats {tmp_path}/b/{runs[0].path.name}" in err
     assert "\n1 run\n" in out
+
+
+def test_an_undamaged_copy_is_kept_before_a_damaged_one(tmp_path, capsys):
+    """Of two copies of one episode, the first in path order was kept though a flipped byte had cost it a
+    chunk: the table's solve times were over the steps that chunk left, where the other copy held all."""
+    run = record_episode(tmp_path / "runs", seed=1, steps=20)
+    data = run.path.read_bytes()
+    with run.path.open("rb") as f:
+        chunk = make_reader(f).get_summary().chunk_indexes[1]
+    bad = bytearray(data)
+    bad[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0x10  # inside its compressed records
+    copies = tmp_path / "copies"
+    damaged, intact = copies / "a" / run.path.name, copies / "b" / run.path.name
+    for path, content in ((damaged, bytes(bad)), (intact, data)):
+        path.parent.mkdir(parents=True)
+        path.write_bytes(content)
+    assert read_recording(damaged).problems[0].startswith("bad chunk at byte")
+    assert main(["review", str(copies), "--json", str(tmp_path / "r.json")]) == 0
+    err = capsys.readouterr().err
+    assert f"e.g. {damaged} repeats {intact}" in err
+    (group,) = json.loads((tmp_path / "r.json").read_text())["groups"]
+    assert group["files"] == [str(intact)]
+    assert group["totals"]["control_steps"] == 20
 
 
 def test_a_folder_with_files_of_its_own_says_its_subfolders_are_not_read(runs, tmp_path, capsys):
