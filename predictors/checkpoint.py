@@ -8,15 +8,18 @@ is informational), and the checks every file of a zoo goes through (names, hashe
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
+import os
 import re
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, BinaryIO, Final
 
 from predictors.base import OBS_LEN
 from predictors.errors import CheckpointMismatch, PredictorError, short_repr
-from predictors.hashing import is_sha256, sha256_file
+from predictors.hashing import is_sha256
 
 if TYPE_CHECKING:
     import torch
@@ -64,15 +67,31 @@ def check_sha256(value: object, what: str) -> str:
     return value
 
 
-def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]:
-    """A JSON object whose ``"format"`` is ``document_format``, or PredictorError naming ``path``."""
+def read_capped(path: Path, limit: int, room: str) -> bytes:
+    """The bytes of ``path``, read once, or PredictorError naming it when it is not a regular file or holds
+    more than ``limit`` bytes (refused before they are read; ``room`` ends the message: "a ... may have")."""
     if path.exists() and not path.is_file():  # a directory or a FIFO (reading one would block forever)
         raise PredictorError(f"{path}: not a regular file")
-    size = path.stat().st_size  # a missing file: FileNotFoundError, as before
-    if size > MAX_DOCUMENT_BYTES:
-        raise PredictorError(f"{path}: {size} bytes, more than the {MAX_DOCUMENT_BYTES} a {what} may have")
+    with path.open("rb") as handle:  # a missing file: FileNotFoundError, as before
+        size = os.fstat(handle.fileno()).st_size
+        data = handle.read(limit + 1) if size <= limit else b""  # + 1: a file that grew since fstat
+    size = max(size, len(data))
+    if size > limit:
+        raise PredictorError(f"{path}: {size} bytes, more than the {limit} {room}")
+    return data
+
+
+def read_document(path: Path, document_format: str, what: str) -> dict[str, Any]:
+    """A JSON object whose ``"format"`` is ``document_format``, or PredictorError naming ``path``."""
+    return parse_document(
+        path, read_capped(path, MAX_DOCUMENT_BYTES, f"a {what} may have"), document_format, what
+    )
+
+
+def parse_document(path: Path, data: bytes, document_format: str, what: str) -> dict[str, Any]:
+    """``read_document`` of the bytes ``data`` read from ``path``."""
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        document = json.loads(data.decode("utf-8"))
     except UnicodeDecodeError:
         raise PredictorError(f"{path}: not valid JSON (not UTF-8 text)") from None
     except ValueError as exc:  # JSONDecodeError, or an integer literal of more than 4300 digits
@@ -146,16 +165,22 @@ def load_checkpoint(
 ) -> LearnedPredictor:
     """The predictor of a checkpoint pair (``config`` defaults to ``weights`` with ``.json``).
 
-    Everything is checked before it is used, each failure a PredictorError naming the file: the sha256 (when
-    expected, as the zoo always does), the model kind (registered, never imported on the file's word), the
-    config's types and ranges before any net is built (its size counted on the meta device), the weights'
-    size before they are read, then that they are a state_dict of finite float tensors of the net's shapes.
+    Everything is checked before it is used, each failure a PredictorError naming the file: each file's
+    sha256 (when expected, as the zoo always does) on the bytes then used, the config's first, the model
+    kind (registered, never imported on the file's word), the config's types and ranges before any net is
+    built (its size counted on the meta device), the weights' size before they are read, then that they are
+    a state_dict of finite float tensors of the net's shapes.
     """
     weights = Path(weights)
     config = Path(config) if config is not None else weights.with_suffix(".json")
     for path, expected in ((weights, expected_sha256), (config, expected_config_sha256)):
         _check_file(path, expected)
-    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
+    # Each file is read once, and the bytes hashed are the bytes used: hashed, then read again, a file
+    # replaced between the reads (`zoo add --replace`) built or loaded other bytes than were checked.
+    what = "crowdmpc predictor config"
+    data = read_capped(config, MAX_DOCUMENT_BYTES, f"a {what} may have")
+    _check_bytes(config, data, expected_config_sha256)
+    document = parse_document(config, data, CONFIG_FORMAT, what)
     kind = _config_kind(document, config)
     own_name = document.get("name", weights.stem)
     if not isinstance(own_name, str):
@@ -165,7 +190,7 @@ def load_checkpoint(
         raise PredictorError(f'{config}: "obs_len" must be an integer, got {short_repr(obs_len)}')
     if not 2 <= obs_len <= MAX_OBS_LEN:
         raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
-    net = _loaded_net(kind, document, weights, config)
+    net = _loaded_net(kind, document, weights, config, expected_sha256)
     try:
         return kind.predictor(net, name=name or own_name, obs_len=obs_len)
     except PredictorError as exc:
@@ -173,14 +198,20 @@ def load_checkpoint(
 
 
 def _check_file(path: Path, expected: str | None) -> None:
-    """PredictorError unless ``path`` is a regular file of sha256 ``expected`` (when one is expected)."""
+    """PredictorError unless ``path`` is a regular file and ``expected`` (when given) a sha256."""
     if not path.exists():
         raise PredictorError(f"checkpoint file {path} does not exist")
     if not path.is_file():
         raise PredictorError(f"checkpoint file {path} is not a regular file")
     if expected is not None:
-        found = sha256_file(path)
-        if found != check_sha256(expected, f"the expected sha256 of {path}"):
+        check_sha256(expected, f"the expected sha256 of {path}")
+
+
+def _check_bytes(path: Path, data: bytes, expected: str | None) -> None:
+    """CheckpointMismatch unless ``data``, read from ``path``, has sha256 ``expected`` (when expected)."""
+    if expected is not None:
+        found = hashlib.sha256(data).hexdigest()
+        if found != expected:
             raise CheckpointMismatch(path, expected, found)
 
 
@@ -204,9 +235,11 @@ def _config_kind(document: dict, config: Path) -> ModelKind:
     return kind
 
 
-def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) -> torch.nn.Module:
+def _loaded_net(
+    kind: ModelKind, document: dict, weights: Path, config: Path, expected: str | None
+) -> torch.nn.Module:
     """The net of ``document``'s "net", built and bounded before any memory is taken, with the weights of
-    ``weights`` once their size and every tensor are checked."""
+    ``weights`` once their size, their sha256 (``expected``, when given) and every tensor are checked."""
     import torch
 
     try:
@@ -218,13 +251,10 @@ def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) ->
         raise PredictorError(f'{config}: "net": {exc}') from None
     expected_state = net.state_dict()
     limit = 8 * sum(t.numel() for t in expected_state.values()) + WEIGHTS_OVERHEAD_BYTES
-    size = weights.stat().st_size
-    if size > limit:
-        raise PredictorError(
-            f"{weights}: {size} bytes, more than the {limit} a state_dict of the net of {config} can take"
-        )
+    data = read_capped(weights, limit, f"a state_dict of the net of {config} can take")
+    _check_bytes(weights, data, expected)
     try:
-        state = load_tensors(weights)
+        state = load_tensors(io.BytesIO(data))
     except Exception:  # whatever a corrupt or hostile file makes torch raise, the file is at fault
         # torch's own message suggests weights_only=False, which a checkpoint must never need
         raise PredictorError(
@@ -239,7 +269,7 @@ def _loaded_net(kind: ModelKind, document: dict, weights: Path, config: Path) ->
     return net
 
 
-def load_tensors(path: Path) -> Any:
+def load_tensors(path: Path | BinaryIO) -> Any:
     """``torch.load(path, weights_only=True)`` onto the CPU, never a pickled object, and without torch's
     advice on a pickle's protocol, a warning of two lines that came before the caller's one-line refusal of
     such a file (`zoo add`, `train --resume`)."""

@@ -1,0 +1,84 @@
+"""A checkpoint file is read once: the bytes whose sha256 is checked are the bytes built and loaded. Hashed,
+then read again, a file replaced between the two reads (`zoo add --replace` while a run starts) loaded other
+weights, or built another net, than the manifest's sha256 had vouched for."""
+
+from __future__ import annotations
+
+import builtins
+import hashlib
+import io
+import json
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+
+from predictors import checkpoint
+
+REAL_ZOO = Path(__file__).resolve().parents[2] / "checkpoints"
+NAME = "social_lstm_eth"
+
+
+@pytest.fixture
+def pair(tmp_path) -> tuple[Path, Path]:
+    for suffix in (".pt", ".json"):
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", tmp_path / f"{NAME}{suffix}")
+    return tmp_path / f"{NAME}.pt", tmp_path / f"{NAME}.json"
+
+
+def replace_after_first_open(monkeypatch, target: Path, content: bytes) -> list[Path]:
+    """Every later open of ``target`` finds ``content``: the file is replaced (renamed over, as `zoo add
+    --replace` does) as soon as it is first opened. Returns the list of replaced files, to check it ran."""
+    real_open = io.open
+    replaced: list[Path] = []
+
+    def opening(file, *args, **kwargs):
+        handle = real_open(file, *args, **kwargs)
+        if not replaced and isinstance(file, str | os.PathLike) and Path(file) == target:
+            replaced.append(target)
+            staged = target.with_name(target.name + ".staged")
+            staged.write_bytes(content)
+            os.replace(staged, target)
+        return handle
+
+    monkeypatch.setattr(io, "open", opening)
+    monkeypatch.setattr(builtins, "open", opening)
+    return replaced
+
+
+def other_weights(weights: Path) -> bytes:
+    state = torch.load(weights, weights_only=True)
+    state["head.bias"] = state["head.bias"] + 1.0
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    return buffer.getvalue()
+
+
+def test_weights_replaced_after_their_hash_are_not_what_loads(pair, monkeypatch):
+    weights, config = pair
+    original = weights.read_bytes()
+    bias = torch.load(weights, weights_only=True)["head.bias"].to(torch.float64)
+    expected = {
+        "expected_sha256": hashlib.sha256(original).hexdigest(),
+        "expected_config_sha256": hashlib.sha256(config.read_bytes()).hexdigest(),
+    }
+    replaced = replace_after_first_open(monkeypatch, weights, other_weights(weights))
+    predictor = checkpoint.load_checkpoint(weights, config, **expected)
+    assert replaced == [weights] and weights.read_bytes() != original
+    assert torch.equal(predictor.net.state_dict()["head.bias"], bias)  # the checked weights, not the new
+
+
+def test_a_config_replaced_after_its_hash_is_not_what_builds(pair, monkeypatch):
+    weights, config = pair
+    document = json.loads(config.read_text())
+    expected = {
+        "expected_sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
+        "expected_config_sha256": hashlib.sha256(config.read_bytes()).hexdigest(),
+    }
+    other = json.dumps({**document, "obs_len": document["obs_len"] - 1}).encode()  # valid, not the hashed
+    replaced = replace_after_first_open(monkeypatch, config, other)
+    predictor = checkpoint.load_checkpoint(weights, config, **expected)
+    assert replaced == [config]
+    assert predictor.obs_len == document["obs_len"]
