@@ -190,11 +190,14 @@ def load_checkpoint(
         raise PredictorError(f'{config}: "obs_len" must be an integer, got {short_repr(obs_len)}')
     if not 2 <= obs_len <= MAX_OBS_LEN:
         raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
-    net = _loaded_net(kind, document, weights, config, expected_sha256)
+    net, sha256 = _loaded_net(kind, document, weights, config, expected_sha256)
     try:
-        return kind.predictor(net, name=name or own_name, obs_len=obs_len)
+        predictor = kind.predictor(net, name=name or own_name, obs_len=obs_len)
     except PredictorError as exc:
         raise PredictorError(f"{config}: {exc}") from None
+    # what a run records it planned with: the zoo's manifest, read again, may name weights put in since
+    predictor.weights_sha256 = sha256
+    return predictor
 
 
 def _check_file(path: Path, expected: str | None) -> None:
@@ -207,12 +210,12 @@ def _check_file(path: Path, expected: str | None) -> None:
         check_sha256(expected, f"the expected sha256 of {path}")
 
 
-def _check_bytes(path: Path, data: bytes, expected: str | None) -> None:
-    """CheckpointMismatch unless ``data``, read from ``path``, has sha256 ``expected`` (when expected)."""
-    if expected is not None:
-        found = hashlib.sha256(data).hexdigest()
-        if found != expected:
-            raise CheckpointMismatch(path, expected, found)
+def _check_bytes(path: Path, data: bytes, expected: str | None) -> str:
+    """The sha256 of ``data``, read from ``path``; CheckpointMismatch unless it is ``expected`` (if given)."""
+    found = hashlib.sha256(data).hexdigest()
+    if expected is not None and found != expected:
+        raise CheckpointMismatch(path, expected, found)
+    return found
 
 
 def _config_kind(document: dict, config: Path) -> ModelKind:
@@ -237,9 +240,10 @@ def _config_kind(document: dict, config: Path) -> ModelKind:
 
 def _loaded_net(
     kind: ModelKind, document: dict, weights: Path, config: Path, expected: str | None
-) -> torch.nn.Module:
+) -> tuple[torch.nn.Module, str]:
     """The net of ``document``'s "net", built and bounded before any memory is taken, with the weights of
-    ``weights`` once their size, their sha256 (``expected``, when given) and every tensor are checked."""
+    ``weights`` once their size, their sha256 (``expected``, when given) and every tensor are checked; and
+    that sha256."""
     import torch
 
     try:
@@ -252,7 +256,7 @@ def _loaded_net(
     expected_state = net.state_dict()
     limit = 8 * sum(t.numel() for t in expected_state.values()) + WEIGHTS_OVERHEAD_BYTES
     data = read_capped(weights, limit, f"a state_dict of the net of {config} can take")
-    _check_bytes(weights, data, expected)
+    sha256 = _check_bytes(weights, data, expected)
     try:
         state = load_tensors(io.BytesIO(data))
     except Exception:  # whatever a corrupt or hostile file makes torch raise, the file is at fault
@@ -266,7 +270,7 @@ def _loaded_net(
         net.load_state_dict(state, strict=True)
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:  # not expected after the checks above
         raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from None
-    return net
+    return net, sha256
 
 
 def load_tensors(path: Path | BinaryIO) -> Any:

@@ -1,5 +1,4 @@
-"""Learned predictors: any net that keeps the step contract (``predictors.nets.contract``) behind the
-``Predictor`` protocol.
+"""Learned predictors: any net keeping the step contract (``predictors.nets.contract``) as a ``Predictor``.
 
 One ``LearnedPredictor`` computes the same map two ways:
 
@@ -63,6 +62,7 @@ class LearnedPredictor:
         self.obs_len = obs_len
         self.kind: str = str(kind or getattr(type(self), "default_kind", type(net).__name__))
         self.config: Any = net.config
+        self.weights_sha256: str | None = None  # of the file load_checkpoint read them from, if it did
         # A private float64 copy in eval mode: training may go on with the original. Typed Any: the step
         # contract's methods (encode, decode_step) are not nn.Module's.
         self.net: Any = copy.deepcopy(net).to(torch.float64).eval()

@@ -42,6 +42,14 @@ def checkpoint_sha256(name: str | None) -> str | None:
     return located.entry.sha256 if located is not None else None
 
 
+def loaded_sha256(predictor: Predictor) -> str | None:
+    """The sha256 of the weights ``predictor`` holds: for one ``load_checkpoint`` read (a zoo entry's), that
+    of the bytes it loaded, which the entry records (the manifest, read again, may name weights a `zoo add
+    --replace` put in since); else ``checkpoint_sha256`` of its name (None: a predictor without weights)."""
+    sha256 = getattr(predictor, "weights_sha256", None)  # a LearnedPredictor's; any Predictor may come here
+    return sha256 if isinstance(sha256, str) else checkpoint_sha256(predictor.name)
+
+
 def trained_prediction_length(name: str | None) -> int | None:
     """Steps ahead a zoo model was trained to predict: its manifest's ``training.pred_len``, else
     ``PRED_LEN`` (TrajNet++'s 12, the only length ``crowdmpc train`` trained before it recorded one); None for

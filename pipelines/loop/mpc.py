@@ -62,7 +62,7 @@ from pipelines.loop.step_record import allowances_record
 from predictors.base import ObservingPredictor, Predictor
 from predictors.conformal_classes import CLASS_WINDOW, MOTION_CLASSES
 from predictors.errors import NoCasadiTwin, PredictorError
-from predictors.registry import checkpoint_sha256, load_predictor
+from predictors.registry import load_predictor, loaded_sha256
 
 STANDING = MOTION_CLASSES.index("standing")
 
@@ -102,7 +102,7 @@ class MPCController(SolversHeld):
         world = self.env_config.world()
         check_margins_world(spec, world)  # before the calibration is looked up: the cause, not a symptom
         cfg = mpc_config(spec, jit, world)
-        self.predictor_sha256 = sha256 = checkpoint_sha256(self.model.name)
+        self.predictor_sha256 = sha256 = loaded_sha256(self.model)  # of the weights loaded, read with them
         at = spec.margins.located(self.model.name, cfg.horizon, sha256)  # the calibrations read once
         self.cfg = cfg.replace(human_margins=spec.margins.resolve(self.model.name, cfg.horizon, sha256, at))
         # conformal-motion and -shortfall: a margin per human and step from its motion class, every step

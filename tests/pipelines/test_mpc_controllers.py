@@ -424,7 +424,7 @@ def test_the_records_name_the_weights_loaded_when_the_zoo_entry_is_replaced_mean
 
     controller = make_controller(ControllerSpec("cmpc", "social_lstm_eth"))
     loaded = checkpoint_sha256("social_lstm_eth")
-    monkeypatch.setattr(pipelines.loop.mpc, "checkpoint_sha256", lambda name: "f" * 64)  # replaced
+    monkeypatch.setattr(pipelines.loop.mpc, "loaded_sha256", lambda model: "f" * 64)  # replaced
     assert controller.describe()["predictor_sha256"] == loaded
     result = run_episode(controller, seed=0, scenario="circle", n_humans=1)
     assert result.predictor_sha256 == loaded

@@ -4,13 +4,21 @@ weights' recording without a word. The weights' sha256 is part of what identifie
 
 from __future__ import annotations
 
+import builtins
+import io
 import json
+import os
+from pathlib import Path
 
 import pytest
+import torch
 
+from crowdsim.world import OBS_LEN
 from pipelines.cli import main
 from pipelines.errors import PipelineError
 from tests.pipelines.mcap_episode import record_episode
+
+CHECKPOINTS = Path(__file__).resolve().parents[2] / "checkpoints"
 
 OLD, NEW = "86" * 32, "ee" * 32
 
@@ -29,3 +37,57 @@ def test_a_recording_of_other_weights_is_not_replaced(tmp_path):
     record_episode(tmp_path, seed=1, steps=3, predictor_sha256=OLD)  # a rerun of its own run replaces it
     with pytest.raises(PipelineError, match=r"it holds another run's episode \(.*predictor_sha256"):
         record_episode(tmp_path, seed=1, steps=3, predictor_sha256=NEW)
+
+
+# ------------------------------------------------------------------ the weights a controller loaded, recorded
+TOY = "tests.plugins.toy_predictor:ToyNet"
+
+
+def _pair(kind: str, src: Path, seed: int) -> Path:
+    """A checkpoint pair ``mine`` in ``src`` of weights drawn with ``seed``: of the shipped social_lstm_eth's
+    net, or of a plugin's model kind."""
+    from predictors.checkpoint import save_checkpoint
+    from predictors.models import register_plugins
+    from predictors.nets.social_lstm import SocialLSTM, SocialLSTMConfig
+    from tests.plugins.toy_predictor import ToyNet
+
+    src.mkdir()
+    with torch.random.fork_rng(devices=[]):  # the global generator as it was, for the tests after
+        torch.manual_seed(seed)
+        if kind == "plugin":
+            register_plugins([TOY])
+            net, model = ToyNet(), TOY
+        else:
+            document = json.loads((CHECKPOINTS / "social_lstm_eth.json").read_text())
+            net, model = SocialLSTM(SocialLSTMConfig(**document["net"])), "social_lstm"
+    return save_checkpoint(net, model=model, name="mine", out_dir=src, obs_len=OBS_LEN)[0]
+
+
+@pytest.mark.parametrize("kind", ["social_lstm", "plugin"])
+def test_a_controller_records_the_weights_it_loaded_when_they_are_replaced_meanwhile(
+    tmp_path, monkeypatch, kind
+):
+    """Building an MPC controller read the zoo's manifest to load the weights, then again for the sha256 its
+    records name: a `zoo add --replace` in between had every episode name the new weights, run with the old.
+    The replacement happens here as soon as the old weights file is opened."""
+    from pipelines.loop.controllers import make_controller
+    from pipelines.loop.spec import ControllerSpec
+    from predictors.zoo_edit import add_to_zoo
+
+    user = Path(os.environ["CROWDMPC_ZOO"])
+    options = {"name": "mine", "protocol": "p", "training_data": {}, "metrics": {}, "directory": user}
+    old = add_to_zoo(_pair(kind, tmp_path / "old", seed=1), **options)
+    new_weights = _pair(kind, tmp_path / "new", seed=2)
+    real_open, replaced = io.open, []
+
+    def opening(file, *args, **kwargs):
+        handle = real_open(file, *args, **kwargs)
+        if not replaced and isinstance(file, str | os.PathLike) and Path(file) == user / "mine.pt":
+            replaced.append(add_to_zoo(new_weights, **options, replace=True))
+        return handle
+
+    monkeypatch.setattr(io, "open", opening)
+    monkeypatch.setattr(builtins, "open", opening)
+    controller = make_controller(ControllerSpec("cmpc", "mine"))
+    assert replaced and replaced[0].sha256 != old.sha256  # the zoo names the new weights now
+    assert controller.describe()["predictor_sha256"] == old.sha256  # the weights it plans with
