@@ -210,8 +210,9 @@ def check_margins(experiment: Experiment) -> None:
         world = experiment.method_worlds.get(label, experiment.world)
         margins = spec.margins.behind(world.sensor_range, world.sensor_tracks)
         try:
-            margins.resolve(name, horizon, sha256)
-            margins.resolve_classes(name, horizon, sha256)
+            at = margins.located(name, horizon, sha256)  # the calibrations read once, as the controller does
+            margins.resolve(name, horizon, sha256, at)
+            margins.resolve_classes(name, horizon, sha256, at)
         except PipelineError as exc:
             raise PipelineError(f"method {label!r} of experiment {experiment.name!r}: {exc}") from None
 

@@ -218,9 +218,10 @@ def planned_margins(cell: Cell) -> dict[str, Any]:
     spec = cell.spec.behind(cell.world.sensor_range, cell.world.sensor_tracks)  # as the worker builds it
     name, sha256 = spec.predictor_name, checkpoint_sha256(spec.predictor_name)
     horizon = mpc_config(spec, world=cell.world.env_config().world()).horizon
-    classes = spec.margins.resolve_classes(name, horizon, sha256)
+    at = spec.margins.located(name, horizon, sha256)  # the calibrations read once, as the controller does
+    classes = spec.margins.resolve_classes(name, horizon, sha256, at)
     planned = {
-        "margins_m": list(spec.margins.resolve(name, horizon, sha256)),
+        "margins_m": list(spec.margins.resolve(name, horizon, sha256, at)),
         "classes": None if classes is None else classes.to_json(),
     }
     return json.loads(json.dumps(plain(planned)))  # as read back from a record
