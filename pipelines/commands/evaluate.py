@@ -144,8 +144,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     from pipelines.plugins import code_with_plugins
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.evaluate import EvalConfig, check_dataset_predictor, evaluate_scenes, format_table
-    from predictors.registry import PREDICTORS, checkpoint_sha256, load_predictor
-    from predictors.zoo import locate
+    from predictors.registry import PREDICTORS, load_predictor, loaded_sha256
+    from predictors.zoo import load_located, locate
 
     check_writable(args.json, "--json", json_only=True)
     _choose_files(args)
@@ -155,7 +155,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     # before the load: an edited plugin whose weights no longer fit said why only in simulate
     for note in zoo_notes(args.predictor):
         print(note, file=sys.stderr)
-    predictor = load_predictor(args.predictor)
+    # the entry the name loads (none for a built-in: constant velocity, the oracle), read once so that the
+    # sha256 and protocol recorded are the scored weights', whatever a `zoo add --replace` puts in meanwhile
+    located = None if args.predictor in PREDICTORS else locate(args.predictor)
+    predictor = load_predictor(args.predictor) if located is None else load_located(located)
     progress = False if args.no_progress else None  # None: a bar on a terminal only
     if args.test is not None:
         files, root = {"test": list(args.test)}, None
@@ -172,12 +175,10 @@ def _evaluate(args: argparse.Namespace) -> int:
         data_dir=None if root is None else str(root),
         files_evaluated=[str(p) for p in files[args.split]],
         # what the numbers depend on beyond the data: the weights, the samples' seed, the code
-        predictor_sha256=checkpoint_sha256(args.predictor),
+        predictor_sha256=loaded_sha256(predictor),
         seed=args.seed,
         code=code_with_plugins(),
     )
-    # the entry the name loads: none for a built-in (constant velocity, the oracle), loaded by name first
-    located = None if args.predictor in PREDICTORS else locate(args.predictor)
     entry = None if located is None else located.entry
     trained = None if entry is None else entry.protocol
     result["trained_protocol"] = trained  # None: no zoo entry (constant velocity, the oracle)

@@ -63,6 +63,24 @@ def _pair(kind: str, src: Path, seed: int) -> Path:
     return save_checkpoint(net, model=model, name="mine", out_dir=src, obs_len=OBS_LEN)[0]
 
 
+def replace_on_open(monkeypatch, weights: Path, weights_new: Path, **options) -> list:
+    """`zoo add --replace` of ``weights_new`` as soon as the zoo's ``weights`` are first opened (in the list
+    returned: the new entry)."""
+    from predictors.zoo_edit import add_to_zoo
+
+    real_open, replaced = io.open, []
+
+    def opening(file, *args, **kwargs):
+        handle = real_open(file, *args, **kwargs)
+        if not replaced and isinstance(file, str | os.PathLike) and Path(file) == weights:
+            replaced.append(add_to_zoo(weights_new, **options, replace=True))
+        return handle
+
+    monkeypatch.setattr(io, "open", opening)
+    monkeypatch.setattr(builtins, "open", opening)
+    return replaced
+
+
 @pytest.mark.parametrize("kind", ["social_lstm", "plugin"])
 def test_a_controller_records_the_weights_it_loaded_when_they_are_replaced_meanwhile(
     tmp_path, monkeypatch, kind
@@ -77,17 +95,27 @@ def test_a_controller_records_the_weights_it_loaded_when_they_are_replaced_meanw
     user = Path(os.environ["CROWDMPC_ZOO"])
     options = {"name": "mine", "protocol": "p", "training_data": {}, "metrics": {}, "directory": user}
     old = add_to_zoo(_pair(kind, tmp_path / "old", seed=1), **options)
-    new_weights = _pair(kind, tmp_path / "new", seed=2)
-    real_open, replaced = io.open, []
-
-    def opening(file, *args, **kwargs):
-        handle = real_open(file, *args, **kwargs)
-        if not replaced and isinstance(file, str | os.PathLike) and Path(file) == user / "mine.pt":
-            replaced.append(add_to_zoo(new_weights, **options, replace=True))
-        return handle
-
-    monkeypatch.setattr(io, "open", opening)
-    monkeypatch.setattr(builtins, "open", opening)
+    replaced = replace_on_open(
+        monkeypatch, user / "mine.pt", _pair(kind, tmp_path / "new", seed=2), **options
+    )
     controller = make_controller(ControllerSpec("cmpc", "mine"))
     assert replaced and replaced[0].sha256 != old.sha256  # the zoo names the new weights now
     assert controller.describe()["predictor_sha256"] == old.sha256  # the weights it plans with
+
+
+def test_evaluate_records_the_entry_it_scored_when_it_is_replaced_meanwhile(tmp_path, monkeypatch):
+    """evaluate loaded the weights, scored them, then read the manifest again for the sha256 and protocol its
+    JSON names: a `zoo add --replace` during the scoring gave the old weights' scores the new entry's."""
+    from predictors.zoo_edit import add_to_zoo
+    from tests.predictors.samples import write_walk_file
+
+    user = Path(os.environ["CROWDMPC_ZOO"])
+    options = {"name": "mine", "training_data": {}, "metrics": {}, "directory": user}
+    old = add_to_zoo(_pair("social_lstm", tmp_path / "old", seed=1), protocol="old", **options)
+    new_weights = _pair("social_lstm", tmp_path / "new", seed=2)
+    replaced = replace_on_open(monkeypatch, user / "mine.pt", new_weights, protocol="new", **options)
+    walk, out = write_walk_file(tmp_path / "walk.ndjson"), tmp_path / "scores.json"
+    assert main(["evaluate", "--predictor", "mine", "--test", str(walk), "--json", str(out)]) == 0
+    scores = json.loads(out.read_text())
+    assert replaced and replaced[0].sha256 != old.sha256
+    assert (scores["predictor_sha256"], scores["trained_protocol"]) == (old.sha256, "old")
