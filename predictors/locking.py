@@ -2,8 +2,9 @@
 of one data folder, wait for each other; and whether the process a leftover file names still runs.
 
 A lock file rather than the folder itself: on NFS (home directories on clusters) flock is emulated with fcntl
-locks, which need a file opened for writing. The file stays once released: removing it would let a waiter
-and a newcomer lock two different files."""
+locks, which need a file opened for writing. The file stays once released, unless a failed run removes the
+one it made: a lock taken is held only while its path still names it, else taken anew, so that a waiter and a
+newcomer never lock two different files."""
 
 from __future__ import annotations
 
@@ -23,6 +24,28 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
     ``waiting``. PredictorError "``path``: cannot ``purpose`` (why)" when it cannot be a lock: a symbolic
     link planted there must not make us create a file elsewhere (O_NOFOLLOW), nor a FIFO block the open for
     ever (O_NONBLOCK, then anything but a regular file refused)."""
+    while True:
+        fd = _open_lock(path, purpose)
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise PredictorError(f"{path}: cannot {purpose} (not a regular file); remove it")
+            try:
+                _lock(fd, waiting)
+            except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP: not ours
+                raise PredictorError(
+                    f"{path}: cannot {purpose} ({exc.strerror}: its file system does not lock files; an NFS "
+                    "mount without its lock daemon?)"
+                ) from None
+            # A failed run removes a lock it made (remove_made_folders): one opened before that and locked
+            # after it is a file no newcomer opens, so both would run; such a lock is taken again, anew.
+            if _names(path, fd):
+                yield
+                return
+        finally:
+            os.close(fd)  # releases the lock
+
+
+def _open_lock(path: Path, purpose: str) -> int:
     try:
         # 0o666: the umask decides, as for every file open() makes (a group's shared folder under umask 002)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o666)
@@ -32,19 +55,17 @@ def locked(path: Path, purpose: str, waiting: Callable[[], None] | None = None) 
         if _planted(path):  # the open's own error said "No such device or address" for a FIFO
             raise PredictorError(f"{path}: cannot {purpose} (not a regular file); remove it") from None
         raise PredictorError(f"{path}: cannot {purpose} ({exc.strerror or exc})") from None
+    return fd
+
+
+def _names(path: Path, fd: int) -> bool:
+    """Whether ``path`` is still the file open as ``fd``."""
     try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise PredictorError(f"{path}: cannot {purpose} (not a regular file); remove it")
-        try:
-            _lock(fd, waiting)
-        except OSError as exc:  # ENOLCK (an NFS mount without its lock daemon), EOPNOTSUPP: not a bug of ours
-            raise PredictorError(
-                f"{path}: cannot {purpose} ({exc.strerror}: its file system does not lock files; an NFS "
-                "mount without its lock daemon?)"
-            ) from None
-        yield
-    finally:
-        os.close(fd)  # releases the lock
+        here = os.lstat(path)
+    except OSError:
+        return False
+    there = os.fstat(fd)
+    return (here.st_dev, here.st_ino) == (there.st_dev, there.st_ino)
 
 
 def _lock(fd: int, waiting: Callable[[], None] | None) -> None:
@@ -91,18 +112,21 @@ def _planted(path: Path) -> bool:
         return False
 
 
-def remove_made_folders(lock: Path, made: list[Path]) -> None:
+def remove_made_folders(lock: Path, made: list[Path], lock_made: bool = False) -> None:
     """For a run that failed holding ``lock``, which made the folders ``made`` (innermost first, the lock's
     own among them): remove them where the lock is all they hold, the lock first while still held (a run
-    that opened it meanwhile and tries it now is refused), so that a failed run leaves nothing it made."""
-    if not made or [p.name for p in lock.parent.iterdir()] != [lock.name]:
-        return
-    lock.unlink()
-    for folder in made:
-        try:
-            folder.rmdir()
-        except OSError:  # something else was put there meanwhile: not ours to remove
-            break
+    that opened it meanwhile and tries it now is refused), so that a failed run leaves nothing it made.
+    ``lock_made``: the run made the lock itself, which goes even from a folder it found (a sweep refused a
+    folder a failed `data synth` had left its lock in as one holding files)."""
+    if made and [p.name for p in lock.parent.iterdir()] == [lock.name]:
+        lock.unlink()
+        for folder in made:
+            try:
+                folder.rmdir()
+            except OSError:  # something else was put there meanwhile: not ours to remove
+                break
+    elif lock_made:
+        lock.unlink(missing_ok=True)
 
 
 def pid_alive(pid: int) -> bool:

@@ -96,8 +96,8 @@ def _one_synth_at_a_time(out: Path) -> Iterator[None]:
     """Hold ``out``'s lock while a synth writes it; a second synth into it is refused, as a second train or
     sweep into one folder is: two finishing together paired one's data with the other's provenance (each
     renamed its data into place after writing its provenance), and one waiting for the other would find
-    its data there and replace it, or be refused, after a wait of up to an hour. A run that fails before
-    writing leaves no folder it made: only its lock would be in them."""
+    its data there and replace it, or be refused, after a wait of up to an hour. A run that fails leaves no
+    folder it made, nor a lock it made: a sweep --out refused the folder it was left in."""
     from predictors.locking import locked, remove_made_folders
 
     def refuse() -> None:
@@ -107,12 +107,13 @@ def _one_synth_at_a_time(out: Path) -> Iterator[None]:
 
     lock = _synth_lock_path(out)
     made = list(takewhile(lambda folder: not folder.exists(), (lock.parent, *lock.parent.parents)))
+    lock_made = not os.path.lexists(lock)
     lock.parent.mkdir(parents=True, exist_ok=True)
     with locked(lock, f"lock --out {out}", waiting=refuse):
         try:
             yield
         except BaseException:
-            remove_made_folders(lock, made)
+            remove_made_folders(lock, made, lock_made)
             raise
 
 

@@ -1,0 +1,72 @@
+"""What ``crowdmpc data`` leaves where it fails, and where its outputs go."""
+
+import os
+import sys
+import types
+
+import pytest
+
+from pipelines.experiments.log import check_sweep_directory
+from predictors import locking
+from tests.cli_calls import run_cli as run
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CROWDMPC_CACHE", str(tmp_path_factory.mktemp("cache")))
+
+
+def _synthesize_failing(monkeypatch):
+    """A synthesize stopped half way through its scenes (Ctrl-C)."""
+
+    def synthesize(out_path, *_args, **_options):
+        out_path.write_text("half the scenes\n")
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(
+        sys.modules, "pipelines.experiments.synth", types.SimpleNamespace(synthesize=synthesize)
+    )
+
+
+def test_a_failed_synth_leaves_the_folder_it_found_as_it_was(monkeypatch, tmp_path, capsys):
+    """A synth stopped in a folder that existed left its lock there (only the folders it made went), and a
+    sweep --out then refused that folder as one holding files. A lock a successful run left stays."""
+    _synthesize_failing(monkeypatch)
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    argv = ["data", "synth", "--out", str(folder / "s.ndjson"), "--episodes", "1", "--humans", "2"]
+    code, _, err = run(capsys, *argv, "--seed", "0")
+    assert code == 130 and err.strip().splitlines()[-1] == "crowdmpc data: interrupted"
+    assert os.listdir(folder) == []
+    check_sweep_directory(folder)  # refuses nothing
+    earlier = folder / ".s.ndjson.synth.lock"  # of a synth that finished
+    earlier.write_text("")
+    assert run(capsys, *argv, "--seed", "1")[0] == 130
+    assert os.listdir(folder) == [earlier.name]
+    made = tmp_path / "new" / "deeper"  # folders it made go with it, as before
+    code, _, _ = run(capsys, "data", "synth", "--out", str(made / "s.ndjson"), *argv[4:], "--seed", "0")
+    assert code == 130 and os.listdir(tmp_path) == ["runs"]
+
+
+def test_a_lock_removed_before_it_was_taken_is_taken_anew(tmp_path, monkeypatch):
+    """A run that opened a lock just before a failed run removed it, and locked it just after, held a file
+    no newcomer opens: both ran. The lock is taken anew, as the file its path names."""
+    lock = tmp_path / ".x.lock"
+    real_flock = locking.fcntl.flock
+    removed: list[bool] = []
+
+    def flock(fd, operation):
+        if not removed:  # the failed run's removal, between this run's open and its lock
+            removed.append(True)
+            lock.unlink()
+        real_flock(fd, operation)
+
+    monkeypatch.setattr(locking.fcntl, "flock", flock)
+    with locking.locked(lock, "test"):
+        assert removed and lock.is_file()
+        newcomer = os.open(lock, os.O_WRONLY)
+        try:
+            with pytest.raises(BlockingIOError):  # the file a newcomer opens is the one held
+                real_flock(newcomer, locking.fcntl.LOCK_EX | locking.fcntl.LOCK_NB)
+        finally:
+            os.close(newcomer)
