@@ -14,6 +14,7 @@ from typing import Final
 
 from crowdsim.profiles import make_env_config
 from pipelines.commands import check_writable, replace_file
+from pipelines.commands.standard_output import shown
 from pipelines.config.settings import check_last_seed
 from pipelines.errors import PipelineError, writes_named
 
@@ -75,7 +76,7 @@ def _synthesize_into(args: argparse.Namespace, provenance: Path, synthesize) -> 
                 progress=False if args.no_progress else None,
             )
             if "path" in summary:
-                summary["path"] = str(args.out)
+                summary["path"] = shown(args.out)  # "./-", not "-", which reads as standard output
             provenance.unlink(missing_ok=True)  # the old data goes without provenance, never beside the new
             args.out.unlink(missing_ok=True)
             _write_provenance(args, summary, provenance, staged)

@@ -31,7 +31,14 @@ def without_missing_parents(path: Path) -> Path:
 
 def output_arg(text: str) -> Path:
     """An argparse ``type`` for an output option: a path, ``without_missing_parents``. An empty value (an
-    unset shell variable) is refused, as ``path_arg`` refuses it: ``Path("")`` is the current directory."""
+    unset shell variable) is refused, as ``path_arg`` refuses it: ``Path("")`` is the current directory. So
+    is "-", standard output to every tool (``--json -`` here), where these outputs are files or folders: it
+    made one called "-" (``data synth --out -``), which "./-" still names."""
     if not text:
         raise argparse.ArgumentTypeError("must be a path, got ''")
+    if text == "-":
+        raise argparse.ArgumentTypeError(
+            "got '-' (standard output), but this output is a file or folder; name one "
+            "(./- for one called '-')"
+        )
     return without_missing_parents(Path(text))

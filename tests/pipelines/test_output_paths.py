@@ -10,6 +10,7 @@ import pytest
 from pipelines.cli import main
 from pipelines.commands.output_paths import output_arg, without_missing_parents
 from tests.benchmark_modules import load_benchmark
+from tests.cli_calls import parser_error, run_cli
 from tests.predictors.samples import write_tiny_ewap, write_walk_file
 
 QUICK_SIMULATE = ["simulate", "--controller", "straight", "--humans", "0", "--episodes", "1", "--no-progress"]
@@ -111,3 +112,33 @@ def test_data_synth_and_export_make_only_their_files(tmp_path, monkeypatch):
     export = ["export", "vanilla_lstm_eth", "--humans", "1", "--robots", "1", "--horizon", "2"]
     assert main([*export, "--out", "E/x/../m.casadi"]) == 0
     assert os.listdir("E") == ["m.casadi"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["data", "synth", "--episodes", "1", "--humans", "7", "--seed", "0", "--out"],
+        ["data", "prepare", "--raw", ".", "--out"],
+        ["export", "constant_velocity", "--out"],
+        ["train", "--model", "social_lstm", "--out"],
+        ["review", ".", "--plot"],
+        ["compare", "a", "b", "--plot"],
+    ],
+)
+def test_an_output_named_dash_is_refused_as_standard_output(argv, tmp_path, monkeypatch, capsys):
+    """``data synth --out -`` (and every output option but ``--json``) made a file or folder called "-",
+    where "-" is standard output to every tool and to ``--json -``; "./-" names one called "-"."""
+    monkeypatch.chdir(tmp_path)
+    line = parser_error(capsys, *argv, "-")
+    assert line.endswith(
+        f"argument {argv[-1]}: got '-' (standard output), but this output is a file or folder; name one "
+        f"(./- for one called '-'); see 'crowdmpc {' '.join(argv[: 2 if argv[0] == 'data' else 1])} --help'"
+    )
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_synth_into_a_file_called_dash_names_it_so(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    synth = ["data", "synth", "--episodes", "1", "--humans", "7", "--seed", "0", "--out", "./-"]
+    code, out, _ = run_cli(capsys, *synth)
+    assert code == 0 and Path("-").is_file() and "path: ./-\n" in out
