@@ -13,6 +13,7 @@ import os
 import stat
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from itertools import takewhile
 from pathlib import Path
 
 from predictors.errors import PredictorError
@@ -127,6 +128,27 @@ def remove_made_folders(lock: Path, made: list[Path], lock_made: bool = False) -
                 break
     elif lock_made:
         lock.unlink(missing_ok=True)
+
+
+@contextmanager
+def locked_undone_on_failure(
+    lock: Path, purpose: str, waiting: Callable[[], None] | None = None
+) -> Iterator[None]:
+    """``locked`` on ``lock``, its folder made as needed; a run that fails inside leaves neither the lock
+    where it made it nor a folder it made for it (``remove_made_folders``): a failed run's lock had the
+    folder it found refused by a sweep --out as one holding files. Judged on the folder as resolved (in
+    a/x/../../b with a/x missing, an existing b does not exist as named)."""
+    folder = lock.parent.resolve()
+    lock = folder / lock.name
+    made = list(takewhile(lambda parent: not parent.exists(), (folder, *folder.parents)))
+    lock_made = not os.path.lexists(lock)
+    folder.mkdir(parents=True, exist_ok=True)
+    with locked(lock, purpose, waiting):
+        try:
+            yield
+        except BaseException:
+            remove_made_folders(lock, made, lock_made)
+            raise
 
 
 def pid_alive(pid: int) -> bool:

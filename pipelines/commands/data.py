@@ -205,12 +205,12 @@ def _prepare_seed(args: argparse.Namespace) -> int:
 
 def _one_prepare_at_a_time(out: Path):
     """The lock of preparations into ``out``, a hidden ``.NAME.prepare.lock`` beside the folder (a link's
-    target): two at once each moved their files in, and the last to finish won, over files of the other."""
-    from predictors.locking import locked
+    target): two at once each moved their files in, and the last to finish won, over files of the other. A
+    failed one takes away the lock and the folders it made for it (it left them, an empty raw_ewap's too)."""
+    from predictors.locking import locked_undone_on_failure
 
     folder = out.resolve()
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    return locked(
+    return locked_undone_on_failure(
         folder.parent / f".{folder.name}.prepare.lock",
         "serialise the preparations into it",
         waiting=lambda: print(f"waiting for another `data prepare` into {out} to finish", flush=True),

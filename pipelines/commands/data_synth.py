@@ -6,9 +6,6 @@ from __future__ import annotations
 import argparse
 import os
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
-from itertools import takewhile
 from pathlib import Path
 from typing import Final
 
@@ -92,30 +89,20 @@ def _synth_lock_path(out: Path) -> Path:
     return out.parent.resolve() / f".{out.name}.synth.lock"
 
 
-@contextmanager
-def _one_synth_at_a_time(out: Path) -> Iterator[None]:
+def _one_synth_at_a_time(out: Path):
     """Hold ``out``'s lock while a synth writes it; a second synth into it is refused, as a second train or
     sweep into one folder is: two finishing together paired one's data with the other's provenance (each
     renamed its data into place after writing its provenance), and one waiting for the other would find
     its data there and replace it, or be refused, after a wait of up to an hour. A run that fails leaves no
     folder it made, nor a lock it made: a sweep --out refused the folder it was left in."""
-    from predictors.locking import locked, remove_made_folders
+    from predictors.locking import locked_undone_on_failure
 
     def refuse() -> None:
         raise PipelineError(
             f"another crowdmpc data synth is writing --out {out}; wait for it or name another file"
         )
 
-    lock = _synth_lock_path(out)
-    made = list(takewhile(lambda folder: not folder.exists(), (lock.parent, *lock.parent.parents)))
-    lock_made = not os.path.lexists(lock)
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    with locked(lock, f"lock --out {out}", waiting=refuse):
-        try:
-            yield
-        except BaseException:
-            remove_made_folders(lock, made, lock_made)
-            raise
+    return locked_undone_on_failure(_synth_lock_path(out), f"lock --out {out}", waiting=refuse)
 
 
 def _remove_dead_staged(out: Path) -> None:

@@ -9,6 +9,7 @@ import pytest
 from pipelines.experiments.log import check_sweep_directory
 from predictors import locking
 from tests.cli_calls import run_cli as run
+from tests.predictors.samples import write_tiny_ewap
 
 
 @pytest.fixture(autouse=True)
@@ -70,3 +71,26 @@ def test_a_lock_removed_before_it_was_taken_is_taken_anew(tmp_path, monkeypatch)
                 real_flock(newcomer, locking.fcntl.LOCK_EX | locking.fcntl.LOCK_NB)
         finally:
             os.close(newcomer)
+
+
+def test_a_failed_prepare_leaves_no_lock_nor_folder_it_made(tmp_path, capsys):
+    """A prepare of an obsmat.txt with no rows left its .NAME.prepare.lock beside --out, and the folders it
+    had made to hold that lock: a sweep --out then refused the folder it was in. A lock a finished prepare
+    left stays, as before."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    obsmat = raw / "seq_eth" / "obsmat.txt"
+    rows = obsmat.read_text()
+    obsmat.write_text("")
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for out in (runs / "prepared", runs / "new" / "deeper" / "prepared"):
+        code, _, err = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(out), "--no-tags")
+        assert code == 2 and f"{obsmat}: no annotation rows" in err
+        assert os.listdir(runs) == []
+    check_sweep_directory(runs)  # refuses nothing
+    obsmat.write_text(rows)
+    argv = ["data", "prepare", "--raw", str(raw), "--out", str(runs / "prepared"), "--no-tags", "--no-check"]
+    assert run(capsys, *argv)[0] == 0
+    obsmat.write_text("")
+    assert run(capsys, *argv)[0] == 2
+    assert sorted(os.listdir(runs)) == [".prepared.prepare.lock", "prepared"]
