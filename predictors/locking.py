@@ -139,7 +139,6 @@ def locked_undone_on_failure(
     folder it found refused by a sweep --out as one holding files. Judged on the folder as resolved (in
     a/x/../../b with a/x missing, an existing b does not exist as named)."""
     folder = lock.parent.resolve()
-    lock = folder / lock.name
     made = list(takewhile(lambda parent: not parent.exists(), (folder, *folder.parents)))
     lock_made = not os.path.lexists(lock)
     folder.mkdir(parents=True, exist_ok=True)

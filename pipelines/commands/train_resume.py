@@ -9,9 +9,6 @@ import argparse
 import json
 import re
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
-from itertools import takewhile
 from pathlib import Path
 from typing import Any, Final
 
@@ -61,32 +58,20 @@ _RECORDED_TYPES: Final[dict[str, tuple[type, ...]]] = {
 }
 
 
-@contextmanager
-def one_run_at_a_time(out: Path) -> Iterator[None]:
+def one_run_at_a_time(out: Path):
     """Hold ``out``'s lock (a hidden file made with the folder; a second train is refused) while a run
     trains: the check that --out holds no run (no last.ckpt until the first epoch ends) let a second train
     started meanwhile train into the same folder, which ended with one run's settings beside the other's
-    last.ckpt. A run that fails before writing anything (a broken net, refused when its module is built)
-    leaves no folder it made (--out and the parents it needed): only its lock would be in them."""
-    from predictors.locking import locked, remove_made_folders
+    last.ckpt. A run that fails leaves no folder it made (--out and the parents it needed), nor its lock in
+    an --out it found (a sweep --out refused the empty folder for it)."""
+    from predictors.locking import locked_undone_on_failure
 
     def refuse() -> None:
         raise PipelineError(
             f"another crowdmpc train is writing to {out}; wait for it or choose another --out"
         )
 
-    # Judged on the resolved path: in --out a/x/../../b/run with a/x missing, the existing b does not exist
-    # as named, and an empty b would have been removed with the folders made.
-    target = out.resolve()
-    made = list(takewhile(lambda folder: not folder.exists(), (target, *target.parents)))  # out, then parents
-    out.mkdir(parents=True, exist_ok=True)
-    lock = out / LOCK_FILE
-    with locked(lock, "lock the training run", waiting=refuse):
-        try:
-            yield
-        except BaseException:
-            remove_made_folders(lock, made)
-            raise
+    return locked_undone_on_failure(out / LOCK_FILE, "lock the training run", waiting=refuse)
 
 
 def run_settings(args: argparse.Namespace, net_config: Any, name: str, files: dict[str, list[Path]]) -> dict:

@@ -138,6 +138,25 @@ def test_a_second_train_into_an_out_a_run_holds_is_refused(tmp_path, capsys):
     assert main(args) == 0  # once the other run has ended
 
 
+def test_a_failed_train_leaves_the_out_it_found_as_it_was(tmp_path, monkeypatch, capsys):
+    """A train stopped in an empty --out that existed (Ctrl-C as it started fitting) left its .train.lock
+    there, and a sweep --out then refused that folder as one holding files."""
+    from pipelines.commands import train_fit
+    from pipelines.experiments.log import check_sweep_directory
+
+    def interrupted(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train_fit, "run_training", interrupted)
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    out = tmp_path / "run"
+    out.mkdir()
+    args = ["train", "--model", "vanilla_lstm", "--train", str(data), "--val", str(data), "--out", str(out)]
+    assert main([*args, "--epochs", "1", "--no-progress"]) == 130
+    assert list(out.iterdir()) == []
+    check_sweep_directory(out)  # refuses nothing
+
+
 @pytest.mark.parametrize("planted", ["fifo", "directory"])
 def test_a_lock_planted_as_no_regular_file_is_named_so(planted, tmp_path, capsys):
     """The open's own error was the message: "(No such device or address)" for a FIFO, "(Is a directory)"
