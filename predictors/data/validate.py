@@ -186,7 +186,9 @@ def _parse_line(path: Path, lineno: int, raw: bytes) -> Any:
         # without its line end: an error at the end of a cut line was placed at column 1 of the next line
         return json.loads(text.rstrip("\r\n"))
     except json.JSONDecodeError as exc:
-        raise DatasetFormatError(path, lineno, f"invalid JSON ({exc.msg} at column {exc.colno})") from None
+        # some of json's messages end in " at" ("Unterminated string starting at"), as they name the place
+        reason = f"invalid JSON ({exc.msg.removesuffix(' at')} at column {exc.colno})"
+        raise DatasetFormatError(path, lineno, reason) from None
     except RecursionError:
         raise DatasetFormatError(path, lineno, "invalid JSON (nested too deeply)") from None
     except ValueError as exc:  # an integer literal beyond Python's digit limit (sys.get_int_max_str_digits)

@@ -140,6 +140,12 @@ BAD_NDJSON: dict[str, tuple[list, int, str]] = {
         N + 1,
         "invalid JSON (Expecting ',' delimiter at column 34)",
     ),
+    # json's own message ends "starting at", followed by its column: it read "starting at at column 20"
+    "a line cut inside a name": (
+        VALID + ['{"track": {"f": 0, "p'],
+        N + 1,
+        "invalid JSON (Unterminated string starting at column 20)",
+    ),
     "carriage returns only": (["\r".join(json.dumps(r) for r in VALID)], 1, "invalid JSON (Extra data"),
     # line 2 is pedestrian 1 at frame 0, (0, 0): the reader kept one of the two and dropped the other
     "a second position for a pedestrian and frame": (
