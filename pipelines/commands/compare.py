@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, write_output
-from pipelines.commands.output_paths import output_arg
+from pipelines.commands.output_paths import file_output_arg
 from pipelines.commands.standard_output import is_stdout, json_on_stdout, json_path, shown
 from pipelines.errors import PipelineError
 from pipelines.plain_json import plain
@@ -72,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--plot",
-        type=output_arg,
+        type=file_output_arg,
         metavar="PNG",
         help="each run's change against the first per method and crowd size, with 95 %% intervals",
     )

@@ -12,7 +12,7 @@ from crowdsim.scenarios import MAX_HUMANS
 from pipelines.commands import PREPARE_ROOM, check_writable, path_arg
 from pipelines.commands.data_synth import run_synth
 from pipelines.commands.evaluate import counted, seed_arg
-from pipelines.commands.output_paths import output_arg
+from pipelines.commands.output_paths import file_output_arg, output_arg
 from pipelines.errors import PipelineError, writes_named
 
 # A synthetic episode takes ~30 ms and ~15 kB of scenes (7 humans): 100 000 (as `simulate --episodes`) is most
@@ -109,7 +109,7 @@ def _register_synth(actions) -> None:
     synth.add_argument(
         "--out",
         required=True,
-        type=output_arg,
+        type=file_output_arg,
         help="ndjson file to write; a second synth into it while one runs is refused (a hidden "
         ".NAME.synth.lock beside it)",
     )

@@ -10,7 +10,7 @@ from pathlib import Path
 from crowdsim.scenarios import MAX_HUMANS, MAX_ROBOTS
 from mpc.config import MAX_HORIZON  # the MPC's: the CasADi function unrolls H recursive steps
 from pipelines.commands import check_outside_the_zoos, check_writable, replace_file
-from pipelines.commands.output_paths import output_arg
+from pipelines.commands.output_paths import file_output_arg
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -42,7 +42,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("name", help="registered predictor or model-zoo name")
-    parser.add_argument("--out", required=True, type=output_arg, help="output file (.casadi)")
+    parser.add_argument("--out", required=True, type=file_output_arg, help="output file (.casadi)")
     parser.add_argument(
         "--humans", type=int, default=7, help=f"number of humans N_h, 1..{MAX_HUMANS} (default 7)"
     )

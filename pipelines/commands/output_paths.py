@@ -42,3 +42,25 @@ def output_arg(text: str) -> Path:
             "(./- for one called '-')"
         )
     return without_missing_parents(Path(text))
+
+
+def file_output_arg(text: str) -> Path:
+    """``output_arg`` for an output that is a file: a folder's name is refused (``names_a_folder``)."""
+    path = output_arg(text)
+    check_names_a_file(text)
+    return path
+
+
+def names_a_folder(text: str) -> bool:
+    """Whether ``text`` names a folder by its ending (``runs/``, ``runs/.``) that ``Path`` drops, making it a
+    file's name: ``data synth --out runs/`` wrote a file called runs. Others (``/``, ``./``, ``x/..``) keep
+    naming a folder, which the write itself refuses."""
+    return os.path.basename(text) in ("", ".") and Path(text).name not in ("", "..")
+
+
+def check_names_a_file(text: str) -> None:
+    """ArgumentTypeError where ``text``, an output that is a file, names a folder (``names_a_folder``)."""
+    if names_a_folder(text):
+        raise argparse.ArgumentTypeError(
+            f"got {text!r}, a folder, but this output is a file; name a file in it"
+        )

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from pipelines.commands import check_writable, comma_items, path_arg, write_output
-from pipelines.commands.output_paths import output_arg
+from pipelines.commands.output_paths import file_output_arg
 from pipelines.commands.review_notes import (
     deeper_note,
     subfolders_note,
@@ -88,7 +88,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("path", type=path_arg, help="an .mcap file, or a folder of them (aggregate table)")
     parser.add_argument(
-        "--plot", type=output_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
+        "--plot", type=file_output_arg, metavar="PNG", help="trajectories with plans (overlay with --compare)"
     )
     parser.add_argument(
         "--times",
@@ -98,7 +98,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--animate",
-        type=output_arg,
+        type=file_output_arg,
         metavar="GIF|MP4",
         help="the episode as an animation at simulated speed; a frame is shown 0.02 s (GIF; MP4 0.001 s) "
         "to 655.35 s (a GIF's longest), so an episode of steps beyond plays faster or slower, as the output "

@@ -170,7 +170,7 @@ class SimulateRun:
 
 def resolve_run(args: argparse.Namespace) -> SimulateRun:
     """The run's effective config, with every number and output path checked before any work starts."""
-    from pipelines.commands.simulate_checks import check_choices_apply
+    from pipelines.commands.simulate_checks import check_choices_apply, check_file_outputs
     from pipelines.config import command_config
     from pipelines.loop.margins import parse_margins
 
@@ -189,6 +189,7 @@ def resolve_run(args: argparse.Namespace) -> SimulateRun:
         margins=parse_margins(chosen.margins) if chosen.margins else ControllerSpec.margins,
     )
     check_choices_apply(config, spec)
+    check_file_outputs(config)
     paths = {name: getattr(config.simulate, name) for name in ("plot", "record")}
     json_out = None if config.simulate.json is None else json_path(config.simulate.json)
     outputs = {k: None if v is None else without_missing_parents(Path(v)) for k, v in paths.items()}

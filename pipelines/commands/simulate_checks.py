@@ -19,6 +19,7 @@ from pipelines.commands.idle_choices import (
     untracked_because,
     visibility_shown,
 )
+from pipelines.commands.output_paths import names_a_folder
 from pipelines.errors import PipelineError
 from pipelines.loop.spec import MPC_CONTROLLERS, is_shipped
 
@@ -204,6 +205,16 @@ def _check_where_chosen(config: RunConfig, spec: ControllerSpec) -> None:
             # check_world's order: the predictor's sampling time, then its history
             key = "dt" if predictor.obs_len > 1 and abs(config.world.dt - PREDICTOR_DT) > 1e-12 else "obs_len"
             raise config.error("world", key, str(exc)) from None
+
+
+def check_file_outputs(config: RunConfig) -> None:
+    """[simulate] json and plot are files: one named as a folder (``--json runs/``) wrote a file called runs.
+    Checked here, not in the settings: a sweep records a config file's, which it never writes."""
+    for name in ("json", "plot"):
+        value = getattr(config.simulate, name)
+        if value is not None and names_a_folder(value):
+            label = config.label("simulate", name)
+            raise PipelineError(f"{label} {value}: a folder, but this output is a file; name a file in it")
 
 
 def check_recording(config: RunConfig) -> None:

@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Final, TextIO
 
-from pipelines.commands.output_paths import without_missing_parents
+from pipelines.commands.output_paths import check_names_a_file, without_missing_parents
 from pipelines.errors import PipelineError
 
 # The one value that names standard output. Told apart by identity, not equality: Path("./-") == Path("-"),
@@ -34,6 +34,7 @@ def json_path(text: str) -> Path:
         import argparse
 
         raise argparse.ArgumentTypeError("must be a path or -, got ''")
+    check_names_a_file(text)
     return without_missing_parents(Path(text))
 
 

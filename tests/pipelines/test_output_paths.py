@@ -142,3 +142,34 @@ def test_a_synth_into_a_file_called_dash_names_it_so(tmp_path, monkeypatch, caps
     synth = ["data", "synth", "--episodes", "1", "--humans", "7", "--seed", "0", "--out", "./-"]
     code, out, _ = run_cli(capsys, *synth)
     assert code == 0 and Path("-").is_file() and "path: ./-\n" in out
+
+
+@pytest.mark.parametrize("ending", ["/", "/."])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["data", "synth", "--episodes", "1", "--humans", "7", "--seed", "0", "--out"],
+        ["export", "constant_velocity", "--out"],
+        ["review", "x.mcap", "--plot"],
+        ["compare", "a", "b", "--json"],
+        [*QUICK_SIMULATE, "--json"],
+    ],
+)
+def test_a_file_output_named_as_a_folder_is_refused(argv, ending, tmp_path, monkeypatch, capsys):
+    """``data synth --out runs/`` wrote a file called runs (Path drops the slash), as export --out, the
+    --json options and simulate's --json did: an output that is a file, named as a folder, is refused."""
+    monkeypatch.chdir(tmp_path)
+    given = f"runs{ending}"
+    if argv[0] == "simulate":  # read as a setting, not by the parser
+        code, _, err = run_cli(capsys, *argv, given)
+        assert code == 2 and err == (
+            f"crowdmpc simulate: error: --json {given}: a folder, but this output is a file; name a file "
+            "in it\n"
+        )
+    else:
+        line = parser_error(capsys, *argv, given)
+        assert (
+            f"argument {argv[-1]}: got {given!r}, a folder, but this output is a file; name a file in it"
+            in line
+        )
+    assert os.listdir(tmp_path) == []
