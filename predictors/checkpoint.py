@@ -15,7 +15,7 @@ import os
 import re
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO, Final
+from typing import TYPE_CHECKING, Any, BinaryIO, Final, NamedTuple
 
 from predictors.base import OBS_LEN
 from predictors.errors import CheckpointMismatch, PredictorError, short_repr
@@ -155,6 +155,15 @@ def _legacy_model(document: dict[str, Any], config: Path) -> str:
     raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
 
 
+class CheckedPair(NamedTuple):
+    """A checkpoint pair as ``read_checkpoint`` read it, each file once: its predictor and the bytes it was
+    built and loaded from, for a caller that keeps them (`zoo add` copies them into the zoo)."""
+
+    predictor: LearnedPredictor
+    weights: bytes  # the .pt's bytes, loaded (their sha256: predictor.weights_sha256)
+    config: bytes  # the .json's bytes, parsed
+
+
 def load_checkpoint(
     weights: str | Path,
     config: str | Path | None = None,
@@ -163,7 +172,26 @@ def load_checkpoint(
     expected_sha256: str | None = None,
     expected_config_sha256: str | None = None,
 ) -> LearnedPredictor:
-    """The predictor of a checkpoint pair (``config`` defaults to ``weights`` with ``.json``).
+    """The predictor of a checkpoint pair: ``read_checkpoint``'s, without the files' bytes."""
+    return read_checkpoint(
+        weights,
+        config,
+        name=name,
+        expected_sha256=expected_sha256,
+        expected_config_sha256=expected_config_sha256,
+    ).predictor
+
+
+def read_checkpoint(
+    weights: str | Path,
+    config: str | Path | None = None,
+    *,
+    name: str | None = None,
+    expected_sha256: str | None = None,
+    expected_config_sha256: str | None = None,
+) -> CheckedPair:
+    """The predictor of a checkpoint pair (``config`` defaults to ``weights`` with ``.json``), with the bytes
+    of each file it was made from.
 
     Everything is checked before it is used, each failure a PredictorError naming the file: each file's
     sha256 (when expected, as the zoo always does) on the bytes then used, the config's first, the model
@@ -190,14 +218,14 @@ def load_checkpoint(
         raise PredictorError(f'{config}: "obs_len" must be an integer, got {short_repr(obs_len)}')
     if not 2 <= obs_len <= MAX_OBS_LEN:
         raise PredictorError(f'{config}: "obs_len" must be in 2..{MAX_OBS_LEN}, got {obs_len}')
-    net, sha256 = _loaded_net(kind, document, weights, config, expected_sha256)
+    net, weights_data, sha256 = _loaded_net(kind, document, weights, config, expected_sha256)
     try:
         predictor = kind.predictor(net, name=name or own_name, obs_len=obs_len)
     except PredictorError as exc:
         raise PredictorError(f"{config}: {exc}") from None
     # what a run records it planned with: the zoo's manifest, read again, may name weights put in since
     predictor.weights_sha256 = sha256
-    return predictor
+    return CheckedPair(predictor, weights_data, data)
 
 
 def _check_file(path: Path, expected: str | None) -> None:
@@ -240,10 +268,10 @@ def _config_kind(document: dict, config: Path) -> ModelKind:
 
 def _loaded_net(
     kind: ModelKind, document: dict, weights: Path, config: Path, expected: str | None
-) -> tuple[torch.nn.Module, str]:
+) -> tuple[torch.nn.Module, bytes, str]:
     """The net of ``document``'s "net", built and bounded before any memory is taken, with the weights of
     ``weights`` once their size, their sha256 (``expected``, when given) and every tensor are checked; and
-    that sha256."""
+    the bytes they were loaded from, and their sha256."""
     import torch
 
     try:
@@ -270,7 +298,7 @@ def _loaded_net(
         net.load_state_dict(state, strict=True)
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:  # not expected after the checks above
         raise PredictorError(f"{weights}: weights do not fit the net of {config}: {exc}") from None
-    return net, sha256
+    return net, data, sha256
 
 
 def load_tensors(path: Path | BinaryIO) -> Any:

@@ -16,7 +16,7 @@ from dataclasses import replace as replace_fields
 from pathlib import Path
 from typing import Any
 
-from predictors.checkpoint import CONFIG_FORMAT, load_checkpoint, read_document
+from predictors.checkpoint import CONFIG_FORMAT, parse_document, read_checkpoint, read_document
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.manifest import (
@@ -75,7 +75,7 @@ def add_entry(
     entries = read_manifest(root)  # refuse to add to a manifest that does not read
     which = SHIPPED if shipped else USER
     _check_case_clash(name, entries, root, which)
-    entry, config_bytes = _new_entry(
+    entry, weights_bytes, config_bytes = _new_entry(
         weights,
         name=name,
         protocol=protocol,
@@ -94,33 +94,35 @@ def add_entry(
         if _unchanged(previous, entry, root, which, replace):
             return entry, entry
         _check_no_stray_file(entry, previous, root, which, (weights, config))
-        _write_pair(weights, config_bytes, entry, root, entries)
+        _write_pair(weights_bytes, config_bytes, entry, root, entries)
         _drop_leftovers(name, root)
     return entries[name], None if _stopped_add(previous, entry) else previous  # finished: no entry replaced
 
 
-def _new_entry(weights: Path, *, name: str, **recorded: Any) -> tuple[ZooEntry, bytes]:
-    """The entry of ``weights`` (and its config) under ``name``, and the config's bytes as the zoo keeps them
-    (named ``name``); ``recorded``: ZooEntry's protocol, training_data, metrics and training. PredictorError
-    when the pair does not load or the entry does not check."""
+def _new_entry(weights: Path, *, name: str, **recorded: Any) -> tuple[ZooEntry, bytes, bytes]:
+    """The entry of ``weights`` (and its config) under ``name``, the weights' bytes and the config's as the
+    zoo keeps them (named ``name``); ``recorded``: ZooEntry's protocol, training_data, metrics and training.
+    PredictorError when the pair does not load or the entry does not check."""
     config = weights.with_suffix(".json")
-    predictor = load_checkpoint(weights, config)  # refuse a pair that does not load
-    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
+    # The bytes kept are the bytes that loaded, each file read once: read again to be hashed and copied, a
+    # pair replaced meanwhile (a training run writing it) was added without a check.
+    checked = read_checkpoint(weights, config)  # refuse a pair that does not load
+    document = parse_document(config, checked.config, CONFIG_FORMAT, "crowdmpc predictor config")
     if "model" not in document:
         raise PredictorError(f'{config}: "model" is missing; `crowdmpc train` writes it')
     document["name"] = name
     config_bytes = (json.dumps(document, indent=2) + "\n").encode()
     entry = ZooEntry(  # checked (name, protocol, metrics ...) before anything is written
         name=name,
-        cls=type(predictor).__name__,
+        cls=type(checked.predictor).__name__,
         model=document["model"],
         file=f"{name}.pt",
-        sha256=sha256_file(weights),
+        sha256=hashlib.sha256(checked.weights).hexdigest(),
         config=f"{name}.json",
         config_sha256=hashlib.sha256(config_bytes).hexdigest(),
         **recorded,
     )
-    return entry, config_bytes
+    return entry, checked.weights, config_bytes
 
 
 def _unchanged(previous: ZooEntry | None, entry: ZooEntry, root: Path, which: str, replace: bool) -> bool:
@@ -170,10 +172,10 @@ def _same_file(path: Path, other: Path) -> bool:
 
 
 def _write_pair(
-    weights: Path, config_bytes: bytes, entry: ZooEntry, root: Path, entries: dict[str, ZooEntry]
+    weights_bytes: bytes, config_bytes: bytes, entry: ZooEntry, root: Path, entries: dict[str, ZooEntry]
 ) -> None:
-    """Copy ``weights`` and write the config as ``entry``'s files in ``root`` and record the entry (with the
-    copy's sha256, should the source have changed since it was hashed) in ``entries`` and the manifest.
+    """Write the weights and the config, the bytes ``entry`` records the sha256 of, as its files in ``root``
+    and record the entry in ``entries`` and the manifest.
 
     Never written over in place: an add interrupted at any instant (Ctrl-C, a kill, a full disk, a power
     loss) leaves a manifest whose entries all name files holding what it records. The new pair is written
@@ -183,10 +185,9 @@ def _write_pair(
     files are as they were; after it, the entry's files are never the ones being replaced."""
     staged = [root / f".{file_name}.{os.getpid()}.new" for file_name in (entry.file, entry.config)]
     try:
-        _copy_synced(weights, staged[0])
+        _write_synced(staged[0], weights_bytes)
         _write_synced(staged[1], config_bytes)
-        final = replace_fields(entry, sha256=sha256_file(staged[0]))
-        entries[entry.name] = replace_fields(final, file=staged[0].name, config=staged[1].name)
+        entries[entry.name] = replace_fields(entry, file=staged[0].name, config=staged[1].name)
         write_manifest(entries, root)
     except BaseException:
         for path in staged:
@@ -196,7 +197,7 @@ def _write_pair(
     # Not entry.paths(): a symbolic link NAME.pt in the zoo is replaced, never the file it points to.
     for path, file_name in zip(staged, (entry.file, entry.config), strict=True):
         _replace_with_link(path, root / file_name)
-    entries[entry.name] = final
+    entries[entry.name] = entry
     write_manifest(entries, root)
     for path in staged:
         path.unlink(missing_ok=True)

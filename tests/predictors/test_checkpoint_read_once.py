@@ -82,3 +82,36 @@ def test_a_config_replaced_after_its_hash_is_not_what_builds(pair, monkeypatch):
     predictor = checkpoint.load_checkpoint(weights, config, **expected)
     assert replaced == [config]
     assert predictor.obs_len == document["obs_len"]
+
+
+# ------------------------------------------------------------------------------------ zoo add: the bytes kept
+def nan_weights(weights: Path) -> bytes:
+    """Weights that do not load (a NaN): a pair holding them is refused."""
+    state = torch.load(weights, weights_only=True)
+    state["head.bias"][0] = float("nan")
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    return buffer.getvalue()
+
+
+@pytest.mark.parametrize("suffix", [".pt", ".json"])
+def test_zoo_add_keeps_the_bytes_it_checked_when_the_source_is_replaced_meanwhile(pair, monkeypatch, suffix):
+    """`zoo add` loaded the pair to check it, then read the config again and copied and hashed the weights
+    again: a source replaced in between (here by a pair that never loads) was added unchecked."""
+    from predictors import zoo
+    from predictors.zoo_edit import add_to_zoo
+
+    weights, config = pair
+    source = weights if suffix == ".pt" else config
+    original = {path: path.read_bytes() for path in pair}
+    unloadable = config.read_bytes().replace(b'"obs_len": 9', b'"obs_len": 1')  # obs_len is 2..100
+    broken = nan_weights(weights) if suffix == ".pt" else unloadable
+    replaced = replace_after_first_open(monkeypatch, source, broken)
+    directory = weights.parent / "zoo"
+    entry = add_to_zoo(weights, name="mine", protocol="p", training_data={}, metrics={}, directory=directory)
+    monkeypatch.undo()
+    assert replaced == [source] and source.read_bytes() == broken
+    assert (directory / "mine.pt").read_bytes() == original[weights]
+    assert entry.sha256 == hashlib.sha256(original[weights]).hexdigest()
+    assert json.loads((directory / "mine.json").read_text())["obs_len"] == 9
+    assert zoo.verify(directory) == [("mine", None)]

@@ -189,6 +189,13 @@ def half_copy(source, destination, *_args, **_kwargs):
     raise Interrupted
 
 
+def half_write(target: Path, data: bytes) -> None:
+    """zoo_edit._write_synced (the weights' bytes as they loaded, then the config's) that writes half of
+    ``data``, then is interrupted."""
+    Path(target).write_bytes(data[: len(data) // 2])
+    raise Interrupted
+
+
 def entry_state(root: Path, name: str) -> tuple[str | None, str]:
     """The zoo's verdict on ``name`` (None: loads, hashes as recorded) and the sha256 its entry records."""
     problems = dict(zoo.verify(root))
@@ -201,6 +208,7 @@ def test_a_replace_interrupted_while_copying_keeps_the_old_entry(tmp_path, user,
     with monkeypatch.context() as patched, pytest.raises(Interrupted):
         patched.setattr(shutil, "copyfile", half_copy)
         patched.setattr(shutil, "copyfileobj", half_copy)
+        patched.setattr(zoo_edit, "_write_synced", half_write)
         zoo_edit.add_to_zoo(new, name="mine", protocol="p", training_data={}, metrics={}, replace=True)
     assert entry_state(user, "mine") == (None, old.sha256)
     assert hashlib.sha256((user / "mine.pt").read_bytes()).hexdigest() == old.sha256
