@@ -27,9 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
-from predictors.checkpoint import (
-    load_checkpoint,
-)
+from predictors.checkpoint import CheckedPair, read_checkpoint
 from predictors.errors import PredictorError
 from predictors.home import expand_home, home_dir
 from predictors.manifest import (
@@ -218,8 +216,13 @@ def find_entry(name: str, directory: str | Path | None = None) -> ZooEntry:
 
 def load_located(located: Located, name: str | None = None) -> LearnedPredictor:
     """A located entry as a predictor, after checking both files' sha256 against its manifest."""
+    return read_located(located, name).predictor
+
+
+def read_located(located: Located, name: str | None = None) -> CheckedPair:
+    """``load_located``'s predictor with the bytes of the files it was made from."""
     weights, config = located.entry.paths(located.root, located.manifest)
-    return load_checkpoint(
+    return read_checkpoint(
         weights,
         config,
         name=name or located.entry.name,
@@ -263,23 +266,24 @@ def verify_entries(user_dir: str | Path | None = None) -> list[tuple[Located, st
             )
             continue
         try:
-            load_located(located)
-            results.append((located, disagreement(located)))
+            results.append((located, disagreement(located, read_located(located).config)))
         except PredictorError as exc:
             results.append((located, str(exc)))
     return results
 
 
-def disagreement(located: Located) -> str | None:
+def disagreement(located: Located, config_bytes: bytes) -> str | None:
     """Where ``located``'s manifest entry says other than its config (whose sha256 the entry holds, so the
     config is the pair's truth): its model kind or a value of its training record (epochs,
     limit_batches, seed ...). ``zoo list`` shows the entry's, loading takes the config's; a manifest edited
-    by hand would show one model and run another. None when they agree."""
-    from predictors.checkpoint import CONFIG_FORMAT, read_document
+    by hand would show one model and run another. None when they agree. ``config_bytes``: the config as
+    the entry loaded (``read_located``); read again, a config replaced since was reported on, not the one
+    that loaded."""
+    from predictors.checkpoint import CONFIG_FORMAT, parse_document
 
     entry = located.entry
     _, config = entry.paths(located.root, located.manifest)
-    document = read_document(config, CONFIG_FORMAT, "crowdmpc predictor config")
+    document = parse_document(config, config_bytes, CONFIG_FORMAT, "crowdmpc predictor config")
     trained = document.get("training")
     # not the class: an entry records the predictor class that loads it, a config the one that saved it
     pairs = [("model", entry.model, document.get("model"))]
@@ -306,8 +310,8 @@ def verify(directory: str | Path | None = None) -> list[tuple[str, str | None]]:
     results: list[tuple[str, str | None]] = []
     for name in zoo_names(root):
         try:
-            load_zoo(name, root)
-            results.append((name, disagreement(Located(USER, root, find_entry(name, root)))))
+            located = Located(USER, root, find_entry(name, root))  # the entry read once: the one loaded
+            results.append((name, disagreement(located, read_located(located).config)))
         except PredictorError as exc:
             results.append((name, str(exc)))
     return results

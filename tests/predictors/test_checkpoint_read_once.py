@@ -115,3 +115,35 @@ def test_zoo_add_keeps_the_bytes_it_checked_when_the_source_is_replaced_meanwhil
     assert entry.sha256 == hashlib.sha256(original[weights]).hexdigest()
     assert json.loads((directory / "mine.json").read_text())["obs_len"] == 9
     assert zoo.verify(directory) == [("mine", None)]
+
+
+# --------------------------------------------------------------------- zoo verify: of the config that loaded
+@pytest.mark.parametrize("both_zoos", [False, True])
+def test_zoo_verify_reports_on_the_config_that_loaded(pair, monkeypatch, both_zoos):
+    """`zoo verify` loaded each entry, then read its config again to compare it with the entry: a config
+    replaced in between was reported on (here a training record the entry does not have), not the one that
+    loaded, which agrees with it."""
+    from predictors import zoo
+    from predictors.zoo_edit import add_to_zoo
+
+    weights, _ = pair
+    directory = weights.parent / "zoo"
+    add_to_zoo(
+        weights,
+        name="mine",
+        protocol="p",
+        training_data={},
+        metrics={},
+        training={"epochs": 25},  # as its config says
+        directory=directory,
+    )
+    config = directory / "mine.json"
+    document = json.loads(config.read_text())
+    other = {**document, "training": {**document["training"], "epochs": 99}}
+    replaced = replace_after_first_open(monkeypatch, config, json.dumps(other).encode())
+    if both_zoos:
+        problems = [(located.entry.name, problem) for located, problem in zoo.verify_entries(directory)]
+    else:
+        problems = zoo.verify(directory)
+    assert replaced == [config]
+    assert ("mine", None) in problems
