@@ -34,4 +34,4 @@ def synthetic_closed_loop(plan, errors: np.ndarray | None = None):
     from pipelines.experiments.calibrate import ClosedLoopErrors
 
     scores, motion = class_errors(4) if errors is None else (errors, np.zeros(len(errors), dtype=int))
-    return ClosedLoopErrors(scores, motion, scores, {"seeds": [plan.seed, plan.seed]})
+    return ClosedLoopErrors(scores, motion, scores, {"seeds": [plan.seed, plan.seed]}, None)

@@ -164,15 +164,17 @@ def _check_real_horizon(args: argparse.Namespace, predictor: Any) -> None:
         )
 
 
-def _real(args: argparse.Namespace, predictor: Any, sha256: str | None) -> tuple[list, Any]:
+def _real(args: argparse.Namespace, predictor: Any) -> tuple[list, Any]:
     from predictors.calibration import calibrate_real
     from predictors.data.locate import prepared_dir, protocol_files
     from predictors.real_data import real_errors
+    from predictors.registry import loaded_sha256
 
     _check_real_horizon(args, predictor)
     files = protocol_files(args.data_dir, "paper", progress=args.progress)
     for note in trained_on_notes(args.predictor, files["val"], files["test"] if args.holdout else []):
         print(note, file=sys.stderr)
+    sha256 = loaded_sha256(predictor)  # of the weights measured: the zoo's entry may be newer by now
     blocks, _ = calibrate_real(
         predictor, files["val"], args.alpha, args.horizon, root=prepared_dir(args.data_dir), sha256=sha256
     )
@@ -200,11 +202,11 @@ def _plan(args: argparse.Namespace) -> Any:
     )
 
 
-def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
+def _closed_loop(args: argparse.Namespace) -> list:
     from pipelines.experiments.calibrate import closed_loop_errors, errors_sha256
     from predictors.calibration import calibrations_from_errors
 
-    errors, classes, shortfall, details = closed_loop_errors(_plan(args), progress=args.progress)
+    errors, classes, shortfall, details, sha256 = closed_loop_errors(_plan(args), progress=args.progress)
     if errors.shape[0] == 0:
         raise PipelineError(
             f"no human came within --near {args.near:g} m of a robot in {args.episodes} episode(s), so there "
@@ -216,7 +218,7 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
         errors,
         args.alpha,
         predictor=args.predictor,
-        predictor_sha256=sha256,
+        predictor_sha256=sha256,  # of the weights the episodes loaded
         source="closed-loop",
         data_sha256=errors_sha256(errors, details, classes),
         details=details | {"rows": int(errors.shape[0])},
@@ -225,8 +227,9 @@ def _closed_loop(args: argparse.Namespace, sha256: str | None) -> list:
     )
 
 
-def _closed_loop_holdout(args: argparse.Namespace) -> Any:
-    """As many further episodes, on the seeds right after the calibration's: crowds it never saw."""
+def _closed_loop_holdout(args: argparse.Namespace, sha256: str | None) -> Any:
+    """As many further episodes, on the seeds right after the calibration's: crowds it never saw, planning
+    with the weights calibrated (``sha256``), else refused."""
     from pipelines.experiments.calibrate import closed_loop_errors
     from pipelines.loop.margins import parse_margins
 
@@ -235,6 +238,11 @@ def _closed_loop_holdout(args: argparse.Namespace) -> Any:
         plan, seed=plan.seed + plan.episodes, margins=parse_margins(args.holdout_margins)
     )
     measured = closed_loop_errors(after, progress=args.progress)
+    if measured.predictor_sha256 != sha256:  # their coverage would be other weights' (nothing is stored)
+        raise PipelineError(
+            f"{args.predictor}'s weights were replaced as calibrate ran (zoo add --replace?): margins of "
+            f"sha256 {str(sha256)[:12]}…, held out with {str(measured.predictor_sha256)[:12]}…; none stored"
+        )
     return measured.errors, measured.classes, measured.shortfall
 
 
@@ -265,9 +273,8 @@ def _check_sources(args: argparse.Namespace, holdout_margins: bool) -> None:
         )
 
 
-def _check_first(args: argparse.Namespace) -> str | None:
-    """Refuse now what would otherwise fail after the calibration episodes; returns the sha256 of the
-    predictor's weights (None for a weightless one)."""
+def _check_first(args: argparse.Namespace) -> None:
+    """Refuse now what would otherwise fail after the calibration episodes."""
     from pipelines.loop.margins import MarginSpec, parse_margins
     from predictors.calibration_store import calibrations_path, stored_calibrations
     from predictors.registry import checkpoint_sha256
@@ -288,13 +295,12 @@ def _check_first(args: argparse.Namespace) -> str | None:
         stored_calibrations()  # read as storing will: a file calibrate cannot extend fails now
     else:  # stores nothing, but its held-out episodes may plan with the blocks in force: not a killed run's
         take_back_before_planning([holdout_margins])
-    sha256 = checkpoint_sha256(args.predictor)
     if args.source == "closed-loop":
-        _check_closed_loop(args, holdout_margins, sha256)
+        # held-out margins looked up for the weights the zoo holds now; the blocks name those measured
+        _check_closed_loop(args, holdout_margins, checkpoint_sha256(args.predictor))
         note = evaluation_seeds_note(args.seed, args.episodes)
         if note is not None:
             print(note, file=sys.stderr)
-    return sha256
 
 
 def _check_closed_loop(args: argparse.Namespace, holdout_margins: MarginSpec, sha256: str | None) -> None:
@@ -342,7 +348,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     from predictors.conformal import coverage
     from predictors.registry import load_predictor
 
-    sha256 = _check_first(args)
+    _check_first(args)
     if args.source == "real":
         from predictors.oracle import ORACLE_PREDICTOR
 
@@ -350,13 +356,14 @@ def _calibrate(args: argparse.Namespace) -> int:
             raise PipelineError(
                 "the ORCA oracle knows the simulator, not real people: use --source closed-loop"
             )
-        blocks, holdout = _real(args, load_predictor(args.predictor), sha256)
+        blocks, holdout = _real(args, load_predictor(args.predictor))
     else:
-        blocks, holdout = _closed_loop(args, sha256), None
+        blocks, holdout = _closed_loop(args), None
     holdout_classes = holdout_shortfall = None
     with storing(blocks, args) as blocks:
         if args.holdout and args.source == "closed-loop":
-            holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args)
+            sha256 = blocks[0].predictor_sha256  # one predictor's, of the same weights, in every block
+            holdout, holdout_classes, holdout_shortfall = _closed_loop_holdout(args, sha256)
     held = holdout is not None and len(holdout) > 0  # none near a robot: no coverage, not an error
     cover = [coverage(holdout, b.quantiles) for b in blocks] if held else None
     n = ", ".join(str(c) for c in blocks[0].n)

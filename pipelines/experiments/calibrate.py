@@ -219,6 +219,7 @@ class ClosedLoopErrors(NamedTuple):
     classes: np.ndarray  # (n,) motion class at prediction time
     shortfall: np.ndarray  # (n, H) distance shortfall, m
     details: dict[str, Any]  # what identifies the episodes
+    predictor_sha256: str | None  # of the weights they planned with, as their controller loaded them
 
 
 def closed_loop_errors(plan: ClosedLoopPlan, progress: bool | None = None) -> ClosedLoopErrors:
@@ -231,6 +232,7 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool | None = None) -> Cl
     env_config = make_env_config(plan.profile, plan.visibility)
     spec = _controller_spec(plan).behind(plan.sensor_range, plan.sensor_tracks)
     controller = make_controller(spec, env_config)
+    sha256 = controller.describe()["predictor_sha256"]  # the zoo's entry, read again, may be newer weights
     # behind the sensor, the NLP of every crowd size in view built before the first episode
     controller = behind_sensor(
         controller, plan.sensor_range, plan.sensor_tracks, PAPER_ROBOTS, max(plan.humans)
@@ -261,7 +263,7 @@ def closed_loop_errors(plan: ClosedLoopPlan, progress: bool | None = None) -> Cl
         del details["sensor_range"]
     if plan.sensor_tracks:  # a tracked sensor's blocks, as made before the option
         del details["sensor_tracks"]
-    return ClosedLoopErrors(observer.errors, observer.classes, observer.shortfall, details)
+    return ClosedLoopErrors(observer.errors, observer.classes, observer.shortfall, details, sha256)
 
 
 def _controller_spec(plan: ClosedLoopPlan) -> ControllerSpec:

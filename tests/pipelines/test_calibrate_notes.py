@@ -35,7 +35,7 @@ def episodes(monkeypatch):
         recorded = ("episodes", "seed", "humans", "controller", "profile", "visibility", "near")
         details = {key: getattr(plan, key) for key in recorded}
         details |= {"seeds": [plan.seed, plan.seed + plan.episodes - 1]}
-        return experiment.ClosedLoopErrors(scores, motion, scores, details)
+        return experiment.ClosedLoopErrors(scores, motion, scores, details, None)
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
 
@@ -283,7 +283,7 @@ def test_calibrate_says_which_margins_no_plan_can_keep(monkeypatch, capsys):
 
     def measured(plan, progress=True):
         scores, motion = class_errors(4)  # walking's 0.9 margins 0.72 k m: 1.44 k m when doubled
-        return experiment.ClosedLoopErrors(2 * scores, motion, scores, {"humans": list(plan.humans)})
+        return experiment.ClosedLoopErrors(2 * scores, motion, scores, {"humans": list(plan.humans)}, None)
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
     assert main([*CALIBRATE, "--alpha", "0.1", "--episodes", "4", "--dry-run"]) == 0

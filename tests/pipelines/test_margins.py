@@ -177,13 +177,14 @@ def test_prediction_errors_score_the_people_predicted_while_they_are_tracked():
 @pytest.mark.slow
 def test_closed_loop_errors_of_constant_velocity():
     plan = ClosedLoopPlan("constant_velocity", episodes=2, humans=(3,))
-    errors, classes, shortfall, details = closed_loop_errors(plan, progress=False)
+    errors, classes, shortfall, details, sha256 = closed_loop_errors(plan, progress=False)
     assert shortfall.shape == errors.shape
     both = np.isfinite(shortfall) & np.isfinite(errors)
     assert np.all(shortfall[both] <= errors[both] + 1e-12)  # the triangle inequality
     assert classes.shape == (len(errors),) and set(classes.tolist()) <= {0, 1, 2, 3}
     assert errors.ndim == 2 and errors.shape[1] == 4 and len(errors) > 10
     assert details["seeds"] == [1_000_000, 1_000_001]
+    assert sha256 is None  # constant velocity plans with no weights
     finite = errors[np.isfinite(errors)]
     assert (finite >= 0).all() and np.nanmedian(errors[:, 3]) >= np.nanmedian(errors[:, 0])
     # The calibration episodes are ordinary closed-loop episodes of their seeds.
@@ -707,7 +708,7 @@ def test_a_block_whose_details_hold_a_tuple_is_taken_back_when_the_held_out_run_
             assert (tmp_path / "calibrations.json").exists()
             raise KeyboardInterrupt
         scores, motion = class_errors(4)
-        return experiment.ClosedLoopErrors(scores, motion, scores, {"humans": plan.humans})
+        return experiment.ClosedLoopErrors(scores, motion, scores, {"humans": plan.humans}, None)
 
     monkeypatch.setattr(experiment, "closed_loop_errors", measured)
     argv = [

@@ -9,6 +9,7 @@ import io
 import json
 import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -119,3 +120,113 @@ def test_evaluate_records_the_entry_it_scored_when_it_is_replaced_meanwhile(tmp_
     scores = json.loads(out.read_text())
     assert replaced and replaced[0].sha256 != old.sha256
     assert (scores["predictor_sha256"], scores["trained_protocol"]) == (old.sha256, "old")
+
+
+# ------------------------------------------------------------ calibrate: the weights its quantiles came from
+CALIBRATE = ["calibrate", "--predictor", "mine", "--no-progress"]
+
+
+def _calibrate_zoo(tmp_path) -> tuple[dict, Path, Path]:
+    """The zoo entry "mine" (weights of seed 1), the options to add to it, and other weights (seed 2)."""
+    from predictors.zoo_edit import add_to_zoo
+
+    user = Path(os.environ["CROWDMPC_ZOO"])
+    options = {"name": "mine", "protocol": "p", "training_data": {}, "metrics": {}, "directory": user}
+    add_to_zoo(_pair("social_lstm", tmp_path / "old", seed=1), **options)
+    return options, user, _pair("social_lstm", tmp_path / "new", seed=2)
+
+
+def _fake_episodes(monkeypatch) -> list:
+    """Closed-loop episodes that measure tests/calibration_blocks.class_errors(4); returns the sha256 of the
+    weights each episode's controller planned with."""
+    from tests.calibration_blocks import class_errors
+
+    planned: list = []
+
+    def episode(controller, *, observers, **_):
+        planned.append(controller.describe()["predictor_sha256"])
+        scores, motion = class_errors(4)
+        observers[0].rows.append(scores)
+        observers[0].class_rows.append(motion)
+        observers[0].shortfall_rows.append(scores)
+        return SimpleNamespace(metrics=SimpleNamespace(success=1))
+
+    monkeypatch.setattr("pipelines.loop.episode.run_episode", episode)
+    return planned
+
+
+def _replace_at_call(
+    monkeypatch, module, function: str, call: int, weights: Path, after: bool = False, **options
+) -> list:
+    """`zoo add --replace` of ``weights`` as ``module.function`` is called for the ``call``-th time, before it
+    runs (``after``: once it has returned); in the list returned, the new entry."""
+    from predictors.zoo_edit import add_to_zoo
+
+    real, calls, replaced = getattr(module, function), [], []
+
+    def replacing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == call and not after:
+            replaced.append(add_to_zoo(weights, **options, replace=True))
+        result = real(*args, **kwargs)
+        if len(calls) == call and after:
+            replaced.append(add_to_zoo(weights, **options, replace=True))
+        return result
+
+    monkeypatch.setattr(module, function, replacing)
+    return replaced
+
+
+def test_calibrate_names_the_weights_its_episodes_loaded_when_they_are_replaced_meanwhile(
+    tmp_path, monkeypatch
+):
+    """calibrate read the weights' sha256 from the manifest before its episodes' controller loaded them: a
+    `zoo add --replace` in between stamped the new weights' margins with the old weights' sha256."""
+    from pipelines.experiments import calibrate as experiment
+
+    options, _, new_weights = _calibrate_zoo(tmp_path)
+    planned = _fake_episodes(monkeypatch)
+    replaced = _replace_at_call(monkeypatch, experiment, "closed_loop_errors", 1, new_weights, **options)
+    out = tmp_path / "blocks.json"
+    argv = [*CALIBRATE, "--source", "closed-loop", "--episodes", "1", "--dry-run", "--json", str(out)]
+    assert main(argv) == 0
+    [block] = json.loads(out.read_text())["blocks"]
+    assert planned == [replaced[0].sha256]
+    assert block["predictor_sha256"] == replaced[0].sha256
+
+
+def test_calibrate_refuses_held_out_episodes_of_other_weights(tmp_path, monkeypatch, capsys):
+    """The held-out episodes loaded the predictor again: weights replaced after the calibration's episodes
+    had their coverage printed as the stored margins'. They are refused, and nothing is stored."""
+    from pipelines.experiments import calibrate as experiment
+
+    options, user, new_weights = _calibrate_zoo(tmp_path)
+    planned = _fake_episodes(monkeypatch)
+    replaced = _replace_at_call(monkeypatch, experiment, "closed_loop_errors", 2, new_weights, **options)
+    assert main([*CALIBRATE, "--source", "closed-loop", "--episodes", "1", "--holdout"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert planned[1] == replaced[0].sha256 != planned[0]
+    assert f"margins of sha256 {planned[0][:12]}…, held out with {planned[1][:12]}…; none stored" in err
+    assert "\n" not in err and not (user / "calibrations.json").exists()
+
+
+def test_real_calibration_names_the_weights_it_measured_when_they_are_replaced_meanwhile(
+    tmp_path, monkeypatch
+):
+    """calibrate --source real read the weights' sha256 from the manifest, then loaded the predictor: a
+    `zoo add --replace` in between stamped the new weights' margins with the old weights' sha256."""
+    from pipelines.commands import calibrate as command
+    from predictors.data import locate
+    from tests.predictors.samples import write_crowds
+
+    options, _, new_weights = _calibrate_zoo(tmp_path)
+    replaced = _replace_at_call(monkeypatch, command, "_check_first", 1, new_weights, after=True, **options)
+    scenes = write_crowds(tmp_path / "scenes.ndjson")
+    split = {"train": [], "val": [scenes], "test": []}
+    monkeypatch.setattr(locate, "protocol_files", lambda *args, **kwargs: split)
+    monkeypatch.setattr(locate, "prepared_dir", lambda *args, **kwargs: tmp_path)
+    out = tmp_path / "blocks.json"
+    argv = [*CALIBRATE, "--source", "real", "--alpha", "0.5", "--dry-run", "--json", str(out)]
+    assert main(argv) == 0
+    [block] = json.loads(out.read_text())["blocks"]
+    assert block["predictor_sha256"] == replaced[0].sha256
