@@ -127,7 +127,11 @@ class ModelKind:
         override may repeat a defining value (a stored config holds them all) but not change it."""
         if overrides is not None and not isinstance(overrides, Mapping):
             return self._config(overrides)  # refused there, in one line
-        config = self._config({**self.defaults, **(overrides or {})})
+        values = {**self.defaults, **(overrides or {})}
+        config = self._config(values)
+        from predictors.nets.config_checks import check_annotated_types
+
+        check_annotated_types(self.config_class, values, self.name)  # what the class's own checks let by
         self.check_new(config)
         return config
 

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import types
+import typing
+from collections.abc import Mapping
 from dataclasses import asdict, fields, is_dataclass
 from typing import Any, TypeVar
 
@@ -74,3 +77,52 @@ def config_from_dict(cls: type[T], values: object, label: str) -> T:
             f"unknown {label} config keys {short_repr(unknown, 200)}; expected a subset of {sorted(known)}"
         )
     return cls(**values)  # __post_init__ checks every value's type and range
+
+
+# What each plain annotation takes from a JSON file, and how a message names it. An int is a number to
+# float (JSON writes 2 for 2.0); a bool is no int here, though Python's isinstance says it is.
+_PLAIN_TYPES: dict[object, tuple[str, Any]] = {
+    int: ("an integer", lambda v: isinstance(v, int) and not isinstance(v, bool)),
+    float: ("a number", lambda v: isinstance(v, int | float) and not isinstance(v, bool)),
+    bool: ("true or false", lambda v: isinstance(v, bool)),
+    str: ("a string", lambda v: isinstance(v, str)),
+    type(None): ("null", lambda v: v is None),
+}
+
+
+def check_annotated_types(cls: type, values: Mapping[str, Any], label: str) -> None:
+    """PredictorError naming the first of ``values`` that its dataclass field's annotation refuses.
+
+    A plugin's config class may check nothing in ``__post_init__``: a string size then failed deep in torch
+    ("empty(): argument 'size' ... must be tuple of ints"), naming no key, and ``true`` built a net of width
+    1. Only plain annotations (int, float, bool, str, None and unions of them) are checked; a field of any
+    other type, or a class whose annotations do not resolve, is left to the class."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except Exception:  # a name only its own module's TYPE_CHECKING block imports: nothing to check against
+        return
+    for name, value in values.items():
+        members = _plain_members(hints.get(name))
+        if members is None:
+            continue
+        if not any(_PLAIN_TYPES[m][1](value) for m in members):
+            kinds = " or ".join(_PLAIN_TYPES[m][0] for m in members)
+            raise wrong_type(
+                label, name, f"{kinds} ({cls.__name__}.{name}: {_annotation_text(cls, name)})", value
+            )
+
+
+def _plain_members(annotation: object) -> tuple[object, ...] | None:
+    """``annotation``'s types when each is one of ``_PLAIN_TYPES`` (a union's members), else None."""
+    if isinstance(annotation, type) and annotation in _PLAIN_TYPES:  # an annotation may be unhashable
+        return (annotation,)
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        members = typing.get_args(annotation)
+        return members if all(m in _PLAIN_TYPES for m in members) else None
+    return None
+
+
+def _annotation_text(cls: type, name: str) -> str:
+    """The annotation as its class writes it ("int | None"), for a message."""
+    written = next(f.type for f in fields(cls) if f.name == name)  # type: ignore[arg-type]
+    return written if isinstance(written, str) else getattr(written, "__name__", repr(written))

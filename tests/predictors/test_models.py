@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import re
 import sys
+from dataclasses import dataclass
 from importlib import metadata
 
 import numpy as np
@@ -310,6 +311,42 @@ def test_bad_configs_are_refused(no_plugins, kind, values, message):
     if isinstance(values, dict):  # a dict given to build_net is validated the same way
         with pytest.raises(PredictorError, match=re.escape(message)):
             model_kind(kind).build_net({**values})
+
+
+@dataclass(frozen=True)
+class UncheckedConfig:  # a newcomer's config: annotated, and no __post_init__ checking anything
+    hidden_dim: int = 8
+    radius: float = 2.0
+    tag: str | None = None
+
+
+class Unchecked(ToyNet):
+    config_class = UncheckedConfig
+
+
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        ({"hidden_dim": "8"}, "hidden_dim must be an integer (UncheckedConfig.hidden_dim: int), got '8'"),
+        ({"hidden_dim": True}, "hidden_dim must be an integer (UncheckedConfig.hidden_dim: int), got True"),
+        ({"hidden_dim": 8.0}, "hidden_dim must be an integer (UncheckedConfig.hidden_dim: int), got 8.0"),
+        ({"radius": "2"}, "radius must be a number (UncheckedConfig.radius: float), got '2'"),
+        ({"radius": None}, "radius must be a number (UncheckedConfig.radius: float), got None"),
+        ({"tag": 3}, "tag must be a string or null (UncheckedConfig.tag: str | None), got 3"),
+    ],
+)
+def test_a_plugin_config_value_of_another_type_than_its_annotation_is_refused(values, message):
+    """A plugin whose config class checks nothing: a string size failed in torch ("empty(): argument 'size'
+    ... must be tuple of ints", no key named) and ``true`` built a net of width 1; each is now one line
+    naming the key, the type it is annotated with and the value."""
+    kind = ModelKind(name="mine:Unchecked", net_class=Unchecked, source="plugin")
+    with pytest.raises(PredictorError) as refused:
+        kind.config(values)
+    assert str(refused.value) == f"mine:Unchecked config holds a value of the wrong type: {message}"
+    assert kind.config({"radius": 3, "tag": None}).radius == 3  # JSON's 3 for 3.0; a union takes null
+    assert kind.config({"tag": "x"}).tag == "x"
+    stored = kind.build_net({"hidden_dim": 4, "radius": 2.0, "tag": 7})  # a stored config keeps loading
+    assert stored.config.tag == 7
 
 
 def test_an_oversized_net_is_refused_before_memory_is_taken(no_plugins, monkeypatch):
