@@ -64,6 +64,17 @@ def trained_prediction_length(name: str | None) -> int | None:
     return value if isinstance(value, int) and not isinstance(value, bool) and value >= 1 else PRED_LEN
 
 
+def never_loads(located: zoo.Located) -> str | None:
+    """Why user zoo entry ``located`` is never what its name loads, else None: a built-in predictor or a
+    shipped model of that name loads first. ``zoo add`` refuses both names; an entry written by hand, or
+    added before the shipped zoo took its name, has one all the same."""
+    if located.source != zoo.USER:
+        return None
+    if located.entry.name in PREDICTORS:
+        return zoo.never_loads_line(located, f"the built-in predictor {located.entry.name!r}")
+    return zoo.never_loads_line(located, "a shipped model") if zoo.shadowed(located) else None
+
+
 def load_predictor(name: str) -> Predictor:
     if not isinstance(name, str):  # a list was "unhashable type: 'list'"
         raise UnknownPredictor(name, available())

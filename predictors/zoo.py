@@ -251,19 +251,22 @@ def shadowed(located: Located) -> bool:
     return located.source == USER and located.entry.name in read_manifest(checkpoints_dir())
 
 
+def never_loads_line(located: Located, taker: str) -> str:
+    """The line saying that user entry ``located`` never loads, since ``taker`` has its name."""
+    name = located.entry.name
+    return (
+        f"{located.manifest}: {taker} has this name, so this entry never loads; remove it "
+        f"(`crowdmpc zoo remove {name}`) and add it under another name"
+    )
+
+
 def verify_entries(user_dir: str | Path | None = None) -> list[tuple[Located, str | None]]:
     """``(entry, problem or None)`` for every entry of both zoos: files present, hashes as recorded, weights
     loadable, no user entry under a shipped name."""
     results: list[tuple[Located, str | None]] = []
     for located in zoo_entries(user_dir):
         if shadowed(located):
-            results.append(
-                (
-                    located,
-                    f"{located.manifest}: a shipped model has this name, so this entry never loads; "
-                    f"remove it (`crowdmpc zoo remove {located.entry.name}`) and add it under another name",
-                )
-            )
+            results.append((located, never_loads_line(located, "a shipped model")))
             continue
         try:
             results.append((located, disagreement(located, read_located(located).config)))

@@ -325,7 +325,7 @@ def zoo_notes(predictor: str | None) -> list[str]:
     once: a plugin net whose module file changed since training (``plugin_entry_note``: its outputs may
     differ from the figures `zoo list` shows), and a quick check trained with ``train --limit-batches``
     (``zoo.quick_check_line``: simulate, sweep and evaluate ran it beside trained models without a word)."""
-    from pipelines.commands.zoo import quick_check_line
+    from pipelines.commands.zoo_list import quick_check_line
 
     entry = _zoo_entry(predictor)
     if predictor is None or entry is None:

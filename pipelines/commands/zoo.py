@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from pipelines.commands import examples, path_arg
+from pipelines.commands.zoo_list import quick_check_line, run_list
 from pipelines.errors import PipelineError
 
 EPILOG = """examples:
@@ -25,15 +26,17 @@ EPILOG = """examples:
 Two zoos, each NAME.pt (state_dict) + NAME.json (config) per model and a manifest.json with their sha256,
 training data and metrics: the shipped zoo, checkpoints/ (or $CROWDMPC_CHECKPOINTS), read-only; and the user
 zoo, $CROWDMPC_ZOO (default $XDG_DATA_HOME/crowdmpc/zoo, else ~/.local/share/crowdmpc/zoo, or --dir), where
-`add` writes and `remove` deletes. A user model may not take a shipped model's name. `add` under a name the
-zoo has already is refused (adding the very same model again changes nothing) unless --replace says to replace
-that entry; so is a name whose files would be the zoo's own (manifest, calibrations), or files there that are
-no entry's of that name (your own NAME.pt: move it away first). Parallel adds and removes take turns. The
-metrics file must be the one `crowdmpc train` wrote for these weights. A file whose sha256 differs from its
-manifest is refused when loaded; `verify` checks every entry of both zoos and names the hidden files an add or
-remove stopped on the way left in the user zoo (`remove --leftovers NAME` removes them, keeping the entry;
-`remove NAME` removes them with it). A model of a plugin's kind loads once the plugin is registered
-(crowdmpc --plugin module:NetClass zoo ...); the shipped zoo holds only the kinds the project ships.
+`add` writes and `remove` deletes. A user model may not take a shipped model's name nor a built-in predictor's
+(an entry that has one, written by hand or added before the shipped zoo took the name, never loads: `list`
+marks it !, `verify` fails). `add` under a name the zoo has already is refused (adding the very same model
+again changes nothing) unless --replace says to replace that entry; so is a name whose files would be the
+zoo's own (manifest, calibrations), or files there that are no entry's of that name (your own NAME.pt: move it
+away first). Parallel adds and removes take turns. The metrics file must be the one `crowdmpc train` wrote for
+these weights. A file whose sha256 differs from its manifest is refused when loaded; `verify` checks every
+entry of both zoos and names the hidden files an add or remove stopped on the way left in the user zoo
+(`remove --leftovers NAME` removes them, keeping the entry; `remove NAME` removes them with it). A model of a
+plugin's kind loads once the plugin is registered (crowdmpc --plugin module:NetClass zoo ...); the shipped zoo
+holds only the kinds the project ships.
 """
 
 
@@ -137,104 +140,30 @@ def _add_and_remove(actions: Any) -> None:
     )
 
 
-def _metric(metrics: dict, split: str, key: str) -> str:
-    """A metric as a table cell: "-" when absent, "?" when the manifest holds something else than a number."""
-    values = metrics.get(split, {})
-    value = values.get(key) if isinstance(values, dict) else None
-    if value is None:
-        return "-"
-    return "?" if isinstance(value, bool) or not isinstance(value, int | float) else f"{value:.3f}"
-
-
-def _pooling(located) -> str:
-    """The net's pooling as a table cell: "-" for a kind without one, "?" for a config that does not read."""
-    from predictors import checkpoint
-    from predictors.errors import PredictorError
-
-    try:
-        _, config = located.entry.paths(located.root, located.manifest)
-        net = checkpoint.read_document(config, checkpoint.CONFIG_FORMAT, "crowdmpc predictor config").get(
-            "net"
-        )
-    except (OSError, PredictorError):
-        return "?"
-    if not isinstance(net, dict):
-        return "?"
-    pooling = net.get("pooling", "-")
-    return pooling if isinstance(pooling, str) and len(pooling) <= 16 else "?"
-
-
-def format_list(located_entries) -> str:
-    header = [
-        "name",
-        "class",
-        "model",
-        "pooling",
-        "protocol",
-        "val ADE",
-        "val FDE",
-        "test ADE",
-        "test FDE",
-        "top-20 ADE/FDE",
-        "kB",
-        "zoo",
-    ]
-    rows = []
-    for located in located_entries:
-        entry = located.entry
-        m = entry.metrics
-        topk = "-"
-        if _metric(m, "test", "topk_ade") != "-":
-            topk = f"{_metric(m, 'test', 'topk_ade')}/{_metric(m, 'test', 'topk_fde')}"
-        rows.append(
-            [
-                entry.name + (" *" if quick_check(entry.training) is not None else ""),
-                entry.cls,
-                entry.model,
-                _pooling(located),
-                entry.protocol,
-                _metric(m, "val", "ade"),
-                _metric(m, "val", "fde"),
-                _metric(m, "test", "ade"),
-                _metric(m, "test", "fde"),
-                topk,
-                entry.training.get("size_kb", "-"),
-                located.source,
-            ]
-        )
-    from predictors.text_table import aligned_lines
-
-    rows = [[str(c) for c in r] for r in rows]
-    return "\n".join(aligned_lines(header, rows, numbers_right=False))
-
-
 def run(args: argparse.Namespace) -> int:
-    from predictors import zoo, zoo_remove
+    from predictors import registry, zoo, zoo_remove
     from predictors.errors import PredictorError
 
     if args.zoo_command in ("list", "show", "verify", "calibrations"):
         zoo.readable_zoo_dir(args.dir)
     if args.zoo_command == "list":
-        entries = zoo.zoo_entries(args.dir)
-        if not entries:
-            roots = " and ".join(f"the {source} zoo {root}" for source, root in zoo.zoo_roots(args.dir))
-            print(f"no models in {roots}")
-            return 0
-        print(format_list(entries))
-        print("ADE/FDE in metres, TrajNet++ metrics of the primary pedestrian (9 -> 12 steps)")
-        if any(quick_check(located.entry.training) is not None for located in entries):
-            print("* a quick check (train --limit-batches: a few batches an epoch), not a trained model")
-        return 0
+        return run_list(args.dir)
     if args.zoo_command == "show":
         located = zoo.locate(args.name, args.dir)
+        if located is None and args.name in registry.PREDICTORS:
+            raise PipelineError(f"{args.name!r} is a built-in predictor, with no weights: no zoo holds it")
         if located is None:
             from predictors.errors import UnknownPredictor
 
             raise UnknownPredictor(args.name, sorted({e.entry.name for e in zoo.zoo_entries(args.dir)}))
         print(json.dumps({**located.entry.to_json(), "zoo": located.source}, indent=2))
+        never = registry.never_loads(located)  # a user entry named as a built-in predictor
+        if never is not None:
+            print(f"note: {never}", file=sys.stderr)
         return 0
     if args.zoo_command == "verify":
         results = zoo.verify_entries(args.dir)
+        results = [(located, registry.never_loads(located) or problem) for located, problem in results]
         for located, problem in results:
             label = located.entry.name if located.source == zoo.SHIPPED else f"{located.entry.name} (user)"
             print(f"{label}: {'ok' if problem is None else problem}")
@@ -356,21 +285,6 @@ def _add(args: argparse.Namespace) -> int:
     if note is not None:  # docs/extending.md: such a model is never mistaken for a trained one
         print(note, file=sys.stderr)
     return 0
-
-
-def quick_check(training: dict) -> int | None:
-    """The batches an epoch an entry trained on when ``train --limit-batches`` cut its epochs, else None."""
-    limit = training.get("limit_batches")
-    return limit if isinstance(limit, int) and not isinstance(limit, bool) else None
-
-
-def quick_check_line(shown: str, training: dict) -> str | None:
-    """The note on an entry (named ``shown``) that ``quick_check`` finds, else None."""
-    limit = quick_check(training)
-    if limit is None:
-        return None
-    batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
-    return f"note: {shown} trained on {batches}: a quick check, not a trained model (zoo list: *)"
 
 
 def _added_line(entry, previous, args: argparse.Namespace, root: Path) -> str:

@@ -279,6 +279,39 @@ def test_a_user_entry_under_a_shipped_name_is_reported_and_never_loads(shipped, 
     assert available().count(NAME) == 1
     code, out, _ = cli(["zoo", "verify"], capsys)
     assert code == 1 and f"{NAME} (user): {user / zoo.MANIFEST_NAME}: a shipped model has this name" in out
+    code, out, _ = cli(["zoo", "list"], capsys)  # listed without a mark, it read as a model one could use
+    rows = [line.split()[:3] for line in out.splitlines() if line.startswith(NAME)]
+    assert code == 0 and rows == [
+        [NAME, "SocialLSTMPredictor", "social_lstm"],
+        [NAME, "!", "SocialLSTMPredictor"],
+    ]
+    assert f"! {user / zoo.MANIFEST_NAME}: a shipped model has this name, so this entry never loads" in out
+
+
+def test_a_user_entry_under_a_built_in_predictors_name_is_reported_and_never_loads(shipped, user, capsys):
+    """A user entry named constant_velocity (written by hand, or by a version whose add took the name): the
+    name loads the built-in, yet verify said ok and show printed the entry as the model of that name."""
+    for suffix in (".pt", ".json"):
+        user.mkdir(exist_ok=True)
+        shutil.copyfile(REAL_ZOO / f"{NAME}{suffix}", user / f"constant_velocity{suffix}")
+    entry = {**real_entry(), "name": "constant_velocity"}
+    write_manifest(user, {**entry, "file": "constant_velocity.pt", "config": "constant_velocity.json"})
+    assert type(load_predictor("constant_velocity")).__name__ == "ConstantVelocity"
+    said = (
+        f"{user / zoo.MANIFEST_NAME}: the built-in predictor 'constant_velocity' has this name, so this "
+        "entry never loads; remove it (`crowdmpc zoo remove constant_velocity`) and add it under another name"
+    )
+    code, out, _ = cli(["zoo", "verify"], capsys)
+    assert code == 1 and f"constant_velocity (user): {said}" in out.splitlines()
+    code, out, _ = cli(["zoo", "list"], capsys)
+    assert code == 0 and "constant_velocity !" in out and f"! {said}" in out.splitlines()
+    code, out, err = cli(["zoo", "show", "constant_velocity"], capsys)
+    assert code == 0 and json.loads(out)["zoo"] == "user" and one_line(err) == f"note: {said}"
+    (user / zoo.MANIFEST_NAME).unlink()
+    code, _, err = cli(["zoo", "show", "orca_oracle"], capsys)  # was "unknown predictor 'orca_oracle'"
+    assert code == 2 and one_line(err) == (
+        "crowdmpc zoo: error: 'orca_oracle' is a built-in predictor, with no weights: no zoo holds it"
+    )
 
 
 def test_a_broken_user_manifest_stops_no_shipped_model(shipped, user, capsys):

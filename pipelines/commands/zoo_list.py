@@ -1,0 +1,115 @@
+"""``crowdmpc zoo list``: one line per model of both zoos, with what marks a model not to be taken for a
+trained one (``*``: a quick check) or one that never loads (``!``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def run_list(directory: Path | None) -> int:
+    from predictors import registry, zoo
+
+    entries = zoo.zoo_entries(directory)
+    if not entries:
+        roots = " and ".join(f"the {source} zoo {root}" for source, root in zoo.zoo_roots(directory))
+        print(f"no models in {roots}")
+        return 0
+    # a user entry whose name a built-in predictor or a shipped model takes: listed, it read as usable
+    never = [registry.never_loads(located) for located in entries]
+    print(format_list(entries, [line is not None for line in never]))
+    print("ADE/FDE in metres, TrajNet++ metrics of the primary pedestrian (9 -> 12 steps)")
+    if any(quick_check(located.entry.training) is not None for located in entries):
+        print("* a quick check (train --limit-batches: a few batches an epoch), not a trained model")
+    for line in never:
+        if line is not None:
+            print(f"! {line}")
+    return 0
+
+
+def _metric(metrics: dict, split: str, key: str) -> str:
+    """A metric as a table cell: "-" when absent, "?" when the manifest holds something else than a number."""
+    values = metrics.get(split, {})
+    value = values.get(key) if isinstance(values, dict) else None
+    if value is None:
+        return "-"
+    return "?" if isinstance(value, bool) or not isinstance(value, int | float) else f"{value:.3f}"
+
+
+def _pooling(located) -> str:
+    """The net's pooling as a table cell: "-" for a kind without one, "?" for a config that does not read."""
+    from predictors import checkpoint
+    from predictors.errors import PredictorError
+
+    try:
+        _, config = located.entry.paths(located.root, located.manifest)
+        net = checkpoint.read_document(config, checkpoint.CONFIG_FORMAT, "crowdmpc predictor config").get(
+            "net"
+        )
+    except (OSError, PredictorError):
+        return "?"
+    if not isinstance(net, dict):
+        return "?"
+    pooling = net.get("pooling", "-")
+    return pooling if isinstance(pooling, str) and len(pooling) <= 16 else "?"
+
+
+def format_list(located_entries, never_loads: list[bool] | None = None) -> str:
+    """The table of ``located_entries``; ``never_loads``, per entry, marks with ``!`` one that never loads."""
+    header = [
+        "name",
+        "class",
+        "model",
+        "pooling",
+        "protocol",
+        "val ADE",
+        "val FDE",
+        "test ADE",
+        "test FDE",
+        "top-20 ADE/FDE",
+        "kB",
+        "zoo",
+    ]
+    rows = []
+    for index, located in enumerate(located_entries):
+        entry = located.entry
+        marks = " *" if quick_check(entry.training) is not None else ""
+        marks += " !" if never_loads is not None and never_loads[index] else ""
+        m = entry.metrics
+        topk = "-"
+        if _metric(m, "test", "topk_ade") != "-":
+            topk = f"{_metric(m, 'test', 'topk_ade')}/{_metric(m, 'test', 'topk_fde')}"
+        rows.append(
+            [
+                entry.name + marks,
+                entry.cls,
+                entry.model,
+                _pooling(located),
+                entry.protocol,
+                _metric(m, "val", "ade"),
+                _metric(m, "val", "fde"),
+                _metric(m, "test", "ade"),
+                _metric(m, "test", "fde"),
+                topk,
+                entry.training.get("size_kb", "-"),
+                located.source,
+            ]
+        )
+    from predictors.text_table import aligned_lines
+
+    rows = [[str(c) for c in r] for r in rows]
+    return "\n".join(aligned_lines(header, rows, numbers_right=False))
+
+
+def quick_check(training: dict) -> int | None:
+    """The batches an epoch an entry trained on when ``train --limit-batches`` cut its epochs, else None."""
+    limit = training.get("limit_batches")
+    return limit if isinstance(limit, int) and not isinstance(limit, bool) else None
+
+
+def quick_check_line(shown: str, training: dict) -> str | None:
+    """The note on an entry (named ``shown``) that ``quick_check`` finds, else None."""
+    limit = quick_check(training)
+    if limit is None:
+        return None
+    batches = f"{limit} batch{'es' * (limit != 1)} an epoch (train --limit-batches {limit})"
+    return f"note: {shown} trained on {batches}: a quick check, not a trained model (zoo list: *)"
