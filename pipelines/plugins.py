@@ -36,7 +36,7 @@ from pipelines.loop.spec import (
 )
 from predictors import models
 from predictors.errors import PredictorError, short_repr
-from predictors.plugin_import import lone_spec
+from predictors.plugin_import import form_hint, lone_spec
 
 PluginKind = Literal["model", "controller"]
 
@@ -56,6 +56,7 @@ def register(spec: str) -> PluginKind:
     if not is_plugin_spec(spec):
         raise PluginError(
             f"plugin {short_repr(spec)} is not of the form module:NetClass or module:Controller"
+            f"{form_hint(spec)}"
         )
     try:
         with _exits_refused(spec):

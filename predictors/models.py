@@ -26,7 +26,7 @@ from importlib import metadata
 from typing import TYPE_CHECKING, Any, Final, cast
 
 from predictors.errors import PredictorError, short_repr
-from predictors.plugin_import import import_class, lone_spec, reloaded_class, shadowing
+from predictors.plugin_import import form_hint, import_class, lone_spec, reloaded_class, shadowing
 
 if TYPE_CHECKING:
     import torch
@@ -306,7 +306,7 @@ def load_plugin(spec: str) -> ModelKind:
     The module is looked up among the installed ones, then in the current directory: a user's
     one-file plugin next to where they work needs no install."""
     if not isinstance(spec, str) or len(spec) > MAX_PLUGIN_SPEC or PLUGIN_PATTERN.fullmatch(spec) is None:
-        raise PredictorError(f"plugin {short_repr(spec)} is not of the form module:NetClass")
+        raise PredictorError(f"plugin {short_repr(spec)} is not of the form module:NetClass{form_hint(spec)}")
     known = _PLUGINS.get(spec)
     if known is not None and reloaded_class(spec, known.net_class) is None:
         return known

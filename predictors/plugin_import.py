@@ -9,7 +9,7 @@ import importlib.abc
 import importlib.machinery
 import os
 import sys
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any, Final
 
 from predictors.errors import PredictorError
@@ -40,6 +40,7 @@ def import_class(spec: str, what: str = "plugin") -> object:
     except Exception as exc:  # a plugin module that does not import: say which and why, in one line
         raise PredictorError(
             f"{what} {spec!r}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
+            f"{_not_found_hint(exc, module_name, class_name, cwd)}"
         ) from None
     if not hasattr(module, class_name):
         if (yours := _shadowed_file(module_name, module, Path(cwd))) is not None:
@@ -58,6 +59,39 @@ def import_class(spec: str, what: str = "plugin") -> object:
         )
         raise PredictorError(f"{what} {spec!r}: module {module_name!r} has no {class_name!r}{reload}")
     return getattr(module, class_name)
+
+
+def form_hint(spec: object) -> str:
+    """For a spec that is not ``module:Class`` because it names a file (``./window_mlp.py:WindowMLP``,
+    ``window_mlp.py``), the spec to write instead, in brackets; else "" (a spec longer than
+    ``models.MAX_PLUGIN_SPEC``, 200, is no path anyone typed, and its hint would flood the line)."""
+    if not isinstance(spec, str) or len(spec) > 200:
+        return ""
+    path, colon, class_name = spec.partition(":")
+    if not ("/" in path or path.endswith(".py")):
+        return ""
+    stem = PurePath(path).stem
+    return (
+        f" (a module's name as Python imports it, not a file: run crowdmpc from the folder that holds "
+        f"{stem}.py and write {stem}:{class_name if colon and class_name else 'ClassName'})"
+    )
+
+
+def _not_found_hint(exc: Exception, module_name: str, class_name: str, cwd: str) -> str:
+    """What to do when the plugin's own module was not found (not a module it imports): "No module named
+    'window_mlp'" said nothing of where crowdmpc looked, when the user ran it from another folder than the
+    file's, or named the file (window_mlp.py:WindowMLP) for the module."""
+    if not isinstance(exc, ModuleNotFoundError) or exc.name is None:
+        return ""
+    if not (module_name == exc.name or module_name.startswith(exc.name + ".")):
+        return ""  # a module the plugin imports is missing: the message names it
+    if module_name.endswith(".py"):
+        return f" (name the module, not its file: {module_name[:-3]}:{class_name})"
+    top = module_name.partition(".")[0]
+    return (
+        f" (not installed, and no {top}.py nor {top}/ in the folder crowdmpc runs in, {cwd}: run it from "
+        f"the folder that holds {top}.py, or put that folder on PYTHONPATH)"
+    )
 
 
 class _AfterInstalled(importlib.abc.MetaPathFinder):

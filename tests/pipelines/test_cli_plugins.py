@@ -139,6 +139,40 @@ def test_a_bad_plugin_is_a_one_line_error(spec, message, capsys):
     assert PLUGINS_ENV not in os.environ
 
 
+def test_a_plugin_named_by_its_file_or_run_from_another_folder_says_what_to_write(
+    tmp_path, monkeypatch, capsys
+):
+    """A newcomer's three slips with docs/extending.md's ``--plugin window_mlp:WindowMLP``: running from
+    another folder than the file's ("No module named 'mine_q'", nothing said of where crowdmpc looked),
+    naming the file for the module, and giving its path. A module the plugin imports that is missing keeps
+    its own message, which names it."""
+    monkeypatch.chdir(tmp_path)
+    here = Path.cwd()  # as the command sees it (tmp_path may be reached through a link)
+    (tmp_path / "needs_q_dep.py").write_text("import no_such_dep_q\n")
+    said = {
+        spec: parser_error(capsys, "--plugin", spec, "zoo", "list")
+        for spec in ("mine_q:Net", "mine_q.py:Net", "./sub/mine_q.py:Net", "needs_q_dep:Net")
+    }
+    assert said["mine_q:Net"] == (
+        "crowdmpc: error: argument --plugin: plugin 'mine_q:Net': importing 'mine_q' failed: "
+        "ModuleNotFoundError: No module named 'mine_q' (not installed, and no mine_q.py nor mine_q/ in the "
+        f"folder crowdmpc runs in, {here}: run it from the folder that holds mine_q.py, or put that "
+        "folder on PYTHONPATH); see 'crowdmpc --help'"
+    )
+    assert said["mine_q.py:Net"].endswith(
+        "No module named 'mine_q' (name the module, not its file: mine_q:Net); see 'crowdmpc --help'"
+    )
+    assert said["./sub/mine_q.py:Net"] == (
+        "crowdmpc: error: argument --plugin: plugin './sub/mine_q.py:Net' is not of the form "
+        "module:NetClass or module:Controller (a module's name as Python imports it, not a file: run "
+        "crowdmpc from the folder that holds mine_q.py and write mine_q:Net); see 'crowdmpc --help'"
+    )
+    assert said["needs_q_dep:Net"].endswith(
+        "importing 'needs_q_dep' failed: ModuleNotFoundError: No module named 'no_such_dep_q'; see "
+        "'crowdmpc --help'"
+    )
+
+
 def test_a_plugin_file_named_as_crowdmpcs_own_package_is_told_to_be_renamed(tmp_path, monkeypatch, capsys):
     """It said "module 'mpc' has no 'MyNet'; ... importlib.reload(mpc) first", of crowdmpc's mpc package."""
     import mpc
