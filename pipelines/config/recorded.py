@@ -220,7 +220,21 @@ def provenance(path: Path, run: dict[str, Any], index: int, total: int) -> str:
         f"# From {path}, run {index} of {total} (started {_plain(run.get('started', '?'))}), crowdmpc "
         f"{_plain(run.get('version', '?'))} at commit {commit}{dirty}.\n"
         "# Its [sweep] out is that directory, where a rerun resumes; give --out NEW to rerun elsewhere.\n"
+        f"{_plugins_note(code.get('plugins'))}"
     )
+
+
+def _plugins_note(recorded: object) -> str:
+    """Comment lines naming the plugins a run's code held (``code.plugins``: ``module:Class`` -> sha256), as
+    the --plugin options a rerun needs: the file names none, and a sweep of it alone stopped on the first
+    predictor or controller of a plugin's ("a plugin that is not registered")."""
+    from pipelines.loop.spec import is_plugin_spec
+
+    specs = sorted(spec for spec in recorded if is_plugin_spec(spec)) if isinstance(recorded, dict) else []
+    if not specs:
+        return ""
+    options = " ".join(f"--plugin {spec}" for spec in specs)
+    return comment(f"It ran plugins' code: rerun it as `crowdmpc {options} --config FILE sweep --out NEW`.")
 
 
 def machine_note(config: RunConfig) -> str:

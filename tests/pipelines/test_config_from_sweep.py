@@ -99,6 +99,25 @@ def test_recorded_values_stay_inside_their_comment(tmp_path, capsys):
     assert main(["config", "show", "--config", str(tmp_path / "printed.toml")]) == 0
 
 
+def test_the_plugins_a_sweep_ran_are_named_as_the_options_a_rerun_needs(tmp_path, capsys):
+    """A sweep of a plugin's predictor (docs/extending.md, section 5) recorded the plugin in its code, and the
+    printed file named none: its rerun stopped on "a plugin that is not registered" with nothing in the file
+    saying which. A recorded name that is no module:Class (a hand-edited record) is left out."""
+    plugins = {"mine_q:Net": "ab" * 32, "my_controller:GoStraight": "cd" * 32, "x\n[mpc]": "0"}
+    run = {"started": "2026-12-01", "version": "0.1.0", "code": {"commit": "abc", "plugins": plugins}}
+    run["config"] = {"sweep": {"experiment": "baselines"}}
+    (tmp_path / SWEEP_FILE).write_text(json.dumps({"experiment": "baselines", "runs": [run]}))
+    assert main(["config", "show", "--from-sweep", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    said = " ".join(line[2:] for line in printed.splitlines()[2:4])  # a comment wrapped at the file's width
+    assert said == (
+        "It ran plugins' code: rerun it as `crowdmpc --plugin mine_q:Net --plugin my_controller:GoStraight "
+        "--config FILE sweep --out NEW`."
+    )
+    (tmp_path / "printed.toml").write_text(printed)
+    assert main(["config", "show", "--config", str(tmp_path / "printed.toml")]) == 0
+
+
 def _recorded_sweep(directory, sets: list[str]) -> None:
     """A sweep.json whose run recorded the effective config of ``sets``, as `crowdmpc sweep` records it."""
     from pipelines.config import load
