@@ -79,6 +79,13 @@ class RunCheckpoint(ModelCheckpoint):
         if not self._should_save_on_train_epoch_end(trainer):
             self._save_last_unless_saved(trainer)
 
+    def _save_topk_checkpoint(self, trainer: Any, monitor_candidates: dict[str, Any]) -> None:
+        # An epoch whose training loss was not finite is no best, whatever its validation ADE: a Gaussian
+        # head's NaN sigmas (a negative one's log) leave the mean, and so the ADE, finite, and that epoch was
+        # kept as "the best epoch before" the divergence it was, its weights written as a trained model's.
+        if not any(isinstance(c, StopOnDivergence) and c.diverging for c in trainer.callbacks):
+            super()._save_topk_checkpoint(trainer, monitor_candidates)
+
     def _save_last_unless_saved(self, trainer: Any) -> None:
         # skipped too when this step is saved already: a new best writes last.ckpt with it
         if not self._should_skip_saving_checkpoint(trainer):
@@ -114,6 +121,19 @@ class StopOnDivergence(Callback):
     def __init__(self) -> None:
         self.epoch: int | None = None  # the epoch whose loss was not finite
         self.loss = math.nan
+        self.diverging = False  # a step of this epoch had a loss that is not finite (RunCheckpoint reads it)
+
+    def on_train_epoch_start(self, trainer: Any, pl_module: Any) -> None:
+        self.diverging = False
+
+    def on_train_batch_end(
+        self, trainer: Any, pl_module: Any, outputs: Any, batch: Any, batch_idx: int
+    ) -> None:
+        # the step's loss, as both modules log it: the epoch's mean is known only after its validation,
+        # when the best checkpoint has been saved
+        loss = trainer.callback_metrics.get("train_loss")
+        if loss is not None and not bool(torch.isfinite(loss).all()):
+            self.diverging = True
 
     def on_train_epoch_end(self, trainer: Any, pl_module: Any) -> None:
         loss = trainer.callback_metrics.get("train_loss_epoch")

@@ -206,6 +206,28 @@ class NoPadding(ToyNet):
         return super().decode_step(h, prev, cur, neighbours)
 
 
+class NegativeSigmas(ToyNet):
+    """A Gaussian head whose sigma_x is negative (a raw linear output, here made so for every seed): the
+    NLL's log of sigma_x * sigma_y is NaN from the first step, while the mean, and so every validation ADE,
+    is finite."""
+
+    head_type = "gaussian"
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        self.readout = nn.Linear(config.hidden_dim, 5)
+
+    def decode_step(self, h, prev, cur, neighbours):  # ToyNet's encode steps through it too
+        h, out = super().decode_step(h, prev, cur, neighbours)
+        return h, self._gaussian(out)
+
+    @staticmethod
+    def _gaussian(raw):
+        sigma_x = -0.1 - torch.nn.functional.softplus(raw[..., 2:3])  # with sigma_y > 0: log(sx sy) is NaN
+        sigma_y = 0.1 + torch.nn.functional.softplus(raw[..., 3:4])
+        return torch.cat([raw[..., :2], sigma_x, sigma_y, 0.5 * torch.tanh(raw[..., 4:5])], dim=-1)
+
+
 class NaNFromItsThirdStep(ToyNet):
     """A net that trains, then diverges: its third training step on (the walk file's one batch an epoch: the
     third epoch) and every later one are NaN, as a learning rate that overshoots late does."""

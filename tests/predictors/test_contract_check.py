@@ -4,6 +4,7 @@ every registered kind, shipped or plugin, passes the same check."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -258,6 +259,27 @@ def test_a_training_whose_loss_is_nan_stops_after_that_epoch_in_one_line_and_wri
     # stopped after the first epoch ("": the learning rate's row, logged as the epoch starts, has no epoch)
     assert {line.split(",")[0] for line in epochs} - {""} == {"0"}
     assert not list((tmp_path / "run").glob("*.pt"))
+
+
+def test_a_diverged_epoch_whose_validation_ade_is_finite_is_no_best_epoch(tmp_path, capsys):
+    """A Gaussian head's negative sigmas make the loss NaN from the first step while the mean, and the
+    validation ADE, stay finite: that epoch was saved as the best, said to be "the best epoch before" the
+    divergence it was, and its weights written as a trained model's (exit 0)."""
+    model = f"{BROKEN}:NegativeSigmas"
+    data = write_walk_file(tmp_path / "walk.ndjson")
+    argv = ["--plugin", model, "train", "--model", model, "--train", str(data), "--val", str(data)]
+    code = main([*argv, "--epochs", "3", "--out", str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith(
+        f"crowdmpc train: error: model {model!r}: training diverged: the training loss was nan in epoch 0, "
+        "and no epoch before it validated; no weights written"
+    ), err
+    rows = (tmp_path / "run" / "csv" / "version_0" / "metrics.csv").read_text().splitlines()
+    column = rows[0].split(",").index("val_ade")
+    ades = [float(row.split(",")[column]) for row in rows[1:] if row.split(",")[column]]
+    assert ades and all(map(math.isfinite, ades))  # what made the diverged epoch look like a best one
+    assert not list((tmp_path / "run").glob("*.pt"))
+    assert not list((tmp_path / "run" / "checkpoints").glob("best*"))
 
 
 def test_a_model_loads_and_an_in_place_change_is_still_refused_under_inference_mode():
