@@ -60,6 +60,17 @@ def _record_end(data: bytes, offset: int, limit: int) -> int | None:
     return end if end <= limit else None
 
 
+def _overrun(data: bytes, offset: int, limit: int) -> str | None:
+    """How the record at ``offset`` of a complete file runs past ``limit``, its last record's end, by its
+    length field, in words; None where it does not (its content is what is bad) or the field is cut."""
+    if offset + 9 > limit:
+        return None
+    length, room = struct.unpack_from("<Q", data, offset + 1)[0], limit - offset - 9
+    if length <= room:
+        return None
+    return f"its length field says {length} bytes, where {room} remain before the closing magic"
+
+
 def summary_crc_problem(data: bytes, footer_offset: int, footer: Footer) -> str | None:
     """Why the summary section of ``data`` does not match its footer's CRC (MCAP: the CRC-32 of every byte
     from the summary's start through the footer's summary offset start; 0: none recorded), or None."""
@@ -192,11 +203,19 @@ def walk_file(
                 records = _records(buffer, len(data), first=False)
                 continue
             if complete:
-                problems.append(
-                    f"corrupt record at byte {offset} ({reason(exc)}); the rest of the file is not read"
-                )
+                why = _overrun(data, offset, limit) or reason(exc)  # not mcap's RecordLengthLimitExceeded
+                problems.append(f"corrupt record at byte {offset} ({why}); the rest of the file is not read")
             else:  # a record longer than the whole file, in a file cut short: the cut, as any other
                 stopped_at = CUT if isinstance(exc, RecordLengthLimitExceeded) else reason(exc)
+            break
+        if complete and buffer.tell() > limit:
+            # mcap read the bytes its length field claims past the record's content as padding, the closing
+            # magic among them: the next read failed at the file's end, named as the corrupt record's place
+            problems.append(
+                f"corrupt record at byte {offset} ({_overrun(data, offset, limit)}); the rest of the file is "
+                "not read"
+            )
+            take(record, offset)
             break
         data_ended = data_ended or isinstance(record, DataEnd)
         if isinstance(record, Footer):

@@ -149,3 +149,26 @@ def test_a_cut_before_the_first_chunk_names_no_time(episode, tmp_path):
         f"{path} is truncated (the run was killed or is still writing): read no message, no chunk was "
         "complete; the rest is lost (the file ends inside a record)"
     )
+
+
+def test_a_record_length_past_the_file_is_named_in_words(episode, tmp_path, capsys):
+    """A complete file whose record's length field ran past its end had a corrupt record in mcap's words,
+    "(RecordLengthLimitExceeded: METADATA record has length ... that exceeds limit ...)", where the length
+    exceeded the file's size, and else one "at byte" the file's size, "(the file ends inside a record)": the
+    place of no record, and a cut in a file that had none."""
+    data = episode.read_bytes()
+    first = 8 + 9 + int.from_bytes(data[9:17], "little")  # the record after the header: the metadata
+    room = len(data) - 8 - first - 9  # the bytes from its content's start to the closing magic
+    for length in (10**12, room + 12, room + 3):  # past the file's size, into or past the closing magic
+        bad = bytearray(data)
+        bad[first + 1 : first + 9] = length.to_bytes(8, "little")
+        path = tmp_path / f"length{length}.mcap"
+        path.write_bytes(bytes(bad))
+        rec = read_recording(path)
+        problem = (
+            f"corrupt record at byte {first} (its length field says {length} bytes, where {room} remain "
+            "before the closing magic); the rest of the file is not read"
+        )
+        assert rec.problems == [problem] and not rec.truncated, length
+        rc, out = review_check(capsys, path)
+        assert rc == 1 and f"check {path}: the file itself: 1 problem\n  {problem}\n" in out
