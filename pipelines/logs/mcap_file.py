@@ -5,10 +5,11 @@ its CRC checked by the reader, one chunk at a time). The data section's CRC is c
 (``validate_crcs``; 0, i.e. absent, in recordings made before crowdmpc wrote it), and the summary section's
 (the footer's ``summary_crc``), which no mcap reader verifies, at the footer: a changed byte among the chunk
 indexes made mcap's indexed reader, as Foxglove reads a file, fail on a file whose messages all read here.
-A record that does not parse is stepped over by its length where that lies within the file. The messages
-read are counted against the summary's Statistics record (``statistics_problem``): where a file has no data
-section CRC, a chunk whose opcode byte changed is skipped by mcap's reader as a record it does not know. A
-footer reached without a DataEnd record before it is a problem too: that record holds the data section's CRC.
+A record that does not parse is stepped over by its length where that lies within the file, and so is the
+first record where it is not a header (its opcode byte changed). The messages read are counted against the
+summary's Statistics record (``statistics_problem``): where a file has no data section CRC, a chunk whose
+opcode byte changed is skipped by mcap's reader as a record it does not know. A footer reached without a
+DataEnd record before it is a problem too: that record holds the data section's CRC.
 """
 
 from __future__ import annotations
@@ -141,25 +142,34 @@ def _after_header(
     path: Path, data: bytes, buffer: io.BytesIO, limit: int, problems: list[str]
 ) -> Iterator[McapRecord]:
     """The records after the header of ``data`` (read through ``buffer``), the last ending by ``limit``. A
-    header record whose content does not parse but whose length lies within the file is stepped over, a
-    problem: a changed byte in its library's name lost the file whole, where mcap's reader read every
-    message. PipelineError where no header record stands after the magic."""
+    header record whose content does not parse, or whose opcode byte changed, but whose length lies within
+    the file is stepped over, a problem: one changed byte of it lost the file whole, where mcap's reader
+    read every message. PipelineError where no record after the magic ends within the file."""
     records = _records(buffer, len(data), first=True)
+    start = len(MAGIC)
+    opcode = data[start] if len(data) > start else None
     try:
         header = next(records)
     except Exception as exc:  # noqa: BLE001 (whatever the bytes after the magic are)
-        start = len(MAGIC)
-        end = _record_end(data, start, limit) if data[start : start + 1] == bytes([Opcode.HEADER]) else None
-        if end is None:
-            raise PipelineError(
-                f"{path} has no complete MCAP header ({len(data)} bytes; {reason(exc)}): not a recording"
-            ) from None
-        problems.append(f"corrupt header record at byte {start} ({reason(exc)}); left out")
-        buffer.seek(end)
-        return _records(buffer, len(data), first=False)
-    if not isinstance(header, Header):
-        raise PipelineError(f"{path} does not start with an MCAP header record: not a recording")
-    return records
+        why = reason(exc)
+    else:
+        # an opcode MCAP does not define is skipped by mcap's reader: what it returned is the next record
+        if opcode == Opcode.HEADER and isinstance(header, Header):
+            return records
+        why = ""
+    end = _record_end(data, start, limit)
+    if end is None:
+        why = why or "its first record runs past the file's end"
+        raise PipelineError(f"{path} has no complete MCAP header ({len(data)} bytes; {why}): not a recording")
+    if opcode == Opcode.HEADER:
+        problems.append(f"corrupt header record at byte {start} ({why}); left out")
+    else:  # MCAP: "the first record after the leading magic bytes is the Header record"
+        problems.append(
+            f"the record at byte {start}, where MCAP's header stands, has opcode {opcode:#04x}, not a "
+            f"header's {Opcode.HEADER:#04x}: readers that check it refuse the file; left out"
+        )
+    buffer.seek(end)
+    return _records(buffer, len(data), first=False)
 
 
 def walk_file(

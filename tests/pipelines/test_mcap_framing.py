@@ -96,6 +96,41 @@ def test_a_header_that_does_not_parse_loses_itself_only(episode, tmp_path, capsy
         read_recording(cut)
 
 
+@pytest.mark.parametrize("opcode", [0x7F, Opcode.SCHEMA, Opcode.DATA_END])
+def test_a_header_whose_opcode_changed_loses_itself_only(episode, tmp_path, capsys, opcode):
+    """A changed opcode byte of the header record refused the recording whole, "does not start with an MCAP
+    header record: not a recording", where mcap's reader read every message of it: the file starts with
+    MCAP's magic, and its header's place is damaged as its content was in the test above. An opcode MCAP
+    does not define (mcap skips the record), one whose record does not parse (a schema) and one that does
+    (a Data End of CRC 0) alike."""
+    data = episode.read_bytes()
+    assert data[8] == Opcode.HEADER
+    bad = bytearray(data)
+    bad[8] = opcode
+    path = tmp_path / "header_opcode.mcap"
+    path.write_bytes(bytes(bad))
+    with open(path, "rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) > 0
+
+    rec, whole = read_recording(path), read_recording(episode)
+    problem = (
+        f"the record at byte 8, where MCAP's header stands, has opcode {opcode:#04x}, not a header's 0x01: "
+        "readers that check it refuse the file; left out"
+    )
+    assert rec.problems == [problem]
+    assert {t: [m.data for m in ms] for t, ms in rec.messages.items()} == {
+        t: [m.data for m in ms] for t, ms in whole.messages.items()
+    }
+    assert rec.metadata == whole.metadata and not rec.truncated
+    rc, out = review_check(capsys, path)
+    assert rc == 1 and f"check {path}: the file itself: 1 problem\n  {problem}\n" in out
+
+    # cut inside that record, it is still no recording
+    path.write_bytes(bytes(bad[:20]))
+    with pytest.raises(PipelineError, match=r"has no complete MCAP header \(20 bytes; "):
+        read_recording(path)
+
+
 def test_a_changed_closing_magic_is_no_cut(episode, tmp_path, capsys):
     """A changed byte of the closing magic was read as a killed run's file: "truncated (the run was killed
     or is still writing) ... the rest is lost", of a file that had lost nothing."""
