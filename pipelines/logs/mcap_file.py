@@ -140,8 +140,9 @@ def _file_bytes(path: Path) -> bytes:
 
 def _after_header(
     path: Path, data: bytes, buffer: io.BytesIO, limit: int, problems: list[str]
-) -> Iterator[McapRecord]:
-    """The records after the header of ``data`` (read through ``buffer``), the last ending by ``limit``. A
+) -> tuple[Header | None, Iterator[McapRecord]]:
+    """The header of ``data`` (None where it did not read) and the records after it (read through
+    ``buffer``), the last ending by ``limit``. A
     header record whose content does not parse, or whose opcode byte changed, but whose length lies within
     the file is stepped over, a problem: one changed byte of it lost the file whole, where mcap's reader
     read every message. PipelineError where no record after the magic ends within the file."""
@@ -155,7 +156,7 @@ def _after_header(
     else:
         # an opcode MCAP does not define is skipped by mcap's reader: what it returned is the next record
         if opcode == Opcode.HEADER and isinstance(header, Header):
-            return records
+            return header, records
         why = ""
     end = _record_end(data, start, limit)
     if end is None:
@@ -169,21 +170,23 @@ def _after_header(
             f"header's {Opcode.HEADER:#04x}: readers that check it refuse the file; left out"
         )
     buffer.seek(end)
-    return _records(buffer, len(data), first=False)
+    return None, _records(buffer, len(data), first=False)
 
 
 def walk_file(
     path: Path, take: Callable[[McapRecord, int], None], problems: list[str]
 ) -> tuple[bool, str | None]:
-    """Hand every record of ``path`` after its header to ``take`` (with its offset), and the damage found
-    to ``problems``; whether the file is complete (it ends with the closing magic, or with its footer and 8
-    bytes a change kept from being it: a problem) and what stopped reading early, if anything did.
-    PipelineError when ``path`` is no recording at all."""
+    """Hand every record of ``path`` to ``take`` (with its offset), its header first where it reads, and the
+    damage found to ``problems``; whether the file is complete (it ends with the closing magic, or with its
+    footer and 8 bytes a change kept from being it: a problem) and what stopped reading early, if anything
+    did. PipelineError when ``path`` is no recording at all."""
     data = _file_bytes(path)
     complete = len(data) >= 2 * len(MAGIC) and data.endswith(MAGIC)
     limit = len(data) - len(MAGIC) if complete else len(data)  # where the last record must end
     buffer = io.BytesIO(data)
-    records = _after_header(path, data, buffer, limit, problems)
+    header, records = _after_header(path, data, buffer, limit, problems)
+    if header is not None:
+        take(header, len(MAGIC))
 
     stopped_at = None
     # every MCAP file ends its data section with a DataEnd record; a changed opcode byte made mcap's reader

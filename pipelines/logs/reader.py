@@ -13,9 +13,10 @@ count log time from 0. Either way ``Recording.sim_seconds`` gives the simulation
 every place (warnings, problems) names a message by it.
 
 Nothing in a file raises past ``read_recording`` except a file that is not a recording at all (missing, a
-folder, empty, not MCAP, no complete header): a bad chunk, a message that is not JSON or lacks what the review
-reads (``pipelines.logs.shapes``), a bad metadata value or a corrupt record becomes a line of
-``Recording.problems`` or of ``LoggedMessage.problem``, and the messages it held are left out.
+folder, empty, not MCAP, no complete header, another program's MCAP file: ``_Walk.foreign``): a bad chunk, a
+message that is not JSON or lacks what the review reads (``pipelines.logs.shapes``), a bad metadata value or a
+corrupt record becomes a line of ``Recording.problems`` or of ``LoggedMessage.problem``, and the messages it
+held are left out.
 """
 
 from __future__ import annotations
@@ -29,13 +30,13 @@ from pathlib import Path
 from typing import Any, Final
 
 from mcap.records import Channel as McapChannel
-from mcap.records import Chunk, McapRecord, Message, Metadata, Schema, Statistics
+from mcap.records import Chunk, Header, McapRecord, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import breakup_chunk
 
 from pipelines.errors import PipelineError
 from pipelines.logs.mcap_file import reason, statistics_problem, walk_file
 from pipelines.logs.recorder import UNFINISHED_SUFFIX
-from pipelines.logs.schemas import EPISODE_FORMAT
+from pipelines.logs.schemas import CHANNELS, EPISODE_FORMAT, LIBRARY, METADATA_NAMES
 from pipelines.logs.shapes import episode_metadata_problems, message_problem
 from predictors.errors import short_repr
 
@@ -211,6 +212,7 @@ class _Walk:
         self._orphans: dict[int, list[Message]] = {}  # channel id -> messages read before its channel
         self._read: Counter[int] = Counter()  # channel id -> messages read, whatever their topic
         self._statistics: Statistics | None = None
+        self._library: str | None = None  # the header's; None where it did not read
 
     def take(self, record: McapRecord, offset: int) -> None:
         if self.metadata_only and not isinstance(record, Metadata):
@@ -242,6 +244,27 @@ class _Walk:
             self.metadata[record.name] = dict(record.metadata)
         elif isinstance(record, Statistics) and self._statistics is None:
             self._statistics = record
+        elif isinstance(record, Header):
+            self._library = record.library
+
+    def foreign(self) -> str | None:
+        """Why the file is another program's MCAP file, not a crowdmpc recording: its header names another
+        library and it holds none of a recording's metadata records or topics (a recording whose header is
+        damaged still holds those); None for a recording, and for a file that holds nothing to tell."""
+        topics = sorted({channel.topic for channel in self._channels.values()})
+        if self._library == LIBRARY or CHANNELS.keys() & topics or METADATA_NAMES & self.metadata.keys():
+            return None
+        if self._library is None and not topics and not self.metadata:
+            return None
+        held = [
+            f"{what}{'s' * (len(names) != 1)} {', '.join(map(repr, names[:3]))}"
+            + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+            for what, names in (("topic", topics), ("metadata record", sorted(self.metadata)))
+            if names
+        ]
+        by = f"written by {self._library!r}" if self._library is not None else "its header unread"
+        what = f"holds {'; '.join(held)}, none of an episode's" if held else "holds nothing"
+        return f"is an MCAP file but not a crowdmpc recording ({by}; it {what})"
 
     def finish(self) -> None:
         """The messages read against the Statistics record's counts; messages whose channel came later (the
@@ -305,8 +328,8 @@ def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Rec
     topics absent from ``messages`` and ``channels``: every chunk is still decompressed and checked, but
     the hundreds of state messages are not parsed.
 
-    Raises PipelineError only when ``path`` is no recording at all: missing, a folder, empty, not MCAP, or
-    cut inside its header.
+    Raises PipelineError only when ``path`` is no recording at all: missing, a folder, empty, not MCAP, cut
+    inside its header, or another program's MCAP file.
     """
     if not isinstance(path, str | os.PathLike):
         raise PipelineError(f"read_recording takes a path to an MCAP file, got {short_repr(path)}")
@@ -315,6 +338,8 @@ def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Rec
     path = Path(path)
     walk = _Walk(path, topics=None if topics is None else frozenset(topics))
     complete, stopped_at = walk_file(path, walk.take, walk.problems)
+    if (foreign := walk.foreign()) is not None:  # a table of dashes, and "ok" under --check, said nothing
+        raise PipelineError(f"{path} {foreign}")
     walk.finish()
     return Recording(
         path, walk.metadata, walk.channels, walk.messages, not complete, stopped_at, walk.problems

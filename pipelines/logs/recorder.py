@@ -24,7 +24,7 @@ from typing import IO, Any, Final
 from mcap.writer import CompressionType, Writer
 
 from pipelines.errors import PipelineError, RecordingRefused
-from pipelines.logs.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, MessageSchema
+from pipelines.logs.schemas import LIBRARY, MESSAGE_ENCODING, SCHEMA_ENCODING, MessageSchema
 
 DEFAULT_CHUNK_SIZE: Final[int] = 64 * 1024  # bytes, uncompressed
 UNFINISHED_SUFFIX: Final[str] = ".part"  # the file's name until it is finished
@@ -170,7 +170,7 @@ class McapRecorder:
             self._writer = Writer(
                 self._stream, chunk_size=chunk_size, compression=compression, enable_data_crcs=True
             )
-            self._writer.start(profile="", library="crowdmpc")
+            self._writer.start(profile="", library=LIBRARY)
         except OSError as exc:
             self._stream.close()
             raise self._unwritten(exc) from None

@@ -21,6 +21,11 @@ MESSAGE_ENCODING: Final[str] = "json"
 # /episode/metrics is the EpisodeRecord (pipelines/loop/record.py); 3: log times are wall clock, episode
 # start_time_ns + simulation time (before: simulation time from 0). The reader flags a file of another.
 EPISODE_FORMAT: Final[str] = "crowdmpc-episode/3"
+# The library its header names, as every recording since the first: the reader tells another program's
+# MCAP file by it (with the metadata and topics, which a file whose header is damaged still holds).
+LIBRARY: Final[str] = "crowdmpc"
+# The metadata records an episode file holds (pipelines.logs.recording).
+METADATA_NAMES: Final[frozenset[str]] = frozenset({"crowdmpc", "episode", "config", "run"})
 
 
 @dataclass(frozen=True, eq=False)

@@ -257,6 +257,55 @@ def test_a_device_or_a_pipe_is_named_as_no_regular_file(tmp_path, capsys):
     assert capsys.readouterr().err.endswith("missing.mcap: no such recording\n")
 
 
+def _other_programs_file(path, topics=("/foo",), metadata=()):
+    from mcap.writer import Writer
+
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="other")
+        schema = writer.register_schema("Foo", "jsonschema", b'{"type": "object"}')
+        for name in metadata:
+            writer.add_metadata(name, {"k": "v"})
+        for topic in topics:
+            channel = writer.register_channel(topic, "json", schema)
+            for k in range(5):
+                writer.add_message(channel, log_time=k, data=json.dumps({"x": k}).encode(), publish_time=k)
+        writer.finish()
+
+
+def test_another_programs_mcap_file_is_no_recording(runs, tmp_path, capsys):
+    """An MCAP file with none of a recording's metadata or topics was reviewed as one: a table of dashes and,
+    under --check, "5 messages, ok", exit 0, and in a folder a row counted among its runs."""
+    path = tmp_path / "other.mcap"
+    _other_programs_file(path)
+    for check in ([], ["--check"]):
+        assert main(["review", str(path), *check]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err == (
+            f"crowdmpc review: error: {path} is an MCAP file but not a crowdmpc recording (written by "
+            "'other'; it holds topic '/foo', none of an episode's)\n"
+        )
+    many = tmp_path / "many.mcap"
+    _other_programs_file(many, topics=("/a", "/b", "/c", "/d"), metadata=("m",))
+    with pytest.raises(PipelineError, match=r"topics '/a', '/b', '/c' and 1 more; metadata record 'm', none"):
+        read_recording(many)
+    # one of a recording's topics or metadata records is a crowdmpc file's, whatever program wrote it
+    _other_programs_file(path, topics=("/foo", "/robots"))
+    assert read_recording(path).channels.keys() == {"/foo", "/robots"}
+    _other_programs_file(path, metadata=("episode",))
+    assert read_recording(path).metadata == {"episode": {"k": "v"}}
+
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    shutil.copy(runs[0].path, folder)
+    _other_programs_file(folder / "other.mcap")
+    assert main(["review", str(folder)]) == 0
+    out, err = capsys.readouterr()
+    assert "\n1 run\n" in out and "other.mcap" not in out
+    assert f"crowdmpc review: unreadable: {folder / 'other.mcap'} is an MCAP file but not a crowdmpc " in err
+    assert main(["review", str(folder), "--check"]) == 1
+
+
 def test_a_folder_of_run_folders_is_reviewed_one_and_two_levels_down(runs, tmp_path, capsys):
     """A folder with no recordings of its own stands for those one and two levels below it (runs/ over
     runs/cmpc/, a sweep's DIR over DIR/mcap/CELL/), named by their paths below it, since cells hold files of
