@@ -55,10 +55,10 @@ compression fails) or a message that is not what the review reads is left out, w
 every one, with the schema violations, a truncated file and the file's own problems on lines apart from its
 messages' count, and checks --compare's file too.
 
-In a folder, every readable file is reviewed; each unreadable one (empty, not MCAP, cut inside its header,
-another program's MCAP file, a folder named *.mcap) gets one line on stderr, and each unfinished
-NAME.mcap.part (a recording still being written, or whose run was killed: review it by name to read what it
-holds) a warning line.
+In a folder, every readable file is reviewed; each unreadable one (empty, not MCAP, another program's MCAP
+file, cut before its first metadata record or holding none and no message, a folder named *.mcap) gets one
+line on stderr, and each unfinished NAME.mcap.part (a recording still being written, or whose run was
+killed: review it by name to read what it holds) a warning line.
 
 Exit code: 0 when the review ran, even with files left out of a folder (a sweep killed half-way must still
 review what it finished); 2 when nothing could be read (one file, or a folder without one readable recording);

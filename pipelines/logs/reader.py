@@ -13,10 +13,10 @@ count log time from 0. Either way ``Recording.sim_seconds`` gives the simulation
 every place (warnings, problems) names a message by it.
 
 Nothing in a file raises past ``read_recording`` except a file that is not a recording at all (missing, a
-folder, empty, not MCAP, no complete header, another program's MCAP file: ``_Walk.foreign``): a bad chunk, a
-message that is not JSON or lacks what the review reads (``pipelines.logs.shapes``), a bad metadata value or a
-corrupt record becomes a line of ``Recording.problems`` or of ``LoggedMessage.problem``, and the messages it
-held are left out.
+folder, empty, not MCAP, no complete header, another program's MCAP file (``_Walk.foreign``), no metadata
+record and no message read): a bad chunk, a message that is not JSON or lacks what the review reads
+(``pipelines.logs.shapes``), a bad metadata value or a corrupt record becomes a line of ``Recording.problems``
+or of ``LoggedMessage.problem``, and the messages it held are left out.
 """
 
 from __future__ import annotations
@@ -247,6 +247,11 @@ class _Walk:
         elif isinstance(record, Header):
             self._library = record.library
 
+    @property
+    def messages_read(self) -> int:
+        """The messages read, whatever their topic (``topics`` leaves some undecoded) or channel."""
+        return sum(self._read.values())
+
     def foreign(self) -> str | None:
         """Why the file is another program's MCAP file, not a crowdmpc recording: its header names another
         library and it holds none of a recording's metadata records or topics (a recording whose header is
@@ -322,6 +327,16 @@ class _Walk:
         return LoggedMessage(message.log_time, data, message_problem(topic, data))
 
 
+def _why_none(walk: _Walk, complete: bool, stopped_at: str | None) -> str:
+    """Why a file read nothing past its header, said after "holds no metadata record and no message"."""
+    if not complete:
+        cut = stopped_at or "no footer"
+        return f", nothing to review: it is cut short ({cut}; its run was killed or is still writing)"
+    if walk.problems:
+        return f" that reads, nothing to review: {walk.problems[0]}"
+    return ", nothing to review"
+
+
 def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Recording:
     """Read every message and metadata record of ``path``; a truncated file reads up to its last chunk.
     ``topics``: only the messages of these (``crowdmpc compare`` reads "/episode/metrics" alone), the other
@@ -329,7 +344,7 @@ def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Rec
     the hundreds of state messages are not parsed.
 
     Raises PipelineError only when ``path`` is no recording at all: missing, a folder, empty, not MCAP, cut
-    inside its header, or another program's MCAP file.
+    inside its header, another program's MCAP file, or one with no metadata record and no message.
     """
     if not isinstance(path, str | os.PathLike):
         raise PipelineError(f"read_recording takes a path to an MCAP file, got {short_repr(path)}")
@@ -341,6 +356,11 @@ def read_recording(path: str | Path, topics: Iterable[str] | None = None) -> Rec
     if (foreign := walk.foreign()) is not None:  # a table of dashes, and "ok" under --check, said nothing
         raise PipelineError(f"{path} {foreign}")
     walk.finish()
+    if not walk.metadata and not walk.messages_read:
+        # it was a table of dashes, exit 0 without --check, where review's help promises 2 when nothing reads
+        raise PipelineError(
+            f"{path} holds no metadata record and no message{_why_none(walk, complete, stopped_at)}"
+        )
     return Recording(
         path, walk.metadata, walk.channels, walk.messages, not complete, stopped_at, walk.problems
     )

@@ -113,3 +113,10 @@ def record_episode(
     else:
         recorder.close()
     return RecordedEpisode(recorder.paths[-1], observations, outputs, result, meta)
+
+
+def cut_before_episode_metadata(data: bytes) -> bytes:
+    """A recording's bytes up to its "episode" metadata record: the header and the "crowdmpc" record alone, a
+    run killed before the rest reached the file (one cut before the "crowdmpc" record reads nothing)."""
+    header_end = 8 + 9 + int.from_bytes(data[9:17], "little")
+    return data[: header_end + 9 + int.from_bytes(data[header_end + 1 : header_end + 9], "little")]

@@ -16,6 +16,7 @@ from mcap.stream_reader import StreamReader
 from pipelines.cli import main
 from pipelines.errors import PipelineError
 from pipelines.logs.reader import read_recording
+from pipelines.logs.recorder import McapRecorder
 from tests.pipelines.mcap_episode import record_episode
 
 
@@ -162,8 +163,10 @@ def test_a_cut_is_named_alike_wherever_it_falls(episode, tmp_path):
     size), where a cut inside a shorter record said "the file ends inside a record"."""
     data = episode.read_bytes()
     first = 8 + 9 + int.from_bytes(data[9:17], "little")  # the record after the header: the metadata
-    length = int.from_bytes(data[first + 1 : first + 9], "little")
-    for cut in (first + 9 + 1, first + 9 + length - 1):  # its length runs past the file's end, or not
+    # the one after it: a file that reads nothing past its header is nothing to review (test below)
+    second = first + 9 + int.from_bytes(data[first + 1 : first + 9], "little")
+    length = int.from_bytes(data[second + 1 : second + 9], "little")
+    for cut in (second + 9 + 1, second + 9 + length - 1):  # its length runs past the file's end, or not
         path = tmp_path / f"cut{cut}.mcap"
         path.write_bytes(data[:cut])
         rec = read_recording(path)
@@ -193,17 +196,50 @@ def test_a_record_length_past_the_file_is_named_in_words(episode, tmp_path, caps
     place of no record, and a cut in a file that had none."""
     data = episode.read_bytes()
     first = 8 + 9 + int.from_bytes(data[9:17], "little")  # the record after the header: the metadata
-    room = len(data) - 8 - first - 9  # the bytes from its content's start to the closing magic
+    at = first + 9 + int.from_bytes(data[first + 1 : first + 9], "little")  # the next: the first one reads
+    room = len(data) - 8 - at - 9  # the bytes from its content's start to the closing magic
     for length in (10**12, room + 12, room + 3):  # past the file's size, into or past the closing magic
         bad = bytearray(data)
-        bad[first + 1 : first + 9] = length.to_bytes(8, "little")
+        bad[at + 1 : at + 9] = length.to_bytes(8, "little")
         path = tmp_path / f"length{length}.mcap"
         path.write_bytes(bytes(bad))
         rec = read_recording(path)
         problem = (
-            f"corrupt record at byte {first} (its length field says {length} bytes, where {room} remain "
+            f"corrupt record at byte {at} (its length field says {length} bytes, where {room} remain "
             "before the closing magic); the rest of the file is not read"
         )
         assert rec.problems == [problem] and not rec.truncated, length
         rc, out = review_check(capsys, path)
         assert rc == 1 and f"check {path}: the file itself: 1 problem\n  {problem}\n" in out
+
+
+def test_a_file_that_reads_nothing_past_its_header_is_nothing_to_review(episode, tmp_path, capsys):
+    """A file cut to its header (40 bytes of a recording) was reviewed as a table of dashes with exit 0
+    without --check, where review's help promises 2 when nothing could be read: a script running `crowdmpc
+    review FILE` took it for a recording that had passed. So was a finished file of a header alone."""
+    data = episode.read_bytes()
+    header_end = 8 + 9 + int.from_bytes(data[9:17], "little")
+    first_read = header_end + 9 + int.from_bytes(data[header_end + 1 : header_end + 9], "little")
+    for cut in (header_end, 40, first_read - 1):
+        path = tmp_path / f"cut{cut}.mcap"
+        path.write_bytes(data[:cut])
+        for check in ([], ["--check"]):
+            assert main(["review", str(path), *check]) == 2, (cut, check)
+            out, err = capsys.readouterr()
+            assert out == "" and err == (
+                f"crowdmpc review: error: {path} holds no metadata record and no message, nothing to review: "
+                "it is cut short (the file ends inside a record; its run was killed or is still writing)\n"
+            )
+    header_alone = tmp_path / "header_alone.mcap"
+    McapRecorder(header_alone).close()
+    with pytest.raises(
+        PipelineError, match=r"header_alone.mcap holds no metadata record and no message, nothing"
+    ):
+        read_recording(header_alone)
+
+    # a cut that keeps its first metadata record reads it: a killed run's file, reviewed as before
+    path = tmp_path / "first.mcap"
+    path.write_bytes(data[:first_read])
+    assert read_recording(path).truncated
+    assert main(["review", str(path)]) == 0
+    assert main(["review", str(path), "--check"]) == 1

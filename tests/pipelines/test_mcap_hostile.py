@@ -39,9 +39,7 @@ from pipelines.logs.schemas import EPISODE_METRICS, HUMANS, ROBOTS, SOLVER
 from tests.pipelines.mcap_episode import record_episode
 
 REPO = Path(__file__).resolve().parents[2]
-HEADER_END = (
-    33  # magic (8) + crowdmpc's Header record (9 + 4 + 4 + len("crowdmpc")): the shortest readable cut
-)
+HEADER_END = 33  # magic (8) + crowdmpc's Header record (9 + 4 + 4 + len("crowdmpc"))
 S = 1_000_000_000  # ns
 
 
@@ -77,9 +75,19 @@ def episode(tmp_path_factory):
 def test_cut_at_many_offsets_reads_a_prefix_or_is_reported(episode, tmp_path, capsys):
     data = episode.path.read_bytes()
     complete = read_recording(episode.path)
+    # the shortest readable cut keeps the first metadata record after the header: one that reads nothing
+    # past the header is nothing to review
+    first_read = HEADER_END + 9 + int.from_bytes(data[HEADER_END + 1 : HEADER_END + 9], "little")
     rng = random.Random(0)
     cuts = sorted(
-        {*range(0, HEADER_END + 2, 3), HEADER_END, *rng.sample(range(40, len(data)), 40), len(data) - 1}
+        {
+            *range(0, HEADER_END + 2, 3),
+            HEADER_END,
+            first_read - 1,
+            first_read,
+            *rng.sample(range(40, len(data)), 40),
+            len(data) - 1,
+        }
     )
     folder = tmp_path / "cuts"
     folder.mkdir()
@@ -98,7 +106,7 @@ def test_cut_at_many_offsets_reads_a_prefix_or_is_reported(episode, tmp_path, ca
         assert rec.truncated and not rec.problems and not rec.message_problems(), cut
         for topic, messages in rec.messages.items():  # what was read is what was written
             assert [m.data for m in messages] == [m.data for m in complete.messages[topic][: len(messages)]]
-    assert [p.name for p in unreadable] == [f"cut{c:07d}.mcap" for c in cuts if c < HEADER_END]
+    assert [p.name for p in unreadable] == [f"cut{c:07d}.mcap" for c in cuts if c < first_read]
 
     rc, out, err = review(capsys, folder)
     assert rc == 0

@@ -18,7 +18,7 @@ from pipelines.logs.recording import McapEpisodeRecorder
 from pipelines.logs.review import setups_table, summarize
 from pipelines.logs.schemas import ROBOTS
 from pipelines.logs.view import episode_view
-from tests.pipelines.mcap_episode import control_output, record_episode
+from tests.pipelines.mcap_episode import control_output, cut_before_episode_metadata, record_episode
 
 
 @pytest.fixture(scope="module")
@@ -507,7 +507,7 @@ def test_a_recording_of_unknown_set_up_joins_the_one_known_or_stands_apart(tmp_p
     """A file cut before its metadata names no set-up: with one set-up in the folder it is among its runs
     (as the folder's one aggregate always counted it); beside two, it is a group of its own, so named."""
     first = record_episode(tmp_path, seed=1, steps=4, n_humans=4)
-    (tmp_path / "cut.mcap").write_bytes(first.path.read_bytes()[:200])
+    (tmp_path / "cut.mcap").write_bytes(cut_before_episode_metadata(first.path.read_bytes()))
     assert main(["review", str(tmp_path)]) == 0
     out, err = capsys.readouterr()
     assert "different set-ups" not in err and "\n2 runs, 1 whose episode did not end" in out

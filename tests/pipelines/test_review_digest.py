@@ -17,7 +17,7 @@ from pipelines.logs.identity import run_identity
 from pipelines.logs.reader import read_recording
 from pipelines.logs.review import summarize
 from pipelines.logs.schema_check import check_recording
-from tests.pipelines.mcap_episode import record_episode
+from tests.pipelines.mcap_episode import cut_before_episode_metadata, record_episode
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +96,7 @@ def test_a_folder_with_two_set_ups_pools_each_ones_steps_alone(folder, tmp_path,
 
 def test_a_run_of_unknown_set_up_keeps_its_place_in_the_one_known_set_up(tmp_path, capsys):
     first = record_episode(tmp_path, seed=1, steps=4)
-    (tmp_path / "a_cut.mcap").write_bytes(first.path.read_bytes()[:200])  # before its metadata
+    (tmp_path / "a_cut.mcap").write_bytes(cut_before_episode_metadata(first.path.read_bytes()))
     record_episode(tmp_path, seed=2, steps=4)
     assert main(["review", str(tmp_path), "--json", str(tmp_path / "r.json")]) == 0
     (group,) = json.loads((tmp_path / "r.json").read_text())["groups"]

@@ -15,7 +15,7 @@ from pipelines.cli import main
 from pipelines.logs.reader import read_recording
 from pipelines.logs.recording import McapEpisodeRecorder
 from tests.pipelines import mcap_episode
-from tests.pipelines.mcap_episode import record_episode
+from tests.pipelines.mcap_episode import cut_before_episode_metadata, record_episode
 
 WARNING = "crowdmpc review: warning:"
 
@@ -252,7 +252,7 @@ def test_compare_with_a_recording_that_names_no_crowd_says_so(tmp_path, capsys):
     circle, seed None vs 1, humans None vs 4"."""
     a = record_episode(tmp_path / "a", seed=1, steps=4)
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(a.path.read_bytes()[:40])  # its header, and 7 bytes of its first metadata record
+    cut.write_bytes(cut_before_episode_metadata(a.path.read_bytes()))
     assert main(["review", str(a.path), "--compare", str(cut)]) == 0
     err = capsys.readouterr().err
     assert "None" not in err
