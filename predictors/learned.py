@@ -38,7 +38,7 @@ from predictors import base
 from predictors.base import OBS_LEN, check_history, check_humans, check_rollout_inputs, robot_indices
 from predictors.errors import PredictorError
 from predictors.export import TensorSpec, export_function, output_shapes
-from predictors.nets.contract import check_step_contract
+from predictors.nets.contract import check_predictor_contract
 from predictors.threads import single_threaded
 
 # (humans, robots, horizon) of the check on first export: small, but with neighbours and a recursion.
@@ -69,8 +69,8 @@ class LearnedPredictor:
         for p in self.net.parameters():
             p.requires_grad_(False)
         # A zoo entry of a net that breaks the step contract fails here, in one line, rather than predicting
-        # broadcast nonsense in a closed loop.
-        check_step_contract(self.net, f"predictor {name!r} (model {self.kind!r})", obs_len=obs_len)
+        # broadcast nonsense, or NaN at every step, in a closed loop.
+        check_predictor_contract(self.net, f"predictor {name!r} (model {self.kind!r})", obs_len=obs_len)
         self._functions: dict[tuple[int, int, int], ca.Function] = {}
         self._export_checked = False  # to_casadi's first build is checked against torch (_check_export)
         self._export_failure: PredictorError | None = None  # what that check raised: raised again

@@ -222,17 +222,39 @@ def _dtype_and_device(net: torch.nn.Module) -> tuple[torch.dtype, torch.device]:
     return torch.float32, torch.device("cpu")
 
 
-def check_step_contract(net: torch.nn.Module, where: str, *, obs_len: int) -> None:
+def check_step_contract(net: torch.nn.Module, where: str, *, obs_len: int, finite: bool = False) -> None:
     """PredictorError, one line starting with ``where`` (e.g. "model 'mymod:MyNet'"), unless ``net``'s
     ``encode`` and ``decode_step`` keep the step contract on a synthetic batch of ``obs_len`` steps: every
     state tensor ``(B, N, ...)``, ``decode_step`` handing back the state it was given in the same shapes and
-    dtypes, ``out`` ``(B, N, K)`` in the positions' dtype with K the head's width."""
+    dtypes, ``out`` ``(B, N, K)`` in the positions' dtype with K the head's width. With ``finite`` (a net
+    about to predict, not one about to train), both ``out`` must also be finite."""
     head = _head_type(net, where)
     for agents in (CHECK_AGENTS, OTHER_AGENTS):
-        _check_steps(net, where, obs_len, head, agents)
+        _check_steps(net, where, obs_len, head, agents, finite)
 
 
-def _check_steps(net: torch.nn.Module, where: str, obs_len: int, head: str, agents: int) -> None:
+def check_predictor_contract(net: torch.nn.Module, where: str, *, obs_len: int) -> None:
+    """``check_step_contract`` with finite outputs, for a net about to predict: training keeps a net whose
+    outputs are NaN, its divergence told by the epoch's loss."""
+    check_step_contract(net, where, obs_len=obs_len, finite=True)
+
+
+def _check_finite(out: torch.Tensor, where: str, what: str, agents: int) -> None:
+    """Every agent of the synthetic batch is observed, so no entry of ``out`` stands for padding: a NaN or
+    inf there would be predicted in every closed-loop step, each of which then fell back to its safe plan,
+    and the run ended 0 as the predictor's."""
+    bad = ~torch.isfinite(out)
+    if bool(bad.any()):
+        raise PredictorError(
+            f"{where}: {what} holds NaN or inf in {int(bad.sum())} of {out.numel()} entries on a synthetic "
+            f"batch (B={CHECK_BATCH}, N={agents}) where every agent is observed; a predictor must return "
+            f"finite outputs there {SEE}"
+        )
+
+
+def _check_steps(
+    net: torch.nn.Module, where: str, obs_len: int, head: str, agents: int, finite: bool = False
+) -> None:
     """``check_step_contract`` on a synthetic batch of ``agents`` agents."""
     dtype, device = _dtype_and_device(net)
     positions, mask = synthetic_scene(obs_len, agents=agents, dtype=dtype, device=device)
@@ -250,6 +272,9 @@ def _check_steps(net: torch.nn.Module, where: str, obs_len: int, head: str, agen
         stepped = _unchanged(where, "decode_step", agents, arguments, step_net.decode_step, *state, *inputs)
         new_state, new_out = _split(stepped, where, "decode_step", agents)
         _check_head(new_out, lead, head, dtype, where, "decode_step's out")
+        if finite:
+            _check_finite(out, where, "encode's out", agents)
+            _check_finite(new_out, where, "decode_step's out", agents)
     before = [(tuple(t.shape), t.dtype) for t in state]
     after = [(tuple(t.shape), t.dtype) for t in new_state]
     if before != after:

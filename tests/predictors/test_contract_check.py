@@ -311,3 +311,25 @@ def test_a_net_failing_on_a_real_batch_ends_train_in_one_line(tmp_path, capsys):
         f"crowdmpc train: error: model {model!r}: training failed in the net's code (broken_nets.py:"
     )
     assert "in decode_step): ValueError: an absent agent in the batch (the contract check's" in err
+
+
+def test_a_predictor_whose_net_predicts_nan_for_observed_agents_is_refused_where_it_loads():
+    """A plugin net predicting NaN loaded as a zoo predictor, and ``simulate`` with it fell back at every step
+    and ended 0, its table saying "NaN predictions 98 of 98". Training keeps such a net: the epoch's loss
+    tells its divergence (test_a_training_whose_loss_is_nan_stops_after_that_epoch...)."""
+    from predictors.learned import LearnedPredictor
+    from tests.plugins.broken_nets import DividesByItsOwnDistance
+    from tests.plugins.toy_predictor import ToyConfig, ToyNet
+
+    net = DividesByItsOwnDistance(ToyConfig())
+    check_step_contract(net, "model 'x'", obs_len=OBS_LEN)  # its shapes keep the contract
+    with pytest.raises(PredictorError) as caught:
+        LearnedPredictor(net, name="divides", kind=f"{BROKEN}:DividesByItsOwnDistance")
+    message = str(caught.value)
+    expected = (
+        f"predictor 'divides' (model '{BROKEN}:DividesByItsOwnDistance'): encode's out holds NaN or inf "
+        "in 12 of 12 entries on a synthetic batch (B=2, N=3) where every agent is observed; a predictor "
+        "must return finite outputs there"
+    )
+    assert message.startswith(expected) and "\n" not in message, message
+    assert LearnedPredictor(ToyNet(ToyConfig()), name="toy").name == "toy"
