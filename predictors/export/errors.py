@@ -2,10 +2,26 @@
 
 from __future__ import annotations
 
+from typing import Any
+from weakref import WeakKeyDictionary
+
 from predictors.errors import PredictorError
 
 # The module whose forward runs now, innermost last: pushed and popped by predictors.export.trace's hooks.
 MODULE_STACK: list[str] = []
+# The net a symbolic run traces now (trace.symbolic_run), and per net traced, the first module where that run
+# met detach() of a symbolic tensor. The export maps detach() to the identity, CasADi having no stop-gradient,
+# so its Jacobian differentiates through what torch's does not: the parity check names the module when the
+# Jacobians then differ, where it said only "differs ... (Jacobians)".
+TRACING: list[Any] = []
+DETACHED: WeakKeyDictionary[Any, str] = WeakKeyDictionary()
+
+
+def detach(x: Any, *args: Any, **kwargs: Any) -> Any:
+    """``x.detach()`` on a symbolic tensor: ``x`` itself, where it was met kept in ``DETACHED``."""
+    if TRACING:
+        DETACHED.setdefault(TRACING[-1], current_module())
+    return x
 
 
 def current_module() -> str:

@@ -33,6 +33,7 @@ from predictors.export.elementwise import (
     unary,
     where,
 )
+from predictors.export.errors import detach
 from predictors.export.layers import (
     dropout,
     full_like,
@@ -229,7 +230,7 @@ def _functions() -> dict[Any, Callable[..., Any]]:
         F.layer_norm: layer_norm,
         F.scaled_dot_product_attention: scaled_dot_product_attention,
         F.dropout: dropout,
-        torch.Tensor.detach: identity,
+        torch.Tensor.detach: detach,
         torch.Tensor.contiguous: identity,
         torch.Tensor.clone: identity,
     }
@@ -243,7 +244,7 @@ def _methods() -> dict[str, Callable[..., Any]]:
         "double": lambda x: as_float(x),
         "bool": lambda x: to(x, torch.bool),
         "type_as": lambda x, other: to(x, other.dtype),
-        "detach": identity,
+        "detach": detach,
         "contiguous": identity,
         "clone": identity,
         "new_zeros": new_constant(torch.zeros),

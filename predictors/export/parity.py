@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from crowdsim.world import DT
-from predictors.export.errors import ExportError
+from predictors.export.errors import DETACHED, ExportError
 from predictors.threads import single_threaded
 
 
@@ -173,9 +173,31 @@ def require_parity(predictor: Exported, n_humans: int, n_robots: int, horizon: i
             predictor.name,
         )
     if not parity.ok():
+        if parity.value_error <= PARITY_TOLERANCE and math.isfinite(parity.jacobian_error):
+            net = getattr(predictor, "net", None)
+            detached = DETACHED.get(net) if net is not None else None
+            raise ExportError(_derivatives_differ(parity, detached), predictor.name)
         raise ExportError(
             f"the exported prediction differs from torch by {parity.value_error:.2e} (values) and "
             f"{parity.jacobian_error:.2e} (Jacobians), more than {PARITY_TOLERANCE:g}",
             predictor.name,
         )
     return parity
+
+
+def _derivatives_differ(parity: Parity, detached: str | None) -> str:
+    """Values that agree with Jacobians that do not: torch stops a gradient the export cannot stop."""
+    agree = (
+        f"the exported prediction agrees with torch ({parity.value_error:.2e}) but its Jacobians with respect"
+        f" to the robots' plan differ by {parity.jacobian_error:.2e}, more than {PARITY_TOLERANCE:g}"
+    )
+    if detached is not None:
+        return (
+            f"detach() (in module {detached!r}) has no CasADi counterpart: the exported function would "
+            f"differentiate through it; {agree}; detach only while training (if self.training), as the "
+            "shipped nets do"
+        )
+    return (
+        f"{agree}: usually a gradient torch stops and CasADi cannot, as a detach(), a torch.no_grad() "
+        "block or a straight-through trick (x + (f(x) - x).detach()) stops it"
+    )

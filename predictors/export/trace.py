@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from predictors.export.elementwise import sigmoid
-from predictors.export.errors import MODULE_STACK, ExportError, current_module
+from predictors.export.errors import MODULE_STACK, TRACING, ExportError, current_module
 from predictors.export.linalg import linear
 from predictors.export.movement import squeeze, unsqueeze
 from predictors.export.ops import register
@@ -128,6 +128,7 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
     post = nn.modules.module.register_module_forward_hook(leave)
     MODULE_STACK.clear()
     MODULE_STACK.append(type(net).__name__)
+    TRACING.append(net)
     was_training = net.training
     net.eval()
     try:
@@ -137,6 +138,7 @@ def symbolic_run(net: nn.Module) -> Iterator[None]:
         pre.remove()
         post.remove()
         MODULE_STACK.clear()
+        TRACING.remove(net)
         for module in patched:
             del module.forward
         net.train(was_training)

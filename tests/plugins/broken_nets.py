@@ -243,3 +243,21 @@ class NaNFromItsThirdStep(ToyNet):
             if self.steps >= 3:
                 out = out * float("nan")
         return h, out
+
+
+class DetachesItsPosition(ToyNet):
+    """Steps from a detached copy of the current positions, a stop-gradient CasADi has no counterpart for:
+    its exported values are torch's, its Jacobian with respect to the robots' plan is not."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        return super().decode_step(h, prev, cur.detach(), neighbours)
+
+
+class VelocityWithoutGradients(ToyNet):
+    """Takes its velocity under ``torch.no_grad()``, which a symbolic run (itself without gradients) cannot
+    see: as ``DetachesItsPosition`` for the export, without a detach() to name."""
+
+    def decode_step(self, h, prev, cur, neighbours):
+        with torch.no_grad():
+            velocity = cur - prev
+        return super().decode_step(h, cur - velocity, cur, neighbours)

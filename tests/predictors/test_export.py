@@ -642,7 +642,7 @@ def test_the_parity_check_measures_values_and_jacobians_apart():
     assert check_parity(LowerTriangular(value_offset=0.9e-6), 2, 2, 3).ok()  # within 1e-6
     with pytest.raises(ExportError) as refused:
         require_parity(LowerTriangular(slope=2e-6), 2, 2, 3)
-    assert "differs from torch by" in str(refused.value) and "2.00e-06 (Jacobians), more than 1e-06" in str(
+    assert "but its Jacobians with respect to the robots' plan differ by 2.00e-06, more than 1e-06" in str(
         refused.value
     )
     assert require_parity(LowerTriangular(value_offset=0.5e-6), 2, 2, 3).ok()
@@ -748,3 +748,29 @@ def test_a_jacobian_that_is_nan_in_torch_too_is_named_so_not_called_a_difference
         "or inf"
     ), message
     assert "differs" not in message and "sqrt" in message and "\n" not in message
+
+
+@pytest.mark.parametrize(
+    ("net", "cause"),
+    [
+        ("DetachesItsPosition", "detach() (in module 'DetachesItsPosition') has no CasADi counterpart: the "
+         "exported function would differentiate through it; the exported prediction agrees with torch"),
+        ("VelocityWithoutGradients", "the exported prediction agrees with torch"),
+    ],
+)  # fmt: skip
+def test_jacobians_that_differ_where_values_agree_name_the_stopped_gradient(net, cause):
+    """The export maps detach() to the identity (CasADi has no stop-gradient), so a net detaching on its
+    predicting path was refused with "differs from torch by 0.00e+00 (values) and 1.04e-01 (Jacobians)",
+    which named neither the detach nor that only the derivatives differed."""
+    import tests.plugins.broken_nets as broken
+    from predictors.learned import LearnedPredictor
+    from tests.plugins.toy_predictor import ToyConfig
+
+    predictor = LearnedPredictor(getattr(broken, net)(ToyConfig()), name="stops")
+    with pytest.raises(ExportError) as refused:
+        predictor.to_casadi(2, 1, 3)
+    message = str(refused.value)
+    assert message.startswith(f"cannot export: {cause}"), message
+    assert "but its Jacobians with respect to the robots' plan differ by" in message and "\n" not in message
+    if net == "VelocityWithoutGradients":
+        assert "a detach(), a torch.no_grad() block or a straight-through trick" in message
