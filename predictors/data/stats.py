@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import numpy as np
 
 from predictors.data.trajnet_io import shown_scenes
 from predictors.data.validate import parse_ndjson
-from predictors.errors import PredictorError
+from predictors.errors import DatasetFormatError, PredictorError
 from predictors.text_table import aligned_lines
 
 
@@ -92,7 +93,20 @@ def ndjson_files(directory: str | Path) -> list[Path]:
         return [directory]
     if not directory.is_dir():
         raise PredictorError(f"{directory} is neither an ndjson file nor a directory")
-    files = sorted(p for p in directory.rglob("*.ndjson") if p.is_file())
+    matches = sorted(directory.rglob("*.ndjson"))
+    for path in matches:
+        # left out, the folder's statistics described fewer files than it holds, without a word; evaluate
+        # and train refuse such a file too (validate.require_file)
+        if not (path.is_file() or path.is_dir()):
+            what = (
+                f"a symbolic link to {os.readlink(path)}, which does not exist"
+                if path.is_symlink()
+                else "not a regular file (a pipe, a socket or a device)"
+            )
+            raise DatasetFormatError(
+                path, None, f"{what}, named *.ndjson under {directory}; remove it or make it an ndjson file"
+            )
+    files = [p for p in matches if p.is_file()]
     if not files:
         raise PredictorError(f"no .ndjson files under {directory}")
     return files

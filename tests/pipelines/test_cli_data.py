@@ -247,6 +247,24 @@ def test_stats_without_files(tmp_path, capsys):
     assert_one_line_error(code, err, "no .ndjson files under")
 
 
+@pytest.mark.parametrize("kind", ["fifo", "dangling link"])
+def test_stats_names_a_file_named_ndjson_it_cannot_read(tmp_path, capsys, kind):
+    """A FIFO or a dangling symbolic link named *.ndjson in the folder was left out without a word: the table
+    described fewer files than the folder holds, exit 0. Evaluate and train refuse such a file too."""
+    folder = tmp_path / "d"
+    write_walk_file(folder / "walk.ndjson")
+    odd = folder / "p.ndjson"
+    if kind == "fifo":
+        os.mkfifo(odd)
+    else:
+        odd.symlink_to(tmp_path / "gone.ndjson")
+    code, _, err = run(capsys, "data", "stats", str(folder))
+    what = (
+        "not a regular file (a pipe" if kind == "fifo" else f"a symbolic link to {tmp_path / 'gone.ndjson'}"
+    )
+    assert_one_line_error(code, err, f"{odd}: {what}", f"named *.ndjson under {folder}; remove it")
+
+
 def test_prepare_and_evaluate(tmp_path, capsys):
     raw = write_tiny_ewap(tmp_path / "data")
     out = tmp_path / "prepared"
