@@ -145,7 +145,7 @@ def _register_synth(actions) -> None:
 
 
 def run_prepare(args: argparse.Namespace) -> int:
-    from predictors.data.locate import raw_ewap_dir
+    from predictors.data.locate import raw_ewap_dir, raw_ewap_problem
     from predictors.data.prepare import prepare_ewap
     from predictors.data.selfcheck import default_references, expected_references
     from predictors.data.trajnet_scenes import TRAJNETPP_ACCEPTANCE
@@ -153,6 +153,9 @@ def run_prepare(args: argparse.Namespace) -> int:
     seed = _prepare_seed(args)
     check_writable(args.out, "--out", directory=True, room=PREPARE_ROOM)
     raw = raw_ewap_dir(args.raw) if args.raw.is_dir() else None
+    problem = raw_ewap_problem(args.raw) if raw is None and args.raw.is_dir() else None
+    if problem is not None:
+        raise PipelineError(f"--raw {args.raw}: {problem}")
     if raw is None:
         raise PipelineError(
             f"--raw {args.raw} is a file; give the folder holding seq_eth/ and seq_hotel/"

@@ -35,6 +35,7 @@ from typing import Final
 from predictors.data.ewap import EWAP_SEQUENCES, SPLITS
 from predictors.data.prepare import CONVERTER_VERSION, STAGING_INFIX, prepare_ewap
 from predictors.data.selfcheck import default_references
+from predictors.data.validate import require_file
 from predictors.errors import PredictorError
 from predictors.hashing import sha256_file
 from predictors.home import expand_home, home_dir
@@ -172,6 +173,21 @@ def raw_ewap_dir(directory: Path) -> Path | None:
     for candidate in (directory / "raw_ewap", directory):
         if all((candidate / seq / "obsmat.txt").is_file() for seq in EWAP_SEQUENCES.values()):
             return candidate
+    return None
+
+
+def raw_ewap_problem(directory: Path) -> str | None:
+    """One line naming an ``obsmat.txt`` where ``raw_ewap_dir`` looks that is there but no regular file (a
+    folder, a FIFO, a dangling link), if any: the general "expected a BIWI EWAP directory" left the user to
+    find which of the four places was wrong."""
+    for candidate in (directory / "raw_ewap", directory):
+        for seq in EWAP_SEQUENCES.values():
+            path = candidate / seq / "obsmat.txt"
+            if os.path.lexists(path) and not path.is_file():
+                try:
+                    require_file(path, " (expected a BIWI EWAP obsmat.txt)")
+                except PredictorError as exc:
+                    return str(exc)
     return None
 
 

@@ -322,6 +322,21 @@ def test_prepare_rejects_a_directory_without_ewap(tmp_path, capsys):
     assert_one_line_error(code, err, "expected a BIWI EWAP directory", "evaluate --test", "Your own data")
 
 
+@pytest.mark.parametrize(
+    ("kind", "what"), [("fifo", "not a regular file"), ("folder", "is a directory, not a data file")]
+)
+def test_prepare_names_an_obsmat_that_is_no_regular_file(tmp_path, capsys, kind, what):
+    """R/seq_eth/obsmat.txt a FIFO or a folder got the general "expected a BIWI EWAP directory holding
+    seq_eth/obsmat.txt and seq_hotel/obsmat.txt", naming neither the file nor what was wrong with it."""
+    raw = write_tiny_ewap(tmp_path / "data")
+    obsmat = raw / "seq_eth" / "obsmat.txt"
+    obsmat.unlink()
+    os.mkfifo(obsmat) if kind == "fifo" else obsmat.mkdir()
+    code, _, err = run(capsys, "data", "prepare", "--raw", str(raw), "--out", str(tmp_path / "o"))
+    assert_one_line_error(code, err, f"--raw {raw}: {obsmat}: {what} (expected a BIWI EWAP obsmat.txt)")
+    assert not (tmp_path / "o").exists()
+
+
 def test_prepare_reports_a_malformed_obsmat_line(tmp_path, capsys):
     raw = write_tiny_ewap(tmp_path / "data")
     obsmat = raw / "seq_hotel" / "obsmat.txt"
