@@ -117,13 +117,14 @@ def run_row(
         "controller": controller,
         "robots": n_robots,
         "episodes": args.episodes,
-        "success_rate": float(success.mean()),
+        # % of the episodes, as every other *_rate the project writes (docs/outputs.md's conventions)
+        "success_rate": 100 * float(success.mean()),
         "travel_time_mean": float(travel[success > 0].mean()) if success.any() else math.nan,
         "min_robot_distance": float(closest.min()),
-        "contact_rate": float((closest < 2 * config.radius).mean()),
+        "contact_rate": 100 * float((closest < 2 * config.radius).mean()),
         "humans": args.humans,
-        "collision_rate": float(collision.mean()),
-        "timeout_rate": float(timeout.mean()),
+        "collision_rate": 100 * float(collision.mean()),
+        "timeout_rate": 100 * float(timeout.mean()),
     }
 
 
@@ -135,9 +136,9 @@ def print_rows(rows: list[dict[str, Any]], radius: float) -> None:
     for r in rows:
         travel = "n/a" if math.isnan(r["travel_time_mean"]) else f"{r['travel_time_mean']:.1f}"
         print(
-            f"{r['controller']:10s} {r['robots']:3d} {r['episodes']:4d} {100 * r['success_rate']:7.0f}% "
-            f"{travel:>9s} {r['min_robot_distance']:10.2f} {100 * r['contact_rate']:7.0f}% {r['humans']:3d} "
-            f"{100 * r['collision_rate']:8.0f}% {100 * r['timeout_rate']:7.0f}%"
+            f"{r['controller']:10s} {r['robots']:3d} {r['episodes']:4d} {r['success_rate']:7.0f}% "
+            f"{travel:>9s} {r['min_robot_distance']:10.2f} {r['contact_rate']:7.0f}% {r['humans']:3d} "
+            f"{r['collision_rate']:8.0f}% {r['timeout_rate']:7.0f}%"
         )
     print(
         f"(closest: the smallest centre distance of two robots in the row; contact below {2 * radius:g} m; "

@@ -77,13 +77,15 @@ def test_a_config_file_gives_its_mpc_table_and_margins(tmp_path, monkeypatch):
 
 
 def test_one_row_end_to_end(tmp_path, capsys):
-    """Two robots swapping places without flocking pass (the head-on tie broken), d_min apart."""
+    """Two robots swapping places without flocking pass (the head-on tie broken), d_min apart; its rates in %
+    as every `*_rate` the project writes (they were shares, 1.0 for all)."""
     out = tmp_path / "rows.json"
     robot_swaps.main(["--robots", "2", "--controllers", "cmpc", "--mpc", "w_floc=0", "--json", str(out)])
     printed = capsys.readouterr().out
     assert "cmpc         2    1     100%" in printed
     (row,) = json.loads(out.read_text(encoding="utf-8"))["rows"]
-    assert row["success_rate"] == 1.0 and row["min_robot_distance"] > 0.8 and row["contact_rate"] == 0.0
+    assert row["success_rate"] == 100.0 and row["min_robot_distance"] > 0.8 and row["contact_rate"] == 0.0
+    assert row["collision_rate"] == 0.0 and row["timeout_rate"] == 0.0
 
 
 @pytest.mark.parametrize(
