@@ -26,12 +26,14 @@ SCALARS: dict[str, tuple[type, ...]] = {
 
 
 def doc_table(heading: str, index: int = 0) -> dict[str, dict[str, str]]:
-    """The ``index``-th table of outputs.md's section ``heading`` (its ``## `` line, without the marks):
-    each name its first column gives (`a`, `b`: two names) -> the row's cells by column name, a type
-    column of as many types as names ("integer, string") giving each name its own."""
+    """The ``index``-th table of outputs.md's section ``heading`` (its ``## `` or ``### `` line, without the
+    marks; up to the next heading of its level or above): each name its first column gives (`a`, `b`: two
+    names) -> the row's cells by column name, a type column of as many types as names ("integer, string")
+    giving each name its own."""
     text = DOC.read_text(encoding="utf-8")
-    start = text.index(f"\n## {heading}\n")
-    section = text[start + 1 :].split("\n## ", 1)[0]
+    found = re.search(rf"^(##+) {re.escape(heading)}\n", text, re.M)
+    assert found is not None, f"no section {heading!r} in {DOC.name}"
+    section = re.split(rf"^#{{2,{len(found[1])}}} ", text[found.end() :], maxsplit=1, flags=re.M)[0]
     tables = re.findall(r"(?:^\|.*\n)+", section, re.M)
     header, _, *rows = tables[index].splitlines()
     columns = [cell.strip() for cell in header.strip("|").split("|")]
