@@ -134,7 +134,8 @@ def test_review_memorys_json_is_as_documented(tmp_path, monkeypatch):
 
 
 def test_robot_scalings_json_is_as_documented(tmp_path, monkeypatch):
-    argv = ["--robots", "2", "--controllers", "cmpc", "--humans", "1", "--episodes", "1"]
+    # one robot as well: no robot-robot distance (null)
+    argv = ["--robots", "1", "2", "--controllers", "cmpc", "--humans", "1", "--episodes", "1"]
     report = run_json("robot_scaling", [*argv, "--scenarios", "circle"], tmp_path, monkeypatch)
     check_documented(table("robot_scaling"), [report])
     row = without(doc_table(RUN_ALL, RUN_ALL_ROBOTS_ROW), "method", "mpc_overrides")
