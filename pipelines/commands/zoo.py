@@ -59,7 +59,7 @@ def register(subparsers) -> None:
     actions = parser.add_subparsers(dest="zoo_command", metavar="ACTION", required=True)
     actions.add_parser(
         "list",
-        help="one line per model of both zoos with its metrics",
+        help="one line per model of both zoos: the predictor class it loads as, its model kind and metrics",
         **examples("crowdmpc zoo list", "crowdmpc zoo --dir my_zoo list"),
     )
     show = actions.add_parser(

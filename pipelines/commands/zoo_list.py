@@ -53,6 +53,19 @@ def _pooling(located) -> str:
     return pooling if isinstance(pooling, str) and len(pooling) <= 16 else "?"
 
 
+def _loaded_class(entry) -> str:
+    """The class the entry loads as, told by its model kind: the shipped manifest's "class" was written
+    before model kinds (``SocialLSTMPredictor`` for the LSTMs, which load as ``LearnedPredictor``), so one
+    kind showed two classes. An unregistered plugin kind shows the class ``zoo add`` recorded."""
+    from predictors.errors import PredictorError
+    from predictors.models import model_kind
+
+    try:
+        return model_kind(entry.model).predictor_class_name
+    except PredictorError:
+        return entry.cls
+
+
 def format_list(located_entries, never_loads: list[bool] | None = None) -> str:
     """The table of ``located_entries``; ``never_loads``, per entry, marks with ``!`` one that never loads."""
     header = [
@@ -81,7 +94,7 @@ def format_list(located_entries, never_loads: list[bool] | None = None) -> str:
         rows.append(
             [
                 entry.name + marks,
-                entry.cls,
+                _loaded_class(entry),
                 entry.model,
                 _pooling(located),
                 entry.protocol,

@@ -270,6 +270,17 @@ def test_remove_refuses_what_the_user_zoo_does_not_have(shipped, user, capsys):
     assert code == 2 and "zoo name '../x' is not allowed" in one_line(err)
 
 
+def test_zoo_list_shows_the_class_a_model_loads_as_for_either_zoo(shipped, user, pair, capsys):
+    """The shipped manifest's "class" predates model kinds: its social_lstm row said SocialLSTMPredictor and
+    the same weights added to the user zoo LearnedPredictor, the class both load as."""
+    assert real_entry()["class"] == "SocialLSTMPredictor"  # what the shipped manifest records
+    assert cli(["zoo", "add", str(pair), "--name", "mine"], capsys)[0] == 0
+    code, out, _ = cli(["zoo", "list"], capsys)
+    classes = {line.split()[0]: line.split()[1] for line in out.splitlines()[2:4]}
+    loaded = type(load_predictor(NAME)).__name__
+    assert code == 0 and classes == {NAME: loaded, "mine": loaded} and loaded == "LearnedPredictor"
+
+
 def test_a_user_entry_under_a_shipped_name_is_reported_and_never_loads(shipped, user, capsys):
     for suffix in (".pt", ".json"):
         user.mkdir(exist_ok=True)
@@ -282,8 +293,8 @@ def test_a_user_entry_under_a_shipped_name_is_reported_and_never_loads(shipped, 
     code, out, _ = cli(["zoo", "list"], capsys)  # listed without a mark, it read as a model one could use
     rows = [line.split()[:3] for line in out.splitlines() if line.startswith(NAME)]
     assert code == 0 and rows == [
-        [NAME, "SocialLSTMPredictor", "social_lstm"],
-        [NAME, "!", "SocialLSTMPredictor"],
+        [NAME, "LearnedPredictor", "social_lstm"],
+        [NAME, "!", "LearnedPredictor"],
     ]
     assert f"! {user / zoo.MANIFEST_NAME}: a shipped model has this name, so this entry never loads" in out
 
