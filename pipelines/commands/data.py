@@ -125,7 +125,13 @@ def _register_synth(actions) -> None:
     synth.add_argument(
         "--seed", required=True, type=seed_arg, help="seed of episode 0 (episode i uses seed + i)"
     )
-    synth.add_argument("--scenario", choices=("circle", "perpendicular"), default="circle")
+    synth.add_argument(
+        "--scenario",
+        choices=("circle", "perpendicular"),
+        default="circle",
+        help="where the humans start and head: circle (crossing a circle) or perpendicular (crossing at a "
+        "right angle) (default circle)",
+    )
     synth.add_argument("--no-progress", action="store_true", help="no progress bar of the episodes")
     synth.add_argument(
         "--with-robots",

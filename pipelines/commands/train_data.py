@@ -46,8 +46,22 @@ def data_options(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="explicit training ndjson files instead of --protocol (needs --val)",
     )
-    parser.add_argument("--val", nargs="+", type=path_arg, default=None, metavar="FILE")
-    parser.add_argument("--test", nargs="+", type=path_arg, default=None, metavar="FILE")
+    parser.add_argument(
+        "--val",
+        nargs="+",
+        type=path_arg,
+        default=None,
+        metavar="FILE",
+        help="explicit validation ndjson files, which choose the best epoch (with --train)",
+    )
+    parser.add_argument(
+        "--test",
+        nargs="+",
+        type=path_arg,
+        default=None,
+        metavar="FILE",
+        help="explicit test ndjson files scored after training (with --train and --val; default: none)",
+    )
 
 
 def resolve_files(args) -> tuple[dict[str, list[Path]], Path | None]:

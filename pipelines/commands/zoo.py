@@ -65,7 +65,7 @@ def register(subparsers) -> None:
     show = actions.add_parser(
         "show", help="the manifest entry of one model", **examples("crowdmpc zoo show social_lstm_eth")
     )
-    show.add_argument("name")
+    show.add_argument("name", help="the model's zoo name (zoo list's first column)")
     actions.add_parser(
         "verify",
         help="check every entry's files against its manifest (exit 1 on a problem)",
@@ -131,7 +131,9 @@ def _add_and_remove(actions: Any) -> None:
         "the NAME.pt and NAME.json that were added from it)",
         **examples("crowdmpc zoo remove my_social_lstm"),
     )
-    remove.add_argument("name")
+    remove.add_argument(
+        "name", help="the user zoo's entry to remove, with its files (with --leftovers: only its leftovers)"
+    )
     remove.add_argument(
         "--leftovers",
         action="store_true",

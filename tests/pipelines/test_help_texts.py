@@ -1,0 +1,55 @@
+"""What every ``--help`` says of each option: a help text, and the default of an option that has one, as
+argparse holds it (a help stating another default is the kind of fault these catch)."""
+
+import argparse
+import re
+
+import pytest
+
+from pipelines.cli import build_parser
+
+# argparse's own: --help, --version and the choice of a command
+SELF_EXPLAINED = (argparse._HelpAction, argparse._VersionAction, argparse._SubParsersAction)
+
+
+def _options():
+    """(command words, option) of every argument of every parser, the top level's included."""
+
+    def walk(parser: argparse.ArgumentParser, path: tuple[str, ...]):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    yield from walk(sub, (*path, name))
+            elif not isinstance(action, SELF_EXPLAINED):
+                yield path, action
+
+    return list(walk(build_parser(), ()))
+
+
+def _id(path: tuple[str, ...], action: argparse.Action) -> str:
+    return " ".join(["crowdmpc", *path, action.option_strings[0] if action.option_strings else action.dest])
+
+
+OPTIONS = [pytest.param(path, action, id=_id(path, action)) for path, action in _options()]
+
+
+@pytest.mark.parametrize(("path", "action"), OPTIONS)
+def test_every_option_of_every_command_has_a_help(path, action):
+    """`crowdmpc calibrate --help` listed --source with its choices and no word of what it chooses, `data
+    synth`'s --scenario neither what it is nor its default, `train`'s --val and --test nothing at all."""
+    assert action.help and action.help.strip(), f"`{_id(path, action)}` has no help text"
+
+
+def _shown(default: object) -> str:
+    """A default as a help text writes it: a tuple of values comma-separated (calibrate --alpha 0.1,0.05)."""
+    return ",".join(map(str, default)) if isinstance(default, tuple) else str(default)
+
+
+@pytest.mark.parametrize(("path", "action"), OPTIONS)
+def test_an_option_with_a_default_says_it_in_its_help(path, action):
+    """An option whose default is a value (not None: resolved later, often from a config or a run) says
+    that value: "(default 7)", "default: circle"."""
+    if action.default in (None, False, [], argparse.SUPPRESS) or action.nargs == 0:
+        return
+    said = re.search(rf"default:? {re.escape(_shown(action.default))}\b", action.help or "")
+    assert said, f"`{_id(path, action)}` defaults to {action.default!r}; its help says {action.help!r}"
